@@ -1,0 +1,29 @@
+# Two commands (README): `make run` (the main job) and `make test` (the test suite).
+# Both create a local virtual environment in .venv on first use.
+PYTHON ?= python3
+VENV   := .venv
+STAMP  := $(VENV)/.installed-stamp
+
+.PHONY: run test test-slow clean
+
+$(STAMP): pyproject.toml
+	$(PYTHON) -m venv $(VENV)
+	$(VENV)/bin/python -m pip install --quiet --upgrade pip
+	$(VENV)/bin/python -m pip install --quiet -e ".[test]"
+	touch $(STAMP)
+
+run: $(STAMP)
+	$(VENV)/bin/jaxobs demo --out out
+
+# pytest exits 5 when it collects nothing: for the main suite that is a broken
+# checkout and fails; for the slow suite it only means there are no slow tests.
+test: $(STAMP)
+	@$(VENV)/bin/python -m pytest -m "not slow"; rc=$$?; \
+	if [ $$rc -eq 5 ]; then echo "make test: pytest collected no tests"; exit 1; fi; exit $$rc
+
+test-slow: $(STAMP)
+	@$(VENV)/bin/python -m pytest -m slow; rc=$$?; \
+	if [ $$rc -eq 5 ]; then echo "make test-slow: no slow tests"; exit 0; fi; exit $$rc
+
+clean:
+	rm -rf $(VENV) out .pytest_cache

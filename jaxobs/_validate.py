@@ -1,0 +1,83 @@
+"""Eager argument checks shared by every constructor.
+
+Constructors run outside ``jit``: they check concrete values and raise a
+``ValueError`` naming the field and the allowed range.  Traced values (a module
+rebuilt inside ``vmap`` or ``grad``) cannot be checked eagerly and pass through;
+modules rebuilt by ``jax.tree_util`` never call ``__init__`` anyway.
+"""
+
+from __future__ import annotations
+
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+
+def _is_concrete(x) -> bool:
+    return not isinstance(x, jax.core.Tracer)
+
+
+def as_float(x):
+    """A gain or parameter as a floating JAX array of the default float dtype."""
+    if isinstance(x, jax.Array) and jnp.issubdtype(x.dtype, jnp.floating):
+        return x
+    return jnp.asarray(x, dtype=jnp.result_type(float))
+
+
+def check_real(name: str, x, *, lower=None, upper=None, lower_open=True, owner=""):
+    """Check that every element of ``x`` is finite and inside the given range.
+
+    ``lower_open`` makes the lower bound strict (``x > lower``); otherwise
+    ``x >= lower``.  Returns ``x`` converted to a float array.
+    """
+    where = f"{owner}.{name}" if owner else name
+    if _is_concrete(x):
+        try:
+            arr = np.asarray(x, dtype=float)
+        except (TypeError, ValueError):
+            raise ValueError(f"{where} must be a real number, got {x!r}") from None
+        rng = _range_text(lower, upper, lower_open)
+        if not np.all(np.isfinite(arr)):
+            raise ValueError(f"{where} must be finite{rng}, got {_show(arr)}")
+        if lower is not None:
+            bad = arr <= lower if lower_open else arr < lower
+            if np.any(bad):
+                raise ValueError(f"{where} must be finite{rng}, got {_show(arr)}")
+        if upper is not None and np.any(arr > upper):
+            raise ValueError(f"{where} must be finite{rng}, got {_show(arr)}")
+    return as_float(x)
+
+
+def check_positive(name: str, x, owner=""):
+    return check_real(name, x, lower=0.0, lower_open=True, owner=owner)
+
+
+def check_nonnegative(name: str, x, owner=""):
+    return check_real(name, x, lower=0.0, lower_open=False, owner=owner)
+
+
+def check_sample_time(name: str, ts, owner="") -> float:
+    """Sample times are static Python floats: they fix the scan length."""
+    where = f"{owner}.{name}" if owner else name
+    try:
+        val = float(ts)
+    except (TypeError, ValueError):
+        raise ValueError(f"{where} must be a positive finite number of seconds, got {ts!r}") from None
+    if not math.isfinite(val) or val <= 0:
+        raise ValueError(f"{where} must be a positive finite number of seconds, got {ts!r}")
+    return val
+
+
+def _range_text(lower, upper, lower_open):
+    parts = []
+    if lower is not None:
+        parts.append(f"{'>' if lower_open else '>='} {lower:g}")
+    if upper is not None:
+        parts.append(f"<= {upper:g}")
+    return (" and " + " and ".join(parts)) if parts else ""
+
+
+def _show(arr):
+    return f"{arr.item():g}" if arr.ndim == 0 else np.array2string(arr, precision=4)

@@ -1,0 +1,81 @@
+"""Shared cores: the generalized integrator, the SOGI, the second-order SOGI and the FLL.
+
+Every SOGI-type observer in jaxobs is built from these pure vector-field
+functions; none writes them again.
+
+Generalized integrator (GI) at centre frequency ω'
+-------------------------------------------------
+With input ``x`` and states (y, q):
+
+    ẏ = ω' (x − q),    q̇ = ω' y        ⇒  Y/X = ω' s / (s² + ω'²),  Q = (ω'/s) Y.
+
+``q`` lags ``y`` by 90° at ω'.  In complex-envelope terms (w = y + jq,
+rotating at ω'), ẇ = ω' x + jω' w, so the envelope W of the output obeys
+Ẇ ≈ (ω'/2) X̃ once the double-frequency term is averaged out: near its centre
+frequency the GI acts on envelopes as an integrator of gain ω'/2.  This is
+the fact behind every small-signal model in paper 001.
+
+SOGI (001 eqs 1–2, 6–7; 000 eqs 12–13)
+-------------------------------------
+GI with input x = k (v − y):
+
+    D(s) = y/v = k ω' s / (s² + k ω' s + ω'²),   Q(s) = q/v = k ω'² / (s² + k ω' s + ω'²).
+
+Second-order SOGI (000 eqs 17–18)
+---------------------------------
+Two GIs replacing the two integrators of the second-order low-pass
+filter K1 K2 / (x² + K2 x + K1 K2).  With 1/s in place of each GI that filter is
+``z = (1/s)·K2 (K1 (v − y) − z)``, ``y = (1/s)·z``; with GIs:
+
+    GI_a:  ż_a = ω' (K2 (K1 (v − y) − z_a) − z_b),  ż_b = ω' z_a
+    GI_b:  ẏ   = ω' (z_a − q),                      q̇   = ω' y
+
+Substituting g = ω' s / (s² + ω'²) for 1/s and clearing (s² + ω'²)² gives
+
+    y/v = K1 K2 ω'² s² / (s⁴ + K2 ω' s³ + (2 + K1 K2) ω'² s² + K2 ω'³ s + ω'⁴)   (000 eq 17)
+    q/v = (ω'/s)·y/v = K1 K2 ω'³ s / (same)                                        (000 eq 18)
+
+On envelopes each GI integrates with gain ω'/2, so the amplitude response is
+K1 K2 (ω'/2)² / (s² + K2 (ω'/2) s + K1 K2 (ω'/2)²).  Paper 001 eq (30) writes the
+WIF amplitude response as (k1 k2 ωn²/4)/(s² + (k1 ωn/2) s + k1 k2 ωn²/4): the
+damping term carries k1, so Golestan's k1 is Xu's K2 and k2 is K1.
+"""
+
+from __future__ import annotations
+
+import jax.numpy as jnp
+
+
+def gi_vf(y, q, x, w):
+    """Generalized integrator: returns (ẏ, q̇) for input ``x`` at centre ``w``."""
+    return w * (x - q), w * y
+
+
+def sogi_vf(y, q, v, w, k):
+    """SOGI: returns (ẏ, q̇) for input ``v``, gain ``k``, centre ``w`` (001 eqs 6–7)."""
+    return gi_vf(y, q, k * (v - y), w)
+
+
+def sogi2_vf(za, zb, y, q, v, w, K1, K2):
+    """Second-order SOGI (000 eqs 17–18): returns (ża, żb, ẏ, q̇).
+
+    ``(y, q)`` are the filtered in-phase and quadrature outputs (v', qv');
+    ``(za, zb)`` are the first GI's outputs.  ``za`` is the input of the output
+    GI, used by the WIF frequency detector.
+    """
+    dza, dzb = gi_vf(za, zb, K2 * (K1 * (v - y) - za), w)
+    dy, dq = gi_vf(y, q, za, w)
+    return dza, dzb, dy, dq
+
+
+def safe_sq_amplitude(y, q, v_floor):
+    """V̂² = y² + q², floored at ``v_floor²`` so the FLL normalization never divides by 0.
+
+    The floor is exact above it (no bias once V̂ > v_floor).
+    """
+    return jnp.maximum(y * y + q * q, v_floor * v_floor)
+
+
+def fll_rate(err, q, y, lam, v_floor):
+    """Normalized FLL, 001 eq (8): ω̂̇ = −λ · err · q / V̂²."""
+    return -lam * err * q / safe_sq_amplitude(y, q, v_floor)

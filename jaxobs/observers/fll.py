@@ -1,0 +1,214 @@
+"""The SOGI-FLL family of paper 001 (Golestan et al., IEEE TPEL 2018).
+
+All three take a single-phase signal v(t) = V cos θ and estimate the in-phase
+and quadrature components, amplitude V̂, phase θ̂ = atan2(qv', v') (001 eq 10)
+and frequency ω̂ (rad/s).  Gains are named as in paper 001 (k, k1, k2, λ=lam),
+so tuning jobs can name them.
+
+State layout (flat arrays, integrators in the order of 001 Table II):
+
+- SOGIFLL:    [v', qv', ω̂]                      (3 integrators)
+- SOGIFLLWPF: [p, qp, v', qv', ω̂]               (5 integrators; p = prefilter)
+- SOGIFLLWIF: [z_a, z_b, v', qv', ω̂]            (5 integrators; z = first GI)
+"""
+
+from __future__ import annotations
+
+from typing import Literal, NamedTuple
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+
+from .._validate import check_positive, check_sample_time
+from ..discretize import AB3, AbstractRule
+from ._cores import fll_rate, sogi2_vf, sogi_vf
+from .base import AbstractObserver, check_rule
+
+__all__ = ["FLLOutput", "SOGIFLL", "SOGIFLLWPF", "SOGIFLLWIF"]
+
+
+class FLLOutput(NamedTuple):
+    v_alpha: jax.Array  # filtered in-phase signal v' (input units)
+    v_beta: jax.Array  # filtered quadrature signal qv' (input units)
+    amplitude: jax.Array  # V̂ = sqrt(v'² + qv'²)
+    theta: jax.Array  # θ̂ = atan2(qv', v'), rad, in (−π, π]
+    omega: jax.Array  # ω̂, rad/s
+
+
+def _fll_output(y, q, w):
+    return FLLOutput(v_alpha=y, v_beta=q, amplitude=jnp.sqrt(y * y + q * q), theta=jnp.arctan2(q, y), omega=w)
+
+
+class SOGIFLL(AbstractObserver):
+    """Standard SOGI-FLL, 001 Fig. 1(a), eqs (6)–(8).
+
+        v̇'  = ω̂ [k (v − v') − qv']                       (6)
+        q̇v' = ω̂ v'                                        (7)
+        ω̂̇   = −(λ / V̂²) (v − v') qv'                        (8)
+
+    Small-signal model (001 eqs 18–20): ω̂/ω = (λ/2)/(s² + (kωn/2) s + λ/2);
+    damping rule λ = k² ωn² / 4 for ζ = 1/√2 (eq 22).
+
+    Args:
+        k: SOGI gain (> 0).  lam: FLL gain λ (> 0, rad²/s²).
+        omega_n: nominal frequency and initial ω̂ (rad/s, > 0).
+        ts: sample time (s).  rule: discretization rule (001 uses AB3).
+        v_floor: floor of V̂ in the FLL normalization (input units, > 0).
+    """
+
+    k: jax.Array
+    lam: jax.Array
+    omega_n: jax.Array
+    ts: float = eqx.field(static=True)
+    rule: AbstractRule = eqx.field(static=True)
+    v_floor: float = eqx.field(static=True)
+
+    def __init__(self, k, lam, omega_n=100 * jnp.pi, *, ts=1e-4, rule=None, v_floor=1e-3):
+        self.k = check_positive("k", k, "SOGIFLL")
+        self.lam = check_positive("lam", lam, "SOGIFLL")
+        self.omega_n = check_positive("omega_n", omega_n, "SOGIFLL")
+        self.ts = check_sample_time("ts", ts, "SOGIFLL")
+        self.rule = check_rule(AB3() if rule is None else rule, "SOGIFLL")
+        self.v_floor = float(check_positive("v_floor", v_floor, "SOGIFLL"))
+
+    def f(self, x, u):
+        y, q, w = x[0], x[1], x[2]
+        dy, dq = sogi_vf(y, q, u, w, self.k)
+        dw = fll_rate(u - y, q, y, self.lam, self.v_floor)
+        return jnp.stack([dy, dq, dw])
+
+    def output(self, x):
+        return _fll_output(x[0], x[1], x[2])
+
+    def initial_state(self):
+        z = jnp.zeros_like(self.omega_n)
+        return jnp.stack([z, z, self.omega_n])
+
+
+class SOGIFLLWPF(AbstractObserver):
+    """SOGI-FLL with a SOGI prefilter, 001 Fig. 1(b).
+
+    A SOGI (gain k1; only its in-phase output p is used) tuned at the FLL's ω̂
+    prefilters v, and a SOGI-FLL (k2, λ) runs on p:
+
+        ṗ   = ω̂ [k1 (v − p) − qp],      q̇p = ω̂ p
+        v̇'  = ω̂ [k2 (p − v') − qv'],    q̇v' = ω̂ v'
+        ω̂̇   = −(λ / V̂²) (p − v') qv'
+
+    On envelopes the prefilter is the lag (k1ωn/2)/(s + k1ωn/2) on the phase seen
+    by the SOGI-FLL while the FLL integrator sits after it, which gives the
+    characteristic polynomial s³ + (k1+k2)ωn/2 s² + k1k2ωn²/4 s + k1λωn/4 of
+    001 eqs (24)–(25).  Tuning (eq 29): k1 = k2 = √2, λ = 2(ζ+1)ωn²/(2ζ+1)³.
+    """
+
+    k1: jax.Array
+    k2: jax.Array
+    lam: jax.Array
+    omega_n: jax.Array
+    ts: float = eqx.field(static=True)
+    rule: AbstractRule = eqx.field(static=True)
+    v_floor: float = eqx.field(static=True)
+
+    def __init__(self, k1, k2, lam, omega_n=100 * jnp.pi, *, ts=1e-4, rule=None, v_floor=1e-3):
+        self.k1 = check_positive("k1", k1, "SOGIFLLWPF")
+        self.k2 = check_positive("k2", k2, "SOGIFLLWPF")
+        self.lam = check_positive("lam", lam, "SOGIFLLWPF")
+        self.omega_n = check_positive("omega_n", omega_n, "SOGIFLLWPF")
+        self.ts = check_sample_time("ts", ts, "SOGIFLLWPF")
+        self.rule = check_rule(AB3() if rule is None else rule, "SOGIFLLWPF")
+        self.v_floor = float(check_positive("v_floor", v_floor, "SOGIFLLWPF"))
+
+    def f(self, x, u):
+        p, qp, y, q, w = x[0], x[1], x[2], x[3], x[4]
+        dp, dqp = sogi_vf(p, qp, u, w, self.k1)
+        dy, dq = sogi_vf(y, q, p, w, self.k2)
+        dw = fll_rate(p - y, q, y, self.lam, self.v_floor)
+        return jnp.stack([dp, dqp, dy, dq, dw])
+
+    def output(self, x):
+        return _fll_output(x[2], x[3], x[4])
+
+    def initial_state(self):
+        z = jnp.zeros_like(self.omega_n)
+        return jnp.stack([z, z, z, z, self.omega_n])
+
+
+class SOGIFLLWIF(AbstractObserver):
+    """SOGI-FLL with an in-loop SOGI filter, 001 Fig. 1(c): the second-order SOGI + FLL.
+
+    The filter is the second-order SOGI of paper 000 (eqs 17–18), see
+    :mod:`jaxobs.observers._cores`.  Mapping its envelope dynamics onto 001
+    eq (30) gives Golestan's k1 = Xu's K2 (the damping term) and k2 = K1:
+
+        ża = ω̂ [k1 (k2 (v − v') − za) − zb],   żb = ω̂ za
+        v̇' = ω̂ (za − qv'),                       q̇v' = ω̂ v'
+
+    The frequency detector — derived so that the small-signal model is exactly
+    001 eqs (31)–(32).  In the frame ψ = ∫ω̂ let u = θ − ψ be the input phase and
+    φ = θ̂ − ψ the output phase.  The filter acts linearly on envelopes:
+    φ = H u, H = a/(s² + b s + a), a = k1k2ωn²/4, b = k1ωn/2.  Since θ̂ = ψ + φ,
+    asking θ̂/θ = T = (a s + d)/(s³ + b s² + a s + d), d = k1λωn/4 (eq 31), fixes
+    ψ = (T − H)/(1 − H) θ = d/(s D + d) θ with D = s² + b s + a, i.e.
+
+        ω̂ = s ψ = (d/a) · H u = (d/a) φ   ⇒   ω̂̇ = (d/a) φ̇.
+
+    The output GI integrates za on envelopes with gain ω̂/2, so its phase moves
+    as φ̇ = (ω̂/2)·Im(Za V'*)/|V'|², and averaging the product za·qv' gives
+    Im(Za V'*) = −2⟨za qv'⟩.  With d/a = λ/(k2 ωn) and ω̂ ≈ ωn:
+
+        ω̂̇ = −(λ / k2) · za · qv' / V̂²                    (fll_error="input")
+
+    — the same form as the SOGI-FLL's eq (8), whose error k(v − v') is likewise
+    the input of the output GI (there λ/k · k(v − v') = λ (v − v')).  In steady
+    state za/v' = 1/G_GI(jω) = j(ω² − ω̂²)/(ω ω̂), so ⟨za qv'⟩ is a direct
+    frequency-error detector: ω̂̇ = (λ/k2)(ω² − ω̂²)/(2ωω̂) ≈ (λ/(k2ωn))(ω − ω̂),
+    positive when ω > ω̂.
+
+    The tempting alternative, the SOGI-FLL's error (v − v')·qv' on the WIF's
+    outputs (``fll_error="residual"``), drives ω̂̇ = c (1 − H) u with c = λ/2 and
+    gives ω̂/ω = c (s + b)/(s³ + b s² + (a + c) s + c b): the same constant term
+    but an s-coefficient λ/2 too large (17 % with Table I's gains) and an extra
+    zero, so it does not have 001's small-signal model.  It is kept for comparison
+    (tests/test_fll.py checks both models against simulation).
+
+    Tuning (eq 34, symmetric optimum): k1 = 2bωc/ωn, k2 = 2ωc/ωn, λ = 2ωc²/b.
+    """
+
+    k1: jax.Array
+    k2: jax.Array
+    lam: jax.Array
+    omega_n: jax.Array
+    ts: float = eqx.field(static=True)
+    rule: AbstractRule = eqx.field(static=True)
+    v_floor: float = eqx.field(static=True)
+    fll_error: Literal["input", "residual"] = eqx.field(static=True)
+
+    def __init__(self, k1, k2, lam, omega_n=100 * jnp.pi, *, ts=1e-4, rule=None, v_floor=1e-3, fll_error="input"):
+        self.k1 = check_positive("k1", k1, "SOGIFLLWIF")
+        self.k2 = check_positive("k2", k2, "SOGIFLLWIF")
+        self.lam = check_positive("lam", lam, "SOGIFLLWIF")
+        self.omega_n = check_positive("omega_n", omega_n, "SOGIFLLWIF")
+        self.ts = check_sample_time("ts", ts, "SOGIFLLWIF")
+        self.rule = check_rule(AB3() if rule is None else rule, "SOGIFLLWIF")
+        self.v_floor = float(check_positive("v_floor", v_floor, "SOGIFLLWIF"))
+        if fll_error not in ("input", "residual"):
+            raise ValueError(f"SOGIFLLWIF.fll_error must be 'input' or 'residual', got {fll_error!r}")
+        self.fll_error = fll_error
+
+    def f(self, x, u):
+        za, zb, y, q, w = x[0], x[1], x[2], x[3], x[4]
+        # Golestan's (k1, k2) = Xu's (K2, K1).
+        dza, dzb, dy, dq = sogi2_vf(za, zb, y, q, u, w, K1=self.k2, K2=self.k1)
+        if self.fll_error == "input":
+            dw = fll_rate(za, q, y, self.lam / self.k2, self.v_floor)
+        else:
+            dw = fll_rate(u - y, q, y, self.lam, self.v_floor)
+        return jnp.stack([dza, dzb, dy, dq, dw])
+
+    def output(self, x):
+        return _fll_output(x[2], x[3], x[4])
+
+    def initial_state(self):
+        z = jnp.zeros_like(self.omega_n)
+        return jnp.stack([z, z, z, z, self.omega_n])

@@ -1,0 +1,78 @@
+"""Fixed-frequency quadrature signal generators: the SOGI-QSG and the second-order SOGI.
+
+Linear time-invariant at a given centre frequency ω' (no FLL): the building
+blocks on their own, used to check discretization rules against exact
+solutions and as filters in flux observers when the frequency is supplied
+from outside.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+
+from .._validate import check_positive, check_sample_time
+from ..discretize import AbstractRule, Tustin
+from ._cores import sogi2_vf, sogi_vf
+from .base import AbstractObserver, check_rule
+
+__all__ = ["QSGOutput", "SOGI", "SOGI2"]
+
+
+class QSGOutput(NamedTuple):
+    v_alpha: jax.Array  # in-phase output v' = D(s) v
+    v_beta: jax.Array  # quadrature output qv' = Q(s) v
+
+
+class SOGI(AbstractObserver):
+    """SOGI-QSG at fixed ω' (000 eqs 12–13; 001 eqs 1–2): D = kω's/(s²+kω's+ω'²)."""
+
+    k: jax.Array
+    omega: jax.Array
+    ts: float = eqx.field(static=True)
+    rule: AbstractRule = eqx.field(static=True)
+
+    def __init__(self, k, omega=100 * jnp.pi, *, ts=1e-4, rule=None):
+        self.k = check_positive("k", k, "SOGI")
+        self.omega = check_positive("omega", omega, "SOGI")
+        self.ts = check_sample_time("ts", ts, "SOGI")
+        self.rule = check_rule(Tustin() if rule is None else rule, "SOGI")
+
+    def f(self, x, u):
+        dy, dq = sogi_vf(x[0], x[1], u, self.omega, self.k)
+        return jnp.stack([dy, dq])
+
+    def output(self, x):
+        return QSGOutput(v_alpha=x[0], v_beta=x[1])
+
+    def initial_state(self):
+        return jnp.zeros((2,), dtype=self.omega.dtype)
+
+
+class SOGI2(AbstractObserver):
+    """Second-order SOGI at fixed ω' (000 eqs 17–18), gains K1, K2 in paper 000's naming."""
+
+    K1: jax.Array
+    K2: jax.Array
+    omega: jax.Array
+    ts: float = eqx.field(static=True)
+    rule: AbstractRule = eqx.field(static=True)
+
+    def __init__(self, K1, K2, omega=100 * jnp.pi, *, ts=1e-4, rule=None):
+        self.K1 = check_positive("K1", K1, "SOGI2")
+        self.K2 = check_positive("K2", K2, "SOGI2")
+        self.omega = check_positive("omega", omega, "SOGI2")
+        self.ts = check_sample_time("ts", ts, "SOGI2")
+        self.rule = check_rule(Tustin() if rule is None else rule, "SOGI2")
+
+    def f(self, x, u):
+        return jnp.stack(sogi2_vf(x[0], x[1], x[2], x[3], u, self.omega, self.K1, self.K2))
+
+    def output(self, x):
+        return QSGOutput(v_alpha=x[2], v_beta=x[3])
+
+    def initial_state(self):
+        return jnp.zeros((4,), dtype=self.omega.dtype)

@@ -1,0 +1,156 @@
+"""Test waveforms for signal-level observers, as scan-friendly functions of time.
+
+A :class:`GridSignal` is a PyTree whose leaves (amplitude, frequency, event
+time, step sizes, harmonic magnitudes, …) may carry a leading batch axis; it is
+called as ``sig(t)`` inside a scan or ``vmap``.  Every disturbance switches on
+at ``t_event`` (one rule for all of them, so that a test is "settle, then
+disturb"):
+
+    θ(t) = ω₀ t + φ₀ + [t ≥ tₑ] (2π Δf (t − tₑ) + Δφ)
+    v(t) = V₀ (1 − [t ≥ tₑ] sag) cos θ
+           + [t ≥ tₑ] ( Σₕ Vₕ cos(h θ) + dc + V_sub cos(2π f_sub t) )
+
+``sag`` is the *depth* of the sag (the amplitude falls by ``sag·V₀``).  Paper 001
+writes "a 0.75 p.u. voltage sag" (Test 3) and "a 0.5 p.u. voltage sag" (Test B)
+without saying whether the figure is the depth or the retained voltage; we read
+it as the depth (Test 3 leaves 0.25 p.u.), the harder of the two readings.
+
+Tests 1–3 (model accuracy, 001 Sec. V) and A–E (performance, 001 Sec. VI) are
+built by :func:`paper001_test`.
+"""
+
+from __future__ import annotations
+
+import math
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+
+from ._validate import as_float, check_nonnegative, check_positive, check_real
+
+__all__ = ["GridSignal", "paper001_test", "PAPER001_TESTS", "TEST_C_HARMONICS", "stack"]
+
+# 001 Test C: V3 ≈ 0.054, V5 ≈ 0.048, V7 ≈ 0.022, V9 ≈ 0.005, V11 ≈ 0.012, V13 ≈ 0.006 p.u.
+TEST_C_HARMONICS = {3: 0.054, 5: 0.048, 7: 0.022, 9: 0.005, 11: 0.012, 13: 0.006}
+
+
+class GridSignal(eqx.Module):
+    """Single-phase test voltage with a settle-then-disturb event (see module doc)."""
+
+    amplitude: jax.Array  # V₀ before the event (input units, > 0)
+    freq: jax.Array  # f₀, Hz (> 0)
+    phase: jax.Array  # φ₀, rad
+    t_event: jax.Array  # tₑ, s (>= 0)
+    freq_step: jax.Array  # Δf, Hz
+    phase_jump: jax.Array  # Δφ, rad
+    sag: jax.Array  # sag depth, fraction of V₀ in [0, 1)
+    dc: jax.Array  # dc step, input units
+    harmonics: jax.Array  # Vₕ for each of `orders`, shape (..., len(orders))
+    sub_amplitude: jax.Array  # V_sub, input units
+    sub_freq: jax.Array  # f_sub, Hz (>= 0)
+    orders: tuple[int, ...] = eqx.field(static=True)
+
+    def __init__(
+        self,
+        amplitude=1.0,
+        freq=50.0,
+        phase=0.0,
+        t_event=0.2,
+        *,
+        freq_step=0.0,
+        phase_jump=0.0,
+        sag=0.0,
+        dc=0.0,
+        harmonics=None,
+        sub_amplitude=0.0,
+        sub_freq=1.0,
+    ):
+        own = "GridSignal"
+        self.amplitude = check_positive("amplitude", amplitude, own)
+        self.freq = check_positive("freq", freq, own)
+        self.phase = check_real("phase", phase, owner=own)
+        self.t_event = check_nonnegative("t_event", t_event, own)
+        self.freq_step = check_real("freq_step", freq_step, owner=own)
+        self.phase_jump = check_real("phase_jump", phase_jump, owner=own)
+        self.sag = check_real("sag", sag, lower=0.0, lower_open=False, upper=0.999, owner=own)
+        self.dc = check_real("dc", dc, owner=own)
+        harmonics = dict(harmonics or {})
+        for h in harmonics:
+            if not (isinstance(h, int) and h >= 2):
+                raise ValueError(f"{own}.harmonics keys must be integer orders >= 2, got {h!r}")
+        self.orders = tuple(sorted(harmonics))
+        mags = [harmonics[h] for h in self.orders]
+        self.harmonics = check_nonnegative("harmonics", jnp.asarray(mags, dtype=jnp.result_type(float)) if mags else jnp.zeros((0,)), own)
+        self.sub_amplitude = check_nonnegative("sub_amplitude", sub_amplitude, own)
+        self.sub_freq = check_nonnegative("sub_freq", sub_freq, own)
+        if self.freq.ndim == 0 and not isinstance(self.freq, jax.core.Tracer):
+            f_after = float(self.freq) + float(jnp.max(jnp.atleast_1d(self.freq_step)))
+            if f_after <= 0:
+                raise ValueError(f"{own}.freq_step must keep the frequency > 0 Hz, got freq + freq_step = {f_after:g}")
+
+    def _on(self, t):
+        return (t >= self.t_event).astype(as_float(t).dtype)
+
+    def theta(self, t):
+        """True fundamental phase θ(t), rad (unwrapped)."""
+        on = self._on(t)
+        dt = jnp.maximum(t - self.t_event, 0.0)
+        return 2 * jnp.pi * self.freq * t + self.phase + on * (2 * jnp.pi * self.freq_step * dt + self.phase_jump)
+
+    def omega(self, t):
+        """True fundamental angular frequency ω(t), rad/s."""
+        return 2 * jnp.pi * (self.freq + self._on(t) * self.freq_step)
+
+    def fundamental_amplitude(self, t):
+        return self.amplitude * (1.0 - self._on(t) * self.sag)
+
+    def __call__(self, t):
+        on = self._on(t)
+        th = self.theta(t)
+        v = self.fundamental_amplitude(t) * jnp.cos(th)
+        for i, h in enumerate(self.orders):
+            v = v + on * self.harmonics[..., i] * jnp.cos(h * th)
+        v = v + on * (self.dc + self.sub_amplitude * jnp.cos(2 * jnp.pi * self.sub_freq * t))
+        return v
+
+
+PAPER001_TESTS = ("1", "2", "3", "A", "B", "C", "D", "E")
+
+
+def paper001_test(name: str, *, freq=50.0, amplitude=1.0, t_event=0.2, phase=0.0) -> GridSignal:
+    """The test signals of paper 001 (p.u. amplitude, 50 Hz nominal).
+
+    1: +2 Hz step;  2: +20° phase jump;  3: 0.75 p.u. sag (depth);
+    A: 50 → 52 Hz;  B: 0.5 p.u. sag with +60° jump;  C: harmonics 3–13 (THD ≈ 7.7 %);
+    D: +0.1 p.u. dc step;  E: 0.1 p.u. 1 Hz sub-harmonic.
+    """
+    key = str(name).upper()
+    # Every test carries the Test C harmonic orders (zero magnitude outside Test C)
+    # so that all eight share one static structure and stack into one batch.
+    no_harmonics = {h: 0.0 for h in TEST_C_HARMONICS}
+    kw = dict(amplitude=amplitude, freq=freq, phase=phase, t_event=t_event, harmonics=no_harmonics)
+    if key in ("1", "A"):
+        return GridSignal(**kw, freq_step=2.0)
+    if key == "2":
+        return GridSignal(**kw, phase_jump=math.radians(20.0))
+    if key == "3":
+        return GridSignal(**kw, sag=0.75)
+    if key == "B":
+        return GridSignal(**kw, sag=0.5, phase_jump=math.radians(60.0))
+    if key == "C":
+        kw["harmonics"] = {h: m * amplitude for h, m in TEST_C_HARMONICS.items()}
+        return GridSignal(**kw)
+    if key == "D":
+        return GridSignal(**kw, dc=0.1 * amplitude)
+    if key == "E":
+        return GridSignal(**kw, sub_amplitude=0.1 * amplitude, sub_freq=1.0)
+    raise ValueError(f"test name must be one of {', '.join(PAPER001_TESTS)}, got {name!r}")
+
+
+def stack(modules):
+    """Stack equally-shaped modules (signals, observers, scenarios) along a new leading batch axis."""
+    modules = list(modules)
+    if not modules:
+        raise ValueError("stack needs at least one module")
+    return jax.tree.map(lambda *xs: jnp.stack(xs), *modules)

@@ -1,0 +1,1 @@
+"""Tuning jobs (objectives, gain parametrizations, optimizers, job files) — filled by the tuning issue."""
