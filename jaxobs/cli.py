@@ -1,6 +1,10 @@
 """The ``jaxobs`` command line.
 
-    jaxobs demo [--out DIR] [--json]     the FLL family on paper 001 Tests A–E
+    jaxobs demo [--out DIR] [--json]                       the FLL family on paper 001 Tests A–E
+    jaxobs closed-form {sogi-fll,wpf,wif,cleso} [--name value ...] [--json]
+                                                           closed-form gains, formula and source
+    jaxobs bode [--out DIR]                                the papers' Bode figures (000 Fig. 5,
+                                                           002 Fig. 4, 001 Fig. 14)
 
 Errors in the arguments end the program with one line on stderr and exit
 status 2; nothing prints a traceback for bad input.
@@ -41,6 +45,96 @@ def _cmd_demo(args) -> int:
     return 0 if all(r["ok"] for r in rows) else 1
 
 
+_CF_OPTIONS = {
+    "sogi-fll": ("k", "omega_n", "zeta"),
+    "wpf": ("omega_n", "zeta"),
+    "wif": ("omega_c", "b", "omega_n"),
+    "cleso": ("omega0", "rs", "lq"),
+}
+
+
+def closed_form_rows(design: str, values: dict) -> dict:
+    """Gains of a closed-form design with the formula and source of each (used by the CLI)."""
+    import math
+
+    from . import linear
+
+    pi = math.pi
+    if design == "sogi-fll":
+        k = values.get("k", 1 / math.sqrt(2))
+        wn = values.get("omega_n", 100 * pi)
+        zeta = values.get("zeta", 1 / math.sqrt(2))
+        obs = linear.sogi_fll_closed_form(k=k, omega_n=wn, zeta=zeta)
+        gains = [("k", float(obs.k), "chosen (001 uses 1/√2)", "001 Sec. II-B"),
+                 ("lam", float(obs.lam), "λ = k²ωn²/(8ζ²)", "001 eq (22)")]
+        inputs = dict(k=k, omega_n=wn, zeta=zeta)
+    elif design == "wpf":
+        wn = values.get("omega_n", 100 * pi)
+        zeta = values.get("zeta", 1 / math.sqrt(2))
+        obs = linear.wpf_closed_form(omega_n=wn, zeta=zeta)
+        gains = [("k1", float(obs.k1), "k1 = √2 (prefilter ζ = 1/√2)", "001 eq (26)"),
+                 ("k2", float(obs.k2), "k2 = k1 (amplitude poles coincide)", "001 Sec. III-B"),
+                 ("lam", float(obs.lam), "λ = 2(ζ+1)ωn²/(2ζ+1)³", "001 eq (29)")]
+        inputs = dict(omega_n=wn, zeta=zeta)
+    elif design == "wif":
+        wc = values.get("omega_c", 2 * pi * 18.8)
+        b = values.get("b", 1 + math.sqrt(2))
+        wn = values.get("omega_n", 100 * pi)
+        obs = linear.wif_closed_form(omega_c=wc, b=b, omega_n=wn)
+        pm = math.degrees(float(linear.symmetric_optimum_pm(b)))
+        gains = [("k1", float(obs.k1), "k1 = 2bωc/ωn", "001 eq (34)"),
+                 ("k2", float(obs.k2), "k2 = 2ωc/ωn", "001 eq (34)"),
+                 ("lam", float(obs.lam), "λ = 2ωc²/b", "001 eq (34)"),
+                 ("phase_margin_deg", pm, "PM = atan((b²−1)/(2b))", "001 eq (39)")]
+        inputs = dict(omega_c=wc, b=b, omega_n=wn)
+    elif design == "cleso":
+        if "rs" not in values or "lq" not in values:
+            raise ValueError("closed-form cleso needs --rs (stator resistance, ohm >= 0) and --lq (q-axis inductance, H > 0)")
+        w0 = values.get("omega0", 500 * pi)
+        g = linear.cleso_closed_form(w0, values["rs"], values["lq"])
+        gains = [("l1", float(g.l1), "l1 = 2ω0 − μ, μ = Rs/Lq", "002 eq (16)"),
+                 ("l2", float(g.l2), "l2 = ω0²", "002 eq (16)")]
+        inputs = dict(omega0=w0, rs=values["rs"], lq=values["lq"])
+    else:  # argparse restricts the choices
+        raise ValueError(f"design must be one of {', '.join(_CF_OPTIONS)}, got {design!r}")
+    return {
+        "design": design,
+        "inputs": inputs,
+        "gains": [dict(name=n, value=v, formula=f, source=src) for n, v, f, src in gains],
+    }
+
+
+def _cmd_closed_form(args) -> int:
+    _enable_x64()
+    values = {}
+    for name in ("k", "omega_n", "zeta", "omega_c", "b", "omega0", "rs", "lq"):
+        v = getattr(args, name)
+        if v is None:
+            continue
+        if name not in _CF_OPTIONS[args.design]:
+            allowed = ", ".join("--" + o.replace("_", "-") for o in _CF_OPTIONS[args.design])
+            raise ValueError(f"--{name.replace('_', '-')} does not apply to {args.design} (allowed: {allowed})")
+        values[name] = v
+    res = closed_form_rows(args.design, values)
+    if args.json:
+        print(json.dumps(res, indent=1))
+    else:
+        ins = ", ".join(f"{k} = {v:.6g}" for k, v in res["inputs"].items())
+        print(f"{args.design}: {ins}")
+        for g in res["gains"]:
+            print(f"  {g['name']:<18}{g['value']:>14.6g}   {g['formula']:<36}{g['source']}")
+    return 0
+
+
+def _cmd_bode(args) -> int:
+    _enable_x64()
+    from .plot import paper_bode_figures
+
+    for p in paper_bode_figures(args.out):
+        print(p)
+    return 0
+
+
 class _Parser(argparse.ArgumentParser):
     def error(self, message):  # one line, exit 2, no usage dump
         self.exit(2, f"jaxobs: error: {message}\n")
@@ -54,6 +148,23 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument("--json", action="store_true", help="print the table as JSON rows")
     d.add_argument("--t-event", type=float, default=0.2, help="time of the test event, s (default 0.2)")
     d.set_defaults(func=_cmd_demo)
+
+    c = sub.add_parser("closed-form", help="closed-form gains with formula and source equation")
+    c.add_argument("design", choices=list(_CF_OPTIONS), help="which design rule")
+    c.add_argument("--k", type=float, help="SOGI gain k (sogi-fll)")
+    c.add_argument("--omega-n", dest="omega_n", type=float, help="nominal frequency, rad/s (default 100π)")
+    c.add_argument("--zeta", type=float, help="damping ratio (default 1/√2)")
+    c.add_argument("--omega-c", dest="omega_c", type=float, help="crossover, rad/s (wif, default 2π·18.8)")
+    c.add_argument("--b", type=float, help="symmetric-optimum factor b > 1 (wif, default 1+√2)")
+    c.add_argument("--omega0", type=float, help="LESO bandwidth, rad/s (cleso, default 500π)")
+    c.add_argument("--rs", type=float, help="stator resistance, ohm (cleso)")
+    c.add_argument("--lq", type=float, help="q-axis inductance, H (cleso)")
+    c.add_argument("--json", action="store_true", help="print JSON")
+    c.set_defaults(func=_cmd_closed_form)
+
+    b = sub.add_parser("bode", help="Bode figures of the papers' flux observers, LESOs and FLL loops")
+    b.add_argument("--out", default="out", help="folder for the figures (default: out)")
+    b.set_defaults(func=_cmd_bode)
     return p
 
 

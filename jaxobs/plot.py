@@ -45,3 +45,87 @@ def fll_demo_figure(traces, tests, t_event, path=None):
         fig.savefig(path, dpi=110)
         plt.close(fig)
     return fig
+
+
+def bode_figure(tfs: dict, omega, title: str, path=None, hz: bool = True, mark=None):
+    """Bode magnitude (dB) and phase (deg) of several transfer functions on one grid.
+
+    Complex-coefficient filters are plotted over negative and positive frequency
+    when ``omega`` contains both signs (their response is not conjugate-symmetric).
+    """
+    from .linear import bode
+
+    plt = _plt()
+    omega = np.asarray(omega)
+    x = omega / (2 * math.pi) if hz else omega
+    fig, (ax_m, ax_p) = plt.subplots(2, 1, figsize=(7.5, 6), sharex=True)
+    for name, tf in tfs.items():
+        mag, ph = bode(tf, omega)
+        ax_m.plot(x, np.asarray(mag), lw=1.3, label=name)
+        ax_p.plot(x, np.asarray(ph), lw=1.3, label=name)
+    if np.all(omega > 0):
+        ax_m.set_xscale("log")
+    if mark is not None:
+        for ax in (ax_m, ax_p):
+            ax.axvline(mark / (2 * math.pi) if hz else mark, color="k", lw=0.6, ls=":")
+    ax_m.set_ylabel("magnitude (dB)")
+    ax_p.set_ylabel("phase (deg)")
+    ax_p.set_xlabel("frequency (Hz)" if hz else "ω (rad/s)")
+    for ax in (ax_m, ax_p):
+        ax.grid(True, which="both", alpha=0.3)
+    ax_m.legend(fontsize=8)
+    ax_m.set_title(title)
+    fig.tight_layout()
+    if path is not None:
+        fig.savefig(path, dpi=110)
+        plt.close(fig)
+    return fig
+
+
+def paper_bode_figures(out_dir):
+    """The three Bode figures of the papers: 000 Fig. 5, 002 Fig. 4, 001 Fig. 14. Returns the paths."""
+    from pathlib import Path
+
+    from . import linear
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    w1 = 100 * math.pi
+    paths = []
+    # 000 Fig. 5: ω' = 100π, ωc = 100, k = 1.414, K1 = 1.56, K2 = 3.11
+    flux = {
+        "pure integrator": linear.integrator_flux_tf(),
+        "LPF (ωc = 100)": linear.lpf_flux_tf(100.0),
+        "SOIFO (k = 1.414)": linear.soifo_tf(1.414, w1),
+        "second-order SOIFO (K1 = 1.56, K2 = 3.11)": linear.sosoifo_tf(1.56, 3.11, w1),
+    }
+    p = out / "bode_flux_observers_000_fig5.png"
+    bode_figure(flux, np.logspace(0, 5, 2000), "Paper 000 Fig. 5: flux observers ψ̂/e", p, mark=w1)
+    paths.append(p)
+    # 002 Fig. 4 / Table II (two-sided, the FA-LESO is complex)
+    leso = {
+        "C-LESO (ω0 = 500π)": linear.cleso_tf(500 * math.pi),
+        "GI-LESO (Kr = 2ω0², ωc = π)": linear.gileso_tf(500 * math.pi, 2 * (500 * math.pi) ** 2, math.pi, w1),
+        "FA-LESO (k1 = 10π, k2 = 100π)": linear.faleso_tf(10 * math.pi, 100 * math.pi, w1),
+    }
+    wpos = np.logspace(0, 4.5, 1200)
+    omega = np.concatenate([-wpos[::-1], wpos])
+    p = out / "bode_lesos_002_fig4.png"
+    fig = bode_figure(leso, omega, "Paper 002 Fig. 4: LESOs ê/e at ω̂e = 100π (two-sided)", None, mark=w1)
+    for ax in fig.axes:
+        ax.set_xscale("symlog", linthresh=10)
+    fig.savefig(p, dpi=110)
+    _plt().close(fig)
+    paths.append(p)
+    # 001 Fig. 14: open loops θ̂/(θ − θ̂), Table I gains
+    s, wp, wi = linear.sogi_fll_closed_form(), linear.wpf_closed_form(), linear.wif_closed_form()
+    fll = {
+        "SOGI-FLL": linear.sogi_fll_model(s.k, s.lam, s.omega_n).open_loop,
+        "SOGI-FLL-WPF": linear.wpf_model(wp.k1, wp.k2, wp.lam, wp.omega_n).open_loop,
+        "SOGI-FLL-WIF": linear.wif_model(wi.k1, wi.k2, wi.lam, wi.omega_n).open_loop,
+    }
+    p = out / "bode_fll_open_loop_001_fig14.png"
+    bode_figure(fll, np.logspace(0, 4, 1500), "Paper 001 Fig. 14: FLL open loops, Table I gains", p,
+                mark=2 * math.pi * 18.8)
+    paths.append(p)
+    return paths

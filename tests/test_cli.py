@@ -26,3 +26,30 @@ def test_bad_arguments_exit_with_one_line():
         lines = p.stderr.strip().splitlines()
         assert len(lines) == 1 and lines[0].startswith("jaxobs: error:"), p.stderr
         assert "Traceback" not in p.stderr
+
+
+def test_closed_form_json_reports_formula_and_source(capsys):
+    assert main(["closed-form", "wif", "--json"]) == 0
+    res = json.loads(capsys.readouterr().out)
+    gains = {g["name"]: g for g in res["gains"]}
+    assert round(gains["k1"]["value"], 3) == 1.815 and round(gains["k2"]["value"], 3) == 0.752
+    assert round(gains["lam"]["value"]) == 11559
+    assert gains["lam"]["source"] == "001 eq (34)" and "2ωc²/b" in gains["lam"]["formula"]
+    assert main(["closed-form", "cleso", "--rs", "0.5", "--lq", "0.012", "--omega0", "1000"]) == 0
+    out = capsys.readouterr().out
+    assert "l2" in out and "1e+06" in out
+
+
+def test_closed_form_bad_options_exit_2(capsys):
+    assert main(["closed-form", "wif", "--k", "2"]) == 2
+    assert "--k does not apply to wif" in capsys.readouterr().err
+    assert main(["closed-form", "cleso"]) == 2
+    assert "--rs" in capsys.readouterr().err
+    assert main(["closed-form", "sogi-fll", "--zeta", "-1"]) == 2
+    assert "zeta" in capsys.readouterr().err
+
+
+def test_bode_figures(tmp_path):
+    assert main(["bode", "--out", str(tmp_path)]) == 0
+    names = sorted(p.name for p in tmp_path.iterdir())
+    assert names == ["bode_fll_open_loop_001_fig14.png", "bode_flux_observers_000_fig5.png", "bode_lesos_002_fig4.png"]

@@ -1,9 +1,4 @@
-"""Linear analysis: transfer functions as coefficient arrays, responses, the papers'
-small-signal models and closed-form tuning rules.
-
-Transfer functions hold numerator and denominator coefficients (highest power
-first, as ``jnp.polyval``), real or complex, so frequency responses and
-anything computed from them are differentiable with respect to gains.
+"""Paper 001 (SOGI-FLL family): small-signal models and closed-form tuning rules.
 
 Closed forms are pure functions that return the same observer modules the
 simulator runs, so a closed-form design and a tuned one are compared directly.
@@ -14,14 +9,13 @@ from __future__ import annotations
 import math
 
 import equinox as eqx
-import jax
 import jax.numpy as jnp
-import jax.scipy.linalg as jsl
 
-from ._validate import as_float, check_positive, check_real
+from .._validate import as_float, check_positive, check_real
+from ._tf import TransferFunction
 
 __all__ = [
-    "TransferFunction",
+    "FLLModel",
     "sogi_fll_model",
     "wpf_model",
     "wif_model",
@@ -35,78 +29,6 @@ __all__ = [
 ]
 
 
-class TransferFunction(eqx.Module):
-    """G(s) = num(s) / den(s), coefficients highest power first."""
-
-    num: jax.Array
-    den: jax.Array
-
-    def __init__(self, num, den):
-        num = jnp.atleast_1d(jnp.asarray(num))
-        den = jnp.atleast_1d(jnp.asarray(den))
-        dtype = jnp.result_type(num, den, float)
-        self.num = num.astype(dtype)
-        self.den = den.astype(dtype)
-
-    def __call__(self, s):
-        return jnp.polyval(self.num, s) / jnp.polyval(self.den, s)
-
-    def freqresp(self, omega):
-        return self(1j * as_float(omega))
-
-    def state_space(self):
-        """Controllable canonical form (A, B, C, D) of a proper G."""
-        den = self.den / self.den[0]
-        num = self.num / self.den[0]
-        n = den.shape[0] - 1
-        if num.shape[0] > n + 1:
-            raise ValueError(f"TransferFunction must be proper: numerator degree {num.shape[0]-1} > denominator degree {n}")
-        num = jnp.concatenate([jnp.zeros(n + 1 - num.shape[0], num.dtype), num])
-        d = num[0]
-        b = num[1:] - d * den[1:]  # strictly proper part, highest power first
-        a = jnp.zeros((n, n), den.dtype).at[0, :].set(-den[1:])
-        a = a.at[1:, :-1].set(jnp.eye(n - 1, dtype=den.dtype)) if n > 1 else a
-        bvec = jnp.zeros((n, 1), den.dtype).at[0, 0].set(1.0)
-        c = b[None, :]
-        return a, bvec, c, d
-
-    def _zoh(self, dt: float):
-        a, b, c, d = self.state_space()
-        n = a.shape[0]
-        m = jnp.zeros((n + 1, n + 1), a.dtype).at[:n, :n].set(a).at[:n, n:].set(b)
-        em = jsl.expm(m * dt)
-        return em[:n, :n], em[:n, n:], c, d
-
-    def lsim_zoh(self, u, dt: float, x0=None):
-        """Response to samples ``u`` held over each ``dt`` (exact ZOH discretization)."""
-        ad, bd, c, d = self._zoh(dt)
-        x = jnp.zeros((ad.shape[0], 1), ad.dtype) if x0 is None else x0
-
-        def body(x, uk):
-            y = (c @ x)[0, 0] + d * uk
-            return ad @ x + bd * uk, y
-
-        _, y = jax.lax.scan(body, x, u)
-        return y
-
-    def step(self, t):
-        """Unit-step response at uniformly spaced times ``t`` (exact for a step at t[0])."""
-        dt = float(t[1] - t[0])
-        return self.lsim_zoh(jnp.ones_like(t), dt)
-
-    def impulse(self, t):
-        """Unit-impulse response C e^{At} B of a strictly proper G at uniformly spaced ``t``."""
-        dt = float(t[1] - t[0])
-        ad, _, c, _ = self._zoh(dt)
-        _, b, _, _ = self.state_space()
-
-        def body(x, _):
-            return ad @ x, (c @ x)[0, 0]
-
-        _, y = jax.lax.scan(body, b, None, length=t.shape[0])
-        return y
-
-
 # --------------------------------------------------------------------------
 # paper 001 small-signal models (θ̂/θ, ω̂/ω and V̂/V)
 # --------------------------------------------------------------------------
@@ -116,28 +38,40 @@ class FLLModel(eqx.Module):
     amplitude: TransferFunction  # V̂/V
     phase: TransferFunction  # θ̂/θ
     frequency: TransferFunction  # ω̂/ω
+    open_loop: TransferFunction  # θ̂/(θ − θ̂), the loop of 001 Fig. 14
 
 
 def sogi_fll_model(k, lam, omega_n) -> FLLModel:
     """001 eqs (18)–(20)."""
     kw = k * omega_n / 2
     den = jnp.stack([jnp.ones_like(kw), kw, lam / 2])
+    zero = jnp.zeros_like(kw)
     return FLLModel(
         amplitude=TransferFunction(jnp.stack([kw]), jnp.stack([jnp.ones_like(kw), kw])),
         phase=TransferFunction(jnp.stack([kw, lam / 2]), den),
         frequency=TransferFunction(jnp.stack([lam / 2]), den),
+        # (kωn/2)(s + λ/(kωn)) / s²
+        open_loop=TransferFunction(jnp.stack([kw, lam / 2]), jnp.stack([jnp.ones_like(kw), zero, zero])),
     )
 
 
 def wpf_model(k1, k2, lam, omega_n) -> FLLModel:
-    """001 eqs (23)–(25)."""
+    """001 eqs (23)–(25).
+
+    001 notes that Fig. 4 "does not have a standard form"; rearranged, the loop
+    whose closed loop is (24) is L = T/(1 − T) = (b1b2 s + d)/(s² (s + b1 + b2)),
+    b_i = k_iωn/2, d = k1λωn/4 — the open loop drawn in Fig. 14.
+    """
     b1, b2 = k1 * omega_n / 2, k2 * omega_n / 2
     one = jnp.ones_like(b1)
-    den = jnp.stack([one, b1 + b2, b1 * b2, k1 * lam * omega_n / 4])
+    zero = jnp.zeros_like(b1)
+    d = k1 * lam * omega_n / 4
+    den = jnp.stack([one, b1 + b2, b1 * b2, d])
     return FLLModel(
         amplitude=TransferFunction(jnp.stack([b1 * b2]), jnp.stack([one, b1 + b2, b1 * b2])),
-        phase=TransferFunction(jnp.stack([b1 * b2, k1 * lam * omega_n / 4]), den),
-        frequency=TransferFunction(jnp.stack([k1 * lam * omega_n / 4]), den),
+        phase=TransferFunction(jnp.stack([b1 * b2, d]), den),
+        frequency=TransferFunction(jnp.stack([d]), den),
+        open_loop=TransferFunction(jnp.stack([b1 * b2, d]), jnp.stack([one, b1 + b2, zero, zero])),
     )
 
 
@@ -147,11 +81,14 @@ def wif_model(k1, k2, lam, omega_n) -> FLLModel:
     b = k1 * omega_n / 2
     d = k1 * lam * omega_n / 4
     one = jnp.ones_like(a)
+    zero = jnp.zeros_like(a)
     den = jnp.stack([one, b, a, d])
     return FLLModel(
         amplitude=TransferFunction(jnp.stack([a]), jnp.stack([one, b, a])),
         phase=TransferFunction(jnp.stack([a, d]), den),
         frequency=TransferFunction(jnp.stack([d]), den),
+        # eq (33): (k1k2ωn²/4)(s + λ/(k2ωn)) / (s² (s + k1ωn/2))
+        open_loop=TransferFunction(jnp.stack([a, d]), jnp.stack([one, b, zero, zero])),
     )
 
 
@@ -182,7 +119,7 @@ def symmetric_optimum_pm(b):
 
 def sogi_fll_closed_form(k=1 / math.sqrt(2), omega_n=100 * math.pi, zeta=1 / math.sqrt(2), **kw):
     """A :class:`~jaxobs.SOGIFLL` tuned by 001 eq (22) (Table I: k = 1/√2, λ = 12337)."""
-    from .observers.fll import SOGIFLL
+    from ..observers.fll import SOGIFLL
 
     check_positive("k", k, "sogi_fll_closed_form")
     check_positive("zeta", zeta, "sogi_fll_closed_form")
@@ -191,7 +128,7 @@ def sogi_fll_closed_form(k=1 / math.sqrt(2), omega_n=100 * math.pi, zeta=1 / mat
 
 def wpf_closed_form(omega_n=100 * math.pi, zeta=1 / math.sqrt(2), **kw):
     """A :class:`~jaxobs.SOGIFLLWPF` tuned by 001 eq (29) (Table I: k1 = k2 = √2, λ = 23948)."""
-    from .observers.fll import SOGIFLLWPF
+    from ..observers.fll import SOGIFLLWPF
 
     check_positive("zeta", zeta, "wpf_closed_form")
     return SOGIFLLWPF(k1=math.sqrt(2), k2=math.sqrt(2), lam=wpf_lambda(as_float(omega_n), zeta), omega_n=omega_n, **kw)
@@ -203,7 +140,7 @@ def wif_closed_form(omega_c=2 * math.pi * 18.8, b=1 + math.sqrt(2), omega_n=100 
     Defaults are 001's: b = 1 + √2 (ζ = 1/√2, PM = 45°), ωc = 2π·18.8 rad/s
     (Table I: k1 = 1.815, k2 = 0.752, λ = 11559).
     """
-    from .observers.fll import SOGIFLLWIF
+    from ..observers.fll import SOGIFLLWIF
 
     check_real("b", b, lower=1.0, owner="wif_closed_form")
     check_positive("omega_c", omega_c, "wif_closed_form")

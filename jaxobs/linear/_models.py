@@ -1,0 +1,230 @@
+"""Small-signal models of papers 000 (flux observers) and 002 (back-EMF LESOs).
+
+Paper 000 (Xu et al., TPEL 2018): transfer functions from back EMF e_r to the
+estimated rotor flux ψ̂_r (Table III and eqs 15, 20), their dc and harmonic
+gains (eqs 16, 21, 29, 36) and the second-order SOGI's Tustin coefficients
+(eqs 22–25).
+
+Paper 002 (Li et al.): transfer functions from the true to the estimated
+equivalent BEMF ê/e (Table II, eqs 15–17, 21/26, 29–30), the C-LESO closed
+form (16), and the position errors caused by Rs and Lq mismatch (41)–(43).
+
+Misprints found in the papers, and what we use instead:
+
+- 000 Table III writes the second-order SOIFO's s³ coefficient as K2 ω'³; the
+  body's eq (20) has K2 ω' (dimensionally the only possibility: every term of
+  the quartic must scale as ω'⁴).  We use eq (20).
+- 000 eqs (24)–(25): the coefficients b0, a1…a4 and both numerators agree
+  with a generic Tustin substitution to rounding (tests/test_linear.py), so
+  no misprint survives there in our copy.
+- 000 Sec. III-B, item 4: "magnitude … decays at rates of −20 and −60 dB/decade
+  at lower and higher frequencies".  Below ω' the second-order SOIFO's gain
+  *rises* at +20 dB/decade (H ∝ s); it is the attenuation of low frequencies
+  that grows at 20 dB/decade.  Above ω' it falls at −60 dB/decade as stated.
+"""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+
+from .._validate import as_float, check_positive, check_real
+from ._tf import DiscreteTransferFunction, TransferFunction
+
+__all__ = [
+    "integrator_flux_tf",
+    "lpf_flux_tf",
+    "soifo_tf",
+    "sosoifo_tf",
+    "sogi2_tf",
+    "flux_dc_gain",
+    "soifo_harmonic_factor",
+    "sosoifo_harmonic_factor",
+    "lpf_compensation",
+    "sogi2_tustin_paper",
+    "cleso_tf",
+    "leso_tf",
+    "gileso_tf",
+    "faleso_tf",
+    "CLESOGains",
+    "cleso_closed_form",
+    "faleso_is_stable",
+    "position_error_rs",
+    "position_error_lq",
+]
+
+# --------------------------------------------------------------------------
+# paper 000: flux observers, ψ̂/e
+# --------------------------------------------------------------------------
+
+
+def integrator_flux_tf() -> TransferFunction:
+    """Pure integrator 1/s (000 eq 6)."""
+    return TransferFunction([1.0], [1.0, 0.0])
+
+
+def lpf_flux_tf(omega_c) -> TransferFunction:
+    """Low-pass filter 1/(s + ωc) (000, Sec. II)."""
+    return TransferFunction([1.0], jnp.stack([jnp.ones_like(as_float(omega_c)), as_float(omega_c)]))
+
+
+def soifo_tf(k, omega) -> TransferFunction:
+    """SOIFO (000 eq 15): (1/ω') Q(s) = k ω' / (s² + k ω' s + ω'²)."""
+    k, w = as_float(k), as_float(omega)
+    return TransferFunction(jnp.stack([k * w]), jnp.stack([jnp.ones_like(w), k * w, w * w]))
+
+
+def _sogi2_den(K1, K2, w):
+    return jnp.stack([jnp.ones_like(w), K2 * w, (2 + K1 * K2) * w**2, K2 * w**3, w**4])
+
+
+def sosoifo_tf(K1, K2, omega) -> TransferFunction:
+    """Second-order SOIFO (000 eq 20): K1K2ω'² s / (s⁴ + K2ω's³ + (2+K1K2)ω'²s² + K2ω'³s + ω'⁴)."""
+    K1, K2, w = as_float(K1), as_float(K2), as_float(omega)
+    return TransferFunction(jnp.stack([K1 * K2 * w**2, jnp.zeros_like(w)]), _sogi2_den(K1, K2, w))
+
+
+def sogi2_tf(K1, K2, omega):
+    """Second-order SOGI outputs (000 eqs 17–18): (D1, Q1) = (v'/v, qv'/v)."""
+    K1, K2, w = as_float(K1), as_float(K2), as_float(omega)
+    z = jnp.zeros_like(w)
+    d1 = TransferFunction(jnp.stack([K1 * K2 * w**2, z, z]), _sogi2_den(K1, K2, w))
+    q1 = TransferFunction(jnp.stack([K1 * K2 * w**3, z]), _sogi2_den(K1, K2, w))
+    return d1, q1
+
+
+def flux_dc_gain(tf: TransferFunction):
+    """Final value of ψ̂ for a unit dc back EMF: lim_{s→0} s·H(s)·(1/s) = H(0) (000 eqs 29, 36).
+
+    Infinite for the pure integrator (the ramp A₀t of eq 10).
+    """
+    return tf.dcgain()
+
+
+def soifo_harmonic_factor(h, k):
+    """000 eq (16): amplitude of the h-th harmonic relative to a pure integrator, 1/√((1−h²)²/(k²h²) + 1)."""
+    h = as_float(h)
+    return 1.0 / jnp.sqrt((1 - h**2) ** 2 / (k**2 * h**2) + 1)
+
+
+def sosoifo_harmonic_factor(h, K1, K2):
+    """000 eq (21): 1/√([1 − h²(2+K1K2) + h⁴]²/(h²K1K2)² + (hK2 − h³K2)²/(h²K1K2)²)."""
+    h = as_float(h)
+    a = (1 - h**2 * (2 + K1 * K2) + h**4) / (h**2 * K1 * K2)
+    b = (h * K2 - h**3 * K2) / (h**2 * K1 * K2)
+    return 1.0 / jnp.sqrt(a**2 + b**2)
+
+
+def lpf_compensation(omega_1, omega_c):
+    """Gain and rotation that turn the LPF's output at ω1 into the integrator's (000 eq 11).
+
+    The LPF passes the fundamental as A₁/√(ω₁² + ωc²) at −0.5π + θ₁ with
+    θ₁ = atan(ωc/ω₁), instead of the integrator's A₁/ω₁ at −0.5π.  Returns
+    (gain, phase) with gain·e^{j·phase}·H_LPF(jω₁) = 1/(jω₁), i.e.
+    gain = √(ω₁² + ωc²)/ω₁ and phase = −θ₁.  Needs ω₁, hence a speed estimate.
+    """
+    w1, wc = as_float(omega_1), as_float(omega_c)
+    h = 1.0 / (1j * w1 + wc)
+    target = 1.0 / (1j * w1)
+    ratio = target / h
+    return jnp.abs(ratio), jnp.angle(ratio)
+
+
+def sogi2_tustin_paper(K1, K2, omega, ts):
+    """000 eqs (22)–(25): the Tustin coefficients of the second-order SOGI, as printed.
+
+    u = 2K1K2ω'²Ts², v = 8K2ω'Ts, w = 4(2+K1K2)ω'²Ts², x = 2K2ω'³Ts³, y = ω'⁴Ts⁴;
+    b0 = u/Σ, a1 = (−64 − 2v + 2x + 4y)/Σ, a2 = (96 − 2w + 6y)/Σ,
+    a3 = (−64 + 2v − 2x + 4y)/Σ, a4 = (16 − v + w − x + y)/Σ with Σ = 16 + v + w + x + y;
+    Q1(z) = b0 ω'Ts (1 + 2z⁻¹ − 2z⁻³ − z⁻⁴)/A(z),  D1(z) = 2b0 (1 − 2z⁻² + z⁻⁴)/A(z).
+
+    Returns (D1, Q1) as discrete transfer functions.
+    """
+    K1, K2, w = as_float(K1), as_float(K2), as_float(omega)
+    u = 2 * K1 * K2 * w**2 * ts**2
+    v = 8 * K2 * w * ts
+    ww = 4 * (2 + K1 * K2) * w**2 * ts**2
+    x = 2 * K2 * w**3 * ts**3
+    y = w**4 * ts**4
+    sig = 16 + v + ww + x + y
+    b0 = u / sig
+    a = jnp.stack([jnp.ones_like(w), (-64 - 2 * v + 2 * x + 4 * y) / sig, (96 - 2 * ww + 6 * y) / sig,
+                   (-64 + 2 * v - 2 * x + 4 * y) / sig, (16 - v + ww - x + y) / sig])
+    q_num = b0 * w * ts * jnp.asarray([1.0, 2.0, 0.0, -2.0, -1.0])
+    d_num = 2 * b0 * jnp.asarray([1.0, 0.0, -2.0, 0.0, 1.0])
+    return DiscreteTransferFunction(d_num, a, ts=float(ts)), DiscreteTransferFunction(q_num, a, ts=float(ts))
+
+
+# --------------------------------------------------------------------------
+# paper 002: back-EMF LESOs, ê/e
+# --------------------------------------------------------------------------
+
+
+def leso_tf(l1, l2, mu) -> TransferFunction:
+    """LESO with constant gains (002 eq 15): l2 / (s² + (μ + l1) s + l2)."""
+    l1, l2, mu = as_float(l1), as_float(l2), as_float(mu)
+    return TransferFunction(jnp.stack([l2]), jnp.stack([jnp.ones_like(l2), mu + l1, l2]))
+
+
+def cleso_tf(omega0) -> TransferFunction:
+    """C-LESO with the gains of (16) (002 eq 17): ω0² / (s + ω0)²."""
+    w = as_float(omega0)
+    return TransferFunction(jnp.stack([w * w]), jnp.stack([jnp.ones_like(w), 2 * w, w * w]))
+
+
+def gileso_tf(omega0, K_r, omega_c, omega_e) -> TransferFunction:
+    """GI-LESO (002 eqs 29–30): (G + ω0²)/(s² + 2ω0 s + G + ω0²), G = 2K_r ωc s/(s² + 2ωc s + ω̂e²)."""
+    w0, kr, wc, we = (as_float(a) for a in (omega0, K_r, omega_c, omega_e))
+    one = jnp.ones_like(w0)
+    gi_den = jnp.stack([one, 2 * wc, we * we])  # s² + 2ωc s + ω̂²
+    # numerator: 2Kr ωc s + ω0² (s² + 2ωc s + ω̂²)
+    num = jnp.stack([w0**2, 2 * kr * wc + 2 * wc * w0**2, w0**2 * we**2])
+    den = jnp.convolve(jnp.stack([one, 2 * w0, 0 * one]), gi_den) + jnp.concatenate([jnp.zeros(2), num])
+    return TransferFunction(num, den)
+
+
+def faleso_tf(k1, k2, omega_e) -> TransferFunction:
+    """FA-LESO, a complex-coefficient filter (002 eqs 21, 26): (k2 s + k1)/(s² + (k2 − jω̂e) s + k1).
+
+    Acts on the complex vector e_α + j e_β: positive-sequence components are at
+    +ω, the 5th harmonic (negative sequence) at −5ω̂e, the 7th at +7ω̂e.
+    """
+    k1, k2, we = as_float(k1), as_float(k2), as_float(omega_e)
+    one = jnp.ones_like(k1)
+    return TransferFunction(jnp.stack([k2, k1]).astype(complex), jnp.stack([one + 0j, k2 - 1j * we, k1 + 0j]))
+
+
+def faleso_is_stable(k1, k2, omega_e):
+    """Generalized Routh test on 002 eq (22) (stable iff k1 > 0 and k2 > 0, eq 24)."""
+    from ._tf import is_hurwitz
+
+    return is_hurwitz(faleso_tf(k1, k2, omega_e).den)
+
+
+class CLESOGains(eqx.Module):
+    """Constant LESO gains (002 eq 16) with the μ = Rs/Lq they were designed for."""
+
+    l1: jax.Array
+    l2: jax.Array
+    omega0: jax.Array
+
+
+def cleso_closed_form(omega0, Rs, Lq) -> CLESOGains:
+    """002 eq (16): l1 = 2ω0 − μ, l2 = ω0², μ = Rs/Lq; both poles at −ω0."""
+    w0 = check_positive("omega0", omega0, "cleso_closed_form")
+    rs = check_real("Rs", Rs, lower=0.0, lower_open=False, owner="cleso_closed_form")
+    lq = check_positive("Lq", Lq, "cleso_closed_form")
+    mu = rs / lq
+    return CLESOGains(l1=2 * w0 - mu, l2=w0**2, omega0=w0)
+
+
+def position_error_rs(delta_rs, i_d, i_q, e_ex):
+    """002 eq (42): Δθ = atan(−ΔRs î_d / (E_ex − ΔRs î_q)), rad."""
+    return jnp.arctan2(-delta_rs * i_d, e_ex - delta_rs * i_q)
+
+
+def position_error_lq(delta_lq, i_d, i_q, e_ex, omega_e):
+    """002 eq (43): Δθ = atan(ΔLq î_q / (E_ex/ω̂e − ΔLq î_d)), rad."""
+    return jnp.arctan2(delta_lq * i_q, e_ex / omega_e - delta_lq * i_d)
+
