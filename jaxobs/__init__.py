@@ -1,6 +1,6 @@
 """jaxobs — a differentiable JAX simulator for tuning sensorless motor-drive observers and FLLs."""
 
-from . import linear as linear, metrics as metrics, signals as signals
+from . import drive as drive, linear as linear, metrics as metrics, signals as signals
 from .discretize import AB3 as AB3, Euler as Euler, Held as Held, Knots as Knots, RK4 as RK4, Tustin as Tustin
 from .observers import (
     FLLOutput as FLLOutput,

@@ -284,3 +284,18 @@ def test_bad_arguments_raise_value_error_naming_the_field(ctor, kwargs, field):
 def test_bad_test_name():
     with pytest.raises(ValueError, match="test name"):
         jaxobs.paper001_test("Z")
+
+
+def test_gradients_stay_finite_through_the_zero_initial_state():
+    """Amplitude √(v'² + qv'²) and phase atan2 are evaluated at the zero initial state; their
+    gradients there must not be NaN (see jaxobs/_math.py)."""
+    obs = linear.sogi_fll_closed_form()
+    sig = jaxobs.paper001_test("B", t_event=0.05)
+
+    def loss(o):
+        sol = jaxobs.simulate(o, sig, 0.1)
+        return jnp.mean((sol.out.amplitude - sol.truth.amplitude) ** 2) + jnp.mean(metrics.wrap(sol.out.theta - sol.truth.theta) ** 2)
+
+    g = eqx.filter_grad(loss)(obs)
+    assert np.isfinite(float(g.k)) and np.isfinite(float(g.lam))
+    assert float(g.k) != 0.0

@@ -20,6 +20,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
+from .._math import safe_atan2, safe_norm2
 from .._validate import check_positive, check_sample_time
 from ..discretize import AB3, AbstractRule
 from ._cores import fll_rate, sogi2_vf, sogi_vf
@@ -37,7 +38,7 @@ class FLLOutput(NamedTuple):
 
 
 def _fll_output(y, q, w):
-    return FLLOutput(v_alpha=y, v_beta=q, amplitude=jnp.sqrt(y * y + q * q), theta=jnp.arctan2(q, y), omega=w)
+    return FLLOutput(v_alpha=y, v_beta=q, amplitude=safe_norm2(y, q), theta=safe_atan2(q, y), omega=w)
 
 
 class SOGIFLL(AbstractObserver):

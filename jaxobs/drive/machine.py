@@ -1,0 +1,186 @@
+"""Permanent-magnet synchronous machine: parameters, presets and the plant vector field.
+
+Frames and scaling (motulator's conventions): space vectors are complex,
+x_ab = x_α + j x_β (stationary) and x_dq = x_ab e^{−jθe} (rotor), amplitude
+invariant (peak phase quantities), so power is P = (3/2) Re(u i*) and torque
+Te = (3/2) p Im(ψ* i) style expressions carry the 3/2.  Angles are electrical
+(θe = p θm); ``omega_m`` is the mechanical speed in rad/s.
+
+Plant, integrated in the rotor frame (the currents are smooth there):
+
+    Ld di_d/dt = u_d − Rs i_d + ωe Lq i_q − e_d
+    Lq di_q/dt = u_q − Rs i_q − ωe Ld i_d − e_q
+    J dωm/dt   = Te − TL − B ωm,       dθe/dt = p ωm
+
+with the PM back EMF, fundamental plus a negative-sequence 5th and a
+positive-sequence 7th harmonic in the stationary frame (relative amplitudes
+a5, a7 of the fundamental EMF):
+
+    e_ab = j ωe ψf (e^{jθe} + a5 e^{−j5θe} + a7 e^{j7θe})
+    e_dq = j ωe ψf (1 + a5 e^{−j6θe} + a7 e^{j6θe})
+
+(002 eq 5 is the fundamental: e_ab = ωe ψf [−sin θe, cos θe]).  Torque from the
+power balance, Te·ωm = (3/2) Re(e_dq i_dq*) + reluctance term:
+
+    Te = (3/2) p [ψf Re(j(1 + a5 e^{−j6θe} + a7 e^{j6θe}) i_dq*) + (Ld − Lq) i_d i_q].
+"""
+
+from __future__ import annotations
+
+import math
+import numbers
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+
+from .._validate import check_nonnegative, check_positive, check_real
+
+__all__ = ["PMSMParams", "spmsm_paper000", "ipmsm_paper002", "PlantState", "plant_vf", "torque", "bemf_dq", "bemf_ab"]
+
+
+class PMSMParams(eqx.Module):
+    """Machine parameters (SI).  ``p`` is static: it is a structural integer, not a gain."""
+
+    Rs: jax.Array  # stator resistance, Ω (>= 0)
+    Ld: jax.Array  # d-axis inductance, H (> 0)
+    Lq: jax.Array  # q-axis inductance, H (> 0)
+    psi_f: jax.Array  # PM flux linkage (peak, amplitude invariant), Wb (> 0)
+    J: jax.Array  # inertia, kg·m² (> 0)
+    B: jax.Array  # viscous friction, N·m·s/rad (>= 0)
+    a5: jax.Array  # 5th-harmonic BEMF amplitude / fundamental (negative sequence)
+    a7: jax.Array  # 7th-harmonic BEMF amplitude / fundamental (positive sequence)
+    T_rated: jax.Array  # rated torque, N·m (> 0)
+    n_rated: jax.Array  # rated speed, r/min (> 0)
+    p: int = eqx.field(static=True)  # pole pairs
+
+    def __init__(self, Rs, Ld, Lq, psi_f, J, p, *, B=0.0, a5=0.0, a7=0.0, T_rated=1.0, n_rated=1000.0):
+        own = "PMSMParams"
+        self.Rs = check_nonnegative("Rs", Rs, own)
+        self.Ld = check_positive("Ld", Ld, own)
+        self.Lq = check_positive("Lq", Lq, own)
+        self.psi_f = check_positive("psi_f", psi_f, own)
+        self.J = check_positive("J", J, own)
+        self.B = check_nonnegative("B", B, own)
+        self.a5 = check_real("a5", a5, lower=0.0, lower_open=False, upper=1.0, owner=own)
+        self.a7 = check_real("a7", a7, lower=0.0, lower_open=False, upper=1.0, owner=own)
+        self.T_rated = check_positive("T_rated", T_rated, own)
+        self.n_rated = check_positive("n_rated", n_rated, own)
+        integral = isinstance(p, numbers.Integral) and not isinstance(p, bool)
+        if not integral and isinstance(p, float) and math.isfinite(p) and p.is_integer():
+            integral = True
+        if not integral or int(p) < 1:
+            raise ValueError(f"{own}.p (pole pairs) must be a positive integer, got {p!r}")
+        self.p = int(p)
+
+    @property
+    def kt(self):
+        """Torque constant at i_d = 0, N·m/A (peak current): (3/2) p ψf."""
+        return 1.5 * self.p * self.psi_f
+
+    @property
+    def i_rated(self):
+        """q-axis current for rated torque at i_d = 0, A (peak)."""
+        return self.T_rated / self.kt
+
+    def with_mismatch(self, dRs=0.0, dL=0.0, dpsi=0.0):
+        """A copy with relative errors: Rs(1 + dRs), Ld, Lq (1 + dL), ψf (1 + dpsi) — what an estimate assumes."""
+        return eqx.tree_at(
+            lambda m: (m.Rs, m.Ld, m.Lq, m.psi_f),
+            self,
+            (self.Rs * (1 + dRs), self.Ld * (1 + dL), self.Lq * (1 + dL), self.psi_f * (1 + dpsi)),
+        )
+
+
+def spmsm_paper000(**overrides) -> PMSMParams:
+    """Paper 000 Table II SPMSM: ψf = 0.35 Wb, 2000 r/min, 3 pole pairs, L = 5 mH, Rs = 0.8 Ω,
+    14 N·m, J = 3.78e-4 kg·m².  Friction is not given; B = 0 by default."""
+    kw = dict(Rs=0.8, Ld=5e-3, Lq=5e-3, psi_f=0.35, J=3.78e-4, p=3, B=0.0, T_rated=14.0, n_rated=2000.0)
+    kw.update(overrides)
+    return PMSMParams(**kw)
+
+
+def ipmsm_paper002(**overrides) -> PMSMParams:
+    """IPMSM for paper 002's operating points (ASSUMED values: our copy lacks 002's machine table).
+
+    002 runs 300/600/840 r/min at 25/50/70 Hz, so p = 5.  The rest is chosen as a
+    plausible ~2 kW lab machine and documented as assumed:
+
+    - Rs = 0.6 Ω, Ld = 6 mH, Lq = 12 mH (saliency 2, an IPMSM),
+    - ψf = 0.45 Wb: BEMF 141 V peak at 600 r/min, 198 V at 840 r/min,
+    - J = 5e-3 kg·m², B = 1e-3 N·m·s/rad, rated 30 N·m at 600 r/min (8.9 A at i_d = 0).
+
+    002's machine is dual three-phase under vector space decomposition; we model
+    its αβ subspace, the one the observers see (002 eqs 4–5), as an equivalent
+    three-phase machine.  Left out: the xy (harmonic) subspace and its currents,
+    the zero sequences and the mutual coupling between the two winding sets.
+    002 Sec. V-B runs one set alone to expose the 5th and 7th BEMF harmonics;
+    ``a5``/``a7`` model that case.
+    """
+    kw = dict(Rs=0.6, Ld=6e-3, Lq=12e-3, psi_f=0.45, J=5e-3, p=5, B=1e-3, T_rated=30.0, n_rated=600.0)
+    kw.update(overrides)
+    return PMSMParams(**kw)
+
+
+class PlantState(eqx.Module):
+    """x = [i_d, i_q, ωm, θe] as one flat array for the rules."""
+
+    x: jax.Array
+
+
+def _harmonic_factor(par: PMSMParams, theta_e):
+    """1 + a5 e^{−j6θ} + a7 e^{j6θ} as (re, im)."""
+    c6, s6 = jnp.cos(6 * theta_e), jnp.sin(6 * theta_e)
+    re = 1.0 + (par.a5 + par.a7) * c6
+    im = (par.a7 - par.a5) * s6
+    return re, im
+
+
+def bemf_dq(par: PMSMParams, omega_e, theta_e):
+    """e_dq = j ωe ψf (1 + a5 e^{−j6θ} + a7 e^{j6θ}), returns (e_d, e_q)."""
+    re, im = _harmonic_factor(par, theta_e)
+    k = omega_e * par.psi_f
+    return -k * im, k * re
+
+
+def bemf_ab(par: PMSMParams, omega_e, theta_e):
+    """e_ab = e_dq e^{jθe}, returns (e_α, e_β)."""
+    ed, eq = bemf_dq(par, omega_e, theta_e)
+    c, s = jnp.cos(theta_e), jnp.sin(theta_e)
+    return ed * c - eq * s, ed * s + eq * c
+
+
+def torque(par: PMSMParams, i_d, i_q, theta_e):
+    """Electromagnetic torque, N·m (see module doc)."""
+    re, im = _harmonic_factor(par, theta_e)
+    # Re(j h i*) with h = re + j im, i = i_d + j i_q:  j h = −im + j re;  Re((−im + j re)(i_d − j i_q)) = −im i_d + re i_q
+    pm = par.psi_f * (re * i_q - im * i_d)
+    return 1.5 * par.p * (pm + (par.Ld - par.Lq) * i_d * i_q)
+
+
+def plant_vf(par: PMSMParams, x, u_ab, t_load):
+    """dx/dt for x = [i_d, i_q, ωm, θe] under stationary-frame voltage ``u_ab = (u_α, u_β)``."""
+    i_d, i_q, w_m, th = x[0], x[1], x[2], x[3]
+    w_e = par.p * w_m
+    c, s = jnp.cos(th), jnp.sin(th)
+    u_d = c * u_ab[0] + s * u_ab[1]
+    u_q = -s * u_ab[0] + c * u_ab[1]
+    e_d, e_q = bemf_dq(par, w_e, th)
+    di_d = (u_d - par.Rs * i_d + w_e * par.Lq * i_q - e_d) / par.Ld
+    di_q = (u_q - par.Rs * i_q - w_e * par.Ld * i_d - e_q) / par.Lq
+    te = torque(par, i_d, i_q, th)
+    dw = (te - t_load - par.B * w_m) / par.J
+    return jnp.stack([di_d, di_q, dw, w_e])
+
+
+def dq_to_ab(d, q, theta):
+    c, s = jnp.cos(theta), jnp.sin(theta)
+    return d * c - q * s, d * s + q * c
+
+
+def ab_to_dq(a, b, theta):
+    c, s = jnp.cos(theta), jnp.sin(theta)
+    return a * c + b * s, -a * s + b * c
+
+
+RPM = 2 * math.pi / 60.0  # r/min → rad/s
