@@ -4,6 +4,11 @@ from . import drive as drive, linear as linear, metrics as metrics, signals as s
 from .discretize import AB3 as AB3, Euler as Euler, Held as Held, Knots as Knots, RK4 as RK4, Tustin as Tustin
 from .observers import (
     FLLOutput as FLLOutput,
+    LPFFlux as LPFFlux,
+    ObserverBank as ObserverBank,
+    PureIntegratorFlux as PureIntegratorFlux,
+    SecondOrderSOIFO as SecondOrderSOIFO,
+    SOIFO as SOIFO,
     ObserverState as ObserverState,
     SOGI as SOGI,
     SOGI2 as SOGI2,

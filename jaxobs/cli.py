@@ -5,6 +5,7 @@
                                                            closed-form gains, formula and source
     jaxobs bode [--out DIR]                                the papers' Bode figures (000 Fig. 5,
                                                            002 Fig. 4, 001 Fig. 14)
+    jaxobs reproduce flux [--out DIR] [--json] [--quick]   paper 000's experiments, paper vs ours
 
 Errors in the arguments end the program with one line on stderr and exit
 status 2; nothing prints a traceback for bad input.
@@ -135,6 +136,39 @@ def _cmd_bode(args) -> int:
     return 0
 
 
+def _cmd_reproduce(args) -> int:
+    _enable_x64()
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    if args.paper == "flux":
+        from .plot import flux_circles_figure, position_error_figure
+        from .reproduce.flux import OBSERVER_NAMES, format_rows, run_flux_experiments
+
+        rows, traces = run_flux_experiments(quick=args.quick)
+        figs = []
+        for key, fname in (("du_alpha = 5 V at 1000 r/min", "flux_circles_du_alpha_5V.png"), ("steady 400 r/min", "flux_circles_400rpm.png")):
+            p = out / fname
+            flux_circles_figure(traces[key], OBSERVER_NAMES, f"Paper 000: estimated flux, {key}", p)
+            figs.append(p)
+        for key, fname, t_from in (
+            ("load step 10 N·m at 2000 r/min", "position_error_load_step.png", 0.3),
+            ("speed 400-2000-400 r/min", "position_error_speed_variation.png", 0.8),
+            ("du_alpha = 5 V at 1000 r/min", "position_error_du_alpha_5V.png", 0.8),
+        ):
+            p = out / fname
+            position_error_figure(traces[key], OBSERVER_NAMES, f"Paper 000: {key}", p, t_from=t_from)
+            figs.append(p)
+        if args.json:
+            print(json.dumps(rows, indent=1))
+        else:
+            print("Paper 000 (second-order SOIFO) experiments on the simulated SPMSM drive — paper vs ours")
+            print(format_rows(rows))
+            for p in figs:
+                print(f"figure: {p}")
+        return 0 if all(r["ours"] for r in rows if r["metric"] == "finite") else 1
+    raise ValueError(f"reproduce: unknown paper {args.paper!r}")
+
+
 class _Parser(argparse.ArgumentParser):
     def error(self, message):  # one line, exit 2, no usage dump
         self.exit(2, f"jaxobs: error: {message}\n")
@@ -165,6 +199,13 @@ def build_parser() -> argparse.ArgumentParser:
     b = sub.add_parser("bode", help="Bode figures of the papers' flux observers, LESOs and FLL loops")
     b.add_argument("--out", default="out", help="folder for the figures (default: out)")
     b.set_defaults(func=_cmd_bode)
+
+    r = sub.add_parser("reproduce", help="reproduce a paper's experiments on the simulated drive")
+    r.add_argument("paper", choices=["flux"], help="flux: paper 000 (rotor-flux observers)")
+    r.add_argument("--out", default="out", help="folder for the figures (default: out)")
+    r.add_argument("--json", action="store_true", help="print rows {experiment, observer, metric, unit, paper, ours}")
+    r.add_argument("--quick", action="store_true", help="skip the long runs (20 r/min steady state, I-f start-up)")
+    r.set_defaults(func=_cmd_reproduce)
     return p
 
 

@@ -238,10 +238,10 @@ def solve_small(a, b):
     diagonally dominant, so elimination without pivoting is stable.  Unrolled
     elementwise code vectorizes across a vmapped batch; a batched LAPACK call
     per scenario made the Tustin rule 40× slower on CPU.  Falls back to
-    ``jnp.linalg.solve`` above 8 states.
+    ``jnp.linalg.solve`` above 12 states.
     """
     n = a.shape[0]
-    if n > 8:
+    if n > 12:
         return jnp.linalg.solve(a, b)
     rows = [a[i] for i in range(n)]
     rhs = [b[i] for i in range(n)]

@@ -129,3 +129,56 @@ def paper_bode_figures(out_dir):
                 mark=2 * math.pi * 18.8)
     paths.append(p)
     return paths
+
+
+def flux_circles_figure(sol, names, title, path=None, last: float = 0.1):
+    """Estimated rotor-flux circles (ψ̂β vs ψ̂α) of each observer over the last ``last`` seconds."""
+    plt = _plt()
+    t = np.asarray(sol.t)
+    m = t >= t[-1] - last
+    fig, axes = plt.subplots(1, len(names), figsize=(3.2 * len(names), 3.4), squeeze=False)
+    for ax, name, o in zip(axes[0], names, sol.obs.each):
+        pa, pb = np.asarray(o.psi_a)[m], np.asarray(o.psi_b)[m]
+        ax.plot(pa, pb, lw=0.8)
+        ax.set_aspect("equal", adjustable="datalim")
+        ax.axhline(0, color="k", lw=0.4)
+        ax.axvline(0, color="k", lw=0.4)
+        ax.set_title(name, fontsize=9)
+        ax.set_xlabel("ψ̂α (Wb)")
+        ax.grid(True, alpha=0.3)
+    axes[0, 0].set_ylabel("ψ̂β (Wb)")
+    fig.suptitle(title, fontsize=10)
+    fig.tight_layout()
+    if path is not None:
+        fig.savefig(path, dpi=110)
+        plt.close(fig)
+    return fig
+
+
+def position_error_figure(sol, names, title, path=None, t_from: float = 0.0):
+    """Wrapped position error θ̂e − θe of each observer, with the speed on a second axis."""
+    from .metrics import wrap
+
+    plt = _plt()
+    t = np.asarray(sol.t)
+    m = t >= t_from
+    fig, (ax_s, ax_e) = plt.subplots(2, 1, figsize=(9, 5.5), sharex=True)
+    ax_s.plot(t[m], np.asarray(sol.speed_rpm)[m], label="speed", lw=1)
+    ax_s.plot(t[m], np.asarray(sol.omega_m_ref)[m] * 30 / math.pi, "k--", lw=0.8, label="reference")
+    ax_s.set_ylabel("speed (r/min)")
+    ax_s.legend(fontsize=8)
+    for name, o in zip(names, sol.obs.each):
+        err = np.asarray(wrap(o.theta - sol.theta_e))[m]
+        ax_e.plot(t[m], err, lw=0.8, label=name)
+    ax_e.set_ylim(-1.7, 1.7)
+    ax_e.set_ylabel("θ̂e − θe (rad)")
+    ax_e.set_xlabel("time (s)")
+    ax_e.legend(fontsize=8, ncol=4)
+    for ax in (ax_s, ax_e):
+        ax.grid(True, alpha=0.3)
+    fig.suptitle(title, fontsize=10)
+    fig.tight_layout()
+    if path is not None:
+        fig.savefig(path, dpi=110)
+        plt.close(fig)
+    return fig

@@ -29,7 +29,7 @@ import jax.numpy as jnp
 
 from ._validate import as_float, check_nonnegative, check_positive, check_real
 
-__all__ = ["GridSignal", "paper001_test", "PAPER001_TESTS", "TEST_C_HARMONICS", "stack"]
+__all__ = ["GridSignal", "EMFSignal", "paper001_test", "PAPER001_TESTS", "TEST_C_HARMONICS", "stack"]
 
 # 001 Test C: V3 ≈ 0.054, V5 ≈ 0.048, V7 ≈ 0.022, V9 ≈ 0.005, V11 ≈ 0.012, V13 ≈ 0.006 p.u.
 TEST_C_HARMONICS = {3: 0.054, 5: 0.048, 7: 0.022, 9: 0.005, 11: 0.012, 13: 0.006}
@@ -154,3 +154,58 @@ def stack(modules):
     if not modules:
         raise ValueError("stack needs at least one module")
     return jax.tree.map(lambda *xs: jnp.stack(xs), *modules)
+
+
+class EMFSignal(eqx.Module):
+    """A two-axis back EMF for testing flux observers without a drive (000 eq 8).
+
+    e_ab(t) = A0 + A1 e^{j(ω1 t + φ1)}·(−j) … written per axis as
+    e_α = A0α + A1 cos(ω1 t + φ1) + Σ_h A_h cos(s_h h ω1 t),
+    e_β = A0β + A1 sin(ω1 t + φ1) + Σ_h s_h A_h sin(s_h h ω1 t),
+    with s_h = ±1 the sequence of harmonic h.  ``__call__(t)`` returns a
+    :class:`~jaxobs.drive.DriveInput` with u = e and i = 0, the voltage being the
+    *average* of e over the coming period [t, t + ts] — the same convention as
+    the drive, which tells the observer at t_k the voltage it applies over
+    [t_k, t_{k+1}].  The true rotor flux (∫e with no dc) is A1/ω1 (sin, −cos)
+    of the fundamental.
+    """
+
+    A1: jax.Array
+    omega1: jax.Array
+    phase: jax.Array
+    dc: jax.Array  # (A0α, A0β)
+    harmonics: jax.Array  # amplitudes A_h for `orders`
+    orders: tuple[int, ...] = eqx.field(static=True)  # signed: +7 positive, −5 negative sequence
+    ts: float = eqx.field(static=True)
+
+    def __init__(self, A1, omega1, phase=0.0, dc=(0.0, 0.0), harmonics=None, ts=1e-4):
+        self.A1 = check_positive("A1", A1, "EMFSignal")
+        self.omega1 = check_positive("omega1", omega1, "EMFSignal")
+        self.phase = check_real("phase", phase, owner="EMFSignal")
+        self.dc = as_float(jnp.asarray(dc, dtype=jnp.result_type(float)))
+        harmonics = dict(harmonics or {})
+        self.orders = tuple(sorted(harmonics, key=abs))
+        self.harmonics = as_float(jnp.asarray([harmonics[h] for h in self.orders], dtype=jnp.result_type(float))) if self.orders else jnp.zeros((0,))
+        self.ts = float(ts)
+
+    def _avg_cis(self, w, phi, t):
+        # average of (cos, sin)(w τ + phi) over τ ∈ [t, t + ts]
+        a1, a0 = w * (t + self.ts) + phi, w * t + phi
+        return (jnp.sin(a1) - jnp.sin(a0)) / (w * self.ts), (jnp.cos(a0) - jnp.cos(a1)) / (w * self.ts)
+
+    def emf(self, t):
+        ca, sa = self._avg_cis(self.omega1, self.phase, t)
+        ea = self.dc[0] + self.A1 * ca
+        eb = self.dc[1] + self.A1 * sa
+        for i, h in enumerate(self.orders):
+            ch, sh = self._avg_cis(h * self.omega1, 0.0, t)  # signed frequency: sequence in the sign
+            ea = ea + self.harmonics[i] * ch
+            eb = eb + self.harmonics[i] * sh
+        return ea, eb
+
+    def __call__(self, t):
+        from .drive.simulate import DriveInput
+
+        ea, eb = self.emf(t)
+        z = jnp.zeros_like(ea)
+        return DriveInput(u_a=ea, u_b=eb, i_a=z, i_b=z)

@@ -5,6 +5,8 @@ import math
 import subprocess
 import sys
 
+import pytest
+
 from jaxobs.cli import main
 
 
@@ -53,3 +55,16 @@ def test_bode_figures(tmp_path):
     assert main(["bode", "--out", str(tmp_path)]) == 0
     names = sorted(p.name for p in tmp_path.iterdir())
     assert names == ["bode_fll_open_loop_001_fig14.png", "bode_flux_observers_000_fig5.png", "bode_lesos_002_fig4.png"]
+
+
+@pytest.mark.slow
+def test_reproduce_flux_quick_json(tmp_path, capsys):
+    """The paper-000 reproduction runs end to end (about a minute) and prints comparable rows."""
+    assert main(["reproduce", "flux", "--quick", "--json", "--out", str(tmp_path)]) == 0
+    rows = json.loads(capsys.readouterr().out)
+    assert {"experiment", "observer", "metric", "unit", "paper", "ours"} <= set(rows[0])
+    by = {(r["experiment"], r["observer"], r["metric"]): r for r in rows}
+    lpf = by[("du_alpha = 5 V at 1000 r/min", "LPF", "flux_offset")]
+    assert lpf["paper"] == 0.05 and lpf["ours"] == pytest.approx(0.05, rel=0.02)
+    assert by[("speed 400-2000-400 r/min", "second-order SOIFO", "max_abs")]["ours"] < 0.2
+    assert len(list(tmp_path.glob("*.png"))) == 5

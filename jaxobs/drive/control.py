@@ -25,8 +25,8 @@ i_d* = 0 by default; ``id_mode="mtpa"`` gives the IPMSM's maximum torque per
 ampere, i_d = ψf/(2(Lq − Ld)) − √(ψf²/(4(Lq − Ld)²) + i_q²) (i_d = 0 for Ld = Lq).
 
 I-f start-up: the current vector of amplitude I_f is held along an angle
-θ_f whose frequency ramps at a fixed rate; when it reaches ω_switch the
-controller switches to the position it is given (observer or encoder) and the
+θ_f whose frequency ramps at a fixed rate; when it has reached ω_switch and
+stayed there ``hold`` seconds the controller switches to the position it is given (observer or encoder) and the
 speed loop, whose integrator starts at I_f for a bumpless transfer.
 """
 
@@ -51,11 +51,13 @@ class IfStartup(eqx.Module):
     i_f: jax.Array  # current amplitude during start-up, A (> 0)
     accel: jax.Array  # ramp rate of the electrical frequency, rad/s² (> 0)
     omega_switch: jax.Array  # electrical speed at which control switches to the given position, rad/s
+    hold: jax.Array  # time spent at omega_switch before switching (lets an observer converge), s
 
-    def __init__(self, i_f, accel, omega_switch):
+    def __init__(self, i_f, accel, omega_switch, hold=0.0):
         self.i_f = check_positive("i_f", i_f, "IfStartup")
         self.accel = check_positive("accel", accel, "IfStartup")
         self.omega_switch = check_positive("omega_switch", omega_switch, "IfStartup")
+        self.hold = check_nonnegative("hold", hold, "IfStartup")
 
 
 class ControllerState(eqx.Module):
@@ -65,6 +67,7 @@ class ControllerState(eqx.Module):
     iq_ref: jax.Array  # speed-loop output held between its samples, A
     theta_f: jax.Array  # I-f angle, rad
     omega_f: jax.Array  # I-f electrical frequency, rad/s
+    t_at_switch: jax.Array  # time spent at the switch-over frequency, s
     mode: jax.Array  # 0: I-f start-up, 1: closed loop on the given position
 
 
@@ -134,7 +137,7 @@ class FOC(eqx.Module):
     def init(self, startup: IfStartup | None = None) -> ControllerState:
         z = jnp.zeros_like(self.kp_d)
         mode = jnp.asarray(1 if startup is None else 0, dtype=jnp.int32)
-        return ControllerState(int_d=z, int_q=z, int_w=z, iq_ref=z, theta_f=z, omega_f=z, mode=mode)
+        return ControllerState(int_d=z, int_q=z, int_w=z, iq_ref=z, theta_f=z, omega_f=z, t_at_switch=z, mode=mode)
 
     def _id_ref(self, est: PMSMParams, iq):
         if self.id_mode == "zero":
@@ -157,11 +160,14 @@ class FOC(eqx.Module):
         if startup is not None:
             omega_f = jnp.minimum(cs.omega_f + startup.accel * ts, startup.omega_switch)
             theta_f = cs.theta_f + cs.omega_f * ts
-            switch = (cs.mode == 0) & (cs.omega_f >= startup.omega_switch)
+            at_top = cs.omega_f >= startup.omega_switch
+            t_at_switch = jnp.where(at_top, cs.t_at_switch + ts, cs.t_at_switch)
+            switch = (cs.mode == 0) & at_top & (t_at_switch >= startup.hold)
             mode = jnp.where(switch, 1, cs.mode)
             int_w0 = jnp.where(switch, startup.i_f, cs.int_w)
         else:
             omega_f, theta_f, mode, int_w0 = cs.omega_f, cs.theta_f, cs.mode, cs.int_w
+            t_at_switch = cs.t_at_switch
         closed = mode == 1
         th = jnp.where(closed, theta, theta_f)
         w_e = jnp.where(closed, omega_e, omega_f)
@@ -202,6 +208,8 @@ class FOC(eqx.Module):
         co, so = jnp.cos(th_out), jnp.sin(th_out)
         u_a = co * u_d - so * u_q
         u_b = so * u_d + co * u_q
-        new = ControllerState(int_d=int_d, int_q=int_q, int_w=int_w, iq_ref=iq_ref, theta_f=theta_f, omega_f=omega_f, mode=mode)
+        new = ControllerState(
+            int_d=int_d, int_q=int_q, int_w=int_w, iq_ref=iq_ref, theta_f=theta_f, omega_f=omega_f, t_at_switch=t_at_switch, mode=mode
+        )
         return new, (u_a, u_b), (id_ref, iq_ref)
 

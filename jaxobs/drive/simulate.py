@@ -7,7 +7,9 @@ One scan step is one control period T_s (10 kHz by default), as on a DSP:
    t_{k−1}: the one-sample computation delay), plus the voltage-sensor errors;
 2. the observer steps on (u_ab, i_ab) and reports θ̂e, ω̂e at t_k;
 3. the controller uses the encoder (``sensorless=False``) or the observer's
-   θ̂e, ω̂e and computes the voltage to apply over [t_{k+1}, t_{k+2}];
+   θ̂e, ω̂e (from ``handover`` on; the encoder before, while the observer
+   converges — or an I-f start-up) and computes the voltage to apply over
+   [t_{k+1}, t_{k+2}];
 4. the plant integrates over [t_k, t_{k+1}] in ``n_sub`` substeps of a
    discretization rule, under the applied voltage (limited, plus the dead-time
    error of the instantaneous current) and the load at t_k.
@@ -60,8 +62,9 @@ class Drive(eqx.Module):
     n_sub: int = eqx.field(static=True)  # plant substeps per control period
     rule: AbstractRule = eqx.field(static=True)  # plant integration rule
     sensorless: bool = eqx.field(static=True)
+    handover: float = eqx.field(static=True)  # sensorless: encoder until this time (s), observer after
 
-    def __init__(self, foc, inverter=None, *, startup=None, n_sub=2, rule=None, sensorless=False):
+    def __init__(self, foc, inverter=None, *, startup=None, n_sub=2, rule=None, sensorless=False, handover=0.0):
         if not isinstance(foc, FOC):
             raise ValueError(f"Drive.foc must be a FOC, got {type(foc).__name__}")
         self.foc = foc
@@ -72,6 +75,9 @@ class Drive(eqx.Module):
         self.n_sub = n_sub
         self.rule = check_rule(RK4() if rule is None else rule, "Drive")
         self.sensorless = bool(sensorless)
+        if not (handover >= 0.0):
+            raise ValueError(f"Drive.handover must be >= 0 s, got {handover!r}")
+        self.handover = float(handover)
 
     @property
     def ts(self) -> float:
@@ -146,7 +152,10 @@ def simulate_drive(drive: Drive, scenario: Scenario, t1: float, observer=None) -
         else:
             obs_state, obs_out = None, None
         if drive.sensorless:
-            th_c, w_e_c = obs_out.theta, obs_out.omega
+            # before the hand-over time the encoder runs the drive while the observer converges
+            use_obs = t >= drive.handover
+            th_c = jnp.where(use_obs, obs_out.theta, th)
+            w_e_c = jnp.where(use_obs, obs_out.omega, par.p * w_m)
             w_m_c = w_e_c / par.p
         else:
             th_c, w_e_c, w_m_c = th, par.p * w_m, w_m

@@ -7,6 +7,7 @@ All functions are JAX functions of the coefficients: differentiable w.r.t. gains
 
 from ._fll import (
     FLLModel as FLLModel,
+    pll_gains as pll_gains,
     sogi_fll_closed_form as sogi_fll_closed_form,
     sogi_fll_lambda as sogi_fll_lambda,
     sogi_fll_model as sogi_fll_model,

@@ -23,6 +23,7 @@ __all__ = [
     "wpf_lambda",
     "wif_symmetric_optimum",
     "symmetric_optimum_pm",
+    "pll_gains",
     "sogi_fll_closed_form",
     "wpf_closed_form",
     "wif_closed_form",
@@ -110,6 +111,11 @@ def wpf_lambda(omega_n, zeta=1 / math.sqrt(2)):
 def wif_symmetric_optimum(b, omega_c, omega_n):
     """001 eq (34): k1 = 2 b ωc / ωn, k2 = 2 ωc / ωn, λ = 2 ωc² / b."""
     return 2 * b * omega_c / omega_n, 2 * omega_c / omega_n, 2 * omega_c**2 / b
+
+
+def pll_gains(bandwidth, zeta=1 / math.sqrt(2)):
+    """Type-2 PLL on a normalized error: k_p = 2ζω_b, k_i = ω_b² (θ̂/θ = (k_p s + k_i)/(s² + k_p s + k_i))."""
+    return 2 * zeta * bandwidth, bandwidth**2
 
 
 def symmetric_optimum_pm(b):

@@ -79,3 +79,22 @@ def safe_sq_amplitude(y, q, v_floor):
 def fll_rate(err, q, y, lam, v_floor):
     """Normalized FLL, 001 eq (8): ω̂̇ = −λ · err · q / V̂²."""
     return -lam * err * q / safe_sq_amplitude(y, q, v_floor)
+
+
+def pll_vf(theta_p, omega_p, err, kp, ki):
+    """Type-2 PLL on a normalized phase error ``err`` ≈ sin(θ − θ_p):
+
+        θ̇_p = ω_p + k_p err,    ω̇_p = k_i err.
+
+    Linearized, θ_p/θ = (k_p s + k_i)/(s² + k_p s + k_i); the closed form
+    k_p = 2ζω_b, k_i = ω_b² places both poles at natural frequency ω_b with
+    damping ζ (:func:`jaxobs.linear.pll_gains`).
+    """
+    return omega_p + kp * err, ki * err
+
+
+def quadrature_error(x_a, x_b, theta_p, floor):
+    """Normalized quadrature phase detector for a vector (x_a, x_b) = |x|(cos θ, sin θ):
+    (x_b cos θ_p − x_a sin θ_p)/|x| = sin(θ − θ_p)."""
+    mag = jnp.sqrt(jnp.maximum(x_a * x_a + x_b * x_b, floor * floor))
+    return (x_b * jnp.cos(theta_p) - x_a * jnp.sin(theta_p)) / mag

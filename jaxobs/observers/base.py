@@ -6,16 +6,24 @@ leaves, with pure ``init`` and ``step``:
     state = obs.init()
     state, out = obs.step(state, u)      # u: one input sample (or an input path)
 
-``step`` returns the outputs computed from the state *before* the update, so
-``out`` at sample n is the estimate at t_n built from inputs up to n − 1: the
-observer is strictly causal, as on a DSP, and its outputs line up with a
+``out`` at sample n is always the estimate *at* t_n, built only from data a
+DSP has at t_n:
+
+- signal-level observers (the FLL family) see a sample v(t_n) but not the
+  signal over [t_n, t_{n+1}], so ``step`` returns the outputs of the state
+  *before* the update (inputs up to n − 1 integrated up to t_n);
+- drive observers (flux observers, LESOs) at t_n know the current i_n and
+  the voltage applied over the period that just ended, so ``step``
+  integrates that period and returns the outputs at t_n.
+
+Either way the observer is strictly causal and its outputs line up with a
 continuous-time reference sampled at t_n.
 """
 
 from __future__ import annotations
 
 import abc
-from typing import Any
+from typing import Any, NamedTuple
 
 import equinox as eqx
 import jax
@@ -73,3 +81,28 @@ class AbstractObserver(eqx.Module):
     def vector_field(self, t, x, signal):
         """``f(t, x, args)`` for ``diffrax.ODETerm``: ``args`` is a signal, called at t."""
         return self.f(x, signal(t))
+
+
+class BankOutput(NamedTuple):
+    theta: Any  # the primary observer's θ̂e (what a sensorless controller uses)
+    omega: Any  # the primary observer's ω̂e
+    each: tuple  # every observer's own outputs, in order
+
+
+class ObserverBank(eqx.Module):
+    """Several observers fed the same measurements; ``primary`` closes the loop when sensorless.
+
+    Lets one drive simulation compare observers on identical data (000's
+    per-observer position errors) without them disturbing each other.
+    """
+
+    observers: tuple
+    primary: int = eqx.field(static=True, default=0)
+
+    def init(self, u0=None):
+        return tuple(o.init() for o in self.observers)
+
+    def step(self, state, u):
+        pairs = [o.step(s, u) for o, s in zip(self.observers, state)]
+        outs = tuple(p[1] for p in pairs)
+        return tuple(p[0] for p in pairs), BankOutput(theta=outs[self.primary].theta, omega=outs[self.primary].omega, each=outs)

@@ -1,0 +1,1 @@
+"""Paper reproductions run on the simulated drives (``jaxobs reproduce ...``)."""
