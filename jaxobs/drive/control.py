@@ -27,7 +27,8 @@ ampere, i_d = ψf/(2(Lq − Ld)) − √(ψf²/(4(Lq − Ld)²) + i_q²) (i_d = 
 I-f start-up: the current vector of amplitude I_f is held along an angle
 θ_f whose frequency ramps at a fixed rate; when it has reached ω_switch and
 stayed there ``hold`` seconds the controller switches to the position it is given (observer or encoder) and the
-speed loop, whose integrator starts at I_f for a bumpless transfer.
+speed loop, whose integrator starts at the q-axis current the rotor carries at that moment,
+I_f cos(θ_f − θ̂), for a bumpless transfer (I_f itself would be a torque step at no load).
 """
 
 from __future__ import annotations
@@ -164,7 +165,9 @@ class FOC(eqx.Module):
             t_at_switch = jnp.where(at_top, cs.t_at_switch + ts, cs.t_at_switch)
             switch = (cs.mode == 0) & at_top & (t_at_switch >= startup.hold)
             mode = jnp.where(switch, 1, cs.mode)
-            int_w0 = jnp.where(switch, startup.i_f, cs.int_w)
+            # bumpless transfer: start the speed integrator at the q-current the rotor
+            # actually carries, i_f cos(θ_f − θ) (the I-f vector is i_f along θ_f + 90°)
+            int_w0 = jnp.where(switch, startup.i_f * jnp.cos(theta_f - theta), cs.int_w)
         else:
             omega_f, theta_f, mode, int_w0 = cs.omega_f, cs.theta_f, cs.mode, cs.int_w
             t_at_switch = cs.t_at_switch
