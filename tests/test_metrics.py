@@ -1,0 +1,73 @@
+"""Metrics: exact values on known signals, and smooth surrogates converging to the exact ones."""
+
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from jaxobs import metrics as M
+
+T = jnp.linspace(0.0, 1.0, 10001)
+
+
+def _response(t, t_event=0.2, tau=0.05):
+    return jnp.where(t >= t_event, 1 - jnp.exp(-(t - t_event) / tau) * jnp.cos(40 * (t - t_event)), 0.0)
+
+
+def test_settling_time_exact_and_smooth_converges():
+    x = _response(T)
+    exact = float(M.settling_time(T, x, 1.0, 0.02, 0.2))
+    dt = float(T[1] - T[0])
+    # exact: the envelope e^{-t/τ} falls below 2 % at τ ln 50 = 0.1956 s (the cosine makes it a little earlier)
+    assert 0.17 < exact <= 0.1957
+    errs = []
+    for temp in (1e-2, 1e-3, 1e-4, 1e-5):
+        smooth = float(M.smooth_settling_time(T, x, 1.0, 0.02, 0.2, temperature=temp, sharpness=0.02 * temp))
+        errs.append(abs(smooth - (exact - dt)))
+    assert errs[-1] < 2 * dt
+    assert errs[0] > errs[-1]
+    # and it has a gradient w.r.t. a parameter of the response
+    g = jax.grad(lambda tau: M.smooth_settling_time(T, _response(T, tau=tau), 1.0, 0.02, 0.2))(0.05)
+    assert np.isfinite(float(g)) and float(g) > 0
+
+
+def test_smooth_max_and_peak_to_peak_converge():
+    x = jnp.sin(2 * math.pi * 5 * T) + 0.3
+    mask = T > 0.5
+    exact_pp = float(M.peak_to_peak(x, mask))
+    assert exact_pp == pytest.approx(2.0, abs=1e-6)
+    errs = [abs(float(M.smooth_peak_to_peak(x, mask, temp)) - exact_pp) for temp in (0.1, 0.01, 0.001)]
+    assert errs[0] > errs[1] > errs[2] and errs[2] < 0.02
+    assert float(M.smooth_abs(jnp.asarray(-0.3), 1e-8)) == pytest.approx(0.3)
+
+
+def test_overshoot_iae_itae():
+    x = _response(T)
+    os_ = float(M.overshoot(x, 1.0, 0.0, T >= 0.2))
+    assert 0.0 < os_ < 0.6
+    e = jnp.where(T >= 0.2, jnp.exp(-(T - 0.2) / 0.05), 0.0)
+    assert float(M.iae(T, e, 0.2)) == pytest.approx(0.05 * (1 - math.exp(-16)), rel=2e-3)
+    assert float(M.itae(T, e, 0.2)) == pytest.approx(0.05**2, rel=2e-3)
+
+
+def test_harmonic_amplitude_dc_offset_and_imbalance():
+    w = 2 * math.pi * 50
+    mask = (T >= 0.5) & (T < 1.0)  # exactly 25 whole periods (5000 samples)
+    x = 0.1 + 0.35 * jnp.cos(w * T + 0.3) + 0.02 * jnp.sin(5 * w * T)
+    assert float(M.harmonic_amplitude(T, x, w, mask)) == pytest.approx(0.35, rel=1e-6)
+    assert float(M.harmonic_amplitude(T, x, 5 * w, mask)) == pytest.approx(0.02, rel=1e-5)
+    assert float(M.harmonic_amplitude(T, x, 0.0, mask)) == pytest.approx(0.1, rel=1e-6)
+    pa, pb = 0.05 + 0.35 * jnp.cos(w * T), 0.30 * jnp.sin(w * T)
+    assert float(M.flux_offset(pa, pb, mask)) == pytest.approx(0.05, rel=1e-6)
+    assert float(M.flux_imbalance(pa, pb, mask)) == pytest.approx(0.05, abs=1e-4)
+
+
+def test_wrap_and_moving_average():
+    assert float(M.wrap(jnp.asarray(3 * math.pi / 2))) == pytest.approx(-math.pi / 2)
+    assert float(M.wrap(jnp.asarray(math.pi))) == pytest.approx(math.pi)
+    ma = np.asarray(M.moving_average(jnp.arange(10.0), 3))
+    np.testing.assert_allclose(ma, [0, 0.5, 1, 2, 3, 4, 5, 6, 7, 8])
+    with pytest.raises(ValueError, match="window"):
+        M.moving_average(jnp.arange(3.0), 0)
