@@ -181,6 +181,34 @@ class TransferFunction(eqx.Module):
         _, y = jax.lax.scan(body, x0, None, length=t.shape[0])
         return y
 
+    def phasor_response(self, omega, t):
+        """Complex response to e^{jω(t − t[0])} switched on at t[0] from rest, exact at the samples.
+
+        For a real G this is the response to cos + j·sin; its distance from the
+        steady state G(jω) e^{jωt}, :meth:`phasor_transient`, is a smooth
+        envelope (no ripple at ω), which makes settling times continuous in
+        the coefficients.
+        """
+        a, b, c, d = self.state_space()
+        n = a.shape[0]
+        dt = float(t[1] - t[0])
+        cdt = jnp.result_type(a, 1j)
+        w = as_float(omega)
+        aug = jnp.zeros((n + 1, n + 1), cdt).at[:n, :n].set(a).at[:n, n].set(b[:, 0]).at[n, n].set(1j * w)
+        ead = jsl.expm(aug * dt)
+        x0 = jnp.zeros((n + 1,), cdt).at[n].set(1.0)
+
+        def body(x, _):
+            return ead @ x, c[0] @ x[:n] + d * x[n]
+
+        _, y = jax.lax.scan(body, x0, None, length=t.shape[0])
+        return y
+
+    def phasor_transient(self, omega, t):
+        """|y(t) − G(jω) e^{jω(t − t[0])}| for the switched-on phasor input: the decaying transient's envelope."""
+        y = self.phasor_response(omega, t)
+        return jnp.abs(y - self.freqresp(omega) * jnp.exp(1j * as_float(omega) * (t - t[0])))
+
     def settling_time(self, t, band=0.02):
         """Step-response settling time to within ``band`` of the final value (exact on the grid)."""
         from ..metrics import settling_time

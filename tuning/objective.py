@@ -1,0 +1,194 @@
+"""Objectives: a scenario batch × simulation × metric × aggregation over the batch.
+
+Per scenario the value is a weighted sum of metrics of one simulation; over the
+batch the values are aggregated by the mean, a smooth worst case (log-sum-exp
+with a temperature) or the CVaR (mean of the worst (1 − α) fraction).
+
+Divergence.  A scenario whose simulation is not finite, or whose value or
+gradient is not finite, is given a large finite ``penalty`` and a zero gradient
+(the penalty is a constant).  The objective is then never NaN and one bad
+scenario cannot poison the gradient of the others.  This is why the gradient
+is assembled per scenario (``vmap`` of ``value_and_grad``) and exposed through
+a ``jax.custom_jvp``: optax (reverse mode) and optimistix (forward or reverse)
+both see the sanitized derivative.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+
+from jaxobs import metrics as M
+from jaxobs.simulate import simulate
+
+from .params import Parametrization
+
+__all__ = ["METRICS", "Term", "Objective", "aggregate"]
+
+
+# --------------------------------------------------------------------------
+# per-scenario metrics (smooth where the exact one has no useful gradient)
+# --------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class MetricContext:
+    t_event: float
+    steady_from: float  # start of the steady window, s
+    band_hz: float = 0.05
+    temperature: float = 1e-3  # smooth max/settling temperature, s (or units of the metric)
+
+
+def _freq_err_hz(sol):
+    return (sol.out.omega - sol.truth.omega) / (2 * math.pi)
+
+
+def _phase_err(sol):
+    return M.wrap(sol.out.theta - sol.truth.theta)
+
+
+def _position_err(sol, sig):
+    """Flux observers on an EMF signal: ψ lags e by 90°, e_α = A1 cos(ω1 t + φ)."""
+    return M.wrap(sol.out.theta - (sig.omega1 * sol.t + sig.phase - math.pi / 2))
+
+
+def _steady(sol, ctx):
+    return sol.t >= ctx.steady_from
+
+
+METRICS: dict[str, Callable] = {
+    # FLL family on grid signals
+    "itae_freq": lambda sol, sig, ctx: M.itae(sol.t, _freq_err_hz(sol), ctx.t_event),
+    "iae_freq": lambda sol, sig, ctx: M.iae(sol.t, _freq_err_hz(sol), ctx.t_event),
+    "iae_phase": lambda sol, sig, ctx: M.iae(sol.t, _phase_err(sol), ctx.t_event),
+    "itae_phase": lambda sol, sig, ctx: M.itae(sol.t, _phase_err(sol), ctx.t_event),
+    "settling_freq": lambda sol, sig, ctx: M.smooth_settling_time(
+        sol.t, sol.out.omega / (2 * math.pi), sol.truth.omega[-1] / (2 * math.pi), ctx.band_hz, ctx.t_event, temperature=ctx.temperature
+    ),
+    "ripple_freq": lambda sol, sig, ctx: M.smooth_peak_to_peak(_freq_err_hz(sol), _steady(sol, ctx), 1e-3),
+    "rms_freq_steady": lambda sol, sig, ctx: M.rms(_freq_err_hz(sol), _steady(sol, ctx)),
+    "rms_phase_steady": lambda sol, sig, ctx: M.rms(_phase_err(sol), _steady(sol, ctx)),
+    # flux observers on EMF signals
+    "iae_position": lambda sol, sig, ctx: M.iae(sol.t, _position_err(sol, sig), ctx.t_event),
+    "rms_position_steady": lambda sol, sig, ctx: M.rms(_position_err(sol, sig), _steady(sol, ctx)),
+    "ripple_position": lambda sol, sig, ctx: M.smooth_peak_to_peak(_position_err(sol, sig), _steady(sol, ctx), 1e-4),
+}
+
+
+@dataclass(frozen=True)
+class Term:
+    metric: str
+    weight: float = 1.0
+
+
+# --------------------------------------------------------------------------
+# aggregation over the batch
+# --------------------------------------------------------------------------
+
+
+def aggregate(values, kind: str, alpha: float = 0.9, temperature: float | None = None):
+    """Aggregate per-scenario values: ``mean``, ``max`` (smooth, log-sum-exp) or ``cvar``.
+
+    ``max`` uses ``temperature`` in the units of the values (default: 1 % of
+    their mean magnitude); ``cvar`` the mean of the largest ⌈(1 − α)·B⌉ values.
+    """
+    if kind == "mean":
+        return jnp.mean(values)
+    if kind == "max":
+        t = temperature if temperature is not None else 0.01 * jax.lax.stop_gradient(jnp.mean(jnp.abs(values)) + 1e-30)
+        return M.smooth_max(values, t) + t * jnp.log(values.shape[0])
+    if kind == "cvar":
+        k = max(1, math.ceil((1 - alpha) * values.shape[0]))
+        return jnp.mean(jnp.sort(values)[-k:])
+    raise ValueError(f"aggregate must be 'mean', 'max' or 'cvar', got {kind!r}")
+
+
+# --------------------------------------------------------------------------
+# the objective
+# --------------------------------------------------------------------------
+
+
+class Objective:
+    """value(θ), value_and_grad(θ) and per-scenario scores for a component and a scenario batch."""
+
+    def __init__(self, component, param: Parametrization, scenarios, horizon: float, terms: list[Term], ctx: MetricContext,
+                 agg: str = "mean", alpha: float = 0.9, temperature: float | None = None, penalty: float = 1e3):
+        for term in terms:
+            if term.metric not in METRICS:
+                raise ValueError(f"objective metric {term.metric!r} is unknown; known: {', '.join(METRICS)}")
+        self.component = component
+        self.param = param
+        self.scenarios = scenarios
+        self.horizon = float(horizon)
+        self.terms = list(terms)
+        self.ctx = ctx
+        self.agg, self.alpha, self.temperature, self.penalty = agg, alpha, temperature, float(penalty)
+        self._vg = eqx.filter_jit(self._per_scenario_value_and_grad)
+        self._metrics = eqx.filter_jit(self._per_scenario_metrics)
+
+        @jax.custom_jvp
+        def value(theta):
+            return self._aggregate_with_grad(theta)[0]
+
+        @value.defjvp
+        def _value_jvp(primals, tangents):
+            (theta,), (tdot,) = primals, tangents
+            v, g = self._aggregate_with_grad(theta)
+            return v, jnp.dot(g, tdot)
+
+        self.value = value
+
+    # --- single scenario
+    def _one(self, theta, sig):
+        comp = self.param.apply(self.component, theta)
+        sol = simulate(comp, sig, self.horizon)
+        vals = [term.weight * METRICS[term.metric](sol, sig, self.ctx) for term in self.terms]
+        return sum(vals), sol.ok
+
+    def _per_scenario_value_and_grad(self, theta):
+        def vg(sig):
+            (v, ok), g = jax.value_and_grad(self._one, has_aux=True)(theta, sig)
+            return v, ok, g
+
+        v, ok, g = jax.vmap(vg)(self.scenarios)
+        good = ok & jnp.isfinite(v) & jnp.all(jnp.isfinite(g), axis=-1)
+        v = jnp.where(good, v, self.penalty)
+        g = jnp.where(good[:, None], g, 0.0)
+        return v, g, good
+
+    def _aggregate_with_grad(self, theta):
+        v, g, _ = self._vg(theta)
+        agg_v, w = jax.value_and_grad(lambda vv: aggregate(vv, self.agg, self.alpha, self.temperature))(v)
+        return agg_v, w @ g
+
+    def value_and_grad(self, theta):
+        return self._aggregate_with_grad(theta)
+
+    # --- reporting
+    def _per_scenario_metrics(self, theta, scenarios):
+        def one(sig):
+            comp = self.param.apply(self.component, theta)
+            sol = simulate(comp, sig, self.horizon)
+            return {term.metric: METRICS[term.metric](sol, sig, self.ctx) for term in self.terms}, sol.ok
+
+        return jax.vmap(one)(scenarios)
+
+    def scores(self, theta, scenarios=None) -> dict:
+        """Objective and each metric's mean and worst over ``scenarios`` (default: the tuning set)."""
+        scenarios = self.scenarios if scenarios is None else scenarios
+        mets, ok = self._metrics(theta, scenarios)
+        total = sum(term.weight * mets[term.metric] for term in self.terms)
+        good = ok & jnp.isfinite(total)
+        total = jnp.where(good, total, self.penalty)
+        out = {"objective": float(aggregate(total, self.agg, self.alpha, self.temperature)), "diverged": int(jnp.sum(~good))}
+        for term in self.terms:
+            m = jnp.where(good, mets[term.metric], jnp.nan)
+            out[f"{term.metric}_mean"] = float(jnp.nanmean(m))
+            out[f"{term.metric}_worst"] = float(jnp.nanmax(m))
+        out["per_scenario_worst"] = float(jnp.max(total))
+        return out
