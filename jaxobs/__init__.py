@@ -3,7 +3,10 @@
 from . import drive as drive, linear as linear, metrics as metrics, signals as signals
 from .discretize import AB3 as AB3, Euler as Euler, Held as Held, Knots as Knots, RK4 as RK4, Tustin as Tustin
 from .observers import (
+    CLESO as CLESO,
+    FALESO as FALESO,
     FLLOutput as FLLOutput,
+    GILESO as GILESO,
     LPFFlux as LPFFlux,
     ObserverBank as ObserverBank,
     PureIntegratorFlux as PureIntegratorFlux,

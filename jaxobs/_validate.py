@@ -81,3 +81,9 @@ def _range_text(lower, upper, lower_open):
 
 def _show(arr):
     return f"{arr.item():g}" if arr.ndim == 0 else np.array2string(arr, precision=4)
+
+
+def static_float(checked, raw) -> float:
+    """A checked scalar kept as a static Python float (from the raw value, so it also works in ``jit``)."""
+    del checked
+    return float(raw)

@@ -6,6 +6,7 @@
     jaxobs bode [--out DIR]                                the papers' Bode figures (000 Fig. 5,
                                                            002 Fig. 4, 001 Fig. 14)
     jaxobs reproduce flux [--out DIR] [--json] [--quick]   paper 000's experiments, paper vs ours
+    jaxobs reproduce leso [--out DIR] [--json]             paper 002's experiments, paper vs ours
 
 Errors in the arguments end the program with one line on stderr and exit
 status 2; nothing prints a traceback for bad input.
@@ -166,6 +167,29 @@ def _cmd_reproduce(args) -> int:
             for p in figs:
                 print(f"figure: {p}")
         return 0 if all(r["ours"] for r in rows if r["metric"] == "finite") else 1
+    if args.paper == "leso":
+        from .plot import position_error_figure
+        from .reproduce.flux import format_rows
+        from .reproduce.leso import LESO_NAMES, run_leso_experiments
+
+        rows, traces = run_leso_experiments()
+        figs = []
+        for key, fname, t_from in (
+            ("steady 600 r/min no load", "leso_position_error_600rpm.png", 0.4),
+            ("speed ramp 300-600-840-600-300 r/min", "leso_speed_ramp.png", 0.4),
+            ("load step 0-80 % at 600 r/min", "leso_load_step.png", 0.4),
+        ):
+            p = out / fname
+            position_error_figure(traces[key], LESO_NAMES, f"Paper 002: {key}", p, t_from=t_from)
+            figs.append(p)
+        if args.json:
+            print(json.dumps(rows, indent=1))
+        else:
+            print("Paper 002 (LESOs) experiments on the simulated IPMSM drive — paper vs ours")
+            print(format_rows(rows))
+            for p in figs:
+                print(f"figure: {p}")
+        return 0 if all(r["ours"] for r in rows if r["metric"] == "finite") else 1
     raise ValueError(f"reproduce: unknown paper {args.paper!r}")
 
 
@@ -201,7 +225,7 @@ def build_parser() -> argparse.ArgumentParser:
     b.set_defaults(func=_cmd_bode)
 
     r = sub.add_parser("reproduce", help="reproduce a paper's experiments on the simulated drive")
-    r.add_argument("paper", choices=["flux"], help="flux: paper 000 (rotor-flux observers)")
+    r.add_argument("paper", choices=["flux", "leso"], help="flux: paper 000 (rotor-flux observers); leso: paper 002 (LESOs)")
     r.add_argument("--out", default="out", help="folder for the figures (default: out)")
     r.add_argument("--json", action="store_true", help="print rows {experiment, observer, metric, unit, paper, ours}")
     r.add_argument("--quick", action="store_true", help="skip the long runs (20 r/min steady state, I-f start-up)")

@@ -23,7 +23,7 @@ import jax
 import jax.numpy as jnp
 
 from .._math import safe_norm2
-from .._validate import as_float, check_nonnegative, check_positive, check_real
+from .._validate import static_float as _static_float, as_float, check_nonnegative, check_positive, check_real
 
 __all__ = ["Inverter", "Sensors", "clarke_abc_to_ab", "ab_to_abc"]
 
@@ -49,7 +49,7 @@ class Inverter(eqx.Module):
     def __init__(self, udc=540.0, f_pwm=10e3, i_smooth=0.0):
         self.udc = check_positive("udc", udc, "Inverter")
         self.f_pwm = check_positive("f_pwm", f_pwm, "Inverter")
-        self.i_smooth = float(check_nonnegative("i_smooth", i_smooth, "Inverter"))
+        self.i_smooth = _static_float(check_nonnegative("i_smooth", i_smooth, "Inverter"), i_smooth)
 
     @property
     def u_max(self):

@@ -24,6 +24,7 @@ from ._models import (
     cleso_closed_form as cleso_closed_form,
     cleso_tf as cleso_tf,
     faleso_is_stable as faleso_is_stable,
+    faleso_pll_loop as faleso_pll_loop,
     faleso_tf as faleso_tf,
     flux_dc_gain as flux_dc_gain,
     gileso_tf as gileso_tf,

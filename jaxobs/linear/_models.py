@@ -50,6 +50,7 @@ __all__ = [
     "CLESOGains",
     "cleso_closed_form",
     "faleso_is_stable",
+    "faleso_pll_loop",
     "position_error_rs",
     "position_error_lq",
 ]
@@ -228,3 +229,35 @@ def position_error_lq(delta_lq, i_d, i_q, e_ex, omega_e):
     """002 eq (43): Δθ = atan(ΔLq î_q / (E_ex/ω̂e − ΔLq î_d)), rad."""
     return jnp.arctan2(delta_lq * i_q, e_ex / omega_e - delta_lq * i_d)
 
+
+
+def _poly_shift(c, a):
+    """Coefficients (highest first) of p(s + a) for p with coefficients ``c``."""
+    n = c.shape[0] - 1
+    out = jnp.zeros((n + 1,), jnp.result_type(c, a))
+    for k in range(n + 1):
+        p = jnp.ones((1,), out.dtype)
+        for _ in range(n - k):
+            p = jnp.convolve(p, jnp.stack([jnp.ones_like(a), a]).astype(out.dtype))
+        out = out.at[k:].add(c[k] * p)
+    return out
+
+
+def faleso_pll_loop(k1, k2, omega_e, kp, ki) -> TransferFunction:
+    """The PLL's open loop through the FA-LESO, linearized at ω̂e = ωe (real coefficients).
+
+    A small phase modulation δ of the BEMF reaches the FA-LESO's output through its
+    envelope response H(s) = G_FA(s + jωe) (complex); the angle the PLL detects is
+    filtered by H_φ(s) = (H(s) + H̄(s))/2, H̄ with conjugated coefficients.  The type-2 PLL
+    closes L(s) = H_φ(s)(k_p s + k_i)/s².  (The frequency-adaptation path — ω̂ fed back to
+    the FA-LESO — vanishes to first order at the operating point, since G_FA(jω̂) = 1
+    for every ω̂.)
+    """
+    g = faleso_tf(k1, k2, omega_e)
+    jw = 1j * as_float(omega_e)
+    h = TransferFunction(_poly_shift(g.num, jw), _poly_shift(g.den, jw))
+    hbar = TransferFunction(jnp.conj(h.num), jnp.conj(h.den))
+    hphi = 0.5 * (h + hbar)
+    hphi = TransferFunction(jnp.real(hphi.num), jnp.real(hphi.den))
+    pll = TransferFunction(jnp.stack([kp, ki]), jnp.stack([jnp.ones_like(kp), jnp.zeros_like(kp), jnp.zeros_like(kp)]))
+    return hphi * pll

@@ -4,3 +4,4 @@ from .base import AbstractObserver as AbstractObserver, BankOutput as BankOutput
 from .fll import FLLOutput as FLLOutput, SOGIFLL as SOGIFLL, SOGIFLLWIF as SOGIFLLWIF, SOGIFLLWPF as SOGIFLLWPF
 from .sogi import QSGOutput as QSGOutput, SOGI as SOGI, SOGI2 as SOGI2
 from .flux import FluxOutput as FluxOutput, LPFFlux as LPFFlux, PureIntegratorFlux as PureIntegratorFlux, SecondOrderSOIFO as SecondOrderSOIFO, SOIFO as SOIFO
+from .leso import CLESO as CLESO, FALESO as FALESO, GILESO as GILESO, LESOOutput as LESOOutput

@@ -21,7 +21,7 @@ import jax
 import jax.numpy as jnp
 
 from .._math import safe_atan2, safe_norm2
-from .._validate import check_positive, check_sample_time
+from .._validate import static_float as _static_float, check_positive, check_sample_time
 from ..discretize import AB3, AbstractRule
 from ._cores import fll_rate, sogi2_vf, sogi_vf
 from .base import AbstractObserver, check_rule
@@ -71,7 +71,7 @@ class SOGIFLL(AbstractObserver):
         self.omega_n = check_positive("omega_n", omega_n, "SOGIFLL")
         self.ts = check_sample_time("ts", ts, "SOGIFLL")
         self.rule = check_rule(AB3() if rule is None else rule, "SOGIFLL")
-        self.v_floor = float(check_positive("v_floor", v_floor, "SOGIFLL"))
+        self.v_floor = _static_float(check_positive("v_floor", v_floor, "SOGIFLL"), v_floor)
 
     def f(self, x, u):
         y, q, w = x[0], x[1], x[2]
@@ -118,7 +118,7 @@ class SOGIFLLWPF(AbstractObserver):
         self.omega_n = check_positive("omega_n", omega_n, "SOGIFLLWPF")
         self.ts = check_sample_time("ts", ts, "SOGIFLLWPF")
         self.rule = check_rule(AB3() if rule is None else rule, "SOGIFLLWPF")
-        self.v_floor = float(check_positive("v_floor", v_floor, "SOGIFLLWPF"))
+        self.v_floor = _static_float(check_positive("v_floor", v_floor, "SOGIFLLWPF"), v_floor)
 
     def f(self, x, u):
         p, qp, y, q, w = x[0], x[1], x[2], x[3], x[4]
@@ -192,7 +192,7 @@ class SOGIFLLWIF(AbstractObserver):
         self.omega_n = check_positive("omega_n", omega_n, "SOGIFLLWIF")
         self.ts = check_sample_time("ts", ts, "SOGIFLLWIF")
         self.rule = check_rule(AB3() if rule is None else rule, "SOGIFLLWIF")
-        self.v_floor = float(check_positive("v_floor", v_floor, "SOGIFLLWIF"))
+        self.v_floor = _static_float(check_positive("v_floor", v_floor, "SOGIFLLWIF"), v_floor)
         if fll_error not in ("input", "residual"):
             raise ValueError(f"SOGIFLLWIF.fll_error must be 'input' or 'residual', got {fll_error!r}")
         self.fll_error = fll_error

@@ -1,0 +1,232 @@
+"""Back-EMF extended state observers of paper 002 (Li et al.): C-LESO, GI-LESO, FA-LESO, each
+followed by a normalized quadrature PLL whose ω̂e the GI- and FA-LESO use.
+
+Model (002 eqs 4–8): p i_ab = b0 u_ab − μ i_ab + x2, b0 = 1/L̂q, μ = R̂s/L̂q, x2 = −e_ab/L̂q.
+Observer (eq 9), per axis, with ε1 = x̂1 − i:
+
+    p x̂1 = x̂2 + b0 u − μ x̂1 − l1(t) * ε1,      p x̂2 = −l2(t) * ε1,      ê = −L̂q x̂2   (eq 10)
+
+so that ê/e = L2(s)/(s² + (μ + L1(s)) s + L2(s))  (eq 14).
+
+- C-LESO (eqs 15–17): l1 = 2ω0 − μ, l2 = ω0²  →  ω0²/(s + ω0)².  States [x̂1, x̂2] per axis.
+- GI-LESO (eqs 29–30): L1 = 2ω0 − μ, L2(s) = ω0² + G(s), G = 2K_r ωc s/(s² + 2ωc s + ω̂e²):
+  x̂2 = x̂2a − r with ẋ̂2a = −ω0² ε1 and r = (G/s) ε1, i.e. r̈ = 2K_r ωc ε1 − 2ωc ṙ − ω̂e² r.
+  States [x̂1, x̂2a, r, ṙ] per axis (order 4, as 002 says).
+- FA-LESO (eqs 25–28): L1 = −jω̂e − μ, L2 = k1 + k2 s on the complex vector x = xα + j xβ:
+  x̂2 = −k2 ε1 − k1 z with ż = ε1, and
+  ẋ̂1α = x̂2α + b0 uα − μ x̂1α + μ ε1α − ω̂e ε1β,  ẋ̂1β = x̂2β + b0 uβ − μ x̂1β + μ ε1β + ω̂e ε1α
+  (the −μx̂1 + με1 = −μ i of eq 27 is the known term F).  ê/e = (k2 s + k1)/(s² + (k2 − jω̂e)s + k1).
+  States [x̂1α, x̂1β, zα, zβ].
+
+PLL (our design; 002's PLL section is missing from our copy).  ê = ωe ψ (−sin θe, cos θe)
+(002 eq 5), so the normalized quadrature detector
+
+    err = sgn(ω̂e)·(−êα cos θ̂ − êβ sin θ̂)/|ê| = sin(θe − θ̂)
+
+drives a type-2 loop θ̂̇ = ω̂ + k_p err, ω̂̇ = k_i err, tuned by pole placement
+(k_p = 2ζω_b, k_i = ω_b², :func:`jaxobs.linear.pll_gains`).  With the FA-LESO in
+the loop the phase seen by the PLL is filtered by the FA-LESO's envelope response;
+:func:`jaxobs.linear.faleso_pll_loop` builds that loop and the tests check its
+stability with the complex Routh test and its phase margin.  ω̂ is fed back to
+the GI-LESO's resonance and to the FA-LESO's rotation term: a frequency-adaptation
+loop, stable here because the PLL is slower (ω_b = 2π·15 rad/s by default) than
+the LESO (k2 = 100π).
+
+Sampling.  Like the flux observers, at t_k the observer integrates the period
+[t_{k−1}, t_k] with the voltage applied over it (held) and the current
+interpolated linearly between its samples, and returns the estimate at t_k.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import ClassVar, NamedTuple
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+
+from .._math import safe_atan2
+from .._validate import check_nonnegative, check_positive, check_sample_time
+from ..discretize import RK4, AbstractRule, Knots
+from ._cores import pll_vf
+from .base import check_rule
+
+__all__ = ["LESOOutput", "LESOState", "CLESO", "GILESO", "FALESO"]
+
+
+class LESOOutput(NamedTuple):
+    e_a: jax.Array  # estimated equivalent BEMF, V
+    e_b: jax.Array
+    theta: jax.Array  # θ̂e from the PLL, rad (wrapped)
+    omega: jax.Array  # ω̂e from the PLL, rad/s
+    theta_emf: jax.Array  # the BEMF's own angle, atan2(−êα, êβ) (positive rotation), rad
+
+
+class LESOState(eqx.Module):
+    x: jax.Array
+    rule: object
+    i_prev: jax.Array
+    u_prev: jax.Array
+    started: jax.Array
+
+
+def _wrap(a):
+    return jnp.pi - jnp.mod(jnp.pi - a, 2 * jnp.pi)
+
+
+class _LESOBase(eqx.Module):
+    Rs: eqx.AbstractVar[jax.Array]
+    Lq: eqx.AbstractVar[jax.Array]
+    kp_pll: eqx.AbstractVar[jax.Array]
+    ki_pll: eqx.AbstractVar[jax.Array]
+    omega0_pll: eqx.AbstractVar[jax.Array]
+    ts: eqx.AbstractVar[float]
+    rule: eqx.AbstractVar[AbstractRule]
+    e_floor: eqx.AbstractVar[float]
+    n_leso: ClassVar[int]  # LESO states (the PLL's two follow)
+
+    def initial_state(self):
+        z = jnp.zeros((self.n_leso,), self.Rs.dtype)
+        return jnp.concatenate([z, jnp.stack([jnp.zeros_like(self.Rs), self.omega0_pll])])
+
+    def init(self, u0=None) -> LESOState:
+        x0 = self.initial_state()
+        z2 = jnp.zeros((2,), x0.dtype)
+        inp0 = (z2, z2)
+        return LESOState(x=x0, rule=self.rule.init(self.f, x0, inp0), i_prev=z2, u_prev=z2, started=jnp.asarray(False))
+
+    # the LESO part: returns (dx_leso, ê) for input (u, i) and speed ω̂
+    def leso(self, xl, u, i, w):  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def f(self, x, inp):
+        u, i = inp
+        xl, th, w = x[: self.n_leso], x[self.n_leso], x[self.n_leso + 1]
+        dxl, e = self.leso(xl, u, i, w)
+        mag = jnp.sqrt(jnp.maximum(e[0] * e[0] + e[1] * e[1], self.e_floor**2))
+        err = jnp.where(w < 0, -1.0, 1.0) * (-e[0] * jnp.cos(th) - e[1] * jnp.sin(th)) / mag
+        dth, dw = pll_vf(th, w, err, self.kp_pll, self.ki_pll)
+        return jnp.concatenate([dxl, jnp.stack([dth, dw])])
+
+    def step(self, state: LESOState, meas):
+        i = jnp.stack([meas.i_a, meas.i_b])
+        path = Knots(u0=(state.u_prev, state.i_prev), um=(state.u_prev, 0.5 * (i + state.i_prev)), u1=(state.u_prev, i))
+        x1, rs = self.rule.step(self.f, state.x, path, self.ts, state.rule)
+        x1 = jnp.where(state.started, x1, state.x)
+        x1 = x1.at[self.n_leso].set(_wrap(x1[self.n_leso]))
+        new = LESOState(x=x1, rule=rs, i_prev=i, u_prev=jnp.stack([meas.u_a, meas.u_b]), started=jnp.asarray(True))
+        _, e = self.leso(x1[: self.n_leso], new.u_prev, i, x1[self.n_leso + 1])
+        out = LESOOutput(e_a=e[0], e_b=e[1], theta=x1[self.n_leso], omega=x1[self.n_leso + 1], theta_emf=safe_atan2(-e[0], e[1]))
+        return new, out
+
+    @property
+    def mu(self):
+        return self.Rs / self.Lq
+
+
+def _common(obj, Rs, Lq, kp_pll, ki_pll, omega0_pll, ts, rule, e_floor, name):
+    obj.Rs = check_nonnegative("Rs", Rs, name)
+    obj.Lq = check_positive("Lq", Lq, name)
+    obj.kp_pll = check_positive("kp_pll", kp_pll, name)
+    obj.ki_pll = check_positive("ki_pll", ki_pll, name)
+    obj.omega0_pll = jnp.asarray(omega0_pll, dtype=obj.Rs.dtype)
+    obj.ts = check_sample_time("ts", ts, name)
+    obj.rule = check_rule(RK4() if rule is None else rule, name)
+    obj.e_floor = float(e_floor)
+
+
+_DEFAULT_PLL = (2 * 0.7071 * 2 * math.pi * 15, (2 * math.pi * 15) ** 2)
+
+
+class CLESO(_LESOBase):
+    """Conventional LESO (002 eqs 15–17), gains from the bandwidth ω0: l1 = 2ω0 − μ, l2 = ω0²."""
+
+    Rs: jax.Array
+    Lq: jax.Array
+    omega0: jax.Array  # LESO bandwidth, rad/s
+    kp_pll: jax.Array
+    ki_pll: jax.Array
+    omega0_pll: jax.Array  # initial PLL speed, rad/s
+    ts: float = eqx.field(static=True)
+    rule: AbstractRule = eqx.field(static=True)
+    e_floor: float = eqx.field(static=True)
+    n_leso: ClassVar[int] = 4
+
+    def __init__(self, Rs, Lq, omega0=500 * math.pi, kp_pll=_DEFAULT_PLL[0], ki_pll=_DEFAULT_PLL[1], omega0_pll=0.0, *, ts=1e-4, rule=None, e_floor=1.0):
+        _common(self, Rs, Lq, kp_pll, ki_pll, omega0_pll, ts, rule, e_floor, "CLESO")
+        self.omega0 = check_positive("omega0", omega0, "CLESO")
+
+    def leso(self, xl, u, i, w):
+        mu, b0 = self.mu, 1.0 / self.Lq
+        l1, l2 = 2 * self.omega0 - mu, self.omega0**2
+        x1, x2 = xl[0:2], xl[2:4]
+        eps = x1 - i
+        dx1 = x2 + b0 * u - mu * x1 - l1 * eps
+        dx2 = -l2 * eps
+        return jnp.concatenate([dx1, dx2]), -self.Lq * x2
+
+
+class GILESO(_LESOBase):
+    """LESO with a generalized integrator at ω̂e in its internal model (002 eqs 29–30)."""
+
+    Rs: jax.Array
+    Lq: jax.Array
+    omega0: jax.Array
+    K_r: jax.Array  # GI gain (002 Table II: 2ω0²)
+    omega_c: jax.Array  # GI damping (002 Table II: π)
+    kp_pll: jax.Array
+    ki_pll: jax.Array
+    omega0_pll: jax.Array
+    ts: float = eqx.field(static=True)
+    rule: AbstractRule = eqx.field(static=True)
+    e_floor: float = eqx.field(static=True)
+    n_leso: ClassVar[int] = 8
+
+    def __init__(self, Rs, Lq, omega0=500 * math.pi, K_r=None, omega_c=math.pi, kp_pll=_DEFAULT_PLL[0], ki_pll=_DEFAULT_PLL[1], omega0_pll=0.0, *, ts=1e-4, rule=None, e_floor=1.0):
+        _common(self, Rs, Lq, kp_pll, ki_pll, omega0_pll, ts, rule, e_floor, "GILESO")
+        self.omega0 = check_positive("omega0", omega0, "GILESO")
+        self.K_r = check_positive("K_r", 2 * float(omega0) ** 2 if K_r is None else K_r, "GILESO")
+        self.omega_c = check_positive("omega_c", omega_c, "GILESO")
+
+    def leso(self, xl, u, i, w):
+        mu, b0 = self.mu, 1.0 / self.Lq
+        l1 = 2 * self.omega0 - mu
+        x1, x2a, r, rd = xl[0:2], xl[2:4], xl[4:6], xl[6:8]
+        eps = x1 - i
+        x2 = x2a - r
+        dx1 = x2 + b0 * u - mu * x1 - l1 * eps
+        dx2a = -(self.omega0**2) * eps
+        drd = 2 * self.K_r * self.omega_c * eps - 2 * self.omega_c * rd - w * w * r
+        return jnp.concatenate([dx1, dx2a, rd, drd]), -self.Lq * x2
+
+
+class FALESO(_LESOBase):
+    """Frequency-adaptive complex-coefficient LESO (002 eqs 25–28)."""
+
+    Rs: jax.Array
+    Lq: jax.Array
+    k1: jax.Array
+    k2: jax.Array
+    kp_pll: jax.Array
+    ki_pll: jax.Array
+    omega0_pll: jax.Array
+    ts: float = eqx.field(static=True)
+    rule: AbstractRule = eqx.field(static=True)
+    e_floor: float = eqx.field(static=True)
+    n_leso: ClassVar[int] = 4
+
+    def __init__(self, Rs, Lq, k1=10 * math.pi, k2=100 * math.pi, kp_pll=_DEFAULT_PLL[0], ki_pll=_DEFAULT_PLL[1], omega0_pll=0.0, *, ts=1e-4, rule=None, e_floor=1.0):
+        _common(self, Rs, Lq, kp_pll, ki_pll, omega0_pll, ts, rule, e_floor, "FALESO")
+        # 002 eq (24): stable iff k1 > 0 and k2 > 0 (generalized Routh test)
+        self.k1 = check_positive("k1", k1, "FALESO")
+        self.k2 = check_positive("k2", k2, "FALESO")
+
+    def leso(self, xl, u, i, w):
+        mu, b0 = self.mu, 1.0 / self.Lq
+        x1, z = xl[0:2], xl[2:4]
+        eps = x1 - i
+        x2 = -self.k2 * eps - self.k1 * z
+        rot = jnp.stack([-w * eps[1], w * eps[0]])  # j ω̂ ε1
+        dx1 = x2 + b0 * u - mu * x1 + mu * eps + rot
+        return jnp.concatenate([dx1, eps]), -self.Lq * x2

@@ -1,0 +1,153 @@
+"""Paper 002's experiments (Sec. V) on the simulated IPMSM drive: ``jaxobs reproduce leso``.
+
+Set-up and assumptions (our copy of 002 lacks the machine table and the PLL section):
+
+- Machine: the ASSUMED IPMSM preset (:func:`jaxobs.drive.ipmsm_paper002`), p = 5, so
+  300/600/840 r/min are 25/50/70 Hz as in 002, on a bench whose total inertia we
+  ASSUME to be 10× the motor's (0.05 kg·m²: a load machine is coupled; with the
+  motor alone an 80 % load step stalls the drive before any speed loop reacts).  i_d* = 0 (002 engages field
+  weakening at 840 r/min; our assumed machine reaches it without).
+- Observers with 002 Table II's gains: C-LESO ω0 = 500π; GI-LESO ω0 = 500π,
+  K_r = 2ω0², ωc = π; FA-LESO k1 = 10π, k2 = 100π; each with our PLL
+  (ω_b = 2π·15 rad/s, ζ = 1/√2, pole placement).
+- The drive runs sensorless on the FA-LESO (after an encoder hand-over); the
+  C- and GI-LESO estimate from the same measurements (an ObserverBank).
+- BEMF harmonics (Sec. V-B): 002 does not give the machine's harmonic content;
+  we set a5 = 6.75 % and a7 = 8.79 % so that the C-LESO's *transfer function*
+  at 300 r/min predicts the C-LESO percentages 002 measured (5.4 % and 5.9 %).
+  Everything else in that experiment is then a prediction.
+- Position error = θ̂e (PLL) − θe, wrapped, in degrees.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .. import drive as D
+from .. import linear
+from ..metrics import harmonic_amplitude, wrap
+from ..observers import CLESO, FALESO, GILESO, ObserverBank
+
+__all__ = ["LESO_NAMES", "leso_bank", "leso_drive", "run_leso_experiments", "A5", "A7", "BENCH_J"]
+
+LESO_NAMES = ("C-LESO", "GI-LESO", "FA-LESO")
+A5, A7 = 0.0675, 0.0879
+BENCH_J = 0.05  # ASSUMED bench inertia, kg·m²
+W0 = 500 * math.pi
+K1_FA, K2_FA = 10 * math.pi, 100 * math.pi
+
+
+def leso_bank(est: D.PMSMParams, omega0_pll, pll=None):
+    kp, ki = linear.pll_gains(2 * math.pi * 15.0) if pll is None else pll
+    return ObserverBank(
+        (
+            CLESO(est.Rs, est.Lq, W0, kp, ki, omega0_pll),
+            GILESO(est.Rs, est.Lq, W0, 2 * W0**2, math.pi, kp, ki, omega0_pll),
+            FALESO(est.Rs, est.Lq, K1_FA, K2_FA, kp, ki, omega0_pll),
+        ),
+        primary=2,
+    )
+
+
+def leso_drive(par, handover=0.3, alpha_s=2 * math.pi * 5):
+    return D.Drive(D.FOC.imc(par, alpha_c=2 * math.pi * 300, alpha_s=alpha_s), sensorless=True, handover=handover)
+
+
+def _err_deg(sol, i):
+    return np.degrees(np.asarray(wrap(sol.obs.each[i].theta - sol.theta_e)))
+
+
+def run_leso_experiments():
+    """Returns (rows, traces); rows {experiment, observer, metric, unit, paper, ours}."""
+    rows, traces = [], {}
+
+    def run(name, par, est, rpm0, t1, speed_ref, load=None, handover=0.3):
+        we = par.p * rpm0 * D.RPM
+        sc = D.Scenario(par, est_par=est, speed_ref=speed_ref, load=load, omega_m0=rpm0 * D.RPM)
+        sol = D.simulate_drive(leso_drive(par, handover), sc, t1, observer=leso_bank(est, we))
+        traces[name] = sol
+        return sol, np.asarray(sol.t)
+
+    par = D.ipmsm_paper002(J=BENCH_J)
+    # --- steady state, no load (Figs. 10-12)
+    paper_mean = {300: (14.0, 7.0, 0.0), 600: (23.0, 10.0, 0.0), 840: (34.0, 12.0, 0.0)}
+    for rpm in (300, 600, 840):
+        name = f"steady {rpm} r/min no load"
+        sol, t = run(name, par, par, rpm, 0.8, D.Profile.constant(rpm * D.RPM))
+        m = t >= 0.6
+        for i, obs in enumerate(LESO_NAMES):
+            err = _err_deg(sol, i)[m]
+            # 002 reports the lag as a positive error; ours is θ̂ − θ (negative for a lag)
+            rows.append(dict(experiment=name, observer=obs, metric="mean_lag", unit="deg", paper=paper_mean[rpm][i], ours=float(-err.mean())))
+            rows.append(dict(experiment=name, observer=obs, metric="ripple", unit="deg", paper=2.3 if obs == "FA-LESO" else None, ours=float(np.ptp(err))))
+        we = par.p * rpm * D.RPM
+        for i, (obs, tf) in enumerate(zip(LESO_NAMES, (linear.cleso_tf(W0), linear.gileso_tf(W0, 2 * W0**2, math.pi, we), linear.faleso_tf(K1_FA, K2_FA, we)))):
+            lag = -math.degrees(float(np.angle(complex(tf.freqresp(we)))))
+            rows.append(dict(experiment=name, observer=obs, metric="tf_lag", unit="deg", paper=None, ours=lag))
+
+    # --- BEMF harmonics (Figs. 13-14)
+    hpar = D.ipmsm_paper002(a5=A5, a7=A7, J=BENCH_J)
+    paper_h = {300: ((5.4, 5.9), (3.6, 4.0), (0.8, 0.7)), 600: ((4.1, 4.5), (2.7, 2.9), (0.6, 0.7))}
+    for rpm, frac in ((300, 0.5), (600, 0.4)):
+        name = f"harmonics {rpm} r/min {int(frac * 100)} % load"
+        load = float(hpar.T_rated) * frac
+        sol, t = run(name, hpar, hpar, rpm, 1.0, D.Profile.constant(rpm * D.RPM), load=D.Profile.constant(load))
+        we = hpar.p * rpm * D.RPM
+        n_per = int(round(2 * math.pi / we / 1e-4))
+        m = np.zeros_like(t, dtype=bool)
+        m[-10 * n_per:] = True  # ten whole electrical periods
+        for i, obs in enumerate(LESO_NAMES):
+            ea = np.asarray(sol.obs.each[i].e_a)
+            fund = float(harmonic_amplitude(t, ea, we, m))
+            for h, paper in zip((5, 7), paper_h[rpm][i]):
+                pct = 100 * float(harmonic_amplitude(t, ea, h * we, m)) / fund
+                rows.append(dict(experiment=name, observer=obs, metric=f"h{h}", unit="%", paper=paper, ours=pct))
+        for obs, tf in zip(LESO_NAMES, (linear.cleso_tf(W0), linear.gileso_tf(W0, 2 * W0**2, math.pi, we), linear.faleso_tf(K1_FA, K2_FA, we))):
+            for h, a, sgn in ((5, A5, -1), (7, A7, +1)):
+                pred = 100 * a * abs(complex(tf.freqresp(sgn * h * we))) / abs(complex(tf.freqresp(we)))
+                rows.append(dict(experiment=name, observer=obs, metric=f"h{h}_tf", unit="%", paper=None, ours=pred))
+
+    # --- speed ramp 300-600-840-600-300 r/min, no load (Fig. 16)
+    prof = D.Scenario.speed_rpm([0.0, 0.6, 1.4, 2.2, 3.0], [300, 600, 840, 600, 300], ramp=0.4)
+    name = "speed ramp 300-600-840-600-300 r/min"
+    sol, t = run(name, par, par, 300, 3.6, prof)
+    m = t >= 0.6
+    rows.append(dict(experiment=name, observer="FA-LESO", metric="max_abs", unit="deg", paper=4.5, ours=float(np.abs(_err_deg(sol, 2)[m]).max())))
+    rows.append(dict(experiment=name, observer="FA-LESO", metric="max_speed_err", unit="r/min", paper=13.0,
+                     ours=float(np.max(np.abs(np.asarray(sol.obs.each[2].omega) / par.p - np.asarray(sol.omega_m))[m]) * 30 / math.pi)))
+
+    # --- load step 0 -> 80 % at 600 r/min (Fig. 17)
+    name = "load step 0-80 % at 600 r/min"
+    sol, t = run(name, par, par, 600, 1.2, D.Profile.constant(600 * D.RPM), load=D.Scenario.load_steps([0.0, 0.6, 0.9], [0.0, 0.8 * float(par.T_rated), 0.0]))
+    m = t >= 0.55
+    rows.append(dict(experiment=name, observer="FA-LESO", metric="max_abs", unit="deg", paper=3.2, ours=float(np.abs(_err_deg(sol, 2)[m]).max())))
+
+    # --- Rs and Lq mismatch at 300 r/min, rated load (Fig. 18), against eqs (42)-(43)
+    we = par.p * 300 * D.RPM
+
+    for label, est, delta in (
+        ("Rs_est = 1.5 Rs", D.ipmsm_paper002(Rs=1.5 * float(par.Rs), J=BENCH_J), ("Rs", -0.5 * float(par.Rs))),
+        ("Rs_est = 0.5 Rs", D.ipmsm_paper002(Rs=0.5 * float(par.Rs), J=BENCH_J), ("Rs", 0.5 * float(par.Rs))),
+        ("Lq_est = 1.5 Lq", D.ipmsm_paper002(Lq=1.5 * float(par.Lq), J=BENCH_J), ("Lq", -0.5 * float(par.Lq))),
+        ("Lq_est = 0.5 Lq", D.ipmsm_paper002(Lq=0.5 * float(par.Lq), J=BENCH_J), ("Lq", 0.5 * float(par.Lq))),
+    ):
+        name = f"{label}, rated load, 300 r/min"
+        sol, t = run(name, par, est, 300, 1.2, D.Profile.constant(300 * D.RPM), load=D.Profile.constant(float(par.T_rated)))
+        m = t >= 1.0
+        err = float(np.mean(_err_deg(sol, 2)[m]))
+        # eqs (42)-(43): Δ = true − nominal; E_ex at i_d = 0 is ωe ψf (+ (Ld − Lq) i_d = 0)
+        e_ex = we * float(par.psi_f)
+        id_hat = float(np.mean(np.asarray(sol.i_d)[m]))
+        iq_hat = float(np.mean(np.asarray(sol.i_q)[m]))
+        if delta[0] == "Rs":
+            pred = math.degrees(float(linear.position_error_rs(delta[1], id_hat, iq_hat, e_ex)))
+        else:
+            pred = math.degrees(float(linear.position_error_lq(delta[1], id_hat, iq_hat, e_ex, we)))
+        rows.append(dict(experiment=name, observer="FA-LESO", metric="mean_error", unit="deg", paper=None, ours=err))
+        rows.append(dict(experiment=name, observer="FA-LESO", metric="eq42_43", unit="deg", paper=None, ours=pred))
+
+    for name, sol in traces.items():
+        rows.append(dict(experiment=name, observer="drive", metric="finite", unit="bool", paper=None, ours=bool(sol.ok)))
+    return rows, traces

@@ -1,0 +1,176 @@
+"""Back-EMF LESOs of paper 002 on the simulated IPMSM drive: steady lag, harmonics, mismatch,
+the PLL loop, batching and gradients."""
+
+import math
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import jaxobs
+from jaxobs import drive as D
+from jaxobs import linear as L
+from jaxobs.metrics import harmonic_amplitude, wrap
+from jaxobs.reproduce.leso import A5, A7, BENCH_J, K1_FA, K2_FA, W0, leso_bank, leso_drive
+
+PAR = D.ipmsm_paper002(J=BENCH_J)
+
+
+@pytest.fixture(scope="module")
+def steady_runs():
+    """25, 50 and 70 Hz (300/600/840 r/min), no load, sensorless on the FA-LESO — one vmapped call."""
+    rpms = jnp.array([300.0, 600.0, 840.0])
+
+    def run(rpm):
+        sc = D.Scenario(PAR, speed_ref=D.Profile.constant(0.0))  # traced speed set below
+        sc = eqx.tree_at(lambda s: (s.speed_ref.values, s.omega_m0), sc, (jnp.atleast_1d(rpm * D.RPM), rpm * D.RPM))
+        bank = eqx.tree_at(lambda b: tuple(o.omega0_pll for o in b.observers), leso_bank(PAR, 1.0), (PAR.p * rpm * D.RPM,) * 3)
+        sol = D.simulate_drive(leso_drive(PAR), sc, 0.8, observer=bank)
+        errs = jnp.stack([jnp.degrees(wrap(o.theta - sol.theta_e)) for o in sol.obs.each])
+        return jnp.mean(errs[:, -2000:], axis=1), sol.ok
+
+    return jax.jit(jax.vmap(run))(rpms)
+
+
+def test_steady_position_errors_c_gi_fa(steady_runs):
+    """Measured mean lags (deg) at 25/50/70 Hz: C-LESO 11.42/22.62/31.28 (TF 11.42/22.62/31.28;
+    002: 14/23/34), GI-LESO 3.86/7.75/10.92 (TF 3.83/7.70/10.85; 002: 7/10/12), FA-LESO 0.001 (002: ≈ 0)."""
+    err, ok = steady_runs
+    assert bool(jnp.all(ok))
+    lag = -np.asarray(err)  # rows: speeds; cols: C, GI, FA
+    for j, f in enumerate((25, 50, 70)):
+        we = 2 * math.pi * f
+        tf_c = -math.degrees(np.angle(complex(L.cleso_tf(W0).freqresp(we))))
+        assert abs(lag[j, 2]) < 0.5
+        assert lag[j, 0] == pytest.approx(tf_c, abs=1.0)
+        assert lag[j, 2] < lag[j, 1] < lag[j, 0]
+    assert lag[0, 0] < lag[1, 0] < lag[2, 0]
+
+
+@pytest.fixture(scope="module")
+def harmonics_run():
+    hpar = D.ipmsm_paper002(a5=A5, a7=A7, J=BENCH_J)
+    we = hpar.p * 300 * D.RPM
+    sc = D.Scenario(hpar, speed_ref=D.Profile.constant(300 * D.RPM), omega_m0=300 * D.RPM, load=D.Profile.constant(0.5 * float(hpar.T_rated)))
+    sol = D.simulate_drive(leso_drive(hpar), sc, 1.0, observer=leso_bank(hpar, we))
+    return sol, we
+
+
+def test_faleso_attenuates_5th_and_7th_more_than_cleso(harmonics_run):
+    """300 r/min, half load, BEMF with a5 = 6.75 %, a7 = 8.79 % (set so the C-LESO's transfer function
+    predicts 002's measured C-LESO 5.4 % / 5.9 %).  Measured in ê_α: C-LESO 5.50/6.23 %, GI-LESO
+    5.50/6.22 %, FA-LESO 2.15/2.91 %; transfer functions at −5ω̂e and +7ω̂e: 5.45/5.96, 5.45/5.94,
+    2.13/2.78 %; 002 measured 5.4/5.9, 3.6/4.0, 0.8/0.7 %.
+
+    The closed loop (current loop, PLL) does not explain the gap to the paper: our simulated ratios
+    follow the transfer functions within 5 %.  With Table II's k2 = 100π the FA-LESO passes 32 % of a
+    −5ω̂e component; 002's 0.8/5.4 needs ~12 %, i.e. a narrower filter (k2 ≈ 35π, checked below) than
+    its Table II states.  The GI-LESO's resonance sits at ω̂e only, so at ±5ω̂e, ±7ω̂e it behaves as
+    the C-LESO; 002's 3.6/4.0 % would need a lower ω0 than 500π for the GI-LESO."""
+    sol, we = harmonics_run
+    t = np.asarray(sol.t)
+    n_per = int(round(2 * math.pi / we / 1e-4))
+    m = np.zeros_like(t, dtype=bool)
+    m[-10 * n_per:] = True
+    pct = {}
+    for name, o in zip(("C", "GI", "FA"), sol.obs.each):
+        ea = np.asarray(o.e_a)
+        fund = float(harmonic_amplitude(t, ea, we, m))
+        pct[name] = [100 * float(harmonic_amplitude(t, ea, h * we, m)) / fund for h in (5, 7)]
+    tfs = {"C": L.cleso_tf(W0), "GI": L.gileso_tf(W0, 2 * W0**2, math.pi, we), "FA": L.faleso_tf(K1_FA, K2_FA, we)}
+    for name, tf in tfs.items():
+        for idx, (h, a, sgn) in enumerate(((5, A5, -1), (7, A7, +1))):
+            pred = 100 * a * abs(complex(tf.freqresp(sgn * h * we)))
+            assert pct[name][idx] == pytest.approx(pred, rel=0.06), (name, h, pct[name][idx], pred)
+    r5, r7 = pct["FA"][0] / pct["C"][0], pct["FA"][1] / pct["C"][1]
+    assert 0.35 < r5 < 0.43 and 0.42 < r7 < 0.51  # measured 0.392 and 0.467
+    # the k2 that would give 002's FA/C ratio at the 5th
+    g = lambda k2: abs(complex(L.faleso_tf(K1_FA, k2, we).freqresp(-5 * we))) / abs(complex(L.cleso_tf(W0).freqresp(5 * we)))  # noqa: E731
+    assert g(35 * math.pi) == pytest.approx(0.8 / 5.4, rel=0.15)
+
+
+@pytest.mark.parametrize("which, factor", [("Lq", 1.5), ("Lq", 0.5), ("Rs", 1.5), ("Rs", 0.5)])
+def test_parameter_mismatch_against_eqs_42_43(which, factor):
+    """Rated load, 300 r/min, i_d = 0.  Measured FA-LESO mean error −7.08° / +6.68° for L̂q = 1.5/0.5 Lq
+    (eq 43: −6.77° / +6.59°); R̂s errors give < 0.01° (eq 42: 0 with i_d = 0)."""
+    est = D.ipmsm_paper002(J=BENCH_J, **{which: factor * float(getattr(PAR, which))})
+    we = PAR.p * 300 * D.RPM
+    sc = D.Scenario(PAR, est_par=est, speed_ref=D.Profile.constant(300 * D.RPM), omega_m0=300 * D.RPM, load=D.Profile.constant(float(PAR.T_rated)))
+    sol = D.simulate_drive(leso_drive(PAR), sc, 1.2, observer=leso_bank(est, we))
+    t = np.asarray(sol.t)
+    m = t >= 1.0
+    err = float(np.mean(np.degrees(np.asarray(wrap(sol.obs.each[2].theta - sol.theta_e)))[m]))
+    i_d, i_q = float(np.mean(np.asarray(sol.i_d)[m])), float(np.mean(np.asarray(sol.i_q)[m]))
+    e_ex = we * float(PAR.psi_f)
+    if which == "Lq":
+        pred = math.degrees(float(L.position_error_lq((1 - factor) * float(PAR.Lq), i_d, i_q, e_ex, we)))
+        assert err == pytest.approx(pred, rel=0.10)
+        assert abs(err) > 5.0
+    else:
+        assert abs(err) < 0.01
+
+
+def test_pll_loop_through_the_faleso_is_stable():
+    """Our PLL (ω_b = 2π·15 rad/s, ζ = 1/√2) closed through the FA-LESO's envelope response: stable by the
+    generalized Routh test at 25, 50 and 70 Hz, crossover 136 rad/s with 40.5° phase margin."""
+    kp, ki = L.pll_gains(2 * math.pi * 15)
+    for f in (25, 50, 70):
+        loop = L.faleso_pll_loop(K1_FA, K2_FA, 2 * math.pi * f, kp, ki)
+        assert bool(L.is_hurwitz(loop.feedback().den))
+        m = L.margins(loop)
+        assert float(m.phase_margin) == pytest.approx(40.5, abs=0.5)
+
+
+def test_vmap_over_64_scenarios_and_gradients():
+    base = D.Scenario(PAR, load=D.Profile.constant(10.0))
+    batch = D.grid(base, speed_rpm=np.linspace(300, 840, 8), dLq=[-0.3, -0.2, -0.1, 0.0, 0.1, 0.2, 0.3, 0.4])
+    drv = D.Drive(D.FOC.imc(PAR, 2 * math.pi * 300, 2 * math.pi * 5))  # sensored: the FA-LESO runs open loop
+
+    def run(s):
+        w0 = s.speed_ref.values[0] * PAR.p
+        obs = jaxobs.FALESO(PAR.Rs, PAR.Lq, K1_FA, K2_FA, omega0_pll=1.0)
+        obs = eqx.tree_at(lambda o: (o.Lq, o.omega0_pll), obs, (s.est_par.Lq, w0))
+        s = eqx.tree_at(lambda x: x.omega_m0, s, s.speed_ref.values[0])
+        sol = D.simulate_drive(drv, s, 0.8, observer=obs)
+        return jnp.mean(jnp.degrees(wrap(sol.obs.theta - sol.theta_e))[-1000:]), sol.ok
+
+    err, ok = jax.jit(jax.vmap(run))(batch.scenarios)
+    assert err.shape == (64,) and bool(jnp.all(ok))
+    err = np.asarray(err).reshape(8, 8)
+    assert np.all(np.diff(err, axis=1) < 0)  # more L̂q error, more angle error (eq 43), at every speed
+    assert np.all(np.abs(err[:, 3]) < 0.05)  # no mismatch: measured <= 0.0024° after 0.7 s at 10 N·m
+
+
+@pytest.mark.parametrize("ctor, names", [(jaxobs.FALESO, ("k1", "k2", "kp_pll", "ki_pll")), (jaxobs.CLESO, ("omega0",))], ids=["FA", "C"])
+def test_gradients_wrt_leso_and_pll_gains(ctor, names):
+    sc = D.Scenario(PAR, speed_ref=D.Profile.constant(600 * D.RPM), omega_m0=600 * D.RPM, load=D.Profile.constant(5.0))
+    drv = D.Drive(D.FOC.imc(PAR, 2 * math.pi * 300, 2 * math.pi * 5))
+    obs = ctor(PAR.Rs, PAR.Lq, omega0_pll=0.95 * PAR.p * 600 * D.RPM)
+
+    def loss(o):
+        sol = D.simulate_drive(drv, sc, 0.08, observer=o)
+        return jnp.mean(wrap(sol.obs.theta - sol.theta_e)[200:] ** 2)
+
+    grads = eqx.filter_grad(loss)(obs)
+    f = eqx.filter_jit(loss)
+    for name in names:
+        g = float(getattr(grads, name))
+        x0 = float(getattr(obs, name))
+        h = 1e-6 * x0
+        up = eqx.tree_at(lambda o: getattr(o, name), obs, jnp.asarray(x0 + h))
+        dn = eqx.tree_at(lambda o: getattr(o, name), obs, jnp.asarray(x0 - h))
+        fd = (float(f(up)) - float(f(dn))) / (2 * h)
+        assert np.isfinite(g) and g == pytest.approx(fd, rel=1e-4, abs=1e-12), (name, g, fd)
+
+
+def test_bad_leso_arguments():
+    with pytest.raises(ValueError, match=r"FALESO\.k1"):
+        jaxobs.FALESO(0.6, 0.012, k1=-1.0)  # 002 eq (24): k1 > 0, k2 > 0
+    with pytest.raises(ValueError, match=r"FALESO\.k2"):
+        jaxobs.FALESO(0.6, 0.012, k2=0.0)
+    with pytest.raises(ValueError, match=r"CLESO\.Lq"):
+        jaxobs.CLESO(0.6, 0.0)
+    with pytest.raises(ValueError, match=r"GILESO\.omega_c"):
+        jaxobs.GILESO(0.6, 0.012, omega_c=-1.0)
