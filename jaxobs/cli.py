@@ -137,13 +137,27 @@ def _cmd_bode(args) -> int:
     return 0
 
 
+def _emit_rows(rows, figs, as_json: bool, title: str) -> int:
+    """Print paper-vs-ours rows (table or JSON); non-zero exit if any simulation diverged."""
+    from .reproduce.flux import format_rows
+
+    if as_json:
+        print(json.dumps(rows, indent=1))
+    else:
+        print(title)
+        print(format_rows(rows))
+        for p in figs:
+            print(f"figure: {p}")
+    return 0 if all(r["ours"] for r in rows if r["metric"] == "finite") else 1
+
+
 def _cmd_reproduce(args) -> int:
     _enable_x64()
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     if args.paper == "flux":
         from .plot import flux_circles_figure, position_error_figure
-        from .reproduce.flux import OBSERVER_NAMES, format_rows, run_flux_experiments
+        from .reproduce.flux import OBSERVER_NAMES, run_flux_experiments
 
         rows, traces = run_flux_experiments(quick=args.quick)
         figs = []
@@ -159,17 +173,9 @@ def _cmd_reproduce(args) -> int:
             p = out / fname
             position_error_figure(traces[key], OBSERVER_NAMES, f"Paper 000: {key}", p, t_from=t_from)
             figs.append(p)
-        if args.json:
-            print(json.dumps(rows, indent=1))
-        else:
-            print("Paper 000 (second-order SOIFO) experiments on the simulated SPMSM drive — paper vs ours")
-            print(format_rows(rows))
-            for p in figs:
-                print(f"figure: {p}")
-        return 0 if all(r["ours"] for r in rows if r["metric"] == "finite") else 1
+        return _emit_rows(rows, figs, args.json, "Paper 000 (second-order SOIFO) experiments on the simulated SPMSM drive — paper vs ours")
     if args.paper == "leso":
         from .plot import position_error_figure
-        from .reproduce.flux import format_rows
         from .reproduce.leso import LESO_NAMES, run_leso_experiments
 
         rows, traces = run_leso_experiments()
@@ -182,14 +188,7 @@ def _cmd_reproduce(args) -> int:
             p = out / fname
             position_error_figure(traces[key], LESO_NAMES, f"Paper 002: {key}", p, t_from=t_from)
             figs.append(p)
-        if args.json:
-            print(json.dumps(rows, indent=1))
-        else:
-            print("Paper 002 (LESOs) experiments on the simulated IPMSM drive — paper vs ours")
-            print(format_rows(rows))
-            for p in figs:
-                print(f"figure: {p}")
-        return 0 if all(r["ours"] for r in rows if r["metric"] == "finite") else 1
+        return _emit_rows(rows, figs, args.json, "Paper 002 (LESOs) experiments on the simulated IPMSM drive — paper vs ours")
     raise ValueError(f"reproduce: unknown paper {args.paper!r}")
 
 
@@ -233,8 +232,9 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
-def main(argv=None) -> int:
-    parser = build_parser()
+def main(argv=None, parser=None) -> int:
+    """Run the CLI; ``parser`` lets the application layer (``tuning.cli``) add commands."""
+    parser = build_parser() if parser is None else parser
     args = parser.parse_args(argv)
     try:
         return args.func(args)

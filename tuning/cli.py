@@ -76,13 +76,8 @@ def build_parser():
 
 
 def main(argv=None) -> int:
-    parser = build_parser()
-    args = parser.parse_args(argv)
-    try:
-        return args.func(args)
-    except ValueError as e:  # JobError is a ValueError: one line naming the field
-        print(f"jaxobs: error: {e}", file=sys.stderr)
-        return 2
+    # JobError is a ValueError: base.main prints it as one line naming the field, exit 2
+    return base.main(argv, parser=build_parser())
 
 
 if __name__ == "__main__":

@@ -43,6 +43,7 @@ __all__ = [
     "sosoifo_harmonic_factor",
     "lpf_compensation",
     "sogi2_tustin_paper",
+    "sogi2_tustin_coefficients",
     "cleso_tf",
     "leso_tf",
     "gileso_tf",
@@ -132,6 +133,21 @@ def lpf_compensation(omega_1, omega_c):
     return jnp.abs(ratio), jnp.angle(ratio)
 
 
+def sogi2_tustin_coefficients(K1, K2, w, ts):
+    """000 eqs (22)–(25): (a1…a4, D1 numerator, Q1 numerator), each in ascending powers of z⁻¹."""
+    u = 2 * K1 * K2 * w**2 * ts**2
+    v = 8 * K2 * w * ts
+    ww = 4 * (2 + K1 * K2) * w**2 * ts**2
+    x = 2 * K2 * w**3 * ts**3
+    y = w**4 * ts**4
+    sig = 16 + v + ww + x + y
+    b0 = u / sig
+    a = jnp.stack([-64 - 2 * v + 2 * x + 4 * y, 96 - 2 * ww + 6 * y, -64 + 2 * v - 2 * x + 4 * y, 16 - v + ww - x + y]) / sig
+    d_num = 2 * b0 * jnp.asarray([1.0, 0.0, -2.0, 0.0, 1.0])
+    q_num = b0 * w * ts * jnp.asarray([1.0, 2.0, 0.0, -2.0, -1.0])
+    return a, d_num, q_num
+
+
 def sogi2_tustin_paper(K1, K2, omega, ts):
     """000 eqs (22)–(25): the Tustin coefficients of the second-order SOGI, as printed.
 
@@ -142,18 +158,8 @@ def sogi2_tustin_paper(K1, K2, omega, ts):
 
     Returns (D1, Q1) as discrete transfer functions.
     """
-    K1, K2, w = as_float(K1), as_float(K2), as_float(omega)
-    u = 2 * K1 * K2 * w**2 * ts**2
-    v = 8 * K2 * w * ts
-    ww = 4 * (2 + K1 * K2) * w**2 * ts**2
-    x = 2 * K2 * w**3 * ts**3
-    y = w**4 * ts**4
-    sig = 16 + v + ww + x + y
-    b0 = u / sig
-    a = jnp.stack([jnp.ones_like(w), (-64 - 2 * v + 2 * x + 4 * y) / sig, (96 - 2 * ww + 6 * y) / sig,
-                   (-64 + 2 * v - 2 * x + 4 * y) / sig, (16 - v + ww - x + y) / sig])
-    q_num = b0 * w * ts * jnp.asarray([1.0, 2.0, 0.0, -2.0, -1.0])
-    d_num = 2 * b0 * jnp.asarray([1.0, 0.0, -2.0, 0.0, 1.0])
+    a, d_num, q_num = sogi2_tustin_coefficients(as_float(K1), as_float(K2), as_float(omega), ts)
+    a = jnp.concatenate([jnp.ones((1,), a.dtype), a])
     return DiscreteTransferFunction(d_num, a, ts=float(ts)), DiscreteTransferFunction(q_num, a, ts=float(ts))
 
 

@@ -320,18 +320,9 @@ class SecondOrderSOIFO(_FluxBase):
 
     # --- paper 000 eqs (22)-(25) ---------------------------------------------
     def _coeffs(self, w):
-        K1, K2, ts = self.K1, self.K2, self.ts
-        u = 2 * K1 * K2 * w**2 * ts**2
-        v = 8 * K2 * w * ts
-        ww = 4 * (2 + K1 * K2) * w**2 * ts**2
-        xx = 2 * K2 * w**3 * ts**3
-        y = w**4 * ts**4
-        sig = 16 + v + ww + xx + y
-        b0 = u / sig
-        a = jnp.stack([(-64 - 2 * v + 2 * xx + 4 * y), (96 - 2 * ww + 6 * y), (-64 + 2 * v - 2 * xx + 4 * y), (16 - v + ww - xx + y)]) / sig
-        bd = 2 * b0 * jnp.stack([1.0, 0.0, -2.0, 0.0, 1.0])
-        bq = b0 * w * ts * jnp.stack([1.0, 2.0, 0.0, -2.0, -1.0])
-        return a, bd, bq
+        from ..linear._models import sogi2_tustin_coefficients  # lazy: linear imports observers
+
+        return sogi2_tustin_coefficients(self.K1, self.K2, w, self.ts)
 
     def _paper_step(self, x, e):
         w = x[8]
