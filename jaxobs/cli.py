@@ -7,6 +7,7 @@
                                                            002 Fig. 4, 001 Fig. 14)
     jaxobs reproduce flux [--out DIR] [--json] [--quick]   paper 000's experiments, paper vs ours
     jaxobs reproduce leso [--out DIR] [--json]             paper 002's experiments, paper vs ours
+    jaxobs study [STUDY.toml] [--out DIR]                  robustness study → NetCDF, worst cases, figures
 
 Errors in the arguments end the program with one line on stderr and exit
 status 2; nothing prints a traceback for bad input.
@@ -137,6 +138,91 @@ def _cmd_bode(args) -> int:
     return 0
 
 
+_FLL_CTORS = {"SOGIFLL": "SOGIFLL", "SOGIFLLWPF": "SOGIFLLWPF", "SOGIFLLWIF": "SOGIFLLWIF"}
+
+
+def load_study(path):
+    """Parse a study TOML into (name, designs, axes, options); errors name the field (ValueError)."""
+    import tomllib
+
+    import jaxobs
+    from . import linear
+    from .study import STUDY_AXES
+
+    try:
+        raw = tomllib.loads(Path(path).read_text())
+    except OSError as e:
+        raise ValueError(f"study file: cannot read {str(path)!r}: {e.strerror}") from None
+    except tomllib.TOMLDecodeError as e:
+        raise ValueError(f"study file: not valid TOML: {e}") from None
+    st = raw.get("study", {})
+    opts = dict(t_event=float(st.get("t_event", 0.1)), horizon=float(st.get("horizon", 0.4)), sample=int(st.get("sample", 0)),
+                chunk_size=int(st.get("chunk_size", 2048)), seed=int(st.get("seed", 0)))
+    designs = {}
+    for name, spec in raw.get("designs", {}).items():
+        where = f"designs.{name}"
+        if "closed_form" in spec:
+            cf = {"sogi-fll": linear.sogi_fll_closed_form, "wpf": linear.wpf_closed_form, "wif": linear.wif_closed_form}
+            if spec["closed_form"] not in cf:
+                raise ValueError(f"{where}.closed_form must be one of {', '.join(cf)}, got {spec['closed_form']!r}")
+            designs[name] = cf[spec["closed_form"]]()
+        elif "result" in spec:
+            res = json.loads(Path(spec["result"]).read_text())
+            comp = res.get("component")
+            if comp not in _FLL_CTORS:
+                raise ValueError(f"{where}.result: component {comp!r} is not an FLL (studies run the FLL family)")
+            kw = {k: v for k, v in res["job"].get("component", {}).items()}
+            kw.update(res["gains"]["tuned"])
+            designs[name] = getattr(jaxobs, _FLL_CTORS[comp])(**kw)
+        elif "component" in spec:
+            comp = spec["component"]
+            if comp not in _FLL_CTORS:
+                raise ValueError(f"{where}.component must be one of {', '.join(_FLL_CTORS)}, got {comp!r}")
+            designs[name] = getattr(jaxobs, _FLL_CTORS[comp])(**{k: v for k, v in spec.items() if k != "component"})
+        else:
+            raise ValueError(f"{where}: give closed_form, result (a tuning result.json) or component with gains")
+    if not designs:
+        raise ValueError("designs: at least one design is required")
+    axes = raw.get("axes", {})
+    if not axes:
+        raise ValueError("axes: at least one axis is required")
+    for k, v in axes.items():
+        if k not in STUDY_AXES:
+            raise ValueError(f"axes.{k}: unknown axis; allowed: {', '.join(STUDY_AXES)}")
+        if not isinstance(v, list) or not v or not all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in v):
+            raise ValueError(f"axes.{k} must be a non-empty list of numbers")
+    return st.get("name", "study"), designs, axes, opts
+
+
+def _cmd_study(args) -> int:
+    _enable_x64()
+    from importlib import resources
+
+    from .plot import study_figures
+    from .study import STUDY_METRICS, run_study, worst_cases
+
+    path = Path(args.study) if args.study else Path(str(resources.files("jaxobs") / "data" / "default_study.toml"))
+    name, designs, axes, opts = load_study(path)
+    out = Path(args.out) if args.out else Path("out") / name
+    out.mkdir(parents=True, exist_ok=True)
+    ds = run_study(designs, axes, progress=not args.quiet, **opts)
+    ds.to_netcdf(out / "study.nc", engine="scipy")
+    worst = {m: worst_cases(ds, m, 3) for m in STUDY_METRICS}
+    (out / "worst_cases.json").write_text(json.dumps(worst, indent=1))
+    figs = study_figures(ds, out)
+    n = int(ds.attrs["scenarios"])
+    print(f"study {name}: {len(designs)} designs x {n} scenarios in {ds.attrs['seconds']:.1f} s")
+    print(f"{'design':<16}" + "".join(f"{m + ' mean':>20}{'worst':>12}" for m in ("settling_freq", "ripple_freq", "rms_phase")) + f"{'diverged':>10}")
+    for d in ds["design"].values:
+        sel = ds.sel(design=d)
+        row = f"{str(d):<16}"
+        for m in ("settling_freq", "ripple_freq", "rms_phase"):
+            row += f"{float(sel[m].mean()):>20.4g}{float(sel[m].max()):>12.4g}"
+        print(row + f"{int(sel['diverged'].sum()):>10}")
+    print(f"results: {out / 'study.nc'}, {out / 'worst_cases.json'}, {len(figs)} figures")
+    return 0
+
+
 def _emit_rows(rows, figs, as_json: bool, title: str) -> int:
     """Print paper-vs-ours rows (table or JSON); non-zero exit if any simulation diverged."""
     from .reproduce.flux import format_rows
@@ -229,6 +315,12 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--json", action="store_true", help="print rows {experiment, observer, metric, unit, paper, ours}")
     r.add_argument("--quick", action="store_true", help="skip the long runs (20 r/min steady state, I-f start-up)")
     r.set_defaults(func=_cmd_reproduce)
+
+    st = sub.add_parser("study", help="robustness study of FLL designs over a scenario grid (xarray/NetCDF)")
+    st.add_argument("study", nargs="?", help="study file (TOML); default: the FLL family's closed forms")
+    st.add_argument("--out", help="results folder (default: out/<study name>)")
+    st.add_argument("--quiet", action="store_true", help="no progress bar")
+    st.set_defaults(func=_cmd_study)
     return p
 
 

@@ -182,3 +182,49 @@ def position_error_figure(sol, names, title, path=None, t_from: float = 0.0):
         fig.savefig(path, dpi=110)
         plt.close(fig)
     return fig
+
+
+def study_figures(ds, out_dir):
+    """Heat-maps (mean over the other axes, first two axes) and distributions per metric; returns the paths."""
+    from pathlib import Path
+
+    plt = _plt()
+    out = Path(out_dir)
+    paths = []
+    axes = [d for d in ds.dims if d != "design"]
+    for metric in ("settling_freq", "ripple_freq", "rms_phase"):
+        da = ds[metric]
+        if len(axes) >= 2 and "sample" not in axes:
+            a0, a1 = axes[0], axes[1]
+            red = da.mean(dim=[d for d in axes if d not in (a0, a1)]) if len(axes) > 2 else da
+            designs = list(ds["design"].values)
+            fig, axs = plt.subplots(1, len(designs), figsize=(4 * len(designs), 3.4), squeeze=False)
+            for ax, d in zip(axs[0], designs):
+                arr = np.asarray(red.sel(design=d).transpose(a1, a0))
+                im = ax.imshow(arr, origin="lower", aspect="auto", extent=None)
+                ax.set_xticks(range(len(ds[a0])), [f"{v:g}" for v in ds[a0].values], fontsize=7)
+                ax.set_yticks(range(len(ds[a1])), [f"{v:g}" for v in ds[a1].values], fontsize=7)
+                ax.set_xlabel(a0)
+                ax.set_ylabel(a1)
+                ax.set_title(str(d), fontsize=9)
+                fig.colorbar(im, ax=ax)
+            fig.suptitle(f"{metric} (mean over the other axes)", fontsize=10)
+            fig.tight_layout()
+            p = out / f"heatmap_{metric}.png"
+            fig.savefig(p, dpi=100)
+            plt.close(fig)
+            paths.append(p)
+        fig, ax = plt.subplots(figsize=(6, 3.4))
+        for d in ds["design"].values:
+            vals = np.asarray(da.sel(design=d)).ravel()
+            vals = vals[np.isfinite(vals)]
+            ax.hist(vals, bins=30, alpha=0.5, label=str(d))
+        ax.set_xlabel(metric)
+        ax.set_ylabel("scenarios")
+        ax.legend(fontsize=8)
+        fig.tight_layout()
+        p = out / f"distribution_{metric}.png"
+        fig.savefig(p, dpi=100)
+        plt.close(fig)
+        paths.append(p)
+    return paths

@@ -1,0 +1,89 @@
+"""Robustness studies: labelled results checked against single runs, NetCDF round trip, 10,000+ scenarios."""
+
+import json
+import math
+import time
+
+import numpy as np
+import pytest
+import xarray as xr
+
+import jaxobs
+from jaxobs import linear
+from jaxobs import metrics as M
+from jaxobs.cli import main
+from jaxobs.study import run_study, worst_cases
+
+AXES = {"freq_step": [-2.0, 1.0], "dc": [0.0, 0.1], "phase_jump_deg": [0.0, 30.0]}
+
+
+@pytest.fixture(scope="module")
+def small_study():
+    designs = {"SOGI-FLL": linear.sogi_fll_closed_form(), "WIF": linear.wif_closed_form()}
+    return designs, run_study(designs, AXES, progress=False)
+
+
+def test_dims_coords_and_values_match_single_runs(small_study):
+    designs, ds = small_study
+    assert ds["ripple_freq"].dims == ("design", "freq_step", "dc", "phase_jump_deg")
+    assert list(ds["design"].values) == ["SOGI-FLL", "WIF"]
+    np.testing.assert_array_equal(ds["dc"].values, [0.0, 0.1])
+    t_event, steady = ds.attrs["t_event"], ds.attrs["steady_from"]
+    for dname, fs, dc, pj in (("SOGI-FLL", -2.0, 0.1, 30.0), ("WIF", 1.0, 0.0, 0.0), ("WIF", -2.0, 0.1, 0.0)):
+        sig = jaxobs.GridSignal(t_event=t_event, freq_step=fs, dc=dc, phase_jump=math.radians(pj))
+        sol = jaxobs.simulate(designs[dname], sig, ds.attrs["horizon"])
+        ferr = (sol.out.omega - sol.truth.omega) / (2 * math.pi)
+        ripple = float(M.peak_to_peak(ferr, sol.t >= steady))
+        rms = float(M.rms(M.wrap(sol.out.theta - sol.truth.theta), sol.t >= steady))
+        cell = ds.sel(design=dname, freq_step=fs, dc=dc, phase_jump_deg=pj)
+        assert float(cell["ripple_freq"]) == pytest.approx(ripple, rel=1e-9, abs=1e-12)
+        assert float(cell["rms_phase"]) == pytest.approx(rms, rel=1e-9, abs=1e-12)
+    assert int(ds["diverged"].sum()) == 0
+    # the SOGI-FLL's dc ripple is the worst case of the study
+    worst = worst_cases(ds, "ripple_freq", 1)
+    assert worst[0]["design"] == "SOGI-FLL" and worst[0]["dc"] == 0.1
+
+
+def test_netcdf_round_trip(small_study, tmp_path):
+    _, ds = small_study
+    ds.to_netcdf(tmp_path / "s.nc", engine="scipy")
+    back = xr.load_dataset(tmp_path / "s.nc", engine="scipy")
+    assert back.identical(ds)
+
+
+def test_bad_study_arguments():
+    with pytest.raises(ValueError, match="axis 'spin'"):
+        run_study({"a": linear.wif_closed_form()}, {"spin": [1.0]})
+    with pytest.raises(ValueError, match="horizon"):
+        run_study({"a": linear.wif_closed_form()}, {"dc": [0.0]}, t_event=0.5, horizon=0.4)
+
+
+def test_study_of_more_than_10000_scenarios(tmp_path, capsys):
+    """10,240 scenarios (random draws over 5 axes) of the SOGI-FLL-WIF in chunks of 2048; time reported."""
+    t0 = time.time()
+    ds = run_study({"WIF": linear.wif_closed_form()},
+                   {"freq_step": [-3.0, 3.0], "phase_jump_deg": [-60.0, 60.0], "dc": [0.0, 0.1], "harmonics_scale": [0.0, 2.0], "noise": [0.0, 0.01]},
+                   sample=10240, horizon=0.3, chunk_size=2048, progress=False)
+    elapsed = time.time() - t0
+    assert ds.sizes["sample"] == 10240 and int(ds["diverged"].sum()) == 0
+    assert np.all(np.isfinite(ds["rms_phase"].values))
+    print(f"\n10,240-scenario study: {elapsed:.1f} s on this machine")
+
+
+def test_study_cli_default(tmp_path, capsys):
+    assert main(["study", "--out", str(tmp_path), "--quiet"]) == 0
+    out = capsys.readouterr().out
+    assert "3 designs x 200 scenarios" in out
+    ds = xr.load_dataset(tmp_path / "study.nc", engine="scipy")
+    assert set(ds["design"].values) == {"SOGI-FLL", "SOGI-FLL-WPF", "SOGI-FLL-WIF"}
+    worst = json.loads((tmp_path / "worst_cases.json").read_text())
+    assert worst["ripple_freq"][0]["design"] == "SOGI-FLL"
+    assert len(list(tmp_path.glob("heatmap_*.png"))) == 3
+
+
+def test_study_file_errors(tmp_path, capsys):
+    p = tmp_path / "s.toml"
+    p.write_text('[designs.a]\nclosed_form = "nope"\n[axes]\ndc = [0.0]\n')
+    assert main(["study", str(p)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "designs.a.closed_form" in err[0]
