@@ -267,3 +267,17 @@ def test_kill_9_then_resume_gives_the_same_gains(tmp_path):
 def test_every_preset_job_validates(preset):
     job = load_job(Path(__file__).parents[1] / "tuning" / "presets" / preset)
     assert job.gains and job.terms
+
+
+@pytest.mark.slow
+def test_leso_drive_job_runs(tmp_path):
+    """A FA-LESO job on the IPMSM drive (signal = "drive"): the observer binds to each scenario's
+    estimated parameters and speed, gradients flow through the closed-loop scan."""
+    text = (Path(__file__).parents[1] / "tuning" / "presets" / "faleso.toml").read_text()
+    text = text.replace("steps = 20", "steps = 2").replace("dLq = [-0.2, 0.2]", "dLq = [0.0]").replace("load_nm = [0.0, 15.0]", "load_nm = [15.0]")
+    path = tmp_path / "fa.toml"
+    path.write_text(text)
+    assert main(["tune", str(path), "--out", str(tmp_path / "o"), "--quiet"]) == 0
+    res = json.loads((tmp_path / "o" / "result.json").read_text())
+    assert res["scores"]["tuned"]["diverged"] == 0
+    assert res["gains"]["closed_form"]["k2"] == pytest.approx(100 * math.pi)

@@ -104,6 +104,26 @@ def _cf_sosoifo(comp):
     return {"K1": 1.56, "K2": 3.11, "lam": 1.56**3 / (2 * 3.11)}
 
 
+def _cf_cleso(comp):
+    return {"omega0": 500 * math.pi}
+
+
+def _pll_cf():
+    kp, ki = linear.pll_gains(2 * math.pi * 15.0)
+    return {"kp_pll": float(kp), "ki_pll": float(ki)}
+
+
+def _cf_faleso(comp):
+    return {"k1": 10 * math.pi, "k2": 100 * math.pi, **_pll_cf()}
+
+
+def _bind_leso(comp, sc):
+    """A LESO assumes the scenario's estimated Rs, Lq and starts its PLL at the scenario's speed."""
+    import equinox as eqx
+
+    return eqx.tree_at(lambda o: (o.Rs, o.Lq, o.omega0_pll), comp, (sc.est_par.Rs, sc.est_par.Lq, sc.speed_ref.values[0] * sc.par.p))
+
+
 @dataclass(frozen=True)
 class ComponentInfo:
     ctor: object
@@ -112,6 +132,7 @@ class ComponentInfo:
     closed_form: object
     signal: str
     closed_form_source: str
+    bind: object = None
 
 
 COMPONENTS = {
@@ -120,10 +141,13 @@ COMPONENTS = {
     "SOGIFLLWIF": ComponentInfo(jaxobs.SOGIFLLWIF, ("k1", "k2", "lam"), dict(k1=1.815, k2=0.752, lam=11559.0, omega_n=W_N), _cf_wif, "grid", "001 eq (34), Table I"),
     "SOIFO": ComponentInfo(jaxobs.SOIFO, ("k", "lam"), dict(Rs=0.0, L=1.0, k=1.414, lam=0.5, omega0=W_N), _cf_soifo, "emf", "000 (k = 1.414), lam = k²/4"),
     "SecondOrderSOIFO": ComponentInfo(jaxobs.SecondOrderSOIFO, ("K1", "K2", "lam"), dict(Rs=0.0, L=1.0, K1=1.56, K2=3.11, lam=1.56**3 / 6.22, omega0=W_N), _cf_sosoifo, "emf", "000 (K1 = 1.56, K2 = 3.11), lam = K1³/(2K2)"),
+    "CLESO": ComponentInfo(jaxobs.CLESO, ("omega0", "kp_pll", "ki_pll"), dict(Rs=0.6, Lq=0.012, omega0=500 * math.pi, **_pll_cf()), lambda c: {**_cf_cleso(c), **_pll_cf()}, "drive", "002 Table II (ω0 = 500π), PLL pole placement ω_b = 2π·15", _bind_leso),
+    "FALESO": ComponentInfo(jaxobs.FALESO, ("k1", "k2", "kp_pll", "ki_pll"), dict(Rs=0.6, Lq=0.012, k1=10 * math.pi, k2=100 * math.pi, **_pll_cf()), _cf_faleso, "drive", "002 Table II (k1 = 10π, k2 = 100π), PLL pole placement ω_b = 2π·15", _bind_leso),
 }
 
 GRID_AXES = ("freq_step", "phase_jump_deg", "sag", "dc", "harmonics_scale", "sub_amplitude", "phase_deg")
 EMF_AXES = ("speed_hz", "dc_alpha", "dc_beta", "h5", "h7", "omega0_error", "phase_deg")
+DRIVE_AXES = ("speed_rpm", "load_nm", "dRs", "dLq")  # paper 002's IPMSM (assumed, see the README) on its bench
 
 
 # --------------------------------------------------------------------------
@@ -213,8 +237,8 @@ def _parse_scenarios(tab: dict, where: str, signal_default: str, seed: int) -> S
     tab = _get({"s": tab}, "s", where, dict)
     _no_unknown(tab, ("signal", "t_event", "horizon", "steady_from", "grid", "sample", "seed"), where)
     signal = _get(tab, "signal", f"{where}.signal", str, signal_default)
-    if signal not in ("grid", "emf"):
-        raise JobError(f"{where}.signal", f"must be 'grid' or 'emf', got {signal!r}")
+    if signal not in ("grid", "emf", "drive"):
+        raise JobError(f"{where}.signal", f"must be 'grid', 'emf' or 'drive', got {signal!r}")
     if signal != signal_default:
         raise JobError(f"{where}.signal", f"the component needs '{signal_default}' signals, got {signal!r}")
     t_event = _get(tab, "t_event", f"{where}.t_event", float, 0.1)
@@ -227,7 +251,7 @@ def _parse_scenarios(tab: dict, where: str, signal_default: str, seed: int) -> S
     if not (0 <= steady < horizon):
         raise JobError(f"{where}.steady_from", f"must be in [0, horizon), got {steady}")
     grid = _get(tab, "grid", f"{where}.grid", dict, required=True)
-    allowed = GRID_AXES if signal == "grid" else EMF_AXES
+    allowed = {"grid": GRID_AXES, "emf": EMF_AXES, "drive": DRIVE_AXES}[signal]
     axes = {}
     for k in grid:
         if k not in allowed:
@@ -317,7 +341,7 @@ def parse_job(raw: dict) -> Job:
         if metric not in METRICS:
             raise JobError(f"{where}.metric", f"unknown metric {metric!r}; known: {', '.join(METRICS)}")
         grid_only = metric.endswith(("_freq", "_phase", "freq_steady", "phase_steady"))
-        if (info.signal == "emf") == grid_only:
+        if (info.signal != "grid") == grid_only:
             raise JobError(f"{where}.metric", f"{metric!r} does not apply to {comp} ({info.signal} signals)")
         weight = _get(t, "weight", f"{where}.weight", float, 1.0)
         if weight <= 0:
@@ -391,9 +415,34 @@ def _combos(spec: ScenarioSpec):
     return names, combos
 
 
+def _drive_scenarios(names, combos):
+    from jaxobs import drive as D
+    from jaxobs.reproduce.leso import BENCH_J
+
+    par = D.ipmsm_paper002(J=BENCH_J)
+    items = []
+    for combo in combos:
+        a = dict(zip(names, combo))
+        rpm = a.get("speed_rpm", 600.0)
+        est = D.ipmsm_paper002(J=BENCH_J, Rs=float(par.Rs) * (1 + a.get("dRs", 0.0)), Lq=float(par.Lq) * (1 + a.get("dLq", 0.0)))
+        items.append(D.Scenario(par, est_par=est, speed_ref=D.Profile.constant(rpm * D.RPM), load=D.Profile.constant(a.get("load_nm", 0.0)), omega_m0=rpm * D.RPM))
+    return stack(items)
+
+
+def job_drive():
+    """The drive a ``signal = "drive"`` job runs: sensored FOC on the IPMSM, the observer estimating beside it."""
+    from jaxobs import drive as D
+    from jaxobs.reproduce.leso import BENCH_J
+
+    par = D.ipmsm_paper002(J=BENCH_J)
+    return D.Drive(D.FOC.imc(par, 2 * math.pi * 300, 2 * math.pi * 5))
+
+
 def build_scenarios(spec: ScenarioSpec, values: dict):
     """A batched signal for every combination of the axes (or ``sample`` random ones)."""
     names, combos = _combos(spec)
+    if spec.signal == "drive":
+        return _drive_scenarios(names, combos), names, combos
     sigs = []
     for combo in combos:
         a = dict(zip(names, combo))
@@ -437,7 +486,9 @@ def build_objective(job: Job, spec: ScenarioSpec | None = None):
     scen, names, combos = build_scenarios(spec, job.values)
     ctx = MetricContext(t_event=spec.t_event, steady_from=spec.steady_from)
     param = Parametrization(job.gains)
-    obj = Objective(comp, param, scen, spec.horizon, job.terms, ctx, job.agg, job.alpha, job.temperature, job.penalty)
+    info = COMPONENTS[job.component]
+    drive = job_drive() if info.signal == "drive" else None
+    obj = Objective(comp, param, scen, spec.horizon, job.terms, ctx, job.agg, job.alpha, job.temperature, job.penalty, drive=drive, bind=info.bind)
     return obj, (names, combos)
 
 

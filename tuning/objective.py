@@ -53,7 +53,9 @@ def _phase_err(sol):
 
 
 def _position_err(sol, sig):
-    """Flux observers on an EMF signal: ψ lags e by 90°, e_α = A1 cos(ω1 t + φ)."""
+    """Position error of an observer: on the drive, θ̂e − θe; on an EMF signal, ψ lags e by 90°."""
+    if hasattr(sol, "theta_e"):  # a DriveSolution
+        return M.wrap(sol.obs.theta - sol.theta_e)
     return M.wrap(sol.out.theta - (sig.omega1 * sol.t + sig.phase - math.pi / 2))
 
 
@@ -117,7 +119,11 @@ class Objective:
     """value(θ), value_and_grad(θ) and per-scenario scores for a component and a scenario batch."""
 
     def __init__(self, component, param: Parametrization, scenarios, horizon: float, terms: list[Term], ctx: MetricContext,
-                 agg: str = "mean", alpha: float = 0.9, temperature: float | None = None, penalty: float = 1e3):
+                 agg: str = "mean", alpha: float = 0.9, temperature: float | None = None, penalty: float = 1e3,
+                 drive=None, bind=None):
+        """``drive``: run each scenario (a drive Scenario) closed loop with this Drive, the component
+        as its observer; ``bind(component, scenario)``: adapt the component to the scenario (the
+        parameters an observer assumes, its initial speed) before the run."""
         for term in terms:
             if term.metric not in METRICS:
                 raise ValueError(f"objective metric {term.metric!r} is unknown; known: {', '.join(METRICS)}")
@@ -128,6 +134,7 @@ class Objective:
         self.terms = list(terms)
         self.ctx = ctx
         self.agg, self.alpha, self.temperature, self.penalty = agg, alpha, temperature, float(penalty)
+        self.drive, self.bind = drive, bind
         self._vg = eqx.filter_jit(self._per_scenario_value_and_grad)
         self._metrics = eqx.filter_jit(self._per_scenario_metrics)
 
@@ -144,9 +151,18 @@ class Objective:
         self.value = value
 
     # --- single scenario
+    def _simulate(self, comp, sig):
+        if self.bind is not None:
+            comp = self.bind(comp, sig)
+        if self.drive is not None:
+            from jaxobs.drive import simulate_drive
+
+            return simulate_drive(self.drive, sig, self.horizon, observer=comp)
+        return simulate(comp, sig, self.horizon)
+
     def _one(self, theta, sig):
         comp = self.param.apply(self.component, theta)
-        sol = simulate(comp, sig, self.horizon)
+        sol = self._simulate(comp, sig)
         vals = [term.weight * METRICS[term.metric](sol, sig, self.ctx) for term in self.terms]
         return sum(vals), sol.ok
 
@@ -173,7 +189,7 @@ class Objective:
     def _per_scenario_metrics(self, theta, scenarios):
         def one(sig):
             comp = self.param.apply(self.component, theta)
-            sol = simulate(comp, sig, self.horizon)
+            sol = self._simulate(comp, sig)
             return {term.metric: METRICS[term.metric](sol, sig, self.ctx) for term in self.terms}, sol.ok
 
         return jax.vmap(one)(scenarios)

@@ -9,7 +9,6 @@ import jax
 import numpy as np
 
 from jaxobs.metrics import wrap
-from jaxobs.simulate import simulate
 
 
 def _plt():
@@ -41,9 +40,12 @@ def write_report(out: Path, job, obj, thetas: dict, history: list):
     fig, axes = plt.subplots(2, 1, figsize=(8, 5.5), sharex=True)
     for label, th in thetas.items():
         comp = obj.param.apply(obj.component, th)
-        sol = simulate(comp, sig, obj.horizon)
+        sol = obj._simulate(comp, sig)
         t = np.asarray(sol.t)
-        if sol.truth is not None:
+        if hasattr(sol, "theta_e"):  # drive: observer speed and position error
+            axes[0].plot(t, np.asarray(sol.obs.omega) / (2 * math.pi), lw=1, label=label)
+            axes[1].plot(t, np.degrees(np.asarray(wrap(sol.obs.theta - sol.theta_e))), lw=1, label=label)
+        elif sol.truth is not None:
             axes[0].plot(t, np.asarray(sol.out.omega) / (2 * math.pi), lw=1, label=label)
             axes[1].plot(t, np.degrees(np.asarray(wrap(sol.out.theta - sol.truth.theta))), lw=1, label=label)
         else:
