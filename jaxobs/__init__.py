@@ -1,25 +1,64 @@
 """jaxobs — a differentiable JAX simulator for tuning sensorless motor-drive observers and FLLs."""
 
-from . import drive as drive, linear as linear, metrics as metrics, signals as signals
-from .discretize import AB3 as AB3, Euler as Euler, Held as Held, Knots as Knots, RK4 as RK4, Tustin as Tustin
+from . import drive as drive
+from . import linear as linear
+from . import metrics as metrics
+from . import signals as signals
+from .discretize import AB3 as AB3
+from .discretize import RK4 as RK4
+from .discretize import Euler as Euler
+from .discretize import Held as Held
+from .discretize import Knots as Knots
+from .discretize import Tustin as Tustin
 from .observers import (
     CLESO as CLESO,
+)
+from .observers import (
     FALESO as FALESO,
-    FLLOutput as FLLOutput,
+)
+from .observers import (
     GILESO as GILESO,
-    LPFFlux as LPFFlux,
-    ObserverBank as ObserverBank,
-    PureIntegratorFlux as PureIntegratorFlux,
-    SecondOrderSOIFO as SecondOrderSOIFO,
-    SOIFO as SOIFO,
-    ObserverState as ObserverState,
+)
+from .observers import (
     SOGI as SOGI,
+)
+from .observers import (
     SOGI2 as SOGI2,
+)
+from .observers import (
     SOGIFLL as SOGIFLL,
+)
+from .observers import (
     SOGIFLLWIF as SOGIFLLWIF,
+)
+from .observers import (
     SOGIFLLWPF as SOGIFLLWPF,
 )
-from .signals import GridSignal as GridSignal, paper001_test as paper001_test, stack as stack
-from .simulate import SignalSolution as SignalSolution, simulate as simulate
+from .observers import (
+    SOIFO as SOIFO,
+)
+from .observers import (
+    FLLOutput as FLLOutput,
+)
+from .observers import (
+    LPFFlux as LPFFlux,
+)
+from .observers import (
+    ObserverBank as ObserverBank,
+)
+from .observers import (
+    ObserverState as ObserverState,
+)
+from .observers import (
+    PureIntegratorFlux as PureIntegratorFlux,
+)
+from .observers import (
+    SecondOrderSOIFO as SecondOrderSOIFO,
+)
+from .signals import GridSignal as GridSignal
+from .signals import paper001_test as paper001_test
+from .signals import stack as stack
+from .simulate import SignalSolution as SignalSolution
+from .simulate import simulate as simulate
 
 __version__ = "0.1.0"

@@ -146,6 +146,7 @@ def load_study(path):
     import tomllib
 
     import jaxobs
+
     from . import linear
     from .study import STUDY_AXES
 

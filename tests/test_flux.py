@@ -13,7 +13,15 @@ import jaxobs
 from jaxobs import drive as D
 from jaxobs import linear as L
 from jaxobs.metrics import wrap
-from jaxobs.reproduce.flux import K1, K2, K_SOIFO, LPF_WC, bench_machine, flux_bank, flux_drive
+from jaxobs.reproduce.flux import (
+    K1,
+    K2,
+    K_SOIFO,
+    LPF_WC,
+    bench_machine,
+    flux_bank,
+    flux_drive,
+)
 from jaxobs.signals import EMFSignal
 
 W1 = 100 * math.pi

@@ -13,7 +13,16 @@ import jaxobs
 from jaxobs import drive as D
 from jaxobs import linear as L
 from jaxobs.metrics import harmonic_amplitude, wrap
-from jaxobs.reproduce.leso import A5, A7, BENCH_J, K1_FA, K2_FA, W0, leso_bank, leso_drive
+from jaxobs.reproduce.leso import (
+    A5,
+    A7,
+    BENCH_J,
+    K1_FA,
+    K2_FA,
+    W0,
+    leso_bank,
+    leso_drive,
+)
 
 PAR = D.ipmsm_paper002(J=BENCH_J)
 

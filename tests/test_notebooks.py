@@ -3,7 +3,6 @@
 Budget: each notebook under 240 s on 2 CPU cores (measured: see README); slow-marked, run by CI.
 """
 
-import os
 import time
 from pathlib import Path
 

@@ -17,7 +17,15 @@ import pytest
 
 import jaxobs
 from jaxobs import linear
-from tuning import GainSpec, Objective, Parametrization, SolverConfig, Term, load_job, run_solver
+from tuning import (
+    GainSpec,
+    Objective,
+    Parametrization,
+    SolverConfig,
+    Term,
+    load_job,
+    run_solver,
+)
 from tuning.cli import main
 from tuning.objective import MetricContext
 from tuning.targets import flux_settling_time, lambda_for_damping, match_settling_time

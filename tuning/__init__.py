@@ -3,7 +3,16 @@
     from tuning import load_job, run_job
 """
 
-from .job import COMPONENTS as COMPONENTS, JobError as JobError, load_job as load_job, parse_job as parse_job, run_job as run_job
-from .objective import METRICS as METRICS, Objective as Objective, Term as Term, aggregate as aggregate
-from .params import GainSpec as GainSpec, Parametrization as Parametrization
-from .solvers import SolverConfig as SolverConfig, run_solver as run_solver
+from .job import COMPONENTS as COMPONENTS
+from .job import JobError as JobError
+from .job import load_job as load_job
+from .job import parse_job as parse_job
+from .job import run_job as run_job
+from .objective import METRICS as METRICS
+from .objective import Objective as Objective
+from .objective import Term as Term
+from .objective import aggregate as aggregate
+from .params import GainSpec as GainSpec
+from .params import Parametrization as Parametrization
+from .solvers import SolverConfig as SolverConfig
+from .solvers import run_solver as run_solver

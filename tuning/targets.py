@@ -30,7 +30,6 @@ from __future__ import annotations
 
 import math
 
-
 import jax.numpy as jnp
 import numpy as np
 import optimistix as optx

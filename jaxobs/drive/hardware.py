@@ -23,7 +23,8 @@ import jax
 import jax.numpy as jnp
 
 from .._math import safe_norm2
-from .._validate import static_float as _static_float, as_float, check_nonnegative, check_positive, check_real
+from .._validate import as_float, check_nonnegative, check_positive, check_real
+from .._validate import static_float as _static_float
 
 __all__ = ["Inverter", "Sensors", "clarke_abc_to_ab", "ab_to_abc"]
 

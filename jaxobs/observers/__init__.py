@@ -1,7 +1,22 @@
 """Observers: the SOGI-FLL family (and, as they land, flux observers, LESOs and PLLs)."""
 
-from .base import AbstractObserver as AbstractObserver, BankOutput as BankOutput, ObserverBank as ObserverBank, ObserverState as ObserverState
-from .fll import FLLOutput as FLLOutput, SOGIFLL as SOGIFLL, SOGIFLLWIF as SOGIFLLWIF, SOGIFLLWPF as SOGIFLLWPF
-from .sogi import QSGOutput as QSGOutput, SOGI as SOGI, SOGI2 as SOGI2
-from .flux import FluxOutput as FluxOutput, LPFFlux as LPFFlux, PureIntegratorFlux as PureIntegratorFlux, SecondOrderSOIFO as SecondOrderSOIFO, SOIFO as SOIFO
-from .leso import CLESO as CLESO, FALESO as FALESO, GILESO as GILESO, LESOOutput as LESOOutput
+from .base import AbstractObserver as AbstractObserver
+from .base import BankOutput as BankOutput
+from .base import ObserverBank as ObserverBank
+from .base import ObserverState as ObserverState
+from .fll import SOGIFLL as SOGIFLL
+from .fll import SOGIFLLWIF as SOGIFLLWIF
+from .fll import SOGIFLLWPF as SOGIFLLWPF
+from .fll import FLLOutput as FLLOutput
+from .flux import SOIFO as SOIFO
+from .flux import FluxOutput as FluxOutput
+from .flux import LPFFlux as LPFFlux
+from .flux import PureIntegratorFlux as PureIntegratorFlux
+from .flux import SecondOrderSOIFO as SecondOrderSOIFO
+from .leso import CLESO as CLESO
+from .leso import FALESO as FALESO
+from .leso import GILESO as GILESO
+from .leso import LESOOutput as LESOOutput
+from .sogi import SOGI as SOGI
+from .sogi import SOGI2 as SOGI2
+from .sogi import QSGOutput as QSGOutput

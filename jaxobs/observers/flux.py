@@ -320,7 +320,9 @@ class SecondOrderSOIFO(_FluxBase):
 
     # --- paper 000 eqs (22)-(25) ---------------------------------------------
     def _coeffs(self, w):
-        from ..linear._models import sogi2_tustin_coefficients  # lazy: linear imports observers
+        from ..linear._models import (
+            sogi2_tustin_coefficients,  # lazy: linear imports observers
+        )
 
         return sogi2_tustin_coefficients(self.K1, self.K2, w, self.ts)
 

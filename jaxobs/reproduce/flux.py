@@ -32,14 +32,18 @@ from __future__ import annotations
 import math
 
 import equinox as eqx
-
-
 import numpy as np
 
 from .. import drive as D
 from .. import linear
 from ..metrics import wrap
-from ..observers import LPFFlux, ObserverBank, PureIntegratorFlux, SecondOrderSOIFO, SOIFO
+from ..observers import (
+    SOIFO,
+    LPFFlux,
+    ObserverBank,
+    PureIntegratorFlux,
+    SecondOrderSOIFO,
+)
 
 __all__ = ["OBSERVER_NAMES", "bench_machine", "flux_bank", "run_flux_experiments", "flux_drive"]
 
