@@ -116,7 +116,31 @@ def _check_common(obj, Rs, L, ts, rule, name):
     obj.rule = check_rule(RK4() if rule is None else rule, name)
 
 
-class PureIntegratorFlux(_FluxBase):
+def _check_pll(obj, kp_pll, ki_pll, omega0, psi_floor, name):
+    obj.kp_pll = check_positive("kp_pll", kp_pll, name)
+    obj.ki_pll = check_positive("ki_pll", ki_pll, name)
+    obj.omega0 = jnp.asarray(omega0, dtype=obj.kp_pll.dtype)
+    obj.psi_floor = float(psi_floor)
+
+
+class _PLLFluxBase(_FluxBase):
+    """Flux filters with state [ψα, ψβ, θ_pll, ω_pll]: a type-2 PLL on the estimated flux gives ω̂."""
+
+    kp_pll: eqx.AbstractVar[jax.Array]
+    ki_pll: eqx.AbstractVar[jax.Array]
+    omega0: eqx.AbstractVar[jax.Array]
+    psi_floor: eqx.AbstractVar[float]
+
+    def initial_state(self):
+        z = jnp.zeros_like(self.kp_pll)
+        return jnp.stack([z, z, z, self.omega0])
+
+    def _pll_rates(self, x):
+        err = quadrature_error(x[0], x[1], x[2], self.psi_floor)
+        return pll_vf(x[2], x[3], err, self.kp_pll, self.ki_pll)
+
+
+class PureIntegratorFlux(_PLLFluxBase):
     """ψ̂ = ∫ê dt (000 eq 6) with a type-2 PLL on ψ̂ for the speed.  State [ψα, ψβ, θ_pll, ω_pll]."""
 
     Rs: jax.Array
@@ -130,25 +154,16 @@ class PureIntegratorFlux(_FluxBase):
 
     def __init__(self, Rs, L, kp_pll, ki_pll, omega0=0.0, *, ts=1e-4, rule=None, psi_floor=1e-4):
         _check_common(self, Rs, L, ts, rule, "PureIntegratorFlux")
-        self.kp_pll = check_positive("kp_pll", kp_pll, "PureIntegratorFlux")
-        self.ki_pll = check_positive("ki_pll", ki_pll, "PureIntegratorFlux")
-        self.omega0 = jnp.asarray(omega0, dtype=self.kp_pll.dtype)
-        self.psi_floor = float(psi_floor)
-
-    def initial_state(self):
-        z = jnp.zeros_like(self.kp_pll)
-        return jnp.stack([z, z, z, self.omega0])
+        _check_pll(self, kp_pll, ki_pll, omega0, psi_floor, "PureIntegratorFlux")
 
     def f(self, x, e):
-        err = quadrature_error(x[0], x[1], x[2], self.psi_floor)
-        dth, dw = pll_vf(x[2], x[3], err, self.kp_pll, self.ki_pll)
-        return jnp.stack([e[0], e[1], dth, dw])
+        return jnp.stack([e[0], e[1], *self._pll_rates(x)])
 
     def output(self, x, e):
         return FluxOutput(psi_a=x[0], psi_b=x[1], theta=safe_atan2(x[1], x[0]), omega=x[3], e_a=e[0], e_b=e[1])
 
 
-class LPFFlux(_FluxBase):
+class LPFFlux(_PLLFluxBase):
     """ψ̂ = ê/(s + ωc) (000 Sec. II) with a type-2 PLL for the speed and optional compensation.
 
     With ``compensate=True`` the estimate is scaled by √(ω̂² + ωc²)/|ω̂| and rotated by
@@ -171,20 +186,11 @@ class LPFFlux(_FluxBase):
     def __init__(self, Rs, L, omega_c, kp_pll, ki_pll, omega0=0.0, *, compensate=False, ts=1e-4, rule=None, psi_floor=1e-4):
         _check_common(self, Rs, L, ts, rule, "LPFFlux")
         self.omega_c = check_positive("omega_c", omega_c, "LPFFlux")
-        self.kp_pll = check_positive("kp_pll", kp_pll, "LPFFlux")
-        self.ki_pll = check_positive("ki_pll", ki_pll, "LPFFlux")
-        self.omega0 = jnp.asarray(omega0, dtype=self.kp_pll.dtype)
+        _check_pll(self, kp_pll, ki_pll, omega0, psi_floor, "LPFFlux")
         self.compensate = bool(compensate)
-        self.psi_floor = float(psi_floor)
-
-    def initial_state(self):
-        z = jnp.zeros_like(self.kp_pll)
-        return jnp.stack([z, z, z, self.omega0])
 
     def f(self, x, e):
-        err = quadrature_error(x[0], x[1], x[2], self.psi_floor)
-        dth, dw = pll_vf(x[2], x[3], err, self.kp_pll, self.ki_pll)
-        return jnp.stack([e[0] - self.omega_c * x[0], e[1] - self.omega_c * x[1], dth, dw])
+        return jnp.stack([e[0] - self.omega_c * x[0], e[1] - self.omega_c * x[1], *self._pll_rates(x)])
 
     def output(self, x, e):
         pa, pb, w = x[0], x[1], x[3]
