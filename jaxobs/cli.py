@@ -238,12 +238,24 @@ def _emit_rows(rows, figs, as_json: bool, title: str) -> int:
     return 0 if all(r["ours"] for r in rows if r["metric"] == "finite") else 1
 
 
+def _error_figures(traces, names, paper: str, specs, out: Path):
+    """One position-error figure per (experiment, file name, start time) in ``specs``."""
+    from .plot import position_error_figure
+
+    paths = []
+    for key, fname, t_from in specs:
+        p = out / fname
+        position_error_figure(traces[key], names, f"Paper {paper}: {key}", p, t_from=t_from)
+        paths.append(p)
+    return paths
+
+
 def _cmd_reproduce(args) -> int:
     _enable_x64()
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     if args.paper == "flux":
-        from .plot import flux_circles_figure, position_error_figure
+        from .plot import flux_circles_figure
         from .reproduce.flux import OBSERVER_NAMES, run_flux_experiments
 
         rows, traces = run_flux_experiments(quick=args.quick)
@@ -252,29 +264,21 @@ def _cmd_reproduce(args) -> int:
             p = out / fname
             flux_circles_figure(traces[key], OBSERVER_NAMES, f"Paper 000: estimated flux, {key}", p)
             figs.append(p)
-        for key, fname, t_from in (
+        figs += _error_figures(traces, OBSERVER_NAMES, "000", (
             ("load step 10 N·m at 2000 r/min", "position_error_load_step.png", 0.3),
             ("speed 400-2000-400 r/min", "position_error_speed_variation.png", 0.8),
             ("du_alpha = 5 V at 1000 r/min", "position_error_du_alpha_5V.png", 0.8),
-        ):
-            p = out / fname
-            position_error_figure(traces[key], OBSERVER_NAMES, f"Paper 000: {key}", p, t_from=t_from)
-            figs.append(p)
+        ), out)
         return _emit_rows(rows, figs, args.json, "Paper 000 (second-order SOIFO) experiments on the simulated SPMSM drive — paper vs ours")
     if args.paper == "leso":
-        from .plot import position_error_figure
         from .reproduce.leso import LESO_NAMES, run_leso_experiments
 
         rows, traces = run_leso_experiments()
-        figs = []
-        for key, fname, t_from in (
+        figs = _error_figures(traces, LESO_NAMES, "002", (
             ("steady 600 r/min no load", "leso_position_error_600rpm.png", 0.4),
             ("speed ramp 300-600-840-600-300 r/min", "leso_speed_ramp.png", 0.4),
             ("load step 0-80 % at 600 r/min", "leso_load_step.png", 0.4),
-        ):
-            p = out / fname
-            position_error_figure(traces[key], LESO_NAMES, f"Paper 002: {key}", p, t_from=t_from)
-            figs.append(p)
+        ), out)
         return _emit_rows(rows, figs, args.json, "Paper 002 (LESOs) experiments on the simulated IPMSM drive — paper vs ours")
     raise ValueError(f"reproduce: unknown paper {args.paper!r}")
 

@@ -16,6 +16,15 @@ def _plt():
     return plt
 
 
+def _finish(fig, path, dpi=110):
+    """Lay out, save to ``path`` (if given) and close; the figure is returned for notebooks."""
+    fig.tight_layout()
+    if path is not None:
+        fig.savefig(path, dpi=dpi)
+        _plt().close(fig)
+    return fig
+
+
 def fll_demo_figure(traces, tests, t_event, path=None):
     """Frequency estimate and phase error of each FLL for each test (rows = tests)."""
     from . import metrics
@@ -40,11 +49,7 @@ def fll_demo_figure(traces, tests, t_event, path=None):
     axes[-1, 1].set_xlabel("time after event (ms)")
     axes[0, 0].legend(fontsize=8)
     fig.suptitle("Paper 001 Tests A–E, Table I gains (simulated, 10 kHz, AB3)")
-    fig.tight_layout()
-    if path is not None:
-        fig.savefig(path, dpi=110)
-        plt.close(fig)
-    return fig
+    return _finish(fig, path)
 
 
 def bode_figure(tfs: dict, omega, title: str, path=None, hz: bool = True, mark=None):
@@ -75,11 +80,7 @@ def bode_figure(tfs: dict, omega, title: str, path=None, hz: bool = True, mark=N
         ax.grid(True, which="both", alpha=0.3)
     ax_m.legend(fontsize=8)
     ax_m.set_title(title)
-    fig.tight_layout()
-    if path is not None:
-        fig.savefig(path, dpi=110)
-        plt.close(fig)
-    return fig
+    return _finish(fig, path)
 
 
 def paper_bode_figures(out_dir):
@@ -114,8 +115,7 @@ def paper_bode_figures(out_dir):
     fig = bode_figure(leso, omega, "Paper 002 Fig. 4: LESOs ê/e at ω̂e = 100π (two-sided)", None, mark=w1)
     for ax in fig.axes:
         ax.set_xscale("symlog", linthresh=10)
-    fig.savefig(p, dpi=110)
-    _plt().close(fig)
+    _finish(fig, p)
     paths.append(p)
     # 001 Fig. 14: open loops θ̂/(θ − θ̂), Table I gains
     s, wp, wi = linear.sogi_fll_closed_form(), linear.wpf_closed_form(), linear.wif_closed_form()
@@ -148,11 +148,7 @@ def flux_circles_figure(sol, names, title, path=None, last: float = 0.1):
         ax.grid(True, alpha=0.3)
     axes[0, 0].set_ylabel("ψ̂β (Wb)")
     fig.suptitle(title, fontsize=10)
-    fig.tight_layout()
-    if path is not None:
-        fig.savefig(path, dpi=110)
-        plt.close(fig)
-    return fig
+    return _finish(fig, path)
 
 
 def position_error_figure(sol, names, title, path=None, t_from: float = 0.0):
@@ -177,11 +173,7 @@ def position_error_figure(sol, names, title, path=None, t_from: float = 0.0):
     for ax in (ax_s, ax_e):
         ax.grid(True, alpha=0.3)
     fig.suptitle(title, fontsize=10)
-    fig.tight_layout()
-    if path is not None:
-        fig.savefig(path, dpi=110)
-        plt.close(fig)
-    return fig
+    return _finish(fig, path)
 
 
 def study_figures(ds, out_dir):
@@ -209,10 +201,8 @@ def study_figures(ds, out_dir):
                 ax.set_title(str(d), fontsize=9)
                 fig.colorbar(im, ax=ax)
             fig.suptitle(f"{metric} (mean over the other axes)", fontsize=10)
-            fig.tight_layout()
             p = out / f"heatmap_{metric}.png"
-            fig.savefig(p, dpi=100)
-            plt.close(fig)
+            _finish(fig, p, dpi=100)
             paths.append(p)
         fig, ax = plt.subplots(figsize=(6, 3.4))
         for d in ds["design"].values:
@@ -222,9 +212,7 @@ def study_figures(ds, out_dir):
         ax.set_xlabel(metric)
         ax.set_ylabel("scenarios")
         ax.legend(fontsize=8)
-        fig.tight_layout()
         p = out / f"distribution_{metric}.png"
-        fig.savefig(p, dpi=100)
-        plt.close(fig)
+        _finish(fig, p, dpi=100)
         paths.append(p)
     return paths
