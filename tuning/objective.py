@@ -194,13 +194,17 @@ class Objective:
 
         return jax.vmap(one)(scenarios)
 
-    def scores(self, theta, scenarios=None) -> dict:
-        """Objective and each metric's mean and worst over ``scenarios`` (default: the tuning set)."""
+    def per_scenario(self, theta, scenarios=None):
+        """Each scenario's metrics, its weighted total (the penalty where it diverged) and the good mask — no gradient."""
         scenarios = self.scenarios if scenarios is None else scenarios
         mets, ok = self._metrics(theta, scenarios)
         total = sum(term.weight * mets[term.metric] for term in self.terms)
         good = ok & jnp.isfinite(total)
-        total = jnp.where(good, total, self.penalty)
+        return mets, jnp.where(good, total, self.penalty), good
+
+    def scores(self, theta, scenarios=None) -> dict:
+        """Objective and each metric's mean and worst over ``scenarios`` (default: the tuning set)."""
+        mets, total, good = self.per_scenario(theta, scenarios)
         out = {"objective": float(aggregate(total, self.agg, self.alpha, self.temperature)), "diverged": int(jnp.sum(~good))}
         for term in self.terms:
             m = jnp.where(good, mets[term.metric], jnp.nan)

@@ -34,7 +34,7 @@ def write_report(out: Path, job, obj, thetas: dict, history: list):
         fig.savefig(out / "convergence.png", dpi=110)
         plt.close(fig)
     # responses on the scenario where the closed form does worst
-    per = obj._vg(thetas["closed_form"])[0]
+    per = obj.per_scenario(thetas["closed_form"])[1]
     worst = int(np.argmax(np.asarray(per)))
     sig = jax.tree.map(lambda x: x[worst], obj.scenarios)
     fig, axes = plt.subplots(2, 1, figsize=(8, 5.5), sharex=True)
