@@ -37,7 +37,7 @@ from . import metrics as M
 from .signals import TEST_C_HARMONICS, GridSignal
 from .simulate import simulate
 
-__all__ = ["STUDY_AXES", "STUDY_METRICS", "run_study", "worst_cases", "NoisyGridSignal"]
+__all__ = ["STUDY_AXES", "STUDY_METRICS", "run_study", "worst_cases", "NoisyGridSignal", "grid_signals"]
 
 STUDY_AXES = ("freq_step", "phase_jump_deg", "sag", "dc", "harmonics_scale", "sub_amplitude", "phase_deg", "noise")
 STUDY_METRICS = ("settling_freq", "ripple_freq", "rms_phase", "itae_freq", "iae_phase")
@@ -64,12 +64,34 @@ class NoisyGridSignal(eqx.Module):
         return self.clean.fundamental_amplitude(t)
 
 
-def _signals(axes: dict, combos, t_event: float, freq: float):
-    """Batched NoisyGridSignal for the combinations (vectorized: no per-scenario constructor calls)."""
+_AXIS_LOWER = {"sag": 0.0, "harmonics_scale": 0.0, "sub_amplitude": 0.0, "noise": 0.0}
+
+
+def grid_signals(names, combos, t_event: float, freq: float):
+    """Batched :class:`NoisyGridSignal` for ``combos`` (tuples of values for the axes ``names``).
+
+    Vectorized — the leaves are set as arrays, no constructor runs per scenario — and
+    checked as :class:`GridSignal` would check one scenario: a ``ValueError`` names the axis.
+    Shared by studies and by tuning jobs on grid signals.
+    """
+    names = list(names)
+    for name in names:
+        if name not in STUDY_AXES:
+            raise ValueError(f"grid axis {name!r} is unknown; known axes: {', '.join(STUDY_AXES)}")
     n = len(combos)
+    for i, name in enumerate(names):
+        col = np.asarray([c[i] for c in combos], dtype=float)
+        if not np.all(np.isfinite(col)):
+            raise ValueError(f"grid axis {name} must be finite")
+        if name in _AXIS_LOWER and np.any(col < _AXIS_LOWER[name]):
+            raise ValueError(f"grid axis {name} must be >= 0, got {col.min():g}")
+        if name == "sag" and np.any(col > 0.999):
+            raise ValueError(f"grid axis sag must be <= 0.999 (a sag depth), got {col.max():g}")
+        if name == "freq_step" and np.any(freq + col <= 0):
+            raise ValueError(f"grid axis freq_step must keep the frequency > 0 Hz, got freq + freq_step = {freq + col.min():g}")
     base = NoisyGridSignal(GridSignal(freq=freq, t_event=t_event, harmonics={h: 0.0 for h in TEST_C_HARMONICS}), jnp.asarray(0.0), jax.random.PRNGKey(0))
     batched = jax.tree.map(lambda x: jnp.broadcast_to(x, (n,) + jnp.shape(x)), base)
-    cols = {name: np.asarray([c[i] for c in combos], dtype=float) for i, name in enumerate(axes)}
+    cols = {name: np.asarray([c[i] for c in combos], dtype=float) for i, name in enumerate(names)}
     c = batched.clean
     if "freq_step" in cols:
         c = eqx.tree_at(lambda s: s.freq_step, c, jnp.asarray(cols["freq_step"]))
@@ -125,9 +147,7 @@ def run_study(designs: dict, axes: dict, *, t_event=0.1, horizon=0.4, steady_fro
 
     if not designs:
         raise ValueError("run_study needs at least one design")
-    for name in axes:
-        if name not in STUDY_AXES:
-            raise ValueError(f"study axis {name!r} is unknown; known axes: {', '.join(STUDY_AXES)}")
+    for name in axes:  # names and values are checked by grid_signals
         if len(axes[name]) < 1:
             raise ValueError(f"study axis {name!r} needs at least one value")
     if not horizon > t_event >= 0:
@@ -143,7 +163,7 @@ def run_study(designs: dict, axes: dict, *, t_event=0.1, horizon=0.4, steady_fro
         combos = list(itertools.product(*(list(map(float, axes[n])) for n in names)))
     n = len(combos)
     freq = float(next(iter(designs.values())).omega_n) / (2 * math.pi)
-    sigs = _signals(axes, combos, t_event, freq)
+    sigs = grid_signals(names, combos, t_event, freq)
     chunk = min(chunk_size, n)
     pad = (-n) % chunk
     if pad:

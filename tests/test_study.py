@@ -4,6 +4,7 @@ import json
 import math
 import time
 
+import jax
 import numpy as np
 import pytest
 import xarray as xr
@@ -87,3 +88,20 @@ def test_study_file_errors(tmp_path, capsys):
     assert main(["study", str(p)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "designs.a.closed_form" in err[0]
+
+
+def test_grid_signals_check_values_like_gridsignal_and_match_it():
+    from jaxobs.study import grid_signals
+
+    with pytest.raises(ValueError, match="axis sag"):
+        grid_signals(["sag"], [(1.5,)], 0.1, 50.0)
+    with pytest.raises(ValueError, match="axis freq_step"):
+        grid_signals(["freq_step"], [(-60.0,)], 0.1, 50.0)
+    with pytest.raises(ValueError, match="axis noise"):
+        grid_signals(["noise"], [(-0.1,)], 0.1, 50.0)
+    # the vectorized batch equals signals built one by one
+    sigs = grid_signals(["freq_step", "phase_jump_deg", "harmonics_scale"], [(2.0, 30.0, 1.0), (-1.0, 0.0, 0.5)], 0.1, 50.0)
+    t = np.linspace(0.0, 0.3, 301)
+    one = jaxobs.GridSignal(t_event=0.1, freq_step=-1.0, harmonics={h: 0.5 * m for h, m in jaxobs.signals.TEST_C_HARMONICS.items()})
+    second = jax.tree.map(lambda x: x[1], sigs)
+    np.testing.assert_array_equal(np.asarray(second(t)), np.asarray(one(t)))

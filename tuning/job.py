@@ -59,7 +59,8 @@ import numpy as np
 
 import jaxobs
 from jaxobs import linear
-from jaxobs.signals import TEST_C_HARMONICS, EMFSignal, GridSignal, stack
+from jaxobs.signals import EMFSignal, stack
+from jaxobs.study import grid_signals
 
 from .objective import METRICS, MetricContext, Objective, Term
 from .params import GainSpec, Parametrization
@@ -443,35 +444,21 @@ def build_scenarios(spec: ScenarioSpec, values: dict):
     names, combos = _combos(spec)
     if spec.signal == "drive":
         return _drive_scenarios(names, combos), names, combos
+    if spec.signal == "grid":
+        return grid_signals(names, combos, spec.t_event, float(values.get("omega_n", W_N)) / (2 * math.pi)), names, combos
     sigs = []
-    for combo in combos:
+    for combo in combos:  # back EMFs for the flux observers
         a = dict(zip(names, combo))
-        if spec.signal == "grid":
-            scale = a.get("harmonics_scale", 0.0)
-            sigs.append(
-                GridSignal(
-                    freq=float(values.get("omega_n", W_N)) / (2 * math.pi),
-                    phase=math.radians(a.get("phase_deg", 0.0)),
-                    t_event=spec.t_event,
-                    freq_step=a.get("freq_step", 0.0),
-                    phase_jump=math.radians(a.get("phase_jump_deg", 0.0)),
-                    sag=a.get("sag", 0.0),
-                    dc=a.get("dc", 0.0),
-                    harmonics={h: scale * m for h, m in TEST_C_HARMONICS.items()},
-                    sub_amplitude=a.get("sub_amplitude", 0.0),
-                )
+        f = a.get("speed_hz", 50.0)
+        sigs.append(
+            EMFSignal(
+                A1=100.0 * f / 50.0,  # BEMF ∝ speed: 100 V at 50 Hz
+                omega1=2 * math.pi * f,
+                phase=math.radians(a.get("phase_deg", 0.0)),
+                dc=(a.get("dc_alpha", 0.0), a.get("dc_beta", 0.0)),
+                harmonics={-5: a.get("h5", 0.0) * 100.0 * f / 50.0, 7: a.get("h7", 0.0) * 100.0 * f / 50.0},
             )
-        else:
-            f = a.get("speed_hz", 50.0)
-            sigs.append(
-                EMFSignal(
-                    A1=100.0 * f / 50.0,  # BEMF ∝ speed: 100 V at 50 Hz
-                    omega1=2 * math.pi * f,
-                    phase=math.radians(a.get("phase_deg", 0.0)),
-                    dc=(a.get("dc_alpha", 0.0), a.get("dc_beta", 0.0)),
-                    harmonics={-5: a.get("h5", 0.0) * 100.0 * f / 50.0, 7: a.get("h7", 0.0) * 100.0 * f / 50.0},
-                )
-            )
+        )
     return stack(sigs), names, combos
 
 
