@@ -1,5 +1,26 @@
 """jaxobs — a differentiable JAX simulator for tuning sensorless motor-drive observers and FLLs."""
 
+import os as _os
+import sys as _sys
+
+
+def _host_devices():
+    """One XLA host device per core, so a sharded batch uses every core (jaxobs.sharding).
+
+    Only possible before JAX is imported; an explicit XLA flag or
+    ``JAXOBS_HOST_DEVICES`` (``1``: off, ``n``: n devices) wins.
+    """
+    flags = _os.environ.get("XLA_FLAGS", "")
+    if "jax" in _sys.modules or "xla_force_host_platform_device_count" in flags:
+        return
+    want = _os.environ.get("JAXOBS_HOST_DEVICES", "auto")
+    n = (_os.cpu_count() or 1) if want == "auto" else int(want) if want.isdigit() else 1
+    if n > 1:
+        _os.environ["XLA_FLAGS"] = (flags + f" --xla_force_host_platform_device_count={n}").strip()
+
+
+_host_devices()
+
 from . import drive as drive
 from . import linear as linear
 from . import metrics as metrics
@@ -60,5 +81,7 @@ from .signals import paper001_test as paper001_test
 from .signals import stack as stack
 from .simulate import SignalSolution as SignalSolution
 from .simulate import simulate as simulate
+from .sharding import batch_mesh as batch_mesh
+from .sharding import shard_batch as shard_batch
 
 __version__ = "0.1.0"

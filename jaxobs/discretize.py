@@ -182,11 +182,67 @@ def diffrax_rk4_step(f: VectorField, x, u, h):
 
 def rk4_step(f: VectorField, x, path: AbstractInputPath, h):
     """Plain classic RK4 step (used to start AB3, which has no history yet)."""
+    if _splittable(x):
+        return _split_rule(_rk4_formula, f, x, path, h)
+    return _rk4_formula(f, x, path, h, _Arr)
+
+
+def _rk4_formula(f, x, path, h, ops):
     k1 = f(x, path.at(0.0))
-    k2 = f(x + 0.5 * h * k1, path.at(0.5))
-    k3 = f(x + 0.5 * h * k2, path.at(0.5))
-    k4 = f(x + h * k3, path.at(1.0))
-    return x + (h / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+    k2 = f(ops.axpy(0.5 * h, k1, x), path.at(0.5))
+    k3 = f(ops.axpy(0.5 * h, k2, x), path.at(0.5))
+    k4 = f(ops.axpy(h, k3, x), path.at(1.0))
+    return ops.rk4_sum(x, h / 6.0, k1, k2, k3, k4)
+
+
+# --------------------------------------------------------------------------
+# Component-wise evaluation.  The rules are written once on flat state arrays,
+# but inside a vmapped loop every ``jnp.stack`` of a vector field's components
+# becomes a concatenate that XLA's CPU fusion evaluates element by element,
+# duplicating every expression shared between components (a drive step's
+# cos θ appeared up to 8 times; benchmarks/).  For small states the rules
+# therefore run the same formula on tuples of scalar components: the vector
+# field's stack and the rule's unstack fold away, no concatenate is left in
+# the step, and every number is bit-for-bit the one the array form computes
+# (same operations, same order, per component).
+# --------------------------------------------------------------------------
+
+_SPLIT_MAX = 64
+
+
+def _splittable(x) -> bool:
+    return isinstance(x, jax.Array) and x.ndim == 1 and 0 < x.shape[0] <= _SPLIT_MAX
+
+
+def _unbind(x):
+    return tuple(x[i] for i in range(x.shape[0]))
+
+
+class _Arr:
+    @staticmethod
+    def axpy(a, y, x):
+        return x + a * y
+
+    @staticmethod
+    def rk4_sum(x, c, k1, k2, k3, k4):
+        return x + c * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+
+
+class _Tup:
+    @staticmethod
+    def axpy(a, y, x):
+        return tuple(xi + a * yi for xi, yi in zip(x, y))
+
+    @staticmethod
+    def rk4_sum(x, c, k1, k2, k3, k4):
+        return tuple(xi + c * (a + 2.0 * b + 2.0 * d + e) for xi, a, b, d, e in zip(x, k1, k2, k3, k4))
+
+
+def _split_rule(formula, f, x, path, h):
+    def fs(z, u):
+        return _unbind(f(jnp.stack(z), u))
+
+    return jnp.stack(formula(fs, _unbind(x), path, h, _Tup))
 
 
 class Tustin(AbstractRule):
@@ -263,7 +319,17 @@ def solve_small(a, b):
 class AB3State(eqx.Module):
     f1: jax.Array  # f at the previous sample,     shape = x.shape
     f2: jax.Array  # f two samples back,           shape = x.shape
-    n: jax.Array  # samples taken so far (int32 scalar)
+    n: jax.Array | None  # samples taken so far (int32 scalar); None once past the start-up ("steady")
+
+    startup_steps: ClassVar[int] = 2
+
+    def steady(self) -> AB3State:
+        """The same state, declared past its start-up: its step is plain AB3, with no branch.
+
+        Only valid once ``startup_steps`` steps have been taken; the simulation
+        loop (:mod:`jaxobs._loop`) converts the carry after running them.
+        """
+        return AB3State(f1=self.f1, f2=self.f2, n=None)
 
 
 class AB3(AbstractRule):
@@ -279,7 +345,8 @@ class AB3(AbstractRule):
     start-up does not spoil the third order (a zero or Euler start leaves an
     O(h²) error for ever).  The branch is a ``lax.cond`` on the sample count,
     which stays unbatched — and so a real branch — when the whole simulation
-    is vmapped.
+    is vmapped.  The simulation loops take those two steps on their own and
+    then run the state's :meth:`AB3State.steady` form, which has no branch.
     """
 
     order: ClassVar[int] = 3
@@ -298,6 +365,8 @@ class AB3(AbstractRule):
         def start(_):
             return rk4_step(f, x, path, h)
 
+        if rule_state.n is None:  # steady: the loop has taken the start-up steps already
+            return ab3(None), AB3State(f1=f0, f2=rule_state.f1, n=None)
         x1 = jax.lax.cond(rule_state.n >= 2, ab3, start, None)
         new_state = AB3State(f1=f0, f2=rule_state.f1, n=jnp.minimum(rule_state.n + 1, 2))
         return x1, new_state

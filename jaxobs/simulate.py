@@ -14,6 +14,7 @@ A simulation that diverges is reported by ``sol.ok`` (per scenario under
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any, Literal
 
 import equinox as eqx
@@ -21,6 +22,7 @@ import jax
 import jax.numpy as jnp
 
 from ._validate import check_sample_time
+from ._loop import run_loop
 from .discretize import Knots
 
 __all__ = ["SignalSolution", "simulate", "n_samples"]
@@ -39,6 +41,12 @@ class SignalSolution(eqx.Module):
     truth: SignalTruth | None  # what the signal really is, when it can say
     final_state: Any  # observer state after the last sample (to continue a run)
     ok: jax.Array  # bool: every output finite over the horizon
+    cost: jax.Array | None = None  # ts·Σ cost(out, truth) when a running cost was given
+
+
+def _all_finite(tree) -> jax.Array:
+    leaves = [x for x in jax.tree.leaves(tree) if jnp.issubdtype(jnp.result_type(x), jnp.inexact)]
+    return jnp.all(jnp.stack([jnp.all(jnp.isfinite(x)) for x in leaves])) if leaves else jnp.asarray(True)
 
 
 def n_samples(t1: float, ts: float, t0: float = 0.0) -> int:
@@ -46,6 +54,9 @@ def n_samples(t1: float, ts: float, t0: float = 0.0) -> int:
     if n < 1:
         raise ValueError(f"t1 must exceed t0 by at least one sample time ({ts:g} s), got t0={t0:g}, t1={t1:g}")
     return n
+
+
+DEFAULT_UNROLL = 8  # loop unrolling of signal-level simulations (jaxobs._loop; measured in benchmarks/)
 
 
 @eqx.filter_jit
@@ -58,6 +69,11 @@ def simulate(
     input_path: Literal["hold", "knots"] = "hold",
     state0=None,
     throw: bool = False,
+    inputs: Literal["precomputed", "loop"] = "precomputed",
+    save: Literal["all", "final"] = "all",
+    cost: Callable | None = None,
+    checkpoint: str = "auto",
+    unroll: int = DEFAULT_UNROLL,
 ) -> SignalSolution:
     """Scan ``observer`` over ``signal`` from ``t0`` to ``t1`` (exclusive), one sample per ``observer.ts``.
 
@@ -70,29 +86,78 @@ def simulate(
             for comparisons with a continuous-time reference.
         state0: initial observer state (default ``observer.init()``).
         throw: raise if any output is non-finite, instead of reporting ``ok``.
+        inputs: ``"precomputed"`` evaluates the signal at every sample before the
+            loop (fast, n samples of memory); ``"loop"`` evaluates it inside each
+            step (no input array; what a long horizon or a huge batch wants).
+        save: ``"all"`` returns every sample's outputs; ``"final"`` only the final
+            state, ``ok`` and ``cost`` (``t``, ``u``, ``out``, ``truth`` are None), so a
+            long horizon keeps no trajectory.
+        cost: optional running cost ``cost(out, truth) -> scalar`` evaluated at
+            every sample (``truth`` the signal's :class:`SignalTruth` at t_n, or None);
+            ``sol.cost`` is its integral ts·Σ cost — the streaming form of an ISE-type
+            objective, whose gradient over a long horizon needs no trajectory.
+        checkpoint: ``"auto"``, ``"none"``, ``"step"`` or ``"chunk"`` — how reverse-mode
+            AD stores the loop (:mod:`jaxobs._loop`); results are identical.
+        unroll: loop unrolling (static); results are identical.
     """
     ts = check_sample_time("ts", observer.ts, type(observer).__name__)
     n = n_samples(t1, ts, t0)
-    dtype = jnp.result_type(float)
-    t = t0 + ts * jnp.arange(n, dtype=dtype)
-    u = signal(t)
-    if input_path == "hold":
-        xs = u
-    elif input_path == "knots":
-        xs = Knots(u0=u, um=signal(t + 0.5 * ts), u1=signal(t + ts))
-    else:
+    if inputs not in ("precomputed", "loop"):
+        raise ValueError(f"inputs must be 'precomputed' or 'loop', got {inputs!r}")
+    if save not in ("all", "final"):
+        raise ValueError(f"save must be 'all' or 'final', got {save!r}")
+    if input_path not in ("hold", "knots"):
         raise ValueError(f"input_path must be 'hold' or 'knots', got {input_path!r}")
-    state = observer.init(u[0]) if state0 is None else state0
+    dtype = jnp.result_type(float)
+    has_truth = all(hasattr(signal, a) for a in ("theta", "omega", "fundamental_amplitude"))
+
+    def input_at(t):
+        u = signal(t)
+        if input_path == "hold":
+            return u, u
+        return u, Knots(u0=u, um=signal(t + 0.5 * ts), u1=signal(t + ts))
+
+    def truth_at(t):
+        if not has_truth:
+            return None
+        return SignalTruth(theta=signal.theta(t), omega=signal.omega(t), amplitude=signal.fundamental_amplitude(t))
+
+    t_all = t0 + ts * jnp.arange(n, dtype=dtype)
+    if inputs == "precomputed":
+        u_all, path_all = input_at(t_all)
+        xs = (t_all, path_all)
+        u_first = u_all[0]
+    else:
+        # the sample index, not t: t0 + ts*k is then computed exactly as above
+        xs = jnp.arange(n, dtype=jnp.int32)
+        u_first = signal(jnp.asarray(t0, dtype))
+    state = observer.init(u_first) if state0 is None else state0
 
     def body(carry, x):
-        return observer.step(carry, x)
+        st, acc = carry
+        if inputs == "precomputed":
+            t, path = x
+        else:
+            t = t0 + ts * x.astype(dtype)
+            _, path = input_at(t)
+        st, out = observer.step(st, path)
+        if cost is not None:
+            acc = acc + cost(out, truth_at(t))
+        ys = out if save == "all" else None
+        return (st, acc), ys
 
-    final_state, out = jax.lax.scan(body, state, xs)
-    leaves = jax.tree.leaves(out)
-    ok = jnp.all(jnp.stack([jnp.all(jnp.isfinite(leaf)) for leaf in leaves]))
+    carry0 = (state, jnp.zeros((), dtype))
+    (final_state, acc), out = run_loop(body, carry0, xs, n, unroll=unroll, checkpoint=checkpoint)
+    # ok: every output finite; with save="final" the outputs are gone, but a
+    # non-finite value never leaves the state of these systems again, so the
+    # final state (and the running cost) tell the same.
+    ok = _all_finite(out if save == "all" else (final_state, acc))
+    if throw:
+        final_state = eqx.error_if(final_state, ~ok, "simulation diverged: non-finite observer output")
+    total = None if cost is None else ts * acc
+    if save == "final":
+        return SignalSolution(t=None, u=None, out=None, truth=None, final_state=final_state, ok=ok, cost=total)
     if throw:
         out = eqx.error_if(out, ~ok, "simulation diverged: non-finite observer output")
-    truth = None
-    if all(hasattr(signal, a) for a in ("theta", "omega", "fundamental_amplitude")):
-        truth = SignalTruth(theta=signal.theta(t), omega=signal.omega(t), amplitude=signal.fundamental_amplitude(t))
-    return SignalSolution(t=t, u=u, out=out, truth=truth, final_state=final_state, ok=ok)
+    u = u_all if inputs == "precomputed" else signal(t_all)
+    return SignalSolution(t=t_all, u=u, out=out, truth=truth_at(t_all), final_state=final_state, ok=ok, cost=total)

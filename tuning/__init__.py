@@ -3,6 +3,8 @@
     from tuning import load_job, run_job
 """
 
+import jaxobs as _jaxobs  # noqa: F401  (first: lets jaxobs give XLA one host device per core)
+
 from .job import COMPONENTS as COMPONENTS
 from .job import JobError as JobError
 from .job import load_job as load_job

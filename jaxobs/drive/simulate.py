@@ -20,12 +20,14 @@ The plant's vector field :func:`plant_field` is the same function
 
 from __future__ import annotations
 
-from typing import Any, NamedTuple
+from collections.abc import Callable
+from typing import Any, Literal, NamedTuple
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 
+from .._loop import run_loop
 from .._validate import check_sample_time
 from ..discretize import RK4, AbstractRule, Held
 from ..observers.base import check_rule
@@ -104,19 +106,57 @@ class DriveSolution(eqx.Module):
     mode: jax.Array  # 0: I-f start-up, 1: closed loop
     obs: Any  # observer outputs (None without an observer)
     ok: jax.Array  # bool: every state finite over the horizon
+    cost: jax.Array | None = None  # ts·Σ cost(sample) when a running cost was given
+    final: Any = None  # the loop's final carry (plant state x, rule, ctrl, obs, u)
 
     @property
     def speed_rpm(self):
         return self.omega_m * 60 / (2 * jnp.pi)
 
 
+_TRAJECTORY_FIELDS = (
+    "theta_e", "theta_e_hat", "omega_m", "omega_m_hat", "omega_m_ref", "i_d", "i_q", "i_a", "i_b",
+    "u_a", "u_b", "torque", "load", "id_ref", "iq_ref", "mode", "obs",
+)
+
+
 def _wrap(a):
     return jnp.pi - jnp.mod(jnp.pi - a, 2 * jnp.pi)
 
 
+DEFAULT_UNROLL = 2  # loop unrolling of the drive (jaxobs._loop; measured in benchmarks/)
+
+
 @eqx.filter_jit
-def simulate_drive(drive: Drive, scenario: Scenario, t1: float, observer=None) -> DriveSolution:
-    """Simulate the closed loop from t = 0 to ``t1`` (static) for one scenario (vmap for a batch)."""
+def simulate_drive(
+    drive: Drive,
+    scenario: Scenario,
+    t1: float,
+    observer=None,
+    *,
+    save: Literal["all", "final"] = "all",
+    cost: Callable | None = None,
+    inputs: Literal["loop", "precomputed"] = "loop",
+    checkpoint: str = "auto",
+    unroll: int = DEFAULT_UNROLL,
+) -> DriveSolution:
+    """Simulate the closed loop from t = 0 to ``t1`` (static) for one scenario (vmap for a batch).
+
+    Args:
+        save: ``"all"`` returns every sample; ``"final"`` returns a solution whose
+            trajectory fields are None (only ``ok``, ``cost`` and ``final``), so long
+            horizons keep no trajectory.
+        cost: optional running cost ``cost(sample) -> scalar``; ``sample`` is a
+            :class:`DriveSolution` of one sample's scalars; ``sol.cost`` = ts·Σ cost.
+        inputs: ``"loop"`` evaluates the speed-reference and load profiles inside
+            each step; ``"precomputed"`` before the loop (two arrays of n samples).
+        checkpoint, unroll: how the loop is differentiated and unrolled
+            (:mod:`jaxobs._loop`); results are identical.
+    """
+    if save not in ("all", "final"):
+        raise ValueError(f"save must be 'all' or 'final', got {save!r}")
+    if inputs not in ("loop", "precomputed"):
+        raise ValueError(f"inputs must be 'loop' or 'precomputed', got {inputs!r}")
     ts = check_sample_time("ts", drive.ts, "Drive")
     n = int(round(t1 / ts))
     if n < 1:
@@ -140,9 +180,15 @@ def simulate_drive(drive: Drive, scenario: Scenario, t1: float, observer=None) -
         u=(jnp.zeros((), dtype), jnp.zeros((), dtype)),
     )
 
-    def body(carry, k):
+    def body(carry, xk):
+        if inputs == "loop":
+            k = xk
+            t = k * ts
+            w_ref, t_load = scenario.speed_ref(t), scenario.load(t)
+        else:
+            k, w_ref, t_load = xk
+            t = k * ts
         x = carry["x"]
-        t = k * ts
         i_d, i_q, w_m, th = x[0], x[1], x[2], x[3]
         i_a, i_b = dq_to_ab(i_d, i_q, th)
         u_a, u_b = carry["u"]
@@ -159,12 +205,10 @@ def simulate_drive(drive: Drive, scenario: Scenario, t1: float, observer=None) -
             w_m_c = w_e_c / par.p
         else:
             th_c, w_e_c, w_m_c = th, par.p * w_m, w_m
-        w_ref = scenario.speed_ref(t)
         ctrl, (ua_next, ub_next), (id_ref, iq_ref) = foc.step(
             carry["ctrl"], k, im_a, im_b, th_c, w_e_c, w_m_c, w_ref, est, inv.u_max, drive.startup
         )
         ua_next, ub_next = inv.limit(ua_next, ub_next)
-        t_load = scenario.load(t)
         inp = Held((u_a, u_b, t_load))
         rs = carry["rule"]
         xn = x
@@ -192,11 +236,27 @@ def simulate_drive(drive: Drive, scenario: Scenario, t1: float, observer=None) -
             obs=obs_out,
         )
         new = dict(x=xn, rule=rs, ctrl=ctrl, obs=obs_state, u=(ua_next, ub_next))
-        return new, out
+        if cost is not None:
+            new["acc"] = carry["acc"] + cost(DriveSolution(t=t, ok=jnp.asarray(True), **out))
+        return new, (out if save == "all" else None)
 
-    _, out = jax.lax.scan(body, carry0, jnp.arange(n))
+    if cost is not None:
+        carry0["acc"] = jnp.zeros((), dtype)
+    ks = jnp.arange(n)
+    if inputs == "loop":
+        xs = ks
+    else:
+        tt = ks * ts
+        xs = (ks, scenario.speed_ref(tt), scenario.load(tt))
+    final, out = run_loop(body, carry0, xs, n, unroll=unroll, checkpoint=checkpoint)
+    total = None if cost is None else ts * final["acc"]
+    if save == "final":
+        # the plant state, controller and observer states stay non-finite once they are
+        ok = jnp.all(jnp.isfinite(final["x"])) & jnp.all(jnp.isfinite(jnp.stack(final["u"])))
+        nones = {f: None for f in _TRAJECTORY_FIELDS}
+        return DriveSolution(t=None, ok=ok, cost=total, final=final, **nones)
     ok = jnp.all(jnp.stack([jnp.all(jnp.isfinite(out[f])) for f in ("omega_m", "i_d", "i_q", "u_a", "u_b")]))
-    return DriveSolution(t=ts * jnp.arange(n, dtype=dtype), ok=ok, **out)
+    return DriveSolution(t=ts * jnp.arange(n, dtype=dtype), ok=ok, cost=total, final=final, **out)
 
 
 @eqx.filter_jit
