@@ -33,7 +33,18 @@ four things done to it, none of which changes a single number it returns
    - ``"chunk"``: the horizon is cut into ⌈√n⌉-step chunks; the outer scan
      stores one carry per chunk, each chunk is recomputed once in the backward
      pass with its steps checkpointed, so memory is O(√n) carries.
-   - ``"auto"`` (default): ``"chunk"`` above ``CHUNK_ABOVE`` steps, else ``"step"``.
+   - ``"forward"``: forward sensitivities.  The loop is a ``jax.custom_vjp``
+     whose forward pass carries, beside the state, its derivative with respect
+     to every *perturbed* input scalar (``symbolic_zeros``: a tuning job's few
+     gains; the signal and scenario are not perturbed), so the backward pass
+     is one small product and nothing is stored per step: O(1) memory in the
+     horizon, and a gradient for about the price of one forward pass per
+     tangent's linear part.  Exact (forward- and reverse-mode derivatives of the
+     same program agree to rounding; tested).  Needs a loop without per-step
+     outputs (``save="final"`` with a running cost) and at most ``FORWARD_MAX``
+     perturbed scalars, else the reverse-mode mode below is used.
+   - ``"auto"`` (default): ``"forward"`` when it applies, otherwise
+     ``"chunk"`` above ``CHUNK_ABOVE`` steps and ``"step"`` below.
 """
 
 from __future__ import annotations
@@ -49,8 +60,13 @@ import numpy as np
 
 __all__ = ["run_loop", "Checkpoint", "CHUNK_ABOVE", "resolve_checkpoint"]
 
-Checkpoint = Literal["auto", "none", "step", "chunk"]
-CHECKPOINTS = ("auto", "none", "step", "chunk")
+Checkpoint = Literal["auto", "none", "step", "chunk", "forward"]
+CHECKPOINTS = ("auto", "none", "step", "chunk", "forward")
+
+# "auto"/"forward": reverse-mode requests through a loop with no per-step
+# outputs are served by forward sensitivities when at most this many input
+# scalars are perturbed (a tuning job's handful of gains).
+FORWARD_MAX = 8
 
 # Above this many steps "auto" checkpoints per chunk.  Below it per-step
 # checkpointing keeps the carries of every step (n × carry), which for 1 s at
@@ -108,8 +124,9 @@ def check_checkpoint(checkpoint) -> str:
 
 
 def resolve_checkpoint(checkpoint: str, n: int) -> str:
+    """The reverse-mode storage mode (forward sensitivities are decided at differentiation time)."""
     checkpoint = check_checkpoint(checkpoint)
-    if checkpoint == "auto":
+    if checkpoint in ("auto", "forward"):
         return "chunk" if n > CHUNK_ABOVE else "step"
     return checkpoint
 
@@ -164,7 +181,12 @@ def run_loop(
     """
     unroll = check_unroll(unroll)
     mode = resolve_checkpoint(checkpoint, n)
+    if checkpoint in ("auto", "forward"):
+        return _sensitivity_loop(lambda c, x: _run(body, c, x, n, unroll, mode, split), carry, xs)
+    return _run(body, carry, xs, n, unroll, mode, split)
 
+
+def _run(body, carry, xs, n, unroll, mode, split):
     if split:
 
         def inner(c, x):
@@ -190,3 +212,112 @@ def run_loop(
     if ys_head is not None:
         ys = ys_head if ys is None else jax.tree.map(lambda a, b: jnp.concatenate([a, b]), ys_head, ys)
     return carry, ys
+
+
+# ---------------------------------------------------------------------------
+# forward sensitivities behind a custom VJP
+# ---------------------------------------------------------------------------
+
+
+def _is_float(x) -> bool:
+    return jnp.issubdtype(jnp.result_type(x), jnp.inexact)
+
+
+def _is_zero(x) -> bool:
+    return isinstance(x, jax.custom_derivatives.SymbolicZero)
+
+
+def _instantiate(c):
+    if not _is_zero(c):
+        return c
+    aval = c.aval
+    if aval.dtype == jax.dtypes.float0:
+        return np.zeros(aval.shape, dtype=jax.dtypes.float0)
+    return jnp.zeros(aval.shape, aval.dtype)
+
+
+def _sensitivity_loop(loop, carry, xs):
+    """``loop(carry, xs)`` whose reverse-mode derivative is computed by forward sensitivities when that applies."""
+    conv, consts = jax.closure_convert(loop, carry, xs)
+    out_shape = jax.eval_shape(loop, carry, xs)
+    has_ys = bool(jax.tree.leaves(out_shape[1]))
+
+    @jax.custom_vjp
+    def f(consts, carry, xs):
+        return conv(carry, xs, *consts)
+
+    def fwd(consts, carry, xs):
+        primals = (consts, carry, xs)
+        is_p = lambda p: isinstance(p, jax.custom_derivatives.CustomVJPPrimal)  # noqa: E731
+        values = jax.tree.map(lambda p: p.value, primals, is_leaf=is_p)
+        flags = jax.tree.map(lambda p: bool(p.perturbed), primals, is_leaf=is_p)
+        leaves, treedef = jax.tree.flatten(values)
+        pert = [i for i, (leaf, fl) in enumerate(zip(leaves, jax.tree.leaves(flags))) if fl and _is_float(leaf)]
+        n_dirs = sum(int(np.prod(np.shape(leaves[i]))) for i in pert)
+
+        def of_perturbed(*pl):
+            full = list(leaves)
+            for i, v in zip(pert, pl):
+                full[i] = v
+            c, cr, x = jax.tree.unflatten(treedef, full)
+            return conv(cr, x, *c)
+
+        pvals = [leaves[i] for i in pert]
+        if not has_ys and 0 < n_dirs <= FORWARD_MAX:
+            # one tangent per perturbed scalar, pushed alongside the primal (which is computed once)
+            sizes = [int(np.prod(np.shape(v))) for v in pvals]
+            eye = jnp.eye(n_dirs, dtype=jnp.result_type(*pvals))
+            basis, off = [], 0
+            for v, sz in zip(pvals, sizes):
+                basis.append(eye[:, off : off + sz].reshape((n_dirs,) + np.shape(v)).astype(jnp.result_type(v)))
+                off += sz
+            # the primal does not depend on the tangent: out_axes=None keeps it computed once
+            y, jac = jax.vmap(lambda *t: jax.jvp(of_perturbed, tuple(pvals), tuple(t)), out_axes=(None, 0))(*basis)
+            state["kind"] = "forward"
+            return y, (jac, pvals)
+        y, vjp_fn = jax.vjp(of_perturbed, *pvals)
+        state["kind"] = "reverse"
+        return y, (vjp_fn, pvals)
+
+    def bwd(res, cot):
+        obj, pvals = res
+        if state["kind"] == "forward":
+            # d(loss)/d(input scalar j) = Σ_outputs cot · ∂out/∂input_j
+            per_dir = None
+            for c, jl in zip(jax.tree.leaves(cot, is_leaf=_is_zero), jax.tree.leaves(obj)):
+                if _is_zero(c) or not _is_float(jl) or jnp.result_type(c) == jax.dtypes.float0:
+                    continue
+                term = jnp.sum(jnp.reshape(c * jl, (jl.shape[0], -1)), axis=1)
+                per_dir = term if per_dir is None else per_dir + term
+            grads, off = [], 0
+            for v in pvals:
+                sz = int(np.prod(np.shape(v)))
+                g = jnp.zeros(np.shape(v), jnp.result_type(v)) if per_dir is None else per_dir[off : off + sz].reshape(np.shape(v))
+                grads.append(g.astype(jnp.result_type(v)))
+                off += sz
+        else:
+            grads = list(obj(jax.tree.map(_instantiate, cot, is_leaf=_is_zero)))
+        return _scatter(grads)
+
+    # bwd must return cotangents for (consts, carry, xs); perturbed leaves get theirs, the rest None
+    leaves_all, treedef_all = jax.tree.flatten((consts, carry, xs))
+    state = {}
+
+    def _scatter(grads):
+        pert = state["pert"]
+        full = [None] * len(leaves_all)
+        for i, g in zip(pert, grads):
+            full[i] = g
+        return jax.tree.unflatten(treedef_all, full)
+
+    fwd_inner = fwd
+
+    def fwd_rec(consts, carry, xs):
+        is_p = lambda p: isinstance(p, jax.custom_derivatives.CustomVJPPrimal)  # noqa: E731
+        flags = jax.tree.leaves(jax.tree.map(lambda p: bool(p.perturbed), (consts, carry, xs), is_leaf=is_p))
+        vals = jax.tree.leaves(jax.tree.map(lambda p: p.value, (consts, carry, xs), is_leaf=is_p))
+        state["pert"] = [i for i, (v, fl) in enumerate(zip(vals, flags)) if fl and _is_float(v)]
+        return fwd_inner(consts, carry, xs)
+
+    f.defvjp(fwd_rec, bwd, symbolic_zeros=True)
+    return f(consts, carry, xs)

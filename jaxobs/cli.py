@@ -283,6 +283,24 @@ def _cmd_reproduce(args) -> int:
     raise ValueError(f"reproduce: unknown paper {args.paper!r}")
 
 
+def _cmd_bench(args) -> int:
+    import json
+
+    from .bench import run_bench, table
+
+    log = (lambda m: print(m, file=sys.stderr)) if args.json else print
+    res = run_bench(quick=args.quick, log=log)
+    if args.out:
+        path = Path(args.out)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(json.dumps(res, indent=1))
+    if args.json:
+        print(json.dumps(res, indent=1))
+    else:
+        print(table(res))
+    return 0
+
+
 class _Parser(argparse.ArgumentParser):
     def error(self, message):  # one line, exit 2, no usage dump
         self.exit(2, f"jaxobs: error: {message}\n")
@@ -326,6 +344,12 @@ def build_parser() -> argparse.ArgumentParser:
     st.add_argument("--out", help="results folder (default: out/<study name>)")
     st.add_argument("--quiet", action="store_true", help="no progress bar")
     st.set_defaults(func=_cmd_study)
+
+    be = sub.add_parser("bench", help="scenario-steps/s of jaxobs beside NumPy and numba, gradient cost and memory")
+    be.add_argument("--quick", action="store_true", help="small batches and horizons (a minute)")
+    be.add_argument("--json", action="store_true", help="print the results as JSON (progress goes to stderr)")
+    be.add_argument("--out", help="also write the JSON results to this file")
+    be.set_defaults(func=_cmd_bench)
     return p
 
 

@@ -1,0 +1,52 @@
+"""The benchmark's baselines compute what jaxobs computes (float64), and `jaxobs bench` runs."""
+
+import json
+import subprocess
+import sys
+
+import jax
+import numpy as np
+import pytest
+
+from jaxobs import bench as B
+
+numba = pytest.importorskip("numba", reason="numba is the benchmark extra: pip install 'jaxobs[bench]'")
+
+
+@pytest.mark.parametrize("kind", B.FLL_KINDS)
+def test_fll_baselines_equal_jaxobs(kind):
+    n = 1500
+    fn, args = B.jax_fll(kind, 4, "loop", n * B.TS, shard=False)
+    ref = np.asarray(fn(args))
+    for inputs in ("loop", "precomputed"):
+        for par in (False, True):
+            got = B.numba_fll(kind, np.float64, par, inputs)(*B.fll_baseline_args(kind, 4, np.float64, inputs, n))
+            np.testing.assert_allclose(got, ref, rtol=1e-12)
+    np.testing.assert_allclose(B.numpy_fll(kind, 4, np.float64, n), ref, rtol=1e-12)
+
+
+def test_drive_baselines_equal_jaxobs():
+    n = 1200  # 0.12 s: past the hand-over to the observer (0.05 s) and the load step (0.1 s)
+    fn, args = B.jax_drive(3, "loop", n * B.TS, shard=False)
+    ref = np.asarray(fn(args))
+    w = np.asarray(B.drive_setup(3)[3])
+    for par in (False, True):
+        np.testing.assert_allclose(B.numba_drive(np.float64, par)(w, n), ref, rtol=1e-10)
+    np.testing.assert_allclose(B.numpy_drive(3, np.float64, n), ref, rtol=1e-10)
+
+
+@pytest.mark.slow
+def test_bench_cli_quick_json(tmp_path):
+    out = tmp_path / "bench.json"
+    r = subprocess.run([sys.executable, "-m", "jaxobs.cli", "bench", "--quick", "--json", "--out", str(out)], capture_output=True, text=True, timeout=1800)
+    assert r.returncode == 0, r.stderr[-3000:]
+    res = json.loads(r.stdout)
+    assert json.loads(out.read_text()) == res
+    rows = res["rows"]
+    assert {"workload", "impl", "dtype", "batch", "steps_per_s", "ratio_vs_numba_parallel"} <= set(rows[0])
+    assert {r["impl"] for r in rows} == {"jaxobs", "numba-parallel", "numba-serial", "numpy"}
+    assert all(r["steps_per_s"] > 0 for r in rows)
+    assert res["grad_temp_mb_10s"]["auto"] <= 64.0
+    assert set(res["compile_s"]) == {"sogi-fll-wif", "drive-sosoifo"}
+    assert jax.devices  # the process ran with jaxobs's host devices
+    assert len(res["devices"]) >= 1
