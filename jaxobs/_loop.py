@@ -50,7 +50,6 @@ four things done to it, none of which changes a single number it returns
 from __future__ import annotations
 
 import math
-import os as _os
 from collections.abc import Callable
 from typing import Any, Literal
 
@@ -191,8 +190,6 @@ def _run(body, carry, xs, n, unroll, mode, split):
 
         def inner(c, x):
             c, y = body(_join(c), x)
-            if _os.environ.get("JAXOBS_BARRIER") == "1":
-                c, y = jax.lax.optimization_barrier((c, y))
             return _split(c), y
 
         wrap, unwrap = _split, _join
@@ -253,6 +250,7 @@ def _sensitivity_loop(loop, carry, xs):
         flags = jax.tree.map(lambda p: bool(p.perturbed), primals, is_leaf=is_p)
         leaves, treedef = jax.tree.flatten(values)
         pert = [i for i, (leaf, fl) in enumerate(zip(leaves, jax.tree.leaves(flags))) if fl and _is_float(leaf)]
+        state["pert"] = pert
         n_dirs = sum(int(np.prod(np.shape(leaves[i]))) for i in pert)
 
         def of_perturbed(*pl):
@@ -310,14 +308,5 @@ def _sensitivity_loop(loop, carry, xs):
             full[i] = g
         return jax.tree.unflatten(treedef_all, full)
 
-    fwd_inner = fwd
-
-    def fwd_rec(consts, carry, xs):
-        is_p = lambda p: isinstance(p, jax.custom_derivatives.CustomVJPPrimal)  # noqa: E731
-        flags = jax.tree.leaves(jax.tree.map(lambda p: bool(p.perturbed), (consts, carry, xs), is_leaf=is_p))
-        vals = jax.tree.leaves(jax.tree.map(lambda p: p.value, (consts, carry, xs), is_leaf=is_p))
-        state["pert"] = [i for i, (v, fl) in enumerate(zip(vals, flags)) if fl and _is_float(v)]
-        return fwd_inner(consts, carry, xs)
-
-    f.defvjp(fwd_rec, bwd, symbolic_zeros=True)
+    f.defvjp(fwd, bwd, symbolic_zeros=True)
     return f(consts, carry, xs)

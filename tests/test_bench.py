@@ -1,10 +1,10 @@
 """The benchmark's baselines compute what jaxobs computes (float64), and `jaxobs bench` runs."""
 
 import json
+import os
 import subprocess
 import sys
 
-import jax
 import numpy as np
 import pytest
 
@@ -48,5 +48,5 @@ def test_bench_cli_quick_json(tmp_path):
     assert all(r["steps_per_s"] > 0 for r in rows)
     assert res["grad_temp_mb_10s"]["auto"] <= 64.0
     assert set(res["compile_s"]) == {"sogi-fll-wif", "drive-sosoifo"}
-    assert jax.devices  # the process ran with jaxobs's host devices
-    assert len(res["devices"]) >= 1
+    # `import jaxobs` gave the bench process one host device per core
+    assert len(res["devices"]) == (os.cpu_count() or 1)

@@ -43,11 +43,10 @@ def test_streaming_cost_modes_equal_the_plain_trajectory(kind, wif_batch):
     obs = B.fll_observer(kind)
     ref_cost, ref_x = _plain_costs(obs, wif_batch, T1)
     for inputs, ck in (("loop", "auto"), ("precomputed", "chunk"), ("loop", "step")):
-        if True:
-            sol = jax.jit(jax.vmap(lambda s: jaxobs.simulate(obs, s, T1, inputs=inputs, save="final", cost=B._fll_cost, checkpoint=ck)))(wif_batch)
-            np.testing.assert_allclose(sol.cost, ref_cost, rtol=1e-12)
-            np.testing.assert_allclose(sol.final_state.x, ref_x, rtol=1e-12, atol=1e-12)
-            assert sol.out is None and bool(jnp.all(sol.ok))
+        sol = jax.jit(jax.vmap(lambda s: jaxobs.simulate(obs, s, T1, inputs=inputs, save="final", cost=B._fll_cost, checkpoint=ck)))(wif_batch)
+        np.testing.assert_allclose(sol.cost, ref_cost, rtol=1e-12)
+        np.testing.assert_allclose(sol.final_state.x, ref_x, rtol=1e-12, atol=1e-12)
+        assert sol.out is None and bool(jnp.all(sol.ok))
 
 
 def test_run_loop_is_a_scan():

@@ -72,6 +72,29 @@ def f_wif(x, u, out, P):
     out[4] = -(P[2] / P[1]) * za * q / maximum(y * y + q * q, P[3])
 
 
+def ab3_step(f, S, x, u, P, i, h, k1, k2, k3, k4, xt, f1, f2):
+    """One step of jaxobs.AB3 (RK4 for the first two samples) on x, in place."""
+    f(x, u, k1, P)
+    if i < 2:  # RK4 start-up (AB3 has no history yet)
+        for j in range(S):
+            xt[j] = x[j] + HALF_H * k1[j]
+        f(xt, u, k2, P)
+        for j in range(S):
+            xt[j] = x[j] + HALF_H * k2[j]
+        f(xt, u, k3, P)
+        for j in range(S):
+            xt[j] = x[j] + h * k3[j]
+        f(xt, u, k4, P)
+        for j in range(S):
+            x[j] = x[j] + H6 * (k1[j] + F(2.0) * k2[j] + F(2.0) * k3[j] + k4[j])
+    else:
+        for j in range(S):
+            x[j] = x[j] + H12 * (F(23.0) * k1[j] - F(16.0) * f1[j] + F(5.0) * f2[j])
+    for j in range(S):
+        f2[j] = f1[j]
+        f1[j] = k1[j]
+
+
 def ab3_run(f, S, x, P, sp, n, h, k1, k2, k3, k4, xt, f1, f2):
     """jaxobs.simulate(..., inputs="loop", save="final", cost=(ω̂ − ω)²) with the AB3 rule."""
     acc = x[S - 1] * F(0.0)
@@ -80,25 +103,7 @@ def ab3_run(f, S, x, P, sp, n, h, k1, k2, k3, k4, xt, f1, f2):
         u, om = signal(t, sp[0], sp[1], sp[2], sp[3], sp[4], sp[5], sp[6], sp[7], sp[8], sp[9])
         d = x[S - 1] - om
         acc = acc + d * d
-        f(x, u, k1, P)
-        if i < 2:  # RK4 start-up (AB3 has no history yet)
-            for j in range(S):
-                xt[j] = x[j] + HALF_H * k1[j]
-            f(xt, u, k2, P)
-            for j in range(S):
-                xt[j] = x[j] + HALF_H * k2[j]
-            f(xt, u, k3, P)
-            for j in range(S):
-                xt[j] = x[j] + h * k3[j]
-            f(xt, u, k4, P)
-            for j in range(S):
-                x[j] = x[j] + H6 * (k1[j] + F(2.0) * k2[j] + F(2.0) * k3[j] + k4[j])
-        else:
-            for j in range(S):
-                x[j] = x[j] + H12 * (F(23.0) * k1[j] - F(16.0) * f1[j] + F(5.0) * f2[j])
-        for j in range(S):
-            f2[j] = f1[j]
-            f1[j] = k1[j]
+        ab3_step(f, S, x, u, P, i, h, k1, k2, k3, k4, xt, f1, f2)
     return h * acc
 
 
@@ -106,28 +111,9 @@ def ab3_run_pre(f, S, x, P, U, OM, n, h, k1, k2, k3, k4, xt, f1, f2):
     """ab3_run with the input and the true ω precomputed (arrays U, OM of n samples)."""
     acc = x[S - 1] * F(0.0)
     for i in range(n):
-        u = U[i]
         d = x[S - 1] - OM[i]
         acc = acc + d * d
-        f(x, u, k1, P)
-        if i < 2:
-            for j in range(S):
-                xt[j] = x[j] + HALF_H * k1[j]
-            f(xt, u, k2, P)
-            for j in range(S):
-                xt[j] = x[j] + HALF_H * k2[j]
-            f(xt, u, k3, P)
-            for j in range(S):
-                xt[j] = x[j] + h * k3[j]
-            f(xt, u, k4, P)
-            for j in range(S):
-                x[j] = x[j] + H6 * (k1[j] + F(2.0) * k2[j] + F(2.0) * k3[j] + k4[j])
-        else:
-            for j in range(S):
-                x[j] = x[j] + H12 * (F(23.0) * k1[j] - F(16.0) * f1[j] + F(5.0) * f2[j])
-        for j in range(S):
-            f2[j] = f1[j]
-            f1[j] = k1[j]
+        ab3_step(f, S, x, U[i], P, i, h, k1, k2, k3, k4, xt, f1, f2)
     return h * acc
 
 
@@ -382,6 +368,6 @@ def numba_namespace(F, h, ts=None, speed_every=10):
     if ts is not None:
         ns.update(HALF_TS=F(0.5 * ts), TS6=F(ts / 6.0))
     exec(compile(SOURCE, "<jaxobs.bench.kernels>", "exec"), ns)
-    for name in ("signal", "f_sogifll", "f_wpf", "f_wif", "ab3_run", "ab3_run_pre", "obs_f", "plant_f", "wrap", "drive_run"):
+    for name in ("signal", "f_sogifll", "f_wpf", "f_wif", "ab3_step", "ab3_run", "ab3_run_pre", "obs_f", "plant_f", "wrap", "drive_run"):
         ns[name] = numba.njit(inline="always" if name not in ("ab3_run", "ab3_run_pre", "drive_run") else "never")(ns[name])
     return ns
