@@ -180,9 +180,16 @@ def run_loop(
     """
     unroll = check_unroll(unroll)
     mode = resolve_checkpoint(checkpoint, n)
-    if checkpoint in ("auto", "forward"):
+    if checkpoint in ("auto", "forward") and not _has_outputs(body, carry, xs):
+        # forward sensitivities only serve loops without per-step outputs; the others go
+        # straight to reverse mode (no custom_vjp around them)
         return _sensitivity_loop(lambda c, x: _run(body, c, x, n, unroll, mode, split), carry, xs)
     return _run(body, carry, xs, n, unroll, mode, split)
+
+
+def _has_outputs(body, carry, xs) -> bool:
+    x0 = None if xs is None else jax.tree.map(lambda a: a[0], xs)
+    return bool(jax.tree.leaves(jax.eval_shape(body, carry, x0)[1]))
 
 
 def _run(body, carry, xs, n, unroll, mode, split):
@@ -236,8 +243,6 @@ def _instantiate(c):
 def _sensitivity_loop(loop, carry, xs):
     """``loop(carry, xs)`` whose reverse-mode derivative is computed by forward sensitivities when that applies."""
     conv, consts = jax.closure_convert(loop, carry, xs)
-    out_shape = jax.eval_shape(loop, carry, xs)
-    has_ys = bool(jax.tree.leaves(out_shape[1]))
 
     @jax.custom_vjp
     def f(consts, carry, xs):
@@ -261,7 +266,7 @@ def _sensitivity_loop(loop, carry, xs):
             return conv(cr, x, *c)
 
         pvals = [leaves[i] for i in pert]
-        if not has_ys and 0 < n_dirs <= FORWARD_MAX:
+        if 0 < n_dirs <= FORWARD_MAX:
             # one tangent per perturbed scalar, pushed alongside the primal (which is computed once)
             sizes = [int(np.prod(np.shape(v))) for v in pvals]
             eye = jnp.eye(n_dirs, dtype=jnp.result_type(*pvals))

@@ -182,67 +182,11 @@ def diffrax_rk4_step(f: VectorField, x, u, h):
 
 def rk4_step(f: VectorField, x, path: AbstractInputPath, h):
     """Plain classic RK4 step (used to start AB3, which has no history yet)."""
-    if _splittable(x):
-        return _split_rule(_rk4_formula, f, x, path, h)
-    return _rk4_formula(f, x, path, h, _Arr)
-
-
-def _rk4_formula(f, x, path, h, ops):
     k1 = f(x, path.at(0.0))
-    k2 = f(ops.axpy(0.5 * h, k1, x), path.at(0.5))
-    k3 = f(ops.axpy(0.5 * h, k2, x), path.at(0.5))
-    k4 = f(ops.axpy(h, k3, x), path.at(1.0))
-    return ops.rk4_sum(x, h / 6.0, k1, k2, k3, k4)
-
-
-# --------------------------------------------------------------------------
-# Component-wise evaluation.  The rules are written once on flat state arrays,
-# but inside a vmapped loop every ``jnp.stack`` of a vector field's components
-# becomes a concatenate that XLA's CPU fusion evaluates element by element,
-# duplicating every expression shared between components (a drive step's
-# cos θ appeared up to 8 times; benchmarks/).  For small states the rules
-# therefore run the same formula on tuples of scalar components: the vector
-# field's stack and the rule's unstack fold away, no concatenate is left in
-# the step, and every number is bit-for-bit the one the array form computes
-# (same operations, same order, per component).
-# --------------------------------------------------------------------------
-
-_SPLIT_MAX = 64
-
-
-def _splittable(x) -> bool:
-    return isinstance(x, jax.Array) and x.ndim == 1 and 0 < x.shape[0] <= _SPLIT_MAX
-
-
-def _unbind(x):
-    return tuple(x[i] for i in range(x.shape[0]))
-
-
-class _Arr:
-    @staticmethod
-    def axpy(a, y, x):
-        return x + a * y
-
-    @staticmethod
-    def rk4_sum(x, c, k1, k2, k3, k4):
-        return x + c * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
-
-
-class _Tup:
-    @staticmethod
-    def axpy(a, y, x):
-        return tuple(xi + a * yi for xi, yi in zip(x, y))
-
-    @staticmethod
-    def rk4_sum(x, c, k1, k2, k3, k4):
-        return tuple(xi + c * (a + 2.0 * b + 2.0 * d + e) for xi, a, b, d, e in zip(x, k1, k2, k3, k4))
-
-
-def _split_rule(formula, f, x, path, h):
-    def fs(z, u):
-        return _unbind(f(jnp.stack(z), u))
-
-    return jnp.stack(formula(fs, _unbind(x), path, h, _Tup))
+    k2 = f(x + 0.5 * h * k1, path.at(0.5))
+    k3 = f(x + 0.5 * h * k2, path.at(0.5))
+    k4 = f(x + h * k3, path.at(1.0))
+    return x + (h / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
 
 
 class Tustin(AbstractRule):

@@ -124,7 +124,10 @@ def _wrap(a):
     return jnp.pi - jnp.mod(jnp.pi - a, 2 * jnp.pi)
 
 
-DEFAULT_UNROLL = 2  # loop unrolling of the drive (jaxobs._loop; measured in benchmarks/)
+# Loop unrolling of the drive (jaxobs._loop).  1: the drive step is large, and
+# unrolling it made XLA's CPU fusion duplicate work (forward 3.1 → 1.3 M
+# scenario-steps/s at 2) and its reverse-mode compile blow up (> 200 s).
+DEFAULT_UNROLL = 1
 
 
 @eqx.filter_jit
