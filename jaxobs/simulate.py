@@ -125,21 +125,22 @@ def simulate(
     t_all = t0 + ts * jnp.arange(n, dtype=dtype)
     if inputs == "precomputed":
         u_all, path_all = input_at(t_all)
-        xs = (t_all, path_all)
+        xs, xs_map = (t_all, path_all), None
         u_first = u_all[0]
     else:
-        # the sample index, not t: t0 + ts*k is then computed exactly as above
+        # sample indices, mapped to (t, input) a block of steps at a time inside
+        # the loop (jaxobs._loop, point 5); t0 + ts*k is computed exactly as above
+        def xs_map(k):
+            t = t0 + ts * k.astype(dtype)
+            return t, input_at(t)[1]
+
         xs = jnp.arange(n, dtype=jnp.int32)
         u_first = signal(jnp.asarray(t0, dtype))
     state = observer.init(u_first) if state0 is None else state0
 
     def body(carry, x):
         st, acc = carry
-        if inputs == "precomputed":
-            t, path = x
-        else:
-            t = t0 + ts * x.astype(dtype)
-            _, path = input_at(t)
+        t, path = x
         st, out = observer.step(st, path)
         if cost is not None:
             acc = acc + cost(out, truth_at(t))
@@ -147,7 +148,7 @@ def simulate(
         return (st, acc), ys
 
     carry0 = (state, jnp.zeros((), dtype))
-    (final_state, acc), out = run_loop(body, carry0, xs, n, unroll=unroll, checkpoint=checkpoint)
+    (final_state, acc), out = run_loop(body, carry0, xs, n, unroll=unroll, checkpoint=checkpoint, xs_map=xs_map)
     # ok: every output finite; with save="final" the outputs are gone, but a
     # non-finite value never leaves the state of these systems again, so the
     # final state (and the running cost) tell the same.

@@ -42,7 +42,7 @@ def _plain_costs(obs, sig, t1):
 def test_streaming_cost_modes_equal_the_plain_trajectory(kind, wif_batch):
     obs = B.fll_observer(kind)
     ref_cost, ref_x = _plain_costs(obs, wif_batch, T1)
-    for inputs, ck in (("loop", "auto"), ("precomputed", "chunk"), ("loop", "step")):
+    for inputs, ck in (("loop", "auto"), ("precomputed", "chunk"), ("loop", "step"), ("loop", "chunk"), ("loop", "none")):
         sol = jax.jit(jax.vmap(lambda s: jaxobs.simulate(obs, s, T1, inputs=inputs, save="final", cost=B._fll_cost, checkpoint=ck)))(wif_batch)
         np.testing.assert_allclose(sol.cost, ref_cost, rtol=1e-12)
         np.testing.assert_allclose(sol.final_state.x, ref_x, rtol=1e-12, atol=1e-12)
@@ -65,6 +65,46 @@ def test_run_loop_is_a_scan():
             c, y = run_loop(body, carry, xs, 103, unroll=unroll, checkpoint=ck)
             np.testing.assert_allclose(c[0], ref_c[0], rtol=1e-15)
             np.testing.assert_allclose(y, ref_y, rtol=1e-15)
+
+
+def test_run_loop_maps_inputs_a_block_at_a_time():
+    """xs_map (the signal evaluated per block of steps) gives the scan over the mapped inputs, in every mode."""
+
+    def body(c, x):
+        t, u = x
+        return c + u * t, u
+
+    idx = jnp.arange(301, dtype=jnp.int32)
+    xs_map = lambda k: (0.01 * k, jnp.cos(0.01 * k))  # noqa: E731
+    ref_c, ref_y = jax.lax.scan(body, jnp.zeros(()), xs_map(idx))
+    for ck in ("none", "step", "chunk", "forward"):
+        c, y = run_loop(body, jnp.zeros(()), idx, 301, unroll=8, checkpoint=ck, xs_map=xs_map)
+        np.testing.assert_allclose(c, ref_c, rtol=1e-15)
+        np.testing.assert_allclose(y, ref_y, rtol=1e-15)
+    with pytest.raises(ValueError, match="xs_map needs xs"):
+        run_loop(body, jnp.zeros(()), None, 3, xs_map=xs_map)
+
+
+@pytest.mark.parametrize("n_dirs", [2, 5])
+def test_multi_jvp_matches_jacfwd_and_prunes_mixed_terms(n_dirs):
+    """Forward sensitivities along several directions at once: nested (≤ NESTED_MAX) or vmapped, both = jacfwd."""
+    from jaxobs._loop import NESTED_MAX, _multi_jvp
+
+    def fun(p):
+        def body(x, t):
+            return jnp.stack([x[1], -p[0] * x[0] - p[1] * x[1] + jnp.sum(p[2:]) * jnp.sin(t)]), None
+
+        return jax.lax.scan(body, jnp.array([1.0, 0.0]), jnp.linspace(0.0, 2.0, 50))[0]
+
+    p = jnp.linspace(1.0, 2.0, n_dirs)
+    y, jac = _multi_jvp(fun, (p,), [jnp.eye(n_dirs)])
+    np.testing.assert_allclose(y, fun(p), rtol=1e-15)
+    np.testing.assert_allclose(jac.T, jax.jacfwd(fun)(p), rtol=1e-13)
+    if n_dirs <= NESTED_MAX:
+        # one loop carrying the primal and one tangent per direction: the 2**d - 1 - d mixed terms are gone
+        jaxpr = jax.make_jaxpr(lambda p: _multi_jvp(fun, (p,), [jnp.eye(n_dirs)]))(p)
+        scans = [e for e in jaxpr.jaxpr.eqns if e.primitive.name == "scan"]
+        assert [e.params["num_carry"] for e in scans] == [1 + n_dirs]
 
 
 def test_run_loop_rejects_bad_settings():

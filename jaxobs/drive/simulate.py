@@ -184,13 +184,8 @@ def simulate_drive(
     )
 
     def body(carry, xk):
-        if inputs == "loop":
-            k = xk
-            t = k * ts
-            w_ref, t_load = scenario.speed_ref(t), scenario.load(t)
-        else:
-            k, w_ref, t_load = xk
-            t = k * ts
+        k, w_ref, t_load = xk
+        t = k * ts
         x = carry["x"]
         i_d, i_q, w_m, th = x[0], x[1], x[2], x[3]
         i_a, i_b = dq_to_ab(i_d, i_q, th)
@@ -245,13 +240,14 @@ def simulate_drive(
 
     if cost is not None:
         carry0["acc"] = jnp.zeros((), dtype)
-    ks = jnp.arange(n)
-    if inputs == "loop":
-        xs = ks
-    else:
+    def profiles(ks):
         tt = ks * ts
-        xs = (ks, scenario.speed_ref(tt), scenario.load(tt))
-    final, out = run_loop(body, carry0, xs, n, unroll=unroll, checkpoint=checkpoint)
+        return ks, scenario.speed_ref(tt), scenario.load(tt)
+
+    ks = jnp.arange(n)
+    # "loop": the profiles are evaluated a block of steps at a time inside the loop (jaxobs._loop, point 5)
+    xs, xs_map = (ks, profiles) if inputs == "loop" else (profiles(ks), None)
+    final, out = run_loop(body, carry0, xs, n, unroll=unroll, checkpoint=checkpoint, xs_map=xs_map)
     total = None if cost is None else ts * final["acc"]
     if save == "final":
         # the plant state, controller and observer states stay non-finite once they are
