@@ -77,6 +77,7 @@ from .observers import (
     SecondOrderSOIFO as SecondOrderSOIFO,
 )
 from .signals import GridSignal as GridSignal
+from .signals import SampledSignal as SampledSignal
 from .signals import paper001_test as paper001_test
 from .signals import stack as stack
 from .simulate import SignalSolution as SignalSolution

@@ -27,9 +27,9 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from ._validate import as_float, check_nonnegative, check_positive, check_real
+from ._validate import as_float, check_nonnegative, check_positive, check_real, check_sample_time
 
-__all__ = ["GridSignal", "EMFSignal", "paper001_test", "PAPER001_TESTS", "TEST_C_HARMONICS", "stack"]
+__all__ = ["GridSignal", "SampledSignal", "EMFSignal", "paper001_test", "PAPER001_TESTS", "TEST_C_HARMONICS", "stack"]
 
 # 001 Test C: V3 ≈ 0.054, V5 ≈ 0.048, V7 ≈ 0.022, V9 ≈ 0.005, V11 ≈ 0.012, V13 ≈ 0.006 p.u.
 TEST_C_HARMONICS = {3: 0.054, 5: 0.048, 7: 0.022, 9: 0.005, 11: 0.012, 13: 0.006}
@@ -113,6 +113,98 @@ class GridSignal(eqx.Module):
             v = v + on * self.harmonics[..., i] * jnp.cos(h * th)
         v = v + on * (self.dc + self.sub_amplitude * jnp.cos(2 * jnp.pi * self.sub_freq * t))
         return v
+
+
+class SampledSignal(eqx.Module):
+    """A signal given by its samples u_k = u(t₀ + k·ts): a recording, or a waveform computed once.
+
+    ``sig(t)`` reads the samples back by linear interpolation; a time within
+    ``SNAP`` of a sample interval from a sample instant reads that sample
+    exactly (the loop's sample times t₀ + ts·k carry rounding errors of a few
+    ulps, and a replayed recording should give back the recorded numbers, not
+    a blend of neighbours).  Before the first sample and after the last one
+    the end sample is held — a traced time cannot raise, so a horizon longer
+    than the recording must be checked by the caller (``simulate`` does).
+
+    ``truth`` is the true (θ, ω, fundamental amplitude) at the same instants,
+    when known (a synthetic waveform); with it, ``simulate`` fills in
+    :class:`~jaxobs.simulate.SignalTruth` and a cost may compare against it.
+    Leaves may carry a leading batch axis (``vmap`` over recordings of one
+    length).
+
+    This is also how a benchmark feeds *precomputed* inputs: the waveform is
+    generated once, outside the timed function, and the loop only reads it,
+    a block of steps at a time (``inputs="loop"``).
+    """
+
+    samples: jax.Array  # u_k, shape (..., n)
+    truth: tuple | None  # (θ_k, ω_k, V_k), each shaped like samples, or None
+    ts: float = eqx.field(static=True)  # sample interval, s
+    t0: float = eqx.field(static=True)  # time of the first sample, s (static, so a horizon is checked when traced)
+
+    SNAP = 1e-3  # fraction of a sample interval treated as "on" a sample instant
+
+    def __init__(self, samples, ts, t0=0.0, *, truth=None):
+        own = "SampledSignal"
+        samples = check_real("samples", samples, owner=own)
+        if samples.ndim < 1 or samples.shape[-1] < 2:
+            raise ValueError(f"{own}.samples must hold at least 2 samples along its last axis, got shape {samples.shape}")
+        self.samples = samples
+        self.ts = check_sample_time("ts", ts, own)
+        try:
+            self.t0 = float(t0)
+        except (TypeError, ValueError, jax.errors.ConcretizationTypeError):
+            raise ValueError(f"{own}.t0 must be a finite number of seconds (static), got {t0!r}") from None
+        if not math.isfinite(self.t0):
+            raise ValueError(f"{own}.t0 must be a finite number of seconds (static), got {t0!r}")
+        if truth is not None:
+            if len(truth) != 3:
+                raise ValueError(f"{own}.truth must be (theta, omega, amplitude) sample arrays, got {len(truth)} arrays")
+            truth = tuple(check_real(name, a, owner=own) for name, a in zip(("truth.theta", "truth.omega", "truth.amplitude"), truth))
+            for name, a in zip(("theta", "omega", "amplitude"), truth):
+                if a.shape != samples.shape:
+                    raise ValueError(f"{own}.truth.{name} must have the shape of samples {samples.shape}, got {a.shape}")
+        self.truth = truth
+
+    @property
+    def n(self) -> int:
+        return self.samples.shape[-1]
+
+    @property
+    def has_truth(self) -> bool:
+        return self.truth is not None
+
+    @property
+    def t_end(self) -> float:
+        """Time of the last sample, s."""
+        return self.t0 + self.ts * (self.n - 1)
+
+    def _read(self, arr, t):
+        x = (t - self.t0) / self.ts
+        k = jnp.round(x)
+        d = x - k
+        snap = jnp.abs(d) <= self.SNAP
+        i = jnp.clip(k, 0, self.n - 1).astype(jnp.int32)
+        j = jnp.clip(k + jnp.where(d < 0, -1, 1), 0, self.n - 1).astype(jnp.int32)
+        a_i, a_j = arr[..., i], arr[..., j]
+        return jnp.where(snap, a_i, a_i + jnp.abs(d) * (a_j - a_i))
+
+    def __call__(self, t):
+        return self._read(self.samples, t)
+
+    def _truth(self, which, t):
+        if self.truth is None:
+            raise ValueError("SampledSignal was built without truth=(theta, omega, amplitude)")
+        return self._read(self.truth[which], t)
+
+    def theta(self, t):
+        return self._truth(0, t)
+
+    def omega(self, t):
+        return self._truth(1, t)
+
+    def fundamental_amplitude(self, t):
+        return self._truth(2, t)
 
 
 PAPER001_TESTS = ("1", "2", "3", "A", "B", "C", "D", "E")

@@ -24,6 +24,7 @@ import jax.numpy as jnp
 from ._validate import check_sample_time
 from ._loop import run_loop
 from .discretize import Knots
+from .signals import SampledSignal
 
 __all__ = ["SignalSolution", "simulate", "n_samples"]
 
@@ -87,8 +88,11 @@ def simulate(
         state0: initial observer state (default ``observer.init()``).
         throw: raise if any output is non-finite, instead of reporting ``ok``.
         inputs: ``"precomputed"`` evaluates the signal at every sample before the
-            loop (fast, n samples of memory); ``"loop"`` evaluates it inside each
-            step (no input array; what a long horizon or a huge batch wants).
+            loop (n samples of memory); ``"loop"`` evaluates it inside the loop, a
+            block of steps at a time (:mod:`jaxobs._loop`, point 5: no n-sample
+            input array and, on CPU, as fast or faster — what a long horizon or a
+            huge batch wants).  Inputs already sampled (a recording) are a
+            :class:`~jaxobs.signals.SampledSignal`.
         save: ``"all"`` returns every sample's outputs; ``"final"`` only the final
             state, ``ok`` and ``cost`` (``t``, ``u``, ``out``, ``truth`` are None), so a
             long horizon keeps no trajectory.
@@ -109,7 +113,17 @@ def simulate(
     if input_path not in ("hold", "knots"):
         raise ValueError(f"input_path must be 'hold' or 'knots', got {input_path!r}")
     dtype = jnp.result_type(float)
-    has_truth = all(hasattr(signal, a) for a in ("theta", "omega", "fundamental_amplitude"))
+    has_truth = getattr(signal, "has_truth", True) and all(hasattr(signal, a) for a in ("theta", "omega", "fundamental_amplitude"))
+    if isinstance(signal, SampledSignal):
+        # a recording holds its end sample beyond its last instant (signals.py);
+        # a horizon that starts before it or runs past it is a mistake, not a hold
+        t_last = t0 + ts * (n - 1)
+        tol = SampledSignal.SNAP * signal.ts
+        if t0 < signal.t0 - tol or t_last > signal.t_end + tol:
+            raise ValueError(
+                f"simulate: the horizon [t0, t0 + ts*(n-1)] = [{t0:g}, {t_last:g}] s must lie inside the "
+                f"SampledSignal's samples [{signal.t0:g}, {signal.t_end:g}] s"
+            )
 
     def input_at(t):
         u = signal(t)

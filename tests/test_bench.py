@@ -18,6 +18,9 @@ def test_fll_baselines_equal_jaxobs(kind):
     n = 1500
     fn, args = B.jax_fll(kind, 4, "loop", n * B.TS, shard=False)
     ref = np.asarray(fn(args))
+    # jaxobs reading the precomputed samples (SampledSignal) computes the same
+    fn_pre, args_pre = B.jax_fll(kind, 4, "precomputed", n * B.TS, shard=False)
+    np.testing.assert_allclose(np.asarray(fn_pre(args_pre)), ref, rtol=1e-12)
     for inputs in ("loop", "precomputed"):
         for par in (False, True):
             got = B.numba_fll(kind, np.float64, par, inputs)(*B.fll_baseline_args(kind, 4, np.float64, inputs, n))

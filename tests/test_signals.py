@@ -1,0 +1,105 @@
+"""SampledSignal: a recording (or a waveform sampled once) read back inside the loop."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import jaxobs
+from jaxobs.signals import GridSignal, SampledSignal
+
+TS = 1e-4
+N = 3000  # 0.3 s: past the event at 0.2 s
+
+
+def _grid():
+    return GridSignal(1.0, 50.0, 0.3, 0.2, freq_step=1.5, phase_jump=0.4, sag=0.2)
+
+
+def _sampled(sig, n=N, t0=0.0):
+    t = t0 + TS * jnp.arange(n, dtype=jnp.float64)
+    return SampledSignal(sig(t), TS, t0, truth=(sig.theta(t), sig.omega(t), sig.fundamental_amplitude(t)))
+
+
+def _obs():
+    return jaxobs.SOGIFLL(1.41, 2000.0, ts=TS)
+
+
+@pytest.mark.parametrize("inputs", ["precomputed", "loop"])
+def test_replayed_samples_give_the_simulation_of_the_signal(inputs):
+    """Read back at the loop's own sample instants the samples come back exactly (the snap), so
+    the replay is the signal's simulation: outputs, truth and a running cost."""
+    sig, obs = _grid(), _obs()
+    cost = lambda out, tr: (out.omega - tr.omega) ** 2  # noqa: E731
+    rec = _sampled(sig)
+    a = jaxobs.simulate(obs, sig, N * TS, inputs=inputs, cost=cost)
+    b = jaxobs.simulate(obs, rec, N * TS, inputs=inputs, cost=cost)
+    np.testing.assert_array_equal(np.asarray(b.u), np.asarray(rec.samples))
+    # the samples were computed outside jit, where XLA fuses cos(θ(t)) differently: ulps apart
+    np.testing.assert_allclose(np.asarray(b.u), np.asarray(a.u), rtol=0, atol=1e-13)
+    np.testing.assert_allclose(np.asarray(b.out.omega), np.asarray(a.out.omega), rtol=1e-12, atol=1e-9)
+    np.testing.assert_allclose(np.asarray(b.truth.theta), np.asarray(a.truth.theta), rtol=1e-12)
+    assert float(b.cost) == pytest.approx(float(a.cost), rel=1e-12)
+    assert bool(b.ok)
+
+
+def test_between_samples_reads_linear_interpolation_and_holds_the_ends():
+    s = SampledSignal(jnp.asarray([0.0, 2.0, 1.0, 5.0]), 0.5, t0=1.0)
+    t = jnp.asarray([0.0, 1.0, 1.25, 1.5, 1.6, 2.0, 2.4, 2.5, 9.0])
+    np.testing.assert_allclose(np.asarray(s(t)), [0.0, 0.0, 1.0, 2.0, 1.8, 1.0, 4.2, 5.0, 5.0], rtol=1e-12)
+    # a time a rounding error off a sample instant reads the sample itself
+    assert float(s(jnp.asarray(1.5 - 1e-12))) == 2.0
+    assert s.t_end == 2.5 and s.n == 4
+
+
+def test_without_truth_the_solution_has_none():
+    sol = jaxobs.simulate(_obs(), SampledSignal(jnp.cos(2 * jnp.pi * 50 * TS * jnp.arange(500.0)), TS), 0.05)
+    assert sol.truth is None and bool(sol.ok)
+    with pytest.raises(ValueError, match="truth"):
+        SampledSignal(jnp.zeros(10), TS).omega(0.0)
+
+
+def test_vmap_over_recordings_and_gradient_through_the_samples():
+    sig = _grid()
+    rec = _sampled(sig, n=800)
+    batch = jax.tree.map(lambda x: jnp.stack([x, 1.1 * x]), rec)  # two recordings, one scaled
+    cost = lambda out, tr: (out.omega - tr.omega) ** 2  # noqa: E731
+    f = jax.jit(jax.vmap(lambda s: jaxobs.simulate(_obs(), s, 800 * TS, save="final", cost=cost, inputs="loop").cost))
+    c = np.asarray(f(batch))
+    one = jaxobs.simulate(_obs(), rec, 800 * TS, save="final", cost=cost, inputs="loop").cost
+    assert c.shape == (2,) and c[0] == pytest.approx(float(one), rel=1e-12) and c[1] != c[0]
+
+    # d cost / d (scale of the recording), by AD and by central differences
+    def loss(a):
+        r = SampledSignal(a * rec.samples, TS, truth=rec.truth)
+        return jaxobs.simulate(_obs(), r, 800 * TS, save="final", cost=cost, inputs="loop").cost
+
+    g = float(jax.grad(loss)(1.0))
+    h = 1e-6
+    fd = (float(loss(1.0 + h)) - float(loss(1.0 - h))) / (2 * h)
+    assert np.isfinite(g) and g == pytest.approx(fd, rel=1e-5)
+
+
+@pytest.mark.parametrize(
+    "kwargs, field",
+    [
+        (dict(samples=[1.0], ts=TS), "SampledSignal.samples"),
+        (dict(samples=[1.0, float("nan")], ts=TS), "SampledSignal.samples"),
+        (dict(samples=[1.0, 2.0], ts=0.0), "SampledSignal.ts"),
+        (dict(samples=[1.0, 2.0], ts=TS, t0=float("inf")), "SampledSignal.t0"),
+        (dict(samples=[1.0, 2.0], ts=TS, truth=([0.0, 1.0], [1.0, 1.0])), "SampledSignal.truth"),
+        (dict(samples=[1.0, 2.0], ts=TS, truth=([0.0, 1.0], [1.0, 1.0], [1.0])), "SampledSignal.truth.amplitude"),
+    ],
+)
+def test_bad_arguments_raise_value_error_naming_the_field(kwargs, field):
+    with pytest.raises(ValueError, match=field.replace(".", r"\.")):
+        SampledSignal(**kwargs)
+
+
+def test_a_horizon_past_the_recording_is_an_error():
+    rec = SampledSignal(jnp.zeros(100), TS, t0=0.0)
+    jaxobs.simulate(_obs(), rec, 100 * TS)  # exactly the recording: fine
+    with pytest.raises(ValueError, match="horizon"):
+        jaxobs.simulate(_obs(), rec, 101 * TS)
+    with pytest.raises(ValueError, match="horizon"):
+        jaxobs.simulate(_obs(), SampledSignal(jnp.zeros(100), TS, t0=0.01), 0.005)
