@@ -84,5 +84,6 @@ from .simulate import SignalSolution as SignalSolution
 from .simulate import simulate as simulate
 from .sharding import batch_mesh as batch_mesh
 from .sharding import shard_batch as shard_batch
+from .sharding import map_batch as map_batch
 
 __version__ = "0.1.0"

@@ -137,16 +137,29 @@ def simulate(
         return SignalTruth(theta=signal.theta(t), omega=signal.omega(t), amplitude=signal.fundamental_amplitude(t))
 
     t_all = t0 + ts * jnp.arange(n, dtype=dtype)
+    need_truth = cost is not None and has_truth
     if inputs == "precomputed":
         u_all, path_all = input_at(t_all)
-        xs, xs_map = (t_all, path_all), None
+        xs, xs_map = (t_all, path_all, None), None
         u_first = u_all[0]
     else:
-        # sample indices, mapped to (t, input) a block of steps at a time inside
-        # the loop (jaxobs._loop, point 5); t0 + ts*k is computed exactly as above
+        # a recording whose samples fall on the loop's own instants is read a
+        # block at a time by slicing (contiguous per scenario), not by the
+        # element-wise gather of SampledSignal.__call__: at batch 8192 in float64
+        # the gather ran the SOGI-FLL-WIF at 44 M steps/s, the slice at ~80
+        # (benchmarks/README.md); the values are identical (the snap)
+        off = signal.aligned_offset(t0, ts) if isinstance(signal, SampledSignal) and input_path == "hold" else None
+
+        # sample indices, mapped to (t, input, truth) a block of steps at a time
+        # inside the loop (jaxobs._loop, point 5); t0 + ts*k is computed exactly as above
         def xs_map(k):
             t = t0 + ts * k.astype(dtype)
-            return t, input_at(t)[1]
+            if off is None:
+                return t, input_at(t)[1], (truth_at(t) if need_truth else None)
+            start, size = k[0] + off, k.shape[0]
+            path = signal.window(signal.samples, start, size)
+            truth = SignalTruth(*(signal.window(a, start, size) for a in signal.truth)) if need_truth else None
+            return t, path, truth
 
         xs = jnp.arange(n, dtype=jnp.int32)
         u_first = signal(jnp.asarray(t0, dtype))
@@ -154,10 +167,10 @@ def simulate(
 
     def body(carry, x):
         st, acc = carry
-        t, path = x
+        t, path, truth = x
         st, out = observer.step(st, path)
         if cost is not None:
-            acc = acc + cost(out, truth_at(t))
+            acc = acc + cost(out, truth_at(t) if truth is None else truth)
         ys = out if save == "all" else None
         return (st, acc), ys
 

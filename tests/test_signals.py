@@ -30,7 +30,7 @@ def test_replayed_samples_give_the_simulation_of_the_signal(inputs):
     """Read back at the loop's own sample instants the samples come back exactly (the snap), so
     the replay is the signal's simulation: outputs, truth and a running cost."""
     sig, obs = _grid(), _obs()
-    cost = lambda out, tr: (out.omega - tr.omega) ** 2  # noqa: E731
+    cost = lambda out, tr: (out.omega - tr.omega) ** 2
     rec = _sampled(sig)
     a = jaxobs.simulate(obs, sig, N * TS, inputs=inputs, cost=cost)
     b = jaxobs.simulate(obs, rec, N * TS, inputs=inputs, cost=cost)
@@ -63,7 +63,7 @@ def test_vmap_over_recordings_and_gradient_through_the_samples():
     sig = _grid()
     rec = _sampled(sig, n=800)
     batch = jax.tree.map(lambda x: jnp.stack([x, 1.1 * x]), rec)  # two recordings, one scaled
-    cost = lambda out, tr: (out.omega - tr.omega) ** 2  # noqa: E731
+    cost = lambda out, tr: (out.omega - tr.omega) ** 2
     f = jax.jit(jax.vmap(lambda s: jaxobs.simulate(_obs(), s, 800 * TS, save="final", cost=cost, inputs="loop").cost))
     c = np.asarray(f(batch))
     one = jaxobs.simulate(_obs(), rec, 800 * TS, save="final", cost=cost, inputs="loop").cost

@@ -13,8 +13,8 @@ Workloads (each scenario differs: a frequency step, phase jump and sag per scena
   PI, second-order SOIFO + FLL by RK4), 0.2 s at 10 kHz, running cost
   ∫(θ̂ − θ)²; the speed reference differs per scenario.
 
-Implementations: ``jaxobs`` (``jit(vmap(simulate))``, batch sharded over every
-host device), ``numba`` (``njit`` loop over the batch, serial and
+Implementations: ``jaxobs`` (``jit`` of :func:`jaxobs.map_batch` over
+``simulate``: the batch sharded over every host device, 512 scenarios per tile), ``numba`` (``njit`` loop over the batch, serial and
 ``parallel=True``), ``numpy`` (Python loop over time, vectorized over the
 batch).  The baselines are :mod:`jaxobs.bench.kernels`, checked equal to jaxobs
 in tests/test_bench.py.  numba is optional (``pip install jaxobs[bench]``).
@@ -42,7 +42,7 @@ from .. import drive as D
 from ..linear import sogi_fll_closed_form, wif_closed_form, wpf_closed_form
 from ..metrics import wrap
 from ..observers import SecondOrderSOIFO
-from ..sharding import shard_batch
+from ..sharding import map_batch, shard_batch
 from ..signals import GridSignal, SampledSignal
 from ..simulate import simulate
 from . import kernels
@@ -114,6 +114,13 @@ def _fll_cost(out, truth):
     return d * d
 
 
+def _batched(one, shard: bool):
+    """The jitted batch function: sharded over every device and tiled (``map_batch``), or plain ``vmap``."""
+    if shard:
+        return jax.jit(lambda b: map_batch(one, b))
+    return jax.jit(jax.vmap(one))
+
+
 def jax_fll(kind: str, batch: int, inputs: str, t1: float = FLL_T1, shard: bool = True):
     """(jitted function, sharded argument): per-scenario running costs of the FLL workload.
 
@@ -134,11 +141,8 @@ def jax_fll(kind: str, batch: int, inputs: str, t1: float = FLL_T1, shard: bool 
     else:
         raise ValueError(f"inputs must be 'loop' or 'precomputed', got {inputs!r}")
 
-    @jax.jit
-    def fn(sig):
-        return jax.vmap(lambda s: simulate(obs, s, t1, inputs="loop", save="final", cost=_fll_cost).cost)(sig)
-
-    return fn, (shard_batch(sig) if shard else sig)
+    one = lambda s: simulate(obs, s, t1, inputs="loop", save="final", cost=_fll_cost).cost  # noqa: E731
+    return _batched(one, shard), (shard_batch(sig) if shard else sig)
 
 
 def _fll_params(kind, dtype):
@@ -263,11 +267,8 @@ def _drive_cost(s):
 def jax_drive(batch: int, inputs: str = "loop", t1: float = DRIVE_T1, shard: bool = True):
     drive, obs, sc, _ = drive_setup(batch)
 
-    @jax.jit
-    def fn(sc):
-        return jax.vmap(lambda s: D.simulate_drive(drive, s, t1, obs, save="final", cost=_drive_cost, inputs=inputs).cost)(sc)
-
-    return fn, (shard_batch(sc) if shard else sc)
+    one = lambda s: D.simulate_drive(drive, s, t1, obs, save="final", cost=_drive_cost, inputs=inputs).cost  # noqa: E731
+    return _batched(one, shard), (shard_batch(sc) if shard else sc)
 
 
 def _drive_params(dtype):
