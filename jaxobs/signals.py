@@ -192,18 +192,6 @@ class SampledSignal(eqx.Module):
     def __call__(self, t):
         return self._read(self.samples, t)
 
-    def aligned_offset(self, t0: float, ts: float) -> int | None:
-        """The sample index of time ``t0`` when a clock ``t0 + ts·k`` falls on the sample instants, else None (static)."""
-        if abs(ts - self.ts) > 1e-12 * self.ts:
-            return None
-        off = (t0 - self.t0) / self.ts
-        k = round(off)
-        return k if abs(off - k) <= self.SNAP and 0 <= k < self.n else None
-
-    def window(self, arr, start, size: int):
-        """``arr[..., start:start + size]`` for a traced ``start`` (the caller keeps it in range)."""
-        return jax.lax.dynamic_slice_in_dim(arr, start, size, axis=arr.ndim - 1)
-
     def _truth(self, which, t):
         if self.truth is None:
             raise ValueError("SampledSignal was built without truth=(theta, omega, amplitude)")

@@ -143,23 +143,11 @@ def simulate(
         xs, xs_map = (t_all, path_all, None), None
         u_first = u_all[0]
     else:
-        # a recording whose samples fall on the loop's own instants is read a
-        # block at a time by slicing (contiguous per scenario), not by the
-        # element-wise gather of SampledSignal.__call__: at batch 8192 in float64
-        # the gather ran the SOGI-FLL-WIF at 44 M steps/s, the slice at ~80
-        # (benchmarks/README.md); the values are identical (the snap)
-        off = signal.aligned_offset(t0, ts) if isinstance(signal, SampledSignal) and input_path == "hold" else None
-
         # sample indices, mapped to (t, input, truth) a block of steps at a time
         # inside the loop (jaxobs._loop, point 5); t0 + ts*k is computed exactly as above
         def xs_map(k):
             t = t0 + ts * k.astype(dtype)
-            if off is None:
-                return t, input_at(t)[1], (truth_at(t) if need_truth else None)
-            start, size = k[0] + off, k.shape[0]
-            path = signal.window(signal.samples, start, size)
-            truth = SignalTruth(*(signal.window(a, start, size) for a in signal.truth)) if need_truth else None
-            return t, path, truth
+            return t, input_at(t)[1], (truth_at(t) if need_truth else None)
 
         xs = jnp.arange(n, dtype=jnp.int32)
         u_first = signal(jnp.asarray(t0, dtype))
