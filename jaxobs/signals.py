@@ -27,7 +27,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from ._validate import as_float, check_nonnegative, check_positive, check_real, check_sample_time
+from ._validate import as_float, check_nonnegative, check_positive, check_real, check_sample_time, static_float
 
 __all__ = ["GridSignal", "SampledSignal", "EMFSignal", "paper001_test", "PAPER001_TESTS", "TEST_C_HARMONICS", "stack"]
 
@@ -151,12 +151,7 @@ class SampledSignal(eqx.Module):
             raise ValueError(f"{own}.samples must hold at least 2 samples along its last axis, got shape {samples.shape}")
         self.samples = samples
         self.ts = check_sample_time("ts", ts, own)
-        try:
-            self.t0 = float(t0)
-        except (TypeError, ValueError, jax.errors.ConcretizationTypeError):
-            raise ValueError(f"{own}.t0 must be a finite number of seconds (static), got {t0!r}") from None
-        if not math.isfinite(self.t0):
-            raise ValueError(f"{own}.t0 must be a finite number of seconds (static), got {t0!r}")
+        self.t0 = static_float(check_real("t0", t0, owner=own), t0)
         if truth is not None:
             if len(truth) != 3:
                 raise ValueError(f"{own}.truth must be (theta, omega, amplitude) sample arrays, got {len(truth)} arrays")
