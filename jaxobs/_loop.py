@@ -25,16 +25,16 @@ checks each against the plain scan, to 1e-12 or tighter):
 3. **Unroll.**  XLA's CPU while loop pays a fixed cost per iteration (several
    microseconds, the same order as a whole step over 512 scenarios), so the
    body is unrolled ``unroll`` times.
-4. **Checkpoint** (only matters under reverse-mode AD):
+4. **Checkpoint** (only matters under reverse-mode AD), a strategy object:
 
-   - ``"none"``: plain scan; the VJP stores every step's residuals
+   - :class:`NoCheckpoint`: plain scan; the VJP stores every step's residuals
      (a 10 s gradient at batch 1024 needed gigabytes).
-   - ``"step"``: ``jax.checkpoint`` on the step; the VJP stores only the carry
+   - :class:`StepCheckpoint`: ``jax.checkpoint`` on the step; the VJP stores only the carry
      per step and recomputes the step once.
-   - ``"chunk"``: the horizon is cut into ⌈√n⌉-step chunks; the outer scan
+   - :class:`ChunkCheckpoint`: the horizon is cut into ⌈√n⌉-step chunks; the outer scan
      stores one carry per chunk, each chunk is recomputed once in the backward
      pass with its steps checkpointed, so memory is O(√n) carries.
-   - ``"forward"``: forward sensitivities.  The loop is a ``jax.custom_vjp``
+   - :class:`ForwardSensitivity`: forward sensitivities.  The loop is a ``jax.custom_vjp``
      whose forward pass carries, beside the state, its derivative with respect
      to every *perturbed* input scalar (``symbolic_zeros``: a tuning job's few
      gains; the signal and scenario are not perturbed), so the backward pass
@@ -42,56 +42,138 @@ checks each against the plain scan, to 1e-12 or tighter):
      horizon, and a gradient for about the price of one forward pass per
      tangent's linear part.  Exact (forward- and reverse-mode derivatives of the
      same program agree to rounding; tested).  Needs a loop without per-step
-     outputs (``save="final"`` with a running cost) and at most ``FORWARD_MAX``
-     perturbed scalars, else the reverse-mode mode below is used.
-   - ``"auto"`` (default): ``"forward"`` when it applies, otherwise
-     ``"chunk"`` above ``CHUNK_ABOVE`` steps and ``"step"`` below.
+     outputs (``SaveFinal`` with a running cost; asking for it with per-step
+     outputs is a ValueError) and at most ``max_scalars`` perturbed scalars;
+     with more, its ``fallback`` reverse-mode strategy runs.
+   - :class:`AutoCheckpoint` (the default): forward sensitivities when the loop
+     has no per-step outputs (up to ``forward_max`` perturbed scalars), otherwise
+     chunks above ``chunk_above`` steps and per-step checkpoints below.
 
    With two or three perturbed scalars (a tuning job's gains) the tangents
    are pushed by nested JVPs with the mixed terms removed (:func:`_multi_jvp`),
    each tangent an array of the primal's shape, which XLA fuses into the
    primal's kernels: value_and_grad costs about 2× the forward pass.
 5. **Inputs a block at a time** (``xs_map``).  A signal evaluated inside the
-   step (``inputs="loop"``) let XLA's fusion recompute its ``cos`` in every
+   step let XLA's fusion recompute its ``cos`` in every
    kernel that read it — once per state component, per tangent, and across
    unrolled steps.  The loop instead evaluates the inputs of ``INPUT_BLOCK``
    steps at once (a chunk's, under ``"chunk"``), vectorized, and runs those
    steps over the stored block: a loop boundary is a fusion boundary, so each
    input sample is computed once, and memory stays O(block × batch) rather
-   than the n samples of ``inputs="precomputed"``.  Measured on the SOGI-FLL
+   than n samples of precomputed inputs.  Measured on the SOGI-FLL
    (batch 1024, 2 devices): 53 → 105 M scenario-steps/s in float32, 32 → 61
    in float64, the same as precomputed inputs.
 """
 
 from __future__ import annotations
 
+import abc
 import math
 from collections.abc import Callable
-from typing import Any, Literal
+from typing import Any
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-__all__ = ["run_loop", "Checkpoint", "CHUNK_ABOVE", "resolve_checkpoint"]
+__all__ = [
+    "run_loop",
+    "AbstractCheckpoint",
+    "NoCheckpoint",
+    "StepCheckpoint",
+    "ChunkCheckpoint",
+    "ForwardSensitivity",
+    "AutoCheckpoint",
+]
 
-Checkpoint = Literal["auto", "none", "step", "chunk", "forward"]
-CHECKPOINTS = ("auto", "none", "step", "chunk", "forward")
-
-# "auto"/"forward": reverse-mode requests through a loop with no per-step
-# outputs are served by forward sensitivities when at most this many input
-# scalars are perturbed (a tuning job's handful of gains).
-FORWARD_MAX = 8
 # Up to this many perturbed scalars the tangents are pushed by nested JVPs
 # (each its own array; see _multi_jvp), above it by vmap over the directions.
 # Tracing the nested form costs 2**d copies of the loop before dead-code
 # elimination, so it stays small.
 NESTED_MAX = 3
 
-# Above this many steps "auto" checkpoints per chunk.  Below it per-step
-# checkpointing keeps the carries of every step (n × carry), which for 1 s at
-# 10 kHz and batch 1024 is a few tens of MB — cheap, and a little faster.
-CHUNK_ABOVE = 20_000
+
+# ---------------------------------------------------------------------------
+# checkpoint strategies (how reverse-mode AD stores the loop; results are identical)
+# ---------------------------------------------------------------------------
+
+
+class AbstractCheckpoint(eqx.Module):
+    """How reverse-mode AD stores the time loop; every strategy gives the same numbers."""
+
+    @abc.abstractmethod
+    def _mode(self, n: int, has_outputs: bool) -> tuple[str, int]:
+        """(reverse-mode storage: "none" | "step" | "chunk", forward-sensitivity scalar limit; 0 = never)."""
+
+
+class NoCheckpoint(AbstractCheckpoint):
+    """Plain ``lax.scan``: the VJP stores every step's residuals (fast for short loops, memory-hungry)."""
+
+    def _mode(self, n, has_outputs):
+        return "none", 0
+
+
+class StepCheckpoint(AbstractCheckpoint):
+    """``jax.checkpoint`` on each step: the VJP stores one carry per step and recomputes the step once."""
+
+    def _mode(self, n, has_outputs):
+        return "step", 0
+
+
+class ChunkCheckpoint(AbstractCheckpoint):
+    """About √n-step chunks: one carry stored per chunk, each chunk recomputed once (O(√n) memory)."""
+
+    def _mode(self, n, has_outputs):
+        return "chunk", 0
+
+
+class ForwardSensitivity(AbstractCheckpoint):
+    """Forward sensitivities behind a custom VJP: O(1) memory, for loops without per-step outputs.
+
+    The gradient costs about one forward pass per perturbed scalar's tangent;
+    with more than ``max_scalars`` perturbed scalars the ``fallback`` strategy
+    (reverse mode) runs instead.
+    """
+
+    max_scalars: int = eqx.field(static=True, default=8)
+    fallback: AbstractCheckpoint = eqx.field(static=True, default=ChunkCheckpoint())
+
+    def __check_init__(self):
+        if isinstance(self.max_scalars, bool) or not isinstance(self.max_scalars, int) or self.max_scalars < 1:
+            raise ValueError(f"ForwardSensitivity.max_scalars must be an integer >= 1, got {self.max_scalars!r}")
+        if not isinstance(self.fallback, AbstractCheckpoint) or isinstance(self.fallback, ForwardSensitivity):
+            raise ValueError("ForwardSensitivity.fallback must be a reverse-mode strategy (NoCheckpoint, StepCheckpoint, ...)")
+
+    def _mode(self, n, has_outputs):
+        if has_outputs:
+            raise ValueError(
+                "ForwardSensitivity serves loops without per-step outputs: use save=SaveFinal(cost) "
+                "(or another checkpoint strategy with SaveAll)"
+            )
+        return self.fallback._mode(n, has_outputs)[0], self.max_scalars
+
+
+class AutoCheckpoint(AbstractCheckpoint):
+    """The default: forward sensitivities for a loop without per-step outputs and at most ``forward_max``
+    perturbed scalars; otherwise chunks above ``chunk_above`` steps and per-step checkpoints below.
+
+    Below ``chunk_above`` per-step checkpointing keeps the carries of every step
+    (n × carry), which for 1 s at 10 kHz and batch 1024 is a few tens of MB —
+    cheap, and a little faster than chunks.
+    """
+
+    chunk_above: int = eqx.field(static=True, default=20_000)
+    forward_max: int = eqx.field(static=True, default=8)
+
+    def __check_init__(self):
+        for name in ("chunk_above", "forward_max"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int) or v < 0:
+                raise ValueError(f"AutoCheckpoint.{name} must be an integer >= 0, got {v!r}")
+
+    def _mode(self, n, has_outputs):
+        return ("chunk" if n > self.chunk_above else "step"), (0 if has_outputs else self.forward_max)
 
 # With ``xs_map``, the inputs of this many steps are evaluated together (module doc, point 5).
 INPUT_BLOCK = 128
@@ -140,17 +222,12 @@ def to_steady(carry):
     return jax.tree.map(lambda s: s.steady() if _has_steady(s) else s, carry, is_leaf=_has_steady)
 
 
-def check_checkpoint(checkpoint) -> str:
-    if checkpoint not in CHECKPOINTS:
-        raise ValueError(f"checkpoint must be one of {CHECKPOINTS}, got {checkpoint!r}")
-    return checkpoint
-
-
-def resolve_checkpoint(checkpoint: str, n: int) -> str:
-    """The reverse-mode storage mode (forward sensitivities are decided at differentiation time)."""
-    checkpoint = check_checkpoint(checkpoint)
-    if checkpoint in ("auto", "forward"):
-        return "chunk" if n > CHUNK_ABOVE else "step"
+def check_checkpoint(checkpoint) -> AbstractCheckpoint:
+    if not isinstance(checkpoint, AbstractCheckpoint):
+        raise ValueError(
+            "checkpoint must be a checkpoint strategy (jaxobs.AutoCheckpoint(), NoCheckpoint(), StepCheckpoint(), "
+            f"ChunkCheckpoint(), ForwardSensitivity()), got {checkpoint!r}"
+        )
     return checkpoint
 
 
@@ -225,7 +302,7 @@ def run_loop(
     n: int,
     *,
     unroll: int = 1,
-    checkpoint: str = "auto",
+    checkpoint: AbstractCheckpoint = AutoCheckpoint(),
     split: bool = True,
     xs_map: Callable[[Any], Any] | None = None,
 ):
@@ -240,20 +317,23 @@ def run_loop(
     signal as ``xs_map``.
     """
     unroll = check_unroll(unroll)
-    mode = resolve_checkpoint(checkpoint, n)
+    checkpoint = check_checkpoint(checkpoint)
     if xs_map is not None and xs is None:
         raise ValueError("run_loop: xs_map needs xs (the per-step values it maps)")
-    loop = lambda c, x: _run(body, c, x, n, unroll, mode, split, xs_map)  # noqa: E731
-    if checkpoint not in ("auto", "forward"):
-        return loop(carry, xs)
     # one Python trace of the loop: its closed-over arrays become explicit inputs,
-    # and its outputs tell whether forward sensitivities apply
+    # and its outputs tell whether forward sensitivities may apply
+    if xs is None:
+        x_one = None
+    else:
+        first = jax.tree.map(lambda a: a[:1], xs)
+        x_one = jax.tree.map(lambda a: a[0], first if xs_map is None else xs_map(first))
+    has_outputs = bool(jax.tree.leaves(jax.eval_shape(body, carry, x_one)[1]))
+    mode, forward_max = checkpoint._mode(n, has_outputs)
+    loop = lambda c, x: _run(body, c, x, n, unroll, mode, split, xs_map)  # noqa: E731
+    if not forward_max:
+        return loop(carry, xs)
     conv, consts = jax.closure_convert(loop, carry, xs)
-    if jax.tree.leaves(jax.eval_shape(conv, carry, xs, *consts)[1]):
-        # forward sensitivities only serve loops without per-step outputs; the others go
-        # straight to reverse mode (no custom_vjp around them)
-        return conv(carry, xs, *consts)
-    return _sensitivity_loop(conv, consts, carry, xs)
+    return _sensitivity_loop(conv, consts, carry, xs, forward_max)
 
 
 def _run(body, carry, xs, n, unroll, mode, split, xs_map=None):
@@ -304,7 +384,7 @@ def _instantiate(c):
     return jnp.zeros(aval.shape, aval.dtype)
 
 
-def _sensitivity_loop(conv, consts, carry, xs):
+def _sensitivity_loop(conv, consts, carry, xs, forward_max):
     """``conv(carry, xs, *consts)`` (a closure-converted loop) whose reverse-mode derivative is
     computed by forward sensitivities when that applies."""
 
@@ -330,7 +410,7 @@ def _sensitivity_loop(conv, consts, carry, xs):
             return conv(cr, x, *c)
 
         pvals = [leaves[i] for i in pert]
-        if 0 < n_dirs <= FORWARD_MAX:
+        if 0 < n_dirs <= forward_max:
             # one tangent per perturbed scalar, pushed alongside the primal (which is computed once)
             sizes = [int(np.prod(np.shape(v))) for v in pvals]
             eye = jnp.eye(n_dirs, dtype=jnp.result_type(*pvals))
@@ -398,7 +478,7 @@ def _multi_jvp(fun, primals, basis):
     1024, 2 devices), value_and_grad / forward 3.0 by vmap, 2.05 nested.
     """
     n_dirs = int(np.shape(basis[0])[0])
-    if 1 <= n_dirs <= NESTED_MAX and _dce_jaxpr is not None:
+    if 1 <= n_dirs <= NESTED_MAX:
         F = fun
         for d in range(n_dirs):
             e = tuple(b[d] for b in basis)
@@ -420,21 +500,11 @@ def _multi_jvp(fun, primals, basis):
                 tans.append(o)
             return y, tans
 
-        closed, out_shape = jax.make_jaxpr(F, return_shape=True)(*primals)
-        out_tree = jax.tree.structure(out_shape)
-        index = jax.tree.unflatten(out_tree, list(range(out_tree.num_leaves)))
-        y_idx, t_idx = first_order(index)
-        keep = set(jax.tree.leaves((y_idx, t_idx)))
-        used = [i in keep for i in range(out_tree.num_leaves)]
-        jaxpr, _ = _dce_jaxpr(closed.jaxpr, used, instantiate=True)
-        vals = iter(jax.core.eval_jaxpr(jaxpr, closed.consts, *jax.tree.leaves(primals)))
-        y, tans = first_order(jax.tree.unflatten(out_tree, [next(vals) if u else None for u in used]))
+        # Only the first-order terms leave this jit: JAX's dead-code elimination
+        # at lowering (its scan rule drops loop-carried values nothing reads)
+        # removes every mixed higher-order tangent before XLA sees the loop.
+        y, tans = jax.jit(lambda *p: first_order(F(*p)))(*primals)
         return y, jax.tree.map(lambda *t: jnp.stack(t), *tans)
     # the primal does not depend on the tangent: out_axes=None keeps it computed once
     return jax.vmap(lambda *t: jax.jvp(fun, primals, t), out_axes=(None, 0))(*basis)
 
-
-try:  # JAX's own dead-code elimination (its scan rule drops unused loop-carried values)
-    from jax._src.interpreters.partial_eval import dce_jaxpr as _dce_jaxpr
-except ImportError:  # pragma: no cover - a JAX without it falls back to vmap over directions
-    _dce_jaxpr = None

@@ -26,3 +26,8 @@ def safe_atan2(y, x):
     """atan2(y, x), 0 at the origin with a zero gradient there."""
     ok = (x * x + y * y) > _TINY
     return jnp.where(ok, jnp.arctan2(jnp.where(ok, y, 0.0), jnp.where(ok, x, 1.0)), 0.0)
+
+
+def wrap(a):
+    """Angle wrapped to (−π, π] (electrical angles and angle errors, DESIGN.md "Metrics")."""
+    return jnp.pi - jnp.mod(jnp.pi - a, 2 * jnp.pi)

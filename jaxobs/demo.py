@@ -23,7 +23,7 @@ import numpy as np
 
 from . import linear, metrics
 from .signals import paper001_test, stack
-from .simulate import simulate
+from .simulate import OnSignal, simulate
 
 __all__ = ["fll_demo", "DEMO_TESTS", "format_table", "table_i_flls"]
 
@@ -42,14 +42,14 @@ def table_i_flls(**kw):
 
 @eqx.filter_jit
 def _run_batch(observer, signals, t1):
-    return jax.vmap(lambda s: simulate(observer, s, t1))(signals)
+    return jax.vmap(lambda s: simulate(OnSignal(observer, s), t1))(signals)
 
 
 def fll_demo(t_event: float = 0.2, steady_delay: float = 1.0, steady_len: float = 1.0, flls=None):
     """Run the demo; returns (rows, traces).
 
     rows: list of dicts {test, fll, settle_ms, settle_cycles, freq_pp_hz,
-    phase_pp_deg, amp_pp_pu, ok}; traces: {fll: SignalSolution batched over tests}.
+    phase_pp_deg, amp_pp_pu, ok}; traces: {fll: Solution batched over tests}.
     """
     flls = table_i_flls() if flls is None else flls
     signals = stack([paper001_test(name, t_event=t_event) for name in DEMO_TESTS])
@@ -60,9 +60,10 @@ def fll_demo(t_event: float = 0.2, steady_delay: float = 1.0, steady_len: float 
         sol = _run_batch(obs, signals, t1)
         traces[fll_name] = sol
         t = np.asarray(sol.t[0])
-        f_hat = np.asarray(sol.out.omega) / (2 * math.pi)
-        err = np.asarray(metrics.wrap(sol.out.theta - sol.truth.theta))
-        amp = np.asarray(sol.out.amplitude)
+        out = sol.outputs
+        f_hat = np.asarray(out.obs.omega) / (2 * math.pi)
+        err = np.asarray(metrics.wrap(out.obs.theta - out.truth.theta))
+        amp = np.asarray(out.obs.amplitude)
         steady = (t >= t_event + steady_delay) & (t < t_event + steady_delay + steady_len)
         for i, test in enumerate(DEMO_TESTS):
             settle = {5: math.nan, 2: math.nan}

@@ -34,9 +34,8 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-from diffrax._solver.runge_kutta import ButcherTableau
 
-__all__ = ["Held", "Knots", "AbstractRule", "Euler", "Tustin", "AB3", "RK4"]
+__all__ = ["Held", "Knots", "AbstractRule", "Euler", "Tustin", "AB3", "RK4", "check_rule"]
 
 VectorField = Callable[[jax.Array, Any], jax.Array]
 
@@ -134,7 +133,7 @@ class Euler(AbstractRule):
         return x1, rule_state
 
 
-_rk4_tableau = ButcherTableau(
+_rk4_tableau = diffrax.ButcherTableau(
     a_lower=(np.array([0.5]), np.array([0.0, 0.5]), np.array([0.0, 0.0, 1.0])),
     b_sol=np.array([1 / 6, 1 / 3, 1 / 3, 1 / 6]),
     # The classic RK4 has no embedded pair; diffrax wants an error row, so give
@@ -147,7 +146,7 @@ _rk4_tableau = ButcherTableau(
 class _DiffraxClassicRK4(diffrax.AbstractERK):
     """The classic fourth-order Runge--Kutta tableau in diffrax's ERK machinery."""
 
-    tableau: ClassVar[ButcherTableau] = _rk4_tableau
+    tableau: ClassVar[diffrax.ButcherTableau] = _rk4_tableau
     interpolation_cls: ClassVar[Callable[..., diffrax.LocalLinearInterpolation]] = (
         diffrax.LocalLinearInterpolation
     )
@@ -314,3 +313,12 @@ class AB3(AbstractRule):
         x1 = jax.lax.cond(rule_state.n >= 2, ab3, start, None)
         new_state = AB3State(f1=f0, f2=rule_state.f1, n=jnp.minimum(rule_state.n + 1, 2))
         return x1, new_state
+
+
+def check_rule(rule, owner: str) -> AbstractRule:
+    """A component's ``rule`` must be a discretization rule object."""
+    if not isinstance(rule, AbstractRule):
+        raise ValueError(
+            f"{owner}.rule must be a discretization rule (jaxobs.Euler(), Tustin(), AB3(), RK4()), got {rule!r}"
+        )
+    return rule

@@ -12,16 +12,13 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
+from ._math import wrap as wrap
+
 __all__ = [
     "wrap", "moving_average", "settling_time", "window_mask", "peak_to_peak", "steady_mean", "rms",
     "overshoot", "iae", "itae", "harmonic_amplitude", "flux_offset", "flux_imbalance",
     "smooth_max", "smooth_abs", "smooth_settling_time", "smooth_peak_to_peak",
 ]
-
-
-def wrap(angle):
-    """Wrap an angle to (−π, π]."""
-    return jnp.pi - jnp.mod(jnp.pi - angle, 2 * jnp.pi)
 
 
 def moving_average(x, n: int):

@@ -33,8 +33,8 @@ def fll_demo_figure(traces, tests, t_event, path=None):
     fig, axes = plt.subplots(len(tests), 2, figsize=(11, 2.2 * len(tests)), sharex=False, squeeze=False)
     for name, sol in traces.items():
         t = np.asarray(sol.t[0])
-        f_hat = np.asarray(sol.out.omega) / (2 * math.pi)
-        err = np.degrees(np.asarray(metrics.wrap(sol.out.theta - sol.truth.theta)))
+        f_hat = np.asarray(sol.outputs.obs.omega) / (2 * math.pi)
+        err = np.degrees(np.asarray(metrics.wrap(sol.outputs.obs.theta - sol.outputs.truth.theta)))
         for i, test in enumerate(tests):
             span = 0.3 if test in ("A", "B") else 1.2
             m = (t >= t_event - 0.05) & (t <= t_event + span)
@@ -137,7 +137,7 @@ def flux_circles_figure(sol, names, title, path=None, last: float = 0.1):
     t = np.asarray(sol.t)
     m = t >= t[-1] - last
     fig, axes = plt.subplots(1, len(names), figsize=(3.2 * len(names), 3.4), squeeze=False)
-    for ax, name, o in zip(axes[0], names, sol.obs.each):
+    for ax, name, o in zip(axes[0], names, sol.outputs.obs.each):
         pa, pb = np.asarray(o.psi_a)[m], np.asarray(o.psi_b)[m]
         ax.plot(pa, pb, lw=0.8)
         ax.set_aspect("equal", adjustable="datalim")
@@ -159,12 +159,12 @@ def position_error_figure(sol, names, title, path=None, t_from: float = 0.0):
     t = np.asarray(sol.t)
     m = t >= t_from
     fig, (ax_s, ax_e) = plt.subplots(2, 1, figsize=(9, 5.5), sharex=True)
-    ax_s.plot(t[m], np.asarray(sol.speed_rpm)[m], label="speed", lw=1)
-    ax_s.plot(t[m], np.asarray(sol.omega_m_ref)[m] * 30 / math.pi, "k--", lw=0.8, label="reference")
+    ax_s.plot(t[m], np.asarray(sol.outputs.speed_rpm)[m], label="speed", lw=1)
+    ax_s.plot(t[m], np.asarray(sol.outputs.omega_m_ref)[m] * 30 / math.pi, "k--", lw=0.8, label="reference")
     ax_s.set_ylabel("speed (r/min)")
     ax_s.legend(fontsize=8)
-    for name, o in zip(names, sol.obs.each):
-        err = np.asarray(wrap(o.theta - sol.theta_e))[m]
+    for name, o in zip(names, sol.outputs.obs.each):
+        err = np.asarray(wrap(o.theta - sol.outputs.theta_e))[m]
         ax_e.plot(t[m], err, lw=0.8, label=name)
     ax_e.set_ylim(-1.7, 1.7)
     ax_e.set_ylabel("θ̂e − θe (rad)")

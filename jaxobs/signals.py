@@ -27,6 +27,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
+from .measurements import DriveInput
 from ._validate import as_float, check_nonnegative, check_positive, check_real, check_sample_time, static_float
 
 __all__ = ["GridSignal", "SampledSignal", "EMFSignal", "paper001_test", "PAPER001_TESTS", "TEST_C_HARMONICS", "stack"]
@@ -250,7 +251,7 @@ class EMFSignal(eqx.Module):
     e_α = A0α + A1 cos(ω1 t + φ1) + Σ_h A_h cos(s_h h ω1 t),
     e_β = A0β + A1 sin(ω1 t + φ1) + Σ_h s_h A_h sin(s_h h ω1 t),
     with s_h = ±1 the sequence of harmonic h.  ``__call__(t)`` returns a
-    :class:`~jaxobs.drive.DriveInput` with u = e and i = 0, the voltage being the
+    :class:`~jaxobs.measurements.DriveInput` with u = e and i = 0, the voltage being the
     *average* of e over the coming period [t, t + ts] — the same convention as
     the drive, which tells the observer at t_k the voltage it applies over
     [t_k, t_{k+1}].  The true rotor flux (∫e with no dc) is A1/ω1 (sin, −cos)
@@ -291,8 +292,6 @@ class EMFSignal(eqx.Module):
         return ea, eb
 
     def __call__(self, t):
-        from .drive.simulate import DriveInput
-
         ea, eb = self.emf(t)
         z = jnp.zeros_like(ea)
         return DriveInput(u_a=ea, u_b=eb, i_a=z, i_b=z)

@@ -1,12 +1,32 @@
-"""The simulation entry point for signal-level observers.
+"""The one time loop: ``jaxobs.simulate(system, t1)`` runs any *system*.
 
-``simulate(observer, signal, t1)`` scans the observer's pure ``step`` over the
-signal sampled every ``observer.ts`` and returns named fields.  It is a
-``filter_jit``-ed function of PyTrees, so ``jax.vmap`` over a batch of signals
-or of observers (gains), and ``jax.grad`` through it, apply unchanged::
+A system is an ``equinox.Module`` with a sample time ``ts`` and two pure methods
+(DESIGN.md, "Systems and the one loop")::
 
-    sol = jaxobs.simulate(obs, sig, 0.5)
-    sols = jax.vmap(lambda s: jaxobs.simulate(obs, s, 0.5))(batched_signal)
+    state = system.init()
+    state, out = system.step(state, k)      # k: the sample index (int32 scalar)
+
+so that a user's own scan gives exactly what ``simulate`` returns::
+
+    _, outs = jax.lax.scan(system.step, system.init(), jnp.arange(n))
+    outs == jaxobs.simulate(system, t0 + n * ts).outputs       # tested, element for element
+
+Two systems ship with jaxobs: :class:`OnSignal` (an observer fed a test signal
+or a recording) and :class:`jaxobs.drive.ClosedLoop` (the PMSM drive, with an
+observer or the encoder).  A system may split its step into ``input(k)`` (what
+the outside world supplies at sample k: signal samples, speed and load
+profiles) and ``advance(state, x)``, with ``step(state, k) == advance(state,
+input(k))``; ``simulate`` then evaluates the inputs a block of steps at a time,
+vectorized (:mod:`jaxobs._loop`, point 5), which is what makes long horizons
+fast on CPU.
+
+What to keep and how reverse-mode AD stores the loop are strategy objects,
+as diffrax passes ``SaveAt`` and adjoints: :class:`SaveAll` / :class:`SaveFinal`
+(each with an optional running cost) and the checkpoint strategies of
+:mod:`jaxobs._loop` (:class:`AutoCheckpoint` by default).  ``simulate`` is a
+``filter_jit``-ed function of PyTrees: ``jax.vmap`` over a batch of systems
+(scenarios, gains) and ``jax.grad`` through it apply unchanged.  Gains stay
+leaves of the system.
 
 A simulation that diverges is reported by ``sol.ok`` (per scenario under
 ``vmap``), not raised, unless ``throw=True``.
@@ -14,166 +34,323 @@ A simulation that diverges is reported by ``sol.ok`` (per scenario under
 
 from __future__ import annotations
 
+import os
 from collections.abc import Callable
-from typing import Any, Literal
+from typing import Any, ClassVar, NamedTuple
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 
+from ._loop import AbstractCheckpoint, AutoCheckpoint, check_unroll, run_loop
 from ._validate import check_sample_time
-from ._loop import run_loop
 from .discretize import Knots
 from .signals import SampledSignal
+from .system import AbstractSystem
 
-__all__ = ["SignalSolution", "simulate", "n_samples"]
-
-
-class SignalTruth(eqx.Module):
-    theta: jax.Array  # true fundamental phase, rad (unwrapped), shape (n,)
-    omega: jax.Array  # true fundamental frequency, rad/s, shape (n,)
-    amplitude: jax.Array  # true fundamental amplitude, shape (n,)
-
-
-class SignalSolution(eqx.Module):
-    t: jax.Array  # sample times t_n, shape (n,)
-    u: jax.Array  # input samples u(t_n), shape (n,)
-    out: Any  # observer outputs (NamedTuple of arrays of shape (n,)), estimate at t_n
-    truth: SignalTruth | None  # what the signal really is, when it can say
-    final_state: Any  # observer state after the last sample (to continue a run)
-    ok: jax.Array  # bool: every output finite over the horizon
-    cost: jax.Array | None = None  # ts·Σ cost(out, truth) when a running cost was given
+__all__ = [
+    "simulate",
+    "Solution",
+    "AbstractSave",
+    "SaveAll",
+    "SaveFinal",
+    "OnSignal",
+    "SignalTruth",
+    "SignalOutput",
+    "n_samples",
+]
 
 
-def _all_finite(tree) -> jax.Array:
+# ---------------------------------------------------------------------------
+# what to save
+# ---------------------------------------------------------------------------
+
+
+class AbstractSave(eqx.Module):
+    """What ``simulate`` keeps: every step's outputs, or only the end; optionally a running cost.
+
+    ``cost(out) -> scalar`` is evaluated on every step's output ``out`` (the
+    system's output type: :class:`SignalOutput` for :class:`OnSignal`, the
+    drive's ``DriveOutput`` for ``ClosedLoop``); ``sol.cost`` is its integral
+    ts·Σ cost — the streaming form of an ISE-type objective, whose gradient
+    over a long horizon needs no trajectory.
+    """
+
+    cost: Callable | None = eqx.field(static=True, default=None)
+    keeps_outputs: ClassVar[bool]
+
+    def __check_init__(self):
+        if self.cost is not None and not callable(self.cost):
+            raise ValueError(f"{type(self).__name__}.cost must be a callable cost(out) -> scalar or None, got {self.cost!r}")
+
+
+class SaveAll(AbstractSave):
+    """Keep every step's outputs (``sol.outputs``, leading axis the samples) and the final state."""
+
+    keeps_outputs: ClassVar[bool] = True
+
+
+class SaveFinal(AbstractSave):
+    """Keep only the final state, ``ok`` and the running cost: a long horizon stores no trajectory."""
+
+    keeps_outputs: ClassVar[bool] = False
+
+
+# ---------------------------------------------------------------------------
+# the solution
+# ---------------------------------------------------------------------------
+
+
+class Solution(eqx.Module):
+    """What :func:`simulate` returns (under ``vmap``, every field gains the batch axis).
+
+    Attributes:
+        t: sample times t_k = t0 + k·ts, s, shape (n,) (None with :class:`SaveFinal`).
+        outputs: the stacked step outputs, exactly what ``lax.scan(system.step, ...)``
+            returns (None with :class:`SaveFinal`).
+        final_state: the system state after the last step (pass it as ``state0`` to continue).
+        ok: bool, every floating-point output finite over the horizon (with
+            :class:`SaveFinal`: the final state and the cost finite — a non-finite
+            value never leaves these systems' states again).
+        cost: ts·Σ cost(out) when the save strategy has a cost, else None.
+    """
+
+    t: jax.Array | None
+    outputs: Any
+    final_state: Any
+    ok: jax.Array
+    cost: jax.Array | None = None
+
+
+def all_finite(tree) -> jax.Array:
+    """True when every floating-point leaf of ``tree`` is finite everywhere."""
     leaves = [x for x in jax.tree.leaves(tree) if jnp.issubdtype(jnp.result_type(x), jnp.inexact)]
     return jnp.all(jnp.stack([jnp.all(jnp.isfinite(x)) for x in leaves])) if leaves else jnp.asarray(True)
 
 
-def n_samples(t1: float, ts: float, t0: float = 0.0) -> int:
-    n = int(round((t1 - t0) / ts))
+def n_samples(t1, ts: float, t0: float = 0.0) -> int:
+    """Samples in [t0, t1): round((t1 − t0)/ts), checked (finite, at least one)."""
+    if not isinstance(t1, (int, float, np.integer, np.floating)) or isinstance(t1, bool):
+        raise ValueError(f"simulate: t1 must be a Python number of seconds (static), got {type(t1).__name__}")
+    if not np.isfinite(t1):
+        raise ValueError(f"simulate: t1 must be finite, got {t1!r}")
+    steps = (float(t1) - float(t0)) / ts
+    if not steps < 2**31 - 1:
+        raise ValueError(f"simulate: t1 − t0 = {t1 - t0:g} s is {steps:.3g} samples of {ts:g} s, more than 2^31 − 1")
+    n = int(round(steps))
     if n < 1:
-        raise ValueError(f"t1 must exceed t0 by at least one sample time ({ts:g} s), got t0={t0:g}, t1={t1:g}")
+        raise ValueError(f"simulate: t1 must exceed t0 by at least one sample time ({ts:g} s), got t0={t0:g}, t1={t1:g}")
     return n
 
 
-DEFAULT_UNROLL = 8  # loop unrolling of signal-level simulations (jaxobs._loop; measured in benchmarks/)
+def _available_memory() -> float:
+    try:
+        return float(os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_AVPHYS_PAGES"))
+    except (ValueError, OSError, AttributeError):  # pragma: no cover - not POSIX
+        return float("inf")
+
+
+def _check_memory(out_shape, n: int):
+    """Refuse a trajectory that cannot fit: n × (bytes of one step's outputs) against the free memory.
+
+    The estimate is per scenario (inside ``vmap`` the batch axis is not seen);
+    a batch multiplies it, which the caller's own sizing must allow for.
+    """
+    per_step = sum(int(np.prod(a.shape)) * np.dtype(a.dtype).itemsize for a in jax.tree.leaves(out_shape))
+    need = per_step * n
+    avail = _available_memory()
+    if need > avail:
+        raise ValueError(
+            f"simulate: saving every step needs {need / 2**30:.3g} GiB ({n} steps × {per_step} bytes) but "
+            f"{avail / 2**30:.3g} GiB are free: shorten t1 or use save=SaveFinal(cost)"
+        )
+
+
+# ---------------------------------------------------------------------------
+# an observer on a signal
+# ---------------------------------------------------------------------------
+
+
+class SignalTruth(NamedTuple):
+    """What a synthetic signal really is at a sample."""
+
+    theta: jax.Array  # true fundamental phase, rad (unwrapped)
+    omega: jax.Array  # true fundamental frequency, rad/s
+    amplitude: jax.Array  # true fundamental amplitude
+
+
+class SignalOutput(NamedTuple):
+    """One step of :class:`OnSignal`: the input sample, the observer's outputs, and the truth."""
+
+    u: Any  # the input sample u(t_k) the observer was given
+    obs: Any  # the observer's outputs at t_k (its NamedTuple)
+    truth: SignalTruth | None  # what the signal really is at t_k (None if the signal cannot say)
+
+
+class OnSignal(AbstractSystem):
+    """An observer fed a signal sampled every ``observer.ts``, from ``t0`` on: a system for :func:`simulate`.
+
+    ``step(state, k)`` feeds the observer u(t_k), t_k = t0 + k·ts, held over the
+    period (as a DSP does), or, with ``knots=True``, u at t_k, t_k + ts/2 and
+    t_k + ts (for comparisons with a continuous-time reference).  The output is
+    a :class:`SignalOutput`.
+
+    Args:
+        observer: any module with ``init(u0)``/``step`` and a sample time ``ts``.
+        signal: callable ``signal(t)`` (a :class:`~jaxobs.signals.GridSignal`,
+            :class:`~jaxobs.signals.EMFSignal`, :class:`~jaxobs.signals.SampledSignal`...);
+            with ``theta``/``omega``/``fundamental_amplitude`` methods its truth is reported.
+        t0: time of sample 0, s.
+        knots: give the rule the input at the period's start, middle and end.
+
+    The observer starts from ``observer.init(u(t0))``; to start elsewhere, pass
+    ``state0=`` to :func:`simulate`.
+    """
+
+    observer: Any
+    signal: Any
+    t0: float = eqx.field(static=True)
+    knots: bool = eqx.field(static=True)
+
+    # loop unrolling (jaxobs._loop point 3): a signal-level step is small
+    unroll: ClassVar[int] = 8
+
+    def __init__(self, observer, signal, *, t0=0.0, knots=False):
+        if not (hasattr(observer, "init") and hasattr(observer, "step") and hasattr(observer, "ts")):
+            raise ValueError(f"OnSignal.observer must have init, step and ts, got {type(observer).__name__}")
+        if not callable(signal):
+            raise ValueError(f"OnSignal.signal must be callable signal(t), got {type(signal).__name__}")
+        check_sample_time("ts", observer.ts, type(observer).__name__)
+        if isinstance(t0, bool) or not isinstance(t0, (int, float)) or not np.isfinite(t0):
+            raise ValueError(f"OnSignal.t0 must be a finite number of seconds, got {t0!r}")
+        self.observer = observer
+        self.signal = signal
+        self.t0 = float(t0)
+        self.knots = bool(knots)
+
+    @property
+    def ts(self) -> float:
+        return self.observer.ts
+
+    @property
+    def has_truth(self) -> bool:
+        sig = self.signal
+        return getattr(sig, "has_truth", True) and all(hasattr(sig, a) for a in ("theta", "omega", "fundamental_amplitude"))
+
+    def time(self, k):
+        """t_k = t0 + k·ts (in the default float dtype)."""
+        return self.t0 + self.ts * jnp.asarray(k).astype(jnp.result_type(float))
+
+    def init(self):
+        return self.observer.init(self.signal(jnp.asarray(self.t0, jnp.result_type(float))))
+
+    def input(self, k):
+        """What the observer is given at sample k, and the truth there."""
+        t = self.time(k)
+        u = self.signal(t)
+        path = Knots(u0=u, um=self.signal(t + 0.5 * self.ts), u1=self.signal(t + self.ts)) if self.knots else u
+        sig = self.signal
+        truth = SignalTruth(sig.theta(t), sig.omega(t), sig.fundamental_amplitude(t)) if self.has_truth else None
+        return u, path, truth
+
+    def advance(self, state, x):
+        u, path, truth = x
+        state, out = self.observer.step(state, path)
+        return state, SignalOutput(u=u, obs=out, truth=truth)
+
+    def step(self, state, k):
+        return self.advance(state, self.input(k))
+
+    def check_horizon(self, n: int):
+        """A recording cannot be read outside its samples (it holds its end values, which would be a lie)."""
+        sig = self.signal
+        if isinstance(sig, SampledSignal):
+            t_last = self.t0 + self.ts * (n - 1)
+            tol = SampledSignal.SNAP * sig.ts
+            if self.t0 < sig.t0 - tol or t_last > sig.t_end + tol:
+                raise ValueError(
+                    f"simulate: the horizon [t0, t0 + ts*(n-1)] = [{self.t0:g}, {t_last:g}] s must lie inside the "
+                    f"SampledSignal's samples [{sig.t0:g}, {sig.t_end:g}] s"
+                )
+
+
+# ---------------------------------------------------------------------------
+# the loop
+# ---------------------------------------------------------------------------
+
+
+class _Carry(NamedTuple):
+    state: Any
+    acc: jax.Array
 
 
 @eqx.filter_jit
 def simulate(
-    observer,
-    signal,
+    system,
     t1: float,
     *,
-    t0: float = 0.0,
-    input_path: Literal["hold", "knots"] = "hold",
+    save: AbstractSave = SaveAll(),
+    checkpoint: AbstractCheckpoint = AutoCheckpoint(),
     state0=None,
     throw: bool = False,
-    inputs: Literal["precomputed", "loop"] = "precomputed",
-    save: Literal["all", "final"] = "all",
-    cost: Callable | None = None,
-    checkpoint: str = "auto",
-    unroll: int = DEFAULT_UNROLL,
-) -> SignalSolution:
-    """Scan ``observer`` over ``signal`` from ``t0`` to ``t1`` (exclusive), one sample per ``observer.ts``.
+    unroll: int | None = None,
+) -> Solution:
+    """Run ``system`` from its first sample (t0, default 0) up to ``t1`` (exclusive), one step per ``system.ts``.
 
     Args:
-        observer: any module with ``init``/``step`` and a sample time ``ts``.
-        signal: callable ``signal(t)`` (e.g. a :class:`~jaxobs.signals.GridSignal`).
-        t1, t0: horizon in seconds (static: they fix the scan length).
-        input_path: ``"hold"`` feeds the sample u(t_n) held over the period, as a
-            DSP does; ``"knots"`` gives the rule u at t_n, t_n + ts/2 and t_n + ts,
-            for comparisons with a continuous-time reference.
-        state0: initial observer state (default ``observer.init()``).
-        throw: raise if any output is non-finite, instead of reporting ``ok``.
-        inputs: ``"precomputed"`` evaluates the signal at every sample before the
-            loop (n samples of memory); ``"loop"`` evaluates it inside the loop, a
-            block of steps at a time (:mod:`jaxobs._loop`, point 5: no n-sample
-            input array and, on CPU, as fast or faster — what a long horizon or a
-            huge batch wants).  Inputs already sampled (a recording) are a
-            :class:`~jaxobs.signals.SampledSignal`.
-        save: ``"all"`` returns every sample's outputs; ``"final"`` only the final
-            state, ``ok`` and ``cost`` (``t``, ``u``, ``out``, ``truth`` are None), so a
-            long horizon keeps no trajectory.
-        cost: optional running cost ``cost(out, truth) -> scalar`` evaluated at
-            every sample (``truth`` the signal's :class:`SignalTruth` at t_n, or None);
-            ``sol.cost`` is its integral ts·Σ cost — the streaming form of an ISE-type
-            objective, whose gradient over a long horizon needs no trajectory.
-        checkpoint: ``"auto"``, ``"none"``, ``"step"`` or ``"chunk"`` — how reverse-mode
-            AD stores the loop (:mod:`jaxobs._loop`); results are identical.
-        unroll: loop unrolling (static); results are identical.
+        system: a module with ``ts``, ``init()`` and ``step(state, k)`` (:class:`OnSignal`,
+            :class:`jaxobs.drive.ClosedLoop`, or your own); ``t0`` read from ``system.t0`` when it has one.
+        t1: end of the horizon, s (static: it fixes the number of steps n = round((t1 − t0)/ts)).
+        save: :class:`SaveAll` (default) or :class:`SaveFinal`, each with an optional running cost.
+        checkpoint: how reverse-mode AD stores the loop (:class:`~jaxobs.AutoCheckpoint` by default;
+            :class:`~jaxobs.NoCheckpoint`, :class:`~jaxobs.StepCheckpoint`,
+            :class:`~jaxobs.ChunkCheckpoint`, :class:`~jaxobs.ForwardSensitivity`); results are identical.
+        state0: the state to start from (default ``system.init()``), e.g. a previous ``sol.final_state``.
+        throw: raise if the run is not ``ok``, instead of only reporting it.
+        unroll: loop unrolling (static; default the system's ``unroll`` attribute, else 1); results are identical.
+
+    Returns:
+        A :class:`Solution`: ``t``, ``outputs`` (the stacked step outputs), ``final_state``, ``ok``, ``cost``.
+
+    Raises:
+        ValueError: a bad horizon (not finite, shorter than one sample, more than 2^31 − 1 steps),
+            a trajectory larger than the free memory, or bad strategy objects.
     """
-    ts = check_sample_time("ts", observer.ts, type(observer).__name__)
+    if not (hasattr(system, "init") and hasattr(system, "step") and hasattr(system, "ts")):
+        raise ValueError(f"simulate: system must have ts, init() and step(state, k), got {type(system).__name__}")
+    if not isinstance(save, AbstractSave):
+        raise ValueError(f"simulate: save must be SaveAll(...) or SaveFinal(...), got {save!r}")
+    ts = check_sample_time("ts", system.ts, type(system).__name__)
+    t0 = float(getattr(system, "t0", 0.0))
     n = n_samples(t1, ts, t0)
-    if inputs not in ("precomputed", "loop"):
-        raise ValueError(f"inputs must be 'precomputed' or 'loop', got {inputs!r}")
-    if save not in ("all", "final"):
-        raise ValueError(f"save must be 'all' or 'final', got {save!r}")
-    if input_path not in ("hold", "knots"):
-        raise ValueError(f"input_path must be 'hold' or 'knots', got {input_path!r}")
+    unroll = check_unroll(getattr(system, "unroll", 1) if unroll is None else unroll)
+    if hasattr(system, "check_horizon"):
+        system.check_horizon(n)
     dtype = jnp.result_type(float)
-    has_truth = getattr(signal, "has_truth", True) and all(hasattr(signal, a) for a in ("theta", "omega", "fundamental_amplitude"))
-    if isinstance(signal, SampledSignal):
-        # a recording holds its end sample beyond its last instant (signals.py);
-        # a horizon that starts before it or runs past it is a mistake, not a hold
-        t_last = t0 + ts * (n - 1)
-        tol = SampledSignal.SNAP * signal.ts
-        if t0 < signal.t0 - tol or t_last > signal.t_end + tol:
-            raise ValueError(
-                f"simulate: the horizon [t0, t0 + ts*(n-1)] = [{t0:g}, {t_last:g}] s must lie inside the "
-                f"SampledSignal's samples [{signal.t0:g}, {signal.t_end:g}] s"
-            )
-
-    def input_at(t):
-        u = signal(t)
-        if input_path == "hold":
-            return u, u
-        return u, Knots(u0=u, um=signal(t + 0.5 * ts), u1=signal(t + ts))
-
-    def truth_at(t):
-        if not has_truth:
-            return None
-        return SignalTruth(theta=signal.theta(t), omega=signal.omega(t), amplitude=signal.fundamental_amplitude(t))
-
-    t_all = t0 + ts * jnp.arange(n, dtype=dtype)
-    need_truth = cost is not None and has_truth
-    if inputs == "precomputed":
-        u_all, path_all = input_at(t_all)
-        xs, xs_map = (t_all, path_all, None), None
-        u_first = u_all[0]
-    else:
-        # sample indices, mapped to (t, input, truth) a block of steps at a time
-        # inside the loop (jaxobs._loop, point 5); t0 + ts*k is computed exactly as above
-        def xs_map(k):
-            t = t0 + ts * k.astype(dtype)
-            return t, input_at(t)[1], (truth_at(t) if need_truth else None)
-
-        xs = jnp.arange(n, dtype=jnp.int32)
-        u_first = signal(jnp.asarray(t0, dtype))
-    state = observer.init(u_first) if state0 is None else state0
+    ks = jnp.arange(n, dtype=jnp.int32)
+    blocked = hasattr(system, "input") and hasattr(system, "advance")
+    advance = system.advance if blocked else system.step
+    xs_map = (lambda kb: jax.lax.map(system.input, kb)) if blocked else None
+    cost = save.cost
 
     def body(carry, x):
-        st, acc = carry
-        t, path, truth = x
-        st, out = observer.step(st, path)
-        if cost is not None:
-            acc = acc + cost(out, truth_at(t) if truth is None else truth)
-        ys = out if save == "all" else None
-        return (st, acc), ys
+        state, out = advance(carry.state, x)
+        acc = carry.acc if cost is None else carry.acc + cost(out)
+        return _Carry(state, acc), (out if save.keeps_outputs else None)
 
-    carry0 = (state, jnp.zeros((), dtype))
-    (final_state, acc), out = run_loop(body, carry0, xs, n, unroll=unroll, checkpoint=checkpoint, xs_map=xs_map)
-    # ok: every output finite; with save="final" the outputs are gone, but a
-    # non-finite value never leaves the state of these systems again, so the
-    # final state (and the running cost) tell the same.
-    ok = _all_finite(out if save == "all" else (final_state, acc))
+    state = system.init() if state0 is None else state0
+    carry0 = _Carry(state, jnp.zeros((), dtype))
+    if save.keeps_outputs:
+        x_one = xs_map(ks[:1]) if blocked else ks[:1]
+        _check_memory(jax.eval_shape(lambda c, x: body(c, jax.tree.map(lambda a: a[0], x))[1], carry0, x_one), n)
+    final, outputs = run_loop(body, carry0, ks, n, unroll=unroll, checkpoint=checkpoint, xs_map=xs_map)
+    total = None if cost is None else ts * final.acc
+    ok = all_finite(outputs) if save.keeps_outputs else all_finite(final)
+    final_state = final.state
     if throw:
-        final_state = eqx.error_if(final_state, ~ok, "simulation diverged: non-finite observer output")
-    total = None if cost is None else ts * acc
-    if save == "final":
-        return SignalSolution(t=None, u=None, out=None, truth=None, final_state=final_state, ok=ok, cost=total)
-    if throw:
-        out = eqx.error_if(out, ~ok, "simulation diverged: non-finite observer output")
-    u = u_all if inputs == "precomputed" else signal(t_all)
-    return SignalSolution(t=t_all, u=u, out=out, truth=truth_at(t_all), final_state=final_state, ok=ok, cost=total)
+        final_state = eqx.error_if(final_state, ~ok, "simulation diverged: non-finite output")
+        if save.keeps_outputs:
+            outputs = eqx.error_if(outputs, ~ok, "simulation diverged: non-finite output")
+    t = (t0 + ts * ks.astype(dtype)) if save.keeps_outputs else None
+    return Solution(t=t, outputs=outputs, final_state=final_state, ok=ok, cost=total)

@@ -35,7 +35,7 @@ import numpy as np
 
 from . import metrics as M
 from .signals import TEST_C_HARMONICS, GridSignal
-from .simulate import simulate
+from .simulate import OnSignal, simulate
 
 __all__ = ["STUDY_AXES", "STUDY_METRICS", "run_study", "worst_cases", "NoisyGridSignal", "grid_signals"]
 
@@ -117,10 +117,11 @@ def grid_signals(names, combos, t_event: float, freq: float):
 
 def _metrics(sol, t_event: float, steady_from: float, band_hz: float, n_period: int):
     t = sol.t
-    f_hat = sol.out.omega / (2 * math.pi)
-    f_true = sol.truth.omega / (2 * math.pi)
+    out = sol.outputs
+    f_hat = out.obs.omega / (2 * math.pi)
+    f_true = out.truth.omega / (2 * math.pi)
     ferr = f_hat - f_true
-    perr = M.wrap(sol.out.theta - sol.truth.theta)
+    perr = M.wrap(out.obs.theta - out.truth.theta)
     steady = t >= steady_from
     # settle on the one-period average of f̂: harmonics and dc leave a ripple that is not a transient
     f_avg = M.moving_average(f_hat, n_period)
@@ -178,7 +179,7 @@ def run_study(designs: dict, axes: dict, *, t_event=0.1, horizon=0.4, steady_fro
         @eqx.filter_jit
         def run_chunk(obs, batch):
             def one(sig):
-                sol = simulate(obs, sig, horizon)
+                sol = simulate(OnSignal(obs, sig), horizon)
                 m = _metrics(sol, t_event, steady_from, band_hz, max(1, int(round(1.0 / (freq * obs.ts)))))
                 ok = sol.ok & jnp.all(jnp.stack([jnp.isfinite(v) for v in m.values()]))
                 return m, ok

@@ -24,7 +24,8 @@ import jax
 import jax.numpy as jnp
 
 from jaxobs import metrics as M
-from jaxobs.simulate import simulate
+from jaxobs.drive import ClosedLoop
+from jaxobs.simulate import OnSignal, simulate
 
 from .params import Parametrization
 
@@ -45,18 +46,19 @@ class MetricContext:
 
 
 def _freq_err_hz(sol):
-    return (sol.out.omega - sol.truth.omega) / (2 * math.pi)
+    return (sol.outputs.obs.omega - sol.outputs.truth.omega) / (2 * math.pi)
 
 
 def _phase_err(sol):
-    return M.wrap(sol.out.theta - sol.truth.theta)
+    return M.wrap(sol.outputs.obs.theta - sol.outputs.truth.theta)
 
 
 def _position_err(sol, sig):
     """Position error of an observer: on the drive, θ̂e − θe; on an EMF signal, ψ lags e by 90°."""
-    if hasattr(sol, "theta_e"):  # a DriveSolution
-        return M.wrap(sol.obs.theta - sol.theta_e)
-    return M.wrap(sol.out.theta - (sig.omega1 * sol.t + sig.phase - math.pi / 2))
+    out = sol.outputs
+    if hasattr(out, "theta_e"):  # the closed-loop drive's DriveOutput
+        return M.wrap(out.obs.theta - out.theta_e)
+    return M.wrap(out.obs.theta - (sig.omega1 * sol.t + sig.phase - math.pi / 2))
 
 
 def _steady(sol, ctx):
@@ -70,7 +72,8 @@ METRICS: dict[str, Callable] = {
     "iae_phase": lambda sol, sig, ctx: M.iae(sol.t, _phase_err(sol), ctx.t_event),
     "itae_phase": lambda sol, sig, ctx: M.itae(sol.t, _phase_err(sol), ctx.t_event),
     "settling_freq": lambda sol, sig, ctx: M.smooth_settling_time(
-        sol.t, sol.out.omega / (2 * math.pi), sol.truth.omega[-1] / (2 * math.pi), ctx.band_hz, ctx.t_event, temperature=ctx.temperature
+        sol.t, sol.outputs.obs.omega / (2 * math.pi), sol.outputs.truth.omega[-1] / (2 * math.pi), ctx.band_hz,
+        ctx.t_event, temperature=ctx.temperature,
     ),
     "ripple_freq": lambda sol, sig, ctx: M.smooth_peak_to_peak(_freq_err_hz(sol), _steady(sol, ctx), 1e-3),
     "rms_freq_steady": lambda sol, sig, ctx: M.rms(_freq_err_hz(sol), _steady(sol, ctx)),
@@ -155,10 +158,8 @@ class Objective:
         if self.bind is not None:
             comp = self.bind(comp, sig)
         if self.drive is not None:
-            from jaxobs.drive import simulate_drive
-
-            return simulate_drive(self.drive, sig, self.horizon, observer=comp)
-        return simulate(comp, sig, self.horizon)
+            return simulate(ClosedLoop(self.drive, comp, sig), self.horizon)
+        return simulate(OnSignal(comp, sig), self.horizon)
 
     def _one(self, theta, sig):
         comp = self.param.apply(self.component, theta)

@@ -1,60 +1,42 @@
-"""The PMSM drive: machine, inverter, sensors, FOC, I-f start-up, scenarios, closed-loop scan."""
+"""The PMSM drive: machine, plant, inverter, sensors, FOC, I-f start-up, scenarios and the closed loop.
+
+Every dynamic piece is a step component (``init``/``step``): :class:`PMSM`,
+:class:`Inverter`, :class:`Sensors`, :class:`FOC`, and the system that wires
+them with an observer, :class:`ClosedLoop`, which ``jaxobs.simulate`` runs.
+"""
 
 from .control import FOC as FOC
 from .control import ControllerState as ControllerState
+from .control import FOCInput as FOCInput
+from .control import FOCOutput as FOCOutput
 from .control import IfStartup as IfStartup
 from .hardware import Inverter as Inverter
+from .hardware import InverterInput as InverterInput
+from .hardware import SensorInput as SensorInput
 from .hardware import Sensors as Sensors
-from .machine import (
-    RPM as RPM,
-)
-from .machine import (
-    PMSMParams as PMSMParams,
-)
-from .machine import (
-    ab_to_dq as ab_to_dq,
-)
-from .machine import (
-    bemf_ab as bemf_ab,
-)
-from .machine import (
-    bemf_dq as bemf_dq,
-)
-from .machine import (
-    dq_to_ab as dq_to_ab,
-)
-from .machine import (
-    ipmsm_paper002 as ipmsm_paper002,
-)
-from .machine import (
-    plant_vf as plant_vf,
-)
-from .machine import (
-    spmsm_paper000 as spmsm_paper000,
-)
-from .machine import (
-    torque as torque,
-)
+from .loop import ClosedLoop as ClosedLoop
+from .loop import Drive as Drive
+from .loop import DriveOutput as DriveOutput
+from .loop import LoopInput as LoopInput
+from .loop import LoopState as LoopState
+from .machine import RPM as RPM
+from .machine import PMSMParams as PMSMParams
+from .machine import ab_to_dq as ab_to_dq
+from .machine import bemf_ab as bemf_ab
+from .machine import bemf_dq as bemf_dq
+from .machine import dq_to_ab as dq_to_ab
+from .machine import ipmsm_paper002 as ipmsm_paper002
+from .machine import plant_vf as plant_vf
+from .machine import spmsm_paper000 as spmsm_paper000
+from .machine import torque as torque
+from .plant import PMSM as PMSM
+from .plant import PlantInput as PlantInput
+from .plant import PlantOutput as PlantOutput
+from .plant import PlantState as PlantState
+from .plant import plant_field as plant_field
 from .scenario import GRID_AXES as GRID_AXES
 from .scenario import Batch as Batch
 from .scenario import Profile as Profile
 from .scenario import Scenario as Scenario
 from .scenario import grid as grid
-from .simulate import (
-    Drive as Drive,
-)
-from .simulate import (
-    DriveInput as DriveInput,
-)
-from .simulate import (
-    DriveSolution as DriveSolution,
-)
-from .simulate import (
-    plant_field as plant_field,
-)
-from .simulate import (
-    simulate_drive as simulate_drive,
-)
-from .simulate import (
-    simulate_plant_open_loop as simulate_plant_open_loop,
-)
+from ..measurements import DriveInput as DriveInput

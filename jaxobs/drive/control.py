@@ -33,7 +33,7 @@ I_f cos(θ_f − θ̂), for a bumpless transfer (I_f itself would be a torque st
 
 from __future__ import annotations
 
-from typing import Literal
+from typing import Literal, NamedTuple
 
 import equinox as eqx
 import jax
@@ -43,7 +43,7 @@ from .._math import safe_norm2
 from .._validate import check_nonnegative, check_positive, check_sample_time
 from .machine import PMSMParams
 
-__all__ = ["FOC", "IfStartup", "ControllerState"]
+__all__ = ["FOC", "FOCInput", "FOCOutput", "IfStartup", "ControllerState"]
 
 
 class IfStartup(eqx.Module):
@@ -72,8 +72,36 @@ class ControllerState(eqx.Module):
     mode: jax.Array  # 0: I-f start-up, 1: closed loop on the given position
 
 
+class FOCInput(NamedTuple):
+    """What the controller is given at sample ``k``."""
+
+    k: jax.Array  # sample index (the speed loop runs when k % speed_every == 0)
+    i_a: jax.Array  # measured stationary-frame currents, A
+    i_b: jax.Array
+    theta: jax.Array  # electrical angle the controller uses (encoder or observer), rad
+    omega_e: jax.Array  # electrical speed it uses (decoupling, delay compensation), rad/s
+    omega_m: jax.Array  # mechanical speed the speed loop uses, rad/s
+    omega_m_ref: jax.Array  # speed reference, rad/s (i_q* in A when outer="current")
+
+
+class FOCOutput(NamedTuple):
+    u_a: jax.Array  # voltage to apply over the next period (before the inverter's limit), V
+    u_b: jax.Array
+    id_ref: jax.Array  # current references, A
+    iq_ref: jax.Array
+    theta: jax.Array  # the angle the current loop used (given position, or the I-f angle in start-up), rad
+
+
 class FOC(eqx.Module):
-    """FOC gains and settings (gains are leaves: differentiable and tunable)."""
+    """FOC gains and settings (gains are leaves: differentiable and tunable).
+
+    Besides its gains the controller needs the machine it assumes (``est``: its
+    decoupling terms and MTPA use it), the voltage limit of its inverter
+    (``u_max``, for anti-windup) and, optionally, an I-f ``startup``.
+    :meth:`imc` sets ``est``; :class:`~jaxobs.drive.ClosedLoop` binds the
+    scenario's assumed machine, the inverter's limit and the drive's start-up
+    with :meth:`bind` before it steps.
+    """
 
     kp_d: jax.Array  # V/A
     ki_d: jax.Array  # V/(A·s)
@@ -88,9 +116,22 @@ class FOC(eqx.Module):
     delay_compensation: bool = eqx.field(static=True)
     outer: Literal["speed", "current"] = eqx.field(static=True)  # "current": the reference is i_q*, A
     setpoint_weight: float = eqx.field(static=True)  # b in k_pω (b ω* − ω): 0 = I-P (no overshoot), 1 = PI
+    est: PMSMParams | None  # the machine the controller assumes
+    u_max: jax.Array | None  # voltage limit for anti-windup, V
+    startup: IfStartup | None  # I-f start-up (None: closed loop from t = 0)
 
-    def __init__(self, kp_d, ki_d, kp_q, ki_q, kp_w, ki_w, i_max, *, ts=1e-4, speed_every=10, id_mode="zero", delay_compensation=True, outer="speed", setpoint_weight=0.0):
+    def __init__(
+        self, kp_d, ki_d, kp_q, ki_q, kp_w, ki_w, i_max, *, ts=1e-4, speed_every=10, id_mode="zero",
+        delay_compensation=True, outer="speed", setpoint_weight=0.0, est=None, u_max=None, startup=None,
+    ):
         own = "FOC"
+        if est is not None and not isinstance(est, PMSMParams):
+            raise ValueError(f"{own}.est must be a PMSMParams or None, got {type(est).__name__}")
+        if startup is not None and not isinstance(startup, IfStartup):
+            raise ValueError(f"{own}.startup must be an IfStartup or None, got {type(startup).__name__}")
+        self.est = est
+        self.u_max = None if u_max is None else check_positive("u_max", u_max, own)
+        self.startup = startup
         self.kp_d = check_positive("kp_d", kp_d, own)
         self.ki_d = check_nonnegative("ki_d", ki_d, own)
         self.kp_q = check_positive("kp_q", kp_q, own)
@@ -132,12 +173,19 @@ class FOC(eqx.Module):
             kp_w=2 * alpha_s * est_par.J / kt,
             ki_w=alpha_s**2 * est_par.J / kt,
             i_max=i_max,
+            est=kw.pop("est", est_par),
             **kw,
         )
 
-    def init(self, startup: IfStartup | None = None) -> ControllerState:
+    def bind(self, est: PMSMParams, u_max, startup: IfStartup | None = None) -> FOC:
+        """This controller with its assumed machine, voltage limit and start-up set (no checks: traced-safe)."""
+        return eqx.tree_at(
+            lambda f: (f.est, f.u_max, f.startup), self, (est, u_max, startup), is_leaf=lambda x: x is None
+        )
+
+    def init(self) -> ControllerState:
         z = jnp.zeros_like(self.kp_d)
-        mode = jnp.asarray(1 if startup is None else 0, dtype=jnp.int32)
+        mode = jnp.asarray(1 if self.startup is None else 0, dtype=jnp.int32)
         return ControllerState(int_d=z, int_q=z, int_w=z, iq_ref=z, theta_f=z, omega_f=z, t_at_switch=z, mode=mode)
 
     def _id_ref(self, est: PMSMParams, iq):
@@ -149,13 +197,20 @@ class FOC(eqx.Module):
         mtpa = a - jnp.sign(safe) * jnp.sqrt(a * a + iq * iq)
         return jnp.where(jnp.abs(dl) > 1e-12, mtpa, 0.0)
 
-    def step(self, cs: ControllerState, k, i_a, i_b, theta, omega_e, omega_m, omega_m_ref, est: PMSMParams, u_max, startup: IfStartup | None = None):
-        """One current-loop period.  Returns (new state, (u_α*, u_β*), diagnostics).
+    def step(self, cs: ControllerState, inp: FOCInput) -> tuple[ControllerState, FOCOutput]:
+        """One current-loop period: the voltage to apply over the next period.
 
-        ``theta``/``omega_e``/``omega_m``: the position and speeds the controller
-        uses (encoder or observer); ``u_max``: the voltage limit for anti-windup.
-        ``omega_m_ref`` is the speed reference (rad/s), or i_q* (A) when ``outer="current"``.
+        ``inp.theta``/``omega_e``/``omega_m``: the position and speeds the controller
+        uses (encoder or observer); ``inp.omega_m_ref`` is the speed reference
+        (rad/s), or i_q* (A) when ``outer="current"``.
         """
+        if self.est is None or self.u_max is None:
+            raise ValueError(
+                "FOC.step needs the assumed machine and the voltage limit: build it with FOC.imc(est_par, ...) "
+                "and u_max=..., or call foc.bind(est, u_max, startup) (ClosedLoop does)"
+            )
+        k, i_a, i_b, theta, omega_e, omega_m, omega_m_ref = inp
+        est, u_max, startup = self.est, self.u_max, self.startup
         ts = self.ts
         # --- start-up angle (advanced every period; only used in mode 0)
         if startup is not None:
@@ -212,7 +267,8 @@ class FOC(eqx.Module):
         u_a = co * u_d - so * u_q
         u_b = so * u_d + co * u_q
         new = ControllerState(
-            int_d=int_d, int_q=int_q, int_w=int_w, iq_ref=iq_ref, theta_f=theta_f, omega_f=omega_f, t_at_switch=t_at_switch, mode=mode
+            int_d=int_d, int_q=int_q, int_w=int_w, iq_ref=iq_ref, theta_f=theta_f, omega_f=omega_f,
+            t_at_switch=t_at_switch, mode=mode,
         )
-        return new, (u_a, u_b), (id_ref, iq_ref)
+        return new, FOCOutput(u_a=u_a, u_b=u_b, id_ref=id_ref, iq_ref=iq_ref, theta=jnp.where(mode == 1, theta, theta_f))
 

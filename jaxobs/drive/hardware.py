@@ -17,6 +17,7 @@ key folded with the sample index, so a run is reproducible and vmappable.
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import equinox as eqx
 import jax
@@ -26,8 +27,9 @@ import numpy as np
 from .._math import safe_norm2
 from .._validate import as_float, check_nonnegative, check_positive, check_real
 from .._validate import static_float as _static_float
+from ..measurements import DriveInput
 
-__all__ = ["Inverter", "Sensors", "clarke_abc_to_ab", "ab_to_abc"]
+__all__ = ["Inverter", "InverterInput", "Sensors", "SensorInput", "clarke_abc_to_ab", "ab_to_abc"]
 
 _S3 = math.sqrt(3.0)
 
@@ -41,8 +43,31 @@ def clarke_abc_to_ab(xa, xb, xc):
     return (2.0 / 3.0) * (xa - 0.5 * (xb + xc)), (xb - xc) / _S3
 
 
+class InverterInput(NamedTuple):
+    """The commanded stationary-frame voltage, V."""
+
+    u_a: jax.Array
+    u_b: jax.Array
+
+
+class SensorInput(NamedTuple):
+    """The true quantities a sensor set measures at sample ``k``."""
+
+    k: jax.Array  # sample index (the noise is a function of the key and k)
+    u_a: jax.Array  # voltage applied over the period that starts at t_k, V
+    u_b: jax.Array
+    i_a: jax.Array  # stationary-frame currents at t_k, A
+    i_b: jax.Array
+
+
 class Inverter(eqx.Module):
-    """Average-value two-level inverter with dc-link limit and dead time."""
+    """Average-value two-level inverter with dc-link limit and dead time.
+
+    As a step component it is stateless: ``step(None, InverterInput)`` returns the
+    voltage it can apply (the command limited to |u| ≤ U_dc/√3).  The dead-time
+    error depends on the instantaneous current, so the plant adds it inside its
+    vector field (:class:`~jaxobs.drive.PMSM`).
+    """
 
     udc: jax.Array  # dc-link voltage, V (> 0)
     f_pwm: jax.Array  # switching frequency, Hz (> 0)
@@ -63,6 +88,12 @@ class Inverter(eqx.Module):
         scale = jnp.where(mag > self.u_max, self.u_max / jnp.maximum(mag, 1e-12), 1.0)
         return u_a * scale, u_b * scale
 
+    def init(self):
+        return None
+
+    def step(self, state, inp: InverterInput) -> tuple[None, InverterInput]:
+        return state, InverterInput(*self.limit(inp.u_a, inp.u_b))
+
     def _sgn(self, i):
         if self.i_smooth > 0:
             return jnp.tanh(i / self.i_smooth)
@@ -82,7 +113,14 @@ def _statically_zero(x) -> bool:
 
 
 class Sensors(eqx.Module):
-    """Per-axis offsets, gain errors and white noise of the current and voltage measurements."""
+    """Per-axis offsets, gain errors and white noise of the current and voltage measurements.
+
+    As a step component its state is the PRNG key of its noise (``init(key)``),
+    and ``step(key, SensorInput) -> (key, DriveInput)`` gives the measured
+    voltage and current an observer is told; the noise of sample k is drawn
+    from ``fold_in(key, k)``, so a run is reproducible, vmappable and the same
+    whatever the loop's blocking.
+    """
 
     i_offset: jax.Array  # (Δi_α, Δi_β), A
     u_offset: jax.Array  # (Δu_α, Δu_β), V
@@ -106,6 +144,12 @@ class Sensors(eqx.Module):
         for name in ("i_offset", "u_offset", "i_gain"):
             if getattr(self, name).shape[-1:] != (2,):
                 raise ValueError(f"{own}.{name} must have two entries (α, β), got shape {getattr(self, name).shape}")
+
+    def init(self, key=None):
+        return jax.random.PRNGKey(0) if key is None else key
+
+    def step(self, key, inp: SensorInput) -> tuple[jax.Array, DriveInput]:
+        return key, DriveInput(*self.measure(key, inp.k, inp.u_a, inp.u_b, inp.i_a, inp.i_b))
 
     def measure(self, key, k, u_a, u_b, i_a, i_b):
         """Measured (u_α, u_β, i_α, i_β) at sample ``k``."""

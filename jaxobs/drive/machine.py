@@ -36,7 +36,7 @@ import jax.numpy as jnp
 
 from .._validate import check_nonnegative, check_positive, check_real
 
-__all__ = ["PMSMParams", "spmsm_paper000", "ipmsm_paper002", "PlantState", "plant_vf", "torque", "bemf_dq", "bemf_ab"]
+__all__ = ["PMSMParams", "spmsm_paper000", "ipmsm_paper002", "plant_vf", "torque", "bemf_dq", "bemf_ab"]
 
 
 class PMSMParams(eqx.Module):
@@ -120,12 +120,6 @@ def ipmsm_paper002(**overrides) -> PMSMParams:
     kw = dict(Rs=0.6, Ld=6e-3, Lq=12e-3, psi_f=0.45, J=5e-3, p=5, B=1e-3, T_rated=30.0, n_rated=600.0)
     kw.update(overrides)
     return PMSMParams(**kw)
-
-
-class PlantState(eqx.Module):
-    """x = [i_d, i_q, ωm, θe] as one flat array for the rules."""
-
-    x: jax.Array
 
 
 def _harmonic_factor(par: PMSMParams, theta_e):

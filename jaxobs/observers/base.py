@@ -31,15 +31,6 @@ import jax
 from ..discretize import AbstractRule
 
 
-def check_rule(rule, owner: str) -> AbstractRule:
-    """A component's ``rule`` must be a discretization rule object."""
-    if not isinstance(rule, AbstractRule):
-        raise ValueError(
-            f"{owner}.rule must be a discretization rule (jaxobs.Euler(), Tustin(), AB3(), RK4()), got {rule!r}"
-        )
-    return rule
-
-
 class ObserverState(eqx.Module):
     """State of a state-vector observer: the flat state and the rule's own state."""
 

@@ -55,9 +55,8 @@ import jax.numpy as jnp
 
 from .._math import safe_atan2
 from .._validate import check_nonnegative, check_positive, check_sample_time
-from ..discretize import RK4, AbstractRule
+from ..discretize import RK4, AbstractRule, check_rule
 from ._cores import pll_vf, quadrature_error, safe_sq_amplitude, sogi2_vf, sogi_vf
-from .base import check_rule
 
 __all__ = ["FluxOutput", "FluxState", "PureIntegratorFlux", "LPFFlux", "SOIFO", "SecondOrderSOIFO"]
 

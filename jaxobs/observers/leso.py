@@ -46,11 +46,10 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from .._math import safe_atan2
+from .._math import safe_atan2, wrap
 from .._validate import check_nonnegative, check_positive, check_sample_time
-from ..discretize import RK4, AbstractRule, Knots
+from ..discretize import RK4, AbstractRule, Knots, check_rule
 from ._cores import pll_vf
-from .base import check_rule
 
 __all__ = ["LESOOutput", "LESOState", "CLESO", "GILESO", "FALESO"]
 
@@ -69,10 +68,6 @@ class LESOState(eqx.Module):
     i_prev: jax.Array
     u_prev: jax.Array
     started: jax.Array
-
-
-def _wrap(a):
-    return jnp.pi - jnp.mod(jnp.pi - a, 2 * jnp.pi)
 
 
 class _LESOBase(eqx.Module):
@@ -114,7 +109,7 @@ class _LESOBase(eqx.Module):
         path = Knots(u0=(state.u_prev, state.i_prev), um=(state.u_prev, 0.5 * (i + state.i_prev)), u1=(state.u_prev, i))
         x1, rs = self.rule.step(self.f, state.x, path, self.ts, state.rule)
         x1 = jnp.where(state.started, x1, state.x)
-        x1 = x1.at[self.n_leso].set(_wrap(x1[self.n_leso]))
+        x1 = x1.at[self.n_leso].set(wrap(x1[self.n_leso]))
         new = LESOState(x=x1, rule=rs, i_prev=i, u_prev=jnp.stack([meas.u_a, meas.u_b]), started=jnp.asarray(True))
         _, e = self.leso(x1[: self.n_leso], new.u_prev, i, x1[self.n_leso + 1])
         out = LESOOutput(e_a=e[0], e_b=e[1], theta=x1[self.n_leso], omega=x1[self.n_leso + 1], theta_emf=safe_atan2(-e[0], e[1]))

@@ -15,9 +15,9 @@ import jax
 import jax.numpy as jnp
 
 from .._validate import check_positive, check_sample_time
-from ..discretize import AbstractRule, Tustin
+from ..discretize import AbstractRule, Tustin, check_rule
 from ._cores import sogi2_vf, sogi_vf
-from .base import AbstractObserver, check_rule
+from .base import AbstractObserver
 
 __all__ = ["QSGOutput", "SOGI", "SOGI2"]
 

@@ -37,6 +37,7 @@ import numpy as np
 from .. import drive as D
 from .. import linear
 from ..metrics import wrap
+from ..simulate import simulate
 from ..observers import (
     SOIFO,
     LPFFlux,
@@ -81,8 +82,8 @@ def _window(t, start, stop):
 
 
 def _obs_metrics(sol, i, mask):
-    o = sol.obs.each[i]
-    err = np.asarray(wrap(o.theta - sol.theta_e))[mask]
+    o = sol.outputs.obs.each[i]
+    err = np.asarray(wrap(o.theta - sol.outputs.theta_e))[mask]
     pa, pb = np.asarray(o.psi_a)[mask], np.asarray(o.psi_b)[mask]
     finite = bool(np.all(np.isfinite(err)))
     return dict(
@@ -121,7 +122,7 @@ def run_flux_experiments(quick: bool = False):
         est = par if est is None else est
         w0 = par.p * rpm0 * D.RPM if omega0 is None else omega0
         sc = D.Scenario(par, est_par=est, speed_ref=speed_ref, load=load, sensors=sensors, omega_m0=rpm0 * D.RPM if startup is None else 0.0)
-        sol = D.simulate_drive(flux_drive(par, handover, startup, alpha_s), sc, t1, observer=flux_bank(est, w0))
+        sol = simulate(D.ClosedLoop(flux_drive(par, handover, startup, alpha_s), flux_bank(est, w0), sc), t1)
         traces[name] = sol
         return sol, np.asarray(sol.t)
 
@@ -178,7 +179,7 @@ def run_flux_experiments(quick: bool = False):
         sol, t = run(name, 0, 10.0, 0.0, prof, load=load, startup=start, omega0=we_sw, alpha_s=2 * math.pi * 1.0)
         rows += _rows(name, sol, _window(t, 4.0, 10.0), err_metric, {})
         rows += _rows(name + " (last 3 s)", sol, _window(t, 7.0, 10.0), err_metric, {})
-        rpm = np.asarray(sol.speed_rpm)
+        rpm = np.asarray(sol.outputs.speed_rpm)
         rows.append(dict(experiment=name, observer="second-order SOIFO", metric="final_speed", unit="r/min", paper=200.0, ours=float(rpm[-1])))
     for name, sol in traces.items():
         rows.append(dict(experiment=name, observer="drive", metric="finite", unit="bool", paper=None, ours=bool(sol.ok)))

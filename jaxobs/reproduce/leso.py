@@ -28,6 +28,7 @@ import numpy as np
 from .. import drive as D
 from .. import linear
 from ..metrics import harmonic_amplitude, wrap
+from ..simulate import simulate
 from ..observers import CLESO, FALESO, GILESO, ObserverBank
 
 __all__ = ["LESO_NAMES", "leso_bank", "leso_drive", "run_leso_experiments", "A5", "A7", "BENCH_J"]
@@ -56,7 +57,7 @@ def leso_drive(par, handover=0.3, alpha_s=2 * math.pi * 5):
 
 
 def _err_deg(sol, i):
-    return np.degrees(np.asarray(wrap(sol.obs.each[i].theta - sol.theta_e)))
+    return np.degrees(np.asarray(wrap(sol.outputs.obs.each[i].theta - sol.outputs.theta_e)))
 
 
 def run_leso_experiments():
@@ -66,7 +67,7 @@ def run_leso_experiments():
     def run(name, par, est, rpm0, t1, speed_ref, load=None, handover=0.3):
         we = par.p * rpm0 * D.RPM
         sc = D.Scenario(par, est_par=est, speed_ref=speed_ref, load=load, omega_m0=rpm0 * D.RPM)
-        sol = D.simulate_drive(leso_drive(par, handover), sc, t1, observer=leso_bank(est, we))
+        sol = simulate(D.ClosedLoop(leso_drive(par, handover), leso_bank(est, we), sc), t1)
         traces[name] = sol
         return sol, np.asarray(sol.t)
 
@@ -99,7 +100,7 @@ def run_leso_experiments():
         m = np.zeros_like(t, dtype=bool)
         m[-10 * n_per:] = True  # ten whole electrical periods
         for i, obs in enumerate(LESO_NAMES):
-            ea = np.asarray(sol.obs.each[i].e_a)
+            ea = np.asarray(sol.outputs.obs.each[i].e_a)
             fund = float(harmonic_amplitude(t, ea, we, m))
             for h, paper in zip((5, 7), paper_h[rpm][i]):
                 pct = 100 * float(harmonic_amplitude(t, ea, h * we, m)) / fund
@@ -116,7 +117,7 @@ def run_leso_experiments():
     m = t >= 0.6
     rows.append(dict(experiment=name, observer="FA-LESO", metric="max_abs", unit="deg", paper=4.5, ours=float(np.abs(_err_deg(sol, 2)[m]).max())))
     rows.append(dict(experiment=name, observer="FA-LESO", metric="max_speed_err", unit="r/min", paper=13.0,
-                     ours=float(np.max(np.abs(np.asarray(sol.obs.each[2].omega) / par.p - np.asarray(sol.omega_m))[m]) * 30 / math.pi)))
+                     ours=float(np.max(np.abs(np.asarray(sol.outputs.obs.each[2].omega) / par.p - np.asarray(sol.outputs.omega_m))[m]) * 30 / math.pi)))
 
     # --- load step 0 -> 80 % at 600 r/min (Fig. 17)
     name = "load step 0-80 % at 600 r/min"
@@ -139,8 +140,8 @@ def run_leso_experiments():
         err = float(np.mean(_err_deg(sol, 2)[m]))
         # eqs (42)-(43): Δ = true − nominal; E_ex at i_d = 0 is ωe ψf (+ (Ld − Lq) i_d = 0)
         e_ex = we * float(par.psi_f)
-        id_hat = float(np.mean(np.asarray(sol.i_d)[m]))
-        iq_hat = float(np.mean(np.asarray(sol.i_q)[m]))
+        id_hat = float(np.mean(np.asarray(sol.outputs.i_d)[m]))
+        iq_hat = float(np.mean(np.asarray(sol.outputs.i_q)[m]))
         if delta[0] == "Rs":
             pred = math.degrees(float(linear.position_error_rs(delta[1], id_hat, iq_hat, e_ex)))
         else:

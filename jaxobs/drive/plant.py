@@ -1,0 +1,111 @@
+"""The PMSM plant as a step-function component: one control period of the machine under a held voltage.
+
+``PMSM(par, inverter, dead_time, ts=..., n_sub=..., rule=...)`` has the
+contract of every dynamic piece (DESIGN.md): ``init(...)`` and
+``step(state, PlantInput) -> (state, PlantOutput)``.  Like the signal-level
+observers, ``step`` returns what the sensors see *at* t_k (the state before the
+update) and integrates the machine over [t_k, t_{k+1}] in ``n_sub`` substeps of
+its discretization rule, under the voltage applied over that period (already
+limited by the inverter; the dead-time error of the instantaneous current is
+added inside the vector field) and the load torque at t_k.
+
+The vector field :meth:`PMSM.field` (:func:`plant_field`) is the same function
+``diffrax.diffeqsolve`` runs as the high-accuracy reference (tests/test_drive.py).
+State x = [i_d (A), i_q (A), ω_m (rad/s, mechanical), θ_e (rad, electrical)];
+θ_e is wrapped to (−π, π] after every period.
+"""
+
+from __future__ import annotations
+
+from typing import Any, NamedTuple
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+
+from .._math import wrap
+from .._validate import check_nonnegative, check_sample_time
+from ..discretize import RK4, AbstractRule, Held, check_rule
+from .hardware import Inverter
+from .machine import PMSMParams, dq_to_ab, plant_vf, torque
+
+__all__ = ["PMSM", "PlantInput", "PlantOutput", "PlantState", "plant_field"]
+
+
+def plant_field(par: PMSMParams, inverter: Inverter, dead_time, x, inp):
+    """Plant vector field with the inverter's dead-time error; ``inp = (u_α, u_β, T_L)`` (applied, limited)."""
+    i_a, i_b = dq_to_ab(x[0], x[1], x[3])
+    du_a, du_b = inverter.dead_time_error(dead_time, i_a, i_b)
+    return plant_vf(par, x, (inp[0] + du_a, inp[1] + du_b), inp[2])
+
+
+class PlantInput(NamedTuple):
+    """What drives the machine over one period."""
+
+    u_a: jax.Array  # applied stationary-frame voltage (inverter-limited, before the dead-time error), V
+    u_b: jax.Array
+    t_load: jax.Array  # load torque, N·m
+
+
+class PlantOutput(NamedTuple):
+    """The machine at t_k."""
+
+    i_d: jax.Array  # rotor-frame currents, A
+    i_q: jax.Array
+    omega_m: jax.Array  # mechanical speed, rad/s
+    theta_e: jax.Array  # electrical angle, rad (the state's: wrapped to (−π, π] after every period)
+    i_a: jax.Array  # stationary-frame currents, A
+    i_b: jax.Array
+    torque: jax.Array  # electromagnetic torque, N·m
+
+
+class PlantState(NamedTuple):
+    x: jax.Array  # [i_d, i_q, ω_m, θ_e], shape (4,)
+    rule: Any  # the integration rule's own state (None for one-step rules)
+
+
+class PMSM(eqx.Module):
+    """The machine ``par`` behind an inverter with dead time ``dead_time``, integrated per control period."""
+
+    par: PMSMParams
+    inverter: Inverter
+    dead_time: jax.Array  # s
+    ts: float = eqx.field(static=True)  # control period, s
+    n_sub: int = eqx.field(static=True)  # substeps per period
+    rule: AbstractRule = eqx.field(static=True)
+
+    def __init__(self, par, inverter=None, dead_time=0.0, *, ts=1e-4, n_sub=2, rule=None):
+        if not isinstance(par, PMSMParams):
+            raise ValueError(f"PMSM.par must be a PMSMParams, got {type(par).__name__}")
+        self.par = par
+        self.inverter = Inverter() if inverter is None else inverter
+        self.dead_time = check_nonnegative("dead_time", dead_time, "PMSM")
+        self.ts = check_sample_time("ts", ts, "PMSM")
+        if isinstance(n_sub, bool) or not isinstance(n_sub, int) or n_sub < 1:
+            raise ValueError(f"PMSM.n_sub must be an integer >= 1, got {n_sub!r}")
+        self.n_sub = n_sub
+        self.rule = check_rule(RK4() if rule is None else rule, "PMSM")
+
+    def field(self, x, inp):
+        """dx/dt at state ``x`` under ``inp = (u_α, u_β, T_L)``."""
+        return plant_field(self.par, self.inverter, self.dead_time, x, inp)
+
+    def init(self, omega_m0=0.0, theta_e0=0.0, i_d0=0.0, i_q0=0.0) -> PlantState:
+        dtype = jnp.result_type(self.par.Rs, float)
+        x0 = jnp.stack([jnp.asarray(v, dtype) for v in (i_d0, i_q0, omega_m0, theta_e0)])
+        return PlantState(x=x0, rule=self.rule.init(self.field, x0, None))
+
+    def output(self, x) -> PlantOutput:
+        i_d, i_q, w_m, th = x[0], x[1], x[2], x[3]
+        i_a, i_b = dq_to_ab(i_d, i_q, th)
+        return PlantOutput(i_d, i_q, w_m, th, i_a, i_b, torque(self.par, i_d, i_q, th))
+
+    def step(self, state: PlantState, inp: PlantInput) -> tuple[PlantState, PlantOutput]:
+        out = self.output(state.x)
+        path = Held((inp.u_a, inp.u_b, inp.t_load))
+        h = self.ts / self.n_sub
+        x, rs = state.x, state.rule
+        for _ in range(self.n_sub):
+            x, rs = self.rule.step(self.field, x, path, h, rs)
+        x = x.at[3].set(wrap(x[3]))
+        return PlantState(x=x, rule=rs), out

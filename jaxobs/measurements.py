@@ -1,0 +1,23 @@
+"""What a drive observer is given each control period (the lowest layer: signals, drive and observers use it).
+
+Frame and units: stationary (αβ) frame, amplitude-invariant Clarke transform,
+volts and amperes.  The voltage is the one applied over the period that
+starts at the sample (what a DSP knows at t_k: it computed it at t_{k−1}).
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import jax
+
+__all__ = ["DriveInput"]
+
+
+class DriveInput(NamedTuple):
+    """Measured stationary-frame voltage (V) and current (A) at one sample."""
+
+    u_a: jax.Array
+    u_b: jax.Array
+    i_a: jax.Array
+    i_b: jax.Array
