@@ -41,16 +41,16 @@ def write_report(out: Path, job, obj, thetas: dict, history: list):
     for label, th in thetas.items():
         comp = obj.param.apply(obj.component, th)
         sol = obj._simulate(comp, sig)
-        t, out = np.asarray(sol.t), sol.outputs
-        if hasattr(out, "theta_e"):  # drive: observer speed and position error
-            axes[0].plot(t, np.asarray(out.obs.omega) / (2 * math.pi), lw=1, label=label)
-            axes[1].plot(t, np.degrees(np.asarray(wrap(out.obs.theta - out.theta_e))), lw=1, label=label)
-        elif out.truth is not None:
-            axes[0].plot(t, np.asarray(out.obs.omega) / (2 * math.pi), lw=1, label=label)
-            axes[1].plot(t, np.degrees(np.asarray(wrap(out.obs.theta - out.truth.theta))), lw=1, label=label)
+        t, so = np.asarray(sol.t), sol.outputs
+        if hasattr(so, "theta_e"):  # drive: observer speed and position error
+            axes[0].plot(t, np.asarray(so.obs.omega) / (2 * math.pi), lw=1, label=label)
+            axes[1].plot(t, np.degrees(np.asarray(wrap(so.obs.theta - so.theta_e))), lw=1, label=label)
+        elif so.truth is not None:
+            axes[0].plot(t, np.asarray(so.obs.omega) / (2 * math.pi), lw=1, label=label)
+            axes[1].plot(t, np.degrees(np.asarray(wrap(so.obs.theta - so.truth.theta))), lw=1, label=label)
         else:
-            axes[0].plot(t, np.asarray(out.obs.omega) / (2 * math.pi), lw=1, label=label)
-            err = wrap(out.obs.theta - (sig.omega1 * sol.t + sig.phase - math.pi / 2))
+            axes[0].plot(t, np.asarray(so.obs.omega) / (2 * math.pi), lw=1, label=label)
+            err = wrap(so.obs.theta - (sig.omega1 * sol.t + sig.phase - math.pi / 2))
             axes[1].plot(t, np.degrees(np.asarray(err)), lw=1, label=label)
     axes[0].set_ylabel("estimated frequency (Hz)")
     axes[1].set_ylabel("phase / position error (deg)")
