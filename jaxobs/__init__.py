@@ -1,25 +1,12 @@
-"""jaxobs — a differentiable JAX simulator for tuning sensorless motor-drive observers and FLLs."""
+"""jaxobs — a differentiable JAX simulator for tuning sensorless motor-drive observers and FLLs.
 
-import os as _os
-import sys as _sys
+Importing it has no side effects: no environment variable or JAX option
+changes.  To run a sharded batch on every CPU core, call
+:func:`jaxobs.use_host_devices` before the first JAX computation.
+"""
 
-
-def _host_devices():
-    """One XLA host device per core, so a sharded batch uses every core (jaxobs.sharding).
-
-    Only possible before JAX is imported; an explicit XLA flag or
-    ``JAXOBS_HOST_DEVICES`` (``1``: off, ``n``: n devices) wins.
-    """
-    flags = _os.environ.get("XLA_FLAGS", "")
-    if "jax" in _sys.modules or "xla_force_host_platform_device_count" in flags:
-        return
-    want = _os.environ.get("JAXOBS_HOST_DEVICES", "auto")
-    n = (_os.cpu_count() or 1) if want == "auto" else int(want) if want.isdigit() else 1
-    if n > 1:
-        _os.environ["XLA_FLAGS"] = (flags + f" --xla_force_host_platform_device_count={n}").strip()
-
-
-_host_devices()
+from importlib.metadata import PackageNotFoundError as _PackageNotFoundError
+from importlib.metadata import version as _version
 
 from . import drive as drive
 from . import linear as linear
@@ -98,5 +85,9 @@ from .simulate import simulate as simulate
 from .sharding import batch_mesh as batch_mesh
 from .sharding import shard_batch as shard_batch
 from .sharding import map_batch as map_batch
+from .sharding import use_host_devices as use_host_devices
 
-__version__ = "0.1.0"
+try:  # one source: the version in pyproject.toml, as installed
+    __version__ = _version("jaxobs")
+except _PackageNotFoundError:  # a source tree that was never installed
+    __version__ = "0+unknown"

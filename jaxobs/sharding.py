@@ -8,11 +8,19 @@ runs each device's share.  Results equal the single-device run (to float64
 rounding: tests/test_perf.py runs 4 host devices in a subprocess).
 
 CPU.  XLA runs one device's loop on one thread, so a 2-core machine needs two
-*host* devices to use both cores: ``import jaxobs`` sets
-``XLA_FLAGS=--xla_force_host_platform_device_count=<cores>`` when JAX has not
-been imported yet and the flag is not already set (``JAXOBS_HOST_DEVICES=1``
-turns this off, an integer sets the count).  This measured 1.9× on batch-1024
-forward simulations (benchmarks/README.md).  Import jaxobs before jax to get it.
+*host* devices to use both cores.  ``import jaxobs`` changes nothing (no
+environment variables, no JAX configuration); call
+:func:`use_host_devices` once, before the first JAX computation, to make JAX's
+CPU backend expose one device per usable core (the ``jaxobs`` command line
+does this first thing)::
+
+    import jaxobs
+    jaxobs.use_host_devices()      # or use_host_devices(4); JAXOBS_HOST_DEVICES=1 turns the default off
+
+It sets JAX's public ``jax_num_cpu_devices`` option.  Called after JAX has
+started its backends it cannot change the count: it warns once and returns the
+current count.  This measured 1.9× on batch-1024 forward simulations
+(benchmarks/README.md).
 
 Tiles.  ``jit(vmap(simulate))`` steps the whole batch in lock-step: every
 time step sweeps every scenario's state (and its block of inputs), so once a
@@ -38,13 +46,82 @@ program; per-scenario results come back sharded, ``jax.device_get`` or
 
 from __future__ import annotations
 
+import os
+import re
+import warnings
+
 import jax
 import numpy as np
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
-__all__ = ["batch_mesh", "shard_batch", "batch_size", "map_batch", "TILE"]
+__all__ = ["batch_mesh", "shard_batch", "batch_size", "map_batch", "use_host_devices", "TILE"]
 
 AXIS = "batch"
+
+ENV = "JAXOBS_HOST_DEVICES"
+
+
+def _usable_cores() -> int:
+    """Cores this process may run on: its CPU affinity where the OS reports it, else ``os.cpu_count()``."""
+    try:
+        return len(os.sched_getaffinity(0)) or 1
+    except (AttributeError, OSError):  # not on every platform (macOS, Windows)
+        return os.cpu_count() or 1
+
+
+def _xla_flag_count() -> int | None:
+    """The count in an explicit ``--xla_force_host_platform_device_count`` of ``XLA_FLAGS``, if any (read only)."""
+    m = re.search(r"--xla_force_host_platform_device_count=(\d+)", os.environ.get("XLA_FLAGS", ""))
+    return int(m.group(1)) if m else None
+
+
+_warned_late = False
+
+
+def use_host_devices(n: int | None = None) -> int:
+    """Make JAX's CPU backend expose ``n`` devices, so a sharded batch uses ``n`` cores; returns the count.
+
+    Call it before the first JAX computation (importing jax and jaxobs is fine):
+    it sets JAX's public option ``jax_num_cpu_devices``, which JAX reads when it
+    starts its backends.  ``n`` defaults to the usable cores
+    (``os.sched_getaffinity``, which honours CPU affinity and cpusets; else
+    ``os.cpu_count()``).  With ``n=None`` the environment variable
+    ``JAXOBS_HOST_DEVICES``, read at each call, replaces that default: an
+    integer n ≥ 1, or ``1`` for off (JAX's configuration is left as it is).
+    An explicit ``--xla_force_host_platform_device_count`` in ``XLA_FLAGS``
+    also wins over the default (it is read, never written).  An explicit ``n``
+    wins over both.
+
+    If JAX has already started its backends the count can no longer change: the
+    first such call warns (``RuntimeWarning``), and every such call returns the
+    number of CPU devices JAX has.  Only the CPU backend is affected; a GPU
+    backend keeps its devices.
+    """
+    global _warned_late
+    if n is None:
+        env = os.environ.get(ENV, "").strip()
+        if env and not (env.isdigit() and int(env) >= 1):
+            raise ValueError(f"{ENV} must be an integer >= 1 (1: off), got {env!r}")
+        flag = _xla_flag_count()
+        if (env and int(env) == 1) or (not env and flag is not None):  # off, or the user's own XLA flag: leave JAX as it is
+            return flag or 1
+        n = int(env) if env else _usable_cores()
+    elif isinstance(n, bool) or not isinstance(n, int) or n < 1:
+        raise ValueError(f"use_host_devices: n must be an integer >= 1, got {n!r}")
+    try:
+        jax.config.update("jax_num_cpu_devices", n)
+    except RuntimeError:  # JAX raises this once its backends are initialized
+        count = len(jax.devices("cpu"))
+        if not _warned_late and count != n:
+            _warned_late = True
+            warnings.warn(
+                f"jaxobs.use_host_devices({n}): JAX has already started with {count} CPU device(s); "
+                "call it before the first JAX computation to change the count",
+                RuntimeWarning,
+                stacklevel=2,
+            )
+        return count
+    return n
 
 
 def batch_mesh(devices=None) -> Mesh:

@@ -1,13 +1,119 @@
-"""The command line: the main job's demo and its error handling."""
+"""The command line: the one parser, the demo, error handling; no side effects of ``import jaxobs``."""
 
 import json
 import math
+import os
+import re
 import subprocess
 import sys
+import tomllib
+from pathlib import Path
 
 import pytest
 
-from jaxobs.cli import main
+import jaxobs
+from tuning.cli import build_parser, load_study, main
+from tuning.results import load_result, tuned_component
+
+ROOT = Path(__file__).resolve().parents[1]
+COMMANDS = ("tune", "demo", "closed-form", "bode", "reproduce", "study")
+
+
+def _python(code_or_args, env_drop=(), env_add=None):
+    """Run a fresh interpreter (``-c code`` or ``-m ...`` args) with this checkout first on the path."""
+    env = {k: v for k, v in os.environ.items() if k not in env_drop}
+    env["PYTHONPATH"] = os.pathsep.join([str(ROOT), *filter(None, [os.environ.get("PYTHONPATH")])])
+    env.update(env_add or {})
+    args = ["-c", code_or_args] if isinstance(code_or_args, str) else list(code_or_args)
+    return subprocess.run([sys.executable, *args], capture_output=True, text=True, env=env, cwd=ROOT, timeout=300)
+
+
+def test_python_m_jaxobs_lists_every_command_and_version():
+    p = _python(["-m", "jaxobs", "--help"])
+    assert p.returncode == 0, p.stderr
+    listed = re.search(r"\{([a-z,-]+)\}", p.stdout).group(1).split(",")
+    assert sorted(listed) == sorted(COMMANDS)
+    assert "bench" not in listed  # benchmarks run with `make bench`
+    p = _python(["-m", "jaxobs", "--version"])
+    assert p.returncode == 0, p.stderr
+    assert p.stdout.strip() == f"jaxobs {jaxobs.__version__}"
+    assert re.fullmatch(r"\d+\.\d+\.\d+\S*", jaxobs.__version__)
+
+
+def test_console_script_is_the_one_parser():
+    """pyproject's ``jaxobs`` script is ``tuning.cli:main``, whose parser has every command."""
+    meta = tomllib.loads((ROOT / "pyproject.toml").read_text())
+    assert meta["project"]["scripts"] == {"jaxobs": "tuning.cli:main"}
+    assert jaxobs.__version__ == meta["project"]["version"]
+    helptext = build_parser().format_help()
+    assert all(c in helptext for c in COMMANDS) and "--version" in helptext
+    assert not (ROOT / "jaxobs" / "cli.py").exists()
+
+
+def test_import_jaxobs_leaves_the_environment_alone():
+    """``import jaxobs`` changes no environment variable (jax's own import sets a few, so jax comes first)."""
+    code = (
+        "import os, jax; before = dict(os.environ); import jaxobs, tuning; "
+        "assert 'XLA_FLAGS' not in os.environ, os.environ['XLA_FLAGS']; "
+        "assert dict(os.environ) == before, {k: v for k, v in os.environ.items() if before.get(k) != v}"
+    )
+    p = _python(code, env_drop=("XLA_FLAGS", "JAXOBS_HOST_DEVICES"))
+    assert p.returncode == 0, p.stderr
+
+
+def test_library_never_imports_tuning():
+    """Every module of jaxobs/ but the ``python -m jaxobs`` entry point imports without tuning/."""
+    code = (
+        "import importlib, pkgutil, sys, jaxobs\n"
+        "for m in pkgutil.walk_packages(jaxobs.__path__, 'jaxobs.'):\n"
+        "    if m.name != 'jaxobs.__main__':\n"
+        "        importlib.import_module(m.name)\n"
+        "print(sorted(m for m in sys.modules if m == 'tuning' or m.startswith('tuning.')))\n"
+    )
+    p = _python(code)
+    assert p.returncode == 0, p.stderr
+    assert p.stdout.strip() == "[]"
+
+
+def test_use_host_devices_before_and_after_jax_starts():
+    code = (
+        "import warnings, jax, jaxobs\n"
+        "assert jaxobs.use_host_devices(2) == 2\n"
+        "assert len(jax.devices()) == 2, jax.devices()\n"
+        "with warnings.catch_warnings(record=True) as w:\n"
+        "    warnings.simplefilter('always')\n"
+        "    assert jaxobs.use_host_devices(3) == 2\n"  # too late: warns, keeps 2
+        "    assert jaxobs.use_host_devices(3) == 2\n"  # warns once
+        "    assert jaxobs.use_host_devices() == 2\n"
+        "    assert jaxobs.use_host_devices(2) == 2\n"
+        "assert len(w) == 1 and 'already started' in str(w[0].message), [str(x.message) for x in w]\n"
+        "print(len(jax.devices()))\n"
+    )
+    p = _python(code, env_drop=("XLA_FLAGS", "JAXOBS_HOST_DEVICES"))
+    assert p.returncode == 0, p.stderr
+    assert p.stdout.strip() == "2"
+
+
+def test_use_host_devices_default_and_env_override():
+    code = "import os, jax, jaxobs; n = jaxobs.use_host_devices(); print(n, len(jax.devices()), len(os.sched_getaffinity(0)))"
+    p = _python(code, env_drop=("XLA_FLAGS", "JAXOBS_HOST_DEVICES"))
+    assert p.returncode == 0, p.stderr
+    n, devs, cores = map(int, p.stdout.split())
+    assert n == devs == cores
+    p = _python(code, env_drop=("XLA_FLAGS",), env_add={"JAXOBS_HOST_DEVICES": "1"})
+    assert p.returncode == 0, p.stderr
+    assert p.stdout.split()[:2] == ["1", "1"]
+    p = _python(code, env_drop=("XLA_FLAGS",), env_add={"JAXOBS_HOST_DEVICES": "3"})
+    assert p.returncode == 0, p.stderr
+    assert p.stdout.split()[:2] == ["3", "3"]
+    with pytest.raises(ValueError, match="n must be an integer >= 1"):
+        jaxobs.use_host_devices(0)
+
+
+def test_no_private_argparse_attributes():
+    for pkg in ("jaxobs", "tuning"):
+        for f in (ROOT / pkg).rglob("*.py"):
+            assert "_actions" not in f.read_text(), f
 
 
 def test_demo_json_rows_and_figure(tmp_path, capsys):
@@ -23,7 +129,7 @@ def test_demo_json_rows_and_figure(tmp_path, capsys):
 
 def test_bad_arguments_exit_with_one_line():
     for argv in (["demo", "--t-event", "-1"], ["nonsense"], ["demo", "--t-event", "abc"]):
-        p = subprocess.run([sys.executable, "-m", "jaxobs.cli", *argv], capture_output=True, text=True)
+        p = _python(["-m", "jaxobs", *argv])
         assert p.returncode == 2, (argv, p.stderr)
         lines = p.stderr.strip().splitlines()
         assert len(lines) == 1 and lines[0].startswith("jaxobs: error:"), p.stderr
@@ -68,3 +174,42 @@ def test_reproduce_flux_quick_json(tmp_path, capsys):
     assert lpf["paper"] == 0.05 and lpf["ours"] == pytest.approx(0.05, rel=0.02)
     assert by[("speed 400-2000-400 r/min", "second-order SOIFO", "max_abs")]["ours"] < 0.2
     assert len(list(tmp_path.glob("*.png"))) == 5
+
+
+def _result_json(tmp_path, component="SOGIFLLWIF", tuned=None):
+    """A tuning result as ``run_job`` writes it (the fields a study reads back)."""
+    job = {"job": {"name": "t", "component": component}, "component": {"k1": 1.7},
+           "gains": {"lam": {"init": 11559.0, "lower": 1000.0, "upper": 1e5, "log": True}},
+           "scenarios": {"signal": "grid", "grid": {"dc": [0.0]}}, "objective": {"terms": [{"metric": "itae_freq"}]}}
+    p = tmp_path / "result.json"
+    p.write_text(json.dumps({"job": job, "component": component, "gains": {"tuned": tuned or {"lam": 9000.0}}}))
+    return p
+
+
+def test_study_design_from_a_tuning_result(tmp_path):
+    """tuning.results reads result.json; the study gets the tuned component (job values + tuned gains)."""
+    obs = tuned_component(load_result(_result_json(tmp_path)))
+    assert isinstance(obs, jaxobs.SOGIFLLWIF)
+    assert (float(obs.k1), float(obs.k2), float(obs.lam)) == (1.7, 0.752, 9000.0)  # [component], job default, tuned
+    st = tmp_path / "s.toml"
+    st.write_text(f'[designs.tuned]\nresult = "{_result_json(tmp_path)}"\n[axes]\ndc = [0.0]\n')
+    name, designs, axes, _ = load_study(st)
+    assert float(designs["tuned"].lam) == 9000.0 and axes == {"dc": [0.0]}
+
+
+def test_study_result_errors_are_one_line(tmp_path, capsys):
+    st = tmp_path / "s.toml"
+    for content, expect in ((None, "cannot read"), ("{", "not valid JSON"), ('{"job": {}}', "no 'component'")):
+        res = tmp_path / "r.json"
+        if content is None:
+            res.unlink(missing_ok=True)
+        else:
+            res.write_text(content)
+        st.write_text(f'[designs.a]\nresult = "{res}"\n[axes]\ndc = [0.0]\n')
+        assert main(["study", str(st)]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and err[0].startswith("jaxobs: error: designs.a.result:") and expect in err[0], err
+    _result_json(tmp_path, tuned={"zz": 1.0})
+    st.write_text(f'[designs.a]\nresult = "{tmp_path / "result.json"}"\n[axes]\ndc = [0.0]\n')
+    assert main(["study", str(st)]) == 2
+    assert "gains.tuned.zz" in capsys.readouterr().err

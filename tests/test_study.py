@@ -12,7 +12,7 @@ import xarray as xr
 import jaxobs
 from jaxobs import linear
 from jaxobs import metrics as M
-from jaxobs.cli import main
+from tuning.cli import main
 from jaxobs.study import run_study, worst_cases
 
 AXES = {"freq_step": [-2.0, 1.0], "dc": [0.0, 0.1], "phase_jump_deg": [0.0, 30.0]}

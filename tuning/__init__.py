@@ -1,9 +1,8 @@
 """Tuning jobs: objectives, gain parametrizations, optimizers (optax, optimistix), TOML jobs, CLI, results.
 
     from tuning import load_job, run_job
+    from tuning import load_result, tuned_component     # a run's result.json back as a component
 """
-
-import jaxobs as _jaxobs  # noqa: F401  (first: lets jaxobs give XLA one host device per core)
 
 from .job import COMPONENTS as COMPONENTS
 from .job import JobError as JobError
@@ -16,5 +15,7 @@ from .objective import Term as Term
 from .objective import aggregate as aggregate
 from .params import GainSpec as GainSpec
 from .params import Parametrization as Parametrization
+from .results import load_result as load_result
+from .results import tuned_component as tuned_component
 from .solvers import SolverConfig as SolverConfig
 from .solvers import run_solver as run_solver

@@ -1,22 +1,298 @@
-"""The ``jaxobs`` console script: the library's commands plus ``jaxobs tune``.
-
-The library (``jaxobs/``) never imports ``tuning/`` (DESIGN.md: data flows one
-way), so the tuning command is added here, at the application layer, on top of
-``jaxobs.cli``'s parser.
+"""The ``jaxobs`` command line: the one parser, with every command (DESIGN.md: the top layer).
 
     jaxobs tune [JOB.toml] [--out DIR] [--resume] [--check] [--quiet]
+                                                           gradient tuning job (default: embedded WIF job)
+    jaxobs demo [--out DIR] [--json]                       the FLL family on paper 001 Tests A–E
+    jaxobs closed-form {sogi-fll,wpf,wif,cleso} [--name value ...] [--json]
+                                                           closed-form gains, formula and source
+    jaxobs bode [--out DIR]                                the papers' Bode figures (000 Fig. 5,
+                                                           002 Fig. 4, 001 Fig. 14)
+    jaxobs reproduce flux [--out DIR] [--json] [--quick]   paper 000's experiments, paper vs ours
+    jaxobs reproduce leso [--out DIR] [--json]             paper 002's experiments, paper vs ours
+    jaxobs study [STUDY.toml] [--out DIR]                  robustness study → NetCDF, worst cases, figures
+    jaxobs --version
 
-Without a file it runs the embedded default job (``tuning/presets/wif_robust.toml``).
-Job-file problems end with one line naming the field, exit status 2.
+The console script ``jaxobs`` and ``python -m jaxobs`` both run :func:`main`.
+It first calls :func:`jaxobs.use_host_devices` (one JAX CPU device per usable
+core; ``JAXOBS_HOST_DEVICES=1`` turns it off), then the command.  ``jaxobs
+tune`` without a file runs the embedded default job
+(``tuning/presets/wif_robust.toml``).  Benchmarks are not a command: ``make
+bench`` (``benchmarks/``).
+
+Errors in the arguments or input files end the program with one line on stderr
+and exit status 2 (a job-file error names the field); nothing prints a
+traceback for bad input.
 """
 
 from __future__ import annotations
 
+import argparse
+import json
 import sys
 from importlib import resources
 from pathlib import Path
 
-from jaxobs import cli as base
+import jaxobs
+from jaxobs import linear, use_host_devices
+from jaxobs.study import STUDY_AXES
+
+from .job import load_job, run_job
+from .results import load_result, tuned_component
+
+
+def _enable_x64():
+    import jax
+
+    jax.config.update("jax_enable_x64", True)
+
+
+def _cmd_demo(args) -> int:
+    _enable_x64()
+    from jaxobs.demo import DEMO_TESTS, fll_demo, format_table
+    from jaxobs.plot import fll_demo_figure
+
+    if args.t_event <= 0:
+        raise ValueError(f"--t-event must be > 0 s, got {args.t_event}")
+    rows, traces = fll_demo(t_event=args.t_event)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    fig_path = out / "fll_tests_A_E.png"
+    fll_demo_figure(traces, DEMO_TESTS, args.t_event, fig_path)
+    if args.json:
+        print(json.dumps(rows, indent=1))
+    else:
+        print("Paper 001 FLLs with Table I gains on Tests A–E (float64, AB3 at 10 kHz)")
+        print(format_table(rows))
+        print(f"figure: {fig_path}")
+    return 0 if all(r["ok"] for r in rows) else 1
+
+
+_CF_OPTIONS = {
+    "sogi-fll": ("k", "omega_n", "zeta"),
+    "wpf": ("omega_n", "zeta"),
+    "wif": ("omega_c", "b", "omega_n"),
+    "cleso": ("omega0", "rs", "lq"),
+}
+
+
+def closed_form_rows(design: str, values: dict) -> dict:
+    """Gains of a closed-form design with the formula and source of each (used by the CLI)."""
+    import math
+
+    from jaxobs import linear
+
+    pi = math.pi
+    if design == "sogi-fll":
+        k = values.get("k", 1 / math.sqrt(2))
+        wn = values.get("omega_n", 100 * pi)
+        zeta = values.get("zeta", 1 / math.sqrt(2))
+        obs = linear.sogi_fll_closed_form(k=k, omega_n=wn, zeta=zeta)
+        gains = [("k", float(obs.k), "chosen (001 uses 1/√2)", "001 Sec. II-B"),
+                 ("lam", float(obs.lam), "λ = k²ωn²/(8ζ²)", "001 eq (22)")]
+        inputs = dict(k=k, omega_n=wn, zeta=zeta)
+    elif design == "wpf":
+        wn = values.get("omega_n", 100 * pi)
+        zeta = values.get("zeta", 1 / math.sqrt(2))
+        obs = linear.wpf_closed_form(omega_n=wn, zeta=zeta)
+        gains = [("k1", float(obs.k1), "k1 = √2 (prefilter ζ = 1/√2)", "001 eq (26)"),
+                 ("k2", float(obs.k2), "k2 = k1 (amplitude poles coincide)", "001 Sec. III-B"),
+                 ("lam", float(obs.lam), "λ = 2(ζ+1)ωn²/(2ζ+1)³", "001 eq (29)")]
+        inputs = dict(omega_n=wn, zeta=zeta)
+    elif design == "wif":
+        wc = values.get("omega_c", 2 * pi * 18.8)
+        b = values.get("b", 1 + math.sqrt(2))
+        wn = values.get("omega_n", 100 * pi)
+        obs = linear.wif_closed_form(omega_c=wc, b=b, omega_n=wn)
+        pm = math.degrees(float(linear.symmetric_optimum_pm(b)))
+        gains = [("k1", float(obs.k1), "k1 = 2bωc/ωn", "001 eq (34)"),
+                 ("k2", float(obs.k2), "k2 = 2ωc/ωn", "001 eq (34)"),
+                 ("lam", float(obs.lam), "λ = 2ωc²/b", "001 eq (34)"),
+                 ("phase_margin_deg", pm, "PM = atan((b²−1)/(2b))", "001 eq (39)")]
+        inputs = dict(omega_c=wc, b=b, omega_n=wn)
+    elif design == "cleso":
+        if "rs" not in values or "lq" not in values:
+            raise ValueError("closed-form cleso needs --rs (stator resistance, ohm >= 0) and --lq (q-axis inductance, H > 0)")
+        w0 = values.get("omega0", 500 * pi)
+        g = linear.cleso_closed_form(w0, values["rs"], values["lq"])
+        gains = [("l1", float(g.l1), "l1 = 2ω0 − μ, μ = Rs/Lq", "002 eq (16)"),
+                 ("l2", float(g.l2), "l2 = ω0²", "002 eq (16)")]
+        inputs = dict(omega0=w0, rs=values["rs"], lq=values["lq"])
+    else:  # argparse restricts the choices
+        raise ValueError(f"design must be one of {', '.join(_CF_OPTIONS)}, got {design!r}")
+    return {
+        "design": design,
+        "inputs": inputs,
+        "gains": [dict(name=n, value=v, formula=f, source=src) for n, v, f, src in gains],
+    }
+
+
+def _cmd_closed_form(args) -> int:
+    _enable_x64()
+    values = {}
+    for name in ("k", "omega_n", "zeta", "omega_c", "b", "omega0", "rs", "lq"):
+        v = getattr(args, name)
+        if v is None:
+            continue
+        if name not in _CF_OPTIONS[args.design]:
+            allowed = ", ".join("--" + o.replace("_", "-") for o in _CF_OPTIONS[args.design])
+            raise ValueError(f"--{name.replace('_', '-')} does not apply to {args.design} (allowed: {allowed})")
+        values[name] = v
+    res = closed_form_rows(args.design, values)
+    if args.json:
+        print(json.dumps(res, indent=1))
+    else:
+        ins = ", ".join(f"{k} = {v:.6g}" for k, v in res["inputs"].items())
+        print(f"{args.design}: {ins}")
+        for g in res["gains"]:
+            print(f"  {g['name']:<18}{g['value']:>14.6g}   {g['formula']:<36}{g['source']}")
+    return 0
+
+
+def _cmd_bode(args) -> int:
+    _enable_x64()
+    from jaxobs.plot import paper_bode_figures
+
+    for p in paper_bode_figures(args.out):
+        print(p)
+    return 0
+
+
+_FLL_CTORS = {"SOGIFLL": "SOGIFLL", "SOGIFLLWPF": "SOGIFLLWPF", "SOGIFLLWIF": "SOGIFLLWIF"}
+
+
+def load_study(path):
+    """Parse a study TOML into (name, designs, axes, options); errors name the field (ValueError)."""
+    import tomllib
+
+    try:
+        raw = tomllib.loads(Path(path).read_text())
+    except OSError as e:
+        raise ValueError(f"study file: cannot read {str(path)!r}: {e.strerror}") from None
+    except tomllib.TOMLDecodeError as e:
+        raise ValueError(f"study file: not valid TOML: {e}") from None
+    st = raw.get("study", {})
+    opts = dict(t_event=float(st.get("t_event", 0.1)), horizon=float(st.get("horizon", 0.4)), sample=int(st.get("sample", 0)),
+                chunk_size=int(st.get("chunk_size", 2048)), seed=int(st.get("seed", 0)))
+    designs = {}
+    for name, spec in raw.get("designs", {}).items():
+        where = f"designs.{name}"
+        if "closed_form" in spec:
+            cf = {"sogi-fll": linear.sogi_fll_closed_form, "wpf": linear.wpf_closed_form, "wif": linear.wif_closed_form}
+            if spec["closed_form"] not in cf:
+                raise ValueError(f"{where}.closed_form must be one of {', '.join(cf)}, got {spec['closed_form']!r}")
+            designs[name] = cf[spec["closed_form"]]()
+        elif "result" in spec:  # a tuning run's result.json, read by tuning.results
+            try:
+                res = load_result(spec["result"])
+                if res["component"] not in _FLL_CTORS:
+                    raise ValueError(f"component {res['component']!r} is not an FLL (studies run the FLL family)")
+                designs[name] = tuned_component(res)
+            except ValueError as e:
+                raise ValueError(f"{where}.result: {e}") from None
+        elif "component" in spec:
+            comp = spec["component"]
+            if comp not in _FLL_CTORS:
+                raise ValueError(f"{where}.component must be one of {', '.join(_FLL_CTORS)}, got {comp!r}")
+            designs[name] = getattr(jaxobs, _FLL_CTORS[comp])(**{k: v for k, v in spec.items() if k != "component"})
+        else:
+            raise ValueError(f"{where}: give closed_form, result (a tuning result.json) or component with gains")
+    if not designs:
+        raise ValueError("designs: at least one design is required")
+    axes = raw.get("axes", {})
+    if not axes:
+        raise ValueError("axes: at least one axis is required")
+    for k, v in axes.items():
+        if k not in STUDY_AXES:
+            raise ValueError(f"axes.{k}: unknown axis; allowed: {', '.join(STUDY_AXES)}")
+        if not isinstance(v, list) or not v or not all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in v):
+            raise ValueError(f"axes.{k} must be a non-empty list of numbers")
+    return st.get("name", "study"), designs, axes, opts
+
+
+def _cmd_study(args) -> int:
+    _enable_x64()
+    from jaxobs.plot import study_figures
+    from jaxobs.study import STUDY_METRICS, run_study, worst_cases
+
+    path = Path(args.study) if args.study else Path(str(resources.files("jaxobs") / "data" / "default_study.toml"))
+    name, designs, axes, opts = load_study(path)
+    out = Path(args.out) if args.out else Path("out") / name
+    out.mkdir(parents=True, exist_ok=True)
+    ds = run_study(designs, axes, progress=not args.quiet, **opts)
+    ds.to_netcdf(out / "study.nc", engine="scipy")
+    worst = {m: worst_cases(ds, m, 3) for m in STUDY_METRICS}
+    (out / "worst_cases.json").write_text(json.dumps(worst, indent=1))
+    figs = study_figures(ds, out)
+    n = int(ds.attrs["scenarios"])
+    print(f"study {name}: {len(designs)} designs x {n} scenarios in {ds.attrs['seconds']:.1f} s")
+    print(f"{'design':<16}" + "".join(f"{m + ' mean':>20}{'worst':>12}" for m in ("settling_freq", "ripple_freq", "rms_phase")) + f"{'diverged':>10}")
+    for d in ds["design"].values:
+        sel = ds.sel(design=d)
+        row = f"{str(d):<16}"
+        for m in ("settling_freq", "ripple_freq", "rms_phase"):
+            row += f"{float(sel[m].mean()):>20.4g}{float(sel[m].max()):>12.4g}"
+        print(row + f"{int(sel['diverged'].sum()):>10}")
+    print(f"results: {out / 'study.nc'}, {out / 'worst_cases.json'}, {len(figs)} figures")
+    return 0
+
+
+def _emit_rows(rows, figs, as_json: bool, title: str) -> int:
+    """Print paper-vs-ours rows (table or JSON); non-zero exit if any simulation diverged."""
+    from jaxobs.reproduce.flux import format_rows
+
+    if as_json:
+        print(json.dumps(rows, indent=1))
+    else:
+        print(title)
+        print(format_rows(rows))
+        for p in figs:
+            print(f"figure: {p}")
+    return 0 if all(r["ours"] for r in rows if r["metric"] == "finite") else 1
+
+
+def _error_figures(traces, names, paper: str, specs, out: Path):
+    """One position-error figure per (experiment, file name, start time) in ``specs``."""
+    from jaxobs.plot import position_error_figure
+
+    paths = []
+    for key, fname, t_from in specs:
+        p = out / fname
+        position_error_figure(traces[key], names, f"Paper {paper}: {key}", p, t_from=t_from)
+        paths.append(p)
+    return paths
+
+
+def _cmd_reproduce(args) -> int:
+    _enable_x64()
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    if args.paper == "flux":
+        from jaxobs.plot import flux_circles_figure
+        from jaxobs.reproduce.flux import OBSERVER_NAMES, run_flux_experiments
+
+        rows, traces = run_flux_experiments(quick=args.quick)
+        figs = []
+        for key, fname in (("du_alpha = 5 V at 1000 r/min", "flux_circles_du_alpha_5V.png"), ("steady 400 r/min", "flux_circles_400rpm.png")):
+            p = out / fname
+            flux_circles_figure(traces[key], OBSERVER_NAMES, f"Paper 000: estimated flux, {key}", p)
+            figs.append(p)
+        figs += _error_figures(traces, OBSERVER_NAMES, "000", (
+            ("load step 10 N·m at 2000 r/min", "position_error_load_step.png", 0.3),
+            ("speed 400-2000-400 r/min", "position_error_speed_variation.png", 0.8),
+            ("du_alpha = 5 V at 1000 r/min", "position_error_du_alpha_5V.png", 0.8),
+        ), out)
+        return _emit_rows(rows, figs, args.json, "Paper 000 (second-order SOIFO) experiments on the simulated SPMSM drive — paper vs ours")
+    if args.paper == "leso":
+        from jaxobs.reproduce.leso import LESO_NAMES, run_leso_experiments
+
+        rows, traces = run_leso_experiments()
+        figs = _error_figures(traces, LESO_NAMES, "002", (
+            ("steady 600 r/min no load", "leso_position_error_600rpm.png", 0.4),
+            ("speed ramp 300-600-840-600-300 r/min", "leso_speed_ramp.png", 0.4),
+            ("load step 0-80 % at 600 r/min", "leso_load_step.png", 0.4),
+        ), out)
+        return _emit_rows(rows, figs, args.json, "Paper 002 (LESOs) experiments on the simulated IPMSM drive — paper vs ours")
+    raise ValueError(f"reproduce: unknown paper {args.paper!r}")
 
 
 def default_job_path() -> Path:
@@ -24,9 +300,7 @@ def default_job_path() -> Path:
 
 
 def _cmd_tune(args) -> int:
-    base._enable_x64()
-    from .job import load_job, run_job
-
+    _enable_x64()
     path = Path(args.job) if args.job else default_job_path()
     job = load_job(path)
     if args.check:
@@ -62,9 +336,16 @@ def _print_summary(result: dict, out: Path):
     print(f"results: {out / 'result.json'}")
 
 
-def build_parser():
-    p = base.build_parser()
-    sub = next(a for a in p._actions if a.dest == "cmd")
+class _Parser(argparse.ArgumentParser):
+    def error(self, message):  # one line, exit 2, no usage dump
+        self.exit(2, f"jaxobs: error: {message}\n")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The one parser: every subcommand of ``jaxobs``, and ``--version``."""
+    p = _Parser(prog="jaxobs", description="Differentiable simulation and tuning of motor-drive observers and FLLs.")
+    p.add_argument("--version", action="version", version=f"jaxobs {jaxobs.__version__}")
+    sub = p.add_subparsers(dest="cmd", required=True, parser_class=_Parser)
     t = sub.add_parser("tune", help="gradient-based gain tuning from a TOML job (default: embedded WIF job)")
     t.add_argument("job", nargs="?", help="job file (TOML); default: the embedded robust SOGI-FLL-WIF job")
     t.add_argument("--out", help="results folder (default: out/<job name>)")
@@ -72,15 +353,57 @@ def build_parser():
     t.add_argument("--check", action="store_true", help="validate the job file and exit")
     t.add_argument("--quiet", action="store_true", help="no progress bar")
     t.set_defaults(func=_cmd_tune)
+
+    d = sub.add_parser("demo", help="FLL family (SOGI-FLL, -WPF, -WIF) on paper 001 Tests A-E")
+    d.add_argument("--out", default="out", help="folder for the figure (default: out)")
+    d.add_argument("--json", action="store_true", help="print the table as JSON rows")
+    d.add_argument("--t-event", type=float, default=0.2, help="time of the test event, s (default 0.2)")
+    d.set_defaults(func=_cmd_demo)
+
+    c = sub.add_parser("closed-form", help="closed-form gains with formula and source equation")
+    c.add_argument("design", choices=list(_CF_OPTIONS), help="which design rule")
+    c.add_argument("--k", type=float, help="SOGI gain k (sogi-fll)")
+    c.add_argument("--omega-n", dest="omega_n", type=float, help="nominal frequency, rad/s (default 100π)")
+    c.add_argument("--zeta", type=float, help="damping ratio (default 1/√2)")
+    c.add_argument("--omega-c", dest="omega_c", type=float, help="crossover, rad/s (wif, default 2π·18.8)")
+    c.add_argument("--b", type=float, help="symmetric-optimum factor b > 1 (wif, default 1+√2)")
+    c.add_argument("--omega0", type=float, help="LESO bandwidth, rad/s (cleso, default 500π)")
+    c.add_argument("--rs", type=float, help="stator resistance, ohm (cleso)")
+    c.add_argument("--lq", type=float, help="q-axis inductance, H (cleso)")
+    c.add_argument("--json", action="store_true", help="print JSON")
+    c.set_defaults(func=_cmd_closed_form)
+
+    b = sub.add_parser("bode", help="Bode figures of the papers' flux observers, LESOs and FLL loops")
+    b.add_argument("--out", default="out", help="folder for the figures (default: out)")
+    b.set_defaults(func=_cmd_bode)
+
+    r = sub.add_parser("reproduce", help="reproduce a paper's experiments on the simulated drive")
+    r.add_argument("paper", choices=["flux", "leso"], help="flux: paper 000 (rotor-flux observers); leso: paper 002 (LESOs)")
+    r.add_argument("--out", default="out", help="folder for the figures (default: out)")
+    r.add_argument("--json", action="store_true", help="print rows {experiment, observer, metric, unit, paper, ours}")
+    r.add_argument("--quick", action="store_true", help="skip the long runs (20 r/min steady state, I-f start-up)")
+    r.set_defaults(func=_cmd_reproduce)
+
+    st = sub.add_parser("study", help="robustness study of FLL designs over a scenario grid (xarray/NetCDF)")
+    st.add_argument("study", nargs="?", help="study file (TOML); default: the FLL family's closed forms")
+    st.add_argument("--out", help="results folder (default: out/<study name>)")
+    st.add_argument("--quiet", action="store_true", help="no progress bar")
+    st.set_defaults(func=_cmd_study)
+
     return p
 
 
 def main(argv=None) -> int:
-    # JobError is a ValueError: base.main prints it as one line naming the field, exit 2
-    return base.main(argv, parser=build_parser())
+    """Run the command line (``argv`` defaults to ``sys.argv[1:]``); returns the exit status."""
+    parser = build_parser()
+    try:
+        use_host_devices()  # before any JAX computation: one CPU device per usable core
+        args = parser.parse_args(argv)
+        return args.func(args)
+    except ValueError as e:  # bad input, job-file errors (JobError) included: one line, exit 2
+        print(f"jaxobs: error: {e}", file=sys.stderr)
+        return 2
 
 
 if __name__ == "__main__":
     sys.exit(main())
-
-
