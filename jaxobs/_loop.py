@@ -305,6 +305,7 @@ def run_loop(
     checkpoint: AbstractCheckpoint = AutoCheckpoint(),
     split: bool = True,
     xs_map: Callable[[Any], Any] | None = None,
+    peel: bool = True,
 ):
     """``lax.scan(body, carry, xs, length=n)``, made fast and cheap to differentiate (module doc).
 
@@ -329,14 +330,14 @@ def run_loop(
         x_one = jax.tree.map(lambda a: a[0], first if xs_map is None else xs_map(first))
     has_outputs = bool(jax.tree.leaves(jax.eval_shape(body, carry, x_one)[1]))
     mode, forward_max = checkpoint._mode(n, has_outputs)
-    loop = lambda c, x: _run(body, c, x, n, unroll, mode, split, xs_map)  # noqa: E731
+    loop = lambda c, x: _run(body, c, x, n, unroll, mode, split, xs_map, peel)  # noqa: E731
     if not forward_max:
         return loop(carry, xs)
     conv, consts = jax.closure_convert(loop, carry, xs)
     return _sensitivity_loop(conv, consts, carry, xs, forward_max)
 
 
-def _run(body, carry, xs, n, unroll, mode, split, xs_map=None):
+def _run(body, carry, xs, n, unroll, mode, split, xs_map=None, peel=True):
     if split:
 
         def inner(c, x):
@@ -347,13 +348,14 @@ def _run(body, carry, xs, n, unroll, mode, split, xs_map=None):
     else:
         inner, wrap, unwrap = body, (lambda c: c), (lambda c: c)
 
-    p = min(startup_steps(carry), n)
+    p = min(startup_steps(carry), n) if peel else 0
     ys_head = None
     if p:
         head = None if xs is None else jax.tree.map(lambda a: a[:p], xs)
         c, ys_head = _scan(inner, wrap(carry), head, p, 1, "none" if mode == "none" else "step", xs_map)
         carry = unwrap(c)
-    carry = to_steady(carry)
+    if peel:
+        carry = to_steady(carry)
     rest = None if xs is None else jax.tree.map(lambda a: a[p:], xs)
     c, ys = _scan(inner, wrap(carry), rest, n - p, unroll, mode, xs_map)
     carry = unwrap(c)

@@ -308,7 +308,8 @@ def simulate(
             :class:`~jaxobs.ChunkCheckpoint`, :class:`~jaxobs.ForwardSensitivity`); results are identical.
         state0: the state to start from (default ``system.init()``), e.g. a previous ``sol.final_state``.
         throw: raise if the run is not ``ok``, instead of only reporting it.
-        unroll: loop unrolling (static; default the system's ``unroll`` attribute, else 1); results are identical.
+        unroll: loop unrolling of the :class:`SaveFinal` loop (static; default the system's ``unroll``
+            attribute, else 1).
 
     Returns:
         A :class:`Solution`: ``t``, ``outputs`` (the stacked step outputs), ``final_state``, ``ok``, ``cost``.
@@ -329,10 +330,21 @@ def simulate(
         system.check_horizon(n)
     dtype = jnp.result_type(float)
     ks = jnp.arange(n, dtype=jnp.int32)
-    blocked = hasattr(system, "input") and hasattr(system, "advance")
-    advance = system.advance if blocked else system.step
-    xs_map = (lambda kb: jax.lax.map(system.input, kb)) if blocked else None
     cost = save.cost
+    # Two loops, one result.  With SaveAll the body is exactly the system's step
+    # (plus the cost), scanned plainly: a user's own lax.scan of system.step gives
+    # the same numbers bit for bit (tested).  With SaveFinal (throughput: tuning,
+    # benchmarks, studies of long horizons) the loop is made fast (jaxobs._loop:
+    # inputs a block of steps at a time, multistep start-ups peeled, state vectors
+    # split, unrolled).  Those rewrites change which operations XLA fuses, and
+    # XLA's CPU backend always contracts a·b + c into a fused multiply-add where it
+    # fuses, so the two loops agree to rounding (1e-12 relative, tests/test_perf.py),
+    # not to the last bit.
+    fast = not save.keeps_outputs
+    blocked = fast and hasattr(system, "input") and hasattr(system, "advance")
+    advance = system.advance if blocked else system.step
+    # lax.map, not vmap: each block's inputs are computed by the same scalar code as in the step
+    xs_map = (lambda kb: jax.lax.map(system.input, kb)) if blocked else None
 
     def body(carry, x):
         state, out = advance(carry.state, x)
@@ -342,9 +354,10 @@ def simulate(
     state = system.init() if state0 is None else state0
     carry0 = _Carry(state, jnp.zeros((), dtype))
     if save.keeps_outputs:
-        x_one = xs_map(ks[:1]) if blocked else ks[:1]
-        _check_memory(jax.eval_shape(lambda c, x: body(c, jax.tree.map(lambda a: a[0], x))[1], carry0, x_one), n)
-    final, outputs = run_loop(body, carry0, ks, n, unroll=unroll, checkpoint=checkpoint, xs_map=xs_map)
+        _check_memory(jax.eval_shape(lambda c, k: body(c, k)[1], carry0, ks[0]), n)
+    final, outputs = run_loop(
+        body, carry0, ks, n, unroll=unroll if fast else 1, checkpoint=checkpoint, xs_map=xs_map, split=fast, peel=fast
+    )
     total = None if cost is None else ts * final.acc
     ok = all_finite(outputs) if save.keeps_outputs else all_finite(final)
     final_state = final.state

@@ -27,6 +27,18 @@ def _open_loop_case(n=400):
     return jnp.asarray(ua), jnp.asarray(ub), jnp.full(n, 2.0)
 
 
+def _scan_plant(par, inv, ua, ub, tl, n_sub, rule, dead_time=0.0):
+    """The plant component alone under held voltages: its states at every t_k (the user's own scan)."""
+    plant = D.PMSM(par, inv, dead_time, ts=TS, n_sub=n_sub, rule=rule)
+
+    def step(state, u):
+        state, _ = plant.step(state, u)
+        return state, state.x
+
+    _, xs = jax.lax.scan(step, plant.init(), D.PlantInput(ua, ub, tl))
+    return jnp.concatenate([plant.init().x[None], xs], axis=0)
+
+
 def _diffrax_plant(par, inv, ua, ub, tl, dead_time):
     n = ua.shape[0]
     u = jnp.stack([ua, ub, tl], 1)
@@ -54,7 +66,7 @@ def test_scan_plant_converges_to_diffrax_at_the_rules_order(rule, order):
     ref = _diffrax_plant(par, inv, ua, ub, tl, 0.0)
     errs = []
     for n_sub in (1, 2, 4):
-        xs = np.asarray(D.simulate_plant_open_loop(par, inv, ua, ub, tl, TS, n_sub, rule))
+        xs = np.asarray(_scan_plant(par, inv, ua, ub, tl, n_sub, rule))
         errs.append(np.max(np.abs(xs[:, :3] - ref[:, :3])))
     slope = -np.polyfit(np.log([1, 2, 4]), np.log(errs), 1)[0]
     assert abs(slope - order) <= 0.3, (slope, errs)
@@ -68,7 +80,7 @@ def test_dead_time_plant_matches_diffrax():
     inv = D.Inverter(i_smooth=0.5)
     ua, ub, tl = _open_loop_case()
     ref = _diffrax_plant(par, inv, 2 * ua, 2 * ub, 0 * tl, 2e-6)
-    xs = np.asarray(D.simulate_plant_open_loop(par, inv, 2 * ua, 2 * ub, 0 * tl, TS, 8, jaxobs.RK4(), dead_time=2e-6))
+    xs = np.asarray(_scan_plant(par, inv, 2 * ua, 2 * ub, 0 * tl, 8, jaxobs.RK4(), dead_time=2e-6))
     assert np.max(np.abs(xs[:, :3] - ref[:, :3])) < 1e-5
 
 
@@ -84,7 +96,7 @@ DRIVE = D.Drive(FOC)
 @pytest.fixture(scope="module")
 def speed_and_load_run():
     sc = D.Scenario(PAR, speed_ref=D.Scenario.speed_rpm([0.0, 0.01], [0, 2000]), load=D.Scenario.load_steps([0.0, 0.3], [0.0, 10.0]))
-    return D.simulate_drive(DRIVE, sc, 0.6)
+    return jaxobs.simulate(D.ClosedLoop(DRIVE, None, sc), 0.6)
 
 
 def test_sensored_speed_step_then_load_step(speed_and_load_run):
@@ -93,7 +105,7 @@ def test_sensored_speed_step_then_load_step(speed_and_load_run):
     5.83/α_s = 46.4 ms; the 10 N·m step dips 841 r/min (J is only 3.78e-4 kg·m²: 26,000 rad/s²
     until i_q catches up) and recovers within 2 % in 41 ms."""
     sol = speed_and_load_run
-    t, rpm = np.asarray(sol.t), np.asarray(sol.speed_rpm)
+    t, rpm = np.asarray(sol.t), np.asarray(sol.outputs.speed_rpm)
     first = t < 0.3
     settle = float(metrics.settling_time(t[first], rpm[first], 2000.0, 40.0, 0.01))
     overshoot = rpm[first].max() / 2000 - 1
@@ -104,7 +116,7 @@ def test_sensored_speed_step_then_load_step(speed_and_load_run):
     assert 0.030 <= settle_load <= 0.050, settle_load
     assert 700 <= dip <= 950, dip
     # in steady state the load is carried: Te = TL + Bω, i_q = TL/K_t
-    assert float(sol.i_q[-1]) == pytest.approx(10.0 / float(PAR.kt), rel=1e-3)
+    assert float(sol.outputs.i_q[-1]) == pytest.approx(10.0 / float(PAR.kt), rel=1e-3)
     assert bool(sol.ok)
 
 
@@ -114,12 +126,12 @@ def test_power_balance_at_steady_state(speed_and_load_run):
     Input power per period is (3/2) u·ī with u the held applied voltage and ī the trapezoid
     mean of the sampled currents at both ends of the period (error O((ωe Ts)²) ≈ 3e-4)."""
     sol = speed_and_load_run
-    ua, ub = np.asarray(sol.u_a), np.asarray(sol.u_b)
-    ia, ib = np.asarray(sol.i_a), np.asarray(sol.i_b)
+    ua, ub = np.asarray(sol.outputs.u_a), np.asarray(sol.outputs.u_b)
+    ia, ib = np.asarray(sol.outputs.i_a), np.asarray(sol.outputs.i_b)
     sl = slice(-1000, -1)
     p_in = 1.5 * (ua[sl] * 0.5 * (ia[sl] + ia[1:][sl]) + ub[sl] * 0.5 * (ib[sl] + ib[1:][sl]))
     p_cu = 1.5 * float(PAR.Rs) * (ia[sl] ** 2 + ib[sl] ** 2)
-    p_mech = np.asarray(sol.torque)[sl] * np.asarray(sol.omega_m)[sl]
+    p_mech = np.asarray(sol.outputs.torque)[sl] * np.asarray(sol.outputs.omega_m)[sl]
     balance = (p_in.mean() - p_cu.mean() - p_mech.mean()) / p_in.mean()
     assert abs(balance) < 0.005, balance
     assert p_mech.mean() == pytest.approx(10.0 * 2000 * math.pi / 30, rel=0.01)
@@ -134,8 +146,8 @@ def test_current_loop_time_constant_matches_imc():
         ac = 2 * math.pi * fc
         foc = D.FOC.imc(par, alpha_c=ac, alpha_s=2 * math.pi * 20, outer="current")
         sc = D.Scenario(par, speed_ref=D.Profile([0.0, 0.002], [0.0, 5.0], kind="step"))
-        sol = D.simulate_drive(D.Drive(foc), sc, 0.03)
-        t, iq = np.asarray(sol.t), np.asarray(sol.i_q)
+        sol = jaxobs.simulate(D.ClosedLoop(D.Drive(foc), None, sc), 0.03)
+        t, iq = np.asarray(sol.t), np.asarray(sol.outputs.i_q)
         after = t >= 0.002
         tau = np.sum(1 - iq[after] / 5.0) * TS
         assert tau * ac == pytest.approx(1.0, abs=0.10), (fc, tau * ac)
@@ -146,13 +158,13 @@ def test_mtpa_and_ipmsm_torque():
     par = D.ipmsm_paper002()
     foc = D.FOC.imc(par, alpha_c=2 * math.pi * 300, alpha_s=2 * math.pi * 10, id_mode="mtpa")
     sc = D.Scenario(par, speed_ref=D.Profile.constant(600 * D.RPM), load=D.Scenario.load_steps([0.0, 0.05], [0.0, 20.0]), omega_m0=600 * D.RPM)
-    sol = D.simulate_drive(D.Drive(foc), sc, 0.6)
-    i_d, i_q = float(sol.i_d[-1]), float(sol.i_q[-1])
+    sol = jaxobs.simulate(D.ClosedLoop(D.Drive(foc), None, sc), 0.6)
+    i_d, i_q = float(sol.outputs.i_d[-1]), float(sol.outputs.i_q[-1])
     dl = float(par.Lq - par.Ld)
     a = float(par.psi_f) / (2 * dl)
     assert i_d == pytest.approx(a - math.sqrt(a * a + i_q * i_q), rel=2e-3)  # on the MTPA curve
     assert i_d < -0.1
-    assert float(sol.torque[-1]) == pytest.approx(20.0 + float(par.B) * 600 * D.RPM, rel=1e-3)
+    assert float(sol.outputs.torque[-1]) == pytest.approx(20.0 + float(par.B) * 600 * D.RPM, rel=1e-3)
 
 
 def test_if_startup_switches_over():
@@ -160,13 +172,13 @@ def test_if_startup_switches_over():
     start = D.IfStartup(i_f=6.0, accel=2 * math.pi * 20 / 0.2, omega_switch=3 * 20 * D.RPM)  # 20 r/min
     drv = D.Drive(FOC, startup=start)
     sc = D.Scenario(par, speed_ref=D.Scenario.speed_rpm([0.0, 0.4], [20, 200], ramp=0.2))
-    sol = D.simulate_drive(drv, sc, 1.0)
-    mode = np.asarray(sol.mode)
+    sol = jaxobs.simulate(D.ClosedLoop(drv, None, sc), 1.0)
+    mode = np.asarray(sol.outputs.mode)
     t = np.asarray(sol.t)
     t_switch = t[np.argmax(mode == 1)]
     assert mode[0] == 0 and mode[-1] == 1
     assert 0.0 < t_switch < 0.2
-    assert float(sol.speed_rpm[-1]) == pytest.approx(200.0, abs=1.0)
+    assert float(sol.outputs.speed_rpm[-1]) == pytest.approx(200.0, abs=1.0)
 
 
 def test_sensor_offsets_and_noise_are_applied():
@@ -197,11 +209,11 @@ def test_jit_vmap_over_256_scenarios():
     base = D.Scenario(PAR, load=D.Profile.constant(5.0))
     batch = D.grid(base, speed_rpm=np.linspace(200, 2000, 16), dRs=np.linspace(-0.5, 0.5, 4), dL=np.linspace(-0.2, 0.2, 4))
     assert batch.size == 256 and batch.shape == (16, 4, 4) and batch.dims == ("speed_rpm", "dRs", "dL")
-    run = jax.jit(jax.vmap(lambda s: D.simulate_drive(DRIVE, s, 0.3)))
+    run = jax.jit(jax.vmap(lambda s: jaxobs.simulate(D.ClosedLoop(DRIVE, None, s), 0.3)))
     sol = run(batch.scenarios)
-    assert sol.omega_m.shape == (256, 3000)
+    assert sol.outputs.omega_m.shape == (256, 3000)
     assert bool(jnp.all(sol.ok))
-    w_end = np.asarray(sol.omega_m[:, -1]).reshape(batch.shape)
+    w_end = np.asarray(sol.outputs.omega_m[:, -1]).reshape(batch.shape)
     np.testing.assert_allclose(w_end, np.broadcast_to(np.linspace(200, 2000, 16)[:, None, None] * D.RPM, batch.shape), rtol=2e-3)
     # the grid is labelled: element (i, j, k) has the i-th speed, j-th dRs, k-th dL
     est_rs = np.asarray(batch.scenarios.est_par.Rs).reshape(batch.shape)
@@ -213,8 +225,8 @@ def test_grad_of_speed_error_wrt_speed_pi_gain_matches_finite_differences():
 
     def loss(kp_w):
         drv = eqx.tree_at(lambda d: d.foc.kp_w, DRIVE, kp_w)
-        sol = D.simulate_drive(drv, sc, 0.1)
-        return jnp.mean((sol.omega_m - sol.omega_m_ref) ** 2)
+        sol = jaxobs.simulate(D.ClosedLoop(drv, None, sc), 0.1)
+        return jnp.mean((sol.outputs.omega_m - sol.outputs.omega_m_ref) ** 2)
 
     k0 = FOC.kp_w
     g = float(jax.grad(loss)(k0))
@@ -262,5 +274,5 @@ def test_bad_sample_times_and_settings():
     with pytest.raises(ValueError, match="grid axis 'spin'"):
         D.grid(D.Scenario(PAR), spin=[1.0])
     with pytest.raises(ValueError, match="observer"):
-        D.simulate_drive(D.Drive(FOC, sensorless=True), D.Scenario(PAR), 0.01)
+        D.ClosedLoop(D.Drive(FOC, sensorless=True), None, D.Scenario(PAR))
     assert D.spmsm_paper000(p=3.0).p == 3

@@ -51,12 +51,12 @@ def _numpy_sogi_fll(k, lam, wn, v, h, v_floor=1e-3):
 def test_numpy_loop_parity_1s_at_10khz():
     obs = linear.sogi_fll_closed_form()
     sig = jaxobs.paper001_test("C", t_event=0.3)
-    sol = jaxobs.simulate(obs, sig, 1.0)
-    ref = _numpy_sogi_fll(float(obs.k), float(obs.lam), float(obs.omega_n), np.asarray(sol.u), obs.ts)
+    sol = jaxobs.simulate(jaxobs.OnSignal(obs, sig), 1.0)
+    ref = _numpy_sogi_fll(float(obs.k), float(obs.lam), float(obs.omega_n), np.asarray(sol.outputs.u), obs.ts)
     assert len(sol.t) == 10_000
-    np.testing.assert_allclose(np.asarray(sol.out.v_alpha), ref[:, 0], rtol=0, atol=1e-12)
-    np.testing.assert_allclose(np.asarray(sol.out.v_beta), ref[:, 1], rtol=0, atol=1e-12)
-    np.testing.assert_allclose(np.asarray(sol.out.omega), ref[:, 2], rtol=1e-12, atol=0)
+    np.testing.assert_allclose(np.asarray(sol.outputs.obs.v_alpha), ref[:, 0], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(np.asarray(sol.outputs.obs.v_beta), ref[:, 1], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(np.asarray(sol.outputs.obs.omega), ref[:, 2], rtol=1e-12, atol=0)
 
 
 # --------------------------------------------------------------------------
@@ -78,7 +78,7 @@ def _model_deviation(obs, model, test, t1=0.6):
     footnote 2) without shifting one against the other.
     """
     sig = jaxobs.paper001_test(test, t_event=TE)
-    sol = jaxobs.simulate(obs, sig, t1)
+    sol = jaxobs.simulate(jaxobs.OnSignal(obs, sig), t1)
     t = np.asarray(sol.t)
     after = t >= TE
     tau = jnp.asarray(t[after] - TE)
@@ -86,16 +86,16 @@ def _model_deviation(obs, model, test, t1=0.6):
     if test == "1":  # ω̂ after a +2 Hz step: ω̂ = ωn + Δω · step(G_ω)
         lin = np.full_like(t, wn)
         lin[after] += 2 * math.pi * 2 * np.asarray(model.frequency.step(tau))
-        x, scale = np.asarray(sol.out.omega), 2 * math.pi * 2
+        x, scale = np.asarray(sol.outputs.obs.omega), 2 * math.pi * 2
     elif test == "2":  # ω̂ after a 20° jump: ω = Δφ δ(t) ⇒ ω̂ = ωn + Δφ · impulse(G_ω)
         lin = np.full_like(t, wn)
         lin[after] += math.radians(20) * np.asarray(model.frequency.impulse(tau))
-        x = np.asarray(sol.out.omega)
+        x = np.asarray(sol.outputs.obs.omega)
         scale = np.max(np.abs(lin - wn))  # the step has no frequency size: use the model's peak
     else:  # V̂ after a 0.75 p.u. sag: V̂ = 1 − 0.75 · step(G_V)
         lin = np.ones_like(t)
         lin[after] -= 0.75 * np.asarray(model.amplitude.step(tau))
-        x, scale = np.asarray(sol.out.amplitude), 0.75
+        x, scale = np.asarray(sol.outputs.obs.amplitude), 0.75
     n_period = int(round(0.02 / obs.ts))
     xa = np.asarray(metrics.moving_average(jnp.asarray(x), n_period))
     la = np.asarray(metrics.moving_average(jnp.asarray(lin), n_period))
@@ -211,7 +211,7 @@ def test_jit_vmap_over_1024_signals():
         ]
     )
     obs = linear.wif_closed_form()
-    run = jax.jit(jax.vmap(lambda s: jaxobs.simulate(obs, s, 0.5).out.omega[-1]))
+    run = jax.jit(jax.vmap(lambda s: jaxobs.simulate(jaxobs.OnSignal(obs, s), 0.5).outputs.obs.omega[-1]))
     w_end = np.asarray(run(sigs))
     assert w_end.shape == (n,)
     np.testing.assert_allclose(w_end / (2 * np.pi), 50.0 + np.asarray(sigs.freq_step), atol=1e-3)
@@ -223,13 +223,13 @@ def test_vmap_over_gains_reports_divergence_per_scenario():
     bad = jaxobs.SOGIFLL(k=40.0, lam=12000.0, rule=jaxobs.Euler(), ts=1e-3)  # k·ω·ts ≫ 2: Euler blows up
     batch = jaxobs.stack([good, bad, good])
     sig = jaxobs.paper001_test("A", t_event=0.1)
-    ok = jax.vmap(lambda o: jaxobs.simulate(o, sig, 0.3).ok)(batch)
+    ok = jax.vmap(lambda o: jaxobs.simulate(jaxobs.OnSignal(o, sig), 0.3).ok)(batch)
     assert ok.tolist() == [True, False, True]
 
 
 def _freq_loss(obs, sig, t1=0.3):
-    sol = jaxobs.simulate(obs, sig, t1)
-    return jnp.mean((sol.out.omega - sol.truth.omega) ** 2)
+    sol = jaxobs.simulate(jaxobs.OnSignal(obs, sig), t1)
+    return jnp.mean((sol.outputs.obs.omega - sol.outputs.truth.omega) ** 2)
 
 
 @pytest.mark.parametrize("make", [linear.sogi_fll_closed_form, linear.wif_closed_form], ids=["SOGI-FLL", "WIF"])
@@ -284,8 +284,10 @@ def test_gradients_stay_finite_through_the_zero_initial_state():
     sig = jaxobs.paper001_test("B", t_event=0.05)
 
     def loss(o):
-        sol = jaxobs.simulate(o, sig, 0.1)
-        return jnp.mean((sol.out.amplitude - sol.truth.amplitude) ** 2) + jnp.mean(metrics.wrap(sol.out.theta - sol.truth.theta) ** 2)
+        out = jaxobs.simulate(jaxobs.OnSignal(o, sig), 0.1).outputs
+        return jnp.mean((out.obs.amplitude - out.truth.amplitude) ** 2) + jnp.mean(
+            metrics.wrap(out.obs.theta - out.truth.theta) ** 2
+        )
 
     g = eqx.filter_grad(loss)(obs)
     assert np.isfinite(float(g.k)) and np.isfinite(float(g.lam))

@@ -53,8 +53,8 @@ def table_i_runs():
     sig = EMFSignal(A1=100.0, omega1=W1, dc=(5.0, 0.0), harmonics=harm)
     out = {}
     for name, obs in _observers().items():
-        sol = jaxobs.simulate(obs, sig, 2.0)
-        out[name] = (np.asarray(sol.t), np.asarray(sol.out.psi_a), np.asarray(sol.out.psi_b))
+        sol = jaxobs.simulate(jaxobs.OnSignal(obs, sig), 2.0)
+        out[name] = (np.asarray(sol.t), np.asarray(sol.outputs.obs.psi_a), np.asarray(sol.outputs.obs.psi_b))
     return harm, out
 
 
@@ -113,8 +113,10 @@ def test_harmonic_attenuation_per_order_eqs_16_21(table_i_runs, h):
 def du_alpha_run():
     par = bench_machine()
     we = par.p * 1000 * D.RPM
-    sc = D.Scenario(par, speed_ref=D.Profile.constant(1000 * D.RPM), omega_m0=1000 * D.RPM, sensors=D.Sensors(u_offset=(5.0, 0.0)))
-    return D.simulate_drive(flux_drive(par, 0.4), sc, 0.8, observer=flux_bank(par, we))
+    sc = D.Scenario(
+        par, speed_ref=D.Profile.constant(1000 * D.RPM), omega_m0=1000 * D.RPM, sensors=D.Sensors(u_offset=(5.0, 0.0))
+    )
+    return jaxobs.simulate(D.ClosedLoop(flux_drive(par, 0.4), flux_bank(par, we), sc), 0.8)
 
 
 def test_du_alpha_ripple_orders_lpf_soifo_second_order(du_alpha_run):
@@ -125,12 +127,13 @@ def test_du_alpha_ripple_orders_lpf_soifo_second_order(du_alpha_run):
     sol = du_alpha_run
     t = np.asarray(sol.t)
     m = t >= 0.6
-    ripple = [float(np.ptp(np.asarray(wrap(o.theta - sol.theta_e))[m])) for o in sol.obs.each[1:]]
+    out = sol.outputs
+    ripple = [float(np.ptp(np.asarray(wrap(o.theta - out.theta_e))[m])) for o in out.obs.each[1:]]
     lpf, soifo, so2 = ripple
     assert lpf > soifo > so2
     assert 1.6 <= lpf / soifo <= 2.3  # measured 1.93
     assert so2 < 1e-3 * soifo
-    offs = [float(np.hypot(np.mean(np.asarray(o.psi_a)[m]), np.mean(np.asarray(o.psi_b)[m]))) for o in sol.obs.each[1:]]
+    offs = [float(np.hypot(np.mean(np.asarray(o.psi_a)[m]), np.mean(np.asarray(o.psi_b)[m]))) for o in out.obs.each[1:]]
     assert offs[0] == pytest.approx(5.0 / LPF_WC, rel=0.02)
     assert 0.0225 <= offs[1] <= 0.030
     assert offs[2] < 1e-5
@@ -140,11 +143,12 @@ def test_du_alpha_ripple_orders_lpf_soifo_second_order(du_alpha_run):
 def sensorless_runs():
     par = bench_machine()
     out = {}
-    for rpm, t1, hand, load in ((400, 1.4, 0.8, None), (2000, 0.8, 0.2, D.Scenario.load_steps([0.0, 0.4], [0.0, 10.0]))):
+    steps = D.Scenario.load_steps([0.0, 0.4], [0.0, 10.0])
+    for rpm, t1, hand, load in ((400, 1.4, 0.8, None), (2000, 0.8, 0.2, steps)):
         we = par.p * rpm * D.RPM
         obs = jaxobs.SecondOrderSOIFO(par.Rs, par.Ld, K1, K2, K1**3 / (2 * K2), omega0=we)
         sc = D.Scenario(par, speed_ref=D.Profile.constant(rpm * D.RPM), omega_m0=rpm * D.RPM, load=load)
-        out[rpm] = D.simulate_drive(flux_drive(par, hand), sc, t1, observer=obs)
+        out[rpm] = jaxobs.simulate(D.ClosedLoop(flux_drive(par, hand), obs, sc), t1)
     return out
 
 
@@ -157,8 +161,8 @@ def test_sensorless_second_order_soifo_holds_400_and_2000_rpm_and_the_load_step(
     During the 10 N·m step the error peaks at 0.06 rad (paper 0.20) and the speed recovers."""
     for rpm, sol in sensorless_runs.items():
         t = np.asarray(sol.t)
-        err = np.abs(np.asarray(wrap(sol.obs.theta - sol.theta_e)))
-        speed = np.asarray(sol.speed_rpm)
+        err = np.abs(np.asarray(wrap(sol.outputs.obs.theta - sol.outputs.theta_e)))
+        speed = np.asarray(sol.outputs.speed_rpm)
         steady = (t >= t[-1] - 0.1)
         assert bool(sol.ok)
         assert err[steady].max() < 5e-3, (rpm, err[steady].max())
@@ -180,8 +184,8 @@ def test_vmap_over_64_scenarios_with_the_second_order_soifo():
         obs = jaxobs.SecondOrderSOIFO(par.Rs, par.Ld, K1, K2, 0.6, omega0=1.0)
         obs = eqx.tree_at(lambda o: (o.Rs, o.omega0), obs, (s.est_par.Rs, we0))
         s = eqx.tree_at(lambda x: x.omega_m0, s, s.speed_ref.values[0])
-        sol = D.simulate_drive(drv, s, 0.4, observer=obs)  # sensored: the observer runs open loop
-        return jnp.max(jnp.abs(wrap(sol.obs.theta - sol.theta_e)[-500:])), sol.ok
+        sol = jaxobs.simulate(D.ClosedLoop(drv, obs, s), 0.4)  # sensored: the observer runs open loop
+        return jnp.max(jnp.abs(wrap(sol.outputs.obs.theta - sol.outputs.theta_e)[-500:])), sol.ok
 
     err, ok = jax.jit(jax.vmap(run))(batch.scenarios)
     assert err.shape == (64,) and bool(jnp.all(ok))
@@ -191,13 +195,15 @@ def test_vmap_over_64_scenarios_with_the_second_order_soifo():
 
 
 def _flux_loss(obs, sig, t1=0.15):
-    sol = jaxobs.simulate(obs, sig, t1)
+    sol = jaxobs.simulate(jaxobs.OnSignal(obs, sig), t1)
     t = sol.t
     th_true = sig.omega1 * t + sig.phase - math.pi / 2  # ψ = ∫e lags e by 90°
-    return jnp.mean(wrap(sol.out.theta - th_true)[500:] ** 2)
+    return jnp.mean(wrap(sol.outputs.obs.theta - th_true)[500:] ** 2)
 
 
-@pytest.mark.parametrize("names", [("SOIFO", ("k", "lam")), ("second-order SOIFO", ("K1", "K2", "lam"))], ids=["SOIFO", "SOSOIFO"])
+@pytest.mark.parametrize(
+    "names", [("SOIFO", ("k", "lam")), ("second-order SOIFO", ("K1", "K2", "lam"))], ids=["SOIFO", "SOSOIFO"]
+)
 def test_gradients_wrt_observer_gains_match_finite_differences(names):
     which, fields = names
     sig = EMFSignal(A1=100.0, omega1=W1, dc=(3.0, -1.0), harmonics={-5: 8.0, 7: 5.0})
@@ -213,8 +219,8 @@ def test_paper_discretization_of_the_second_order_soifo():
     paper = jaxobs.SecondOrderSOIFO(0.0, 1.0, K1, K2, 0.6, omega0=W1, discretization="paper")
     th = {}
     for name, o in (("ours", ours), ("paper", paper)):
-        sol = jaxobs.simulate(o, sig, 1.0)
-        th[name] = np.asarray(wrap(sol.out.theta - (W1 * sol.t - math.pi / 2)))[-2000:]
+        sol = jaxobs.simulate(jaxobs.OnSignal(o, sig), 1.0)
+        th[name] = np.asarray(wrap(sol.outputs.obs.theta - (W1 * sol.t - math.pi / 2)))[-2000:]
     assert np.abs(th["ours"]).max() < 1e-3
     assert np.mean(th["paper"]) == pytest.approx(-0.5 * W1 * 1e-4, rel=0.05)
 
@@ -226,7 +232,11 @@ def test_paper_discretization_of_the_second_order_soifo():
         (jaxobs.SOIFO, dict(Rs=0.8, L=5e-3, k=1.4, lam=-1.0, omega0=100.0), "SOIFO.lam"),
         (jaxobs.SOIFO, dict(Rs=-0.8, L=5e-3, k=1.4, lam=0.5, omega0=100.0), "SOIFO.Rs"),
         (jaxobs.SecondOrderSOIFO, dict(Rs=0.8, L=0.0, K1=1.5, K2=3.0, lam=0.5, omega0=100.0), "SecondOrderSOIFO.L"),
-        (jaxobs.SecondOrderSOIFO, dict(Rs=0.8, L=5e-3, K1=1.5, K2=float("nan"), lam=0.5, omega0=100.0), "SecondOrderSOIFO.K2"),
+        (
+            jaxobs.SecondOrderSOIFO,
+            dict(Rs=0.8, L=5e-3, K1=1.5, K2=float("nan"), lam=0.5, omega0=100.0),
+            "SecondOrderSOIFO.K2",
+        ),
         (jaxobs.LPFFlux, dict(Rs=0.8, L=5e-3, omega_c=0.0, kp_pll=10.0, ki_pll=10.0), "LPFFlux.omega_c"),
         (jaxobs.PureIntegratorFlux, dict(Rs=0.8, L=5e-3, kp_pll=10.0, ki_pll=10.0, ts=0.0), "PureIntegratorFlux.ts"),
     ],

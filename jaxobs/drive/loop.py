@@ -186,14 +186,14 @@ class ClosedLoop(AbstractSystem):
             u_b=z,
         )
 
-    def input(self, k) -> LoopInput:
-        t = k * self.ts
-        return LoopInput(k=k, omega_m_ref=self.scenario.speed_ref(t), load=self.scenario.load(t))
-
-    def advance(self, state: LoopState, x: LoopInput) -> tuple[LoopState, DriveOutput]:
+    def step(self, state: LoopState, k) -> tuple[LoopState, DriveOutput]:
         drive, sc = self.drive, self.scenario
-        k = x.k
         t = k * self.ts
+        # The profiles are evaluated here, inside the step, not a block of steps at a
+        # time (as OnSignal's signal is): evaluated apart, XLA fused their arithmetic
+        # differently (last-bit differences), and a user's own scan of this step must
+        # give exactly what simulate gives.  They are a handful of compares per step.
+        x = LoopInput(k=k, omega_m_ref=sc.speed_ref(t), load=sc.load(t))
         plant_state, y = self.plant.step(state.plant, PlantInput(state.u_a, state.u_b, x.load))
         key, meas = sc.sensors.step(state.sensors, SensorInput(k, state.u_a, state.u_b, y.i_a, y.i_b))
         if self.observer is not None:
@@ -220,6 +220,3 @@ class ClosedLoop(AbstractSystem):
         )
         new = LoopState(plant=plant_state, ctrl=ctrl, obs=obs_state, sensors=key, u_a=u_next.u_a, u_b=u_next.u_b)
         return new, out
-
-    def step(self, state: LoopState, k) -> tuple[LoopState, DriveOutput]:
-        return self.advance(state, self.input(k))
