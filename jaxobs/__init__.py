@@ -82,6 +82,7 @@ from .simulate import SignalOutput as SignalOutput
 from .simulate import SignalTruth as SignalTruth
 from .simulate import Solution as Solution
 from .simulate import simulate as simulate
+from .system import AbstractSystem as AbstractSystem
 from .sharding import batch_mesh as batch_mesh
 from .sharding import shard_batch as shard_batch
 from .sharding import map_batch as map_batch

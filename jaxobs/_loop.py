@@ -222,6 +222,11 @@ def to_steady(carry):
     return jax.tree.map(lambda s: s.steady() if _has_steady(s) else s, carry, is_leaf=_has_steady)
 
 
+def to_started(carry):
+    """Undo :func:`to_steady`: the carry a plain scan of the step would end with."""
+    return jax.tree.map(lambda s: s.started() if _has_steady(s) else s, carry, is_leaf=_has_steady)
+
+
 def check_checkpoint(checkpoint) -> AbstractCheckpoint:
     if not isinstance(checkpoint, AbstractCheckpoint):
         raise ValueError(
@@ -359,6 +364,8 @@ def _run(body, carry, xs, n, unroll, mode, split, xs_map=None, peel=True):
     rest = None if xs is None else jax.tree.map(lambda a: a[p:], xs)
     c, ys = _scan(inner, wrap(carry), rest, n - p, unroll, mode, xs_map)
     carry = unwrap(c)
+    if peel:
+        carry = to_started(carry)
     if ys_head is not None:
         ys = ys_head if ys is None else jax.tree.map(lambda a, b: jnp.concatenate([a, b]), ys_head, ys)
     return carry, ys

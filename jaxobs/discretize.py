@@ -274,6 +274,12 @@ class AB3State(eqx.Module):
         """
         return AB3State(f1=self.f1, f2=self.f2, n=None)
 
+    def started(self) -> AB3State:
+        """The state in its general form again (the sample count saturates at ``startup_steps``)."""
+        if self.n is not None:
+            return self
+        return AB3State(f1=self.f1, f2=self.f2, n=jnp.asarray(self.startup_steps, dtype=jnp.int32))
+
 
 class AB3(AbstractRule):
     """Third-order Adams--Bashforth, the integrator of paper 001 Sec. VI.

@@ -299,8 +299,9 @@ def simulate(
     """Run ``system`` from its first sample (t0, default 0) up to ``t1`` (exclusive), one step per ``system.ts``.
 
     Args:
-        system: a module with ``ts``, ``init()`` and ``step(state, k)`` (:class:`OnSignal`,
-            :class:`jaxobs.drive.ClosedLoop`, or your own); ``t0`` read from ``system.t0`` when it has one.
+        system: a :class:`~jaxobs.AbstractSystem`, with ``ts``, ``init()`` and ``step(state, k)``
+            (:class:`OnSignal`, :class:`jaxobs.drive.ClosedLoop`, or your own subclass); ``t0`` read from
+            ``system.t0`` when it has one.
         t1: end of the horizon, s (static: it fixes the number of steps n = round((t1 − t0)/ts)).
         save: :class:`SaveAll` (default) or :class:`SaveFinal`, each with an optional running cost.
         checkpoint: how reverse-mode AD stores the loop (:class:`~jaxobs.AutoCheckpoint` by default;
@@ -318,8 +319,12 @@ def simulate(
         ValueError: a bad horizon (not finite, shorter than one sample, more than 2^31 − 1 steps),
             a trajectory larger than the free memory, or bad strategy objects.
     """
-    if not (hasattr(system, "init") and hasattr(system, "step") and hasattr(system, "ts")):
-        raise ValueError(f"simulate: system must have ts, init() and step(state, k), got {type(system).__name__}")
+    if not isinstance(system, AbstractSystem):
+        hint = " (an observer runs on a signal as jaxobs.OnSignal(observer, signal))" if hasattr(system, "step") else ""
+        raise ValueError(
+            f"simulate: system must be a jaxobs.AbstractSystem (ts, init(), step(state, k)), "
+            f"got {type(system).__name__}{hint}"
+        )
     if not isinstance(save, AbstractSave):
         raise ValueError(f"simulate: save must be SaveAll(...) or SaveFinal(...), got {save!r}")
     ts = check_sample_time("ts", system.ts, type(system).__name__)
