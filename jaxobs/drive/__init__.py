@@ -10,6 +10,7 @@ from .control import ControllerState as ControllerState
 from .control import FOCInput as FOCInput
 from .control import FOCOutput as FOCOutput
 from .control import IfStartup as IfStartup
+from .control import OperatingPoint as OperatingPoint
 from .hardware import Inverter as Inverter
 from .hardware import InverterInput as InverterInput
 from .hardware import SensorInput as SensorInput

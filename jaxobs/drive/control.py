@@ -43,7 +43,24 @@ from .._math import safe_norm2
 from .._validate import check_nonnegative, check_positive, check_sample_time
 from .machine import PMSMParams
 
-__all__ = ["FOC", "FOCInput", "FOCOutput", "IfStartup", "ControllerState"]
+__all__ = ["FOC", "FOCInput", "FOCOutput", "IfStartup", "ControllerState", "OperatingPoint"]
+
+
+class OperatingPoint(NamedTuple):
+    """A steady operating point of the drive (the true machine), to start a scenario in (DESIGN.md).
+
+    At steady state the currents sit at their references and the speed at its
+    reference; the PI integrators hold what the loop needs to stay there.
+    """
+
+    omega_m: jax.Array  # mechanical speed, rad/s
+    omega_m_ref: jax.Array  # speed reference at t = 0, rad/s
+    theta_e: jax.Array  # electrical angle at t = 0, rad
+    t_load: jax.Array  # load torque at t = 0, N·m
+    i_d: jax.Array  # rotor-frame currents, A
+    i_q: jax.Array
+    u_d: jax.Array  # rotor-frame voltage the true machine needs there, V
+    u_q: jax.Array
 
 
 class IfStartup(eqx.Module):
@@ -90,6 +107,11 @@ class FOCOutput(NamedTuple):
     id_ref: jax.Array  # current references, A
     iq_ref: jax.Array
     theta: jax.Array  # the angle the current loop used (given position, or the I-f angle in start-up), rad
+
+
+def _torque_dq(par: PMSMParams, i_d, i_q):
+    """Mean electromagnetic torque (no BEMF harmonics), N·m."""
+    return 1.5 * par.p * (par.psi_f * i_q + (par.Ld - par.Lq) * i_d * i_q)
 
 
 class FOC(eqx.Module):
@@ -183,10 +205,61 @@ class FOC(eqx.Module):
             lambda f: (f.est, f.u_max, f.startup), self, (est, u_max, startup), is_leaf=lambda x: x is None
         )
 
-    def init(self) -> ControllerState:
+    def init(self, op: OperatingPoint | None = None) -> ControllerState:
+        """Zero integrators (``op=None``), or the integrators that hold the drive at ``op`` (a steady start).
+
+        At a steady operating point the errors are zero, so the current PIs'
+        outputs are their integrators plus the decoupling terms (computed with
+        the *assumed* machine), which must equal the voltage the true machine
+        needs; the speed PI's output, k_pω (b ω* − ω) + ∫, must equal i_q.
+        With an I-f start-up the drive starts from standstill: zeros.
+        """
         z = jnp.zeros_like(self.kp_d)
         mode = jnp.asarray(1 if self.startup is None else 0, dtype=jnp.int32)
-        return ControllerState(int_d=z, int_q=z, int_w=z, iq_ref=z, theta_f=z, omega_f=z, t_at_switch=z, mode=mode)
+        if op is None or self.startup is not None:
+            return ControllerState(int_d=z, int_q=z, int_w=z, iq_ref=z, theta_f=z, omega_f=z, t_at_switch=z, mode=mode)
+        est = self.est
+        w_e = est.p * op.omega_m
+        int_d = op.u_d + w_e * est.Lq * op.i_q
+        int_q = op.u_q - w_e * (est.Ld * op.i_d + est.psi_f)
+        if self.outer == "current":
+            int_w = z
+        else:
+            int_w = op.i_q - self.kp_w * (self.setpoint_weight * op.omega_m_ref - op.omega_m)
+        return ControllerState(
+            int_d=z + int_d, int_q=z + int_q, int_w=z + int_w, iq_ref=z + op.i_q, theta_f=z, omega_f=z,
+            t_at_switch=z, mode=mode,
+        )
+
+    def operating_point(self, par: PMSMParams, omega_m, omega_m_ref, theta_e, t_load) -> OperatingPoint:
+        """The steady state of the true machine ``par`` under this controller at speed ω_m and load T_L.
+
+        The speed loop settles where the torque balances the load and friction,
+        T_e(i_d(i_q), i_q) = T_L + B ω_m, with i_d from this controller's i_d
+        policy (zero, or MTPA on the assumed machine): solved by Newton's method
+        from i_q = (T_L + B ω_m)/K_t (exact in one step for i_d = 0).  With
+        ``outer="current"`` the reference *is* i_q.  The voltage is the true
+        machine's steady rotor-frame voltage (the BEMF harmonics, which average
+        out, are left out).
+        """
+        w_e = par.p * omega_m
+        if self.outer == "current":
+            i_q = jnp.clip(omega_m_ref, -self.i_max, self.i_max)
+        else:
+            need = t_load + par.B * omega_m
+            i_q = need / (1.5 * par.p * par.psi_f)
+            for _ in range(4):  # Newton on T_e(i_q) − need, with i_d = i_d*(i_q)
+                te, dte = jax.jvp(lambda iq: _torque_dq(par, self._id_ref(self.est, iq), iq), (i_q,), (jnp.ones_like(i_q),))
+                i_q = i_q - (te - need) / dte
+            i_q = jnp.clip(i_q, -self.i_max, self.i_max)
+        i_d = self._id_ref(self.est, i_q)
+        u_d = par.Rs * i_d - w_e * par.Lq * i_q
+        u_q = par.Rs * i_q + w_e * (par.Ld * i_d + par.psi_f)
+        z = jnp.zeros_like(w_e)
+        return OperatingPoint(
+            omega_m=z + omega_m, omega_m_ref=z + omega_m_ref, theta_e=z + theta_e, t_load=z + t_load,
+            i_d=z + i_d, i_q=z + i_q, u_d=u_d, u_q=u_q,
+        )
 
     def _id_ref(self, est: PMSMParams, iq):
         if self.id_mode == "zero":

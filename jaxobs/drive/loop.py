@@ -42,8 +42,9 @@ from .._math import wrap
 from .._validate import check_sample_time
 from ..discretize import RK4, AbstractRule, check_rule
 from ..system import AbstractSystem
-from .control import FOC, ControllerState, FOCInput, IfStartup
+from .control import FOC, ControllerState, FOCInput, IfStartup, OperatingPoint
 from .hardware import Inverter, InverterInput, SensorInput
+from .machine import dq_to_ab
 from .plant import PMSM, PlantInput, PlantState
 from .scenario import Scenario
 
@@ -173,18 +174,44 @@ class ClosedLoop(AbstractSystem):
         """The FOC with the scenario's assumed machine, the inverter's voltage limit and the drive's start-up."""
         return self.drive.foc.bind(self.scenario.est_par, self.drive.inverter.u_max, self.drive.startup)
 
-    def init(self) -> LoopState:
+    def operating_point(self) -> OperatingPoint:
+        """The steady state the scenario starts in: its initial speed, the load at t = 0, currents that carry it."""
         sc = self.scenario
-        plant = self.plant.init(omega_m0=sc.omega_m0, theta_e0=sc.theta_e0)
-        z = jnp.zeros((), plant.x.dtype)
-        return LoopState(
-            plant=plant,
-            ctrl=self.controller.init(),
-            obs=None if self.observer is None else self.observer.init(),
-            sensors=sc.sensors.init(sc.key),
-            u_a=z,
-            u_b=z,
-        )
+        return self.controller.operating_point(sc.par, sc.omega_m0, sc.speed_ref(0.0), sc.theta_e0, sc.load(0.0))
+
+    def init(self) -> LoopState:
+        """The loop at t = 0: a steady start, or standstill with an I-f start-up.
+
+        Without a start-up the scenario starts in the steady state of its
+        initial speed and the load at t = 0 (DESIGN.md: no transient nobody
+        asked for): the machine carries the currents that balance the load,
+        the FOC's integrators hold them (:meth:`FOC.init`), the voltage of the
+        period that starts at t = 0 is the steady one (computed at t_{−1}, so
+        rotated to θ_e0 + ω_e T_s/2 by the delay compensation), and the
+        observer starts locked on the true machine where it can
+        (``observer.init_at(op)``; otherwise its own ``init()``).  With the
+        drive's I-f start-up the scenario starts from standstill, all zeros.
+        """
+        sc = self.scenario
+        foc = self.controller
+        if self.drive.startup is not None:
+            plant = self.plant.init(omega_m0=sc.omega_m0, theta_e0=sc.theta_e0)
+            z = jnp.zeros((), plant.x.dtype)
+            obs = None if self.observer is None else self.observer.init()
+            return LoopState(plant=plant, ctrl=foc.init(), obs=obs, sensors=sc.sensors.init(sc.key), u_a=z, u_b=z)
+        op = self.operating_point()
+        plant = self.plant.init(omega_m0=op.omega_m, theta_e0=op.theta_e, i_d0=op.i_d, i_q0=op.i_q)
+        w_e = sc.par.p * op.omega_m
+        th_u = op.theta_e + (0.5 if foc.delay_compensation else -1.0) * w_e * self.ts
+        u_a, u_b = dq_to_ab(op.u_d, op.u_q, th_u)
+        _, u = self.drive.inverter.step(None, InverterInput(u_a, u_b))
+        if self.observer is None:
+            obs = None
+        elif hasattr(self.observer, "init_at"):
+            obs = self.observer.init_at(op, sc.par)
+        else:
+            obs = self.observer.init()
+        return LoopState(plant=plant, ctrl=foc.init(op), obs=obs, sensors=sc.sensors.init(sc.key), u_a=u.u_a, u_b=u.u_b)
 
     def step(self, state: LoopState, k) -> tuple[LoopState, DriveOutput]:
         drive, sc = self.drive, self.scenario
