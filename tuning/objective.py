@@ -29,7 +29,7 @@ from jaxobs.simulate import OnSignal, simulate
 
 from .params import Parametrization
 
-__all__ = ["METRICS", "Term", "Objective", "aggregate"]
+__all__ = ["METRICS", "DRIVE_METRICS", "Term", "Objective", "aggregate"]
 
 
 # --------------------------------------------------------------------------
@@ -43,6 +43,8 @@ class MetricContext:
     steady_from: float  # start of the steady window, s
     band_hz: float = 0.05
     temperature: float = 1e-3  # smooth max/settling temperature, s (or units of the metric)
+    band_deg: float = 2.0  # position-error band for settling_position, electrical degrees
+    band_rpm: float = 5.0  # speed-error band for settling_speed, r/min (mechanical)
 
 
 def _freq_err_hz(sol):
@@ -59,6 +61,18 @@ def _position_err(sol, sig):
     if hasattr(out, "theta_e"):  # the closed-loop drive's DriveOutput
         return M.wrap(out.obs.theta - out.theta_e)
     return M.wrap(out.obs.theta - (sig.omega1 * sol.t + sig.phase - math.pi / 2))
+
+
+def _speed_err_rpm(sol, sc):
+    """Speed-estimate error of a drive observer, ω̂e/p − ωm, in r/min (mechanical); ``sc`` the drive Scenario."""
+    out = sol.outputs
+    return (out.obs.omega / sc.par.p - out.omega_m) * 30 / math.pi
+
+
+def _sample_noise(x, mask):
+    """rms of the sample-to-sample change over √2: the standard deviation of white noise on ``x``,
+    blind to its slow variations (a speed estimate's high-frequency noise)."""
+    return M.rms(jnp.diff(x) / math.sqrt(2.0), mask[1:])
 
 
 def _steady(sol, ctx):
@@ -82,7 +96,19 @@ METRICS: dict[str, Callable] = {
     "iae_position": lambda sol, sig, ctx: M.iae(sol.t, _position_err(sol, sig), ctx.t_event),
     "rms_position_steady": lambda sol, sig, ctx: M.rms(_position_err(sol, sig), _steady(sol, ctx)),
     "ripple_position": lambda sol, sig, ctx: M.smooth_peak_to_peak(_position_err(sol, sig), _steady(sol, ctx), 1e-4),
+    # drive observers in the closed loop (the scenario is a drive Scenario): settling after a load or
+    # speed step at t_event, and the noise the estimates carry (DESIGN.md "Metrics": smooth for gradients)
+    "settling_position": lambda sol, sig, ctx: M.smooth_settling_time(
+        sol.t, _position_err(sol, sig), 0.0, math.radians(ctx.band_deg), ctx.t_event, temperature=ctx.temperature
+    ),
+    "settling_speed": lambda sol, sig, ctx: M.smooth_settling_time(
+        sol.t, _speed_err_rpm(sol, sig), 0.0, ctx.band_rpm, ctx.t_event, temperature=ctx.temperature
+    ),
+    "rms_speed_steady": lambda sol, sig, ctx: M.rms(_speed_err_rpm(sol, sig), _steady(sol, ctx)),
+    "speed_noise_rpm": lambda sol, sig, ctx: _sample_noise(sol.outputs.obs.omega / sig.par.p * 30 / math.pi, _steady(sol, ctx)),
 }
+# metrics that need the closed-loop drive (signal = "drive" jobs)
+DRIVE_METRICS = ("settling_position", "settling_speed", "rms_speed_steady", "speed_noise_rpm")
 
 
 @dataclass(frozen=True)
