@@ -141,9 +141,7 @@ def test_wif_fll_derivation_matters():
     a = naive.k1 * naive.k2 * naive.omega_n**2 / 4
     b = naive.k1 * naive.omega_n / 2
     c = naive.lam / 2
-    naive_model = eqx.tree_at(
-        lambda m: m.frequency, model, linear.TransferFunction([c, c * b], [1.0, b, a + c, c * b])
-    )
+    naive_model = eqx.tree_at(lambda m: m.frequency, model, linear.TransferFunction([c, c * b], [1.0, b, a + c, c * b]))
     assert _model_deviation(naive, naive_model, "1") <= BOUNDS["1"]
 
 

@@ -163,7 +163,7 @@ def test_sensorless_second_order_soifo_holds_400_and_2000_rpm_and_the_load_step(
         t = np.asarray(sol.t)
         err = np.abs(np.asarray(wrap(sol.outputs.obs.theta - sol.outputs.theta_e)))
         speed = np.asarray(sol.outputs.speed_rpm)
-        steady = (t >= t[-1] - 0.1)
+        steady = t >= t[-1] - 0.1
         assert bool(sol.ok)
         assert err[steady].max() < 5e-3, (rpm, err[steady].max())
         assert np.abs(speed[steady] - rpm).max() < 0.01 * rpm

@@ -36,9 +36,11 @@ def steady_runs():
     def run(rpm):
         sc = D.Scenario(PAR, speed_ref=D.Profile.constant(0.0))  # traced speed set below
         sc = eqx.tree_at(lambda s: (s.speed_ref.values, s.omega_m0), sc, (jnp.atleast_1d(rpm * D.RPM), rpm * D.RPM))
-        bank = eqx.tree_at(lambda b: tuple(o.omega0_pll for o in b.observers), leso_bank(PAR, 1.0), (PAR.p * rpm * D.RPM,) * 3)
-        sol = D.simulate_drive(leso_drive(PAR), sc, 0.8, observer=bank)
-        errs = jnp.stack([jnp.degrees(wrap(o.theta - sol.theta_e)) for o in sol.obs.each])
+        bank = eqx.tree_at(
+            lambda b: tuple(o.omega0_pll for o in b.observers), leso_bank(PAR, 1.0), (PAR.p * rpm * D.RPM,) * 3
+        )
+        sol = jaxobs.simulate(D.ClosedLoop(leso_drive(PAR), bank, sc), 0.8)
+        errs = jnp.stack([jnp.degrees(wrap(o.theta - sol.outputs.theta_e)) for o in sol.outputs.obs.each])
         return jnp.mean(errs[:, -2000:], axis=1), sol.ok
 
     return jax.jit(jax.vmap(run))(rpms)
@@ -63,8 +65,13 @@ def test_steady_position_errors_c_gi_fa(steady_runs):
 def harmonics_run():
     hpar = D.ipmsm_paper002(a5=A5, a7=A7, J=BENCH_J)
     we = hpar.p * 300 * D.RPM
-    sc = D.Scenario(hpar, speed_ref=D.Profile.constant(300 * D.RPM), omega_m0=300 * D.RPM, load=D.Profile.constant(0.5 * float(hpar.T_rated)))
-    sol = D.simulate_drive(leso_drive(hpar), sc, 1.0, observer=leso_bank(hpar, we))
+    sc = D.Scenario(
+        hpar,
+        speed_ref=D.Profile.constant(300 * D.RPM),
+        omega_m0=300 * D.RPM,
+        load=D.Profile.constant(0.5 * float(hpar.T_rated)),
+    )
+    sol = jaxobs.simulate(D.ClosedLoop(leso_drive(hpar), leso_bank(hpar, we), sc), 1.0)
     return sol, we
 
 
@@ -83,9 +90,9 @@ def test_faleso_attenuates_5th_and_7th_more_than_cleso(harmonics_run):
     t = np.asarray(sol.t)
     n_per = int(round(2 * math.pi / we / 1e-4))
     m = np.zeros_like(t, dtype=bool)
-    m[-10 * n_per:] = True
+    m[-10 * n_per :] = True
     pct = {}
-    for name, o in zip(("C", "GI", "FA"), sol.obs.each):
+    for name, o in zip(("C", "GI", "FA"), sol.outputs.obs.each):
         ea = np.asarray(o.e_a)
         fund = float(harmonic_amplitude(t, ea, we, m))
         pct[name] = [100 * float(harmonic_amplitude(t, ea, h * we, m)) / fund for h in (5, 7)]
@@ -97,7 +104,8 @@ def test_faleso_attenuates_5th_and_7th_more_than_cleso(harmonics_run):
     r5, r7 = pct["FA"][0] / pct["C"][0], pct["FA"][1] / pct["C"][1]
     assert 0.35 < r5 < 0.43 and 0.42 < r7 < 0.51  # measured 0.392 and 0.467
     # the k2 that would give 002's FA/C ratio at the 5th
-    g = lambda k2: abs(complex(L.faleso_tf(K1_FA, k2, we).freqresp(-5 * we))) / abs(complex(L.cleso_tf(W0).freqresp(5 * we)))  # noqa: E731
+    c5 = abs(complex(L.cleso_tf(W0).freqresp(5 * we)))
+    g = lambda k2: abs(complex(L.faleso_tf(K1_FA, k2, we).freqresp(-5 * we))) / c5  # noqa: E731
     assert g(35 * math.pi) == pytest.approx(0.8 / 5.4, rel=0.15)
 
 
@@ -107,12 +115,19 @@ def test_parameter_mismatch_against_eqs_42_43(which, factor):
     (eq 43: −6.77° / +6.59°); R̂s errors give < 0.01° (eq 42: 0 with i_d = 0)."""
     est = D.ipmsm_paper002(J=BENCH_J, **{which: factor * float(getattr(PAR, which))})
     we = PAR.p * 300 * D.RPM
-    sc = D.Scenario(PAR, est_par=est, speed_ref=D.Profile.constant(300 * D.RPM), omega_m0=300 * D.RPM, load=D.Profile.constant(float(PAR.T_rated)))
-    sol = D.simulate_drive(leso_drive(PAR), sc, 1.2, observer=leso_bank(est, we))
+    sc = D.Scenario(
+        PAR,
+        est_par=est,
+        speed_ref=D.Profile.constant(300 * D.RPM),
+        omega_m0=300 * D.RPM,
+        load=D.Profile.constant(float(PAR.T_rated)),
+    )
+    sol = jaxobs.simulate(D.ClosedLoop(leso_drive(PAR), leso_bank(est, we), sc), 1.2)
     t = np.asarray(sol.t)
     m = t >= 1.0
-    err = float(np.mean(np.degrees(np.asarray(wrap(sol.obs.each[2].theta - sol.theta_e)))[m]))
-    i_d, i_q = float(np.mean(np.asarray(sol.i_d)[m])), float(np.mean(np.asarray(sol.i_q)[m]))
+    out = sol.outputs
+    err = float(np.mean(np.degrees(np.asarray(wrap(out.obs.each[2].theta - out.theta_e)))[m]))
+    i_d, i_q = float(np.mean(np.asarray(out.i_d)[m])), float(np.mean(np.asarray(out.i_q)[m]))
     e_ex = we * float(PAR.psi_f)
     if which == "Lq":
         pred = math.degrees(float(L.position_error_lq((1 - factor) * float(PAR.Lq), i_d, i_q, e_ex, we)))
@@ -143,8 +158,8 @@ def test_vmap_over_64_scenarios_and_gradients():
         obs = jaxobs.FALESO(PAR.Rs, PAR.Lq, K1_FA, K2_FA, omega0_pll=1.0)
         obs = eqx.tree_at(lambda o: (o.Lq, o.omega0_pll), obs, (s.est_par.Lq, w0))
         s = eqx.tree_at(lambda x: x.omega_m0, s, s.speed_ref.values[0])
-        sol = D.simulate_drive(drv, s, 0.8, observer=obs)
-        return jnp.mean(jnp.degrees(wrap(sol.obs.theta - sol.theta_e))[-1000:]), sol.ok
+        sol = jaxobs.simulate(D.ClosedLoop(drv, obs, s), 0.8)
+        return jnp.mean(jnp.degrees(wrap(sol.outputs.obs.theta - sol.outputs.theta_e))[-1000:]), sol.ok
 
     err, ok = jax.jit(jax.vmap(run))(batch.scenarios)
     assert err.shape == (64,) and bool(jnp.all(ok))
@@ -153,15 +168,17 @@ def test_vmap_over_64_scenarios_and_gradients():
     assert np.all(np.abs(err[:, 3]) < 0.05)  # no mismatch: measured <= 0.0024° after 0.7 s at 10 N·m
 
 
-@pytest.mark.parametrize("ctor, names", [(jaxobs.FALESO, ("k1", "k2", "kp_pll", "ki_pll")), (jaxobs.CLESO, ("omega0",))], ids=["FA", "C"])
+@pytest.mark.parametrize(
+    "ctor, names", [(jaxobs.FALESO, ("k1", "k2", "kp_pll", "ki_pll")), (jaxobs.CLESO, ("omega0",))], ids=["FA", "C"]
+)
 def test_gradients_wrt_leso_and_pll_gains(ctor, names):
     sc = D.Scenario(PAR, speed_ref=D.Profile.constant(600 * D.RPM), omega_m0=600 * D.RPM, load=D.Profile.constant(5.0))
     drv = D.Drive(D.FOC.imc(PAR, 2 * math.pi * 300, 2 * math.pi * 5))
     obs = ctor(PAR.Rs, PAR.Lq, omega0_pll=0.95 * PAR.p * 600 * D.RPM)
 
     def loss(o):
-        sol = D.simulate_drive(drv, sc, 0.08, observer=o)
-        return jnp.mean(wrap(sol.obs.theta - sol.theta_e)[200:] ** 2)
+        sol = jaxobs.simulate(D.ClosedLoop(drv, o, sc), 0.08)
+        return jnp.mean(wrap(sol.outputs.obs.theta - sol.outputs.theta_e)[200:] ** 2)
 
     assert_field_grads_match_fd(loss, obs, names, rel=1e-4, abs=1e-12)
 

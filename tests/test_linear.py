@@ -63,7 +63,9 @@ def test_margins_poles_and_response_match_python_control(i, margins_fn):
     tf = L.TransferFunction(num, den)
     w = np.logspace(-2, 3, 7)
     np.testing.assert_allclose(np.asarray(tf.freqresp(w)), control.tf(num, den)(1j * w), rtol=1e-12)
-    np.testing.assert_allclose(np.sort_complex(np.asarray(tf.poles())), np.sort_complex(control.poles(control.tf(num, den))), rtol=1e-8)
+    np.testing.assert_allclose(
+        np.sort_complex(np.asarray(tf.poles())), np.sort_complex(control.poles(control.tf(num, den))), rtol=1e-8
+    )
     assert bool(tf.is_stable())
 
 
@@ -75,8 +77,12 @@ def test_complex_tf_evaluation_and_poles_match_numpy():
         num = rng.normal(size=n) + 1j * rng.normal(size=n)
         tf = L.TransferFunction(num, den)
         w = np.linspace(-50, 50, 11)
-        np.testing.assert_allclose(np.asarray(tf.freqresp(w)), np.polyval(num, 1j * w) / np.polyval(den, 1j * w), rtol=1e-12)
-        np.testing.assert_allclose(np.sort_complex(np.asarray(tf.poles())), np.sort_complex(np.roots(den)), rtol=1e-8, atol=1e-10)
+        np.testing.assert_allclose(
+            np.asarray(tf.freqresp(w)), np.polyval(num, 1j * w) / np.polyval(den, 1j * w), rtol=1e-12
+        )
+        np.testing.assert_allclose(
+            np.sort_complex(np.asarray(tf.poles())), np.sort_complex(np.roots(den)), rtol=1e-8, atol=1e-10
+        )
 
 
 def test_complex_routh_agrees_with_root_locations_on_random_polynomials():
@@ -259,8 +265,12 @@ def test_dc_final_values_eqs_29_36():
 @pytest.mark.parametrize("h", [2, 3, 4, 5, 7, 11, 13])
 def test_harmonic_factors_eqs_16_21_equal_gain_relative_to_integrator(h):
     s_tf, ss_tf = L.soifo_tf(K, W1), L.sosoifo_tf(K1, K2, W1)
-    assert float(L.soifo_harmonic_factor(h, K)) == pytest.approx(abs(complex(s_tf.freqresp(h * W1))) * h * W1, rel=1e-12)
-    assert float(L.sosoifo_harmonic_factor(h, K1, K2)) == pytest.approx(abs(complex(ss_tf.freqresp(h * W1))) * h * W1, rel=1e-12)
+    assert float(L.soifo_harmonic_factor(h, K)) == pytest.approx(
+        abs(complex(s_tf.freqresp(h * W1))) * h * W1, rel=1e-12
+    )
+    assert float(L.sosoifo_harmonic_factor(h, K1, K2)) == pytest.approx(
+        abs(complex(ss_tf.freqresp(h * W1))) * h * W1, rel=1e-12
+    )
 
 
 def test_second_order_soifo_is_not_better_at_every_harmonic():
@@ -277,7 +287,9 @@ def test_second_order_soifo_is_not_better_at_every_harmonic():
 
 
 def _slope_db_per_decade(tf, w):
-    return float((20 * jnp.log10(jnp.abs(tf.freqresp(w * 1.01))) - 20 * jnp.log10(jnp.abs(tf.freqresp(w)))) / jnp.log10(1.01))
+    return float(
+        (20 * jnp.log10(jnp.abs(tf.freqresp(w * 1.01))) - 20 * jnp.log10(jnp.abs(tf.freqresp(w)))) / jnp.log10(1.01)
+    )
 
 
 def test_bode_slopes_below_and_above_centre():

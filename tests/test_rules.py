@@ -51,7 +51,7 @@ def test_rule_order_on_linear_sogi(rule, order):
     errs = []
     for h in hs:
         sogi = jaxobs.SOGI(k=k, omega=OMEGA_C, ts=h, rule=rule)
-        sol = jaxobs.simulate(sogi, _input, T_END, input_path="knots")
+        sol = jaxobs.simulate(jaxobs.OnSignal(sogi, _input, knots=True), T_END)
         errs.append(np.linalg.norm(np.asarray(sol.final_state.x) - ref))
     slope = np.polyfit(np.log(hs), np.log(errs), 1)[0]
     assert abs(slope - order) <= 0.3, (type(rule).__name__, slope, errs)
@@ -80,12 +80,12 @@ def test_tustin_is_the_bilinear_transform():
     k, h = 1.2, 1e-4
     sogi = jaxobs.SOGI(k=k, omega=OMEGA_C, ts=h, rule=jaxobs.Tustin())
     n = 2000
-    sol = jaxobs.simulate(sogi, lambda t: jnp.sin(OMEGA_IN * t), n * h, input_path="knots")
+    sol = jaxobs.simulate(jaxobs.OnSignal(sogi, lambda t: jnp.sin(OMEGA_IN * t), knots=True), n * h)
     g = control.tf([k * OMEGA_C, 0], [1, k * OMEGA_C, OMEGA_C**2])
     gd = control.sample_system(g, h, method="tustin")
     t = np.arange(n) * h
     y = control.forced_response(gd, T=t, U=np.sin(OMEGA_IN * t)).outputs
-    np.testing.assert_allclose(np.asarray(sol.out.v_alpha), y, atol=1e-11)
+    np.testing.assert_allclose(np.asarray(sol.outputs.obs.v_alpha), y, atol=1e-11)
 
 
 def test_held_input_is_zero_order_hold():

@@ -25,20 +25,19 @@ def _obs():
     return jaxobs.SOGIFLL(1.41, 2000.0, ts=TS)
 
 
-@pytest.mark.parametrize("inputs", ["precomputed", "loop"])
-def test_replayed_samples_give_the_simulation_of_the_signal(inputs):
+def test_replayed_samples_give_the_simulation_of_the_signal():
     """Read back at the loop's own sample instants the samples come back exactly (the snap), so
     the replay is the signal's simulation: outputs, truth and a running cost."""
     sig, obs = _grid(), _obs()
-    cost = lambda out, tr: (out.omega - tr.omega) ** 2
+    save = jaxobs.SaveAll(cost=lambda o: (o.obs.omega - o.truth.omega) ** 2)
     rec = _sampled(sig)
-    a = jaxobs.simulate(obs, sig, N * TS, inputs=inputs, cost=cost)
-    b = jaxobs.simulate(obs, rec, N * TS, inputs=inputs, cost=cost)
-    np.testing.assert_array_equal(np.asarray(b.u), np.asarray(rec.samples))
+    a = jaxobs.simulate(jaxobs.OnSignal(obs, sig), N * TS, save=save)
+    b = jaxobs.simulate(jaxobs.OnSignal(obs, rec), N * TS, save=save)
+    np.testing.assert_array_equal(np.asarray(b.outputs.u), np.asarray(rec.samples))
     # the samples were computed outside jit, where XLA fuses cos(θ(t)) differently: ulps apart
-    np.testing.assert_allclose(np.asarray(b.u), np.asarray(a.u), rtol=0, atol=1e-13)
-    np.testing.assert_allclose(np.asarray(b.out.omega), np.asarray(a.out.omega), rtol=1e-12, atol=1e-9)
-    np.testing.assert_allclose(np.asarray(b.truth.theta), np.asarray(a.truth.theta), rtol=1e-12)
+    np.testing.assert_allclose(np.asarray(b.outputs.u), np.asarray(a.outputs.u), rtol=0, atol=1e-13)
+    np.testing.assert_allclose(np.asarray(b.outputs.obs.omega), np.asarray(a.outputs.obs.omega), rtol=1e-12, atol=1e-9)
+    np.testing.assert_allclose(np.asarray(b.outputs.truth.theta), np.asarray(a.outputs.truth.theta), rtol=1e-12)
     assert float(b.cost) == pytest.approx(float(a.cost), rel=1e-12)
     assert bool(b.ok)
 
@@ -53,8 +52,9 @@ def test_between_samples_reads_linear_interpolation_and_holds_the_ends():
 
 
 def test_without_truth_the_solution_has_none():
-    sol = jaxobs.simulate(_obs(), SampledSignal(jnp.cos(2 * jnp.pi * 50 * TS * jnp.arange(500.0)), TS), 0.05)
-    assert sol.truth is None and bool(sol.ok)
+    rec = SampledSignal(jnp.cos(2 * jnp.pi * 50 * TS * jnp.arange(500.0)), TS)
+    sol = jaxobs.simulate(jaxobs.OnSignal(_obs(), rec), 0.05)
+    assert sol.outputs.truth is None and bool(sol.ok)
     with pytest.raises(ValueError, match="truth"):
         SampledSignal(jnp.zeros(10), TS).omega(0.0)
 
@@ -63,16 +63,16 @@ def test_vmap_over_recordings_and_gradient_through_the_samples():
     sig = _grid()
     rec = _sampled(sig, n=800)
     batch = jax.tree.map(lambda x: jnp.stack([x, 1.1 * x]), rec)  # two recordings, one scaled
-    cost = lambda out, tr: (out.omega - tr.omega) ** 2
-    f = jax.jit(jax.vmap(lambda s: jaxobs.simulate(_obs(), s, 800 * TS, save="final", cost=cost, inputs="loop").cost))
+    save = jaxobs.SaveFinal(cost=lambda o: (o.obs.omega - o.truth.omega) ** 2)
+    f = jax.jit(jax.vmap(lambda s: jaxobs.simulate(jaxobs.OnSignal(_obs(), s), 800 * TS, save=save).cost))
     c = np.asarray(f(batch))
-    one = jaxobs.simulate(_obs(), rec, 800 * TS, save="final", cost=cost, inputs="loop").cost
+    one = jaxobs.simulate(jaxobs.OnSignal(_obs(), rec), 800 * TS, save=save).cost
     assert c.shape == (2,) and c[0] == pytest.approx(float(one), rel=1e-12) and c[1] != c[0]
 
     # d cost / d (scale of the recording), by AD and by central differences
     def loss(a):
         r = SampledSignal(a * rec.samples, TS, truth=rec.truth)
-        return jaxobs.simulate(_obs(), r, 800 * TS, save="final", cost=cost, inputs="loop").cost
+        return jaxobs.simulate(jaxobs.OnSignal(_obs(), r), 800 * TS, save=save).cost
 
     g = float(jax.grad(loss)(1.0))
     h = 1e-6
@@ -98,11 +98,11 @@ def test_bad_arguments_raise_value_error_naming_the_field(kwargs, field):
 
 def test_a_horizon_past_the_recording_is_an_error():
     rec = SampledSignal(jnp.zeros(100), TS, t0=0.0)
-    jaxobs.simulate(_obs(), rec, 100 * TS)  # exactly the recording: fine
+    jaxobs.simulate(jaxobs.OnSignal(_obs(), rec), 100 * TS)  # exactly the recording: fine
     with pytest.raises(ValueError, match="horizon"):
-        jaxobs.simulate(_obs(), rec, 101 * TS)
+        jaxobs.simulate(jaxobs.OnSignal(_obs(), rec), 101 * TS)
     with pytest.raises(ValueError, match="horizon"):
-        jaxobs.simulate(_obs(), SampledSignal(jnp.zeros(100), TS, t0=0.01), 0.005)
+        jaxobs.simulate(jaxobs.OnSignal(_obs(), SampledSignal(jnp.zeros(100), TS, t0=0.01)), 0.005)
 
 
 def test_a_recording_read_on_and_off_its_sample_instants():
@@ -110,15 +110,18 @@ def test_a_recording_read_on_and_off_its_sample_instants():
     t0 = 0.05 + ts/2 they fall between samples (read by interpolation) — both give the signal."""
     sig, obs = _grid(), _obs()
     rec = _sampled(sig)
-    cost = lambda out, tr: (out.omega - tr.omega) ** 2
-    a = jaxobs.simulate(obs, rec, 0.25, t0=0.05, inputs="loop", save="final", cost=cost)
-    b = jaxobs.simulate(obs, sig, 0.25, t0=0.05, inputs="loop", save="final", cost=cost)
+    save = jaxobs.SaveFinal(cost=lambda o: (o.obs.omega - o.truth.omega) ** 2)
+    a = jaxobs.simulate(jaxobs.OnSignal(obs, rec, t0=0.05), 0.25, save=save)
+    b = jaxobs.simulate(jaxobs.OnSignal(obs, sig, t0=0.05), 0.25, save=save)
     assert float(a.cost) == pytest.approx(float(b.cost), rel=1e-10)
-    c = jaxobs.simulate(obs, rec, 0.25, t0=0.05 + TS / 2, inputs="loop", save="final", cost=cost)
-    d = jaxobs.simulate(obs, sig, 0.25, t0=0.05 + TS / 2, inputs="loop", save="final", cost=cost)
+    c = jaxobs.simulate(jaxobs.OnSignal(obs, rec, t0=0.05 + TS / 2), 0.25, save=save)
+    d = jaxobs.simulate(jaxobs.OnSignal(obs, sig, t0=0.05 + TS / 2), 0.25, save=save)
     # linear interpolation of a 50 Hz cosine sampled at 10 kHz: |error| <= (ωts)²/8 ≈ 1.2e-4 of the
     # amplitude, which moves the cost by about as much (measured 1.4e-4 relative)
     assert float(c.cost) == pytest.approx(float(d.cost), rel=1e-3)
     assert float(c.cost) != pytest.approx(float(d.cost), rel=1e-6)  # it did interpolate
-    np.testing.assert_allclose(np.asarray(rec(0.05 + TS / 2 + TS * jnp.arange(100))),
-                               np.asarray(sig(0.05 + TS / 2 + TS * jnp.arange(100))), atol=1.3e-4)
+    np.testing.assert_allclose(
+        np.asarray(rec(0.05 + TS / 2 + TS * jnp.arange(100))),
+        np.asarray(sig(0.05 + TS / 2 + TS * jnp.arange(100))),
+        atol=1.3e-4,
+    )

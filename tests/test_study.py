@@ -12,8 +12,8 @@ import xarray as xr
 import jaxobs
 from jaxobs import linear
 from jaxobs import metrics as M
-from tuning.cli import main
 from jaxobs.study import run_study, worst_cases
+from tuning.cli import main
 
 AXES = {"freq_step": [-2.0, 1.0], "dc": [0.0, 0.1], "phase_jump_deg": [0.0, 30.0]}
 
@@ -32,10 +32,11 @@ def test_dims_coords_and_values_match_single_runs(small_study):
     t_event, steady = ds.attrs["t_event"], ds.attrs["steady_from"]
     for dname, fs, dc, pj in (("SOGI-FLL", -2.0, 0.1, 30.0), ("WIF", 1.0, 0.0, 0.0), ("WIF", -2.0, 0.1, 0.0)):
         sig = jaxobs.GridSignal(t_event=t_event, freq_step=fs, dc=dc, phase_jump=math.radians(pj))
-        sol = jaxobs.simulate(designs[dname], sig, ds.attrs["horizon"])
-        ferr = (sol.out.omega - sol.truth.omega) / (2 * math.pi)
+        sol = jaxobs.simulate(jaxobs.OnSignal(designs[dname], sig), ds.attrs["horizon"])
+        out = sol.outputs
+        ferr = (out.obs.omega - out.truth.omega) / (2 * math.pi)
         ripple = float(M.peak_to_peak(ferr, sol.t >= steady))
-        rms = float(M.rms(M.wrap(sol.out.theta - sol.truth.theta), sol.t >= steady))
+        rms = float(M.rms(M.wrap(out.obs.theta - out.truth.theta), sol.t >= steady))
         cell = ds.sel(design=dname, freq_step=fs, dc=dc, phase_jump_deg=pj)
         assert float(cell["ripple_freq"]) == pytest.approx(ripple, rel=1e-9, abs=1e-12)
         assert float(cell["rms_phase"]) == pytest.approx(rms, rel=1e-9, abs=1e-12)
@@ -62,9 +63,20 @@ def test_bad_study_arguments():
 def test_study_of_more_than_10000_scenarios(tmp_path, capsys):
     """10,240 scenarios (random draws over 5 axes) of the SOGI-FLL-WIF in chunks of 2048; time reported."""
     t0 = time.time()
-    ds = run_study({"WIF": linear.wif_closed_form()},
-                   {"freq_step": [-3.0, 3.0], "phase_jump_deg": [-60.0, 60.0], "dc": [0.0, 0.1], "harmonics_scale": [0.0, 2.0], "noise": [0.0, 0.01]},
-                   sample=10240, horizon=0.3, chunk_size=2048, progress=False)
+    ds = run_study(
+        {"WIF": linear.wif_closed_form()},
+        {
+            "freq_step": [-3.0, 3.0],
+            "phase_jump_deg": [-60.0, 60.0],
+            "dc": [0.0, 0.1],
+            "harmonics_scale": [0.0, 2.0],
+            "noise": [0.0, 0.01],
+        },
+        sample=10240,
+        horizon=0.3,
+        chunk_size=2048,
+        progress=False,
+    )
     elapsed = time.time() - t0
     assert ds.sizes["sample"] == 10240 and int(ds["diverged"].sum()) == 0
     assert np.all(np.isfinite(ds["rms_phase"].values))
@@ -100,8 +112,12 @@ def test_grid_signals_check_values_like_gridsignal_and_match_it():
     with pytest.raises(ValueError, match="axis noise"):
         grid_signals(["noise"], [(-0.1,)], 0.1, 50.0)
     # the vectorized batch equals signals built one by one
-    sigs = grid_signals(["freq_step", "phase_jump_deg", "harmonics_scale"], [(2.0, 30.0, 1.0), (-1.0, 0.0, 0.5)], 0.1, 50.0)
+    sigs = grid_signals(
+        ["freq_step", "phase_jump_deg", "harmonics_scale"], [(2.0, 30.0, 1.0), (-1.0, 0.0, 0.5)], 0.1, 50.0
+    )
     t = np.linspace(0.0, 0.3, 301)
-    one = jaxobs.GridSignal(t_event=0.1, freq_step=-1.0, harmonics={h: 0.5 * m for h, m in jaxobs.signals.TEST_C_HARMONICS.items()})
+    one = jaxobs.GridSignal(
+        t_event=0.1, freq_step=-1.0, harmonics={h: 0.5 * m for h, m in jaxobs.signals.TEST_C_HARMONICS.items()}
+    )
     second = jax.tree.map(lambda x: x[1], sigs)
     np.testing.assert_array_equal(np.asarray(second(t)), np.asarray(one(t)))

@@ -47,7 +47,9 @@ def itae_tuning():
     comp = linear.sogi_fll_closed_form()
     param = Parametrization([GainSpec("lam", float(comp.lam), 500.0, 500000.0)])
     obj = Objective(comp, param, sig, 0.4, [Term("itae_freq")], MetricContext(t_event=0.1, steady_from=0.3))
-    res = run_solver(obj, param.theta0(), SolverConfig(kind="adam", learning_rate=0.1, steps=60, patience=15), quiet=True)
+    res = run_solver(
+        obj, param.theta0(), SolverConfig(kind="adam", learning_rate=0.1, steps=60, patience=15), quiet=True
+    )
     return obj, param, res
 
 
@@ -150,7 +152,9 @@ steps = 3
 def test_bad_job_files_exit_2_with_one_line_naming_the_field(tmp_path, edit, field):
     path = tmp_path / "job.toml"
     path.write_text(edit(GOOD))
-    p = subprocess.run([sys.executable, "-m", "tuning.cli", "tune", str(path), "--check"], capture_output=True, text=True)
+    p = subprocess.run(
+        [sys.executable, "-m", "tuning.cli", "tune", str(path), "--check"], capture_output=True, text=True
+    )
     assert p.returncode == 2, p.stderr
     lines = p.stderr.strip().splitlines()
     assert len(lines) == 1 and field in lines[0], p.stderr
@@ -240,11 +244,15 @@ def test_robust_tuning_over_1024_scenarios_beats_closed_form_on_held_out_worst_c
     assert res["scenarios"]["count"] == 1024
     h = res["holdout"]
     assert h["tuned"]["per_scenario_worst"] < h["closed_form"]["per_scenario_worst"]
-    print(f"robust tuning, 1024 scenarios, {res['iterations']} iterations: {elapsed:.1f} s; held-out worst "
-          f"{h['closed_form']['per_scenario_worst']:.4g} (closed form) -> {h['tuned']['per_scenario_worst']:.4g} (tuned)")
+    print(
+        f"robust tuning, 1024 scenarios, {res['iterations']} iterations: {elapsed:.1f} s; held-out worst "
+        f"{h['closed_form']['per_scenario_worst']:.4g} (closed form) -> {h['tuned']['per_scenario_worst']:.4g} (tuned)"
+    )
 
 
-KILL = GOOD.replace('name = "t"', 'name = "resume"').replace("steps = 3", "steps = 40\nlearning_rate = 0.05\ncheckpoint_every = 4\npatience = 100")
+KILL = GOOD.replace('name = "t"', 'name = "resume"').replace(
+    "steps = 3", "steps = 40\nlearning_rate = 0.05\ncheckpoint_every = 4\npatience = 100"
+)
 
 
 @pytest.mark.slow
@@ -252,8 +260,16 @@ def test_kill_9_then_resume_gives_the_same_gains(tmp_path):
     path = tmp_path / "job.toml"
     path.write_text(KILL)
     ref_out, out = tmp_path / "ref", tmp_path / "killed"
-    subprocess.run([sys.executable, "-m", "tuning.cli", "tune", str(path), "--out", str(ref_out), "--quiet"], check=True, capture_output=True)
-    proc = subprocess.Popen([sys.executable, "-m", "tuning.cli", "tune", str(path), "--out", str(out), "--quiet"], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    subprocess.run(
+        [sys.executable, "-m", "tuning.cli", "tune", str(path), "--out", str(ref_out), "--quiet"],
+        check=True,
+        capture_output=True,
+    )
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "tuning.cli", "tune", str(path), "--out", str(out), "--quiet"],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
     meta = out / "checkpoint.json"
     deadline = time.time() + 300
     while time.time() < deadline:
@@ -264,14 +280,20 @@ def test_kill_9_then_resume_gives_the_same_gains(tmp_path):
     os.kill(proc.pid, signal.SIGKILL)
     proc.wait()
     assert not (out / "result.json").exists()
-    subprocess.run([sys.executable, "-m", "tuning.cli", "tune", str(path), "--out", str(out), "--resume", "--quiet"], check=True, capture_output=True)
+    subprocess.run(
+        [sys.executable, "-m", "tuning.cli", "tune", str(path), "--out", str(out), "--resume", "--quiet"],
+        check=True,
+        capture_output=True,
+    )
     ref = json.loads((ref_out / "result.json").read_text())["gains"]["tuned"]
     got = json.loads((out / "result.json").read_text())["gains"]["tuned"]
     for k in ref:
         assert got[k] == pytest.approx(ref[k], rel=1e-9)
 
 
-@pytest.mark.parametrize("preset", sorted(p.name for p in (Path(__file__).parents[1] / "tuning" / "presets").glob("*.toml")))
+@pytest.mark.parametrize(
+    "preset", sorted(p.name for p in (Path(__file__).parents[1] / "tuning" / "presets").glob("*.toml"))
+)
 def test_every_preset_job_validates(preset):
     job = load_job(Path(__file__).parents[1] / "tuning" / "presets" / preset)
     assert job.gains and job.terms
@@ -282,7 +304,11 @@ def test_leso_drive_job_runs(tmp_path):
     """A FA-LESO job on the IPMSM drive (signal = "drive"): the observer binds to each scenario's
     estimated parameters and speed, gradients flow through the closed-loop scan."""
     text = (Path(__file__).parents[1] / "tuning" / "presets" / "faleso.toml").read_text()
-    text = text.replace("steps = 20", "steps = 2").replace("dLq = [-0.2, 0.2]", "dLq = [0.0]").replace("load_nm = [0.0, 15.0]", "load_nm = [15.0]")
+    text = (
+        text.replace("steps = 20", "steps = 2")
+        .replace("dLq = [-0.2, 0.2]", "dLq = [0.0]")
+        .replace("load_nm = [0.0, 15.0]", "load_nm = [15.0]")
+    )
     path = tmp_path / "fa.toml"
     path.write_text(text)
     assert main(["tune", str(path), "--out", str(tmp_path / "o"), "--quiet"]) == 0
