@@ -23,6 +23,7 @@ from tuning.export import (
     TOLERANCE,
     add_export_parser,
     compile_and_check,
+    drive_test_signal,
     export_observer,
     observer_from_design,
     observer_from_result,
@@ -166,6 +167,16 @@ def test_default_job_result_exports_and_matches(tmp_path, capsys):
     assert compile_and_check(out) <= TOLERANCE
 
 
+def test_leso_result_says_what_the_job_binds_per_scenario(tmp_path):
+    path = tmp_path / "leso.json"
+    path.write_text(json.dumps({"component": "CLESO", "job": {"component": {}},
+                                "gains": {"tuned": {"omega0": 1200.0, "kp_pll": 130.0, "ki_pll": 8000.0}}}))
+    notes = []
+    obs = observer_from_result(path, notes=notes)
+    assert isinstance(obs, jaxobs.CLESO) and float(obs.omega0) == 1200.0 and isinstance(obs.rule, jaxobs.RK4)
+    assert any("Rs = 0.6, Lq = 0.012, omega0_pll = 0" in n for n in notes), notes
+
+
 def test_result_ts_rule_and_omega_n_are_read_when_present(tmp_path):
     path = _default_job_result(tmp_path, ts=5e-5, rule="Tustin(newton_iters=3)", omega_n=2 * np.pi * 60)
     notes = []
@@ -187,14 +198,78 @@ def test_closed_form_design_from_the_command_line(tmp_path, capsys):
     assert c["gains"]["lam"]["value"] == float(np.float32(linear.sogi_fll_closed_form().lam))
 
 
+_W = 2 * np.pi * 50
+_KP, _KI = (float(g) for g in linear.pll_gains(2 * np.pi * 15.0))
+_DRIVE = {
+    "PureIntegratorFlux": lambda **kw: jaxobs.PureIntegratorFlux(Rs=0.5, L=0.005, kp_pll=_KP, ki_pll=_KI, omega0=_W,
+                                                                 **kw),
+    "LPFFlux": lambda **kw: jaxobs.LPFFlux(Rs=0.5, L=0.005, omega_c=20.0, kp_pll=_KP, ki_pll=_KI, omega0=_W,
+                                           compensate=True, **kw),
+    "SOIFO": lambda **kw: jaxobs.SOIFO(Rs=0.5, L=0.005, k=1.414, lam=0.5, omega0=_W, **kw),
+    "SecondOrderSOIFO": lambda **kw: jaxobs.SecondOrderSOIFO(Rs=0.5, L=0.005, K1=1.56, K2=3.11, lam=1.56**3 / 6.22,
+                                                             omega0=_W, **kw),
+    "CLESO": lambda **kw: jaxobs.CLESO(Rs=0.6, Lq=0.012, **kw),
+    "GILESO": lambda **kw: jaxobs.GILESO(Rs=0.6, Lq=0.012, omega0_pll=_W, **kw),
+    "FALESO": lambda **kw: jaxobs.FALESO(Rs=0.6, Lq=0.012, omega0_pll=_W, **kw),
+}
+
+
+@pytest.mark.parametrize(
+    "name, rule",
+    [(n, None) for n in _DRIVE] + [("SOIFO", jaxobs.Tustin()), ("PureIntegratorFlux", jaxobs.AB3()),
+                                   ("CLESO", jaxobs.Euler()), ("FALESO", jaxobs.Tustin())],
+    ids=lambda v: v if isinstance(v, str) else type(v).__name__ if v is not None else "RK4",
+)
+def test_drive_observers_c_matches_the_float32_jax_step(tmp_path, name, rule):
+    """Flux observers (000) and LESOs with their PLL (002): the C step keeps i_prev, u_prev and the started
+    flag, forms the back EMF (held) or the LESO's current knots (start, middle, end of the period), integrates
+    and returns the outputs after the update; it matches 12 000 steps of a PMSM record with a speed step and
+    an angle jump to 1e-4 (measured 6e-7 ... 3e-5; the LESOs' back EMF, tens of volts, carries the largest)."""
+    _need_cc()
+    c = export_observer(_DRIVE[name](**({} if rule is None else {"rule": rule})), tmp_path)
+    assert c["inputs"] == ["u_a", "u_b", "i_a", "i_b"] and c["golden"]["steps"] >= MIN_STEPS
+    err = compile_and_check(tmp_path)
+    assert err <= TOLERANCE, f"{name} {c['rule']['name']}: max relative error {err:.3g}"
+
+
+def test_drive_observer_files(tmp_path):
+    """A SOIFO: JX_NU = 4 (u_a, u_b, i_a, i_b), JX_NY = 6; jx_state keeps u_prev, i_prev and started; the golden
+    record starts on alpha only (the first back EMF has no beta component) and its first row is the initial
+    state's outputs (the first step only records u and i)."""
+    obs = _DRIVE["SOIFO"]()
+    c = export_observer(obs, tmp_path)
+    h = (tmp_path / "observer.h").read_text()
+    assert "#define JX_NU 4" in h and "#define JX_NY 6" in h and "JX_Y_IS_ANGLE {0, 0, 1, 0, 0, 0}" in h
+    assert "float u_prev[2];" in h and "float i_prev[2];" in h and "int started;" in h
+    data = np.loadtxt(tmp_path / "golden.csv", delimiter=",", skiprows=1)
+    assert data[0, 1] == 0 and data[0, 3] == 0 and data[1, 3] == 0 and data[0, 0] != 0  # beta off in period 1
+    assert np.float32(data[0, 7]) == np.float32(obs.omega0)  # omega output of the initial state
+    assert data[1, 7] > 0 and np.all(data[0, 4:6] == 0)
+    assert c["angle_outputs"] == ["theta"] and "first period on alpha only" in c["golden"]["signal"]
+    assert set(c["ops_per_step"]) >= {"steady", "per_f", "per_out", "per_input"}
+
+
+def test_drive_test_signal_is_a_consistent_machine():
+    """The record's back EMF, computed as the flux observers do (000 eq 6), has |e| = ω(t)ψ (the speed 10 % up
+    from one third on) to 0.1 %, away from the two events."""
+    ts, w, rs, ls, psi, n = 1e-4, _W, 0.5, 0.005, 0.1, 3000
+    data, _ = drive_test_signal(ts, n, omega=w, Rs=rs, L=ls, psi=psi)
+    u, i = data[:, :2].astype(float), data[:, 2:].astype(float)
+    e = u[:-1] - rs * 0.5 * (i[1:] + i[:-1]) - ls * (i[1:] - i[:-1]) / ts  # e over period k (from sample k to k+1)
+    k = np.arange(n - 1)
+    want = w * psi * np.where(k >= n // 3, 1.1, 1.0)
+    away = (np.abs(k - n // 3) > 1) & (np.abs(k - 2 * n // 3) > 1)
+    assert np.allclose(np.hypot(e[:, 0], e[:, 1])[away], want[away], rtol=1e-3)
+
+
 def test_unsupported_components_and_bad_input_raise_clear_errors(tmp_path):
-    with pytest.raises(ValueError, match=r"component SOIFO is not supported yet; supported: SOGIFLL, SOGIFLLWPF"):
-        export_observer(jaxobs.SOIFO(Rs=0.0, L=1.0, k=1.414, lam=0.5, omega0=314.0), tmp_path)
-    with pytest.raises(ValueError, match=r"component CLESO is not supported yet"):
-        export_observer(jaxobs.CLESO(Rs=0.6, Lq=0.012), tmp_path)
+    with pytest.raises(ValueError, match=r"component SOGI is not supported yet; supported: SOGIFLL, SOGIFLLWPF"):
+        export_observer(jaxobs.SOGI(k=1.414), tmp_path)
+    with pytest.raises(ValueError, match=r"SecondOrderSOIFO\(discretization='paper'\) \(000 eqs 22-25\) is not"):
+        export_observer(_DRIVE["SecondOrderSOIFO"](discretization="paper"), tmp_path)
     res = tmp_path / "r.json"
-    res.write_text(json.dumps({"component": "SecondOrderSOIFO", "gains": {"tuned": {}}, "job": {}}))
-    with pytest.raises(ValueError, match="component SecondOrderSOIFO is not supported yet"):
+    res.write_text(json.dumps({"component": "NoSuchObserver", "gains": {"tuned": {}}, "job": {}}))
+    with pytest.raises(ValueError, match="component 'NoSuchObserver' is not a jaxobs component"):
         observer_from_result(res)
     with pytest.raises(ValueError, match="design must be one of sogi-fll, wpf, wif, got 'cleso'"):
         observer_from_design("cleso")

@@ -7,7 +7,8 @@ their derivatives (the Jacobian the Tustin rule's Newton iteration needs),
 counts their operations and evaluates them in NumPy (the export's self-check).
 
 Numbers follow JAX's float32 promotion, so that the C computes what the JAX
-step computes:
+step computes (to rounding: XLA fuses some multiply-adds and turns divisions by
+constants into products):
 
 - a gain (a float32 leaf) is a *named* constant, ``JX_K1``, defined once in
   the header with its float32 value;
@@ -31,14 +32,15 @@ from collections.abc import Iterable
 import numpy as np
 
 __all__ = ["Expr", "var", "const", "named", "scope", "fmax", "sqrt", "sin", "cos", "atan2", "gt", "lt", "eq", "select",
-           "let", "deriv", "Block", "count_ops", "evaluate", "c_float"]
+           "atan", "fabs", "fmod", "let", "deriv", "Block", "count_ops", "evaluate", "c_float"]
 
 _F32 = np.float32
 
 # binary operators: C token and precedence; unary minus and atoms bind tighter
 _BIN = {"add": ("+", 1), "sub": ("-", 1), "mul": ("*", 2), "div": ("/", 2)}
 _CMP = {"gt": ">", "lt": "<", "eq": "=="}
-_FUN = {"sqrt": "sqrtf", "sin": "sinf", "cos": "cosf", "atan2": "atan2f", "fmax": "fmaxf"}
+_FUN = {"sqrt": "sqrtf", "sin": "sinf", "cos": "cosf", "atan": "atanf", "atan2": "atan2f", "fmax": "fmaxf",
+        "fabs": "fabsf", "fmod": "fmodf"}
 _PREC_NEG, _PREC_ATOM = 3, 4
 
 _table: dict = {}
@@ -114,6 +116,11 @@ class Expr:
 
     def __rtruediv__(self, o):
         return _binary("div", o, self)
+
+    def __pow__(self, n):
+        if n != 2:
+            raise ValueError(f"only squares are written as C (x * x, as lax.integer_pow), got power {n!r}")
+        return self * self
 
     def __neg__(self):
         if self.op == "const":
@@ -203,6 +210,19 @@ def cos(a) -> Expr:
 
 def atan2(y, x) -> Expr:
     return _fun("atan2", y, x)
+
+
+def atan(a) -> Expr:
+    return _fun("atan", a)
+
+
+def fabs(a) -> Expr:
+    return _fun("fabs", a)
+
+
+def fmod(a, b) -> Expr:
+    """C ``fmodf`` (XLA's ``rem``): the remainder with the sign of ``a``."""
+    return _fun("fmod", a, b)
 
 
 def gt(a, b) -> Expr:
@@ -304,6 +324,14 @@ def deriv(e: Expr, x: Expr, memo: dict | None = None) -> Expr:
             d = _dmul(cos(a[0]), da[0])
         elif op == "cos":
             d = -_dmul(sin(a[0]), da[0]) if not _zero(da[0]) else const(0.0)
+        elif op == "atan":
+            d = _ddiv(da[0], 1.0 + a[0] * a[0])
+        elif op == "fabs":
+            d = select(lt(a[0], 0.0), -da[0], da[0]) if not _zero(da[0]) else const(0.0)
+        elif op == "fmod":  # d fmod(a, b)/da = 1 between the jumps
+            if not _zero(da[1]):
+                raise ValueError("fmod by a varying divisor is not differentiated here")
+            d = da[0]
         elif op == "atan2":  # d atan2(y, x) = (x dy − y dx)/(x² + y²)
             num = _dsub(_dmul(a[1], da[0]), _dmul(a[0], da[1]))
             d = _ddiv(num, a[1] * a[1] + a[0] * a[0])
@@ -414,6 +442,12 @@ def evaluate(roots: Iterable[Expr], env: dict, dtype=np.float32) -> list:
                 v = np.cos(a[0])
             elif op == "atan2":
                 v = np.arctan2(a[0], a[1])
+            elif op == "atan":
+                v = np.arctan(a[0])
+            elif op == "fabs":
+                v = np.abs(a[0])
+            elif op == "fmod":
+                v = np.fmod(a[0], a[1])
             elif op == "fmax":
                 v = np.maximum(a[0], a[1])
             elif op == "gt":
@@ -467,7 +501,7 @@ class Block:
                 name = node.hint or f"t{len(taken)}"
                 k = 2
                 while name in taken or name in self.reserved:
-                    name = f"{node.hint or 't'}{k}"
+                    name = f"{node.hint}_{k}" if node.hint else f"t{len(taken) + k}"
                     k += 1
                 taken.add(name)
                 ctype = "int" if node.op in _CMP else "float"

@@ -5,7 +5,8 @@ initialization, its helper functions and the statements that advance
 ``s->x`` by one period into ``x1`` — with the rule's constants and its
 operation count, computed from the loops it writes (``per_f`` and ``per_jac``
 are the counts of one call of ``jx_f`` and ``jx_jac``).  The C follows the
-Python line for line, so it rounds as the JAX step rounds:
+Python line for line, the same float32 operations in the same order (XLA may
+still fuse some multiply-adds, so the two agree to rounding, not bit for bit):
 
 - Euler:  x₊ = x + f(x, u)·h                                   (``diffrax.Euler``)
 - RK4:    the classic tableau, ``rk4_step``
@@ -14,7 +15,10 @@ Python line for line, so it rounds as the JAX step rounds:
           Euler predictor, the Newton matrix I − h/2 ∂f/∂x solved by unpivoted Gauss
           elimination (``solve_small``)
 
-The input is held over the period (zero-order hold, ``jaxobs.discretize.Held``).
+``jx_f(x, e, dx)`` takes the input at the stage's time: ``@E0``, ``@EM`` and ``@E1`` in
+``advance`` stand for the input arrays at the start, middle and end of the period (all three
+the same array for a held input, ``jaxobs.discretize.Held``; three knots for
+``jaxobs.discretize.Knots``, which the LESOs use for the current).
 """
 
 from __future__ import annotations
@@ -64,17 +68,18 @@ class RuleC:
 
 _LOOP = "for (i = 0; i < JX_NX; ++i)"
 
-_RK4_FN = f"""/* Classic RK4 over one period with the input held, k1 = f(x, u) given (jaxobs.discretize.rk4_step). */
-static void jx_rk4(const float *x, const float *u, const float *k1, float *x1)
+_RK4_FN = f"""/* Classic RK4 over one period (jaxobs.discretize.rk4_step): k1 = f(x, e(0)) given,
+ * eh = e(1/2), e1 = e(1). */
+static void jx_rk4(const float *x, const float *eh, const float *e1, const float *k1, float *x1)
 {{
     float k2[JX_NX], k3[JX_NX], k4[JX_NX], xt[JX_NX];
     int i;
     {_LOOP} xt[i] = x[i] + JX_H_2 * k1[i];
-    jx_f(xt, u, k2);
+    jx_f(xt, eh, k2);
     {_LOOP} xt[i] = x[i] + JX_H_2 * k2[i];
-    jx_f(xt, u, k3);
+    jx_f(xt, eh, k3);
     {_LOOP} xt[i] = x[i] + JX_H * k3[i];
-    jx_f(xt, u, k4);
+    jx_f(xt, e1, k4);
     {_LOOP} x1[i] = x[i] + JX_H_6 * (k1[i] + 2.0f * k2[i] + 2.0f * k3[i] + k4[i]);
 }}
 """
@@ -100,7 +105,7 @@ def euler(rule: Euler, h: float, nx: int, per_f: dict, per_jac=None) -> RuleC:
         "Euler", "forward Euler (diffrax.Euler): x+ = x + f(x, u) h",
         _h_consts(h, "JX_H"),
         locals=["float f0[JX_NX];"],
-        advance=f"    jx_f(s->x, u, f0);\n    {_LOOP} x1[i] = s->x[i] + f0[i] * JX_H;",
+        advance=f"    jx_f(s->x, @E0, f0);\n    {_LOOP} x1[i] = s->x[i] + f0[i] * JX_H;",
         ops_steady=ops_sum((1, per_f), (nx, ops(add=1, mul=1))),
     )
 
@@ -111,15 +116,15 @@ def rk4(rule: RK4, h: float, nx: int, per_f: dict, per_jac=None) -> RuleC:
         _h_consts(h, "JX_H", "JX_H_2", "JX_H_6"),
         functions=_RK4_FN,
         locals=["float f0[JX_NX];"],
-        advance="    jx_f(s->x, u, f0);\n    jx_rk4(s->x, u, f0, x1);",
+        advance="    jx_f(s->x, @E0, f0);\n    jx_rk4(s->x, @EM, @E1, f0, x1);",
         ops_steady=ops_sum((1, per_f), (1, _rk4_ops(nx, per_f))),
     )
 
 
 def ab3(rule: AB3, h: float, nx: int, per_f: dict, per_jac=None) -> RuleC:
-    advance = f"""    jx_f(s->x, u, f0);
+    advance = f"""    jx_f(s->x, @E0, f0);
     if (s->n < 2) {{  /* start-up: no history yet, RK4 (jaxobs.discretize.AB3) */
-        jx_rk4(s->x, u, f0, x1);
+        jx_rk4(s->x, @EM, @E1, f0, x1);
         s->n += 1;
     }} else {{  /* 001 Sec. VI: y[n] = y[n-1] + (Ts/12)(23 x[n-1] - 16 x[n-2] + 5 x[n-3]) */
         {_LOOP} x1[i] = s->x[i] + JX_H_12 * (23.0f * f0[i] - 16.0f * s->f1[i] + 5.0f * s->f2[i]);
@@ -176,22 +181,22 @@ def tustin(rule: Tustin, h: float, nx: int, per_f: dict, per_jac: dict) -> RuleC
         raise ValueError(f"export: the Tustin rule is written in C for at most 12 states (solve_small), got {nx}")
     iters = rule.newton_iters
     fn = _SOLVE_FN + f"""
-/* Implicit trapezoidal rule: x+ = x + h/2 [f(x, u) + f(x+, u)], solved by JX_NEWTON_ITERS Newton
+/* Implicit trapezoidal rule: x+ = x + h/2 [f(x, e0) + f(x+, e1)], solved by JX_NEWTON_ITERS Newton
  * iterations from the Euler predictor (jaxobs.discretize.Tustin). */
-static void jx_tustin(const float *x, const float *u, float *x1)
+static void jx_tustin(const float *x, const float *e0, const float *e1, float *x1)
 {{
     float f0[JX_NX], c[JX_NX], fy[JX_NX], r[JX_NX], d[JX_NX], J[JX_NX * JX_NX], a[JX_NX * JX_NX];
     int i, j, it;
-    jx_f(x, u, f0);
+    jx_f(x, e0, f0);
     {_LOOP} {{
         c[i] = x[i] + JX_H_2 * f0[i];
         x1[i] = x[i] + JX_H * f0[i];
     }}
     for (it = 0; it < JX_NEWTON_ITERS; ++it) {{
-        jx_jac(x1, u, J);
+        jx_jac(x1, e1, J);
         {_LOOP}
             for (j = 0; j < JX_NX; ++j) a[i * JX_NX + j] = (i == j ? 1.0f : 0.0f) - JX_H_2 * J[i * JX_NX + j];
-        jx_f(x1, u, fy);
+        jx_f(x1, e1, fy);
         {_LOOP} r[i] = x1[i] - c[i] - JX_H_2 * fy[i];
         jx_solve(a, r, d);
         {_LOOP} x1[i] = x1[i] - d[i];
@@ -204,7 +209,7 @@ static void jx_tustin(const float *x, const float *u, float *x1)
         "Tustin", f"implicit trapezoidal (Tustin), {iters} Newton iteration(s) from an Euler predictor",
         _h_consts(h, "JX_H", "JX_H_2"),
         functions=fn,
-        advance="    jx_tustin(s->x, u, x1);",
+        advance="    jx_tustin(s->x, @E0, @E1, x1);",
         ops_steady=ops_sum((1, per_f), (nx, ops(add=2, mul=2)), (iters, per_iter)),
         uses_jac=True,
         newton_iters=iters,

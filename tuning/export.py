@@ -12,13 +12,18 @@ writes to DIR:
   operator (:mod:`tuning._cmodels`), integrated by the same rule at the same ``ts``
   (:mod:`tuning._crules`: Euler, Tustin with its Newton iterations and Jacobian,
   AB3 with its RK4 start-up and history, RK4), gains baked in as float32
-  constants.  As in :mod:`jaxobs.observers.base`, ``jx_step`` of a signal-level
-  observer (the FLL family) returns the outputs of the state *before* the update.
+  constants.  The step convention is :mod:`jaxobs.observers.base`'s: an FLL
+  (signal-level) returns the outputs of the state *before* the update; a flux
+  observer or LESO (drive observer) keeps the previous current and voltage,
+  integrates the period that just ended (back EMF of 000 eq 6, or the LESO's
+  current interpolated over the period) and returns the outputs after it.
   The header's comment gives the operation count per step;
 - ``golden.csv``: a header line, then per step the ``JX_NU`` inputs and the ``JX_NY``
   outputs of the JAX step run in float32 (``lax.scan`` of ``observer.step``) over a
-  test signal of ≥ 10 000 samples: a 50 Hz (ωn) unit sine with a +2 Hz frequency step
-  at one third and a +40° phase jump at two thirds of the record;
+  test record of ≥ 10 000 samples: for an FLL a unit sine at ωn with a +2 Hz step at
+  one third and a +40° phase jump at two thirds (:func:`fll_test_signal`); for a drive
+  observer the voltages and currents of a PMSM with a +10 % speed step and a +30°
+  angle jump (:func:`drive_test_signal`), or a recording passed as ``signal``;
 - ``coefficients.json``: the discrete-time step's coefficients (gains, rule constants,
   initial state), the step convention and the operation count;
 - ``test_main.c``: the harness: replays golden.csv through ``jx_step`` and fails if
@@ -28,13 +33,18 @@ writes to DIR:
 (``cc -std=c99 -O2 -Wall -Werror -pedantic``) and returns that error; the tests do
 it for every supported observer and for the default job's result.
 
-Supported: the FLL family of paper 001 (SOGIFLL, SOGIFLLWPF, SOGIFLLWIF).  The drive
-observers (flux observers of 000, LESOs of 002 with their PLL) are not written yet:
-exporting one raises a ``ValueError`` naming it.
+Supported: the FLL family of 001 (SOGIFLL, SOGIFLLWPF, SOGIFLLWIF), the flux observers
+of 000 (PureIntegratorFlux, LPFFlux, SOIFO, SecondOrderSOIFO with ``discretization="rule"``)
+and the LESOs of 002 with their PLL (CLESO, GILESO, FALESO); anything else raises a
+``ValueError`` naming it.
 
-Before writing, the export evaluates the emitted vector field and outputs at random
-states and compares them with the observer's own ``f`` and ``output``, so an emitter
-that drifts from the JAX cores fails at export time, not on the target.
+The C cannot be bit-identical to XLA's float32 (XLA contracts multiply-adds into FMAs
+and rewrites divisions by constants), so the check is a tolerance, and the golden
+records avoid the few instants where an output is discontinuous in the state: see
+:func:`drive_test_signal` (the first period of the drive records).  Before writing, the
+export evaluates the emitted vector field (and outputs) at random states and compares
+them with the observer's own, so an emitter that drifts from the JAX cores fails at
+export time, not on the target.
 """
 
 from __future__ import annotations
@@ -48,6 +58,7 @@ import subprocess
 import tempfile
 from importlib import resources
 from pathlib import Path
+from typing import NamedTuple
 
 import equinox as eqx
 import jax
@@ -57,10 +68,11 @@ import numpy as np
 from jaxobs.discretize import AB3, RK4, Euler, Tustin
 
 from . import _cexpr as cx
-from ._cmodels import CModel, model_for, supported
+from ._cmodels import MEMORY, CModel, model_for, supported
 from ._crules import RuleC, needs_jacobian, ops_sum, ops_total, rule_c
 
 __all__ = ["export_observer", "observer_from_result", "observer_from_design", "compile_and_check", "fll_test_signal",
+           "drive_test_signal",
            "add_export_parser", "cli_export", "DESIGNS", "TOLERANCE", "MIN_STEPS"]
 
 TOLERANCE = 1e-4  # max |y_C − y_golden| / (1 + |y_golden|)
@@ -158,6 +170,10 @@ def observer_from_result(path, *, gains: str = "tuned", notes: list | None = Non
         kw["rule"] = parse_rule(res["rule"], "result.json rule")
     else:
         notes.append(f"result.json has no 'rule': the {name} default {type(probe.rule).__name__} is used")
+    if info.bind is not None:
+        bound = ", ".join(f"{k} = {float(getattr(probe, k)):g}" for k in ("Rs", "Lq", "omega0_pll")
+                          if hasattr(probe, k))
+        notes.append(f"the job sets Rs, Lq and the PLL's initial speed per scenario; exported with {bound}")
     diverged = res.get("scores", {}).get(gains, {}).get("diverged") if gains in res.get("scores", {}) else None
     if diverged:
         notes.append(f"the {gains} design diverged on {diverged} of the job's scenarios")
@@ -181,14 +197,78 @@ def observer_from_design(name: str, **kw):
 def fll_test_signal(ts: float, n_steps: int, f0: float = 50.0, amplitude: float = 1.0):
     """Unit sine at ``f0`` with a +2 Hz step at n/3 and a +40° phase jump at 2n/3 (GridSignal's settle-then-disturb).
 
-    Returns (samples as float32, shape (n_steps,), a one-line description).
+    Returns (samples as float32, shape (n_steps, 1), a one-line description).
     """
     t = np.arange(n_steps) * ts
     t1, t2 = (n_steps // 3) * ts, (2 * n_steps // 3) * ts
     theta = 2 * np.pi * f0 * t + np.where(t >= t1, 2 * np.pi * 2.0 * (t - t1), 0.0)
     theta = theta + np.where(t >= t2, np.radians(40.0), 0.0)
     v = (amplitude * np.cos(theta)).astype(np.float32)
-    return v, f"{amplitude:g} cos at {f0:g} Hz, +2 Hz step at {t1:g} s, +40 deg phase jump at {t2:g} s, ts = {ts:g} s"
+    doc = f"{amplitude:g} cos at {f0:g} Hz, +2 Hz step at {t1:g} s, +40 deg phase jump at {t2:g} s, ts = {ts:g} s"
+    return v[:, None], doc
+
+
+def drive_test_signal(ts: float, n_steps: int, *, omega: float, Rs: float, L: float, psi: float = 0.1,
+                      current: float | None = None, start: str = ""):
+    """Sampled (u_α, u_β, i_α, i_β) of a surface PMSM turning at electrical speed ``omega``, with a +10 % speed
+    step at n/3 and a +30° angle jump at 2n/3.
+
+    θ(0) = π/2; i = I (−sin θ, cos θ) (q-axis current, I = min(5 A, ψ/(2L)) unless given),
+    e = ω ψ (−sin θ, cos θ) (002 eq 5), u = R i + L di/dt + e.  ``u`` at sample k is the voltage applied
+    over [t_k, t_k+1] (its period average: R i + e averaged over 8 midpoints, L Δi/ts exactly), as a drive
+    observer expects; ``i`` is sampled at t_k.  Returns (float32 array (n_steps, 4), a one-line description).
+
+    ``start`` shapes the first period so that the outputs are well conditioned from the first step
+    (otherwise a float32 implementation other than XLA's own, bit for bit, cannot be held to 1e-4 there):
+
+    - ``"flux"``: the first voltage sample also carries ψ(0)/ts, the flux the integrators cannot know
+      (000's initial-value problem).  A pure integrator started at 0 estimates ψ(t) − ψ(0), which passes
+      through 0 once per turn, where atan2 turns rounding into any angle;
+    - ``"alpha"``: the first voltage and the first two current samples have no β component, so the first
+      back EMF is on α only.  After a single back-EMF sample the two SOGIs of a SOIFO hold proportional
+      states, the cross product whose sign gives the direction of rotation is 0 but for rounding, and
+      the signed ω̂ is ±|ω̂| by chance; with a β-free first sample that product is exactly 0.
+    """
+    if start not in ("", "flux", "alpha"):
+        raise ValueError(f"drive_test_signal: start must be '', 'flux' or 'alpha', got {start!r}")
+    current = min(5.0, 0.5 * psi / L) if current is None else current
+    t1, t2 = (n_steps // 3) * ts, (2 * n_steps // 3) * ts
+
+    def theta(t):
+        return (np.pi / 2 + omega * t + np.where(t >= t1, 0.1 * omega * (t - t1), 0.0)
+                + np.where(t >= t2, np.radians(30.0), 0.0))
+
+    def cur(t):
+        th = theta(t)
+        return current * np.stack([-np.sin(th), np.cos(th)], axis=-1)
+
+    def emf(t):
+        th = theta(t)
+        w = omega * np.where(t >= t1, 1.1, 1.0)
+        return (w * psi)[..., None] * np.stack([-np.sin(th), np.cos(th)], axis=-1)
+
+    t = np.arange(n_steps + 1) * ts
+    mid = t[:-1, None] + (np.arange(8) + 0.5) / 8 * ts
+    u = np.mean(Rs * cur(mid) + emf(mid), axis=1) + L * (cur(t[1:]) - cur(t[:-1])) / ts
+    i = cur(t[:-1])
+    if start == "flux":
+        th0 = theta(np.asarray(0.0))
+        u[0] += psi * np.array([np.cos(th0), np.sin(th0)]) / ts
+    elif start == "alpha":
+        u[0, 1] = i[0, 1] = i[1, 1] = 0.0
+    data = np.concatenate([u, i], axis=1).astype(np.float32)
+    first = {"": "", "flux": ", first period carries psi(0)/ts", "alpha": ", first period on alpha only"}[start]
+    doc = (f"PMSM u/i at {omega / (2 * np.pi):g} Hz electrical (psi = {psi:g} Wb, I = {current:.3g} A, "
+           f"Rs = {Rs:g} ohm, L = {L:g} H){first}, +10 % speed step at {t1:g} s, +30 deg angle jump at {t2:g} s, "
+           f"ts = {ts:g} s")
+    return data, doc
+
+
+class _Meas(NamedTuple):  # what a drive observer's step reads (jaxobs.drive's DriveInput fields)
+    u_a: jax.Array
+    u_b: jax.Array
+    i_a: jax.Array
+    i_b: jax.Array
 
 
 def _float32(observer):
@@ -198,7 +278,8 @@ def _float32(observer):
 @eqx.filter_jit
 def _scan_outputs(observer, u):
     # one compile per observer class and rule: the gains are traced leaves
-    _, out = jax.lax.scan(lambda s, x: observer.step(s, x), observer.init(u[0]), u)
+    u0 = jax.tree.map(lambda a: a[0], u)
+    _, out = jax.lax.scan(lambda s, x: observer.step(s, x), observer.init(u0), u)
     return out
 
 
@@ -206,7 +287,9 @@ def _golden(obs32, model: CModel, u: np.ndarray) -> np.ndarray:
     # 64-bit types off: every number in the step is float32, as on the target (some rules, e.g.
     # diffrax's Euler, would otherwise promote a float32 state with a float64 step size)
     with jax.enable_x64(False):
-        out = _scan_outputs(obs32, jnp.asarray(u, jnp.float32))
+        uj = jnp.asarray(u, jnp.float32)
+        inputs = uj[:, 0] if model.kind == "signal" else _Meas(*(uj[:, k] for k in range(4)))
+        out = _scan_outputs(obs32, inputs)
     names = list(type(out)._fields)
     if names != model.outputs:
         raise AssertionError(f"export: {model.component} outputs {names} differ from the C model's {model.outputs}")
@@ -218,55 +301,49 @@ def _golden(obs32, model: CModel, u: np.ndarray) -> np.ndarray:
 
 
 def _self_check(obs32, model: CModel, n_points: int = 8):
-    """The emitted f and outputs against the observer's own, in float32 at random states."""
+    """The emitted f (and outputs) against the observer's own, in float32 at random states and inputs."""
     rng = np.random.default_rng(0)
     x0 = model.x0.astype(np.float64)
     for _ in range(n_points):
         x = (x0 + rng.normal(size=x0.shape) * np.maximum(1.0, 0.1 * np.abs(x0))).astype(np.float32)
-        u = rng.normal(size=len(model.inputs)).astype(np.float32)
-        env = {**dict(zip(model.states, x)), **dict(zip(model.inputs, u))}
-        got_f = np.asarray(cx.evaluate(model.f, env), np.float64)
-        got_y = np.asarray(cx.evaluate(model.out, env), np.float64)
-        with jax.enable_x64(False):
-            want_f = np.asarray(obs32.f(jnp.asarray(x), jnp.float32(u[0])), np.float64)
-            want_y = np.asarray([np.float64(v) for v in obs32.output(jnp.asarray(x))])
-        pairs = (("vector field", got_f, want_f, model.states), ("output", got_y, want_y, model.outputs))
-        for what, got, want, names in pairs:
+        e = (rng.normal(size=len(model.field)) * 10.0).astype(np.float32)
+        env = {**dict(zip(model.states, x)), **dict(zip(model.field, e))}
+        checks = [("vector field", cx.evaluate(model.f, env), model.jax_f, model.states)]
+        if model.jax_out is not None:
+            checks.append(("output", cx.evaluate(model.out, env), model.jax_out, model.outputs))
+        for what, got, jax_fn, names in checks:
+            with jax.enable_x64(False):
+                want = jax_fn(obs32, jnp.asarray(x), jnp.asarray(e))
+                want = np.asarray([np.float64(v) for v in (want if isinstance(want, tuple) else list(want))])
+            got = np.asarray(got, np.float64)
             bad = np.abs(got - want) > 1e-4 * (1 + np.abs(want))
             if np.any(bad):
                 i = int(np.argmax(bad))
                 raise AssertionError(f"export: the C {what} of {model.component} differs from the JAX one at "
-                                     f"{names[i]}: {got[i]!r} vs {want[i]!r} (x = {x.tolist()}, u = {u.tolist()})")
+                                     f"{names[i]}: {got[i]!r} vs {want[i]!r} (x = {x.tolist()}, e = {e.tolist()})")
 
 
 # --------------------------------------------------------------------------------------------
 # writing C
 # --------------------------------------------------------------------------------------------
 
-
-def _vars_used(roots) -> list[str]:
-    return [n.value for n in cx._topo(roots) if n.op == "var"]
+_PARAMS = {"x", "e", "e0", "em", "e1", "u", "dx", "y", "J", "s", "i"}  # C names the functions use
 
 
-def _preamble(model: CModel, roots, with_inputs: bool) -> list[str]:
-    used = set(_vars_used(roots))
-    lines = [f"    const float {s} = x[{i}];" for i, s in enumerate(model.states) if s in used]
-    if with_inputs:
-        lines += [f"    const float {s} = u[{i}];" for i, s in enumerate(model.inputs) if s in used]
-    return lines
-
-
-def _c_function(signature: str, doc: str, model: CModel, assigns, with_inputs: bool) -> str:
+def _c_function(signature: str, doc: str, assigns, bindings: dict) -> str:
+    """A C function: locals for the variables it uses (``bindings``: name -> (type, source)), then the assignments."""
     roots = [e for _, e in assigns]
-    clash = {"x", "u", "dx", "y", "J"} & (set(model.states) | set(model.inputs))
-    if clash:
-        raise AssertionError(f"export: {model.component}: state or input names {sorted(clash)} clash with C parameters")
-    body = _preamble(model, roots, with_inputs)
-    used = set(_vars_used(roots))
-    if with_inputs and not any(s in used for s in model.inputs):
-        body.append("    (void)u;")
-    block = cx.Block(reserved=set(model.states) | set(model.inputs) | {"x", "u", "dx", "y", "J"})
+    used = {n.value for n in cx._topo(roots) if n.op == "var"}
+    missing = used - set(bindings)
+    if missing:
+        raise AssertionError(f"export: {signature}: no source for {sorted(missing)}")
+    body = [f"    const {t} {name} = {src};" for name, (t, src) in bindings.items() if name in used]
+    block = cx.Block(reserved=set(bindings) | _PARAMS)
     body.append(block.emit(assigns))
+    sources = [bindings[n][1] for n in used]
+    for arr in ("e", "u"):  # an input array the function does not read (e.g. the outputs of a LESO)
+        if f"const float *{arr}," in signature and not any(src.startswith(f"{arr}[") for src in sources):
+            body.append(f"    (void){arr};")
     return f"/* {doc} */\n{signature}\n{{\n" + "\n".join(body) + "\n}\n"
 
 
@@ -284,8 +361,19 @@ def _json_ops(o: dict) -> dict:
     return {**{k: o[k] for k in kinds}, "calls": dict(sorted(o["calls"].items())), "total": ops_total(o)}
 
 
+_STEP_DOC = {
+    "signal": """ * jx_step returns the estimate at t_n from the samples before t_n: the outputs of the state before
+ * u is integrated over the period (jaxobs/observers/base.py, signal-level observers).""",
+    "drive": """ * u = (u_a, u_b, i_a, i_b): the current sampled at t_n and the voltage about to be applied.  jx_step
+ * integrates the period that just ended (the voltage given one step earlier, the current from
+ * i_prev to i) and returns the estimate at t_n (jaxobs/observers/base.py, drive observers); the
+ * first call only records u and i.""",
+}
+
+
 def _emit(obs32, model: CModel, rule: RuleC, jac, source: str, notes, ops: dict) -> tuple[str, str]:
-    nx, nu, ny = len(model.states), len(model.inputs), len(model.outputs)
+    nx, nu, ny, ne = len(model.states), len(model.inputs), len(model.outputs), len(model.field)
+    drive = model.kind == "drive"
     angle_mask = ", ".join("1" if i in model.angles else "0" for i in range(ny))
     gains_doc = "\n".join(f" *   {m:<14} {cx.c_float(v):<16} {k}" for k, (m, v) in model.gains.items())
     statics = ", ".join(f"{k} = {v!r}" for k, v in model.statics.items())
@@ -297,6 +385,11 @@ def _emit(obs32, model: CModel, rule: RuleC, jac, source: str, notes, ops: dict)
     in_doc = "\n".join(f" *   u[{i}]  {d}" for i, d in enumerate(model.input_doc))
     out_doc = "\n".join(f" *   y[{i}]  {d}" for i, d in enumerate(model.output_doc))
     st_doc = "\n".join(f" *   x[{i}]  {s}: {d}" for i, (s, d) in enumerate(zip(model.states, model.state_doc)))
+    memory = ""
+    if drive:
+        memory = ("    float u_prev[2]; /* voltage applied over the period ending at the next sample (V) */\n"
+                  "    float i_prev[2]; /* current at the previous sample (A) */\n"
+                  "    int started;     /* 0 until the first sample has been seen */\n")
     header = f"""/* observer.h -- {model.component} exported by `jaxobs export` (float32, C99).
  *
  * {model.reference}.
@@ -309,8 +402,7 @@ def _emit(obs32, model: CModel, rule: RuleC, jac, source: str, notes, ops: dict)
  * Call jx_init(&s) once, then jx_step(&s, u, y) once per sample period:
 {in_doc}
 {out_doc}
- * jx_step returns the estimate at t_n from the samples before t_n: the outputs of the state before
- * u is integrated over the period (jaxobs/observers/base.py, signal-level observers).
+{_STEP_DOC[model.kind]}
  *
  * State (jx_state.x, as the JAX observer's flat state):
 {st_doc}
@@ -335,7 +427,7 @@ extern "C" {{
 
 typedef struct {{
     float x[JX_NX]; /* {', '.join(model.states)} */
-{''.join(f'    {f}{chr(10)}' for f in rule.state_fields)}}} jx_state;
+{memory}{''.join(f'    {f}{chr(10)}' for f in rule.state_fields)}}} jx_state;
 
 void jx_init(jx_state *s);
 void jx_step(jx_state *s, const float *u, float *y);
@@ -348,22 +440,72 @@ void jx_step(jx_state *s, const float *u, float *y);
 """
     macros = [f"#define {m} {cx.c_float(v)} /* {k} */" for k, (m, v) in model.gains.items()]
     macros += [f"#define {m} {cx.c_float(v)} /* {doc} */" for m, v, doc in rule.constants]
+    macros.append(f"#define JX_NE {ne} /* inputs of f: {', '.join(model.field)} */")
     if rule.uses_jac:
         macros.append(f"#define JX_NEWTON_ITERS {rule.newton_iters}")
-    funcs = [_c_function("static void jx_f(const float *x, const float *u, float *dx)",
-                         "vector field dx/dt = f(x, u) (the observer's f, per core as in jaxobs/observers/_cores.py)",
-                         model, [(f"dx[{i}]", e) for i, e in enumerate(model.f)], True),
-             _c_function("static void jx_out(const float *x, float *y)",
-                         "outputs of the state x (the observer's output)", model,
-                         [(f"y[{i}]", e) for i, e in enumerate(model.out)], False)]
+
+    xs = {s: ("float", f"x[{i}]") for i, s in enumerate(model.states)}
+    es = {s: ("float", f"e[{i}]") for i, s in enumerate(model.field)}
+    f_doc = {"signal": "the sample v", "drive": "the back EMF (V)" if model.path == "held" else "(u, i) at the stage"}
+    funcs = [_c_function("static void jx_f(const float *x, const float *e, float *dx)",
+                         f"vector field dx/dt = f(x, e), e = {f_doc[model.kind]} (the observer's f; cores as in "
+                         "jaxobs/observers/_cores.py)", [(f"dx[{i}]", e) for i, e in enumerate(model.f)], {**xs, **es})]
+    if drive:
+        funcs.append(_c_function("static void jx_out(const float *x, const float *e, float *y)",
+                                 "outputs of the state x after the period with input e (the observer's outputs)",
+                                 [(f"y[{i}]", e) for i, e in enumerate(model.out)], {**xs, **es}))
+    else:
+        funcs.append(_c_function("static void jx_out(const float *x, float *y)",
+                                 "outputs of the state x (the observer's output)",
+                                 [(f"y[{i}]", e) for i, e in enumerate(model.out)], xs))
     if rule.uses_jac:
-        funcs.append(_c_function("static void jx_jac(const float *x, const float *u, float *J)",
+        funcs.append(_c_function("static void jx_jac(const float *x, const float *e, float *J)",
                                  "Jacobian J[i * JX_NX + j] = d f_i / d x_j (Tustin's Newton iteration)",
-                                 model, [(f"J[{i * nx + j}]", jac[i][j]) for i in range(nx) for j in range(nx)], True))
+                                 [(f"J[{i * nx + j}]", jac[i][j]) for i in range(nx) for j in range(nx)], {**xs, **es}))
+    if drive:
+        arrays = ["e"] if model.path == "held" else ["e0", "em", "e1"]
+        sig = ", ".join(f"float *{a}" for a in arrays)
+        mem = {n: ("float", src) for n, src in MEMORY.items()}
+        us = {s: ("float", f"u[{i}]") for i, s in enumerate(model.inputs)}
+        what = ("the back EMF over the period just ended (000 eq 6), 0 before the first sample" if model.path == "held"
+                else "(u, i) at the start, middle and end of the period just ended: voltage held, current linear")
+        funcs.append(_c_function(f"static void jx_input(const jx_state *s, const float *u, {sig})", what,
+                                 [(f"{a}[{k}]", e) for a, k, e in model.period_input],
+                                 {**us, **mem, "started": ("int", "s->started")}))
+    if model.post:
+        funcs.append(_c_function("static void jx_post(float *x)", "the updated state's angle wrapped to (-pi, pi]",
+                                 [(f"x[{i}]", e) for i, e in model.post], xs))
+
     init = [f"    s->x[{i}] = {cx.c_float(v)}; /* {s} */" for i, (s, v) in enumerate(zip(model.states, model.x0))]
+    if drive:
+        init += ["    s->u_prev[0] = s->u_prev[1] = 0.0f;", "    s->i_prev[0] = s->i_prev[1] = 0.0f;",
+                 "    s->started = 0;"]
     init += [f"    {line}" for line in rule.init]
     init_decl = "    int i;\n" if any("for (i" in line for line in rule.init) else ""
     locals_ = "".join(f"    {d}\n" for d in rule.locals)
+    if not drive:
+        advance = rule.advance.replace("@E0", "u").replace("@EM", "u").replace("@E1", "u")
+        step = f"""    jx_out(s->x, y); /* the estimate at t_n: the state before this sample is integrated */
+{advance}
+    for (i = 0; i < JX_NX; ++i) s->x[i] = x1[i];"""
+    else:
+        held = model.path == "held"
+        e0, em, e1 = ("e", "e", "e") if held else ("e0", "em", "e1")
+        advance = rule.advance.replace("@E0", e0).replace("@EM", em).replace("@E1", e1)
+        locals_ += "    float e[JX_NE];\n" if held else "    float e0[JX_NE], em[JX_NE], e1[JX_NE];\n"
+        post = "    jx_post(x1);\n" if model.post else ""
+        step = f"""    jx_input(s, u, {'e' if held else 'e0, em, e1'});
+{advance}
+    if (!s->started) {{ /* the first sample only records u and i */
+        for (i = 0; i < JX_NX; ++i) x1[i] = s->x[i];
+    }}
+{post}    for (i = 0; i < JX_NX; ++i) s->x[i] = x1[i];
+    s->u_prev[0] = u[0];
+    s->u_prev[1] = u[1];
+    s->i_prev[0] = u[2];
+    s->i_prev[1] = u[3];
+    s->started = 1;
+    jx_out(s->x, {e1}, y); /* the estimate at t_n, after the period just ended */"""
     source_c = f"""/* observer.c -- {model.component} exported by `jaxobs export`; see observer.h. */
 #include <math.h>
 
@@ -382,9 +524,7 @@ void jx_step(jx_state *s, const float *u, float *y)
 {{
     float x1[JX_NX];
 {locals_}    int i;
-    jx_out(s->x, y); /* the estimate at t_n: the state before this sample is integrated */
-{rule.advance}
-    for (i = 0; i < JX_NX; ++i) s->x[i] = x1[i];
+{step}
 }}
 """
     return header, source_c
@@ -399,15 +539,23 @@ def _harness() -> str:
 # --------------------------------------------------------------------------------------------
 
 
+def _machine(obs) -> tuple[float, float]:
+    """(R̂s, L̂) the drive observer assumes: the golden signal's machine."""
+    L = obs.L if hasattr(obs, "L") else obs.Lq
+    return float(obs.Rs), float(L)
+
+
 def export_observer(observer, out_dir, *, n_steps: int = 12_000, signal=None, source: str = "", notes=()) -> dict:
     """Write ``observer`` as C99 float32 with its golden vectors into ``out_dir``; returns coefficients.json's content.
 
     Args:
-        observer: a supported jaxobs observer (SOGIFLL, SOGIFLLWPF, SOGIFLLWIF); its gains are
+        observer: a supported jaxobs observer (FLL family, flux observers, LESOs); its gains are
             rounded to float32, as the C holds them.
         out_dir: folder for observer.h, observer.c, test_main.c, golden.csv, coefficients.json.
-        n_steps: length of the default test signal (:func:`fll_test_signal`), >= 10 000.
-        signal: instead of the default, the inputs per step, shape (n,) or (n, JX_NU).
+        n_steps: length of the default test signal (:func:`fll_test_signal` for the FLL family,
+            :func:`drive_test_signal` for drive observers), >= 10 000.
+        signal: instead of the default, the inputs per step, shape (n,) or (n, JX_NU) (drive
+            observers: columns u_a, u_b, i_a, i_b, e.g. recorded from a drive simulation).
         source: where the design comes from (a result file, a closed form), for the header.
         notes: lines recorded in the header and coefficients.json (e.g. defaults used).
     """
@@ -425,9 +573,17 @@ def export_observer(observer, out_dir, *, n_steps: int = 12_000, signal=None, so
                    for fi in model.f]
             per_jac = cx.count_ops([e for row in jac for e in row])
         rule = rule_c(obs32.rule, obs32.ts, nx, per_f, per_jac)
-        ops = {"steady": ops_sum((1, rule.ops_steady), (1, per_out)), "per_f": per_f, "per_out": per_out}
+        extra = [(1, per_out)]
+        ops = {"per_f": per_f, "per_out": per_out}
+        if model.period_input:
+            ops["per_input"] = cx.count_ops([e for _, _, e in model.period_input])
+            extra.append((1, ops["per_input"]))
+        if model.post:
+            ops["per_post"] = cx.count_ops([e for _, e in model.post])
+            extra.append((1, ops["per_post"]))
+        ops["steady"] = ops_sum((1, rule.ops_steady), *extra)
         if rule.ops_startup is not None:
-            ops["startup"] = ops_sum((1, rule.ops_startup), (1, per_out))
+            ops["startup"] = ops_sum((1, rule.ops_startup), *extra)
         if per_jac is not None:
             ops["per_jac"] = per_jac
         _self_check(obs32, model)
@@ -436,16 +592,19 @@ def export_observer(observer, out_dir, *, n_steps: int = 12_000, signal=None, so
     if signal is None:
         if not (isinstance(n_steps, int) and n_steps >= MIN_STEPS):
             raise ValueError(f"export: n_steps must be an integer >= {MIN_STEPS}, got {n_steps!r}")
-        f0 = float(obs32.omega_n) / (2 * math.pi)
-        u, signal_doc = fll_test_signal(obs32.ts, n_steps, f0)
-        u = u[:, None]
+        if model.kind == "signal":
+            u, signal_doc = fll_test_signal(obs32.ts, n_steps, model.omega_signal / (2 * math.pi))
+        else:
+            rs, ls = _machine(obs32)
+            u, signal_doc = drive_test_signal(obs32.ts, n_steps, omega=model.omega_signal, Rs=rs, L=ls,
+                                              start=model.signal_start)
     else:
         u = np.asarray(signal, np.float32)
         u = u[:, None] if u.ndim == 1 else u
         if u.ndim != 2 or u.shape[1] != nu or u.shape[0] < 1 or not np.all(np.isfinite(u)):
             raise ValueError(f"export: signal must be finite, shape (n,) or (n, {nu}), got shape {np.shape(signal)}")
         signal_doc = f"user signal, {u.shape[0]} steps"
-    y = _golden(obs32, model, u[:, 0] if nu == 1 else u)
+    y = _golden(obs32, model, u)
     if not np.all(np.isfinite(y)):
         raise ValueError(f"export: the JAX step of {model.component} gave non-finite outputs on the test signal "
                          "(an unstable design?): no golden vectors written")
@@ -457,6 +616,10 @@ def export_observer(observer, out_dir, *, n_steps: int = 12_000, signal=None, so
     (out / "test_main.c").write_text(_harness())
     np.savetxt(out / "golden.csv", np.concatenate([u, y], axis=1), fmt="%.9g", delimiter=",",
                header=",".join(model.inputs + model.outputs), comments="")
+    step_doc = {"signal": "jx_step returns the outputs of the state before the sample is integrated (signal-level "
+                          "observer)",
+                "drive": "jx_step integrates the period that just ended and returns the outputs after it (drive "
+                         "observer); the first call only records u and i"}
     coeffs = {
         "component": model.component,
         "reference": model.reference,
@@ -466,7 +629,7 @@ def export_observer(observer, out_dir, *, n_steps: int = 12_000, signal=None, so
         "ts": obs32.ts,
         "rule": {"name": rule.name, "description": rule.description, "startup_steps": rule.startup_steps,
                  **({"newton_iters": rule.newton_iters} if rule.uses_jac else {})},
-        "step": "jx_step returns the outputs of the state before the sample is integrated (signal-level observer)",
+        "step": step_doc[model.kind],
         "gains": {k: {"c_name": m, "value": float(v), "given": float(getattr(observer, k))}
                   for k, (m, v) in model.gains.items()},
         "static": {k: v for k, v in model.statics.items()},
