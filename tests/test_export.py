@@ -1,0 +1,306 @@
+"""Firmware export (tuning/export.py): the C of every supported observer, compiled with the system C
+compiler, matches the golden vectors of the float32 JAX step to 1e-4 over >= 10 000 steps.
+
+The golden vectors come from the JAX step in float32 (64-bit types off inside the export), whatever
+this suite's x64 setting; the checks run the generated harness (test_main.c) and read its error.
+"""
+
+import argparse
+import json
+import re
+import shutil
+import tomllib
+from importlib import resources
+
+import numpy as np
+import pytest
+
+import jaxobs
+from jaxobs import linear
+from tuning import _cmodels
+from tuning.export import (
+    MIN_STEPS,
+    TOLERANCE,
+    add_export_parser,
+    compile_and_check,
+    drive_test_signal,
+    export_observer,
+    observer_from_design,
+    observer_from_result,
+)
+
+
+def _need_cc():
+    if shutil.which("cc") is None:
+        pytest.skip("no C compiler (cc) on PATH: export not checked")
+
+
+def _cli(argv):
+    p = argparse.ArgumentParser()
+    add_export_parser(p.add_subparsers(dest="cmd"))
+    args = p.parse_args(argv)
+    return args.func(args)
+
+
+# the README's tuned gains of the default job (`make run`); the slow test below runs the job itself
+_README_TUNED = {"k1": 1.43718, "k2": 0.666805, "lam": 7871.22}
+
+
+def _default_job_result(tmp_path, **extra):
+    """A result.json as `jaxobs tune` writes it for the default job (tuning/presets/wif_robust.toml)."""
+    raw = tomllib.loads((resources.files("tuning") / "presets" / "wif_robust.toml").read_text())
+    res = {
+        "job": raw,
+        "component": raw["job"]["component"],
+        "closed_form_source": "001 eq (34), Table I",
+        "gains": {"initial": {"k1": 1.815, "k2": 0.752, "lam": 11559.0}, "tuned": dict(_README_TUNED),
+                  "closed_form": {"k1": 1.81549, "k2": 0.752, "lam": 11559.3}},
+        "scores": {"tuned": {"objective": 0.0047, "diverged": 0}},
+        "stopped": "early stop",
+        **extra,
+    }
+    path = tmp_path / "result.json"
+    path.write_text(json.dumps(res))
+    return path
+
+
+@pytest.mark.parametrize(
+    "design, rule",
+    [("sogi-fll", None), ("wpf", None), ("wif", None), ("wif", jaxobs.Euler()), ("wif", jaxobs.RK4()),
+     ("wif", jaxobs.Tustin()), ("wpf", jaxobs.Tustin())],
+    ids=lambda v: v if isinstance(v, str) else type(v).__name__ if v is not None else "AB3",
+)
+def test_fll_family_c_matches_the_float32_jax_step(tmp_path, design, rule):
+    """Each closed-form FLL design, each rule (AB3 default, with its RK4 start-up; Euler; RK4; Tustin with
+    Newton and the emitted Jacobian): cc -std=c99 -Wall -Werror -pedantic compiles it and the C matches
+    golden.csv to 1e-4 relative at every step (measured 4e-7 ... 5e-6)."""
+    _need_cc()
+    obs = observer_from_design(design, **({} if rule is None else {"rule": rule}))
+    c = export_observer(obs, tmp_path)
+    assert c["golden"]["steps"] >= MIN_STEPS
+    err = compile_and_check(tmp_path)
+    assert err <= TOLERANCE, f"{design} {c['rule']['name']}: max relative error {err:.3g}"
+
+
+def test_files_macros_and_coefficients_agree(tmp_path):
+    """JX_NU/JX_NY equal the golden columns and coefficients.json; the gains baked into observer.c are the
+    design's gains in float32; the golden record is >= 10 000 steps with the frequency step and phase jump."""
+    obs = linear.wif_closed_form()
+    c = export_observer(obs, tmp_path)
+    h = (tmp_path / "observer.h").read_text()
+    src = (tmp_path / "observer.c").read_text()
+    nu = int(re.search(r"#define JX_NU (\d+)", h).group(1))
+    ny = int(re.search(r"#define JX_NY (\d+)", h).group(1))
+    assert (nu, ny) == (1, 5) == (len(c["inputs"]), len(c["outputs"]))
+    for decl in ("typedef struct", "} jx_state;", "void jx_init(jx_state *s);",
+                 "void jx_step(jx_state *s, const float *u, float *y);"):
+        assert decl in h
+    head = (tmp_path / "golden.csv").read_text().splitlines()
+    assert head[0].split(",") == c["inputs"] + c["outputs"] == ["v", "v_alpha", "v_beta", "amplitude", "theta", "omega"]
+    data = np.loadtxt(tmp_path / "golden.csv", delimiter=",", skiprows=1)
+    assert data.shape == (c["golden"]["steps"], nu + ny) and data.shape[0] >= MIN_STEPS
+    # the estimate tracks the +2 Hz step: ω̂ ends near 2π·52 rad/s
+    assert data[-1, 5] == pytest.approx(2 * np.pi * 52, rel=2e-3)
+    # the first output is the initial state (outputs before the update)
+    assert np.float32(data[0, 5]) == np.float32(obs.omega_n)
+    for name in ("k1", "k2", "lam", "omega_n"):
+        want = np.float32(getattr(obs, name))
+        assert c["gains"][name]["value"] == float(want)
+        macro = float(re.search(rf"#define JX_{name.upper()} (\S+)f", src).group(1))
+        assert np.float32(macro) == want, name
+    assert c["rule"] == {"name": "AB3", "description": c["rule"]["description"], "startup_steps": 2}
+    assert c["angle_outputs"] == ["theta"] and "JX_Y_IS_ANGLE {0, 0, 0, 1, 0}" in h
+    assert str(c["ops_per_step"]["steady"]["total"]) in h
+
+
+def test_operation_counts_by_hand(tmp_path):
+    """SOGI-FLL: f = 12 ops (v'² + qv'²: 2×, 1+; fmaxf; ω̂(k(v − v') − qv'): 2+, 2×; ω̂v': 1×;
+    −λ(v − v')qv'/V̂²: 2×, 1÷ with v − v' shared), outputs = 8 (2×, 1+, sqrtf, atan2f, 1 compare,
+    2 selects).  Euler adds 1× 1+ per state (26 per step); AB3 adds 4× 3+ per state (41) and each RK4
+    start-up step is 4 f + 3·(1× 1+) + 3× 4+ per state."""
+    for rule, steady in ((jaxobs.Euler(), 26), (jaxobs.AB3(), 41)):
+        c = export_observer(linear.sogi_fll_closed_form(rule=rule), tmp_path / type(rule).__name__)
+        o = c["ops_per_step"]
+        assert o["per_f"]["total"] == 12 and o["per_out"]["total"] == 8
+        assert o["per_f"] | {"calls": None} == {"add": 3, "mul": 7, "div": 1, "call": 1, "compare": 0, "select": 0,
+                                                "calls": None, "total": 12}
+        assert o["steady"]["total"] == steady, type(rule).__name__
+    assert o["startup"]["total"] == 4 * 12 + 3 * 3 * 2 + 3 * 7 + 8
+
+
+def test_the_check_fails_on_a_wrong_gain_or_wrong_golden(tmp_path):
+    """The harness is not vacuous: λ off by 1 % in the C, or one golden output moved by 1e-3, fails 1e-4."""
+    _need_cc()
+    export_observer(linear.wif_closed_form(), tmp_path)
+    src = (tmp_path / "observer.c").read_text()
+    lam = re.search(r"#define JX_LAM (\S+)f", src).group(1)
+    wrong = src.replace(f"#define JX_LAM {lam}f", f"#define JX_LAM {float(lam) * 1.01!r}f")
+    assert wrong != src
+    (tmp_path / "observer.c").write_text(wrong)
+    assert compile_and_check(tmp_path) > 10 * TOLERANCE
+    (tmp_path / "observer.c").write_text(src)
+    assert compile_and_check(tmp_path) <= TOLERANCE
+    lines = (tmp_path / "golden.csv").read_text().splitlines()
+    row = lines[5000].split(",")
+    row[2] = repr(float(row[2]) + 1e-3)
+    lines[5000] = ",".join(row)
+    (tmp_path / "golden.csv").write_text("\n".join(lines) + "\n")
+    assert compile_and_check(tmp_path) > TOLERANCE
+
+
+def test_default_job_result_exports_and_matches(tmp_path, capsys):
+    """`jaxobs export RESULT.json --check` on the default job's result (wif_robust.toml, README's tuned gains):
+    the tuned gains are baked in, ts and rule fall back to SOGIFLLWIF's defaults (said so), and the C
+    compiles with cc -std=c99 and matches >= 10 000 golden steps to 1e-4."""
+    _need_cc()
+    path = _default_job_result(tmp_path)
+    out = tmp_path / "c"
+    assert _cli(["export", str(path), "--out", str(out), "--check"]) == 0
+    text = capsys.readouterr().out
+    assert "no 'ts'" in text and "no 'rule'" in text and "check: max" in text and ": OK" in text
+    c = json.loads((out / "coefficients.json").read_text())
+    assert c["component"] == "SOGIFLLWIF" and c["rule"]["name"] == "AB3" and c["ts"] == 1e-4
+    for k, v in _README_TUNED.items():
+        assert c["gains"][k]["value"] == float(np.float32(v))
+    assert any("no 'ts'" in n for n in c["notes"]) and "no 'ts'" in (out / "observer.h").read_text()
+    assert c["golden"]["steps"] >= MIN_STEPS
+    assert compile_and_check(out) <= TOLERANCE
+
+
+def test_leso_result_says_what_the_job_binds_per_scenario(tmp_path):
+    path = tmp_path / "leso.json"
+    path.write_text(json.dumps({"component": "CLESO", "job": {"component": {}},
+                                "gains": {"tuned": {"omega0": 1200.0, "kp_pll": 130.0, "ki_pll": 8000.0}}}))
+    notes = []
+    obs = observer_from_result(path, notes=notes)
+    assert isinstance(obs, jaxobs.CLESO) and float(obs.omega0) == 1200.0 and isinstance(obs.rule, jaxobs.RK4)
+    assert any("Rs = 0.6, Lq = 0.012, omega0_pll = 0" in n for n in notes), notes
+
+
+def test_result_ts_rule_and_omega_n_are_read_when_present(tmp_path):
+    path = _default_job_result(tmp_path, ts=5e-5, rule="Tustin(newton_iters=3)", omega_n=2 * np.pi * 60)
+    notes = []
+    obs = observer_from_result(path, notes=notes)
+    assert notes == []
+    assert obs.ts == 5e-5 and isinstance(obs.rule, jaxobs.Tustin) and obs.rule.newton_iters == 3
+    assert float(obs.omega_n) == pytest.approx(2 * np.pi * 60)
+    assert float(obs.k1) == _README_TUNED["k1"]
+    cf = observer_from_result(path, gains="closed_form")
+    assert float(cf.lam) == 11559.3
+
+
+def test_closed_form_design_from_the_command_line(tmp_path, capsys):
+    _need_cc()
+    assert _cli(["export", "--design", "sogi-fll", "--rule", "rk4", "--out", str(tmp_path), "--check"]) == 0
+    out = capsys.readouterr().out
+    assert "SOGIFLL (RK4" in out and ": OK" in out
+    c = json.loads((tmp_path / "coefficients.json").read_text())
+    assert c["gains"]["lam"]["value"] == float(np.float32(linear.sogi_fll_closed_form().lam))
+
+
+_W = 2 * np.pi * 50
+_KP, _KI = (float(g) for g in linear.pll_gains(2 * np.pi * 15.0))
+_DRIVE = {
+    "PureIntegratorFlux": lambda **kw: jaxobs.PureIntegratorFlux(Rs=0.5, L=0.005, kp_pll=_KP, ki_pll=_KI, omega0=_W,
+                                                                 **kw),
+    "LPFFlux": lambda **kw: jaxobs.LPFFlux(Rs=0.5, L=0.005, omega_c=20.0, kp_pll=_KP, ki_pll=_KI, omega0=_W,
+                                           compensate=True, **kw),
+    "SOIFO": lambda **kw: jaxobs.SOIFO(Rs=0.5, L=0.005, k=1.414, lam=0.5, omega0=_W, **kw),
+    "SecondOrderSOIFO": lambda **kw: jaxobs.SecondOrderSOIFO(Rs=0.5, L=0.005, K1=1.56, K2=3.11, lam=1.56**3 / 6.22,
+                                                             omega0=_W, **kw),
+    "CLESO": lambda **kw: jaxobs.CLESO(Rs=0.6, Lq=0.012, **kw),
+    "GILESO": lambda **kw: jaxobs.GILESO(Rs=0.6, Lq=0.012, omega0_pll=_W, **kw),
+    "FALESO": lambda **kw: jaxobs.FALESO(Rs=0.6, Lq=0.012, omega0_pll=_W, **kw),
+}
+
+
+@pytest.mark.parametrize(
+    "name, rule",
+    [(n, None) for n in _DRIVE] + [("SOIFO", jaxobs.Tustin()), ("PureIntegratorFlux", jaxobs.AB3()),
+                                   ("CLESO", jaxobs.Euler()), ("FALESO", jaxobs.Tustin())],
+    ids=lambda v: v if isinstance(v, str) else type(v).__name__ if v is not None else "RK4",
+)
+def test_drive_observers_c_matches_the_float32_jax_step(tmp_path, name, rule):
+    """Flux observers (000) and LESOs with their PLL (002): the C step keeps i_prev, u_prev and the started
+    flag, forms the back EMF (held) or the LESO's current knots (start, middle, end of the period), integrates
+    and returns the outputs after the update; it matches 12 000 steps of a PMSM record with a speed step and
+    an angle jump to 1e-4 (measured 6e-7 ... 3e-5; the LESOs' back EMF, tens of volts, carries the largest)."""
+    _need_cc()
+    c = export_observer(_DRIVE[name](**({} if rule is None else {"rule": rule})), tmp_path)
+    assert c["inputs"] == ["u_a", "u_b", "i_a", "i_b"] and c["golden"]["steps"] >= MIN_STEPS
+    err = compile_and_check(tmp_path)
+    assert err <= TOLERANCE, f"{name} {c['rule']['name']}: max relative error {err:.3g}"
+
+
+def test_drive_observer_files(tmp_path):
+    """A SOIFO: JX_NU = 4 (u_a, u_b, i_a, i_b), JX_NY = 6; jx_state keeps u_prev, i_prev and started; the golden
+    record starts on alpha only (the first back EMF has no beta component) and its first row is the initial
+    state's outputs (the first step only records u and i)."""
+    obs = _DRIVE["SOIFO"]()
+    c = export_observer(obs, tmp_path)
+    h = (tmp_path / "observer.h").read_text()
+    assert "#define JX_NU 4" in h and "#define JX_NY 6" in h and "JX_Y_IS_ANGLE {0, 0, 1, 0, 0, 0}" in h
+    assert "float u_prev[2];" in h and "float i_prev[2];" in h and "int started;" in h
+    data = np.loadtxt(tmp_path / "golden.csv", delimiter=",", skiprows=1)
+    assert data[0, 1] == 0 and data[0, 3] == 0 and data[1, 3] == 0 and data[0, 0] != 0  # beta off in period 1
+    assert np.float32(data[0, 7]) == np.float32(obs.omega0)  # omega output of the initial state
+    assert data[1, 7] > 0 and np.all(data[0, 4:6] == 0)
+    assert c["angle_outputs"] == ["theta"] and "first period on alpha only" in c["golden"]["signal"]
+    assert set(c["ops_per_step"]) >= {"steady", "per_f", "per_out", "per_input"}
+
+
+def test_drive_test_signal_is_a_consistent_machine():
+    """The record's back EMF, computed as the flux observers do (000 eq 6), has |e| = ω(t)ψ (the speed 10 % up
+    from one third on) to 0.1 %, away from the two events."""
+    ts, w, rs, ls, psi, n = 1e-4, _W, 0.5, 0.005, 0.1, 3000
+    data, _ = drive_test_signal(ts, n, omega=w, Rs=rs, L=ls, psi=psi)
+    u, i = data[:, :2].astype(float), data[:, 2:].astype(float)
+    e = u[:-1] - rs * 0.5 * (i[1:] + i[:-1]) - ls * (i[1:] - i[:-1]) / ts  # e over period k (from sample k to k+1)
+    k = np.arange(n - 1)
+    want = w * psi * np.where(k >= n // 3, 1.1, 1.0)
+    away = (np.abs(k - n // 3) > 1) & (np.abs(k - 2 * n // 3) > 1)
+    assert np.allclose(np.hypot(e[:, 0], e[:, 1])[away], want[away], rtol=1e-3)
+
+
+def test_unsupported_components_and_bad_input_raise_clear_errors(tmp_path):
+    with pytest.raises(ValueError, match=r"component SOGI is not supported yet; supported: SOGIFLL, SOGIFLLWPF"):
+        export_observer(jaxobs.SOGI(k=1.414), tmp_path)
+    with pytest.raises(ValueError, match=r"SecondOrderSOIFO\(discretization='paper'\) \(000 eqs 22-25\) is not"):
+        export_observer(_DRIVE["SecondOrderSOIFO"](discretization="paper"), tmp_path)
+    res = tmp_path / "r.json"
+    res.write_text(json.dumps({"component": "NoSuchObserver", "gains": {"tuned": {}}, "job": {}}))
+    with pytest.raises(ValueError, match="component 'NoSuchObserver' is not a jaxobs component"):
+        observer_from_result(res)
+    with pytest.raises(ValueError, match="design must be one of sogi-fll, wpf, wif, got 'cleso'"):
+        observer_from_design("cleso")
+    with pytest.raises(ValueError, match="give a result.json or --design"):
+        _cli(["export", "--out", str(tmp_path)])
+    with pytest.raises(ValueError, match="n_steps must be an integer >= 10000"):
+        export_observer(linear.wif_closed_form(), tmp_path, n_steps=500)
+    with pytest.raises(ValueError, match=r"result.json rule: unknown rule 'Heun'"):
+        observer_from_result(_default_job_result(tmp_path, rule="Heun"))
+    diverged = _default_job_result(tmp_path, status="diverged")
+    with pytest.raises(ValueError, match="status 'diverged'"):
+        observer_from_result(diverged)
+
+
+def test_self_check_catches_an_emitter_that_drifts_from_the_jax_core(tmp_path, monkeypatch):
+    """The export compares the emitted f with the observer's own before writing anything."""
+    monkeypatch.setattr(_cmodels, "gi_vf", lambda y, q, x, w: (w * (x - q), w * y * 1.01))
+    with pytest.raises(AssertionError, match="C vector field of SOGIFLL differs from the JAX one"):
+        export_observer(linear.sogi_fll_closed_form(), tmp_path)
+    assert not (tmp_path / "observer.c").exists()
+
+
+@pytest.mark.slow
+def test_default_job_run_then_export_matches(tmp_path):
+    """The real thing: `jaxobs tune` on the default job (about 40 s), then export of its result.json."""
+    _need_cc()
+    from tuning import load_job, run_job
+    from tuning.cli import default_job_path
+
+    run_job(load_job(default_job_path()), tmp_path / "tune", quiet=True)
+    assert _cli(["export", str(tmp_path / "tune" / "result.json"), "--out", str(tmp_path / "c")]) == 0
+    c = json.loads((tmp_path / "c" / "coefficients.json").read_text())
+    assert c["component"] == "SOGIFLLWIF" and c["golden"]["steps"] >= MIN_STEPS
+    assert compile_and_check(tmp_path / "c") <= TOLERANCE

@@ -1,0 +1,750 @@
+"""Firmware export: an observer as C99 float32, checked against golden vectors from the JAX step.
+
+    jaxobs export RESULT.json --out DIR        the tuned design of a ``jaxobs tune`` result
+    jaxobs export --design wif --out DIR       a closed-form design (sogi-fll, wpf, wif)
+
+writes to DIR:
+
+- ``observer.h`` / ``observer.c``: ``jx_state``, ``jx_init(&s)``, ``jx_step(&s, u, y)``,
+  ``JX_NU`` / ``JX_NY`` inputs and outputs per step.  The step is exactly the JAX
+  step: the observer's vector field (``jx_f``) and outputs (``jx_out``) written by
+  per-core emitters that mirror :mod:`jaxobs.observers._cores` operator for
+  operator (:mod:`tuning._cmodels`), integrated by the same rule at the same ``ts``
+  (:mod:`tuning._crules`: Euler, Tustin with its Newton iterations and Jacobian,
+  AB3 with its RK4 start-up and history, RK4), gains baked in as float32
+  constants.  The step convention is :mod:`jaxobs.observers.base`'s: an FLL
+  (signal-level) returns the outputs of the state *before* the update; a flux
+  observer or LESO (drive observer) keeps the previous current and voltage,
+  integrates the period that just ended (back EMF of 000 eq 6, or the LESO's
+  current interpolated over the period) and returns the outputs after it.
+  The header's comment gives the operation count per step;
+- ``golden.csv``: a header line, then per step the ``JX_NU`` inputs and the ``JX_NY``
+  outputs of the JAX step run in float32 (``lax.scan`` of ``observer.step``) over a
+  test record of ≥ 10 000 samples: for an FLL a unit sine at ωn with a +2 Hz step at
+  one third and a +40° phase jump at two thirds (:func:`fll_test_signal`); for a drive
+  observer the voltages and currents of a PMSM with a +10 % speed step and a +30°
+  angle jump (:func:`drive_test_signal`), or a recording passed as ``signal``;
+- ``coefficients.json``: the discrete-time step's coefficients (gains, rule constants,
+  initial state), the step convention and the operation count;
+- ``test_main.c``: the harness: replays golden.csv through ``jx_step`` and fails if
+  max |y_C − y_golden| / (1 + |y_golden|) > 1e-4 at any step (angles compared modulo 2π).
+
+:func:`compile_and_check` compiles the harness with the system C compiler
+(``cc -std=c99 -O2 -Wall -Werror -pedantic``) and returns that error; the tests do
+it for every supported observer and for the default job's result.
+
+Supported: the FLL family of 001 (SOGIFLL, SOGIFLLWPF, SOGIFLLWIF), the flux observers
+of 000 (PureIntegratorFlux, LPFFlux, SOIFO, SecondOrderSOIFO with ``discretization="rule"``)
+and the LESOs of 002 with their PLL (CLESO, GILESO, FALESO); anything else raises a
+``ValueError`` naming it.
+
+The C cannot be bit-identical to XLA's float32 (XLA contracts multiply-adds into FMAs
+and rewrites divisions by constants), so the check is a tolerance, and the golden
+records avoid the few instants where an output is discontinuous in the state: see
+:func:`drive_test_signal` (the first period of the drive records).  Before writing, the
+export evaluates the emitted vector field (and outputs) at random states and compares
+them with the observer's own, so an emitter that drifts from the JAX cores fails at
+export time, not on the target.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import re
+import shutil
+import subprocess
+import tempfile
+from importlib import resources
+from pathlib import Path
+from typing import NamedTuple
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from jaxobs.discretize import AB3, RK4, Euler, Tustin
+
+from . import _cexpr as cx
+from ._cmodels import MEMORY, CModel, model_for, supported
+from ._crules import RuleC, needs_jacobian, ops_sum, ops_total, rule_c
+
+__all__ = ["export_observer", "observer_from_result", "observer_from_design", "compile_and_check", "fll_test_signal",
+           "drive_test_signal",
+           "add_export_parser", "cli_export", "DESIGNS", "TOLERANCE", "MIN_STEPS"]
+
+TOLERANCE = 1e-4  # max |y_C − y_golden| / (1 + |y_golden|)
+MIN_STEPS = 10_000  # the golden record is at least this long
+CFLAGS = ("-std=c99", "-O2", "-Wall", "-Werror", "-pedantic")
+
+DESIGNS = {  # closed forms, as `jaxobs closed-form` computes them (defaults: paper 001 Table I)
+    "sogi-fll": ("sogi_fll_closed_form", "001 eq (22): k = 1/√2, λ = k²ωn²/(8ζ²), ζ = 1/√2"),
+    "wpf": ("wpf_closed_form", "001 eq (29): k1 = k2 = √2, λ = 2(ζ+1)ωn²/(2ζ+1)³, ζ = 1/√2"),
+    "wif": ("wif_closed_form", "001 eq (34), symmetric optimum: b = 1+√2, ωc = 2π·18.8 rad/s"),
+}
+
+_RULES = {"euler": Euler, "tustin": Tustin, "ab3": AB3, "rk4": RK4}
+
+
+# --------------------------------------------------------------------------------------------
+# where the observer comes from
+# --------------------------------------------------------------------------------------------
+
+
+def parse_rule(spec, where: str = "rule"):
+    """A rule from its name (``"AB3"``), its repr (``"Tustin(newton_iters=3)"``) or ``{"name": ..., ...}``."""
+    kw = {}
+    if isinstance(spec, dict):
+        kw = {k: v for k, v in spec.items() if k not in ("name", "kind")}
+        spec = spec.get("name", spec.get("kind"))
+    if not isinstance(spec, str):
+        known = ", ".join(c.__name__ for c in _RULES.values())
+        raise ValueError(f"{where}: must be a rule name ({known}), got {spec!r}")
+    m = re.fullmatch(r"\s*(\w+)\s*(?:\((.*)\))?\s*", spec)
+    cls = _RULES.get(m.group(1).lower()) if m else None
+    if cls is None:
+        raise ValueError(f"{where}: unknown rule {spec!r}; known: {', '.join(c.__name__ for c in _RULES.values())}")
+    for item in filter(None, (s.strip() for s in (m.group(2) or "").split(","))):
+        k, _, v = item.partition("=")
+        try:
+            kw[k.strip()] = int(v)
+        except ValueError:
+            raise ValueError(f"{where}: cannot read the rule option {item!r} in {spec!r}") from None
+    try:
+        return cls(**kw)
+    except TypeError as e:
+        raise ValueError(f"{where}: {e}") from None
+
+
+def observer_from_result(path, *, gains: str = "tuned", notes: list | None = None):
+    """The observer of a ``jaxobs tune`` result.json with its ``gains`` ("tuned", "closed_form" or "initial").
+
+    Constructor values are rebuilt as the job built them: the component's
+    defaults, then the job's ``[component]`` table, then the chosen gains.  The
+    sample time, rule and nominal frequency are read from the result's ``ts``,
+    ``rule`` and ``omega_n`` when it has them; otherwise the component's defaults
+    are used and a line saying so is appended to ``notes``.
+    """
+    from .job import COMPONENTS
+
+    notes = [] if notes is None else notes
+    path = Path(path)
+    try:
+        res = json.loads(path.read_text())
+    except OSError as e:
+        raise ValueError(f"result file: cannot read {str(path)!r}: {e.strerror}") from None
+    except json.JSONDecodeError as e:
+        raise ValueError(f"result file {str(path)!r}: not valid JSON: {e}") from None
+    if not isinstance(res, dict):
+        raise ValueError(f"result file {str(path)!r}: not a jaxobs tune result (a JSON object)")
+    comp = res.get("component")
+    if comp not in COMPONENTS:
+        raise ValueError(f"result file {str(path)!r}: component {comp!r} is not a jaxobs component")
+    info = COMPONENTS[comp]
+    if info.ctor.__name__ not in supported():
+        raise ValueError(f"export: component {comp} is not supported yet; supported: {', '.join(supported())}")
+    table = res.get("gains", {}).get(gains)
+    if not isinstance(table, dict):
+        have = ", ".join(res.get("gains", {})) or "none"
+        raise ValueError(f"result file {str(path)!r}: no gains.{gains} (has: {have})")
+    if gains == "tuned" and str(res.get("status", "")).lower() == "diverged":
+        raise ValueError(f"result file {str(path)!r}: status 'diverged': the tuned gains are not a design "
+                         "(export --gains closed_form instead)")
+    values = dict(info.defaults)
+    values.update(res.get("job", {}).get("component", {}))
+    values.update(table)
+    kw = {}
+    name = info.ctor.__name__
+    if "omega_n" in res and "omega_n" in values:
+        values["omega_n"] = float(res["omega_n"])
+    elif "omega_n" in values:
+        notes.append(f"result.json has no 'omega_n': the job's value {values['omega_n']:.9g} rad/s is used")
+    probe = info.ctor(**values)  # defaults of ts and rule
+    if "ts" in res:
+        kw["ts"] = float(res["ts"])
+    else:
+        notes.append(f"result.json has no 'ts': the {name} default ts = {probe.ts:g} s is used")
+    if "rule" in res:
+        kw["rule"] = parse_rule(res["rule"], "result.json rule")
+    else:
+        notes.append(f"result.json has no 'rule': the {name} default {type(probe.rule).__name__} is used")
+    if info.bind is not None:
+        bound = ", ".join(f"{k} = {float(getattr(probe, k)):g}" for k in ("Rs", "Lq", "omega0_pll")
+                          if hasattr(probe, k))
+        notes.append(f"the job sets Rs, Lq and the PLL's initial speed per scenario; exported with {bound}")
+    diverged = res.get("scores", {}).get(gains, {}).get("diverged") if gains in res.get("scores", {}) else None
+    if diverged:
+        notes.append(f"the {gains} design diverged on {diverged} of the job's scenarios")
+    return info.ctor(**values, **kw)
+
+
+def observer_from_design(name: str, **kw):
+    """A closed-form design by name (``sogi-fll``, ``wpf``, ``wif``); ``kw`` go to its jaxobs.linear function."""
+    from jaxobs import linear
+
+    if name not in DESIGNS:
+        raise ValueError(f"design must be one of {', '.join(DESIGNS)}, got {name!r}")
+    return getattr(linear, DESIGNS[name][0])(**kw)
+
+
+# --------------------------------------------------------------------------------------------
+# golden vectors
+# --------------------------------------------------------------------------------------------
+
+
+def fll_test_signal(ts: float, n_steps: int, f0: float = 50.0, amplitude: float = 1.0):
+    """Unit sine at ``f0`` with a +2 Hz step at n/3 and a +40° phase jump at 2n/3 (GridSignal's settle-then-disturb).
+
+    Returns (samples as float32, shape (n_steps, 1), a one-line description).
+    """
+    t = np.arange(n_steps) * ts
+    t1, t2 = (n_steps // 3) * ts, (2 * n_steps // 3) * ts
+    theta = 2 * np.pi * f0 * t + np.where(t >= t1, 2 * np.pi * 2.0 * (t - t1), 0.0)
+    theta = theta + np.where(t >= t2, np.radians(40.0), 0.0)
+    v = (amplitude * np.cos(theta)).astype(np.float32)
+    doc = f"{amplitude:g} cos at {f0:g} Hz, +2 Hz step at {t1:g} s, +40 deg phase jump at {t2:g} s, ts = {ts:g} s"
+    return v[:, None], doc
+
+
+def drive_test_signal(ts: float, n_steps: int, *, omega: float, Rs: float, L: float, psi: float = 0.1,
+                      current: float | None = None, start: str = ""):
+    """Sampled (u_α, u_β, i_α, i_β) of a surface PMSM turning at electrical speed ``omega``, with a +10 % speed
+    step at n/3 and a +30° angle jump at 2n/3.
+
+    θ(0) = π/2; i = I (−sin θ, cos θ) (q-axis current, I = min(5 A, ψ/(2L)) unless given),
+    e = ω ψ (−sin θ, cos θ) (002 eq 5), u = R i + L di/dt + e.  ``u`` at sample k is the voltage applied
+    over [t_k, t_k+1] (its period average: R i + e averaged over 8 midpoints, L Δi/ts exactly), as a drive
+    observer expects; ``i`` is sampled at t_k.  Returns (float32 array (n_steps, 4), a one-line description).
+
+    ``start`` shapes the first period so that the outputs are well conditioned from the first step
+    (otherwise a float32 implementation other than XLA's own, bit for bit, cannot be held to 1e-4 there):
+
+    - ``"flux"``: the first voltage sample also carries ψ(0)/ts, the flux the integrators cannot know
+      (000's initial-value problem).  A pure integrator started at 0 estimates ψ(t) − ψ(0), which passes
+      through 0 once per turn, where atan2 turns rounding into any angle;
+    - ``"alpha"``: the first voltage and the first two current samples have no β component, so the first
+      back EMF is on α only.  After a single back-EMF sample the two SOGIs of a SOIFO hold proportional
+      states, the cross product whose sign gives the direction of rotation is 0 but for rounding, and
+      the signed ω̂ is ±|ω̂| by chance; with a β-free first sample that product is exactly 0.
+    """
+    if start not in ("", "flux", "alpha"):
+        raise ValueError(f"drive_test_signal: start must be '', 'flux' or 'alpha', got {start!r}")
+    current = min(5.0, 0.5 * psi / L) if current is None else current
+    t1, t2 = (n_steps // 3) * ts, (2 * n_steps // 3) * ts
+
+    def theta(t):
+        return (np.pi / 2 + omega * t + np.where(t >= t1, 0.1 * omega * (t - t1), 0.0)
+                + np.where(t >= t2, np.radians(30.0), 0.0))
+
+    def cur(t):
+        th = theta(t)
+        return current * np.stack([-np.sin(th), np.cos(th)], axis=-1)
+
+    def emf(t):
+        th = theta(t)
+        w = omega * np.where(t >= t1, 1.1, 1.0)
+        return (w * psi)[..., None] * np.stack([-np.sin(th), np.cos(th)], axis=-1)
+
+    t = np.arange(n_steps + 1) * ts
+    mid = t[:-1, None] + (np.arange(8) + 0.5) / 8 * ts
+    u = np.mean(Rs * cur(mid) + emf(mid), axis=1) + L * (cur(t[1:]) - cur(t[:-1])) / ts
+    i = cur(t[:-1])
+    if start == "flux":
+        th0 = theta(np.asarray(0.0))
+        u[0] += psi * np.array([np.cos(th0), np.sin(th0)]) / ts
+    elif start == "alpha":
+        u[0, 1] = i[0, 1] = i[1, 1] = 0.0
+    data = np.concatenate([u, i], axis=1).astype(np.float32)
+    first = {"": "", "flux": ", first period carries psi(0)/ts", "alpha": ", first period on alpha only"}[start]
+    doc = (f"PMSM u/i at {omega / (2 * np.pi):g} Hz electrical (psi = {psi:g} Wb, I = {current:.3g} A, "
+           f"Rs = {Rs:g} ohm, L = {L:g} H){first}, +10 % speed step at {t1:g} s, +30 deg angle jump at {t2:g} s, "
+           f"ts = {ts:g} s")
+    return data, doc
+
+
+class _Meas(NamedTuple):  # what a drive observer's step reads (jaxobs.drive's DriveInput fields)
+    u_a: jax.Array
+    u_b: jax.Array
+    i_a: jax.Array
+    i_b: jax.Array
+
+
+def _float32(observer):
+    return jax.tree.map(lambda a: a.astype(jnp.float32) if eqx.is_inexact_array(a) else a, observer)
+
+
+@eqx.filter_jit
+def _scan_outputs(observer, u):
+    # one compile per observer class and rule: the gains are traced leaves
+    u0 = jax.tree.map(lambda a: a[0], u)
+    _, out = jax.lax.scan(lambda s, x: observer.step(s, x), observer.init(u0), u)
+    return out
+
+
+def _golden(obs32, model: CModel, u: np.ndarray) -> np.ndarray:
+    # 64-bit types off: every number in the step is float32, as on the target (some rules, e.g.
+    # diffrax's Euler, would otherwise promote a float32 state with a float64 step size)
+    with jax.enable_x64(False):
+        uj = jnp.asarray(u, jnp.float32)
+        inputs = uj[:, 0] if model.kind == "signal" else _Meas(*(uj[:, k] for k in range(4)))
+        out = _scan_outputs(obs32, inputs)
+    names = list(type(out)._fields)
+    if names != model.outputs:
+        raise AssertionError(f"export: {model.component} outputs {names} differ from the C model's {model.outputs}")
+    cols = [np.asarray(c) for c in out]
+    for n, c in zip(names, cols):
+        if c.dtype != np.float32:
+            raise AssertionError(f"export: the float32 JAX step returned {n} as {c.dtype}")
+    return np.stack(cols, axis=1)
+
+
+def _self_check(obs32, model: CModel, n_points: int = 8):
+    """The emitted f (and outputs) against the observer's own, in float32 at random states and inputs."""
+    rng = np.random.default_rng(0)
+    x0 = model.x0.astype(np.float64)
+    for _ in range(n_points):
+        x = (x0 + rng.normal(size=x0.shape) * np.maximum(1.0, 0.1 * np.abs(x0))).astype(np.float32)
+        e = (rng.normal(size=len(model.field)) * 10.0).astype(np.float32)
+        env = {**dict(zip(model.states, x)), **dict(zip(model.field, e))}
+        checks = [("vector field", cx.evaluate(model.f, env), model.jax_f, model.states)]
+        if model.jax_out is not None:
+            checks.append(("output", cx.evaluate(model.out, env), model.jax_out, model.outputs))
+        for what, got, jax_fn, names in checks:
+            with jax.enable_x64(False):
+                want = jax_fn(obs32, jnp.asarray(x), jnp.asarray(e))
+                want = np.asarray([np.float64(v) for v in (want if isinstance(want, tuple) else list(want))])
+            got = np.asarray(got, np.float64)
+            bad = np.abs(got - want) > 1e-4 * (1 + np.abs(want))
+            if np.any(bad):
+                i = int(np.argmax(bad))
+                raise AssertionError(f"export: the C {what} of {model.component} differs from the JAX one at "
+                                     f"{names[i]}: {got[i]!r} vs {want[i]!r} (x = {x.tolist()}, e = {e.tolist()})")
+
+
+# --------------------------------------------------------------------------------------------
+# writing C
+# --------------------------------------------------------------------------------------------
+
+_PARAMS = {"x", "e", "e0", "em", "e1", "u", "dx", "y", "J", "s", "i"}  # C names the functions use
+
+
+def _c_function(signature: str, doc: str, assigns, bindings: dict) -> str:
+    """A C function: locals for the variables it uses (``bindings``: name -> (type, source)), then the assignments."""
+    roots = [e for _, e in assigns]
+    used = {n.value for n in cx._topo(roots) if n.op == "var"}
+    missing = used - set(bindings)
+    if missing:
+        raise AssertionError(f"export: {signature}: no source for {sorted(missing)}")
+    body = [f"    const {t} {name} = {src};" for name, (t, src) in bindings.items() if name in used]
+    block = cx.Block(reserved=set(bindings) | _PARAMS)
+    body.append(block.emit(assigns))
+    sources = [bindings[n][1] for n in used]
+    for arr in ("e", "u"):  # an input array the function does not read (e.g. the outputs of a LESO)
+        if f"const float *{arr}," in signature and not any(src.startswith(f"{arr}[") for src in sources):
+            body.append(f"    (void){arr};")
+    return f"/* {doc} */\n{signature}\n{{\n" + "\n".join(body) + "\n}\n"
+
+
+def _ops_text(o: dict) -> str:
+    calls = ", ".join(f"{k} {v}" for k, v in sorted(o["calls"].items()))
+    parts = [f"{o['add']} +/-", f"{o['mul']} *", f"{o['div']} /",
+             f"{o['call']} calls" + (f" ({calls})" if calls else "")]
+    if o["compare"] or o["select"]:
+        parts.append(f"{o['compare']} compares, {o['select']} selects")
+    return f"{ops_total(o)} = " + ", ".join(parts)
+
+
+def _json_ops(o: dict) -> dict:
+    kinds = ("add", "mul", "div", "call", "compare", "select")
+    return {**{k: o[k] for k in kinds}, "calls": dict(sorted(o["calls"].items())), "total": ops_total(o)}
+
+
+_STEP_DOC = {
+    "signal": """ * jx_step returns the estimate at t_n from the samples before t_n: the outputs of the state before
+ * u is integrated over the period (jaxobs/observers/base.py, signal-level observers).""",
+    "drive": """ * u = (u_a, u_b, i_a, i_b): the current sampled at t_n and the voltage about to be applied.  jx_step
+ * integrates the period that just ended (the voltage given one step earlier, the current from
+ * i_prev to i) and returns the estimate at t_n (jaxobs/observers/base.py, drive observers); the
+ * first call only records u and i.""",
+}
+
+
+def _emit(obs32, model: CModel, rule: RuleC, jac, source: str, notes, ops: dict) -> tuple[str, str]:
+    nx, nu, ny, ne = len(model.states), len(model.inputs), len(model.outputs), len(model.field)
+    drive = model.kind == "drive"
+    angle_mask = ", ".join("1" if i in model.angles else "0" for i in range(ny))
+    gains_doc = "\n".join(f" *   {m:<14} {cx.c_float(v):<16} {k}" for k, (m, v) in model.gains.items())
+    statics = ", ".join(f"{k} = {v!r}" for k, v in model.statics.items())
+    startup = ""
+    if ops.get("startup"):
+        startup = (f"\n *   each of the first {rule.startup_steps} steps (RK4 start-up):"
+                   f"\n *     {_ops_text(ops['startup'])}")
+    note_lines = "".join(f"\n *   note: {n}" for n in notes)
+    in_doc = "\n".join(f" *   u[{i}]  {d}" for i, d in enumerate(model.input_doc))
+    out_doc = "\n".join(f" *   y[{i}]  {d}" for i, d in enumerate(model.output_doc))
+    st_doc = "\n".join(f" *   x[{i}]  {s}: {d}" for i, (s, d) in enumerate(zip(model.states, model.state_doc)))
+    memory = ""
+    if drive:
+        memory = ("    float u_prev[2]; /* voltage applied over the period ending at the next sample (V) */\n"
+                  "    float i_prev[2]; /* current at the previous sample (A) */\n"
+                  "    int started;     /* 0 until the first sample has been seen */\n")
+    header = f"""/* observer.h -- {model.component} exported by `jaxobs export` (float32, C99).
+ *
+ * {model.reference}.
+ * Design: {source}.{note_lines}
+ * Discretization: {rule.description}, ts = {obs32.ts!r} s.
+ * Gains (float32, baked into observer.c):
+{gains_doc}
+ *   static options: {statics or 'none'}
+ *
+ * Call jx_init(&s) once, then jx_step(&s, u, y) once per sample period:
+{in_doc}
+{out_doc}
+{_STEP_DOC[model.kind]}
+ *
+ * State (jx_state.x, as the JAX observer's flat state):
+{st_doc}
+ *
+ * Operations per step, jx_out included (+/- counts negations too):
+ *   {_ops_text(ops['steady'])}{startup}
+ *
+ * golden.csv holds the JAX step's float32 outputs; test_main.c checks this code against them
+ * (max |y_C - y_golden| / (1 + |y_golden|) <= 1e-4, angles modulo 2 pi).
+ */
+#ifndef JX_OBSERVER_H
+#define JX_OBSERVER_H
+
+#ifdef __cplusplus
+extern "C" {{
+#endif
+
+#define JX_NU {nu} /* inputs per step */
+#define JX_NY {ny} /* outputs per step */
+#define JX_NX {nx} /* states */
+#define JX_Y_IS_ANGLE {{{angle_mask}}} /* outputs compared modulo 2 pi */
+
+typedef struct {{
+    float x[JX_NX]; /* {', '.join(model.states)} */
+{memory}{''.join(f'    {f}{chr(10)}' for f in rule.state_fields)}}} jx_state;
+
+void jx_init(jx_state *s);
+void jx_step(jx_state *s, const float *u, float *y);
+
+#ifdef __cplusplus
+}}
+#endif
+
+#endif /* JX_OBSERVER_H */
+"""
+    macros = [f"#define {m} {cx.c_float(v)} /* {k} */" for k, (m, v) in model.gains.items()]
+    macros += [f"#define {m} {cx.c_float(v)} /* {doc} */" for m, v, doc in rule.constants]
+    macros.append(f"#define JX_NE {ne} /* inputs of f: {', '.join(model.field)} */")
+    if rule.uses_jac:
+        macros.append(f"#define JX_NEWTON_ITERS {rule.newton_iters}")
+
+    xs = {s: ("float", f"x[{i}]") for i, s in enumerate(model.states)}
+    es = {s: ("float", f"e[{i}]") for i, s in enumerate(model.field)}
+    f_doc = {"signal": "the sample v", "drive": "the back EMF (V)" if model.path == "held" else "(u, i) at the stage"}
+    funcs = [_c_function("static void jx_f(const float *x, const float *e, float *dx)",
+                         f"vector field dx/dt = f(x, e), e = {f_doc[model.kind]} (the observer's f; cores as in "
+                         "jaxobs/observers/_cores.py)", [(f"dx[{i}]", e) for i, e in enumerate(model.f)], {**xs, **es})]
+    if drive:
+        funcs.append(_c_function("static void jx_out(const float *x, const float *e, float *y)",
+                                 "outputs of the state x after the period with input e (the observer's outputs)",
+                                 [(f"y[{i}]", e) for i, e in enumerate(model.out)], {**xs, **es}))
+    else:
+        funcs.append(_c_function("static void jx_out(const float *x, float *y)",
+                                 "outputs of the state x (the observer's output)",
+                                 [(f"y[{i}]", e) for i, e in enumerate(model.out)], xs))
+    if rule.uses_jac:
+        funcs.append(_c_function("static void jx_jac(const float *x, const float *e, float *J)",
+                                 "Jacobian J[i * JX_NX + j] = d f_i / d x_j (Tustin's Newton iteration)",
+                                 [(f"J[{i * nx + j}]", jac[i][j]) for i in range(nx) for j in range(nx)], {**xs, **es}))
+    if drive:
+        arrays = ["e"] if model.path == "held" else ["e0", "em", "e1"]
+        sig = ", ".join(f"float *{a}" for a in arrays)
+        mem = {n: ("float", src) for n, src in MEMORY.items()}
+        us = {s: ("float", f"u[{i}]") for i, s in enumerate(model.inputs)}
+        what = ("the back EMF over the period just ended (000 eq 6), 0 before the first sample" if model.path == "held"
+                else "(u, i) at the start, middle and end of the period just ended: voltage held, current linear")
+        funcs.append(_c_function(f"static void jx_input(const jx_state *s, const float *u, {sig})", what,
+                                 [(f"{a}[{k}]", e) for a, k, e in model.period_input],
+                                 {**us, **mem, "started": ("int", "s->started")}))
+    if model.post:
+        funcs.append(_c_function("static void jx_post(float *x)", "the updated state's angle wrapped to (-pi, pi]",
+                                 [(f"x[{i}]", e) for i, e in model.post], xs))
+
+    init = [f"    s->x[{i}] = {cx.c_float(v)}; /* {s} */" for i, (s, v) in enumerate(zip(model.states, model.x0))]
+    if drive:
+        init += ["    s->u_prev[0] = s->u_prev[1] = 0.0f;", "    s->i_prev[0] = s->i_prev[1] = 0.0f;",
+                 "    s->started = 0;"]
+    init += [f"    {line}" for line in rule.init]
+    init_decl = "    int i;\n" if any("for (i" in line for line in rule.init) else ""
+    locals_ = "".join(f"    {d}\n" for d in rule.locals)
+    if not drive:
+        advance = rule.advance.replace("@E0", "u").replace("@EM", "u").replace("@E1", "u")
+        step = f"""    jx_out(s->x, y); /* the estimate at t_n: the state before this sample is integrated */
+{advance}
+    for (i = 0; i < JX_NX; ++i) s->x[i] = x1[i];"""
+    else:
+        held = model.path == "held"
+        e0, em, e1 = ("e", "e", "e") if held else ("e0", "em", "e1")
+        advance = rule.advance.replace("@E0", e0).replace("@EM", em).replace("@E1", e1)
+        locals_ += "    float e[JX_NE];\n" if held else "    float e0[JX_NE], em[JX_NE], e1[JX_NE];\n"
+        post = "    jx_post(x1);\n" if model.post else ""
+        step = f"""    jx_input(s, u, {'e' if held else 'e0, em, e1'});
+{advance}
+    if (!s->started) {{ /* the first sample only records u and i */
+        for (i = 0; i < JX_NX; ++i) x1[i] = s->x[i];
+    }}
+{post}    for (i = 0; i < JX_NX; ++i) s->x[i] = x1[i];
+    s->u_prev[0] = u[0];
+    s->u_prev[1] = u[1];
+    s->i_prev[0] = u[2];
+    s->i_prev[1] = u[3];
+    s->started = 1;
+    jx_out(s->x, {e1}, y); /* the estimate at t_n, after the period just ended */"""
+    source_c = f"""/* observer.c -- {model.component} exported by `jaxobs export`; see observer.h. */
+#include <math.h>
+
+#include "observer.h"
+
+{chr(10).join(macros)}
+
+{chr(10).join(funcs)}
+{rule.functions}
+void jx_init(jx_state *s)
+{{
+{init_decl}{chr(10).join(init)}
+}}
+
+void jx_step(jx_state *s, const float *u, float *y)
+{{
+    float x1[JX_NX];
+{locals_}    int i;
+{step}
+}}
+"""
+    return header, source_c
+
+
+def _harness() -> str:
+    return (resources.files("tuning") / "c" / "test_main.c").read_text()
+
+
+# --------------------------------------------------------------------------------------------
+# the export
+# --------------------------------------------------------------------------------------------
+
+
+def _machine(obs) -> tuple[float, float]:
+    """(R̂s, L̂) the drive observer assumes: the golden signal's machine."""
+    L = obs.L if hasattr(obs, "L") else obs.Lq
+    return float(obs.Rs), float(L)
+
+
+def export_observer(observer, out_dir, *, n_steps: int = 12_000, signal=None, source: str = "", notes=()) -> dict:
+    """Write ``observer`` as C99 float32 with its golden vectors into ``out_dir``; returns coefficients.json's content.
+
+    Args:
+        observer: a supported jaxobs observer (FLL family, flux observers, LESOs); its gains are
+            rounded to float32, as the C holds them.
+        out_dir: folder for observer.h, observer.c, test_main.c, golden.csv, coefficients.json.
+        n_steps: length of the default test signal (:func:`fll_test_signal` for the FLL family,
+            :func:`drive_test_signal` for drive observers), >= 10 000.
+        signal: instead of the default, the inputs per step, shape (n,) or (n, JX_NU) (drive
+            observers: columns u_a, u_b, i_a, i_b, e.g. recorded from a drive simulation).
+        source: where the design comes from (a result file, a closed form), for the header.
+        notes: lines recorded in the header and coefficients.json (e.g. defaults used).
+    """
+    notes = list(notes)
+    obs32 = _float32(observer)
+    with cx.scope():
+        model = model_for(obs32)
+        nx, nu = len(model.states), len(model.inputs)
+        per_f, per_out = cx.count_ops(model.f), cx.count_ops(model.out)
+        jac, per_jac = None, None
+        if needs_jacobian(obs32.rule):
+            xs = {n.value: n for n in cx._topo(model.f) if n.op == "var"}
+            memos = {s: {} for s in model.states}
+            jac = [[cx.deriv(fi, xs[s], memos[s]) if s in xs else cx.const(0.0) for s in model.states]
+                   for fi in model.f]
+            per_jac = cx.count_ops([e for row in jac for e in row])
+        rule = rule_c(obs32.rule, obs32.ts, nx, per_f, per_jac)
+        extra = [(1, per_out)]
+        ops = {"per_f": per_f, "per_out": per_out}
+        if model.period_input:
+            ops["per_input"] = cx.count_ops([e for _, _, e in model.period_input])
+            extra.append((1, ops["per_input"]))
+        if model.post:
+            ops["per_post"] = cx.count_ops([e for _, e in model.post])
+            extra.append((1, ops["per_post"]))
+        ops["steady"] = ops_sum((1, rule.ops_steady), *extra)
+        if rule.ops_startup is not None:
+            ops["startup"] = ops_sum((1, rule.ops_startup), *extra)
+        if per_jac is not None:
+            ops["per_jac"] = per_jac
+        _self_check(obs32, model)
+        header, source_c = _emit(obs32, model, rule, jac, source or f"{model.component} as given", notes, ops)
+
+    if signal is None:
+        if not (isinstance(n_steps, int) and n_steps >= MIN_STEPS):
+            raise ValueError(f"export: n_steps must be an integer >= {MIN_STEPS}, got {n_steps!r}")
+        if model.kind == "signal":
+            u, signal_doc = fll_test_signal(obs32.ts, n_steps, model.omega_signal / (2 * math.pi))
+        else:
+            rs, ls = _machine(obs32)
+            u, signal_doc = drive_test_signal(obs32.ts, n_steps, omega=model.omega_signal, Rs=rs, L=ls,
+                                              start=model.signal_start)
+    else:
+        u = np.asarray(signal, np.float32)
+        u = u[:, None] if u.ndim == 1 else u
+        if u.ndim != 2 or u.shape[1] != nu or u.shape[0] < 1 or not np.all(np.isfinite(u)):
+            raise ValueError(f"export: signal must be finite, shape (n,) or (n, {nu}), got shape {np.shape(signal)}")
+        signal_doc = f"user signal, {u.shape[0]} steps"
+    y = _golden(obs32, model, u)
+    if not np.all(np.isfinite(y)):
+        raise ValueError(f"export: the JAX step of {model.component} gave non-finite outputs on the test signal "
+                         "(an unstable design?): no golden vectors written")
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "observer.h").write_text(header)
+    (out / "observer.c").write_text(source_c)
+    (out / "test_main.c").write_text(_harness())
+    np.savetxt(out / "golden.csv", np.concatenate([u, y], axis=1), fmt="%.9g", delimiter=",",
+               header=",".join(model.inputs + model.outputs), comments="")
+    step_doc = {"signal": "jx_step returns the outputs of the state before the sample is integrated (signal-level "
+                          "observer)",
+                "drive": "jx_step integrates the period that just ended and returns the outputs after it (drive "
+                         "observer); the first call only records u and i"}
+    coeffs = {
+        "component": model.component,
+        "reference": model.reference,
+        "design": source or f"{model.component} as given",
+        "notes": notes,
+        "dtype": "float32",
+        "ts": obs32.ts,
+        "rule": {"name": rule.name, "description": rule.description, "startup_steps": rule.startup_steps,
+                 **({"newton_iters": rule.newton_iters} if rule.uses_jac else {})},
+        "step": step_doc[model.kind],
+        "gains": {k: {"c_name": m, "value": float(v), "given": float(getattr(observer, k))}
+                  for k, (m, v) in model.gains.items()},
+        "static": {k: v for k, v in model.statics.items()},
+        "rule_constants": {m: {"value": float(np.float32(v)), "meaning": doc} for m, v, doc in rule.constants},
+        "state": [{"name": s, "meaning": d, "initial": float(v)}
+                  for s, d, v in zip(model.states, model.state_doc, model.x0)],
+        "inputs": model.inputs,
+        "outputs": model.outputs,
+        "angle_outputs": [model.outputs[i] for i in model.angles],
+        "ops_per_step": {k: _json_ops(v) for k, v in ops.items()},
+        "golden": {"steps": int(u.shape[0]), "signal": signal_doc, "columns": model.inputs + model.outputs,
+                   "tolerance": TOLERANCE, "error": "max |y_C - y_golden| / (1 + |y_golden|), angles modulo 2 pi"},
+    }
+    (out / "coefficients.json").write_text(json.dumps(coeffs, indent=1, ensure_ascii=False) + "\n")
+    return coeffs
+
+
+def compile_and_check(out_dir, *, cc: str | None = None, extra_flags=()) -> float:
+    """Compile ``out_dir``'s observer.c + test_main.c with the system C compiler and replay golden.csv.
+
+    Runs ``cc -std=c99 -O2 -Wall -Werror -pedantic observer.c test_main.c -lm`` in a temporary
+    folder and returns max |y_C − y_golden| / (1 + |y_golden|) over every step and output.
+    Raises ``RuntimeError`` if there is no compiler, the code does not compile or the harness
+    cannot read the vectors.
+    """
+    out = Path(out_dir).resolve()
+    cc = cc or shutil.which("cc")
+    if cc is None:
+        raise RuntimeError("no C compiler (cc) on PATH: export not checked")
+    with tempfile.TemporaryDirectory() as tmp:
+        exe = Path(tmp) / "jx_test"
+        cmd = [cc, *CFLAGS, *extra_flags, str(out / "observer.c"), str(out / "test_main.c"), "-o", str(exe), "-lm"]
+        p = subprocess.run(cmd, capture_output=True, text=True, cwd=tmp)
+        if p.returncode != 0:
+            raise RuntimeError(f"export: {' '.join(cmd)} failed:\n{p.stderr}")
+        r = subprocess.run([str(exe), str(out / "golden.csv")], capture_output=True, text=True, timeout=120)
+    m = re.search(r"max_rel_err=(\S+)", r.stdout)
+    if r.returncode not in (0, 1) or m is None:
+        raise RuntimeError(f"export: the harness failed (exit {r.returncode}): {r.stdout}{r.stderr}")
+    return float(m.group(1))
+
+
+# --------------------------------------------------------------------------------------------
+# command line (wired into the one parser by tuning.cli)
+# --------------------------------------------------------------------------------------------
+
+
+def add_export_parser(subparsers) -> argparse.ArgumentParser:
+    """Add ``jaxobs export`` to the CLI's subparsers."""
+    e = subparsers.add_parser("export", help="an observer as C99 float32 with golden vectors and a test harness")
+    e.add_argument("result", nargs="?", help="a `jaxobs tune` result.json (its tuned gains)")
+    e.add_argument("--design", choices=list(DESIGNS), help="a closed-form design instead of a result")
+    e.add_argument("--out", default="out/export", help="folder for the files (default: out/export)")
+    e.add_argument("--gains", choices=["tuned", "closed_form", "initial"], default="tuned",
+                   help="which gains of the result (default: tuned)")
+    e.add_argument("--rule", choices=list(_RULES),
+                   help="discretization rule (default: the result's or the component's)")
+    e.add_argument("--ts", type=float, help="sample time, s (default: the result's or the component's)")
+    e.add_argument("--steps", type=int, default=12_000, help=f"golden record length (>= {MIN_STEPS}, default 12000)")
+    e.add_argument("--check", action="store_true", help="compile with cc and replay the golden vectors")
+    e.set_defaults(func=cli_export)
+    return e
+
+
+def cli_export(args) -> int:
+    """``jaxobs export``: 0 on success, 1 if --check finds the C off the golden vectors; bad input raises ValueError."""
+    jax.config.update("jax_enable_x64", True)  # the closed forms in double, as `jaxobs closed-form` computes them
+    if (args.result is None) == (args.design is None):
+        raise ValueError("export: give a result.json or --design (one of them)")
+    if args.ts is not None and not (math.isfinite(args.ts) and args.ts > 0):
+        raise ValueError(f"--ts must be a sample time > 0 s, got {args.ts}")
+    notes: list = []
+    kw = {}
+    if args.ts is not None:
+        kw["ts"] = args.ts
+    if args.rule is not None:
+        kw["rule"] = _RULES[args.rule]()
+    if args.result is not None:
+        obs = observer_from_result(args.result, gains=args.gains, notes=notes)
+        if kw:
+            obs = _rebuild(obs, **kw)
+            notes = [n for n in notes if not any(f"no '{k}'" in n for k in kw)]
+        source = f"{args.result} ({args.gains} gains)"
+    else:
+        obs = observer_from_design(args.design, **kw)
+        source = f"closed form {args.design}, {DESIGNS[args.design][1]}"
+    coeffs = export_observer(obs, args.out, n_steps=args.steps, source=source, notes=notes)
+    out = Path(args.out)
+    o = coeffs["ops_per_step"]
+    print(f"{coeffs['component']} ({coeffs['rule']['name']}, ts = {coeffs['ts']:g} s, float32) from {source}")
+    print(f"  {out / 'observer.h'}, observer.c   jx_init / jx_step, "
+          f"JX_NU = {len(coeffs['inputs'])}, JX_NY = {len(coeffs['outputs'])}")
+    print(f"  {out / 'golden.csv'}   {coeffs['golden']['steps']} steps: {coeffs['golden']['signal']}")
+    start = f", {o['startup']['total']} in each start-up step" if "startup" in o else ""
+    print(f"  {out / 'coefficients.json'}   gains, rule constants; {o['steady']['total']} operations per step{start}")
+    print(f"  {out / 'test_main.c'}   {' '.join(('cc',) + CFLAGS)} observer.c test_main.c -lm && ./a.out golden.csv")
+    for n in notes:
+        print(f"note: {n}")
+    if args.check:
+        if shutil.which("cc") is None:
+            print("check: no C compiler (cc) on PATH: not checked")
+            return 0
+        err = compile_and_check(out)
+        ok = err <= TOLERANCE
+        print(f"check: max |y_C - y_golden|/(1 + |y_golden|) = {err:.3g} over {coeffs['golden']['steps']} steps "
+              f"(tolerance {TOLERANCE:g}): {'OK' if ok else 'FAIL'}")
+        return 0 if ok else 1
+    return 0
+
+
+def _rebuild(obs, **kw):
+    """The same observer with another ts or rule (static fields: rebuilt through the constructor)."""
+    import dataclasses
+
+    values = {f.name: getattr(obs, f.name) for f in dataclasses.fields(obs) if f.name not in ("ts", "rule")}
+    values.update(ts=kw.get("ts", obs.ts), rule=kw.get("rule", obs.rule))
+    return type(obs)(**values)
+
