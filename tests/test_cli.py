@@ -16,7 +16,7 @@ from tuning.cli import build_parser, load_study, main
 from tuning.results import load_result, tuned_component
 
 ROOT = Path(__file__).resolve().parents[1]
-COMMANDS = ("tune", "demo", "closed-form", "bode", "reproduce", "study")
+COMMANDS = ("tune", "demo", "closed-form", "bode", "reproduce", "study", "export")
 
 
 def _python(code_or_args, env_drop=(), env_add=None):

@@ -10,6 +10,8 @@
     jaxobs reproduce flux [--out DIR] [--json] [--quick]   paper 000's experiments, paper vs ours
     jaxobs reproduce leso [--out DIR] [--json]             paper 002's experiments, paper vs ours
     jaxobs study [STUDY.toml] [--out DIR]                  robustness study → NetCDF, worst cases, figures
+    jaxobs export [RESULT.json | --design D] [--out DIR] [--check]
+                                                           the observer as C99 float32 with golden vectors
     jaxobs --version
 
 The console script ``jaxobs`` and ``python -m jaxobs`` both run :func:`main`.
@@ -36,6 +38,7 @@ import jaxobs
 from jaxobs import linear, use_host_devices
 from jaxobs.study import STUDY_AXES
 
+from .export import add_export_parser
 from .job import load_job, run_job
 from .results import load_result, tuned_component
 
@@ -390,6 +393,7 @@ def build_parser() -> argparse.ArgumentParser:
     st.add_argument("--quiet", action="store_true", help="no progress bar")
     st.set_defaults(func=_cmd_study)
 
+    add_export_parser(sub)
     return p
 
 
