@@ -3,8 +3,11 @@
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
+
+from . import linear, metrics, papers
 
 
 def _plt():
@@ -27,8 +30,6 @@ def _finish(fig, path, dpi=110):
 
 def fll_demo_figure(traces, tests, t_event, path=None):
     """Frequency estimate and phase error of each FLL for each test (rows = tests)."""
-    from . import metrics
-
     plt = _plt()
     fig, axes = plt.subplots(len(tests), 2, figsize=(11, 2.2 * len(tests)), sharex=False, squeeze=False)
     for name, sol in traces.items():
@@ -58,14 +59,12 @@ def bode_figure(tfs: dict, omega, title: str, path=None, hz: bool = True, mark=N
     Complex-coefficient filters are plotted over negative and positive frequency
     when ``omega`` contains both signs (their response is not conjugate-symmetric).
     """
-    from .linear import bode
-
     plt = _plt()
     omega = np.asarray(omega)
     x = omega / (2 * math.pi) if hz else omega
     fig, (ax_m, ax_p) = plt.subplots(2, 1, figsize=(7.5, 6), sharex=True)
     for name, tf in tfs.items():
-        mag, ph = bode(tf, omega)
+        mag, ph = linear.bode(tf, omega)
         ax_m.plot(x, np.asarray(mag), lw=1.3, label=name)
         ax_p.plot(x, np.asarray(ph), lw=1.3, label=name)
     if np.all(omega > 0):
@@ -85,34 +84,34 @@ def bode_figure(tfs: dict, omega, title: str, path=None, hz: bool = True, mark=N
 
 def paper_bode_figures(out_dir):
     """The three Bode figures of the papers: 000 Fig. 5, 002 Fig. 4, 001 Fig. 14. Returns the paths."""
-    from pathlib import Path
-
-    from . import linear
-
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    w1 = 100 * math.pi
     paths = []
     # 000 Fig. 5: ω' = 100π, ωc = 100, k = 1.414, K1 = 1.56, K2 = 3.11
+    w1 = papers.FLUX_FIG5_OMEGA
+    k, K1, K2 = papers.SOIFO_K, papers.SECOND_ORDER_SOIFO_K1, papers.SECOND_ORDER_SOIFO_K2
     flux = {
         "pure integrator": linear.integrator_flux_tf(),
-        "LPF (ωc = 100)": linear.lpf_flux_tf(100.0),
-        "SOIFO (k = 1.414)": linear.soifo_tf(1.414, w1),
-        "second-order SOIFO (K1 = 1.56, K2 = 3.11)": linear.sosoifo_tf(1.56, 3.11, w1),
+        f"LPF (ωc = {papers.LPF_OMEGA_C:g})": linear.lpf_flux_tf(papers.LPF_OMEGA_C),
+        f"SOIFO (k = {k:g})": linear.soifo_tf(k, w1),
+        f"second-order SOIFO (K1 = {K1:g}, K2 = {K2:g})": linear.sosoifo_tf(K1, K2, w1),
     }
     p = out / "bode_flux_observers_000_fig5.png"
     bode_figure(flux, np.logspace(0, 5, 2000), "Paper 000 Fig. 5: flux observers ψ̂/e", p, mark=w1)
     paths.append(p)
     # 002 Fig. 4 / Table II (two-sided, the FA-LESO is complex)
+    we = papers.LESO_TABLE_II_OMEGA_E
     leso = {
-        "C-LESO (ω0 = 500π)": linear.cleso_tf(500 * math.pi),
-        "GI-LESO (Kr = 2ω0², ωc = π)": linear.gileso_tf(500 * math.pi, 2 * (500 * math.pi) ** 2, math.pi, w1),
-        "FA-LESO (k1 = 10π, k2 = 100π)": linear.faleso_tf(10 * math.pi, 100 * math.pi, w1),
+        "C-LESO (ω0 = 500π)": linear.cleso_tf(papers.LESO_OMEGA0),
+        "GI-LESO (Kr = 2ω0², ωc = π)": linear.gileso_tf(
+            papers.LESO_OMEGA0, papers.GILESO_K_R, papers.GILESO_OMEGA_C, we
+        ),
+        "FA-LESO (k1 = 10π, k2 = 100π)": linear.faleso_tf(papers.FALESO_K1, papers.FALESO_K2, we),
     }
     wpos = np.logspace(0, 4.5, 1200)
     omega = np.concatenate([-wpos[::-1], wpos])
     p = out / "bode_lesos_002_fig4.png"
-    fig = bode_figure(leso, omega, "Paper 002 Fig. 4: LESOs ê/e at ω̂e = 100π (two-sided)", None, mark=w1)
+    fig = bode_figure(leso, omega, "Paper 002 Fig. 4: LESOs ê/e at ω̂e = 100π (two-sided)", None, mark=we)
     for ax in fig.axes:
         ax.set_xscale("symlog", linthresh=10)
     _finish(fig, p)
@@ -126,7 +125,7 @@ def paper_bode_figures(out_dir):
     }
     p = out / "bode_fll_open_loop_001_fig14.png"
     bode_figure(fll, np.logspace(0, 4, 1500), "Paper 001 Fig. 14: FLL open loops, Table I gains", p,
-                mark=2 * math.pi * 18.8)
+                mark=papers.WIF_OMEGA_C)
     paths.append(p)
     return paths
 
@@ -153,8 +152,6 @@ def flux_circles_figure(sol, names, title, path=None, last: float = 0.1):
 
 def position_error_figure(sol, names, title, path=None, t_from: float = 0.0):
     """Wrapped position error θ̂e − θe of each observer, with the speed on a second axis."""
-    from .metrics import wrap
-
     plt = _plt()
     t = np.asarray(sol.t)
     m = t >= t_from
@@ -164,7 +161,7 @@ def position_error_figure(sol, names, title, path=None, t_from: float = 0.0):
     ax_s.set_ylabel("speed (r/min)")
     ax_s.legend(fontsize=8)
     for name, o in zip(names, sol.outputs.obs.each):
-        err = np.asarray(wrap(o.theta - sol.outputs.theta_e))[m]
+        err = np.asarray(metrics.wrap(o.theta - sol.outputs.theta_e))[m]
         ax_e.plot(t[m], err, lw=0.8, label=name)
     ax_e.set_ylim(-1.7, 1.7)
     ax_e.set_ylabel("θ̂e − θe (rad)")
@@ -178,8 +175,6 @@ def position_error_figure(sol, names, title, path=None, t_from: float = 0.0):
 
 def study_figures(ds, out_dir):
     """Heat-maps (mean over the other axes, first two axes) and distributions per metric; returns the paths."""
-    from pathlib import Path
-
     plt = _plt()
     out = Path(out_dir)
     paths = []

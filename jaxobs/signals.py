@@ -27,13 +27,11 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from .measurements import DriveInput
+from . import papers
 from ._validate import as_float, check_nonnegative, check_positive, check_real, check_sample_time, static_float
+from .measurements import DriveInput
 
-__all__ = ["GridSignal", "SampledSignal", "EMFSignal", "paper001_test", "PAPER001_TESTS", "TEST_C_HARMONICS", "stack"]
-
-# 001 Test C: V3 ≈ 0.054, V5 ≈ 0.048, V7 ≈ 0.022, V9 ≈ 0.005, V11 ≈ 0.012, V13 ≈ 0.006 p.u.
-TEST_C_HARMONICS = {3: 0.054, 5: 0.048, 7: 0.022, 9: 0.005, 11: 0.012, 13: 0.006}
+__all__ = ["GridSignal", "SampledSignal", "EMFSignal", "paper001_test", "PAPER001_TESTS", "stack"]
 
 
 class GridSignal(eqx.Module):
@@ -203,37 +201,35 @@ class SampledSignal(eqx.Module):
         return self._truth(2, t)
 
 
-PAPER001_TESTS = ("1", "2", "3", "A", "B", "C", "D", "E")
+PAPER001_TESTS = tuple(papers.TESTS_001)
 
 
 def paper001_test(name: str, *, freq=50.0, amplitude=1.0, t_event=0.2, phase=0.0) -> GridSignal:
-    """The test signals of paper 001 (p.u. amplitude, 50 Hz nominal).
+    """The test signals of paper 001 (p.u. amplitude, 50 Hz nominal), from :data:`jaxobs.papers.TESTS_001`.
 
     1: +2 Hz step;  2: +20° phase jump;  3: 0.75 p.u. sag (depth);
     A: 50 → 52 Hz;  B: 0.5 p.u. sag with +60° jump;  C: harmonics 3–13 (THD ≈ 7.7 %);
     D: +0.1 p.u. dc step;  E: 0.1 p.u. 1 Hz sub-harmonic.
     """
     key = str(name).upper()
+    if key not in papers.TESTS_001:
+        raise ValueError(f"test name must be one of {', '.join(PAPER001_TESTS)}, got {name!r}")
+    test = papers.TESTS_001[key]
     # Every test carries the Test C harmonic orders (zero magnitude outside Test C)
     # so that all eight share one static structure and stack into one batch.
-    no_harmonics = {h: 0.0 for h in TEST_C_HARMONICS}
-    kw = dict(amplitude=amplitude, freq=freq, phase=phase, t_event=t_event, harmonics=no_harmonics)
-    if key in ("1", "A"):
-        return GridSignal(**kw, freq_step=2.0)
-    if key == "2":
-        return GridSignal(**kw, phase_jump=math.radians(20.0))
-    if key == "3":
-        return GridSignal(**kw, sag=0.75)
-    if key == "B":
-        return GridSignal(**kw, sag=0.5, phase_jump=math.radians(60.0))
-    if key == "C":
-        kw["harmonics"] = {h: m * amplitude for h, m in TEST_C_HARMONICS.items()}
-        return GridSignal(**kw)
-    if key == "D":
-        return GridSignal(**kw, dc=0.1 * amplitude)
-    if key == "E":
-        return GridSignal(**kw, sub_amplitude=0.1 * amplitude, sub_freq=1.0)
-    raise ValueError(f"test name must be one of {', '.join(PAPER001_TESTS)}, got {name!r}")
+    harmonics = {h: 0.0 for h in papers.TEST_C_HARMONICS}
+    if "harmonics_scale" in test:
+        harmonics = {h: test["harmonics_scale"] * m * amplitude for h, m in papers.TEST_C_HARMONICS.items()}
+    kw = dict(amplitude=amplitude, freq=freq, phase=phase, t_event=t_event, harmonics=harmonics)
+    for field in ("freq_step", "sag", "sub_freq"):
+        if field in test:
+            kw[field] = test[field]
+    if "phase_jump_deg" in test:
+        kw["phase_jump"] = math.radians(test["phase_jump_deg"])
+    for field in ("dc", "sub_amplitude"):  # p.u. of the amplitude
+        if field in test:
+            kw[field] = test[field] * amplitude
+    return GridSignal(**kw)
 
 
 def stack(modules):

@@ -12,10 +12,11 @@ variable per metric, dims ``("design", *axes)`` (or ``("design", "sample")``
 with the axes as coordinates along ``sample``), and a ``diverged`` flag: a
 diverging scenario is reported, never fatal.
 
-Scenarios are single-phase grid signals (the FLL family): axes are
-``freq_step`` (Hz), ``phase_jump_deg``, ``sag``, ``dc``, ``harmonics_scale``
-(× Test C's spectrum), ``sub_amplitude`` (1 Hz), ``phase_deg`` (initial phase)
-and ``noise`` (white noise standard deviation, p.u., with a per-scenario seed).
+Scenarios are single-phase grid signals (the FLL family) built by
+:func:`jaxobs.scenarios.grid_signals`: axes are ``freq_step`` (Hz),
+``phase_jump_deg``, ``sag``, ``dc``, ``harmonics_scale`` (× Test C's spectrum),
+``sub_amplitude`` (1 Hz), ``phase_deg`` (initial phase) and ``noise`` (white noise
+standard deviation, p.u., with a per-scenario seed).
 Metrics (exact versions): ``settling_freq`` (s after the event for the
 one-period average of f̂ to stay within ``band_hz`` of the final frequency), ``ripple_freq`` (steady p-p, Hz),
 ``rms_phase`` (steady rms phase error, rad), ``itae_freq`` and ``iae_phase``.
@@ -34,85 +35,13 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import metrics as M
-from .signals import TEST_C_HARMONICS, GridSignal
+from .scenarios import GRID_SIGNAL_AXES, grid_signals
 from .simulate import OnSignal, simulate
 
-__all__ = ["STUDY_AXES", "STUDY_METRICS", "run_study", "worst_cases", "NoisyGridSignal", "grid_signals"]
+__all__ = ["STUDY_AXES", "STUDY_METRICS", "run_study", "worst_cases"]
 
-STUDY_AXES = ("freq_step", "phase_jump_deg", "sag", "dc", "harmonics_scale", "sub_amplitude", "phase_deg", "noise")
+STUDY_AXES = GRID_SIGNAL_AXES  # the scenarios a study runs: jaxobs.scenarios.grid_signals
 STUDY_METRICS = ("settling_freq", "ripple_freq", "rms_phase", "itae_freq", "iae_phase")
-
-
-class NoisyGridSignal(eqx.Module):
-    """A :class:`GridSignal` plus white measurement noise (std ``noise``, seeded per scenario)."""
-
-    clean: GridSignal
-    noise: jax.Array
-    key: jax.Array
-
-    def __call__(self, t):
-        n = jax.random.normal(self.key, jnp.shape(t), dtype=jnp.result_type(t))
-        return self.clean(t) + self.noise * n
-
-    def theta(self, t):
-        return self.clean.theta(t)
-
-    def omega(self, t):
-        return self.clean.omega(t)
-
-    def fundamental_amplitude(self, t):
-        return self.clean.fundamental_amplitude(t)
-
-
-_AXIS_LOWER = {"sag": 0.0, "harmonics_scale": 0.0, "sub_amplitude": 0.0, "noise": 0.0}
-
-
-def grid_signals(names, combos, t_event: float, freq: float):
-    """Batched :class:`NoisyGridSignal` for ``combos`` (tuples of values for the axes ``names``).
-
-    Vectorized — the leaves are set as arrays, no constructor runs per scenario — and
-    checked as :class:`GridSignal` would check one scenario: a ``ValueError`` names the axis.
-    Shared by studies and by tuning jobs on grid signals.
-    """
-    names = list(names)
-    for name in names:
-        if name not in STUDY_AXES:
-            raise ValueError(f"grid axis {name!r} is unknown; known axes: {', '.join(STUDY_AXES)}")
-    n = len(combos)
-    for i, name in enumerate(names):
-        col = np.asarray([c[i] for c in combos], dtype=float)
-        if not np.all(np.isfinite(col)):
-            raise ValueError(f"grid axis {name} must be finite")
-        if name in _AXIS_LOWER and np.any(col < _AXIS_LOWER[name]):
-            raise ValueError(f"grid axis {name} must be >= 0, got {col.min():g}")
-        if name == "sag" and np.any(col > 0.999):
-            raise ValueError(f"grid axis sag must be <= 0.999 (a sag depth), got {col.max():g}")
-        if name == "freq_step" and np.any(freq + col <= 0):
-            raise ValueError(f"grid axis freq_step must keep the frequency > 0 Hz, got freq + freq_step = {freq + col.min():g}")
-    base = NoisyGridSignal(GridSignal(freq=freq, t_event=t_event, harmonics={h: 0.0 for h in TEST_C_HARMONICS}), jnp.asarray(0.0), jax.random.PRNGKey(0))
-    batched = jax.tree.map(lambda x: jnp.broadcast_to(x, (n,) + jnp.shape(x)), base)
-    cols = {name: np.asarray([c[i] for c in combos], dtype=float) for i, name in enumerate(names)}
-    c = batched.clean
-    if "freq_step" in cols:
-        c = eqx.tree_at(lambda s: s.freq_step, c, jnp.asarray(cols["freq_step"]))
-    if "phase_jump_deg" in cols:
-        c = eqx.tree_at(lambda s: s.phase_jump, c, jnp.asarray(np.radians(cols["phase_jump_deg"])))
-    if "sag" in cols:
-        c = eqx.tree_at(lambda s: s.sag, c, jnp.asarray(cols["sag"]))
-    if "dc" in cols:
-        c = eqx.tree_at(lambda s: s.dc, c, jnp.asarray(cols["dc"]))
-    if "harmonics_scale" in cols:
-        mags = np.asarray([TEST_C_HARMONICS[h] for h in c.orders])
-        c = eqx.tree_at(lambda s: s.harmonics, c, jnp.asarray(cols["harmonics_scale"][:, None] * mags[None, :]))
-    if "sub_amplitude" in cols:
-        c = eqx.tree_at(lambda s: s.sub_amplitude, c, jnp.asarray(cols["sub_amplitude"]))
-    if "phase_deg" in cols:
-        c = eqx.tree_at(lambda s: s.phase, c, jnp.asarray(np.radians(cols["phase_deg"])))
-    out = eqx.tree_at(lambda s: s.clean, batched, c)
-    if "noise" in cols:
-        out = eqx.tree_at(lambda s: s.noise, out, jnp.asarray(cols["noise"]))
-    keys = jax.vmap(lambda i: jax.random.fold_in(jax.random.PRNGKey(12345), i))(jnp.arange(n))
-    return eqx.tree_at(lambda s: s.key, out, keys)
 
 
 def _metrics(sol, t_event: float, steady_from: float, band_hz: float, n_period: int):

@@ -13,20 +13,15 @@ from gradcheck import assert_field_grads_match_fd
 import jaxobs
 from jaxobs import drive as D
 from jaxobs import linear as L
+from jaxobs import papers
 from jaxobs.metrics import wrap
-from jaxobs.reproduce.flux import (
-    K1,
-    K2,
-    K_SOIFO,
-    LPF_WC,
-    bench_machine,
-    flux_bank,
-    flux_drive,
-)
+from jaxobs.reproduce.flux import bench_machine, flux_bank, flux_drive
 from jaxobs.signals import EMFSignal
 
+K_SOIFO, K1, K2 = papers.SOIFO_K, papers.SECOND_ORDER_SOIFO_K1, papers.SECOND_ORDER_SOIFO_K2
+LPF_WC = papers.LPF_OMEGA_C
 W1 = 100 * math.pi
-KP, KI = L.pll_gains(2 * math.pi * 20)
+KP, KI = L.pll_gains(2 * math.pi * papers.FLUX_PLL_HZ)
 FROZEN = 1e-12  # an FLL gain this small keeps ω̂ at ω1: the filters' own transfer functions are tested
 
 
@@ -177,7 +172,7 @@ def test_vmap_over_64_scenarios_with_the_second_order_soifo():
     par = bench_machine()
     base = D.Scenario(par, load=D.Profile.constant(2.0))
     batch = D.grid(base, speed_rpm=np.linspace(1400, 2000, 8), dRs=np.linspace(-0.5, 0.5, 8))
-    drv = D.Drive(D.FOC.imc(par, 2 * math.pi * 300, 2 * math.pi * 5))
+    drv = D.Drive(D.FOC.imc(par, 2 * math.pi * papers.BENCH_CURRENT_HZ, 2 * math.pi * papers.BENCH_SPEED_HZ))
 
     def run(s):
         we0 = s.speed_ref.values[0] * par.p

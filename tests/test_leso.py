@@ -13,19 +13,14 @@ from gradcheck import assert_field_grads_match_fd
 import jaxobs
 from jaxobs import drive as D
 from jaxobs import linear as L
+from jaxobs import papers
 from jaxobs.metrics import harmonic_amplitude, wrap
-from jaxobs.reproduce.leso import (
-    A5,
-    A7,
-    BENCH_J,
-    K1_FA,
-    K2_FA,
-    W0,
-    leso_bank,
-    leso_drive,
-)
+from jaxobs.reproduce.leso import bench_machine, leso_bank, leso_drive
 
-PAR = D.ipmsm_paper002(J=BENCH_J)
+A5, A7 = papers.IPMSM_002_A5, papers.IPMSM_002_A7
+W0, K1_FA, K2_FA = papers.LESO_OMEGA0, papers.FALESO_K1, papers.FALESO_K2
+PAR = bench_machine()
+DRIVE_BANDWIDTHS = (2 * math.pi * papers.BENCH_CURRENT_HZ, 2 * math.pi * papers.BENCH_SPEED_HZ)
 
 
 @pytest.fixture(scope="module")
@@ -63,7 +58,7 @@ def test_steady_position_errors_c_gi_fa(steady_runs):
 
 @pytest.fixture(scope="module")
 def harmonics_run():
-    hpar = D.ipmsm_paper002(a5=A5, a7=A7, J=BENCH_J)
+    hpar = bench_machine(a5=A5, a7=A7)
     we = hpar.p * 300 * D.RPM
     sc = D.Scenario(
         hpar,
@@ -96,7 +91,8 @@ def test_faleso_attenuates_5th_and_7th_more_than_cleso(harmonics_run):
         ea = np.asarray(o.e_a)
         fund = float(harmonic_amplitude(t, ea, we, m))
         pct[name] = [100 * float(harmonic_amplitude(t, ea, h * we, m)) / fund for h in (5, 7)]
-    tfs = {"C": L.cleso_tf(W0), "GI": L.gileso_tf(W0, 2 * W0**2, math.pi, we), "FA": L.faleso_tf(K1_FA, K2_FA, we)}
+    gi = L.gileso_tf(W0, papers.GILESO_K_R, papers.GILESO_OMEGA_C, we)
+    tfs = {"C": L.cleso_tf(W0), "GI": gi, "FA": L.faleso_tf(K1_FA, K2_FA, we)}
     for name, tf in tfs.items():
         for idx, (h, a, sgn) in enumerate(((5, A5, -1), (7, A7, +1))):
             pred = 100 * a * abs(complex(tf.freqresp(sgn * h * we)))
@@ -113,7 +109,7 @@ def test_faleso_attenuates_5th_and_7th_more_than_cleso(harmonics_run):
 def test_parameter_mismatch_against_eqs_42_43(which, factor):
     """Rated load, 300 r/min, i_d = 0.  Measured FA-LESO mean error −7.08° / +6.68° for L̂q = 1.5/0.5 Lq
     (eq 43: −6.77° / +6.59°); R̂s errors give < 0.01° (eq 42: 0 with i_d = 0)."""
-    est = D.ipmsm_paper002(J=BENCH_J, **{which: factor * float(getattr(PAR, which))})
+    est = bench_machine(**{which: factor * float(getattr(PAR, which))})
     we = PAR.p * 300 * D.RPM
     sc = D.Scenario(
         PAR,
@@ -140,7 +136,7 @@ def test_parameter_mismatch_against_eqs_42_43(which, factor):
 def test_pll_loop_through_the_faleso_is_stable():
     """Our PLL (ω_b = 2π·15 rad/s, ζ = 1/√2) closed through the FA-LESO's envelope response: stable by the
     generalized Routh test at 25, 50 and 70 Hz, crossover 136 rad/s with 40.5° phase margin."""
-    kp, ki = L.pll_gains(2 * math.pi * 15)
+    kp, ki = L.pll_gains(2 * math.pi * papers.LESO_PLL_HZ)
     for f in (25, 50, 70):
         loop = L.faleso_pll_loop(K1_FA, K2_FA, 2 * math.pi * f, kp, ki)
         assert bool(L.is_hurwitz(loop.feedback().den))
@@ -151,7 +147,7 @@ def test_pll_loop_through_the_faleso_is_stable():
 def test_vmap_over_64_scenarios_and_gradients():
     base = D.Scenario(PAR, load=D.Profile.constant(10.0))
     batch = D.grid(base, speed_rpm=np.linspace(300, 840, 8), dLq=[-0.3, -0.2, -0.1, 0.0, 0.1, 0.2, 0.3, 0.4])
-    drv = D.Drive(D.FOC.imc(PAR, 2 * math.pi * 300, 2 * math.pi * 5))  # sensored: the FA-LESO runs open loop
+    drv = D.Drive(D.FOC.imc(PAR, *DRIVE_BANDWIDTHS))  # sensored: the FA-LESO runs open loop
 
     def run(s):
         w0 = s.speed_ref.values[0] * PAR.p
@@ -173,7 +169,7 @@ def test_vmap_over_64_scenarios_and_gradients():
 )
 def test_gradients_wrt_leso_and_pll_gains(ctor, names):
     sc = D.Scenario(PAR, speed_ref=D.Profile.constant(600 * D.RPM), omega_m0=600 * D.RPM, load=D.Profile.constant(5.0))
-    drv = D.Drive(D.FOC.imc(PAR, 2 * math.pi * 300, 2 * math.pi * 5))
+    drv = D.Drive(D.FOC.imc(PAR, *DRIVE_BANDWIDTHS))
     obs = ctor(PAR.Rs, PAR.Lq, omega0_pll=0.95 * PAR.p * 600 * D.RPM)
 
     def loss(o):

@@ -11,6 +11,7 @@ import optimistix as optx
 import pytest
 
 from jaxobs import linear as L
+from jaxobs import papers
 
 W1 = 100 * math.pi
 
@@ -174,7 +175,7 @@ def test_pinned_crossover_formulation_has_no_interior_maximum():
     ≈ 2.6x no k2 can pin the crossover: the integral term alone exceeds unit gain at ωc): PM
     falls monotonically with λ and passes 45° exactly at (34).  The symmetric optimum is
     the optimum over the *crossover position* for a given pole/zero pair (next test)."""
-    b, wc = 1 + math.sqrt(2), 2 * math.pi * 18.8
+    b, wc = papers.WIF_B, papers.WIF_OMEGA_C
     k1_so, k2_so, lam_so = (float(v) for v in L.wif_symmetric_optimum(b, wc, W1))
 
     def k2_on_crossover(log_lam):
@@ -204,7 +205,7 @@ def test_symmetric_optimum_recovered_by_optimization():
     Outer: a Newton root find over log ωz places that optimal crossover at 2π·18.8 rad/s,
     differentiating through the inner optimum by implicit differentiation.  The result is
     001 eq (34) within 0.1 %."""
-    b, wc_target = 1 + math.sqrt(2), 2 * math.pi * 18.8
+    b, wc_target = papers.WIF_B, papers.WIF_OMEGA_C
     k1_so, k2_so, lam_so = (float(v) for v in L.wif_symmetric_optimum(b, wc_target, W1))
 
     def loop(log_k2, log_wz):
@@ -247,7 +248,7 @@ def test_with_k1_and_k2_fixed_the_margin_has_no_interior_maximum_over_lambda():
 # paper 000: flux observers
 # --------------------------------------------------------------------------
 
-K, K1, K2 = 1.414, 1.56, 3.11
+K, K1, K2 = papers.SOIFO_K, papers.SECOND_ORDER_SOIFO_K1, papers.SECOND_ORDER_SOIFO_K2
 
 
 def test_soifo_and_second_order_soifo_integrate_at_centre_frequency():
@@ -349,7 +350,7 @@ def test_tustin_matches_python_control_and_prewarp_is_exact_at_its_frequency():
 
 def test_faleso_unit_gain_zero_phase_at_the_estimated_frequency():
     for we in (2 * math.pi * 25, 2 * math.pi * 50, 2 * math.pi * 70):
-        g = complex(L.faleso_tf(10 * math.pi, 100 * math.pi, we).freqresp(we))
+        g = complex(L.faleso_tf(papers.FALESO_K1, papers.FALESO_K2, we).freqresp(we))
         assert abs(g) == pytest.approx(1.0, abs=1e-12)
         assert math.degrees(np.angle(g)) == pytest.approx(0.0, abs=1e-10)
 
@@ -357,7 +358,8 @@ def test_faleso_unit_gain_zero_phase_at_the_estimated_frequency():
 def test_cleso_phase_lag_against_paper_position_errors():
     """C-LESO (ω0 = 500π) lag −2 atan(ω/ω0): 11.4°, 22.6°, 31.3° at 25/50/70 Hz; the paper
     measured mean position errors of 14°, 23°, 34° (the rest is PLL, delay and current-loop)."""
-    lags = [-math.degrees(np.angle(complex(L.cleso_tf(500 * math.pi).freqresp(2 * math.pi * f)))) for f in (25, 50, 70)]
+    tf = L.cleso_tf(papers.LESO_OMEGA0)
+    lags = [-math.degrees(np.angle(complex(tf.freqresp(2 * math.pi * f)))) for f in (25, 50, 70)]
     for lag, f in zip(lags, (25, 50, 70)):
         assert lag == pytest.approx(2 * math.degrees(math.atan(f / 250.0)), abs=1e-9)
     paper = [14.0, 23.0, 34.0]
@@ -377,13 +379,13 @@ def test_faleso_complex_routh_matches_roots_over_gain_grid():
 
 
 def test_gileso_and_cleso_closed_form():
-    g = L.cleso_closed_form(500 * math.pi, Rs=0.5, Lq=0.012)
-    assert float(g.l1) == pytest.approx(2 * 500 * math.pi - 0.5 / 0.012)
-    assert float(g.l2) == pytest.approx((500 * math.pi) ** 2)
+    w0 = papers.LESO_OMEGA0
+    g = L.cleso_closed_form(w0, Rs=0.5, Lq=0.012)
+    assert float(g.l1) == pytest.approx(2 * w0 - 0.5 / 0.012)
+    assert float(g.l2) == pytest.approx(w0**2)
     tf = L.leso_tf(g.l1, g.l2, 0.5 / 0.012)
-    np.testing.assert_allclose(np.asarray(tf.den), np.asarray(L.cleso_tf(500 * math.pi).den))
-    w0 = 500 * math.pi
-    gi = L.gileso_tf(w0, 2 * w0**2, math.pi, W1)
+    np.testing.assert_allclose(np.asarray(tf.den), np.asarray(L.cleso_tf(w0).den))
+    gi = L.gileso_tf(w0, papers.GILESO_K_R, papers.GILESO_OMEGA_C, W1)
     assert bool(gi.is_stable())
 
 
@@ -392,10 +394,10 @@ def test_gileso_at_the_fundamental_lags():
     Table II's damping ωc = π the integrator's peak is finite, G(jω̂) = K_r, so
     G_GI-LESO(jω̂) = (K_r + ω0²)/(K_r + ω0² − ω̂² + 2jω0ω̂): gain 1.001/1.004/1.008 and lag
     3.8°/7.7°/10.9° at 25/50/70 Hz — beside the paper's measured mean errors 7°/10°/12°."""
-    w0 = 500 * math.pi
+    w0 = papers.LESO_OMEGA0
     for f, lag in ((25, 3.827), (50, 7.696), (70, 10.851)):
         we = 2 * math.pi * f
-        g = complex(L.gileso_tf(w0, 2 * w0**2, math.pi, we).freqresp(we))
+        g = complex(L.gileso_tf(w0, papers.GILESO_K_R, papers.GILESO_OMEGA_C, we).freqresp(we))
         exact = 3 * w0**2 / (3 * w0**2 - we**2 + 2j * w0 * we)
         assert g == pytest.approx(exact, rel=1e-9)
         assert -math.degrees(np.angle(g)) == pytest.approx(lag, abs=1e-3)

@@ -12,6 +12,7 @@ import xarray as xr
 import jaxobs
 from jaxobs import linear
 from jaxobs import metrics as M
+from jaxobs import papers
 from jaxobs.study import run_study, worst_cases
 from tuning.cli import main
 
@@ -103,7 +104,7 @@ def test_study_file_errors(tmp_path, capsys):
 
 
 def test_grid_signals_check_values_like_gridsignal_and_match_it():
-    from jaxobs.study import grid_signals
+    from jaxobs.scenarios import grid_signals
 
     with pytest.raises(ValueError, match="axis sag"):
         grid_signals(["sag"], [(1.5,)], 0.1, 50.0)
@@ -116,8 +117,7 @@ def test_grid_signals_check_values_like_gridsignal_and_match_it():
         ["freq_step", "phase_jump_deg", "harmonics_scale"], [(2.0, 30.0, 1.0), (-1.0, 0.0, 0.5)], 0.1, 50.0
     )
     t = np.linspace(0.0, 0.3, 301)
-    one = jaxobs.GridSignal(
-        t_event=0.1, freq_step=-1.0, harmonics={h: 0.5 * m for h, m in jaxobs.signals.TEST_C_HARMONICS.items()}
-    )
+    harmonics = {h: 0.5 * m for h, m in papers.TEST_C_HARMONICS.items()}
+    one = jaxobs.GridSignal(t_event=0.1, freq_step=-1.0, harmonics=harmonics)
     second = jax.tree.map(lambda x: x[1], sigs)
     np.testing.assert_array_equal(np.asarray(second(t)), np.asarray(one(t)))

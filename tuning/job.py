@@ -55,15 +55,18 @@ import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 
+import equinox as eqx
 import numpy as np
 
 import jaxobs
-from jaxobs import linear
+from jaxobs import drive as D
+from jaxobs import linear, papers
+from jaxobs.scenarios import grid_signals
 from jaxobs.signals import EMFSignal, stack
-from jaxobs.study import grid_signals
 
 from .objective import METRICS, MetricContext, Objective, Term
 from .params import GainSpec, Parametrization
+from .report import write_report
 from .solvers import SolverConfig, run_solver
 
 __all__ = ["JobError", "Job", "load_job", "parse_job", "run_job", "COMPONENTS"]
@@ -81,48 +84,49 @@ class JobError(ValueError):
 # components: constructor, free gains, closed form
 # --------------------------------------------------------------------------
 
-W_N = 100 * math.pi
+W_N = papers.FLL_OMEGA_N
+SOIFO_K, SOIFO2_K1, SOIFO2_K2 = papers.SOIFO_K, papers.SECOND_ORDER_SOIFO_K1, papers.SECOND_ORDER_SOIFO_K2
 
 
 def _cf_sogi(comp):
-    return {"k": 1 / math.sqrt(2), "lam": float(linear.sogi_fll_lambda(1 / math.sqrt(2), float(comp.omega_n)))}
+    k = papers.SOGI_FLL_K
+    return {"k": k, "lam": float(linear.sogi_fll_lambda(k, float(comp.omega_n)))}
 
 
 def _cf_wpf(comp):
-    return {"k1": math.sqrt(2), "k2": math.sqrt(2), "lam": float(linear.wpf_lambda(float(comp.omega_n)))}
+    return {"k1": papers.WPF_K1, "k2": papers.WPF_K2, "lam": float(linear.wpf_lambda(float(comp.omega_n)))}
 
 
 def _cf_wif(comp):
-    k1, k2, lam = linear.wif_symmetric_optimum(1 + math.sqrt(2), 2 * math.pi * 18.8, float(comp.omega_n))
+    k1, k2, lam = linear.wif_symmetric_optimum(papers.WIF_B, papers.WIF_OMEGA_C, float(comp.omega_n))
     return {"k1": float(k1), "k2": float(k2), "lam": float(lam)}
 
 
 def _cf_soifo(comp):
-    return {"k": 1.414, "lam": 1.414**2 / 4}
+    return {"k": SOIFO_K, "lam": SOIFO_K**2 / 4}
 
 
 def _cf_sosoifo(comp):
-    return {"K1": 1.56, "K2": 3.11, "lam": 1.56**3 / (2 * 3.11)}
+    return {"K1": SOIFO2_K1, "K2": SOIFO2_K2, "lam": SOIFO2_K1**3 / (2 * SOIFO2_K2)}
 
 
 def _cf_cleso(comp):
-    return {"omega0": 500 * math.pi}
+    return {"omega0": papers.LESO_OMEGA0}
 
 
 def _pll_cf():
-    kp, ki = linear.pll_gains(2 * math.pi * 15.0)
+    kp, ki = linear.pll_gains(2 * math.pi * papers.LESO_PLL_HZ)
     return {"kp_pll": float(kp), "ki_pll": float(ki)}
 
 
 def _cf_faleso(comp):
-    return {"k1": 10 * math.pi, "k2": 100 * math.pi, **_pll_cf()}
+    return {"k1": papers.FALESO_K1, "k2": papers.FALESO_K2, **_pll_cf()}
 
 
 def _bind_leso(comp, sc):
     """A LESO assumes the scenario's estimated Rs, Lq and starts its PLL at the scenario's speed."""
-    import equinox as eqx
-
-    return eqx.tree_at(lambda o: (o.Rs, o.Lq, o.omega0_pll), comp, (sc.est_par.Rs, sc.est_par.Lq, sc.speed_ref.values[0] * sc.par.p))
+    est = (sc.est_par.Rs, sc.est_par.Lq, sc.speed_ref.values[0] * sc.par.p)
+    return eqx.tree_at(lambda o: (o.Rs, o.Lq, o.omega0_pll), comp, est)
 
 
 @dataclass(frozen=True)
@@ -136,14 +140,69 @@ class ComponentInfo:
     bind: object = None
 
 
+_IPMSM = papers.IPMSM_002  # the drive jobs' machine (ASSUMED, see jaxobs.papers): the LESOs assume its Rs, Lq
+
 COMPONENTS = {
-    "SOGIFLL": ComponentInfo(jaxobs.SOGIFLL, ("k", "lam"), dict(k=1 / math.sqrt(2), lam=12337.0, omega_n=W_N), _cf_sogi, "grid", "001 eq (22), Table I"),
-    "SOGIFLLWPF": ComponentInfo(jaxobs.SOGIFLLWPF, ("k1", "k2", "lam"), dict(k1=math.sqrt(2), k2=math.sqrt(2), lam=23948.0, omega_n=W_N), _cf_wpf, "grid", "001 eq (29), Table I"),
-    "SOGIFLLWIF": ComponentInfo(jaxobs.SOGIFLLWIF, ("k1", "k2", "lam"), dict(k1=1.815, k2=0.752, lam=11559.0, omega_n=W_N), _cf_wif, "grid", "001 eq (34), Table I"),
-    "SOIFO": ComponentInfo(jaxobs.SOIFO, ("k", "lam"), dict(Rs=0.0, L=1.0, k=1.414, lam=0.5, omega0=W_N), _cf_soifo, "emf", "000 (k = 1.414), lam = k²/4"),
-    "SecondOrderSOIFO": ComponentInfo(jaxobs.SecondOrderSOIFO, ("K1", "K2", "lam"), dict(Rs=0.0, L=1.0, K1=1.56, K2=3.11, lam=1.56**3 / 6.22, omega0=W_N), _cf_sosoifo, "emf", "000 (K1 = 1.56, K2 = 3.11), lam = K1³/(2K2)"),
-    "CLESO": ComponentInfo(jaxobs.CLESO, ("omega0", "kp_pll", "ki_pll"), dict(Rs=0.6, Lq=0.012, omega0=500 * math.pi, **_pll_cf()), lambda c: {**_cf_cleso(c), **_pll_cf()}, "drive", "002 Table II (ω0 = 500π), PLL pole placement ω_b = 2π·15", _bind_leso),
-    "FALESO": ComponentInfo(jaxobs.FALESO, ("k1", "k2", "kp_pll", "ki_pll"), dict(Rs=0.6, Lq=0.012, k1=10 * math.pi, k2=100 * math.pi, **_pll_cf()), _cf_faleso, "drive", "002 Table II (k1 = 10π, k2 = 100π), PLL pole placement ω_b = 2π·15", _bind_leso),
+    "SOGIFLL": ComponentInfo(
+        jaxobs.SOGIFLL,
+        gains=("k", "lam"),
+        defaults=dict(k=papers.SOGI_FLL_K, lam=papers.SOGI_FLL_LAM, omega_n=W_N),
+        closed_form=_cf_sogi,
+        signal="grid",
+        closed_form_source="001 eq (22), Table I",
+    ),
+    "SOGIFLLWPF": ComponentInfo(
+        jaxobs.SOGIFLLWPF,
+        gains=("k1", "k2", "lam"),
+        defaults=dict(k1=papers.WPF_K1, k2=papers.WPF_K2, lam=papers.WPF_LAM, omega_n=W_N),
+        closed_form=_cf_wpf,
+        signal="grid",
+        closed_form_source="001 eq (29), Table I",
+    ),
+    "SOGIFLLWIF": ComponentInfo(
+        jaxobs.SOGIFLLWIF,
+        gains=("k1", "k2", "lam"),
+        defaults=dict(k1=papers.WIF_K1, k2=papers.WIF_K2, lam=papers.WIF_LAM, omega_n=W_N),
+        closed_form=_cf_wif,
+        signal="grid",
+        closed_form_source="001 eq (34), Table I",
+    ),
+    "SOIFO": ComponentInfo(
+        jaxobs.SOIFO,
+        gains=("k", "lam"),
+        defaults=dict(Rs=0.0, L=1.0, k=SOIFO_K, lam=0.5, omega0=W_N),
+        closed_form=_cf_soifo,
+        signal="emf",
+        closed_form_source="000 (k = 1.414), lam = k²/4",
+    ),
+    "SecondOrderSOIFO": ComponentInfo(
+        jaxobs.SecondOrderSOIFO,
+        gains=("K1", "K2", "lam"),
+        defaults=dict(Rs=0.0, L=1.0, K1=SOIFO2_K1, K2=SOIFO2_K2, lam=SOIFO2_K1**3 / (2 * SOIFO2_K2), omega0=W_N),
+        closed_form=_cf_sosoifo,
+        signal="emf",
+        closed_form_source="000 (K1 = 1.56, K2 = 3.11), lam = K1³/(2K2)",
+    ),
+    # the drive jobs run the ASSUMED IPMSM of jaxobs.papers; a LESO starts from its Rs and Lq
+    "CLESO": ComponentInfo(
+        jaxobs.CLESO,
+        gains=("omega0", "kp_pll", "ki_pll"),
+        defaults=dict(Rs=papers.IPMSM_002["Rs"], Lq=papers.IPMSM_002["Lq"], omega0=papers.LESO_OMEGA0, **_pll_cf()),
+        closed_form=lambda c: {**_cf_cleso(c), **_pll_cf()},
+        signal="drive",
+        closed_form_source="002 Table II (ω0 = 500π), PLL pole placement ω_b = 2π·15",
+        bind=_bind_leso,
+    ),
+    "FALESO": ComponentInfo(
+        jaxobs.FALESO,
+        gains=("k1", "k2", "kp_pll", "ki_pll"),
+        defaults=dict(Rs=papers.IPMSM_002["Rs"], Lq=papers.IPMSM_002["Lq"], k1=papers.FALESO_K1, k2=papers.FALESO_K2,
+                      **_pll_cf()),
+        closed_form=_cf_faleso,
+        signal="drive",
+        closed_form_source="002 Table II (k1 = 10π, k2 = 100π), PLL pole placement ω_b = 2π·15",
+        bind=_bind_leso,
+    ),
 }
 
 GRID_AXES = ("freq_step", "phase_jump_deg", "sag", "dc", "harmonics_scale", "sub_amplitude", "phase_deg")
@@ -417,26 +476,23 @@ def _combos(spec: ScenarioSpec):
 
 
 def _drive_scenarios(names, combos):
-    from jaxobs import drive as D
-    from jaxobs.reproduce.leso import BENCH_J
-
-    par = D.ipmsm_paper002(J=BENCH_J)
+    par = D.ipmsm_paper002(J=papers.BENCH_J_002)
     items = []
     for combo in combos:
         a = dict(zip(names, combo))
         rpm = a.get("speed_rpm", 600.0)
-        est = D.ipmsm_paper002(J=BENCH_J, Rs=float(par.Rs) * (1 + a.get("dRs", 0.0)), Lq=float(par.Lq) * (1 + a.get("dLq", 0.0)))
-        items.append(D.Scenario(par, est_par=est, speed_ref=D.Profile.constant(rpm * D.RPM), load=D.Profile.constant(a.get("load_nm", 0.0)), omega_m0=rpm * D.RPM))
+        est = D.ipmsm_paper002(
+            J=papers.BENCH_J_002, Rs=float(par.Rs) * (1 + a.get("dRs", 0.0)), Lq=float(par.Lq) * (1 + a.get("dLq", 0.0))
+        )
+        speed, load = D.Profile.constant(rpm * D.RPM), D.Profile.constant(a.get("load_nm", 0.0))
+        items.append(D.Scenario(par, est_par=est, speed_ref=speed, load=load, omega_m0=rpm * D.RPM))
     return stack(items)
 
 
 def job_drive():
     """The drive a ``signal = "drive"`` job runs: sensored FOC on the IPMSM, the observer estimating beside it."""
-    from jaxobs import drive as D
-    from jaxobs.reproduce.leso import BENCH_J
-
-    par = D.ipmsm_paper002(J=BENCH_J)
-    return D.Drive(D.FOC.imc(par, 2 * math.pi * 300, 2 * math.pi * 5))
+    par = D.ipmsm_paper002(J=papers.BENCH_J_002)
+    return D.Drive(D.FOC.imc(par, 2 * math.pi * papers.BENCH_CURRENT_HZ, 2 * math.pi * papers.BENCH_SPEED_HZ))
 
 
 def build_scenarios(spec: ScenarioSpec, values: dict):
@@ -490,8 +546,6 @@ def _inside(g: GainSpec, v: float) -> float:
 
 def run_job(job: Job, out: Path, resume: bool = False, quiet: bool = False) -> dict:
     """Tune, score initial / tuned / closed form on the same scenarios, write the results folder."""
-    from .report import write_report
-
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.time()
     obj, (names, combos) = build_objective(job)

@@ -11,7 +11,9 @@ import math
 import equinox as eqx
 import jax.numpy as jnp
 
+from .. import papers
 from .._validate import as_float, check_positive, check_real
+from ..observers.fll import SOGIFLL, SOGIFLLWIF, SOGIFLLWPF
 from ._tf import TransferFunction
 
 __all__ = [
@@ -98,12 +100,12 @@ def wif_model(k1, k2, lam, omega_n) -> FLLModel:
 # --------------------------------------------------------------------------
 
 
-def sogi_fll_lambda(k, omega_n, zeta=1 / math.sqrt(2)):
+def sogi_fll_lambda(k, omega_n, zeta=papers.FLL_ZETA):
     """001 eq (22): λ = k² ωn² / (8 ζ²)  (= k² ωn² / 4 at ζ = 1/√2)."""
     return k**2 * omega_n**2 / (8 * zeta**2)
 
 
-def wpf_lambda(omega_n, zeta=1 / math.sqrt(2)):
+def wpf_lambda(omega_n, zeta=papers.FLL_ZETA):
     """001 eq (29), with k1 = k2 = √2: λ = 2 (ζ + 1) ωn² / (2ζ + 1)³."""
     return 2 * (zeta + 1) * omega_n**2 / (2 * zeta + 1) ** 3
 
@@ -123,31 +125,26 @@ def symmetric_optimum_pm(b):
     return jnp.arctan((b**2 - 1) / (2 * b))
 
 
-def sogi_fll_closed_form(k=1 / math.sqrt(2), omega_n=100 * math.pi, zeta=1 / math.sqrt(2), **kw):
+def sogi_fll_closed_form(k=papers.SOGI_FLL_K, omega_n=papers.FLL_OMEGA_N, zeta=papers.FLL_ZETA, **kw):
     """A :class:`~jaxobs.SOGIFLL` tuned by 001 eq (22) (Table I: k = 1/√2, λ = 12337)."""
-    from ..observers.fll import SOGIFLL
-
     check_positive("k", k, "sogi_fll_closed_form")
     check_positive("zeta", zeta, "sogi_fll_closed_form")
     return SOGIFLL(k=k, lam=sogi_fll_lambda(as_float(k), as_float(omega_n), zeta), omega_n=omega_n, **kw)
 
 
-def wpf_closed_form(omega_n=100 * math.pi, zeta=1 / math.sqrt(2), **kw):
+def wpf_closed_form(omega_n=papers.FLL_OMEGA_N, zeta=papers.FLL_ZETA, **kw):
     """A :class:`~jaxobs.SOGIFLLWPF` tuned by 001 eq (29) (Table I: k1 = k2 = √2, λ = 23948)."""
-    from ..observers.fll import SOGIFLLWPF
-
     check_positive("zeta", zeta, "wpf_closed_form")
-    return SOGIFLLWPF(k1=math.sqrt(2), k2=math.sqrt(2), lam=wpf_lambda(as_float(omega_n), zeta), omega_n=omega_n, **kw)
+    lam = wpf_lambda(as_float(omega_n), zeta)
+    return SOGIFLLWPF(k1=papers.WPF_K1, k2=papers.WPF_K2, lam=lam, omega_n=omega_n, **kw)
 
 
-def wif_closed_form(omega_c=2 * math.pi * 18.8, b=1 + math.sqrt(2), omega_n=100 * math.pi, **kw):
+def wif_closed_form(omega_c=papers.WIF_OMEGA_C, b=papers.WIF_B, omega_n=papers.FLL_OMEGA_N, **kw):
     """A :class:`~jaxobs.SOGIFLLWIF` tuned by the symmetric optimum, 001 eq (34).
 
     Defaults are 001's: b = 1 + √2 (ζ = 1/√2, PM = 45°), ωc = 2π·18.8 rad/s
     (Table I: k1 = 1.815, k2 = 0.752, λ = 11559).
     """
-    from ..observers.fll import SOGIFLLWIF
-
     check_real("b", b, lower=1.0, owner="wif_closed_form")
     check_positive("omega_c", omega_c, "wif_closed_form")
     k1, k2, lam = wif_symmetric_optimum(as_float(b), as_float(omega_c), as_float(omega_n))

@@ -2,8 +2,8 @@
 
 Paper 000 (Xu et al., TPEL 2018): transfer functions from back EMF e_r to the
 estimated rotor flux ψ̂_r (Table III and eqs 15, 20), their dc and harmonic
-gains (eqs 16, 21, 29, 36) and the second-order SOGI's Tustin coefficients
-(eqs 22–25).
+gains (eqs 16, 21, 29, 36) and the second-order SOGI's Tustin transfer functions
+(eqs 22–25, from the coefficients the observer runs, :mod:`jaxobs.observers._cores`).
 
 Paper 002 (Li et al.): transfer functions from the true to the estimated
 equivalent BEMF ê/e (Table II, eqs 15–17, 21/26, 29–30), the C-LESO closed
@@ -30,7 +30,8 @@ import jax
 import jax.numpy as jnp
 
 from .._validate import as_float, check_positive, check_real
-from ._tf import DiscreteTransferFunction, TransferFunction
+from ..observers._cores import sogi2_tustin_coefficients
+from ._tf import DiscreteTransferFunction, TransferFunction, is_hurwitz
 
 __all__ = [
     "integrator_flux_tf",
@@ -43,7 +44,6 @@ __all__ = [
     "sosoifo_harmonic_factor",
     "lpf_compensation",
     "sogi2_tustin_paper",
-    "sogi2_tustin_coefficients",
     "cleso_tf",
     "leso_tf",
     "gileso_tf",
@@ -133,21 +133,6 @@ def lpf_compensation(omega_1, omega_c):
     return jnp.abs(ratio), jnp.angle(ratio)
 
 
-def sogi2_tustin_coefficients(K1, K2, w, ts):
-    """000 eqs (22)–(25): (a1…a4, D1 numerator, Q1 numerator), each in ascending powers of z⁻¹."""
-    u = 2 * K1 * K2 * w**2 * ts**2
-    v = 8 * K2 * w * ts
-    ww = 4 * (2 + K1 * K2) * w**2 * ts**2
-    x = 2 * K2 * w**3 * ts**3
-    y = w**4 * ts**4
-    sig = 16 + v + ww + x + y
-    b0 = u / sig
-    a = jnp.stack([-64 - 2 * v + 2 * x + 4 * y, 96 - 2 * ww + 6 * y, -64 + 2 * v - 2 * x + 4 * y, 16 - v + ww - x + y]) / sig
-    d_num = 2 * b0 * jnp.asarray([1.0, 0.0, -2.0, 0.0, 1.0])
-    q_num = b0 * w * ts * jnp.asarray([1.0, 2.0, 0.0, -2.0, -1.0])
-    return a, d_num, q_num
-
-
 def sogi2_tustin_paper(K1, K2, omega, ts):
     """000 eqs (22)–(25): the Tustin coefficients of the second-order SOGI, as printed.
 
@@ -204,8 +189,6 @@ def faleso_tf(k1, k2, omega_e) -> TransferFunction:
 
 def faleso_is_stable(k1, k2, omega_e):
     """Generalized Routh test on 002 eq (22) (stable iff k1 > 0 and k2 > 0, eq 24)."""
-    from ._tf import is_hurwitz
-
     return is_hurwitz(faleso_tf(k1, k2, omega_e).den)
 
 

@@ -22,6 +22,7 @@ import jax.scipy.linalg as jsl
 import optimistix as optx
 
 from .._validate import as_float
+from ..metrics import settling_time
 
 __all__ = [
     "TransferFunction",
@@ -211,8 +212,6 @@ class TransferFunction(eqx.Module):
 
     def settling_time(self, t, band=0.02):
         """Step-response settling time to within ``band`` of the final value (exact on the grid)."""
-        from ..metrics import settling_time
-
         y = self.step(t)
         final = self.dcgain()
         return settling_time(t - t[0], jnp.real(y), jnp.real(final), band * jnp.abs(final))

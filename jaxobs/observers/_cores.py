@@ -21,8 +21,8 @@ GI with input x = k (v − y):
 
     D(s) = y/v = k ω' s / (s² + k ω' s + ω'²),   Q(s) = q/v = k ω'² / (s² + k ω' s + ω'²).
 
-Second-order SOGI (000 eqs 17–18)
----------------------------------
+Second-order SOGI (000 eqs 17–18; Tustin difference equations, eqs 22–25)
+-------------------------------------------------------------------------
 Two GIs replacing the two integrators of the second-order low-pass
 filter K1 K2 / (x² + K2 x + K1 K2).  With 1/s in place of each GI that filter is
 ``z = (1/s)·K2 (K1 (v − y) − z)``, ``y = (1/s)·z``; with GIs:
@@ -66,6 +66,27 @@ def sogi2_vf(za, zb, y, q, v, w, K1, K2):
     dza, dzb = gi_vf(za, zb, K2 * (K1 * (v - y) - za), w)
     dy, dq = gi_vf(y, q, za, w)
     return dza, dzb, dy, dq
+
+
+def sogi2_tustin_coefficients(K1, K2, w, ts):
+    """Second-order SOGI by Tustin, 000 eqs (22)–(25): (a1…a4, D1 numerator, Q1 numerator), each in
+    ascending powers of z⁻¹.
+
+    The difference equations :class:`~jaxobs.SecondOrderSOIFO` runs with ``discretization="paper"``;
+    :func:`jaxobs.linear.sogi2_tustin_paper` builds the discrete transfer functions from them.
+    """
+    u = 2 * K1 * K2 * w**2 * ts**2
+    v = 8 * K2 * w * ts
+    ww = 4 * (2 + K1 * K2) * w**2 * ts**2
+    x = 2 * K2 * w**3 * ts**3
+    y = w**4 * ts**4
+    sig = 16 + v + ww + x + y
+    b0 = u / sig
+    a = jnp.stack([-64 - 2 * v + 2 * x + 4 * y, 96 - 2 * ww + 6 * y, -64 + 2 * v - 2 * x + 4 * y, 16 - v + ww - x + y])
+    a = a / sig
+    d_num = 2 * b0 * jnp.asarray([1.0, 0.0, -2.0, 0.0, 1.0])
+    q_num = b0 * w * ts * jnp.asarray([1.0, 2.0, 0.0, -2.0, -1.0])
+    return a, d_num, q_num
 
 
 def safe_sq_amplitude(y, q, v_floor):

@@ -20,6 +20,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
+from .. import papers
 from .._math import safe_atan2, safe_norm2
 from .._validate import check_positive, check_sample_time
 from .._validate import static_float as _static_float
@@ -66,7 +67,7 @@ class SOGIFLL(AbstractObserver):
     rule: AbstractRule = eqx.field(static=True)
     v_floor: float = eqx.field(static=True)
 
-    def __init__(self, k, lam, omega_n=100 * jnp.pi, *, ts=1e-4, rule=None, v_floor=1e-3):
+    def __init__(self, k, lam, omega_n=papers.FLL_OMEGA_N, *, ts=1e-4, rule=None, v_floor=1e-3):
         self.k = check_positive("k", k, "SOGIFLL")
         self.lam = check_positive("lam", lam, "SOGIFLL")
         self.omega_n = check_positive("omega_n", omega_n, "SOGIFLL")
@@ -112,7 +113,7 @@ class SOGIFLLWPF(AbstractObserver):
     rule: AbstractRule = eqx.field(static=True)
     v_floor: float = eqx.field(static=True)
 
-    def __init__(self, k1, k2, lam, omega_n=100 * jnp.pi, *, ts=1e-4, rule=None, v_floor=1e-3):
+    def __init__(self, k1, k2, lam, omega_n=papers.FLL_OMEGA_N, *, ts=1e-4, rule=None, v_floor=1e-3):
         self.k1 = check_positive("k1", k1, "SOGIFLLWPF")
         self.k2 = check_positive("k2", k2, "SOGIFLLWPF")
         self.lam = check_positive("lam", lam, "SOGIFLLWPF")
@@ -186,7 +187,7 @@ class SOGIFLLWIF(AbstractObserver):
     v_floor: float = eqx.field(static=True)
     fll_error: Literal["input", "residual"] = eqx.field(static=True)
 
-    def __init__(self, k1, k2, lam, omega_n=100 * jnp.pi, *, ts=1e-4, rule=None, v_floor=1e-3, fll_error="input"):
+    def __init__(self, k1, k2, lam, omega_n=papers.FLL_OMEGA_N, *, ts=1e-4, rule=None, v_floor=1e-3, fll_error="input"):
         self.k1 = check_positive("k1", k1, "SOGIFLLWIF")
         self.k2 = check_positive("k2", k2, "SOGIFLLWIF")
         self.lam = check_positive("lam", lam, "SOGIFLLWIF")

@@ -56,7 +56,7 @@ import jax.numpy as jnp
 from .._math import safe_atan2
 from .._validate import check_nonnegative, check_positive, check_sample_time
 from ..discretize import RK4, AbstractRule, check_rule
-from ._cores import pll_vf, quadrature_error, safe_sq_amplitude, sogi2_vf, sogi_vf
+from ._cores import pll_vf, quadrature_error, safe_sq_amplitude, sogi2_tustin_coefficients, sogi2_vf, sogi_vf
 
 __all__ = ["FluxOutput", "FluxState", "PureIntegratorFlux", "LPFFlux", "SOIFO", "SecondOrderSOIFO"]
 
@@ -324,16 +324,9 @@ class SecondOrderSOIFO(_FluxBase):
         return jnp.stack([*ax, *bx, -(lam / self.K1) * num / _fll_norm(x[2], x[3], x[6], x[7], e, self.v_floor)])
 
     # --- paper 000 eqs (22)-(25) ---------------------------------------------
-    def _coeffs(self, w):
-        from ..linear._models import (
-            sogi2_tustin_coefficients,  # lazy: linear imports observers
-        )
-
-        return sogi2_tustin_coefficients(self.K1, self.K2, w, self.ts)
-
     def _paper_step(self, x, e):
         w = x[8]
-        a, bd, bq = self._coeffs(jnp.maximum(w, self.omega_min))
+        a, bd, bq = sogi2_tustin_coefficients(self.K1, self.K2, jnp.maximum(w, self.omega_min), self.ts)
         outs = []
         new_hist = []
         for ax, ex in ((0, e[0]), (1, e[1])):

@@ -46,6 +46,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
+from .. import papers
 from .._math import safe_atan2, wrap
 from .._validate import check_nonnegative, check_positive, check_sample_time
 from ..discretize import RK4, AbstractRule, Knots, check_rule
@@ -131,7 +132,9 @@ def _common(obj, Rs, Lq, kp_pll, ki_pll, omega0_pll, ts, rule, e_floor, name):
     obj.e_floor = float(e_floor)
 
 
-_DEFAULT_PLL = (2 * 0.7071 * 2 * math.pi * 15, (2 * math.pi * 15) ** 2)
+# The PLL defaults: pole placement at ω_b = 2π·papers.LESO_PLL_HZ with ζ = 0.7071 (linear.pll_gains
+# uses 1/√2, 1e-5 apart; written as before so that the defaults keep their values).
+_DEFAULT_PLL = (2 * 0.7071 * 2 * math.pi * papers.LESO_PLL_HZ, (2 * math.pi * papers.LESO_PLL_HZ) ** 2)
 
 
 class CLESO(_LESOBase):
@@ -148,7 +151,8 @@ class CLESO(_LESOBase):
     e_floor: float = eqx.field(static=True)
     n_leso: ClassVar[int] = 4
 
-    def __init__(self, Rs, Lq, omega0=500 * math.pi, kp_pll=_DEFAULT_PLL[0], ki_pll=_DEFAULT_PLL[1], omega0_pll=0.0, *, ts=1e-4, rule=None, e_floor=1.0):
+    def __init__(self, Rs, Lq, omega0=papers.LESO_OMEGA0, kp_pll=_DEFAULT_PLL[0], ki_pll=_DEFAULT_PLL[1],
+                 omega0_pll=0.0, *, ts=1e-4, rule=None, e_floor=1.0):
         _common(self, Rs, Lq, kp_pll, ki_pll, omega0_pll, ts, rule, e_floor, "CLESO")
         self.omega0 = check_positive("omega0", omega0, "CLESO")
 
@@ -178,7 +182,8 @@ class GILESO(_LESOBase):
     e_floor: float = eqx.field(static=True)
     n_leso: ClassVar[int] = 8
 
-    def __init__(self, Rs, Lq, omega0=500 * math.pi, K_r=None, omega_c=math.pi, kp_pll=_DEFAULT_PLL[0], ki_pll=_DEFAULT_PLL[1], omega0_pll=0.0, *, ts=1e-4, rule=None, e_floor=1.0):
+    def __init__(self, Rs, Lq, omega0=papers.LESO_OMEGA0, K_r=None, omega_c=papers.GILESO_OMEGA_C,
+                 kp_pll=_DEFAULT_PLL[0], ki_pll=_DEFAULT_PLL[1], omega0_pll=0.0, *, ts=1e-4, rule=None, e_floor=1.0):
         _common(self, Rs, Lq, kp_pll, ki_pll, omega0_pll, ts, rule, e_floor, "GILESO")
         self.omega0 = check_positive("omega0", omega0, "GILESO")
         self.K_r = check_positive("K_r", 2 * float(omega0) ** 2 if K_r is None else K_r, "GILESO")
@@ -211,7 +216,8 @@ class FALESO(_LESOBase):
     e_floor: float = eqx.field(static=True)
     n_leso: ClassVar[int] = 4
 
-    def __init__(self, Rs, Lq, k1=10 * math.pi, k2=100 * math.pi, kp_pll=_DEFAULT_PLL[0], ki_pll=_DEFAULT_PLL[1], omega0_pll=0.0, *, ts=1e-4, rule=None, e_floor=1.0):
+    def __init__(self, Rs, Lq, k1=papers.FALESO_K1, k2=papers.FALESO_K2, kp_pll=_DEFAULT_PLL[0], ki_pll=_DEFAULT_PLL[1],
+                 omega0_pll=0.0, *, ts=1e-4, rule=None, e_floor=1.0):
         _common(self, Rs, Lq, kp_pll, ki_pll, omega0_pll, ts, rule, e_floor, "FALESO")
         # 002 eq (24): stable iff k1 > 0 and k2 > 0 (generalized Routh test)
         self.k1 = check_positive("k1", k1, "FALESO")

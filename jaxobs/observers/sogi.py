@@ -14,6 +14,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
+from .. import papers
 from .._validate import check_positive, check_sample_time
 from ..discretize import AbstractRule, Tustin, check_rule
 from ._cores import sogi2_vf, sogi_vf
@@ -35,7 +36,7 @@ class SOGI(AbstractObserver):
     ts: float = eqx.field(static=True)
     rule: AbstractRule = eqx.field(static=True)
 
-    def __init__(self, k, omega=100 * jnp.pi, *, ts=1e-4, rule=None):
+    def __init__(self, k, omega=papers.FLL_OMEGA_N, *, ts=1e-4, rule=None):
         self.k = check_positive("k", k, "SOGI")
         self.omega = check_positive("omega", omega, "SOGI")
         self.ts = check_sample_time("ts", ts, "SOGI")
@@ -61,7 +62,7 @@ class SOGI2(AbstractObserver):
     ts: float = eqx.field(static=True)
     rule: AbstractRule = eqx.field(static=True)
 
-    def __init__(self, K1, K2, omega=100 * jnp.pi, *, ts=1e-4, rule=None):
+    def __init__(self, K1, K2, omega=papers.FLL_OMEGA_N, *, ts=1e-4, rule=None):
         self.K1 = check_positive("K1", K1, "SOGI2")
         self.K2 = check_positive("K2", K2, "SOGI2")
         self.omega = check_positive("omega", omega, "SOGI2")

@@ -35,7 +35,7 @@ import equinox as eqx
 import numpy as np
 
 from .. import drive as D
-from .. import linear
+from .. import linear, papers
 from ..metrics import wrap
 from ..simulate import simulate
 from ..observers import (
@@ -49,22 +49,23 @@ from ..observers import (
 __all__ = ["OBSERVER_NAMES", "bench_machine", "flux_bank", "run_flux_experiments", "flux_drive"]
 
 OBSERVER_NAMES = ("integrator", "LPF", "SOIFO", "second-order SOIFO")
-BENCH_J = 10 * 3.78e-4  # ASSUMED bench inertia (motor + load machine), kg·m²
-K_SOIFO, K1, K2 = 1.414, 1.56, 3.11
-LPF_WC = 100.0
+# 000's gains (Fig. 5 and Sec. IV), under the paper's names; jaxobs.papers is their home.
+K_SOIFO, K1, K2 = papers.SOIFO_K, papers.SECOND_ORDER_SOIFO_K1, papers.SECOND_ORDER_SOIFO_K2
 
 
 def bench_machine(**kw):
-    return D.spmsm_paper000(J=BENCH_J, **kw)
+    """000 Table II's SPMSM on the bench's ASSUMED inertia (:data:`jaxobs.papers.BENCH_J_000`)."""
+    return D.spmsm_paper000(J=papers.BENCH_J_000, **kw)
 
 
-def flux_bank(est: D.PMSMParams, omega0, *, lam_soifo=K_SOIFO**2 / 4, lam_sosoifo=K1**3 / (2 * K2), K1_=K1, K2_=K2, k=K_SOIFO):
+def flux_bank(est: D.PMSMParams, omega0, *, lam_soifo=K_SOIFO**2 / 4, lam_sosoifo=K1**3 / (2 * K2), K1_=K1, K2_=K2,
+              k=K_SOIFO):
     """The four observers of 000 with the Fig. 5 settings; the second-order SOIFO is the primary."""
-    kp, ki = linear.pll_gains(2 * math.pi * 20.0)
+    kp, ki = linear.pll_gains(2 * math.pi * papers.FLUX_PLL_HZ)
     return ObserverBank(
         (
             PureIntegratorFlux(est.Rs, est.Ld, kp, ki, omega0=omega0),
-            LPFFlux(est.Rs, est.Ld, LPF_WC, kp, ki, omega0=omega0),
+            LPFFlux(est.Rs, est.Ld, papers.LPF_OMEGA_C, kp, ki, omega0=omega0),
             SOIFO(est.Rs, est.Ld, k, lam_soifo, omega0=omega0),
             SecondOrderSOIFO(est.Rs, est.Ld, K1_, K2_, lam_sosoifo, omega0=omega0),
         ),
@@ -72,8 +73,8 @@ def flux_bank(est: D.PMSMParams, omega0, *, lam_soifo=K_SOIFO**2 / 4, lam_sosoif
     )
 
 
-def flux_drive(par, handover, startup=None, alpha_s=2 * math.pi * 5):
-    foc = D.FOC.imc(par, alpha_c=2 * math.pi * 300, alpha_s=alpha_s)
+def flux_drive(par, handover, startup=None, alpha_s=2 * math.pi * papers.BENCH_SPEED_HZ):
+    foc = D.FOC.imc(par, alpha_c=2 * math.pi * papers.BENCH_CURRENT_HZ, alpha_s=alpha_s)
     return D.Drive(foc, sensorless=True, handover=handover, startup=startup)
 
 
@@ -118,7 +119,8 @@ def run_flux_experiments(quick: bool = False):
     rows, traces = [], {}
     err_metric = [("max_abs", "rad")]
 
-    def run(name, rpm0, t1, handover, speed_ref, load=None, sensors=None, est=None, startup=None, omega0=None, alpha_s=2 * math.pi * 5):
+    def run(name, rpm0, t1, handover, speed_ref, load=None, sensors=None, est=None, startup=None, omega0=None,
+            alpha_s=2 * math.pi * papers.BENCH_SPEED_HZ):
         est = par if est is None else est
         w0 = par.p * rpm0 * D.RPM if omega0 is None else omega0
         sc = D.Scenario(par, est_par=est, speed_ref=speed_ref, load=load, sensors=sensors, omega_m0=rpm0 * D.RPM if startup is None else 0.0)

@@ -26,34 +26,45 @@ import math
 import numpy as np
 
 from .. import drive as D
-from .. import linear
+from .. import linear, papers
 from ..metrics import harmonic_amplitude, wrap
 from ..simulate import simulate
 from ..observers import CLESO, FALESO, GILESO, ObserverBank
 
-__all__ = ["LESO_NAMES", "leso_bank", "leso_drive", "run_leso_experiments", "A5", "A7", "BENCH_J"]
+__all__ = ["LESO_NAMES", "bench_machine", "leso_bank", "leso_drive", "run_leso_experiments"]
 
 LESO_NAMES = ("C-LESO", "GI-LESO", "FA-LESO")
-A5, A7 = 0.0675, 0.0879
-BENCH_J = 0.05  # ASSUMED bench inertia, kg·m²
-W0 = 500 * math.pi
-K1_FA, K2_FA = 10 * math.pi, 100 * math.pi
+# 002 Table II's gains and our ASSUMED harmonic content, under short names; jaxobs.papers is their home.
+A5, A7 = papers.IPMSM_002_A5, papers.IPMSM_002_A7
+W0, K_R, WC_GI = papers.LESO_OMEGA0, papers.GILESO_K_R, papers.GILESO_OMEGA_C
+K1_FA, K2_FA = papers.FALESO_K1, papers.FALESO_K2
+
+
+def bench_machine(**kw):
+    """The ASSUMED IPMSM (:func:`jaxobs.drive.ipmsm_paper002`) on the bench's ASSUMED inertia."""
+    return D.ipmsm_paper002(J=papers.BENCH_J_002, **kw)
 
 
 def leso_bank(est: D.PMSMParams, omega0_pll, pll=None):
-    kp, ki = linear.pll_gains(2 * math.pi * 15.0) if pll is None else pll
+    kp, ki = linear.pll_gains(2 * math.pi * papers.LESO_PLL_HZ) if pll is None else pll
     return ObserverBank(
         (
             CLESO(est.Rs, est.Lq, W0, kp, ki, omega0_pll),
-            GILESO(est.Rs, est.Lq, W0, 2 * W0**2, math.pi, kp, ki, omega0_pll),
+            GILESO(est.Rs, est.Lq, W0, K_R, WC_GI, kp, ki, omega0_pll),
             FALESO(est.Rs, est.Lq, K1_FA, K2_FA, kp, ki, omega0_pll),
         ),
         primary=2,
     )
 
 
-def leso_drive(par, handover=0.3, alpha_s=2 * math.pi * 5):
-    return D.Drive(D.FOC.imc(par, alpha_c=2 * math.pi * 300, alpha_s=alpha_s), sensorless=True, handover=handover)
+def leso_drive(par, handover=0.3, alpha_s=2 * math.pi * papers.BENCH_SPEED_HZ):
+    foc = D.FOC.imc(par, alpha_c=2 * math.pi * papers.BENCH_CURRENT_HZ, alpha_s=alpha_s)
+    return D.Drive(foc, sensorless=True, handover=handover)
+
+
+def _tfs(we):
+    """The three LESOs' ê/e at ω̂e = ``we`` (002 Table II's gains), in LESO_NAMES' order."""
+    return linear.cleso_tf(W0), linear.gileso_tf(W0, K_R, WC_GI, we), linear.faleso_tf(K1_FA, K2_FA, we)
 
 
 def _err_deg(sol, i):
@@ -71,7 +82,7 @@ def run_leso_experiments():
         traces[name] = sol
         return sol, np.asarray(sol.t)
 
-    par = D.ipmsm_paper002(J=BENCH_J)
+    par = bench_machine()
     # --- steady state, no load (Figs. 10-12)
     paper_mean = {300: (14.0, 7.0, 0.0), 600: (23.0, 10.0, 0.0), 840: (34.0, 12.0, 0.0)}
     for rpm in (300, 600, 840):
@@ -84,12 +95,12 @@ def run_leso_experiments():
             rows.append(dict(experiment=name, observer=obs, metric="mean_lag", unit="deg", paper=paper_mean[rpm][i], ours=float(-err.mean())))
             rows.append(dict(experiment=name, observer=obs, metric="ripple", unit="deg", paper=2.3 if obs == "FA-LESO" else None, ours=float(np.ptp(err))))
         we = par.p * rpm * D.RPM
-        for i, (obs, tf) in enumerate(zip(LESO_NAMES, (linear.cleso_tf(W0), linear.gileso_tf(W0, 2 * W0**2, math.pi, we), linear.faleso_tf(K1_FA, K2_FA, we)))):
+        for i, (obs, tf) in enumerate(zip(LESO_NAMES, _tfs(we))):
             lag = -math.degrees(float(np.angle(complex(tf.freqresp(we)))))
             rows.append(dict(experiment=name, observer=obs, metric="tf_lag", unit="deg", paper=None, ours=lag))
 
     # --- BEMF harmonics (Figs. 13-14)
-    hpar = D.ipmsm_paper002(a5=A5, a7=A7, J=BENCH_J)
+    hpar = bench_machine(a5=A5, a7=A7)
     paper_h = {300: ((5.4, 5.9), (3.6, 4.0), (0.8, 0.7)), 600: ((4.1, 4.5), (2.7, 2.9), (0.6, 0.7))}
     for rpm, frac in ((300, 0.5), (600, 0.4)):
         name = f"harmonics {rpm} r/min {int(frac * 100)} % load"
@@ -105,7 +116,7 @@ def run_leso_experiments():
             for h, paper in zip((5, 7), paper_h[rpm][i]):
                 pct = 100 * float(harmonic_amplitude(t, ea, h * we, m)) / fund
                 rows.append(dict(experiment=name, observer=obs, metric=f"h{h}", unit="%", paper=paper, ours=pct))
-        for obs, tf in zip(LESO_NAMES, (linear.cleso_tf(W0), linear.gileso_tf(W0, 2 * W0**2, math.pi, we), linear.faleso_tf(K1_FA, K2_FA, we))):
+        for obs, tf in zip(LESO_NAMES, _tfs(we)):
             for h, a, sgn in ((5, A5, -1), (7, A7, +1)):
                 pred = 100 * a * abs(complex(tf.freqresp(sgn * h * we))) / abs(complex(tf.freqresp(we)))
                 rows.append(dict(experiment=name, observer=obs, metric=f"h{h}_tf", unit="%", paper=None, ours=pred))
@@ -129,10 +140,10 @@ def run_leso_experiments():
     we = par.p * 300 * D.RPM
 
     for label, est, delta in (
-        ("Rs_est = 1.5 Rs", D.ipmsm_paper002(Rs=1.5 * float(par.Rs), J=BENCH_J), ("Rs", -0.5 * float(par.Rs))),
-        ("Rs_est = 0.5 Rs", D.ipmsm_paper002(Rs=0.5 * float(par.Rs), J=BENCH_J), ("Rs", 0.5 * float(par.Rs))),
-        ("Lq_est = 1.5 Lq", D.ipmsm_paper002(Lq=1.5 * float(par.Lq), J=BENCH_J), ("Lq", -0.5 * float(par.Lq))),
-        ("Lq_est = 0.5 Lq", D.ipmsm_paper002(Lq=0.5 * float(par.Lq), J=BENCH_J), ("Lq", 0.5 * float(par.Lq))),
+        ("Rs_est = 1.5 Rs", bench_machine(Rs=1.5 * float(par.Rs)), ("Rs", -0.5 * float(par.Rs))),
+        ("Rs_est = 0.5 Rs", bench_machine(Rs=0.5 * float(par.Rs)), ("Rs", 0.5 * float(par.Rs))),
+        ("Lq_est = 1.5 Lq", bench_machine(Lq=1.5 * float(par.Lq)), ("Lq", -0.5 * float(par.Lq))),
+        ("Lq_est = 0.5 Lq", bench_machine(Lq=0.5 * float(par.Lq)), ("Lq", 0.5 * float(par.Lq))),
     ):
         name = f"{label}, rated load, 300 r/min"
         sol, t = run(name, par, est, 300, 1.2, D.Profile.constant(300 * D.RPM), load=D.Profile.constant(float(par.T_rated)))

@@ -1,0 +1,119 @@
+"""One home per paper constant (jaxobs/papers.py): the copies that cannot import it agree with it,
+and no module types a paper's number again."""
+
+import ast
+import math
+import tomllib
+from pathlib import Path
+
+import pytest
+
+from jaxobs import drive as D
+from jaxobs import linear, papers
+
+ROOT = Path(__file__).parents[1]
+PRESETS = ROOT / "tuning" / "presets"
+
+# Preset gains whose initial value is meant to be the paper's (the closed form the job reports beside the
+# tuned gains), with the decimals the TOML writes (None: exact).  TOML cannot import papers.py.
+_PLL_KP, _PLL_KI = (float(g) for g in linear.pll_gains(2 * math.pi * papers.LESO_PLL_HZ))
+PRESET_VALUES = [
+    ("sogi_fll", "lam", papers.SOGI_FLL_LAM, None),
+    ("wpf", "k1", papers.WPF_K1, 4),
+    ("wpf", "k2", papers.WPF_K2, 4),
+    ("wpf", "lam", papers.WPF_LAM, None),
+    ("wif_robust", "k1", papers.WIF_K1, None),
+    ("wif_robust", "k2", papers.WIF_K2, None),
+    ("wif_robust", "lam", papers.WIF_LAM, None),
+    ("soifo", "k", papers.SOIFO_K, None),
+    ("soifo", "lam", papers.SOIFO_K**2 / 4, 3),  # 000's k with the damping rule lam = k²/4
+    ("sosoifo", "K1", papers.SECOND_ORDER_SOIFO_K1, None),
+    ("sosoifo", "K2", papers.SECOND_ORDER_SOIFO_K2, None),
+    ("cleso", "omega0", papers.LESO_OMEGA0, 1),
+    ("faleso", "k1", papers.FALESO_K1, 4),
+    ("faleso", "k2", papers.FALESO_K2, 3),
+    ("faleso", "kp_pll", _PLL_KP, 1),  # the ASSUMED PLL, ω_b = 2π·LESO_PLL_HZ
+    ("faleso", "ki_pll", _PLL_KI, 1),
+]
+
+
+@pytest.mark.parametrize("preset, gain, value, decimals", PRESET_VALUES, ids=[f"{p}.{g}" for p, g, *_ in PRESET_VALUES])
+def test_preset_initial_gains_are_the_papers(preset, gain, value, decimals):
+    job = tomllib.loads((PRESETS / f"{preset}.toml").read_text())
+    init = job["gains"][gain]["init"]
+    assert init == (value if decimals is None else round(value, decimals)), (preset, gain, init, value)
+
+
+def test_every_preset_gain_is_checked():
+    """Every preset gain starts at the paper's value: a new preset (or gain) is added to the table above."""
+    checked = {(p, g) for p, g, _, _ in PRESET_VALUES}
+    for path in sorted(PRESETS.glob("*.toml")):
+        for gain in tomllib.loads(path.read_text()).get("gains", {}):
+            assert (path.stem, gain) in checked, f"{path.name}: gains.{gain} is not checked against jaxobs.papers"
+
+
+@pytest.mark.parametrize(
+    "preset, table", [(D.spmsm_paper000, papers.SPMSM_000), (D.ipmsm_paper002, papers.IPMSM_002)], ids=["000", "002"]
+)
+def test_machine_presets_are_the_papers_tables(preset, table):
+    """jaxobs.drive's machine presets hold the tables of jaxobs.papers (000 Table II; 002's ASSUMED machine)."""
+    par = preset()
+    for field, value in table.items():
+        assert float(getattr(par, field)) == value, field
+
+
+# Numbers that identify a paper constant (their value is unlikely to mean anything else), and the
+# multiples of π that 002 Table II writes.  Found as numeric literals in jaxobs/ or tuning/ outside
+# papers.py, they are a second home.
+PAPER_LITERALS = {
+    1.815, 0.752, 11559.0, 12337.0, 23948.0, 1.414, 1.56, 3.11, 6.22, 3.78e-4, 18.8, 0.0675, 0.0879, 0.018
+}
+PAPER_PI_MULTIPLES = {500, 10}
+
+# Second homes in files other engineers own, to be removed when their changes land (the test then
+# fails until the entry is deleted).  Keep this list short.
+PENDING = {
+    # the drive redesign: spmsm_paper000 and ipmsm_paper002 build on papers.SPMSM_000 and papers.IPMSM_002
+    ("jaxobs/drive/machine.py", 3.78e-4),
+    # the CLI rewrite: `closed-form wif`'s default ωc is papers.WIF_OMEGA_C (linear.wif_closed_form's default)
+    ("jaxobs/cli.py", 18.8),
+}
+
+
+def _paper_literals(path: Path):
+    tree = ast.parse(path.read_text())
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Constant) and type(node.value) in (int, float) and node.value in PAPER_LITERALS:
+            yield node.lineno, node.value
+        if (
+            isinstance(node, ast.BinOp)
+            and isinstance(node.op, ast.Mult)
+            and isinstance(node.left, ast.Constant)
+            and node.left.value in PAPER_PI_MULTIPLES
+            and isinstance(node.right, ast.Attribute)
+            and node.right.attr == "pi"
+        ):
+            yield node.lineno, f"{node.left.value}π"
+
+
+def test_no_paper_constant_is_typed_outside_papers_py():
+    found = set()
+    problems = []
+    for path in sorted([*ROOT.joinpath("jaxobs").rglob("*.py"), *ROOT.joinpath("tuning").rglob("*.py")]):
+        rel = path.relative_to(ROOT).as_posix()
+        if rel == "jaxobs/papers.py":
+            continue
+        for line, value in _paper_literals(path):
+            if (rel, value) in PENDING:
+                found.add((rel, value))
+            else:
+                problems.append(f"{rel}:{line}: {value} (import it from jaxobs.papers)")
+    problems += [f"PENDING entry {entry} no longer occurs: remove it" for entry in sorted(PENDING - found, key=str)]
+    assert not problems, "\n".join(problems)
+
+
+def test_tables_are_read_only():
+    with pytest.raises(TypeError):
+        papers.SPMSM_000["Rs"] = 1.0  # type: ignore[index]
+    with pytest.raises(TypeError):
+        papers.TESTS_001["A"]["freq_step"] = 3.0  # type: ignore[index]
