@@ -25,7 +25,14 @@ from .signals import GridSignal
 __all__ = ["GRID_SIGNAL_AXES", "NoisyGridSignal", "grid_signals"]
 
 GRID_SIGNAL_AXES = (
-    "freq_step", "phase_jump_deg", "sag", "dc", "harmonics_scale", "sub_amplitude", "phase_deg", "noise"
+    "freq_step",
+    "phase_jump_deg",
+    "sag",
+    "dc",
+    "harmonics_scale",
+    "sub_amplitude",
+    "phase_deg",
+    "noise",
 )
 
 

@@ -10,9 +10,8 @@ import pytest
 import xarray as xr
 
 import jaxobs
-from jaxobs import linear
+from jaxobs import linear, papers
 from jaxobs import metrics as M
-from jaxobs import papers
 from jaxobs.study import run_study, worst_cases
 from tuning.cli import main
 

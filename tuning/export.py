@@ -70,6 +70,7 @@ from jaxobs.discretize import AB3, RK4, Euler, Tustin
 from . import _cexpr as cx
 from ._cmodels import MEMORY, CModel, model_for, supported
 from ._crules import RuleC, needs_jacobian, ops_sum, ops_total, rule_c
+from .job import COMPONENTS
 
 __all__ = ["export_observer", "observer_from_result", "observer_from_design", "compile_and_check", "fll_test_signal",
            "drive_test_signal",
@@ -127,8 +128,6 @@ def observer_from_result(path, *, gains: str = "tuned", notes: list | None = Non
     ``rule`` and ``omega_n`` when it has them; otherwise the component's defaults
     are used and a line saying so is appended to ``notes``.
     """
-    from .job import COMPONENTS
-
     notes = [] if notes is None else notes
     path = Path(path)
     try:
