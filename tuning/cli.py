@@ -35,7 +35,7 @@ from importlib import resources
 from pathlib import Path
 
 import jaxobs
-from jaxobs import linear, use_host_devices
+from jaxobs import linear, papers, use_host_devices
 from jaxobs.study import STUDY_AXES
 
 from .export import add_export_parser
@@ -102,7 +102,7 @@ def closed_form_rows(design: str, values: dict) -> dict:
                  ("lam", float(obs.lam), "λ = 2(ζ+1)ωn²/(2ζ+1)³", "001 eq (29)")]
         inputs = dict(omega_n=wn, zeta=zeta)
     elif design == "wif":
-        wc = values.get("omega_c", 2 * pi * 18.8)
+        wc = values.get("omega_c", papers.WIF_OMEGA_C)
         b = values.get("b", 1 + math.sqrt(2))
         wn = values.get("omega_n", 100 * pi)
         obs = linear.wif_closed_form(omega_c=wc, b=b, omega_n=wn)

@@ -34,6 +34,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
+from .. import papers
 from .._validate import check_nonnegative, check_positive, check_real
 
 __all__ = ["PMSMParams", "spmsm_paper000", "ipmsm_paper002", "plant_vf", "torque", "bemf_dq", "bemf_ab"]
@@ -95,7 +96,7 @@ class PMSMParams(eqx.Module):
 def spmsm_paper000(**overrides) -> PMSMParams:
     """Paper 000 Table II SPMSM: ψf = 0.35 Wb, 2000 r/min, 3 pole pairs, L = 5 mH, Rs = 0.8 Ω,
     14 N·m, J = 3.78e-4 kg·m².  Friction is not given; B = 0 by default."""
-    kw = dict(Rs=0.8, Ld=5e-3, Lq=5e-3, psi_f=0.35, J=3.78e-4, p=3, B=0.0, T_rated=14.0, n_rated=2000.0)
+    kw = dict(papers.SPMSM_000)
     kw.update(overrides)
     return PMSMParams(**kw)
 
@@ -117,7 +118,7 @@ def ipmsm_paper002(**overrides) -> PMSMParams:
     002 Sec. V-B runs one set alone to expose the 5th and 7th BEMF harmonics;
     ``a5``/``a7`` model that case.
     """
-    kw = dict(Rs=0.6, Ld=6e-3, Lq=12e-3, psi_f=0.45, J=5e-3, p=5, B=1e-3, T_rated=30.0, n_rated=600.0)
+    kw = dict(papers.IPMSM_002)
     kw.update(overrides)
     return PMSMParams(**kw)
 
