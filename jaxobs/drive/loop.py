@@ -61,8 +61,11 @@ class Drive(eqx.Module):
     rule: AbstractRule = eqx.field(static=True)  # plant integration rule
     sensorless: bool = eqx.field(static=True)
     handover: float = eqx.field(static=True)  # sensorless: encoder until this time (s), observer after
+    settle: float = eqx.field(static=True)  # steady start: the observer's unscored settling phase before t = 0, s
 
-    def __init__(self, foc, inverter=None, *, startup=None, n_sub=2, rule=None, sensorless=False, handover=0.0):
+    def __init__(
+        self, foc, inverter=None, *, startup=None, n_sub=2, rule=None, sensorless=False, handover=0.0, settle=0.2
+    ):
         if not isinstance(foc, FOC):
             raise ValueError(f"Drive.foc must be a FOC, got {type(foc).__name__}")
         self.foc = foc
@@ -78,6 +81,9 @@ class Drive(eqx.Module):
         if not (handover >= 0.0):
             raise ValueError(f"Drive.handover must be >= 0 s, got {handover!r}")
         self.handover = float(handover)
+        if not (0.0 <= settle <= 10.0):
+            raise ValueError(f"Drive.settle must be in [0, 10] s, got {settle!r}")
+        self.settle = float(settle)
 
     @property
     def ts(self) -> float:
@@ -188,9 +194,8 @@ class ClosedLoop(AbstractSystem):
         the FOC's integrators hold them (:meth:`FOC.init`), the voltage of the
         period that starts at t = 0 is the steady one (computed at t_{−1}, so
         rotated to θ_e0 + ω_e T_s/2 by the delay compensation), and the
-        observer starts locked on the true machine where it can
-        (``observer.init_at(op)``; otherwise its own ``init()``).  With the
-        drive's I-f start-up the scenario starts from standstill, all zeros.
+        observer starts settled on that operating point (:meth:`_settled_observer`).
+        With the drive's I-f start-up the scenario starts from standstill, all zeros.
         """
         sc = self.scenario
         foc = self.controller
@@ -205,13 +210,37 @@ class ClosedLoop(AbstractSystem):
         th_u = op.theta_e + (0.5 if foc.delay_compensation else -1.0) * w_e * self.ts
         u_a, u_b = dq_to_ab(op.u_d, op.u_q, th_u)
         _, u = self.drive.inverter.step(None, InverterInput(u_a, u_b))
-        if self.observer is None:
-            obs = None
-        elif hasattr(self.observer, "init_at"):
-            obs = self.observer.init_at(op, sc.par)
-        else:
-            obs = self.observer.init()
+        obs = None if self.observer is None else self._settled_observer(op)
         return LoopState(plant=plant, ctrl=foc.init(op), obs=obs, sensors=sc.sensors.init(sc.key), u_a=u.u_a, u_b=u.u_b)
+
+    def _settled_observer(self, op: OperatingPoint):
+        """The observer after ``drive.settle`` seconds on the steady operating point: a phase before t = 0, unscored.
+
+        It starts from ``observer.init_at(ω_e)`` (its speed estimate at the true
+        speed, where it has one) and steps on the measurements the sensors give
+        of the steady machine over k = −n … −1 (offsets, gain errors and noise
+        included; θ_k = θ_e0 + ω_e k T_s, the voltage of each period centred at
+        θ_k + ω_e T_s/2 as the delay compensation applies it).  So its filters,
+        FLL and PLL are locked when the scored horizon starts, by the observer's
+        own dynamics rather than by a formula per observer.
+        """
+        sc, obs, ts = self.scenario, self.observer, self.ts
+        w_e = sc.par.p * op.omega_m
+        state = obs.init_at(w_e) if hasattr(obs, "init_at") else obs.init()
+        n = int(round(self.drive.settle / ts))
+        if n == 0:
+            return state
+        lead = (0.5 if self.controller.delay_compensation else -1.0) * w_e * ts
+
+        def settle_step(s, k):
+            th = op.theta_e + w_e * (k * ts)
+            i_a, i_b = dq_to_ab(op.i_d, op.i_q, th)
+            u_a, u_b = dq_to_ab(op.u_d, op.u_q, th + lead)
+            _, meas = sc.sensors.step(sc.key, SensorInput(k, u_a, u_b, i_a, i_b))
+            return obs.step(s, meas)[0], None
+
+        state, _ = jax.lax.scan(settle_step, state, jnp.arange(-n, 0, dtype=jnp.int32))
+        return state
 
     def step(self, state: LoopState, k) -> tuple[LoopState, DriveOutput]:
         drive, sc = self.drive, self.scenario

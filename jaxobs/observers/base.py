@@ -93,6 +93,9 @@ class ObserverBank(eqx.Module):
     def init(self, u0=None):
         return tuple(o.init() for o in self.observers)
 
+    def init_at(self, omega_e):
+        return tuple(o.init_at(omega_e) if hasattr(o, "init_at") else o.init() for o in self.observers)
+
     def step(self, state, u):
         pairs = [o.step(s, u) for o, s in zip(self.observers, state)]
         outs = tuple(p[1] for p in pairs)

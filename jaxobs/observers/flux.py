@@ -47,7 +47,7 @@ speed); the WIF's symmetric optimum λ = 2ωc²/b becomes lam = 2(ωc/ω̂)²/b.
 
 from __future__ import annotations
 
-from typing import Literal, NamedTuple
+from typing import ClassVar, Literal, NamedTuple
 
 import equinox as eqx
 import jax
@@ -87,7 +87,15 @@ class _FluxBase(eqx.Module):
     rule: eqx.AbstractVar[AbstractRule]
 
     def init(self, u0=None) -> FluxState:
+        return self._init_from(self.initial_state())
+
+    def init_at(self, omega_e) -> FluxState:
+        """The initial state with the speed estimate at ω_e (rad/s): the start of a drive's settling phase."""
         x0 = self.initial_state()
+        w = jnp.maximum(jnp.abs(omega_e), self.omega_min) if self._speed_abs else omega_e
+        return self._init_from(x0.at[self._speed_index].set(w))
+
+    def _init_from(self, x0) -> FluxState:
         z2 = jnp.zeros((2,), x0.dtype)
         return FluxState(x=x0, rule=self.rule.init(self.f, x0, z2), i_prev=z2, u_prev=z2, started=jnp.asarray(False))
 
@@ -129,6 +137,9 @@ class _PLLFluxBase(_FluxBase):
     ki_pll: eqx.AbstractVar[jax.Array]
     omega0: eqx.AbstractVar[jax.Array]
     psi_floor: eqx.AbstractVar[float]
+
+    _speed_index: ClassVar[int] = 3  # the PLL's ω in the state
+    _speed_abs: ClassVar[bool] = False  # a PLL's speed is signed
 
     def initial_state(self):
         z = jnp.zeros_like(self.kp_pll)
@@ -247,6 +258,9 @@ class SOIFO(_FluxBase):
         self.v_floor = float(v_floor)
         self.omega_min = float(omega_min)
 
+    _speed_index: ClassVar[int] = 4  # the FLL's ω̂ (a SOGI's centre frequency: > 0)
+    _speed_abs: ClassVar[bool] = True
+
     def initial_state(self):
         z = jnp.zeros_like(self.k)
         return jnp.stack([z, z, z, z, self.omega0])
@@ -308,6 +322,9 @@ class SecondOrderSOIFO(_FluxBase):
         self.discretization = discretization
         self.v_floor = float(v_floor)
         self.omega_min = float(omega_min)
+
+    _speed_index: ClassVar[int] = 8
+    _speed_abs: ClassVar[bool] = True
 
     def initial_state(self):
         z = jnp.zeros_like(self.K1)

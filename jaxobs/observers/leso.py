@@ -87,7 +87,13 @@ class _LESOBase(eqx.Module):
         return jnp.concatenate([z, jnp.stack([jnp.zeros_like(self.Rs), self.omega0_pll])])
 
     def init(self, u0=None) -> LESOState:
-        x0 = self.initial_state()
+        return self._init_from(self.initial_state())
+
+    def init_at(self, omega_e) -> LESOState:
+        """The initial state with the PLL's speed at ω_e (rad/s): the start of a drive's settling phase."""
+        return self._init_from(self.initial_state().at[self.n_leso + 1].set(omega_e))
+
+    def _init_from(self, x0) -> LESOState:
         z2 = jnp.zeros((2,), x0.dtype)
         inp0 = (z2, z2)
         return LESOState(x=x0, rule=self.rule.init(self.f, x0, inp0), i_prev=z2, u_prev=z2, started=jnp.asarray(False))
