@@ -1,10 +1,10 @@
-# Two commands (README): `make run` (the main job) and `make test` (the test suite).
-# Both create a local virtual environment in .venv on first use.
+# The two commands (README): `make run` (the main job) and `make test` (the test suite); also `make bench`
+# (the benchmarks, benchmarks/README.md). Each creates a local virtual environment in .venv on first use.
 PYTHON ?= python3
 VENV   := .venv
 STAMP  := $(VENV)/.installed-stamp
 
-.PHONY: run test test-slow lint clean
+.PHONY: run test test-slow lint bench clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -29,6 +29,11 @@ test-slow: $(STAMP)
 lint: $(STAMP)
 	$(VENV)/bin/ruff check .
 	$(VENV)/bin/ruff format --check .
+
+# The full benchmark run (~12 min on 2 cores), results in benchmarks/results/<date>.json; run from the
+# repository root (benchmarks/ is not part of the installed package). Quick look: .venv/bin/python -m benchmarks --quick
+bench: $(STAMP)
+	$(VENV)/bin/python -m benchmarks --out benchmarks/results/$$(date +%Y-%m-%d).json
 
 clean:
 	rm -rf $(VENV) out .pytest_cache

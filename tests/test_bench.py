@@ -1,25 +1,29 @@
-"""The benchmark's baselines compute what jaxobs computes (float64), and `jaxobs bench` runs."""
+"""The benchmark's baselines compute what jaxobs computes (float64), and `python -m benchmarks` runs."""
 
 import json
 import os
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
 
-from jaxobs import bench as B
+from benchmarks import baselines as B
+from benchmarks import workloads as W
 
-numba = pytest.importorskip("numba", reason="numba is the benchmark extra: pip install 'jaxobs[bench]'")
+numba = pytest.importorskip("numba", reason="numba is the benchmark extra: pip install -e '.[bench]'")
+
+ROOT = Path(__file__).resolve().parents[1]
 
 
-@pytest.mark.parametrize("kind", B.FLL_KINDS)
+@pytest.mark.parametrize("kind", W.FLL_KINDS)
 def test_fll_baselines_equal_jaxobs(kind):
     n = 1500
-    fn, args = B.jax_fll(kind, 4, "loop", n * B.TS, shard=False)
+    fn, args = W.jax_fll(kind, 4, "loop", n * W.TS, shard=False)
     ref = np.asarray(fn(args))
     # jaxobs reading the precomputed samples (SampledSignal) computes the same
-    fn_pre, args_pre = B.jax_fll(kind, 4, "precomputed", n * B.TS, shard=False)
+    fn_pre, args_pre = W.jax_fll(kind, 4, "precomputed", n * W.TS, shard=False)
     np.testing.assert_allclose(np.asarray(fn_pre(args_pre)), ref, rtol=1e-12)
     for inputs in ("loop", "precomputed"):
         for par in (False, True):
@@ -30,18 +34,19 @@ def test_fll_baselines_equal_jaxobs(kind):
 
 def test_drive_baselines_equal_jaxobs():
     n = 1200  # 0.12 s: past the hand-over to the observer (0.05 s) and the load step (0.1 s)
-    fn, args = B.jax_drive(3, "loop", n * B.TS, shard=False)
+    fn, args = W.jax_drive(3, "loop", n * W.TS, shard=False)
     ref = np.asarray(fn(args))
-    w = np.asarray(B.drive_setup(3)[3])
+    w = np.asarray(W.drive_setup(3)[3])
     for par in (False, True):
         np.testing.assert_allclose(B.numba_drive(np.float64, par)(w, n), ref, rtol=1e-10)
     np.testing.assert_allclose(B.numpy_drive(3, np.float64, n), ref, rtol=1e-10)
 
 
 @pytest.mark.slow
-def test_bench_cli_quick_json(tmp_path):
+def test_bench_quick_json(tmp_path):
     out = tmp_path / "bench.json"
-    r = subprocess.run([sys.executable, "-m", "jaxobs.cli", "bench", "--quick", "--json", "--out", str(out)], capture_output=True, text=True, timeout=1800)
+    cmd = [sys.executable, "-m", "benchmarks", "--quick", "--json", "--out", str(out)]
+    r = subprocess.run(cmd, capture_output=True, text=True, timeout=1800, cwd=ROOT, check=False)
     assert r.returncode == 0, r.stderr[-3000:]
     res = json.loads(r.stdout)
     assert json.loads(out.read_text()) == res

@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 import jaxobs
-from jaxobs import bench as B
+from benchmarks import workloads as B
 from jaxobs import drive as D
 from jaxobs._loop import run_loop
 
@@ -25,7 +25,7 @@ T1 = 0.05
 
 @pytest.fixture(scope="module")
 def wif_batch():
-    return B._grid_signal_batch(B.fll_scenarios(4), jnp.float64)
+    return B.grid_signal_batch(B.fll_scenarios(4), jnp.float64)
 
 
 def _plain_costs(obs, sig, t1):
@@ -43,7 +43,10 @@ def test_streaming_cost_modes_equal_the_plain_trajectory(kind, wif_batch):
     obs = B.fll_observer(kind)
     ref_cost, ref_x = _plain_costs(obs, wif_batch, T1)
     for inputs, ck in (("loop", "auto"), ("precomputed", "chunk"), ("loop", "step"), ("loop", "chunk"), ("loop", "none")):
-        sol = jax.jit(jax.vmap(lambda s: jaxobs.simulate(obs, s, T1, inputs=inputs, save="final", cost=B._fll_cost, checkpoint=ck)))(wif_batch)
+        def one(s):
+            return jaxobs.simulate(obs, s, T1, inputs=inputs, save="final", cost=B.fll_cost, checkpoint=ck)
+
+        sol = jax.jit(jax.vmap(one))(wif_batch)
         np.testing.assert_allclose(sol.cost, ref_cost, rtol=1e-12)
         np.testing.assert_allclose(sol.final_state.x, ref_x, rtol=1e-12, atol=1e-12)
         assert sol.out is None and bool(jnp.all(sol.ok))
@@ -118,7 +121,7 @@ def test_gradients_agree_across_checkpoint_modes(wif_batch):
     """Forward sensitivities (auto), per-step, per-chunk and plain reverse mode: one gradient."""
     grads = {}
     for ck in ("auto", "none", "step", "chunk"):
-        loss, params = B._fll_loss_fn("sogi-fll-wif", T1, ck)
+        loss, params = B.fll_loss_fn("sogi-fll-wif", T1, ck)
         v, g = jax.jit(jax.value_and_grad(loss))(params, wif_batch)
         grads[ck] = (float(v), np.array([g[n] for n in B.GAINS["sogi-fll-wif"]]))
     for ck in ("auto", "step", "chunk"):
@@ -130,7 +133,10 @@ def test_gradients_agree_across_checkpoint_modes(wif_batch):
     obs = B.fll_observer("sogi-fll-wif")
 
     def loss_of(o, sig):
-        return jnp.mean(jax.vmap(lambda s: jaxobs.simulate(o, s, T1, inputs="loop", save="final", cost=B._fll_cost).cost)(sig))
+        def one(s):
+            return jaxobs.simulate(o, s, T1, inputs="loop", save="final", cost=B.fll_cost).cost
+
+        return jnp.mean(jax.vmap(one)(sig))
 
     assert_field_grads_match_fd(loss_of, obs, B.GAINS["sogi-fll-wif"], wif_batch, rel=1e-5)
 
@@ -149,7 +155,8 @@ def test_drive_streaming_cost_equals_trajectory():
     full = jax.jit(jax.vmap(lambda s: D.simulate_drive(drive, s, 0.03, obs, unroll=1, checkpoint="none")))(sc)
     ref = 1e-4 * np.sum(np.asarray(jaxobs.metrics.wrap(full.obs.theta - full.theta_e)) ** 2, axis=1)
     for inputs in ("loop", "precomputed"):
-        fin = jax.jit(jax.vmap(lambda s: D.simulate_drive(drive, s, 0.03, obs, save="final", cost=B._drive_cost, inputs=inputs)))(sc)
+        fin = jax.jit(jax.vmap(
+            lambda s: D.simulate_drive(drive, s, 0.03, obs, save="final", cost=B.drive_cost, inputs=inputs)))(sc)
         np.testing.assert_allclose(fin.cost, ref, rtol=1e-10)
         np.testing.assert_allclose(fin.final["x"], full.final["x"], rtol=1e-12, atol=1e-12)
         assert fin.theta_e is None and bool(jnp.all(fin.ok))
@@ -180,7 +187,7 @@ _SHARD_SCRIPT = textwrap.dedent(
     os.environ["XLA_FLAGS"] = "--xla_force_host_platform_device_count=4"
     import jaxobs, jax, numpy as np
     jax.config.update("jax_enable_x64", True)
-    from jaxobs import bench as B
+    from benchmarks import workloads as B
     assert len(jax.devices()) == 4, jax.devices()
     out = {}
     for kind in ("sogi-fll-wif",):
@@ -192,7 +199,7 @@ _SHARD_SCRIPT = textwrap.dedent(
         np.testing.assert_allclose(a, b, rtol=1e-12, atol=0)
         # tiles of one scenario per lax.map iteration: the same numbers
         obs = B.fll_observer(kind)
-        one = lambda s: jaxobs.simulate(obs, s, 0.05, inputs="loop", save="final", cost=B._fll_cost).cost
+        one = lambda s: jaxobs.simulate(obs, s, 0.05, inputs="loop", save="final", cost=B.fll_cost).cost
         c = np.asarray(jax.jit(lambda s: jaxobs.map_batch(one, s, tile=1))(sharded))
         np.testing.assert_allclose(c, b, rtol=1e-12, atol=0)
     fn, sharded = B.jax_drive(8, "loop", 0.02)
@@ -207,7 +214,10 @@ _SHARD_SCRIPT = textwrap.dedent(
 def test_sharded_batch_equals_single_device_run():
     """4 host devices in a fresh process (XLA reads the flag at start-up)."""
     env = {k: v for k, v in os.environ.items() if k != "XLA_FLAGS"}
-    r = subprocess.run([sys.executable, "-c", _SHARD_SCRIPT], capture_output=True, text=True, env=env, timeout=600)
+    # from the repository root, where `benchmarks` is importable
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    r = subprocess.run([sys.executable, "-c", _SHARD_SCRIPT], capture_output=True, text=True, env=env, timeout=600,
+                       cwd=root)
     assert r.returncode == 0, r.stderr[-2000:]
     assert "SHARDED-EQUALS-SINGLE" in r.stdout
 

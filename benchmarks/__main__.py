@@ -1,0 +1,39 @@
+"""``python -m benchmarks [--quick] [--json] [--out FILE]`` (from the repository root; ``make bench``)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+# jaxobs before jax: `import jaxobs` gives XLA one host device per core (jaxobs/__init__.py), and the
+# jaxobs rows shard the batch over them
+import jaxobs  # noqa: F401
+
+from .run import run_bench, table
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(
+        prog="python -m benchmarks",
+        description="scenario-steps/s of jaxobs beside NumPy and numba, gradient cost and memory")
+    p.add_argument("--quick", action="store_true", help="small batches and horizons (a few minutes)")
+    p.add_argument("--json", action="store_true", help="print the results as JSON (progress goes to stderr)")
+    p.add_argument("--out", help="also write the JSON results to this file")
+    args = p.parse_args(argv)
+    log = (lambda m: print(m, file=sys.stderr)) if args.json else print
+    res = run_bench(quick=args.quick, log=log)
+    if args.out:
+        path = Path(args.out)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(json.dumps(res, indent=1))
+    if args.json:
+        print(json.dumps(res, indent=1))
+    else:
+        print(table(res))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

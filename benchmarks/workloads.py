@@ -1,0 +1,248 @@
+"""The benchmark workloads as jaxobs runs them: every call into the jaxobs API is in this module.
+
+Workloads (each scenario differs: a frequency step, phase jump and sag per scenario):
+
+- ``sogi-fll``, ``sogi-fll-wpf``, ``sogi-fll-wif``: the FLL family of paper 001
+  with its AB3 integrator and closed-form gains, 1 s at 10 kHz, running cost
+  ∫(ω̂ − ω)² (nothing else kept).  ``inputs="loop"`` computes the grid voltage
+  (two cosines) inside the loop; ``"precomputed"`` samples the voltage and the
+  true ω once, outside the timed call, and every implementation reads the same
+  arrays (jaxobs through a :class:`jaxobs.SampledSignal`).
+- ``drive-sosoifo``: the closed-loop sensorless PMSM drive of paper 000
+  (plant by RK4 in two substeps, inverter with dead time, current and speed
+  PI, second-order SOIFO + FLL by RK4), 0.2 s at 10 kHz, running cost
+  ∫(θ̂ − θ)²; the speed reference differs per scenario.
+
+Besides the jitted batch functions (:func:`jax_fll`, :func:`jax_drive`: ``jit``
+of :func:`jaxobs.map_batch` over ``simulate``, the batch sharded over every
+host device, 512 scenarios per tile) this module reads off the same jaxobs
+objects the parameters and inputs the baselines take (:func:`fll_baseline_params`,
+:func:`fll_samples`, :func:`drive_baseline_params`), and builds the gradient
+workload (:func:`fll_loss_fn`, :func:`grad_temp_mb`).  The simulation API is
+used nowhere else in ``benchmarks/``.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+import jaxobs
+from jaxobs import drive as D
+from jaxobs.linear import sogi_fll_closed_form, wif_closed_form, wpf_closed_form
+from jaxobs.metrics import wrap
+from jaxobs.reproduce.flux import K1, K2, bench_machine, flux_drive
+
+FLL_KINDS = ("sogi-fll", "sogi-fll-wpf", "sogi-fll-wif")
+# the gains a tuning job tunes (omega_n, the nominal frequency, is a design input)
+GAINS = {"sogi-fll": ("k", "lam"), "sogi-fll-wpf": ("k1", "k2", "lam"), "sogi-fll-wif": ("k1", "k2", "lam")}
+TS = 1e-4
+FLL_T1 = 1.0
+DRIVE_T1 = 0.2
+
+
+# ---------------------------------------------------------------------------
+# FLL family
+# ---------------------------------------------------------------------------
+
+
+def fll_scenarios(batch: int) -> dict:
+    """Per-scenario grid-signal parameters (NumPy, float64), by jaxobs.GridSignal field name."""
+    s = np.linspace(0.0, 1.0, batch) if batch > 1 else np.zeros(1)
+    return {
+        "amplitude": np.ones(batch),
+        "freq": np.full(batch, 50.0),
+        "phase": np.zeros(batch),
+        "t_event": np.full(batch, 0.2),
+        "freq_step": -2.0 + 4.0 * s,
+        "phase_jump": np.radians(40.0) * s,
+        "sag": 0.5 * s,
+        "dc": np.zeros(batch),
+        "sub_amplitude": np.zeros(batch),
+        "sub_freq": np.ones(batch),
+    }
+
+
+def grid_signal_batch(cols: dict, dtype):
+    """A batched :class:`jaxobs.GridSignal` (leading scenario axis) with the columns of :func:`fll_scenarios`."""
+    base = jaxobs.GridSignal()
+    b = len(cols["freq"])
+    sig = jax.tree.map(lambda x: jnp.broadcast_to(jnp.asarray(x, dtype), (b,) + jnp.shape(x)), base)
+    for name, col in cols.items():
+        sig = eqx.tree_at(lambda s, name=name: getattr(s, name), sig, jnp.asarray(col, dtype))
+    return sig
+
+
+def fll_observer(kind: str):
+    """The FLL of a workload with its closed-form gains."""
+    if kind == "sogi-fll":
+        return sogi_fll_closed_form(k=math.sqrt(2))
+    if kind == "sogi-fll-wpf":
+        return wpf_closed_form()
+    if kind == "sogi-fll-wif":
+        return wif_closed_form()
+    raise ValueError(f"FLL workload must be one of {FLL_KINDS}, got {kind!r}")
+
+
+def fll_cost(out, truth):
+    """Running cost (ω̂ − ω)²."""
+    d = out.omega - truth.omega
+    return d * d
+
+
+def _batched(one, shard: bool):
+    """The jitted batch function: sharded over every device and tiled (``map_batch``), or plain ``vmap``."""
+    if shard:
+        return jax.jit(lambda b: jaxobs.map_batch(one, b))
+    return jax.jit(jax.vmap(one))
+
+
+def jax_fll(kind: str, batch: int, inputs: str, t1: float = FLL_T1, shard: bool = True):
+    """(jitted function, its batch argument): per-scenario running costs of the FLL workload.
+
+    ``inputs="loop"``: the grid signal is generated inside the loop.
+    ``inputs="precomputed"``: the waveform and its true frequency are sampled
+    once, before the timed function (as the baselines get them: the same
+    arrays), and the loop reads them back from a :class:`jaxobs.SampledSignal`,
+    a block of steps at a time.
+    """
+    obs = fll_observer(kind)
+    dtype = jnp.result_type(float)
+    if inputs == "loop":
+        sig = grid_signal_batch(fll_scenarios(batch), dtype)
+    elif inputs == "precomputed":
+        u, truth = _fll_samples(fll_scenarios(batch), round(t1 / TS), dtype)
+        sig = jax.vmap(lambda u, th, om, a: jaxobs.SampledSignal(u, TS, truth=(th, om, a)))(u, *truth)
+    else:
+        raise ValueError(f"inputs must be 'loop' or 'precomputed', got {inputs!r}")
+
+    def one(s):
+        return jaxobs.simulate(obs, s, t1, inputs="loop", save="final", cost=fll_cost).cost
+
+    return _batched(one, shard), (jaxobs.shard_batch(sig) if shard else sig)
+
+
+@functools.partial(jax.jit, static_argnums=(1, 2))
+def _fll_samples_jit(sig, n, dtype):
+    t = jnp.asarray(0.0, dtype) + jnp.asarray(TS, dtype) * jnp.arange(n, dtype=dtype)
+    u = jax.vmap(lambda s: s(t))(sig)
+    G = jaxobs.GridSignal
+    truth = tuple(jax.vmap(lambda s, f=f: f(s, t))(sig) for f in (G.theta, G.omega, G.fundamental_amplitude))
+    return u, truth
+
+
+def _fll_samples(cols, n, dtype):
+    """The FLL workload's waveform and truth (θ, ω, V), sampled (B, n) by jaxobs's own signal in the working dtype."""
+    return _fll_samples_jit(grid_signal_batch(cols, dtype), n, jnp.dtype(dtype))
+
+
+def fll_samples(batch: int, n: int, dtype) -> tuple[np.ndarray, np.ndarray]:
+    """The baselines' precomputed inputs (B, n): the waveform and true ω that jaxobs's precomputed rows read."""
+    u, (_, om, _) = _fll_samples(fll_scenarios(batch), n, dtype)
+    return np.asarray(u), np.asarray(om)
+
+
+def fll_baseline_params(kind: str) -> tuple[tuple[float, ...], tuple[float, ...]]:
+    """(gains P, initial state x0) of the workload's FLL as benchmarks.kernels takes them (float64).
+
+    P = (k, lam, v_floor², 0, 0) for the SOGI-FLL, (k1, k2, lam, v_floor², 0) for the WPF and WIF;
+    x0 = zeros with ω = omega_n last (3 states for the SOGI-FLL, 5 for the others).
+    """
+    obs = fll_observer(kind)
+    vf2 = float(obs.v_floor * obs.v_floor)
+    if kind == "sogi-fll":
+        p, S = (float(obs.k), float(obs.lam), vf2, 0.0, 0.0), 3
+    else:
+        p, S = (float(obs.k1), float(obs.k2), float(obs.lam), vf2, 0.0), 5
+    return p, (0.0,) * (S - 1) + (float(obs.omega_n),)
+
+
+# ---------------------------------------------------------------------------
+# drive
+# ---------------------------------------------------------------------------
+
+
+def drive_setup(batch: int):
+    """(drive, observer, batched scenarios, per-scenario speed refs in rad/s) of the drive workload."""
+    par = bench_machine()
+    drive = flux_drive(par, handover=0.05)
+    obs = jaxobs.SecondOrderSOIFO(par.Rs, par.Ld, K1, K2, K1**3 / (2 * K2), omega0=par.p * 1000 * D.RPM)
+    rpm = np.linspace(500.0, 2000.0, batch) if batch > 1 else np.array([1000.0])
+    base = D.Scenario(par, load=D.Profile([0.0, 0.1], [0.0, 5.0], kind="step"), omega_m0=1000 * D.RPM, dead_time=2e-6)
+    sc = jax.tree.map(lambda x: jnp.broadcast_to(x, (batch,) + jnp.shape(x)), base)
+    w = jnp.asarray(rpm * D.RPM, jnp.result_type(float))
+    sc = eqx.tree_at(lambda s: s.speed_ref.values, sc, w[:, None])
+    sc = eqx.tree_at(lambda s: s.omega_m0, sc, w)
+    return drive, obs, sc, rpm * D.RPM
+
+
+def drive_cost(s):
+    """Running cost wrap(θ̂ − θ)²."""
+    d = wrap(s.obs.theta - s.theta_e)
+    return d * d
+
+
+def jax_drive(batch: int, inputs: str = "loop", t1: float = DRIVE_T1, shard: bool = True):
+    """(jitted function, its batch argument): per-scenario running costs of the drive workload."""
+    drive, obs, sc, _ = drive_setup(batch)
+
+    def one(s):
+        return D.simulate_drive(drive, s, t1, obs, save="final", cost=drive_cost, inputs=inputs).cost
+
+    return _batched(one, shard), (jaxobs.shard_batch(sc) if shard else sc)
+
+
+def drive_baseline_params():
+    """(M, OB, C, P, omega0, speed_every) of the drive workload as benchmarks.kernels.drive_run takes them (floats)."""
+    drive, obs, _, _ = drive_setup(1)
+    par = bench_machine()
+    foc, inv = drive.foc, drive.inverter
+    du = float(inv.udc) * 2e-6 * float(inv.f_pwm)
+    M = (par.Rs, par.Ld, par.Lq, par.psi_f, par.J, par.B, par.p, par.a5, par.a7, du)
+    OB = (obs.Rs, obs.L, obs.K1, obs.K2, obs.lam, obs.v_floor**2, obs.omega_min)
+    C = (foc.kp_d, foc.ki_d, foc.kp_q, foc.ki_q, foc.kp_w, foc.ki_w, foc.i_max, par.Ld, par.Lq, par.psi_f,
+         foc.setpoint_weight)
+    P = (inv.u_max, drive.handover, TS * foc.speed_every, 0.1, 5.0)
+    M, OB, C, P = (tuple(float(v) for v in t) for t in (M, OB, C, P))
+    return M, OB, C, P, float(obs.omega0), int(foc.speed_every)
+
+
+# ---------------------------------------------------------------------------
+# gradients
+# ---------------------------------------------------------------------------
+
+
+def fll_loss_fn(kind: str, t1: float, checkpoint, inputs: str = "loop"):
+    """(loss(gains, signals) → mean running cost over the batch, the observer's tuned gains) for the FLL workload."""
+    obs = fll_observer(kind)
+    names = GAINS[kind]
+    params = {n: getattr(obs, n) for n in names}
+
+    def loss(params, sig):
+        o = eqx.tree_at(lambda m: tuple(getattr(m, n) for n in names), obs, tuple(params[n] for n in names))
+
+        def one(s):
+            return jaxobs.simulate(o, s, t1, inputs=inputs, save="final", cost=fll_cost, checkpoint=checkpoint).cost
+
+        return jnp.mean(jax.vmap(one)(sig))
+
+    return loss, params
+
+
+def fll_signal_batch(batch: int, shard: bool = True):
+    """The FLL workload's signals (batched GridSignal) in the working dtype, sharded over the devices."""
+    sig = grid_signal_batch(fll_scenarios(batch), jnp.result_type(float))
+    return jaxobs.shard_batch(sig) if shard else sig
+
+
+def grad_temp_mb(kind: str = "sogi-fll", batch: int = 1024, t1: float = 10.0, checkpoint="auto") -> float:
+    """XLA's temporary-buffer size (MB) of value_and_grad over ``t1`` seconds at ``batch`` (compiled, not run)."""
+    loss, params = fll_loss_fn(kind, t1, checkpoint)
+    sig = fll_signal_batch(batch, shard=False)
+    compiled = jax.jit(jax.value_and_grad(loss)).lower(params, sig).compile()
+    return compiled.memory_analysis().temp_size_in_bytes / 1e6
