@@ -60,25 +60,32 @@ def numpy_fll(kind: str, batch: int, dtype, n: int) -> np.ndarray:
 
 
 def numba_drive(dtype, parallel: bool):
-    """A compiled numba batch runner of the drive: ``run(W, n) -> costs``, W the per-scenario speeds (rad/s)."""
-    M, OB, C, P, omega0, every = W.drive_baseline_params()
-    params = (_cast(P, dtype), _cast(M, dtype), _cast(OB, dtype), _cast(C, dtype), omega0)
+    """A compiled numba batch runner of the drive: ``run(w, n) -> costs``, w the per-scenario speeds (rad/s).
+
+    The initial state of each scenario is jaxobs's steady start (:func:`benchmarks.workloads.drive_initial`),
+    computed once outside the timed call.
+    """
+    M, OB, C, P, every = W.drive_baseline_params()
+    params = (_cast(P, dtype), _cast(M, dtype), _cast(OB, dtype), _cast(C, dtype))
     run = _numba(K.NUMBA_DRIVE, parallel)
+    cache = {}
 
     def runner(w, n):
-        return run(w, *params, n, W.TS, every, dtype)
+        key = w.shape[0]
+        if key not in cache:
+            cache[key] = tuple(np.ascontiguousarray(a, dtype) for a in W.drive_initial(key))
+        return run(*cache[key], w, *params, n, W.TS, every, dtype)
 
     return runner
 
 
 def numpy_drive(batch: int, dtype, n: int) -> np.ndarray:
     """The drive workload by NumPy: a Python loop over time, each step vectorized over the batch."""
-    M, OB, C, P, omega0, every = W.drive_baseline_params()
+    M, OB, C, P, every = W.drive_baseline_params()
     w = np.asarray(W.drive_setup(batch)[3], dtype)
-    x = np.zeros((4, batch), dtype)
-    x[2] = w
-    o = np.zeros((9, batch), dtype)
-    o[8] = omega0
+    X0, O0, S0 = (np.asarray(a, dtype) for a in W.drive_initial(batch))
+    x, o = np.ascontiguousarray(X0.T), np.ascontiguousarray(O0.T)
+    s0 = tuple(np.ascontiguousarray(S0[:, j]) for j in range(S0.shape[1]))
     z = np.zeros(batch, dtype)
     args = (_cast(P, dtype), _cast(M, dtype), _cast(OB, dtype), _cast(C, dtype), (w, z, z, z, z))
-    return K.drive_run(x, o, *args, n, W.TS, every, dtype)
+    return K.drive_run(x, o, s0, *args, n, W.TS, every, dtype)

@@ -323,10 +323,12 @@ def wrap(a, F):
 
 
 @compiled
-def drive_run(x, o, P, M, OB, C, prof, n, t_s, every, F):
-    """jaxobs.drive.simulate_drive(..., save="final", cost=wrap(θ̂ − θ)²), sensorless, SecondOrderSOIFO.
+def drive_run(x, o, s0, P, M, OB, C, prof, n, t_s, every, F):
+    """jaxobs.simulate(ClosedLoop(...), save=SaveFinal(cost=wrap(θ̂ − θ)²)), sensorless, SecondOrderSOIFO.
 
     x: plant [i_d, i_q, ωm, θe]; o: observer states; both stepped in place; OB: observer parameters (obs_f).
+    s0 = (u_α, u_β, int_d, int_q, int_w, i_q held, i_prev α, β, u_prev α, β, observer started): the rest of
+    the loop's initial state (jaxobs's steady start, ClosedLoop.init, computes it).
     P = (u_max, handover, speed_every·ts, t_load_step, load);
     C = FOC gains (kp_d, ki_d, kp_q, ki_q, kp_w, ki_w, i_max, Ld, Lq, psi (estimates), setpoint weight);
     prof = (ω*, u_offset α, u_offset β, i_offset α, i_offset β); ``t_s`` the control period (float64),
@@ -347,16 +349,8 @@ def drive_run(x, o, P, M, OB, C, prof, n, t_s, every, F):
     ok4 = np.zeros_like(o)
     ot = np.zeros_like(o)
     acc = x[0] * F(0.0)
-    ua = acc
-    ub = acc
-    int_d = acc
-    int_q = acc
-    int_w = acc
-    iq_hold = acc
-    ipa = acc
-    ipb = acc
-    upa = acc
-    upb = acc
+    ua, ub, int_d, int_q, int_w, iq_hold = s0[0], s0[1], s0[2], s0[3], s0[4], s0[5]
+    ipa, ipb, upa, upb, started0 = s0[6], s0[7], s0[8], s0[9], s0[10]
     p = M[6]
     for k in range(n):
         t = F(k) * ts
@@ -372,7 +366,8 @@ def drive_run(x, o, P, M, OB, C, prof, n, t_s, every, F):
         # --- observer: back EMF over the period that ended, RK4 on the 9 states
         ea = upa - OB[0] * F(0.5) * (ima + ipa) - OB[1] * (ima - ipa) / ts
         eb = upb - OB[0] * F(0.5) * (imb + ipb) - OB[1] * (imb - ipb) / ts
-        started = sel(k > 0, F(1.0), F(0.0))
+        go = (k > 0) | (started0 > F(0.5))
+        started = sel(go, F(1.0), F(0.0))
         ea = ea * started
         eb = eb * started
         obs_f(o, ea, eb, ok1, OB, F)
@@ -386,7 +381,7 @@ def drive_run(x, o, P, M, OB, C, prof, n, t_s, every, F):
             ot[j] = o[j] + ts * ok3[j]
         obs_f(ot, ea, eb, ok4, OB, F)
         for j in range(9):
-            o[j] = sel(k > 0, o[j] + ts6 * (ok1[j] + F(2.0) * ok2[j] + F(2.0) * ok3[j] + ok4[j]), o[j])
+            o[j] = sel(go, o[j] + ts6 * (ok1[j] + F(2.0) * ok2[j] + F(2.0) * ok3[j] + ok4[j]), o[j])
         ipa = ima
         ipb = imb
         upa = uma
@@ -494,16 +489,17 @@ def fll_batch_pre(kind, x0, P, U, OM, n, h, F):
     return out
 
 
-def drive_batch(W, P, M, OB, C, omega0, n, ts, every, F):
-    """Per-scenario costs of the drive workload, started at speed ``W`` (batch,) rad/s (the speed reference too)."""
+def drive_batch(X0, O0, S0, W, P, M, OB, C, n, ts, every, F):
+    """Per-scenario costs of the drive workload: initial plant X0 (batch, 4), observer O0 (batch, 9) and loop
+    state S0 (batch, 11) as jaxobs's steady start gives them, speed reference ``W`` (batch,) rad/s."""
     out = np.empty(W.shape[0], W.dtype)
     for b in prange(W.shape[0]):
-        x = np.zeros(4, W.dtype)
-        x[2] = W[b]
-        o = np.zeros(9, W.dtype)
-        o[8] = omega0
+        x = X0[b].copy()
+        o = O0[b].copy()
+        s0 = S0[b]
         z = F(0.0)
-        out[b] = drive_run(x, o, P, M, OB, C, (W[b], z, z, z, z), n, ts, every, F)
+        s0t = (s0[0], s0[1], s0[2], s0[3], s0[4], s0[5], s0[6], s0[7], s0[8], s0[9], s0[10])
+        out[b] = drive_run(x, o, s0t, P, M, OB, C, (W[b], z, z, z, z), n, ts, every, F)
     return out
 
 

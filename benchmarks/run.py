@@ -114,7 +114,7 @@ def run_bench(quick: bool = False, log: Callable[[str], None] = print) -> dict:
         # drive
         n = round(drive_t1 / W.TS)
         for batch in batches:
-            fn, args = W.jax_drive(batch, "loop", drive_t1)
+            fn, args = W.jax_drive(batch, drive_t1)
             jax.block_until_ready(fn(args))
             t = best_time(partial(fn, args), repeats)
             add(Row("drive-sosoifo", "jaxobs", dt, batch, "loop", batch * n / t))
@@ -188,7 +188,7 @@ def compile_benchmarks(log) -> dict:
     res = {}
     for name, build in (
         ("sogi-fll-wif", lambda: W.jax_fll("sogi-fll-wif", 1024, "loop", 1.0)),
-        ("drive-sosoifo", lambda: W.jax_drive(1024, "loop", W.DRIVE_T1)),
+        ("drive-sosoifo", lambda: W.jax_drive(1024, W.DRIVE_T1)),
     ):
         fn, args = build()
         t0 = time.perf_counter()

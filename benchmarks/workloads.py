@@ -36,7 +36,9 @@ import jaxobs
 from jaxobs import drive as D
 from jaxobs.linear import sogi_fll_closed_form, wif_closed_form, wpf_closed_form
 from jaxobs.metrics import wrap
-from jaxobs.reproduce.flux import K1, K2, bench_machine, flux_drive
+from jaxobs.papers import SECOND_ORDER_SOIFO_K1 as K1
+from jaxobs.papers import SECOND_ORDER_SOIFO_K2 as K2
+from jaxobs.reproduce.flux import bench_machine, flux_drive
 
 FLL_KINDS = ("sogi-fll", "sogi-fll-wpf", "sogi-fll-wif")
 # the gains a tuning job tunes (omega_n, the nominal frequency, is a design input)
@@ -89,9 +91,9 @@ def fll_observer(kind: str):
     raise ValueError(f"FLL workload must be one of {FLL_KINDS}, got {kind!r}")
 
 
-def fll_cost(out, truth):
-    """Running cost (ω̂ − ω)²."""
-    d = out.omega - truth.omega
+def fll_cost(o):
+    """Running cost (ω̂ − ω)² of one step's :class:`jaxobs.SignalOutput`."""
+    d = o.obs.omega - o.truth.omega
     return d * d
 
 
@@ -122,7 +124,7 @@ def jax_fll(kind: str, batch: int, inputs: str, t1: float = FLL_T1, shard: bool 
         raise ValueError(f"inputs must be 'loop' or 'precomputed', got {inputs!r}")
 
     def one(s):
-        return jaxobs.simulate(obs, s, t1, inputs="loop", save="final", cost=fll_cost).cost
+        return jaxobs.simulate(jaxobs.OnSignal(obs, s), t1, save=jaxobs.SaveFinal(cost=fll_cost)).cost
 
     return _batched(one, shard), (jaxobs.shard_batch(sig) if shard else sig)
 
@@ -182,23 +184,41 @@ def drive_setup(batch: int):
 
 
 def drive_cost(s):
-    """Running cost wrap(θ̂ − θ)²."""
+    """Running cost wrap(θ̂ − θ)² of one step's :class:`jaxobs.drive.DriveOutput`."""
     d = wrap(s.obs.theta - s.theta_e)
     return d * d
 
 
-def jax_drive(batch: int, inputs: str = "loop", t1: float = DRIVE_T1, shard: bool = True):
-    """(jitted function, its batch argument): per-scenario running costs of the drive workload."""
+def jax_drive(batch: int, t1: float = DRIVE_T1, shard: bool = True):
+    """(jitted function, its batch argument): per-scenario running costs of the drive workload.
+
+    The closed loop evaluates its speed and load profiles inside its step (jaxobs.drive.loop), so the
+    drive has one input mode ("loop").
+    """
     drive, obs, sc, _ = drive_setup(batch)
 
     def one(s):
-        return D.simulate_drive(drive, s, t1, obs, save="final", cost=drive_cost, inputs=inputs).cost
+        return jaxobs.simulate(D.ClosedLoop(drive, obs, s), t1, save=jaxobs.SaveFinal(cost=drive_cost)).cost
 
     return _batched(one, shard), (jaxobs.shard_batch(sc) if shard else sc)
 
 
+def drive_initial(batch: int):
+    """The drive workload's initial states as the baselines take them: plant (batch, 4), observer (batch, 9) and
+    (batch, 11) = (u_α, u_β, int_d, int_q, int_w, i_q held, i_prev α, β, u_prev α, β, started), from jaxobs's
+    steady start (``ClosedLoop.init``: the operating point and the observer's settling phase)."""
+    drive, obs, sc, _ = drive_setup(batch)
+    st = jax.jit(jax.vmap(lambda s: D.ClosedLoop(drive, obs, s).init()))(sc)
+    o, c = st.obs, st.ctrl
+    rest = jnp.stack(
+        [st.u_a, st.u_b, c.int_d, c.int_q, c.int_w, c.iq_ref, o.i_prev[:, 0], o.i_prev[:, 1], o.u_prev[:, 0],
+         o.u_prev[:, 1], o.started.astype(st.u_a.dtype)], axis=1,
+    )
+    return np.asarray(st.plant.x), np.asarray(o.x), np.asarray(rest)
+
+
 def drive_baseline_params():
-    """(M, OB, C, P, omega0, speed_every) of the drive workload as benchmarks.kernels.drive_run takes them (floats)."""
+    """(M, OB, C, P, speed_every) of the drive workload as benchmarks.kernels.drive_run takes them (floats)."""
     drive, obs, _, _ = drive_setup(1)
     par = bench_machine()
     foc, inv = drive.foc, drive.inverter
@@ -209,7 +229,7 @@ def drive_baseline_params():
          foc.setpoint_weight)
     P = (inv.u_max, drive.handover, TS * foc.speed_every, 0.1, 5.0)
     M, OB, C, P = (tuple(float(v) for v in t) for t in (M, OB, C, P))
-    return M, OB, C, P, float(obs.omega0), int(foc.speed_every)
+    return M, OB, C, P, int(foc.speed_every)
 
 
 # ---------------------------------------------------------------------------
@@ -217,7 +237,16 @@ def drive_baseline_params():
 # ---------------------------------------------------------------------------
 
 
-def fll_loss_fn(kind: str, t1: float, checkpoint, inputs: str = "loop"):
+CHECKPOINTS = {
+    "auto": jaxobs.AutoCheckpoint(),
+    "none": jaxobs.NoCheckpoint(),
+    "step": jaxobs.StepCheckpoint(),
+    "chunk": jaxobs.ChunkCheckpoint(),
+    "forward": jaxobs.ForwardSensitivity(),
+}
+
+
+def fll_loss_fn(kind: str, t1: float, checkpoint: str):
     """(loss(gains, signals) → mean running cost over the batch, the observer's tuned gains) for the FLL workload."""
     obs = fll_observer(kind)
     names = GAINS[kind]
@@ -227,7 +256,8 @@ def fll_loss_fn(kind: str, t1: float, checkpoint, inputs: str = "loop"):
         o = eqx.tree_at(lambda m: tuple(getattr(m, n) for n in names), obs, tuple(params[n] for n in names))
 
         def one(s):
-            return jaxobs.simulate(o, s, t1, inputs=inputs, save="final", cost=fll_cost, checkpoint=checkpoint).cost
+            save = jaxobs.SaveFinal(cost=fll_cost)
+            return jaxobs.simulate(jaxobs.OnSignal(o, s), t1, save=save, checkpoint=CHECKPOINTS[checkpoint]).cost
 
         return jnp.mean(jax.vmap(one)(sig))
 

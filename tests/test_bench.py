@@ -34,7 +34,7 @@ def test_fll_baselines_equal_jaxobs(kind):
 
 def test_drive_baselines_equal_jaxobs():
     n = 1200  # 0.12 s: past the hand-over to the observer (0.05 s) and the load step (0.1 s)
-    fn, args = W.jax_drive(3, "loop", n * W.TS, shard=False)
+    fn, args = W.jax_drive(3, n * W.TS, shard=False)
     ref = np.asarray(fn(args))
     w = np.asarray(W.drive_setup(3)[3])
     for par in (False, True):
