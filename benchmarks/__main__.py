@@ -17,7 +17,8 @@ from .run import run_bench, table
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(
         prog="python -m benchmarks",
-        description="scenario-steps/s of jaxobs beside NumPy and numba, gradient cost and memory")
+        description="scenario-steps/s of jaxobs beside NumPy and numba, gradient cost and memory",
+    )
     p.add_argument("--quick", action="store_true", help="small batches and horizons (a few minutes)")
     p.add_argument("--json", action="store_true", help="print the results as JSON (progress goes to stderr)")
     p.add_argument("--out", help="also write the JSON results to this file")

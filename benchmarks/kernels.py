@@ -64,8 +64,18 @@ TINY = 1e-30
 # The kernels' observers, numbered for the numba batch loops (a branch per scenario, not per step).
 SOGI_FLL, SOGI_FLL_WPF, SOGI_FLL_WIF = 0, 1, 2
 # The grid signal's parameters, in the order of :func:`signal`'s ``sp`` (jaxobs.GridSignal's field names).
-SIGNAL_PARAMS = ("amplitude", "freq", "phase", "t_event", "freq_step", "phase_jump", "sag", "dc",
-                 "sub_amplitude", "sub_freq")
+SIGNAL_PARAMS = (
+    "amplitude",
+    "freq",
+    "phase",
+    "t_event",
+    "freq_step",
+    "phase_jump",
+    "sag",
+    "dc",
+    "sub_amplitude",
+    "sub_freq",
+)
 
 
 def _jitable(inline: str):

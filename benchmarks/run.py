@@ -83,8 +83,10 @@ def run_bench(quick: bool = False, log: Callable[[str], None] = print) -> dict:
 
     def add(row):
         rows.append(row)
-        log(f"  {row.workload:14s} {row.impl:15s} {row.dtype} {row.inputs:11s} batch {row.batch:5d}: "
-            f"{row.steps_per_s / 1e6:9.2f} M steps/s")
+        log(
+            f"  {row.workload:14s} {row.impl:15s} {row.dtype} {row.inputs:11s} batch {row.batch:5d}: "
+            f"{row.steps_per_s / 1e6:9.2f} M steps/s"
+        )
 
     for dt in ("f32", "f64"):
         _set_dtype(dt)
@@ -165,8 +167,10 @@ def gradient_benchmarks(quick: bool, log) -> dict:
             t_f = min(t_f, best_time(partial(fwd, params, sig), 1))
             t_g = min(t_g, best_time(partial(vg, params, sig), 1))
         out["grad_over_forward"][ck] = t_g / t_f
-        log(f"  value_and_grad / forward ({kind} gains {W.GAINS[kind]}, batch {batch}, {t1:g} s, f64, "
-            f"checkpoint={ck}): {t_g / t_f:.2f}")
+        log(
+            f"  value_and_grad / forward ({kind} gains {W.GAINS[kind]}, batch {batch}, {t1:g} s, f64, "
+            f"checkpoint={ck}): {t_g / t_f:.2f}"
+        )
     for ck in CHECKPOINTS:
         mb = W.grad_temp_mb(kind, batch, 10.0, ck)
         out["grad_temp_mb_10s"][ck] = mb
@@ -204,8 +208,10 @@ def table(res: dict) -> str:
     lines = [f"{head[0]:14s} {head[1]:15s} {head[2]:5s} {head[3]:11s} {head[4]:>6s} {head[5]:>10s} {head[6]:>12s}"]
     for r in res["rows"]:
         ratio = "" if r["ratio_vs_numba_parallel"] is None else f"{r['ratio_vs_numba_parallel']:.2f}"
-        lines.append(f"{r['workload']:14s} {r['impl']:15s} {r['dtype']:5s} {r['inputs']:11s} {r['batch']:6d} "
-                     f"{r['steps_per_s'] / 1e6:10.2f} {ratio:>12s}")
+        lines.append(
+            f"{r['workload']:14s} {r['impl']:15s} {r['dtype']:5s} {r['inputs']:11s} {r['batch']:6d} "
+            f"{r['steps_per_s'] / 1e6:10.2f} {ratio:>12s}"
+        )
     g = res["grad_over_forward"]
     lines.append("value_and_grad / forward: " + ", ".join(f"{k} {v:.2f}" for k, v in g.items()))
     mem = res["grad_temp_mb_10s"]

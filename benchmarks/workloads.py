@@ -211,8 +211,20 @@ def drive_initial(batch: int):
     st = jax.jit(jax.vmap(lambda s: D.ClosedLoop(drive, obs, s).init()))(sc)
     o, c = st.obs, st.ctrl
     rest = jnp.stack(
-        [st.u_a, st.u_b, c.int_d, c.int_q, c.int_w, c.iq_ref, o.i_prev[:, 0], o.i_prev[:, 1], o.u_prev[:, 0],
-         o.u_prev[:, 1], o.started.astype(st.u_a.dtype)], axis=1,
+        [
+            st.u_a,
+            st.u_b,
+            c.int_d,
+            c.int_q,
+            c.int_w,
+            c.iq_ref,
+            o.i_prev[:, 0],
+            o.i_prev[:, 1],
+            o.u_prev[:, 0],
+            o.u_prev[:, 1],
+            o.started.astype(st.u_a.dtype),
+        ],
+        axis=1,
     )
     return np.asarray(st.plant.x), np.asarray(o.x), np.asarray(rest)
 
@@ -225,8 +237,19 @@ def drive_baseline_params():
     du = float(inv.udc) * 2e-6 * float(inv.f_pwm)
     M = (par.Rs, par.Ld, par.Lq, par.psi_f, par.J, par.B, par.p, par.a5, par.a7, du)
     OB = (obs.Rs, obs.L, obs.K1, obs.K2, obs.lam, obs.v_floor**2, obs.omega_min)
-    C = (foc.kp_d, foc.ki_d, foc.kp_q, foc.ki_q, foc.kp_w, foc.ki_w, foc.i_max, par.Ld, par.Lq, par.psi_f,
-         foc.setpoint_weight)
+    C = (
+        foc.kp_d,
+        foc.ki_d,
+        foc.kp_q,
+        foc.ki_q,
+        foc.kp_w,
+        foc.ki_w,
+        foc.i_max,
+        par.Ld,
+        par.Lq,
+        par.psi_f,
+        foc.setpoint_weight,
+    )
     P = (inv.u_max, drive.handover, TS * foc.speed_every, 0.1, 5.0)
     M, OB, C, P = (tuple(float(v) for v in t) for t in (M, OB, C, P))
     return M, OB, C, P, int(foc.speed_every)

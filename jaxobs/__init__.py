@@ -12,12 +12,19 @@ from . import drive as drive
 from . import linear as linear
 from . import metrics as metrics
 from . import signals as signals
+from ._loop import AbstractCheckpoint as AbstractCheckpoint
+from ._loop import AutoCheckpoint as AutoCheckpoint
+from ._loop import ChunkCheckpoint as ChunkCheckpoint
+from ._loop import ForwardSensitivity as ForwardSensitivity
+from ._loop import NoCheckpoint as NoCheckpoint
+from ._loop import StepCheckpoint as StepCheckpoint
 from .discretize import AB3 as AB3
 from .discretize import RK4 as RK4
 from .discretize import Euler as Euler
 from .discretize import Held as Held
 from .discretize import Knots as Knots
 from .discretize import Tustin as Tustin
+from .measurements import DriveInput as DriveInput
 from .observers import (
     CLESO as CLESO,
 )
@@ -63,17 +70,14 @@ from .observers import (
 from .observers import (
     SecondOrderSOIFO as SecondOrderSOIFO,
 )
+from .sharding import batch_mesh as batch_mesh
+from .sharding import map_batch as map_batch
+from .sharding import shard_batch as shard_batch
+from .sharding import use_host_devices as use_host_devices
 from .signals import GridSignal as GridSignal
 from .signals import SampledSignal as SampledSignal
 from .signals import paper001_test as paper001_test
 from .signals import stack as stack
-from ._loop import AbstractCheckpoint as AbstractCheckpoint
-from ._loop import AutoCheckpoint as AutoCheckpoint
-from ._loop import ChunkCheckpoint as ChunkCheckpoint
-from ._loop import ForwardSensitivity as ForwardSensitivity
-from ._loop import NoCheckpoint as NoCheckpoint
-from ._loop import StepCheckpoint as StepCheckpoint
-from .measurements import DriveInput as DriveInput
 from .simulate import AbstractSave as AbstractSave
 from .simulate import OnSignal as OnSignal
 from .simulate import SaveAll as SaveAll
@@ -83,10 +87,6 @@ from .simulate import SignalTruth as SignalTruth
 from .simulate import Solution as Solution
 from .simulate import simulate as simulate
 from .system import AbstractSystem as AbstractSystem
-from .sharding import batch_mesh as batch_mesh
-from .sharding import shard_batch as shard_batch
-from .sharding import map_batch as map_batch
-from .sharding import use_host_devices as use_host_devices
 
 try:  # one source: the version in pyproject.toml, as installed
     __version__ = _version("jaxobs")

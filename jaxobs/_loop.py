@@ -143,7 +143,9 @@ class ForwardSensitivity(AbstractCheckpoint):
         if isinstance(self.max_scalars, bool) or not isinstance(self.max_scalars, int) or self.max_scalars < 1:
             raise ValueError(f"ForwardSensitivity.max_scalars must be an integer >= 1, got {self.max_scalars!r}")
         if not isinstance(self.fallback, AbstractCheckpoint) or isinstance(self.fallback, ForwardSensitivity):
-            raise ValueError("ForwardSensitivity.fallback must be a reverse-mode strategy (NoCheckpoint, StepCheckpoint, ...)")
+            raise ValueError(
+                "ForwardSensitivity.fallback must be a reverse-mode strategy (NoCheckpoint, StepCheckpoint, ...)"
+            )
 
     def _mode(self, n, has_outputs):
         if has_outputs:
@@ -174,6 +176,7 @@ class AutoCheckpoint(AbstractCheckpoint):
 
     def _mode(self, n, has_outputs):
         return ("chunk" if n > self.chunk_above else "step"), (0 if has_outputs else self.forward_max)
+
 
 # With ``xs_map``, the inputs of this many steps are evaluated together (module doc, point 5).
 INPUT_BLOCK = 128
@@ -447,7 +450,11 @@ def _sensitivity_loop(conv, consts, carry, xs, forward_max):
             grads, off = [], 0
             for v in pvals:
                 sz = int(np.prod(np.shape(v)))
-                g = jnp.zeros(np.shape(v), jnp.result_type(v)) if per_dir is None else per_dir[off : off + sz].reshape(np.shape(v))
+                g = (
+                    jnp.zeros(np.shape(v), jnp.result_type(v))
+                    if per_dir is None
+                    else per_dir[off : off + sz].reshape(np.shape(v))
+                )
                 grads.append(g.astype(jnp.result_type(v)))
                 off += sz
         else:
@@ -516,4 +523,3 @@ def _multi_jvp(fun, primals, basis):
         return y, jax.tree.map(lambda *t: jnp.stack(t), *tans)
     # the primal does not depend on the tangent: out_axes=None keeps it computed once
     return jax.vmap(lambda *t: jax.jvp(fun, primals, t), out_axes=(None, 0))(*basis)
-

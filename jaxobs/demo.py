@@ -104,4 +104,3 @@ def format_table(rows) -> str:
             f"{r['freq_pp_hz']:>11.4f}{r['phase_pp_deg']:>12.3f}{r['amp_pp_pu']:>11.4f}{flag}"
         )
     return "\n".join(lines)
-

@@ -147,9 +147,7 @@ class _DiffraxClassicRK4(diffrax.AbstractERK):
     """The classic fourth-order Runge--Kutta tableau in diffrax's ERK machinery."""
 
     tableau: ClassVar[diffrax.ButcherTableau] = _rk4_tableau
-    interpolation_cls: ClassVar[Callable[..., diffrax.LocalLinearInterpolation]] = (
-        diffrax.LocalLinearInterpolation
-    )
+    interpolation_cls: ClassVar[Callable[..., diffrax.LocalLinearInterpolation]] = diffrax.LocalLinearInterpolation
 
     def order(self, terms):
         return 4

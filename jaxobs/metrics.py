@@ -15,9 +15,23 @@ import jax.numpy as jnp
 from ._math import wrap as wrap
 
 __all__ = [
-    "wrap", "moving_average", "settling_time", "window_mask", "peak_to_peak", "steady_mean", "rms",
-    "overshoot", "iae", "itae", "harmonic_amplitude", "flux_offset", "flux_imbalance",
-    "smooth_max", "smooth_abs", "smooth_settling_time", "smooth_peak_to_peak",
+    "wrap",
+    "moving_average",
+    "settling_time",
+    "window_mask",
+    "peak_to_peak",
+    "steady_mean",
+    "rms",
+    "overshoot",
+    "iae",
+    "itae",
+    "harmonic_amplitude",
+    "flux_offset",
+    "flux_imbalance",
+    "smooth_max",
+    "smooth_abs",
+    "smooth_settling_time",
+    "smooth_peak_to_peak",
 ]
 
 

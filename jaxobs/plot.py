@@ -124,8 +124,9 @@ def paper_bode_figures(out_dir):
         "SOGI-FLL-WIF": linear.wif_model(wi.k1, wi.k2, wi.lam, wi.omega_n).open_loop,
     }
     p = out / "bode_fll_open_loop_001_fig14.png"
-    bode_figure(fll, np.logspace(0, 4, 1500), "Paper 001 Fig. 14: FLL open loops, Table I gains", p,
-                mark=papers.WIF_OMEGA_C)
+    bode_figure(
+        fll, np.logspace(0, 4, 1500), "Paper 001 Fig. 14: FLL open loops, Table I gains", p, mark=papers.WIF_OMEGA_C
+    )
     paths.append(p)
     return paths
 

@@ -103,7 +103,9 @@ def use_host_devices(n: int | None = None) -> int:
         if env and not (env.isdigit() and int(env) >= 1):
             raise ValueError(f"{ENV} must be an integer >= 1 (1: off), got {env!r}")
         flag = _xla_flag_count()
-        if (env and int(env) == 1) or (not env and flag is not None):  # off, or the user's own XLA flag: leave JAX as it is
+        if (env and int(env) == 1) or (
+            not env and flag is not None
+        ):  # off, or the user's own XLA flag: leave JAX as it is
             return flag or 1
         n = int(env) if env else _usable_cores()
     elif isinstance(n, bool) or not isinstance(n, int) or n < 1:
@@ -192,4 +194,6 @@ def map_batch(fn, tree, *, mesh: Mesh | None = None, tile: int = TILE):
     n_dev = mesh.devices.size
     if n_dev == 1 or b % n_dev:
         return local(tree)
-    return jax.shard_map(local, mesh=mesh, in_specs=PartitionSpec(AXIS), out_specs=PartitionSpec(AXIS), check_vma=False)(tree)
+    return jax.shard_map(
+        local, mesh=mesh, in_specs=PartitionSpec(AXIS), out_specs=PartitionSpec(AXIS), check_vma=False
+    )(tree)

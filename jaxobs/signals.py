@@ -80,7 +80,9 @@ class GridSignal(eqx.Module):
                 raise ValueError(f"{own}.harmonics keys must be integer orders >= 2, got {h!r}")
         self.orders = tuple(sorted(harmonics))
         mags = [harmonics[h] for h in self.orders]
-        self.harmonics = check_nonnegative("harmonics", jnp.asarray(mags, dtype=jnp.result_type(float)) if mags else jnp.zeros((0,)), own)
+        self.harmonics = check_nonnegative(
+            "harmonics", jnp.asarray(mags, dtype=jnp.result_type(float)) if mags else jnp.zeros((0,)), own
+        )
         self.sub_amplitude = check_nonnegative("sub_amplitude", sub_amplitude, own)
         self.sub_freq = check_nonnegative("sub_freq", sub_freq, own)
         if self.freq.ndim == 0 and not isinstance(self.freq, jax.core.Tracer):
@@ -147,17 +149,26 @@ class SampledSignal(eqx.Module):
         own = "SampledSignal"
         samples = check_real("samples", samples, owner=own)
         if samples.ndim < 1 or samples.shape[-1] < 2:
-            raise ValueError(f"{own}.samples must hold at least 2 samples along its last axis, got shape {samples.shape}")
+            raise ValueError(
+                f"{own}.samples must hold at least 2 samples along its last axis, got shape {samples.shape}"
+            )
         self.samples = samples
         self.ts = check_sample_time("ts", ts, own)
         self.t0 = static_float(check_real("t0", t0, owner=own), t0)
         if truth is not None:
             if len(truth) != 3:
-                raise ValueError(f"{own}.truth must be (theta, omega, amplitude) sample arrays, got {len(truth)} arrays")
-            truth = tuple(check_real(name, a, owner=own) for name, a in zip(("truth.theta", "truth.omega", "truth.amplitude"), truth))
+                raise ValueError(
+                    f"{own}.truth must be (theta, omega, amplitude) sample arrays, got {len(truth)} arrays"
+                )
+            truth = tuple(
+                check_real(name, a, owner=own)
+                for name, a in zip(("truth.theta", "truth.omega", "truth.amplitude"), truth)
+            )
             for name, a in zip(("theta", "omega", "amplitude"), truth):
                 if a.shape != samples.shape:
-                    raise ValueError(f"{own}.truth.{name} must have the shape of samples {samples.shape}, got {a.shape}")
+                    raise ValueError(
+                        f"{own}.truth.{name} must have the shape of samples {samples.shape}, got {a.shape}"
+                    )
         self.truth = truth
 
     @property
@@ -269,7 +280,11 @@ class EMFSignal(eqx.Module):
         self.dc = as_float(jnp.asarray(dc, dtype=jnp.result_type(float)))
         harmonics = dict(harmonics or {})
         self.orders = tuple(sorted(harmonics, key=abs))
-        self.harmonics = as_float(jnp.asarray([harmonics[h] for h in self.orders], dtype=jnp.result_type(float))) if self.orders else jnp.zeros((0,))
+        self.harmonics = (
+            as_float(jnp.asarray([harmonics[h] for h in self.orders], dtype=jnp.result_type(float)))
+            if self.orders
+            else jnp.zeros((0,))
+        )
         self.ts = float(ts)
 
     def _avg_cis(self, w, phi, t):

@@ -82,7 +82,9 @@ class AbstractSave(eqx.Module):
 
     def __check_init__(self):
         if self.cost is not None and not callable(self.cost):
-            raise ValueError(f"{type(self).__name__}.cost must be a callable cost(out) -> scalar or None, got {self.cost!r}")
+            raise ValueError(
+                f"{type(self).__name__}.cost must be a callable cost(out) -> scalar or None, got {self.cost!r}"
+            )
 
 
 class SaveAll(AbstractSave):
@@ -140,7 +142,9 @@ def n_samples(t1, ts: float, t0: float = 0.0) -> int:
         raise ValueError(f"simulate: t1 − t0 = {t1 - t0:g} s is {steps:.3g} samples of {ts:g} s, more than 2^31 − 1")
     n = int(round(steps))
     if n < 1:
-        raise ValueError(f"simulate: t1 must exceed t0 by at least one sample time ({ts:g} s), got t0={t0:g}, t1={t1:g}")
+        raise ValueError(
+            f"simulate: t1 must exceed t0 by at least one sample time ({ts:g} s), got t0={t0:g}, t1={t1:g}"
+        )
     return n
 
 
@@ -236,7 +240,9 @@ class OnSignal(AbstractSystem):
     @property
     def has_truth(self) -> bool:
         sig = self.signal
-        return getattr(sig, "has_truth", True) and all(hasattr(sig, a) for a in ("theta", "omega", "fundamental_amplitude"))
+        return getattr(sig, "has_truth", True) and all(
+            hasattr(sig, a) for a in ("theta", "omega", "fundamental_amplitude")
+        )
 
     def time(self, k):
         """t_k = t0 + k·ts (in the default float dtype)."""

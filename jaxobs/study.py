@@ -70,8 +70,19 @@ def _progress(done, total, t0, stream=sys.stderr):
     stream.flush()
 
 
-def run_study(designs: dict, axes: dict, *, t_event=0.1, horizon=0.4, steady_from=None, band_hz=0.05, sample=0, seed=0,
-              chunk_size=2048, progress=True):
+def run_study(
+    designs: dict,
+    axes: dict,
+    *,
+    t_event=0.1,
+    horizon=0.4,
+    steady_from=None,
+    band_hz=0.05,
+    sample=0,
+    seed=0,
+    chunk_size=2048,
+    progress=True,
+):
     """Simulate every design on every scenario; returns an ``xarray.Dataset`` (see module doc)."""
     import xarray as xr
 
@@ -124,7 +135,10 @@ def run_study(designs: dict, axes: dict, *, t_event=0.1, horizon=0.4, steady_fro
             done += min(chunk, n - start)
             if progress:
                 _progress(done, total, t0)
-        results[dname] = ({k: np.concatenate([p[k] for p in parts_m])[:n] for k in STUDY_METRICS}, np.concatenate(parts_ok)[:n])
+        results[dname] = (
+            {k: np.concatenate([p[k] for p in parts_m])[:n] for k in STUDY_METRICS},
+            np.concatenate(parts_ok)[:n],
+        )
 
     dnames = list(designs)
     if sample:
@@ -143,7 +157,14 @@ def run_study(designs: dict, axes: dict, *, t_event=0.1, horizon=0.4, steady_fro
         data[k] = (dims, arr)
     data["diverged"] = (dims, np.stack([(~results[d][1]).astype(np.int8).reshape(shape) for d in dnames]))
     ds = xr.Dataset(data, coords=coords)
-    ds.attrs.update(t_event=t_event, horizon=horizon, steady_from=steady_from, band_hz=band_hz, scenarios=n, seconds=time.time() - t0)
+    ds.attrs.update(
+        t_event=t_event,
+        horizon=horizon,
+        steady_from=steady_from,
+        band_hz=band_hz,
+        scenarios=n,
+        seconds=time.time() - t0,
+    )
     for dname, obs in designs.items():
         gains = {f: float(getattr(obs, f)) for f in ("k", "k1", "k2", "lam") if hasattr(obs, f)}
         ds.attrs[f"gains {dname}"] = ", ".join(f"{k}={v:.6g}" for k, v in gains.items())
@@ -157,7 +178,10 @@ def worst_cases(ds, metric: str, k: int = 5):
         df = ds[metric].sel(design=d).to_dataframe(name="value").reset_index()
         df = df.dropna(subset=["value"]).sort_values("value", ascending=False).head(k)
         for rec in df.to_dict("records"):
-            rec = {key: (float(v) if isinstance(v, (int, float, np.floating, np.integer)) else str(v)) for key, v in rec.items()}
+            rec = {
+                key: (float(v) if isinstance(v, (int, float, np.floating, np.integer)) else str(v))
+                for key, v in rec.items()
+            }
             rec.update(design=str(d), metric=metric)
             out.append(rec)
     return out

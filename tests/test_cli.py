@@ -95,7 +95,10 @@ def test_use_host_devices_before_and_after_jax_starts():
 
 
 def test_use_host_devices_default_and_env_override():
-    code = "import os, jax, jaxobs; n = jaxobs.use_host_devices(); print(n, len(jax.devices()), len(os.sched_getaffinity(0)))"
+    code = (
+        "import os, jax, jaxobs; n = jaxobs.use_host_devices(); "
+        "print(n, len(jax.devices()), len(os.sched_getaffinity(0)))"
+    )
     p = _python(code, env_drop=("XLA_FLAGS", "JAXOBS_HOST_DEVICES"))
     assert p.returncode == 0, p.stderr
     n, devs, cores = map(int, p.stdout.split())
@@ -178,9 +181,13 @@ def test_reproduce_flux_quick_json(tmp_path, capsys):
 
 def _result_json(tmp_path, component="SOGIFLLWIF", tuned=None):
     """A tuning result as ``run_job`` writes it (the fields a study reads back)."""
-    job = {"job": {"name": "t", "component": component}, "component": {"k1": 1.7},
-           "gains": {"lam": {"init": 11559.0, "lower": 1000.0, "upper": 1e5, "log": True}},
-           "scenarios": {"signal": "grid", "grid": {"dc": [0.0]}}, "objective": {"terms": [{"metric": "itae_freq"}]}}
+    job = {
+        "job": {"name": "t", "component": component},
+        "component": {"k1": 1.7},
+        "gains": {"lam": {"init": 11559.0, "lower": 1000.0, "upper": 1e5, "log": True}},
+        "scenarios": {"signal": "grid", "grid": {"dc": [0.0]}},
+        "objective": {"terms": [{"metric": "itae_freq"}]},
+    }
     p = tmp_path / "result.json"
     p.write_text(json.dumps({"job": job, "component": component, "gains": {"tuned": tuned or {"lam": 9000.0}}}))
     return p

@@ -48,9 +48,15 @@ def _diffrax_plant(par, inv, ua, ub, tl, dead_time):
         return D.plant_field(par, inv, dead_time, x, u[idx])
 
     sol = diffrax.diffeqsolve(
-        diffrax.ODETerm(vf), diffrax.Dopri8(), 0.0, n * TS, 1e-5, jnp.zeros(4),
+        diffrax.ODETerm(vf),
+        diffrax.Dopri8(),
+        0.0,
+        n * TS,
+        1e-5,
+        jnp.zeros(4),
         stepsize_controller=diffrax.PIDController(rtol=1e-12, atol=1e-12, jump_ts=jnp.asarray(TS * np.arange(1, n))),
-        saveat=diffrax.SaveAt(ts=jnp.asarray(TS * np.arange(n + 1))), max_steps=100_000,
+        saveat=diffrax.SaveAt(ts=jnp.asarray(TS * np.arange(n + 1))),
+        max_steps=100_000,
     )
     return np.asarray(sol.ys)
 
@@ -95,7 +101,9 @@ DRIVE = D.Drive(FOC)
 
 @pytest.fixture(scope="module")
 def speed_and_load_run():
-    sc = D.Scenario(PAR, speed_ref=D.Scenario.speed_rpm([0.0, 0.01], [0, 2000]), load=D.Scenario.load_steps([0.0, 0.3], [0.0, 10.0]))
+    sc = D.Scenario(
+        PAR, speed_ref=D.Scenario.speed_rpm([0.0, 0.01], [0, 2000]), load=D.Scenario.load_steps([0.0, 0.3], [0.0, 10.0])
+    )
     return jaxobs.simulate(D.ClosedLoop(DRIVE, None, sc), 0.6)
 
 
@@ -157,7 +165,12 @@ def test_current_loop_time_constant_matches_imc():
 def test_mtpa_and_ipmsm_torque():
     par = D.ipmsm_paper002()
     foc = D.FOC.imc(par, alpha_c=2 * math.pi * 300, alpha_s=2 * math.pi * 10, id_mode="mtpa")
-    sc = D.Scenario(par, speed_ref=D.Profile.constant(600 * D.RPM), load=D.Scenario.load_steps([0.0, 0.05], [0.0, 20.0]), omega_m0=600 * D.RPM)
+    sc = D.Scenario(
+        par,
+        speed_ref=D.Profile.constant(600 * D.RPM),
+        load=D.Scenario.load_steps([0.0, 0.05], [0.0, 20.0]),
+        omega_m0=600 * D.RPM,
+    )
     sol = jaxobs.simulate(D.ClosedLoop(D.Drive(foc), None, sc), 0.6)
     i_d, i_q = float(sol.outputs.i_d[-1]), float(sol.outputs.i_q[-1])
     dl = float(par.Lq - par.Ld)
@@ -207,21 +220,29 @@ def test_dead_time_voltage_error():
 
 def test_jit_vmap_over_256_scenarios():
     base = D.Scenario(PAR, load=D.Profile.constant(5.0))
-    batch = D.grid(base, speed_rpm=np.linspace(200, 2000, 16), dRs=np.linspace(-0.5, 0.5, 4), dL=np.linspace(-0.2, 0.2, 4))
+    batch = D.grid(
+        base, speed_rpm=np.linspace(200, 2000, 16), dRs=np.linspace(-0.5, 0.5, 4), dL=np.linspace(-0.2, 0.2, 4)
+    )
     assert batch.size == 256 and batch.shape == (16, 4, 4) and batch.dims == ("speed_rpm", "dRs", "dL")
     run = jax.jit(jax.vmap(lambda s: jaxobs.simulate(D.ClosedLoop(DRIVE, None, s), 0.3)))
     sol = run(batch.scenarios)
     assert sol.outputs.omega_m.shape == (256, 3000)
     assert bool(jnp.all(sol.ok))
     w_end = np.asarray(sol.outputs.omega_m[:, -1]).reshape(batch.shape)
-    np.testing.assert_allclose(w_end, np.broadcast_to(np.linspace(200, 2000, 16)[:, None, None] * D.RPM, batch.shape), rtol=2e-3)
+    np.testing.assert_allclose(
+        w_end, np.broadcast_to(np.linspace(200, 2000, 16)[:, None, None] * D.RPM, batch.shape), rtol=2e-3
+    )
     # the grid is labelled: element (i, j, k) has the i-th speed, j-th dRs, k-th dL
     est_rs = np.asarray(batch.scenarios.est_par.Rs).reshape(batch.shape)
     np.testing.assert_allclose(est_rs[3, :, 1], float(PAR.Rs) * (1 + np.linspace(-0.5, 0.5, 4)))
 
 
 def test_grad_of_speed_error_wrt_speed_pi_gain_matches_finite_differences():
-    sc = D.Scenario(PAR, speed_ref=D.Scenario.speed_rpm([0.0, 0.005], [0, 1000]), load=D.Scenario.load_steps([0.0, 0.06], [0.0, 4.0]))
+    sc = D.Scenario(
+        PAR,
+        speed_ref=D.Scenario.speed_rpm([0.0, 0.005], [0, 1000]),
+        load=D.Scenario.load_steps([0.0, 0.06], [0.0, 4.0]),
+    )
 
     def loss(kp_w):
         drv = eqx.tree_at(lambda d: d.foc.kp_w, DRIVE, kp_w)

@@ -53,8 +53,11 @@ def _default_job_result(tmp_path, **extra):
         "job": raw,
         "component": raw["job"]["component"],
         "closed_form_source": "001 eq (34), Table I",
-        "gains": {"initial": {"k1": 1.815, "k2": 0.752, "lam": 11559.0}, "tuned": dict(_README_TUNED),
-                  "closed_form": {"k1": 1.81549, "k2": 0.752, "lam": 11559.3}},
+        "gains": {
+            "initial": {"k1": 1.815, "k2": 0.752, "lam": 11559.0},
+            "tuned": dict(_README_TUNED),
+            "closed_form": {"k1": 1.81549, "k2": 0.752, "lam": 11559.3},
+        },
         "scores": {"tuned": {"objective": 0.0047, "diverged": 0}},
         "stopped": "early stop",
         **extra,
@@ -66,8 +69,15 @@ def _default_job_result(tmp_path, **extra):
 
 @pytest.mark.parametrize(
     "design, rule",
-    [("sogi-fll", None), ("wpf", None), ("wif", None), ("wif", jaxobs.Euler()), ("wif", jaxobs.RK4()),
-     ("wif", jaxobs.Tustin()), ("wpf", jaxobs.Tustin())],
+    [
+        ("sogi-fll", None),
+        ("wpf", None),
+        ("wif", None),
+        ("wif", jaxobs.Euler()),
+        ("wif", jaxobs.RK4()),
+        ("wif", jaxobs.Tustin()),
+        ("wpf", jaxobs.Tustin()),
+    ],
     ids=lambda v: v if isinstance(v, str) else type(v).__name__ if v is not None else "AB3",
 )
 def test_fll_family_c_matches_the_float32_jax_step(tmp_path, design, rule):
@@ -92,8 +102,12 @@ def test_files_macros_and_coefficients_agree(tmp_path):
     nu = int(re.search(r"#define JX_NU (\d+)", h).group(1))
     ny = int(re.search(r"#define JX_NY (\d+)", h).group(1))
     assert (nu, ny) == (1, 5) == (len(c["inputs"]), len(c["outputs"]))
-    for decl in ("typedef struct", "} jx_state;", "void jx_init(jx_state *s);",
-                 "void jx_step(jx_state *s, const float *u, float *y);"):
+    for decl in (
+        "typedef struct",
+        "} jx_state;",
+        "void jx_init(jx_state *s);",
+        "void jx_step(jx_state *s, const float *u, float *y);",
+    ):
         assert decl in h
     head = (tmp_path / "golden.csv").read_text().splitlines()
     assert head[0].split(",") == c["inputs"] + c["outputs"] == ["v", "v_alpha", "v_beta", "amplitude", "theta", "omega"]
@@ -122,8 +136,16 @@ def test_operation_counts_by_hand(tmp_path):
         c = export_observer(linear.sogi_fll_closed_form(rule=rule), tmp_path / type(rule).__name__)
         o = c["ops_per_step"]
         assert o["per_f"]["total"] == 12 and o["per_out"]["total"] == 8
-        assert o["per_f"] | {"calls": None} == {"add": 3, "mul": 7, "div": 1, "call": 1, "compare": 0, "select": 0,
-                                                "calls": None, "total": 12}
+        assert o["per_f"] | {"calls": None} == {
+            "add": 3,
+            "mul": 7,
+            "div": 1,
+            "call": 1,
+            "compare": 0,
+            "select": 0,
+            "calls": None,
+            "total": 12,
+        }
         assert o["steady"]["total"] == steady, type(rule).__name__
     assert o["startup"]["total"] == 4 * 12 + 3 * 3 * 2 + 3 * 7 + 8
 
@@ -169,8 +191,15 @@ def test_default_job_result_exports_and_matches(tmp_path, capsys):
 
 def test_leso_result_says_what_the_job_binds_per_scenario(tmp_path):
     path = tmp_path / "leso.json"
-    path.write_text(json.dumps({"component": "CLESO", "job": {"component": {}},
-                                "gains": {"tuned": {"omega0": 1200.0, "kp_pll": 130.0, "ki_pll": 8000.0}}}))
+    path.write_text(
+        json.dumps(
+            {
+                "component": "CLESO",
+                "job": {"component": {}},
+                "gains": {"tuned": {"omega0": 1200.0, "kp_pll": 130.0, "ki_pll": 8000.0}},
+            }
+        )
+    )
     notes = []
     obs = observer_from_result(path, notes=notes)
     assert isinstance(obs, jaxobs.CLESO) and float(obs.omega0) == 1200.0 and isinstance(obs.rule, jaxobs.RK4)
@@ -201,13 +230,16 @@ def test_closed_form_design_from_the_command_line(tmp_path, capsys):
 _W = 2 * np.pi * 50
 _KP, _KI = (float(g) for g in linear.pll_gains(2 * np.pi * 15.0))
 _DRIVE = {
-    "PureIntegratorFlux": lambda **kw: jaxobs.PureIntegratorFlux(Rs=0.5, L=0.005, kp_pll=_KP, ki_pll=_KI, omega0=_W,
-                                                                 **kw),
-    "LPFFlux": lambda **kw: jaxobs.LPFFlux(Rs=0.5, L=0.005, omega_c=20.0, kp_pll=_KP, ki_pll=_KI, omega0=_W,
-                                           compensate=True, **kw),
+    "PureIntegratorFlux": lambda **kw: jaxobs.PureIntegratorFlux(
+        Rs=0.5, L=0.005, kp_pll=_KP, ki_pll=_KI, omega0=_W, **kw
+    ),
+    "LPFFlux": lambda **kw: jaxobs.LPFFlux(
+        Rs=0.5, L=0.005, omega_c=20.0, kp_pll=_KP, ki_pll=_KI, omega0=_W, compensate=True, **kw
+    ),
     "SOIFO": lambda **kw: jaxobs.SOIFO(Rs=0.5, L=0.005, k=1.414, lam=0.5, omega0=_W, **kw),
-    "SecondOrderSOIFO": lambda **kw: jaxobs.SecondOrderSOIFO(Rs=0.5, L=0.005, K1=1.56, K2=3.11, lam=1.56**3 / 6.22,
-                                                             omega0=_W, **kw),
+    "SecondOrderSOIFO": lambda **kw: jaxobs.SecondOrderSOIFO(
+        Rs=0.5, L=0.005, K1=1.56, K2=3.11, lam=1.56**3 / 6.22, omega0=_W, **kw
+    ),
     "CLESO": lambda **kw: jaxobs.CLESO(Rs=0.6, Lq=0.012, **kw),
     "GILESO": lambda **kw: jaxobs.GILESO(Rs=0.6, Lq=0.012, omega0_pll=_W, **kw),
     "FALESO": lambda **kw: jaxobs.FALESO(Rs=0.6, Lq=0.012, omega0_pll=_W, **kw),
@@ -216,8 +248,13 @@ _DRIVE = {
 
 @pytest.mark.parametrize(
     "name, rule",
-    [(n, None) for n in _DRIVE] + [("SOIFO", jaxobs.Tustin()), ("PureIntegratorFlux", jaxobs.AB3()),
-                                   ("CLESO", jaxobs.Euler()), ("FALESO", jaxobs.Tustin())],
+    [(n, None) for n in _DRIVE]
+    + [
+        ("SOIFO", jaxobs.Tustin()),
+        ("PureIntegratorFlux", jaxobs.AB3()),
+        ("CLESO", jaxobs.Euler()),
+        ("FALESO", jaxobs.Tustin()),
+    ],
     ids=lambda v: v if isinstance(v, str) else type(v).__name__ if v is not None else "RK4",
 )
 def test_drive_observers_c_matches_the_float32_jax_step(tmp_path, name, rule):

@@ -195,7 +195,10 @@ def test_the_checks_see_a_violation(tmp_path, monkeypatch):
     probe.write_text("from . import study\n\n\ndef f():\n    from . import metrics\n")
     monkeypatch.setitem(MODULES, "jaxobs._probe", probe)
     monkeypatch.setitem(RANK, "jaxobs._probe", RANK["jaxobs.signals"])
-    assert {(t, lazy) for t, _, lazy in _imports("jaxobs._probe")} == {("jaxobs.study", False), ("jaxobs.metrics", True)}
+    assert {(t, lazy) for t, _, lazy in _imports("jaxobs._probe")} == {
+        ("jaxobs.study", False),
+        ("jaxobs.metrics", True),
+    }
     found = _violations()
     assert "a layer above it" in " ".join(found[("jaxobs._probe", "jaxobs.study")])
     assert "inside a function" in " ".join(found[("jaxobs._probe", "jaxobs.metrics")])

@@ -26,7 +26,9 @@ def test_notebook_executes(path, monkeypatch):
     monkeypatch.setenv("JAXOBS_NOTEBOOK_SMALL", "1")
     nb = nbformat.read(path, as_version=4)
     t0 = time.time()
-    NotebookClient(nb, timeout=BUDGET_S, kernel_name="python3", resources={"metadata": {"path": str(path.parent)}}).execute()
+    NotebookClient(
+        nb, timeout=BUDGET_S, kernel_name="python3", resources={"metadata": {"path": str(path.parent)}}
+    ).execute()
     elapsed = time.time() - t0
     print(f"\n{path.name}: {elapsed:.1f} s")
     assert elapsed < BUDGET_S

@@ -231,8 +231,9 @@ def test_sharded_batch_equals_single_device_run():
     env = {k: v for k, v in os.environ.items() if k != "XLA_FLAGS"}
     # from the repository root, where `benchmarks` is importable
     root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-    r = subprocess.run([sys.executable, "-c", _SHARD_SCRIPT], capture_output=True, text=True, env=env, timeout=600,
-                       cwd=root)
+    r = subprocess.run(
+        [sys.executable, "-c", _SHARD_SCRIPT], capture_output=True, text=True, env=env, timeout=600, cwd=root
+    )
     assert r.returncode == 0, r.stderr[-2000:]
     assert "SHARDED-EQUALS-SINGLE" in r.stdout
 

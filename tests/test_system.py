@@ -33,8 +33,10 @@ def _assert_trees_equal(a, b):
 def test_user_scan_of_the_closed_loop_equals_simulate_exactly():
     """Encoder drive, speed ramp and a load step inside the horizon: every output, every sample, bit for bit."""
     sc = D.Scenario(
-        PAR, speed_ref=D.Scenario.speed_rpm([0.0, 0.002], [0, 600], ramp=0.01),
-        load=D.Scenario.load_steps([0.0, 0.02], [0.0, 3.0]), sensors=D.Sensors(i_noise=0.05, u_offset=(1.0, 0.0)),
+        PAR,
+        speed_ref=D.Scenario.speed_rpm([0.0, 0.002], [0, 600], ramp=0.01),
+        load=D.Scenario.load_steps([0.0, 0.02], [0.0, 3.0]),
+        sensors=D.Sensors(i_noise=0.05, u_offset=(1.0, 0.0)),
     )
     system = D.ClosedLoop(D.Drive(FOC), None, sc)
     n = 300

@@ -1,7 +1,7 @@
 """Tuning jobs: objectives, gain parametrizations, optimizers (optax, optimistix), TOML jobs, CLI, results.
 
-    from tuning import load_job, run_job
-    from tuning import load_result, tuned_component     # a run's result.json back as a component
+from tuning import load_job, run_job
+from tuning import load_result, tuned_component     # a run's result.json back as a component
 """
 
 from .job import COMPONENTS as COMPONENTS

@@ -31,16 +31,47 @@ from collections.abc import Iterable
 
 import numpy as np
 
-__all__ = ["Expr", "var", "const", "named", "scope", "fmax", "sqrt", "sin", "cos", "atan2", "gt", "lt", "eq", "select",
-           "atan", "fabs", "fmod", "let", "deriv", "Block", "count_ops", "evaluate", "c_float"]
+__all__ = [
+    "Expr",
+    "var",
+    "const",
+    "named",
+    "scope",
+    "fmax",
+    "sqrt",
+    "sin",
+    "cos",
+    "atan2",
+    "gt",
+    "lt",
+    "eq",
+    "select",
+    "atan",
+    "fabs",
+    "fmod",
+    "let",
+    "deriv",
+    "Block",
+    "count_ops",
+    "evaluate",
+    "c_float",
+]
 
 _F32 = np.float32
 
 # binary operators: C token and precedence; unary minus and atoms bind tighter
 _BIN = {"add": ("+", 1), "sub": ("-", 1), "mul": ("*", 2), "div": ("/", 2)}
 _CMP = {"gt": ">", "lt": "<", "eq": "=="}
-_FUN = {"sqrt": "sqrtf", "sin": "sinf", "cos": "cosf", "atan": "atanf", "atan2": "atan2f", "fmax": "fmaxf",
-        "fabs": "fabsf", "fmod": "fmodf"}
+_FUN = {
+    "sqrt": "sqrtf",
+    "sin": "sinf",
+    "cos": "cosf",
+    "atan": "atanf",
+    "atan2": "atan2f",
+    "fmax": "fmaxf",
+    "fabs": "fabsf",
+    "fmod": "fmodf",
+}
 _PREC_NEG, _PREC_ATOM = 3, 4
 
 _table: dict = {}
@@ -551,4 +582,3 @@ class Block:
             b, _ = self._p(e.args[2])
             return f"({c} ? {a} : {b})", _PREC_ATOM
         raise AssertionError(op)
-

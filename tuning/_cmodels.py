@@ -144,8 +144,9 @@ def _gains(obs) -> dict:
         v = getattr(obs, fld.name)
         if eqx.is_array(v):
             if np.ndim(v) != 0:
-                raise ValueError(f"{type(obs).__name__}.{fld.name}: only scalar gains can be exported, "
-                                 f"got shape {np.shape(v)}")
+                raise ValueError(
+                    f"{type(obs).__name__}.{fld.name}: only scalar gains can be exported, got shape {np.shape(v)}"
+                )
             macro = "JX_" + fld.name.upper()
             if macro in macros:
                 raise ValueError(f"{type(obs).__name__}: two gains map to the C name {macro}")
@@ -186,11 +187,24 @@ def fll_output(y, q, w):
 
 def _fll_model(obs, name, reference, states, state_doc, f, out, g) -> CModel:
     return CModel(
-        component=name, reference=reference, kind="signal", states=states, state_doc=state_doc,
-        inputs=["v"], input_doc=["v: the sampled single-phase signal (input units)"], field=["v"],
-        outputs=["v_alpha", "v_beta", "amplitude", "theta", "omega"], output_doc=_FLL_OUT_DOC, angles=(3,),
-        gains=_named(g), statics=_statics(obs), f=f, out=out, x0=np.asarray(obs.initial_state(), np.float32),
-        jax_f=lambda o, x, e: o.f(x, e[0]), jax_out=lambda o, x, e: o.output(x),
+        component=name,
+        reference=reference,
+        kind="signal",
+        states=states,
+        state_doc=state_doc,
+        inputs=["v"],
+        input_doc=["v: the sampled single-phase signal (input units)"],
+        field=["v"],
+        outputs=["v_alpha", "v_beta", "amplitude", "theta", "omega"],
+        output_doc=_FLL_OUT_DOC,
+        angles=(3,),
+        gains=_named(g),
+        statics=_statics(obs),
+        f=f,
+        out=out,
+        x0=np.asarray(obs.initial_state(), np.float32),
+        jax_f=lambda o, x, e: o.f(x, e[0]),
+        jax_out=lambda o, x, e: o.output(x),
         omega_signal=float(obs.omega_n),
     )
 
@@ -203,8 +217,16 @@ def _sogifll(obs: SOGIFLL) -> CModel:
     y, q, w, v = var("vp"), var("qvp"), var("w"), var("v")
     dy, dq = sogi_vf(y, q, v, w, g["k"])
     dw = fll_rate(v - y, q, y, g["lam"], obs.v_floor)
-    return _fll_model(obs, "SOGIFLL", "paper 001 Fig. 1(a), eqs (6)-(8)", ["vp", "qvp", "w"], _FLL_STATE_DOC,
-                      [dy, dq, dw], fll_output(y, q, w), g)
+    return _fll_model(
+        obs,
+        "SOGIFLL",
+        "paper 001 Fig. 1(a), eqs (6)-(8)",
+        ["vp", "qvp", "w"],
+        _FLL_STATE_DOC,
+        [dy, dq, dw],
+        fll_output(y, q, w),
+        g,
+    )
 
 
 def _wpf(obs: SOGIFLLWPF) -> CModel:
@@ -213,10 +235,16 @@ def _wpf(obs: SOGIFLLWPF) -> CModel:
     dp, dqp = sogi_vf(p, qp, v, w, g["k1"])
     dy, dq = sogi_vf(y, q, p, w, g["k2"])
     dw = fll_rate(p - y, q, y, g["lam"], obs.v_floor)
-    return _fll_model(obs, "SOGIFLLWPF", "paper 001 Fig. 1(b) (SOGI prefilter + SOGI-FLL)",
-                      ["p", "qp", "vp", "qvp", "w"],
-                      ["prefilter in-phase output", "prefilter quadrature"] + _FLL_STATE_DOC,
-                      [dp, dqp, dy, dq, dw], fll_output(y, q, w), g)
+    return _fll_model(
+        obs,
+        "SOGIFLLWPF",
+        "paper 001 Fig. 1(b) (SOGI prefilter + SOGI-FLL)",
+        ["p", "qp", "vp", "qvp", "w"],
+        ["prefilter in-phase output", "prefilter quadrature"] + _FLL_STATE_DOC,
+        [dp, dqp, dy, dq, dw],
+        fll_output(y, q, w),
+        g,
+    )
 
 
 def _wif(obs: SOGIFLLWIF) -> CModel:
@@ -228,10 +256,16 @@ def _wif(obs: SOGIFLLWIF) -> CModel:
         dw = fll_rate(za, q, y, g["lam"] / g["k2"], obs.v_floor)
     else:
         dw = fll_rate(v - y, q, y, g["lam"], obs.v_floor)
-    return _fll_model(obs, "SOGIFLLWIF", "paper 001 Fig. 1(c) (second-order SOGI of 000 eqs 17-18 + FLL)",
-                      ["za", "zb", "vp", "qvp", "w"],
-                      ["first GI, in-phase (input of the output GI)", "first GI, quadrature"] + _FLL_STATE_DOC,
-                      [dza, dzb, dy, dq, dw], fll_output(y, q, w), g)
+    return _fll_model(
+        obs,
+        "SOGIFLLWIF",
+        "paper 001 Fig. 1(c) (second-order SOGI of 000 eqs 17-18 + FLL)",
+        ["za", "zb", "vp", "qvp", "w"],
+        ["first GI, in-phase (input of the output GI)", "first GI, quadrature"] + _FLL_STATE_DOC,
+        [dza, dzb, dy, dq, dw],
+        fll_output(y, q, w),
+        g,
+    )
 
 
 # --- drive observers: shared pieces --------------------------------------------------------
@@ -244,7 +278,10 @@ _DRIVE_INPUT_DOC = [
     "i_b: current sampled now, beta (A)",
 ]
 MEMORY = {  # the drive observers' memory in jx_state, as variables of period_input
-    "u_prev_a": "s->u_prev[0]", "u_prev_b": "s->u_prev[1]", "i_prev_a": "s->i_prev[0]", "i_prev_b": "s->i_prev[1]",
+    "u_prev_a": "s->u_prev[0]",
+    "u_prev_b": "s->u_prev[1]",
+    "i_prev_a": "s->i_prev[0]",
+    "i_prev_b": "s->i_prev[1]",
 }
 
 
@@ -289,12 +326,28 @@ def _fll_norm(ya, qa, yb, qb, e, v_floor):
 
 def _flux_model(obs, name, reference, states, state_doc, f, out, g, omega_signal, start) -> CModel:
     return CModel(
-        component=name, reference=reference, kind="drive", states=states, state_doc=state_doc,
-        inputs=list(_DRIVE_INPUTS), input_doc=list(_DRIVE_INPUT_DOC), field=["e_a", "e_b"],
-        outputs=list(_FLUX_OUT), output_doc=list(_FLUX_OUT_DOC), angles=(2,), gains=_named(g), statics=_statics(obs),
-        f=f, out=out, x0=np.asarray(obs.initial_state(), np.float32), path="held", period_input=back_emf(g, obs.ts),
-        jax_f=lambda o, x, e: o.f(x, e), jax_out=lambda o, x, e: o.output(x, e),
-        omega_signal=omega_signal if omega_signal > 0 else 2 * math.pi * 50, signal_start=start,
+        component=name,
+        reference=reference,
+        kind="drive",
+        states=states,
+        state_doc=state_doc,
+        inputs=list(_DRIVE_INPUTS),
+        input_doc=list(_DRIVE_INPUT_DOC),
+        field=["e_a", "e_b"],
+        outputs=list(_FLUX_OUT),
+        output_doc=list(_FLUX_OUT_DOC),
+        angles=(2,),
+        gains=_named(g),
+        statics=_statics(obs),
+        f=f,
+        out=out,
+        x0=np.asarray(obs.initial_state(), np.float32),
+        path="held",
+        period_input=back_emf(g, obs.ts),
+        jax_f=lambda o, x, e: o.f(x, e),
+        jax_out=lambda o, x, e: o.output(x, e),
+        omega_signal=omega_signal if omega_signal > 0 else 2 * math.pi * 50,
+        signal_start=start,
     )
 
 
@@ -305,16 +358,30 @@ def _pll_flux(obs, name, reference, dpsi, out_psi, g):
     dth, dw = pll_vf(th, w, err, g["kp_pll"], g["ki_pll"])
     pa, pb = out_psi(psi_a, psi_b, w)
     out = [pa, pb, safe_atan2(pb, pa), w, e[0], e[1]]
-    return _flux_model(obs, name, reference, ["psi_a", "psi_b", "th", "w"],
-                       ["flux estimate, alpha (Wb)", "flux estimate, beta (Wb)", "PLL angle (rad)",
-                        "PLL speed (rad/s)"],
-                       [*dpsi(psi_a, psi_b, e), dth, dw], out, g, float(obs.omega0), "flux")
+    return _flux_model(
+        obs,
+        name,
+        reference,
+        ["psi_a", "psi_b", "th", "w"],
+        ["flux estimate, alpha (Wb)", "flux estimate, beta (Wb)", "PLL angle (rad)", "PLL speed (rad/s)"],
+        [*dpsi(psi_a, psi_b, e), dth, dw],
+        out,
+        g,
+        float(obs.omega0),
+        "flux",
+    )
 
 
 def _pure_integrator(obs: PureIntegratorFlux) -> CModel:
     g = _gains(obs)
-    return _pll_flux(obs, "PureIntegratorFlux", "paper 000 eq (6): psi = integral of the back EMF, type-2 PLL on psi",
-                     lambda pa, pb, e: [e[0], e[1]], lambda pa, pb, w: (pa, pb), g)
+    return _pll_flux(
+        obs,
+        "PureIntegratorFlux",
+        "paper 000 eq (6): psi = integral of the back EMF, type-2 PLL on psi",
+        lambda pa, pb, e: [e[0], e[1]],
+        lambda pa, pb, w: (pa, pb),
+        g,
+    )
 
 
 def _lpf(obs: LPFFlux) -> CModel:
@@ -330,8 +397,14 @@ def _lpf(obs: LPFFlux) -> CModel:
         c, s = let("rot_c", cos(rot)), let("rot_s", sin(rot))
         return gain * (c * pa - s * pb), gain * (s * pa + c * pb)
 
-    return _pll_flux(obs, "LPFFlux", "paper 000 Sec. II: psi = e/(s + wc), eq (11) compensation, type-2 PLL",
-                     lambda pa, pb, e: [e[0] - wc * pa, e[1] - wc * pb], psi_out, g)
+    return _pll_flux(
+        obs,
+        "LPFFlux",
+        "paper 000 Sec. II: psi = e/(s + wc), eq (11) compensation, type-2 PLL",
+        lambda pa, pb, e: [e[0] - wc * pa, e[1] - wc * pb],
+        psi_out,
+        g,
+    )
 
 
 def _soifo(obs: SOIFO) -> CModel:
@@ -346,17 +419,32 @@ def _soifo(obs: SOIFO) -> CModel:
     wm = let("w_out", fmax(w, obs.omega_min))
     pa, pb = let("pa", qa / wm), let("pb", qb / wm)
     out = [pa, pb, safe_atan2(pb, pa), _signed(w, pa, pb, ya, yb), e[0], e[1]]
-    return _flux_model(obs, "SOIFO", "paper 000 Sec. III-A, eq (15), Fig. 3 (two SOGIs, one FLL)",
-                       ["y_a", "q_a", "y_b", "q_b", "w"],
-                       ["SOGI alpha, in-phase", "SOGI alpha, quadrature", "SOGI beta, in-phase",
-                        "SOGI beta, quadrature", "FLL frequency |w^e| (rad/s)"],
-                       [dya, dqa, dyb, dqb, dw], out, g, float(obs.omega0), "alpha")
+    return _flux_model(
+        obs,
+        "SOIFO",
+        "paper 000 Sec. III-A, eq (15), Fig. 3 (two SOGIs, one FLL)",
+        ["y_a", "q_a", "y_b", "q_b", "w"],
+        [
+            "SOGI alpha, in-phase",
+            "SOGI alpha, quadrature",
+            "SOGI beta, in-phase",
+            "SOGI beta, quadrature",
+            "FLL frequency |w^e| (rad/s)",
+        ],
+        [dya, dqa, dyb, dqb, dw],
+        out,
+        g,
+        float(obs.omega0),
+        "alpha",
+    )
 
 
 def _sosoifo(obs: SecondOrderSOIFO) -> CModel:
     if obs.discretization != "rule":
-        raise ValueError("export: SecondOrderSOIFO(discretization='paper') (000 eqs 22-25) is not supported yet; "
-                         "export the rule-discretized SecondOrderSOIFO")
+        raise ValueError(
+            "export: SecondOrderSOIFO(discretization='paper') (000 eqs 22-25) is not supported yet; "
+            "export the rule-discretized SecondOrderSOIFO"
+        )
     g = _gains(obs)
     names = ["za_a", "zb_a", "y_a", "q_a", "za_b", "zb_b", "y_b", "q_b", "w"]
     x = [var(n) for n in names]
@@ -371,10 +459,18 @@ def _sosoifo(obs: SecondOrderSOIFO) -> CModel:
     pa, pb = let("pa", x[3] / wm), let("pb", x[7] / wm)
     out = [pa, pb, safe_atan2(pb, pa), _signed(w, pa, pb, x[2], x[6]), e[0], e[1]]
     doc = ["first GI, in-phase", "first GI, quadrature", "output GI, in-phase", "output GI, quadrature"]
-    return _flux_model(obs, "SecondOrderSOIFO", "paper 000 Sec. III-B, eq (20), Fig. 4 (second-order SOGIs, one FLL)",
-                       names,
-                       [f"alpha {d}" for d in doc] + [f"beta {d}" for d in doc] + ["FLL frequency |w^e| (rad/s)"],
-                       [*ax, *bx, dw], out, g, float(obs.omega0), "alpha")
+    return _flux_model(
+        obs,
+        "SecondOrderSOIFO",
+        "paper 000 Sec. III-B, eq (20), Fig. 4 (second-order SOGIs, one FLL)",
+        names,
+        [f"alpha {d}" for d in doc] + [f"beta {d}" for d in doc] + ["FLL frequency |w^e| (rad/s)"],
+        [*ax, *bx, dw],
+        out,
+        g,
+        float(obs.omega0),
+        "alpha",
+    )
 
 
 # --- LESOs (002) with their PLL ------------------------------------------------------------
@@ -422,13 +518,21 @@ def _faleso(g, xl, u, i, w):
 
 
 _LESO = {  # per class: the LESO part, its state pairs (alpha, beta) with their meaning, the reference
-    CLESO: (_cleso, [("x1", "current estimate x^1 (A)"), ("x2", "disturbance x^2 = -e/Lq (A/s)")],
-            "paper 002 eqs (15)-(17): conventional LESO, l1 = 2 w0 - mu, l2 = w0^2, quadrature PLL"),
-    GILESO: (_gileso, [("x1", "current estimate x^1 (A)"), ("x2a", "x^2a (A/s)"), ("r", "GI state r"),
-                       ("rd", "GI state dr/dt")],
-             "paper 002 eqs (29)-(30): LESO with a generalized integrator at w^e, quadrature PLL"),
-    FALESO: (_faleso, [("x1", "current estimate x^1 (A)"), ("z", "integral of eps (A s)")],
-             "paper 002 eqs (25)-(28): frequency-adaptive complex-coefficient LESO, quadrature PLL"),
+    CLESO: (
+        _cleso,
+        [("x1", "current estimate x^1 (A)"), ("x2", "disturbance x^2 = -e/Lq (A/s)")],
+        "paper 002 eqs (15)-(17): conventional LESO, l1 = 2 w0 - mu, l2 = w0^2, quadrature PLL",
+    ),
+    GILESO: (
+        _gileso,
+        [("x1", "current estimate x^1 (A)"), ("x2a", "x^2a (A/s)"), ("r", "GI state r"), ("rd", "GI state dr/dt")],
+        "paper 002 eqs (29)-(30): LESO with a generalized integrator at w^e, quadrature PLL",
+    ),
+    FALESO: (
+        _faleso,
+        [("x1", "current estimate x^1 (A)"), ("z", "integral of eps (A s)")],
+        "paper 002 eqs (25)-(28): frequency-adaptive complex-coefficient LESO, quadrature PLL",
+    ),
 }
 
 
@@ -452,29 +556,56 @@ def _leso(obs) -> CModel:
     out = [e_out[0], e_out[1], th, w, safe_atan2(-e_out[0], e_out[1])]
     # the input path over the period: voltage held, current linear between its samples (Knots)
     u, i, u_prev, i_prev, _ = _drive_vars()
-    period = [(arr, k, v) for arr, vals in (("e0", [*u_prev, *i_prev]),
-                                            ("em", [*u_prev, *(0.5 * (i[k] + i_prev[k]) for k in (0, 1))]),
-                                            ("e1", [*u_prev, *i]))
-              for k, v in enumerate(vals)]
+    period = [
+        (arr, k, v)
+        for arr, vals in (
+            ("e0", [*u_prev, *i_prev]),
+            ("em", [*u_prev, *(0.5 * (i[k] + i_prev[k]) for k in (0, 1))]),
+            ("e1", [*u_prev, *i]),
+        )
+        for k, v in enumerate(vals)
+    ]
 
     def jax_f(o, x, ev):
         return o.f(x, (ev[:2], ev[2:]))
 
     return CModel(
-        component=type(obs).__name__, reference=reference, kind="drive",
-        states=names + ["th", "w"], state_doc=doc + ["PLL angle (rad)", "PLL speed (rad/s)"],
-        inputs=list(_DRIVE_INPUTS), input_doc=list(_DRIVE_INPUT_DOC), field=["u_a", "u_b", "i_a", "i_b"],
-        outputs=list(_LESO_OUT), output_doc=list(_LESO_OUT_DOC), angles=(2, 4), gains=_named(g), statics=_statics(obs),
-        f=[*dxl, dth, dw], out=out, x0=np.asarray(obs.initial_state(), np.float32), path="knots",
-        period_input=period, post=[(n, wrap(th))], jax_f=jax_f, jax_out=None,
+        component=type(obs).__name__,
+        reference=reference,
+        kind="drive",
+        states=names + ["th", "w"],
+        state_doc=doc + ["PLL angle (rad)", "PLL speed (rad/s)"],
+        inputs=list(_DRIVE_INPUTS),
+        input_doc=list(_DRIVE_INPUT_DOC),
+        field=["u_a", "u_b", "i_a", "i_b"],
+        outputs=list(_LESO_OUT),
+        output_doc=list(_LESO_OUT_DOC),
+        angles=(2, 4),
+        gains=_named(g),
+        statics=_statics(obs),
+        f=[*dxl, dth, dw],
+        out=out,
+        x0=np.asarray(obs.initial_state(), np.float32),
+        path="knots",
+        period_input=period,
+        post=[(n, wrap(th))],
+        jax_f=jax_f,
+        jax_out=None,
         omega_signal=float(obs.omega0_pll) if float(obs.omega0_pll) > 0 else 2 * math.pi * 50,
     )
 
 
 MODELS: dict[type, Callable] = {
-    SOGIFLL: _sogifll, SOGIFLLWPF: _wpf, SOGIFLLWIF: _wif,
-    PureIntegratorFlux: _pure_integrator, LPFFlux: _lpf, SOIFO: _soifo, SecondOrderSOIFO: _sosoifo,
-    CLESO: _leso, GILESO: _leso, FALESO: _leso,
+    SOGIFLL: _sogifll,
+    SOGIFLLWPF: _wpf,
+    SOGIFLLWIF: _wif,
+    PureIntegratorFlux: _pure_integrator,
+    LPFFlux: _lpf,
+    SOIFO: _soifo,
+    SecondOrderSOIFO: _sosoifo,
+    CLESO: _leso,
+    GILESO: _leso,
+    FALESO: _leso,
 }
 
 
@@ -486,7 +617,7 @@ def model_for(observer) -> CModel:
     """The C model of ``observer``; a ``ValueError`` naming the component if there is none."""
     build = MODELS.get(type(observer))
     if build is None:
-        raise ValueError(f"export: component {type(observer).__name__} is not supported yet; "
-                         f"supported: {', '.join(supported())}")
+        raise ValueError(
+            f"export: component {type(observer).__name__} is not supported yet; supported: {', '.join(supported())}"
+        )
     return build(observer)
-

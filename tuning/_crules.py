@@ -102,7 +102,8 @@ def _h_consts(h, *which):
 
 def euler(rule: Euler, h: float, nx: int, per_f: dict, per_jac=None) -> RuleC:
     return RuleC(
-        "Euler", "forward Euler (diffrax.Euler): x+ = x + f(x, u) h",
+        "Euler",
+        "forward Euler (diffrax.Euler): x+ = x + f(x, u) h",
         _h_consts(h, "JX_H"),
         locals=["float f0[JX_NX];"],
         advance=f"    jx_f(s->x, @E0, f0);\n    {_LOOP} x1[i] = s->x[i] + f0[i] * JX_H;",
@@ -112,7 +113,8 @@ def euler(rule: Euler, h: float, nx: int, per_f: dict, per_jac=None) -> RuleC:
 
 def rk4(rule: RK4, h: float, nx: int, per_f: dict, per_jac=None) -> RuleC:
     return RuleC(
-        "RK4", "classic fourth-order Runge-Kutta, input held over the period",
+        "RK4",
+        "classic fourth-order Runge-Kutta, input held over the period",
         _h_consts(h, "JX_H", "JX_H_2", "JX_H_6"),
         functions=_RK4_FN,
         locals=["float f0[JX_NX];"],
@@ -134,10 +136,14 @@ def ab3(rule: AB3, h: float, nx: int, per_f: dict, per_jac=None) -> RuleC:
         s->f1[i] = f0[i];
     }}"""
     return RuleC(
-        "AB3", "third-order Adams-Bashforth (paper 001 Sec. VI), RK4 for the first two periods",
+        "AB3",
+        "third-order Adams-Bashforth (paper 001 Sec. VI), RK4 for the first two periods",
         _h_consts(h, "JX_H", "JX_H_2", "JX_H_6", "JX_H_12"),
-        state_fields=["float f1[JX_NX]; /* AB3: f one sample back */", "float f2[JX_NX]; /* AB3: f two samples back */",
-                      "int n;           /* AB3: start-up steps taken (0, 1, 2) */"],
+        state_fields=[
+            "float f1[JX_NX]; /* AB3: f one sample back */",
+            "float f2[JX_NX]; /* AB3: f two samples back */",
+            "int n;           /* AB3: start-up steps taken (0, 1, 2) */",
+        ],
         init=[f"{_LOOP} {{\n        s->f1[i] = 0.0f;\n        s->f2[i] = 0.0f;\n    }}", "s->n = 0;"],
         functions=_RK4_FN,
         locals=["float f0[JX_NX];"],
@@ -180,7 +186,9 @@ def tustin(rule: Tustin, h: float, nx: int, per_f: dict, per_jac: dict) -> RuleC
     if nx > 12:
         raise ValueError(f"export: the Tustin rule is written in C for at most 12 states (solve_small), got {nx}")
     iters = rule.newton_iters
-    fn = _SOLVE_FN + f"""
+    fn = (
+        _SOLVE_FN
+        + f"""
 /* Implicit trapezoidal rule: x+ = x + h/2 [f(x, e0) + f(x+, e1)], solved by JX_NEWTON_ITERS Newton
  * iterations from the Euler predictor (jaxobs.discretize.Tustin). */
 static void jx_tustin(const float *x, const float *e0, const float *e1, float *x1)
@@ -203,10 +211,18 @@ static void jx_tustin(const float *x, const float *e0, const float *e1, float *x
     }}
 }}
 """
-    per_iter = ops_sum((1, per_jac), (nx * nx, ops(add=1, mul=1)), (1, per_f), (nx, ops(add=2, mul=1)),
-                       (1, _solve_ops(nx)), (nx, ops(add=1)))
+    )
+    per_iter = ops_sum(
+        (1, per_jac),
+        (nx * nx, ops(add=1, mul=1)),
+        (1, per_f),
+        (nx, ops(add=2, mul=1)),
+        (1, _solve_ops(nx)),
+        (nx, ops(add=1)),
+    )
     return RuleC(
-        "Tustin", f"implicit trapezoidal (Tustin), {iters} Newton iteration(s) from an Euler predictor",
+        "Tustin",
+        f"implicit trapezoidal (Tustin), {iters} Newton iteration(s) from an Euler predictor",
         _h_consts(h, "JX_H", "JX_H_2"),
         functions=fn,
         advance="    jx_tustin(s->x, @E0, @E1, x1);",

@@ -90,16 +90,20 @@ def closed_form_rows(design: str, values: dict) -> dict:
         wn = values.get("omega_n", 100 * pi)
         zeta = values.get("zeta", 1 / math.sqrt(2))
         obs = linear.sogi_fll_closed_form(k=k, omega_n=wn, zeta=zeta)
-        gains = [("k", float(obs.k), "chosen (001 uses 1/√2)", "001 Sec. II-B"),
-                 ("lam", float(obs.lam), "λ = k²ωn²/(8ζ²)", "001 eq (22)")]
+        gains = [
+            ("k", float(obs.k), "chosen (001 uses 1/√2)", "001 Sec. II-B"),
+            ("lam", float(obs.lam), "λ = k²ωn²/(8ζ²)", "001 eq (22)"),
+        ]
         inputs = dict(k=k, omega_n=wn, zeta=zeta)
     elif design == "wpf":
         wn = values.get("omega_n", 100 * pi)
         zeta = values.get("zeta", 1 / math.sqrt(2))
         obs = linear.wpf_closed_form(omega_n=wn, zeta=zeta)
-        gains = [("k1", float(obs.k1), "k1 = √2 (prefilter ζ = 1/√2)", "001 eq (26)"),
-                 ("k2", float(obs.k2), "k2 = k1 (amplitude poles coincide)", "001 Sec. III-B"),
-                 ("lam", float(obs.lam), "λ = 2(ζ+1)ωn²/(2ζ+1)³", "001 eq (29)")]
+        gains = [
+            ("k1", float(obs.k1), "k1 = √2 (prefilter ζ = 1/√2)", "001 eq (26)"),
+            ("k2", float(obs.k2), "k2 = k1 (amplitude poles coincide)", "001 Sec. III-B"),
+            ("lam", float(obs.lam), "λ = 2(ζ+1)ωn²/(2ζ+1)³", "001 eq (29)"),
+        ]
         inputs = dict(omega_n=wn, zeta=zeta)
     elif design == "wif":
         wc = values.get("omega_c", papers.WIF_OMEGA_C)
@@ -107,18 +111,24 @@ def closed_form_rows(design: str, values: dict) -> dict:
         wn = values.get("omega_n", 100 * pi)
         obs = linear.wif_closed_form(omega_c=wc, b=b, omega_n=wn)
         pm = math.degrees(float(linear.symmetric_optimum_pm(b)))
-        gains = [("k1", float(obs.k1), "k1 = 2bωc/ωn", "001 eq (34)"),
-                 ("k2", float(obs.k2), "k2 = 2ωc/ωn", "001 eq (34)"),
-                 ("lam", float(obs.lam), "λ = 2ωc²/b", "001 eq (34)"),
-                 ("phase_margin_deg", pm, "PM = atan((b²−1)/(2b))", "001 eq (39)")]
+        gains = [
+            ("k1", float(obs.k1), "k1 = 2bωc/ωn", "001 eq (34)"),
+            ("k2", float(obs.k2), "k2 = 2ωc/ωn", "001 eq (34)"),
+            ("lam", float(obs.lam), "λ = 2ωc²/b", "001 eq (34)"),
+            ("phase_margin_deg", pm, "PM = atan((b²−1)/(2b))", "001 eq (39)"),
+        ]
         inputs = dict(omega_c=wc, b=b, omega_n=wn)
     elif design == "cleso":
         if "rs" not in values or "lq" not in values:
-            raise ValueError("closed-form cleso needs --rs (stator resistance, ohm >= 0) and --lq (q-axis inductance, H > 0)")
+            raise ValueError(
+                "closed-form cleso needs --rs (stator resistance, ohm >= 0) and --lq (q-axis inductance, H > 0)"
+            )
         w0 = values.get("omega0", 500 * pi)
         g = linear.cleso_closed_form(w0, values["rs"], values["lq"])
-        gains = [("l1", float(g.l1), "l1 = 2ω0 − μ, μ = Rs/Lq", "002 eq (16)"),
-                 ("l2", float(g.l2), "l2 = ω0²", "002 eq (16)")]
+        gains = [
+            ("l1", float(g.l1), "l1 = 2ω0 − μ, μ = Rs/Lq", "002 eq (16)"),
+            ("l2", float(g.l2), "l2 = ω0²", "002 eq (16)"),
+        ]
         inputs = dict(omega0=w0, rs=values["rs"], lq=values["lq"])
     else:  # argparse restricts the choices
         raise ValueError(f"design must be one of {', '.join(_CF_OPTIONS)}, got {design!r}")
@@ -174,8 +184,13 @@ def load_study(path):
     except tomllib.TOMLDecodeError as e:
         raise ValueError(f"study file: not valid TOML: {e}") from None
     st = raw.get("study", {})
-    opts = dict(t_event=float(st.get("t_event", 0.1)), horizon=float(st.get("horizon", 0.4)), sample=int(st.get("sample", 0)),
-                chunk_size=int(st.get("chunk_size", 2048)), seed=int(st.get("seed", 0)))
+    opts = dict(
+        t_event=float(st.get("t_event", 0.1)),
+        horizon=float(st.get("horizon", 0.4)),
+        sample=int(st.get("sample", 0)),
+        chunk_size=int(st.get("chunk_size", 2048)),
+        seed=int(st.get("seed", 0)),
+    )
     designs = {}
     for name, spec in raw.get("designs", {}).items():
         where = f"designs.{name}"
@@ -207,7 +222,11 @@ def load_study(path):
     for k, v in axes.items():
         if k not in STUDY_AXES:
             raise ValueError(f"axes.{k}: unknown axis; allowed: {', '.join(STUDY_AXES)}")
-        if not isinstance(v, list) or not v or not all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in v):
+        if (
+            not isinstance(v, list)
+            or not v
+            or not all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in v)
+        ):
             raise ValueError(f"axes.{k} must be a non-empty list of numbers")
     return st.get("name", "study"), designs, axes, opts
 
@@ -228,7 +247,11 @@ def _cmd_study(args) -> int:
     figs = study_figures(ds, out)
     n = int(ds.attrs["scenarios"])
     print(f"study {name}: {len(designs)} designs x {n} scenarios in {ds.attrs['seconds']:.1f} s")
-    print(f"{'design':<16}" + "".join(f"{m + ' mean':>20}{'worst':>12}" for m in ("settling_freq", "ripple_freq", "rms_phase")) + f"{'diverged':>10}")
+    print(
+        f"{'design':<16}"
+        + "".join(f"{m + ' mean':>20}{'worst':>12}" for m in ("settling_freq", "ripple_freq", "rms_phase"))
+        + f"{'diverged':>10}"
+    )
     for d in ds["design"].values:
         sel = ds.sel(design=d)
         row = f"{str(d):<16}"
@@ -275,26 +298,48 @@ def _cmd_reproduce(args) -> int:
 
         rows, traces = run_flux_experiments(quick=args.quick)
         figs = []
-        for key, fname in (("du_alpha = 5 V at 1000 r/min", "flux_circles_du_alpha_5V.png"), ("steady 400 r/min", "flux_circles_400rpm.png")):
+        for key, fname in (
+            ("du_alpha = 5 V at 1000 r/min", "flux_circles_du_alpha_5V.png"),
+            ("steady 400 r/min", "flux_circles_400rpm.png"),
+        ):
             p = out / fname
             flux_circles_figure(traces[key], OBSERVER_NAMES, f"Paper 000: estimated flux, {key}", p)
             figs.append(p)
-        figs += _error_figures(traces, OBSERVER_NAMES, "000", (
-            ("load step 10 N·m at 2000 r/min", "position_error_load_step.png", 0.3),
-            ("speed 400-2000-400 r/min", "position_error_speed_variation.png", 0.8),
-            ("du_alpha = 5 V at 1000 r/min", "position_error_du_alpha_5V.png", 0.8),
-        ), out)
-        return _emit_rows(rows, figs, args.json, "Paper 000 (second-order SOIFO) experiments on the simulated SPMSM drive — paper vs ours")
+        figs += _error_figures(
+            traces,
+            OBSERVER_NAMES,
+            "000",
+            (
+                ("load step 10 N·m at 2000 r/min", "position_error_load_step.png", 0.3),
+                ("speed 400-2000-400 r/min", "position_error_speed_variation.png", 0.8),
+                ("du_alpha = 5 V at 1000 r/min", "position_error_du_alpha_5V.png", 0.8),
+            ),
+            out,
+        )
+        return _emit_rows(
+            rows,
+            figs,
+            args.json,
+            "Paper 000 (second-order SOIFO) experiments on the simulated SPMSM drive — paper vs ours",
+        )
     if args.paper == "leso":
         from jaxobs.reproduce.leso import LESO_NAMES, run_leso_experiments
 
         rows, traces = run_leso_experiments()
-        figs = _error_figures(traces, LESO_NAMES, "002", (
-            ("steady 600 r/min no load", "leso_position_error_600rpm.png", 0.4),
-            ("speed ramp 300-600-840-600-300 r/min", "leso_speed_ramp.png", 0.4),
-            ("load step 0-80 % at 600 r/min", "leso_load_step.png", 0.4),
-        ), out)
-        return _emit_rows(rows, figs, args.json, "Paper 002 (LESOs) experiments on the simulated IPMSM drive — paper vs ours")
+        figs = _error_figures(
+            traces,
+            LESO_NAMES,
+            "002",
+            (
+                ("steady 600 r/min no load", "leso_position_error_600rpm.png", 0.4),
+                ("speed ramp 300-600-840-600-300 r/min", "leso_speed_ramp.png", 0.4),
+                ("load step 0-80 % at 600 r/min", "leso_load_step.png", 0.4),
+            ),
+            out,
+        )
+        return _emit_rows(
+            rows, figs, args.json, "Paper 002 (LESOs) experiments on the simulated IPMSM drive — paper vs ours"
+        )
     raise ValueError(f"reproduce: unknown paper {args.paper!r}")
 
 
@@ -311,7 +356,10 @@ def _cmd_tune(args) -> int:
         for v in job.scenarios.axes.values():
             n *= len(v)
         n = job.scenarios.sample or n
-        print(f"{path}: OK — {job.component}, free gains {', '.join(g.name for g in job.gains)}, {n} scenarios, solver {job.solver.kind}")
+        print(
+            f"{path}: OK — {job.component}, free gains {', '.join(g.name for g in job.gains)}, {n} scenarios, "
+            f"solver {job.solver.kind}"
+        )
         return 0
     out = Path(args.out) if args.out else Path("out") / job.name
     result = run_job(job, out, resume=args.resume, quiet=args.quiet)
@@ -322,8 +370,11 @@ def _cmd_tune(args) -> int:
 def _print_summary(result: dict, out: Path):
     g, s = result["gains"], result["scores"]
     names = list(g["tuned"])
-    print(f"{result['component']} tuned in {result['iterations']} iterations ({result['stopped']}), {result['time_s']:.1f} s, "
-          f"{result['scenarios']['count']} scenarios")
+    print(
+        f"{result['component']} tuned in {result['iterations']} iterations ({result['stopped']}), "
+        f"{result['time_s']:.1f} s, "
+        f"{result['scenarios']['count']} scenarios"
+    )
     head = f"{'gain':<8}{'initial':>14}{'closed form':>14}{'tuned':>14}"
     print(head)
     for n in names:
@@ -335,7 +386,10 @@ def _print_summary(result: dict, out: Path):
         print(f"{k:<28}{s['initial'][k]:>14.6g}{s['closed_form'][k]:>14.6g}{s['tuned'][k]:>14.6g}")
     if "holdout" in result:
         h = result["holdout"]
-        print(f"held-out set ({h['count']} scenarios): worst {h['closed_form']['per_scenario_worst']:.6g} (closed form) vs {h['tuned']['per_scenario_worst']:.6g} (tuned)")
+        print(
+            f"held-out set ({h['count']} scenarios): worst {h['closed_form']['per_scenario_worst']:.6g} "
+            f"(closed form) vs {h['tuned']['per_scenario_worst']:.6g} (tuned)"
+        )
     print(f"results: {out / 'result.json'}")
 
 
@@ -381,7 +435,9 @@ def build_parser() -> argparse.ArgumentParser:
     b.set_defaults(func=_cmd_bode)
 
     r = sub.add_parser("reproduce", help="reproduce a paper's experiments on the simulated drive")
-    r.add_argument("paper", choices=["flux", "leso"], help="flux: paper 000 (rotor-flux observers); leso: paper 002 (LESOs)")
+    r.add_argument(
+        "paper", choices=["flux", "leso"], help="flux: paper 000 (rotor-flux observers); leso: paper 002 (LESOs)"
+    )
     r.add_argument("--out", default="out", help="folder for the figures (default: out)")
     r.add_argument("--json", action="store_true", help="print rows {experiment, observer, metric, unit, paper, ours}")
     r.add_argument("--quick", action="store_true", help="skip the long runs (20 r/min steady state, I-f start-up)")

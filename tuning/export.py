@@ -72,9 +72,19 @@ from ._cmodels import MEMORY, CModel, model_for, supported
 from ._crules import RuleC, needs_jacobian, ops_sum, ops_total, rule_c
 from .job import COMPONENTS
 
-__all__ = ["export_observer", "observer_from_result", "observer_from_design", "compile_and_check", "fll_test_signal",
-           "drive_test_signal",
-           "add_export_parser", "cli_export", "DESIGNS", "TOLERANCE", "MIN_STEPS"]
+__all__ = [
+    "export_observer",
+    "observer_from_result",
+    "observer_from_design",
+    "compile_and_check",
+    "fll_test_signal",
+    "drive_test_signal",
+    "add_export_parser",
+    "cli_export",
+    "DESIGNS",
+    "TOLERANCE",
+    "MIN_STEPS",
+]
 
 TOLERANCE = 1e-4  # max |y_C − y_golden| / (1 + |y_golden|)
 MIN_STEPS = 10_000  # the golden record is at least this long
@@ -149,8 +159,10 @@ def observer_from_result(path, *, gains: str = "tuned", notes: list | None = Non
         have = ", ".join(res.get("gains", {})) or "none"
         raise ValueError(f"result file {str(path)!r}: no gains.{gains} (has: {have})")
     if gains == "tuned" and str(res.get("status", "")).lower() == "diverged":
-        raise ValueError(f"result file {str(path)!r}: status 'diverged': the tuned gains are not a design "
-                         "(export --gains closed_form instead)")
+        raise ValueError(
+            f"result file {str(path)!r}: status 'diverged': the tuned gains are not a design "
+            "(export --gains closed_form instead)"
+        )
     values = dict(info.defaults)
     values.update(res.get("job", {}).get("component", {}))
     values.update(table)
@@ -170,8 +182,9 @@ def observer_from_result(path, *, gains: str = "tuned", notes: list | None = Non
     else:
         notes.append(f"result.json has no 'rule': the {name} default {type(probe.rule).__name__} is used")
     if info.bind is not None:
-        bound = ", ".join(f"{k} = {float(getattr(probe, k)):g}" for k in ("Rs", "Lq", "omega0_pll")
-                          if hasattr(probe, k))
+        bound = ", ".join(
+            f"{k} = {float(getattr(probe, k)):g}" for k in ("Rs", "Lq", "omega0_pll") if hasattr(probe, k)
+        )
         notes.append(f"the job sets Rs, Lq and the PLL's initial speed per scenario; exported with {bound}")
     diverged = res.get("scores", {}).get(gains, {}).get("diverged") if gains in res.get("scores", {}) else None
     if diverged:
@@ -207,8 +220,17 @@ def fll_test_signal(ts: float, n_steps: int, f0: float = 50.0, amplitude: float 
     return v[:, None], doc
 
 
-def drive_test_signal(ts: float, n_steps: int, *, omega: float, Rs: float, L: float, psi: float = 0.1,
-                      current: float | None = None, start: str = ""):
+def drive_test_signal(
+    ts: float,
+    n_steps: int,
+    *,
+    omega: float,
+    Rs: float,
+    L: float,
+    psi: float = 0.1,
+    current: float | None = None,
+    start: str = "",
+):
     """Sampled (u_α, u_β, i_α, i_β) of a surface PMSM turning at electrical speed ``omega``, with a +10 % speed
     step at n/3 and a +30° angle jump at 2n/3.
 
@@ -234,8 +256,12 @@ def drive_test_signal(ts: float, n_steps: int, *, omega: float, Rs: float, L: fl
     t1, t2 = (n_steps // 3) * ts, (2 * n_steps // 3) * ts
 
     def theta(t):
-        return (np.pi / 2 + omega * t + np.where(t >= t1, 0.1 * omega * (t - t1), 0.0)
-                + np.where(t >= t2, np.radians(30.0), 0.0))
+        return (
+            np.pi / 2
+            + omega * t
+            + np.where(t >= t1, 0.1 * omega * (t - t1), 0.0)
+            + np.where(t >= t2, np.radians(30.0), 0.0)
+        )
 
     def cur(t):
         th = theta(t)
@@ -257,9 +283,11 @@ def drive_test_signal(ts: float, n_steps: int, *, omega: float, Rs: float, L: fl
         u[0, 1] = i[0, 1] = i[1, 1] = 0.0
     data = np.concatenate([u, i], axis=1).astype(np.float32)
     first = {"": "", "flux": ", first period carries psi(0)/ts", "alpha": ", first period on alpha only"}[start]
-    doc = (f"PMSM u/i at {omega / (2 * np.pi):g} Hz electrical (psi = {psi:g} Wb, I = {current:.3g} A, "
-           f"Rs = {Rs:g} ohm, L = {L:g} H){first}, +10 % speed step at {t1:g} s, +30 deg angle jump at {t2:g} s, "
-           f"ts = {ts:g} s")
+    doc = (
+        f"PMSM u/i at {omega / (2 * np.pi):g} Hz electrical (psi = {psi:g} Wb, I = {current:.3g} A, "
+        f"Rs = {Rs:g} ohm, L = {L:g} H){first}, +10 % speed step at {t1:g} s, +30 deg angle jump at {t2:g} s, "
+        f"ts = {ts:g} s"
+    )
     return data, doc
 
 
@@ -318,8 +346,10 @@ def _self_check(obs32, model: CModel, n_points: int = 8):
             bad = np.abs(got - want) > 1e-4 * (1 + np.abs(want))
             if np.any(bad):
                 i = int(np.argmax(bad))
-                raise AssertionError(f"export: the C {what} of {model.component} differs from the JAX one at "
-                                     f"{names[i]}: {got[i]!r} vs {want[i]!r} (x = {x.tolist()}, e = {e.tolist()})")
+                raise AssertionError(
+                    f"export: the C {what} of {model.component} differs from the JAX one at "
+                    f"{names[i]}: {got[i]!r} vs {want[i]!r} (x = {x.tolist()}, e = {e.tolist()})"
+                )
 
 
 # --------------------------------------------------------------------------------------------
@@ -348,8 +378,12 @@ def _c_function(signature: str, doc: str, assigns, bindings: dict) -> str:
 
 def _ops_text(o: dict) -> str:
     calls = ", ".join(f"{k} {v}" for k, v in sorted(o["calls"].items()))
-    parts = [f"{o['add']} +/-", f"{o['mul']} *", f"{o['div']} /",
-             f"{o['call']} calls" + (f" ({calls})" if calls else "")]
+    parts = [
+        f"{o['add']} +/-",
+        f"{o['mul']} *",
+        f"{o['div']} /",
+        f"{o['call']} calls" + (f" ({calls})" if calls else ""),
+    ]
     if o["compare"] or o["select"]:
         parts.append(f"{o['compare']} compares, {o['select']} selects")
     return f"{ops_total(o)} = " + ", ".join(parts)
@@ -378,17 +412,20 @@ def _emit(obs32, model: CModel, rule: RuleC, jac, source: str, notes, ops: dict)
     statics = ", ".join(f"{k} = {v!r}" for k, v in model.statics.items())
     startup = ""
     if ops.get("startup"):
-        startup = (f"\n *   each of the first {rule.startup_steps} steps (RK4 start-up):"
-                   f"\n *     {_ops_text(ops['startup'])}")
+        startup = (
+            f"\n *   each of the first {rule.startup_steps} steps (RK4 start-up):\n *     {_ops_text(ops['startup'])}"
+        )
     note_lines = "".join(f"\n *   note: {n}" for n in notes)
     in_doc = "\n".join(f" *   u[{i}]  {d}" for i, d in enumerate(model.input_doc))
     out_doc = "\n".join(f" *   y[{i}]  {d}" for i, d in enumerate(model.output_doc))
     st_doc = "\n".join(f" *   x[{i}]  {s}: {d}" for i, (s, d) in enumerate(zip(model.states, model.state_doc)))
     memory = ""
     if drive:
-        memory = ("    float u_prev[2]; /* voltage applied over the period ending at the next sample (V) */\n"
-                  "    float i_prev[2]; /* current at the previous sample (A) */\n"
-                  "    int started;     /* 0 until the first sample has been seen */\n")
+        memory = (
+            "    float u_prev[2]; /* voltage applied over the period ending at the next sample (V) */\n"
+            "    float i_prev[2]; /* current at the previous sample (A) */\n"
+            "    int started;     /* 0 until the first sample has been seen */\n"
+        )
     header = f"""/* observer.h -- {model.component} exported by `jaxobs export` (float32, C99).
  *
  * {model.reference}.
@@ -396,7 +433,7 @@ def _emit(obs32, model: CModel, rule: RuleC, jac, source: str, notes, ops: dict)
  * Discretization: {rule.description}, ts = {obs32.ts!r} s.
  * Gains (float32, baked into observer.c):
 {gains_doc}
- *   static options: {statics or 'none'}
+ *   static options: {statics or "none"}
  *
  * Call jx_init(&s) once, then jx_step(&s, u, y) once per sample period:
 {in_doc}
@@ -407,7 +444,7 @@ def _emit(obs32, model: CModel, rule: RuleC, jac, source: str, notes, ops: dict)
 {st_doc}
  *
  * Operations per step, jx_out included (+/- counts negations too):
- *   {_ops_text(ops['steady'])}{startup}
+ *   {_ops_text(ops["steady"])}{startup}
  *
  * golden.csv holds the JAX step's float32 outputs; test_main.c checks this code against them
  * (max |y_C - y_golden| / (1 + |y_golden|) <= 1e-4, angles modulo 2 pi).
@@ -425,8 +462,8 @@ extern "C" {{
 #define JX_Y_IS_ANGLE {{{angle_mask}}} /* outputs compared modulo 2 pi */
 
 typedef struct {{
-    float x[JX_NX]; /* {', '.join(model.states)} */
-{memory}{''.join(f'    {f}{chr(10)}' for f in rule.state_fields)}}} jx_state;
+    float x[JX_NX]; /* {", ".join(model.states)} */
+{memory}{"".join(f"    {f}{chr(10)}" for f in rule.state_fields)}}} jx_state;
 
 void jx_init(jx_state *s);
 void jx_step(jx_state *s, const float *u, float *y);
@@ -446,39 +483,77 @@ void jx_step(jx_state *s, const float *u, float *y);
     xs = {s: ("float", f"x[{i}]") for i, s in enumerate(model.states)}
     es = {s: ("float", f"e[{i}]") for i, s in enumerate(model.field)}
     f_doc = {"signal": "the sample v", "drive": "the back EMF (V)" if model.path == "held" else "(u, i) at the stage"}
-    funcs = [_c_function("static void jx_f(const float *x, const float *e, float *dx)",
-                         f"vector field dx/dt = f(x, e), e = {f_doc[model.kind]} (the observer's f; cores as in "
-                         "jaxobs/observers/_cores.py)", [(f"dx[{i}]", e) for i, e in enumerate(model.f)], {**xs, **es})]
+    funcs = [
+        _c_function(
+            "static void jx_f(const float *x, const float *e, float *dx)",
+            f"vector field dx/dt = f(x, e), e = {f_doc[model.kind]} (the observer's f; cores as in "
+            "jaxobs/observers/_cores.py)",
+            [(f"dx[{i}]", e) for i, e in enumerate(model.f)],
+            {**xs, **es},
+        )
+    ]
     if drive:
-        funcs.append(_c_function("static void jx_out(const float *x, const float *e, float *y)",
-                                 "outputs of the state x after the period with input e (the observer's outputs)",
-                                 [(f"y[{i}]", e) for i, e in enumerate(model.out)], {**xs, **es}))
+        funcs.append(
+            _c_function(
+                "static void jx_out(const float *x, const float *e, float *y)",
+                "outputs of the state x after the period with input e (the observer's outputs)",
+                [(f"y[{i}]", e) for i, e in enumerate(model.out)],
+                {**xs, **es},
+            )
+        )
     else:
-        funcs.append(_c_function("static void jx_out(const float *x, float *y)",
-                                 "outputs of the state x (the observer's output)",
-                                 [(f"y[{i}]", e) for i, e in enumerate(model.out)], xs))
+        funcs.append(
+            _c_function(
+                "static void jx_out(const float *x, float *y)",
+                "outputs of the state x (the observer's output)",
+                [(f"y[{i}]", e) for i, e in enumerate(model.out)],
+                xs,
+            )
+        )
     if rule.uses_jac:
-        funcs.append(_c_function("static void jx_jac(const float *x, const float *e, float *J)",
-                                 "Jacobian J[i * JX_NX + j] = d f_i / d x_j (Tustin's Newton iteration)",
-                                 [(f"J[{i * nx + j}]", jac[i][j]) for i in range(nx) for j in range(nx)], {**xs, **es}))
+        funcs.append(
+            _c_function(
+                "static void jx_jac(const float *x, const float *e, float *J)",
+                "Jacobian J[i * JX_NX + j] = d f_i / d x_j (Tustin's Newton iteration)",
+                [(f"J[{i * nx + j}]", jac[i][j]) for i in range(nx) for j in range(nx)],
+                {**xs, **es},
+            )
+        )
     if drive:
         arrays = ["e"] if model.path == "held" else ["e0", "em", "e1"]
         sig = ", ".join(f"float *{a}" for a in arrays)
         mem = {n: ("float", src) for n, src in MEMORY.items()}
         us = {s: ("float", f"u[{i}]") for i, s in enumerate(model.inputs)}
-        what = ("the back EMF over the period just ended (000 eq 6), 0 before the first sample" if model.path == "held"
-                else "(u, i) at the start, middle and end of the period just ended: voltage held, current linear")
-        funcs.append(_c_function(f"static void jx_input(const jx_state *s, const float *u, {sig})", what,
-                                 [(f"{a}[{k}]", e) for a, k, e in model.period_input],
-                                 {**us, **mem, "started": ("int", "s->started")}))
+        what = (
+            "the back EMF over the period just ended (000 eq 6), 0 before the first sample"
+            if model.path == "held"
+            else "(u, i) at the start, middle and end of the period just ended: voltage held, current linear"
+        )
+        funcs.append(
+            _c_function(
+                f"static void jx_input(const jx_state *s, const float *u, {sig})",
+                what,
+                [(f"{a}[{k}]", e) for a, k, e in model.period_input],
+                {**us, **mem, "started": ("int", "s->started")},
+            )
+        )
     if model.post:
-        funcs.append(_c_function("static void jx_post(float *x)", "the updated state's angle wrapped to (-pi, pi]",
-                                 [(f"x[{i}]", e) for i, e in model.post], xs))
+        funcs.append(
+            _c_function(
+                "static void jx_post(float *x)",
+                "the updated state's angle wrapped to (-pi, pi]",
+                [(f"x[{i}]", e) for i, e in model.post],
+                xs,
+            )
+        )
 
     init = [f"    s->x[{i}] = {cx.c_float(v)}; /* {s} */" for i, (s, v) in enumerate(zip(model.states, model.x0))]
     if drive:
-        init += ["    s->u_prev[0] = s->u_prev[1] = 0.0f;", "    s->i_prev[0] = s->i_prev[1] = 0.0f;",
-                 "    s->started = 0;"]
+        init += [
+            "    s->u_prev[0] = s->u_prev[1] = 0.0f;",
+            "    s->i_prev[0] = s->i_prev[1] = 0.0f;",
+            "    s->started = 0;",
+        ]
     init += [f"    {line}" for line in rule.init]
     init_decl = "    int i;\n" if any("for (i" in line for line in rule.init) else ""
     locals_ = "".join(f"    {d}\n" for d in rule.locals)
@@ -493,7 +568,7 @@ void jx_step(jx_state *s, const float *u, float *y);
         advance = rule.advance.replace("@E0", e0).replace("@EM", em).replace("@E1", e1)
         locals_ += "    float e[JX_NE];\n" if held else "    float e0[JX_NE], em[JX_NE], e1[JX_NE];\n"
         post = "    jx_post(x1);\n" if model.post else ""
-        step = f"""    jx_input(s, u, {'e' if held else 'e0, em, e1'});
+        step = f"""    jx_input(s, u, {"e" if held else "e0, em, e1"});
 {advance}
     if (!s->started) {{ /* the first sample only records u and i */
         for (i = 0; i < JX_NX; ++i) x1[i] = s->x[i];
@@ -568,8 +643,9 @@ def export_observer(observer, out_dir, *, n_steps: int = 12_000, signal=None, so
         if needs_jacobian(obs32.rule):
             xs = {n.value: n for n in cx._topo(model.f) if n.op == "var"}
             memos = {s: {} for s in model.states}
-            jac = [[cx.deriv(fi, xs[s], memos[s]) if s in xs else cx.const(0.0) for s in model.states]
-                   for fi in model.f]
+            jac = [
+                [cx.deriv(fi, xs[s], memos[s]) if s in xs else cx.const(0.0) for s in model.states] for fi in model.f
+            ]
             per_jac = cx.count_ops([e for row in jac for e in row])
         rule = rule_c(obs32.rule, obs32.ts, nx, per_f, per_jac)
         extra = [(1, per_out)]
@@ -595,8 +671,9 @@ def export_observer(observer, out_dir, *, n_steps: int = 12_000, signal=None, so
             u, signal_doc = fll_test_signal(obs32.ts, n_steps, model.omega_signal / (2 * math.pi))
         else:
             rs, ls = _machine(obs32)
-            u, signal_doc = drive_test_signal(obs32.ts, n_steps, omega=model.omega_signal, Rs=rs, L=ls,
-                                              start=model.signal_start)
+            u, signal_doc = drive_test_signal(
+                obs32.ts, n_steps, omega=model.omega_signal, Rs=rs, L=ls, start=model.signal_start
+            )
     else:
         u = np.asarray(signal, np.float32)
         u = u[:, None] if u.ndim == 1 else u
@@ -605,20 +682,29 @@ def export_observer(observer, out_dir, *, n_steps: int = 12_000, signal=None, so
         signal_doc = f"user signal, {u.shape[0]} steps"
     y = _golden(obs32, model, u)
     if not np.all(np.isfinite(y)):
-        raise ValueError(f"export: the JAX step of {model.component} gave non-finite outputs on the test signal "
-                         "(an unstable design?): no golden vectors written")
+        raise ValueError(
+            f"export: the JAX step of {model.component} gave non-finite outputs on the test signal "
+            "(an unstable design?): no golden vectors written"
+        )
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     (out / "observer.h").write_text(header)
     (out / "observer.c").write_text(source_c)
     (out / "test_main.c").write_text(_harness())
-    np.savetxt(out / "golden.csv", np.concatenate([u, y], axis=1), fmt="%.9g", delimiter=",",
-               header=",".join(model.inputs + model.outputs), comments="")
-    step_doc = {"signal": "jx_step returns the outputs of the state before the sample is integrated (signal-level "
-                          "observer)",
-                "drive": "jx_step integrates the period that just ended and returns the outputs after it (drive "
-                         "observer); the first call only records u and i"}
+    np.savetxt(
+        out / "golden.csv",
+        np.concatenate([u, y], axis=1),
+        fmt="%.9g",
+        delimiter=",",
+        header=",".join(model.inputs + model.outputs),
+        comments="",
+    )
+    step_doc = {
+        "signal": "jx_step returns the outputs of the state before the sample is integrated (signal-level observer)",
+        "drive": "jx_step integrates the period that just ended and returns the outputs after it (drive "
+        "observer); the first call only records u and i",
+    }
     coeffs = {
         "component": model.component,
         "reference": model.reference,
@@ -626,21 +712,33 @@ def export_observer(observer, out_dir, *, n_steps: int = 12_000, signal=None, so
         "notes": notes,
         "dtype": "float32",
         "ts": obs32.ts,
-        "rule": {"name": rule.name, "description": rule.description, "startup_steps": rule.startup_steps,
-                 **({"newton_iters": rule.newton_iters} if rule.uses_jac else {})},
+        "rule": {
+            "name": rule.name,
+            "description": rule.description,
+            "startup_steps": rule.startup_steps,
+            **({"newton_iters": rule.newton_iters} if rule.uses_jac else {}),
+        },
         "step": step_doc[model.kind],
-        "gains": {k: {"c_name": m, "value": float(v), "given": float(getattr(observer, k))}
-                  for k, (m, v) in model.gains.items()},
+        "gains": {
+            k: {"c_name": m, "value": float(v), "given": float(getattr(observer, k))}
+            for k, (m, v) in model.gains.items()
+        },
         "static": {k: v for k, v in model.statics.items()},
         "rule_constants": {m: {"value": float(np.float32(v)), "meaning": doc} for m, v, doc in rule.constants},
-        "state": [{"name": s, "meaning": d, "initial": float(v)}
-                  for s, d, v in zip(model.states, model.state_doc, model.x0)],
+        "state": [
+            {"name": s, "meaning": d, "initial": float(v)} for s, d, v in zip(model.states, model.state_doc, model.x0)
+        ],
         "inputs": model.inputs,
         "outputs": model.outputs,
         "angle_outputs": [model.outputs[i] for i in model.angles],
         "ops_per_step": {k: _json_ops(v) for k, v in ops.items()},
-        "golden": {"steps": int(u.shape[0]), "signal": signal_doc, "columns": model.inputs + model.outputs,
-                   "tolerance": TOLERANCE, "error": "max |y_C - y_golden| / (1 + |y_golden|), angles modulo 2 pi"},
+        "golden": {
+            "steps": int(u.shape[0]),
+            "signal": signal_doc,
+            "columns": model.inputs + model.outputs,
+            "tolerance": TOLERANCE,
+            "error": "max |y_C - y_golden| / (1 + |y_golden|), angles modulo 2 pi",
+        },
     }
     (out / "coefficients.json").write_text(json.dumps(coeffs, indent=1, ensure_ascii=False) + "\n")
     return coeffs
@@ -682,10 +780,15 @@ def add_export_parser(subparsers) -> argparse.ArgumentParser:
     e.add_argument("result", nargs="?", help="a `jaxobs tune` result.json (its tuned gains)")
     e.add_argument("--design", choices=list(DESIGNS), help="a closed-form design instead of a result")
     e.add_argument("--out", default="out/export", help="folder for the files (default: out/export)")
-    e.add_argument("--gains", choices=["tuned", "closed_form", "initial"], default="tuned",
-                   help="which gains of the result (default: tuned)")
-    e.add_argument("--rule", choices=list(_RULES),
-                   help="discretization rule (default: the result's or the component's)")
+    e.add_argument(
+        "--gains",
+        choices=["tuned", "closed_form", "initial"],
+        default="tuned",
+        help="which gains of the result (default: tuned)",
+    )
+    e.add_argument(
+        "--rule", choices=list(_RULES), help="discretization rule (default: the result's or the component's)"
+    )
     e.add_argument("--ts", type=float, help="sample time, s (default: the result's or the component's)")
     e.add_argument("--steps", type=int, default=12_000, help=f"golden record length (>= {MIN_STEPS}, default 12000)")
     e.add_argument("--check", action="store_true", help="compile with cc and replay the golden vectors")
@@ -719,8 +822,10 @@ def cli_export(args) -> int:
     out = Path(args.out)
     o = coeffs["ops_per_step"]
     print(f"{coeffs['component']} ({coeffs['rule']['name']}, ts = {coeffs['ts']:g} s, float32) from {source}")
-    print(f"  {out / 'observer.h'}, observer.c   jx_init / jx_step, "
-          f"JX_NU = {len(coeffs['inputs'])}, JX_NY = {len(coeffs['outputs'])}")
+    print(
+        f"  {out / 'observer.h'}, observer.c   jx_init / jx_step, "
+        f"JX_NU = {len(coeffs['inputs'])}, JX_NY = {len(coeffs['outputs'])}"
+    )
     print(f"  {out / 'golden.csv'}   {coeffs['golden']['steps']} steps: {coeffs['golden']['signal']}")
     start = f", {o['startup']['total']} in each start-up step" if "startup" in o else ""
     print(f"  {out / 'coefficients.json'}   gains, rule constants; {o['steady']['total']} operations per step{start}")
@@ -733,8 +838,10 @@ def cli_export(args) -> int:
             return 0
         err = compile_and_check(out)
         ok = err <= TOLERANCE
-        print(f"check: max |y_C - y_golden|/(1 + |y_golden|) = {err:.3g} over {coeffs['golden']['steps']} steps "
-              f"(tolerance {TOLERANCE:g}): {'OK' if ok else 'FAIL'}")
+        print(
+            f"check: max |y_C - y_golden|/(1 + |y_golden|) = {err:.3g} over {coeffs['golden']['steps']} steps "
+            f"(tolerance {TOLERANCE:g}): {'OK' if ok else 'FAIL'}"
+        )
         return 0 if ok else 1
     return 0
 
@@ -746,4 +853,3 @@ def _rebuild(obs, **kw):
     values = {f.name: getattr(obs, f.name) for f in dataclasses.fields(obs) if f.name not in ("ts", "rule")}
     values.update(ts=kw.get("ts", obs.ts), rule=kw.get("rule", obs.rule))
     return type(obs)(**values)
-

@@ -196,8 +196,9 @@ COMPONENTS = {
     "FALESO": ComponentInfo(
         jaxobs.FALESO,
         gains=("k1", "k2", "kp_pll", "ki_pll"),
-        defaults=dict(Rs=papers.IPMSM_002["Rs"], Lq=papers.IPMSM_002["Lq"], k1=papers.FALESO_K1, k2=papers.FALESO_K2,
-                      **_pll_cf()),
+        defaults=dict(
+            Rs=papers.IPMSM_002["Rs"], Lq=papers.IPMSM_002["Lq"], k1=papers.FALESO_K1, k2=papers.FALESO_K2, **_pll_cf()
+        ),
         closed_form=_cf_faleso,
         signal="drive",
         closed_form_source="002 Table II (k1 = 10π, k2 = 100π), PLL pole placement ω_b = 2π·15",
@@ -421,7 +422,11 @@ def parse_job(raw: dict) -> Job:
         raise JobError("objective.penalty", f"must be > 0, got {penalty}")
 
     sol_t = _get(raw, "solver", "solver", dict, {})
-    _no_unknown(sol_t, ("kind", "learning_rate", "steps", "patience", "tol", "schedule", "checkpoint_every", "progress_every"), "solver")
+    _no_unknown(
+        sol_t,
+        ("kind", "learning_rate", "steps", "patience", "tol", "schedule", "checkpoint_every", "progress_every"),
+        "solver",
+    )
     kind = _get(sol_t, "kind", "solver.kind", str, "adam")
     if kind not in ("adam", "adamw", "sgd", "bfgs"):
         raise JobError("solver.kind", f"must be adam, adamw, sgd or bfgs, got {kind!r}")
@@ -501,7 +506,11 @@ def build_scenarios(spec: ScenarioSpec, values: dict):
     if spec.signal == "drive":
         return _drive_scenarios(names, combos), names, combos
     if spec.signal == "grid":
-        return grid_signals(names, combos, spec.t_event, float(values.get("omega_n", W_N)) / (2 * math.pi)), names, combos
+        return (
+            grid_signals(names, combos, spec.t_event, float(values.get("omega_n", W_N)) / (2 * math.pi)),
+            names,
+            combos,
+        )
     sigs = []
     for combo in combos:  # back EMFs for the flux observers
         a = dict(zip(names, combo))
@@ -531,7 +540,20 @@ def build_objective(job: Job, spec: ScenarioSpec | None = None):
     param = Parametrization(job.gains)
     info = COMPONENTS[job.component]
     drive = job_drive() if info.signal == "drive" else None
-    obj = Objective(comp, param, scen, spec.horizon, job.terms, ctx, job.agg, job.alpha, job.temperature, job.penalty, drive=drive, bind=info.bind)
+    obj = Objective(
+        comp,
+        param,
+        scen,
+        spec.horizon,
+        job.terms,
+        ctx,
+        job.agg,
+        job.alpha,
+        job.temperature,
+        job.penalty,
+        drive=drive,
+        bind=info.bind,
+    )
     return obj, (names, combos)
 
 
@@ -562,7 +584,11 @@ def run_job(job: Job, out: Path, resume: bool = False, quiet: bool = False) -> d
         "component": job.component,
         "closed_form_source": info.closed_form_source,
         # the closed form is reported exactly; it is scored at θ nudged inside the gains' open bounds
-        "gains": {"initial": param.values(theta0), "tuned": param.values(res.theta), "closed_form": {g.name: float(cf[g.name]) for g in job.gains}},
+        "gains": {
+            "initial": param.values(theta0),
+            "tuned": param.values(res.theta),
+            "closed_form": {g.name: float(cf[g.name]) for g in job.gains},
+        },
         "scores": {k: obj.scores(th) for k, th in thetas.items()},
         "scenarios": {"axes": names, "count": len(combos)},
         "iterations": res.iterations,
@@ -577,4 +603,3 @@ def run_job(job: Job, out: Path, resume: bool = False, quiet: bool = False) -> d
     (out / "history.json").write_text(json.dumps(res.history))
     write_report(out, job, obj, thetas, res.history)
     return result
-

@@ -86,8 +86,12 @@ METRICS: dict[str, Callable] = {
     "iae_phase": lambda sol, sig, ctx: M.iae(sol.t, _phase_err(sol), ctx.t_event),
     "itae_phase": lambda sol, sig, ctx: M.itae(sol.t, _phase_err(sol), ctx.t_event),
     "settling_freq": lambda sol, sig, ctx: M.smooth_settling_time(
-        sol.t, sol.outputs.obs.omega / (2 * math.pi), sol.outputs.truth.omega[-1] / (2 * math.pi), ctx.band_hz,
-        ctx.t_event, temperature=ctx.temperature,
+        sol.t,
+        sol.outputs.obs.omega / (2 * math.pi),
+        sol.outputs.truth.omega[-1] / (2 * math.pi),
+        ctx.band_hz,
+        ctx.t_event,
+        temperature=ctx.temperature,
     ),
     "ripple_freq": lambda sol, sig, ctx: M.smooth_peak_to_peak(_freq_err_hz(sol), _steady(sol, ctx), 1e-3),
     "rms_freq_steady": lambda sol, sig, ctx: M.rms(_freq_err_hz(sol), _steady(sol, ctx)),
@@ -105,7 +109,9 @@ METRICS: dict[str, Callable] = {
         sol.t, _speed_err_rpm(sol, sig), 0.0, ctx.band_rpm, ctx.t_event, temperature=ctx.temperature
     ),
     "rms_speed_steady": lambda sol, sig, ctx: M.rms(_speed_err_rpm(sol, sig), _steady(sol, ctx)),
-    "speed_noise_rpm": lambda sol, sig, ctx: _sample_noise(sol.outputs.obs.omega / sig.par.p * 30 / math.pi, _steady(sol, ctx)),
+    "speed_noise_rpm": lambda sol, sig, ctx: _sample_noise(
+        sol.outputs.obs.omega / sig.par.p * 30 / math.pi, _steady(sol, ctx)
+    ),
 }
 # metrics that need the closed-loop drive (signal = "drive" jobs)
 DRIVE_METRICS = ("settling_position", "settling_speed", "rms_speed_steady", "speed_noise_rpm")
@@ -147,9 +153,21 @@ def aggregate(values, kind: str, alpha: float = 0.9, temperature: float | None =
 class Objective:
     """value(θ), value_and_grad(θ) and per-scenario scores for a component and a scenario batch."""
 
-    def __init__(self, component, param: Parametrization, scenarios, horizon: float, terms: list[Term], ctx: MetricContext,
-                 agg: str = "mean", alpha: float = 0.9, temperature: float | None = None, penalty: float = 1e3,
-                 drive=None, bind=None):
+    def __init__(
+        self,
+        component,
+        param: Parametrization,
+        scenarios,
+        horizon: float,
+        terms: list[Term],
+        ctx: MetricContext,
+        agg: str = "mean",
+        alpha: float = 0.9,
+        temperature: float | None = None,
+        penalty: float = 1e3,
+        drive=None,
+        bind=None,
+    ):
         """``drive``: run each scenario (a drive Scenario) closed loop with this Drive, the component
         as its observer; ``bind(component, scenario)``: adapt the component to the scenario (the
         parameters an observer assumes, its initial speed) before the run."""
@@ -222,7 +240,7 @@ class Objective:
         return jax.vmap(one)(scenarios)
 
     def per_scenario(self, theta, scenarios=None):
-        """Each scenario's metrics, its weighted total (the penalty where it diverged) and the good mask — no gradient."""
+        """Each scenario's metrics, its weighted total (the penalty where diverged) and the good mask — no gradient."""
         scenarios = self.scenarios if scenarios is None else scenarios
         mets, ok = self._metrics(theta, scenarios)
         total = sum(term.weight * mets[term.metric] for term in self.terms)
@@ -232,7 +250,10 @@ class Objective:
     def scores(self, theta, scenarios=None) -> dict:
         """Objective and each metric's mean and worst over ``scenarios`` (default: the tuning set)."""
         mets, total, good = self.per_scenario(theta, scenarios)
-        out = {"objective": float(aggregate(total, self.agg, self.alpha, self.temperature)), "diverged": int(jnp.sum(~good))}
+        out = {
+            "objective": float(aggregate(total, self.agg, self.alpha, self.temperature)),
+            "diverged": int(jnp.sum(~good)),
+        }
         for term in self.terms:
             m = jnp.where(good, mets[term.metric], jnp.nan)
             out[f"{term.metric}_mean"] = float(jnp.nanmean(m))

@@ -70,7 +70,8 @@ def _progress(i, total, value, best, stream=sys.stderr):
 def _save_checkpoint(path: Path, it, theta, opt_state, best_theta, best_value, history, since_best):
     leaves = jax.tree.leaves(opt_state)
     tmp = path.with_suffix(".tmp.npz")
-    np.savez(tmp, theta=np.asarray(theta), best_theta=np.asarray(best_theta), *[np.asarray(x) for x in leaves])
+    arrays = {f"arr_{i}": np.asarray(x) for i, x in enumerate(leaves)}  # np.savez's names for positional arrays
+    np.savez(tmp, theta=np.asarray(theta), best_theta=np.asarray(best_theta), **arrays)
     os.replace(tmp, path)
     meta = dict(iteration=it, best_value=best_value, since_best=since_best, history=history, n_leaves=len(leaves))
     tmpj = path.with_suffix(".tmp.json")
@@ -87,7 +88,9 @@ def _load_checkpoint(path: Path, opt_state_template):
     return meta, jnp.asarray(data["theta"]), jnp.asarray(data["best_theta"]), opt_state
 
 
-def run_solver(objective, theta0, cfg: SolverConfig, checkpoint: Path | None = None, resume: bool = False, quiet: bool = False) -> TuneResult:
+def run_solver(
+    objective, theta0, cfg: SolverConfig, checkpoint: Path | None = None, resume: bool = False, quiet: bool = False
+) -> TuneResult:
     """Minimize ``objective`` from θ0 with the configured solver."""
     t_start = time.time()
     if cfg.kind == "bfgs":
@@ -95,7 +98,13 @@ def run_solver(objective, theta0, cfg: SolverConfig, checkpoint: Path | None = N
         sol = optx.minimise(fn, optx.BFGS(rtol=cfg.tol, atol=cfg.tol), theta0, max_steps=cfg.steps, throw=False)
         value = float(objective.value(sol.value))
         steps = int(sol.stats.get("num_steps", cfg.steps))
-        return TuneResult(theta=sol.value, value=value, iterations=steps, history=[dict(iteration=steps, value=value, time_s=time.time() - t_start)], stopped=str(sol.result))
+        return TuneResult(
+            theta=sol.value,
+            value=value,
+            iterations=steps,
+            history=[dict(iteration=steps, value=value, time_s=time.time() - t_start)],
+            stopped=str(sol.result),
+        )
 
     opt = make_optax(cfg)
     theta = theta0
@@ -103,7 +112,12 @@ def run_solver(objective, theta0, cfg: SolverConfig, checkpoint: Path | None = N
     best_theta, best_value, since_best, history, start = theta, math.inf, 0, [], 0
     if resume and checkpoint is not None and checkpoint.exists():
         meta, theta, best_theta, opt_state = _load_checkpoint(checkpoint, opt_state)
-        start, best_value, since_best, history = meta["iteration"], meta["best_value"], meta["since_best"], meta["history"]
+        start, best_value, since_best, history = (
+            meta["iteration"],
+            meta["best_value"],
+            meta["since_best"],
+            meta["history"],
+        )
 
     @jax.jit
     def update(theta, opt_state, grad):

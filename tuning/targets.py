@@ -49,7 +49,9 @@ def lambda_for_damping(k, omega_n, zeta=1 / math.sqrt(2), lam0=None):
         return jnp.atleast_1d(-jnp.real(p) / jnp.abs(p) - zeta)
 
     lam0 = 0.3 * k**2 * omega_n**2 if lam0 is None else lam0  # underdamped start: complex poles
-    sol = optx.least_squares(residual, optx.LevenbergMarquardt(rtol=1e-12, atol=1e-12), jnp.log(jnp.asarray(lam0, float)), max_steps=100)
+    sol = optx.least_squares(
+        residual, optx.LevenbergMarquardt(rtol=1e-12, atol=1e-12), jnp.log(jnp.asarray(lam0, float)), max_steps=100
+    )
     return jnp.exp(sol.value)
 
 
@@ -58,7 +60,9 @@ def _envelope_tf(gains, omega):
         (k,) = gains
         return linear.TransferFunction(jnp.stack([k * omega / 2]), jnp.stack([jnp.ones_like(k), k * omega / 2]))
     K1, K2 = gains
-    return linear.TransferFunction(jnp.stack([K1 * K2 * omega**2 / 4]), jnp.stack([jnp.ones_like(K1), K2 * omega / 2, K1 * K2 * omega**2 / 4]))
+    return linear.TransferFunction(
+        jnp.stack([K1 * K2 * omega**2 / 4]), jnp.stack([jnp.ones_like(K1), K2 * omega / 2, K1 * K2 * omega**2 / 4])
+    )
 
 
 def _flux_tf(gains, omega):
@@ -98,8 +102,7 @@ def match_settling_time(target, omega, coupling=2.0, band=0.02, lower=1.0, upper
         return flux_settling_time((k1, coupling * k1), omega, band, definition) - target
 
     solver = optx.Bisection(rtol=1e-10, atol=1e-10)
-    sol = optx.root_find(miss, solver, jnp.asarray(0.5 * (lower + upper)), options=dict(lower=lower, upper=upper), max_steps=200)
+    sol = optx.root_find(
+        miss, solver, jnp.asarray(0.5 * (lower + upper)), options=dict(lower=lower, upper=upper), max_steps=200
+    )
     return sol.value
-
-
-

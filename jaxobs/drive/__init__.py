@@ -5,6 +5,7 @@ Every dynamic piece is a step component (``init``/``step``): :class:`PMSM`,
 them with an observer, :class:`ClosedLoop`, which ``jaxobs.simulate`` runs.
 """
 
+from ..measurements import DriveInput as DriveInput
 from .control import FOC as FOC
 from .control import ControllerState as ControllerState
 from .control import FOCInput as FOCInput
@@ -40,4 +41,3 @@ from .scenario import Batch as Batch
 from .scenario import Profile as Profile
 from .scenario import Scenario as Scenario
 from .scenario import grid as grid
-from ..measurements import DriveInput as DriveInput

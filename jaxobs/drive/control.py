@@ -143,8 +143,24 @@ class FOC(eqx.Module):
     startup: IfStartup | None  # I-f start-up (None: closed loop from t = 0)
 
     def __init__(
-        self, kp_d, ki_d, kp_q, ki_q, kp_w, ki_w, i_max, *, ts=1e-4, speed_every=10, id_mode="zero",
-        delay_compensation=True, outer="speed", setpoint_weight=0.0, est=None, u_max=None, startup=None,
+        self,
+        kp_d,
+        ki_d,
+        kp_q,
+        ki_q,
+        kp_w,
+        ki_w,
+        i_max,
+        *,
+        ts=1e-4,
+        speed_every=10,
+        id_mode="zero",
+        delay_compensation=True,
+        outer="speed",
+        setpoint_weight=0.0,
+        est=None,
+        u_max=None,
+        startup=None,
     ):
         own = "FOC"
         if est is not None and not isinstance(est, PMSMParams):
@@ -227,8 +243,14 @@ class FOC(eqx.Module):
         else:
             int_w = op.i_q - self.kp_w * (self.setpoint_weight * op.omega_m_ref - op.omega_m)
         return ControllerState(
-            int_d=z + int_d, int_q=z + int_q, int_w=z + int_w, iq_ref=z + op.i_q, theta_f=z, omega_f=z,
-            t_at_switch=z, mode=mode,
+            int_d=z + int_d,
+            int_q=z + int_q,
+            int_w=z + int_w,
+            iq_ref=z + op.i_q,
+            theta_f=z,
+            omega_f=z,
+            t_at_switch=z,
+            mode=mode,
         )
 
     def operating_point(self, par: PMSMParams, omega_m, omega_m_ref, theta_e, t_load) -> OperatingPoint:
@@ -249,7 +271,9 @@ class FOC(eqx.Module):
             need = t_load + par.B * omega_m
             i_q = need / (1.5 * par.p * par.psi_f)
             for _ in range(4):  # Newton on T_e(i_q) − need, with i_d = i_d*(i_q)
-                te, dte = jax.jvp(lambda iq: _torque_dq(par, self._id_ref(self.est, iq), iq), (i_q,), (jnp.ones_like(i_q),))
+                te, dte = jax.jvp(
+                    lambda iq: _torque_dq(par, self._id_ref(self.est, iq), iq), (i_q,), (jnp.ones_like(i_q),)
+                )
                 i_q = i_q - (te - need) / dte
             i_q = jnp.clip(i_q, -self.i_max, self.i_max)
         i_d = self._id_ref(self.est, i_q)
@@ -257,8 +281,14 @@ class FOC(eqx.Module):
         u_q = par.Rs * i_q + w_e * (par.Ld * i_d + par.psi_f)
         z = jnp.zeros_like(w_e)
         return OperatingPoint(
-            omega_m=z + omega_m, omega_m_ref=z + omega_m_ref, theta_e=z + theta_e, t_load=z + t_load,
-            i_d=z + i_d, i_q=z + i_q, u_d=u_d, u_q=u_q,
+            omega_m=z + omega_m,
+            omega_m_ref=z + omega_m_ref,
+            theta_e=z + theta_e,
+            t_load=z + t_load,
+            i_d=z + i_d,
+            i_q=z + i_q,
+            u_d=u_d,
+            u_q=u_q,
         )
 
     def _id_ref(self, est: PMSMParams, iq):
@@ -340,8 +370,15 @@ class FOC(eqx.Module):
         u_a = co * u_d - so * u_q
         u_b = so * u_d + co * u_q
         new = ControllerState(
-            int_d=int_d, int_q=int_q, int_w=int_w, iq_ref=iq_ref, theta_f=theta_f, omega_f=omega_f,
-            t_at_switch=t_at_switch, mode=mode,
+            int_d=int_d,
+            int_q=int_q,
+            int_w=int_w,
+            iq_ref=iq_ref,
+            theta_f=theta_f,
+            omega_f=omega_f,
+            t_at_switch=t_at_switch,
+            mode=mode,
         )
-        return new, FOCOutput(u_a=u_a, u_b=u_b, id_ref=id_ref, iq_ref=iq_ref, theta=jnp.where(mode == 1, theta, theta_f))
-
+        return new, FOCOutput(
+            u_a=u_a, u_b=u_b, id_ref=id_ref, iq_ref=iq_ref, theta=jnp.where(mode == 1, theta, theta_f)
+        )

@@ -137,7 +137,9 @@ class Sensors(eqx.Module):
         own = "Sensors"
         self.i_offset = check_real("i_offset", jnp.asarray(i_offset, dtype=as_float(0.0).dtype), owner=own)
         self.u_offset = check_real("u_offset", jnp.asarray(u_offset, dtype=as_float(0.0).dtype), owner=own)
-        self.i_gain = 1.0 + check_real("i_gain_error", jnp.asarray(i_gain_error, dtype=as_float(0.0).dtype), lower=-1.0, owner=own)
+        self.i_gain = 1.0 + check_real(
+            "i_gain_error", jnp.asarray(i_gain_error, dtype=as_float(0.0).dtype), lower=-1.0, owner=own
+        )
         self.i_noise = check_nonnegative("i_noise", i_noise, own)
         self.u_noise = check_nonnegative("u_noise", u_noise, own)
         self.noisy = not _statically_zero(i_noise) or not _statically_zero(u_noise)

@@ -265,14 +265,27 @@ class ClosedLoop(AbstractSystem):
             w_m_c = w_e_c / sc.par.p
         else:
             th_c, w_e_c, w_m_c = y.theta_e, w_e, y.omega_m
-        ctrl, c = self.controller.step(
-            state.ctrl, FOCInput(k, meas.i_a, meas.i_b, th_c, w_e_c, w_m_c, x.omega_m_ref)
-        )
+        ctrl, c = self.controller.step(state.ctrl, FOCInput(k, meas.i_a, meas.i_b, th_c, w_e_c, w_m_c, x.omega_m_ref))
         _, u_next = drive.inverter.step(None, InverterInput(c.u_a, c.u_b))
         out = DriveOutput(
-            t=t, theta_e=wrap(y.theta_e), theta_e_hat=wrap(c.theta), omega_m=y.omega_m, omega_m_hat=w_m_c,
-            omega_m_ref=x.omega_m_ref, i_d=y.i_d, i_q=y.i_q, i_a=y.i_a, i_b=y.i_b, u_a=state.u_a, u_b=state.u_b,
-            torque=y.torque, load=x.load, id_ref=c.id_ref, iq_ref=c.iq_ref, mode=ctrl.mode, obs=obs_out,
+            t=t,
+            theta_e=wrap(y.theta_e),
+            theta_e_hat=wrap(c.theta),
+            omega_m=y.omega_m,
+            omega_m_hat=w_m_c,
+            omega_m_ref=x.omega_m_ref,
+            i_d=y.i_d,
+            i_q=y.i_q,
+            i_a=y.i_a,
+            i_b=y.i_b,
+            u_a=state.u_a,
+            u_b=state.u_b,
+            torque=y.torque,
+            load=x.load,
+            id_ref=c.id_ref,
+            iq_ref=c.iq_ref,
+            mode=ctrl.mode,
+            obs=obs_out,
         )
         new = LoopState(plant=plant_state, ctrl=ctrl, obs=obs_state, sensors=key, u_a=u_next.u_a, u_b=u_next.u_b)
         return new, out

@@ -148,7 +148,8 @@ def bemf_ab(par: PMSMParams, omega_e, theta_e):
 def torque(par: PMSMParams, i_d, i_q, theta_e):
     """Electromagnetic torque, N·m (see module doc)."""
     re, im = _harmonic_factor(par, theta_e)
-    # Re(j h i*) with h = re + j im, i = i_d + j i_q:  j h = −im + j re;  Re((−im + j re)(i_d − j i_q)) = −im i_d + re i_q
+    # Re(j h i*) with h = re + j im, i = i_d + j i_q:  j h = −im + j re;
+    # Re((−im + j re)(i_d − j i_q)) = −im i_d + re i_q
     pm = par.psi_f * (re * i_q - im * i_d)
     return 1.5 * par.p * (pm + (par.Ld - par.Lq) * i_d * i_q)
 

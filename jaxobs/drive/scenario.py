@@ -41,7 +41,9 @@ class Profile(eqx.Module):
         t = np.asarray(times, dtype=float)
         v = np.asarray(values, dtype=float)
         if t.ndim != 1 or t.shape != v.shape or t.size < 1:
-            raise ValueError(f"Profile.times and values must be 1-D of equal non-zero length, got {t.shape} and {v.shape}")
+            raise ValueError(
+                f"Profile.times and values must be 1-D of equal non-zero length, got {t.shape} and {v.shape}"
+            )
         if not (np.all(np.isfinite(t)) and np.all(np.isfinite(v))):
             raise ValueError("Profile.times and values must be finite")
         if np.any(np.diff(t) < 0):
@@ -86,7 +88,18 @@ class Scenario(eqx.Module):
     omega_m0: jax.Array  # initial mechanical speed, rad/s
     theta_e0: jax.Array  # initial electrical angle, rad
 
-    def __init__(self, par, est_par=None, speed_ref=None, load=None, sensors=None, dead_time=0.0, seed=0, omega_m0=0.0, theta_e0=0.0):
+    def __init__(
+        self,
+        par,
+        est_par=None,
+        speed_ref=None,
+        load=None,
+        sensors=None,
+        dead_time=0.0,
+        seed=0,
+        omega_m0=0.0,
+        theta_e0=0.0,
+    ):
         if not isinstance(par, PMSMParams):
             raise ValueError(f"Scenario.par must be a PMSMParams, got {type(par).__name__}")
         self.par = par
@@ -209,6 +222,3 @@ def grid(base: Scenario, **axes: Sequence[float]) -> Batch:
         items.append(s)
     stacked = jax.tree.map(lambda *xs: jnp.stack(xs), *items)
     return Batch(scenarios=stacked, dims=names, coords=coords)
-
-
-

@@ -219,7 +219,6 @@ def position_error_lq(delta_lq, i_d, i_q, e_ex, omega_e):
     return jnp.arctan2(delta_lq * i_q, e_ex / omega_e - delta_lq * i_d)
 
 
-
 def _poly_shift(c, a):
     """Coefficients (highest first) of p(s + a) for p with coefficients ``c``."""
     n = c.shape[0] - 1

@@ -99,4 +99,6 @@ class ObserverBank(eqx.Module):
     def step(self, state, u):
         pairs = [o.step(s, u) for o, s in zip(self.observers, state)]
         outs = tuple(p[1] for p in pairs)
-        return tuple(p[0] for p in pairs), BankOutput(theta=outs[self.primary].theta, omega=outs[self.primary].omega, each=outs)
+        return tuple(p[0] for p in pairs), BankOutput(
+            theta=outs[self.primary].theta, omega=outs[self.primary].omega, each=outs
+        )

@@ -193,7 +193,9 @@ class LPFFlux(_PLLFluxBase):
     compensate: bool = eqx.field(static=True)
     psi_floor: float = eqx.field(static=True)
 
-    def __init__(self, Rs, L, omega_c, kp_pll, ki_pll, omega0=0.0, *, compensate=False, ts=1e-4, rule=None, psi_floor=1e-4):
+    def __init__(
+        self, Rs, L, omega_c, kp_pll, ki_pll, omega0=0.0, *, compensate=False, ts=1e-4, rule=None, psi_floor=1e-4
+    ):
         _check_common(self, Rs, L, ts, rule, "LPFFlux")
         self.omega_c = check_positive("omega_c", omega_c, "LPFFlux")
         _check_pll(self, kp_pll, ki_pll, omega0, psi_floor, "LPFFlux")
@@ -276,7 +278,9 @@ class SOIFO(_FluxBase):
     def output(self, x, e):
         w = jnp.maximum(x[4], self.omega_min)
         pa, pb = x[1] / w, x[3] / w
-        return FluxOutput(psi_a=pa, psi_b=pb, theta=safe_atan2(pb, pa), omega=_signed(x[4], pa, pb, x[0], x[2]), e_a=e[0], e_b=e[1])
+        return FluxOutput(
+            psi_a=pa, psi_b=pb, theta=safe_atan2(pb, pa), omega=_signed(x[4], pa, pb, x[0], x[2]), e_a=e[0], e_b=e[1]
+        )
 
 
 class SecondOrderSOIFO(_FluxBase):
@@ -311,7 +315,9 @@ class SecondOrderSOIFO(_FluxBase):
     v_floor: float = eqx.field(static=True)
     omega_min: float = eqx.field(static=True)
 
-    def __init__(self, Rs, L, K1, K2, lam, omega0, *, ts=1e-4, rule=None, discretization="rule", v_floor=1e-2, omega_min=1.0):
+    def __init__(
+        self, Rs, L, K1, K2, lam, omega0, *, ts=1e-4, rule=None, discretization="rule", v_floor=1e-2, omega_min=1.0
+    ):
         _check_common(self, Rs, L, ts, rule, "SecondOrderSOIFO")
         self.K1 = check_positive("K1", K1, "SecondOrderSOIFO")
         self.K2 = check_positive("K2", K2, "SecondOrderSOIFO")
@@ -366,10 +372,14 @@ class SecondOrderSOIFO(_FluxBase):
         new = FluxState(x=x1, rule=state.rule, i_prev=i, u_prev=jnp.stack([u.u_a, u.u_b]), started=jnp.asarray(True))
         w = jnp.maximum(x1[8], self.omega_min)
         pa, pb = qa / w, qb / w
-        out = FluxOutput(psi_a=pa, psi_b=pb, theta=safe_atan2(pb, pa), omega=_signed(x1[8], pa, pb, ya, yb), e_a=e[0], e_b=e[1])
+        out = FluxOutput(
+            psi_a=pa, psi_b=pb, theta=safe_atan2(pb, pa), omega=_signed(x1[8], pa, pb, ya, yb), e_a=e[0], e_b=e[1]
+        )
         return new, out
 
     def output(self, x, e):
         w = jnp.maximum(x[8], self.omega_min)
         pa, pb = x[3] / w, x[7] / w
-        return FluxOutput(psi_a=pa, psi_b=pb, theta=safe_atan2(pb, pa), omega=_signed(x[8], pa, pb, x[2], x[6]), e_a=e[0], e_b=e[1])
+        return FluxOutput(
+            psi_a=pa, psi_b=pb, theta=safe_atan2(pb, pa), omega=_signed(x[8], pa, pb, x[2], x[6]), e_a=e[0], e_b=e[1]
+        )

@@ -119,7 +119,9 @@ class _LESOBase(eqx.Module):
         x1 = x1.at[self.n_leso].set(wrap(x1[self.n_leso]))
         new = LESOState(x=x1, rule=rs, i_prev=i, u_prev=jnp.stack([meas.u_a, meas.u_b]), started=jnp.asarray(True))
         _, e = self.leso(x1[: self.n_leso], new.u_prev, i, x1[self.n_leso + 1])
-        out = LESOOutput(e_a=e[0], e_b=e[1], theta=x1[self.n_leso], omega=x1[self.n_leso + 1], theta_emf=safe_atan2(-e[0], e[1]))
+        out = LESOOutput(
+            e_a=e[0], e_b=e[1], theta=x1[self.n_leso], omega=x1[self.n_leso + 1], theta_emf=safe_atan2(-e[0], e[1])
+        )
         return new, out
 
     @property
@@ -157,8 +159,19 @@ class CLESO(_LESOBase):
     e_floor: float = eqx.field(static=True)
     n_leso: ClassVar[int] = 4
 
-    def __init__(self, Rs, Lq, omega0=papers.LESO_OMEGA0, kp_pll=_DEFAULT_PLL[0], ki_pll=_DEFAULT_PLL[1],
-                 omega0_pll=0.0, *, ts=1e-4, rule=None, e_floor=1.0):
+    def __init__(
+        self,
+        Rs,
+        Lq,
+        omega0=papers.LESO_OMEGA0,
+        kp_pll=_DEFAULT_PLL[0],
+        ki_pll=_DEFAULT_PLL[1],
+        omega0_pll=0.0,
+        *,
+        ts=1e-4,
+        rule=None,
+        e_floor=1.0,
+    ):
         _common(self, Rs, Lq, kp_pll, ki_pll, omega0_pll, ts, rule, e_floor, "CLESO")
         self.omega0 = check_positive("omega0", omega0, "CLESO")
 
@@ -188,8 +201,21 @@ class GILESO(_LESOBase):
     e_floor: float = eqx.field(static=True)
     n_leso: ClassVar[int] = 8
 
-    def __init__(self, Rs, Lq, omega0=papers.LESO_OMEGA0, K_r=None, omega_c=papers.GILESO_OMEGA_C,
-                 kp_pll=_DEFAULT_PLL[0], ki_pll=_DEFAULT_PLL[1], omega0_pll=0.0, *, ts=1e-4, rule=None, e_floor=1.0):
+    def __init__(
+        self,
+        Rs,
+        Lq,
+        omega0=papers.LESO_OMEGA0,
+        K_r=None,
+        omega_c=papers.GILESO_OMEGA_C,
+        kp_pll=_DEFAULT_PLL[0],
+        ki_pll=_DEFAULT_PLL[1],
+        omega0_pll=0.0,
+        *,
+        ts=1e-4,
+        rule=None,
+        e_floor=1.0,
+    ):
         _common(self, Rs, Lq, kp_pll, ki_pll, omega0_pll, ts, rule, e_floor, "GILESO")
         self.omega0 = check_positive("omega0", omega0, "GILESO")
         self.K_r = check_positive("K_r", 2 * float(omega0) ** 2 if K_r is None else K_r, "GILESO")
@@ -222,8 +248,20 @@ class FALESO(_LESOBase):
     e_floor: float = eqx.field(static=True)
     n_leso: ClassVar[int] = 4
 
-    def __init__(self, Rs, Lq, k1=papers.FALESO_K1, k2=papers.FALESO_K2, kp_pll=_DEFAULT_PLL[0], ki_pll=_DEFAULT_PLL[1],
-                 omega0_pll=0.0, *, ts=1e-4, rule=None, e_floor=1.0):
+    def __init__(
+        self,
+        Rs,
+        Lq,
+        k1=papers.FALESO_K1,
+        k2=papers.FALESO_K2,
+        kp_pll=_DEFAULT_PLL[0],
+        ki_pll=_DEFAULT_PLL[1],
+        omega0_pll=0.0,
+        *,
+        ts=1e-4,
+        rule=None,
+        e_floor=1.0,
+    ):
         _common(self, Rs, Lq, kp_pll, ki_pll, omega0_pll, ts, rule, e_floor, "FALESO")
         # 002 eq (24): stable iff k1 > 0 and k2 > 0 (generalized Routh test)
         self.k1 = check_positive("k1", k1, "FALESO")

@@ -37,7 +37,6 @@ import numpy as np
 from .. import drive as D
 from .. import linear, papers
 from ..metrics import wrap
-from ..simulate import simulate
 from ..observers import (
     SOIFO,
     LPFFlux,
@@ -45,6 +44,7 @@ from ..observers import (
     PureIntegratorFlux,
     SecondOrderSOIFO,
 )
+from ..simulate import simulate
 
 __all__ = ["OBSERVER_NAMES", "bench_machine", "flux_bank", "run_flux_experiments", "flux_drive"]
 
@@ -58,8 +58,9 @@ def bench_machine(**kw):
     return D.spmsm_paper000(J=papers.BENCH_J_000, **kw)
 
 
-def flux_bank(est: D.PMSMParams, omega0, *, lam_soifo=K_SOIFO**2 / 4, lam_sosoifo=K1**3 / (2 * K2), K1_=K1, K2_=K2,
-              k=K_SOIFO):
+def flux_bank(
+    est: D.PMSMParams, omega0, *, lam_soifo=K_SOIFO**2 / 4, lam_sosoifo=K1**3 / (2 * K2), K1_=K1, K2_=K2, k=K_SOIFO
+):
     """The four observers of 000 with the Fig. 5 settings; the second-order SOIFO is the primary."""
     kp, ki = linear.pll_gains(2 * math.pi * papers.FLUX_PLL_HZ)
     return ObserverBank(
@@ -101,7 +102,14 @@ def _rows(experiment, sol, mask, metrics_wanted, paper):
         m = _obs_metrics(sol, i, mask)
         for metric, unit in metrics_wanted:
             rows.append(
-                dict(experiment=experiment, observer=name, metric=metric, unit=unit, paper=paper.get((name, metric)), ours=m[metric])
+                dict(
+                    experiment=experiment,
+                    observer=name,
+                    metric=metric,
+                    unit=unit,
+                    paper=paper.get((name, metric)),
+                    ours=m[metric],
+                )
             )
     return rows
 
@@ -119,19 +127,52 @@ def run_flux_experiments(quick: bool = False):
     rows, traces = [], {}
     err_metric = [("max_abs", "rad")]
 
-    def run(name, rpm0, t1, handover, speed_ref, load=None, sensors=None, est=None, startup=None, omega0=None,
-            alpha_s=2 * math.pi * papers.BENCH_SPEED_HZ):
+    def run(
+        name,
+        rpm0,
+        t1,
+        handover,
+        speed_ref,
+        load=None,
+        sensors=None,
+        est=None,
+        startup=None,
+        omega0=None,
+        alpha_s=2 * math.pi * papers.BENCH_SPEED_HZ,
+    ):
         est = par if est is None else est
         w0 = par.p * rpm0 * D.RPM if omega0 is None else omega0
-        sc = D.Scenario(par, est_par=est, speed_ref=speed_ref, load=load, sensors=sensors, omega_m0=rpm0 * D.RPM if startup is None else 0.0)
+        sc = D.Scenario(
+            par,
+            est_par=est,
+            speed_ref=speed_ref,
+            load=load,
+            sensors=sensors,
+            omega_m0=rpm0 * D.RPM if startup is None else 0.0,
+        )
         sol = simulate(D.ClosedLoop(flux_drive(par, handover, startup, alpha_s), flux_bank(est, w0), sc), t1)
         traces[name] = sol
         return sol, np.asarray(sol.t)
 
     # --- A. steady state, no load (Figs. 10-17)
     for rpm, t1, hand, paper in (
-        (2000, 0.6, 0.2, {("LPF", "max_abs"): 0.4, ("SOIFO", "max_abs"): 0.15, ("second-order SOIFO", "max_abs"): 0.13}),
-        (400, 1.6, 0.8, {("integrator", "max_abs"): 6.0, ("LPF", "max_abs"): 1.2, ("SOIFO", "max_abs"): 0.035, ("second-order SOIFO", "max_abs"): 0.03}),
+        (
+            2000,
+            0.6,
+            0.2,
+            {("LPF", "max_abs"): 0.4, ("SOIFO", "max_abs"): 0.15, ("second-order SOIFO", "max_abs"): 0.13},
+        ),
+        (
+            400,
+            1.6,
+            0.8,
+            {
+                ("integrator", "max_abs"): 6.0,
+                ("LPF", "max_abs"): 1.2,
+                ("SOIFO", "max_abs"): 0.035,
+                ("second-order SOIFO", "max_abs"): 0.03,
+            },
+        ),
     ):
         sol, t = run(f"steady {rpm} r/min", rpm, t1, hand, D.Profile.constant(rpm * D.RPM))
         mask = _window(t, t1 - _periods(rpm, 5), t1)
@@ -146,28 +187,80 @@ def run_flux_experiments(quick: bool = False):
     # --- B. speed variation 400 <-> 2000 r/min (Fig. 18)
     prof = D.Scenario.speed_rpm([0.0, 1.0, 2.0], [400, 2000, 400], ramp=0.5)
     sol, t = run("speed 400-2000-400 r/min", 400, 3.0, 0.8, prof)
-    rows += _rows("speed 400-2000-400 r/min", sol, _window(t, 1.0, 3.0), err_metric, {("LPF", "max_abs"): 1.2, ("SOIFO", "max_abs"): 0.15, ("second-order SOIFO", "max_abs"): 0.13})
+    rows += _rows(
+        "speed 400-2000-400 r/min",
+        sol,
+        _window(t, 1.0, 3.0),
+        err_metric,
+        {("LPF", "max_abs"): 1.2, ("SOIFO", "max_abs"): 0.15, ("second-order SOIFO", "max_abs"): 0.13},
+    )
 
     # --- C. load step 0 -> 10 N·m at 2000 r/min (Fig. 19)
-    sol, t = run("load step 10 N·m at 2000 r/min", 2000, 0.8, 0.2, D.Profile.constant(2000 * D.RPM), load=D.Scenario.load_steps([0.0, 0.4], [0.0, 10.0]))
-    rows += _rows("load step 10 N·m at 2000 r/min", sol, _window(t, 0.4, 0.8), err_metric, {("LPF", "max_abs"): 1.3, ("SOIFO", "max_abs"): 0.25, ("second-order SOIFO", "max_abs"): 0.20})
+    sol, t = run(
+        "load step 10 N·m at 2000 r/min",
+        2000,
+        0.8,
+        0.2,
+        D.Profile.constant(2000 * D.RPM),
+        load=D.Scenario.load_steps([0.0, 0.4], [0.0, 10.0]),
+    )
+    rows += _rows(
+        "load step 10 N·m at 2000 r/min",
+        sol,
+        _window(t, 0.4, 0.8),
+        err_metric,
+        {("LPF", "max_abs"): 1.3, ("SOIFO", "max_abs"): 0.25, ("second-order SOIFO", "max_abs"): 0.20},
+    )
 
     # --- D. dc disturbances at 1000 r/min (Figs. 21-22)
     for label, sens, paper in (
-        ("du_alpha = 5 V at 1000 r/min", D.Sensors(u_offset=(5.0, 0.0)),
-         {("LPF", "flux_offset"): 0.05, ("SOIFO", "flux_offset"): 0.03, ("second-order SOIFO", "flux_offset"): 0.0,
-          ("LPF", "ripple"): 0.65, ("SOIFO", "ripple"): 0.25, ("second-order SOIFO", "ripple"): 0.0}),
-        ("di_beta = 1.5 A at 1000 r/min", D.Sensors(i_offset=(0.0, 1.5)),
-         {("LPF", "flux_offset"): 0.03, ("SOIFO", "flux_offset"): 0.017, ("second-order SOIFO", "flux_offset"): 0.005,
-          ("LPF", "ripple"): 0.6, ("SOIFO", "ripple"): 0.22, ("second-order SOIFO", "ripple"): 0.0}),
+        (
+            "du_alpha = 5 V at 1000 r/min",
+            D.Sensors(u_offset=(5.0, 0.0)),
+            {
+                ("LPF", "flux_offset"): 0.05,
+                ("SOIFO", "flux_offset"): 0.03,
+                ("second-order SOIFO", "flux_offset"): 0.0,
+                ("LPF", "ripple"): 0.65,
+                ("SOIFO", "ripple"): 0.25,
+                ("second-order SOIFO", "ripple"): 0.0,
+            },
+        ),
+        (
+            "di_beta = 1.5 A at 1000 r/min",
+            D.Sensors(i_offset=(0.0, 1.5)),
+            {
+                ("LPF", "flux_offset"): 0.03,
+                ("SOIFO", "flux_offset"): 0.017,
+                ("second-order SOIFO", "flux_offset"): 0.005,
+                ("LPF", "ripple"): 0.6,
+                ("SOIFO", "ripple"): 0.22,
+                ("second-order SOIFO", "ripple"): 0.0,
+            },
+        ),
     ):
         sol, t = run(label, 1000, 1.0, 0.4, D.Profile.constant(1000 * D.RPM), sensors=sens)
-        rows += _rows(label, sol, _window(t, 1.0 - _periods(1000, 10), 1.0), [("flux_offset", "Wb"), ("ripple", "rad")], paper)
+        rows += _rows(
+            label, sol, _window(t, 1.0 - _periods(1000, 10), 1.0), [("flux_offset", "Wb"), ("ripple", "rad")], paper
+        )
 
     # --- E. Rs mismatch: the observers assume 0.4 Rs0, 10 N·m at 1000 r/min (Fig. 23)
-    sol, t = run("Rs_est = 0.4 Rs0, 10 N·m, 1000 r/min", 1000, 1.0, 0.4, D.Profile.constant(1000 * D.RPM),
-                 load=D.Scenario.load_steps([0.0, 0.2], [0.0, 10.0]), est=eqx.tree_at(lambda m: m.Rs, par, 0.4 * par.Rs))
-    rows += _rows("Rs_est = 0.4 Rs0, 10 N·m, 1000 r/min", sol, _window(t, 1.0 - _periods(1000, 10), 1.0), err_metric + [("mean", "rad")], {})
+    sol, t = run(
+        "Rs_est = 0.4 Rs0, 10 N·m, 1000 r/min",
+        1000,
+        1.0,
+        0.4,
+        D.Profile.constant(1000 * D.RPM),
+        load=D.Scenario.load_steps([0.0, 0.2], [0.0, 10.0]),
+        est=eqx.tree_at(lambda m: m.Rs, par, 0.4 * par.Rs),
+    )
+    rows += _rows(
+        "Rs_est = 0.4 Rs0, 10 N·m, 1000 r/min",
+        sol,
+        _window(t, 1.0 - _periods(1000, 10), 1.0),
+        err_metric + [("mean", "rad")],
+        {},
+    )
 
     # --- F. I-f start to 20 r/min, sensorless to 200 r/min, load step (Fig. 20)
     if not quick:
@@ -182,9 +275,20 @@ def run_flux_experiments(quick: bool = False):
         rows += _rows(name, sol, _window(t, 4.0, 10.0), err_metric, {})
         rows += _rows(name + " (last 3 s)", sol, _window(t, 7.0, 10.0), err_metric, {})
         rpm = np.asarray(sol.outputs.speed_rpm)
-        rows.append(dict(experiment=name, observer="second-order SOIFO", metric="final_speed", unit="r/min", paper=200.0, ours=float(rpm[-1])))
+        rows.append(
+            dict(
+                experiment=name,
+                observer="second-order SOIFO",
+                metric="final_speed",
+                unit="r/min",
+                paper=200.0,
+                ours=float(rpm[-1]),
+            )
+        )
     for name, sol in traces.items():
-        rows.append(dict(experiment=name, observer="drive", metric="finite", unit="bool", paper=None, ours=bool(sol.ok)))
+        rows.append(
+            dict(experiment=name, observer="drive", metric="finite", unit="bool", paper=None, ours=bool(sol.ok))
+        )
     return rows, traces
 
 
@@ -197,6 +301,3 @@ def format_rows(rows) -> str:
         ours = str(ours) if isinstance(ours, bool) else f"{ours:.4g}"
         out.append(f"{r['experiment']:<52}{r['observer']:<20}{r['metric']:<13}{r['unit']:<6}{paper:>9}{ours:>11}")
     return "\n".join(out)
-
-
-

@@ -28,8 +28,8 @@ import numpy as np
 from .. import drive as D
 from .. import linear, papers
 from ..metrics import harmonic_amplitude, wrap
-from ..simulate import simulate
 from ..observers import CLESO, FALESO, GILESO, ObserverBank
+from ..simulate import simulate
 
 __all__ = ["LESO_NAMES", "bench_machine", "leso_bank", "leso_drive", "run_leso_experiments"]
 
@@ -92,10 +92,28 @@ def run_leso_experiments():
         for i, obs in enumerate(LESO_NAMES):
             err = _err_deg(sol, i)[m]
             # 002 reports the lag as a positive error; ours is θ̂ − θ (negative for a lag)
-            rows.append(dict(experiment=name, observer=obs, metric="mean_lag", unit="deg", paper=paper_mean[rpm][i], ours=float(-err.mean())))
-            rows.append(dict(experiment=name, observer=obs, metric="ripple", unit="deg", paper=2.3 if obs == "FA-LESO" else None, ours=float(np.ptp(err))))
+            rows.append(
+                dict(
+                    experiment=name,
+                    observer=obs,
+                    metric="mean_lag",
+                    unit="deg",
+                    paper=paper_mean[rpm][i],
+                    ours=float(-err.mean()),
+                )
+            )
+            rows.append(
+                dict(
+                    experiment=name,
+                    observer=obs,
+                    metric="ripple",
+                    unit="deg",
+                    paper=2.3 if obs == "FA-LESO" else None,
+                    ours=float(np.ptp(err)),
+                )
+            )
         we = par.p * rpm * D.RPM
-        for i, (obs, tf) in enumerate(zip(LESO_NAMES, _tfs(we))):
+        for obs, tf in zip(LESO_NAMES, _tfs(we)):
             lag = -math.degrees(float(np.angle(complex(tf.freqresp(we)))))
             rows.append(dict(experiment=name, observer=obs, metric="tf_lag", unit="deg", paper=None, ours=lag))
 
@@ -109,7 +127,7 @@ def run_leso_experiments():
         we = hpar.p * rpm * D.RPM
         n_per = int(round(2 * math.pi / we / 1e-4))
         m = np.zeros_like(t, dtype=bool)
-        m[-10 * n_per:] = True  # ten whole electrical periods
+        m[-10 * n_per :] = True  # ten whole electrical periods
         for i, obs in enumerate(LESO_NAMES):
             ea = np.asarray(sol.outputs.obs.each[i].e_a)
             fund = float(harmonic_amplitude(t, ea, we, m))
@@ -126,15 +144,53 @@ def run_leso_experiments():
     name = "speed ramp 300-600-840-600-300 r/min"
     sol, t = run(name, par, par, 300, 3.6, prof)
     m = t >= 0.6
-    rows.append(dict(experiment=name, observer="FA-LESO", metric="max_abs", unit="deg", paper=4.5, ours=float(np.abs(_err_deg(sol, 2)[m]).max())))
-    rows.append(dict(experiment=name, observer="FA-LESO", metric="max_speed_err", unit="r/min", paper=13.0,
-                     ours=float(np.max(np.abs(np.asarray(sol.outputs.obs.each[2].omega) / par.p - np.asarray(sol.outputs.omega_m))[m]) * 30 / math.pi)))
+    rows.append(
+        dict(
+            experiment=name,
+            observer="FA-LESO",
+            metric="max_abs",
+            unit="deg",
+            paper=4.5,
+            ours=float(np.abs(_err_deg(sol, 2)[m]).max()),
+        )
+    )
+    rows.append(
+        dict(
+            experiment=name,
+            observer="FA-LESO",
+            metric="max_speed_err",
+            unit="r/min",
+            paper=13.0,
+            ours=float(
+                np.max(np.abs(np.asarray(sol.outputs.obs.each[2].omega) / par.p - np.asarray(sol.outputs.omega_m))[m])
+                * 30
+                / math.pi
+            ),
+        )
+    )
 
     # --- load step 0 -> 80 % at 600 r/min (Fig. 17)
     name = "load step 0-80 % at 600 r/min"
-    sol, t = run(name, par, par, 600, 1.2, D.Profile.constant(600 * D.RPM), load=D.Scenario.load_steps([0.0, 0.6, 0.9], [0.0, 0.8 * float(par.T_rated), 0.0]))
+    sol, t = run(
+        name,
+        par,
+        par,
+        600,
+        1.2,
+        D.Profile.constant(600 * D.RPM),
+        load=D.Scenario.load_steps([0.0, 0.6, 0.9], [0.0, 0.8 * float(par.T_rated), 0.0]),
+    )
     m = t >= 0.55
-    rows.append(dict(experiment=name, observer="FA-LESO", metric="max_abs", unit="deg", paper=3.2, ours=float(np.abs(_err_deg(sol, 2)[m]).max())))
+    rows.append(
+        dict(
+            experiment=name,
+            observer="FA-LESO",
+            metric="max_abs",
+            unit="deg",
+            paper=3.2,
+            ours=float(np.abs(_err_deg(sol, 2)[m]).max()),
+        )
+    )
 
     # --- Rs and Lq mismatch at 300 r/min, rated load (Fig. 18), against eqs (42)-(43)
     we = par.p * 300 * D.RPM
@@ -146,7 +202,9 @@ def run_leso_experiments():
         ("Lq_est = 0.5 Lq", bench_machine(Lq=0.5 * float(par.Lq)), ("Lq", 0.5 * float(par.Lq))),
     ):
         name = f"{label}, rated load, 300 r/min"
-        sol, t = run(name, par, est, 300, 1.2, D.Profile.constant(300 * D.RPM), load=D.Profile.constant(float(par.T_rated)))
+        sol, t = run(
+            name, par, est, 300, 1.2, D.Profile.constant(300 * D.RPM), load=D.Profile.constant(float(par.T_rated))
+        )
         m = t >= 1.0
         err = float(np.mean(_err_deg(sol, 2)[m]))
         # eqs (42)-(43): Δ = true − nominal; E_ex at i_d = 0 is ωe ψf (+ (Ld − Lq) i_d = 0)
@@ -161,5 +219,7 @@ def run_leso_experiments():
         rows.append(dict(experiment=name, observer="FA-LESO", metric="eq42_43", unit="deg", paper=None, ours=pred))
 
     for name, sol in traces.items():
-        rows.append(dict(experiment=name, observer="drive", metric="finite", unit="bool", paper=None, ours=bool(sol.ok)))
+        rows.append(
+            dict(experiment=name, observer="drive", metric="finite", unit="bool", paper=None, ours=bool(sol.ok))
+        )
     return rows, traces
