@@ -17,12 +17,14 @@ run: $(STAMP)
 
 # pytest exits 5 when it collects nothing: for the main suite that is a broken
 # checkout and fails; for the slow suite it only means there are no slow tests.
+# -n auto: one pytest worker per core (pytest-xdist); XLA compiles on one thread, so two workers on two cores
+# halve the wall time.  Compilations are cached across runs (tests/conftest.py).
 test: $(STAMP)
-	@$(VENV)/bin/python -m pytest -m "not slow"; rc=$$?; \
+	@$(VENV)/bin/python -m pytest -m "not slow" -n auto; rc=$$?; \
 	if [ $$rc -eq 5 ]; then echo "make test: pytest collected no tests"; exit 1; fi; exit $$rc
 
 test-slow: $(STAMP)
-	@$(VENV)/bin/python -m pytest -m slow; rc=$$?; \
+	@$(VENV)/bin/python -m pytest -m slow -n auto; rc=$$?; \
 	if [ $$rc -eq 5 ]; then echo "make test-slow: no slow tests"; exit 0; fi; exit $$rc
 
 # ruff: lint and formatting (line length 120), as CI runs it

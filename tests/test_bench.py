@@ -17,7 +17,10 @@ numba = pytest.importorskip("numba", reason="numba is the benchmark extra: pip i
 ROOT = Path(__file__).resolve().parents[1]
 
 
-@pytest.mark.parametrize("kind", W.FLL_KINDS)
+# The default job's FLL (the WIF) in the default suite; the other two (numba compiles ~30 s each) in the slow one.
+@pytest.mark.parametrize(
+    "kind", [k if k == "sogi-fll-wif" else pytest.param(k, marks=pytest.mark.slow) for k in W.FLL_KINDS]
+)
 def test_fll_baselines_equal_jaxobs(kind):
     n = 1500
     fn, args = W.jax_fll(kind, 4, "loop", n * W.TS, shard=False)
