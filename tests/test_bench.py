@@ -59,5 +59,5 @@ def test_bench_quick_json(tmp_path):
     assert all(r["steps_per_s"] > 0 for r in rows)
     assert res["grad_temp_mb_10s"]["auto"] <= 64.0
     assert set(res["compile_s"]) == {"sogi-fll-wif", "drive-sosoifo"}
-    # `import jaxobs` gave the bench process one host device per core
+    # the bench process gave JAX one host device per usable core
     assert len(res["devices"]) == len(os.sched_getaffinity(0))  # jaxobs.use_host_devices(): one per usable core
