@@ -293,11 +293,14 @@ def run_flux_experiments(quick: bool = False):
 
 
 def format_rows(rows) -> str:
-    head = f"{'experiment':<52}{'observer':<20}{'metric':<13}{'unit':<6}{'paper':>9}{'ours':>11}"
+    """The rows as a fixed-width table; each text column as wide as its longest entry plus a space."""
+    cols = ("experiment", "observer", "metric", "unit")
+    width = {c: max([len(c)] + [len(str(r[c])) for r in rows]) + 1 for c in cols}
+    head = "".join(f"{c:<{width[c]}}" for c in cols) + f"{'paper':>9}{'ours':>11}"
     out = [head, "-" * len(head)]
     for r in rows:
         paper = "" if r["paper"] is None else f"{r['paper']:.3g}"
         ours = r["ours"]
         ours = str(ours) if isinstance(ours, bool) else f"{ours:.4g}"
-        out.append(f"{r['experiment']:<52}{r['observer']:<20}{r['metric']:<13}{r['unit']:<6}{paper:>9}{ours:>11}")
+        out.append("".join(f"{str(r[c]):<{width[c]}}" for c in cols) + f"{paper:>9}{ours:>11}")
     return "\n".join(out)
