@@ -212,3 +212,28 @@ def study_figures(ds, out_dir):
         _finish(fig, p, dpi=100)
         paths.append(p)
     return paths
+
+
+def drive_study_figure(ds, path):
+    """Empirical CDFs of every drive-study metric over the scenarios, all designs on one axis per metric
+    (one scale per metric across designs, units on the axes), lost-sync counts in the legend."""
+    from .drive_study import DRIVE_STUDY_METRICS
+
+    plt = _plt()
+    metrics = list(DRIVE_STUDY_METRICS)
+    fig, axs = plt.subplots(1, len(metrics), figsize=(4.2 * len(metrics), 3.6), squeeze=False)
+    for ax, m in zip(axs[0], metrics):
+        unit, long_name = DRIVE_STUDY_METRICS[m]
+        for d in ds["design"].values:
+            v = np.sort(np.asarray(ds[m].sel(design=d)).ravel())
+            v = v[np.isfinite(v)]
+            lost = int(ds["lost_sync_count"].sel(design=d))
+            if v.size:
+                ax.step(v, np.arange(1, v.size + 1) / v.size, where="post", label=f"{d} (lost sync: {lost})")
+        ax.set_xlabel(f"{m} ({unit})")
+        ax.set_ylabel("fraction of scenarios")
+        ax.set_title(long_name, fontsize=8)
+        ax.grid(True, alpha=0.3)
+        ax.legend(fontsize=7)
+    fig.suptitle(f"drive study: {int(ds.attrs['scenarios'])} scenarios per design", fontsize=10)
+    return _finish(fig, path, dpi=100)

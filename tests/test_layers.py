@@ -47,6 +47,7 @@ LAYERS = [
     # the library's own applications: studies, the demo, the papers' reproductions, figures, benchmarks
     (
         "jaxobs.study",
+        "jaxobs.drive_study",
         "jaxobs.demo",
         "jaxobs.reproduce.flux",
         "jaxobs.reproduce.leso",

@@ -184,6 +184,10 @@ def load_study(path):
     except tomllib.TOMLDecodeError as e:
         raise ValueError(f"study file: not valid TOML: {e}") from None
     st = raw.get("study", {})
+    if st.get("kind", "fll") == "drive":
+        return _load_drive_study(raw, st)
+    if st.get("kind", "fll") != "fll":
+        raise ValueError(f"study.kind must be 'fll' or 'drive', got {st.get('kind')!r}")
     opts = dict(
         t_event=float(st.get("t_event", 0.1)),
         horizon=float(st.get("horizon", 0.4)),
@@ -231,6 +235,122 @@ def load_study(path):
     return st.get("name", "study"), designs, axes, opts
 
 
+_DRIVE_OBSERVERS = ("CLESO", "GILESO", "FALESO", "PureIntegratorFlux", "LPFFlux", "SOIFO", "SecondOrderSOIFO")
+_MACHINES = {"ipmsm_paper002": "ipmsm_paper002", "spmsm_paper000": "spmsm_paper000"}
+
+
+def _load_drive_study(raw: dict, st: dict):
+    """A drive study (``[study] kind = "drive"``): (name, designs, axes, options) for jaxobs.drive_study."""
+    import math
+
+    from jaxobs import drive as D
+    from jaxobs.drive_study import DRIVE_STUDY_AXES
+
+    known = {"kind", "name", "machine", "horizon", "steady_from", "sampling", "sample", "seed", "chunk_size"}
+    for k in st:
+        if k not in known:
+            raise ValueError(f"study.{k}: unknown key; allowed: {', '.join(sorted(known))}")
+    machine = st.get("machine", "ipmsm_paper002")
+    if machine not in _MACHINES:
+        raise ValueError(f"study.machine must be one of {', '.join(_MACHINES)}, got {machine!r}")
+    par = getattr(D, _MACHINES[machine])()
+    dr = raw.get("drive", {})
+    for k in dr:
+        if k not in ("alpha_c_hz", "alpha_s_hz", "settle"):
+            raise ValueError(f"drive.{k}: unknown key; allowed: alpha_c_hz, alpha_s_hz, settle")
+    ac, as_ = float(dr.get("alpha_c_hz", papers.BENCH_CURRENT_HZ)), float(dr.get("alpha_s_hz", papers.BENCH_SPEED_HZ))
+    for k, v in (("drive.alpha_c_hz", ac), ("drive.alpha_s_hz", as_)):
+        if not (math.isfinite(v) and 0 < v <= 5000):
+            raise ValueError(f"{k} must be in (0, 5000] Hz, got {v!r}")
+    foc = D.FOC.imc(par, alpha_c=2 * math.pi * ac, alpha_s=2 * math.pi * as_)
+    drive = D.Drive(foc, sensorless=True, settle=float(dr.get("settle", 0.2)))
+    designs = {}
+    for name, spec in raw.get("designs", {}).items():
+        where = f"designs.{name}"
+        if not isinstance(spec, dict):
+            raise ValueError(f"{where} must be a table")
+        if "result" in spec:
+            try:
+                res = load_result(spec["result"])
+                if res["component"] not in _DRIVE_OBSERVERS:
+                    raise ValueError(f"component {res['component']!r} is not a drive observer")
+                designs[name] = tuned_component(res)
+            except ValueError as e:
+                raise ValueError(f"{where}.result: {e}") from None
+        elif spec.get("component") in _DRIVE_OBSERVERS:
+            kw = {k: v for k, v in spec.items() if k != "component"}
+            # the machine's Rs and L are placeholders: the study binds each scenario's assumed machine
+            comp = spec["component"]
+            lq = (
+                {"L": par.Ld}
+                if comp in ("PureIntegratorFlux", "LPFFlux", "SOIFO", "SecondOrderSOIFO")
+                else {"Lq": par.Lq}
+            )
+            if comp in ("SOIFO", "SecondOrderSOIFO"):
+                kw.setdefault("omega0", 1.0)
+            try:
+                designs[name] = getattr(jaxobs, comp)(Rs=par.Rs, **lq, **kw)
+            except TypeError as e:
+                raise ValueError(f"{where}: {e}") from None
+        else:
+            raise ValueError(
+                f"{where}: give component (one of {', '.join(_DRIVE_OBSERVERS)}) with its gains, "
+                "or result (a tuning result.json)"
+            )
+    if not designs:
+        raise ValueError("designs: at least one design is required")
+    axes = raw.get("axes", {})
+    for k, v in axes.items():
+        if k not in DRIVE_STUDY_AXES:
+            raise ValueError(f"axes.{k}: unknown axis; allowed: {', '.join(DRIVE_STUDY_AXES)}")
+        if (
+            not isinstance(v, list)
+            or not v
+            or not all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in v)
+        ):
+            raise ValueError(f"axes.{k} must be a non-empty list of numbers")
+    opts = dict(
+        machine=par,
+        drive=drive,
+        horizon=float(st.get("horizon", 0.3)),
+        sampling=str(st.get("sampling", "grid")),
+        sample=int(st.get("sample", 0)),
+        seed=int(st.get("seed", 0)),
+        chunk_size=int(st.get("chunk_size", 256)),
+    )
+    if "steady_from" in st:
+        opts["steady_from"] = float(st["steady_from"])
+    return st.get("name", "drive-study"), designs, axes, dict(opts, kind="drive")
+
+
+def _cmd_drive_study(name, designs, axes, opts, out: Path, quiet: bool) -> int:
+    from jaxobs.drive_study import DRIVE_STUDY_METRICS, run_drive_study
+    from jaxobs.plot import drive_study_figure
+
+    def progress(done, total):
+        if not quiet:
+            print(f"drive study: {done}/{total} scenario runs", file=sys.stderr, flush=True)
+
+    ds = run_drive_study(designs, axes, progress=progress, **opts)
+    ds.to_netcdf(out / "study.nc", engine="scipy")
+    fig = out / "drive_study.png"
+    drive_study_figure(ds, fig)
+    n = int(ds.attrs["scenarios"])
+    print(f"drive study {name}: {len(designs)} designs x {n} scenarios ({ds.attrs['sampling']}), sensorless")
+    qs = [float(q) for q in ds["quantile"].values]
+    head = f"{'design':<18}{'metric':<26}" + "".join(f"{'q' + format(q, 'g'):>10}" for q in qs) + f"{'lost sync':>11}"
+    print(head)
+    for d in ds["design"].values:
+        lost = int(ds["lost_sync_count"].sel(design=d))
+        for m in DRIVE_STUDY_METRICS:
+            vals = ds[f"{m}_q"].sel(design=d).values
+            unit = DRIVE_STUDY_METRICS[m][0]
+            row = f"{str(d):<18}{m + ' (' + unit + ')':<26}" + "".join(f"{v:>10.4g}" for v in vals)
+            print(row + f"{lost:>11}")
+    print(f"results: {out / 'study.nc'}, {fig}")
+    return 0
+
+
 def _cmd_study(args) -> int:
     _enable_x64()
     from jaxobs.plot import study_figures
@@ -240,6 +360,8 @@ def _cmd_study(args) -> int:
     name, designs, axes, opts = load_study(path)
     out = Path(args.out) if args.out else Path("out") / name
     out.mkdir(parents=True, exist_ok=True)
+    if opts.pop("kind", "fll") == "drive":
+        return _cmd_drive_study(name, designs, axes, opts, out, args.quiet)
     ds = run_study(designs, axes, progress=not args.quiet, **opts)
     ds.to_netcdf(out / "study.nc", engine="scipy")
     worst = {m: worst_cases(ds, m, 3) for m in STUDY_METRICS}
@@ -443,7 +565,9 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--quick", action="store_true", help="skip the long runs (20 r/min steady state, I-f start-up)")
     r.set_defaults(func=_cmd_reproduce)
 
-    st = sub.add_parser("study", help="robustness study of FLL designs over a scenario grid (xarray/NetCDF)")
+    st = sub.add_parser(
+        "study", help="robustness study of FLL or sensorless-drive designs over a scenario grid (xarray/NetCDF)"
+    )
     st.add_argument("study", nargs="?", help="study file (TOML); default: the FLL family's closed forms")
     st.add_argument("--out", help="results folder (default: out/<study name>)")
     st.add_argument("--quiet", action="store_true", help="no progress bar")

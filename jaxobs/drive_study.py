@@ -1,0 +1,262 @@
+"""Robustness studies of sensorless drives: drive observers × a grid (or a Sobol/LHS sample) of scenarios.
+
+    ds = run_drive_study({"C-LESO": cleso, "FA-LESO": faleso}, {"speed_rpm": [300, 600], "dRs": [-0.3, 0.3]},
+                         machine=ipmsm_paper002(), horizon=0.3)
+    ds["pos_err_rms_deg"].sel(design="FA-LESO").max()
+    ds["pos_err_rms_deg_q"].sel(design="FA-LESO", quantile=0.99)
+
+Every design is the observer that closes the loop (``Drive(sensorless=True)``)
+on every scenario, each scenario started in its steady state (its speed, its
+load, the observer settled before t = 0; DESIGN.md).  The observer is bound to
+the scenario: its resistance and inductance are the scenario's *assumed*
+machine (``est_par``: the mismatch axes move it), its initial speed the
+scenario's.  Axes (all optional; a value per scenario):
+
+- ``speed_rpm`` (r/min), ``load_nm`` (N·m): the operating point;
+- ``dRs``, ``dLd``, ``dLq``, ``dpsi``: relative errors of the assumed machine
+  (est = true · (1 + v)); ``dJ``: relative change of the true inertia (the
+  controller keeps the nominal one);
+- ``i_noise`` (A), ``u_noise`` (V): white noise on the current and voltage
+  measurements (standard deviation; the key is per scenario from ``seed``);
+- ``dead_time`` (s): inverter dead time.
+
+Metrics per scenario, over the steady window [steady_from, horizon):
+``pos_err_rms_deg`` and ``pos_err_max_deg`` (|θ̂e − θe|, electrical degrees),
+``speed_err_rms_rpm`` (ω̂e/p − ωm, r/min), ``speed_noise_rpm`` (the
+sample-to-sample noise of ω̂e/p: rms of the first difference over √2) and
+``lost_sync``: the scenario diverged (a non-finite value) or its position error
+exceeded 90° in the steady window — a per-scenario flag, never fatal.  The
+Dataset has dims ``("design", *axes)`` (a grid) or ``("design", "sample")``
+(a sample, the axes as coordinates), quantiles over the scenarios of every
+metric (``<metric>_q`` with a ``quantile`` coordinate 0.5, 0.95, 0.99, 1.0;
+lost-sync scenarios excluded from them and counted in ``lost_sync_count``).
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+import time
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from . import metrics as M
+from .drive import RPM, ClosedLoop, Drive, PMSMParams, Scenario, Sensors
+from .simulate import simulate
+
+__all__ = ["DRIVE_STUDY_AXES", "DRIVE_STUDY_METRICS", "QUANTILES", "run_drive_study", "drive_scenarios"]
+
+# axis → (unit, allowed range)
+DRIVE_STUDY_AXES = {
+    "speed_rpm": ("r/min", (1.0, 1e5)),
+    "load_nm": ("N·m", (-1e4, 1e4)),
+    "dRs": ("1", (-0.95, 10.0)),
+    "dLd": ("1", (-0.95, 10.0)),
+    "dLq": ("1", (-0.95, 10.0)),
+    "dpsi": ("1", (-0.95, 10.0)),
+    "dJ": ("1", (-0.95, 100.0)),
+    "i_noise": ("A", (0.0, 1e3)),
+    "u_noise": ("V", (0.0, 1e4)),
+    "dead_time": ("s", (0.0, 1e-4)),
+}
+DRIVE_STUDY_METRICS = {
+    "pos_err_rms_deg": ("deg", "rms position error in the steady window (electrical)"),
+    "pos_err_max_deg": ("deg", "peak position error in the steady window (electrical)"),
+    "speed_err_rms_rpm": ("r/min", "rms speed-estimate error in the steady window"),
+    "speed_noise_rpm": ("r/min", "speed-estimate noise: rms sample-to-sample change / sqrt(2)"),
+}
+QUANTILES = (0.5, 0.95, 0.99, 1.0)
+LOST_SYNC_DEG = 90.0
+
+
+def _check_axes(axes: dict):
+    if not axes:
+        raise ValueError("drive study: at least one axis is required")
+    for name, vals in axes.items():
+        if name not in DRIVE_STUDY_AXES:
+            raise ValueError(f"axes.{name}: unknown drive-study axis; allowed: {', '.join(DRIVE_STUDY_AXES)}")
+        unit, (lo, hi) = DRIVE_STUDY_AXES[name]
+        arr = np.asarray(vals, dtype=float)
+        if arr.ndim != 1 or arr.size < 1 or not np.all(np.isfinite(arr)) or np.any(arr < lo) or np.any(arr > hi):
+            raise ValueError(f"axes.{name} must be a non-empty list of numbers in [{lo:g}, {hi:g}] {unit}")
+
+
+def drive_scenarios(machine: PMSMParams, names, combos, *, seed: int = 0) -> Scenario:
+    """A batched Scenario (leading axis len(combos)), one per combination of the named axes' values."""
+    cols = {n: np.asarray([c[i] for c in combos], dtype=float) for i, n in enumerate(names)}
+    b = len(combos)
+    noisy = any(n in cols for n in ("i_noise", "u_noise"))
+    # a noisy Sensors (static flag) when a noise axis exists; its levels are set per scenario below
+    sensors = Sensors(i_noise=1.0, u_noise=1.0) if noisy else Sensors()
+    base = Scenario(machine, sensors=sensors)
+    sc = jax.tree.map(lambda x: jnp.broadcast_to(x, (b,) + jnp.shape(x)), base)
+
+    def col(name, default):
+        return jnp.asarray(cols.get(name, np.full(b, default)))
+
+    speed = col("speed_rpm", 600.0) * RPM
+    par = eqx.tree_at(lambda p: p.J, sc.par, sc.par.J * (1 + col("dJ", 0.0)))
+    est = sc.est_par
+    est = eqx.tree_at(
+        lambda p: (p.Rs, p.Ld, p.Lq, p.psi_f, p.J),
+        est,
+        (
+            est.Rs * (1 + col("dRs", 0.0)),
+            est.Ld * (1 + col("dLd", 0.0)),
+            est.Lq * (1 + col("dLq", 0.0)),
+            est.psi_f * (1 + col("dpsi", 0.0)),
+            est.J,  # the controller's inertia stays nominal
+        ),
+    )
+    sens = eqx.tree_at(lambda s: (s.i_noise, s.u_noise), sc.sensors, (col("i_noise", 0.0), col("u_noise", 0.0)))
+    keys = jax.vmap(lambda i: jax.random.fold_in(jax.random.PRNGKey(seed), i))(jnp.arange(b))
+    return eqx.tree_at(
+        lambda s: (s.par, s.est_par, s.speed_ref.values, s.load.values, s.sensors, s.dead_time, s.key, s.omega_m0),
+        sc,
+        (par, est, speed[:, None], col("load_nm", 0.0)[:, None], sens, col("dead_time", 0.0), keys, speed),
+    )
+
+
+def bind_observer(obs, sc: Scenario):
+    """The observer with the scenario's assumed machine and initial speed (LESOs: Rs, Lq; flux observers: Rs, L)."""
+    est, w_e = sc.est_par, sc.est_par.p * sc.omega_m0
+    if hasattr(obs, "Lq"):  # LESO family
+        return eqx.tree_at(lambda o: (o.Rs, o.Lq, o.omega0_pll), obs, (est.Rs, est.Lq, w_e))
+    if hasattr(obs, "L"):  # flux observers of paper 000
+        return eqx.tree_at(lambda o: (o.Rs, o.L, o.omega0), obs, (est.Rs, est.Ld, jnp.maximum(jnp.abs(w_e), 1.0)))
+    raise ValueError(f"drive study: {type(obs).__name__} is not a drive observer (a LESO or a flux observer)")
+
+
+def _sample(axes: dict, n: int, method: str, seed: int):
+    from scipy.stats import qmc
+
+    names = list(axes)
+    lo = np.array([min(axes[k]) for k in names], dtype=float)
+    hi = np.array([max(axes[k]) for k in names], dtype=float)
+    if method == "sobol":
+        u = qmc.Sobol(len(names), scramble=True, seed=seed).random(n)
+    elif method == "lhs":
+        u = qmc.LatinHypercube(len(names), seed=seed).random(n)
+    else:
+        raise ValueError(f"sampling must be 'grid', 'sobol' or 'lhs', got {method!r}")
+    return [tuple(r) for r in qmc.scale(u, lo, np.where(hi > lo, hi, lo + 1e-300))]
+
+
+def run_drive_study(
+    designs: dict,
+    axes: dict,
+    *,
+    machine: PMSMParams,
+    drive: Drive,
+    horizon: float = 0.3,
+    steady_from: float | None = None,
+    sampling: str = "grid",
+    sample: int = 0,
+    seed: int = 0,
+    chunk_size: int = 256,
+    progress=None,
+):
+    """Run every design (a drive observer closing ``drive``'s loop) on every scenario; an ``xarray.Dataset``.
+
+    ``sampling="grid"``: the Cartesian product of the axes; ``"sobol"``/``"lhs"``: ``sample``
+    points drawn by scipy.stats.qmc inside the axes' [min, max].  ``progress(done, total)`` is
+    called after each chunk.
+    """
+    import xarray as xr
+
+    if not designs:
+        raise ValueError("drive study: at least one design is required")
+    _check_axes(axes)
+    if not drive.sensorless:
+        raise ValueError("drive study: the drive must be sensorless (Drive(..., sensorless=True))")
+    if not (horizon > 0 and math.isfinite(horizon)):
+        raise ValueError(f"horizon must be a finite number of seconds > 0, got {horizon!r}")
+    steady_from = 0.5 * horizon if steady_from is None else float(steady_from)
+    if not 0 <= steady_from < horizon:
+        raise ValueError(f"steady_from must be in [0, horizon), got {steady_from!r}")
+    names = list(axes)
+    if sampling == "grid":
+        combos = list(itertools.product(*(list(map(float, axes[n])) for n in names)))
+    else:
+        if not (isinstance(sample, int) and sample >= 1):
+            raise ValueError(f"sample must be an integer >= 1 with sampling={sampling!r}, got {sample!r}")
+        combos = _sample(axes, sample, sampling, seed)
+    n = len(combos)
+    scs = drive_scenarios(machine, names, combos, seed=seed)
+    chunk = max(1, min(chunk_size, n))
+    pad = (-n) % chunk
+    if pad:
+        scs = jax.tree.map(lambda x: jnp.concatenate([x, jnp.repeat(x[-1:], pad, axis=0)]), scs)
+    p = machine.p
+
+    def metrics_of(sol):
+        o = sol.outputs
+        steady = sol.t >= steady_from
+        err = jnp.degrees(M.wrap(o.obs.theta - o.theta_e))
+        w_hat = o.obs.omega / p * 30 / math.pi
+        w_err = w_hat - o.omega_m * 30 / math.pi
+        m = {
+            "pos_err_rms_deg": M.rms(err, steady),
+            "pos_err_max_deg": jnp.max(jnp.where(steady, jnp.abs(err), 0.0)),
+            "speed_err_rms_rpm": M.rms(w_err, steady),
+            "speed_noise_rpm": M.rms(jnp.diff(w_hat) / math.sqrt(2.0), steady[1:]),
+        }
+        finite = sol.ok & jnp.all(jnp.stack([jnp.isfinite(v) for v in m.values()]))
+        lost = ~finite | (m["pos_err_max_deg"] > LOST_SYNC_DEG)
+        return m, lost
+
+    results = {}
+    t0 = time.time()
+    done, total = 0, n * len(designs)
+    for dname, obs in designs.items():
+
+        @eqx.filter_jit
+        def run_chunk(obs, batch):
+            return jax.vmap(lambda s: metrics_of(simulate(ClosedLoop(drive, bind_observer(obs, s), s), horizon)))(batch)
+
+        parts_m, parts_l = [], []
+        for start in range(0, n + pad, chunk):
+            m, lost = run_chunk(obs, jax.tree.map(lambda x: x[start : start + chunk], scs))
+            parts_m.append(jax.tree.map(np.asarray, m))
+            parts_l.append(np.asarray(lost))
+            done += min(chunk, n - start)
+            if progress is not None:
+                progress(done, total)
+        results[dname] = (
+            {k: np.concatenate([q[k] for q in parts_m])[:n] for k in DRIVE_STUDY_METRICS},
+            np.concatenate(parts_l)[:n],
+        )
+
+    dnames = list(designs)
+    if sampling == "grid":
+        dims = ("design", *names)
+        shape = tuple(len(axes[k]) for k in names)
+        coords = {"design": dnames, **{k: np.asarray(axes[k], dtype=float) for k in names}}
+    else:
+        dims, shape = ("design", "sample"), (n,)
+        coords = {"design": dnames, "sample": np.arange(n)}
+        for i, k in enumerate(names):
+            coords[k] = ("sample", np.asarray([c[i] for c in combos]))
+    data = {}
+    qs = np.asarray(QUANTILES)
+    for k, (unit, long_name) in DRIVE_STUDY_METRICS.items():
+        vals = np.stack([np.where(results[d][1], np.nan, results[d][0][k]) for d in dnames])  # (design, n)
+        data[k] = (dims, vals.reshape((len(dnames), *shape)), {"units": unit, "long_name": long_name})
+        q = np.stack([np.nanquantile(v, qs) if np.isfinite(v).any() else np.full(qs.shape, np.nan) for v in vals])
+        data[f"{k}_q"] = (("design", "quantile"), q, {"units": unit, "long_name": f"{long_name}, quantiles"})
+    lost = np.stack([results[d][1] for d in dnames])
+    data["lost_sync"] = (
+        dims,
+        lost.reshape((len(dnames), *shape)).astype(np.int8),
+        {"units": "1", "long_name": f"diverged or position error > {LOST_SYNC_DEG:g} deg in the steady window"},
+    )
+    data["lost_sync_count"] = (("design",), lost.sum(axis=1).astype(np.int64), {"units": "1"})
+    ds = xr.Dataset(data, coords={**coords, "quantile": qs})
+    for k in names:
+        ds[k].attrs["units"] = DRIVE_STUDY_AXES[k][0]
+    ds.attrs.update(horizon=horizon, steady_from=steady_from, scenarios=n, sampling=sampling, seed=seed)
+    ds.attrs["seconds"] = time.time() - t0
+    return ds
