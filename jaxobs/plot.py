@@ -217,13 +217,11 @@ def study_figures(ds, out_dir):
 def drive_study_figure(ds, path):
     """Empirical CDFs of every drive-study metric over the scenarios, all designs on one axis per metric
     (one scale per metric across designs, units on the axes), lost-sync counts in the legend."""
-    from .drive_study import DRIVE_STUDY_METRICS
-
     plt = _plt()
-    metrics = list(DRIVE_STUDY_METRICS)
+    metrics = [v[: -len("_q")] for v in ds.data_vars if v.endswith("_q")]  # the metrics with quantiles
     fig, axs = plt.subplots(1, len(metrics), figsize=(4.2 * len(metrics), 3.6), squeeze=False)
     for ax, m in zip(axs[0], metrics):
-        unit, long_name = DRIVE_STUDY_METRICS[m]
+        unit, long_name = ds[m].attrs["units"], ds[m].attrs["long_name"]
         for d in ds["design"].values:
             v = np.sort(np.asarray(ds[m].sel(design=d)).ravel())
             v = v[np.isfinite(v)]
