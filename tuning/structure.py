@@ -130,7 +130,8 @@ def _flux(name: str, v: dict) -> tuple[dict, dict]:
 
 def _drive_speed(job) -> float:
     """The electrical speed (rad/s) the drive jobs linearize at: the first scenario's speed (600 r/min default)."""
-    rpm = (job.scenarios.axes.get("speed_rpm") or [600.0])[0]
+    rpm = (job.scenarios.axes.get("speed_rpm") if job is not None else None) or [600.0]
+    rpm = rpm[0]
     return rpm * math.pi / 30 * papers.IPMSM_002["p"]
 
 
