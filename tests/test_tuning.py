@@ -316,3 +316,146 @@ def test_leso_drive_job_runs(tmp_path):
     res = json.loads((tmp_path / "o" / "result.json").read_text())
     assert res["scores"]["tuned"]["diverged"] == 0
     assert res["gains"]["closed_form"]["k2"] == pytest.approx(papers.FALESO_K2)
+
+
+# --------------------------------------------------------------------------
+# honest outcome, linear structure, reproducible results, BFGS (issue 18)
+# --------------------------------------------------------------------------
+
+UNSTABLE = GOOD.replace(
+    "[gains.lam]\ninit = 12337.0\nlower = 1000.0\nupper = 100000.0",
+    "[gains.k]\ninit = 40.0\nlower = 0.01\nupper = 100.0",
+)
+
+
+def _strict_json(path):
+    """result.json parsed with NaN / Infinity tokens refused."""
+
+    def refuse(token):
+        raise AssertionError(f"{path.name} holds a bare {token}")
+
+    return json.loads(path.read_text(), parse_constant=refuse)
+
+
+def test_unstable_start_exits_3_with_status_diverged_and_no_nan(tmp_path, capsys):
+    """k = 40 diverges in every scenario: status "diverged", exit 3, no tuned gains, null (with a reason)
+    where the metrics are undefined, never a bare NaN token."""
+    path = tmp_path / "job.toml"
+    path.write_text(UNSTABLE)
+    assert main(["tune", str(path), "--out", str(tmp_path / "o"), "--quiet"]) == 3
+    assert "DIVERGED" in capsys.readouterr().out
+    res = _strict_json(tmp_path / "o" / "result.json")
+    assert res["status"] == "diverged"
+    assert res["gains"]["tuned"] is None and res["scores"]["tuned"] is None
+    assert res["scores"]["initial"]["diverged"] == 2 and res["scores"]["initial"]["itae_freq_mean"] is None
+    assert "gains.tuned" in res["null_reasons"] and res["scores"]["initial"]["null_reason"]
+    assert all(h["diverged"] == 2 for h in _strict_json(tmp_path / "o" / "history.json"))
+
+
+def test_tiny_penalty_and_huge_steps_never_report_diverging_gains_as_tuned(tmp_path):
+    """penalty = 1e-9 makes diverging cheaper than tracking and a learning rate of 3 jumps there at once:
+    every iterate after the first diverges; the stable initial design comes back, as "no_improvement"."""
+    text = (
+        GOOD.replace("steps = 3", "steps = 3\nlearning_rate = 3.0\npatience = 100")
+        .replace("upper = 100000.0", "upper = 1.0e9")
+        .replace("[objective]", "[objective]\npenalty = 1e-9")
+    )
+    path = tmp_path / "job.toml"
+    path.write_text(text)
+    assert main(["tune", str(path), "--out", str(tmp_path / "o"), "--quiet"]) == 0
+    res = _strict_json(tmp_path / "o" / "result.json")
+    hist = _strict_json(tmp_path / "o" / "history.json")
+    assert any(h["diverged"] for h in hist)  # the solver did wander into divergence
+    assert res["status"] == "no_improvement" and "diverged" in res["reason"]
+    assert res["scores"]["tuned"]["diverged"] == 0
+    assert res["gains"]["tuned"]["lam"] == pytest.approx(12337.0)
+    best = [h for h in hist if h["iteration"] == res["best_iteration"]][0]
+    assert best["diverged"] == 0
+
+
+def test_gain_at_a_bound_is_flagged(tmp_path, capsys):
+    """A gain that ends within 1 % of its bound is listed under at_bound and a warning goes to stderr."""
+    text = GOOD.replace(
+        "init = 12337.0\nlower = 1000.0\nupper = 100000.0", "init = 12337.0\nlower = 1000.0\nupper = 12400.0"
+    )
+    path = tmp_path / "job.toml"
+    path.write_text(text.replace("steps = 3", "steps = 3\nlearning_rate = 1.0"))
+    assert main(["tune", str(path), "--out", str(tmp_path / "o"), "--quiet"]) == 0
+    res = _strict_json(tmp_path / "o" / "result.json")
+    assert res["at_bound"]["lam"]["bound"] == "upper"
+    assert "within 1 % of its upper bound" in capsys.readouterr().err
+
+
+def test_two_runs_write_byte_identical_results_that_rebuild_the_design(tmp_path):
+    """result.json and history.json are byte-identical for two runs (timings go to timing.json); they hold
+    ts, rule, omega_n, every value, versions and the job file's sha256; export rebuilds the tuned design
+    from them; scores.nc has the grid's axis as a dim; the linear structure is there for every design."""
+    import hashlib
+
+    import xarray as xr
+
+    from tuning.export import observer_from_result
+
+    path = tmp_path / "job.toml"
+    path.write_text(GOOD)
+    for o in ("a", "b"):
+        assert main(["tune", str(path), "--out", str(tmp_path / o), "--quiet"]) == 0
+    for f in ("result.json", "history.json"):
+        assert (tmp_path / "a" / f).read_bytes() == (tmp_path / "b" / f).read_bytes(), f
+    res = _strict_json(tmp_path / "a" / "result.json")
+    assert res["job_sha256"] == hashlib.sha256(path.read_bytes()).hexdigest()
+    assert res["versions"]["x64"] is True and res["versions"]["jax"] == jax.__version__
+    assert res["rule"] == {"name": "AB3"} and res["ts"] == pytest.approx(1e-4) and res["omega_n"] == W_N
+    assert res["values"]["tuned"]["k"] == papers.SOGI_FLL_K and "lam" in res["values"]["tuned"]
+    assert "time_s" not in res and "total_s" in json.loads((tmp_path / "a" / "timing.json").read_text())
+    hist = _strict_json(tmp_path / "a" / "history.json")
+    assert [h["iteration"] for h in hist] == [0, 1, 2, 3] and all("lam" in h["gains"] for h in hist)
+    notes = []
+    obs = observer_from_result(tmp_path / "a" / "result.json", notes=notes)
+    assert float(obs.lam) == res["gains"]["tuned"]["lam"] and obs.ts == res["ts"] and type(obs.rule).__name__ == "AB3"
+    assert not any("has no" in n for n in notes)
+    ds = xr.open_dataset(tmp_path / "a" / "scores.nc", engine="scipy")
+    assert ds["itae_freq"].dims == ("design", "freq_step") and list(ds["freq_step"].values) == [1.0, 2.0]
+    for d in ("closed_form", "tuned"):
+        lin = res["linear"][d]
+        assert lin["phase_margin_deg"] > 0 and lin["crossover_hz"] > 0 and 0 < lin["dominant_damping"] <= 1
+    # the closed form at the closed-form design: ζ = 1/√2, the rule's λ
+    cf = res["linear"]["closed_form"]
+    assert cf["dominant_damping"] == pytest.approx(1 / math.sqrt(2), rel=1e-4)
+    assert cf["closed_form_rule"]["lam_over_rule"] == pytest.approx(1.0, rel=1e-4)
+
+
+def test_wif_structure_of_the_symmetric_optimum():
+    """At 001's WIF gains the linear model gives the symmetric optimum back: PM 45°, crossover 18.8 Hz,
+    ζ = 1/√2 for the pair, b = 1 + √2 and λ = 2ωc²/b at the design's k1, k2."""
+    from tuning.structure import structure
+
+    s = structure("SOGIFLLWIF", dict(k1=papers.WIF_K1, k2=papers.WIF_K2, lam=papers.WIF_LAM, omega_n=W_N))
+    assert s["phase_margin_deg"] == pytest.approx(45.0, abs=0.1)
+    assert s["crossover_hz"] == pytest.approx(18.8, rel=1e-3)
+    assert s["dominant_damping"] == pytest.approx(1 / math.sqrt(2), rel=1e-3)
+    rule = s["closed_form_rule"]
+    assert rule["b_implied"] == pytest.approx(1 + math.sqrt(2), rel=1e-3)
+    assert rule["lam_rule"] == pytest.approx(papers.WIF_LAM, rel=1e-3)
+    assert s["gain_margin_db"] is None and "gain_margin_db" in s["not_available"]
+    fa = structure("FALESO", load_job(Path(__file__).parents[1] / "tuning" / "presets" / "faleso.toml").values)
+    assert fa["routh_stable"] is True
+
+
+def test_bfgs_records_every_iteration_with_a_readable_reason(tmp_path, capsys):
+    """optimistix BFGS run step by step: one history entry per accepted iterate, a status and a sentence
+    (never the raw enum text), and options that do not apply to BFGS rejected at --check."""
+    text = GOOD.replace('kind = "adam"', 'kind = "bfgs"')
+    path = tmp_path / "job.toml"
+    path.write_text(text)
+    assert main(["tune", str(path), "--out", str(tmp_path / "o"), "--quiet"]) == 0
+    res = _strict_json(tmp_path / "o" / "result.json")
+    hist = _strict_json(tmp_path / "o" / "history.json")
+    assert res["status"] in ("converged", "budget", "no_improvement")
+    assert "has no roots" not in res["reason"] and "BFGS" in res["reason"] or res["status"] == "no_improvement"
+    assert len(hist) >= 2 and hist[0]["iteration"] == 0
+    assert res["gains"]["tuned"]["lam"] == pytest.approx(min(hist, key=lambda h: h["value"])["gains"]["lam"])
+    path.write_text(text.replace("steps = 3", "steps = 3\nlearning_rate = 0.1"))
+    assert main(["tune", str(path), "--check"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "solver.learning_rate" in err[0] and "bfgs" in err[0]

@@ -485,34 +485,77 @@ def _cmd_tune(args) -> int:
         return 0
     out = Path(args.out) if args.out else Path("out") / job.name
     result = run_job(job, out, resume=args.resume, quiet=args.quiet)
-    _print_summary(result, out)
-    return 0
+    try:
+        timing = json.loads((out / "timing.json").read_text())
+    except (OSError, ValueError):
+        timing = {}
+    _print_summary(result, out, timing)
+    return 3 if result["status"] == "diverged" else 0
 
 
-def _print_summary(result: dict, out: Path):
-    g, s = result["gains"], result["scores"]
-    names = list(g["tuned"])
+def _fmt(v, spec=">14.6g") -> str:
+    if v is None:
+        return f"{'-':>14}"
+    if isinstance(v, bool):
+        return f"{'yes' if v else 'no':>14}"
+    return format(v, spec)
+
+
+_LINEAR_ROWS = (
+    ("phase margin (deg)", lambda s: s.get("phase_margin_deg")),
+    ("crossover (Hz)", lambda s: s.get("crossover_hz")),
+    ("dominant damping", lambda s: s.get("dominant_damping")),
+    ("dominant pole (Hz)", lambda s: s.get("dominant_hz")),
+    ("least pair damping", lambda s: s.get("least_pair_damping")),
+    ("stable (linear)", lambda s: s.get("stable")),
+    ("Routh stable", lambda s: s.get("routh_stable")),
+    ("b = k1/k2", lambda s: s.get("closed_form_rule", {}).get("b_implied")),
+    ("wc = k2 wn/2 (Hz)", lambda s: s.get("closed_form_rule", {}).get("crossover_hz_implied")),
+    ("PM of SO at b (deg)", lambda s: s.get("closed_form_rule", {}).get("phase_margin_deg_implied")),
+    ("lam by the rule", lambda s: s.get("closed_form_rule", {}).get("lam_rule")),
+    ("lam / rule", lambda s: s.get("closed_form_rule", {}).get("lam_over_rule")),
+    ("kp by the rule", lambda s: s.get("closed_form_rule", {}).get("kp_rule")),
+)
+
+
+def _print_summary(result: dict, out: Path, timing: dict | None = None):
+    g, s, lin = result["gains"], result["scores"], result.get("linear", {})
+    designs = ("initial", "closed_form", "tuned")
+    heads = "".join(f"{h:>14}" for h in ("initial", "closed form", "tuned"))
+    secs = f", {timing['total_s']:.1f} s" if timing and "total_s" in timing else ""
     print(
-        f"{result['component']} tuned in {result['iterations']} iterations ({result['stopped']}), "
-        f"{result['time_s']:.1f} s, "
+        f"{result['component']}: {result['status']} after {result['iterations']} iterations{secs}, "
         f"{result['scenarios']['count']} scenarios"
     )
-    head = f"{'gain':<8}{'initial':>14}{'closed form':>14}{'tuned':>14}"
-    print(head)
+    print(f"  {result['reason']}")
+    if result["status"] == "diverged":
+        print("DIVERGED: no gains are reported as tuned (every design tried diverged in some tuning scenario)")
+    names = list(g["initial"])
+    print(f"{'gain':<22}{heads}")
     for n in names:
-        print(f"{n:<8}{g['initial'][n]:>14.6g}{g['closed_form'][n]:>14.6g}{g['tuned'][n]:>14.6g}")
+        print(f"{n:<22}" + "".join(_fmt((g[d] or {}).get(n)) for d in designs))
     print(f"closed form: {result['closed_form_source']}")
-    keys = [k for k in s["tuned"] if k not in ("diverged",)]
-    print(f"{'score':<28}{'initial':>14}{'closed form':>14}{'tuned':>14}")
+    rows = [(label, [None if lin.get(d) is None else f(lin[d]) for d in designs]) for label, f in _LINEAR_ROWS]
+    rows = [(label, vals) for label, vals in rows if any(v is not None for v in vals)]
+    if rows:
+        print(f"{'linear model':<22}{heads}")
+        for label, vals in rows:
+            print(f"{label:<22}" + "".join(_fmt(v) for v in vals))
+    keys = [k for k in s["initial"] if k not in ("diverged", "null_reason")]
+    print(f"{'score':<22}{heads}")
     for k in keys:
-        print(f"{k:<28}{s['initial'][k]:>14.6g}{s['closed_form'][k]:>14.6g}{s['tuned'][k]:>14.6g}")
+        print(f"{k:<22}" + "".join(_fmt((s[d] or {}).get(k)) for d in designs))
+    print(f"{'diverged scenarios':<22}" + "".join(_fmt((s[d] or {}).get("diverged"), ">14d") for d in designs))
     if "holdout" in result:
         h = result["holdout"]
-        print(
-            f"held-out set ({h['count']} scenarios): worst {h['closed_form']['per_scenario_worst']:.6g} "
-            f"(closed form) vs {h['tuned']['per_scenario_worst']:.6g} (tuned)"
-        )
-    print(f"results: {out / 'result.json'}")
+        worst = {d: (h[d] or {}).get("per_scenario_worst") for d in designs}
+        div = {d: (h[d] or {}).get("diverged") for d in designs}
+        print(f"{'held-out worst':<22}" + "".join(_fmt(worst[d]) for d in designs) + f"   ({h['count']} scenarios)")
+        print(f"{'held-out diverged':<22}" + "".join(_fmt(div[d], ">14d") for d in designs))
+    for name, b in result.get("at_bound", {}).items():
+        msg = f"warning: tuned {name} = {b['value']:.6g} is within 1 % of its {b['bound']} bound {b['limit']:g}"
+        print(f"jaxobs: {msg}", file=sys.stderr)
+    print(f"results: {out / 'result.json'} (history.json, timing.json, scores.nc)")
 
 
 class _Parser(argparse.ArgumentParser):

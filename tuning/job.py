@@ -47,6 +47,8 @@ A job file::
 
 from __future__ import annotations
 
+import dataclasses
+import hashlib
 import itertools
 import json
 import math
@@ -69,7 +71,7 @@ from .params import GainSpec, Parametrization
 from .report import write_report
 from .solvers import SolverConfig, run_solver
 
-__all__ = ["JobError", "Job", "load_job", "parse_job", "run_job", "COMPONENTS"]
+__all__ = ["JobError", "Job", "load_job", "parse_job", "run_job", "COMPONENTS", "rule_spec", "write_json"]
 
 
 class JobError(ValueError):
@@ -292,6 +294,7 @@ class Job:
     temperature: float | None
     penalty: float
     solver: SolverConfig
+    sha256: str | None = None  # of the job file's bytes (load_job); None for a job built from a dict
 
 
 def _parse_scenarios(tab: dict, where: str, signal_default: str, seed: int) -> ScenarioSpec:
@@ -430,6 +433,10 @@ def parse_job(raw: dict) -> Job:
     kind = _get(sol_t, "kind", "solver.kind", str, "adam")
     if kind not in ("adam", "adamw", "sgd", "bfgs"):
         raise JobError("solver.kind", f"must be adam, adamw, sgd or bfgs, got {kind!r}")
+    if kind == "bfgs":  # optimistix BFGS: no learning rate, schedule, patience or checkpoints
+        for key in ("learning_rate", "schedule", "patience", "checkpoint_every"):
+            if key in sol_t:
+                raise JobError(f"solver.{key}", "does not apply to kind = 'bfgs' (it applies to adam, adamw, sgd)")
     cfg = SolverConfig(
         kind=kind,
         learning_rate=_get(sol_t, "learning_rate", "solver.learning_rate", float, 0.05),
@@ -454,14 +461,19 @@ def parse_job(raw: dict) -> Job:
 def load_job(path) -> Job:
     path = Path(path)
     try:
-        text = path.read_text()
+        data = path.read_bytes()
+        text = data.decode()
     except OSError as e:
         raise JobError("job file", f"cannot read {str(path)!r}: {e.strerror}") from None
+    except UnicodeDecodeError as e:
+        raise JobError("job file", f"not UTF-8 text: {e}") from None
     try:
         raw = tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:
         raise JobError("job file", f"not valid TOML: {e}") from None
-    return parse_job(raw)
+    job = parse_job(raw)
+    job.sha256 = hashlib.sha256(data).hexdigest()
+    return job
 
 
 # --------------------------------------------------------------------------
@@ -566,8 +578,100 @@ def _inside(g: GainSpec, v: float) -> float:
     return float(v)
 
 
+def rule_spec(rule) -> dict:
+    """A discretization rule as JSON that :func:`tuning.export.parse_rule` reads back: ``{"name": ..., options}``."""
+    opts = {f.name: getattr(rule, f.name) for f in dataclasses.fields(rule)}
+    return {"name": type(rule).__name__, **{k: v for k, v in opts.items() if isinstance(v, (bool, int, float, str))}}
+
+
+def sanitize(obj, path: str = "", reasons: dict | None = None):
+    """``obj`` with every non-finite float replaced by ``None``; ``reasons[path]`` says what it was."""
+    reasons = {} if reasons is None else reasons
+    if isinstance(obj, dict):
+        return {k: sanitize(v, f"{path}.{k}" if path else str(k), reasons) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [sanitize(v, f"{path}[{i}]", reasons) for i, v in enumerate(obj)]
+    if isinstance(obj, (float, np.floating)) and not math.isfinite(float(obj)):
+        reasons[path] = f"not a finite number ({float(obj)})"
+        return None
+    if isinstance(obj, np.generic):
+        return obj.item()
+    return obj
+
+
+def write_json(path: Path, obj) -> None:
+    """JSON without NaN or Infinity tokens: non-finite numbers become null, listed under ``null_reasons``."""
+    reasons: dict = {}
+    clean = sanitize(obj, "", reasons)
+    if reasons and isinstance(clean, dict):
+        clean["null_reasons"] = {**clean.get("null_reasons", {}), **reasons}
+    path.write_text(json.dumps(clean, indent=1, allow_nan=False) + "\n")
+
+
+def _at_bounds(job: Job, gains: dict) -> dict:
+    """Free gains within 1 % of a bound: {name: {"bound": "lower" | "upper", "limit": ..., "value": ...}}."""
+    out = {}
+    for g in job.gains:
+        v = gains[g.name]
+        for side, lim in (("lower", g.lower), ("upper", g.upper)):
+            if lim is not None and abs(v - lim) <= 0.01 * abs(lim):
+                out[g.name] = {"bound": side, "limit": lim, "value": v}
+    return out
+
+
+def _scores_dataset(obj, names, combos, spec: ScenarioSpec, per: dict):
+    """Per-scenario metrics of each design as an xarray Dataset: the grid's axes as dims (a full grid),
+    else one ``scenario`` dim with the axes as coordinates (sampled scenarios)."""
+    import xarray as xr
+
+    designs = list(per)
+    grid = spec.sample == 0
+    if grid:
+        dims = ("design", *names)
+        shape = tuple(len(spec.axes[n]) for n in names)
+        coords = {"design": designs, **{n: list(spec.axes[n]) for n in names}}
+    else:
+        dims, shape = ("design", "scenario"), (len(combos),)
+        coords = {"design": designs, "scenario": np.arange(len(combos))}
+        coords.update({n: ("scenario", [c[i] for c in combos]) for i, n in enumerate(names)})
+    data = {}
+    keys = [t.metric for t in obj.terms]
+    for key in (*keys, "total", "diverged"):
+        rows = []
+        for d in designs:
+            mets, total, good = per[d]
+            x = {"total": total, "diverged": ~good}.get(key, mets.get(key) if key in mets else None)
+            rows.append(np.asarray(x, dtype=float).reshape(shape))
+        data[key] = (dims, np.stack(rows))
+    ds = xr.Dataset(data, coords=coords)
+    ds["diverged"] = ds["diverged"].astype("int8")
+    ds.attrs["note"] = "total: the weighted objective per scenario (the penalty where diverged); diverged: 1/0"
+    return ds
+
+
+def _versions() -> dict:
+    import platform
+
+    import jax
+
+    return {
+        "jaxobs": jaxobs.__version__,
+        "jax": jax.__version__,
+        "numpy": np.__version__,
+        "python": platform.python_version(),
+        "x64": bool(jax.config.jax_enable_x64),
+    }
+
+
 def run_job(job: Job, out: Path, resume: bool = False, quiet: bool = False) -> dict:
-    """Tune, score initial / tuned / closed form on the same scenarios, write the results folder."""
+    """Tune, score initial / tuned / closed form on the same scenarios, write the results folder.
+
+    ``result.json`` (outcome, gains, every constructor value, scores, linear structure, what is needed to
+    rebuild the design) and ``history.json`` are byte-identical for two runs of one job; the timings go
+    to ``timing.json``, the per-scenario scores to ``scores.nc`` (and ``holdout_scores.nc``).
+    """
+    from .structure import structure
+
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.time()
     obj, (names, combos) = build_objective(job)
@@ -578,28 +682,61 @@ def run_job(job: Job, out: Path, resume: bool = False, quiet: bool = False) -> d
     cf = {g.name: cf_all[g.name] for g in job.gains}
     theta_cf = param.to_theta({g.name: _inside(g, cf[g.name]) for g in job.gains})
     res = run_solver(obj, theta0, job.solver, checkpoint=out / "checkpoint.npz", resume=resume, quiet=quiet)
-    thetas = {"initial": theta0, "tuned": res.theta, "closed_form": theta_cf}
-    result = {
-        "job": job.raw,
-        "component": job.component,
-        "closed_form_source": info.closed_form_source,
+    thetas = {"initial": theta0, "closed_form": theta_cf}
+    if res.theta is not None:  # never a design that diverged in some scenario
+        thetas["tuned"] = res.theta
+    gains = {
+        "initial": param.values(theta0),
         # the closed form is reported exactly; it is scored at θ nudged inside the gains' open bounds
-        "gains": {
-            "initial": param.values(theta0),
-            "tuned": param.values(res.theta),
-            "closed_form": {g.name: float(cf[g.name]) for g in job.gains},
-        },
-        "scores": {k: obj.scores(th) for k, th in thetas.items()},
+        "closed_form": {g.name: float(cf[g.name]) for g in job.gains},
+        "tuned": param.values(res.theta) if res.theta is not None else None,
+    }
+    fixed = {k: float(v) for k, v in job.values.items() if k not in param.names}
+    values = {k: (None if g is None else {**fixed, **g}) for k, g in gains.items()}
+    per = {k: obj.per_scenario(th) for k, th in thetas.items()}
+    scores = {k: (obj.summarize(*per[k]) if k in per else None) for k in gains}
+    lin = {k: (None if v is None else structure(job.component, v, job)) for k, v in values.items()}
+    result = {
+        "status": res.status,
+        "reason": res.reason,
+        "job": job.raw,
+        "job_sha256": job.sha256,
+        "component": job.component,
+        "ts": float(obj.component.ts),
+        "rule": rule_spec(obj.component.rule),
+        "omega_n": float(job.values["omega_n"]) if "omega_n" in job.values else None,
+        "closed_form_source": info.closed_form_source,
+        "gains": gains,
+        "values": values,
+        "at_bound": _at_bounds(job, gains["tuned"]) if gains["tuned"] is not None else {},
+        "scores": scores,
+        "linear": lin,
         "scenarios": {"axes": names, "count": len(combos)},
         "iterations": res.iterations,
-        "stopped": res.stopped,
-        "time_s": time.time() - t0,
+        "best_iteration": res.best_iteration,
+        "versions": _versions(),
     }
+    nulls = {}
+    if "omega_n" not in job.values:
+        nulls["omega_n"] = f"{job.component} has no nominal frequency omega_n"
+    if gains["tuned"] is None:
+        nulls["gains.tuned"] = nulls["values.tuned"] = nulls["scores.tuned"] = nulls["linear.tuned"] = (
+            "status 'diverged': every design tried diverged in some tuning scenario, so nothing is tuned"
+        )
+    if info.bind is not None:
+        result["values_note"] = "Rs, Lq and the PLL's initial speed are set per scenario from its estimated machine"
+    if nulls:
+        result["null_reasons"] = nulls
     if job.holdout is not None:
         hobj, (hn, hc) = build_objective(job, job.holdout)
-        result["holdout"] = {k: hobj.scores(th) for k, th in thetas.items()}
+        hper = {k: hobj.per_scenario(th) for k, th in thetas.items()}
+        result["holdout"] = {k: (hobj.summarize(*hper[k]) if k in hper else None) for k in gains}
         result["holdout"]["count"] = len(hc)
-    (out / "result.json").write_text(json.dumps(result, indent=1, default=float))
-    (out / "history.json").write_text(json.dumps(res.history))
+        _scores_dataset(hobj, hn, hc, job.holdout, hper).to_netcdf(out / "holdout_scores.nc", engine="scipy")
+    _scores_dataset(obj, names, combos, job.scenarios, per).to_netcdf(out / "scores.nc", engine="scipy")
+    write_json(out / "result.json", result)
+    write_json(out / "history.json", res.history)
     write_report(out, job, obj, thetas, res.history)
+    timing = {"total_s": time.time() - t0, **res.timing, "iterations": res.iterations}
+    (out / "timing.json").write_text(json.dumps(timing, indent=1) + "\n")
     return result

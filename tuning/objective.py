@@ -230,6 +230,12 @@ class Objective:
     def value_and_grad(self, theta):
         return self._aggregate_with_grad(theta)
 
+    def value_grad_diverged(self, theta):
+        """The objective, its gradient and how many scenarios diverged, from one batch evaluation."""
+        v, g, good = self._vg(theta)
+        agg_v, w = jax.value_and_grad(lambda vv: aggregate(vv, self.agg, self.alpha, self.temperature))(v)
+        return agg_v, w @ g, int(jnp.sum(~good))
+
     # --- reporting
     def _per_scenario_metrics(self, theta, scenarios):
         def one(sig):
@@ -249,14 +255,23 @@ class Objective:
 
     def scores(self, theta, scenarios=None) -> dict:
         """Objective and each metric's mean and worst over ``scenarios`` (default: the tuning set)."""
-        mets, total, good = self.per_scenario(theta, scenarios)
+        return self.summarize(*self.per_scenario(theta, scenarios))
+
+    def summarize(self, mets, total, good) -> dict:
+        """:meth:`scores` from :meth:`per_scenario`'s output.  Where every scenario diverged the metrics'
+        means and worsts are ``None`` (there is nothing to average), and ``"null_reason"`` says why."""
         out = {
             "objective": float(aggregate(total, self.agg, self.alpha, self.temperature)),
             "diverged": int(jnp.sum(~good)),
         }
         for term in self.terms:
             m = jnp.where(good, mets[term.metric], jnp.nan)
-            out[f"{term.metric}_mean"] = float(jnp.nanmean(m))
-            out[f"{term.metric}_worst"] = float(jnp.nanmax(m))
+            if bool(jnp.any(good)):
+                out[f"{term.metric}_mean"] = float(jnp.nanmean(m))
+                out[f"{term.metric}_worst"] = float(jnp.nanmax(m))
+            else:
+                out[f"{term.metric}_mean"] = out[f"{term.metric}_worst"] = None
         out["per_scenario_worst"] = float(jnp.max(total))
+        if not bool(jnp.any(good)):
+            out["null_reason"] = "every scenario diverged: the metrics' means and worsts are undefined"
         return out

@@ -23,7 +23,7 @@ import numpy as np
 import optax
 import optimistix as optx
 
-__all__ = ["SolverConfig", "TuneResult", "run_solver", "make_optax"]
+__all__ = ["SolverConfig", "TuneResult", "run_solver", "make_optax", "decide_status", "STATUSES"]
 
 
 @dataclass(frozen=True)
@@ -40,11 +40,57 @@ class SolverConfig:
 
 @dataclass
 class TuneResult:
-    theta: jax.Array
+    """What a solver found.  ``theta`` is the best design that diverged in no tuning scenario (``None``
+    when no design tried was stable: ``status == "diverged"``); ``history`` has one entry per point
+    evaluated (iteration, objective, diverged scenarios, gains); ``status`` is one of
+    ``converged | budget | no_improvement | diverged`` and ``reason`` says why in words."""
+
+    theta: jax.Array | None
     value: float
     iterations: int
     history: list = field(default_factory=list)
-    stopped: str = ""
+    status: str = ""
+    reason: str = ""
+    best_iteration: int | None = None
+    timing: dict = field(default_factory=dict)
+
+    @property
+    def stopped(self) -> str:  # the old name of the outcome
+        return self.status
+
+
+STATUSES = ("converged", "budget", "no_improvement", "diverged")
+
+
+def _entry(objective, it, value, diverged, theta) -> dict:
+    return dict(iteration=int(it), value=float(value), diverged=int(diverged), gains=objective.param.values(theta))
+
+
+def decide_status(
+    history: list, finished: bool, tol: float, finished_reason: str, budget_reason: str, best: int | None = None
+):
+    """(status, reason, best entry index) from the history: the best design is the least objective among
+    the points that diverged in no scenario; none: ``diverged``; the initial point best (no relative
+    improvement > ``tol``): ``no_improvement``; else ``converged`` if the solver ``finished`` by its own
+    test, ``budget`` if it ran out of steps.  ``best``: the solver's own choice of best stable entry."""
+    stable = [i for i, h in enumerate(history) if h["diverged"] == 0]
+    n_div = sum(1 for h in history if h["diverged"] > 0)
+    if not stable:
+        worst = min(h["diverged"] for h in history) if history else 0
+        return (
+            "diverged",
+            f"every design tried ({len(history)}) diverged in at least {worst} tuning scenario(s): nothing is tuned",
+            None,
+        )
+    if best is None or history[best]["diverged"]:
+        best = min(stable, key=lambda i: (history[i]["value"], i))
+    h0 = history[0]
+    note = f"; {n_div} of {len(history)} designs tried diverged and were never candidates" if n_div else ""
+    if h0["diverged"] == 0 and (best == 0 or history[best]["value"] >= h0["value"] - tol * abs(h0["value"])):
+        return "no_improvement", f"no design improved on the initial one{note}", best
+    if finished:
+        return "converged", finished_reason + note, best
+    return "budget", budget_reason + note, best
 
 
 def make_optax(cfg: SolverConfig):
@@ -60,10 +106,13 @@ def make_optax(cfg: SolverConfig):
     raise ValueError(f"solver.kind must be one of adam, adamw, sgd, bfgs, got {cfg.kind!r}")
 
 
-def _progress(i, total, value, best, stream=sys.stderr):
+def _progress(i, total, value, best, diverged=0, stream=sys.stderr):
     width = 24
     done = int(width * min(i, total) / max(total, 1))
-    stream.write(f"tune [{'#' * done}{'.' * (width - done)}] {i:>4}/{total} objective {value:.6g} best {best:.6g}\n")
+    div = f" diverged {diverged}" if diverged else ""
+    stream.write(
+        f"tune [{'#' * done}{'.' * (width - done)}] {i:>4}/{total} objective {value:.6g} best {best:.6g}{div}\n"
+    )
     stream.flush()
 
 
@@ -91,21 +140,11 @@ def _load_checkpoint(path: Path, opt_state_template):
 def run_solver(
     objective, theta0, cfg: SolverConfig, checkpoint: Path | None = None, resume: bool = False, quiet: bool = False
 ) -> TuneResult:
-    """Minimize ``objective`` from θ0 with the configured solver."""
-    t_start = time.time()
+    """Minimize ``objective`` from θ0 with the configured solver; the best design is the best one that
+    diverged in no scenario (:func:`decide_status`)."""
     if cfg.kind == "bfgs":
-        fn = lambda th, _: objective.value(th)  # noqa: E731
-        sol = optx.minimise(fn, optx.BFGS(rtol=cfg.tol, atol=cfg.tol), theta0, max_steps=cfg.steps, throw=False)
-        value = float(objective.value(sol.value))
-        steps = int(sol.stats.get("num_steps", cfg.steps))
-        return TuneResult(
-            theta=sol.value,
-            value=value,
-            iterations=steps,
-            history=[dict(iteration=steps, value=value, time_s=time.time() - t_start)],
-            stopped=str(sol.result),
-        )
-
+        return _run_bfgs(objective, theta0, cfg, quiet)
+    t_start = time.time()
     opt = make_optax(cfg)
     theta = theta0
     opt_state = opt.init(theta)
@@ -124,21 +163,22 @@ def run_solver(
         updates, opt_state = opt.update(grad, opt_state, theta)
         return optax.apply_updates(theta, updates), opt_state
 
-    stopped = "budget"
+    early = False
     it = start
     for it in range(start, cfg.steps):
-        value, grad = objective.value_and_grad(theta)
+        value, grad, ndiv = objective.value_grad_diverged(theta)
         value = float(value)
-        history.append(dict(iteration=it, value=value, time_s=time.time() - t_start))
-        improved = (not math.isfinite(best_value)) or value < best_value - cfg.tol * abs(best_value)
+        history.append(_entry(objective, it, value, ndiv, theta))
+        # a design that diverges in some scenario is never a candidate, whatever its (penalized) value
+        improved = ndiv == 0 and ((not math.isfinite(best_value)) or value < best_value - cfg.tol * abs(best_value))
         if improved:
             best_value, best_theta, since_best = value, theta, 0
         else:
             since_best += 1
         if not quiet and (it % cfg.progress_every == 0 or it == cfg.steps - 1):
-            _progress(it + 1, cfg.steps, value, best_value)
+            _progress(it + 1, cfg.steps, value, best_value, ndiv)
         if since_best >= cfg.patience:
-            stopped = "early stop"
+            early = True
             it += 1
             break
         theta, opt_state = update(theta, opt_state, grad)
@@ -146,8 +186,94 @@ def run_solver(
             _save_checkpoint(checkpoint, it + 1, theta, opt_state, best_theta, best_value, history, since_best)
     else:
         it = cfg.steps
-    # the last update is scored too: keep whichever point is best
-    value = float(objective.value(theta))
-    if value < best_value:
-        best_value, best_theta = value, theta
-    return TuneResult(theta=best_theta, value=best_value, iterations=it, history=history, stopped=stopped)
+    if not early:  # the last update is scored too: keep it if it is stable and better
+        value, _, ndiv = objective.value_grad_diverged(theta)
+        history.append(_entry(objective, it, float(value), ndiv, theta))
+        if ndiv == 0 and float(value) < best_value:
+            best_value, best_theta = float(value), theta
+    # the loop's best (first to reach best_value, the early-stop test's choice)
+    best_idx = next((i for i, h in enumerate(history) if h["diverged"] == 0 and h["value"] == best_value), None)
+    status, reason, best = decide_status(
+        history,
+        early,
+        cfg.tol,
+        f"converged: no relative improvement > {cfg.tol:g} in {cfg.patience} iterations",
+        f"budget: {cfg.steps} steps used, still improving",
+        best_idx,
+    )
+    return TuneResult(
+        theta=None if best is None else best_theta,
+        value=math.nan if best is None else history[best]["value"],
+        iterations=it,
+        history=history,
+        status=status,
+        reason=reason,
+        best_iteration=None if best is None else history[best]["iteration"],
+        timing=dict(solver_s=time.time() - t_start),
+    )
+
+
+def _bfgs_reason(result) -> tuple[bool, str]:
+    """(finished by its own test, a sentence) for an optimistix RESULTS value."""
+    R = optx.RESULTS
+    if result == R.successful:
+        return True, "converged: BFGS's relative change of θ and of the objective fell below tol"
+    if result == R.nonlinear_max_steps_reached:
+        return False, "budget: BFGS used its max_steps"
+    if result == R.nonlinear_divergence:
+        return False, "BFGS diverged"
+    if result == R.nonfinite:
+        return False, "BFGS met a non-finite objective or gradient"
+    return False, f"BFGS stopped: {R[result] or 'unknown reason'}"
+
+
+def _run_bfgs(objective, theta0, cfg: SolverConfig, quiet: bool) -> TuneResult:
+    """optimistix BFGS run step by step (init / step / terminate), so that every accepted iterate is
+    recorded and progress is shown.  Each recorded iterate is scored once more for its diverged count."""
+    import equinox as eqx
+
+    t_start = time.time()
+    solver = optx.BFGS(rtol=cfg.tol, atol=cfg.tol)
+    fn = lambda th, _: (objective.value(th), None)  # noqa: E731
+    tags = frozenset()
+    f_struct = jax.ShapeDtypeStruct((), theta0.dtype)
+    state = solver.init(fn, theta0, None, {}, f_struct, None, tags)
+    step = eqx.filter_jit(lambda y, st: solver.step(fn, y, None, {}, st, tags))
+    terminate = eqx.filter_jit(lambda y, st: solver.terminate(fn, y, None, {}, st, tags))
+    y = theta0
+    value, _, ndiv = objective.value_grad_diverged(y)
+    history = [_entry(objective, 0, value, ndiv, y)]
+    best_value = float(value) if ndiv == 0 else math.inf
+    result, n = optx.RESULTS.nonlinear_max_steps_reached, 0
+    for n in range(1, cfg.steps + 1):
+        done, res = terminate(y, state)
+        if bool(done):
+            result, n = res, n - 1
+            break
+        y_new, state, _ = step(y, state)
+        if not bool(jnp.all(y_new == y)):  # an accepted step: record the new iterate
+            y = y_new
+            value, _, ndiv = objective.value_grad_diverged(y)
+            history.append(_entry(objective, n, value, ndiv, y))
+            if ndiv == 0:
+                best_value = min(best_value, float(value))
+        if not quiet and (n % cfg.progress_every == 0 or n == cfg.steps):
+            _progress(n, cfg.steps, history[-1]["value"], best_value, history[-1]["diverged"])
+    else:
+        done, res = terminate(y, state)
+        if bool(done):
+            result = res
+    finished, sentence = _bfgs_reason(result)
+    status, reason, best = decide_status(history, finished, cfg.tol, sentence, sentence)
+    if not finished and status == "converged":  # pragma: no cover - decide_status returns budget then
+        status = "budget"
+    return TuneResult(
+        theta=None if best is None else objective.param.to_theta(history[best]["gains"]),
+        value=math.nan if best is None else history[best]["value"],
+        iterations=n,
+        history=history,
+        status=status,
+        reason=reason if status != "budget" or "budget" in reason else f"{sentence} ({reason})",
+        best_iteration=None if best is None else history[best]["iteration"],
+        timing=dict(solver_s=time.time() - t_start),
+    )

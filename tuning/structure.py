@@ -1,0 +1,188 @@
+"""The linear structure of a design: what the papers' small-signal models say about a set of gains.
+
+For a design (every constructor value of a component: the tuned or fixed gains,
+ωn, ...) :func:`structure` returns one JSON-ready table:
+
+- ``phase_margin_deg``, ``crossover_hz`` (and ``gain_margin_db``) of the loop the
+  paper closes (001 Fig. 14 for the FLL family; the PLL through the FA-LESO, 002);
+- ``dominant_damping``: the damping ratio −Re p/|p| of the closed loop's slowest
+  poles (1 for a real pole), with ``dominant_hz`` = |p|/2π, ``least_pair_damping``
+  (the least damped complex pair; 1 if none) and ``stable``;
+- the closed-form rule re-evaluated at the design's other gains: the λ of 001 eq (22)
+  at the design's k (SOGI-FLL), of eq (29) (WPF), of the symmetric optimum at the
+  design's k1, k2 (WIF, with the implied b = k1/k2 and ωc = k2ωn/2 and the PM that b
+  would give, eq 39); lam = k²/4 and K1³/(2K2) for the flux observers;
+- a Routh test where the paper gives one (FA-LESO, 002 eq 24).
+
+What a model cannot say is ``None``, and ``not_available`` says why, field by field.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from jaxobs import linear, papers
+
+__all__ = ["structure", "STRUCTURE_FIELDS"]
+
+STRUCTURE_FIELDS = ("phase_margin_deg", "crossover_hz", "gain_margin_db", "dominant_damping", "dominant_hz", "stable")
+
+
+def _margins(loop) -> dict:
+    m = linear.margins(loop)
+    pm, wgc, gm = float(m.phase_margin), float(m.omega_gc), float(m.gain_margin)
+    out, why = {}, {}
+    out["phase_margin_deg"] = pm if math.isfinite(pm) else None
+    out["crossover_hz"] = wgc / (2 * math.pi) if math.isfinite(wgc) else None
+    if out["phase_margin_deg"] is None:
+        why["phase_margin_deg"] = why["crossover_hz"] = "the loop gain never crosses 1"
+    out["gain_margin_db"] = 20 * math.log10(gm) if math.isfinite(gm) and gm > 0 else None
+    if out["gain_margin_db"] is None:
+        why["gain_margin_db"] = "the loop's phase never crosses -180 deg (infinite gain margin)"
+    return out, why
+
+
+def _poles(tf) -> dict:
+    p = np.asarray(tf.poles(), dtype=complex)
+    dom = p[np.argmax(p.real)]
+    mag = abs(dom)
+    cplx = [z for z in p if abs(z.imag) > 1e-9 * abs(z)]
+    return {
+        "least_pair_damping": float(min(-z.real / abs(z) for z in cplx)) if cplx else 1.0,
+        "stable": bool(np.all(p.real < 0)),
+        "dominant_damping": float(-dom.real / mag) if mag > 0 else None,
+        "dominant_hz": float(mag / (2 * math.pi)),
+        "poles": [[float(z.real), float(z.imag)] for z in sorted(p, key=lambda z: (z.real, z.imag))],
+    }
+
+
+def _na(out: dict, why: dict, reason: str, *fields):
+    for f in fields:
+        out[f] = None
+        why[f] = reason
+
+
+def _fll(name: str, v: dict) -> tuple[dict, dict]:
+    wn = float(v["omega_n"])
+    if name == "SOGIFLL":
+        k, lam = float(v["k"]), float(v["lam"])
+        model = linear.sogi_fll_model(k, lam, wn)
+        rule = {
+            "rule": "001 eq (22): lam = k^2 omega_n^2 / (8 zeta^2), zeta = 1/sqrt(2), at this k",
+            "lam_rule": float(linear.sogi_fll_lambda(k, wn)),
+        }
+    elif name == "SOGIFLLWPF":
+        k1, k2, lam = float(v["k1"]), float(v["k2"]), float(v["lam"])
+        model = linear.wpf_model(k1, k2, lam, wn)
+        rule = {
+            "rule": "001 eq (29): lam = 2 (zeta + 1) omega_n^2 / (2 zeta + 1)^3 (it assumes k1 = k2 = sqrt(2))",
+            "lam_rule": float(linear.wpf_lambda(wn)),
+        }
+    else:
+        k1, k2, lam = float(v["k1"]), float(v["k2"]), float(v["lam"])
+        model = linear.wif_model(k1, k2, lam, wn)
+        b, wc = k1 / k2, k2 * wn / 2
+        rule = {
+            "rule": "001 eq (34), symmetric optimum at this k1, k2: b = k1/k2, omega_c = k2 omega_n/2, "
+            "lam = 2 omega_c^2 / b",
+            "b_implied": b,
+            "omega_c_implied": wc,
+            "crossover_hz_implied": wc / (2 * math.pi),
+            "lam_rule": 2 * wc**2 / b,
+            "phase_margin_deg_implied": float(np.degrees(linear.symmetric_optimum_pm(b))) if b > 1 else None,
+        }
+    out, why = _margins(model.open_loop)
+    out.update(_poles(model.frequency))
+    rule["lam_over_rule"] = float(v["lam"]) / rule["lam_rule"]
+    if rule.get("phase_margin_deg_implied", 0.0) is None:
+        why["phase_margin_deg_implied"] = "b = k1/k2 <= 1: no symmetric optimum"
+    out["model"] = {"SOGIFLL": "001 eqs (18)-(21)", "SOGIFLLWPF": "001 eqs (23)-(25)"}.get(name, "001 eqs (30)-(33)")
+    out["closed_form_rule"] = rule
+    return out, why
+
+
+def _flux(name: str, v: dict) -> tuple[dict, dict]:
+    w = float(v["omega0"])
+    out, why = {}, {}
+    _na(
+        out,
+        why,
+        "jaxobs.linear has no small-signal model of the flux observers' frequency loop (000 gives the filter only)",
+        "phase_margin_deg",
+        "crossover_hz",
+        "gain_margin_db",
+    )
+    if name == "SOIFO":
+        k, lam = float(v["k"]), float(v["lam"])
+        out.update(_poles(linear.soifo_tf(k, w)))
+        rule = {"rule": "lam = k^2/4 (001 eq 22 normalized), at this k", "lam_rule": k**2 / 4}
+    else:
+        K1, K2, lam = float(v["K1"]), float(v["K2"]), float(v["lam"])
+        out.update(_poles(linear.sosoifo_tf(K1, K2, w)))
+        rule = {"rule": "lam = K1^3/(2 K2), at this K1, K2", "lam_rule": K1**3 / (2 * K2)}
+    rule["lam_over_rule"] = lam / rule["lam_rule"]
+    out["model"] = "000 eqs (15), (20): the filter psi/e at omega0 (poles and damping are the filter's)"
+    out["closed_form_rule"] = rule
+    return out, why
+
+
+def _drive_speed(job) -> float:
+    """The electrical speed (rad/s) the drive jobs linearize at: the first scenario's speed (600 r/min default)."""
+    rpm = (job.scenarios.axes.get("speed_rpm") if job is not None else None) or [600.0]
+    rpm = rpm[0]
+    return rpm * math.pi / 30 * papers.IPMSM_002["p"]
+
+
+def _leso(name: str, v: dict, job) -> tuple[dict, dict]:
+    from jaxobs.linear import TransferFunction
+
+    we = _drive_speed(job)
+    kp, ki = float(v["kp_pll"]), float(v["ki_pll"])
+    out, why = {}, {}
+    if name == "FALESO":
+        k1, k2 = float(v["k1"]), float(v["k2"])
+        loop = linear.faleso_pll_loop(k1, k2, we, kp, ki)
+        m, why = _margins(loop)
+        out.update(m)
+        out.update(_poles(loop.feedback()))
+        out["routh_stable"] = bool(linear.faleso_is_stable(k1, k2, we))
+        out["model"] = f"002 eqs (21)-(24): the PLL through the FA-LESO, linearized at omega_e = {we:.6g} rad/s"
+    else:
+        pll = TransferFunction(np.array([kp, ki]), np.array([1.0, 0.0, 0.0]))
+        m, why = _margins(pll)
+        out.update(m)
+        out.update(_poles(pll.feedback()))
+        out["leso"] = _poles(linear.cleso_tf(float(v["omega0"])))
+        out["model"] = "the type-2 PLL alone, (kp s + ki)/s^2 (the C-LESO is not in the loop model)"
+        why["routh_stable"] = "no Routh test for the C-LESO in the papers (its poles are real, at -omega0)"
+        out["routh_stable"] = None
+    out["omega_e"] = we
+    b = math.sqrt(ki)
+    out["closed_form_rule"] = {
+        "rule": "PLL pole placement kp = 2 zeta omega_b, ki = omega_b^2 (zeta = 1/sqrt(2)) at this ki",
+        "kp_rule": float(linear.pll_gains(b)[0]),
+        "pll_bandwidth_hz_implied": b / (2 * math.pi),
+    }
+    return out, why
+
+
+def structure(component: str, values: dict, job=None) -> dict:
+    """The linear structure of a design (see the module docstring); ``values``: every constructor value."""
+    try:
+        if component in ("SOGIFLL", "SOGIFLLWPF", "SOGIFLLWIF"):
+            out, why = _fll(component, values)
+        elif component in ("SOIFO", "SecondOrderSOIFO"):
+            out, why = _flux(component, values)
+        elif component in ("CLESO", "FALESO"):
+            out, why = _leso(component, values, job)
+        else:
+            out, why = {}, {}
+            _na(out, why, f"no small-signal model of {component} in jaxobs.linear", *STRUCTURE_FIELDS)
+    except (ValueError, ArithmeticError, np.linalg.LinAlgError) as e:  # a model that cannot be evaluated
+        out, why = {}, {}
+        _na(out, why, f"the linear model could not be evaluated: {e}", *STRUCTURE_FIELDS)
+    if why:
+        out["not_available"] = why
+    return out
