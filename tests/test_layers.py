@@ -55,7 +55,7 @@ LAYERS = [
     ),
     ("jaxobs.reproduce",),
     # tuning: it changes gains (and exports the tuned observer)
-    ("tuning._cexpr", "tuning.params", "tuning.solvers"),
+    ("tuning._cexpr", "tuning.params", "tuning.solvers", "tuning.structure"),
     ("tuning._crules", "tuning._cmodels", "tuning.objective", "tuning.report", "tuning.targets"),
     ("tuning.job",),
     ("tuning.results", "tuning.export"),
