@@ -70,6 +70,7 @@ from .objective import METRICS, MetricContext, Objective, Term
 from .params import GainSpec, Parametrization
 from .report import write_report
 from .solvers import SolverConfig, run_solver
+from .structure import structure
 
 __all__ = ["JobError", "Job", "load_job", "parse_job", "run_job", "COMPONENTS", "rule_spec", "write_json"]
 
@@ -670,8 +671,6 @@ def run_job(job: Job, out: Path, resume: bool = False, quiet: bool = False) -> d
     rebuild the design) and ``history.json`` are byte-identical for two runs of one job; the timings go
     to ``timing.json``, the per-scenario scores to ``scores.nc`` (and ``holdout_scores.nc``).
     """
-    from .structure import structure
-
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.time()
     obj, (names, combos) = build_objective(job)
