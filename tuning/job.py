@@ -63,10 +63,11 @@ import numpy as np
 import jaxobs
 from jaxobs import drive as D
 from jaxobs import linear, papers
+from jaxobs.drive_study import DRIVE_STUDY_AXES, drive_scenarios
 from jaxobs.scenarios import grid_signals
 from jaxobs.signals import EMFSignal, stack
 
-from .objective import METRICS, MetricContext, Objective, Term
+from .objective import DRIVE_METRICS, METRICS, MetricContext, Objective, Term
 from .params import GainSpec, Parametrization
 from .report import write_report
 from .solvers import SolverConfig, run_solver
@@ -196,6 +197,27 @@ COMPONENTS = {
         closed_form_source="002 Table II (ω0 = 500π), PLL pole placement ω_b = 2π·15",
         bind=_bind_leso,
     ),
+    "GILESO": ComponentInfo(
+        jaxobs.GILESO,
+        gains=("omega0", "K_r", "omega_c", "kp_pll", "ki_pll"),
+        defaults=dict(
+            Rs=papers.IPMSM_002["Rs"],
+            Lq=papers.IPMSM_002["Lq"],
+            omega0=papers.LESO_OMEGA0,
+            K_r=papers.GILESO_K_R,
+            omega_c=papers.GILESO_OMEGA_C,
+            **_pll_cf(),
+        ),
+        closed_form=lambda c: {
+            "omega0": papers.LESO_OMEGA0,
+            "K_r": papers.GILESO_K_R,
+            "omega_c": papers.GILESO_OMEGA_C,
+            **_pll_cf(),
+        },
+        signal="drive",
+        closed_form_source="002 Table II (ω0 = 500π, K_r = 2ω0², ωc = π), PLL pole placement ω_b = 2π·15",
+        bind=_bind_leso,
+    ),
     "FALESO": ComponentInfo(
         jaxobs.FALESO,
         gains=("k1", "k2", "kp_pll", "ki_pll"),
@@ -211,7 +233,8 @@ COMPONENTS = {
 
 GRID_AXES = ("freq_step", "phase_jump_deg", "sag", "dc", "harmonics_scale", "sub_amplitude", "phase_deg")
 EMF_AXES = ("speed_hz", "dc_alpha", "dc_beta", "h5", "h7", "omega0_error", "phase_deg")
-DRIVE_AXES = ("speed_rpm", "load_nm", "dRs", "dLq")  # paper 002's IPMSM (assumed, see the README) on its bench
+# paper 002's IPMSM (assumed, see the README) on its bench: jaxobs.drive_study's axes (units and ranges there)
+DRIVE_AXES = tuple(DRIVE_STUDY_AXES)
 
 
 # --------------------------------------------------------------------------
@@ -296,6 +319,18 @@ class Job:
     penalty: float
     solver: SolverConfig
     sha256: str | None = None  # of the job file's bytes (load_job); None for a job built from a dict
+    drive: DriveSpec | None = None  # signal = "drive" jobs: how the observer sits in the loop
+
+
+@dataclass(frozen=True)
+class DriveSpec:
+    """``[drive]`` of a drive job: ``loop = "sensorless"`` (the default: the tuned observer closes the loop,
+    from t = 0 after its settling phase, or from ``handover`` s on) or ``"sensored"`` (the encoder closes it and
+    the observer estimates beside it); ``settle`` (s): the observer's unscored settling phase before t = 0."""
+
+    loop: str = "sensorless"
+    handover: float = 0.0
+    settle: float = 0.2
 
 
 def _parse_scenarios(tab: dict, where: str, signal_default: str, seed: int) -> ScenarioSpec:
@@ -324,6 +359,13 @@ def _parse_scenarios(tab: dict, where: str, signal_default: str, seed: int) -> S
         axes[k] = _get(grid, k, f"{where}.grid.{k}", list)
     if signal == "emf" and "speed_hz" in axes and min(axes["speed_hz"]) <= 0:
         raise JobError(f"{where}.grid.speed_hz", "must be > 0 Hz")
+    if signal == "drive":
+        for k, v in axes.items():  # the physical ranges of jaxobs.drive_study, checked at --check time
+            unit, (lo, hi) = DRIVE_STUDY_AXES[k]
+            if not v or not all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in v):
+                raise JobError(f"{where}.grid.{k}", "must be a non-empty list of numbers")
+            if not all(math.isfinite(x) and lo <= x <= hi for x in v):
+                raise JobError(f"{where}.grid.{k}", f"values must be in [{lo:g}, {hi:g}] {unit}")
     sample = _get(tab, "sample", f"{where}.sample", int, 0)
     if sample < 0:
         raise JobError(f"{where}.sample", f"must be >= 0, got {sample}")
@@ -333,7 +375,7 @@ def _parse_scenarios(tab: dict, where: str, signal_default: str, seed: int) -> S
 
 def parse_job(raw: dict) -> Job:
     """Validate a job dict (the parsed TOML); raises :class:`JobError` naming the field."""
-    _no_unknown(raw, ("job", "component", "gains", "scenarios", "holdout", "objective", "solver"), "job file")
+    _no_unknown(raw, ("job", "component", "gains", "scenarios", "holdout", "objective", "solver", "drive"), "job file")
     job_t = _get(raw, "job", "job", dict, required=True)
     _no_unknown(job_t, ("name", "component", "seed"), "job")
     name = _get(job_t, "name", "job.name", str, "job")
@@ -384,6 +426,22 @@ def parse_job(raw: dict) -> Job:
         values[gname] = init
 
     scen = _parse_scenarios(_get(raw, "scenarios", "scenarios", dict, required=True), "scenarios", info.signal, seed)
+    drive = None
+    if scen.signal == "drive":
+        dt = _get(raw, "drive", "drive", dict, {})
+        _no_unknown(dt, ("loop", "handover", "settle"), "drive")
+        loop = _get(dt, "loop", "drive.loop", str, "sensorless")
+        if loop not in ("sensorless", "sensored"):
+            raise JobError("drive.loop", f"must be 'sensorless' or 'sensored', got {loop!r}")
+        handover = _get(dt, "handover", "drive.handover", float, 0.0)
+        if not 0.0 <= handover < scen.horizon:
+            raise JobError("drive.handover", f"must be in [0, horizon = {scen.horizon:g}) s, got {handover:g}")
+        settle = _get(dt, "settle", "drive.settle", float, 0.2)
+        if not 0.0 <= settle <= 10.0:
+            raise JobError("drive.settle", f"must be in [0, 10] s, got {settle:g}")
+        drive = DriveSpec(loop, handover, settle)
+    elif "drive" in raw:
+        raise JobError("drive", f"applies to drive jobs (scenarios.signal = 'drive'), not {scen.signal!r} signals")
     holdout = None
     if "holdout" in raw:
         h = dict(_get(raw, "holdout", "holdout", dict))
@@ -406,6 +464,8 @@ def parse_job(raw: dict) -> Job:
         if metric not in METRICS:
             raise JobError(f"{where}.metric", f"unknown metric {metric!r}; known: {', '.join(METRICS)}")
         grid_only = metric.endswith(("_freq", "_phase", "freq_steady", "phase_steady"))
+        if metric in DRIVE_METRICS and info.signal != "drive":
+            raise JobError(f"{where}.metric", f"{metric!r} needs the closed-loop drive, not {comp} ({info.signal})")
         if (info.signal != "grid") == grid_only:
             raise JobError(f"{where}.metric", f"{metric!r} does not apply to {comp} ({info.signal} signals)")
         weight = _get(t, "weight", f"{where}.weight", float, 1.0)
@@ -456,7 +516,9 @@ def parse_job(raw: dict) -> Job:
             raise JobError(f"solver.{fld}", f"must be >= 1, got {getattr(cfg, fld)}")
     if cfg.schedule not in ("constant", "cosine"):
         raise JobError("solver.schedule", f"must be constant or cosine, got {cfg.schedule!r}")
-    return Job(raw, name, comp, seed, values, gains, scen, holdout, terms, agg, alpha, temperature, penalty, cfg)
+    return Job(
+        raw, name, comp, seed, values, gains, scen, holdout, terms, agg, alpha, temperature, penalty, cfg, drive=drive
+    )
 
 
 def load_job(path) -> Job:
@@ -493,31 +555,24 @@ def _combos(spec: ScenarioSpec):
     return names, combos
 
 
-def _drive_scenarios(names, combos):
-    par = D.ipmsm_paper002(J=papers.BENCH_J_002)
-    items = []
-    for combo in combos:
-        a = dict(zip(names, combo))
-        rpm = a.get("speed_rpm", 600.0)
-        est = D.ipmsm_paper002(
-            J=papers.BENCH_J_002, Rs=float(par.Rs) * (1 + a.get("dRs", 0.0)), Lq=float(par.Lq) * (1 + a.get("dLq", 0.0))
-        )
-        speed, load = D.Profile.constant(rpm * D.RPM), D.Profile.constant(a.get("load_nm", 0.0))
-        items.append(D.Scenario(par, est_par=est, speed_ref=speed, load=load, omega_m0=rpm * D.RPM))
-    return stack(items)
+def _drive_scenarios(names, combos, seed=0):
+    """The IPMSM bench (J = papers.BENCH_J_002) for every combination; each starts steady at its speed."""
+    return drive_scenarios(D.ipmsm_paper002(J=papers.BENCH_J_002), names, combos, seed=seed)
 
 
-def job_drive():
-    """The drive a ``signal = "drive"`` job runs: sensored FOC on the IPMSM, the observer estimating beside it."""
+def job_drive(spec: DriveSpec | None = None):
+    """The drive a ``signal = "drive"`` job runs: FOC on the IPMSM bench; sensorless by default (``spec``)."""
+    spec = DriveSpec() if spec is None else spec
     par = D.ipmsm_paper002(J=papers.BENCH_J_002)
-    return D.Drive(D.FOC.imc(par, 2 * math.pi * papers.BENCH_CURRENT_HZ, 2 * math.pi * papers.BENCH_SPEED_HZ))
+    foc = D.FOC.imc(par, 2 * math.pi * papers.BENCH_CURRENT_HZ, 2 * math.pi * papers.BENCH_SPEED_HZ)
+    return D.Drive(foc, sensorless=spec.loop == "sensorless", handover=spec.handover, settle=spec.settle)
 
 
 def build_scenarios(spec: ScenarioSpec, values: dict):
     """A batched signal for every combination of the axes (or ``sample`` random ones)."""
     names, combos = _combos(spec)
     if spec.signal == "drive":
-        return _drive_scenarios(names, combos), names, combos
+        return _drive_scenarios(names, combos, spec.seed), names, combos
     if spec.signal == "grid":
         return (
             grid_signals(names, combos, spec.t_event, float(values.get("omega_n", W_N)) / (2 * math.pi)),
@@ -552,7 +607,7 @@ def build_objective(job: Job, spec: ScenarioSpec | None = None):
     ctx = MetricContext(t_event=spec.t_event, steady_from=spec.steady_from)
     param = Parametrization(job.gains)
     info = COMPONENTS[job.component]
-    drive = job_drive() if info.signal == "drive" else None
+    drive = job_drive(job.drive) if info.signal == "drive" else None
     obj = Objective(
         comp,
         param,
@@ -701,6 +756,7 @@ def run_job(job: Job, out: Path, resume: bool = False, quiet: bool = False) -> d
         "job": job.raw,
         "job_sha256": job.sha256,
         "component": job.component,
+        "loop": None if job.drive is None else job.drive.loop,
         "ts": float(obj.component.ts),
         "rule": rule_spec(obj.component.rule),
         "omega_n": float(job.values["omega_n"]) if "omega_n" in job.values else None,
