@@ -18,6 +18,7 @@ from ._loop import ChunkCheckpoint as ChunkCheckpoint
 from ._loop import ForwardSensitivity as ForwardSensitivity
 from ._loop import NoCheckpoint as NoCheckpoint
 from ._loop import StepCheckpoint as StepCheckpoint
+from ._time import SampleTime as SampleTime
 from .discretize import AB3 as AB3
 from .discretize import RK4 as RK4
 from .discretize import Euler as Euler
@@ -80,6 +81,7 @@ from .signals import paper001_test as paper001_test
 from .signals import stack as stack
 from .simulate import AbstractSave as AbstractSave
 from .simulate import OnSignal as OnSignal
+from .simulate import PrecisionWarning as PrecisionWarning
 from .simulate import SaveAll as SaveAll
 from .simulate import SaveFinal as SaveFinal
 from .simulate import SignalOutput as SignalOutput

@@ -5,12 +5,26 @@ temperature for gradients, which converge to the exact ones as the temperature
 goes to 0 (tests/test_metrics.py).  Angles are electrical and errors are wrapped to
 (−π, π].  Bands, windows and event times are arguments, never constants.
 All functions act on the last axis (time) and broadcast over leading axes.
+
+Bad windows and bands.  A window (``mask``, or the samples from ``t_event`` on)
+that selects no sample has no metric: with a *concrete* mask (eager calls,
+reports) the function raises a ``ValueError``; with a *traced* one (inside
+``jit``/``vmap``/``grad``, where nothing can be raised) it returns NaN — the
+documented flag, which ``sol.ok``-style checks and ``jnp.isfinite`` catch (a
+tuning objective replaces it by its penalty).  Likewise ``settling_time`` and
+``smooth_settling_time`` reject a non-finite or negative ``band`` (and a
+non-finite ``final``) with a ``ValueError`` when concrete and return NaN when
+traced.  A settling time that never settles is capped at the end of the record;
+:func:`settled` says which values are censored.
 """
 
 from __future__ import annotations
 
+import math
+
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from ._math import wrap as wrap
 
@@ -32,7 +46,42 @@ __all__ = [
     "smooth_abs",
     "smooth_settling_time",
     "smooth_peak_to_peak",
+    "settled",
+    "lost_lock",
 ]
+
+
+def _concrete(*xs) -> bool:
+    return not any(isinstance(x, jax.core.Tracer) for x in xs)
+
+
+def _window(mask, name: str):
+    """The number of samples in the window; raises if a concrete window is empty (module doc)."""
+    count = jnp.sum(jnp.asarray(mask), axis=-1)
+    if _concrete(mask) and np.any(np.asarray(count) == 0):
+        raise ValueError(f"{name}: the window (mask) selects no samples; a metric of an empty window is undefined")
+    return count
+
+
+def _after(t, t_event, name: str):
+    """Mask t >= t_event; raises if a concrete ``t_event`` is after the last sample."""
+    m = t >= t_event
+    if _concrete(m) and not np.all(np.any(np.asarray(m), axis=-1)):
+        raise ValueError(f"{name}: t_event = {t_event!r} is after the last sample: the window after it is empty")
+    return m
+
+
+def _check_band(name: str, final, band):
+    """NaN flag (traced) or ValueError (concrete) for a non-finite or negative band, or a non-finite final."""
+    if _concrete(band) and not np.all(np.isfinite(np.asarray(band)) & (np.asarray(band) >= 0)):
+        raise ValueError(f"{name}: band must be finite and >= 0 (units of x), got {band!r}")
+    if _concrete(final) and not np.all(np.isfinite(np.asarray(final))):
+        raise ValueError(f"{name}: final must be finite, got {final!r}")
+    return ~(jnp.isfinite(band) & (band >= 0) & jnp.isfinite(final))
+
+
+def _nan_where(bad, x):
+    return jnp.where(bad, jnp.nan, x)
 
 
 def moving_average(x, n: int):
@@ -59,24 +108,51 @@ def settling_time(t, x, final, band, t_event=0.0):
 
     ``final`` and ``band`` are in the units of ``x`` (use band = 0.05·|step|
     for a 5 % band).  Returns 0 if x never leaves the band after the event,
-    and ``t[-1] − t_event`` if it has not settled by the end of the record.
+    and ``t[-1] − t_event`` if it has not settled by the end of the record —
+    a censored value, which :func:`settled` tells apart.
     """
-    outside = (jnp.abs(x - final) > band) & (t >= t_event)
+    bad = _check_band("settling_time", final, band)
+    after = _after(t, t_event, "settling_time")
+    outside = (jnp.abs(x - final) > band) & after
     idx = jnp.arange(x.shape[-1])
     last_out = jnp.max(jnp.where(outside, idx, -1), axis=-1)
     settled_at = jnp.where(last_out < 0, t_event, t[jnp.minimum(last_out + 1, x.shape[-1] - 1)])
-    return settled_at - t_event
+    return _nan_where(bad | ~jnp.any(after, axis=-1), settled_at - t_event)
+
+
+def settled(t, x, final, band, t_event=0.0, min_hold=0.0):
+    """Whether x has settled by the end of the record: after ``t_event`` it enters
+    |x − final| <= ``band`` and stays there, ending inside the band for at least ``min_hold`` s.
+
+    False marks :func:`settling_time` values that are censored at the horizon (the
+    signal was still outside the band at the last sample, or settled less than
+    ``min_hold`` before the end).  Checks its arguments as :func:`settling_time` does
+    (a traced bad band or empty window gives False).
+    """
+    bad = _check_band("settled", final, band)
+    after = _after(t, t_event, "settled")
+    outside = (jnp.abs(x - final) > band) & after
+    idx = jnp.arange(x.shape[-1])
+    last_out = jnp.max(jnp.where(outside, idx, -1), axis=-1)
+    n = x.shape[-1]
+    inside_at_end = last_out < n - 1
+    settled_at = jnp.where(last_out < 0, t_event, t[jnp.minimum(last_out + 1, n - 1)])
+    hold = t[..., -1] - settled_at
+    return inside_at_end & (hold >= min_hold) & ~bad & jnp.any(after, axis=-1)
 
 
 def peak_to_peak(x, mask):
     """max − min of ``x`` over the samples where ``mask`` is true."""
+    count = _window(mask, "peak_to_peak")
     hi = jnp.max(jnp.where(mask, x, -jnp.inf), axis=-1)
     lo = jnp.min(jnp.where(mask, x, jnp.inf), axis=-1)
-    return hi - lo
+    return _nan_where(count == 0, hi - lo)
 
 
 def steady_mean(x, mask):
-    return jnp.sum(jnp.where(mask, x, 0.0), axis=-1) / jnp.sum(mask, axis=-1)
+    """Mean of ``x`` over the samples where ``mask`` is true."""
+    count = _window(mask, "steady_mean")
+    return jnp.sum(jnp.where(mask, x, 0.0), axis=-1) / jnp.where(count == 0, jnp.nan, count)
 
 
 def rms(x, mask):
@@ -93,20 +169,25 @@ def overshoot(x, final, initial, mask=None):
     step = final - initial
     beyond = (x - final) * jnp.sign(step)
     if mask is not None:
+        empty = _window(mask, "overshoot") == 0
         beyond = jnp.where(mask, beyond, -jnp.inf)
+        return _nan_where(empty, jnp.maximum(jnp.max(beyond, axis=-1), 0.0) / jnp.abs(step))
     return jnp.maximum(jnp.max(beyond, axis=-1), 0.0) / jnp.abs(step)
 
 
 def iae(t, e, t_event=0.0):
     """∫|e| dt after ``t_event`` (rectangle rule on the sample grid)."""
     dt = t[1] - t[0]
-    return jnp.sum(jnp.where(t >= t_event, jnp.abs(e), 0.0), axis=-1) * dt
+    after = _after(t, t_event, "iae")
+    return _nan_where(~jnp.any(after, axis=-1), jnp.sum(jnp.where(after, jnp.abs(e), 0.0), axis=-1) * dt)
 
 
 def itae(t, e, t_event=0.0):
     """∫(t − t_event)|e| dt after ``t_event``."""
     dt = t[1] - t[0]
-    return jnp.sum(jnp.where(t >= t_event, (t - t_event) * jnp.abs(e), 0.0), axis=-1) * dt
+    after = _after(t, t_event, "itae")
+    val = jnp.sum(jnp.where(after, (t - t_event) * jnp.abs(e), 0.0), axis=-1) * dt
+    return _nan_where(~jnp.any(after, axis=-1), val)
 
 
 def harmonic_amplitude(t, x, omega, mask=None):
@@ -115,8 +196,11 @@ def harmonic_amplitude(t, x, omega, mask=None):
     Exact for a sinusoid when the window holds whole periods of every component
     present; ``omega = 0`` gives the mean (the dc offset).
     """
+    if mask is not None:
+        _window(mask, "harmonic_amplitude")
     w = jnp.ones_like(x) if mask is None else mask.astype(x.dtype)
     n = jnp.sum(w, axis=-1)
+    n = jnp.where(n == 0, jnp.nan, n)
     c = jnp.sum(w * x * jnp.cos(omega * t), axis=-1) / n
     s = jnp.sum(w * x * jnp.sin(omega * t), axis=-1) / n
     return jnp.where(omega == 0, c, 2 * jnp.sqrt(c * c + s * s))
@@ -140,9 +224,11 @@ def flux_imbalance(psi_a, psi_b, mask):
 def smooth_max(x, temperature, mask=None, axis=-1):
     """temperature·log Σ exp(x/temperature) − temperature·log n: between max − T log n and max."""
     if mask is not None:
+        _window(jnp.moveaxis(jnp.asarray(mask), axis, -1) if _concrete(mask) else mask, "smooth_max")
         x = jnp.where(mask, x, -jnp.inf)
     n = jnp.sum(jnp.isfinite(x), axis=axis)
-    return temperature * (jax.nn.logsumexp(x / temperature, axis=axis) - jnp.log(n))
+    val = temperature * (jax.nn.logsumexp(x / temperature, axis=axis) - jnp.log(n))
+    return _nan_where(n == 0, val)
 
 
 def smooth_abs(x, eps):
@@ -157,12 +243,29 @@ def smooth_settling_time(t, x, final, band, t_event=0.0, temperature=None, sharp
     time of the last sample outside the band, i.e. :func:`settling_time` minus
     one sample.  Defaults: temperature = 2 samples, sharpness = band/20.
     """
+    bad = _check_band("smooth_settling_time", final, band)
+    after = _after(t, t_event, "smooth_settling_time")
     dt = t[1] - t[0]
     temperature = 2 * dt if temperature is None else temperature
     sharpness = band / 20 if sharpness is None else sharpness
     outside = jax.nn.sigmoid((jnp.abs(x - final) - band) / sharpness)
     score = (t - t_event) * outside
-    return jnp.maximum(smooth_max(score, temperature, mask=t >= t_event), 0.0)
+    return _nan_where(bad, jnp.maximum(smooth_max(score, temperature, mask=after), 0.0))
+
+
+def lost_lock(theta_hat, theta, window_mask, tol_rad=math.pi / 4):
+    """Whether an estimate has lost lock: |wrap(θ̂ − θ)| > ``tol_rad`` somewhere in the final window.
+
+    ``window_mask`` marks the final (steady) window, e.g. ``window_mask(t, t1 − 0.1)``.  A locked
+    estimate stays within a few degrees of the truth there, even under distortion; one that slips
+    cycles, locks to the wrong frequency or diverges (NaN counts as far) sweeps through every angle.
+    The default tolerance, 45° (π/4 rad), is far above any locked steady error of the FLL family
+    and far below a slip.  Returns a bool per scenario (leading axes); a concrete empty window
+    raises, a traced one gives True (lock cannot be confirmed).
+    """
+    count = _window(window_mask, "lost_lock")
+    near = jnp.abs(wrap(theta_hat - theta)) <= tol_rad  # False for NaN
+    return jnp.any(window_mask & ~near, axis=-1) | (count == 0)
 
 
 def smooth_peak_to_peak(x, mask, temperature):

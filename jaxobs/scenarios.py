@@ -14,11 +14,14 @@ p.u., with a per-scenario seed).
 
 from __future__ import annotations
 
+from typing import ClassVar
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ._time import time_value
 from .papers import TEST_C_HARMONICS
 from .signals import GridSignal
 
@@ -43,8 +46,11 @@ class NoisyGridSignal(eqx.Module):
     noise: jax.Array
     key: jax.Array
 
+    accepts_sample_time: ClassVar[bool] = True  # passed on to the clean signal (exact float32 phase)
+
     def __call__(self, t):
-        n = jax.random.normal(self.key, jnp.shape(t), dtype=jnp.result_type(t))
+        tv = time_value(t)
+        n = jax.random.normal(self.key, jnp.shape(tv), dtype=jnp.result_type(tv))
         return self.clean(t) + self.noise * n
 
     def theta(self, t):

@@ -22,16 +22,18 @@ built by :func:`paper001_test`.
 from __future__ import annotations
 
 import math
+from typing import ClassVar
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 
 from . import papers
+from ._time import SampleTime, cycles, exact_phase, frac_mul, time_value
 from ._validate import as_float, check_nonnegative, check_positive, check_real, check_sample_time, static_float
 from .measurements import DriveInput
 
-__all__ = ["GridSignal", "SampledSignal", "EMFSignal", "paper001_test", "PAPER001_TESTS", "stack"]
+__all__ = ["GridSignal", "SampledSignal", "EMFSignal", "SampleTime", "paper001_test", "PAPER001_TESTS", "stack"]
 
 
 class GridSignal(eqx.Module):
@@ -90,11 +92,27 @@ class GridSignal(eqx.Module):
             if f_after <= 0:
                 raise ValueError(f"{own}.freq_step must keep the frequency > 0 Hz, got freq + freq_step = {f_after:g}")
 
+    # OnSignal passes a SampleTime (the sample index) instead of the rounded float t_k
+    accepts_sample_time: ClassVar[bool] = True
+
     def _on(self, t):
+        t = time_value(t)
         return (t >= self.t_event).astype(as_float(t).dtype)
 
+    def _cycles(self, t):
+        """θ(t)/(2π) without φ₀ and Δφ, in cycles; in float32 (a SampleTime) exact and reduced modulo 1.
+
+        The event term is split as Δf·t − Δf·tₑ so that each product is reduced exactly (jaxobs._time).
+        """
+        c = cycles(self.freq, t) + self._on(t) * (cycles(self.freq_step, t) - frac_mul(self.freq_step, self.t_event))
+        return c - jax.lax.stop_gradient(jnp.round(c))
+
     def theta(self, t):
-        """True fundamental phase θ(t), rad (unwrapped)."""
+        """True fundamental phase θ(t), rad: unwrapped in float64; in float32 from a :class:`SampleTime`,
+        reduced modulo 2π (an unwrapped float32 phase of 3·10⁴ rad is only good to 2 mrad)."""
+        if exact_phase(t, self.freq):
+            return 2 * jnp.pi * self._cycles(t) + self.phase + self._on(t) * self.phase_jump
+        t = time_value(t)
         on = self._on(t)
         dt = jnp.maximum(t - self.t_event, 0.0)
         return 2 * jnp.pi * self.freq * t + self.phase + on * (2 * jnp.pi * self.freq_step * dt + self.phase_jump)
@@ -112,7 +130,11 @@ class GridSignal(eqx.Module):
         v = self.fundamental_amplitude(t) * jnp.cos(th)
         for i, h in enumerate(self.orders):
             v = v + on * self.harmonics[..., i] * jnp.cos(h * th)
-        v = v + on * (self.dc + self.sub_amplitude * jnp.cos(2 * jnp.pi * self.sub_freq * t))
+        if exact_phase(t, self.sub_freq):
+            sub = jnp.cos(2 * jnp.pi * cycles(self.sub_freq, t))
+        else:
+            sub = jnp.cos(2 * jnp.pi * self.sub_freq * time_value(t))
+        v = v + on * (self.dc + self.sub_amplitude * sub)
         return v
 
 
@@ -271,36 +293,69 @@ class EMFSignal(eqx.Module):
     dc: jax.Array  # (A0α, A0β)
     harmonics: jax.Array  # amplitudes A_h for `orders`
     orders: tuple[int, ...] = eqx.field(static=True)  # signed: +7 positive, −5 negative sequence
-    ts: float = eqx.field(static=True)
+    ts: float = eqx.field(static=True)  # the observer's sample time (OnSignal checks they agree)
+
+    accepts_sample_time: ClassVar[bool] = True
 
     def __init__(self, A1, omega1, phase=0.0, dc=(0.0, 0.0), harmonics=None, ts=1e-4):
-        self.A1 = check_positive("A1", A1, "EMFSignal")
-        self.omega1 = check_positive("omega1", omega1, "EMFSignal")
-        self.phase = check_real("phase", phase, owner="EMFSignal")
-        self.dc = as_float(jnp.asarray(dc, dtype=jnp.result_type(float)))
+        own = "EMFSignal"
+        self.A1 = check_positive("A1", A1, own)
+        self.omega1 = check_positive("omega1", omega1, own)
+        self.phase = check_real("phase", phase, owner=own)
+        self.dc = check_real("dc", jnp.asarray(dc, dtype=jnp.result_type(float)), owner=own)
+        if self.dc.shape[-1:] != (2,):
+            raise ValueError(f"{own}.dc must be the pair (A0α, A0β), got shape {self.dc.shape}")
         harmonics = dict(harmonics or {})
+        for h in harmonics:
+            if isinstance(h, bool) or not isinstance(h, int) or h == 0:
+                raise ValueError(f"{own}.harmonics keys must be nonzero signed integer orders, got {h!r}")
         self.orders = tuple(sorted(harmonics, key=abs))
         self.harmonics = (
-            as_float(jnp.asarray([harmonics[h] for h in self.orders], dtype=jnp.result_type(float)))
+            check_real("harmonics", jnp.asarray([harmonics[h] for h in self.orders], jnp.result_type(float)), owner=own)
             if self.orders
             else jnp.zeros((0,))
         )
-        self.ts = float(ts)
+        self.ts = check_sample_time("ts", ts, own)
 
     def _avg_cis(self, w, phi, t):
         # average of (cos, sin)(w τ + phi) over τ ∈ [t, t + ts]
         a1, a0 = w * (t + self.ts) + phi, w * t + phi
         return (jnp.sin(a1) - jnp.sin(a0)) / (w * self.ts), (jnp.cos(a0) - jnp.cos(a1)) / (w * self.ts)
 
+    def _avg_cis_exact(self, c_mid, h, phi):
+        # float32, t a SampleTime: the same average written at the period's middle,
+        # (sin a1 − sin a0, cos a0 − cos a1) = 2 sin(w ts/2)·(cos a_m, sin a_m), a_m = w (t + ts/2) + phi,
+        # with a_m from the exact cycles c_mid of ω1 (t + ts/2) (jaxobs._time), h·c_mid reduced modulo 1
+        c = h * c_mid
+        a_m = 2 * jnp.pi * (c - jax.lax.stop_gradient(jnp.round(c))) + phi
+        x = 0.5 * h * self.omega1 * self.ts
+        sinc = jnp.sin(x) / x
+        return sinc * jnp.cos(a_m), sinc * jnp.sin(a_m)
+
     def emf(self, t):
-        ca, sa = self._avg_cis(self.omega1, self.phase, t)
-        ea = self.dc[0] + self.A1 * ca
-        eb = self.dc[1] + self.A1 * sa
+        if exact_phase(t, self.omega1):
+            mid = SampleTime(t.k, t.ts, t.t0 + 0.5 * self.ts)
+            c_mid = cycles(self.omega1, mid, 1 / (2 * math.pi))
+            cis = lambda h, phi: self._avg_cis_exact(c_mid, h, phi)  # noqa: E731
+        else:
+            t = time_value(t)
+            cis = lambda h, phi: self._avg_cis(h * self.omega1, phi, t)  # noqa: E731
+        ca, sa = cis(1, self.phase)
+        ea = self.dc[..., 0] + self.A1 * ca
+        eb = self.dc[..., 1] + self.A1 * sa
         for i, h in enumerate(self.orders):
-            ch, sh = self._avg_cis(h * self.omega1, 0.0, t)  # signed frequency: sequence in the sign
-            ea = ea + self.harmonics[i] * ch
-            eb = eb + self.harmonics[i] * sh
+            ch, sh = cis(h, 0.0)  # signed frequency: sequence in the sign
+            ea = ea + self.harmonics[..., i] * ch
+            eb = eb + self.harmonics[..., i] * sh
         return ea, eb
+
+    def flux_angle(self, t):
+        """The true rotor-flux angle ω1 t + φ1 − π/2, rad (ψ lags e by 90°); in float32 from a
+        :class:`SampleTime`, reduced modulo 2π and exact (jaxobs._time)."""
+        if exact_phase(t, self.omega1):
+            c = cycles(self.omega1, t, 1 / (2 * math.pi))
+            return 2 * jnp.pi * (c - jax.lax.stop_gradient(jnp.round(c))) + self.phase - jnp.pi / 2
+        return self.omega1 * time_value(t) + self.phase - jnp.pi / 2
 
     def __call__(self, t):
         ea, eb = self.emf(t)

@@ -34,7 +34,9 @@ A simulation that diverges is reported by ``sol.ok`` (per scenario under
 
 from __future__ import annotations
 
+import math
 import os
+import warnings
 from collections.abc import Callable
 from typing import Any, ClassVar, NamedTuple
 
@@ -44,9 +46,10 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._loop import AbstractCheckpoint, AutoCheckpoint, check_unroll, run_loop
+from ._time import SampleTime
 from ._validate import check_sample_time
 from .discretize import Knots
-from .signals import SampledSignal
+from .signals import EMFSignal, SampledSignal
 from .system import AbstractSystem
 
 __all__ = [
@@ -59,7 +62,31 @@ __all__ = [
     "SignalTruth",
     "SignalOutput",
     "n_samples",
+    "PrecisionWarning",
 ]
+
+
+class PrecisionWarning(UserWarning):
+    """jaxobs is running in float32 (x64 disabled): see README, "float32 vs float64"."""
+
+
+_warned_float32 = False
+
+
+def _warn_float32():
+    """Once per process: the library runs in float32 because the caller did not enable x64."""
+    global _warned_float32
+    if _warned_float32 or jnp.result_type(float) != jnp.float32:
+        return
+    _warned_float32 = True
+    warnings.warn(
+        "jaxobs is running in float32 (jax_enable_x64 is off). Signal phases stay exact at any horizon, but "
+        "observer states, metrics and gradients carry float32 rounding (README, 'float32 vs float64'). For "
+        "float64 call jax.config.update('jax_enable_x64', True) before the first computation. "
+        "(Shown once per process.)",
+        PrecisionWarning,
+        stacklevel=3,
+    )
 
 
 # ---------------------------------------------------------------------------
@@ -228,6 +255,12 @@ class OnSignal(AbstractSystem):
         check_sample_time("ts", observer.ts, type(observer).__name__)
         if isinstance(t0, bool) or not isinstance(t0, (int, float)) or not np.isfinite(t0):
             raise ValueError(f"OnSignal.t0 must be a finite number of seconds, got {t0!r}")
+        if isinstance(signal, EMFSignal) and not math.isclose(signal.ts, float(observer.ts), rel_tol=1e-12):
+            # the EMF is the average over [t_k, t_k + ts] of the signal's ts: it must be the observer's
+            raise ValueError(
+                f"OnSignal: EMFSignal.ts = {signal.ts:g} s must equal the observer's "
+                f"{type(observer).__name__}.ts = {float(observer.ts):g} s"
+            )
         self.observer = observer
         self.signal = signal
         self.t0 = float(t0)
@@ -248,14 +281,28 @@ class OnSignal(AbstractSystem):
         """t_k = t0 + k·ts (in the default float dtype)."""
         return self.t0 + self.ts * jnp.asarray(k).astype(jnp.result_type(float))
 
+    def _at(self, k, offset: float = 0.0):
+        """The time of sample k (+ a static offset) as the signal takes it: a :class:`SampleTime` (the
+        exact index, so that a float32 phase stays accurate at any horizon: jaxobs._time) for signals
+        that accept one, else the float t_k + offset."""
+        if getattr(self.signal, "accepts_sample_time", False):
+            return SampleTime(jnp.asarray(k, jnp.int32), self.ts, self.t0 + offset)
+        return self.time(k) + offset if offset else self.time(k)
+
     def init(self):
+        if getattr(self.signal, "accepts_sample_time", False):
+            return self.observer.init(self.signal(self._at(0)))
         return self.observer.init(self.signal(jnp.asarray(self.t0, jnp.result_type(float))))
 
     def input(self, k):
         """What the observer is given at sample k, and the truth there."""
-        t = self.time(k)
+        t = self._at(k)
         u = self.signal(t)
-        path = Knots(u0=u, um=self.signal(t + 0.5 * self.ts), u1=self.signal(t + self.ts)) if self.knots else u
+        path = (
+            Knots(u0=u, um=self.signal(self._at(k, 0.5 * self.ts)), u1=self.signal(self._at(k, self.ts)))
+            if self.knots
+            else u
+        )
         sig = self.signal
         truth = SignalTruth(sig.theta(t), sig.omega(t), sig.fundamental_amplitude(t)) if self.has_truth else None
         return u, path, truth
@@ -333,6 +380,7 @@ def simulate(
         )
     if not isinstance(save, AbstractSave):
         raise ValueError(f"simulate: save must be SaveAll(...) or SaveFinal(...), got {save!r}")
+    _warn_float32()  # at trace time: the first call of a process always traces
     ts = check_sample_time("ts", system.ts, type(system).__name__)
     t0 = float(getattr(system, "t0", 0.0))
     n = n_samples(t1, ts, t0)

@@ -71,3 +71,61 @@ def test_wrap_and_moving_average():
     np.testing.assert_allclose(ma, [0, 0.5, 1, 2, 3, 4, 5, 6, 7, 8])
     with pytest.raises(ValueError, match="window"):
         M.moving_average(jnp.arange(3.0), 0)
+
+
+# --------------------------------------------------------------------------
+# empty windows, bad bands, censored settling times, lost lock
+# --------------------------------------------------------------------------
+
+
+def test_an_empty_concrete_window_raises_and_a_traced_one_gives_nan():
+    x = jnp.arange(10.0)
+    empty = jnp.zeros(10, bool)
+    for f in (M.peak_to_peak, M.steady_mean, M.rms):
+        with pytest.raises(ValueError, match="no samples"):
+            f(x, empty)
+        assert np.isnan(float(jax.jit(f)(x, empty)))
+    t = jnp.linspace(0.0, 0.9, 10)
+    for f in (M.iae, M.itae):
+        with pytest.raises(ValueError, match="t_event"):
+            f(t, x, 5.0)
+        assert np.isnan(float(jax.jit(f)(t, x, 5.0)))
+
+
+def test_settling_time_rejects_a_bad_band_or_final():
+    t = jnp.linspace(0.0, 1.0, 101)
+    x = 1.0 - jnp.exp(-t / 0.1)
+    for band in (float("nan"), -0.1, float("inf")):
+        with pytest.raises(ValueError, match="band"):
+            M.settling_time(t, x, 1.0, band)
+        with pytest.raises(ValueError, match="band"):
+            M.smooth_settling_time(t, x, 1.0, band)
+        assert np.isnan(float(jax.jit(M.settling_time)(t, x, 1.0, band)))
+    with pytest.raises(ValueError, match="final"):
+        M.settling_time(t, x, float("nan"), 0.05)
+
+
+def test_settled_marks_censored_settling_times():
+    t = jnp.linspace(0.0, 1.0, 1001)
+    x = 1.0 - jnp.exp(-t / 0.1)
+    assert bool(M.settled(t, x, 1.0, 0.05))  # settles at 0.3 s
+    assert not bool(M.settled(t, x, 1.0, 0.05, min_hold=0.8))  # but not held for 0.8 s
+    ramp = t  # never within 0.05 of 2
+    assert not bool(M.settled(t, ramp, 2.0, 0.05))
+    assert float(M.settling_time(t, ramp, 2.0, 0.05)) == pytest.approx(1.0)  # capped at the horizon
+    assert bool(jax.jit(M.settled)(t, x, 1.0, 0.05))
+
+
+def test_lost_lock():
+    t = jnp.linspace(0.0, 1.0, 1001)
+    theta = 2 * jnp.pi * 50 * t
+    w = M.window_mask(t, 0.9)
+    assert not bool(M.lost_lock(theta + 0.05 * jnp.sin(t * 300), theta, w))  # locked, with ripple
+    slipping = theta + 2 * jnp.pi * 10.0 * t  # 10 Hz off: slips through every angle in the window
+    assert bool(M.lost_lock(slipping, theta, w))
+    assert bool(M.lost_lock(theta.at[-1].set(jnp.nan), theta, w))  # a NaN estimate is not locked
+    assert bool(M.lost_lock(theta + 0.5, theta, w, tol_rad=0.4))
+    with pytest.raises(ValueError, match="no samples"):
+        M.lost_lock(theta, theta, jnp.zeros_like(w))
+    batch = jnp.stack([theta, slipping])
+    np.testing.assert_array_equal(np.asarray(jax.jit(M.lost_lock)(batch, theta, w)), [False, True])

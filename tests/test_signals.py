@@ -125,3 +125,34 @@ def test_a_recording_read_on_and_off_its_sample_instants():
         np.asarray(sig(0.05 + TS / 2 + TS * jnp.arange(100))),
         atol=1.3e-4,
     )
+
+
+@pytest.mark.parametrize(
+    "kwargs, field",
+    [
+        (dict(ts=0.0), "EMFSignal.ts"),
+        (dict(ts=-1e-4), "EMFSignal.ts"),
+        (dict(ts=float("nan")), "EMFSignal.ts"),
+        (dict(A1=float("nan")), "EMFSignal.A1"),
+        (dict(omega1=0.0), "EMFSignal.omega1"),
+        (dict(dc=(float("nan"), 0.0)), "EMFSignal.dc"),
+        (dict(dc=(1.0, 2.0, 3.0)), "EMFSignal.dc"),
+        (dict(harmonics={0: 1.0}), "EMFSignal.harmonics"),
+        (dict(harmonics={5: float("inf")}), "EMFSignal.harmonics"),
+    ],
+)
+def test_emf_signal_bad_arguments_name_the_field(kwargs, field):
+    from jaxobs.signals import EMFSignal
+
+    args = dict(A1=100.0, omega1=314.0) | kwargs
+    with pytest.raises(ValueError, match=field.replace(".", r"\.")):
+        EMFSignal(**args)
+
+
+def test_on_signal_rejects_an_emf_with_another_sample_time():
+    from jaxobs.signals import EMFSignal
+
+    obs = jaxobs.PureIntegratorFlux(0.0, 1.0, 100.0, 2500.0, ts=1e-4)
+    with pytest.raises(ValueError, match=r"EMFSignal\.ts = 5e-05 s.*PureIntegratorFlux\.ts = 0\.0001 s"):
+        jaxobs.OnSignal(obs, EMFSignal(A1=100.0, omega1=314.0, ts=5e-5))
+    jaxobs.OnSignal(obs, EMFSignal(A1=100.0, omega1=314.0, ts=1e-4))  # the same: fine
