@@ -20,7 +20,7 @@ helper (:func:`sel`, :func:`maximum`, :func:`minimum`): ``np.where`` /
 
 Both must compute what jaxobs computes, operation for operation, so that the
 throughput comparison is of one algorithm: tests/test_bench.py checks them
-against :func:`jaxobs.simulate` / :func:`jaxobs.drive.simulate_drive` in float64.
+against :func:`jaxobs.simulate` (of :class:`jaxobs.OnSignal` and :class:`jaxobs.drive.ClosedLoop`) in float64.
 Literals are cast to the working dtype ``F`` (``np.float32`` or ``np.float64``,
 passed in: numba compiles one version per dtype), so a float32 run stays in
 float32 as jaxobs does; the rule's step fractions (h/2, h/6, h/12) are rounded

@@ -157,7 +157,7 @@ class SampledSignal(eqx.Module):
 
     This is also how a benchmark feeds *precomputed* inputs: the waveform is
     generated once, outside the timed function, and the loop only reads it,
-    a block of steps at a time (``inputs="loop"``).
+    a block of steps at a time (``SaveFinal``: :mod:`jaxobs._loop`, point 5).
     """
 
     samples: jax.Array  # u_k, shape (..., n)

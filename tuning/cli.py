@@ -630,6 +630,13 @@ def main(argv=None) -> int:
     except ValueError as e:  # bad input, job-file errors (JobError) included: one line, exit 2
         print(f"jaxobs: error: {e}", file=sys.stderr)
         return 2
+    except OSError as e:  # an output folder that cannot be made or written, a file that cannot be read
+        where = f": {e.filename}" if e.filename else ""
+        print(f"jaxobs: error: {e.strerror or e}{where}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("jaxobs: interrupted", file=sys.stderr)
+        return 130
 
 
 if __name__ == "__main__":
