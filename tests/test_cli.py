@@ -131,7 +131,12 @@ def test_demo_json_rows_and_figure(tmp_path, capsys):
 
 
 def test_bad_arguments_exit_with_one_line():
-    for argv in (["demo", "--t-event", "-1"], ["nonsense"], ["demo", "--t-event", "abc"]):
+    for argv in (
+        ["demo", "--t-event", "-1"],
+        ["nonsense"],
+        ["demo", "--t-event", "abc"],
+        ["export", "--design", "wif", "--out", "/dev/null/x"],  # an output folder that cannot be made
+    ):
         p = _python(["-m", "jaxobs", *argv])
         assert p.returncode == 2, (argv, p.stderr)
         lines = p.stderr.strip().splitlines()
