@@ -58,7 +58,8 @@ LAYERS = [
     ("tuning._cexpr", "tuning.params", "tuning.solvers", "tuning.structure"),
     ("tuning._crules", "tuning._cmodels", "tuning.objective", "tuning.report", "tuning.targets"),
     ("tuning.job",),
-    ("tuning.results", "tuning.export"),
+    ("tuning.results",),
+    ("tuning.export",),
     ("tuning",),
     # the command line: the top layer (`jaxobs ...` and `python -m jaxobs`)
     ("tuning.cli",),

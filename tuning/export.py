@@ -71,6 +71,7 @@ from . import _cexpr as cx
 from ._cmodels import MEMORY, CModel, model_for, supported
 from ._crules import RuleC, needs_jacobian, ops_sum, ops_total, rule_c
 from .job import COMPONENTS
+from .results import load_result
 
 __all__ = [
     "export_observer",
@@ -140,14 +141,7 @@ def observer_from_result(path, *, gains: str = "tuned", notes: list | None = Non
     """
     notes = [] if notes is None else notes
     path = Path(path)
-    try:
-        res = json.loads(path.read_text())
-    except OSError as e:
-        raise ValueError(f"result file: cannot read {str(path)!r}: {e.strerror}") from None
-    except json.JSONDecodeError as e:
-        raise ValueError(f"result file {str(path)!r}: not valid JSON: {e}") from None
-    if not isinstance(res, dict):
-        raise ValueError(f"result file {str(path)!r}: not a jaxobs tune result (a JSON object)")
+    res = load_result(path)
     comp = res.get("component")
     if comp not in COMPONENTS:
         raise ValueError(f"result file {str(path)!r}: component {comp!r} is not a jaxobs component")
