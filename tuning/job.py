@@ -232,7 +232,9 @@ COMPONENTS = {
 }
 
 GRID_AXES = ("freq_step", "phase_jump_deg", "sag", "dc", "harmonics_scale", "sub_amplitude", "phase_deg")
-EMF_AXES = ("speed_hz", "dc_alpha", "dc_beta", "h5", "h7", "omega0_error", "phase_deg")
+# (an "omega0_error" axis was accepted and ignored: removed.  The flux observers start their FLL at
+# omega0 = 2π·50 Hz whatever speed_hz is, so speed_hz already sets the initial frequency error.)
+EMF_AXES = ("speed_hz", "dc_alpha", "dc_beta", "h5", "h7", "phase_deg")
 # paper 002's IPMSM (assumed, see the README) on its bench: jaxobs.drive_study's axes (units and ranges there)
 DRIVE_AXES = tuple(DRIVE_STUDY_AXES)
 
