@@ -13,6 +13,8 @@ machine (``est_par``: the mismatch axes move it), its initial speed the
 scenario's.  Axes (all optional; a value per scenario):
 
 - ``speed_rpm`` (r/min), ``load_nm`` (N·m): the operating point;
+- ``speed_step_rpm`` (r/min), ``load_step_nm`` (N·m): steps of the speed reference and of the load at
+  ``t_event`` (the events a settling time is measured after);
 - ``dRs``, ``dLd``, ``dLq``, ``dpsi``: relative errors of the assumed machine
   (est = true · (1 + v)); ``dJ``: relative change of the true inertia (the
   controller keeps the nominal one);
@@ -44,7 +46,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import metrics as M
-from .drive import RPM, ClosedLoop, Drive, PMSMParams, Scenario, Sensors
+from .drive import RPM, ClosedLoop, Drive, PMSMParams, Profile, Scenario, Sensors
 from .simulate import simulate
 
 __all__ = ["DRIVE_STUDY_AXES", "DRIVE_STUDY_METRICS", "QUANTILES", "run_drive_study", "drive_scenarios"]
@@ -53,6 +55,8 @@ __all__ = ["DRIVE_STUDY_AXES", "DRIVE_STUDY_METRICS", "QUANTILES", "run_drive_st
 DRIVE_STUDY_AXES = {
     "speed_rpm": ("r/min", (1.0, 1e5)),
     "load_nm": ("N·m", (-1e4, 1e4)),
+    "speed_step_rpm": ("r/min", (-1e5, 1e5)),
+    "load_step_nm": ("N·m", (-1e4, 1e4)),
     "dRs": ("1", (-0.95, 10.0)),
     "dLd": ("1", (-0.95, 10.0)),
     "dLq": ("1", (-0.95, 10.0)),
@@ -84,14 +88,21 @@ def _check_axes(axes: dict):
             raise ValueError(f"axes.{name} must be a non-empty list of numbers in [{lo:g}, {hi:g}] {unit}")
 
 
-def drive_scenarios(machine: PMSMParams, names, combos, *, seed: int = 0) -> Scenario:
-    """A batched Scenario (leading axis len(combos)), one per combination of the named axes' values."""
+def drive_scenarios(machine: PMSMParams, names, combos, *, seed: int = 0, t_event: float = 0.0) -> Scenario:
+    """A batched Scenario (leading axis len(combos)), one per combination of the named axes' values.
+
+    Each starts steady at ``speed_rpm`` and ``load_nm``; the speed reference and the load step by
+    ``speed_step_rpm`` and ``load_step_nm`` at ``t_event`` (s; both 0 by default: no event).
+    """
+    if not (math.isfinite(t_event) and t_event >= 0):
+        raise ValueError(f"t_event must be a finite number of seconds >= 0, got {t_event!r}")
     cols = {n: np.asarray([c[i] for c in combos], dtype=float) for i, n in enumerate(names)}
     b = len(combos)
     noisy = any(n in cols for n in ("i_noise", "u_noise"))
     # a noisy Sensors (static flag) when a noise axis exists; its levels are set per scenario below
     sensors = Sensors(i_noise=1.0, u_noise=1.0) if noisy else Sensors()
-    base = Scenario(machine, sensors=sensors)
+    two = Profile([0.0, t_event], [0.0, 0.0], kind="step")  # before / after the event
+    base = Scenario(machine, sensors=sensors, speed_ref=two, load=two)
     sc = jax.tree.map(lambda x: jnp.broadcast_to(x, (b,) + jnp.shape(x)), base)
 
     def col(name, default):
@@ -116,7 +127,16 @@ def drive_scenarios(machine: PMSMParams, names, combos, *, seed: int = 0) -> Sce
     return eqx.tree_at(
         lambda s: (s.par, s.est_par, s.speed_ref.values, s.load.values, s.sensors, s.dead_time, s.key, s.omega_m0),
         sc,
-        (par, est, speed[:, None], col("load_nm", 0.0)[:, None], sens, col("dead_time", 0.0), keys, speed),
+        (
+            par,
+            est,
+            jnp.stack([speed, speed + col("speed_step_rpm", 0.0) * RPM], axis=1),
+            jnp.stack([col("load_nm", 0.0), col("load_nm", 0.0) + col("load_step_nm", 0.0)], axis=1),
+            sens,
+            col("dead_time", 0.0),
+            keys,
+            speed,
+        ),
     )
 
 
@@ -153,6 +173,7 @@ def run_drive_study(
     drive: Drive,
     horizon: float = 0.3,
     steady_from: float | None = None,
+    t_event: float = 0.0,
     sampling: str = "grid",
     sample: int = 0,
     seed: int = 0,
@@ -185,7 +206,7 @@ def run_drive_study(
             raise ValueError(f"sample must be an integer >= 1 with sampling={sampling!r}, got {sample!r}")
         combos = _sample(axes, sample, sampling, seed)
     n = len(combos)
-    scs = drive_scenarios(machine, names, combos, seed=seed)
+    scs = drive_scenarios(machine, names, combos, seed=seed, t_event=t_event)
     chunk = max(1, min(chunk_size, n))
     pad = (-n) % chunk
     if pad:

@@ -90,3 +90,21 @@ def test_the_leso_drive_preset_runs(tmp_path):
     assert main(["study", str(PRESET), "--out", str(out), "--quiet"]) == 0
     ds = xr.open_dataset(out / "study.nc", engine="scipy")
     assert ds.attrs["scenarios"] >= 1000 and {"dRs", "dLq"} <= set(ds.dims) and "quantile" in ds.coords
+
+
+def test_a_load_step_at_t_event_is_the_only_transient():
+    """load_step_nm steps the load at t_event: before it the drive is steady (error as without a step), after
+    it the FA-LESO's PLL sees the deceleration (the error grows)."""
+    axes = {"speed_rpm": [600.0], "load_step_nm": [0.0, 5.0]}
+    ds = run_drive_study(
+        {"FA-LESO": DESIGNS["FA-LESO"]},
+        axes,
+        machine=PAR,
+        drive=DRIVE,
+        horizon=0.08,
+        steady_from=0.0,
+        t_event=0.03,
+        chunk_size=2,
+    )
+    peak = ds["pos_err_max_deg"].sel(design="FA-LESO", speed_rpm=600.0)
+    assert float(peak.sel(load_step_nm=0.0)) < 0.1 < float(peak.sel(load_step_nm=5.0))

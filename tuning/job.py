@@ -557,9 +557,10 @@ def _combos(spec: ScenarioSpec):
     return names, combos
 
 
-def _drive_scenarios(names, combos, seed=0):
-    """The IPMSM bench (J = papers.BENCH_J_002) for every combination; each starts steady at its speed."""
-    return drive_scenarios(D.ipmsm_paper002(J=papers.BENCH_J_002), names, combos, seed=seed)
+def _drive_scenarios(names, combos, seed=0, t_event=0.0):
+    """The IPMSM bench (J = papers.BENCH_J_002) for every combination; each starts steady at its speed, and
+    the speed_step_rpm / load_step_nm axes step the reference and the load at t_event."""
+    return drive_scenarios(D.ipmsm_paper002(J=papers.BENCH_J_002), names, combos, seed=seed, t_event=t_event)
 
 
 def job_drive(spec: DriveSpec | None = None):
@@ -574,7 +575,7 @@ def build_scenarios(spec: ScenarioSpec, values: dict):
     """A batched signal for every combination of the axes (or ``sample`` random ones)."""
     names, combos = _combos(spec)
     if spec.signal == "drive":
-        return _drive_scenarios(names, combos, spec.seed), names, combos
+        return _drive_scenarios(names, combos, spec.seed, spec.t_event), names, combos
     if spec.signal == "grid":
         return (
             grid_signals(names, combos, spec.t_event, float(values.get("omega_n", W_N)) / (2 * math.pi)),
