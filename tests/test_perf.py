@@ -226,6 +226,7 @@ _SHARD_SCRIPT = textwrap.dedent(
 )
 
 
+@pytest.mark.slow  # a fresh process on 4 host devices compiles everything again (15-45 s on 2 cores)
 def test_sharded_batch_equals_single_device_run():
     """4 host devices in a fresh process (XLA reads the flag at start-up)."""
     env = {k: v for k, v in os.environ.items() if k != "XLA_FLAGS"}
