@@ -152,23 +152,24 @@ def flux_circles_figure(sol, names, title, path=None, last: float = 0.1):
     return _finish(fig, path)
 
 
-def _clipped_range(peaks: dict, ratio: float = 3.0):
-    """The observers whose peak |error| would flatten the others: each peak more than ``ratio`` times the
-    next smaller one is left out of the y-range, from the largest down (at least one observer stays in)."""
+def _clipped_range(peaks: dict, ratio: float = 3.0, lost: float = 30.0):
+    """The observers that have lost track and would flatten the others: from the largest peak |error| (deg)
+    down, each peak above ``lost`` degrees and more than ``ratio`` times the next one is left out of the
+    y-range (at least one observer stays in).  Returns (clipped names, the largest peak kept)."""
     order = sorted(peaks, key=peaks.get, reverse=True)
     clipped = []
     for hi, lo in zip(order, order[1:]):
-        if peaks[hi] > ratio * max(peaks[lo], 1e-12):
-            clipped = order[: order.index(hi) + 1]
-    kept = [n for n in order if n not in clipped]
-    return clipped, max(peaks[n] for n in kept)
+        if not (peaks[hi] > lost and peaks[hi] > ratio * peaks[lo]):
+            break
+        clipped.append(hi)
+    return clipped, max(peaks[n] for n in order if n not in clipped)
 
 
 def position_error_figure(sol, names, title, path=None, t_from: float = 0.0):
     """Wrapped position error θ̂e − θe (deg) of each observer, with the speed on a second axis.
 
-    The y-range shows the observers compared: an observer whose error dwarfs the others (a pure
-    integrator's drift sweeps ±180°) is drawn clipped, its peak given in the legend.
+    The y-range shows the observers compared: an observer that has lost track (a pure integrator's
+    drift sweeps ±180°), its error dwarfing the others', is drawn clipped, its peak given in the legend.
     """
     t = np.asarray(sol.t)
     m = t >= t_from
@@ -177,6 +178,13 @@ def position_error_figure(sol, names, title, path=None, t_from: float = 0.0):
     ax_s.plot(t[m], np.asarray(sol.outputs.omega_m_ref)[m] * 30 / math.pi, "k--", lw=0.8, label="reference")
     ax_s.set_ylabel("speed (r/min)")
     ax_s.ticklabel_format(axis="y", useOffset=False, style="plain")
+    speeds = np.concatenate(
+        [np.asarray(sol.outputs.speed_rpm)[m], np.asarray(sol.outputs.omega_m_ref)[m] * 30 / math.pi]
+    )
+    if speeds.size and np.isfinite(speeds).all():  # at least ±5 r/min: a steady speed reads as flat, not as noise
+        mid, half = 0.5 * (speeds.max() + speeds.min()), 0.5 * (speeds.max() - speeds.min())
+        half = max(1.1 * half, 5.0)
+        ax_s.set_ylim(mid - half, mid + half)
     ax_s.legend(fontsize=8)
     errs = {
         name: np.degrees(np.asarray(metrics.wrap(o.theta - sol.outputs.theta_e))[m])
