@@ -1,4 +1,10 @@
-"""matplotlib figures (imported lazily: the library itself never needs a display)."""
+"""matplotlib figures (imported lazily: the library itself never needs a display).
+
+Figures are made with :class:`matplotlib.figure.Figure`, not ``pyplot``: drawing one
+neither selects a backend nor registers a window, so a script writes its files on a
+machine without a display and a notebook keeps its own (inline) backend; a figure
+returned with ``path=None`` displays in Jupyter as the value of a cell.
+"""
 
 from __future__ import annotations
 
@@ -10,28 +16,25 @@ import numpy as np
 from . import linear, metrics, papers
 
 
-def _plt():
-    import matplotlib
+def _subplots(*args, figsize, **kwargs):
+    """``pyplot.subplots`` without pyplot: (figure, axes) on a plain Figure."""
+    from matplotlib.figure import Figure
 
-    matplotlib.use("Agg", force=False)
-    import matplotlib.pyplot as plt
-
-    return plt
+    fig = Figure(figsize=figsize)
+    return fig, fig.subplots(*args, **kwargs)
 
 
 def _finish(fig, path, dpi=110):
-    """Lay out, save to ``path`` (if given) and close; the figure is returned for notebooks."""
+    """Lay out and save to ``path`` (if given); the figure is returned for notebooks."""
     fig.tight_layout()
     if path is not None:
         fig.savefig(path, dpi=dpi)
-        _plt().close(fig)
     return fig
 
 
 def fll_demo_figure(traces, tests, t_event, path=None):
     """Frequency estimate and phase error of each FLL for each test (rows = tests)."""
-    plt = _plt()
-    fig, axes = plt.subplots(len(tests), 2, figsize=(11, 2.2 * len(tests)), sharex=False, squeeze=False)
+    fig, axes = _subplots(len(tests), 2, figsize=(11, 2.2 * len(tests)), sharex=False, squeeze=False)
     for name, sol in traces.items():
         t = np.asarray(sol.t[0])
         f_hat = np.asarray(sol.outputs.obs.omega) / (2 * math.pi)
@@ -59,10 +62,9 @@ def bode_figure(tfs: dict, omega, title: str, path=None, hz: bool = True, mark=N
     Complex-coefficient filters are plotted over negative and positive frequency
     when ``omega`` contains both signs (their response is not conjugate-symmetric).
     """
-    plt = _plt()
     omega = np.asarray(omega)
     x = omega / (2 * math.pi) if hz else omega
-    fig, (ax_m, ax_p) = plt.subplots(2, 1, figsize=(7.5, 6), sharex=True)
+    fig, (ax_m, ax_p) = _subplots(2, 1, figsize=(7.5, 6), sharex=True)
     for name, tf in tfs.items():
         mag, ph = linear.bode(tf, omega)
         ax_m.plot(x, np.asarray(mag), lw=1.3, label=name)
@@ -133,10 +135,9 @@ def paper_bode_figures(out_dir):
 
 def flux_circles_figure(sol, names, title, path=None, last: float = 0.1):
     """Estimated rotor-flux circles (ψ̂β vs ψ̂α) of each observer over the last ``last`` seconds."""
-    plt = _plt()
     t = np.asarray(sol.t)
     m = t >= t[-1] - last
-    fig, axes = plt.subplots(1, len(names), figsize=(3.2 * len(names), 3.4), squeeze=False)
+    fig, axes = _subplots(1, len(names), figsize=(3.2 * len(names), 3.4), squeeze=False)
     for ax, name, o in zip(axes[0], names, sol.outputs.obs.each):
         pa, pb = np.asarray(o.psi_a)[m], np.asarray(o.psi_b)[m]
         ax.plot(pa, pb, lw=0.8)
@@ -151,62 +152,133 @@ def flux_circles_figure(sol, names, title, path=None, last: float = 0.1):
     return _finish(fig, path)
 
 
+def _clipped_range(peaks: dict, ratio: float = 3.0, lost: float = 30.0):
+    """The observers that have lost track and would flatten the others: from the largest peak |error| (deg)
+    down, each peak above ``lost`` degrees and more than ``ratio`` times the next one is left out of the
+    y-range (at least one observer stays in).  Returns (clipped names, the largest peak kept)."""
+    order = sorted(peaks, key=peaks.get, reverse=True)
+    clipped = []
+    for hi, lo in zip(order, order[1:]):
+        if not (peaks[hi] > lost and peaks[hi] > ratio * peaks[lo]):
+            break
+        clipped.append(hi)
+    return clipped, max(peaks[n] for n in order if n not in clipped)
+
+
 def position_error_figure(sol, names, title, path=None, t_from: float = 0.0):
-    """Wrapped position error θ̂e − θe of each observer, with the speed on a second axis."""
-    plt = _plt()
+    """Wrapped position error θ̂e − θe (deg) of each observer, with the speed on a second axis.
+
+    The y-range shows the observers compared: an observer that has lost track (a pure integrator's
+    drift sweeps ±180°), its error dwarfing the others', is drawn clipped, its peak given in the legend.
+    """
     t = np.asarray(sol.t)
     m = t >= t_from
-    fig, (ax_s, ax_e) = plt.subplots(2, 1, figsize=(9, 5.5), sharex=True)
+    fig, (ax_s, ax_e) = _subplots(2, 1, figsize=(9, 5.5), sharex=True)
     ax_s.plot(t[m], np.asarray(sol.outputs.speed_rpm)[m], label="speed", lw=1)
     ax_s.plot(t[m], np.asarray(sol.outputs.omega_m_ref)[m] * 30 / math.pi, "k--", lw=0.8, label="reference")
     ax_s.set_ylabel("speed (r/min)")
+    ax_s.ticklabel_format(axis="y", useOffset=False, style="plain")
+    speeds = np.concatenate(
+        [np.asarray(sol.outputs.speed_rpm)[m], np.asarray(sol.outputs.omega_m_ref)[m] * 30 / math.pi]
+    )
+    if speeds.size and np.isfinite(speeds).all():  # at least ±5 r/min: a steady speed reads as flat, not as noise
+        mid, half = 0.5 * (speeds.max() + speeds.min()), 0.5 * (speeds.max() - speeds.min())
+        half = max(1.1 * half, 5.0)
+        ax_s.set_ylim(mid - half, mid + half)
     ax_s.legend(fontsize=8)
-    for name, o in zip(names, sol.outputs.obs.each):
-        err = np.asarray(metrics.wrap(o.theta - sol.outputs.theta_e))[m]
-        ax_e.plot(t[m], err, lw=0.8, label=name)
-    ax_e.set_ylim(-1.7, 1.7)
-    ax_e.set_ylabel("θ̂e − θe (rad)")
+    errs = {
+        name: np.degrees(np.asarray(metrics.wrap(o.theta - sol.outputs.theta_e))[m])
+        for name, o in zip(names, sol.outputs.obs.each)
+    }
+    peaks = {n: float(np.nanmax(np.abs(e))) if e.size and np.isfinite(e).any() else 0.0 for n, e in errs.items()}
+    clipped, top = _clipped_range(peaks) if len(peaks) > 1 else ([], max(peaks.values(), default=1.0))
+    for name, err in errs.items():
+        label = f"{name} (clipped: peaks ±{peaks[name]:.0f}°)" if name in clipped else name
+        ax_e.plot(t[m], err, lw=0.8, label=label)
+    lim = min(1.15 * top, 185.0) if top > 0 else 1.0
+    ax_e.set_ylim(-lim, lim)
+    ax_e.set_ylabel("θ̂e − θe (deg)")
     ax_e.set_xlabel("time (s)")
-    ax_e.legend(fontsize=8, ncol=4)
+    ax_e.legend(fontsize=8, ncol=2)
     for ax in (ax_s, ax_e):
         ax.grid(True, alpha=0.3)
     fig.suptitle(title, fontsize=10)
     return _finish(fig, path)
 
 
+# plotted metrics: (scale to the shown unit, shown unit, short name); a Dataset's own attrs name the rest
+_STUDY_PLOT = {
+    "settling_freq": (1.0, "s", "settling time"),
+    "ripple_freq": (1.0, "Hz p-p", "steady frequency ripple"),
+    "rms_phase": (180.0 / math.pi, "deg", "steady rms phase error"),
+}
+# axes' units when the Dataset has none (a study written before the units were added)
+_AXIS_UNITS = {
+    "freq_step": "Hz",
+    "phase_jump_deg": "deg",
+    "sag": "p.u.",
+    "dc": "p.u.",
+    "harmonics_scale": "× Test C",
+    "sub_amplitude": "p.u.",
+    "phase_deg": "deg",
+    "noise": "p.u.",
+}
+
+
+def _axis_label(ds, name: str) -> str:
+    unit = _AXIS_UNITS.get(name) or ds[name].attrs.get("units", "")
+    return f"{name} ({unit})" if unit and unit != "1" else name
+
+
 def study_figures(ds, out_dir):
-    """Heat-maps (mean over the other axes, first two axes) and distributions per metric; returns the paths."""
-    plt = _plt()
+    """Heat-maps (mean over the other axes, first two axes) and distributions per metric; returns the paths.
+
+    One colour scale per metric across designs (one labelled colour bar) and one set of histogram bins,
+    so designs compare by eye; the rms phase error is shown in degrees.  Settling times that are censored
+    at the horizon (``settled`` False) are counted in the histogram's legend.
+    """
     out = Path(out_dir)
     paths = []
-    axes = [d for d in ds.dims if d != "design"]
-    for metric in ("settling_freq", "ripple_freq", "rms_phase"):
-        da = ds[metric]
+    axes = [d for d in ds[next(iter(_STUDY_PLOT))].dims if d != "design"]
+    designs = list(ds["design"].values)
+    for metric, (scale, unit, short) in _STUDY_PLOT.items():
+        da = ds[metric] * scale
+        finite = np.asarray(da)[np.isfinite(np.asarray(da))]
         if len(axes) >= 2 and "sample" not in axes:
             a0, a1 = axes[0], axes[1]
             red = da.mean(dim=[d for d in axes if d not in (a0, a1)]) if len(axes) > 2 else da
-            designs = list(ds["design"].values)
-            fig, axs = plt.subplots(1, len(designs), figsize=(4 * len(designs), 3.4), squeeze=False)
+            vals = np.asarray(red)
+            vmin, vmax = (float(np.nanmin(vals)), float(np.nanmax(vals))) if np.isfinite(vals).any() else (0, 1)
+            fig, axs = _subplots(1, len(designs), figsize=(3.6 * len(designs) + 1.2, 3.4), squeeze=False)
             for ax, d in zip(axs[0], designs):
                 arr = np.asarray(red.sel(design=d).transpose(a1, a0))
-                im = ax.imshow(arr, origin="lower", aspect="auto", extent=None)
+                im = ax.imshow(arr, origin="lower", aspect="auto", vmin=vmin, vmax=vmax)
                 ax.set_xticks(range(len(ds[a0])), [f"{v:g}" for v in ds[a0].values], fontsize=7)
                 ax.set_yticks(range(len(ds[a1])), [f"{v:g}" for v in ds[a1].values], fontsize=7)
-                ax.set_xlabel(a0)
-                ax.set_ylabel(a1)
+                ax.set_xlabel(_axis_label(ds, a0))
                 ax.set_title(str(d), fontsize=9)
-                fig.colorbar(im, ax=ax)
-            fig.suptitle(f"{metric} (mean over the other axes)", fontsize=10)
+            axs[0, 0].set_ylabel(_axis_label(ds, a1))
+            fig.subplots_adjust(left=0.1, right=0.86, top=0.8, bottom=0.16, wspace=0.25)
+            fig.colorbar(im, ax=list(axs[0]), label=f"{short} ({unit})")
+            others = [d for d in axes if d not in (a0, a1)]
+            how = f"mean over {', '.join(others)}" if others else "every scenario"
+            fig.suptitle(f"{short} ({unit}), {how}; one colour scale for all designs", fontsize=10)
             p = out / f"heatmap_{metric}.png"
-            _finish(fig, p, dpi=100)
+            fig.savefig(p, dpi=100)  # the colour bar spans the axes: no tight_layout
             paths.append(p)
-        fig, ax = plt.subplots(figsize=(6, 3.4))
-        for d in ds["design"].values:
+        fig, ax = _subplots(figsize=(6, 3.4))
+        bins = np.histogram_bin_edges(finite, bins=30) if finite.size else 30
+        for d in designs:
             vals = np.asarray(da.sel(design=d)).ravel()
             vals = vals[np.isfinite(vals)]
-            ax.hist(vals, bins=30, alpha=0.5, label=str(d))
-        ax.set_xlabel(metric)
+            label = str(d)
+            if metric == "settling_freq" and "settled" in ds:
+                unsettled = int((~np.asarray(ds["settled"].sel(design=d), dtype=bool)).sum())
+                label += f" ({unsettled} not settled: counted at the horizon)" if unsettled else ""
+            ax.hist(vals, bins=bins, alpha=0.5, label=label)
+        ax.set_xlabel(f"{short} ({unit})")
         ax.set_ylabel("scenarios")
+        ax.set_title(f"{short} over {int(ds.attrs.get('scenarios', finite.size))} scenarios per design", fontsize=10)
         ax.legend(fontsize=8)
         p = out / f"distribution_{metric}.png"
         _finish(fig, p, dpi=100)
@@ -217,9 +289,8 @@ def study_figures(ds, out_dir):
 def drive_study_figure(ds, path):
     """Empirical CDFs of every drive-study metric over the scenarios, all designs on one axis per metric
     (one scale per metric across designs, units on the axes), lost-sync counts in the legend."""
-    plt = _plt()
     metrics = [v[: -len("_q")] for v in ds.data_vars if v.endswith("_q")]  # the metrics with quantiles
-    fig, axs = plt.subplots(1, len(metrics), figsize=(4.2 * len(metrics), 3.6), squeeze=False)
+    fig, axs = _subplots(1, len(metrics), figsize=(4.2 * len(metrics), 3.6), squeeze=False)
     for ax, m in zip(axs[0], metrics):
         unit, long_name = ds[m].attrs["units"], ds[m].attrs["long_name"]
         for d in ds["design"].values:

@@ -10,7 +10,13 @@ call per chunk of ``chunk_size`` scenarios (the last chunk is padded, so one
 compilation serves all), with a progress bar over chunks.  The result has one
 variable per metric, dims ``("design", *axes)`` (or ``("design", "sample")``
 with the axes as coordinates along ``sample``), and a ``diverged`` flag: a
-diverging scenario is reported, never fatal.
+diverging scenario is reported, never fatal.  Every variable and coordinate
+carries CF-style ``units`` and ``long_name``; ``settled`` flags the settling
+times that are censored at the horizon (False: not settled by the end of the
+run); ``gain`` holds each design's gains, dims ``("design", "gain_name")`` (NaN
+where a design has no such gain); the attributes hold the study's options and
+the versions that made it, nothing that changes between two identical runs
+(the wall time is the second value of ``run_study(..., return_seconds=True)``).
 
 Scenarios are single-phase grid signals (the FLL family) built by
 :func:`jaxobs.scenarios.grid_signals`: axes are ``freq_step`` (Hz),
@@ -42,6 +48,26 @@ __all__ = ["STUDY_AXES", "STUDY_METRICS", "run_study", "worst_cases"]
 
 STUDY_AXES = GRID_SIGNAL_AXES  # the scenarios a study runs: jaxobs.scenarios.grid_signals
 STUDY_METRICS = ("settling_freq", "ripple_freq", "rms_phase", "itae_freq", "iae_phase")
+# CF-style (units, long_name) of every metric, axis and flag of a study Dataset
+METRIC_META = {
+    "settling_freq": ("s", "settling time of the one-period average of the frequency estimate after the event"),
+    "ripple_freq": ("Hz", "steady peak-to-peak frequency error"),
+    "rms_phase": ("rad", "steady rms phase error"),
+    "itae_freq": ("Hz s2", "ITAE of the frequency error after the event"),
+    "iae_phase": ("rad s", "IAE of the phase error after the event"),
+}
+AXIS_META = {
+    "freq_step": ("Hz", "frequency step at the event"),
+    "phase_jump_deg": ("degree", "phase jump at the event"),
+    "sag": ("1", "voltage sag depth at the event (p.u.)"),
+    "dc": ("1", "dc offset (p.u. of the fundamental)"),
+    "harmonics_scale": ("1", "harmonic distortion (multiple of 001 Test C's spectrum)"),
+    "sub_amplitude": ("1", "1 Hz subharmonic amplitude (p.u.)"),
+    "phase_deg": ("degree", "initial phase"),
+    "noise": ("1", "white measurement noise standard deviation (p.u.)"),
+}
+GAIN_NAMES = ("k", "k1", "k2", "lam")
+GAIN_UNITS = {"k": "1", "k1": "1", "k2": "1", "lam": "rad2 s-2"}  # jaxobs.observers.fll: λ in rad²/s²
 
 
 def _metrics(sol, t_event: float, steady_from: float, band_hz: float, n_period: int):
@@ -56,6 +82,7 @@ def _metrics(sol, t_event: float, steady_from: float, band_hz: float, n_period: 
     f_avg = M.moving_average(f_hat, n_period)
     return {
         "settling_freq": M.settling_time(t, f_avg, f_true[-1], band_hz, t_event),
+        "settled": M.settled(t, f_avg, f_true[-1], band_hz, t_event),
         "ripple_freq": M.peak_to_peak(ferr, steady),
         "rms_phase": M.rms(perr, steady),
         "itae_freq": M.itae(t, ferr, t_event),
@@ -82,8 +109,13 @@ def run_study(
     seed=0,
     chunk_size=2048,
     progress=True,
+    return_seconds=False,
 ):
-    """Simulate every design on every scenario; returns an ``xarray.Dataset`` (see module doc)."""
+    """Simulate every design on every scenario; returns an ``xarray.Dataset`` (see module doc).
+
+    With ``return_seconds=True`` returns ``(dataset, seconds)``, the wall time of the runs
+    (kept out of the Dataset, so two identical studies write identical files).
+    """
     import xarray as xr
 
     if not designs:
@@ -121,7 +153,7 @@ def run_study(
             def one(sig):
                 sol = simulate(OnSignal(obs, sig), horizon)
                 m = _metrics(sol, t_event, steady_from, band_hz, max(1, int(round(1.0 / (freq * obs.ts)))))
-                ok = sol.ok & jnp.all(jnp.stack([jnp.isfinite(v) for v in m.values()]))
+                ok = sol.ok & jnp.all(jnp.stack([jnp.isfinite(m[k]) for k in STUDY_METRICS]))
                 return m, ok
 
             return jax.vmap(one)(batch)
@@ -136,7 +168,7 @@ def run_study(
             if progress:
                 _progress(done, total, t0)
         results[dname] = (
-            {k: np.concatenate([p[k] for p in parts_m])[:n] for k in STUDY_METRICS},
+            {k: np.concatenate([p[k] for p in parts_m])[:n] for k in (*STUDY_METRICS, "settled")},
             np.concatenate(parts_ok)[:n],
         )
 
@@ -144,18 +176,40 @@ def run_study(
     if sample:
         dims = ("design", "sample")
         shape = (n,)
-        coords = {"design": dnames, "sample": np.arange(n)}
+        coords = {"design": dnames, "sample": ("sample", np.arange(n), _meta("1", "scenario drawn at random"))}
         for i, name in enumerate(names):
-            coords[name] = ("sample", np.asarray([c[i] for c in combos]))
+            coords[name] = ("sample", np.asarray([c[i] for c in combos]), _meta(*AXIS_META[name]))
     else:
         dims = ("design", *names)
         shape = tuple(len(axes[nm]) for nm in names)
-        coords = {"design": dnames, **{nm: np.asarray(axes[nm], dtype=float) for nm in names}}
+        coords = {
+            "design": dnames,
+            **{nm: (nm, np.asarray(axes[nm], dtype=float), _meta(*AXIS_META[nm])) for nm in names},
+        }
+    coords["design"] = ("design", dnames, {"long_name": "observer design"})
+    gains_present = [g for g in GAIN_NAMES if any(hasattr(o, g) for o in designs.values())]
+    coords["gain_name"] = ("gain_name", gains_present, {"long_name": "name of the observer's gain field"})
+    coords["gain_units"] = ("gain_name", [GAIN_UNITS[g] for g in gains_present], {"long_name": "units of each gain"})
     data = {}
     for k in STUDY_METRICS:
         arr = np.stack([np.where(results[d][1], results[d][0][k], np.nan).reshape(shape) for d in dnames])
-        data[k] = (dims, arr)
-    data["diverged"] = (dims, np.stack([(~results[d][1]).astype(np.int8).reshape(shape) for d in dnames]))
+        data[k] = (dims, arr, _meta(*METRIC_META[k]))
+    data["settled"] = (
+        dims,
+        np.stack([(results[d][0]["settled"] & results[d][1]).reshape(shape) for d in dnames]),
+        _meta("1", "settled by the horizon (False: settling_freq is censored at horizon - t_event)"),
+    )
+    data["diverged"] = (
+        dims,
+        np.stack([(~results[d][1]).astype(np.int8).reshape(shape) for d in dnames]),
+        _meta("1", "simulation diverged or a metric is not finite (1: its metrics are NaN)"),
+    )
+    gain = [[float(getattr(obs, g)) if hasattr(obs, g) else np.nan for g in gains_present] for obs in designs.values()]
+    data["gain"] = (
+        ("design", "gain_name"),
+        np.asarray(gain, dtype=float).reshape(len(dnames), len(gains_present)),
+        _meta("see gain_units", "observer gain (NaN: the design has no such gain)"),
+    )
     ds = xr.Dataset(data, coords=coords)
     ds.attrs.update(
         t_event=t_event,
@@ -163,12 +217,36 @@ def run_study(
         steady_from=steady_from,
         band_hz=band_hz,
         scenarios=n,
-        seconds=time.time() - t0,
+        sampling="random" if sample else "grid",
+        seed=seed,
+        **_provenance(),
     )
-    for dname, obs in designs.items():
-        gains = {f: float(getattr(obs, f)) for f in ("k", "k1", "k2", "lam") if hasattr(obs, f)}
-        ds.attrs[f"gains {dname}"] = ", ".join(f"{k}={v:.6g}" for k, v in gains.items())
-    return ds
+    seconds = time.time() - t0
+    return (ds, seconds) if return_seconds else ds
+
+
+def _meta(units: str, long_name: str) -> dict:
+    return {"units": units, "long_name": long_name}
+
+
+def _provenance() -> dict:
+    """The versions that made a Dataset (strings: NetCDF attributes)."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    def v(pkg):
+        try:
+            return version(pkg)
+        except PackageNotFoundError:
+            return "unknown"
+
+    return {
+        "source": "jaxobs.study.run_study",
+        "jaxobs_version": v("jaxobs"),
+        "jax_version": jax.__version__,
+        "jaxlib_version": v("jaxlib"),
+        "equinox_version": v("equinox"),
+        "numpy_version": np.__version__,
+    }
 
 
 def worst_cases(ds, metric: str, k: int = 5):

@@ -1,6 +1,8 @@
 """Every notebook executes without error (small-grid switch JAXOBS_NOTEBOOK_SMALL=1).
 
 Budget: each notebook under 240 s on 2 CPU cores (measured: see README); slow-marked, run by CI.
+No notebook forces a matplotlib backend: under ipykernel the inline backend shows its figures, and
+every executed notebook must show at least one (an ``image/png`` output).
 """
 
 import time
@@ -32,3 +34,11 @@ def test_notebook_executes(path, monkeypatch):
     elapsed = time.time() - t0
     print(f"\n{path.name}: {elapsed:.1f} s")
     assert elapsed < BUDGET_S
+    images = [o for c in nb.cells if c.cell_type == "code" for o in c.outputs if "image/png" in o.get("data", {})]
+    assert images, f"{path.name} shows no figure (an image/png output)"
+
+
+def test_notebooks_force_no_backend():
+    for path in NOTEBOOKS:
+        nb = nbformat.read(path, as_version=4)
+        assert not any("matplotlib.use(" in c.source for c in nb.cells), path.name

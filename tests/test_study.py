@@ -60,6 +60,40 @@ def test_bad_study_arguments():
         run_study({"a": linear.wif_closed_form()}, {"dc": [0.0]}, t_event=0.5, horizon=0.4)
 
 
+def test_dataset_has_units_gains_settled_and_provenance(small_study, tmp_path):
+    """Every variable and coordinate has CF units and a long name; the gains are numbers; the settling times
+    censored at the horizon are flagged; two identical studies write byte-identical files."""
+    designs, ds = small_study
+    for name in [*ds.data_vars, *ds.coords]:
+        if name in ("design", "gain_name", "gain_units"):
+            assert "long_name" in ds[name].attrs, name
+            continue
+        assert {"units", "long_name"} <= set(ds[name].attrs), name
+    assert ds["rms_phase"].attrs["units"] == "rad" and ds["freq_step"].attrs["units"] == "Hz"
+    assert ds["gain"].dims == ("design", "gain_name")
+    assert float(ds["gain"].sel(design="SOGI-FLL", gain_name="k")) == pytest.approx(float(designs["SOGI-FLL"].k))
+    assert float(ds["gain"].sel(design="WIF", gain_name="lam")) == pytest.approx(float(designs["WIF"].lam))
+    assert np.isnan(float(ds["gain"].sel(design="SOGI-FLL", gain_name="k1")))
+    assert not any(isinstance(v, str) and "=" in v for v in ds.attrs.values())  # no gains as strings
+    assert ds["settled"].dtype == bool and ds["settled"].dims == ds["settling_freq"].dims
+    censored = np.isclose(ds["settling_freq"], ds.attrs["horizon"] - ds.attrs["t_event"], atol=2e-4)
+    assert not np.any(censored & ds["settled"])  # a settling time at the horizon is never "settled"
+    assert "seconds" not in ds.attrs and ds.attrs["jax_version"] == jax.__version__
+    again, seconds = run_study(designs, AXES, progress=False, return_seconds=True)
+    assert seconds > 0
+    ds.to_netcdf(tmp_path / "a.nc", engine="scipy")
+    again.to_netcdf(tmp_path / "b.nc", engine="scipy")
+    assert (tmp_path / "a.nc").read_bytes() == (tmp_path / "b.nc").read_bytes()
+
+
+def test_unsettled_runs_are_flagged():
+    """A sluggish design on a short horizon has not settled: ``settled`` False, its time censored."""
+    slow = jaxobs.SOGIFLL(k=0.3, lam=500.0)
+    ds = run_study({"slow": slow}, {"freq_step": [3.0]}, horizon=0.2, progress=False)
+    assert not bool(ds["settled"].squeeze())
+    assert float(ds["settling_freq"].squeeze()) == pytest.approx(0.1, abs=2e-4)  # t[-1] - t_event
+
+
 def test_study_of_more_than_10000_scenarios(tmp_path, capsys):
     """10,240 scenarios (random draws over 5 axes) of the SOGI-FLL-WIF in chunks of 2048; time reported."""
     t0 = time.time()

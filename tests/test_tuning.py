@@ -1,6 +1,7 @@
 """Tuning: closed forms recovered by optimization, nonlinear tuning beating them, robust tuning,
 resume after kill -9, and job-file validation."""
 
+import dataclasses
 import json
 import math
 import os
@@ -465,3 +466,14 @@ def test_bfgs_records_every_iteration_with_a_readable_reason(tmp_path, capsys):
     assert main(["tune", str(path), "--check"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "solver.learning_rate" in err[0] and "bfgs" in err[0]
+
+
+def test_report_names_scenarios_in_the_objectives_order():
+    """responses.png names its scenario by the values tuning.report enumerates: the job's own order, grid or sampled."""
+    from tuning.job import _combos, load_job
+    from tuning.report import scenario_values
+
+    job = load_job(Path(__file__).parents[1] / "tuning" / "presets" / "wif_robust.toml")
+    assert scenario_values(job.scenarios) == _combos(job.scenarios)
+    sampled = dataclasses.replace(job.scenarios, sample=7, seed=3)
+    assert scenario_values(sampled) == _combos(sampled)

@@ -362,13 +362,13 @@ def _cmd_study(args) -> int:
     out.mkdir(parents=True, exist_ok=True)
     if opts.pop("kind", "fll") == "drive":
         return _cmd_drive_study(name, designs, axes, opts, out, args.quiet)
-    ds = run_study(designs, axes, progress=not args.quiet, **opts)
+    ds, seconds = run_study(designs, axes, progress=not args.quiet, return_seconds=True, **opts)
     ds.to_netcdf(out / "study.nc", engine="scipy")
     worst = {m: worst_cases(ds, m, 3) for m in STUDY_METRICS}
     (out / "worst_cases.json").write_text(json.dumps(worst, indent=1))
     figs = study_figures(ds, out)
     n = int(ds.attrs["scenarios"])
-    print(f"study {name}: {len(designs)} designs x {n} scenarios in {ds.attrs['seconds']:.1f} s")
+    print(f"study {name}: {len(designs)} designs x {n} scenarios in {seconds:.1f} s")
     print(
         f"{'design':<16}"
         + "".join(f"{m + ' mean':>20}{'worst':>12}" for m in ("settling_freq", "ripple_freq", "rms_phase"))

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import math
 from pathlib import Path
 
@@ -11,20 +12,48 @@ import numpy as np
 from jaxobs.metrics import wrap
 
 
-def _plt():
-    import matplotlib
+def _subplots(*args, figsize, **kwargs):
+    """``pyplot.subplots`` without pyplot: no backend selected, so a notebook running a job keeps its own."""
+    from matplotlib.figure import Figure
 
-    matplotlib.use("Agg", force=False)
-    import matplotlib.pyplot as plt
+    fig = Figure(figsize=figsize)
+    return fig, fig.subplots(*args, **kwargs)
 
-    return plt
+
+# how each design's curve is drawn: "initial" often equals the closed form (a job that starts there), so it is
+# dashed and on top, visible over "closed_form"
+_STYLE = {"initial": dict(ls="--", lw=1.2, zorder=3), "closed_form": dict(lw=1.6), "tuned": dict(lw=1.2)}
+
+
+def scenario_values(spec) -> tuple[list, list]:
+    """The axis names and the value tuple of every scenario of a job's ``ScenarioSpec``, in the objective's order.
+
+    The same enumeration as the scenarios' builder (``tuning.job``): the Cartesian grid, or ``sample``
+    random points drawn (seeded) between each axis' smallest and largest value.
+    """
+    names = list(spec.axes)
+    if spec.sample:
+        rng = np.random.default_rng(spec.seed)
+        lo, hi = {n: min(spec.axes[n]) for n in names}, {n: max(spec.axes[n]) for n in names}
+        return names, [tuple(rng.uniform(lo[n], hi[n]) for n in names) for _ in range(spec.sample)]
+    return names, list(itertools.product(*(spec.axes[n] for n in names)))
+
+
+_UNITS = {"freq_step": " Hz", "speed_hz": " Hz", "speed_rpm": " r/min", "dc": " p.u.", "sag": " p.u.", "noise": " p.u."}
+
+
+def _describe(spec, index: int) -> str:
+    names, combos = scenario_values(spec)
+    if not names or index >= len(combos):
+        return f"scenario #{index}"
+    values = ", ".join(f"{n} = {v:.4g}{_UNITS.get(n, '')}" for n, v in zip(names, combos[index]))
+    return f"scenario #{index}: {values}"
 
 
 def write_report(out: Path, job, obj, thetas: dict, history: list):
-    plt = _plt()
     # convergence
     if history:
-        fig, ax = plt.subplots(figsize=(6, 3.5))
+        fig, ax = _subplots(figsize=(6, 3.5))
         ax.semilogy([h["iteration"] for h in history], [h["value"] for h in history], lw=1.2)
         ax.set_xlabel("iteration")
         ax.set_ylabel("objective")
@@ -32,33 +61,35 @@ def write_report(out: Path, job, obj, thetas: dict, history: list):
         ax.grid(True, which="both", alpha=0.3)
         fig.tight_layout()
         fig.savefig(out / "convergence.png", dpi=110)
-        plt.close(fig)
     # responses on the scenario where the closed form does worst
     per = obj.per_scenario(thetas["closed_form"])[1]
     worst = int(np.argmax(np.asarray(per)))
     sig = jax.tree.map(lambda x: x[worst], obj.scenarios)
-    fig, axes = plt.subplots(2, 1, figsize=(8, 5.5), sharex=True)
+    fig, axes = _subplots(2, 1, figsize=(8, 5.5), sharex=True)
     for label, th in thetas.items():
+        style = _STYLE.get(label, dict(lw=1))
         comp = obj.param.apply(obj.component, th)
         sol = obj._simulate(comp, sig)
         t, so = np.asarray(sol.t), sol.outputs
         if hasattr(so, "theta_e"):  # drive: observer speed and position error
-            axes[0].plot(t, np.asarray(so.obs.omega) / (2 * math.pi), lw=1, label=label)
-            axes[1].plot(t, np.degrees(np.asarray(wrap(so.obs.theta - so.theta_e))), lw=1, label=label)
+            axes[0].plot(t, np.asarray(so.obs.omega) / (2 * math.pi), label=label, **style)
+            axes[1].plot(t, np.degrees(np.asarray(wrap(so.obs.theta - so.theta_e))), label=label, **style)
         elif so.truth is not None:
-            axes[0].plot(t, np.asarray(so.obs.omega) / (2 * math.pi), lw=1, label=label)
-            axes[1].plot(t, np.degrees(np.asarray(wrap(so.obs.theta - so.truth.theta))), lw=1, label=label)
+            axes[0].plot(t, np.asarray(so.obs.omega) / (2 * math.pi), label=label, **style)
+            axes[1].plot(t, np.degrees(np.asarray(wrap(so.obs.theta - so.truth.theta))), label=label, **style)
         else:
-            axes[0].plot(t, np.asarray(so.obs.omega) / (2 * math.pi), lw=1, label=label)
+            axes[0].plot(t, np.asarray(so.obs.omega) / (2 * math.pi), label=label, **style)
             err = wrap(so.obs.theta - (sig.omega1 * sol.t + sig.phase - math.pi / 2))
-            axes[1].plot(t, np.degrees(np.asarray(err)), lw=1, label=label)
+            axes[1].plot(t, np.degrees(np.asarray(err)), label=label, **style)
     axes[0].set_ylabel("estimated frequency (Hz)")
     axes[1].set_ylabel("phase / position error (deg)")
     axes[1].set_xlabel("time (s)")
     axes[0].legend(fontsize=8)
     for ax in axes:
         ax.grid(True, alpha=0.3)
-    fig.suptitle(f"{job.name}: closed form vs tuned on the closed form's worst scenario (#{worst})", fontsize=10)
+    fig.suptitle(
+        f"{job.name}: closed form vs tuned on the closed form's worst scenario\n{_describe(job.scenarios, worst)}",
+        fontsize=10,
+    )
     fig.tight_layout()
     fig.savefig(out / "responses.png", dpi=110)
-    plt.close(fig)
