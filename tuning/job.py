@@ -70,6 +70,7 @@ from jaxobs.scenarios import grid_signals
 from jaxobs.signals import EMFSignal, stack
 
 from .objective import DRIVE_METRICS, METRICS, MetricContext, Objective, Term
+from .outdir import atomic_path, atomic_write_text
 from .params import GainSpec, Parametrization
 from .report import write_report
 from .solvers import SolverConfig, run_solver
@@ -849,7 +850,7 @@ def write_json(path: Path, obj) -> None:
     clean = sanitize(obj, "", reasons)
     if reasons and isinstance(clean, dict):
         clean["null_reasons"] = {**clean.get("null_reasons", {}), **reasons}
-    path.write_text(json.dumps(clean, indent=1, allow_nan=False) + "\n")
+    atomic_write_text(path, json.dumps(clean, indent=1, allow_nan=False) + "\n")
 
 
 def _at_bounds(job: Job, gains: dict) -> dict:
@@ -907,6 +908,16 @@ def _versions() -> dict:
     }
 
 
+CHECKPOINT = "checkpoint.npz"
+
+
+def job_fingerprint(job: Job) -> str:
+    """What a checkpoint is checked against: the job file's sha256, or the sha256 of the job dict's JSON."""
+    if job.sha256:
+        return job.sha256
+    return hashlib.sha256(json.dumps(job.raw, sort_keys=True, default=str).encode()).hexdigest()
+
+
 def run_job(job: Job, out: Path, resume: bool = False, quiet: bool = False) -> dict:
     """Tune, score initial / tuned / closed form on the same scenarios, write the results folder.
 
@@ -923,7 +934,15 @@ def run_job(job: Job, out: Path, resume: bool = False, quiet: bool = False) -> d
     cf_all = info.closed_form(obj.component)
     cf = {g.name: cf_all[g.name] for g in job.gains}
     theta_cf = param.to_theta({g.name: _inside(g, cf[g.name]) for g in job.gains})
-    res = run_solver(obj, theta0, job.solver, checkpoint=out / "checkpoint.npz", resume=resume, quiet=quiet)
+    res = run_solver(
+        obj,
+        theta0,
+        job.solver,
+        checkpoint=out / CHECKPOINT,
+        resume=resume,
+        quiet=quiet,
+        fingerprint=job_fingerprint(job),
+    )
     thetas = {"initial": theta0, "closed_form": theta_cf}
     if res.theta is not None:  # never a design that diverged in some scenario
         thetas["tuned"] = res.theta
@@ -975,11 +994,13 @@ def run_job(job: Job, out: Path, resume: bool = False, quiet: bool = False) -> d
         hper = {k: hobj.per_scenario(th) for k, th in thetas.items()}
         result["holdout"] = {k: (hobj.summarize(*hper[k]) if k in hper else None) for k in gains}
         result["holdout"]["count"] = len(hc)
-        _scores_dataset(hobj, hn, hc, job.holdout, hper).to_netcdf(out / "holdout_scores.nc", engine="scipy")
-    _scores_dataset(obj, names, combos, job.scenarios, per).to_netcdf(out / "scores.nc", engine="scipy")
-    write_json(out / "result.json", result)
+        with atomic_path(out / "holdout_scores.nc") as tmp:
+            _scores_dataset(hobj, hn, hc, job.holdout, hper).to_netcdf(tmp, engine="scipy")
+    with atomic_path(out / "scores.nc") as tmp:
+        _scores_dataset(obj, names, combos, job.scenarios, per).to_netcdf(tmp, engine="scipy")
     write_json(out / "history.json", res.history)
     write_report(out, job, obj, thetas, res.history)
     timing = {"total_s": time.time() - t0, **res.timing, "iterations": res.iterations}
-    (out / "timing.json").write_text(json.dumps(timing, indent=1) + "\n")
+    atomic_write_text(out / "timing.json", json.dumps(timing, indent=1) + "\n")
+    write_json(out / "result.json", result)  # last: a result.json means a complete results folder
     return result

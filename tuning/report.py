@@ -10,6 +10,8 @@ import numpy as np
 
 from jaxobs.metrics import wrap
 
+from .outdir import atomic_path
+
 
 def _plt():
     import matplotlib
@@ -31,7 +33,8 @@ def write_report(out: Path, job, obj, thetas: dict, history: list):
         ax.set_title(f"{job.name}: convergence")
         ax.grid(True, which="both", alpha=0.3)
         fig.tight_layout()
-        fig.savefig(out / "convergence.png", dpi=110)
+        with atomic_path(out / "convergence.png") as tmp:
+            fig.savefig(tmp, dpi=110)
         plt.close(fig)
     # responses on the scenario where the closed form does worst
     per = obj.per_scenario(thetas["closed_form"])[1]
@@ -60,5 +63,6 @@ def write_report(out: Path, job, obj, thetas: dict, history: list):
         ax.grid(True, alpha=0.3)
     fig.suptitle(f"{job.name}: closed form vs tuned on the closed form's worst scenario (#{worst})", fontsize=10)
     fig.tight_layout()
-    fig.savefig(out / "responses.png", dpi=110)
+    with atomic_path(out / "responses.png") as tmp:
+        fig.savefig(tmp, dpi=110)
     plt.close(fig)
