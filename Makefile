@@ -13,7 +13,7 @@ $(STAMP): pyproject.toml
 	touch $(STAMP)
 
 run: $(STAMP)
-	$(VENV)/bin/jaxobs tune --out out/tune
+	$(VENV)/bin/jaxobs tune --out out/tune --force
 
 # pytest exits 5 when it collects nothing: for the main suite that is a broken
 # checkout and fails; for the slow suite it only means there are no slow tests.

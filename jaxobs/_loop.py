@@ -285,6 +285,9 @@ def _scan(body, carry, xs, n, unroll, checkpoint, xs_map=None):
     return carry, ys
 
 
+MAX_BLOCK_SEARCH = 1 << 16  # the divisor search of _block_size looks at no more than 3·2^15 sizes
+
+
 def _block_size(n: int, target: int, unroll: int) -> int:
     """Steps per block: ``n`` itself when short, else a divisor of ``n`` near ``target``.
 
@@ -296,6 +299,8 @@ def _block_size(n: int, target: int, unroll: int) -> int:
     """
     if n <= 2 * target:
         return n
+    if target > MAX_BLOCK_SEARCH:  # bounded work whatever n (simulate caps n below 2^31: target < 46 341)
+        return max(unroll, target // unroll * unroll)
     best = None
     for d in range(max(1, target // 2), 2 * target + 1):
         if n % d == 0 and d % unroll == 0 and (best is None or abs(d - target) < abs(best - target)):

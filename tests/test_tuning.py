@@ -272,11 +272,13 @@ def test_kill_9_then_resume_gives_the_same_gains(tmp_path):
         stdout=subprocess.DEVNULL,
         stderr=subprocess.DEVNULL,
     )
-    meta = out / "checkpoint.json"
+    ckpt = out / "checkpoint.npz"  # one file, renamed into place whole: always readable
     deadline = time.time() + 300
     while time.time() < deadline:
-        if meta.exists() and json.loads(meta.read_text())["iteration"] >= 8:
-            break
+        if ckpt.exists():
+            with np.load(ckpt) as data:
+                if json.loads(str(data["meta"]))["iteration"] >= 8:
+                    break
         time.sleep(0.05)
     assert proc.poll() is None, "the job finished before it could be killed"
     os.kill(proc.pid, signal.SIGKILL)

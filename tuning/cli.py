@@ -21,9 +21,21 @@ tune`` without a file runs the embedded default job
 (``tuning/presets/wif_robust.toml``).  Benchmarks are not a command: ``make
 bench`` (``benchmarks/``).
 
-Errors in the arguments or input files end the program with one line on stderr
-and exit status 2 (a job-file error names the field); nothing prints a
-traceback for bad input.
+Every failure ends the program with one line on stderr.  Exit statuses:
+
+- 0: done;
+- 1: an internal error (a bug, or the machine ran out of memory): the one line names the log file
+  holding the traceback (``<out>/error.log``, or a temporary file before ``--out`` is known);
+- 2: bad input: arguments, a job or study file (the line names the field), an output folder that cannot
+  be used (a symlink, not writable, locked by another process, results there without ``--force``), a
+  checkpoint that ``--resume`` cannot use (corrupt, or another job's);
+- 3: ``tune`` only: every design tried diverged (status ``diverged``, nothing tuned);
+- 130: interrupted (Ctrl-C).
+
+``tune`` and ``study`` write only under ``--out`` (default ``./out/<name>``, the job's or study's name
+reduced to ``[A-Za-z0-9._-]``): see :mod:`tuning.outdir` for the lock file, symlinks and ``--force``.
+``tune --resume`` continues from ``<out>/checkpoint.npz`` if it is this job's (the job file's sha256 is
+in it); with no checkpoint it says so in one line and starts fresh.
 """
 
 from __future__ import annotations
@@ -31,6 +43,8 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+import tempfile
+import traceback
 from importlib import resources
 from pathlib import Path
 
@@ -39,7 +53,8 @@ from jaxobs import linear, papers, use_host_devices
 from jaxobs.study import STUDY_AXES
 
 from .export import add_export_parser
-from .job import load_job, run_job
+from .job import CHECKPOINT, load_job, read_toml, run_job
+from .outdir import OutDir, atomic_path, atomic_write_text, safe_name
 from .results import load_result, tuned_component
 
 
@@ -175,14 +190,8 @@ _FLL_CTORS = {"SOGIFLL": "SOGIFLL", "SOGIFLLWPF": "SOGIFLLWPF", "SOGIFLLWIF": "S
 
 def load_study(path):
     """Parse a study TOML into (name, designs, axes, options); errors name the field (ValueError)."""
-    import tomllib
 
-    try:
-        raw = tomllib.loads(Path(path).read_text())
-    except OSError as e:
-        raise ValueError(f"study file: cannot read {str(path)!r}: {e.strerror}") from None
-    except tomllib.TOMLDecodeError as e:
-        raise ValueError(f"study file: not valid TOML: {e}") from None
+    raw, _ = read_toml(path, "study file")  # size, nesting and encoding checked before parsing
     st = raw.get("study", {})
     if st.get("kind", "fll") == "drive":
         return _load_drive_study(raw, st)
@@ -332,9 +341,10 @@ def _cmd_drive_study(name, designs, axes, opts, out: Path, quiet: bool) -> int:
             print(f"drive study: {done}/{total} scenario runs", file=sys.stderr, flush=True)
 
     ds = run_drive_study(designs, axes, progress=progress, **opts)
-    ds.to_netcdf(out / "study.nc", engine="scipy")
     fig = out / "drive_study.png"
     drive_study_figure(ds, fig)
+    with atomic_path(out / "study.nc") as tmp:
+        ds.to_netcdf(tmp, engine="scipy")
     n = int(ds.attrs["scenarios"])
     print(f"drive study {name}: {len(designs)} designs x {n} scenarios ({ds.attrs['sampling']}), sensorless")
     qs = [float(q) for q in ds["quantile"].values]
@@ -353,20 +363,26 @@ def _cmd_drive_study(name, designs, axes, opts, out: Path, quiet: bool) -> int:
 
 def _cmd_study(args) -> int:
     _enable_x64()
+    path = Path(args.study) if args.study else Path(str(resources.files("jaxobs") / "data" / "default_study.toml"))
+    name, designs, axes, opts = load_study(path)
+    out = Path(args.out) if args.out else Path("out") / safe_name(str(name), "study")
+    with OutDir(out, ["study.nc"], force=args.force):
+        args.log_dir = out
+        return _run_study(name, designs, axes, opts, out, args.quiet)
+
+
+def _run_study(name, designs, axes, opts, out: Path, quiet: bool) -> int:
     from jaxobs.plot import study_figures
     from jaxobs.study import STUDY_METRICS, run_study, worst_cases
 
-    path = Path(args.study) if args.study else Path(str(resources.files("jaxobs") / "data" / "default_study.toml"))
-    name, designs, axes, opts = load_study(path)
-    out = Path(args.out) if args.out else Path("out") / name
-    out.mkdir(parents=True, exist_ok=True)
     if opts.pop("kind", "fll") == "drive":
-        return _cmd_drive_study(name, designs, axes, opts, out, args.quiet)
-    ds, seconds = run_study(designs, axes, progress=not args.quiet, return_seconds=True, **opts)
-    ds.to_netcdf(out / "study.nc", engine="scipy")
+        return _cmd_drive_study(name, designs, axes, opts, out, quiet)
+    ds, seconds = run_study(designs, axes, progress=not quiet, return_seconds=True, **opts)
     worst = {m: worst_cases(ds, m, 3) for m in STUDY_METRICS}
-    (out / "worst_cases.json").write_text(json.dumps(worst, indent=1))
+    atomic_write_text(out / "worst_cases.json", json.dumps(worst, indent=1))
     figs = study_figures(ds, out)
+    with atomic_path(out / "study.nc") as tmp:  # last: a study.nc means a complete results folder
+        ds.to_netcdf(tmp, engine="scipy")
     n = int(ds.attrs["scenarios"])
     print(f"study {name}: {len(designs)} designs x {n} scenarios in {seconds:.1f} s")
     print(
@@ -483,8 +499,13 @@ def _cmd_tune(args) -> int:
             f"solver {job.solver.kind}"
         )
         return 0
-    out = Path(args.out) if args.out else Path("out") / job.name
-    result = run_job(job, out, resume=args.resume, quiet=args.quiet)
+    out = Path(args.out) if args.out else Path("out") / safe_name(job.name)
+    products = ["result.json"]
+    if not args.resume:
+        products.append(CHECKPOINT)  # a fresh run would overwrite it: --resume, or --force to start over
+    with OutDir(out, products, force=args.force):
+        args.log_dir = out
+        result = run_job(job, out, resume=args.resume, quiet=args.quiet)
     try:
         timing = json.loads((out / "timing.json").read_text())
     except (OSError, ValueError):
@@ -574,6 +595,7 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--resume", action="store_true", help="continue from the checkpoint in --out")
     t.add_argument("--check", action="store_true", help="validate the job file and exit")
     t.add_argument("--quiet", action="store_true", help="no progress bar")
+    t.add_argument("--force", action="store_true", help="overwrite results (and a checkpoint) already in --out")
     t.set_defaults(func=_cmd_tune)
 
     d = sub.add_parser("demo", help="FLL family (SOGI-FLL, -WPF, -WIF) on paper 001 Tests A-E")
@@ -614,6 +636,7 @@ def build_parser() -> argparse.ArgumentParser:
     st.add_argument("study", nargs="?", help="study file (TOML); default: the FLL family's closed forms")
     st.add_argument("--out", help="results folder (default: out/<study name>)")
     st.add_argument("--quiet", action="store_true", help="no progress bar")
+    st.add_argument("--force", action="store_true", help="overwrite a study.nc already in --out")
     st.set_defaults(func=_cmd_study)
 
     add_export_parser(sub)
@@ -623,6 +646,7 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv=None) -> int:
     """Run the command line (``argv`` defaults to ``sys.argv[1:]``); returns the exit status."""
     parser = build_parser()
+    args = None
     try:
         use_host_devices()  # before any JAX computation: one CPU device per usable core
         args = parser.parse_args(argv)
@@ -637,6 +661,31 @@ def main(argv=None) -> int:
     except KeyboardInterrupt:
         print("jaxobs: interrupted", file=sys.stderr)
         return 130
+    except (Exception, MemoryError) as e:  # an internal error: the traceback to a log, one line here
+        log = _write_error_log(getattr(args, "log_dir", None))
+        what = "out of memory" if isinstance(e, MemoryError) else f"internal error ({type(e).__name__})"
+        print(f"jaxobs: {what}: {' '.join(str(e).split())[:120]} — traceback in {log}", file=sys.stderr)
+        return 1
+
+
+def _write_error_log(out) -> str:
+    """The current exception's traceback to ``<out>/error.log`` (else a temporary file); its path."""
+    text = traceback.format_exc()
+    if out is not None:
+        try:
+            path = Path(out) / "error.log"
+            if not path.is_symlink():
+                path.write_text(text)
+                return str(path)
+        except OSError:
+            pass
+    try:
+        fd, path = tempfile.mkstemp(prefix="jaxobs-error-", suffix=".log")
+        with open(fd, "w") as f:
+            f.write(text)
+        return path
+    except OSError:
+        return "(no log: nothing writable)"
 
 
 if __name__ == "__main__":

@@ -52,6 +52,8 @@ import hashlib
 import itertools
 import json
 import math
+import os
+import re
 import time
 import tomllib
 from dataclasses import dataclass
@@ -68,6 +70,7 @@ from jaxobs.scenarios import grid_signals
 from jaxobs.signals import EMFSignal, stack
 
 from .objective import DRIVE_METRICS, METRICS, MetricContext, Objective, Term
+from .outdir import atomic_path, atomic_write_text
 from .params import GainSpec, Parametrization
 from .report import write_report
 from .solvers import SolverConfig, run_solver
@@ -77,11 +80,40 @@ __all__ = ["JobError", "Job", "load_job", "parse_job", "run_job", "COMPONENTS", 
 
 
 class JobError(ValueError):
-    """A problem with a job file; ``str()`` is one line naming the field."""
+    """A problem with a job file; ``str()`` is one line naming the field, at most :data:`MAX_ERROR` characters."""
 
     def __init__(self, field: str, message: str):
         self.field = field
-        super().__init__(f"{field}: {message}")
+        field = _cap(field, 80)
+        line = " ".join(f"{field}: {message}".split())  # one line, whatever the message holds
+        super().__init__(_cap(line, MAX_ERROR))
+
+
+MAX_ERROR = 200  # characters in a job-file error
+MAX_FILE_BYTES = 1_000_000  # a job file larger than this is refused before it is parsed
+MAX_DEPTH = 20  # nesting of tables, arrays and dotted keys
+MAX_STEPS = 10_000_000  # time steps of one simulation (horizon / ts)
+MAX_SCENARIOS = 1_000_000  # scenarios of a grid or of `sample`
+MAX_INT = 2**63 - 1
+MAX_SOLVER_STEPS = 1_000_000
+# bytes a simulation keeps per scenario and time step while its gradient is taken (states, outputs and
+# their cotangents, float64): an estimate for the memory check, not a measurement
+BYTES_PER_STEP = {"grid": 512, "emf": 512, "drive": 2048}
+
+
+def _cap(text: str, n: int) -> str:
+    return text if len(text) <= n else text[: n - 1] + "…"
+
+
+def _show(v) -> str:
+    """A value for an error message: its repr, long ones elided."""
+    if isinstance(v, int) and not isinstance(v, bool) and abs(v) > 10**20:
+        return f"an integer of {len(str(abs(v)))} digits"
+    try:
+        r = repr(v) if not isinstance(v, (list, dict)) or len(v) <= 8 else f"{type(v).__name__} of {len(v)}"
+    except (RecursionError, ValueError):
+        r = type(v).__name__
+    return _cap(r, 60)
 
 
 # --------------------------------------------------------------------------
@@ -252,28 +284,31 @@ def _get(table: dict, key: str, field: str, kind, default=None, required=False):
     v = table[key]
     if kind is float:
         if isinstance(v, bool) or not isinstance(v, (int, float)):
-            raise JobError(field, f"must be a number, got {type(v).__name__} {v!r}")
-        if not math.isfinite(float(v)):
-            raise JobError(field, f"must be finite, got {v!r}")
-        return float(v)
+            raise JobError(field, f"must be a number, got {type(v).__name__} {_show(v)}")
+        return _finite(v, field)
     if kind is int:
         if isinstance(v, bool) or not isinstance(v, int):
-            raise JobError(field, f"must be an integer, got {type(v).__name__} {v!r}")
+            raise JobError(field, f"must be an integer, got {type(v).__name__} {_show(v)}")
+        if abs(v) > MAX_INT:
+            raise JobError(field, f"out of range (|value| <= 2^63 - 1), got {_show(v)}")
         return v
     if kind is bool:
         if not isinstance(v, bool):
-            raise JobError(field, f"must be true or false, got {v!r}")
+            raise JobError(field, f"must be true or false, got {_show(v)}")
         return v
     if kind is str:
         if not isinstance(v, str):
-            raise JobError(field, f"must be a string, got {type(v).__name__} {v!r}")
+            raise JobError(field, f"must be a string, got {type(v).__name__} {_show(v)}")
         return v
     if kind is list:
         if not isinstance(v, list) or not v:
-            raise JobError(field, f"must be a non-empty list of numbers, got {v!r}")
-        for x in v:
-            if isinstance(x, bool) or not isinstance(x, (int, float)) or not math.isfinite(float(x)):
-                raise JobError(field, f"must be a non-empty list of finite numbers, got {v!r}")
+            raise JobError(field, f"must be a non-empty list of numbers, got {_show(v)}")
+        if len(v) > MAX_SCENARIOS:
+            raise JobError(field, f"too many values ({len(v)} > {MAX_SCENARIOS})")
+        for i, x in enumerate(v):
+            if isinstance(x, bool) or not isinstance(x, (int, float)):
+                raise JobError(f"{field}[{i}]", f"must be a finite number, got {type(x).__name__} {_show(x)}")
+            _finite(x, f"{field}[{i}]")
         return [float(x) for x in v]
     if kind is dict:
         if not isinstance(v, dict):
@@ -282,10 +317,21 @@ def _get(table: dict, key: str, field: str, kind, default=None, required=False):
     raise AssertionError(kind)
 
 
+def _finite(v, field: str) -> float:
+    """``v`` as a finite float: an integer beyond the float range (10^309) or NaN / inf is an error."""
+    try:
+        f = float(v)
+    except OverflowError:
+        raise JobError(field, f"out of the float range, got {_show(v)}") from None
+    if not math.isfinite(f):
+        raise JobError(field, f"must be finite, got {_show(v)}")
+    return f
+
+
 def _no_unknown(table: dict, allowed, where: str):
     for key in table:
         if key not in allowed:
-            raise JobError(f"{where}.{key}", f"unknown key; allowed: {', '.join(allowed)}")
+            raise JobError(f"{where}.{_cap(str(key), 40)}", f"unknown key; allowed: {', '.join(allowed)}")
 
 
 # --------------------------------------------------------------------------
@@ -335,43 +381,113 @@ class DriveSpec:
     settle: float = 0.2
 
 
-def _parse_scenarios(tab: dict, where: str, signal_default: str, seed: int) -> ScenarioSpec:
+# the physical range of every scenario axis (closed intervals unless noted), checked at --check time;
+# freq_step is checked against the component's nominal frequency, speed_hz against the sample rate
+AXIS_RANGES = {
+    "grid": {
+        "freq_step": ("Hz", (-1e4, 1e4)),
+        "phase_jump_deg": ("deg", (-360.0, 360.0)),
+        "sag": ("1", (0.0, 0.999)),
+        "dc": ("pu", (-10.0, 10.0)),
+        "harmonics_scale": ("1", (0.0, 100.0)),
+        "sub_amplitude": ("pu", (0.0, 10.0)),
+        "phase_deg": ("deg", (-360.0, 360.0)),
+    },
+    "emf": {
+        "speed_hz": ("Hz", (1e-3, 1e4)),
+        "dc_alpha": ("V", (-1e4, 1e4)),
+        "dc_beta": ("V", (-1e4, 1e4)),
+        "h5": ("1", (0.0, 10.0)),
+        "h7": ("1", (0.0, 10.0)),
+        "omega0_error": ("1", (-0.99, 10.0)),
+        "phase_deg": ("deg", (-360.0, 360.0)),
+    },
+    "drive": DRIVE_STUDY_AXES,
+}
+
+
+def _available_memory() -> int:
+    """Bytes of memory available now (MemAvailable on Linux, else the physical memory; 16 GiB if unknown)."""
+    try:
+        for line in Path("/proc/meminfo").read_text().splitlines():
+            if line.startswith("MemAvailable:"):
+                return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    try:
+        return os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    except (ValueError, OSError, AttributeError):
+        return 16 * 2**30
+
+
+def _check_size(spec: ScenarioSpec, where: str, ts: float, extra_s: float = 0.0) -> None:
+    """Time steps, scenario count and the memory a simulation of the batch needs, at --check time."""
+    n_scen = spec.sample or math.prod(len(v) for v in spec.axes.values())
+    if n_scen > MAX_SCENARIOS:
+        raise JobError(f"{where}.grid", f"{n_scen} scenarios (the product of the axes' lengths) > {MAX_SCENARIOS}")
+    steps = (spec.horizon + extra_s) / ts
+    if spec.horizon < ts:
+        raise JobError(f"{where}.horizon", f"shorter than one sample (ts = {ts:g} s), got {spec.horizon:g} s")
+    if steps > MAX_STEPS:
+        raise JobError(f"{where}.horizon", f"{steps:.3g} time steps of {ts:g} s > {MAX_STEPS:g}: too long")
+    if (spec.horizon - spec.steady_from) / ts < 10:
+        raise JobError(
+            f"{where}.steady_from",
+            f"the steady window [{spec.steady_from:g}, {spec.horizon:g}) s holds fewer than 10 samples of {ts:g} s",
+        )
+    need = steps * n_scen * BYTES_PER_STEP[spec.signal]
+    have = _available_memory()
+    if need > have:
+        raise JobError(
+            f"{where}.horizon",
+            f"{n_scen} scenarios x {steps:.3g} steps need about {need / 2**30:.3g} GiB, "
+            f"{have / 2**30:.3g} GiB available: shorten the horizon or use fewer scenarios",
+        )
+
+
+def _parse_scenarios(tab: dict, where: str, signal_default: str, seed: int, freq_n: float, ts: float) -> ScenarioSpec:
     tab = _get({"s": tab}, "s", where, dict)
     _no_unknown(tab, ("signal", "t_event", "horizon", "steady_from", "grid", "sample", "seed"), where)
     signal = _get(tab, "signal", f"{where}.signal", str, signal_default)
     if signal not in ("grid", "emf", "drive"):
-        raise JobError(f"{where}.signal", f"must be 'grid', 'emf' or 'drive', got {signal!r}")
+        raise JobError(f"{where}.signal", f"must be 'grid', 'emf' or 'drive', got {_show(signal)}")
     if signal != signal_default:
-        raise JobError(f"{where}.signal", f"the component needs '{signal_default}' signals, got {signal!r}")
+        raise JobError(f"{where}.signal", f"the component needs '{signal_default}' signals, got {_show(signal)}")
     t_event = _get(tab, "t_event", f"{where}.t_event", float, 0.1)
     horizon = _get(tab, "horizon", f"{where}.horizon", float, 0.4)
     if t_event < 0:
         raise JobError(f"{where}.t_event", f"must be >= 0 s, got {t_event}")
     if horizon <= t_event:
-        raise JobError(f"{where}.horizon", f"must exceed t_event ({t_event} s), got {horizon}")
+        raise JobError(f"{where}.horizon", f"must exceed t_event ({t_event:g} s), got {horizon:g}")
+    if horizon > MAX_STEPS * ts:
+        raise JobError(f"{where}.horizon", f"{horizon:g} s is more than {MAX_STEPS:g} time steps of {ts:g} s")
     steady = _get(tab, "steady_from", f"{where}.steady_from", float, t_event + 0.75 * (horizon - t_event))
     if not (0 <= steady < horizon):
-        raise JobError(f"{where}.steady_from", f"must be in [0, horizon), got {steady}")
+        raise JobError(f"{where}.steady_from", f"must be in [0, horizon), got {steady:g}")
     grid = _get(tab, "grid", f"{where}.grid", dict, required=True)
-    allowed = {"grid": GRID_AXES, "emf": EMF_AXES, "drive": DRIVE_AXES}[signal]
+    allowed = AXIS_RANGES[signal]
     axes = {}
+    if not grid:
+        raise JobError(f"{where}.grid", f"at least one axis is required; allowed: {', '.join(allowed)}")
     for k in grid:
         if k not in allowed:
-            raise JobError(f"{where}.grid.{k}", f"unknown axis; allowed: {', '.join(allowed)}")
-        axes[k] = _get(grid, k, f"{where}.grid.{k}", list)
-    if signal == "emf" and "speed_hz" in axes and min(axes["speed_hz"]) <= 0:
-        raise JobError(f"{where}.grid.speed_hz", "must be > 0 Hz")
-    if signal == "drive":
-        for k, v in axes.items():  # the physical ranges of jaxobs.drive_study, checked at --check time
-            unit, (lo, hi) = DRIVE_STUDY_AXES[k]
-            if not v or not all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in v):
-                raise JobError(f"{where}.grid.{k}", "must be a non-empty list of numbers")
-            if not all(math.isfinite(x) and lo <= x <= hi for x in v):
-                raise JobError(f"{where}.grid.{k}", f"values must be in [{lo:g}, {hi:g}] {unit}")
+            raise JobError(f"{where}.grid.{_cap(k, 40)}", f"unknown axis; allowed: {', '.join(allowed)}")
+        v = axes[k] = _get(grid, k, f"{where}.grid.{k}", list)
+        unit, (lo, hi) = allowed[k]
+        if signal == "grid" and k == "freq_step":  # the frequency stays in (0, 1/(4 ts)]
+            lo, hi = max(lo, -freq_n * (1 - 1e-6)), min(hi, 0.25 / ts - freq_n)
+        if signal == "emf" and k == "speed_hz":
+            hi = min(hi, 0.25 / ts)
+        for i, x in enumerate(v):
+            if not lo <= x <= hi:
+                u = "" if unit == "1" else f" {unit}"
+                raise JobError(f"{where}.grid.{k}[{i}]", f"must be in [{lo:g}, {hi:g}]{u}, got {x:g}")
     sample = _get(tab, "sample", f"{where}.sample", int, 0)
-    if sample < 0:
-        raise JobError(f"{where}.sample", f"must be >= 0, got {sample}")
+    if not 0 <= sample <= MAX_SCENARIOS:
+        raise JobError(f"{where}.sample", f"must be in [0, {MAX_SCENARIOS}] (0: the full grid), got {_show(sample)}")
     sseed = _get(tab, "seed", f"{where}.seed", int, seed)
+    if not 0 <= sseed < 2**32:
+        raise JobError(f"{where}.seed", f"must be in [0, 2^32), got {_show(sseed)}")
     return ScenarioSpec(signal, t_event, horizon, steady, axes, sample, sseed)
 
 
@@ -383,9 +499,11 @@ def parse_job(raw: dict) -> Job:
     name = _get(job_t, "name", "job.name", str, "job")
     comp = _get(job_t, "component", "job.component", str, required=True)
     if comp not in COMPONENTS:
-        raise JobError("job.component", f"unknown component {comp!r}; known: {', '.join(COMPONENTS)}")
+        raise JobError("job.component", f"unknown component {_show(comp)}; known: {', '.join(COMPONENTS)}")
     info = COMPONENTS[comp]
     seed = _get(job_t, "seed", "job.seed", int, 0)
+    if not 0 <= seed < 2**32 - 1:
+        raise JobError("job.seed", f"must be in [0, 2^32 - 1), got {_show(seed)}")
 
     values = dict(info.defaults)
     comp_t = _get(raw, "component", "component", dict, {})
@@ -394,9 +512,10 @@ def parse_job(raw: dict) -> Job:
             raise JobError(f"component.{k}", f"unknown for {comp}; allowed: {', '.join(info.defaults)}")
         values[k] = _get(comp_t, k, f"component.{k}", float)
     try:
-        info.ctor(**values)
-    except ValueError as e:
+        ts = float(info.ctor(**values).ts)
+    except (ValueError, ArithmeticError, TypeError) as e:
         raise JobError("component", str(e)) from None
+    freq_n = float(values.get("omega_n", W_N)) / (2 * math.pi)
 
     gains_t = _get(raw, "gains", "gains", dict, required=True)
     if not gains_t:
@@ -405,7 +524,7 @@ def parse_job(raw: dict) -> Job:
     for gname, spec in gains_t.items():
         where = f"gains.{gname}"
         if gname not in info.gains:
-            raise JobError(where, f"unknown gain for {comp}; tunable: {', '.join(info.gains)}")
+            raise JobError(_cap(where, 60), f"unknown gain for {comp}; tunable: {', '.join(info.gains)}")
         spec = _get(gains_t, gname, where, dict)
         _no_unknown(spec, ("init", "lower", "upper", "log"), where)
         init = _get(spec, "init", f"{where}.init", float, values[gname])
@@ -424,17 +543,28 @@ def parse_job(raw: dict) -> Job:
             raise JobError(f"{where}.init", f"must be > 0, got {init}")
         if (lower is not None and init <= lower) or (upper is not None and init >= upper):
             raise JobError(f"{where}.init", f"must lie strictly inside [{lower}, {upper}], got {init}")
-        gains.append(GainSpec(gname, init, lower, upper, log))
+        if lower is not None and upper is not None and (upper - lower) < 1e-6 * upper:
+            raise JobError(f"{where}.upper", f"bounds [{lower:g}, {upper:g}] are too narrow (relative width < 1e-6)")
+        g = GainSpec(gname, init, lower, upper, log)
+        try:  # the parametrization must map init (and the closed form, nudged inside) to a finite θ
+            th = g.to_theta(init)
+        except (ValueError, ArithmeticError):
+            th = math.nan
+        if not math.isfinite(th):
+            raise JobError(f"{where}.init", f"{init:g} cannot be parametrized inside its bounds [{lower}, {upper}]")
+        gains.append(g)
         values[gname] = init
 
-    scen = _parse_scenarios(_get(raw, "scenarios", "scenarios", dict, required=True), "scenarios", info.signal, seed)
+    scen = _parse_scenarios(
+        _get(raw, "scenarios", "scenarios", dict, required=True), "scenarios", info.signal, seed, freq_n, ts
+    )
     drive = None
     if scen.signal == "drive":
         dt = _get(raw, "drive", "drive", dict, {})
         _no_unknown(dt, ("loop", "handover", "settle"), "drive")
         loop = _get(dt, "loop", "drive.loop", str, "sensorless")
         if loop not in ("sensorless", "sensored"):
-            raise JobError("drive.loop", f"must be 'sensorless' or 'sensored', got {loop!r}")
+            raise JobError("drive.loop", f"must be 'sensorless' or 'sensored', got {_show(loop)}")
         handover = _get(dt, "handover", "drive.handover", float, 0.0)
         if not 0.0 <= handover < scen.horizon:
             raise JobError("drive.handover", f"must be in [0, horizon = {scen.horizon:g}) s, got {handover:g}")
@@ -449,7 +579,11 @@ def parse_job(raw: dict) -> Job:
         h = dict(_get(raw, "holdout", "holdout", dict))
         for key in ("t_event", "horizon", "steady_from"):
             h.setdefault(key, getattr(scen, key))
-        holdout = _parse_scenarios(h, "holdout", info.signal, seed + 1)
+        holdout = _parse_scenarios(h, "holdout", info.signal, seed + 1, freq_n, ts)
+    settle = drive.settle if drive is not None else 0.0
+    for spec, where in ((scen, "scenarios"), (holdout, "holdout")):
+        if spec is not None:
+            _check_size(spec, where, ts, settle)
 
     obj_t = _get(raw, "objective", "objective", dict, required=True)
     _no_unknown(obj_t, ("terms", "aggregate", "alpha", "temperature", "penalty"), "objective")
@@ -460,23 +594,25 @@ def parse_job(raw: dict) -> Job:
     for i, t in enumerate(terms_raw):
         where = f"objective.terms[{i}]"
         if not isinstance(t, dict):
-            raise JobError(where, f"must be a table {{ metric = ..., weight = ... }}, got {t!r}")
+            raise JobError(where, f"must be a table {{ metric = ..., weight = ... }}, got {_show(t)}")
         _no_unknown(t, ("metric", "weight"), where)
         metric = _get(t, "metric", f"{where}.metric", str, required=True)
         if metric not in METRICS:
-            raise JobError(f"{where}.metric", f"unknown metric {metric!r}; known: {', '.join(METRICS)}")
+            raise JobError(f"{where}.metric", f"unknown metric {_show(metric)}; known: {', '.join(METRICS)}")
         grid_only = metric.endswith(("_freq", "_phase", "freq_steady", "phase_steady"))
         if metric in DRIVE_METRICS and info.signal != "drive":
-            raise JobError(f"{where}.metric", f"{metric!r} needs the closed-loop drive, not {comp} ({info.signal})")
+            raise JobError(
+                f"{where}.metric", f"{_show(metric)} needs the closed-loop drive, not {comp} ({info.signal})"
+            )
         if (info.signal != "grid") == grid_only:
-            raise JobError(f"{where}.metric", f"{metric!r} does not apply to {comp} ({info.signal} signals)")
+            raise JobError(f"{where}.metric", f"{_show(metric)} does not apply to {comp} ({info.signal} signals)")
         weight = _get(t, "weight", f"{where}.weight", float, 1.0)
         if weight <= 0:
             raise JobError(f"{where}.weight", f"must be > 0, got {weight}")
         terms.append(Term(metric, weight))
     agg = _get(obj_t, "aggregate", "objective.aggregate", str, "mean")
     if agg not in ("mean", "max", "cvar"):
-        raise JobError("objective.aggregate", f"must be mean, max or cvar, got {agg!r}")
+        raise JobError("objective.aggregate", f"must be mean, max or cvar, got {_show(agg)}")
     alpha = _get(obj_t, "alpha", "objective.alpha", float, 0.9)
     if not 0 <= alpha < 1:
         raise JobError("objective.alpha", f"must be in [0, 1), got {alpha}")
@@ -495,7 +631,7 @@ def parse_job(raw: dict) -> Job:
     )
     kind = _get(sol_t, "kind", "solver.kind", str, "adam")
     if kind not in ("adam", "adamw", "sgd", "bfgs"):
-        raise JobError("solver.kind", f"must be adam, adamw, sgd or bfgs, got {kind!r}")
+        raise JobError("solver.kind", f"must be adam, adamw, sgd or bfgs, got {_show(kind)}")
     if kind == "bfgs":  # optimistix BFGS: no learning rate, schedule, patience or checkpoints
         for key in ("learning_rate", "schedule", "patience", "checkpoint_every"):
             if key in sol_t:
@@ -510,32 +646,85 @@ def parse_job(raw: dict) -> Job:
         checkpoint_every=_get(sol_t, "checkpoint_every", "solver.checkpoint_every", int, 5),
         progress_every=_get(sol_t, "progress_every", "solver.progress_every", int, 1),
     )
-    for fld in ("learning_rate",):
-        if getattr(cfg, fld) <= 0:
-            raise JobError(f"solver.{fld}", f"must be > 0, got {getattr(cfg, fld)}")
+    if not 0 < cfg.learning_rate <= 1e6:
+        raise JobError("solver.learning_rate", f"must be in (0, 1e6], got {cfg.learning_rate:g}")
+    if cfg.tol < 0:
+        raise JobError("solver.tol", f"must be >= 0, got {cfg.tol:g}")
+    if cfg.steps > MAX_SOLVER_STEPS:
+        raise JobError("solver.steps", f"must be <= {MAX_SOLVER_STEPS}, got {_show(cfg.steps)}")
     for fld in ("steps", "patience", "checkpoint_every", "progress_every"):
         if getattr(cfg, fld) < 1:
             raise JobError(f"solver.{fld}", f"must be >= 1, got {getattr(cfg, fld)}")
     if cfg.schedule not in ("constant", "cosine"):
-        raise JobError("solver.schedule", f"must be constant or cosine, got {cfg.schedule!r}")
+        raise JobError("solver.schedule", f"must be constant or cosine, got {_show(cfg.schedule)}")
     return Job(
         raw, name, comp, seed, values, gains, scen, holdout, terms, agg, alpha, temperature, penalty, cfg, drive=drive
     )
 
 
-def load_job(path) -> Job:
+_STRINGS = re.compile(r'"""(?:[^\\]|\\.)*?"""|\'\'\'.*?\'\'\'|"(?:[^"\\\n]|\\.)*"|\'[^\'\n]*\'|#[^\n]*', re.S)
+
+
+def check_nesting(text: str, what: str = "job file") -> None:
+    """Refuse TOML nested deeper than :data:`MAX_DEPTH` (arrays, inline tables, dotted keys) before it is
+    parsed: the parser recurses on nesting and builds one table per dotted-key part."""
+    bare = _STRINGS.sub('""', text)
+    depth = 0
+    for m in re.finditer(r"[\[\]{}]", bare):
+        depth += 1 if m.group() in "[{" else -1
+        if depth > MAX_DEPTH + 2:  # + 2: a [[table]] header's brackets
+            raise JobError(what, f"nested deeper than {MAX_DEPTH} levels (arrays / inline tables)")
+    for n, line in enumerate(bare.splitlines(), 1):
+        key = line.split("=", 1)[0] if "=" in line else line
+        if key.count(".") > MAX_DEPTH:
+            raise JobError(what, f"line {n}: a dotted key of more than {MAX_DEPTH} parts")
+
+
+def _depth(obj) -> int:
+    """Nesting depth of parsed TOML (iterative: no recursion on a deep value)."""
+    best, stack = 0, [(obj, 0)]
+    while stack:
+        o, d = stack.pop()
+        best = max(best, d)
+        if d > MAX_DEPTH + 1:
+            break
+        if isinstance(o, dict):
+            stack.extend((v, d + 1) for v in o.values())
+        elif isinstance(o, list):
+            stack.extend((v, d + 1) for v in o)
+    return best
+
+
+def read_toml(path, what: str = "job file") -> tuple[dict, bytes]:
+    """A TOML file's table and bytes, or a :class:`JobError` of one line: unreadable, larger than
+    :data:`MAX_FILE_BYTES`, not UTF-8, nested deeper than :data:`MAX_DEPTH`, not TOML."""
     path = Path(path)
     try:
-        data = path.read_bytes()
-        text = data.decode()
+        with open(path, "rb") as f:
+            data = f.read(MAX_FILE_BYTES + 1)
     except OSError as e:
-        raise JobError("job file", f"cannot read {str(path)!r}: {e.strerror}") from None
+        raise JobError(what, f"cannot read {_cap(str(path), 80)!r}: {e.strerror}") from None
+    if len(data) > MAX_FILE_BYTES:
+        raise JobError(what, f"larger than {MAX_FILE_BYTES} bytes")
+    try:
+        text = data.decode()
     except UnicodeDecodeError as e:
-        raise JobError("job file", f"not UTF-8 text: {e}") from None
+        raise JobError(what, f"not UTF-8 text: byte {e.start} is {data[e.start : e.start + 1]!r}") from None
+    check_nesting(text, what)
     try:
         raw = tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:
-        raise JobError("job file", f"not valid TOML: {e}") from None
+        raise JobError(what, f"not valid TOML: {e}") from None
+    except RecursionError:
+        raise JobError(what, f"nested deeper than {MAX_DEPTH} levels") from None
+    if _depth(raw) > MAX_DEPTH:
+        raise JobError(what, f"nested deeper than {MAX_DEPTH} levels")
+    return raw, data
+
+
+def load_job(path) -> Job:
+    """Read, check and parse a job file (:func:`read_toml`, then :func:`parse_job`)."""
+    raw, data = read_toml(path)
     job = parse_job(raw)
     job.sha256 = hashlib.sha256(data).hexdigest()
     return job
@@ -664,7 +853,7 @@ def write_json(path: Path, obj) -> None:
     clean = sanitize(obj, "", reasons)
     if reasons and isinstance(clean, dict):
         clean["null_reasons"] = {**clean.get("null_reasons", {}), **reasons}
-    path.write_text(json.dumps(clean, indent=1, allow_nan=False) + "\n")
+    atomic_write_text(path, json.dumps(clean, indent=1, allow_nan=False) + "\n")
 
 
 def _at_bounds(job: Job, gains: dict) -> dict:
@@ -722,6 +911,16 @@ def _versions() -> dict:
     }
 
 
+CHECKPOINT = "checkpoint.npz"
+
+
+def job_fingerprint(job: Job) -> str:
+    """What a checkpoint is checked against: the job file's sha256, or the sha256 of the job dict's JSON."""
+    if job.sha256:
+        return job.sha256
+    return hashlib.sha256(json.dumps(job.raw, sort_keys=True, default=str).encode()).hexdigest()
+
+
 def run_job(job: Job, out: Path, resume: bool = False, quiet: bool = False) -> dict:
     """Tune, score initial / tuned / closed form on the same scenarios, write the results folder.
 
@@ -738,7 +937,15 @@ def run_job(job: Job, out: Path, resume: bool = False, quiet: bool = False) -> d
     cf_all = info.closed_form(obj.component)
     cf = {g.name: cf_all[g.name] for g in job.gains}
     theta_cf = param.to_theta({g.name: _inside(g, cf[g.name]) for g in job.gains})
-    res = run_solver(obj, theta0, job.solver, checkpoint=out / "checkpoint.npz", resume=resume, quiet=quiet)
+    res = run_solver(
+        obj,
+        theta0,
+        job.solver,
+        checkpoint=out / CHECKPOINT,
+        resume=resume,
+        quiet=quiet,
+        fingerprint=job_fingerprint(job),
+    )
     thetas = {"initial": theta0, "closed_form": theta_cf}
     if res.theta is not None:  # never a design that diverged in some scenario
         thetas["tuned"] = res.theta
@@ -790,11 +997,13 @@ def run_job(job: Job, out: Path, resume: bool = False, quiet: bool = False) -> d
         hper = {k: hobj.per_scenario(th) for k, th in thetas.items()}
         result["holdout"] = {k: (hobj.summarize(*hper[k]) if k in hper else None) for k in gains}
         result["holdout"]["count"] = len(hc)
-        _scores_dataset(hobj, hn, hc, job.holdout, hper).to_netcdf(out / "holdout_scores.nc", engine="scipy")
-    _scores_dataset(obj, names, combos, job.scenarios, per).to_netcdf(out / "scores.nc", engine="scipy")
-    write_json(out / "result.json", result)
+        with atomic_path(out / "holdout_scores.nc") as tmp:
+            _scores_dataset(hobj, hn, hc, job.holdout, hper).to_netcdf(tmp, engine="scipy")
+    with atomic_path(out / "scores.nc") as tmp:
+        _scores_dataset(obj, names, combos, job.scenarios, per).to_netcdf(tmp, engine="scipy")
     write_json(out / "history.json", res.history)
     write_report(out, job, obj, thetas, res.history)
     timing = {"total_s": time.time() - t0, **res.timing, "iterations": res.iterations}
-    (out / "timing.json").write_text(json.dumps(timing, indent=1) + "\n")
+    atomic_write_text(out / "timing.json", json.dumps(timing, indent=1) + "\n")
+    write_json(out / "result.json", result)  # last: a result.json means a complete results folder
     return result

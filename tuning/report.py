@@ -11,6 +11,8 @@ import numpy as np
 
 from jaxobs.metrics import wrap
 
+from .outdir import atomic_path
+
 
 def _subplots(*args, figsize, **kwargs):
     """``pyplot.subplots`` without pyplot: no backend selected, so a notebook running a job keeps its own."""
@@ -60,7 +62,8 @@ def write_report(out: Path, job, obj, thetas: dict, history: list):
         ax.set_title(f"{job.name}: convergence")
         ax.grid(True, which="both", alpha=0.3)
         fig.tight_layout()
-        fig.savefig(out / "convergence.png", dpi=110)
+        with atomic_path(out / "convergence.png") as tmp:
+            fig.savefig(tmp, dpi=110)
     # responses on the scenario where the closed form does worst
     per = obj.per_scenario(thetas["closed_form"])[1]
     worst = int(np.argmax(np.asarray(per)))
@@ -92,4 +95,5 @@ def write_report(out: Path, job, obj, thetas: dict, history: list):
         fontsize=10,
     )
     fig.tight_layout()
-    fig.savefig(out / "responses.png", dpi=110)
+    with atomic_path(out / "responses.png") as tmp:
+        fig.savefig(tmp, dpi=110)

@@ -23,7 +23,7 @@ import numpy as np
 import optax
 import optimistix as optx
 
-__all__ = ["SolverConfig", "TuneResult", "run_solver", "make_optax", "decide_status", "STATUSES"]
+__all__ = ["CheckpointError", "SolverConfig", "TuneResult", "run_solver", "make_optax", "decide_status", "STATUSES"]
 
 
 @dataclass(frozen=True)
@@ -116,32 +116,88 @@ def _progress(i, total, value, best, diverged=0, stream=sys.stderr):
     stream.flush()
 
 
-def _save_checkpoint(path: Path, it, theta, opt_state, best_theta, best_value, history, since_best):
+class CheckpointError(ValueError):
+    """A checkpoint that ``--resume`` cannot use (corrupt, or another job's); ``str()`` is one line."""
+
+
+_replace = os.replace  # the rename that publishes a checkpoint (a test kills runs here)
+
+
+def _save_checkpoint(path: Path, it, theta, opt_state, best_theta, best_value, history, since_best, fingerprint):
+    """One file, written to a temp file and renamed: θ, the optimizer state, the best point, and the
+    metadata (iteration, history, the job's fingerprint) as a JSON string inside the same npz."""
     leaves = jax.tree.leaves(opt_state)
-    tmp = path.with_suffix(".tmp.npz")
     arrays = {f"arr_{i}": np.asarray(x) for i, x in enumerate(leaves)}  # np.savez's names for positional arrays
-    np.savez(tmp, theta=np.asarray(theta), best_theta=np.asarray(best_theta), **arrays)
-    os.replace(tmp, path)
-    meta = dict(iteration=it, best_value=best_value, since_best=since_best, history=history, n_leaves=len(leaves))
-    tmpj = path.with_suffix(".tmp.json")
-    tmpj.write_text(json.dumps(meta))
-    os.replace(tmpj, path.with_suffix(".json"))
+    meta = dict(
+        format=CHECKPOINT_FORMAT,
+        job_sha256=fingerprint,
+        iteration=it,
+        best_value=best_value,
+        since_best=since_best,
+        history=history,
+        n_leaves=len(leaves),
+    )
+    tmp = path.with_name(f".{path.stem}.{os.getpid()}.tmp.npz")
+    try:
+        with open(tmp, "wb") as f:
+            th, best = np.asarray(theta), np.asarray(best_theta)
+            np.savez(f, meta=np.asarray(json.dumps(meta)), theta=th, best_theta=best, **arrays)
+            f.flush()
+            os.fsync(f.fileno())
+        _replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
 
 
-def _load_checkpoint(path: Path, opt_state_template):
-    meta = json.loads(path.with_suffix(".json").read_text())
-    data = np.load(path)
-    leaves = [jnp.asarray(data[f"arr_{i}"]) for i in range(meta["n_leaves"])]
-    treedef = jax.tree.structure(opt_state_template)
-    opt_state = jax.tree.unflatten(treedef, leaves)
-    return meta, jnp.asarray(data["theta"]), jnp.asarray(data["best_theta"]), opt_state
+CHECKPOINT_FORMAT = "jaxobs-checkpoint-1"
+
+
+def _load_checkpoint(path: Path, opt_state_template, fingerprint: str | None):
+    """(meta, θ, best θ, optimizer state) of a checkpoint, or a one-line :class:`CheckpointError`."""
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            meta = json.loads(str(data["meta"]))
+            if not isinstance(meta, dict) or meta.get("format") != CHECKPOINT_FORMAT:
+                raise ValueError("not a jaxobs checkpoint")
+            leaves = [jnp.asarray(data[f"arr_{i}"]) for i in range(int(meta["n_leaves"]))]
+            theta, best_theta = jnp.asarray(data["theta"]), jnp.asarray(data["best_theta"])
+        for key in ("iteration", "best_value", "since_best", "history"):
+            meta[key]  # noqa: B018 - present, or KeyError
+        treedef = jax.tree.structure(opt_state_template)
+        opt_state = jax.tree.unflatten(treedef, leaves)
+        shapes = [np.shape(x) for x in jax.tree.leaves(opt_state_template)]
+        if [tuple(x.shape) for x in leaves] != [tuple(s) for s in shapes] or theta.shape != best_theta.shape:
+            raise ValueError("array shapes differ from the job's")
+    except Exception as e:  # a torn, truncated or foreign file: one line, never a traceback
+        raise CheckpointError(
+            f"--resume: checkpoint {str(path)!r} is corrupt or unreadable ({type(e).__name__}: {str(e)[:80]}); "
+            "delete it or run without --resume and with --force"
+        ) from None
+    if fingerprint is not None and meta.get("job_sha256") != fingerprint:
+        got = str(meta.get("job_sha256"))[:12]
+        raise CheckpointError(
+            f"--resume: checkpoint {str(path)!r} belongs to another job (sha256 {got}…, this job {fingerprint[:12]}…)"
+        )
+    return meta, theta, best_theta, opt_state
 
 
 def run_solver(
-    objective, theta0, cfg: SolverConfig, checkpoint: Path | None = None, resume: bool = False, quiet: bool = False
+    objective,
+    theta0,
+    cfg: SolverConfig,
+    checkpoint: Path | None = None,
+    resume: bool = False,
+    quiet: bool = False,
+    fingerprint: str | None = None,
 ) -> TuneResult:
     """Minimize ``objective`` from θ0 with the configured solver; the best design is the best one that
-    diverged in no scenario (:func:`decide_status`)."""
+    diverged in no scenario (:func:`decide_status`).
+
+    ``checkpoint``: one npz file, rewritten atomically every ``cfg.checkpoint_every`` iterations, holding
+    ``fingerprint`` (the job's sha256).  ``resume``: continue from it; a checkpoint of another job, or a
+    corrupt one, raises :class:`CheckpointError` (one line); no checkpoint at all: one line on stderr and
+    a fresh start."""
     if cfg.kind == "bfgs":
         return _run_bfgs(objective, theta0, cfg, quiet)
     t_start = time.time()
@@ -149,8 +205,10 @@ def run_solver(
     theta = theta0
     opt_state = opt.init(theta)
     best_theta, best_value, since_best, history, start = theta, math.inf, 0, [], 0
-    if resume and checkpoint is not None and checkpoint.exists():
-        meta, theta, best_theta, opt_state = _load_checkpoint(checkpoint, opt_state)
+    if resume and checkpoint is not None and not checkpoint.exists():
+        print(f"jaxobs: --resume: no checkpoint {str(checkpoint)!r}: starting fresh", file=sys.stderr, flush=True)
+    elif resume and checkpoint is not None:
+        meta, theta, best_theta, opt_state = _load_checkpoint(checkpoint, opt_state, fingerprint)
         start, best_value, since_best, history = (
             meta["iteration"],
             meta["best_value"],
@@ -183,7 +241,9 @@ def run_solver(
             break
         theta, opt_state = update(theta, opt_state, grad)
         if checkpoint is not None and (it + 1) % cfg.checkpoint_every == 0:
-            _save_checkpoint(checkpoint, it + 1, theta, opt_state, best_theta, best_value, history, since_best)
+            _save_checkpoint(
+                checkpoint, it + 1, theta, opt_state, best_theta, best_value, history, since_best, fingerprint
+            )
     else:
         it = cfg.steps
     if not early:  # the last update is scored too: keep it if it is stable and better

@@ -1,0 +1,193 @@
+"""Outputs that stay in place: sanitised names, no symlinks followed, a lock per --out, no silent overwrite;
+atomic, fingerprinted checkpoints that resume bit-identically after a kill at any point."""
+
+import json
+import os
+import socket
+
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from tuning import solvers
+from tuning.cli import main
+from tuning.outdir import LOCK, OutDir, OutError, safe_name
+from tuning.params import GainSpec, Parametrization
+from tuning.solvers import CheckpointError, SolverConfig, run_solver
+
+# --------------------------------------------------------------------------
+# containment
+# --------------------------------------------------------------------------
+
+
+def test_names_are_sanitised():
+    assert safe_name("../../etc") == "_.._etc"
+    assert safe_name("/abs/path") == "_abs_path"
+    assert safe_name("..") == "job" and safe_name("") == "job" and safe_name("...", "study") == "study"
+    assert safe_name("wif-robust_1.2") == "wif-robust_1.2"
+
+
+def test_symlinks_locks_and_existing_results(tmp_path):
+    target = tmp_path / "elsewhere"
+    target.mkdir()
+    (tmp_path / "link").symlink_to(target)
+    with pytest.raises(OutError, match="symlink"):
+        OutDir(tmp_path / "link", ["result.json"]).__enter__()
+    out = tmp_path / "o"
+    out.mkdir()
+    (out / "result.json").symlink_to(target / "x.json")
+    with pytest.raises(OutError, match="symlink"):
+        OutDir(out, ["result.json"], force=True).__enter__()
+    (out / "result.json").unlink()
+    (out / "result.json").write_text("{}")
+    with pytest.raises(OutError, match="--force"):
+        OutDir(out, ["result.json"]).__enter__()
+    assert not (out / LOCK).exists()  # released on refusal
+    with OutDir(out, ["result.json"], force=True):
+        assert (out / LOCK).exists()
+        with pytest.raises(OutError, match="in use by process"):  # a second writer on the same folder
+            OutDir(out, [], force=True).__enter__()
+    assert not (out / LOCK).exists()
+    (out / LOCK).write_text(f"999999999 {socket.gethostname()}\n")  # stale: that process is gone
+    with OutDir(out, [], force=True):
+        pass
+    (tmp_path / "file").write_text("")
+    with pytest.raises(OutError, match="not a folder"):
+        OutDir(tmp_path / "file").__enter__()
+
+
+GOOD = """
+[job]
+name = "../../escape"
+component = "SOGIFLL"
+[gains.lam]
+init = 12337.0
+lower = 1000.0
+upper = 100000.0
+[scenarios]
+t_event = 0.02
+horizon = 0.06
+[scenarios.grid]
+freq_step = [1.0]
+[objective]
+terms = [{ metric = "itae_freq", weight = 1.0 }]
+[solver]
+steps = 1
+checkpoint_every = 1
+"""
+
+
+def test_cli_refuses_a_locked_or_used_out_with_one_line(tmp_path, capsys, monkeypatch):
+    path = tmp_path / "job.toml"
+    path.write_text(GOOD)
+    out = tmp_path / "o"
+    out.mkdir()
+    (out / LOCK).write_text(f"1 {socket.gethostname()}\n")  # pid 1 is alive: a live lock
+    assert main(["tune", str(path), "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "in use" in err[0]
+    (out / LOCK).unlink()
+    (out / "result.json").write_text("{}")
+    assert main(["tune", str(path), "--out", str(out)]) == 2
+    assert "--force" in capsys.readouterr().err
+    # the name cannot escape: the default folder is ./out/<sanitised name>
+    monkeypatch.chdir(tmp_path)
+    assert main(["tune", str(path), "--quiet"]) == 0
+    assert (tmp_path / "out" / "_.._escape" / "result.json").exists()
+    assert not (tmp_path.parent / "escape").exists()
+    capsys.readouterr()
+    # --resume on another job's checkpoint: one line, exit 2
+    other = tmp_path / "other.toml"
+    other.write_text(GOOD.replace("init = 12337.0", "init = 12000.0"))
+    assert main(["tune", str(other), "--out", str(tmp_path / "out" / "_.._escape"), "--resume", "--force"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "another job" in err[0]
+
+
+def test_internal_error_is_one_line_with_a_log(tmp_path, capsys, monkeypatch):
+    path = tmp_path / "job.toml"
+    path.write_text(GOOD)
+
+    def boom(*a, **k):
+        raise RuntimeError("boom")
+
+    monkeypatch.setattr("tuning.cli.run_job", boom)
+    assert main(["tune", str(path), "--out", str(tmp_path / "o")]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "error.log" in err[0]
+    assert "RuntimeError: boom" in (tmp_path / "o" / "error.log").read_text()
+    assert not (tmp_path / "o" / LOCK).exists()
+
+
+# --------------------------------------------------------------------------
+# checkpoints: kill at every point, resume bit-identically
+# --------------------------------------------------------------------------
+
+
+class _Quadratic:
+    """A cheap stand-in objective with the interface run_solver uses."""
+
+    def __init__(self):
+        self.param = Parametrization([GainSpec("a", 2.0, 0.1, 50.0), GainSpec("b", 1.0, 0.01, 10.0, log=False)])
+
+    def value_grad_diverged(self, theta):
+        target = jnp.asarray([0.3, -0.7])
+        v = jnp.sum((theta - target) ** 2 * jnp.asarray([1.0, 3.0])) + 0.1 * jnp.sum(jnp.sin(3 * theta))
+        g = 2 * (theta - target) * jnp.asarray([1.0, 3.0]) + 0.3 * jnp.cos(3 * theta)
+        return v, g, 0
+
+
+CFG = SolverConfig(kind="adam", learning_rate=0.1, steps=24, patience=100, checkpoint_every=2, progress_every=1)
+
+
+class Killed(BaseException):
+    pass
+
+
+def _run(ckpt, resume=False, fp="job-a"):
+    obj = _Quadratic()
+    res = run_solver(obj, obj.param.theta0(), CFG, checkpoint=ckpt, resume=resume, quiet=True, fingerprint=fp)
+    return json.dumps(
+        dict(theta=np.asarray(res.theta).tolist(), h=res.history, s=res.status, r=res.reason, b=res.best_iteration)
+    ).encode()
+
+
+@pytest.mark.parametrize("where", ["before_rename", "after_rename"])
+@pytest.mark.parametrize("k", [1, 2, 3, 5, 8, 11])
+def test_kill_at_any_checkpoint_and_resume_is_bit_identical(tmp_path, monkeypatch, where, k):
+    """12 kill points: at the k-th checkpoint, with its temp file written but not yet renamed (a kill
+    mid-checkpoint), or just after the rename; the resumed run equals an uninterrupted one byte for byte."""
+    ref = _run(tmp_path / "ref.npz")
+    ckpt = tmp_path / "c.npz"
+    calls = {"n": 0}
+    real = os.replace
+
+    def replace(src, dst):
+        calls["n"] += 1
+        if calls["n"] == k and where == "before_rename":
+            raise Killed
+        real(src, dst)
+        if calls["n"] == k and where == "after_rename":
+            raise Killed
+
+    monkeypatch.setattr(solvers, "_replace", replace)
+    with pytest.raises(Killed):
+        _run(ckpt)
+    monkeypatch.setattr(solvers, "_replace", real)
+    assert not [p for p in tmp_path.iterdir() if ".tmp" in p.name]  # no temp file left behind
+    assert ckpt.exists() == (k > 1 or where == "after_rename")
+    assert _run(ckpt, resume=True) == ref
+
+
+def test_resume_refuses_foreign_and_corrupt_checkpoints(tmp_path, capsys):
+    ckpt = tmp_path / "c.npz"
+    ref = _run(ckpt)
+    with pytest.raises(CheckpointError, match="another job"):
+        _run(ckpt, resume=True, fp="job-b")
+    ckpt.write_bytes(ckpt.read_bytes()[:100])
+    with pytest.raises(CheckpointError, match="corrupt") as e:
+        _run(ckpt, resume=True)
+    assert "\n" not in str(e.value)
+    ckpt.unlink()
+    assert _run(ckpt, resume=True) == ref  # nothing to resume: one line, a fresh start
+    assert "no checkpoint" in capsys.readouterr().err
