@@ -263,8 +263,8 @@ _DRIVE = {
 def test_drive_observers_c_matches_the_float32_jax_step(tmp_path, name, rule):
     """Flux observers (000) and LESOs with their PLL (002): the C step keeps i_prev, u_prev and the started
     flag, forms the back EMF (held) or the LESO's current knots (start, middle, end of the period), integrates
-    and returns the outputs after the update; it matches 12 000 steps of a PMSM record with a speed step and
-    an angle jump to 1e-4 (measured 6e-7 ... 3e-5; the LESOs' back EMF, tens of volts, carries the largest)."""
+    and returns the outputs after the update; it matches the default record (12 000 steps recorded in a
+    sensored FOC drive, the observer as given, not bound to the machine) to 1e-4."""
     _need_cc()
     c = export_observer(_DRIVE[name](**({} if rule is None else {"rule": rule})), tmp_path)
     assert c["inputs"] == ["u_a", "u_b", "i_a", "i_b"] and c["golden"]["steps"] >= MIN_STEPS
