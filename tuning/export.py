@@ -22,8 +22,12 @@ writes to DIR:
   outputs of the JAX step run in float32 (``lax.scan`` of ``observer.step``) over a
   test record of ≥ 10 000 samples: for an FLL a unit sine at ωn with a +2 Hz step at
   one third and a +40° phase jump at two thirds (:func:`fll_test_signal`); for a drive
-  observer the voltages and currents of a PMSM with a +10 % speed step and a +30°
-  angle jump (:func:`drive_test_signal`), or a recording passed as ``signal``;
+  observer the u and i recorded in a sensored FOC drive of its family's machine (000's SPMSM
+  for the flux observers, 002's IPMSM for the LESOs) with a speed step and a load step
+  (:func:`drive_recording`; the CLI binds the observer to that machine's Rs, L and speed), or
+  with ``--record synthetic`` the synthesized PMSM signal of :func:`drive_test_signal` (a +10 %
+  speed step and a +30° angle jump on the observer's own Rs, L), or a recording passed as
+  ``signal``;
 - ``coefficients.json``: the discrete-time step's coefficients (gains, rule constants,
   initial state), the step convention and the operation count;
 - ``test_main.c``: the harness: replays golden.csv through ``jx_step`` and fails if
@@ -41,7 +45,9 @@ and the LESOs of 002 with their PLL (CLESO, GILESO, FALESO); anything else raise
 The C cannot be bit-identical to XLA's float32 (XLA contracts multiply-adds into FMAs
 and rewrites divisions by constants), so the check is a tolerance, and the golden
 records avoid the few instants where an output is discontinuous in the state: see
-:func:`drive_test_signal` (the first period of the drive records).  Before writing, the
+:func:`drive_test_signal` (the first period of the drive records, shaped the same way in
+:func:`drive_recording`: unshaped, a pure integrator's θ̂ misses by 5e-2 rad and a Tustin
+SOIFO's signed ω̂ flips, error 2).  Before writing, the
 export evaluates the emitted vector field (and outputs) at random states and compares
 them with the observer's own, so an emitter that drifts from the JAX cores fails at
 export time, not on the target.
@@ -80,6 +86,9 @@ __all__ = [
     "compile_and_check",
     "fll_test_signal",
     "drive_test_signal",
+    "drive_recording",
+    "drive_machine",
+    "bind_to_drive",
     "add_export_parser",
     "cli_export",
     "DESIGNS",
@@ -283,6 +292,134 @@ def drive_test_signal(
         f"ts = {ts:g} s"
     )
     return data, doc
+
+
+# the machine a drive observer's recording runs on, and the speed it runs at (both 50 Hz electrical)
+_DRIVE_MACHINES = {
+    "flux": ("spmsm_paper000", "BENCH_J_000", 1000.0),  # 000's SPMSM, p = 3
+    "leso": ("ipmsm_paper002", "BENCH_J_002", 300.0),  # 002's (assumed) IPMSM, p = 5: 25 Hz (see drive_recording)
+}
+
+
+def _family(observer) -> str:
+    if hasattr(observer, "Lq"):
+        return "leso"
+    if hasattr(observer, "L"):
+        return "flux"
+    raise ValueError(f"export: {type(observer).__name__} is not a drive observer (flux observer or LESO)")
+
+
+def drive_machine(observer):
+    """The machine a drive observer's recording runs on: 000's SPMSM for the flux observers, 002's IPMSM for
+    the LESOs, each with the bench inertia of the drive studies (``papers.BENCH_J_*``, 10× the table's)."""
+    from jaxobs import drive, papers
+
+    ctor, j, _ = _DRIVE_MACHINES[_family(observer)]
+    return getattr(drive, ctor)(J=getattr(papers, j))
+
+
+def bind_to_drive(observer, machine, rpm: float):
+    """``observer`` with the machine's Rs and L (flux observers: Ld; LESOs: Lq) and its initial speed at ``rpm``
+    (flux observers: the FLL's or PLL's omega0; LESOs: the PLL's omega0_pll), as :func:`drive_recording` runs it.
+
+    The gains are untouched.  A flux observer of a ``signal = "emf"`` job has Rs = 0, L = 1 (it sees the
+    back EMF itself); on a recording of u and i it needs the machine's.
+    """
+    we = float(rpm) * math.pi / 30 * int(machine.p)
+    if _family(observer) == "leso":
+        names, vals = ("Rs", "Lq", "omega0_pll"), (machine.Rs, machine.Lq, we)
+    else:
+        names, vals = ("Rs", "L", "omega0"), (machine.Rs, machine.Ld, we)
+    vals = tuple(jnp.asarray(v, jnp.result_type(getattr(observer, n))) for n, v in zip(names, vals))
+    return eqx.tree_at(lambda o: tuple(getattr(o, n) for n in names), observer, vals)
+
+
+class _Tap(eqx.Module):
+    """An "observer" that returns what it is fed: the measurements a ClosedLoop gives its observer."""
+
+    def init(self, u0=None):
+        return None
+
+    def step(self, state, u):
+        return state, u
+
+
+def drive_recording(
+    observer,
+    n_steps: int = 12_000,
+    *,
+    machine=None,
+    rpm: float | None = None,
+    load: tuple = (0.3, 0.8),
+    speed_step: float = 0.1,
+    start: str = "",
+):
+    """The (u_α, u_β, i_α, i_β) a drive observer is fed in a sensored FOC drive, ``n_steps`` samples at its ts.
+
+    ``jaxobs.simulate(ClosedLoop(Drive(FOC.imc(machine, 2π·300, 2π·5)), _Tap(), scenario), t1)``: the
+    encoder closes the loop, the sensors are ideal (no offsets, gain errors or noise, no dead time), and
+    the drive starts in the steady state of ``rpm`` (default 1000 r/min on 000's SPMSM, 600 r/min on
+    002's IPMSM: 50 Hz electrical) with ``load[0]``·T_rated.  The speed reference steps by
+    ``speed_step`` (+10 %) at n/3, the load to ``load[1]``·T_rated at 2n/3.  The rows are the
+    measurements the loop hands its observer at each sample (a tap observer returns them), so the
+    voltage in row k is the one applied over [t_k, t_k+1] (the FOC computed it at t_k−1) and the
+    current is sampled at t_k: the drive observers' contract.  With ideal sensors they equal the
+    outputs' u_a, u_b, i_a, i_b.
+
+    ``machine``: a :class:`jaxobs.drive.PMSMParams` (default :func:`drive_machine`).  Export the
+    observer bound to the same machine and speed (:func:`bind_to_drive`).  Returns (float32 array
+    (n_steps, 4), a one-line description).
+
+    The rotor starts at θe = π/2, where the q-axis current and the back EMF lie on −α, so the
+    β components of the first samples are small.  ``start`` shapes the first period as
+    :func:`drive_test_signal` does (the reasons are there): ``"flux"`` adds the rotor flux at t = 0,
+    ψf (cos θe0, sin θe0), divided by ts to the first voltage (the pure integrator's initial value);
+    ``"alpha"`` zeroes the β components of the first voltage and the first two currents (a few
+    per cent of their amplitude at θe0 = π/2: 5 % of the voltage, the ω_e L i_q drop; 3 % of the current).
+    """
+    if start not in ("", "flux", "alpha"):
+        raise ValueError(f"drive_recording: start must be '', 'flux' or 'alpha', got {start!r}")
+    import jaxobs
+    from jaxobs import drive as D
+    from jaxobs import papers
+
+    family = _family(observer)
+    machine = drive_machine(observer) if machine is None else machine
+    rpm = _DRIVE_MACHINES[family][2] if rpm is None else float(rpm)
+    if not (isinstance(n_steps, int) and n_steps >= 2):
+        raise ValueError(f"drive_recording: n_steps must be an integer >= 2, got {n_steps!r}")
+    ts = float(observer.ts)
+    t1, t2 = (n_steps // 3) * ts, (2 * n_steps // 3) * ts
+    t_rated = float(machine.T_rated)
+    foc = D.FOC.imc(machine, 2 * math.pi * papers.BENCH_CURRENT_HZ, 2 * math.pi * papers.BENCH_SPEED_HZ, ts=ts)
+    scenario = D.Scenario(
+        machine,
+        speed_ref=D.Scenario.speed_rpm([0.0, t1], [rpm, (1 + speed_step) * rpm]),
+        load=D.Scenario.load_steps([0.0, t2], [load[0] * t_rated, load[1] * t_rated]),
+        omega_m0=rpm * D.RPM,
+        theta_e0=math.pi / 2,
+    )
+    sol = jaxobs.simulate(D.ClosedLoop(D.Drive(foc, settle=0.0), _Tap(), scenario), n_steps * ts)
+    m = sol.outputs.obs
+    data = np.stack([np.asarray(m.u_a), np.asarray(m.u_b), np.asarray(m.i_a), np.asarray(m.i_b)], axis=1)
+    data = data[:n_steps].astype(np.float64)
+    if start == "flux":
+        th0 = float(np.asarray(sol.outputs.theta_e)[0])
+        data[0, :2] += float(machine.psi_f) * np.array([math.cos(th0), math.sin(th0)]) / ts
+    elif start == "alpha":
+        data[0, 1] = data[0, 3] = data[1, 3] = 0.0
+    if data.shape[0] != n_steps or not np.all(np.isfinite(data)):
+        raise ValueError(f"drive_recording: the drive gave {data.shape[0]} finite rows of {n_steps}")
+    we = rpm * math.pi / 30 * int(machine.p)
+    doc = (
+        f"sensored FOC drive ({'000 SPMSM' if family == 'flux' else '002 IPMSM'}: Rs = {float(machine.Rs):g} ohm, "
+        f"Ld = {float(machine.Ld):g} H, Lq = {float(machine.Lq):g} H, psi = {float(machine.psi_f):g} Wb, "
+        f"p = {int(machine.p)}), steady start at {rpm:g} r/min ({we / (2 * math.pi):g} Hz electrical) and "
+        f"{load[0]:g} T_rated, speed reference {speed_step:+.0%} at {t1:g} s, load to {load[1]:g} T_rated at "
+        f"{t2:g} s, ideal sensors, ts = {ts:g} s"
+    )
+    doc += {"": "", "flux": ", first period carries psi(0)/ts", "alpha": ", first period on alpha only"}[start]
+    return data.astype(np.float32), doc
 
 
 class _Meas(NamedTuple):  # what a drive observer's step reads (jaxobs.drive's DriveInput fields)
@@ -621,9 +758,12 @@ def export_observer(observer, out_dir, *, n_steps: int = 12_000, signal=None, so
             rounded to float32, as the C holds them.
         out_dir: folder for observer.h, observer.c, test_main.c, golden.csv, coefficients.json.
         n_steps: length of the default test signal (:func:`fll_test_signal` for the FLL family,
-            :func:`drive_test_signal` for drive observers), >= 10 000.
+            :func:`drive_recording` for drive observers), >= 10 000.
         signal: instead of the default, the inputs per step, shape (n,) or (n, JX_NU) (drive
-            observers: columns u_a, u_b, i_a, i_b, e.g. recorded from a drive simulation).
+            observers: columns u_a, u_b, i_a, i_b, e.g. :func:`drive_recording` at another speed),
+            or ``"synthetic"`` for a drive observer: :func:`drive_test_signal` on the observer's
+            own Rs and L.  The default recording runs on :func:`drive_machine`: export the
+            observer bound to it (:func:`bind_to_drive`) to get that machine's Rs and L in the C.
         source: where the design comes from (a result file, a closed form), for the header.
         notes: lines recorded in the header and coefficients.json (e.g. defaults used).
     """
@@ -664,10 +804,16 @@ def export_observer(observer, out_dir, *, n_steps: int = 12_000, signal=None, so
         if model.kind == "signal":
             u, signal_doc = fll_test_signal(obs32.ts, n_steps, model.omega_signal / (2 * math.pi))
         else:
-            rs, ls = _machine(obs32)
-            u, signal_doc = drive_test_signal(
-                obs32.ts, n_steps, omega=model.omega_signal, Rs=rs, L=ls, start=model.signal_start
-            )
+            u, signal_doc = drive_recording(observer, n_steps, start=model.signal_start)
+    elif isinstance(signal, str) and signal == "synthetic" and model.kind == "drive":
+        if not (isinstance(n_steps, int) and n_steps >= MIN_STEPS):
+            raise ValueError(f"export: n_steps must be an integer >= {MIN_STEPS}, got {n_steps!r}")
+        rs, ls = _machine(obs32)
+        u, signal_doc = drive_test_signal(
+            obs32.ts, n_steps, omega=model.omega_signal, Rs=rs, L=ls, start=model.signal_start
+        )
+    elif isinstance(signal, str):
+        raise ValueError(f"export: signal must be an array (or 'synthetic' for a drive observer), got {signal!r}")
     else:
         u = np.asarray(signal, np.float32)
         u = u[:, None] if u.ndim == 1 else u
@@ -785,6 +931,14 @@ def add_export_parser(subparsers) -> argparse.ArgumentParser:
     )
     e.add_argument("--ts", type=float, help="sample time, s (default: the result's or the component's)")
     e.add_argument("--steps", type=int, default=12_000, help=f"golden record length (>= {MIN_STEPS}, default 12000)")
+    e.add_argument(
+        "--record",
+        choices=["drive", "synthetic"],
+        default="drive",
+        help="drive observers' golden record: u/i recorded in a sensored FOC drive of the family's machine, "
+        "the observer bound to its Rs, L and speed (default), or the synthesized PMSM signal on the observer's "
+        "own Rs, L",
+    )
     e.add_argument("--check", action="store_true", help="compile with cc and replay the golden vectors")
     e.set_defaults(func=cli_export)
     return e
@@ -812,7 +966,22 @@ def cli_export(args) -> int:
     else:
         obs = observer_from_design(args.design, **kw)
         source = f"closed form {args.design}, {DESIGNS[args.design][1]}"
-    coeffs = export_observer(obs, args.out, n_steps=args.steps, source=source, notes=notes)
+    signal = None
+    if hasattr(obs, "Rs") and args.record == "drive":
+        machine, rpm = drive_machine(obs), _DRIVE_MACHINES[_family(obs)][2]
+        obs = bind_to_drive(obs, machine, rpm)
+        speed = "omega0_pll" if _family(obs) == "leso" else "omega0"
+        notes = [n for n in notes if "sets Rs, Lq" not in n]
+        notes.append(
+            f"bound to the recording's machine: Rs = {float(obs.Rs):g}, "
+            f"{'Lq' if speed == 'omega0_pll' else 'L'} = {float(_machine(obs)[1]):g}, "
+            f"{speed} = {float(getattr(obs, speed)):.6g} rad/s ({rpm:g} r/min)"
+        )
+        if args.steps < MIN_STEPS:
+            raise ValueError(f"export: --steps must be >= {MIN_STEPS}, got {args.steps}")
+    elif hasattr(obs, "Rs"):
+        signal = "synthetic"
+    coeffs = export_observer(obs, args.out, n_steps=args.steps, signal=signal, source=source, notes=notes)
     out = Path(args.out)
     o = coeffs["ops_per_step"]
     print(f"{coeffs['component']} ({coeffs['rule']['name']}, ts = {coeffs['ts']:g} s, float32) from {source}")

@@ -11,7 +11,8 @@ For a design (every constructor value of a component: the tuned or fixed gains,
 - the closed-form rule re-evaluated at the design's other gains: the λ of 001 eq (22)
   at the design's k (SOGI-FLL), of eq (29) (WPF), of the symmetric optimum at the
   design's k1, k2 (WIF, with the implied b = k1/k2 and ωc = k2ωn/2 and the PM that b
-  would give, eq 39); lam = k²/4 and K1³/(2K2) for the flux observers;
+  would give, eq 39); lam = k²/4 and K1³/(2K2) for the flux observers, and for the
+  second-order SOIFO 000's equal-settling-time K1 at the design's K2 (``k1_rule``);
 - a Routh test where the paper gives one (FA-LESO, 002 eq 24).
 
 What a model cannot say is ``None``, and ``not_available`` says why, field by field.
@@ -21,9 +22,12 @@ from __future__ import annotations
 
 import math
 
+import jax.numpy as jnp
 import numpy as np
 
 from jaxobs import linear, papers
+
+from .targets import _settling_at_k2, k1_for_settling_time_at_k2, soifo_settling_time
 
 __all__ = ["structure", "STRUCTURE_FIELDS"]
 
@@ -122,10 +126,46 @@ def _flux(name: str, v: dict) -> tuple[dict, dict]:
         K1, K2, lam = float(v["K1"]), float(v["K2"]), float(v["lam"])
         out.update(_poles(linear.sosoifo_tf(K1, K2, w)))
         rule = {"rule": "lam = K1^3/(2 K2), at this K1, K2", "lam_rule": K1**3 / (2 * K2)}
+        rule.update(_k1_rule(K1, K2, w, why))
     rule["lam_over_rule"] = lam / rule["lam_rule"]
     out["model"] = "000 eqs (15), (20): the filter psi/e at omega0 (poles and damping are the filter's)"
     out["closed_form_rule"] = rule
     return out, why
+
+
+def _k1_rule(K1: float, K2: float, omega0: float, why: dict) -> dict:
+    """000's settling-time rule re-evaluated at this K2 (tuning.targets.k1_for_settling_time_at_k2).
+
+    Both envelope models depend on ω't only, so the K1 found at ω' = 100π holds at any ω0, and
+    the settling times scale as 100π/ω0.  About 3 s for the first design of a process (one
+    compile), 0.1 s for the next.
+    """
+    w = papers.FLUX_FIG5_OMEGA
+    target = soifo_settling_time(papers.SOIFO_K, w)
+    k1 = k1_for_settling_time_at_k2(target, K2, w)
+    own = float(_settling_at(K1, K2, w))
+    scale = w / omega0 if omega0 > 0 else float("nan")
+    out = {
+        "k1_rule_doc": "000: equal 2 % settling time of the amplitude envelope (001 eqs 18, 30) with the SOIFO at "
+        "k = 1.414, at this K2: the smallest K1 that settles as fast (at fixed K2 the settling time is not "
+        "monotonic in K1; see tuning/targets.py)",
+        "k1_rule": k1,
+        "k1_over_rule": K1 / k1 if k1 else None,
+        "settling_time_target_ms": 1e3 * target * scale,
+        "settling_time_ms": 1e3 * own * scale,
+    }
+    if k1 is None:
+        why["k1_rule"] = why["k1_over_rule"] = (
+            f"no K1 in [0.05, 20] settles within the SOIFO's {1e3 * target * scale:.3g} ms at K2 = {K2:.4g} "
+            f"(the envelope decays at K2 omega0/4 whatever K1 is)"
+        )
+    return out
+
+
+def _settling_at(K1, K2, omega):
+    return _settling_at_k2(jnp.asarray(np.full(64, float(K1))), jnp.asarray(float(K2)), float(omega), 0.02)[
+        0
+    ]  # same compile
 
 
 def _drive_speed(job) -> float:
