@@ -56,8 +56,9 @@ LAYERS = [
     ("jaxobs.reproduce",),
     # tuning: it changes gains (and exports the tuned observer)
     ("tuning.outdir",),
-    ("tuning._cexpr", "tuning.params", "tuning.solvers", "tuning.structure"),
+    ("tuning._cexpr", "tuning.params", "tuning.solvers"),
     ("tuning._crules", "tuning._cmodels", "tuning.objective", "tuning.report", "tuning.targets"),
+    ("tuning.structure",),
     ("tuning.job",),
     ("tuning.results",),
     ("tuning.export",),
