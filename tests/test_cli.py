@@ -113,10 +113,14 @@ def test_use_host_devices_default_and_env_override():
         jaxobs.use_host_devices(0)
 
 
-def test_no_private_argparse_attributes():
-    for pkg in ("jaxobs", "tuning"):
+def test_public_apis_only():
+    """No private attributes of other libraries: argparse's _actions, jax._src, diffrax._..."""
+    for pkg in ("jaxobs", "tuning", "benchmarks"):
         for f in (ROOT / pkg).rglob("*.py"):
-            assert "_actions" not in f.read_text(), f
+            text = f.read_text()
+            for private in ("_actions", "jax._src", "diffrax._"):
+                assert private not in text, (f, private)
+    assert not (ROOT / "jaxobs" / "bench").exists()  # benchmarks live in benchmarks/, outside the library
 
 
 def test_demo_json_rows_and_figure(tmp_path, capsys):
