@@ -21,7 +21,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._time import time_value
+from ._time import SampleTime, time_value
 from .papers import TEST_C_HARMONICS
 from .signals import GridSignal
 
@@ -40,7 +40,13 @@ GRID_SIGNAL_AXES = (
 
 
 class NoisyGridSignal(eqx.Module):
-    """A :class:`GridSignal` plus white measurement noise (std ``noise``, seeded per scenario)."""
+    """A :class:`GridSignal` plus white measurement noise (std ``noise``, seeded per scenario).
+
+    The noise of sample k is drawn from ``fold_in(key, k)``: white in time, the same sample for the
+    same k however the loop evaluates it (one step at a time, or a block of steps at once).  Given a
+    float time instead of a :class:`~jaxobs.SampleTime` (no sample index), one independent draw per
+    element of ``t`` is made from ``key``.
+    """
 
     clean: GridSignal
     noise: jax.Array
@@ -50,7 +56,13 @@ class NoisyGridSignal(eqx.Module):
 
     def __call__(self, t):
         tv = time_value(t)
-        n = jax.random.normal(self.key, jnp.shape(tv), dtype=jnp.result_type(tv))
+        dtype = jnp.result_type(tv)
+        if isinstance(t, SampleTime):
+            k = jnp.asarray(t.k)
+            draw = lambda kk: jax.random.normal(jax.random.fold_in(self.key, kk), (), dtype=dtype)  # noqa: E731
+            n = draw(k) if k.ndim == 0 else jax.vmap(draw)(k.ravel()).reshape(k.shape)
+        else:
+            n = jax.random.normal(self.key, jnp.shape(tv), dtype=dtype)
         return self.clean(t) + self.noise * n
 
     def theta(self, t):
@@ -66,12 +78,13 @@ class NoisyGridSignal(eqx.Module):
 _AXIS_LOWER = {"sag": 0.0, "harmonics_scale": 0.0, "sub_amplitude": 0.0, "noise": 0.0}
 
 
-def grid_signals(names, combos, t_event: float, freq: float):
+def grid_signals(names, combos, t_event: float, freq: float, *, seed: int = 0):
     """Batched :class:`NoisyGridSignal` for ``combos`` (tuples of values for the axes ``names``).
 
     Vectorized — the leaves are set as arrays, no constructor runs per scenario — and
     checked as :class:`GridSignal` would check one scenario: a ``ValueError`` names the axis.
-    Shared by studies (:func:`jaxobs.study.run_study`) and by tuning jobs on grid signals.
+    Shared by studies (:func:`jaxobs.study.run_study`) and by tuning jobs on grid signals.  Scenario i's
+    noise key is ``fold_in(PRNGKey(seed), i)``: the study's (or job's) seed drives its noise.
     """
     names = list(names)
     for name in names:
@@ -113,5 +126,5 @@ def grid_signals(names, combos, t_event: float, freq: float):
     out = eqx.tree_at(lambda s: s.clean, batched, c)
     if "noise" in cols:
         out = eqx.tree_at(lambda s: s.noise, out, jnp.asarray(cols["noise"]))
-    keys = jax.vmap(lambda i: jax.random.fold_in(jax.random.PRNGKey(12345), i))(jnp.arange(n))
+    keys = jax.vmap(lambda i: jax.random.fold_in(jax.random.PRNGKey(seed), i))(jnp.arange(n))
     return eqx.tree_at(lambda s: s.key, out, keys)

@@ -136,7 +136,7 @@ def run_study(
         combos = list(itertools.product(*(list(map(float, axes[n])) for n in names)))
     n = len(combos)
     freq = float(next(iter(designs.values())).omega_n) / (2 * math.pi)
-    sigs = grid_signals(names, combos, t_event, freq)
+    sigs = grid_signals(names, combos, t_event, freq, seed=seed)
     chunk = min(chunk_size, n)
     pad = (-n) % chunk
     if pad:

@@ -154,3 +154,22 @@ def test_grid_signals_check_values_like_gridsignal_and_match_it():
     one = jaxobs.GridSignal(t_event=0.1, freq_step=-1.0, harmonics=harmonics)
     second = jax.tree.map(lambda x: x[1], sigs)
     np.testing.assert_array_equal(np.asarray(second(t)), np.asarray(one(t)))
+
+
+def test_noise_axis_is_white_in_time_and_driven_by_the_seed():
+    """The noise an observer sees on a noisy grid signal: a new draw every sample (not a constant offset),
+    std as asked, the same draw for the same sample index, and another one for another seed."""
+    from jaxobs.scenarios import grid_signals
+
+    obs = jaxobs.linear.sogi_fll_closed_form()
+
+    def seen(seed):
+        sig = jax.tree.map(lambda x: x[0], grid_signals(["noise"], [(0.1,)], 0.1, 50.0, seed=seed))
+        sol = jaxobs.simulate(jaxobs.OnSignal(obs, sig), 0.2)
+        return np.asarray(sol.outputs.u) - np.asarray(sig.clean(sol.t))
+
+    a, b = seen(0), seen(1)
+    assert abs(np.std(a) - 0.1) < 0.01 and abs(np.mean(a)) < 0.01
+    assert abs(np.corrcoef(a[1:], a[:-1])[0, 1]) < 0.1  # white: no sample-to-sample correlation
+    np.testing.assert_array_equal(a, seen(0))
+    assert not np.allclose(a, b)

@@ -767,7 +767,9 @@ def build_scenarios(spec: ScenarioSpec, values: dict):
         return _drive_scenarios(names, combos, spec.seed, spec.t_event), names, combos
     if spec.signal == "grid":
         return (
-            grid_signals(names, combos, spec.t_event, float(values.get("omega_n", W_N)) / (2 * math.pi)),
+            grid_signals(
+                names, combos, spec.t_event, float(values.get("omega_n", W_N)) / (2 * math.pi), seed=spec.seed
+            ),
             names,
             combos,
         )
