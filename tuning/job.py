@@ -59,13 +59,12 @@ import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 
-import equinox as eqx
 import numpy as np
 
 import jaxobs
 from jaxobs import drive as D
 from jaxobs import linear, papers
-from jaxobs.drive_study import DRIVE_STUDY_AXES, drive_scenarios
+from jaxobs.drive_study import DRIVE_STUDY_AXES, bind_observer, drive_scenarios
 from jaxobs.scenarios import grid_signals
 from jaxobs.signals import EMFSignal, stack
 
@@ -159,12 +158,6 @@ def _cf_faleso(comp):
     return {"k1": papers.FALESO_K1, "k2": papers.FALESO_K2, **_pll_cf()}
 
 
-def _bind_leso(comp, sc):
-    """A LESO assumes the scenario's estimated Rs, Lq and starts its PLL at the scenario's speed."""
-    est = (sc.est_par.Rs, sc.est_par.Lq, sc.speed_ref.values[0] * sc.par.p)
-    return eqx.tree_at(lambda o: (o.Rs, o.Lq, o.omega0_pll), comp, est)
-
-
 @dataclass(frozen=True)
 class ComponentInfo:
     ctor: object
@@ -227,7 +220,7 @@ COMPONENTS = {
         closed_form=lambda c: {**_cf_cleso(c), **_pll_cf()},
         signal="drive",
         closed_form_source="002 Table II (ω0 = 500π), PLL pole placement ω_b = 2π·15",
-        bind=_bind_leso,
+        bind=bind_observer,  # the scenario's assumed Rs, Lq; the PLL starts at its speed
     ),
     "GILESO": ComponentInfo(
         jaxobs.GILESO,
@@ -248,7 +241,7 @@ COMPONENTS = {
         },
         signal="drive",
         closed_form_source="002 Table II (ω0 = 500π, K_r = 2ω0², ωc = π), PLL pole placement ω_b = 2π·15",
-        bind=_bind_leso,
+        bind=bind_observer,  # the scenario's assumed Rs, Lq; the PLL starts at its speed
     ),
     "FALESO": ComponentInfo(
         jaxobs.FALESO,
@@ -259,7 +252,7 @@ COMPONENTS = {
         closed_form=_cf_faleso,
         signal="drive",
         closed_form_source="002 Table II (k1 = 10π, k2 = 100π), PLL pole placement ω_b = 2π·15",
-        bind=_bind_leso,
+        bind=bind_observer,  # the scenario's assumed Rs, Lq; the PLL starts at its speed
     ),
 }
 

@@ -206,12 +206,20 @@ class ClosedLoop(AbstractSystem):
             return LoopState(plant=plant, ctrl=foc.init(), obs=obs, sensors=sc.sensors.init(sc.key), u_a=z, u_b=z)
         op = self.operating_point()
         plant = self.plant.init(omega_m0=op.omega_m, theta_e0=op.theta_e, i_d0=op.i_d, i_q0=op.i_q)
-        w_e = sc.par.p * op.omega_m
-        th_u = op.theta_e + (0.5 if foc.delay_compensation else -1.0) * w_e * self.ts
-        u_a, u_b = dq_to_ab(op.u_d, op.u_q, th_u)
+        u_a, u_b = self._steady_voltage(op, op.theta_e)
         _, u = self.drive.inverter.step(None, InverterInput(u_a, u_b))
         obs = None if self.observer is None else self._settled_observer(op)
         return LoopState(plant=plant, ctrl=foc.init(op), obs=obs, sensors=sc.sensors.init(sc.key), u_a=u.u_a, u_b=u.u_b)
+
+    def _steady_voltage(self, op: OperatingPoint, theta):
+        """(u_α, u_β) applied over the period that starts where the rotor is at ``theta``, at steady state.
+
+        The FOC computed it one period earlier and rotated it by its delay compensation (1.5 ω_e T_s ahead
+        of the angle it had then), so it is centred at θ + ω_e T_s/2; without compensation, at θ − ω_e T_s.
+        """
+        w_e = self.scenario.par.p * op.omega_m
+        lead = (0.5 if self.drive.foc.delay_compensation else -1.0) * w_e * self.ts
+        return dq_to_ab(op.u_d, op.u_q, theta + lead)
 
     def _settled_observer(self, op: OperatingPoint):
         """The observer after ``drive.settle`` seconds on the steady operating point: a phase before t = 0, unscored.
@@ -230,12 +238,11 @@ class ClosedLoop(AbstractSystem):
         n = int(round(self.drive.settle / ts))
         if n == 0:
             return state
-        lead = (0.5 if self.controller.delay_compensation else -1.0) * w_e * ts
 
         def settle_step(s, k):
             th = op.theta_e + w_e * (k * ts)
             i_a, i_b = dq_to_ab(op.i_d, op.i_q, th)
-            u_a, u_b = dq_to_ab(op.u_d, op.u_q, th + lead)
+            u_a, u_b = self._steady_voltage(op, th)
             _, meas = sc.sensors.step(sc.key, SensorInput(k, u_a, u_b, i_a, i_b))
             return obs.step(s, meas)[0], None
 
