@@ -75,6 +75,7 @@ from .sharding import batch_mesh as batch_mesh
 from .sharding import map_batch as map_batch
 from .sharding import shard_batch as shard_batch
 from .sharding import use_host_devices as use_host_devices
+from .signals import DriveRecording as DriveRecording
 from .signals import GridSignal as GridSignal
 from .signals import SampledSignal as SampledSignal
 from .signals import paper001_test as paper001_test

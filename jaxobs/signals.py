@@ -21,19 +21,33 @@ built by :func:`paper001_test`.
 
 from __future__ import annotations
 
+import csv
 import math
+from pathlib import Path
 from typing import ClassVar
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from . import papers
 from ._time import SampleTime, cycles, exact_phase, frac_mul, time_value
 from ._validate import as_float, check_nonnegative, check_positive, check_real, check_sample_time, static_float
 from .measurements import DriveInput
 
-__all__ = ["GridSignal", "SampledSignal", "EMFSignal", "SampleTime", "paper001_test", "PAPER001_TESTS", "stack"]
+__all__ = [
+    "GridSignal",
+    "SampledSignal",
+    "DriveRecording",
+    "EMFSignal",
+    "SampleTime",
+    "paper001_test",
+    "PAPER001_TESTS",
+    "stack",
+    "read_recording",
+    "MAX_CSV_BYTES",
+]
 
 
 class GridSignal(eqx.Module):
@@ -207,14 +221,7 @@ class SampledSignal(eqx.Module):
         return self.t0 + self.ts * (self.n - 1)
 
     def _read(self, arr, t):
-        x = (t - self.t0) / self.ts
-        k = jnp.round(x)
-        d = x - k
-        snap = jnp.abs(d) <= self.SNAP
-        i = jnp.clip(k, 0, self.n - 1).astype(jnp.int32)
-        j = jnp.clip(k + jnp.where(d < 0, -1, 1), 0, self.n - 1).astype(jnp.int32)
-        a_i, a_j = arr[..., i], arr[..., j]
-        return jnp.where(snap, a_i, a_i + jnp.abs(d) * (a_j - a_i))
+        return _read_samples(arr, t, self.t0, self.ts, self.SNAP)
 
     def __call__(self, t):
         return self._read(self.samples, t)
@@ -232,6 +239,380 @@ class SampledSignal(eqx.Module):
 
     def fundamental_amplitude(self, t):
         return self._truth(2, t)
+
+    @classmethod
+    def from_csv(
+        cls,
+        path,
+        *,
+        columns=None,
+        time_column=None,
+        sample_rate=None,
+        ts=None,
+        truth=None,
+        max_bytes: int | None = None,
+    ) -> SampledSignal:
+        """A recorded signal from a CSV file, resampled to the observer's sample time ``ts``.
+
+        The file: one row per sample, comma-separated numbers, an optional header row of column
+        names, ``#`` comment lines.  The time base is a ``time_column`` (s, strictly increasing; it
+        may be non-uniform) or a ``sample_rate`` (Hz, uniform rows).  Times are taken from the first
+        row: sample 0 is t = 0.
+
+        Args:
+            columns: the channel(s): a name (from the header) or a 0-based index, or a list of them
+                (several channels give a batch, samples shaped (channels, n), for ``vmap``); default:
+                the one column that is neither the time nor a truth column.
+            time_column / sample_rate: the time base (exactly one of them).
+            ts: the observer's sample time, s.  ``None`` keeps the recording's own (uniform) rate.
+                Otherwise the recording is read at t_k = k·ts by linear interpolation (point
+                sampling, as the DSP's converter would: no anti-alias filter).  A recording sampled
+                more slowly than 1/ts (any interval longer than 1.01·ts) is refused: interpolation
+                would invent the samples in between.
+            truth: ``(theta, omega, amplitude)`` column names or indices: the signal's true phase (rad),
+                angular frequency (rad/s) and fundamental amplitude, when the recording carries them
+                (a reference instrument, or a synthetic record); the metrics that compare an estimate
+                with the truth need them.
+            max_bytes: refuse a larger file (default :data:`MAX_CSV_BYTES`).
+
+        Raises:
+            ValueError: a missing or unreadable file, a file too large, a row of another width, a
+                non-number, a non-finite value, an unknown column, a time column that is not
+                strictly increasing, fewer than 2 samples, a rate below 1/ts, or both or neither of
+                ``time_column`` and ``sample_rate``.
+        """
+        single = columns is None or isinstance(columns, (str, int))
+        want_truth = () if truth is None else tuple(truth)
+        if truth is not None and len(want_truth) != 3:
+            raise ValueError(f"from_csv: truth must be 3 columns (theta, omega, amplitude), got {truth!r}")
+        rec = read_recording(
+            path,
+            None if columns is None else ([columns] if single else list(columns)),
+            time_column=time_column,
+            sample_rate=sample_rate,
+            ts=ts,
+            extra=want_truth,
+            angle=want_truth[:1],
+            max_bytes=max_bytes,
+        )
+        data = rec["columns"]
+        samples = data[0] if single else np.stack(data)
+        tr = None
+        if want_truth:
+            tr = tuple(np.broadcast_to(a, samples.shape) for a in rec["extra"])
+        return cls(samples, rec["ts"], truth=tr)
+
+
+def _read_samples(arr, t, t0, ts, snap_tol):
+    """Linear interpolation of ``arr[..., k]`` (samples at t0 + k·ts) at time t; within ``snap_tol`` of a
+    sample interval from a sample instant, that sample exactly; the end samples held outside."""
+    n = arr.shape[-1]
+    x = (t - t0) / ts
+    k = jnp.round(x)
+    d = x - k
+    snap = jnp.abs(d) <= snap_tol
+    i = jnp.clip(k, 0, n - 1).astype(jnp.int32)
+    j = jnp.clip(k + jnp.where(d < 0, -1, 1), 0, n - 1).astype(jnp.int32)
+    a_i, a_j = arr[..., i], arr[..., j]
+    return jnp.where(snap, a_i, a_i + jnp.abs(d) * (a_j - a_i))
+
+
+# --------------------------------------------------------------------------------------------
+# recordings from CSV files
+# --------------------------------------------------------------------------------------------
+
+MAX_CSV_BYTES = 64 * 2**20  # a recording file larger than this is refused (from_csv's max_bytes default)
+_RATE_SLACK = 1.01  # a recording's interval may exceed ts by 1 % (clock jitter) before it is "too slow"
+
+
+def _csv_table(path, max_bytes):
+    """(header or None, float array (rows, columns)) of a CSV file; ValueError naming the problem."""
+    p = Path(path)
+    try:
+        size = p.stat().st_size
+    except OSError as e:
+        raise ValueError(f"recording {str(p)!r}: cannot read it ({e.strerror})") from None
+    if not p.is_file():
+        raise ValueError(f"recording {str(p)!r}: not a file")
+    if size > max_bytes:
+        raise ValueError(f"recording {str(p)!r}: {size} bytes, more than the limit of {max_bytes} bytes")
+    try:
+        text = p.read_text()
+    except UnicodeDecodeError:
+        raise ValueError(f"recording {str(p)!r}: not UTF-8 text") from None
+    except OSError as e:
+        raise ValueError(f"recording {str(p)!r}: cannot read it ({e.strerror})") from None
+    lines = [(n, ln) for n, ln in enumerate(text.splitlines(), 1) if ln.strip() and not ln.lstrip().startswith("#")]
+    if not lines:
+        raise ValueError(f"recording {str(p)!r}: no data rows")
+    rows = list(csv.reader(ln for _, ln in lines))
+    header = None
+    try:
+        [float(x) for x in rows[0]]
+    except ValueError:
+        header = [x.strip() for x in rows[0]]
+        rows, lines = rows[1:], lines[1:]
+        if len(set(header)) != len(header):
+            raise ValueError(f"recording {str(p)!r}: the header repeats a column name: {header}") from None
+    width = len(header) if header is not None else len(rows[0]) if rows else 0
+    out = np.empty((len(rows), width))
+    for r, ((lineno, _), row) in enumerate(zip(lines, rows)):
+        if len(row) != width:
+            raise ValueError(f"recording {str(p)!r}: line {lineno} has {len(row)} fields, the file {width}")
+        try:
+            out[r] = [float(x) for x in row]
+        except ValueError:
+            raise ValueError(f"recording {str(p)!r}: line {lineno} holds a field that is not a number") from None
+    return header, out
+
+
+def _column(spec, header, width, path, role):
+    """The index of a column given by name or 0-based index."""
+    if isinstance(spec, (int, np.integer)) and not isinstance(spec, bool):
+        if not 0 <= spec < width:
+            raise ValueError(f"recording {str(path)!r}: {role} column index {spec} is outside 0..{width - 1}")
+        return int(spec)
+    if isinstance(spec, str):
+        if header is None:
+            raise ValueError(f"recording {str(path)!r}: {role} column {spec!r} named, but the file has no header row")
+        if spec not in header:
+            raise ValueError(f"recording {str(path)!r}: no {role} column {spec!r}; columns: {', '.join(header)}")
+        return header.index(spec)
+    raise ValueError(f"recording {str(path)!r}: a {role} column must be a name or an index, got {spec!r}")
+
+
+def read_recording(
+    path,
+    columns=None,
+    *,
+    time_column=None,
+    sample_rate=None,
+    ts=None,
+    extra=(),
+    angle=(),
+    averaged=(),
+    max_bytes=None,
+) -> dict:
+    """Read channels of a CSV recording and resample them to ``ts`` (the engine of :meth:`SampledSignal.from_csv`
+    and :meth:`DriveRecording.from_csv`; their docstrings give the file format and the checks).
+
+    ``columns`` and ``extra`` are lists of column names or indices; ``angle`` names the columns among them
+    that are angles (unwrapped before interpolation, rad); ``averaged`` those that hold the average over the
+    period that starts at each row (a drive's applied voltage): resampled as the average over [t_k, t_k + ts]
+    of the recording held piecewise constant.  Returns ``{"columns": [arrays], "extra": [arrays], "ts": s,
+    "rate_hz": the recording's own rate, "duration": s, "names": [column names]}``.
+    """
+    max_bytes = MAX_CSV_BYTES if max_bytes is None else int(max_bytes)
+    header, table = _csv_table(path, max_bytes)
+    width = table.shape[1]
+    if (time_column is None) == (sample_rate is None):
+        raise ValueError(f"recording {str(path)!r}: give exactly one of time_column and sample_rate")
+    tcol = None if time_column is None else _column(time_column, header, width, path, "time")
+    idx_extra = [_column(c, header, width, path, "truth") for c in extra]
+    if columns is None:
+        rest = [i for i in range(width) if i != tcol and i not in idx_extra]
+        if len(rest) != 1:
+            names = [header[i] if header else str(i) for i in rest]
+            raise ValueError(f"recording {str(path)!r}: name the channel among {', '.join(names)} (columns=...)")
+        columns = rest
+    idx = [_column(c, header, width, path, "signal") for c in columns]
+    if table.shape[0] < 2:
+        raise ValueError(f"recording {str(path)!r}: {table.shape[0]} sample(s); at least 2 are needed")
+    for i in sorted({*idx, *idx_extra, *([] if tcol is None else [tcol])}):
+        bad = np.flatnonzero(~np.isfinite(table[:, i]))
+        if bad.size:
+            name = header[i] if header else str(i)
+            raise ValueError(f"recording {str(path)!r}: column {name!r} is not finite at data row {bad[0] + 1}")
+    if tcol is not None:
+        t = table[:, tcol] - table[0, tcol]
+        dt = np.diff(t)
+        if np.any(dt <= 0):
+            r = int(np.flatnonzero(dt <= 0)[0])
+            raise ValueError(
+                f"recording {str(path)!r}: the time column is not strictly increasing (data rows {r + 1}, {r + 2})"
+            )
+        step, longest = float(np.median(dt)), float(np.max(dt))
+        uniform = float(np.max(np.abs(dt - step))) <= 1e-6 * step
+    else:
+        rate = float(sample_rate)
+        if not (math.isfinite(rate) and rate > 0):
+            raise ValueError(f"recording {str(path)!r}: sample_rate must be a number of Hz > 0, got {sample_rate!r}")
+        step = longest = 1.0 / rate
+        t = step * np.arange(table.shape[0])
+        uniform = True
+    if ts is None:
+        if not uniform:
+            raise ValueError(
+                f"recording {str(path)!r}: the time column is not uniform (intervals {np.min(dt):.6g} to "
+                f"{longest:.6g} s): give ts= to resample it"
+            )
+        ts = step
+    ts = check_sample_time("ts", ts, "recording")
+    if longest > _RATE_SLACK * ts:
+        raise ValueError(
+            f"recording {str(path)!r}: sampled at intervals up to {longest:.6g} s ({1 / longest:.6g} Hz), slower "
+            f"than the observer's ts = {ts:g} s ({1 / ts:g} Hz): interpolation would invent the samples between"
+        )
+    names_of = {i: (header[i] if header else str(i)) for i in range(width)}
+    angle_idx = {_column(c, header, width, path, "truth") for c in angle}
+    avg_idx = {_column(c, header, width, path, "signal") for c in averaged}
+    exact = uniform and abs(step - ts) <= 1e-9 * ts
+    n = table.shape[0] if exact else int(math.floor(t[-1] / ts * (1 + 1e-12))) + 1
+    if avg_idx and not exact:  # every period [t_k, t_k + ts] must lie inside the record
+        n = int(math.floor((t[-1] + step) / ts * (1 + 1e-12)))
+    if n < 2:
+        raise ValueError(
+            f"recording {str(path)!r}: {t[-1]:.6g} s long, fewer than 2 samples of ts = {ts:g} s after resampling"
+        )
+    tk = ts * np.arange(n)
+
+    def resample(i):
+        x = table[:, i]
+        if i in angle_idx:
+            x = np.unwrap(x)
+        if exact:
+            return x.copy()
+        if i in avg_idx:  # the average over [t_k, t_k + ts] of x held constant over each recorded interval
+            edges = np.append(t, t[-1] + step)
+            cum = np.concatenate([[0.0], np.cumsum(x * np.diff(edges))])
+            return (np.interp(tk + ts, edges, cum) - np.interp(tk, edges, cum)) / ts
+        return np.interp(tk, t, x)
+
+    return {
+        "columns": [resample(i) for i in idx],
+        "extra": [resample(i) for i in idx_extra],
+        "ts": ts,
+        "rate_hz": 1.0 / step,
+        "duration": float(t[-1]),
+        "names": [names_of[i] for i in idx],
+    }
+
+
+class DriveRecording(eqx.Module):
+    """A recording of a drive's measurements, (u_α, u_β, i_α, i_β) per sample, for a drive observer run open
+    loop (``jaxobs.OnSignal(observer, recording)``), with the encoder's electrical angle when known.
+
+    ``recording(t)`` returns the :class:`~jaxobs.measurements.DriveInput` at t_k (the drive observers'
+    contract: the voltage applied over [t_k, t_k+1], the current sampled at t_k); its ``ts`` must be the
+    observer's (``OnSignal`` checks it; :meth:`from_csv` resamples).  With ``theta_e`` (the encoder's
+    electrical angle, rad) the truth is reported: ``theta`` the angle (unwrapped), ``omega`` the electrical
+    speed (given, or the angle's centred difference), ``fundamental_amplitude`` the voltage vector's length
+    |u_αβ|, so that ``jaxobs.metrics`` and the tuning objectives compare θ̂ with the encoder.
+    Leaves may carry a leading batch axis (recordings of one length).
+    """
+
+    samples: jax.Array  # (..., 4, n): u_α, u_β (V), i_α, i_β (A)
+    theta_e: jax.Array | None  # (..., n) encoder electrical angle, rad (unwrapped), or None
+    omega_e: jax.Array | None  # (..., n) electrical speed, rad/s, or None
+    ts: float = eqx.field(static=True)
+    t0: float = eqx.field(static=True)
+
+    SNAP = SampledSignal.SNAP
+
+    def __init__(self, u_a, u_b, i_a, i_b, ts, *, theta_e=None, omega_e=None, t0=0.0):
+        own = "DriveRecording"
+        arrs = [check_real(nm, a, owner=own) for nm, a in zip(("u_a", "u_b", "i_a", "i_b"), (u_a, u_b, i_a, i_b))]
+        shape = arrs[0].shape
+        if len(shape) < 1 or shape[-1] < 2:
+            raise ValueError(f"{own}.u_a must hold at least 2 samples along its last axis, got shape {shape}")
+        for nm, a in zip(("u_b", "i_a", "i_b"), arrs[1:]):
+            if a.shape != shape:
+                raise ValueError(f"{own}.{nm} must have the shape of u_a {shape}, got {a.shape}")
+        self.samples = jnp.stack(arrs, axis=-2)
+        self.ts = check_sample_time("ts", ts, own)
+        self.t0 = static_float(check_real("t0", t0, owner=own), t0)
+        if theta_e is None and omega_e is not None:
+            raise ValueError(f"{own}.omega_e needs theta_e (the encoder angle) beside it")
+        if theta_e is not None:
+            theta_e = check_real("theta_e", theta_e, owner=own)
+            if theta_e.shape != shape:
+                raise ValueError(f"{own}.theta_e must have the shape of u_a {shape}, got {theta_e.shape}")
+            if omega_e is None:  # the angle's derivative: centred differences (one-sided at the ends)
+                omega_e = jnp.gradient(theta_e, self.ts, axis=-1)
+            omega_e = check_real("omega_e", omega_e, owner=own)
+            if omega_e.shape != shape:
+                raise ValueError(f"{own}.omega_e must have the shape of u_a {shape}, got {omega_e.shape}")
+        self.theta_e, self.omega_e = theta_e, omega_e
+
+    @property
+    def n(self) -> int:
+        return self.samples.shape[-1]
+
+    @property
+    def t_end(self) -> float:
+        """Time of the last sample, s."""
+        return self.t0 + self.ts * (self.n - 1)
+
+    @property
+    def has_truth(self) -> bool:
+        return self.theta_e is not None
+
+    def __call__(self, t):
+        x = _read_samples(self.samples, t, self.t0, self.ts, self.SNAP)
+        return DriveInput(u_a=x[..., 0], u_b=x[..., 1], i_a=x[..., 2], i_b=x[..., 3])
+
+    def theta(self, t):
+        if self.theta_e is None:
+            raise ValueError("DriveRecording was built without theta_e (the encoder angle)")
+        return _read_samples(self.theta_e, t, self.t0, self.ts, self.SNAP)
+
+    def omega(self, t):
+        if self.omega_e is None:
+            raise ValueError("DriveRecording was built without theta_e (the encoder angle)")
+        return _read_samples(self.omega_e, t, self.t0, self.ts, self.SNAP)
+
+    def fundamental_amplitude(self, t):
+        m = self(t)
+        return jnp.sqrt(m.u_a * m.u_a + m.u_b * m.u_b)
+
+    COLUMNS = ("u_a", "u_b", "i_a", "i_b")
+
+    @classmethod
+    def from_csv(
+        cls,
+        path,
+        *,
+        columns=COLUMNS,
+        time_column=None,
+        sample_rate=None,
+        ts=None,
+        theta_e=None,
+        omega_e=None,
+        max_bytes: int | None = None,
+    ) -> DriveRecording:
+        """A drive recording from a CSV file (the format and the checks of :meth:`SampledSignal.from_csv`).
+
+        ``columns``: the four columns u_α, u_β (V), i_α, i_β (A), names or indices (default the names
+        ``u_a, u_b, i_a, i_b``); ``theta_e``: the encoder's electrical angle column (rad, wrapped or not),
+        ``omega_e``: an electrical speed column (rad/s; default the angle's derivative).  Resampled to
+        ``ts``: the currents and the angle by linear interpolation, the voltages as the average over
+        each new period [t_k, t_k + ts] of the recorded voltage held over its own periods (a voltage row
+        is what the inverter applied until the next row).
+        """
+        columns = list(columns)
+        if len(columns) != 4:
+            raise ValueError(f"DriveRecording.from_csv: columns must be 4 (u_a, u_b, i_a, i_b), got {columns!r}")
+        extra = [c for c in (theta_e, omega_e) if c is not None]
+        if omega_e is not None and theta_e is None:
+            raise ValueError("DriveRecording.from_csv: omega_e needs theta_e (the encoder angle) beside it")
+        rec = read_recording(
+            path,
+            columns,
+            time_column=time_column,
+            sample_rate=sample_rate,
+            ts=ts,
+            extra=extra,
+            angle=extra[:1],
+            averaged=columns[:2],
+            max_bytes=max_bytes,
+        )
+        ex = rec["extra"]
+        return cls(
+            *rec["columns"],
+            rec["ts"],
+            theta_e=ex[0] if ex else None,
+            omega_e=ex[1] if len(ex) > 1 else None,
+        )
 
 
 PAPER001_TESTS = tuple(papers.TESTS_001)

@@ -49,7 +49,7 @@ from ._loop import AbstractCheckpoint, AutoCheckpoint, check_unroll, run_loop
 from ._time import SampleTime
 from ._validate import check_sample_time
 from .discretize import Knots
-from .signals import EMFSignal, SampledSignal
+from .signals import DriveRecording, EMFSignal, SampledSignal
 from .system import AbstractSystem
 
 __all__ = [
@@ -255,11 +255,15 @@ class OnSignal(AbstractSystem):
         check_sample_time("ts", observer.ts, type(observer).__name__)
         if isinstance(t0, bool) or not isinstance(t0, (int, float)) or not np.isfinite(t0):
             raise ValueError(f"OnSignal.t0 must be a finite number of seconds, got {t0!r}")
-        if isinstance(signal, EMFSignal) and not math.isclose(signal.ts, float(observer.ts), rel_tol=1e-12):
-            # the EMF is the average over [t_k, t_k + ts] of the signal's ts: it must be the observer's
+        if isinstance(signal, (EMFSignal, DriveRecording)) and not math.isclose(
+            signal.ts, float(observer.ts), rel_tol=1e-12
+        ):
+            # the voltage is the average over [t_k, t_k + ts] of the signal's ts: it must be the observer's
+            fix = " (DriveRecording.from_csv(..., ts=observer.ts) resamples a recording)"
             raise ValueError(
-                f"OnSignal: EMFSignal.ts = {signal.ts:g} s must equal the observer's "
+                f"OnSignal: {type(signal).__name__}.ts = {signal.ts:g} s must equal the observer's "
                 f"{type(observer).__name__}.ts = {float(observer.ts):g} s"
+                + (fix if isinstance(signal, DriveRecording) else "")
             )
         self.observer = observer
         self.signal = signal
@@ -318,13 +322,13 @@ class OnSignal(AbstractSystem):
     def check_horizon(self, n: int):
         """A recording cannot be read outside its samples (it holds its end values, which would be a lie)."""
         sig = self.signal
-        if isinstance(sig, SampledSignal):
+        if isinstance(sig, (SampledSignal, DriveRecording)):
             t_last = self.t0 + self.ts * (n - 1)
             tol = SampledSignal.SNAP * sig.ts
             if self.t0 < sig.t0 - tol or t_last > sig.t_end + tol:
                 raise ValueError(
                     f"simulate: the horizon [t0, t0 + ts*(n-1)] = [{self.t0:g}, {t_last:g}] s must lie inside the "
-                    f"SampledSignal's samples [{sig.t0:g}, {sig.t_end:g}] s"
+                    f"{type(sig).__name__}'s samples [{sig.t0:g}, {sig.t_end:g}] s"
                 )
 
 

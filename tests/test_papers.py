@@ -29,6 +29,11 @@ PRESET_VALUES = [
     ("soifo", "lam", papers.SOIFO_K**2 / 4, 3),  # 000's k with the damping rule lam = k²/4
     ("sosoifo", "K1", papers.SECOND_ORDER_SOIFO_K1, None),
     ("sosoifo", "K2", papers.SECOND_ORDER_SOIFO_K2, None),
+    ("recording_sosoifo", "K1", papers.SECOND_ORDER_SOIFO_K1, None),
+    ("recording_sosoifo", "K2", papers.SECOND_ORDER_SOIFO_K2, None),
+    ("recording_wif", "k1", papers.WIF_K1, None),
+    ("recording_wif", "k2", papers.WIF_K2, None),
+    ("recording_wif", "lam", papers.WIF_LAM, None),
     ("cleso", "omega0", papers.LESO_OMEGA0, 1),
     ("faleso", "k1", papers.FALESO_K1, 4),
     ("faleso", "k2", papers.FALESO_K2, 3),

@@ -353,6 +353,7 @@ def drive_recording(
     load: tuple = (0.3, 0.8),
     speed_step: float = 0.1,
     start: str = "",
+    encoder: bool = False,
 ):
     """The (u_α, u_β, i_α, i_β) a drive observer is fed in a sensored FOC drive, ``n_steps`` samples at its ts.
 
@@ -376,6 +377,10 @@ def drive_recording(
     ψf (cos θe0, sin θe0), divided by ts to the first voltage (the pure integrator's initial value);
     ``"alpha"`` zeroes the β components of the first voltage and the first two currents (a few
     per cent of their amplitude at θe0 = π/2: 5 % of the voltage, the ω_e L i_q drop; 3 % of the current).
+
+    ``encoder=True`` appends two columns, the true electrical angle θe (rad, wrapped) and speed ωe
+    (rad/s) at t_k: what an encoder would record beside u and i (the shipped example recording,
+    ``tuning/presets/recordings/``, is made this way).
     """
     if start not in ("", "flux", "alpha"):
         raise ValueError(f"drive_recording: start must be '', 'flux' or 'alpha', got {start!r}")
@@ -408,6 +413,10 @@ def drive_recording(
         data[0, :2] += float(machine.psi_f) * np.array([math.cos(th0), math.sin(th0)]) / ts
     elif start == "alpha":
         data[0, 1] = data[0, 3] = data[1, 3] = 0.0
+    if encoder:
+        th = np.asarray(sol.outputs.theta_e, dtype=np.float64)[:n_steps]
+        we_true = np.asarray(sol.outputs.omega_m, dtype=np.float64)[:n_steps] * int(machine.p)
+        data = np.concatenate([data, th[:, None], we_true[:, None]], axis=1)
     if data.shape[0] != n_steps or not np.all(np.isfinite(data)):
         raise ValueError(f"drive_recording: the drive gave {data.shape[0]} finite rows of {n_steps}")
     we = rpm * math.pi / 30 * int(machine.p)

@@ -59,6 +59,9 @@ import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 
+import equinox as eqx
+import jax
+import jax.numpy as jnp
 import numpy as np
 
 import jaxobs
@@ -341,6 +344,7 @@ class ScenarioSpec:
     axes: dict  # name -> list of values
     sample: int  # 0: full grid; n > 0: n random combinations (seeded)
     seed: int
+    recording: RecordingSpec | None = None  # [scenarios.recording]: recorded signals instead of a grid
 
 
 @dataclass
@@ -415,7 +419,7 @@ def _available_memory() -> int:
 
 def _check_size(spec: ScenarioSpec, where: str, ts: float, extra_s: float = 0.0) -> None:
     """Time steps, scenario count and the memory a simulation of the batch needs, at --check time."""
-    n_scen = spec.sample or math.prod(len(v) for v in spec.axes.values())
+    n_scen = spec.sample or math.prod(len(v) for v in spec.axes.values())  # a recording: one per file
     if n_scen > MAX_SCENARIOS:
         raise JobError(f"{where}.grid", f"{n_scen} scenarios (the product of the axes' lengths) > {MAX_SCENARIOS}")
     steps = (spec.horizon + extra_s) / ts
@@ -438,9 +442,11 @@ def _check_size(spec: ScenarioSpec, where: str, ts: float, extra_s: float = 0.0)
         )
 
 
-def _parse_scenarios(tab: dict, where: str, signal_default: str, seed: int, freq_n: float, ts: float) -> ScenarioSpec:
+def _parse_scenarios(
+    tab: dict, where: str, signal_default: str, seed: int, freq_n: float, ts: float, base: Path | None = None
+) -> ScenarioSpec:
     tab = _get({"s": tab}, "s", where, dict)
-    _no_unknown(tab, ("signal", "t_event", "horizon", "steady_from", "grid", "sample", "seed"), where)
+    _no_unknown(tab, ("signal", "t_event", "horizon", "steady_from", "grid", "sample", "seed", "recording"), where)
     signal = _get(tab, "signal", f"{where}.signal", str, signal_default)
     if signal not in ("grid", "emf", "drive"):
         raise JobError(f"{where}.signal", f"must be 'grid', 'emf' or 'drive', got {_show(signal)}")
@@ -457,6 +463,8 @@ def _parse_scenarios(tab: dict, where: str, signal_default: str, seed: int, freq
     steady = _get(tab, "steady_from", f"{where}.steady_from", float, t_event + 0.75 * (horizon - t_event))
     if not (0 <= steady < horizon):
         raise JobError(f"{where}.steady_from", f"must be in [0, horizon), got {steady:g}")
+    if "recording" in tab:
+        return _parse_recording_scenarios(tab, where, signal, t_event, horizon, steady, seed, ts, base)
     grid = _get(tab, "grid", f"{where}.grid", dict, required=True)
     allowed = AXIS_RANGES[signal]
     axes = {}
@@ -484,8 +492,153 @@ def _parse_scenarios(tab: dict, where: str, signal_default: str, seed: int, freq
     return ScenarioSpec(signal, t_event, horizon, steady, axes, sample, sseed)
 
 
-def parse_job(raw: dict) -> Job:
-    """Validate a job dict (the parsed TOML); raises :class:`JobError` naming the field."""
+# --------------------------------------------------------------------------
+# [scenarios.recording]: recorded signals as the scenarios
+# --------------------------------------------------------------------------
+
+MAX_RECORDING_BYTES = 8 * 2**20  # a recording file of a job or study larger than this is refused
+MAX_RECORDINGS = 64  # files of one [scenarios.recording]
+# what each kind of job reads from a recording: its signal columns and its truth columns (defaults)
+RECORDING_COLUMNS = {
+    "grid": (["v"], ["theta", "omega", "amplitude"]),  # v; true phase (rad), ω (rad/s), amplitude
+    "emf": (["u_a", "u_b", "i_a", "i_b"], ["theta_e", "omega_e"]),  # u/i; encoder angle (rad), speed (rad/s)
+    "drive": (["u_a", "u_b", "i_a", "i_b"], ["theta_e", "omega_e"]),
+}
+
+
+@dataclass(frozen=True)
+class RecordingSpec:
+    """``[scenarios.recording]``: one scenario per file, read at the component's ``ts``."""
+
+    files: tuple  # as written in the job file
+    paths: tuple  # resolved against the job file's folder (or the working folder)
+    time_column: object  # a column name or index, or None
+    sample_rate: float | None  # Hz, when there is no time column
+    columns: tuple
+    truth: tuple
+    ts: float
+    sha256: tuple = ()  # of each file's bytes, when checked at parse time
+
+
+def _col_spec(v, field: str):
+    if isinstance(v, bool) or not isinstance(v, (str, int)) or (isinstance(v, int) and not 0 <= v < 10_000):
+        raise JobError(field, f"must be a column name or a 0-based index, got {_show(v)}")
+    return v
+
+
+def _parse_recording_scenarios(tab, where, signal, t_event, horizon, steady, seed, ts, base) -> ScenarioSpec:
+    """``[<where>.recording]``: the file(s), the time base, the columns; read and checked now when the job
+    file's folder is known (``base``): exists, at most :data:`MAX_RECORDING_BYTES`, the columns present,
+    finite, time strictly increasing, sampled at least at 1/ts, long enough for the horizon."""
+    w = f"{where}.recording"
+    if "grid" in tab or "sample" in tab:
+        key = "grid" if "grid" in tab else "sample"
+        raise JobError(f"{where}.{key}", "does not apply with a recording: the recordings are the scenarios")
+    rec = _get(tab, "recording", w, dict)
+    _no_unknown(rec, ("file", "time_column", "sample_rate", "columns", "truth"), w)
+    files = rec.get("file")
+    if isinstance(files, str):
+        files = [files]
+    if not isinstance(files, list) or not files or not all(isinstance(f, str) and f for f in files):
+        raise JobError(f"{w}.file", f"missing (required): a CSV file name or a list of them, got {_show(files)}")
+    if len(files) > MAX_RECORDINGS:
+        raise JobError(f"{w}.file", f"{len(files)} files, more than {MAX_RECORDINGS}")
+    if ("time_column" in rec) == ("sample_rate" in rec):
+        raise JobError(w, "give exactly one of time_column (a column of seconds) and sample_rate (Hz)")
+    tcol = _col_spec(rec["time_column"], f"{w}.time_column") if "time_column" in rec else None
+    rate = _get(rec, "sample_rate", f"{w}.sample_rate", float)
+    if rate is not None and not 0 < rate <= 1e9:
+        raise JobError(f"{w}.sample_rate", f"must be in (0, 1e9] Hz, got {rate:g}")
+    cols_default, truth_default = RECORDING_COLUMNS[signal]
+    cols, truth = rec.get("columns", cols_default), rec.get("truth", truth_default)
+    n_truth = (3,) if signal == "grid" else (1, 2)  # grid: theta, omega, amplitude; u/i: theta_e [, omega_e]
+    for key, v, n_ok in (("columns", cols, (len(cols_default),)), ("truth", truth, n_truth)):
+        if not isinstance(v, list) or len(v) not in n_ok:
+            raise JobError(f"{w}.{key}", f"must be a list of {' or '.join(map(str, n_ok))} column(s), got {_show(v)}")
+        for i, c in enumerate(v):
+            _col_spec(c, f"{w}.{key}[{i}]")
+    root = Path.cwd() if base is None else Path(base)
+    paths = tuple(str(Path(f) if Path(f).is_absolute() else root / f) for f in files)
+    spec = RecordingSpec(tuple(files), paths, tcol, rate, tuple(cols), tuple(truth), ts)
+    if base is not None:
+        digests = []
+        for i, path in enumerate(paths):
+            field = f"{w}.file" if len(files) == 1 else f"{w}.file[{i}]"
+            try:
+                size = Path(path).stat().st_size
+            except OSError as e:
+                msg = f"cannot read {_cap(files[i], 80)!r} (relative to the job file): {e.strerror}"
+                raise JobError(field, msg) from None
+            if size > MAX_RECORDING_BYTES:
+                raise JobError(field, f"{files[i]!r} is {size} bytes, more than {MAX_RECORDING_BYTES} (8 MiB)")
+            try:
+                sig = _load_one(spec, signal, path)
+            except ValueError as e:
+                raise JobError(field, str(e).replace(path, files[i])) from None
+            need = int(round(horizon / ts))
+            if sig.n < need:
+                raise JobError(
+                    f"{where}.horizon",
+                    f"{horizon:g} s needs {need} samples of {ts:g} s; {files[i]!r} gives {sig.n} "
+                    f"({(sig.n - 1) * ts:.6g} s)",
+                )
+            digests.append(hashlib.sha256(Path(path).read_bytes()).hexdigest())
+        spec = dataclasses.replace(spec, sha256=tuple(digests))
+    axes = {"recording": [float(i) for i in range(len(files))]}
+    return ScenarioSpec(signal, t_event, horizon, steady, axes, 0, seed, recording=spec)
+
+
+def _load_one(spec: RecordingSpec, signal: str, path: str):
+    kw = dict(time_column=spec.time_column, sample_rate=spec.sample_rate, ts=spec.ts, max_bytes=MAX_RECORDING_BYTES)
+    if signal == "grid":
+        return jaxobs.SampledSignal.from_csv(path, columns=spec.columns[0], truth=spec.truth, **kw)
+    truth = dict(zip(("theta_e", "omega_e"), spec.truth))
+    return jaxobs.DriveRecording.from_csv(path, columns=spec.columns, **truth, **kw)
+
+
+def load_recordings(spec: RecordingSpec, signal: str):
+    """The recordings of a job as one batched signal (each cut to the shortest, all read at ``spec.ts``)."""
+    sigs = [_load_one(spec, signal, p) for p in spec.paths]
+    n = min(s.n for s in sigs)
+    return stack(jax.tree.map(lambda x: x[..., :n] if eqx.is_array(x) else x, s) for s in sigs)
+
+
+def _bind_recording(obs, rec):
+    """A drive observer on a recording starts from the recorded speed at t = 0 (the encoder's, as a drive job's
+    observer starts from the scenario's true speed): flux observers' omega0, LESOs' omega0_pll."""
+    w0 = rec.omega_e[..., 0]
+    if hasattr(obs, "Lq"):
+        return eqx.tree_at(lambda o: o.omega0_pll, obs, w0.astype(obs.omega0_pll.dtype))
+    return eqx.tree_at(lambda o: o.omega0, obs, jnp.maximum(jnp.abs(w0), 1.0).astype(obs.omega0.dtype))
+
+
+def _check_recording_job(job, comp_t: dict) -> None:
+    """What a recording cannot give: the closed loop's metrics; a flux observer on u/i needs the machine's Rs, L."""
+    for spec, where in ((job.scenarios, "scenarios"), (job.holdout, "holdout")):
+        if spec is None or spec.recording is None:
+            continue
+        for i, t in enumerate(job.terms):
+            if t.metric in DRIVE_METRICS:
+                raise JobError(
+                    f"objective.terms[{i}].metric",
+                    f"{t.metric!r} needs the closed-loop drive; a recording runs the observer open loop "
+                    "(use iae_position, rms_position_steady, ripple_position)",
+                )
+        if spec.signal == "emf":
+            for k in ("Rs", "L"):
+                if k not in comp_t:
+                    raise JobError(
+                        f"component.{k}",
+                        f"required with a u/i recording ({where}.recording): the machine's {k} "
+                        "(the default Rs = 0, L = 1 is for back-EMF signals)",
+                    )
+
+
+def parse_job(raw: dict, base: Path | None = None) -> Job:
+    """Validate a job dict (the parsed TOML); raises :class:`JobError` naming the field.
+
+    ``base``: the job file's folder, against which a recording's relative ``file`` is read (and then
+    checked now: it exists, its columns, its rate); without it the files are read when the job runs."""
     _no_unknown(raw, ("job", "component", "gains", "scenarios", "holdout", "objective", "solver", "drive"), "job file")
     job_t = _get(raw, "job", "job", dict, required=True)
     _no_unknown(job_t, ("name", "component", "seed"), "job")
@@ -549,7 +702,7 @@ def parse_job(raw: dict) -> Job:
         values[gname] = init
 
     scen = _parse_scenarios(
-        _get(raw, "scenarios", "scenarios", dict, required=True), "scenarios", info.signal, seed, freq_n, ts
+        _get(raw, "scenarios", "scenarios", dict, required=True), "scenarios", info.signal, seed, freq_n, ts, base
     )
     drive = None
     if scen.signal == "drive":
@@ -572,7 +725,7 @@ def parse_job(raw: dict) -> Job:
         h = dict(_get(raw, "holdout", "holdout", dict))
         for key in ("t_event", "horizon", "steady_from"):
             h.setdefault(key, getattr(scen, key))
-        holdout = _parse_scenarios(h, "holdout", info.signal, seed + 1, freq_n, ts)
+        holdout = _parse_scenarios(h, "holdout", info.signal, seed + 1, freq_n, ts, base)
     settle = drive.settle if drive is not None else 0.0
     for spec, where in ((scen, "scenarios"), (holdout, "holdout")):
         if spec is not None:
@@ -650,9 +803,11 @@ def parse_job(raw: dict) -> Job:
             raise JobError(f"solver.{fld}", f"must be >= 1, got {getattr(cfg, fld)}")
     if cfg.schedule not in ("constant", "cosine"):
         raise JobError("solver.schedule", f"must be constant or cosine, got {_show(cfg.schedule)}")
-    return Job(
+    job = Job(
         raw, name, comp, seed, values, gains, scen, holdout, terms, agg, alpha, temperature, penalty, cfg, drive=drive
     )
+    _check_recording_job(job, comp_t)
+    return job
 
 
 _STRINGS = re.compile(r'"""(?:[^\\]|\\.)*?"""|\'\'\'.*?\'\'\'|"(?:[^"\\\n]|\\.)*"|\'[^\'\n]*\'|#[^\n]*', re.S)
@@ -718,7 +873,7 @@ def read_toml(path, what: str = "job file") -> tuple[dict, bytes]:
 def load_job(path) -> Job:
     """Read, check and parse a job file (:func:`read_toml`, then :func:`parse_job`)."""
     raw, data = read_toml(path)
-    job = parse_job(raw)
+    job = parse_job(raw, Path(path).parent)
     job.sha256 = hashlib.sha256(data).hexdigest()
     return job
 
@@ -756,6 +911,8 @@ def job_drive(spec: DriveSpec | None = None):
 def build_scenarios(spec: ScenarioSpec, values: dict):
     """A batched signal for every combination of the axes (or ``sample`` random ones)."""
     names, combos = _combos(spec)
+    if spec.recording is not None:
+        return load_recordings(spec.recording, spec.signal), names, combos
     if spec.signal == "drive":
         return _drive_scenarios(names, combos, spec.seed, spec.t_event), names, combos
     if spec.signal == "grid":
@@ -795,6 +952,9 @@ def build_objective(job: Job, spec: ScenarioSpec | None = None):
     param = Parametrization(job.gains)
     info = COMPONENTS[job.component]
     drive = job_drive(job.drive) if info.signal == "drive" else None
+    bind = info.bind
+    if spec.recording is not None:  # the observer runs open loop on the recorded u/i or voltage
+        drive, bind = None, (_bind_recording if info.signal != "grid" else None)
     obj = Objective(
         comp,
         param,
@@ -807,7 +967,7 @@ def build_objective(job: Job, spec: ScenarioSpec | None = None):
         job.temperature,
         job.penalty,
         drive=drive,
-        bind=info.bind,
+        bind=bind,
     )
     return obj, (names, combos)
 
@@ -906,14 +1066,24 @@ def _versions() -> dict:
     }
 
 
+def _recordings_provenance(job: Job) -> dict:
+    """``{"recordings": [{"file", "sha256"}, ...]}`` of a job on recordings (else nothing)."""
+    rec = job.scenarios.recording
+    if rec is None:
+        return {}
+    return {"recordings": [{"file": f, "sha256": h} for f, h in zip(rec.files, rec.sha256 or [None] * len(rec.files))]}
+
+
 CHECKPOINT = "checkpoint.npz"
 
 
 def job_fingerprint(job: Job) -> str:
     """What a checkpoint is checked against: the job file's sha256, or the sha256 of the job dict's JSON."""
-    if job.sha256:
-        return job.sha256
-    return hashlib.sha256(json.dumps(job.raw, sort_keys=True, default=str).encode()).hexdigest()
+    fp = job.sha256 or hashlib.sha256(json.dumps(job.raw, sort_keys=True, default=str).encode()).hexdigest()
+    recs = [s.recording.sha256 for s in (job.scenarios, job.holdout) if s is not None and s.recording is not None]
+    if any(recs):  # a checkpoint is this job's only on the same recordings
+        fp = hashlib.sha256((fp + "".join(d for r in recs for d in r)).encode()).hexdigest()
+    return fp
 
 
 def run_job(job: Job, out: Path, resume: bool = False, quiet: bool = False) -> dict:
@@ -972,6 +1142,7 @@ def run_job(job: Job, out: Path, resume: bool = False, quiet: bool = False) -> d
         "scores": scores,
         "linear": lin,
         "scenarios": {"axes": names, "count": len(combos)},
+        **_recordings_provenance(job),
         "iterations": res.iterations,
         "best_iteration": res.best_iteration,
         "versions": _versions(),

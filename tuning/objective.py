@@ -60,6 +60,8 @@ def _position_err(sol, sig):
     out = sol.outputs
     if hasattr(out, "theta_e"):  # the closed-loop drive's DriveOutput
         return M.wrap(out.obs.theta - out.theta_e)
+    if getattr(out, "truth", None) is not None:  # a recording of u/i with its encoder angle
+        return M.wrap(out.obs.theta - out.truth.theta)
     return M.wrap(out.obs.theta - (sig.omega1 * sol.t + sig.phase - math.pi / 2))
 
 
