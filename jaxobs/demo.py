@@ -22,6 +22,7 @@ import jax
 import numpy as np
 
 from . import linear, metrics
+from .progress import Progress
 from .signals import paper001_test, stack
 from .simulate import OnSignal, simulate
 
@@ -45,20 +46,24 @@ def _run_batch(observer, signals, t1):
     return jax.vmap(lambda s: simulate(OnSignal(observer, s), t1))(signals)
 
 
-def fll_demo(t_event: float = 0.2, steady_delay: float = 1.0, steady_len: float = 1.0, flls=None):
+def fll_demo(t_event: float = 0.2, steady_delay: float = 1.0, steady_len: float = 1.0, flls=None, progress=None):
     """Run the demo; returns (rows, traces).
 
     rows: list of dicts {test, fll, settle_ms, settle_cycles, freq_pp_hz,
     phase_pp_deg, amp_pp_pu, ok}; traces: {fll: Solution batched over tests}.
+    ``progress``: one step per FLL, each named as it compiles and runs (:mod:`jaxobs.progress`).
     """
     flls = table_i_flls() if flls is None else flls
     signals = stack([paper001_test(name, t_event=t_event) for name in DEMO_TESTS])
     t1 = t_event + steady_delay + steady_len
     f_n = 50.0
     rows, traces = [], {}
+    bar = Progress(progress, len(flls), "demo", unit="FLL")
     for fll_name, obs in flls.items():
+        bar.stage(f"{fll_name} on Tests {', '.join(DEMO_TESTS)} (compiling, then {t1:g} s each)")
         sol = _run_batch(obs, signals, t1)
         traces[fll_name] = sol
+        bar.update()
         t = np.asarray(sol.t[0])
         out = sol.outputs
         f_hat = np.asarray(out.obs.omega) / (2 * math.pi)
@@ -85,6 +90,7 @@ def fll_demo(t_event: float = 0.2, steady_delay: float = 1.0, steady_len: float 
                     ok=bool(sol.ok[i]),
                 )
             )
+    bar.close()
     return rows, traces
 
 

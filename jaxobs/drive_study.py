@@ -48,6 +48,7 @@ import numpy as np
 
 from . import metrics as M
 from .drive import RPM, ClosedLoop, Drive, PMSMParams, Profile, Scenario, Sensors
+from .progress import Progress
 from .simulate import simulate
 
 __all__ = ["DRIVE_STUDY_AXES", "DRIVE_STUDY_METRICS", "QUANTILES", "run_drive_study", "drive_scenarios"]
@@ -191,8 +192,9 @@ def run_drive_study(
     """Run every design (a drive observer closing ``drive``'s loop) on every scenario; an ``xarray.Dataset``.
 
     ``sampling="grid"``: the Cartesian product of the axes; ``"sobol"``/``"lhs"``: ``sample``
-    points drawn by scipy.stats.qmc inside the axes' [min, max].  ``progress(done, total)`` is
-    called after each chunk.
+    points drawn by scipy.stats.qmc inside the axes' [min, max].  ``progress``: ``True`` a tqdm bar
+    on stderr (each design's compilation named), a callable ``progress(done, total)`` called after
+    each chunk, ``None``/``False`` nothing (:mod:`jaxobs.progress`).
     """
     import xarray as xr
 
@@ -239,7 +241,7 @@ def run_drive_study(
 
     results = {}
 
-    done, total = 0, n * len(designs)
+    bar = Progress(progress, n * len(designs), "drive study", unit="scenario")
     for dname, obs in designs.items():
 
         @eqx.filter_jit
@@ -248,17 +250,17 @@ def run_drive_study(
 
         parts_m, parts_l = [], []
         for start in range(0, n + pad, chunk):
+            bar.stage(f"{dname} (compiling, then {chunk} scenarios a chunk)" if start == 0 else dname)
             m, lost = run_chunk(obs, jax.tree.map(lambda x: x[start : start + chunk], scs))
             parts_m.append(jax.tree.map(np.asarray, m))
             parts_l.append(np.asarray(lost))
-            done += min(chunk, n - start)
-            if progress is not None:
-                progress(done, total)
+            bar.update(min(chunk, n - start))
         results[dname] = (
             {k: np.concatenate([q[k] for q in parts_m])[:n] for k in DRIVE_STUDY_METRICS},
             np.concatenate(parts_l)[:n],
         )
 
+    bar.close()
     dnames = list(designs)
     if sampling == "grid":
         dims = ("design", *names)

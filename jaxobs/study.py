@@ -7,7 +7,8 @@
 Every design is simulated on every scenario of the Cartesian grid (or on
 ``sample`` random points drawn from the axes' ranges) in one ``jit(vmap)``
 call per chunk of ``chunk_size`` scenarios (the last chunk is padded, so one
-compilation serves all), with a progress bar over chunks.  The result has one
+compilation serves all), with progress over chunks when asked (``progress=True``: a tqdm bar on
+stderr that names each design's compilation; a callable: ``progress(done, total)``).  The result has one
 variable per metric, dims ``("design", *axes)`` (or ``("design", "sample")``
 with the axes as coordinates along ``sample``), and a ``diverged`` flag: a
 diverging scenario is reported, never fatal.  Every variable and coordinate
@@ -32,7 +33,6 @@ from __future__ import annotations
 
 import itertools
 import math
-import sys
 import time
 
 import equinox as eqx
@@ -41,6 +41,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import metrics as M
+from .progress import Progress
 from .scenarios import GRID_SIGNAL_AXES, grid_signals
 from .simulate import OnSignal, simulate
 
@@ -90,13 +91,6 @@ def _metrics(sol, t_event: float, steady_from: float, band_hz: float, n_period: 
     }
 
 
-def _progress(done, total, t0, stream=sys.stderr):
-    width = 24
-    k = int(width * done / max(total, 1))
-    stream.write(f"study [{'#' * k}{'.' * (width - k)}] {done}/{total} scenarios, {time.time() - t0:.1f} s\n")
-    stream.flush()
-
-
 def run_study(
     designs: dict,
     axes: dict,
@@ -108,7 +102,7 @@ def run_study(
     sample=0,
     seed=0,
     chunk_size=2048,
-    progress=True,
+    progress=False,
     return_seconds=False,
 ):
     """Simulate every design on every scenario; returns an ``xarray.Dataset`` (see module doc).
@@ -144,8 +138,7 @@ def run_study(
 
     results = {}
     t0 = time.time()
-    total = n * len(designs)
-    done = 0
+    bar = Progress(progress, n * len(designs), "study", unit="scenario")
     for dname, obs in designs.items():
 
         @eqx.filter_jit
@@ -161,17 +154,17 @@ def run_study(
         parts_m, parts_ok = [], []
         for start in range(0, n + pad, chunk):
             batch = jax.tree.map(lambda x: x[start : start + chunk], sigs)
+            bar.stage(f"{dname} (compiling, then {chunk} scenarios a chunk)" if start == 0 else dname)
             m, ok = run_chunk(obs, batch)
             parts_m.append(jax.tree.map(np.asarray, m))
             parts_ok.append(np.asarray(ok))
-            done += min(chunk, n - start)
-            if progress:
-                _progress(done, total, t0)
+            bar.update(min(chunk, n - start))
         results[dname] = (
             {k: np.concatenate([p[k] for p in parts_m])[:n] for k in (*STUDY_METRICS, "settled")},
             np.concatenate(parts_ok)[:n],
         )
 
+    bar.close()
     dnames = list(designs)
     if sample:
         dims = ("design", "sample")

@@ -22,7 +22,15 @@ PACKAGES = ("jaxobs", "tuning")
 # Lowest first.  A module may import only modules of lower layers.  The order is docs/architecture.md's.
 LAYERS = [
     # foundations: no project imports
-    ("jaxobs._math", "jaxobs._validate", "jaxobs.papers", "jaxobs.measurements", "jaxobs.system", "jaxobs._time"),
+    (
+        "jaxobs._math",
+        "jaxobs._validate",
+        "jaxobs.papers",
+        "jaxobs.measurements",
+        "jaxobs.system",
+        "jaxobs._time",
+        "jaxobs.progress",
+    ),
     # integration rules (and check_rule)
     ("jaxobs.discretize",),
     # signals and plant: they produce the measurements

@@ -9,10 +9,15 @@
                                                            002 Fig. 4, 001 Fig. 14)
     jaxobs reproduce flux [--out DIR] [--json] [--quick]   paper 000's experiments, paper vs ours
     jaxobs reproduce leso [--out DIR] [--json]             paper 002's experiments, paper vs ours
-    jaxobs study [STUDY.toml] [--out DIR]                  robustness study → NetCDF, worst cases, figures
+    jaxobs study [STUDY.toml] [--out DIR] [--quiet]        robustness study → NetCDF, worst cases, figures
     jaxobs export [RESULT.json | --design D] [--out DIR] [--check]
                                                            the observer as C99 float32 with golden vectors
     jaxobs --version
+
+Every command takes ``--quiet``: without it the long ones show their progress on stderr when it is a
+terminal (tqdm bars that name each compilation before it starts, one step per solver iteration, study
+chunk, reproduced experiment or export stage; nothing in a pipe or a log, where an error stays one
+line); stdout holds the results either way.
 
 The console script ``jaxobs`` and ``python -m jaxobs`` both run :func:`main`.
 It first calls :func:`jaxobs.use_host_devices` (one JAX CPU device per usable
@@ -58,6 +63,12 @@ from .outdir import OutDir, atomic_path, atomic_write_text, safe_name
 from .results import load_result, tuned_component
 
 
+def _progress(args=None, quiet=None):
+    """The library's ``progress`` for a command: bars when stderr is a terminal, none with --quiet."""
+    quiet = args.quiet if quiet is None else quiet
+    return False if quiet else "auto"
+
+
 def _enable_x64():
     import jax
 
@@ -71,7 +82,7 @@ def _cmd_demo(args) -> int:
 
     if args.t_event <= 0:
         raise ValueError(f"--t-event must be > 0 s, got {args.t_event}")
-    rows, traces = fll_demo(t_event=args.t_event)
+    rows, traces = fll_demo(t_event=args.t_event, progress=_progress(args))
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     fig_path = out / "fll_tests_A_E.png"
@@ -336,11 +347,7 @@ def _cmd_drive_study(name, designs, axes, opts, out: Path, quiet: bool) -> int:
     from jaxobs.drive_study import DRIVE_STUDY_METRICS, run_drive_study
     from jaxobs.plot import drive_study_figure
 
-    def progress(done, total):
-        if not quiet:
-            print(f"drive study: {done}/{total} scenario runs", file=sys.stderr, flush=True)
-
-    ds = run_drive_study(designs, axes, progress=progress, **opts)
+    ds = run_drive_study(designs, axes, progress=_progress(quiet=quiet), **opts)
     fig = out / "drive_study.png"
     drive_study_figure(ds, fig)
     with atomic_path(out / "study.nc") as tmp:
@@ -377,7 +384,7 @@ def _run_study(name, designs, axes, opts, out: Path, quiet: bool) -> int:
 
     if opts.pop("kind", "fll") == "drive":
         return _cmd_drive_study(name, designs, axes, opts, out, quiet)
-    ds, seconds = run_study(designs, axes, progress=not quiet, return_seconds=True, **opts)
+    ds, seconds = run_study(designs, axes, progress=_progress(quiet=quiet), return_seconds=True, **opts)
     worst = {m: worst_cases(ds, m, 3) for m in STUDY_METRICS}
     atomic_write_text(out / "worst_cases.json", json.dumps(worst, indent=1))
     figs = study_figures(ds, out)
@@ -434,7 +441,7 @@ def _cmd_reproduce(args) -> int:
         from jaxobs.plot import flux_circles_figure
         from jaxobs.reproduce.flux import OBSERVER_NAMES, run_flux_experiments
 
-        rows, traces = run_flux_experiments(quick=args.quick)
+        rows, traces = run_flux_experiments(quick=args.quick, progress=_progress(args))
         figs = []
         for key, fname in (
             ("du_alpha = 5 V at 1000 r/min", "flux_circles_du_alpha_5V.png"),
@@ -463,7 +470,7 @@ def _cmd_reproduce(args) -> int:
     if args.paper == "leso":
         from jaxobs.reproduce.leso import LESO_NAMES, run_leso_experiments
 
-        rows, traces = run_leso_experiments()
+        rows, traces = run_leso_experiments(progress=_progress(args))
         figs = _error_figures(
             traces,
             LESO_NAMES,
@@ -589,22 +596,26 @@ def build_parser() -> argparse.ArgumentParser:
     p = _Parser(prog="jaxobs", description="Differentiable simulation and tuning of motor-drive observers and FLLs.")
     p.add_argument("--version", action="version", version=f"jaxobs {jaxobs.__version__}")
     sub = p.add_subparsers(dest="cmd", required=True, parser_class=_Parser)
-    t = sub.add_parser("tune", help="gradient-based gain tuning from a TOML job (default: embedded WIF job)")
+    # every command takes --quiet: no progress on stderr (stdout, the results, is the same either way)
+    quiet = _Parser(add_help=False)
+    quiet.add_argument("--quiet", action="store_true", help="no progress bars or compile notices on stderr")
+    t = sub.add_parser(
+        "tune", help="gradient-based gain tuning from a TOML job (default: embedded WIF job)", parents=[quiet]
+    )
     t.add_argument("job", nargs="?", help="job file (TOML); default: the embedded robust SOGI-FLL-WIF job")
     t.add_argument("--out", help="results folder (default: out/<job name>)")
     t.add_argument("--resume", action="store_true", help="continue from the checkpoint in --out")
     t.add_argument("--check", action="store_true", help="validate the job file and exit")
-    t.add_argument("--quiet", action="store_true", help="no progress bar")
     t.add_argument("--force", action="store_true", help="overwrite results (and a checkpoint) already in --out")
     t.set_defaults(func=_cmd_tune)
 
-    d = sub.add_parser("demo", help="FLL family (SOGI-FLL, -WPF, -WIF) on paper 001 Tests A-E")
+    d = sub.add_parser("demo", help="FLL family (SOGI-FLL, -WPF, -WIF) on paper 001 Tests A-E", parents=[quiet])
     d.add_argument("--out", default="out", help="folder for the figure (default: out)")
     d.add_argument("--json", action="store_true", help="print the table as JSON rows")
     d.add_argument("--t-event", type=float, default=0.2, help="time of the test event, s (default 0.2)")
     d.set_defaults(func=_cmd_demo)
 
-    c = sub.add_parser("closed-form", help="closed-form gains with formula and source equation")
+    c = sub.add_parser("closed-form", help="closed-form gains with formula and source equation", parents=[quiet])
     c.add_argument("design", choices=list(_CF_OPTIONS), help="which design rule")
     c.add_argument("--k", type=float, help="SOGI gain k (sogi-fll)")
     c.add_argument("--omega-n", dest="omega_n", type=float, help="nominal frequency, rad/s (default 100π)")
@@ -617,11 +628,11 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--json", action="store_true", help="print JSON")
     c.set_defaults(func=_cmd_closed_form)
 
-    b = sub.add_parser("bode", help="Bode figures of the papers' flux observers, LESOs and FLL loops")
+    b = sub.add_parser("bode", help="Bode figures of the papers' flux observers, LESOs and FLL loops", parents=[quiet])
     b.add_argument("--out", default="out", help="folder for the figures (default: out)")
     b.set_defaults(func=_cmd_bode)
 
-    r = sub.add_parser("reproduce", help="reproduce a paper's experiments on the simulated drive")
+    r = sub.add_parser("reproduce", help="reproduce a paper's experiments on the simulated drive", parents=[quiet])
     r.add_argument(
         "paper", choices=["flux", "leso"], help="flux: paper 000 (rotor-flux observers); leso: paper 002 (LESOs)"
     )
@@ -631,11 +642,12 @@ def build_parser() -> argparse.ArgumentParser:
     r.set_defaults(func=_cmd_reproduce)
 
     st = sub.add_parser(
-        "study", help="robustness study of FLL or sensorless-drive designs over a scenario grid (xarray/NetCDF)"
+        "study",
+        help="robustness study of FLL or sensorless-drive designs over a scenario grid (xarray/NetCDF)",
+        parents=[quiet],
     )
     st.add_argument("study", nargs="?", help="study file (TOML); default: the FLL family's closed forms")
     st.add_argument("--out", help="results folder (default: out/<study name>)")
-    st.add_argument("--quiet", action="store_true", help="no progress bar")
     st.add_argument("--force", action="store_true", help="overwrite a study.nc already in --out")
     st.set_defaults(func=_cmd_study)
 

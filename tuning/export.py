@@ -72,6 +72,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxobs.discretize import AB3, RK4, Euler, Tustin
+from jaxobs.progress import Progress
 
 from . import _cexpr as cx
 from ._cmodels import MEMORY, CModel, model_for, supported
@@ -759,7 +760,9 @@ def _machine(obs) -> tuple[float, float]:
     return float(obs.Rs), float(L)
 
 
-def export_observer(observer, out_dir, *, n_steps: int = 12_000, signal=None, source: str = "", notes=()) -> dict:
+def export_observer(
+    observer, out_dir, *, n_steps: int = 12_000, signal=None, source: str = "", notes=(), progress=None
+) -> dict:
     """Write ``observer`` as C99 float32 with its golden vectors into ``out_dir``; returns coefficients.json's content.
 
     Args:
@@ -775,8 +778,12 @@ def export_observer(observer, out_dir, *, n_steps: int = 12_000, signal=None, so
             observer bound to it (:func:`bind_to_drive`) to get that machine's Rs and L in the C.
         source: where the design comes from (a result file, a closed form), for the header.
         notes: lines recorded in the header and coefficients.json (e.g. defaults used).
+        progress: its three stages (C emitted and self-checked, the test record, the golden vectors), each
+            named as it runs (:mod:`jaxobs.progress`: ``True`` a tqdm bar on stderr, or a callable).
     """
     notes = list(notes)
+    bar = Progress(progress, 3, "export", unit="stage")
+    bar.stage("emitting the C and checking it against the JAX vector field")
     obs32 = _float32(observer)
     with cx.scope():
         model = model_for(obs32)
@@ -806,7 +813,8 @@ def export_observer(observer, out_dir, *, n_steps: int = 12_000, signal=None, so
             ops["per_jac"] = per_jac
         _self_check(obs32, model)
         header, source_c = _emit(obs32, model, rule, jac, source or f"{model.component} as given", notes, ops)
-
+    bar.update()
+    bar.stage("the test record" + (" (compiling and running the sensored drive)" if model.kind == "drive" else ""))
     if signal is None:
         if not (isinstance(n_steps, int) and n_steps >= MIN_STEPS):
             raise ValueError(f"export: n_steps must be an integer >= {MIN_STEPS}, got {n_steps!r}")
@@ -829,7 +837,11 @@ def export_observer(observer, out_dir, *, n_steps: int = 12_000, signal=None, so
         if u.ndim != 2 or u.shape[1] != nu or u.shape[0] < 1 or not np.all(np.isfinite(u)):
             raise ValueError(f"export: signal must be finite, shape (n,) or (n, {nu}), got shape {np.shape(signal)}")
         signal_doc = f"user signal, {u.shape[0]} steps"
+    bar.update()
+    bar.stage(f"golden vectors: the float32 JAX step over {u.shape[0]} samples (compiling)")
     y = _golden(obs32, model, u)
+    bar.update()
+    bar.close()
     if not np.all(np.isfinite(y)):
         raise ValueError(
             f"export: the JAX step of {model.component} gave non-finite outputs on the test signal "
@@ -949,6 +961,7 @@ def add_export_parser(subparsers) -> argparse.ArgumentParser:
         "own Rs, L",
     )
     e.add_argument("--check", action="store_true", help="compile with cc and replay the golden vectors")
+    e.add_argument("--quiet", action="store_true", help="no progress on stderr")
     e.set_defaults(func=cli_export)
     return e
 
@@ -990,7 +1003,9 @@ def cli_export(args) -> int:
             raise ValueError(f"export: --steps must be >= {MIN_STEPS}, got {args.steps}")
     elif hasattr(obs, "Rs"):
         signal = "synthetic"
-    coeffs = export_observer(obs, args.out, n_steps=args.steps, signal=signal, source=source, notes=notes)
+    coeffs = export_observer(
+        obs, args.out, n_steps=args.steps, signal=signal, source=source, notes=notes, progress=not args.quiet and "auto"
+    )
     out = Path(args.out)
     o = coeffs["ops_per_step"]
     print(f"{coeffs['component']} ({coeffs['rule']['name']}, ts = {coeffs['ts']:g} s, float32) from {source}")

@@ -68,6 +68,7 @@ import jaxobs
 from jaxobs import drive as D
 from jaxobs import linear, papers
 from jaxobs.drive_study import DRIVE_STUDY_AXES, bind_observer, drive_scenarios
+from jaxobs.progress import Progress
 from jaxobs.scenarios import grid_signals
 from jaxobs.signals import EMFSignal, stack
 
@@ -1074,6 +1075,16 @@ def _recordings_provenance(job: Job) -> dict:
     return {"recordings": [{"file": f, "sha256": h} for f, h in zip(rec.files, rec.sha256 or [None] * len(rec.files))]}
 
 
+def _score_designs(obj, thetas: dict, bar: Progress, what: str) -> dict:
+    """Each design's per-scenario scores, one progress step each (the first one compiles)."""
+    per = {}
+    for i, (k, th) in enumerate(thetas.items()):
+        bar.stage(f"{what}{k}" + (" (compiling the metrics)" if i == 0 else ""))
+        per[k] = obj.per_scenario(th)
+        bar.update()
+    return per
+
+
 CHECKPOINT = "checkpoint.npz"
 
 
@@ -1122,8 +1133,11 @@ def run_job(job: Job, out: Path, resume: bool = False, quiet: bool = False) -> d
     }
     fixed = {k: float(v) for k, v in job.values.items() if k not in param.names}
     values = {k: (None if g is None else {**fixed, **g}) for k, g in gains.items()}
-    per = {k: obj.per_scenario(th) for k, th in thetas.items()}
+    n_scored = len(thetas) * (2 if job.holdout is not None else 1)
+    bar = Progress(not quiet and "auto", n_scored, "score", unit="design")
+    per = _score_designs(obj, thetas, bar, "")
     scores = {k: (obj.summarize(*per[k]) if k in per else None) for k in gains}
+    bar.stage("linear structure of each design (margins, poles)")
     lin = {k: (None if v is None else structure(job.component, v, job)) for k, v in values.items()}
     result = {
         "status": res.status,
@@ -1160,11 +1174,12 @@ def run_job(job: Job, out: Path, resume: bool = False, quiet: bool = False) -> d
         result["null_reasons"] = nulls
     if job.holdout is not None:
         hobj, (hn, hc) = build_objective(job, job.holdout)
-        hper = {k: hobj.per_scenario(th) for k, th in thetas.items()}
+        hper = _score_designs(hobj, thetas, bar, "held-out ")
         result["holdout"] = {k: (hobj.summarize(*hper[k]) if k in hper else None) for k in gains}
         result["holdout"]["count"] = len(hc)
         with atomic_path(out / "holdout_scores.nc") as tmp:
             _scores_dataset(hobj, hn, hc, job.holdout, hper).to_netcdf(tmp, engine="scipy")
+    bar.close()
     with atomic_path(out / "scores.nc") as tmp:
         _scores_dataset(obj, names, combos, job.scenarios, per).to_netcdf(tmp, engine="scipy")
     write_json(out / "history.json", res.history)

@@ -23,6 +23,8 @@ import numpy as np
 import optax
 import optimistix as optx
 
+from jaxobs.progress import Progress
+
 __all__ = ["CheckpointError", "SolverConfig", "TuneResult", "run_solver", "make_optax", "decide_status", "STATUSES"]
 
 
@@ -106,14 +108,25 @@ def make_optax(cfg: SolverConfig):
     raise ValueError(f"solver.kind must be one of adam, adamw, sgd, bfgs, got {cfg.kind!r}")
 
 
-def _progress(i, total, value, best, diverged=0, stream=sys.stderr):
-    width = 24
-    done = int(width * min(i, total) / max(total, 1))
-    div = f" diverged {diverged}" if diverged else ""
-    stream.write(
-        f"tune [{'#' * done}{'.' * (width - done)}] {i:>4}/{total} objective {value:.6g} best {best:.6g}{div}\n"
-    )
-    stream.flush()
+def _bar(cfg: SolverConfig, quiet: bool) -> Progress:
+    """The solver's tqdm bar on stderr when it is a terminal (none when ``quiet``), announcing the first
+    compilation."""
+    bar = Progress("auto" if not quiet else False, cfg.steps, f"tune ({cfg.kind})", unit="step")
+    bar.stage("compiling the objective and its gradient (once; tens of seconds for a drive)")
+    return bar
+
+
+def _show(bar: Progress, i: int, cfg: SolverConfig, value, best, diverged, first: bool) -> None:
+    """One iteration done; the objective, the best stable value and the diverged scenarios every
+    ``cfg.progress_every`` iterations."""
+    post = {}
+    if i % cfg.progress_every == 0 or i == cfg.steps:
+        post = dict(objective=f"{value:.6g}", best=f"{best:.6g}")
+        if diverged:
+            post["diverged"] = int(diverged)
+    if first:  # compiled: the description returns to the solver's name
+        bar.stage("")
+    bar.update(1, **post)
 
 
 class CheckpointError(ValueError):
@@ -223,6 +236,9 @@ def run_solver(
 
     early = False
     it = start
+    bar = _bar(cfg, quiet)
+    if start:
+        bar.update(start)
     for it in range(start, cfg.steps):
         value, grad, ndiv = objective.value_grad_diverged(theta)
         value = float(value)
@@ -233,8 +249,7 @@ def run_solver(
             best_value, best_theta, since_best = value, theta, 0
         else:
             since_best += 1
-        if not quiet and (it % cfg.progress_every == 0 or it == cfg.steps - 1):
-            _progress(it + 1, cfg.steps, value, best_value, ndiv)
+        _show(bar, it + 1, cfg, value, best_value, ndiv, it == start)
         if since_best >= cfg.patience:
             early = True
             it += 1
@@ -246,6 +261,7 @@ def run_solver(
             )
     else:
         it = cfg.steps
+    bar.close()
     if not early:  # the last update is scored too: keep it if it is stable and better
         value, _, ndiv = objective.value_grad_diverged(theta)
         history.append(_entry(objective, it, float(value), ndiv, theta))
@@ -301,7 +317,9 @@ def _run_bfgs(objective, theta0, cfg: SolverConfig, quiet: bool) -> TuneResult:
     step = eqx.filter_jit(lambda y, st: solver.step(fn, y, None, {}, st, tags))
     terminate = eqx.filter_jit(lambda y, st: solver.terminate(fn, y, None, {}, st, tags))
     y = theta0
+    bar = _bar(cfg, quiet)
     value, _, ndiv = objective.value_grad_diverged(y)
+    bar.stage("compiling BFGS's step")
     history = [_entry(objective, 0, value, ndiv, y)]
     best_value = float(value) if ndiv == 0 else math.inf
     result, n = optx.RESULTS.nonlinear_max_steps_reached, 0
@@ -317,12 +335,12 @@ def _run_bfgs(objective, theta0, cfg: SolverConfig, quiet: bool) -> TuneResult:
             history.append(_entry(objective, n, value, ndiv, y))
             if ndiv == 0:
                 best_value = min(best_value, float(value))
-        if not quiet and (n % cfg.progress_every == 0 or n == cfg.steps):
-            _progress(n, cfg.steps, history[-1]["value"], best_value, history[-1]["diverged"])
+        _show(bar, n, cfg, history[-1]["value"], best_value, history[-1]["diverged"], n == 1)
     else:
         done, res = terminate(y, state)
         if bool(done):
             result = res
+    bar.close()
     finished, sentence = _bfgs_reason(result)
     status, reason, best = decide_status(history, finished, cfg.tol, sentence, sentence)
     if not finished and status == "converged":  # pragma: no cover - decide_status returns budget then

@@ -44,6 +44,7 @@ from ..observers import (
     PureIntegratorFlux,
     SecondOrderSOIFO,
 )
+from ..progress import Progress
 from ..simulate import simulate
 
 __all__ = ["OBSERVER_NAMES", "bench_machine", "flux_bank", "run_flux_experiments", "flux_drive"]
@@ -118,13 +119,16 @@ def _periods(rpm, n, p=3):
     return n * 2 * math.pi / (p * rpm * D.RPM)
 
 
-def run_flux_experiments(quick: bool = False):
+def run_flux_experiments(quick: bool = False, progress=None):
     """Run 000's experiments.  Returns (rows, traces) — rows {experiment, observer, metric, unit, paper, ours}.
 
-    ``quick`` skips the 20 r/min and start-up runs (several simulated seconds each).
+    ``quick`` skips the 20 r/min and start-up runs (several simulated seconds each).  ``progress``: one
+    step per experiment, each named as it compiles and runs (:mod:`jaxobs.progress`: ``True`` a tqdm bar
+    on stderr, or a callable ``progress(done, total)``).
     """
     par = bench_machine()
     rows, traces = [], {}
+    bar = Progress(progress, None, "reproduce flux", unit="experiment")
     err_metric = [("max_abs", "rad")]
 
     def run(
@@ -150,9 +154,12 @@ def run_flux_experiments(quick: bool = False):
             sensors=sensors,
             omega_m0=rpm0 * D.RPM if startup is None else 0.0,
         )
+        bar.stage(f"{name} ({t1:g} s)")
         sol = simulate(D.ClosedLoop(flux_drive(par, handover, startup, alpha_s), flux_bank(est, w0), sc), t1)
         traces[name] = sol
-        return sol, np.asarray(sol.t)
+        t = np.asarray(sol.t)
+        bar.update()
+        return sol, t
 
     # --- A. steady state, no load (Figs. 10-17)
     for rpm, t1, hand, paper in (
@@ -289,6 +296,7 @@ def run_flux_experiments(quick: bool = False):
         rows.append(
             dict(experiment=name, observer="drive", metric="finite", unit="bool", paper=None, ours=bool(sol.ok))
         )
+    bar.close()
     return rows, traces
 
 

@@ -29,6 +29,7 @@ from .. import drive as D
 from .. import linear, papers
 from ..metrics import harmonic_amplitude, wrap
 from ..observers import CLESO, FALESO, GILESO, ObserverBank
+from ..progress import Progress
 from ..simulate import simulate
 
 __all__ = ["LESO_NAMES", "bench_machine", "leso_bank", "leso_drive", "run_leso_experiments"]
@@ -71,16 +72,21 @@ def _err_deg(sol, i):
     return np.degrees(np.asarray(wrap(sol.outputs.obs.each[i].theta - sol.outputs.theta_e)))
 
 
-def run_leso_experiments():
-    """Returns (rows, traces); rows {experiment, observer, metric, unit, paper, ours}."""
+def run_leso_experiments(progress=None):
+    """Returns (rows, traces); rows {experiment, observer, metric, unit, paper, ours}.  ``progress``: one
+    step per experiment, each named as it compiles and runs (:mod:`jaxobs.progress`)."""
     rows, traces = [], {}
+    bar = Progress(progress, None, "reproduce leso", unit="experiment")
 
     def run(name, par, est, rpm0, t1, speed_ref, load=None, handover=0.3):
         we = par.p * rpm0 * D.RPM
         sc = D.Scenario(par, est_par=est, speed_ref=speed_ref, load=load, omega_m0=rpm0 * D.RPM)
+        bar.stage(f"{name} ({t1:g} s)")
         sol = simulate(D.ClosedLoop(leso_drive(par, handover), leso_bank(est, we), sc), t1)
         traces[name] = sol
-        return sol, np.asarray(sol.t)
+        t = np.asarray(sol.t)
+        bar.update()
+        return sol, t
 
     par = bench_machine()
     # --- steady state, no load (Figs. 10-12)
@@ -222,4 +228,5 @@ def run_leso_experiments():
         rows.append(
             dict(experiment=name, observer="drive", metric="finite", unit="bool", paper=None, ours=bool(sol.ok))
         )
+    bar.close()
     return rows, traces

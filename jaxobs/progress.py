@@ -1,0 +1,71 @@
+"""Progress of long library calls: silent by default, a tqdm bar on stderr, or the caller's callback.
+
+The library prints nothing unless asked: a long function (a study, a paper's reproduction) takes
+``progress=`` and hands it to :class:`Progress`:
+
+- ``None`` or ``False``: nothing;
+- ``True``: a `tqdm <https://tqdm.github.io>`_ bar on stderr (stdout stays the command's output);
+- ``"auto"``: a bar when stderr is a terminal, else nothing (what the command line asks for: a log or
+  a pipe keeps its one line per error, and no carriage-return animation);
+- a callable ``progress(done, total)``: called after each unit of work (``total`` may be ``None``
+  when the amount is not known in advance).
+
+:meth:`Progress.stage` names what runs now ("compiling SOGIFLL", an experiment's name), so that the
+first compilation, which can take tens of seconds, is announced instead of silent.
+"""
+
+from __future__ import annotations
+
+import sys
+
+__all__ = ["Progress", "check_progress"]
+
+
+def check_progress(progress, owner: str = "progress"):
+    """``progress`` if it is None, a bool, ``"auto"`` or a callable; else a ValueError naming it."""
+    if progress is None or isinstance(progress, bool) or callable(progress) or progress == "auto":
+        return progress
+    raise ValueError(f"{owner} must be True, False, None, 'auto' or a callable progress(done, total), got {progress!r}")
+
+
+class Progress:
+    """One progress report of ``total`` units (``None``: unknown), as ``progress`` asks (module doc)."""
+
+    def __init__(self, progress, total: int | None, desc: str, unit: str = "it"):
+        progress = check_progress(progress)
+        self.total, self.done, self.desc = total, 0, desc
+        self._callback = progress if callable(progress) and not isinstance(progress, bool) else None
+        self._bar = None
+        if progress == "auto":
+            isatty = getattr(sys.stderr, "isatty", None)
+            progress = bool(isatty is not None and isatty())
+        if progress is True:
+            from tqdm import tqdm
+
+            self._bar = tqdm(total=total, desc=desc, unit=unit, file=sys.stderr, dynamic_ncols=True, leave=True)
+
+    def stage(self, text: str) -> None:
+        """Name what runs now (shown at once in the bar's description)."""
+        if self._bar is not None:
+            self._bar.set_description_str(f"{self.desc}: {text}" if text else self.desc, refresh=True)
+
+    def update(self, n: int = 1, **postfix) -> None:
+        """``n`` more units done; ``postfix`` values are shown after the bar (objective, best, ...)."""
+        self.done += n
+        if self._bar is not None:
+            if postfix:
+                self._bar.set_postfix(postfix, refresh=False)
+            self._bar.update(n)
+        if self._callback is not None:
+            self._callback(self.done, self.total)
+
+    def close(self) -> None:
+        if self._bar is not None:
+            self._bar.close()
+            self._bar = None
+
+    def __enter__(self) -> Progress:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()

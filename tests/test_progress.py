@@ -1,0 +1,112 @@
+"""Progress: silent library by default, tqdm bars on stderr when asked (compilation announced), --quiet
+on every command, stdout untouched."""
+
+import sys
+
+import jax.numpy as jnp
+import pytest
+
+import jaxobs
+from jaxobs.progress import Progress
+from jaxobs.study import run_study
+from tuning.cli import build_parser
+from tuning.solvers import SolverConfig, run_solver
+
+
+def test_progress_is_silent_by_default_a_bar_on_stderr_or_a_callback(capsys, monkeypatch):
+    calls = []
+    with Progress(lambda d, t: calls.append((d, t)), 3, "x") as p:
+        p.stage("compiling")
+        p.update()
+        p.update(2)
+    assert calls == [(1, 3), (3, 3)]
+    with Progress(None, 3, "x") as p:
+        p.stage("compiling")
+        p.update(3)
+    out = capsys.readouterr()
+    assert out.out == "" and out.err == ""
+    with Progress(True, 2, "demo") as p:
+        p.stage("compiling SOGIFLL")
+        p.update(2, objective="1.5")
+    out = capsys.readouterr()
+    assert out.out == "" and "demo: compiling SOGIFLL" in out.err and "2/2" in out.err and "objective=1.5" in out.err
+    _terminal(monkeypatch, False)
+    with Progress("auto", 1, "x") as p:  # "auto": a bar only on a terminal
+        p.update()
+    assert capsys.readouterr().err == ""
+    _terminal(monkeypatch)
+    with Progress("auto", 1, "x") as p:
+        p.update()
+    assert "1/1" in capsys.readouterr().err
+    with pytest.raises(ValueError, match="progress must be True, False, None, 'auto' or a callable"):
+        Progress("yes", 1, "x")
+
+
+class _Quadratic:
+    """A stand-in objective with no compilation: (θ − 1)², never diverged."""
+
+    class param:
+        @staticmethod
+        def values(theta):
+            return {"g": float(theta[0])}
+
+        @staticmethod
+        def to_theta(values):
+            return jnp.asarray([values["g"]])
+
+    def value_grad_diverged(self, theta):
+        return jnp.sum((theta - 1.0) ** 2), 2 * (theta - 1.0), 0
+
+    def value(self, theta):
+        return jnp.sum((theta - 1.0) ** 2)
+
+
+def _terminal(monkeypatch, yes=True):
+    """stderr (pytest's capture) taken for a terminal: the command line's bars are on ("auto")."""
+    monkeypatch.setattr(sys.stderr, "isatty", lambda: yes, raising=False)
+
+
+@pytest.mark.parametrize("kind", ["adam", "bfgs"])
+def test_every_solver_shows_progress_on_stderr_unless_quiet(capsys, monkeypatch, kind):
+    cfg = SolverConfig(kind=kind, learning_rate=0.1, steps=5, patience=100)
+    _terminal(monkeypatch, False)  # a pipe or a log: no bar (an error stays one line)
+    run_solver(_Quadratic(), jnp.zeros(1), cfg, quiet=False)
+    assert capsys.readouterr().err == ""
+    _terminal(monkeypatch)
+    run_solver(_Quadratic(), jnp.zeros(1), cfg, quiet=False)
+    out = capsys.readouterr()
+    assert out.out == ""
+    assert f"tune ({kind})" in out.err and "compiling the objective" in out.err and "/5" in out.err, out.err
+    assert "objective=" in out.err and "best=" in out.err
+    run_solver(_Quadratic(), jnp.zeros(1), cfg, quiet=True)
+    assert capsys.readouterr().err == ""
+
+
+def test_study_announces_each_compilation_and_counts_scenarios(capsys):
+    calls = []
+    designs = {"sogi": jaxobs.linear.sogi_fll_closed_form()}
+    run_study(designs, {"freq_step": [1.0, 2.0]}, horizon=0.15, progress=lambda d, t: calls.append((d, t)))
+    assert calls == [(2, 2)]
+    assert capsys.readouterr().err == ""  # a callback, no bar
+    run_study(designs, {"freq_step": [1.0, 2.0]}, horizon=0.15, progress=True)
+    err = capsys.readouterr().err
+    assert "study: sogi (compiling" in err and "2/2" in err
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["tune", "--quiet"],
+        ["demo", "--quiet"],
+        ["closed-form", "wif", "--quiet"],
+        ["bode", "--quiet"],
+        ["reproduce", "flux", "--quiet"],
+        ["reproduce", "leso", "--quiet"],
+        ["study", "--quiet"],
+        ["export", "--design", "wif", "--quiet"],
+    ],
+)
+def test_every_command_takes_quiet(argv):
+    args = build_parser().parse_args(argv)
+    assert args.quiet is True
+    assert build_parser().parse_args([a for a in argv if a != "--quiet"]).quiet is False
