@@ -70,11 +70,18 @@ def numba_available() -> bool:
 
 
 def run_bench(quick: bool = False, log: Callable[[str], None] = print) -> dict:
-    """Run every benchmark; returns ``{"rows": [...], "grad_over_forward": ..., ...}``."""
-    batches = (1, 1024) if quick else (1, 64, 1024, 8192)
+    """Run every benchmark; returns ``{"rows": [...], "grad_over_forward": ..., ...}``.
+
+    ``quick``: a look in about 80 s on 2 cores (measured 78 s), most of it compilation (numba's kernels compile
+    10-30 s each): batch 1024 only, float64 only, the SOGI-FLL 0.1 s and the drive 0.05 s, numba's
+    parallel kernels only (the ratios' reference), the gradient with the default checkpointing only.
+    """
+    batches = (1024,) if quick else (1, 64, 1024, 8192)
     fll_t1, drive_t1 = (0.1, 0.05) if quick else (W.FLL_T1, W.DRIVE_T1)
     kinds = ("sogi-fll",) if quick else W.FLL_KINDS
     repeats = 2 if quick else 3
+    dtypes = ("f64",) if quick else ("f32", "f64")
+    numba_kinds = (True,) if quick else (True, False)  # parallel, serial
     have_numba = numba_available()
     rows: list[Row] = []
     extra: dict = {"devices": [str(d) for d in jax.devices()], "numba": have_numba, "quick": quick}
@@ -88,7 +95,7 @@ def run_bench(quick: bool = False, log: Callable[[str], None] = print) -> dict:
             f"{row.steps_per_s / 1e6:9.2f} M steps/s"
         )
 
-    for dt in ("f32", "f64"):
+    for dt in dtypes:
         _set_dtype(dt)
         dtype = DTYPES[dt]
         for kind in kinds:
@@ -100,7 +107,7 @@ def run_bench(quick: bool = False, log: Callable[[str], None] = print) -> dict:
                     t = best_time(partial(fn, args), repeats)
                     add(Row(kind, "jaxobs", dt, batch, inputs, batch * n / t))
                     if have_numba:
-                        for par in (True, False):
+                        for par in numba_kinds:
                             if not par and batch > 1024:
                                 continue  # serial numba at 8192 adds minutes and no information
                             run = baselines.numba_fll(kind, dtype, par, inputs)
@@ -121,7 +128,7 @@ def run_bench(quick: bool = False, log: Callable[[str], None] = print) -> dict:
             t = best_time(partial(fn, args), repeats)
             add(Row("drive-sosoifo", "jaxobs", dt, batch, "loop", batch * n / t))
             if have_numba:
-                for par in (True, False):
+                for par in numba_kinds:
                     if not par and batch > 1024:
                         continue
                     run = baselines.numba_drive(dtype, par)
@@ -143,6 +150,7 @@ def run_bench(quick: bool = False, log: Callable[[str], None] = print) -> dict:
             r.ratio_vs_numba_parallel = r.steps_per_s / ref[key]
 
     _set_dtype("f64")
+    extra["dtypes"] = list(dtypes)
     extra.update(gradient_benchmarks(quick, log))
     extra.update(compile_benchmarks(log))
     return {"rows": [dataclasses.asdict(r) for r in rows], **extra}
@@ -157,7 +165,8 @@ def gradient_benchmarks(quick: bool, log) -> dict:
     loss, params = W.fll_loss_fn(kind, t1, "auto")
     fwd = jax.jit(loss)
     jax.block_until_ready(fwd(params, sig))
-    for ck in CHECKPOINTS:
+    checkpoints = ("auto",) if quick else CHECKPOINTS  # each one is a compilation of its gradient
+    for ck in checkpoints:
         loss_c, _ = W.fll_loss_fn(kind, t1, ck)
         vg = jax.jit(jax.value_and_grad(loss_c))
         jax.block_until_ready(vg(params, sig))
@@ -171,7 +180,7 @@ def gradient_benchmarks(quick: bool, log) -> dict:
             f"  value_and_grad / forward ({kind} gains {W.GAINS[kind]}, batch {batch}, {t1:g} s, f64, "
             f"checkpoint={ck}): {t_g / t_f:.2f}"
         )
-    for ck in CHECKPOINTS:
+    for ck in checkpoints:
         mb = W.grad_temp_mb(kind, batch, 10.0, ck)
         out["grad_temp_mb_10s"][ck] = mb
         log(f"  10 s gradient temporaries ({kind}, batch {batch}, f64, checkpoint={ck}): {mb:,.1f} MB")
