@@ -244,3 +244,27 @@ def test_recording_job_checks_size_and_the_closed_loop_metrics(tmp_path, capsys,
     drive.write_text(drive.read_text().replace("Rs = 0.8\n", ""))
     assert main(["tune", str(drive), "--check"]) == 2
     assert "component.Rs: required with a u/i recording" in capsys.readouterr().err
+
+
+def test_study_file_on_a_recording(tmp_path, capsys):
+    """A study file's [study.recording] (tuning/presets/study_recording_fll.toml, one design here): the
+    designs run on the recording, study.nc has dims (design, recording) with units and the file's sha256."""
+    import xarray as xr
+
+    from tuning.cli import main
+
+    path = _job_copy(tmp_path, "study_recording_fll.toml")
+    text = path.read_text()
+    path.write_text(text[: text.index("[designs.SOGI-FLL]")] + '[designs.WIF]\nclosed_form = "wif"\n')
+    assert main(["study", str(path), "--out", str(tmp_path / "o"), "--quiet"]) == 0
+    assert capsys.readouterr().err == ""
+    with xr.open_dataset(tmp_path / "o" / "study.nc", engine="scipy") as ds:
+        assert ds["ripple_freq"].dims == ("design", "recording")
+        assert str(ds["recording"].values[0]) == "recordings/grid_50_51hz.csv"
+        assert all("units" in ds[v].attrs for v in ds.data_vars)
+        assert 0 < float(ds["ripple_freq"].sel(design="WIF")[0]) < 0.1 and bool(ds["settled"].all())
+        assert len(ds.attrs["recordings_sha256"]) == 64
+    path.write_text(path.read_text().replace('time_column = "t"', 'time_column = "time"'))
+    assert main(["study", str(path), "--out", str(tmp_path / "o2"), "--quiet"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and "study.recording.file" in err and "no time column 'time'" in err, err

@@ -58,7 +58,7 @@ from jaxobs import linear, papers, use_host_devices
 from jaxobs.study import STUDY_AXES
 
 from .export import add_export_parser
-from .job import CHECKPOINT, load_job, read_toml, run_job
+from .job import CHECKPOINT, _parse_recording_scenarios, load_job, load_recordings, read_toml, run_job
 from .outdir import OutDir, atomic_path, atomic_write_text, safe_name
 from .results import load_result, tuned_component
 
@@ -241,6 +241,8 @@ def load_study(path):
     if not designs:
         raise ValueError("designs: at least one design is required")
     axes = raw.get("axes", {})
+    if "recording" in st:  # [study.recording]: recorded grid voltages are the scenarios
+        return st.get("name", "study"), designs, {}, _study_recordings(st, axes, designs, opts, Path(path).parent)
     if not axes:
         raise ValueError("axes: at least one axis is required")
     for k, v in axes.items():
@@ -253,6 +255,96 @@ def load_study(path):
         ):
             raise ValueError(f"axes.{k} must be a non-empty list of numbers")
     return st.get("name", "study"), designs, axes, opts
+
+
+def _study_recordings(st: dict, axes: dict, designs: dict, opts: dict, base: Path) -> dict:
+    """``[study.recording]`` of an FLL study (the keys of a job's ``[scenarios.recording]``), read and
+    checked now against the designs' sample time; the options for :func:`_recording_study`."""
+    if axes:
+        raise ValueError("axes: does not apply with study.recording (the recordings are the scenarios)")
+    ts = sorted({float(d.ts) for d in designs.values()})
+    if len(ts) != 1:
+        raise ValueError(f"designs: a study on recordings needs one sample time for all designs, got {ts}")
+    t_event, horizon = opts["t_event"], opts["horizon"]
+    if not horizon > t_event >= 0:
+        raise ValueError(f"study.horizon must exceed study.t_event >= 0, got {t_event:g}, {horizon:g}")
+    steady = t_event + 0.75 * (horizon - t_event)
+    spec = _parse_recording_scenarios(
+        {"recording": st["recording"]}, "study", "grid", t_event, horizon, steady, 0, ts[0], base
+    )
+    return dict(t_event=t_event, horizon=horizon, steady_from=steady, recording=spec.recording)
+
+
+def _recording_study(designs: dict, rec, *, t_event, horizon, steady_from, progress, band_hz=0.05):
+    """Every FLL design on every recording (one ``jit(vmap)`` per design): the study's metrics
+    (``jaxobs.study``: settling, ripple, rms phase, ITAE, IAE against the recordings' truth columns) as a
+    Dataset of dims (design, recording), with units and the recordings' sha256."""
+    import math
+    import time
+
+    import equinox as eqx
+    import jax
+    import jax.numpy as jnp
+    import numpy as np
+    import xarray as xr
+
+    from jaxobs.progress import Progress
+    from jaxobs.simulate import OnSignal, simulate
+    from jaxobs.study import METRIC_META, STUDY_METRICS, _metrics
+
+    sigs = load_recordings(rec, "grid")
+    t0 = time.time()
+    results = {}
+    with Progress(progress, len(designs), "study (recordings)", unit="design") as bar:
+        for dname, obs in designs.items():
+            n_period = max(1, int(round(2 * math.pi / (float(obs.omega_n) * obs.ts))))
+
+            @eqx.filter_jit
+            def run(obs, batch):
+                def one(sig):
+                    sol = simulate(OnSignal(obs, sig), horizon)
+                    m = _metrics(sol, t_event, steady_from, band_hz, n_period)
+                    return m, sol.ok & jnp.all(jnp.stack([jnp.isfinite(m[k]) for k in STUDY_METRICS]))
+
+                return jax.vmap(one)(batch)
+
+            bar.stage(f"{dname} (compiling, then {len(rec.files)} recording(s))")
+            m, ok = run(obs, sigs)
+            results[dname] = (jax.tree.map(np.asarray, m), np.asarray(ok))
+            bar.update()
+    dims, names = ("design", "recording"), list(results)
+    data = {}
+    for k in STUDY_METRICS:
+        vals = np.stack([np.where(results[d][1], results[d][0][k], np.nan) for d in names])
+        data[k] = (dims, vals, {"units": METRIC_META[k][0], "long_name": METRIC_META[k][1]})
+    data["settled"] = (
+        dims,
+        np.stack([results[d][0]["settled"] & results[d][1] for d in names]),
+        {"units": "1", "long_name": "settled by the horizon (False: settling_freq is censored at horizon - t_event)"},
+    )
+    data["diverged"] = (
+        dims,
+        np.stack([(~results[d][1]).astype(np.int8) for d in names]),
+        {"units": "1", "long_name": "simulation diverged or a metric is not finite (1: its metrics are NaN)"},
+    )
+    coords = {
+        "design": ("design", names, {"long_name": "observer design"}),
+        "recording": ("recording", list(rec.files), {"long_name": "recording file (relative to the study file)"}),
+    }
+    ds = xr.Dataset(data, coords=coords)
+    ds.attrs.update(
+        t_event=t_event,
+        horizon=horizon,
+        steady_from=steady_from,
+        band_hz=band_hz,
+        scenarios=len(rec.files),
+        sampling="recordings",
+        recordings_sha256=" ".join(rec.sha256),
+        source="jaxobs study (recordings)",
+        jaxobs_version=jaxobs.__version__,
+        jax_version=jax.__version__,
+    )
+    return ds, time.time() - t0
 
 
 _DRIVE_OBSERVERS = ("CLESO", "GILESO", "FALESO", "PureIntegratorFlux", "LPFFlux", "SOIFO", "SecondOrderSOIFO")
@@ -384,7 +476,11 @@ def _run_study(name, designs, axes, opts, out: Path, quiet: bool) -> int:
 
     if opts.pop("kind", "fll") == "drive":
         return _cmd_drive_study(name, designs, axes, opts, out, quiet)
-    ds, seconds = run_study(designs, axes, progress=_progress(quiet=quiet), return_seconds=True, **opts)
+    if "recording" in opts:
+        rec = opts.pop("recording")
+        ds, seconds = _recording_study(designs, rec, progress=_progress(quiet=quiet), **opts)
+    else:
+        ds, seconds = run_study(designs, axes, progress=_progress(quiet=quiet), return_seconds=True, **opts)
     worst = {m: worst_cases(ds, m, 3) for m in STUDY_METRICS}
     atomic_write_text(out / "worst_cases.json", json.dumps(worst, indent=1))
     figs = study_figures(ds, out)
