@@ -110,3 +110,12 @@ def test_every_command_takes_quiet(argv):
     args = build_parser().parse_args(argv)
     assert args.quiet is True
     assert build_parser().parse_args([a for a in argv if a != "--quiet"]).quiet is False
+
+
+def test_export_reports_its_three_stages(tmp_path):
+    from tuning.export import export_observer, observer_from_design
+
+    calls = []
+    export_observer(observer_from_design("wif"), tmp_path, n_steps=10_000, progress=lambda d, t: calls.append((d, t)))
+    assert calls == [(1, 3), (2, 3), (3, 3)]
+    assert (tmp_path / "golden.csv").exists()
