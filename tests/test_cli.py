@@ -215,7 +215,7 @@ def test_study_design_from_a_tuning_result(tmp_path):
 
 def test_study_result_errors_are_one_line(tmp_path, capsys):
     st = tmp_path / "s.toml"
-    for content, expect in ((None, "cannot read"), ("{", "not valid JSON"), ('{"job": {}}', "no 'component'")):
+    for content, expect in ((None, "no such file"), ("{", "not valid JSON"), ('{"job": {}}', "no 'component'")):
         res = tmp_path / "r.json"
         if content is None:
             res.unlink(missing_ok=True)

@@ -50,12 +50,11 @@ from pathlib import Path
 
 import jaxobs
 from jaxobs import linear, papers, use_host_devices
-from jaxobs.study import STUDY_AXES
 
 from .export import add_export_parser
-from .job import CHECKPOINT, load_job, read_toml, run_job
+from .job import CHECKPOINT, load_job, run_job
 from .outdir import OutDir, atomic_path, atomic_write_text, safe_name
-from .results import load_result, tuned_component
+from .study_file import load_study as _load_study
 
 
 def _enable_x64():
@@ -96,8 +95,6 @@ _CF_OPTIONS = {
 def closed_form_rows(design: str, values: dict) -> dict:
     """Gains of a closed-form design with the formula and source of each (used by the CLI)."""
     import math
-
-    from jaxobs import linear
 
     pi = math.pi
     if design == "sogi-fll":
@@ -185,151 +182,10 @@ def _cmd_bode(args) -> int:
     return 0
 
 
-_FLL_CTORS = {"SOGIFLL": "SOGIFLL", "SOGIFLLWPF": "SOGIFLLWPF", "SOGIFLLWIF": "SOGIFLLWIF"}
-
-
 def load_study(path):
-    """Parse a study TOML into (name, designs, axes, options); errors name the field (ValueError)."""
-
-    raw, _ = read_toml(path, "study file")  # size, nesting and encoding checked before parsing
-    st = raw.get("study", {})
-    if st.get("kind", "fll") == "drive":
-        return _load_drive_study(raw, st)
-    if st.get("kind", "fll") != "fll":
-        raise ValueError(f"study.kind must be 'fll' or 'drive', got {st.get('kind')!r}")
-    opts = dict(
-        t_event=float(st.get("t_event", 0.1)),
-        horizon=float(st.get("horizon", 0.4)),
-        sample=int(st.get("sample", 0)),
-        chunk_size=int(st.get("chunk_size", 2048)),
-        seed=int(st.get("seed", 0)),
-    )
-    designs = {}
-    for name, spec in raw.get("designs", {}).items():
-        where = f"designs.{name}"
-        if "closed_form" in spec:
-            cf = {"sogi-fll": linear.sogi_fll_closed_form, "wpf": linear.wpf_closed_form, "wif": linear.wif_closed_form}
-            if spec["closed_form"] not in cf:
-                raise ValueError(f"{where}.closed_form must be one of {', '.join(cf)}, got {spec['closed_form']!r}")
-            designs[name] = cf[spec["closed_form"]]()
-        elif "result" in spec:  # a tuning run's result.json, read by tuning.results
-            try:
-                res = load_result(spec["result"])
-                if res["component"] not in _FLL_CTORS:
-                    raise ValueError(f"component {res['component']!r} is not an FLL (studies run the FLL family)")
-                designs[name] = tuned_component(res)
-            except ValueError as e:
-                raise ValueError(f"{where}.result: {e}") from None
-        elif "component" in spec:
-            comp = spec["component"]
-            if comp not in _FLL_CTORS:
-                raise ValueError(f"{where}.component must be one of {', '.join(_FLL_CTORS)}, got {comp!r}")
-            designs[name] = getattr(jaxobs, _FLL_CTORS[comp])(**{k: v for k, v in spec.items() if k != "component"})
-        else:
-            raise ValueError(f"{where}: give closed_form, result (a tuning result.json) or component with gains")
-    if not designs:
-        raise ValueError("designs: at least one design is required")
-    axes = raw.get("axes", {})
-    if not axes:
-        raise ValueError("axes: at least one axis is required")
-    for k, v in axes.items():
-        if k not in STUDY_AXES:
-            raise ValueError(f"axes.{k}: unknown axis; allowed: {', '.join(STUDY_AXES)}")
-        if (
-            not isinstance(v, list)
-            or not v
-            or not all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in v)
-        ):
-            raise ValueError(f"axes.{k} must be a non-empty list of numbers")
-    return st.get("name", "study"), designs, axes, opts
-
-
-_DRIVE_OBSERVERS = ("CLESO", "GILESO", "FALESO", "PureIntegratorFlux", "LPFFlux", "SOIFO", "SecondOrderSOIFO")
-_MACHINES = {"ipmsm_paper002": "ipmsm_paper002", "spmsm_paper000": "spmsm_paper000"}
-
-
-def _load_drive_study(raw: dict, st: dict):
-    """A drive study (``[study] kind = "drive"``): (name, designs, axes, options) for jaxobs.drive_study."""
-    import math
-
-    from jaxobs import drive as D
-    from jaxobs.drive_study import DRIVE_STUDY_AXES
-
-    known = {"kind", "name", "machine", "horizon", "steady_from", "sampling", "sample", "seed", "chunk_size"}
-    for k in st:
-        if k not in known:
-            raise ValueError(f"study.{k}: unknown key; allowed: {', '.join(sorted(known))}")
-    machine = st.get("machine", "ipmsm_paper002")
-    if machine not in _MACHINES:
-        raise ValueError(f"study.machine must be one of {', '.join(_MACHINES)}, got {machine!r}")
-    par = getattr(D, _MACHINES[machine])()
-    dr = raw.get("drive", {})
-    for k in dr:
-        if k not in ("alpha_c_hz", "alpha_s_hz", "settle"):
-            raise ValueError(f"drive.{k}: unknown key; allowed: alpha_c_hz, alpha_s_hz, settle")
-    ac, as_ = float(dr.get("alpha_c_hz", papers.BENCH_CURRENT_HZ)), float(dr.get("alpha_s_hz", papers.BENCH_SPEED_HZ))
-    for k, v in (("drive.alpha_c_hz", ac), ("drive.alpha_s_hz", as_)):
-        if not (math.isfinite(v) and 0 < v <= 5000):
-            raise ValueError(f"{k} must be in (0, 5000] Hz, got {v!r}")
-    foc = D.FOC.imc(par, alpha_c=2 * math.pi * ac, alpha_s=2 * math.pi * as_)
-    drive = D.Drive(foc, sensorless=True, settle=float(dr.get("settle", 0.2)))
-    designs = {}
-    for name, spec in raw.get("designs", {}).items():
-        where = f"designs.{name}"
-        if not isinstance(spec, dict):
-            raise ValueError(f"{where} must be a table")
-        if "result" in spec:
-            try:
-                res = load_result(spec["result"])
-                if res["component"] not in _DRIVE_OBSERVERS:
-                    raise ValueError(f"component {res['component']!r} is not a drive observer")
-                designs[name] = tuned_component(res)
-            except ValueError as e:
-                raise ValueError(f"{where}.result: {e}") from None
-        elif spec.get("component") in _DRIVE_OBSERVERS:
-            kw = {k: v for k, v in spec.items() if k != "component"}
-            # the machine's Rs and L are placeholders: the study binds each scenario's assumed machine
-            comp = spec["component"]
-            lq = (
-                {"L": par.Ld}
-                if comp in ("PureIntegratorFlux", "LPFFlux", "SOIFO", "SecondOrderSOIFO")
-                else {"Lq": par.Lq}
-            )
-            if comp in ("SOIFO", "SecondOrderSOIFO"):
-                kw.setdefault("omega0", 1.0)
-            try:
-                designs[name] = getattr(jaxobs, comp)(Rs=par.Rs, **lq, **kw)
-            except TypeError as e:
-                raise ValueError(f"{where}: {e}") from None
-        else:
-            raise ValueError(
-                f"{where}: give component (one of {', '.join(_DRIVE_OBSERVERS)}) with its gains, "
-                "or result (a tuning result.json)"
-            )
-    if not designs:
-        raise ValueError("designs: at least one design is required")
-    axes = raw.get("axes", {})
-    for k, v in axes.items():
-        if k not in DRIVE_STUDY_AXES:
-            raise ValueError(f"axes.{k}: unknown axis; allowed: {', '.join(DRIVE_STUDY_AXES)}")
-        if (
-            not isinstance(v, list)
-            or not v
-            or not all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in v)
-        ):
-            raise ValueError(f"axes.{k} must be a non-empty list of numbers")
-    opts = dict(
-        machine=par,
-        drive=drive,
-        horizon=float(st.get("horizon", 0.3)),
-        sampling=str(st.get("sampling", "grid")),
-        sample=int(st.get("sample", 0)),
-        seed=int(st.get("seed", 0)),
-        chunk_size=int(st.get("chunk_size", 256)),
-    )
-    if "steady_from" in st:
-        opts["steady_from"] = float(st["steady_from"])
-    return st.get("name", "drive-study"), designs, axes, dict(opts, kind="drive")
+    """A study file as (name, designs, axes, options): :func:`tuning.study_file.load_study`, checked in full."""
+    spec = _load_study(path)
+    return spec.name, spec.designs, spec.axes, dict(spec.opts, kind=spec.kind)
 
 
 def _cmd_drive_study(name, designs, axes, opts, out: Path, quiet: bool) -> int:
@@ -348,10 +204,10 @@ def _cmd_drive_study(name, designs, axes, opts, out: Path, quiet: bool) -> int:
     n = int(ds.attrs["scenarios"])
     print(f"drive study {name}: {len(designs)} designs x {n} scenarios ({ds.attrs['sampling']}), sensorless")
     qs = [float(q) for q in ds["quantile"].values]
-    head = f"{'design':<18}{'metric':<26}" + "".join(f"{'q' + format(q, 'g'):>10}" for q in qs) + f"{'lost sync':>11}"
+    head = f"{'design':<18}{'metric':<26}" + "".join(f"{'q' + format(q, 'g'):>10}" for q in qs) + f"{'lost lock':>11}"
     print(head)
     for d in ds["design"].values:
-        lost = int(ds["lost_sync_count"].sel(design=d))
+        lost = int(ds["lost_lock_count"].sel(design=d))
         for m in DRIVE_STUDY_METRICS:
             vals = ds[f"{m}_q"].sel(design=d).values
             unit = DRIVE_STUDY_METRICS[m][0]
@@ -364,7 +220,11 @@ def _cmd_drive_study(name, designs, axes, opts, out: Path, quiet: bool) -> int:
 def _cmd_study(args) -> int:
     _enable_x64()
     path = Path(args.study) if args.study else Path(str(resources.files("jaxobs") / "data" / "default_study.toml"))
-    name, designs, axes, opts = load_study(path)
+    spec = _load_study(path)  # everything checked: tables, keys, ranges, sizes, result files
+    name, designs, axes, opts = spec.name, spec.designs, spec.axes, dict(spec.opts, kind=spec.kind)
+    if args.check:
+        print(f"{path}: OK — {spec.kind} study {name!r}, {len(designs)} designs x {spec.scenarios} scenarios")
+        return 0
     out = Path(args.out) if args.out else Path("out") / safe_name(str(name), "study")
     with OutDir(out, ["study.nc"], force=args.force):
         args.log_dir = out
@@ -562,17 +422,25 @@ def _print_summary(result: dict, out: Path, timing: dict | None = None):
         print(f"{'linear model':<22}{heads}")
         for label, vals in rows:
             print(f"{label:<22}" + "".join(_fmt(v) for v in vals))
-    keys = [k for k in s["initial"] if k not in ("diverged", "null_reason")]
+    keys = [k for k in s["initial"] if k not in ("diverged", "lost_lock", "null_reason")]
     print(f"{'score':<22}{heads}")
     for k in keys:
         print(f"{k:<22}" + "".join(_fmt((s[d] or {}).get(k)) for d in designs))
     print(f"{'diverged scenarios':<22}" + "".join(_fmt((s[d] or {}).get("diverged"), ">14d") for d in designs))
+    print(f"{'lost lock':<22}" + "".join(_fmt((s[d] or {}).get("lost_lock"), ">14d") for d in designs))
     if "holdout" in result:
         h = result["holdout"]
         worst = {d: (h[d] or {}).get("per_scenario_worst") for d in designs}
         div = {d: (h[d] or {}).get("diverged") for d in designs}
         print(f"{'held-out worst':<22}" + "".join(_fmt(worst[d]) for d in designs) + f"   ({h['count']} scenarios)")
         print(f"{'held-out diverged':<22}" + "".join(_fmt(div[d], ">14d") for d in designs))
+        lost = {d: (h[d] or {}).get("lost_lock") for d in designs}
+        print(f"{'held-out lost lock':<22}" + "".join(_fmt(lost[d], ">14d") for d in designs))
+    for where, n in (result.get("lost_lock_tuned_only") or {}).items():
+        if n:
+            sets, nc = ("tuning", "scores.nc") if where == "tuning" else ("held-out", "holdout_scores.nc")
+            msg = f"warning: the tuned design lost lock in {n} {sets} scenarios where the closed form holds it"
+            print(f"jaxobs: {msg} (lost_lock in {nc})", file=sys.stderr)
     for name, b in result.get("at_bound", {}).items():
         msg = f"warning: tuned {name} = {b['value']:.6g} is within 1 % of its {b['bound']} bound {b['limit']:g}"
         print(f"jaxobs: {msg}", file=sys.stderr)
@@ -637,6 +505,7 @@ def build_parser() -> argparse.ArgumentParser:
     st.add_argument("--out", help="results folder (default: out/<study name>)")
     st.add_argument("--quiet", action="store_true", help="no progress bar")
     st.add_argument("--force", action="store_true", help="overwrite a study.nc already in --out")
+    st.add_argument("--check", action="store_true", help="validate the study file (every range, the sizes) and exit")
     st.set_defaults(func=_cmd_study)
 
     add_export_parser(sub)

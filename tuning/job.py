@@ -879,16 +879,22 @@ def _scores_dataset(obj, names, combos, spec: ScenarioSpec, per: dict):
         coords.update({n: ("scenario", [c[i] for c in combos]) for i, n in enumerate(names)})
     data = {}
     keys = [t.metric for t in obj.terms]
-    for key in (*keys, "total", "diverged"):
+    for key in (*keys, "total", "diverged", "lost_lock"):
         rows = []
         for d in designs:
             mets, total, good = per[d]
-            x = {"total": total, "diverged": ~good}.get(key, mets.get(key) if key in mets else None)
+            flags = {"total": total, "diverged": ~good, "lost_lock": mets["lost_lock"] | ~good}
+            x = flags.get(key, mets.get(key) if key in mets else None)
             rows.append(np.asarray(x, dtype=float).reshape(shape))
         data[key] = (dims, np.stack(rows))
     ds = xr.Dataset(data, coords=coords)
     ds["diverged"] = ds["diverged"].astype("int8")
-    ds.attrs["note"] = "total: the weighted objective per scenario (the penalty where diverged); diverged: 1/0"
+    ds["lost_lock"] = ds["lost_lock"].astype("int8")
+    ds.attrs["note"] = (
+        "total: the weighted objective per scenario (the penalty where diverged); diverged: 1/0; lost_lock: 1 where "
+        "the estimate ended far from the truth in the steady window (45 deg or 10 % on signals, 90 deg on the "
+        "drive) or diverged"
+    )
     return ds
 
 
@@ -907,6 +913,14 @@ def _versions() -> dict:
 
 
 CHECKPOINT = "checkpoint.npz"
+
+
+def _lost_only(per: dict) -> int | None:
+    """Scenarios where the tuned design lost lock (or diverged) and the closed form did not (None: no tuned)."""
+    if "tuned" not in per:
+        return None
+    lost = {k: np.asarray(per[k][0]["lost_lock"] | ~per[k][2]) for k in ("tuned", "closed_form")}
+    return int(np.sum(lost["tuned"] & ~lost["closed_form"]))
 
 
 def job_fingerprint(job: Job) -> str:
@@ -987,11 +1001,13 @@ def run_job(job: Job, out: Path, resume: bool = False, quiet: bool = False) -> d
         result["values_note"] = "Rs, Lq and the PLL's initial speed are set per scenario from its estimated machine"
     if nulls:
         result["null_reasons"] = nulls
+    result["lost_lock_tuned_only"] = {"tuning": _lost_only(per)}
     if job.holdout is not None:
         hobj, (hn, hc) = build_objective(job, job.holdout)
         hper = {k: hobj.per_scenario(th) for k, th in thetas.items()}
         result["holdout"] = {k: (hobj.summarize(*hper[k]) if k in hper else None) for k in gains}
         result["holdout"]["count"] = len(hc)
+        result["lost_lock_tuned_only"]["holdout"] = _lost_only(hper)
         with atomic_path(out / "holdout_scores.nc") as tmp:
             _scores_dataset(hobj, hn, hc, job.holdout, hper).to_netcdf(tmp, engine="scipy")
     with atomic_path(out / "scores.nc") as tmp:

@@ -29,7 +29,7 @@ from jaxobs.simulate import OnSignal, simulate
 
 from .params import Parametrization
 
-__all__ = ["METRICS", "DRIVE_METRICS", "Term", "Objective", "aggregate"]
+__all__ = ["METRICS", "DRIVE_METRICS", "LOST_LOCK", "Term", "Objective", "aggregate"]
 
 
 # --------------------------------------------------------------------------
@@ -113,6 +113,9 @@ METRICS: dict[str, Callable] = {
         sol.outputs.obs.omega / sig.par.p * 30 / math.pi, _steady(sol, ctx)
     ),
 }
+# the per-scenario flag :meth:`Objective.per_scenario` adds to the metrics: the estimate ended far from the
+# truth (jaxobs.metrics.lost_lock_of: 45° / 10 % on signals, 90° on the drive, over the steady window)
+LOST_LOCK = "lost_lock"
 # metrics that need the closed-loop drive (signal = "drive" jobs)
 DRIVE_METRICS = ("settling_position", "settling_speed", "rms_speed_steady", "speed_noise_rpm")
 
@@ -241,12 +244,16 @@ class Objective:
         def one(sig):
             comp = self.param.apply(self.component, theta)
             sol = self._simulate(comp, sig)
-            return {term.metric: METRICS[term.metric](sol, sig, self.ctx) for term in self.terms}, sol.ok
+            mets = {term.metric: METRICS[term.metric](sol, sig, self.ctx) for term in self.terms}
+            # far from the truth over the steady window (jaxobs.metrics, "lost lock"): reported, not tuned on
+            mets[LOST_LOCK] = M.lost_lock_of(sol, self.ctx.steady_from, signal=sig)
+            return mets, sol.ok
 
         return jax.vmap(one)(scenarios)
 
     def per_scenario(self, theta, scenarios=None):
-        """Each scenario's metrics, its weighted total (the penalty where diverged) and the good mask — no gradient."""
+        """Each scenario's metrics (and its :data:`LOST_LOCK` flag), its weighted total (the penalty where
+        diverged) and the good mask — no gradient."""
         scenarios = self.scenarios if scenarios is None else scenarios
         mets, ok = self._metrics(theta, scenarios)
         total = sum(term.weight * mets[term.metric] for term in self.terms)
@@ -264,6 +271,8 @@ class Objective:
             "objective": float(aggregate(total, self.agg, self.alpha, self.temperature)),
             "diverged": int(jnp.sum(~good)),
         }
+        if LOST_LOCK in mets:  # scenarios whose estimate ends far from the truth, the diverged ones included
+            out[LOST_LOCK] = int(jnp.sum(mets[LOST_LOCK] | ~good))
         for term in self.terms:
             m = jnp.where(good, mets[term.metric], jnp.nan)
             if bool(jnp.any(good)):
