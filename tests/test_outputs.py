@@ -8,9 +8,10 @@ import socket
 import jax.numpy as jnp
 import numpy as np
 import pytest
+import xarray as xr
 
 from tuning import solvers
-from tuning.cli import main
+from tuning.cli import _print_summary, main
 from tuning.outdir import LOCK, OutDir, OutError, safe_name
 from tuning.params import GainSpec, Parametrization
 from tuning.solvers import CheckpointError, SolverConfig, run_solver
@@ -94,6 +95,18 @@ def test_cli_refuses_a_locked_or_used_out_with_one_line(tmp_path, capsys, monkey
     monkeypatch.chdir(tmp_path)
     assert main(["tune", str(path), "--quiet"]) == 0
     assert (tmp_path / "out" / "_.._escape" / "result.json").exists()
+    # lost lock, per design and per scenario: the closed form and the tuned design hold it
+    res = json.loads((tmp_path / "out" / "_.._escape" / "result.json").read_text())
+    assert [res["scores"][d]["lost_lock"] for d in ("initial", "closed_form", "tuned")] == [0, 0, 0]
+    assert res["lost_lock_tuned_only"] == {"tuning": 0}
+    scores = xr.load_dataset(tmp_path / "out" / "_.._escape" / "scores.nc", engine="scipy")
+    assert scores["lost_lock"].dtype == np.int8 and scores["lost_lock"].dims == scores["total"].dims
+    assert int(scores["lost_lock"].sum()) == 0
+    # a tuned design that loses lock where the closed form holds it is a warning
+    capsys.readouterr()
+    _print_summary(dict(res, lost_lock_tuned_only={"tuning": 2}), tmp_path)
+    warn = [ln for ln in capsys.readouterr().err.splitlines() if "lost lock" in ln]
+    assert len(warn) == 1 and "2 tuning scenarios where the closed form holds it" in warn[0]
     assert not (tmp_path.parent / "escape").exists()
     capsys.readouterr()
     # --resume on another job's checkpoint: one line, exit 2

@@ -110,6 +110,20 @@ def test_diverging_candidates_give_a_finite_penalty_and_gradient():
     assert float(jax.jvp(obj.value, (param.theta0(),), (jnp.ones(1),))[1]) == pytest.approx(float(g_ok[0]))
 
 
+def test_per_scenario_scores_flag_a_lost_lock_that_does_not_diverge():
+    """k = 20 with λ = 1e4 settles at 115 rad/s against the true 326.7: finite (not diverged, its score a
+    number), but lost lock in both scenarios; k = 0.7 holds lock.  summarize counts them (diverged included)."""
+    sigs = jaxobs.stack([jaxobs.GridSignal(t_event=0.1, freq_step=f) for f in (-1.0, 2.0)])
+    comp = jaxobs.SOGIFLL(k=0.7, lam=1e4)
+    param = Parametrization([GainSpec("k", 0.7, 0.01, 100.0)])
+    obj = Objective(comp, param, sigs, 0.4, [Term("rms_phase_steady")], MetricContext(0.1, 0.3))
+    mets, total, good = obj.per_scenario(param.to_theta({"k": 20.0}))
+    assert np.all(np.asarray(good)) and np.all(np.asarray(mets["lost_lock"]))
+    assert obj.summarize(mets, total, good)["lost_lock"] == 2
+    mets, total, good = obj.per_scenario(param.theta0())
+    assert not np.any(np.asarray(mets["lost_lock"])) and obj.summarize(mets, total, good)["lost_lock"] == 0
+
+
 # --------------------------------------------------------------------------
 # job files
 # --------------------------------------------------------------------------

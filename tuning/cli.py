@@ -56,6 +56,34 @@ from .job import CHECKPOINT, load_job, run_job
 from .outdir import OutDir, atomic_path, atomic_write_text, safe_name
 from .study_file import load_study as _load_study
 
+# the files each command writes under --out (refused there without --force; jaxobs.plot names them)
+DEMO_FILES = ("fll_tests_A_E.png",)
+BODE_FILES = ("bode_flux_observers_000_fig5.png", "bode_lesos_002_fig4.png", "bode_fll_open_loop_001_fig14.png")
+REPRODUCE_FILES = {
+    "flux": (
+        "flux_circles_du_alpha_5V.png",
+        "flux_circles_400rpm.png",
+        "position_error_load_step.png",
+        "position_error_speed_variation.png",
+        "position_error_du_alpha_5V.png",
+    ),
+    "leso": ("leso_position_error_600rpm.png", "leso_speed_ramp.png", "leso_load_step.png"),
+}
+
+
+class _out(OutDir):
+    """``with _out(args, files) as out``: ``--out`` checked and locked before any work (tuning.outdir), its
+    path as the value; an internal error's log goes there."""
+
+    def __init__(self, args, files):
+        super().__init__(Path(args.out), files, force=args.force)
+        self.args = args
+
+    def __enter__(self) -> Path:
+        super().__enter__()
+        self.args.log_dir = self.path
+        return self.path
+
 
 def _enable_x64():
     import jax
@@ -70,11 +98,11 @@ def _cmd_demo(args) -> int:
 
     if args.t_event <= 0:
         raise ValueError(f"--t-event must be > 0 s, got {args.t_event}")
-    rows, traces = fll_demo(t_event=args.t_event)
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    fig_path = out / "fll_tests_A_E.png"
-    fll_demo_figure(traces, DEMO_TESTS, args.t_event, fig_path)
+    with _out(args, DEMO_FILES) as out:
+        rows, traces = fll_demo(t_event=args.t_event)
+        fig_path = out / DEMO_FILES[0]
+        with atomic_path(fig_path) as tmp:
+            fll_demo_figure(traces, DEMO_TESTS, args.t_event, tmp)
     if args.json:
         print(json.dumps(rows, indent=1))
     else:
@@ -177,7 +205,9 @@ def _cmd_bode(args) -> int:
     _enable_x64()
     from jaxobs.plot import paper_bode_figures
 
-    for p in paper_bode_figures(args.out):
+    with _out(args, BODE_FILES) as out:
+        figs = paper_bode_figures(out)
+    for p in figs:
         print(p)
     return 0
 
@@ -288,8 +318,14 @@ def _error_figures(traces, names, paper: str, specs, out: Path):
 
 def _cmd_reproduce(args) -> int:
     _enable_x64()
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
+    if args.paper not in REPRODUCE_FILES:
+        raise ValueError(f"reproduce: unknown paper {args.paper!r}")
+    args.out = args.out or f"out/reproduce-{args.paper}"
+    with _out(args, REPRODUCE_FILES[args.paper]) as out:
+        return _reproduce(args, out)
+
+
+def _reproduce(args, out: Path) -> int:
     if args.paper == "flux":
         from jaxobs.plot import flux_circles_figure
         from jaxobs.reproduce.flux import OBSERVER_NAMES, run_flux_experiments
@@ -467,7 +503,8 @@ def build_parser() -> argparse.ArgumentParser:
     t.set_defaults(func=_cmd_tune)
 
     d = sub.add_parser("demo", help="FLL family (SOGI-FLL, -WPF, -WIF) on paper 001 Tests A-E")
-    d.add_argument("--out", default="out", help="folder for the figure (default: out)")
+    d.add_argument("--out", default="out/demo", help="folder for the figure (default: out/demo)")
+    d.add_argument("--force", action="store_true", help="overwrite the figure already in --out")
     d.add_argument("--json", action="store_true", help="print the table as JSON rows")
     d.add_argument("--t-event", type=float, default=0.2, help="time of the test event, s (default 0.2)")
     d.set_defaults(func=_cmd_demo)
@@ -486,14 +523,16 @@ def build_parser() -> argparse.ArgumentParser:
     c.set_defaults(func=_cmd_closed_form)
 
     b = sub.add_parser("bode", help="Bode figures of the papers' flux observers, LESOs and FLL loops")
-    b.add_argument("--out", default="out", help="folder for the figures (default: out)")
+    b.add_argument("--out", default="out/bode", help="folder for the figures (default: out/bode)")
+    b.add_argument("--force", action="store_true", help="overwrite figures already in --out")
     b.set_defaults(func=_cmd_bode)
 
     r = sub.add_parser("reproduce", help="reproduce a paper's experiments on the simulated drive")
     r.add_argument(
         "paper", choices=["flux", "leso"], help="flux: paper 000 (rotor-flux observers); leso: paper 002 (LESOs)"
     )
-    r.add_argument("--out", default="out", help="folder for the figures (default: out)")
+    r.add_argument("--out", help="folder for the figures (default: out/reproduce-<paper>)")
+    r.add_argument("--force", action="store_true", help="overwrite figures already in --out")
     r.add_argument("--json", action="store_true", help="print rows {experiment, observer, metric, unit, paper, ours}")
     r.add_argument("--quick", action="store_true", help="skip the long runs (20 r/min steady state, I-f start-up)")
     r.set_defaults(func=_cmd_reproduce)
