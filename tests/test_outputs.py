@@ -204,3 +204,41 @@ def test_resume_refuses_foreign_and_corrupt_checkpoints(tmp_path, capsys):
     ckpt.unlink()
     assert _run(ckpt, resume=True) == ref  # nothing to resume: one line, a fresh start
     assert "no checkpoint" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(
+    "argv, product",
+    [
+        (["demo"], "fll_tests_A_E.png"),
+        (["bode"], "bode_lesos_002_fig4.png"),
+        (["reproduce", "flux", "--quick"], "flux_circles_400rpm.png"),
+        (["reproduce", "leso"], "leso_speed_ramp.png"),
+        (["export", "--design", "wif"], "observer.c"),
+    ],
+    ids=lambda v: " ".join(v) if isinstance(v, list) else v,
+)
+def test_every_writing_command_takes_the_lock_and_keeps_results(tmp_path, capsys, argv, product):
+    """demo, bode, reproduce and export, as tune and study: a second process on the same --out refuses in one
+    line; a result already there is kept without --force; a symlinked --out or result is refused — each
+    before any work (these runs would take seconds to minutes: they return at once, writing nothing)."""
+    out = tmp_path / "o"
+    out.mkdir()
+
+    def refused(args, what):
+        assert main([*argv, *args]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and err[0].startswith("jaxobs: error: ") and what in err[0], err
+
+    (out / LOCK).write_text(f"1 {socket.gethostname()}\n")  # pid 1 is alive: another process holds it
+    refused(["--out", str(out)], "in use by process 1")
+    refused(["--out", str(out), "--force"], "in use by process 1")
+    (out / LOCK).unlink()
+    (out / product).write_text("mine")
+    refused(["--out", str(out)], "use --force")
+    assert (out / product).read_text() == "mine" and not (out / LOCK).exists()
+    (out / product).unlink()
+    (out / product).symlink_to(tmp_path / "elsewhere")
+    refused(["--out", str(out), "--force"], "symlink")
+    (tmp_path / "link").symlink_to(out)
+    refused(["--out", str(tmp_path / "link")], "symlink")
+    assert sorted(p.name for p in out.iterdir()) == [product] and not (tmp_path / "elsewhere").exists()

@@ -332,10 +332,8 @@ def _reproduce(args, out: Path) -> int:
 
         rows, traces = run_flux_experiments(quick=args.quick)
         figs = []
-        for key, fname in (
-            ("du_alpha = 5 V at 1000 r/min", "flux_circles_du_alpha_5V.png"),
-            ("steady 400 r/min", "flux_circles_400rpm.png"),
-        ):
+        files = REPRODUCE_FILES["flux"]
+        for key, fname in zip(("du_alpha = 5 V at 1000 r/min", "steady 400 r/min"), files[:2], strict=True):
             p = out / fname
             flux_circles_figure(traces[key], OBSERVER_NAMES, f"Paper 000: estimated flux, {key}", p)
             figs.append(p)
@@ -343,10 +341,11 @@ def _reproduce(args, out: Path) -> int:
             traces,
             OBSERVER_NAMES,
             "000",
-            (
-                ("load step 10 N·m at 2000 r/min", "position_error_load_step.png", 0.3),
-                ("speed 400-2000-400 r/min", "position_error_speed_variation.png", 0.8),
-                ("du_alpha = 5 V at 1000 r/min", "position_error_du_alpha_5V.png", 0.8),
+            zip(
+                ("load step 10 N·m at 2000 r/min", "speed 400-2000-400 r/min", "du_alpha = 5 V at 1000 r/min"),
+                files[2:],
+                (0.3, 0.8, 0.8),
+                strict=True,
             ),
             out,
         )
@@ -364,10 +363,15 @@ def _reproduce(args, out: Path) -> int:
             traces,
             LESO_NAMES,
             "002",
-            (
-                ("steady 600 r/min no load", "leso_position_error_600rpm.png", 0.4),
-                ("speed ramp 300-600-840-600-300 r/min", "leso_speed_ramp.png", 0.4),
-                ("load step 0-80 % at 600 r/min", "leso_load_step.png", 0.4),
+            zip(
+                (
+                    "steady 600 r/min no load",
+                    "speed ramp 300-600-840-600-300 r/min",
+                    "load step 0-80 % at 600 r/min",
+                ),
+                REPRODUCE_FILES["leso"],
+                (0.4, 0.4, 0.4),
+                strict=True,
             ),
             out,
         )
