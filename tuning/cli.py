@@ -2,15 +2,17 @@
 
     jaxobs tune [JOB.toml] [--out DIR] [--resume] [--check] [--quiet]
                                                            gradient tuning job (default: embedded WIF job)
-    jaxobs demo [--out DIR] [--json]                       the FLL family on paper 001 Tests A–E
+    jaxobs demo [--out DIR] [--force] [--json]             the FLL family on paper 001 Tests A–E
     jaxobs closed-form {sogi-fll,wpf,wif,cleso} [--name value ...] [--json]
                                                            closed-form gains, formula and source
-    jaxobs bode [--out DIR]                                the papers' Bode figures (000 Fig. 5,
+    jaxobs bode [--out DIR] [--force]                      the papers' Bode figures (000 Fig. 5,
                                                            002 Fig. 4, 001 Fig. 14)
-    jaxobs reproduce flux [--out DIR] [--json] [--quick]   paper 000's experiments, paper vs ours
-    jaxobs reproduce leso [--out DIR] [--json]             paper 002's experiments, paper vs ours
-    jaxobs study [STUDY.toml] [--out DIR]                  robustness study → NetCDF, worst cases, figures
-    jaxobs export [RESULT.json | --design D] [--out DIR] [--check]
+    jaxobs reproduce flux [--out DIR] [--force] [--json] [--quick]
+                                                           paper 000's experiments, paper vs ours
+    jaxobs reproduce leso [--out DIR] [--force] [--json]   paper 002's experiments, paper vs ours
+    jaxobs study [STUDY.toml] [--out DIR] [--force] [--check] [--quiet]
+                                                           robustness study → NetCDF, worst cases, figures
+    jaxobs export [RESULT.json | --design D] [--out DIR] [--force] [--check]
                                                            the observer as C99 float32 with golden vectors
     jaxobs --version
 
@@ -26,14 +28,17 @@ Every failure ends the program with one line on stderr.  Exit statuses:
 - 0: done;
 - 1: an internal error (a bug, or the machine ran out of memory): the one line names the log file
   holding the traceback (``<out>/error.log``, or a temporary file before ``--out`` is known);
-- 2: bad input: arguments, a job or study file (the line names the field), an output folder that cannot
-  be used (a symlink, not writable, locked by another process, results there without ``--force``), a
-  checkpoint that ``--resume`` cannot use (corrupt, or another job's);
+- 2: bad input: arguments, a job or study file (the line names the field; ``tune --check`` and
+  ``study --check`` check the whole file and stop), an output folder that cannot be used (a symlink, not
+  writable, locked by another process, results there without ``--force``), a checkpoint that ``--resume``
+  cannot use (corrupt, or another job's);
 - 3: ``tune`` only: every design tried diverged (status ``diverged``, nothing tuned);
 - 130: interrupted (Ctrl-C).
 
-``tune`` and ``study`` write only under ``--out`` (default ``./out/<name>``, the job's or study's name
-reduced to ``[A-Za-z0-9._-]``): see :mod:`tuning.outdir` for the lock file, symlinks and ``--force``.
+Every command that writes (``tune``, ``study``, ``demo``, ``bode``, ``reproduce``, ``export``) writes only
+under ``--out`` (``tune`` and ``study``: default ``./out/<name>``, the job's or study's name reduced to
+``[A-Za-z0-9._-]``; the others ``./out/<command>``), checked and locked before any work: see
+:mod:`tuning.outdir` for the lock file, symlinks and ``--force``.
 ``tune --resume`` continues from ``<out>/checkpoint.npz`` if it is this job's (the job file's sha256 is
 in it); with no checkpoint it says so in one line and starts fresh.
 """
