@@ -12,9 +12,9 @@ variable per metric, dims ``("design", *axes)`` (or ``("design", "sample")``
 with the axes as coordinates along ``sample``), and a ``diverged`` flag: a
 diverging scenario is reported, never fatal.  Every variable and coordinate
 carries CF-style ``units`` and ``long_name``; ``lost_lock`` flags the scenarios
-whose estimate is far from the truth over the steady window (phase error > 45° or mean frequency error
-> 10 %, or diverged: :mod:`jaxobs.metrics`, "lost lock"), ``lost_lock_count`` counts them per design;
-``settled`` flags the settling
+whose estimate is far from the truth over the steady window (phase error > 45° or
+mean frequency error > 10 %, or diverged: :mod:`jaxobs.metrics`, "lost lock"),
+``lost_lock_count`` counts them per design; ``settled`` flags the settling
 times that are censored at the horizon (False: not settled by the end of the
 run); ``gain`` holds each design's gains, dims ``("design", "gain_name")`` (NaN
 where a design has no such gain); the attributes hold the study's options and

@@ -283,14 +283,14 @@ def _run_study(name, designs, axes, opts, out: Path, quiet: bool) -> int:
     print(
         f"{'design':<16}"
         + "".join(f"{m + ' mean':>20}{'worst':>12}" for m in ("settling_freq", "ripple_freq", "rms_phase"))
-        + f"{'diverged':>10}"
+        + f"{'diverged':>10}{'lost lock':>11}"
     )
     for d in ds["design"].values:
         sel = ds.sel(design=d)
         row = f"{str(d):<16}"
         for m in ("settling_freq", "ripple_freq", "rms_phase"):
             row += f"{float(sel[m].mean()):>20.4g}{float(sel[m].max()):>12.4g}"
-        print(row + f"{int(sel['diverged'].sum()):>10}")
+        print(row + f"{int(sel['diverged'].sum()):>10}{int(sel['lost_lock_count']):>11}")
     print(f"results: {out / 'study.nc'}, {out / 'worst_cases.json'}, {len(figs)} figures")
     return 0
 

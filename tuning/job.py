@@ -994,9 +994,9 @@ def run_job(job: Job, out: Path, resume: bool = False, quiet: bool = False) -> d
     if "omega_n" not in job.values:
         nulls["omega_n"] = f"{job.component} has no nominal frequency omega_n"
     if gains["tuned"] is None:
-        nulls["gains.tuned"] = nulls["values.tuned"] = nulls["scores.tuned"] = nulls["linear.tuned"] = (
-            "status 'diverged': every design tried diverged in some tuning scenario, so nothing is tuned"
-        )
+        why = "status 'diverged': every design tried diverged in some tuning scenario, so nothing is tuned"
+        for key in ("gains.tuned", "values.tuned", "scores.tuned", "linear.tuned", "lost_lock_tuned_only"):
+            nulls[key] = why
     if info.bind is not None:
         result["values_note"] = "Rs, Lq and the PLL's initial speed are set per scenario from its estimated machine"
     if nulls:

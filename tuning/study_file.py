@@ -203,7 +203,7 @@ def _result(spec: dict, where: str, base: Path, family: tuple):
         if res["component"] not in family:
             raise ValueError(f"component {_show(res['component'])} is not one of {', '.join(family)}")
         return tuned_component(res)
-    except (ValueError, TypeError, KeyError, ArithmeticError) as e:
+    except (ValueError, TypeError, KeyError, AttributeError, ArithmeticError) as e:  # a malformed result
         raise JobError(f"{where}.result", str(e)) from None
 
 
