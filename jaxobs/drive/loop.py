@@ -195,15 +195,16 @@ class ClosedLoop(AbstractSystem):
         period that starts at t = 0 is the steady one (computed at t_{−1}, so
         rotated to θ_e0 + ω_e T_s/2 by the delay compensation), and the
         observer starts settled on that operating point (:meth:`_settled_observer`).
-        With the drive's I-f start-up the scenario starts from standstill (the
-        scenario's ``omega_m0``, 0 by default), all zeros, with the I-f angle at
+        With the drive's I-f start-up the scenario starts from standstill (whatever
+        its ``omega_m0``: an I-f start-up from a spinning rotor would be a different
+        problem, and a job's scenarios keep their speed for the observer's binding), all zeros, with the I-f angle at
         θ_e0 − 90°: the rotor parked on the current vector, where an alignment
         phase leaves it (:mod:`jaxobs.drive.control`, step 1).
         """
         sc = self.scenario
         foc = self.controller
         if self.drive.startup is not None:
-            plant = self.plant.init(omega_m0=sc.omega_m0, theta_e0=sc.theta_e0)
+            plant = self.plant.init(omega_m0=0.0, theta_e0=sc.theta_e0)
             z = jnp.zeros((), plant.x.dtype)
             obs = None if self.observer is None else self.observer.init()
             ctrl = foc.init(theta_f0=sc.theta_e0 - jnp.pi / 2)
