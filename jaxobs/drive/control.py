@@ -47,7 +47,10 @@ I-f start-up from standstill (:class:`IfStartup`; the design and its reasons):
    ``dwell`` seconds: |ω̂ − ω_f| ≤ speed_tol·ω_f, and the offset Δ = θ_f − θ̂ (the
    load angle when θ̂ = θ) steady, |Δ − Δ̄| ≤ tol with Δ̄ its low-pass over
    ``dwell``.  An observer that never agrees keeps the drive in I-f (synchronous,
-   open loop): a fail-safe, visible as ``mode`` staying 0.
+   open loop): a fail-safe, visible as ``mode`` staying 0.  (With the speed
+   seeding of ClosedLoop the speed test holds by construction and the angle test
+   decides: an unconverged flux estimate wanders against θ_f.)  Forward rotation
+   only: ω_switch > 0.
 4. *Bumpless hand-over.*  At the switch the controller moves to the given frame
    θ̂ with nothing stepping: the current references continue the I-f vector seen
    from θ̂ (i_q = I_f cos Δ, i_d = −I_f sin Δ); the speed integrator is pre-loaded
