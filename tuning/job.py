@@ -367,11 +367,14 @@ class Job:
 class DriveSpec:
     """``[drive]`` of a drive job: ``loop = "sensorless"`` (the default: the tuned observer closes the loop,
     from t = 0 after its settling phase, or from ``handover`` s on) or ``"sensored"`` (the encoder closes it and
-    the observer estimates beside it); ``settle`` (s): the observer's unscored settling phase before t = 0."""
+    the observer estimates beside it); ``settle`` (s): the observer's unscored settling phase before t = 0;
+    ``start``: ``"steady"`` (each scenario starts in its operating point) or ``"standstill"`` (from rest, by
+    the I-f start-up :meth:`jaxobs.drive.IfStartup.for_machine` of the job's machine, then its hand-over)."""
 
     loop: str = "sensorless"
     handover: float = 0.0
     settle: float = 0.2
+    start: str = "steady"
 
 
 # the physical range of every scenario axis (closed intervals unless noted), checked at --check time;
@@ -554,7 +557,7 @@ def parse_job(raw: dict) -> Job:
     drive = None
     if scen.signal == "drive":
         dt = _get(raw, "drive", "drive", dict, {})
-        _no_unknown(dt, ("loop", "handover", "settle"), "drive")
+        _no_unknown(dt, ("loop", "handover", "settle", "start"), "drive")
         loop = _get(dt, "loop", "drive.loop", str, "sensorless")
         if loop not in ("sensorless", "sensored"):
             raise JobError("drive.loop", f"must be 'sensorless' or 'sensored', got {_show(loop)}")
@@ -565,6 +568,7 @@ def parse_job(raw: dict) -> Job:
         if not 0.0 <= settle <= 10.0:
             raise JobError("drive.settle", f"must be in [0, 10] s, got {settle:g}")
         drive = DriveSpec(loop, handover, settle)
+        drive = _parse_start(dt, drive, scen)
     elif "drive" in raw:
         raise JobError("drive", f"applies to drive jobs (scenarios.signal = 'drive'), not {scen.signal!r} signals")
     holdout = None
@@ -745,12 +749,34 @@ def _drive_scenarios(names, combos, seed=0, t_event=0.0):
     return drive_scenarios(D.ipmsm_paper002(J=papers.BENCH_J_002), names, combos, seed=seed, t_event=t_event)
 
 
+def _parse_start(dt: dict, drive: DriveSpec, scen) -> DriveSpec:
+    """``[drive] start``: "steady" or "standstill" (the I-f start-up must fit in the horizon; it hands over
+    itself, so ``handover`` stays 0)."""
+    start = _get(dt, "start", "drive.start", str, "steady")
+    if start not in ("steady", "standstill"):
+        raise JobError("drive.start", f"must be 'steady' or 'standstill', got {_show(start)}")
+    drive = dataclasses.replace(drive, start=start)
+    if start == "standstill":
+        if drive.handover > 0:
+            raise JobError("drive.handover", "must be 0 with start = 'standstill' (the I-f start-up hands over)")
+        s = job_drive(drive).startup
+        t_if = float(s.omega_switch / s.accel + s.hold + s.dwell)
+        if scen.horizon <= t_if:
+            raise JobError(
+                "drive.start", f"'standstill' needs horizon > {t_if:.3g} s (the I-f start-up), got {scen.horizon:g}"
+            )
+    return drive
+
+
 def job_drive(spec: DriveSpec | None = None):
     """The drive a ``signal = "drive"`` job runs: FOC on the IPMSM bench; sensorless by default (``spec``)."""
     spec = DriveSpec() if spec is None else spec
     par = D.ipmsm_paper002(J=papers.BENCH_J_002)
     foc = D.FOC.imc(par, 2 * math.pi * papers.BENCH_CURRENT_HZ, 2 * math.pi * papers.BENCH_SPEED_HZ)
-    return D.Drive(foc, sensorless=spec.loop == "sensorless", handover=spec.handover, settle=spec.settle)
+    startup = D.IfStartup.for_machine(par) if spec.start == "standstill" else None  # [drive] start
+    return D.Drive(
+        foc, sensorless=spec.loop == "sensorless", handover=spec.handover, settle=spec.settle, startup=startup
+    )
 
 
 def build_scenarios(spec: ScenarioSpec, values: dict):
@@ -976,6 +1002,7 @@ def run_job(job: Job, out: Path, resume: bool = False, quiet: bool = False) -> d
         "job_sha256": job.sha256,
         "component": job.component,
         "loop": None if job.drive is None else job.drive.loop,
+        "start": None if job.drive is None else job.drive.start,
         "ts": float(obj.component.ts),
         "rule": rule_spec(obj.component.rule),
         "omega_n": float(job.values["omega_n"]) if "omega_n" in job.values else None,
