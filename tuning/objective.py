@@ -29,7 +29,7 @@ from jaxobs.simulate import OnSignal, simulate
 
 from .params import Parametrization
 
-__all__ = ["METRICS", "DRIVE_METRICS", "Term", "Objective", "aggregate"]
+__all__ = ["METRICS", "DRIVE_METRICS", "LOST_SYNC_DEG", "Term", "Objective", "aggregate"]
 
 
 # --------------------------------------------------------------------------
@@ -115,6 +115,18 @@ METRICS: dict[str, Callable] = {
 }
 # metrics that need the closed-loop drive (signal = "drive" jobs)
 DRIVE_METRICS = ("settling_position", "settling_speed", "rms_speed_steady", "speed_noise_rpm")
+
+# Loss of synchronism of a drive observer, a per-scenario flag (never fatal): its simulation diverged, or
+# |θ̂e − θe| exceeded this anywhere in the scored horizon [0, horizon) (the settling phase before t = 0 is
+# not scored).  jaxobs.drive_study flags the same threshold over its steady window only; a job has events
+# (speed and load steps), and a pole slip during one is a loss of synchronism even if the observer
+# locks again afterwards.
+LOST_SYNC_DEG = 90.0
+
+
+def _lost_sync(sol, sig):
+    err = jnp.abs(_position_err(sol, sig))
+    return jnp.max(jnp.where(jnp.isfinite(err), err, jnp.inf)) > math.radians(LOST_SYNC_DEG)
 
 
 @dataclass(frozen=True)
@@ -241,16 +253,23 @@ class Objective:
         def one(sig):
             comp = self.param.apply(self.component, theta)
             sol = self._simulate(comp, sig)
-            return {term.metric: METRICS[term.metric](sol, sig, self.ctx) for term in self.terms}, sol.ok
+            mets = {term.metric: METRICS[term.metric](sol, sig, self.ctx) for term in self.terms}
+            if self.drive is not None:
+                mets["lost_sync"] = _lost_sync(sol, sig)
+            return mets, sol.ok
 
         return jax.vmap(one)(scenarios)
 
     def per_scenario(self, theta, scenarios=None):
-        """Each scenario's metrics, its weighted total (the penalty where diverged) and the good mask — no gradient."""
+        """Each scenario's metrics, its weighted total (the penalty where diverged) and the good mask — no gradient.
+
+        On the drive the metrics hold ``lost_sync`` too: diverged, or |θ̂e − θe| > :data:`LOST_SYNC_DEG`."""
         scenarios = self.scenarios if scenarios is None else scenarios
         mets, ok = self._metrics(theta, scenarios)
         total = sum(term.weight * mets[term.metric] for term in self.terms)
         good = ok & jnp.isfinite(total)
+        if "lost_sync" in mets:
+            mets = {**mets, "lost_sync": mets["lost_sync"] | ~good}
         return mets, jnp.where(good, total, self.penalty), good
 
     def scores(self, theta, scenarios=None) -> dict:
@@ -264,6 +283,8 @@ class Objective:
             "objective": float(aggregate(total, self.agg, self.alpha, self.temperature)),
             "diverged": int(jnp.sum(~good)),
         }
+        if "lost_sync" in mets:  # drive observers: scenarios that lost synchronism (diverged ones included)
+            out["lost_sync"] = int(jnp.sum(mets["lost_sync"]))
         for term in self.terms:
             m = jnp.where(good, mets[term.metric], jnp.nan)
             if bool(jnp.any(good)):
