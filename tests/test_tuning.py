@@ -495,6 +495,8 @@ def test_bfgs_records_every_iteration_with_a_readable_reason(tmp_path, capsys):
     assert "has no roots" not in res["reason"] and "BFGS" in res["reason"] or res["status"] == "no_improvement"
     assert len(hist) >= 2 and hist[0]["iteration"] == 0
     assert res["gains"]["tuned"]["lam"] == pytest.approx(min(hist, key=lambda h: h["value"])["gains"]["lam"])
+    # a run that used its budget says so on stderr (and nothing else does)
+    assert ("budget ran out" in capsys.readouterr().err) == (res["status"] == "budget")
     path.write_text(text.replace("steps = 3", "steps = 3\nlearning_rate = 0.1"))
     assert main(["tune", str(path), "--check"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
@@ -633,7 +635,9 @@ def test_every_drive_component_may_be_tuned_by_a_job():
     """Every drive observer of papers 000 and 002 (but the pure integrator) is a job component whose
     observer gains, PLL or FLL included, are free gains; LESOs default to 002's IPMSM, flux observers to
     000's SPMSM."""
-    from tuning.job import COMPONENTS
+    import tomllib
+
+    from tuning.job import COMPONENTS, parse_job
 
     want = {
         "CLESO": {"omega0", "kp_pll", "ki_pll"},
@@ -650,3 +654,8 @@ def test_every_drive_component_may_be_tuned_by_a_job():
         cf = info.closed_form(None)
         assert set(cf) >= gains - {"K_r"}, comp
     assert "PureIntegratorFlux" not in COMPONENTS
+    # a LESO may run on 000's SPMSM (its model with Ld = Lq), asked for explicitly
+    raw = tomllib.loads((Path(__file__).parents[1] / "tuning" / "presets" / "cleso.toml").read_text())
+    raw["drive"]["machine"] = "spmsm000"
+    assert parse_job(raw).drive.machine == "spmsm000"
+    assert load_job(Path(__file__).parents[1] / "tuning" / "presets" / "cleso.toml").drive.machine == "ipmsm002"
