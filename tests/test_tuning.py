@@ -520,14 +520,14 @@ def test_report_names_scenarios_in_the_objectives_order():
 
 FLUX_DRIVE = """
 [job]
-name = "sosoifo-drive"
-component = "SecondOrderSOIFO"
-[gains.K1]
-init = 1.56
+name = "soifo-drive"
+component = "SOIFO"
+[gains.k]
+init = 1.414
 lower = 0.2
-upper = 6.0
+upper = 5.0
 [gains.lam]
-init = 0.61
+init = 0.5
 lower = 0.01
 upper = 5.0
 [drive]
@@ -552,14 +552,14 @@ steps = 2
 def _lpf(text: str) -> str:
     """FLUX_DRIVE as a job of 000's LPF observer: its cut-off and its PLL's kp free."""
     return (
-        text.replace('"SecondOrderSOIFO"', '"LPFFlux"')
-        .replace("[gains.K1]\ninit = 1.56\nlower = 0.2\nupper = 6.0", "[gains.omega_c]\ninit = 100.0\nupper = 1000.0")
-        .replace("[gains.lam]\ninit = 0.61\nlower = 0.01\nupper = 5.0", "[gains.kp_pll]\ninit = 177.7\nupper = 2000.0")
+        text.replace('"SOIFO"', '"LPFFlux"')
+        .replace("[gains.k]\ninit = 1.414\nlower = 0.2\nupper = 5.0", "[gains.omega_c]\ninit = 100.0\nupper = 1000.0")
+        .replace("[gains.lam]\ninit = 0.5\nlower = 0.01\nupper = 5.0", "[gains.kp_pll]\ninit = 177.7\nupper = 2000.0")
     )
 
 
 def test_flux_observer_drive_job_runs_sensorless_on_the_spmsm(tmp_path, capsys):
-    """A second-order SOIFO job with signal = "drive" closes the loop of 000's SPMSM (the component's default
+    """A SOIFO job with signal = "drive" closes the loop of 000's SPMSM (the component's default
     machine): result.json says loop "sensorless" and machine "spmsm000", scores every design with its
     lost-sync count, and scores.nc holds the per-scenario lost_sync flag; 2 solver steps end in "budget",
     which is warned about."""
@@ -570,7 +570,7 @@ def test_flux_observer_drive_job_runs_sensorless_on_the_spmsm(tmp_path, capsys):
     assert main(["tune", str(path), "--out", str(tmp_path / "o"), "--quiet"]) == 0
     res = _strict_json(tmp_path / "o" / "result.json")
     assert res["loop"] == "sensorless" and res["machine"] == "spmsm000"
-    assert res["gains"]["closed_form"]["K1"] == pytest.approx(papers.SECOND_ORDER_SOIFO_K1)
+    assert res["gains"]["closed_form"]["k"] == pytest.approx(papers.SOIFO_K)
     for design in ("initial", "closed_form", "tuned"):
         assert res["scores"][design]["diverged"] == 0 and res["scores"][design]["lost_sync"] == 0
         # rad: it holds the drive (a loss of synchronism is > 90°; 000 measured 0.15 rad peak at 2000 r/min)
@@ -598,7 +598,7 @@ def test_flux_observer_drive_job_runs_sensorless_on_the_spmsm(tmp_path, capsys):
             "must be one of ipmsm002, spmsm000",
         ),
         (lambda s: s.replace('loop = "sensorless"', "loop = 'sensorless'\nmachine = 3"), "drive.machine", "string"),
-        (lambda s: s.replace('"SecondOrderSOIFO"', '"PureIntegratorFlux"'), "job.component", "not tunable"),
+        (lambda s: s.replace('"SOIFO"', '"PureIntegratorFlux"'), "job.component", "not tunable"),
         (lambda s: s.replace('signal = "drive"', 'signal = "grid"'), "scenarios.signal", "'emf' or 'drive'"),
         # on EMF signals there is no drive: [drive] is refused
         (
