@@ -399,9 +399,10 @@ def _cmd_tune(args) -> int:
         for v in job.scenarios.axes.values():
             n *= len(v)
         n = job.scenarios.sample or n
+        drive = "" if job.drive is None else f", {job.drive.loop} drive on {job.drive.machine}"
         print(
-            f"{path}: OK — {job.component}, free gains {', '.join(g.name for g in job.gains)}, {n} scenarios, "
-            f"solver {job.solver.kind}"
+            f"{path}: OK — {job.component}, free gains {', '.join(g.name for g in job.gains)}, {n} scenarios"
+            f"{drive}, solver {job.solver.kind}"
         )
         return 0
     out = Path(args.out) if args.out else Path("out") / safe_name(job.name)
@@ -467,12 +468,14 @@ def _print_summary(result: dict, out: Path, timing: dict | None = None):
         print(f"{'linear model':<22}{heads}")
         for label, vals in rows:
             print(f"{label:<22}" + "".join(_fmt(v) for v in vals))
-    keys = [k for k in s["initial"] if k not in ("diverged", "lost_lock", "null_reason")]
+    keys = [k for k in s["initial"] if k not in ("diverged", "lost_lock", "lost_sync", "null_reason")]
     print(f"{'score':<22}{heads}")
     for k in keys:
         print(f"{k:<22}" + "".join(_fmt((s[d] or {}).get(k)) for d in designs))
     print(f"{'diverged scenarios':<22}" + "".join(_fmt((s[d] or {}).get("diverged"), ">14d") for d in designs))
     print(f"{'lost lock':<22}" + "".join(_fmt((s[d] or {}).get("lost_lock"), ">14d") for d in designs))
+    if "lost_sync" in s["initial"]:  # drive jobs: diverged or |position error| > 90 deg
+        print(f"{'lost sync scenarios':<22}" + "".join(_fmt((s[d] or {}).get("lost_sync"), ">14d") for d in designs))
     if "holdout" in result:
         h = result["holdout"]
         worst = {d: (h[d] or {}).get("per_scenario_worst") for d in designs}
@@ -489,6 +492,12 @@ def _print_summary(result: dict, out: Path, timing: dict | None = None):
     for name, b in result.get("at_bound", {}).items():
         msg = f"warning: tuned {name} = {b['value']:.6g} is within 1 % of its {b['bound']} bound {b['limit']:g}"
         print(f"jaxobs: {msg}", file=sys.stderr)
+    if result["status"] == "budget":
+        print(
+            f"jaxobs: warning: the solver's budget ran out before its stopping rule ({result['reason']}): "
+            "the tuned gains may not be an optimum (raise solver.steps)",
+            file=sys.stderr,
+        )
     print(f"results: {out / 'result.json'} (history.json, timing.json, scores.nc)")
 
 

@@ -186,11 +186,11 @@ def observer_from_result(path, *, gains: str = "tuned", notes: list | None = Non
         kw["rule"] = parse_rule(res["rule"], "result.json rule")
     else:
         notes.append(f"result.json has no 'rule': the {name} default {type(probe.rule).__name__} is used")
-    if info.bind is not None:
-        bound = ", ".join(
-            f"{k} = {float(getattr(probe, k)):g}" for k in ("Rs", "Lq", "omega0_pll") if hasattr(probe, k)
-        )
-        notes.append(f"the job sets Rs, Lq and the PLL's initial speed per scenario; exported with {bound}")
+    if info.bind is not None or res.get("loop") is not None:  # a drive job bound these per scenario
+        # LESOs: Rs, Lq and the PLL's initial speed; flux observers: Rs, L and the FLL's or PLL's omega0
+        keys = ("Rs", "Lq", "omega0_pll") if hasattr(probe, "Lq") else ("Rs", "L", "omega0")
+        bound = ", ".join(f"{k} = {float(getattr(probe, k)):g}" for k in keys)
+        notes.append(f"the job sets {', '.join(keys)} per scenario; exported with {bound}")
     diverged = res.get("scores", {}).get(gains, {}).get("diverged") if gains in res.get("scores", {}) else None
     if diverged:
         notes.append(f"the {gains} design diverged on {diverged} of the job's scenarios")
