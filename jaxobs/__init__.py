@@ -26,6 +26,7 @@ from .discretize import Held as Held
 from .discretize import Knots as Knots
 from .discretize import Tustin as Tustin
 from .measurements import DriveInput as DriveInput
+from .metrics import lost_lock_of as lost_lock_of
 from .observers import (
     CLESO as CLESO,
 )

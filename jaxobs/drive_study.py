@@ -26,12 +26,14 @@ Metrics per scenario, over the steady window [steady_from, horizon):
 ``pos_err_rms_deg`` and ``pos_err_max_deg`` (|θ̂e − θe|, electrical degrees),
 ``speed_err_rms_rpm`` (ω̂e/p − ωm, r/min), ``speed_noise_rpm`` (the
 sample-to-sample noise of ω̂e/p: rms of the first difference over √2) and
-``lost_sync``: the scenario diverged (a non-finite value) or its position error
-exceeded 90° in the steady window — a per-scenario flag, never fatal.  The
+``lost_lock``: the scenario diverged (a non-finite value) or its position error
+exceeded 90° (electrical) in the steady window — a per-scenario flag, never fatal, with the
+definition the FLL studies and the tuning share (:mod:`jaxobs.metrics`, "lost lock": 90° for a drive,
+where the current vector beyond it brakes the machine; ``diverged`` flags the non-finite ones alone).  The
 Dataset has dims ``("design", *axes)`` (a grid) or ``("design", "sample")``
 (a sample, the axes as coordinates), quantiles over the scenarios of every
 metric (``<metric>_q`` with a ``quantile`` coordinate 0.5, 0.95, 0.99, 1.0;
-lost-sync scenarios excluded from them and counted in ``lost_sync_count``).
+lost-lock scenarios excluded from them and counted in ``lost_lock_count``).
 """
 
 from __future__ import annotations
@@ -75,7 +77,6 @@ DRIVE_STUDY_METRICS = {
     "speed_noise_rpm": ("r/min", "speed-estimate noise: rms sample-to-sample change / sqrt(2)"),
 }
 QUANTILES = (0.5, 0.95, 0.99, 1.0)
-LOST_SYNC_DEG = 90.0
 
 
 def _version(name: str) -> str:
@@ -236,8 +237,8 @@ def run_drive_study(
             "speed_noise_rpm": M.rms(jnp.diff(w_hat) / math.sqrt(2.0), steady[1:]),
         }
         finite = sol.ok & jnp.all(jnp.stack([jnp.isfinite(v) for v in m.values()]))
-        lost = ~finite | (m["pos_err_max_deg"] > LOST_SYNC_DEG)
-        return m, lost
+        lost = ~finite | M.lost_lock(o.obs.theta, o.theta_e, steady, math.radians(M.LOCK_TOL_DRIVE_DEG))
+        return m, lost, ~finite
 
     results = {}
 
@@ -248,16 +249,18 @@ def run_drive_study(
         def run_chunk(obs, batch):
             return jax.vmap(lambda s: metrics_of(simulate(ClosedLoop(drive, bind_observer(obs, s), s), horizon)))(batch)
 
-        parts_m, parts_l = [], []
+        parts_m, parts_l, parts_d = [], [], []
         for start in range(0, n + pad, chunk):
             bar.stage(f"{dname} (compiling, then {chunk} scenarios a chunk)" if start == 0 else dname)
-            m, lost = run_chunk(obs, jax.tree.map(lambda x: x[start : start + chunk], scs))
+            m, lost, div = run_chunk(obs, jax.tree.map(lambda x: x[start : start + chunk], scs))
             parts_m.append(jax.tree.map(np.asarray, m))
             parts_l.append(np.asarray(lost))
+            parts_d.append(np.asarray(div))
             bar.update(min(chunk, n - start))
         results[dname] = (
             {k: np.concatenate([q[k] for q in parts_m])[:n] for k in DRIVE_STUDY_METRICS},
             np.concatenate(parts_l)[:n],
+            np.concatenate(parts_d)[:n],
         )
 
     bar.close()
@@ -279,12 +282,26 @@ def run_drive_study(
         q = np.stack([np.nanquantile(v, qs) if np.isfinite(v).any() else np.full(qs.shape, np.nan) for v in vals])
         data[f"{k}_q"] = (("design", "quantile"), q, {"units": unit, "long_name": f"{long_name}, quantiles"})
     lost = np.stack([results[d][1] for d in dnames])
-    data["lost_sync"] = (
+    data["lost_lock"] = (
         dims,
         lost.reshape((len(dnames), *shape)).astype(np.int8),
-        {"units": "1", "long_name": f"diverged or position error > {LOST_SYNC_DEG:g} deg in the steady window"},
+        {
+            "units": "1",
+            "long_name": f"lost lock: diverged, or position error > {M.LOCK_TOL_DRIVE_DEG:g} deg (electrical) "
+            "in the steady window (1: lost)",
+        },
     )
-    data["lost_sync_count"] = (("design",), lost.sum(axis=1).astype(np.int64), {"units": "1"})
+    data["lost_lock_count"] = (
+        ("design",),
+        lost.sum(axis=1).astype(np.int64),
+        {"units": "1", "long_name": "scenarios that lost lock (diverged ones included)"},
+    )
+    div = np.stack([results[d][2] for d in dnames])
+    data["diverged"] = (
+        dims,
+        div.reshape((len(dnames), *shape)).astype(np.int8),
+        {"units": "1", "long_name": "simulation diverged or a metric is not finite (1: its metrics are NaN)"},
+    )
     ds = xr.Dataset(data, coords={**coords, "quantile": qs})
     for k in names:
         ds[k].attrs["units"] = DRIVE_STUDY_AXES[k][0]

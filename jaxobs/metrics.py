@@ -48,6 +48,10 @@ __all__ = [
     "smooth_peak_to_peak",
     "settled",
     "lost_lock",
+    "lost_lock_of",
+    "LOCK_TOL_DEG",
+    "LOCK_TOL_DRIVE_DEG",
+    "LOCK_FREQ_TOL",
 ]
 
 
@@ -253,19 +257,94 @@ def smooth_settling_time(t, x, final, band, t_event=0.0, temperature=None, sharp
     return _nan_where(bad, jnp.maximum(smooth_max(score, temperature, mask=after), 0.0))
 
 
-def lost_lock(theta_hat, theta, window_mask, tol_rad=math.pi / 4):
-    """Whether an estimate has lost lock: |wrap(θ̂ − θ)| > ``tol_rad`` somewhere in the final window.
+# What "lost lock" means, one definition for simulations, tuning and studies (README, "Lost lock").
+# An estimate has lost lock when, over the final (steady) window of the run, it is far from the truth:
+# - its angle error |wrap(θ̂ − θ)| exceeds the tolerance at some sample: LOCK_TOL_DEG = 45° for an estimate
+#   on a signal (the FLL family on grid signals, flux observers on a back EMF): a locked FLL stays within a
+#   few degrees even under 001 Test C's distortion, a slip or a false lock sweeps through every angle;
+#   LOCK_TOL_DRIVE_DEG = 90° electrical for a drive observer in the closed loop: beyond 90° the current
+#   vector brakes the machine (synchronism is lost), while a drive with a biased estimate (the C-LESO's
+#   lag, 23° at 600 r/min; an Lq mismatch) still runs;
+# - or, on a signal, its mean frequency error over the window exceeds LOCK_FREQ_TOL = 10 % of the true
+#   frequency: there θ̂ comes from filters (θ̂ = atan2(qv', v')), not from integrating ω̂, so a wrong ω̂
+#   can sit beside a bounded angle error (a band-pass tuned to 115 rad/s fed 326.7 rad/s).  On the drive
+#   θ̂ is the PLL's (or the flux's) own angle, whose bounded error bounds the mean speed error already;
+# - or any of them is not finite (a diverged run has lost lock).
+LOCK_TOL_DEG = 45.0
+LOCK_TOL_DRIVE_DEG = 90.0
+LOCK_FREQ_TOL = 0.10
+
+
+def lost_lock(theta_hat, theta, window_mask, tol_rad=math.pi / 4, *, omega_hat=None, omega=None, freq_tol=None):
+    """Whether an estimate has lost lock: |wrap(θ̂ − θ)| > ``tol_rad`` somewhere in the final window
+    (and, with ``omega_hat``, ``omega`` and ``freq_tol``, the window's mean |ω̂ − ω| > ``freq_tol`` × mean |ω|).
 
     ``window_mask`` marks the final (steady) window, e.g. ``window_mask(t, t1 − 0.1)``.  A locked
     estimate stays within a few degrees of the truth there, even under distortion; one that slips
     cycles, locks to the wrong frequency or diverges (NaN counts as far) sweeps through every angle.
-    The default tolerance, 45° (π/4 rad), is far above any locked steady error of the FLL family
-    and far below a slip.  Returns a bool per scenario (leading axes); a concrete empty window
-    raises, a traced one gives True (lock cannot be confirmed).
+    The default tolerance, 45° (π/4 rad, :data:`LOCK_TOL_DEG`), is far above any locked steady error
+    of the FLL family and far below a slip (the definition: the comment above).  Returns a bool per
+    scenario (leading axes); a concrete empty window raises, a traced one gives True (lock cannot be
+    confirmed).
     """
     count = _window(window_mask, "lost_lock")
     near = jnp.abs(wrap(theta_hat - theta)) <= tol_rad  # False for NaN
-    return jnp.any(window_mask & ~near, axis=-1) | (count == 0)
+    lost = jnp.any(window_mask & ~near, axis=-1) | (count == 0)
+    if freq_tol is not None:
+        if omega_hat is None or omega is None:
+            raise ValueError("lost_lock: freq_tol needs omega_hat and omega")
+        n = jnp.maximum(count, 1)
+        err = jnp.sum(jnp.where(window_mask, omega_hat - omega, 0.0), axis=-1) / n
+        ref = jnp.sum(jnp.where(window_mask, jnp.abs(omega), 0.0), axis=-1) / n
+        lost = lost | ~(jnp.abs(err) <= freq_tol * ref)  # NaN: lost
+    return lost
+
+
+def lost_lock_of(sol, steady_from=None, *, signal=None, tol_deg=None, freq_tol=LOCK_FREQ_TOL):
+    """The lost-lock flag of a simulation (:func:`jaxobs.simulate` with ``SaveAll``): True where the
+    observer's estimate is far from the truth over the final window ``t >= steady_from`` (default: the
+    last quarter of the record); the definition and tolerances are :func:`lost_lock`'s (module
+    constants :data:`LOCK_TOL_DEG`, :data:`LOCK_TOL_DRIVE_DEG`, :data:`LOCK_FREQ_TOL`).
+
+    - an observer on a signal that reports its truth (``OnSignal`` on a ``GridSignal``): θ̂ against the
+      true phase (45°) and ω̂ against the true frequency (10 %);
+    - an observer on an ``EMFSignal`` (no truth in the outputs): pass ``signal=`` the EMFSignal; θ̂ against
+      its rotor-flux angle ω1 t + φ1 − π/2, ω̂ against ω1;
+    - the closed-loop drive (``ClosedLoop`` with an observer): θ̂e against θe (90° electrical).
+
+    Works under ``jit``/``vmap`` (a bool per scenario).  It reads the outputs only: the solution, and
+    ``simulate``, are unchanged.  ``tol_deg`` overrides the angle tolerance, ``freq_tol=None`` drops the
+    frequency test.
+    """
+    out = getattr(sol, "outputs", None)
+    if out is None:
+        raise ValueError("lost_lock_of: needs the trajectory (simulate with save=SaveAll(), the default)")
+    t = sol.t
+    if steady_from is None:
+        steady_from = t[..., 0] + 0.75 * (t[..., -1] - t[..., 0])
+        mask = t >= jnp.expand_dims(steady_from, -1)
+    else:
+        mask = t >= steady_from
+    obs = getattr(out, "obs", None)
+    if obs is None or not hasattr(obs, "theta"):
+        raise ValueError("lost_lock_of: the outputs hold no observer estimate (obs.theta): nothing to lock")
+    if hasattr(out, "theta_e"):  # the closed-loop drive's DriveOutput
+        tol = LOCK_TOL_DRIVE_DEG if tol_deg is None else tol_deg
+        return lost_lock(obs.theta, out.theta_e, mask, math.radians(tol))
+    tol = math.radians(LOCK_TOL_DEG if tol_deg is None else tol_deg)
+    truth = getattr(out, "truth", None)
+    if truth is not None:
+        theta, omega = truth.theta, truth.omega
+    elif signal is not None and hasattr(signal, "flux_angle"):
+        theta = signal.flux_angle(t)
+        omega = jnp.broadcast_to(jnp.expand_dims(jnp.asarray(signal.omega1), -1), jnp.shape(obs.omega))
+    else:
+        raise ValueError(
+            "lost_lock_of: the signal reports no truth; pass signal= an EMFSignal (its flux angle is the truth)"
+        )
+    if freq_tol is None:
+        return lost_lock(obs.theta, theta, mask, tol)
+    return lost_lock(obs.theta, theta, mask, tol, omega_hat=obs.omega, omega=omega, freq_tol=freq_tol)
 
 
 def smooth_peak_to_peak(x, mask, temperature):

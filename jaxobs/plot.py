@@ -288,7 +288,7 @@ def study_figures(ds, out_dir):
 
 def drive_study_figure(ds, path):
     """Empirical CDFs of every drive-study metric over the scenarios, all designs on one axis per metric
-    (one scale per metric across designs, units on the axes), lost-sync counts in the legend."""
+    (one scale per metric across designs, units on the axes), lost-lock counts in the legend."""
     metrics = [v[: -len("_q")] for v in ds.data_vars if v.endswith("_q")]  # the metrics with quantiles
     fig, axs = _subplots(1, len(metrics), figsize=(4.2 * len(metrics), 3.6), squeeze=False)
     for ax, m in zip(axs[0], metrics):
@@ -296,9 +296,9 @@ def drive_study_figure(ds, path):
         for d in ds["design"].values:
             v = np.sort(np.asarray(ds[m].sel(design=d)).ravel())
             v = v[np.isfinite(v)]
-            lost = int(ds["lost_sync_count"].sel(design=d))
+            lost = int(ds["lost_lock_count"].sel(design=d))
             if v.size:
-                ax.step(v, np.arange(1, v.size + 1) / v.size, where="post", label=f"{d} (lost sync: {lost})")
+                ax.step(v, np.arange(1, v.size + 1) / v.size, where="post", label=f"{d} (lost lock: {lost})")
         ax.set_xlabel(f"{m} ({unit})")
         ax.set_ylabel("fraction of scenarios")
         ax.set_title(long_name, fontsize=8)

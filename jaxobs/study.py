@@ -12,7 +12,10 @@ stderr that names each design's compilation; a callable: ``progress(done, total)
 variable per metric, dims ``("design", *axes)`` (or ``("design", "sample")``
 with the axes as coordinates along ``sample``), and a ``diverged`` flag: a
 diverging scenario is reported, never fatal.  Every variable and coordinate
-carries CF-style ``units`` and ``long_name``; ``settled`` flags the settling
+carries CF-style ``units`` and ``long_name``; ``lost_lock`` flags the scenarios
+whose estimate is far from the truth over the steady window (phase error > 45° or
+mean frequency error > 10 %, or diverged: :mod:`jaxobs.metrics`, "lost lock"),
+``lost_lock_count`` counts them per design; ``settled`` flags the settling
 times that are censored at the horizon (False: not settled by the end of the
 run); ``gain`` holds each design's gains, dims ``("design", "gain_name")`` (NaN
 where a design has no such gain); the attributes hold the study's options and
@@ -67,6 +70,10 @@ AXIS_META = {
     "phase_deg": ("degree", "initial phase"),
     "noise": ("1", "white measurement noise standard deviation (p.u.)"),
 }
+LOST_LOCK_LONG_NAME = (
+    f"lost lock: diverged, or in the steady window a phase error > {M.LOCK_TOL_DEG:g} deg or a mean frequency "
+    f"error > {100 * M.LOCK_FREQ_TOL:g} % (1: lost)"
+)
 GAIN_NAMES = ("k", "k1", "k2", "lam")
 GAIN_UNITS = {"k": "1", "k1": "1", "k2": "1", "lam": "rad2 s-2"}  # jaxobs.observers.fll: λ in rad²/s²
 
@@ -88,6 +95,17 @@ def _metrics(sol, t_event: float, steady_from: float, band_hz: float, n_period: 
         "rms_phase": M.rms(perr, steady),
         "itae_freq": M.itae(t, ferr, t_event),
         "iae_phase": M.iae(t, perr, t_event),
+        # far from the truth over the steady window: phase error > 45° or mean frequency error > 10 %
+        # (jaxobs.metrics, "lost lock")
+        "lost_lock": M.lost_lock(
+            out.obs.theta,
+            out.truth.theta,
+            steady,
+            math.radians(M.LOCK_TOL_DEG),
+            omega_hat=out.obs.omega,
+            omega=out.truth.omega,
+            freq_tol=M.LOCK_FREQ_TOL,
+        ),
     }
 
 
@@ -160,7 +178,7 @@ def run_study(
             parts_ok.append(np.asarray(ok))
             bar.update(min(chunk, n - start))
         results[dname] = (
-            {k: np.concatenate([p[k] for p in parts_m])[:n] for k in (*STUDY_METRICS, "settled")},
+            {k: np.concatenate([p[k] for p in parts_m])[:n] for k in (*STUDY_METRICS, "settled", "lost_lock")},
             np.concatenate(parts_ok)[:n],
         )
 
@@ -196,6 +214,17 @@ def run_study(
         dims,
         np.stack([(~results[d][1]).astype(np.int8).reshape(shape) for d in dnames]),
         _meta("1", "simulation diverged or a metric is not finite (1: its metrics are NaN)"),
+    )
+    lost = np.stack([(results[d][0]["lost_lock"] | ~results[d][1]).reshape(shape) for d in dnames])
+    data["lost_lock"] = (
+        dims,
+        lost.astype(np.int8),
+        _meta("1", LOST_LOCK_LONG_NAME),
+    )
+    data["lost_lock_count"] = (
+        ("design",),
+        lost.reshape(len(dnames), -1).sum(axis=1).astype(np.int64),
+        _meta("1", "scenarios that lost lock (diverged ones included)"),
     )
     gain = [[float(getattr(obs, g)) if hasattr(obs, g) else np.nan for g in gains_present] for obs in designs.values()]
     data["gain"] = (
@@ -243,16 +272,34 @@ def _provenance() -> dict:
 
 
 def worst_cases(ds, metric: str, k: int = 5):
-    """The ``k`` worst scenarios per design for ``metric``: dicts with the design, the value and the coordinates."""
+    """The ``k`` worst scenarios per design for ``metric``: dicts with the design, the value, the coordinates
+    and the flags ``diverged`` and ``lost_lock``.
+
+    Diverged scenarios (no finite metric) are the worst of all: they come first, with ``value`` None and
+    ``diverged`` True, never dropped; then the finite values, largest first.
+    """
     out = []
+    has_div = "diverged" in ds
+    has_lost = "lost_lock" in ds
     for d in ds["design"].values:
-        df = ds[metric].sel(design=d).to_dataframe(name="value").reset_index()
-        df = df.dropna(subset=["value"]).sort_values("value", ascending=False).head(k)
+        sel = ds.sel(design=d)
+        df = sel[metric].to_dataframe(name="value").reset_index()
+        df["diverged"] = sel["diverged"].values.reshape(-1).astype(bool) if has_div else df["value"].isna()
+        df["diverged"] |= df["value"].isna()
+        if has_lost:
+            df["lost_lock"] = sel["lost_lock"].values.reshape(-1).astype(bool) | df["diverged"]
+        # diverged first (in scenario order), then the finite values, largest first
+        df["_rank"] = np.where(df["diverged"], np.inf, df["value"].fillna(-np.inf))
+        df = df.sort_values("_rank", ascending=False, kind="stable").head(k).drop(columns="_rank")
         for rec in df.to_dict("records"):
-            rec = {
-                key: (float(v) if isinstance(v, (int, float, np.floating, np.integer)) else str(v))
-                for key, v in rec.items()
-            }
-            rec.update(design=str(d), metric=metric)
-            out.append(rec)
+            item = {}
+            for key, v in rec.items():
+                if key in ("diverged", "lost_lock"):
+                    item[key] = bool(v)
+                elif isinstance(v, (int, float, np.floating, np.integer)) and not isinstance(v, (bool, np.bool_)):
+                    item[key] = float(v) if math.isfinite(float(v)) else None
+                else:
+                    item[key] = str(v)
+            item.update(design=str(d), metric=metric)
+            out.append(item)
     return out

@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 
 import jaxobs
-from tuning.cli import build_parser, load_study, main
+from tuning.cli import BODE_FILES, DEMO_FILES, REPRODUCE_FILES, build_parser, load_study, main
 from tuning.results import load_result, tuned_component
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -132,6 +132,7 @@ def test_demo_json_rows_and_figure(tmp_path, capsys):
     a = [r for r in rows if r["test"] == "A"]
     assert all(math.isfinite(r["settle_cycles"]) for r in a)
     assert (tmp_path / "fll_tests_A_E.png").stat().st_size > 10_000
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(DEMO_FILES)
 
 
 def test_bad_arguments_exit_with_one_line():
@@ -169,10 +170,18 @@ def test_closed_form_bad_options_exit_2(capsys):
     assert "zeta" in capsys.readouterr().err
 
 
-def test_bode_figures(tmp_path):
+def test_bode_figures(tmp_path, capsys):
     assert main(["bode", "--out", str(tmp_path)]) == 0
     names = sorted(p.name for p in tmp_path.iterdir())
     assert names == ["bode_fll_open_loop_001_fig14.png", "bode_flux_observers_000_fig5.png", "bode_lesos_002_fig4.png"]
+    assert names == sorted(BODE_FILES)  # the files the lock protects are the files written
+    # a second run keeps them without --force, and replaces them with it
+    before = {p.name: p.stat().st_mtime_ns for p in tmp_path.iterdir()}
+    assert main(["bode", "--out", str(tmp_path)]) == 2
+    assert "--force" in capsys.readouterr().err
+    assert main(["bode", "--out", str(tmp_path), "--force"]) == 0
+    after = {p.name: p.stat().st_mtime_ns for p in tmp_path.iterdir()}
+    assert set(after) == set(before) and all(after[n] > before[n] for n in before)
 
 
 @pytest.mark.slow
@@ -185,7 +194,7 @@ def test_reproduce_flux_quick_json(tmp_path, capsys):
     lpf = by[("du_alpha = 5 V at 1000 r/min", "LPF", "flux_offset")]
     assert lpf["paper"] == 0.05 and lpf["ours"] == pytest.approx(0.05, rel=0.02)
     assert by[("speed 400-2000-400 r/min", "second-order SOIFO", "max_abs")]["ours"] < 0.2
-    assert len(list(tmp_path.glob("*.png"))) == 5
+    assert sorted(p.name for p in tmp_path.glob("*.png")) == sorted(REPRODUCE_FILES["flux"])
 
 
 def _result_json(tmp_path, component="SOGIFLLWIF", tuned=None):
@@ -215,7 +224,7 @@ def test_study_design_from_a_tuning_result(tmp_path):
 
 def test_study_result_errors_are_one_line(tmp_path, capsys):
     st = tmp_path / "s.toml"
-    for content, expect in ((None, "cannot read"), ("{", "not valid JSON"), ('{"job": {}}', "no 'component'")):
+    for content, expect in ((None, "no such file"), ("{", "not valid JSON"), ('{"job": {}}', "no 'component'")):
         res = tmp_path / "r.json"
         if content is None:
             res.unlink(missing_ok=True)
@@ -229,3 +238,18 @@ def test_study_result_errors_are_one_line(tmp_path, capsys):
     st.write_text(f'[designs.a]\nresult = "{tmp_path / "result.json"}"\n[axes]\ndc = [0.0]\n')
     assert main(["study", str(st)]) == 2
     assert "gains.tuned.zz" in capsys.readouterr().err
+
+
+def test_study_result_paths_are_relative_to_the_study_file(tmp_path, monkeypatch):
+    """``result = "result.json"`` means the file beside the study file, whatever the working directory."""
+    studies, cwd = tmp_path / "studies", tmp_path / "cwd"
+    studies.mkdir()
+    cwd.mkdir()
+    _result_json(studies, tuned={"lam": 9000.0})
+    _result_json(cwd, tuned={"lam": 5000.0})  # another result in the working directory: never read
+    (studies / "s.toml").write_text('[designs.tuned]\nresult = "result.json"\n[axes]\ndc = [0.0]\n')
+    monkeypatch.chdir(cwd)
+    for path in (studies / "s.toml", Path("..") / "studies" / "s.toml"):
+        assert float(load_study(path)[1]["tuned"].lam) == 9000.0
+    (studies / "t.toml").write_text(f'[designs.tuned]\nresult = "{cwd / "result.json"}"\n[axes]\ndc = [0.0]\n')
+    assert float(load_study(studies / "t.toml")[1]["tuned"].lam) == 5000.0  # an absolute path as it is

@@ -334,3 +334,28 @@ def test_sensorless_drive_starts_locked():
     err = np.degrees(np.asarray(metrics.wrap(o.obs.theta - o.theta_e)))
     assert np.max(np.abs(err)) < 0.1, np.max(np.abs(err))
     assert np.max(np.abs(np.asarray(o.omega_m) / (600 * D.RPM) - 1)) < 1e-3
+
+
+def test_ok_is_false_for_a_non_finite_observer_or_plant_signal():
+    """``sol.ok`` (SaveAll and SaveFinal) is False when the observer's estimate is NaN — even in a sensored
+    drive, where it never feeds back and the plant runs on — or when the plant's signals are (a NaN inertia,
+    which the constructors would refuse, set under jit); True for the healthy run beside them."""
+    par = D.ipmsm_paper002()
+    drive = D.Drive(D.FOC.imc(par, 2 * math.pi * 300, 2 * math.pi * 5), settle=0.0)  # sensored
+    obs = jaxobs.FALESO(par.Rs, par.Lq)
+    sc = D.Scenario(par, omega_m0=600 * D.RPM, speed_ref=D.Profile.constant(600 * D.RPM))
+
+    @jax.jit
+    def run(k1, J):
+        o = eqx.tree_at(lambda o: o.k1, obs, k1)
+        s = eqx.tree_at(lambda s: s.par.J, sc, J)
+        loop = D.ClosedLoop(drive, o, s)
+        full = jaxobs.simulate(loop, 0.003)
+        return full.ok, jaxobs.simulate(loop, 0.003, save=jaxobs.SaveFinal()).ok, jnp.isfinite(full.outputs.omega_m)
+
+    k1, J = jnp.asarray(float(obs.k1)), jnp.asarray(float(sc.par.J))
+    assert [bool(x) for x in run(k1, J)[:2]] == [True, True]
+    ok_all, ok_final, plant_finite = run(jnp.nan, J)  # the observer diverges, the plant does not
+    assert bool(jnp.all(plant_finite)) and not bool(ok_all) and not bool(ok_final)
+    ok_all, ok_final, _ = run(k1, jnp.nan)
+    assert not bool(ok_all) and not bool(ok_final)

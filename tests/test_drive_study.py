@@ -25,7 +25,7 @@ def test_grid_study_dims_quantiles_and_the_papers_ordering():
     ds = run_drive_study(DESIGNS, axes, machine=PAR, drive=DRIVE, horizon=0.06, chunk_size=8)
     assert ds["pos_err_rms_deg"].dims == ("design", "speed_rpm", "dRs", "dLq")
     assert list(ds["quantile"].values) == list(QUANTILES)
-    assert int(ds["lost_sync_count"].sum()) == 0
+    assert int(ds["lost_lock_count"].sum()) == 0
     c, fa = (ds["pos_err_rms_deg"].sel(design=d) for d in ("C-LESO", "FA-LESO"))
     assert bool((fa < c).all())
     # the C-LESO's steady lag is its transfer function's phase: 11.4° at 300 r/min, 22.6° at 600 (README)
@@ -77,7 +77,7 @@ def test_cli_drive_study_writes_netcdf_with_the_axes(tmp_path, capsys):
     ds = xr.open_dataset(out / "study.nc", engine="scipy")
     assert {"dRs", "dLq"} <= set(ds["pos_err_rms_deg"].dims) and "quantile" in ds.coords
     assert (out / "drive_study.png").stat().st_size > 10_000
-    assert "lost sync" in capsys.readouterr().out
+    assert "lost lock" in capsys.readouterr().out
     bad = tmp_path / "bad.toml"
     bad.write_text(_small_preset(tmp_path).read_text().replace("[axes]", "[axes]\nhorizn = [1.0]"))
     assert main(["study", str(bad), "--out", str(out)]) == 2

@@ -69,6 +69,7 @@ LAYERS = [
     ("tuning.structure",),
     ("tuning.job",),
     ("tuning.results",),
+    ("tuning.study_file",),
     ("tuning.export",),
     ("tuning",),
     # the command line: the top layer (`jaxobs ...` and `python -m jaxobs`)

@@ -129,3 +129,52 @@ def test_lost_lock():
         M.lost_lock(theta, theta, jnp.zeros_like(w))
     batch = jnp.stack([theta, slipping])
     np.testing.assert_array_equal(np.asarray(jax.jit(M.lost_lock)(batch, theta, w)), [False, True])
+
+
+def test_lost_lock_frequency_test_catches_a_wrong_frequency_beside_a_bounded_angle():
+    """On a signal θ̂ comes from filters, so a wrong ω̂ can sit beside a bounded angle error: the mean
+    frequency error (> LOCK_FREQ_TOL of the true one) flags it; a locked ripple does not."""
+    t = jnp.linspace(0.0, 1.0, 1001)
+    theta = 2 * jnp.pi * 50 * t
+    w = M.window_mask(t, 0.9)
+    omega = jnp.full_like(t, 2 * jnp.pi * 50)
+    kw = dict(omega=omega, freq_tol=M.LOCK_FREQ_TOL)
+    ripple = omega * (1 + 0.3 * jnp.sin(2 * jnp.pi * 100 * t))  # 30 % ripple, mean right: locked
+    assert not bool(M.lost_lock(theta + 0.1, theta, w, omega_hat=ripple, **kw))
+    assert bool(M.lost_lock(theta + 0.1, theta, w, omega_hat=0.85 * omega, **kw))  # 15 % low: lost
+    assert not bool(M.lost_lock(theta + 0.1, theta, w, omega_hat=0.95 * omega, **kw))
+    assert bool(M.lost_lock(theta, theta, w, omega_hat=omega.at[-1].set(jnp.nan), **kw))
+    with pytest.raises(ValueError, match="omega_hat"):
+        M.lost_lock(theta, theta, w, freq_tol=0.1)
+
+
+def test_lost_lock_of_a_simulation_under_jit():
+    """jaxobs.lost_lock_of(sol): the closed-form SOGI-FLL keeps lock after a 2 Hz step; k = 20, λ = 1e4 (which
+    the constructor would refuse, set under jit) settles at 115 rad/s against the true 326.7 with ok = True:
+    lost lock.  A flux observer on an EMFSignal is checked against the signal's flux angle."""
+    import equinox as eqx
+
+    import jaxobs
+    from jaxobs import linear
+
+    sig = jaxobs.GridSignal(t_event=0.1, freq_step=2.0)
+    good = linear.sogi_fll_closed_form()
+
+    @jax.jit
+    def run(k, lam):
+        sol = jaxobs.simulate(jaxobs.OnSignal(eqx.tree_at(lambda o: (o.k, o.lam), good, (k, lam)), sig), 0.4)
+        return jaxobs.lost_lock_of(sol), jaxobs.lost_lock_of(sol, 0.3, freq_tol=None), sol.ok
+
+    assert [bool(x) for x in run(good.k, good.lam)] == [False, False, True]
+    lost, lost_angle, ok = run(20.0, 1e4)
+    assert bool(ok) and bool(lost) and bool(lost_angle)  # finite, "ok", and far from the truth
+    # a flux observer on a back EMF (no truth in the outputs): the signal's flux angle is the truth
+    emf = jaxobs.signals.EMFSignal(A1=100.0, omega1=2 * math.pi * 50)
+    obs = jaxobs.SOIFO(Rs=0.0, L=1.0, k=1.414, lam=0.5, omega0=2 * math.pi * 50)
+    sol = jaxobs.simulate(jaxobs.OnSignal(obs, emf), 0.3)
+    assert not bool(jaxobs.lost_lock_of(sol, signal=emf))
+    assert bool(jaxobs.lost_lock_of(sol, signal=jaxobs.signals.EMFSignal(A1=100.0, omega1=2 * math.pi * 40)))
+    with pytest.raises(ValueError, match="EMFSignal"):
+        jaxobs.lost_lock_of(sol)
+    with pytest.raises(ValueError, match="SaveAll"):
+        jaxobs.lost_lock_of(jaxobs.simulate(jaxobs.OnSignal(obs, emf), 0.01, save=jaxobs.SaveFinal()))

@@ -8,9 +8,10 @@ import socket
 import jax.numpy as jnp
 import numpy as np
 import pytest
+import xarray as xr
 
 from tuning import solvers
-from tuning.cli import main
+from tuning.cli import _print_summary, main
 from tuning.outdir import LOCK, OutDir, OutError, safe_name
 from tuning.params import GainSpec, Parametrization
 from tuning.solvers import CheckpointError, SolverConfig, run_solver
@@ -94,6 +95,18 @@ def test_cli_refuses_a_locked_or_used_out_with_one_line(tmp_path, capsys, monkey
     monkeypatch.chdir(tmp_path)
     assert main(["tune", str(path), "--quiet"]) == 0
     assert (tmp_path / "out" / "_.._escape" / "result.json").exists()
+    # lost lock, per design and per scenario: the closed form and the tuned design hold it
+    res = json.loads((tmp_path / "out" / "_.._escape" / "result.json").read_text())
+    assert [res["scores"][d]["lost_lock"] for d in ("initial", "closed_form", "tuned")] == [0, 0, 0]
+    assert res["lost_lock_tuned_only"] == {"tuning": 0}
+    scores = xr.load_dataset(tmp_path / "out" / "_.._escape" / "scores.nc", engine="scipy")
+    assert scores["lost_lock"].dtype == np.int8 and scores["lost_lock"].dims == scores["total"].dims
+    assert int(scores["lost_lock"].sum()) == 0
+    # a tuned design that loses lock where the closed form holds it is a warning
+    capsys.readouterr()
+    _print_summary(dict(res, lost_lock_tuned_only={"tuning": 2}), tmp_path)
+    warn = [ln for ln in capsys.readouterr().err.splitlines() if "lost lock" in ln]
+    assert len(warn) == 1 and "2 tuning scenarios where the closed form holds it" in warn[0]
     assert not (tmp_path.parent / "escape").exists()
     capsys.readouterr()
     # --resume on another job's checkpoint: one line, exit 2
@@ -191,3 +204,41 @@ def test_resume_refuses_foreign_and_corrupt_checkpoints(tmp_path, capsys):
     ckpt.unlink()
     assert _run(ckpt, resume=True) == ref  # nothing to resume: one line, a fresh start
     assert "no checkpoint" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(
+    "argv, product",
+    [
+        (["demo"], "fll_tests_A_E.png"),
+        (["bode"], "bode_lesos_002_fig4.png"),
+        (["reproduce", "flux", "--quick"], "flux_circles_400rpm.png"),
+        (["reproduce", "leso"], "leso_speed_ramp.png"),
+        (["export", "--design", "wif"], "observer.c"),
+    ],
+    ids=lambda v: " ".join(v) if isinstance(v, list) else v,
+)
+def test_every_writing_command_takes_the_lock_and_keeps_results(tmp_path, capsys, argv, product):
+    """demo, bode, reproduce and export, as tune and study: a second process on the same --out refuses in one
+    line; a result already there is kept without --force; a symlinked --out or result is refused — each
+    before any work (these runs would take seconds to minutes: they return at once, writing nothing)."""
+    out = tmp_path / "o"
+    out.mkdir()
+
+    def refused(args, what):
+        assert main([*argv, *args]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and err[0].startswith("jaxobs: error: ") and what in err[0], err
+
+    (out / LOCK).write_text(f"1 {socket.gethostname()}\n")  # pid 1 is alive: another process holds it
+    refused(["--out", str(out)], "in use by process 1")
+    refused(["--out", str(out), "--force"], "in use by process 1")
+    (out / LOCK).unlink()
+    (out / product).write_text("mine")
+    refused(["--out", str(out)], "use --force")
+    assert (out / product).read_text() == "mine" and not (out / LOCK).exists()
+    (out / product).unlink()
+    (out / product).symlink_to(tmp_path / "elsewhere")
+    refused(["--out", str(out), "--force"], "symlink")
+    (tmp_path / "link").symlink_to(out)
+    refused(["--out", str(tmp_path / "link")], "symlink")
+    assert sorted(p.name for p in out.iterdir()) == [product] and not (tmp_path / "elsewhere").exists()

@@ -34,6 +34,13 @@ PRESET_VALUES = [
     ("recording_wif", "k1", papers.WIF_K1, None),
     ("recording_wif", "k2", papers.WIF_K2, None),
     ("recording_wif", "lam", papers.WIF_LAM, None),
+    ("sosoifo", "lam", papers.SECOND_ORDER_SOIFO_K1**3 / (2 * papers.SECOND_ORDER_SOIFO_K2), 2),  # lam = K1³/(2K2)
+    ("soifo_noise", "k", papers.SOIFO_K, None),
+    ("soifo_noise", "lam", papers.SOIFO_K**2 / 4, 3),
+    ("gileso", "omega0", papers.LESO_OMEGA0, 1),
+    ("gileso", "omega_c", papers.GILESO_OMEGA_C, 5),
+    ("gileso", "kp_pll", _PLL_KP, 1),
+    ("gileso", "ki_pll", _PLL_KI, 1),
     ("cleso", "omega0", papers.LESO_OMEGA0, 1),
     ("faleso", "k1", papers.FALESO_K1, 4),
     ("faleso", "k2", papers.FALESO_K2, 3),

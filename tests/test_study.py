@@ -40,7 +40,7 @@ def test_dims_coords_and_values_match_single_runs(small_study):
         cell = ds.sel(design=dname, freq_step=fs, dc=dc, phase_jump_deg=pj)
         assert float(cell["ripple_freq"]) == pytest.approx(ripple, rel=1e-9, abs=1e-12)
         assert float(cell["rms_phase"]) == pytest.approx(rms, rel=1e-9, abs=1e-12)
-    assert int(ds["diverged"].sum()) == 0
+    assert int(ds["diverged"].sum()) == 0 and int(ds["lost_lock"].sum()) == 0  # the closed forms hold lock
     # the SOGI-FLL's dc ripple is the worst case of the study
     worst = worst_cases(ds, "ripple_freq", 1)
     assert worst[0]["design"] == "SOGI-FLL" and worst[0]["dc"] == 0.1
@@ -173,3 +173,51 @@ def test_noise_axis_is_white_in_time_and_driven_by_the_seed():
     assert abs(np.corrcoef(a[1:], a[:-1])[0, 1]) < 0.1  # white: no sample-to-sample correlation
     np.testing.assert_array_equal(a, seen(0))
     assert not np.allclose(a, b)
+
+
+def test_lost_lock_and_diverged_scenarios_are_flagged_and_listed_first():
+    """A false lock (k = 20, λ = 1e4: finite, 115 rad/s against 326.7) is flagged lost_lock but not diverged;
+    a NaN gain diverges (lost_lock too); the closed form holds lock.  worst_cases lists the diverged first."""
+    import equinox as eqx
+
+    good = linear.sogi_fll_closed_form()
+    designs = {
+        "closed form": good,
+        "false lock": eqx.tree_at(lambda o: (o.k, o.lam), good, (20.0, 1e4)),  # the constructor would refuse
+        "nan": eqx.tree_at(lambda o: o.lam, good, float("nan")),
+    }
+    ds = run_study(designs, {"freq_step": [-1.0, 2.0]}, progress=False)
+    assert ds["lost_lock"].dtype == np.int8 and ds["lost_lock"].dims == ("design", "freq_step")
+    assert list(ds["lost_lock_count"].values) == [0, 2, 2]
+    assert list(ds["diverged"].sum("freq_step").values) == [0, 0, 2]
+    assert np.all(np.isfinite(ds["rms_phase"].sel(design="false lock")))  # finite, yet far from the truth
+    worst = worst_cases(ds, "rms_phase", 2)
+    assert [(w["design"], w["diverged"], w["lost_lock"]) for w in worst] == [
+        ("closed form", False, False),
+        ("closed form", False, False),
+        ("false lock", False, True),
+        ("false lock", False, True),
+        ("nan", True, True),
+        ("nan", True, True),
+    ]
+    assert worst[-1]["value"] is None and json.loads(json.dumps(worst, allow_nan=False)) == worst
+
+
+def test_worst_cases_put_diverged_scenarios_first():
+    """Diverged scenarios (NaN metric) come first, flagged, value None; then the finite values, largest first."""
+    vals = np.array([[0.3, np.nan, 0.9, 0.1]])
+    ds = xr.Dataset(
+        {
+            "m": (("design", "dc"), vals),
+            "diverged": (("design", "dc"), np.isnan(vals).astype(np.int8)),
+            "lost_lock": (("design", "dc"), np.array([[0, 1, 1, 0]], np.int8)),
+        },
+        coords={"design": ["a"], "dc": [0.0, 0.1, 0.2, 0.3]},
+    )
+    w = worst_cases(ds, "m", 3)
+    assert [(r["dc"], r["value"], r["diverged"], r["lost_lock"]) for r in w] == [
+        (0.1, None, True, True),
+        (0.2, 0.9, False, True),
+        (0.0, 0.3, False, False),
+    ]
+    assert len(worst_cases(ds, "m", 10)) == 4  # nothing dropped

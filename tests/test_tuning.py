@@ -110,6 +110,20 @@ def test_diverging_candidates_give_a_finite_penalty_and_gradient():
     assert float(jax.jvp(obj.value, (param.theta0(),), (jnp.ones(1),))[1]) == pytest.approx(float(g_ok[0]))
 
 
+def test_per_scenario_scores_flag_a_lost_lock_that_does_not_diverge():
+    """k = 20 with λ = 1e4 settles at 115 rad/s against the true 326.7: finite (not diverged, its score a
+    number), but lost lock in both scenarios; k = 0.7 holds lock.  summarize counts them (diverged included)."""
+    sigs = jaxobs.stack([jaxobs.GridSignal(t_event=0.1, freq_step=f) for f in (-1.0, 2.0)])
+    comp = jaxobs.SOGIFLL(k=0.7, lam=1e4)
+    param = Parametrization([GainSpec("k", 0.7, 0.01, 100.0)])
+    obj = Objective(comp, param, sigs, 0.4, [Term("rms_phase_steady")], MetricContext(0.1, 0.3))
+    mets, total, good = obj.per_scenario(param.to_theta({"k": 20.0}))
+    assert np.all(np.asarray(good)) and np.all(np.asarray(mets["lost_lock"]))
+    assert obj.summarize(mets, total, good)["lost_lock"] == 2
+    mets, total, good = obj.per_scenario(param.theta0())
+    assert not np.any(np.asarray(mets["lost_lock"])) and obj.summarize(mets, total, good)["lost_lock"] == 0
+
+
 # --------------------------------------------------------------------------
 # job files
 # --------------------------------------------------------------------------
@@ -495,6 +509,8 @@ def test_bfgs_records_every_iteration_with_a_readable_reason(tmp_path, capsys):
     assert "has no roots" not in res["reason"] and "BFGS" in res["reason"] or res["status"] == "no_improvement"
     assert len(hist) >= 2 and hist[0]["iteration"] == 0
     assert res["gains"]["tuned"]["lam"] == pytest.approx(min(hist, key=lambda h: h["value"])["gains"]["lam"])
+    # a run that used its budget says so on stderr (and nothing else does)
+    assert ("budget ran out" in capsys.readouterr().err) == (res["status"] == "budget")
     path.write_text(text.replace("steps = 3", "steps = 3\nlearning_rate = 0.1"))
     assert main(["tune", str(path), "--check"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
@@ -510,3 +526,150 @@ def test_report_names_scenarios_in_the_objectives_order():
     assert scenario_values(job.scenarios) == _combos(job.scenarios)
     sampled = dataclasses.replace(job.scenarios, sample=7, seed=3)
     assert scenario_values(sampled) == _combos(sampled)
+
+
+# --------------------------------------------------------------------------
+# flux observers of paper 000 as sensorless drive jobs on its SPMSM (issue 17)
+# --------------------------------------------------------------------------
+
+FLUX_DRIVE = """
+[job]
+name = "soifo-drive"
+component = "SOIFO"
+[gains.k]
+init = 1.414
+lower = 0.2
+upper = 5.0
+[gains.lam]
+init = 0.5
+lower = 0.01
+upper = 5.0
+[drive]
+loop = "sensorless"
+settle = 0.05
+[scenarios]
+signal = "drive"
+t_event = 0.005
+horizon = 0.02
+steady_from = 0.01
+[scenarios.grid]
+speed_rpm = [1000.0]
+load_step_nm = [2.0]
+[objective]
+terms = [{ metric = "rms_position_steady", weight = 1.0 }]
+[solver]
+kind = "adam"
+steps = 2
+"""
+
+
+def _lpf(text: str) -> str:
+    """FLUX_DRIVE as a job of 000's LPF observer: its cut-off and its PLL's kp free."""
+    return (
+        text.replace('"SOIFO"', '"LPFFlux"')
+        .replace("[gains.k]\ninit = 1.414\nlower = 0.2\nupper = 5.0", "[gains.omega_c]\ninit = 100.0\nupper = 1000.0")
+        .replace("[gains.lam]\ninit = 0.5\nlower = 0.01\nupper = 5.0", "[gains.kp_pll]\ninit = 177.7\nupper = 2000.0")
+    )
+
+
+def test_flux_observer_drive_job_runs_sensorless_on_the_spmsm(tmp_path, capsys):
+    """A SOIFO job with signal = "drive" closes the loop of 000's SPMSM (the component's default
+    machine): result.json says loop "sensorless" and machine "spmsm000", scores every design with its
+    lost-sync count, and scores.nc holds the per-scenario lost_sync flag; 2 solver steps end in "budget",
+    which is warned about."""
+    path = tmp_path / "job.toml"
+    path.write_text(FLUX_DRIVE)
+    assert main(["tune", str(path), "--check"]) == 0
+    assert "sensorless drive on spmsm000" in capsys.readouterr().out
+    assert main(["tune", str(path), "--out", str(tmp_path / "o"), "--quiet"]) == 0
+    res = _strict_json(tmp_path / "o" / "result.json")
+    assert res["loop"] == "sensorless" and res["machine"] == "spmsm000"
+    assert res["gains"]["closed_form"]["k"] == pytest.approx(papers.SOIFO_K)
+    for design in ("initial", "closed_form", "tuned"):
+        assert res["scores"][design]["diverged"] == 0 and res["scores"][design]["lost_sync"] == 0
+        # rad: it holds the drive (a loss of synchronism is > 90°; 000 measured 0.15 rad peak at 2000 r/min)
+        assert res["scores"][design]["rms_position_steady_worst"] < 0.1
+    import xarray as xr
+
+    with xr.open_dataset(tmp_path / "o" / "scores.nc") as ds:
+        assert ds["lost_sync"].dims == ("design", "speed_rpm", "load_step_nm")
+        assert int(ds["lost_sync"].sum()) == 0
+    err = capsys.readouterr().err
+    assert (res["status"] == "budget") == ("budget ran out before its stopping rule" in err)
+
+
+@pytest.mark.parametrize(
+    "edit, field, words",
+    [
+        (
+            lambda s: s.replace('loop = "sensorless"', 'loop = "sensorless"\nmachine = "ipmsm002"'),
+            "drive.machine",
+            "cannot run on ipmsm002",
+        ),
+        (
+            lambda s: s.replace('loop = "sensorless"', 'loop = "sensorless"\nmachine = "spmsm"'),
+            "drive.machine",
+            "must be one of ipmsm002, spmsm000",
+        ),
+        (lambda s: s.replace('loop = "sensorless"', "loop = 'sensorless'\nmachine = 3"), "drive.machine", "string"),
+        (lambda s: s.replace('"SOIFO"', '"PureIntegratorFlux"'), "job.component", "not tunable"),
+        (lambda s: s.replace('signal = "drive"', 'signal = "grid"'), "scenarios.signal", "'emf' or 'drive'"),
+        # on EMF signals there is no drive: [drive] is refused
+        (
+            lambda s: s.replace('signal = "drive"', 'signal = "emf"').replace(
+                "speed_rpm = [1000.0]\nload_step_nm = [2.0]", "speed_hz = [50.0]"
+            ),
+            "drive",
+            "applies to drive jobs",
+        ),
+        # the LPF observer runs in the drive only; 000's LPF is not a machine for the LESOs' IPMSM either
+        (
+            lambda s: _lpf(s).replace('signal = "drive"', 'signal = "emf"'),
+            "scenarios.signal",
+            "'drive' signals",
+        ),
+        (
+            lambda s: _lpf(s).replace('loop = "sensorless"', 'loop = "sensorless"\nmachine = "ipmsm002"'),
+            "drive.machine",
+            "LPFFlux",
+        ),
+    ],
+)
+def test_flux_drive_job_bad_machine_or_component_exits_2(tmp_path, capsys, edit, field, words):
+    """--check refuses a flux observer on the salient IPMSM, an unknown machine, the pure integrator (its
+    integration constant never decays), and a signal the component cannot run on: exit 2, one line."""
+    path = tmp_path / "job.toml"
+    path.write_text(edit(FLUX_DRIVE))
+    assert main(["tune", str(path), "--check"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and field in err and words in err, err
+
+
+def test_every_drive_component_may_be_tuned_by_a_job():
+    """Every drive observer of papers 000 and 002 (but the pure integrator) is a job component whose
+    observer gains, PLL or FLL included, are free gains; LESOs default to 002's IPMSM, flux observers to
+    000's SPMSM."""
+    import tomllib
+
+    from tuning.job import COMPONENTS, parse_job
+
+    want = {
+        "CLESO": {"omega0", "kp_pll", "ki_pll"},
+        "GILESO": {"omega0", "K_r", "omega_c", "kp_pll", "ki_pll"},
+        "FALESO": {"k1", "k2", "kp_pll", "ki_pll"},
+        "SOIFO": {"k", "lam"},
+        "SecondOrderSOIFO": {"K1", "K2", "lam"},
+        "LPFFlux": {"omega_c", "kp_pll", "ki_pll"},
+    }
+    for comp, gains in want.items():
+        info = COMPONENTS[comp]
+        assert set(info.gains) == gains and "drive" in info.signals, comp
+        assert info.machines[0] == ("ipmsm002" if "LESO" in comp else "spmsm000"), comp
+        cf = info.closed_form(None)
+        assert set(cf) >= gains - {"K_r"}, comp
+    assert "PureIntegratorFlux" not in COMPONENTS
+    # a LESO may run on 000's SPMSM (its model with Ld = Lq), asked for explicitly
+    raw = tomllib.loads((Path(__file__).parents[1] / "tuning" / "presets" / "cleso.toml").read_text())
+    raw["drive"]["machine"] = "spmsm000"
+    assert parse_job(raw).drive.machine == "spmsm000"
+    assert load_job(Path(__file__).parents[1] / "tuning" / "presets" / "cleso.toml").drive.machine == "ipmsm002"

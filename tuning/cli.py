@@ -2,15 +2,17 @@
 
     jaxobs tune [JOB.toml] [--out DIR] [--resume] [--check] [--quiet]
                                                            gradient tuning job (default: embedded WIF job)
-    jaxobs demo [--out DIR] [--json]                       the FLL family on paper 001 Tests A–E
+    jaxobs demo [--out DIR] [--force] [--json]             the FLL family on paper 001 Tests A–E
     jaxobs closed-form {sogi-fll,wpf,wif,cleso} [--name value ...] [--json]
                                                            closed-form gains, formula and source
-    jaxobs bode [--out DIR]                                the papers' Bode figures (000 Fig. 5,
+    jaxobs bode [--out DIR] [--force]                      the papers' Bode figures (000 Fig. 5,
                                                            002 Fig. 4, 001 Fig. 14)
-    jaxobs reproduce flux [--out DIR] [--json] [--quick]   paper 000's experiments, paper vs ours
-    jaxobs reproduce leso [--out DIR] [--json]             paper 002's experiments, paper vs ours
-    jaxobs study [STUDY.toml] [--out DIR] [--quiet]        robustness study → NetCDF, worst cases, figures
-    jaxobs export [RESULT.json | --design D] [--out DIR] [--check]
+    jaxobs reproduce flux [--out DIR] [--force] [--json] [--quick]
+                                                           paper 000's experiments, paper vs ours
+    jaxobs reproduce leso [--out DIR] [--force] [--json]   paper 002's experiments, paper vs ours
+    jaxobs study [STUDY.toml] [--out DIR] [--force] [--check] [--quiet]
+                                                           robustness study → NetCDF, worst cases, figures
+    jaxobs export [RESULT.json | --design D] [--out DIR] [--force] [--check]
                                                            the observer as C99 float32 with golden vectors
     jaxobs --version
 
@@ -31,14 +33,17 @@ Every failure ends the program with one line on stderr.  Exit statuses:
 - 0: done;
 - 1: an internal error (a bug, or the machine ran out of memory): the one line names the log file
   holding the traceback (``<out>/error.log``, or a temporary file before ``--out`` is known);
-- 2: bad input: arguments, a job or study file (the line names the field), an output folder that cannot
-  be used (a symlink, not writable, locked by another process, results there without ``--force``), a
-  checkpoint that ``--resume`` cannot use (corrupt, or another job's);
+- 2: bad input: arguments, a job or study file (the line names the field; ``tune --check`` and
+  ``study --check`` check the whole file and stop), an output folder that cannot be used (a symlink, not
+  writable, locked by another process, results there without ``--force``), a checkpoint that ``--resume``
+  cannot use (corrupt, or another job's);
 - 3: ``tune`` only: every design tried diverged (status ``diverged``, nothing tuned);
 - 130: interrupted (Ctrl-C).
 
-``tune`` and ``study`` write only under ``--out`` (default ``./out/<name>``, the job's or study's name
-reduced to ``[A-Za-z0-9._-]``): see :mod:`tuning.outdir` for the lock file, symlinks and ``--force``.
+Every command that writes (``tune``, ``study``, ``demo``, ``bode``, ``reproduce``, ``export``) writes only
+under ``--out`` (``tune`` and ``study``: default ``./out/<name>``, the job's or study's name reduced to
+``[A-Za-z0-9._-]``; the others ``./out/<command>``), checked and locked before any work: see
+:mod:`tuning.outdir` for the lock file, symlinks and ``--force``.
 ``tune --resume`` continues from ``<out>/checkpoint.npz`` if it is this job's (the job file's sha256 is
 in it); with no checkpoint it says so in one line and starts fresh.
 """
@@ -55,12 +60,39 @@ from pathlib import Path
 
 import jaxobs
 from jaxobs import linear, papers, use_host_devices
-from jaxobs.study import STUDY_AXES
 
 from .export import add_export_parser
-from .job import CHECKPOINT, _parse_recording_scenarios, load_job, load_recordings, read_toml, run_job
+from .job import CHECKPOINT, load_job, load_recordings, run_job
 from .outdir import OutDir, atomic_path, atomic_write_text, safe_name
-from .results import load_result, tuned_component
+from .study_file import load_study as _load_study
+
+# the files each command writes under --out (refused there without --force; jaxobs.plot names them)
+DEMO_FILES = ("fll_tests_A_E.png",)
+BODE_FILES = ("bode_flux_observers_000_fig5.png", "bode_lesos_002_fig4.png", "bode_fll_open_loop_001_fig14.png")
+REPRODUCE_FILES = {
+    "flux": (
+        "flux_circles_du_alpha_5V.png",
+        "flux_circles_400rpm.png",
+        "position_error_load_step.png",
+        "position_error_speed_variation.png",
+        "position_error_du_alpha_5V.png",
+    ),
+    "leso": ("leso_position_error_600rpm.png", "leso_speed_ramp.png", "leso_load_step.png"),
+}
+
+
+class _out(OutDir):
+    """``with _out(args, files) as out``: ``--out`` checked and locked before any work (tuning.outdir), its
+    path as the value; an internal error's log goes there."""
+
+    def __init__(self, args, files):
+        super().__init__(Path(args.out), files, force=args.force)
+        self.args = args
+
+    def __enter__(self) -> Path:
+        super().__enter__()
+        self.args.log_dir = self.path
+        return self.path
 
 
 def _progress(args=None, quiet=None):
@@ -82,11 +114,11 @@ def _cmd_demo(args) -> int:
 
     if args.t_event <= 0:
         raise ValueError(f"--t-event must be > 0 s, got {args.t_event}")
-    rows, traces = fll_demo(t_event=args.t_event, progress=_progress(args))
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    fig_path = out / "fll_tests_A_E.png"
-    fll_demo_figure(traces, DEMO_TESTS, args.t_event, fig_path)
+    with _out(args, DEMO_FILES) as out:
+        rows, traces = fll_demo(t_event=args.t_event, progress=_progress(args))
+        fig_path = out / DEMO_FILES[0]
+        with atomic_path(fig_path) as tmp:
+            fll_demo_figure(traces, DEMO_TESTS, args.t_event, tmp)
     if args.json:
         print(json.dumps(rows, indent=1))
     else:
@@ -107,8 +139,6 @@ _CF_OPTIONS = {
 def closed_form_rows(design: str, values: dict) -> dict:
     """Gains of a closed-form design with the formula and source of each (used by the CLI)."""
     import math
-
-    from jaxobs import linear
 
     pi = math.pi
     if design == "sogi-fll":
@@ -191,94 +221,48 @@ def _cmd_bode(args) -> int:
     _enable_x64()
     from jaxobs.plot import paper_bode_figures
 
-    for p in paper_bode_figures(args.out):
+    with _out(args, BODE_FILES) as out:
+        figs = paper_bode_figures(out)
+    for p in figs:
         print(p)
     return 0
 
 
-_FLL_CTORS = {"SOGIFLL": "SOGIFLL", "SOGIFLLWPF": "SOGIFLLWPF", "SOGIFLLWIF": "SOGIFLLWIF"}
-
-
 def load_study(path):
-    """Parse a study TOML into (name, designs, axes, options); errors name the field (ValueError)."""
-
-    raw, _ = read_toml(path, "study file")  # size, nesting and encoding checked before parsing
-    st = raw.get("study", {})
-    if st.get("kind", "fll") == "drive":
-        return _load_drive_study(raw, st)
-    if st.get("kind", "fll") != "fll":
-        raise ValueError(f"study.kind must be 'fll' or 'drive', got {st.get('kind')!r}")
-    opts = dict(
-        t_event=float(st.get("t_event", 0.1)),
-        horizon=float(st.get("horizon", 0.4)),
-        sample=int(st.get("sample", 0)),
-        chunk_size=int(st.get("chunk_size", 2048)),
-        seed=int(st.get("seed", 0)),
-    )
-    designs = {}
-    for name, spec in raw.get("designs", {}).items():
-        where = f"designs.{name}"
-        if "closed_form" in spec:
-            cf = {"sogi-fll": linear.sogi_fll_closed_form, "wpf": linear.wpf_closed_form, "wif": linear.wif_closed_form}
-            if spec["closed_form"] not in cf:
-                raise ValueError(f"{where}.closed_form must be one of {', '.join(cf)}, got {spec['closed_form']!r}")
-            designs[name] = cf[spec["closed_form"]]()
-        elif "result" in spec:  # a tuning run's result.json, read by tuning.results
-            try:
-                res = load_result(spec["result"])
-                if res["component"] not in _FLL_CTORS:
-                    raise ValueError(f"component {res['component']!r} is not an FLL (studies run the FLL family)")
-                designs[name] = tuned_component(res)
-            except ValueError as e:
-                raise ValueError(f"{where}.result: {e}") from None
-        elif "component" in spec:
-            comp = spec["component"]
-            if comp not in _FLL_CTORS:
-                raise ValueError(f"{where}.component must be one of {', '.join(_FLL_CTORS)}, got {comp!r}")
-            designs[name] = getattr(jaxobs, _FLL_CTORS[comp])(**{k: v for k, v in spec.items() if k != "component"})
-        else:
-            raise ValueError(f"{where}: give closed_form, result (a tuning result.json) or component with gains")
-    if not designs:
-        raise ValueError("designs: at least one design is required")
-    axes = raw.get("axes", {})
-    if "recording" in st:  # [study.recording]: recorded grid voltages are the scenarios
-        return st.get("name", "study"), designs, {}, _study_recordings(st, axes, designs, opts, Path(path).parent)
-    if not axes:
-        raise ValueError("axes: at least one axis is required")
-    for k, v in axes.items():
-        if k not in STUDY_AXES:
-            raise ValueError(f"axes.{k}: unknown axis; allowed: {', '.join(STUDY_AXES)}")
-        if (
-            not isinstance(v, list)
-            or not v
-            or not all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in v)
-        ):
-            raise ValueError(f"axes.{k} must be a non-empty list of numbers")
-    return st.get("name", "study"), designs, axes, opts
+    """A study file as (name, designs, axes, options): :func:`tuning.study_file.load_study`, checked in full."""
+    spec = _load_study(path)
+    return spec.name, spec.designs, spec.axes, dict(spec.opts, kind=spec.kind)
 
 
-def _study_recordings(st: dict, axes: dict, designs: dict, opts: dict, base: Path) -> dict:
-    """``[study.recording]`` of an FLL study (the keys of a job's ``[scenarios.recording]``), read and
-    checked now against the designs' sample time; the options for :func:`_recording_study`."""
-    if axes:
-        raise ValueError("axes: does not apply with study.recording (the recordings are the scenarios)")
-    ts = sorted({float(d.ts) for d in designs.values()})
-    if len(ts) != 1:
-        raise ValueError(f"designs: a study on recordings needs one sample time for all designs, got {ts}")
-    t_event, horizon = opts["t_event"], opts["horizon"]
-    if not horizon > t_event >= 0:
-        raise ValueError(f"study.horizon must exceed study.t_event >= 0, got {t_event:g}, {horizon:g}")
-    steady = t_event + 0.75 * (horizon - t_event)
-    spec = _parse_recording_scenarios(
-        {"recording": st["recording"]}, "study", "grid", t_event, horizon, steady, 0, ts[0], base
-    )
-    return dict(t_event=t_event, horizon=horizon, steady_from=steady, recording=spec.recording)
+def _cmd_drive_study(name, designs, axes, opts, out: Path, quiet: bool) -> int:
+    from jaxobs.drive_study import DRIVE_STUDY_METRICS, run_drive_study
+    from jaxobs.plot import drive_study_figure
+
+    ds = run_drive_study(designs, axes, progress=_progress(quiet=quiet), **opts)
+    fig = out / "drive_study.png"
+    drive_study_figure(ds, fig)
+    with atomic_path(out / "study.nc") as tmp:
+        ds.to_netcdf(tmp, engine="scipy")
+    n = int(ds.attrs["scenarios"])
+    print(f"drive study {name}: {len(designs)} designs x {n} scenarios ({ds.attrs['sampling']}), sensorless")
+    qs = [float(q) for q in ds["quantile"].values]
+    head = f"{'design':<18}{'metric':<26}" + "".join(f"{'q' + format(q, 'g'):>10}" for q in qs) + f"{'lost lock':>11}"
+    print(head)
+    for d in ds["design"].values:
+        lost = int(ds["lost_lock_count"].sel(design=d))
+        for m in DRIVE_STUDY_METRICS:
+            vals = ds[f"{m}_q"].sel(design=d).values
+            unit = DRIVE_STUDY_METRICS[m][0]
+            row = f"{str(d):<18}{m + ' (' + unit + ')':<26}" + "".join(f"{v:>10.4g}" for v in vals)
+            print(row + f"{lost:>11}")
+    print(f"results: {out / 'study.nc'}, {fig}")
+    return 0
 
 
-def _recording_study(designs: dict, rec, *, t_event, horizon, steady_from, progress, band_hz=0.05):
-    """Every FLL design on every recording (one ``jit(vmap)`` per design): the study's metrics
-    (``jaxobs.study``: settling, ripple, rms phase, ITAE, IAE against the recordings' truth columns) as a
-    Dataset of dims (design, recording), with units and the recordings' sha256."""
+def _recording_study(designs: dict, *, recording, t_event, horizon, steady_from, band_hz, progress, **_):
+    """Every FLL design on every recording of ``[study.recording]`` (one ``jit(vmap)`` per design): the
+    study's metrics and flags (``jaxobs.study``: settling, ripple, rms phase, ITAE, IAE, lost lock, against
+    the recordings' truth columns), a Dataset of dims (design, recording) with units and the files' sha256."""
     import math
     import time
 
@@ -290,8 +274,9 @@ def _recording_study(designs: dict, rec, *, t_event, horizon, steady_from, progr
 
     from jaxobs.progress import Progress
     from jaxobs.simulate import OnSignal, simulate
-    from jaxobs.study import METRIC_META, STUDY_METRICS, _metrics
+    from jaxobs.study import LOST_LOCK_LONG_NAME, METRIC_META, STUDY_METRICS, _metrics
 
+    rec = recording
     sigs = load_recordings(rec, "grid")
     t0 = time.time()
     results = {}
@@ -327,6 +312,13 @@ def _recording_study(designs: dict, rec, *, t_event, horizon, steady_from, progr
         np.stack([(~results[d][1]).astype(np.int8) for d in names]),
         {"units": "1", "long_name": "simulation diverged or a metric is not finite (1: its metrics are NaN)"},
     )
+    lost = np.stack([results[d][0]["lost_lock"] | ~results[d][1] for d in names])
+    data["lost_lock"] = (dims, lost.astype(np.int8), {"units": "1", "long_name": LOST_LOCK_LONG_NAME})
+    data["lost_lock_count"] = (
+        ("design",),
+        lost.sum(axis=1).astype(np.int64),
+        {"units": "1", "long_name": "recordings on which the design lost lock (diverged ones included)"},
+    )
     coords = {
         "design": ("design", names, {"long_name": "observer design"}),
         "recording": ("recording", list(rec.files), {"long_name": "recording file (relative to the study file)"}),
@@ -347,123 +339,14 @@ def _recording_study(designs: dict, rec, *, t_event, horizon, steady_from, progr
     return ds, time.time() - t0
 
 
-_DRIVE_OBSERVERS = ("CLESO", "GILESO", "FALESO", "PureIntegratorFlux", "LPFFlux", "SOIFO", "SecondOrderSOIFO")
-_MACHINES = {"ipmsm_paper002": "ipmsm_paper002", "spmsm_paper000": "spmsm_paper000"}
-
-
-def _load_drive_study(raw: dict, st: dict):
-    """A drive study (``[study] kind = "drive"``): (name, designs, axes, options) for jaxobs.drive_study."""
-    import math
-
-    from jaxobs import drive as D
-    from jaxobs.drive_study import DRIVE_STUDY_AXES
-
-    known = {"kind", "name", "machine", "horizon", "steady_from", "sampling", "sample", "seed", "chunk_size"}
-    for k in st:
-        if k not in known:
-            raise ValueError(f"study.{k}: unknown key; allowed: {', '.join(sorted(known))}")
-    machine = st.get("machine", "ipmsm_paper002")
-    if machine not in _MACHINES:
-        raise ValueError(f"study.machine must be one of {', '.join(_MACHINES)}, got {machine!r}")
-    par = getattr(D, _MACHINES[machine])()
-    dr = raw.get("drive", {})
-    for k in dr:
-        if k not in ("alpha_c_hz", "alpha_s_hz", "settle"):
-            raise ValueError(f"drive.{k}: unknown key; allowed: alpha_c_hz, alpha_s_hz, settle")
-    ac, as_ = float(dr.get("alpha_c_hz", papers.BENCH_CURRENT_HZ)), float(dr.get("alpha_s_hz", papers.BENCH_SPEED_HZ))
-    for k, v in (("drive.alpha_c_hz", ac), ("drive.alpha_s_hz", as_)):
-        if not (math.isfinite(v) and 0 < v <= 5000):
-            raise ValueError(f"{k} must be in (0, 5000] Hz, got {v!r}")
-    foc = D.FOC.imc(par, alpha_c=2 * math.pi * ac, alpha_s=2 * math.pi * as_)
-    drive = D.Drive(foc, sensorless=True, settle=float(dr.get("settle", 0.2)))
-    designs = {}
-    for name, spec in raw.get("designs", {}).items():
-        where = f"designs.{name}"
-        if not isinstance(spec, dict):
-            raise ValueError(f"{where} must be a table")
-        if "result" in spec:
-            try:
-                res = load_result(spec["result"])
-                if res["component"] not in _DRIVE_OBSERVERS:
-                    raise ValueError(f"component {res['component']!r} is not a drive observer")
-                designs[name] = tuned_component(res)
-            except ValueError as e:
-                raise ValueError(f"{where}.result: {e}") from None
-        elif spec.get("component") in _DRIVE_OBSERVERS:
-            kw = {k: v for k, v in spec.items() if k != "component"}
-            # the machine's Rs and L are placeholders: the study binds each scenario's assumed machine
-            comp = spec["component"]
-            lq = (
-                {"L": par.Ld}
-                if comp in ("PureIntegratorFlux", "LPFFlux", "SOIFO", "SecondOrderSOIFO")
-                else {"Lq": par.Lq}
-            )
-            if comp in ("SOIFO", "SecondOrderSOIFO"):
-                kw.setdefault("omega0", 1.0)
-            try:
-                designs[name] = getattr(jaxobs, comp)(Rs=par.Rs, **lq, **kw)
-            except TypeError as e:
-                raise ValueError(f"{where}: {e}") from None
-        else:
-            raise ValueError(
-                f"{where}: give component (one of {', '.join(_DRIVE_OBSERVERS)}) with its gains, "
-                "or result (a tuning result.json)"
-            )
-    if not designs:
-        raise ValueError("designs: at least one design is required")
-    axes = raw.get("axes", {})
-    for k, v in axes.items():
-        if k not in DRIVE_STUDY_AXES:
-            raise ValueError(f"axes.{k}: unknown axis; allowed: {', '.join(DRIVE_STUDY_AXES)}")
-        if (
-            not isinstance(v, list)
-            or not v
-            or not all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in v)
-        ):
-            raise ValueError(f"axes.{k} must be a non-empty list of numbers")
-    opts = dict(
-        machine=par,
-        drive=drive,
-        horizon=float(st.get("horizon", 0.3)),
-        sampling=str(st.get("sampling", "grid")),
-        sample=int(st.get("sample", 0)),
-        seed=int(st.get("seed", 0)),
-        chunk_size=int(st.get("chunk_size", 256)),
-    )
-    if "steady_from" in st:
-        opts["steady_from"] = float(st["steady_from"])
-    return st.get("name", "drive-study"), designs, axes, dict(opts, kind="drive")
-
-
-def _cmd_drive_study(name, designs, axes, opts, out: Path, quiet: bool) -> int:
-    from jaxobs.drive_study import DRIVE_STUDY_METRICS, run_drive_study
-    from jaxobs.plot import drive_study_figure
-
-    ds = run_drive_study(designs, axes, progress=_progress(quiet=quiet), **opts)
-    fig = out / "drive_study.png"
-    drive_study_figure(ds, fig)
-    with atomic_path(out / "study.nc") as tmp:
-        ds.to_netcdf(tmp, engine="scipy")
-    n = int(ds.attrs["scenarios"])
-    print(f"drive study {name}: {len(designs)} designs x {n} scenarios ({ds.attrs['sampling']}), sensorless")
-    qs = [float(q) for q in ds["quantile"].values]
-    head = f"{'design':<18}{'metric':<26}" + "".join(f"{'q' + format(q, 'g'):>10}" for q in qs) + f"{'lost sync':>11}"
-    print(head)
-    for d in ds["design"].values:
-        lost = int(ds["lost_sync_count"].sel(design=d))
-        for m in DRIVE_STUDY_METRICS:
-            vals = ds[f"{m}_q"].sel(design=d).values
-            unit = DRIVE_STUDY_METRICS[m][0]
-            row = f"{str(d):<18}{m + ' (' + unit + ')':<26}" + "".join(f"{v:>10.4g}" for v in vals)
-            print(row + f"{lost:>11}")
-    print(f"results: {out / 'study.nc'}, {fig}")
-    return 0
-
-
 def _cmd_study(args) -> int:
     _enable_x64()
     path = Path(args.study) if args.study else Path(str(resources.files("jaxobs") / "data" / "default_study.toml"))
-    name, designs, axes, opts = load_study(path)
+    spec = _load_study(path)  # everything checked: tables, keys, ranges, sizes, result files
+    name, designs, axes, opts = spec.name, spec.designs, spec.axes, dict(spec.opts, kind=spec.kind)
+    if args.check:
+        print(f"{path}: OK — {spec.kind} study {name!r}, {len(designs)} designs x {spec.scenarios} scenarios")
+        return 0
     out = Path(args.out) if args.out else Path("out") / safe_name(str(name), "study")
     with OutDir(out, ["study.nc"], force=args.force):
         args.log_dir = out
@@ -476,10 +359,10 @@ def _run_study(name, designs, axes, opts, out: Path, quiet: bool) -> int:
 
     if opts.pop("kind", "fll") == "drive":
         return _cmd_drive_study(name, designs, axes, opts, out, quiet)
-    if "recording" in opts:
-        rec = opts.pop("recording")
-        ds, seconds = _recording_study(designs, rec, progress=_progress(quiet=quiet), **opts)
+    if opts.get("recording") is not None:  # [study.recording]: the recordings are the scenarios
+        ds, seconds = _recording_study(designs, progress=_progress(quiet=quiet), **opts)
     else:
+        opts.pop("recording", None)
         ds, seconds = run_study(designs, axes, progress=_progress(quiet=quiet), return_seconds=True, **opts)
     worst = {m: worst_cases(ds, m, 3) for m in STUDY_METRICS}
     atomic_write_text(out / "worst_cases.json", json.dumps(worst, indent=1))
@@ -491,14 +374,14 @@ def _run_study(name, designs, axes, opts, out: Path, quiet: bool) -> int:
     print(
         f"{'design':<16}"
         + "".join(f"{m + ' mean':>20}{'worst':>12}" for m in ("settling_freq", "ripple_freq", "rms_phase"))
-        + f"{'diverged':>10}"
+        + f"{'diverged':>10}{'lost lock':>11}"
     )
     for d in ds["design"].values:
         sel = ds.sel(design=d)
         row = f"{str(d):<16}"
         for m in ("settling_freq", "ripple_freq", "rms_phase"):
             row += f"{float(sel[m].mean()):>20.4g}{float(sel[m].max()):>12.4g}"
-        print(row + f"{int(sel['diverged'].sum()):>10}")
+        print(row + f"{int(sel['diverged'].sum()):>10}{int(sel['lost_lock_count']):>11}")
     print(f"results: {out / 'study.nc'}, {out / 'worst_cases.json'}, {len(figs)} figures")
     return 0
 
@@ -531,18 +414,22 @@ def _error_figures(traces, names, paper: str, specs, out: Path):
 
 def _cmd_reproduce(args) -> int:
     _enable_x64()
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
+    if args.paper not in REPRODUCE_FILES:
+        raise ValueError(f"reproduce: unknown paper {args.paper!r}")
+    args.out = args.out or f"out/reproduce-{args.paper}"
+    with _out(args, REPRODUCE_FILES[args.paper]) as out:
+        return _reproduce(args, out)
+
+
+def _reproduce(args, out: Path) -> int:
     if args.paper == "flux":
         from jaxobs.plot import flux_circles_figure
         from jaxobs.reproduce.flux import OBSERVER_NAMES, run_flux_experiments
 
         rows, traces = run_flux_experiments(quick=args.quick, progress=_progress(args))
         figs = []
-        for key, fname in (
-            ("du_alpha = 5 V at 1000 r/min", "flux_circles_du_alpha_5V.png"),
-            ("steady 400 r/min", "flux_circles_400rpm.png"),
-        ):
+        files = REPRODUCE_FILES["flux"]
+        for key, fname in zip(("du_alpha = 5 V at 1000 r/min", "steady 400 r/min"), files[:2], strict=True):
             p = out / fname
             flux_circles_figure(traces[key], OBSERVER_NAMES, f"Paper 000: estimated flux, {key}", p)
             figs.append(p)
@@ -550,10 +437,11 @@ def _cmd_reproduce(args) -> int:
             traces,
             OBSERVER_NAMES,
             "000",
-            (
-                ("load step 10 N·m at 2000 r/min", "position_error_load_step.png", 0.3),
-                ("speed 400-2000-400 r/min", "position_error_speed_variation.png", 0.8),
-                ("du_alpha = 5 V at 1000 r/min", "position_error_du_alpha_5V.png", 0.8),
+            zip(
+                ("load step 10 N·m at 2000 r/min", "speed 400-2000-400 r/min", "du_alpha = 5 V at 1000 r/min"),
+                files[2:],
+                (0.3, 0.8, 0.8),
+                strict=True,
             ),
             out,
         )
@@ -571,10 +459,15 @@ def _cmd_reproduce(args) -> int:
             traces,
             LESO_NAMES,
             "002",
-            (
-                ("steady 600 r/min no load", "leso_position_error_600rpm.png", 0.4),
-                ("speed ramp 300-600-840-600-300 r/min", "leso_speed_ramp.png", 0.4),
-                ("load step 0-80 % at 600 r/min", "leso_load_step.png", 0.4),
+            zip(
+                (
+                    "steady 600 r/min no load",
+                    "speed ramp 300-600-840-600-300 r/min",
+                    "load step 0-80 % at 600 r/min",
+                ),
+                REPRODUCE_FILES["leso"],
+                (0.4, 0.4, 0.4),
+                strict=True,
             ),
             out,
         )
@@ -597,9 +490,10 @@ def _cmd_tune(args) -> int:
         for v in job.scenarios.axes.values():
             n *= len(v)
         n = job.scenarios.sample or n
+        drive = "" if job.drive is None else f", {job.drive.loop} drive on {job.drive.machine}"
         print(
-            f"{path}: OK — {job.component}, free gains {', '.join(g.name for g in job.gains)}, {n} scenarios, "
-            f"solver {job.solver.kind}"
+            f"{path}: OK — {job.component}, free gains {', '.join(g.name for g in job.gains)}, {n} scenarios"
+            f"{drive}, solver {job.solver.kind}"
         )
         return 0
     out = Path(args.out) if args.out else Path("out") / safe_name(job.name)
@@ -665,20 +559,36 @@ def _print_summary(result: dict, out: Path, timing: dict | None = None):
         print(f"{'linear model':<22}{heads}")
         for label, vals in rows:
             print(f"{label:<22}" + "".join(_fmt(v) for v in vals))
-    keys = [k for k in s["initial"] if k not in ("diverged", "null_reason")]
+    keys = [k for k in s["initial"] if k not in ("diverged", "lost_lock", "lost_sync", "null_reason")]
     print(f"{'score':<22}{heads}")
     for k in keys:
         print(f"{k:<22}" + "".join(_fmt((s[d] or {}).get(k)) for d in designs))
     print(f"{'diverged scenarios':<22}" + "".join(_fmt((s[d] or {}).get("diverged"), ">14d") for d in designs))
+    print(f"{'lost lock':<22}" + "".join(_fmt((s[d] or {}).get("lost_lock"), ">14d") for d in designs))
+    if "lost_sync" in s["initial"]:  # drive jobs: diverged or |position error| > 90 deg
+        print(f"{'lost sync scenarios':<22}" + "".join(_fmt((s[d] or {}).get("lost_sync"), ">14d") for d in designs))
     if "holdout" in result:
         h = result["holdout"]
         worst = {d: (h[d] or {}).get("per_scenario_worst") for d in designs}
         div = {d: (h[d] or {}).get("diverged") for d in designs}
         print(f"{'held-out worst':<22}" + "".join(_fmt(worst[d]) for d in designs) + f"   ({h['count']} scenarios)")
         print(f"{'held-out diverged':<22}" + "".join(_fmt(div[d], ">14d") for d in designs))
+        lost = {d: (h[d] or {}).get("lost_lock") for d in designs}
+        print(f"{'held-out lost lock':<22}" + "".join(_fmt(lost[d], ">14d") for d in designs))
+    for where, n in (result.get("lost_lock_tuned_only") or {}).items():
+        if n:
+            sets, nc = ("tuning", "scores.nc") if where == "tuning" else ("held-out", "holdout_scores.nc")
+            msg = f"warning: the tuned design lost lock in {n} {sets} scenarios where the closed form holds it"
+            print(f"jaxobs: {msg} (lost_lock in {nc})", file=sys.stderr)
     for name, b in result.get("at_bound", {}).items():
         msg = f"warning: tuned {name} = {b['value']:.6g} is within 1 % of its {b['bound']} bound {b['limit']:g}"
         print(f"jaxobs: {msg}", file=sys.stderr)
+    if result["status"] == "budget":
+        print(
+            f"jaxobs: warning: the solver's budget ran out before its stopping rule ({result['reason']}): "
+            "the tuned gains may not be an optimum (raise solver.steps)",
+            file=sys.stderr,
+        )
     print(f"results: {out / 'result.json'} (history.json, timing.json, scores.nc)")
 
 
@@ -706,7 +616,8 @@ def build_parser() -> argparse.ArgumentParser:
     t.set_defaults(func=_cmd_tune)
 
     d = sub.add_parser("demo", help="FLL family (SOGI-FLL, -WPF, -WIF) on paper 001 Tests A-E", parents=[quiet])
-    d.add_argument("--out", default="out", help="folder for the figure (default: out)")
+    d.add_argument("--out", default="out/demo", help="folder for the figure (default: out/demo)")
+    d.add_argument("--force", action="store_true", help="overwrite the figure already in --out")
     d.add_argument("--json", action="store_true", help="print the table as JSON rows")
     d.add_argument("--t-event", type=float, default=0.2, help="time of the test event, s (default 0.2)")
     d.set_defaults(func=_cmd_demo)
@@ -725,14 +636,16 @@ def build_parser() -> argparse.ArgumentParser:
     c.set_defaults(func=_cmd_closed_form)
 
     b = sub.add_parser("bode", help="Bode figures of the papers' flux observers, LESOs and FLL loops", parents=[quiet])
-    b.add_argument("--out", default="out", help="folder for the figures (default: out)")
+    b.add_argument("--out", default="out/bode", help="folder for the figures (default: out/bode)")
+    b.add_argument("--force", action="store_true", help="overwrite figures already in --out")
     b.set_defaults(func=_cmd_bode)
 
     r = sub.add_parser("reproduce", help="reproduce a paper's experiments on the simulated drive", parents=[quiet])
     r.add_argument(
         "paper", choices=["flux", "leso"], help="flux: paper 000 (rotor-flux observers); leso: paper 002 (LESOs)"
     )
-    r.add_argument("--out", default="out", help="folder for the figures (default: out)")
+    r.add_argument("--out", help="folder for the figures (default: out/reproduce-<paper>)")
+    r.add_argument("--force", action="store_true", help="overwrite figures already in --out")
     r.add_argument("--json", action="store_true", help="print rows {experiment, observer, metric, unit, paper, ours}")
     r.add_argument("--quick", action="store_true", help="skip the long runs (20 r/min steady state, I-f start-up)")
     r.set_defaults(func=_cmd_reproduce)
@@ -745,6 +658,7 @@ def build_parser() -> argparse.ArgumentParser:
     st.add_argument("study", nargs="?", help="study file (TOML); default: the FLL family's closed forms")
     st.add_argument("--out", help="results folder (default: out/<study name>)")
     st.add_argument("--force", action="store_true", help="overwrite a study.nc already in --out")
+    st.add_argument("--check", action="store_true", help="validate the study file (every range, the sizes) and exit")
     st.set_defaults(func=_cmd_study)
 
     add_export_parser(sub)

@@ -78,6 +78,7 @@ from . import _cexpr as cx
 from ._cmodels import MEMORY, CModel, model_for, supported
 from ._crules import RuleC, needs_jacobian, ops_sum, ops_total, rule_c
 from .job import COMPONENTS
+from .outdir import OutDir, atomic_path, atomic_write_text
 from .results import load_result
 
 __all__ = [
@@ -97,6 +98,7 @@ __all__ = [
     "MIN_STEPS",
 ]
 
+EXPORT_FILES = ("observer.h", "observer.c", "test_main.c", "golden.csv", "coefficients.json")
 TOLERANCE = 1e-4  # max |y_C − y_golden| / (1 + |y_golden|)
 MIN_STEPS = 10_000  # the golden record is at least this long
 CFLAGS = ("-std=c99", "-O2", "-Wall", "-Werror", "-pedantic")
@@ -185,11 +187,11 @@ def observer_from_result(path, *, gains: str = "tuned", notes: list | None = Non
         kw["rule"] = parse_rule(res["rule"], "result.json rule")
     else:
         notes.append(f"result.json has no 'rule': the {name} default {type(probe.rule).__name__} is used")
-    if info.bind is not None:
-        bound = ", ".join(
-            f"{k} = {float(getattr(probe, k)):g}" for k in ("Rs", "Lq", "omega0_pll") if hasattr(probe, k)
-        )
-        notes.append(f"the job sets Rs, Lq and the PLL's initial speed per scenario; exported with {bound}")
+    if info.bind is not None or res.get("loop") is not None:  # a drive job bound these per scenario
+        # LESOs: Rs, Lq and the PLL's initial speed; flux observers: Rs, L and the FLL's or PLL's omega0
+        keys = ("Rs", "Lq", "omega0_pll") if hasattr(probe, "Lq") else ("Rs", "L", "omega0")
+        bound = ", ".join(f"{k} = {float(getattr(probe, k)):g}" for k in keys)
+        notes.append(f"the job sets {', '.join(keys)} per scenario; exported with {bound}")
     diverged = res.get("scores", {}).get(gains, {}).get("diverged") if gains in res.get("scores", {}) else None
     if diverged:
         notes.append(f"the {gains} design diverged on {diverged} of the job's scenarios")
@@ -850,17 +852,19 @@ def export_observer(
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    (out / "observer.h").write_text(header)
-    (out / "observer.c").write_text(source_c)
-    (out / "test_main.c").write_text(_harness())
-    np.savetxt(
-        out / "golden.csv",
-        np.concatenate([u, y], axis=1),
-        fmt="%.9g",
-        delimiter=",",
-        header=",".join(model.inputs + model.outputs),
-        comments="",
-    )
+    # each file to a temp file, then renamed (tuning.outdir): a symlink there is replaced, never followed
+    atomic_write_text(out / "observer.h", header)
+    atomic_write_text(out / "observer.c", source_c)
+    atomic_write_text(out / "test_main.c", _harness())
+    with atomic_path(out / "golden.csv") as tmp:
+        np.savetxt(
+            tmp,
+            np.concatenate([u, y], axis=1),
+            fmt="%.9g",
+            delimiter=",",
+            header=",".join(model.inputs + model.outputs),
+            comments="",
+        )
     step_doc = {
         "signal": "jx_step returns the outputs of the state before the sample is integrated (signal-level observer)",
         "drive": "jx_step integrates the period that just ended and returns the outputs after it (drive "
@@ -901,7 +905,7 @@ def export_observer(
             "error": "max |y_C - y_golden| / (1 + |y_golden|), angles modulo 2 pi",
         },
     }
-    (out / "coefficients.json").write_text(json.dumps(coeffs, indent=1, ensure_ascii=False) + "\n")
+    atomic_write_text(out / "coefficients.json", json.dumps(coeffs, indent=1, ensure_ascii=False) + "\n")
     return coeffs
 
 
@@ -962,6 +966,7 @@ def add_export_parser(subparsers) -> argparse.ArgumentParser:
     )
     e.add_argument("--check", action="store_true", help="compile with cc and replay the golden vectors")
     e.add_argument("--quiet", action="store_true", help="no progress on stderr")
+    e.add_argument("--force", action="store_true", help="overwrite an export already in --out")
     e.set_defaults(func=cli_export)
     return e
 
@@ -973,6 +978,14 @@ def cli_export(args) -> int:
         raise ValueError("export: give a result.json or --design (one of them)")
     if args.ts is not None and not (math.isfinite(args.ts) and args.ts > 0):
         raise ValueError(f"--ts must be a sample time > 0 s, got {args.ts}")
+    # the output folder is checked and locked before any work (tuning.outdir): no symlinks, one writer,
+    # an existing export kept unless --force
+    with OutDir(Path(args.out), EXPORT_FILES, force=getattr(args, "force", False)):
+        args.log_dir = Path(args.out)
+        return _export(args)
+
+
+def _export(args) -> int:
     notes: list = []
     kw = {}
     if args.ts is not None:

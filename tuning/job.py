@@ -4,7 +4,8 @@ A job file::
 
     [job]
     name = "wif-robust"
-    component = "SOGIFLLWIF"        # SOGIFLL | SOGIFLLWPF | SOGIFLLWIF | SOIFO | SecondOrderSOIFO
+    component = "SOGIFLLWIF"        # SOGIFLL | SOGIFLLWPF | SOGIFLLWIF | SOIFO | SecondOrderSOIFO | LPFFlux
+                                     # | CLESO | GILESO | FALESO
     seed = 0
 
     [component]                      # constructor values; frozen unless listed in [gains]
@@ -18,7 +19,8 @@ A job file::
     upper = 100000.0
     log = true
 
-    [scenarios]                      # "grid" signals for the FLL family, "emf" for flux observers
+    [scenarios]                      # "grid" signals for the FLL family, "emf" for flux observers,
+                                     # "drive" for the drive observers (LESOs, LPFFlux, the SOIFOs)
     signal = "grid"
     t_event = 0.1
     horizon = 0.4
@@ -30,6 +32,10 @@ A job file::
     [holdout]                        # optional: a held-out set, scored but never tuned on
     [holdout.grid]
     freq_step = [-1.5, 1.5]
+
+    [drive]                          # drive jobs only (scenarios.signal = "drive")
+    loop = "sensorless"              # sensorless (the tuned observer closes the loop) | sensored
+    machine = "spmsm000"             # ipmsm002 | spmsm000; default: the component's (LESOs 002, flux 000)
 
     [objective]
     terms = [{ metric = "itae_freq", weight = 1.0 }]
@@ -72,7 +78,7 @@ from jaxobs.progress import Progress
 from jaxobs.scenarios import grid_signals
 from jaxobs.signals import EMFSignal, stack
 
-from .objective import DRIVE_METRICS, METRICS, MetricContext, Objective, Term
+from .objective import DRIVE_METRICS, LOST_SYNC_DEG, METRICS, MetricContext, Objective, Term
 from .outdir import atomic_path, atomic_write_text
 from .params import GainSpec, Parametrization
 from .report import write_report
@@ -149,6 +155,15 @@ def _cf_sosoifo(comp):
     return {"K1": SOIFO2_K1, "K2": SOIFO2_K2, "lam": SOIFO2_K1**3 / (2 * SOIFO2_K2)}
 
 
+def _cf_lpf(comp):
+    return {"omega_c": papers.LPF_OMEGA_C, **_flux_pll_cf()}
+
+
+def _flux_pll_cf():
+    kp, ki = linear.pll_gains(2 * math.pi * papers.FLUX_PLL_HZ)
+    return {"kp_pll": float(kp), "ki_pll": float(ki)}
+
+
 def _cf_cleso(comp):
     return {"omega0": papers.LESO_OMEGA0}
 
@@ -171,9 +186,22 @@ class ComponentInfo:
     signal: str
     closed_form_source: str
     bind: object = None
+    # the machines a sensorless drive job may run this component on, the default first (DRIVE_MACHINES);
+    # empty: no drive jobs.  A component whose ``signal`` is "emf" runs on EMF signals by default and in the
+    # drive with ``scenarios.signal = "drive"``.
+    machines: tuple = ()
+
+    @property
+    def signals(self) -> tuple:
+        """The scenario signals this component runs on, its default first."""
+        return (self.signal, "drive") if self.machines and self.signal != "drive" else (self.signal,)
 
 
-_IPMSM = papers.IPMSM_002  # the drive jobs' machine (ASSUMED, see jaxobs.papers): the LESOs assume its Rs, Lq
+_IPMSM = papers.IPMSM_002  # the LESO drive jobs' machine (ASSUMED, see jaxobs.papers): the LESOs assume its Rs, Lq
+# A LESO's extended-EMF model (002 eqs 4–5) holds on a non-salient machine too (Ld = Lq), so the LESOs
+# may run on 000's SPMSM; the flux observers may not run on the IPMSM: their back EMF u − R̂s i − L̂ di/dt
+# with one inductance is not dψ_f/dt on a salient machine.
+_LESO_MACHINES = ("ipmsm002", "spmsm000")
 
 COMPONENTS = {
     "SOGIFLL": ComponentInfo(
@@ -207,6 +235,7 @@ COMPONENTS = {
         closed_form=_cf_soifo,
         signal="emf",
         closed_form_source="000 (k = 1.414), lam = k²/4",
+        machines=("spmsm000",),
     ),
     "SecondOrderSOIFO": ComponentInfo(
         jaxobs.SecondOrderSOIFO,
@@ -215,6 +244,24 @@ COMPONENTS = {
         closed_form=_cf_sosoifo,
         signal="emf",
         closed_form_source="000 (K1 = 1.56, K2 = 3.11), lam = K1³/(2K2)",
+        machines=("spmsm000",),
+    ),
+    # 000's LPF flux estimator ψ̂ = ê/(s + ωc), uncompensated as in 000 Fig. 5, with the type-2 PLL (ASSUMED,
+    # papers.FLUX_PLL_HZ) that gives it a speed: drive jobs only (on a bare EMF signal its PLL has nothing
+    # to close).  The pure integrator is no job component: its flux starts from zero, so its circle is
+    # offset by the flux at its start (000's "unknown integral initial value") and θ̂ is wrong by up to
+    # 90° whatever its PLL gains; in a sensorless drive it loses synchronism (README, "Drive jobs").
+    "LPFFlux": ComponentInfo(
+        jaxobs.LPFFlux,
+        gains=("omega_c", "kp_pll", "ki_pll"),
+        defaults=dict(
+            Rs=papers.SPMSM_000["Rs"], L=papers.SPMSM_000["Ld"], omega_c=papers.LPF_OMEGA_C, **_flux_pll_cf()
+        ),
+        closed_form=_cf_lpf,
+        signal="drive",
+        closed_form_source="000 Fig. 5 (omega_c = 100 rad/s), PLL pole placement omega_b = 2 pi 20 (ASSUMED)",
+        bind=bind_observer,  # the scenario's assumed Rs, L; the PLL starts at its speed
+        machines=("spmsm000",),
     ),
     # the drive jobs run the ASSUMED IPMSM of jaxobs.papers; a LESO starts from its Rs and Lq
     "CLESO": ComponentInfo(
@@ -225,6 +272,7 @@ COMPONENTS = {
         signal="drive",
         closed_form_source="002 Table II (ω0 = 500π), PLL pole placement ω_b = 2π·15",
         bind=bind_observer,  # the scenario's assumed Rs, Lq; the PLL starts at its speed
+        machines=_LESO_MACHINES,
     ),
     "GILESO": ComponentInfo(
         jaxobs.GILESO,
@@ -246,6 +294,7 @@ COMPONENTS = {
         signal="drive",
         closed_form_source="002 Table II (ω0 = 500π, K_r = 2ω0², ωc = π), PLL pole placement ω_b = 2π·15",
         bind=bind_observer,  # the scenario's assumed Rs, Lq; the PLL starts at its speed
+        machines=_LESO_MACHINES,
     ),
     "FALESO": ComponentInfo(
         jaxobs.FALESO,
@@ -257,8 +306,24 @@ COMPONENTS = {
         signal="drive",
         closed_form_source="002 Table II (k1 = 10π, k2 = 100π), PLL pole placement ω_b = 2π·15",
         bind=bind_observer,  # the scenario's assumed Rs, Lq; the PLL starts at its speed
+        machines=_LESO_MACHINES,
     ),
 }
+
+# the machines of sensorless drive jobs ([drive] machine): each on its bench's ASSUMED inertia (jaxobs.papers),
+# with the FOC of the simulated benches (IMC current loop papers.BENCH_CURRENT_HZ, I-P speed loop
+# papers.BENCH_SPEED_HZ), as `jaxobs reproduce flux|leso` runs them
+DRIVE_MACHINES = {
+    "ipmsm002": ("paper 002's IPMSM (ASSUMED, papers.IPMSM_002), J = papers.BENCH_J_002", "ipmsm_paper002"),
+    "spmsm000": ("paper 000's SPMSM (Table II, papers.SPMSM_000), J = papers.BENCH_J_000", "spmsm_paper000"),
+}
+_BENCH_J = {"ipmsm002": papers.BENCH_J_002, "spmsm000": papers.BENCH_J_000}
+
+
+def drive_machine(name: str):
+    """The PMSMParams of a drive job's machine (a key of :data:`DRIVE_MACHINES`), on its bench's inertia."""
+    return getattr(D, DRIVE_MACHINES[name][1])(J=_BENCH_J[name])
+
 
 GRID_AXES = ("freq_step", "phase_jump_deg", "sag", "dc", "harmonics_scale", "sub_amplitude", "phase_deg")
 # (an "omega0_error" axis was accepted and ignored: removed.  The flux observers start their FLL at
@@ -372,11 +437,17 @@ class Job:
 class DriveSpec:
     """``[drive]`` of a drive job: ``loop = "sensorless"`` (the default: the tuned observer closes the loop,
     from t = 0 after its settling phase, or from ``handover`` s on) or ``"sensored"`` (the encoder closes it and
-    the observer estimates beside it); ``settle`` (s): the observer's unscored settling phase before t = 0."""
+    the observer estimates beside it); ``settle`` (s): the observer's unscored settling phase before t = 0;
+    ``start``: ``"steady"`` (each scenario starts in its operating point) or ``"standstill"`` (from rest, by
+    the I-f start-up :meth:`jaxobs.drive.IfStartup.for_machine` of the job's machine, then its hand-over);
+    ``machine``: the drive's machine (:data:`DRIVE_MACHINES`; by default the component's: the LESOs run
+    002's IPMSM, the flux observers 000's SPMSM)."""
 
     loop: str = "sensorless"
     handover: float = 0.0
     settle: float = 0.2
+    start: str = "steady"
+    machine: str = "ipmsm002"  # a key of DRIVE_MACHINES; a job's default is its component's first machine
 
 
 # the physical range of every scenario axis (closed intervals unless noted), checked at --check time;
@@ -444,15 +515,17 @@ def _check_size(spec: ScenarioSpec, where: str, ts: float, extra_s: float = 0.0)
 
 
 def _parse_scenarios(
-    tab: dict, where: str, signal_default: str, seed: int, freq_n: float, ts: float, base: Path | None = None
+    tab: dict, where: str, signals: tuple, seed: int, freq_n: float, ts: float, base: Path | None = None
 ) -> ScenarioSpec:
+    """``signals``: the component's (its default first); ``base``: the job file's folder (recordings)."""
     tab = _get({"s": tab}, "s", where, dict)
     _no_unknown(tab, ("signal", "t_event", "horizon", "steady_from", "grid", "sample", "seed", "recording"), where)
-    signal = _get(tab, "signal", f"{where}.signal", str, signal_default)
+    signal = _get(tab, "signal", f"{where}.signal", str, signals[0])
     if signal not in ("grid", "emf", "drive"):
         raise JobError(f"{where}.signal", f"must be 'grid', 'emf' or 'drive', got {_show(signal)}")
-    if signal != signal_default:
-        raise JobError(f"{where}.signal", f"the component needs '{signal_default}' signals, got {_show(signal)}")
+    if signal not in signals:
+        need = " or ".join(f"'{x}'" for x in signals)
+        raise JobError(f"{where}.signal", f"the component needs {need} signals, got {_show(signal)}")
     t_event = _get(tab, "t_event", f"{where}.t_event", float, 0.1)
     horizon = _get(tab, "horizon", f"{where}.horizon", float, 0.4)
     if t_event < 0:
@@ -625,7 +698,7 @@ def _check_recording_job(job, comp_t: dict) -> None:
                     f"{t.metric!r} needs the closed-loop drive; a recording runs the observer open loop "
                     "(use iae_position, rms_position_steady, ripple_position)",
                 )
-        if spec.signal == "emf":
+        if spec.signal != "grid" and "L" in COMPONENTS[job.component].defaults:  # a flux observer
             for k in ("Rs", "L"):
                 if k not in comp_t:
                     raise JobError(
@@ -645,6 +718,12 @@ def parse_job(raw: dict, base: Path | None = None) -> Job:
     _no_unknown(job_t, ("name", "component", "seed"), "job")
     name = _get(job_t, "name", "job.name", str, "job")
     comp = _get(job_t, "component", "job.component", str, required=True)
+    if comp == "PureIntegratorFlux":
+        raise JobError(
+            "job.component",
+            "PureIntegratorFlux is not tunable: its flux keeps the integration constant of its start, so it "
+            "cannot hold a sensorless drive; use LPFFlux, SOIFO or SecondOrderSOIFO",
+        )
     if comp not in COMPONENTS:
         raise JobError("job.component", f"unknown component {_show(comp)}; known: {', '.join(COMPONENTS)}")
     info = COMPONENTS[comp]
@@ -703,12 +782,12 @@ def parse_job(raw: dict, base: Path | None = None) -> Job:
         values[gname] = init
 
     scen = _parse_scenarios(
-        _get(raw, "scenarios", "scenarios", dict, required=True), "scenarios", info.signal, seed, freq_n, ts, base
+        _get(raw, "scenarios", "scenarios", dict, required=True), "scenarios", info.signals, seed, freq_n, ts, base
     )
     drive = None
     if scen.signal == "drive":
         dt = _get(raw, "drive", "drive", dict, {})
-        _no_unknown(dt, ("loop", "handover", "settle"), "drive")
+        _no_unknown(dt, ("loop", "handover", "settle", "start", "machine"), "drive")
         loop = _get(dt, "loop", "drive.loop", str, "sensorless")
         if loop not in ("sensorless", "sensored"):
             raise JobError("drive.loop", f"must be 'sensorless' or 'sensored', got {_show(loop)}")
@@ -718,7 +797,16 @@ def parse_job(raw: dict, base: Path | None = None) -> Job:
         settle = _get(dt, "settle", "drive.settle", float, 0.2)
         if not 0.0 <= settle <= 10.0:
             raise JobError("drive.settle", f"must be in [0, 10] s, got {settle:g}")
-        drive = DriveSpec(loop, handover, settle)
+        machine = _get(dt, "machine", "drive.machine", str, info.machines[0])
+        if machine not in DRIVE_MACHINES:
+            raise JobError("drive.machine", f"must be one of {', '.join(DRIVE_MACHINES)}, got {_show(machine)}")
+        if machine not in info.machines:
+            raise JobError(
+                "drive.machine",
+                f"{comp} cannot run on {machine} ({DRIVE_MACHINES[machine][0]}); allowed: {', '.join(info.machines)}",
+            )
+        drive = DriveSpec(loop, handover, settle, machine=machine)
+        drive = _parse_start(dt, drive, scen)
     elif "drive" in raw:
         raise JobError("drive", f"applies to drive jobs (scenarios.signal = 'drive'), not {scen.signal!r} signals")
     holdout = None
@@ -726,7 +814,8 @@ def parse_job(raw: dict, base: Path | None = None) -> Job:
         h = dict(_get(raw, "holdout", "holdout", dict))
         for key in ("t_event", "horizon", "steady_from"):
             h.setdefault(key, getattr(scen, key))
-        holdout = _parse_scenarios(h, "holdout", info.signal, seed + 1, freq_n, ts, base)
+        h.setdefault("signal", scen.signal)
+        holdout = _parse_scenarios(h, "holdout", (scen.signal,), seed + 1, freq_n, ts, base)
     settle = drive.settle if drive is not None else 0.0
     for spec, where in ((scen, "scenarios"), (holdout, "holdout")):
         if spec is not None:
@@ -747,12 +836,12 @@ def parse_job(raw: dict, base: Path | None = None) -> Job:
         if metric not in METRICS:
             raise JobError(f"{where}.metric", f"unknown metric {_show(metric)}; known: {', '.join(METRICS)}")
         grid_only = metric.endswith(("_freq", "_phase", "freq_steady", "phase_steady"))
-        if metric in DRIVE_METRICS and info.signal != "drive":
+        if metric in DRIVE_METRICS and scen.signal != "drive":
             raise JobError(
-                f"{where}.metric", f"{_show(metric)} needs the closed-loop drive, not {comp} ({info.signal})"
+                f"{where}.metric", f"{_show(metric)} needs the closed-loop drive, not {comp} ({scen.signal})"
             )
-        if (info.signal != "grid") == grid_only:
-            raise JobError(f"{where}.metric", f"{_show(metric)} does not apply to {comp} ({info.signal} signals)")
+        if (scen.signal != "grid") == grid_only:
+            raise JobError(f"{where}.metric", f"{_show(metric)} does not apply to {comp} ({scen.signal} signals)")
         weight = _get(t, "weight", f"{where}.weight", float, 1.0)
         if weight <= 0:
             raise JobError(f"{where}.weight", f"must be > 0, got {weight}")
@@ -895,27 +984,50 @@ def _combos(spec: ScenarioSpec):
     return names, combos
 
 
-def _drive_scenarios(names, combos, seed=0, t_event=0.0):
-    """The IPMSM bench (J = papers.BENCH_J_002) for every combination; each starts steady at its speed, and
+def _drive_scenarios(names, combos, seed=0, t_event=0.0, machine="ipmsm002"):
+    """The machine's bench (:func:`drive_machine`) for every combination; each starts steady at its speed, and
     the speed_step_rpm / load_step_nm axes step the reference and the load at t_event."""
-    return drive_scenarios(D.ipmsm_paper002(J=papers.BENCH_J_002), names, combos, seed=seed, t_event=t_event)
+    return drive_scenarios(drive_machine(machine), names, combos, seed=seed, t_event=t_event)
+
+
+def _parse_start(dt: dict, drive: DriveSpec, scen) -> DriveSpec:
+    """``[drive] start``: "steady" or "standstill" (the I-f start-up must fit in the horizon; it hands over
+    itself, so ``handover`` stays 0)."""
+    start = _get(dt, "start", "drive.start", str, "steady")
+    if start not in ("steady", "standstill"):
+        raise JobError("drive.start", f"must be 'steady' or 'standstill', got {_show(start)}")
+    drive = dataclasses.replace(drive, start=start)
+    if start == "standstill":
+        if drive.handover > 0:
+            raise JobError("drive.handover", "must be 0 with start = 'standstill' (the I-f start-up hands over)")
+        s = job_drive(drive).startup
+        t_if = float(s.omega_switch / s.accel + s.hold + s.dwell)
+        if scen.horizon <= t_if:
+            raise JobError(
+                "drive.start", f"'standstill' needs horizon > {t_if:.3g} s (the I-f start-up), got {scen.horizon:g}"
+            )
+    return drive
 
 
 def job_drive(spec: DriveSpec | None = None):
-    """The drive a ``signal = "drive"`` job runs: FOC on the IPMSM bench; sensorless by default (``spec``)."""
+    """The drive a ``signal = "drive"`` job runs: FOC on its machine's bench; sensorless by default (``spec``)."""
     spec = DriveSpec() if spec is None else spec
-    par = D.ipmsm_paper002(J=papers.BENCH_J_002)
+    par = drive_machine(spec.machine)
     foc = D.FOC.imc(par, 2 * math.pi * papers.BENCH_CURRENT_HZ, 2 * math.pi * papers.BENCH_SPEED_HZ)
-    return D.Drive(foc, sensorless=spec.loop == "sensorless", handover=spec.handover, settle=spec.settle)
+    startup = D.IfStartup.for_machine(par) if spec.start == "standstill" else None  # [drive] start
+    return D.Drive(
+        foc, sensorless=spec.loop == "sensorless", handover=spec.handover, settle=spec.settle, startup=startup
+    )
 
 
-def build_scenarios(spec: ScenarioSpec, values: dict):
-    """A batched signal for every combination of the axes (or ``sample`` random ones)."""
+def build_scenarios(spec: ScenarioSpec, values: dict, machine: str = "ipmsm002"):
+    """A batched signal for every combination of the axes (or ``sample`` random ones); ``machine``: a drive
+    job's (:data:`DRIVE_MACHINES`)."""
     names, combos = _combos(spec)
     if spec.recording is not None:
         return load_recordings(spec.recording, spec.signal), names, combos
     if spec.signal == "drive":
-        return _drive_scenarios(names, combos, spec.seed, spec.t_event), names, combos
+        return _drive_scenarios(names, combos, spec.seed, spec.t_event, machine), names, combos
     if spec.signal == "grid":
         return (
             grid_signals(
@@ -948,14 +1060,14 @@ def build_scenarios(spec: ScenarioSpec, values: dict):
 def build_objective(job: Job, spec: ScenarioSpec | None = None):
     spec = job.scenarios if spec is None else spec
     comp = COMPONENTS[job.component].ctor(**job.values)
-    scen, names, combos = build_scenarios(spec, job.values)
+    machine = job.drive.machine if job.drive is not None else "ipmsm002"
+    scen, names, combos = build_scenarios(spec, job.values, machine)
     ctx = MetricContext(t_event=spec.t_event, steady_from=spec.steady_from)
     param = Parametrization(job.gains)
-    info = COMPONENTS[job.component]
-    drive = job_drive(job.drive) if info.signal == "drive" else None
-    bind = info.bind
+    drive = job_drive(job.drive) if spec.signal == "drive" else None
+    bind = bind_observer if drive is not None else None  # the scenario's assumed machine and speed
     if spec.recording is not None:  # the observer runs open loop on the recorded u/i or voltage
-        drive, bind = None, (_bind_recording if info.signal != "grid" else None)
+        drive, bind = None, (_bind_recording if spec.signal != "grid" else None)
     obj = Objective(
         comp,
         param,
@@ -1040,16 +1152,26 @@ def _scores_dataset(obj, names, combos, spec: ScenarioSpec, per: dict):
         coords.update({n: ("scenario", [c[i] for c in combos]) for i, n in enumerate(names)})
     data = {}
     keys = [t.metric for t in obj.terms]
-    for key in (*keys, "total", "diverged"):
+    extra = ("lost_sync",) if obj.drive is not None else ()
+    for key in (*keys, "total", "diverged", "lost_lock", *extra):
         rows = []
         for d in designs:
             mets, total, good = per[d]
-            x = {"total": total, "diverged": ~good}.get(key, mets.get(key) if key in mets else None)
+            flags = {"total": total, "diverged": ~good, "lost_lock": mets["lost_lock"] | ~good}
+            x = flags.get(key, mets.get(key) if key in mets else None)
             rows.append(np.asarray(x, dtype=float).reshape(shape))
         data[key] = (dims, np.stack(rows))
     ds = xr.Dataset(data, coords=coords)
     ds["diverged"] = ds["diverged"].astype("int8")
-    ds.attrs["note"] = "total: the weighted objective per scenario (the penalty where diverged); diverged: 1/0"
+    ds["lost_lock"] = ds["lost_lock"].astype("int8")
+    ds.attrs["note"] = (
+        "total: the weighted objective per scenario (the penalty where diverged); diverged: 1/0; lost_lock: 1 where "
+        "the estimate ended far from the truth in the steady window (45 deg or 10 % on signals, 90 deg on the "
+        "drive) or diverged"
+    )
+    if extra:
+        ds["lost_sync"] = ds["lost_sync"].astype("int8")
+        ds.attrs["note"] += f"; lost_sync: 1 where diverged or |position error| > {LOST_SYNC_DEG:g} deg (drive)"
     return ds
 
 
@@ -1086,6 +1208,14 @@ def _score_designs(obj, thetas: dict, bar: Progress, what: str) -> dict:
 
 
 CHECKPOINT = "checkpoint.npz"
+
+
+def _lost_only(per: dict) -> int | None:
+    """Scenarios where the tuned design lost lock (or diverged) and the closed form did not (None: no tuned)."""
+    if "tuned" not in per:
+        return None
+    lost = {k: np.asarray(per[k][0]["lost_lock"] | ~per[k][2]) for k in ("tuned", "closed_form")}
+    return int(np.sum(lost["tuned"] & ~lost["closed_form"]))
 
 
 def job_fingerprint(job: Job) -> str:
@@ -1146,6 +1276,7 @@ def run_job(job: Job, out: Path, resume: bool = False, quiet: bool = False) -> d
         "job_sha256": job.sha256,
         "component": job.component,
         "loop": None if job.drive is None else job.drive.loop,
+        "start": None if job.drive is None else job.drive.start,
         "ts": float(obj.component.ts),
         "rule": rule_spec(obj.component.rule),
         "omega_n": float(job.values["omega_n"]) if "omega_n" in job.values else None,
@@ -1165,18 +1296,24 @@ def run_job(job: Job, out: Path, resume: bool = False, quiet: bool = False) -> d
     if "omega_n" not in job.values:
         nulls["omega_n"] = f"{job.component} has no nominal frequency omega_n"
     if gains["tuned"] is None:
-        nulls["gains.tuned"] = nulls["values.tuned"] = nulls["scores.tuned"] = nulls["linear.tuned"] = (
-            "status 'diverged': every design tried diverged in some tuning scenario, so nothing is tuned"
+        why = "status 'diverged': every design tried diverged in some tuning scenario, so nothing is tuned"
+        for key in ("gains.tuned", "values.tuned", "scores.tuned", "linear.tuned", "lost_lock_tuned_only"):
+            nulls[key] = why
+    if job.drive is not None:
+        result["machine"] = job.drive.machine
+        result["values_note"] = (
+            "Rs, Lq (LESOs) or Rs, L (flux observers) and the PLL's or FLL's initial speed (omega0_pll, omega0) "
+            f"are set per scenario from its estimated machine ({DRIVE_MACHINES[job.drive.machine][0]})"
         )
-    if info.bind is not None:
-        result["values_note"] = "Rs, Lq and the PLL's initial speed are set per scenario from its estimated machine"
     if nulls:
         result["null_reasons"] = nulls
+    result["lost_lock_tuned_only"] = {"tuning": _lost_only(per)}
     if job.holdout is not None:
         hobj, (hn, hc) = build_objective(job, job.holdout)
         hper = _score_designs(hobj, thetas, bar, "held-out ")
         result["holdout"] = {k: (hobj.summarize(*hper[k]) if k in hper else None) for k in gains}
         result["holdout"]["count"] = len(hc)
+        result["lost_lock_tuned_only"]["holdout"] = _lost_only(hper)
         with atomic_path(out / "holdout_scores.nc") as tmp:
             _scores_dataset(hobj, hn, hc, job.holdout, hper).to_netcdf(tmp, engine="scipy")
     bar.close()

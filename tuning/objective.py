@@ -29,7 +29,7 @@ from jaxobs.simulate import OnSignal, simulate
 
 from .params import Parametrization
 
-__all__ = ["METRICS", "DRIVE_METRICS", "Term", "Objective", "aggregate"]
+__all__ = ["METRICS", "DRIVE_METRICS", "LOST_LOCK", "LOST_SYNC_DEG", "Term", "Objective", "aggregate"]
 
 
 # --------------------------------------------------------------------------
@@ -115,8 +115,23 @@ METRICS: dict[str, Callable] = {
         sol.outputs.obs.omega / sig.par.p * 30 / math.pi, _steady(sol, ctx)
     ),
 }
+# the per-scenario flag :meth:`Objective.per_scenario` adds to the metrics: the estimate ended far from the
+# truth (jaxobs.metrics.lost_lock_of: 45° / 10 % on signals, 90° on the drive, over the steady window)
+LOST_LOCK = "lost_lock"
 # metrics that need the closed-loop drive (signal = "drive" jobs)
 DRIVE_METRICS = ("settling_position", "settling_speed", "rms_speed_steady", "speed_noise_rpm")
+
+# Loss of synchronism of a drive observer, a per-scenario flag (never fatal): its simulation diverged, or
+# |θ̂e − θe| exceeded this anywhere in the scored horizon [0, horizon) (the settling phase before t = 0 is
+# not scored).  jaxobs.drive_study flags the same threshold over its steady window only; a job has events
+# (speed and load steps), and a pole slip during one is a loss of synchronism even if the observer
+# locks again afterwards.
+LOST_SYNC_DEG = 90.0
+
+
+def _lost_sync(sol, sig):
+    err = jnp.abs(_position_err(sol, sig))
+    return jnp.max(jnp.where(jnp.isfinite(err), err, jnp.inf)) > math.radians(LOST_SYNC_DEG)
 
 
 @dataclass(frozen=True)
@@ -243,16 +258,26 @@ class Objective:
         def one(sig):
             comp = self.param.apply(self.component, theta)
             sol = self._simulate(comp, sig)
-            return {term.metric: METRICS[term.metric](sol, sig, self.ctx) for term in self.terms}, sol.ok
+            mets = {term.metric: METRICS[term.metric](sol, sig, self.ctx) for term in self.terms}
+            # far from the truth over the steady window (jaxobs.metrics, "lost lock"): reported, not tuned on
+            mets[LOST_LOCK] = M.lost_lock_of(sol, self.ctx.steady_from, signal=sig)
+            if self.drive is not None:
+                mets["lost_sync"] = _lost_sync(sol, sig)
+            return mets, sol.ok
 
         return jax.vmap(one)(scenarios)
 
     def per_scenario(self, theta, scenarios=None):
-        """Each scenario's metrics, its weighted total (the penalty where diverged) and the good mask — no gradient."""
+        """Each scenario's metrics (and its :data:`LOST_LOCK` flag), its weighted total (the penalty where
+        diverged) and the good mask — no gradient.
+
+        On the drive the metrics hold ``lost_sync`` too: diverged, or |θ̂e − θe| > :data:`LOST_SYNC_DEG`."""
         scenarios = self.scenarios if scenarios is None else scenarios
         mets, ok = self._metrics(theta, scenarios)
         total = sum(term.weight * mets[term.metric] for term in self.terms)
         good = ok & jnp.isfinite(total)
+        if "lost_sync" in mets:
+            mets = {**mets, "lost_sync": mets["lost_sync"] | ~good}
         return mets, jnp.where(good, total, self.penalty), good
 
     def scores(self, theta, scenarios=None) -> dict:
@@ -266,6 +291,10 @@ class Objective:
             "objective": float(aggregate(total, self.agg, self.alpha, self.temperature)),
             "diverged": int(jnp.sum(~good)),
         }
+        if LOST_LOCK in mets:  # scenarios whose estimate ends far from the truth, the diverged ones included
+            out[LOST_LOCK] = int(jnp.sum(mets[LOST_LOCK] | ~good))
+        if "lost_sync" in mets:  # drive observers: scenarios that lost synchronism (diverged ones included)
+            out["lost_sync"] = int(jnp.sum(mets["lost_sync"]))
         for term in self.terms:
             m = jnp.where(good, mets[term.metric], jnp.nan)
             if bool(jnp.any(good)):

@@ -24,24 +24,63 @@ current limit (speed loop) or the voltage limit (current loop) is reached.
 i_d* = 0 by default; ``id_mode="mtpa"`` gives the IPMSM's maximum torque per
 ampere, i_d = ψf/(2(Lq − Ld)) − √(ψf²/(4(Lq − Ld)²) + i_q²) (i_d = 0 for Ld = Lq).
 
-I-f start-up: the current vector of amplitude I_f is held along an angle
-θ_f whose frequency ramps at a fixed rate; when it has reached ω_switch and
-stayed there ``hold`` seconds the controller switches to the position it is given (observer or encoder) and the
-speed loop, whose integrator starts at the q-axis current the rotor carries at that moment,
-I_f cos(θ_f − θ̂), for a bumpless transfer (I_f itself would be a torque step at no load).
+I-f start-up from standstill (:class:`IfStartup`; the design and its reasons):
+
+1. *Parked start.*  The current vector of amplitude I_f is held along θ_f + 90°,
+   and θ_f starts at θ_e0 − 90°: the rotor starts on its no-load equilibrium (its
+   d axis on the current vector).  A real drive gets there by a d-axis alignment
+   (pre-positioning) phase, which friction and eddy currents settle; the model
+   has almost no damping (B ≈ 0), so we start where that phase ends.  Started
+   90° off instead (θ_f = 0 with the rotor at 0, the old start) the rotor swung
+   ±90° for the whole start-up (−41 … 126 r/min around a 0 … 60 r/min ramp on the
+   IPMSM bench) and no observer could be handed a rotor moving like that.
+2. *Smooth ramp.*  The rotor follows θ_f through the torque-angle "spring"
+   T = K_t I_f cos(θ_f − θ), which is undamped (natural frequency
+   √(p K_t I_f/J), 5–12 Hz on the benches).  A linear frequency ramp steps the
+   acceleration at its start and end and excites that swing; the default
+   raised-cosine ramp ω_f = ω_sw (τ − sin 2πτ/2π), τ = t/T_r, T_r = ω_sw/accel,
+   has a continuous acceleration (peak 2× the mean ``accel``) and leaves it
+   nearly at rest.
+3. *Hold and agreement.*  At ω_switch the drive waits at least ``hold`` seconds
+   (the observer converges: the flux observers' SOGIs have a bandwidth ∝ ω̂) and
+   then until the position and speed it is given *agree* with the I-f frame for
+   ``dwell`` seconds: |ω̂ − ω_f| ≤ speed_tol·ω_f, and the offset Δ = θ_f − θ̂ (the
+   load angle when θ̂ = θ) steady, |Δ − Δ̄| ≤ tol with Δ̄ its low-pass over
+   ``dwell``.  An observer that never agrees keeps the drive in I-f (synchronous,
+   open loop): a fail-safe, visible as ``mode`` staying 0.  (With the speed
+   seeding of ClosedLoop the speed test holds by construction and the angle test
+   decides: an unconverged flux estimate wanders against θ_f.)  Forward rotation
+   only: ω_switch > 0.
+4. *Bumpless hand-over.*  At the switch the controller moves to the given frame
+   θ̂ with nothing stepping: the current references continue the I-f vector seen
+   from θ̂ (i_q = I_f cos Δ, i_d = −I_f sin Δ); the speed integrator is pre-loaded
+   so that the I-P output k_pω(b ω* − ω̂) + ∫ equals I_f cos Δ (without the
+   k_pω ω̂ term, as before, the switch stepped i_q by −k_pω ω̂: −5.8 A on the
+   IPMSM bench at 60 r/min); the current PIs' integrators are rotated into θ̂
+   with their decoupling terms, so the voltage vector is continuous; the held
+   i_q* until the next speed-loop sample is I_f cos Δ, not I_f.
+5. *Blend.*  Over ``blend`` seconds after the switch the d-current reference
+   goes linearly from −I_f sin Δ (up to I_f at no load: the I-f vector
+   magnetizes) to the controller's i_d policy; the speed loop then carries the
+   torque on the estimated q axis alone.
+
+:class:`~jaxobs.drive.ClosedLoop` also holds the observer's speed estimate at
+the I-f frequency while the I-f runs (``seed_speed``), see there.
 """
 
 from __future__ import annotations
 
+import math
 from typing import Literal, NamedTuple
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from .._math import safe_norm2
-from .._validate import check_nonnegative, check_positive, check_sample_time
-from .machine import PMSMParams
+from .. import papers
+from .._math import safe_norm2, wrap
+from .._validate import check_nonnegative, check_positive, check_real, check_sample_time
+from .machine import RPM, PMSMParams
 
 __all__ = ["FOC", "FOCInput", "FOCOutput", "IfStartup", "ControllerState", "OperatingPoint"]
 
@@ -64,18 +103,72 @@ class OperatingPoint(NamedTuple):
 
 
 class IfStartup(eqx.Module):
-    """Open-loop I-f start-up parameters."""
+    """I-f start-up from standstill, then a hand-over to the given position (module doc, steps 1–5).
+
+    :meth:`for_machine` gives the defaults we use for a machine (``jaxobs.papers``, IF_*).
+    """
 
     i_f: jax.Array  # current amplitude during start-up, A (> 0)
-    accel: jax.Array  # ramp rate of the electrical frequency, rad/s² (> 0)
+    accel: jax.Array  # mean ramp rate of the electrical frequency, rad/s² (> 0)
     omega_switch: jax.Array  # electrical speed at which control switches to the given position, rad/s
-    hold: jax.Array  # time spent at omega_switch before switching (lets an observer converge), s
+    hold: jax.Array  # least time spent at omega_switch before switching (lets an observer converge), s
+    blend: jax.Array  # after the switch: the d-current goes from the I-f vector's to the i_d policy, s
+    tol: jax.Array  # agreement: |Δ − Δ̄| of the offset Δ = θ_f − θ̂ (the load angle), rad
+    speed_tol: jax.Array  # agreement: |ω̂ − ω_f| / ω_f
+    dwell: jax.Array  # agreement must hold this long (and Δ̄ is Δ low-passed over it), s (> 0)
+    smooth: bool = eqx.field(static=True)  # raised-cosine ramp (continuous acceleration); False: linear
 
-    def __init__(self, i_f, accel, omega_switch, hold=0.0):
-        self.i_f = check_positive("i_f", i_f, "IfStartup")
-        self.accel = check_positive("accel", accel, "IfStartup")
-        self.omega_switch = check_positive("omega_switch", omega_switch, "IfStartup")
-        self.hold = check_nonnegative("hold", hold, "IfStartup")
+    def __init__(
+        self, i_f, accel, omega_switch, hold=0.0, *, blend=0.05, tol=0.2, speed_tol=0.1, dwell=0.02, smooth=True
+    ):
+        own = "IfStartup"
+        self.i_f = check_positive("i_f", i_f, own)
+        self.accel = check_positive("accel", accel, own)
+        self.omega_switch = check_positive("omega_switch", omega_switch, own)
+        self.hold = check_nonnegative("hold", hold, own)
+        self.blend = check_nonnegative("blend", blend, own)
+        self.tol = check_real("tol", tol, lower=0.0, upper=3.15, owner=own)
+        self.speed_tol = check_positive("speed_tol", speed_tol, own)
+        self.dwell = check_positive("dwell", dwell, own)
+        self.smooth = bool(smooth)
+
+    @classmethod
+    def for_machine(cls, par: PMSMParams, *, rpm_switch=None, i_f=None, **kw) -> IfStartup:
+        """The start-up we design for ``par`` (the machine the controller assumes), ASSUMED rules of thumb.
+
+        - I_f = papers.IF_CURRENT_PU × the rated current: enough torque to accelerate and to carry a
+          light load, small enough not to heat or saturate (I-f runs at a load angle near 90° at no load);
+        - switch at papers.IF_SWITCH_PU × rated speed (``rpm_switch`` to override), where every observer
+          here has converged within the hold and a sensorless speed loop at α_s = 2π·5 rad/s is stable
+          through it (the flux observers cannot start at 0 Hz: 000 Sec. IV; see below);
+        - mean acceleration such that the ramp's *peak* torque (2× the mean for the raised cosine) is
+          papers.IF_ACCEL_TORQUE_PU of K_t I_f, the rest being margin for load and swing; and slower still
+          if that ramp would last less than papers.IF_RAMP_SWING_PERIODS periods of the undamped swing
+          2π/√(p K_t I_f/J): a raised cosine as short as one period still rings (measured: ±25 % of the
+          switch speed on the SPMSM bench, ramp 0.11 s, swing period 84 ms);
+        - hold papers.IF_HOLD s at the switch speed.
+
+        A sensorless speed loop closed through a frequency-normalized FLL (SOIFO types: natural frequency
+        ≈ ω̂e/2) needs the switch speed high enough that the FLL is faster than the speed loop: we measured
+        a limit cycle (230–610 r/min) with α_s = 2π·5 rad/s after a switch at 200 r/min (10 %) on the SPMSM
+        bench, and ±1 % at 400 r/min (ω_e,sw ≥ 4 α_s).  Through a LESO's 15 Hz PLL the loop rang ±11 % at
+        60 r/min (10 %) on the IPMSM bench and ±3 % at 120 r/min.  Hence 20 % by default.
+        """
+        i_rated, kt, J, p = float(par.i_rated), float(par.kt), float(par.J), par.p
+        i_f = papers.IF_CURRENT_PU * i_rated if i_f is None else float(i_f)
+        rpm = papers.IF_SWITCH_PU * float(par.n_rated) if rpm_switch is None else float(rpm_switch)
+        accel_m = papers.IF_ACCEL_TORQUE_PU * kt * i_f / (2 * J)  # mean mechanical, rad/s²
+        swing_period = 2 * math.pi / math.sqrt(p * kt * i_f / J)
+        accel_m = min(accel_m, rpm * RPM / (papers.IF_RAMP_SWING_PERIODS * swing_period))
+        kw.setdefault("hold", papers.IF_HOLD)
+        return cls(i_f, p * accel_m, p * rpm * RPM, **kw)
+
+    def ramp(self, t):
+        """The I-f electrical frequency at time t from the start, rad/s."""
+        tau = jnp.clip(t * self.accel / self.omega_switch, 0.0, 1.0)
+        if self.smooth:
+            tau = tau - jnp.sin(2 * jnp.pi * tau) / (2 * jnp.pi)
+        return self.omega_switch * tau
 
 
 class ControllerState(eqx.Module):
@@ -87,6 +180,10 @@ class ControllerState(eqx.Module):
     omega_f: jax.Array  # I-f electrical frequency, rad/s
     t_at_switch: jax.Array  # time spent at the switch-over frequency, s
     mode: jax.Array  # 0: I-f start-up, 1: closed loop on the given position
+    d_lp: jax.Array  # I-f: the offset θ_f − θ̂ low-passed over the dwell, rad
+    t_agree: jax.Array  # I-f: how long the given position has agreed with the I-f frame, s
+    t_closed: jax.Array  # time since the switch, s
+    id_hand: jax.Array  # the d-current at the switch (in the given frame), A
 
 
 class FOCInput(NamedTuple):
@@ -221,19 +318,21 @@ class FOC(eqx.Module):
             lambda f: (f.est, f.u_max, f.startup), self, (est, u_max, startup), is_leaf=lambda x: x is None
         )
 
-    def init(self, op: OperatingPoint | None = None) -> ControllerState:
+    def init(self, op: OperatingPoint | None = None, *, theta_f0=0.0) -> ControllerState:
         """Zero integrators (``op=None``), or the integrators that hold the drive at ``op`` (a steady start).
 
         At a steady operating point the errors are zero, so the current PIs'
         outputs are their integrators plus the decoupling terms (computed with
         the *assumed* machine), which must equal the voltage the true machine
         needs; the speed PI's output, k_pω (b ω* − ω) + ∫, must equal i_q.
-        With an I-f start-up the drive starts from standstill: zeros.
+        With an I-f start-up the drive starts from standstill: zeros, and the
+        I-f angle at ``theta_f0`` (ClosedLoop: θ_e0 − 90°, the parked rotor).
         """
         z = jnp.zeros_like(self.kp_d)
         mode = jnp.asarray(1 if self.startup is None else 0, dtype=jnp.int32)
+        rest = dict(theta_f=z + theta_f0, omega_f=z, t_at_switch=z, mode=mode, d_lp=z, t_agree=z, t_closed=z, id_hand=z)
         if op is None or self.startup is not None:
-            return ControllerState(int_d=z, int_q=z, int_w=z, iq_ref=z, theta_f=z, omega_f=z, t_at_switch=z, mode=mode)
+            return ControllerState(int_d=z, int_q=z, int_w=z, iq_ref=z, **rest)
         est = self.est
         w_e = est.p * op.omega_m
         int_d = op.u_d + w_e * est.Lq * op.i_q
@@ -242,16 +341,7 @@ class FOC(eqx.Module):
             int_w = z
         else:
             int_w = op.i_q - self.kp_w * (self.setpoint_weight * op.omega_m_ref - op.omega_m)
-        return ControllerState(
-            int_d=z + int_d,
-            int_q=z + int_q,
-            int_w=z + int_w,
-            iq_ref=z + op.i_q,
-            theta_f=z,
-            omega_f=z,
-            t_at_switch=z,
-            mode=mode,
-        )
+        return ControllerState(int_d=z + int_d, int_q=z + int_q, int_w=z + int_w, iq_ref=z + op.i_q, **rest)
 
     def operating_point(self, par: PMSMParams, omega_m, omega_m_ref, theta_e, t_load) -> OperatingPoint:
         """The steady state of the true machine ``par`` under this controller at speed ω_m and load T_L.
@@ -315,20 +405,35 @@ class FOC(eqx.Module):
         k, i_a, i_b, theta, omega_e, omega_m, omega_m_ref = inp
         est, u_max, startup = self.est, self.u_max, self.startup
         ts = self.ts
-        # --- start-up angle (advanced every period; only used in mode 0)
+        # --- I-f start-up (module doc): the angle advances every period, used in mode 0
         if startup is not None:
-            omega_f = jnp.minimum(cs.omega_f + startup.accel * ts, startup.omega_switch)
-            theta_f = cs.theta_f + cs.omega_f * ts
-            at_top = cs.omega_f >= startup.omega_switch
-            t_at_switch = jnp.where(at_top, cs.t_at_switch + ts, cs.t_at_switch)
-            switch = (cs.mode == 0) & at_top & (t_at_switch >= startup.hold)
+            omega_f = startup.ramp(k * ts)
+            theta_f = wrap(cs.theta_f + 0.5 * (cs.omega_f + omega_f) * ts)  # trapezoidal: exact for the ramp
+            at_top = omega_f >= startup.omega_switch
+            t_at_switch = jnp.where(at_top, cs.t_at_switch + ts, 0.0)
+            # agreement of the given position with the I-f frame: Δ = θ_f − θ̂ steady and ω̂ ≈ ω_f
+            delta = wrap(theta_f - theta)
+            d_lp = jnp.where(
+                cs.t_at_switch > 0, wrap(cs.d_lp + jnp.minimum(ts / startup.dwell, 1.0) * wrap(delta - cs.d_lp)), delta
+            )
+            agree = (
+                at_top
+                & (jnp.abs(wrap(delta - d_lp)) <= startup.tol)
+                & (jnp.abs(omega_e - omega_f) <= startup.speed_tol * omega_f)
+            )
+            t_agree = jnp.where(agree, cs.t_agree + ts, 0.0)
+            switch = (cs.mode == 0) & (t_at_switch >= startup.hold) & (t_agree >= startup.dwell)
             mode = jnp.where(switch, 1, cs.mode)
-            # bumpless transfer: start the speed integrator at the q-current the rotor
-            # actually carries, i_f cos(θ_f − θ) (the I-f vector is i_f along θ_f + 90°)
-            int_w0 = jnp.where(switch, startup.i_f * jnp.cos(theta_f - theta), cs.int_w)
+            t_closed = jnp.where(cs.mode == 1, cs.t_closed + ts, 0.0)  # 0 at the switch
+            # bumpless: the I-f vector (I_f along θ_f + 90°) seen from the given frame
+            iq_hand = startup.i_f * jnp.cos(delta)
+            id_hand = jnp.where(switch, -startup.i_f * jnp.sin(delta), cs.id_hand)
+            # the speed PI's output k_pω(b ω* − ω̂) + ∫ starts at iq_hand
+            int_w0 = jnp.where(switch, iq_hand - self.kp_w * (self.setpoint_weight * omega_m_ref - omega_m), cs.int_w)
+            iq_held = jnp.where(switch, iq_hand, cs.iq_ref)
         else:
-            omega_f, theta_f, mode, int_w0 = cs.omega_f, cs.theta_f, cs.mode, cs.int_w
-            t_at_switch = cs.t_at_switch
+            omega_f, theta_f, mode, int_w0, iq_held = cs.omega_f, cs.theta_f, cs.mode, cs.int_w, cs.iq_ref
+            t_at_switch, d_lp, t_agree, t_closed, id_hand = cs.t_at_switch, cs.d_lp, cs.t_agree, cs.t_closed, cs.id_hand
         closed = mode == 1
         th = jnp.where(closed, theta, theta_f)
         w_e = jnp.where(closed, omega_e, omega_f)
@@ -342,27 +447,42 @@ class FOC(eqx.Module):
         # conditional integration: freeze while saturated and the error pushes further
         windup = (unsat != iq_sat) & (jnp.sign(e_w) == jnp.sign(unsat))
         int_w = jnp.where(run_speed & ~windup, int_w0 + self.ki_w * e_w * tw, int_w0)
-        iq_ref = jnp.where(run_speed, iq_sat, cs.iq_ref)
+        iq_ref = jnp.where(run_speed, iq_sat, iq_held)
         if self.outer == "current":  # the reference is i_q* itself (current-loop tests, torque control)
             iq_ref = jnp.clip(omega_m_ref, -self.i_max, self.i_max)
             int_w = cs.int_w
+        id_ref = self._id_ref(est, iq_ref)
+        int_d0, int_q0 = cs.int_d, cs.int_q
         if startup is not None:
+            # I-f: I_f on the I-f frame's q axis; after the switch the d-current blends from the I-f vector's
+            r = jnp.where(startup.blend > 0, jnp.clip(1.0 - t_closed / jnp.maximum(startup.blend, ts), 0.0, 1.0), 0.0)
+            id_ref = jnp.where(closed, r * id_hand + (1 - r) * id_ref, 0.0)
             iq_ref = jnp.where(closed, iq_ref, startup.i_f)
             int_w = jnp.where(closed, int_w, cs.int_w)
-        id_ref = self._id_ref(est, iq_ref)
+            # the current PIs' integrators into the new frame, so that the voltage vector is continuous:
+            # u = ∫ + decoupling, rotated by Δ from θ_f to θ̂, minus the decoupling computed in θ̂
+            cf, sf = jnp.cos(theta_f), jnp.sin(theta_f)
+            idf, iqf = cf * i_a + sf * i_b, -sf * i_a + cf * i_b
+            ch, sh = jnp.cos(theta), jnp.sin(theta)
+            idh, iqh = ch * i_a + sh * i_b, -sh * i_a + ch * i_b
+            vd = cs.int_d - omega_f * est.Lq * iqf
+            vq = cs.int_q + omega_f * (est.Ld * idf + est.psi_f)
+            cd, sd = jnp.cos(delta), jnp.sin(delta)
+            int_d0 = jnp.where(switch, cd * vd - sd * vq + omega_e * est.Lq * iqh, cs.int_d)
+            int_q0 = jnp.where(switch, sd * vd + cd * vq - omega_e * (est.Ld * idh + est.psi_f), cs.int_q)
 
         # --- current loop
         c, s = jnp.cos(th), jnp.sin(th)
         i_d = c * i_a + s * i_b
         i_q = -s * i_a + c * i_b
         e_d, e_q = id_ref - i_d, iq_ref - i_q
-        u_d = self.kp_d * e_d + cs.int_d - w_e * est.Lq * i_q
-        u_q = self.kp_q * e_q + cs.int_q + w_e * (est.Ld * i_d + est.psi_f)
+        u_d = self.kp_d * e_d + int_d0 - w_e * est.Lq * i_q
+        u_q = self.kp_q * e_q + int_q0 + w_e * (est.Ld * i_d + est.psi_f)
         mag = safe_norm2(u_d, u_q)
         sat = mag > u_max
         scale = jnp.where(sat, u_max / jnp.maximum(mag, 1e-12), 1.0)
-        int_d = jnp.where(sat, cs.int_d, cs.int_d + self.ki_d * e_d * ts)
-        int_q = jnp.where(sat, cs.int_q, cs.int_q + self.ki_q * e_q * ts)
+        int_d = jnp.where(sat, int_d0, int_d0 + self.ki_d * e_d * ts)
+        int_q = jnp.where(sat, int_q0, int_q0 + self.ki_q * e_q * ts)
         u_d, u_q = u_d * scale, u_q * scale
         # the voltage is applied one period later, for a period: rotate by 1.5 ωe Ts
         th_out = th + (1.5 * w_e * ts if self.delay_compensation else 0.0)
@@ -378,6 +498,10 @@ class FOC(eqx.Module):
             omega_f=omega_f,
             t_at_switch=t_at_switch,
             mode=mode,
+            d_lp=d_lp,
+            t_agree=t_agree,
+            t_closed=t_closed,
+            id_hand=id_hand,
         )
         return new, FOCOutput(
             u_a=u_a, u_b=u_b, id_ref=id_ref, iq_ref=iq_ref, theta=jnp.where(mode == 1, theta, theta_f)

@@ -195,15 +195,20 @@ class ClosedLoop(AbstractSystem):
         period that starts at t = 0 is the steady one (computed at t_{−1}, so
         rotated to θ_e0 + ω_e T_s/2 by the delay compensation), and the
         observer starts settled on that operating point (:meth:`_settled_observer`).
-        With the drive's I-f start-up the scenario starts from standstill, all zeros.
+        With the drive's I-f start-up the scenario starts from standstill (whatever
+        its ``omega_m0``: an I-f start-up from a spinning rotor would be a different
+        problem, and a job's scenarios keep their speed for the observer's binding), all zeros, with the I-f angle at
+        θ_e0 − 90°: the rotor parked on the current vector, where an alignment
+        phase leaves it (:mod:`jaxobs.drive.control`, step 1).
         """
         sc = self.scenario
         foc = self.controller
         if self.drive.startup is not None:
-            plant = self.plant.init(omega_m0=sc.omega_m0, theta_e0=sc.theta_e0)
+            plant = self.plant.init(omega_m0=0.0, theta_e0=sc.theta_e0)
             z = jnp.zeros((), plant.x.dtype)
             obs = None if self.observer is None else self.observer.init()
-            return LoopState(plant=plant, ctrl=foc.init(), obs=obs, sensors=sc.sensors.init(sc.key), u_a=z, u_b=z)
+            ctrl = foc.init(theta_f0=sc.theta_e0 - jnp.pi / 2)
+            return LoopState(plant=plant, ctrl=ctrl, obs=obs, sensors=sc.sensors.init(sc.key), u_a=z, u_b=z)
         op = self.operating_point()
         plant = self.plant.init(omega_m0=op.omega_m, theta_e0=op.theta_e, i_d0=op.i_d, i_q0=op.i_q)
         u_a, u_b = self._steady_voltage(op, op.theta_e)
@@ -273,6 +278,15 @@ class ClosedLoop(AbstractSystem):
         else:
             th_c, w_e_c, w_m_c = y.theta_e, w_e, y.omega_m
         ctrl, c = self.controller.step(state.ctrl, FOCInput(k, meas.i_a, meas.i_b, th_c, w_e_c, w_m_c, x.omega_m_ref))
+        if drive.startup is not None and hasattr(self.observer, "seed_speed"):
+            # While the I-f runs, the observer's speed estimate (FLL centre frequency, PLL integrator) is held
+            # at the I-f frequency, the rotor's mean speed; released at the switch.  Without it the flux
+            # observers' FLLs never left their initial 1 rad/s: their gain is lam·ω̂² (frequency-normalized,
+            # jaxobs.observers.flux), so at ω̂ = 1 rad/s they adapt in ~1 s, while the I-f ramp takes 0.1 s —
+            # the SOGIs, centred at 1 rad/s, then gave a flux of the wrong phase and amplitude and the drive
+            # ran away at the hand-over.  A DSP knows ω_f too: it is the FLL's feed-forward, not a cheat.
+            seeded = self.observer.seed_speed(obs_state, ctrl.omega_f)
+            obs_state = jax.tree.map(lambda a, b: jnp.where(ctrl.mode == 0, a, b), seeded, obs_state)
         _, u_next = drive.inverter.step(None, InverterInput(c.u_a, c.u_b))
         out = DriveOutput(
             t=t,

@@ -96,6 +96,9 @@ class ObserverBank(eqx.Module):
     def init_at(self, omega_e):
         return tuple(o.init_at(omega_e) if hasattr(o, "init_at") else o.init() for o in self.observers)
 
+    def seed_speed(self, state, omega_e):
+        return tuple(o.seed_speed(s, omega_e) if hasattr(o, "seed_speed") else s for o, s in zip(self.observers, state))
+
     def step(self, state, u):
         pairs = [o.step(s, u) for o, s in zip(self.observers, state)]
         outs = tuple(p[1] for p in pairs)

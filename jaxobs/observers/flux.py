@@ -95,6 +95,12 @@ class _FluxBase(eqx.Module):
         w = jnp.maximum(jnp.abs(omega_e), self.omega_min) if self._speed_abs else omega_e
         return self._init_from(x0.at[self._speed_index].set(w))
 
+    def seed_speed(self, state: FluxState, omega_e) -> FluxState:
+        """``state`` with its speed estimate (FLL centre frequency or PLL speed) set to ω_e: an I-f start-up
+        holds it at the I-f frequency until the hand-over (jaxobs.drive.ClosedLoop)."""
+        w = jnp.maximum(jnp.abs(omega_e), self.omega_min) if self._speed_abs else omega_e
+        return eqx.tree_at(lambda s: s.x, state, state.x.at[self._speed_index].set(w))
+
     def _init_from(self, x0) -> FluxState:
         z2 = jnp.zeros((2,), x0.dtype)
         return FluxState(x=x0, rule=self.rule.init(self.f, x0, z2), i_prev=z2, u_prev=z2, started=jnp.asarray(False))

@@ -93,6 +93,11 @@ class _LESOBase(eqx.Module):
         """The initial state with the PLL's speed at ω_e (rad/s): the start of a drive's settling phase."""
         return self._init_from(self.initial_state().at[self.n_leso + 1].set(omega_e))
 
+    def seed_speed(self, state: LESOState, omega_e) -> LESOState:
+        """``state`` with the PLL's speed set to ω_e: an I-f start-up holds it at the I-f frequency until the
+        hand-over (jaxobs.drive.ClosedLoop)."""
+        return eqx.tree_at(lambda s: s.x, state, state.x.at[self.n_leso + 1].set(omega_e))
+
     def _init_from(self, x0) -> LESOState:
         z2 = jnp.zeros((2,), x0.dtype)
         inp0 = (z2, z2)

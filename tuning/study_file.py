@@ -1,0 +1,420 @@
+"""Study files (``jaxobs study FILE``): read and check everything before a single scenario runs.
+
+The same machinery as job files (:mod:`tuning.job`): the size, nesting and encoding are checked before the
+TOML is parsed; every table and key is known (an unknown one is refused in one line that names it and the
+allowed ones); every number is finite and in its physical range; the scenario count, the time steps and
+the memory of one chunk are bounded.  ``jaxobs study FILE --check`` stops there.
+
+A FLL study::
+
+    [study]
+    name = "fll-family"            # the output folder's default name (out/<name>)
+    kind = "fll"                   # "fll" (default) or "drive"
+    t_event = 0.1                  # s, the event of every scenario
+    horizon = 0.4                  # s
+    steady_from = 0.325            # s (default t_event + 0.75 (horizon - t_event))
+    band_hz = 0.05                 # settling band, Hz
+    sample = 0                     # 0: the full grid; n: n random points inside the axes' ranges
+    seed = 0                       # the random points and the noise
+    chunk_size = 2048              # scenarios per compiled call
+
+    [designs.WIF]                  # one of: closed_form, result, component (+ its gains)
+    closed_form = "wif"
+    [designs.tuned]
+    result = "out/tune/result.json"   # a tuning run's result; relative to the study file's folder
+    [designs.mine]
+    component = "SOGIFLL"
+    k = 1.0
+    lam = 20000.0
+
+    [axes]                         # jaxobs.study.STUDY_AXES, each a non-empty list of numbers in its range
+    freq_step = [-2.0, 2.0]
+
+A drive study (``kind = "drive"``) has the keys of :func:`_parse_drive` and a ``[drive]`` table.
+
+``result`` paths: a relative path is read relative to the folder of the study file (not the working
+directory), so a study file and the results it names move together; an absolute path is read as it is.
+Either must exist and be a tuning ``result.json`` of the right family.  Reading is all a study does with
+it (nothing is written there), and its content never reaches an error message.
+"""
+
+from __future__ import annotations
+
+import inspect
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import jaxobs
+from jaxobs import drive as D
+from jaxobs import linear, papers
+from jaxobs.drive_study import DRIVE_STUDY_AXES
+from jaxobs.study import STUDY_AXES
+
+from .job import (
+    AXIS_RANGES,
+    MAX_SCENARIOS,
+    MAX_STEPS,
+    JobError,
+    _available_memory,
+    _cap,
+    _get,
+    _no_unknown,
+    _parse_recording_scenarios,
+    _show,
+    read_toml,
+)
+from .results import load_result, tuned_component
+
+__all__ = ["StudySpec", "load_study", "parse_study", "FLL_CLOSED_FORMS", "FLL_COMPONENTS", "DRIVE_OBSERVERS"]
+
+WHAT = "study file"
+FLL_CLOSED_FORMS = {
+    "sogi-fll": linear.sogi_fll_closed_form,
+    "wpf": linear.wpf_closed_form,
+    "wif": linear.wif_closed_form,
+}
+FLL_COMPONENTS = ("SOGIFLL", "SOGIFLLWPF", "SOGIFLLWIF")
+DRIVE_OBSERVERS = ("CLESO", "GILESO", "FALESO", "PureIntegratorFlux", "LPFFlux", "SOIFO", "SecondOrderSOIFO")
+_FLUX = ("PureIntegratorFlux", "LPFFlux", "SOIFO", "SecondOrderSOIFO")
+MACHINES = ("ipmsm_paper002", "spmsm_paper000")
+# the study's scenario axes and their physical ranges: the tuning jobs' grid axes, and the noise level
+FLL_AXIS_RANGES = {k: {**AXIS_RANGES["grid"], "noise": ("pu", (0.0, 10.0))}[k] for k in STUDY_AXES}
+MAX_CHUNK = 100_000
+# bytes one scenario keeps per time step while a chunk runs (every step's outputs and the metrics' temporaries,
+# float64): an estimate for the memory check, not a measurement
+BYTES_PER_STEP = {"fll": 256, "drive": 1024}
+
+_FLL_STUDY_KEYS = (
+    "kind",
+    "name",
+    "t_event",
+    "horizon",
+    "steady_from",
+    "band_hz",
+    "sample",
+    "seed",
+    "chunk_size",
+    "recording",
+)
+_DRIVE_STUDY_KEYS = ("kind", "name", "machine", "horizon", "steady_from", "sampling", "sample", "seed", "chunk_size")
+
+
+@dataclass
+class StudySpec:
+    """A checked study file: ``run_study`` / ``run_drive_study`` take ``designs``, ``axes`` and ``opts``."""
+
+    name: str
+    kind: str  # "fll" | "drive"
+    designs: dict
+    axes: dict
+    opts: dict = field(default_factory=dict)
+    scenarios: int = 0
+
+
+def load_study(path) -> StudySpec:
+    """Read, check and build a study file; errors are one-line :class:`~tuning.job.JobError`\\ s (exit 2)."""
+    path = Path(path)
+    raw, _ = read_toml(path, WHAT)  # size, nesting and encoding checked before parsing
+    return parse_study(raw, base=path.resolve().parent)
+
+
+def parse_study(raw: dict, base: Path | None = None) -> StudySpec:
+    """Check a parsed study file; ``base`` is the folder relative ``result`` paths are read from."""
+    base = Path.cwd() if base is None else Path(base)
+    st = _get(raw, "study", "study", dict, {})
+    kind = _get(st, "kind", "study.kind", str, "fll")
+    if kind not in ("fll", "drive"):
+        raise JobError("study.kind", f"must be 'fll' or 'drive', got {_show(kind)}")
+    tables = ("study", "designs", "axes") + (("drive",) if kind == "drive" else ())
+    _no_unknown(raw, tables, WHAT)
+    name = _get(st, "name", "study.name", str, "study" if kind == "fll" else "drive-study")
+    if kind == "drive":
+        return _parse_drive(raw, st, name, base)
+    return _parse_fll(raw, st, name, base)
+
+
+# --------------------------------------------------------------------------------------------------
+# shared pieces
+# --------------------------------------------------------------------------------------------------
+
+
+def _axes(raw: dict, ranges: dict, limits: dict | None = None) -> dict:
+    """``[axes]``: known names, non-empty lists of finite numbers inside each axis's range."""
+    axes_t = _get(raw, "axes", "axes", dict, {})
+    if not axes_t:
+        raise JobError("axes", f"at least one axis is required; allowed: {', '.join(ranges)}")
+    axes = {}
+    for k in axes_t:
+        if k not in ranges:
+            raise JobError(f"axes.{_cap(str(k), 40)}", f"unknown axis; allowed: {', '.join(ranges)}")
+        v = axes[k] = _get(axes_t, k, f"axes.{k}", list)
+        unit, (lo, hi) = (limits or {}).get(k, ranges[k])
+        for i, x in enumerate(v):
+            if not lo <= x <= hi:
+                u = "" if unit == "1" else f" {unit}"
+                raise JobError(f"axes.{k}[{i}]", f"must be in [{lo:g}, {hi:g}]{u}, got {x:g}")
+    return axes
+
+
+def _count(axes: dict, sample: int) -> int:
+    n = sample or math.prod(len(v) for v in axes.values())
+    if n > MAX_SCENARIOS:
+        raise JobError("axes", f"{n} scenarios (the product of the axes' lengths) > {MAX_SCENARIOS}")
+    return n
+
+
+def _check_steps(horizon: float, steady_from: float, ts: float, n: int, chunk: int, kind: str, extra_s=0.0) -> None:
+    """Time steps of one run, the steady window's samples, and the memory of one chunk, against the machine."""
+    if horizon < ts:
+        raise JobError("study.horizon", f"shorter than one sample (ts = {ts:g} s), got {horizon:g} s")
+    steps = (horizon + extra_s) / ts
+    if steps > MAX_STEPS:
+        raise JobError("study.horizon", f"{steps:.3g} time steps of {ts:g} s > {MAX_STEPS:g}: too long")
+    if (horizon - steady_from) / ts < 10:
+        raise JobError(
+            "study.steady_from",
+            f"the steady window [{steady_from:g}, {horizon:g}) s holds fewer than 10 samples of {ts:g} s",
+        )
+    need = steps * min(n, chunk) * BYTES_PER_STEP[kind]
+    have = _available_memory()
+    if need > have:
+        raise JobError(
+            "study.chunk_size",
+            f"{min(n, chunk)} scenarios per chunk x {steps:.3g} steps need about {need / 2**30:.3g} GiB, "
+            f"{have / 2**30:.3g} GiB available: a smaller chunk_size or a shorter horizon",
+        )
+
+
+def _seed(st: dict) -> int:
+    seed = _get(st, "seed", "study.seed", int, 0)
+    if not 0 <= seed < 2**32:
+        raise JobError("study.seed", f"must be in [0, 2^32), got {_show(seed)}")
+    return seed
+
+
+def _chunk(st: dict, default: int) -> int:
+    chunk = _get(st, "chunk_size", "study.chunk_size", int, default)
+    if not 1 <= chunk <= MAX_CHUNK:
+        raise JobError("study.chunk_size", f"must be in [1, {MAX_CHUNK}], got {_show(chunk)}")
+    return chunk
+
+
+def _result(spec: dict, where: str, base: Path, family: tuple):
+    """A tuning result's tuned design; ``result`` relative to the study file's folder (module doc)."""
+    _no_unknown(spec, ("result",), where)
+    rel = _get(spec, "result", f"{where}.result", str)
+    if not rel or "\x00" in rel:
+        raise JobError(f"{where}.result", f"must be the path of a tuning result.json, got {_show(rel)}")
+    p = Path(rel)
+    p = p if p.is_absolute() else base / p
+    if not p.is_file():
+        raise JobError(f"{where}.result", f"no such file {_cap(str(p), 100)!r} (relative paths: from the study file)")
+    try:
+        res = load_result(p)
+        if res["component"] not in family:
+            raise ValueError(f"component {_show(res['component'])} is not one of {', '.join(family)}")
+        return tuned_component(res)
+    except (ValueError, TypeError, KeyError, AttributeError, ArithmeticError) as e:  # a malformed result
+        raise JobError(f"{where}.result", str(e)) from None
+
+
+def _ctor_params(ctor, exclude=()) -> dict:
+    """The constructor's settable parameters: name -> default (inspect.Parameter.empty: required)."""
+    sig = inspect.signature(ctor)
+    return {n: p.default for n, p in sig.parameters.items() if n not in ("rule", *exclude)}
+
+
+def _component(spec: dict, where: str, comp: str, exclude=(), fixed=None):
+    """A component from its gains: known keys (typos named), each of its default's type, then the constructor."""
+    ctor = getattr(jaxobs, comp)
+    params = _ctor_params(ctor, exclude)
+    _no_unknown(spec, ("component", *params), where)
+    kw = {}
+    for k, default in params.items():
+        f = f"{where}.{k}"
+        if k not in spec:
+            if default is inspect.Parameter.empty and k not in (fixed or {}):
+                raise JobError(f, f"missing (required by {comp})")
+            continue
+        if isinstance(default, bool):
+            kw[k] = _get(spec, k, f, bool)
+        elif isinstance(default, str):
+            kw[k] = _get(spec, k, f, str)
+        else:
+            kw[k] = _get(spec, k, f, float)
+    try:
+        return ctor(**(fixed or {}), **kw)
+    except (ValueError, TypeError, ArithmeticError) as e:
+        raise JobError(where, str(e)) from None
+
+
+def _designs(raw: dict, build) -> dict:
+    designs_t = _get(raw, "designs", "designs", dict, {})
+    if not designs_t:
+        raise JobError("designs", "at least one design is required")
+    designs = {}
+    for name in designs_t:
+        where = f"designs.{_cap(str(name), 40)}"
+        spec = _get(designs_t, name, where, dict)
+        given = [k for k in ("closed_form", "result", "component") if k in spec]
+        if len(given) != 1:
+            raise JobError(where, f"give exactly one of closed_form, result, component (got {len(given)})")
+        designs[name] = build(spec, where, given[0])
+    return designs
+
+
+# --------------------------------------------------------------------------------------------------
+# FLL studies
+# --------------------------------------------------------------------------------------------------
+
+
+def _parse_fll(raw: dict, st: dict, name: str, base: Path) -> StudySpec:
+    _no_unknown(st, _FLL_STUDY_KEYS, "study")
+
+    def build(spec, where, how):
+        if how == "closed_form":
+            _no_unknown(spec, ("closed_form",), where)
+            cf = _get(spec, "closed_form", f"{where}.closed_form", str)
+            if cf not in FLL_CLOSED_FORMS:
+                raise JobError(f"{where}.closed_form", f"must be one of {', '.join(FLL_CLOSED_FORMS)}, got {_show(cf)}")
+            return FLL_CLOSED_FORMS[cf]()
+        if how == "result":
+            return _result(spec, where, base, FLL_COMPONENTS)
+        comp = _get(spec, "component", f"{where}.component", str)
+        if comp not in FLL_COMPONENTS:
+            raise JobError(f"{where}.component", f"must be one of {', '.join(FLL_COMPONENTS)}, got {_show(comp)}")
+        return _component(spec, where, comp)
+
+    designs = _designs(raw, build)
+    t_event = _get(st, "t_event", "study.t_event", float, 0.1)
+    horizon = _get(st, "horizon", "study.horizon", float, 0.4)
+    if t_event < 0:
+        raise JobError("study.t_event", f"must be >= 0 s, got {t_event:g}")
+    if not horizon > t_event:
+        raise JobError("study.horizon", f"must exceed t_event ({t_event:g} s), got {horizon:g}")
+    ts = min(float(d.ts) for d in designs.values())
+    if horizon / ts > MAX_STEPS:
+        raise JobError("study.horizon", f"{horizon:g} s is more than {MAX_STEPS:g} time steps of {ts:g} s")
+    steady = _get(st, "steady_from", "study.steady_from", float, t_event + 0.75 * (horizon - t_event))
+    if not 0 <= steady < horizon:
+        raise JobError("study.steady_from", f"must be in [0, horizon = {horizon:g}) s, got {steady:g}")
+    band = _get(st, "band_hz", "study.band_hz", float, 0.05)
+    if not 0 < band <= 100:
+        raise JobError("study.band_hz", f"must be in (0, 100] Hz, got {band:g}")
+    sample = _get(st, "sample", "study.sample", int, 0)
+    if not 0 <= sample <= MAX_SCENARIOS:
+        raise JobError("study.sample", f"must be in [0, {MAX_SCENARIOS}] (0: the full grid), got {_show(sample)}")
+    seed, chunk = _seed(st), _chunk(st, 2048)
+    # the frequency after the step stays in (0, 1/(4 ts)] of every design (the run takes the first's ω_n)
+    freq = float(next(iter(designs.values())).omega_n) / (2 * math.pi)
+    if "recording" in st:  # [study.recording]: recorded voltages instead of the axes' grid
+        return _fll_recordings(raw, st, name, base, designs, t_event, horizon, steady, band)
+    unit, (lo, hi) = FLL_AXIS_RANGES["freq_step"]
+    limits = {"freq_step": (unit, (max(lo, -freq * (1 - 1e-6)), min(hi, 0.25 / ts - freq)))}
+    axes = _axes(raw, FLL_AXIS_RANGES, limits)
+    n = _count(axes, sample)
+    _check_steps(horizon, steady, ts, n, chunk, "fll")
+    opts = dict(
+        t_event=t_event, horizon=horizon, steady_from=steady, band_hz=band, sample=sample, seed=seed, chunk_size=chunk
+    )
+    return StudySpec(name, "fll", designs, axes, opts, n)
+
+
+def _fll_recordings(raw, st, name, base, designs, t_event, horizon, steady, band) -> StudySpec:
+    """``[study.recording]``: the keys of a job's ``[scenarios.recording]`` (:mod:`tuning.job`), every file
+    read and checked now at the designs' one sample time; no ``[axes]``, ``sample`` or ``chunk_size``."""
+    for key in ("sample", "chunk_size"):
+        if key in st:
+            raise JobError(f"study.{key}", "does not apply with study.recording (the recordings are the scenarios)")
+    if "axes" in raw:
+        raise JobError("axes", "does not apply with study.recording (the recordings are the scenarios)")
+    ts = sorted({float(d.ts) for d in designs.values()})
+    if len(ts) != 1:
+        raise JobError("designs", f"a study on recordings needs one sample time for all designs, got {ts}")
+    spec = _parse_recording_scenarios(
+        {"recording": st["recording"]}, "study", "grid", t_event, horizon, steady, 0, ts[0], base
+    )
+    opts = dict(t_event=t_event, horizon=horizon, steady_from=steady, band_hz=band, recording=spec.recording)
+    return StudySpec(name, "fll", designs, {}, opts, len(spec.recording.files))
+
+
+# --------------------------------------------------------------------------------------------------
+# drive studies
+# --------------------------------------------------------------------------------------------------
+
+
+def _parse_drive(raw: dict, st: dict, name: str, base: Path) -> StudySpec:
+    _no_unknown(st, _DRIVE_STUDY_KEYS, "study")
+    machine = _get(st, "machine", "study.machine", str, "ipmsm_paper002")
+    if machine not in MACHINES:
+        raise JobError("study.machine", f"must be one of {', '.join(MACHINES)}, got {_show(machine)}")
+    par = getattr(D, machine)()
+    dr = _get(raw, "drive", "drive", dict, {})
+    _no_unknown(dr, ("alpha_c_hz", "alpha_s_hz", "settle"), "drive")
+    ac = _get(dr, "alpha_c_hz", "drive.alpha_c_hz", float, papers.BENCH_CURRENT_HZ)
+    as_ = _get(dr, "alpha_s_hz", "drive.alpha_s_hz", float, papers.BENCH_SPEED_HZ)
+    for k, v in (("drive.alpha_c_hz", ac), ("drive.alpha_s_hz", as_)):
+        if not 0 < v <= 5000:
+            raise JobError(k, f"must be in (0, 5000] Hz, got {v:g}")
+    settle = _get(dr, "settle", "drive.settle", float, 0.2)
+    if not 0 <= settle <= 10:
+        raise JobError("drive.settle", f"must be in [0, 10] s, got {settle:g}")
+    try:
+        foc = D.FOC.imc(par, alpha_c=2 * math.pi * ac, alpha_s=2 * math.pi * as_)
+        drive = D.Drive(foc, sensorless=True, settle=settle)
+    except (ValueError, ArithmeticError) as e:
+        raise JobError("drive", str(e)) from None
+
+    def build(spec, where, how):
+        if how == "closed_form":
+            raise JobError(f"{where}.closed_form", "drive studies take component (with its gains) or result")
+        if how == "result":
+            return _result(spec, where, base, DRIVE_OBSERVERS)
+        comp = _get(spec, "component", f"{where}.component", str)
+        if comp not in DRIVE_OBSERVERS:
+            raise JobError(f"{where}.component", f"must be one of {', '.join(DRIVE_OBSERVERS)}, got {_show(comp)}")
+        # the machine's Rs and L are placeholders and the initial speed is the scenario's: the study binds
+        # each scenario's assumed machine (jaxobs.drive_study.bind_observer); the drive's ts rules
+        if comp in _FLUX:
+            fixed = {"Rs": par.Rs, "L": par.Ld}
+            exclude = ("Rs", "L", "omega0", "ts")
+            if comp in ("SOIFO", "SecondOrderSOIFO"):
+                fixed["omega0"] = 1.0
+        else:
+            fixed, exclude = {"Rs": par.Rs, "Lq": par.Lq}, ("Rs", "Lq", "omega0_pll", "ts")
+        return _component(spec, where, comp, exclude, fixed)
+
+    designs = _designs(raw, build)
+    horizon = _get(st, "horizon", "study.horizon", float, 0.3)
+    if not horizon > 0:
+        raise JobError("study.horizon", f"must be > 0 s, got {horizon:g}")
+    ts = float(drive.ts)
+    if horizon / ts > MAX_STEPS:
+        raise JobError("study.horizon", f"{horizon:g} s is more than {MAX_STEPS:g} time steps of {ts:g} s")
+    steady = _get(st, "steady_from", "study.steady_from", float, 0.5 * horizon)
+    if not 0 <= steady < horizon:
+        raise JobError("study.steady_from", f"must be in [0, horizon = {horizon:g}) s, got {steady:g}")
+    sampling = _get(st, "sampling", "study.sampling", str, "grid")
+    if sampling not in ("grid", "sobol", "lhs"):
+        raise JobError("study.sampling", f"must be grid, sobol or lhs, got {_show(sampling)}")
+    sample = _get(st, "sample", "study.sample", int, 0)
+    if sampling == "grid" and sample:
+        raise JobError("study.sample", "applies to sampling = 'sobol' or 'lhs' (a grid runs every combination)")
+    if sampling != "grid" and not 1 <= sample <= MAX_SCENARIOS:
+        raise JobError("study.sample", f"must be in [1, {MAX_SCENARIOS}] with sampling = {sampling!r}, got {sample}")
+    seed, chunk = _seed(st), _chunk(st, 256)
+    axes = _axes(raw, DRIVE_STUDY_AXES)
+    n = _count(axes, sample)
+    _check_steps(horizon, steady, ts, n, chunk, "drive", extra_s=settle)
+    opts = dict(
+        machine=par,
+        drive=drive,
+        horizon=horizon,
+        steady_from=steady,
+        sampling=sampling,
+        sample=sample,
+        seed=seed,
+        chunk_size=chunk,
+    )
+    return StudySpec(name, "drive", designs, axes, opts, n)
