@@ -14,7 +14,7 @@ scenario's.  Axes (all optional; a value per scenario):
 
 - ``speed_rpm`` (r/min), ``load_nm`` (N·m): the operating point;
 - ``speed_step_rpm`` (r/min), ``load_step_nm`` (N·m): steps of the speed reference and of the load at
-  ``t_event`` (the events a settling time is measured after);
+  ``t_event`` (s, in [0, horizon); 0 by default: a step at the start);
 - ``dRs``, ``dLd``, ``dLq``, ``dpsi``: relative errors of the assumed machine
   (est = true · (1 + v)); ``dJ``: relative change of the true inertia (the
   controller keeps the nominal one);
@@ -33,7 +33,11 @@ where the current vector beyond it brakes the machine; ``diverged`` flags the no
 Dataset has dims ``("design", *axes)`` (a grid) or ``("design", "sample")``
 (a sample, the axes as coordinates), quantiles over the scenarios of every
 metric (``<metric>_q`` with a ``quantile`` coordinate 0.5, 0.95, 0.99, 1.0;
-lost-lock scenarios excluded from them and counted in ``lost_lock_count``).
+lost-lock scenarios excluded from them and counted in ``lost_lock_count``).  Every variable and
+coordinate has ``units`` and ``long_name``; ``gain`` holds each design's gains (dims ``("design",
+"gain_name")``, units in ``gain_units``, NaN where a design has no such gain); the attributes hold the
+options, the true machine (``machine_Rs``, ...) and the versions, nothing that changes between two
+identical runs.
 """
 
 from __future__ import annotations
@@ -53,7 +57,16 @@ from .drive import RPM, ClosedLoop, Drive, PMSMParams, Profile, Scenario, Sensor
 from .progress import Progress
 from .simulate import simulate
 
-__all__ = ["DRIVE_STUDY_AXES", "DRIVE_STUDY_METRICS", "QUANTILES", "run_drive_study", "drive_scenarios"]
+__all__ = [
+    "DRIVE_STUDY_AXES",
+    "DRIVE_STUDY_AXIS_NAMES",
+    "DRIVE_STUDY_METRICS",
+    "DRIVE_GAIN_UNITS",
+    "QUANTILES",
+    "run_drive_study",
+    "drive_scenarios",
+    "drive_gains",
+]
 
 # axis → (unit, allowed range)
 DRIVE_STUDY_AXES = {
@@ -77,6 +90,38 @@ DRIVE_STUDY_METRICS = {
     "speed_noise_rpm": ("r/min", "speed-estimate noise: rms sample-to-sample change / sqrt(2)"),
 }
 QUANTILES = (0.5, 0.95, 0.99, 1.0)
+# axis -> what it is, in words (the NetCDF long_name and the figures' labels)
+DRIVE_STUDY_AXIS_NAMES = {
+    "speed_rpm": "speed (and its reference before the event)",
+    "load_nm": "load torque before the event",
+    "speed_step_rpm": "step of the speed reference at t_event",
+    "load_step_nm": "step of the load torque at t_event",
+    "dRs": "relative error of the assumed stator resistance Rs",
+    "dLd": "relative error of the assumed d-axis inductance Ld",
+    "dLq": "relative error of the assumed q-axis inductance Lq",
+    "dpsi": "relative error of the assumed PM flux linkage",
+    "dJ": "relative change of the true inertia (controller: nominal)",
+    "i_noise": "current-sensor noise (standard deviation)",
+    "u_noise": "voltage-sensor noise (standard deviation)",
+    "dead_time": "inverter dead time",
+}
+# a drive observer's gains (the tuned ones; the assumed machine and the initial speeds are bound per scenario)
+# and their units: the LESOs of 002 (FA-LESO: ê/e = (k2 s + k1)/(s² + (k2 − jω̂e)s + k1)), the normalized PLLs
+# (ω̂ = kp·err + ki∫err, err in rad), the flux observers of 000 (k, K1, K2, lam dimensionless: lam is the
+# frequency-normalized FLL gain, jaxobs.observers.flux)
+DRIVE_GAIN_UNITS = {
+    "omega0": "rad s-1",
+    "K_r": "s-2",
+    "omega_c": "rad s-1",
+    "k1": "s-2",
+    "k2": "s-1",
+    "k": "1",
+    "K1": "1",
+    "K2": "1",
+    "lam": "1",
+    "kp_pll": "s-1",
+    "ki_pll": "s-2",
+}
 
 
 def _version(name: str) -> str:
@@ -84,6 +129,11 @@ def _version(name: str) -> str:
         return _pkg_version(name)
     except PackageNotFoundError:  # pragma: no cover - a source tree without an install
         return "unknown"
+
+
+def _axis_meta(name: str) -> dict:
+    unit = DRIVE_STUDY_AXES[name][0]
+    return {"units": unit, "long_name": DRIVE_STUDY_AXIS_NAMES[name]}
 
 
 def _check_axes(axes: dict):
@@ -160,6 +210,13 @@ def bind_observer(obs, sc: Scenario):
     raise ValueError(f"drive study: {type(obs).__name__} is not a drive observer (a LESO or a flux observer)")
 
 
+def drive_gains(obs) -> dict:
+    """A drive observer's gains (name -> float): its fields named in :data:`DRIVE_GAIN_UNITS`, less what a study
+    binds per scenario (a flux observer's ``omega0`` is its initial speed, a LESO's its bandwidth)."""
+    bound = {"omega0"} if hasattr(obs, "L") else set()
+    return {g: float(getattr(obs, g)) for g in DRIVE_GAIN_UNITS if hasattr(obs, g) and g not in bound}
+
+
 def _sample(axes: dict, n: int, method: str, seed: int):
     from scipy.stats import qmc
 
@@ -209,6 +266,8 @@ def run_drive_study(
     steady_from = 0.5 * horizon if steady_from is None else float(steady_from)
     if not 0 <= steady_from < horizon:
         raise ValueError(f"steady_from must be in [0, horizon), got {steady_from!r}")
+    if not (math.isfinite(t_event) and 0 <= t_event < horizon):
+        raise ValueError(f"t_event must be in [0, horizon = {horizon:g}) s, got {t_event!r}")
     names = list(axes)
     if sampling == "grid":
         combos = list(itertools.product(*(list(map(float, axes[n])) for n in names)))
@@ -243,20 +302,25 @@ def run_drive_study(
     results = {}
 
     bar = Progress(progress, n * len(designs), "drive study", unit="scenario")
+
+    # one compiled function for all designs: designs of one observer class (a closed form and a tuned one)
+    # differ in their gains, which are array leaves, and share its compilation
+    @eqx.filter_jit
+    def run_chunk(obs, batch):
+        return jax.vmap(lambda s: metrics_of(simulate(ClosedLoop(drive, bind_observer(obs, s), s), horizon)))(batch)
+
+    compiled = set()
     for dname, obs in designs.items():
-
-        @eqx.filter_jit
-        def run_chunk(obs, batch):
-            return jax.vmap(lambda s: metrics_of(simulate(ClosedLoop(drive, bind_observer(obs, s), s), horizon)))(batch)
-
         parts_m, parts_l, parts_d = [], [], []
         for start in range(0, n + pad, chunk):
-            bar.stage(f"{dname} (compiling, then {chunk} scenarios a chunk)" if start == 0 else dname)
+            new = start == 0 and type(obs) not in compiled
+            bar.stage(f"{dname} (compiling, then {chunk} scenarios a chunk)" if new else dname)
             m, lost, div = run_chunk(obs, jax.tree.map(lambda x: x[start : start + chunk], scs))
             parts_m.append(jax.tree.map(np.asarray, m))
             parts_l.append(np.asarray(lost))
             parts_d.append(np.asarray(div))
             bar.update(min(chunk, n - start))
+            compiled.add(type(obs))
         results[dname] = (
             {k: np.concatenate([q[k] for q in parts_m])[:n] for k in DRIVE_STUDY_METRICS},
             np.concatenate(parts_l)[:n],
@@ -268,14 +332,24 @@ def run_drive_study(
     if sampling == "grid":
         dims = ("design", *names)
         shape = tuple(len(axes[k]) for k in names)
-        coords = {"design": dnames, **{k: np.asarray(axes[k], dtype=float) for k in names}}
+        coords = {k: (k, np.asarray(axes[k], dtype=float), _axis_meta(k)) for k in names}
     else:
         dims, shape = ("design", "sample"), (n,)
-        coords = {"design": dnames, "sample": np.arange(n)}
+        coords = {"sample": ("sample", np.arange(n), {"units": "1", "long_name": f"scenario drawn by {sampling}"})}
         for i, k in enumerate(names):
-            coords[k] = ("sample", np.asarray([c[i] for c in combos]))
-    data = {}
+            coords[k] = ("sample", np.asarray([c[i] for c in combos], dtype=float), _axis_meta(k))
+    coords["design"] = ("design", dnames, {"long_name": "observer design (closing the loop sensorless)"})
     qs = np.asarray(QUANTILES)
+    coords["quantile"] = (
+        "quantile",
+        qs,
+        {"units": "1", "long_name": "quantile over the scenarios that kept lock (1: the worst)"},
+    )
+    gains = {d: drive_gains(obs) for d, obs in designs.items()}
+    gnames = [g for g in DRIVE_GAIN_UNITS if any(g in gains[d] for d in dnames)]
+    coords["gain_name"] = ("gain_name", gnames, {"long_name": "name of the observer's gain field"})
+    coords["gain_units"] = ("gain_name", [DRIVE_GAIN_UNITS[g] for g in gnames], {"long_name": "units of each gain"})
+    data = {}
     for k, (unit, long_name) in DRIVE_STUDY_METRICS.items():
         vals = np.stack([np.where(results[d][1], np.nan, results[d][0][k]) for d in dnames])  # (design, n)
         data[k] = (dims, vals.reshape((len(dnames), *shape)), {"units": unit, "long_name": long_name})
@@ -302,10 +376,22 @@ def run_drive_study(
         div.reshape((len(dnames), *shape)).astype(np.int8),
         {"units": "1", "long_name": "simulation diverged or a metric is not finite (1: its metrics are NaN)"},
     )
-    ds = xr.Dataset(data, coords={**coords, "quantile": qs})
-    for k in names:
-        ds[k].attrs["units"] = DRIVE_STUDY_AXES[k][0]
-    ds.attrs.update(horizon=horizon, steady_from=steady_from, scenarios=n, sampling=sampling, seed=seed)
+    data["gain"] = (
+        ("design", "gain_name"),
+        np.asarray([[gains[d].get(g, np.nan) for g in gnames] for d in dnames], dtype=float).reshape(
+            len(dnames), len(gnames)
+        ),
+        {"units": "see gain_units", "long_name": "observer gain (NaN: the design has no such gain)"},
+    )
+    ds = xr.Dataset(data, coords=coords)
+    ds.attrs.update(
+        horizon=horizon, steady_from=steady_from, t_event=t_event, scenarios=n, sampling=sampling, seed=seed
+    )
+    # the true machine (the assumed one is this, moved by the mismatch axes) and the drive's controller
+    for f in ("Rs", "Ld", "Lq", "psi_f", "p", "J"):
+        ds.attrs[f"machine_{f}"] = float(getattr(machine, f))
+    ds.attrs.update(drive_ts=float(drive.ts), drive_settle=float(drive.settle))
     # provenance, and nothing that differs between two identical runs (the run time is not stored)
-    ds.attrs.update(jaxobs_version=_version("jaxobs"), jax_version=jax.__version__, t_event=t_event)
+    ds.attrs.update(source="jaxobs.drive_study.run_drive_study", jaxobs_version=_version("jaxobs"))
+    ds.attrs.update(jax_version=jax.__version__, numpy_version=np.__version__, xarray_version=xr.__version__)
     return ds

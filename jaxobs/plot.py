@@ -275,7 +275,7 @@ def study_figures(ds, out_dir):
             if metric == "settling_freq" and "settled" in ds:
                 unsettled = int((~np.asarray(ds["settled"].sel(design=d), dtype=bool)).sum())
                 label += f" ({unsettled} not settled: counted at the horizon)" if unsettled else ""
-            ax.hist(vals, bins=bins, alpha=0.5, label=label)
+            ax.hist(vals, bins=bins, histtype="step", lw=1.6, label=label)  # outlines: no mixed colours
         ax.set_xlabel(f"{short} ({unit})")
         ax.set_ylabel("scenarios")
         ax.set_title(f"{short} over {int(ds.attrs.get('scenarios', finite.size))} scenarios per design", fontsize=10)
@@ -286,23 +286,130 @@ def study_figures(ds, out_dir):
     return paths
 
 
+# the drive study's axes and metrics in words (with their units) for the figures' labels
+_DRIVE_AXIS_LABELS = {
+    "speed_rpm": "speed (r/min)",
+    "load_nm": "load torque (N·m)",
+    "speed_step_rpm": "speed-reference step (r/min)",
+    "load_step_nm": "load step (N·m)",
+    "dRs": "error of assumed Rs (R̂s/Rs − 1)",
+    "dLd": "error of assumed Ld (L̂d/Ld − 1)",
+    "dLq": "error of assumed Lq (L̂q/Lq − 1)",
+    "dpsi": "error of assumed PM flux (ψ̂/ψ − 1)",
+    "dJ": "inertia change (J/J_nominal − 1)",
+    "i_noise": "current noise, std (A)",
+    "u_noise": "voltage noise, std (V)",
+    "dead_time": "dead time (µs)",
+}
+_DRIVE_AXIS_SCALE = {"dead_time": 1e6}
+_DRIVE_METRIC_LABELS = {
+    "pos_err_rms_deg": "rms position error (deg el.)",
+    "pos_err_max_deg": "peak position error (deg el.)",
+    "speed_err_rms_rpm": "rms speed-estimate error (r/min)",
+    "speed_noise_rpm": "speed-estimate noise (r/min)",
+}
+
+
+def _drive_axis_label(ds, name: str) -> str:
+    if name in _DRIVE_AXIS_LABELS:
+        return _DRIVE_AXIS_LABELS[name]
+    unit = ds[name].attrs.get("units", "")
+    return f"{name} ({unit})" if unit and unit != "1" else name
+
+
+def _vs_axis(ds, metric: str, design, axis: str, bins: int = 8):
+    """(x, median, 95 % quantile) of ``metric`` of one design against one swept axis, over every other
+    axis (a grid) or in bins of equal count of the axis's values (a sample); lost-lock scenarios (NaN) left out."""
+    da = ds[metric].sel(design=design)
+    if "sample" not in ds.dims:
+        other = [d for d in da.dims if d != axis]
+        flat = np.asarray(da.transpose(axis, *other)).reshape(da.sizes[axis], -1)
+        x = np.asarray(ds[axis].values, dtype=float)
+    else:
+        xs, vs = np.asarray(ds[axis].values, dtype=float), np.asarray(da.values, dtype=float)
+        edges = np.unique(np.quantile(xs, np.linspace(0, 1, bins + 1)))
+        idx = np.clip(np.searchsorted(edges, xs, side="right") - 1, 0, max(len(edges) - 2, 0))
+        groups = [vs[idx == i] for i in range(max(len(edges) - 1, 1))]
+        x = np.asarray([xs[idx == i].mean() if (idx == i).any() else np.nan for i in range(len(groups))])
+        width = max(len(g) for g in groups)
+        flat = np.full((len(groups), width), np.nan)
+        for i, g in enumerate(groups):
+            flat[i, : len(g)] = g
+    with np.errstate(all="ignore"):
+        ok = np.isfinite(flat).any(axis=1)
+        med, q95 = np.full(len(x), np.nan), np.full(len(x), np.nan)
+        med[ok] = np.nanquantile(flat[ok], 0.5, axis=1)
+        q95[ok] = np.nanquantile(flat[ok], 0.95, axis=1)
+    return x, med, q95
+
+
 def drive_study_figure(ds, path):
-    """Empirical CDFs of every drive-study metric over the scenarios, all designs on one axis per metric
-    (one scale per metric across designs, units on the axes), lost-lock counts in the legend."""
+    """The drive study on one page, one row per metric (one y-scale per row, shared by every design):
+    the empirical CDF over the scenarios (lost-lock counts in the legend), then the metric's median (solid)
+    and 95 % quantile (dashed) against each swept axis, over the other axes (a grid) or in bins of the
+    axis (a Sobol/LHS sample).  Axes and metrics are labelled in words with their units."""
     metrics = [v[: -len("_q")] for v in ds.data_vars if v.endswith("_q")]  # the metrics with quantiles
-    fig, axs = _subplots(1, len(metrics), figsize=(4.2 * len(metrics), 3.6), squeeze=False)
-    for ax, m in zip(axs[0], metrics):
-        unit, long_name = ds[m].attrs["units"], ds[m].attrs["long_name"]
-        for d in ds["design"].values:
+    axes = [k for k in ds[metrics[0]].dims if k not in ("design", "sample")]
+    if "sample" in ds.dims:
+        axes = [k for k in ds.coords if ds[k].dims == ("sample",) and k != "sample"]
+    designs = list(ds["design"].values)
+    colors = {d: f"C{i}" for i, d in enumerate(designs)}
+    ncol = 1 + len(axes)
+    fig, axs = _subplots(len(metrics), ncol, figsize=(3.3 * ncol + 0.5, 2.5 * len(metrics) + 0.8), squeeze=False)
+    for r, m in enumerate(metrics):
+        label = _DRIVE_METRIC_LABELS.get(m, f"{m} ({ds[m].attrs.get('units', '')})")
+        vals = np.asarray(ds[m].values, dtype=float)
+        pos = vals[np.isfinite(vals) & (vals > 0)]
+        logy = pos.size > 0 and pos.max() / max(pos.min(), 1e-300) > 30  # designs that differ by decades
+        ax = axs[r, 0]
+        for d in designs:
             v = np.sort(np.asarray(ds[m].sel(design=d)).ravel())
             v = v[np.isfinite(v)]
             lost = int(ds["lost_lock_count"].sel(design=d))
             if v.size:
-                ax.step(v, np.arange(1, v.size + 1) / v.size, where="post", label=f"{d} (lost lock: {lost})")
-        ax.set_xlabel(f"{m} ({unit})")
-        ax.set_ylabel("fraction of scenarios")
-        ax.set_title(long_name, fontsize=8)
+                frac = np.arange(1, v.size + 1) / v.size
+                ax.step(v, frac, where="post", color=colors[d], label=f"{d} (lost: {lost})")
+        if logy:
+            ax.set_xscale("log")
+        ax.set_xlabel(label, fontsize=8)
+        ax.set_ylabel("fraction of scenarios", fontsize=8)
         ax.grid(True, alpha=0.3)
-        ax.legend(fontsize=7)
-    fig.suptitle(f"drive study: {int(ds.attrs['scenarios'])} scenarios per design", fontsize=10)
-    return _finish(fig, path, dpi=100)
+        if r == 0:
+            ax.legend(fontsize=6)
+        for c, a in enumerate(axes, start=1):
+            ax = axs[r, c]
+            scale = _DRIVE_AXIS_SCALE.get(a, 1.0)
+            for d in designs:
+                x, med, q95 = _vs_axis(ds, m, d, a)
+                ax.plot(x * scale, med, "o-", color=colors[d], ms=3, lw=1.2, label=f"{d} median")
+                ax.plot(x * scale, q95, "s--", color=colors[d], ms=2.5, lw=0.9, label=f"{d} 95 %")
+            if logy:
+                ax.set_yscale("log")
+            ax.set_xlabel(_drive_axis_label(ds, a), fontsize=8)
+            ax.set_ylabel(label if c == 1 else "", fontsize=8)
+            ax.grid(True, alpha=0.3)
+            ax.tick_params(labelsize=7)
+        if len(axes) > 1:  # one y-scale per metric across the axes' panels
+            lo = min(axs[r, c].get_ylim()[0] for c in range(1, ncol))
+            hi = max(axs[r, c].get_ylim()[1] for c in range(1, ncol))
+            for c in range(1, ncol):
+                axs[r, c].set_ylim(lo, hi)
+        axs[r, 0].tick_params(labelsize=7)
+    from matplotlib.lines import Line2D
+
+    handles = [Line2D([], [], color=colors[d], lw=2, label=str(d)) for d in designs]
+    handles += [
+        Line2D([], [], color="k", ls="-", marker="o", ms=3, label="median"),
+        Line2D([], [], color="k", ls="--", marker="s", ms=3, label="95 % quantile"),
+    ]
+    fig.legend(handles=handles, loc="lower center", ncol=len(handles), fontsize=8, frameon=False)
+    how = "the other axes" if "sample" not in ds.dims else f"bins of the axis ({ds.attrs.get('sampling', 'sample')})"
+    fig.suptitle(
+        f"drive study: {int(ds.attrs['scenarios'])} scenarios per design, sensorless; left: distribution over the "
+        f"scenarios; right: median and 95 % quantile over {how}",
+        fontsize=10,
+    )
+    fig.tight_layout(rect=(0, 0.035, 1, 1))
+    if path is not None:
+        fig.savefig(path, dpi=90)
+    return fig

@@ -1,16 +1,22 @@
 """Drive robustness studies: sensorless designs over operating points × mismatches × noise → NetCDF."""
 
+import hashlib
+import json
 import math
 from pathlib import Path
 
+import equinox as eqx
 import numpy as np
 import pytest
 import xarray as xr
 
 import jaxobs
 from jaxobs import drive as D
+from jaxobs import papers
 from jaxobs.drive_study import QUANTILES, run_drive_study
 from tuning.cli import main
+from tuning.job import COMPONENTS, DriveSpec, JobError, drive_machine, job_drive
+from tuning.study_file import load_study
 
 PAR = D.ipmsm_paper002()
 DRIVE = D.Drive(D.FOC.imc(PAR, alpha_c=2 * math.pi * 300, alpha_s=2 * math.pi * 5), sensorless=True)
@@ -72,12 +78,30 @@ def _small_preset(tmp_path):
 
 
 def test_cli_drive_study_writes_netcdf_with_the_axes(tmp_path, capsys):
-    out = tmp_path / "out"
-    assert main(["study", str(_small_preset(tmp_path)), "--out", str(out), "--quiet"]) == 0
-    ds = xr.open_dataset(out / "study.nc", engine="scipy")
+    """The NetCDF: dims, units and long_name on every variable and coordinate, each design's gains as numbers,
+    the machine and provenance (the study file's sha256), and the same bytes from two identical runs."""
+    out, again = tmp_path / "out", tmp_path / "again"
+    small = _small_preset(tmp_path)
+    assert main(["study", str(small), "--out", str(out), "--quiet"]) == 0
+    ds = xr.load_dataset(out / "study.nc", engine="scipy")
     assert {"dRs", "dLq"} <= set(ds["pos_err_rms_deg"].dims) and "quantile" in ds.coords
     assert (out / "drive_study.png").stat().st_size > 10_000
-    assert "lost lock" in capsys.readouterr().out
+    printed = capsys.readouterr().out
+    assert "lost lock" in printed and "FA-LESO-tuned  pos_err_rms_deg (deg)" in printed  # columns apart
+    for name in [*ds.data_vars, *ds.coords]:
+        assert "long_name" in ds[name].attrs, name
+        if name not in ("design", "gain_name", "gain_units"):
+            assert "units" in ds[name].attrs, name
+    assert ds["dRs"].attrs["units"] == "1" and "resistance" in ds["dRs"].attrs["long_name"]
+    assert ds["speed_rpm"].attrs["units"] == "r/min"
+    assert float(ds["gain"].sel(design="FA-LESO-tuned", gain_name="k2")) == 184.4
+    assert float(ds["gain"].sel(design="C-LESO", gain_name="omega0")) == pytest.approx(papers.LESO_OMEGA0)
+    assert np.isnan(float(ds["gain"].sel(design="C-LESO", gain_name="k1")))
+    assert ds.attrs["study_sha256"] == hashlib.sha256(small.read_bytes()).hexdigest()
+    assert ds.attrs["machine"].startswith("ipmsm002") and ds.attrs["machine_J"] == papers.BENCH_J_002
+    assert ds.attrs["t_event"] == 0.0 and ds.attrs["jax_version"]
+    assert main(["study", str(small), "--out", str(again), "--quiet"]) == 0
+    assert (out / "study.nc").read_bytes() == (again / "study.nc").read_bytes()
     bad = tmp_path / "bad.toml"
     bad.write_text(_small_preset(tmp_path).read_text().replace("[axes]", "[axes]\nhorizn = [1.0]"))
     assert main(["study", str(bad), "--out", str(out)]) == 2
@@ -108,3 +132,77 @@ def test_a_load_step_at_t_event_is_the_only_transient():
     )
     peak = ds["pos_err_max_deg"].sel(design="FA-LESO", speed_rpm=600.0)
     assert float(peak.sel(load_step_nm=0.0)) < 0.1 < float(peak.sel(load_step_nm=5.0))
+
+
+# --------------------------------------------------------------------------------------------------
+# study files: the jobs' machines, closed forms, t_event (parsing only: cheap)
+# --------------------------------------------------------------------------------------------------
+
+STUDY_HEAD = '[study]\nkind = "drive"\nhorizon = 0.2\n'
+
+
+def _cleso_result(tmp_path, machine: str) -> Path:
+    """A drive job's result.json as run_job writes it (the fields a study reads): the C-LESO tuned on machine."""
+    import tomllib
+
+    job = tomllib.loads((PRESET.parent / "cleso.toml").read_text())
+    job["drive"]["machine"] = machine
+    p = tmp_path / f"result_{machine}.json"
+    p.write_text(
+        json.dumps({"job": job, "component": "CLESO", "gains": {"tuned": {"omega0": 3000.0}}, "machine": machine})
+    )
+    return p
+
+
+def test_a_study_runs_the_jobs_machine_and_drive(tmp_path):
+    """One machine table: a study of a tuning result runs the machine, bench inertia and FOC of the job that
+    tuned it (tuning.job.drive_machine / job_drive), and refuses another machine in one line."""
+    res = _cleso_result(tmp_path, "spmsm000")
+    st = tmp_path / "s.toml"
+    st.write_text(STUDY_HEAD + f'[designs.tuned]\nresult = "{res.name}"\n[axes]\ndRs = [0.0]\n')
+    spec = load_study(st)
+    assert spec.opts["machine"] == drive_machine("spmsm000") and float(spec.opts["machine"].J) == papers.BENCH_J_000
+    want = job_drive(DriveSpec(machine="spmsm000"))
+    got = spec.opts["drive"]
+    assert got.sensorless and got.ts == want.ts and got.settle == want.settle
+    assert bool(eqx.tree_equal(got.foc, want.foc))
+    assert float(spec.designs["tuned"].omega0) == 3000.0
+    assert spec.provenance["machine"].startswith("spmsm000:")
+    assert hashlib.sha256(res.read_bytes()).hexdigest() in spec.provenance["result_files"]
+    # without a result: the component's default machine, the IPMSM on its bench (J = BENCH_J_002, not the motor's)
+    st.write_text(STUDY_HEAD + '[designs.cf]\nclosed_form = "CLESO"\n[axes]\ndRs = [0.0]\n')
+    assert float(load_study(st).opts["machine"].J) == papers.BENCH_J_002
+    # a result tuned on one machine, the study on another: one line naming the design
+    st.write_text(STUDY_HEAD + f'machine = "ipmsm002"\n[designs.tuned]\nresult = "{res.name}"\n[axes]\ndRs = [0.0]\n')
+    with pytest.raises(JobError, match=r"designs.tuned.result: was tuned on spmsm000, the study runs ipmsm002"):
+        load_study(st)
+
+
+def test_closed_form_designs_have_the_jobs_closed_form_gains(tmp_path):
+    st = tmp_path / "s.toml"
+    st.write_text(
+        STUDY_HEAD + '[designs.c]\nclosed_form = "CLESO"\n[designs.fa]\nclosed_form = "FALESO"\n[axes]\ndRs = [0.0]\n'
+    )
+    designs = load_study(st).designs
+    for name, comp in (("c", "CLESO"), ("fa", "FALESO")):
+        info = COMPONENTS[comp]
+        cf = info.closed_form(info.ctor(**info.defaults))
+        assert cf and all(float(getattr(designs[name], g)) == pytest.approx(v) for g, v in cf.items())
+    assert float(designs["fa"].k1) == papers.FALESO_K1 and float(designs["c"].omega0) == papers.LESO_OMEGA0
+
+
+def test_t_event_of_a_drive_study(tmp_path):
+    """t_event: given, in [0, horizon); by default the middle of the horizon when a step axis is swept, else 0."""
+    st = tmp_path / "s.toml"
+    body = '[designs.c]\nclosed_form = "FALESO"\n[axes]\n'
+    st.write_text(STUDY_HEAD + body + "load_step_nm = [0.0, 5.0]\n")
+    assert load_study(st).opts["t_event"] == pytest.approx(0.1)
+    st.write_text(STUDY_HEAD + body + "dRs = [0.0]\n")
+    assert load_study(st).opts["t_event"] == 0.0
+    st.write_text(STUDY_HEAD + "t_event = 0.05\n" + body + "speed_step_rpm = [100.0]\n")
+    assert load_study(st).opts["t_event"] == 0.05
+    st.write_text(STUDY_HEAD + "t_event = 0.2\n" + body + "speed_step_rpm = [100.0]\n")
+    with pytest.raises(JobError, match=r"study.t_event: must be in \[0, horizon = 0.2\) s"):
+        load_study(st)
+    with pytest.raises(ValueError, match="t_event must be in"):
+        run_drive_study(DESIGNS, {"dRs": [0.0]}, machine=PAR, drive=DRIVE, horizon=0.05, t_event=0.05)

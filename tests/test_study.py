@@ -1,8 +1,11 @@
 """Robustness studies: labelled results checked against single runs, NetCDF round trip, 10,000+ scenarios."""
 
+import hashlib
 import json
 import math
 import time
+from importlib import resources
+from pathlib import Path
 
 import jax
 import numpy as np
@@ -126,6 +129,9 @@ def test_study_cli_default(tmp_path, capsys):
     worst = json.loads((tmp_path / "worst_cases.json").read_text())
     assert worst["ripple_freq"][0]["design"] == "SOGI-FLL"
     assert len(list(tmp_path.glob("heatmap_*.png"))) == 3
+    # provenance: the study file's sha256 (here the packaged default study)
+    default = Path(str(resources.files("jaxobs") / "data" / "default_study.toml"))
+    assert ds.attrs["study_sha256"] == hashlib.sha256(default.read_bytes()).hexdigest()
 
 
 def test_study_file_errors(tmp_path, capsys):

@@ -234,11 +234,12 @@ def load_study(path):
     return spec.name, spec.designs, spec.axes, dict(spec.opts, kind=spec.kind)
 
 
-def _cmd_drive_study(name, designs, axes, opts, out: Path, quiet: bool) -> int:
+def _cmd_drive_study(name, designs, axes, opts, out: Path, quiet: bool, provenance=None) -> int:
     from jaxobs.drive_study import DRIVE_STUDY_METRICS, run_drive_study
     from jaxobs.plot import drive_study_figure
 
     ds = run_drive_study(designs, axes, progress=_progress(quiet=quiet), **opts)
+    ds.attrs.update(provenance or {})  # the study file's and the result files' sha256, the machine
     fig = out / "drive_study.png"
     drive_study_figure(ds, fig)
     with atomic_path(out / "study.nc") as tmp:
@@ -246,14 +247,18 @@ def _cmd_drive_study(name, designs, axes, opts, out: Path, quiet: bool) -> int:
     n = int(ds.attrs["scenarios"])
     print(f"drive study {name}: {len(designs)} designs x {n} scenarios ({ds.attrs['sampling']}), sensorless")
     qs = [float(q) for q in ds["quantile"].values]
-    head = f"{'design':<18}{'metric':<26}" + "".join(f"{'q' + format(q, 'g'):>10}" for q in qs) + f"{'lost lock':>11}"
+    # columns sized from their content (long design names and metric labels never run together)
+    labels = {m: f"{m} ({u})" for m, (u, _) in DRIVE_STUDY_METRICS.items()}
+    wd = max(len("design"), *(len(str(d)) for d in ds["design"].values)) + 2
+    wm = max(len(x) for x in labels.values()) + 2
+    head = f"{'design':<{wd}}{'metric':<{wm}}" + "".join(f"{'q' + format(q, 'g'):>10}" for q in qs)
+    head += f"{'lost lock':>11}"
     print(head)
     for d in ds["design"].values:
         lost = int(ds["lost_lock_count"].sel(design=d))
         for m in DRIVE_STUDY_METRICS:
             vals = ds[f"{m}_q"].sel(design=d).values
-            unit = DRIVE_STUDY_METRICS[m][0]
-            row = f"{str(d):<18}{m + ' (' + unit + ')':<26}" + "".join(f"{v:>10.4g}" for v in vals)
+            row = f"{str(d):<{wd}}{labels[m]:<{wm}}" + "".join(f"{v:>10.4g}" for v in vals)
             print(row + f"{lost:>11}")
     print(f"results: {out / 'study.nc'}, {fig}")
     return 0
@@ -343,7 +348,8 @@ def _cmd_study(args) -> int:
     _enable_x64()
     path = Path(args.study) if args.study else Path(str(resources.files("jaxobs") / "data" / "default_study.toml"))
     spec = _load_study(path)  # everything checked: tables, keys, ranges, sizes, result files
-    name, designs, axes, opts = spec.name, spec.designs, spec.axes, dict(spec.opts, kind=spec.kind)
+    name, designs, axes = spec.name, spec.designs, spec.axes
+    opts = dict(spec.opts, kind=spec.kind, provenance=spec.provenance)
     if args.check:
         print(f"{path}: OK — {spec.kind} study {name!r}, {len(designs)} designs x {spec.scenarios} scenarios")
         return 0
@@ -357,13 +363,15 @@ def _run_study(name, designs, axes, opts, out: Path, quiet: bool) -> int:
     from jaxobs.plot import study_figures
     from jaxobs.study import STUDY_METRICS, run_study, worst_cases
 
+    provenance = opts.pop("provenance", None) or {}
     if opts.pop("kind", "fll") == "drive":
-        return _cmd_drive_study(name, designs, axes, opts, out, quiet)
+        return _cmd_drive_study(name, designs, axes, opts, out, quiet, provenance)
     if opts.get("recording") is not None:  # [study.recording]: the recordings are the scenarios
         ds, seconds = _recording_study(designs, progress=_progress(quiet=quiet), **opts)
     else:
         opts.pop("recording", None)
         ds, seconds = run_study(designs, axes, progress=_progress(quiet=quiet), return_seconds=True, **opts)
+    ds.attrs.update(provenance)  # the study file's and the result files' sha256
     worst = {m: worst_cases(ds, m, 3) for m in STUDY_METRICS}
     atomic_write_text(out / "worst_cases.json", json.dumps(worst, indent=1))
     figs = study_figures(ds, out)
@@ -371,14 +379,15 @@ def _run_study(name, designs, axes, opts, out: Path, quiet: bool) -> int:
         ds.to_netcdf(tmp, engine="scipy")
     n = int(ds.attrs["scenarios"])
     print(f"study {name}: {len(designs)} designs x {n} scenarios in {seconds:.1f} s")
+    wd = max(len("design"), *(len(str(d)) for d in ds["design"].values)) + 2  # sized from the names
     print(
-        f"{'design':<16}"
+        f"{'design':<{wd}}"
         + "".join(f"{m + ' mean':>20}{'worst':>12}" for m in ("settling_freq", "ripple_freq", "rms_phase"))
         + f"{'diverged':>10}{'lost lock':>11}"
     )
     for d in ds["design"].values:
         sel = ds.sel(design=d)
-        row = f"{str(d):<16}"
+        row = f"{str(d):<{wd}}"
         for m in ("settling_freq", "ripple_freq", "rms_phase"):
             row += f"{float(sel[m].mean()):>20.4g}{float(sel[m].max()):>12.4g}"
         print(row + f"{int(sel['diverged'].sum()):>10}{int(sel['lost_lock_count']):>11}")

@@ -314,7 +314,8 @@ def _family(observer) -> str:
 
 def drive_machine(observer):
     """The machine a drive observer's recording runs on: 000's SPMSM for the flux observers, 002's IPMSM for
-    the LESOs, each with the bench inertia of the drive studies (``papers.BENCH_J_*``, 10× the table's)."""
+    the LESOs, each with the bench inertia of the drive jobs and studies (``papers.BENCH_J_*``, 10× the
+    table's: tuning.job.DRIVE_MACHINES)."""
     from jaxobs import drive, papers
 
     ctor, j, _ = _DRIVE_MACHINES[_family(observer)]

@@ -30,7 +30,27 @@ A FLL study::
     [axes]                         # jaxobs.study.STUDY_AXES, each a non-empty list of numbers in its range
     freq_step = [-2.0, 2.0]
 
-A drive study (``kind = "drive"``) has the keys of :func:`_parse_drive` and a ``[drive]`` table.
+A drive study::
+
+    [study]
+    kind = "drive"
+    machine = "ipmsm002"           # tuning.job.DRIVE_MACHINES (the jobs' machines, bench inertia and FOC);
+                                   # default: the machine a result design was tuned on, else the first design's
+    horizon = 0.3                  # s
+    steady_from = 0.15             # s (default horizon / 2)
+    t_event = 0.15                 # s, the steps' instant (default horizon / 2 with a step axis, else 0)
+    sampling = "grid"              # grid | sobol | lhs (with sample = n)
+    [drive]
+    settle = 0.2                   # s, the observer's unscored settling phase before t = 0
+    [designs.C-LESO]
+    closed_form = "CLESO"          # a drive component's closed-form gains (tuning.job.COMPONENTS)
+    [designs.tuned]
+    result = "out/cleso/result.json"
+    [designs.mine]
+    component = "FALESO"
+    k1 = 16.1
+    [axes]                         # jaxobs.drive_study.DRIVE_STUDY_AXES
+    dRs = [-0.2, 0.2]
 
 ``result`` paths: a relative path is read relative to the folder of the study file (not the working
 directory), so a study file and the results it names move together; an absolute path is read as it is.
@@ -40,21 +60,24 @@ it (nothing is written there), and its content never reaches an error message.
 
 from __future__ import annotations
 
+import hashlib
 import inspect
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import jaxobs
-from jaxobs import drive as D
-from jaxobs import linear, papers
+from jaxobs import linear
 from jaxobs.drive_study import DRIVE_STUDY_AXES
 from jaxobs.study import STUDY_AXES
 
 from .job import (
     AXIS_RANGES,
+    COMPONENTS,
+    DRIVE_MACHINES,
     MAX_SCENARIOS,
     MAX_STEPS,
+    DriveSpec,
     JobError,
     _available_memory,
     _cap,
@@ -62,6 +85,9 @@ from .job import (
     _no_unknown,
     _parse_recording_scenarios,
     _show,
+    drive_machine,
+    job_drive,
+    parse_job,
     read_toml,
 )
 from .results import load_result, tuned_component
@@ -77,7 +103,9 @@ FLL_CLOSED_FORMS = {
 FLL_COMPONENTS = ("SOGIFLL", "SOGIFLLWPF", "SOGIFLLWIF")
 DRIVE_OBSERVERS = ("CLESO", "GILESO", "FALESO", "PureIntegratorFlux", "LPFFlux", "SOIFO", "SecondOrderSOIFO")
 _FLUX = ("PureIntegratorFlux", "LPFFlux", "SOIFO", "SecondOrderSOIFO")
-MACHINES = ("ipmsm_paper002", "spmsm_paper000")
+# the drive jobs' machines (tuning.job.DRIVE_MACHINES: the same names, bench inertias and FOC), so a study
+# scores a tuned result on the drive that tuned it
+MACHINES = tuple(DRIVE_MACHINES)
 # the study's scenario axes and their physical ranges: the tuning jobs' grid axes, and the noise level
 FLL_AXIS_RANGES = {k: {**AXIS_RANGES["grid"], "noise": ("pu", (0.0, 10.0))}[k] for k in STUDY_AXES}
 MAX_CHUNK = 100_000
@@ -97,7 +125,19 @@ _FLL_STUDY_KEYS = (
     "chunk_size",
     "recording",
 )
-_DRIVE_STUDY_KEYS = ("kind", "name", "machine", "horizon", "steady_from", "sampling", "sample", "seed", "chunk_size")
+_DRIVE_STUDY_KEYS = (
+    "kind",
+    "name",
+    "machine",
+    "t_event",
+    "horizon",
+    "steady_from",
+    "sampling",
+    "sample",
+    "seed",
+    "chunk_size",
+)
+STEP_AXES = ("speed_step_rpm", "load_step_nm")
 
 
 @dataclass
@@ -110,13 +150,18 @@ class StudySpec:
     axes: dict
     opts: dict = field(default_factory=dict)
     scenarios: int = 0
+    # NetCDF attributes: the sha256 of the study file and of every result file it reads (names relative
+    # to the study file, as written there), and the drive study's machine
+    provenance: dict = field(default_factory=dict)
 
 
 def load_study(path) -> StudySpec:
     """Read, check and build a study file; errors are one-line :class:`~tuning.job.JobError`\\ s (exit 2)."""
     path = Path(path)
-    raw, _ = read_toml(path, WHAT)  # size, nesting and encoding checked before parsing
-    return parse_study(raw, base=path.resolve().parent)
+    raw, data = read_toml(path, WHAT)  # size, nesting and encoding checked before parsing
+    spec = parse_study(raw, base=path.resolve().parent)
+    spec.provenance = {"study_file": path.name, "study_sha256": hashlib.sha256(data).hexdigest(), **spec.provenance}
+    return spec
 
 
 def parse_study(raw: dict, base: Path | None = None) -> StudySpec:
@@ -126,8 +171,9 @@ def parse_study(raw: dict, base: Path | None = None) -> StudySpec:
     kind = _get(st, "kind", "study.kind", str, "fll")
     if kind not in ("fll", "drive"):
         raise JobError("study.kind", f"must be 'fll' or 'drive', got {_show(kind)}")
-    tables = ("study", "designs", "axes") + (("drive",) if kind == "drive" else ())
-    _no_unknown(raw, tables, WHAT)
+    _no_unknown(raw, ("study", "designs", "axes", "drive"), WHAT)  # every table a study file may have
+    if kind != "drive" and "drive" in raw:
+        raise JobError("drive", "applies to drive studies (study.kind = 'drive')")
     name = _get(st, "name", "study.name", str, "study" if kind == "fll" else "drive-study")
     if kind == "drive":
         return _parse_drive(raw, st, name, base)
@@ -200,8 +246,9 @@ def _chunk(st: dict, default: int) -> int:
     return chunk
 
 
-def _result(spec: dict, where: str, base: Path, family: tuple):
-    """A tuning result's tuned design; ``result`` relative to the study file's folder (module doc)."""
+def _result(spec: dict, where: str, base: Path, family: tuple, out: dict | None = None):
+    """A tuning result's tuned design; ``result`` relative to the study file's folder (module doc).  ``out``,
+    when given, receives the result (``"result"``) and the file's sha256 (``"sha256"``)."""
     _no_unknown(spec, ("result",), where)
     rel = _get(spec, "result", f"{where}.result", str)
     if not rel or "\x00" in rel:
@@ -214,9 +261,17 @@ def _result(spec: dict, where: str, base: Path, family: tuple):
         res = load_result(p)
         if res["component"] not in family:
             raise ValueError(f"component {_show(res['component'])} is not one of {', '.join(family)}")
-        return tuned_component(res)
+        comp = tuned_component(res)
+        if out is not None:
+            out.update(result=res, sha256=hashlib.sha256(p.read_bytes()).hexdigest(), path=rel)
+        return comp
     except (ValueError, TypeError, KeyError, AttributeError, ArithmeticError) as e:  # a malformed result
         raise JobError(f"{where}.result", str(e)) from None
+
+
+def _results_attr(results: dict) -> dict:
+    """The result files' provenance as one NetCDF attribute (``design: path sha256 HEX``, one a line)."""
+    return {"result_files": "\n".join(f"{d}: {v}" for d, v in results.items())} if results else {}
 
 
 def _ctor_params(ctor, exclude=()) -> dict:
@@ -271,6 +326,7 @@ def _designs(raw: dict, build) -> dict:
 
 def _parse_fll(raw: dict, st: dict, name: str, base: Path) -> StudySpec:
     _no_unknown(st, _FLL_STUDY_KEYS, "study")
+    results = {}  # provenance: each result file's sha256
 
     def build(spec, where, how):
         if how == "closed_form":
@@ -280,7 +336,10 @@ def _parse_fll(raw: dict, st: dict, name: str, base: Path) -> StudySpec:
                 raise JobError(f"{where}.closed_form", f"must be one of {', '.join(FLL_CLOSED_FORMS)}, got {_show(cf)}")
             return FLL_CLOSED_FORMS[cf]()
         if how == "result":
-            return _result(spec, where, base, FLL_COMPONENTS)
+            info = {}
+            obs = _result(spec, where, base, FLL_COMPONENTS, info)
+            results[where.split(".", 1)[1]] = f"{info['path']} sha256 {info['sha256']}"
+            return obs
         comp = _get(spec, "component", f"{where}.component", str)
         if comp not in FLL_COMPONENTS:
             raise JobError(f"{where}.component", f"must be one of {', '.join(FLL_COMPONENTS)}, got {_show(comp)}")
@@ -309,7 +368,7 @@ def _parse_fll(raw: dict, st: dict, name: str, base: Path) -> StudySpec:
     # the frequency after the step stays in (0, 1/(4 ts)] of every design (the run takes the first's ω_n)
     freq = float(next(iter(designs.values())).omega_n) / (2 * math.pi)
     if "recording" in st:  # [study.recording]: recorded voltages instead of the axes' grid
-        return _fll_recordings(raw, st, name, base, designs, t_event, horizon, steady, band)
+        return _fll_recordings(raw, st, name, base, designs, t_event, horizon, steady, band, results)
     unit, (lo, hi) = FLL_AXIS_RANGES["freq_step"]
     limits = {"freq_step": (unit, (max(lo, -freq * (1 - 1e-6)), min(hi, 0.25 / ts - freq)))}
     axes = _axes(raw, FLL_AXIS_RANGES, limits)
@@ -318,10 +377,10 @@ def _parse_fll(raw: dict, st: dict, name: str, base: Path) -> StudySpec:
     opts = dict(
         t_event=t_event, horizon=horizon, steady_from=steady, band_hz=band, sample=sample, seed=seed, chunk_size=chunk
     )
-    return StudySpec(name, "fll", designs, axes, opts, n)
+    return StudySpec(name, "fll", designs, axes, opts, n, _results_attr(results))
 
 
-def _fll_recordings(raw, st, name, base, designs, t_event, horizon, steady, band) -> StudySpec:
+def _fll_recordings(raw, st, name, base, designs, t_event, horizon, steady, band, results) -> StudySpec:
     """``[study.recording]``: the keys of a job's ``[scenarios.recording]`` (:mod:`tuning.job`), every file
     read and checked now at the designs' one sample time; no ``[axes]``, ``sample`` or ``chunk_size``."""
     for key in ("sample", "chunk_size"):
@@ -336,7 +395,7 @@ def _fll_recordings(raw, st, name, base, designs, t_event, horizon, steady, band
         {"recording": st["recording"]}, "study", "grid", t_event, horizon, steady, 0, ts[0], base
     )
     opts = dict(t_event=t_event, horizon=horizon, steady_from=steady, band_hz=band, recording=spec.recording)
-    return StudySpec(name, "fll", designs, {}, opts, len(spec.recording.files))
+    return StudySpec(name, "fll", designs, {}, opts, len(spec.recording.files), _results_attr(results))
 
 
 # --------------------------------------------------------------------------------------------------
@@ -344,38 +403,57 @@ def _fll_recordings(raw, st, name, base, designs, t_event, horizon, steady, band
 # --------------------------------------------------------------------------------------------------
 
 
+def _result_machine(res: dict) -> str | None:
+    """The drive machine a result was tuned on (``machine``; older results: its job's ``[drive]``); None for a
+    result that is no drive job (a flux observer tuned on EMF signals)."""
+    if res.get("machine") is not None:
+        return str(res["machine"])
+    job = parse_job(res["job"])
+    return job.drive.machine if job.drive is not None else None
+
+
 def _parse_drive(raw: dict, st: dict, name: str, base: Path) -> StudySpec:
     _no_unknown(st, _DRIVE_STUDY_KEYS, "study")
-    machine = _get(st, "machine", "study.machine", str, "ipmsm_paper002")
-    if machine not in MACHINES:
-        raise JobError("study.machine", f"must be one of {', '.join(MACHINES)}, got {_show(machine)}")
-    par = getattr(D, machine)()
     dr = _get(raw, "drive", "drive", dict, {})
-    _no_unknown(dr, ("alpha_c_hz", "alpha_s_hz", "settle"), "drive")
-    ac = _get(dr, "alpha_c_hz", "drive.alpha_c_hz", float, papers.BENCH_CURRENT_HZ)
-    as_ = _get(dr, "alpha_s_hz", "drive.alpha_s_hz", float, papers.BENCH_SPEED_HZ)
-    for k, v in (("drive.alpha_c_hz", ac), ("drive.alpha_s_hz", as_)):
-        if not 0 < v <= 5000:
-            raise JobError(k, f"must be in (0, 5000] Hz, got {v:g}")
+    # the FOC is the drive jobs' (tuning.job.job_drive: the bench's IMC current and I-P speed loops), so a tuned
+    # result is scored on the drive that tuned it; only the observer's unscored settling phase is the study's
+    _no_unknown(dr, ("settle",), "drive")
     settle = _get(dr, "settle", "drive.settle", float, 0.2)
     if not 0 <= settle <= 10:
         raise JobError("drive.settle", f"must be in [0, 10] s, got {settle:g}")
-    try:
-        foc = D.FOC.imc(par, alpha_c=2 * math.pi * ac, alpha_s=2 * math.pi * as_)
-        drive = D.Drive(foc, sensorless=True, settle=settle)
-    except (ValueError, ArithmeticError) as e:
-        raise JobError("drive", str(e)) from None
+    tuned_on = {}  # "designs.NAME" -> the machine its result was tuned on
+    results = {}  # design -> its result file and sha256
 
     def build(spec, where, how):
-        if how == "closed_form":
-            raise JobError(f"{where}.closed_form", "drive studies take component (with its gains) or result")
         if how == "result":
-            return _result(spec, where, base, DRIVE_OBSERVERS)
+            info = {}
+            obs = _result(spec, where, base, DRIVE_OBSERVERS, info)
+            results[where.split(".", 1)[1]] = f"{info['path']} sha256 {info['sha256']}"
+            try:
+                m = _result_machine(info["result"])
+            except (ValueError, TypeError, KeyError, AttributeError) as e:
+                raise JobError(f"{where}.result", str(e)) from None
+            if m is not None:
+                tuned_on[where] = m
+            return obs
+        if how == "closed_form":  # the component's closed-form gains, as a job's closed_form scores them
+            _no_unknown(spec, ("closed_form",), where)
+            comp = _get(spec, "closed_form", f"{where}.closed_form", str)
+            if comp not in DRIVE_OBSERVERS or comp not in COMPONENTS:
+                allowed = ", ".join(c for c in DRIVE_OBSERVERS if c in COMPONENTS)
+                raise JobError(f"{where}.closed_form", f"must be one of {allowed}, got {_show(comp)}")
+            info = COMPONENTS[comp]
+            values = {**info.defaults, **info.closed_form(info.ctor(**info.defaults))}
+            try:
+                return info.ctor(**values)
+            except (ValueError, TypeError, ArithmeticError) as e:
+                raise JobError(where, str(e)) from None
         comp = _get(spec, "component", f"{where}.component", str)
         if comp not in DRIVE_OBSERVERS:
             raise JobError(f"{where}.component", f"must be one of {', '.join(DRIVE_OBSERVERS)}, got {_show(comp)}")
         # the machine's Rs and L are placeholders and the initial speed is the scenario's: the study binds
         # each scenario's assumed machine (jaxobs.drive_study.bind_observer); the drive's ts rules
+        par = drive_machine("spmsm000" if comp in _FLUX else "ipmsm002")
         if comp in _FLUX:
             fixed = {"Rs": par.Rs, "L": par.Ld}
             exclude = ("Rs", "L", "omega0", "ts")
@@ -386,6 +464,29 @@ def _parse_drive(raw: dict, st: dict, name: str, base: Path) -> StudySpec:
         return _component(spec, where, comp, exclude, fixed)
 
     designs = _designs(raw, build)
+    # the machine: study.machine, else the one the results were tuned on, else the first design's default
+    first = type(next(iter(designs.values()))).__name__
+    default = next(iter(tuned_on.values()), None) or COMPONENTS.get(first, COMPONENTS["CLESO"]).machines[0]
+    machine = _get(st, "machine", "study.machine", str, default)
+    if machine not in MACHINES:
+        raise JobError("study.machine", f"must be one of {', '.join(MACHINES)}, got {_show(machine)}")
+    for where, m in tuned_on.items():
+        if m != machine:
+            raise JobError(f"{where}.result", f"was tuned on {m}, the study runs {machine}: give study.machine = {m!r}")
+    for dname, obs in designs.items():
+        comp = type(obs).__name__
+        if comp in COMPONENTS and machine not in COMPONENTS[comp].machines:
+            raise JobError(
+                f"designs.{_cap(str(dname), 40)}",
+                f"{comp} cannot run on {machine} ({DRIVE_MACHINES[machine][0]}); "
+                f"allowed: {', '.join(COMPONENTS[comp].machines)}",
+            )
+    par = drive_machine(machine)
+    try:
+        drive = job_drive(DriveSpec(loop="sensorless", settle=settle, machine=machine))
+    except (ValueError, ArithmeticError) as e:
+        raise JobError("drive", str(e)) from None
+    provenance = {"machine": f"{machine}: {DRIVE_MACHINES[machine][0]}", **_results_attr(results)}
     horizon = _get(st, "horizon", "study.horizon", float, 0.3)
     if not horizon > 0:
         raise JobError("study.horizon", f"must be > 0 s, got {horizon:g}")
@@ -395,6 +496,13 @@ def _parse_drive(raw: dict, st: dict, name: str, base: Path) -> StudySpec:
     steady = _get(st, "steady_from", "study.steady_from", float, 0.5 * horizon)
     if not 0 <= steady < horizon:
         raise JobError("study.steady_from", f"must be in [0, horizon = {horizon:g}) s, got {steady:g}")
+    # the steps' instant: by default the middle of the horizon when a step axis is swept (the steady window's
+    # default start, so the scored window holds the step's response and a steady stretch before it does not
+    # count), else 0 (no step: the value does not matter)
+    has_step = any(a in _get(raw, "axes", "axes", dict, {}) for a in STEP_AXES)
+    t_event = _get(st, "t_event", "study.t_event", float, 0.5 * horizon if has_step else 0.0)
+    if not 0 <= t_event < horizon:
+        raise JobError("study.t_event", f"must be in [0, horizon = {horizon:g}) s, got {t_event:g}")
     sampling = _get(st, "sampling", "study.sampling", str, "grid")
     if sampling not in ("grid", "sobol", "lhs"):
         raise JobError("study.sampling", f"must be grid, sobol or lhs, got {_show(sampling)}")
@@ -412,9 +520,10 @@ def _parse_drive(raw: dict, st: dict, name: str, base: Path) -> StudySpec:
         drive=drive,
         horizon=horizon,
         steady_from=steady,
+        t_event=t_event,
         sampling=sampling,
         sample=sample,
         seed=seed,
         chunk_size=chunk,
     )
-    return StudySpec(name, "drive", designs, axes, opts, n)
+    return StudySpec(name, "drive", designs, axes, opts, n, provenance)
