@@ -140,13 +140,15 @@ def test_internal_error_is_one_line_with_a_log(tmp_path, capsys, monkeypatch):
 class _Quadratic:
     """A cheap stand-in objective with the interface run_solver uses."""
 
-    def __init__(self):
-        self.param = Parametrization([GainSpec("a", 2.0, 0.1, 50.0), GainSpec("b", 1.0, 0.01, 10.0, log=False)])
+    def __init__(self, n_gains=2):
+        specs = [GainSpec("a", 2.0, 0.1, 50.0), GainSpec("b", 1.0, 0.01, 10.0, log=False)]
+        self.param = Parametrization(specs[:n_gains])
+        self.n = n_gains
 
     def value_grad_diverged(self, theta):
-        target = jnp.asarray([0.3, -0.7])
-        v = jnp.sum((theta - target) ** 2 * jnp.asarray([1.0, 3.0])) + 0.1 * jnp.sum(jnp.sin(3 * theta))
-        g = 2 * (theta - target) * jnp.asarray([1.0, 3.0]) + 0.3 * jnp.cos(3 * theta)
+        target, w = jnp.asarray([0.3, -0.7])[: self.n], jnp.asarray([1.0, 3.0])[: self.n]
+        v = jnp.sum((theta - target) ** 2 * w) + 0.1 * jnp.sum(jnp.sin(3 * theta))
+        g = 2 * (theta - target) * w + 0.3 * jnp.cos(3 * theta)
         return v, g, 0
 
 
@@ -157,8 +159,8 @@ class Killed(BaseException):
     pass
 
 
-def _run(ckpt, resume=False, fp="job-a"):
-    obj = _Quadratic()
+def _run(ckpt, resume=False, fp="job-a", n_gains=2):
+    obj = _Quadratic(n_gains)
     res = run_solver(obj, obj.param.theta0(), CFG, checkpoint=ckpt, resume=resume, quiet=True, fingerprint=fp)
     return json.dumps(
         dict(theta=np.asarray(res.theta).tolist(), h=res.history, s=res.status, r=res.reason, b=res.best_iteration)
@@ -204,6 +206,21 @@ def test_resume_refuses_foreign_and_corrupt_checkpoints(tmp_path, capsys):
     ckpt.unlink()
     assert _run(ckpt, resume=True) == ref  # nothing to resume: one line, a fresh start
     assert "no checkpoint" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("n_saved, n_resumed", [(1, 2), (2, 1), (2, 2)])
+def test_a_foreign_checkpoint_belongs_to_another_job_whatever_its_gain_count(tmp_path, n_saved, n_resumed):
+    """The fingerprint is checked before the arrays: another job's checkpoint with another number of gains
+    (other array shapes) is "another job", not "corrupt"; a same-fingerprint checkpoint whose shapes differ
+    (a hand-edited job hash) is still reported as corrupt."""
+    ckpt = tmp_path / "c.npz"
+    _run(ckpt, fp="job-a", n_gains=n_saved)
+    with pytest.raises(CheckpointError, match="belongs to another job") as e:
+        _run(ckpt, resume=True, fp="job-b", n_gains=n_resumed)
+    assert "corrupt" not in str(e.value) and "\n" not in str(e.value)
+    if n_saved != n_resumed:
+        with pytest.raises(CheckpointError, match="corrupt or unreadable.*shapes differ"):
+            _run(ckpt, resume=True, fp="job-a", n_gains=n_resumed)
 
 
 @pytest.mark.parametrize(
