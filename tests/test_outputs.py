@@ -93,8 +93,19 @@ def test_cli_refuses_a_locked_or_used_out_with_one_line(tmp_path, capsys, monkey
     assert "--force" in capsys.readouterr().err
     # the name cannot escape: the default folder is ./out/<sanitised name>
     monkeypatch.chdir(tmp_path)
-    assert main(["tune", str(path), "--quiet"]) == 0
+    old_umask = os.umask(0o027)  # not the usual 022: a mode that neither 0600 nor a hard-coded 0644 matches
+    try:
+        assert main(["tune", str(path), "--quiet"]) == 0
+        with open(tmp_path / "plain", "w") as f:
+            f.write("")
+    finally:
+        os.umask(old_umask)
     assert (tmp_path / "out" / "_.._escape" / "result.json").exists()
+    # every output (the atomically written JSON files included) gets the mode a plain open() gives, 0640 here
+    plain = (tmp_path / "plain").stat().st_mode & 0o777
+    modes = {p.name: oct(p.stat().st_mode & 0o777) for p in (tmp_path / "out" / "_.._escape").iterdir()}
+    assert {"result.json", "history.json", "timing.json", "responses.png"} <= set(modes)
+    assert set(modes.values()) == {oct(plain)} == {"0o640"}, modes
     # lost lock, per design and per scenario: the closed form and the tuned design hold it
     res = json.loads((tmp_path / "out" / "_.._escape" / "result.json").read_text())
     assert [res["scores"][d]["lost_lock"] for d in ("initial", "closed_form", "tuned")] == [0, 0, 0]
