@@ -211,7 +211,10 @@ def _job_copy(tmp_path, name="recording_wif.toml"):
     "old, new, field, words",
     [
         ('file = "recordings/grid_50_51hz.csv"', 'file = "recordings/none.csv"', "scenarios.recording.file", "cannot"),
-        ('columns = ["v"]', 'columns = ["volts"]', "scenarios.recording.file", "no signal column 'volts'"),
+        ('columns = ["v"]', 'columns = ["volts"]', "scenarios.recording.columns[0]", "no signal column 'volts'"),
+        ('columns = ["v"]', "columns = [7]", "scenarios.recording.columns[0]", "index 7 is outside"),
+        ('"omega", "amplitude"]', '"w", "amplitude"]', "scenarios.recording.truth[1]", "no truth column 'w'"),
+        ('time_column = "t"', 'time_column = "time"', "scenarios.recording.time_column", "no time column"),
         ('time_column = "t"', 'time_column = "t"\nsample_rate = 1e4', "scenarios.recording", "exactly one"),
         ('time_column = "t"', "sample_rate = 5000.0", "scenarios.recording.file", "slower than the observer's ts"),
         ("horizon = 0.4", "horizon = 0.5", "scenarios.horizon", "needs 5000 samples"),

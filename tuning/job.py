@@ -647,6 +647,8 @@ def _parse_recording_scenarios(tab, where, signal, t_event, horizon, steady, see
                 raise JobError(field, f"{files[i]!r} is {size} bytes, more than {MAX_RECORDING_BYTES} (8 MiB)")
             try:
                 sig = _load_one(spec, signal, path)
+            except jaxobs.signals.RecordingColumnError as e:  # a column not in the file: the key that named it
+                raise JobError(_column_field(w, e, spec), str(e).replace(path, files[i])) from None
             except ValueError as e:
                 raise JobError(field, str(e).replace(path, files[i])) from None
             need = int(round(horizon / ts))
@@ -660,6 +662,15 @@ def _parse_recording_scenarios(tab, where, signal, t_event, horizon, steady, see
         spec = dataclasses.replace(spec, sha256=tuple(digests))
     axes = {"recording": [float(i) for i in range(len(files))]}
     return ScenarioSpec(signal, t_event, horizon, steady, axes, 0, seed, recording=spec)
+
+
+def _column_field(w: str, e, spec: RecordingSpec) -> str:
+    """The job field of a recording column that the file lacks: ``<w>.columns[i]``, ``<w>.truth[i]`` or
+    ``<w>.time_column``."""
+    if e.role == "time":
+        return f"{w}.time_column"
+    key, listed = ("columns", spec.columns) if e.role == "signal" else ("truth", spec.truth)
+    return f"{w}.{key}[{listed.index(e.spec)}]" if e.spec in listed else f"{w}.{key}"
 
 
 def _load_one(spec: RecordingSpec, signal: str, path: str):
