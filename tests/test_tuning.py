@@ -27,6 +27,7 @@ from tuning import (
     load_job,
     run_solver,
 )
+from tuning import job as job_mod
 from tuning.cli import main
 from tuning.objective import MetricContext
 from tuning.targets import flux_settling_time, lambda_for_damping, match_settling_time
@@ -321,6 +322,43 @@ def test_kill_9_then_resume_gives_the_same_gains(tmp_path):
 def test_every_preset_job_validates(preset):
     job = load_job(Path(__file__).parents[1] / "tuning" / "presets" / preset)
     assert job.gains and job.terms
+
+
+def test_drive_speeds_are_checked_against_the_jobs_machine(tmp_path, capsys):
+    """A drive job's speed_rpm (and speed_rpm + speed_step_rpm) must stay below the speed at which the
+    machine's back EMF reaches the inverter's limit: ψf ωe = U_dc/√3 (no field weakening in the FOC)."""
+    presets = Path(__file__).parents[1] / "tuning" / "presets"
+    # the oracle, by hand from the machines' tables: 540 V dc link, u_max = 540/√3 V
+    for name, par in (("ipmsm002", papers.IPMSM_002), ("spmsm000", papers.SPMSM_000)):
+        n_max = 540.0 / math.sqrt(3) / par["psi_f"] / par["p"] * 60 / (2 * math.pi)
+        assert job_mod.drive_speed_limit_rpm(name) == pytest.approx(n_max, rel=1e-12)
+    assert 1.3 * papers.IPMSM_002["n_rated"] < job_mod.drive_speed_limit_rpm("ipmsm002") < 1e4
+    cleso = (presets / "cleso.toml").read_text()
+    soifo = (presets / "soifo.toml").read_text()
+    cases = [  # (job text, None if it passes, else the field and the range the one-line error names)
+        (cleso.replace("[300.0, 600.0, 840.0]", "[84000.0]"), "scenarios.grid.speed_rpm[0]", "[1, 1323] r/min"),
+        (cleso.replace("[300.0, 600.0, 840.0]", "[300.0, 1400.0]"), "scenarios.grid.speed_rpm[1]", "ipmsm002"),
+        (cleso.replace("[300.0, 600.0, 840.0]", "[1300.0]"), None, None),
+        (
+            cleso.replace("load_nm = [0.0, 15.0]", "speed_step_rpm = [-100.0, 600.0]"),
+            "scenarios.grid.speed_step_rpm[1]",
+            "got 1440",
+        ),
+        (cleso.replace("load_nm = [0.0, 15.0]", "speed_step_rpm = [-1700.0]"), "speed_step_rpm[0]", "got -1400"),
+        (cleso.replace("load_nm = [0.0, 15.0]", "speed_step_rpm = [-1000.0, 400.0]"), None, None),
+        (soifo.replace("[600.0, 1200.0, 2000.0]", "[2800.0]"), None, None),  # the SPMSM allows 2835 r/min
+        (soifo.replace("[600.0, 1200.0, 2000.0]", "[2900.0]"), "scenarios.grid.speed_rpm[0]", "[1, 2835] r/min"),
+    ]
+    for i, (text, field, words) in enumerate(cases):
+        path = tmp_path / f"j{i}.toml"
+        path.write_text(text)
+        rc = main(["tune", str(path), "--check"])
+        out = capsys.readouterr()
+        if field is None:
+            assert rc == 0, out.err
+        else:
+            err = out.err.strip()
+            assert rc == 2 and "\n" not in err and field in err and words in err, err
 
 
 @pytest.mark.slow
