@@ -503,6 +503,50 @@ def test_wif_structure_of_the_symmetric_optimum():
     assert fa["routh_stable"] is True
 
 
+def _oracle_dominant(num, den, cancel_tol=None):
+    """python-control's dominant damping: the pole of largest real part of the closed loop, after minreal
+    cancels pole-zero pairs closer than ``cancel_tol`` rad/s (None: no cancellation)."""
+    control = pytest.importorskip("control")
+    t = control.tf(np.asarray(num, dtype=float), np.asarray(den, dtype=float))
+    if cancel_tol is not None:
+        t = t.minreal(tol=cancel_tol)
+    p = np.asarray(t.poles())
+    dom = p[np.argmax(p.real)]
+    return -dom.real / abs(dom), abs(dom) / (2 * math.pi), len(p)
+
+
+def test_dominant_damping_leaves_out_the_poles_a_zero_cancels():
+    """The FA-LESO's PLL loop at 002's closed form (faleso.toml, 300 r/min) has a pole pair at -0.106 ± j157.13
+    rad/s (damping 0.0007) with a zero pair 0.03 rad/s away: a doublet left out of the dominant damping, which
+    becomes the real dominant mode's (the oracle: python-control after minreal); a loop without a doublet
+    (the SOGI-FLL's) is unchanged: nothing cancelled, the oracle without minreal."""
+    from tuning.structure import structure
+
+    job = load_job(Path(__file__).parents[1] / "tuning" / "presets" / "faleso.toml")
+    v = job.values
+    fa = structure("FALESO", v, job)
+    we = fa["omega_e"]
+    loop = linear.faleso_pll_loop(v["k1"], v["k2"], we, v["kp_pll"], v["ki_pll"]).feedback()
+    # 1 rad/s: the doublet is 0.03 rad/s apart; every other pole is > 50 rad/s from every zero
+    zeta, hz, n_left = _oracle_dominant(loop.num, loop.den, cancel_tol=1.0)
+    assert n_left < len(fa["poles"])  # minreal did cancel something
+    assert fa["dominant_damping"] == pytest.approx(zeta, rel=1e-9) and fa["dominant_damping"] > 0.5
+    assert fa["dominant_hz"] == pytest.approx(hz, rel=1e-9)
+    assert fa["least_pair_damping"] == pytest.approx(zeta, rel=1e-9)  # the remaining complex pair is dominant
+    cancelled = [complex(*z) for z in fa["cancelled_poles"]]
+    pair = [z for z in cancelled if abs(abs(z.imag) - we) < 1.0]
+    assert len(pair) == 2 and all(-z.real / abs(z) < 1e-3 for z in pair)  # the ~0.0007 pair
+    raw, _, _ = _oracle_dominant(loop.num, loop.den)
+    assert raw < 1e-3  # what was reported before: the doublet
+    assert fa["stable"] is True and len(fa["poles"]) == 6  # every pole still listed
+    # no doublet: unchanged (001's WIF, whose closed loop has a zero: ζ = 1/√2 for its pair, as before)
+    wif = structure("SOGIFLLWIF", dict(k1=papers.WIF_K1, k2=papers.WIF_K2, lam=papers.WIF_LAM, omega_n=W_N))
+    model = linear.wif_model(papers.WIF_K1, papers.WIF_K2, papers.WIF_LAM, W_N).frequency
+    assert wif["cancelled_poles"] == []
+    zeta, hz, _ = _oracle_dominant(model.num, model.den)
+    assert wif["dominant_damping"] == pytest.approx(zeta, rel=1e-9) and wif["dominant_hz"] == pytest.approx(hz)
+
+
 def test_sosoifo_structure_gives_the_settling_time_k1_rule_at_its_k2():
     """000's rule (equal 2 % envelope settling with the SOIFO at k = 1.414: 17.6 ms at 100π rad/s) at the
     design's K2: at 000's K2 = 3.11 the smallest K1 that settles as fast is 0.949 (000 chose 1.56, 17.2 ms);
