@@ -234,6 +234,18 @@ def test_recording_job_errors_name_the_field(tmp_path, capsys, old, new, field, 
     assert "\n" not in err and field in err and words in err, err
 
 
+def test_responses_plot_names_a_recording_scenario_by_its_file(tmp_path):
+    """responses.png's title names a recording job's scenario by its file, not "recording = 0"; a grid
+    job's scenario keeps its axis values."""
+    from tuning.job import load_job
+    from tuning.report import _describe
+
+    job = load_job(_job_copy(tmp_path))
+    assert _describe(job.scenarios, 0) == "scenario #0: recording grid_50_51hz.csv"
+    grid = load_job(ROOT / "tuning" / "presets" / "sogi_fll.toml")
+    assert "recording" not in _describe(grid.scenarios, 0) and " = " in _describe(grid.scenarios, 0)
+
+
 def test_recording_job_checks_size_and_the_closed_loop_metrics(tmp_path, capsys, monkeypatch):
     from tuning import job as J
     from tuning.cli import main
