@@ -282,4 +282,4 @@ def test_study_file_on_a_recording(tmp_path, capsys):
     path.write_text(path.read_text().replace('time_column = "t"', 'time_column = "time"'))
     assert main(["study", str(path), "--out", str(tmp_path / "o2"), "--quiet"]) == 2
     err = capsys.readouterr().err.strip()
-    assert "\n" not in err and "study.recording.file" in err and "no time column 'time'" in err, err
+    assert "\n" not in err and "study.recording.time_column" in err and "no time column 'time'" in err, err
