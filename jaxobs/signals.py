@@ -47,6 +47,7 @@ __all__ = [
     "stack",
     "read_recording",
     "MAX_CSV_BYTES",
+    "RecordingColumnError",
 ]
 
 
@@ -366,19 +367,32 @@ def _csv_table(path, max_bytes):
     return header, out
 
 
+class RecordingColumnError(ValueError):
+    """A column of a recording that is not there; ``role`` ("time", "signal" or "truth") and ``spec`` (the
+    name or index asked for) let a caller name the argument or job field that asked for it."""
+
+    def __init__(self, msg: str, role: str, spec):
+        super().__init__(msg)
+        self.role, self.spec = role, spec
+
+
 def _column(spec, header, width, path, role):
     """The index of a column given by name or 0-based index."""
+    p = str(path)
     if isinstance(spec, (int, np.integer)) and not isinstance(spec, bool):
         if not 0 <= spec < width:
-            raise ValueError(f"recording {str(path)!r}: {role} column index {spec} is outside 0..{width - 1}")
+            msg = f"recording {p!r}: {role} column index {spec} is outside 0..{width - 1}"
+            raise RecordingColumnError(msg, role, spec)
         return int(spec)
     if isinstance(spec, str):
         if header is None:
-            raise ValueError(f"recording {str(path)!r}: {role} column {spec!r} named, but the file has no header row")
+            msg = f"recording {p!r}: {role} column {spec!r} named, but the file has no header row"
+            raise RecordingColumnError(msg, role, spec)
         if spec not in header:
-            raise ValueError(f"recording {str(path)!r}: no {role} column {spec!r}; columns: {', '.join(header)}")
+            msg = f"recording {p!r}: no {role} column {spec!r}; columns: {', '.join(header)}"
+            raise RecordingColumnError(msg, role, spec)
         return header.index(spec)
-    raise ValueError(f"recording {str(path)!r}: a {role} column must be a name or an index, got {spec!r}")
+    raise RecordingColumnError(f"recording {p!r}: a {role} column must be a name or an index, got {spec!r}", role, spec)
 
 
 def read_recording(

@@ -93,8 +93,19 @@ def test_cli_refuses_a_locked_or_used_out_with_one_line(tmp_path, capsys, monkey
     assert "--force" in capsys.readouterr().err
     # the name cannot escape: the default folder is ./out/<sanitised name>
     monkeypatch.chdir(tmp_path)
-    assert main(["tune", str(path), "--quiet"]) == 0
+    old_umask = os.umask(0o027)  # not the usual 022: a mode that neither 0600 nor a hard-coded 0644 matches
+    try:
+        assert main(["tune", str(path), "--quiet"]) == 0
+        with open(tmp_path / "plain", "w") as f:
+            f.write("")
+    finally:
+        os.umask(old_umask)
     assert (tmp_path / "out" / "_.._escape" / "result.json").exists()
+    # every output (the atomically written JSON files included) gets the mode a plain open() gives, 0640 here
+    plain = (tmp_path / "plain").stat().st_mode & 0o777
+    modes = {p.name: oct(p.stat().st_mode & 0o777) for p in (tmp_path / "out" / "_.._escape").iterdir()}
+    assert {"result.json", "history.json", "timing.json", "responses.png"} <= set(modes)
+    assert set(modes.values()) == {oct(plain)} == {"0o640"}, modes
     # lost lock, per design and per scenario: the closed form and the tuned design hold it
     res = json.loads((tmp_path / "out" / "_.._escape" / "result.json").read_text())
     assert [res["scores"][d]["lost_lock"] for d in ("initial", "closed_form", "tuned")] == [0, 0, 0]
@@ -140,13 +151,15 @@ def test_internal_error_is_one_line_with_a_log(tmp_path, capsys, monkeypatch):
 class _Quadratic:
     """A cheap stand-in objective with the interface run_solver uses."""
 
-    def __init__(self):
-        self.param = Parametrization([GainSpec("a", 2.0, 0.1, 50.0), GainSpec("b", 1.0, 0.01, 10.0, log=False)])
+    def __init__(self, n_gains=2):
+        specs = [GainSpec("a", 2.0, 0.1, 50.0), GainSpec("b", 1.0, 0.01, 10.0, log=False)]
+        self.param = Parametrization(specs[:n_gains])
+        self.n = n_gains
 
     def value_grad_diverged(self, theta):
-        target = jnp.asarray([0.3, -0.7])
-        v = jnp.sum((theta - target) ** 2 * jnp.asarray([1.0, 3.0])) + 0.1 * jnp.sum(jnp.sin(3 * theta))
-        g = 2 * (theta - target) * jnp.asarray([1.0, 3.0]) + 0.3 * jnp.cos(3 * theta)
+        target, w = jnp.asarray([0.3, -0.7])[: self.n], jnp.asarray([1.0, 3.0])[: self.n]
+        v = jnp.sum((theta - target) ** 2 * w) + 0.1 * jnp.sum(jnp.sin(3 * theta))
+        g = 2 * (theta - target) * w + 0.3 * jnp.cos(3 * theta)
         return v, g, 0
 
 
@@ -157,8 +170,8 @@ class Killed(BaseException):
     pass
 
 
-def _run(ckpt, resume=False, fp="job-a"):
-    obj = _Quadratic()
+def _run(ckpt, resume=False, fp="job-a", n_gains=2):
+    obj = _Quadratic(n_gains)
     res = run_solver(obj, obj.param.theta0(), CFG, checkpoint=ckpt, resume=resume, quiet=True, fingerprint=fp)
     return json.dumps(
         dict(theta=np.asarray(res.theta).tolist(), h=res.history, s=res.status, r=res.reason, b=res.best_iteration)
@@ -204,6 +217,21 @@ def test_resume_refuses_foreign_and_corrupt_checkpoints(tmp_path, capsys):
     ckpt.unlink()
     assert _run(ckpt, resume=True) == ref  # nothing to resume: one line, a fresh start
     assert "no checkpoint" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("n_saved, n_resumed", [(1, 2), (2, 1), (2, 2)])
+def test_a_foreign_checkpoint_belongs_to_another_job_whatever_its_gain_count(tmp_path, n_saved, n_resumed):
+    """The fingerprint is checked before the arrays: another job's checkpoint with another number of gains
+    (other array shapes) is "another job", not "corrupt"; a same-fingerprint checkpoint whose shapes differ
+    (a hand-edited job hash) is still reported as corrupt."""
+    ckpt = tmp_path / "c.npz"
+    _run(ckpt, fp="job-a", n_gains=n_saved)
+    with pytest.raises(CheckpointError, match="belongs to another job") as e:
+        _run(ckpt, resume=True, fp="job-b", n_gains=n_resumed)
+    assert "corrupt" not in str(e.value) and "\n" not in str(e.value)
+    if n_saved != n_resumed:
+        with pytest.raises(CheckpointError, match="corrupt or unreadable.*shapes differ"):
+            _run(ckpt, resume=True, fp="job-a", n_gains=n_resumed)
 
 
 @pytest.mark.parametrize(

@@ -211,7 +211,10 @@ def _job_copy(tmp_path, name="recording_wif.toml"):
     "old, new, field, words",
     [
         ('file = "recordings/grid_50_51hz.csv"', 'file = "recordings/none.csv"', "scenarios.recording.file", "cannot"),
-        ('columns = ["v"]', 'columns = ["volts"]', "scenarios.recording.file", "no signal column 'volts'"),
+        ('columns = ["v"]', 'columns = ["volts"]', "scenarios.recording.columns[0]", "no signal column 'volts'"),
+        ('columns = ["v"]', "columns = [7]", "scenarios.recording.columns[0]", "index 7 is outside"),
+        ('"omega", "amplitude"]', '"w", "amplitude"]', "scenarios.recording.truth[1]", "no truth column 'w'"),
+        ('time_column = "t"', 'time_column = "time"', "scenarios.recording.time_column", "no time column"),
         ('time_column = "t"', 'time_column = "t"\nsample_rate = 1e4', "scenarios.recording", "exactly one"),
         ('time_column = "t"', "sample_rate = 5000.0", "scenarios.recording.file", "slower than the observer's ts"),
         ("horizon = 0.4", "horizon = 0.5", "scenarios.horizon", "needs 5000 samples"),
@@ -229,6 +232,18 @@ def test_recording_job_errors_name_the_field(tmp_path, capsys, old, new, field, 
     assert main(["tune", str(path), "--check"]) == 2
     err = capsys.readouterr().err.strip()
     assert "\n" not in err and field in err and words in err, err
+
+
+def test_responses_plot_names_a_recording_scenario_by_its_file(tmp_path):
+    """responses.png's title names a recording job's scenario by its file, not "recording = 0"; a grid
+    job's scenario keeps its axis values."""
+    from tuning.job import load_job
+    from tuning.report import _describe
+
+    job = load_job(_job_copy(tmp_path))
+    assert _describe(job.scenarios, 0) == "scenario #0: recording grid_50_51hz.csv"
+    grid = load_job(ROOT / "tuning" / "presets" / "sogi_fll.toml")
+    assert "recording" not in _describe(grid.scenarios, 0) and " = " in _describe(grid.scenarios, 0)
 
 
 def test_recording_job_checks_size_and_the_closed_loop_metrics(tmp_path, capsys, monkeypatch):
@@ -267,4 +282,4 @@ def test_study_file_on_a_recording(tmp_path, capsys):
     path.write_text(path.read_text().replace('time_column = "t"', 'time_column = "time"'))
     assert main(["study", str(path), "--out", str(tmp_path / "o2"), "--quiet"]) == 2
     err = capsys.readouterr().err.strip()
-    assert "\n" not in err and "study.recording.file" in err and "no time column 'time'" in err, err
+    assert "\n" not in err and "study.recording.time_column" in err and "no time column 'time'" in err, err

@@ -27,6 +27,7 @@ from tuning import (
     load_job,
     run_solver,
 )
+from tuning import job as job_mod
 from tuning.cli import main
 from tuning.objective import MetricContext
 from tuning.targets import flux_settling_time, lambda_for_damping, match_settling_time
@@ -323,6 +324,43 @@ def test_every_preset_job_validates(preset):
     assert job.gains and job.terms
 
 
+def test_drive_speeds_are_checked_against_the_jobs_machine(tmp_path, capsys):
+    """A drive job's speed_rpm (and speed_rpm + speed_step_rpm) must stay below the speed at which the
+    machine's back EMF reaches the inverter's limit: ψf ωe = U_dc/√3 (no field weakening in the FOC)."""
+    presets = Path(__file__).parents[1] / "tuning" / "presets"
+    # the oracle, by hand from the machines' tables: 540 V dc link, u_max = 540/√3 V
+    for name, par in (("ipmsm002", papers.IPMSM_002), ("spmsm000", papers.SPMSM_000)):
+        n_max = 540.0 / math.sqrt(3) / par["psi_f"] / par["p"] * 60 / (2 * math.pi)
+        assert job_mod.drive_speed_limit_rpm(name) == pytest.approx(n_max, rel=1e-12)
+    assert 1.3 * papers.IPMSM_002["n_rated"] < job_mod.drive_speed_limit_rpm("ipmsm002") < 1e4
+    cleso = (presets / "cleso.toml").read_text()
+    soifo = (presets / "soifo.toml").read_text()
+    cases = [  # (job text, None if it passes, else the field and the range the one-line error names)
+        (cleso.replace("[300.0, 600.0, 840.0]", "[84000.0]"), "scenarios.grid.speed_rpm[0]", "[1, 1323] r/min"),
+        (cleso.replace("[300.0, 600.0, 840.0]", "[300.0, 1400.0]"), "scenarios.grid.speed_rpm[1]", "ipmsm002"),
+        (cleso.replace("[300.0, 600.0, 840.0]", "[1300.0]"), None, None),
+        (
+            cleso.replace("load_nm = [0.0, 15.0]", "speed_step_rpm = [-100.0, 600.0]"),
+            "scenarios.grid.speed_step_rpm[1]",
+            "got 1440",
+        ),
+        (cleso.replace("load_nm = [0.0, 15.0]", "speed_step_rpm = [-1700.0]"), "speed_step_rpm[0]", "got -1400"),
+        (cleso.replace("load_nm = [0.0, 15.0]", "speed_step_rpm = [-1000.0, 400.0]"), None, None),
+        (soifo.replace("[600.0, 1200.0, 2000.0]", "[2800.0]"), None, None),  # the SPMSM allows 2835 r/min
+        (soifo.replace("[600.0, 1200.0, 2000.0]", "[2900.0]"), "scenarios.grid.speed_rpm[0]", "[1, 2835] r/min"),
+    ]
+    for i, (text, field, words) in enumerate(cases):
+        path = tmp_path / f"j{i}.toml"
+        path.write_text(text)
+        rc = main(["tune", str(path), "--check"])
+        out = capsys.readouterr()
+        if field is None:
+            assert rc == 0, out.err
+        else:
+            err = out.err.strip()
+            assert rc == 2 and "\n" not in err and field in err and words in err, err
+
+
 @pytest.mark.slow
 def test_leso_drive_job_runs(tmp_path):
     """A FA-LESO job on the IPMSM drive (signal = "drive"): the observer binds to each scenario's
@@ -463,6 +501,50 @@ def test_wif_structure_of_the_symmetric_optimum():
     assert s["gain_margin_db"] is None and "gain_margin_db" in s["not_available"]
     fa = structure("FALESO", load_job(Path(__file__).parents[1] / "tuning" / "presets" / "faleso.toml").values)
     assert fa["routh_stable"] is True
+
+
+def _oracle_dominant(num, den, cancel_tol=None):
+    """python-control's dominant damping: the pole of largest real part of the closed loop, after minreal
+    cancels pole-zero pairs closer than ``cancel_tol`` rad/s (None: no cancellation)."""
+    control = pytest.importorskip("control")
+    t = control.tf(np.asarray(num, dtype=float), np.asarray(den, dtype=float))
+    if cancel_tol is not None:
+        t = t.minreal(tol=cancel_tol)
+    p = np.asarray(t.poles())
+    dom = p[np.argmax(p.real)]
+    return -dom.real / abs(dom), abs(dom) / (2 * math.pi), len(p)
+
+
+def test_dominant_damping_leaves_out_the_poles_a_zero_cancels():
+    """The FA-LESO's PLL loop at 002's closed form (faleso.toml, 300 r/min) has a pole pair at -0.106 ± j157.13
+    rad/s (damping 0.0007) with a zero pair 0.03 rad/s away: a doublet left out of the dominant damping, which
+    becomes the real dominant mode's (the oracle: python-control after minreal); a loop without a doublet
+    (the SOGI-FLL's) is unchanged: nothing cancelled, the oracle without minreal."""
+    from tuning.structure import structure
+
+    job = load_job(Path(__file__).parents[1] / "tuning" / "presets" / "faleso.toml")
+    v = job.values
+    fa = structure("FALESO", v, job)
+    we = fa["omega_e"]
+    loop = linear.faleso_pll_loop(v["k1"], v["k2"], we, v["kp_pll"], v["ki_pll"]).feedback()
+    # 1 rad/s: the doublet is 0.03 rad/s apart; every other pole is > 50 rad/s from every zero
+    zeta, hz, n_left = _oracle_dominant(loop.num, loop.den, cancel_tol=1.0)
+    assert n_left < len(fa["poles"])  # minreal did cancel something
+    assert fa["dominant_damping"] == pytest.approx(zeta, rel=1e-9) and fa["dominant_damping"] > 0.5
+    assert fa["dominant_hz"] == pytest.approx(hz, rel=1e-9)
+    assert fa["least_pair_damping"] == pytest.approx(zeta, rel=1e-9)  # the remaining complex pair is dominant
+    cancelled = [complex(*z) for z in fa["cancelled_poles"]]
+    pair = [z for z in cancelled if abs(abs(z.imag) - we) < 1.0]
+    assert len(pair) == 2 and all(-z.real / abs(z) < 1e-3 for z in pair)  # the ~0.0007 pair
+    raw, _, _ = _oracle_dominant(loop.num, loop.den)
+    assert raw < 1e-3  # what was reported before: the doublet
+    assert fa["stable"] is True and len(fa["poles"]) == 6  # every pole still listed
+    # no doublet: unchanged (001's WIF, whose closed loop has a zero: ζ = 1/√2 for its pair, as before)
+    wif = structure("SOGIFLLWIF", dict(k1=papers.WIF_K1, k2=papers.WIF_K2, lam=papers.WIF_LAM, omega_n=W_N))
+    model = linear.wif_model(papers.WIF_K1, papers.WIF_K2, papers.WIF_LAM, W_N).frequency
+    assert wif["cancelled_poles"] == []
+    zeta, hz, _ = _oracle_dominant(model.num, model.den)
+    assert wif["dominant_damping"] == pytest.approx(zeta, rel=1e-9) and wif["dominant_hz"] == pytest.approx(hz)
 
 
 def test_sosoifo_structure_gives_the_settling_time_k1_rule_at_its_k2():

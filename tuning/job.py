@@ -647,6 +647,8 @@ def _parse_recording_scenarios(tab, where, signal, t_event, horizon, steady, see
                 raise JobError(field, f"{files[i]!r} is {size} bytes, more than {MAX_RECORDING_BYTES} (8 MiB)")
             try:
                 sig = _load_one(spec, signal, path)
+            except jaxobs.signals.RecordingColumnError as e:  # a column not in the file: the key that named it
+                raise JobError(_column_field(w, e, spec), str(e).replace(path, files[i])) from None
             except ValueError as e:
                 raise JobError(field, str(e).replace(path, files[i])) from None
             need = int(round(horizon / ts))
@@ -660,6 +662,15 @@ def _parse_recording_scenarios(tab, where, signal, t_event, horizon, steady, see
         spec = dataclasses.replace(spec, sha256=tuple(digests))
     axes = {"recording": [float(i) for i in range(len(files))]}
     return ScenarioSpec(signal, t_event, horizon, steady, axes, 0, seed, recording=spec)
+
+
+def _column_field(w: str, e, spec: RecordingSpec) -> str:
+    """The job field of a recording column that the file lacks: ``<w>.columns[i]``, ``<w>.truth[i]`` or
+    ``<w>.time_column``."""
+    if e.role == "time":
+        return f"{w}.time_column"
+    key, listed = ("columns", spec.columns) if e.role == "signal" else ("truth", spec.truth)
+    return f"{w}.{key}[{listed.index(e.spec)}]" if e.spec in listed else f"{w}.{key}"
 
 
 def _load_one(spec: RecordingSpec, signal: str, path: str):
@@ -820,6 +831,8 @@ def parse_job(raw: dict, base: Path | None = None) -> Job:
     for spec, where in ((scen, "scenarios"), (holdout, "holdout")):
         if spec is not None:
             _check_size(spec, where, ts, settle)
+            if drive is not None:
+                _check_drive_speeds(spec, where, drive.machine)
 
     obj_t = _get(raw, "objective", "objective", dict, required=True)
     _no_unknown(obj_t, ("terms", "aggregate", "alpha", "temperature", "penalty"), "objective")
@@ -1007,6 +1020,40 @@ def _parse_start(dt: dict, drive: DriveSpec, scen) -> DriveSpec:
                 "drive.start", f"'standstill' needs horizon > {t_if:.3g} s (the I-f start-up), got {scen.horizon:g}"
             )
     return drive
+
+
+def drive_speed_limit_rpm(machine: str) -> float:
+    """The highest drive speed (r/min, either direction) a job may ask of ``machine``: the speed at which the
+    back EMF alone, ωe ψf, reaches the inverter's voltage limit u_max = U_dc/√3 (the job's default
+    :class:`jaxobs.drive.Inverter`).  Above it the FOC cannot hold even zero current, as field weakening is
+    not modelled (i_d* is 0 or MTPA, never negative for flux weakening): the machine would run away from its
+    reference and a tuning there scores an uncontrolled drive.  It is a no-load bound (load adds Rs·i and
+    ωe·Lq·i to the voltage), so it is necessary, not sufficient: ipmsm002 1323 r/min (2.2 × its 600 r/min
+    rating), spmsm000 2835 r/min (1.4 × 2000 r/min)."""
+    par = drive_machine(machine)
+    w_e = float(D.Inverter().u_max) / float(par.psi_f)  # rad/s electrical
+    return w_e / par.p * 60.0 / (2 * math.pi)
+
+
+def _check_drive_speeds(spec: ScenarioSpec, where: str, machine: str) -> None:
+    """speed_rpm and speed_rpm + speed_step_rpm (every combination of the grid) within ± the machine's
+    :func:`drive_speed_limit_rpm`, at --check time."""
+    speeds, steps = spec.axes.get("speed_rpm"), spec.axes.get("speed_step_rpm", [0.0])
+    if not speeds:
+        return
+    n_max = drive_speed_limit_rpm(machine)
+    rng = f"must be in [1, {n_max:.0f}] r/min on {machine} (its back EMF reaches the inverter's voltage limit there)"
+    for i, x in enumerate(speeds):
+        if abs(x) > n_max:
+            raise JobError(f"{where}.grid.speed_rpm[{i}]", f"{rng}, got {x:g}")
+    for j, d in enumerate(steps):
+        after = max(speeds) + d if d >= 0 else min(speeds) + d  # the extreme speed after this step
+        if abs(after) > n_max:
+            raise JobError(
+                f"{where}.grid.speed_step_rpm[{j}]",
+                f"speed_rpm + speed_step_rpm must be in [-{n_max:.0f}, {n_max:.0f}] r/min on {machine} (its back "
+                f"EMF reaches the inverter's voltage limit there), got {after:g}",
+            )
 
 
 def job_drive(spec: DriveSpec | None = None):

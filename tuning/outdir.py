@@ -14,8 +14,8 @@ from __future__ import annotations
 
 import os
 import re
+import secrets
 import socket
-import tempfile
 from pathlib import Path
 
 __all__ = ["OutError", "safe_name", "OutDir", "atomic_write_bytes", "atomic_write_text", "atomic_path"]
@@ -113,9 +113,21 @@ class OutDir:
 
 def atomic_write_bytes(path: Path, data: bytes) -> None:
     """``data`` to a temp file beside ``path``, flushed, then renamed over it (a symlink there is replaced,
-    never followed)."""
+    never followed).  The file gets the mode a plain ``open(path, "w")`` would give it (0o666 less the
+    umask): the temp file is created with ``os.open(..., 0o666)`` and ``O_EXCL``, not ``tempfile.mkstemp``
+    (which always makes 0600 files), so no umask has to be read (``os.umask`` can only be read by setting it,
+    which races with other threads)."""
     path = Path(path)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    flags = os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_NOFOLLOW", 0) | getattr(os, "O_BINARY", 0)
+    for _ in range(100):
+        tmp = str(path.parent / f".{path.name}.{secrets.token_hex(6)}.tmp")
+        try:
+            fd = os.open(tmp, flags, 0o666)
+            break
+        except FileExistsError:
+            continue
+    else:
+        raise FileExistsError(f"no free temp file name beside {str(path)!r}")
     try:
         with os.fdopen(fd, "wb") as f:
             f.write(data)

@@ -45,6 +45,10 @@ _UNITS = {"freq_step": " Hz", "speed_hz": " Hz", "speed_rpm": " r/min", "dc": " 
 
 
 def _describe(spec, index: int) -> str:
+    """The scenario's axis values, or for a job on recordings the recording's file name."""
+    rec = getattr(spec, "recording", None)
+    if rec is not None and index < len(rec.files):
+        return f"scenario #{index}: recording {Path(rec.files[index]).name}"
     names, combos = scenario_values(spec)
     if not names or index >= len(combos):
         return f"scenario #{index}"

@@ -167,31 +167,47 @@ CHECKPOINT_FORMAT = "jaxobs-checkpoint-1"
 
 
 def _load_checkpoint(path: Path, opt_state_template, fingerprint: str | None):
-    """(meta, θ, best θ, optimizer state) of a checkpoint, or a one-line :class:`CheckpointError`."""
+    """(meta, θ, best θ, optimizer state) of a checkpoint, or a one-line :class:`CheckpointError`.
+
+    The job's fingerprint is checked right after the metadata, before any array is read: another job's
+    checkpoint (other gains, so other array shapes) is reported as "belongs to another job", never as a
+    corrupt file."""
+
+    def corrupt(e):
+        return CheckpointError(
+            f"--resume: checkpoint {str(path)!r} is corrupt or unreadable ({type(e).__name__}: {str(e)[:80]}); "
+            "delete it or run without --resume and with --force"
+        )
+
     try:
-        with np.load(path, allow_pickle=False) as data:
+        data = np.load(path, allow_pickle=False)
+    except Exception as e:  # a torn, truncated or foreign file: one line, never a traceback
+        raise corrupt(e) from None
+    with data:
+        try:
             meta = json.loads(str(data["meta"]))
             if not isinstance(meta, dict) or meta.get("format") != CHECKPOINT_FORMAT:
                 raise ValueError("not a jaxobs checkpoint")
+        except Exception as e:
+            raise corrupt(e) from None
+        if fingerprint is not None and meta.get("job_sha256") != fingerprint:
+            got = str(meta.get("job_sha256"))[:12]
+            raise CheckpointError(
+                f"--resume: checkpoint {str(path)!r} belongs to another job "
+                f"(sha256 {got}…, this job {fingerprint[:12]}…)"
+            )
+        try:
             leaves = [jnp.asarray(data[f"arr_{i}"]) for i in range(int(meta["n_leaves"]))]
             theta, best_theta = jnp.asarray(data["theta"]), jnp.asarray(data["best_theta"])
-        for key in ("iteration", "best_value", "since_best", "history"):
-            meta[key]  # noqa: B018 - present, or KeyError
-        treedef = jax.tree.structure(opt_state_template)
-        opt_state = jax.tree.unflatten(treedef, leaves)
-        shapes = [np.shape(x) for x in jax.tree.leaves(opt_state_template)]
-        if [tuple(x.shape) for x in leaves] != [tuple(s) for s in shapes] or theta.shape != best_theta.shape:
-            raise ValueError("array shapes differ from the job's")
-    except Exception as e:  # a torn, truncated or foreign file: one line, never a traceback
-        raise CheckpointError(
-            f"--resume: checkpoint {str(path)!r} is corrupt or unreadable ({type(e).__name__}: {str(e)[:80]}); "
-            "delete it or run without --resume and with --force"
-        ) from None
-    if fingerprint is not None and meta.get("job_sha256") != fingerprint:
-        got = str(meta.get("job_sha256"))[:12]
-        raise CheckpointError(
-            f"--resume: checkpoint {str(path)!r} belongs to another job (sha256 {got}…, this job {fingerprint[:12]}…)"
-        )
+            for key in ("iteration", "best_value", "since_best", "history"):
+                meta[key]  # noqa: B018 - present, or KeyError
+            treedef = jax.tree.structure(opt_state_template)
+            opt_state = jax.tree.unflatten(treedef, leaves)
+            shapes = [np.shape(x) for x in jax.tree.leaves(opt_state_template)]
+            if [tuple(x.shape) for x in leaves] != [tuple(s) for s in shapes] or theta.shape != best_theta.shape:
+                raise ValueError("array shapes differ from the job's")
+        except Exception as e:
+            raise corrupt(e) from None
     return meta, theta, best_theta, opt_state
 
 

@@ -7,7 +7,10 @@ For a design (every constructor value of a component: the tuned or fixed gains,
   paper closes (001 Fig. 14 for the FLL family; the PLL through the FA-LESO, 002);
 - ``dominant_damping``: the damping ratio −Re p/|p| of the closed loop's slowest
   poles (1 for a real pole), with ``dominant_hz`` = |p|/2π, ``least_pair_damping``
-  (the least damped complex pair; 1 if none) and ``stable``;
+  (the least damped complex pair; 1 if none) and ``stable``; poles cancelled by a zero
+  (a zero within 1 % of |p| and a mode whose step-response amplitude |r/p| is below 1e-3
+  of the largest mode's: :data:`NEAR_ZERO_REL`, :data:`CANCELLED_REL`) are left out of these
+  three and listed in ``cancelled_poles`` (``stable`` and ``poles`` keep every pole);
 - the closed-form rule re-evaluated at the design's other gains: the λ of 001 eq (22)
   at the design's k (SOGI-FLL), of eq (29) (WPF), of the symmetric optimum at the
   design's k1, k2 (WIF, with the implied b = k1/k2 and ωc = k2ωn/2 and the PM that b
@@ -48,17 +51,49 @@ def _margins(loop) -> dict:
     return out, why
 
 
+# A pole-zero doublet is left out of dominant_damping, dominant_hz and least_pair_damping (it stays in "poles",
+# "stable" and is listed in "cancelled_poles"): a pole with a zero within NEAR_ZERO_REL |p| of it whose mode
+# contributes less than CANCELLED_REL of the largest mode's amplitude to the step response (|r_i/p_i|, r_i its
+# residue).  The zero test keeps a numerically split repeated pole, whose residues are huge, from hiding the
+# others.  The FA-LESO's PLL loop (002) has such a doublet near ±jωe: the FA-LESO's own slow pole
+# -k1/(k2 - jωe) sits next to its zero -k1/k2, and in the loop's envelope model it becomes a pair at
+# ≈ -0.1 ± j157 rad/s (damping 0.0007 at 300 r/min for 002's closed form) with a zero pair 0.03 rad/s away:
+# its mode's amplitude is 2e-4 of the largest, so it is no "dominant" dynamics of the loop, while reporting
+# it read as a nearly unstable design.  1e-3 keeps every mode a plot of the response could show.
+CANCELLED_REL = 1e-3
+NEAR_ZERO_REL = 1e-2
+
+
+def _mode_amplitudes(tf, p) -> np.ndarray:
+    """|r_i / p_i|: each pole's coefficient in the step response (inf where undefined: a repeated pole, or a
+    pole at 0, is never taken for cancelled)."""
+    num, den = np.asarray(tf.num, dtype=complex), np.asarray(tf.den, dtype=complex)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        a = np.abs(np.polyval(num, p) / np.polyval(np.polyder(den), p) / p)
+    return np.where(np.isfinite(a), a, np.inf)
+
+
 def _poles(tf) -> dict:
     p = np.asarray(tf.poles(), dtype=complex)
-    dom = p[np.argmax(p.real)]
+    amp = _mode_amplitudes(tf, p)
+    finite = amp[np.isfinite(amp)]
+    big = float(np.max(finite)) if finite.size else 0.0
+    z = np.asarray(tf.zeros(), dtype=complex)
+    near = np.array([bool(z.size) and np.min(np.abs(z - x)) < NEAR_ZERO_REL * abs(x) for x in p], dtype=bool)
+    cancelled = near & np.isfinite(amp) & (amp < CANCELLED_REL * big)
+    seen = p[~cancelled] if np.any(~cancelled) else p  # the modes the response shows
+    dom = seen[np.argmax(seen.real)]
     mag = abs(dom)
-    cplx = [z for z in p if abs(z.imag) > 1e-9 * abs(z)]
+    cplx = [z for z in seen if abs(z.imag) > 1e-9 * abs(z)]
     return {
         "least_pair_damping": float(min(-z.real / abs(z) for z in cplx)) if cplx else 1.0,
         "stable": bool(np.all(p.real < 0)),
         "dominant_damping": float(-dom.real / mag) if mag > 0 else None,
         "dominant_hz": float(mag / (2 * math.pi)),
         "poles": [[float(z.real), float(z.imag)] for z in sorted(p, key=lambda z: (z.real, z.imag))],
+        "cancelled_poles": [
+            [float(z.real), float(z.imag)] for z in sorted(p[cancelled], key=lambda z: (z.real, z.imag))
+        ],
     }
 
 
