@@ -340,3 +340,34 @@ def test_standstill_jobs_score_the_position_error_from_the_hand_over_on():
     )
     assert float(METRICS["rms_position_steady"](never, None, ctx)) == pytest.approx(1.7, rel=1e-4)
     assert bool(_lost_sync(never, None, ctx))  # 97° in the steady window
+
+
+@pytest.mark.slow
+def test_a_standstill_start_above_the_load_limit_runs_backwards_and_is_flagged_lost_speed():
+    """The review's case: SOIFO, 000's SPMSM, 1000 r/min reference from standstill.  Measured: 4.5 N·m (above
+    tuning.job.if_load_limit's 3.82, which is sufficient, not necessary) still starts; 5 N·m runs backwards
+    (−320 r/min) with the observer locked to it — lost_speed flags it, lost lock does not."""
+    import jax.numpy as jnp
+
+    from jaxobs import metrics as M
+    from tuning.job import DriveSpec, if_load_limit
+
+    assert 3.5 < if_load_limit(DriveSpec(start="standstill", machine="spmsm000")) < 4.5
+    _, obs = _observer("SOIFO")
+    start = D.IfStartup.for_machine(SPMSM)
+    foc = D.FOC.imc(SPMSM, 2 * math.pi * papers.BENCH_CURRENT_HZ, 2 * math.pi * papers.BENCH_SPEED_HZ)
+    drive = D.Drive(foc, startup=start, sensorless=True)
+    scs = [
+        D.Scenario(SPMSM, speed_ref=D.Profile.constant(1000 * D.RPM), load=D.Profile.constant(tl)) for tl in (4.5, 5.0)
+    ]
+    batch = jax.tree.map(lambda *x: jnp.stack(x), *scs)
+    run = jax.jit(jax.vmap(lambda s: jaxobs.simulate(D.ClosedLoop(drive, bind_observer(obs, s), s), 1.0)))
+    sol = run(batch)
+    o = sol.outputs
+    win = sol.t[0] >= 0.7
+    lost_speed = np.asarray(M.lost_speed(o.omega_m, o.omega_m_ref, win))
+    lost_lock = np.asarray(M.lost_lock(o.obs.theta, o.theta_e, win, math.radians(M.LOCK_TOL_DRIVE_DEG)))
+    rpm_end = np.asarray(o.speed_rpm)[:, -1]
+    assert list(lost_speed) == [False, True], rpm_end
+    assert rpm_end[0] == pytest.approx(1000.0, rel=0.05) and rpm_end[1] < 0.0
+    assert not lost_lock[1]  # the observer tracks the rotor turning the wrong way
