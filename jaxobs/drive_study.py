@@ -29,7 +29,10 @@ sample-to-sample noise of ω̂e/p: rms of the first difference over √2) and
 ``lost_lock``: the scenario diverged (a non-finite value) or its position error
 exceeded 90° (electrical) in the steady window — a per-scenario flag, never fatal, with the
 definition the FLL studies and the tuning share (:mod:`jaxobs.metrics`, "lost lock": 90° for a drive,
-where the current vector beyond it brakes the machine; ``diverged`` flags the non-finite ones alone).  The
+where the current vector beyond it brakes the machine; ``diverged`` flags the non-finite ones alone);
+``lost_speed``: diverged, or the drive missed its speed reference over the steady window
+(:func:`jaxobs.metrics.lost_speed`: mean |ωm − ωm*| > 20 % of mean |ωm*|, at least 20 r/min), counted in
+``lost_speed_count`` — an observer locked to a rotor that turns the wrong way holds lock but not speed.  The
 Dataset has dims ``("design", *axes)`` (a grid) or ``("design", "sample")``
 (a sample, the axes as coordinates), quantiles over the scenarios of every
 metric (``<metric>_q`` with a ``quantile`` coordinate 0.5, 0.95, 0.99, 1.0;
@@ -297,7 +300,8 @@ def run_drive_study(
         }
         finite = sol.ok & jnp.all(jnp.stack([jnp.isfinite(v) for v in m.values()]))
         lost = ~finite | M.lost_lock(o.obs.theta, o.theta_e, steady, math.radians(M.LOCK_TOL_DRIVE_DEG))
-        return m, lost, ~finite
+        off = ~finite | M.lost_speed(o.omega_m, o.omega_m_ref, steady)  # missed its speed reference
+        return m, lost, ~finite, off
 
     results = {}
 
@@ -311,20 +315,22 @@ def run_drive_study(
 
     compiled = set()
     for dname, obs in designs.items():
-        parts_m, parts_l, parts_d = [], [], []
+        parts_m, parts_l, parts_d, parts_s = [], [], [], []
         for start in range(0, n + pad, chunk):
             new = start == 0 and type(obs) not in compiled
             bar.stage(f"{dname} (compiling, then {chunk} scenarios a chunk)" if new else dname)
-            m, lost, div = run_chunk(obs, jax.tree.map(lambda x: x[start : start + chunk], scs))
+            m, lost, div, off = run_chunk(obs, jax.tree.map(lambda x: x[start : start + chunk], scs))
             parts_m.append(jax.tree.map(np.asarray, m))
             parts_l.append(np.asarray(lost))
             parts_d.append(np.asarray(div))
+            parts_s.append(np.asarray(off))
             bar.update(min(chunk, n - start))
             compiled.add(type(obs))
         results[dname] = (
             {k: np.concatenate([q[k] for q in parts_m])[:n] for k in DRIVE_STUDY_METRICS},
             np.concatenate(parts_l)[:n],
             np.concatenate(parts_d)[:n],
+            np.concatenate(parts_s)[:n],
         )
 
     bar.close()
@@ -369,6 +375,21 @@ def run_drive_study(
         ("design",),
         lost.sum(axis=1).astype(np.int64),
         {"units": "1", "long_name": "scenarios that lost lock (diverged ones included)"},
+    )
+    off = np.stack([results[d][3] for d in dnames])
+    data["lost_speed"] = (
+        dims,
+        off.reshape((len(dnames), *shape)).astype(np.int8),
+        {
+            "units": "1",
+            "long_name": f"lost speed: diverged, or the steady window's mean |speed - reference| > "
+            f"{100 * M.SPEED_TOL:g} % of the mean |reference| (at least {M.SPEED_FLOOR_RPM:g} r/min) (1: lost)",
+        },
+    )
+    data["lost_speed_count"] = (
+        ("design",),
+        off.sum(axis=1).astype(np.int64),
+        {"units": "1", "long_name": "scenarios that missed their speed reference (diverged ones included)"},
     )
     div = np.stack([results[d][2] for d in dnames])
     data["diverged"] = (

@@ -49,6 +49,9 @@ __all__ = [
     "settled",
     "lost_lock",
     "lost_lock_of",
+    "lost_speed",
+    "SPEED_TOL",
+    "SPEED_FLOOR_RPM",
     "LOCK_TOL_DEG",
     "LOCK_TOL_DRIVE_DEG",
     "LOCK_FREQ_TOL",
@@ -298,6 +301,29 @@ def lost_lock(theta_hat, theta, window_mask, tol_rad=math.pi / 4, *, omega_hat=N
         ref = jnp.sum(jnp.where(window_mask, jnp.abs(omega), 0.0), axis=-1) / n
         lost = lost | ~(jnp.abs(err) <= freq_tol * ref)  # NaN: lost
     return lost
+
+
+# A drive that does not follow its speed reference ("lost speed"), a per-scenario flag beside lost lock: over
+# the steady window, the mean |ωm − ωm*| exceeds SPEED_TOL × the mean |ωm*| (at least SPEED_FLOOR_RPM, so a
+# near-zero reference is not flagged by noise), or a value is not finite.  It catches what lost lock cannot:
+# an observer that tracks a rotor turning the wrong way (a standstill start under a load the I-f start-up
+# cannot carry runs backwards with a locked observer: |ωm − ωm*| > 100 % of ωm*), a speed stuck far from
+# its reference, and a large speed limit cycle.  20 %: far above a locked drive's speed ripple and
+# load-step dips after the steady window begins (≤ 1 % measured on the presets), far below a reversal.
+SPEED_TOL = 0.20
+SPEED_FLOOR_RPM = 20.0
+
+
+def lost_speed(omega_m, omega_m_ref, window_mask, rel_tol=SPEED_TOL, floor_rpm=SPEED_FLOOR_RPM):
+    """Whether a drive lost its speed: the window's mean |ωm − ωm*| > max(``rel_tol`` × mean |ωm*|,
+    ``floor_rpm``) (speeds in rad/s, mechanical; ``floor_rpm`` in r/min), or it is not finite.  Returns a bool
+    per scenario (leading axes); a concrete empty window raises, a traced one gives True."""
+    count = _window(window_mask, "lost_speed")
+    n = jnp.maximum(count, 1)
+    err = jnp.sum(jnp.where(window_mask, jnp.abs(omega_m - omega_m_ref), 0.0), axis=-1) / n
+    ref = jnp.sum(jnp.where(window_mask, jnp.abs(omega_m_ref), 0.0), axis=-1) / n
+    tol = jnp.maximum(rel_tol * ref, floor_rpm * math.pi / 30)
+    return ~(err <= tol) | (count == 0)  # NaN: lost
 
 
 def lost_lock_of(sol, steady_from=None, *, signal=None, tol_deg=None, freq_tol=LOCK_FREQ_TOL):

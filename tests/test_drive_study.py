@@ -33,6 +33,7 @@ def test_grid_study_dims_quantiles_and_the_papers_ordering():
     assert ds["pos_err_rms_deg"].dims == ("design", "speed_rpm", "dRs", "dLq")
     assert list(ds["quantile"].values) == list(QUANTILES)
     assert int(ds["lost_lock_count"].sum()) == 0
+    assert int(ds["lost_speed_count"].sum()) == 0 and ds["lost_speed"].dims == ds["lost_lock"].dims
     c, fa = (ds["pos_err_rms_deg"].sel(design=d) for d in ("C-LESO", "FA-LESO"))
     assert bool((fa < c).all())
     # the C-LESO's steady lag is its transfer function's phase: 11.4° at 300 r/min, 22.6° at 600 (README)

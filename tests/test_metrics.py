@@ -131,6 +131,24 @@ def test_lost_lock():
     np.testing.assert_array_equal(np.asarray(jax.jit(M.lost_lock)(batch, theta, w)), [False, True])
 
 
+def test_lost_speed():
+    """A drive that misses its speed reference: a reversal (the standstill start that ran backwards), 25 %
+    off, a NaN; not a locked drive with ±5 % ripple, nor a small error at a near-zero reference (the floor)."""
+    t = jnp.linspace(0.0, 1.0, 1001)
+    w = M.window_mask(t, 0.7)
+    ref = jnp.full_like(t, 1000 * jnp.pi / 30)
+    assert not bool(M.lost_speed(ref * (1 + 0.05 * jnp.sin(2 * jnp.pi * 11 * t)), ref, w))
+    assert bool(M.lost_speed(-0.4 * ref, ref, w))  # −400 r/min against +1000
+    assert bool(M.lost_speed(0.75 * ref, ref, w)) and not bool(M.lost_speed(0.85 * ref, ref, w))
+    assert bool(M.lost_speed(ref.at[-1].set(jnp.nan), ref, w))
+    small = jnp.full_like(t, 5 * jnp.pi / 30)  # 5 r/min reference, 15 r/min off: under the 20 r/min floor
+    assert not bool(M.lost_speed(small + 15 * jnp.pi / 30, small, w))
+    assert bool(M.lost_speed(small + 30 * jnp.pi / 30, small, w))
+    with pytest.raises(ValueError, match="no samples"):
+        M.lost_speed(ref, ref, jnp.zeros_like(w))
+    np.testing.assert_array_equal(np.asarray(jax.jit(M.lost_speed)(jnp.stack([ref, -ref]), ref, w)), [False, True])
+
+
 def test_lost_lock_frequency_test_catches_a_wrong_frequency_beside_a_bounded_angle():
     """On a signal θ̂ comes from filters, so a wrong ω̂ can sit beside a bounded angle error: the mean
     frequency error (> LOCK_FREQ_TOL of the true one) flags it; a locked ripple does not."""

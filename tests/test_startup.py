@@ -168,26 +168,37 @@ def test_startup_defaults_and_checks():
             D.IfStartup(4.0, 100.0, 30.0, **kw)
 
 
+def _faleso_job(tmp_path, drive_extra, horizon="1.5", steady="0.9", grid=None, loop="sensorless"):
+    """faleso.toml with ``drive_extra`` in [drive], the horizon and steady window set, ``grid`` its grid lines."""
+    import re
+    from pathlib import Path
+
+    from tuning.job import load_job
+
+    text = (Path(__file__).parents[1] / "tuning" / "presets" / "faleso.toml").read_text()
+    assert 'loop = "sensorless"\n' in text
+    text = text.replace('loop = "sensorless"\n', f'loop = "{loop}"\n{drive_extra}\n')
+    text = re.sub(r"(?m)^horizon = .*$", f"horizon = {horizon}", text)
+    text = re.sub(r"(?m)^steady_from = .*$", f"steady_from = {steady}", text)
+    if grid is not None:
+        text = re.sub(r"(?ms)^\[scenarios\.grid\]\n.*?(?=^\[objective\])", f"[scenarios.grid]\n{grid}\n", text)
+    path = tmp_path / "j.toml"
+    path.write_text(text)
+    return load_job(path)
+
+
 def test_drive_job_start_option(tmp_path):
     """``[drive] start = "standstill"`` gives the job's drive the machine's I-f start-up; bad values, a start-up
     longer than the horizon and a hand-over time beside it are one-line errors at --check."""
-    from pathlib import Path
+    from tuning.job import JobError, job_drive
 
-    from tuning.job import JobError, job_drive, load_job
+    light = "speed_rpm = [300.0, 840.0]\nload_nm = [0.0, 5.0]"
 
-    text = (Path(__file__).parents[1] / "tuning" / "presets" / "faleso.toml").read_text()
-    assert 'loop = "sensorless"\n' in text and "horizon = 0.3\n" in text
-
-    def job(drive_extra, horizon="1.5"):
-        path = tmp_path / "j.toml"
-        path.write_text(
-            text.replace('loop = "sensorless"\n', f'loop = "sensorless"\n{drive_extra}\n').replace(
-                "horizon = 0.3\n", f"horizon = {horizon}\n"
-            )
-        )
-        return load_job(path)
+    def job(extra, horizon="1.5", grid=light):
+        return _faleso_job(tmp_path, extra, horizon, steady=str(min(0.9, 0.8 * float(horizon))), grid=grid)
 
     assert job("").drive.start == "steady" and job_drive(job("").drive).startup is None
+    assert job("", grid=None).drive.start == "steady"  # the preset's 15 N·m: fine from a steady start
     j = job('start = "standstill"')
     assert j.drive.start == "standstill"
     assert job_drive(j.drive).startup is not None
@@ -198,6 +209,48 @@ def test_drive_job_start_option(tmp_path):
     ):
         with pytest.raises(JobError, match=field):
             job(extra, horizon)
+
+
+def test_standstill_job_checks_what_the_i_f_start_up_can_carry(tmp_path):
+    """A standstill job is refused (one line naming the field) where its I-f start-up cannot work: a load above
+    :func:`tuning.job.if_load_limit` (tested at the boundary, ±0.1 %), a speed reference below the hand-over
+    speed (120 r/min on the IPMSM bench), a steady window before the earliest hand-over."""
+    from tuning.job import IF_SUDDEN_LOAD_PU, DriveSpec, JobError, if_handover_earliest, if_load_limit
+
+    spec = DriveSpec(start="standstill", machine="ipmsm002")
+    par, start = D.ipmsm_paper002(J=papers.BENCH_J_002), None
+    start = D.IfStartup.for_machine(par)
+    # the derivation by hand: the equal-area root, K_t I_f, the raised cosine's peak acceleration, friction
+    d0 = math.asin(IF_SUDDEN_LOAD_PU)
+    assert 1 + math.cos(d0) == pytest.approx((math.pi - d0) * math.sin(d0), abs=2e-4)
+    a_peak = 2 * float(start.accel) / par.p
+    want = IF_SUDDEN_LOAD_PU * float(par.kt) * float(start.i_f) - float(par.J) * a_peak
+    want -= float(par.B) * float(start.omega_switch) / par.p
+    limit = if_load_limit(spec)
+    assert limit == pytest.approx(want) and 7.0 < limit < 9.0  # 8.27 N·m of the 30 N·m rated
+    assert if_load_limit(spec, dJ=1.0) == pytest.approx(limit - float(par.J) * a_peak)
+    t_ho = if_handover_earliest(spec)
+    assert t_ho == pytest.approx(float(start.omega_switch / start.accel) + max(float(start.hold), float(start.dwell)))
+    ss = 'start = "standstill"'
+    ok = _faleso_job(tmp_path, ss, grid=f"speed_rpm = [300.0]\nload_nm = [{limit * 0.999:.6f}]")
+    assert ok.drive.start == "standstill"
+    with pytest.raises(JobError, match=r"scenarios\.grid\.load_nm.*<= 8\.27"):
+        _faleso_job(tmp_path, ss, grid=f"speed_rpm = [300.0]\nload_nm = [{limit * 1.001:.6f}]")
+    # a load step during the start-up counts; after the earliest hand-over it does not
+    with pytest.raises(JobError, match="load_nm"):
+        _faleso_job(tmp_path, ss, grid=f"speed_rpm = [300.0]\nload_nm = [{limit - 1:.4f}]\nload_step_nm = [2.0]")
+    rpm_sw = float(start.omega_switch) / par.p / D.RPM
+    _faleso_job(tmp_path, ss, grid=f"speed_rpm = [{rpm_sw * 1.001:.4f}]")
+    with pytest.raises(JobError, match=r"speed_rpm.*hand-over speed 120"):
+        _faleso_job(tmp_path, ss, grid=f"speed_rpm = [{rpm_sw * 0.999:.4f}]")
+    with pytest.raises(JobError, match="speed_rpm"):  # a step below it
+        _faleso_job(tmp_path, ss, grid="speed_rpm = [300.0]\nspeed_step_rpm = [-250.0]")
+    _faleso_job(tmp_path, ss, steady=f"{t_ho + 1e-3:.4f}", grid="speed_rpm = [300.0]")
+    with pytest.raises(JobError, match=r"scenarios\.steady_from.*standstill"):
+        _faleso_job(tmp_path, ss, steady=f"{t_ho - 1e-3:.4f}", grid="speed_rpm = [300.0]")
+    # the encoder may close the loop after the same start-up
+    j = _faleso_job(tmp_path, ss, grid="speed_rpm = [300.0]", loop="sensored")
+    assert j.drive.loop == "sensored" and j.drive.start == "standstill"
 
 
 @pytest.mark.slow
@@ -251,3 +304,70 @@ def test_an_observer_that_never_agrees_keeps_the_drive_in_i_f():
     rpm = np.asarray(sol.outputs.speed_rpm)[np.asarray(sol.t) > 0.4]
     rpm_sw = float(start.omega_switch) / SPMSM.p / D.RPM
     assert np.max(np.abs(rpm / rpm_sw - 1)) < 0.02, (rpm.min(), rpm.max())
+
+
+def test_standstill_jobs_score_the_position_error_from_the_hand_over_on():
+    """The position-error metrics of a job skip a standstill start's I-f phase (``mode`` 0: the controller
+    runs on the I-f angle, the observer sits ~90° off), but never inside the steady window: a drive that has
+    not handed over by then is scored on its real error and flagged lost_sync."""
+    from types import SimpleNamespace
+
+    import jax.numpy as jnp
+
+    from tuning.objective import METRICS, MetricContext, _lost_sync
+
+    t = jnp.linspace(0.0, 1.0, 1001)
+    err = jnp.where(t < 0.4, 1.65, 0.01)  # 95° during I-f, 0.6° after
+    ctx = MetricContext(t_event=0.0, steady_from=0.7)
+
+    def sol(mode):
+        out = SimpleNamespace(theta_e=jnp.zeros_like(t), obs=SimpleNamespace(theta=err), mode=mode)
+        return SimpleNamespace(t=t, outputs=out)
+
+    handed = sol(jnp.where(t < 0.4, 0, 1))
+    assert float(METRICS["iae_position"](handed, None, ctx)) == pytest.approx(0.01 * 0.6, rel=0.02)
+    assert not bool(_lost_sync(handed, None, ctx))
+    steady = sol(jnp.ones_like(t, dtype=jnp.int32))  # a steady start: every sample counts
+    assert float(METRICS["iae_position"](steady, None, ctx)) == pytest.approx(1.65 * 0.4 + 0.01 * 0.6, rel=0.02)
+    assert bool(_lost_sync(steady, None, ctx))
+    never = SimpleNamespace(
+        t=t,
+        outputs=SimpleNamespace(
+            theta_e=jnp.zeros_like(t),
+            obs=SimpleNamespace(theta=jnp.full_like(t, 1.7)),
+            mode=jnp.zeros_like(t, dtype=jnp.int32),
+        ),
+    )
+    assert float(METRICS["rms_position_steady"](never, None, ctx)) == pytest.approx(1.7, rel=1e-4)
+    assert bool(_lost_sync(never, None, ctx))  # 97° in the steady window
+
+
+@pytest.mark.slow
+def test_a_standstill_start_above_the_load_limit_runs_backwards_and_is_flagged_lost_speed():
+    """The review's case: SOIFO, 000's SPMSM, 1000 r/min reference from standstill.  Measured: 4.5 N·m (above
+    tuning.job.if_load_limit's 3.82, which is sufficient, not necessary) still starts; 5 N·m runs backwards
+    (−320 r/min) with the observer locked to it — lost_speed flags it, lost lock does not."""
+    import jax.numpy as jnp
+
+    from jaxobs import metrics as M
+    from tuning.job import DriveSpec, if_load_limit
+
+    assert 3.5 < if_load_limit(DriveSpec(start="standstill", machine="spmsm000")) < 4.5
+    _, obs = _observer("SOIFO")
+    start = D.IfStartup.for_machine(SPMSM)
+    foc = D.FOC.imc(SPMSM, 2 * math.pi * papers.BENCH_CURRENT_HZ, 2 * math.pi * papers.BENCH_SPEED_HZ)
+    drive = D.Drive(foc, startup=start, sensorless=True)
+    scs = [
+        D.Scenario(SPMSM, speed_ref=D.Profile.constant(1000 * D.RPM), load=D.Profile.constant(tl)) for tl in (4.5, 5.0)
+    ]
+    batch = jax.tree.map(lambda *x: jnp.stack(x), *scs)
+    run = jax.jit(jax.vmap(lambda s: jaxobs.simulate(D.ClosedLoop(drive, bind_observer(obs, s), s), 1.0)))
+    sol = run(batch)
+    o = sol.outputs
+    win = sol.t[0] >= 0.7
+    lost_speed = np.asarray(M.lost_speed(o.omega_m, o.omega_m_ref, win))
+    lost_lock = np.asarray(M.lost_lock(o.obs.theta, o.theta_e, win, math.radians(M.LOCK_TOL_DRIVE_DEG)))
+    rpm_end = np.asarray(o.speed_rpm)[:, -1]
+    assert list(lost_speed) == [False, True], rpm_end
+    assert rpm_end[0] == pytest.approx(1000.0, rel=0.05) and rpm_end[1] < 0.0
+    assert not lost_lock[1]  # the observer tracks the rotor turning the wrong way

@@ -669,6 +669,7 @@ def test_flux_observer_drive_job_runs_sensorless_on_the_spmsm(tmp_path, capsys):
     assert res["gains"]["closed_form"]["k"] == pytest.approx(papers.SOIFO_K)
     for design in ("initial", "closed_form", "tuned"):
         assert res["scores"][design]["diverged"] == 0 and res["scores"][design]["lost_sync"] == 0
+        assert res["scores"][design]["lost_speed"] == 0  # it follows its speed reference
         # rad: it holds the drive (a loss of synchronism is > 90°; 000 measured 0.15 rad peak at 2000 r/min)
         assert res["scores"][design]["rms_position_steady_worst"] < 0.1
     import xarray as xr
@@ -676,6 +677,7 @@ def test_flux_observer_drive_job_runs_sensorless_on_the_spmsm(tmp_path, capsys):
     with xr.open_dataset(tmp_path / "o" / "scores.nc") as ds:
         assert ds["lost_sync"].dims == ("design", "speed_rpm", "load_step_nm")
         assert int(ds["lost_sync"].sum()) == 0
+        assert ds["lost_speed"].dims == ds["lost_sync"].dims and int(ds["lost_speed"].sum()) == 0
     err = capsys.readouterr().err
     assert (res["status"] == "budget") == ("budget ran out before its stopping rule" in err)
 

@@ -568,7 +568,7 @@ def _print_summary(result: dict, out: Path, timing: dict | None = None):
         print(f"{'linear model':<22}{heads}")
         for label, vals in rows:
             print(f"{label:<22}" + "".join(_fmt(v) for v in vals))
-    keys = [k for k in s["initial"] if k not in ("diverged", "lost_lock", "lost_sync", "null_reason")]
+    keys = [k for k in s["initial"] if k not in ("diverged", "lost_lock", "lost_sync", "lost_speed", "null_reason")]
     print(f"{'score':<22}{heads}")
     for k in keys:
         print(f"{k:<22}" + "".join(_fmt((s[d] or {}).get(k)) for d in designs))
@@ -576,6 +576,8 @@ def _print_summary(result: dict, out: Path, timing: dict | None = None):
     print(f"{'lost lock':<22}" + "".join(_fmt((s[d] or {}).get("lost_lock"), ">14d") for d in designs))
     if "lost_sync" in s["initial"]:  # drive jobs: diverged or |position error| > 90 deg
         print(f"{'lost sync scenarios':<22}" + "".join(_fmt((s[d] or {}).get("lost_sync"), ">14d") for d in designs))
+    if "lost_speed" in s["initial"]:  # drive jobs: missed the speed reference by > 20 % in the steady window
+        print(f"{'lost speed scenarios':<22}" + "".join(_fmt((s[d] or {}).get("lost_speed"), ">14d") for d in designs))
     if "holdout" in result:
         h = result["holdout"]
         worst = {d: (h[d] or {}).get("per_scenario_worst") for d in designs}
@@ -589,6 +591,14 @@ def _print_summary(result: dict, out: Path, timing: dict | None = None):
             sets, nc = ("tuning", "scores.nc") if where == "tuning" else ("held-out", "holdout_scores.nc")
             msg = f"warning: the tuned design lost lock in {n} {sets} scenarios where the closed form holds it"
             print(f"jaxobs: {msg} (lost_lock in {nc})", file=sys.stderr)
+    for d in designs:  # a drive that missed its speed reference (e.g. ran backwards) is flagged, never silent
+        n = (s[d] or {}).get("lost_speed")
+        if n:
+            print(
+                f"jaxobs: warning: the {d.replace('_', ' ')} drive missed its speed reference (> 20 % off, or "
+                f"turning against it) in {n} scenarios (lost_speed in scores.nc)",
+                file=sys.stderr,
+            )
     for name, b in result.get("at_bound", {}).items():
         msg = f"warning: tuned {name} = {b['value']:.6g} is within 1 % of its {b['bound']} bound {b['limit']:g}"
         print(f"jaxobs: {msg}", file=sys.stderr)

@@ -73,6 +73,7 @@ import numpy as np
 import jaxobs
 from jaxobs import drive as D
 from jaxobs import linear, papers
+from jaxobs import metrics as M
 from jaxobs.drive_study import DRIVE_STUDY_AXES, bind_observer, drive_scenarios
 from jaxobs.progress import Progress
 from jaxobs.scenarios import grid_signals
@@ -827,6 +828,8 @@ def parse_job(raw: dict, base: Path | None = None) -> Job:
             h.setdefault(key, getattr(scen, key))
         h.setdefault("signal", scen.signal)
         holdout = _parse_scenarios(h, "holdout", (scen.signal,), seed + 1, freq_n, ts, base)
+    if holdout is not None and holdout.recording is None and drive is not None and drive.start == "standstill":
+        _check_standstill(drive, holdout, "holdout")
     settle = drive.settle if drive is not None else 0.0
     for spec, where in ((scen, "scenarios"), (holdout, "holdout")):
         if spec is not None:
@@ -1003,9 +1006,82 @@ def _drive_scenarios(names, combos, seed=0, t_event=0.0, machine="ipmsm002"):
     return drive_scenarios(drive_machine(machine), names, combos, seed=seed, t_event=t_event)
 
 
+# The sudden-load limit of a synchronous machine held by a current vector (the equal-area criterion): a torque
+# T applied at once to a rotor at rest in the I-f frame swings it, undamped, from δ = 0 past its load angle δ0
+# (T = T_max sin δ0) to δ_peak with ∫0^δpeak (T_max sin δ − T) dδ = 0; it pulls out unless δ_peak ≤ π − δ0,
+# i.e. 1 + cos δ0 ≥ (π − δ0) sin δ0: δ0 ≤ 46.44°, T ≤ 0.7246 T_max.
+IF_SUDDEN_LOAD_PU = 0.7246
+
+
+def if_load_limit(spec: DriveSpec, dJ: float = 0.0) -> float:
+    """The largest load (N·m) a ``start = "standstill"`` job may put on its machine during the I-f start-up.
+
+    During I-f the rotor is held by the current vector I_f only: its torque is at most T_max = K_t I_f (the
+    magnet torque; an IPMSM's reluctance torque is left out).  The load is on from t = 0 (a step), so the
+    sudden-load limit applies (IF_SUDDEN_LOAD_PU above); the ramp's peak acceleration torque J·a_peak
+    (a_peak = 2 × the mean for the raised cosine) and the friction at the switch speed B·ω_sw count as load
+    too — conservatively, as if sudden (they build up gradually).  Hence
+
+        T_L ≤ 0.7246 K_t I_f − J (1 + dJ) a_peak − B ω_m,sw.
+
+    On 000's SPMSM bench: 0.7246 · 7.0 − 1.25 − 0 = 3.82 N·m; measured with the SOIFO at 1000 r/min, 4.5 N·m
+    still started and 5.0 N·m ran backwards (−320 r/min, flagged lost_speed): sufficient, not necessary."""
+    par = drive_machine(spec.machine)
+    s = D.IfStartup.for_machine(par)
+    a_peak_m = float(s.accel) / par.p * (2.0 if s.smooth else 1.0)  # mechanical, rad/s²
+    w_sw_m = float(s.omega_switch) / par.p
+    return (
+        IF_SUDDEN_LOAD_PU * float(par.kt) * float(s.i_f) - float(par.J) * (1.0 + dJ) * a_peak_m - float(par.B) * w_sw_m
+    )
+
+
+def if_handover_earliest(spec: DriveSpec) -> float:
+    """The earliest time (s) the I-f start-up of a standstill job can hand over: the ramp to the switch speed,
+    then both the hold and the agreement's dwell at it (they run at the same time)."""
+    s = D.IfStartup.for_machine(drive_machine(spec.machine))
+    return float(s.omega_switch / s.accel) + max(float(s.hold), float(s.dwell))
+
+
+def _check_standstill(drive: DriveSpec, spec: ScenarioSpec, where: str) -> None:
+    """What an I-f start-up can do, checked before any run (``--check`` too): the load it must carry, the
+    speed reference it hands over to, and a steady window after its hand-over."""
+    s = D.IfStartup.for_machine(drive_machine(drive.machine))
+    axes = spec.axes
+    rpm_sw = float(s.omega_switch) / drive_machine(drive.machine).p * 30 / math.pi
+    t_ho = if_handover_earliest(drive)
+    if spec.steady_from < t_ho:
+        raise JobError(
+            f"{where}.steady_from",
+            f"must be >= {t_ho:.3g} s with start = 'standstill' (the I-f start-up hands over at {t_ho:.3g} s at "
+            f"the earliest), got {spec.steady_from:g}",
+        )
+    speeds = axes.get("speed_rpm", [600.0])
+    steps = axes.get("speed_step_rpm", [0.0])
+    low = min(min(abs(v) for v in speeds), min(abs(v + d) for v in speeds for d in steps))
+    if low < rpm_sw:
+        raise JobError(
+            f"{where}.grid.speed_rpm",
+            f"must be >= the I-f hand-over speed {rpm_sw:.4g} r/min with start = 'standstill' (with any "
+            f"speed_step_rpm), got {low:g}",
+        )
+    dj = max(axes.get("dJ", [0.0]))
+    limit = if_load_limit(drive, dj)
+    load = max(abs(v) for v in axes.get("load_nm", [0.0]))
+    if spec.t_event < t_ho:  # a load step during the start-up is carried by it too
+        load += max(abs(v) for v in axes.get("load_step_nm", [0.0]))
+    if load > limit:
+        raise JobError(
+            f"{where}.grid.load_nm",
+            f"the load during the I-f start-up must be <= {limit:.4g} N·m on {drive.machine} (0.7246 K_t I_f − "
+            f"J a_peak − B ω_sw, tuning.job.if_load_limit), got {load:g}",
+        )
+
+
 def _parse_start(dt: dict, drive: DriveSpec, scen) -> DriveSpec:
     """``[drive] start``: "steady" or "standstill" (the I-f start-up must fit in the horizon; it hands over
-    itself, so ``handover`` stays 0)."""
+    itself, so ``handover`` stays 0; :func:`_check_standstill`).  ``loop = "sensored"`` with a standstill
+    start is allowed: the same I-f start-up hands over to the encoder's angle (by the same agreement test),
+    and the observer estimates beside it from t = 0, scored from the hand-over on."""
     start = _get(dt, "start", "drive.start", str, "steady")
     if start not in ("steady", "standstill"):
         raise JobError("drive.start", f"must be 'steady' or 'standstill', got {_show(start)}")
@@ -1019,6 +1095,8 @@ def _parse_start(dt: dict, drive: DriveSpec, scen) -> DriveSpec:
             raise JobError(
                 "drive.start", f"'standstill' needs horizon > {t_if:.3g} s (the I-f start-up), got {scen.horizon:g}"
             )
+        if scen.recording is None:  # a recording has no drive to start
+            _check_standstill(drive, scen, "scenarios")
     return drive
 
 
@@ -1199,7 +1277,7 @@ def _scores_dataset(obj, names, combos, spec: ScenarioSpec, per: dict):
         coords.update({n: ("scenario", [c[i] for c in combos]) for i, n in enumerate(names)})
     data = {}
     keys = [t.metric for t in obj.terms]
-    extra = ("lost_sync",) if obj.drive is not None else ()
+    extra = ("lost_sync", "lost_speed") if obj.drive is not None else ()
     for key in (*keys, "total", "diverged", "lost_lock", *extra):
         rows = []
         for d in designs:
@@ -1218,7 +1296,12 @@ def _scores_dataset(obj, names, combos, spec: ScenarioSpec, per: dict):
     )
     if extra:
         ds["lost_sync"] = ds["lost_sync"].astype("int8")
+        ds["lost_speed"] = ds["lost_speed"].astype("int8")
         ds.attrs["note"] += f"; lost_sync: 1 where diverged or |position error| > {LOST_SYNC_DEG:g} deg (drive)"
+        ds.attrs["note"] += (
+            f"; lost_speed: 1 where diverged or the steady window's mean |speed - reference| > "
+            f"{100 * M.SPEED_TOL:g} % of the mean |reference| (at least {M.SPEED_FLOOR_RPM:g} r/min) (drive)"
+        )
     return ds
 
 

@@ -234,6 +234,18 @@ def _leso(name: str, v: dict, job) -> tuple[dict, dict]:
         why["routh_stable"] = "no Routh test for the C-LESO in the papers (its poles are real, at -omega0)"
         out["routh_stable"] = None
     out["omega_e"] = we
+    # Scope (measured, issue 17 review): this is the observer's loop alone.  In a sensorless job the PLL's
+    # θ̂ and ω̂ close the FOC's current and speed loops, and an Lq mismatch makes the LESO's angle error
+    # depend on i_q, which the speed loop sets from ω̂: a second loop (speed loop -> i_q -> θ̂ error -> ω̂
+    # -> speed loop) that this model leaves open.  The tuned FA-LESO of faleso.toml (0.3 s horizon) had
+    # "stable": true here with a 21° phase margin, yet grew an ~11 Hz oscillation to ±40° by 0.9 s in the
+    # sensorless drive with dLq = +0.2 (near the speed loop's and the PLL's crossover).  So "stable" and
+    # the margins are necessary, not sufficient: the drive presets score the closed loop on a long horizon.
+    out["scope"] = (
+        "the observer's PLL loop alone, nominal machine (no Rs/L mismatch), speed loop and FOC open; it does "
+        "not model the sensorless drive's speed loop closing through the estimate, so 'stable' here does not "
+        "mean the sensorless drive is stable (the long-horizon simulation scores that)"
+    )
     b = math.sqrt(ki)
     out["closed_form_rule"] = {
         "rule": "PLL pole placement kp = 2 zeta omega_b, ki = omega_b^2 (zeta = 1/sqrt(2)) at this ki",
