@@ -57,6 +57,12 @@ class _Named:
         self.name, self.text = name, text
 
 
+# A hang is unbounded; a --check takes 0.01-1.4 s on the quiet 2-core machine (the largest file, 200 000
+# values, is the slowest) but was seen above 2 s with the machine loaded by parallel jobs: 10 s catches a hang
+# without failing on load.
+HANG_S = 10.0
+
+
 def _lines_with_values(text: str) -> list[int]:
     return [i for i, ln in enumerate(text.splitlines()) if "=" in ln and not ln.lstrip().startswith("#")]
 
@@ -195,7 +201,7 @@ def test_fuzzed_job_files_never_traceback_or_hang(tmp_path, capsys):
             _one_line(err)
         stats[rc] += 1
         slowest = max(slowest, (dt, label))
-        assert dt < 2.0, f"{label}: --check took {dt:.2f} s"
+        assert dt < HANG_S, f"{label}: --check took {dt:.2f} s"
     print(
         f"fuzz: {len(cases)} files, {stats[2]} rejected, {stats[0]} accepted, 0 tracebacks, "
         f"slowest {slowest[0]:.2f} s ({slowest[1]})"
@@ -210,7 +216,7 @@ def test_must_fail_job_files_are_rejected_by_check(tmp_path, capsys, label, text
     assert rc == 2, f"{label}: accepted"
     _one_line(err)
     assert field in err, err
-    assert dt < 2.0
+    assert dt < HANG_S
 
 
 # --------------------------------------------------------------------------
@@ -373,7 +379,7 @@ def test_fuzzed_study_files_never_traceback_or_hang(tmp_path, capsys):
             _one_line(err)
         stats[rc] += 1
         slowest = max(slowest, (dt, label))
-        assert dt < 2.0, f"{label}: --check took {dt:.2f} s"
+        assert dt < HANG_S, f"{label}: --check took {dt:.2f} s"
     print(
         f"study fuzz: {len(cases)} files, {stats[2]} rejected, {stats[0]} accepted, 0 tracebacks, "
         f"slowest {slowest[0]:.2f} s ({slowest[1]})"
@@ -389,4 +395,4 @@ def test_must_fail_study_files_are_rejected_by_check(tmp_path, capsys, label, te
     assert rc == 2, f"{label}: accepted"
     _one_line(err)
     assert field in err, err
-    assert dt < 2.0
+    assert dt < HANG_S
