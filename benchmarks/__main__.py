@@ -4,8 +4,13 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 from pathlib import Path
+
+# numba's OpenMP threads sleep when idle instead of spinning: a spinning pool kept both cores busy after every
+# numba call, slowing whichever implementation was timed next (set before numba starts its threads)
+os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 import jaxobs
 

@@ -55,8 +55,9 @@ def test_bench_quick_json(tmp_path):
     res = json.loads(r.stdout)
     assert json.loads(out.read_text()) == res
     rows = res["rows"]
-    assert {"workload", "impl", "dtype", "batch", "steps_per_s", "ratio_vs_numba_parallel"} <= set(rows[0])
-    assert {r["impl"] for r in rows} == {"jaxobs", "numba-parallel", "numba-serial", "numpy"}
+    assert {"workload", "impl", "dtype", "batch", "steps_per_s", "ratio_vs_numba_inner"} <= set(rows[0])
+    assert {r["impl"] for r in rows} == {"jaxobs", "numba-inner", "numba-scalar-par", "numba-scalar", "numpy"}
+    assert res["ceilings"]["bandwidth_gbs"] > 0
     assert all(r["steps_per_s"] > 0 for r in rows)
     assert res["grad_temp_mb_10s"]["auto"] <= 64.0
     assert set(res["compile_s"]) == {"sogi-fll-wif", "drive-sosoifo"}
