@@ -66,25 +66,24 @@ checks each against the plain scan, to 1e-12 or tighter):
    once instead (``OnSignal.input_block``: a recording on the loop's own sample
    grid is one contiguous slice per block, where a per-step read gathered a
    column of the batch per step).
-6. **The step on state components** (:func:`_scalarized_step`).  Point 1 splits
-   the carry, but the step itself still works on vectors: an observer's ``f``
-   stacks its derivative, the rule forms x + h/12 (23 f − 16 f₋₁ + 5 f₋₂) on the
-   stacked vectors, and the split slices the result apart.  XLA's CPU fusion
-   then computed the whole stacked AB3 combination once per component it
-   sliced out (three times for the SOGI-FLL), and materialized four stacked
-   (batch, 3) arrays per step.  The loop instead traces the step to a jaxpr
-   and evaluates it with every small 1-D value held as its elements: an
+6. **The step on state components** (:func:`_scalarized_step`; an
+   experiment, *off*: ``SCALARIZE = False``).  Point 1 splits the carry, but
+   the step itself still works on vectors: an observer's ``f`` stacks its
+   derivative, the rule forms x + h/12 (23 f − 16 f₋₁ + 5 f₋₂) on the stacked
+   vectors, and the split slices the result apart.  XLA's CPU fusion then
+   computes the whole stacked AB3 combination once per component it slices out
+   (three times for the SOGI-FLL) and materializes four stacked (batch, 3)
+   arrays per step.  With the switch on, the loop traces the step to a jaxpr
+   and evaluates it with every small 1-D value held as its elements (an
    elementwise operation becomes one operation per element, a ``stack`` or
-   ``concatenate`` a list, a ``slice`` a pick; anything else (a ``cond``, a
-   custom derivative, a reduction) sees the stacked array.  The same
-   operations on the same numbers, so the results equal the array form (to
-   rounding: XLA may contract differently).  Steps of more than
-   ``SCALARIZE_MAX_EQNS`` equations (the drive, ~1600) keep the array form:
-   their compile time grows with the operation count (an earlier attempt at
-   the drive: a gradient's compile 7 → 41 s).  Measured on the SOGI-FLL
-   (precomputed input, batch 1024, float32, 2 devices, in one process):
-   0.47 → 0.59× the batch-inner numba kernel; in float64 no change beyond the
-   noise.
+   ``concatenate`` a list, a ``slice`` a pick; anything else sees the stacked
+   array).  The optimized HLO then has no stack and no recomputation, and the
+   results equal the array form to rounding (tests/test_perf.py) — but it ran
+   *slower*: SOGI-FLL, batch 1024, 2 devices, one process each, float32,
+   input in the loop 82.8 → 19.8 M scenario-steps/s, precomputed 425 → 66
+   (the cause is not yet understood; the HLO of the inner loop looked leaner).
+   Steps of more than ``SCALARIZE_MAX_EQNS`` equations (the drive, ~1600)
+   would keep the array form in any case (compile time).
 """
 
 from __future__ import annotations
@@ -237,7 +236,7 @@ def _join(tree):
 # the step on state components (module doc, point 6)
 # ---------------------------------------------------------------------------
 
-SCALARIZE = True  # module switch (tests compare against the array form)
+SCALARIZE = False  # off: measured slower (module doc, point 6); tests compare both forms
 # A step with more equations than this keeps the array form: its compile time, not its run time, dominates
 # (the drive: ~2000 equations; the FLL family: ~60-150).
 SCALARIZE_MAX_EQNS = 600
