@@ -25,11 +25,14 @@ def main(argv=None) -> int:
     p.add_argument("--quick", action="store_true", help="small batches and horizons (a few minutes)")
     p.add_argument("--json", action="store_true", help="print the results as JSON (progress goes to stderr)")
     p.add_argument("--out", help="also write the JSON results to this file")
+    p.add_argument("--batches", type=int, nargs="+", help="batch sizes (default 1 64 1024 8192; --quick 1 1024)")
+    p.add_argument("--no-serial", action="store_true", help="leave out the serial scalar numba rows")
     args = p.parse_args(argv)
     # before any JAX computation: one JAX CPU device per usable core; the jaxobs rows shard the batch over them
     jaxobs.use_host_devices()
     log = (lambda m: print(m, file=sys.stderr)) if args.json else print
-    res = run_bench(quick=args.quick, log=log)
+    batches = None if args.batches is None else tuple(args.batches)
+    res = run_bench(quick=args.quick, log=log, batches=batches, serial=not args.no_serial)
     if args.out:
         path = Path(args.out)
         path.parent.mkdir(parents=True, exist_ok=True)

@@ -87,15 +87,22 @@ def numba_available() -> bool:
     return True
 
 
-def run_bench(quick: bool = False, log: Callable[[str], None] = print) -> dict:
-    """Run every benchmark; returns ``{"rows": [...], "grad_over_forward": ..., ...}``."""
-    batches = (1, 1024) if quick else (1, 64, 1024, 8192)
+def run_bench(
+    quick: bool = False, log: Callable[[str], None] = print, batches: tuple[int, ...] | None = None, serial: bool = True
+) -> dict:
+    """Run every benchmark; returns ``{"rows": [...], "grad_over_forward": ..., ...}``.
+
+    ``batches`` replaces the default batch sizes; ``serial=False`` leaves out the serial scalar numba rows.
+    """
+    if batches is None:
+        batches = (1, 1024) if quick else (1, 64, 1024, 8192)
     fll_t1, drive_t1 = (0.1, 0.05) if quick else (W.FLL_T1, W.DRIVE_T1)
     kinds = ("sogi-fll",) if quick else W.FLL_KINDS
     repeats = 3
     have_numba = numba_available()
     rows: list[Row] = []
     extra: dict = {"devices": [str(d) for d in jax.devices()], "numba": have_numba, "quick": quick}
+    extra["batches"] = list(batches)
     extra["load_avg_start"] = _load_avg()
     if not have_numba:
         log("numba is not installed (pip install -e '.[bench]'): numba rows and ratios are left out")
@@ -132,7 +139,7 @@ def run_bench(quick: bool = False, log: Callable[[str], None] = print) -> dict:
                         run(*baselines.fll_inner_args(kind, 2, dtype, inputs, 3))  # compile
                         group[REF] = partial(run, *baselines.fll_inner_args(kind, batch, dtype, inputs, n))
                         for par in (True, False):
-                            if not par and batch > 1024:
+                            if not par and (batch > 1024 or not serial):
                                 continue  # serial numba at 8192 adds minutes and no information
                             run = baselines.numba_fll(kind, dtype, par, inputs)
                             run(*baselines.fll_baseline_args(kind, 2, dtype, inputs, 3))  # compile
@@ -154,7 +161,7 @@ def run_bench(quick: bool = False, log: Callable[[str], None] = print) -> dict:
                 run(np.ones(2, dtype), 3)  # compile
                 group[REF] = partial(run, w, n)
                 for par in (True, False):
-                    if not par and batch > 1024:
+                    if not par and (batch > 1024 or not serial):
                         continue
                     run = baselines.numba_drive(dtype, par)
                     run(np.ones(2, dtype), 3)  # compile
