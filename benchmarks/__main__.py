@@ -32,7 +32,10 @@ def main(argv=None) -> int:
     jaxobs.use_host_devices()
     log = (lambda m: print(m, file=sys.stderr)) if args.json else print
     batches = None if args.batches is None else tuple(args.batches)
-    res = run_bench(quick=args.quick, log=log, batches=batches, serial=not args.no_serial)
+    part = None if not args.out else str(Path(args.out).with_suffix(".partial.json"))
+    res = run_bench(quick=args.quick, log=log, batches=batches, serial=not args.no_serial, partial_out=part)
+    if part:
+        Path(part).unlink(missing_ok=True)
     if args.out:
         path = Path(args.out)
         path.parent.mkdir(parents=True, exist_ok=True)

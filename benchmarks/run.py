@@ -20,11 +20,13 @@ temporary-buffer size of a 10 s (100k-step) gradient at batch 1024.
 from __future__ import annotations
 
 import dataclasses
+import json
 import math
 import os
 import time
 from collections.abc import Callable
 from functools import partial
+from pathlib import Path
 
 import jax
 import numpy as np
@@ -88,11 +90,16 @@ def numba_available() -> bool:
 
 
 def run_bench(
-    quick: bool = False, log: Callable[[str], None] = print, batches: tuple[int, ...] | None = None, serial: bool = True
+    quick: bool = False,
+    log: Callable[[str], None] = print,
+    batches: tuple[int, ...] | None = None,
+    serial: bool = True,
+    partial_out: str | None = None,
 ) -> dict:
     """Run every benchmark; returns ``{"rows": [...], "grad_over_forward": ..., ...}``.
 
-    ``batches`` replaces the default batch sizes; ``serial=False`` leaves out the serial scalar numba rows.
+    ``batches`` replaces the default batch sizes; ``serial=False`` leaves out the serial scalar numba rows;
+    ``partial_out``: a file rewritten with the rows measured so far after each row.
     """
     if batches is None:
         batches = (1, 1024) if quick else (1, 64, 1024, 8192)
@@ -109,6 +116,8 @@ def run_bench(
 
     def add(row):
         rows.append(row)
+        if partial_out:  # a run cut short keeps what it measured
+            Path(partial_out).write_text(json.dumps({"rows": [dataclasses.asdict(r) for r in rows], "partial": True}))
         log(
             f"  {row.workload:14s} {row.impl:15s} {row.dtype} {row.inputs:11s} batch {row.batch:5d}: "
             f"{row.steps_per_s / 1e6:9.2f} M steps/s"
@@ -125,12 +134,13 @@ def run_bench(
         for k, t in best.items():
             add(Row(key[0], k, key[1], key[2], key[3], steps / t))
 
-    for dt in ("f32", "f64"):
-        _set_dtype(dt)
-        dtype = DTYPES[dt]
-        for kind in kinds:
+    # batch outermost: the batch-1024 rows of every workload and dtype come first (a partial run has them)
+    for batch in batches:
+        for dt in ("f32", "f64"):
+            _set_dtype(dt)
+            dtype = DTYPES[dt]
             n = round(fll_t1 / W.TS)
-            for batch in batches:
+            for kind in kinds:
                 for inputs in ("loop", "precomputed"):
                     fn, args = W.jax_fll(kind, batch, inputs, fll_t1)
                     group = {"jaxobs": partial(fn, args)}
@@ -150,9 +160,8 @@ def run_bench(
                     n_np = min(n, 1000)
                     t = best_time(partial(baselines.numpy_fll, kind, batch, dtype, n_np), 1)
                     add(Row(kind, "numpy", dt, batch, "loop", batch * n_np / t))
-        # drive
-        n = round(drive_t1 / W.TS)
-        for batch in batches:
+            # drive
+            n = round(drive_t1 / W.TS)
             fn, args = W.jax_drive(batch, drive_t1)
             group = {"jaxobs": partial(fn, args)}
             if have_numba:
