@@ -794,12 +794,10 @@ def njit_inner(fn) -> dict:
     ``error_model="numpy"``: a float division by zero gives inf/nan as in NumPy and JAX instead of raising
     (numba's default, Python's semantics, checks every divisor: a branch in the batch loop that stops
     LLVM from vectorizing it).  The divisors here are floored (v_floor², ω_min), never zero.
-    ``cache=True``: compiled once per machine into ``__pycache__`` (tests/test_bench_inner.py would otherwise
-    compile them for minutes on every run).
     """
     if numba is None:
         return {}
-    return {True: numba.njit(parallel=True, error_model="numpy", cache=True)(fn)}
+    return {True: numba.njit(parallel=True, error_model="numpy")(fn)}
 
 
 def fll_inner_cached(kind, x0, P, U, OM, n, h, F):
