@@ -13,7 +13,9 @@ from benchmarks import workloads as W
 numba = pytest.importorskip("numba", reason="numba is the benchmark extra: pip install -e '.[bench]'")
 
 
-@pytest.mark.parametrize("inputs", ["loop", "precomputed"])
+# the signal-in-the-loop kernel (another numba compile of minutes on 2 busy cores) differs only in its input
+# function: it runs in the slow suite, the precomputed one (the same step arithmetic) in the default suite
+@pytest.mark.parametrize("inputs", [pytest.param("loop", marks=pytest.mark.slow), "precomputed"])
 def test_fll_inner_equals_jaxobs(inputs):
     """Every FLL of the family, float64, 5 scenarios (blocks of 2 and 3 over two threads), 2100 steps (past the
     frequency step, phase jump and sag at 0.2 s, where the scenarios part)."""
