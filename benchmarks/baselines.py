@@ -1,8 +1,10 @@
 """The baselines on the workloads: parameters and inputs from :mod:`benchmarks.workloads`, kernels from
 :mod:`benchmarks.kernels`.
 
-``numba_*`` return a compiled batch runner (serial, or ``parallel=True``: a
-``prange`` over scenarios); ``numpy_*`` run the same kernels from Python on
+``numba_*`` return a compiled batch runner: the batch-inner kernels
+(:func:`numba_fll_inner`, :func:`numba_drive` with ``inner=True``: time-major arrays, the batch the
+inner SIMD loop, threads over batch blocks) and the scalar per-scenario ones (serial, or
+``parallel=True``: a ``prange`` over scenarios); ``numpy_*`` run the same kernels from Python on
 arrays of shape (batch,): a Python loop over time, vectorized over the batch.
 """
 
@@ -40,6 +42,29 @@ def numba_fll(kind: str, dtype, parallel: bool, inputs: str):
     return runner
 
 
+def numba_fll_inner(kind: str, dtype, inputs: str):
+    """The batch-inner numba runner (time-major inputs, threads over batch blocks):
+    ``run(*fll_inner_args(kind, batch, dtype, inputs, n)) -> costs``."""
+    p, x0 = W.fll_baseline_params(kind)
+    run = _numba(K.NUMBA_FLL_INNER if inputs == "loop" else K.NUMBA_FLL_INNER_PRE, True)
+    params = (FLL_KERNEL[kind], _cast(x0, dtype), _cast(p, dtype))
+
+    def runner(*args):
+        *data, n = args
+        return run(*params, *data, n, W.TS, dtype)
+
+    return runner
+
+
+def fll_inner_args(kind: str, batch: int, dtype, inputs: str, n: int) -> tuple:
+    """The data a :func:`numba_fll_inner` runner takes: :func:`fll_baseline_args` transposed, batch last
+    (``(SP (10, B), n)``, or ``(U, OM, n)`` time-major (n, B)); transposed before timing."""
+    return tuple(
+        np.ascontiguousarray(a.T) if isinstance(a, np.ndarray) else a
+        for a in fll_baseline_args(kind, batch, dtype, inputs, n)
+    )
+
+
 def fll_baseline_args(kind: str, batch: int, dtype, inputs: str, n: int) -> tuple:
     """The data a :func:`numba_fll` runner takes: ``(SP, n)`` for ``"loop"``, ``(U, OM, n)`` for ``"precomputed"``."""
     if inputs == "loop":
@@ -59,15 +84,16 @@ def numpy_fll(kind: str, batch: int, dtype, n: int) -> np.ndarray:
     return K.ab3_run(FLL_FIELD[kind], K.signal_input, x0, _cast(p, dtype), sp, n, W.TS, dtype)
 
 
-def numba_drive(dtype, parallel: bool):
+def numba_drive(dtype, parallel: bool, inner: bool = False):
     """A compiled numba batch runner of the drive: ``run(w, n) -> costs``, w the per-scenario speeds (rad/s).
 
     The initial state of each scenario is jaxobs's steady start (:func:`benchmarks.workloads.drive_initial`),
-    computed once outside the timed call.
+    computed once outside the timed call.  ``inner``: the batch-inner kernel (threads over batch blocks,
+    ``parallel`` must be True).
     """
     M, OB, C, P, every = W.drive_baseline_params()
     params = (_cast(P, dtype), _cast(M, dtype), _cast(OB, dtype), _cast(C, dtype))
-    run = _numba(K.NUMBA_DRIVE, parallel)
+    run = _numba(K.NUMBA_DRIVE_INNER if inner else K.NUMBA_DRIVE, parallel)
     cache = {}
 
     def runner(w, n):

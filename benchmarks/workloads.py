@@ -269,10 +269,13 @@ CHECKPOINTS = {
 }
 
 
-def fll_loss_fn(kind: str, t1: float, checkpoint: str):
-    """(loss(gains, signals) → mean running cost over the batch, the observer's tuned gains) for the FLL workload."""
+def fll_loss_fn(kind: str, t1: float, checkpoint: str, names: tuple[str, ...] | None = None):
+    """(loss(gains, signals) → mean running cost over the batch, the observer's tuned gains) for the FLL workload.
+
+    ``names``: the gains differentiated (default the tuned ones, :data:`GAINS`); ``omega_n`` also sets the
+    initial state."""
     obs = fll_observer(kind)
-    names = GAINS[kind]
+    names = GAINS[kind] if names is None else tuple(names)
     params = {n: getattr(obs, n) for n in names}
 
     def loss(params, sig):

@@ -1,7 +1,7 @@
 """The time loop shared by every simulation: one ``lax.scan`` made fast on CPU and cheap to differentiate.
 
 ``run_loop(body, carry, xs, n)`` is ``lax.scan(body, carry, xs, length=n)`` with
-five things done to it, none of which changes what it returns beyond
+six things done to it, none of which changes what it returns beyond
 rounding (XLA may fuse the same arithmetic differently; tests/test_perf.py
 checks each against the plain scan, to 1e-12 or tighter):
 
@@ -62,7 +62,28 @@ checks each against the plain scan, to 1e-12 or tighter):
    input sample is computed once, and memory stays O(block × batch) rather
    than n samples of precomputed inputs.  Measured on the SOGI-FLL
    (batch 1024, 2 devices): 53 → 105 M scenario-steps/s in float32, 32 → 61
-   in float64, the same as precomputed inputs.
+   in float64, the same as precomputed inputs.  A system may read a block at
+   once instead (``OnSignal.input_block``: a recording on the loop's own sample
+   grid is one contiguous slice per block, where a per-step read gathered a
+   column of the batch per step).
+6. **The step on state components** (:func:`_scalarized_step`; an
+   experiment, *off*: ``SCALARIZE = False``).  Point 1 splits the carry, but
+   the step itself still works on vectors: an observer's ``f`` stacks its
+   derivative, the rule forms x + h/12 (23 f − 16 f₋₁ + 5 f₋₂) on the stacked
+   vectors, and the split slices the result apart.  XLA's CPU fusion then
+   computes the whole stacked AB3 combination once per component it slices out
+   (three times for the SOGI-FLL) and materializes four stacked (batch, 3)
+   arrays per step.  With the switch on, the loop traces the step to a jaxpr
+   and evaluates it with every small 1-D value held as its elements (an
+   elementwise operation becomes one operation per element, a ``stack`` or
+   ``concatenate`` a list, a ``slice`` a pick; anything else sees the stacked
+   array).  The optimized HLO then has no stack and no recomputation, and the
+   results equal the array form to rounding (tests/test_perf.py) — but it ran
+   *slower*: SOGI-FLL, batch 1024, 2 devices, one process each, float32,
+   input in the loop 82.8 → 19.8 M scenario-steps/s, precomputed 425 → 66
+   (the cause is not yet understood; the HLO of the inner loop looked leaner).
+   Steps of more than ``SCALARIZE_MAX_EQNS`` equations (the drive, ~1600)
+   would keep the array form in any case (compile time).
 """
 
 from __future__ import annotations
@@ -211,6 +232,140 @@ def _join(tree):
     return jax.tree.map(lambda a: jnp.stack(a.parts) if _is_split(a) else a, tree, is_leaf=_is_split)
 
 
+# ---------------------------------------------------------------------------
+# the step on state components (module doc, point 6)
+# ---------------------------------------------------------------------------
+
+SCALARIZE = False  # off: measured slower (module doc, point 6); tests compare both forms
+# A step with more equations than this keeps the array form: its compile time, not its run time, dominates
+# (the drive: ~2000 equations; the FLL family: ~60-150).
+SCALARIZE_MAX_EQNS = 600
+
+_ELEMENTWISE = frozenset(
+    """add sub mul div neg max min abs sign sqrt rsqrt cbrt exp exp2 log log1p expm1 sin cos tan asin acos atan
+    atan2 sinh cosh tanh asinh acosh atanh pow integer_pow square select_n convert_element_type eq ne lt le gt ge
+    and or not xor floor ceil round rem nextafter clamp erf erfc erf_inv logistic copy copy_p is_finite
+    reduce_precision""".split()
+)
+
+
+class _Parts:
+    """A small 1-D array held as its elements (0-d arrays) while the step is evaluated."""
+
+    __slots__ = ("parts",)
+
+    def __init__(self, parts):
+        self.parts = tuple(parts)
+
+
+def _materialize(v):
+    return jnp.stack(v.parts) if isinstance(v, _Parts) else v
+
+
+def _element(v, i):
+    """Element i of an operand of an elementwise operation on n-vectors (a scalar operand broadcasts)."""
+    if isinstance(v, _Parts):
+        return v.parts[i]
+    return v if np.ndim(v) == 0 else v[i]
+
+
+def _count_eqns(jaxpr) -> int:
+    return sum(1 + sum(_count_eqns(j.jaxpr) for j in _sub_jaxprs(e)) for e in jaxpr.eqns)
+
+
+def _sub_jaxprs(eqn):
+    return [p for p in eqn.params.values() if isinstance(p, jax.extend.core.ClosedJaxpr)]
+
+
+def _bind(eqn, ins):
+    out = eqn.primitive.bind(*ins, **eqn.primitive.get_bind_params(eqn.params))
+    return list(out) if eqn.primitive.multiple_results else [out]
+
+
+def _apply(eqn, ins):
+    """One equation of the step, on operands that may be held as elements."""
+    name, params = eqn.primitive.name, eqn.params
+    out_avals = [v.aval for v in eqn.outvars]
+    vec = len(out_avals) == 1 and len(out_avals[0].shape) == 1 and 0 < out_avals[0].shape[0] <= _SPLIT_MAX
+    if name in ("jit", "pjit", "closed_call") and isinstance(params.get("jaxpr"), jax.extend.core.ClosedJaxpr):
+        inner = params["jaxpr"]
+        return _eval_parts(inner.jaxpr, inner.consts, ins)
+    if vec and name == "stack" and params.get("axis") == 0 and all(np.ndim(x) == 0 for x in ins):
+        return [_Parts(ins)]
+    if vec and name == "concatenate" and params.get("dimension") == 0 and any(isinstance(x, _Parts) for x in ins):
+        parts = []
+        for x in ins:
+            parts += x.parts if isinstance(x, _Parts) else [x[i] for i in range(np.shape(x)[0])]
+        return [_Parts(parts)]
+    if not any(isinstance(x, _Parts) for x in ins):
+        return _bind(eqn, ins)
+    if vec and name in _ELEMENTWISE:
+        n = out_avals[0].shape[0]
+        if all(isinstance(x, _Parts) or np.ndim(x) == 0 or np.shape(x) == (n,) for x in ins):
+            return [_Parts(eqn.primitive.bind(*(_element(x, i) for x in ins), **params) for i in range(n))]
+    if name == "slice" and isinstance(ins[0], _Parts) and params.get("strides") in (None, (1,)):
+        (start,), (limit,) = params["start_indices"], params["limit_indices"]
+        return [_Parts(ins[0].parts[start:limit])]
+    if name == "squeeze" and isinstance(ins[0], _Parts) and len(ins[0].parts) == 1:
+        return [ins[0].parts[0]]
+    return _bind(eqn, [_materialize(x) for x in ins])
+
+
+def _eval_parts(jaxpr, consts, args):
+    """Evaluate ``jaxpr`` with small 1-D values held as elements (_Parts) wherever the operations allow."""
+    env = {}
+
+    def read(a):
+        return a.val if isinstance(a, jax.extend.core.Literal) else env[a]
+
+    env.update(zip(jaxpr.constvars, consts))
+    env.update(zip(jaxpr.invars, args))
+    for eqn in jaxpr.eqns:
+        outs = _apply(eqn, [read(a) for a in eqn.invars])
+        for v, o in zip(eqn.outvars, outs):
+            if not isinstance(v, jax.extend.core.DropVar):
+                env[v] = o
+    return [read(a) for a in jaxpr.outvars]
+
+
+def _scalarized_step(body, c, x):
+    """``body(_join(c), x)`` with the split carry ``c``, its state vectors never stacked (module doc, point 6).
+
+    The step is traced to a jaxpr on the joined carry and evaluated with every small 1-D value (the state
+    vectors, the rules' derivative vectors, their AB3/RK4 combinations) held as its elements: an
+    elementwise operation on them becomes one operation per element, a ``stack`` or ``concatenate``
+    of them a list, a ``slice`` a pick.  Anything else sees the stacked array.  Returns the new carry
+    split as ``c`` is.
+    """
+
+    def spec(a):
+        if _is_split(a):
+            p = a.parts[0]
+            return jax.ShapeDtypeStruct((len(a.parts),) + jnp.shape(p), jnp.result_type(p))
+        return jax.ShapeDtypeStruct(jnp.shape(a), jnp.result_type(a))
+
+    c_spec = jax.tree.map(spec, c, is_leaf=_is_split)
+    x_spec = jax.tree.map(spec, x)
+    closed, out_shape = jax.make_jaxpr(body, return_shape=True)(c_spec, x_spec)
+    if _count_eqns(closed.jaxpr) > SCALARIZE_MAX_EQNS:
+        c2, y = body(_join(c), x)
+        return _split(c2), y
+    c_leaves = jax.tree.leaves(c, is_leaf=_is_split)
+    args = [_Parts(a.parts) if _is_split(a) else a for a in c_leaves] + jax.tree.leaves(x)
+    outs = _eval_parts(closed.jaxpr, closed.consts, args)
+    out_c_shape, out_y_shape = out_shape
+    n_c = len(jax.tree.leaves(out_c_shape))
+    new_c = []
+    for a, o in zip(c_leaves, outs[:n_c]):
+        if _is_split(a):
+            new_c.append(_Split(o.parts if isinstance(o, _Parts) else (o[i] for i in range(len(a.parts)))))
+        else:
+            new_c.append(_materialize(o))
+    c_tree = jax.tree.structure(c, is_leaf=_is_split)
+    y = jax.tree.unflatten(jax.tree.structure(out_y_shape), [_materialize(o) for o in outs[n_c:]])
+    return jax.tree.unflatten(c_tree, new_c), y
+
+
 def _has_steady(x):
     return hasattr(x, "steady") and hasattr(x, "startup_steps")
 
@@ -354,6 +509,8 @@ def _run(body, carry, xs, n, unroll, mode, split, xs_map=None, peel=True):
     if split:
 
         def inner(c, x):
+            if SCALARIZE:
+                return _scalarized_step(body, c, x)
             c, y = body(_join(c), x)
             return _split(c), y
 

@@ -25,7 +25,10 @@ current count.  This measured 1.9× on batch-1024 forward simulations
 Tiles.  ``jit(vmap(simulate))`` steps the whole batch in lock-step: every
 time step sweeps every scenario's state (and its block of inputs), so once a
 device's share outgrows the CPU caches each step streams it from memory.
-:func:`map_batch` runs each device's share ``TILE`` scenarios at a time
+:func:`map_batch` runs each device's share ``TILE`` scenarios at a time (a
+share of at most ``TILE`` runs as it is, without a one-tile ``lax.map`` around
+it: SOGI-FLL, batch 1024, precomputed input, one process each, float32
+179.8 → 425.2 M scenario-steps/s, float64 unchanged, 99.6 → 98.9)
 (``shard_map`` over the mesh, ``lax.map(..., batch_size=TILE)`` inside), so a
 tile's state stays in cache for the whole horizon.  SOGI-FLL-WIF, batch 8192,
 float64, M scenario-steps/s, ``vmap`` → ``map_batch`` in one run: precomputed
@@ -189,7 +192,11 @@ def map_batch(fn, tree, *, mesh: Mesh | None = None, tile: int = TILE):
     b = batch_size(tree)
 
     def local(t):
-        return jax.lax.map(fn, t, batch_size=min(tile, batch_size(t)))
+        if batch_size(t) <= tile:
+            # one tile: the share's loop runs as it is (module doc: a one-iteration lax.map around it
+            # ran the float32 SOGI-FLL at 0.4x the speed)
+            return jax.vmap(fn)(t)
+        return jax.lax.map(fn, t, batch_size=tile)
 
     n_dev = mesh.devices.size
     if n_dev == 1 or b % n_dev:

@@ -311,6 +311,43 @@ class OnSignal(AbstractSystem):
         truth = SignalTruth(sig.theta(t), sig.omega(t), sig.fundamental_amplitude(t)) if self.has_truth else None
         return u, path, truth
 
+    def _sample_offset(self) -> int | None:
+        """The index of sample 0's time in a :class:`SampledSignal` on this system's sample grid (same
+        interval, t0 on a sample instant), else None."""
+        sig = self.signal
+        if self.knots or not isinstance(sig, SampledSignal):
+            return None
+        ts = float(self.ts)
+        if abs(sig.ts - ts) > 1e-12 * ts:
+            return None
+        off = (self.t0 - sig.t0) / ts
+        return round(off) if abs(off - round(off)) <= 1e-9 else None
+
+    def input_block(self, kb):
+        """``input`` at the consecutive sample indices ``kb`` (leading axis the block), computed together.
+
+        A recording on this system's own sample grid (a :class:`SampledSignal` with the observer's
+        interval) is read as one contiguous slice of each sample array: at those instants
+        ``SampledSignal.__call__`` snaps to the sample, so the values are the same (in float32 a
+        sample time t_k rounded by more than SNAP of an interval reads a blend of neighbours there, the
+        exact sample here).  Under ``vmap`` over recordings the slice is a block of B rows, where a
+        per-step read (``input`` mapped over the block) gathers one column per step.  Anything else
+        is ``input`` mapped over the block.
+        """
+        off = self._sample_offset()
+        if off is None:
+            return jax.lax.map(self.input, kb)
+        size = kb.shape[0]
+        start = kb[0] + off
+
+        def read(a):
+            return jnp.moveaxis(jax.lax.dynamic_slice_in_dim(a, start, size, axis=-1), -1, 0)
+
+        u = read(self.signal.samples)
+        sig = self.signal
+        truth = SignalTruth(*(read(a) for a in sig.truth)) if sig.truth is not None else None
+        return u, u, truth
+
     def advance(self, state, x):
         u, path, truth = x
         state, out = self.observer.step(state, path)
@@ -407,7 +444,11 @@ def simulate(
     blocked = fast and hasattr(system, "input") and hasattr(system, "advance")
     advance = system.advance if blocked else system.step
     # lax.map, not vmap: each block's inputs are computed by the same scalar code as in the step
-    xs_map = (lambda kb: jax.lax.map(system.input, kb)) if blocked else None
+    # (a system may read a block at once: OnSignal.input_block)
+    if blocked:
+        xs_map = system.input_block if hasattr(system, "input_block") else (lambda kb: jax.lax.map(system.input, kb))
+    else:
+        xs_map = None
 
     def body(carry, x):
         state, out = advance(carry.state, x)

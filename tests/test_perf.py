@@ -11,6 +11,7 @@ import subprocess
 import sys
 import textwrap
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -259,3 +260,55 @@ def test_shard_batch_leaves_uneven_batches_whole():
     assert len(y["a"].sharding.device_set) == 1
     with pytest.raises(ValueError, match="common leading axis"):
         jaxobs.shard_batch({"a": jnp.arange(5.0), "b": jnp.ones(4)})
+
+
+def test_step_on_components_equals_the_array_form(wif_batch, monkeypatch):
+    """_loop point 6: the step evaluated on state components gives the array form's cost, final state and
+    gradient (forward sensitivities) to rounding, and its loop stacks no state vector."""
+    import jaxobs._loop as L
+
+    obs = B.fll_observer("sogi-fll-wif")
+
+    def run(gains, sig):
+        o = eqx.tree_at(lambda m: (m.k1, m.lam), obs, gains)
+        sol = jaxobs.simulate(jaxobs.OnSignal(o, sig), T1, save=jaxobs.SaveFinal(cost=B.fll_cost))
+        return sol.cost, sol.final_state
+
+    def loss(gains, sigs):
+        return jnp.mean(jax.vmap(lambda s: run(gains, s)[0])(sigs))
+
+    g0 = (obs.k1, obs.lam)
+    out = {}
+    for on in (False, True):
+        monkeypatch.setattr(L, "SCALARIZE", on)
+        jax.clear_caches()  # simulate's traces are cached on its arguments, not on this module switch
+        cost, state = jax.jit(jax.vmap(lambda s: run(g0, s)))(wif_batch)
+        grad = jax.jit(jax.grad(loss))(g0, wif_batch)
+        text = str(jax.make_jaxpr(lambda s: run(g0, s))(jax.tree.map(lambda a: a[0], wif_batch)))
+        out[on] = (cost, state, grad, text.count("stack[") + text.count("concatenate["))
+    for a, b in zip(jax.tree.leaves(out[True][:3]), jax.tree.leaves(out[False][:3])):
+        np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-14)
+    # the WIF's five-state vectors are stacked in every step of the array form, in none of the component form
+    assert out[True][3] < out[False][3]
+
+
+def test_recording_is_read_a_block_at_a_time():
+    """OnSignal.input_block: a SampledSignal on the loop's sample grid is sliced a block at a time (the same
+    numbers as reading it per step); off the grid (t0 half a sample in) it is read per step, interpolated."""
+    obs = B.fll_observer("sogi-fll")
+    n = 700
+    t = 1e-4 * np.arange(n)
+    u = np.cos(2 * np.pi * 50.3 * t) + 0.1 * np.cos(2 * np.pi * 150.0 * t)
+    truth = (2 * np.pi * 50.3 * t, np.full(n, 2 * np.pi * 50.3), np.ones(n))
+    rec = jaxobs.SampledSignal(jnp.asarray(u), 1e-4, truth=tuple(map(jnp.asarray, truth)))
+    for t0, blocked in ((0.0, True), (0.5e-4, False)):
+        system = jaxobs.OnSignal(obs, rec, t0=t0)
+        assert (system._sample_offset() is not None) == blocked
+        t1 = t0 + 600 * 1e-4
+        fast = jaxobs.simulate(system, t1, save=jaxobs.SaveFinal(cost=B.fll_cost))
+        plain = jaxobs.simulate(system, t1, save=jaxobs.SaveAll(cost=B.fll_cost))
+        np.testing.assert_allclose(fast.cost, plain.cost, rtol=1e-12)
+        ks = jnp.arange(5, 133, dtype=jnp.int32)
+        per_step = jax.lax.map(system.input, ks)
+        for a, b in zip(jax.tree.leaves(system.input_block(ks)), jax.tree.leaves(per_step)):
+            np.testing.assert_array_equal(a, b)
