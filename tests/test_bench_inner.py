@@ -1,7 +1,8 @@
 """The batch-inner numba kernels (benchmarks.kernels, the bench's reference) compute what jaxobs computes.
 
-Cheap (small batches and horizons) but each numba kernel compiles for 10-60 s: skipped only where numba
-(the `bench` extra) is missing.
+Small batches and horizons, but each numba kernel compiles for 10-100 s (the three FLL kernels of the
+precomputed test took 104 s on the quiet 2-core machine): the whole module runs in the slow suite, which CI
+runs (`make test-slow`); skipped only where numba (the `bench` extra) is missing.
 """
 
 import numpy as np
@@ -12,10 +13,10 @@ from benchmarks import workloads as W
 
 numba = pytest.importorskip("numba", reason="numba is the benchmark extra: pip install -e '.[bench]'")
 
+pytestmark = pytest.mark.slow  # numba compilation, see the module docstring
 
-# the signal-in-the-loop kernel (another numba compile of minutes on 2 busy cores) differs only in its input
-# function: it runs in the slow suite, the precomputed one (the same step arithmetic) in the default suite
-@pytest.mark.parametrize("inputs", [pytest.param("loop", marks=pytest.mark.slow), "precomputed"])
+
+@pytest.mark.parametrize("inputs", ["loop", "precomputed"])
 def test_fll_inner_equals_jaxobs(inputs):
     """Every FLL of the family, float64, 5 scenarios (blocks of 2 and 3 over two threads), 2100 steps (past the
     frequency step, phase jump and sag at 0.2 s, where the scenarios part)."""
