@@ -32,7 +32,7 @@ lint: $(STAMP)
 	$(VENV)/bin/ruff check .
 	$(VENV)/bin/ruff format --check .
 
-# The full benchmark run (~12 min on 2 cores), results in benchmarks/results/<date>.json; run from the
+# The full benchmark run (over 30 min on 2 cores with the batch-inner numba kernels, benchmarks/README.md), results in benchmarks/results/<date>.json; run from the
 # repository root (benchmarks/ is not part of the installed package). Quick look: .venv/bin/python -m benchmarks --quick
 bench: $(STAMP)
 	$(VENV)/bin/python -m benchmarks --out benchmarks/results/$$(date +%Y-%m-%d).json
