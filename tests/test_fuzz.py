@@ -187,15 +187,13 @@ def _one_line(err: str):
     assert len(lines[0]) <= 230 and "Traceback" not in err, lines[0][:500]
 
 
-def test_fuzzed_job_files_never_traceback_or_hang(tmp_path, capsys):
-    cases = list(mutations())
-    assert len(cases) >= 300
-    path = tmp_path / "job.toml"
+def _run_fuzz(cases, path, check, capsys, what):
+    """Every mutated file through ``check`` (--check): exit 0 or 2, a one-line error, no hang."""
     stats = {0: 0, 2: 0}
     slowest = (0.0, "")
     for label, data in cases:
         path.write_bytes(data)
-        rc, err, dt = _check(path, capsys)
+        rc, err, dt = check(path, capsys)
         assert rc in (0, 2), f"{label}: exit {rc}: {err[:500]}"
         if rc == 2:
             _one_line(err)
@@ -203,9 +201,15 @@ def test_fuzzed_job_files_never_traceback_or_hang(tmp_path, capsys):
         slowest = max(slowest, (dt, label))
         assert dt < HANG_S, f"{label}: --check took {dt:.2f} s"
     print(
-        f"fuzz: {len(cases)} files, {stats[2]} rejected, {stats[0]} accepted, 0 tracebacks, "
+        f"{what}: {len(cases)} files, {stats[2]} rejected, {stats[0]} accepted, 0 tracebacks, "
         f"slowest {slowest[0]:.2f} s ({slowest[1]})"
     )
+
+
+def test_fuzzed_job_files_never_traceback_or_hang(tmp_path, capsys):
+    cases = list(mutations())
+    assert len(cases) >= 300
+    _run_fuzz(cases, tmp_path / "job.toml", _check, capsys, "fuzz")
 
 
 @pytest.mark.parametrize("label, text, field", MUST_FAIL, ids=[m[0] for m in MUST_FAIL])
@@ -368,22 +372,7 @@ def test_fuzzed_study_files_never_traceback_or_hang(tmp_path, capsys):
     cases = list(mutations(seed=1, per_preset=30, files=STUDIES))
     assert len(cases) >= 100
     (tmp_path / "result.json").write_text(json.dumps(RESULT))
-    path = tmp_path / "study.toml"
-    stats = {0: 0, 2: 0}
-    slowest = (0.0, "")
-    for label, data in cases:
-        path.write_bytes(data)
-        rc, err, dt = _study_check(path, capsys)
-        assert rc in (0, 2), f"{label}: exit {rc}: {err[:500]}"
-        if rc == 2:
-            _one_line(err)
-        stats[rc] += 1
-        slowest = max(slowest, (dt, label))
-        assert dt < HANG_S, f"{label}: --check took {dt:.2f} s"
-    print(
-        f"study fuzz: {len(cases)} files, {stats[2]} rejected, {stats[0]} accepted, 0 tracebacks, "
-        f"slowest {slowest[0]:.2f} s ({slowest[1]})"
-    )
+    _run_fuzz(cases, tmp_path / "study.toml", _study_check, capsys, "study fuzz")
 
 
 @pytest.mark.parametrize("label, text, field", STUDY_MUST_FAIL, ids=[m[0] for m in STUDY_MUST_FAIL])
