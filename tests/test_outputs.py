@@ -50,8 +50,9 @@ def test_symlinks_locks_and_existing_results(tmp_path):
             OutDir(out, [], force=True).__enter__()
     assert not (out / LOCK).exists()
     (out / LOCK).write_text(f"999999999 {socket.gethostname()}\n")  # stale: that process is gone
-    with OutDir(out, [], force=True):
-        pass
+    with OutDir(out, [], force=True):  # taken over: the lock now names this process
+        assert (out / LOCK).read_text().split() == [str(os.getpid()), socket.gethostname()]
+    assert not (out / LOCK).exists()
     (tmp_path / "file").write_text("")
     with pytest.raises(OutError, match="not a folder"):
         OutDir(tmp_path / "file").__enter__()
