@@ -455,12 +455,25 @@ def simulate(
         acc = carry.acc if cost is None else carry.acc + cost(out)
         return _Carry(state, acc), (out if save.keeps_outputs else None)
 
-    state = system.init() if state0 is None else state0
-    carry0 = _Carry(state, jnp.zeros((), dtype))
+    # Without state0 the loop builds the initial state itself (carry_fn): a gain that also sets the initial
+    # state (an FLL's omega_n) is then one direction of the forward sensitivities, not one per state component.
+    def carry_fn():
+        state = system.init() if state0 is None else state0
+        return _Carry(state, jnp.zeros((), dtype))
+
     if save.keeps_outputs:
-        _check_memory(jax.eval_shape(lambda c, k: body(c, k)[1], carry0, ks[0]), n)
+        _check_memory(jax.eval_shape(lambda k: body(carry_fn(), k)[1], ks[0]), n)
     final, outputs = run_loop(
-        body, carry0, ks, n, unroll=unroll if fast else 1, checkpoint=checkpoint, xs_map=xs_map, split=fast, peel=fast
+        body,
+        None,
+        ks,
+        n,
+        unroll=unroll if fast else 1,
+        checkpoint=checkpoint,
+        xs_map=xs_map,
+        split=fast,
+        peel=fast,
+        carry_fn=carry_fn,
     )
     total = None if cost is None else ts * final.acc
     ok = all_finite(outputs) if save.keeps_outputs else all_finite(final)

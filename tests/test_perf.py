@@ -165,6 +165,40 @@ def test_ten_second_gradient_fits_in_64_mb():
     assert B.grad_temp_mb("sogi-fll", 1024, 10.0, "none") > 1000.0
 
 
+def test_a_gain_that_sets_the_initial_state_is_one_forward_direction(wif_batch):
+    """omega_n sets the SOGI-FLL's initial ω̂.  The loop builds its initial carry inside the forward-sensitivity
+    region (run_loop's carry_fn), so omega_n is one perturbed scalar there, not the three state components (and
+    AB3 history) it reaches.  With max_scalars=1 the gradient therefore stays in forward mode: O(1) memory in
+    the horizon, where the NoCheckpoint fallback (taken when the directions outnumber max_scalars) stores every
+    step's residuals."""
+    obs = B.fll_observer("sogi-fll")
+    sig = jax.tree.map(lambda x: x[:2], wif_batch)
+
+    def loss_for(ck):
+        def loss(wn):
+            o = eqx.tree_at(lambda m: m.omega_n, obs, wn)
+
+            def one(s):
+                return jaxobs.simulate(
+                    jaxobs.OnSignal(o, s), 0.5, save=jaxobs.SaveFinal(cost=B.fll_cost), checkpoint=ck
+                ).cost
+
+            return jnp.mean(jax.vmap(one)(sig))
+
+        return jax.jit(jax.value_and_grad(loss))
+
+    one_dir = jaxobs.ForwardSensitivity(max_scalars=1, fallback=jaxobs.NoCheckpoint())
+    f = loss_for(one_dir)
+    mb = f.lower(obs.omega_n).compile().memory_analysis().temp_size_in_bytes / 1e6
+    none = loss_for(jaxobs.NoCheckpoint())
+    mb_none = none.lower(obs.omega_n).compile().memory_analysis().temp_size_in_bytes / 1e6
+    # 5000 steps x 2 scenarios of stored residuals (the fallback) is megabytes; the forward pass, kilobytes
+    assert mb < 0.5 < mb_none, (mb, mb_none)
+    (v1, g1), (v2, g2) = f(obs.omega_n), none(obs.omega_n)
+    assert float(v1) == pytest.approx(float(v2), rel=1e-13)
+    assert float(g1) == pytest.approx(float(g2), rel=1e-9)
+
+
 def test_drive_streaming_cost_equals_trajectory():
     drive, obs, sc, _ = B.drive_setup(3)
     full = jax.jit(jax.vmap(lambda s: jaxobs.simulate(D.ClosedLoop(drive, obs, s), 0.03)))(sc)
