@@ -1,7 +1,9 @@
 """Timing, the result rows, the text table: scenario-steps per second of jaxobs beside NumPy and numba.
 
 Implementations: ``jaxobs`` (:mod:`benchmarks.workloads`: ``jit`` of
-:func:`jaxobs.map_batch` over ``simulate``); ``numba-inner``, the reference of
+:func:`jaxobs.map_batch` over ``simulate``); ``jax-hand`` (the precomputed SOGI-FLL hand-written in JAX: one
+scan over time-major rows, :func:`benchmarks.workloads.jax_hand_fll`, equal to jaxobs; it separates what is
+jaxobs's loop from what is XLA's CPU code generation); ``numba-inner``, the reference of
 the ratios (the batch the inner SIMD loop over time-major arrays, threads over
 batch blocks: how a performance engineer writes it); the earlier scalar
 baselines, one scenario at a time, ``numba-scalar-par`` (``prange`` over
@@ -41,7 +43,7 @@ CHECKPOINTS = ("auto", "none", "step", "chunk")
 @dataclasses.dataclass
 class Row:
     workload: str
-    impl: str  # jaxobs | numba-inner | numba-scalar-par | numba-scalar | numpy
+    impl: str  # jaxobs | jax-hand | numba-inner | numba-scalar-par | numba-scalar | numpy
     dtype: str
     batch: int
     inputs: str  # loop | precomputed
@@ -151,6 +153,10 @@ def run_bench(
                 for inputs in ("loop", "precomputed"):
                     fn, args = W.jax_fll(kind, batch, inputs, fll_t1)
                     group = {"jaxobs": partial(fn, args)}
+                    if kind == "sogi-fll" and inputs == "precomputed":
+                        # the same program hand-written in JAX: XLA's pace on the minimal step
+                        hand, hargs = W.jax_hand_fll(batch, fll_t1)
+                        group["jax-hand"] = partial(hand, *hargs)
                     if have_numba:
                         run = baselines.numba_fll_inner(kind, dtype, inputs)
                         run(*baselines.fll_inner_args(kind, 2, dtype, inputs, 3))  # compile
