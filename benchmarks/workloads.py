@@ -365,7 +365,8 @@ def jax_hand_fll(batch: int, t1: float = FLL_T1):
         return h * acc
 
     rows = lambda a: tuple(a.T)  # noqa: E731  (B, 3) -> three (B,) rows
-    mesh = jaxobs.batch_mesh()
+    devs = jax.devices()
+    mesh = jaxobs.batch_mesh(devs if batch % len(devs) == 0 else devs[:1])  # as shard_batch: uneven runs whole
     spec_b, spec_tb = P("batch"), P(None, "batch")
     fn = jax.jit(
         jax.shard_map(
