@@ -38,13 +38,33 @@ device is what a batch of 1024 gives each of two devices).  Results equal the pl
 same per-scenario program; XLA may vectorize a tile's elementwise functions
 differently, a last-bit difference).
 
-Many hosts.  The same code runs over several machines: call
-``jax.distributed.initialize()`` on every process first (coordinator address,
-process count and id, or let a cluster environment such as SLURM supply them),
-then build the mesh from ``jax.devices()`` (every process's devices) and give
-:func:`shard_batch` each process's global batch.  Each process must run the same
-program; per-scenario results come back sharded, ``jax.device_get`` or
-``multihost_utils.process_allgather`` collects them.
+Many processes.  A study splits over several processes, on one machine or many
+(:func:`jaxobs.study.run_study`; tests/test_distributed.py runs 2 local processes
+and finds the single-process numbers).  Every process calls
+:func:`init_distributed` first (``jax.distributed.initialize``, with the CPU
+backend's collectives set to gloo), then runs the same program: ``jax.devices()``
+is now every process's devices and :func:`batch_mesh` spans them all.  Each
+process holds the whole batch (a study builds it from its axes and seed, the same
+everywhere), :func:`global_batch` places only that process's rows on its devices,
+``jit`` of :func:`map_batch` runs each device's share, and :func:`gather_batch`
+all-gathers the per-scenario results, so every process has them all.  Two
+processes on this machine::
+
+    # the same script in two shells (or two background jobs), process ids 0 and 1:
+    JAX_PLATFORMS=cpu JAXOBS_HOST_DEVICES=1 python my_study.py 0 &
+    JAX_PLATFORMS=cpu JAXOBS_HOST_DEVICES=1 python my_study.py 1
+    # my_study.py:  jaxobs.use_host_devices()      # JAXOBS_HOST_DEVICES=1: one device per process
+    #               jaxobs.init_distributed("localhost:12345", 2, int(sys.argv[1]))
+    #               ds = run_study(...)              # every process returns the whole Dataset
+
+On a GPU cluster under SLURM: one process per GPU
+(``srun --nodes=M --ntasks-per-node=G --gpus-per-node=G python my_study.py``,
+G GPUs a node) and ``jaxobs.init_distributed()`` with no arguments.  JAX reads
+the count (``SLURM_NTASKS``), each process's id (``SLURM_PROCID``) and the
+coordinator (the first node, a port from the job id, or ``JAX_COORDINATOR_PORT``)
+from SLURM's environment and gives each process the GPU of its node-local id
+(``SLURM_LOCALID``) as its one local device; the mesh spans every GPU of the job.
+That path is JAX's own and was not run here (no cluster: CPU processes only).
 """
 
 from __future__ import annotations
@@ -269,6 +289,8 @@ def global_batch(tree, mesh: Mesh | None = None):
     (``jax.make_array_from_callback``), so nothing crosses between processes.  In one process this
     is :func:`shard_batch` with the split required.
     """
+    if any(np.ndim(x) == 0 for x in jax.tree.leaves(tree)):
+        raise ValueError("global_batch: every array leaf of the batch needs the leading scenario axis (got a scalar)")
     mesh = batch_mesh() if mesh is None else mesh
     n_dev = mesh.devices.size
     b = batch_size(tree)

@@ -188,6 +188,8 @@ def test_global_batch_and_gather_batch_in_one_process():
     assert isinstance(back["a"], np.ndarray)
     with pytest.raises(ValueError, match="divide"):
         jaxobs.sharding.global_batch({"a": np.arange(5.0)}, jaxobs.batch_mesh([jax.devices()[0]] * 2))
+    with pytest.raises(ValueError, match="scalar"):
+        jaxobs.sharding.global_batch({"a": np.arange(6.0), "s": np.float64(1.0)}, mesh)
     with pytest.raises(ValueError, match="mesh"):
         run_study({"a": linear.sogi_fll_closed_form()}, {"dc": [0.0]}, mesh="cpu")
 

@@ -45,6 +45,11 @@ Every command that writes (``tune``, ``study``, ``demo``, ``bode``, ``reproduce`
 under ``--out`` (``tune`` and ``study``: default ``./out/<name>``, the job's or study's name reduced to
 ``[A-Za-z0-9._-]``; the others ``./out/<command>``), checked and locked before any work: see
 :mod:`tuning.outdir` for the lock file, symlinks and ``--force``.
+``study --coordinator HOST:PORT --num-processes N --process-id I`` (or ``--distributed``: from the
+environment, e.g. SLURM) runs one process of a study split over processes (:func:`jaxobs.init_distributed`,
+before the study file is loaded): process 0 alone checks, locks and writes ``--out``, prints the table and
+shows progress; the others compute their share, print one line and exit 0; when process 0 cannot use
+``--out`` every process ends with exit 2 before computing.  FLL studies only.
 ``tune --resume`` continues from ``<out>/checkpoint.npz`` if it is this job's (the job file's sha256 is
 in it); with no checkpoint it says so in one line and starts fresh.
 """
