@@ -38,13 +38,33 @@ device is what a batch of 1024 gives each of two devices).  Results equal the pl
 same per-scenario program; XLA may vectorize a tile's elementwise functions
 differently, a last-bit difference).
 
-Many hosts.  The same code runs over several machines: call
-``jax.distributed.initialize()`` on every process first (coordinator address,
-process count and id, or let a cluster environment such as SLURM supply them),
-then build the mesh from ``jax.devices()`` (every process's devices) and give
-:func:`shard_batch` each process's global batch.  Each process must run the same
-program; per-scenario results come back sharded, ``jax.device_get`` or
-``multihost_utils.process_allgather`` collects them.
+Many processes.  A study splits over several processes, on one machine or many
+(:func:`jaxobs.study.run_study`; tests/test_distributed.py runs 2 local processes
+and finds the single-process numbers).  Every process calls
+:func:`init_distributed` first (``jax.distributed.initialize``, with the CPU
+backend's collectives set to gloo), then runs the same program: ``jax.devices()``
+is now every process's devices and :func:`batch_mesh` spans them all.  Each
+process holds the whole batch (a study builds it from its axes and seed, the same
+everywhere), :func:`global_batch` places only that process's rows on its devices,
+``jit`` of :func:`map_batch` runs each device's share, and :func:`gather_batch`
+all-gathers the per-scenario results, so every process has them all.  Two
+processes on this machine::
+
+    # the same script in two shells (or two background jobs), process ids 0 and 1:
+    JAX_PLATFORMS=cpu JAXOBS_HOST_DEVICES=1 python my_study.py 0 &
+    JAX_PLATFORMS=cpu JAXOBS_HOST_DEVICES=1 python my_study.py 1
+    # my_study.py:  jaxobs.use_host_devices()      # JAXOBS_HOST_DEVICES=1: one device per process
+    #               jaxobs.init_distributed("localhost:12345", 2, int(sys.argv[1]))
+    #               ds = run_study(...)              # every process returns the whole Dataset
+
+On a GPU cluster under SLURM: one process per GPU
+(``srun --nodes=M --ntasks-per-node=G --gpus-per-node=G python my_study.py``,
+G GPUs a node) and ``jaxobs.init_distributed()`` with no arguments.  JAX reads
+the count (``SLURM_NTASKS``), each process's id (``SLURM_PROCID``) and the
+coordinator (the first node, a port from the job id, or ``JAX_COORDINATOR_PORT``)
+from SLURM's environment and gives each process the GPU of its node-local id
+(``SLURM_LOCALID``) as its one local device; the mesh spans every GPU of the job.
+That path is JAX's own and was not run here (no cluster: CPU processes only).
 """
 
 from __future__ import annotations
@@ -57,7 +77,17 @@ import jax
 import numpy as np
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
-__all__ = ["batch_mesh", "shard_batch", "batch_size", "map_batch", "use_host_devices", "TILE"]
+__all__ = [
+    "batch_mesh",
+    "shard_batch",
+    "batch_size",
+    "map_batch",
+    "use_host_devices",
+    "init_distributed",
+    "global_batch",
+    "gather_batch",
+    "TILE",
+]
 
 AXIS = "batch"
 
@@ -204,3 +234,86 @@ def map_batch(fn, tree, *, mesh: Mesh | None = None, tile: int = TILE):
     return jax.shard_map(
         local, mesh=mesh, in_specs=PartitionSpec(AXIS), out_specs=PartitionSpec(AXIS), check_vma=False
     )(tree)
+
+
+def init_distributed(coordinator: str | None = None, num_processes: int | None = None, process_id: int | None = None):
+    """Join a run of several processes (``jax.distributed.initialize``); call it in every process, first.
+
+    ``coordinator`` is process 0's ``"HOST:PORT"`` (a free port there; every process gives the same),
+    ``num_processes`` the count N ≥ 1 and ``process_id`` this process's index in ``0 … N-1``.  Left
+    out (``None``), JAX fills them in from the environment: ``JAX_COORDINATOR_ADDRESS``, or a cluster
+    launcher it detects (SLURM's ``srun``, Open MPI's ``mpirun``), which also gives each process its
+    GPU(s) there.  Call it before the first JAX computation (``jax.devices()`` counts), once per
+    process; :func:`use_host_devices` may come before it.
+
+    On the CPU backend the processes' collectives (the gather of a study's results) need an
+    implementation: this sets ``jax_cpu_collectives_implementation`` to ``"gloo"`` (TCP, in jaxlib)
+    unless it names one already (``"mpi"``); a GPU backend uses NCCL and ignores the option.
+    Afterwards ``jax.devices()`` lists every process's devices, ``jax.local_devices()`` this
+    process's, and :func:`jaxobs.study.run_study` splits each chunk of scenarios over all of them.
+    Returns ``(process_id, num_processes)`` as JAX sees them.  JAX raises ``RuntimeError`` for a
+    second call or one after its backends started, and when the coordinator cannot be reached in
+    its timeout (300 s).
+    """
+    if coordinator is not None:
+        host, sep, port = coordinator.rpartition(":") if isinstance(coordinator, str) else ("", "", "")
+        if not (sep and host and port.isdigit() and 1 <= int(port) <= 65535):
+            raise ValueError(
+                f"init_distributed: coordinator must be 'HOST:PORT' with a port in 1..65535, got {coordinator!r}"
+            )
+    for name, v, low in (("num_processes", num_processes, 1), ("process_id", process_id, 0)):
+        if v is not None and (isinstance(v, bool) or not isinstance(v, int) or v < low):
+            raise ValueError(f"init_distributed: {name} must be an integer >= {low}, got {v!r}")
+    if num_processes is not None and process_id is not None and process_id >= num_processes:
+        raise ValueError(
+            f"init_distributed: process_id must be in 0..{num_processes - 1} (num_processes={num_processes}), "
+            f"got {process_id}"
+        )
+    if jax.config.jax_cpu_collectives_implementation is None:
+        jax.config.update("jax_cpu_collectives_implementation", "gloo")
+    try:
+        jax.distributed.initialize(coordinator, num_processes, process_id)
+    except ValueError as e:  # JAX's own: a value it could not find in the arguments or the environment
+        raise ValueError(
+            f"init_distributed: {e} (give coordinator, num_processes and process_id, or run it under a "
+            "launcher JAX detects: SLURM's srun, Open MPI's mpirun)"
+        ) from None
+    return jax.process_index(), jax.process_count()
+
+
+def global_batch(tree, mesh: Mesh | None = None):
+    """A batch that every process holds in full (the same values) as global arrays split over ``mesh``.
+
+    Every array leaf's leading (scenario) axis is split over ``mesh`` (default: every process's
+    devices), which must divide it; each process fills only its own devices' rows
+    (``jax.make_array_from_callback``), so nothing crosses between processes.  In one process this
+    is :func:`shard_batch` with the split required.
+    """
+    if any(np.ndim(x) == 0 for x in jax.tree.leaves(tree)):
+        raise ValueError("global_batch: every array leaf of the batch needs the leading scenario axis (got a scalar)")
+    mesh = batch_mesh() if mesh is None else mesh
+    n_dev = mesh.devices.size
+    b = batch_size(tree)
+    if b % n_dev:
+        raise ValueError(f"global_batch: the batch ({b}) must divide over the mesh's {n_dev} devices (pad it)")
+    split = NamedSharding(mesh, PartitionSpec(AXIS))
+
+    def put(x):
+        x = np.asarray(x)
+        return jax.make_array_from_callback(x.shape, split, lambda idx: x[idx])
+
+    return jax.tree.map(put, tree)
+
+
+def gather_batch(tree):
+    """Every leaf of ``tree`` (per-scenario results, sharded over any devices) as a whole NumPy array, on
+    every process: a collective across processes (``multihost_utils.process_allgather``) when the
+    leaf spans several, else a plain copy to the host."""
+    from jax.experimental import multihost_utils
+
+    def get(x):
+        if isinstance(x, jax.Array) and not x.is_fully_addressable:
+            return np.asarray(multihost_utils.process_allgather(x, tiled=True))
+        return np.asarray(x)
+
+    return jax.tree.map(get, tree)

@@ -22,6 +22,17 @@ where a design has no such gain); the attributes hold the study's options and
 the versions that made it, nothing that changes between two identical runs
 (the wall time is the second value of ``run_study(..., return_seconds=True)``).
 
+Devices and processes.  Each chunk is split over ``mesh`` (default :func:`jaxobs.batch_mesh`: every
+device JAX has, of every process), padded up to a multiple of its device count; each device runs its
+share as one ``vmap`` (:func:`jaxobs.map_batch`, no communication).  One device is the plain ``jit(vmap)``.
+Several host devices in one process (:func:`jaxobs.use_host_devices`) use every core.  Several
+processes (:func:`jaxobs.init_distributed` in each, then the same ``run_study`` call in each): every
+process builds every scenario (the grid, or the draws from ``seed``: the same everywhere), places its own
+devices' rows of each chunk (:func:`jaxobs.sharding.global_batch`), and receives every scenario's
+metrics (an all-gather, :func:`jaxobs.sharding.gather_batch`), so every process returns the whole
+Dataset.  The numbers equal a one-device run's to rounding: a device's share is a smaller ``vmap``,
+which XLA may vectorize differently in the last bit (tests/test_distributed.py: 2 processes).
+
 Scenarios are single-phase grid signals (the FLL family) built by
 :func:`jaxobs.scenarios.grid_signals`: axes are ``freq_step`` (Hz),
 ``phase_jump_deg``, ``sag``, ``dc``, ``harmonics_scale`` (× Test C's spectrum),
@@ -44,6 +55,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import metrics as M
+from . import sharding
 from .progress import Progress
 from .scenarios import GRID_SIGNAL_AXES, grid_signals
 from .simulate import OnSignal, simulate
@@ -122,11 +134,14 @@ def run_study(
     chunk_size=2048,
     progress=False,
     return_seconds=False,
+    mesh=None,
 ):
     """Simulate every design on every scenario; returns an ``xarray.Dataset`` (see module doc).
 
     With ``return_seconds=True`` returns ``(dataset, seconds)``, the wall time of the runs
-    (kept out of the Dataset, so two identical studies write identical files).
+    (kept out of the Dataset, so two identical studies write identical files).  ``mesh``: the devices
+    each chunk is split over, a one-axis ``"batch"`` mesh (default ``jaxobs.batch_mesh()``, every
+    device of every process; ``jaxobs.batch_mesh(jax.devices()[:1])`` keeps to one device).
     """
     import xarray as xr
 
@@ -139,6 +154,8 @@ def run_study(
         raise ValueError(f"horizon must exceed t_event >= 0, got t_event={t_event}, horizon={horizon}")
     if chunk_size < 1:
         raise ValueError(f"chunk_size must be >= 1, got {chunk_size}")
+    if mesh is not None and not (isinstance(mesh, jax.sharding.Mesh) and mesh.axis_names == (sharding.AXIS,)):
+        raise ValueError(f"mesh must be a one-axis jax.sharding.Mesh named 'batch' (jaxobs.batch_mesh), got {mesh!r}")
     steady_from = t_event + 0.75 * (horizon - t_event) if steady_from is None else steady_from
     names = list(axes)
     if sample:
@@ -149,15 +166,25 @@ def run_study(
     n = len(combos)
     freq = float(next(iter(designs.values())).omega_n) / (2 * math.pi)
     sigs = grid_signals(names, combos, t_event, freq, seed=seed)
-    chunk = min(chunk_size, n)
+    mesh = sharding.batch_mesh() if mesh is None else mesh
+    n_dev = mesh.devices.size
+    # a chunk divides over the devices (padded up to a multiple of their count): every device gets an equal share
+    chunk = -(-min(chunk_size, n) // n_dev) * n_dev
     pad = (-n) % chunk
     if pad:
         sigs = jax.tree.map(lambda x: jnp.concatenate([x, jnp.repeat(x[-1:], pad, axis=0)]), sigs)
+    if n_dev > 1:
+        # every process holds every scenario (built from the axes and the seed, identically everywhere) and
+        # places only its own devices' rows of each chunk (sharding.global_batch)
+        sigs = jax.tree.map(np.asarray, sigs)
 
     results = {}
     t0 = time.time()
     bar = Progress(progress, n * len(designs), "study", unit="scenario")
     for dname, obs in designs.items():
+        if n_dev > 1:
+            # the gains as host values: each process passes its own copy, the same on all, to the global jit
+            obs = jax.tree.map(lambda x: np.asarray(x) if eqx.is_array(x) else x, obs)
 
         @eqx.filter_jit
         def run_chunk(obs, batch):
@@ -167,15 +194,22 @@ def run_study(
                 ok = sol.ok & jnp.all(jnp.stack([jnp.isfinite(m[k]) for k in STUDY_METRICS]))
                 return m, ok
 
-            return jax.vmap(one)(batch)
+            if n_dev == 1:
+                return jax.vmap(one)(batch)
+            # each device's share in one piece (tile = the share): the same per-device program as one
+            # device's vmap, no lax.map around it; scenarios are independent, so nothing is communicated
+            return sharding.map_batch(one, batch, mesh=mesh, tile=chunk // n_dev)
 
         parts_m, parts_ok = [], []
         for start in range(0, n + pad, chunk):
             batch = jax.tree.map(lambda x: x[start : start + chunk], sigs)
+            if n_dev > 1:
+                batch = sharding.global_batch(batch, mesh)
             bar.stage(f"{dname} (compiling, then {chunk} scenarios a chunk)" if start == 0 else dname)
-            m, ok = run_chunk(obs, batch)
-            parts_m.append(jax.tree.map(np.asarray, m))
-            parts_ok.append(np.asarray(ok))
+            # the per-scenario results, whole, on every process (an all-gather when the mesh spans processes)
+            m, ok = sharding.gather_batch(run_chunk(obs, batch))
+            parts_m.append(m)
+            parts_ok.append(ok)
             bar.update(min(chunk, n - start))
         results[dname] = (
             {k: np.concatenate([p[k] for p in parts_m])[:n] for k in (*STUDY_METRICS, "settled", "lost_lock")},

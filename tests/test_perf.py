@@ -256,6 +256,15 @@ _SHARD_SCRIPT = textwrap.dedent(
     fn_plain, plain = B.jax_drive(8, 0.02, shard=False)
     a, b = np.asarray(fn(sharded)), np.asarray(fn_plain(jax.device_put(plain, jax.devices()[0])))
     np.testing.assert_allclose(a, b, rtol=1e-12, atol=0)
+    # a study over the 4 host devices (6 scenarios: chunks padded to 8) equals it on one device
+    from jaxobs import linear
+    from jaxobs.study import run_study
+    axes = {"freq_step": [-2.0, 1.0], "dc": [0.0, 0.05, 0.1]}
+    designs = {"SOGI-FLL": linear.sogi_fll_closed_form()}
+    one = run_study(designs, axes, horizon=0.2, mesh=jaxobs.batch_mesh(jax.devices()[:1]))
+    four = run_study(designs, axes, horizon=0.2)
+    for k in one.data_vars:
+        np.testing.assert_allclose(four[k].values, one[k].values, rtol=1e-12, atol=0, err_msg=k)
     print("SHARDED-EQUALS-SINGLE")
     """
 )

@@ -11,6 +11,7 @@
                                                            paper 000's experiments, paper vs ours
     jaxobs reproduce leso [--out DIR] [--force] [--json]   paper 002's experiments, paper vs ours
     jaxobs study [STUDY.toml] [--out DIR] [--force] [--check] [--quiet]
+                 [--coordinator HOST:PORT --num-processes N --process-id I | --distributed]
                                                            robustness study → NetCDF, worst cases, figures
     jaxobs export [RESULT.json | --design D] [--out DIR] [--force] [--check]
                                                            the observer as C99 float32 with golden vectors
@@ -44,6 +45,11 @@ Every command that writes (``tune``, ``study``, ``demo``, ``bode``, ``reproduce`
 under ``--out`` (``tune`` and ``study``: default ``./out/<name>``, the job's or study's name reduced to
 ``[A-Za-z0-9._-]``; the others ``./out/<command>``), checked and locked before any work: see
 :mod:`tuning.outdir` for the lock file, symlinks and ``--force``.
+``study --coordinator HOST:PORT --num-processes N --process-id I`` (or ``--distributed``: from the
+environment, e.g. SLURM) runs one process of a study split over processes (:func:`jaxobs.init_distributed`,
+before the study file is loaded): process 0 alone checks, locks and writes ``--out``, prints the table and
+shows progress; the others compute their share, print one line and exit 0; when process 0 cannot use
+``--out`` every process ends with exit 2 before computing.  FLL studies only.
 ``tune --resume`` continues from ``<out>/checkpoint.npz`` if it is this job's (the job file's sha256 is
 in it); with no checkpoint it says so in one line and starts fresh.
 """
@@ -51,7 +57,9 @@ in it); with no checkpoint it says so in one line and starts fresh.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
+import os
 import sys
 import tempfile
 import traceback
@@ -346,6 +354,8 @@ def _recording_study(designs: dict, *, recording, t_event, horizon, steady_from,
 
 def _cmd_study(args) -> int:
     _enable_x64()
+    # a distributed run is joined before anything starts JAX (loading the designs does); --check joins nothing
+    rank = None if args.check else _join_distributed(args)
     path = Path(args.study) if args.study else Path(str(resources.files("jaxobs") / "data" / "default_study.toml"))
     spec = _load_study(path)  # everything checked: tables, keys, ranges, sizes, result files
     name, designs, axes = spec.name, spec.designs, spec.axes
@@ -354,9 +364,74 @@ def _cmd_study(args) -> int:
         print(f"{path}: OK — {spec.kind} study {name!r}, {len(designs)} designs x {spec.scenarios} scenarios")
         return 0
     out = Path(args.out) if args.out else Path("out") / safe_name(str(name), "study")
+    if rank is not None and rank[1] > 1:
+        if spec.kind == "drive" or spec.opts.get("recording") is not None:
+            raise ValueError(
+                f"{path}: only FLL studies on a scenario grid or sample are split over processes; "
+                f"run this {'drive' if spec.kind == 'drive' else 'recording'} study without --coordinator/--distributed"
+            )
+        return _distributed_study(name, designs, axes, opts, out, args, rank)
     with OutDir(out, ["study.nc"], force=args.force):
         args.log_dir = out
         return _run_study(name, designs, axes, opts, out, args.quiet)
+
+
+def _join_distributed(args):
+    """``study --coordinator/--num-processes/--process-id/--distributed``: join the run (jaxobs.init_distributed,
+    which takes what is not given from the environment); (process id, process count), or None: not asked."""
+    given = (args.coordinator, args.num_processes, args.process_id)
+    if not args.distributed and all(v is None for v in given):
+        return None
+    if None not in given[1:] and args.process_id >= args.num_processes:
+        n = args.num_processes
+        raise ValueError(f"--process-id must be in 0..{n - 1} (--num-processes {n}), got {args.process_id}")
+    return jaxobs.init_distributed(*given)
+
+
+@contextlib.contextmanager
+def _stdout_to_stderr():
+    """File descriptor 1 points at stderr inside (what native code prints there goes to stderr)."""
+    sys.stdout.flush()
+    saved = os.dup(1)
+    try:
+        os.dup2(2, 1)
+        yield
+    finally:
+        os.dup2(saved, 1)
+        os.close(saved)
+
+
+def _distributed_study(name, designs, axes, opts, out: Path, args, rank) -> int:
+    """One process of a study split over processes: every process computes its share of every chunk
+    (jaxobs.study.run_study), process 0 alone checks, locks and writes ``--out`` (and shows progress)."""
+    import numpy as np
+    from jax.experimental import multihost_utils
+
+    from jaxobs.study import run_study
+
+    pid, count = rank
+    with contextlib.ExitStack() as stack:
+        failure = None
+        if pid == 0:
+            try:
+                stack.enter_context(OutDir(out, ["study.nc"], force=args.force))
+                args.log_dir = out
+            except Exception as e:  # told to the others first, so that none of them waits for it in a collective
+                failure = e
+        # every process learns whether process 0 can write before any of them computes; this first collective
+        # connects the CPU collectives, whose gloo prints a line on the C++ stdout: to stderr, stdout is results
+        with _stdout_to_stderr():
+            ok = int(multihost_utils.broadcast_one_to_all(np.int32(failure is None)))
+        if failure is not None:
+            raise failure
+        if not ok:
+            raise ValueError(f"process 0 cannot use --out {str(out)!r} (its error says why); nothing computed")
+        if pid == 0:
+            return _run_study(name, designs, axes, opts, out, args.quiet)
+        kw = {k: v for k, v in opts.items() if k not in ("kind", "provenance", "recording")}
+        run_study(designs, axes, progress=False, **kw)
+        print(f"study {name}: process {pid} of {count} computed its share; process 0 writes the results")
+        return 0
 
 
 def _run_study(name, designs, axes, opts, out: Path, quiet: bool) -> int:
@@ -616,6 +691,29 @@ class _Parser(argparse.ArgumentParser):
         self.exit(2, f"jaxobs: error: {message}\n")
 
 
+def _host_port(text: str) -> str:
+    """argparse type of ``--coordinator``: ``HOST:PORT``, the port in 1..65535."""
+    host, sep, port = text.rpartition(":")
+    if not (sep and host and port.isdigit() and 1 <= int(port) <= 65535):
+        raise argparse.ArgumentTypeError(f"must be HOST:PORT with a port in 1..65535, got {text!r}")
+    return text
+
+
+def _int_at_least(low: int):
+    """argparse type: an integer >= ``low``."""
+
+    def parse(text: str) -> int:
+        try:
+            v = int(text)
+        except ValueError:
+            v = None
+        if v is None or v < low:
+            raise argparse.ArgumentTypeError(f"must be an integer >= {low}, got {text!r}")
+        return v
+
+    return parse
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The one parser: every subcommand of ``jaxobs``, and ``--version``."""
     p = _Parser(prog="jaxobs", description="Differentiable simulation and tuning of motor-drive observers and FLLs.")
@@ -678,6 +776,17 @@ def build_parser() -> argparse.ArgumentParser:
     st.add_argument("--out", help="results folder (default: out/<study name>)")
     st.add_argument("--force", action="store_true", help="overwrite a study.nc already in --out")
     st.add_argument("--check", action="store_true", help="validate the study file (every range, the sizes) and exit")
+    dist = st.add_argument_group(
+        "distributed run",
+        "one process of a study split over processes (jaxobs.init_distributed): give all three, or "
+        "--distributed to take them from the environment (JAX_COORDINATOR_ADDRESS, SLURM's srun, Open MPI)",
+    )
+    dist.add_argument("--coordinator", type=_host_port, metavar="HOST:PORT", help="process 0's address and a free port")
+    dist.add_argument("--num-processes", type=_int_at_least(1), metavar="N", help="the number of processes, >= 1")
+    dist.add_argument("--process-id", type=_int_at_least(0), metavar="I", help="this process's index, 0..N-1")
+    dist.add_argument(
+        "--distributed", action="store_true", help="join a distributed run; what is not given, the environment gives"
+    )
     st.set_defaults(func=_cmd_study)
 
     add_export_parser(sub)

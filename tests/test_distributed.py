@@ -1,0 +1,210 @@
+"""A study split over processes (jax.distributed, CPU collectives) equals the same study in one process.
+
+Two local processes, one CPU device each, join a run on a free localhost port; each runs the
+``jaxobs study`` command line (process 0 writes the results, process 1 only computes) and then
+``run_study`` itself, and saves the Dataset it returned.  Both Datasets and process 0's study.nc must
+equal the study run here, in one process, to float64 rounding.
+"""
+
+import os
+import socket
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import numpy as np
+import pytest
+import xarray as xr
+
+import jaxobs
+from jaxobs import linear
+from jaxobs.study import run_study
+from tuning.cli import main
+
+ROOT = Path(__file__).resolve().parents[1]
+AXES = {"freq_step": [-2.0, 1.0], "dc": [0.0, 0.05, 0.1]}
+# 6 scenarios in chunks of 4 over 2 devices: two chunks, the last padded (2 scenarios of 4 are copies)
+OPTS = {"t_event": 0.1, "horizon": 0.2, "chunk_size": 4}
+STUDY_TOML = """\
+[study]
+name = "two-processes"
+t_event = 0.1
+horizon = 0.2
+chunk_size = 4
+[designs.SOGI-FLL]
+closed_form = "sogi-fll"
+[axes]
+freq_step = [-2.0, 1.0]
+dc = [0.0, 0.05, 0.1]
+"""
+
+_WORKER = (
+    textwrap.dedent(
+        """
+    import sys
+    import jax
+    from tuning.cli import main
+
+    import jaxobs.sharding as S
+
+    # the split itself: every chunk's results reach gather_batch spread over both processes, this process
+    # holding 2 rows of each chunk of 4 (without the split, both would compute everything, and agree too)
+    seen, gather = [], S.gather_batch
+    def spy(tree):
+        seen.extend((x.is_fully_addressable, [s.data.shape[0] for s in x.addressable_shards])
+                    for x in jax.tree.leaves(tree))
+        return gather(tree)
+    S.gather_batch = spy
+
+    pid, addr, toml, out = int(sys.argv[1]), sys.argv[2], sys.argv[3], sys.argv[4]
+    rc = main(["study", toml, "--out", out, "--quiet", "--coordinator", addr, "--num-processes", "2",
+               "--process-id", str(pid)])
+    assert rc == 0, rc
+    # the command line joined the run: two processes, one device each, the mesh over both
+    assert (jax.process_count(), len(jax.devices()), len(jax.local_devices())) == (2, 2, 1), jax.devices()
+    from jaxobs import linear
+    from jaxobs.study import run_study
+
+    ds = run_study({"SOGI-FLL": linear.sogi_fll_closed_form()}, __AXES__, **__OPTS__)
+    ds.to_netcdf(f"{out}/process{pid}.nc", engine="scipy")
+    # 2 runs x 2 chunks x 8 leaves (7 metrics and flags, ok)
+    assert len(seen) == 32 and all(s == (False, [2]) for s in seen), seen
+    print("WORKER-DONE", pid)
+    """
+    )
+    .replace("__AXES__", repr(AXES))
+    .replace("__OPTS__", repr(OPTS))
+)
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def _gloo_available() -> bool:
+    try:
+        from jax._src.lib import _jax
+    except ImportError:  # cannot tell in this jaxlib: run, and let the processes say
+        return True
+    return hasattr(_jax, "make_gloo_tcp_collectives")
+
+
+def _assert_same_study(got: xr.Dataset, want: xr.Dataset, what: str):
+    assert set(got.data_vars) == set(want.data_vars), what
+    for k in want.data_vars:
+        a, b = got[k].values, want[k].values
+        assert a.shape == b.shape and a.dtype == b.dtype, (what, k)
+        if a.dtype.kind == "f":
+            # a device's share is a smaller vmap, which XLA may vectorize differently: last-bit differences
+            # (the same ones as chunk_size=2 in one process gives)
+            np.testing.assert_allclose(a, b, rtol=1e-12, atol=0, equal_nan=True, err_msg=f"{what}: {k}")
+        else:
+            np.testing.assert_array_equal(a, b, err_msg=f"{what}: {k}")
+    for c in want.coords:
+        np.testing.assert_array_equal(got[c].values, want[c].values, err_msg=f"{what}: coordinate {c}")
+    for key, v in want.attrs.items():
+        assert got.attrs[key] == v, (what, key)
+
+
+@pytest.mark.skipif(not _gloo_available(), reason="this jaxlib has no gloo CPU collectives")
+def test_study_over_two_processes_equals_one_process(tmp_path):
+    toml = tmp_path / "study.toml"
+    toml.write_text(STUDY_TOML)
+    out = tmp_path / "out"
+    env = {k: v for k, v in os.environ.items() if k not in ("XLA_FLAGS", "JAX_NUM_CPU_DEVICES")}
+    env.update(JAX_PLATFORMS="cpu", JAXOBS_HOST_DEVICES="1", PYTHONPATH=str(ROOT))
+    cache = os.environ.get("JAXOBS_TEST_CACHE", str(Path.home() / ".cache" / "jaxobs" / "jax-tests"))
+    if cache:  # the test suite's persistent compilation cache (tests/conftest.py): it changes no number
+        env.update(JAX_COMPILATION_CACHE_DIR=cache, JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS="1.0")
+    addr = f"127.0.0.1:{_free_port()}"
+    args = [str(toml), str(out)]
+    procs = [
+        subprocess.Popen(
+            [sys.executable, "-c", _WORKER, str(pid), addr, *args],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+            env=env,
+            cwd=ROOT,
+        )
+        for pid in (0, 1)
+    ]
+    outs = []
+    try:
+        for p in procs:
+            outs.append(p.communicate(timeout=300))
+    finally:
+        for p in procs:  # a process left waiting for its peer in a collective
+            if p.poll() is None:
+                p.kill()
+                p.wait()
+    for pid, (p, (so, se)) in enumerate(zip(procs, outs)):
+        assert p.returncode == 0 and f"WORKER-DONE {pid}" in so, f"process {pid}:\n{so[-2000:]}\n{se[-3000:]}"
+    # the command line: process 0 wrote the results and printed the table, process 1 one line
+    assert "study two-processes: 1 designs x 6 scenarios" in outs[0][0]
+    assert "process 1 of 2 computed its share; process 0 writes the results" in outs[1][0]
+    assert "[Gloo]" not in outs[0][0] + outs[1][0]  # gloo's connection line goes to stderr, stdout is results
+    assert sorted(f.name for f in out.glob("*.nc")) == ["process0.nc", "process1.nc", "study.nc"]
+
+    want = run_study({"SOGI-FLL": linear.sogi_fll_closed_form()}, AXES, **OPTS)
+    want.to_netcdf(tmp_path / "one_process.nc", engine="scipy")  # through the same writer (NetCDF3: int32 counts)
+    want = xr.load_dataset(tmp_path / "one_process.nc", engine="scipy")
+    assert want.sizes["freq_step"] * want.sizes["dc"] == 6 and float(want["ripple_freq"].max()) > 0
+    for name in ("process0.nc", "process1.nc"):
+        _assert_same_study(xr.load_dataset(out / name, engine="scipy"), want, name)
+    cli = xr.load_dataset(out / "study.nc", engine="scipy")
+    assert cli.attrs["source"] == "jaxobs.study.run_study" and "study_sha256" in cli.attrs
+    _assert_same_study(cli, want, "study.nc (jaxobs study, process 0)")
+
+
+def test_init_distributed_rejects_bad_arguments_before_touching_jax():
+    for kw, field in (
+        ({"coordinator": "localhost"}, "coordinator"),
+        ({"coordinator": "localhost:0"}, "coordinator"),
+        ({"coordinator": ":1234"}, "coordinator"),
+        ({"coordinator": 1234}, "coordinator"),
+        ({"num_processes": 0}, "num_processes"),
+        ({"num_processes": True}, "num_processes"),
+        ({"process_id": -1}, "process_id"),
+        ({"process_id": 1.0}, "process_id"),
+        ({"num_processes": 2, "process_id": 2}, r"process_id must be in 0\.\.1"),
+    ):
+        with pytest.raises(ValueError, match=field):
+            jaxobs.init_distributed(**kw)
+
+
+def test_global_batch_and_gather_batch_in_one_process():
+    import jax
+
+    x = {"a": np.arange(6.0), "b": np.arange(12.0).reshape(6, 2)}
+    mesh = jaxobs.batch_mesh(jax.devices()[:1])
+    g = jaxobs.sharding.global_batch(x, mesh)
+    assert g["a"].sharding.spec == jax.sharding.PartitionSpec("batch")
+    back = jaxobs.sharding.gather_batch(g)
+    np.testing.assert_array_equal(back["b"], x["b"])
+    assert isinstance(back["a"], np.ndarray)
+    with pytest.raises(ValueError, match="divide"):
+        jaxobs.sharding.global_batch({"a": np.arange(5.0)}, jaxobs.batch_mesh([jax.devices()[0]] * 2))
+    with pytest.raises(ValueError, match="scalar"):
+        jaxobs.sharding.global_batch({"a": np.arange(6.0), "s": np.float64(1.0)}, mesh)
+    with pytest.raises(ValueError, match="mesh"):
+        run_study({"a": linear.sogi_fll_closed_form()}, {"dc": [0.0]}, mesh="cpu")
+
+
+def test_study_cli_rejects_bad_distributed_options(capsys):
+    for argv, msg in (
+        (["--num-processes", "0"], "--num-processes: must be an integer >= 1"),
+        (["--process-id", "x"], "--process-id: must be an integer >= 0"),
+        (["--coordinator", "host"], "--coordinator: must be HOST:PORT"),
+        (["--coordinator", "h:1", "--num-processes", "2", "--process-id", "2"], "--process-id must be in 0..1"),
+    ):
+        try:
+            rc = main(["study", "--out", "unused", *argv])
+        except SystemExit as e:  # argparse's error (tuning.cli._Parser): one line, then exit 2
+            rc = e.code
+        assert rc == 2, argv
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and msg in err[0], (argv, err)
