@@ -236,7 +236,13 @@ def map_batch(fn, tree, *, mesh: Mesh | None = None, tile: int = TILE):
     )(tree)
 
 
-def init_distributed(coordinator: str | None = None, num_processes: int | None = None, process_id: int | None = None):
+def init_distributed(
+    coordinator: str | None = None,
+    num_processes: int | None = None,
+    process_id: int | None = None,
+    *,
+    timeout: int = 300,
+):
     """Join a run of several processes (``jax.distributed.initialize``); call it in every process, first.
 
     ``coordinator`` is process 0's ``"HOST:PORT"`` (a free port there; every process gives the same),
@@ -252,9 +258,15 @@ def init_distributed(coordinator: str | None = None, num_processes: int | None =
     Afterwards ``jax.devices()`` lists every process's devices, ``jax.local_devices()`` this
     process's, and :func:`jaxobs.study.run_study` splits each chunk of scenarios over all of them.
     Returns ``(process_id, num_processes)`` as JAX sees them.  JAX raises ``RuntimeError`` for a
-    second call or one after its backends started, and when the coordinator cannot be reached in
-    its timeout (300 s).
+    second call or one after its backends started.  ``timeout`` (seconds, ≥ 1) is how long every
+    process waits for the others to join (``initialization_timeout``): a process still missing a
+    peer then is aborted by JAX's C++ runtime (SIGABRT, exit status 134, a stack dump on stderr; jax
+    0.10 raises nothing Python could catch), so launch all N processes together.  A process other
+    than 0 given ``coordinator`` first waits (up to ``timeout``) for process 0 to listen there and
+    raises ``ConnectionError`` if it never does, before JAX is touched.
     """
+    if isinstance(timeout, bool) or not isinstance(timeout, int) or timeout < 1:
+        raise ValueError(f"init_distributed: timeout must be an integer >= 1 (seconds), got {timeout!r}")
     if coordinator is not None:
         host, sep, port = coordinator.rpartition(":") if isinstance(coordinator, str) else ("", "", "")
         if not (sep and host and port.isdigit() and 1 <= int(port) <= 65535):
@@ -269,16 +281,43 @@ def init_distributed(coordinator: str | None = None, num_processes: int | None =
             f"init_distributed: process_id must be in 0..{num_processes - 1} (num_processes={num_processes}), "
             f"got {process_id}"
         )
+    if coordinator is not None and process_id not in (None, 0):
+        _wait_for_coordinator(coordinator, timeout)
     if jax.config.jax_cpu_collectives_implementation is None:
         jax.config.update("jax_cpu_collectives_implementation", "gloo")
     try:
-        jax.distributed.initialize(coordinator, num_processes, process_id)
+        jax.distributed.initialize(coordinator, num_processes, process_id, initialization_timeout=timeout)
     except ValueError as e:  # JAX's own: a value it could not find in the arguments or the environment
         raise ValueError(
             f"init_distributed: {e} (give coordinator, num_processes and process_id, or run it under a "
             "launcher JAX detects: SLURM's srun, Open MPI's mpirun)"
         ) from None
     return jax.process_index(), jax.process_count()
+
+
+def _wait_for_coordinator(coordinator: str, timeout: int) -> None:
+    """A process other than 0 first checks that process 0 listens (TCP, retried for ``timeout`` s).
+
+    Without it a missing process 0 is found only by JAX's C++ runtime, which aborts the process;
+    this gives a Python error (``ConnectionError``; the CLI prints it in one line).  A process 0
+    whose peers never come cannot be caught this way: JAX aborts it after ``timeout``."""
+    import socket
+    import time
+
+    host, _, port = coordinator.rpartition(":")
+    host = host.strip("[]")  # "[::1]:1234"
+    deadline = time.monotonic() + timeout
+    while True:
+        try:
+            with socket.create_connection((host, int(port)), timeout=min(5.0, timeout)):
+                return
+        except OSError as e:
+            if time.monotonic() >= deadline:
+                raise ConnectionError(
+                    f"init_distributed: no coordinator (process 0) listening at {coordinator} within {timeout} s "
+                    f"({e.strerror or e}); start every process of the run together"
+                ) from None
+            time.sleep(0.25)
 
 
 def global_batch(tree, mesh: Mesh | None = None):

@@ -102,7 +102,8 @@ class GridSignal(eqx.Module):
         )
         self.sub_amplitude = check_nonnegative("sub_amplitude", sub_amplitude, own)
         self.sub_freq = check_nonnegative("sub_freq", sub_freq, own)
-        if self.freq.ndim == 0 and not isinstance(self.freq, jax.core.Tracer):
+        # a traced freq or freq_step (vmap over either) is checked by nobody here: the divergence flags see it
+        if self.freq.ndim == 0 and not any(isinstance(x, jax.core.Tracer) for x in (self.freq, self.freq_step)):
             f_after = float(self.freq) + float(jnp.max(jnp.atleast_1d(self.freq_step)))
             if f_after <= 0:
                 raise ValueError(f"{own}.freq_step must keep the frequency > 0 Hz, got freq + freq_step = {f_after:g}")

@@ -11,6 +11,7 @@ import socket
 import subprocess
 import sys
 import textwrap
+import time
 from pathlib import Path
 
 import numpy as np
@@ -200,6 +201,10 @@ def test_study_cli_rejects_bad_distributed_options(capsys):
         (["--process-id", "x"], "--process-id: must be an integer >= 0"),
         (["--coordinator", "host"], "--coordinator: must be HOST:PORT"),
         (["--coordinator", "h:1", "--num-processes", "2", "--process-id", "2"], "--process-id must be in 0..1"),
+        (["--timeout", "0"], "--timeout: must be an integer >= 1"),
+        # without --distributed all three are needed, named as the command line names them
+        (["--num-processes", "2", "--process-id", "0"], "needs --coordinator, --num-processes and --process-id"),
+        (["--coordinator", "h:1", "--process-id", "0"], "(missing: --num-processes)"),
     ):
         try:
             rc = main(["study", "--out", "unused", *argv])
@@ -208,3 +213,28 @@ def test_study_cli_rejects_bad_distributed_options(capsys):
         assert rc == 2, argv
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and msg in err[0], (argv, err)
+
+
+def test_study_cli_refuses_what_cannot_be_split_before_joining(tmp_path, capsys):
+    # a drive or recording study is refused from the file before the process joins (a refusal after
+    # joining would leave the other processes waiting); --timeout 1 bounds the test if it did join
+    dist = ["--coordinator", f"127.0.0.1:{_free_port()}", "--num-processes", "2", "--process-id", "1"]
+    for body, kind in (('[study]\nkind = "drive"\n', "drive"), ('[study.recording]\nfiles = ["a.csv"]\n', "recording")):
+        f = tmp_path / f"{kind}.toml"
+        f.write_text(body)
+        assert main(["study", str(f), "--out", str(tmp_path / "o"), "--timeout", "1", *dist]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and f"run this {kind} study without --coordinator" in err[0], err
+    assert not (tmp_path / "o").exists()
+
+
+def test_a_process_whose_coordinator_never_comes_gets_one_line(tmp_path, capsys):
+    # process 1 checks that process 0 listens before JAX's runtime would abort it: exit 2, one line
+    dist = ["--coordinator", f"127.0.0.1:{_free_port()}", "--num-processes", "2", "--process-id", "1"]
+    t0 = time.monotonic()
+    assert main(["study", "--out", str(tmp_path / "o"), "--timeout", "1", "--quiet", *dist]) == 2
+    assert time.monotonic() - t0 < 30
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "no coordinator (process 0) listening at 127.0.0.1:" in err[0], err
+    with pytest.raises(ValueError, match="timeout must be an integer >= 1"):
+        jaxobs.init_distributed(timeout=0)

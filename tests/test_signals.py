@@ -156,3 +156,14 @@ def test_on_signal_rejects_an_emf_with_another_sample_time():
     with pytest.raises(ValueError, match=r"EMFSignal\.ts = 5e-05 s.*PureIntegratorFlux\.ts = 0\.0001 s"):
         jaxobs.OnSignal(obs, EMFSignal(A1=100.0, omega1=314.0, ts=5e-5))
     jaxobs.OnSignal(obs, EMFSignal(A1=100.0, omega1=314.0, ts=1e-4))  # the same: fine
+
+
+def test_grid_signal_vmaps_over_freq_step_and_still_refuses_a_concrete_bad_one():
+    """The constructor's freq + freq_step > 0 check runs on concrete values only: a vmap over
+    ``freq_step`` (a sweep of frequency steps) builds the signal with a tracer and must not raise
+    JAX's ConcretizationTypeError; a concrete step that stops the grid still gets the ValueError."""
+    steps = jnp.array([-2.0, 0.0, 3.0])
+    f = jax.vmap(lambda s: GridSignal(1.0, 50.0, 0.0, 0.01, freq_step=s).omega(jnp.float64(0.02)))
+    np.testing.assert_allclose(np.asarray(f(steps)), 2 * np.pi * (50.0 + np.asarray(steps)), rtol=1e-12)
+    with pytest.raises(ValueError, match="freq_step must keep the frequency > 0 Hz"):
+        GridSignal(1.0, 50.0, 0.0, 0.01, freq_step=-60.0)

@@ -11,7 +11,7 @@
                                                            paper 000's experiments, paper vs ours
     jaxobs reproduce leso [--out DIR] [--force] [--json]   paper 002's experiments, paper vs ours
     jaxobs study [STUDY.toml] [--out DIR] [--force] [--check] [--quiet]
-                 [--coordinator HOST:PORT --num-processes N --process-id I | --distributed]
+                 [--coordinator HOST:PORT --num-processes N --process-id I | --distributed] [--timeout S]
                                                            robustness study → NetCDF, worst cases, figures
     jaxobs export [RESULT.json | --design D] [--out DIR] [--force] [--check]
                                                            the observer as C99 float32 with golden vectors
@@ -49,7 +49,10 @@ under ``--out`` (``tune`` and ``study``: default ``./out/<name>``, the job's or 
 environment, e.g. SLURM) runs one process of a study split over processes (:func:`jaxobs.init_distributed`,
 before the study file is loaded): process 0 alone checks, locks and writes ``--out``, prints the table and
 shows progress; the others compute their share, print one line and exit 0; when process 0 cannot use
-``--out`` every process ends with exit 2 before computing.  FLL studies only.
+``--out`` every process ends with exit 2 before computing.  FLL studies only (a drive or recording study
+is refused before joining).  ``--timeout S`` (default 300): how long each process waits for the others;
+a process other than 0 that finds no coordinator then exits 2 with one line, a process 0 left alone is
+aborted by JAX's runtime (exit 134).
 ``tune --resume`` continues from ``<out>/checkpoint.npz`` if it is this job's (the job file's sha256 is
 in it); with no checkpoint it says so in one line and starts fresh.
 """
@@ -354,9 +357,14 @@ def _recording_study(designs: dict, *, recording, t_event, horizon, steady_from,
 
 def _cmd_study(args) -> int:
     _enable_x64()
-    # a distributed run is joined before anything starts JAX (loading the designs does); --check joins nothing
-    rank = None if args.check else _join_distributed(args)
     path = Path(args.study) if args.study else Path(str(resources.files("jaxobs") / "data" / "default_study.toml"))
+    # a distributed run is joined before anything starts JAX (loading the designs does); --check joins nothing.
+    # What cannot be split over processes is refused before joining: a process that refuses after joining
+    # leaves the others waiting for it.
+    rank = None
+    if not args.check and _distributed_asked(args):
+        _refuse_unsplittable(path)
+        rank = _join_distributed(args)
     spec = _load_study(path)  # everything checked: tables, keys, ranges, sizes, result files
     name, designs, axes = spec.name, spec.designs, spec.axes
     opts = dict(spec.opts, kind=spec.kind, provenance=spec.provenance)
@@ -365,27 +373,69 @@ def _cmd_study(args) -> int:
         return 0
     out = Path(args.out) if args.out else Path("out") / safe_name(str(name), "study")
     if rank is not None and rank[1] > 1:
-        if spec.kind == "drive" or spec.opts.get("recording") is not None:
-            raise ValueError(
-                f"{path}: only FLL studies on a scenario grid or sample are split over processes; "
-                f"run this {'drive' if spec.kind == 'drive' else 'recording'} study without --coordinator/--distributed"
-            )
         return _distributed_study(name, designs, axes, opts, out, args, rank)
     with OutDir(out, ["study.nc"], force=args.force):
         args.log_dir = out
         return _run_study(name, designs, axes, opts, out, args.quiet)
 
 
+def _distributed_asked(args) -> bool:
+    """Whether ``study`` was given any of the distributed run's options."""
+    given = (args.coordinator, args.num_processes, args.process_id, args.timeout)
+    return args.distributed or any(v is not None for v in given)
+
+
+def _refuse_unsplittable(path: Path) -> None:
+    """Drive and recording studies run in one process: refused from the raw TOML, before JAX starts.
+
+    A file that does not parse passes here; :func:`tuning.study_file.load_study` reports it after joining
+    (every process reads the same file, so every process stops with the same one-line error)."""
+    from .job import JobError, read_toml
+    from .study_file import WHAT
+
+    try:
+        raw, _ = read_toml(path, WHAT)
+    except JobError:
+        return
+    st = raw.get("study") if isinstance(raw.get("study"), dict) else {}
+    kind = "drive" if st.get("kind") == "drive" else "recording" if "recording" in st else None
+    if kind is not None:
+        raise ValueError(
+            f"{path}: only FLL studies on a scenario grid or sample are split over processes; "
+            f"run this {kind} study without --coordinator/--num-processes/--process-id/--distributed"
+        )
+
+
 def _join_distributed(args):
-    """``study --coordinator/--num-processes/--process-id/--distributed``: join the run (jaxobs.init_distributed,
-    which takes what is not given from the environment); (process id, process count), or None: not asked."""
+    """``study --coordinator/--num-processes/--process-id/--distributed``: join the run
+    (jaxobs.init_distributed); (process id, process count).  Without ``--distributed`` all three are
+    required; with it, what is not given comes from the environment (JAX_COORDINATOR_ADDRESS, SLURM, Open MPI)."""
     given = (args.coordinator, args.num_processes, args.process_id)
-    if not args.distributed and all(v is None for v in given):
-        return None
+    if not args.distributed:
+        missing = [f for f, v in zip(("--coordinator", "--num-processes", "--process-id"), given) if v is None]
+        if missing:
+            raise ValueError(
+                f"a distributed study needs --coordinator, --num-processes and --process-id (missing: "
+                f"{', '.join(missing)}), or --distributed to take them from the environment"
+            )
     if None not in given[1:] and args.process_id >= args.num_processes:
         n = args.num_processes
         raise ValueError(f"--process-id must be in 0..{n - 1} (--num-processes {n}), got {args.process_id}")
-    return jaxobs.init_distributed(*given)
+    timeout = 300 if args.timeout is None else args.timeout
+    if not args.quiet:  # a process left alone is aborted by JAX's runtime (a C++ stack dump): say so first
+        who = "this process" if args.process_id is None else f"process {args.process_id}"
+        print(
+            f"jaxobs: {who} joins the distributed run; it waits up to {timeout} s (--timeout) for the others, "
+            "then JAX aborts it",
+            file=sys.stderr,
+        )
+    try:
+        return jaxobs.init_distributed(*given, timeout=timeout)
+    except ValueError as e:  # what JAX could not find: name the CLI's options, not the function's arguments
+        raise ValueError(
+            f"{e}".replace("init_distributed: ", "--distributed: ", 1)
+            + "; or give --coordinator, --num-processes and --process-id"
+        ) from None
 
 
 @contextlib.contextmanager
@@ -425,7 +475,7 @@ def _distributed_study(name, designs, axes, opts, out: Path, args, rank) -> int:
         if failure is not None:
             raise failure
         if not ok:
-            raise ValueError(f"process 0 cannot use --out {str(out)!r} (its error says why); nothing computed")
+            raise ValueError("process 0 cannot use its --out (its error says why); nothing computed")
         if pid == 0:
             return _run_study(name, designs, axes, opts, out, args.quiet)
         kw = {k: v for k, v in opts.items() if k not in ("kind", "provenance", "recording")}
@@ -786,6 +836,13 @@ def build_parser() -> argparse.ArgumentParser:
     dist.add_argument("--process-id", type=_int_at_least(0), metavar="I", help="this process's index, 0..N-1")
     dist.add_argument(
         "--distributed", action="store_true", help="join a distributed run; what is not given, the environment gives"
+    )
+    dist.add_argument(
+        "--timeout",
+        type=_int_at_least(1),
+        metavar="S",
+        help="seconds to wait for every process to join (default 300); a process still alone then is "
+        "killed by JAX (exit status 134, no results), not given an error",
     )
     st.set_defaults(func=_cmd_study)
 
