@@ -238,3 +238,15 @@ def test_a_process_whose_coordinator_never_comes_gets_one_line(tmp_path, capsys)
     assert len(err) == 1 and "no coordinator (process 0) listening at 127.0.0.1:" in err[0], err
     with pytest.raises(ValueError, match="timeout must be an integer >= 1"):
         jaxobs.init_distributed(timeout=0)
+
+
+def test_distributed_without_an_environment_names_what_to_set(tmp_path):
+    # a subprocess: jax.distributed.initialize changes process-wide JAX state even when it refuses
+    env = {k: v for k, v in os.environ.items() if not k.startswith(("JAX_COORDINATOR", "SLURM_", "OMPI_", "PMI"))}
+    env.update(JAX_PLATFORMS="cpu", JAXOBS_HOST_DEVICES="1", PYTHONPATH=str(ROOT))
+    cmd = [sys.executable, "-m", "tuning.cli", "study", "--distributed", "--quiet", "--out", str(tmp_path / "o")]
+    r = subprocess.run(cmd, capture_output=True, text=True, env=env, cwd=ROOT, timeout=120, check=False)
+    err = r.stderr.strip().splitlines()
+    assert r.returncode == 2 and len(err) == 1, r.stderr
+    assert "--distributed: the environment does not give the run" in err[0] and "JAX_COORDINATOR_ADDRESS" in err[0]
+    assert not (tmp_path / "o").exists()

@@ -431,10 +431,12 @@ def _join_distributed(args):
         )
     try:
         return jaxobs.init_distributed(*given, timeout=timeout)
-    except ValueError as e:  # what JAX could not find: name the CLI's options, not the function's arguments
+    except ValueError as e:  # what JAX could not find: name the CLI's options and variables, not the function's
+        jax_says = str(e.__context__ or e).rstrip(".")  # init_distributed raises from JAX's own ValueError
         raise ValueError(
-            f"{e}".replace("init_distributed: ", "--distributed: ", 1)
-            + "; or give --coordinator, --num-processes and --process-id"
+            f"--distributed: the environment does not give the run ({jax_says}): set JAX_COORDINATOR_ADDRESS "
+            "(with --num-processes and --process-id), launch under SLURM's srun or Open MPI's mpirun, "
+            "or give --coordinator, --num-processes and --process-id"
         ) from None
 
 
