@@ -7,10 +7,13 @@ Precomputed SOGI-FLL, 1 s at 10 kHz, M scenario-steps/s, best of 3, in one proce
 - ``tiles``: jaxobs's loop under :func:`jaxobs.map_batch` on every host device, the tile 256 … the
   whole device share, beside the hand-written JAX scan (:func:`benchmarks.workloads.jax_hand_fll`);
 - ``layout``: one device, the whole batch under one ``vmap``: the samples scenario-major (batch, n) as
-  jaxobs stores them, the same samples stored time-major (n, batch) and ``vmap``\\ ped with
-  ``in_axes=1``, and ``map_batch``'s 512-tiles of the scenario-major array.
+  jaxobs stores them, the same samples stored time-major (n, batch) and ``vmap``-ed with
+  ``in_axes=1``, and ``map_batch``'s 512-tiles of the scenario-major array;
+- ``scan over xs``: outside jaxobs's loop, a per-scenario ``lax.scan`` with the samples as its ``xs``,
+  ``vmap``-ed over every device, the step on jaxobs's stacked state or on a tuple of components,
+  the samples scenario-major or time-major (``in_axes=1``).
 
-About 30 s per dtype on a 2-core machine (compiles included).
+About a minute per dtype on a 2-core machine (compiles included).
 """
 
 from __future__ import annotations
@@ -82,6 +85,52 @@ def main(argv=None) -> None:
         "512-tiles": _rate(lambda: tiled(sig), b1, n),
     }
     print(f"{a.dtype} batch {b1}, 1 device:", ", ".join(f"{k} {v:.0f}" for k, v in rows.items()))
+
+    # outside jaxobs's loop: a per-scenario lax.scan with the samples as its xs, vmapped, on every device,
+    # the step on jaxobs's stacked state (obs.f) or on a tuple of components (as jax-hand), the samples
+    # scenario-major (B, n) or time-major (n, B) with in_axes=1; from jax-hand's start-up state
+    from jax.sharding import PartitionSpec as P
+
+    h = jnp.asarray(W.TS, jnp.result_type(float))
+    field = W._sogi_fll_field(obs)
+
+    def scan_one(stacked, x, f1, f2, acc, u, om):
+        def step(c, row):
+            x, f1, f2, acc = c
+            d = x[2] - row[1]
+            if stacked:
+                f0 = obs.f(x, row[0])
+                return (x + (h / 12) * (23 * f0 - 16 * f1 + 5 * f2), f0, f1, acc + d * d), None
+            f0 = field(*x, row[0])
+            x = tuple(xi + (h / 12) * (23 * p - 16 * q + 5 * r) for xi, p, q, r in zip(x, f0, f1, f2))
+            return (x, f0, f1, acc + d * d), None
+
+        if stacked:
+            x, f1, f2 = jnp.stack(x), jnp.stack(f1), jnp.stack(f2)
+        return h * jax.lax.scan(step, (x, f1, f2, acc), (u, om))[0][3]
+
+    mesh = jaxobs.batch_mesh()
+    sb = P("batch")
+    rows = {}
+    for stacked in (True, False):
+        for major in ("scenario", "time"):
+            ax = 0 if major == "scenario" else 1
+            spec = P("batch", None) if major == "scenario" else P(None, "batch")
+            f = jax.jit(
+                jax.shard_map(
+                    jax.vmap(lambda *args, s=stacked: scan_one(s, *args), in_axes=(0, 0, 0, 0, ax, ax)),
+                    mesh=mesh,
+                    in_specs=((sb,) * 3, (sb,) * 3, (sb,) * 3, sb, spec, spec),
+                    out_specs=sb,
+                    check_vma=False,
+                )
+            )
+            u, om = hargs[4:] if major == "time" else (x.T for x in hargs[4:])
+            args = (*hargs[:4], jax.device_put(u, jax.NamedSharding(mesh, spec)), jax.device_put(om, u.sharding))
+            if not bool(jnp.all(f(*args) == hand(*hargs))):
+                raise SystemExit("the per-scenario scan changed the costs")
+            rows[f"{'stacked' if stacked else 'tuple'} step, {major}-major"] = _rate(lambda f=f, a=args: f(*a), B, n)
+    print(f"{a.dtype} batch {B}, scan over xs:", ", ".join(f"{k} {v:.0f}" for k, v in rows.items()))
 
 
 if __name__ == "__main__":
