@@ -69,6 +69,7 @@ That path is JAX's own and was not run here (no cluster: CPU processes only).
 
 from __future__ import annotations
 
+import math
 import os
 import re
 import warnings
@@ -281,13 +282,20 @@ def init_distributed(
             f"init_distributed: process_id must be in 0..{num_processes - 1} (num_processes={num_processes}), "
             f"got {process_id}"
         )
+    import time
+
+    deadline = time.monotonic() + timeout  # one budget: the wait for process 0, then JAX's own
     if coordinator is not None and process_id not in (None, 0):
         _wait_for_coordinator(coordinator, timeout)
-    if jax.config.jax_cpu_collectives_implementation is None:
+    set_gloo = jax.config.jax_cpu_collectives_implementation is None
+    if set_gloo:
         jax.config.update("jax_cpu_collectives_implementation", "gloo")
     try:
-        jax.distributed.initialize(coordinator, num_processes, process_id, initialization_timeout=timeout)
+        left = max(1, math.ceil(deadline - time.monotonic()))
+        jax.distributed.initialize(coordinator, num_processes, process_id, initialization_timeout=left)
     except ValueError as e:  # JAX's own: a value it could not find in the arguments or the environment
+        if set_gloo:  # refused: leave JAX's options as they were
+            jax.config.update("jax_cpu_collectives_implementation", None)
         raise ValueError(
             f"init_distributed: {e} (give coordinator, num_processes and process_id, or run it under a "
             "launcher JAX detects: SLURM's srun, Open MPI's mpirun)"

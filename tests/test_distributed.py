@@ -205,6 +205,7 @@ def test_study_cli_rejects_bad_distributed_options(capsys):
         # without --distributed all three are needed, named as the command line names them
         (["--num-processes", "2", "--process-id", "0"], "needs --coordinator, --num-processes and --process-id"),
         (["--coordinator", "h:1", "--process-id", "0"], "(missing: --num-processes)"),
+        (["--timeout", "5"], "--timeout applies to a distributed run"),
     ):
         try:
             rc = main(["study", "--out", "unused", *argv])
@@ -222,9 +223,10 @@ def test_study_cli_refuses_what_cannot_be_split_before_joining(tmp_path, capsys)
     for body, kind in (('[study]\nkind = "drive"\n', "drive"), ('[study.recording]\nfiles = ["a.csv"]\n', "recording")):
         f = tmp_path / f"{kind}.toml"
         f.write_text(body)
-        assert main(["study", str(f), "--out", str(tmp_path / "o"), "--timeout", "1", *dist]) == 2
-        err = capsys.readouterr().err.strip().splitlines()
-        assert len(err) == 1 and f"run this {kind} study without --coordinator" in err[0], err
+        for check in ([], ["--check"]):  # --check refuses it too: what passes --check, the run accepts
+            assert main(["study", str(f), "--out", str(tmp_path / "o"), "--timeout", "1", *check, *dist]) == 2
+            err = capsys.readouterr().err.strip().splitlines()
+            assert len(err) == 1 and f"run this {kind} study without --coordinator" in err[0], err
     assert not (tmp_path / "o").exists()
 
 
@@ -250,3 +252,32 @@ def test_distributed_without_an_environment_names_what_to_set(tmp_path):
     assert r.returncode == 2 and len(err) == 1, r.stderr
     assert "--distributed: the environment does not give the run" in err[0] and "JAX_COORDINATOR_ADDRESS" in err[0]
     assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.slow  # two more processes (3 s quiet, more under load): the default suite is at its time budget
+@pytest.mark.skipif(not _gloo_available(), reason="this jaxlib has no gloo CPU collectives")
+def test_processes_given_different_study_files_stop_before_computing(tmp_path):
+    # different files would give different chunk shapes, on which gloo aborts both processes (a C++ dump);
+    # the command line compares the files' sha256 right after joining and ends each process in one line
+    env = {k: v for k, v in os.environ.items() if k not in ("XLA_FLAGS", "JAX_NUM_CPU_DEVICES")}
+    env.update(JAX_PLATFORMS="cpu", JAXOBS_HOST_DEVICES="1", PYTHONPATH=str(ROOT))
+    addr = f"127.0.0.1:{_free_port()}"
+    procs = []
+    for pid in (0, 1):
+        f = tmp_path / f"study{pid}.toml"
+        f.write_text(STUDY_TOML if pid == 0 else STUDY_TOML.replace("dc = [0.0, 0.05, 0.1]", "dc = [0.0, 0.1]"))
+        cmd = [sys.executable, "-m", "tuning.cli", "study", str(f), "--out", str(tmp_path / "out"), "--quiet"]
+        cmd += ["--coordinator", addr, "--num-processes", "2", "--process-id", str(pid), "--timeout", "60"]
+        procs.append(subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env))
+    try:
+        outs = [p.communicate(timeout=120) for p in procs]
+    finally:
+        for p in procs:
+            if p.poll() is None:
+                p.kill()
+                p.wait()
+    for pid, (p, (so, se)) in enumerate(zip(procs, outs)):
+        err = [line for line in se.strip().splitlines() if not line.startswith("[Gloo]")]
+        assert p.returncode == 2 and len(err) == 1, f"process {pid}: rc {p.returncode}\n{so}\n{se[-3000:]}"
+        assert "given different study files" in err[0] and "process(es) 1 differ" in err[0], err
+    assert not (tmp_path / "out" / "study.nc").exists()

@@ -61,6 +61,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import hashlib
 import json
 import os
 import sys
@@ -362,9 +363,10 @@ def _cmd_study(args) -> int:
     # What cannot be split over processes is refused before joining: a process that refuses after joining
     # leaves the others waiting for it.
     rank = None
-    if not args.check and _distributed_asked(args):
-        _refuse_unsplittable(path)
-        rank = _join_distributed(args)
+    if _distributed_asked(args):
+        _refuse_unsplittable(path)  # --check too: a file that passes --check is one the run accepts
+        if not args.check:
+            rank = _join_distributed(args)
     spec = _load_study(path)  # everything checked: tables, keys, ranges, sizes, result files
     name, designs, axes = spec.name, spec.designs, spec.axes
     opts = dict(spec.opts, kind=spec.kind, provenance=spec.provenance)
@@ -413,6 +415,11 @@ def _join_distributed(args):
     given = (args.coordinator, args.num_processes, args.process_id)
     if not args.distributed:
         missing = [f for f, v in zip(("--coordinator", "--num-processes", "--process-id"), given) if v is None]
+        if len(missing) == 3:  # --timeout alone
+            raise ValueError(
+                "--timeout applies to a distributed run: give --coordinator, --num-processes and --process-id, "
+                "or --distributed"
+            )
         if missing:
             raise ValueError(
                 f"a distributed study needs --coordinator, --num-processes and --process-id (missing: "
@@ -422,11 +429,12 @@ def _join_distributed(args):
         n = args.num_processes
         raise ValueError(f"--process-id must be in 0..{n - 1} (--num-processes {n}), got {args.process_id}")
     timeout = 300 if args.timeout is None else args.timeout
-    if not args.quiet:  # a process left alone is aborted by JAX's runtime (a C++ stack dump): say so first
-        who = "this process" if args.process_id is None else f"process {args.process_id}"
+    if not args.quiet and args.process_id == 0 and (args.num_processes or 0) > 1:
+        # process 0 left alone is aborted by JAX's runtime (a C++ stack dump): say so first.  The others
+        # check that process 0 listens before JAX starts and end with one line if it does not.
         print(
-            f"jaxobs: {who} joins the distributed run; it waits up to {timeout} s (--timeout) for the others, "
-            "then JAX aborts it",
+            f"jaxobs: process 0 waits up to {timeout} s (--timeout) for the other {args.num_processes - 1} "
+            "process(es); if they do not come, JAX aborts it (exit 134)",
             file=sys.stderr,
         )
     try:
@@ -470,14 +478,25 @@ def _distributed_study(name, designs, axes, opts, out: Path, args, rank) -> int:
                 args.log_dir = out
             except Exception as e:  # told to the others first, so that none of them waits for it in a collective
                 failure = e
-        # every process learns whether process 0 can write before any of them computes; this first collective
-        # connects the CPU collectives, whose gloo prints a line on the C++ stdout: to stderr, stdout is results
+        # every process learns whether process 0 can write, and whether all were given the same study (file and
+        # result files, by sha256), before any of them computes: different files would give different chunk
+        # shapes, on which the collectives abort the processes.  The first collective connects the CPU
+        # collectives, whose gloo prints a line on the C++ stdout: to stderr, stdout is results.
+        prov = {k: v for k, v in sorted((opts.get("provenance") or {}).items()) if k != "study_file"}
+        digest = hashlib.sha256(json.dumps(prov, sort_keys=True, default=str).encode()).digest()
         with _stdout_to_stderr():
             ok = int(multihost_utils.broadcast_one_to_all(np.int32(failure is None)))
+            digests = np.asarray(multihost_utils.process_allgather(np.frombuffer(digest[:16], dtype=np.int32)))
         if failure is not None:
             raise failure
         if not ok:
             raise ValueError("process 0 cannot use its --out (its error says why); nothing computed")
+        differ = [i for i in range(count) if not np.array_equal(digests.reshape(count, -1)[i], digests[0])]
+        if differ:
+            raise ValueError(
+                f"the processes were given different study files (or result files): process(es) "
+                f"{', '.join(map(str, differ))} differ from process 0; give every process the same; nothing computed"
+            )
         if pid == 0:
             return _run_study(name, designs, axes, opts, out, args.quiet)
         kw = {k: v for k, v in opts.items() if k not in ("kind", "provenance", "recording")}
@@ -843,8 +862,8 @@ def build_parser() -> argparse.ArgumentParser:
         "--timeout",
         type=_int_at_least(1),
         metavar="S",
-        help="seconds to wait for every process to join (default 300); a process still alone then is "
-        "killed by JAX (exit status 134, no results), not given an error",
+        help="seconds to wait for every process to join (default 300); then a process other than 0 that found "
+        "no process 0 exits 2 with one line, and a process 0 left alone is aborted by JAX (exit 134)",
     )
     st.set_defaults(func=_cmd_study)
 
