@@ -165,7 +165,12 @@ def test_vmap_over_64_scenarios_and_gradients():
 
 
 @pytest.mark.parametrize(
-    "ctor, names", [(jaxobs.FALESO, ("k1", "k2", "kp_pll", "ki_pll")), (jaxobs.CLESO, ("omega0",))], ids=["FA", "C"]
+    "ctor, names",
+    [
+        pytest.param(jaxobs.FALESO, ("k1", "k2", "kp_pll", "ki_pll"), id="FA"),
+        # the C-LESO's one gain: the same code path as the FA-LESO's; in the slow suite for the fast one's budget
+        pytest.param(jaxobs.CLESO, ("omega0",), id="C", marks=pytest.mark.slow),
+    ],
 )
 def test_gradients_wrt_leso_and_pll_gains(ctor, names):
     sc = D.Scenario(PAR, speed_ref=D.Profile.constant(600 * D.RPM), omega_m0=600 * D.RPM, load=D.Profile.constant(5.0))

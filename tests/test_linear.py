@@ -167,6 +167,7 @@ def test_grad_of_phase_margin_and_crossover_match_finite_differences():
 # --------------------------------------------------------------------------
 
 
+@pytest.mark.slow  # over the fast suite's budget on a cold compile cache (~ 5 s); CI runs it
 def test_pinned_crossover_formulation_has_no_interior_maximum():
     """The literal formulation — k1 fixed (ωp fixed), |L(jωc)| = 1 at ωc = 2π·18.8, maximize
     the PM over (k2, λ) — has no interior optimum: on the constraint PM = atan(ωc/ωz) −
@@ -233,6 +234,7 @@ def test_symmetric_optimum_recovered_by_optimization():
     assert float(m.phase_margin) == pytest.approx(math.degrees(math.atan((b * b - 1) / (2 * b))), abs=1e-3)
 
 
+@pytest.mark.slow  # over the fast suite's budget on a cold compile cache (~ 17 s); CI runs it
 def test_with_k1_and_k2_fixed_the_margin_has_no_interior_maximum_over_lambda():
     """PM(λ) with k1, k2 fixed decreases monotonically: the best λ is the boundary λ → 0
     (a loop without integral action), so the symmetric optimum needs k2 free as well."""

@@ -97,6 +97,7 @@ def test_unsettled_runs_are_flagged():
     assert float(ds["settling_freq"].squeeze()) == pytest.approx(0.1, abs=2e-4)  # t[-1] - t_event
 
 
+@pytest.mark.slow  # a scale run (~15 s of simulation, not compile), over the fast suite's budget; CI runs it
 def test_study_of_more_than_10000_scenarios(tmp_path, capsys):
     """10,240 scenarios (random draws over 5 axes) of the SOGI-FLL-WIF in chunks of 2048; time reported."""
     t0 = time.time()
