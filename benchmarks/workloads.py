@@ -320,6 +320,23 @@ def _sogi_fll_field(obs):
     return f
 
 
+def sogi_fll_tuple_step(obs, h):
+    """jax-hand's steady AB3 step on state rows: ``step((x, f1, f2, acc), (u, ω)) -> (carry, None)`` with x, f1,
+    f2 tuples of the (y, q, ω̂) rows and acc the running sum of (ω̂ − ω)² (the output at t_k is the state before
+    the update, as in jaxobs.AbstractObserver.step)."""
+    f = _sogi_fll_field(obs)
+
+    def step(c, row):
+        x, f1, f2, acc = c
+        uu, ww = row
+        d = x[2] - ww
+        f0 = f(*x, uu)
+        x = tuple(xi + (h / 12) * (23 * a - 16 * b + 5 * cc) for xi, a, b, cc in zip(x, f0, f1, f2))
+        return (x, f0, f1, acc + d * d), None
+
+    return step
+
+
 def jax_hand_fll(batch: int, t1: float = FLL_T1):
     """(jitted function, its arguments): the precomputed SOGI-FLL workload hand-written in JAX as a performance
     engineer would write it for XLA — the inputs time-major (n, B), every state component and AB3 history entry
@@ -349,18 +366,10 @@ def jax_hand_fll(batch: int, t1: float = FLL_T1):
         return jax.vmap(one)(sig)
 
     x, f1, f2, acc = start(sig)
-    f = _sogi_fll_field(obs)
     h = jnp.asarray(TS, dtype)
+    step = sogi_fll_tuple_step(obs, h)
 
     def kernel(x, f1, f2, acc, U, OM):
-        def step(c, row):
-            x, f1, f2, acc = c
-            uu, ww = row
-            d = x[2] - ww  # the output at t_k is the state before the update (jaxobs.AbstractObserver.step)
-            f0 = f(*x, uu)
-            x = tuple(xi + (h / 12) * (23 * a - 16 * b + 5 * cc) for xi, a, b, cc in zip(x, f0, f1, f2))
-            return (x, f0, f1, acc + d * d), None
-
         (_, _, _, acc), _ = jax.lax.scan(step, (x, f1, f2, acc), (U, OM))
         return h * acc
 

@@ -72,6 +72,7 @@ from __future__ import annotations
 import math
 import os
 import re
+import time
 import warnings
 
 import jax
@@ -282,11 +283,9 @@ def init_distributed(
             f"init_distributed: process_id must be in 0..{num_processes - 1} (num_processes={num_processes}), "
             f"got {process_id}"
         )
-    import time
-
     deadline = time.monotonic() + timeout  # one budget: the wait for process 0, then JAX's own
     if coordinator is not None and process_id not in (None, 0):
-        _wait_for_coordinator(coordinator, timeout)
+        _wait_for_coordinator(coordinator, timeout, deadline)
     set_gloo = jax.config.jax_cpu_collectives_implementation is None
     if set_gloo:
         jax.config.update("jax_cpu_collectives_implementation", "gloo")
@@ -303,18 +302,16 @@ def init_distributed(
     return jax.process_index(), jax.process_count()
 
 
-def _wait_for_coordinator(coordinator: str, timeout: int) -> None:
+def _wait_for_coordinator(coordinator: str, timeout: int, deadline: float) -> None:
     """A process other than 0 first checks that process 0 listens (TCP, retried for ``timeout`` s).
 
     Without it a missing process 0 is found only by JAX's C++ runtime, which aborts the process;
     this gives a Python error (``ConnectionError``; the CLI prints it in one line).  A process 0
     whose peers never come cannot be caught this way: JAX aborts it after ``timeout``."""
     import socket
-    import time
 
     host, _, port = coordinator.rpartition(":")
     host = host.strip("[]")  # "[::1]:1234"
-    deadline = time.monotonic() + timeout
     while True:
         try:
             with socket.create_connection((host, int(port)), timeout=min(5.0, timeout)):

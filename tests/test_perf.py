@@ -151,9 +151,11 @@ def test_gradients_agree_across_checkpoint_modes(wif_batch, modes):
     for ck in modes:
         assert grads[ck][0] == pytest.approx(grads["none"][0], rel=1e-13)
         np.testing.assert_allclose(grads[ck][1], grads["none"][1], rtol=1e-9)
-    if modes != ("auto",):
-        return
-    # and against central differences (of the loss as a function of the observer)
+
+
+def test_forward_gradient_matches_central_differences(wif_batch):
+    """The default (forward-sensitivity) gradient against central differences of the loss as a function of
+    the observer."""
     from gradcheck import assert_field_grads_match_fd
 
     obs = B.fll_observer("sogi-fll-wif")

@@ -482,7 +482,7 @@ def _distributed_study(name, designs, axes, opts, out: Path, args, rank) -> int:
         # result files, by sha256), before any of them computes: different files would give different chunk
         # shapes, on which the collectives abort the processes.  The first collective connects the CPU
         # collectives, whose gloo prints a line on the C++ stdout: to stderr, stdout is results.
-        prov = {k: v for k, v in sorted((opts.get("provenance") or {}).items()) if k != "study_file"}
+        prov = {k: v for k, v in (opts.get("provenance") or {}).items() if k != "study_file"}
         digest = hashlib.sha256(json.dumps(prov, sort_keys=True, default=str).encode()).digest()
         with _stdout_to_stderr():
             ok = int(multihost_utils.broadcast_one_to_all(np.int32(failure is None)))
@@ -491,7 +491,7 @@ def _distributed_study(name, designs, axes, opts, out: Path, args, rank) -> int:
             raise failure
         if not ok:
             raise ValueError("process 0 cannot use its --out (its error says why); nothing computed")
-        differ = [i for i in range(count) if not np.array_equal(digests.reshape(count, -1)[i], digests[0])]
+        differ = [i for i, d in enumerate(digests) if not np.array_equal(d, digests[0])]
         if differ:
             raise ValueError(
                 f"the processes were given different study files (or result files): process(es) "
