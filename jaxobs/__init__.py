@@ -55,6 +55,12 @@ from .observers import (
     SOIFO as SOIFO,
 )
 from .observers import (
+    AbstractDriveObserver as AbstractDriveObserver,
+)
+from .observers import (
+    AbstractObserver as AbstractObserver,
+)
+from .observers import (
     FLLOutput as FLLOutput,
 )
 from .observers import (

@@ -72,6 +72,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxobs.discretize import AB3, RK4, Euler, Tustin
+from jaxobs.observers import AbstractDriveObserver, AbstractFluxObserver, AbstractLESO
 from jaxobs.progress import Progress
 
 from . import _cexpr as cx
@@ -90,7 +91,7 @@ __all__ = [
     "drive_test_signal",
     "drive_recording",
     "drive_machine",
-    "bind_to_drive",
+    "drive_rpm",
     "add_export_parser",
     "cli_export",
     "DESIGNS",
@@ -189,7 +190,7 @@ def observer_from_result(path, *, gains: str = "tuned", notes: list | None = Non
         notes.append(f"result.json has no 'rule': the {name} default {type(probe.rule).__name__} is used")
     if info.bind is not None or res.get("loop") is not None:  # a drive job bound these per scenario
         # LESOs: Rs, Lq and the PLL's initial speed; flux observers: Rs, L and the FLL's or PLL's omega0
-        keys = ("Rs", "Lq", "omega0_pll") if hasattr(probe, "Lq") else ("Rs", "L", "omega0")
+        keys = type(probe).bound_fields
         bound = ", ".join(f"{k} = {float(getattr(probe, k)):g}" for k in keys)
         notes.append(f"the job sets {', '.join(keys)} per scenario; exported with {bound}")
     diverged = res.get("scores", {}).get(gains, {}).get("diverged") if gains in res.get("scores", {}) else None
@@ -297,18 +298,17 @@ def drive_test_signal(
     return data, doc
 
 
-# the machine a drive observer's recording runs on, and the speed it runs at (both 50 Hz electrical)
+# the machine a drive observer's recording runs on, and the speed it runs at (both 50 Hz electrical), by family
 _DRIVE_MACHINES = {
-    "flux": ("spmsm_paper000", "BENCH_J_000", 1000.0),  # 000's SPMSM, p = 3
-    "leso": ("ipmsm_paper002", "BENCH_J_002", 300.0),  # 002's (assumed) IPMSM, p = 5: 25 Hz (see drive_recording)
+    AbstractFluxObserver: ("spmsm_paper000", "BENCH_J_000", 1000.0, "000 SPMSM"),  # p = 3
+    AbstractLESO: ("ipmsm_paper002", "BENCH_J_002", 300.0, "002 IPMSM"),  # (assumed) p = 5: 25 Hz (drive_recording)
 }
 
 
-def _family(observer) -> str:
-    if hasattr(observer, "Lq"):
-        return "leso"
-    if hasattr(observer, "L"):
-        return "flux"
+def _bench(observer) -> tuple:
+    for family, bench in _DRIVE_MACHINES.items():
+        if isinstance(observer, family):
+            return bench
     raise ValueError(f"export: {type(observer).__name__} is not a drive observer (flux observer or LESO)")
 
 
@@ -318,24 +318,13 @@ def drive_machine(observer):
     table's: tuning.job.DRIVE_MACHINES)."""
     from jaxobs import drive, papers
 
-    ctor, j, _ = _DRIVE_MACHINES[_family(observer)]
+    ctor, j, _, _ = _bench(observer)
     return getattr(drive, ctor)(J=getattr(papers, j))
 
 
-def bind_to_drive(observer, machine, rpm: float):
-    """``observer`` with the machine's Rs and L (flux observers: Ld; LESOs: Lq) and its initial speed at ``rpm``
-    (flux observers: the FLL's or PLL's omega0; LESOs: the PLL's omega0_pll), as :func:`drive_recording` runs it.
-
-    The gains are untouched.  A flux observer of a ``signal = "emf"`` job has Rs = 0, L = 1 (it sees the
-    back EMF itself); on a recording of u and i it needs the machine's.
-    """
-    we = float(rpm) * math.pi / 30 * int(machine.p)
-    if _family(observer) == "leso":
-        names, vals = ("Rs", "Lq", "omega0_pll"), (machine.Rs, machine.Lq, we)
-    else:
-        names, vals = ("Rs", "L", "omega0"), (machine.Rs, machine.Ld, we)
-    vals = tuple(jnp.asarray(v, jnp.result_type(getattr(observer, n))) for n, v in zip(names, vals))
-    return eqx.tree_at(lambda o: tuple(getattr(o, n) for n in names), observer, vals)
+def drive_rpm(observer) -> float:
+    """The speed (r/min) a drive observer's default recording runs at (:func:`drive_recording`)."""
+    return _bench(observer)[2]
 
 
 class _Tap(eqx.Module):
@@ -372,7 +361,7 @@ def drive_recording(
     outputs' u_a, u_b, i_a, i_b.
 
     ``machine``: a :class:`jaxobs.drive.PMSMParams` (default :func:`drive_machine`).  Export the
-    observer bound to the same machine and speed (:func:`bind_to_drive`).  Returns (float32 array
+    observer bound to the same machine and speed (``observer.bind(machine, ω_e)``).  Returns (float32 array
     (n_steps, 4), a one-line description).
 
     The rotor starts at θe = π/2, where the q-axis current and the back EMF lie on −α, so the
@@ -392,9 +381,8 @@ def drive_recording(
     from jaxobs import drive as D
     from jaxobs import papers
 
-    family = _family(observer)
     machine = drive_machine(observer) if machine is None else machine
-    rpm = _DRIVE_MACHINES[family][2] if rpm is None else float(rpm)
+    rpm = drive_rpm(observer) if rpm is None else float(rpm)
     if not (isinstance(n_steps, int) and n_steps >= 2):
         raise ValueError(f"drive_recording: n_steps must be an integer >= 2, got {n_steps!r}")
     ts = float(observer.ts)
@@ -425,7 +413,7 @@ def drive_recording(
         raise ValueError(f"drive_recording: the drive gave {data.shape[0]} finite rows of {n_steps}")
     we = rpm * math.pi / 30 * int(machine.p)
     doc = (
-        f"sensored FOC drive ({'000 SPMSM' if family == 'flux' else '002 IPMSM'}: Rs = {float(machine.Rs):g} ohm, "
+        f"sensored FOC drive ({_bench(observer)[3]}: Rs = {float(machine.Rs):g} ohm, "
         f"Ld = {float(machine.Ld):g} H, Lq = {float(machine.Lq):g} H, psi = {float(machine.psi_f):g} Wb, "
         f"p = {int(machine.p)}), steady start at {rpm:g} r/min ({we / (2 * math.pi):g} Hz electrical) and "
         f"{load[0]:g} T_rated, speed reference {speed_step:+.0%} at {t1:g} s, load to {load[1]:g} T_rated at "
@@ -758,9 +746,9 @@ def _harness() -> str:
 
 
 def _machine(obs) -> tuple[float, float]:
-    """(R̂s, L̂) the drive observer assumes: the golden signal's machine."""
-    L = obs.L if hasattr(obs, "L") else obs.Lq
-    return float(obs.Rs), float(L)
+    """(R̂s, L̂) the drive observer assumes: the golden signal's machine (the first two of its bound fields)."""
+    rs, ls = type(obs).bound_fields[:2]
+    return float(getattr(obs, rs)), float(getattr(obs, ls))
 
 
 def export_observer(
@@ -778,7 +766,7 @@ def export_observer(
             observers: columns u_a, u_b, i_a, i_b, e.g. :func:`drive_recording` at another speed),
             or ``"synthetic"`` for a drive observer: :func:`drive_test_signal` on the observer's
             own Rs and L.  The default recording runs on :func:`drive_machine`: export the
-            observer bound to it (:func:`bind_to_drive`) to get that machine's Rs and L in the C.
+            observer bound to it (``observer.bind``) to get that machine's Rs and L in the C.
         source: where the design comes from (a result file, a closed form), for the header.
         notes: lines recorded in the header and coefficients.json (e.g. defaults used).
         progress: its three stages (C emitted and self-checked, the test record, the golden vectors), each
@@ -1003,19 +991,19 @@ def _export(args) -> int:
         obs = observer_from_design(args.design, **kw)
         source = f"closed form {args.design}, {DESIGNS[args.design][1]}"
     signal = None
-    if hasattr(obs, "Rs") and args.record == "drive":
-        machine, rpm = drive_machine(obs), _DRIVE_MACHINES[_family(obs)][2]
-        obs = bind_to_drive(obs, machine, rpm)
-        speed = "omega0_pll" if _family(obs) == "leso" else "omega0"
+    if isinstance(obs, AbstractDriveObserver) and args.record == "drive":
+        machine, rpm = drive_machine(obs), drive_rpm(obs)
+        obs = obs.bind(machine, rpm * math.pi / 30 * int(machine.p))  # the one binding (its clamp included)
+        r_name, l_name, speed = type(obs).bound_fields
         notes = [n for n in notes if "sets Rs, Lq" not in n]
         notes.append(
-            f"bound to the recording's machine: Rs = {float(obs.Rs):g}, "
-            f"{'Lq' if speed == 'omega0_pll' else 'L'} = {float(_machine(obs)[1]):g}, "
+            f"bound to the recording's machine: {r_name} = {float(getattr(obs, r_name)):g}, "
+            f"{l_name} = {float(getattr(obs, l_name)):g}, "
             f"{speed} = {float(getattr(obs, speed)):.6g} rad/s ({rpm:g} r/min)"
         )
         if args.steps < MIN_STEPS:
             raise ValueError(f"export: --steps must be >= {MIN_STEPS}, got {args.steps}")
-    elif hasattr(obs, "Rs"):
+    elif isinstance(obs, AbstractDriveObserver):
         signal = "synthetic"
     coeffs = export_observer(
         obs, args.out, n_steps=args.steps, signal=signal, source=source, notes=notes, progress=not args.quiet and "auto"

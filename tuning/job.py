@@ -67,7 +67,6 @@ from pathlib import Path
 
 import equinox as eqx
 import jax
-import jax.numpy as jnp
 import numpy as np
 
 import jaxobs
@@ -689,15 +688,6 @@ def load_recordings(spec: RecordingSpec, signal: str):
     return stack(jax.tree.map(lambda x: x[..., :n] if eqx.is_array(x) else x, s) for s in sigs)
 
 
-def _bind_recording(obs, rec):
-    """A drive observer on a recording starts from the recorded speed at t = 0 (the encoder's, as a drive job's
-    observer starts from the scenario's true speed): flux observers' omega0, LESOs' omega0_pll."""
-    w0 = rec.omega_e[..., 0]
-    if hasattr(obs, "Lq"):
-        return eqx.tree_at(lambda o: o.omega0_pll, obs, w0.astype(obs.omega0_pll.dtype))
-    return eqx.tree_at(lambda o: o.omega0, obs, jnp.maximum(jnp.abs(w0), 1.0).astype(obs.omega0.dtype))
-
-
 def _check_recording_job(job, comp_t: dict) -> None:
     """What a recording cannot give: the closed loop's metrics; a flux observer on u/i needs the machine's Rs, L."""
     for spec, where in ((job.scenarios, "scenarios"), (job.holdout, "holdout")):
@@ -1192,7 +1182,9 @@ def build_objective(job: Job, spec: ScenarioSpec | None = None):
     drive = job_drive(job.drive) if spec.signal == "drive" else None
     bind = bind_observer if drive is not None else None  # the scenario's assumed machine and speed
     if spec.recording is not None:  # the observer runs open loop on the recorded u/i or voltage
-        drive, bind = None, (_bind_recording if spec.signal != "grid" else None)
+        # a drive observer on a recording starts from the recorded speed at t = 0 (the encoder's, as a drive
+        # job's observer starts from the scenario's true speed); est_par None: the component's own Rs and L
+        drive, bind = None, ((lambda obs, rec: obs.bind(None, rec.omega_e[..., 0])) if spec.signal != "grid" else None)
     obj = Objective(
         comp,
         param,

@@ -41,6 +41,7 @@ import jax.numpy as jnp
 from .._math import wrap
 from .._validate import check_sample_time
 from ..discretize import RK4, AbstractRule, check_rule
+from ..observers import AbstractDriveObserver
 from ..system import AbstractSystem
 from .control import FOC, ControllerState, FOCInput, IfStartup, OperatingPoint
 from .hardware import Inverter, InverterInput, SensorInput
@@ -229,8 +230,8 @@ class ClosedLoop(AbstractSystem):
     def _settled_observer(self, op: OperatingPoint):
         """The observer after ``drive.settle`` seconds on the steady operating point: a phase before t = 0, unscored.
 
-        It starts from ``observer.init_at(ω_e)`` (its speed estimate at the true
-        speed, where it has one) and steps on the measurements the sensors give
+        A drive observer (:class:`~jaxobs.observers.AbstractDriveObserver`) starts from
+        ``observer.init_at(ω_e)`` (its speed estimate at the true speed) and steps on the measurements the sensors give
         of the steady machine over k = −n … −1 (offsets, gain errors and noise
         included; θ_k = θ_e0 + ω_e k T_s, the voltage of each period centred at
         θ_k + ω_e T_s/2 as the delay compensation applies it).  So its filters,
@@ -239,7 +240,8 @@ class ClosedLoop(AbstractSystem):
         """
         sc, obs, ts = self.scenario, self.observer, self.ts
         w_e = sc.par.p * op.omega_m
-        state = obs.init_at(w_e) if hasattr(obs, "init_at") else obs.init()
+        # a drive observer starts at the true speed (its contract); any other observer (a probe) from its init()
+        state = obs.init_at(w_e) if isinstance(obs, AbstractDriveObserver) else obs.init()
         n = int(round(self.drive.settle / ts))
         if n == 0:
             return state
@@ -278,7 +280,7 @@ class ClosedLoop(AbstractSystem):
         else:
             th_c, w_e_c, w_m_c = y.theta_e, w_e, y.omega_m
         ctrl, c = self.controller.step(state.ctrl, FOCInput(k, meas.i_a, meas.i_b, th_c, w_e_c, w_m_c, x.omega_m_ref))
-        if drive.startup is not None and hasattr(self.observer, "seed_speed"):
+        if drive.startup is not None and isinstance(self.observer, AbstractDriveObserver):
             # While the I-f runs, the observer's speed estimate (FLL centre frequency, PLL integrator) is held
             # at the I-f frequency, the rotor's mean speed; released at the switch.  Without it the flux
             # observers' FLLs never left their initial 1 rad/s: their gain is lam·ω̂² (frequency-normalized,

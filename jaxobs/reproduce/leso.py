@@ -46,16 +46,21 @@ def bench_machine(**kw):
     return D.ipmsm_paper002(J=papers.BENCH_J_002, **kw)
 
 
-def leso_bank(est: D.PMSMParams, omega0_pll, pll=None):
+def leso_bank(est: D.PMSMParams, omega_e, pll=None):
+    """C-, GI- and FA-LESO with 002 Table II's gains, bound to the machine ``est`` they assume (its Rs, Lq) and
+    with their PLLs started at ω_e (rad/s), by their one binding (``ObserverBank.bind``); the FA-LESO is the
+    primary."""
     kp, ki = linear.pll_gains(2 * math.pi * papers.LESO_PLL_HZ) if pll is None else pll
-    return ObserverBank(
+    # Rs = 0, Lq = 1 are placeholders: bind() sets the assumed machine and the PLLs' start speed
+    bank = ObserverBank(
         (
-            CLESO(est.Rs, est.Lq, W0, kp, ki, omega0_pll),
-            GILESO(est.Rs, est.Lq, W0, K_R, WC_GI, kp, ki, omega0_pll),
-            FALESO(est.Rs, est.Lq, K1_FA, K2_FA, kp, ki, omega0_pll),
+            CLESO(0.0, 1.0, W0, kp, ki),
+            GILESO(0.0, 1.0, W0, K_R, WC_GI, kp, ki),
+            FALESO(0.0, 1.0, K1_FA, K2_FA, kp, ki),
         ),
         primary=2,
     )
+    return bank.bind(est, omega_e)
 
 
 def leso_drive(par, handover=0.3, alpha_s=2 * math.pi * papers.BENCH_SPEED_HZ):
