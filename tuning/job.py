@@ -76,6 +76,7 @@ from jaxobs import linear, papers
 from jaxobs import metrics as M
 from jaxobs.drive_study import DRIVE_STUDY_AXES, bind_observer, drive_scenarios
 from jaxobs.progress import Progress
+from jaxobs.provenance import sha256, versions
 from jaxobs.scenarios import grid_signals
 from jaxobs.signals import EMFSignal, stack
 
@@ -659,7 +660,7 @@ def _parse_recording_scenarios(tab, where, signal, t_event, horizon, steady, see
                     f"{horizon:g} s needs {need} samples of {ts:g} s; {files[i]!r} gives {sig.n} "
                     f"({(sig.n - 1) * ts:.6g} s)",
                 )
-            digests.append(hashlib.sha256(Path(path).read_bytes()).hexdigest())
+            digests.append(sha256(Path(path)))
         spec = dataclasses.replace(spec, sha256=tuple(digests))
     axes = {"recording": [float(i) for i in range(len(files))]}
     return ScenarioSpec(signal, t_event, horizon, steady, axes, 0, seed, recording=spec)
@@ -980,7 +981,7 @@ def load_job(path) -> Job:
     """Read, check and parse a job file (:func:`read_toml`, then :func:`parse_job`)."""
     raw, data = read_toml(path)
     job = parse_job(raw, Path(path).parent)
-    job.sha256 = hashlib.sha256(data).hexdigest()
+    job.sha256 = sha256(data)
     return job
 
 
@@ -1305,20 +1306,6 @@ def _scores_dataset(obj, names, combos, spec: ScenarioSpec, per: dict):
     return ds
 
 
-def _versions() -> dict:
-    import platform
-
-    import jax
-
-    return {
-        "jaxobs": jaxobs.__version__,
-        "jax": jax.__version__,
-        "numpy": np.__version__,
-        "python": platform.python_version(),
-        "x64": bool(jax.config.jax_enable_x64),
-    }
-
-
 def _recordings_provenance(job: Job) -> dict:
     """``{"recordings": [{"file", "sha256"}, ...]}`` of a job on recordings (else nothing)."""
     rec = job.scenarios.recording
@@ -1420,7 +1407,7 @@ def run_job(job: Job, out: Path, resume: bool = False, quiet: bool = False) -> d
         **_recordings_provenance(job),
         "iterations": res.iterations,
         "best_iteration": res.best_iteration,
-        "versions": _versions(),
+        "versions": versions(),
     }
     nulls = {}
     if "omega_n" not in job.values:
