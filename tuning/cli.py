@@ -71,7 +71,7 @@ from importlib import resources
 from pathlib import Path
 
 import jaxobs
-from jaxobs import linear, papers, use_host_devices
+from jaxobs import linear, papers, use_compile_cache, use_host_devices
 
 from .export import add_export_parser
 from .job import CHECKPOINT, load_job, load_recordings, run_job
@@ -793,6 +793,12 @@ def build_parser() -> argparse.ArgumentParser:
     # every command takes --quiet: no progress on stderr (stdout, the results, is the same either way)
     quiet = _Parser(add_help=False)
     quiet.add_argument("--quiet", action="store_true", help="no progress bars or compile notices on stderr")
+    quiet.add_argument(
+        "--no-cache",
+        action="store_true",
+        help="do not keep compiled programs on disk (default: kept in $JAXOBS_CACHE_DIR or ~/.cache/jaxobs/jax, "
+        "so a second run skips most of XLA's work; JAXOBS_CACHE_DIR=off turns it off too)",
+    )
     t = sub.add_parser(
         "tune", help="gradient-based gain tuning from a TOML job (default: embedded WIF job)", parents=[quiet]
     )
@@ -878,6 +884,8 @@ def main(argv=None) -> int:
     try:
         use_host_devices()  # before any JAX computation: one CPU device per usable core
         args = parser.parse_args(argv)
+        if not getattr(args, "no_cache", False):
+            use_compile_cache()  # before any compilation: compiled programs are reused by the next process
         return args.func(args)
     except ValueError as e:  # bad input, job-file errors (JobError) included: one line, exit 2
         print(f"jaxobs: error: {e}", file=sys.stderr)
