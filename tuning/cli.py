@@ -64,6 +64,7 @@ import contextlib
 import hashlib
 import json
 import os
+import shlex
 import sys
 import tempfile
 import traceback
@@ -655,8 +656,11 @@ def _cmd_tune(args) -> int:
     products = ["result.json"]
     if not args.resume:
         products.append(CHECKPOINT)  # a fresh run would overwrite it: --resume, or --force to start over
-    with OutDir(out, products, force=args.force):
+    resume = f"jaxobs tune {shlex.quote(str(path))} --out {shlex.quote(str(out))} --resume"
+    hint = f"an earlier run stopped here: continue it with `{resume}` (--force starts over and discards it)"
+    with OutDir(out, products, force=args.force, hints={CHECKPOINT: hint}):
         args.log_dir = out
+        args.on_interrupt = f"; continue with: {resume}"  # what Ctrl-C says (main)
         result = run_job(job, out, resume=args.resume, quiet=args.quiet)
     try:
         timing = json.loads((out / "timing.json").read_text())
@@ -895,7 +899,9 @@ def main(argv=None) -> int:
         print(f"jaxobs: error: {e.strerror or e}{where}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
-        print("jaxobs: interrupted", file=sys.stderr)
+        # on a line of its own: a progress bar may hold the terminal's current line
+        start = "\n" if sys.stderr.isatty() else ""
+        print(f"{start}jaxobs: interrupted{getattr(args, 'on_interrupt', '')}", file=sys.stderr)
         return 130
     except (Exception, MemoryError) as e:  # an internal error: the traceback to a log, one line here
         log = _write_error_log(getattr(args, "log_dir", None))
