@@ -58,3 +58,20 @@ def test_ctrl_c_names_resume_and_rerun_names_resume_first(tmp_path):
     err = q.communicate(timeout=120)[1].strip().splitlines()
     assert q.returncode == 2 and len(err) == 1, err
     assert "continue it with `jaxobs tune" in err[0] and err[0].index("--resume") < err[0].index("--force"), err
+
+
+def test_no_command_lists_the_commands(capsys):
+    from tuning.cli import main
+
+    assert main([]) == 2
+    err = capsys.readouterr().err
+    for cmd in ("tune", "study", "export", "closed-form", "reproduce"):
+        assert f"    {cmd}" in err, err
+
+
+def test_closed_form_error_names_the_flag(capsys):
+    from tuning.cli import main
+
+    assert main(["closed-form", "wif", "--b", "-1"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err == "jaxobs: error: --b must be finite and > 1, got -1", err

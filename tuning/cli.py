@@ -64,6 +64,7 @@ import contextlib
 import hashlib
 import json
 import os
+import re
 import shlex
 import sys
 import tempfile
@@ -219,7 +220,10 @@ def _cmd_closed_form(args) -> int:
             allowed = ", ".join("--" + o.replace("_", "-") for o in _CF_OPTIONS[args.design])
             raise ValueError(f"--{name.replace('_', '-')} does not apply to {args.design} (allowed: {allowed})")
         values[name] = v
-    res = closed_form_rows(args.design, values)
+    try:
+        res = closed_form_rows(args.design, values)
+    except ValueError as e:  # name the flag the user typed (wif_closed_form.b -> --b), not the function's field
+        raise ValueError(re.sub(r"\b\w+_closed_form\.(\w+)", lambda m: "--" + m[1].replace("_", "-"), str(e))) from None
     if args.json:
         print(json.dumps(res, indent=1))
     else:
@@ -793,7 +797,7 @@ def build_parser() -> argparse.ArgumentParser:
     """The one parser: every subcommand of ``jaxobs``, and ``--version``."""
     p = _Parser(prog="jaxobs", description="Differentiable simulation and tuning of motor-drive observers and FLLs.")
     p.add_argument("--version", action="version", version=f"jaxobs {jaxobs.__version__}")
-    sub = p.add_subparsers(dest="cmd", required=True, parser_class=_Parser)
+    sub = p.add_subparsers(dest="cmd", parser_class=_Parser, metavar="COMMAND")  # none given: main lists them
     # every command takes --quiet: no progress on stderr (stdout, the results, is the same either way)
     quiet = _Parser(add_help=False)
     quiet.add_argument("--quiet", action="store_true", help="no progress bars or compile notices on stderr")
@@ -888,6 +892,9 @@ def main(argv=None) -> int:
     try:
         use_host_devices()  # before any JAX computation: one CPU device per usable core
         args = parser.parse_args(argv)
+        if args.cmd is None:  # `jaxobs` alone: the commands, not argparse's "arguments are required: cmd"
+            parser.print_help(sys.stderr)
+            return 2
         if not getattr(args, "no_cache", False):
             use_compile_cache()  # before any compilation: compiled programs are reused by the next process
         return args.func(args)
