@@ -46,10 +46,13 @@ def _pid_alive(pid: int) -> bool:
 class OutDir:
     """The results folder of one run: checked, locked, released (a context manager)."""
 
-    def __init__(self, path: Path, products=(), force: bool = False):
+    def __init__(self, path: Path, products=(), force: bool = False, hints: dict | None = None):
+        """``hints``: product name -> what to say instead of "use --force" when it exists (a checkpoint names
+        ``--resume`` first: --force would discard the work it holds)."""
         self.path = Path(path)
         self.products = tuple(products)
         self.force = force
+        self.hints = dict(hints or {})
         self._locked = False
 
     def __enter__(self):
@@ -70,7 +73,8 @@ class OutDir:
             if not self.force:
                 for name in self.products:
                     if (p / name).exists():
-                        raise OutError(f"{str(p / name)!r} exists: use --force to overwrite it")
+                        hint = self.hints.get(name, "use --force to overwrite it")
+                        raise OutError(f"{str(p / name)!r} exists: {hint}")
         except BaseException:
             self.release()
             raise
