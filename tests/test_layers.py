@@ -31,6 +31,7 @@ LAYERS = [
         "jaxobs._time",
         "jaxobs.progress",
         "jaxobs.provenance",
+        "jaxobs._cache",
     ),
     # integration rules (and check_rule)
     ("jaxobs.discretize",),
