@@ -247,11 +247,10 @@ class Random(_Drawn):
 
 
 def _qmc_points(self, u) -> list[tuple]:
-    from scipy.stats import qmc
-
     lo, hi = self._bounds()
-    # an axis with one value (min = max) stays at it: qmc.scale refuses an empty interval
-    return [tuple(r) for r in qmc.scale(u, lo, np.where(hi > lo, hi, lo + 1e-300))]
+    # u · (hi − lo) + lo, the arithmetic of scipy.stats.qmc.scale, which refuses an axis of one value
+    # (min = max); such an axis stays at its value
+    return [tuple(r) for r in u * (hi - lo) + lo]
 
 
 class Sobol(_Drawn):

@@ -33,7 +33,12 @@ metrics (an all-gather, :func:`jaxobs.sharding.gather_batch`), so every process 
 Dataset.  The numbers equal a one-device run's to rounding: a device's share is a smaller ``vmap``,
 which XLA may vectorize differently in the last bit (tests/test_distributed.py: 2 processes).
 
-Scenarios are single-phase grid signals (the FLL family) built by
+The scenarios come from a sampler (:mod:`jaxobs.scenarios`): a dict of axes is a ``Grid`` (or, with
+``sample``, a ``Random`` sample); ``Sobol``, ``LHS`` and ``Recordings`` (recorded signals with their truth
+columns: dims ``("design", "recording")``) are passed as ``axes`` themselves.  The loop over chunks, devices
+and processes is the one study runner, :func:`jaxobs.runner.run_scenarios`, which drive studies share.
+
+Sampled scenarios are single-phase grid signals (the FLL family) built by
 :func:`jaxobs.scenarios.grid_signals`: axes are ``freq_step`` (Hz),
 ``phase_jump_deg``, ``sag``, ``dc``, ``harmonics_scale`` (× Test C's spectrum),
 ``sub_amplitude`` (1 Hz), ``phase_deg`` (initial phase) and ``noise`` (white noise

@@ -55,7 +55,6 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
-import itertools
 import json
 import math
 import os
@@ -77,7 +76,7 @@ from jaxobs import metrics as M
 from jaxobs.drive_study import DRIVE_STUDY_AXES, bind_observer, drive_scenarios
 from jaxobs.progress import Progress
 from jaxobs.provenance import sha256, versions
-from jaxobs.scenarios import grid_signals
+from jaxobs.scenarios import Grid, Random, grid_signals
 from jaxobs.signals import EMFSignal, stack
 
 from .objective import DRIVE_METRICS, LOST_SYNC_DEG, METRICS, MetricContext, Objective, Term
@@ -991,14 +990,11 @@ def load_job(path) -> Job:
 
 
 def _combos(spec: ScenarioSpec):
-    names = list(spec.axes)
-    combos = list(itertools.product(*(spec.axes[n] for n in names)))
-    if spec.sample:
-        rng = np.random.default_rng(spec.seed)
-        lows = {n: min(spec.axes[n]) for n in names}
-        highs = {n: max(spec.axes[n]) for n in names}
-        combos = [tuple(rng.uniform(lows[n], highs[n]) for n in names) for _ in range(spec.sample)]
-    return names, combos
+    """The axes' names and the scenarios' points: the studies' samplers (a grid, or ``sample`` uniform draws)."""
+    if not spec.axes:
+        return [], [()]
+    sampler = Random(spec.axes, spec.sample, spec.seed) if spec.sample else Grid(spec.axes)
+    return list(sampler.names), sampler.points()
 
 
 def _drive_scenarios(names, combos, seed=0, t_event=0.0, machine="ipmsm002"):
