@@ -1,142 +1,17 @@
-"""C99 from a step's jaxpr: any pure ``step(state, u) -> (state, out)`` written as straight-line C.
-
-:func:`generate` traces ``observer.step(state, u)`` with :func:`jax.make_jaxpr` (the
-observer's array leaves, its gains, are inputs of the trace, so they stay named in the
-C: ``JX_LAM``), then walks the jaxpr once.  Every array is unrolled into C scalars (a
-state of shape (5,) is five locals): observers' arrays hold a handful of entries, and
-scalar code is what a DSP compiler vectorizes or not as it likes.  Per equation:
-
-- scalar arithmetic and the C99 ``<math.h>`` functions (``sinf``, ``atan2f``, ...) as
-  one SSA local each, ``const float t12 = t3 * t5;``;
-- comparisons give ``int`` truth values that feed selects (``c ? a : b``); an ``int``
-  counter (AB3's start-up count) is the only other integer;
-- data movement (slice, squeeze, reshape, broadcast, concatenate, stack, split,
-  transpose, pad, gather/scatter and dynamic slices at constant indices) emits no code:
-  it re-arranges the scalars.  Which element goes where is found by running the
-  primitive itself on an array of element ids, so it has XLA's semantics exactly;
-- ``jit``, ``closed_call``, ``custom_jvp_call``, ``custom_vjp_call``, ``remat`` are
-  inlined; ``cond`` becomes ``if``/``else`` (AB3's RK4 start-up);
-- an equation whose inputs are all constants is evaluated now (by the primitive itself)
-  and written as a literal with every digit of its float32 (or float64) value.
-
-Anything else (loops, random numbers, FFTs, ...) raises a ``ValueError`` naming the
-primitive and the line of Python that made it.  Dead code is dropped; the operation
-count per step is that of the emitted C, arithmetic only (data movement is free).
+"""The jaxpr's primitives as C: :class:`Walker` reads a jaxpr equation by equation into an :class:`Emitter`,
+which writes the statements of :mod:`tuning.export.ir`.  What each primitive becomes is in
+:mod:`tuning.export.codegen`'s module doc; :data:`SUPPORTED` lists them.
 """
 
 from __future__ import annotations
 
-import dataclasses
-from collections import Counter
-from typing import Any
-
-import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-__all__ = ["CStep", "Leaf", "generate", "leaf_name", "c_literal"]
+from .ir import Assign, Decl, If, Let, S, c_literal, ctype, deps, lit
 
-
-# --------------------------------------------------------------------------------------------
-# scalars, types, literals
-# --------------------------------------------------------------------------------------------
-
-_CTYPE = {np.dtype(np.float32): "float", np.dtype(np.float64): "double", np.dtype(np.int32): "int"}
-_CTYPE[np.dtype(np.bool_)] = "int"  # truth values: 0 or 1
-
-
-def _ctype(dtype) -> str:
-    dt = np.dtype(dtype)
-    if dt not in _CTYPE:
-        raise ValueError(f"export: dtype {dt} cannot be written as C (float32, float64, int32 and bool can)")
-    return _CTYPE[dt]
-
-
-def c_literal(value, dtype) -> str:
-    """``value`` as a C literal of ``dtype`` with every digit (shortest repr that reads back the same number)."""
-    dt = np.dtype(dtype)
-    if dt == np.bool_:
-        return "1" if bool(value) else "0"
-    if dt.kind in "iu":
-        return str(int(value))
-    v = dt.type(value)
-    if np.isnan(v):
-        return "NAN"
-    if np.isinf(v):
-        return "INFINITY" if v > 0 else "(-INFINITY)"
-    text = str(v)  # numpy's shortest repr that reads back the same float32 (float64) number
-    if "." not in text and "e" not in text:
-        text += ".0"
-    if dt == np.float32:
-        text += "f"
-    return f"({text})" if text.startswith("-") else text
-
-
-@dataclasses.dataclass(frozen=True)
-class S:
-    """One scalar of the C program: a name or a literal (``lit``), its dtype, and whether it depends only on
-    constants and gains (``const``: the C compiler folds it, so it is not counted per step)."""
-
-    c: str
-    dtype: np.dtype
-    lit: Any = None
-    const: bool = False
-    truth: S | None = None  # an int that is a converted truth value: ``if (truth)`` reads better
-
-    @property
-    def is_lit(self):
-        return self.lit is not None
-
-
-def _lit(value, dtype) -> S:
-    dt = np.dtype(dtype)
-    v = dt.type(value)
-    return S(c_literal(v, dt), dt, lit=v, const=True)
-
-
-# --------------------------------------------------------------------------------------------
-# statements
-# --------------------------------------------------------------------------------------------
-
-
-@dataclasses.dataclass
-class Let:
-    """``const T name = expr;``"""
-
-    name: str
-    ctype: str
-    expr: str
-    deps: tuple
-    op: str  # what it costs: "add", "mul", "div", "call:sinf", "compare", "select", "logic", "" (none)
-    const: bool
-
-
-@dataclasses.dataclass
-class Assign:
-    target: str
-    expr: str
-    deps: tuple
-
-
-@dataclasses.dataclass
-class Decl:
-    name: str
-    ctype: str
-
-
-@dataclasses.dataclass
-class If:
-    cond: str
-    deps: tuple
-    then: list
-    other: list
-    outputs: tuple  # names assigned in both branches
-
-
-def _deps(*xs: S) -> tuple:
-    return tuple(x.c for x in xs if not x.is_lit)
-
+__all__ = ["SUPPORTED", "Emitter", "Walker"]
 
 # --------------------------------------------------------------------------------------------
 # the primitives
@@ -210,7 +85,7 @@ def _sub_jaxpr(j):
     return j, []
 
 
-class _Emitter:
+class Emitter:
     def __init__(self, dtype):
         self.fdt = np.dtype(dtype)
         self.double = self.fdt == np.float64
@@ -225,11 +100,11 @@ class _Emitter:
         return f"{prefix}{self.n}"
 
     def let(self, expr: str, dtype, deps: tuple, op: str, const: bool, truth=None) -> S:
-        key = (_ctype(dtype), expr)
+        key = (ctype(dtype), expr)
         if key in self.memo:
             return self.memo[key]
         name = self.fresh("b" if np.dtype(dtype) == np.bool_ else "t")
-        self.block.append(Let(name, _ctype(dtype), expr, deps, op, const))
+        self.block.append(Let(name, ctype(dtype), expr, deps, op, const))
         self.memo[key] = out = S(name, np.dtype(dtype), const=const, truth=truth)
         return out
 
@@ -241,41 +116,41 @@ class _Emitter:
     def unary(self, prim: str, x: S, params) -> S:
         dt = x.dtype
         if prim == "neg":
-            return self.let(f"-{x.c}", dt, _deps(x), "add", x.const)
+            return self.let(f"-{x.c}", dt, deps(x), "add", x.const)
         if prim == "not":
             if dt != np.bool_:
                 raise ValueError("export: bitwise not of an integer cannot be written (truth values only)")
-            return self.let(f"!{x.c}", dt, _deps(x), "logic", x.const)
+            return self.let(f"!{x.c}", dt, deps(x), "logic", x.const)
         if prim in ("square",):
             return self.binary("mul", x, x)
         if prim == "integer_pow":
             return self.integer_pow(x, int(params["y"]))
         if prim == "rsqrt":
-            return self.binary("div", _lit(1, dt), self.unary("sqrt", x, {}))
+            return self.binary("div", lit(1, dt), self.unary("sqrt", x, {}))
         if prim == "logistic":
             e = self.unary("exp", self.unary("neg", x, {}), {})
-            return self.binary("div", _lit(1, dt), self.binary("add", _lit(1, dt), e))
+            return self.binary("div", lit(1, dt), self.binary("add", lit(1, dt), e))
         if prim == "sign":
             one, zero = c_literal(1, dt), c_literal(0, dt)
             expr = f"({x.c} > {zero} ? {one} : ({x.c} < {zero} ? -{one} : {x.c}))"
-            return self.let(expr, dt, _deps(x), "compare", x.const)
+            return self.let(expr, dt, deps(x), "compare", x.const)
         if prim == "is_finite":
-            return self.let(f"isfinite({x.c})", np.bool_, _deps(x), "compare", x.const)
+            return self.let(f"isfinite({x.c})", np.bool_, deps(x), "compare", x.const)
         if prim == "round":
             # lax.RoundingMethod: 0 away from zero (roundf), 1 to nearest even (rintf in the default mode)
             call = "roundf" if int(params.get("rounding_method", 0)) == 0 else "rintf"
-            return self.let(f"{self.fn(call, dt)}({x.c})", dt, _deps(x), f"call:{call}", x.const)
+            return self.let(f"{self.fn(call, dt)}({x.c})", dt, deps(x), f"call:{call}", x.const)
         call = _UNARY_CALLS[prim]
         if dt.kind != "f":
             if prim == "abs":
-                return self.let(f"({x.c} < 0 ? -{x.c} : {x.c})", dt, _deps(x), "compare", x.const)
+                return self.let(f"({x.c} < 0 ? -{x.c} : {x.c})", dt, deps(x), "compare", x.const)
             raise ValueError(f"export: {prim} of an integer cannot be written (floats only)")
-        return self.let(f"{self.fn(call, dt)}({x.c})", dt, _deps(x), f"call:{call}", x.const)
+        return self.let(f"{self.fn(call, dt)}({x.c})", dt, deps(x), f"call:{call}", x.const)
 
     def integer_pow(self, x: S, y: int) -> S:
         # the same products in the same order as jax's lowering of integer_pow (binary exponentiation)
         if y == 0:
-            return _lit(1, x.dtype)
+            return lit(1, x.dtype)
         recip, y = y < 0, abs(y)
         acc = None
         while y > 0:
@@ -284,7 +159,7 @@ class _Emitter:
             y >>= 1
             if y > 0:
                 x = self.binary("mul", x, x)
-        return self.binary("div", _lit(1, acc.dtype), acc) if recip else acc
+        return self.binary("div", lit(1, acc.dtype), acc) if recip else acc
 
     def binary(self, prim: str, a: S, b: S) -> S:
         dt = a.dtype
@@ -300,30 +175,30 @@ class _Emitter:
                 if p.is_lit and p.lit == 1:
                     return q
                 if p.is_lit and p.lit == 0:
-                    return _lit(0, dt)
+                    return lit(0, dt)
         if prim == "div" and b.is_lit and b.lit == 1:
             return a
         if prim in _BINARY_OPS:
             sym, op = _BINARY_OPS[prim]
             if prim == "div" and dt.kind != "f":
                 raise ValueError("export: integer division cannot be written (truth values and counters only)")
-            return self.let(f"{a.c} {sym} {b.c}", dt, _deps(a, b), op, const)
+            return self.let(f"{a.c} {sym} {b.c}", dt, deps(a, b), op, const)
         if prim in _COMPARE:
-            return self.let(f"{a.c} {_COMPARE[prim]} {b.c}", np.bool_, _deps(a, b), "compare", const)
+            return self.let(f"{a.c} {_COMPARE[prim]} {b.c}", np.bool_, deps(a, b), "compare", const)
         if prim in _LOGIC or prim == "xor":
             if dt != np.bool_:
                 raise ValueError(f"export: bitwise {prim} of integers cannot be written (truth values only)")
             sym = _LOGIC.get(prim, "!=")
-            return self.let(f"{a.c} {sym} {b.c}", dt, _deps(a, b), "logic", const)
+            return self.let(f"{a.c} {sym} {b.c}", dt, deps(a, b), "logic", const)
         if prim in ("max", "min") and dt.kind != "f":
             sym = ">" if prim == "max" else "<"
-            return self.let(f"{a.c} {sym} {b.c} ? {a.c} : {b.c}", dt, _deps(a, b), "compare", const)
+            return self.let(f"{a.c} {sym} {b.c} ? {a.c} : {b.c}", dt, deps(a, b), "compare", const)
         if prim == "nextafter":
-            return self.let(f"{self.fn('nextafterf', dt)}({a.c}, {b.c})", dt, _deps(a, b), "call:nextafterf", const)
+            return self.let(f"{self.fn('nextafterf', dt)}({a.c}, {b.c})", dt, deps(a, b), "call:nextafterf", const)
         call = _BINARY_CALLS[prim]
         if dt.kind != "f":
             raise ValueError(f"export: {prim} of integers cannot be written (floats only)")
-        return self.let(f"{self.fn(call, dt)}({a.c}, {b.c})", dt, _deps(a, b), f"call:{call}", const)
+        return self.let(f"{self.fn(call, dt)}({a.c}, {b.c})", dt, deps(a, b), f"call:{call}", const)
 
     def select(self, which: S, cases: list) -> S:
         if which.is_lit:
@@ -339,22 +214,22 @@ class _Emitter:
             expr = cases[-1].c
             for k in range(len(cases) - 2, -1, -1):
                 expr = f"{which.c} == {k} ? {cases[k].c} : ({expr})"
-        return self.let(expr, dt, _deps(which, *cases), "select", const)
+        return self.let(expr, dt, deps(which, *cases), "select", const)
 
     def convert(self, x: S, new) -> S:
         new = np.dtype(new)
         if new == x.dtype:
             return x
         if x.is_lit:
-            return _lit(x.lit, new)
+            return lit(x.lit, new)
         if new == np.bool_:
-            return self.let(f"{x.c} != 0", new, _deps(x), "compare", x.const)
+            return self.let(f"{x.c} != 0", new, deps(x), "compare", x.const)
         if x.dtype == np.bool_ and new.kind == "f":
             expr = f"{x.c} ? {c_literal(1, new)} : {c_literal(0, new)}"
-            return self.let(expr, new, _deps(x), "select", x.const)
+            return self.let(expr, new, deps(x), "select", x.const)
         if x.dtype == np.bool_ and new.kind == "i":
             return S(x.c, new, const=x.const, truth=x)  # 0 or 1 already
-        return self.let(f"({_ctype(new)}){x.c}", new, _deps(x), "", x.const)
+        return self.let(f"({ctype(new)}){x.c}", new, deps(x), "", x.const)
 
 
 # --------------------------------------------------------------------------------------------
@@ -366,7 +241,7 @@ def _array(value) -> np.ndarray:
     a = np.asarray(value)
     out = np.empty(a.shape, dtype=object)
     for idx in np.ndindex(a.shape):
-        out[idx] = _lit(a[idx], a.dtype)
+        out[idx] = lit(a[idx], a.dtype)
     return out
 
 
@@ -379,8 +254,8 @@ def _values(arr) -> np.ndarray:
     return np.asarray([s.lit for s in arr.flat], dtype=dt).reshape(arr.shape)
 
 
-class _Walker:
-    def __init__(self, emitter: _Emitter):
+class Walker:
+    def __init__(self, emitter: Emitter):
         self.em = emitter
 
     def run(self, jaxpr, consts, args) -> list:
@@ -522,7 +397,7 @@ class _Walker:
                             "mul", self.em.convert(a3[bi][i, k], dtype), self.em.convert(b3[bi][j, k], dtype)
                         )
                         acc = term if acc is None else self.em.binary("add", acc, term)
-                    out[bi + (i, j)] = acc if acc is not None else _lit(0, dtype)
+                    out[bi + (i, j)] = acc if acc is not None else lit(0, dtype)
         return out.reshape(out_shape)
 
     def cond(self, eqn, ins) -> list:
@@ -539,7 +414,7 @@ class _Walker:
             arr = np.empty(var.aval.shape, dtype=object)
             for idx in np.ndindex(var.aval.shape):
                 name = em.fresh("c")
-                outer.append(Decl(name, _ctype(var.aval.dtype)))
+                outer.append(Decl(name, ctype(var.aval.dtype)))
                 arr[idx] = S(name, np.dtype(var.aval.dtype))
             results.append(arr)
         blocks = []
@@ -550,7 +425,7 @@ class _Walker:
             outs = self.run(jaxpr, consts, ops)
             for res, o in zip(results, outs):
                 for r, s in zip(res.flat, np.broadcast_to(o, res.shape).flat):
-                    em.block.append(Assign(r.c, s.c, _deps(s)))
+                    em.block.append(Assign(r.c, s.c, deps(s)))
             blocks.append(em.block)
         em.block, em.memo = outer, memo
         names = tuple(r.c for res in results for r in res.flat)
@@ -559,237 +434,6 @@ class _Walker:
         for k in range(len(blocks) - 2, -1, -1):
             test = index.truth.c if (index.truth is not None and len(blocks) == 2) else f"{index.c} <= {k}"
             then, other = (stmt, blocks[k]) if index.truth is not None and len(blocks) == 2 else (blocks[k], stmt)
-            stmt = [If(test, _deps(index.truth or index), then, other, names)]
+            stmt = [If(test, deps(index.truth or index), then, other, names)]
         outer.extend(stmt)
         return results
-
-
-# --------------------------------------------------------------------------------------------
-# liveness, counts, text
-# --------------------------------------------------------------------------------------------
-
-
-def _prune(block: list, live: set) -> list:
-    """Drop statements whose results nobody reads (backwards); ``live`` is updated with what is read."""
-    kept = []
-    for st in reversed(block):
-        if isinstance(st, Let):
-            if st.name not in live:
-                continue
-            live.update(st.deps)
-        elif isinstance(st, Decl):
-            if st.name not in live:
-                continue
-        elif isinstance(st, Assign):
-            if st.target not in live and not st.target.startswith(("s->", "y[")):
-                continue
-            live.update(st.deps)
-        elif isinstance(st, If):
-            if not any(n in live for n in st.outputs):
-                continue
-            live_then, live_else = set(live), set(live)
-            st.then = _prune(st.then, live_then)
-            st.other = _prune(st.other, live_else)
-            live |= live_then | live_else
-            live.update(st.deps)
-        kept.append(st)
-    return kept[::-1]
-
-
-def _count(block: list) -> tuple[Counter, Counter]:
-    """(cheapest, dearest) operation counts of a block: an ``if`` counts its cheaper and its dearer branch."""
-    lo, hi = Counter(), Counter()
-    for st in block:
-        if isinstance(st, Let) and st.op and not st.const:
-            lo[st.op] += 1
-            hi[st.op] += 1
-        elif isinstance(st, If):
-            lo_t, hi_t = _count(st.then)
-            lo_e, hi_e = _count(st.other)
-            lo.update(min(lo_t, lo_e, key=lambda c: sum(c.values())))
-            hi.update(max(hi_t, hi_e, key=lambda c: sum(c.values())))
-    return lo, hi
-
-
-def ops_summary(c: Counter) -> dict:
-    """An operation count as JSON: +/- (negations included), *, /, calls by name, compares, selects, logic, total."""
-    calls = {k[5:]: v for k, v in sorted(c.items()) if k.startswith("call:")}
-    out = {
-        "add": c["add"],
-        "mul": c["mul"],
-        "div": c["div"],
-        "call": sum(calls.values()),
-        "compare": c["compare"],
-        "select": c["select"],
-        "logic": c["logic"],
-        "calls": calls,
-    }
-    out["total"] = sum(v for k, v in out.items() if k != "calls")
-    return out
-
-
-def render(block: list, indent: str = "    ") -> list:
-    lines = []
-    for st in block:
-        if isinstance(st, Let):
-            lines.append(f"{indent}const {st.ctype} {st.name} = {st.expr};")
-        elif isinstance(st, Decl):
-            lines.append(f"{indent}{st.ctype} {st.name};")
-        elif isinstance(st, Assign):
-            lines.append(f"{indent}{st.target} = {st.expr};")
-        elif isinstance(st, If):
-            lines.append(f"{indent}if ({st.cond}) {{")
-            lines += render(st.then, indent + "    ")
-            lines.append(f"{indent}}} else {{")
-            lines += render(st.other, indent + "    ")
-            lines.append(f"{indent}}}")
-    return lines
-
-
-# --------------------------------------------------------------------------------------------
-# the step of an observer
-# --------------------------------------------------------------------------------------------
-
-
-def leaf_name(path) -> str:
-    """A pytree key path as a C identifier part: ``.rule.f1`` -> ``rule_f1``, ``[0]`` -> ``0``."""
-    parts = []
-    for k in path:
-        for attr in ("name", "key", "idx"):
-            if hasattr(k, attr):
-                parts.append(str(getattr(k, attr)))
-                break
-    return "_".join(parts) or "value"
-
-
-@dataclasses.dataclass
-class Leaf:
-    """One array leaf of the state, the input, the output or the gains, as C sees it."""
-
-    name: str  # C identifier part (the pytree path joined by '_')
-    shape: tuple
-    dtype: np.dtype
-    value: np.ndarray | None = None  # initial state / gain value
-
-    @property
-    def size(self) -> int:
-        return int(np.prod(self.shape, dtype=int))
-
-    def scalars(self) -> list[str]:
-        """Column names of its scalars: the name, or ``name_0, name_1, ...``."""
-        return [self.name] if self.shape == () else [f"{self.name}_{i}" for i in range(self.size)]
-
-
-@dataclasses.dataclass
-class CStep:
-    """A step written as C: its leaves and the body of ``jx_step`` (reads ``s``, ``u``; writes ``s``, ``y``)."""
-
-    gains: list  # [Leaf]: macros JX_<NAME> with their values
-    state: list  # [Leaf]: fields of jx_state with their initial values
-    inputs: list  # [Leaf]: u[0..] in order
-    outputs: list  # [Leaf]: y[0..] in order
-    body: str
-    ops_steady: dict
-    ops_worst: dict
-    has_branch: bool
-
-    @property
-    def input_names(self) -> list:
-        return [n for leaf in self.inputs for n in leaf.scalars()]
-
-    @property
-    def output_names(self) -> list:
-        return [n for leaf in self.outputs for n in leaf.scalars()]
-
-
-def _leaves(tree, values=True) -> list:
-    out = []
-    for path, leaf in jax.tree_util.tree_flatten_with_path(tree)[0]:
-        a = np.asarray(leaf)
-        out.append(Leaf(leaf_name(path), a.shape, a.dtype, a if values else None))
-    return out
-
-
-def gain_macro(leaf: Leaf, i: int | None = None) -> str:
-    return "JX_" + leaf.name.upper() + ("" if i is None else f"_{i}")
-
-
-def generate(observer, state, u, *, input_names=None) -> CStep:
-    """``observer.step(state, u)`` as the body of a C function ``jx_step(jx_state *s, const T *u, T *y)``.
-
-    ``state`` and ``u`` give the structure, shapes and dtypes (their values: the initial state, recorded in
-    the result); the observer's array leaves become named constants ``JX_<PATH>``.  ``input_names`` names
-    the scalars of ``u`` (default: its pytree paths).  Floats must be all float32 or all float64.
-    """
-    params, static = eqx.partition(observer, eqx.is_array)
-    gains = _leaves(params)
-    st_leaves = _leaves(state)
-    in_leaves = _leaves(u, values=False)
-    if input_names is not None:
-        if len(input_names) != sum(x.size for x in in_leaves):
-            raise ValueError(f"export: {len(input_names)} input names for {sum(x.size for x in in_leaves)} inputs")
-        if len(in_leaves) == 1 and in_leaves[0].shape == ():
-            in_leaves[0].name = input_names[0]
-        else:
-            for leaf, name in zip(in_leaves, input_names):
-                leaf.name = name
-    floats = {x.dtype for x in gains + st_leaves + in_leaves if x.dtype.kind == "f"}
-    if len(floats) > 1:
-        raise ValueError(f"export: the step mixes float types {sorted(map(str, floats))}: give one (float32)")
-    fdt = floats.pop() if floats else np.dtype(np.float32)
-
-    def step(p, s, x):
-        return eqx.combine(p, static).step(s, x)
-
-    closed, out_shape = jax.make_jaxpr(step, return_shape=True)(params, state, u)
-    em = _Emitter(fdt)
-    args = []
-    for g in gains:
-        arr = np.empty(g.shape, dtype=object)
-        for i, idx in enumerate(np.ndindex(g.shape)):
-            arr[idx] = S(gain_macro(g, None if g.shape == () else i), g.dtype, const=True)
-        args.append(arr)
-    for leaf in st_leaves:
-        arr = np.empty(leaf.shape, dtype=object)
-        for i, idx in enumerate(np.ndindex(leaf.shape)):
-            name = leaf.name if leaf.shape == () else f"{leaf.name}_{i}"
-            src = f"s->{leaf.name}" if leaf.shape == () else f"s->{leaf.name}[{i}]"
-            em.block.append(Let(name, _ctype(leaf.dtype), src, (), "", False))
-            arr[idx] = S(name, leaf.dtype)
-        args.append(arr)
-    k = 0
-    for leaf in in_leaves:
-        arr = np.empty(leaf.shape, dtype=object)
-        for i, idx in enumerate(np.ndindex(leaf.shape)):
-            name = leaf.scalars()[i]
-            em.block.append(Let(name, _ctype(leaf.dtype), f"u[{k}]", (), "", False))
-            arr[idx] = S(name, leaf.dtype)
-            k += 1
-        args.append(arr)
-    outs = _Walker(em).run(closed.jaxpr, closed.consts, args)
-    new_state, y = jax.tree.unflatten(jax.tree.structure(out_shape), outs)
-    out_leaves = [
-        Leaf(leaf_name(path), np.shape(a), a.flat[0].dtype if a.size else fdt)
-        for path, a in jax.tree_util.tree_flatten_with_path(y)[0]
-    ]
-    # stores last: every read of s happened into locals above, so the order of the stores does not matter
-    for leaf, arr in zip(st_leaves, jax.tree.leaves(new_state)):
-        arr = np.broadcast_to(arr, leaf.shape)
-        for i, s_ in enumerate(arr.flat):
-            target = f"s->{leaf.name}" if leaf.shape == () else f"s->{leaf.name}[{i}]"
-            s_ = em.convert(s_, leaf.dtype)
-            if s_.c != (leaf.name if leaf.shape == () else f"{leaf.name}_{i}"):
-                em.block.append(Assign(target, s_.c, _deps(s_)))
-    j = 0
-    for arr in jax.tree.leaves(y):
-        for s_ in arr.flat:
-            s_ = em.convert(s_, fdt)
-            em.block.append(Assign(f"y[{j}]", s_.c, _deps(s_)))
-            j += 1
-    block = _prune(em.block, set())
-    lo, hi = _count(block)
-    has_branch = any(isinstance(st, If) for st in block)
-    body = "\n".join(render(block))
-    if not any("u[" in st.expr for st in block if isinstance(st, Let)):
-        body = "    (void)u;\n" + body
-    return CStep(gains, st_leaves, in_leaves, out_leaves, body, ops_summary(lo), ops_summary(hi), has_branch)

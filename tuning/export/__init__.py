@@ -76,10 +76,10 @@ from jaxobs.measurements import DriveInput
 from jaxobs.observers import SOIFO, LPFFlux, PureIntegratorFlux, SecondOrderSOIFO
 from jaxobs.progress import Progress
 
-from .codegen_wip import CStep, c_literal, gain_macro, generate, leaf_name
-from .job import COMPONENTS
-from .outdir import OutDir, atomic_path, atomic_write_text
-from .results import load_result
+from ..job import COMPONENTS
+from ..outdir import OutDir, atomic_path, atomic_write_text
+from ..results import load_result
+from .codegen import CStep, gain_macro, generate, is_angle, leaf_name, reference, rule_doc, statics, write_c
 
 __all__ = [
     "export_observer",
@@ -473,169 +473,8 @@ def _golden(obs32, state0, step: CStep, u: np.ndarray) -> np.ndarray:
     return y
 
 
-# --------------------------------------------------------------------------------------------
-# writing C
-# --------------------------------------------------------------------------------------------
-
-
-def is_angle(name: str) -> bool:
-    """Outputs named ``theta...`` are angles (rad): the check compares them modulo 2π."""
-    return name.startswith("theta")
-
-
-def _ops_text(o: dict) -> str:
-    calls = ", ".join(f"{k} {v}" for k, v in o["calls"].items())
-    parts = [
-        f"{o['add']} +/-",
-        f"{o['mul']} *",
-        f"{o['div']} /",
-        f"{o['call']} calls" + (f" ({calls})" if calls else ""),
-    ]
-    if o["compare"] or o["select"] or o["logic"]:
-        parts.append(f"{o['compare']} compares, {o['select']} selects, {o['logic']} logic")
-    return f"{o['total']} = " + ", ".join(parts)
-
-
-_STEP_DOC = {
-    "signal": """ * jx_step returns the estimate at t_n from the samples before t_n: the outputs of the state before
- * u is integrated over the period (jaxobs/observers/base.py, signal-level observers).""",
-    "drive": """ * u = (u_a, u_b, i_a, i_b): the current sampled at t_n and the voltage about to be applied.  jx_step
- * integrates the period that just ended (the voltage given one step earlier, the current from
- * i_prev to i) and returns the estimate at t_n (jaxobs/observers/base.py, drive observers); the
- * first call only records u and i.""",
-}
-
-
-def _reference(observer) -> str:
-    """The first line of the observer's docstring: its paper and equations (DESIGN.md: every observer says)."""
-    doc = (type(observer).__doc__ or "").strip().splitlines()
-    return doc[0].rstrip(".") if doc else type(observer).__name__
-
-
-def _rule_doc(rule) -> dict:
-    """The rule's name, first docstring line and options; an observer without a rule integrates in its step."""
-    if rule is None:
-        return {"name": "none", "description": "the step's own update"}
-    doc = (type(rule).__doc__ or "").strip().splitlines()
-    fields = {f.name: getattr(rule, f.name) for f in dataclasses.fields(rule)}
-    return {"name": type(rule).__name__, "description": doc[0] if doc else "", **fields}
-
-
-def _statics(observer) -> dict:
-    """The observer's static fields but ts and rule (floors, options), for the record."""
-    out = {}
-    for f in dataclasses.fields(observer):
-        v = getattr(observer, f.name)
-        if f.name not in ("ts", "rule") and not eqx.is_array(v) and isinstance(v, (int, float, str, bool)):
-            out[f.name] = v
-    return out
-
-
-def _emit(obs32, step: CStep, kind: str, source: str, notes) -> tuple[str, str]:
-    """observer.h and observer.c of a generated step."""
-    component = type(obs32).__name__
-    ctype = "float"
-    gains = [
-        (gain_macro(g, None if g.shape == () else i), v, g.name) for g in step.gains for i, v in enumerate(g.value.flat)
-    ]
-    gains_doc = "\n".join(
-        f" *   {m:<14} {c_literal(v, g_dt):<16} {n}" for (m, v, n), g_dt in zip(gains, [np.float32] * len(gains))
-    )
-    statics = ", ".join(f"{k} = {v!r}" for k, v in _statics(obs32).items())
-    note_lines = "".join(f"\n *   note: {n}" for n in notes)
-    in_doc = "\n".join(f" *   u[{i}]  {n}" for i, n in enumerate(step.input_names))
-    out_doc = "\n".join(
-        f" *   y[{i}]  {n}" + (" (angle, rad)" if is_angle(n) else "") for i, n in enumerate(step.output_names)
-    )
-    fields = []
-    for leaf in step.state:
-        ct = "float" if leaf.dtype.kind == "f" else "int"
-        dims = "" if leaf.shape == () else f"[{leaf.size}]"
-        what = "truth value" if leaf.dtype == np.bool_ else "counter" if leaf.dtype.kind == "i" else ""
-        fields.append(f"    {ct} {leaf.name}{dims};" + (f" /* {what} */" if what else ""))
-    angle_mask = ", ".join("1" if is_angle(n) else "0" for n in step.output_names)
-    worst = ""
-    if step.has_branch:
-        dearer = _ops_text(step.ops_worst)
-        worst = f"\n *   a step taking the dearer branch of each if (e.g. AB3's RK4 start-up):\n *     {dearer}"
-    rule = _rule_doc(getattr(obs32, "rule", None))
-    opts = ", ".join(f"{k}={v!r}" for k, v in rule.items() if k not in ("name", "description"))
-    header = f"""/* observer.h -- {component} exported by `jaxobs export` (float32, C99), generated from the jaxpr of
- * its step (tuning.export.codegen): the same operations as the JAX step, in the same order.
- *
- * {_reference(obs32)}.
- * Design: {source}.{note_lines}
- * Discretization: {rule["name"]}({opts}): {rule["description"].rstrip(".")}; ts = {obs32.ts!r} s.
- * Gains (float32, baked into observer.c as macros):
-{gains_doc}
- *   static options: {statics or "none"}
- *
- * Call jx_init(&s) once, then jx_step(&s, u, y) once per sample period:
-{in_doc}
-{out_doc}
-{_STEP_DOC[kind]}
- *
- * Operations per step, outputs included (+/- counts negations too; operations on constants
- * only, which the C compiler folds, are not counted):
- *   {_ops_text(step.ops_steady)}{worst}
- *
- * golden.csv holds the JAX step's float32 outputs; test_main.c checks this code against them
- * (max |y_C - y_golden| / (1 + |y_golden|) <= 1e-4, angles modulo 2 pi).
- */
-#ifndef JX_OBSERVER_H
-#define JX_OBSERVER_H
-
-#ifdef __cplusplus
-extern "C" {{
-#endif
-
-#define JX_NU {len(step.input_names)} /* inputs per step */
-#define JX_NY {len(step.output_names)} /* outputs per step */
-#define JX_Y_IS_ANGLE {{{angle_mask}}} /* outputs compared modulo 2 pi */
-
-/* the JAX step's state, leaf by leaf (pytree paths joined by '_') */
-typedef struct {{
-{chr(10).join(fields)}
-}} jx_state;
-
-void jx_init(jx_state *s);
-void jx_step(jx_state *s, const {ctype} *u, {ctype} *y);
-
-#ifdef __cplusplus
-}}
-#endif
-
-#endif /* JX_OBSERVER_H */
-"""
-    macros = "\n".join(f"#define {m} {c_literal(v, np.float32)} /* {n} */" for m, v, n in gains)
-    init = []
-    for leaf in step.state:
-        for i, v in enumerate(np.asarray(leaf.value).flat):
-            target = f"s->{leaf.name}" if leaf.shape == () else f"s->{leaf.name}[{i}]"
-            init.append(f"    {target} = {c_literal(v, leaf.dtype)};")
-    source_c = f"""/* observer.c -- {component} exported by `jaxobs export`; see observer.h. */
-#include <math.h>
-
-#include "observer.h"
-
-{macros}
-
-void jx_init(jx_state *s)
-{{
-{chr(10).join(init)}
-}}
-
-/* One period: reads the state into locals, computes, then stores the new state and the outputs. */
-void jx_step(jx_state *s, const {ctype} *u, {ctype} *y)
-{{
-{step.body}
-}}
-"""
-    return header, source_c
-
-
 def _harness() -> str:
-    return (resources.files("tuning") / "c" / "test_main.c").read_text()
+    return (resources.files("tuning.export") / "test_main.c").read_text()
 
 
 # --------------------------------------------------------------------------------------------
@@ -698,7 +537,7 @@ def export_observer(
         state0 = obs32.init(u0)
         step = generate(obs32, state0, u0, input_names=list(DriveInput._fields) if kind == "drive" else ["v"])
     component = type(obs32).__name__
-    header, source_c = _emit(obs32, step, kind, source or f"{component} as given", notes)
+    header, source_c = write_c(obs32, step, kind, source or f"{component} as given", notes)
     bar.update()
     bar.stage("the test record" + (" (compiling and running the sensored drive)" if kind == "drive" else ""))
     nu = len(step.input_names)
@@ -771,15 +610,15 @@ def export_observer(
         ops["worst"] = step.ops_worst
     coeffs = {
         "component": component,
-        "reference": _reference(obs32),
+        "reference": reference(obs32),
         "design": source or f"{component} as given",
         "notes": notes,
         "dtype": "float32",
         "ts": obs32.ts,
-        "rule": _rule_doc(getattr(obs32, "rule", None)),
+        "rule": rule_doc(getattr(obs32, "rule", None)),
         "step": step_doc[kind],
         "gains": gains,
-        "static": _statics(obs32),
+        "static": statics(obs32),
         "state": state,
         "inputs": step.input_names,
         "outputs": step.output_names,
