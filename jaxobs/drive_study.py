@@ -91,6 +91,8 @@ DRIVE_STUDY_METRICS = {
     "pos_err_max_deg": ("deg", "peak position error in the steady window (electrical)"),
     "speed_err_rms_rpm": ("r/min", "rms speed-estimate error in the steady window"),
     "speed_noise_rpm": ("r/min", "speed-estimate noise: rms sample-to-sample change / sqrt(2)"),
+    "pos_bias_deg": ("deg", "|mean position error| in the steady window (electrical): the observer's steady lag"),
+    "speed_dev_max_rpm": ("r/min", "peak |true speed - reference| after t_event (a load step's dip)"),
 }
 QUANTILES = (0.5, 0.95, 0.99, 1.0)
 # axis -> what it is, in words (the NetCDF long_name and the figures' labels)
@@ -297,6 +299,8 @@ def run_drive_study(
             "pos_err_max_deg": jnp.max(jnp.where(steady, jnp.abs(err), 0.0)),
             "speed_err_rms_rpm": M.rms(w_err, steady),
             "speed_noise_rpm": M.rms(jnp.diff(w_hat) / math.sqrt(2.0), steady[1:]),
+            "pos_bias_deg": jnp.abs(M.steady_mean(err, steady)),
+            "speed_dev_max_rpm": M.peak_deviation(sol.t, o.omega_m, o.omega_m_ref, t_event) * 30 / math.pi,
         }
         finite = sol.ok & jnp.all(jnp.stack([jnp.isfinite(v) for v in m.values()]))
         lost = ~finite | M.lost_lock(o.obs.theta, o.theta_e, steady, math.radians(M.LOCK_TOL_DRIVE_DEG))

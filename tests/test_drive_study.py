@@ -38,6 +38,9 @@ def test_grid_study_dims_quantiles_and_the_papers_ordering():
     assert bool((fa < c).all())
     # the C-LESO's steady lag is its transfer function's phase: 11.4° at 300 r/min, 22.6° at 600 (README)
     np.testing.assert_allclose(c.sel(dRs=0.3, dLq=0.2).values, [11.4, 22.6], atol=3.0)
+    # ... which is its steady bias: the rms of a steady lag is the lag
+    bias = ds["pos_bias_deg"].sel(design="C-LESO", dRs=0.3, dLq=0.2).values
+    np.testing.assert_allclose(bias, c.sel(dRs=0.3, dLq=0.2).values, rtol=0.02)
     # quantile 1.0 is the worst scenario
     assert float(ds["pos_err_rms_deg_q"].sel(design="C-LESO", quantile=1.0)) == pytest.approx(float(c.max()))
     for v in ds.data_vars:

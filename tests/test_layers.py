@@ -30,6 +30,7 @@ LAYERS = [
         "jaxobs.system",
         "jaxobs._time",
         "jaxobs.progress",
+        "jaxobs._cache",
     ),
     # integration rules (and check_rule)
     ("jaxobs.discretize",),

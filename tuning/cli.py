@@ -64,6 +64,8 @@ import contextlib
 import hashlib
 import json
 import os
+import re
+import shlex
 import sys
 import tempfile
 import traceback
@@ -71,7 +73,7 @@ from importlib import resources
 from pathlib import Path
 
 import jaxobs
-from jaxobs import linear, papers, use_host_devices
+from jaxobs import linear, papers, use_compile_cache, use_host_devices
 
 from .export import add_export_parser
 from .job import CHECKPOINT, load_job, load_recordings, run_job
@@ -218,7 +220,10 @@ def _cmd_closed_form(args) -> int:
             allowed = ", ".join("--" + o.replace("_", "-") for o in _CF_OPTIONS[args.design])
             raise ValueError(f"--{name.replace('_', '-')} does not apply to {args.design} (allowed: {allowed})")
         values[name] = v
-    res = closed_form_rows(args.design, values)
+    try:
+        res = closed_form_rows(args.design, values)
+    except ValueError as e:  # name the flag the user typed (wif_closed_form.b -> --b), not the function's field
+        raise ValueError(re.sub(r"\b\w+_closed_form\.(\w+)", lambda m: "--" + m[1].replace("_", "-"), str(e))) from None
     if args.json:
         print(json.dumps(res, indent=1))
     else:
@@ -655,8 +660,11 @@ def _cmd_tune(args) -> int:
     products = ["result.json"]
     if not args.resume:
         products.append(CHECKPOINT)  # a fresh run would overwrite it: --resume, or --force to start over
-    with OutDir(out, products, force=args.force):
+    resume = f"jaxobs tune {shlex.quote(str(path))} --out {shlex.quote(str(out))} --resume"
+    hint = f"an earlier run stopped here: continue it with `{resume}` (--force starts over and discards it)"
+    with OutDir(out, products, force=args.force, hints={CHECKPOINT: hint}):
         args.log_dir = out
+        args.on_interrupt = f"; continue with: {resume}"  # what Ctrl-C says (main)
         result = run_job(job, out, resume=args.resume, quiet=args.quiet)
     try:
         timing = json.loads((out / "timing.json").read_text())
@@ -789,10 +797,16 @@ def build_parser() -> argparse.ArgumentParser:
     """The one parser: every subcommand of ``jaxobs``, and ``--version``."""
     p = _Parser(prog="jaxobs", description="Differentiable simulation and tuning of motor-drive observers and FLLs.")
     p.add_argument("--version", action="version", version=f"jaxobs {jaxobs.__version__}")
-    sub = p.add_subparsers(dest="cmd", required=True, parser_class=_Parser)
+    sub = p.add_subparsers(dest="cmd", parser_class=_Parser, metavar="COMMAND")  # none given: main lists them
     # every command takes --quiet: no progress on stderr (stdout, the results, is the same either way)
     quiet = _Parser(add_help=False)
     quiet.add_argument("--quiet", action="store_true", help="no progress bars or compile notices on stderr")
+    quiet.add_argument(
+        "--no-cache",
+        action="store_true",
+        help="do not keep compiled programs on disk (default: kept in $JAXOBS_CACHE_DIR or ~/.cache/jaxobs/jax, "
+        "so a second run skips most of XLA's work; JAXOBS_CACHE_DIR=off turns it off too)",
+    )
     t = sub.add_parser(
         "tune", help="gradient-based gain tuning from a TOML job (default: embedded WIF job)", parents=[quiet]
     )
@@ -878,6 +892,11 @@ def main(argv=None) -> int:
     try:
         use_host_devices()  # before any JAX computation: one CPU device per usable core
         args = parser.parse_args(argv)
+        if args.cmd is None:  # `jaxobs` alone: the commands, not argparse's "arguments are required: cmd"
+            parser.print_help(sys.stderr)
+            return 2
+        if not getattr(args, "no_cache", False):
+            use_compile_cache()  # before any compilation: compiled programs are reused by the next process
         return args.func(args)
     except ValueError as e:  # bad input, job-file errors (JobError) included: one line, exit 2
         print(f"jaxobs: error: {e}", file=sys.stderr)
@@ -887,7 +906,9 @@ def main(argv=None) -> int:
         print(f"jaxobs: error: {e.strerror or e}{where}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
-        print("jaxobs: interrupted", file=sys.stderr)
+        # on a line of its own: a progress bar may hold the terminal's current line
+        start = "\n" if sys.stderr.isatty() else ""
+        print(f"{start}jaxobs: interrupted{getattr(args, 'on_interrupt', '')}", file=sys.stderr)
         return 130
     except (Exception, MemoryError) as e:  # an internal error: the traceback to a log, one line here
         log = _write_error_log(getattr(args, "log_dir", None))

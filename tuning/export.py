@@ -941,6 +941,7 @@ def compile_and_check(out_dir, *, cc: str | None = None, extra_flags=()) -> floa
 def add_export_parser(subparsers) -> argparse.ArgumentParser:
     """Add ``jaxobs export`` to the CLI's subparsers."""
     e = subparsers.add_parser("export", help="an observer as C99 float32 with golden vectors and a test harness")
+    e.add_argument("--no-cache", action="store_true", help="do not keep compiled programs on disk")
     e.add_argument("result", nargs="?", help="a `jaxobs tune` result.json (its tuned gains)")
     e.add_argument("--design", choices=list(DESIGNS), help="a closed-form design instead of a result")
     e.add_argument("--out", default="out/export", help="folder for the files (default: out/export)")
