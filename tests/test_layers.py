@@ -65,8 +65,11 @@ LAYERS = [
     ("jaxobs.reproduce",),
     # tuning: it changes gains (and exports the tuned observer)
     ("tuning.outdir",),
-    ("tuning._cexpr", "tuning.params", "tuning.solvers"),
-    ("tuning._crules", "tuning._cmodels", "tuning.objective", "tuning.report", "tuning.targets"),
+    # the C export's code generator (jaxpr -> C) is beside the rest: it knows no observer
+    ("tuning.export.ir",),
+    ("tuning.export.lower",),
+    ("tuning.export.codegen", "tuning.params", "tuning.solvers"),
+    ("tuning.objective", "tuning.report", "tuning.targets"),
     ("tuning.structure",),
     ("tuning.job",),
     ("tuning.results",),

@@ -93,10 +93,16 @@ from ._models import (
     soifo_harmonic_factor as soifo_harmonic_factor,
 )
 from ._models import (
+    soifo_harmonic_phase as soifo_harmonic_phase,
+)
+from ._models import (
     soifo_tf as soifo_tf,
 )
 from ._models import (
     sosoifo_harmonic_factor as sosoifo_harmonic_factor,
+)
+from ._models import (
+    sosoifo_harmonic_phase as sosoifo_harmonic_phase,
 )
 from ._models import (
     sosoifo_tf as sosoifo_tf,
