@@ -38,6 +38,7 @@ LAYERS = [
     ("jaxobs.signals", "jaxobs.drive.machine", "jaxobs.drive.hardware"),
     ("jaxobs.scenarios", "jaxobs.drive.plant", "jaxobs.drive.control", "jaxobs.drive.scenario"),
     ("jaxobs.drive.loop",),
+    ("jaxobs.drive.bench",),
     ("jaxobs.drive",),
     # observers: they estimate
     ("jaxobs.observers._cores", "jaxobs.observers.base"),

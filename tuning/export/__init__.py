@@ -89,7 +89,6 @@ __all__ = [
     "fll_test_signal",
     "drive_test_signal",
     "drive_recording",
-    "drive_machine",
     "bind_to_drive",
     "add_export_parser",
     "cli_export",
@@ -295,10 +294,10 @@ def drive_test_signal(
     return data, doc
 
 
-# the machine a drive observer's recording runs on, and the speed it runs at (both 50 Hz electrical)
-_DRIVE_MACHINES = {
-    "flux": ("spmsm_paper000", "BENCH_J_000", 1000.0),  # 000's SPMSM, p = 3
-    "leso": ("ipmsm_paper002", "BENCH_J_002", 300.0),  # 002's (assumed) IPMSM, p = 5: 25 Hz (see drive_recording)
+# the bench (jaxobs.drive.bench_machine) a drive observer's recording runs on, and its speed (r/min)
+_RECORDING_BENCH = {
+    "flux": ("spmsm000", 1000.0),  # 000's SPMSM, p = 3: 50 Hz
+    "leso": ("ipmsm002", 300.0),  # 002's (assumed) IPMSM, p = 5: 25 Hz (see drive_recording)
 }
 
 
@@ -310,14 +309,13 @@ def _family(observer) -> str:
     raise ValueError(f"export: {type(observer).__name__} is not a drive observer (flux observer or LESO)")
 
 
-def drive_machine(observer):
-    """The machine a drive observer's recording runs on: 000's SPMSM for the flux observers, 002's IPMSM for
-    the LESOs, each with the bench inertia of the drive jobs and studies (``papers.BENCH_J_*``, 10× the
-    table's: tuning.job.DRIVE_MACHINES)."""
-    from jaxobs import drive, papers
+def _recording_bench(observer):
+    """The machine (:func:`jaxobs.drive.bench_machine`: 000's SPMSM for the flux observers, 002's IPMSM for the
+    LESOs, on the drive jobs' bench inertia) and the speed (r/min) a drive observer's recording runs at."""
+    from jaxobs.drive import bench_machine
 
-    ctor, j, _ = _DRIVE_MACHINES[_family(observer)]
-    return getattr(drive, ctor)(J=getattr(papers, j))
+    name, rpm = _RECORDING_BENCH[_family(observer)]
+    return bench_machine(name), rpm
 
 
 def bind_to_drive(observer, machine, rpm: float):
@@ -369,9 +367,9 @@ def drive_recording(
     current is sampled at t_k: the drive observers' contract.  With ideal sensors they equal the
     outputs' u_a, u_b, i_a, i_b.
 
-    ``machine``: a :class:`jaxobs.drive.PMSMParams` (default :func:`drive_machine`).  Export the
-    observer bound to the same machine and speed (:func:`bind_to_drive`).  Returns (float32 array
-    (n_steps, 4), a one-line description).
+    ``machine``: a :class:`jaxobs.drive.PMSMParams` (default: the bench of the observer's family,
+    :func:`jaxobs.drive.bench_machine`).  Export the observer bound to the same machine and speed
+    (:func:`bind_to_drive`).  Returns (float32 array (n_steps, 4), a one-line description).
 
     The rotor starts at θe = π/2, where the q-axis current and the back EMF lie on −α, so the
     β components of the first samples are small.  ``start`` shapes the first period as
@@ -388,17 +386,16 @@ def drive_recording(
         raise ValueError(f"drive_recording: start must be '', 'flux' or 'alpha', got {start!r}")
     import jaxobs
     from jaxobs import drive as D
-    from jaxobs import papers
 
     family = _family(observer)
-    machine = drive_machine(observer) if machine is None else machine
-    rpm = _DRIVE_MACHINES[family][2] if rpm is None else float(rpm)
+    bench, bench_rpm = _recording_bench(observer)
+    machine = bench if machine is None else machine
+    rpm = bench_rpm if rpm is None else float(rpm)
     if not (isinstance(n_steps, int) and n_steps >= 2):
         raise ValueError(f"drive_recording: n_steps must be an integer >= 2, got {n_steps!r}")
     ts = float(observer.ts)
     t1, t2 = (n_steps // 3) * ts, (2 * n_steps // 3) * ts
     t_rated = float(machine.T_rated)
-    foc = D.FOC.imc(machine, 2 * math.pi * papers.BENCH_CURRENT_HZ, 2 * math.pi * papers.BENCH_SPEED_HZ, ts=ts)
     scenario = D.Scenario(
         machine,
         speed_ref=D.Scenario.speed_rpm([0.0, t1], [rpm, (1 + speed_step) * rpm]),
@@ -406,7 +403,8 @@ def drive_recording(
         omega_m0=rpm * D.RPM,
         theta_e0=math.pi / 2,
     )
-    sol = jaxobs.simulate(D.ClosedLoop(D.Drive(foc, settle=0.0), _Tap(), scenario), n_steps * ts)
+    drive = D.bench_drive(machine, sensorless=False, settle=0.0, ts=ts)  # the encoder closes the loop
+    sol = jaxobs.simulate(D.ClosedLoop(drive, _Tap(), scenario), n_steps * ts)
     m = sol.outputs.obs
     data = np.stack([np.asarray(m.u_a), np.asarray(m.u_b), np.asarray(m.i_a), np.asarray(m.i_b)], axis=1)
     data = data[:n_steps].astype(np.float64)
@@ -520,7 +518,7 @@ def export_observer(
         signal: instead of the default, the inputs per step, shape (n,) or (n, JX_NU) (drive
             observers: columns u_a, u_b, i_a, i_b, e.g. :func:`drive_recording` at another speed),
             or ``"synthetic"`` for a drive observer: :func:`drive_test_signal` on the observer's
-            own Rs and L.  The default recording runs on :func:`drive_machine`: export the
+            own Rs and L.  The default recording runs on its bench (:func:`jaxobs.drive.bench_machine`): export the
             observer bound to it (:func:`bind_to_drive`) to get that machine's Rs and L in the C.
         source: where the design comes from (a result file, a closed form), for the header.
         notes: lines recorded in the header and coefficients.json (e.g. defaults used).
@@ -740,7 +738,7 @@ def _export(args) -> int:
         source = f"closed form {args.design}, {DESIGNS[args.design][1]}"
     signal = None
     if hasattr(obs, "Rs") and args.record == "drive":
-        machine, rpm = drive_machine(obs), _DRIVE_MACHINES[_family(obs)][2]
+        machine, rpm = _recording_bench(obs)
         obs = bind_to_drive(obs, machine, rpm)
         speed = "omega0_pll" if _family(obs) == "leso" else "omega0"
         notes = [n for n in notes if "sets Rs, Lq" not in n]
