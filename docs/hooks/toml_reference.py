@@ -276,6 +276,7 @@ def _axes_table(title: str, ranges: dict, intro: str) -> str:
 def reference_markdown() -> str:
     sys.path.insert(0, str(ROOT))
     import tuning
+    from jaxobs.drive import BENCH_MACHINES  # the drive jobs' and studies' machines
     from tuning import job as job_mod
     from tuning import study_file
 
@@ -366,7 +367,7 @@ def reference_markdown() -> str:
             index,
             None,
             'Drive jobs only (`scenarios.signal = "drive"`). Machines: '
-            + ", ".join(f"`{m}`" for m in job_mod.DRIVE_MACHINES)
+            + ", ".join(f"`{m}`" for m in BENCH_MACHINES)
             + ".",
         )
     )
@@ -417,7 +418,7 @@ def reference_markdown() -> str:
             "study",
             index,
             "drive",
-            "A sensorless-drive study. Machines: " + ", ".join(f"`{m}`" for m in study_file.MACHINES) + ".",
+            "A sensorless-drive study. Machines: " + ", ".join(f"`{m}`" for m in BENCH_MACHINES) + ".",
         )
     )
     out.append(
