@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["S", "Let", "Assign", "Decl", "If", "c_literal", "ctype", "lit", "deps", "prune", "count"]
+__all__ = ["S", "Let", "Assign", "Decl", "If", "Comment", "c_literal", "ctype", "lit", "deps", "prune", "count"]
 __all__ += ["ops_summary", "render"]
 
 # --------------------------------------------------------------------------------------------
@@ -110,6 +110,13 @@ class If:
     outputs: tuple  # names assigned in both branches
 
 
+@dataclasses.dataclass
+class Comment:
+    """Where the statements that follow come from (a file:line of the Python step), for the reader."""
+
+    text: str
+
+
 def deps(*xs: S) -> tuple:
     return tuple(x.c for x in xs if not x.is_lit)
 
@@ -180,8 +187,12 @@ def ops_summary(c: Counter) -> dict:
 
 def render(block: list, indent: str = "    ") -> list:
     lines = []
-    for st in block:
-        if isinstance(st, Let):
+    for k, st in enumerate(block):
+        if isinstance(st, Comment):
+            nxt = block[k + 1] if k + 1 < len(block) else None
+            if nxt is not None and not isinstance(nxt, Comment):  # a comment on nothing is dropped
+                lines.append(f"{indent}/* {st.text} */")
+        elif isinstance(st, Let):
             lines.append(f"{indent}const {st.ctype} {st.name} = {st.expr};")
         elif isinstance(st, Decl):
             lines.append(f"{indent}{st.ctype} {st.name};")

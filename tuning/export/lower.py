@@ -9,7 +9,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .ir import Assign, Decl, If, Let, S, c_literal, ctype, deps, lit
+from .ir import Assign, Comment, Decl, If, Let, S, c_literal, ctype, deps, lit
 
 __all__ = ["SUPPORTED", "Emitter", "Walker"]
 
@@ -74,7 +74,7 @@ def _where(eqn) -> str:
     for f in frames:
         name = f.file_name.replace("\\", "/")
         if "/jax/" not in name and "/jaxlib/" not in name and "/equinox/" not in name:
-            return f"{name.rsplit('/', 2)[-1] if '/' in name else name}:{f.line_num} ({f.function_name})"
+            return f"{name.rsplit('/', 1)[-1]}:{f.line_num} ({f.function_name})"
     return "unknown"
 
 
@@ -92,6 +92,7 @@ class Emitter:
         self.n = 0
         self.block: list = []
         self.memo: dict = {}  # (type, expression) -> its scalar: common subexpressions computed once
+        self.where = ""  # the Python line of the statements being written (a comment when it changes)
 
     # --- naming and statements ------------------------------------------------------------
 
@@ -272,6 +273,11 @@ class Walker:
             env[var] = a
         for eqn in jaxpr.eqns:
             ins = [read(v) for v in eqn.invars]
+            if eqn.primitive.name not in _CALLS:
+                where = _where(eqn)
+                if where not in ("unknown", self.em.where):  # a jitted jnp function's equations: no user line
+                    self.em.where = where
+                    self.em.block.append(Comment(where))
             try:
                 outs = self.eqn(eqn, ins)
             except ValueError as e:
