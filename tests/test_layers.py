@@ -30,6 +30,8 @@ LAYERS = [
         "jaxobs.system",
         "jaxobs._time",
         "jaxobs.progress",
+        "jaxobs.provenance",
+        "jaxobs._cache",
     ),
     # integration rules (and check_rule)
     ("jaxobs.discretize",),
@@ -42,6 +44,7 @@ LAYERS = [
     ("jaxobs.observers",),
     # the closed loop composes the drive's parts with a drive observer (its contract, observers.base)
     ("jaxobs.drive.loop",),
+    ("jaxobs.drive.bench",),
     ("jaxobs.drive",),
     # the one loop over a system, and sharding a batch over devices
     ("jaxobs._loop",),
@@ -53,6 +56,8 @@ LAYERS = [
     ("jaxobs.linear._models", "jaxobs.linear._fll"),
     ("jaxobs.linear",),
     ("jaxobs",),
+    # the one study runner (samplers in jaxobs.scenarios)
+    ("jaxobs.runner",),
     # the library's own applications: studies, the demo, the papers' reproductions, figures, benchmarks
     (
         "jaxobs.study",
@@ -65,8 +70,11 @@ LAYERS = [
     ("jaxobs.reproduce",),
     # tuning: it changes gains (and exports the tuned observer)
     ("tuning.outdir",),
-    ("tuning._cexpr", "tuning.params", "tuning.solvers"),
-    ("tuning._crules", "tuning._cmodels", "tuning.objective", "tuning.report", "tuning.targets"),
+    # the C export's code generator (jaxpr -> C) is beside the rest: it knows no observer
+    ("tuning.export.ir",),
+    ("tuning.export.lower",),
+    ("tuning.export.codegen", "tuning.params", "tuning.solvers"),
+    ("tuning.objective", "tuning.report", "tuning.targets"),
     ("tuning.structure",),
     ("tuning.job",),
     ("tuning.results",),

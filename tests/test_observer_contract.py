@@ -29,8 +29,8 @@ from jaxobs.observers import (
 from jaxobs.reproduce import flux as RF
 from jaxobs.reproduce import leso as RL
 
-SPMSM = D.spmsm_paper000(J=papers.BENCH_J_000)
-IPMSM = D.ipmsm_paper002(J=papers.BENCH_J_002)
+SPMSM = D.bench_machine("spmsm000")
+IPMSM = D.bench_machine("ipmsm002")
 KP, KI = linear.pll_gains(2 * math.pi * 20.0)
 
 FLL_FLUX = {
@@ -152,7 +152,7 @@ def test_the_export_binding_now_clamps():
 
 
 def test_the_reproductions_banks_are_their_old_constructions():
-    est, w = RF.bench_machine(Rs=0.9), 2 * math.pi * 100.0
+    est, w = D.bench_machine("spmsm000", Rs=0.9), 2 * math.pi * 100.0
     kp, ki = linear.pll_gains(2 * math.pi * papers.FLUX_PLL_HZ)
     k, K1, K2 = RF.K_SOIFO, RF.K1, RF.K2
     old = jaxobs.ObserverBank(
@@ -165,7 +165,7 @@ def test_the_reproductions_banks_are_their_old_constructions():
         primary=3,
     )
     assert _leaves_equal(RF.flux_bank(est, w), old)
-    est, w = RL.bench_machine(Lq=1.5 * float(IPMSM.Lq)), 2 * math.pi * 25.0
+    est, w = D.bench_machine("ipmsm002", Lq=1.5 * float(IPMSM.Lq)), 2 * math.pi * 25.0
     kp, ki = linear.pll_gains(2 * math.pi * papers.LESO_PLL_HZ)
     old = jaxobs.ObserverBank(
         (
