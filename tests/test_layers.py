@@ -56,6 +56,7 @@ LAYERS = [
     (
         "jaxobs.study",
         "jaxobs.drive_study",
+        "jaxobs.drive.stability",
         "jaxobs.demo",
         "jaxobs.reproduce.flux",
         "jaxobs.reproduce.leso",
