@@ -64,7 +64,8 @@ LAYERS = [
     ("jaxobs.reproduce",),
     # tuning: it changes gains (and exports the tuned observer)
     ("tuning.outdir",),
-    ("tuning._cexpr", "tuning.params", "tuning.solvers"),
+    ("tuning._cexpr", "tuning.params", "tuning.solvers", "tuning.aggregations"),
+    ("tuning.strategies",),
     ("tuning._crules", "tuning._cmodels", "tuning.objective", "tuning.report", "tuning.targets"),
     ("tuning.structure",),
     ("tuning.job",),
