@@ -18,6 +18,7 @@ import optax
 import pytest
 
 import jaxobs
+from jaxobs import drive as D
 from jaxobs import linear, papers
 from tuning import (
     GainSpec,
@@ -27,7 +28,6 @@ from tuning import (
     load_job,
     tune,
 )
-from tuning import job as job_mod
 from tuning.cli import main
 from tuning.objective import MetricContext
 from tuning.solvers import OptaxSolver
@@ -334,8 +334,8 @@ def test_drive_speeds_are_checked_against_the_jobs_machine(tmp_path, capsys):
     # the oracle, by hand from the machines' tables: 540 V dc link, u_max = 540/√3 V
     for name, par in (("ipmsm002", papers.IPMSM_002), ("spmsm000", papers.SPMSM_000)):
         n_max = 540.0 / math.sqrt(3) / par["psi_f"] / par["p"] * 60 / (2 * math.pi)
-        assert job_mod.drive_speed_limit_rpm(name) == pytest.approx(n_max, rel=1e-12)
-    assert 1.3 * papers.IPMSM_002["n_rated"] < job_mod.drive_speed_limit_rpm("ipmsm002") < 1e4
+        assert D.drive_speed_limit_rpm(D.bench_machine(name)) == pytest.approx(n_max, rel=1e-12)
+    assert 1.3 * papers.IPMSM_002["n_rated"] < D.drive_speed_limit_rpm(D.bench_machine("ipmsm002")) < 1e4
     cleso = (presets / "cleso.toml").read_text()
     soifo = (presets / "soifo.toml").read_text()
     cases = [  # (job text, None if it passes, else the field and the range the one-line error names)
@@ -517,6 +517,23 @@ def _oracle_dominant(num, den, cancel_tol=None):
     p = np.asarray(t.poles())
     dom = p[np.argmax(p.real)]
     return -dom.real / abs(dom), abs(dom) / (2 * math.pi), len(p)
+
+
+def test_leso_structure_is_linearized_at_the_jobs_machine_speed(tmp_path):
+    """A LESO job's linear structure is taken at its first speed_rpm in electrical rad/s on the job's own machine:
+    300 r/min is 5 · 10π rad/s on 002's IPMSM (p = 5) and 3 · 10π on 000's SPMSM (p = 3).  (It used 002's pole
+    pairs for every LESO job, so a LESO on the SPMSM was linearized at 5/3 of its speed.)"""
+    from tuning.structure import structure
+
+    text = (Path(__file__).parents[1] / "tuning" / "presets" / "faleso.toml").read_text()
+    for machine, p in (("ipmsm002", 5), ("spmsm000", 3)):
+        f = tmp_path / f"{machine}.toml"
+        f.write_text(text.replace('loop = "sensorless"', f'loop = "sensorless"\nmachine = "{machine}"', 1))
+        job = load_job(f)
+        assert job.drive.machine == machine and D.bench_machine(machine).p == p
+        fa = structure("FALESO", job.values, job)
+        assert fa["omega_e"] == pytest.approx(300.0 * math.pi / 30 * p, rel=1e-12)
+        assert "omega_e = " + f"{fa['omega_e']:.6g}" in fa["model"]
 
 
 def test_dominant_damping_leaves_out_the_poles_a_zero_cancels():

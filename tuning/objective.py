@@ -45,8 +45,8 @@ class MetricContext:
     steady_from: float  # start of the steady window, s
     band_hz: float = 0.05
     temperature: float = 1e-3  # smooth max/settling temperature, s (or units of the metric)
-    band_deg: float = 2.0  # position-error band for settling_position, electrical degrees
-    band_rpm: float = 5.0  # speed-error band for settling_speed, r/min (mechanical)
+    band_deg: float = 2.0  # settling_position's band around the error's own final value, electrical degrees
+    band_rpm: float = 5.0  # settling_speed's band around the speed reference, r/min (mechanical)
 
 
 def _freq_err_hz(sol):
@@ -87,6 +87,11 @@ def _speed_err_rpm(sol, sc):
     return (out.obs.omega / sc.par.p - out.omega_m) * 30 / math.pi
 
 
+def _rpm(omega_m):
+    """Mechanical speed, rad/s -> r/min."""
+    return omega_m * 30 / math.pi
+
+
 def _sample_noise(x, mask):
     """rms of the sample-to-sample change over √2: the standard deviation of white noise on ``x``,
     blind to its slow variations (a speed estimate's high-frequency noise)."""
@@ -119,17 +124,31 @@ METRICS: dict[str, Callable] = {
     "rms_position_steady": lambda sol, sig, ctx: M.rms(_position_err(sol, sig), _steady(sol, ctx)),
     "ripple_position": lambda sol, sig, ctx: M.smooth_peak_to_peak(_position_err(sol, sig), _steady(sol, ctx), 1e-4),
     # drive observers in the closed loop (the scenario is a drive Scenario): settling after a load or
-    # speed step at t_event, and the noise the estimates carry (DESIGN.md "Metrics": smooth for gradients)
-    "settling_position": lambda sol, sig, ctx: M.smooth_settling_time(
+    # speed step at t_event, and the noise the estimates carry (DESIGN.md "Metrics": smooth for gradients).
+    # settling_position settles to a band around the error's own final value (its mean over the steady
+    # window), so a steady lag settles; the lag is bias_position.  Before issue 26 it settled to 0 within
+    # the band, and a biased observer never settled (the whole window for C-LESO and GI-LESO).
+    "settling_position": lambda sol, sig, ctx: M.smooth_settling_to_steady(
         sol.t,
         _scored_position_err(sol, sig, ctx),
-        0.0,
         math.radians(ctx.band_deg),
+        _steady(sol, ctx),
         ctx.t_event,
         temperature=ctx.temperature,
     ),
-    "settling_speed": lambda sol, sig, ctx: M.smooth_settling_time(
-        sol.t, _speed_err_rpm(sol, sig), 0.0, ctx.band_rpm, ctx.t_event, temperature=ctx.temperature
+    "bias_position": lambda sol, sig, ctx: jnp.abs(M.steady_mean(_position_err(sol, sig), _steady(sol, ctx))),
+    # the true speed against its reference (r/min), not the speed estimate's error (as it was before issue 26):
+    # after a speed step its settling, after a load step its recovery time; and the peak deviation after it
+    "settling_speed": lambda sol, sig, ctx: M.smooth_settling_to_reference(
+        sol.t,
+        _rpm(sol.outputs.omega_m),
+        _rpm(sol.outputs.omega_m_ref),
+        ctx.band_rpm,
+        ctx.t_event,
+        temperature=ctx.temperature,
+    ),
+    "peak_speed_dev": lambda sol, sig, ctx: M.smooth_peak_deviation(
+        sol.t, _rpm(sol.outputs.omega_m), _rpm(sol.outputs.omega_m_ref), ctx.t_event, temperature=ctx.temperature
     ),
     "rms_speed_steady": lambda sol, sig, ctx: M.rms(_speed_err_rpm(sol, sig), _steady(sol, ctx)),
     "speed_noise_rpm": lambda sol, sig, ctx: _sample_noise(
@@ -140,7 +159,13 @@ METRICS: dict[str, Callable] = {
 # truth (jaxobs.metrics.lost_lock_of: 45° / 10 % on signals, 90° on the drive, over the steady window)
 LOST_LOCK = "lost_lock"
 # metrics that need the closed-loop drive (signal = "drive" jobs)
-DRIVE_METRICS = ("settling_position", "settling_speed", "rms_speed_steady", "speed_noise_rpm")
+DRIVE_METRICS = (
+    "settling_position",
+    "settling_speed",
+    "peak_speed_dev",
+    "rms_speed_steady",
+    "speed_noise_rpm",
+)
 
 # Loss of synchronism of a drive observer, a per-scenario flag (never fatal): its simulation diverged, or
 # |θ̂e − θe| exceeded this anywhere in the scored horizon [0, horizon) (the settling phase before t = 0 is

@@ -15,6 +15,7 @@ from it replays exactly the computation an uninterrupted run would have done.
 from __future__ import annotations
 
 import abc
+import io
 import json
 import math
 import os
@@ -31,6 +32,8 @@ import optax
 import optimistix as optx
 
 from jaxobs.progress import Progress
+
+from .outdir import atomic_write_bytes
 
 __all__ = [
     "AbstractSolver",
@@ -142,17 +145,13 @@ def _save_checkpoint(path: Path, it, theta, opt_state, best_theta, best_value, h
         history=history,
         n_leaves=len(leaves),
     )
-    tmp = path.with_name(f".{path.stem}.{os.getpid()}.tmp.npz")
-    try:
-        with open(tmp, "wb") as f:
-            th, best = np.asarray(theta), np.asarray(best_theta)
-            np.savez(f, meta=np.asarray(json.dumps(meta)), theta=th, best_theta=best, **arrays)
-            f.flush()
-            os.fsync(f.fileno())
-        _replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
+    buf = io.BytesIO()
+    np.savez(
+        buf, meta=np.asarray(json.dumps(meta)), theta=np.asarray(theta), best_theta=np.asarray(best_theta), **arrays
+    )
+    # a random, O_EXCL|O_NOFOLLOW temp name beside the checkpoint, renamed by _replace (looked up now: tests
+    # patch it to kill a run between the write and the rename)
+    atomic_write_bytes(path, buf.getvalue(), replace=_replace)
 
 
 CHECKPOINT_FORMAT = "jaxobs-checkpoint-1"
