@@ -309,8 +309,8 @@ def test_encoder_drive_started_at_speed_stays_within_half_a_percent_from_t0():
     horizon.  Measured: ≤ 1.3e-4 of ω* (the old zero start braked to −24 % of the reference at 1000 r/min, 5 N·m)."""
     base = D.Scenario(PAR, omega_m0=1.0, theta_e0=0.4)
     batch = D.grid(base, speed_rpm=[300.0, 1000.0], load_nm=[0.0, 5.0])
-    sc = batch.scenarios
-    sc = eqx.tree_at(lambda s: s.omega_m0, sc, sc.speed_ref.values[:, 0])  # start at the reference
+    sc = batch.scenarios  # D.grid starts each scenario at its speed_rpm (omega_m0), whatever the base's
+    np.testing.assert_allclose(np.asarray(sc.omega_m0), np.asarray(sc.speed_ref.values[:, 0]), rtol=1e-12)
     sol = jax.jit(jax.vmap(lambda s: jaxobs.simulate(D.ClosedLoop(DRIVE, None, s), 0.3)))(sc)
     w, w_ref = np.asarray(sol.outputs.omega_m), np.asarray(sol.outputs.omega_m_ref)
     rel = np.max(np.abs(w - w_ref), axis=1) / w_ref[:, 0]
@@ -359,3 +359,28 @@ def test_ok_is_false_for_a_non_finite_observer_or_plant_signal():
     assert bool(jnp.all(plant_finite)) and not bool(ok_all) and not bool(ok_final)
     ok_all, ok_final, _ = run(k1, jnp.nan)
     assert not bool(ok_all) and not bool(ok_final)
+
+
+def test_one_scenario_builder_starts_at_speed_and_checks_its_axes():
+    """D.grid and the studies share scenario_batch: speed_rpm also sets omega_m0 (a steady start), the
+    mismatch axes set the assumed machine from the true one, a noise axis makes the sensors noisy, a seed
+    axis or the batch seed gives the keys; unknown axes and values out of range are named."""
+    base = D.Scenario(PAR, load=D.Profile.constant(5.0))
+    batch = D.grid(base, speed_rpm=[300.0, 600.0], dLd=[0.1], dLq=[-0.2], i_noise=[0.0, 0.5])
+    sc = batch.scenarios
+    np.testing.assert_allclose(np.asarray(sc.omega_m0), np.repeat([300.0, 600.0], 2) * D.RPM, rtol=1e-12)
+    np.testing.assert_allclose(np.asarray(sc.speed_ref.values[:, 0]), np.asarray(sc.omega_m0), rtol=1e-12)
+    np.testing.assert_allclose(np.asarray(sc.load.values[:, 0]), 5.0)
+    np.testing.assert_allclose(np.asarray(sc.est_par.Ld), float(PAR.Ld) * 1.1, rtol=1e-12)
+    np.testing.assert_allclose(np.asarray(sc.est_par.Lq), float(PAR.Lq) * 0.8, rtol=1e-12)
+    assert sc.sensors.noisy and list(np.asarray(sc.sensors.i_noise)) == [0.0, 0.5, 0.0, 0.5]
+    steps = D.scenario_batch(base, ("speed_rpm", "speed_step_rpm"), [(300.0, 60.0)], seed=4, t_event=0.1)
+    np.testing.assert_allclose(np.asarray(steps.speed_ref.values[0]), np.array([300.0, 360.0]) * D.RPM)
+    np.testing.assert_array_equal(np.asarray(steps.speed_ref.times[0]), [0.0, 0.1])
+    np.testing.assert_array_equal(steps.key[0], jax.random.fold_in(jax.random.PRNGKey(4), 0))
+    seeded = D.scenario_batch(base, ("seed",), [(3.0,), (5.0,)])
+    np.testing.assert_array_equal(seeded.key[1], jax.random.PRNGKey(5))
+    with pytest.raises(ValueError, match=r"grid axis dRs must be in \[-0.95, 10\]"):
+        D.grid(base, dRs=[-2.0])
+    with pytest.raises(ValueError, match="give dL or dLd/dLq"):
+        D.grid(base, dL=[0.1], dLq=[0.1])

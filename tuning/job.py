@@ -55,7 +55,6 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
-import itertools
 import json
 import math
 import os
@@ -77,7 +76,8 @@ from jaxobs import metrics as M
 from jaxobs.drive import BENCH_MACHINES
 from jaxobs.drive_study import DRIVE_STUDY_AXES, bind_observer, drive_scenarios
 from jaxobs.progress import Progress
-from jaxobs.scenarios import grid_signals
+from jaxobs.provenance import sha256, versions
+from jaxobs.scenarios import Grid, Random, grid_signals
 from jaxobs.signals import EMFSignal, stack
 
 from .objective import DRIVE_METRICS, LOST_SYNC_DEG, METRICS, MetricContext, Objective, Term
@@ -652,7 +652,7 @@ def _parse_recording_scenarios(tab, where, signal, t_event, horizon, steady, see
                     f"{horizon:g} s needs {need} samples of {ts:g} s; {files[i]!r} gives {sig.n} "
                     f"({(sig.n - 1) * ts:.6g} s)",
                 )
-            digests.append(hashlib.sha256(Path(path).read_bytes()).hexdigest())
+            digests.append(sha256(Path(path)))
         spec = dataclasses.replace(spec, sha256=tuple(digests))
     axes = {"recording": [float(i) for i in range(len(files))]}
     return ScenarioSpec(signal, t_event, horizon, steady, axes, 0, seed, recording=spec)
@@ -973,7 +973,7 @@ def load_job(path) -> Job:
     """Read, check and parse a job file (:func:`read_toml`, then :func:`parse_job`)."""
     raw, data = read_toml(path)
     job = parse_job(raw, Path(path).parent)
-    job.sha256 = hashlib.sha256(data).hexdigest()
+    job.sha256 = sha256(data)
     return job
 
 
@@ -983,14 +983,11 @@ def load_job(path) -> Job:
 
 
 def _combos(spec: ScenarioSpec):
-    names = list(spec.axes)
-    combos = list(itertools.product(*(spec.axes[n] for n in names)))
-    if spec.sample:
-        rng = np.random.default_rng(spec.seed)
-        lows = {n: min(spec.axes[n]) for n in names}
-        highs = {n: max(spec.axes[n]) for n in names}
-        combos = [tuple(rng.uniform(lows[n], highs[n]) for n in names) for _ in range(spec.sample)]
-    return names, combos
+    """The axes' names and the scenarios' points: the studies' samplers (a grid, or ``sample`` uniform draws)."""
+    if not spec.axes:
+        return [], [()]
+    sampler = Random(spec.axes, spec.sample, spec.seed) if spec.sample else Grid(spec.axes)
+    return list(sampler.names), sampler.points()
 
 
 def _drive_scenarios(names, combos, seed=0, t_event=0.0, machine="ipmsm002"):
@@ -1249,20 +1246,6 @@ def _scores_dataset(obj, names, combos, spec: ScenarioSpec, per: dict):
     return ds
 
 
-def _versions() -> dict:
-    import platform
-
-    import jax
-
-    return {
-        "jaxobs": jaxobs.__version__,
-        "jax": jax.__version__,
-        "numpy": np.__version__,
-        "python": platform.python_version(),
-        "x64": bool(jax.config.jax_enable_x64),
-    }
-
-
 def _recordings_provenance(job: Job) -> dict:
     """``{"recordings": [{"file", "sha256"}, ...]}`` of a job on recordings (else nothing)."""
     rec = job.scenarios.recording
@@ -1364,7 +1347,7 @@ def run_job(job: Job, out: Path, resume: bool = False, quiet: bool = False) -> d
         **_recordings_provenance(job),
         "iterations": res.iterations,
         "best_iteration": res.best_iteration,
-        "versions": _versions(),
+        "versions": versions(),
     }
     nulls = {}
     if "omega_n" not in job.values:

@@ -273,12 +273,31 @@ def _axes_table(title: str, ranges: dict, intro: str) -> str:
     return "\n".join(lines) + "\n"
 
 
+class _Names:
+    """The given public names of the ``tuning`` package, each from whichever of its modules defines it."""
+
+    def __init__(self, *names: str):
+        import pkgutil
+
+        import tuning
+
+        mods = [tuning] + [importlib.import_module(m.name) for m in pkgutil.walk_packages(tuning.__path__, "tuning.")]
+        for name in names:
+            found = [vars(m)[name] for m in mods if name in vars(m)]
+            if not found:
+                raise RuntimeError(f"the TOML reference needs tuning's {name}, which no module of tuning defines")
+            setattr(self, name, found[0])
+
+
 def reference_markdown() -> str:
     sys.path.insert(0, str(ROOT))
     import tuning
     from jaxobs.drive import BENCH_MACHINES  # the drive jobs' and studies' machines
-    from tuning import job as job_mod
-    from tuning import study_file
+
+    # the schema's public tables wherever a refactor puts them (tuning's modules are being split): each name is
+    # looked up in tuning's submodules, the first that defines it wins
+    job_mod = _Names("AXIS_RANGES", "RECORDING_COLUMNS")
+    study_file = _Names("parse_study", "FLL_CLOSED_FORMS", "DRIVE_OBSERVERS", "FLL_COMPONENTS", "FLL_AXIS_RANGES")
 
     index = SourceIndex(ROOT / "tuning")
     presets = ROOT / "tuning" / "presets"
