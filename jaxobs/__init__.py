@@ -12,6 +12,7 @@ from . import drive as drive
 from . import linear as linear
 from . import metrics as metrics
 from . import signals as signals
+from ._cache import use_compile_cache as use_compile_cache
 from ._loop import AbstractCheckpoint as AbstractCheckpoint
 from ._loop import AutoCheckpoint as AutoCheckpoint
 from ._loop import ChunkCheckpoint as ChunkCheckpoint

@@ -46,6 +46,12 @@ __all__ = [
     "smooth_abs",
     "smooth_settling_time",
     "smooth_peak_to_peak",
+    "settling_to_steady",
+    "smooth_settling_to_steady",
+    "settling_to_reference",
+    "smooth_settling_to_reference",
+    "peak_deviation",
+    "smooth_peak_deviation",
     "settled",
     "lost_lock",
     "lost_lock_of",
@@ -375,3 +381,62 @@ def lost_lock_of(sol, steady_from=None, *, signal=None, tol_deg=None, freq_tol=L
 
 def smooth_peak_to_peak(x, mask, temperature):
     return smooth_max(x, temperature, mask) + smooth_max(-x, temperature, mask)
+
+
+# --------------------------------------------------------------------------
+# drive metrics that measure what their names say (issue 26): a settling to the signal's own final value,
+# the true speed against its reference, the peak deviation after a load step
+# --------------------------------------------------------------------------
+
+
+def _own_final(x, steady_mask, name):
+    """The signal's own final value, its mean over ``steady_mask``, and whether it is unusable (not finite)."""
+    _window(steady_mask, name)  # a concrete empty window raises, naming the caller (module doc)
+    final = steady_mean(x, steady_mask)
+    bad = ~jnp.isfinite(final)
+    return jnp.where(bad, 0.0, final), bad
+
+
+def settling_to_steady(t, x, band, steady_mask, t_event=0.0):
+    """Time after ``t_event`` from which x stays within ``band`` of its *own* final value (exact).
+
+    The final value is the mean of x over ``steady_mask`` (the steady window), so a signal that settles
+    to a bias settles: an observer's steady angle lag (the C-LESO's 11–37° on the IPMSM bench) is not a
+    failure to settle.  Report the bias apart, ``steady_mean(x, steady_mask)``.  ``band`` in the units of
+    x.  Censored at ``t[-1] − t_event`` as :func:`settling_time`; NaN where x is not finite in the window.
+    """
+    final, bad = _own_final(x, steady_mask, "settling_to_steady")
+    return _nan_where(bad, settling_time(t, x, final, band, t_event))
+
+
+def smooth_settling_to_steady(t, x, band, steady_mask, t_event=0.0, temperature=None, sharpness=None):
+    """:func:`settling_to_steady` through :func:`smooth_settling_time` (the final value is a smooth mean too)."""
+    final, bad = _own_final(x, steady_mask, "smooth_settling_to_steady")
+    return _nan_where(bad, smooth_settling_time(t, x, final, band, t_event, temperature, sharpness))
+
+
+def settling_to_reference(t, x, ref, band, t_event=0.0):
+    """Time after ``t_event`` from which |x − ref| stays within ``band`` (exact): a quantity against its
+    reference, e.g. the drive's true speed ωm against ωm* after a speed step.  After a load step it is the
+    *recovery time*: from the step until the speed is back within the band for good.  ``ref`` is a signal
+    (or a constant) in the units of x; censored at ``t[-1] − t_event`` as :func:`settling_time`."""
+    return settling_time(t, x - ref, 0.0, band, t_event)
+
+
+def smooth_settling_to_reference(t, x, ref, band, t_event=0.0, temperature=None, sharpness=None):
+    """:func:`settling_to_reference` through :func:`smooth_settling_time`."""
+    return smooth_settling_time(t, x - ref, 0.0, band, t_event, temperature, sharpness)
+
+
+def peak_deviation(t, x, ref, t_event=0.0):
+    """max |x − ref| after ``t_event`` (exact): the speed dip (or rise) after a load step, in the units of x."""
+    after = _after(t, t_event, "peak_deviation")
+    dev = jnp.max(jnp.where(after, jnp.abs(x - ref), -jnp.inf), axis=-1)
+    return _nan_where(~jnp.any(after, axis=-1), dev)
+
+
+def smooth_peak_deviation(t, x, ref, t_event=0.0, temperature=1e-3):
+    """:func:`peak_deviation` as a soft maximum (``temperature`` in the units of x) of a smooth |x − ref|
+    (ε = ``temperature``): within ``temperature``·(1 + log n) below the exact peak, n the samples after the event."""
+    after = _after(t, t_event, "smooth_peak_deviation")
+    return smooth_max(smooth_abs(x - ref, temperature), temperature, mask=after)

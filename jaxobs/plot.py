@@ -307,6 +307,8 @@ _DRIVE_METRIC_LABELS = {
     "pos_err_max_deg": "peak position error (deg el.)",
     "speed_err_rms_rpm": "rms speed-estimate error (r/min)",
     "speed_noise_rpm": "speed-estimate noise (r/min)",
+    "pos_bias_deg": "steady position lag |mean| (deg el.)",
+    "speed_dev_max_rpm": "peak speed deviation after the event (r/min)",
 }
 
 

@@ -18,6 +18,9 @@ import jax
 jax.config.update("jax_enable_x64", True)
 
 _cache = os.environ.get("JAXOBS_TEST_CACHE", str(Path.home() / ".cache" / "jaxobs" / "jax-tests"))
+# the command line run in a subprocess (tests/test_cli.py, ...) keeps its compilations in the same folder
+# (jaxobs.use_compile_cache reads JAXOBS_CACHE_DIR), not in the user's own cache; "off" where the cache is off
+os.environ["JAXOBS_CACHE_DIR"] = _cache or "off"
 if _cache:
     jax.config.update("jax_compilation_cache_dir", _cache)
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 1.0)

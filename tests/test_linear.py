@@ -377,7 +377,8 @@ def test_faleso_complex_routh_matches_roots_over_gain_grid():
             assert bool(L.faleso_is_stable(k1, k2, we)) == bool(np.all(roots.real < 0)), (k1, k2)
             assert bool(L.faleso_is_stable(k1, k2, we)) == (k1 > 0 and k2 > 0)
     col = np.asarray(L.routh_complex(jnp.asarray([1.0, 7.0 - 1j * we, 3.0])))
-    np.testing.assert_allclose(col, [1.0, 7.0, 3.0])  # (a0, a1, a2^(2)/(a1^2)) of 002 Table I
+    # (a0, a1, a2^(2)/a1^2) of 002 Table I, with a2^(2) = k1 k2^2 (printed: k1 k2; tests/test_errata.py)
+    np.testing.assert_allclose(col, [1.0, 7.0, 3.0])
 
 
 def test_gileso_and_cleso_closed_form():

@@ -196,3 +196,81 @@ def test_lost_lock_of_a_simulation_under_jit():
         jaxobs.lost_lock_of(sol)
     with pytest.raises(ValueError, match="SaveAll"):
         jaxobs.lost_lock_of(jaxobs.simulate(jaxobs.OnSignal(obs, emf), 0.01, save=jaxobs.SaveFinal()))
+
+
+# --------------------------------------------------------------------------
+# drive metrics (issue 26): settling to the own final value, speed against its reference, load-step dip
+# --------------------------------------------------------------------------
+
+
+def test_settling_to_steady_settles_a_biased_signal_and_reports_the_bias_apart():
+    """A position error that decays from 0.5 rad onto a steady lag of −0.3 rad: e(t) = −0.3 + 0.5 e^{−(t−0.2)/τ}
+    after the event at 0.2 s.  It enters the ±0.02 band around −0.3 when 0.5 e^{−s/τ} = 0.02, s = τ ln 25 = 0.1609 s;
+    settling to 0 (the old settling_position) never happens: censored at the horizon, 0.8 s."""
+    tau = 0.05
+    e = jnp.where(T >= 0.2, -0.3 + 0.5 * jnp.exp(-(T - 0.2) / tau), 0.2)
+    steady = T >= 0.8
+    exact = float(M.settling_to_steady(T, e, 0.02, steady, 0.2))
+    dt = float(T[1] - T[0])
+    assert exact == pytest.approx(tau * math.log(25), abs=dt)
+    # the bias, its own metric: −0.3 plus the tail's mean over [0.8, 1], 0.5 τ/0.2 (e^{−12} − e^{−16}) = 7.7e-7
+    bias = -0.3 + 0.5 * tau / 0.2 * (math.exp(-12) - math.exp(-16))
+    assert float(M.steady_mean(e, steady)) == pytest.approx(bias, abs=1e-8)
+    assert float(M.settling_time(T, e, 0.0, 0.02, 0.2)) == pytest.approx(0.8)  # the ill-posed one: censored
+    # the smooth surrogate converges to the exact one (minus one sample, as smooth_settling_time)
+    errs = []
+    for temp in (1e-2, 1e-3, 1e-4, 1e-5):
+        sm = M.smooth_settling_to_steady(T, e, 0.02, steady, 0.2, temperature=temp, sharpness=0.02 * temp)
+        errs.append(abs(float(sm) - (exact - dt)))
+    assert errs[-1] < 2 * dt and errs[0] > errs[-1]
+    # a gradient with respect to the decay's time constant: slower decay, later settling; the exact one's is
+    # d(τ ln 25)/dτ = ln 25 = 3.22, the surrogate's at its default sharpness (band/20) a little less: the
+    # sigmoid counts a sample as outside from a little inside the band (measured 2.99)
+    g = jax.grad(lambda tau: M.smooth_settling_to_steady(T, -0.3 + 0.5 * jnp.exp(-(T - 0.2) / tau), 0.02, steady, 0.2))(
+        0.05
+    )
+    assert 0.9 * math.log(25) < float(g) < math.log(25)
+    # a window with no sample raises (concrete), NaN under jit; a non-finite signal gives NaN
+    with pytest.raises(ValueError, match="settling_to_steady"):
+        M.settling_to_steady(T, e, 0.02, T > 2.0)
+    assert np.isnan(float(jax.jit(M.settling_to_steady)(T, e, 0.02, T > 2.0)))
+    assert np.isnan(float(M.settling_to_steady(T, e.at[-1].set(jnp.nan), 0.02, steady)))
+
+
+def _dip(t, t_event, depth, tau):
+    """A speed dip after a load step: depth·s·e^{1 − s}, s = (t − t_event)/τ, peaking at ``depth`` when s = 1."""
+    s = jnp.maximum(t - t_event, 0.0) / tau
+    return depth * s * jnp.exp(1.0 - s)
+
+
+def test_peak_deviation_and_recovery_after_a_load_step():
+    """The true speed against a ramping reference, ω = ω* − dip: the dip of 30 r/min peaks τ = 20 ms after the step
+    (a sample), and the speed is back within ±1 r/min for good when s e^{1−s} = 1/30, s > 1 (solved by bisection)."""
+    t_event, depth, tau = 0.3, 30.0, 0.02
+    ref = 600.0 + 50.0 * T  # r/min: the reference itself moves, the metric follows it
+    w = ref - _dip(T, t_event, depth, tau)
+    lo, hi = 1.0, 20.0
+    for _ in range(80):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if mid * math.exp(1 - mid) > 1 / depth else (lo, mid)
+    dt = float(T[1] - T[0])
+    assert float(M.peak_deviation(T, w, ref, t_event)) == pytest.approx(depth, rel=1e-12)
+    rec = float(M.settling_to_reference(T, w, ref, 1.0, t_event))
+    assert rec == pytest.approx(lo * tau, abs=dt)
+    # before the event nothing counts: a larger deviation at t < t_event does not change them
+    w2 = w - jnp.where(T < 0.1, 100.0, 0.0)
+    assert float(M.peak_deviation(T, w2, ref, t_event)) == pytest.approx(depth, rel=1e-12)
+    assert float(M.settling_to_reference(T, w2, ref, 1.0, t_event)) == rec
+    # smooth versions converge; gradients exist
+    n_after = int(jnp.sum(T >= t_event))
+    for temp in (1.0, 1e-1, 1e-2, 1e-3):
+        sm = float(M.smooth_peak_deviation(T, w, ref, t_event, temperature=temp))
+        assert depth - temp * (1 + math.log(n_after)) <= sm <= depth + 1e-12
+    assert abs(float(M.smooth_peak_deviation(T, w, ref, t_event, 1e-4)) - depth) < 1e-2
+    sm = float(M.smooth_settling_to_reference(T, w, ref, 1.0, t_event, temperature=1e-5, sharpness=1e-5))
+    assert abs(sm - (rec - dt)) < 2 * dt
+    g = jax.grad(lambda d: M.smooth_peak_deviation(T, ref - _dip(T, t_event, d, tau), ref, t_event))(depth)
+    assert float(g) == pytest.approx(1.0, rel=1e-3)
+    # the event after the record raises
+    with pytest.raises(ValueError, match="t_event"):
+        M.peak_deviation(T, w, ref, 2.0)

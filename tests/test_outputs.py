@@ -1,20 +1,25 @@
 """Outputs that stay in place: sanitised names, no symlinks followed, a lock per --out, no silent overwrite;
 atomic, fingerprinted checkpoints that resume bit-identically after a kill at any point."""
 
+import contextlib
+import errno
+import fcntl
 import json
+import multiprocessing
 import os
 import socket
+import time
 
 import jax.numpy as jnp
 import numpy as np
 import pytest
 import xarray as xr
 
-from tuning import solvers
+from tuning import solvers, strategies
 from tuning.cli import _print_summary, main
-from tuning.outdir import LOCK, OutDir, OutError, safe_name
+from tuning.outdir import LOCK, OutDir, OutError, atomic_path, atomic_write_bytes, safe_name
 from tuning.params import GainSpec, Parametrization
-from tuning.solvers import CheckpointError, SolverConfig, run_solver
+from tuning.solvers import CheckpointError, tune
 
 # --------------------------------------------------------------------------
 # containment
@@ -26,6 +31,20 @@ def test_names_are_sanitised():
     assert safe_name("/abs/path") == "_abs_path"
     assert safe_name("..") == "job" and safe_name("") == "job" and safe_name("...", "study") == "study"
     assert safe_name("wif-robust_1.2") == "wif-robust_1.2"
+
+
+@contextlib.contextmanager
+def held_lock(out, pid):
+    """``out``'s lock held as another process would hold it (an open file description of its own, flock'ed),
+    naming ``pid``."""
+    fd = os.open(out / LOCK, os.O_RDWR | os.O_CREAT, 0o644)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        os.write(fd, f"{pid} {socket.gethostname()}\n".encode())
+        yield
+    finally:
+        (out / LOCK).unlink(missing_ok=True)
+        os.close(fd)
 
 
 def test_symlinks_locks_and_existing_results(tmp_path):
@@ -49,8 +68,12 @@ def test_symlinks_locks_and_existing_results(tmp_path):
         with pytest.raises(OutError, match="in use by process"):  # a second writer on the same folder
             OutDir(out, [], force=True).__enter__()
     assert not (out / LOCK).exists()
-    (out / LOCK).write_text(f"999999999 {socket.gethostname()}\n")  # stale: that process is gone
-    with OutDir(out, [], force=True):  # taken over: the lock now names this process
+    (out / LOCK).write_text(f"999999999 {socket.gethostname()}\n")  # left by a killed run: nobody holds it
+    with OutDir(out, [], force=True):  # locked again: the lock now names this process
+        assert (out / LOCK).read_text().split() == [str(os.getpid()), socket.gethostname()]
+    assert not (out / LOCK).exists()
+    (out / LOCK).write_text("")  # a 0-byte lock (a full disk, once): lockable, not "remove it by hand"
+    with OutDir(out, [], force=True):
         assert (out / LOCK).read_text().split() == [str(os.getpid()), socket.gethostname()]
     assert not (out / LOCK).exists()
     (tmp_path / "file").write_text("")
@@ -84,11 +107,10 @@ def test_cli_refuses_a_locked_or_used_out_with_one_line(tmp_path, capsys, monkey
     path.write_text(GOOD)
     out = tmp_path / "o"
     out.mkdir()
-    (out / LOCK).write_text(f"1 {socket.gethostname()}\n")  # pid 1 is alive: a live lock
-    assert main(["tune", str(path), "--out", str(out)]) == 2
+    with held_lock(out, 1):  # another process holds it
+        assert main(["tune", str(path), "--out", str(out)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "in use" in err[0]
-    (out / LOCK).unlink()
     (out / "result.json").write_text("{}")
     assert main(["tune", str(path), "--out", str(out)]) == 2
     assert "--force" in capsys.readouterr().err
@@ -150,7 +172,7 @@ def test_internal_error_is_one_line_with_a_log(tmp_path, capsys, monkeypatch):
 
 
 class _Quadratic:
-    """A cheap stand-in objective with the interface run_solver uses."""
+    """A cheap stand-in objective with the interface the solvers use."""
 
     def __init__(self, n_gains=2):
         specs = [GainSpec("a", 2.0, 0.1, 50.0), GainSpec("b", 1.0, 0.01, 10.0, log=False)]
@@ -164,7 +186,7 @@ class _Quadratic:
         return v, g, 0
 
 
-CFG = SolverConfig(kind="adam", learning_rate=0.1, steps=24, patience=100, checkpoint_every=2, progress_every=1)
+CFG = strategies.solver("adam", learning_rate=0.1, steps=24, patience=100, checkpoint_every=2, progress_every=1)
 
 
 class Killed(BaseException):
@@ -173,7 +195,7 @@ class Killed(BaseException):
 
 def _run(ckpt, resume=False, fp="job-a", n_gains=2):
     obj = _Quadratic(n_gains)
-    res = run_solver(obj, obj.param.theta0(), CFG, checkpoint=ckpt, resume=resume, quiet=True, fingerprint=fp)
+    res = tune(obj, CFG, obj.param.theta0(), checkpoint=ckpt, resume=resume, quiet=True, fingerprint=fp)
     return json.dumps(
         dict(theta=np.asarray(res.theta).tolist(), h=res.history, s=res.status, r=res.reason, b=res.best_iteration)
     ).encode()
@@ -258,10 +280,9 @@ def test_every_writing_command_takes_the_lock_and_keeps_results(tmp_path, capsys
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and err[0].startswith("jaxobs: error: ") and what in err[0], err
 
-    (out / LOCK).write_text(f"1 {socket.gethostname()}\n")  # pid 1 is alive: another process holds it
-    refused(["--out", str(out)], "in use by process 1")
-    refused(["--out", str(out), "--force"], "in use by process 1")
-    (out / LOCK).unlink()
+    with held_lock(out, 1):  # another process holds it
+        refused(["--out", str(out)], "in use by process 1")
+        refused(["--out", str(out), "--force"], "in use by process 1")
     (out / product).write_text("mine")
     refused(["--out", str(out)], "use --force")
     assert (out / product).read_text() == "mine" and not (out / LOCK).exists()
@@ -271,3 +292,95 @@ def test_every_writing_command_takes_the_lock_and_keeps_results(tmp_path, capsys
     (tmp_path / "link").symlink_to(out)
     refused(["--out", str(tmp_path / "link")], "symlink")
     assert sorted(p.name for p in out.iterdir()) == [product] and not (tmp_path / "elsewhere").exists()
+
+
+# --------------------------------------------------------------------------
+# the lock under concurrent starters; temp files nobody can redirect
+
+
+def _starter(out, log, barrier, stale):
+    """One starter: wait for the others, try the lock, and if it is ours log the interval we held it."""
+    barrier.wait()
+    try:
+        with OutDir(out, [], force=True):
+            fd = os.open(log, os.O_WRONLY | os.O_APPEND)
+            os.write(fd, f"in {os.getpid()}\n".encode())
+            time.sleep(0.002)
+            os.write(fd, f"out {os.getpid()}\n".encode())
+            os.close(fd)
+    except OutError:
+        pass
+    os._exit(0)
+
+
+# 100 trials (the issue's count) in the slow suite: ~35 s on a loaded 2-core machine, mostly forking a
+# process that has JAX loaded; 10 in the fast suite
+@pytest.mark.parametrize("trials", [10, pytest.param(100, marks=pytest.mark.slow)])
+def test_six_concurrent_starters_never_hold_the_lock_together(tmp_path, trials):
+    """6 processes start on one folder at once, ``trials`` times, half of the trials over a lock file left by a dead
+    process: the log of who held the lock never shows two holders at once, and every trial has a holder.
+    (The former read-pid/unlink/re-create takeover gave two holders in 11 of 100 trials.)"""
+    ctx = multiprocessing.get_context("fork")  # cheap starters: no interpreter start-up, no JAX import
+    out, log = tmp_path / "o", tmp_path / "log"
+    out.mkdir()
+    for trial in range(trials):
+        log.write_text("")
+        if trial % 2:
+            (out / LOCK).write_text(f"999999999 {socket.gethostname()}\n")  # left behind by a kill
+        barrier = ctx.Barrier(6)
+        procs = [ctx.Process(target=_starter, args=(out, log, barrier, trial % 2)) for _ in range(6)]
+        for p in procs:
+            p.start()
+        for p in procs:
+            p.join(30)
+            assert p.exitcode == 0
+        events = log.read_text().split("\n")[:-1]
+        assert events, f"trial {trial}: nobody got the lock"
+        holders = 0
+        for e in events:
+            holders += 1 if e.startswith("in ") else -1
+            assert holders in (0, 1), f"trial {trial}: two holders at once: {events}"
+        assert not (out / LOCK).exists()
+
+
+def test_a_lock_that_cannot_be_written_leaves_no_file(tmp_path, monkeypatch):
+    out = tmp_path / "o"
+    out.mkdir()
+
+    def full(fd, data, offset):
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+
+    monkeypatch.setattr(os, "pwrite", full)
+    with pytest.raises(OutError, match=r"cannot write the lock .*\.jaxobs\.lock.*No space left on device"):
+        OutDir(out, []).__enter__()
+    assert list(out.iterdir()) == []
+
+
+def test_temp_files_cannot_be_redirected(tmp_path):
+    """Symlinks pre-created at every name the former temp files used (``.<stem>.<pid>.tmp<suffix>``, for
+    the pids around ours) point outside; writing through atomic_path and atomic_write_bytes changes nothing
+    there, leaves regular files at the results' paths and no temp file behind."""
+    out, outside = tmp_path / "o", tmp_path / "outside"
+    out.mkdir()
+    outside.mkdir()
+    names = ("scores.nc", "convergence.png", "responses.png", "study.nc", "checkpoint.npz")
+    for name in names:
+        stem, suffix = name.rsplit(".", 1)
+        for pid in range(os.getpid() - 50, os.getpid() + 50):
+            for tmp in (f".{stem}.{pid}.tmp.{suffix}", f".{stem}.{pid}.tmp{('.' + suffix)}"):
+                (out / tmp).unlink(missing_ok=True)
+                (out / tmp).symlink_to(outside / f"{tmp}-target")
+    for name in names[:-1]:
+        with atomic_path(out / name) as tmp:
+            tmp.write_bytes(b"result")
+    atomic_write_bytes(out / "checkpoint.npz", b"ckpt")
+    assert list(outside.iterdir()) == []
+    for name in names:
+        assert (out / name).is_file() and not (out / name).is_symlink()
+    assert all(p.is_symlink() for p in out.iterdir() if p.name.startswith("."))  # only the planted links
+    with pytest.raises(RuntimeError):  # a failed write leaves nothing either
+        with atomic_path(out / "failed.png") as tmp:
+            tmp.write_bytes(b"half")
+            raise RuntimeError
+    assert not (out / "failed.png").exists()
+    assert all(p.is_symlink() for p in out.iterdir() if p.name.startswith("."))

@@ -64,6 +64,8 @@ import contextlib
 import hashlib
 import json
 import os
+import re
+import shlex
 import sys
 import tempfile
 import traceback
@@ -71,7 +73,7 @@ from importlib import resources
 from pathlib import Path
 
 import jaxobs
-from jaxobs import linear, papers, use_host_devices
+from jaxobs import linear, papers, use_compile_cache, use_host_devices
 
 from .export import add_export_parser
 from .job import CHECKPOINT, load_job, load_recordings, run_job
@@ -218,7 +220,10 @@ def _cmd_closed_form(args) -> int:
             allowed = ", ".join("--" + o.replace("_", "-") for o in _CF_OPTIONS[args.design])
             raise ValueError(f"--{name.replace('_', '-')} does not apply to {args.design} (allowed: {allowed})")
         values[name] = v
-    res = closed_form_rows(args.design, values)
+    try:
+        res = closed_form_rows(args.design, values)
+    except ValueError as e:  # name the flag the user typed (wif_closed_form.b -> --b), not the function's field
+        raise ValueError(re.sub(r"\b\w+_closed_form\.(\w+)", lambda m: "--" + m[1].replace("_", "-"), str(e))) from None
     if args.json:
         print(json.dumps(res, indent=1))
     else:
@@ -277,83 +282,26 @@ def _cmd_drive_study(name, designs, axes, opts, out: Path, quiet: bool, provenan
 
 
 def _recording_study(designs: dict, *, recording, t_event, horizon, steady_from, band_hz, progress, **_):
-    """Every FLL design on every recording of ``[study.recording]`` (one ``jit(vmap)`` per design): the
-    study's metrics and flags (``jaxobs.study``: settling, ripple, rms phase, ITAE, IAE, lost lock, against
-    the recordings' truth columns), a Dataset of dims (design, recording) with units and the files' sha256."""
-    import math
-    import time
-
-    import equinox as eqx
+    """Every FLL design on every recording of ``[study.recording]``: :func:`jaxobs.study.run_study` with a
+    :class:`jaxobs.scenarios.Recordings` sampler (dims (design, recording), the files' sha256); (Dataset, s)."""
     import jax
-    import jax.numpy as jnp
-    import numpy as np
-    import xarray as xr
 
-    from jaxobs.progress import Progress
-    from jaxobs.simulate import OnSignal, simulate
-    from jaxobs.study import LOST_LOCK_LONG_NAME, METRIC_META, STUDY_METRICS, _metrics
+    from jaxobs.scenarios import Recordings
+    from jaxobs.study import run_study
 
     rec = recording
-    sigs = load_recordings(rec, "grid")
-    t0 = time.time()
-    results = {}
-    with Progress(progress, len(designs), "study (recordings)", unit="design") as bar:
-        for dname, obs in designs.items():
-            n_period = max(1, int(round(2 * math.pi / (float(obs.omega_n) * obs.ts))))
-
-            @eqx.filter_jit
-            def run(obs, batch):
-                def one(sig):
-                    sol = simulate(OnSignal(obs, sig), horizon)
-                    m = _metrics(sol, t_event, steady_from, band_hz, n_period)
-                    return m, sol.ok & jnp.all(jnp.stack([jnp.isfinite(m[k]) for k in STUDY_METRICS]))
-
-                return jax.vmap(one)(batch)
-
-            bar.stage(f"{dname} (compiling, then {len(rec.files)} recording(s))")
-            m, ok = run(obs, sigs)
-            results[dname] = (jax.tree.map(np.asarray, m), np.asarray(ok))
-            bar.update()
-    dims, names = ("design", "recording"), list(results)
-    data = {}
-    for k in STUDY_METRICS:
-        vals = np.stack([np.where(results[d][1], results[d][0][k], np.nan) for d in names])
-        data[k] = (dims, vals, {"units": METRIC_META[k][0], "long_name": METRIC_META[k][1]})
-    data["settled"] = (
-        dims,
-        np.stack([results[d][0]["settled"] & results[d][1] for d in names]),
-        {"units": "1", "long_name": "settled by the horizon (False: settling_freq is censored at horizon - t_event)"},
-    )
-    data["diverged"] = (
-        dims,
-        np.stack([(~results[d][1]).astype(np.int8) for d in names]),
-        {"units": "1", "long_name": "simulation diverged or a metric is not finite (1: its metrics are NaN)"},
-    )
-    lost = np.stack([results[d][0]["lost_lock"] | ~results[d][1] for d in names])
-    data["lost_lock"] = (dims, lost.astype(np.int8), {"units": "1", "long_name": LOST_LOCK_LONG_NAME})
-    data["lost_lock_count"] = (
-        ("design",),
-        lost.sum(axis=1).astype(np.int64),
-        {"units": "1", "long_name": "recordings on which the design lost lock (diverged ones included)"},
-    )
-    coords = {
-        "design": ("design", names, {"long_name": "observer design"}),
-        "recording": ("recording", list(rec.files), {"long_name": "recording file (relative to the study file)"}),
-    }
-    ds = xr.Dataset(data, coords=coords)
-    ds.attrs.update(
+    sampler = Recordings(load_recordings(rec, "grid"), rec.files, rec.sha256)
+    return run_study(
+        designs,
+        sampler,
         t_event=t_event,
         horizon=horizon,
         steady_from=steady_from,
         band_hz=band_hz,
-        scenarios=len(rec.files),
-        sampling="recordings",
-        recordings_sha256=" ".join(rec.sha256),
-        source="jaxobs study (recordings)",
-        jaxobs_version=jaxobs.__version__,
-        jax_version=jax.__version__,
+        progress=progress,
+        return_seconds=True,
+        mesh=jaxobs.batch_mesh(jax.devices()[:1]),
     )
-    return ds, time.time() - t0
 
 
 def _cmd_study(args) -> int:
@@ -648,15 +596,18 @@ def _cmd_tune(args) -> int:
         drive = "" if job.drive is None else f", {job.drive.loop} drive on {job.drive.machine}"
         print(
             f"{path}: OK — {job.component}, free gains {', '.join(g.name for g in job.gains)}, {n} scenarios"
-            f"{drive}, solver {job.solver.kind}"
+            f"{drive}, solver {job.solver.name}"
         )
         return 0
     out = Path(args.out) if args.out else Path("out") / safe_name(job.name)
     products = ["result.json"]
     if not args.resume:
         products.append(CHECKPOINT)  # a fresh run would overwrite it: --resume, or --force to start over
-    with OutDir(out, products, force=args.force):
+    resume = f"jaxobs tune {shlex.quote(str(path))} --out {shlex.quote(str(out))} --resume"
+    hint = f"an earlier run stopped here: continue it with `{resume}` (--force starts over and discards it)"
+    with OutDir(out, products, force=args.force, hints={CHECKPOINT: hint}):
         args.log_dir = out
+        args.on_interrupt = f"; continue with: {resume}"  # what Ctrl-C says (main)
         result = run_job(job, out, resume=args.resume, quiet=args.quiet)
     try:
         timing = json.loads((out / "timing.json").read_text())
@@ -789,10 +740,16 @@ def build_parser() -> argparse.ArgumentParser:
     """The one parser: every subcommand of ``jaxobs``, and ``--version``."""
     p = _Parser(prog="jaxobs", description="Differentiable simulation and tuning of motor-drive observers and FLLs.")
     p.add_argument("--version", action="version", version=f"jaxobs {jaxobs.__version__}")
-    sub = p.add_subparsers(dest="cmd", required=True, parser_class=_Parser)
+    sub = p.add_subparsers(dest="cmd", parser_class=_Parser, metavar="COMMAND")  # none given: main lists them
     # every command takes --quiet: no progress on stderr (stdout, the results, is the same either way)
     quiet = _Parser(add_help=False)
     quiet.add_argument("--quiet", action="store_true", help="no progress bars or compile notices on stderr")
+    quiet.add_argument(
+        "--no-cache",
+        action="store_true",
+        help="do not keep compiled programs on disk (default: kept in $JAXOBS_CACHE_DIR or ~/.cache/jaxobs/jax, "
+        "so a second run skips most of XLA's work; JAXOBS_CACHE_DIR=off turns it off too)",
+    )
     t = sub.add_parser(
         "tune", help="gradient-based gain tuning from a TOML job (default: embedded WIF job)", parents=[quiet]
     )
@@ -878,6 +835,11 @@ def main(argv=None) -> int:
     try:
         use_host_devices()  # before any JAX computation: one CPU device per usable core
         args = parser.parse_args(argv)
+        if args.cmd is None:  # `jaxobs` alone: the commands, not argparse's "arguments are required: cmd"
+            parser.print_help(sys.stderr)
+            return 2
+        if not getattr(args, "no_cache", False):
+            use_compile_cache()  # before any compilation: compiled programs are reused by the next process
         return args.func(args)
     except ValueError as e:  # bad input, job-file errors (JobError) included: one line, exit 2
         print(f"jaxobs: error: {e}", file=sys.stderr)
@@ -887,7 +849,9 @@ def main(argv=None) -> int:
         print(f"jaxobs: error: {e.strerror or e}{where}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
-        print("jaxobs: interrupted", file=sys.stderr)
+        # on a line of its own: a progress bar may hold the terminal's current line
+        start = "\n" if sys.stderr.isatty() else ""
+        print(f"{start}jaxobs: interrupted{getattr(args, 'on_interrupt', '')}", file=sys.stderr)
         return 130
     except (Exception, MemoryError) as e:  # an internal error: the traceback to a log, one line here
         log = _write_error_log(getattr(args, "log_dir", None))

@@ -9,7 +9,8 @@ Paper 002 (Li et al.): transfer functions from the true to the estimated
 equivalent BEMF ê/e (Table II, eqs 15–17, 21/26, 29–30), the C-LESO closed
 form (16), and the position errors caused by Rs and Lq mismatch (41)–(43).
 
-Misprints found in the papers, and what we use instead:
+Misprints found in the papers, and what we use instead (the full list, each derived and tested:
+docs/errata.md, tests/test_errata.py):
 
 - 000 Table III writes the second-order SOIFO's s³ coefficient as K2 ω'³; the
   body's eq (20) has K2 ω' (dimensionally the only possibility: every term of
@@ -42,6 +43,8 @@ __all__ = [
     "flux_dc_gain",
     "soifo_harmonic_factor",
     "sosoifo_harmonic_factor",
+    "soifo_harmonic_phase",
+    "sosoifo_harmonic_phase",
     "lpf_compensation",
     "sogi2_tustin_paper",
     "cleso_tf",
@@ -116,6 +119,32 @@ def sosoifo_harmonic_factor(h, K1, K2):
     a = (1 - h**2 * (2 + K1 * K2) + h**4) / (h**2 * K1 * K2)
     b = (h * K2 - h**3 * K2) / (h**2 * K1 * K2)
     return 1.0 / jnp.sqrt(a**2 + b**2)
+
+
+def soifo_harmonic_phase(h, k):
+    """000 eq (16)'s γ_h1, rad: the h-th harmonic of ψ̂ is (factor)·(A_h/ω_h)·sin(ω_h t + φ_h − π/2 + γ_h1).
+
+    γ_h1 = arg H(jhω') + π/2 with H = kω'/(s² + kω's + ω'²), i.e. atan((1 − h²)/(kh)), as printed (the
+    printed arctangent is in the right quadrant because kh > 0).  Eq (32)'s θ₁, the phase of H itself, is
+    printed as atan(kω'ω_h/(ω_h² − ω'²)), which is π off for h > 1 (errata: docs/errata.md).
+    """
+    h = as_float(h)
+    return jnp.arctan2(1 - h**2, k * h)
+
+
+def sosoifo_harmonic_phase(h, K1, K2):
+    """000 eq (21)'s γ_h2, corrected, rad: the h-th harmonic is (factor)·(A_h/ω_h)·sin(ω_h t + φ_h − π/2 + γ_h2).
+
+    H(jhω') = jhK1K2 / (ω' P) with P = [1 − h²(2+K1K2) + h⁴] + j K2 h(1 − h²)  (000 eq 39), so
+    γ_h2 = arg H + π/2 = π − arg P.  The paper prints γ_h2 = atan((K2ω'ω_h³ − K2ω'³ω_h) /
+    (ω'⁴ − h²(2+K1K2)ω'²ω_h² + ω_h⁴)): its denominator has an extra h² (the middle term is
+    (2+K1K2)ω'²ω_h², i.e. h²(2+K1K2)ω'⁴), and a plain arctangent cannot give π − arg P, which lies near π
+    for h > 1: the printed angle is 180° off there (errata: docs/errata.md; tests/test_errata.py).
+    """
+    h = as_float(h)
+    re = 1 - h**2 * (2 + K1 * K2) + h**4
+    im = K2 * h * (1 - h**2)
+    return jnp.pi - jnp.arctan2(im, re)
 
 
 def lpf_compensation(omega_1, omega_c):

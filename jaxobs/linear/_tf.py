@@ -108,6 +108,30 @@ class TransferFunction(eqx.Module):
     def dcgain(self):
         return self(jnp.asarray(0.0, self.den.dtype))
 
+    # --- python-control ------------------------------------------------------
+    def to_control(self):
+        """This G(s) as a ``control.TransferFunction`` (python-control, the test extra: ``pip install control``).
+
+        python-control holds real coefficients only: a complex-coefficient filter (the FA-LESO's, 002 eq 26;
+        the GI-LESO's) is refused with a ``ValueError``."""
+        import control  # optional: python-control is this bridge's, not the library's, dependency
+
+        num, den = _real_coefficients(self, "TransferFunction.to_control")
+        return control.tf(num, den)
+
+    @classmethod
+    def from_control(cls, sys) -> TransferFunction:
+        """A continuous-time SISO ``control.TransferFunction`` (or anything ``control.tf`` accepts) as a
+        :class:`TransferFunction`; a discrete one (``dt`` set) is refused: use ``DiscreteTransferFunction``."""
+        import control
+
+        sys = control.tf(sys)
+        if sys.ninputs != 1 or sys.noutputs != 1:
+            raise ValueError(f"from_control: a SISO system is needed, got {sys.noutputs}x{sys.ninputs}")
+        if sys.dt not in (0, None):
+            raise ValueError(f"from_control: a continuous-time system is needed (dt = 0), got dt = {sys.dt!r}")
+        return cls(jnp.asarray(sys.num[0][0], float), jnp.asarray(sys.den[0][0], float))
+
     # --- time responses ----------------------------------------------------
     def state_space(self):
         """Controllable canonical form (A, B, C, D) of a proper G."""
@@ -296,10 +320,20 @@ def is_hurwitz(coeffs):
 # --------------------------------------------------------------------------
 
 
-def bode(tf: TransferFunction, omega):
-    """Magnitude (dB) and unwrapped phase (deg) of G(jω) on the grid ``omega``."""
+def bode(tf: TransferFunction, omega, *, convention: str = "db-deg"):
+    """G(jω) on the grid ``omega`` (rad/s): magnitude (dB) and unwrapped phase (deg) by default.
+
+    ``convention="control"`` returns python-control's ``(magnitude, phase in rad, omega)`` instead (absolute
+    magnitude, unwrapped phase), as ``control.frequency_response``/``bode_plot`` give them.
+    """
+    if convention not in ("db-deg", "control"):
+        raise ValueError(f"bode: convention must be 'db-deg' or 'control', got {convention!r}")
+    omega = as_float(omega)
     g = tf.freqresp(omega)
-    return 20 * jnp.log10(jnp.abs(g)), jnp.degrees(jnp.unwrap(jnp.angle(g)))
+    phase = jnp.unwrap(jnp.angle(g))
+    if convention == "control":
+        return jnp.abs(g), phase, omega
+    return 20 * jnp.log10(jnp.abs(g)), jnp.degrees(phase)
 
 
 class Margins(eqx.Module):
@@ -422,12 +456,33 @@ def margins(loop: TransferFunction, *, grid_size: int = 4000, max_crossings: int
 # --------------------------------------------------------------------------
 
 
+def _real_coefficients(tf, where):
+    if jnp.iscomplexobj(tf.num) or jnp.iscomplexobj(tf.den):
+        raise ValueError(
+            f"{where}: python-control holds real coefficients only; this transfer function has complex ones "
+            "(a complex-coefficient filter such as the FA-LESO's): use jaxobs.linear's own bode/margins/poles"
+        )
+    import numpy as np
+
+    return np.asarray(tf.num, float), np.asarray(tf.den, float)
+
+
 class DiscreteTransferFunction(eqx.Module):
     """H(z) = Σ b_k z^(−k) / Σ a_k z^(−k), coefficients in ascending powers of z⁻¹, a₀ = 1."""
 
     num: jax.Array
     den: jax.Array
     ts: float = eqx.field(static=True)
+
+    def to_control(self):
+        """This H(z) as a discrete ``control.TransferFunction`` (``dt = ts``), in python-control's descending
+        powers of z (both polynomials multiplied by zⁿ); complex coefficients are refused."""
+        import control
+        import numpy as np
+
+        b, a = _real_coefficients(self, "DiscreteTransferFunction.to_control")
+        n = max(b.shape[0], a.shape[0])
+        return control.tf(np.pad(b, (0, n - b.shape[0])), np.pad(a, (0, n - a.shape[0])), self.ts)
 
     def __call__(self, z):
         zi = 1.0 / z

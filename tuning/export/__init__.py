@@ -56,6 +56,7 @@ export time, not on the target.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import math
 import re
@@ -64,7 +65,6 @@ import subprocess
 import tempfile
 from importlib import resources
 from pathlib import Path
-from typing import NamedTuple
 
 import equinox as eqx
 import jax
@@ -72,14 +72,14 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxobs.discretize import AB3, RK4, Euler, Tustin
+from jaxobs.measurements import DriveInput
+from jaxobs.observers import SOIFO, LPFFlux, PureIntegratorFlux, SecondOrderSOIFO
 from jaxobs.progress import Progress
 
-from . import _cexpr as cx
-from ._cmodels import MEMORY, CModel, model_for, supported
-from ._crules import RuleC, needs_jacobian, ops_sum, ops_total, rule_c
-from .job import COMPONENTS
-from .outdir import OutDir, atomic_path, atomic_write_text
-from .results import load_result
+from ..job import COMPONENTS
+from ..outdir import OutDir, atomic_path, atomic_write_text
+from ..results import load_result
+from .codegen import CStep, gain_macro, generate, is_angle, leaf_name, reference, rule_doc, statics, write_c
 
 __all__ = [
     "export_observer",
@@ -89,7 +89,6 @@ __all__ = [
     "fll_test_signal",
     "drive_test_signal",
     "drive_recording",
-    "drive_machine",
     "bind_to_drive",
     "add_export_parser",
     "cli_export",
@@ -158,8 +157,6 @@ def observer_from_result(path, *, gains: str = "tuned", notes: list | None = Non
     if comp not in COMPONENTS:
         raise ValueError(f"result file {str(path)!r}: component {comp!r} is not a jaxobs component")
     info = COMPONENTS[comp]
-    if info.ctor.__name__ not in supported():
-        raise ValueError(f"export: component {comp} is not supported yet; supported: {', '.join(supported())}")
     table = res.get("gains", {}).get(gains)
     if not isinstance(table, dict):
         have = ", ".join(res.get("gains", {})) or "none"
@@ -297,10 +294,10 @@ def drive_test_signal(
     return data, doc
 
 
-# the machine a drive observer's recording runs on, and the speed it runs at (both 50 Hz electrical)
-_DRIVE_MACHINES = {
-    "flux": ("spmsm_paper000", "BENCH_J_000", 1000.0),  # 000's SPMSM, p = 3
-    "leso": ("ipmsm_paper002", "BENCH_J_002", 300.0),  # 002's (assumed) IPMSM, p = 5: 25 Hz (see drive_recording)
+# the bench (jaxobs.drive.bench_machine) a drive observer's recording runs on, and its speed (r/min)
+_RECORDING_BENCH = {
+    "flux": ("spmsm000", 1000.0),  # 000's SPMSM, p = 3: 50 Hz
+    "leso": ("ipmsm002", 300.0),  # 002's (assumed) IPMSM, p = 5: 25 Hz (see drive_recording)
 }
 
 
@@ -312,14 +309,13 @@ def _family(observer) -> str:
     raise ValueError(f"export: {type(observer).__name__} is not a drive observer (flux observer or LESO)")
 
 
-def drive_machine(observer):
-    """The machine a drive observer's recording runs on: 000's SPMSM for the flux observers, 002's IPMSM for
-    the LESOs, each with the bench inertia of the drive jobs and studies (``papers.BENCH_J_*``, 10× the
-    table's: tuning.job.DRIVE_MACHINES)."""
-    from jaxobs import drive, papers
+def _recording_bench(observer):
+    """The machine (:func:`jaxobs.drive.bench_machine`: 000's SPMSM for the flux observers, 002's IPMSM for the
+    LESOs, on the drive jobs' bench inertia) and the speed (r/min) a drive observer's recording runs at."""
+    from jaxobs.drive import bench_machine
 
-    ctor, j, _ = _DRIVE_MACHINES[_family(observer)]
-    return getattr(drive, ctor)(J=getattr(papers, j))
+    name, rpm = _RECORDING_BENCH[_family(observer)]
+    return bench_machine(name), rpm
 
 
 def bind_to_drive(observer, machine, rpm: float):
@@ -371,9 +367,9 @@ def drive_recording(
     current is sampled at t_k: the drive observers' contract.  With ideal sensors they equal the
     outputs' u_a, u_b, i_a, i_b.
 
-    ``machine``: a :class:`jaxobs.drive.PMSMParams` (default :func:`drive_machine`).  Export the
-    observer bound to the same machine and speed (:func:`bind_to_drive`).  Returns (float32 array
-    (n_steps, 4), a one-line description).
+    ``machine``: a :class:`jaxobs.drive.PMSMParams` (default: the bench of the observer's family,
+    :func:`jaxobs.drive.bench_machine`).  Export the observer bound to the same machine and speed
+    (:func:`bind_to_drive`).  Returns (float32 array (n_steps, 4), a one-line description).
 
     The rotor starts at θe = π/2, where the q-axis current and the back EMF lie on −α, so the
     β components of the first samples are small.  ``start`` shapes the first period as
@@ -390,17 +386,16 @@ def drive_recording(
         raise ValueError(f"drive_recording: start must be '', 'flux' or 'alpha', got {start!r}")
     import jaxobs
     from jaxobs import drive as D
-    from jaxobs import papers
 
     family = _family(observer)
-    machine = drive_machine(observer) if machine is None else machine
-    rpm = _DRIVE_MACHINES[family][2] if rpm is None else float(rpm)
+    bench, bench_rpm = _recording_bench(observer)
+    machine = bench if machine is None else machine
+    rpm = bench_rpm if rpm is None else float(rpm)
     if not (isinstance(n_steps, int) and n_steps >= 2):
         raise ValueError(f"drive_recording: n_steps must be an integer >= 2, got {n_steps!r}")
     ts = float(observer.ts)
     t1, t2 = (n_steps // 3) * ts, (2 * n_steps // 3) * ts
     t_rated = float(machine.T_rated)
-    foc = D.FOC.imc(machine, 2 * math.pi * papers.BENCH_CURRENT_HZ, 2 * math.pi * papers.BENCH_SPEED_HZ, ts=ts)
     scenario = D.Scenario(
         machine,
         speed_ref=D.Scenario.speed_rpm([0.0, t1], [rpm, (1 + speed_step) * rpm]),
@@ -408,7 +403,8 @@ def drive_recording(
         omega_m0=rpm * D.RPM,
         theta_e0=math.pi / 2,
     )
-    sol = jaxobs.simulate(D.ClosedLoop(D.Drive(foc, settle=0.0), _Tap(), scenario), n_steps * ts)
+    drive = D.bench_drive(machine, sensorless=False, settle=0.0, ts=ts)  # the encoder closes the loop
+    sol = jaxobs.simulate(D.ClosedLoop(drive, _Tap(), scenario), n_steps * ts)
     m = sol.outputs.obs
     data = np.stack([np.asarray(m.u_a), np.asarray(m.u_b), np.asarray(m.i_a), np.asarray(m.i_b)], axis=1)
     data = data[:n_steps].astype(np.float64)
@@ -435,326 +431,69 @@ def drive_recording(
     return data.astype(np.float32), doc
 
 
-class _Meas(NamedTuple):  # what a drive observer's step reads (jaxobs.drive's DriveInput fields)
-    u_a: jax.Array
-    u_b: jax.Array
-    i_a: jax.Array
-    i_b: jax.Array
-
-
 def _float32(observer):
     return jax.tree.map(lambda a: a.astype(jnp.float32) if eqx.is_inexact_array(a) else a, observer)
 
 
+def _is_drive(observer) -> bool:
+    """A drive observer reads (u_a, u_b, i_a, i_b) each step; any other observer reads one sample v."""
+    return hasattr(observer, "Rs")
+
+
+def _zero_input(observer):
+    z = jnp.zeros((), jnp.float32)
+    return DriveInput(z, z, z, z) if _is_drive(observer) else z
+
+
 @eqx.filter_jit
-def _scan_outputs(observer, u):
+def _scan_outputs(observer, state0, u):
     # one compile per observer class and rule: the gains are traced leaves
-    u0 = jax.tree.map(lambda a: a[0], u)
-    _, out = jax.lax.scan(lambda s, x: observer.step(s, x), observer.init(u0), u)
+    _, out = jax.lax.scan(lambda s, x: observer.step(s, x), state0, u)
     return out
 
 
-def _golden(obs32, model: CModel, u: np.ndarray) -> np.ndarray:
+def _golden(obs32, state0, step: CStep, u: np.ndarray) -> np.ndarray:
     # 64-bit types off: every number in the step is float32, as on the target (some rules, e.g.
     # diffrax's Euler, would otherwise promote a float32 state with a float64 step size)
     with jax.enable_x64(False):
         uj = jnp.asarray(u, jnp.float32)
-        inputs = uj[:, 0] if model.kind == "signal" else _Meas(*(uj[:, k] for k in range(4)))
-        out = _scan_outputs(obs32, inputs)
-    names = list(type(out)._fields)
-    if names != model.outputs:
-        raise AssertionError(f"export: {model.component} outputs {names} differ from the C model's {model.outputs}")
-    cols = [np.asarray(c) for c in out]
-    for n, c in zip(names, cols):
+        inputs = DriveInput(*(uj[:, k] for k in range(4))) if _is_drive(obs32) else uj[:, 0]
+        out = _scan_outputs(obs32, state0, inputs)
+    cols = []
+    for leaf in jax.tree.leaves(out):
+        c = np.asarray(leaf)
         if c.dtype != np.float32:
-            raise AssertionError(f"export: the float32 JAX step returned {n} as {c.dtype}")
-    return np.stack(cols, axis=1)
-
-
-def _self_check(obs32, model: CModel, n_points: int = 8):
-    """The emitted f (and outputs) against the observer's own, in float32 at random states and inputs."""
-    rng = np.random.default_rng(0)
-    x0 = model.x0.astype(np.float64)
-    for _ in range(n_points):
-        x = (x0 + rng.normal(size=x0.shape) * np.maximum(1.0, 0.1 * np.abs(x0))).astype(np.float32)
-        e = (rng.normal(size=len(model.field)) * 10.0).astype(np.float32)
-        env = {**dict(zip(model.states, x)), **dict(zip(model.field, e))}
-        checks = [("vector field", cx.evaluate(model.f, env), model.jax_f, model.states)]
-        if model.jax_out is not None:
-            checks.append(("output", cx.evaluate(model.out, env), model.jax_out, model.outputs))
-        for what, got, jax_fn, names in checks:
-            with jax.enable_x64(False):
-                want = jax_fn(obs32, jnp.asarray(x), jnp.asarray(e))
-                want = np.asarray([np.float64(v) for v in (want if isinstance(want, tuple) else list(want))])
-            got = np.asarray(got, np.float64)
-            bad = np.abs(got - want) > 1e-4 * (1 + np.abs(want))
-            if np.any(bad):
-                i = int(np.argmax(bad))
-                raise AssertionError(
-                    f"export: the C {what} of {model.component} differs from the JAX one at "
-                    f"{names[i]}: {got[i]!r} vs {want[i]!r} (x = {x.tolist()}, e = {e.tolist()})"
-                )
-
-
-# --------------------------------------------------------------------------------------------
-# writing C
-# --------------------------------------------------------------------------------------------
-
-_PARAMS = {"x", "e", "e0", "em", "e1", "u", "dx", "y", "J", "s", "i"}  # C names the functions use
-
-
-def _c_function(signature: str, doc: str, assigns, bindings: dict) -> str:
-    """A C function: locals for the variables it uses (``bindings``: name -> (type, source)), then the assignments."""
-    roots = [e for _, e in assigns]
-    used = {n.value for n in cx._topo(roots) if n.op == "var"}
-    missing = used - set(bindings)
-    if missing:
-        raise AssertionError(f"export: {signature}: no source for {sorted(missing)}")
-    body = [f"    const {t} {name} = {src};" for name, (t, src) in bindings.items() if name in used]
-    block = cx.Block(reserved=set(bindings) | _PARAMS)
-    body.append(block.emit(assigns))
-    sources = [bindings[n][1] for n in used]
-    for arr in ("e", "u"):  # an input array the function does not read (e.g. the outputs of a LESO)
-        if f"const float *{arr}," in signature and not any(src.startswith(f"{arr}[") for src in sources):
-            body.append(f"    (void){arr};")
-    return f"/* {doc} */\n{signature}\n{{\n" + "\n".join(body) + "\n}\n"
-
-
-def _ops_text(o: dict) -> str:
-    calls = ", ".join(f"{k} {v}" for k, v in sorted(o["calls"].items()))
-    parts = [
-        f"{o['add']} +/-",
-        f"{o['mul']} *",
-        f"{o['div']} /",
-        f"{o['call']} calls" + (f" ({calls})" if calls else ""),
-    ]
-    if o["compare"] or o["select"]:
-        parts.append(f"{o['compare']} compares, {o['select']} selects")
-    return f"{ops_total(o)} = " + ", ".join(parts)
-
-
-def _json_ops(o: dict) -> dict:
-    kinds = ("add", "mul", "div", "call", "compare", "select")
-    return {**{k: o[k] for k in kinds}, "calls": dict(sorted(o["calls"].items())), "total": ops_total(o)}
-
-
-_STEP_DOC = {
-    "signal": """ * jx_step returns the estimate at t_n from the samples before t_n: the outputs of the state before
- * u is integrated over the period (jaxobs/observers/base.py, signal-level observers).""",
-    "drive": """ * u = (u_a, u_b, i_a, i_b): the current sampled at t_n and the voltage about to be applied.  jx_step
- * integrates the period that just ended (the voltage given one step earlier, the current from
- * i_prev to i) and returns the estimate at t_n (jaxobs/observers/base.py, drive observers); the
- * first call only records u and i.""",
-}
-
-
-def _emit(obs32, model: CModel, rule: RuleC, jac, source: str, notes, ops: dict) -> tuple[str, str]:
-    nx, nu, ny, ne = len(model.states), len(model.inputs), len(model.outputs), len(model.field)
-    drive = model.kind == "drive"
-    angle_mask = ", ".join("1" if i in model.angles else "0" for i in range(ny))
-    gains_doc = "\n".join(f" *   {m:<14} {cx.c_float(v):<16} {k}" for k, (m, v) in model.gains.items())
-    statics = ", ".join(f"{k} = {v!r}" for k, v in model.statics.items())
-    startup = ""
-    if ops.get("startup"):
-        startup = (
-            f"\n *   each of the first {rule.startup_steps} steps (RK4 start-up):\n *     {_ops_text(ops['startup'])}"
-        )
-    note_lines = "".join(f"\n *   note: {n}" for n in notes)
-    in_doc = "\n".join(f" *   u[{i}]  {d}" for i, d in enumerate(model.input_doc))
-    out_doc = "\n".join(f" *   y[{i}]  {d}" for i, d in enumerate(model.output_doc))
-    st_doc = "\n".join(f" *   x[{i}]  {s}: {d}" for i, (s, d) in enumerate(zip(model.states, model.state_doc)))
-    memory = ""
-    if drive:
-        memory = (
-            "    float u_prev[2]; /* voltage applied over the period ending at the next sample (V) */\n"
-            "    float i_prev[2]; /* current at the previous sample (A) */\n"
-            "    int started;     /* 0 until the first sample has been seen */\n"
-        )
-    header = f"""/* observer.h -- {model.component} exported by `jaxobs export` (float32, C99).
- *
- * {model.reference}.
- * Design: {source}.{note_lines}
- * Discretization: {rule.description}, ts = {obs32.ts!r} s.
- * Gains (float32, baked into observer.c):
-{gains_doc}
- *   static options: {statics or "none"}
- *
- * Call jx_init(&s) once, then jx_step(&s, u, y) once per sample period:
-{in_doc}
-{out_doc}
-{_STEP_DOC[model.kind]}
- *
- * State (jx_state.x, as the JAX observer's flat state):
-{st_doc}
- *
- * Operations per step, jx_out included (+/- counts negations too):
- *   {_ops_text(ops["steady"])}{startup}
- *
- * golden.csv holds the JAX step's float32 outputs; test_main.c checks this code against them
- * (max |y_C - y_golden| / (1 + |y_golden|) <= 1e-4, angles modulo 2 pi).
- */
-#ifndef JX_OBSERVER_H
-#define JX_OBSERVER_H
-
-#ifdef __cplusplus
-extern "C" {{
-#endif
-
-#define JX_NU {nu} /* inputs per step */
-#define JX_NY {ny} /* outputs per step */
-#define JX_NX {nx} /* states */
-#define JX_Y_IS_ANGLE {{{angle_mask}}} /* outputs compared modulo 2 pi */
-
-typedef struct {{
-    float x[JX_NX]; /* {", ".join(model.states)} */
-{memory}{"".join(f"    {f}{chr(10)}" for f in rule.state_fields)}}} jx_state;
-
-void jx_init(jx_state *s);
-void jx_step(jx_state *s, const float *u, float *y);
-
-#ifdef __cplusplus
-}}
-#endif
-
-#endif /* JX_OBSERVER_H */
-"""
-    macros = [f"#define {m} {cx.c_float(v)} /* {k} */" for k, (m, v) in model.gains.items()]
-    macros += [f"#define {m} {cx.c_float(v)} /* {doc} */" for m, v, doc in rule.constants]
-    macros.append(f"#define JX_NE {ne} /* inputs of f: {', '.join(model.field)} */")
-    if rule.uses_jac:
-        macros.append(f"#define JX_NEWTON_ITERS {rule.newton_iters}")
-
-    xs = {s: ("float", f"x[{i}]") for i, s in enumerate(model.states)}
-    es = {s: ("float", f"e[{i}]") for i, s in enumerate(model.field)}
-    f_doc = {"signal": "the sample v", "drive": "the back EMF (V)" if model.path == "held" else "(u, i) at the stage"}
-    funcs = [
-        _c_function(
-            "static void jx_f(const float *x, const float *e, float *dx)",
-            f"vector field dx/dt = f(x, e), e = {f_doc[model.kind]} (the observer's f; cores as in "
-            "jaxobs/observers/_cores.py)",
-            [(f"dx[{i}]", e) for i, e in enumerate(model.f)],
-            {**xs, **es},
-        )
-    ]
-    if drive:
-        funcs.append(
-            _c_function(
-                "static void jx_out(const float *x, const float *e, float *y)",
-                "outputs of the state x after the period with input e (the observer's outputs)",
-                [(f"y[{i}]", e) for i, e in enumerate(model.out)],
-                {**xs, **es},
-            )
-        )
-    else:
-        funcs.append(
-            _c_function(
-                "static void jx_out(const float *x, float *y)",
-                "outputs of the state x (the observer's output)",
-                [(f"y[{i}]", e) for i, e in enumerate(model.out)],
-                xs,
-            )
-        )
-    if rule.uses_jac:
-        funcs.append(
-            _c_function(
-                "static void jx_jac(const float *x, const float *e, float *J)",
-                "Jacobian J[i * JX_NX + j] = d f_i / d x_j (Tustin's Newton iteration)",
-                [(f"J[{i * nx + j}]", jac[i][j]) for i in range(nx) for j in range(nx)],
-                {**xs, **es},
-            )
-        )
-    if drive:
-        arrays = ["e"] if model.path == "held" else ["e0", "em", "e1"]
-        sig = ", ".join(f"float *{a}" for a in arrays)
-        mem = {n: ("float", src) for n, src in MEMORY.items()}
-        us = {s: ("float", f"u[{i}]") for i, s in enumerate(model.inputs)}
-        what = (
-            "the back EMF over the period just ended (000 eq 6), 0 before the first sample"
-            if model.path == "held"
-            else "(u, i) at the start, middle and end of the period just ended: voltage held, current linear"
-        )
-        funcs.append(
-            _c_function(
-                f"static void jx_input(const jx_state *s, const float *u, {sig})",
-                what,
-                [(f"{a}[{k}]", e) for a, k, e in model.period_input],
-                {**us, **mem, "started": ("int", "s->started")},
-            )
-        )
-    if model.post:
-        funcs.append(
-            _c_function(
-                "static void jx_post(float *x)",
-                "the updated state's angle wrapped to (-pi, pi]",
-                [(f"x[{i}]", e) for i, e in model.post],
-                xs,
-            )
-        )
-
-    init = [f"    s->x[{i}] = {cx.c_float(v)}; /* {s} */" for i, (s, v) in enumerate(zip(model.states, model.x0))]
-    if drive:
-        init += [
-            "    s->u_prev[0] = s->u_prev[1] = 0.0f;",
-            "    s->i_prev[0] = s->i_prev[1] = 0.0f;",
-            "    s->started = 0;",
-        ]
-    init += [f"    {line}" for line in rule.init]
-    init_decl = "    int i;\n" if any("for (i" in line for line in rule.init) else ""
-    locals_ = "".join(f"    {d}\n" for d in rule.locals)
-    if not drive:
-        advance = rule.advance.replace("@E0", "u").replace("@EM", "u").replace("@E1", "u")
-        step = f"""    jx_out(s->x, y); /* the estimate at t_n: the state before this sample is integrated */
-{advance}
-    for (i = 0; i < JX_NX; ++i) s->x[i] = x1[i];"""
-    else:
-        held = model.path == "held"
-        e0, em, e1 = ("e", "e", "e") if held else ("e0", "em", "e1")
-        advance = rule.advance.replace("@E0", e0).replace("@EM", em).replace("@E1", e1)
-        locals_ += "    float e[JX_NE];\n" if held else "    float e0[JX_NE], em[JX_NE], e1[JX_NE];\n"
-        post = "    jx_post(x1);\n" if model.post else ""
-        step = f"""    jx_input(s, u, {"e" if held else "e0, em, e1"});
-{advance}
-    if (!s->started) {{ /* the first sample only records u and i */
-        for (i = 0; i < JX_NX; ++i) x1[i] = s->x[i];
-    }}
-{post}    for (i = 0; i < JX_NX; ++i) s->x[i] = x1[i];
-    s->u_prev[0] = u[0];
-    s->u_prev[1] = u[1];
-    s->i_prev[0] = u[2];
-    s->i_prev[1] = u[3];
-    s->started = 1;
-    jx_out(s->x, {e1}, y); /* the estimate at t_n, after the period just ended */"""
-    source_c = f"""/* observer.c -- {model.component} exported by `jaxobs export`; see observer.h. */
-#include <math.h>
-
-#include "observer.h"
-
-{chr(10).join(macros)}
-
-{chr(10).join(funcs)}
-{rule.functions}
-void jx_init(jx_state *s)
-{{
-{init_decl}{chr(10).join(init)}
-}}
-
-void jx_step(jx_state *s, const float *u, float *y)
-{{
-    float x1[JX_NX];
-{locals_}    int i;
-{step}
-}}
-"""
-    return header, source_c
+            raise ValueError(f"export: the float32 JAX step returned an output as {c.dtype}")
+        cols.append(c.reshape(c.shape[0], -1))
+    y = np.concatenate(cols, axis=1)
+    if y.shape[1] != len(step.output_names):
+        raise AssertionError(f"export: {y.shape[1]} golden outputs for {len(step.output_names)} in the C")
+    return y
 
 
 def _harness() -> str:
-    return (resources.files("tuning") / "c" / "test_main.c").read_text()
+    return (resources.files("tuning.export") / "test_main.c").read_text()
 
 
 # --------------------------------------------------------------------------------------------
 # the export
 # --------------------------------------------------------------------------------------------
+
+
+# How a drive recording's first period is shaped (drive_test_signal explains why): the flux the
+# integrators cannot know for a pure integrator or an LPF, a beta-free first back EMF for the SOIFOs,
+# whose signed speed is otherwise the sign of a rounding error.  Any other observer: unshaped.
+_RECORD_START = {PureIntegratorFlux: "flux", LPFFlux: "flux", SOIFO: "alpha", SecondOrderSOIFO: "alpha"}
+
+
+def _record_start(observer) -> str:
+    return _RECORD_START.get(type(observer), "")
+
+
+def _signal_speed(observer) -> float:
+    """The electrical speed (rad/s) of a drive observer's synthetic record: its initial speed, else 50 Hz."""
+    w = float(getattr(observer, "omega0_pll", getattr(observer, "omega0", 0.0)))
+    return w if w > 0 else 2 * math.pi * 50.0
 
 
 def _machine(obs) -> tuple[float, float]:
@@ -769,68 +508,51 @@ def export_observer(
     """Write ``observer`` as C99 float32 with its golden vectors into ``out_dir``; returns coefficients.json's content.
 
     Args:
-        observer: a supported jaxobs observer (FLL family, flux observers, LESOs); its gains are
-            rounded to float32, as the C holds them.
+        observer: any observer that follows the step contract (jaxobs.observers.base), a user's own
+            included: the C is generated from the jaxpr of its ``step``; its gains are rounded to
+            float32, as the C holds them.  A drive observer reads (u_a, u_b, i_a, i_b) per step, any
+            other one sample ``v``.
         out_dir: folder for observer.h, observer.c, test_main.c, golden.csv, coefficients.json.
-        n_steps: length of the default test signal (:func:`fll_test_signal` for the FLL family,
-            :func:`drive_recording` for drive observers), >= 10 000.
+        n_steps: length of the default test signal (:func:`fll_test_signal` for a signal-level
+            observer, :func:`drive_recording` for drive observers), >= 10 000.
         signal: instead of the default, the inputs per step, shape (n,) or (n, JX_NU) (drive
             observers: columns u_a, u_b, i_a, i_b, e.g. :func:`drive_recording` at another speed),
             or ``"synthetic"`` for a drive observer: :func:`drive_test_signal` on the observer's
-            own Rs and L.  The default recording runs on :func:`drive_machine`: export the
+            own Rs and L.  The default recording runs on its bench (:func:`jaxobs.drive.bench_machine`): export the
             observer bound to it (:func:`bind_to_drive`) to get that machine's Rs and L in the C.
         source: where the design comes from (a result file, a closed form), for the header.
         notes: lines recorded in the header and coefficients.json (e.g. defaults used).
-        progress: its three stages (C emitted and self-checked, the test record, the golden vectors), each
-            named as it runs (:mod:`jaxobs.progress`: ``True`` a tqdm bar on stderr, or a callable).
+        progress: its three stages (C generated, the test record, the golden vectors), each named as
+            it runs (:mod:`jaxobs.progress`: ``True`` a tqdm bar on stderr, or a callable).
     """
     notes = list(notes)
     bar = Progress(progress, 3, "export", unit="stage")
-    bar.stage("emitting the C and checking it against the JAX vector field")
+    bar.stage("generating the C from the jaxpr of the step")
     obs32 = _float32(observer)
-    with cx.scope():
-        model = model_for(obs32)
-        nx, nu = len(model.states), len(model.inputs)
-        per_f, per_out = cx.count_ops(model.f), cx.count_ops(model.out)
-        jac, per_jac = None, None
-        if needs_jacobian(obs32.rule):
-            xs = {n.value: n for n in cx._topo(model.f) if n.op == "var"}
-            memos = {s: {} for s in model.states}
-            jac = [
-                [cx.deriv(fi, xs[s], memos[s]) if s in xs else cx.const(0.0) for s in model.states] for fi in model.f
-            ]
-            per_jac = cx.count_ops([e for row in jac for e in row])
-        rule = rule_c(obs32.rule, obs32.ts, nx, per_f, per_jac)
-        extra = [(1, per_out)]
-        ops = {"per_f": per_f, "per_out": per_out}
-        if model.period_input:
-            ops["per_input"] = cx.count_ops([e for _, _, e in model.period_input])
-            extra.append((1, ops["per_input"]))
-        if model.post:
-            ops["per_post"] = cx.count_ops([e for _, e in model.post])
-            extra.append((1, ops["per_post"]))
-        ops["steady"] = ops_sum((1, rule.ops_steady), *extra)
-        if rule.ops_startup is not None:
-            ops["startup"] = ops_sum((1, rule.ops_startup), *extra)
-        if per_jac is not None:
-            ops["per_jac"] = per_jac
-        _self_check(obs32, model)
-        header, source_c = _emit(obs32, model, rule, jac, source or f"{model.component} as given", notes, ops)
+    kind = "drive" if _is_drive(obs32) else "signal"
+    with jax.enable_x64(False):
+        u0 = _zero_input(obs32)
+        state0 = obs32.init(u0)
+        step = generate(obs32, state0, u0, input_names=list(DriveInput._fields) if kind == "drive" else ["v"])
+    component = type(obs32).__name__
+    _self_check(obs32, step, state0)
+    header, source_c = write_c(obs32, step, kind, source or f"{component} as given", notes)
     bar.update()
-    bar.stage("the test record" + (" (compiling and running the sensored drive)" if model.kind == "drive" else ""))
-    if signal is None:
+    bar.stage("the test record" + (" (compiling and running the sensored drive)" if kind == "drive" else ""))
+    nu = len(step.input_names)
+    if signal is None or (isinstance(signal, str) and signal == "synthetic" and kind == "drive"):
         if not (isinstance(n_steps, int) and n_steps >= MIN_STEPS):
             raise ValueError(f"export: n_steps must be an integer >= {MIN_STEPS}, got {n_steps!r}")
-        if model.kind == "signal":
-            u, signal_doc = fll_test_signal(obs32.ts, n_steps, model.omega_signal / (2 * math.pi))
-        else:
-            u, signal_doc = drive_recording(observer, n_steps, start=model.signal_start)
-    elif isinstance(signal, str) and signal == "synthetic" and model.kind == "drive":
-        if not (isinstance(n_steps, int) and n_steps >= MIN_STEPS):
-            raise ValueError(f"export: n_steps must be an integer >= {MIN_STEPS}, got {n_steps!r}")
+    if signal is None and kind == "signal":
+        # an FLL's nominal frequency when it has one, else 50 Hz
+        f0 = float(getattr(obs32, "omega_n", 2 * math.pi * 50.0)) / (2 * math.pi)
+        u, signal_doc = fll_test_signal(obs32.ts, n_steps, f0)
+    elif signal is None:
+        u, signal_doc = drive_recording(observer, n_steps, start=_record_start(obs32))
+    elif isinstance(signal, str) and signal == "synthetic" and kind == "drive":
         rs, ls = _machine(obs32)
         u, signal_doc = drive_test_signal(
-            obs32.ts, n_steps, omega=model.omega_signal, Rs=rs, L=ls, start=model.signal_start
+            obs32.ts, n_steps, omega=_signal_speed(obs32), Rs=rs, L=ls, start=_record_start(obs32)
         )
     elif isinstance(signal, str):
         raise ValueError(f"export: signal must be an array (or 'synthetic' for a drive observer), got {signal!r}")
@@ -842,12 +564,12 @@ def export_observer(
         signal_doc = f"user signal, {u.shape[0]} steps"
     bar.update()
     bar.stage(f"golden vectors: the float32 JAX step over {u.shape[0]} samples (compiling)")
-    y = _golden(obs32, model, u)
+    y = _golden(obs32, state0, step, u)
     bar.update()
     bar.close()
     if not np.all(np.isfinite(y)):
         raise ValueError(
-            f"export: the JAX step of {model.component} gave non-finite outputs on the test signal "
+            f"export: the JAX step of {component} gave non-finite outputs on the test signal "
             "(an unstable design?): no golden vectors written"
         )
 
@@ -857,57 +579,110 @@ def export_observer(
     atomic_write_text(out / "observer.h", header)
     atomic_write_text(out / "observer.c", source_c)
     atomic_write_text(out / "test_main.c", _harness())
+    columns = step.input_names + step.output_names
     with atomic_path(out / "golden.csv") as tmp:
         np.savetxt(
-            tmp,
-            np.concatenate([u, y], axis=1),
-            fmt="%.9g",
-            delimiter=",",
-            header=",".join(model.inputs + model.outputs),
-            comments="",
+            tmp, np.concatenate([u, y], axis=1), fmt="%.9g", delimiter=",", header=",".join(columns), comments=""
         )
     step_doc = {
         "signal": "jx_step returns the outputs of the state before the sample is integrated (signal-level observer)",
         "drive": "jx_step integrates the period that just ended and returns the outputs after it (drive "
         "observer); the first call only records u and i",
     }
+    gains = {}
+    for g in step.gains:
+        for i, v in enumerate(g.value.flat):
+            key = g.name if g.shape == () else f"{g.name}_{i}"
+            given = np.asarray(_leaf_at(observer, g.name)).flat[i]
+            gains[key] = {
+                "c_name": gain_macro(g, None if g.shape == () else i),
+                "value": float(v),
+                "given": float(given),
+            }
+    state = [
+        {"name": n, "c": f"s->{leaf.name}" + ("" if leaf.shape == () else f"[{i}]"), "initial": v.item()}
+        for leaf in step.state
+        for i, (n, v) in enumerate(zip(leaf.scalars(), np.asarray(leaf.value).flat))
+    ]
+    ops = {"steady": step.ops_steady}
+    if step.has_branch:
+        ops["worst"] = step.ops_worst
     coeffs = {
-        "component": model.component,
-        "reference": model.reference,
-        "design": source or f"{model.component} as given",
+        "component": component,
+        "reference": reference(obs32),
+        "design": source or f"{component} as given",
         "notes": notes,
         "dtype": "float32",
         "ts": obs32.ts,
-        "rule": {
-            "name": rule.name,
-            "description": rule.description,
-            "startup_steps": rule.startup_steps,
-            **({"newton_iters": rule.newton_iters} if rule.uses_jac else {}),
-        },
-        "step": step_doc[model.kind],
-        "gains": {
-            k: {"c_name": m, "value": float(v), "given": float(getattr(observer, k))}
-            for k, (m, v) in model.gains.items()
-        },
-        "static": {k: v for k, v in model.statics.items()},
-        "rule_constants": {m: {"value": float(np.float32(v)), "meaning": doc} for m, v, doc in rule.constants},
-        "state": [
-            {"name": s, "meaning": d, "initial": float(v)} for s, d, v in zip(model.states, model.state_doc, model.x0)
-        ],
-        "inputs": model.inputs,
-        "outputs": model.outputs,
-        "angle_outputs": [model.outputs[i] for i in model.angles],
-        "ops_per_step": {k: _json_ops(v) for k, v in ops.items()},
+        "rule": rule_doc(getattr(obs32, "rule", None)),
+        "step": step_doc[kind],
+        "gains": gains,
+        "static": statics(obs32),
+        "state": state,
+        "inputs": step.input_names,
+        "outputs": step.output_names,
+        "angle_outputs": [n for n in step.output_names if is_angle(n)],
+        "ops_per_step": ops,
         "golden": {
             "steps": int(u.shape[0]),
             "signal": signal_doc,
-            "columns": model.inputs + model.outputs,
+            "columns": columns,
             "tolerance": TOLERANCE,
             "error": "max |y_C - y_golden| / (1 + |y_golden|), angles modulo 2 pi",
         },
     }
     atomic_write_text(out / "coefficients.json", json.dumps(coeffs, indent=1, ensure_ascii=False) + "\n")
     return coeffs
+
+
+@eqx.filter_jit
+def _one_step(observer, state, u):
+    return observer.step(state, u)
+
+
+def _self_check(obs32, step: CStep, state0, n_points: int = 8):
+    """The emitted statements, run in Python on float32 numpy scalars, against the JAX step at random states
+    and inputs (floats around the initial state, flags and counters through a few values): a code
+    generator bug fails here, with or without a C compiler, and before anything is written."""
+    rng = np.random.default_rng(0)
+    leaves, tree = jax.tree.flatten(state0)
+    n_in = len(step.input_names)
+    for k in range(n_points):
+        state = []
+        for leaf in leaves:
+            a = np.asarray(leaf)
+            if a.dtype == np.bool_:
+                a = np.full(a.shape, k % 2 == 1)
+            elif a.dtype.kind in "iu":
+                a = np.full(a.shape, k % 3, a.dtype)
+            else:
+                a = (a + rng.normal(size=a.shape) * np.maximum(1.0, 0.1 * np.abs(a))).astype(a.dtype)
+            state.append(a)
+        u = (rng.normal(size=n_in) * 10.0).astype(np.float32)
+        with jax.enable_x64(False):
+            uj = DriveInput(*(jnp.float32(v) for v in u)) if _is_drive(obs32) else jnp.float32(u[0])
+            new, out = _one_step(obs32, jax.tree.unflatten(tree, [jnp.asarray(a) for a in state]), uj)
+        got_state, got_y = step.run(state, u)
+        want = [np.asarray(a, np.float64).reshape(-1) for a in [*jax.tree.leaves(new), *jax.tree.leaves(out)]]
+        got = [np.asarray(a, np.float64).reshape(-1) for a in [*got_state, got_y]]
+        names = [n for leaf in step.state for n in leaf.scalars()] + step.output_names
+        want, got = np.concatenate(want), np.concatenate(got)
+        bad = ~(np.abs(got - want) <= 1e-4 * (1 + np.abs(want)))
+        if np.any(bad):
+            i = int(np.argmax(bad))
+            raise AssertionError(
+                f"export: the generated C of {type(obs32).__name__} differs from the JAX step at {names[i]}: "
+                f"{got[i]!r} vs {want[i]!r} (a code generator bug; nothing written)"
+            )
+
+
+def _leaf_at(observer, name: str):
+    """The observer's array leaf whose path name (codegen.leaf_name) is ``name``."""
+    params, _ = eqx.partition(observer, eqx.is_array)
+    for path, leaf in jax.tree_util.tree_flatten_with_path(params)[0]:
+        if leaf_name(path) == name:
+            return leaf
+    raise KeyError(name)
 
 
 def compile_and_check(out_dir, *, cc: str | None = None, extra_flags=()) -> float:
@@ -943,6 +718,7 @@ def compile_and_check(out_dir, *, cc: str | None = None, extra_flags=()) -> floa
 def add_export_parser(subparsers) -> argparse.ArgumentParser:
     """Add ``jaxobs export`` to the CLI's subparsers."""
     e = subparsers.add_parser("export", help="an observer as C99 float32 with golden vectors and a test harness")
+    e.add_argument("--no-cache", action="store_true", help="do not keep compiled programs on disk")
     e.add_argument("result", nargs="?", help="a `jaxobs tune` result.json (its tuned gains)")
     e.add_argument("--design", choices=list(DESIGNS), help="a closed-form design instead of a result")
     e.add_argument("--out", default="out/export", help="folder for the files (default: out/export)")
@@ -1004,7 +780,7 @@ def _export(args) -> int:
         source = f"closed form {args.design}, {DESIGNS[args.design][1]}"
     signal = None
     if hasattr(obs, "Rs") and args.record == "drive":
-        machine, rpm = drive_machine(obs), _DRIVE_MACHINES[_family(obs)][2]
+        machine, rpm = _recording_bench(obs)
         obs = bind_to_drive(obs, machine, rpm)
         speed = "omega0_pll" if _family(obs) == "leso" else "omega0"
         notes = [n for n in notes if "sets Rs, Lq" not in n]
@@ -1028,8 +804,8 @@ def _export(args) -> int:
         f"JX_NU = {len(coeffs['inputs'])}, JX_NY = {len(coeffs['outputs'])}"
     )
     print(f"  {out / 'golden.csv'}   {coeffs['golden']['steps']} steps: {coeffs['golden']['signal']}")
-    start = f", {o['startup']['total']} in each start-up step" if "startup" in o else ""
-    print(f"  {out / 'coefficients.json'}   gains, rule constants; {o['steady']['total']} operations per step{start}")
+    start = f", {o['worst']['total']} in a step taking every dearer branch" if "worst" in o else ""
+    print(f"  {out / 'coefficients.json'}   gains, state; {o['steady']['total']} operations per step{start}")
     print(f"  {out / 'test_main.c'}   {' '.join(('cc',) + CFLAGS)} observer.c test_main.c -lm && ./a.out golden.csv")
     for n in notes:
         print(f"note: {n}")
@@ -1049,7 +825,6 @@ def _export(args) -> int:
 
 def _rebuild(obs, **kw):
     """The same observer with another ts or rule (static fields: rebuilt through the constructor)."""
-    import dataclasses
 
     values = {f.name: getattr(obs, f.name) for f in dataclasses.fields(obs) if f.name not in ("ts", "rule")}
     values.update(ts=kw.get("ts", obs.ts), rule=kw.get("rule", obs.rule))

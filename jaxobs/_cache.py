@@ -1,0 +1,63 @@
+"""JAX's persistent compilation cache, in one call (issue 31: compiled once per machine).
+
+Every new process compiles its programs again: a drive closed loop takes several
+seconds of XLA work, a tuning job tens.  JAX can keep compiled executables on disk
+and reuse them in the next process (``jax_compilation_cache_dir``); a cached
+executable is the same program, so no number changes.
+
+``use_compile_cache()`` turns it on in a per-user folder; the ``jaxobs`` command
+line calls it first thing (``--no-cache`` or ``JAXOBS_CACHE_DIR=off`` turn it off).
+The folder is, in order: the ``path`` argument, ``$JAXOBS_CACHE_DIR``,
+``$XDG_CACHE_HOME/jaxobs/jax``, ``~/.cache/jaxobs/jax``.
+
+Only compilations that take at least ``min_compile_s`` are written (JAX's
+``jax_persistent_cache_min_compile_time_secs``): the many sub-second ones cost
+more to write and read than to redo.  0.5 s keeps every closed loop, gradient
+and tuning step and leaves out the small helpers.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import jax
+
+__all__ = ["use_compile_cache", "CACHE_ENV"]
+
+CACHE_ENV = "JAXOBS_CACHE_DIR"
+_OFF = ("", "0", "off", "none", "false", "no")
+
+
+def _default_dir() -> Path:
+    base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
+    return Path(base) / "jaxobs" / "jax"
+
+
+def use_compile_cache(path: str | os.PathLike | None = None, *, min_compile_s: float = 0.5) -> Path | None:
+    """Keep JAX's compiled programs in ``path`` (default: ``$JAXOBS_CACHE_DIR``, else the user's cache folder).
+
+    Returns the folder, or ``None`` where the cache is off (``JAXOBS_CACHE_DIR`` set to ``off``, ``0`` or an
+    empty string, with no ``path`` given).  Call it before the computations whose compilations should be
+    kept; it may be called again to move the cache.  ``min_compile_s`` (s, ≥ 0): compilations shorter than
+    this are not written.
+    """
+    if isinstance(min_compile_s, bool) or not isinstance(min_compile_s, int | float) or not min_compile_s >= 0:
+        raise ValueError(f"use_compile_cache: min_compile_s must be a number >= 0 (seconds), got {min_compile_s!r}")
+    if path is None:
+        env = os.environ.get(CACHE_ENV)
+        if env is not None and env.strip().lower() in _OFF:
+            return None
+        folder = Path(env).expanduser() if env is not None else _default_dir()
+    else:
+        folder = Path(path).expanduser()
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise ValueError(
+            f"{CACHE_ENV}: cannot create the compilation cache folder {str(folder)!r} ({e.strerror or e}); "
+            f"set {CACHE_ENV}=off to run without it"
+        ) from None
+    jax.config.update("jax_compilation_cache_dir", str(folder))
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", float(min_compile_s))
+    return folder

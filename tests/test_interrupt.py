@@ -1,0 +1,77 @@
+"""Ctrl-C on `jaxobs tune` says how to continue, and rerunning over the checkpoint names --resume first
+(issue 29).  A real SIGINT to a real process, not a raised KeyboardInterrupt."""
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).parents[1]
+
+JOB = """
+[job]
+name = "interrupt-me"
+component = "SOGIFLL"
+[gains.lam]
+init = 12337.0
+lower = 1000.0
+upper = 200000.0
+[scenarios]
+t_event = 0.05
+horizon = 0.1
+[scenarios.grid]
+freq_step = [-2.0, 2.0]
+[objective]
+terms = [{ metric = "itae_freq", weight = 1.0 }]
+[solver]
+kind = "adam"
+learning_rate = 0.01
+steps = 100000
+"""
+
+
+def _run(args, **kw):
+    env = {**os.environ, "JAX_PLATFORMS": "cpu", "JAXOBS_HOST_DEVICES": "1"}
+    return subprocess.Popen(
+        [sys.executable, "-m", "jaxobs", *args], cwd=ROOT, env=env, stderr=subprocess.PIPE, text=True, **kw
+    )
+
+
+def test_ctrl_c_names_resume_and_rerun_names_resume_first(tmp_path):
+    job, out = tmp_path / "job.toml", tmp_path / "out"
+    job.write_text(JOB)
+    p = _run(["tune", str(job), "--out", str(out)], stdout=subprocess.DEVNULL)
+    deadline = time.monotonic() + 240
+    while not (out / "checkpoint.npz").exists():  # the solver is iterating: its first checkpoint is written
+        assert p.poll() is None, p.stderr.read()
+        assert time.monotonic() < deadline, "no checkpoint within 240 s"
+        time.sleep(0.2)
+    p.send_signal(signal.SIGINT)
+    err = p.communicate(timeout=120)[1]
+    assert p.returncode == 130, err
+    last = err.strip().splitlines()[-1]
+    assert last == f"jaxobs: interrupted; continue with: jaxobs tune {job} --out {out} --resume", err
+    # the same command again, without --resume: refused, naming --resume before --force
+    q = _run(["tune", str(job), "--out", str(out)], stdout=subprocess.DEVNULL)
+    err = q.communicate(timeout=120)[1].strip().splitlines()
+    assert q.returncode == 2 and len(err) == 1, err
+    assert "continue it with `jaxobs tune" in err[0] and err[0].index("--resume") < err[0].index("--force"), err
+
+
+def test_no_command_lists_the_commands(capsys):
+    from tuning.cli import main
+
+    assert main([]) == 2
+    err = capsys.readouterr().err
+    for cmd in ("tune", "study", "export", "closed-form", "reproduce"):
+        assert f"    {cmd}" in err, err
+
+
+def test_closed_form_error_names_the_flag(capsys):
+    from tuning.cli import main
+
+    assert main(["closed-form", "wif", "--b", "-1"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err == "jaxobs: error: --b must be finite and > 1, got -1", err

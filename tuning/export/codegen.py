@@ -1,0 +1,384 @@
+"""C99 from a step's jaxpr: any pure ``step(state, u) -> (state, out)`` written as straight-line C.
+
+:func:`generate` traces ``observer.step(state, u)`` with :func:`jax.make_jaxpr` (the
+observer's array leaves, its gains, are inputs of the trace, so they stay named in the
+C: ``JX_LAM``), then walks the jaxpr once.  Every array is unrolled into C scalars (a
+state of shape (5,) is five locals): observers' arrays hold a handful of entries, and
+scalar code is what a DSP compiler vectorizes or not as it likes.  Per equation:
+
+- scalar arithmetic and the C99 ``<math.h>`` functions (``sinf``, ``atan2f``, ...) as
+  one SSA local each, ``const float t12 = t3 * t5;``;
+- comparisons give ``int`` truth values that feed selects (``c ? a : b``); an ``int``
+  counter (AB3's start-up count) is the only other integer;
+- data movement (slice, squeeze, reshape, broadcast, concatenate, stack, split,
+  transpose, pad, gather/scatter and dynamic slices at constant indices) emits no code:
+  it re-arranges the scalars.  Which element goes where is found by running the
+  primitive itself on an array of element ids, so it has XLA's semantics exactly;
+- ``jit``, ``closed_call``, ``custom_jvp_call``, ``custom_vjp_call``, ``remat`` are
+  inlined; ``cond`` becomes ``if``/``else`` (AB3's RK4 start-up);
+- an equation whose inputs are all constants is evaluated now (by the primitive itself)
+  and written as a literal with every digit of its float32 (or float64) value.
+
+Anything else (loops, random numbers, FFTs, ...) raises a ``ValueError`` naming the
+primitive and the line of Python that made it.  Dead code is dropped; the operation
+count per step is that of the emitted C, arithmetic only (data movement is free).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import equinox as eqx
+import jax
+import numpy as np
+
+from .ir import Assign, If, Let, S, c_literal, count, ctype, deps, evaluate, ops_summary, prune, render
+from .lower import Emitter, Walker
+
+__all__ = [
+    "CStep",
+    "Leaf",
+    "generate",
+    "leaf_name",
+    "gain_macro",
+    "is_angle",
+    "write_c",
+    "reference",
+    "rule_doc",
+    "statics",
+]
+
+# --------------------------------------------------------------------------------------------
+# the step of an observer
+# --------------------------------------------------------------------------------------------
+
+
+def leaf_name(path) -> str:
+    """A pytree key path as a C identifier part: ``.rule.f1`` -> ``rule_f1``, ``[0]`` -> ``0``."""
+    parts = []
+    for k in path:
+        for attr in ("name", "key", "idx"):
+            if hasattr(k, attr):
+                parts.append(str(getattr(k, attr)))
+                break
+    return "_".join(parts) or "value"
+
+
+@dataclasses.dataclass
+class Leaf:
+    """One array leaf of the state, the input, the output or the gains, as C sees it."""
+
+    name: str  # C identifier part (the pytree path joined by '_')
+    shape: tuple
+    dtype: np.dtype
+    value: np.ndarray | None = None  # initial state / gain value
+
+    @property
+    def size(self) -> int:
+        return int(np.prod(self.shape, dtype=int))
+
+    def scalars(self) -> list[str]:
+        """Column names of its scalars: the name, or ``name_0, name_1, ...``."""
+        return [self.name] if self.shape == () else [f"{self.name}_{i}" for i in range(self.size)]
+
+
+@dataclasses.dataclass
+class CStep:
+    """A step written as C: its leaves and the body of ``jx_step`` (reads ``s``, ``u``; writes ``s``, ``y``)."""
+
+    gains: list  # [Leaf]: macros JX_<NAME> with their values
+    state: list  # [Leaf]: fields of jx_state with their initial values
+    inputs: list  # [Leaf]: u[0..] in order
+    outputs: list  # [Leaf]: y[0..] in order
+    body: str
+    ops_steady: dict
+    ops_worst: dict
+    has_branch: bool
+    block: list  # the statements of the body (tuning.export.ir)
+
+    def run(self, state: list, u) -> tuple[list, np.ndarray]:
+        """The emitted step on numpy scalars: ``state`` the values of the state leaves (as ``Leaf.value``),
+        ``u`` the inputs; returns (the new state leaves, the outputs y).  The C, run in Python."""
+        env = {}
+        for g in self.gains:
+            for i, v in enumerate(np.asarray(g.value).reshape(-1)):
+                env[gain_macro(g, None if g.shape == () else i)] = v
+        for leaf, value in zip(self.state, state):
+            for i, v in enumerate(np.asarray(value, leaf.dtype).reshape(-1)):
+                env[f"s->{leaf.name}" if leaf.shape == () else f"s->{leaf.name}[{i}]"] = v
+        dtypes = [leaf.dtype for leaf in self.inputs for _ in range(leaf.size)]
+        for k, (v, dt) in enumerate(zip(np.asarray(u).reshape(-1), dtypes)):
+            env[f"u[{k}]"] = dt.type(v)
+        env = evaluate(self.block, env)
+        new = []
+        for leaf, value in zip(self.state, state):
+            flat = np.asarray(value, leaf.dtype).reshape(-1).copy()
+            for i in range(flat.size):
+                key = f"s->{leaf.name}" if leaf.shape == () else f"s->{leaf.name}[{i}]"
+                flat[i] = env.get(key, flat[i])  # a leaf the step leaves as it is is not stored
+            new.append(flat.reshape(leaf.shape))
+        y = np.asarray([env[f"y[{j}]"] for j in range(len(self.output_names))])
+        return new, y
+
+    @property
+    def input_names(self) -> list:
+        return [n for leaf in self.inputs for n in leaf.scalars()]
+
+    @property
+    def output_names(self) -> list:
+        return [n for leaf in self.outputs for n in leaf.scalars()]
+
+
+def _leaves(tree, values=True) -> list:
+    out = []
+    for path, leaf in jax.tree_util.tree_flatten_with_path(tree)[0]:
+        a = np.asarray(leaf)
+        out.append(Leaf(leaf_name(path), a.shape, a.dtype, a if values else None))
+    return out
+
+
+def gain_macro(leaf: Leaf, i: int | None = None) -> str:
+    return "JX_" + leaf.name.upper() + ("" if i is None else f"_{i}")
+
+
+def generate(observer, state, u, *, input_names=None) -> CStep:
+    """``observer.step(state, u)`` as the body of a C function ``jx_step(jx_state *s, const T *u, T *y)``.
+
+    ``state`` and ``u`` give the structure, shapes and dtypes (their values: the initial state, recorded in
+    the result); the observer's array leaves become named constants ``JX_<PATH>``.  ``input_names`` names
+    the scalars of ``u`` (default: its pytree paths).  Floats must be all float32 or all float64.
+    """
+    params, static = eqx.partition(observer, eqx.is_array)
+    gains = _leaves(params)
+    st_leaves = _leaves(state)
+    in_leaves = _leaves(u, values=False)
+    if input_names is not None:
+        if len(input_names) != sum(x.size for x in in_leaves):
+            raise ValueError(f"export: {len(input_names)} input names for {sum(x.size for x in in_leaves)} inputs")
+        if len(in_leaves) == 1 and in_leaves[0].shape == ():
+            in_leaves[0].name = input_names[0]
+        else:
+            for leaf, name in zip(in_leaves, input_names):
+                leaf.name = name
+    floats = {x.dtype for x in gains + st_leaves + in_leaves if x.dtype.kind == "f"}
+    if len(floats) > 1:
+        raise ValueError(f"export: the step mixes float types {sorted(map(str, floats))}: give one (float32)")
+    fdt = floats.pop() if floats else np.dtype(np.float32)
+
+    def step(p, s, x):
+        return eqx.combine(p, static).step(s, x)
+
+    closed, out_shape = jax.make_jaxpr(step, return_shape=True)(params, state, u)
+    em = Emitter(fdt)
+    args = []
+    for g in gains:
+        arr = np.empty(g.shape, dtype=object)
+        for i, idx in enumerate(np.ndindex(g.shape)):
+            arr[idx] = S(gain_macro(g, None if g.shape == () else i), g.dtype, const=True)
+        args.append(arr)
+    for leaf in st_leaves:
+        arr = np.empty(leaf.shape, dtype=object)
+        for i, idx in enumerate(np.ndindex(leaf.shape)):
+            name = leaf.name if leaf.shape == () else f"{leaf.name}_{i}"
+            src = f"s->{leaf.name}" if leaf.shape == () else f"s->{leaf.name}[{i}]"
+            em.block.append(Let(name, ctype(leaf.dtype), src, (), "", False))
+            arr[idx] = S(name, leaf.dtype)
+        args.append(arr)
+    k = 0
+    for leaf in in_leaves:
+        arr = np.empty(leaf.shape, dtype=object)
+        for i, idx in enumerate(np.ndindex(leaf.shape)):
+            name = leaf.scalars()[i]
+            em.block.append(Let(name, ctype(leaf.dtype), f"u[{k}]", (), "", False))
+            arr[idx] = S(name, leaf.dtype)
+            k += 1
+        args.append(arr)
+    outs = Walker(em).run(closed.jaxpr, closed.consts, args)
+    new_state, y = jax.tree.unflatten(jax.tree.structure(out_shape), outs)
+    out_leaves = [
+        Leaf(leaf_name(path), np.shape(a), a.flat[0].dtype if a.size else fdt)
+        for path, a in jax.tree_util.tree_flatten_with_path(y)[0]
+    ]
+    # stores last: every read of s happened into locals above, so the order of the stores does not matter
+    for leaf, arr in zip(st_leaves, jax.tree.leaves(new_state)):
+        arr = np.broadcast_to(arr, leaf.shape)
+        for i, s_ in enumerate(arr.flat):
+            target = f"s->{leaf.name}" if leaf.shape == () else f"s->{leaf.name}[{i}]"
+            s_ = em.convert(s_, leaf.dtype)
+            if s_.c != (leaf.name if leaf.shape == () else f"{leaf.name}_{i}"):
+                em.block.append(Assign(target, s_.c, deps(s_), s_))
+    j = 0
+    for arr in jax.tree.leaves(y):
+        for s_ in arr.flat:
+            s_ = em.convert(s_, fdt)
+            em.block.append(Assign(f"y[{j}]", s_.c, deps(s_), s_))
+            j += 1
+    block = prune(em.block, set())
+    lo, hi = count(block)
+    has_branch = any(isinstance(st, If) for st in block)
+    body = "\n".join(render(block))
+    if not any("u[" in st.expr for st in block if isinstance(st, Let)):
+        body = "    (void)u;\n" + body
+    return CStep(gains, st_leaves, in_leaves, out_leaves, body, ops_summary(lo), ops_summary(hi), has_branch, block)
+
+
+# --------------------------------------------------------------------------------------------
+# the files observer.h and observer.c
+# --------------------------------------------------------------------------------------------
+
+
+def is_angle(name: str) -> bool:
+    """Outputs named ``theta...`` are angles (rad): the check compares them modulo 2π."""
+    return name.startswith("theta")
+
+
+def _ops_text(o: dict) -> str:
+    calls = ", ".join(f"{k} {v}" for k, v in o["calls"].items())
+    parts = [
+        f"{o['add']} +/-",
+        f"{o['mul']} *",
+        f"{o['div']} /",
+        f"{o['call']} calls" + (f" ({calls})" if calls else ""),
+    ]
+    if o["compare"] or o["select"] or o["logic"]:
+        parts.append(f"{o['compare']} compares, {o['select']} selects, {o['logic']} logic")
+    return f"{o['total']} = " + ", ".join(parts)
+
+
+_STEP_DOC = {
+    "signal": """ * jx_step returns the estimate at t_n from the samples before t_n: the outputs of the state before
+ * u is integrated over the period (jaxobs/observers/base.py, signal-level observers).""",
+    "drive": """ * u = (u_a, u_b, i_a, i_b): the current sampled at t_n and the voltage about to be applied.  jx_step
+ * integrates the period that just ended (the voltage given one step earlier, the current from
+ * i_prev to i) and returns the estimate at t_n (jaxobs/observers/base.py, drive observers); the
+ * first call only records u and i.""",
+}
+
+
+def reference(observer) -> str:
+    """The first line of the observer's docstring: its paper and equations (DESIGN.md: every observer says)."""
+    doc = (type(observer).__doc__ or "").strip().splitlines()
+    return doc[0].rstrip(".") if doc else type(observer).__name__
+
+
+def rule_doc(rule) -> dict:
+    """The rule's name, first docstring line and options; an observer without a rule integrates in its step."""
+    if rule is None:
+        return {"name": "none", "description": "the step's own update"}
+    doc = (type(rule).__doc__ or "").strip().splitlines()
+    fields = {f.name: getattr(rule, f.name) for f in dataclasses.fields(rule)}
+    return {"name": type(rule).__name__, "description": doc[0] if doc else "", **fields}
+
+
+def statics(observer) -> dict:
+    """The observer's static fields but ts and rule (floors, options), for the record."""
+    out = {}
+    for f in dataclasses.fields(observer):
+        v = getattr(observer, f.name)
+        if f.name not in ("ts", "rule") and not eqx.is_array(v) and isinstance(v, (int, float, str, bool)):
+            out[f.name] = v
+    return out
+
+
+def write_c(obs32, step: CStep, kind: str, source: str, notes) -> tuple[str, str]:
+    """observer.h and observer.c of a generated step: ``kind`` "signal" or "drive" (the step convention
+    documented in the header), ``source`` where the design comes from, ``notes`` lines for the header."""
+    component = type(obs32).__name__
+    c_type = "float"
+    gains = [
+        (gain_macro(g, None if g.shape == () else i), v, g.name) for g in step.gains for i, v in enumerate(g.value.flat)
+    ]
+    gains_doc = "\n".join(
+        f" *   {m:<14} {c_literal(v, g_dt):<16} {n}" for (m, v, n), g_dt in zip(gains, [np.float32] * len(gains))
+    )
+    options = ", ".join(f"{k} = {v!r}" for k, v in statics(obs32).items())
+    note_lines = "".join(f"\n *   note: {n}" for n in notes)
+    in_doc = "\n".join(f" *   u[{i}]  {n}" for i, n in enumerate(step.input_names))
+    out_doc = "\n".join(
+        f" *   y[{i}]  {n}" + (" (angle, rad)" if is_angle(n) else "") for i, n in enumerate(step.output_names)
+    )
+    fields = []
+    for leaf in step.state:
+        ct = "float" if leaf.dtype.kind == "f" else "int"
+        dims = "" if leaf.shape == () else f"[{leaf.size}]"
+        what = "truth value" if leaf.dtype == np.bool_ else "counter" if leaf.dtype.kind == "i" else ""
+        fields.append(f"    {ct} {leaf.name}{dims};" + (f" /* {what} */" if what else ""))
+    angle_mask = ", ".join("1" if is_angle(n) else "0" for n in step.output_names)
+    worst = ""
+    if step.has_branch:
+        dearer = _ops_text(step.ops_worst)
+        worst = f"\n *   a step taking the dearer branch of each if (e.g. AB3's RK4 start-up):\n *     {dearer}"
+    rule = rule_doc(getattr(obs32, "rule", None))
+    opts = ", ".join(f"{k}={v!r}" for k, v in rule.items() if k not in ("name", "description"))
+    header = f"""/* observer.h -- {component} exported by `jaxobs export` (float32, C99), generated from the jaxpr of
+ * its step (tuning.export.codegen): the same operations as the JAX step, in the same order.
+ *
+ * {reference(obs32)}.
+ * Design: {source}.{note_lines}
+ * Discretization: {rule["name"]}({opts}): {rule["description"].rstrip(".")}; ts = {obs32.ts!r} s.
+ * Gains (float32, baked into observer.c as macros):
+{gains_doc}
+ *   static options: {options or "none"}
+ *
+ * Call jx_init(&s) once, then jx_step(&s, u, y) once per sample period:
+{in_doc}
+{out_doc}
+{_STEP_DOC[kind]}
+ *
+ * Operations per step, outputs included (+/- counts negations too; operations on constants
+ * only, which the C compiler folds, are not counted):
+ *   {_ops_text(step.ops_steady)}{worst}
+ *
+ * golden.csv holds the JAX step's float32 outputs; test_main.c checks this code against them
+ * (max |y_C - y_golden| / (1 + |y_golden|) <= 1e-4, angles modulo 2 pi).
+ */
+#ifndef JX_OBSERVER_H
+#define JX_OBSERVER_H
+
+#ifdef __cplusplus
+extern "C" {{
+#endif
+
+#define JX_NU {len(step.input_names)} /* inputs per step */
+#define JX_NY {len(step.output_names)} /* outputs per step */
+#define JX_Y_IS_ANGLE {{{angle_mask}}} /* outputs compared modulo 2 pi */
+
+/* the JAX step's state, leaf by leaf (pytree paths joined by '_') */
+typedef struct {{
+{chr(10).join(fields)}
+}} jx_state;
+
+void jx_init(jx_state *s);
+void jx_step(jx_state *s, const {c_type} *u, {c_type} *y);
+
+#ifdef __cplusplus
+}}
+#endif
+
+#endif /* JX_OBSERVER_H */
+"""
+    macros = "\n".join(f"#define {m} {c_literal(v, np.float32)} /* {n} */" for m, v, n in gains)
+    init = []
+    for leaf in step.state:
+        for i, v in enumerate(np.asarray(leaf.value).flat):
+            target = f"s->{leaf.name}" if leaf.shape == () else f"s->{leaf.name}[{i}]"
+            init.append(f"    {target} = {c_literal(v, leaf.dtype)};")
+    source_c = f"""/* observer.c -- {component} exported by `jaxobs export`; see observer.h. */
+#include <math.h>
+
+#include "observer.h"
+
+{macros}
+
+void jx_init(jx_state *s)
+{{
+{chr(10).join(init)}
+}}
+
+/* One period: reads the state into locals, computes, then stores the new state and the outputs. */
+void jx_step(jx_state *s, const {c_type} *u, {c_type} *y)
+{{
+{step.body}
+}}
+"""
+    return header, source_c
