@@ -72,8 +72,14 @@ __all__ = [
     "drive_gains",
 ]
 
-# axis → (unit, allowed range): the one table of drive axes (jaxobs.drive.DRIVE_AXES)
-DRIVE_STUDY_AXES = {name: (unit, rng) for name, (unit, rng, _) in DRIVE_AXES.items()}
+# axis → (unit, allowed range): the axes of drive studies and drive jobs, a part of the one table of drive
+# axes (jaxobs.drive.DRIVE_AXES, same names and ranges).  Not here: dL (dLd and dLq together), the sensor
+# offsets and a per-scenario seed (a study's noise keys come from its own seed)
+DRIVE_STUDY_AXES = {
+    name: (unit, rng)
+    for name, (unit, rng, _) in DRIVE_AXES.items()
+    if name not in ("dL", "u_offset_alpha", "u_offset_beta", "i_offset_alpha", "i_offset_beta", "seed")
+}
 DRIVE_STUDY_METRICS = {
     "pos_err_rms_deg": ("deg", "rms position error in the steady window (electrical)"),
     "pos_err_max_deg": ("deg", "peak position error in the steady window (electrical)"),

@@ -72,7 +72,8 @@ LAYERS = [
     # the C export's code generator (jaxpr -> C) is beside the rest: it knows no observer
     ("tuning.export.ir",),
     ("tuning.export.lower",),
-    ("tuning.export.codegen", "tuning.params", "tuning.solvers"),
+    ("tuning.export.codegen", "tuning.params", "tuning.solvers", "tuning.aggregations"),
+    ("tuning.strategies",),
     ("tuning.objective", "tuning.report", "tuning.targets"),
     ("tuning.structure",),
     ("tuning.job",),
