@@ -56,9 +56,9 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import metrics as M
+from ._simulate import simulate
 from .drive import RPM, ClosedLoop, Drive, PMSMParams, Profile, Scenario, Sensors
 from .progress import Progress
-from .simulate import simulate
 
 __all__ = [
     "DRIVE_STUDY_AXES",

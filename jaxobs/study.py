@@ -56,9 +56,9 @@ import numpy as np
 
 from . import metrics as M
 from . import sharding
+from ._simulate import OnSignal, simulate
 from .progress import Progress
 from .scenarios import GRID_SIGNAL_AXES, grid_signals
-from .simulate import OnSignal, simulate
 
 __all__ = ["STUDY_AXES", "STUDY_METRICS", "run_study", "worst_cases"]
 

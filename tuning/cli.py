@@ -294,8 +294,8 @@ def _recording_study(designs: dict, *, recording, t_event, horizon, steady_from,
     import numpy as np
     import xarray as xr
 
+    from jaxobs import OnSignal, simulate
     from jaxobs.progress import Progress
-    from jaxobs.simulate import OnSignal, simulate
     from jaxobs.study import LOST_LOCK_LONG_NAME, METRIC_META, STUDY_METRICS, _metrics
 
     rec = recording

@@ -23,9 +23,9 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
+from jaxobs import OnSignal, simulate
 from jaxobs import metrics as M
 from jaxobs.drive import ClosedLoop
-from jaxobs.simulate import OnSignal, simulate
 
 from .params import Parametrization
 

@@ -5,7 +5,7 @@ Every dynamic piece is a step component (``init``/``step``): :class:`PMSM`,
 them with an observer, :class:`ClosedLoop`, which ``jaxobs.simulate`` runs.
 """
 
-from ..measurements import DriveInput as DriveInput
+from .._measurements import DriveInput as DriveInput
 from .control import FOC as FOC
 from .control import ControllerState as ControllerState
 from .control import FOCInput as FOCInput
