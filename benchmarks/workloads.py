@@ -34,11 +34,10 @@ import numpy as np
 
 import jaxobs
 from jaxobs import drive as D
-from jaxobs.linear import sogi_fll_closed_form, wif_closed_form, wpf_closed_form
+from jaxobs.linear import second_order_soifo_lambda, sogi_fll_closed_form, wif_closed_form, wpf_closed_form
 from jaxobs.metrics import wrap
 from jaxobs.papers import SECOND_ORDER_SOIFO_K1 as K1
 from jaxobs.papers import SECOND_ORDER_SOIFO_K2 as K2
-from jaxobs.reproduce.flux import bench_machine, flux_drive
 
 FLL_KINDS = ("sogi-fll", "sogi-fll-wpf", "sogi-fll-wif")
 # the gains a tuning job tunes (omega_n, the nominal frequency, is a design input)
@@ -171,9 +170,11 @@ def fll_baseline_params(kind: str) -> tuple[tuple[float, ...], tuple[float, ...]
 
 def drive_setup(batch: int):
     """(drive, observer, batched scenarios, per-scenario speed refs in rad/s) of the drive workload."""
-    par = bench_machine()
-    drive = flux_drive(par, handover=0.05)
-    obs = jaxobs.SecondOrderSOIFO(par.Rs, par.Ld, K1, K2, K1**3 / (2 * K2), omega0=par.p * 1000 * D.RPM)
+    par = D.bench_machine("spmsm000")
+    drive = D.bench_drive(par, handover=0.05)
+    obs = jaxobs.SecondOrderSOIFO(
+        par.Rs, par.Ld, K1, K2, second_order_soifo_lambda(K1, K2), omega0=par.p * 1000 * D.RPM
+    )
     rpm = np.linspace(500.0, 2000.0, batch) if batch > 1 else np.array([1000.0])
     base = D.Scenario(par, load=D.Profile([0.0, 0.1], [0.0, 5.0], kind="step"), omega_m0=1000 * D.RPM, dead_time=2e-6)
     sc = jax.tree.map(lambda x: jnp.broadcast_to(x, (batch,) + jnp.shape(x)), base)
@@ -232,7 +233,7 @@ def drive_initial(batch: int):
 def drive_baseline_params():
     """(M, OB, C, P, speed_every) of the drive workload as benchmarks.kernels.drive_run takes them (floats)."""
     drive, obs, _, _ = drive_setup(1)
-    par = bench_machine()
+    par = D.bench_machine("spmsm000")
     foc, inv = drive.foc, drive.inverter
     du = float(inv.udc) * 2e-6 * float(inv.f_pwm)
     M = (par.Rs, par.Ld, par.Lq, par.psi_f, par.J, par.B, par.p, par.a5, par.a7, du)

@@ -16,7 +16,7 @@ from jaxobs import drive as D
 from jaxobs import papers
 from jaxobs.drive_study import QUANTILES, run_drive_study
 from tuning.cli import main
-from tuning.job import COMPONENTS, DriveSpec, JobError, drive_machine, job_drive
+from tuning.job import COMPONENTS, DriveSpec, JobError, job_drive
 from tuning.study_file import load_study
 
 PAR = D.ipmsm_paper002()
@@ -162,12 +162,12 @@ def _cleso_result(tmp_path, machine: str) -> Path:
 
 def test_a_study_runs_the_jobs_machine_and_drive(tmp_path):
     """One machine table: a study of a tuning result runs the machine, bench inertia and FOC of the job that
-    tuned it (tuning.job.drive_machine / job_drive), and refuses another machine in one line."""
+    tuned it (jaxobs.drive.bench_machine / tuning.job.job_drive), and refuses another machine in one line."""
     res = _cleso_result(tmp_path, "spmsm000")
     st = tmp_path / "s.toml"
     st.write_text(STUDY_HEAD + f'[designs.tuned]\nresult = "{res.name}"\n[axes]\ndRs = [0.0]\n')
     spec = load_study(st)
-    assert spec.opts["machine"] == drive_machine("spmsm000") and float(spec.opts["machine"].J) == papers.BENCH_J_000
+    assert spec.opts["machine"] == D.bench_machine("spmsm000") and float(spec.opts["machine"].J) == papers.BENCH_J_000
     want = job_drive(DriveSpec(machine="spmsm000"))
     got = spec.opts["drive"]
     assert got.sensorless and got.ts == want.ts and got.settle == want.settle

@@ -22,13 +22,13 @@ import pytest
 
 import jaxobs
 from jaxobs import linear
+from jaxobs.drive import bench_machine
 from tuning.export import (
     MIN_STEPS,
     TOLERANCE,
     add_export_parser,
     bind_to_drive,
     compile_and_check,
-    drive_machine,
     drive_recording,
     drive_test_signal,
     export_observer,
@@ -356,11 +356,11 @@ def test_drive_recording_is_what_the_loop_feeds_its_observer():
     (000 eq 6 on 000's SPMSM) has |e| = ω_e ψf to 1 %, ω_e the true speed (10 % up after the speed step)."""
     import jaxobs.drive as D
 
-    obs = bind_to_drive(_DRIVE["SOIFO"](), drive_machine(_DRIVE["SOIFO"]()), 1000.0)
+    obs = bind_to_drive(_DRIVE["SOIFO"](), bench_machine("spmsm000"), 1000.0)
     n = 3000
     data, doc = drive_recording(obs, n)
     assert data.shape == (n, 4) and data.dtype == np.float32 and "000 SPMSM" in doc
-    m = drive_machine(obs)
+    m = bench_machine("spmsm000")
     load = D.Profile.constant(0.3 * float(m.T_rated))
     sc = D.Scenario(m, speed_ref=D.Profile.constant(1000 * D.RPM), load=load, omega_m0=1000 * D.RPM, theta_e0=np.pi / 2)
     foc = D.FOC.imc(m, 2 * np.pi * 300.0, 2 * np.pi * 5.0)
@@ -397,8 +397,9 @@ def test_drive_observers_match_on_a_drive_recording(tmp_path, name, rule):
     _need_cc()
     obs = _DRIVE[name](**({} if rule is None else {"rule": rule}))
     rpm = 300.0 if hasattr(obs, "Lq") else 1000.0
-    obs = bind_to_drive(obs, drive_machine(obs), rpm)
-    assert float(obs.Rs) == float(drive_machine(obs).Rs)
+    machine = bench_machine("ipmsm002" if hasattr(obs, "Lq") else "spmsm000")
+    obs = bind_to_drive(obs, machine, rpm)
+    assert float(obs.Rs) == float(machine.Rs)
     c = export_observer(obs, tmp_path)
     assert "sensored FOC drive" in c["golden"]["signal"] and c["golden"]["steps"] == 12_000
     err = compile_and_check(tmp_path)
@@ -409,7 +410,7 @@ def test_unshaped_recording_start_is_ill_conditioned(tmp_path):
     """Why the recording's first period is shaped: unshaped, a Tustin SOIFO's signed speed flips at the first
     sample in one implementation and not the other (error 2), a pure integrator's angle misses by 5e-2."""
     _need_cc()
-    obs = bind_to_drive(_DRIVE["SOIFO"](rule=jaxobs.Tustin()), drive_machine(_DRIVE["SOIFO"]()), 1000.0)
+    obs = bind_to_drive(_DRIVE["SOIFO"](rule=jaxobs.Tustin()), bench_machine("spmsm000"), 1000.0)
     data, _ = drive_recording(obs, 12_000)
     export_observer(obs, tmp_path, signal=data)
     assert compile_and_check(tmp_path) > 1e-2
@@ -523,4 +524,17 @@ def test_a_primitive_without_c_is_refused_by_name(tmp_path):
         ValueError, match=r"primitive 'while' \(at test_export.py:\d+ \(_Looping.step\)\), which cannot be written as"
     ):
         export_observer(_Looping(), tmp_path)
+    assert not (tmp_path / "observer.c").exists()
+
+
+def test_the_export_runs_its_c_in_python_before_writing(tmp_path, monkeypatch):
+    """Without a C compiler too: the emitted statements run on float32 numpy scalars at random states and
+    inputs and must give the JAX step's new state and outputs, so a code generator that turns a subtraction
+    into an addition writes nothing."""
+    from tuning.export.lower import Emitter
+
+    binary = Emitter.binary
+    monkeypatch.setattr(Emitter, "binary", lambda self, p, a, b: binary(self, "add" if p == "sub" else p, a, b))
+    with pytest.raises(AssertionError, match="generated C of SOGIFLL differs from the JAX step at "):
+        export_observer(linear.sogi_fll_closed_form(), tmp_path)
     assert not (tmp_path / "observer.c").exists()

@@ -15,7 +15,7 @@ from jaxobs import drive as D
 from jaxobs import linear as L
 from jaxobs import papers
 from jaxobs.metrics import wrap
-from jaxobs.reproduce.flux import bench_machine, flux_bank, flux_drive
+from jaxobs.reproduce.flux import flux_bank
 from jaxobs.signals import EMFSignal
 
 K_SOIFO, K1, K2 = papers.SOIFO_K, papers.SECOND_ORDER_SOIFO_K1, papers.SECOND_ORDER_SOIFO_K2
@@ -106,12 +106,12 @@ def test_harmonic_attenuation_per_order_eqs_16_21(table_i_runs, h):
 
 @pytest.fixture(scope="module")
 def du_alpha_run():
-    par = bench_machine()
+    par = D.bench_machine("spmsm000")
     we = par.p * 1000 * D.RPM
     sc = D.Scenario(
         par, speed_ref=D.Profile.constant(1000 * D.RPM), omega_m0=1000 * D.RPM, sensors=D.Sensors(u_offset=(5.0, 0.0))
     )
-    return jaxobs.simulate(D.ClosedLoop(flux_drive(par, 0.4), flux_bank(par, we), sc), 0.8)
+    return jaxobs.simulate(D.ClosedLoop(D.bench_drive(par, handover=0.4), flux_bank(par, we), sc), 0.8)
 
 
 def test_du_alpha_ripple_orders_lpf_soifo_second_order(du_alpha_run):
@@ -136,14 +136,14 @@ def test_du_alpha_ripple_orders_lpf_soifo_second_order(du_alpha_run):
 
 @pytest.fixture(scope="module")
 def sensorless_runs():
-    par = bench_machine()
+    par = D.bench_machine("spmsm000")
     out = {}
     steps = D.Scenario.load_steps([0.0, 0.4], [0.0, 10.0])
     for rpm, t1, hand, load in ((400, 1.4, 0.8, None), (2000, 0.8, 0.2, steps)):
         we = par.p * rpm * D.RPM
-        obs = jaxobs.SecondOrderSOIFO(par.Rs, par.Ld, K1, K2, K1**3 / (2 * K2), omega0=we)
+        obs = jaxobs.SecondOrderSOIFO(par.Rs, par.Ld, K1, K2, L.second_order_soifo_lambda(K1, K2), omega0=we)
         sc = D.Scenario(par, speed_ref=D.Profile.constant(rpm * D.RPM), omega_m0=rpm * D.RPM, load=load)
-        out[rpm] = jaxobs.simulate(D.ClosedLoop(flux_drive(par, hand), obs, sc), t1)
+        out[rpm] = jaxobs.simulate(D.ClosedLoop(D.bench_drive(par, handover=hand), obs, sc), t1)
     return out
 
 
@@ -169,7 +169,7 @@ def test_sensorless_second_order_soifo_holds_400_and_2000_rpm_and_the_load_step(
 
 
 def test_vmap_over_64_scenarios_with_the_second_order_soifo():
-    par = bench_machine()
+    par = D.bench_machine("spmsm000")
     base = D.Scenario(par, load=D.Profile.constant(2.0))
     batch = D.grid(base, speed_rpm=np.linspace(1400, 2000, 8), dRs=np.linspace(-0.5, 0.5, 8))
     drv = D.Drive(D.FOC.imc(par, 2 * math.pi * papers.BENCH_CURRENT_HZ, 2 * math.pi * papers.BENCH_SPEED_HZ))
@@ -178,7 +178,6 @@ def test_vmap_over_64_scenarios_with_the_second_order_soifo():
         we0 = s.speed_ref.values[0] * par.p
         obs = jaxobs.SecondOrderSOIFO(par.Rs, par.Ld, K1, K2, 0.6, omega0=1.0)
         obs = eqx.tree_at(lambda o: (o.Rs, o.omega0), obs, (s.est_par.Rs, we0))
-        s = eqx.tree_at(lambda x: x.omega_m0, s, s.speed_ref.values[0])
         sol = jaxobs.simulate(D.ClosedLoop(drv, obs, s), 0.4)  # sensored: the observer runs open loop
         return jnp.max(jnp.abs(wrap(sol.outputs.obs.theta - sol.outputs.theta_e)[-500:])), sol.ok
 

@@ -30,6 +30,7 @@ LAYERS = [
         "jaxobs._system",
         "jaxobs._time",
         "jaxobs.progress",
+        "jaxobs.provenance",
         "jaxobs._cache",
     ),
     # integration rules (and check_rule)
@@ -38,6 +39,7 @@ LAYERS = [
     ("jaxobs.signals", "jaxobs.drive.machine", "jaxobs.drive.hardware"),
     ("jaxobs.scenarios", "jaxobs.drive.plant", "jaxobs.drive.control", "jaxobs.drive.scenario"),
     ("jaxobs.drive.loop",),
+    ("jaxobs.drive.bench",),
     ("jaxobs.drive",),
     # observers: they estimate
     ("jaxobs.observers._cores", "jaxobs.observers.base"),
@@ -53,6 +55,8 @@ LAYERS = [
     ("jaxobs.linear._models", "jaxobs.linear._fll"),
     ("jaxobs.linear",),
     ("jaxobs",),
+    # the one study runner (samplers in jaxobs.scenarios)
+    ("jaxobs.runner",),
     # the library's own applications: studies, the demo, the papers' reproductions, figures, benchmarks
     (
         "jaxobs.study",
@@ -68,7 +72,8 @@ LAYERS = [
     # the C export's code generator (jaxpr -> C) is beside the rest: it knows no observer
     ("tuning.export.ir",),
     ("tuning.export.lower",),
-    ("tuning.export.codegen", "tuning.params", "tuning.solvers"),
+    ("tuning.export.codegen", "tuning.params", "tuning.solvers", "tuning.aggregations"),
+    ("tuning.strategies",),
     ("tuning.objective", "tuning.report", "tuning.targets"),
     ("tuning.structure",),
     ("tuning.job",),

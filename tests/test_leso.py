@@ -15,11 +15,11 @@ from jaxobs import drive as D
 from jaxobs import linear as L
 from jaxobs import papers
 from jaxobs.metrics import harmonic_amplitude, wrap
-from jaxobs.reproduce.leso import bench_machine, leso_bank, leso_drive
+from jaxobs.reproduce.leso import leso_bank
 
 A5, A7 = papers.IPMSM_002_A5, papers.IPMSM_002_A7
 W0, K1_FA, K2_FA = papers.LESO_OMEGA0, papers.FALESO_K1, papers.FALESO_K2
-PAR = bench_machine()
+PAR = D.bench_machine("ipmsm002")
 DRIVE_BANDWIDTHS = (2 * math.pi * papers.BENCH_CURRENT_HZ, 2 * math.pi * papers.BENCH_SPEED_HZ)
 
 
@@ -34,7 +34,7 @@ def steady_runs():
         bank = eqx.tree_at(
             lambda b: tuple(o.omega0_pll for o in b.observers), leso_bank(PAR, 1.0), (PAR.p * rpm * D.RPM,) * 3
         )
-        sol = jaxobs.simulate(D.ClosedLoop(leso_drive(PAR), bank, sc), 0.8)
+        sol = jaxobs.simulate(D.ClosedLoop(D.bench_drive(PAR, handover=0.3), bank, sc), 0.8)
         errs = jnp.stack([jnp.degrees(wrap(o.theta - sol.outputs.theta_e)) for o in sol.outputs.obs.each])
         return jnp.mean(errs[:, -2000:], axis=1), sol.ok
 
@@ -58,7 +58,7 @@ def test_steady_position_errors_c_gi_fa(steady_runs):
 
 @pytest.fixture(scope="module")
 def harmonics_run():
-    hpar = bench_machine(a5=A5, a7=A7)
+    hpar = D.bench_machine("ipmsm002", a5=A5, a7=A7)
     we = hpar.p * 300 * D.RPM
     sc = D.Scenario(
         hpar,
@@ -66,7 +66,7 @@ def harmonics_run():
         omega_m0=300 * D.RPM,
         load=D.Profile.constant(0.5 * float(hpar.T_rated)),
     )
-    sol = jaxobs.simulate(D.ClosedLoop(leso_drive(hpar), leso_bank(hpar, we), sc), 1.0)
+    sol = jaxobs.simulate(D.ClosedLoop(D.bench_drive(hpar, handover=0.3), leso_bank(hpar, we), sc), 1.0)
     return sol, we
 
 
@@ -109,7 +109,7 @@ def test_faleso_attenuates_5th_and_7th_more_than_cleso(harmonics_run):
 def test_parameter_mismatch_against_eqs_42_43(which, factor):
     """Rated load, 300 r/min, i_d = 0.  Measured FA-LESO mean error −7.08° / +6.68° for L̂q = 1.5/0.5 Lq
     (eq 43: −6.77° / +6.59°); R̂s errors give < 0.01° (eq 42: 0 with i_d = 0)."""
-    est = bench_machine(**{which: factor * float(getattr(PAR, which))})
+    est = D.bench_machine("ipmsm002", **{which: factor * float(getattr(PAR, which))})
     we = PAR.p * 300 * D.RPM
     sc = D.Scenario(
         PAR,
@@ -118,7 +118,7 @@ def test_parameter_mismatch_against_eqs_42_43(which, factor):
         omega_m0=300 * D.RPM,
         load=D.Profile.constant(float(PAR.T_rated)),
     )
-    sol = jaxobs.simulate(D.ClosedLoop(leso_drive(PAR), leso_bank(est, we), sc), 1.2)
+    sol = jaxobs.simulate(D.ClosedLoop(D.bench_drive(PAR, handover=0.3), leso_bank(est, we), sc), 1.2)
     t = np.asarray(sol.t)
     m = t >= 1.0
     out = sol.outputs
@@ -153,7 +153,6 @@ def test_vmap_over_64_scenarios_and_gradients():
         w0 = s.speed_ref.values[0] * PAR.p
         obs = jaxobs.FALESO(PAR.Rs, PAR.Lq, K1_FA, K2_FA, omega0_pll=1.0)
         obs = eqx.tree_at(lambda o: (o.Lq, o.omega0_pll), obs, (s.est_par.Lq, w0))
-        s = eqx.tree_at(lambda x: x.omega_m0, s, s.speed_ref.values[0])
         sol = jaxobs.simulate(D.ClosedLoop(drv, obs, s), 0.8)
         return jnp.mean(jnp.degrees(wrap(sol.outputs.obs.theta - sol.outputs.theta_e))[-1000:]), sol.ok
 

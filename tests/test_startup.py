@@ -21,6 +21,7 @@ hand-over); the others are ``slow``.  Measured (this design):
 import dataclasses
 import math
 
+import equinox as eqx
 import jax
 import numpy as np
 import pytest
@@ -213,12 +214,13 @@ def test_drive_job_start_option(tmp_path):
 
 def test_standstill_job_checks_what_the_i_f_start_up_can_carry(tmp_path):
     """A standstill job is refused (one line naming the field) where its I-f start-up cannot work: a load above
-    :func:`tuning.job.if_load_limit` (tested at the boundary, ±0.1 %), a speed reference below the hand-over
+    :func:`jaxobs.drive.if_load_limit` (tested at the boundary, ±0.1 %), a speed reference below the hand-over
     speed (120 r/min on the IPMSM bench), a steady window before the earliest hand-over."""
-    from tuning.job import IF_SUDDEN_LOAD_PU, DriveSpec, JobError, if_handover_earliest, if_load_limit
+    from jaxobs.drive import IF_SUDDEN_LOAD_PU, if_handover_earliest, if_load_limit
+    from tuning.job import JobError
 
-    spec = DriveSpec(start="standstill", machine="ipmsm002")
     par, start = D.ipmsm_paper002(J=papers.BENCH_J_002), None
+    assert bool(eqx.tree_equal(D.bench_machine("ipmsm002"), par))
     start = D.IfStartup.for_machine(par)
     # the derivation by hand: the equal-area root, K_t I_f, the raised cosine's peak acceleration, friction
     d0 = math.asin(IF_SUDDEN_LOAD_PU)
@@ -226,10 +228,10 @@ def test_standstill_job_checks_what_the_i_f_start_up_can_carry(tmp_path):
     a_peak = 2 * float(start.accel) / par.p
     want = IF_SUDDEN_LOAD_PU * float(par.kt) * float(start.i_f) - float(par.J) * a_peak
     want -= float(par.B) * float(start.omega_switch) / par.p
-    limit = if_load_limit(spec)
+    limit = if_load_limit(par)
     assert limit == pytest.approx(want) and 7.0 < limit < 9.0  # 8.27 N·m of the 30 N·m rated
-    assert if_load_limit(spec, dJ=1.0) == pytest.approx(limit - float(par.J) * a_peak)
-    t_ho = if_handover_earliest(spec)
+    assert if_load_limit(par, dJ=1.0) == pytest.approx(limit - float(par.J) * a_peak)
+    t_ho = if_handover_earliest(par)
     assert t_ho == pytest.approx(float(start.omega_switch / start.accel) + max(float(start.hold), float(start.dwell)))
     ss = 'start = "standstill"'
     ok = _faleso_job(tmp_path, ss, grid=f"speed_rpm = [300.0]\nload_nm = [{limit * 0.999:.6f}]")
@@ -345,14 +347,13 @@ def test_standstill_jobs_score_the_position_error_from_the_hand_over_on():
 @pytest.mark.slow
 def test_a_standstill_start_above_the_load_limit_runs_backwards_and_is_flagged_lost_speed():
     """The review's case: SOIFO, 000's SPMSM, 1000 r/min reference from standstill.  Measured: 4.5 N·m (above
-    tuning.job.if_load_limit's 3.82, which is sufficient, not necessary) still starts; 5 N·m runs backwards
+    jaxobs.drive.if_load_limit's 3.82, which is sufficient, not necessary) still starts; 5 N·m runs backwards
     (−320 r/min) with the observer locked to it — lost_speed flags it, lost lock does not."""
     import jax.numpy as jnp
 
     from jaxobs import metrics as M
-    from tuning.job import DriveSpec, if_load_limit
 
-    assert 3.5 < if_load_limit(DriveSpec(start="standstill", machine="spmsm000")) < 4.5
+    assert 3.5 < D.if_load_limit(D.bench_machine("spmsm000")) < 4.5
     _, obs = _observer("SOIFO")
     start = D.IfStartup.for_machine(SPMSM)
     foc = D.FOC.imc(SPMSM, 2 * math.pi * papers.BENCH_CURRENT_HZ, 2 * math.pi * papers.BENCH_SPEED_HZ)

@@ -14,22 +14,23 @@ from pathlib import Path
 import jax
 import jax.numpy as jnp
 import numpy as np
+import optax
 import pytest
 
 import jaxobs
+from jaxobs import drive as D
 from jaxobs import linear, papers
 from tuning import (
     GainSpec,
     Objective,
     Parametrization,
-    SolverConfig,
     Term,
     load_job,
-    run_solver,
+    tune,
 )
-from tuning import job as job_mod
 from tuning.cli import main
 from tuning.objective import MetricContext
+from tuning.solvers import OptaxSolver
 from tuning.targets import flux_settling_time, lambda_for_damping, match_settling_time
 
 W_N = papers.FLL_OMEGA_N
@@ -48,10 +49,10 @@ def itae_tuning():
     sig = jaxobs.stack([jaxobs.paper001_test("A", t_event=0.1)])
     comp = linear.sogi_fll_closed_form()
     param = Parametrization([GainSpec("lam", float(comp.lam), 500.0, 500000.0)])
-    obj = Objective(comp, param, sig, 0.4, [Term("itae_freq")], MetricContext(t_event=0.1, steady_from=0.3))
-    res = run_solver(
-        obj, param.theta0(), SolverConfig(kind="adam", learning_rate=0.1, steps=60, patience=15), quiet=True
+    obj = Objective(
+        comp, param, sig, horizon=0.4, terms=[Term("itae_freq")], ctx=MetricContext(t_event=0.1, steady_from=0.3)
     )
+    res = tune(obj, OptaxSolver(optax.adam(0.1), steps=60, patience=15, name="adam"), param.theta0(), quiet=True)
     return obj, param, res
 
 
@@ -100,7 +101,9 @@ def test_diverging_candidates_give_a_finite_penalty_and_gradient():
     sigs = jaxobs.stack([jaxobs.paper001_test("A", t_event=0.1, phase=p) for p in (0.0, 1.0)])
     comp = jaxobs.SOGIFLL(k=0.7, lam=12000.0, rule=jaxobs.Euler(), ts=1e-3)
     param = Parametrization([GainSpec("k", 0.7, 0.01, 100.0)])
-    obj = Objective(comp, param, sigs, 0.3, [Term("itae_freq")], MetricContext(0.1, 0.25), penalty=123.0)
+    obj = Objective(
+        comp, param, sigs, horizon=0.3, terms=[Term("itae_freq")], ctx=MetricContext(0.1, 0.25), penalty=123.0
+    )
     bad = param.to_theta({"k": 40.0})
     v, g = obj.value_and_grad(bad)
     assert float(v) == 123.0 and np.all(np.isfinite(np.asarray(g))) and float(g[0]) == 0.0
@@ -117,7 +120,7 @@ def test_per_scenario_scores_flag_a_lost_lock_that_does_not_diverge():
     sigs = jaxobs.stack([jaxobs.GridSignal(t_event=0.1, freq_step=f) for f in (-1.0, 2.0)])
     comp = jaxobs.SOGIFLL(k=0.7, lam=1e4)
     param = Parametrization([GainSpec("k", 0.7, 0.01, 100.0)])
-    obj = Objective(comp, param, sigs, 0.4, [Term("rms_phase_steady")], MetricContext(0.1, 0.3))
+    obj = Objective(comp, param, sigs, horizon=0.4, terms=[Term("rms_phase_steady")], ctx=MetricContext(0.1, 0.3))
     mets, total, good = obj.per_scenario(param.to_theta({"k": 20.0}))
     assert np.all(np.asarray(good)) and np.all(np.asarray(mets["lost_lock"]))
     assert obj.summarize(mets, total, good)["lost_lock"] == 2
@@ -331,8 +334,8 @@ def test_drive_speeds_are_checked_against_the_jobs_machine(tmp_path, capsys):
     # the oracle, by hand from the machines' tables: 540 V dc link, u_max = 540/√3 V
     for name, par in (("ipmsm002", papers.IPMSM_002), ("spmsm000", papers.SPMSM_000)):
         n_max = 540.0 / math.sqrt(3) / par["psi_f"] / par["p"] * 60 / (2 * math.pi)
-        assert job_mod.drive_speed_limit_rpm(name) == pytest.approx(n_max, rel=1e-12)
-    assert 1.3 * papers.IPMSM_002["n_rated"] < job_mod.drive_speed_limit_rpm("ipmsm002") < 1e4
+        assert D.drive_speed_limit_rpm(D.bench_machine(name)) == pytest.approx(n_max, rel=1e-12)
+    assert 1.3 * papers.IPMSM_002["n_rated"] < D.drive_speed_limit_rpm(D.bench_machine("ipmsm002")) < 1e4
     cleso = (presets / "cleso.toml").read_text()
     soifo = (presets / "soifo.toml").read_text()
     cases = [  # (job text, None if it passes, else the field and the range the one-line error names)
@@ -514,6 +517,23 @@ def _oracle_dominant(num, den, cancel_tol=None):
     p = np.asarray(t.poles())
     dom = p[np.argmax(p.real)]
     return -dom.real / abs(dom), abs(dom) / (2 * math.pi), len(p)
+
+
+def test_leso_structure_is_linearized_at_the_jobs_machine_speed(tmp_path):
+    """A LESO job's linear structure is taken at its first speed_rpm in electrical rad/s on the job's own machine:
+    300 r/min is 5 · 10π rad/s on 002's IPMSM (p = 5) and 3 · 10π on 000's SPMSM (p = 3).  (It used 002's pole
+    pairs for every LESO job, so a LESO on the SPMSM was linearized at 5/3 of its speed.)"""
+    from tuning.structure import structure
+
+    text = (Path(__file__).parents[1] / "tuning" / "presets" / "faleso.toml").read_text()
+    for machine, p in (("ipmsm002", 5), ("spmsm000", 3)):
+        f = tmp_path / f"{machine}.toml"
+        f.write_text(text.replace('loop = "sensorless"', f'loop = "sensorless"\nmachine = "{machine}"', 1))
+        job = load_job(f)
+        assert job.drive.machine == machine and D.bench_machine(machine).p == p
+        fa = structure("FALESO", job.values, job)
+        assert fa["omega_e"] == pytest.approx(300.0 * math.pi / 30 * p, rel=1e-12)
+        assert "omega_e = " + f"{fa['omega_e']:.6g}" in fa["model"]
 
 
 def test_dominant_damping_leaves_out_the_poles_a_zero_cancels():

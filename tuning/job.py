@@ -55,7 +55,6 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
-import itertools
 import json
 import math
 import os
@@ -74,16 +73,20 @@ import jaxobs
 from jaxobs import drive as D
 from jaxobs import linear, papers
 from jaxobs import metrics as M
+from jaxobs.drive import BENCH_MACHINES
 from jaxobs.drive_study import DRIVE_STUDY_AXES, bind_observer, drive_scenarios
 from jaxobs.progress import Progress
-from jaxobs.scenarios import grid_signals
+from jaxobs.provenance import sha256, versions
+from jaxobs.scenarios import Grid, Random, grid_signals
 from jaxobs.signals import EMFSignal, stack
 
+from . import strategies
+from .aggregations import AbstractAggregation
 from .objective import DRIVE_METRICS, LOST_SYNC_DEG, METRICS, MetricContext, Objective, Term
 from .outdir import atomic_path, atomic_write_text
 from .params import GainSpec, Parametrization
 from .report import write_report
-from .solvers import SolverConfig, run_solver
+from .solvers import AbstractSolver, tune
 from .structure import structure
 
 __all__ = ["JobError", "Job", "load_job", "parse_job", "run_job", "COMPONENTS", "rule_spec", "write_json"]
@@ -149,11 +152,11 @@ def _cf_wif(comp):
 
 
 def _cf_soifo(comp):
-    return {"k": SOIFO_K, "lam": SOIFO_K**2 / 4}
+    return {"k": SOIFO_K, "lam": linear.soifo_lambda(SOIFO_K)}
 
 
 def _cf_sosoifo(comp):
-    return {"K1": SOIFO2_K1, "K2": SOIFO2_K2, "lam": SOIFO2_K1**3 / (2 * SOIFO2_K2)}
+    return {"K1": SOIFO2_K1, "K2": SOIFO2_K2, "lam": linear.second_order_soifo_lambda(SOIFO2_K1, SOIFO2_K2)}
 
 
 def _cf_lpf(comp):
@@ -187,7 +190,7 @@ class ComponentInfo:
     signal: str
     closed_form_source: str
     bind: object = None
-    # the machines a sensorless drive job may run this component on, the default first (DRIVE_MACHINES);
+    # the machines a sensorless drive job may run this component on, the default first (BENCH_MACHINES);
     # empty: no drive jobs.  A component whose ``signal`` is "emf" runs on EMF signals by default and in the
     # drive with ``scenarios.signal = "drive"``.
     machines: tuple = ()
@@ -241,7 +244,14 @@ COMPONENTS = {
     "SecondOrderSOIFO": ComponentInfo(
         jaxobs.SecondOrderSOIFO,
         gains=("K1", "K2", "lam"),
-        defaults=dict(Rs=0.0, L=1.0, K1=SOIFO2_K1, K2=SOIFO2_K2, lam=SOIFO2_K1**3 / (2 * SOIFO2_K2), omega0=W_N),
+        defaults=dict(
+            Rs=0.0,
+            L=1.0,
+            K1=SOIFO2_K1,
+            K2=SOIFO2_K2,
+            lam=linear.second_order_soifo_lambda(SOIFO2_K1, SOIFO2_K2),
+            omega0=W_N,
+        ),
         closed_form=_cf_sosoifo,
         signal="emf",
         closed_form_source="000 (K1 = 1.56, K2 = 3.11), lam = K1³/(2K2)",
@@ -310,21 +320,6 @@ COMPONENTS = {
         machines=_LESO_MACHINES,
     ),
 }
-
-# the machines of sensorless drive jobs ([drive] machine): each on its bench's ASSUMED inertia (jaxobs.papers),
-# with the FOC of the simulated benches (IMC current loop papers.BENCH_CURRENT_HZ, I-P speed loop
-# papers.BENCH_SPEED_HZ), as `jaxobs reproduce flux|leso` runs them
-DRIVE_MACHINES = {
-    "ipmsm002": ("paper 002's IPMSM (ASSUMED, papers.IPMSM_002), J = papers.BENCH_J_002", "ipmsm_paper002"),
-    "spmsm000": ("paper 000's SPMSM (Table II, papers.SPMSM_000), J = papers.BENCH_J_000", "spmsm_paper000"),
-}
-_BENCH_J = {"ipmsm002": papers.BENCH_J_002, "spmsm000": papers.BENCH_J_000}
-
-
-def drive_machine(name: str):
-    """The PMSMParams of a drive job's machine (a key of :data:`DRIVE_MACHINES`), on its bench's inertia."""
-    return getattr(D, DRIVE_MACHINES[name][1])(J=_BENCH_J[name])
-
 
 GRID_AXES = ("freq_step", "phase_jump_deg", "sag", "dc", "harmonics_scale", "sub_amplitude", "phase_deg")
 # (an "omega0_error" axis was accepted and ignored: removed.  The flux observers start their FLL at
@@ -425,11 +420,9 @@ class Job:
     scenarios: ScenarioSpec
     holdout: ScenarioSpec | None
     terms: list
-    agg: str
-    alpha: float
-    temperature: float | None
+    aggregation: AbstractAggregation  # objective.aggregate (with alpha, temperature), tuning.strategies
     penalty: float
-    solver: SolverConfig
+    solver: AbstractSolver  # [solver], tuning.strategies
     sha256: str | None = None  # of the job file's bytes (load_job); None for a job built from a dict
     drive: DriveSpec | None = None  # signal = "drive" jobs: how the observer sits in the loop
 
@@ -441,14 +434,14 @@ class DriveSpec:
     the observer estimates beside it); ``settle`` (s): the observer's unscored settling phase before t = 0;
     ``start``: ``"steady"`` (each scenario starts in its operating point) or ``"standstill"`` (from rest, by
     the I-f start-up :meth:`jaxobs.drive.IfStartup.for_machine` of the job's machine, then its hand-over);
-    ``machine``: the drive's machine (:data:`DRIVE_MACHINES`; by default the component's: the LESOs run
+    ``machine``: the drive's machine (:data:`BENCH_MACHINES`; by default the component's: the LESOs run
     002's IPMSM, the flux observers 000's SPMSM)."""
 
     loop: str = "sensorless"
     handover: float = 0.0
     settle: float = 0.2
     start: str = "steady"
-    machine: str = "ipmsm002"  # a key of DRIVE_MACHINES; a job's default is its component's first machine
+    machine: str = "ipmsm002"  # a key of BENCH_MACHINES; a job's default is its component's first machine
 
 
 # the physical range of every scenario axis (closed intervals unless noted), checked at --check time;
@@ -659,7 +652,7 @@ def _parse_recording_scenarios(tab, where, signal, t_event, horizon, steady, see
                     f"{horizon:g} s needs {need} samples of {ts:g} s; {files[i]!r} gives {sig.n} "
                     f"({(sig.n - 1) * ts:.6g} s)",
                 )
-            digests.append(hashlib.sha256(Path(path).read_bytes()).hexdigest())
+            digests.append(sha256(Path(path)))
         spec = dataclasses.replace(spec, sha256=tuple(digests))
     axes = {"recording": [float(i) for i in range(len(files))]}
     return ScenarioSpec(signal, t_event, horizon, steady, axes, 0, seed, recording=spec)
@@ -810,12 +803,12 @@ def parse_job(raw: dict, base: Path | None = None) -> Job:
         if not 0.0 <= settle <= 10.0:
             raise JobError("drive.settle", f"must be in [0, 10] s, got {settle:g}")
         machine = _get(dt, "machine", "drive.machine", str, info.machines[0])
-        if machine not in DRIVE_MACHINES:
-            raise JobError("drive.machine", f"must be one of {', '.join(DRIVE_MACHINES)}, got {_show(machine)}")
+        if machine not in BENCH_MACHINES:
+            raise JobError("drive.machine", f"must be one of {', '.join(BENCH_MACHINES)}, got {_show(machine)}")
         if machine not in info.machines:
             raise JobError(
                 "drive.machine",
-                f"{comp} cannot run on {machine} ({DRIVE_MACHINES[machine][0]}); allowed: {', '.join(info.machines)}",
+                f"{comp} cannot run on {machine} ({BENCH_MACHINES[machine]}); allowed: {', '.join(info.machines)}",
             )
         drive = DriveSpec(loop, handover, settle, machine=machine)
         drive = _parse_start(dt, drive, scen)
@@ -863,8 +856,8 @@ def parse_job(raw: dict, base: Path | None = None) -> Job:
             raise JobError(f"{where}.weight", f"must be > 0, got {weight}")
         terms.append(Term(metric, weight))
     agg = _get(obj_t, "aggregate", "objective.aggregate", str, "mean")
-    if agg not in ("mean", "max", "cvar"):
-        raise JobError("objective.aggregate", f"must be mean, max or cvar, got {_show(agg)}")
+    if agg not in strategies.AGGREGATIONS:
+        raise JobError("objective.aggregate", f"must be {strategies.one_of(strategies.AGGREGATIONS)}, got {_show(agg)}")
     alpha = _get(obj_t, "alpha", "objective.alpha", float, 0.9)
     if not 0 <= alpha < 1:
         raise JobError("objective.alpha", f"must be in [0, 1), got {alpha}")
@@ -882,14 +875,15 @@ def parse_job(raw: dict, base: Path | None = None) -> Job:
         "solver",
     )
     kind = _get(sol_t, "kind", "solver.kind", str, "adam")
-    if kind not in ("adam", "adamw", "sgd", "bfgs"):
-        raise JobError("solver.kind", f"must be adam, adamw, sgd or bfgs, got {_show(kind)}")
-    if kind == "bfgs":  # optimistix BFGS: no learning rate, schedule, patience or checkpoints
-        for key in ("learning_rate", "schedule", "patience", "checkpoint_every"):
+    if kind not in strategies.SOLVER_KINDS:
+        raise JobError("solver.kind", f"must be {strategies.one_of(strategies.SOLVER_KINDS)}, got {_show(kind)}")
+    if kind in strategies.MINIMISERS:  # optimistix: no learning rate, schedule, patience or checkpoints
+        for key in strategies.OPTAX_ONLY:
             if key in sol_t:
-                raise JobError(f"solver.{key}", "does not apply to kind = 'bfgs' (it applies to adam, adamw, sgd)")
-    cfg = SolverConfig(
-        kind=kind,
+                raise JobError(
+                    f"solver.{key}", f"does not apply to kind = '{kind}' (it applies to {', '.join(strategies.OPTAX)})"
+                )
+    opts = dict(
         learning_rate=_get(sol_t, "learning_rate", "solver.learning_rate", float, 0.05),
         steps=_get(sol_t, "steps", "solver.steps", int, 100),
         patience=_get(sol_t, "patience", "solver.patience", int, 25),
@@ -898,19 +892,33 @@ def parse_job(raw: dict, base: Path | None = None) -> Job:
         checkpoint_every=_get(sol_t, "checkpoint_every", "solver.checkpoint_every", int, 5),
         progress_every=_get(sol_t, "progress_every", "solver.progress_every", int, 1),
     )
-    if not 0 < cfg.learning_rate <= 1e6:
-        raise JobError("solver.learning_rate", f"must be in (0, 1e6], got {cfg.learning_rate:g}")
-    if cfg.tol < 0:
-        raise JobError("solver.tol", f"must be >= 0, got {cfg.tol:g}")
-    if cfg.steps > MAX_SOLVER_STEPS:
-        raise JobError("solver.steps", f"must be <= {MAX_SOLVER_STEPS}, got {_show(cfg.steps)}")
+    if not 0 < opts["learning_rate"] <= 1e6:
+        raise JobError("solver.learning_rate", f"must be in (0, 1e6], got {opts['learning_rate']:g}")
+    if opts["tol"] < 0:
+        raise JobError("solver.tol", f"must be >= 0, got {opts['tol']:g}")
+    if opts["steps"] > MAX_SOLVER_STEPS:
+        raise JobError("solver.steps", f"must be <= {MAX_SOLVER_STEPS}, got {_show(opts['steps'])}")
     for fld in ("steps", "patience", "checkpoint_every", "progress_every"):
-        if getattr(cfg, fld) < 1:
-            raise JobError(f"solver.{fld}", f"must be >= 1, got {getattr(cfg, fld)}")
-    if cfg.schedule not in ("constant", "cosine"):
-        raise JobError("solver.schedule", f"must be constant or cosine, got {_show(cfg.schedule)}")
+        if opts[fld] < 1:
+            raise JobError(f"solver.{fld}", f"must be >= 1, got {opts[fld]}")
+    if opts["schedule"] not in strategies.SCHEDULES:
+        raise JobError(
+            "solver.schedule", f"must be {strategies.one_of(strategies.SCHEDULES)}, got {_show(opts['schedule'])}"
+        )
     job = Job(
-        raw, name, comp, seed, values, gains, scen, holdout, terms, agg, alpha, temperature, penalty, cfg, drive=drive
+        raw=raw,
+        name=name,
+        component=comp,
+        seed=seed,
+        values=values,
+        gains=gains,
+        scenarios=scen,
+        holdout=holdout,
+        terms=terms,
+        aggregation=strategies.aggregation(agg, alpha=alpha, temperature=temperature),
+        penalty=penalty,
+        solver=strategies.solver(kind, **opts),
+        drive=drive,
     )
     _check_recording_job(job, comp_t)
     return job
@@ -980,7 +988,7 @@ def load_job(path) -> Job:
     """Read, check and parse a job file (:func:`read_toml`, then :func:`parse_job`)."""
     raw, data = read_toml(path)
     job = parse_job(raw, Path(path).parent)
-    job.sha256 = hashlib.sha256(data).hexdigest()
+    job.sha256 = sha256(data)
     return job
 
 
@@ -990,65 +998,27 @@ def load_job(path) -> Job:
 
 
 def _combos(spec: ScenarioSpec):
-    names = list(spec.axes)
-    combos = list(itertools.product(*(spec.axes[n] for n in names)))
-    if spec.sample:
-        rng = np.random.default_rng(spec.seed)
-        lows = {n: min(spec.axes[n]) for n in names}
-        highs = {n: max(spec.axes[n]) for n in names}
-        combos = [tuple(rng.uniform(lows[n], highs[n]) for n in names) for _ in range(spec.sample)]
-    return names, combos
+    """The axes' names and the scenarios' points: the studies' samplers (a grid, or ``sample`` uniform draws)."""
+    if not spec.axes:
+        return [], [()]
+    sampler = Random(spec.axes, spec.sample, spec.seed) if spec.sample else Grid(spec.axes)
+    return list(sampler.names), sampler.points()
 
 
 def _drive_scenarios(names, combos, seed=0, t_event=0.0, machine="ipmsm002"):
-    """The machine's bench (:func:`drive_machine`) for every combination; each starts steady at its speed, and
-    the speed_step_rpm / load_step_nm axes step the reference and the load at t_event."""
-    return drive_scenarios(drive_machine(machine), names, combos, seed=seed, t_event=t_event)
-
-
-# The sudden-load limit of a synchronous machine held by a current vector (the equal-area criterion): a torque
-# T applied at once to a rotor at rest in the I-f frame swings it, undamped, from δ = 0 past its load angle δ0
-# (T = T_max sin δ0) to δ_peak with ∫0^δpeak (T_max sin δ − T) dδ = 0; it pulls out unless δ_peak ≤ π − δ0,
-# i.e. 1 + cos δ0 ≥ (π − δ0) sin δ0: δ0 ≤ 46.44°, T ≤ 0.7246 T_max.
-IF_SUDDEN_LOAD_PU = 0.7246
-
-
-def if_load_limit(spec: DriveSpec, dJ: float = 0.0) -> float:
-    """The largest load (N·m) a ``start = "standstill"`` job may put on its machine during the I-f start-up.
-
-    During I-f the rotor is held by the current vector I_f only: its torque is at most T_max = K_t I_f (the
-    magnet torque; an IPMSM's reluctance torque is left out).  The load is on from t = 0 (a step), so the
-    sudden-load limit applies (IF_SUDDEN_LOAD_PU above); the ramp's peak acceleration torque J·a_peak
-    (a_peak = 2 × the mean for the raised cosine) and the friction at the switch speed B·ω_sw count as load
-    too — conservatively, as if sudden (they build up gradually).  Hence
-
-        T_L ≤ 0.7246 K_t I_f − J (1 + dJ) a_peak − B ω_m,sw.
-
-    On 000's SPMSM bench: 0.7246 · 7.0 − 1.25 − 0 = 3.82 N·m; measured with the SOIFO at 1000 r/min, 4.5 N·m
-    still started and 5.0 N·m ran backwards (−320 r/min, flagged lost_speed): sufficient, not necessary."""
-    par = drive_machine(spec.machine)
-    s = D.IfStartup.for_machine(par)
-    a_peak_m = float(s.accel) / par.p * (2.0 if s.smooth else 1.0)  # mechanical, rad/s²
-    w_sw_m = float(s.omega_switch) / par.p
-    return (
-        IF_SUDDEN_LOAD_PU * float(par.kt) * float(s.i_f) - float(par.J) * (1.0 + dJ) * a_peak_m - float(par.B) * w_sw_m
-    )
-
-
-def if_handover_earliest(spec: DriveSpec) -> float:
-    """The earliest time (s) the I-f start-up of a standstill job can hand over: the ramp to the switch speed,
-    then both the hold and the agreement's dwell at it (they run at the same time)."""
-    s = D.IfStartup.for_machine(drive_machine(spec.machine))
-    return float(s.omega_switch / s.accel) + max(float(s.hold), float(s.dwell))
+    """The machine's bench (:func:`jaxobs.drive.bench_machine`) for every combination; each starts steady at
+    its speed, and the speed_step_rpm / load_step_nm axes step the reference and the load at t_event."""
+    return drive_scenarios(D.bench_machine(machine), names, combos, seed=seed, t_event=t_event)
 
 
 def _check_standstill(drive: DriveSpec, spec: ScenarioSpec, where: str) -> None:
     """What an I-f start-up can do, checked before any run (``--check`` too): the load it must carry, the
     speed reference it hands over to, and a steady window after its hand-over."""
-    s = D.IfStartup.for_machine(drive_machine(drive.machine))
+    par = D.bench_machine(drive.machine)
+    s = D.IfStartup.for_machine(par)
     axes = spec.axes
-    rpm_sw = float(s.omega_switch) / drive_machine(drive.machine).p * 30 / math.pi
-    t_ho = if_handover_earliest(drive)
+    rpm_sw = float(s.omega_switch) / par.p * 30 / math.pi
+    t_ho = D.if_handover_earliest(par)
     if spec.steady_from < t_ho:
         raise JobError(
             f"{where}.steady_from",
@@ -1065,7 +1035,7 @@ def _check_standstill(drive: DriveSpec, spec: ScenarioSpec, where: str) -> None:
             f"speed_step_rpm), got {low:g}",
         )
     dj = max(axes.get("dJ", [0.0]))
-    limit = if_load_limit(drive, dj)
+    limit = D.if_load_limit(par, dj)
     load = max(abs(v) for v in axes.get("load_nm", [0.0]))
     if spec.t_event < t_ho:  # a load step during the start-up is carried by it too
         load += max(abs(v) for v in axes.get("load_step_nm", [0.0]))
@@ -1073,7 +1043,7 @@ def _check_standstill(drive: DriveSpec, spec: ScenarioSpec, where: str) -> None:
         raise JobError(
             f"{where}.grid.load_nm",
             f"the load during the I-f start-up must be <= {limit:.4g} N·m on {drive.machine} (0.7246 K_t I_f − "
-            f"J a_peak − B ω_sw, tuning.job.if_load_limit), got {load:g}",
+            f"J a_peak − B ω_sw, jaxobs.drive.if_load_limit), got {load:g}",
         )
 
 
@@ -1100,26 +1070,13 @@ def _parse_start(dt: dict, drive: DriveSpec, scen) -> DriveSpec:
     return drive
 
 
-def drive_speed_limit_rpm(machine: str) -> float:
-    """The highest drive speed (r/min, either direction) a job may ask of ``machine``: the speed at which the
-    back EMF alone, ωe ψf, reaches the inverter's voltage limit u_max = U_dc/√3 (the job's default
-    :class:`jaxobs.drive.Inverter`).  Above it the FOC cannot hold even zero current, as field weakening is
-    not modelled (i_d* is 0 or MTPA, never negative for flux weakening): the machine would run away from its
-    reference and a tuning there scores an uncontrolled drive.  It is a no-load bound (load adds Rs·i and
-    ωe·Lq·i to the voltage), so it is necessary, not sufficient: ipmsm002 1323 r/min (2.2 × its 600 r/min
-    rating), spmsm000 2835 r/min (1.4 × 2000 r/min)."""
-    par = drive_machine(machine)
-    w_e = float(D.Inverter().u_max) / float(par.psi_f)  # rad/s electrical
-    return w_e / par.p * 60.0 / (2 * math.pi)
-
-
 def _check_drive_speeds(spec: ScenarioSpec, where: str, machine: str) -> None:
     """speed_rpm and speed_rpm + speed_step_rpm (every combination of the grid) within ± the machine's
-    :func:`drive_speed_limit_rpm`, at --check time."""
+    :func:`jaxobs.drive.drive_speed_limit_rpm`, at --check time."""
     speeds, steps = spec.axes.get("speed_rpm"), spec.axes.get("speed_step_rpm", [0.0])
     if not speeds:
         return
-    n_max = drive_speed_limit_rpm(machine)
+    n_max = D.drive_speed_limit_rpm(D.bench_machine(machine))
     rng = f"must be in [1, {n_max:.0f}] r/min on {machine} (its back EMF reaches the inverter's voltage limit there)"
     for i, x in enumerate(speeds):
         if abs(x) > n_max:
@@ -1137,17 +1094,16 @@ def _check_drive_speeds(spec: ScenarioSpec, where: str, machine: str) -> None:
 def job_drive(spec: DriveSpec | None = None):
     """The drive a ``signal = "drive"`` job runs: FOC on its machine's bench; sensorless by default (``spec``)."""
     spec = DriveSpec() if spec is None else spec
-    par = drive_machine(spec.machine)
-    foc = D.FOC.imc(par, 2 * math.pi * papers.BENCH_CURRENT_HZ, 2 * math.pi * papers.BENCH_SPEED_HZ)
+    par = D.bench_machine(spec.machine)
     startup = D.IfStartup.for_machine(par) if spec.start == "standstill" else None  # [drive] start
-    return D.Drive(
-        foc, sensorless=spec.loop == "sensorless", handover=spec.handover, settle=spec.settle, startup=startup
+    return D.bench_drive(
+        par, sensorless=spec.loop == "sensorless", handover=spec.handover, settle=spec.settle, startup=startup
     )
 
 
 def build_scenarios(spec: ScenarioSpec, values: dict, machine: str = "ipmsm002"):
     """A batched signal for every combination of the axes (or ``sample`` random ones); ``machine``: a drive
-    job's (:data:`DRIVE_MACHINES`)."""
+    job's (:data:`BENCH_MACHINES`)."""
     names, combos = _combos(spec)
     if spec.recording is not None:
         return load_recordings(spec.recording, spec.signal), names, combos
@@ -1197,13 +1153,11 @@ def build_objective(job: Job, spec: ScenarioSpec | None = None):
         comp,
         param,
         scen,
-        spec.horizon,
-        job.terms,
-        ctx,
-        job.agg,
-        job.alpha,
-        job.temperature,
-        job.penalty,
+        horizon=spec.horizon,
+        terms=job.terms,
+        ctx=ctx,
+        aggregation=job.aggregation,
+        penalty=job.penalty,
         drive=drive,
         bind=bind,
     )
@@ -1305,20 +1259,6 @@ def _scores_dataset(obj, names, combos, spec: ScenarioSpec, per: dict):
     return ds
 
 
-def _versions() -> dict:
-    import platform
-
-    import jax
-
-    return {
-        "jaxobs": jaxobs.__version__,
-        "jax": jax.__version__,
-        "numpy": np.__version__,
-        "python": platform.python_version(),
-        "x64": bool(jax.config.jax_enable_x64),
-    }
-
-
 def _recordings_provenance(job: Job) -> dict:
     """``{"recordings": [{"file", "sha256"}, ...]}`` of a job on recordings (else nothing)."""
     rec = job.scenarios.recording
@@ -1373,10 +1313,10 @@ def run_job(job: Job, out: Path, resume: bool = False, quiet: bool = False) -> d
     cf_all = info.closed_form(obj.component)
     cf = {g.name: cf_all[g.name] for g in job.gains}
     theta_cf = param.to_theta({g.name: _inside(g, cf[g.name]) for g in job.gains})
-    res = run_solver(
+    res = tune(
         obj,
-        theta0,
         job.solver,
+        theta0,
         checkpoint=out / CHECKPOINT,
         resume=resume,
         quiet=quiet,
@@ -1420,7 +1360,7 @@ def run_job(job: Job, out: Path, resume: bool = False, quiet: bool = False) -> d
         **_recordings_provenance(job),
         "iterations": res.iterations,
         "best_iteration": res.best_iteration,
-        "versions": _versions(),
+        "versions": versions(),
     }
     nulls = {}
     if "omega_n" not in job.values:
@@ -1433,7 +1373,7 @@ def run_job(job: Job, out: Path, resume: bool = False, quiet: bool = False) -> d
         result["machine"] = job.drive.machine
         result["values_note"] = (
             "Rs, Lq (LESOs) or Rs, L (flux observers) and the PLL's or FLL's initial speed (omega0_pll, omega0) "
-            f"are set per scenario from its estimated machine ({DRIVE_MACHINES[job.drive.machine][0]})"
+            f"are set per scenario from its estimated machine ({BENCH_MACHINES[job.drive.machine]})"
         )
     if nulls:
         result["null_reasons"] = nulls

@@ -29,6 +29,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxobs import linear, papers
+from jaxobs.drive import bench_machine
 
 from .targets import _settling_at_k2, k1_for_settling_time_at_k2, soifo_settling_time
 
@@ -156,11 +157,11 @@ def _flux(name: str, v: dict) -> tuple[dict, dict]:
     if name == "SOIFO":
         k, lam = float(v["k"]), float(v["lam"])
         out.update(_poles(linear.soifo_tf(k, w)))
-        rule = {"rule": "lam = k^2/4 (001 eq 22 normalized), at this k", "lam_rule": k**2 / 4}
+        rule = {"rule": "lam = k^2/4 (001 eq 22 normalized), at this k", "lam_rule": linear.soifo_lambda(k)}
     else:
         K1, K2, lam = float(v["K1"]), float(v["K2"]), float(v["lam"])
         out.update(_poles(linear.sosoifo_tf(K1, K2, w)))
-        rule = {"rule": "lam = K1^3/(2 K2), at this K1, K2", "lam_rule": K1**3 / (2 * K2)}
+        rule = {"rule": "lam = K1^3/(2 K2), at this K1, K2", "lam_rule": linear.second_order_soifo_lambda(K1, K2)}
         rule.update(_k1_rule(K1, K2, w, why))
     rule["lam_over_rule"] = lam / rule["lam_rule"]
     out["model"] = "000 eqs (15), (20): the filter psi/e at omega0 (poles and damping are the filter's)"
@@ -204,10 +205,12 @@ def _settling_at(K1, K2, omega):
 
 
 def _drive_speed(job) -> float:
-    """The electrical speed (rad/s) the drive jobs linearize at: the first scenario's speed (600 r/min default)."""
+    """The electrical speed (rad/s) the drive jobs linearize at: the first scenario's speed (600 r/min default)
+    times the pole pairs of the job's machine (``[drive] machine``; 002's IPMSM without a job)."""
     rpm = (job.scenarios.axes.get("speed_rpm") if job is not None else None) or [600.0]
     rpm = rpm[0]
-    return rpm * math.pi / 30 * papers.IPMSM_002["p"]
+    machine = job.drive.machine if job is not None and job.drive is not None else "ipmsm002"
+    return rpm * math.pi / 30 * bench_machine(machine).p
 
 
 def _leso(name: str, v: dict, job) -> tuple[dict, dict]:

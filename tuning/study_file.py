@@ -34,7 +34,7 @@ A drive study::
 
     [study]
     kind = "drive"
-    machine = "ipmsm002"           # tuning.job.DRIVE_MACHINES (the jobs' machines, bench inertia and FOC);
+    machine = "ipmsm002"           # jaxobs.drive.BENCH_MACHINES (the jobs' machines, bench inertia and FOC);
                                    # default: the machine a result design was tuned on, else the first design's
     horizon = 0.3                  # s
     steady_from = 0.15             # s (default horizon / 2)
@@ -60,7 +60,6 @@ it (nothing is written there), and its content never reaches an error message.
 
 from __future__ import annotations
 
-import hashlib
 import inspect
 import math
 from dataclasses import dataclass, field
@@ -68,13 +67,14 @@ from pathlib import Path
 
 import jaxobs
 from jaxobs import linear
+from jaxobs.drive import BENCH_MACHINES, bench_machine
 from jaxobs.drive_study import DRIVE_STUDY_AXES
+from jaxobs.provenance import sha256
 from jaxobs.study import STUDY_AXES
 
 from .job import (
     AXIS_RANGES,
     COMPONENTS,
-    DRIVE_MACHINES,
     MAX_SCENARIOS,
     MAX_STEPS,
     DriveSpec,
@@ -85,7 +85,6 @@ from .job import (
     _no_unknown,
     _parse_recording_scenarios,
     _show,
-    drive_machine,
     job_drive,
     parse_job,
     read_toml,
@@ -103,9 +102,9 @@ FLL_CLOSED_FORMS = {
 FLL_COMPONENTS = ("SOGIFLL", "SOGIFLLWPF", "SOGIFLLWIF")
 DRIVE_OBSERVERS = ("CLESO", "GILESO", "FALESO", "PureIntegratorFlux", "LPFFlux", "SOIFO", "SecondOrderSOIFO")
 _FLUX = ("PureIntegratorFlux", "LPFFlux", "SOIFO", "SecondOrderSOIFO")
-# the drive jobs' machines (tuning.job.DRIVE_MACHINES: the same names, bench inertias and FOC), so a study
+# the drive jobs' machines (jaxobs.drive.BENCH_MACHINES: the same names, bench inertias and FOC), so a study
 # scores a tuned result on the drive that tuned it
-MACHINES = tuple(DRIVE_MACHINES)
+MACHINES = tuple(BENCH_MACHINES)
 # the study's scenario axes and their physical ranges: the tuning jobs' grid axes, and the noise level
 FLL_AXIS_RANGES = {k: {**AXIS_RANGES["grid"], "noise": ("pu", (0.0, 10.0))}[k] for k in STUDY_AXES}
 MAX_CHUNK = 100_000
@@ -160,7 +159,7 @@ def load_study(path) -> StudySpec:
     path = Path(path)
     raw, data = read_toml(path, WHAT)  # size, nesting and encoding checked before parsing
     spec = parse_study(raw, base=path.resolve().parent)
-    spec.provenance = {"study_file": path.name, "study_sha256": hashlib.sha256(data).hexdigest(), **spec.provenance}
+    spec.provenance = {"study_file": path.name, "study_sha256": sha256(data), **spec.provenance}
     return spec
 
 
@@ -263,7 +262,7 @@ def _result(spec: dict, where: str, base: Path, family: tuple, out: dict | None 
             raise ValueError(f"component {_show(res['component'])} is not one of {', '.join(family)}")
         comp = tuned_component(res)
         if out is not None:
-            out.update(result=res, sha256=hashlib.sha256(p.read_bytes()).hexdigest(), path=rel)
+            out.update(result=res, sha256=sha256(p), path=rel)
         return comp
     except (ValueError, TypeError, KeyError, AttributeError, ArithmeticError) as e:  # a malformed result
         raise JobError(f"{where}.result", str(e)) from None
@@ -453,7 +452,7 @@ def _parse_drive(raw: dict, st: dict, name: str, base: Path) -> StudySpec:
             raise JobError(f"{where}.component", f"must be one of {', '.join(DRIVE_OBSERVERS)}, got {_show(comp)}")
         # the machine's Rs and L are placeholders and the initial speed is the scenario's: the study binds
         # each scenario's assumed machine (jaxobs.drive_study.bind_observer); the drive's ts rules
-        par = drive_machine("spmsm000" if comp in _FLUX else "ipmsm002")
+        par = bench_machine("spmsm000" if comp in _FLUX else "ipmsm002")
         if comp in _FLUX:
             fixed = {"Rs": par.Rs, "L": par.Ld}
             exclude = ("Rs", "L", "omega0", "ts")
@@ -478,15 +477,15 @@ def _parse_drive(raw: dict, st: dict, name: str, base: Path) -> StudySpec:
         if comp in COMPONENTS and machine not in COMPONENTS[comp].machines:
             raise JobError(
                 f"designs.{_cap(str(dname), 40)}",
-                f"{comp} cannot run on {machine} ({DRIVE_MACHINES[machine][0]}); "
+                f"{comp} cannot run on {machine} ({BENCH_MACHINES[machine]}); "
                 f"allowed: {', '.join(COMPONENTS[comp].machines)}",
             )
-    par = drive_machine(machine)
+    par = bench_machine(machine)
     try:
         drive = job_drive(DriveSpec(loop="sensorless", settle=settle, machine=machine))
     except (ValueError, ArithmeticError) as e:
         raise JobError("drive", str(e)) from None
-    provenance = {"machine": f"{machine}: {DRIVE_MACHINES[machine][0]}", **_results_attr(results)}
+    provenance = {"machine": f"{machine}: {BENCH_MACHINES[machine]}", **_results_attr(results)}
     horizon = _get(st, "horizon", "study.horizon", float, 0.3)
     if not horizon > 0:
         raise JobError("study.horizon", f"must be > 0 s, got {horizon:g}")

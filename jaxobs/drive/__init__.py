@@ -1,4 +1,5 @@
-"""The PMSM drive: machine, plant, inverter, sensors, FOC, I-f start-up, scenarios and the closed loop.
+"""The PMSM drive: machine, plant, inverter, sensors, FOC, I-f start-up, scenarios, the closed loop and the
+simulated benches (:mod:`jaxobs.drive.bench`).
 
 Every dynamic piece is a step component (``init``/``step``): :class:`PMSM`,
 :class:`Inverter`, :class:`Sensors`, :class:`FOC`, and the system that wires
@@ -6,6 +7,13 @@ them with an observer, :class:`ClosedLoop`, which ``jaxobs.simulate`` runs.
 """
 
 from .._measurements import DriveInput as DriveInput
+from .bench import BENCH_MACHINES as BENCH_MACHINES
+from .bench import IF_SUDDEN_LOAD_PU as IF_SUDDEN_LOAD_PU
+from .bench import bench_drive as bench_drive
+from .bench import bench_machine as bench_machine
+from .bench import drive_speed_limit_rpm as drive_speed_limit_rpm
+from .bench import if_handover_earliest as if_handover_earliest
+from .bench import if_load_limit as if_load_limit
 from .control import FOC as FOC
 from .control import ControllerState as ControllerState
 from .control import FOCInput as FOCInput
@@ -36,8 +44,10 @@ from .plant import PlantInput as PlantInput
 from .plant import PlantOutput as PlantOutput
 from .plant import PlantState as PlantState
 from .plant import plant_field as plant_field
+from .scenario import DRIVE_AXES as DRIVE_AXES
 from .scenario import GRID_AXES as GRID_AXES
 from .scenario import Batch as Batch
 from .scenario import Profile as Profile
 from .scenario import Scenario as Scenario
 from .scenario import grid as grid
+from .scenario import scenario_batch as scenario_batch

@@ -12,6 +12,9 @@ from ._fll import (
     pll_gains as pll_gains,
 )
 from ._fll import (
+    second_order_soifo_lambda as second_order_soifo_lambda,
+)
+from ._fll import (
     sogi_fll_closed_form as sogi_fll_closed_form,
 )
 from ._fll import (
@@ -19,6 +22,9 @@ from ._fll import (
 )
 from ._fll import (
     sogi_fll_model as sogi_fll_model,
+)
+from ._fll import (
+    soifo_lambda as soifo_lambda,
 )
 from ._fll import (
     symmetric_optimum_pm as symmetric_optimum_pm,

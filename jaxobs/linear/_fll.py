@@ -24,6 +24,8 @@ __all__ = [
     "sogi_fll_lambda",
     "wpf_lambda",
     "wif_symmetric_optimum",
+    "soifo_lambda",
+    "second_order_soifo_lambda",
     "symmetric_optimum_pm",
     "pll_gains",
     "sogi_fll_closed_form",
@@ -113,6 +115,20 @@ def wpf_lambda(omega_n, zeta=papers.FLL_ZETA):
 def wif_symmetric_optimum(b, omega_c, omega_n):
     """001 eq (34): k1 = 2 b ωc / ωn, k2 = 2 ωc / ωn, λ = 2 ωc² / b."""
     return 2 * b * omega_c / omega_n, 2 * omega_c / omega_n, 2 * omega_c**2 / b
+
+
+def soifo_lambda(k):
+    """The SOIFO's FLL gain ``lam`` (dimensionless: 000's FLL is frequency-normalized, λ(ω̂) = lam·ω̂²,
+    :mod:`jaxobs.observers.flux`): 001 eq (22) at ζ = 1/√2 with ωn → 1, lam = k²/4, the same damping at
+    every speed."""
+    return k**2 / 4
+
+
+def second_order_soifo_lambda(K1, K2):
+    """The second-order SOIFO's FLL gain ``lam`` (dimensionless, as :func:`soifo_lambda`): 001's symmetric
+    optimum (eq 34) frequency-normalized, in 000's names (the WIF's k1 = K2, k2 = K1) with b = K2/K1:
+    lam = K1³/(2 K2)."""
+    return K1**3 / (2 * K2)
 
 
 def pll_gains(bandwidth, zeta=1 / math.sqrt(2)):

@@ -47,20 +47,22 @@ from ..observers import (
 )
 from ..progress import Progress
 
-__all__ = ["OBSERVER_NAMES", "bench_machine", "flux_bank", "run_flux_experiments", "flux_drive"]
+__all__ = ["OBSERVER_NAMES", "flux_bank", "run_flux_experiments"]
 
 OBSERVER_NAMES = ("integrator", "LPF", "SOIFO", "second-order SOIFO")
 # 000's gains (Fig. 5 and Sec. IV), under the paper's names; jaxobs.papers is their home.
 K_SOIFO, K1, K2 = papers.SOIFO_K, papers.SECOND_ORDER_SOIFO_K1, papers.SECOND_ORDER_SOIFO_K2
 
 
-def bench_machine(**kw):
-    """000 Table II's SPMSM on the bench's ASSUMED inertia (:data:`jaxobs.papers.BENCH_J_000`)."""
-    return D.spmsm_paper000(J=papers.BENCH_J_000, **kw)
-
-
 def flux_bank(
-    est: D.PMSMParams, omega0, *, lam_soifo=K_SOIFO**2 / 4, lam_sosoifo=K1**3 / (2 * K2), K1_=K1, K2_=K2, k=K_SOIFO
+    est: D.PMSMParams,
+    omega0,
+    *,
+    lam_soifo=linear.soifo_lambda(K_SOIFO),
+    lam_sosoifo=linear.second_order_soifo_lambda(K1, K2),
+    K1_=K1,
+    K2_=K2,
+    k=K_SOIFO,
 ):
     """The four observers of 000 with the Fig. 5 settings; the second-order SOIFO is the primary."""
     kp, ki = linear.pll_gains(2 * math.pi * papers.FLUX_PLL_HZ)
@@ -73,11 +75,6 @@ def flux_bank(
         ),
         primary=3,
     )
-
-
-def flux_drive(par, handover, startup=None, alpha_s=2 * math.pi * papers.BENCH_SPEED_HZ):
-    foc = D.FOC.imc(par, alpha_c=2 * math.pi * papers.BENCH_CURRENT_HZ, alpha_s=alpha_s)
-    return D.Drive(foc, sensorless=True, handover=handover, startup=startup)
 
 
 def _window(t, start, stop):
@@ -126,7 +123,7 @@ def run_flux_experiments(quick: bool = False, progress=None):
     step per experiment, each named as it compiles and runs (:mod:`jaxobs.progress`: ``True`` a tqdm bar
     on stderr, or a callable ``progress(done, total)``).
     """
-    par = bench_machine()
+    par = D.bench_machine("spmsm000")
     rows, traces = [], {}
     bar = Progress(progress, None, "reproduce flux", unit="experiment")
     err_metric = [("max_abs", "rad")]
@@ -155,7 +152,8 @@ def run_flux_experiments(quick: bool = False, progress=None):
             omega_m0=rpm0 * D.RPM if startup is None else 0.0,
         )
         bar.stage(f"{name} ({t1:g} s)")
-        sol = simulate(D.ClosedLoop(flux_drive(par, handover, startup, alpha_s), flux_bank(est, w0), sc), t1)
+        drive = D.bench_drive(par, handover=handover, startup=startup, alpha_s=alpha_s)
+        sol = simulate(D.ClosedLoop(drive, flux_bank(est, w0), sc), t1)
         traces[name] = sol
         t = np.asarray(sol.t)
         bar.update()

@@ -32,18 +32,13 @@ from ..metrics import harmonic_amplitude, wrap
 from ..observers import CLESO, FALESO, GILESO, ObserverBank
 from ..progress import Progress
 
-__all__ = ["LESO_NAMES", "bench_machine", "leso_bank", "leso_drive", "run_leso_experiments"]
+__all__ = ["LESO_NAMES", "leso_bank", "run_leso_experiments"]
 
 LESO_NAMES = ("C-LESO", "GI-LESO", "FA-LESO")
 # 002 Table II's gains and our ASSUMED harmonic content, under short names; jaxobs.papers is their home.
 A5, A7 = papers.IPMSM_002_A5, papers.IPMSM_002_A7
 W0, K_R, WC_GI = papers.LESO_OMEGA0, papers.GILESO_K_R, papers.GILESO_OMEGA_C
 K1_FA, K2_FA = papers.FALESO_K1, papers.FALESO_K2
-
-
-def bench_machine(**kw):
-    """The ASSUMED IPMSM (:func:`jaxobs.drive.ipmsm_paper002`) on the bench's ASSUMED inertia."""
-    return D.ipmsm_paper002(J=papers.BENCH_J_002, **kw)
 
 
 def leso_bank(est: D.PMSMParams, omega0_pll, pll=None):
@@ -56,11 +51,6 @@ def leso_bank(est: D.PMSMParams, omega0_pll, pll=None):
         ),
         primary=2,
     )
-
-
-def leso_drive(par, handover=0.3, alpha_s=2 * math.pi * papers.BENCH_SPEED_HZ):
-    foc = D.FOC.imc(par, alpha_c=2 * math.pi * papers.BENCH_CURRENT_HZ, alpha_s=alpha_s)
-    return D.Drive(foc, sensorless=True, handover=handover)
 
 
 def _tfs(we):
@@ -82,13 +72,13 @@ def run_leso_experiments(progress=None):
         we = par.p * rpm0 * D.RPM
         sc = D.Scenario(par, est_par=est, speed_ref=speed_ref, load=load, omega_m0=rpm0 * D.RPM)
         bar.stage(f"{name} ({t1:g} s)")
-        sol = simulate(D.ClosedLoop(leso_drive(par, handover), leso_bank(est, we), sc), t1)
+        sol = simulate(D.ClosedLoop(D.bench_drive(par, handover=handover), leso_bank(est, we), sc), t1)
         traces[name] = sol
         t = np.asarray(sol.t)
         bar.update()
         return sol, t
 
-    par = bench_machine()
+    par = D.bench_machine("ipmsm002")
     # --- steady state, no load (Figs. 10-12)
     paper_mean = {300: (14.0, 7.0, 0.0), 600: (23.0, 10.0, 0.0), 840: (34.0, 12.0, 0.0)}
     for rpm in (300, 600, 840):
@@ -124,7 +114,7 @@ def run_leso_experiments(progress=None):
             rows.append(dict(experiment=name, observer=obs, metric="tf_lag", unit="deg", paper=None, ours=lag))
 
     # --- BEMF harmonics (Figs. 13-14)
-    hpar = bench_machine(a5=A5, a7=A7)
+    hpar = D.bench_machine("ipmsm002", a5=A5, a7=A7)
     paper_h = {300: ((5.4, 5.9), (3.6, 4.0), (0.8, 0.7)), 600: ((4.1, 4.5), (2.7, 2.9), (0.6, 0.7))}
     for rpm, frac in ((300, 0.5), (600, 0.4)):
         name = f"harmonics {rpm} r/min {int(frac * 100)} % load"
@@ -202,10 +192,10 @@ def run_leso_experiments(progress=None):
     we = par.p * 300 * D.RPM
 
     for label, est, delta in (
-        ("Rs_est = 1.5 Rs", bench_machine(Rs=1.5 * float(par.Rs)), ("Rs", -0.5 * float(par.Rs))),
-        ("Rs_est = 0.5 Rs", bench_machine(Rs=0.5 * float(par.Rs)), ("Rs", 0.5 * float(par.Rs))),
-        ("Lq_est = 1.5 Lq", bench_machine(Lq=1.5 * float(par.Lq)), ("Lq", -0.5 * float(par.Lq))),
-        ("Lq_est = 0.5 Lq", bench_machine(Lq=0.5 * float(par.Lq)), ("Lq", 0.5 * float(par.Lq))),
+        ("Rs_est = 1.5 Rs", D.bench_machine("ipmsm002", Rs=1.5 * float(par.Rs)), ("Rs", -0.5 * float(par.Rs))),
+        ("Rs_est = 0.5 Rs", D.bench_machine("ipmsm002", Rs=0.5 * float(par.Rs)), ("Rs", 0.5 * float(par.Rs))),
+        ("Lq_est = 1.5 Lq", D.bench_machine("ipmsm002", Lq=1.5 * float(par.Lq)), ("Lq", -0.5 * float(par.Lq))),
+        ("Lq_est = 0.5 Lq", D.bench_machine("ipmsm002", Lq=0.5 * float(par.Lq)), ("Lq", 0.5 * float(par.Lq))),
     ):
         name = f"{label}, rated load, 300 r/min"
         sol, t = run(

@@ -88,7 +88,6 @@ __all__ = [
     "fll_test_signal",
     "drive_test_signal",
     "drive_recording",
-    "drive_machine",
     "bind_to_drive",
     "add_export_parser",
     "cli_export",
@@ -294,10 +293,10 @@ def drive_test_signal(
     return data, doc
 
 
-# the machine a drive observer's recording runs on, and the speed it runs at (both 50 Hz electrical)
-_DRIVE_MACHINES = {
-    "flux": ("spmsm_paper000", "BENCH_J_000", 1000.0),  # 000's SPMSM, p = 3
-    "leso": ("ipmsm_paper002", "BENCH_J_002", 300.0),  # 002's (assumed) IPMSM, p = 5: 25 Hz (see drive_recording)
+# the bench (jaxobs.drive.bench_machine) a drive observer's recording runs on, and its speed (r/min)
+_RECORDING_BENCH = {
+    "flux": ("spmsm000", 1000.0),  # 000's SPMSM, p = 3: 50 Hz
+    "leso": ("ipmsm002", 300.0),  # 002's (assumed) IPMSM, p = 5: 25 Hz (see drive_recording)
 }
 
 
@@ -309,14 +308,13 @@ def _family(observer) -> str:
     raise ValueError(f"export: {type(observer).__name__} is not a drive observer (flux observer or LESO)")
 
 
-def drive_machine(observer):
-    """The machine a drive observer's recording runs on: 000's SPMSM for the flux observers, 002's IPMSM for
-    the LESOs, each with the bench inertia of the drive jobs and studies (``papers.BENCH_J_*``, 10× the
-    table's: tuning.job.DRIVE_MACHINES)."""
-    from jaxobs import drive, papers
+def _recording_bench(observer):
+    """The machine (:func:`jaxobs.drive.bench_machine`: 000's SPMSM for the flux observers, 002's IPMSM for the
+    LESOs, on the drive jobs' bench inertia) and the speed (r/min) a drive observer's recording runs at."""
+    from jaxobs.drive import bench_machine
 
-    ctor, j, _ = _DRIVE_MACHINES[_family(observer)]
-    return getattr(drive, ctor)(J=getattr(papers, j))
+    name, rpm = _RECORDING_BENCH[_family(observer)]
+    return bench_machine(name), rpm
 
 
 def bind_to_drive(observer, machine, rpm: float):
@@ -368,9 +366,9 @@ def drive_recording(
     current is sampled at t_k: the drive observers' contract.  With ideal sensors they equal the
     outputs' u_a, u_b, i_a, i_b.
 
-    ``machine``: a :class:`jaxobs.drive.PMSMParams` (default :func:`drive_machine`).  Export the
-    observer bound to the same machine and speed (:func:`bind_to_drive`).  Returns (float32 array
-    (n_steps, 4), a one-line description).
+    ``machine``: a :class:`jaxobs.drive.PMSMParams` (default: the bench of the observer's family,
+    :func:`jaxobs.drive.bench_machine`).  Export the observer bound to the same machine and speed
+    (:func:`bind_to_drive`).  Returns (float32 array (n_steps, 4), a one-line description).
 
     The rotor starts at θe = π/2, where the q-axis current and the back EMF lie on −α, so the
     β components of the first samples are small.  ``start`` shapes the first period as
@@ -387,17 +385,16 @@ def drive_recording(
         raise ValueError(f"drive_recording: start must be '', 'flux' or 'alpha', got {start!r}")
     import jaxobs
     from jaxobs import drive as D
-    from jaxobs import papers
 
     family = _family(observer)
-    machine = drive_machine(observer) if machine is None else machine
-    rpm = _DRIVE_MACHINES[family][2] if rpm is None else float(rpm)
+    bench, bench_rpm = _recording_bench(observer)
+    machine = bench if machine is None else machine
+    rpm = bench_rpm if rpm is None else float(rpm)
     if not (isinstance(n_steps, int) and n_steps >= 2):
         raise ValueError(f"drive_recording: n_steps must be an integer >= 2, got {n_steps!r}")
     ts = float(observer.ts)
     t1, t2 = (n_steps // 3) * ts, (2 * n_steps // 3) * ts
     t_rated = float(machine.T_rated)
-    foc = D.FOC.imc(machine, 2 * math.pi * papers.BENCH_CURRENT_HZ, 2 * math.pi * papers.BENCH_SPEED_HZ, ts=ts)
     scenario = D.Scenario(
         machine,
         speed_ref=D.Scenario.speed_rpm([0.0, t1], [rpm, (1 + speed_step) * rpm]),
@@ -405,7 +402,8 @@ def drive_recording(
         omega_m0=rpm * D.RPM,
         theta_e0=math.pi / 2,
     )
-    sol = jaxobs.simulate(D.ClosedLoop(D.Drive(foc, settle=0.0), _Tap(), scenario), n_steps * ts)
+    drive = D.bench_drive(machine, sensorless=False, settle=0.0, ts=ts)  # the encoder closes the loop
+    sol = jaxobs.simulate(D.ClosedLoop(drive, _Tap(), scenario), n_steps * ts)
     m = sol.outputs.obs
     data = np.stack([np.asarray(m.u_a), np.asarray(m.u_b), np.asarray(m.i_a), np.asarray(m.i_b)], axis=1)
     data = data[:n_steps].astype(np.float64)
@@ -519,7 +517,7 @@ def export_observer(
         signal: instead of the default, the inputs per step, shape (n,) or (n, JX_NU) (drive
             observers: columns u_a, u_b, i_a, i_b, e.g. :func:`drive_recording` at another speed),
             or ``"synthetic"`` for a drive observer: :func:`drive_test_signal` on the observer's
-            own Rs and L.  The default recording runs on :func:`drive_machine`: export the
+            own Rs and L.  The default recording runs on its bench (:func:`jaxobs.drive.bench_machine`): export the
             observer bound to it (:func:`bind_to_drive`) to get that machine's Rs and L in the C.
         source: where the design comes from (a result file, a closed form), for the header.
         notes: lines recorded in the header and coefficients.json (e.g. defaults used).
@@ -536,6 +534,7 @@ def export_observer(
         state0 = obs32.init(u0)
         step = generate(obs32, state0, u0, input_names=list(DriveInput._fields) if kind == "drive" else ["v"])
     component = type(obs32).__name__
+    _self_check(obs32, step, state0)
     header, source_c = write_c(obs32, step, kind, source or f"{component} as given", notes)
     bar.update()
     bar.stage("the test record" + (" (compiling and running the sensored drive)" if kind == "drive" else ""))
@@ -633,6 +632,47 @@ def export_observer(
     }
     atomic_write_text(out / "coefficients.json", json.dumps(coeffs, indent=1, ensure_ascii=False) + "\n")
     return coeffs
+
+
+@eqx.filter_jit
+def _one_step(observer, state, u):
+    return observer.step(state, u)
+
+
+def _self_check(obs32, step: CStep, state0, n_points: int = 8):
+    """The emitted statements, run in Python on float32 numpy scalars, against the JAX step at random states
+    and inputs (floats around the initial state, flags and counters through a few values): a code
+    generator bug fails here, with or without a C compiler, and before anything is written."""
+    rng = np.random.default_rng(0)
+    leaves, tree = jax.tree.flatten(state0)
+    n_in = len(step.input_names)
+    for k in range(n_points):
+        state = []
+        for leaf in leaves:
+            a = np.asarray(leaf)
+            if a.dtype == np.bool_:
+                a = np.full(a.shape, k % 2 == 1)
+            elif a.dtype.kind in "iu":
+                a = np.full(a.shape, k % 3, a.dtype)
+            else:
+                a = (a + rng.normal(size=a.shape) * np.maximum(1.0, 0.1 * np.abs(a))).astype(a.dtype)
+            state.append(a)
+        u = (rng.normal(size=n_in) * 10.0).astype(np.float32)
+        with jax.enable_x64(False):
+            uj = DriveInput(*(jnp.float32(v) for v in u)) if _is_drive(obs32) else jnp.float32(u[0])
+            new, out = _one_step(obs32, jax.tree.unflatten(tree, [jnp.asarray(a) for a in state]), uj)
+        got_state, got_y = step.run(state, u)
+        want = [np.asarray(a, np.float64).reshape(-1) for a in [*jax.tree.leaves(new), *jax.tree.leaves(out)]]
+        got = [np.asarray(a, np.float64).reshape(-1) for a in [*got_state, got_y]]
+        names = [n for leaf in step.state for n in leaf.scalars()] + step.output_names
+        want, got = np.concatenate(want), np.concatenate(got)
+        bad = ~(np.abs(got - want) <= 1e-4 * (1 + np.abs(want)))
+        if np.any(bad):
+            i = int(np.argmax(bad))
+            raise AssertionError(
+                f"export: the generated C of {type(obs32).__name__} differs from the JAX step at {names[i]}: "
+                f"{got[i]!r} vs {want[i]!r} (a code generator bug; nothing written)"
+            )
 
 
 def _leaf_at(observer, name: str):
@@ -739,7 +779,7 @@ def _export(args) -> int:
         source = f"closed form {args.design}, {DESIGNS[args.design][1]}"
     signal = None
     if hasattr(obs, "Rs") and args.record == "drive":
-        machine, rpm = drive_machine(obs), _DRIVE_MACHINES[_family(obs)][2]
+        machine, rpm = _recording_bench(obs)
         obs = bind_to_drive(obs, machine, rpm)
         speed = "omega0_pll" if _family(obs) == "leso" else "omega0"
         notes = [n for n in notes if "sets Rs, Lq" not in n]

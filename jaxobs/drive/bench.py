@@ -1,0 +1,122 @@
+"""The simulated benches: the papers' machines on their benches' inertia, the FOC they run, and what the
+I-f start-up and the inverter allow on them.
+
+One builder for every caller (drive jobs and studies in ``tuning/``, ``jaxobs.reproduce``, the C export's
+recordings): :func:`bench_machine` by name (:data:`BENCH_MACHINES`), :func:`bench_drive` on a machine.
+
+- ``"spmsm000"``: 000 Table II's SPMSM (p = 3).  Table II's J = 3.78e-4 kg·m² is the motor's; the bench
+  couples a load machine, so we ASSUME a total J = :data:`jaxobs.papers.BENCH_J_000` (10×).
+- ``"ipmsm002"``: the ASSUMED IPMSM of 002 (p = 5, :data:`jaxobs.papers.IPMSM_002`) on the ASSUMED bench
+  inertia :data:`jaxobs.papers.BENCH_J_002` (10× the motor's: with the motor alone an 80 % load step stalls
+  the drive before any speed loop reacts).
+
+The FOC of both benches: IMC current loop α_c = 2π·:data:`~jaxobs.papers.BENCH_CURRENT_HZ` rad/s, I-P
+speed loop α_s = 2π·:data:`~jaxobs.papers.BENCH_SPEED_HZ` rad/s (:meth:`jaxobs.drive.FOC.imc`).
+"""
+
+from __future__ import annotations
+
+import math
+
+from .. import papers
+from .control import FOC, IfStartup
+from .hardware import Inverter
+from .loop import Drive
+from .machine import PMSMParams, ipmsm_paper002, spmsm_paper000
+
+__all__ = [
+    "BENCH_MACHINES",
+    "IF_SUDDEN_LOAD_PU",
+    "bench_drive",
+    "bench_machine",
+    "drive_speed_limit_rpm",
+    "if_handover_earliest",
+    "if_load_limit",
+]
+
+# name -> what it is (for messages and provenance)
+BENCH_MACHINES = {
+    "ipmsm002": "paper 002's IPMSM (ASSUMED, papers.IPMSM_002), J = papers.BENCH_J_002",
+    "spmsm000": "paper 000's SPMSM (Table II, papers.SPMSM_000), J = papers.BENCH_J_000",
+}
+_PRESETS = {"ipmsm002": (ipmsm_paper002, papers.BENCH_J_002), "spmsm000": (spmsm_paper000, papers.BENCH_J_000)}
+
+
+def bench_machine(name: str = "ipmsm002", **overrides) -> PMSMParams:
+    """The :class:`PMSMParams` of a bench (a key of :data:`BENCH_MACHINES`) on its bench's inertia (kg·m²);
+    ``overrides``: other parameters (e.g. ``a5``, ``a7`` or a mismatched ``Rs``), as the presets take them."""
+    if name not in _PRESETS:
+        raise ValueError(f"bench_machine: name must be one of {', '.join(BENCH_MACHINES)}, got {name!r}")
+    ctor, inertia = _PRESETS[name]
+    return ctor(**{"J": inertia, **overrides})
+
+
+def bench_drive(
+    machine: PMSMParams,
+    *,
+    sensorless: bool = True,
+    handover: float = 0.0,
+    settle: float = 0.2,
+    startup: IfStartup | None = None,
+    alpha_s: float | None = None,
+    ts: float | None = None,
+) -> Drive:
+    """The bench's drive on ``machine`` (the machine the FOC assumes): IMC current loop at
+    2π·BENCH_CURRENT_HZ rad/s, I-P speed loop at ``alpha_s`` (rad/s; default 2π·BENCH_SPEED_HZ).
+
+    ``sensorless``: the observer closes the loop (from ``handover`` s on, after ``settle`` s of unscored
+    settling); ``startup``: an I-f start-up from standstill (:meth:`IfStartup.for_machine`) or None (each
+    scenario starts steady); ``ts``: the control period (s; default the FOC's)."""
+    alpha_s = 2 * math.pi * papers.BENCH_SPEED_HZ if alpha_s is None else alpha_s
+    kw = {} if ts is None else {"ts": ts}
+    foc = FOC.imc(machine, alpha_c=2 * math.pi * papers.BENCH_CURRENT_HZ, alpha_s=alpha_s, **kw)
+    return Drive(foc, sensorless=sensorless, handover=handover, settle=settle, startup=startup)
+
+
+# The sudden-load limit of a synchronous machine held by a current vector (the equal-area criterion): a torque
+# T applied at once to a rotor at rest in the I-f frame swings it, undamped, from δ = 0 past its load angle δ0
+# (T = T_max sin δ0) to δ_peak with ∫0^δpeak (T_max sin δ − T) dδ = 0; it pulls out unless δ_peak ≤ π − δ0,
+# i.e. 1 + cos δ0 ≥ (π − δ0) sin δ0: δ0 ≤ 46.44°, T ≤ 0.7246 T_max.
+IF_SUDDEN_LOAD_PU = 0.7246
+
+
+def if_load_limit(machine: PMSMParams, dJ: float = 0.0) -> float:
+    """The largest load (N·m) that ``machine`` may carry during its I-f start-up
+    (:meth:`IfStartup.for_machine`), with its inertia scaled by ``1 + dJ``.
+
+    During I-f the rotor is held by the current vector I_f only: its torque is at most T_max = K_t I_f (the
+    magnet torque; an IPMSM's reluctance torque is left out).  The load is on from t = 0 (a step), so the
+    sudden-load limit applies (:data:`IF_SUDDEN_LOAD_PU`); the ramp's peak acceleration torque J·a_peak
+    (a_peak = 2 × the mean for the raised cosine) and the friction at the switch speed B·ω_sw count as load
+    too — conservatively, as if sudden (they build up gradually).  Hence
+
+        T_L ≤ 0.7246 K_t I_f − J (1 + dJ) a_peak − B ω_m,sw.
+
+    On 000's SPMSM bench: 0.7246 · 7.0 − 1.25 − 0 = 3.82 N·m; measured with the SOIFO at 1000 r/min, 4.5 N·m
+    still started and 5.0 N·m ran backwards (−320 r/min, flagged lost_speed): sufficient, not necessary."""
+    s = IfStartup.for_machine(machine)
+    a_peak_m = float(s.accel) / machine.p * (2.0 if s.smooth else 1.0)  # mechanical, rad/s²
+    w_sw_m = float(s.omega_switch) / machine.p
+    return (
+        IF_SUDDEN_LOAD_PU * float(machine.kt) * float(s.i_f)
+        - float(machine.J) * (1.0 + dJ) * a_peak_m
+        - float(machine.B) * w_sw_m
+    )
+
+
+def if_handover_earliest(machine: PMSMParams) -> float:
+    """The earliest time (s) the I-f start-up of ``machine`` can hand over: the ramp to the switch speed,
+    then both the hold and the agreement's dwell at it (they run at the same time)."""
+    s = IfStartup.for_machine(machine)
+    return float(s.omega_switch / s.accel) + max(float(s.hold), float(s.dwell))
+
+
+def drive_speed_limit_rpm(machine: PMSMParams) -> float:
+    """The highest speed (r/min, either direction) a drive may ask of ``machine``: the speed at which the
+    back EMF alone, ωe ψf, reaches the inverter's voltage limit u_max = U_dc/√3 (the default
+    :class:`Inverter`).  Above it the FOC cannot hold even zero current, as field weakening is not modelled
+    (i_d* is 0 or MTPA, never negative for flux weakening): the machine would run away from its reference.
+    It is a no-load bound (load adds Rs·i and ωe·Lq·i to the voltage), so it is necessary, not sufficient:
+    ipmsm002 1323 r/min (2.2 × its 600 r/min rating), spmsm000 2835 r/min (1.4 × 2000 r/min)."""
+    w_e = float(Inverter().u_max) / float(machine.psi_f)  # rad/s electrical
+    return w_e / machine.p * 60.0 / (2 * math.pi)
