@@ -61,6 +61,7 @@ LAYERS = [
     (
         "jaxobs.study",
         "jaxobs.drive_study",
+        "jaxobs.drive.stability",
         "jaxobs.demo",
         "jaxobs.reproduce.flux",
         "jaxobs.reproduce.leso",

@@ -201,6 +201,10 @@ class ClosedLoop(AbstractSystem):
         period that starts at t = 0 is the steady one (computed at t_{−1}, so
         rotated to θ_e0 + ω_e T_s/2 by the delay compensation), and the
         observer starts settled on that operating point (:meth:`_settled_observer`).
+        An observer that closes the loop from t = 0 (sensorless, no hand-over)
+        starts at the operating point under its own steady angle error, the FOC's
+        references met in the observer's frame (``OperatingPoint.offset``; the
+        reasons and measurements in the code below).
         With the drive's I-f start-up the scenario starts from standstill (whatever
         its ``omega_m0``: an I-f start-up from a spinning rotor would be a different
         problem, and a job's scenarios keep their speed for the observer's binding), all zeros, with the I-f angle at
@@ -233,7 +237,9 @@ class ClosedLoop(AbstractSystem):
                 # over 0.15 s: C-LESO 2.9 % (one pass, the old start), 0.016 % (two), 0.001 % (three); FA-LESO
                 # 0.069 %, 0.005 %, 0.005 %.  Two passes: 0.2 s more of observer steps per scenario.
                 for _ in range(self.settle_passes - 1):
-                    op = self.operating_point(offset)
+                    # beyond 90° no current in the observer's frame carries the load (it brakes): no steady
+                    # state to start in, so such an observer (not locked in its settling) starts as before
+                    op = self.operating_point(jnp.where(jnp.abs(offset) < jnp.pi / 2, offset, 0.0))
                     obs, offset = self._settled_observer(op)
         plant = self.plant.init(omega_m0=op.omega_m, theta_e0=op.theta_e, i_d0=op.i_d, i_q0=op.i_q)
         u_a, u_b = self._steady_voltage(op, op.theta_e)
