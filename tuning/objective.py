@@ -24,9 +24,9 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
+from jaxobs import OnSignal, simulate
 from jaxobs import metrics as M
 from jaxobs.drive import ClosedLoop
-from jaxobs.simulate import OnSignal, simulate
 
 from .aggregations import AbstractAggregation, Mean
 from .params import Parametrization
