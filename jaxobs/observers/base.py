@@ -40,7 +40,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from ..discretize import AbstractRule
+from .._discretize import AbstractRule
 
 __all__ = [
     "AbstractObserver",
