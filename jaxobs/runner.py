@@ -32,9 +32,9 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import sharding
+from ._simulate import simulate
 from .progress import Progress
 from .scenarios import AbstractSampler
-from .simulate import simulate
 
 __all__ = ["StudyRun", "run_scenarios"]
 

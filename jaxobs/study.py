@@ -57,10 +57,10 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import metrics as M
+from ._simulate import OnSignal
 from .provenance import provenance
 from .runner import run_scenarios
 from .scenarios import GRID_SIGNAL_AXES, AbstractSampler, Grid, Random, Recordings, grid_signals
-from .simulate import OnSignal
 
 __all__ = ["STUDY_AXES", "STUDY_METRICS", "study_metrics", "run_study", "worst_cases"]
 

@@ -18,6 +18,7 @@ Conventions of the pages' code blocks:
 from __future__ import annotations
 
 import importlib.util
+import os
 import re
 import subprocess
 import sys
@@ -65,8 +66,9 @@ def _run_cli(cmd: str, cwd: Path) -> subprocess.CompletedProcess:
     """``cmd`` in ``cwd`` as a reader runs it at the repository's root (``tuning/presets/...`` resolves)."""
     if not (cwd / "tuning").exists():
         (cwd / "tuning").symlink_to(ROOT / "tuning")
+    env = {**os.environ, "COLUMNS": "100"}  # argparse wraps its help to the terminal's width
     return subprocess.run(
-        [_jaxobs_exe(), *cmd.split()[1:]], capture_output=True, text=True, cwd=cwd, timeout=1800, check=False
+        [_jaxobs_exe(), *cmd.split()[1:]], capture_output=True, text=True, cwd=cwd, timeout=1800, check=False, env=env
     )
 
 
