@@ -642,13 +642,14 @@ def test_bfgs_records_every_iteration_with_a_readable_reason(tmp_path, capsys):
 
 def test_report_names_scenarios_in_the_objectives_order():
     """responses.png names its scenario by the values tuning.report enumerates: the job's own order, grid or sampled."""
-    from tuning.job import _combos, load_job
+    from tuning.job import load_job
+    from tuning.job.scenarios import scenario_points
     from tuning.report import scenario_values
 
     job = load_job(Path(__file__).parents[1] / "tuning" / "presets" / "wif_robust.toml")
-    assert scenario_values(job.scenarios) == _combos(job.scenarios)
+    assert scenario_values(job.scenarios) == scenario_points(job.scenarios)
     sampled = dataclasses.replace(job.scenarios, sample=7, seed=3)
-    assert scenario_values(sampled) == _combos(sampled)
+    assert scenario_values(sampled) == scenario_points(sampled)
 
 
 # --------------------------------------------------------------------------
