@@ -1,10 +1,11 @@
 # The two commands (README): `make run` (the main job) and `make test` (the test suite); also `make bench`
-# (the benchmarks, benchmarks/README.md). Each creates a local virtual environment in .venv on first use.
+# (the benchmarks, benchmarks/README.md) and `make docs` (the documentation site into site/).  Each creates a
+# local virtual environment in .venv on first use.
 PYTHON ?= python3
 VENV   := .venv
 STAMP  := $(VENV)/.installed-stamp
 
-.PHONY: run test test-slow lint bench clean
+.PHONY: run test test-slow lint bench docs clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -37,5 +38,16 @@ lint: $(STAMP)
 bench: $(STAMP)
 	$(VENV)/bin/python -m benchmarks --out benchmarks/results/$$(date +%Y-%m-%d).json
 
+# The documentation site (mkdocs.yml) into site/, --strict: a broken link, a missing page or a docstring that
+# mkdocstrings cannot render fails the build.  The docs extra goes into .venv once (its own stamp).  The TOML
+# reference and the API pages are generated while it builds (docs/hooks/).
+DOCS_STAMP := $(VENV)/.docs-stamp
+$(DOCS_STAMP): $(STAMP)
+	$(VENV)/bin/python -m pip install --quiet -e ".[test,bench,docs]"
+	touch $(DOCS_STAMP)
+
+docs: $(DOCS_STAMP)
+	NO_MKDOCS_2_WARNING=1 $(VENV)/bin/mkdocs build --strict --quiet
+
 clean:
-	rm -rf $(VENV) out .pytest_cache
+	rm -rf $(VENV) out site .pytest_cache

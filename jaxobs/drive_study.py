@@ -45,10 +45,7 @@ identical runs.
 
 from __future__ import annotations
 
-import itertools
 import math
-from importlib.metadata import PackageNotFoundError
-from importlib.metadata import version as _pkg_version
 
 import equinox as eqx
 import jax
@@ -56,9 +53,13 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import metrics as M
-from .drive import RPM, ClosedLoop, Drive, PMSMParams, Profile, Scenario, Sensors
-from .progress import Progress
-from .simulate import simulate
+from .drive import DRIVE_AXES, RPM, ClosedLoop, Drive, PMSMParams, Profile, Scenario, scenario_batch
+from .provenance import provenance
+from .runner import run_scenarios
+from .scenarios import LHS, Grid, Sobol
+from .sharding import batch_mesh
+
+SAMPLERS = {"sobol": Sobol, "lhs": LHS}  # sampling name -> sampler (jaxobs.scenarios)
 
 __all__ = [
     "DRIVE_STUDY_AXES",
@@ -71,20 +72,13 @@ __all__ = [
     "drive_gains",
 ]
 
-# axis → (unit, allowed range)
+# axis → (unit, allowed range): the axes of drive studies and drive jobs, a part of the one table of drive
+# axes (jaxobs.drive.DRIVE_AXES, same names and ranges).  Not here: dL (dLd and dLq together), the sensor
+# offsets and a per-scenario seed (a study's noise keys come from its own seed)
 DRIVE_STUDY_AXES = {
-    "speed_rpm": ("r/min", (1.0, 1e5)),
-    "load_nm": ("N·m", (-1e4, 1e4)),
-    "speed_step_rpm": ("r/min", (-1e5, 1e5)),
-    "load_step_nm": ("N·m", (-1e4, 1e4)),
-    "dRs": ("1", (-0.95, 10.0)),
-    "dLd": ("1", (-0.95, 10.0)),
-    "dLq": ("1", (-0.95, 10.0)),
-    "dpsi": ("1", (-0.95, 10.0)),
-    "dJ": ("1", (-0.95, 100.0)),
-    "i_noise": ("A", (0.0, 1e3)),
-    "u_noise": ("V", (0.0, 1e4)),
-    "dead_time": ("s", (0.0, 1e-4)),
+    name: (unit, rng)
+    for name, (unit, rng, _) in DRIVE_AXES.items()
+    if name not in ("dL", "u_offset_alpha", "u_offset_beta", "i_offset_alpha", "i_offset_beta", "seed")
 }
 DRIVE_STUDY_METRICS = {
     "pos_err_rms_deg": ("deg", "rms position error in the steady window (electrical)"),
@@ -96,20 +90,7 @@ DRIVE_STUDY_METRICS = {
 }
 QUANTILES = (0.5, 0.95, 0.99, 1.0)
 # axis -> what it is, in words (the NetCDF long_name and the figures' labels)
-DRIVE_STUDY_AXIS_NAMES = {
-    "speed_rpm": "speed (and its reference before the event)",
-    "load_nm": "load torque before the event",
-    "speed_step_rpm": "step of the speed reference at t_event",
-    "load_step_nm": "step of the load torque at t_event",
-    "dRs": "relative error of the assumed stator resistance Rs",
-    "dLd": "relative error of the assumed d-axis inductance Ld",
-    "dLq": "relative error of the assumed q-axis inductance Lq",
-    "dpsi": "relative error of the assumed PM flux linkage",
-    "dJ": "relative change of the true inertia (controller: nominal)",
-    "i_noise": "current-sensor noise (standard deviation)",
-    "u_noise": "voltage-sensor noise (standard deviation)",
-    "dead_time": "inverter dead time",
-}
+DRIVE_STUDY_AXIS_NAMES = {name: what for name, (_, _, what) in DRIVE_AXES.items()}
 # a drive observer's gains (the tuned ones; the assumed machine and the initial speeds are bound per scenario)
 # and their units: the LESOs of 002 (FA-LESO: ê/e = (k2 s + k1)/(s² + (k2 − jω̂e)s + k1)), the normalized PLLs
 # (ω̂ = kp·err + ki∫err, err in rad), the flux observers of 000 (k, K1, K2, lam dimensionless: lam is the
@@ -127,13 +108,6 @@ DRIVE_GAIN_UNITS = {
     "kp_pll": "s-1",
     "ki_pll": "s-2",
 }
-
-
-def _version(name: str) -> str:
-    try:
-        return _pkg_version(name)
-    except PackageNotFoundError:  # pragma: no cover - a source tree without an install
-        return "unknown"
 
 
 def _axis_meta(name: str) -> dict:
@@ -154,55 +128,18 @@ def _check_axes(axes: dict):
 
 
 def drive_scenarios(machine: PMSMParams, names, combos, *, seed: int = 0, t_event: float = 0.0) -> Scenario:
-    """A batched Scenario (leading axis len(combos)), one per combination of the named axes' values.
+    """A batched Scenario (leading axis len(combos)), one per combination of the named axes' values
+    (:func:`jaxobs.drive.scenario_batch` on ``machine``, noise keys from ``seed``).
 
-    Each starts steady at ``speed_rpm`` and ``load_nm``; the speed reference and the load step by
-    ``speed_step_rpm`` and ``load_step_nm`` at ``t_event`` (s; both 0 by default: no event).
+    Each starts steady at ``speed_rpm`` (600 r/min without the axis) and ``load_nm``; the speed reference
+    and the load step by ``speed_step_rpm`` and ``load_step_nm`` at ``t_event`` (s; both 0 by default: no event).
     """
     if not (math.isfinite(t_event) and t_event >= 0):
         raise ValueError(f"t_event must be a finite number of seconds >= 0, got {t_event!r}")
-    cols = {n: np.asarray([c[i] for c in combos], dtype=float) for i, n in enumerate(names)}
-    b = len(combos)
-    noisy = any(n in cols for n in ("i_noise", "u_noise"))
-    # a noisy Sensors (static flag) when a noise axis exists; its levels are set per scenario below
-    sensors = Sensors(i_noise=1.0, u_noise=1.0) if noisy else Sensors()
-    two = Profile([0.0, t_event], [0.0, 0.0], kind="step")  # before / after the event
-    base = Scenario(machine, sensors=sensors, speed_ref=two, load=two)
-    sc = jax.tree.map(lambda x: jnp.broadcast_to(x, (b,) + jnp.shape(x)), base)
-
-    def col(name, default):
-        return jnp.asarray(cols.get(name, np.full(b, default)))
-
-    speed = col("speed_rpm", 600.0) * RPM
-    par = eqx.tree_at(lambda p: p.J, sc.par, sc.par.J * (1 + col("dJ", 0.0)))
-    est = sc.est_par
-    est = eqx.tree_at(
-        lambda p: (p.Rs, p.Ld, p.Lq, p.psi_f, p.J),
-        est,
-        (
-            est.Rs * (1 + col("dRs", 0.0)),
-            est.Ld * (1 + col("dLd", 0.0)),
-            est.Lq * (1 + col("dLq", 0.0)),
-            est.psi_f * (1 + col("dpsi", 0.0)),
-            est.J,  # the controller's inertia stays nominal
-        ),
-    )
-    sens = eqx.tree_at(lambda s: (s.i_noise, s.u_noise), sc.sensors, (col("i_noise", 0.0), col("u_noise", 0.0)))
-    keys = jax.vmap(lambda i: jax.random.fold_in(jax.random.PRNGKey(seed), i))(jnp.arange(b))
-    return eqx.tree_at(
-        lambda s: (s.par, s.est_par, s.speed_ref.values, s.load.values, s.sensors, s.dead_time, s.key, s.omega_m0),
-        sc,
-        (
-            par,
-            est,
-            jnp.stack([speed, speed + col("speed_step_rpm", 0.0) * RPM], axis=1),
-            jnp.stack([col("load_nm", 0.0), col("load_nm", 0.0) + col("load_step_nm", 0.0)], axis=1),
-            sens,
-            col("dead_time", 0.0),
-            keys,
-            speed,
-        ),
-    )
+    two = Profile([0.0, t_event], [600.0 * RPM] * 2, kind="step")  # before / after the event
+    zero = Profile([0.0, t_event], [0.0, 0.0], kind="step")
+    base = Scenario(machine, speed_ref=two, load=zero, omega_m0=600.0 * RPM)
+    return scenario_batch(base, names, combos, seed=seed, t_event=t_event)
 
 
 def bind_observer(obs, sc: Scenario):
@@ -222,21 +159,6 @@ def drive_gains(obs) -> dict:
     return {g: float(getattr(obs, g)) for g in DRIVE_GAIN_UNITS if hasattr(obs, g) and g not in bound}
 
 
-def _sample(axes: dict, n: int, method: str, seed: int):
-    from scipy.stats import qmc
-
-    names = list(axes)
-    lo = np.array([min(axes[k]) for k in names], dtype=float)
-    hi = np.array([max(axes[k]) for k in names], dtype=float)
-    if method == "sobol":
-        u = qmc.Sobol(len(names), scramble=True, seed=seed).random(n)
-    elif method == "lhs":
-        u = qmc.LatinHypercube(len(names), seed=seed).random(n)
-    else:
-        raise ValueError(f"sampling must be 'grid', 'sobol' or 'lhs', got {method!r}")
-    return [tuple(r) for r in qmc.scale(u, lo, np.where(hi > lo, hi, lo + 1e-300))]
-
-
 def run_drive_study(
     designs: dict,
     axes: dict,
@@ -251,13 +173,15 @@ def run_drive_study(
     seed: int = 0,
     chunk_size: int = 256,
     progress=None,
+    mesh=None,
 ):
     """Run every design (a drive observer closing ``drive``'s loop) on every scenario; an ``xarray.Dataset``.
 
     ``sampling="grid"``: the Cartesian product of the axes; ``"sobol"``/``"lhs"``: ``sample``
     points drawn by scipy.stats.qmc inside the axes' [min, max].  ``progress``: ``True`` a tqdm bar
     on stderr (each design's compilation named), a callable ``progress(done, total)`` called after
-    each chunk, ``None``/``False`` nothing (:mod:`jaxobs.progress`).
+    each chunk, ``None``/``False`` nothing (:mod:`jaxobs.progress`).  ``mesh``: the devices each chunk is
+    split over (:func:`jaxobs.runner.run_scenarios`; default one device, as before the runner was shared).
     """
     import xarray as xr
 
@@ -273,22 +197,17 @@ def run_drive_study(
         raise ValueError(f"steady_from must be in [0, horizon), got {steady_from!r}")
     if not (math.isfinite(t_event) and 0 <= t_event < horizon):
         raise ValueError(f"t_event must be in [0, horizon = {horizon:g}) s, got {t_event!r}")
-    names = list(axes)
     if sampling == "grid":
-        combos = list(itertools.product(*(list(map(float, axes[n])) for n in names)))
-    else:
+        sampler = Grid(axes)
+    elif sampling in SAMPLERS:
         if not (isinstance(sample, int) and sample >= 1):
             raise ValueError(f"sample must be an integer >= 1 with sampling={sampling!r}, got {sample!r}")
-        combos = _sample(axes, sample, sampling, seed)
-    n = len(combos)
-    scs = drive_scenarios(machine, names, combos, seed=seed, t_event=t_event)
-    chunk = max(1, min(chunk_size, n))
-    pad = (-n) % chunk
-    if pad:
-        scs = jax.tree.map(lambda x: jnp.concatenate([x, jnp.repeat(x[-1:], pad, axis=0)]), scs)
+        sampler = SAMPLERS[sampling](axes, sample, seed)
+    else:
+        raise ValueError(f"sampling must be 'grid', 'sobol' or 'lhs', got {sampling!r}")
     p = machine.p
 
-    def metrics_of(sol):
+    def metrics_of(sol, _):
         o = sol.outputs
         steady = sol.t >= steady_from
         err = jnp.degrees(M.wrap(o.obs.theta - o.theta_e))
@@ -303,51 +222,28 @@ def run_drive_study(
             "speed_dev_max_rpm": M.peak_deviation(sol.t, o.omega_m, o.omega_m_ref, t_event) * 30 / math.pi,
         }
         finite = sol.ok & jnp.all(jnp.stack([jnp.isfinite(v) for v in m.values()]))
-        lost = ~finite | M.lost_lock(o.obs.theta, o.theta_e, steady, math.radians(M.LOCK_TOL_DRIVE_DEG))
-        off = ~finite | M.lost_speed(o.omega_m, o.omega_m_ref, steady)  # missed its speed reference
-        return m, lost, ~finite, off
+        m["lost"] = ~finite | M.lost_lock(o.obs.theta, o.theta_e, steady, math.radians(M.LOCK_TOL_DRIVE_DEG))
+        m["diverged"] = ~finite
+        m["off"] = ~finite | M.lost_speed(o.omega_m, o.omega_m_ref, steady)  # missed its speed reference
+        return m
 
-    results = {}
-
-    bar = Progress(progress, n * len(designs), "drive study", unit="scenario")
-
-    # one compiled function for all designs: designs of one observer class (a closed form and a tuned one)
-    # differ in their gains, which are array leaves, and share its compilation
-    @eqx.filter_jit
-    def run_chunk(obs, batch):
-        return jax.vmap(lambda s: metrics_of(simulate(ClosedLoop(drive, bind_observer(obs, s), s), horizon)))(batch)
-
-    compiled = set()
-    for dname, obs in designs.items():
-        parts_m, parts_l, parts_d, parts_s = [], [], [], []
-        for start in range(0, n + pad, chunk):
-            new = start == 0 and type(obs) not in compiled
-            bar.stage(f"{dname} (compiling, then {chunk} scenarios a chunk)" if new else dname)
-            m, lost, div, off = run_chunk(obs, jax.tree.map(lambda x: x[start : start + chunk], scs))
-            parts_m.append(jax.tree.map(np.asarray, m))
-            parts_l.append(np.asarray(lost))
-            parts_d.append(np.asarray(div))
-            parts_s.append(np.asarray(off))
-            bar.update(min(chunk, n - start))
-            compiled.add(type(obs))
-        results[dname] = (
-            {k: np.concatenate([q[k] for q in parts_m])[:n] for k in DRIVE_STUDY_METRICS},
-            np.concatenate(parts_l)[:n],
-            np.concatenate(parts_d)[:n],
-            np.concatenate(parts_s)[:n],
-        )
-
-    bar.close()
+    run = run_scenarios(
+        designs,
+        sampler,
+        lambda obs, s: ClosedLoop(drive, bind_observer(obs, s), s),
+        metrics_of,
+        horizon=horizon,
+        build=lambda names, points: drive_scenarios(machine, names, points, seed=seed, t_event=t_event),
+        chunk_size=chunk_size,
+        mesh=batch_mesh(jax.devices()[:1]) if mesh is None else mesh,
+        progress=progress,
+        label="drive study",
+    )
+    n = len(run.points)
+    results = {d: (v, v["lost"], v["diverged"], v["off"]) for d, v in run.values.items()}
     dnames = list(designs)
-    if sampling == "grid":
-        dims = ("design", *names)
-        shape = tuple(len(axes[k]) for k in names)
-        coords = {k: (k, np.asarray(axes[k], dtype=float), _axis_meta(k)) for k in names}
-    else:
-        dims, shape = ("design", "sample"), (n,)
-        coords = {"sample": ("sample", np.arange(n), {"units": "1", "long_name": f"scenario drawn by {sampling}"})}
-        for i, k in enumerate(names):
-            coords[k] = ("sample", np.asarray([c[i] for c in combos], dtype=float), _axis_meta(k))
+    dims, shape, coords = sampler.layout(_axis_meta)
+    dims = ("design", *dims)
     coords["design"] = ("design", dnames, {"long_name": "observer design (closing the loop sensorless)"})
     qs = np.asarray(QUANTILES)
     coords["quantile"] = (
@@ -417,6 +313,5 @@ def run_drive_study(
         ds.attrs[f"machine_{f}"] = float(getattr(machine, f))
     ds.attrs.update(drive_ts=float(drive.ts), drive_settle=float(drive.settle))
     # provenance, and nothing that differs between two identical runs (the run time is not stored)
-    ds.attrs.update(source="jaxobs.drive_study.run_drive_study", jaxobs_version=_version("jaxobs"))
-    ds.attrs.update(jax_version=jax.__version__, numpy_version=np.__version__, xarray_version=xr.__version__)
+    ds.attrs.update(provenance("jaxobs.drive_study.run_drive_study"))
     return ds

@@ -1,8 +1,12 @@
-"""Scenario builders for signal-level observers: batches of test signals from named axes.
+"""Scenario samplers and builders: which points of the named axes a study runs, and the batched signals.
 
-One place, below both the studies (:mod:`jaxobs.study`) and the tuning jobs (``tuning/``),
-that turns a grid of axis values into a batched signal; each caller picks the
-combinations (a Cartesian grid or random samples) and passes them in.
+One place, below both the studies (:mod:`jaxobs.study`, :mod:`jaxobs.drive_study`) and the tuning jobs
+(``tuning/``).  A *sampler* picks the points of the axes and says how the results are laid out
+(:class:`Grid`: the Cartesian product, one dim per axis; :class:`Random`, :class:`Sobol`, :class:`LHS`:
+``n`` points inside the axes' [min, max], one ``sample`` dim with the axes as coordinates along it;
+:class:`Recordings`: scenarios given whole, one ``recording`` dim); a *builder* turns the points into a
+batched scenario PyTree (:func:`grid_signals` here, :func:`jaxobs.drive.scenarios` for the drive), and
+:func:`jaxobs.runner.run_scenarios` runs every design on it.
 
 Grid signals (the FLL family): single-phase :class:`~jaxobs.GridSignal` s with an event
 at ``t_event`` plus optional white noise.  Axes (:data:`GRID_SIGNAL_AXES`):
@@ -18,8 +22,10 @@ EMF signals (the flux observers without a drive): two-axis :class:`~jaxobs.EMFSi
 
 from __future__ import annotations
 
+import itertools
 import math
-from typing import ClassVar
+from dataclasses import dataclass, field
+from typing import Any, ClassVar
 
 import equinox as eqx
 import jax
@@ -30,7 +36,19 @@ from ._time import SampleTime, time_value
 from .papers import TEST_C_HARMONICS
 from .signals import EMFSignal, GridSignal, stack
 
-__all__ = ["EMF_SIGNAL_AXES", "GRID_SIGNAL_AXES", "NoisyGridSignal", "emf_signals", "grid_signals"]
+__all__ = [
+    "EMF_SIGNAL_AXES",
+    "GRID_SIGNAL_AXES",
+    "LHS",
+    "AbstractSampler",
+    "Grid",
+    "NoisyGridSignal",
+    "Random",
+    "Recordings",
+    "Sobol",
+    "emf_signals",
+    "grid_signals",
+]
 
 GRID_SIGNAL_AXES = (
     "freq_step",
@@ -162,3 +180,163 @@ def emf_signals(names, combos):
             )
         )
     return stack(sigs)
+
+
+# --------------------------------------------------------------------------
+# samplers: which points of the axes a study runs, and how its results are laid out
+# --------------------------------------------------------------------------
+
+
+def _axes_dict(axes) -> dict:
+    if not isinstance(axes, dict) or not axes:
+        raise ValueError("sampler axes must be a non-empty dict of axis name -> list of values")
+    out = {}
+    for name, vals in axes.items():
+        vals = np.asarray(vals, dtype=float).reshape(-1)
+        if vals.size < 1:
+            raise ValueError(f"study axis {name!r} needs at least one value")
+        out[str(name)] = vals
+    return out
+
+
+class AbstractSampler:
+    """The points of a study: ``names`` (the axes), ``points()`` (one tuple of values per scenario, in
+    ``names`` order), ``sampling`` (the Dataset's attribute) and ``layout(axis_meta)``: the dims after
+    ``design``, the shape the per-scenario values take, and the coordinates, each with the attributes
+    ``axis_meta(name)`` gives (``units``, ``long_name``)."""
+
+    names: tuple
+    sampling: str
+
+    def points(self) -> list[tuple]:
+        raise NotImplementedError
+
+    def layout(self, axis_meta) -> tuple[tuple, tuple, dict]:
+        raise NotImplementedError
+
+
+@dataclass(frozen=True, eq=False)
+class Grid(AbstractSampler):
+    """Every combination of the axes' values (row-major: the last axis fastest); dims = the axes."""
+
+    axes: dict
+    sampling: ClassVar[str] = "grid"
+
+    def __post_init__(self):
+        object.__setattr__(self, "axes", _axes_dict(self.axes))
+
+    @property
+    def names(self) -> tuple:
+        return tuple(self.axes)
+
+    def points(self) -> list[tuple]:
+        return list(itertools.product(*(list(map(float, self.axes[n])) for n in self.names)))
+
+    def layout(self, axis_meta):
+        shape = tuple(len(self.axes[n]) for n in self.names)
+        coords = {n: (n, np.asarray(self.axes[n], dtype=float), axis_meta(n)) for n in self.names}
+        return self.names, shape, coords
+
+
+@dataclass(frozen=True, eq=False)
+class _Drawn(AbstractSampler):
+    """``n`` points inside the axes' [min, max]; one ``sample`` dim, the axes as coordinates along it."""
+
+    axes: dict
+    n: int
+    seed: int = 0
+    sample_long_name: ClassVar[str] = "scenario drawn at random"
+
+    def __post_init__(self):
+        object.__setattr__(self, "axes", _axes_dict(self.axes))
+        if isinstance(self.n, bool) or not isinstance(self.n, (int, np.integer)) or self.n < 1:
+            raise ValueError(f"sample must be an integer >= 1 with sampling={self.sampling!r}, got {self.n!r}")
+        if isinstance(self.seed, bool) or not isinstance(self.seed, (int, np.integer)):
+            raise ValueError(f"seed must be an integer, got {self.seed!r}")
+
+    @property
+    def names(self) -> tuple:
+        return tuple(self.axes)
+
+    def _bounds(self):
+        lo = np.array([self.axes[k].min() for k in self.names], dtype=float)
+        hi = np.array([self.axes[k].max() for k in self.names], dtype=float)
+        return lo, hi
+
+    def layout(self, axis_meta):
+        pts = self.points()
+        coords = {"sample": ("sample", np.arange(len(pts)), {"units": "1", "long_name": self.sample_long_name})}
+        for i, k in enumerate(self.names):
+            coords[k] = ("sample", np.asarray([c[i] for c in pts], dtype=float), axis_meta(k))
+        return ("sample",), (len(pts),), coords
+
+
+class Random(_Drawn):
+    """``n`` points drawn uniformly (``numpy.random.default_rng(seed)``, one axis after another per point)."""
+
+    sampling: ClassVar[str] = "random"
+
+    def points(self) -> list[tuple]:
+        rng = np.random.default_rng(self.seed)
+        lo, hi = self._bounds()
+        return [tuple(rng.uniform(a, b) for a, b in zip(lo, hi)) for _ in range(self.n)]
+
+
+def _qmc_points(self, u) -> list[tuple]:
+    lo, hi = self._bounds()
+    # u · (hi − lo) + lo, the arithmetic of scipy.stats.qmc.scale, which refuses an axis of one value
+    # (min = max); such an axis stays at its value
+    return [tuple(r) for r in u * (hi - lo) + lo]
+
+
+class Sobol(_Drawn):
+    """``n`` points of a scrambled Sobol sequence (``scipy.stats.qmc.Sobol``, seeded by ``seed``)."""
+
+    sampling: ClassVar[str] = "sobol"
+    sample_long_name: ClassVar[str] = "scenario drawn by sobol"
+
+    def points(self) -> list[tuple]:
+        from scipy.stats import qmc
+
+        return _qmc_points(self, qmc.Sobol(len(self.names), scramble=True, seed=self.seed).random(self.n))
+
+
+class LHS(_Drawn):
+    """``n`` points of a Latin hypercube (``scipy.stats.qmc.LatinHypercube``, seeded by ``seed``)."""
+
+    sampling: ClassVar[str] = "lhs"
+    sample_long_name: ClassVar[str] = "scenario drawn by lhs"
+
+    def points(self) -> list[tuple]:
+        from scipy.stats import qmc
+
+        return _qmc_points(self, qmc.LatinHypercube(len(self.names), seed=self.seed).random(self.n))
+
+
+@dataclass(frozen=True, eq=False)
+class Recordings(AbstractSampler):
+    """Scenarios given whole: ``signals`` a batched signal (leading axis one per recording, e.g.
+    :func:`jaxobs.signals.stack` of :class:`~jaxobs.SampledSignal` s), ``files`` their names (the
+    ``recording`` coordinate), ``sha256`` their digests (the Dataset's ``recordings_sha256``)."""
+
+    signals: Any
+    files: tuple
+    sha256: tuple = field(default=())
+    sampling: ClassVar[str] = "recordings"
+    names: ClassVar[tuple] = ()
+
+    def __post_init__(self):
+        object.__setattr__(self, "files", tuple(map(str, self.files)))
+        object.__setattr__(self, "sha256", tuple(self.sha256))
+        if not self.files:
+            raise ValueError("Recordings needs at least one recording")
+        n = {int(np.shape(x)[0]) for x in jax.tree.leaves(self.signals) if np.ndim(x) > 0}
+        if n != {len(self.files)}:
+            raise ValueError(f"Recordings.signals must have a leading axis of {len(self.files)} (one per file)")
+
+    def points(self) -> list[tuple]:
+        return [() for _ in self.files]
+
+    def layout(self, axis_meta):
+        coords = {"recording": ("recording", list(self.files), axis_meta("recording"))}
+        return ("recording",), (len(self.files),), coords

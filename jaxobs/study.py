@@ -33,7 +33,12 @@ metrics (an all-gather, :func:`jaxobs.sharding.gather_batch`), so every process 
 Dataset.  The numbers equal a one-device run's to rounding: a device's share is a smaller ``vmap``,
 which XLA may vectorize differently in the last bit (tests/test_distributed.py: 2 processes).
 
-Scenarios are single-phase grid signals (the FLL family) built by
+The scenarios come from a sampler (:mod:`jaxobs.scenarios`): a dict of axes is a ``Grid`` (or, with
+``sample``, a ``Random`` sample); ``Sobol``, ``LHS`` and ``Recordings`` (recorded signals with their truth
+columns: dims ``("design", "recording")``) are passed as ``axes`` themselves.  The loop over chunks, devices
+and processes is the one study runner, :func:`jaxobs.runner.run_scenarios`, which drive studies share.
+
+Sampled scenarios are single-phase grid signals (the FLL family) built by
 :func:`jaxobs.scenarios.grid_signals`: axes are ``freq_step`` (Hz),
 ``phase_jump_deg``, ``sag``, ``dc``, ``harmonics_scale`` (× Test C's spectrum),
 ``sub_amplitude`` (1 Hz), ``phase_deg`` (initial phase) and ``noise`` (white noise
@@ -45,22 +50,19 @@ one-period average of f̂ to stay within ``band_hz`` of the final frequency), ``
 
 from __future__ import annotations
 
-import itertools
 import math
 import time
 
-import equinox as eqx
-import jax
 import jax.numpy as jnp
 import numpy as np
 
 from . import metrics as M
-from . import sharding
-from .progress import Progress
-from .scenarios import GRID_SIGNAL_AXES, grid_signals
-from .simulate import OnSignal, simulate
+from .provenance import provenance
+from .runner import run_scenarios
+from .scenarios import GRID_SIGNAL_AXES, AbstractSampler, Grid, Random, Recordings, grid_signals
+from .simulate import OnSignal
 
-__all__ = ["STUDY_AXES", "STUDY_METRICS", "run_study", "worst_cases"]
+__all__ = ["STUDY_AXES", "STUDY_METRICS", "study_metrics", "run_study", "worst_cases"]
 
 STUDY_AXES = GRID_SIGNAL_AXES  # the scenarios a study runs: jaxobs.scenarios.grid_signals
 STUDY_METRICS = ("settling_freq", "ripple_freq", "rms_phase", "itae_freq", "iae_phase")
@@ -90,7 +92,10 @@ GAIN_NAMES = ("k", "k1", "k2", "lam")
 GAIN_UNITS = {"k": "1", "k1": "1", "k2": "1", "lam": "rad2 s-2"}  # jaxobs.observers.fll: λ in rad²/s²
 
 
-def _metrics(sol, t_event: float, steady_from: float, band_hz: float, n_period: int):
+def study_metrics(sol, t_event: float, steady_from: float, band_hz: float, n_period: int) -> dict:
+    """An FLL run's metrics (:data:`STUDY_METRICS`, exact versions), ``settled`` and ``lost_lock``: scalars of one
+    :class:`~jaxobs.Solution` on a signal with an event at ``t_event`` s, steady from ``steady_from`` s, settling
+    to ``band_hz`` on the ``n_period``-sample average of the frequency estimate."""
     t = sol.t
     out = sol.outputs
     f_hat = out.obs.omega / (2 * math.pi)
@@ -123,7 +128,7 @@ def _metrics(sol, t_event: float, steady_from: float, band_hz: float, n_period: 
 
 def run_study(
     designs: dict,
-    axes: dict,
+    axes,
     *,
     t_event=0.1,
     horizon=0.4,
@@ -138,99 +143,65 @@ def run_study(
 ):
     """Simulate every design on every scenario; returns an ``xarray.Dataset`` (see module doc).
 
-    With ``return_seconds=True`` returns ``(dataset, seconds)``, the wall time of the runs
-    (kept out of the Dataset, so two identical studies write identical files).  ``mesh``: the devices
-    each chunk is split over, a one-axis ``"batch"`` mesh (default ``jaxobs.batch_mesh()``, every
-    device of every process; ``jaxobs.batch_mesh(jax.devices()[:1])`` keeps to one device).
+    ``axes``: a dict of axis values (a :class:`~jaxobs.scenarios.Grid`, or with ``sample > 0`` a
+    :class:`~jaxobs.scenarios.Random` sample of that size seeded by ``seed``), or a sampler itself
+    (``Grid``, ``Random``, ``Sobol``, ``LHS``, or ``Recordings``: recorded signals with truth columns,
+    dims ``(design, recording)``).  With ``return_seconds=True`` returns ``(dataset, seconds)``, the wall
+    time of the runs (kept out of the Dataset, so two identical studies write identical files).  ``mesh``:
+    the devices each chunk is split over, a one-axis ``"batch"`` mesh (default ``jaxobs.batch_mesh()``,
+    every device of every process; ``jaxobs.batch_mesh(jax.devices()[:1])`` keeps to one device).
     """
     import xarray as xr
 
     if not designs:
         raise ValueError("run_study needs at least one design")
-    for name in axes:  # names and values are checked by grid_signals
-        if len(axes[name]) < 1:
-            raise ValueError(f"study axis {name!r} needs at least one value")
+    if isinstance(axes, dict):
+        for name in axes:  # names and values are checked by grid_signals
+            if len(axes[name]) < 1:
+                raise ValueError(f"study axis {name!r} needs at least one value")
+        sampler = Random(axes, sample, seed) if sample else Grid(axes)
+    elif isinstance(axes, AbstractSampler):
+        sampler = axes
+    else:
+        raise ValueError(f"axes must be a dict of axis values or a sampler (jaxobs.scenarios), got {axes!r}")
     if not horizon > t_event >= 0:
         raise ValueError(f"horizon must exceed t_event >= 0, got t_event={t_event}, horizon={horizon}")
     if chunk_size < 1:
         raise ValueError(f"chunk_size must be >= 1, got {chunk_size}")
-    if mesh is not None and not (isinstance(mesh, jax.sharding.Mesh) and mesh.axis_names == (sharding.AXIS,)):
-        raise ValueError(f"mesh must be a one-axis jax.sharding.Mesh named 'batch' (jaxobs.batch_mesh), got {mesh!r}")
     steady_from = t_event + 0.75 * (horizon - t_event) if steady_from is None else steady_from
-    names = list(axes)
-    if sample:
-        rng = np.random.default_rng(seed)
-        combos = [tuple(rng.uniform(min(axes[n]), max(axes[n])) for n in names) for _ in range(sample)]
-    else:
-        combos = list(itertools.product(*(list(map(float, axes[n])) for n in names)))
-    n = len(combos)
+    recordings = isinstance(sampler, Recordings)
     freq = float(next(iter(designs.values())).omega_n) / (2 * math.pi)
-    sigs = grid_signals(names, combos, t_event, freq, seed=seed)
-    mesh = sharding.batch_mesh() if mesh is None else mesh
-    n_dev = mesh.devices.size
-    # a chunk divides over the devices (padded up to a multiple of their count): every device gets an equal share
-    chunk = -(-min(chunk_size, n) // n_dev) * n_dev
-    pad = (-n) % chunk
-    if pad:
-        sigs = jax.tree.map(lambda x: jnp.concatenate([x, jnp.repeat(x[-1:], pad, axis=0)]), sigs)
-    if n_dev > 1:
-        # every process holds every scenario (built from the axes and the seed, identically everywhere) and
-        # places only its own devices' rows of each chunk (sharding.global_batch)
-        sigs = jax.tree.map(np.asarray, sigs)
 
-    results = {}
+    def n_period(obs) -> int:
+        # settle on the one-period average of f̂: one period of the grid's frequency (a recording's: the
+        # design's nominal one), in samples
+        f = float(obs.omega_n) / (2 * math.pi) if recordings else freq
+        return max(1, int(round(1.0 / (f * obs.ts))))
+
+    def metrics(sol, n_per):
+        m = study_metrics(sol, t_event, steady_from, band_hz, n_per)
+        m["ok"] = sol.ok & jnp.all(jnp.stack([jnp.isfinite(m[k]) for k in STUDY_METRICS]))
+        return m
+
     t0 = time.time()
-    bar = Progress(progress, n * len(designs), "study", unit="scenario")
-    for dname, obs in designs.items():
-        if n_dev > 1:
-            # the gains as host values: each process passes its own copy, the same on all, to the global jit
-            obs = jax.tree.map(lambda x: np.asarray(x) if eqx.is_array(x) else x, obs)
-
-        @eqx.filter_jit
-        def run_chunk(obs, batch):
-            def one(sig):
-                sol = simulate(OnSignal(obs, sig), horizon)
-                m = _metrics(sol, t_event, steady_from, band_hz, max(1, int(round(1.0 / (freq * obs.ts)))))
-                ok = sol.ok & jnp.all(jnp.stack([jnp.isfinite(m[k]) for k in STUDY_METRICS]))
-                return m, ok
-
-            if n_dev == 1:
-                return jax.vmap(one)(batch)
-            # each device's share in one piece (tile = the share): the same per-device program as one
-            # device's vmap, no lax.map around it; scenarios are independent, so nothing is communicated
-            return sharding.map_batch(one, batch, mesh=mesh, tile=chunk // n_dev)
-
-        parts_m, parts_ok = [], []
-        for start in range(0, n + pad, chunk):
-            batch = jax.tree.map(lambda x: x[start : start + chunk], sigs)
-            if n_dev > 1:
-                batch = sharding.global_batch(batch, mesh)
-            bar.stage(f"{dname} (compiling, then {chunk} scenarios a chunk)" if start == 0 else dname)
-            # the per-scenario results, whole, on every process (an all-gather when the mesh spans processes)
-            m, ok = sharding.gather_batch(run_chunk(obs, batch))
-            parts_m.append(m)
-            parts_ok.append(ok)
-            bar.update(min(chunk, n - start))
-        results[dname] = (
-            {k: np.concatenate([p[k] for p in parts_m])[:n] for k in (*STUDY_METRICS, "settled", "lost_lock")},
-            np.concatenate(parts_ok)[:n],
-        )
-
-    bar.close()
+    run = run_scenarios(
+        designs,
+        sampler,
+        OnSignal,
+        metrics,
+        horizon=horizon,
+        build=lambda names, points: grid_signals(names, points, t_event, freq, seed=seed),
+        static=n_period,
+        chunk_size=chunk_size,
+        mesh=mesh,
+        progress=progress,
+        label="study",
+    )
+    n = len(run.points)
+    results = {d: (v, v["ok"]) for d, v in run.values.items()}
     dnames = list(designs)
-    if sample:
-        dims = ("design", "sample")
-        shape = (n,)
-        coords = {"design": dnames, "sample": ("sample", np.arange(n), _meta("1", "scenario drawn at random"))}
-        for i, name in enumerate(names):
-            coords[name] = ("sample", np.asarray([c[i] for c in combos]), _meta(*AXIS_META[name]))
-    else:
-        dims = ("design", *names)
-        shape = tuple(len(axes[nm]) for nm in names)
-        coords = {
-            "design": dnames,
-            **{nm: (nm, np.asarray(axes[nm], dtype=float), _meta(*AXIS_META[nm])) for nm in names},
-        }
+    dims, shape, coords = sampler.layout(_axis_meta)
+    dims = ("design", *dims)
     coords["design"] = ("design", dnames, {"long_name": "observer design"})
     gains_present = [g for g in GAIN_NAMES if any(hasattr(o, g) for o in designs.values())]
     coords["gain_name"] = ("gain_name", gains_present, {"long_name": "name of the observer's gain field"})
@@ -255,10 +226,11 @@ def run_study(
         lost.astype(np.int8),
         _meta("1", LOST_LOCK_LONG_NAME),
     )
+    what = "recordings on which the design lost lock" if recordings else "scenarios that lost lock"
     data["lost_lock_count"] = (
         ("design",),
         lost.reshape(len(dnames), -1).sum(axis=1).astype(np.int64),
-        _meta("1", "scenarios that lost lock (diverged ones included)"),
+        _meta("1", f"{what} (diverged ones included)"),
     )
     gain = [[float(getattr(obs, g)) if hasattr(obs, g) else np.nan for g in gains_present] for obs in designs.values()]
     data["gain"] = (
@@ -273,9 +245,11 @@ def run_study(
         steady_from=steady_from,
         band_hz=band_hz,
         scenarios=n,
-        sampling="random" if sample else "grid",
-        seed=seed,
-        **_provenance(),
+        sampling=sampler.sampling,
+        **({} if recordings else {"seed": getattr(sampler, "seed", seed)}),
+        **provenance(
+            "jaxobs.study.run_study", digests={"recordings": " ".join(sampler.sha256)} if recordings else None
+        ),
     )
     seconds = time.time() - t0
     return (ds, seconds) if return_seconds else ds
@@ -285,24 +259,10 @@ def _meta(units: str, long_name: str) -> dict:
     return {"units": units, "long_name": long_name}
 
 
-def _provenance() -> dict:
-    """The versions that made a Dataset (strings: NetCDF attributes)."""
-    from importlib.metadata import PackageNotFoundError, version
-
-    def v(pkg):
-        try:
-            return version(pkg)
-        except PackageNotFoundError:
-            return "unknown"
-
-    return {
-        "source": "jaxobs.study.run_study",
-        "jaxobs_version": v("jaxobs"),
-        "jax_version": jax.__version__,
-        "jaxlib_version": v("jaxlib"),
-        "equinox_version": v("equinox"),
-        "numpy_version": np.__version__,
-    }
+def _axis_meta(name: str) -> dict:
+    if name == "recording":
+        return {"long_name": "recording file (relative to the study file)"}
+    return _meta(*AXIS_META[name])
 
 
 def worst_cases(ds, metric: str, k: int = 5):

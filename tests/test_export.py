@@ -525,3 +525,16 @@ def test_a_primitive_without_c_is_refused_by_name(tmp_path):
     ):
         export_observer(_Looping(), tmp_path)
     assert not (tmp_path / "observer.c").exists()
+
+
+def test_the_export_runs_its_c_in_python_before_writing(tmp_path, monkeypatch):
+    """Without a C compiler too: the emitted statements run on float32 numpy scalars at random states and
+    inputs and must give the JAX step's new state and outputs, so a code generator that turns a subtraction
+    into an addition writes nothing."""
+    from tuning.export.lower import Emitter
+
+    binary = Emitter.binary
+    monkeypatch.setattr(Emitter, "binary", lambda self, p, a, b: binary(self, "add" if p == "sub" else p, a, b))
+    with pytest.raises(AssertionError, match="generated C of SOGIFLL differs from the JAX step at "):
+        export_observer(linear.sogi_fll_closed_form(), tmp_path)
+    assert not (tmp_path / "observer.c").exists()

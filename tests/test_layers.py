@@ -30,6 +30,7 @@ LAYERS = [
         "jaxobs.system",
         "jaxobs._time",
         "jaxobs.progress",
+        "jaxobs.provenance",
         "jaxobs._cache",
     ),
     # integration rules (and check_rule)
@@ -54,6 +55,8 @@ LAYERS = [
     ("jaxobs.linear._models", "jaxobs.linear._fll"),
     ("jaxobs.linear",),
     ("jaxobs",),
+    # the one study runner (samplers in jaxobs.scenarios)
+    ("jaxobs.runner",),
     # the library's own applications: studies, the demo, the papers' reproductions, figures, benchmarks
     (
         "jaxobs.study",
@@ -69,7 +72,8 @@ LAYERS = [
     # the C export's code generator (jaxpr -> C) is beside the rest: it knows no observer
     ("tuning.export.ir",),
     ("tuning.export.lower",),
-    ("tuning.export.codegen", "tuning.params", "tuning.solvers"),
+    ("tuning.export.codegen", "tuning.params", "tuning.solvers", "tuning.aggregations"),
+    ("tuning.strategies",),
     ("tuning.objective", "tuning.report", "tuning.targets"),
     ("tuning.structure",),
     ("tuning.job.fields",),

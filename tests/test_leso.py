@@ -153,7 +153,6 @@ def test_vmap_over_64_scenarios_and_gradients():
         w0 = s.speed_ref.values[0] * PAR.p
         obs = jaxobs.FALESO(PAR.Rs, PAR.Lq, K1_FA, K2_FA, omega0_pll=1.0)
         obs = eqx.tree_at(lambda o: (o.Lq, o.omega0_pll), obs, (s.est_par.Lq, w0))
-        s = eqx.tree_at(lambda x: x.omega_m0, s, s.speed_ref.values[0])
         sol = jaxobs.simulate(D.ClosedLoop(drv, obs, s), 0.8)
         return jnp.mean(jnp.degrees(wrap(sol.outputs.obs.theta - sol.outputs.theta_e))[-1000:]), sol.ok
 

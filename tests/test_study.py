@@ -228,3 +228,77 @@ def test_worst_cases_put_diverged_scenarios_first():
         (0.0, 0.3, False, False),
     ]
     assert len(worst_cases(ds, "m", 10)) == 4  # nothing dropped
+
+
+def test_samplers_points_and_layouts():
+    """Grid: the Cartesian product, row-major; Random: numpy's uniform draws in axis order; Sobol and LHS:
+    scipy.stats.qmc scaled into [min, max] (an axis of one value stays at it); a sample's layout is one
+    ``sample`` dim with the axes as coordinates."""
+    from scipy.stats import qmc
+
+    from jaxobs.scenarios import LHS, Grid, Random, Sobol
+
+    axes = {"dc": [0.0, 0.1], "sag": [0.2, 0.5, 0.3]}
+    g = Grid(axes)
+    assert g.points()[:4] == [(0.0, 0.2), (0.0, 0.5), (0.0, 0.3), (0.1, 0.2)] and len(g.points()) == 6
+    dims, shape, coords = g.layout(lambda n: {"units": "1"})
+    assert dims == ("dc", "sag") and shape == (2, 3) and list(coords["sag"][1]) == [0.2, 0.5, 0.3]
+    rng = np.random.default_rng(7)
+    want = [(rng.uniform(0.0, 0.1), rng.uniform(0.2, 0.5)) for _ in range(3)]
+    assert Random(axes, 3, 7).points() == want
+    u = qmc.Sobol(2, scramble=True, seed=3).random(4)
+    np.testing.assert_array_equal(np.asarray(Sobol(axes, 4, 3).points()), qmc.scale(u, [0.0, 0.2], [0.1, 0.5]))
+    pts = np.asarray(LHS({"dc": [0.05], "sag": [0.2, 0.5]}, 5, 1).points())
+    assert np.all(pts[:, 0] == 0.05) and np.all((pts[:, 1] >= 0.2) & (pts[:, 1] <= 0.5))
+    dims, shape, coords = Sobol(axes, 4, 3).layout(lambda n: {"units": "1"})
+    assert dims == ("sample",) and shape == (4,) and coords["dc"][0] == "sample"
+    assert coords["sample"][2]["long_name"] == "scenario drawn by sobol"
+    with pytest.raises(ValueError, match="sample must be an integer >= 1"):
+        Sobol(axes, 0)
+    with pytest.raises(ValueError, match="axis 'dc' needs at least one value"):
+        Grid({"dc": []})
+
+
+def test_the_runner_takes_any_sampler_factory_and_metrics():
+    """run_study on a Sobol sampler is the one runner with the FLL factory; the runner itself takes a user's
+    factory and metrics and gives the same numbers on the same points."""
+    import jax.numpy as jnp
+
+    from jaxobs.runner import run_scenarios
+    from jaxobs.scenarios import Sobol, grid_signals
+
+    obs = linear.sogi_fll_closed_form()
+    sampler = Sobol({"dc": [0.0, 0.1], "freq_step": [-1.0, 1.0]}, 4, seed=2)
+    ds = run_study({"a": obs}, sampler, horizon=0.2, progress=False)
+    assert ds["rms_phase"].dims == ("design", "sample") and ds.attrs["sampling"] == "sobol"
+    np.testing.assert_array_equal(ds["dc"].values, [p[0] for p in sampler.points()])
+    steady = ds.attrs["steady_from"]
+
+    def rms_phase(sol, _):
+        return {"rms": M.rms(M.wrap(sol.outputs.obs.theta - sol.outputs.truth.theta), sol.t >= steady)}
+
+    freq = float(obs.omega_n) / (2 * math.pi)
+    run = run_scenarios(
+        {"a": obs},
+        sampler,
+        jaxobs.OnSignal,
+        rms_phase,
+        horizon=0.2,
+        build=lambda names, pts: grid_signals(names, pts, ds.attrs["t_event"], freq),
+        chunk_size=3,  # two chunks, the last padded
+    )
+    np.testing.assert_allclose(run.values["a"]["rms"], ds["rms_phase"].sel(design="a").values, rtol=1e-12)
+    assert bool(jnp.all(jnp.isfinite(run.values["a"]["rms"])))
+
+
+def test_provenance_versions_and_digests(tmp_path):
+    from jaxobs.provenance import provenance, sha256, versions
+
+    v = versions()
+    assert v["jax"] == jax.__version__ and v["numpy"] == np.__version__ and isinstance(v["x64"], bool)
+    f = tmp_path / "a.toml"
+    f.write_bytes(b"x = 1\n")
+    assert sha256(f) == sha256(b"x = 1\n") == hashlib.sha256(b"x = 1\n").hexdigest()
+    attrs = provenance("here", digests={"study": sha256(f)})
+    assert attrs["source"] == "here" and attrs["study_sha256"] == sha256(f) and attrs["xarray_version"]
+    assert attrs == provenance("here", digests={"study": sha256(f)})  # nothing that changes between runs

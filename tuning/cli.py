@@ -282,83 +282,26 @@ def _cmd_drive_study(name, designs, axes, opts, out: Path, quiet: bool, provenan
 
 
 def _recording_study(designs: dict, *, recording, t_event, horizon, steady_from, band_hz, progress, **_):
-    """Every FLL design on every recording of ``[study.recording]`` (one ``jit(vmap)`` per design): the
-    study's metrics and flags (``jaxobs.study``: settling, ripple, rms phase, ITAE, IAE, lost lock, against
-    the recordings' truth columns), a Dataset of dims (design, recording) with units and the files' sha256."""
-    import math
-    import time
-
-    import equinox as eqx
+    """Every FLL design on every recording of ``[study.recording]``: :func:`jaxobs.study.run_study` with a
+    :class:`jaxobs.scenarios.Recordings` sampler (dims (design, recording), the files' sha256); (Dataset, s)."""
     import jax
-    import jax.numpy as jnp
-    import numpy as np
-    import xarray as xr
 
-    from jaxobs.progress import Progress
-    from jaxobs.simulate import OnSignal, simulate
-    from jaxobs.study import LOST_LOCK_LONG_NAME, METRIC_META, STUDY_METRICS, _metrics
+    from jaxobs.scenarios import Recordings
+    from jaxobs.study import run_study
 
     rec = recording
-    sigs = load_recordings(rec, "grid")
-    t0 = time.time()
-    results = {}
-    with Progress(progress, len(designs), "study (recordings)", unit="design") as bar:
-        for dname, obs in designs.items():
-            n_period = max(1, int(round(2 * math.pi / (float(obs.omega_n) * obs.ts))))
-
-            @eqx.filter_jit
-            def run(obs, batch):
-                def one(sig):
-                    sol = simulate(OnSignal(obs, sig), horizon)
-                    m = _metrics(sol, t_event, steady_from, band_hz, n_period)
-                    return m, sol.ok & jnp.all(jnp.stack([jnp.isfinite(m[k]) for k in STUDY_METRICS]))
-
-                return jax.vmap(one)(batch)
-
-            bar.stage(f"{dname} (compiling, then {len(rec.files)} recording(s))")
-            m, ok = run(obs, sigs)
-            results[dname] = (jax.tree.map(np.asarray, m), np.asarray(ok))
-            bar.update()
-    dims, names = ("design", "recording"), list(results)
-    data = {}
-    for k in STUDY_METRICS:
-        vals = np.stack([np.where(results[d][1], results[d][0][k], np.nan) for d in names])
-        data[k] = (dims, vals, {"units": METRIC_META[k][0], "long_name": METRIC_META[k][1]})
-    data["settled"] = (
-        dims,
-        np.stack([results[d][0]["settled"] & results[d][1] for d in names]),
-        {"units": "1", "long_name": "settled by the horizon (False: settling_freq is censored at horizon - t_event)"},
-    )
-    data["diverged"] = (
-        dims,
-        np.stack([(~results[d][1]).astype(np.int8) for d in names]),
-        {"units": "1", "long_name": "simulation diverged or a metric is not finite (1: its metrics are NaN)"},
-    )
-    lost = np.stack([results[d][0]["lost_lock"] | ~results[d][1] for d in names])
-    data["lost_lock"] = (dims, lost.astype(np.int8), {"units": "1", "long_name": LOST_LOCK_LONG_NAME})
-    data["lost_lock_count"] = (
-        ("design",),
-        lost.sum(axis=1).astype(np.int64),
-        {"units": "1", "long_name": "recordings on which the design lost lock (diverged ones included)"},
-    )
-    coords = {
-        "design": ("design", names, {"long_name": "observer design"}),
-        "recording": ("recording", list(rec.files), {"long_name": "recording file (relative to the study file)"}),
-    }
-    ds = xr.Dataset(data, coords=coords)
-    ds.attrs.update(
+    sampler = Recordings(load_recordings(rec, "grid"), rec.files, rec.sha256)
+    return run_study(
+        designs,
+        sampler,
         t_event=t_event,
         horizon=horizon,
         steady_from=steady_from,
         band_hz=band_hz,
-        scenarios=len(rec.files),
-        sampling="recordings",
-        recordings_sha256=" ".join(rec.sha256),
-        source="jaxobs study (recordings)",
-        jaxobs_version=jaxobs.__version__,
-        jax_version=jax.__version__,
+        progress=progress,
+        return_seconds=True,
+        mesh=jaxobs.batch_mesh(jax.devices()[:1]),
     )
-    return ds, time.time() - t0
 
 
 def _cmd_study(args) -> int:
@@ -653,7 +596,7 @@ def _cmd_tune(args) -> int:
         drive = "" if job.drive is None else f", {job.drive.loop} drive on {job.drive.machine}"
         print(
             f"{path}: OK — {job.component}, free gains {', '.join(g.name for g in job.gains)}, {n} scenarios"
-            f"{drive}, solver {job.solver.kind}"
+            f"{drive}, solver {job.solver.name}"
         )
         return 0
     out = Path(args.out) if args.out else Path("out") / safe_name(job.name)

@@ -1,8 +1,9 @@
 """Objectives: a scenario batch × simulation × metric × aggregation over the batch.
 
 Per scenario the value is a weighted sum of metrics of one simulation; over the
-batch the values are aggregated by the mean, a smooth worst case (log-sum-exp
-with a temperature) or the CVaR (mean of the worst (1 − α) fraction).
+batch the values are combined by an aggregation object (:mod:`tuning.aggregations`:
+the mean, a smooth worst case (log-sum-exp with a temperature) or the CVaR, the
+mean of the worst (1 − α) fraction).
 
 Divergence.  A scenario whose simulation is not finite, or whose value or
 gradient is not finite, is given a large finite ``penalty`` and a zero gradient
@@ -27,9 +28,10 @@ from jaxobs import metrics as M
 from jaxobs.drive import ClosedLoop
 from jaxobs.simulate import OnSignal, simulate
 
+from .aggregations import AbstractAggregation, Mean
 from .params import Parametrization
 
-__all__ = ["METRICS", "DRIVE_METRICS", "LOST_LOCK", "LOST_SYNC_DEG", "Term", "Objective", "aggregate"]
+__all__ = ["METRICS", "DRIVE_METRICS", "LOST_LOCK", "LOST_SYNC_DEG", "Term", "MetricContext", "Objective"]
 
 
 # --------------------------------------------------------------------------
@@ -186,28 +188,6 @@ class Term:
 
 
 # --------------------------------------------------------------------------
-# aggregation over the batch
-# --------------------------------------------------------------------------
-
-
-def aggregate(values, kind: str, alpha: float = 0.9, temperature: float | None = None):
-    """Aggregate per-scenario values: ``mean``, ``max`` (smooth, log-sum-exp) or ``cvar``.
-
-    ``max`` uses ``temperature`` in the units of the values (default: 1 % of
-    their mean magnitude); ``cvar`` the mean of the largest ⌈(1 − α)·B⌉ values.
-    """
-    if kind == "mean":
-        return jnp.mean(values)
-    if kind == "max":
-        t = temperature if temperature is not None else 0.01 * jax.lax.stop_gradient(jnp.mean(jnp.abs(values)) + 1e-30)
-        return M.smooth_max(values, t) + t * jnp.log(values.shape[0])
-    if kind == "cvar":
-        k = max(1, math.ceil((1 - alpha) * values.shape[0]))
-        return jnp.mean(jnp.sort(values)[-k:])
-    raise ValueError(f"aggregate must be 'mean', 'max' or 'cvar', got {kind!r}")
-
-
-# --------------------------------------------------------------------------
 # the objective
 # --------------------------------------------------------------------------
 
@@ -220,29 +200,34 @@ class Objective:
         component,
         param: Parametrization,
         scenarios,
+        *,
         horizon: float,
         terms: list[Term],
         ctx: MetricContext,
-        agg: str = "mean",
-        alpha: float = 0.9,
-        temperature: float | None = None,
+        aggregation: AbstractAggregation = Mean(),
         penalty: float = 1e3,
         drive=None,
         bind=None,
     ):
-        """``drive``: run each scenario (a drive Scenario) closed loop with this Drive, the component
-        as its observer; ``bind(component, scenario)``: adapt the component to the scenario (the
-        parameters an observer assumes, its initial speed) before the run."""
+        """``component``: the module whose free gains ``param`` sets; ``scenarios``: the batch (leading axis
+        the scenarios); ``horizon``: simulated seconds per scenario; ``terms``: the weighted metrics summed
+        per scenario; ``ctx``: the metrics' event time, steady window and bands; ``aggregation``: how the
+        per-scenario values become one (:class:`~tuning.aggregations.Mean` by default); ``penalty``: the
+        value of a diverged scenario.  ``drive``: run each scenario (a drive Scenario) closed loop with
+        this Drive, the component as its observer; ``bind(component, scenario)``: adapt the component to
+        the scenario (the parameters an observer assumes, its initial speed) before the run."""
         for term in terms:
             if term.metric not in METRICS:
                 raise ValueError(f"objective metric {term.metric!r} is unknown; known: {', '.join(METRICS)}")
+        if not isinstance(aggregation, AbstractAggregation):
+            raise ValueError(f"Objective.aggregation must be tuning.Mean(), SmoothMax() or CVaR(), got {aggregation!r}")
         self.component = component
         self.param = param
         self.scenarios = scenarios
         self.horizon = float(horizon)
         self.terms = list(terms)
         self.ctx = ctx
-        self.agg, self.alpha, self.temperature, self.penalty = agg, alpha, temperature, float(penalty)
+        self.aggregation, self.penalty = aggregation, float(penalty)
         self.drive, self.bind = drive, bind
         self._vg = eqx.filter_jit(self._per_scenario_value_and_grad)
         self._metrics = eqx.filter_jit(self._per_scenario_metrics)
@@ -286,7 +271,7 @@ class Objective:
 
     def _aggregate_with_grad(self, theta):
         v, g, _ = self._vg(theta)
-        agg_v, w = jax.value_and_grad(lambda vv: aggregate(vv, self.agg, self.alpha, self.temperature))(v)
+        agg_v, w = jax.value_and_grad(lambda vv: self.aggregation(vv))(v)
         return agg_v, w @ g
 
     def value_and_grad(self, theta):
@@ -295,7 +280,7 @@ class Objective:
     def value_grad_diverged(self, theta):
         """The objective, its gradient and how many scenarios diverged, from one batch evaluation."""
         v, g, good = self._vg(theta)
-        agg_v, w = jax.value_and_grad(lambda vv: aggregate(vv, self.agg, self.alpha, self.temperature))(v)
+        agg_v, w = jax.value_and_grad(lambda vv: self.aggregation(vv))(v)
         return agg_v, w @ g, int(jnp.sum(~good))
 
     # --- reporting
@@ -339,7 +324,7 @@ class Objective:
         """:meth:`scores` from :meth:`per_scenario`'s output.  Where every scenario diverged the metrics'
         means and worsts are ``None`` (there is nothing to average), and ``"null_reason"`` says why."""
         out = {
-            "objective": float(aggregate(total, self.agg, self.alpha, self.temperature)),
+            "objective": float(self.aggregation(total)),
             "diverged": int(jnp.sum(~good)),
         }
         if LOST_LOCK in mets:  # scenarios whose estimate ends far from the truth, the diverged ones included

@@ -60,7 +60,6 @@ it (nothing is written there), and its content never reaches an error message.
 
 from __future__ import annotations
 
-import hashlib
 import inspect
 import math
 from dataclasses import dataclass, field
@@ -70,6 +69,7 @@ import jaxobs
 from jaxobs import linear
 from jaxobs.drive import BENCH_MACHINES, bench_machine
 from jaxobs.drive_study import DRIVE_STUDY_AXES
+from jaxobs.provenance import sha256
 from jaxobs.study import STUDY_AXES
 
 from .job import (
@@ -159,7 +159,7 @@ def load_study(path) -> StudySpec:
     path = Path(path)
     raw, data = read_toml(path, WHAT)  # size, nesting and encoding checked before parsing
     spec = parse_study(raw, base=path.resolve().parent)
-    spec.provenance = {"study_file": path.name, "study_sha256": hashlib.sha256(data).hexdigest(), **spec.provenance}
+    spec.provenance = {"study_file": path.name, "study_sha256": sha256(data), **spec.provenance}
     return spec
 
 
@@ -262,7 +262,7 @@ def _result(spec: dict, where: str, base: Path, family: tuple, out: dict | None 
             raise ValueError(f"component {show(res['component'])} is not one of {', '.join(family)}")
         comp = tuned_component(res)
         if out is not None:
-            out.update(result=res, sha256=hashlib.sha256(p.read_bytes()).hexdigest(), path=rel)
+            out.update(result=res, sha256=sha256(p), path=rel)
         return comp
     except (ValueError, TypeError, KeyError, AttributeError, ArithmeticError) as e:  # a malformed result
         raise JobError(f"{where}.result", str(e)) from None

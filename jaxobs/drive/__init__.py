@@ -44,8 +44,10 @@ from .plant import PlantInput as PlantInput
 from .plant import PlantOutput as PlantOutput
 from .plant import PlantState as PlantState
 from .plant import plant_field as plant_field
+from .scenario import DRIVE_AXES as DRIVE_AXES
 from .scenario import GRID_AXES as GRID_AXES
 from .scenario import Batch as Batch
 from .scenario import Profile as Profile
 from .scenario import Scenario as Scenario
 from .scenario import grid as grid
+from .scenario import scenario_batch as scenario_batch

@@ -4,15 +4,17 @@ A :class:`Scenario` is a PyTree: the true machine (``par``), what controller and
 observer assume (``est_par``), the speed-reference and load-torque profiles,
 sensor errors, the inverter dead time, a PRNG key for the noise, and the
 initial state.  A batch is a Scenario whose leaves carry a leading axis;
-:func:`grid` builds one from named axes (``speed × mismatch × offset``) and
-returns the axis names and coordinates with it, so a study's results can be
-labelled.
+:func:`scenario_batch` builds one from points of named axes (:data:`DRIVE_AXES`, the one set of
+drive-axis names that studies, tuning jobs and :func:`grid` share), :func:`grid` from the Cartesian
+product of axes (``speed × mismatch × offset``), returning the axis names and coordinates with it, so a
+study's results can be labelled.
 """
 
 from __future__ import annotations
 
 import itertools
-from collections.abc import Callable, Sequence
+import math
+from collections.abc import Sequence
 from typing import Literal
 
 import equinox as eqx
@@ -24,7 +26,7 @@ from .._validate import as_float, check_nonnegative, check_real
 from .hardware import Sensors
 from .machine import RPM, PMSMParams
 
-__all__ = ["Profile", "Scenario", "Batch", "grid", "GRID_AXES"]
+__all__ = ["Profile", "Scenario", "Batch", "grid", "scenario_batch", "DRIVE_AXES", "GRID_AXES"]
 
 
 class Profile(eqx.Module):
@@ -155,70 +157,138 @@ class Batch(eqx.Module):
         return int(np.prod(self.shape))
 
 
-def _set_speed(s: Scenario, v):
-    return eqx.tree_at(lambda x: x.speed_ref, s, Profile.constant(v * RPM))
-
-
-def _set_load(s: Scenario, v):
-    return eqx.tree_at(lambda x: x.load, s, Profile.constant(v))
-
-
-def _set_est(field):
-    def f(s: Scenario, v):
-        return eqx.tree_at(lambda x: getattr(x.est_par, field), s, getattr(s.par, field) * (1 + v))
-
-    return f
-
-
-def _set_est_L(s: Scenario, v):
-    return eqx.tree_at(lambda x: (x.est_par.Ld, x.est_par.Lq), s, (s.par.Ld * (1 + v), s.par.Lq * (1 + v)))
-
-
-def _set_sensor(field, idx):
-    def f(s: Scenario, v):
-        arr = getattr(s.sensors, field).at[idx].set(v)
-        return eqx.tree_at(lambda x: getattr(x.sensors, field), s, arr)
-
-    return f
-
-
-def _set_seed(s: Scenario, v):
-    return eqx.tree_at(lambda x: x.key, s, jax.random.PRNGKey(int(v)))
-
-
-GRID_AXES: dict[str, Callable] = {
-    "speed_rpm": _set_speed,  # constant speed reference, r/min
-    "load_nm": _set_load,  # constant load torque, N·m
-    "dRs": _set_est("Rs"),  # est_par.Rs = par.Rs (1 + v)
-    "dL": _set_est_L,  # est_par.Ld, Lq = par (1 + v)
-    "dLq": _set_est("Lq"),
-    "dpsi": _set_est("psi_f"),
-    "u_offset_alpha": _set_sensor("u_offset", 0),
-    "u_offset_beta": _set_sensor("u_offset", 1),
-    "i_offset_alpha": _set_sensor("i_offset", 0),
-    "i_offset_beta": _set_sensor("i_offset", 1),
-    "dead_time": lambda s, v: eqx.tree_at(lambda x: x.dead_time, s, as_float(v)),
-    "seed": _set_seed,
+# The one table of drive-scenario axes: axis -> (unit, allowed range, what it is).  Studies, tuning jobs
+# and D.grid take these names; relative mismatches are of the assumed machine against the true one
+# (est = true · (1 + v)), ``dJ`` moves the true inertia (the controller keeps the nominal one).
+DRIVE_AXES: dict[str, tuple[str, tuple[float, float], str]] = {
+    "speed_rpm": ("r/min", (1.0, 1e5), "speed (and its reference before the event)"),
+    "load_nm": ("N·m", (-1e4, 1e4), "load torque before the event"),
+    "speed_step_rpm": ("r/min", (-1e5, 1e5), "step of the speed reference at t_event"),
+    "load_step_nm": ("N·m", (-1e4, 1e4), "step of the load torque at t_event"),
+    "dRs": ("1", (-0.95, 10.0), "relative error of the assumed stator resistance Rs"),
+    "dL": ("1", (-0.95, 10.0), "relative error of both assumed inductances Ld and Lq"),
+    "dLd": ("1", (-0.95, 10.0), "relative error of the assumed d-axis inductance Ld"),
+    "dLq": ("1", (-0.95, 10.0), "relative error of the assumed q-axis inductance Lq"),
+    "dpsi": ("1", (-0.95, 10.0), "relative error of the assumed PM flux linkage"),
+    "dJ": ("1", (-0.95, 100.0), "relative change of the true inertia (controller: nominal)"),
+    "i_noise": ("A", (0.0, 1e3), "current-sensor noise (standard deviation)"),
+    "u_noise": ("V", (0.0, 1e4), "voltage-sensor noise (standard deviation)"),
+    "dead_time": ("s", (0.0, 1e-4), "inverter dead time"),
+    "u_offset_alpha": ("V", (-1e4, 1e4), "voltage-sensor offset, alpha axis"),
+    "u_offset_beta": ("V", (-1e4, 1e4), "voltage-sensor offset, beta axis"),
+    "i_offset_alpha": ("A", (-1e3, 1e3), "current-sensor offset, alpha axis"),
+    "i_offset_beta": ("A", (-1e3, 1e3), "current-sensor offset, beta axis"),
+    "seed": ("1", (0.0, 2.0**31 - 1), "noise seed (PRNGKey(seed) of the scenario)"),
 }
+GRID_AXES = tuple(DRIVE_AXES)  # the names D.grid takes
 
 
-def grid(base: Scenario, **axes: Sequence[float]) -> Batch:
+def _two_knots(b: int, t_event: float, before, after) -> Profile:
+    """A batch of ``b`` step profiles: ``before`` until ``t_event``, ``after`` from it on."""
+    p = Profile([0.0, t_event], [0.0, 0.0], kind="step")
+    p = jax.tree.map(lambda x: jnp.broadcast_to(x, (b,) + jnp.shape(x)), p)
+    return eqx.tree_at(lambda q: q.values, p, jnp.stack([before, after], axis=1))
+
+
+def _held(prof: Profile, v) -> Profile:
+    """The batched profile ``prof`` held at ``v`` (one value per scenario) at every knot."""
+    return eqx.tree_at(lambda q: q.values, prof, jnp.broadcast_to(v[:, None], prof.values.shape))
+
+
+def scenario_batch(base: Scenario, names, points, *, seed: int | None = None, t_event: float = 0.0) -> Scenario:
+    """``base`` with a leading axis, one scenario per point (a tuple of values for the axes ``names``,
+    :data:`DRIVE_AXES`), built vectorized (no constructor per scenario).
+
+    ``speed_rpm`` holds the speed reference at the value and *starts the machine there* (``omega_m0``: the
+    scenario starts steady, DESIGN.md); ``load_nm`` holds the load; ``speed_step_rpm`` and ``load_step_nm``
+    make the reference and the load step profiles (the value before, plus the step from ``t_event`` s on).
+    The mismatch axes set the assumed machine from the true one; a noise axis makes the sensors noisy.
+    The noise key: ``PRNGKey(v)`` of a ``seed`` axis, else ``fold_in(PRNGKey(seed), i)`` of scenario i when
+    ``seed`` is given, else the base's.  A ``ValueError`` names an unknown axis or a value out of range.
+    """
+    names = tuple(names)
+    if not (math.isfinite(t_event) and t_event >= 0):
+        raise ValueError(f"t_event must be a finite number of seconds >= 0, got {t_event!r}")
+    for name in names:
+        if name not in DRIVE_AXES:
+            raise ValueError(f"grid axis {name!r} is unknown; known axes: {', '.join(DRIVE_AXES)}")
+    if "dL" in names and ({"dLd", "dLq"} & set(names)):
+        raise ValueError("grid axis dL sets both inductances: give dL or dLd/dLq, not both")
+    b = len(points)
+    cols = {n: np.asarray([p[i] for p in points], dtype=float).reshape(b) for i, n in enumerate(names)}
+    for name, c in cols.items():
+        unit, (lo, hi), _ = DRIVE_AXES[name]
+        if not np.all(np.isfinite(c)) or np.any(c < lo) or np.any(c > hi):
+            raise ValueError(f"grid axis {name} must be in [{lo:g}, {hi:g}] {unit}")
+    if ({"i_noise", "u_noise"} & set(names)) and not base.sensors.noisy:
+        # the noise flag is static (Sensors): a noisy Sensors with the base's offsets, gains and levels
+        s0 = base.sensors
+        noisy = Sensors(s0.i_offset, s0.u_offset, s0.i_gain - 1.0, i_noise=1.0, u_noise=1.0)
+        noisy = eqx.tree_at(lambda s: (s.i_gain, s.i_noise, s.u_noise), noisy, (s0.i_gain, s0.i_noise, s0.u_noise))
+        base = eqx.tree_at(lambda s: s.sensors, base, noisy)
+    sc = jax.tree.map(lambda x: jnp.broadcast_to(x, (b,) + jnp.shape(x)), base)
+
+    def col(name):
+        return jnp.asarray(cols[name])
+
+    if "speed_rpm" in cols:
+        speed = col("speed_rpm") * RPM
+        sc = eqx.tree_at(lambda s: (s.speed_ref, s.omega_m0), sc, (_held(sc.speed_ref, speed), speed))
+    if "speed_step_rpm" in cols:
+        w0 = sc.speed_ref.values[:, 0]
+        ref = _two_knots(b, t_event, w0, w0 + col("speed_step_rpm") * RPM)
+        sc = eqx.tree_at(lambda s: s.speed_ref, sc, ref)
+    if "load_nm" in cols:
+        sc = eqx.tree_at(lambda s: s.load, sc, _held(sc.load, col("load_nm")))
+    if "load_step_nm" in cols:
+        l0 = sc.load.values[:, 0]
+        sc = eqx.tree_at(lambda s: s.load, sc, _two_knots(b, t_event, l0, l0 + col("load_step_nm")))
+    par, est = sc.par, sc.est_par
+    for axis, fields in (("dRs", ("Rs",)), ("dL", ("Ld", "Lq")), ("dLd", ("Ld",)), ("dLq", ("Lq",))):
+        for f in fields if axis in cols else ():
+            est = eqx.tree_at(lambda p, f=f: getattr(p, f), est, getattr(par, f) * (1 + col(axis)))
+    if "dpsi" in cols:
+        est = eqx.tree_at(lambda p: p.psi_f, est, par.psi_f * (1 + col("dpsi")))
+    if "dJ" in cols:  # the true inertia; the controller's stays nominal
+        par = eqx.tree_at(lambda p: p.J, par, par.J * (1 + col("dJ")))
+    sc = eqx.tree_at(lambda s: (s.par, s.est_par), sc, (par, est))
+    sens = sc.sensors
+    for name in ("i_noise", "u_noise"):
+        if name in cols:
+            sens = eqx.tree_at(lambda s, n=name: getattr(s, n), sens, col(name))
+    for name, field, idx in (
+        ("u_offset_alpha", "u_offset", 0),
+        ("u_offset_beta", "u_offset", 1),
+        ("i_offset_alpha", "i_offset", 0),
+        ("i_offset_beta", "i_offset", 1),
+    ):
+        if name in cols:
+            arr = getattr(sens, field).at[:, idx].set(col(name))
+            sens = eqx.tree_at(lambda s, f=field: getattr(s, f), sens, arr)
+    sc = eqx.tree_at(lambda s: s.sensors, sc, sens)
+    if "dead_time" in cols:
+        sc = eqx.tree_at(lambda s: s.dead_time, sc, col("dead_time"))
+    if "seed" in cols:
+        keys = jax.vmap(jax.random.PRNGKey)(jnp.asarray(cols["seed"].astype(np.int64)))
+        sc = eqx.tree_at(lambda s: s.key, sc, keys)
+    elif seed is not None:
+        keys = jax.vmap(lambda i: jax.random.fold_in(jax.random.PRNGKey(seed), i))(jnp.arange(b))
+        sc = eqx.tree_at(lambda s: s.key, sc, keys)
+    return sc
+
+
+def grid(base: Scenario, *, t_event: float = 0.0, **axes: Sequence[float]) -> Batch:
     """Cartesian product of named axes applied to ``base``: ``grid(s, speed_rpm=[...], dRs=[...])``.
 
-    Known axes: ``GRID_AXES``.  The batch is flattened row-major (last axis fastest).
+    Known axes: :data:`DRIVE_AXES` (:func:`scenario_batch` says what each sets; ``speed_rpm`` also starts
+    each scenario at its speed).  The batch is flattened row-major (last axis fastest).
     """
     for name, vals in axes.items():
-        if name not in GRID_AXES:
-            raise ValueError(f"grid axis {name!r} is unknown; known axes: {', '.join(GRID_AXES)}")
+        if name not in DRIVE_AXES:
+            raise ValueError(f"grid axis {name!r} is unknown; known axes: {', '.join(DRIVE_AXES)}")
         if len(vals) < 1:
             raise ValueError(f"grid axis {name!r} needs at least one value")
     names = tuple(axes)
     coords = tuple(tuple(float(v) for v in axes[n]) for n in names)
-    items = []
-    for combo in itertools.product(*coords):
-        s = base
-        for name, v in zip(names, combo):
-            s = GRID_AXES[name](s, v)
-        items.append(s)
-    stacked = jax.tree.map(lambda *xs: jnp.stack(xs), *items)
+    stacked = scenario_batch(base, names, list(itertools.product(*coords)), t_event=t_event)
     return Batch(scenarios=stacked, dims=names, coords=coords)

@@ -535,6 +535,7 @@ def export_observer(
         state0 = obs32.init(u0)
         step = generate(obs32, state0, u0, input_names=list(DriveInput._fields) if kind == "drive" else ["v"])
     component = type(obs32).__name__
+    _self_check(obs32, step, state0)
     header, source_c = write_c(obs32, step, kind, source or f"{component} as given", notes)
     bar.update()
     bar.stage("the test record" + (" (compiling and running the sensored drive)" if kind == "drive" else ""))
@@ -632,6 +633,47 @@ def export_observer(
     }
     atomic_write_text(out / "coefficients.json", json.dumps(coeffs, indent=1, ensure_ascii=False) + "\n")
     return coeffs
+
+
+@eqx.filter_jit
+def _one_step(observer, state, u):
+    return observer.step(state, u)
+
+
+def _self_check(obs32, step: CStep, state0, n_points: int = 8):
+    """The emitted statements, run in Python on float32 numpy scalars, against the JAX step at random states
+    and inputs (floats around the initial state, flags and counters through a few values): a code
+    generator bug fails here, with or without a C compiler, and before anything is written."""
+    rng = np.random.default_rng(0)
+    leaves, tree = jax.tree.flatten(state0)
+    n_in = len(step.input_names)
+    for k in range(n_points):
+        state = []
+        for leaf in leaves:
+            a = np.asarray(leaf)
+            if a.dtype == np.bool_:
+                a = np.full(a.shape, k % 2 == 1)
+            elif a.dtype.kind in "iu":
+                a = np.full(a.shape, k % 3, a.dtype)
+            else:
+                a = (a + rng.normal(size=a.shape) * np.maximum(1.0, 0.1 * np.abs(a))).astype(a.dtype)
+            state.append(a)
+        u = (rng.normal(size=n_in) * 10.0).astype(np.float32)
+        with jax.enable_x64(False):
+            uj = DriveInput(*(jnp.float32(v) for v in u)) if _is_drive(obs32) else jnp.float32(u[0])
+            new, out = _one_step(obs32, jax.tree.unflatten(tree, [jnp.asarray(a) for a in state]), uj)
+        got_state, got_y = step.run(state, u)
+        want = [np.asarray(a, np.float64).reshape(-1) for a in [*jax.tree.leaves(new), *jax.tree.leaves(out)]]
+        got = [np.asarray(a, np.float64).reshape(-1) for a in [*got_state, got_y]]
+        names = [n for leaf in step.state for n in leaf.scalars()] + step.output_names
+        want, got = np.concatenate(want), np.concatenate(got)
+        bad = ~(np.abs(got - want) <= 1e-4 * (1 + np.abs(want)))
+        if np.any(bad):
+            i = int(np.argmax(bad))
+            raise AssertionError(
+                f"export: the generated C of {type(obs32).__name__} differs from the JAX step at {names[i]}: "
+                f"{got[i]!r} vs {want[i]!r} (a code generator bug; nothing written)"
+            )
 
 
 def _leaf_at(observer, name: str):

@@ -32,7 +32,7 @@ import equinox as eqx
 import jax
 import numpy as np
 
-from .ir import Assign, If, Let, S, c_literal, count, ctype, deps, ops_summary, prune, render
+from .ir import Assign, If, Let, S, c_literal, count, ctype, deps, evaluate, ops_summary, prune, render
 from .lower import Emitter, Walker
 
 __all__ = [
@@ -94,6 +94,31 @@ class CStep:
     ops_steady: dict
     ops_worst: dict
     has_branch: bool
+    block: list  # the statements of the body (tuning.export.ir)
+
+    def run(self, state: list, u) -> tuple[list, np.ndarray]:
+        """The emitted step on numpy scalars: ``state`` the values of the state leaves (as ``Leaf.value``),
+        ``u`` the inputs; returns (the new state leaves, the outputs y).  The C, run in Python."""
+        env = {}
+        for g in self.gains:
+            for i, v in enumerate(np.asarray(g.value).reshape(-1)):
+                env[gain_macro(g, None if g.shape == () else i)] = v
+        for leaf, value in zip(self.state, state):
+            for i, v in enumerate(np.asarray(value, leaf.dtype).reshape(-1)):
+                env[f"s->{leaf.name}" if leaf.shape == () else f"s->{leaf.name}[{i}]"] = v
+        dtypes = [leaf.dtype for leaf in self.inputs for _ in range(leaf.size)]
+        for k, (v, dt) in enumerate(zip(np.asarray(u).reshape(-1), dtypes)):
+            env[f"u[{k}]"] = dt.type(v)
+        env = evaluate(self.block, env)
+        new = []
+        for leaf, value in zip(self.state, state):
+            flat = np.asarray(value, leaf.dtype).reshape(-1).copy()
+            for i in range(flat.size):
+                key = f"s->{leaf.name}" if leaf.shape == () else f"s->{leaf.name}[{i}]"
+                flat[i] = env.get(key, flat[i])  # a leaf the step leaves as it is is not stored
+            new.append(flat.reshape(leaf.shape))
+        y = np.asarray([env[f"y[{j}]"] for j in range(len(self.output_names))])
+        return new, y
 
     @property
     def input_names(self) -> list:
@@ -181,12 +206,12 @@ def generate(observer, state, u, *, input_names=None) -> CStep:
             target = f"s->{leaf.name}" if leaf.shape == () else f"s->{leaf.name}[{i}]"
             s_ = em.convert(s_, leaf.dtype)
             if s_.c != (leaf.name if leaf.shape == () else f"{leaf.name}_{i}"):
-                em.block.append(Assign(target, s_.c, deps(s_)))
+                em.block.append(Assign(target, s_.c, deps(s_), s_))
     j = 0
     for arr in jax.tree.leaves(y):
         for s_ in arr.flat:
             s_ = em.convert(s_, fdt)
-            em.block.append(Assign(f"y[{j}]", s_.c, deps(s_)))
+            em.block.append(Assign(f"y[{j}]", s_.c, deps(s_), s_))
             j += 1
     block = prune(em.block, set())
     lo, hi = count(block)
@@ -194,7 +219,7 @@ def generate(observer, state, u, *, input_names=None) -> CStep:
     body = "\n".join(render(block))
     if not any("u[" in st.expr for st in block if isinstance(st, Let)):
         body = "    (void)u;\n" + body
-    return CStep(gains, st_leaves, in_leaves, out_leaves, body, ops_summary(lo), ops_summary(hi), has_branch)
+    return CStep(gains, st_leaves, in_leaves, out_leaves, body, ops_summary(lo), ops_summary(hi), has_branch, block)
 
 
 # --------------------------------------------------------------------------------------------

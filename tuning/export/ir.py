@@ -11,7 +11,21 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["S", "Let", "Assign", "Decl", "If", "c_literal", "ctype", "lit", "deps", "prune", "count"]
+__all__ = [
+    "S",
+    "Let",
+    "Assign",
+    "Decl",
+    "If",
+    "Comment",
+    "evaluate",
+    "c_literal",
+    "ctype",
+    "lit",
+    "deps",
+    "prune",
+    "count",
+]
 __all__ += ["ops_summary", "render"]
 
 # --------------------------------------------------------------------------------------------
@@ -86,6 +100,8 @@ class Let:
     deps: tuple
     op: str  # what it costs: "add", "mul", "div", "call:sinf", "compare", "select", "logic", "" (none)
     const: bool
+    fn: Any = None  # the same operation on numpy scalars (None: a load, ``expr`` names the source)
+    args: tuple = ()  # its operands (S)
 
 
 @dataclasses.dataclass
@@ -93,6 +109,7 @@ class Assign:
     target: str
     expr: str
     deps: tuple
+    value: S | None = None
 
 
 @dataclasses.dataclass
@@ -108,10 +125,36 @@ class If:
     then: list
     other: list
     outputs: tuple  # names assigned in both branches
+    test: Any = None  # env -> bool: the condition on numpy values
+
+
+@dataclasses.dataclass
+class Comment:
+    """Where the statements that follow come from (a file:line of the Python step), for the reader."""
+
+    text: str
 
 
 def deps(*xs: S) -> tuple:
     return tuple(x.c for x in xs if not x.is_lit)
+
+
+def evaluate(block: list, env: dict) -> dict:
+    """Run ``block`` on numpy scalars: ``env`` maps the sources of the loads (``s->x[0]``, ``u[1]``) to values;
+    returns it with every name and target assigned.  float32 numpy arithmetic rounds as C's float does (C99
+    without FP contraction), so this is the emitted C, run in Python: the export's check without a C compiler."""
+
+    def val(x: S):
+        return x.lit if x.is_lit else env[x.c]
+
+    for st in block:
+        if isinstance(st, Let):
+            env[st.name] = env[st.expr] if st.fn is None else st.fn(*(val(a) for a in st.args))
+        elif isinstance(st, Assign):
+            env[st.target] = val(st.value)
+        elif isinstance(st, If):
+            evaluate(st.then if st.test(env) else st.other, env)
+    return env
 
 
 # --------------------------------------------------------------------------------------------
@@ -180,8 +223,12 @@ def ops_summary(c: Counter) -> dict:
 
 def render(block: list, indent: str = "    ") -> list:
     lines = []
-    for st in block:
-        if isinstance(st, Let):
+    for k, st in enumerate(block):
+        if isinstance(st, Comment):
+            nxt = block[k + 1] if k + 1 < len(block) else None
+            if nxt is not None and not isinstance(nxt, Comment):  # a comment on nothing is dropped
+                lines.append(f"{indent}/* {st.text} */")
+        elif isinstance(st, Let):
             lines.append(f"{indent}const {st.ctype} {st.name} = {st.expr};")
         elif isinstance(st, Decl):
             lines.append(f"{indent}{st.ctype} {st.name};")

@@ -5,11 +5,13 @@ which writes the statements of :mod:`tuning.export.ir`.  What each primitive bec
 
 from __future__ import annotations
 
+import math
+
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .ir import Assign, Decl, If, Let, S, c_literal, ctype, deps, lit
+from .ir import Assign, Comment, Decl, If, Let, S, c_literal, ctype, deps, lit
 
 __all__ = ["SUPPORTED", "Emitter", "Walker"]
 
@@ -74,7 +76,7 @@ def _where(eqn) -> str:
     for f in frames:
         name = f.file_name.replace("\\", "/")
         if "/jax/" not in name and "/jaxlib/" not in name and "/equinox/" not in name:
-            return f"{name.rsplit('/', 2)[-1] if '/' in name else name}:{f.line_num} ({f.function_name})"
+            return f"{name.rsplit('/', 1)[-1]}:{f.line_num} ({f.function_name})"
     return "unknown"
 
 
@@ -85,6 +87,69 @@ def _sub_jaxpr(j):
     return j, []
 
 
+_NUMPY = {  # the C operators and <math.h> functions on numpy scalars (float32 in, float32 out)
+    "+": np.add,
+    "-": np.subtract,
+    "*": np.multiply,
+    "/": np.divide,
+    "==": np.equal,
+    "!=": np.not_equal,
+    "<": np.less,
+    "<=": np.less_equal,
+    ">": np.greater,
+    ">=": np.greater_equal,
+    "&&": np.logical_and,
+    "||": np.logical_or,
+    "sqrtf": np.sqrt,
+    "expf": np.exp,
+    "exp2f": np.exp2,
+    "logf": np.log,
+    "log1pf": np.log1p,
+    "expm1f": np.expm1,
+    "sinf": np.sin,
+    "cosf": np.cos,
+    "tanf": np.tan,
+    "asinf": np.arcsin,
+    "acosf": np.arccos,
+    "atanf": np.arctan,
+    "sinhf": np.sinh,
+    "coshf": np.cosh,
+    "tanhf": np.tanh,
+    "asinhf": np.arcsinh,
+    "acoshf": np.arccosh,
+    "atanhf": np.arctanh,
+    "fabsf": np.abs,
+    "floorf": np.floor,
+    "ceilf": np.ceil,
+    "cbrtf": np.cbrt,
+    "erff": lambda x: type(x)(math.erf(x)),
+    "atan2f": np.arctan2,
+    "powf": np.power,
+    "fmodf": np.fmod,
+    "fmaxf": np.fmax,
+    "fminf": np.fmin,
+}
+
+
+def _round_away(x):
+    """roundf: halves away from zero."""
+    t = np.trunc(x)
+    return t + np.sign(x) if abs(x - t) >= 0.5 else t
+
+
+def _pick(which, *cases):
+    """``which ? cases[1] : cases[0]`` (and the chain for select_n's index)."""
+    return cases[int(which)]
+
+
+def _truth_test(name):
+    return lambda env: bool(env[name])
+
+
+def _index_test(name, k):
+    return lambda env: int(env[name]) <= k
+
+
 class Emitter:
     def __init__(self, dtype):
         self.fdt = np.dtype(dtype)
@@ -92,6 +157,7 @@ class Emitter:
         self.n = 0
         self.block: list = []
         self.memo: dict = {}  # (type, expression) -> its scalar: common subexpressions computed once
+        self.where = ""  # the Python line of the statements being written (a comment when it changes)
 
     # --- naming and statements ------------------------------------------------------------
 
@@ -99,12 +165,14 @@ class Emitter:
         self.n += 1
         return f"{prefix}{self.n}"
 
-    def let(self, expr: str, dtype, deps: tuple, op: str, const: bool, truth=None) -> S:
+    def let(self, expr: str, dtype, deps: tuple, op: str, const: bool, truth=None, *, fn, args) -> S:
+        """``const T t<n> = expr;`` (or the earlier local with the same expression); ``fn(*args)`` computes it
+        on numpy scalars (:func:`tuning.export.ir.evaluate`)."""
         key = (ctype(dtype), expr)
         if key in self.memo:
             return self.memo[key]
         name = self.fresh("b" if np.dtype(dtype) == np.bool_ else "t")
-        self.block.append(Let(name, ctype(dtype), expr, deps, op, const))
+        self.block.append(Let(name, ctype(dtype), expr, deps, op, const, fn, tuple(args)))
         self.memo[key] = out = S(name, np.dtype(dtype), const=const, truth=truth)
         return out
 
@@ -116,11 +184,11 @@ class Emitter:
     def unary(self, prim: str, x: S, params) -> S:
         dt = x.dtype
         if prim == "neg":
-            return self.let(f"-{x.c}", dt, deps(x), "add", x.const)
+            return self.let(f"-{x.c}", dt, deps(x), "add", x.const, fn=np.negative, args=(x,))
         if prim == "not":
             if dt != np.bool_:
                 raise ValueError("export: bitwise not of an integer cannot be written (truth values only)")
-            return self.let(f"!{x.c}", dt, deps(x), "logic", x.const)
+            return self.let(f"!{x.c}", dt, deps(x), "logic", x.const, fn=np.logical_not, args=(x,))
         if prim in ("square",):
             return self.binary("mul", x, x)
         if prim == "integer_pow":
@@ -133,19 +201,21 @@ class Emitter:
         if prim == "sign":
             one, zero = c_literal(1, dt), c_literal(0, dt)
             expr = f"({x.c} > {zero} ? {one} : ({x.c} < {zero} ? -{one} : {x.c}))"
-            return self.let(expr, dt, deps(x), "compare", x.const)
+            return self.let(expr, dt, deps(x), "compare", x.const, fn=np.sign, args=(x,))
         if prim == "is_finite":
-            return self.let(f"isfinite({x.c})", np.bool_, deps(x), "compare", x.const)
+            return self.let(f"isfinite({x.c})", np.bool_, deps(x), "compare", x.const, fn=np.isfinite, args=(x,))
         if prim == "round":
             # lax.RoundingMethod: 0 away from zero (roundf), 1 to nearest even (rintf in the default mode)
             call = "roundf" if int(params.get("rounding_method", 0)) == 0 else "rintf"
-            return self.let(f"{self.fn(call, dt)}({x.c})", dt, deps(x), f"call:{call}", x.const)
+            fn = _round_away if call == "roundf" else np.rint
+            return self.let(f"{self.fn(call, dt)}({x.c})", dt, deps(x), f"call:{call}", x.const, fn=fn, args=(x,))
         call = _UNARY_CALLS[prim]
         if dt.kind != "f":
             if prim == "abs":
-                return self.let(f"({x.c} < 0 ? -{x.c} : {x.c})", dt, deps(x), "compare", x.const)
+                return self.let(f"({x.c} < 0 ? -{x.c} : {x.c})", dt, deps(x), "compare", x.const, fn=np.abs, args=(x,))
             raise ValueError(f"export: {prim} of an integer cannot be written (floats only)")
-        return self.let(f"{self.fn(call, dt)}({x.c})", dt, deps(x), f"call:{call}", x.const)
+        fn = _NUMPY[call]
+        return self.let(f"{self.fn(call, dt)}({x.c})", dt, deps(x), f"call:{call}", x.const, fn=fn, args=(x,))
 
     def integer_pow(self, x: S, y: int) -> S:
         # the same products in the same order as jax's lowering of integer_pow (binary exponentiation)
@@ -182,23 +252,26 @@ class Emitter:
             sym, op = _BINARY_OPS[prim]
             if prim == "div" and dt.kind != "f":
                 raise ValueError("export: integer division cannot be written (truth values and counters only)")
-            return self.let(f"{a.c} {sym} {b.c}", dt, deps(a, b), op, const)
+            return self.let(f"{a.c} {sym} {b.c}", dt, deps(a, b), op, const, fn=_NUMPY[sym], args=(a, b))
         if prim in _COMPARE:
-            return self.let(f"{a.c} {_COMPARE[prim]} {b.c}", np.bool_, deps(a, b), "compare", const)
+            sym = _COMPARE[prim]
+            return self.let(f"{a.c} {sym} {b.c}", np.bool_, deps(a, b), "compare", const, fn=_NUMPY[sym], args=(a, b))
         if prim in _LOGIC or prim == "xor":
             if dt != np.bool_:
                 raise ValueError(f"export: bitwise {prim} of integers cannot be written (truth values only)")
             sym = _LOGIC.get(prim, "!=")
-            return self.let(f"{a.c} {sym} {b.c}", dt, deps(a, b), "logic", const)
+            return self.let(f"{a.c} {sym} {b.c}", dt, deps(a, b), "logic", const, fn=_NUMPY[sym], args=(a, b))
         if prim in ("max", "min") and dt.kind != "f":
-            sym = ">" if prim == "max" else "<"
-            return self.let(f"{a.c} {sym} {b.c} ? {a.c} : {b.c}", dt, deps(a, b), "compare", const)
+            sym, fn = (">", np.maximum) if prim == "max" else ("<", np.minimum)
+            return self.let(f"{a.c} {sym} {b.c} ? {a.c} : {b.c}", dt, deps(a, b), "compare", const, fn=fn, args=(a, b))
         if prim == "nextafter":
-            return self.let(f"{self.fn('nextafterf', dt)}({a.c}, {b.c})", dt, deps(a, b), "call:nextafterf", const)
+            expr = f"{self.fn('nextafterf', dt)}({a.c}, {b.c})"
+            return self.let(expr, dt, deps(a, b), "call:nextafterf", const, fn=np.nextafter, args=(a, b))
         call = _BINARY_CALLS[prim]
         if dt.kind != "f":
             raise ValueError(f"export: {prim} of integers cannot be written (floats only)")
-        return self.let(f"{self.fn(call, dt)}({a.c}, {b.c})", dt, deps(a, b), f"call:{call}", const)
+        expr = f"{self.fn(call, dt)}({a.c}, {b.c})"
+        return self.let(expr, dt, deps(a, b), f"call:{call}", const, fn=_NUMPY[call], args=(a, b))
 
     def select(self, which: S, cases: list) -> S:
         if which.is_lit:
@@ -214,7 +287,7 @@ class Emitter:
             expr = cases[-1].c
             for k in range(len(cases) - 2, -1, -1):
                 expr = f"{which.c} == {k} ? {cases[k].c} : ({expr})"
-        return self.let(expr, dt, deps(which, *cases), "select", const)
+        return self.let(expr, dt, deps(which, *cases), "select", const, fn=_pick, args=(which, *cases))
 
     def convert(self, x: S, new) -> S:
         new = np.dtype(new)
@@ -223,13 +296,13 @@ class Emitter:
         if x.is_lit:
             return lit(x.lit, new)
         if new == np.bool_:
-            return self.let(f"{x.c} != 0", new, deps(x), "compare", x.const)
+            return self.let(f"{x.c} != 0", new, deps(x), "compare", x.const, fn=lambda v: v != 0, args=(x,))
         if x.dtype == np.bool_ and new.kind == "f":
             expr = f"{x.c} ? {c_literal(1, new)} : {c_literal(0, new)}"
-            return self.let(expr, new, deps(x), "select", x.const)
+            return self.let(expr, new, deps(x), "select", x.const, fn=new.type, args=(x,))
         if x.dtype == np.bool_ and new.kind == "i":
             return S(x.c, new, const=x.const, truth=x)  # 0 or 1 already
-        return self.let(f"({ctype(new)}){x.c}", new, deps(x), "", x.const)
+        return self.let(f"({ctype(new)}){x.c}", new, deps(x), "", x.const, fn=new.type, args=(x,))
 
 
 # --------------------------------------------------------------------------------------------
@@ -272,6 +345,11 @@ class Walker:
             env[var] = a
         for eqn in jaxpr.eqns:
             ins = [read(v) for v in eqn.invars]
+            if eqn.primitive.name not in _CALLS:
+                where = _where(eqn)
+                if where not in ("unknown", self.em.where):  # a jitted jnp function's equations: no user line
+                    self.em.where = where
+                    self.em.block.append(Comment(where))
             try:
                 outs = self.eqn(eqn, ins)
             except ValueError as e:
@@ -425,15 +503,19 @@ class Walker:
             outs = self.run(jaxpr, consts, ops)
             for res, o in zip(results, outs):
                 for r, s in zip(res.flat, np.broadcast_to(o, res.shape).flat):
-                    em.block.append(Assign(r.c, s.c, deps(s)))
+                    em.block.append(Assign(r.c, s.c, deps(s), s))
             blocks.append(em.block)
         em.block, em.memo = outer, memo
         names = tuple(r.c for res in results for r in res.flat)
         # if (i) {branch 1} else {branch 0}; more branches nest (the index is clamped, as lax.switch does)
         stmt = blocks[-1]
         for k in range(len(blocks) - 2, -1, -1):
-            test = index.truth.c if (index.truth is not None and len(blocks) == 2) else f"{index.c} <= {k}"
-            then, other = (stmt, blocks[k]) if index.truth is not None and len(blocks) == 2 else (blocks[k], stmt)
-            stmt = [If(test, deps(index.truth or index), then, other, names)]
+            if index.truth is not None and len(blocks) == 2:
+                test, then, other = index.truth.c, stmt, blocks[k]
+                check = _truth_test(index.truth.c)
+            else:
+                test, then, other = f"{index.c} <= {k}", blocks[k], stmt
+                check = _index_test(index.c, k)
+            stmt = [If(test, deps(index.truth or index), then, other, names, check)]
         outer.extend(stmt)
         return results

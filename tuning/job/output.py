@@ -7,10 +7,8 @@ import json
 import math
 from pathlib import Path
 
-import jax
 import numpy as np
 
-import jaxobs
 from jaxobs import metrics as M
 
 from ..objective import LOST_SYNC_DEG
@@ -102,18 +100,6 @@ def scores_dataset(obj, names, combos, spec: ScenarioSpec, per: dict):
             f"{100 * M.SPEED_TOL:g} % of the mean |reference| (at least {M.SPEED_FLOOR_RPM:g} r/min) (drive)"
         )
     return ds
-
-
-def versions() -> dict:
-    import platform
-
-    return {
-        "jaxobs": jaxobs.__version__,
-        "jax": jax.__version__,
-        "numpy": np.__version__,
-        "python": platform.python_version(),
-        "x64": bool(jax.config.jax_enable_x64),
-    }
 
 
 def recordings_provenance(job: Job) -> dict:

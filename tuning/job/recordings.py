@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import dataclasses
-import hashlib
 from pathlib import Path
 
 import equinox as eqx
@@ -11,6 +10,7 @@ import jax
 import jax.numpy as jnp
 
 import jaxobs
+from jaxobs.provenance import sha256
 from jaxobs.signals import stack
 
 from ..objective import DRIVE_METRICS
@@ -96,7 +96,7 @@ def parse_recording_scenarios(tab, where, signal, t_event, horizon, steady, seed
                     f"{horizon:g} s needs {need} samples of {ts:g} s; {files[i]!r} gives {sig.n} "
                     f"({(sig.n - 1) * ts:.6g} s)",
                 )
-            digests.append(hashlib.sha256(Path(path).read_bytes()).hexdigest())
+            digests.append(sha256(Path(path)))
         spec = dataclasses.replace(spec, sha256=tuple(digests))
     axes = {"recording": [float(i) for i in range(len(files))]}
     return ScenarioSpec(signal, t_event, horizon, steady, axes, 0, seed, recording=spec)

@@ -12,16 +12,17 @@ import numpy as np
 from jaxobs.drive import BENCH_MACHINES
 from jaxobs.drive_study import bind_observer
 from jaxobs.progress import Progress
+from jaxobs.provenance import versions
 
 from ..objective import MetricContext, Objective
 from ..outdir import atomic_path, atomic_write_text
 from ..params import GainSpec, Parametrization
 from ..report import write_report
-from ..solvers import run_solver
+from ..solvers import tune
 from ..structure import structure
 from .components import COMPONENTS
 from .drive import job_drive
-from .output import at_bounds, recordings_provenance, rule_spec, scores_dataset, versions, write_json
+from .output import at_bounds, recordings_provenance, rule_spec, scores_dataset, write_json
 from .recordings import bind_recording
 from .scenarios import build_scenarios
 from .spec import Job, ScenarioSpec
@@ -42,13 +43,11 @@ def build_objective(job: Job, spec: ScenarioSpec | None = None):
         comp,
         param,
         scen,
-        spec.horizon,
-        job.terms,
-        ctx,
-        job.agg,
-        job.alpha,
-        job.temperature,
-        job.penalty,
+        horizon=spec.horizon,
+        terms=job.terms,
+        ctx=ctx,
+        aggregation=job.aggregation,
+        penalty=job.penalty,
         drive=drive,
         bind=bind,
     )
@@ -110,10 +109,10 @@ def run_job(job: Job, out: Path, resume: bool = False, quiet: bool = False) -> d
     cf_all = info.closed_form(obj.component)
     cf = {g.name: cf_all[g.name] for g in job.gains}
     theta_cf = param.to_theta({g.name: _inside(g, cf[g.name]) for g in job.gains})
-    res = run_solver(
+    res = tune(
         obj,
-        theta0,
         job.solver,
+        theta0,
         checkpoint=out / CHECKPOINT,
         resume=resume,
         quiet=quiet,

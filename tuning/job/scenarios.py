@@ -2,14 +2,11 @@
 
 from __future__ import annotations
 
-import itertools
 import math
-
-import numpy as np
 
 from jaxobs import drive as D
 from jaxobs.drive_study import drive_scenarios
-from jaxobs.scenarios import emf_signals, grid_signals
+from jaxobs.scenarios import Grid, Random, emf_signals, grid_signals
 
 from .components import W_N
 from .recordings import load_recordings
@@ -17,15 +14,11 @@ from .spec import ScenarioSpec
 
 
 def scenario_points(spec: ScenarioSpec):
-    """The axes' names and the scenarios' points: the Cartesian grid, or ``sample`` uniform draws (seeded)."""
-    names = list(spec.axes)
-    combos = list(itertools.product(*(spec.axes[n] for n in names)))
-    if spec.sample:
-        rng = np.random.default_rng(spec.seed)
-        lows = {n: min(spec.axes[n]) for n in names}
-        highs = {n: max(spec.axes[n]) for n in names}
-        combos = [tuple(rng.uniform(lows[n], highs[n]) for n in names) for _ in range(spec.sample)]
-    return names, combos
+    """The axes' names and the scenarios' points: the studies' samplers (a grid, or ``sample`` uniform draws)."""
+    if not spec.axes:
+        return [], [()]
+    sampler = Random(spec.axes, spec.sample, spec.seed) if spec.sample else Grid(spec.axes)
+    return list(sampler.names), sampler.points()
 
 
 def _drive_scenarios(names, combos, seed=0, t_event=0.0, machine="ipmsm002"):

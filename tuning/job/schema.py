@@ -2,16 +2,16 @@
 
 from __future__ import annotations
 
-import hashlib
 import math
 import os
 from pathlib import Path
 
 from jaxobs.drive_study import DRIVE_STUDY_AXES
+from jaxobs.provenance import sha256
 
+from .. import strategies
 from ..objective import DRIVE_METRICS, METRICS, Term
 from ..params import GainSpec
-from ..solvers import SolverConfig
 from .components import COMPONENTS, W_N
 from .drive import check_drive_speeds, check_standstill, parse_drive
 from .fields import MAX_SCENARIOS, MAX_SOLVER_STEPS, MAX_STEPS, JobError, cap, get_field, no_unknown, show
@@ -262,8 +262,8 @@ def parse_job(raw: dict, base: Path | None = None) -> Job:
             raise JobError(f"{where}.weight", f"must be > 0, got {weight}")
         terms.append(Term(metric, weight))
     agg = get_field(obj_t, "aggregate", "objective.aggregate", str, "mean")
-    if agg not in ("mean", "max", "cvar"):
-        raise JobError("objective.aggregate", f"must be mean, max or cvar, got {show(agg)}")
+    if agg not in strategies.AGGREGATIONS:
+        raise JobError("objective.aggregate", f"must be {strategies.one_of(strategies.AGGREGATIONS)}, got {show(agg)}")
     alpha = get_field(obj_t, "alpha", "objective.alpha", float, 0.9)
     if not 0 <= alpha < 1:
         raise JobError("objective.alpha", f"must be in [0, 1), got {alpha}")
@@ -281,14 +281,15 @@ def parse_job(raw: dict, base: Path | None = None) -> Job:
         "solver",
     )
     kind = get_field(sol_t, "kind", "solver.kind", str, "adam")
-    if kind not in ("adam", "adamw", "sgd", "bfgs"):
-        raise JobError("solver.kind", f"must be adam, adamw, sgd or bfgs, got {show(kind)}")
-    if kind == "bfgs":  # optimistix BFGS: no learning rate, schedule, patience or checkpoints
-        for key in ("learning_rate", "schedule", "patience", "checkpoint_every"):
+    if kind not in strategies.SOLVER_KINDS:
+        raise JobError("solver.kind", f"must be {strategies.one_of(strategies.SOLVER_KINDS)}, got {show(kind)}")
+    if kind in strategies.MINIMISERS:  # optimistix: no learning rate, schedule, patience or checkpoints
+        for key in strategies.OPTAX_ONLY:
             if key in sol_t:
-                raise JobError(f"solver.{key}", "does not apply to kind = 'bfgs' (it applies to adam, adamw, sgd)")
-    cfg = SolverConfig(
-        kind=kind,
+                raise JobError(
+                    f"solver.{key}", f"does not apply to kind = '{kind}' (it applies to {', '.join(strategies.OPTAX)})"
+                )
+    opts = dict(
         learning_rate=get_field(sol_t, "learning_rate", "solver.learning_rate", float, 0.05),
         steps=get_field(sol_t, "steps", "solver.steps", int, 100),
         patience=get_field(sol_t, "patience", "solver.patience", int, 25),
@@ -297,19 +298,33 @@ def parse_job(raw: dict, base: Path | None = None) -> Job:
         checkpoint_every=get_field(sol_t, "checkpoint_every", "solver.checkpoint_every", int, 5),
         progress_every=get_field(sol_t, "progress_every", "solver.progress_every", int, 1),
     )
-    if not 0 < cfg.learning_rate <= 1e6:
-        raise JobError("solver.learning_rate", f"must be in (0, 1e6], got {cfg.learning_rate:g}")
-    if cfg.tol < 0:
-        raise JobError("solver.tol", f"must be >= 0, got {cfg.tol:g}")
-    if cfg.steps > MAX_SOLVER_STEPS:
-        raise JobError("solver.steps", f"must be <= {MAX_SOLVER_STEPS}, got {show(cfg.steps)}")
+    if not 0 < opts["learning_rate"] <= 1e6:
+        raise JobError("solver.learning_rate", f"must be in (0, 1e6], got {opts['learning_rate']:g}")
+    if opts["tol"] < 0:
+        raise JobError("solver.tol", f"must be >= 0, got {opts['tol']:g}")
+    if opts["steps"] > MAX_SOLVER_STEPS:
+        raise JobError("solver.steps", f"must be <= {MAX_SOLVER_STEPS}, got {show(opts['steps'])}")
     for fld in ("steps", "patience", "checkpoint_every", "progress_every"):
-        if getattr(cfg, fld) < 1:
-            raise JobError(f"solver.{fld}", f"must be >= 1, got {getattr(cfg, fld)}")
-    if cfg.schedule not in ("constant", "cosine"):
-        raise JobError("solver.schedule", f"must be constant or cosine, got {show(cfg.schedule)}")
+        if opts[fld] < 1:
+            raise JobError(f"solver.{fld}", f"must be >= 1, got {opts[fld]}")
+    if opts["schedule"] not in strategies.SCHEDULES:
+        raise JobError(
+            "solver.schedule", f"must be {strategies.one_of(strategies.SCHEDULES)}, got {show(opts['schedule'])}"
+        )
     job = Job(
-        raw, name, comp, seed, values, gains, scen, holdout, terms, agg, alpha, temperature, penalty, cfg, drive=drive
+        raw=raw,
+        name=name,
+        component=comp,
+        seed=seed,
+        values=values,
+        gains=gains,
+        scenarios=scen,
+        holdout=holdout,
+        terms=terms,
+        aggregation=strategies.aggregation(agg, alpha=alpha, temperature=temperature),
+        penalty=penalty,
+        solver=strategies.solver(kind, **opts),
+        drive=drive,
     )
     check_recording_job(job, comp_t)
     return job
@@ -319,5 +334,5 @@ def load_job(path) -> Job:
     """Read, check and parse a job file (:func:`read_toml`, then :func:`parse_job`)."""
     raw, data = read_toml(path)
     job = parse_job(raw, Path(path).parent)
-    job.sha256 = hashlib.sha256(data).hexdigest()
+    job.sha256 = sha256(data)
     return job

@@ -4,7 +4,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from ..solvers import SolverConfig
+from ..aggregations import AbstractAggregation
+from ..solvers import AbstractSolver
 
 
 @dataclass
@@ -30,11 +31,9 @@ class Job:
     scenarios: ScenarioSpec
     holdout: ScenarioSpec | None
     terms: list
-    agg: str
-    alpha: float
-    temperature: float | None
+    aggregation: AbstractAggregation  # objective.aggregate (with alpha, temperature), tuning.strategies
     penalty: float
-    solver: SolverConfig
+    solver: AbstractSolver  # [solver], tuning.strategies
     sha256: str | None = None  # of the job file's bytes (load_job); None for a job built from a dict
     drive: DriveSpec | None = None  # signal = "drive" jobs: how the observer sits in the loop
 

@@ -1,0 +1,137 @@
+"""The one study runner: every design on every scenario a sampler picks, in chunks, over devices and processes.
+
+    run = run_scenarios(designs, Grid(axes), system_factory, metrics, build=..., horizon=0.4)
+    run.values["tuned"]["rms_phase"]          # one value per scenario, in the sampler's order
+
+FLL studies (:func:`jaxobs.study.run_study`), drive studies (:func:`jaxobs.drive_study.run_drive_study`)
+and studies on recordings are this runner with different samplers (:mod:`jaxobs.scenarios`: ``Grid``,
+``Random``, ``Sobol``, ``LHS``, ``Recordings``), builders (the points → a batched scenario PyTree),
+system factories (a design and one scenario → a system, :class:`jaxobs.AbstractSystem`) and metrics
+(a :class:`jaxobs.Solution` → a dict of per-scenario scalars); each study then lays its values out as
+an ``xarray.Dataset`` (:meth:`jaxobs.scenarios.AbstractSampler.layout`).
+
+The scenarios run ``chunk_size`` at a time (the last chunk padded with copies of the last scenario, so one
+compilation serves all chunks) in one ``jit``: a ``vmap`` on one device; split over ``mesh`` (default
+:func:`jaxobs.batch_mesh`, every device of every process) with :func:`jaxobs.map_batch` on several, each
+chunk padded up to a multiple of the device count.  Several processes (:func:`jaxobs.init_distributed`,
+then the same call in each): every process builds every scenario (from the sampler's points, the same
+everywhere), places only its own devices' rows (:func:`jaxobs.sharding.global_batch`) and receives every
+scenario's values (:func:`jaxobs.sharding.gather_batch`).  Designs of one class with the same static
+fields (a closed form and a tuned one) share one compilation: their gains are array leaves.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Hashable
+from typing import Any, NamedTuple
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from . import sharding
+from .progress import Progress
+from .scenarios import AbstractSampler, Recordings
+from .simulate import simulate
+
+__all__ = ["StudyRun", "run_scenarios"]
+
+
+class StudyRun(NamedTuple):
+    """What :func:`run_scenarios` returns: the sampler's ``points`` (one tuple per scenario, in order) and
+    ``values[design][name]``, a NumPy array with one value per scenario for every name the metrics return."""
+
+    points: list
+    values: dict
+
+
+def run_scenarios(
+    designs: dict,
+    sampler: AbstractSampler,
+    system_factory: Callable[[Any, Any], Any],
+    metrics: Callable[[Any, Hashable], dict],
+    *,
+    horizon: float,
+    build: Callable[[tuple, list], Any] | None = None,
+    static: Callable[[Any], Hashable] | None = None,
+    chunk_size: int = 2048,
+    mesh=None,
+    progress=False,
+    label: str = "study",
+) -> StudyRun:
+    """Simulate ``system_factory(design, scenario)`` for ``horizon`` s on every scenario, every design.
+
+    ``build(names, points)``: the batched scenario PyTree (leading axis one per point) of a sampler's points;
+    a :class:`~jaxobs.scenarios.Recordings` sampler holds its scenarios and needs none.  ``metrics(sol, aux)``:
+    a dict of per-scenario scalars of one run's :class:`~jaxobs.Solution`, ``aux = static(design)`` a hashable
+    Python value of the design that the metrics need outside tracing (``None`` without ``static``; a new value
+    compiles again).  ``progress``: ``True`` a tqdm bar on stderr naming each compilation, a callable
+    ``progress(done, total)``, ``False`` nothing.  ``mesh``: a one-axis ``"batch"`` mesh (default
+    :func:`jaxobs.batch_mesh`).
+    """
+    if not designs:
+        raise ValueError(f"{label}: at least one design is required")
+    if not (isinstance(chunk_size, int) and chunk_size >= 1):
+        raise ValueError(f"chunk_size must be an integer >= 1, got {chunk_size!r}")
+    if not (math.isfinite(horizon) and horizon > 0):
+        raise ValueError(f"horizon must be a finite number of seconds > 0, got {horizon!r}")
+    if mesh is not None and not (isinstance(mesh, jax.sharding.Mesh) and mesh.axis_names == (sharding.AXIS,)):
+        raise ValueError(f"mesh must be a one-axis jax.sharding.Mesh named 'batch' (jaxobs.batch_mesh), got {mesh!r}")
+    points = sampler.points()
+    if isinstance(sampler, Recordings):
+        scs = sampler.signals
+    elif build is None:
+        raise ValueError(f"{label}: a {type(sampler).__name__} sampler needs a scenario builder (build=...)")
+    else:
+        scs = build(sampler.names, points)
+    n = len(points)
+    mesh = sharding.batch_mesh() if mesh is None else mesh
+    n_dev = mesh.devices.size
+    # a chunk divides over the devices (padded up to a multiple of their count): every device gets an equal share
+    chunk = -(-min(chunk_size, n) // n_dev) * n_dev
+    pad = (-n) % chunk
+    if pad:
+        scs = jax.tree.map(lambda x: jnp.concatenate([x, jnp.repeat(x[-1:], pad, axis=0)]), scs)
+    if n_dev > 1:
+        # every process holds every scenario (built from the sampler's points, identically everywhere) and
+        # places only its own devices' rows of each chunk (sharding.global_batch)
+        scs = jax.tree.map(np.asarray, scs)
+    static = (lambda design: None) if static is None else static
+
+    # one compiled function for every design of one class: the gains are array leaves, the per-design
+    # Python value ``aux`` (hashable) is static
+    @eqx.filter_jit
+    def run_chunk(design, batch, aux):
+        def one(sc):
+            return metrics(simulate(system_factory(design, sc), horizon), aux)
+
+        if n_dev == 1:
+            return jax.vmap(one)(batch)
+        # each device's share in one piece (tile = the share): the same per-device program as one device's
+        # vmap, no lax.map around it; scenarios are independent, so nothing is communicated
+        return sharding.map_batch(one, batch, mesh=mesh, tile=chunk // n_dev)
+
+    values = {}
+    compiled = set()
+    with Progress(progress, n * len(designs), label, unit="scenario") as bar:
+        for dname, design in designs.items():
+            aux = static(design)
+            if n_dev > 1:
+                # the gains as host values: each process passes its own copy, the same on all, to the global jit
+                design = jax.tree.map(lambda x: np.asarray(x) if eqx.is_array(x) else x, design)
+            key = (type(design), aux)
+            parts = []
+            for start in range(0, n + pad, chunk):
+                batch = jax.tree.map(lambda x: x[start : start + chunk], scs)
+                if n_dev > 1:
+                    batch = sharding.global_batch(batch, mesh)
+                new = start == 0 and key not in compiled
+                bar.stage(f"{dname} (compiling, then {chunk} scenarios a chunk)" if new else dname)
+                # the per-scenario results, whole, on every process (an all-gather when the mesh spans processes)
+                parts.append(sharding.gather_batch(run_chunk(design, batch, aux)))
+                compiled.add(key)
+                bar.update(min(chunk, n - start))
+            values[dname] = {k: np.concatenate([p[k] for p in parts])[:n] for k in parts[0]}
+    return StudyRun(points, values)
