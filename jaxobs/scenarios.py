@@ -4,7 +4,8 @@ One place, below both the studies (:mod:`jaxobs.study`, :mod:`jaxobs.drive_study
 (``tuning/``).  A *sampler* picks the points of the axes and says how the results are laid out
 (:class:`Grid`: the Cartesian product, one dim per axis; :class:`Random`, :class:`Sobol`, :class:`LHS`:
 ``n`` points inside the axes' [min, max], one ``sample`` dim with the axes as coordinates along it;
-:class:`Recordings`: scenarios given whole, one ``recording`` dim); a *builder* turns the points into a
+:class:`Given`: a batch given whole, one ``scenario`` dim; :class:`Recordings`: recorded signals, one
+``recording`` dim); a *builder* turns the points into a
 batched scenario PyTree (:func:`grid_signals` here, :func:`jaxobs.drive.scenarios` for the drive), and
 :func:`jaxobs.runner.run_scenarios` runs every design on it.
 
