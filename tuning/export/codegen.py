@@ -285,12 +285,12 @@ def write_c(obs32, step: CStep, kind: str, source: str, notes) -> tuple[str, str
     documented in the header), ``source`` where the design comes from, ``notes`` lines for the header."""
     component = type(obs32).__name__
     c_type = "float"
-    gains = [
-        (gain_macro(g, None if g.shape == () else i), v, g.name) for g in step.gains for i, v in enumerate(g.value.flat)
+    gains = [  # (macro, its C literal, the leaf's name), one per scalar of every array leaf
+        (gain_macro(g, None if g.shape == () else i), c_literal(v, g.dtype), g.name)
+        for g in step.gains
+        for i, v in enumerate(g.value.flat)
     ]
-    gains_doc = "\n".join(
-        f" *   {m:<14} {c_literal(v, g_dt):<16} {n}" for (m, v, n), g_dt in zip(gains, [np.float32] * len(gains))
-    )
+    gains_doc = "\n".join(f" *   {m:<14} {v:<16} {n}" for m, v, n in gains)
     options = ", ".join(f"{k} = {v!r}" for k, v in statics(obs32).items())
     note_lines = "".join(f"\n *   note: {n}" for n in notes)
     in_doc = "\n".join(f" *   u[{i}]  {n}" for i, n in enumerate(step.input_names))
@@ -357,7 +357,7 @@ void jx_step(jx_state *s, const {c_type} *u, {c_type} *y);
 
 #endif /* JX_OBSERVER_H */
 """
-    macros = "\n".join(f"#define {m} {c_literal(v, np.float32)} /* {n} */" for m, v, n in gains)
+    macros = "\n".join(f"#define {m} {v} /* {n} */" for m, v, n in gains)
     init = []
     for leaf in step.state:
         for i, v in enumerate(np.asarray(leaf.value).flat):
