@@ -543,6 +543,7 @@ def test_the_export_runs_its_c_in_python_before_writing(tmp_path, monkeypatch):
 class _KitchenState(NamedTuple):
     x: jax.Array  # (4,)
     n: jax.Array  # int32 step count
+    y: jax.Array  # a field named as jx_step's output array: its local is y_
 
 
 class _KitchenOut(NamedTuple):
@@ -560,7 +561,8 @@ class _Kitchen(eqx.Module):
     ts: float = eqx.field(static=True, default=1e-3)
 
     def init(self, u0=None):
-        return _KitchenState(x=jnp.asarray([0.1, -0.2, 0.3, 0.05], jnp.float32), n=jnp.asarray(0, jnp.int32))
+        x0 = jnp.asarray([0.1, -0.2, 0.3, 0.05], jnp.float32)
+        return _KitchenState(x=x0, n=jnp.asarray(0, jnp.int32), y=jnp.zeros((), jnp.float32))
 
     def step(self, s, v):
         x = s.x
@@ -569,8 +571,8 @@ class _Kitchen(eqx.Module):
         r = r.at[1].set(jnp.tanh(v) + jax.lax.stop_gradient(jnp.sum(x)))
         big = jax.lax.cond(s.n >= 3, lambda z: z * 0.5, lambda z: z + 0.25 * jnp.sign(z), r)
         x1 = x + self.ts * (big - x**3 + jnp.log1p(jnp.exp(-jnp.abs(x))) + jax.nn.relu(x) - jnp.floor(x) * 0.01)
-        out = _KitchenOut(y=jnp.stack([jnp.max(x), jnp.round(10 * x[0]) / 10]), theta=jnp.arctan2(x[1], x[0]))
-        return _KitchenState(x=x1, n=jnp.minimum(s.n + 1, 3)), out
+        out = _KitchenOut(y=jnp.stack([jnp.max(x), jnp.round(10 * x[0]) / 10 + s.y]), theta=jnp.arctan2(x[1], x[0]))
+        return _KitchenState(x=x1, n=jnp.minimum(s.n + 1, 3), y=0.5 * s.y + 0.1 * v), out
 
 
 def test_a_step_that_uses_most_primitives_exports_and_matches(tmp_path):
@@ -581,6 +583,7 @@ def test_a_step_that_uses_most_primitives_exports_and_matches(tmp_path):
     assert c["outputs"] == ["y_0", "y_1", "theta"] and "worst" in c["ops_per_step"]
     assert c["gains"]["a_15"]["c_name"] == "JX_A_15"
     h = (tmp_path / "observer.h").read_text()
-    assert "float x[4];" in h and "int n;" in h
+    assert "float x[4];" in h and "int n;" in h and "float y;" in h
+    assert "const float y_ = s->y;" in (tmp_path / "observer.c").read_text()
     if shutil.which("cc") is not None:
         assert compile_and_check(tmp_path) <= TOLERANCE
