@@ -19,8 +19,8 @@ p.u., with a per-scenario seed).
 from __future__ import annotations
 
 import itertools
-from dataclasses import dataclass, field
-from typing import Any, ClassVar
+from dataclasses import dataclass
+from typing import ClassVar
 
 import equinox as eqx
 import jax
@@ -35,6 +35,7 @@ __all__ = [
     "GRID_SIGNAL_AXES",
     "LHS",
     "AbstractSampler",
+    "Given",
     "Grid",
     "NoisyGridSignal",
     "Random",
@@ -178,6 +179,12 @@ class AbstractSampler:
     def layout(self, axis_meta) -> tuple[tuple, tuple, dict]:
         raise NotImplementedError
 
+    def scenarios(self, build, points: list):
+        """The batched scenario PyTree of ``points`` (this sampler's): ``build(names, points)``."""
+        if build is None:
+            raise ValueError(f"a {type(self).__name__} sampler needs a scenario builder (build=...)")
+        return build(self.names, points)
+
 
 @dataclass(frozen=True, eq=False)
 class Grid(AbstractSampler):
@@ -277,30 +284,44 @@ class LHS(_Drawn):
         return _qmc_points(self, qmc.LatinHypercube(len(self.names), seed=self.seed).random(self.n))
 
 
-@dataclass(frozen=True, eq=False)
-class Recordings(AbstractSampler):
-    """Scenarios given whole: ``signals`` a batched signal (leading axis one per recording, e.g.
-    :func:`jaxobs.signals.stack` of :class:`~jaxobs.SampledSignal` s), ``files`` their names (the
-    ``recording`` coordinate), ``sha256`` their digests (the Dataset's ``recordings_sha256``)."""
+class Given(AbstractSampler):
+    """Scenarios given whole: ``batch`` a batched scenario PyTree (leading axis one per scenario), laid out
+    along one dim ``dim`` with ``labels`` as its coordinate (default 0, 1, ...)."""
 
-    signals: Any
-    files: tuple
-    sha256: tuple = field(default=())
-    sampling: ClassVar[str] = "recordings"
     names: ClassVar[tuple] = ()
+    sampling: ClassVar[str] = "given"
 
-    def __post_init__(self):
-        object.__setattr__(self, "files", tuple(map(str, self.files)))
-        object.__setattr__(self, "sha256", tuple(self.sha256))
-        if not self.files:
-            raise ValueError("Recordings needs at least one recording")
-        n = {int(np.shape(x)[0]) for x in jax.tree.leaves(self.signals) if np.ndim(x) > 0}
-        if n != {len(self.files)}:
-            raise ValueError(f"Recordings.signals must have a leading axis of {len(self.files)} (one per file)")
+    def __init__(self, batch, labels=None, dim: str = "scenario"):
+        sizes = {int(np.shape(x)[0]) for x in jax.tree.leaves(batch) if np.ndim(x) > 0}
+        if len(sizes) != 1:
+            raise ValueError(f"{type(self).__name__}: the scenarios need one leading axis, got sizes {sorted(sizes)}")
+        self.batch = batch
+        self.n = sizes.pop()
+        self.labels = list(range(self.n)) if labels is None else list(labels)
+        if len(self.labels) != self.n:
+            raise ValueError(f"{type(self).__name__}: {len(self.labels)} labels for {self.n} scenarios")
+        self.dim = dim
 
     def points(self) -> list[tuple]:
-        return [() for _ in self.files]
+        return [() for _ in range(self.n)]
+
+    def scenarios(self, build, points: list):
+        return self.batch
 
     def layout(self, axis_meta):
-        coords = {"recording": ("recording", list(self.files), axis_meta("recording"))}
-        return ("recording",), (len(self.files),), coords
+        return (self.dim,), (self.n,), {self.dim: (self.dim, self.labels, axis_meta(self.dim))}
+
+
+class Recordings(Given):
+    """Recorded signals: ``signals`` batched (leading axis one per recording, e.g. :func:`jaxobs.signals.stack`
+    of :class:`~jaxobs.SampledSignal` s), ``files`` their names (the ``recording`` coordinate), ``sha256``
+    their digests (the Dataset's ``recordings_sha256``)."""
+
+    sampling: ClassVar[str] = "recordings"
+
+    def __init__(self, signals, files, sha256=()):
+        self.files = tuple(map(str, files))
+        self.sha256 = tuple(sha256)
+        if not self.files:
+            raise ValueError("Recordings needs at least one recording")
+        super().__init__(signals, self.files, dim="recording")

@@ -15,11 +15,11 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from tuning import solvers
+from tuning import solvers, strategies
 from tuning.cli import _print_summary, main
 from tuning.outdir import LOCK, OutDir, OutError, atomic_path, atomic_write_bytes, safe_name
 from tuning.params import GainSpec, Parametrization
-from tuning.solvers import CheckpointError, SolverConfig, run_solver
+from tuning.solvers import CheckpointError, tune
 
 # --------------------------------------------------------------------------
 # containment
@@ -172,7 +172,7 @@ def test_internal_error_is_one_line_with_a_log(tmp_path, capsys, monkeypatch):
 
 
 class _Quadratic:
-    """A cheap stand-in objective with the interface run_solver uses."""
+    """A cheap stand-in objective with the interface the solvers use."""
 
     def __init__(self, n_gains=2):
         specs = [GainSpec("a", 2.0, 0.1, 50.0), GainSpec("b", 1.0, 0.01, 10.0, log=False)]
@@ -186,7 +186,7 @@ class _Quadratic:
         return v, g, 0
 
 
-CFG = SolverConfig(kind="adam", learning_rate=0.1, steps=24, patience=100, checkpoint_every=2, progress_every=1)
+CFG = strategies.solver("adam", learning_rate=0.1, steps=24, patience=100, checkpoint_every=2, progress_every=1)
 
 
 class Killed(BaseException):
@@ -195,7 +195,7 @@ class Killed(BaseException):
 
 def _run(ckpt, resume=False, fp="job-a", n_gains=2):
     obj = _Quadratic(n_gains)
-    res = run_solver(obj, obj.param.theta0(), CFG, checkpoint=ckpt, resume=resume, quiet=True, fingerprint=fp)
+    res = tune(obj, CFG, obj.param.theta0(), checkpoint=ckpt, resume=resume, quiet=True, fingerprint=fp)
     return json.dumps(
         dict(theta=np.asarray(res.theta).tolist(), h=res.history, s=res.status, r=res.reason, b=res.best_iteration)
     ).encode()

@@ -9,8 +9,9 @@ import pytest
 import jaxobs
 from jaxobs.progress import Progress
 from jaxobs.study import run_study
+from tuning import strategies
 from tuning.cli import build_parser
-from tuning.solvers import SolverConfig, run_solver
+from tuning.solvers import tune
 
 
 def test_progress_is_silent_by_default_a_bar_on_stderr_or_a_callback(capsys, monkeypatch):
@@ -68,17 +69,17 @@ def _terminal(monkeypatch, yes=True):
 
 @pytest.mark.parametrize("kind", ["adam", "bfgs"])
 def test_every_solver_shows_progress_on_stderr_unless_quiet(capsys, monkeypatch, kind):
-    cfg = SolverConfig(kind=kind, learning_rate=0.1, steps=5, patience=100)
+    cfg = strategies.solver(kind, learning_rate=0.1, steps=5, patience=100)
     _terminal(monkeypatch, False)  # a pipe or a log: no bar (an error stays one line)
-    run_solver(_Quadratic(), jnp.zeros(1), cfg, quiet=False)
+    tune(_Quadratic(), cfg, jnp.zeros(1), quiet=False)
     assert capsys.readouterr().err == ""
     _terminal(monkeypatch)
-    run_solver(_Quadratic(), jnp.zeros(1), cfg, quiet=False)
+    tune(_Quadratic(), cfg, jnp.zeros(1), quiet=False)
     out = capsys.readouterr()
     assert out.out == ""
     assert f"tune ({kind})" in out.err and "compiling the objective" in out.err and "/5" in out.err, out.err
     assert "objective=" in out.err and "best=" in out.err
-    run_solver(_Quadratic(), jnp.zeros(1), cfg, quiet=True)
+    tune(_Quadratic(), cfg, jnp.zeros(1), quiet=True)
     assert capsys.readouterr().err == ""
 
 

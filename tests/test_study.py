@@ -274,7 +274,7 @@ def test_the_runner_takes_any_sampler_factory_and_metrics():
     np.testing.assert_array_equal(ds["dc"].values, [p[0] for p in sampler.points()])
     steady = ds.attrs["steady_from"]
 
-    def rms_phase(sol, _):
+    def rms_phase(sol, _signal, _aux):
         return {"rms": M.rms(M.wrap(sol.outputs.obs.theta - sol.outputs.truth.theta), sol.t >= steady)}
 
     freq = float(obs.omega_n) / (2 * math.pi)

@@ -14,6 +14,7 @@ from pathlib import Path
 import jax
 import jax.numpy as jnp
 import numpy as np
+import optax
 import pytest
 
 import jaxobs
@@ -23,13 +24,13 @@ from tuning import (
     GainSpec,
     Objective,
     Parametrization,
-    SolverConfig,
     Term,
     load_job,
-    run_solver,
+    tune,
 )
 from tuning.cli import main
 from tuning.objective import MetricContext
+from tuning.solvers import OptaxSolver
 from tuning.targets import flux_settling_time, lambda_for_damping, match_settling_time
 
 W_N = papers.FLL_OMEGA_N
@@ -48,10 +49,10 @@ def itae_tuning():
     sig = jaxobs.stack([jaxobs.paper001_test("A", t_event=0.1)])
     comp = linear.sogi_fll_closed_form()
     param = Parametrization([GainSpec("lam", float(comp.lam), 500.0, 500000.0)])
-    obj = Objective(comp, param, sig, 0.4, [Term("itae_freq")], MetricContext(t_event=0.1, steady_from=0.3))
-    res = run_solver(
-        obj, param.theta0(), SolverConfig(kind="adam", learning_rate=0.1, steps=60, patience=15), quiet=True
+    obj = Objective(
+        comp, param, sig, horizon=0.4, terms=[Term("itae_freq")], ctx=MetricContext(t_event=0.1, steady_from=0.3)
     )
+    res = tune(obj, OptaxSolver(optax.adam(0.1), steps=60, patience=15, name="adam"), param.theta0(), quiet=True)
     return obj, param, res
 
 
@@ -100,7 +101,9 @@ def test_diverging_candidates_give_a_finite_penalty_and_gradient():
     sigs = jaxobs.stack([jaxobs.paper001_test("A", t_event=0.1, phase=p) for p in (0.0, 1.0)])
     comp = jaxobs.SOGIFLL(k=0.7, lam=12000.0, rule=jaxobs.Euler(), ts=1e-3)
     param = Parametrization([GainSpec("k", 0.7, 0.01, 100.0)])
-    obj = Objective(comp, param, sigs, 0.3, [Term("itae_freq")], MetricContext(0.1, 0.25), penalty=123.0)
+    obj = Objective(
+        comp, param, sigs, horizon=0.3, terms=[Term("itae_freq")], ctx=MetricContext(0.1, 0.25), penalty=123.0
+    )
     bad = param.to_theta({"k": 40.0})
     v, g = obj.value_and_grad(bad)
     assert float(v) == 123.0 and np.all(np.isfinite(np.asarray(g))) and float(g[0]) == 0.0
@@ -117,7 +120,7 @@ def test_per_scenario_scores_flag_a_lost_lock_that_does_not_diverge():
     sigs = jaxobs.stack([jaxobs.GridSignal(t_event=0.1, freq_step=f) for f in (-1.0, 2.0)])
     comp = jaxobs.SOGIFLL(k=0.7, lam=1e4)
     param = Parametrization([GainSpec("k", 0.7, 0.01, 100.0)])
-    obj = Objective(comp, param, sigs, 0.4, [Term("rms_phase_steady")], MetricContext(0.1, 0.3))
+    obj = Objective(comp, param, sigs, horizon=0.4, terms=[Term("rms_phase_steady")], ctx=MetricContext(0.1, 0.3))
     mets, total, good = obj.per_scenario(param.to_theta({"k": 20.0}))
     assert np.all(np.asarray(good)) and np.all(np.asarray(mets["lost_lock"]))
     assert obj.summarize(mets, total, good)["lost_lock"] == 2

@@ -596,7 +596,7 @@ def _cmd_tune(args) -> int:
         drive = "" if job.drive is None else f", {job.drive.loop} drive on {job.drive.machine}"
         print(
             f"{path}: OK — {job.component}, free gains {', '.join(g.name for g in job.gains)}, {n} scenarios"
-            f"{drive}, solver {job.solver.kind}"
+            f"{drive}, solver {job.solver.name}"
         )
         return 0
     out = Path(args.out) if args.out else Path("out") / safe_name(job.name)

@@ -80,11 +80,13 @@ from jaxobs.provenance import sha256, versions
 from jaxobs.scenarios import Grid, Random, grid_signals
 from jaxobs.signals import EMFSignal, stack
 
+from . import strategies
+from .aggregations import AbstractAggregation
 from .objective import DRIVE_METRICS, LOST_SYNC_DEG, METRICS, MetricContext, Objective, Term
 from .outdir import atomic_path, atomic_write_text
 from .params import GainSpec, Parametrization
 from .report import write_report
-from .solvers import SolverConfig, run_solver
+from .solvers import AbstractSolver, tune
 from .structure import structure
 
 __all__ = ["JobError", "Job", "load_job", "parse_job", "run_job", "COMPONENTS", "rule_spec", "write_json"]
@@ -418,11 +420,9 @@ class Job:
     scenarios: ScenarioSpec
     holdout: ScenarioSpec | None
     terms: list
-    agg: str
-    alpha: float
-    temperature: float | None
+    aggregation: AbstractAggregation  # objective.aggregate (with alpha, temperature), tuning.strategies
     penalty: float
-    solver: SolverConfig
+    solver: AbstractSolver  # [solver], tuning.strategies
     sha256: str | None = None  # of the job file's bytes (load_job); None for a job built from a dict
     drive: DriveSpec | None = None  # signal = "drive" jobs: how the observer sits in the loop
 
@@ -856,8 +856,8 @@ def parse_job(raw: dict, base: Path | None = None) -> Job:
             raise JobError(f"{where}.weight", f"must be > 0, got {weight}")
         terms.append(Term(metric, weight))
     agg = _get(obj_t, "aggregate", "objective.aggregate", str, "mean")
-    if agg not in ("mean", "max", "cvar"):
-        raise JobError("objective.aggregate", f"must be mean, max or cvar, got {_show(agg)}")
+    if agg not in strategies.AGGREGATIONS:
+        raise JobError("objective.aggregate", f"must be {strategies.one_of(strategies.AGGREGATIONS)}, got {_show(agg)}")
     alpha = _get(obj_t, "alpha", "objective.alpha", float, 0.9)
     if not 0 <= alpha < 1:
         raise JobError("objective.alpha", f"must be in [0, 1), got {alpha}")
@@ -875,14 +875,15 @@ def parse_job(raw: dict, base: Path | None = None) -> Job:
         "solver",
     )
     kind = _get(sol_t, "kind", "solver.kind", str, "adam")
-    if kind not in ("adam", "adamw", "sgd", "bfgs"):
-        raise JobError("solver.kind", f"must be adam, adamw, sgd or bfgs, got {_show(kind)}")
-    if kind == "bfgs":  # optimistix BFGS: no learning rate, schedule, patience or checkpoints
-        for key in ("learning_rate", "schedule", "patience", "checkpoint_every"):
+    if kind not in strategies.SOLVER_KINDS:
+        raise JobError("solver.kind", f"must be {strategies.one_of(strategies.SOLVER_KINDS)}, got {_show(kind)}")
+    if kind in strategies.MINIMISERS:  # optimistix: no learning rate, schedule, patience or checkpoints
+        for key in strategies.OPTAX_ONLY:
             if key in sol_t:
-                raise JobError(f"solver.{key}", "does not apply to kind = 'bfgs' (it applies to adam, adamw, sgd)")
-    cfg = SolverConfig(
-        kind=kind,
+                raise JobError(
+                    f"solver.{key}", f"does not apply to kind = '{kind}' (it applies to {', '.join(strategies.OPTAX)})"
+                )
+    opts = dict(
         learning_rate=_get(sol_t, "learning_rate", "solver.learning_rate", float, 0.05),
         steps=_get(sol_t, "steps", "solver.steps", int, 100),
         patience=_get(sol_t, "patience", "solver.patience", int, 25),
@@ -891,19 +892,33 @@ def parse_job(raw: dict, base: Path | None = None) -> Job:
         checkpoint_every=_get(sol_t, "checkpoint_every", "solver.checkpoint_every", int, 5),
         progress_every=_get(sol_t, "progress_every", "solver.progress_every", int, 1),
     )
-    if not 0 < cfg.learning_rate <= 1e6:
-        raise JobError("solver.learning_rate", f"must be in (0, 1e6], got {cfg.learning_rate:g}")
-    if cfg.tol < 0:
-        raise JobError("solver.tol", f"must be >= 0, got {cfg.tol:g}")
-    if cfg.steps > MAX_SOLVER_STEPS:
-        raise JobError("solver.steps", f"must be <= {MAX_SOLVER_STEPS}, got {_show(cfg.steps)}")
+    if not 0 < opts["learning_rate"] <= 1e6:
+        raise JobError("solver.learning_rate", f"must be in (0, 1e6], got {opts['learning_rate']:g}")
+    if opts["tol"] < 0:
+        raise JobError("solver.tol", f"must be >= 0, got {opts['tol']:g}")
+    if opts["steps"] > MAX_SOLVER_STEPS:
+        raise JobError("solver.steps", f"must be <= {MAX_SOLVER_STEPS}, got {_show(opts['steps'])}")
     for fld in ("steps", "patience", "checkpoint_every", "progress_every"):
-        if getattr(cfg, fld) < 1:
-            raise JobError(f"solver.{fld}", f"must be >= 1, got {getattr(cfg, fld)}")
-    if cfg.schedule not in ("constant", "cosine"):
-        raise JobError("solver.schedule", f"must be constant or cosine, got {_show(cfg.schedule)}")
+        if opts[fld] < 1:
+            raise JobError(f"solver.{fld}", f"must be >= 1, got {opts[fld]}")
+    if opts["schedule"] not in strategies.SCHEDULES:
+        raise JobError(
+            "solver.schedule", f"must be {strategies.one_of(strategies.SCHEDULES)}, got {_show(opts['schedule'])}"
+        )
     job = Job(
-        raw, name, comp, seed, values, gains, scen, holdout, terms, agg, alpha, temperature, penalty, cfg, drive=drive
+        raw=raw,
+        name=name,
+        component=comp,
+        seed=seed,
+        values=values,
+        gains=gains,
+        scenarios=scen,
+        holdout=holdout,
+        terms=terms,
+        aggregation=strategies.aggregation(agg, alpha=alpha, temperature=temperature),
+        penalty=penalty,
+        solver=strategies.solver(kind, **opts),
+        drive=drive,
     )
     _check_recording_job(job, comp_t)
     return job
@@ -1138,13 +1153,11 @@ def build_objective(job: Job, spec: ScenarioSpec | None = None):
         comp,
         param,
         scen,
-        spec.horizon,
-        job.terms,
-        ctx,
-        job.agg,
-        job.alpha,
-        job.temperature,
-        job.penalty,
+        horizon=spec.horizon,
+        terms=job.terms,
+        ctx=ctx,
+        aggregation=job.aggregation,
+        penalty=job.penalty,
         drive=drive,
         bind=bind,
     )
@@ -1300,10 +1313,10 @@ def run_job(job: Job, out: Path, resume: bool = False, quiet: bool = False) -> d
     cf_all = info.closed_form(obj.component)
     cf = {g.name: cf_all[g.name] for g in job.gains}
     theta_cf = param.to_theta({g.name: _inside(g, cf[g.name]) for g in job.gains})
-    res = run_solver(
+    res = tune(
         obj,
-        theta0,
         job.solver,
+        theta0,
         checkpoint=out / CHECKPOINT,
         resume=resume,
         quiet=quiet,

@@ -1,8 +1,9 @@
 """Objectives: a scenario batch × simulation × metric × aggregation over the batch.
 
 Per scenario the value is a weighted sum of metrics of one simulation; over the
-batch the values are aggregated by the mean, a smooth worst case (log-sum-exp
-with a temperature) or the CVaR (mean of the worst (1 − α) fraction).
+batch the values are combined by an aggregation object (:mod:`tuning.aggregations`:
+the mean, a smooth worst case (log-sum-exp with a temperature) or the CVaR, the
+mean of the worst (1 − α) fraction).
 
 Divergence.  A scenario whose simulation is not finite, or whose value or
 gradient is not finite, is given a large finite ``penalty`` and a zero gradient
@@ -23,13 +24,17 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
+from jaxobs import OnSignal, simulate
 from jaxobs import metrics as M
 from jaxobs.drive import ClosedLoop
-from jaxobs.simulate import OnSignal, simulate
+from jaxobs.runner import run_scenarios
+from jaxobs.scenarios import Given
+from jaxobs.sharding import batch_mesh
 
+from .aggregations import AbstractAggregation, Mean
 from .params import Parametrization
 
-__all__ = ["METRICS", "DRIVE_METRICS", "LOST_LOCK", "LOST_SYNC_DEG", "Term", "Objective", "aggregate"]
+__all__ = ["METRICS", "DRIVE_METRICS", "LOST_LOCK", "LOST_SYNC_DEG", "Term", "MetricContext", "Objective"]
 
 
 # --------------------------------------------------------------------------
@@ -156,6 +161,7 @@ METRICS: dict[str, Callable] = {
 # the per-scenario flag :meth:`Objective.per_scenario` adds to the metrics: the estimate ended far from the
 # truth (jaxobs.metrics.lost_lock_of: 45° / 10 % on signals, 90° on the drive, over the steady window)
 LOST_LOCK = "lost_lock"
+_OK = " ok"  # the simulation's own flag among a scenario's metrics (a name no metric has)
 # metrics that need the closed-loop drive (signal = "drive" jobs)
 DRIVE_METRICS = (
     "settling_position",
@@ -186,28 +192,6 @@ class Term:
 
 
 # --------------------------------------------------------------------------
-# aggregation over the batch
-# --------------------------------------------------------------------------
-
-
-def aggregate(values, kind: str, alpha: float = 0.9, temperature: float | None = None):
-    """Aggregate per-scenario values: ``mean``, ``max`` (smooth, log-sum-exp) or ``cvar``.
-
-    ``max`` uses ``temperature`` in the units of the values (default: 1 % of
-    their mean magnitude); ``cvar`` the mean of the largest ⌈(1 − α)·B⌉ values.
-    """
-    if kind == "mean":
-        return jnp.mean(values)
-    if kind == "max":
-        t = temperature if temperature is not None else 0.01 * jax.lax.stop_gradient(jnp.mean(jnp.abs(values)) + 1e-30)
-        return M.smooth_max(values, t) + t * jnp.log(values.shape[0])
-    if kind == "cvar":
-        k = max(1, math.ceil((1 - alpha) * values.shape[0]))
-        return jnp.mean(jnp.sort(values)[-k:])
-    raise ValueError(f"aggregate must be 'mean', 'max' or 'cvar', got {kind!r}")
-
-
-# --------------------------------------------------------------------------
 # the objective
 # --------------------------------------------------------------------------
 
@@ -220,32 +204,36 @@ class Objective:
         component,
         param: Parametrization,
         scenarios,
+        *,
         horizon: float,
         terms: list[Term],
         ctx: MetricContext,
-        agg: str = "mean",
-        alpha: float = 0.9,
-        temperature: float | None = None,
+        aggregation: AbstractAggregation = Mean(),
         penalty: float = 1e3,
         drive=None,
         bind=None,
     ):
-        """``drive``: run each scenario (a drive Scenario) closed loop with this Drive, the component
-        as its observer; ``bind(component, scenario)``: adapt the component to the scenario (the
-        parameters an observer assumes, its initial speed) before the run."""
+        """``component``: the module whose free gains ``param`` sets; ``scenarios``: the batch (leading axis
+        the scenarios); ``horizon``: simulated seconds per scenario; ``terms``: the weighted metrics summed
+        per scenario; ``ctx``: the metrics' event time, steady window and bands; ``aggregation``: how the
+        per-scenario values become one (:class:`~tuning.aggregations.Mean` by default); ``penalty``: the
+        value of a diverged scenario.  ``drive``: run each scenario (a drive Scenario) closed loop with
+        this Drive, the component as its observer; ``bind(component, scenario)``: adapt the component to
+        the scenario (the parameters an observer assumes, its initial speed) before the run."""
         for term in terms:
             if term.metric not in METRICS:
                 raise ValueError(f"objective metric {term.metric!r} is unknown; known: {', '.join(METRICS)}")
+        if not isinstance(aggregation, AbstractAggregation):
+            raise ValueError(f"Objective.aggregation must be tuning.Mean(), SmoothMax() or CVaR(), got {aggregation!r}")
         self.component = component
         self.param = param
         self.scenarios = scenarios
         self.horizon = float(horizon)
         self.terms = list(terms)
         self.ctx = ctx
-        self.agg, self.alpha, self.temperature, self.penalty = agg, alpha, temperature, float(penalty)
+        self.aggregation, self.penalty = aggregation, float(penalty)
         self.drive, self.bind = drive, bind
         self._vg = eqx.filter_jit(self._per_scenario_value_and_grad)
-        self._metrics = eqx.filter_jit(self._per_scenario_metrics)
 
         @jax.custom_jvp
         def value(theta):
@@ -286,7 +274,7 @@ class Objective:
 
     def _aggregate_with_grad(self, theta):
         v, g, _ = self._vg(theta)
-        agg_v, w = jax.value_and_grad(lambda vv: aggregate(vv, self.agg, self.alpha, self.temperature))(v)
+        agg_v, w = jax.value_and_grad(lambda vv: self.aggregation(vv))(v)
         return agg_v, w @ g
 
     def value_and_grad(self, theta):
@@ -295,26 +283,46 @@ class Objective:
     def value_grad_diverged(self, theta):
         """The objective, its gradient and how many scenarios diverged, from one batch evaluation."""
         v, g, good = self._vg(theta)
-        agg_v, w = jax.value_and_grad(lambda vv: aggregate(vv, self.agg, self.alpha, self.temperature))(v)
+        agg_v, w = jax.value_and_grad(lambda vv: self.aggregation(vv))(v)
         return agg_v, w @ g, int(jnp.sum(~good))
 
-    # --- reporting
-    def _per_scenario_metrics(self, theta, scenarios):
-        def one(sig):
-            comp = self.param.apply(self.component, theta)
-            sol = self._simulate(comp, sig)
-            mets = {term.metric: METRICS[term.metric](sol, sig, self.ctx) for term in self.terms}
-            # far from the truth over the steady window (jaxobs.metrics, "lost lock"): reported, not tuned on
-            mets[LOST_LOCK] = M.lost_lock_of(sol, self.ctx.steady_from, signal=sig)
-            if self.drive is not None:
-                mets["lost_sync"] = _lost_sync(sol, sig, self.ctx)
-                # the drive does not follow its speed reference over the steady window (jaxobs.metrics,
-                # "lost speed"): e.g. a standstill start that runs backwards with a locked observer
-                out = sol.outputs
-                mets["lost_speed"] = M.lost_speed(out.omega_m, out.omega_m_ref, _steady(sol, self.ctx))
-            return mets, sol.ok
+    # --- reporting: a design scored on the scenarios by the one study runner (jaxobs.runner)
+    def _system(self, theta, sig):
+        """The system one scenario runs: the component at ``theta``, bound to the scenario, on its signal or
+        closing the drive's loop (what :meth:`_simulate` simulates)."""
+        comp = self.param.apply(self.component, theta)
+        if self.bind is not None:
+            comp = self.bind(comp, sig)
+        return ClosedLoop(self.drive, comp, sig) if self.drive is not None else OnSignal(comp, sig)
 
-        return jax.vmap(one)(scenarios)
+    def _scenario_metrics(self, sol, sig, _aux):
+        mets = {term.metric: METRICS[term.metric](sol, sig, self.ctx) for term in self.terms}
+        # far from the truth over the steady window (jaxobs.metrics, "lost lock"): reported, not tuned on
+        mets[LOST_LOCK] = M.lost_lock_of(sol, self.ctx.steady_from, signal=sig)
+        if self.drive is not None:
+            mets["lost_sync"] = _lost_sync(sol, sig, self.ctx)
+            # the drive does not follow its speed reference over the steady window (jaxobs.metrics,
+            # "lost speed"): e.g. a standstill start that runs backwards with a locked observer
+            out = sol.outputs
+            mets["lost_speed"] = M.lost_speed(out.omega_m, out.omega_m_ref, _steady(sol, self.ctx))
+        return {**mets, _OK: sol.ok}
+
+    def _per_scenario_metrics(self, theta, scenarios):
+        given = Given(scenarios)
+        # one chunk of every scenario on one device: the jit(vmap) the objective always ran, compiled once per
+        # objective (the runner keys its compilation on these two methods)
+        run = run_scenarios(
+            {"design": theta},
+            given,
+            self._system,
+            self._scenario_metrics,
+            horizon=self.horizon,
+            chunk_size=given.n,
+            mesh=batch_mesh(jax.devices()[:1]),
+            label="scores",
+        )
+        mets = dict(run.values["design"])
+        return mets, mets.pop(_OK)
 
     def per_scenario(self, theta, scenarios=None):
         """Each scenario's metrics (and its :data:`LOST_LOCK` flag), its weighted total (the penalty where
@@ -323,7 +331,7 @@ class Objective:
         On the drive the metrics hold ``lost_sync`` too: diverged, or |θ̂e − θe| > :data:`LOST_SYNC_DEG`; and
         ``lost_speed``: diverged, or the drive missed its speed reference (:func:`jaxobs.metrics.lost_speed`)."""
         scenarios = self.scenarios if scenarios is None else scenarios
-        mets, ok = self._metrics(theta, scenarios)
+        mets, ok = self._per_scenario_metrics(theta, scenarios)
         total = sum(term.weight * mets[term.metric] for term in self.terms)
         good = ok & jnp.isfinite(total)
         for key in ("lost_sync", "lost_speed"):
@@ -339,7 +347,7 @@ class Objective:
         """:meth:`scores` from :meth:`per_scenario`'s output.  Where every scenario diverged the metrics'
         means and worsts are ``None`` (there is nothing to average), and ``"null_reason"`` says why."""
         out = {
-            "objective": float(aggregate(total, self.agg, self.alpha, self.temperature)),
+            "objective": float(self.aggregation(total)),
             "diverged": int(jnp.sum(~good)),
         }
         if LOST_LOCK in mets:  # scenarios whose estimate ends far from the truth, the diverged ones included

@@ -1,4 +1,9 @@
-"""Solvers: optax loops (with early stopping and checkpoints) and optimistix BFGS.
+"""Solvers: optax loops (with early stopping and checkpoints) and optimistix minimisers, as objects.
+
+``tune(objective, optimizer)`` takes an optax ``GradientTransformation`` (``optax.adam(0.1)``), an
+optimistix minimiser (``optx.BFGS(rtol, atol)``) or a solver object that holds one with its stopping
+rule (:class:`OptaxSolver`, :class:`OptimistixSolver`); each solver runs its own loop (``solver.run``).
+A TOML job names its optimizer and schedule, and :mod:`tuning.strategies` maps the names to these objects.
 
 The optax loop is a Python loop over *iterations* (each one a compiled
 value-and-gradient of the whole scenario batch), so that it can report
@@ -9,6 +14,7 @@ from it replays exactly the computation an uninterrupted run would have done.
 
 from __future__ import annotations
 
+import abc
 import io
 import json
 import math
@@ -18,6 +24,7 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -28,19 +35,17 @@ from jaxobs.progress import Progress
 
 from .outdir import atomic_write_bytes
 
-__all__ = ["CheckpointError", "SolverConfig", "TuneResult", "run_solver", "make_optax", "decide_status", "STATUSES"]
-
-
-@dataclass(frozen=True)
-class SolverConfig:
-    kind: str = "adam"  # adam | adamw | sgd | bfgs
-    learning_rate: float = 0.05
-    steps: int = 100
-    patience: int = 25  # early stop after this many iterations without relative improvement > tol
-    tol: float = 1e-6
-    schedule: str = "constant"  # constant | cosine
-    checkpoint_every: int = 5
-    progress_every: int = 1
+__all__ = [
+    "AbstractSolver",
+    "OptaxSolver",
+    "OptimistixSolver",
+    "as_solver",
+    "tune",
+    "CheckpointError",
+    "TuneResult",
+    "decide_status",
+    "STATUSES",
+]
 
 
 @dataclass
@@ -98,32 +103,19 @@ def decide_status(
     return "budget", budget_reason + note, best
 
 
-def make_optax(cfg: SolverConfig):
-    lr = cfg.learning_rate
-    if cfg.schedule == "cosine":
-        lr = optax.cosine_decay_schedule(cfg.learning_rate, max(cfg.steps, 1))
-    if cfg.kind == "adam":
-        return optax.adam(lr)
-    if cfg.kind == "adamw":
-        return optax.adamw(lr)
-    if cfg.kind == "sgd":
-        return optax.sgd(lr)
-    raise ValueError(f"solver.kind must be one of adam, adamw, sgd, bfgs, got {cfg.kind!r}")
-
-
-def _bar(cfg: SolverConfig, quiet: bool) -> Progress:
+def _bar(solver: AbstractSolver, quiet: bool) -> Progress:
     """The solver's tqdm bar on stderr when it is a terminal (none when ``quiet``), announcing the first
     compilation."""
-    bar = Progress("auto" if not quiet else False, cfg.steps, f"tune ({cfg.kind})", unit="step")
+    bar = Progress("auto" if not quiet else False, solver.steps, f"tune ({solver.name})", unit="step")
     bar.stage("compiling the objective and its gradient (once; tens of seconds for a drive)")
     return bar
 
 
-def _show(bar: Progress, i: int, cfg: SolverConfig, value, best, diverged, first: bool) -> None:
+def _show(bar: Progress, i: int, solver: AbstractSolver, value, best, diverged, first: bool) -> None:
     """One iteration done; the objective, the best stable value and the diverged scenarios every
-    ``cfg.progress_every`` iterations."""
+    ``solver.progress_every`` iterations."""
     post = {}
-    if i % cfg.progress_every == 0 or i == cfg.steps:
+    if i % solver.progress_every == 0 or i == solver.steps:
         post = dict(objective=f"{value:.6g}", best=f"{best:.6g}")
         if diverged:
             post["diverged"] = int(diverged)
@@ -210,163 +202,262 @@ def _load_checkpoint(path: Path, opt_state_template, fingerprint: str | None):
     return meta, theta, best_theta, opt_state
 
 
-def run_solver(
+class AbstractSolver(abc.ABC):
+    """A tuning run's optimizer with its stopping rule; ``run`` owns the loop.
+
+    Every solver records one history entry per point it evaluates and picks its best design with
+    :func:`decide_status` (the least objective among the designs that diverged in no scenario).
+    Fields every solver has: ``steps`` (iteration budget), ``tol`` (relative improvement that counts),
+    ``progress_every`` (iterations between progress figures), ``name`` (shown in progress and reports).
+    """
+
+    name: str
+    steps: int
+    tol: float
+    progress_every: int
+
+    @abc.abstractmethod
+    def run(
+        self,
+        objective,
+        theta0,
+        *,
+        checkpoint: Path | None = None,
+        resume: bool = False,
+        quiet: bool = False,
+        fingerprint: str | None = None,
+    ) -> TuneResult:
+        """Minimise ``objective`` (``value_grad_diverged(θ)``, ``param``) from θ0."""
+
+
+def _check_budget(owner: str, steps, tol, progress_every) -> None:
+    for fld, v in (("steps", steps), ("progress_every", progress_every)):
+        if isinstance(v, bool) or not isinstance(v, int) or v < 1:
+            raise ValueError(f"{owner}.{fld} must be an integer >= 1, got {v!r}")
+    if isinstance(tol, bool) or not isinstance(tol, (int, float)) or not 0 <= tol < math.inf:
+        raise ValueError(f"{owner}.tol must be a finite number >= 0, got {tol!r}")
+
+
+@dataclass(frozen=True)
+class OptaxSolver(AbstractSolver):
+    """An optax ``GradientTransformation`` run as a Python loop over iterations, each a compiled
+    value-and-gradient of the whole batch, with early stopping and checkpoints.
+
+    ``patience``: stop after this many iterations without a relative improvement > ``tol``;
+    ``checkpoint_every``: iterations between checkpoints (when :meth:`run` is given a file).
+    """
+
+    optimizer: optax.GradientTransformation
+    steps: int = 100
+    patience: int = 25
+    tol: float = 1e-6
+    checkpoint_every: int = 5
+    progress_every: int = 1
+    name: str = "optax"
+
+    def __post_init__(self):
+        if not isinstance(self.optimizer, optax.GradientTransformation):
+            raise ValueError(f"OptaxSolver.optimizer must be an optax GradientTransformation, got {self.optimizer!r}")
+        _check_budget("OptaxSolver", self.steps, self.tol, self.progress_every)
+        for fld in ("patience", "checkpoint_every"):
+            v = getattr(self, fld)
+            if isinstance(v, bool) or not isinstance(v, int) or v < 1:
+                raise ValueError(f"OptaxSolver.{fld} must be an integer >= 1, got {v!r}")
+
+    def run(self, objective, theta0, *, checkpoint=None, resume=False, quiet=False, fingerprint=None) -> TuneResult:
+        """``checkpoint``: one npz file, rewritten atomically every ``checkpoint_every`` iterations, holding
+        ``fingerprint`` (the job's sha256).  ``resume``: continue from it; a checkpoint of another job, or a
+        corrupt one, raises :class:`CheckpointError` (one line); no checkpoint at all: one line on stderr
+        and a fresh start."""
+        t_start = time.time()
+        opt = self.optimizer
+        theta = theta0
+        opt_state = opt.init(theta)
+        best_theta, best_value, since_best, history, start = theta, math.inf, 0, [], 0
+        if resume and checkpoint is not None and not checkpoint.exists():
+            print(f"jaxobs: --resume: no checkpoint {str(checkpoint)!r}: starting fresh", file=sys.stderr, flush=True)
+        elif resume and checkpoint is not None:
+            meta, theta, best_theta, opt_state = _load_checkpoint(checkpoint, opt_state, fingerprint)
+            start, best_value, since_best, history = (
+                meta["iteration"],
+                meta["best_value"],
+                meta["since_best"],
+                meta["history"],
+            )
+
+        @jax.jit
+        def update(theta, opt_state, grad):
+            updates, opt_state = opt.update(grad, opt_state, theta)
+            return optax.apply_updates(theta, updates), opt_state
+
+        early = False
+        it = start
+        bar = _bar(self, quiet)
+        if start:
+            bar.update(start)
+        for it in range(start, self.steps):
+            value, grad, ndiv = objective.value_grad_diverged(theta)
+            value = float(value)
+            history.append(_entry(objective, it, value, ndiv, theta))
+            # a design that diverges in some scenario is never a candidate, whatever its (penalized) value
+            improved = ndiv == 0 and (
+                (not math.isfinite(best_value)) or value < best_value - self.tol * abs(best_value)
+            )
+            if improved:
+                best_value, best_theta, since_best = value, theta, 0
+            else:
+                since_best += 1
+            _show(bar, it + 1, self, value, best_value, ndiv, it == start)
+            if since_best >= self.patience:
+                early = True
+                it += 1
+                break
+            theta, opt_state = update(theta, opt_state, grad)
+            if checkpoint is not None and (it + 1) % self.checkpoint_every == 0:
+                _save_checkpoint(
+                    checkpoint, it + 1, theta, opt_state, best_theta, best_value, history, since_best, fingerprint
+                )
+        else:
+            it = self.steps
+        bar.close()
+        if not early:  # the last update is scored too: keep it if it is stable and better
+            value, _, ndiv = objective.value_grad_diverged(theta)
+            history.append(_entry(objective, it, float(value), ndiv, theta))
+            if ndiv == 0 and float(value) < best_value:
+                best_value, best_theta = float(value), theta
+        # the loop's best (first to reach best_value, the early-stop test's choice)
+        best_idx = next((i for i, h in enumerate(history) if h["diverged"] == 0 and h["value"] == best_value), None)
+        status, reason, best = decide_status(
+            history,
+            early,
+            self.tol,
+            f"converged: no relative improvement > {self.tol:g} in {self.patience} iterations",
+            f"budget: {self.steps} steps used, still improving",
+            best_idx,
+        )
+        return TuneResult(
+            theta=None if best is None else best_theta,
+            value=math.nan if best is None else history[best]["value"],
+            iterations=it,
+            history=history,
+            status=status,
+            reason=reason,
+            best_iteration=None if best is None else history[best]["iteration"],
+            timing=dict(solver_s=time.time() - t_start),
+        )
+
+
+def _minimiser_reason(result, name: str) -> tuple[bool, str]:
+    """(finished by its own test, a sentence) for an optimistix RESULTS value of the minimiser ``name``."""
+    R = optx.RESULTS
+    if result == R.successful:
+        return True, f"converged: {name}'s relative change of θ and of the objective fell below tol"
+    if result == R.nonlinear_max_steps_reached:
+        return False, f"budget: {name} used its max_steps"
+    if result == R.nonlinear_divergence:
+        return False, f"{name} diverged"
+    if result == R.nonfinite:
+        return False, f"{name} met a non-finite objective or gradient"
+    return False, f"{name} stopped: {R[result] or 'unknown reason'}"
+
+
+@dataclass(frozen=True)
+class OptimistixSolver(AbstractSolver):
+    """An optimistix minimiser (``optx.BFGS(rtol, atol)``, ...) run step by step (init / step /
+    terminate), so that every accepted iterate is recorded and progress is shown; it stops by its own
+    test or after ``steps`` steps.  Each recorded iterate is scored once more for its diverged count.
+    No checkpoints (a run is short); ``tol`` is the relative improvement :func:`decide_status` counts."""
+
+    minimiser: optx.AbstractMinimiser
+    steps: int = 100
+    tol: float = 1e-6
+    progress_every: int = 1
+    name: str = "optimistix"
+
+    def __post_init__(self):
+        if not isinstance(self.minimiser, optx.AbstractMinimiser):
+            raise ValueError(f"OptimistixSolver.minimiser must be an optimistix minimiser, got {self.minimiser!r}")
+        _check_budget("OptimistixSolver", self.steps, self.tol, self.progress_every)
+
+    def run(self, objective, theta0, *, checkpoint=None, resume=False, quiet=False, fingerprint=None) -> TuneResult:
+        t_start = time.time()
+        solver = self.minimiser
+        fn = lambda th, _: (objective.value(th), None)  # noqa: E731
+        tags = frozenset()
+        f_struct = jax.ShapeDtypeStruct((), theta0.dtype)
+        state = solver.init(fn, theta0, None, {}, f_struct, None, tags)
+        step = eqx.filter_jit(lambda y, st: solver.step(fn, y, None, {}, st, tags))
+        terminate = eqx.filter_jit(lambda y, st: solver.terminate(fn, y, None, {}, st, tags))
+        y = theta0
+        bar = _bar(self, quiet)
+        value, _, ndiv = objective.value_grad_diverged(y)
+        bar.stage(f"compiling {type(solver).__name__}'s step")
+        history = [_entry(objective, 0, value, ndiv, y)]
+        best_value = float(value) if ndiv == 0 else math.inf
+        result, n = optx.RESULTS.nonlinear_max_steps_reached, 0
+        for n in range(1, self.steps + 1):
+            done, res = terminate(y, state)
+            if bool(done):
+                result, n = res, n - 1
+                break
+            y_new, state, _ = step(y, state)
+            if not bool(jnp.all(y_new == y)):  # an accepted step: record the new iterate
+                y = y_new
+                value, _, ndiv = objective.value_grad_diverged(y)
+                history.append(_entry(objective, n, value, ndiv, y))
+                if ndiv == 0:
+                    best_value = min(best_value, float(value))
+            _show(bar, n, self, history[-1]["value"], best_value, history[-1]["diverged"], n == 1)
+        else:
+            done, res = terminate(y, state)
+            if bool(done):
+                result = res
+        bar.close()
+        finished, sentence = _minimiser_reason(result, type(solver).__name__)
+        status, reason, best = decide_status(history, finished, self.tol, sentence, sentence)
+        if not finished and status == "converged":  # pragma: no cover - decide_status returns budget then
+            status = "budget"
+        return TuneResult(
+            theta=None if best is None else objective.param.to_theta(history[best]["gains"]),
+            value=math.nan if best is None else history[best]["value"],
+            iterations=n,
+            history=history,
+            status=status,
+            reason=reason if status != "budget" or "budget" in reason else f"{sentence} ({reason})",
+            best_iteration=None if best is None else history[best]["iteration"],
+            timing=dict(solver_s=time.time() - t_start),
+        )
+
+
+def as_solver(optimizer) -> AbstractSolver:
+    """A solver object for ``optimizer``: a solver itself, an optax ``GradientTransformation`` (in an
+    :class:`OptaxSolver` with its default stopping rule) or an optimistix minimiser (in an
+    :class:`OptimistixSolver`)."""
+    if isinstance(optimizer, AbstractSolver):
+        return optimizer
+    if isinstance(optimizer, optax.GradientTransformation):
+        return OptaxSolver(optimizer)
+    if isinstance(optimizer, optx.AbstractMinimiser):
+        return OptimistixSolver(optimizer)
+    raise ValueError(
+        "tune: optimizer must be an optax GradientTransformation (optax.adam(0.1)), an optimistix minimiser "
+        f"(optimistix.BFGS(rtol=1e-6, atol=1e-6)) or a solver (OptaxSolver, OptimistixSolver), got {optimizer!r}"
+    )
+
+
+def tune(
     objective,
-    theta0,
-    cfg: SolverConfig,
+    optimizer,
+    theta0=None,
+    *,
     checkpoint: Path | None = None,
     resume: bool = False,
     quiet: bool = False,
     fingerprint: str | None = None,
 ) -> TuneResult:
-    """Minimize ``objective`` from θ0 with the configured solver; the best design is the best one that
-    diverged in no scenario (:func:`decide_status`).
-
-    ``checkpoint``: one npz file, rewritten atomically every ``cfg.checkpoint_every`` iterations, holding
-    ``fingerprint`` (the job's sha256).  ``resume``: continue from it; a checkpoint of another job, or a
-    corrupt one, raises :class:`CheckpointError` (one line); no checkpoint at all: one line on stderr and
-    a fresh start."""
-    if cfg.kind == "bfgs":
-        return _run_bfgs(objective, theta0, cfg, quiet)
-    t_start = time.time()
-    opt = make_optax(cfg)
-    theta = theta0
-    opt_state = opt.init(theta)
-    best_theta, best_value, since_best, history, start = theta, math.inf, 0, [], 0
-    if resume and checkpoint is not None and not checkpoint.exists():
-        print(f"jaxobs: --resume: no checkpoint {str(checkpoint)!r}: starting fresh", file=sys.stderr, flush=True)
-    elif resume and checkpoint is not None:
-        meta, theta, best_theta, opt_state = _load_checkpoint(checkpoint, opt_state, fingerprint)
-        start, best_value, since_best, history = (
-            meta["iteration"],
-            meta["best_value"],
-            meta["since_best"],
-            meta["history"],
-        )
-
-    @jax.jit
-    def update(theta, opt_state, grad):
-        updates, opt_state = opt.update(grad, opt_state, theta)
-        return optax.apply_updates(theta, updates), opt_state
-
-    early = False
-    it = start
-    bar = _bar(cfg, quiet)
-    if start:
-        bar.update(start)
-    for it in range(start, cfg.steps):
-        value, grad, ndiv = objective.value_grad_diverged(theta)
-        value = float(value)
-        history.append(_entry(objective, it, value, ndiv, theta))
-        # a design that diverges in some scenario is never a candidate, whatever its (penalized) value
-        improved = ndiv == 0 and ((not math.isfinite(best_value)) or value < best_value - cfg.tol * abs(best_value))
-        if improved:
-            best_value, best_theta, since_best = value, theta, 0
-        else:
-            since_best += 1
-        _show(bar, it + 1, cfg, value, best_value, ndiv, it == start)
-        if since_best >= cfg.patience:
-            early = True
-            it += 1
-            break
-        theta, opt_state = update(theta, opt_state, grad)
-        if checkpoint is not None and (it + 1) % cfg.checkpoint_every == 0:
-            _save_checkpoint(
-                checkpoint, it + 1, theta, opt_state, best_theta, best_value, history, since_best, fingerprint
-            )
-    else:
-        it = cfg.steps
-    bar.close()
-    if not early:  # the last update is scored too: keep it if it is stable and better
-        value, _, ndiv = objective.value_grad_diverged(theta)
-        history.append(_entry(objective, it, float(value), ndiv, theta))
-        if ndiv == 0 and float(value) < best_value:
-            best_value, best_theta = float(value), theta
-    # the loop's best (first to reach best_value, the early-stop test's choice)
-    best_idx = next((i for i, h in enumerate(history) if h["diverged"] == 0 and h["value"] == best_value), None)
-    status, reason, best = decide_status(
-        history,
-        early,
-        cfg.tol,
-        f"converged: no relative improvement > {cfg.tol:g} in {cfg.patience} iterations",
-        f"budget: {cfg.steps} steps used, still improving",
-        best_idx,
-    )
-    return TuneResult(
-        theta=None if best is None else best_theta,
-        value=math.nan if best is None else history[best]["value"],
-        iterations=it,
-        history=history,
-        status=status,
-        reason=reason,
-        best_iteration=None if best is None else history[best]["iteration"],
-        timing=dict(solver_s=time.time() - t_start),
-    )
-
-
-def _bfgs_reason(result) -> tuple[bool, str]:
-    """(finished by its own test, a sentence) for an optimistix RESULTS value."""
-    R = optx.RESULTS
-    if result == R.successful:
-        return True, "converged: BFGS's relative change of θ and of the objective fell below tol"
-    if result == R.nonlinear_max_steps_reached:
-        return False, "budget: BFGS used its max_steps"
-    if result == R.nonlinear_divergence:
-        return False, "BFGS diverged"
-    if result == R.nonfinite:
-        return False, "BFGS met a non-finite objective or gradient"
-    return False, f"BFGS stopped: {R[result] or 'unknown reason'}"
-
-
-def _run_bfgs(objective, theta0, cfg: SolverConfig, quiet: bool) -> TuneResult:
-    """optimistix BFGS run step by step (init / step / terminate), so that every accepted iterate is
-    recorded and progress is shown.  Each recorded iterate is scored once more for its diverged count."""
-    import equinox as eqx
-
-    t_start = time.time()
-    solver = optx.BFGS(rtol=cfg.tol, atol=cfg.tol)
-    fn = lambda th, _: (objective.value(th), None)  # noqa: E731
-    tags = frozenset()
-    f_struct = jax.ShapeDtypeStruct((), theta0.dtype)
-    state = solver.init(fn, theta0, None, {}, f_struct, None, tags)
-    step = eqx.filter_jit(lambda y, st: solver.step(fn, y, None, {}, st, tags))
-    terminate = eqx.filter_jit(lambda y, st: solver.terminate(fn, y, None, {}, st, tags))
-    y = theta0
-    bar = _bar(cfg, quiet)
-    value, _, ndiv = objective.value_grad_diverged(y)
-    bar.stage("compiling BFGS's step")
-    history = [_entry(objective, 0, value, ndiv, y)]
-    best_value = float(value) if ndiv == 0 else math.inf
-    result, n = optx.RESULTS.nonlinear_max_steps_reached, 0
-    for n in range(1, cfg.steps + 1):
-        done, res = terminate(y, state)
-        if bool(done):
-            result, n = res, n - 1
-            break
-        y_new, state, _ = step(y, state)
-        if not bool(jnp.all(y_new == y)):  # an accepted step: record the new iterate
-            y = y_new
-            value, _, ndiv = objective.value_grad_diverged(y)
-            history.append(_entry(objective, n, value, ndiv, y))
-            if ndiv == 0:
-                best_value = min(best_value, float(value))
-        _show(bar, n, cfg, history[-1]["value"], best_value, history[-1]["diverged"], n == 1)
-    else:
-        done, res = terminate(y, state)
-        if bool(done):
-            result = res
-    bar.close()
-    finished, sentence = _bfgs_reason(result)
-    status, reason, best = decide_status(history, finished, cfg.tol, sentence, sentence)
-    if not finished and status == "converged":  # pragma: no cover - decide_status returns budget then
-        status = "budget"
-    return TuneResult(
-        theta=None if best is None else objective.param.to_theta(history[best]["gains"]),
-        value=math.nan if best is None else history[best]["value"],
-        iterations=n,
-        history=history,
-        status=status,
-        reason=reason if status != "budget" or "budget" in reason else f"{sentence} ({reason})",
-        best_iteration=None if best is None else history[best]["iteration"],
-        timing=dict(solver_s=time.time() - t_start),
-    )
+    """Minimise ``objective`` with ``optimizer`` (see :func:`as_solver`) from θ0 (default
+    ``objective.param.theta0()``); the best design is the best one that diverged in no scenario
+    (:func:`decide_status`).  ``checkpoint``/``resume``/``fingerprint``: see :meth:`OptaxSolver.run`."""
+    solver = as_solver(optimizer)
+    theta0 = objective.param.theta0() if theta0 is None else theta0
+    return solver.run(objective, theta0, checkpoint=checkpoint, resume=resume, quiet=quiet, fingerprint=fingerprint)

@@ -62,8 +62,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxobs.discretize import AB3, RK4, Euler, Tustin
-from jaxobs.measurements import DriveInput
+from jaxobs import AB3, RK4, DriveInput, Euler, Tustin
 from jaxobs.observers import SOIFO, LPFFlux, PureIntegratorFlux, SecondOrderSOIFO
 from jaxobs.progress import Progress
 

@@ -1,0 +1,98 @@
+"""Strategy objects of tuning: aggregations (the method that aggregates), solvers (the method that runs) and
+the one table from a job's names to them."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optax
+import optimistix as optx
+import pytest
+
+from tuning import CVaR, Mean, Objective, OptaxSolver, OptimistixSolver, SmoothMax, strategies, tune
+from tuning.solvers import as_solver
+
+
+def test_aggregations_on_a_hand_made_batch():
+    v = jnp.asarray([1.0, 2.0, 3.0, 10.0])
+    assert float(Mean()(v)) == 4.0
+    assert float(CVaR(0.75)(v)) == 10.0  # the worst ⌈0.25·4⌉ = 1
+    assert float(CVaR(0.5)(v)) == 6.5  # the worst 2
+    assert float(CVaR(0.0)(v)) == 4.0  # all of them: the mean
+    # log-sum-exp: between the max and max + T log B, tight as T → 0; its gradient weights the worst
+    for t in (1.0, 0.1, 1e-3):
+        s = float(SmoothMax(t)(v))
+        assert 10.0 <= s <= 10.0 + t * np.log(4) + 1e-12
+    g = jax.grad(SmoothMax(0.1))(v)
+    assert float(g[-1]) == pytest.approx(1.0, abs=1e-12) and float(jnp.sum(g)) == pytest.approx(1.0)
+    # no temperature: 1 % of the mean magnitude (0.04 here)
+    assert float(SmoothMax()(v)) == pytest.approx(float(SmoothMax(0.04)(v)), rel=1e-12)
+
+
+@pytest.mark.parametrize(
+    "make, match",
+    [
+        (lambda: CVaR(1.0), "CVaR.alpha"),
+        (lambda: CVaR(-0.1), "CVaR.alpha"),
+        (lambda: SmoothMax(0.0), "SmoothMax.temperature"),
+        (lambda: SmoothMax(float("inf")), "SmoothMax.temperature"),
+        (lambda: strategies.aggregation("worst"), "objective.aggregate must be mean, max or cvar"),
+        (lambda: strategies.solver("lbfgs"), "solver.kind must be adam, adamw, sgd or bfgs"),
+        (lambda: strategies.solver("adam", schedule="linear"), "solver.schedule must be constant or cosine"),
+        (lambda: as_solver("adam"), "optimizer must be an optax GradientTransformation"),
+        (lambda: OptaxSolver(optax.adam(0.1), steps=0), "OptaxSolver.steps"),
+        (lambda: OptaxSolver(optax.adam(0.1), patience=True), "OptaxSolver.patience"),
+        (lambda: OptimistixSolver(optx.BFGS(rtol=1e-6, atol=1e-6), tol=-1.0), "OptimistixSolver.tol"),
+        (lambda: Objective(None, None, None, horizon=1.0, terms=[], ctx=None, aggregation="mean"), "aggregation"),
+    ],
+)
+def test_bad_strategies_are_refused_naming_the_field(make, match):
+    with pytest.raises(ValueError, match=match):
+        make()
+
+
+def test_the_table_builds_the_objects_a_job_names():
+    assert strategies.aggregation("mean") == Mean()
+    assert strategies.aggregation("max", temperature=0.5) == SmoothMax(0.5)
+    assert strategies.aggregation("cvar", alpha=0.8, temperature=0.5) == CVaR(0.8)
+    adam = strategies.solver("adam", learning_rate=0.1, steps=7, patience=3)
+    assert isinstance(adam, OptaxSolver) and (adam.name, adam.steps, adam.patience) == ("adam", 7, 3)
+    bfgs = strategies.solver("bfgs", tol=1e-5)
+    assert isinstance(bfgs, OptimistixSolver) and isinstance(bfgs.minimiser, optx.BFGS)
+    assert bfgs.minimiser.rtol == bfgs.minimiser.atol == 1e-5 and bfgs.name == "bfgs"
+    # the cosine schedule decays the learning rate over the solver's steps
+    sched = strategies.SCHEDULES["cosine"](0.1, 10)
+    assert float(sched(0)) == pytest.approx(0.1) and float(sched(10)) == pytest.approx(0.0, abs=1e-12)
+
+
+class _Quadratic:
+    """(θ − 1)², never diverged; no simulation."""
+
+    class param:
+        @staticmethod
+        def values(theta):
+            return {"g": float(theta[0])}
+
+        @staticmethod
+        def to_theta(values):
+            return jnp.asarray([values["g"]])
+
+        @staticmethod
+        def theta0():
+            return jnp.zeros(1)
+
+    def value_grad_diverged(self, theta):
+        return jnp.sum((theta - 1.0) ** 2), 2 * (theta - 1.0), 0
+
+    def value(self, theta):
+        return jnp.sum((theta - 1.0) ** 2)
+
+
+def test_tune_takes_an_optax_transformation_or_an_optimistix_minimiser_directly():
+    # plain gradient descent at rate 0.1 contracts θ − 1 by 0.8 per step: 100 steps (the default budget)
+    res = tune(_Quadratic(), optax.sgd(0.1))
+    assert res.status == "budget" and res.iterations == 100
+    assert float(res.theta[0]) == pytest.approx(1.0 - 0.8**100, abs=1e-12)
+    assert len(res.history) == 101  # every iterate and the last update
+    res = tune(_Quadratic(), optx.BFGS(rtol=1e-8, atol=1e-8), jnp.asarray([3.0]))
+    assert res.status == "converged" and "BFGS" in res.reason
+    assert float(res.theta[0]) == pytest.approx(1.0, abs=1e-6)

@@ -1,0 +1,82 @@
+"""The names a TOML job gives its strategies, and the objects they stand for: the one table.
+
+A job file says ``objective.aggregate = "cvar"``, ``solver.kind = "adam"``, ``solver.schedule =
+"cosine"``; the schema checks the names against these tables and builds the objects with
+:func:`aggregation` and :func:`solver`, which is all that ever reads a name.  In Python, pass the
+objects themselves (``Objective(..., aggregation=CVaR(0.9))``, ``tune(objective, optax.adam(0.1))``).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import optax
+import optimistix as optx
+
+from .aggregations import CVaR, Mean, SmoothMax
+from .solvers import OptaxSolver, OptimistixSolver
+
+__all__ = ["AGGREGATIONS", "SCHEDULES", "OPTAX", "MINIMISERS", "SOLVER_KINDS", "aggregation", "solver", "one_of"]
+
+# objective.aggregate: name -> the aggregation, from objective.alpha (CVaR) and objective.temperature (smooth max)
+AGGREGATIONS: dict[str, Callable] = {
+    "mean": lambda alpha, temperature: Mean(),
+    "max": lambda alpha, temperature: SmoothMax(temperature),
+    "cvar": lambda alpha, temperature: CVaR(alpha),
+}
+
+# solver.schedule: name -> the learning rate over the iterations, from solver.learning_rate and solver.steps
+SCHEDULES: dict[str, Callable] = {
+    "constant": lambda learning_rate, steps: learning_rate,
+    "cosine": lambda learning_rate, steps: optax.cosine_decay_schedule(learning_rate, max(steps, 1)),
+}
+
+# solver.kind: an optax transformation of a learning rate (or schedule), run by OptaxSolver ...
+OPTAX: dict[str, Callable] = {"adam": optax.adam, "adamw": optax.adamw, "sgd": optax.sgd}
+# ... or an optimistix minimiser of a tolerance (relative and absolute), run by OptimistixSolver
+MINIMISERS: dict[str, Callable] = {"bfgs": lambda tol: optx.BFGS(rtol=tol, atol=tol)}
+SOLVER_KINDS = (*OPTAX, *MINIMISERS)
+# the [solver] keys only an optax solver reads (a minimiser refuses them)
+OPTAX_ONLY = ("learning_rate", "schedule", "patience", "checkpoint_every")
+
+
+def one_of(names) -> str:
+    """``a, b, c or d``: the allowed names, for an error message."""
+    names = list(names)
+    return names[0] if len(names) == 1 else ", ".join(names[:-1]) + " or " + names[-1]
+
+
+def aggregation(name: str, *, alpha: float = 0.9, temperature: float | None = None):
+    """The aggregation named ``name`` (:data:`AGGREGATIONS`)."""
+    if name not in AGGREGATIONS:
+        raise ValueError(f"objective.aggregate must be {one_of(AGGREGATIONS)}, got {name!r}")
+    return AGGREGATIONS[name](alpha, temperature)
+
+
+def solver(
+    kind: str,
+    *,
+    learning_rate: float = 0.05,
+    schedule: str = "constant",
+    steps: int = 100,
+    patience: int = 25,
+    tol: float = 1e-6,
+    checkpoint_every: int = 5,
+    progress_every: int = 1,
+):
+    """The solver named ``kind`` (:data:`SOLVER_KINDS`) with a job's ``[solver]`` settings; ``name`` is the kind."""
+    if kind in OPTAX:
+        if schedule not in SCHEDULES:
+            raise ValueError(f"solver.schedule must be {one_of(SCHEDULES)}, got {schedule!r}")
+        return OptaxSolver(
+            OPTAX[kind](SCHEDULES[schedule](learning_rate, steps)),
+            steps=steps,
+            patience=patience,
+            tol=tol,
+            checkpoint_every=checkpoint_every,
+            progress_every=progress_every,
+            name=kind,
+        )
+    if kind in MINIMISERS:
+        return OptimistixSolver(MINIMISERS[kind](tol), steps=steps, tol=tol, progress_every=progress_every, name=kind)
+    raise ValueError(f"solver.kind must be {one_of(SOLVER_KINDS)}, got {kind!r}")
