@@ -4,7 +4,8 @@ One place, below both the studies (:mod:`jaxobs.study`, :mod:`jaxobs.drive_study
 (``tuning/``).  A *sampler* picks the points of the axes and says how the results are laid out
 (:class:`Grid`: the Cartesian product, one dim per axis; :class:`Random`, :class:`Sobol`, :class:`LHS`:
 ``n`` points inside the axes' [min, max], one ``sample`` dim with the axes as coordinates along it;
-:class:`Recordings`: scenarios given whole, one ``recording`` dim); a *builder* turns the points into a
+:class:`Given`: a batch given whole, one ``scenario`` dim; :class:`Recordings`: recorded signals, one
+``recording`` dim); a *builder* turns the points into a
 batched scenario PyTree (:func:`grid_signals` here, :func:`jaxobs.drive.scenarios` for the drive), and
 :func:`jaxobs.runner.run_scenarios` runs every design on it.
 
@@ -14,11 +15,16 @@ at ``t_event`` plus optional white noise.  Axes (:data:`GRID_SIGNAL_AXES`):
 (× 001 Test C's spectrum, :data:`jaxobs.papers.TEST_C_HARMONICS`), ``sub_amplitude``
 (1 Hz), ``phase_deg`` (initial phase) and ``noise`` (white noise standard deviation,
 p.u., with a per-scenario seed).
+
+EMF signals (the flux observers without a drive): two-axis :class:`~jaxobs.EMFSignal` s.  Axes
+(:data:`EMF_SIGNAL_AXES`): ``speed_hz`` (electrical frequency), ``dc_alpha``, ``dc_beta`` (V),
+``h5``, ``h7`` (× the fundamental) and ``phase_deg``.
 """
 
 from __future__ import annotations
 
 import itertools
+import math
 from dataclasses import dataclass
 from typing import ClassVar
 
@@ -29,9 +35,10 @@ import numpy as np
 
 from ._time import SampleTime, time_value
 from .papers import TEST_C_HARMONICS
-from .signals import GridSignal
+from .signals import EMFSignal, GridSignal, stack
 
 __all__ = [
+    "EMF_SIGNAL_AXES",
     "GRID_SIGNAL_AXES",
     "LHS",
     "AbstractSampler",
@@ -41,6 +48,7 @@ __all__ = [
     "Random",
     "Recordings",
     "Sobol",
+    "emf_signals",
     "grid_signals",
 ]
 
@@ -145,6 +153,35 @@ def grid_signals(names, combos, t_event: float, freq: float, *, seed: int = 0):
         out = eqx.tree_at(lambda s: s.noise, out, jnp.asarray(cols["noise"]))
     keys = jax.vmap(lambda i: jax.random.fold_in(jax.random.PRNGKey(seed), i))(jnp.arange(n))
     return eqx.tree_at(lambda s: s.key, out, keys)
+
+
+EMF_SIGNAL_AXES = ("speed_hz", "dc_alpha", "dc_beta", "h5", "h7", "phase_deg")
+
+
+def emf_signals(names, combos):
+    """Batched :class:`~jaxobs.EMFSignal` for ``combos`` (tuples of values for the axes ``names``, of
+    :data:`EMF_SIGNAL_AXES`): a back EMF proportional to speed, 100 V at 50 Hz (``speed_hz``, default 50 Hz),
+    with dc offsets ``dc_alpha``, ``dc_beta`` (V), a negative-sequence 5th and a positive-sequence 7th
+    harmonic of ``h5``, ``h7`` × the fundamental, from the initial phase ``phase_deg``.  An unknown axis is a
+    ``ValueError`` naming it; the values are checked by :class:`~jaxobs.EMFSignal`."""
+    names = list(names)
+    for name in names:
+        if name not in EMF_SIGNAL_AXES:
+            raise ValueError(f"EMF axis {name!r} is unknown; known axes: {', '.join(EMF_SIGNAL_AXES)}")
+    sigs = []
+    for combo in combos:
+        a = dict(zip(names, combo))
+        f = a.get("speed_hz", 50.0)
+        sigs.append(
+            EMFSignal(
+                A1=100.0 * f / 50.0,  # BEMF ∝ speed: 100 V at 50 Hz
+                omega1=2 * math.pi * f,
+                phase=math.radians(a.get("phase_deg", 0.0)),
+                dc=(a.get("dc_alpha", 0.0), a.get("dc_beta", 0.0)),
+                harmonics={-5: a.get("h5", 0.0) * 100.0 * f / 50.0, 7: a.get("h7", 0.0) * 100.0 * f / 50.0},
+            )
+        )
+    return stack(sigs)
 
 
 # --------------------------------------------------------------------------
