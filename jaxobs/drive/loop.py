@@ -17,7 +17,7 @@ One step is one control period T_s (10 kHz by default), as on a DSP:
 2. the sensors measure the current at t_k and the voltage applied over
    [t_k, t_{k+1}], with their offsets, gain errors and noise
    (:class:`~jaxobs.drive.Sensors`);
-3. the observer steps on those measurements (a :class:`~jaxobs.measurements.DriveInput`)
+3. the observer steps on those measurements (a :class:`~jaxobs._measurements.DriveInput`)
    and reports θ̂e, ω̂e at t_k;
 4. the FOC uses the encoder (``drive.sensorless=False``) or the observer's θ̂e,
    ω̂e (from ``drive.handover`` on; the encoder before, while the observer
@@ -38,10 +38,10 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
+from .._discretize import RK4, AbstractRule, check_rule
 from .._math import wrap
+from .._system import AbstractSystem
 from .._validate import check_sample_time
-from ..discretize import RK4, AbstractRule, check_rule
-from ..system import AbstractSystem
 from .control import FOC, ControllerState, FOCInput, IfStartup, OperatingPoint
 from .hardware import Inverter, InverterInput, SensorInput
 from .machine import dq_to_ab
