@@ -46,6 +46,7 @@ LAYERS = [
     ("jaxobs.observers.sogi", "jaxobs.observers.fll", "jaxobs.observers.flux", "jaxobs.observers.leso"),
     ("jaxobs.observers",),
     # the one loop over a system, and sharding a batch over devices
+    ("jaxobs._steps", "jaxobs._sensitivity"),
     ("jaxobs._loop",),
     ("jaxobs.simulate", "jaxobs.sharding"),
     # metrics: they score
