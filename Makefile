@@ -46,8 +46,9 @@ $(DOCS_STAMP): $(STAMP)
 	$(VENV)/bin/python -m pip install --quiet -e ".[test,bench,docs]"
 	touch $(DOCS_STAMP)
 
+# EXECUTE=1: run the notebooks while building, so their figures are on the pages (they are stored without outputs)
 docs: $(DOCS_STAMP)
-	NO_MKDOCS_2_WARNING=1 $(VENV)/bin/mkdocs build --strict --quiet
+	NO_MKDOCS_2_WARNING=1 JAXOBS_DOCS_EXECUTE=$(if $(EXECUTE),true,false) $(VENV)/bin/mkdocs build --strict --quiet
 
 clean:
 	rm -rf $(VENV) out site .pytest_cache

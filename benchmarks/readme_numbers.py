@@ -50,7 +50,8 @@ def _timed(cmd: list[str], cwd: Path, env: dict | None = None, timeout: float = 
     wall = time.perf_counter() - t0
     if r.returncode != 0:
         raise RuntimeError(f"{' '.join(cmd)} failed ({r.returncode}): {r.stderr[-1500:]}")
-    return {"command": " ".join(cmd), "wall_s": round(wall, 1), **_context()}
+    shown = [Path(cmd[0]).name, *cmd[1:]]  # `jaxobs ...`, `python -m ...`: not this machine's paths
+    return {"command": " ".join(shown), "wall_s": round(wall, 1), **_context()}
 
 
 def _jaxobs() -> str:
@@ -87,7 +88,13 @@ def tour() -> dict:
         job = cwd / "short.toml"
         text = (resources.files("tuning") / "presets" / "wif_robust.toml").read_text()
         job.write_text(re.sub(r"(?m)^steps = \d+", "steps = 2", text))
-        subprocess.run([j, "tune", str(job), "--out", "out/tour/tune", "--quiet"], cwd=cwd, check=True, timeout=1800)
+        subprocess.run(
+            [j, "tune", str(job), "--out", "out/tour/tune", "--quiet"],
+            cwd=cwd,
+            check=True,
+            timeout=1800,
+            capture_output=True,
+        )
         rows["export_result"] = _timed(
             [j, "export", "out/tour/tune/result.json", "--out", "out/tour/c-tuned", "--quiet"], cwd
         )

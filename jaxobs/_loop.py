@@ -16,7 +16,7 @@ checks each against the plain scan, to 1e-12 or tighter):
    outputs become separate fused outputs that share their subexpressions.
    Measured on the SOGI-FLL (forward Euler, batch 1024, float32, 2 devices,
    unroll 8, before the default became 3): 48 → 74 M scenario-steps/s.
-2. **Peel multistep start-ups.**  :class:`~jaxobs.discretize.AB3` starts with
+2. **Peel multistep start-ups.**  :class:`~jaxobs._discretize.AB3` starts with
    two RK4 steps behind a ``lax.cond`` on its sample count.  A conditional in
    the loop body costs a branch per step and blocks unrolling, so the loop runs
    the start-up steps on their own and then converts every rule state in the

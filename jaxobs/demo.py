@@ -22,9 +22,9 @@ import jax
 import numpy as np
 
 from . import linear, metrics
+from ._simulate import OnSignal, simulate
 from .progress import Progress
 from .signals import paper001_test, stack
-from .simulate import OnSignal, simulate
 
 __all__ = ["fll_demo", "DEMO_TESTS", "format_table", "table_i_flls"]
 

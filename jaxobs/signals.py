@@ -32,9 +32,9 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import papers
+from ._measurements import DriveInput
 from ._time import SampleTime, cycles, exact_phase, frac_mul, time_value
 from ._validate import as_float, check_nonnegative, check_positive, check_real, check_sample_time, static_float
-from .measurements import DriveInput
 
 __all__ = [
     "GridSignal",
@@ -167,7 +167,7 @@ class SampledSignal(eqx.Module):
 
     ``truth`` is the true (θ, ω, fundamental amplitude) at the same instants,
     when known (a synthetic waveform); with it, ``simulate`` fills in
-    :class:`~jaxobs.simulate.SignalTruth` and a cost may compare against it.
+    :class:`~jaxobs._simulate.SignalTruth` and a cost may compare against it.
     Leaves may carry a leading batch axis (``vmap`` over recordings of one
     length).
 
@@ -507,7 +507,7 @@ class DriveRecording(eqx.Module):
     """A recording of a drive's measurements, (u_α, u_β, i_α, i_β) per sample, for a drive observer run open
     loop (``jaxobs.OnSignal(observer, recording)``), with the encoder's electrical angle when known.
 
-    ``recording(t)`` returns the :class:`~jaxobs.measurements.DriveInput` at t_k (the drive observers'
+    ``recording(t)`` returns the :class:`~jaxobs._measurements.DriveInput` at t_k (the drive observers'
     contract: the voltage applied over [t_k, t_k+1], the current sampled at t_k); its ``ts`` must be the
     observer's (``OnSignal`` checks it; :meth:`from_csv` resamples).  With ``theta_e`` (the encoder's
     electrical angle, rad) the truth is reported: ``theta`` the angle (unwrapped), ``omega`` the electrical
@@ -676,7 +676,7 @@ class EMFSignal(eqx.Module):
     e_α = A0α + A1 cos(ω1 t + φ1) + Σ_h A_h cos(s_h h ω1 t),
     e_β = A0β + A1 sin(ω1 t + φ1) + Σ_h s_h A_h sin(s_h h ω1 t),
     with s_h = ±1 the sequence of harmonic h.  ``__call__(t)`` returns a
-    :class:`~jaxobs.measurements.DriveInput` with u = e and i = 0, the voltage being the
+    :class:`~jaxobs._measurements.DriveInput` with u = e and i = 0, the voltage being the
     *average* of e over the coming period [t, t + ts] — the same convention as
     the drive, which tells the observer at t_k the voltage it applies over
     [t_k, t_{k+1}].  The true rotor flux (∫e with no dc) is A1/ω1 (sin, −cos)

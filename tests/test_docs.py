@@ -18,6 +18,7 @@ Conventions of the pages' code blocks:
 from __future__ import annotations
 
 import importlib.util
+import os
 import re
 import subprocess
 import sys
@@ -65,8 +66,9 @@ def _run_cli(cmd: str, cwd: Path) -> subprocess.CompletedProcess:
     """``cmd`` in ``cwd`` as a reader runs it at the repository's root (``tuning/presets/...`` resolves)."""
     if not (cwd / "tuning").exists():
         (cwd / "tuning").symlink_to(ROOT / "tuning")
+    env = {**os.environ, "COLUMNS": "100"}  # argparse wraps its help to the terminal's width
     return subprocess.run(
-        [_jaxobs_exe(), *cmd.split()[1:]], capture_output=True, text=True, cwd=cwd, timeout=1800, check=False
+        [_jaxobs_exe(), *cmd.split()[1:]], capture_output=True, text=True, cwd=cwd, timeout=1800, check=False, env=env
     )
 
 
@@ -192,3 +194,41 @@ def test_toml_reference_lists_every_schema_key():
     assert not missing, f"keys of the schema missing from the TOML reference: {missing}"
     for table in {t.split(".")[0] for t, _ in keys if t}:
         assert f"`[{table}" in ref, f"no section for [{table}]"
+
+
+# --------------------------------------------------------------------------------------------------
+# names and paths the pages quote exist
+# --------------------------------------------------------------------------------------------------
+
+
+def _resolves(name: str) -> bool:
+    """``jaxobs.x.y`` / ``tuning.x``: the longest importable module prefix, then attributes."""
+    import importlib
+
+    parts = name.split(".")
+    for i in range(len(parts), 0, -1):
+        try:
+            obj = importlib.import_module(".".join(parts[:i]))
+        except ImportError:
+            continue
+        for attr in parts[i:]:
+            if not hasattr(obj, attr):
+                return False
+            obj = getattr(obj, attr)
+        return True
+    return False
+
+
+def test_docs_quote_names_and_files_that_exist():
+    """A module, function or file renamed in the code and not in the docs fails here, naming the page."""
+    stale = []
+    for page in [*PAGES, ROOT / "README.md"]:
+        text = page.read_text()
+        for m in re.finditer(r"`((?:jaxobs|tuning)(?:\.[A-Za-z_]\w*)+)", text):
+            if not m.group(1).endswith("_") and not _resolves(m.group(1)):  # `jaxobs.papers.IF_*`: a family
+                stale.append(f"{page.name}: {m.group(1)}")
+        for m in re.finditer(r"`((?:jaxobs|tuning|tests|benchmarks|notebooks)/[\w./-]+?)[`:\s]", text):
+            path = m.group(1).rstrip(".")
+            if not (ROOT / path).exists():
+                stale.append(f"{page.name}: {path}")
+    assert not stale, "the docs quote names or files that do not exist: " + ", ".join(sorted(set(stale)))

@@ -11,7 +11,8 @@ import pytest
 
 import jaxobs
 from jaxobs import drive as D
-from jaxobs import metrics
+from jaxobs import linear, metrics, papers
+from jaxobs.drive_study import bind_observer
 
 TS = 1e-4
 
@@ -334,6 +335,84 @@ def test_sensorless_drive_starts_locked():
     err = np.degrees(np.asarray(metrics.wrap(o.obs.theta - o.theta_e)))
     assert np.max(np.abs(err)) < 0.1, np.max(np.abs(err))
     assert np.max(np.abs(np.asarray(o.omega_m) / (600 * D.RPM) - 1)) < 1e-3
+
+
+def _bench(name):
+    """A bench of the drive jobs (jaxobs.drive.bench): its machine and its sensorless drive."""
+    par = D.bench_machine(name)
+    return par, D.bench_drive(par)
+
+
+def _steady_start_run(name, horizon=0.1):
+    """The observer ``name`` closing the loop from t = 0 at 300 and 1000 r/min, 0 and 5 N·m (constant)."""
+    if name == "LPFFlux":
+        par, drive = _bench("spmsm000")
+        kp, ki = linear.pll_gains(2 * math.pi * papers.FLUX_PLL_HZ)
+        obs = jaxobs.LPFFlux(par.Rs, par.Ld, papers.LPF_OMEGA_C, float(kp), float(ki))
+    else:
+        par, drive = _bench("ipmsm002")
+        obs = getattr(jaxobs, name)(par.Rs, par.Lq)
+    # D.grid starts each scenario at its speed_rpm
+    sc = D.grid(D.Scenario(par, theta_e0=0.4), speed_rpm=[300.0, 1000.0], load_nm=[0.0, 5.0]).scenarios
+    sol = jax.jit(jax.vmap(lambda s: jaxobs.simulate(D.ClosedLoop(drive, bind_observer(obs, s), s), horizon)))(sc)
+    o = sol.outputs
+    rel = np.max(np.abs(np.asarray(o.omega_m) / np.asarray(o.omega_m_ref) - 1), axis=1)
+    err = np.degrees(np.asarray(metrics.wrap(o.obs.theta - o.theta_e)))
+    return rel, err
+
+
+# measured (float64, 0.1 s): max |ω/ω* − 1| over (300, 0), (300, 5), (1000, 0), (1000, 5) r/min, N·m, and the
+# position error at t = 0 -> the end; before the steady start under the observer's error (issue 26) the LPF
+# dipped 6.6 % at 300 r/min and lost the 5 N·m case (79 %), the C-LESO 2.2 %, the GI-LESO 0.80 %:
+# LPFFlux  ≤ 6e-5, 46.7° (300) and 17.7° (1000) constant; CLESO ≤ 1e-5, −11.4° and −36.9° constant;
+# GILESO ≤ 2.6e-3, −5.0 -> −4.3° and −18.1 -> −15.4° (its generalized integrator, ωc = π rad/s, is still
+# settling after the 0.2 s phase: the error drifts on, −13.0° at 1 s, and the speed follows by ≤ 0.26 %);
+# FALESO ≤ 4e-5, 0.0° (no bias without a mismatch).
+STEADY_START_LAG_DEG = {"LPFFlux": (46.7, 17.7), "CLESO": (-11.4, -36.9), "GILESO": (-5.0, -18.1), "FALESO": (0, 0)}
+
+
+@pytest.mark.parametrize(
+    "name",
+    [
+        "LPFFlux",
+        "CLESO",
+        pytest.param("GILESO", marks=pytest.mark.slow),
+        pytest.param("FALESO", marks=pytest.mark.slow),
+    ],
+)
+def test_sensorless_steady_start_holds_the_speed_within_half_a_percent_from_t0(name):
+    """Every drive observer that closes the loop from t = 0 starts where it settles, the operating point under its
+    own steady angle error (ClosedLoop.init, FOC.operating_point's offset): |ω − ω*| ≤ 0.5 % of ω* from t = 0
+    at 300 and 1000 r/min, 0 and 5 N·m, and the position error at t = 0 is the observer's steady lag."""
+    rel, err = _steady_start_run(name)
+    assert np.all(rel <= 5e-3), rel
+    lag300, lag1000 = STEADY_START_LAG_DEG[name]
+    np.testing.assert_allclose(err[:, 0], [lag300, lag300, lag1000, lag1000], atol=0.2)
+    if name in ("LPFFlux", "CLESO", "FALESO"):  # settled in the 0.2 s phase: the error stays where it started
+        np.testing.assert_allclose(err[:, -1], err[:, 0], atol=0.05)
+
+
+def test_operating_point_under_an_angle_offset_carries_the_load_in_the_controllers_frame():
+    """FOC.operating_point with the controller's frame 30° behind the rotor's (a lagging observer): the references
+    (i_d* = 0, i_q*) rotated by −30° carry the load, and FOC.init's integrators produce the machine's voltage in
+    that frame (zero errors: integrator + decoupling = the voltage)."""
+    par, drive = _bench("ipmsm002")
+    foc = drive.foc.bind(par, 1e3)
+    w, off = 600 * D.RPM, math.radians(-30.0)
+    op = foc.operating_point(par, w, w, 0.0, 10.0, off)
+    torque = 1.5 * par.p * (par.psi_f * op.i_q + (par.Ld - par.Lq) * op.i_d * op.i_q)
+    assert float(torque) == pytest.approx(10.0 + float(par.B) * w, rel=1e-9)
+    c, s = math.cos(off), math.sin(off)
+    i_dc, i_qc = c * op.i_d + s * op.i_q, -s * op.i_d + c * op.i_q  # the controller's frame
+    assert float(i_dc) == pytest.approx(0.0, abs=1e-9)  # i_d* = 0 in its own frame
+    cs = foc.init(op)
+    assert float(cs.iq_ref) == pytest.approx(float(i_qc), rel=1e-12)
+    w_e, u_dc, u_qc = par.p * w, c * op.u_d + s * op.u_q, -s * op.u_d + c * op.u_q
+    assert float(cs.int_d - w_e * par.Lq * i_qc) == pytest.approx(float(u_dc), rel=1e-9)
+    assert float(cs.int_q + w_e * (par.Ld * i_dc + par.psi_f)) == pytest.approx(float(u_qc), rel=1e-9)
+    # without an offset it is the rotor frame's operating point, as before
+    op0 = foc.operating_point(par, w, w, 0.0, 10.0)
+    assert float(op0.offset) == 0.0 and float(op0.i_d) == pytest.approx(0.0, abs=1e-12)
 
 
 def test_ok_is_false_for_a_non_finite_observer_or_plant_signal():

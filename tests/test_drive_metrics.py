@@ -9,7 +9,6 @@ import pytest
 import jaxobs
 from jaxobs import drive as D
 from jaxobs import metrics as M
-from jaxobs import papers
 from jaxobs.drive_study import bind_observer
 from tuning.objective import DRIVE_METRICS, METRICS, MetricContext
 
@@ -17,13 +16,12 @@ from tuning.objective import DRIVE_METRICS, METRICS, MetricContext
 @pytest.fixture(scope="module")
 def cleso_load_step():
     """C-LESO closing the loop on the IPMSM bench at 600 r/min, a 0 -> 3 N·m load step at 50 ms, 0.6 s."""
-    par = D.ipmsm_paper002(J=papers.BENCH_J_002)
-    foc = D.FOC.imc(par, 2 * math.pi * papers.BENCH_CURRENT_HZ, 2 * math.pi * papers.BENCH_SPEED_HZ)
+    par = D.bench_machine("ipmsm002")
     w = 600 * D.RPM
     load = D.Profile([0.0, 0.05], [0.0, 3.0], kind="step")
     sc = D.Scenario(par, speed_ref=D.Profile.constant(w), load=load, omega_m0=w)
     obs = bind_observer(jaxobs.CLESO(par.Rs, par.Lq), sc)
-    sol = jax.jit(lambda: jaxobs.simulate(D.ClosedLoop(D.Drive(foc, sensorless=True), obs, sc), 0.6))()
+    sol = jax.jit(lambda: jaxobs.simulate(D.ClosedLoop(D.bench_drive(par), obs, sc), 0.6))()
     return sol, sc, MetricContext(t_event=0.05, steady_from=0.45, band_deg=1.0)
 
 

@@ -26,15 +26,15 @@ LAYERS = [
         "jaxobs._math",
         "jaxobs._validate",
         "jaxobs.papers",
-        "jaxobs.measurements",
-        "jaxobs.system",
+        "jaxobs._measurements",
+        "jaxobs._system",
         "jaxobs._time",
         "jaxobs.progress",
         "jaxobs.provenance",
         "jaxobs._cache",
     ),
     # integration rules (and check_rule)
-    ("jaxobs.discretize",),
+    ("jaxobs._discretize",),
     # signals and plant: they produce the measurements
     ("jaxobs.signals", "jaxobs.drive.machine", "jaxobs.drive.hardware"),
     ("jaxobs.scenarios", "jaxobs.drive.plant", "jaxobs.drive.control", "jaxobs.drive.scenario"),
@@ -48,7 +48,7 @@ LAYERS = [
     # the one loop over a system, and sharding a batch over devices
     ("jaxobs._steps", "jaxobs._sensitivity"),
     ("jaxobs._loop",),
-    ("jaxobs.simulate", "jaxobs.sharding"),
+    ("jaxobs._simulate", "jaxobs.sharding"),
     # metrics: they score
     ("jaxobs.metrics",),
     # linear analysis: the observers' models, closed forms that return observers, settling times (metrics)
@@ -62,6 +62,7 @@ LAYERS = [
     (
         "jaxobs.study",
         "jaxobs.drive_study",
+        "jaxobs.drive.stability",
         "jaxobs.demo",
         "jaxobs.reproduce.flux",
         "jaxobs.reproduce.leso",
@@ -77,6 +78,11 @@ LAYERS = [
     ("tuning.strategies",),
     ("tuning.objective", "tuning.report", "tuning.targets"),
     ("tuning.structure",),
+    ("tuning.job.fields",),
+    ("tuning.job.toml", "tuning.job.components", "tuning.job.spec"),
+    ("tuning.job.recordings", "tuning.job.drive", "tuning.job.output"),
+    ("tuning.job.schema", "tuning.job.scenarios"),
+    ("tuning.job.run",),
     ("tuning.job",),
     ("tuning.results",),
     ("tuning.study_file",),
@@ -212,7 +218,7 @@ def test_the_checks_see_a_violation(tmp_path, monkeypatch):
     """The parser resolves relative and package imports, and flags upward and deferred ones."""
     targets = {(t, lazy) for t, _, lazy in _imports("jaxobs.signals")}
     assert ("jaxobs.papers", False) in targets  # `from . import papers`
-    assert ("jaxobs.measurements", False) in targets  # `from .measurements import DriveInput`
+    assert ("jaxobs._measurements", False) in targets  # `from ._measurements import DriveInput`
     assert {t for t, _, _ in _imports("jaxobs.reproduce.leso")} >= {"jaxobs.drive", "jaxobs.linear", "jaxobs.papers"}
     probe = tmp_path / "_probe.py"  # a module beside signals that imports upward, once at the top, once deferred
     probe.write_text("from . import study\n\n\ndef f():\n    from . import metrics\n")

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import jaxobs
-from jaxobs.discretize import Held, Knots, diffrax_rk4_step
+from jaxobs._discretize import Held, Knots, diffrax_rk4_step
 
 OMEGA_C = 2 * math.pi * 50.0  # SOGI centre
 OMEGA_IN = 2 * math.pi * 55.0  # input frequency (off-centre, so the response is not trivial)

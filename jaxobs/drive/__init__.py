@@ -6,7 +6,7 @@ Every dynamic piece is a step component (``init``/``step``): :class:`PMSM`,
 them with an observer, :class:`ClosedLoop`, which ``jaxobs.simulate`` runs.
 """
 
-from ..measurements import DriveInput as DriveInput
+from .._measurements import DriveInput as DriveInput
 from .bench import BENCH_MACHINES as BENCH_MACHINES
 from .bench import IF_SUDDEN_LOAD_PU as IF_SUDDEN_LOAD_PU
 from .bench import bench_drive as bench_drive

@@ -89,7 +89,10 @@ class OperatingPoint(NamedTuple):
     """A steady operating point of the drive (the true machine), to start a scenario in (DESIGN.md).
 
     At steady state the currents sit at their references and the speed at its
-    reference; the PI integrators hold what the loop needs to stay there.
+    reference; the PI integrators hold what the loop needs to stay there.  The
+    controller's frame may sit ``offset`` ahead of the rotor's (a biased
+    observer closing the loop): its references are then met in its own frame,
+    and the rotor-frame currents below are those references rotated by ``offset``.
     """
 
     omega_m: jax.Array  # mechanical speed, rad/s
@@ -100,6 +103,7 @@ class OperatingPoint(NamedTuple):
     i_q: jax.Array
     u_d: jax.Array  # rotor-frame voltage the true machine needs there, V
     u_q: jax.Array
+    offset: jax.Array | float = 0.0  # the controller's angle minus the rotor's, rad (0: encoder or unbiased)
 
 
 class IfStartup(eqx.Module):
@@ -204,6 +208,12 @@ class FOCOutput(NamedTuple):
     id_ref: jax.Array  # current references, A
     iq_ref: jax.Array
     theta: jax.Array  # the angle the current loop used (given position, or the I-f angle in start-up), rad
+
+
+def _rotate(x_d, x_q, angle):
+    """(x_d, x_q) seen from a frame ``angle`` behind: R(angle)·(x_d, x_q)."""
+    c, s = jnp.cos(angle), jnp.sin(angle)
+    return c * x_d - s * x_q, s * x_d + c * x_q
 
 
 def _torque_dq(par: PMSMParams, i_d, i_q):
@@ -335,38 +345,49 @@ class FOC(eqx.Module):
             return ControllerState(int_d=z, int_q=z, int_w=z, iq_ref=z, **rest)
         est = self.est
         w_e = est.p * op.omega_m
-        int_d = op.u_d + w_e * est.Lq * op.i_q
-        int_q = op.u_q - w_e * (est.Ld * op.i_d + est.psi_f)
+        # the controller's frame is op.offset ahead of the rotor's: its currents and the voltage it must
+        # produce are the rotor frame's rotated back by the offset (zero offset: the rotor frame itself)
+        i_d, i_q = _rotate(op.i_d, op.i_q, -op.offset)
+        u_d, u_q = _rotate(op.u_d, op.u_q, -op.offset)
+        int_d = u_d + w_e * est.Lq * i_q
+        int_q = u_q - w_e * (est.Ld * i_d + est.psi_f)
         if self.outer == "current":
             int_w = z
         else:
-            int_w = op.i_q - self.kp_w * (self.setpoint_weight * op.omega_m_ref - op.omega_m)
-        return ControllerState(int_d=z + int_d, int_q=z + int_q, int_w=z + int_w, iq_ref=z + op.i_q, **rest)
+            int_w = i_q - self.kp_w * (self.setpoint_weight * op.omega_m_ref - op.omega_m)
+        return ControllerState(int_d=z + int_d, int_q=z + int_q, int_w=z + int_w, iq_ref=z + i_q, **rest)
 
-    def operating_point(self, par: PMSMParams, omega_m, omega_m_ref, theta_e, t_load) -> OperatingPoint:
+    def operating_point(self, par: PMSMParams, omega_m, omega_m_ref, theta_e, t_load, offset=0.0) -> OperatingPoint:
         """The steady state of the true machine ``par`` under this controller at speed ω_m and load T_L.
 
         The speed loop settles where the torque balances the load and friction,
-        T_e(i_d(i_q), i_q) = T_L + B ω_m, with i_d from this controller's i_d
-        policy (zero, or MTPA on the assumed machine): solved by Newton's method
-        from i_q = (T_L + B ω_m)/K_t (exact in one step for i_d = 0).  With
-        ``outer="current"`` the reference *is* i_q.  The voltage is the true
+        T_e(i_d, i_q) = T_L + B ω_m, with the controller's references i_q* and
+        i_d*(i_q*) (zero, or MTPA on the assumed machine) met in its own frame,
+        ``offset`` (rad) ahead of the rotor's: the rotor-frame currents are the
+        references rotated by the offset, (i_d, i_q) = R(offset)(i_d*, i_q*)
+        (a lagging observer, offset < 0, puts part of i_q* on the rotor's d axis,
+        and i_q* grows to carry the load).  Solved by Newton's method from
+        i_q* = (T_L + B ω_m)/(K_t cos offset) (exact in one step for i_d* = 0).
+        With ``outer="current"`` the reference *is* i_q*.  The voltage is the true
         machine's steady rotor-frame voltage (the BEMF harmonics, which average
         out, are left out).
         """
         w_e = par.p * omega_m
+
+        def rotor_currents(iq):
+            return _rotate(self._id_ref(self.est, iq), iq, offset)
+
         if self.outer == "current":
             i_q = jnp.clip(omega_m_ref, -self.i_max, self.i_max)
         else:
             need = t_load + par.B * omega_m
-            i_q = need / (1.5 * par.p * par.psi_f)
-            for _ in range(4):  # Newton on T_e(i_q) − need, with i_d = i_d*(i_q)
-                te, dte = jax.jvp(
-                    lambda iq: _torque_dq(par, self._id_ref(self.est, iq), iq), (i_q,), (jnp.ones_like(i_q),)
-                )
+            # |offset| < 90° where a steady state exists; the floor keeps a wilder offset finite
+            i_q = need / (1.5 * par.p * par.psi_f * jnp.maximum(jnp.cos(offset), 0.1))
+            for _ in range(4):  # Newton on T_e(i_q*) − need
+                te, dte = jax.jvp(lambda iq: _torque_dq(par, *rotor_currents(iq)), (i_q,), (jnp.ones_like(i_q),))
                 i_q = i_q - (te - need) / dte
             i_q = jnp.clip(i_q, -self.i_max, self.i_max)
-        i_d = self._id_ref(self.est, i_q)
+        i_d, i_q = rotor_currents(i_q)
         u_d = par.Rs * i_d - w_e * par.Lq * i_q
         u_q = par.Rs * i_q + w_e * (par.Ld * i_d + par.psi_f)
         z = jnp.zeros_like(w_e)
@@ -379,6 +400,7 @@ class FOC(eqx.Module):
             i_q=z + i_q,
             u_d=u_d,
             u_q=u_q,
+            offset=z + offset,
         )
 
     def _id_ref(self, est: PMSMParams, iq):

@@ -25,9 +25,9 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._math import safe_norm2
+from .._measurements import DriveInput
 from .._validate import as_float, check_nonnegative, check_positive, check_real
 from .._validate import static_float as _static_float
-from ..measurements import DriveInput
 
 __all__ = ["Inverter", "InverterInput", "Sensors", "SensorInput", "clarke_abc_to_ab", "ab_to_abc"]
 

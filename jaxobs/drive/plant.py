@@ -23,9 +23,9 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
+from .._discretize import RK4, AbstractRule, Held, check_rule
 from .._math import wrap
 from .._validate import check_nonnegative, check_sample_time
-from ..discretize import RK4, AbstractRule, Held, check_rule
 from .hardware import Inverter
 from .machine import PMSMParams, dq_to_ab, plant_vf, torque
 

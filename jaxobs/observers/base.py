@@ -28,7 +28,7 @@ from typing import Any, NamedTuple
 import equinox as eqx
 import jax
 
-from ..discretize import AbstractRule
+from .._discretize import AbstractRule
 
 
 class ObserverState(eqx.Module):

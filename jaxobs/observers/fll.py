@@ -21,10 +21,10 @@ import jax
 import jax.numpy as jnp
 
 from .. import papers
+from .._discretize import AB3, AbstractRule, check_rule
 from .._math import safe_atan2, safe_norm2
 from .._validate import check_positive, check_sample_time
 from .._validate import static_float as _static_float
-from ..discretize import AB3, AbstractRule, check_rule
 from ._cores import fll_rate, sogi2_vf, sogi_vf
 from .base import AbstractObserver
 

@@ -53,9 +53,9 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
+from .._discretize import RK4, AbstractRule, check_rule
 from .._math import safe_atan2
 from .._validate import check_nonnegative, check_positive, check_sample_time
-from ..discretize import RK4, AbstractRule, check_rule
 from ._cores import pll_vf, quadrature_error, safe_sq_amplitude, sogi2_tustin_coefficients, sogi2_vf, sogi_vf
 
 __all__ = ["FluxOutput", "FluxState", "PureIntegratorFlux", "LPFFlux", "SOIFO", "SecondOrderSOIFO"]

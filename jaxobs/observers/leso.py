@@ -47,9 +47,9 @@ import jax
 import jax.numpy as jnp
 
 from .. import papers
+from .._discretize import RK4, AbstractRule, Knots, check_rule
 from .._math import safe_atan2, wrap
 from .._validate import check_nonnegative, check_positive, check_sample_time
-from ..discretize import RK4, AbstractRule, Knots, check_rule
 from ._cores import pll_vf
 
 __all__ = ["LESOOutput", "LESOState", "CLESO", "GILESO", "FALESO"]

@@ -15,8 +15,8 @@ import jax
 import jax.numpy as jnp
 
 from .. import papers
+from .._discretize import AbstractRule, Tustin, check_rule
 from .._validate import check_positive, check_sample_time
-from ..discretize import AbstractRule, Tustin, check_rule
 from ._cores import sogi2_vf, sogi_vf
 from .base import AbstractObserver
 

@@ -36,6 +36,7 @@ import numpy as np
 
 from .. import drive as D
 from .. import linear, papers
+from .._simulate import simulate
 from ..metrics import wrap
 from ..observers import (
     SOIFO,
@@ -45,7 +46,6 @@ from ..observers import (
     SecondOrderSOIFO,
 )
 from ..progress import Progress
-from ..simulate import simulate
 
 __all__ = ["OBSERVER_NAMES", "flux_bank", "run_flux_experiments"]
 

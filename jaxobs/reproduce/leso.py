@@ -27,10 +27,10 @@ import numpy as np
 
 from .. import drive as D
 from .. import linear, papers
+from .._simulate import simulate
 from ..metrics import harmonic_amplitude, wrap
 from ..observers import CLESO, FALESO, GILESO, ObserverBank
 from ..progress import Progress
-from ..simulate import simulate
 
 __all__ = ["LESO_NAMES", "leso_bank", "run_leso_experiments"]
 

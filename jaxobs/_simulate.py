@@ -45,12 +45,12 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ._discretize import Knots
 from ._loop import AbstractCheckpoint, AutoCheckpoint, check_unroll, run_loop
+from ._system import AbstractSystem
 from ._time import SampleTime
 from ._validate import check_sample_time
-from .discretize import Knots
 from .signals import DriveRecording, EMFSignal, SampledSignal
-from .system import AbstractSystem
 
 __all__ = [
     "simulate",

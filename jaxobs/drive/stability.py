@@ -1,0 +1,219 @@
+"""Closed-loop stability of a drive design at an operating point, from the simulated, sampled loop itself.
+
+:func:`lyapunov` linearizes :meth:`ClosedLoop.step <jaxobs.drive.ClosedLoop.step>` along its own
+trajectory (``jax.jvp``, forward mode) and measures how fast small perturbations grow or decay: the
+largest Lyapunov exponent of the closed loop (1/s), with the rotor angle's neutral direction taken out.
+Nothing here is a model of the drive; the same step that :func:`jaxobs.simulate` runs (plant under RK4,
+one-sample delay, 1 kHz speed loop, inverter limits, the observer's own discretization) is linearized.
+:func:`linear_speed_loop` is the papers' small-signal view beside it (module end, and docs/stability.md).
+
+Why a Lyapunov exponent and not Floquet multipliers.  At a constant speed the loop is, in the rotor frame,
+periodic with the speed loop's period (``speed_every`` samples); but its state is not in the rotor frame:
+the plant's angle, the observer's stationary-frame filters and the held αβ voltage rotate with θe.  A
+monodromy matrix would need the rotation's action on every observer's state (family-specific
+knowledge).  The Lyapunov exponents need none: they are the growth rates of the state transition
+matrix Φ(t) along the orbit, whatever frame the state is in, and for a relative equilibrium they equal
+log|μ|/T of the rotor-frame Floquet multipliers μ.
+
+The neutral direction.  A common rotation of the rotor angle and of everything that turns with it maps
+the closed loop's orbit onto another orbit of the same loop (the machine, FOC and observers are
+rotation-equivariant), so that direction neither grows nor decays: multiplier 1, exponent 0 — it would
+mask every stable design.  It is found without knowing the state's layout: the derivative of the
+settled state with respect to the scenario's initial angle θe0 (one ``jvp`` through ``init`` and the
+settling run).  That vector is carried as the first column of the QR iterations (it stays the neutral
+direction under Φ), and the exponents of the columns after it are those of the quotient: the
+non-neutral ones.  State components the step only copies (the I-f start-up's bookkeeping when there is
+no start-up) are another trivially neutral block; they are found by the step's Jacobian (a column and a
+row equal to the unit vector) and masked out.
+
+Estimate.  ``n_dirs`` tangent directions (plus the neutral one) are propagated by ``jvp`` and
+re-orthonormalized (QR) every speed-loop period; the exponent is the least-squares slope of the
+accumulated log growth over ``window`` seconds, after ``settle`` seconds that bring the loop to its
+steady orbit (from the steady start) and ``warmup`` seconds that align the directions with the
+dominant modes.  The slope averages the bounded wobble of a non-normal or oscillatory mode; its error
+falls like 1/window.  Everything is inside one ``jit``: vmap it over operating points
+(:func:`stability_sweep`) and differentiate it with respect to the gains (reverse mode through the
+scan; the QR and the log are smooth where the exponents are distinct).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import NamedTuple
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+from jax.flatten_util import ravel_pytree
+
+from ..linear import TransferFunction, sogi_fll_model, wif_model
+from .loop import ClosedLoop
+
+__all__ = ["Stability", "lyapunov", "stability_sweep", "LinearVerdict", "linear_speed_loop", "fll_frequency_soifo"]
+__all__ += ["fll_frequency_sosoifo"]
+
+
+class Stability(NamedTuple):
+    """The verdict of :func:`lyapunov` (each field batched under ``vmap``)."""
+
+    exponent: jax.Array  # largest non-neutral Lyapunov exponent, 1/s (> 0: perturbations grow)
+    exponents: jax.Array  # the n_dirs largest non-neutral exponents, 1/s, largest first
+    margin: jax.Array  # −exponent, 1/s: the decay rate of the slowest mode (> tol: stable)
+    stable: jax.Array  # margin > tol and the orbit held its speed (bool)
+    speed_dev: jax.Array  # max |ωm − ωm*| / |ωm*| over settle + warmup + window (the orbit itself), 1
+
+
+def _split(state):
+    """(the state's float leaves as one vector, a function back to the whole state given the rest)."""
+    dyn, rest = eqx.partition(state, eqx.is_inexact_array)
+    vec, unravel = ravel_pytree(dyn)
+    return vec, rest, unravel
+
+
+def lyapunov(
+    system: ClosedLoop,
+    *,
+    settle: float = 0.2,
+    warmup: float = 0.1,
+    window: float = 0.4,
+    n_dirs: int = 3,
+    tol: float = 0.0,
+    seed: int = 0,
+) -> Stability:
+    """The largest non-neutral Lyapunov exponent of ``system``'s closed loop at its operating point.
+
+    ``settle``, ``warmup``, ``window``: s (module doc); each is rounded to whole speed-loop periods.
+    ``n_dirs`` (≥ 1): tangent directions tracked besides the neutral one (2 or more resolves a complex pair
+    smoothly).  ``tol``: 1/s, the margin a stable verdict needs.  ``seed``: the initial directions.
+    The scenario's profiles should be constant over the run (an operating point); the loop starts in its
+    steady state (no I-f start-up: ``drive.startup`` must be None).
+    """
+    if not isinstance(system, ClosedLoop):
+        raise ValueError(f"lyapunov: system must be a jaxobs.drive.ClosedLoop, got {type(system).__name__}")
+    if system.drive.startup is not None:
+        raise ValueError("lyapunov: system.drive.startup must be None (an operating point, started steady)")
+    for name, v, lo in (("settle", settle, 0.0), ("warmup", warmup, 0.0), ("window", window, 1e-3)):
+        if not (lo <= float(v) <= 100.0):
+            raise ValueError(f"lyapunov: {name} must be in [{lo:g}, 100] s, got {v!r}")
+    if isinstance(n_dirs, bool) or not isinstance(n_dirs, int) or not 1 <= n_dirs <= 16:
+        raise ValueError(f"lyapunov: n_dirs must be an integer in [1, 16], got {n_dirs!r}")
+    ts, blk = system.ts, system.drive.foc.speed_every
+    n_settle, n_warm, n_win = (max(int(round(v / (ts * blk))), 0) for v in (settle, warmup, window))
+    n_win = max(n_win, 2)
+
+    def initial(theta0):
+        s = eqx.tree_at(lambda m: m.scenario.theta_e0, system, theta0)
+        return s.init()
+
+    th0 = system.scenario.theta_e0
+    x0, dx0 = jax.jvp(initial, (th0,), (jnp.ones_like(th0),))
+    vec0, rest0, unravel = _split(x0)
+    is_float = jax.tree.map(eqx.is_inexact_array, x0)
+    neutral, _ = ravel_pytree(eqx.filter(dx0, is_float))
+    n = vec0.shape[0]
+    rand = jax.random.normal(jax.random.PRNGKey(seed), (n, n_dirs), dtype=vec0.dtype)
+    q0 = jnp.concatenate([neutral[:, None], rand], axis=1)
+    ref = jnp.abs(system.scenario.speed_ref(0.0))
+
+    def step_vec(vec, rest, k):
+        """One period on the float part; the rest (noise key, flags) rides along, constant for the tangents."""
+        new, out = system.step(eqx.combine(unravel(vec), rest), k)
+        v, r, _ = _split(new)
+        return v, (r, out)
+
+    # One scan, one copy of the linearized step (settle, warm-up and window alike: compile time).  The
+    # neutral column is propagated from t = 0, so it is d x_k/dθe0 exactly; QR every block keeps the
+    # columns orthonormal; their growth counts after the settle and the warm-up.
+    def block(carry, j):
+        vec, rest, q, mask = carry
+
+        def one(c, i):
+            v, r, t, m = c
+            k = j * blk + i
+            v1, t1, (r1, out) = jax.vmap(
+                lambda tt: jax.jvp(lambda vv: step_vec(vv, r, k), (v,), (tt,), has_aux=True),
+                in_axes=1,
+                out_axes=(None, 1, None),
+            )(t)
+            # components the step only copies (a unit row of its Jacobian: the I-f start-up's bookkeeping
+            # without a start-up, constants) are a trivially neutral block: found at the first step, where
+            # no random column keeps its value through a real update (almost surely), and masked out
+            m = jnp.where(k == 0, jnp.any(t1[:, 1:] != t[:, 1:], axis=1), m)
+            dev = jnp.abs(out.omega_m - out.omega_m_ref) / jnp.maximum(ref, 1e-6)
+            return (v1, r1, t1 * m[:, None], m), dev
+
+        (vec, rest, w, mask), dev = jax.lax.scan(one, (vec, rest, q, mask), jnp.arange(blk))
+        q, r = jnp.linalg.qr(w)
+        grow = jnp.log(jnp.abs(jnp.diagonal(r))[1:])
+        return (vec, rest, q, mask), (grow, jnp.max(dev))
+
+    mask0 = jnp.ones((n,), bool)
+    _, (grow, dev) = jax.lax.scan(block, (vec0, rest0, q0, mask0), jnp.arange(n_settle + n_warm + n_win))
+    # least-squares slope of the accumulated log growth over the window (per direction), 1/s
+    acc = jnp.cumsum(grow, axis=0)[n_settle + n_warm :]
+    t = jnp.arange(n_win, dtype=acc.dtype) * (blk * ts)
+    tc = t - t.mean()
+    slope = (tc[:, None] * (acc - acc.mean(axis=0))).sum(axis=0) / (tc * tc).sum()
+    slope = jnp.where(jnp.all(jnp.isfinite(slope)), slope, jnp.inf)
+    lam = jnp.max(slope)
+    speed_dev = jnp.where(jnp.isfinite(lam), jnp.max(dev), jnp.inf)
+    return Stability(
+        exponent=lam,
+        exponents=-jnp.sort(-slope),
+        margin=-lam,
+        stable=(-lam > tol) & (speed_dev < 0.2),
+        speed_dev=speed_dev,
+    )
+
+
+def stability_sweep(make_system: Callable, scenarios, **kw) -> Stability:
+    """:func:`lyapunov` at every scenario of a batch, one ``jit(vmap)``: ``make_system(scenario)`` gives the
+    ClosedLoop (bind the observer to the scenario there); ``kw`` go to :func:`lyapunov`."""
+    return jax.jit(jax.vmap(lambda sc: lyapunov(make_system(sc), **kw)))(scenarios)
+
+
+# --------------------------------------------------------------------------
+# the papers' small-signal view, with the speed loop closed through the FLL
+# --------------------------------------------------------------------------
+
+
+class LinearVerdict(NamedTuple):
+    observer_poles: jax.Array  # poles of the FLL's ω̂/ω alone (the papers' model), rad/s
+    loop_poles: jax.Array  # poles of the speed loop closed through ω̂ (ideal current loop), rad/s
+    observer_stable: jax.Array  # the papers' verdict: every observer pole in the left half-plane
+    loop_stable: jax.Array  # the composed loop's verdict
+
+
+def fll_frequency_soifo(k, lam, omega_e) -> TransferFunction:
+    """ω̂/ω of the SOIFO's FLL at ω_e (rad/s): 001 eqs (18)–(20) with the frequency-normalized gain
+    λ = lam·ω_e² (jaxobs.observers.flux), λ/2 / (s² + (kω_e/2)s + λ/2)."""
+    return sogi_fll_model(k, lam * omega_e**2, omega_e).frequency
+
+
+def fll_frequency_sosoifo(K1, K2, lam, omega_e) -> TransferFunction:
+    """ω̂/ω of the second-order SOIFO's FLL at ω_e (rad/s): the SOGI-FLL-WIF model, 001 eqs (30)–(32), with
+    k1 = K2, k2 = K1 and λ = lam·ω_e² (jaxobs.observers.flux, SecondOrderSOIFO)."""
+    return wif_model(K2, K1, lam * omega_e**2, omega_e).frequency
+
+
+def linear_speed_loop(fll: TransferFunction, *, J, kt, kp_w, ki_w) -> LinearVerdict:
+    """The speed loop closed through the observer's speed estimate ω̂ = G(s) ω, linear and continuous.
+
+    Mechanics J s ω_m = K_t i_q (J kg·m², K_t N·m/A), current loop ideal (i_q = i_q*), the FOC's I-P
+    speed controller i_q* = −k_pω ω̂ + (k_iω/s)(ω* − ω̂); so the characteristic polynomial is
+    J s² D(s) + K_t (k_pω s + k_iω) N(s) with G = N/D.  With G = 1 (the encoder) its roots are the
+    design's double pole at −α_s.  The papers stop at D(s): every positive gain passes; the product
+    does not when G's bandwidth (∝ ω_e with the normalized FLL) comes near α_s.
+    """
+    num, den = fll.num, fll.den
+    a = J * jnp.convolve(jnp.stack([jnp.ones_like(den[0]), 0.0 * den[0], 0.0 * den[0]]), den)
+    b = kt * jnp.convolve(jnp.stack([kp_w + 0.0 * den[0], ki_w + 0.0 * den[0]]), num)
+    b = jnp.concatenate([jnp.zeros((a.shape[0] - b.shape[0],), b.dtype), b])
+    loop = TransferFunction(jnp.ones((1,), a.dtype), a + b)
+    obs_p, loop_p = fll.poles(), loop.poles()
+    return LinearVerdict(
+        observer_poles=obs_p,
+        loop_poles=loop_p,
+        observer_stable=jnp.all(obs_p.real < 0),
+        loop_stable=jnp.all(loop_p.real < 0),
+    )
