@@ -207,7 +207,7 @@ def run_drive_study(
         raise ValueError(f"sampling must be 'grid', 'sobol' or 'lhs', got {sampling!r}")
     p = machine.p
 
-    def metrics_of(sol, _):
+    def metrics_of(sol, _scenario, _aux):
         o = sol.outputs
         steady = sol.t >= steady_from
         err = jnp.degrees(M.wrap(o.obs.theta - o.theta_e))

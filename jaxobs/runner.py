@@ -34,9 +34,35 @@ import numpy as np
 from . import sharding
 from ._simulate import simulate
 from .progress import Progress
-from .scenarios import AbstractSampler, Recordings
+from .scenarios import AbstractSampler
 
 __all__ = ["StudyRun", "run_scenarios"]
+
+
+class _Task(NamedTuple):
+    """What a chunk runs (static, hashed): the same factory and metrics (a method of one object, say) compile
+    once across calls; a closure made per call compiles per call."""
+
+    system_factory: Callable
+    metrics: Callable
+    horizon: float
+    mesh: Any  # None: one device, a plain vmap
+    tile: int
+
+
+@eqx.filter_jit
+def _run_chunk(task: _Task, design, batch, aux):
+    """Every scenario of ``batch`` (one chunk): ``metrics(simulate(system_factory(design, scenario), horizon),
+    scenario, aux)``; one program for designs of one class (the gains are array leaves, ``aux`` is static)."""
+
+    def one(sc):
+        return task.metrics(simulate(task.system_factory(design, sc), task.horizon), sc, aux)
+
+    if task.mesh is None:
+        return jax.vmap(one)(batch)
+    # each device's share in one piece (tile = the share): the same per-device program as one device's
+    # vmap, no lax.map around it; scenarios are independent, so nothing is communicated
+    return sharding.map_batch(one, batch, mesh=task.mesh, tile=task.tile)
 
 
 class StudyRun(NamedTuple):
@@ -51,7 +77,7 @@ def run_scenarios(
     designs: dict,
     sampler: AbstractSampler,
     system_factory: Callable[[Any, Any], Any],
-    metrics: Callable[[Any, Hashable], dict],
+    metrics: Callable[[Any, Any, Hashable], dict],
     *,
     horizon: float,
     build: Callable[[tuple, list], Any] | None = None,
@@ -64,8 +90,9 @@ def run_scenarios(
     """Simulate ``system_factory(design, scenario)`` for ``horizon`` s on every scenario, every design.
 
     ``build(names, points)``: the batched scenario PyTree (leading axis one per point) of a sampler's points;
-    a :class:`~jaxobs.scenarios.Recordings` sampler holds its scenarios and needs none.  ``metrics(sol, aux)``:
-    a dict of per-scenario scalars of one run's :class:`~jaxobs.Solution`, ``aux = static(design)`` a hashable
+    a sampler that holds its scenarios (:class:`~jaxobs.scenarios.Given`, ``Recordings``) needs none.
+    ``metrics(sol, scenario, aux)``: a dict of per-scenario scalars of one run's :class:`~jaxobs.Solution` on
+    ``scenario``, ``aux = static(design)`` a hashable
     Python value of the design that the metrics need outside tracing (``None`` without ``static``; a new value
     compiles again).  ``progress``: ``True`` a tqdm bar on stderr naming each compilation, a callable
     ``progress(done, total)``, ``False`` nothing.  ``mesh``: a one-axis ``"batch"`` mesh (default
@@ -80,12 +107,7 @@ def run_scenarios(
     if mesh is not None and not (isinstance(mesh, jax.sharding.Mesh) and mesh.axis_names == (sharding.AXIS,)):
         raise ValueError(f"mesh must be a one-axis jax.sharding.Mesh named 'batch' (jaxobs.batch_mesh), got {mesh!r}")
     points = sampler.points()
-    if isinstance(sampler, Recordings):
-        scs = sampler.signals
-    elif build is None:
-        raise ValueError(f"{label}: a {type(sampler).__name__} sampler needs a scenario builder (build=...)")
-    else:
-        scs = build(sampler.names, points)
+    scs = sampler.scenarios(build, points)
     n = len(points)
     mesh = sharding.batch_mesh() if mesh is None else mesh
     n_dev = mesh.devices.size
@@ -99,19 +121,7 @@ def run_scenarios(
         # places only its own devices' rows of each chunk (sharding.global_batch)
         scs = jax.tree.map(np.asarray, scs)
     static = (lambda design: None) if static is None else static
-
-    # one compiled function for every design of one class: the gains are array leaves, the per-design
-    # Python value ``aux`` (hashable) is static
-    @eqx.filter_jit
-    def run_chunk(design, batch, aux):
-        def one(sc):
-            return metrics(simulate(system_factory(design, sc), horizon), aux)
-
-        if n_dev == 1:
-            return jax.vmap(one)(batch)
-        # each device's share in one piece (tile = the share): the same per-device program as one device's
-        # vmap, no lax.map around it; scenarios are independent, so nothing is communicated
-        return sharding.map_batch(one, batch, mesh=mesh, tile=chunk // n_dev)
+    task = _Task(system_factory, metrics, float(horizon), mesh if n_dev > 1 else None, chunk // n_dev)
 
     values = {}
     compiled = set()
@@ -130,7 +140,7 @@ def run_scenarios(
                 new = start == 0 and key not in compiled
                 bar.stage(f"{dname} (compiling, then {chunk} scenarios a chunk)" if new else dname)
                 # the per-scenario results, whole, on every process (an all-gather when the mesh spans processes)
-                parts.append(sharding.gather_batch(run_chunk(design, batch, aux)))
+                parts.append(sharding.gather_batch(_run_chunk(task, design, batch, aux)))
                 compiled.add(key)
                 bar.update(min(chunk, n - start))
             values[dname] = {k: np.concatenate([p[k] for p in parts])[:n] for k in parts[0]}

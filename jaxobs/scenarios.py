@@ -4,7 +4,8 @@ One place, below both the studies (:mod:`jaxobs.study`, :mod:`jaxobs.drive_study
 (``tuning/``).  A *sampler* picks the points of the axes and says how the results are laid out
 (:class:`Grid`: the Cartesian product, one dim per axis; :class:`Random`, :class:`Sobol`, :class:`LHS`:
 ``n`` points inside the axes' [min, max], one ``sample`` dim with the axes as coordinates along it;
-:class:`Recordings`: scenarios given whole, one ``recording`` dim); a *builder* turns the points into a
+:class:`Given`: a batch given whole, one ``scenario`` dim; :class:`Recordings`: recorded signals, one
+``recording`` dim); a *builder* turns the points into a
 batched scenario PyTree (:func:`grid_signals` here, :func:`jaxobs.drive.scenarios` for the drive), and
 :func:`jaxobs.runner.run_scenarios` runs every design on it.
 
@@ -14,13 +15,18 @@ at ``t_event`` plus optional white noise.  Axes (:data:`GRID_SIGNAL_AXES`):
 (× 001 Test C's spectrum, :data:`jaxobs.papers.TEST_C_HARMONICS`), ``sub_amplitude``
 (1 Hz), ``phase_deg`` (initial phase) and ``noise`` (white noise standard deviation,
 p.u., with a per-scenario seed).
+
+EMF signals (the flux observers without a drive): two-axis :class:`~jaxobs.EMFSignal` s.  Axes
+(:data:`EMF_SIGNAL_AXES`): ``speed_hz`` (electrical frequency), ``dc_alpha``, ``dc_beta`` (V),
+``h5``, ``h7`` (× the fundamental) and ``phase_deg``.
 """
 
 from __future__ import annotations
 
 import itertools
-from dataclasses import dataclass, field
-from typing import Any, ClassVar
+import math
+from dataclasses import dataclass
+from typing import ClassVar
 
 import equinox as eqx
 import jax
@@ -29,17 +35,20 @@ import numpy as np
 
 from ._time import SampleTime, time_value
 from .papers import TEST_C_HARMONICS
-from .signals import GridSignal
+from .signals import EMFSignal, GridSignal, stack
 
 __all__ = [
+    "EMF_SIGNAL_AXES",
     "GRID_SIGNAL_AXES",
     "LHS",
     "AbstractSampler",
+    "Given",
     "Grid",
     "NoisyGridSignal",
     "Random",
     "Recordings",
     "Sobol",
+    "emf_signals",
     "grid_signals",
 ]
 
@@ -146,6 +155,35 @@ def grid_signals(names, combos, t_event: float, freq: float, *, seed: int = 0):
     return eqx.tree_at(lambda s: s.key, out, keys)
 
 
+EMF_SIGNAL_AXES = ("speed_hz", "dc_alpha", "dc_beta", "h5", "h7", "phase_deg")
+
+
+def emf_signals(names, combos):
+    """Batched :class:`~jaxobs.EMFSignal` for ``combos`` (tuples of values for the axes ``names``, of
+    :data:`EMF_SIGNAL_AXES`): a back EMF proportional to speed, 100 V at 50 Hz (``speed_hz``, default 50 Hz),
+    with dc offsets ``dc_alpha``, ``dc_beta`` (V), a negative-sequence 5th and a positive-sequence 7th
+    harmonic of ``h5``, ``h7`` × the fundamental, from the initial phase ``phase_deg``.  An unknown axis is a
+    ``ValueError`` naming it; the values are checked by :class:`~jaxobs.EMFSignal`."""
+    names = list(names)
+    for name in names:
+        if name not in EMF_SIGNAL_AXES:
+            raise ValueError(f"EMF axis {name!r} is unknown; known axes: {', '.join(EMF_SIGNAL_AXES)}")
+    sigs = []
+    for combo in combos:
+        a = dict(zip(names, combo))
+        f = a.get("speed_hz", 50.0)
+        sigs.append(
+            EMFSignal(
+                A1=100.0 * f / 50.0,  # BEMF ∝ speed: 100 V at 50 Hz
+                omega1=2 * math.pi * f,
+                phase=math.radians(a.get("phase_deg", 0.0)),
+                dc=(a.get("dc_alpha", 0.0), a.get("dc_beta", 0.0)),
+                harmonics={-5: a.get("h5", 0.0) * 100.0 * f / 50.0, 7: a.get("h7", 0.0) * 100.0 * f / 50.0},
+            )
+        )
+    return stack(sigs)
+
+
 # --------------------------------------------------------------------------
 # samplers: which points of the axes a study runs, and how its results are laid out
 # --------------------------------------------------------------------------
@@ -177,6 +215,12 @@ class AbstractSampler:
 
     def layout(self, axis_meta) -> tuple[tuple, tuple, dict]:
         raise NotImplementedError
+
+    def scenarios(self, build, points: list):
+        """The batched scenario PyTree of ``points`` (this sampler's): ``build(names, points)``."""
+        if build is None:
+            raise ValueError(f"a {type(self).__name__} sampler needs a scenario builder (build=...)")
+        return build(self.names, points)
 
 
 @dataclass(frozen=True, eq=False)
@@ -277,30 +321,44 @@ class LHS(_Drawn):
         return _qmc_points(self, qmc.LatinHypercube(len(self.names), seed=self.seed).random(self.n))
 
 
-@dataclass(frozen=True, eq=False)
-class Recordings(AbstractSampler):
-    """Scenarios given whole: ``signals`` a batched signal (leading axis one per recording, e.g.
-    :func:`jaxobs.signals.stack` of :class:`~jaxobs.SampledSignal` s), ``files`` their names (the
-    ``recording`` coordinate), ``sha256`` their digests (the Dataset's ``recordings_sha256``)."""
+class Given(AbstractSampler):
+    """Scenarios given whole: ``batch`` a batched scenario PyTree (leading axis one per scenario), laid out
+    along one dim ``dim`` with ``labels`` as its coordinate (default 0, 1, ...)."""
 
-    signals: Any
-    files: tuple
-    sha256: tuple = field(default=())
-    sampling: ClassVar[str] = "recordings"
     names: ClassVar[tuple] = ()
+    sampling: ClassVar[str] = "given"
 
-    def __post_init__(self):
-        object.__setattr__(self, "files", tuple(map(str, self.files)))
-        object.__setattr__(self, "sha256", tuple(self.sha256))
-        if not self.files:
-            raise ValueError("Recordings needs at least one recording")
-        n = {int(np.shape(x)[0]) for x in jax.tree.leaves(self.signals) if np.ndim(x) > 0}
-        if n != {len(self.files)}:
-            raise ValueError(f"Recordings.signals must have a leading axis of {len(self.files)} (one per file)")
+    def __init__(self, batch, labels=None, dim: str = "scenario"):
+        sizes = {int(np.shape(x)[0]) for x in jax.tree.leaves(batch) if np.ndim(x) > 0}
+        if len(sizes) != 1:
+            raise ValueError(f"{type(self).__name__}: the scenarios need one leading axis, got sizes {sorted(sizes)}")
+        self.batch = batch
+        self.n = sizes.pop()
+        self.labels = list(range(self.n)) if labels is None else list(labels)
+        if len(self.labels) != self.n:
+            raise ValueError(f"{type(self).__name__}: {len(self.labels)} labels for {self.n} scenarios")
+        self.dim = dim
 
     def points(self) -> list[tuple]:
-        return [() for _ in self.files]
+        return [() for _ in range(self.n)]
+
+    def scenarios(self, build, points: list):
+        return self.batch
 
     def layout(self, axis_meta):
-        coords = {"recording": ("recording", list(self.files), axis_meta("recording"))}
-        return ("recording",), (len(self.files),), coords
+        return (self.dim,), (self.n,), {self.dim: (self.dim, self.labels, axis_meta(self.dim))}
+
+
+class Recordings(Given):
+    """Recorded signals: ``signals`` batched (leading axis one per recording, e.g. :func:`jaxobs.signals.stack`
+    of :class:`~jaxobs.SampledSignal` s), ``files`` their names (the ``recording`` coordinate), ``sha256``
+    their digests (the Dataset's ``recordings_sha256``)."""
+
+    sampling: ClassVar[str] = "recordings"
+
+    def __init__(self, signals, files, sha256=()):
+        self.files = tuple(map(str, files))
+        self.sha256 = tuple(sha256)
+        if not self.files:
+            raise ValueError("Recordings needs at least one recording")
+        super().__init__(signals, self.files, dim="recording")

@@ -178,7 +178,7 @@ def run_study(
         f = float(obs.omega_n) / (2 * math.pi) if recordings else freq
         return max(1, int(round(1.0 / (f * obs.ts))))
 
-    def metrics(sol, n_per):
+    def metrics(sol, _signal, n_per):
         m = study_metrics(sol, t_event, steady_from, band_hz, n_per)
         m["ok"] = sol.ok & jnp.all(jnp.stack([jnp.isfinite(m[k]) for k in STUDY_METRICS]))
         return m
@@ -262,6 +262,8 @@ def _meta(units: str, long_name: str) -> dict:
 def _axis_meta(name: str) -> dict:
     if name == "recording":
         return {"long_name": "recording file (relative to the study file)"}
+    if name == "scenario":
+        return _meta("1", "scenario given whole (jaxobs.scenarios.Given)")
     return _meta(*AXIS_META[name])
 
 

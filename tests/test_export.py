@@ -538,3 +538,52 @@ def test_the_export_runs_its_c_in_python_before_writing(tmp_path, monkeypatch):
     with pytest.raises(AssertionError, match="generated C of SOGIFLL differs from the JAX step at "):
         export_observer(linear.sogi_fll_closed_form(), tmp_path)
     assert not (tmp_path / "observer.c").exists()
+
+
+class _KitchenState(NamedTuple):
+    x: jax.Array  # (4,)
+    n: jax.Array  # int32 step count
+    y: jax.Array  # a field named as jx_step's output array: its local is y_
+
+
+class _KitchenOut(NamedTuple):
+    y: jax.Array  # (2,): an output array is two columns, y_0 and y_1
+    theta: jax.Array
+
+
+class _Kitchen(eqx.Module):
+    """A step that uses most of what the generator turns into C: matrix products, reversal, concatenation,
+    an update at an index, reductions, clipping, integer powers, sign/floor/round, tanh/exp/log1p, a
+    condition on a counter (lax.cond), a stop_gradient, a custom_jvp function (jax.nn.relu) and a gain
+    matrix (its macros JX_A_0 ... JX_A_15)."""
+
+    a: jax.Array  # (4, 4)
+    ts: float = eqx.field(static=True, default=1e-3)
+
+    def init(self, u0=None):
+        x0 = jnp.asarray([0.1, -0.2, 0.3, 0.05], jnp.float32)
+        return _KitchenState(x=x0, n=jnp.asarray(0, jnp.int32), y=jnp.zeros((), jnp.float32))
+
+    def step(self, s, v):
+        x = s.x
+        ax = self.a @ x
+        r = jnp.concatenate([x[::-1][:2], jnp.clip(ax[2:], -1.0, 1.0)])
+        r = r.at[1].set(jnp.tanh(v) + jax.lax.stop_gradient(jnp.sum(x)))
+        big = jax.lax.cond(s.n >= 3, lambda z: z * 0.5, lambda z: z + 0.25 * jnp.sign(z), r)
+        x1 = x + self.ts * (big - x**3 + jnp.log1p(jnp.exp(-jnp.abs(x))) + jax.nn.relu(x) - jnp.floor(x) * 0.01)
+        out = _KitchenOut(y=jnp.stack([jnp.max(x), jnp.round(10 * x[0]) / 10 + s.y]), theta=jnp.arctan2(x[1], x[0]))
+        return _KitchenState(x=x1, n=jnp.minimum(s.n + 1, 3), y=0.5 * s.y + 0.1 * v), out
+
+
+def test_a_step_that_uses_most_primitives_exports_and_matches(tmp_path):
+    """The generator's self-check (numpy, random states) and the C compiled against 12 000 golden steps agree
+    with the JAX step for data movement, reductions, matrix products, a cond and custom_jvp calls."""
+    a = jnp.asarray(np.random.default_rng(1).normal(size=(4, 4)) * 0.5, jnp.float32)
+    c = export_observer(_Kitchen(a=a), tmp_path)
+    assert c["outputs"] == ["y_0", "y_1", "theta"] and "worst" in c["ops_per_step"]
+    assert c["gains"]["a_15"]["c_name"] == "JX_A_15"
+    h = (tmp_path / "observer.h").read_text()
+    assert "float x[4];" in h and "int n;" in h and "float y;" in h
+    assert "const float y_ = s->y;" in (tmp_path / "observer.c").read_text()
+    if shutil.which("cc") is not None:
+        assert compile_and_check(tmp_path) <= TOLERANCE

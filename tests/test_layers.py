@@ -46,6 +46,7 @@ LAYERS = [
     ("jaxobs.observers.sogi", "jaxobs.observers.fll", "jaxobs.observers.flux", "jaxobs.observers.leso"),
     ("jaxobs.observers",),
     # the one loop over a system, and sharding a batch over devices
+    ("jaxobs._steps", "jaxobs._sensitivity"),
     ("jaxobs._loop",),
     ("jaxobs._simulate", "jaxobs.sharding"),
     # metrics: they score
@@ -77,6 +78,11 @@ LAYERS = [
     ("tuning.strategies",),
     ("tuning.objective", "tuning.report", "tuning.targets"),
     ("tuning.structure",),
+    ("tuning.job.fields",),
+    ("tuning.job.toml", "tuning.job.components", "tuning.job.spec"),
+    ("tuning.job.recordings", "tuning.job.drive", "tuning.job.output"),
+    ("tuning.job.schema", "tuning.job.scenarios"),
+    ("tuning.job.run",),
     ("tuning.job",),
     ("tuning.results",),
     ("tuning.study_file",),

@@ -247,8 +247,8 @@ def test_responses_plot_names_a_recording_scenario_by_its_file(tmp_path):
 
 
 def test_recording_job_checks_size_and_the_closed_loop_metrics(tmp_path, capsys, monkeypatch):
-    from tuning import job as J
     from tuning.cli import main
+    from tuning.job import recordings as J
 
     path = _job_copy(tmp_path)
     monkeypatch.setattr(J, "MAX_RECORDING_BYTES", 1000)

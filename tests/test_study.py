@@ -274,7 +274,7 @@ def test_the_runner_takes_any_sampler_factory_and_metrics():
     np.testing.assert_array_equal(ds["dc"].values, [p[0] for p in sampler.points()])
     steady = ds.attrs["steady_from"]
 
-    def rms_phase(sol, _):
+    def rms_phase(sol, _signal, _aux):
         return {"rms": M.rms(M.wrap(sol.outputs.obs.theta - sol.outputs.truth.theta), sol.t >= steady)}
 
     freq = float(obs.omega_n) / (2 * math.pi)
@@ -302,3 +302,27 @@ def test_provenance_versions_and_digests(tmp_path):
     attrs = provenance("here", digests={"study": sha256(f)})
     assert attrs["source"] == "here" and attrs["study_sha256"] == sha256(f) and attrs["xarray_version"]
     assert attrs == provenance("here", digests={"study": sha256(f)})  # nothing that changes between runs
+
+
+def test_given_and_recordings_samplers_hold_their_scenarios():
+    """A batch given whole is laid out along its own dim, labelled; sizes and labels are checked."""
+    import jax.numpy as jnp
+
+    from jaxobs.scenarios import Given, Recordings
+
+    batch = {"a": jnp.arange(3.0), "b": jnp.zeros((3, 2))}
+    g = Given(batch, labels=["x", "y", "z"])
+    assert g.points() == [(), (), ()] and g.scenarios(None, g.points()) is batch
+    assert g.layout(lambda n: {"long_name": n}) == (
+        ("scenario",),
+        (3,),
+        {"scenario": ("scenario", ["x", "y", "z"], {"long_name": "scenario"})},
+    )
+    with pytest.raises(ValueError, match="2 labels for 3 scenarios"):
+        Given(batch, labels=["x", "y"])
+    with pytest.raises(ValueError, match="one leading axis"):
+        Given({"a": jnp.arange(3.0), "b": jnp.zeros(2)})
+    rec = Recordings(batch, ["r1.csv", "r2.csv", "r3.csv"], ["0" * 64] * 3)
+    assert rec.sampling == "recordings" and rec.layout(lambda n: {})[0] == ("recording",)
+    with pytest.raises(ValueError, match="at least one recording"):
+        Recordings(batch, [])

@@ -29,6 +29,7 @@ from tuning import (
     tune,
 )
 from tuning.cli import main
+from tuning.job import JobError, parse_job
 from tuning.objective import MetricContext
 from tuning.solvers import OptaxSolver
 from tuning.targets import flux_settling_time, lambda_for_damping, match_settling_time
@@ -189,6 +190,28 @@ def test_missing_job_file_and_good_check(tmp_path, capsys):
     assert main(["tune", str(path), "--check"]) == 0
     assert "OK" in capsys.readouterr().out
     assert main(["tune", "--check"]) == 0  # the embedded default job
+
+
+def test_an_emf_job_refuses_an_axis_its_signals_ignore():
+    """omega0_error was an accepted EMF axis that changed nothing (the flux observers' FLL starts at 2π·50 Hz
+    whatever it said): now an unknown axis, named in one line, as the library's EMF builder names it."""
+    import tomllib
+
+    from jaxobs.scenarios import emf_signals
+
+    text = (
+        GOOD.replace('component = "SOGIFLL"', 'component = "SOIFO"')
+        .replace("init = 12337.0\nlower = 1000.0\nupper = 100000.0", "init = 0.5\nlower = 0.01\nupper = 5.0")
+        .replace("itae_freq", "iae_position")
+    )
+    ok = parse_job(tomllib.loads(text.replace("freq_step = [1.0, 2.0]", "speed_hz = [25.0]")))
+    assert ok.scenarios.signal == "emf"
+    with pytest.raises(JobError, match=r"^scenarios\.grid\.omega0_error: unknown axis; allowed: speed_hz"):
+        parse_job(tomllib.loads(text.replace("freq_step = [1.0, 2.0]", "speed_hz = [25.0]\nomega0_error = [0.1]")))
+    with pytest.raises(ValueError, match="EMF axis 'omega0_error' is unknown"):
+        emf_signals(["omega0_error"], [(0.1,)])
+    sig = emf_signals(["speed_hz", "h5"], [(25.0, 0.1), (50.0, 0.0)])  # 100 V at 50 Hz, harmonics ∝ it
+    assert np.allclose(np.asarray(sig.A1), [50.0, 100.0]) and np.allclose(np.asarray(sig.harmonics)[:, 0], [5.0, 0])
 
 
 def test_small_job_end_to_end(tmp_path):
@@ -622,13 +645,14 @@ def test_bfgs_records_every_iteration_with_a_readable_reason(tmp_path, capsys):
 
 def test_report_names_scenarios_in_the_objectives_order():
     """responses.png names its scenario by the values tuning.report enumerates: the job's own order, grid or sampled."""
-    from tuning.job import _combos, load_job
+    from tuning.job import load_job
+    from tuning.job.scenarios import scenario_points
     from tuning.report import scenario_values
 
     job = load_job(Path(__file__).parents[1] / "tuning" / "presets" / "wif_robust.toml")
-    assert scenario_values(job.scenarios) == _combos(job.scenarios)
+    assert scenario_values(job.scenarios) == scenario_points(job.scenarios)
     sampled = dataclasses.replace(job.scenarios, sample=7, seed=3)
-    assert scenario_values(sampled) == _combos(sampled)
+    assert scenario_values(sampled) == scenario_points(sampled)
 
 
 # --------------------------------------------------------------------------

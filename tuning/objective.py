@@ -27,6 +27,9 @@ import jax.numpy as jnp
 from jaxobs import OnSignal, simulate
 from jaxobs import metrics as M
 from jaxobs.drive import ClosedLoop
+from jaxobs.runner import run_scenarios
+from jaxobs.scenarios import Given
+from jaxobs.sharding import batch_mesh
 
 from .aggregations import AbstractAggregation, Mean
 from .params import Parametrization
@@ -158,6 +161,7 @@ METRICS: dict[str, Callable] = {
 # the per-scenario flag :meth:`Objective.per_scenario` adds to the metrics: the estimate ended far from the
 # truth (jaxobs.metrics.lost_lock_of: 45° / 10 % on signals, 90° on the drive, over the steady window)
 LOST_LOCK = "lost_lock"
+_OK = " ok"  # the simulation's own flag among a scenario's metrics (a name no metric has)
 # metrics that need the closed-loop drive (signal = "drive" jobs)
 DRIVE_METRICS = (
     "settling_position",
@@ -230,7 +234,6 @@ class Objective:
         self.aggregation, self.penalty = aggregation, float(penalty)
         self.drive, self.bind = drive, bind
         self._vg = eqx.filter_jit(self._per_scenario_value_and_grad)
-        self._metrics = eqx.filter_jit(self._per_scenario_metrics)
 
         @jax.custom_jvp
         def value(theta):
@@ -283,23 +286,43 @@ class Objective:
         agg_v, w = jax.value_and_grad(lambda vv: self.aggregation(vv))(v)
         return agg_v, w @ g, int(jnp.sum(~good))
 
-    # --- reporting
-    def _per_scenario_metrics(self, theta, scenarios):
-        def one(sig):
-            comp = self.param.apply(self.component, theta)
-            sol = self._simulate(comp, sig)
-            mets = {term.metric: METRICS[term.metric](sol, sig, self.ctx) for term in self.terms}
-            # far from the truth over the steady window (jaxobs.metrics, "lost lock"): reported, not tuned on
-            mets[LOST_LOCK] = M.lost_lock_of(sol, self.ctx.steady_from, signal=sig)
-            if self.drive is not None:
-                mets["lost_sync"] = _lost_sync(sol, sig, self.ctx)
-                # the drive does not follow its speed reference over the steady window (jaxobs.metrics,
-                # "lost speed"): e.g. a standstill start that runs backwards with a locked observer
-                out = sol.outputs
-                mets["lost_speed"] = M.lost_speed(out.omega_m, out.omega_m_ref, _steady(sol, self.ctx))
-            return mets, sol.ok
+    # --- reporting: a design scored on the scenarios by the one study runner (jaxobs.runner)
+    def _system(self, theta, sig):
+        """The system one scenario runs: the component at ``theta``, bound to the scenario, on its signal or
+        closing the drive's loop (what :meth:`_simulate` simulates)."""
+        comp = self.param.apply(self.component, theta)
+        if self.bind is not None:
+            comp = self.bind(comp, sig)
+        return ClosedLoop(self.drive, comp, sig) if self.drive is not None else OnSignal(comp, sig)
 
-        return jax.vmap(one)(scenarios)
+    def _scenario_metrics(self, sol, sig, _aux):
+        mets = {term.metric: METRICS[term.metric](sol, sig, self.ctx) for term in self.terms}
+        # far from the truth over the steady window (jaxobs.metrics, "lost lock"): reported, not tuned on
+        mets[LOST_LOCK] = M.lost_lock_of(sol, self.ctx.steady_from, signal=sig)
+        if self.drive is not None:
+            mets["lost_sync"] = _lost_sync(sol, sig, self.ctx)
+            # the drive does not follow its speed reference over the steady window (jaxobs.metrics,
+            # "lost speed"): e.g. a standstill start that runs backwards with a locked observer
+            out = sol.outputs
+            mets["lost_speed"] = M.lost_speed(out.omega_m, out.omega_m_ref, _steady(sol, self.ctx))
+        return {**mets, _OK: sol.ok}
+
+    def _per_scenario_metrics(self, theta, scenarios):
+        given = Given(scenarios)
+        # one chunk of every scenario on one device: the jit(vmap) the objective always ran, compiled once per
+        # objective (the runner keys its compilation on these two methods)
+        run = run_scenarios(
+            {"design": theta},
+            given,
+            self._system,
+            self._scenario_metrics,
+            horizon=self.horizon,
+            chunk_size=given.n,
+            mesh=batch_mesh(jax.devices()[:1]),
+            label="scores",
+        )
+        mets = dict(run.values["design"])
+        return mets, mets.pop(_OK)
 
     def per_scenario(self, theta, scenarios=None):
         """Each scenario's metrics (and its :data:`LOST_LOCK` flag), its weighted total (the penalty where
@@ -308,7 +331,7 @@ class Objective:
         On the drive the metrics hold ``lost_sync`` too: diverged, or |θ̂e − θe| > :data:`LOST_SYNC_DEG`; and
         ``lost_speed``: diverged, or the drive missed its speed reference (:func:`jaxobs.metrics.lost_speed`)."""
         scenarios = self.scenarios if scenarios is None else scenarios
-        mets, ok = self._metrics(theta, scenarios)
+        mets, ok = self._per_scenario_metrics(theta, scenarios)
         total = sum(term.weight * mets[term.metric] for term in self.terms)
         good = ok & jnp.isfinite(total)
         for key in ("lost_sync", "lost_speed"):

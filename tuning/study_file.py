@@ -79,15 +79,15 @@ from .job import (
     MAX_STEPS,
     DriveSpec,
     JobError,
-    _available_memory,
-    _cap,
-    _get,
-    _no_unknown,
-    _parse_recording_scenarios,
-    _show,
+    available_memory,
+    cap,
+    get_field,
     job_drive,
+    no_unknown,
     parse_job,
+    parse_recording_scenarios,
     read_toml,
+    show,
 )
 from .results import load_result, tuned_component
 
@@ -166,14 +166,14 @@ def load_study(path) -> StudySpec:
 def parse_study(raw: dict, base: Path | None = None) -> StudySpec:
     """Check a parsed study file; ``base`` is the folder relative ``result`` paths are read from."""
     base = Path.cwd() if base is None else Path(base)
-    st = _get(raw, "study", "study", dict, {})
-    kind = _get(st, "kind", "study.kind", str, "fll")
+    st = get_field(raw, "study", "study", dict, {})
+    kind = get_field(st, "kind", "study.kind", str, "fll")
     if kind not in ("fll", "drive"):
-        raise JobError("study.kind", f"must be 'fll' or 'drive', got {_show(kind)}")
-    _no_unknown(raw, ("study", "designs", "axes", "drive"), WHAT)  # every table a study file may have
+        raise JobError("study.kind", f"must be 'fll' or 'drive', got {show(kind)}")
+    no_unknown(raw, ("study", "designs", "axes", "drive"), WHAT)  # every table a study file may have
     if kind != "drive" and "drive" in raw:
         raise JobError("drive", "applies to drive studies (study.kind = 'drive')")
-    name = _get(st, "name", "study.name", str, "study" if kind == "fll" else "drive-study")
+    name = get_field(st, "name", "study.name", str, "study" if kind == "fll" else "drive-study")
     if kind == "drive":
         return _parse_drive(raw, st, name, base)
     return _parse_fll(raw, st, name, base)
@@ -186,14 +186,14 @@ def parse_study(raw: dict, base: Path | None = None) -> StudySpec:
 
 def _axes(raw: dict, ranges: dict, limits: dict | None = None) -> dict:
     """``[axes]``: known names, non-empty lists of finite numbers inside each axis's range."""
-    axes_t = _get(raw, "axes", "axes", dict, {})
+    axes_t = get_field(raw, "axes", "axes", dict, {})
     if not axes_t:
         raise JobError("axes", f"at least one axis is required; allowed: {', '.join(ranges)}")
     axes = {}
     for k in axes_t:
         if k not in ranges:
-            raise JobError(f"axes.{_cap(str(k), 40)}", f"unknown axis; allowed: {', '.join(ranges)}")
-        v = axes[k] = _get(axes_t, k, f"axes.{k}", list)
+            raise JobError(f"axes.{cap(str(k), 40)}", f"unknown axis; allowed: {', '.join(ranges)}")
+        v = axes[k] = get_field(axes_t, k, f"axes.{k}", list)
         unit, (lo, hi) = (limits or {}).get(k, ranges[k])
         for i, x in enumerate(v):
             if not lo <= x <= hi:
@@ -222,7 +222,7 @@ def _check_steps(horizon: float, steady_from: float, ts: float, n: int, chunk: i
             f"the steady window [{steady_from:g}, {horizon:g}) s holds fewer than 10 samples of {ts:g} s",
         )
     need = steps * min(n, chunk) * BYTES_PER_STEP[kind]
-    have = _available_memory()
+    have = available_memory()
     if need > have:
         raise JobError(
             "study.chunk_size",
@@ -232,34 +232,34 @@ def _check_steps(horizon: float, steady_from: float, ts: float, n: int, chunk: i
 
 
 def _seed(st: dict) -> int:
-    seed = _get(st, "seed", "study.seed", int, 0)
+    seed = get_field(st, "seed", "study.seed", int, 0)
     if not 0 <= seed < 2**32:
-        raise JobError("study.seed", f"must be in [0, 2^32), got {_show(seed)}")
+        raise JobError("study.seed", f"must be in [0, 2^32), got {show(seed)}")
     return seed
 
 
 def _chunk(st: dict, default: int) -> int:
-    chunk = _get(st, "chunk_size", "study.chunk_size", int, default)
+    chunk = get_field(st, "chunk_size", "study.chunk_size", int, default)
     if not 1 <= chunk <= MAX_CHUNK:
-        raise JobError("study.chunk_size", f"must be in [1, {MAX_CHUNK}], got {_show(chunk)}")
+        raise JobError("study.chunk_size", f"must be in [1, {MAX_CHUNK}], got {show(chunk)}")
     return chunk
 
 
 def _result(spec: dict, where: str, base: Path, family: tuple, out: dict | None = None):
     """A tuning result's tuned design; ``result`` relative to the study file's folder (module doc).  ``out``,
     when given, receives the result (``"result"``) and the file's sha256 (``"sha256"``)."""
-    _no_unknown(spec, ("result",), where)
-    rel = _get(spec, "result", f"{where}.result", str)
+    no_unknown(spec, ("result",), where)
+    rel = get_field(spec, "result", f"{where}.result", str)
     if not rel or "\x00" in rel:
-        raise JobError(f"{where}.result", f"must be the path of a tuning result.json, got {_show(rel)}")
+        raise JobError(f"{where}.result", f"must be the path of a tuning result.json, got {show(rel)}")
     p = Path(rel)
     p = p if p.is_absolute() else base / p
     if not p.is_file():
-        raise JobError(f"{where}.result", f"no such file {_cap(str(p), 100)!r} (relative paths: from the study file)")
+        raise JobError(f"{where}.result", f"no such file {cap(str(p), 100)!r} (relative paths: from the study file)")
     try:
         res = load_result(p)
         if res["component"] not in family:
-            raise ValueError(f"component {_show(res['component'])} is not one of {', '.join(family)}")
+            raise ValueError(f"component {show(res['component'])} is not one of {', '.join(family)}")
         comp = tuned_component(res)
         if out is not None:
             out.update(result=res, sha256=sha256(p), path=rel)
@@ -283,7 +283,7 @@ def _component(spec: dict, where: str, comp: str, exclude=(), fixed=None):
     """A component from its gains: known keys (typos named), each of its default's type, then the constructor."""
     ctor = getattr(jaxobs, comp)
     params = _ctor_params(ctor, exclude)
-    _no_unknown(spec, ("component", *params), where)
+    no_unknown(spec, ("component", *params), where)
     kw = {}
     for k, default in params.items():
         f = f"{where}.{k}"
@@ -292,11 +292,11 @@ def _component(spec: dict, where: str, comp: str, exclude=(), fixed=None):
                 raise JobError(f, f"missing (required by {comp})")
             continue
         if isinstance(default, bool):
-            kw[k] = _get(spec, k, f, bool)
+            kw[k] = get_field(spec, k, f, bool)
         elif isinstance(default, str):
-            kw[k] = _get(spec, k, f, str)
+            kw[k] = get_field(spec, k, f, str)
         else:
-            kw[k] = _get(spec, k, f, float)
+            kw[k] = get_field(spec, k, f, float)
     try:
         return ctor(**(fixed or {}), **kw)
     except (ValueError, TypeError, ArithmeticError) as e:
@@ -304,13 +304,13 @@ def _component(spec: dict, where: str, comp: str, exclude=(), fixed=None):
 
 
 def _designs(raw: dict, build) -> dict:
-    designs_t = _get(raw, "designs", "designs", dict, {})
+    designs_t = get_field(raw, "designs", "designs", dict, {})
     if not designs_t:
         raise JobError("designs", "at least one design is required")
     designs = {}
     for name in designs_t:
-        where = f"designs.{_cap(str(name), 40)}"
-        spec = _get(designs_t, name, where, dict)
+        where = f"designs.{cap(str(name), 40)}"
+        spec = get_field(designs_t, name, where, dict)
         given = [k for k in ("closed_form", "result", "component") if k in spec]
         if len(given) != 1:
             raise JobError(where, f"give exactly one of closed_form, result, component (got {len(given)})")
@@ -324,29 +324,29 @@ def _designs(raw: dict, build) -> dict:
 
 
 def _parse_fll(raw: dict, st: dict, name: str, base: Path) -> StudySpec:
-    _no_unknown(st, _FLL_STUDY_KEYS, "study")
+    no_unknown(st, _FLL_STUDY_KEYS, "study")
     results = {}  # provenance: each result file's sha256
 
     def build(spec, where, how):
         if how == "closed_form":
-            _no_unknown(spec, ("closed_form",), where)
-            cf = _get(spec, "closed_form", f"{where}.closed_form", str)
+            no_unknown(spec, ("closed_form",), where)
+            cf = get_field(spec, "closed_form", f"{where}.closed_form", str)
             if cf not in FLL_CLOSED_FORMS:
-                raise JobError(f"{where}.closed_form", f"must be one of {', '.join(FLL_CLOSED_FORMS)}, got {_show(cf)}")
+                raise JobError(f"{where}.closed_form", f"must be one of {', '.join(FLL_CLOSED_FORMS)}, got {show(cf)}")
             return FLL_CLOSED_FORMS[cf]()
         if how == "result":
             info = {}
             obs = _result(spec, where, base, FLL_COMPONENTS, info)
             results[where.split(".", 1)[1]] = f"{info['path']} sha256 {info['sha256']}"
             return obs
-        comp = _get(spec, "component", f"{where}.component", str)
+        comp = get_field(spec, "component", f"{where}.component", str)
         if comp not in FLL_COMPONENTS:
-            raise JobError(f"{where}.component", f"must be one of {', '.join(FLL_COMPONENTS)}, got {_show(comp)}")
+            raise JobError(f"{where}.component", f"must be one of {', '.join(FLL_COMPONENTS)}, got {show(comp)}")
         return _component(spec, where, comp)
 
     designs = _designs(raw, build)
-    t_event = _get(st, "t_event", "study.t_event", float, 0.1)
-    horizon = _get(st, "horizon", "study.horizon", float, 0.4)
+    t_event = get_field(st, "t_event", "study.t_event", float, 0.1)
+    horizon = get_field(st, "horizon", "study.horizon", float, 0.4)
     if t_event < 0:
         raise JobError("study.t_event", f"must be >= 0 s, got {t_event:g}")
     if not horizon > t_event:
@@ -354,15 +354,15 @@ def _parse_fll(raw: dict, st: dict, name: str, base: Path) -> StudySpec:
     ts = min(float(d.ts) for d in designs.values())
     if horizon / ts > MAX_STEPS:
         raise JobError("study.horizon", f"{horizon:g} s is more than {MAX_STEPS:g} time steps of {ts:g} s")
-    steady = _get(st, "steady_from", "study.steady_from", float, t_event + 0.75 * (horizon - t_event))
+    steady = get_field(st, "steady_from", "study.steady_from", float, t_event + 0.75 * (horizon - t_event))
     if not 0 <= steady < horizon:
         raise JobError("study.steady_from", f"must be in [0, horizon = {horizon:g}) s, got {steady:g}")
-    band = _get(st, "band_hz", "study.band_hz", float, 0.05)
+    band = get_field(st, "band_hz", "study.band_hz", float, 0.05)
     if not 0 < band <= 100:
         raise JobError("study.band_hz", f"must be in (0, 100] Hz, got {band:g}")
-    sample = _get(st, "sample", "study.sample", int, 0)
+    sample = get_field(st, "sample", "study.sample", int, 0)
     if not 0 <= sample <= MAX_SCENARIOS:
-        raise JobError("study.sample", f"must be in [0, {MAX_SCENARIOS}] (0: the full grid), got {_show(sample)}")
+        raise JobError("study.sample", f"must be in [0, {MAX_SCENARIOS}] (0: the full grid), got {show(sample)}")
     seed, chunk = _seed(st), _chunk(st, 2048)
     # the frequency after the step stays in (0, 1/(4 ts)] of every design (the run takes the first's ω_n)
     freq = float(next(iter(designs.values())).omega_n) / (2 * math.pi)
@@ -390,7 +390,7 @@ def _fll_recordings(raw, st, name, base, designs, t_event, horizon, steady, band
     ts = sorted({float(d.ts) for d in designs.values()})
     if len(ts) != 1:
         raise JobError("designs", f"a study on recordings needs one sample time for all designs, got {ts}")
-    spec = _parse_recording_scenarios(
+    spec = parse_recording_scenarios(
         {"recording": st["recording"]}, "study", "grid", t_event, horizon, steady, 0, ts[0], base
     )
     opts = dict(t_event=t_event, horizon=horizon, steady_from=steady, band_hz=band, recording=spec.recording)
@@ -412,12 +412,12 @@ def _result_machine(res: dict) -> str | None:
 
 
 def _parse_drive(raw: dict, st: dict, name: str, base: Path) -> StudySpec:
-    _no_unknown(st, _DRIVE_STUDY_KEYS, "study")
-    dr = _get(raw, "drive", "drive", dict, {})
+    no_unknown(st, _DRIVE_STUDY_KEYS, "study")
+    dr = get_field(raw, "drive", "drive", dict, {})
     # the FOC is the drive jobs' (tuning.job.job_drive: the bench's IMC current and I-P speed loops), so a tuned
     # result is scored on the drive that tuned it; only the observer's unscored settling phase is the study's
-    _no_unknown(dr, ("settle",), "drive")
-    settle = _get(dr, "settle", "drive.settle", float, 0.2)
+    no_unknown(dr, ("settle",), "drive")
+    settle = get_field(dr, "settle", "drive.settle", float, 0.2)
     if not 0 <= settle <= 10:
         raise JobError("drive.settle", f"must be in [0, 10] s, got {settle:g}")
     tuned_on = {}  # "designs.NAME" -> the machine its result was tuned on
@@ -436,20 +436,20 @@ def _parse_drive(raw: dict, st: dict, name: str, base: Path) -> StudySpec:
                 tuned_on[where] = m
             return obs
         if how == "closed_form":  # the component's closed-form gains, as a job's closed_form scores them
-            _no_unknown(spec, ("closed_form",), where)
-            comp = _get(spec, "closed_form", f"{where}.closed_form", str)
+            no_unknown(spec, ("closed_form",), where)
+            comp = get_field(spec, "closed_form", f"{where}.closed_form", str)
             if comp not in DRIVE_OBSERVERS or comp not in COMPONENTS:
                 allowed = ", ".join(c for c in DRIVE_OBSERVERS if c in COMPONENTS)
-                raise JobError(f"{where}.closed_form", f"must be one of {allowed}, got {_show(comp)}")
+                raise JobError(f"{where}.closed_form", f"must be one of {allowed}, got {show(comp)}")
             info = COMPONENTS[comp]
             values = {**info.defaults, **info.closed_form(info.ctor(**info.defaults))}
             try:
                 return info.ctor(**values)
             except (ValueError, TypeError, ArithmeticError) as e:
                 raise JobError(where, str(e)) from None
-        comp = _get(spec, "component", f"{where}.component", str)
+        comp = get_field(spec, "component", f"{where}.component", str)
         if comp not in DRIVE_OBSERVERS:
-            raise JobError(f"{where}.component", f"must be one of {', '.join(DRIVE_OBSERVERS)}, got {_show(comp)}")
+            raise JobError(f"{where}.component", f"must be one of {', '.join(DRIVE_OBSERVERS)}, got {show(comp)}")
         # the machine's Rs and L are placeholders and the initial speed is the scenario's: the study binds
         # each scenario's assumed machine (jaxobs.drive_study.bind_observer); the drive's ts rules
         par = bench_machine("spmsm000" if comp in _FLUX else "ipmsm002")
@@ -466,9 +466,9 @@ def _parse_drive(raw: dict, st: dict, name: str, base: Path) -> StudySpec:
     # the machine: study.machine, else the one the results were tuned on, else the first design's default
     first = type(next(iter(designs.values()))).__name__
     default = next(iter(tuned_on.values()), None) or COMPONENTS.get(first, COMPONENTS["CLESO"]).machines[0]
-    machine = _get(st, "machine", "study.machine", str, default)
+    machine = get_field(st, "machine", "study.machine", str, default)
     if machine not in MACHINES:
-        raise JobError("study.machine", f"must be one of {', '.join(MACHINES)}, got {_show(machine)}")
+        raise JobError("study.machine", f"must be one of {', '.join(MACHINES)}, got {show(machine)}")
     for where, m in tuned_on.items():
         if m != machine:
             raise JobError(f"{where}.result", f"was tuned on {m}, the study runs {machine}: give study.machine = {m!r}")
@@ -476,7 +476,7 @@ def _parse_drive(raw: dict, st: dict, name: str, base: Path) -> StudySpec:
         comp = type(obs).__name__
         if comp in COMPONENTS and machine not in COMPONENTS[comp].machines:
             raise JobError(
-                f"designs.{_cap(str(dname), 40)}",
+                f"designs.{cap(str(dname), 40)}",
                 f"{comp} cannot run on {machine} ({BENCH_MACHINES[machine]}); "
                 f"allowed: {', '.join(COMPONENTS[comp].machines)}",
             )
@@ -486,26 +486,26 @@ def _parse_drive(raw: dict, st: dict, name: str, base: Path) -> StudySpec:
     except (ValueError, ArithmeticError) as e:
         raise JobError("drive", str(e)) from None
     provenance = {"machine": f"{machine}: {BENCH_MACHINES[machine]}", **_results_attr(results)}
-    horizon = _get(st, "horizon", "study.horizon", float, 0.3)
+    horizon = get_field(st, "horizon", "study.horizon", float, 0.3)
     if not horizon > 0:
         raise JobError("study.horizon", f"must be > 0 s, got {horizon:g}")
     ts = float(drive.ts)
     if horizon / ts > MAX_STEPS:
         raise JobError("study.horizon", f"{horizon:g} s is more than {MAX_STEPS:g} time steps of {ts:g} s")
-    steady = _get(st, "steady_from", "study.steady_from", float, 0.5 * horizon)
+    steady = get_field(st, "steady_from", "study.steady_from", float, 0.5 * horizon)
     if not 0 <= steady < horizon:
         raise JobError("study.steady_from", f"must be in [0, horizon = {horizon:g}) s, got {steady:g}")
     # the steps' instant: by default the middle of the horizon when a step axis is swept (the steady window's
     # default start, so the scored window holds the step's response and a steady stretch before it does not
     # count), else 0 (no step: the value does not matter)
-    has_step = any(a in _get(raw, "axes", "axes", dict, {}) for a in STEP_AXES)
-    t_event = _get(st, "t_event", "study.t_event", float, 0.5 * horizon if has_step else 0.0)
+    has_step = any(a in get_field(raw, "axes", "axes", dict, {}) for a in STEP_AXES)
+    t_event = get_field(st, "t_event", "study.t_event", float, 0.5 * horizon if has_step else 0.0)
     if not 0 <= t_event < horizon:
         raise JobError("study.t_event", f"must be in [0, horizon = {horizon:g}) s, got {t_event:g}")
-    sampling = _get(st, "sampling", "study.sampling", str, "grid")
+    sampling = get_field(st, "sampling", "study.sampling", str, "grid")
     if sampling not in ("grid", "sobol", "lhs"):
-        raise JobError("study.sampling", f"must be grid, sobol or lhs, got {_show(sampling)}")
-    sample = _get(st, "sample", "study.sample", int, 0)
+        raise JobError("study.sampling", f"must be grid, sobol or lhs, got {show(sampling)}")
+    sample = get_field(st, "sample", "study.sample", int, 0)
     if sampling == "grid" and sample:
         raise JobError("study.sample", "applies to sampling = 'sobol' or 'lhs' (a grid runs every combination)")
     if sampling != "grid" and not 1 <= sample <= MAX_SCENARIOS:

@@ -81,7 +81,7 @@ def _pattern(field: str) -> re.Pattern | None:
 
 
 class SourceIndex:
-    """Every ``_get(...)`` and ``JobError(...)`` call of ``tuning/``, by field pattern."""
+    """Every ``get_field(...)`` (or ``..._get(...)``) and ``JobError(...)`` call of ``tuning/``, by field pattern."""
 
     def __init__(self, package: Path):
         self.gets = []  # (pattern, exact, function, kind, default, required)
@@ -97,7 +97,7 @@ class SourceIndex:
                     if not isinstance(node, ast.Call):
                         continue
                     name = getattr(node.func, "id", getattr(node.func, "attr", ""))
-                    if name.endswith("_get") and len(node.args) >= 4:
+                    if (name.endswith("_get") or name == "get_field") and len(node.args) >= 4:
                         field = _render(node.args[2], consts)
                         pat = _pattern(field)
                         if pat is None:
@@ -132,6 +132,8 @@ class SourceIndex:
     def _best(rows, path: str, tag: str | None, study: bool):
         # job and study files share table names ([drive]): a study field is read in a study module
         hits = [r[1:] for r in rows if r[1].match(path) and ("study" in r[0]) == study]
+        if not hits:  # a part both files share (a study's recordings are read by the job's parser)
+            hits = [r[1:] for r in rows if r[1].match(path)]
         exact = [r for r in hits if r[1]]
         hits = exact or hits
         if tag:

@@ -6,18 +6,13 @@
 writes to DIR:
 
 - ``observer.h`` / ``observer.c``: ``jx_state``, ``jx_init(&s)``, ``jx_step(&s, u, y)``,
-  ``JX_NU`` / ``JX_NY`` inputs and outputs per step.  The step is exactly the JAX
-  step: the observer's vector field (``jx_f``) and outputs (``jx_out``) written by
-  per-core emitters that mirror :mod:`jaxobs.observers._cores` operator for
-  operator (:mod:`tuning._cmodels`), integrated by the same rule at the same ``ts``
-  (:mod:`tuning._crules`: Euler, Tustin with its Newton iterations and Jacobian,
-  AB3 with its RK4 start-up and history, RK4), gains baked in as float32
-  constants.  The step convention is :mod:`jaxobs.observers.base`'s: an FLL
-  (signal-level) returns the outputs of the state *before* the update; a flux
-  observer or LESO (drive observer) keeps the previous current and voltage,
-  integrates the period that just ended (back EMF of 000 eq 6, or the LESO's
-  current interpolated over the period) and returns the outputs after it.
-  The header's comment gives the operation count per step;
+  ``JX_NU`` / ``JX_NY`` inputs and outputs per step.  The step is the JAX step itself,
+  generated from the jaxpr of ``observer.step`` (:mod:`tuning.export.codegen`): the rule,
+  the back EMF, the drive observers' memory of the previous sample and the step
+  convention of :mod:`jaxobs.observers.base` are whatever the Python does, so any
+  observer that follows the contract exports, a user's own included.  ``jx_state`` is the
+  JAX state leaf by leaf, the gains are float32 macros ``JX_<NAME>``.  The header's
+  comment gives the operation count per step (that of the emitted C);
 - ``golden.csv``: a header line, then per step the ``JX_NU`` inputs and the ``JX_NY``
   outputs of the JAX step run in float32 (``lax.scan`` of ``observer.step``) over a
   test record of ≥ 10 000 samples: for an FLL a unit sine at ωn with a +2 Hz step at
@@ -28,29 +23,25 @@ writes to DIR:
   with ``--record synthetic`` the synthesized PMSM signal of :func:`drive_test_signal` (a +10 %
   speed step and a +30° angle jump on the observer's own Rs, L), or a recording passed as
   ``signal``;
-- ``coefficients.json``: the discrete-time step's coefficients (gains, rule constants,
-  initial state), the step convention and the operation count;
+- ``coefficients.json``: the gains, static options, rule, initial state, the step
+  convention and the operation count;
 - ``test_main.c``: the harness: replays golden.csv through ``jx_step`` and fails if
   max |y_C − y_golden| / (1 + |y_golden|) > 1e-4 at any step (angles compared modulo 2π).
 
 :func:`compile_and_check` compiles the harness with the system C compiler
 (``cc -std=c99 -O2 -Wall -Werror -pedantic``) and returns that error; the tests do
-it for every supported observer and for the default job's result.
-
-Supported: the FLL family of 001 (SOGIFLL, SOGIFLLWPF, SOGIFLLWIF), the flux observers
-of 000 (PureIntegratorFlux, LPFFlux, SOIFO, SecondOrderSOIFO with ``discretization="rule"``)
-and the LESOs of 002 with their PLL (CLESO, GILESO, FALESO); anything else raises a
-``ValueError`` naming it.
+it for every observer family and rule and for the default job's result.  A drive
+observer (flux observers, LESOs) reads (u_a, u_b, i_a, i_b) per step, any other
+observer one sample ``v``; outputs named ``theta...`` are angles.
 
 The C cannot be bit-identical to XLA's float32 (XLA contracts multiply-adds into FMAs
 and rewrites divisions by constants), so the check is a tolerance, and the golden
 records avoid the few instants where an output is discontinuous in the state: see
 :func:`drive_test_signal` (the first period of the drive records, shaped the same way in
 :func:`drive_recording`: unshaped, a pure integrator's θ̂ misses by 5e-2 rad and a Tustin
-SOIFO's signed ω̂ flips, error 2).  Before writing, the
-export evaluates the emitted vector field (and outputs) at random states and compares
-them with the observer's own, so an emitter that drifts from the JAX cores fails at
-export time, not on the target.
+SOIFO's signed ω̂ flips, error 2).  Before writing, the export runs the emitted
+statements in Python (float32 numpy) at random states and compares them with the JAX
+step, so a code generator bug fails at export time, with or without a C compiler.
 """
 
 from __future__ import annotations

@@ -1,0 +1,103 @@
+"""Job-file fields: :class:`JobError` (one line naming the field) and the typed, range-checked getters."""
+
+from __future__ import annotations
+
+import math
+
+
+class JobError(ValueError):
+    """A problem with a job file; ``str()`` is one line naming the field, at most :data:`MAX_ERROR` characters."""
+
+    def __init__(self, field: str, message: str):
+        self.field = field
+        field = cap(field, 80)
+        line = " ".join(f"{field}: {message}".split())  # one line, whatever the message holds
+        super().__init__(cap(line, MAX_ERROR))
+
+
+MAX_ERROR = 200  # characters in a job-file error
+
+
+MAX_STEPS = 10_000_000  # time steps of one simulation (horizon / ts)
+
+
+MAX_SCENARIOS = 1_000_000  # scenarios of a grid or of `sample`
+
+
+MAX_INT = 2**63 - 1
+
+
+MAX_SOLVER_STEPS = 1_000_000
+
+
+def cap(text: str, n: int) -> str:
+    return text if len(text) <= n else text[: n - 1] + "…"
+
+
+def show(v) -> str:
+    """A value for an error message: its repr, long ones elided."""
+    if isinstance(v, int) and not isinstance(v, bool) and abs(v) > 10**20:
+        return f"an integer of {len(str(abs(v)))} digits"
+    try:
+        r = repr(v) if not isinstance(v, (list, dict)) or len(v) <= 8 else f"{type(v).__name__} of {len(v)}"
+    except (RecursionError, ValueError):
+        r = type(v).__name__
+    return cap(r, 60)
+
+
+def get_field(table: dict, key: str, field: str, kind, default=None, required=False):
+    if key not in table:
+        if required:
+            raise JobError(field, "missing (required)")
+        return default
+    v = table[key]
+    if kind is float:
+        if isinstance(v, bool) or not isinstance(v, (int, float)):
+            raise JobError(field, f"must be a number, got {type(v).__name__} {show(v)}")
+        return finite(v, field)
+    if kind is int:
+        if isinstance(v, bool) or not isinstance(v, int):
+            raise JobError(field, f"must be an integer, got {type(v).__name__} {show(v)}")
+        if abs(v) > MAX_INT:
+            raise JobError(field, f"out of range (|value| <= 2^63 - 1), got {show(v)}")
+        return v
+    if kind is bool:
+        if not isinstance(v, bool):
+            raise JobError(field, f"must be true or false, got {show(v)}")
+        return v
+    if kind is str:
+        if not isinstance(v, str):
+            raise JobError(field, f"must be a string, got {type(v).__name__} {show(v)}")
+        return v
+    if kind is list:
+        if not isinstance(v, list) or not v:
+            raise JobError(field, f"must be a non-empty list of numbers, got {show(v)}")
+        if len(v) > MAX_SCENARIOS:
+            raise JobError(field, f"too many values ({len(v)} > {MAX_SCENARIOS})")
+        for i, x in enumerate(v):
+            if isinstance(x, bool) or not isinstance(x, (int, float)):
+                raise JobError(f"{field}[{i}]", f"must be a finite number, got {type(x).__name__} {show(x)}")
+            finite(x, f"{field}[{i}]")
+        return [float(x) for x in v]
+    if kind is dict:
+        if not isinstance(v, dict):
+            raise JobError(field, f"must be a table, got {type(v).__name__}")
+        return v
+    raise AssertionError(kind)
+
+
+def finite(v, field: str) -> float:
+    """``v`` as a finite float: an integer beyond the float range (10^309) or NaN / inf is an error."""
+    try:
+        f = float(v)
+    except OverflowError:
+        raise JobError(field, f"out of the float range, got {show(v)}") from None
+    if not math.isfinite(f):
+        raise JobError(field, f"must be finite, got {show(v)}")
+    return f
+
+
+def no_unknown(table: dict, allowed, where: str):
+    for key in table:
+        if key not in allowed:
+            raise JobError(f"{where}.{cap(str(key), 40)}", f"unknown key; allowed: {', '.join(allowed)}")

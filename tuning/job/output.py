@@ -1,0 +1,110 @@
+"""What a job writes: JSON without NaN, the per-scenario scores as a Dataset, provenance."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+
+from jaxobs import metrics as M
+
+from ..objective import LOST_SYNC_DEG
+from ..outdir import atomic_write_text
+from .spec import Job, ScenarioSpec
+
+
+def rule_spec(rule) -> dict:
+    """A discretization rule as JSON that :func:`tuning.export.parse_rule` reads back: ``{"name": ..., options}``."""
+    opts = {f.name: getattr(rule, f.name) for f in dataclasses.fields(rule)}
+    return {"name": type(rule).__name__, **{k: v for k, v in opts.items() if isinstance(v, (bool, int, float, str))}}
+
+
+def sanitize(obj, path: str = "", reasons: dict | None = None):
+    """``obj`` with every non-finite float replaced by ``None``; ``reasons[path]`` says what it was."""
+    reasons = {} if reasons is None else reasons
+    if isinstance(obj, dict):
+        return {k: sanitize(v, f"{path}.{k}" if path else str(k), reasons) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [sanitize(v, f"{path}[{i}]", reasons) for i, v in enumerate(obj)]
+    if isinstance(obj, (float, np.floating)) and not math.isfinite(float(obj)):
+        reasons[path] = f"not a finite number ({float(obj)})"
+        return None
+    if isinstance(obj, np.generic):
+        return obj.item()
+    return obj
+
+
+def write_json(path: Path, obj) -> None:
+    """JSON without NaN or Infinity tokens: non-finite numbers become null, listed under ``null_reasons``."""
+    reasons: dict = {}
+    clean = sanitize(obj, "", reasons)
+    if reasons and isinstance(clean, dict):
+        clean["null_reasons"] = {**clean.get("null_reasons", {}), **reasons}
+    atomic_write_text(path, json.dumps(clean, indent=1, allow_nan=False) + "\n")
+
+
+def at_bounds(job: Job, gains: dict) -> dict:
+    """Free gains within 1 % of a bound: {name: {"bound": "lower" | "upper", "limit": ..., "value": ...}}."""
+    out = {}
+    for g in job.gains:
+        v = gains[g.name]
+        for side, lim in (("lower", g.lower), ("upper", g.upper)):
+            if lim is not None and abs(v - lim) <= 0.01 * abs(lim):
+                out[g.name] = {"bound": side, "limit": lim, "value": v}
+    return out
+
+
+def scores_dataset(obj, names, combos, spec: ScenarioSpec, per: dict):
+    """Per-scenario metrics of each design as an xarray Dataset: the grid's axes as dims (a full grid),
+    else one ``scenario`` dim with the axes as coordinates (sampled scenarios)."""
+    import xarray as xr
+
+    designs = list(per)
+    grid = spec.sample == 0
+    if grid:
+        dims = ("design", *names)
+        shape = tuple(len(spec.axes[n]) for n in names)
+        coords = {"design": designs, **{n: list(spec.axes[n]) for n in names}}
+    else:
+        dims, shape = ("design", "scenario"), (len(combos),)
+        coords = {"design": designs, "scenario": np.arange(len(combos))}
+        coords.update({n: ("scenario", [c[i] for c in combos]) for i, n in enumerate(names)})
+    data = {}
+    keys = [t.metric for t in obj.terms]
+    extra = ("lost_sync", "lost_speed") if obj.drive is not None else ()
+    for key in (*keys, "total", "diverged", "lost_lock", *extra):
+        rows = []
+        for d in designs:
+            mets, total, good = per[d]
+            flags = {"total": total, "diverged": ~good, "lost_lock": mets["lost_lock"] | ~good}
+            x = flags.get(key, mets.get(key) if key in mets else None)
+            rows.append(np.asarray(x, dtype=float).reshape(shape))
+        data[key] = (dims, np.stack(rows))
+    ds = xr.Dataset(data, coords=coords)
+    ds["diverged"] = ds["diverged"].astype("int8")
+    ds["lost_lock"] = ds["lost_lock"].astype("int8")
+    ds.attrs["note"] = (
+        "total: the weighted objective per scenario (the penalty where diverged); diverged: 1/0; lost_lock: 1 where "
+        "the estimate ended far from the truth in the steady window (45 deg or 10 % on signals, 90 deg on the "
+        "drive) or diverged"
+    )
+    if extra:
+        ds["lost_sync"] = ds["lost_sync"].astype("int8")
+        ds["lost_speed"] = ds["lost_speed"].astype("int8")
+        ds.attrs["note"] += f"; lost_sync: 1 where diverged or |position error| > {LOST_SYNC_DEG:g} deg (drive)"
+        ds.attrs["note"] += (
+            f"; lost_speed: 1 where diverged or the steady window's mean |speed - reference| > "
+            f"{100 * M.SPEED_TOL:g} % of the mean |reference| (at least {M.SPEED_FLOOR_RPM:g} r/min) (drive)"
+        )
+    return ds
+
+
+def recordings_provenance(job: Job) -> dict:
+    """``{"recordings": [{"file", "sha256"}, ...]}`` of a job on recordings (else nothing)."""
+    rec = job.scenarios.recording
+    if rec is None:
+        return {}
+    return {"recordings": [{"file": f, "sha256": h} for f, h in zip(rec.files, rec.sha256 or [None] * len(rec.files))]}

@@ -1,0 +1,193 @@
+"""Running a job: tune, score initial / closed form / tuned on the same scenarios, write the results folder."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+
+from jaxobs.drive import BENCH_MACHINES
+from jaxobs.drive_study import bind_observer
+from jaxobs.progress import Progress
+from jaxobs.provenance import versions
+
+from ..objective import MetricContext, Objective
+from ..outdir import atomic_path, atomic_write_text
+from ..params import GainSpec, Parametrization
+from ..report import write_report
+from ..solvers import tune
+from ..structure import structure
+from .components import COMPONENTS
+from .drive import job_drive
+from .output import at_bounds, recordings_provenance, rule_spec, scores_dataset, write_json
+from .recordings import bind_recording
+from .scenarios import build_scenarios
+from .spec import Job, ScenarioSpec
+
+
+def build_objective(job: Job, spec: ScenarioSpec | None = None):
+    spec = job.scenarios if spec is None else spec
+    comp = COMPONENTS[job.component].ctor(**job.values)
+    machine = job.drive.machine if job.drive is not None else "ipmsm002"
+    scen, names, combos = build_scenarios(spec, job.values, machine)
+    ctx = MetricContext(t_event=spec.t_event, steady_from=spec.steady_from)
+    param = Parametrization(job.gains)
+    drive = job_drive(job.drive) if spec.signal == "drive" else None
+    bind = bind_observer if drive is not None else None  # the scenario's assumed machine and speed
+    if spec.recording is not None:  # the observer runs open loop on the recorded u/i or voltage
+        drive, bind = None, (bind_recording if spec.signal != "grid" else None)
+    obj = Objective(
+        comp,
+        param,
+        scen,
+        horizon=spec.horizon,
+        terms=job.terms,
+        ctx=ctx,
+        aggregation=job.aggregation,
+        penalty=job.penalty,
+        drive=drive,
+        bind=bind,
+    )
+    return obj, (names, combos)
+
+
+def _inside(g: GainSpec, v: float) -> float:
+    """A closed-form value nudged inside the gain's open bounds (the parametrization cannot reach them)."""
+    if g.lower is not None:
+        v = max(v, g.lower * (1 + 1e-9))
+    if g.upper is not None:
+        v = min(v, g.upper * (1 - 1e-9))
+    return float(v)
+
+
+def _score_designs(obj, thetas: dict, bar: Progress, what: str) -> dict:
+    """Each design's per-scenario scores, one progress step each (the first one compiles)."""
+    per = {}
+    for i, (k, th) in enumerate(thetas.items()):
+        bar.stage(f"{what}{k}" + (" (compiling the metrics)" if i == 0 else ""))
+        per[k] = obj.per_scenario(th)
+        bar.update()
+    return per
+
+
+CHECKPOINT = "checkpoint.npz"
+
+
+def _lost_only(per: dict) -> int | None:
+    """Scenarios where the tuned design lost lock (or diverged) and the closed form did not (None: no tuned)."""
+    if "tuned" not in per:
+        return None
+    lost = {k: np.asarray(per[k][0]["lost_lock"] | ~per[k][2]) for k in ("tuned", "closed_form")}
+    return int(np.sum(lost["tuned"] & ~lost["closed_form"]))
+
+
+def job_fingerprint(job: Job) -> str:
+    """What a checkpoint is checked against: the job file's sha256, or the sha256 of the job dict's JSON."""
+    fp = job.sha256 or hashlib.sha256(json.dumps(job.raw, sort_keys=True, default=str).encode()).hexdigest()
+    recs = [s.recording.sha256 for s in (job.scenarios, job.holdout) if s is not None and s.recording is not None]
+    if any(recs):  # a checkpoint is this job's only on the same recordings
+        fp = hashlib.sha256((fp + "".join(d for r in recs for d in r)).encode()).hexdigest()
+    return fp
+
+
+def run_job(job: Job, out: Path, resume: bool = False, quiet: bool = False) -> dict:
+    """Tune, score initial / tuned / closed form on the same scenarios, write the results folder.
+
+    ``result.json`` (outcome, gains, every constructor value, scores, linear structure, what is needed to
+    rebuild the design) and ``history.json`` are byte-identical for two runs of one job; the timings go
+    to ``timing.json``, the per-scenario scores to ``scores.nc`` (and ``holdout_scores.nc``).
+    """
+    out.mkdir(parents=True, exist_ok=True)
+    t0 = time.time()
+    obj, (names, combos) = build_objective(job)
+    param = obj.param
+    theta0 = param.theta0()
+    info = COMPONENTS[job.component]
+    cf_all = info.closed_form(obj.component)
+    cf = {g.name: cf_all[g.name] for g in job.gains}
+    theta_cf = param.to_theta({g.name: _inside(g, cf[g.name]) for g in job.gains})
+    res = tune(
+        obj,
+        job.solver,
+        theta0,
+        checkpoint=out / CHECKPOINT,
+        resume=resume,
+        quiet=quiet,
+        fingerprint=job_fingerprint(job),
+    )
+    thetas = {"initial": theta0, "closed_form": theta_cf}
+    if res.theta is not None:  # never a design that diverged in some scenario
+        thetas["tuned"] = res.theta
+    gains = {
+        "initial": param.values(theta0),
+        # the closed form is reported exactly; it is scored at θ nudged inside the gains' open bounds
+        "closed_form": {g.name: float(cf[g.name]) for g in job.gains},
+        "tuned": param.values(res.theta) if res.theta is not None else None,
+    }
+    fixed = {k: float(v) for k, v in job.values.items() if k not in param.names}
+    values = {k: (None if g is None else {**fixed, **g}) for k, g in gains.items()}
+    n_scored = len(thetas) * (2 if job.holdout is not None else 1)
+    bar = Progress(not quiet and "auto", n_scored, "score", unit="design")
+    per = _score_designs(obj, thetas, bar, "")
+    scores = {k: (obj.summarize(*per[k]) if k in per else None) for k in gains}
+    bar.stage("linear structure of each design (margins, poles)")
+    lin = {k: (None if v is None else structure(job.component, v, job)) for k, v in values.items()}
+    result = {
+        "status": res.status,
+        "reason": res.reason,
+        "job": job.raw,
+        "job_sha256": job.sha256,
+        "component": job.component,
+        "loop": None if job.drive is None else job.drive.loop,
+        "start": None if job.drive is None else job.drive.start,
+        "ts": float(obj.component.ts),
+        "rule": rule_spec(obj.component.rule),
+        "omega_n": float(job.values["omega_n"]) if "omega_n" in job.values else None,
+        "closed_form_source": info.closed_form_source,
+        "gains": gains,
+        "values": values,
+        "at_bound": at_bounds(job, gains["tuned"]) if gains["tuned"] is not None else {},
+        "scores": scores,
+        "linear": lin,
+        "scenarios": {"axes": names, "count": len(combos)},
+        **recordings_provenance(job),
+        "iterations": res.iterations,
+        "best_iteration": res.best_iteration,
+        "versions": versions(),
+    }
+    nulls = {}
+    if "omega_n" not in job.values:
+        nulls["omega_n"] = f"{job.component} has no nominal frequency omega_n"
+    if gains["tuned"] is None:
+        why = "status 'diverged': every design tried diverged in some tuning scenario, so nothing is tuned"
+        for key in ("gains.tuned", "values.tuned", "scores.tuned", "linear.tuned", "lost_lock_tuned_only"):
+            nulls[key] = why
+    if job.drive is not None:
+        result["machine"] = job.drive.machine
+        result["values_note"] = (
+            "Rs, Lq (LESOs) or Rs, L (flux observers) and the PLL's or FLL's initial speed (omega0_pll, omega0) "
+            f"are set per scenario from its estimated machine ({BENCH_MACHINES[job.drive.machine]})"
+        )
+    if nulls:
+        result["null_reasons"] = nulls
+    result["lost_lock_tuned_only"] = {"tuning": _lost_only(per)}
+    if job.holdout is not None:
+        hobj, (hn, hc) = build_objective(job, job.holdout)
+        hper = _score_designs(hobj, thetas, bar, "held-out ")
+        result["holdout"] = {k: (hobj.summarize(*hper[k]) if k in hper else None) for k in gains}
+        result["holdout"]["count"] = len(hc)
+        result["lost_lock_tuned_only"]["holdout"] = _lost_only(hper)
+        with atomic_path(out / "holdout_scores.nc") as tmp:
+            scores_dataset(hobj, hn, hc, job.holdout, hper).to_netcdf(tmp, engine="scipy")
+    bar.close()
+    with atomic_path(out / "scores.nc") as tmp:
+        scores_dataset(obj, names, combos, job.scenarios, per).to_netcdf(tmp, engine="scipy")
+    write_json(out / "history.json", res.history)
+    write_report(out, job, obj, thetas, res.history)
+    timing = {"total_s": time.time() - t0, **res.timing, "iterations": res.iterations}
+    atomic_write_text(out / "timing.json", json.dumps(timing, indent=1) + "\n")
+    write_json(out / "result.json", result)  # last: a result.json means a complete results folder
+    return result

@@ -1,0 +1,338 @@
+"""A job file checked in full (every error names its field) and parsed into a :class:`~tuning.job.spec.Job`."""
+
+from __future__ import annotations
+
+import math
+import os
+from pathlib import Path
+
+from jaxobs.drive_study import DRIVE_STUDY_AXES
+from jaxobs.provenance import sha256
+
+from .. import strategies
+from ..objective import DRIVE_METRICS, METRICS, Term
+from ..params import GainSpec
+from .components import COMPONENTS, W_N
+from .drive import check_drive_speeds, check_standstill, parse_drive
+from .fields import MAX_SCENARIOS, MAX_SOLVER_STEPS, MAX_STEPS, JobError, cap, get_field, no_unknown, show
+from .recordings import check_recording_job, parse_recording_scenarios
+from .spec import Job, ScenarioSpec
+from .toml import read_toml
+
+# the physical range of every scenario axis (closed intervals unless noted), checked at --check time;
+# freq_step is checked against the component's nominal frequency, speed_hz against the sample rate.  (An
+# "omega0_error" EMF axis was accepted and ignored: removed.  The flux observers start their FLL at
+# omega0 = 2π·50 Hz whatever speed_hz is, so speed_hz already sets the initial frequency error.)
+AXIS_RANGES = {
+    "grid": {
+        "freq_step": ("Hz", (-1e4, 1e4)),
+        "phase_jump_deg": ("deg", (-360.0, 360.0)),
+        "sag": ("1", (0.0, 0.999)),
+        "dc": ("pu", (-10.0, 10.0)),
+        "harmonics_scale": ("1", (0.0, 100.0)),
+        "sub_amplitude": ("pu", (0.0, 10.0)),
+        "phase_deg": ("deg", (-360.0, 360.0)),
+    },
+    "emf": {
+        "speed_hz": ("Hz", (1e-3, 1e4)),
+        "dc_alpha": ("V", (-1e4, 1e4)),
+        "dc_beta": ("V", (-1e4, 1e4)),
+        "h5": ("1", (0.0, 10.0)),
+        "h7": ("1", (0.0, 10.0)),
+        "phase_deg": ("deg", (-360.0, 360.0)),
+    },
+    "drive": DRIVE_STUDY_AXES,
+}
+
+
+# bytes a simulation keeps per scenario and time step while its gradient is taken (states, outputs and
+# their cotangents, float64): an estimate for the memory check, not a measurement
+BYTES_PER_STEP = {"grid": 512, "emf": 512, "drive": 2048}
+
+
+def available_memory() -> int:
+    """Bytes of memory available now (MemAvailable on Linux, else the physical memory; 16 GiB if unknown)."""
+    try:
+        for line in Path("/proc/meminfo").read_text().splitlines():
+            if line.startswith("MemAvailable:"):
+                return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    try:
+        return os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    except (ValueError, OSError, AttributeError):
+        return 16 * 2**30
+
+
+def check_size(spec: ScenarioSpec, where: str, ts: float, extra_s: float = 0.0) -> None:
+    """Time steps, scenario count and the memory a simulation of the batch needs, at --check time."""
+    n_scen = spec.sample or math.prod(len(v) for v in spec.axes.values())  # a recording: one per file
+    if n_scen > MAX_SCENARIOS:
+        raise JobError(f"{where}.grid", f"{n_scen} scenarios (the product of the axes' lengths) > {MAX_SCENARIOS}")
+    steps = (spec.horizon + extra_s) / ts
+    if spec.horizon < ts:
+        raise JobError(f"{where}.horizon", f"shorter than one sample (ts = {ts:g} s), got {spec.horizon:g} s")
+    if steps > MAX_STEPS:
+        raise JobError(f"{where}.horizon", f"{steps:.3g} time steps of {ts:g} s > {MAX_STEPS:g}: too long")
+    if (spec.horizon - spec.steady_from) / ts < 10:
+        raise JobError(
+            f"{where}.steady_from",
+            f"the steady window [{spec.steady_from:g}, {spec.horizon:g}) s holds fewer than 10 samples of {ts:g} s",
+        )
+    need = steps * n_scen * BYTES_PER_STEP[spec.signal]
+    have = available_memory()
+    if need > have:
+        raise JobError(
+            f"{where}.horizon",
+            f"{n_scen} scenarios x {steps:.3g} steps need about {need / 2**30:.3g} GiB, "
+            f"{have / 2**30:.3g} GiB available: shorten the horizon or use fewer scenarios",
+        )
+
+
+def parse_scenarios(
+    tab: dict, where: str, signals: tuple, seed: int, freq_n: float, ts: float, base: Path | None = None
+) -> ScenarioSpec:
+    """``signals``: the component's (its default first); ``base``: the job file's folder (recordings)."""
+    tab = get_field({"s": tab}, "s", where, dict)
+    no_unknown(tab, ("signal", "t_event", "horizon", "steady_from", "grid", "sample", "seed", "recording"), where)
+    signal = get_field(tab, "signal", f"{where}.signal", str, signals[0])
+    if signal not in ("grid", "emf", "drive"):
+        raise JobError(f"{where}.signal", f"must be 'grid', 'emf' or 'drive', got {show(signal)}")
+    if signal not in signals:
+        need = " or ".join(f"'{x}'" for x in signals)
+        raise JobError(f"{where}.signal", f"the component needs {need} signals, got {show(signal)}")
+    t_event = get_field(tab, "t_event", f"{where}.t_event", float, 0.1)
+    horizon = get_field(tab, "horizon", f"{where}.horizon", float, 0.4)
+    if t_event < 0:
+        raise JobError(f"{where}.t_event", f"must be >= 0 s, got {t_event}")
+    if horizon <= t_event:
+        raise JobError(f"{where}.horizon", f"must exceed t_event ({t_event:g} s), got {horizon:g}")
+    if horizon > MAX_STEPS * ts:
+        raise JobError(f"{where}.horizon", f"{horizon:g} s is more than {MAX_STEPS:g} time steps of {ts:g} s")
+    steady = get_field(tab, "steady_from", f"{where}.steady_from", float, t_event + 0.75 * (horizon - t_event))
+    if not (0 <= steady < horizon):
+        raise JobError(f"{where}.steady_from", f"must be in [0, horizon), got {steady:g}")
+    if "recording" in tab:
+        return parse_recording_scenarios(tab, where, signal, t_event, horizon, steady, seed, ts, base)
+    grid = get_field(tab, "grid", f"{where}.grid", dict, required=True)
+    allowed = AXIS_RANGES[signal]
+    axes = {}
+    if not grid:
+        raise JobError(f"{where}.grid", f"at least one axis is required; allowed: {', '.join(allowed)}")
+    for k in grid:
+        if k not in allowed:
+            raise JobError(f"{where}.grid.{cap(k, 40)}", f"unknown axis; allowed: {', '.join(allowed)}")
+        v = axes[k] = get_field(grid, k, f"{where}.grid.{k}", list)
+        unit, (lo, hi) = allowed[k]
+        if signal == "grid" and k == "freq_step":  # the frequency stays in (0, 1/(4 ts)]
+            lo, hi = max(lo, -freq_n * (1 - 1e-6)), min(hi, 0.25 / ts - freq_n)
+        if signal == "emf" and k == "speed_hz":
+            hi = min(hi, 0.25 / ts)
+        for i, x in enumerate(v):
+            if not lo <= x <= hi:
+                u = "" if unit == "1" else f" {unit}"
+                raise JobError(f"{where}.grid.{k}[{i}]", f"must be in [{lo:g}, {hi:g}]{u}, got {x:g}")
+    sample = get_field(tab, "sample", f"{where}.sample", int, 0)
+    if not 0 <= sample <= MAX_SCENARIOS:
+        raise JobError(f"{where}.sample", f"must be in [0, {MAX_SCENARIOS}] (0: the full grid), got {show(sample)}")
+    sseed = get_field(tab, "seed", f"{where}.seed", int, seed)
+    if not 0 <= sseed < 2**32:
+        raise JobError(f"{where}.seed", f"must be in [0, 2^32), got {show(sseed)}")
+    return ScenarioSpec(signal, t_event, horizon, steady, axes, sample, sseed)
+
+
+def parse_job(raw: dict, base: Path | None = None) -> Job:
+    """Validate a job dict (the parsed TOML); raises :class:`JobError` naming the field.
+
+    ``base``: the job file's folder, against which a recording's relative ``file`` is read (and then
+    checked now: it exists, its columns, its rate); without it the files are read when the job runs."""
+    no_unknown(raw, ("job", "component", "gains", "scenarios", "holdout", "objective", "solver", "drive"), "job file")
+    job_t = get_field(raw, "job", "job", dict, required=True)
+    no_unknown(job_t, ("name", "component", "seed"), "job")
+    name = get_field(job_t, "name", "job.name", str, "job")
+    comp = get_field(job_t, "component", "job.component", str, required=True)
+    if comp == "PureIntegratorFlux":
+        raise JobError(
+            "job.component",
+            "PureIntegratorFlux is not tunable: its flux keeps the integration constant of its start, so it "
+            "cannot hold a sensorless drive; use LPFFlux, SOIFO or SecondOrderSOIFO",
+        )
+    if comp not in COMPONENTS:
+        raise JobError("job.component", f"unknown component {show(comp)}; known: {', '.join(COMPONENTS)}")
+    info = COMPONENTS[comp]
+    seed = get_field(job_t, "seed", "job.seed", int, 0)
+    if not 0 <= seed < 2**32 - 1:
+        raise JobError("job.seed", f"must be in [0, 2^32 - 1), got {show(seed)}")
+
+    values = dict(info.defaults)
+    comp_t = get_field(raw, "component", "component", dict, {})
+    for k in comp_t:
+        if k not in info.defaults:
+            raise JobError(f"component.{k}", f"unknown for {comp}; allowed: {', '.join(info.defaults)}")
+        values[k] = get_field(comp_t, k, f"component.{k}", float)
+    try:
+        ts = float(info.ctor(**values).ts)
+    except (ValueError, ArithmeticError, TypeError) as e:
+        raise JobError("component", str(e)) from None
+    freq_n = float(values.get("omega_n", W_N)) / (2 * math.pi)
+
+    gains_t = get_field(raw, "gains", "gains", dict, required=True)
+    if not gains_t:
+        raise JobError("gains", "at least one free gain is required")
+    gains = []
+    for gname, spec in gains_t.items():
+        where = f"gains.{gname}"
+        if gname not in info.gains:
+            raise JobError(cap(where, 60), f"unknown gain for {comp}; tunable: {', '.join(info.gains)}")
+        spec = get_field(gains_t, gname, where, dict)
+        no_unknown(spec, ("init", "lower", "upper", "log"), where)
+        init = get_field(spec, "init", f"{where}.init", float, values[gname])
+        lower = get_field(spec, "lower", f"{where}.lower", float)
+        upper = get_field(spec, "upper", f"{where}.upper", float)
+        log = get_field(spec, "log", f"{where}.log", bool, True)
+        if lower is not None and lower < 0:
+            raise JobError(f"{where}.lower", f"must be >= 0 (gains are positive), got {lower}")
+        if log and lower is not None and lower <= 0:
+            raise JobError(f"{where}.lower", f"must be > 0 with log = true, got {lower}")
+        if upper is not None and upper <= 0:
+            raise JobError(f"{where}.upper", f"must be > 0, got {upper}")
+        if lower is not None and upper is not None and not lower < upper:
+            raise JobError(f"{where}.upper", f"must exceed lower ({lower}), got {upper}")
+        if init <= 0:
+            raise JobError(f"{where}.init", f"must be > 0, got {init}")
+        if (lower is not None and init <= lower) or (upper is not None and init >= upper):
+            raise JobError(f"{where}.init", f"must lie strictly inside [{lower}, {upper}], got {init}")
+        if lower is not None and upper is not None and (upper - lower) < 1e-6 * upper:
+            raise JobError(f"{where}.upper", f"bounds [{lower:g}, {upper:g}] are too narrow (relative width < 1e-6)")
+        g = GainSpec(gname, init, lower, upper, log)
+        try:  # the parametrization must map init (and the closed form, nudged inside) to a finite θ
+            th = g.to_theta(init)
+        except (ValueError, ArithmeticError):
+            th = math.nan
+        if not math.isfinite(th):
+            raise JobError(f"{where}.init", f"{init:g} cannot be parametrized inside its bounds [{lower}, {upper}]")
+        gains.append(g)
+        values[gname] = init
+
+    scen = parse_scenarios(
+        get_field(raw, "scenarios", "scenarios", dict, required=True), "scenarios", info.signals, seed, freq_n, ts, base
+    )
+    drive = None
+    if scen.signal == "drive":
+        drive = parse_drive(get_field(raw, "drive", "drive", dict, {}), comp, scen)
+    elif "drive" in raw:
+        raise JobError("drive", f"applies to drive jobs (scenarios.signal = 'drive'), not {scen.signal!r} signals")
+    holdout = None
+    if "holdout" in raw:
+        h = dict(get_field(raw, "holdout", "holdout", dict))
+        for key in ("t_event", "horizon", "steady_from"):
+            h.setdefault(key, getattr(scen, key))
+        h.setdefault("signal", scen.signal)
+        holdout = parse_scenarios(h, "holdout", (scen.signal,), seed + 1, freq_n, ts, base)
+    if holdout is not None and holdout.recording is None and drive is not None and drive.start == "standstill":
+        check_standstill(drive, holdout, "holdout")
+    settle = drive.settle if drive is not None else 0.0
+    for spec, where in ((scen, "scenarios"), (holdout, "holdout")):
+        if spec is not None:
+            check_size(spec, where, ts, settle)
+            if drive is not None:
+                check_drive_speeds(spec, where, drive.machine)
+
+    obj_t = get_field(raw, "objective", "objective", dict, required=True)
+    no_unknown(obj_t, ("terms", "aggregate", "alpha", "temperature", "penalty"), "objective")
+    terms_raw = obj_t.get("terms")
+    if not isinstance(terms_raw, list) or not terms_raw:
+        raise JobError("objective.terms", "missing (required): a list of { metric = ..., weight = ... }")
+    terms = []
+    for i, t in enumerate(terms_raw):
+        where = f"objective.terms[{i}]"
+        if not isinstance(t, dict):
+            raise JobError(where, f"must be a table {{ metric = ..., weight = ... }}, got {show(t)}")
+        no_unknown(t, ("metric", "weight"), where)
+        metric = get_field(t, "metric", f"{where}.metric", str, required=True)
+        if metric not in METRICS:
+            raise JobError(f"{where}.metric", f"unknown metric {show(metric)}; known: {', '.join(METRICS)}")
+        grid_only = metric.endswith(("_freq", "_phase", "freq_steady", "phase_steady"))
+        if metric in DRIVE_METRICS and scen.signal != "drive":
+            raise JobError(f"{where}.metric", f"{show(metric)} needs the closed-loop drive, not {comp} ({scen.signal})")
+        if (scen.signal != "grid") == grid_only:
+            raise JobError(f"{where}.metric", f"{show(metric)} does not apply to {comp} ({scen.signal} signals)")
+        weight = get_field(t, "weight", f"{where}.weight", float, 1.0)
+        if weight <= 0:
+            raise JobError(f"{where}.weight", f"must be > 0, got {weight}")
+        terms.append(Term(metric, weight))
+    agg = get_field(obj_t, "aggregate", "objective.aggregate", str, "mean")
+    if agg not in strategies.AGGREGATIONS:
+        raise JobError("objective.aggregate", f"must be {strategies.one_of(strategies.AGGREGATIONS)}, got {show(agg)}")
+    alpha = get_field(obj_t, "alpha", "objective.alpha", float, 0.9)
+    if not 0 <= alpha < 1:
+        raise JobError("objective.alpha", f"must be in [0, 1), got {alpha}")
+    temperature = get_field(obj_t, "temperature", "objective.temperature", float)
+    if temperature is not None and temperature <= 0:
+        raise JobError("objective.temperature", f"must be > 0, got {temperature}")
+    penalty = get_field(obj_t, "penalty", "objective.penalty", float, 1e3)
+    if penalty <= 0:
+        raise JobError("objective.penalty", f"must be > 0, got {penalty}")
+
+    sol_t = get_field(raw, "solver", "solver", dict, {})
+    no_unknown(
+        sol_t,
+        ("kind", "learning_rate", "steps", "patience", "tol", "schedule", "checkpoint_every", "progress_every"),
+        "solver",
+    )
+    kind = get_field(sol_t, "kind", "solver.kind", str, "adam")
+    if kind not in strategies.SOLVER_KINDS:
+        raise JobError("solver.kind", f"must be {strategies.one_of(strategies.SOLVER_KINDS)}, got {show(kind)}")
+    if kind in strategies.MINIMISERS:  # optimistix: no learning rate, schedule, patience or checkpoints
+        for key in strategies.OPTAX_ONLY:
+            if key in sol_t:
+                raise JobError(
+                    f"solver.{key}", f"does not apply to kind = '{kind}' (it applies to {', '.join(strategies.OPTAX)})"
+                )
+    opts = dict(
+        learning_rate=get_field(sol_t, "learning_rate", "solver.learning_rate", float, 0.05),
+        steps=get_field(sol_t, "steps", "solver.steps", int, 100),
+        patience=get_field(sol_t, "patience", "solver.patience", int, 25),
+        tol=get_field(sol_t, "tol", "solver.tol", float, 1e-6),
+        schedule=get_field(sol_t, "schedule", "solver.schedule", str, "constant"),
+        checkpoint_every=get_field(sol_t, "checkpoint_every", "solver.checkpoint_every", int, 5),
+        progress_every=get_field(sol_t, "progress_every", "solver.progress_every", int, 1),
+    )
+    if not 0 < opts["learning_rate"] <= 1e6:
+        raise JobError("solver.learning_rate", f"must be in (0, 1e6], got {opts['learning_rate']:g}")
+    if opts["tol"] < 0:
+        raise JobError("solver.tol", f"must be >= 0, got {opts['tol']:g}")
+    if opts["steps"] > MAX_SOLVER_STEPS:
+        raise JobError("solver.steps", f"must be <= {MAX_SOLVER_STEPS}, got {show(opts['steps'])}")
+    for fld in ("steps", "patience", "checkpoint_every", "progress_every"):
+        if opts[fld] < 1:
+            raise JobError(f"solver.{fld}", f"must be >= 1, got {opts[fld]}")
+    if opts["schedule"] not in strategies.SCHEDULES:
+        raise JobError(
+            "solver.schedule", f"must be {strategies.one_of(strategies.SCHEDULES)}, got {show(opts['schedule'])}"
+        )
+    job = Job(
+        raw=raw,
+        name=name,
+        component=comp,
+        seed=seed,
+        values=values,
+        gains=gains,
+        scenarios=scen,
+        holdout=holdout,
+        terms=terms,
+        aggregation=strategies.aggregation(agg, alpha=alpha, temperature=temperature),
+        penalty=penalty,
+        solver=strategies.solver(kind, **opts),
+        drive=drive,
+    )
+    check_recording_job(job, comp_t)
+    return job
+
+
+def load_job(path) -> Job:
+    """Read, check and parse a job file (:func:`read_toml`, then :func:`parse_job`)."""
+    raw, data = read_toml(path)
+    job = parse_job(raw, Path(path).parent)
+    job.sha256 = sha256(data)
+    return job

@@ -1,0 +1,69 @@
+"""A parsed job as data: :class:`Job`, its scenario sets, its drive and its recordings."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from ..aggregations import AbstractAggregation
+from ..solvers import AbstractSolver
+
+
+@dataclass
+class ScenarioSpec:
+    signal: str
+    t_event: float
+    horizon: float
+    steady_from: float
+    axes: dict  # name -> list of values
+    sample: int  # 0: full grid; n > 0: n random combinations (seeded)
+    seed: int
+    recording: RecordingSpec | None = None  # [scenarios.recording]: recorded signals instead of a grid
+
+
+@dataclass
+class Job:
+    raw: dict
+    name: str
+    component: str
+    seed: int
+    values: dict  # constructor values
+    gains: list  # GainSpec
+    scenarios: ScenarioSpec
+    holdout: ScenarioSpec | None
+    terms: list
+    aggregation: AbstractAggregation  # objective.aggregate (with alpha, temperature), tuning.strategies
+    penalty: float
+    solver: AbstractSolver  # [solver], tuning.strategies
+    sha256: str | None = None  # of the job file's bytes (load_job); None for a job built from a dict
+    drive: DriveSpec | None = None  # signal = "drive" jobs: how the observer sits in the loop
+
+
+@dataclass(frozen=True)
+class DriveSpec:
+    """``[drive]`` of a drive job: ``loop = "sensorless"`` (the default: the tuned observer closes the loop,
+    from t = 0 after its settling phase, or from ``handover`` s on) or ``"sensored"`` (the encoder closes it and
+    the observer estimates beside it); ``settle`` (s): the observer's unscored settling phase before t = 0;
+    ``start``: ``"steady"`` (each scenario starts in its operating point) or ``"standstill"`` (from rest, by
+    the I-f start-up :meth:`jaxobs.drive.IfStartup.for_machine` of the job's machine, then its hand-over);
+    ``machine``: the drive's machine (:data:`BENCH_MACHINES`; by default the component's: the LESOs run
+    002's IPMSM, the flux observers 000's SPMSM)."""
+
+    loop: str = "sensorless"
+    handover: float = 0.0
+    settle: float = 0.2
+    start: str = "steady"
+    machine: str = "ipmsm002"  # a key of BENCH_MACHINES; a job's default is its component's first machine
+
+
+@dataclass(frozen=True)
+class RecordingSpec:
+    """``[scenarios.recording]``: one scenario per file, read at the component's ``ts``."""
+
+    files: tuple  # as written in the job file
+    paths: tuple  # resolved against the job file's folder (or the working folder)
+    time_column: object  # a column name or index, or None
+    sample_rate: float | None  # Hz, when there is no time column
+    columns: tuple
+    truth: tuple
+    ts: float
+    sha256: tuple = ()  # of each file's bytes, when checked at parse time

@@ -1,0 +1,74 @@
+"""TOML files read safely: size, encoding and nesting checked before the parser sees them."""
+
+from __future__ import annotations
+
+import re
+import tomllib
+from pathlib import Path
+
+from .fields import JobError, cap
+
+MAX_FILE_BYTES = 1_000_000  # a job file larger than this is refused before it is parsed
+
+
+MAX_DEPTH = 20  # nesting of tables, arrays and dotted keys
+
+
+_STRINGS = re.compile(r'"""(?:[^\\]|\\.)*?"""|\'\'\'.*?\'\'\'|"(?:[^"\\\n]|\\.)*"|\'[^\'\n]*\'|#[^\n]*', re.S)
+
+
+def check_nesting(text: str, what: str = "job file") -> None:
+    """Refuse TOML nested deeper than :data:`MAX_DEPTH` (arrays, inline tables, dotted keys) before it is
+    parsed: the parser recurses on nesting and builds one table per dotted-key part."""
+    bare = _STRINGS.sub('""', text)
+    depth = 0
+    for m in re.finditer(r"[\[\]{}]", bare):
+        depth += 1 if m.group() in "[{" else -1
+        if depth > MAX_DEPTH + 2:  # + 2: a [[table]] header's brackets
+            raise JobError(what, f"nested deeper than {MAX_DEPTH} levels (arrays / inline tables)")
+    for n, line in enumerate(bare.splitlines(), 1):
+        key = line.split("=", 1)[0] if "=" in line else line
+        if key.count(".") > MAX_DEPTH:
+            raise JobError(what, f"line {n}: a dotted key of more than {MAX_DEPTH} parts")
+
+
+def _depth(obj) -> int:
+    """Nesting depth of parsed TOML (iterative: no recursion on a deep value)."""
+    best, stack = 0, [(obj, 0)]
+    while stack:
+        o, d = stack.pop()
+        best = max(best, d)
+        if d > MAX_DEPTH + 1:
+            break
+        if isinstance(o, dict):
+            stack.extend((v, d + 1) for v in o.values())
+        elif isinstance(o, list):
+            stack.extend((v, d + 1) for v in o)
+    return best
+
+
+def read_toml(path, what: str = "job file") -> tuple[dict, bytes]:
+    """A TOML file's table and bytes, or a :class:`JobError` of one line: unreadable, larger than
+    :data:`MAX_FILE_BYTES`, not UTF-8, nested deeper than :data:`MAX_DEPTH`, not TOML."""
+    path = Path(path)
+    try:
+        with open(path, "rb") as f:
+            data = f.read(MAX_FILE_BYTES + 1)
+    except OSError as e:
+        raise JobError(what, f"cannot read {cap(str(path), 80)!r}: {e.strerror}") from None
+    if len(data) > MAX_FILE_BYTES:
+        raise JobError(what, f"larger than {MAX_FILE_BYTES} bytes")
+    try:
+        text = data.decode()
+    except UnicodeDecodeError as e:
+        raise JobError(what, f"not UTF-8 text: byte {e.start} is {data[e.start : e.start + 1]!r}") from None
+    check_nesting(text, what)
+    try:
+        raw = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as e:
+        raise JobError(what, f"not valid TOML: {e}") from None
+    except RecursionError:
+        raise JobError(what, f"nested deeper than {MAX_DEPTH} levels") from None
+    if _depth(raw) > MAX_DEPTH:
+        raise JobError(what, f"nested deeper than {MAX_DEPTH} levels")
+    return raw, data
