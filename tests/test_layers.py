@@ -47,6 +47,7 @@ LAYERS = [
     ("jaxobs.drive.bench",),
     ("jaxobs.drive",),
     # the one loop over a system, and sharding a batch over devices
+    ("jaxobs._steps", "jaxobs._sensitivity"),
     ("jaxobs._loop",),
     ("jaxobs._simulate", "jaxobs.sharding"),
     # metrics: they score
