@@ -32,6 +32,7 @@ LAYERS = [
         "jaxobs.progress",
         "jaxobs.provenance",
         "jaxobs._cache",
+        "jaxobs.drive.component",
     ),
     # integration rules (and check_rule)
     ("jaxobs._discretize",),
