@@ -1,5 +1,6 @@
 """Observers: the SOGI-FLL family (and, as they land, flux observers, LESOs and PLLs)."""
 
+from ._cores import sogi2_tustin_coefficients as sogi2_tustin_coefficients
 from .base import AbstractObserver as AbstractObserver
 from .base import BankOutput as BankOutput
 from .base import ObserverBank as ObserverBank
