@@ -8,6 +8,7 @@ this suite's x64 setting; the checks run the generated harness (test_main.c) and
 
 import argparse
 import json
+import math
 import re
 import shutil
 import tomllib
@@ -27,7 +28,6 @@ from tuning.export import (
     MIN_STEPS,
     TOLERANCE,
     add_export_parser,
-    bind_to_drive,
     compile_and_check,
     drive_recording,
     drive_test_signal,
@@ -35,6 +35,11 @@ from tuning.export import (
     observer_from_design,
     observer_from_result,
 )
+
+
+def _bound(obs, machine, rpm: float):
+    """``obs`` bound to ``machine`` at ``rpm``: the one binding, as ``jaxobs export`` does it."""
+    return obs.bind(machine, float(rpm) * math.pi / 30 * int(machine.p))
 
 
 def _need_cc():
@@ -357,7 +362,7 @@ def test_drive_recording_is_what_the_loop_feeds_its_observer():
     (000 eq 6 on 000's SPMSM) has |e| = ω_e ψf to 1 %, ω_e the true speed (10 % up after the speed step)."""
     import jaxobs.drive as D
 
-    obs = bind_to_drive(_DRIVE["SOIFO"](), bench_machine("spmsm000"), 1000.0)
+    obs = _bound(_DRIVE["SOIFO"](), bench_machine("spmsm000"), 1000.0)
     n = 3000
     data, doc = drive_recording(obs, n)
     assert data.shape == (n, 4) and data.dtype == np.float32 and "000 SPMSM" in doc
@@ -397,9 +402,10 @@ def test_drive_observers_match_on_a_drive_recording(tmp_path, name, rule):
     tolerance is absolute there): float32 rounding of the high-gain extended state."""
     _need_cc()
     obs = _DRIVE[name](**({} if rule is None else {"rule": rule}))
-    rpm = 300.0 if hasattr(obs, "Lq") else 1000.0
-    machine = bench_machine("ipmsm002" if hasattr(obs, "Lq") else "spmsm000")
-    obs = bind_to_drive(obs, machine, rpm)
+    leso = isinstance(obs, jaxobs.observers.AbstractLESO)
+    rpm = 300.0 if leso else 1000.0
+    machine = bench_machine("ipmsm002" if leso else "spmsm000")
+    obs = _bound(obs, machine, rpm)
     assert float(obs.Rs) == float(machine.Rs)
     c = export_observer(obs, tmp_path)
     assert "sensored FOC drive" in c["golden"]["signal"] and c["golden"]["steps"] == 12_000
@@ -411,7 +417,7 @@ def test_unshaped_recording_start_is_ill_conditioned(tmp_path):
     """Why the recording's first period is shaped: unshaped, a Tustin SOIFO's signed speed flips at the first
     sample in one implementation and not the other (error 2), a pure integrator's angle misses by 5e-2."""
     _need_cc()
-    obs = bind_to_drive(_DRIVE["SOIFO"](rule=jaxobs.Tustin()), bench_machine("spmsm000"), 1000.0)
+    obs = _bound(_DRIVE["SOIFO"](rule=jaxobs.Tustin()), bench_machine("spmsm000"), 1000.0)
     data, _ = drive_recording(obs, 12_000)
     export_observer(obs, tmp_path, signal=data)
     assert compile_and_check(tmp_path) > 1e-2
@@ -539,3 +545,52 @@ def test_the_export_runs_its_c_in_python_before_writing(tmp_path, monkeypatch):
     with pytest.raises(AssertionError, match="generated C of SOGIFLL differs from the JAX step at "):
         export_observer(linear.sogi_fll_closed_form(), tmp_path)
     assert not (tmp_path / "observer.c").exists()
+
+
+class _KitchenState(NamedTuple):
+    x: jax.Array  # (4,)
+    n: jax.Array  # int32 step count
+    y: jax.Array  # a field named as jx_step's output array: its local is y_
+
+
+class _KitchenOut(NamedTuple):
+    y: jax.Array  # (2,): an output array is two columns, y_0 and y_1
+    theta: jax.Array
+
+
+class _Kitchen(eqx.Module):
+    """A step that uses most of what the generator turns into C: matrix products, reversal, concatenation,
+    an update at an index, reductions, clipping, integer powers, sign/floor/round, tanh/exp/log1p, a
+    condition on a counter (lax.cond), a stop_gradient, a custom_jvp function (jax.nn.relu) and a gain
+    matrix (its macros JX_A_0 ... JX_A_15)."""
+
+    a: jax.Array  # (4, 4)
+    ts: float = eqx.field(static=True, default=1e-3)
+
+    def init(self, u0=None):
+        x0 = jnp.asarray([0.1, -0.2, 0.3, 0.05], jnp.float32)
+        return _KitchenState(x=x0, n=jnp.asarray(0, jnp.int32), y=jnp.zeros((), jnp.float32))
+
+    def step(self, s, v):
+        x = s.x
+        ax = self.a @ x
+        r = jnp.concatenate([x[::-1][:2], jnp.clip(ax[2:], -1.0, 1.0)])
+        r = r.at[1].set(jnp.tanh(v) + jax.lax.stop_gradient(jnp.sum(x)))
+        big = jax.lax.cond(s.n >= 3, lambda z: z * 0.5, lambda z: z + 0.25 * jnp.sign(z), r)
+        x1 = x + self.ts * (big - x**3 + jnp.log1p(jnp.exp(-jnp.abs(x))) + jax.nn.relu(x) - jnp.floor(x) * 0.01)
+        out = _KitchenOut(y=jnp.stack([jnp.max(x), jnp.round(10 * x[0]) / 10 + s.y]), theta=jnp.arctan2(x[1], x[0]))
+        return _KitchenState(x=x1, n=jnp.minimum(s.n + 1, 3), y=0.5 * s.y + 0.1 * v), out
+
+
+def test_a_step_that_uses_most_primitives_exports_and_matches(tmp_path):
+    """The generator's self-check (numpy, random states) and the C compiled against 12 000 golden steps agree
+    with the JAX step for data movement, reductions, matrix products, a cond and custom_jvp calls."""
+    a = jnp.asarray(np.random.default_rng(1).normal(size=(4, 4)) * 0.5, jnp.float32)
+    c = export_observer(_Kitchen(a=a), tmp_path)
+    assert c["outputs"] == ["y_0", "y_1", "theta"] and "worst" in c["ops_per_step"]
+    assert c["gains"]["a_15"]["c_name"] == "JX_A_15"
+    h = (tmp_path / "observer.h").read_text()
+    assert "float x[4];" in h and "int n;" in h and "float y;" in h
+    assert "const float y_ = s->y;" in (tmp_path / "observer.c").read_text()
+    if shutil.which("cc") is not None:
+        assert compile_and_check(tmp_path) <= TOLERANCE

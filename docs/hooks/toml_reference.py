@@ -132,6 +132,8 @@ class SourceIndex:
     def _best(rows, path: str, tag: str | None, study: bool):
         # job and study files share table names ([drive]): a study field is read in a study module
         hits = [r[1:] for r in rows if r[1].match(path) and ("study" in r[0]) == study]
+        if not hits:  # a part both files share (a study's recordings are read by the job's parser)
+            hits = [r[1:] for r in rows if r[1].match(path)]
         exact = [r for r in hits if r[1]]
         hits = exact or hits
         if tag:

@@ -27,6 +27,8 @@ count per step is that of the emitted C, arithmetic only (data movement is free)
 from __future__ import annotations
 
 import dataclasses
+import math
+import re
 
 import equinox as eqx
 import jax
@@ -54,14 +56,28 @@ __all__ = [
 
 
 def leaf_name(path) -> str:
-    """A pytree key path as a C identifier part: ``.rule.f1`` -> ``rule_f1``, ``[0]`` -> ``0``."""
+    """A pytree key path as a C identifier: ``.rule.f1`` -> ``rule_f1``, ``[0]`` (a tuple's) -> ``leaf0``."""
     parts = []
     for k in path:
         for attr in ("name", "key", "idx"):
             if hasattr(k, attr):
                 parts.append(str(getattr(k, attr)))
                 break
-    return "_".join(parts) or "value"
+    name = re.sub(r"\W", "_", "_".join(parts)) or "value"
+    return f"leaf{name}" if name[0].isdigit() else name
+
+
+# C keywords and the names the generated code uses itself: a local named like one of them gets a '_'
+_RESERVED = {"s", "u", "y", "auto", "break", "case", "char", "const", "continue", "default", "do", "double"}
+_RESERVED |= {"else", "enum", "extern", "float", "for", "goto", "if", "inline", "int", "long", "register"}
+_RESERVED |= {"restrict", "return", "short", "signed", "sizeof", "static", "struct", "switch", "typedef"}
+_RESERVED |= {"union", "unsigned", "void", "volatile", "while", "_Bool", "_Complex", "_Imaginary", "jx_state"}
+
+
+def _local(name: str) -> str:
+    """A C local for a state or input scalar that no temporary (t12, b4, c7), macro or keyword shadows."""
+    clash = name in _RESERVED or re.fullmatch(r"[tbc]\d+", name) or name.startswith("JX_") or hasattr(math, name)
+    return f"{name}_" if clash else name
 
 
 @dataclasses.dataclass
@@ -160,6 +176,10 @@ def generate(observer, state, u, *, input_names=None) -> CStep:
         else:
             for leaf, name in zip(in_leaves, input_names):
                 leaf.name = name
+    for kind, leaves in (("gain", gains), ("state", st_leaves), ("input", in_leaves)):
+        names = [x.name for x in leaves]
+        if len(set(names)) != len(names):
+            raise ValueError(f"export: two {kind} leaves share a C name: {sorted(names)}")
     floats = {x.dtype for x in gains + st_leaves + in_leaves if x.dtype.kind == "f"}
     if len(floats) > 1:
         raise ValueError(f"export: the step mixes float types {sorted(map(str, floats))}: give one (float32)")
@@ -179,7 +199,7 @@ def generate(observer, state, u, *, input_names=None) -> CStep:
     for leaf in st_leaves:
         arr = np.empty(leaf.shape, dtype=object)
         for i, idx in enumerate(np.ndindex(leaf.shape)):
-            name = leaf.name if leaf.shape == () else f"{leaf.name}_{i}"
+            name = _local(leaf.name if leaf.shape == () else f"{leaf.name}_{i}")
             src = f"s->{leaf.name}" if leaf.shape == () else f"s->{leaf.name}[{i}]"
             em.block.append(Let(name, ctype(leaf.dtype), src, (), "", False))
             arr[idx] = S(name, leaf.dtype)
@@ -188,7 +208,7 @@ def generate(observer, state, u, *, input_names=None) -> CStep:
     for leaf in in_leaves:
         arr = np.empty(leaf.shape, dtype=object)
         for i, idx in enumerate(np.ndindex(leaf.shape)):
-            name = leaf.scalars()[i]
+            name = _local(leaf.scalars()[i])
             em.block.append(Let(name, ctype(leaf.dtype), f"u[{k}]", (), "", False))
             arr[idx] = S(name, leaf.dtype)
             k += 1
@@ -205,7 +225,7 @@ def generate(observer, state, u, *, input_names=None) -> CStep:
         for i, s_ in enumerate(arr.flat):
             target = f"s->{leaf.name}" if leaf.shape == () else f"s->{leaf.name}[{i}]"
             s_ = em.convert(s_, leaf.dtype)
-            if s_.c != (leaf.name if leaf.shape == () else f"{leaf.name}_{i}"):
+            if s_.c != _local(leaf.name if leaf.shape == () else f"{leaf.name}_{i}"):  # not stored if unchanged
                 em.block.append(Assign(target, s_.c, deps(s_), s_))
     j = 0
     for arr in jax.tree.leaves(y):
@@ -285,12 +305,12 @@ def write_c(obs32, step: CStep, kind: str, source: str, notes) -> tuple[str, str
     documented in the header), ``source`` where the design comes from, ``notes`` lines for the header."""
     component = type(obs32).__name__
     c_type = "float"
-    gains = [
-        (gain_macro(g, None if g.shape == () else i), v, g.name) for g in step.gains for i, v in enumerate(g.value.flat)
+    gains = [  # (macro, its C literal, the leaf's name), one per scalar of every array leaf
+        (gain_macro(g, None if g.shape == () else i), c_literal(v, g.dtype), g.name)
+        for g in step.gains
+        for i, v in enumerate(g.value.flat)
     ]
-    gains_doc = "\n".join(
-        f" *   {m:<14} {c_literal(v, g_dt):<16} {n}" for (m, v, n), g_dt in zip(gains, [np.float32] * len(gains))
-    )
+    gains_doc = "\n".join(f" *   {m:<14} {v:<16} {n}" for m, v, n in gains)
     options = ", ".join(f"{k} = {v!r}" for k, v in statics(obs32).items())
     note_lines = "".join(f"\n *   note: {n}" for n in notes)
     in_doc = "\n".join(f" *   u[{i}]  {n}" for i, n in enumerate(step.input_names))
@@ -357,7 +377,7 @@ void jx_step(jx_state *s, const {c_type} *u, {c_type} *y);
 
 #endif /* JX_OBSERVER_H */
 """
-    macros = "\n".join(f"#define {m} {c_literal(v, np.float32)} /* {n} */" for m, v, n in gains)
+    macros = "\n".join(f"#define {m} {v} /* {n} */" for m, v, n in gains)
     init = []
     for leaf in step.state:
         for i, v in enumerate(np.asarray(leaf.value).flat):
