@@ -38,13 +38,14 @@ LAYERS = [
     # signals and plant: they produce the measurements
     ("jaxobs.signals", "jaxobs.drive.machine", "jaxobs.drive.hardware"),
     ("jaxobs.scenarios", "jaxobs.drive.plant", "jaxobs.drive.control", "jaxobs.drive.scenario"),
-    ("jaxobs.drive.loop",),
-    ("jaxobs.drive.bench",),
-    ("jaxobs.drive",),
     # observers: they estimate
     ("jaxobs.observers._cores", "jaxobs.observers.base"),
     ("jaxobs.observers.sogi", "jaxobs.observers.fll", "jaxobs.observers.flux", "jaxobs.observers.leso"),
     ("jaxobs.observers",),
+    # the closed loop composes the drive's parts with a drive observer (its contract, observers.base)
+    ("jaxobs.drive.loop",),
+    ("jaxobs.drive.bench",),
+    ("jaxobs.drive",),
     # the one loop over a system, and sharding a batch over devices
     ("jaxobs._steps", "jaxobs._sensitivity"),
     ("jaxobs._loop",),
