@@ -17,10 +17,10 @@ import xarray as xr
 
 from tuning import solvers, strategies
 from tuning.cli import main
-from tuning.summary import print_summary
 from tuning.outdir import LOCK, OutDir, OutError, atomic_path, atomic_write_bytes, safe_name
 from tuning.params import GainSpec, Parametrization
 from tuning.solvers import CheckpointError, tune
+from tuning.summary import print_summary
 
 # --------------------------------------------------------------------------
 # containment
