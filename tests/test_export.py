@@ -1,4 +1,4 @@
-"""Firmware export (tuning/export.py): the C generated from the jaxpr of an observer's step (every observer
+"""Firmware export (tuning/export/): the C generated from the jaxpr of an observer's step (every observer
 of jaxobs, and one defined in this file), compiled with the system C compiler, matches the golden vectors of
 the float32 JAX step to 1e-4 over >= 10 000 steps.
 

@@ -88,6 +88,10 @@ LAYERS = [
     ("tuning.job",),
     ("tuning.results",),
     ("tuning.study_file",),
+    # the export: where the observer comes from, its test records, the harness; the export; its command
+    ("tuning.export.sources", "tuning.export.golden", "tuning.export.harness"),
+    ("tuning.export.files",),
+    ("tuning.export.command",),
     ("tuning.export",),
     ("tuning",),
     # the command line: the top layer (`jaxobs ...` and `python -m jaxobs`)
