@@ -1,4 +1,4 @@
-"""Firmware export (tuning/export.py): the C generated from the jaxpr of an observer's step (every observer
+"""Firmware export (tuning/export/): the C generated from the jaxpr of an observer's step (every observer
 of jaxobs, and one defined in this file), compiled with the system C compiler, matches the golden vectors of
 the float32 JAX step to 1e-4 over >= 10 000 steps.
 
@@ -22,7 +22,7 @@ import numpy as np
 import pytest
 
 import jaxobs
-from jaxobs import linear
+from jaxobs import linear, papers
 from jaxobs.drive import bench_machine
 from tuning.export import (
     MIN_STEPS,
@@ -102,6 +102,15 @@ def test_fll_family_c_matches_the_float32_jax_step(tmp_path, design, rule):
     assert c["golden"]["steps"] >= MIN_STEPS
     err = compile_and_check(tmp_path)
     assert err <= TOLERANCE, f"{design} {c['rule']['name']}: max relative error {err:.3g}"
+
+
+def test_the_sogi_filter_exports_too(tmp_path):
+    """Not an FLL and never written by hand for the export: the SOGI quadrature filter (a fixed ω') exports from
+    its step like any observer, outputs v_alpha, v_beta, and matches its golden vectors."""
+    _need_cc()
+    c = export_observer(jaxobs.SOGI(k=1.414), tmp_path)
+    assert c["component"] == "SOGI" and c["outputs"] == ["v_alpha", "v_beta"] and c["angle_outputs"] == []
+    assert compile_and_check(tmp_path) <= TOLERANCE
 
 
 def test_files_macros_and_coefficients_agree(tmp_path):
@@ -251,6 +260,7 @@ def test_closed_form_design_from_the_command_line(tmp_path, capsys):
 
 
 _W = 2 * np.pi * 50
+_K1, _K2 = papers.SECOND_ORDER_SOIFO_K1, papers.SECOND_ORDER_SOIFO_K2
 _KP, _KI = (float(g) for g in linear.pll_gains(2 * np.pi * 15.0))
 _DRIVE = {
     "PureIntegratorFlux": lambda **kw: jaxobs.PureIntegratorFlux(
@@ -259,9 +269,9 @@ _DRIVE = {
     "LPFFlux": lambda **kw: jaxobs.LPFFlux(
         Rs=0.5, L=0.005, omega_c=20.0, kp_pll=_KP, ki_pll=_KI, omega0=_W, compensate=True, **kw
     ),
-    "SOIFO": lambda **kw: jaxobs.SOIFO(Rs=0.5, L=0.005, k=1.414, lam=0.5, omega0=_W, **kw),
+    "SOIFO": lambda **kw: jaxobs.SOIFO(Rs=0.5, L=0.005, k=papers.SOIFO_K, lam=0.5, omega0=_W, **kw),
     "SecondOrderSOIFO": lambda **kw: jaxobs.SecondOrderSOIFO(
-        Rs=0.5, L=0.005, K1=1.56, K2=3.11, lam=1.56**3 / 6.22, omega0=_W, **kw
+        Rs=0.5, L=0.005, K1=_K1, K2=_K2, lam=linear.second_order_soifo_lambda(_K1, _K2), omega0=_W, **kw
     ),
     "CLESO": lambda **kw: jaxobs.CLESO(Rs=0.6, Lq=0.012, **kw),
     "GILESO": lambda **kw: jaxobs.GILESO(Rs=0.6, Lq=0.012, omega0_pll=_W, **kw),

@@ -35,7 +35,9 @@ KP, KI = linear.pll_gains(2 * math.pi * 20.0)
 
 FLL_FLUX = {
     "SOIFO": lambda: jaxobs.SOIFO(0.0, 1.0, 1.4, 0.5, 100.0),
-    "SecondOrderSOIFO": lambda: jaxobs.SecondOrderSOIFO(0.0, 1.0, 1.56, 3.11, 0.6, 100.0),
+    "SecondOrderSOIFO": lambda: jaxobs.SecondOrderSOIFO(
+        0.0, 1.0, papers.SECOND_ORDER_SOIFO_K1, papers.SECOND_ORDER_SOIFO_K2, 0.6, 100.0
+    ),
 }
 PLL_FLUX = {
     "PureIntegratorFlux": lambda: jaxobs.PureIntegratorFlux(0.0, 1.0, KP, KI),

@@ -5,6 +5,7 @@ field (FLL family, SOGIs); :class:`AbstractDriveObserver` the drive observers (f
 :class:`ObserverBank`), bound to a machine and a speed by their one ``bind`` method.
 """
 
+from ._cores import sogi2_tustin_coefficients as sogi2_tustin_coefficients
 from .base import AbstractDriveObserver as AbstractDriveObserver
 from .base import AbstractObserver as AbstractObserver
 from .base import AbstractVectorFieldObserver as AbstractVectorFieldObserver

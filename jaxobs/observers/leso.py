@@ -157,9 +157,12 @@ def _common(obj, Rs, Lq, kp_pll, ki_pll, omega0_pll, ts, rule, e_floor, name):
     obj.e_floor = float(e_floor)
 
 
-# The PLL defaults: pole placement at ω_b = 2π·papers.LESO_PLL_HZ with ζ = 0.7071 (linear.pll_gains
-# uses 1/√2, 1e-5 apart; written as before so that the defaults keep their values).
-_DEFAULT_PLL = (2 * 0.7071 * 2 * math.pi * papers.LESO_PLL_HZ, (2 * math.pi * papers.LESO_PLL_HZ) ** 2)
+# The PLL defaults: pole placement at ω_b = 2π·papers.LESO_PLL_HZ with ζ = papers.PLL_ZETA = 1/√2, the
+# same arithmetic as jaxobs.linear.pll_gains (not importable here: linear sits above the observers), so a
+# LESO's defaults are the tuning jobs' closed form exactly.  (They used ζ = 0.7071 until the papers'
+# constants were consolidated: k_p 1e-5 lower.)
+_W_PLL = 2 * math.pi * papers.LESO_PLL_HZ
+_DEFAULT_PLL = (2 * papers.PLL_ZETA * _W_PLL, _W_PLL**2)
 
 
 class CLESO(AbstractLESO):
