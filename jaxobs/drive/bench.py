@@ -60,15 +60,17 @@ def bench_drive(
     startup: IfStartup | None = None,
     alpha_s: float | None = None,
     ts: float | None = None,
+    speed_schedule: float = 0.0,
 ) -> Drive:
     """The bench's drive on ``machine`` (the machine the FOC assumes): IMC current loop at
     2π·BENCH_CURRENT_HZ rad/s, I-P speed loop at ``alpha_s`` (rad/s; default 2π·BENCH_SPEED_HZ).
 
     ``sensorless``: the observer closes the loop (from ``handover`` s on, after ``settle`` s of unscored
     settling); ``startup``: an I-f start-up from standstill (:meth:`IfStartup.for_machine`) or None (each
-    scenario starts steady); ``ts``: the control period (s; default the FOC's)."""
+    scenario starts steady); ``ts``: the control period (s; default the FOC's); ``speed_schedule``: N > 0
+    lowers the speed loop's bandwidth to min(α_s, |ωe*|/N) (:meth:`FOC.speed_gains`, docs/stability.md), 0 off."""
     alpha_s = 2 * math.pi * papers.BENCH_SPEED_HZ if alpha_s is None else alpha_s
-    kw = {} if ts is None else {"ts": ts}
+    kw = {"speed_schedule": speed_schedule} if ts is None else {"ts": ts, "speed_schedule": speed_schedule}
     foc = FOC.imc(machine, alpha_c=2 * math.pi * papers.BENCH_CURRENT_HZ, alpha_s=alpha_s, **kw)
     return Drive(foc, sensorless=sensorless, handover=handover, settle=settle, startup=startup)
 
