@@ -13,6 +13,7 @@ import pytest
 
 import jaxobs
 from jaxobs import drive as D
+from jaxobs import papers
 
 PAR = D.spmsm_paper000()
 FOC = D.FOC.imc(PAR, alpha_c=2 * math.pi * 300, alpha_s=2 * math.pi * 20)
@@ -54,7 +55,9 @@ def test_user_scan_of_a_sensorless_closed_loop_equals_simulate_exactly():
     par = D.ipmsm_paper002()
     foc = D.FOC.imc(par, alpha_c=2 * math.pi * 300, alpha_s=2 * math.pi * 10)
     w_e = par.p * 300 * D.RPM
-    obs = jaxobs.FALESO(par.Rs, par.Lq, 10 * math.pi, 100 * math.pi, *jaxobs.linear.pll_gains(2 * math.pi * 15), w_e)
+    obs = jaxobs.FALESO(
+        par.Rs, par.Lq, papers.FALESO_K1, papers.FALESO_K2, *jaxobs.linear.pll_gains(2 * math.pi * 15), w_e
+    )
     sc = D.Scenario(par, speed_ref=D.Profile.constant(300 * D.RPM), omega_m0=300 * D.RPM)
     system = D.ClosedLoop(D.Drive(foc, sensorless=True, handover=0.005), obs, sc)
     n = 200

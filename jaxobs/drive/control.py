@@ -245,6 +245,7 @@ class FOC(eqx.Module):
     delay_compensation: bool = eqx.field(static=True)
     outer: Literal["speed", "current"] = eqx.field(static=True)  # "current": the reference is i_q*, A
     setpoint_weight: float = eqx.field(static=True)  # b in k_pω (b ω* − ω): 0 = I-P (no overshoot), 1 = PI
+    speed_schedule: float = eqx.field(static=True)  # N > 0: speed-loop bandwidth min(α_s, |ωe*|/N); 0: fixed
     est: PMSMParams | None  # the machine the controller assumes
     u_max: jax.Array | None  # voltage limit for anti-windup, V
     startup: IfStartup | None  # I-f start-up (None: closed loop from t = 0)
@@ -265,6 +266,7 @@ class FOC(eqx.Module):
         delay_compensation=True,
         outer="speed",
         setpoint_weight=0.0,
+        speed_schedule=0.0,
         est=None,
         u_max=None,
         startup=None,
@@ -298,6 +300,9 @@ class FOC(eqx.Module):
         if not (0.0 <= float(setpoint_weight) <= 1.0):
             raise ValueError(f"{own}.setpoint_weight must be in [0, 1], got {setpoint_weight!r}")
         self.setpoint_weight = float(setpoint_weight)
+        if not (0.0 <= float(speed_schedule) <= 1e3):
+            raise ValueError(f"{own}.speed_schedule must be 0 (off) or a ratio in (0, 1000], got {speed_schedule!r}")
+        self.speed_schedule = float(speed_schedule)
 
     @classmethod
     def imc(cls, est_par: PMSMParams, alpha_c, alpha_s, i_max=None, **kw):
@@ -321,6 +326,24 @@ class FOC(eqx.Module):
             est=kw.pop("est", est_par),
             **kw,
         )
+
+    def speed_gains(self, omega_m_ref):
+        """(k_pω, k_iω) of the speed loop at the mechanical speed reference ω_m* (rad/s).
+
+        ``speed_schedule = N > 0`` keeps the speed loop inside the bandwidth of a speed estimate that scales
+        with the speed (a flux observer's FLL: docs/stability.md): its double pole moves from the designed
+        α_s = 2 k_iω/k_pω to min(α_s, |p ω_m*|/N), so k_pω scales by r = min(1, |p ω_m*|/(N α_s)) and k_iω
+        by r².  Scheduled on the reference, an outside signal: scheduled on ω̂ the I-P's proportional term
+        k_pω(ω̂) ω̂ would double its own small-signal gain.  At ω_m* = 0 the speed loop holds its output.
+        """
+        if self.speed_schedule <= 0:
+            return self.kp_w, self.ki_w
+        if self.est is None:
+            raise ValueError("FOC.speed_gains with speed_schedule > 0 needs the assumed machine (FOC.imc or bind)")
+        alpha = 2 * self.ki_w / self.kp_w
+        w_e = jnp.abs(self.est.p * omega_m_ref)
+        r = jnp.where(alpha > 0, jnp.minimum(w_e / (self.speed_schedule * jnp.where(alpha > 0, alpha, 1.0)), 1.0), 1.0)
+        return self.kp_w * r, self.ki_w * r * r
 
     def bind(self, est: PMSMParams, u_max, startup: IfStartup | None = None) -> FOC:
         """This controller with its assumed machine, voltage limit and start-up set (no checks: traced-safe)."""
@@ -354,7 +377,7 @@ class FOC(eqx.Module):
         if self.outer == "current":
             int_w = z
         else:
-            int_w = i_q - self.kp_w * (self.setpoint_weight * op.omega_m_ref - op.omega_m)
+            int_w = i_q - self.speed_gains(op.omega_m_ref)[0] * (self.setpoint_weight * op.omega_m_ref - op.omega_m)
         return ControllerState(int_d=z + int_d, int_q=z + int_q, int_w=z + int_w, iq_ref=z + i_q, **rest)
 
     def operating_point(self, par: PMSMParams, omega_m, omega_m_ref, theta_e, t_load, offset=0.0) -> OperatingPoint:
@@ -428,6 +451,7 @@ class FOC(eqx.Module):
         est, u_max, startup = self.est, self.u_max, self.startup
         ts = self.ts
         # --- I-f start-up (module doc): the angle advances every period, used in mode 0
+        kp_w, ki_w = self.speed_gains(omega_m_ref)
         if startup is not None:
             omega_f = startup.ramp(k * ts)
             theta_f = wrap(cs.theta_f + 0.5 * (cs.omega_f + omega_f) * ts)  # trapezoidal: exact for the ramp
@@ -451,7 +475,7 @@ class FOC(eqx.Module):
             iq_hand = startup.i_f * jnp.cos(delta)
             id_hand = jnp.where(switch, -startup.i_f * jnp.sin(delta), cs.id_hand)
             # the speed PI's output k_pω(b ω* − ω̂) + ∫ starts at iq_hand
-            int_w0 = jnp.where(switch, iq_hand - self.kp_w * (self.setpoint_weight * omega_m_ref - omega_m), cs.int_w)
+            int_w0 = jnp.where(switch, iq_hand - kp_w * (self.setpoint_weight * omega_m_ref - omega_m), cs.int_w)
             iq_held = jnp.where(switch, iq_hand, cs.iq_ref)
         else:
             omega_f, theta_f, mode, int_w0, iq_held = cs.omega_f, cs.theta_f, cs.mode, cs.int_w, cs.iq_ref
@@ -464,11 +488,11 @@ class FOC(eqx.Module):
         run_speed = (k % self.speed_every) == 0
         tw = ts * self.speed_every
         e_w = omega_m_ref - omega_m
-        unsat = self.kp_w * (self.setpoint_weight * omega_m_ref - omega_m) + int_w0
+        unsat = kp_w * (self.setpoint_weight * omega_m_ref - omega_m) + int_w0
         iq_sat = jnp.clip(unsat, -self.i_max, self.i_max)
         # conditional integration: freeze while saturated and the error pushes further
         windup = (unsat != iq_sat) & (jnp.sign(e_w) == jnp.sign(unsat))
-        int_w = jnp.where(run_speed & ~windup, int_w0 + self.ki_w * e_w * tw, int_w0)
+        int_w = jnp.where(run_speed & ~windup, int_w0 + ki_w * e_w * tw, int_w0)
         iq_ref = jnp.where(run_speed, iq_sat, iq_held)
         if self.outer == "current":  # the reference is i_q* itself (current-loop tests, torque control)
             iq_ref = jnp.clip(omega_m_ref, -self.i_max, self.i_max)

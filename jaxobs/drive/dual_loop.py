@@ -45,6 +45,7 @@ from .._math import wrap
 from .._measurements import DriveInput
 from .._system import AbstractSystem
 from .._validate import check_nonnegative, check_positive
+from ..observers import AbstractDriveObserver
 from .control import FOC, ControllerState, FOCInput, OperatingPoint
 from .dual import DualPlantInput, DualPlantState, DualPMSM, DualPMSMParams, sets_to_vsd, vsd_to_sets
 from .hardware import Inverter
@@ -291,7 +292,9 @@ class DualClosedLoop(AbstractSystem):
         u_a, u_b = self.drive.inverter.limit(*dq_to_ab(op.u_d, op.u_q, op.theta_e + lead))
         obs = None
         if self.observer is not None:
-            obs = self.observer.init_at(w_e) if hasattr(self.observer, "init_at") else self.observer.init()
+            obs = (
+                self.observer.init_at(w_e) if isinstance(self.observer, AbstractDriveObserver) else self.observer.init()
+            )
         key = sc.sensors.init(sc.key)
         return DualLoopState(plant=plant, ctrl=foc.init(op), obs=obs, sensors=key, u=(u_a, u_b, u_a, u_b))
 

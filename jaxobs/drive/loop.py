@@ -42,6 +42,7 @@ from .._discretize import RK4, AbstractRule, check_rule
 from .._math import wrap
 from .._system import AbstractSystem
 from .._validate import check_sample_time
+from ..observers import AbstractDriveObserver
 from .control import FOC, ControllerState, FOCInput, IfStartup, OperatingPoint
 from .hardware import Inverter, InverterInput, SensorInput
 from .machine import dq_to_ab
@@ -260,8 +261,8 @@ class ClosedLoop(AbstractSystem):
         """The observer after ``drive.settle`` seconds on the steady operating point (a phase before t = 0,
         unscored), and its steady angle error θ̂e − θe, rad.
 
-        It starts from ``observer.init_at(ω_e)`` (its speed estimate at the true
-        speed, where it has one) and steps on the measurements the sensors give
+        A drive observer (:class:`~jaxobs.observers.AbstractDriveObserver`) starts from
+        ``observer.init_at(ω_e)`` (its speed estimate at the true speed) and steps on the measurements the sensors give
         of the steady machine over k = −n … −1 (offsets, gain errors and noise
         included; θ_k = θ_e0 + ω_e k T_s, the voltage of each period centred at
         θ_k + ω_e T_s/2 as the delay compensation applies it).  So its filters,
@@ -272,7 +273,8 @@ class ClosedLoop(AbstractSystem):
         """
         sc, obs, ts = self.scenario, self.observer, self.ts
         w_e = sc.par.p * op.omega_m
-        state = obs.init_at(w_e) if hasattr(obs, "init_at") else obs.init()
+        # a drive observer starts at the true speed (its contract); any other observer (a probe) from its init()
+        state = obs.init_at(w_e) if isinstance(obs, AbstractDriveObserver) else obs.init()
         n = int(round(self.drive.settle / ts))
         if n == 0:
             return state, jnp.zeros_like(w_e)
@@ -318,7 +320,7 @@ class ClosedLoop(AbstractSystem):
         else:
             th_c, w_e_c, w_m_c = y.theta_e, w_e, y.omega_m
         ctrl, c = self.controller.step(state.ctrl, FOCInput(k, meas.i_a, meas.i_b, th_c, w_e_c, w_m_c, x.omega_m_ref))
-        if drive.startup is not None and hasattr(self.observer, "seed_speed"):
+        if drive.startup is not None and isinstance(self.observer, AbstractDriveObserver):
             # While the I-f runs, the observer's speed estimate (FLL centre frequency, PLL integrator) is held
             # at the I-f frequency, the rotor's mean speed; released at the switch.  Without it the flux
             # observers' FLLs never left their initial 1 rad/s: their gain is lam·ω̂² (frequency-normalized,

@@ -63,7 +63,15 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxobs import AB3, RK4, DriveInput, Euler, Tustin
-from jaxobs.observers import SOIFO, LPFFlux, PureIntegratorFlux, SecondOrderSOIFO
+from jaxobs.observers import (
+    SOIFO,
+    AbstractDriveObserver,
+    AbstractFluxObserver,
+    AbstractLESO,
+    LPFFlux,
+    PureIntegratorFlux,
+    SecondOrderSOIFO,
+)
 from jaxobs.progress import Progress
 
 from ..job import COMPONENTS
@@ -79,7 +87,6 @@ __all__ = [
     "fll_test_signal",
     "drive_test_signal",
     "drive_recording",
-    "bind_to_drive",
     "add_export_parser",
     "cli_export",
     "DESIGNS",
@@ -176,7 +183,7 @@ def observer_from_result(path, *, gains: str = "tuned", notes: list | None = Non
         notes.append(f"result.json has no 'rule': the {name} default {type(probe.rule).__name__} is used")
     if info.bind is not None or res.get("loop") is not None:  # a drive job bound these per scenario
         # LESOs: Rs, Lq and the PLL's initial speed; flux observers: Rs, L and the FLL's or PLL's omega0
-        keys = ("Rs", "Lq", "omega0_pll") if hasattr(probe, "Lq") else ("Rs", "L", "omega0")
+        keys = type(probe).bound_fields
         bound = ", ".join(f"{k} = {float(getattr(probe, k)):g}" for k in keys)
         notes.append(f"the job sets {', '.join(keys)} per scenario; exported with {bound}")
     diverged = res.get("scores", {}).get(gains, {}).get("diverged") if gains in res.get("scores", {}) else None
@@ -284,18 +291,18 @@ def drive_test_signal(
     return data, doc
 
 
-# the bench (jaxobs.drive.bench_machine) a drive observer's recording runs on, and its speed (r/min)
+# the bench (jaxobs.drive.bench_machine) a drive observer's recording runs on, its speed (r/min) and its name in
+# the record's description, by family (the observer's abstract base)
 _RECORDING_BENCH = {
-    "flux": ("spmsm000", 1000.0),  # 000's SPMSM, p = 3: 50 Hz
-    "leso": ("ipmsm002", 300.0),  # 002's (assumed) IPMSM, p = 5: 25 Hz (see drive_recording)
+    AbstractFluxObserver: ("spmsm000", 1000.0, "000 SPMSM"),  # 000's SPMSM, p = 3: 50 Hz
+    AbstractLESO: ("ipmsm002", 300.0, "002 IPMSM"),  # 002's (assumed) IPMSM, p = 5: 25 Hz (see drive_recording)
 }
 
 
-def _family(observer) -> str:
-    if hasattr(observer, "Lq"):
-        return "leso"
-    if hasattr(observer, "L"):
-        return "flux"
+def _bench_of(observer) -> tuple:
+    for family, bench in _RECORDING_BENCH.items():
+        if isinstance(observer, family):
+            return bench
     raise ValueError(f"export: {type(observer).__name__} is not a drive observer (flux observer or LESO)")
 
 
@@ -304,24 +311,8 @@ def _recording_bench(observer):
     LESOs, on the drive jobs' bench inertia) and the speed (r/min) a drive observer's recording runs at."""
     from jaxobs.drive import bench_machine
 
-    name, rpm = _RECORDING_BENCH[_family(observer)]
+    name, rpm, _ = _bench_of(observer)
     return bench_machine(name), rpm
-
-
-def bind_to_drive(observer, machine, rpm: float):
-    """``observer`` with the machine's Rs and L (flux observers: Ld; LESOs: Lq) and its initial speed at ``rpm``
-    (flux observers: the FLL's or PLL's omega0; LESOs: the PLL's omega0_pll), as :func:`drive_recording` runs it.
-
-    The gains are untouched.  A flux observer of a ``signal = "emf"`` job has Rs = 0, L = 1 (it sees the
-    back EMF itself); on a recording of u and i it needs the machine's.
-    """
-    we = float(rpm) * math.pi / 30 * int(machine.p)
-    if _family(observer) == "leso":
-        names, vals = ("Rs", "Lq", "omega0_pll"), (machine.Rs, machine.Lq, we)
-    else:
-        names, vals = ("Rs", "L", "omega0"), (machine.Rs, machine.Ld, we)
-    vals = tuple(jnp.asarray(v, jnp.result_type(getattr(observer, n))) for n, v in zip(names, vals))
-    return eqx.tree_at(lambda o: tuple(getattr(o, n) for n in names), observer, vals)
 
 
 class _Tap(eqx.Module):
@@ -359,7 +350,7 @@ def drive_recording(
 
     ``machine``: a :class:`jaxobs.drive.PMSMParams` (default: the bench of the observer's family,
     :func:`jaxobs.drive.bench_machine`).  Export the observer bound to the same machine and speed
-    (:func:`bind_to_drive`).  Returns (float32 array (n_steps, 4), a one-line description).
+    (``observer.bind(machine, ω_e)``).  Returns (float32 array (n_steps, 4), a one-line description).
 
     The rotor starts at θe = π/2, where the q-axis current and the back EMF lie on −α, so the
     β components of the first samples are small.  ``start`` shapes the first period as
@@ -377,7 +368,6 @@ def drive_recording(
     import jaxobs
     from jaxobs import drive as D
 
-    family = _family(observer)
     bench, bench_rpm = _recording_bench(observer)
     machine = bench if machine is None else machine
     rpm = bench_rpm if rpm is None else float(rpm)
@@ -411,7 +401,7 @@ def drive_recording(
         raise ValueError(f"drive_recording: the drive gave {data.shape[0]} finite rows of {n_steps}")
     we = rpm * math.pi / 30 * int(machine.p)
     doc = (
-        f"sensored FOC drive ({'000 SPMSM' if family == 'flux' else '002 IPMSM'}: Rs = {float(machine.Rs):g} ohm, "
+        f"sensored FOC drive ({_bench_of(observer)[2]}: Rs = {float(machine.Rs):g} ohm, "
         f"Ld = {float(machine.Ld):g} H, Lq = {float(machine.Lq):g} H, psi = {float(machine.psi_f):g} Wb, "
         f"p = {int(machine.p)}), steady start at {rpm:g} r/min ({we / (2 * math.pi):g} Hz electrical) and "
         f"{load[0]:g} T_rated, speed reference {speed_step:+.0%} at {t1:g} s, load to {load[1]:g} T_rated at "
@@ -427,7 +417,7 @@ def _float32(observer):
 
 def _is_drive(observer) -> bool:
     """A drive observer reads (u_a, u_b, i_a, i_b) each step; any other observer reads one sample v."""
-    return hasattr(observer, "Rs")
+    return isinstance(observer, AbstractDriveObserver)
 
 
 def _zero_input(observer):
@@ -488,8 +478,8 @@ def _signal_speed(observer) -> float:
 
 def _machine(obs) -> tuple[float, float]:
     """(R̂s, L̂) the drive observer assumes: the golden signal's machine."""
-    L = obs.L if hasattr(obs, "L") else obs.Lq
-    return float(obs.Rs), float(L)
+    rs, ls = type(obs).bound_fields[:2]  # (resistance, inductance, start speed)
+    return float(getattr(obs, rs)), float(getattr(obs, ls))
 
 
 def export_observer(
@@ -509,7 +499,7 @@ def export_observer(
             observers: columns u_a, u_b, i_a, i_b, e.g. :func:`drive_recording` at another speed),
             or ``"synthetic"`` for a drive observer: :func:`drive_test_signal` on the observer's
             own Rs and L.  The default recording runs on its bench (:func:`jaxobs.drive.bench_machine`): export the
-            observer bound to it (:func:`bind_to_drive`) to get that machine's Rs and L in the C.
+            observer bound to it (``observer.bind``) to get that machine's Rs and L in the C.
         source: where the design comes from (a result file, a closed form), for the header.
         notes: lines recorded in the header and coefficients.json (e.g. defaults used).
         progress: its three stages (C generated, the test record, the golden vectors), each named as
@@ -769,19 +759,19 @@ def _export(args) -> int:
         obs = observer_from_design(args.design, **kw)
         source = f"closed form {args.design}, {DESIGNS[args.design][1]}"
     signal = None
-    if hasattr(obs, "Rs") and args.record == "drive":
+    if isinstance(obs, AbstractDriveObserver) and args.record == "drive":
         machine, rpm = _recording_bench(obs)
-        obs = bind_to_drive(obs, machine, rpm)
-        speed = "omega0_pll" if _family(obs) == "leso" else "omega0"
+        obs = obs.bind(machine, rpm * math.pi / 30 * int(machine.p))  # the one binding (its clamp included)
+        r_name, l_name, speed = type(obs).bound_fields
         notes = [n for n in notes if "sets Rs, Lq" not in n]
         notes.append(
-            f"bound to the recording's machine: Rs = {float(obs.Rs):g}, "
-            f"{'Lq' if speed == 'omega0_pll' else 'L'} = {float(_machine(obs)[1]):g}, "
+            f"bound to the recording's machine: {r_name} = {float(getattr(obs, r_name)):g}, "
+            f"{l_name} = {float(getattr(obs, l_name)):g}, "
             f"{speed} = {float(getattr(obs, speed)):.6g} rad/s ({rpm:g} r/min)"
         )
         if args.steps < MIN_STEPS:
             raise ValueError(f"export: --steps must be >= {MIN_STEPS}, got {args.steps}")
-    elif hasattr(obs, "Rs"):
+    elif isinstance(obs, AbstractDriveObserver):
         signal = "synthetic"
     coeffs = export_observer(
         obs, args.out, n_steps=args.steps, signal=signal, source=source, notes=notes, progress=not args.quiet and "auto"
