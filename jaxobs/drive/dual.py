@@ -62,6 +62,7 @@ from .. import papers
 from .._discretize import RK4, AbstractRule, Held, check_rule
 from .._math import wrap
 from .._validate import check_nonnegative, check_positive, check_sample_time
+from .component import AbstractComponent
 from .hardware import Inverter
 from .machine import PMSMParams, ab_to_dq, dq_to_ab
 
@@ -242,7 +243,7 @@ class DualPlantState(NamedTuple):
     rule: Any
 
 
-class DualPMSM(eqx.Module):
+class DualPMSM(AbstractComponent):
     """The dual machine ``par`` behind two inverters (one per set, the same ``inverter``, dead time
     ``dead_time`` each, its error added per set inside the vector field), integrated per control period."""
 
@@ -282,9 +283,12 @@ class DualPMSM(eqx.Module):
         u = sets_to_vsd(inp[0] + d_a1, inp[1] + d_b1, inp[2] + d_a2, inp[3] + d_b2)
         return dual_vf(self.par, x, u, inp[4])
 
-    def init(self, omega_m0=0.0, theta_e0=0.0, i_d0=0.0, i_q0=0.0, i_x0=0.0, i_y0=0.0) -> DualPlantState:
+    def init(self, op=None) -> DualPlantState:
+        """The machine at the operating point ``op`` (an OperatingPoint: its αβ currents i_d, i_q, speed and
+        angle; zero xy current), or at rest at θe = 0 (None)."""
         dtype = jnp.result_type(self.par.m.Rs, float)
-        x0 = jnp.stack([jnp.asarray(v, dtype) for v in (i_d0, i_q0, i_x0, i_y0, omega_m0, theta_e0)])
+        vals = (0.0,) * 6 if op is None else (op.i_d, op.i_q, 0.0, 0.0, op.omega_m, op.theta_e)
+        x0 = jnp.stack([jnp.asarray(v, dtype) for v in vals])
         return DualPlantState(x=x0, rule=self.rule.init(self.field, x0, None))
 
     def output(self, x) -> DualPlantOutput:

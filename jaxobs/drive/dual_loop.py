@@ -46,6 +46,7 @@ from .._measurements import DriveInput
 from .._system import AbstractSystem
 from .._validate import check_nonnegative, check_positive
 from ..observers import AbstractDriveObserver
+from .component import AbstractComponent
 from .control import FOC, ControllerState, FOCInput, OperatingPoint
 from .dual import DualPlantInput, DualPlantState, DualPMSM, DualPMSMParams, sets_to_vsd, vsd_to_sets
 from .hardware import Inverter
@@ -99,7 +100,7 @@ class DualFOCState(NamedTuple):
     int_y: jax.Array
 
 
-class DualFOC(eqx.Module):
+class DualFOC(AbstractComponent):
     """Current control of the dual machine, ``mode`` "vsd" or "individual" (module doc)."""
 
     foc: FOC
@@ -133,8 +134,8 @@ class DualFOC(eqx.Module):
         foc = FOC.imc(machine, alpha_c, alpha_s, **kw)
         return cls(foc, alpha_c * est.Lls, alpha_c * est.m.Rs, mode=mode)
 
-    def init(self, op: OperatingPoint) -> DualFOCState:
-        """The integrators that hold the drive at ``op`` (per set; zero xy)."""
+    def init(self, op: OperatingPoint | None = None) -> DualFOCState:
+        """The integrators that hold the drive at ``op`` (per set; zero xy), zeros for None."""
         cs = self.foc.init(op)
         z = jnp.zeros_like(cs.int_d)
         return DualFOCState(main=cs, second=cs, int_x=z, int_y=z)
@@ -285,7 +286,7 @@ class DualClosedLoop(AbstractSystem):
     def init(self) -> DualLoopState:
         sc, foc = self.scenario, self.controller
         op = self.operating_point()
-        plant = self.plant.init(omega_m0=op.omega_m, theta_e0=op.theta_e, i_d0=op.i_d, i_q0=op.i_q)
+        plant = self.plant.init(op)
         w_e = self.machine.p * op.omega_m
         # the first period's voltage, computed at t_{−1} with the delay compensation: centred half a period on
         lead = (0.5 if foc.foc.delay_compensation else -1.0) * w_e * self.ts
@@ -295,7 +296,7 @@ class DualClosedLoop(AbstractSystem):
             obs = (
                 self.observer.init_at(w_e) if isinstance(self.observer, AbstractDriveObserver) else self.observer.init()
             )
-        key = sc.sensors.init(sc.key)
+        key = sc.sensors.init(op, key=sc.key)
         return DualLoopState(plant=plant, ctrl=foc.init(op), obs=obs, sensors=key, u=(u_a, u_b, u_a, u_b))
 
     def step(self, state: DualLoopState, k) -> tuple[DualLoopState, DualOutput]:
