@@ -104,6 +104,15 @@ def test_fll_family_c_matches_the_float32_jax_step(tmp_path, design, rule):
     assert err <= TOLERANCE, f"{design} {c['rule']['name']}: max relative error {err:.3g}"
 
 
+def test_the_sogi_filter_exports_too(tmp_path):
+    """Not an FLL and never written by hand for the export: the SOGI quadrature filter (a fixed ω') exports from
+    its step like any observer, outputs v_alpha, v_beta, and matches its golden vectors."""
+    _need_cc()
+    c = export_observer(jaxobs.SOGI(k=1.414), tmp_path)
+    assert c["component"] == "SOGI" and c["outputs"] == ["v_alpha", "v_beta"] and c["angle_outputs"] == []
+    assert compile_and_check(tmp_path) <= TOLERANCE
+
+
 def test_files_macros_and_coefficients_agree(tmp_path):
     """JX_NU/JX_NY equal the golden columns and coefficients.json; the gains baked into observer.c are the
     design's gains in float32; the golden record is >= 10 000 steps with the frequency step and phase jump."""

@@ -32,19 +32,20 @@ LAYERS = [
         "jaxobs.progress",
         "jaxobs.provenance",
         "jaxobs._cache",
+        "jaxobs.drive.component",
     ),
     # integration rules (and check_rule)
     ("jaxobs._discretize",),
     # signals and plant: they produce the measurements
     ("jaxobs.signals._waveforms", "jaxobs.signals._recordings", "jaxobs.drive.machine", "jaxobs.drive.hardware"),
     ("jaxobs.signals",),
-    ("jaxobs.scenarios", "jaxobs.drive.plant", "jaxobs.drive.control", "jaxobs.drive.scenario"),
+    ("jaxobs.scenarios", "jaxobs.drive.plant", "jaxobs.drive.dual", "jaxobs.drive.control", "jaxobs.drive.scenario"),
     # observers: they estimate
     ("jaxobs.observers._cores", "jaxobs.observers.base"),
     ("jaxobs.observers.sogi", "jaxobs.observers.fll", "jaxobs.observers.flux", "jaxobs.observers.leso"),
     ("jaxobs.observers",),
     # the closed loop composes the drive's parts with a drive observer (its contract, observers.base)
-    ("jaxobs.drive.loop",),
+    ("jaxobs.drive.loop", "jaxobs.drive.dual_loop"),
     ("jaxobs.drive.bench",),
     ("jaxobs.drive",),
     # the one loop over a system, and sharding a batch over devices
