@@ -184,3 +184,32 @@ def test_faleso_closes_the_loop_on_the_mode_s_observer_input(mode):
     else:
         # Figs 13-14: the first set's equivalent BEMF carries them, the FA-LESO attenuates but shows them
         assert min(h57) > 0.5
+
+
+# --- jaxobs reproduce leso --machine dual -------------------------------------------------------------------
+
+
+def test_reproduce_leso_dual_rows():
+    """Figs 13-15 on the dual machine: the FA-LESO attenuates the first set's 5th/7th most; under VSD the
+    αβ subspace carries none (002: "negligible"); every run finite and the FA-LESO's angle held."""
+    from jaxobs.reproduce.leso_dual import DUAL_EXPERIMENTS, run_leso_dual
+
+    rows, _ = run_leso_dual()
+    by = {(r["experiment"], r["observer"], r["metric"]): r for r in rows}
+    assert len(rows) == len(DUAL_EXPERIMENTS) * (3 * 2 + 4)
+    for name, mode, *_ in DUAL_EXPERIMENTS:
+        assert by[(name, "drive", "finite")]["ours"] is True
+        assert abs(by[(name, "FA-LESO", "mean_error")]["ours"]) < 1.0
+        for h in ("h5", "h7"):
+            fa, c = by[(name, "FA-LESO", h)]["ours"], by[(name, "C-LESO", h)]["ours"]
+            if mode == "vsd":
+                assert max(fa, c) < 0.05 and by[(name, "C-LESO", h)]["paper"] is None
+            else:
+                assert fa < c / 1.5 and by[(name, "C-LESO", h)]["paper"] is not None
+
+
+def test_reproduce_flux_refuses_the_dual_machine(tmp_path, capsys):
+    from tuning.cli import main
+
+    assert main(["reproduce", "flux", "--machine", "dual", "--out", str(tmp_path)]) == 2
+    assert "--machine" in capsys.readouterr().err

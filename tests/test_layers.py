@@ -71,6 +71,7 @@ LAYERS = [
         "jaxobs.reproduce.leso",
         "jaxobs.plot",
     ),
+    ("jaxobs.reproduce.leso_dual",),
     ("jaxobs.reproduce",),
     # tuning: it changes gains (and exports the tuned observer)
     ("tuning.outdir",),
