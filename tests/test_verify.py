@@ -9,8 +9,8 @@ from pathlib import Path
 import pytest
 
 from tuning.cli import main
-from tuning.job import UNSAFE_EXIT, job_drive, load_job, parse_job
-from tuning.job.verify import EnvelopeSpec, unsafe_points
+from tuning.job import UNSAFE_EXIT, job_drive, parse_job
+from tuning.job.verify import unsafe_points
 
 PRESETS = Path(__file__).parents[1] / "tuning" / "presets"
 DRIVE_PRESETS = ("cleso", "gileso", "faleso", "soifo", "sosoifo", "soifo_noise")
