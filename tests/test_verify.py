@@ -9,8 +9,8 @@ from pathlib import Path
 import pytest
 
 from tuning.cli import main
-from tuning.job import UNSAFE_EXIT, job_drive, parse_job
-from tuning.job.verify import unsafe_points
+from tuning.job import UNSAFE_EXIT, job_drive, load_job, parse_job
+from tuning.job.verify import EnvelopeSpec, unsafe_points
 
 PRESETS = Path(__file__).parents[1] / "tuning" / "presets"
 DRIVE_PRESETS = ("cleso", "gileso", "faleso", "soifo", "sosoifo", "soifo_noise")
@@ -163,3 +163,17 @@ def test_verification_with_stability_on_a_tiny_job(tmp_path):
     for d in res["verification"]["designs"].values():
         (p,) = d["points"]
         assert isinstance(p["stable"], bool) and p["margin_per_s"] == -p["exponent_per_s"]
+
+
+def test_every_drive_preset_states_its_envelope_and_a_holdout_outside_its_grid():
+    """Every drive preset claims an envelope ([envelope]) verified over >= 2 s, and its held-out set reaches
+    outside the tuning grid: a lower speed or another load."""
+    for name in DRIVE_PRESETS:
+        job = load_job(PRESETS / f"{name}.toml")
+        assert isinstance(job.envelope, EnvelopeSpec) and job.envelope.horizon >= 2.0, name
+        assert job.holdout is not None, name
+        g, h = job.scenarios.axes, job.holdout.axes
+        lower = min(h.get("speed_rpm", [600.0])) < min(g.get("speed_rpm", [600.0]))
+        loads = set(h.get("load_nm", [0.0])) - set(g.get("load_nm", [0.0]))
+        assert lower or loads, name
+        assert job.envelope.speed_rpm[0] <= min(h.get("speed_rpm", [600.0])), name

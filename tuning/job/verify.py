@@ -96,7 +96,7 @@ def parse_envelope(raw: dict, scen: ScenarioSpec, drive: DriveSpec | None) -> En
     speeds = _range(tab, "speed_rpm", 1.0, n_max, "r/min", _span(scen.axes, "speed_rpm", 600.0))
     t_max = 3.0 * float(par.kt) * float(par.i_rated)  # generous: the FOC limits the current to 1.5 i_rated
     loads = _range(tab, "load_nm", 0.0, t_max, "N·m", _span(scen.axes, "load_nm", 0.0))
-    horizon = get_field(tab, "horizon", "envelope.horizon", float, DEFAULT_HORIZON)
+    horizon = get_field(tab, "horizon", "envelope.horizon", float, 2.0)  # DEFAULT_HORIZON
     if not MIN_HORIZON <= horizon <= 10.0:
         raise JobError("envelope.horizon", f"must be in [{MIN_HORIZON:g}, 10] s, got {horizon:g}")
     stability = get_field(tab, "stability", "envelope.stability", bool, True)
