@@ -67,6 +67,8 @@ LAYERS = [
         "jaxobs.reproduce.leso",
         "jaxobs.plot",
     ),
+    # the envelope map: the stability verdict and the long runs of a drive study, over the speed x load plane
+    ("jaxobs.drive.envelope",),
     ("jaxobs.reproduce",),
     # tuning: it changes gains (and exports the tuned observer)
     ("tuning.outdir",),
