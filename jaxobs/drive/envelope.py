@@ -38,8 +38,14 @@ import numpy as np
 
 from .. import AbstractSystem, SaveFinal
 from .. import metrics as M
-from ..drive_study import DRIVE_GAIN_UNITS, DRIVE_STUDY_AXES, DRIVE_STUDY_AXIS_NAMES, bind_observer, drive_gains
-from ..drive_study import drive_scenarios
+from ..drive_study import (
+    DRIVE_GAIN_UNITS,
+    DRIVE_STUDY_AXES,
+    DRIVE_STUDY_AXIS_NAMES,
+    bind_observer,
+    drive_gains,
+    drive_scenarios,
+)
 from ..provenance import provenance
 from ..runner import run_scenarios
 from ..scenarios import Grid
