@@ -87,7 +87,7 @@ LAYERS = [
     ("tuning.job",),
     ("tuning.results",),
     ("tuning.study_file",),
-    ("tuning.export",),
+    ("tuning.export", "tuning.envelope"),
     ("tuning",),
     # the command line: the top layer (`jaxobs ...` and `python -m jaxobs`)
     ("tuning.cli",),

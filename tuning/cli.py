@@ -75,6 +75,7 @@ from pathlib import Path
 import jaxobs
 from jaxobs import linear, papers, use_compile_cache, use_host_devices
 
+from .envelope import add_envelope_parser
 from .export import add_export_parser
 from .job import CHECKPOINT, load_job, load_recordings, run_job
 from .outdir import OutDir, atomic_path, atomic_write_text, safe_name
@@ -825,6 +826,7 @@ def build_parser() -> argparse.ArgumentParser:
     st.set_defaults(func=_cmd_study)
 
     add_export_parser(sub)
+    add_envelope_parser(sub)
     return p
 
 
