@@ -16,6 +16,7 @@ from jaxobs.drive.envelope import ENVELOPE_VARIABLES, envelope
 from jaxobs.drive_study import bind_observer, drive_scenarios
 from tuning.cli import main
 from tuning.job import load_job
+from tuning.job.output import claimed_envelope
 
 PAR = bench_machine("spmsm000")
 DRIVE = bench_drive(PAR)
@@ -128,6 +129,14 @@ def test_cli_envelope_bad_input_is_one_line(tmp_path, capsys):
     fll = Path(__file__).resolve().parents[1] / "tuning" / "presets" / "wif_robust.toml"
     assert main(["envelope", str(fll), "--check"]) == 2
     assert "scenarios.signal" in capsys.readouterr().err
+
+
+def test_claimed_envelope_of_a_drive_job():
+    """result.json's ``envelope``: the preset's speeds (600..2000 r/min) and loads with their steps (0..5 N·m)."""
+    env = claimed_envelope(load_job(PRESET))
+    assert env["speed_rpm"] == [600.0, 2000.0] and env["load_nm"] == [0.0, 5.0] and env["machine"] == "spmsm000"
+    fll = Path(__file__).resolve().parents[1] / "tuning" / "presets" / "wif_robust.toml"
+    assert claimed_envelope(load_job(fll)) is None
 
 
 def _holds_3s(designs, points):
