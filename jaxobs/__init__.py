@@ -70,6 +70,7 @@ from .observers import SOGIFLL as SOGIFLL
 from .observers import SOGIFLLWIF as SOGIFLLWIF
 from .observers import SOGIFLLWPF as SOGIFLLWPF
 from .observers import SOIFO as SOIFO
+from .observers import AbstractDriveObserver as AbstractDriveObserver
 from .observers import AbstractObserver as AbstractObserver
 from .observers import LPFFlux as LPFFlux
 from .observers import ObserverBank as ObserverBank
@@ -125,6 +126,7 @@ __all__ = [
     "RK4",
     # observers
     "AbstractObserver",
+    "AbstractDriveObserver",
     "DriveInput",
     "SOGI",
     "SOGI2",

@@ -64,6 +64,7 @@ __all__ = [
     "IPMSM_002_A5",
     "IPMSM_002_A7",
     "LESO_PLL_HZ",
+    "PLL_ZETA",
     # the simulated benches of 000 and 002
     "BENCH_CURRENT_HZ",
     "BENCH_SPEED_HZ",
@@ -172,6 +173,8 @@ IPMSM_002_A5 = 0.0675
 IPMSM_002_A7 = 0.0879
 # ASSUMED: the type-2 PLL after each LESO, ω_b = 2π·15 rad/s (our copy lacks 002's PLL section).
 LESO_PLL_HZ = 15.0
+# ASSUMED: the damping of our type-2 PLLs, pole placement k_p = 2ζω_b, k_i = ω_b² (jaxobs.linear.pll_gains).
+PLL_ZETA = 1 / math.sqrt(2)
 
 # --------------------------------------------------------------------------
 # The simulated benches of 000 and 002 (ASSUMED: neither paper gives its loop bandwidths)

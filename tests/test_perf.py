@@ -99,7 +99,7 @@ def test_run_loop_maps_inputs_a_block_at_a_time():
 @pytest.mark.parametrize("n_dirs", [2, 5])
 def test_multi_jvp_matches_jacfwd_and_prunes_mixed_terms(n_dirs):
     """Forward sensitivities along several directions at once: nested (≤ NESTED_MAX) or vmapped, both = jacfwd."""
-    from jaxobs._loop import NESTED_MAX, _multi_jvp
+    from jaxobs._sensitivity import NESTED_MAX, multi_jvp
 
     def fun(p):
         def body(x, t):
@@ -108,7 +108,7 @@ def test_multi_jvp_matches_jacfwd_and_prunes_mixed_terms(n_dirs):
         return jax.lax.scan(body, jnp.array([1.0, 0.0]), jnp.linspace(0.0, 2.0, 50))[0]
 
     p = jnp.linspace(1.0, 2.0, n_dirs)
-    y, jac = _multi_jvp(fun, (p,), [jnp.eye(n_dirs)])
+    y, jac = multi_jvp(fun, (p,), [jnp.eye(n_dirs)])
     np.testing.assert_allclose(y, fun(p), rtol=1e-15)
     np.testing.assert_allclose(jac.T, jax.jacfwd(fun)(p), rtol=1e-13)
     if n_dirs <= NESTED_MAX:
@@ -120,7 +120,7 @@ def test_multi_jvp_matches_jacfwd_and_prunes_mixed_terms(n_dirs):
             return [int(m) for m in re.findall(r"%[\w]+:(\d+) = stablehlo.while", jax.jit(f).lower(p).as_text())]
 
         plain = carried(fun)
-        nested = carried(lambda p: _multi_jvp(fun, (p,), [jnp.eye(n_dirs)]))
+        nested = carried(lambda p: multi_jvp(fun, (p,), [jnp.eye(n_dirs)]))
         assert len(plain) == 1 and len(nested) == 1, (plain, nested)
         assert nested[0] - plain[0] == 2 * n_dirs, (plain, nested)
 
@@ -130,6 +130,29 @@ def test_run_loop_rejects_bad_settings():
         run_loop(lambda c, x: (c, None), jnp.zeros(()), None, 3, checkpoint="sometimes")
     with pytest.raises(ValueError, match="unroll must be an integer >= 1"):
         run_loop(lambda c, x: (c, None), jnp.zeros(()), None, 3, unroll=0)
+    with pytest.raises(ValueError, match="fallback must be a reverse-mode strategy"):
+        jaxobs.ForwardSensitivity(fallback=jaxobs.AutoCheckpoint())
+    with pytest.raises(ValueError, match="ForwardSensitivity serves loops without per-step outputs"):
+        run_loop(lambda c, x: (c, c), jnp.zeros(()), None, 3, checkpoint=jaxobs.ForwardSensitivity())
+
+
+def test_auto_checkpoint_picks_a_strategy_and_hands_it_the_loop():
+    """AutoCheckpoint owns no loop of its own: forward sensitivities without per-step outputs (reverse mode
+    past forward_max scalars by chunks above chunk_above steps, per-step checkpoints below), else those."""
+    from jaxobs._steps import Loop
+
+    def loop(n, outputs):
+        return Loop(lambda c, x: (c, None), lambda c: c, n, 1, True, None, True, outputs)
+
+    auto = jaxobs.AutoCheckpoint(chunk_above=100)
+    assert auto.pick(loop(101, True)) == jaxobs.ChunkCheckpoint()
+    assert auto.pick(loop(100, True)) == jaxobs.StepCheckpoint()
+    assert auto.pick(loop(101, False)) == jaxobs.ForwardSensitivity(8, jaxobs.ChunkCheckpoint())
+    assert auto.pick(loop(100, False)) == jaxobs.ForwardSensitivity(8, jaxobs.StepCheckpoint())
+    assert jaxobs.AutoCheckpoint(forward_max=0).pick(loop(5, False)) == jaxobs.StepCheckpoint()
+    # the peeled start-up steps are never chunked
+    assert jaxobs.ChunkCheckpoint().startup == jaxobs.StepCheckpoint()
+    assert jaxobs.NoCheckpoint().startup == jaxobs.NoCheckpoint()
 
 
 @pytest.mark.parametrize(
@@ -319,37 +342,6 @@ def test_shard_batch_leaves_uneven_batches_whole():
     assert len(y["a"].sharding.device_set) == 1
     with pytest.raises(ValueError, match="common leading axis"):
         jaxobs.shard_batch({"a": jnp.arange(5.0), "b": jnp.ones(4)})
-
-
-@pytest.mark.slow  # the component-wise step is an experiment, off by default (SCALARIZE = False); ~18 s cold
-def test_step_on_components_equals_the_array_form(wif_batch, monkeypatch):
-    """_loop point 6: the step evaluated on state components gives the array form's cost, final state and
-    gradient (forward sensitivities) to rounding, and its loop stacks no state vector."""
-    import jaxobs._loop as L
-
-    obs = B.fll_observer("sogi-fll-wif")
-
-    def run(gains, sig):
-        o = eqx.tree_at(lambda m: (m.k1, m.lam), obs, gains)
-        sol = jaxobs.simulate(jaxobs.OnSignal(o, sig), T1, save=jaxobs.SaveFinal(cost=B.fll_cost))
-        return sol.cost, sol.final_state
-
-    def loss(gains, sigs):
-        return jnp.mean(jax.vmap(lambda s: run(gains, s)[0])(sigs))
-
-    g0 = (obs.k1, obs.lam)
-    out = {}
-    for on in (False, True):
-        monkeypatch.setattr(L, "SCALARIZE", on)
-        jax.clear_caches()  # simulate's traces are cached on its arguments, not on this module switch
-        cost, state = jax.jit(jax.vmap(lambda s: run(g0, s)))(wif_batch)
-        grad = jax.jit(jax.grad(loss))(g0, wif_batch)
-        text = str(jax.make_jaxpr(lambda s: run(g0, s))(jax.tree.map(lambda a: a[0], wif_batch)))
-        out[on] = (cost, state, grad, text.count("stack[") + text.count("concatenate["))
-    for a, b in zip(jax.tree.leaves(out[True][:3]), jax.tree.leaves(out[False][:3])):
-        np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-14)
-    # the WIF's five-state vectors are stacked in every step of the array form, in none of the component form
-    assert out[True][3] < out[False][3]
 
 
 def test_recording_is_read_a_block_at_a_time():

@@ -79,7 +79,10 @@ def test_linear_speed_loop_at_g1_is_the_design_and_fll_destabilizes_at_low_speed
     K1, K2 = papers.SECOND_ORDER_SOIFO_K1, papers.SECOND_ORDER_SOIFO_K2
     for rpm, holds in ((300.0, False), (1000.0, True)):
         w_e = par.p * rpm * math.pi / 30
-        for fll in (fll_frequency_sosoifo(K1, K2, K1**3 / (2 * K2), w_e), fll_frequency_soifo(1.414, 0.5, w_e)):
+        for fll in (
+            fll_frequency_sosoifo(K1, K2, K1**3 / (2 * K2), w_e),
+            fll_frequency_soifo(papers.SOIFO_K, 0.5, w_e),
+        ):
             v = linear_speed_loop(fll, **kw)
             assert bool(v.observer_stable)  # the papers' verdict: the FLL alone is always stable
             assert bool(v.loop_stable) == holds, (rpm, np.asarray(v.loop_poles))
@@ -161,3 +164,39 @@ def test_exponent_gradient_matches_finite_differences():
     fd = (float(f(lam0 + h)) - float(f(lam0 - h))) / (2 * h)
     assert g < 0  # a faster FLL decouples it from the speed loop
     assert abs(g - fd) < 0.05 * abs(fd), (g, fd)
+
+
+def test_speed_schedule_keeps_the_speed_loop_inside_the_fll_bandwidth():
+    """FOC(speed_schedule=N): the speed loop's double pole is min(α_s, |p ω*|/N), so k_pω scales by r and
+    k_iω by r² (r = min(1, |p ω*|/(N α_s))); off (N = 0, the default) the gains are the design's."""
+    par = _machine()
+    base = FOC.imc(par, 2 * math.pi * papers.BENCH_CURRENT_HZ, ALPHA_S)
+    foc = FOC.imc(par, 2 * math.pi * papers.BENCH_CURRENT_HZ, ALPHA_S, speed_schedule=6.0)
+    assert base.speed_gains(1.0) == (base.kp_w, base.ki_w)
+    for rpm in (20.0, 200.0, 400.0, 2000.0):
+        w_m = rpm * math.pi / 30
+        r = min(1.0, par.p * w_m / (6.0 * ALPHA_S))
+        kp, ki = foc.speed_gains(jnp.asarray(-w_m))
+        np.testing.assert_allclose([float(kp), float(ki)], [float(base.kp_w) * r, float(base.ki_w) * r * r], rtol=1e-12)
+    with pytest.raises(ValueError, match="speed_schedule"):
+        FOC.imc(par, 1.0, 1.0, speed_schedule=-1.0)
+
+
+@pytest.mark.slow
+def test_speed_schedule_makes_the_flux_observers_stable_at_400_and_200_rpm():
+    """000's second-order SOIFO closes the bench's 5 Hz speed loop unstably at 400 and 200 r/min (its FLL's
+    ω̂ is too slow there, docs/stability.md); with speed_schedule = 6 it is stable at both."""
+    par = _machine()
+    scs = _scenarios([(400.0, 0.0), (200.0, 0.0)])
+    obs = _sosoifo()
+
+    @jax.jit
+    def exponents(drive):
+        return jax.vmap(lambda sc: lyapunov(ClosedLoop(drive, bind_observer(obs, sc), sc)))(scs)
+
+    fixed = exponents(_drive())
+    foc = FOC.imc(par, 2 * math.pi * papers.BENCH_CURRENT_HZ, ALPHA_S, speed_schedule=6.0)
+    scheduled = exponents(Drive(foc, sensorless=True))
+    assert not np.any(np.asarray(fixed.stable)), np.asarray(fixed.exponent)
+    assert np.all(np.asarray(scheduled.stable)), np.asarray(scheduled.exponent)
+    assert np.all(np.asarray(scheduled.exponent) < -3.0), np.asarray(scheduled.exponent)

@@ -14,6 +14,7 @@ from .bench import bench_machine as bench_machine
 from .bench import drive_speed_limit_rpm as drive_speed_limit_rpm
 from .bench import if_handover_earliest as if_handover_earliest
 from .bench import if_load_limit as if_load_limit
+from .component import AbstractComponent as AbstractComponent
 from .control import FOC as FOC
 from .control import ControllerState as ControllerState
 from .control import FOCInput as FOCInput

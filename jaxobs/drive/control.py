@@ -80,6 +80,7 @@ import jax.numpy as jnp
 from .. import papers
 from .._math import safe_norm2, wrap
 from .._validate import check_nonnegative, check_positive, check_real, check_sample_time
+from .component import AbstractComponent
 from .machine import RPM, PMSMParams
 
 __all__ = ["FOC", "FOCInput", "FOCOutput", "IfStartup", "ControllerState", "OperatingPoint"]
@@ -104,6 +105,14 @@ class OperatingPoint(NamedTuple):
     u_d: jax.Array  # rotor-frame voltage the true machine needs there, V
     u_q: jax.Array
     offset: jax.Array | float = 0.0  # the controller's angle minus the rotor's, rad (0: encoder or unbiased)
+
+    @classmethod
+    def at_rest(cls, theta_e) -> OperatingPoint:
+        """The machine at standstill at the electrical angle ``theta_e`` (rad): no speed, current, load or
+        voltage (where an I-f start-up starts, the rotor parked by its alignment)."""
+        theta_e = jnp.asarray(theta_e, dtype=jnp.result_type(theta_e, float))
+        z = jnp.zeros_like(theta_e)
+        return cls(omega_m=z, omega_m_ref=z, theta_e=theta_e, t_load=z, i_d=z, i_q=z, u_d=z, u_q=z)
 
 
 class IfStartup(eqx.Module):
@@ -221,7 +230,7 @@ def _torque_dq(par: PMSMParams, i_d, i_q):
     return 1.5 * par.p * (par.psi_f * i_q + (par.Ld - par.Lq) * i_d * i_q)
 
 
-class FOC(eqx.Module):
+class FOC(AbstractComponent):
     """FOC gains and settings (gains are leaves: differentiable and tunable).
 
     Besides its gains the controller needs the machine it assumes (``est``: its
@@ -245,6 +254,7 @@ class FOC(eqx.Module):
     delay_compensation: bool = eqx.field(static=True)
     outer: Literal["speed", "current"] = eqx.field(static=True)  # "current": the reference is i_q*, A
     setpoint_weight: float = eqx.field(static=True)  # b in k_pω (b ω* − ω): 0 = I-P (no overshoot), 1 = PI
+    speed_schedule: float = eqx.field(static=True)  # N > 0: speed-loop bandwidth min(α_s, |ωe*|/N); 0: fixed
     est: PMSMParams | None  # the machine the controller assumes
     u_max: jax.Array | None  # voltage limit for anti-windup, V
     startup: IfStartup | None  # I-f start-up (None: closed loop from t = 0)
@@ -265,6 +275,7 @@ class FOC(eqx.Module):
         delay_compensation=True,
         outer="speed",
         setpoint_weight=0.0,
+        speed_schedule=0.0,
         est=None,
         u_max=None,
         startup=None,
@@ -298,6 +309,9 @@ class FOC(eqx.Module):
         if not (0.0 <= float(setpoint_weight) <= 1.0):
             raise ValueError(f"{own}.setpoint_weight must be in [0, 1], got {setpoint_weight!r}")
         self.setpoint_weight = float(setpoint_weight)
+        if not (0.0 <= float(speed_schedule) <= 1e3):
+            raise ValueError(f"{own}.speed_schedule must be 0 (off) or a ratio in (0, 1000], got {speed_schedule!r}")
+        self.speed_schedule = float(speed_schedule)
 
     @classmethod
     def imc(cls, est_par: PMSMParams, alpha_c, alpha_s, i_max=None, **kw):
@@ -322,6 +336,24 @@ class FOC(eqx.Module):
             **kw,
         )
 
+    def speed_gains(self, omega_m_ref):
+        """(k_pω, k_iω) of the speed loop at the mechanical speed reference ω_m* (rad/s).
+
+        ``speed_schedule = N > 0`` keeps the speed loop inside the bandwidth of a speed estimate that scales
+        with the speed (a flux observer's FLL: docs/stability.md): its double pole moves from the designed
+        α_s = 2 k_iω/k_pω to min(α_s, |p ω_m*|/N), so k_pω scales by r = min(1, |p ω_m*|/(N α_s)) and k_iω
+        by r².  Scheduled on the reference, an outside signal: scheduled on ω̂ the I-P's proportional term
+        k_pω(ω̂) ω̂ would double its own small-signal gain.  At ω_m* = 0 the speed loop holds its output.
+        """
+        if self.speed_schedule <= 0:
+            return self.kp_w, self.ki_w
+        if self.est is None:
+            raise ValueError("FOC.speed_gains with speed_schedule > 0 needs the assumed machine (FOC.imc or bind)")
+        alpha = 2 * self.ki_w / self.kp_w
+        w_e = jnp.abs(self.est.p * omega_m_ref)
+        r = jnp.where(alpha > 0, jnp.minimum(w_e / (self.speed_schedule * jnp.where(alpha > 0, alpha, 1.0)), 1.0), 1.0)
+        return self.kp_w * r, self.ki_w * r * r
+
     def bind(self, est: PMSMParams, u_max, startup: IfStartup | None = None) -> FOC:
         """This controller with its assumed machine, voltage limit and start-up set (no checks: traced-safe)."""
         return eqx.tree_at(
@@ -330,6 +362,8 @@ class FOC(eqx.Module):
 
     def init(self, op: OperatingPoint | None = None, *, theta_f0=0.0) -> ControllerState:
         """Zero integrators (``op=None``), or the integrators that hold the drive at ``op`` (a steady start).
+
+        ``theta_f0`` (keyword-only extra, rad): the I-f angle to start from when the FOC has a start-up.
 
         At a steady operating point the errors are zero, so the current PIs'
         outputs are their integrators plus the decoupling terms (computed with
@@ -354,7 +388,7 @@ class FOC(eqx.Module):
         if self.outer == "current":
             int_w = z
         else:
-            int_w = i_q - self.kp_w * (self.setpoint_weight * op.omega_m_ref - op.omega_m)
+            int_w = i_q - self.speed_gains(op.omega_m_ref)[0] * (self.setpoint_weight * op.omega_m_ref - op.omega_m)
         return ControllerState(int_d=z + int_d, int_q=z + int_q, int_w=z + int_w, iq_ref=z + i_q, **rest)
 
     def operating_point(self, par: PMSMParams, omega_m, omega_m_ref, theta_e, t_load, offset=0.0) -> OperatingPoint:
@@ -428,6 +462,7 @@ class FOC(eqx.Module):
         est, u_max, startup = self.est, self.u_max, self.startup
         ts = self.ts
         # --- I-f start-up (module doc): the angle advances every period, used in mode 0
+        kp_w, ki_w = self.speed_gains(omega_m_ref)
         if startup is not None:
             omega_f = startup.ramp(k * ts)
             theta_f = wrap(cs.theta_f + 0.5 * (cs.omega_f + omega_f) * ts)  # trapezoidal: exact for the ramp
@@ -451,7 +486,7 @@ class FOC(eqx.Module):
             iq_hand = startup.i_f * jnp.cos(delta)
             id_hand = jnp.where(switch, -startup.i_f * jnp.sin(delta), cs.id_hand)
             # the speed PI's output k_pω(b ω* − ω̂) + ∫ starts at iq_hand
-            int_w0 = jnp.where(switch, iq_hand - self.kp_w * (self.setpoint_weight * omega_m_ref - omega_m), cs.int_w)
+            int_w0 = jnp.where(switch, iq_hand - kp_w * (self.setpoint_weight * omega_m_ref - omega_m), cs.int_w)
             iq_held = jnp.where(switch, iq_hand, cs.iq_ref)
         else:
             omega_f, theta_f, mode, int_w0, iq_held = cs.omega_f, cs.theta_f, cs.mode, cs.int_w, cs.iq_ref
@@ -464,11 +499,11 @@ class FOC(eqx.Module):
         run_speed = (k % self.speed_every) == 0
         tw = ts * self.speed_every
         e_w = omega_m_ref - omega_m
-        unsat = self.kp_w * (self.setpoint_weight * omega_m_ref - omega_m) + int_w0
+        unsat = kp_w * (self.setpoint_weight * omega_m_ref - omega_m) + int_w0
         iq_sat = jnp.clip(unsat, -self.i_max, self.i_max)
         # conditional integration: freeze while saturated and the error pushes further
         windup = (unsat != iq_sat) & (jnp.sign(e_w) == jnp.sign(unsat))
-        int_w = jnp.where(run_speed & ~windup, int_w0 + self.ki_w * e_w * tw, int_w0)
+        int_w = jnp.where(run_speed & ~windup, int_w0 + ki_w * e_w * tw, int_w0)
         iq_ref = jnp.where(run_speed, iq_sat, iq_held)
         if self.outer == "current":  # the reference is i_q* itself (current-loop tests, torque control)
             iq_ref = jnp.clip(omega_m_ref, -self.i_max, self.i_max)

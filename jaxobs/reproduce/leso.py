@@ -41,16 +41,21 @@ W0, K_R, WC_GI = papers.LESO_OMEGA0, papers.GILESO_K_R, papers.GILESO_OMEGA_C
 K1_FA, K2_FA = papers.FALESO_K1, papers.FALESO_K2
 
 
-def leso_bank(est: D.PMSMParams, omega0_pll, pll=None):
+def leso_bank(est: D.PMSMParams, omega_e, pll=None):
+    """C-, GI- and FA-LESO with 002 Table II's gains, bound to the machine ``est`` they assume (its Rs, Lq) and
+    with their PLLs started at ω_e (rad/s), by their one binding (``ObserverBank.bind``); the FA-LESO is the
+    primary."""
     kp, ki = linear.pll_gains(2 * math.pi * papers.LESO_PLL_HZ) if pll is None else pll
-    return ObserverBank(
+    # Rs = 0, Lq = 1 are placeholders: bind() sets the assumed machine and the PLLs' start speed
+    bank = ObserverBank(
         (
-            CLESO(est.Rs, est.Lq, W0, kp, ki, omega0_pll),
-            GILESO(est.Rs, est.Lq, W0, K_R, WC_GI, kp, ki, omega0_pll),
-            FALESO(est.Rs, est.Lq, K1_FA, K2_FA, kp, ki, omega0_pll),
+            CLESO(0.0, 1.0, W0, kp, ki),
+            GILESO(0.0, 1.0, W0, K_R, WC_GI, kp, ki),
+            FALESO(0.0, 1.0, K1_FA, K2_FA, kp, ki),
         ),
         primary=2,
     )
+    return bank.bind(est, omega_e)
 
 
 def _tfs(we):
