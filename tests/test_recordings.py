@@ -273,7 +273,7 @@ def test_study_file_on_a_recording(tmp_path, capsys):
     path.write_text(text[: text.index("[designs.SOGI-FLL]")] + '[designs.WIF]\nclosed_form = "wif"\n')
     assert main(["study", str(path), "--out", str(tmp_path / "o"), "--quiet"]) == 0
     assert capsys.readouterr().err == ""
-    with xr.open_dataset(tmp_path / "o" / "study.nc", engine="scipy") as ds:
+    with xr.open_dataset(tmp_path / "o" / "study.nc", engine="h5netcdf") as ds:
         assert ds["ripple_freq"].dims == ("design", "recording")
         assert str(ds["recording"].values[0]) == "recordings/grid_50_51hz.csv"
         assert all("units" in ds[v].attrs for v in ds.data_vars)

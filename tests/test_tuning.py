@@ -501,7 +501,7 @@ def test_two_runs_write_byte_identical_results_that_rebuild_the_design(tmp_path)
     obs = observer_from_result(tmp_path / "a" / "result.json", notes=notes)
     assert float(obs.lam) == res["gains"]["tuned"]["lam"] and obs.ts == res["ts"] and type(obs.rule).__name__ == "AB3"
     assert not any("has no" in n for n in notes)
-    ds = xr.open_dataset(tmp_path / "a" / "scores.nc", engine="scipy")
+    ds = xr.open_dataset(tmp_path / "a" / "scores.nc", engine="h5netcdf")
     assert ds["itae_freq"].dims == ("design", "freq_step") and list(ds["freq_step"].values) == [1.0, 2.0]
     for d in ("closed_form", "tuned"):
         lin = res["linear"][d]
