@@ -37,9 +37,9 @@ Dataset has dims ``("design", *axes)`` (a grid) or ``("design", "sample")``
 (a sample, the axes as coordinates), quantiles over the scenarios of every
 metric (``<metric>_q`` with a ``quantile`` coordinate 0.5, 0.95, 0.99, 1.0;
 lost-lock scenarios excluded from them and counted in ``lost_lock_count``).  Every variable and
-coordinate has ``units`` (UDUNITS strings: ``degree``; ``min-1`` for r/min) and ``long_name``; each gain is its own
-variable ``gain_<name>`` (dim ``design``, its own ``units``, NaN where a design has no such gain); the attributes hold the
-options, the true machine (``machine_Rs``, ...) and the versions, nothing that changes between two
+coordinate has ``units`` (UDUNITS strings: ``degree``; ``min-1`` for r/min) and ``long_name``; each gain is
+its own variable ``gain_<name>`` (dim ``design``, its own ``units``, NaN where a design has no such gain); the
+attributes hold the options, the true machine (``machine_Rs``, ...) and the versions, nothing that changes between two
 identical runs.
 """
 

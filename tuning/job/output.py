@@ -10,7 +10,6 @@ from pathlib import Path
 import numpy as np
 
 from jaxobs import metrics as M
-
 from jaxobs.drive import DRIVE_AXES
 from jaxobs.drive_study import CF_UNITS
 from jaxobs.study import AXIS_META
