@@ -39,13 +39,13 @@ LAYERS = [
     # signals and plant: they produce the measurements
     ("jaxobs.signals._waveforms", "jaxobs.signals._recordings", "jaxobs.drive.machine", "jaxobs.drive.hardware"),
     ("jaxobs.signals",),
-    ("jaxobs.scenarios", "jaxobs.drive.plant", "jaxobs.drive.control", "jaxobs.drive.scenario"),
+    ("jaxobs.scenarios", "jaxobs.drive.plant", "jaxobs.drive.dual", "jaxobs.drive.control", "jaxobs.drive.scenario"),
     # observers: they estimate
     ("jaxobs.observers._cores", "jaxobs.observers.base"),
     ("jaxobs.observers.sogi", "jaxobs.observers.fll", "jaxobs.observers.flux", "jaxobs.observers.leso"),
     ("jaxobs.observers",),
     # the closed loop composes the drive's parts with a drive observer (its contract, observers.base)
-    ("jaxobs.drive.loop",),
+    ("jaxobs.drive.loop", "jaxobs.drive.dual_loop"),
     ("jaxobs.drive.bench",),
     ("jaxobs.drive",),
     # the one loop over a system, and sharding a batch over devices
@@ -71,6 +71,7 @@ LAYERS = [
         "jaxobs.reproduce.leso",
         "jaxobs.plot",
     ),
+    ("jaxobs.reproduce.leso_dual",),
     ("jaxobs.reproduce",),
     # tuning: it changes gains (and exports the tuned observer)
     ("tuning.outdir",),

@@ -9,7 +9,7 @@
                                                            002 Fig. 4, 001 Fig. 14)
     jaxobs reproduce flux [--out DIR] [--force] [--json] [--quick]
                                                            paper 000's experiments, paper vs ours
-    jaxobs reproduce leso [--out DIR] [--force] [--json]   paper 002's experiments, paper vs ours
+    jaxobs reproduce leso [--out DIR] [--force] [--json] [--machine single|dual]   paper 002's experiments
     jaxobs study [STUDY.toml] [--out DIR] [--force] [--check] [--quiet]
                  [--coordinator HOST:PORT --num-processes N --process-id I | --distributed] [--timeout S]
                                                            robustness study → NetCDF, worst cases, figures
@@ -334,6 +334,12 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--force", action="store_true", help="overwrite figures already in --out")
     r.add_argument("--json", action="store_true", help="print rows {experiment, observer, metric, unit, paper, ours}")
     r.add_argument("--quick", action="store_true", help="skip the long runs (20 r/min steady state, I-f start-up)")
+    r.add_argument(
+        "--machine",
+        choices=["single", "dual"],
+        default="single",
+        help="leso: 'dual' adds Figs 13-15 on the dual three-phase IPMSM (individual sets and VSD control)",
+    )
     r.set_defaults(func=cmd_reproduce)
 
     st = sub.add_parser(
