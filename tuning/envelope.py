@@ -110,7 +110,7 @@ def cli_envelope(args) -> int:
         with atomic_path(out / "envelope.png") as tmp:
             envelope_figure(ds, tmp)
         with atomic_path(out / "envelope.nc") as tmp:
-            ds.to_netcdf(tmp, engine="scipy")
+            ds.to_netcdf(tmp, engine="h5netcdf")
     print(what)
     wd = max(len("design"), *(len(d) for d in designs)) + 2
     head = f"{'design':<{wd}}{'holds':>9}{'stable':>9}{'sync':>9}{'min margin 1/s':>16}"

@@ -39,6 +39,7 @@ import numpy as np
 from .. import AbstractSystem, SaveFinal
 from .. import metrics as M
 from ..drive_study import (
+    CF_UNITS,
     DRIVE_GAIN_UNITS,
     DRIVE_STUDY_AXES,
     DRIVE_STUDY_AXIS_NAMES,
@@ -65,11 +66,11 @@ ENVELOPE_VARIABLES = {
     "synchronous": ("1", "held synchronism over the long run: finite, locked, at speed, settled (1: held)"),
     "lost_lock": ("1", "lost lock over the late window: diverged or position error > 90 deg electrical (1: lost)"),
     "lost_speed": ("1", "lost speed over the late window: diverged, or mean |speed - ref| > 20 % of |ref| (1: lost)"),
-    "pos_err_max_deg": ("deg", "peak |position error| in the late window (electrical)"),
-    "pos_bias_deg": ("deg", "mean position error in the late window (electrical, signed): the steady bias"),
-    "pos_ripple_deg": ("deg", "rms of the position error about its mean in the late window (electrical)"),
-    "speed_dev_early_pct": ("%", "peak |speed - reference| / |reference| in the early window"),
-    "speed_dev_late_pct": ("%", "peak |speed - reference| / |reference| in the late window"),
+    "pos_err_max_deg": ("degree", "peak |position error| in the late window (electrical)"),
+    "pos_bias_deg": ("degree", "mean position error in the late window (electrical, signed): the steady bias"),
+    "pos_ripple_deg": ("degree", "rms of the position error about its mean in the late window (electrical)"),
+    "speed_dev_early_pct": ("percent", "peak |speed - reference| / |reference| in the early window"),
+    "speed_dev_late_pct": ("percent", "peak |speed - reference| / |reference| in the late window"),
     "holds": ("1", "holds: stable, synchronous and peak position error within bound_deg (1: holds)"),
 }
 
@@ -300,12 +301,19 @@ def envelope(
     dims = ("design", "speed_rpm", "load", *names[2:])
     coords = {
         "design": ("design", dnames, {"long_name": "observer design (closing the loop sensorless)"}),
-        "speed_rpm": ("speed_rpm", speeds, {"units": "r/min", "long_name": DRIVE_STUDY_AXIS_NAMES["speed_rpm"]}),
+        "speed_rpm": ("speed_rpm", speeds, {"units": "min-1", "long_name": DRIVE_STUDY_AXIS_NAMES["speed_rpm"]}),
         "load": ("load", loads, {"units": "N m", "long_name": DRIVE_STUDY_AXIS_NAMES["load_nm"]}),
     }
     if mismatch is not None:
         ax = mismatch[0]
-        coords[ax] = (ax, axes[ax], {"units": DRIVE_STUDY_AXES[ax][0], "long_name": DRIVE_STUDY_AXIS_NAMES[ax]})
+        coords[ax] = (
+            ax,
+            axes[ax],
+            {
+                "units": CF_UNITS.get(DRIVE_STUDY_AXES[ax][0], DRIVE_STUDY_AXES[ax][0]),
+                "long_name": DRIVE_STUDY_AXIS_NAMES[ax],
+            },
+        )
     data = {}
     for k, (unit, long_name) in ENVELOPE_VARIABLES.items():
         v = res[k]
@@ -313,15 +321,13 @@ def envelope(
         data[k] = (dims, v, {"units": unit, "long_name": long_name})
     gains = {d: drive_gains(obs) for d, obs in designs.items()}
     gnames = [g for g in DRIVE_GAIN_UNITS if any(g in gains[d] for d in dnames)]
-    coords["gain_name"] = ("gain_name", gnames, {"long_name": "name of the observer's gain field"})
-    coords["gain_units"] = ("gain_name", [DRIVE_GAIN_UNITS[g] for g in gnames], {"long_name": "units of each gain"})
-    data["gain"] = (
-        ("design", "gain_name"),
-        np.asarray([[gains[d].get(g, np.nan) for g in gnames] for d in dnames], dtype=float).reshape(
-            len(dnames), len(gnames)
-        ),
-        {"units": "see gain_units", "long_name": "observer gain (NaN: the design has no such gain)"},
-    )
+    # one variable per gain, each with its own CF units (as the drive studies write them)
+    for g in gnames:
+        data[f"gain_{g}"] = (
+            ("design",),
+            np.asarray([gains[d].get(g, np.nan) for d in dnames], dtype=float),
+            {"units": DRIVE_GAIN_UNITS[g], "long_name": f"observer gain {g} (NaN: the design has no such gain)"},
+        )
     ds = xr.Dataset(data, coords=coords)
     ds.attrs.update(
         horizon=float(horizon),
