@@ -4,6 +4,7 @@ encoder angle (:class:`DriveRecording`), both read from CSV files checked in ful
 from __future__ import annotations
 
 import csv
+import errno
 import math
 from pathlib import Path
 
@@ -140,7 +141,8 @@ class SampledSignal(eqx.Module):
             max_bytes: refuse a larger file (default :data:`MAX_CSV_BYTES`).
 
         Raises:
-            ValueError: a missing or unreadable file, a file too large, a row of another width, a
+            FileNotFoundError: no file at ``path``.
+            ValueError: an unreadable file, a file too large, a row of another width, a
                 non-number, a non-finite value, an unknown column, a time column that is not
                 strictly increasing, fewer than 2 samples, a rate below 1/ts, or both or neither of
                 ``time_column`` and ``sample_rate``.
@@ -194,6 +196,8 @@ _RATE_SLACK = 1.01  # a recording's interval may exceed ts by 1 % (clock jitter)
 def _csv_table(path, max_bytes):
     """(header or None, float array (rows, columns)) of a CSV file; ValueError naming the problem."""
     p = Path(path)
+    if not p.exists() and not p.is_symlink():  # what Python says of a missing file (issue 29), one line
+        raise FileNotFoundError(errno.ENOENT, f"recording {str(p)!r}: no such file")
     try:
         size = p.stat().st_size
     except OSError as e:
