@@ -4,17 +4,16 @@ hide a failure).
 A design tuned and scored on its grid can run away a little outside it (the noise-tuned SOIFO ran away at
 400 r/min, two thirds of its grid's lowest speed).  So a drive job states the envelope it claims
 (``[envelope] speed_rpm = [lo, hi]``, ``load_nm = [lo, hi]``; by default the span of its tuning grid) and,
-after tuning, :func:`verify_designs` runs initial, closed form and tuned at a coarse grid of that envelope
-(3 speeds, lo, geometric middle and hi, × 2 loads, lo and hi) over a long horizon (``[envelope] horizon``,
-2 s by default) through the study runner (:func:`jaxobs.drive_study.run_drive_study`, batched), and gives
-the simulator's own stability verdict at the same points (:func:`jaxobs.drive.stability.lyapunov`, one ``jit(vmap)``
-per design class).  Each point is steady (no event), nominal machine, the job's drive (its speed schedule)
-started steady.
+after tuning, :func:`verify_designs` maps initial, closed form and tuned over a coarse grid of that
+envelope (3 speeds, lo, geometric middle and hi, × 2 loads, lo and hi) with the one envelope map,
+:func:`jaxobs.drive.envelope.envelope`: a long run (``[envelope] horizon``, 2 s by default) through the study
+runner, batched, and the simulator's own stability verdict (:func:`jaxobs.drive.stability.lyapunov`) at the
+same points, on the job's drive (its speed schedule) started steady, nominal machine.
 
-A point *holds* when the simulation neither diverged, nor lost synchronism (|position error| > 90° in the
-steady window), nor missed its speed reference (lost_speed), and is *stable* when the Lyapunov verdict is.
-A tuned design that fails a point where the closed form passes is **unsafe** (:func:`unsafe_points`): the
-job's status becomes ``"unsafe"`` and ``jaxobs tune`` warns and exits 4.
+A point *passes* when the design holds synchronism there (the envelope's ``synchronous``: finite, locked,
+at speed and settled) and is stable (``stable``).  A tuned design that fails a point where the closed form
+passes is **unsafe** (:func:`unsafe_points`): the job's status becomes ``"unsafe"`` and ``jaxobs tune`` warns
+on stderr and exits 4 (:data:`UNSAFE_EXIT`; 3 stays "diverged", where nothing is tuned at all).
 """
 
 from __future__ import annotations
@@ -22,13 +21,10 @@ from __future__ import annotations
 import dataclasses
 import math
 
-import equinox as eqx
-import jax
 import numpy as np
 
 from jaxobs import drive as D
-from jaxobs.drive.stability import lyapunov
-from jaxobs.drive_study import bind_observer, drive_scenarios, run_drive_study
+from jaxobs.drive.envelope import envelope
 
 from .drive import job_drive
 from .fields import JobError, get_field, no_unknown
@@ -37,19 +33,18 @@ from .spec import DriveSpec, ScenarioSpec
 __all__ = ["EnvelopeSpec", "parse_envelope", "verify_designs", "unsafe_points", "UNSAFE_EXIT"]
 
 UNSAFE_EXIT = 4  # jaxobs tune's exit status for status "unsafe" (3 is "diverged": nothing tuned at all)
-MIN_HORIZON = 0.05  # s; tests run short, the presets the default 2 s
+MIN_HORIZON = 0.5  # s: jaxobs.drive.envelope.envelope's least; the presets run the default 2 s
 DEFAULT_HORIZON = 2.0  # s: a slowly growing low-speed oscillation shows within it (docs/stability.md)
 
 
 @dataclasses.dataclass(frozen=True)
 class EnvelopeSpec:
     """The envelope a drive job claims: speeds (r/min) and loads (N·m) as [lo, hi]; ``horizon`` (s) of the
-    verification runs; ``stability``: also the Lyapunov verdict (``lyapunov`` ``settle``/``window``, s)."""
+    verification runs; ``settle``, ``window``: s, of the Lyapunov verdict (:func:`jaxobs.drive.stability.lyapunov`)."""
 
     speed_rpm: tuple
     load_nm: tuple
     horizon: float = DEFAULT_HORIZON
-    stability: bool = True
     settle: float = 0.2
     window: float = 0.4
 
@@ -90,7 +85,7 @@ def parse_envelope(raw: dict, scen: ScenarioSpec, drive: DriveSpec | None) -> En
     if drive.loop != "sensorless":
         raise JobError("envelope", "applies to sensorless drive jobs (drive.loop = 'sensorless')")
     tab = get_field(raw, "envelope", "envelope", dict)
-    no_unknown(tab, ("speed_rpm", "load_nm", "horizon", "stability", "settle", "window"), "envelope")
+    no_unknown(tab, ("speed_rpm", "load_nm", "horizon", "settle", "window"), "envelope")
     par = D.bench_machine(drive.machine)
     n_max = D.drive_speed_limit_rpm(par)
     speeds = _range(tab, "speed_rpm", 1.0, n_max, "r/min", _span(scen.axes, "speed_rpm", 600.0))
@@ -99,78 +94,51 @@ def parse_envelope(raw: dict, scen: ScenarioSpec, drive: DriveSpec | None) -> En
     horizon = get_field(tab, "horizon", "envelope.horizon", float, 2.0)  # DEFAULT_HORIZON
     if not MIN_HORIZON <= horizon <= 10.0:
         raise JobError("envelope.horizon", f"must be in [{MIN_HORIZON:g}, 10] s, got {horizon:g}")
-    stability = get_field(tab, "stability", "envelope.stability", bool, True)
     settle = get_field(tab, "settle", "envelope.settle", float, 0.2)
     if not 0.0 <= settle <= 5.0:
         raise JobError("envelope.settle", f"must be in [0, 5] s, got {settle:g}")
     window = get_field(tab, "window", "envelope.window", float, 0.4)
     if not 0.01 <= window <= 5.0:
         raise JobError("envelope.window", f"must be in [0.01, 5] s, got {window:g}")
-    return EnvelopeSpec(speeds, loads, horizon, stability, settle, window)
-
-
-@eqx.filter_jit
-def _stability(drive, obs, scenarios, settle, window):
-    """:func:`jaxobs.drive.stability.lyapunov` at every scenario for one design; the design is an argument (its gains
-    array leaves), so initial, closed form and tuned of one class share one compilation."""
-
-    def one(sc):
-        return lyapunov(D.ClosedLoop(drive, bind_observer(obs, sc), sc), settle=settle, warmup=0.1, window=window)
-
-    return jax.vmap(one)(scenarios)
+    return EnvelopeSpec(speeds, loads, horizon, settle, window)
 
 
 def verify_designs(designs: dict, env: EnvelopeSpec, drive_spec: DriveSpec) -> dict:
     """Initial, closed form and tuned (``designs``: name -> drive observer) at the envelope's coarse grid over
-    ``env.horizon`` seconds, and their stability verdicts: the ``verification`` block of result.json."""
+    ``env.horizon`` seconds, with their stability verdicts (:func:`jaxobs.drive.envelope.envelope`, the one
+    envelope map, on the job's drive started steady): the ``verification`` block of result.json."""
     drive_spec = dataclasses.replace(drive_spec, start="steady", handover=0.0)  # operating points, started steady
     drive = job_drive(drive_spec)
     par = D.bench_machine(drive_spec.machine)
     speeds, loads = env.points()
-    axes = {"speed_rpm": speeds, "load_nm": loads}
-    # the steady window: the last quarter of the horizon (at least 10 samples)
-    steady_from = max(0.75 * env.horizon, env.horizon - 0.5)
-    ds = run_drive_study(designs, axes, machine=par, drive=drive, horizon=env.horizon, steady_from=steady_from)
+    stab = {"settle": env.settle, "window": env.window}
+    ds = envelope(designs, machine=par, drive=drive, speeds_rpm=speeds, loads_nm=loads, horizon=env.horizon,
+                  stability=stab)  # fmt: skip
     combos = [(s, ld) for s in speeds for ld in loads]
-    scen = drive_scenarios(par, ("speed_rpm", "load_nm"), combos) if env.stability else None
     out = {
         "envelope": {"speed_rpm": list(env.speed_rpm), "load_nm": list(env.load_nm)},
         "horizon_s": env.horizon,
-        "steady_from_s": steady_from,
         "speed_schedule": drive_spec.speed_schedule,
         "points": [{"speed_rpm": s, "load_nm": ld} for s, ld in combos],
-        "holds_definition": "not diverged, |position error| <= 90 deg (electrical) in the steady window, and the "
-        "steady window's mean |speed - reference| within 20 % (lost_speed)",
-        "stable_definition": "jaxobs.drive.stability.lyapunov: the largest non-neutral Lyapunov exponent < 0 "
-        "(margin > 0, 1/s) and the orbit held its speed",
+        "passes_definition": "synchronous (jaxobs.drive.envelope: finite, locked within 90 deg electrical, at its "
+        "speed reference and settled after a 2 % speed-reference step, over the late window) and stable "
+        "(jaxobs.drive.stability.lyapunov: largest non-neutral Lyapunov exponent < 0, 1/s)",
         "designs": {},
     }
-    for name, obs in designs.items():
-        sel = ds.sel(design=name)
-        stab = _stability(drive, obs, scen, env.settle, env.window) if env.stability else None
+    for name in designs:
         rows = []
-        for i, (s, ld) in enumerate(combos):
-            pt = sel.sel(speed_rpm=s, load_nm=ld)
-            lost_lock, lost_speed = bool(pt["lost_lock"]), bool(pt["lost_speed"])
-            row = {
-                "speed_rpm": s,
-                "load_nm": ld,
-                "holds": not (lost_lock or lost_speed or bool(pt["diverged"])),
-                "lost_lock": lost_lock,
-                "lost_speed": lost_speed,
-                "diverged": bool(pt["diverged"]),
-                "pos_err_max_deg": _num(pt["pos_err_max_deg"]),
-                "pos_err_rms_deg": _num(pt["pos_err_rms_deg"]),
-                "pos_bias_deg": _num(pt["pos_bias_deg"]),
-                "speed_err_rms_rpm": _num(pt["speed_err_rms_rpm"]),
-            }
-            if stab is not None:
-                row["stable"] = bool(np.asarray(stab.stable)[i])
-                row["exponent_per_s"] = _num(np.asarray(stab.exponent)[i])
-                row["margin_per_s"] = _num(np.asarray(stab.margin)[i])
+        for s, ld in combos:
+            pt = ds.sel(design=name, speed_rpm=s, load=ld)
+            row = {"speed_rpm": s, "load_nm": ld}
+            for k in ("synchronous", "stable", "holds", "lost_lock", "lost_speed"):
+                row[k] = bool(pt[k])
+            row["margin_per_s"] = _num(pt["margin"])
+            for k in ("pos_err_max_deg", "pos_bias_deg", "pos_ripple_deg", "speed_dev_late_pct"):
+                row[k] = _num(pt[k])
+            row["passes"] = row["synchronous"] and row["stable"]
             rows.append(row)
-        ok = [r["holds"] and r.get("stable", True) for r in rows]
-        out["designs"][name] = {"holds_everywhere": all(ok), "failed_points": int(len(ok) - sum(ok)), "points": rows}
+        n_fail = sum(not r["passes"] for r in rows)
+        out["designs"][name] = {"passes_everywhere": n_fail == 0, "failed_points": n_fail, "points": rows}
     out["unsafe_points"] = unsafe_points(out)
     return out
 
@@ -182,16 +150,13 @@ def _num(x):
 
 
 def unsafe_points(ver: dict) -> list:
-    """The points where the tuned design fails (does not hold, or is not stable) and the closed form passes."""
+    """The points where the tuned design fails (loses synchronism or is not stable) and the closed form passes."""
     des = ver["designs"]
     if "tuned" not in des or "closed_form" not in des:
         return []
 
-    def ok(r):
-        return r["holds"] and r.get("stable", True)
-
     return [
         {"speed_rpm": t["speed_rpm"], "load_nm": t["load_nm"]}
         for t, c in zip(des["tuned"]["points"], des["closed_form"]["points"], strict=True)
-        if ok(c) and not ok(t)
+        if c["passes"] and not t["passes"]
     ]
