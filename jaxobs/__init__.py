@@ -37,6 +37,7 @@ from ._discretize import Tustin as Tustin
 
 # checkpoint strategies of the loop (how gradients through a long horizon are computed)
 from ._loop import AbstractCheckpoint as AbstractCheckpoint
+from ._loop import AbstractReverseCheckpoint as AbstractReverseCheckpoint
 from ._loop import AutoCheckpoint as AutoCheckpoint
 from ._loop import ChunkCheckpoint as ChunkCheckpoint
 from ._loop import ForwardSensitivity as ForwardSensitivity
@@ -113,6 +114,7 @@ __all__ = [
     "PrecisionWarning",
     "SampleTime",
     "AbstractCheckpoint",
+    "AbstractReverseCheckpoint",
     "AutoCheckpoint",
     "NoCheckpoint",
     "StepCheckpoint",

@@ -1,4 +1,4 @@
-"""Firmware export (tuning/export.py): the C generated from the jaxpr of an observer's step (every observer
+"""Firmware export (tuning/export/): the C generated from the jaxpr of an observer's step (every observer
 of jaxobs, and one defined in this file), compiled with the system C compiler, matches the golden vectors of
 the float32 JAX step to 1e-4 over >= 10 000 steps.
 
@@ -102,6 +102,15 @@ def test_fll_family_c_matches_the_float32_jax_step(tmp_path, design, rule):
     assert c["golden"]["steps"] >= MIN_STEPS
     err = compile_and_check(tmp_path)
     assert err <= TOLERANCE, f"{design} {c['rule']['name']}: max relative error {err:.3g}"
+
+
+def test_the_sogi_filter_exports_too(tmp_path):
+    """Not an FLL and never written by hand for the export: the SOGI quadrature filter (a fixed ω') exports from
+    its step like any observer, outputs v_alpha, v_beta, and matches its golden vectors."""
+    _need_cc()
+    c = export_observer(jaxobs.SOGI(k=papers.SOIFO_K), tmp_path)
+    assert c["component"] == "SOGI" and c["outputs"] == ["v_alpha", "v_beta"] and c["angle_outputs"] == []
+    assert compile_and_check(tmp_path) <= TOLERANCE
 
 
 def test_files_macros_and_coefficients_agree(tmp_path):

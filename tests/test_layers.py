@@ -32,18 +32,20 @@ LAYERS = [
         "jaxobs.progress",
         "jaxobs.provenance",
         "jaxobs._cache",
+        "jaxobs.drive.component",
     ),
     # integration rules (and check_rule)
     ("jaxobs._discretize",),
     # signals and plant: they produce the measurements
-    ("jaxobs.signals", "jaxobs.drive.machine", "jaxobs.drive.hardware"),
-    ("jaxobs.scenarios", "jaxobs.drive.plant", "jaxobs.drive.control", "jaxobs.drive.scenario"),
+    ("jaxobs.signals._waveforms", "jaxobs.signals._recordings", "jaxobs.drive.machine", "jaxobs.drive.hardware"),
+    ("jaxobs.signals",),
+    ("jaxobs.scenarios", "jaxobs.drive.plant", "jaxobs.drive.dual", "jaxobs.drive.control", "jaxobs.drive.scenario"),
     # observers: they estimate
     ("jaxobs.observers._cores", "jaxobs.observers.base"),
     ("jaxobs.observers.sogi", "jaxobs.observers.fll", "jaxobs.observers.flux", "jaxobs.observers.leso"),
     ("jaxobs.observers",),
     # the closed loop composes the drive's parts with a drive observer (its contract, observers.base)
-    ("jaxobs.drive.loop",),
+    ("jaxobs.drive.loop", "jaxobs.drive.dual_loop"),
     ("jaxobs.drive.bench",),
     ("jaxobs.drive",),
     # the one loop over a system, and sharding a batch over devices
@@ -69,6 +71,7 @@ LAYERS = [
         "jaxobs.reproduce.leso",
         "jaxobs.plot",
     ),
+    ("jaxobs.reproduce.leso_dual",),
     ("jaxobs.reproduce",),
     # tuning: it changes gains (and exports the tuned observer)
     ("tuning.outdir", "tuning.checkpoint"),
@@ -87,6 +90,10 @@ LAYERS = [
     ("tuning.job",),
     ("tuning.results",),
     ("tuning.study_file",),
+    # the export: where the observer comes from, its test records, the harness; the export; its command
+    ("tuning.export.sources", "tuning.export.golden", "tuning.export.harness"),
+    ("tuning.export.files",),
+    ("tuning.export.command",),
     ("tuning.export",),
     ("tuning",),
     # the command line: the top layer (`jaxobs ...` and `python -m jaxobs`)
@@ -219,9 +226,9 @@ def test_imports_go_down_the_layers_and_none_is_deferred():
 
 def test_the_checks_see_a_violation(tmp_path, monkeypatch):
     """The parser resolves relative and package imports, and flags upward and deferred ones."""
-    targets = {(t, lazy) for t, _, lazy in _imports("jaxobs.signals")}
-    assert ("jaxobs.papers", False) in targets  # `from . import papers`
-    assert ("jaxobs._measurements", False) in targets  # `from ._measurements import DriveInput`
+    targets = {(t, lazy) for t, _, lazy in _imports("jaxobs.signals._waveforms")}
+    assert ("jaxobs.papers", False) in targets  # `from .. import papers`
+    assert ("jaxobs._measurements", False) in targets  # `from .._measurements import DriveInput`
     assert {t for t, _, _ in _imports("jaxobs.reproduce.leso")} >= {"jaxobs.drive", "jaxobs.linear", "jaxobs.papers"}
     probe = tmp_path / "_probe.py"  # a module beside signals that imports upward, once at the top, once deferred
     probe.write_text("from . import study\n\n\ndef f():\n    from . import metrics\n")

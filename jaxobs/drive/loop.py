@@ -214,12 +214,14 @@ class ClosedLoop(AbstractSystem):
         """
         sc = self.scenario
         foc = self.controller
+        # every component starts from one operating point, by the one convention (jaxobs.drive.component)
         if self.drive.startup is not None:
-            plant = self.plant.init(omega_m0=0.0, theta_e0=sc.theta_e0)
+            op = OperatingPoint.at_rest(sc.theta_e0)
+            plant = self.plant.init(op)
             z = jnp.zeros((), plant.x.dtype)
             obs = None if self.observer is None else self.observer.init()
-            ctrl = foc.init(theta_f0=sc.theta_e0 - jnp.pi / 2)
-            return LoopState(plant=plant, ctrl=ctrl, obs=obs, sensors=sc.sensors.init(sc.key), u_a=z, u_b=z)
+            ctrl = foc.init(op, theta_f0=sc.theta_e0 - jnp.pi / 2)
+            return LoopState(plant=plant, ctrl=ctrl, obs=obs, sensors=sc.sensors.init(op, key=sc.key), u_a=z, u_b=z)
         op = self.operating_point()
         obs = None
         if self.observer is not None:
@@ -242,10 +244,12 @@ class ClosedLoop(AbstractSystem):
                     # state to start in, so such an observer (not locked in its settling) starts as before
                     op = self.operating_point(jnp.where(jnp.abs(offset) < jnp.pi / 2, offset, 0.0))
                     obs, offset = self._settled_observer(op)
-        plant = self.plant.init(omega_m0=op.omega_m, theta_e0=op.theta_e, i_d0=op.i_d, i_q0=op.i_q)
+        plant = self.plant.init(op)
         u_a, u_b = self._steady_voltage(op, op.theta_e)
-        _, u = self.drive.inverter.step(None, InverterInput(u_a, u_b))
-        return LoopState(plant=plant, ctrl=foc.init(op), obs=obs, sensors=sc.sensors.init(sc.key), u_a=u.u_a, u_b=u.u_b)
+        inverter = self.drive.inverter
+        _, u = inverter.step(inverter.init(op), InverterInput(u_a, u_b))
+        sensors = sc.sensors.init(op, key=sc.key)
+        return LoopState(plant=plant, ctrl=foc.init(op), obs=obs, sensors=sensors, u_a=u.u_a, u_b=u.u_b)
 
     def _steady_voltage(self, op: OperatingPoint, theta):
         """(u_α, u_β) applied over the period that starts where the rotor is at ``theta``, at steady state.
@@ -329,7 +333,7 @@ class ClosedLoop(AbstractSystem):
             # ran away at the hand-over.  A DSP knows ω_f too: it is the FLL's feed-forward, not a cheat.
             seeded = self.observer.seed_speed(obs_state, ctrl.omega_f)
             obs_state = jax.tree.map(lambda a, b: jnp.where(ctrl.mode == 0, a, b), seeded, obs_state)
-        _, u_next = drive.inverter.step(None, InverterInput(c.u_a, c.u_b))
+        _, u_next = drive.inverter.step(drive.inverter.init(), InverterInput(c.u_a, c.u_b))  # stateless
         out = DriveOutput(
             t=t,
             theta_e=wrap(y.theta_e),

@@ -181,10 +181,10 @@ def run_job(job: Job, out: Path, resume: bool = False, quiet: bool = False) -> d
         result["holdout"]["count"] = len(hc)
         result["lost_lock_tuned_only"]["holdout"] = _lost_only(hper)
         with atomic_path(out / "holdout_scores.nc") as tmp:
-            scores_dataset(hobj, hn, hc, job.holdout, hper).to_netcdf(tmp, engine="scipy")
+            scores_dataset(hobj, hn, hc, job.holdout, hper).to_netcdf(tmp, engine="h5netcdf")
     bar.close()
     with atomic_path(out / "scores.nc") as tmp:
-        scores_dataset(obj, names, combos, job.scenarios, per).to_netcdf(tmp, engine="scipy")
+        scores_dataset(obj, names, combos, job.scenarios, per).to_netcdf(tmp, engine="h5netcdf")
     write_json(out / "history.json", res.history)
     write_report(out, job, obj, thetas, res.history)
     timing = {"total_s": time.time() - t0, **res.timing, "iterations": res.iterations}
