@@ -46,7 +46,7 @@ def versions() -> dict:
 
 def read_file(path, max_bytes: int) -> bytes:
     """The bytes of the regular file at ``path``, at most ``max_bytes`` of them; else a one-line ``ValueError``
-    (``cannot read 'P' (reason)``, ``'P' is not a regular file``, ``'P': more than the limit of N bytes``) that a
+    (``cannot read 'P' (reason)``, ``'P': not a file``, ``'P': more than the limit of N bytes``) that a
     caller prefixes with the field or argument that named the file.
 
     A FIFO, a device or a directory is refused before it is opened (``os.stat``), and the file is opened
@@ -57,13 +57,13 @@ def read_file(path, max_bytes: int) -> bytes:
     try:
         st = os.stat(p)
         if not stat.S_ISREG(st.st_mode):
-            raise ValueError(f"{shown} is not a regular file")
+            raise ValueError(f"{shown}: not a file (only regular files are read: no FIFO, device or folder)")
         if st.st_size > max_bytes:
             raise ValueError(f"{shown}: {st.st_size} bytes, more than the limit of {max_bytes} bytes")
         fd = os.open(p, os.O_RDONLY | os.O_NONBLOCK | getattr(os, "O_CLOEXEC", 0))
         with os.fdopen(fd, "rb") as f:
             if not stat.S_ISREG(os.fstat(f.fileno()).st_mode):
-                raise ValueError(f"{shown} is not a regular file")
+                raise ValueError(f"{shown}: not a file (only regular files are read: no FIFO, device or folder)")
             data = f.read(max_bytes + 1)  # + 1: a file that grew after the stat is still caught
     except OSError as e:
         raise ValueError(f"cannot read {shown} ({e.strerror or type(e).__name__})") from None
