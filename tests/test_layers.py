@@ -76,7 +76,7 @@ LAYERS = [
     ("jaxobs.reproduce.leso_dual",),
     ("jaxobs.reproduce",),
     # tuning: it changes gains (and exports the tuned observer)
-    ("tuning.outdir",),
+    ("tuning.outdir", "tuning.checkpoint"),
     # the C export's code generator (jaxpr -> C) is beside the rest: it knows no observer
     ("tuning.export.ir",),
     ("tuning.export.lower",),
