@@ -24,7 +24,6 @@ from .hardware import Inverter
 from .latency import Latency
 from .loop import Drive
 from .machine import PMSMParams, ipmsm_paper002, spmsm_paper000
-from .weakening import VoltageFeedbackFW
 
 __all__ = [
     "BENCH_MACHINES",
@@ -63,25 +62,20 @@ def bench_drive(
     alpha_s: float | None = None,
     ts: float | None = None,
     latency: Latency | None = None,
-    advance: float | None = None,
-    field_weakening: VoltageFeedbackFW | None = None,
     inverter: Inverter | None = None,
+    **foc_kw,
 ) -> Drive:
     """The bench's drive on ``machine`` (the machine the FOC assumes): IMC current loop at
     2π·BENCH_CURRENT_HZ rad/s, I-P speed loop at ``alpha_s`` (rad/s; default 2π·BENCH_SPEED_HZ).
 
     ``sensorless``: the observer closes the loop (from ``handover`` s on, after ``settle`` s of unscored
     settling); ``startup``: an I-f start-up from standstill (:meth:`IfStartup.for_machine`) or None (each
-    scenario starts steady); ``ts``: the control period (s; default the FOC's); ``latency``, ``advance`` (the
-    FOC's delay compensation, periods; default 1.5), ``field_weakening`` and ``inverter``: as
-    :class:`Drive` and :class:`FOC` take them (defaults: the historical timing, no field weakening, 540 V)."""
+    scenario starts steady); ``ts``: the control period (s; default the FOC's); ``latency`` and ``inverter``: as
+    :class:`Drive` takes them (defaults: the historical timing, 540 V); ``foc_kw``: :class:`FOC`'s options
+    (``advance``, ``field_weakening``, ``speed_schedule``, ...)."""
     alpha_s = 2 * math.pi * papers.BENCH_SPEED_HZ if alpha_s is None else alpha_s
-    kw = {} if ts is None else {"ts": ts}
-    if advance is not None:
-        kw["advance"] = advance
-    foc = FOC.imc(
-        machine, alpha_c=2 * math.pi * papers.BENCH_CURRENT_HZ, alpha_s=alpha_s, field_weakening=field_weakening, **kw
-    )
+    kw = dict(foc_kw) if ts is None else {"ts": ts, **foc_kw}
+    foc = FOC.imc(machine, alpha_c=2 * math.pi * papers.BENCH_CURRENT_HZ, alpha_s=alpha_s, **kw)
     return Drive(
         foc, inverter, sensorless=sensorless, handover=handover, settle=settle, startup=startup, latency=latency
     )
