@@ -37,6 +37,7 @@ from ._discretize import Tustin as Tustin
 
 # checkpoint strategies of the loop (how gradients through a long horizon are computed)
 from ._loop import AbstractCheckpoint as AbstractCheckpoint
+from ._loop import AbstractReverseCheckpoint as AbstractReverseCheckpoint
 from ._loop import AutoCheckpoint as AutoCheckpoint
 from ._loop import ChunkCheckpoint as ChunkCheckpoint
 from ._loop import ForwardSensitivity as ForwardSensitivity
@@ -70,6 +71,7 @@ from .observers import SOGIFLL as SOGIFLL
 from .observers import SOGIFLLWIF as SOGIFLLWIF
 from .observers import SOGIFLLWPF as SOGIFLLWPF
 from .observers import SOIFO as SOIFO
+from .observers import AbstractDriveObserver as AbstractDriveObserver
 from .observers import AbstractObserver as AbstractObserver
 from .observers import LPFFlux as LPFFlux
 from .observers import ObserverBank as ObserverBank
@@ -112,6 +114,7 @@ __all__ = [
     "PrecisionWarning",
     "SampleTime",
     "AbstractCheckpoint",
+    "AbstractReverseCheckpoint",
     "AutoCheckpoint",
     "NoCheckpoint",
     "StepCheckpoint",
@@ -125,6 +128,7 @@ __all__ = [
     "RK4",
     # observers
     "AbstractObserver",
+    "AbstractDriveObserver",
     "DriveInput",
     "SOGI",
     "SOGI2",

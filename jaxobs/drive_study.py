@@ -45,15 +45,16 @@ identical runs.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
-import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 
 from . import metrics as M
 from .drive import DRIVE_AXES, RPM, ClosedLoop, Drive, PMSMParams, Profile, Scenario, scenario_batch
+from .observers import AbstractDriveObserver
 from .provenance import provenance
 from .runner import run_scenarios
 from .scenarios import LHS, Grid, Sobol
@@ -143,20 +144,19 @@ def drive_scenarios(machine: PMSMParams, names, combos, *, seed: int = 0, t_even
 
 
 def bind_observer(obs, sc: Scenario):
-    """The observer with the scenario's assumed machine and initial speed (LESOs: Rs, Lq; flux observers: Rs, L)."""
-    est, w_e = sc.est_par, sc.est_par.p * sc.omega_m0
-    if hasattr(obs, "Lq"):  # LESO family
-        return eqx.tree_at(lambda o: (o.Rs, o.Lq, o.omega0_pll), obs, (est.Rs, est.Lq, w_e))
-    if hasattr(obs, "L"):  # flux observers of paper 000
-        return eqx.tree_at(lambda o: (o.Rs, o.L, o.omega0), obs, (est.Rs, est.Ld, jnp.maximum(jnp.abs(w_e), 1.0)))
-    raise ValueError(f"drive study: {type(obs).__name__} is not a drive observer (a LESO or a flux observer)")
+    """The observer bound to the scenario's assumed machine and initial speed: ``obs.bind(est_par, p̂·ω_m0)``
+    (:meth:`jaxobs.observers.AbstractDriveObserver.bind`, the one binding), as studies and drive jobs run it."""
+    if not isinstance(obs, AbstractDriveObserver):
+        raise ValueError(f"drive study: {type(obs).__name__} is not a drive observer (a LESO or a flux observer)")
+    return obs.bind(sc.est_par, sc.est_par.p * sc.omega_m0)
 
 
 def drive_gains(obs) -> dict:
     """A drive observer's gains (name -> float): its fields named in :data:`DRIVE_GAIN_UNITS`, less what a study
-    binds per scenario (a flux observer's ``omega0`` is its initial speed, a LESO's its bandwidth)."""
-    bound = {"omega0"} if hasattr(obs, "L") else set()
-    return {g: float(getattr(obs, g)) for g in DRIVE_GAIN_UNITS if hasattr(obs, g) and g not in bound}
+    binds per scenario (``bound_fields``: a flux observer's ``omega0`` is its initial speed, a LESO's its
+    bandwidth, a gain)."""
+    fields = {f.name for f in dataclasses.fields(obs)} - set(type(obs).bound_fields)
+    return {g: float(getattr(obs, g)) for g in DRIVE_GAIN_UNITS if g in fields}
 
 
 def run_drive_study(

@@ -63,7 +63,9 @@ __all__ = [
     "BENCH_J_002",
     "IPMSM_002_A5",
     "IPMSM_002_A7",
+    "DUAL_LLS_002",
     "LESO_PLL_HZ",
+    "PLL_ZETA",
     # the simulated benches of 000 and 002
     "BENCH_CURRENT_HZ",
     "BENCH_SPEED_HZ",
@@ -170,8 +172,17 @@ BENCH_J_002 = 10 * IPMSM_002["J"]
 # that the C-LESO's transfer function at 300 r/min predicts the C-LESO percentages 002 measured.
 IPMSM_002_A5 = 0.0675
 IPMSM_002_A7 = 0.0879
+# The dual three-phase IPMSM (jaxobs.drive.dual_ipmsm_paper002; 002's machine, Sec. V).  Its BEMF harmonics:
+# each phase carries IPMSM_002_A5/A7 above, i.e. the content of *one set* that Fig. 13 (300 r/min, half load,
+# two individual sets, C-LESO 5.4 / 5.9 %) implies; VSD maps them to xy, which is why Fig. 15 (VSD, 600 r/min,
+# 80 % load) shows them "negligible" in αβ.  The 11th/13th (which VSD keeps in αβ) are "relatively low"
+# (Sec. V-B) and left out.  ASSUMED: the xy (leakage) inductance Lls, H: a third of the assumed Ld (leakage
+# of 10-35 % of the magnetizing inductance is usual for dual three-phase PMSMs; no number in 002).
+DUAL_LLS_002 = 2e-3
 # ASSUMED: the type-2 PLL after each LESO, ω_b = 2π·15 rad/s (our copy lacks 002's PLL section).
 LESO_PLL_HZ = 15.0
+# ASSUMED: the damping of our type-2 PLLs, pole placement k_p = 2ζω_b, k_i = ω_b² (jaxobs.linear.pll_gains).
+PLL_ZETA = 1 / math.sqrt(2)
 
 # --------------------------------------------------------------------------
 # The simulated benches of 000 and 002 (ASSUMED: neither paper gives its loop bandwidths)

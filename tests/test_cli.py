@@ -12,6 +12,7 @@ from pathlib import Path
 import pytest
 
 import jaxobs
+from jaxobs import papers
 from tuning.cli import BODE_FILES, DEMO_FILES, REPRODUCE_FILES, build_parser, load_study, main
 from tuning.results import load_result, tuned_component
 
@@ -215,7 +216,11 @@ def test_study_design_from_a_tuning_result(tmp_path):
     """tuning.results reads result.json; the study gets the tuned component (job values + tuned gains)."""
     obs = tuned_component(load_result(_result_json(tmp_path)))
     assert isinstance(obs, jaxobs.SOGIFLLWIF)
-    assert (float(obs.k1), float(obs.k2), float(obs.lam)) == (1.7, 0.752, 9000.0)  # [component], job default, tuned
+    assert (float(obs.k1), float(obs.k2), float(obs.lam)) == (
+        1.7,
+        papers.WIF_K2,
+        9000.0,
+    )  # [component], job default, tuned
     st = tmp_path / "s.toml"
     st.write_text(f'[designs.tuned]\nresult = "{_result_json(tmp_path)}"\n[axes]\ndc = [0.0]\n')
     name, designs, axes, _ = load_study(st)

@@ -13,7 +13,7 @@ from jaxobs import papers
 
 
 def test_continuous_round_trip_and_frequency_response():
-    tf = L.sosoifo_tf(1.56, 3.11, 100 * math.pi)
+    tf = L.sosoifo_tf(papers.SECOND_ORDER_SOIFO_K1, papers.SECOND_ORDER_SOIFO_K2, 100 * math.pi)
     sys = tf.to_control()
     assert isinstance(sys, control.TransferFunction) and sys.dt == 0
     w = np.logspace(0, 4, 50)

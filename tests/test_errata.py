@@ -8,10 +8,11 @@ import numpy as np
 import pytest
 
 import jaxobs.linear as L
+from jaxobs import papers
 
 W = 100 * math.pi  # ω' = ω1 = 100π rad/s, 000 Fig. 5
 K = math.sqrt(2)  # 000's k
-K1, K2 = 1.56, 3.11  # 000's K1, K2 (Fig. 5, Table V)
+K1, K2 = papers.SECOND_ORDER_SOIFO_K1, papers.SECOND_ORDER_SOIFO_K2  # 000's K1, K2 (Fig. 5, Table V)
 HS = [2.0, 3.0, 5.0, 7.0, 11.0, 13.0]  # harmonic orders h = ω_h/ω'
 
 

@@ -1,4 +1,4 @@
-"""Firmware export (tuning/export.py): the C generated from the jaxpr of an observer's step (every observer
+"""Firmware export (tuning/export/): the C generated from the jaxpr of an observer's step (every observer
 of jaxobs, and one defined in this file), compiled with the system C compiler, matches the golden vectors of
 the float32 JAX step to 1e-4 over >= 10 000 steps.
 
@@ -8,6 +8,7 @@ this suite's x64 setting; the checks run the generated harness (test_main.c) and
 
 import argparse
 import json
+import math
 import re
 import shutil
 import tomllib
@@ -21,13 +22,12 @@ import numpy as np
 import pytest
 
 import jaxobs
-from jaxobs import linear
+from jaxobs import linear, papers
 from jaxobs.drive import bench_machine
 from tuning.export import (
     MIN_STEPS,
     TOLERANCE,
     add_export_parser,
-    bind_to_drive,
     compile_and_check,
     drive_recording,
     drive_test_signal,
@@ -35,6 +35,11 @@ from tuning.export import (
     observer_from_design,
     observer_from_result,
 )
+
+
+def _bound(obs, machine, rpm: float):
+    """``obs`` bound to ``machine`` at ``rpm``: the one binding, as ``jaxobs export`` does it."""
+    return obs.bind(machine, float(rpm) * math.pi / 30 * int(machine.p))
 
 
 def _need_cc():
@@ -97,6 +102,15 @@ def test_fll_family_c_matches_the_float32_jax_step(tmp_path, design, rule):
     assert c["golden"]["steps"] >= MIN_STEPS
     err = compile_and_check(tmp_path)
     assert err <= TOLERANCE, f"{design} {c['rule']['name']}: max relative error {err:.3g}"
+
+
+def test_the_sogi_filter_exports_too(tmp_path):
+    """Not an FLL and never written by hand for the export: the SOGI quadrature filter (a fixed ω') exports from
+    its step like any observer, outputs v_alpha, v_beta, and matches its golden vectors."""
+    _need_cc()
+    c = export_observer(jaxobs.SOGI(k=1.414), tmp_path)
+    assert c["component"] == "SOGI" and c["outputs"] == ["v_alpha", "v_beta"] and c["angle_outputs"] == []
+    assert compile_and_check(tmp_path) <= TOLERANCE
 
 
 def test_files_macros_and_coefficients_agree(tmp_path):
@@ -246,6 +260,7 @@ def test_closed_form_design_from_the_command_line(tmp_path, capsys):
 
 
 _W = 2 * np.pi * 50
+_K1, _K2 = papers.SECOND_ORDER_SOIFO_K1, papers.SECOND_ORDER_SOIFO_K2
 _KP, _KI = (float(g) for g in linear.pll_gains(2 * np.pi * 15.0))
 _DRIVE = {
     "PureIntegratorFlux": lambda **kw: jaxobs.PureIntegratorFlux(
@@ -254,9 +269,9 @@ _DRIVE = {
     "LPFFlux": lambda **kw: jaxobs.LPFFlux(
         Rs=0.5, L=0.005, omega_c=20.0, kp_pll=_KP, ki_pll=_KI, omega0=_W, compensate=True, **kw
     ),
-    "SOIFO": lambda **kw: jaxobs.SOIFO(Rs=0.5, L=0.005, k=1.414, lam=0.5, omega0=_W, **kw),
+    "SOIFO": lambda **kw: jaxobs.SOIFO(Rs=0.5, L=0.005, k=papers.SOIFO_K, lam=0.5, omega0=_W, **kw),
     "SecondOrderSOIFO": lambda **kw: jaxobs.SecondOrderSOIFO(
-        Rs=0.5, L=0.005, K1=1.56, K2=3.11, lam=1.56**3 / 6.22, omega0=_W, **kw
+        Rs=0.5, L=0.005, K1=_K1, K2=_K2, lam=linear.second_order_soifo_lambda(_K1, _K2), omega0=_W, **kw
     ),
     "CLESO": lambda **kw: jaxobs.CLESO(Rs=0.6, Lq=0.012, **kw),
     "GILESO": lambda **kw: jaxobs.GILESO(Rs=0.6, Lq=0.012, omega0_pll=_W, **kw),
@@ -356,7 +371,7 @@ def test_drive_recording_is_what_the_loop_feeds_its_observer():
     (000 eq 6 on 000's SPMSM) has |e| = ω_e ψf to 1 %, ω_e the true speed (10 % up after the speed step)."""
     import jaxobs.drive as D
 
-    obs = bind_to_drive(_DRIVE["SOIFO"](), bench_machine("spmsm000"), 1000.0)
+    obs = _bound(_DRIVE["SOIFO"](), bench_machine("spmsm000"), 1000.0)
     n = 3000
     data, doc = drive_recording(obs, n)
     assert data.shape == (n, 4) and data.dtype == np.float32 and "000 SPMSM" in doc
@@ -396,9 +411,10 @@ def test_drive_observers_match_on_a_drive_recording(tmp_path, name, rule):
     tolerance is absolute there): float32 rounding of the high-gain extended state."""
     _need_cc()
     obs = _DRIVE[name](**({} if rule is None else {"rule": rule}))
-    rpm = 300.0 if hasattr(obs, "Lq") else 1000.0
-    machine = bench_machine("ipmsm002" if hasattr(obs, "Lq") else "spmsm000")
-    obs = bind_to_drive(obs, machine, rpm)
+    leso = isinstance(obs, jaxobs.observers.AbstractLESO)
+    rpm = 300.0 if leso else 1000.0
+    machine = bench_machine("ipmsm002" if leso else "spmsm000")
+    obs = _bound(obs, machine, rpm)
     assert float(obs.Rs) == float(machine.Rs)
     c = export_observer(obs, tmp_path)
     assert "sensored FOC drive" in c["golden"]["signal"] and c["golden"]["steps"] == 12_000
@@ -410,7 +426,7 @@ def test_unshaped_recording_start_is_ill_conditioned(tmp_path):
     """Why the recording's first period is shaped: unshaped, a Tustin SOIFO's signed speed flips at the first
     sample in one implementation and not the other (error 2), a pure integrator's angle misses by 5e-2."""
     _need_cc()
-    obs = bind_to_drive(_DRIVE["SOIFO"](rule=jaxobs.Tustin()), bench_machine("spmsm000"), 1000.0)
+    obs = _bound(_DRIVE["SOIFO"](rule=jaxobs.Tustin()), bench_machine("spmsm000"), 1000.0)
     data, _ = drive_recording(obs, 12_000)
     export_observer(obs, tmp_path, signal=data)
     assert compile_and_check(tmp_path) > 1e-2

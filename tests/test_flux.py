@@ -3,7 +3,6 @@ drive, sensorless closed loop, batching and gradients."""
 
 import math
 
-import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -176,8 +175,7 @@ def test_vmap_over_64_scenarios_with_the_second_order_soifo():
 
     def run(s):
         we0 = s.speed_ref.values[0] * par.p
-        obs = jaxobs.SecondOrderSOIFO(par.Rs, par.Ld, K1, K2, 0.6, omega0=1.0)
-        obs = eqx.tree_at(lambda o: (o.Rs, o.omega0), obs, (s.est_par.Rs, we0))
+        obs = jaxobs.SecondOrderSOIFO(par.Rs, par.Ld, K1, K2, 0.6, omega0=1.0).bind(s.est_par, we0)  # grid's R̂s
         sol = jaxobs.simulate(D.ClosedLoop(drv, obs, s), 0.4)  # sensored: the observer runs open loop
         return jnp.max(jnp.abs(wrap(sol.outputs.obs.theta - sol.outputs.theta_e)[-500:])), sol.ok
 

@@ -32,19 +32,22 @@ LAYERS = [
         "jaxobs.progress",
         "jaxobs.provenance",
         "jaxobs._cache",
+        "jaxobs.drive.component",
     ),
     # integration rules (and check_rule)
     ("jaxobs._discretize",),
     # signals and plant: they produce the measurements
-    ("jaxobs.signals", "jaxobs.drive.machine", "jaxobs.drive.hardware"),
-    ("jaxobs.scenarios", "jaxobs.drive.plant", "jaxobs.drive.control", "jaxobs.drive.scenario"),
-    ("jaxobs.drive.loop",),
-    ("jaxobs.drive.bench",),
-    ("jaxobs.drive",),
+    ("jaxobs.signals._waveforms", "jaxobs.signals._recordings", "jaxobs.drive.machine", "jaxobs.drive.hardware"),
+    ("jaxobs.signals",),
+    ("jaxobs.scenarios", "jaxobs.drive.plant", "jaxobs.drive.dual", "jaxobs.drive.control", "jaxobs.drive.scenario"),
     # observers: they estimate
     ("jaxobs.observers._cores", "jaxobs.observers.base"),
     ("jaxobs.observers.sogi", "jaxobs.observers.fll", "jaxobs.observers.flux", "jaxobs.observers.leso"),
     ("jaxobs.observers",),
+    # the closed loop composes the drive's parts with a drive observer (its contract, observers.base)
+    ("jaxobs.drive.loop", "jaxobs.drive.dual_loop"),
+    ("jaxobs.drive.bench",),
+    ("jaxobs.drive",),
     # the one loop over a system, and sharding a batch over devices
     ("jaxobs._steps", "jaxobs._sensitivity"),
     ("jaxobs._loop",),
@@ -86,9 +89,15 @@ LAYERS = [
     ("tuning.job",),
     ("tuning.results",),
     ("tuning.study_file",),
+    # the export: where the observer comes from, its test records, the harness; the export; its command
+    ("tuning.export.sources", "tuning.export.golden", "tuning.export.harness"),
+    ("tuning.export.files",),
+    ("tuning.export.command",),
     ("tuning.export",),
     ("tuning",),
     # the command line: the top layer (`jaxobs ...` and `python -m jaxobs`)
+    ("tuning.cli_common", "tuning.summary", "tuning.distributed"),
+    ("tuning.cli_papers",),
     ("tuning.cli",),
     ("jaxobs.__main__",),
 ]
@@ -216,9 +225,9 @@ def test_imports_go_down_the_layers_and_none_is_deferred():
 
 def test_the_checks_see_a_violation(tmp_path, monkeypatch):
     """The parser resolves relative and package imports, and flags upward and deferred ones."""
-    targets = {(t, lazy) for t, _, lazy in _imports("jaxobs.signals")}
-    assert ("jaxobs.papers", False) in targets  # `from . import papers`
-    assert ("jaxobs._measurements", False) in targets  # `from ._measurements import DriveInput`
+    targets = {(t, lazy) for t, _, lazy in _imports("jaxobs.signals._waveforms")}
+    assert ("jaxobs.papers", False) in targets  # `from .. import papers`
+    assert ("jaxobs._measurements", False) in targets  # `from .._measurements import DriveInput`
     assert {t for t, _, _ in _imports("jaxobs.reproduce.leso")} >= {"jaxobs.drive", "jaxobs.linear", "jaxobs.papers"}
     probe = tmp_path / "_probe.py"  # a module beside signals that imports upward, once at the top, once deferred
     probe.write_text("from . import study\n\n\ndef f():\n    from . import metrics\n")
@@ -231,3 +240,66 @@ def test_the_checks_see_a_violation(tmp_path, monkeypatch):
     found = _violations()
     assert "a layer above it" in " ".join(found[("jaxobs._probe", "jaxobs.study")])
     assert "inside a function" in " ".join(found[("jaxobs._probe", "jaxobs.metrics")])
+
+
+def _private_imports(name):
+    """(line, what) for every import in module ``name`` of a private module or name that belongs to another
+    package: ``from x._y import ...`` / ``import x._y`` where ``x`` is not the importer's package or one
+    enclosing it, and ``from pkg.mod import _name`` where ``pkg`` is not.  A package's private parts are its
+    own and its subpackages'."""
+    own = _package_of(name)
+
+    def inside(pkg):  # pkg is the importer's package or encloses it
+        return own == pkg or own.startswith(pkg + ".")
+
+    tree = ast.parse(MODULES[name].read_text())
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            pairs = [(a.name, None) for a in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = own.split(".")
+                module = ".".join(base[: len(base) - (node.level - 1)] + ([node.module] if node.module else []))
+            else:
+                module = node.module
+            pairs = [(module, a.name) for a in node.names]
+        else:
+            continue
+        for module, imported in pairs:
+            if module.split(".")[0] not in PACKAGES:
+                continue
+            parts = module.split(".")
+            for i, part in enumerate(parts):
+                if part.startswith("_") and not part.startswith("__") and not inside(".".join(parts[:i])):
+                    yield node.lineno, f"the private module {module}"
+                    break
+            else:
+                if imported and imported.startswith("_") and not imported.startswith("__"):
+                    target = f"{module}.{imported}"
+                    pkg = target if target in MODULES and MODULES[target].name == "__init__.py" else module
+                    pkg = pkg if pkg in MODULES and MODULES[pkg].name == "__init__.py" else pkg.rpartition(".")[0]
+                    if not inside(pkg):
+                        yield node.lineno, f"the private name {imported} of {module}"
+
+
+def test_no_private_name_crosses_a_package():
+    """A module imports another package's public names only (its own package's, and enclosing packages',
+    private modules and names are its own): a private name is free to change without a caller elsewhere."""
+    bad = [f"{name}:{line} imports {what}" for name in MODULES for line, what in _private_imports(name)]
+    assert not bad, "\n".join(bad)
+
+
+def test_the_private_import_check_sees_one(tmp_path, monkeypatch):
+    probe = tmp_path / "_probe.py"
+    probe.write_text(
+        "from jaxobs.observers._cores import x\nfrom .job.fields import _cap\nfrom jaxobs._validate import y\n"
+        "import jaxobs._math\nfrom .targets import _z\n"
+    )
+    monkeypatch.setitem(MODULES, "tuning._probe", probe)
+    found = [what for _, what in _private_imports("tuning._probe")]
+    assert found == [
+        "the private module jaxobs.observers._cores",
+        "the private name _cap of tuning.job.fields",
+        "the private module jaxobs._validate",
+        "the private module jaxobs._math",
+    ], found

@@ -31,9 +31,7 @@ def steady_runs():
     def run(rpm):
         sc = D.Scenario(PAR, speed_ref=D.Profile.constant(0.0))  # traced speed set below
         sc = eqx.tree_at(lambda s: (s.speed_ref.values, s.omega_m0), sc, (jnp.atleast_1d(rpm * D.RPM), rpm * D.RPM))
-        bank = eqx.tree_at(
-            lambda b: tuple(o.omega0_pll for o in b.observers), leso_bank(PAR, 1.0), (PAR.p * rpm * D.RPM,) * 3
-        )
+        bank = leso_bank(PAR, PAR.p * rpm * D.RPM)
         sol = jaxobs.simulate(D.ClosedLoop(D.bench_drive(PAR, handover=0.3), bank, sc), 0.8)
         errs = jnp.stack([jnp.degrees(wrap(o.theta - sol.outputs.theta_e)) for o in sol.outputs.obs.each])
         return jnp.mean(errs[:, -2000:], axis=1), sol.ok
@@ -151,8 +149,7 @@ def test_vmap_over_64_scenarios_and_gradients():
 
     def run(s):
         w0 = s.speed_ref.values[0] * PAR.p
-        obs = jaxobs.FALESO(PAR.Rs, PAR.Lq, K1_FA, K2_FA, omega0_pll=1.0)
-        obs = eqx.tree_at(lambda o: (o.Lq, o.omega0_pll), obs, (s.est_par.Lq, w0))
+        obs = jaxobs.FALESO(PAR.Rs, PAR.Lq, K1_FA, K2_FA).bind(s.est_par, w0)  # the grid's L̂q (R̂s nominal)
         sol = jaxobs.simulate(D.ClosedLoop(drv, obs, s), 0.8)
         return jnp.mean(jnp.degrees(wrap(sol.outputs.obs.theta - sol.outputs.theta_e))[-1000:]), sol.ok
 

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from jaxobs import metrics as M
+from jaxobs import papers
 
 T = jnp.linspace(0.0, 1.0, 10001)
 
@@ -188,7 +189,7 @@ def test_lost_lock_of_a_simulation_under_jit():
     assert bool(ok) and bool(lost) and bool(lost_angle)  # finite, "ok", and far from the truth
     # a flux observer on a back EMF (no truth in the outputs): the signal's flux angle is the truth
     emf = jaxobs.signals.EMFSignal(A1=100.0, omega1=2 * math.pi * 50)
-    obs = jaxobs.SOIFO(Rs=0.0, L=1.0, k=1.414, lam=0.5, omega0=2 * math.pi * 50)
+    obs = jaxobs.SOIFO(Rs=0.0, L=1.0, k=papers.SOIFO_K, lam=0.5, omega0=2 * math.pi * 50)
     sol = jaxobs.simulate(jaxobs.OnSignal(obs, emf), 0.3)
     assert not bool(jaxobs.lost_lock_of(sol, signal=emf))
     assert bool(jaxobs.lost_lock_of(sol, signal=jaxobs.signals.EMFSignal(A1=100.0, omega1=2 * math.pi * 40)))

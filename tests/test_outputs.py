@@ -16,10 +16,11 @@ import pytest
 import xarray as xr
 
 from tuning import solvers, strategies
-from tuning.cli import _print_summary, main
+from tuning.cli import main
 from tuning.outdir import LOCK, OutDir, OutError, atomic_path, atomic_write_bytes, safe_name
 from tuning.params import GainSpec, Parametrization
 from tuning.solvers import CheckpointError, tune
+from tuning.summary import print_summary
 
 # --------------------------------------------------------------------------
 # containment
@@ -138,7 +139,7 @@ def test_cli_refuses_a_locked_or_used_out_with_one_line(tmp_path, capsys, monkey
     assert int(scores["lost_lock"].sum()) == 0
     # a tuned design that loses lock where the closed form holds it is a warning
     capsys.readouterr()
-    _print_summary(dict(res, lost_lock_tuned_only={"tuning": 2}), tmp_path)
+    print_summary(dict(res, lost_lock_tuned_only={"tuning": 2}), tmp_path)
     warn = [ln for ln in capsys.readouterr().err.splitlines() if "lost lock" in ln]
     assert len(warn) == 1 and "2 tuning scenarios where the closed form holds it" in warn[0]
     assert not (tmp_path.parent / "escape").exists()

@@ -79,7 +79,10 @@ def test_linear_speed_loop_at_g1_is_the_design_and_fll_destabilizes_at_low_speed
     K1, K2 = papers.SECOND_ORDER_SOIFO_K1, papers.SECOND_ORDER_SOIFO_K2
     for rpm, holds in ((300.0, False), (1000.0, True)):
         w_e = par.p * rpm * math.pi / 30
-        for fll in (fll_frequency_sosoifo(K1, K2, K1**3 / (2 * K2), w_e), fll_frequency_soifo(1.414, 0.5, w_e)):
+        for fll in (
+            fll_frequency_sosoifo(K1, K2, K1**3 / (2 * K2), w_e),
+            fll_frequency_soifo(papers.SOIFO_K, 0.5, w_e),
+        ):
             v = linear_speed_loop(fll, **kw)
             assert bool(v.observer_stable)  # the papers' verdict: the FLL alone is always stable
             assert bool(v.loop_stable) == holds, (rpm, np.asarray(v.loop_poles))

@@ -13,6 +13,7 @@ import pytest
 
 import jaxobs
 from jaxobs import drive as D
+from jaxobs import papers
 
 PAR = D.spmsm_paper000()
 FOC = D.FOC.imc(PAR, alpha_c=2 * math.pi * 300, alpha_s=2 * math.pi * 20)
@@ -54,7 +55,9 @@ def test_user_scan_of_a_sensorless_closed_loop_equals_simulate_exactly():
     par = D.ipmsm_paper002()
     foc = D.FOC.imc(par, alpha_c=2 * math.pi * 300, alpha_s=2 * math.pi * 10)
     w_e = par.p * 300 * D.RPM
-    obs = jaxobs.FALESO(par.Rs, par.Lq, 10 * math.pi, 100 * math.pi, *jaxobs.linear.pll_gains(2 * math.pi * 15), w_e)
+    obs = jaxobs.FALESO(
+        par.Rs, par.Lq, papers.FALESO_K1, papers.FALESO_K2, *jaxobs.linear.pll_gains(2 * math.pi * 15), w_e
+    )
     sc = D.Scenario(par, speed_ref=D.Profile.constant(300 * D.RPM), omega_m0=300 * D.RPM)
     system = D.ClosedLoop(D.Drive(foc, sensorless=True, handover=0.005), obs, sc)
     n = 200
@@ -77,17 +80,22 @@ def test_user_scan_of_an_observer_on_a_signal_equals_simulate_exactly():
 
 
 def test_drive_pieces_are_step_components():
-    """PMSM, Sensors, Inverter and FOC each have init/step with named inputs and outputs."""
+    """PMSM, Sensors, Inverter and FOC share one base (AbstractComponent) and one init convention, init(op)
+    with keyword-only extras, and step with named inputs and outputs."""
+    op = D.OperatingPoint.at_rest(0.0)._replace(omega_m=jnp.asarray(100.0))
     plant = D.PMSM(PAR, ts=1e-4)
-    ps, y = plant.step(plant.init(omega_m0=100.0), D.PlantInput(jnp.asarray(10.0), jnp.asarray(0.0), jnp.asarray(0.0)))
+    ps, y = plant.step(plant.init(op), D.PlantInput(jnp.asarray(10.0), jnp.asarray(0.0), jnp.asarray(0.0)))
     assert float(y.omega_m) == 100.0 and ps.x.shape == (4,)
+    assert bool(jnp.all(plant.init().x == 0)) and float(plant.init(D.OperatingPoint.at_rest(0.7)).x[3]) == 0.7
     sens = D.Sensors(u_offset=(5.0, 0.0))
-    key, meas = sens.step(sens.init(jax.random.PRNGKey(1)), D.SensorInput(3, 10.0, 20.0, 1.0, 2.0))
+    key, meas = sens.step(sens.init(op, key=jax.random.PRNGKey(1)), D.SensorInput(3, 10.0, 20.0, 1.0, 2.0))
     assert isinstance(meas, jaxobs.DriveInput) and float(meas.u_a) == 15.0
     inv = D.Inverter(udc=100.0)
     _, u = inv.step(inv.init(), D.InverterInput(jnp.asarray(1000.0), jnp.asarray(0.0)))
     assert float(u.u_a) == pytest.approx(100.0 / math.sqrt(3))
     foc = FOC.bind(PAR, inv.u_max)
+    for component in (plant, sens, inv, foc):
+        assert isinstance(component, D.AbstractComponent)
     cs, c = foc.step(foc.init(), D.FOCInput(0, 0.0, 0.0, 0.0, 0.0, 0.0, 10.0))
     assert isinstance(c, D.FOCOutput) and float(cs.int_w) > 0.0  # I-P: the speed error enters the integrator
     with pytest.raises(ValueError, match="FOC.step needs the assumed machine"):

@@ -39,7 +39,7 @@ W_N = papers.FLL_OMEGA_N
 
 def test_lambda_for_damping_target_recovers_eq_22():
     """LM on the linear model's poles for ζ = 1/√2 returns k²ωn²/4 within 0.1 % (float64)."""
-    for k in (1 / math.sqrt(2), 1.0, 1.414):
+    for k in (1 / math.sqrt(2), 1.0, papers.SOIFO_K):
         lam = float(lambda_for_damping(k, W_N))
         assert lam == pytest.approx(k**2 * W_N**2 / 4, rel=1e-3)
 
@@ -86,11 +86,11 @@ def test_root_find_k1_for_equal_settling_time():
 
 
 def test_parametrization_bounds_round_trip_and_frozen_gains():
-    comp = jaxobs.SOGIFLLWIF(k1=1.8, k2=0.75, lam=11559.0)
-    param = Parametrization([GainSpec("lam", 11559.0, 1000.0, 1e5), GainSpec("k1", 1.8, None, None)])
+    comp = jaxobs.SOGIFLLWIF(k1=1.8, k2=0.75, lam=papers.WIF_LAM)
+    param = Parametrization([GainSpec("lam", papers.WIF_LAM, 1000.0, 1e5), GainSpec("k1", 1.8, None, None)])
     th = param.theta0()
     vals = param.values(th)
-    assert vals["lam"] == pytest.approx(11559.0) and vals["k1"] == pytest.approx(1.8)
+    assert vals["lam"] == pytest.approx(papers.WIF_LAM) and vals["k1"] == pytest.approx(1.8)
     huge = param.apply(comp, jnp.array([1e3, 0.0]))
     assert float(huge.lam) == pytest.approx(1e5)  # bounded
     assert float(huge.k2) == 0.75 and float(huge.omega_n) == float(comp.omega_n)  # frozen, untouched

@@ -60,11 +60,7 @@ in it); with no checkpoint it says so in one line and starts fresh.
 from __future__ import annotations
 
 import argparse
-import contextlib
-import hashlib
 import json
-import os
-import re
 import shlex
 import sys
 import tempfile
@@ -73,176 +69,20 @@ from importlib import resources
 from pathlib import Path
 
 import jaxobs
-from jaxobs import linear, papers, use_compile_cache, use_host_devices
+from jaxobs import use_compile_cache, use_host_devices
 
+from .cli_common import enable_x64, progress_of
+from .cli_papers import BODE_FILES as BODE_FILES
+from .cli_papers import CF_OPTIONS, cmd_bode, cmd_closed_form, cmd_demo, cmd_reproduce
+from .cli_papers import DEMO_FILES as DEMO_FILES
+from .cli_papers import REPRODUCE_FILES as REPRODUCE_FILES
+from .cli_papers import closed_form_rows as closed_form_rows
+from .distributed import distributed_asked, distributed_study, join_distributed, refuse_unsplittable
 from .export import add_export_parser
 from .job import CHECKPOINT, load_job, load_recordings, run_job
 from .outdir import OutDir, atomic_path, atomic_write_text, safe_name
 from .study_file import load_study as _load_study
-
-# the files each command writes under --out (refused there without --force; jaxobs.plot names them)
-DEMO_FILES = ("fll_tests_A_E.png",)
-BODE_FILES = ("bode_flux_observers_000_fig5.png", "bode_lesos_002_fig4.png", "bode_fll_open_loop_001_fig14.png")
-REPRODUCE_FILES = {
-    "flux": (
-        "flux_circles_du_alpha_5V.png",
-        "flux_circles_400rpm.png",
-        "position_error_load_step.png",
-        "position_error_speed_variation.png",
-        "position_error_du_alpha_5V.png",
-    ),
-    "leso": ("leso_position_error_600rpm.png", "leso_speed_ramp.png", "leso_load_step.png"),
-}
-
-
-class _out(OutDir):
-    """``with _out(args, files) as out``: ``--out`` checked and locked before any work (tuning.outdir), its
-    path as the value; an internal error's log goes there."""
-
-    def __init__(self, args, files):
-        super().__init__(Path(args.out), files, force=args.force)
-        self.args = args
-
-    def __enter__(self) -> Path:
-        super().__enter__()
-        self.args.log_dir = self.path
-        return self.path
-
-
-def _progress(args=None, quiet=None):
-    """The library's ``progress`` for a command: bars when stderr is a terminal, none with --quiet."""
-    quiet = args.quiet if quiet is None else quiet
-    return False if quiet else "auto"
-
-
-def _enable_x64():
-    import jax
-
-    jax.config.update("jax_enable_x64", True)
-
-
-def _cmd_demo(args) -> int:
-    _enable_x64()
-    from jaxobs.demo import DEMO_TESTS, fll_demo, format_table
-    from jaxobs.plot import fll_demo_figure
-
-    if args.t_event <= 0:
-        raise ValueError(f"--t-event must be > 0 s, got {args.t_event}")
-    with _out(args, DEMO_FILES) as out:
-        rows, traces = fll_demo(t_event=args.t_event, progress=_progress(args))
-        fig_path = out / DEMO_FILES[0]
-        with atomic_path(fig_path) as tmp:
-            fll_demo_figure(traces, DEMO_TESTS, args.t_event, tmp)
-    if args.json:
-        print(json.dumps(rows, indent=1))
-    else:
-        print("Paper 001 FLLs with Table I gains on Tests A–E (float64, AB3 at 10 kHz)")
-        print(format_table(rows))
-        print(f"figure: {fig_path}")
-    return 0 if all(r["ok"] for r in rows) else 1
-
-
-_CF_OPTIONS = {
-    "sogi-fll": ("k", "omega_n", "zeta"),
-    "wpf": ("omega_n", "zeta"),
-    "wif": ("omega_c", "b", "omega_n"),
-    "cleso": ("omega0", "rs", "lq"),
-}
-
-
-def closed_form_rows(design: str, values: dict) -> dict:
-    """Gains of a closed-form design with the formula and source of each (used by the CLI)."""
-    import math
-
-    pi = math.pi
-    if design == "sogi-fll":
-        k = values.get("k", 1 / math.sqrt(2))
-        wn = values.get("omega_n", 100 * pi)
-        zeta = values.get("zeta", 1 / math.sqrt(2))
-        obs = linear.sogi_fll_closed_form(k=k, omega_n=wn, zeta=zeta)
-        gains = [
-            ("k", float(obs.k), "chosen (001 uses 1/√2)", "001 Sec. II-B"),
-            ("lam", float(obs.lam), "λ = k²ωn²/(8ζ²)", "001 eq (22)"),
-        ]
-        inputs = dict(k=k, omega_n=wn, zeta=zeta)
-    elif design == "wpf":
-        wn = values.get("omega_n", 100 * pi)
-        zeta = values.get("zeta", 1 / math.sqrt(2))
-        obs = linear.wpf_closed_form(omega_n=wn, zeta=zeta)
-        gains = [
-            ("k1", float(obs.k1), "k1 = √2 (prefilter ζ = 1/√2)", "001 eq (26)"),
-            ("k2", float(obs.k2), "k2 = k1 (amplitude poles coincide)", "001 Sec. III-B"),
-            ("lam", float(obs.lam), "λ = 2(ζ+1)ωn²/(2ζ+1)³", "001 eq (29)"),
-        ]
-        inputs = dict(omega_n=wn, zeta=zeta)
-    elif design == "wif":
-        wc = values.get("omega_c", papers.WIF_OMEGA_C)
-        b = values.get("b", 1 + math.sqrt(2))
-        wn = values.get("omega_n", 100 * pi)
-        obs = linear.wif_closed_form(omega_c=wc, b=b, omega_n=wn)
-        pm = math.degrees(float(linear.symmetric_optimum_pm(b)))
-        gains = [
-            ("k1", float(obs.k1), "k1 = 2bωc/ωn", "001 eq (34)"),
-            ("k2", float(obs.k2), "k2 = 2ωc/ωn", "001 eq (34)"),
-            ("lam", float(obs.lam), "λ = 2ωc²/b", "001 eq (34)"),
-            ("phase_margin_deg", pm, "PM = atan((b²−1)/(2b))", "001 eq (39)"),
-        ]
-        inputs = dict(omega_c=wc, b=b, omega_n=wn)
-    elif design == "cleso":
-        if "rs" not in values or "lq" not in values:
-            raise ValueError(
-                "closed-form cleso needs --rs (stator resistance, ohm >= 0) and --lq (q-axis inductance, H > 0)"
-            )
-        w0 = values.get("omega0", 500 * pi)
-        g = linear.cleso_closed_form(w0, values["rs"], values["lq"])
-        gains = [
-            ("l1", float(g.l1), "l1 = 2ω0 − μ, μ = Rs/Lq", "002 eq (16)"),
-            ("l2", float(g.l2), "l2 = ω0²", "002 eq (16)"),
-        ]
-        inputs = dict(omega0=w0, rs=values["rs"], lq=values["lq"])
-    else:  # argparse restricts the choices
-        raise ValueError(f"design must be one of {', '.join(_CF_OPTIONS)}, got {design!r}")
-    return {
-        "design": design,
-        "inputs": inputs,
-        "gains": [dict(name=n, value=v, formula=f, source=src) for n, v, f, src in gains],
-    }
-
-
-def _cmd_closed_form(args) -> int:
-    _enable_x64()
-    values = {}
-    for name in ("k", "omega_n", "zeta", "omega_c", "b", "omega0", "rs", "lq"):
-        v = getattr(args, name)
-        if v is None:
-            continue
-        if name not in _CF_OPTIONS[args.design]:
-            allowed = ", ".join("--" + o.replace("_", "-") for o in _CF_OPTIONS[args.design])
-            raise ValueError(f"--{name.replace('_', '-')} does not apply to {args.design} (allowed: {allowed})")
-        values[name] = v
-    try:
-        res = closed_form_rows(args.design, values)
-    except ValueError as e:  # name the flag the user typed (wif_closed_form.b -> --b), not the function's field
-        raise ValueError(re.sub(r"\b\w+_closed_form\.(\w+)", lambda m: "--" + m[1].replace("_", "-"), str(e))) from None
-    if args.json:
-        print(json.dumps(res, indent=1))
-    else:
-        ins = ", ".join(f"{k} = {v:.6g}" for k, v in res["inputs"].items())
-        print(f"{args.design}: {ins}")
-        for g in res["gains"]:
-            print(f"  {g['name']:<18}{g['value']:>14.6g}   {g['formula']:<36}{g['source']}")
-    return 0
-
-
-def _cmd_bode(args) -> int:
-    _enable_x64()
-    from jaxobs.plot import paper_bode_figures
-
-    with _out(args, BODE_FILES) as out:
-        figs = paper_bode_figures(out)
-    for p in figs:
-        print(p)
-    return 0
+from .summary import print_summary
 
 
 def load_study(path):
@@ -255,7 +95,7 @@ def _cmd_drive_study(name, designs, axes, opts, out: Path, quiet: bool, provenan
     from jaxobs.drive_study import DRIVE_STUDY_METRICS, run_drive_study
     from jaxobs.plot import drive_study_figure
 
-    ds = run_drive_study(designs, axes, progress=_progress(quiet=quiet), **opts)
+    ds = run_drive_study(designs, axes, progress=progress_of(quiet=quiet), **opts)
     ds.attrs.update(provenance or {})  # the study file's and the result files' sha256, the machine
     fig = out / "drive_study.png"
     drive_study_figure(ds, fig)
@@ -305,16 +145,16 @@ def _recording_study(designs: dict, *, recording, t_event, horizon, steady_from,
 
 
 def _cmd_study(args) -> int:
-    _enable_x64()
+    enable_x64()
     path = Path(args.study) if args.study else Path(str(resources.files("jaxobs") / "data" / "default_study.toml"))
     # a distributed run is joined before anything starts JAX (loading the designs does); --check joins nothing.
     # What cannot be split over processes is refused before joining: a process that refuses after joining
     # leaves the others waiting for it.
     rank = None
-    if _distributed_asked(args):
-        _refuse_unsplittable(path)  # --check too: a file that passes --check is one the run accepts
+    if distributed_asked(args):
+        refuse_unsplittable(path)  # --check too: a file that passes --check is one the run accepts
         if not args.check:
-            rank = _join_distributed(args)
+            rank = join_distributed(args)
     spec = _load_study(path)  # everything checked: tables, keys, ranges, sizes, result files
     name, designs, axes = spec.name, spec.designs, spec.axes
     opts = dict(spec.opts, kind=spec.kind, provenance=spec.provenance)
@@ -323,134 +163,10 @@ def _cmd_study(args) -> int:
         return 0
     out = Path(args.out) if args.out else Path("out") / safe_name(str(name), "study")
     if rank is not None and rank[1] > 1:
-        return _distributed_study(name, designs, axes, opts, out, args, rank)
+        return distributed_study(name, designs, axes, opts, out, args, rank, _run_study)
     with OutDir(out, ["study.nc"], force=args.force):
         args.log_dir = out
         return _run_study(name, designs, axes, opts, out, args.quiet)
-
-
-def _distributed_asked(args) -> bool:
-    """Whether ``study`` was given any of the distributed run's options."""
-    given = (args.coordinator, args.num_processes, args.process_id, args.timeout)
-    return args.distributed or any(v is not None for v in given)
-
-
-def _refuse_unsplittable(path: Path) -> None:
-    """Drive and recording studies run in one process: refused from the raw TOML, before JAX starts.
-
-    A file that does not parse passes here; :func:`tuning.study_file.load_study` reports it after joining
-    (every process reads the same file, so every process stops with the same one-line error)."""
-    from .job import JobError, read_toml
-    from .study_file import WHAT
-
-    try:
-        raw, _ = read_toml(path, WHAT)
-    except JobError:
-        return
-    st = raw.get("study") if isinstance(raw.get("study"), dict) else {}
-    kind = "drive" if st.get("kind") == "drive" else "recording" if "recording" in st else None
-    if kind is not None:
-        raise ValueError(
-            f"{path}: only FLL studies on a scenario grid or sample are split over processes; "
-            f"run this {kind} study without --coordinator/--num-processes/--process-id/--distributed"
-        )
-
-
-def _join_distributed(args):
-    """``study --coordinator/--num-processes/--process-id/--distributed``: join the run
-    (jaxobs.init_distributed); (process id, process count).  Without ``--distributed`` all three are
-    required; with it, what is not given comes from the environment (JAX_COORDINATOR_ADDRESS, SLURM, Open MPI)."""
-    given = (args.coordinator, args.num_processes, args.process_id)
-    if not args.distributed:
-        missing = [f for f, v in zip(("--coordinator", "--num-processes", "--process-id"), given) if v is None]
-        if len(missing) == 3:  # --timeout alone
-            raise ValueError(
-                "--timeout applies to a distributed run: give --coordinator, --num-processes and --process-id, "
-                "or --distributed"
-            )
-        if missing:
-            raise ValueError(
-                f"a distributed study needs --coordinator, --num-processes and --process-id (missing: "
-                f"{', '.join(missing)}), or --distributed to take them from the environment"
-            )
-    if None not in given[1:] and args.process_id >= args.num_processes:
-        n = args.num_processes
-        raise ValueError(f"--process-id must be in 0..{n - 1} (--num-processes {n}), got {args.process_id}")
-    timeout = 300 if args.timeout is None else args.timeout
-    if not args.quiet and args.process_id == 0 and (args.num_processes or 0) > 1:
-        # process 0 left alone is aborted by JAX's runtime (a C++ stack dump): say so first.  The others
-        # check that process 0 listens before JAX starts and end with one line if it does not.
-        print(
-            f"jaxobs: process 0 waits up to {timeout} s (--timeout) for the other {args.num_processes - 1} "
-            "process(es); if they do not come, JAX aborts it (exit 134)",
-            file=sys.stderr,
-        )
-    try:
-        return jaxobs.init_distributed(*given, timeout=timeout)
-    except ValueError as e:  # what JAX could not find: name the CLI's options and variables, not the function's
-        jax_says = str(e.__context__ or e).rstrip(".")  # init_distributed raises from JAX's own ValueError
-        raise ValueError(
-            f"--distributed: the environment does not give the run ({jax_says}): set JAX_COORDINATOR_ADDRESS "
-            "(with --num-processes and --process-id), launch under SLURM's srun or Open MPI's mpirun, "
-            "or give --coordinator, --num-processes and --process-id"
-        ) from None
-
-
-@contextlib.contextmanager
-def _stdout_to_stderr():
-    """File descriptor 1 points at stderr inside (what native code prints there goes to stderr)."""
-    sys.stdout.flush()
-    saved = os.dup(1)
-    try:
-        os.dup2(2, 1)
-        yield
-    finally:
-        os.dup2(saved, 1)
-        os.close(saved)
-
-
-def _distributed_study(name, designs, axes, opts, out: Path, args, rank) -> int:
-    """One process of a study split over processes: every process computes its share of every chunk
-    (jaxobs.study.run_study), process 0 alone checks, locks and writes ``--out`` (and shows progress)."""
-    import numpy as np
-    from jax.experimental import multihost_utils
-
-    from jaxobs.study import run_study
-
-    pid, count = rank
-    with contextlib.ExitStack() as stack:
-        failure = None
-        if pid == 0:
-            try:
-                stack.enter_context(OutDir(out, ["study.nc"], force=args.force))
-                args.log_dir = out
-            except Exception as e:  # told to the others first, so that none of them waits for it in a collective
-                failure = e
-        # every process learns whether process 0 can write, and whether all were given the same study (file and
-        # result files, by sha256), before any of them computes: different files would give different chunk
-        # shapes, on which the collectives abort the processes.  The first collective connects the CPU
-        # collectives, whose gloo prints a line on the C++ stdout: to stderr, stdout is results.
-        prov = {k: v for k, v in (opts.get("provenance") or {}).items() if k != "study_file"}
-        digest = hashlib.sha256(json.dumps(prov, sort_keys=True, default=str).encode()).digest()
-        with _stdout_to_stderr():
-            ok = int(multihost_utils.broadcast_one_to_all(np.int32(failure is None)))
-            digests = np.asarray(multihost_utils.process_allgather(np.frombuffer(digest[:16], dtype=np.int32)))
-        if failure is not None:
-            raise failure
-        if not ok:
-            raise ValueError("process 0 cannot use its --out (its error says why); nothing computed")
-        differ = [i for i, d in enumerate(digests) if not np.array_equal(d, digests[0])]
-        if differ:
-            raise ValueError(
-                f"the processes were given different study files (or result files): process(es) "
-                f"{', '.join(map(str, differ))} differ from process 0; give every process the same; nothing computed"
-            )
-        if pid == 0:
-            return _run_study(name, designs, axes, opts, out, args.quiet)
-        kw = {k: v for k, v in opts.items() if k not in ("kind", "provenance", "recording")}
-        run_study(designs, axes, progress=False, **kw)
-        print(f"study {name}: process {pid} of {count} computed its share; process 0 writes the results")
-        return 0
 
 
 def _run_study(name, designs, axes, opts, out: Path, quiet: bool) -> int:
@@ -461,10 +177,10 @@ def _run_study(name, designs, axes, opts, out: Path, quiet: bool) -> int:
     if opts.pop("kind", "fll") == "drive":
         return _cmd_drive_study(name, designs, axes, opts, out, quiet, provenance)
     if opts.get("recording") is not None:  # [study.recording]: the recordings are the scenarios
-        ds, seconds = _recording_study(designs, progress=_progress(quiet=quiet), **opts)
+        ds, seconds = _recording_study(designs, progress=progress_of(quiet=quiet), **opts)
     else:
         opts.pop("recording", None)
-        ds, seconds = run_study(designs, axes, progress=_progress(quiet=quiet), return_seconds=True, **opts)
+        ds, seconds = run_study(designs, axes, progress=progress_of(quiet=quiet), return_seconds=True, **opts)
     ds.attrs.update(provenance)  # the study file's and the result files' sha256
     worst = {m: worst_cases(ds, m, 3) for m in STUDY_METRICS}
     atomic_write_text(out / "worst_cases.json", json.dumps(worst, indent=1))
@@ -489,103 +205,12 @@ def _run_study(name, designs, axes, opts, out: Path, quiet: bool) -> int:
     return 0
 
 
-def _emit_rows(rows, figs, as_json: bool, title: str) -> int:
-    """Print paper-vs-ours rows (table or JSON); non-zero exit if any simulation diverged."""
-    from jaxobs.reproduce.flux import format_rows
-
-    if as_json:
-        print(json.dumps(rows, indent=1))
-    else:
-        print(title)
-        print(format_rows(rows))
-        for p in figs:
-            print(f"figure: {p}")
-    return 0 if all(r["ours"] for r in rows if r["metric"] == "finite") else 1
-
-
-def _error_figures(traces, names, paper: str, specs, out: Path):
-    """One position-error figure per (experiment, file name, start time) in ``specs``."""
-    from jaxobs.plot import position_error_figure
-
-    paths = []
-    for key, fname, t_from in specs:
-        p = out / fname
-        position_error_figure(traces[key], names, f"Paper {paper}: {key}", p, t_from=t_from)
-        paths.append(p)
-    return paths
-
-
-def _cmd_reproduce(args) -> int:
-    _enable_x64()
-    if args.paper not in REPRODUCE_FILES:
-        raise ValueError(f"reproduce: unknown paper {args.paper!r}")
-    args.out = args.out or f"out/reproduce-{args.paper}"
-    with _out(args, REPRODUCE_FILES[args.paper]) as out:
-        return _reproduce(args, out)
-
-
-def _reproduce(args, out: Path) -> int:
-    if args.paper == "flux":
-        from jaxobs.plot import flux_circles_figure
-        from jaxobs.reproduce.flux import OBSERVER_NAMES, run_flux_experiments
-
-        rows, traces = run_flux_experiments(quick=args.quick, progress=_progress(args))
-        figs = []
-        files = REPRODUCE_FILES["flux"]
-        for key, fname in zip(("du_alpha = 5 V at 1000 r/min", "steady 400 r/min"), files[:2], strict=True):
-            p = out / fname
-            flux_circles_figure(traces[key], OBSERVER_NAMES, f"Paper 000: estimated flux, {key}", p)
-            figs.append(p)
-        figs += _error_figures(
-            traces,
-            OBSERVER_NAMES,
-            "000",
-            zip(
-                ("load step 10 N·m at 2000 r/min", "speed 400-2000-400 r/min", "du_alpha = 5 V at 1000 r/min"),
-                files[2:],
-                (0.3, 0.8, 0.8),
-                strict=True,
-            ),
-            out,
-        )
-        return _emit_rows(
-            rows,
-            figs,
-            args.json,
-            "Paper 000 (second-order SOIFO) experiments on the simulated SPMSM drive — paper vs ours",
-        )
-    if args.paper == "leso":
-        from jaxobs.reproduce.leso import LESO_NAMES, run_leso_experiments
-
-        rows, traces = run_leso_experiments(progress=_progress(args))
-        figs = _error_figures(
-            traces,
-            LESO_NAMES,
-            "002",
-            zip(
-                (
-                    "steady 600 r/min no load",
-                    "speed ramp 300-600-840-600-300 r/min",
-                    "load step 0-80 % at 600 r/min",
-                ),
-                REPRODUCE_FILES["leso"],
-                (0.4, 0.4, 0.4),
-                strict=True,
-            ),
-            out,
-        )
-        return _emit_rows(
-            rows, figs, args.json, "Paper 002 (LESOs) experiments on the simulated IPMSM drive — paper vs ours"
-        )
-    raise ValueError(f"reproduce: unknown paper {args.paper!r}")
-
-
 def default_job_path() -> Path:
     return Path(str(resources.files("tuning") / "presets" / "wif_robust.toml"))
 
 
 def _cmd_tune(args) -> int:
-    _enable_x64()
+    enable_x64()
     path = Path(args.job) if args.job else default_job_path()
     job = load_job(path)
     if args.check:
@@ -613,99 +238,8 @@ def _cmd_tune(args) -> int:
         timing = json.loads((out / "timing.json").read_text())
     except (OSError, ValueError):
         timing = {}
-    _print_summary(result, out, timing)
+    print_summary(result, out, timing)
     return 3 if result["status"] == "diverged" else 0
-
-
-def _fmt(v, spec=">14.6g") -> str:
-    if v is None:
-        return f"{'-':>14}"
-    if isinstance(v, bool):
-        return f"{'yes' if v else 'no':>14}"
-    return format(v, spec)
-
-
-_LINEAR_ROWS = (
-    ("phase margin (deg)", lambda s: s.get("phase_margin_deg")),
-    ("crossover (Hz)", lambda s: s.get("crossover_hz")),
-    ("dominant damping", lambda s: s.get("dominant_damping")),
-    ("dominant pole (Hz)", lambda s: s.get("dominant_hz")),
-    ("least pair damping", lambda s: s.get("least_pair_damping")),
-    ("stable (linear)", lambda s: s.get("stable")),
-    ("Routh stable", lambda s: s.get("routh_stable")),
-    ("b = k1/k2", lambda s: s.get("closed_form_rule", {}).get("b_implied")),
-    ("wc = k2 wn/2 (Hz)", lambda s: s.get("closed_form_rule", {}).get("crossover_hz_implied")),
-    ("PM of SO at b (deg)", lambda s: s.get("closed_form_rule", {}).get("phase_margin_deg_implied")),
-    ("lam by the rule", lambda s: s.get("closed_form_rule", {}).get("lam_rule")),
-    ("lam / rule", lambda s: s.get("closed_form_rule", {}).get("lam_over_rule")),
-    ("kp by the rule", lambda s: s.get("closed_form_rule", {}).get("kp_rule")),
-)
-
-
-def _print_summary(result: dict, out: Path, timing: dict | None = None):
-    g, s, lin = result["gains"], result["scores"], result.get("linear", {})
-    designs = ("initial", "closed_form", "tuned")
-    heads = "".join(f"{h:>14}" for h in ("initial", "closed form", "tuned"))
-    secs = f", {timing['total_s']:.1f} s" if timing and "total_s" in timing else ""
-    print(
-        f"{result['component']}: {result['status']} after {result['iterations']} iterations{secs}, "
-        f"{result['scenarios']['count']} scenarios"
-    )
-    print(f"  {result['reason']}")
-    if result["status"] == "diverged":
-        print("DIVERGED: no gains are reported as tuned (every design tried diverged in some tuning scenario)")
-    names = list(g["initial"])
-    print(f"{'gain':<22}{heads}")
-    for n in names:
-        print(f"{n:<22}" + "".join(_fmt((g[d] or {}).get(n)) for d in designs))
-    print(f"closed form: {result['closed_form_source']}")
-    rows = [(label, [None if lin.get(d) is None else f(lin[d]) for d in designs]) for label, f in _LINEAR_ROWS]
-    rows = [(label, vals) for label, vals in rows if any(v is not None for v in vals)]
-    if rows:
-        print(f"{'linear model':<22}{heads}")
-        for label, vals in rows:
-            print(f"{label:<22}" + "".join(_fmt(v) for v in vals))
-    keys = [k for k in s["initial"] if k not in ("diverged", "lost_lock", "lost_sync", "lost_speed", "null_reason")]
-    print(f"{'score':<22}{heads}")
-    for k in keys:
-        print(f"{k:<22}" + "".join(_fmt((s[d] or {}).get(k)) for d in designs))
-    print(f"{'diverged scenarios':<22}" + "".join(_fmt((s[d] or {}).get("diverged"), ">14d") for d in designs))
-    print(f"{'lost lock':<22}" + "".join(_fmt((s[d] or {}).get("lost_lock"), ">14d") for d in designs))
-    if "lost_sync" in s["initial"]:  # drive jobs: diverged or |position error| > 90 deg
-        print(f"{'lost sync scenarios':<22}" + "".join(_fmt((s[d] or {}).get("lost_sync"), ">14d") for d in designs))
-    if "lost_speed" in s["initial"]:  # drive jobs: missed the speed reference by > 20 % in the steady window
-        print(f"{'lost speed scenarios':<22}" + "".join(_fmt((s[d] or {}).get("lost_speed"), ">14d") for d in designs))
-    if "holdout" in result:
-        h = result["holdout"]
-        worst = {d: (h[d] or {}).get("per_scenario_worst") for d in designs}
-        div = {d: (h[d] or {}).get("diverged") for d in designs}
-        print(f"{'held-out worst':<22}" + "".join(_fmt(worst[d]) for d in designs) + f"   ({h['count']} scenarios)")
-        print(f"{'held-out diverged':<22}" + "".join(_fmt(div[d], ">14d") for d in designs))
-        lost = {d: (h[d] or {}).get("lost_lock") for d in designs}
-        print(f"{'held-out lost lock':<22}" + "".join(_fmt(lost[d], ">14d") for d in designs))
-    for where, n in (result.get("lost_lock_tuned_only") or {}).items():
-        if n:
-            sets, nc = ("tuning", "scores.nc") if where == "tuning" else ("held-out", "holdout_scores.nc")
-            msg = f"warning: the tuned design lost lock in {n} {sets} scenarios where the closed form holds it"
-            print(f"jaxobs: {msg} (lost_lock in {nc})", file=sys.stderr)
-    for d in designs:  # a drive that missed its speed reference (e.g. ran backwards) is flagged, never silent
-        n = (s[d] or {}).get("lost_speed")
-        if n:
-            print(
-                f"jaxobs: warning: the {d.replace('_', ' ')} drive missed its speed reference (> 20 % off, or "
-                f"turning against it) in {n} scenarios (lost_speed in scores.nc)",
-                file=sys.stderr,
-            )
-    for name, b in result.get("at_bound", {}).items():
-        msg = f"warning: tuned {name} = {b['value']:.6g} is within 1 % of its {b['bound']} bound {b['limit']:g}"
-        print(f"jaxobs: {msg}", file=sys.stderr)
-    if result["status"] == "budget":
-        print(
-            f"jaxobs: warning: the solver's budget ran out before its stopping rule ({result['reason']}): "
-            "the tuned gains may not be an optimum (raise solver.steps)",
-            file=sys.stderr,
-        )
-    print(f"results: {out / 'result.json'} (history.json, timing.json, scores.nc)")
 
 
 class _Parser(argparse.ArgumentParser):
@@ -765,10 +299,10 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument("--force", action="store_true", help="overwrite the figure already in --out")
     d.add_argument("--json", action="store_true", help="print the table as JSON rows")
     d.add_argument("--t-event", type=float, default=0.2, help="time of the test event, s (default 0.2)")
-    d.set_defaults(func=_cmd_demo)
+    d.set_defaults(func=cmd_demo)
 
     c = sub.add_parser("closed-form", help="closed-form gains with formula and source equation", parents=[quiet])
-    c.add_argument("design", choices=list(_CF_OPTIONS), help="which design rule")
+    c.add_argument("design", choices=list(CF_OPTIONS), help="which design rule")
     c.add_argument("--k", type=float, help="SOGI gain k (sogi-fll)")
     c.add_argument("--omega-n", dest="omega_n", type=float, help="nominal frequency, rad/s (default 100π)")
     c.add_argument("--zeta", type=float, help="damping ratio (default 1/√2)")
@@ -778,12 +312,12 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--rs", type=float, help="stator resistance, ohm (cleso)")
     c.add_argument("--lq", type=float, help="q-axis inductance, H (cleso)")
     c.add_argument("--json", action="store_true", help="print JSON")
-    c.set_defaults(func=_cmd_closed_form)
+    c.set_defaults(func=cmd_closed_form)
 
     b = sub.add_parser("bode", help="Bode figures of the papers' flux observers, LESOs and FLL loops", parents=[quiet])
     b.add_argument("--out", default="out/bode", help="folder for the figures (default: out/bode)")
     b.add_argument("--force", action="store_true", help="overwrite figures already in --out")
-    b.set_defaults(func=_cmd_bode)
+    b.set_defaults(func=cmd_bode)
 
     r = sub.add_parser("reproduce", help="reproduce a paper's experiments on the simulated drive", parents=[quiet])
     r.add_argument(
@@ -793,7 +327,7 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--force", action="store_true", help="overwrite figures already in --out")
     r.add_argument("--json", action="store_true", help="print rows {experiment, observer, metric, unit, paper, ours}")
     r.add_argument("--quick", action="store_true", help="skip the long runs (20 r/min steady state, I-f start-up)")
-    r.set_defaults(func=_cmd_reproduce)
+    r.set_defaults(func=cmd_reproduce)
 
     st = sub.add_parser(
         "study",

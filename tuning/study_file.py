@@ -69,6 +69,7 @@ import jaxobs
 from jaxobs import linear
 from jaxobs.drive import BENCH_MACHINES, bench_machine
 from jaxobs.drive_study import DRIVE_STUDY_AXES
+from jaxobs.observers import AbstractFluxObserver
 from jaxobs.provenance import sha256
 from jaxobs.study import STUDY_AXES
 
@@ -101,7 +102,6 @@ FLL_CLOSED_FORMS = {
 }
 FLL_COMPONENTS = ("SOGIFLL", "SOGIFLLWPF", "SOGIFLLWIF")
 DRIVE_OBSERVERS = ("CLESO", "GILESO", "FALESO", "PureIntegratorFlux", "LPFFlux", "SOIFO", "SecondOrderSOIFO")
-_FLUX = ("PureIntegratorFlux", "LPFFlux", "SOIFO", "SecondOrderSOIFO")
 # the drive jobs' machines (jaxobs.drive.BENCH_MACHINES: the same names, bench inertias and FOC), so a study
 # scores a tuned result on the drive that tuned it
 MACHINES = tuple(BENCH_MACHINES)
@@ -450,17 +450,12 @@ def _parse_drive(raw: dict, st: dict, name: str, base: Path) -> StudySpec:
         comp = get_field(spec, "component", f"{where}.component", str)
         if comp not in DRIVE_OBSERVERS:
             raise JobError(f"{where}.component", f"must be one of {', '.join(DRIVE_OBSERVERS)}, got {show(comp)}")
-        # the machine's Rs and L are placeholders and the initial speed is the scenario's: the study binds
-        # each scenario's assumed machine (jaxobs.drive_study.bind_observer); the drive's ts rules
-        par = bench_machine("spmsm000" if comp in _FLUX else "ipmsm002")
-        if comp in _FLUX:
-            fixed = {"Rs": par.Rs, "L": par.Ld}
-            exclude = ("Rs", "L", "omega0", "ts")
-            if comp in ("SOIFO", "SecondOrderSOIFO"):
-                fixed["omega0"] = 1.0
-        else:
-            fixed, exclude = {"Rs": par.Rs, "Lq": par.Lq}, ("Rs", "Lq", "omega0_pll", "ts")
-        return _component(spec, where, comp, exclude, fixed)
+        # the bound fields (Rs, the inductance, the start speed) are placeholders: the study binds each
+        # scenario's assumed machine and speed (AbstractDriveObserver.bind); the drive's ts rules
+        ctor = getattr(jaxobs, comp)
+        par = bench_machine("spmsm000" if issubclass(ctor, AbstractFluxObserver) else "ipmsm002")
+        fixed = dict(zip(ctor.bound_fields, (0.0, 1.0, 1.0)))  # valid for the constructor, then bound
+        return _component(spec, where, comp, (*ctor.bound_fields, "ts"), fixed).bind(par, 0.0)
 
     designs = _designs(raw, build)
     # the machine: study.machine, else the one the results were tuned on, else the first design's default

@@ -1,5 +1,6 @@
 """The PMSM drive: machine, plant, inverter, sensors, FOC, I-f start-up, scenarios, the closed loop and the
-simulated benches (:mod:`jaxobs.drive.bench`).
+simulated benches (:mod:`jaxobs.drive.bench`), and paper 002's dual three-phase IPMSM (:mod:`jaxobs.drive.dual`,
+:mod:`jaxobs.drive.dual_loop`).
 
 Every dynamic piece is a step component (``init``/``step``): :class:`PMSM`,
 :class:`Inverter`, :class:`Sensors`, :class:`FOC`, and the system that wires
@@ -14,12 +15,24 @@ from .bench import bench_machine as bench_machine
 from .bench import drive_speed_limit_rpm as drive_speed_limit_rpm
 from .bench import if_handover_earliest as if_handover_earliest
 from .bench import if_load_limit as if_load_limit
+from .component import AbstractComponent as AbstractComponent
 from .control import FOC as FOC
 from .control import ControllerState as ControllerState
 from .control import FOCInput as FOCInput
 from .control import FOCOutput as FOCOutput
 from .control import IfStartup as IfStartup
 from .control import OperatingPoint as OperatingPoint
+from .dual import DualPMSM as DualPMSM
+from .dual import DualPMSMParams as DualPMSMParams
+from .dual import dual_ipmsm_paper002 as dual_ipmsm_paper002
+from .dual import sets_to_vsd as sets_to_vsd
+from .dual import vsd_matrix as vsd_matrix
+from .dual import vsd_to_sets as vsd_to_sets
+from .dual_loop import DualClosedLoop as DualClosedLoop
+from .dual_loop import DualDrive as DualDrive
+from .dual_loop import DualFOC as DualFOC
+from .dual_loop import DualOutput as DualOutput
+from .dual_loop import dual_bench_drive as dual_bench_drive
 from .hardware import Inverter as Inverter
 from .hardware import InverterInput as InverterInput
 from .hardware import SensorInput as SensorInput

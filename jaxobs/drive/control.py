@@ -88,6 +88,7 @@ import jax.numpy as jnp
 from .. import papers
 from .._math import safe_norm2, wrap
 from .._validate import check_nonnegative, check_positive, check_real, check_sample_time
+from .component import AbstractComponent
 from .machine import RPM, PMSMParams
 from .weakening import VoltageFeedbackFW
 
@@ -113,6 +114,14 @@ class OperatingPoint(NamedTuple):
     u_d: jax.Array  # rotor-frame voltage the true machine needs there, V
     u_q: jax.Array
     offset: jax.Array | float = 0.0  # the controller's angle minus the rotor's, rad (0: encoder or unbiased)
+
+    @classmethod
+    def at_rest(cls, theta_e) -> OperatingPoint:
+        """The machine at standstill at the electrical angle ``theta_e`` (rad): no speed, current, load or
+        voltage (where an I-f start-up starts, the rotor parked by its alignment)."""
+        theta_e = jnp.asarray(theta_e, dtype=jnp.result_type(theta_e, float))
+        z = jnp.zeros_like(theta_e)
+        return cls(omega_m=z, omega_m_ref=z, theta_e=theta_e, t_load=z, i_d=z, i_q=z, u_d=z, u_q=z)
 
 
 class IfStartup(eqx.Module):
@@ -231,7 +240,7 @@ def _torque_dq(par: PMSMParams, i_d, i_q):
     return 1.5 * par.p * (par.psi_f * i_q + (par.Ld - par.Lq) * i_d * i_q)
 
 
-class FOC(eqx.Module):
+class FOC(AbstractComponent):
     """FOC gains and settings (gains are leaves: differentiable and tunable).
 
     Besides its gains the controller needs the machine it assumes (``est``: its
@@ -377,6 +386,8 @@ class FOC(eqx.Module):
 
     def init(self, op: OperatingPoint | None = None, *, theta_f0=0.0) -> ControllerState:
         """Zero integrators (``op=None``), or the integrators that hold the drive at ``op`` (a steady start).
+
+        ``theta_f0`` (keyword-only extra, rad): the I-f angle to start from when the FOC has a start-up.
 
         At a steady operating point the errors are zero, so the current PIs'
         outputs are their integrators plus the decoupling terms (computed with

@@ -28,6 +28,7 @@ from .._math import safe_norm2
 from .._measurements import DriveInput
 from .._validate import as_float, check_nonnegative, check_positive, check_real
 from .._validate import static_float as _static_float
+from .component import AbstractComponent
 
 __all__ = ["Inverter", "InverterInput", "Sensors", "SensorInput", "clarke_abc_to_ab", "ab_to_abc"]
 
@@ -60,7 +61,7 @@ class SensorInput(NamedTuple):
     i_b: jax.Array
 
 
-class Inverter(eqx.Module):
+class Inverter(AbstractComponent):
     """Average-value two-level inverter with dc-link limit and dead time.
 
     As a step component it is stateless: ``step(None, InverterInput)`` returns the
@@ -88,7 +89,8 @@ class Inverter(eqx.Module):
         scale = jnp.where(mag > self.u_max, self.u_max / jnp.maximum(mag, 1e-12), 1.0)
         return u_a * scale, u_b * scale
 
-    def init(self):
+    def init(self, op=None) -> None:
+        """No state (the operating point does not matter to an average-value model)."""
         return None
 
     def step(self, state, inp: InverterInput) -> tuple[None, InverterInput]:
@@ -112,10 +114,10 @@ def _statically_zero(x) -> bool:
     return bool(np.all(np.asarray(x) == 0))
 
 
-class Sensors(eqx.Module):
+class Sensors(AbstractComponent):
     """Per-axis offsets, gain errors and white noise of the current and voltage measurements.
 
-    As a step component its state is the PRNG key of its noise (``init(key)``),
+    As a step component its state is the PRNG key of its noise (``init(op, key=key)``),
     and ``step(key, SensorInput) -> (key, DriveInput)`` gives the measured
     voltage and current an observer is told; the noise of sample k is drawn
     from ``fold_in(key, k)``, so a run is reproducible, vmappable and the same
@@ -147,7 +149,12 @@ class Sensors(eqx.Module):
             if getattr(self, name).shape[-1:] != (2,):
                 raise ValueError(f"{own}.{name} must have two entries (α, β), got shape {getattr(self, name).shape}")
 
-    def init(self, key=None):
+    def init(self, op=None, *, key=None):
+        """The noise key (``key``, default ``PRNGKey(0)``): the sensors' state, whatever the operating point."""
+        if op is not None and not isinstance(op, tuple):  # a key passed where init(key) used to take it
+            raise ValueError(
+                f"Sensors.init: op must be an OperatingPoint or None (the key is keyword-only), got {type(op).__name__}"
+            )
         return jax.random.PRNGKey(0) if key is None else key
 
     def step(self, key, inp: SensorInput) -> tuple[jax.Array, DriveInput]:

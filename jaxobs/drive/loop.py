@@ -47,6 +47,7 @@ from .._discretize import RK4, AbstractRule, check_rule
 from .._math import wrap
 from .._system import AbstractSystem
 from .._validate import check_sample_time
+from ..observers import AbstractDriveObserver
 from .control import FOC, ControllerState, FOCInput, IfStartup, OperatingPoint
 from .hardware import Inverter, InverterInput, SensorInput
 from .latency import Latency
@@ -252,12 +253,14 @@ class ClosedLoop(AbstractSystem):
         """
         sc = self.scenario
         foc = self.controller
+        # every component starts from one operating point, by the one convention (jaxobs.drive.component)
         if self.drive.startup is not None:
-            plant = self.plant.init(omega_m0=0.0, theta_e0=sc.theta_e0)
+            op = OperatingPoint.at_rest(sc.theta_e0)
+            plant = self.plant.init(op)
             z = jnp.zeros((), plant.x.dtype)
             obs = None if self.observer is None else self.observer.init()
-            ctrl = foc.init(theta_f0=sc.theta_e0 - jnp.pi / 2)
-            return LoopState(plant=plant, ctrl=ctrl, obs=obs, sensors=sc.sensors.init(sc.key), u_a=z, u_b=z)
+            ctrl = foc.init(op, theta_f0=sc.theta_e0 - jnp.pi / 2)
+            return LoopState(plant=plant, ctrl=ctrl, obs=obs, sensors=sc.sensors.init(op, key=sc.key), u_a=z, u_b=z)
         op = self.operating_point()
         obs = None
         if self.observer is not None:
@@ -280,7 +283,8 @@ class ClosedLoop(AbstractSystem):
                     # state to start in, so such an observer (not locked in its settling) starts as before
                     op = self.operating_point(jnp.where(jnp.abs(offset) < jnp.pi / 2, offset, 0.0))
                     obs, offset = self._settled_observer(op)
-        plant = self.plant.init(omega_m0=op.omega_m, theta_e0=op.theta_e, i_d0=op.i_d, i_q0=op.i_q)
+        plant = self.plant.init(op)
+        inverter = self.drive.inverter
         lat, w_e = self.drive.latency, sc.par.p * op.omega_m
         ctrl_op = op
         if self._lag != 0.0:
@@ -291,21 +295,15 @@ class ClosedLoop(AbstractSystem):
         # the voltage of the coming period (for a pipeline of 0: of the period just ended, what the observer
         # is told at the first sample) and, for a pipeline of 2, the one after it
         u_a, u_b = self._steady_voltage(op, op.theta_e + min(lat.pipeline - 1, 0) * w_e * self.ts)
-        _, u = self.drive.inverter.step(None, InverterInput(u_a, u_b))
+        _, u = inverter.step(inverter.init(op), InverterInput(u_a, u_b))
         pending = None
         if lat.pipeline == 2:
-            _, pending = self.drive.inverter.step(
-                None, InverterInput(*self._steady_voltage(op, op.theta_e + w_e * self.ts))
-            )
+            u_a, u_b = self._steady_voltage(op, op.theta_e + w_e * self.ts)
+            _, pending = inverter.step(inverter.init(op), InverterInput(u_a, u_b))
             pending = jnp.stack([pending.u_a, pending.u_b])
+        sensors = sc.sensors.init(op, key=sc.key)
         return LoopState(
-            plant=plant,
-            ctrl=foc.init(ctrl_op),
-            obs=obs,
-            sensors=sc.sensors.init(sc.key),
-            u_a=u.u_a,
-            u_b=u.u_b,
-            pending=pending,
+            plant=plant, ctrl=foc.init(ctrl_op), obs=obs, sensors=sensors, u_a=u.u_a, u_b=u.u_b, pending=pending
         )
 
     def _steady_voltage(self, op: OperatingPoint, theta):
@@ -319,8 +317,8 @@ class ClosedLoop(AbstractSystem):
         """The observer after ``drive.settle`` seconds on the steady operating point (a phase before t = 0,
         unscored), and its steady angle error θ̂e − θe, rad.
 
-        It starts from ``observer.init_at(ω_e)`` (its speed estimate at the true
-        speed, where it has one) and steps on the measurements the sensors give
+        A drive observer (:class:`~jaxobs.observers.AbstractDriveObserver`) starts from
+        ``observer.init_at(ω_e)`` (its speed estimate at the true speed) and steps on the measurements the sensors give
         of the steady machine over k = −n … −1 (offsets, gain errors and noise
         included; θ_k = θ_e0 + ω_e k T_s, the voltage of each period centred at
         θ_k + ω_e T_s/2 as the delay compensation applies it).  So its filters,
@@ -331,7 +329,8 @@ class ClosedLoop(AbstractSystem):
         """
         sc, obs, ts = self.scenario, self.observer, self.ts
         w_e = sc.par.p * op.omega_m
-        state = obs.init_at(w_e) if hasattr(obs, "init_at") else obs.init()
+        # a drive observer starts at the true speed (its contract); any other observer (a probe) from its init()
+        state = obs.init_at(w_e) if isinstance(obs, AbstractDriveObserver) else obs.init()
         n = int(round(self.drive.settle / ts))
         if n == 0:
             return state, jnp.zeros_like(w_e)
@@ -391,7 +390,7 @@ class ClosedLoop(AbstractSystem):
         else:
             th_c, w_e_c, w_m_c = ys.theta_e, w_e, ys.omega_m
         ctrl, c = self.controller.step(state.ctrl, FOCInput(k, meas.i_a, meas.i_b, th_c, w_e_c, w_m_c, x.omega_m_ref))
-        if drive.startup is not None and hasattr(self.observer, "seed_speed"):
+        if drive.startup is not None and isinstance(self.observer, AbstractDriveObserver):
             # While the I-f runs, the observer's speed estimate (FLL centre frequency, PLL integrator) is held
             # at the I-f frequency, the rotor's mean speed; released at the switch.  Without it the flux
             # observers' FLLs never left their initial 1 rad/s: their gain is lam·ω̂² (frequency-normalized,
@@ -400,7 +399,7 @@ class ClosedLoop(AbstractSystem):
             # ran away at the hand-over.  A DSP knows ω_f too: it is the FLL's feed-forward, not a cheat.
             seeded = self.observer.seed_speed(obs_state, ctrl.omega_f)
             obs_state = jax.tree.map(lambda a, b: jnp.where(ctrl.mode == 0, a, b), seeded, obs_state)
-        _, u_next = drive.inverter.step(None, InverterInput(c.u_a, c.u_b))
+        _, u_next = drive.inverter.step(drive.inverter.init(), InverterInput(c.u_a, c.u_b))  # stateless
         applied, pending = state, None  # the voltage over [t_k, t_{k+1}] (as u_a, u_b) and the one after it
         if lat.pipeline == 0:  # computed from this period's sample, applied at once (an ideal controller)
             plant_state, _ = self.plant.step(state.plant, PlantInput(u_next.u_a, u_next.u_b, x.load))

@@ -1,7 +1,7 @@
 """The PMSM plant as a step-function component: one control period of the machine under a held voltage.
 
 ``PMSM(par, inverter, dead_time, ts=..., n_sub=..., rule=...)`` has the
-contract of every dynamic piece (DESIGN.md): ``init(...)`` and
+contract of every drive component (:mod:`jaxobs.drive.component`): ``init(op)`` and
 ``step(state, PlantInput) -> (state, PlantOutput)``.  Like the signal-level
 observers, ``step`` returns what the sensors see *at* t_k (the state before the
 update) and integrates the machine over [t_k, t_{k+1}] in ``n_sub`` substeps of
@@ -26,6 +26,7 @@ import jax.numpy as jnp
 from .._discretize import RK4, AbstractRule, Held, check_rule
 from .._math import wrap
 from .._validate import check_nonnegative, check_sample_time
+from .component import AbstractComponent
 from .hardware import Inverter
 from .machine import PMSMParams, dq_to_ab, plant_vf, torque
 
@@ -64,7 +65,7 @@ class PlantState(NamedTuple):
     rule: Any  # the integration rule's own state (None for one-step rules)
 
 
-class PMSM(eqx.Module):
+class PMSM(AbstractComponent):
     """The machine ``par`` behind an inverter with dead time ``dead_time``, integrated per control period."""
 
     par: PMSMParams
@@ -90,9 +91,12 @@ class PMSM(eqx.Module):
         """dx/dt at state ``x`` under ``inp = (u_α, u_β, T_L)``."""
         return plant_field(self.par, self.inverter, self.dead_time, x, inp)
 
-    def init(self, omega_m0=0.0, theta_e0=0.0, i_d0=0.0, i_q0=0.0) -> PlantState:
+    def init(self, op=None) -> PlantState:
+        """The machine at the operating point ``op`` (an OperatingPoint: its currents i_d, i_q, speed ω_m and
+        angle θ_e; an I-f start-up's is ``OperatingPoint.at_rest(θe0)``), or at rest at θe = 0 (None)."""
         dtype = jnp.result_type(self.par.Rs, float)
-        x0 = jnp.stack([jnp.asarray(v, dtype) for v in (i_d0, i_q0, omega_m0, theta_e0)])
+        vals = (0.0, 0.0, 0.0, 0.0) if op is None else (op.i_d, op.i_q, op.omega_m, op.theta_e)
+        x0 = jnp.stack([jnp.asarray(v, dtype) for v in vals])
         return PlantState(x=x0, rule=self.rule.init(self.field, x0, None))
 
     def output(self, x) -> PlantOutput:

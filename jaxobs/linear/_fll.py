@@ -6,8 +6,6 @@ simulator runs, so a closed-form design and a tuned one are compared directly.
 
 from __future__ import annotations
 
-import math
-
 import equinox as eqx
 import jax.numpy as jnp
 
@@ -131,7 +129,7 @@ def second_order_soifo_lambda(K1, K2):
     return K1**3 / (2 * K2)
 
 
-def pll_gains(bandwidth, zeta=1 / math.sqrt(2)):
+def pll_gains(bandwidth, zeta=papers.PLL_ZETA):
     """Type-2 PLL on a normalized error: k_p = 2ζω_b, k_i = ω_b² (θ̂/θ = (k_p s + k_i)/(s² + k_p s + k_i))."""
     return 2 * zeta * bandwidth, bandwidth**2
 

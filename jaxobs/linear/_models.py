@@ -3,7 +3,7 @@
 Paper 000 (Xu et al., TPEL 2018): transfer functions from back EMF e_r to the
 estimated rotor flux ψ̂_r (Table III and eqs 15, 20), their dc and harmonic
 gains (eqs 16, 21, 29, 36) and the second-order SOGI's Tustin transfer functions
-(eqs 22–25, from the coefficients the observer runs, :mod:`jaxobs.observers._cores`).
+(eqs 22–25, from the coefficients the observer runs, :func:`jaxobs.observers.sogi2_tustin_coefficients`).
 
 Paper 002 (Li et al.): transfer functions from the true to the estimated
 equivalent BEMF ê/e (Table II, eqs 15–17, 21/26, 29–30), the C-LESO closed
@@ -31,7 +31,7 @@ import jax
 import jax.numpy as jnp
 
 from .._validate import as_float, check_positive, check_real
-from ..observers._cores import sogi2_tustin_coefficients
+from ..observers import sogi2_tustin_coefficients
 from ._tf import DiscreteTransferFunction, TransferFunction, is_hurwitz
 
 __all__ = [

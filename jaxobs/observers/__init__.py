@@ -1,7 +1,16 @@
-"""Observers: the SOGI-FLL family (and, as they land, flux observers, LESOs and PLLs)."""
+"""Observers: the SOGI-FLL family, the SOGIs, the flux observers of 000 and the LESOs of 002, on one contract.
 
+:class:`AbstractObserver` is every observer; :class:`AbstractVectorFieldObserver` the ones given by a vector
+field (FLL family, SOGIs); :class:`AbstractDriveObserver` the drive observers (flux observers, LESOs,
+:class:`ObserverBank`), bound to a machine and a speed by their one ``bind`` method.
+"""
+
+from ._cores import sogi2_tustin_coefficients as sogi2_tustin_coefficients
+from .base import AbstractDriveObserver as AbstractDriveObserver
 from .base import AbstractObserver as AbstractObserver
+from .base import AbstractVectorFieldObserver as AbstractVectorFieldObserver
 from .base import BankOutput as BankOutput
+from .base import DriveObserverState as DriveObserverState
 from .base import ObserverBank as ObserverBank
 from .base import ObserverState as ObserverState
 from .fll import SOGIFLL as SOGIFLL
@@ -9,6 +18,7 @@ from .fll import SOGIFLLWIF as SOGIFLLWIF
 from .fll import SOGIFLLWPF as SOGIFLLWPF
 from .fll import FLLOutput as FLLOutput
 from .flux import SOIFO as SOIFO
+from .flux import AbstractFluxObserver as AbstractFluxObserver
 from .flux import FluxOutput as FluxOutput
 from .flux import LPFFlux as LPFFlux
 from .flux import PureIntegratorFlux as PureIntegratorFlux
@@ -16,6 +26,7 @@ from .flux import SecondOrderSOIFO as SecondOrderSOIFO
 from .leso import CLESO as CLESO
 from .leso import FALESO as FALESO
 from .leso import GILESO as GILESO
+from .leso import AbstractLESO as AbstractLESO
 from .leso import LESOOutput as LESOOutput
 from .sogi import SOGI as SOGI
 from .sogi import SOGI2 as SOGI2

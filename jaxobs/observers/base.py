@@ -18,27 +18,66 @@ DSP has at t_n:
 
 Either way the observer is strictly causal and its outputs line up with a
 continuous-time reference sampled at t_n.
+
+The hierarchy (abstract classes; the concrete observers are final):
+
+- :class:`AbstractObserver`: ``ts``, ``init``, ``step``.  Every observer subclasses it.
+- :class:`AbstractVectorFieldObserver`: an observer given by a vector field ``f(x, u)`` on a
+  flat state, integrated by its rule (the FLL family, the SOGIs); ``init``/``step`` come with it.
+- :class:`AbstractDriveObserver`: an observer of a drive (fed a :class:`~jaxobs.measurements.DriveInput`)
+  that assumes a machine and starts at a speed: ``bind``, ``init_at``, ``seed_speed``.  The flux
+  observers (:class:`~jaxobs.observers.flux.AbstractFluxObserver`), the LESOs
+  (:class:`~jaxobs.observers.leso.AbstractLESO`) and :class:`ObserverBank` implement it; a user's own
+  drive observer does too, and then runs in :class:`jaxobs.drive.ClosedLoop` as they do.
 """
 
 from __future__ import annotations
 
 import abc
-from typing import Any, NamedTuple
+from typing import Any, ClassVar, NamedTuple
 
 import equinox as eqx
 import jax
+import jax.numpy as jnp
 
 from .._discretize import AbstractRule
 
+__all__ = [
+    "AbstractObserver",
+    "AbstractVectorFieldObserver",
+    "AbstractDriveObserver",
+    "ObserverState",
+    "DriveObserverState",
+    "ObserverBank",
+    "BankOutput",
+]
+
+
+class AbstractObserver(eqx.Module):
+    """Every observer: a sample time ``ts`` (s) and pure ``init`` / ``step``.
+
+    ``ts`` is a field of each observer (an abstract variable of its family's base) or a property (an
+    :class:`ObserverBank`'s is its primary's); it is not declared here, where a field would be inherited by
+    a subclass that computes it.
+    """
+
+    @abc.abstractmethod
+    def init(self, u0=None) -> Any:
+        """The state at sample 0 (``u0``: the first input, for rules that need it; None otherwise)."""
+
+    @abc.abstractmethod
+    def step(self, state, u) -> tuple[Any, Any]:
+        """One sample: (the state at n + 1, the named outputs at t_n)."""
+
 
 class ObserverState(eqx.Module):
-    """State of a state-vector observer: the flat state and the rule's own state."""
+    """State of a vector-field observer: the flat state and the rule's own state."""
 
     x: jax.Array  # shape (n_states,)
     rule: Any  # rule state (multistep history) or None
 
 
-class AbstractObserver(eqx.Module):
+class AbstractVectorFieldObserver(AbstractObserver):
     """Observer whose dynamics are a vector field ``f(x, u)`` on a flat state ``x``.
 
     Subclasses define ``f``, ``output`` and ``initial_state``; the rule given at
@@ -74,14 +113,71 @@ class AbstractObserver(eqx.Module):
         return self.f(x, signal(t))
 
 
+class DriveObserverState(eqx.Module):
+    """State of a flux observer or a LESO: the flat state, the rule's state and the samples of the last period.
+
+    One class for both families: each integrates the period [t_{k−1}, t_k] from the voltage applied over it
+    and the currents at both ends, so each remembers the same three things.
+    """
+
+    x: jax.Array  # filter, LESO, FLL and PLL states (the observer's layout)
+    rule: Any  # rule state
+    i_prev: jax.Array  # (i_α, i_β) at the previous sample, A
+    u_prev: jax.Array  # (u_α, u_β) applied over the period that ends now, V
+    started: jax.Array  # False until one sample has been seen
+
+
+def replace_leaves(module, **values):
+    """``module`` with the named array fields set to ``values``, each cast to its field's dtype.
+
+    The cast keeps a float32 observer float32 when it is bound to a float64 machine (the C export rounds
+    the observer to float32 first) and keeps ``lax.scan`` carries' dtypes fixed.
+    """
+    names = tuple(values)
+    new = tuple(jnp.asarray(values[n], dtype=jnp.result_type(getattr(module, n))) for n in names)
+    return eqx.tree_at(lambda m: tuple(getattr(m, n) for n in names), module, new)
+
+
+class AbstractDriveObserver(AbstractObserver):
+    """An observer of a drive: fed a :class:`~jaxobs.measurements.DriveInput` each period, it assumes a
+    machine (what the controller believes, ``est_par`` in motulator's vocabulary) and starts at a speed.
+
+    The one way to bind a drive observer to a machine and an operating point is :meth:`bind`; studies,
+    tuning jobs, recordings, the C export and the reproductions all call it.  A drive that starts steady
+    starts the observer with :meth:`init_at`; an I-f start-up holds its speed estimate with
+    :meth:`seed_speed` (:class:`jaxobs.drive.ClosedLoop`).
+    """
+
+    # the fields bind() sets (resistance, inductance, initial speed): not gains, so a study or a job does not
+    # report or tune them (jaxobs.drive_study.drive_gains), and the C export says where they came from
+    bound_fields: ClassVar[tuple[str, ...]]
+
+    @abc.abstractmethod
+    def bind(self, est_par, omega_e):
+        """This observer assuming the machine ``est_par`` (a :class:`jaxobs.drive.PMSMParams`: its Rs and the
+        inductance the family's model uses) and starting at the electrical speed ``omega_e`` (rad/s, signed):
+        its initial speed field is what :meth:`init_at` would start from.  ``est_par=None`` keeps the
+        observer's own machine and sets only the speed (a recording gives the speed, not the machine).
+        The gains are untouched; every value keeps its field's dtype."""
+
+    @abc.abstractmethod
+    def init_at(self, omega_e):
+        """The initial state with the speed estimate at ``omega_e`` (rad/s): a steady start's settling phase."""
+
+    @abc.abstractmethod
+    def seed_speed(self, state, omega_e):
+        """``state`` with its speed estimate set to ``omega_e`` (rad/s): an I-f start-up holds it at the I-f
+        frequency until the hand-over (a DSP knows that frequency: it is the FLL's or PLL's feed-forward)."""
+
+
 class BankOutput(NamedTuple):
     theta: Any  # the primary observer's θ̂e (what a sensorless controller uses)
     omega: Any  # the primary observer's ω̂e
     each: tuple  # every observer's own outputs, in order
 
 
-class ObserverBank(eqx.Module):
-    """Several observers fed the same measurements; ``primary`` closes the loop when sensorless.
+class ObserverBank(AbstractDriveObserver):
+    """Several drive observers fed the same measurements; ``primary`` closes the loop when sensorless.
 
     Lets one drive simulation compare observers on identical data (000's
     per-observer position errors) without them disturbing each other.
@@ -90,14 +186,33 @@ class ObserverBank(eqx.Module):
     observers: tuple
     primary: int = eqx.field(static=True, default=0)
 
+    bound_fields: ClassVar[tuple[str, ...]] = ()  # a bank has none of its own: bind() binds its observers
+
+    def __check_init__(self):
+        for i, o in enumerate(self.observers):
+            if not isinstance(o, AbstractDriveObserver):
+                raise ValueError(
+                    f"ObserverBank.observers[{i}] must be a drive observer (an AbstractDriveObserver: a flux "
+                    f"observer, a LESO), got {type(o).__name__}"
+                )
+        if not 0 <= self.primary < len(self.observers):
+            raise ValueError(f"ObserverBank.primary must be in [0, {len(self.observers) - 1}], got {self.primary}")
+
+    @property
+    def ts(self) -> float:
+        return self.observers[self.primary].ts
+
+    def bind(self, est_par, omega_e) -> ObserverBank:
+        return eqx.tree_at(lambda b: b.observers, self, tuple(o.bind(est_par, omega_e) for o in self.observers))
+
     def init(self, u0=None):
         return tuple(o.init() for o in self.observers)
 
     def init_at(self, omega_e):
-        return tuple(o.init_at(omega_e) if hasattr(o, "init_at") else o.init() for o in self.observers)
+        return tuple(o.init_at(omega_e) for o in self.observers)
 
     def seed_speed(self, state, omega_e):
-        return tuple(o.seed_speed(s, omega_e) if hasattr(o, "seed_speed") else s for o, s in zip(self.observers, state))
+        return tuple(o.seed_speed(s, omega_e) for o, s in zip(self.observers, state))
 
     def step(self, state, u):
         pairs = [o.step(s, u) for o, s in zip(self.observers, state)]

@@ -26,7 +26,7 @@ from .._math import safe_atan2, safe_norm2
 from .._validate import check_positive, check_sample_time
 from .._validate import static_float as _static_float
 from ._cores import fll_rate, sogi2_vf, sogi_vf
-from .base import AbstractObserver
+from .base import AbstractVectorFieldObserver
 
 __all__ = ["FLLOutput", "SOGIFLL", "SOGIFLLWPF", "SOGIFLLWIF"]
 
@@ -43,7 +43,7 @@ def _fll_output(y, q, w):
     return FLLOutput(v_alpha=y, v_beta=q, amplitude=safe_norm2(y, q), theta=safe_atan2(q, y), omega=w)
 
 
-class SOGIFLL(AbstractObserver):
+class SOGIFLL(AbstractVectorFieldObserver):
     """Standard SOGI-FLL, 001 Fig. 1(a), eqs (6)–(8).
 
         v̇'  = ω̂ [k (v − v') − qv']                       (6)
@@ -89,7 +89,7 @@ class SOGIFLL(AbstractObserver):
         return jnp.stack([z, z, self.omega_n])
 
 
-class SOGIFLLWPF(AbstractObserver):
+class SOGIFLLWPF(AbstractVectorFieldObserver):
     """SOGI-FLL with a SOGI prefilter, 001 Fig. 1(b).
 
     A SOGI (gain k1; only its in-phase output p is used) tuned at the FLL's ω̂
@@ -137,7 +137,7 @@ class SOGIFLLWPF(AbstractObserver):
         return jnp.stack([z, z, z, z, self.omega_n])
 
 
-class SOGIFLLWIF(AbstractObserver):
+class SOGIFLLWIF(AbstractVectorFieldObserver):
     """SOGI-FLL with an in-loop SOGI filter, 001 Fig. 1(c): the second-order SOGI + FLL.
 
     The filter is the second-order SOGI of paper 000 (eqs 17–18), see

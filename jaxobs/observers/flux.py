@@ -47,6 +47,7 @@ speed); the WIF's symmetric optimum λ = 2ωc²/b becomes lam = 2(ωc/ω̂)²/b.
 
 from __future__ import annotations
 
+import abc
 from typing import ClassVar, Literal, NamedTuple
 
 import equinox as eqx
@@ -57,8 +58,9 @@ from .._discretize import RK4, AbstractRule, check_rule
 from .._math import safe_atan2
 from .._validate import check_nonnegative, check_positive, check_sample_time
 from ._cores import pll_vf, quadrature_error, safe_sq_amplitude, sogi2_tustin_coefficients, sogi2_vf, sogi_vf
+from .base import AbstractDriveObserver, DriveObserverState, replace_leaves
 
-__all__ = ["FluxOutput", "FluxState", "PureIntegratorFlux", "LPFFlux", "SOIFO", "SecondOrderSOIFO"]
+__all__ = ["FluxOutput", "AbstractFluxObserver", "PureIntegratorFlux", "LPFFlux", "SOIFO", "SecondOrderSOIFO"]
 
 
 class FluxOutput(NamedTuple):
@@ -70,51 +72,63 @@ class FluxOutput(NamedTuple):
     e_b: jax.Array
 
 
-class FluxState(eqx.Module):
-    x: jax.Array  # filter (and FLL or PLL) states
-    rule: object  # rule state
-    i_prev: jax.Array  # (i_α, i_β) at the previous sample
-    u_prev: jax.Array  # (u_α, u_β) applied over the period that ends now
-    started: jax.Array  # False until one sample has been seen
+class AbstractFluxObserver(AbstractDriveObserver):
+    """A flux observer of 000: the back EMF (module doc) fed to a filter, with an FLL or a PLL for the speed.
 
-
-class _FluxBase(eqx.Module):
-    """Shared back-EMF computation and stepping; subclasses give the filter."""
+    Subclasses give the filter (``f``, ``output``, ``initial_state``), where their speed estimate sits in
+    the state (``_speed_index``) and the speed they start from (:meth:`start_speed`).  The model has one
+    inductance ``L``: bound to a machine it takes the d-axis one, Ld (000's machine is non-salient; on a
+    salient one u − R̂s i − L̂ di/dt is not dψf/dt, so the drive jobs run these on 000's SPMSM only).
+    """
 
     Rs: eqx.AbstractVar[jax.Array]
     L: eqx.AbstractVar[jax.Array]
+    omega0: eqx.AbstractVar[jax.Array]
     ts: eqx.AbstractVar[float]
     rule: eqx.AbstractVar[AbstractRule]
 
-    def init(self, u0=None) -> FluxState:
+    bound_fields: ClassVar[tuple[str, ...]] = ("Rs", "L", "omega0")
+    _speed_index: ClassVar[int]  # the speed estimate's place in the state
+
+    @abc.abstractmethod
+    def start_speed(self, omega_e) -> jax.Array:
+        """The speed estimate (rad/s) the observer starts from, or is held at, when the rotor turns at ω_e."""
+
+    def bind(self, est_par, omega_e) -> AbstractFluxObserver:
+        w = self.start_speed(omega_e)
+        if est_par is None:
+            return replace_leaves(self, omega0=w)
+        return replace_leaves(self, Rs=est_par.Rs, L=est_par.Ld, omega0=w)
+
+    def init(self, u0=None) -> DriveObserverState:
         return self._init_from(self.initial_state())
 
-    def init_at(self, omega_e) -> FluxState:
+    def init_at(self, omega_e) -> DriveObserverState:
         """The initial state with the speed estimate at ω_e (rad/s): the start of a drive's settling phase."""
-        x0 = self.initial_state()
-        w = jnp.maximum(jnp.abs(omega_e), self.omega_min) if self._speed_abs else omega_e
-        return self._init_from(x0.at[self._speed_index].set(w))
+        return self._init_from(self.initial_state().at[self._speed_index].set(self.start_speed(omega_e)))
 
-    def seed_speed(self, state: FluxState, omega_e) -> FluxState:
+    def seed_speed(self, state: DriveObserverState, omega_e) -> DriveObserverState:
         """``state`` with its speed estimate (FLL centre frequency or PLL speed) set to ω_e: an I-f start-up
         holds it at the I-f frequency until the hand-over (jaxobs.drive.ClosedLoop)."""
-        w = jnp.maximum(jnp.abs(omega_e), self.omega_min) if self._speed_abs else omega_e
+        w = self.start_speed(omega_e)
         return eqx.tree_at(lambda s: s.x, state, state.x.at[self._speed_index].set(w))
 
-    def _init_from(self, x0) -> FluxState:
+    def _init_from(self, x0) -> DriveObserverState:
         z2 = jnp.zeros((2,), x0.dtype)
-        return FluxState(x=x0, rule=self.rule.init(self.f, x0, z2), i_prev=z2, u_prev=z2, started=jnp.asarray(False))
+        return DriveObserverState(
+            x=x0, rule=self.rule.init(self.f, x0, z2), i_prev=z2, u_prev=z2, started=jnp.asarray(False)
+        )
 
-    def back_emf(self, state: FluxState, u):
+    def back_emf(self, state: DriveObserverState, u):
         i = jnp.stack([u.i_a, u.i_b])
         e = state.u_prev - self.Rs * 0.5 * (i + state.i_prev) - self.L * (i - state.i_prev) / self.ts
         return jnp.where(state.started, e, 0.0), i
 
-    def step(self, state: FluxState, u):
+    def step(self, state: DriveObserverState, u):
         e, i = self.back_emf(state, u)
         x1, rs = self.rule.step(self.f, state.x, e, self.ts, state.rule)
         x1 = jnp.where(state.started, x1, state.x)
-        new = FluxState(x=x1, rule=rs, i_prev=i, u_prev=jnp.stack([u.u_a, u.u_b]), started=jnp.asarray(True))
+        new = DriveObserverState(x=x1, rule=rs, i_prev=i, u_prev=jnp.stack([u.u_a, u.u_b]), started=jnp.asarray(True))
         return new, self.output(x1, e)
 
     def vector_field(self, t, x, e_of_t):
@@ -136,16 +150,18 @@ def _check_pll(obj, kp_pll, ki_pll, omega0, psi_floor, name):
     obj.psi_floor = float(psi_floor)
 
 
-class _PLLFluxBase(_FluxBase):
+class _PLLFluxBase(AbstractFluxObserver):
     """Flux filters with state [ψα, ψβ, θ_pll, ω_pll]: a type-2 PLL on the estimated flux gives ω̂."""
 
     kp_pll: eqx.AbstractVar[jax.Array]
     ki_pll: eqx.AbstractVar[jax.Array]
-    omega0: eqx.AbstractVar[jax.Array]
     psi_floor: eqx.AbstractVar[float]
 
     _speed_index: ClassVar[int] = 3  # the PLL's ω in the state
-    _speed_abs: ClassVar[bool] = False  # a PLL's speed is signed
+
+    def start_speed(self, omega_e):
+        """ω_e itself: a PLL's speed is signed and may be zero."""
+        return jnp.asarray(omega_e)
 
     def initial_state(self):
         z = jnp.zeros_like(self.kp_pll)
@@ -236,12 +252,24 @@ def _fll_norm(ya, qa, yb, qb, e, v_floor):
     return jnp.maximum(jnp.maximum(v2, e[0] * e[0] + e[1] * e[1]), v_floor * v_floor)
 
 
+class _FLLFluxBase(AbstractFluxObserver):
+    """Flux filters whose speed is an FLL's: a SOGI's centre frequency, > 0 (``omega_min`` its floor)."""
+
+    omega_min: eqx.AbstractVar[float]
+
+    def start_speed(self, omega_e):
+        """max(|ω_e|, omega_min): a SOGI cannot tell the direction (the sign comes from the flux's rotation,
+        module doc) and its centre frequency must stay positive.  The floor is the observer's own
+        ``omega_min`` (1 rad/s by default), the one its outputs divide by, not a separate constant."""
+        return jnp.maximum(jnp.abs(omega_e), self.omega_min)
+
+
 def _signed(omega_abs, psi_a, psi_b, y_a, y_b):
     cross = psi_a * y_b - psi_b * y_a
     return jnp.where(cross < 0, -omega_abs, omega_abs)
 
 
-class SOIFO(_FluxBase):
+class SOIFO(_FLLFluxBase):
     """SOGI flux observer with FLL (000 Sec. III-A, eq 15, Fig. 3): ψ̂ = kω'/(s² + kω's + ω'²)·ê.
 
     State [yα, qα, yβ, qβ, ω̂].  FLL: ω̂̇ = −lam·ω̂² Σₓ (êₓ − yₓ) qₓ / Σₓ (yₓ² + qₓ²) (two SOGIs, one FLL;
@@ -267,7 +295,6 @@ class SOIFO(_FluxBase):
         self.omega_min = float(omega_min)
 
     _speed_index: ClassVar[int] = 4  # the FLL's ω̂ (a SOGI's centre frequency: > 0)
-    _speed_abs: ClassVar[bool] = True
 
     def initial_state(self):
         z = jnp.zeros_like(self.k)
@@ -289,7 +316,7 @@ class SOIFO(_FluxBase):
         )
 
 
-class SecondOrderSOIFO(_FluxBase):
+class SecondOrderSOIFO(_FLLFluxBase):
     """Second-order SOIFO with FLL (000 Sec. III-B, eq 20, Fig. 4).
 
     ψ̂ = K1K2ω'²s/(s⁴ + K2ω's³ + (2+K1K2)ω'²s² + K2ω'³s + ω'⁴)·ê: the second-order SOGI of
@@ -335,8 +362,7 @@ class SecondOrderSOIFO(_FluxBase):
         self.v_floor = float(v_floor)
         self.omega_min = float(omega_min)
 
-    _speed_index: ClassVar[int] = 8
-    _speed_abs: ClassVar[bool] = True
+    _speed_index: ClassVar[int] = 8  # the FLL's ω̂
 
     def initial_state(self):
         z = jnp.zeros_like(self.K1)
@@ -369,13 +395,15 @@ class SecondOrderSOIFO(_FluxBase):
         w_new = w - self.ts * self.lam * w * w * num / _fll_norm(ya, qa, yb, qb, e, self.v_floor)
         return jnp.concatenate([new_hist[0], new_hist[1], w_new[None]]), (ya, qa, yb, qb)
 
-    def step(self, state: FluxState, u):
+    def step(self, state: DriveObserverState, u):
         if self.discretization == "rule":
             return super().step(state, u)
         e, i = self.back_emf(state, u)
         x1, (ya, qa, yb, qb) = self._paper_step(state.x, e)
         x1 = jnp.where(state.started, x1, state.x)
-        new = FluxState(x=x1, rule=state.rule, i_prev=i, u_prev=jnp.stack([u.u_a, u.u_b]), started=jnp.asarray(True))
+        new = DriveObserverState(
+            x=x1, rule=state.rule, i_prev=i, u_prev=jnp.stack([u.u_a, u.u_b]), started=jnp.asarray(True)
+        )
         w = jnp.maximum(x1[8], self.omega_min)
         pa, pb = qa / w, qb / w
         out = FluxOutput(

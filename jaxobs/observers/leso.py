@@ -39,6 +39,7 @@ interpolated linearly between its samples, and returns the estimate at t_k.
 
 from __future__ import annotations
 
+import abc
 import math
 from typing import ClassVar, NamedTuple
 
@@ -51,8 +52,9 @@ from .._discretize import RK4, AbstractRule, Knots, check_rule
 from .._math import safe_atan2, wrap
 from .._validate import check_nonnegative, check_positive, check_sample_time
 from ._cores import pll_vf
+from .base import AbstractDriveObserver, DriveObserverState, replace_leaves
 
-__all__ = ["LESOOutput", "LESOState", "CLESO", "GILESO", "FALESO"]
+__all__ = ["LESOOutput", "AbstractLESO", "CLESO", "GILESO", "FALESO"]
 
 
 class LESOOutput(NamedTuple):
@@ -63,15 +65,14 @@ class LESOOutput(NamedTuple):
     theta_emf: jax.Array  # the BEMF's own angle, atan2(−êα, êβ) (positive rotation), rad
 
 
-class LESOState(eqx.Module):
-    x: jax.Array
-    rule: object
-    i_prev: jax.Array
-    u_prev: jax.Array
-    started: jax.Array
+class AbstractLESO(AbstractDriveObserver):
+    """A LESO of 002 followed by the normalized quadrature PLL (module doc).
 
+    Subclasses give the LESO part (:meth:`leso`) and its number of states ``n_leso``; the PLL's θ̂ and ω̂
+    follow them in the state.  The model (002 eqs 4–8) is written in the q-axis inductance: bound to a
+    machine a LESO takes Lq (the extended EMF absorbs the saliency), and its PLL starts at the signed ω_e.
+    """
 
-class _LESOBase(eqx.Module):
     Rs: eqx.AbstractVar[jax.Array]
     Lq: eqx.AbstractVar[jax.Array]
     kp_pll: eqx.AbstractVar[jax.Array]
@@ -80,32 +81,41 @@ class _LESOBase(eqx.Module):
     ts: eqx.AbstractVar[float]
     rule: eqx.AbstractVar[AbstractRule]
     e_floor: eqx.AbstractVar[float]
-    n_leso: ClassVar[int]  # LESO states (the PLL's two follow)
+    n_leso: eqx.AbstractClassVar[int]  # LESO states (the PLL's two follow)
+
+    bound_fields: ClassVar[tuple[str, ...]] = ("Rs", "Lq", "omega0_pll")
+
+    def bind(self, est_par, omega_e) -> AbstractLESO:
+        if est_par is None:
+            return replace_leaves(self, omega0_pll=omega_e)
+        return replace_leaves(self, Rs=est_par.Rs, Lq=est_par.Lq, omega0_pll=omega_e)
 
     def initial_state(self):
         z = jnp.zeros((self.n_leso,), self.Rs.dtype)
         return jnp.concatenate([z, jnp.stack([jnp.zeros_like(self.Rs), self.omega0_pll])])
 
-    def init(self, u0=None) -> LESOState:
+    def init(self, u0=None) -> DriveObserverState:
         return self._init_from(self.initial_state())
 
-    def init_at(self, omega_e) -> LESOState:
+    def init_at(self, omega_e) -> DriveObserverState:
         """The initial state with the PLL's speed at ω_e (rad/s): the start of a drive's settling phase."""
         return self._init_from(self.initial_state().at[self.n_leso + 1].set(omega_e))
 
-    def seed_speed(self, state: LESOState, omega_e) -> LESOState:
+    def seed_speed(self, state: DriveObserverState, omega_e) -> DriveObserverState:
         """``state`` with the PLL's speed set to ω_e: an I-f start-up holds it at the I-f frequency until the
         hand-over (jaxobs.drive.ClosedLoop)."""
         return eqx.tree_at(lambda s: s.x, state, state.x.at[self.n_leso + 1].set(omega_e))
 
-    def _init_from(self, x0) -> LESOState:
+    def _init_from(self, x0) -> DriveObserverState:
         z2 = jnp.zeros((2,), x0.dtype)
         inp0 = (z2, z2)
-        return LESOState(x=x0, rule=self.rule.init(self.f, x0, inp0), i_prev=z2, u_prev=z2, started=jnp.asarray(False))
+        return DriveObserverState(
+            x=x0, rule=self.rule.init(self.f, x0, inp0), i_prev=z2, u_prev=z2, started=jnp.asarray(False)
+        )
 
-    # the LESO part: returns (dx_leso, ê) for input (u, i) and speed ω̂
-    def leso(self, xl, u, i, w):  # pragma: no cover - abstract
-        raise NotImplementedError
+    @abc.abstractmethod
+    def leso(self, xl, u, i, w):
+        """The LESO part: (dx_leso/dt, ê) for the voltage u, current i (αβ) and the PLL's speed ω̂ = w."""
 
     def f(self, x, inp):
         u, i = inp
@@ -116,13 +126,15 @@ class _LESOBase(eqx.Module):
         dth, dw = pll_vf(th, w, err, self.kp_pll, self.ki_pll)
         return jnp.concatenate([dxl, jnp.stack([dth, dw])])
 
-    def step(self, state: LESOState, meas):
+    def step(self, state: DriveObserverState, meas):
         i = jnp.stack([meas.i_a, meas.i_b])
         path = Knots(u0=(state.u_prev, state.i_prev), um=(state.u_prev, 0.5 * (i + state.i_prev)), u1=(state.u_prev, i))
         x1, rs = self.rule.step(self.f, state.x, path, self.ts, state.rule)
         x1 = jnp.where(state.started, x1, state.x)
         x1 = x1.at[self.n_leso].set(wrap(x1[self.n_leso]))
-        new = LESOState(x=x1, rule=rs, i_prev=i, u_prev=jnp.stack([meas.u_a, meas.u_b]), started=jnp.asarray(True))
+        new = DriveObserverState(
+            x=x1, rule=rs, i_prev=i, u_prev=jnp.stack([meas.u_a, meas.u_b]), started=jnp.asarray(True)
+        )
         _, e = self.leso(x1[: self.n_leso], new.u_prev, i, x1[self.n_leso + 1])
         out = LESOOutput(
             e_a=e[0], e_b=e[1], theta=x1[self.n_leso], omega=x1[self.n_leso + 1], theta_emf=safe_atan2(-e[0], e[1])
@@ -145,12 +157,15 @@ def _common(obj, Rs, Lq, kp_pll, ki_pll, omega0_pll, ts, rule, e_floor, name):
     obj.e_floor = float(e_floor)
 
 
-# The PLL defaults: pole placement at ω_b = 2π·papers.LESO_PLL_HZ with ζ = 0.7071 (linear.pll_gains
-# uses 1/√2, 1e-5 apart; written as before so that the defaults keep their values).
-_DEFAULT_PLL = (2 * 0.7071 * 2 * math.pi * papers.LESO_PLL_HZ, (2 * math.pi * papers.LESO_PLL_HZ) ** 2)
+# The PLL defaults: pole placement at ω_b = 2π·papers.LESO_PLL_HZ with ζ = papers.PLL_ZETA = 1/√2, the
+# same arithmetic as jaxobs.linear.pll_gains (not importable here: linear sits above the observers), so a
+# LESO's defaults are the tuning jobs' closed form exactly.  (They used ζ = 0.7071 until the papers'
+# constants were consolidated: k_p 1e-5 lower.)
+_W_PLL = 2 * math.pi * papers.LESO_PLL_HZ
+_DEFAULT_PLL = (2 * papers.PLL_ZETA * _W_PLL, _W_PLL**2)
 
 
-class CLESO(_LESOBase):
+class CLESO(AbstractLESO):
     """Conventional LESO (002 eqs 15–17), gains from the bandwidth ω0: l1 = 2ω0 − μ, l2 = ω0²."""
 
     Rs: jax.Array
@@ -190,7 +205,7 @@ class CLESO(_LESOBase):
         return jnp.concatenate([dx1, dx2]), -self.Lq * x2
 
 
-class GILESO(_LESOBase):
+class GILESO(AbstractLESO):
     """LESO with a generalized integrator at ω̂e in its internal model (002 eqs 29–30)."""
 
     Rs: jax.Array
@@ -238,7 +253,7 @@ class GILESO(_LESOBase):
         return jnp.concatenate([dx1, dx2a, rd, drd]), -self.Lq * x2
 
 
-class FALESO(_LESOBase):
+class FALESO(AbstractLESO):
     """Frequency-adaptive complex-coefficient LESO (002 eqs 25–28)."""
 
     Rs: jax.Array

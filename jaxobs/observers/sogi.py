@@ -18,7 +18,7 @@ from .. import papers
 from .._discretize import AbstractRule, Tustin, check_rule
 from .._validate import check_positive, check_sample_time
 from ._cores import sogi2_vf, sogi_vf
-from .base import AbstractObserver
+from .base import AbstractVectorFieldObserver
 
 __all__ = ["QSGOutput", "SOGI", "SOGI2"]
 
@@ -28,7 +28,7 @@ class QSGOutput(NamedTuple):
     v_beta: jax.Array  # quadrature output qv' = Q(s) v
 
 
-class SOGI(AbstractObserver):
+class SOGI(AbstractVectorFieldObserver):
     """SOGI-QSG at fixed ω' (000 eqs 12–13; 001 eqs 1–2): D = kω's/(s²+kω's+ω'²)."""
 
     k: jax.Array
@@ -53,7 +53,7 @@ class SOGI(AbstractObserver):
         return jnp.zeros((2,), dtype=self.omega.dtype)
 
 
-class SOGI2(AbstractObserver):
+class SOGI2(AbstractVectorFieldObserver):
     """Second-order SOGI at fixed ω' (000 eqs 17–18), gains K1, K2 in paper 000's naming."""
 
     K1: jax.Array

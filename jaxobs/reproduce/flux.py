@@ -70,7 +70,7 @@ DSP_000_ADVANCE = 0.0
 
 def flux_bank(
     est: D.PMSMParams,
-    omega0,
+    omega_e,
     *,
     lam_soifo=linear.soifo_lambda(K_SOIFO),
     lam_sosoifo=linear.second_order_soifo_lambda(K1, K2),
@@ -78,17 +78,20 @@ def flux_bank(
     K2_=K2,
     k=K_SOIFO,
 ):
-    """The four observers of 000 with the Fig. 5 settings; the second-order SOIFO is the primary."""
+    """The four observers of 000 with the Fig. 5 settings, bound to the machine ``est`` they assume and started
+    at ω_e (rad/s) by their one binding (``ObserverBank.bind``); the second-order SOIFO is the primary."""
     kp, ki = linear.pll_gains(2 * math.pi * papers.FLUX_PLL_HZ)
-    return ObserverBank(
+    # Rs = 0, L = 1 and omega0 = 1 rad/s are placeholders: bind() sets the assumed machine and the start speed
+    bank = ObserverBank(
         (
-            PureIntegratorFlux(est.Rs, est.Ld, kp, ki, omega0=omega0),
-            LPFFlux(est.Rs, est.Ld, papers.LPF_OMEGA_C, kp, ki, omega0=omega0),
-            SOIFO(est.Rs, est.Ld, k, lam_soifo, omega0=omega0),
-            SecondOrderSOIFO(est.Rs, est.Ld, K1_, K2_, lam_sosoifo, omega0=omega0),
+            PureIntegratorFlux(0.0, 1.0, kp, ki),
+            LPFFlux(0.0, 1.0, papers.LPF_OMEGA_C, kp, ki),
+            SOIFO(0.0, 1.0, k, lam_soifo, omega0=1.0),
+            SecondOrderSOIFO(0.0, 1.0, K1_, K2_, lam_sosoifo, omega0=1.0),
         ),
         primary=3,
     )
+    return bank.bind(est, omega_e)
 
 
 def _window(t, start, stop):

@@ -7,9 +7,9 @@ from pathlib import Path
 
 import equinox as eqx
 import jax
-import jax.numpy as jnp
 
 import jaxobs
+from jaxobs.observers import AbstractFluxObserver
 from jaxobs.provenance import sha256
 from jaxobs.signals import stack
 
@@ -128,11 +128,9 @@ def load_recordings(spec: RecordingSpec, signal: str):
 
 def bind_recording(obs, rec):
     """A drive observer on a recording starts from the recorded speed at t = 0 (the encoder's, as a drive job's
-    observer starts from the scenario's true speed): flux observers' omega0, LESOs' omega0_pll."""
-    w0 = rec.omega_e[..., 0]
-    if hasattr(obs, "Lq"):
-        return eqx.tree_at(lambda o: o.omega0_pll, obs, w0.astype(obs.omega0_pll.dtype))
-    return eqx.tree_at(lambda o: o.omega0, obs, jnp.maximum(jnp.abs(w0), 1.0).astype(obs.omega0.dtype))
+    observer starts from the scenario's true speed), by its one binding: ``est_par`` None keeps the job's own
+    Rs and L (a recording gives the speed, not the machine)."""
+    return obs.bind(None, rec.omega_e[..., 0])
 
 
 def check_recording_job(job, comp_t: dict) -> None:
@@ -147,7 +145,7 @@ def check_recording_job(job, comp_t: dict) -> None:
                     f"{t.metric!r} needs the closed-loop drive; a recording runs the observer open loop "
                     "(use iae_position, rms_position_steady, ripple_position)",
                 )
-        if spec.signal != "grid" and "L" in COMPONENTS[job.component].defaults:  # a flux observer
+        if spec.signal != "grid" and issubclass(COMPONENTS[job.component].ctor, AbstractFluxObserver):
             for k in ("Rs", "L"):
                 if k not in comp_t:
                     raise JobError(

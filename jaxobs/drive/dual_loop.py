@@ -1,0 +1,367 @@
+"""The dual three-phase drive: its two current-control modes and the closed loop (paper 002, Sec. V-B).
+
+Current control, :class:`DualFOC` with ``mode`` (both reuse :class:`~jaxobs.drive.FOC` unchanged: its
+speed loop, dq current PIs with decoupling, delay compensation, anti-windup):
+
+- ``"vsd"``: VSD control (002 Fig. 15; its refs [5], [6]).  The FOC runs on the αβ subspace (i_αβ =
+  the mean of the two sets' Clarke currents) in the rotor frame, tuned on :meth:`DualPMSMParams.per_set`
+  (the αβ inductances, half the rotor); a PI per xy axis drives i_x, i_y to zero,
+  u_xy = k_p,xy e + k_i,xy ∫e with IMC gains k_p,xy = α_c L̂ls, k_i,xy = α_c R̂s.  The xy disturbance is
+  the BEMF's 5th/7th harmonics, at 5ωe and 7ωe in the stationary xy frame: a PI there attenuates it by
+  its loop gain, it does not cancel it (resonant or rotating-frame xy controllers would; 002 does not
+  say which it used).  Each set's voltage is then z_αβ ± conj(z_xy).
+- ``"individual"``: two individual sets (002 Figs 13-14; ref [6]).  Each set has its own dq frame, set 2's
+  30° behind set 1's in its own Clarke coordinates (θ_e − π/6: its a-axis is 30° ahead), and its own
+  FOC PI state; the gains are the IMC design on one set's self inductances (:meth:`DualPMSMParams.set_self`)
+  and the mutual coupling through the other set is left to the PIs, as in ref. [6].  Both FOCs run the
+  same speed loop on the same inputs, so they hold the same i_q* (each set carries half the torque).
+  The common mode (xy = 0) then has the bandwidth α_c (L + Lls)/(2L) and the differential mode (the
+  xy currents) α_c (L + Lls)/(2 Lls): 3.5 α_c on q with the assumed machine, hence a lower default α_c
+  for this mode (:meth:`DualFOC.imc`).
+
+The observer (``DriveInput``) is chosen by the mode: set 1's measured voltage and current under
+``"individual"`` (002: "the LESOs are only applied to the first set"), the VSD αβ ones under ``"vsd"``.
+
+:class:`DualClosedLoop` is :class:`~jaxobs.drive.ClosedLoop`'s wiring for this machine (same step
+order: plant at t_k, sensors, observer, controller, inverter) with a steady start only: the machine
+at the scenario's speed and load (each set carrying half), the FOC integrators holding it, the observer
+from ``init_at(ω_e)`` converging on the encoder-run drive until ``drive.handover``.  No I-f start-up.
+The scenario gives the profiles, sensors (applied to each set; set 2's noise from another key), dead
+time and ``est_par`` (what the observers assume: the per-set machine); the true machine is ``machine``.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any, ClassVar, Literal, NamedTuple
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+
+from .. import papers
+from .._discretize import RK4, AbstractRule, check_rule
+from .._math import wrap
+from .._measurements import DriveInput
+from .._system import AbstractSystem
+from .._validate import check_nonnegative, check_positive
+from ..observers import AbstractDriveObserver
+from .component import AbstractComponent
+from .control import FOC, ControllerState, FOCInput, OperatingPoint
+from .dual import DualPlantInput, DualPlantState, DualPMSM, DualPMSMParams, sets_to_vsd, vsd_to_sets
+from .hardware import Inverter
+from .machine import dq_to_ab
+from .scenario import Scenario
+
+__all__ = [
+    "DualFOC",
+    "DualFOCInput",
+    "DualFOCOutput",
+    "DualFOCState",
+    "DualDrive",
+    "DualClosedLoop",
+    "DualOutput",
+    "dual_bench_drive",
+]
+
+_C30, _S30 = math.cos(math.pi / 6), math.sin(math.pi / 6)
+
+
+def _rot(a, b, c, s):
+    return c * a - s * b, s * a + c * b
+
+
+class DualFOCInput(NamedTuple):
+    k: jax.Array
+    i_a1: jax.Array  # measured Clarke currents of each set (set 1's stationary frame), A
+    i_b1: jax.Array
+    i_a2: jax.Array
+    i_b2: jax.Array
+    theta: jax.Array  # electrical angle the controller uses, rad
+    omega_e: jax.Array  # rad/s
+    omega_m: jax.Array  # rad/s
+    omega_m_ref: jax.Array  # rad/s
+
+
+class DualFOCOutput(NamedTuple):
+    u_a1: jax.Array  # each set's voltage for the next period (set 1's frame, before the inverters' limit), V
+    u_b1: jax.Array
+    u_a2: jax.Array
+    u_b2: jax.Array
+    id_ref: jax.Array  # A
+    iq_ref: jax.Array
+    theta: jax.Array  # rad
+
+
+class DualFOCState(NamedTuple):
+    main: ControllerState  # the αβ FOC ("vsd") or set 1's ("individual")
+    second: ControllerState  # set 2's ("individual"; carried unused under "vsd")
+    int_x: jax.Array  # xy PI integrators, V
+    int_y: jax.Array
+
+
+class DualFOC(AbstractComponent):
+    """Current control of the dual machine, ``mode`` "vsd" or "individual" (module doc)."""
+
+    foc: FOC
+    kp_xy: jax.Array  # V/A
+    ki_xy: jax.Array  # V/(A·s)
+    mode: Literal["vsd", "individual"] = eqx.field(static=True)
+
+    def __init__(self, foc, kp_xy=1.0, ki_xy=0.0, *, mode="vsd"):
+        if not isinstance(foc, FOC):
+            raise ValueError(f"DualFOC.foc must be a FOC, got {type(foc).__name__}")
+        if mode not in ("vsd", "individual"):
+            raise ValueError(f"DualFOC.mode must be 'vsd' or 'individual', got {mode!r}")
+        self.foc = foc
+        self.kp_xy = check_positive("kp_xy", kp_xy, "DualFOC")
+        self.ki_xy = check_nonnegative("ki_xy", ki_xy, "DualFOC")
+        self.mode = mode
+
+    @classmethod
+    def imc(cls, est: DualPMSMParams, alpha_c, alpha_s, *, mode="vsd", **kw) -> DualFOC:
+        """IMC current loops at ``alpha_c`` rad/s and the double-pole speed loop at ``alpha_s`` on ``est``.
+
+        "vsd": :meth:`FOC.imc` on ``est.per_set()``, xy PIs k_p = α_c L̂ls, k_i = α_c R̂s.  "individual":
+        :meth:`FOC.imc` on ``est.set_self()``; pass a lower ``alpha_c`` there (module doc: the differential
+        mode runs (L̂q + L̂ls)/(2 L̂ls) times faster; the dual bench uses half the single bench's).
+        """
+        if not isinstance(est, DualPMSMParams):
+            raise ValueError(f"DualFOC.imc: est must be a DualPMSMParams, got {type(est).__name__}")
+        if mode not in ("vsd", "individual"):
+            raise ValueError(f"DualFOC.mode must be 'vsd' or 'individual', got {mode!r}")
+        machine = est.per_set() if mode == "vsd" else est.set_self()
+        foc = FOC.imc(machine, alpha_c, alpha_s, **kw)
+        return cls(foc, alpha_c * est.Lls, alpha_c * est.m.Rs, mode=mode)
+
+    def init(self, op: OperatingPoint | None = None) -> DualFOCState:
+        """The integrators that hold the drive at ``op`` (per set; zero xy), zeros for None."""
+        cs = self.foc.init(op)
+        z = jnp.zeros_like(cs.int_d)
+        return DualFOCState(main=cs, second=cs, int_x=z, int_y=z)
+
+    def _xy_pi(self, int_, i, ts, u_max):
+        e = -i
+        int_new = jnp.clip(int_ + self.ki_xy * e * ts, -u_max, u_max)
+        return int_new, self.kp_xy * e + int_
+
+    def step(self, cs: DualFOCState, inp: DualFOCInput) -> tuple[DualFOCState, DualFOCOutput]:
+        foc, ts = self.foc, self.foc.ts
+        k, th, w_e, w_m, ref = inp.k, inp.theta, inp.omega_e, inp.omega_m, inp.omega_m_ref
+        if self.mode == "vsd":
+            i_a, i_b, i_x, i_y = sets_to_vsd(inp.i_a1, inp.i_b1, inp.i_a2, inp.i_b2)
+            main, o = foc.step(cs.main, FOCInput(k, i_a, i_b, th, w_e, w_m, ref))
+            int_x, u_x = self._xy_pi(cs.int_x, i_x, ts, foc.u_max)
+            int_y, u_y = self._xy_pi(cs.int_y, i_y, ts, foc.u_max)
+            u = vsd_to_sets(o.u_a, o.u_b, u_x, u_y)
+            new = DualFOCState(main=main, second=cs.second, int_x=int_x, int_y=int_y)
+            return new, DualFOCOutput(*u, o.id_ref, o.iq_ref, o.theta)
+        main, o1 = foc.step(cs.main, FOCInput(k, inp.i_a1, inp.i_b1, th, w_e, w_m, ref))
+        # set 2 in its own Clarke frame (a2 axis 30° ahead of a1): currents rotated back 30°, angle θ − 30°,
+        # its voltage rotated forward again into set 1's frame
+        j_a, j_b = _rot(inp.i_a2, inp.i_b2, _C30, -_S30)
+        second, o2 = foc.step(cs.second, FOCInput(k, j_a, j_b, th - math.pi / 6, w_e, w_m, ref))
+        u_a2, u_b2 = _rot(o2.u_a, o2.u_b, _C30, _S30)
+        new = DualFOCState(main=main, second=second, int_x=cs.int_x, int_y=cs.int_y)
+        return new, DualFOCOutput(o1.u_a, o1.u_b, u_a2, u_b2, o1.id_ref, o1.iq_ref, o1.theta)
+
+
+class DualDrive(eqx.Module):
+    """The dual drive's hardware and controller: :class:`DualFOC`, one inverter per set (alike)."""
+
+    ctrl: DualFOC
+    inverter: Inverter
+    n_sub: int = eqx.field(static=True)
+    rule: AbstractRule = eqx.field(static=True)
+    sensorless: bool = eqx.field(static=True)
+    handover: float = eqx.field(static=True)  # sensorless: encoder until this time (s), observer after
+
+    def __init__(self, ctrl, inverter=None, *, n_sub=2, rule=None, sensorless=False, handover=0.2):
+        if not isinstance(ctrl, DualFOC):
+            raise ValueError(f"DualDrive.ctrl must be a DualFOC, got {type(ctrl).__name__}")
+        self.ctrl = ctrl
+        self.inverter = Inverter() if inverter is None else inverter
+        if isinstance(n_sub, bool) or not isinstance(n_sub, int) or n_sub < 1:
+            raise ValueError(f"DualDrive.n_sub must be an integer >= 1, got {n_sub!r}")
+        self.n_sub = n_sub
+        self.rule = check_rule(RK4() if rule is None else rule, "DualDrive")
+        self.sensorless = bool(sensorless)
+        if not (0.0 <= handover <= 100.0):
+            raise ValueError(f"DualDrive.handover must be in [0, 100] s, got {handover!r}")
+        self.handover = float(handover)
+
+    @property
+    def ts(self) -> float:
+        return self.ctrl.foc.ts
+
+    @property
+    def mode(self) -> str:
+        return self.ctrl.mode
+
+
+class DualOutput(NamedTuple):
+    """One control period's signals at t_k."""
+
+    t: jax.Array  # s
+    theta_e: jax.Array  # true electrical angle, rad, wrapped
+    theta_e_hat: jax.Array  # the angle the controller used, rad, wrapped
+    omega_m: jax.Array  # rad/s
+    omega_m_hat: jax.Array
+    omega_m_ref: jax.Array
+    i_d: jax.Array  # αβ subspace, rotor frame, A
+    i_q: jax.Array
+    i_x: jax.Array  # xy subspace, A
+    i_y: jax.Array
+    i_a1: jax.Array  # each set's Clarke currents (set 1's frame), A
+    i_b1: jax.Array
+    i_a2: jax.Array
+    i_b2: jax.Array
+    torque: jax.Array  # N·m
+    load: jax.Array  # N·m
+    id_ref: jax.Array  # A (per set / αβ)
+    iq_ref: jax.Array
+    obs: Any  # the observer's outputs (None with the encoder)
+
+    @property
+    def speed_rpm(self):
+        return self.omega_m * 60 / (2 * jnp.pi)
+
+
+class DualLoopState(NamedTuple):
+    plant: DualPlantState
+    ctrl: DualFOCState
+    obs: Any
+    sensors: jax.Array
+    u: tuple  # (u_a1, u_b1, u_a2, u_b2) to apply over the coming period, V
+
+
+class DualClosedLoop(AbstractSystem):
+    """The dual drive ``drive`` on the dual machine ``machine`` running ``scenario`` with ``observer``
+    (None: the encoder).  ``scenario.par`` is not used (the true machine is ``machine``)."""
+
+    drive: DualDrive
+    observer: Any
+    scenario: Scenario
+    machine: DualPMSMParams
+
+    unroll: ClassVar[int] = 1
+
+    def __init__(self, drive: DualDrive, observer, scenario: Scenario, machine: DualPMSMParams):
+        if not isinstance(drive, DualDrive):
+            raise ValueError(f"DualClosedLoop.drive must be a DualDrive, got {type(drive).__name__}")
+        if not isinstance(scenario, Scenario):
+            raise ValueError(f"DualClosedLoop.scenario must be a Scenario, got {type(scenario).__name__}")
+        if not isinstance(machine, DualPMSMParams):
+            raise ValueError(f"DualClosedLoop.machine must be a DualPMSMParams, got {type(machine).__name__}")
+        if drive.sensorless and observer is None:
+            raise ValueError("DualClosedLoop: a sensorless drive needs an observer (observer=None is the encoder)")
+        if scenario.est_par.p != machine.p:
+            raise ValueError(f"DualClosedLoop.scenario.est_par.p must equal the machine's p ({machine.p})")
+        self.drive, self.observer, self.scenario, self.machine = drive, observer, scenario, machine
+
+    @property
+    def ts(self) -> float:
+        return self.drive.ts
+
+    @property
+    def plant(self) -> DualPMSM:
+        d = self.drive
+        return DualPMSM(self.machine, d.inverter, self.scenario.dead_time, ts=d.ts, n_sub=d.n_sub, rule=d.rule)
+
+    @property
+    def controller(self) -> DualFOC:
+        """The DualFOC with its FOC bound to the machine it was tuned on and the inverters' voltage limit."""
+        c = self.drive.ctrl
+        foc = c.foc.bind(c.foc.est, self.drive.inverter.u_max, None)
+        return eqx.tree_at(lambda q: q.foc, c, foc)
+
+    def operating_point(self) -> OperatingPoint:
+        """The steady state at the scenario's initial speed and load: each set carries half the load
+        (the FOC's operating point on the per-set machine), zero xy current."""
+        sc = self.scenario
+        return self.controller.foc.operating_point(
+            self.machine.per_set(), sc.omega_m0, sc.speed_ref(0.0), sc.theta_e0, sc.load(0.0) / 2
+        )
+
+    def init(self) -> DualLoopState:
+        sc, foc = self.scenario, self.controller
+        op = self.operating_point()
+        plant = self.plant.init(op)
+        w_e = self.machine.p * op.omega_m
+        # the first period's voltage, computed at t_{−1} with the delay compensation: centred half a period on
+        lead = (0.5 if foc.foc.delay_compensation else -1.0) * w_e * self.ts
+        u_a, u_b = self.drive.inverter.limit(*dq_to_ab(op.u_d, op.u_q, op.theta_e + lead))
+        obs = None
+        if self.observer is not None:
+            obs = (
+                self.observer.init_at(w_e) if isinstance(self.observer, AbstractDriveObserver) else self.observer.init()
+            )
+        key = sc.sensors.init(op, key=sc.key)
+        return DualLoopState(plant=plant, ctrl=foc.init(op), obs=obs, sensors=key, u=(u_a, u_b, u_a, u_b))
+
+    def step(self, state: DualLoopState, k) -> tuple[DualLoopState, DualOutput]:
+        drive, sc, inv = self.drive, self.scenario, self.drive.inverter
+        t = k * self.ts
+        w_ref, load = sc.speed_ref(t), sc.load(t)
+        plant_state, y = self.plant.step(state.plant, DualPlantInput(*state.u, load))
+        u = state.u
+        key = state.sensors
+        m1 = sc.sensors.measure(key, k, u[0], u[1], y.i_a1, y.i_b1)
+        m2 = sc.sensors.measure(jax.random.fold_in(key, 1), k, u[2], u[3], y.i_a2, y.i_b2)
+        if drive.mode == "individual":
+            obs_in = DriveInput(*m1)
+        else:
+            ua, ub, _, _ = sets_to_vsd(m1[0], m1[1], m2[0], m2[1])
+            ia, ib, _, _ = sets_to_vsd(m1[2], m1[3], m2[2], m2[3])
+            obs_in = DriveInput(ua, ub, ia, ib)
+        if self.observer is not None:
+            obs_state, obs_out = self.observer.step(state.obs, obs_in)
+        else:
+            obs_state, obs_out = None, None
+        w_e = self.machine.p * y.omega_m
+        if drive.sensorless:
+            use_obs = t >= drive.handover
+            th_c = jnp.where(use_obs, obs_out.theta, y.theta_e)
+            w_e_c = jnp.where(use_obs, obs_out.omega, w_e)
+            w_m_c = w_e_c / self.machine.p
+        else:
+            th_c, w_e_c, w_m_c = y.theta_e, w_e, y.omega_m
+        ctrl, c = self.controller.step(
+            state.ctrl, DualFOCInput(k, m1[2], m1[3], m2[2], m2[3], th_c, w_e_c, w_m_c, w_ref)
+        )
+        u_next = (*inv.limit(c.u_a1, c.u_b1), *inv.limit(c.u_a2, c.u_b2))
+        out = DualOutput(
+            t=t,
+            theta_e=wrap(y.theta_e),
+            theta_e_hat=wrap(c.theta),
+            omega_m=y.omega_m,
+            omega_m_hat=w_m_c,
+            omega_m_ref=w_ref,
+            i_d=y.i_d,
+            i_q=y.i_q,
+            i_x=y.i_x,
+            i_y=y.i_y,
+            i_a1=y.i_a1,
+            i_b1=y.i_b1,
+            i_a2=y.i_a2,
+            i_b2=y.i_b2,
+            torque=y.torque,
+            load=load,
+            id_ref=c.id_ref,
+            iq_ref=c.iq_ref,
+            obs=obs_out,
+        )
+        return DualLoopState(plant=plant_state, ctrl=ctrl, obs=obs_state, sensors=key, u=u_next), out
+
+
+def dual_bench_drive(
+    machine: DualPMSMParams, *, mode="vsd", sensorless=True, handover=0.2, alpha_s=None, n_sub=2
+) -> DualDrive:
+    """The single IPMSM bench's drive (:func:`jaxobs.drive.bench_drive`) on the dual machine ``machine`` (what
+    the controller assumes): the speed loop at ``alpha_s`` (default 2π·papers.BENCH_SPEED_HZ rad/s); IMC
+    current loops at 2π·papers.BENCH_CURRENT_HZ rad/s under "vsd", half that under "individual" (its
+    differential mode runs 3.5× faster than α_c on the assumed machine, module doc)."""
+    alpha_c = 2 * math.pi * papers.BENCH_CURRENT_HZ * (1.0 if mode == "vsd" else 0.5)
+    alpha_s = 2 * math.pi * papers.BENCH_SPEED_HZ if alpha_s is None else alpha_s
+    ctrl = DualFOC.imc(machine, alpha_c, alpha_s, mode=mode)
+    return DualDrive(ctrl, sensorless=sensorless, handover=handover, n_sub=n_sub)

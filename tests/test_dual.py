@@ -1,0 +1,186 @@
+"""The dual three-phase IPMSM (paper 002's machine): the VSD transformation, the plant, both current-control
+modes closed loop with the encoder and with the FA-LESO (jaxobs.drive.dual, jaxobs.drive.dual_loop)."""
+
+import math
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from jaxobs import drive as D
+from jaxobs import linear, papers
+from jaxobs._simulate import simulate
+from jaxobs.drive import dual, dual_loop
+from jaxobs.metrics import harmonic_amplitude
+from jaxobs.observers import FALESO
+
+TH = dual.PHASE_ANGLES
+rng = np.random.default_rng(0)
+
+
+def _vsd(x6):
+    return np.asarray(dual.phases_to_vsd(jnp.asarray(x6)))
+
+
+# --- the transformation -------------------------------------------------------------------------------------
+
+
+def test_vsd_matrix_is_zhao_lipo_and_orthogonal():
+    T = dual.vsd_matrix()
+    np.testing.assert_allclose(T @ T.T, np.eye(6), atol=1e-14)
+    r3 = math.sqrt(3) / 2
+    # Zhao & Lipo 1995 eq. (4), phase order A B C X Y Z = a1 b1 c1 a2 b2 c2, factor 1/√3
+    zl = np.array(
+        [
+            [1, -0.5, -0.5, r3, -r3, 0],
+            [0, r3, -r3, 0.5, 0.5, -1],
+            [1, -0.5, -0.5, -r3, r3, 0],
+            [0, -r3, r3, 0.5, 0.5, -1],
+            [1, 1, 1, 0, 0, 0],
+            [0, 0, 0, 1, 1, 1],
+        ]
+    ) / math.sqrt(3)
+    np.testing.assert_allclose(T, zl, atol=1e-14)
+
+
+def test_vsd_power_invariance_and_inverse():
+    T = dual.vsd_matrix()
+    u, i = rng.normal(size=(2, 6))
+    assert (T @ u) @ (T @ i) == pytest.approx(u @ i, rel=1e-12)
+    # the model's amplitude-invariant scaling: P = Σ u_k i_k = 3 Σ over the six VSD coordinates
+    assert 3 * _vsd(u) @ _vsd(i) == pytest.approx(u @ i, rel=1e-12)
+    np.testing.assert_allclose(np.asarray(dual.vsd_to_phases(_vsd(u))), u, atol=1e-12)
+
+
+@pytest.mark.parametrize("wt", [0.0, 0.7, 2.9])
+def test_balanced_pair_30deg_apart_maps_to_alpha_beta_only(wt):
+    amp = 3.0
+    x6 = amp * np.cos(wt - TH)  # each phase displaced as its winding: set 2 30° after set 1
+    v = _vsd(x6)
+    np.testing.assert_allclose(v[:2], [amp * math.cos(wt), amp * math.sin(wt)], atol=1e-12)  # amplitude invariant
+    np.testing.assert_allclose(v[2:], 0.0, atol=1e-12)
+
+
+@pytest.mark.parametrize("h,subspace", [(5, "xy"), (7, "xy"), (11, "ab"), (13, "ab"), (3, "o"), (1, "ab")])
+def test_harmonics_map_as_vsd_says(h, subspace):
+    # a harmonic of order h in every phase, e.g. the BEMF's: x_k = cos(h(ωt − θ_k))
+    v = _vsd(np.cos(h * (0.4 - TH)))
+    where = {"ab": slice(0, 2), "xy": slice(2, 4), "o": slice(4, 6)}
+    for name, sl in where.items():
+        norm = np.linalg.norm(v[sl])
+        if name == subspace:
+            assert norm == pytest.approx(1.0, rel=1e-12)
+        else:
+            assert norm < 1e-12, (h, name, v)
+
+
+def test_sets_and_vsd_agree_with_the_phases():
+    x6 = rng.normal(size=6)
+    x6[:3] -= x6[:3].mean()  # isolated neutrals: no zero sequence per set
+    x6[3:] -= x6[3:].mean()
+
+    def clarke(xa, xb, xc):
+        return (2 * xa - xb - xc) / 3, (xb - xc) / math.sqrt(3)
+
+    a1, b1 = clarke(*x6[:3])
+    c, s = math.cos(math.pi / 6), math.sin(math.pi / 6)
+    a2o, b2o = clarke(*x6[3:])  # set 2 in its own frame, its a-axis 30° ahead: rotate into set 1's
+    a2, b2 = c * a2o - s * b2o, s * a2o + c * b2o
+    np.testing.assert_allclose(dual.sets_to_vsd(a1, b1, a2, b2), _vsd(x6)[:4], atol=1e-12)
+    np.testing.assert_allclose(dual.vsd_to_sets(*dual.sets_to_vsd(a1, b1, a2, b2)), [a1, b1, a2, b2], atol=1e-12)
+
+
+# --- the machine --------------------------------------------------------------------------------------------
+
+
+def test_set_one_is_the_single_machine_and_torque_is_twice_it():
+    m = dual.dual_ipmsm_paper002()
+    single = m.per_set()
+    th, w_e = 0.83, 157.0
+    k = dual.pm_flux_vsd(m, jnp.asarray(th))
+    # set 1's BEMF (z_αβ + conj(z_xy)) is the single machine's, harmonics included
+    e1 = dual.vsd_to_sets(*(w_e * np.asarray(k)))[:2]
+    np.testing.assert_allclose(e1, D.bemf_ab(single, w_e, th), rtol=1e-12)
+    # αβ holds the fundamental only (the 5th/7th went to xy)
+    np.testing.assert_allclose(np.asarray(k[:2]), [-float(m.m.psi_f) * math.sin(th), float(m.m.psi_f) * math.cos(th)])
+    # both sets carrying the same dq current (xy = 0): twice the single machine's torque without its 6th
+    # harmonic ripple (the two sets' 6th-order ripples are 180° apart and cancel)
+    x = jnp.asarray([-1.5, 4.0, 0.0, 0.0, 10.0, th])
+    smooth = D.torque(eqx.tree_at(lambda q: (q.a5, q.a7), single, (0.0, 0.0)), -1.5, 4.0, th)
+    assert float(dual.dual_torque(m, x)) == pytest.approx(2 * float(smooth), rel=1e-12)
+    assert float(D.torque(single, -1.5, 4.0, th)) != pytest.approx(float(smooth), rel=1e-3)
+    # power balance with xy current and harmonics: Te ωm = Σ_k e_k i_k + reluctance
+    x = jnp.asarray([0.0, 4.0, 0.7, -0.4, 10.0, th])
+    i6 = np.asarray(dual.vsd_to_phases(jnp.asarray([*D.dq_to_ab(0.0, 4.0, th), 0.7, -0.4, 0.0, 0.0])))
+    e6 = m.p * 10.0 * np.asarray(dual.vsd_to_phases(jnp.asarray([*k, 0.0, 0.0])))
+    assert float(dual.dual_torque(m, x)) * 10.0 == pytest.approx(e6 @ i6, rel=1e-12)
+
+
+def test_bad_input_names_the_field():
+    m = dual.dual_ipmsm_paper002()
+    with pytest.raises(ValueError, match="Lls"):
+        dual.dual_ipmsm_paper002(Lls=-1e-3)
+    with pytest.raises(ValueError, match="mode"):
+        dual_loop.dual_bench_drive(m, mode="six-step")
+    with pytest.raises(ValueError, match="DualPMSM.par"):
+        dual.DualPMSM(m.m)
+
+
+# --- closed loop --------------------------------------------------------------------------------------------
+
+
+def _run(mode, rpm, load_pu, observer=None, t1=0.4, handover=0.2):
+    m = dual.dual_ipmsm_paper002()
+    est = m.per_set()
+    drv = dual_loop.dual_bench_drive(m, mode=mode, sensorless=observer is not None, handover=handover)
+    sc = D.Scenario(
+        est,
+        speed_ref=D.Profile.constant(rpm * D.RPM),
+        load=D.Profile.constant(load_pu * float(m.m.T_rated)),
+        omega_m0=rpm * D.RPM,
+    )
+    return m, simulate(dual_loop.DualClosedLoop(drv, observer, sc, m), t1)
+
+
+@pytest.mark.parametrize("mode", ["vsd", "individual"])
+def test_encoder_steady_state_holds_speed_and_current_references(mode):
+    m, sol = _run(mode, 300, 0.5, t1=0.5)  # the start ignores the xy currents: a 0.5 r/min dip, settled by 0.3 s
+    o = sol.outputs
+    last = slice(-1000, None)  # the last 0.1 s: 2.5 electrical periods
+    assert abs(float(o.speed_rpm[last].mean()) - 300) < 0.05
+    assert float(np.ptp(o.speed_rpm[last])) < 1.0
+    assert float(np.abs(o.i_q[last] - o.iq_ref[last]).mean()) < 0.02 * float(o.iq_ref[last].mean())
+    assert float(np.abs(o.i_d[last]).max()) < 0.2
+    assert float(o.torque[last].mean()) == pytest.approx(30.0 + float(m.m.B) * 300 * D.RPM, rel=0.01)
+    # the sets share the load: their fundamental currents match (the xy current is the 5th/7th they differ by)
+    i1 = np.hypot(o.i_a1[last], o.i_b1[last]).mean()
+    i2 = np.hypot(o.i_a2[last], o.i_b2[last]).mean()
+    assert i1 == pytest.approx(i2, rel=0.05)
+
+
+@pytest.mark.parametrize("mode", ["vsd", "individual"])
+def test_faleso_closes_the_loop_on_the_mode_s_observer_input(mode):
+    m = dual.dual_ipmsm_paper002()
+    est = m.per_set()
+    we = m.p * 600 * D.RPM
+    kp, ki = linear.pll_gains(2 * math.pi * papers.LESO_PLL_HZ)
+    obs = FALESO(est.Rs, est.Lq, papers.FALESO_K1, papers.FALESO_K2, kp, ki, we)
+    _, sol = _run(mode, 600, 0.4, obs, t1=0.5)
+    o = sol.outputs
+    t = np.asarray(o.t)
+    n_per = int(round(2 * math.pi / we / 1e-4))
+    last = np.zeros_like(t, dtype=bool)
+    last[-5 * n_per :] = True
+    assert abs(float(o.speed_rpm[last].mean()) - 600) < 0.5
+    err = np.degrees(np.angle(np.exp(1j * (np.asarray(o.theta_e_hat) - np.asarray(o.theta_e)))))[last]
+    assert abs(err.mean()) < 0.5 and np.ptp(err) < 2.0
+    ea = np.asarray(o.obs.e_a)
+    fund = float(harmonic_amplitude(t, ea, we, last))
+    h57 = [100 * float(harmonic_amplitude(t, ea, h * we, last)) / fund for h in (5, 7)]
+    if mode == "vsd":
+        # 002 Fig. 15: under VSD the 5th and 7th live in xy; the αβ observer sees none of them
+        assert max(h57) < 0.05
+    else:
+        # Figs 13-14: the first set's equivalent BEMF carries them, the FA-LESO attenuates but shows them
+        assert min(h57) > 0.5

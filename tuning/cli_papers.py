@@ -1,0 +1,245 @@
+"""The papers' commands: ``jaxobs demo``, ``closed-form``, ``bode`` and ``reproduce``."""
+
+from __future__ import annotations
+
+import json
+import math
+import re
+from pathlib import Path
+
+from jaxobs import linear, papers
+
+from .cli_common import CommandOut, enable_x64, progress_of
+from .outdir import atomic_path
+
+# the files each command writes under --out (refused there without --force; jaxobs.plot names them)
+DEMO_FILES = ("fll_tests_A_E.png",)
+
+
+BODE_FILES = ("bode_flux_observers_000_fig5.png", "bode_lesos_002_fig4.png", "bode_fll_open_loop_001_fig14.png")
+
+
+REPRODUCE_FILES = {
+    "flux": (
+        "flux_circles_du_alpha_5V.png",
+        "flux_circles_400rpm.png",
+        "position_error_load_step.png",
+        "position_error_speed_variation.png",
+        "position_error_du_alpha_5V.png",
+    ),
+    "leso": ("leso_position_error_600rpm.png", "leso_speed_ramp.png", "leso_load_step.png"),
+}
+
+
+def cmd_demo(args) -> int:
+    enable_x64()
+    from jaxobs.demo import DEMO_TESTS, fll_demo, format_table
+    from jaxobs.plot import fll_demo_figure
+
+    if args.t_event <= 0:
+        raise ValueError(f"--t-event must be > 0 s, got {args.t_event}")
+    with CommandOut(args, DEMO_FILES) as out:
+        rows, traces = fll_demo(t_event=args.t_event, progress=progress_of(args))
+        fig_path = out / DEMO_FILES[0]
+        with atomic_path(fig_path) as tmp:
+            fll_demo_figure(traces, DEMO_TESTS, args.t_event, tmp)
+    if args.json:
+        print(json.dumps(rows, indent=1))
+    else:
+        print("Paper 001 FLLs with Table I gains on Tests A–E (float64, AB3 at 10 kHz)")
+        print(format_table(rows))
+        print(f"figure: {fig_path}")
+    return 0 if all(r["ok"] for r in rows) else 1
+
+
+CF_OPTIONS = {
+    "sogi-fll": ("k", "omega_n", "zeta"),
+    "wpf": ("omega_n", "zeta"),
+    "wif": ("omega_c", "b", "omega_n"),
+    "cleso": ("omega0", "rs", "lq"),
+}
+
+
+def closed_form_rows(design: str, values: dict) -> dict:
+    """Gains of a closed-form design with the formula and source of each (used by the CLI); the defaults are
+    the papers' (:mod:`jaxobs.papers`)."""
+
+    if design == "sogi-fll":
+        k = values.get("k", papers.SOGI_FLL_K)
+        wn = values.get("omega_n", papers.FLL_OMEGA_N)
+        zeta = values.get("zeta", papers.FLL_ZETA)
+        obs = linear.sogi_fll_closed_form(k=k, omega_n=wn, zeta=zeta)
+        gains = [
+            ("k", float(obs.k), "chosen (001 uses 1/√2)", "001 Sec. II-B"),
+            ("lam", float(obs.lam), "λ = k²ωn²/(8ζ²)", "001 eq (22)"),
+        ]
+        inputs = dict(k=k, omega_n=wn, zeta=zeta)
+    elif design == "wpf":
+        wn = values.get("omega_n", papers.FLL_OMEGA_N)
+        zeta = values.get("zeta", papers.FLL_ZETA)
+        obs = linear.wpf_closed_form(omega_n=wn, zeta=zeta)
+        gains = [
+            ("k1", float(obs.k1), "k1 = √2 (prefilter ζ = 1/√2)", "001 eq (26)"),
+            ("k2", float(obs.k2), "k2 = k1 (amplitude poles coincide)", "001 Sec. III-B"),
+            ("lam", float(obs.lam), "λ = 2(ζ+1)ωn²/(2ζ+1)³", "001 eq (29)"),
+        ]
+        inputs = dict(omega_n=wn, zeta=zeta)
+    elif design == "wif":
+        wc = values.get("omega_c", papers.WIF_OMEGA_C)
+        b = values.get("b", papers.WIF_B)
+        wn = values.get("omega_n", papers.FLL_OMEGA_N)
+        obs = linear.wif_closed_form(omega_c=wc, b=b, omega_n=wn)
+        pm = math.degrees(float(linear.symmetric_optimum_pm(b)))
+        gains = [
+            ("k1", float(obs.k1), "k1 = 2bωc/ωn", "001 eq (34)"),
+            ("k2", float(obs.k2), "k2 = 2ωc/ωn", "001 eq (34)"),
+            ("lam", float(obs.lam), "λ = 2ωc²/b", "001 eq (34)"),
+            ("phase_margin_deg", pm, "PM = atan((b²−1)/(2b))", "001 eq (39)"),
+        ]
+        inputs = dict(omega_c=wc, b=b, omega_n=wn)
+    elif design == "cleso":
+        if "rs" not in values or "lq" not in values:
+            raise ValueError(
+                "closed-form cleso needs --rs (stator resistance, ohm >= 0) and --lq (q-axis inductance, H > 0)"
+            )
+        w0 = values.get("omega0", papers.LESO_OMEGA0)
+        g = linear.cleso_closed_form(w0, values["rs"], values["lq"])
+        gains = [
+            ("l1", float(g.l1), "l1 = 2ω0 − μ, μ = Rs/Lq", "002 eq (16)"),
+            ("l2", float(g.l2), "l2 = ω0²", "002 eq (16)"),
+        ]
+        inputs = dict(omega0=w0, rs=values["rs"], lq=values["lq"])
+    else:  # argparse restricts the choices
+        raise ValueError(f"design must be one of {', '.join(CF_OPTIONS)}, got {design!r}")
+    return {
+        "design": design,
+        "inputs": inputs,
+        "gains": [dict(name=n, value=v, formula=f, source=src) for n, v, f, src in gains],
+    }
+
+
+def cmd_closed_form(args) -> int:
+    enable_x64()
+    values = {}
+    for name in ("k", "omega_n", "zeta", "omega_c", "b", "omega0", "rs", "lq"):
+        v = getattr(args, name)
+        if v is None:
+            continue
+        if name not in CF_OPTIONS[args.design]:
+            allowed = ", ".join("--" + o.replace("_", "-") for o in CF_OPTIONS[args.design])
+            raise ValueError(f"--{name.replace('_', '-')} does not apply to {args.design} (allowed: {allowed})")
+        values[name] = v
+    try:
+        res = closed_form_rows(args.design, values)
+    except ValueError as e:  # name the flag the user typed (wif_closed_form.b -> --b), not the function's field
+        raise ValueError(re.sub(r"\b\w+_closed_form\.(\w+)", lambda m: "--" + m[1].replace("_", "-"), str(e))) from None
+    if args.json:
+        print(json.dumps(res, indent=1))
+    else:
+        ins = ", ".join(f"{k} = {v:.6g}" for k, v in res["inputs"].items())
+        print(f"{args.design}: {ins}")
+        for g in res["gains"]:
+            print(f"  {g['name']:<18}{g['value']:>14.6g}   {g['formula']:<36}{g['source']}")
+    return 0
+
+
+def cmd_bode(args) -> int:
+    enable_x64()
+    from jaxobs.plot import paper_bode_figures
+
+    with CommandOut(args, BODE_FILES) as out:
+        figs = paper_bode_figures(out)
+    for p in figs:
+        print(p)
+    return 0
+
+
+def _emit_rows(rows, figs, as_json: bool, title: str) -> int:
+    """Print paper-vs-ours rows (table or JSON); non-zero exit if any simulation diverged."""
+    from jaxobs.reproduce.flux import format_rows
+
+    if as_json:
+        print(json.dumps(rows, indent=1))
+    else:
+        print(title)
+        print(format_rows(rows))
+        for p in figs:
+            print(f"figure: {p}")
+    return 0 if all(r["ours"] for r in rows if r["metric"] == "finite") else 1
+
+
+def _error_figures(traces, names, paper: str, specs, out: Path):
+    """One position-error figure per (experiment, file name, start time) in ``specs``."""
+    from jaxobs.plot import position_error_figure
+
+    paths = []
+    for key, fname, t_from in specs:
+        p = out / fname
+        position_error_figure(traces[key], names, f"Paper {paper}: {key}", p, t_from=t_from)
+        paths.append(p)
+    return paths
+
+
+def cmd_reproduce(args) -> int:
+    enable_x64()
+    if args.paper not in REPRODUCE_FILES:
+        raise ValueError(f"reproduce: unknown paper {args.paper!r}")
+    args.out = args.out or f"out/reproduce-{args.paper}"
+    with CommandOut(args, REPRODUCE_FILES[args.paper]) as out:
+        return _reproduce(args, out)
+
+
+def _reproduce(args, out: Path) -> int:
+    if args.paper == "flux":
+        from jaxobs.plot import flux_circles_figure
+        from jaxobs.reproduce.flux import OBSERVER_NAMES, run_flux_experiments
+
+        rows, traces = run_flux_experiments(quick=args.quick, progress=progress_of(args))
+        figs = []
+        files = REPRODUCE_FILES["flux"]
+        for key, fname in zip(("du_alpha = 5 V at 1000 r/min", "steady 400 r/min"), files[:2], strict=True):
+            p = out / fname
+            flux_circles_figure(traces[key], OBSERVER_NAMES, f"Paper 000: estimated flux, {key}", p)
+            figs.append(p)
+        figs += _error_figures(
+            traces,
+            OBSERVER_NAMES,
+            "000",
+            zip(
+                ("load step 10 N·m at 2000 r/min", "speed 400-2000-400 r/min", "du_alpha = 5 V at 1000 r/min"),
+                files[2:],
+                (0.3, 0.8, 0.8),
+                strict=True,
+            ),
+            out,
+        )
+        return _emit_rows(
+            rows,
+            figs,
+            args.json,
+            "Paper 000 (second-order SOIFO) experiments on the simulated SPMSM drive — paper vs ours",
+        )
+    if args.paper == "leso":
+        from jaxobs.reproduce.leso import LESO_NAMES, run_leso_experiments
+
+        rows, traces = run_leso_experiments(progress=progress_of(args))
+        figs = _error_figures(
+            traces,
+            LESO_NAMES,
+            "002",
+            zip(
+                (
+                    "steady 600 r/min no load",
+                    "speed ramp 300-600-840-600-300 r/min",
+                    "load step 0-80 % at 600 r/min",
+                ),
+                REPRODUCE_FILES["leso"],
+                (0.4, 0.4, 0.4),
+                strict=True,
+            ),
+            out,
+        )
+        return _emit_rows(
+            rows, figs, args.json, "Paper 002 (LESOs) experiments on the simulated IPMSM drive — paper vs ours"
+        )
+    raise ValueError(f"reproduce: unknown paper {args.paper!r}")

@@ -1,0 +1,142 @@
+"""``jaxobs study`` over several processes: joining the run, refusing what cannot be split, one writer.
+
+Process 0 alone checks, locks and writes ``--out`` and tells the others by a broadcast whether it can before
+anyone computes; every process checks that all were given the same study (sha256) before computing."""
+
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import json
+import os
+import sys
+from pathlib import Path
+
+import jaxobs
+
+from .job import JobError, read_toml
+from .outdir import OutDir
+from .study_file import WHAT
+
+
+def distributed_asked(args) -> bool:
+    """Whether ``study`` was given any of the distributed run's options."""
+    given = (args.coordinator, args.num_processes, args.process_id, args.timeout)
+    return args.distributed or any(v is not None for v in given)
+
+
+def refuse_unsplittable(path: Path) -> None:
+    """Drive and recording studies run in one process: refused from the raw TOML, before JAX starts.
+
+    A file that does not parse passes here; :func:`tuning.study_file.load_study` reports it after joining
+    (every process reads the same file, so every process stops with the same one-line error)."""
+
+    try:
+        raw, _ = read_toml(path, WHAT)
+    except JobError:
+        return
+    st = raw.get("study") if isinstance(raw.get("study"), dict) else {}
+    kind = "drive" if st.get("kind") == "drive" else "recording" if "recording" in st else None
+    if kind is not None:
+        raise ValueError(
+            f"{path}: only FLL studies on a scenario grid or sample are split over processes; "
+            f"run this {kind} study without --coordinator/--num-processes/--process-id/--distributed"
+        )
+
+
+def join_distributed(args):
+    """``study --coordinator/--num-processes/--process-id/--distributed``: join the run
+    (jaxobs.init_distributed); (process id, process count).  Without ``--distributed`` all three are
+    required; with it, what is not given comes from the environment (JAX_COORDINATOR_ADDRESS, SLURM, Open MPI)."""
+    given = (args.coordinator, args.num_processes, args.process_id)
+    if not args.distributed:
+        missing = [f for f, v in zip(("--coordinator", "--num-processes", "--process-id"), given) if v is None]
+        if len(missing) == 3:  # --timeout alone
+            raise ValueError(
+                "--timeout applies to a distributed run: give --coordinator, --num-processes and --process-id, "
+                "or --distributed"
+            )
+        if missing:
+            raise ValueError(
+                f"a distributed study needs --coordinator, --num-processes and --process-id (missing: "
+                f"{', '.join(missing)}), or --distributed to take them from the environment"
+            )
+    if None not in given[1:] and args.process_id >= args.num_processes:
+        n = args.num_processes
+        raise ValueError(f"--process-id must be in 0..{n - 1} (--num-processes {n}), got {args.process_id}")
+    timeout = 300 if args.timeout is None else args.timeout
+    if not args.quiet and args.process_id == 0 and (args.num_processes or 0) > 1:
+        # process 0 left alone is aborted by JAX's runtime (a C++ stack dump): say so first.  The others
+        # check that process 0 listens before JAX starts and end with one line if it does not.
+        print(
+            f"jaxobs: process 0 waits up to {timeout} s (--timeout) for the other {args.num_processes - 1} "
+            "process(es); if they do not come, JAX aborts it (exit 134)",
+            file=sys.stderr,
+        )
+    try:
+        return jaxobs.init_distributed(*given, timeout=timeout)
+    except ValueError as e:  # what JAX could not find: name the CLI's options and variables, not the function's
+        jax_says = str(e.__context__ or e).rstrip(".")  # init_distributed raises from JAX's own ValueError
+        raise ValueError(
+            f"--distributed: the environment does not give the run ({jax_says}): set JAX_COORDINATOR_ADDRESS "
+            "(with --num-processes and --process-id), launch under SLURM's srun or Open MPI's mpirun, "
+            "or give --coordinator, --num-processes and --process-id"
+        ) from None
+
+
+@contextlib.contextmanager
+def _stdout_to_stderr():
+    """File descriptor 1 points at stderr inside (what native code prints there goes to stderr)."""
+    sys.stdout.flush()
+    saved = os.dup(1)
+    try:
+        os.dup2(2, 1)
+        yield
+    finally:
+        os.dup2(saved, 1)
+        os.close(saved)
+
+
+def distributed_study(name, designs, axes, opts, out: Path, args, rank, write) -> int:
+    """One process of a study split over processes: every process computes its share of every chunk
+    (jaxobs.study.run_study), process 0 alone checks, locks and writes ``--out`` (and shows progress) by
+    ``write(name, designs, axes, opts, out, quiet)``, the single-process study of the command line."""
+    import numpy as np
+    from jax.experimental import multihost_utils
+
+    from jaxobs.study import run_study
+
+    pid, count = rank
+    with contextlib.ExitStack() as stack:
+        failure = None
+        if pid == 0:
+            try:
+                stack.enter_context(OutDir(out, ["study.nc"], force=args.force))
+                args.log_dir = out
+            except Exception as e:  # told to the others first, so that none of them waits for it in a collective
+                failure = e
+        # every process learns whether process 0 can write, and whether all were given the same study (file and
+        # result files, by sha256), before any of them computes: different files would give different chunk
+        # shapes, on which the collectives abort the processes.  The first collective connects the CPU
+        # collectives, whose gloo prints a line on the C++ stdout: to stderr, stdout is results.
+        prov = {k: v for k, v in (opts.get("provenance") or {}).items() if k != "study_file"}
+        digest = hashlib.sha256(json.dumps(prov, sort_keys=True, default=str).encode()).digest()
+        with _stdout_to_stderr():
+            ok = int(multihost_utils.broadcast_one_to_all(np.int32(failure is None)))
+            digests = np.asarray(multihost_utils.process_allgather(np.frombuffer(digest[:16], dtype=np.int32)))
+        if failure is not None:
+            raise failure
+        if not ok:
+            raise ValueError("process 0 cannot use its --out (its error says why); nothing computed")
+        differ = [i for i, d in enumerate(digests) if not np.array_equal(d, digests[0])]
+        if differ:
+            raise ValueError(
+                f"the processes were given different study files (or result files): process(es) "
+                f"{', '.join(map(str, differ))} differ from process 0; give every process the same; nothing computed"
+            )
+        if pid == 0:
+            return write(name, designs, axes, opts, out, args.quiet)
+        kw = {k: v for k, v in opts.items() if k not in ("kind", "provenance", "recording")}
+        run_study(designs, axes, progress=False, **kw)
+        print(f"study {name}: process {pid} of {count} computed its share; process 0 writes the results")
+        return 0

@@ -1,0 +1,127 @@
+"""``jaxobs export``: its arguments (:func:`add_export_parser`, wired into the one parser by
+:mod:`tuning.cli`) and what it runs (:func:`cli_export`)."""
+
+from __future__ import annotations
+
+import argparse
+import math
+import shutil
+from pathlib import Path
+
+import jax
+
+from jaxobs.observers import (
+    AbstractDriveObserver,
+)
+
+from ..outdir import OutDir
+from .files import EXPORT_FILES, export_observer
+from .golden import MIN_STEPS, recording_bench
+from .harness import CFLAGS, TOLERANCE, compile_and_check
+from .sources import DESIGNS, RULES, observer_from_design, observer_from_result, rebuild
+
+
+def add_export_parser(subparsers) -> argparse.ArgumentParser:
+    """Add ``jaxobs export`` to the CLI's subparsers."""
+    e = subparsers.add_parser("export", help="an observer as C99 float32 with golden vectors and a test harness")
+    e.add_argument("--no-cache", action="store_true", help="do not keep compiled programs on disk")
+    e.add_argument("result", nargs="?", help="a `jaxobs tune` result.json (its tuned gains)")
+    e.add_argument("--design", choices=list(DESIGNS), help="a closed-form design instead of a result")
+    e.add_argument("--out", default="out/export", help="folder for the files (default: out/export)")
+    e.add_argument(
+        "--gains",
+        choices=["tuned", "closed_form", "initial"],
+        default="tuned",
+        help="which gains of the result (default: tuned)",
+    )
+    e.add_argument("--rule", choices=list(RULES), help="discretization rule (default: the result's or the component's)")
+    e.add_argument("--ts", type=float, help="sample time, s (default: the result's or the component's)")
+    e.add_argument("--steps", type=int, default=12_000, help=f"golden record length (>= {MIN_STEPS}, default 12000)")
+    e.add_argument(
+        "--record",
+        choices=["drive", "synthetic"],
+        default="drive",
+        help="drive observers' golden record: u/i recorded in a sensored FOC drive of the family's machine, "
+        "the observer bound to its Rs, L and speed (default), or the synthesized PMSM signal on the observer's "
+        "own Rs, L",
+    )
+    e.add_argument("--check", action="store_true", help="compile with cc and replay the golden vectors")
+    e.add_argument("--quiet", action="store_true", help="no progress on stderr")
+    e.add_argument("--force", action="store_true", help="overwrite an export already in --out")
+    e.set_defaults(func=cli_export)
+    return e
+
+
+def cli_export(args) -> int:
+    """``jaxobs export``: 0 on success, 1 if --check finds the C off the golden vectors; bad input raises ValueError."""
+    jax.config.update("jax_enable_x64", True)  # the closed forms in double, as `jaxobs closed-form` computes them
+    if (args.result is None) == (args.design is None):
+        raise ValueError("export: give a result.json or --design (one of them)")
+    if args.ts is not None and not (math.isfinite(args.ts) and args.ts > 0):
+        raise ValueError(f"--ts must be a sample time > 0 s, got {args.ts}")
+    # the output folder is checked and locked before any work (tuning.outdir): no symlinks, one writer,
+    # an existing export kept unless --force
+    with OutDir(Path(args.out), EXPORT_FILES, force=getattr(args, "force", False)):
+        args.log_dir = Path(args.out)
+        return _export(args)
+
+
+def _export(args) -> int:
+    notes: list = []
+    kw = {}
+    if args.ts is not None:
+        kw["ts"] = args.ts
+    if args.rule is not None:
+        kw["rule"] = RULES[args.rule]()
+    if args.result is not None:
+        obs = observer_from_result(args.result, gains=args.gains, notes=notes)
+        if kw:
+            obs = rebuild(obs, **kw)
+            notes = [n for n in notes if not any(f"no '{k}'" in n for k in kw)]
+        source = f"{args.result} ({args.gains} gains)"
+    else:
+        obs = observer_from_design(args.design, **kw)
+        source = f"closed form {args.design}, {DESIGNS[args.design][1]}"
+    signal = None
+    if isinstance(obs, AbstractDriveObserver) and args.record == "drive":
+        machine, rpm = recording_bench(obs)
+        obs = obs.bind(machine, rpm * math.pi / 30 * int(machine.p))  # the one binding (its clamp included)
+        r_name, l_name, speed = type(obs).bound_fields
+        notes = [n for n in notes if "sets Rs, Lq" not in n]
+        notes.append(
+            f"bound to the recording's machine: {r_name} = {float(getattr(obs, r_name)):g}, "
+            f"{l_name} = {float(getattr(obs, l_name)):g}, "
+            f"{speed} = {float(getattr(obs, speed)):.6g} rad/s ({rpm:g} r/min)"
+        )
+        if args.steps < MIN_STEPS:
+            raise ValueError(f"export: --steps must be >= {MIN_STEPS}, got {args.steps}")
+    elif isinstance(obs, AbstractDriveObserver):
+        signal = "synthetic"
+    coeffs = export_observer(
+        obs, args.out, n_steps=args.steps, signal=signal, source=source, notes=notes, progress=not args.quiet and "auto"
+    )
+    out = Path(args.out)
+    o = coeffs["ops_per_step"]
+    print(f"{coeffs['component']} ({coeffs['rule']['name']}, ts = {coeffs['ts']:g} s, float32) from {source}")
+    print(
+        f"  {out / 'observer.h'}, observer.c   jx_init / jx_step, "
+        f"JX_NU = {len(coeffs['inputs'])}, JX_NY = {len(coeffs['outputs'])}"
+    )
+    print(f"  {out / 'golden.csv'}   {coeffs['golden']['steps']} steps: {coeffs['golden']['signal']}")
+    start = f", {o['worst']['total']} in a step taking every dearer branch" if "worst" in o else ""
+    print(f"  {out / 'coefficients.json'}   gains, state; {o['steady']['total']} operations per step{start}")
+    print(f"  {out / 'test_main.c'}   {' '.join(('cc',) + CFLAGS)} observer.c test_main.c -lm && ./a.out golden.csv")
+    for n in notes:
+        print(f"note: {n}")
+    if args.check:
+        if shutil.which("cc") is None:
+            print("check: no C compiler (cc) on PATH: not checked")
+            return 0
+        err = compile_and_check(out)
+        ok = err <= TOLERANCE
+        print(
+            f"check: max |y_C - y_golden|/(1 + |y_golden|) = {err:.3g} over {coeffs['golden']['steps']} steps "
+            f"(tolerance {TOLERANCE:g}): {'OK' if ok else 'FAIL'}"
+        )
+        return 0 if ok else 1
+    return 0

@@ -1,0 +1,119 @@
+"""Where an exported observer comes from: a ``jaxobs tune`` result.json (its tuned, closed-form or initial
+gains, rebuilt as the job built them) or a closed-form design by name (``sogi-fll``, ``wpf``, ``wif``), and
+the rule it runs (:func:`parse_rule`)."""
+
+from __future__ import annotations
+
+import dataclasses
+import re
+from pathlib import Path
+
+from jaxobs import AB3, RK4, Euler, Tustin
+
+from ..job import COMPONENTS
+from ..results import load_result
+
+DESIGNS = {  # closed forms, as `jaxobs closed-form` computes them (defaults: paper 001 Table I)
+    "sogi-fll": ("sogi_fll_closed_form", "001 eq (22): k = 1/√2, λ = k²ωn²/(8ζ²), ζ = 1/√2"),
+    "wpf": ("wpf_closed_form", "001 eq (29): k1 = k2 = √2, λ = 2(ζ+1)ωn²/(2ζ+1)³, ζ = 1/√2"),
+    "wif": ("wif_closed_form", "001 eq (34), symmetric optimum: b = 1+√2, ωc = 2π·18.8 rad/s"),
+}
+
+
+RULES = {"euler": Euler, "tustin": Tustin, "ab3": AB3, "rk4": RK4}
+
+
+def parse_rule(spec, where: str = "rule"):
+    """A rule from its name (``"AB3"``), its repr (``"Tustin(newton_iters=3)"``) or ``{"name": ..., ...}``."""
+    kw = {}
+    if isinstance(spec, dict):
+        kw = {k: v for k, v in spec.items() if k not in ("name", "kind")}
+        spec = spec.get("name", spec.get("kind"))
+    if not isinstance(spec, str):
+        known = ", ".join(c.__name__ for c in RULES.values())
+        raise ValueError(f"{where}: must be a rule name ({known}), got {spec!r}")
+    m = re.fullmatch(r"\s*(\w+)\s*(?:\((.*)\))?\s*", spec)
+    cls = RULES.get(m.group(1).lower()) if m else None
+    if cls is None:
+        raise ValueError(f"{where}: unknown rule {spec!r}; known: {', '.join(c.__name__ for c in RULES.values())}")
+    for item in filter(None, (s.strip() for s in (m.group(2) or "").split(","))):
+        k, _, v = item.partition("=")
+        try:
+            kw[k.strip()] = int(v)
+        except ValueError:
+            raise ValueError(f"{where}: cannot read the rule option {item!r} in {spec!r}") from None
+    try:
+        return cls(**kw)
+    except TypeError as e:
+        raise ValueError(f"{where}: {e}") from None
+
+
+def observer_from_result(path, *, gains: str = "tuned", notes: list | None = None):
+    """The observer of a ``jaxobs tune`` result.json with its ``gains`` ("tuned", "closed_form" or "initial").
+
+    Constructor values are rebuilt as the job built them: the component's
+    defaults, then the job's ``[component]`` table, then the chosen gains.  The
+    sample time, rule and nominal frequency are read from the result's ``ts``,
+    ``rule`` and ``omega_n`` when it has them; otherwise the component's defaults
+    are used and a line saying so is appended to ``notes``.
+    """
+    notes = [] if notes is None else notes
+    path = Path(path)
+    res = load_result(path)
+    comp = res.get("component")
+    if comp not in COMPONENTS:
+        raise ValueError(f"result file {str(path)!r}: component {comp!r} is not a jaxobs component")
+    info = COMPONENTS[comp]
+    table = res.get("gains", {}).get(gains)
+    if not isinstance(table, dict):
+        have = ", ".join(res.get("gains", {})) or "none"
+        raise ValueError(f"result file {str(path)!r}: no gains.{gains} (has: {have})")
+    if gains == "tuned" and str(res.get("status", "")).lower() == "diverged":
+        raise ValueError(
+            f"result file {str(path)!r}: status 'diverged': the tuned gains are not a design "
+            "(export --gains closed_form instead)"
+        )
+    values = dict(info.defaults)
+    values.update(res.get("job", {}).get("component", {}))
+    values.update(table)
+    kw = {}
+    name = info.ctor.__name__
+    if "omega_n" in res and "omega_n" in values:
+        values["omega_n"] = float(res["omega_n"])
+    elif "omega_n" in values:
+        notes.append(f"result.json has no 'omega_n': the job's value {values['omega_n']:.9g} rad/s is used")
+    probe = info.ctor(**values)  # defaults of ts and rule
+    if "ts" in res:
+        kw["ts"] = float(res["ts"])
+    else:
+        notes.append(f"result.json has no 'ts': the {name} default ts = {probe.ts:g} s is used")
+    if "rule" in res:
+        kw["rule"] = parse_rule(res["rule"], "result.json rule")
+    else:
+        notes.append(f"result.json has no 'rule': the {name} default {type(probe.rule).__name__} is used")
+    if info.bind is not None or res.get("loop") is not None:  # a drive job bound these per scenario
+        # LESOs: Rs, Lq and the PLL's initial speed; flux observers: Rs, L and the FLL's or PLL's omega0
+        keys = type(probe).bound_fields
+        bound = ", ".join(f"{k} = {float(getattr(probe, k)):g}" for k in keys)
+        notes.append(f"the job sets {', '.join(keys)} per scenario; exported with {bound}")
+    diverged = res.get("scores", {}).get(gains, {}).get("diverged") if gains in res.get("scores", {}) else None
+    if diverged:
+        notes.append(f"the {gains} design diverged on {diverged} of the job's scenarios")
+    return info.ctor(**values, **kw)
+
+
+def observer_from_design(name: str, **kw):
+    """A closed-form design by name (``sogi-fll``, ``wpf``, ``wif``); ``kw`` go to its jaxobs.linear function."""
+    from jaxobs import linear
+
+    if name not in DESIGNS:
+        raise ValueError(f"design must be one of {', '.join(DESIGNS)}, got {name!r}")
+    return getattr(linear, DESIGNS[name][0])(**kw)
+
+
+def rebuild(obs, **kw):
+    """The same observer with another ts or rule (static fields: rebuilt through the constructor)."""
+
+    values = {f.name: getattr(obs, f.name) for f in dataclasses.fields(obs) if f.name not in ("ts", "rule")}
+    values.update(ts=kw.get("ts", obs.ts), rule=kw.get("rule", obs.rule))
+    return type(obs)(**values)

@@ -1,0 +1,97 @@
+"""The summary ``jaxobs tune`` prints: gains, linear structure and scores of the three designs, warnings."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+
+def _fmt(v, spec=">14.6g") -> str:
+    if v is None:
+        return f"{'-':>14}"
+    if isinstance(v, bool):
+        return f"{'yes' if v else 'no':>14}"
+    return format(v, spec)
+
+
+_LINEAR_ROWS = (
+    ("phase margin (deg)", lambda s: s.get("phase_margin_deg")),
+    ("crossover (Hz)", lambda s: s.get("crossover_hz")),
+    ("dominant damping", lambda s: s.get("dominant_damping")),
+    ("dominant pole (Hz)", lambda s: s.get("dominant_hz")),
+    ("least pair damping", lambda s: s.get("least_pair_damping")),
+    ("stable (linear)", lambda s: s.get("stable")),
+    ("Routh stable", lambda s: s.get("routh_stable")),
+    ("b = k1/k2", lambda s: s.get("closed_form_rule", {}).get("b_implied")),
+    ("wc = k2 wn/2 (Hz)", lambda s: s.get("closed_form_rule", {}).get("crossover_hz_implied")),
+    ("PM of SO at b (deg)", lambda s: s.get("closed_form_rule", {}).get("phase_margin_deg_implied")),
+    ("lam by the rule", lambda s: s.get("closed_form_rule", {}).get("lam_rule")),
+    ("lam / rule", lambda s: s.get("closed_form_rule", {}).get("lam_over_rule")),
+    ("kp by the rule", lambda s: s.get("closed_form_rule", {}).get("kp_rule")),
+)
+
+
+def print_summary(result: dict, out: Path, timing: dict | None = None):
+    g, s, lin = result["gains"], result["scores"], result.get("linear", {})
+    designs = ("initial", "closed_form", "tuned")
+    heads = "".join(f"{h:>14}" for h in ("initial", "closed form", "tuned"))
+    secs = f", {timing['total_s']:.1f} s" if timing and "total_s" in timing else ""
+    print(
+        f"{result['component']}: {result['status']} after {result['iterations']} iterations{secs}, "
+        f"{result['scenarios']['count']} scenarios"
+    )
+    print(f"  {result['reason']}")
+    if result["status"] == "diverged":
+        print("DIVERGED: no gains are reported as tuned (every design tried diverged in some tuning scenario)")
+    names = list(g["initial"])
+    print(f"{'gain':<22}{heads}")
+    for n in names:
+        print(f"{n:<22}" + "".join(_fmt((g[d] or {}).get(n)) for d in designs))
+    print(f"closed form: {result['closed_form_source']}")
+    rows = [(label, [None if lin.get(d) is None else f(lin[d]) for d in designs]) for label, f in _LINEAR_ROWS]
+    rows = [(label, vals) for label, vals in rows if any(v is not None for v in vals)]
+    if rows:
+        print(f"{'linear model':<22}{heads}")
+        for label, vals in rows:
+            print(f"{label:<22}" + "".join(_fmt(v) for v in vals))
+    keys = [k for k in s["initial"] if k not in ("diverged", "lost_lock", "lost_sync", "lost_speed", "null_reason")]
+    print(f"{'score':<22}{heads}")
+    for k in keys:
+        print(f"{k:<22}" + "".join(_fmt((s[d] or {}).get(k)) for d in designs))
+    print(f"{'diverged scenarios':<22}" + "".join(_fmt((s[d] or {}).get("diverged"), ">14d") for d in designs))
+    print(f"{'lost lock':<22}" + "".join(_fmt((s[d] or {}).get("lost_lock"), ">14d") for d in designs))
+    if "lost_sync" in s["initial"]:  # drive jobs: diverged or |position error| > 90 deg
+        print(f"{'lost sync scenarios':<22}" + "".join(_fmt((s[d] or {}).get("lost_sync"), ">14d") for d in designs))
+    if "lost_speed" in s["initial"]:  # drive jobs: missed the speed reference by > 20 % in the steady window
+        print(f"{'lost speed scenarios':<22}" + "".join(_fmt((s[d] or {}).get("lost_speed"), ">14d") for d in designs))
+    if "holdout" in result:
+        h = result["holdout"]
+        worst = {d: (h[d] or {}).get("per_scenario_worst") for d in designs}
+        div = {d: (h[d] or {}).get("diverged") for d in designs}
+        print(f"{'held-out worst':<22}" + "".join(_fmt(worst[d]) for d in designs) + f"   ({h['count']} scenarios)")
+        print(f"{'held-out diverged':<22}" + "".join(_fmt(div[d], ">14d") for d in designs))
+        lost = {d: (h[d] or {}).get("lost_lock") for d in designs}
+        print(f"{'held-out lost lock':<22}" + "".join(_fmt(lost[d], ">14d") for d in designs))
+    for where, n in (result.get("lost_lock_tuned_only") or {}).items():
+        if n:
+            sets, nc = ("tuning", "scores.nc") if where == "tuning" else ("held-out", "holdout_scores.nc")
+            msg = f"warning: the tuned design lost lock in {n} {sets} scenarios where the closed form holds it"
+            print(f"jaxobs: {msg} (lost_lock in {nc})", file=sys.stderr)
+    for d in designs:  # a drive that missed its speed reference (e.g. ran backwards) is flagged, never silent
+        n = (s[d] or {}).get("lost_speed")
+        if n:
+            print(
+                f"jaxobs: warning: the {d.replace('_', ' ')} drive missed its speed reference (> 20 % off, or "
+                f"turning against it) in {n} scenarios (lost_speed in scores.nc)",
+                file=sys.stderr,
+            )
+    for name, b in result.get("at_bound", {}).items():
+        msg = f"warning: tuned {name} = {b['value']:.6g} is within 1 % of its {b['bound']} bound {b['limit']:g}"
+        print(f"jaxobs: {msg}", file=sys.stderr)
+    if result["status"] == "budget":
+        print(
+            f"jaxobs: warning: the solver's budget ran out before its stopping rule ({result['reason']}): "
+            "the tuned gains may not be an optimum (raise solver.steps)",
+            file=sys.stderr,
+        )
+    print(f"results: {out / 'result.json'} (history.json, timing.json, scores.nc)")
