@@ -37,9 +37,9 @@ Dataset has dims ``("design", *axes)`` (a grid) or ``("design", "sample")``
 (a sample, the axes as coordinates), quantiles over the scenarios of every
 metric (``<metric>_q`` with a ``quantile`` coordinate 0.5, 0.95, 0.99, 1.0;
 lost-lock scenarios excluded from them and counted in ``lost_lock_count``).  Every variable and
-coordinate has ``units`` and ``long_name``; ``gain`` holds each design's gains (dims ``("design",
-"gain_name")``, units in ``gain_units``, NaN where a design has no such gain); the attributes hold the
-options, the true machine (``machine_Rs``, ...) and the versions, nothing that changes between two
+coordinate has ``units`` (UDUNITS strings: ``degree``; ``min-1`` for r/min) and ``long_name``; each gain is
+its own variable ``gain_<name>`` (dim ``design``, its own ``units``, NaN where a design has no such gain); the
+attributes hold the options, the true machine (``machine_Rs``, ...) and the versions, nothing that changes between two
 identical runs.
 """
 
@@ -89,6 +89,9 @@ DRIVE_STUDY_METRICS = {
     "pos_bias_deg": ("deg", "|mean position error| in the steady window (electrical): the observer's steady lag"),
     "speed_dev_max_rpm": ("r/min", "peak |true speed - reference| after t_event (a load step's dip)"),
 }
+# the metrics' unit labels (the CLI's table) spelled as UDUNITS wants them in the NetCDF: CF readers parse
+# "degree" and "min-1" (revolutions per minute), not "deg" or "r/min"
+CF_UNITS = {"deg": "degree", "r/min": "min-1", "N·m": "N m"}
 QUANTILES = (0.5, 0.95, 0.99, 1.0)
 # axis -> what it is, in words (the NetCDF long_name and the figures' labels)
 DRIVE_STUDY_AXIS_NAMES = {name: what for name, (_, _, what) in DRIVE_AXES.items()}
@@ -113,7 +116,7 @@ DRIVE_GAIN_UNITS = {
 
 def _axis_meta(name: str) -> dict:
     unit = DRIVE_STUDY_AXES[name][0]
-    return {"units": unit, "long_name": DRIVE_STUDY_AXIS_NAMES[name]}
+    return {"units": CF_UNITS.get(unit, unit), "long_name": DRIVE_STUDY_AXIS_NAMES[name]}
 
 
 def _check_axes(axes: dict):
@@ -253,10 +256,9 @@ def run_drive_study(
     )
     gains = {d: drive_gains(obs) for d, obs in designs.items()}
     gnames = [g for g in DRIVE_GAIN_UNITS if any(g in gains[d] for d in dnames)]
-    coords["gain_name"] = ("gain_name", gnames, {"long_name": "name of the observer's gain field"})
-    coords["gain_units"] = ("gain_name", [DRIVE_GAIN_UNITS[g] for g in gnames], {"long_name": "units of each gain"})
     data = {}
-    for k, (unit, long_name) in DRIVE_STUDY_METRICS.items():
+    for k, (label, long_name) in DRIVE_STUDY_METRICS.items():
+        unit = CF_UNITS.get(label, label)  # the label's UDUNITS spelling in the file
         vals = np.stack([np.where(results[d][1], np.nan, results[d][0][k]) for d in dnames])  # (design, n)
         data[k] = (dims, vals.reshape((len(dnames), *shape)), {"units": unit, "long_name": long_name})
         q = np.stack([np.nanquantile(v, qs) if np.isfinite(v).any() else np.full(qs.shape, np.nan) for v in vals])
@@ -297,13 +299,13 @@ def run_drive_study(
         div.reshape((len(dnames), *shape)).astype(np.int8),
         {"units": "1", "long_name": "simulation diverged or a metric is not finite (1: its metrics are NaN)"},
     )
-    data["gain"] = (
-        ("design", "gain_name"),
-        np.asarray([[gains[d].get(g, np.nan) for g in gnames] for d in dnames], dtype=float).reshape(
-            len(dnames), len(gnames)
-        ),
-        {"units": "see gain_units", "long_name": "observer gain (NaN: the design has no such gain)"},
-    )
+    # one variable per gain, each with its own CF units (jaxobs.study does the same)
+    for g in gnames:
+        data[f"gain_{g}"] = (
+            ("design",),
+            np.asarray([gains[d].get(g, np.nan) for d in dnames], dtype=float),
+            {"units": DRIVE_GAIN_UNITS[g], "long_name": f"observer gain {g} (NaN: the design has no such gain)"},
+        )
     ds = xr.Dataset(data, coords=coords)
     ds.attrs.update(
         horizon=horizon, steady_from=steady_from, t_event=t_event, scenarios=n, sampling=sampling, seed=seed

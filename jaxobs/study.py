@@ -2,7 +2,7 @@
 
     ds = run_study({"closed form": fll_a, "tuned": fll_b}, axes={"freq_step": [...], "dc": [...]})
     ds["settling_freq"].sel(design="tuned").max()
-    ds.to_netcdf("study.nc", engine="scipy")
+    ds.to_netcdf("study.nc", engine="h5netcdf")  # NetCDF4
 
 Every design is simulated on every scenario of the Cartesian grid (or on
 ``sample`` random points drawn from the axes' ranges) in one ``jit(vmap)``
@@ -17,8 +17,8 @@ whose estimate is far from the truth over the steady window (phase error > 45° 
 mean frequency error > 10 %, or diverged: :mod:`jaxobs.metrics`, "lost lock"),
 ``lost_lock_count`` counts them per design; ``settled`` flags the settling
 times that are censored at the horizon (False: not settled by the end of the
-run); ``gain`` holds each design's gains, dims ``("design", "gain_name")`` (NaN
-where a design has no such gain); the attributes hold the study's options and
+run); each gain is its own variable ``gain_<name>`` (``gain_k``, ``gain_lam``, ...), dim ``design``, with
+its own ``units`` (NaN where a design has no such gain); the attributes hold the study's options and
 the versions that made it, nothing that changes between two identical runs
 (the wall time is the second value of ``run_study(..., return_seconds=True)``).
 
@@ -210,8 +210,6 @@ def run_study(
     dims = ("design", *dims)
     coords["design"] = ("design", dnames, {"long_name": "observer design"})
     gains_present = [g for g in GAIN_NAMES if any(hasattr(o, g) for o in designs.values())]
-    coords["gain_name"] = ("gain_name", gains_present, {"long_name": "name of the observer's gain field"})
-    coords["gain_units"] = ("gain_name", [GAIN_UNITS[g] for g in gains_present], {"long_name": "units of each gain"})
     data = {}
     for k in STUDY_METRICS:
         arr = np.stack([np.where(results[d][1], results[d][0][k], np.nan).reshape(shape) for d in dnames])
@@ -238,12 +236,14 @@ def run_study(
         lost.reshape(len(dnames), -1).sum(axis=1).astype(np.int64),
         _meta("1", f"{what} (diverged ones included)"),
     )
-    gain = [[float(getattr(obs, g)) if hasattr(obs, g) else np.nan for g in gains_present] for obs in designs.values()]
-    data["gain"] = (
-        ("design", "gain_name"),
-        np.asarray(gain, dtype=float).reshape(len(dnames), len(gains_present)),
-        _meta("see gain_units", "observer gain (NaN: the design has no such gain)"),
-    )
+    # one variable per gain, so each carries its own CF units (a (design, gain_name) array could only say
+    # "see gain_units", which no CF reader understands)
+    for g in gains_present:
+        data[f"gain_{g}"] = (
+            ("design",),
+            np.asarray([float(getattr(obs, g)) if hasattr(obs, g) else np.nan for obs in designs.values()]),
+            _meta(GAIN_UNITS[g], f"observer gain {g} (NaN: the design has no such gain)"),
+        )
     ds = xr.Dataset(data, coords=coords)
     ds.attrs.update(
         t_event=t_event,

@@ -17,7 +17,7 @@ from tuning.cli import BODE_FILES, DEMO_FILES, REPRODUCE_FILES, build_parser, lo
 from tuning.results import load_result, tuned_component
 
 ROOT = Path(__file__).resolve().parents[1]
-COMMANDS = ("tune", "demo", "closed-form", "bode", "reproduce", "study", "export")
+COMMANDS = ("tune", "demo", "closed-form", "bode", "reproduce", "study", "export", "envelope")
 
 
 def _python(code_or_args, env_drop=(), env_add=None):
@@ -258,3 +258,27 @@ def test_study_result_paths_are_relative_to_the_study_file(tmp_path, monkeypatch
         assert float(load_study(path)[1]["tuned"].lam) == 9000.0
     (studies / "t.toml").write_text(f'[designs.tuned]\nresult = "{cwd / "result.json"}"\n[axes]\ndc = [0.0]\n')
     assert float(load_study(studies / "t.toml")[1]["tuned"].lam) == 5000.0  # an absolute path as it is
+
+
+def test_check_also_checks_out(tmp_path, capsys):
+    """``--check`` refuses an ``--out`` the real run would refuse (issue 29): a folder with the results of
+    an earlier run, a file in its place, a folder that cannot be created; a fresh folder passes, and
+    ``--check`` creates nothing."""
+    done = tmp_path / "done"
+    done.mkdir()
+    (done / "result.json").write_text("{}")
+    (done / "study.nc").write_text("")
+    assert main(["tune", "--check", "--out", str(done)]) == 2
+    assert "result.json' exists: use --force" in capsys.readouterr().err
+    assert main(["tune", "--check", "--out", str(done), "--force"]) == 0
+    assert main(["study", "--check", "--out", str(done)]) == 2
+    assert "study.nc' exists: use --force" in capsys.readouterr().err
+    (tmp_path / "file").write_text("")
+    assert main(["study", "--check", "--out", str(tmp_path / "file")]) == 2
+    assert "exists and is not a folder" in capsys.readouterr().err
+    assert main(["study", "--check", "--out", str(tmp_path / "file" / "sub")]) == 2
+    assert "cannot be created" in capsys.readouterr().err
+    fresh = tmp_path / "new" / "deeper"
+    assert main(["tune", "--check", "--out", str(fresh)]) == 0
+    assert main(["study", "--check", "--out", str(fresh)]) == 0
+    assert not (tmp_path / "new").exists()  # --check writes nothing

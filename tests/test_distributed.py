@@ -68,7 +68,7 @@ _WORKER = (
     from jaxobs.study import run_study
 
     ds = run_study({"SOGI-FLL": linear.sogi_fll_closed_form()}, __AXES__, **__OPTS__)
-    ds.to_netcdf(f"{out}/process{pid}.nc", engine="scipy")
+    ds.to_netcdf(f"{out}/process{pid}.nc", engine="h5netcdf")
     # 2 runs x 2 chunks x 8 leaves (7 metrics and flags, ok)
     assert len(seen) == 32 and all(s == (False, [2]) for s in seen), seen
     print("WORKER-DONE", pid)
@@ -151,12 +151,12 @@ def test_study_over_two_processes_equals_one_process(tmp_path):
     assert sorted(f.name for f in out.glob("*.nc")) == ["process0.nc", "process1.nc", "study.nc"]
 
     want = run_study({"SOGI-FLL": linear.sogi_fll_closed_form()}, AXES, **OPTS)
-    want.to_netcdf(tmp_path / "one_process.nc", engine="scipy")  # through the same writer (NetCDF3: int32 counts)
-    want = xr.load_dataset(tmp_path / "one_process.nc", engine="scipy")
+    want.to_netcdf(tmp_path / "one_process.nc", engine="h5netcdf")  # through the same writer (NetCDF4)
+    want = xr.load_dataset(tmp_path / "one_process.nc", engine="h5netcdf")
     assert want.sizes["freq_step"] * want.sizes["dc"] == 6 and float(want["ripple_freq"].max()) > 0
     for name in ("process0.nc", "process1.nc"):
-        _assert_same_study(xr.load_dataset(out / name, engine="scipy"), want, name)
-    cli = xr.load_dataset(out / "study.nc", engine="scipy")
+        _assert_same_study(xr.load_dataset(out / name, engine="h5netcdf"), want, name)
+    cli = xr.load_dataset(out / "study.nc", engine="h5netcdf")
     assert cli.attrs["source"] == "jaxobs.study.run_study" and "study_sha256" in cli.attrs
     _assert_same_study(cli, want, "study.nc (jaxobs study, process 0)")
 

@@ -108,7 +108,7 @@ def test_the_sogi_filter_exports_too(tmp_path):
     """Not an FLL and never written by hand for the export: the SOGI quadrature filter (a fixed ω') exports from
     its step like any observer, outputs v_alpha, v_beta, and matches its golden vectors."""
     _need_cc()
-    c = export_observer(jaxobs.SOGI(k=1.414), tmp_path)
+    c = export_observer(jaxobs.SOGI(k=papers.SOIFO_K), tmp_path)
     assert c["component"] == "SOGI" and c["outputs"] == ["v_alpha", "v_beta"] and c["angle_outputs"] == []
     assert compile_and_check(tmp_path) <= TOLERANCE
 

@@ -92,7 +92,7 @@ _TABLE_I = {1.815, 0.752, 11559, 12337.0, 18.8}
 ALLOWED: dict = {
     "tests/test_papers.py": (PAPER_LITERALS, "this guard's own list of the papers' numbers"),
     "tests/test_cli.py": (_TABLE_I, "oracle: the printed closed form against 001 Table I; a job file's text"),
-    "tests/test_tuning.py": (_TABLE_I, "oracle: the closed form and its crossover against 001 Table I"),
+    "tests/test_tuning.py": (_TABLE_I | {"1+√2"}, "oracle: the closed form, its crossover and b against 001"),
     "tests/test_export.py": (_TABLE_I, "a result.json's text, as a tuning run writes it"),
     "tests/test_fuzz.py": (_TABLE_I, "a job file's text, as a user writes it"),
 }
@@ -102,6 +102,17 @@ def _is_pi(node, aliases) -> bool:
     """``math.pi`` / ``np.pi`` / ``jnp.pi``, or a name bound to one of them."""
     return (isinstance(node, ast.Attribute) and node.attr == "pi") or (
         isinstance(node, ast.Name) and node.id in aliases
+    )
+
+
+def _is_sqrt2(node) -> bool:
+    """``math.sqrt(2)`` (``np.sqrt``, ``jnp.sqrt``, ``sqrt``)."""
+    return (
+        isinstance(node, ast.Call)
+        and getattr(node.func, "attr", getattr(node.func, "id", None)) == "sqrt"
+        and len(node.args) == 1
+        and isinstance(node.args[0], ast.Constant)
+        and node.args[0].value == 2
     )
 
 
@@ -126,6 +137,10 @@ def _paper_literals(source: str):
     for node in ast.walk(tree):
         if isinstance(node, ast.Constant) and type(node.value) in (int, float) and node.value in PAPER_LITERALS:
             yield node.lineno, node.value
+        if isinstance(node, ast.BinOp) and isinstance(node.op, ast.Add):  # 001's b = 1 + √2 (papers.WIF_B)
+            for one, root in ((node.left, node.right), (node.right, node.left)):
+                if isinstance(one, ast.Constant) and one.value == 1 and _is_sqrt2(root):
+                    yield node.lineno, "1+√2"
         if isinstance(node, ast.BinOp) and isinstance(node.op, ast.Mult):
             for k, x in ((node.left, node.right), (node.right, node.left)):
                 if isinstance(k, ast.Constant) and k.value in PAPER_PI_MULTIPLES and _is_pi(x, aliases):
@@ -176,6 +191,7 @@ def test_the_constants_guard_sees_aliases_of_pi():
     ):
         assert [v for _, v in _paper_literals(src)] in (["500π"], ["10π"]), src
     assert not list(_paper_literals("import math\nw = 2 * math.pi * 50\n"))
+    assert [v for _, v in _paper_literals("import math\nb = 1 + math.sqrt(2)\n")] == ["1+√2"]
 
 
 def test_tables_are_read_only():

@@ -101,8 +101,12 @@ def test_from_csv_refuses_what_it_cannot_read(tmp_path, body, kw, match):
 
 
 def test_from_csv_refuses_missing_and_oversized_files(tmp_path):
-    with pytest.raises(ValueError, match="cannot read it"):
+    with pytest.raises(FileNotFoundError, match="none.csv': no such file"):
         jaxobs.SampledSignal.from_csv(tmp_path / "none.csv", sample_rate=1e4)
+    with pytest.raises(FileNotFoundError, match="no such file"):
+        jaxobs.DriveRecording.from_csv(tmp_path / "none.csv", sample_rate=1e4)
+    with pytest.raises(ValueError, match="not a file"):
+        jaxobs.SampledSignal.from_csv(tmp_path, sample_rate=1e4)
     path, _ = _sine(tmp_path)
     with pytest.raises(ValueError, match="more than the limit of 100 bytes"):
         jaxobs.SampledSignal.from_csv(path, time_column="t", max_bytes=100)
@@ -273,7 +277,7 @@ def test_study_file_on_a_recording(tmp_path, capsys):
     path.write_text(text[: text.index("[designs.SOGI-FLL]")] + '[designs.WIF]\nclosed_form = "wif"\n')
     assert main(["study", str(path), "--out", str(tmp_path / "o"), "--quiet"]) == 0
     assert capsys.readouterr().err == ""
-    with xr.open_dataset(tmp_path / "o" / "study.nc", engine="scipy") as ds:
+    with xr.open_dataset(tmp_path / "o" / "study.nc", engine="h5netcdf") as ds:
         assert ds["ripple_freq"].dims == ("design", "recording")
         assert str(ds["recording"].values[0]) == "recordings/grid_50_51hz.csv"
         assert all("units" in ds[v].attrs for v in ds.data_vars)

@@ -51,8 +51,8 @@ def test_dims_coords_and_values_match_single_runs(small_study):
 
 def test_netcdf_round_trip(small_study, tmp_path):
     _, ds = small_study
-    ds.to_netcdf(tmp_path / "s.nc", engine="scipy")
-    back = xr.load_dataset(tmp_path / "s.nc", engine="scipy")
+    ds.to_netcdf(tmp_path / "s.nc", engine="h5netcdf")
+    back = xr.load_dataset(tmp_path / "s.nc", engine="h5netcdf")
     assert back.identical(ds)
 
 
@@ -68,15 +68,18 @@ def test_dataset_has_units_gains_settled_and_provenance(small_study, tmp_path):
     censored at the horizon are flagged; two identical studies write byte-identical files."""
     designs, ds = small_study
     for name in [*ds.data_vars, *ds.coords]:
-        if name in ("design", "gain_name", "gain_units"):
+        if name == "design":  # a label, no quantity
             assert "long_name" in ds[name].attrs, name
             continue
         assert {"units", "long_name"} <= set(ds[name].attrs), name
+        assert "see" not in ds[name].attrs["units"], name  # a CF unit, not a pointer elsewhere
     assert ds["rms_phase"].attrs["units"] == "rad" and ds["freq_step"].attrs["units"] == "Hz"
-    assert ds["gain"].dims == ("design", "gain_name")
-    assert float(ds["gain"].sel(design="SOGI-FLL", gain_name="k")) == pytest.approx(float(designs["SOGI-FLL"].k))
-    assert float(ds["gain"].sel(design="WIF", gain_name="lam")) == pytest.approx(float(designs["WIF"].lam))
-    assert np.isnan(float(ds["gain"].sel(design="SOGI-FLL", gain_name="k1")))
+    # each gain its own variable with its own units (CF)
+    assert ds["gain_k"].dims == ("design",) and ds["gain_k"].attrs["units"] == "1"
+    assert ds["gain_lam"].attrs["units"] == "rad2 s-2"
+    assert float(ds["gain_k"].sel(design="SOGI-FLL")) == pytest.approx(float(designs["SOGI-FLL"].k))
+    assert float(ds["gain_lam"].sel(design="WIF")) == pytest.approx(float(designs["WIF"].lam))
+    assert np.isnan(float(ds["gain_k1"].sel(design="SOGI-FLL")))
     assert not any(isinstance(v, str) and "=" in v for v in ds.attrs.values())  # no gains as strings
     assert ds["settled"].dtype == bool and ds["settled"].dims == ds["settling_freq"].dims
     censored = np.isclose(ds["settling_freq"], ds.attrs["horizon"] - ds.attrs["t_event"], atol=2e-4)
@@ -84,8 +87,8 @@ def test_dataset_has_units_gains_settled_and_provenance(small_study, tmp_path):
     assert "seconds" not in ds.attrs and ds.attrs["jax_version"] == jax.__version__
     again, seconds = run_study(designs, AXES, progress=False, return_seconds=True)
     assert seconds > 0
-    ds.to_netcdf(tmp_path / "a.nc", engine="scipy")
-    again.to_netcdf(tmp_path / "b.nc", engine="scipy")
+    ds.to_netcdf(tmp_path / "a.nc", engine="h5netcdf")
+    again.to_netcdf(tmp_path / "b.nc", engine="h5netcdf")
     assert (tmp_path / "a.nc").read_bytes() == (tmp_path / "b.nc").read_bytes()
 
 
@@ -125,7 +128,9 @@ def test_study_cli_default(tmp_path, capsys):
     assert main(["study", "--out", str(tmp_path), "--quiet"]) == 0
     out = capsys.readouterr().out
     assert "3 designs x 200 scenarios" in out
-    ds = xr.load_dataset(tmp_path / "study.nc", engine="scipy")
+    # the table labels its units (the phase in degrees, as the figures)
+    assert "settling_freq (s) mean" in out and "ripple_freq (Hz) mean" in out and "rms_phase (deg) mean" in out
+    ds = xr.load_dataset(tmp_path / "study.nc", engine="h5netcdf")
     assert set(ds["design"].values) == {"SOGI-FLL", "SOGI-FLL-WPF", "SOGI-FLL-WIF"}
     worst = json.loads((tmp_path / "worst_cases.json").read_text())
     assert worst["ripple_freq"][0]["design"] == "SOGI-FLL"

@@ -501,8 +501,14 @@ def test_two_runs_write_byte_identical_results_that_rebuild_the_design(tmp_path)
     obs = observer_from_result(tmp_path / "a" / "result.json", notes=notes)
     assert float(obs.lam) == res["gains"]["tuned"]["lam"] and obs.ts == res["ts"] and type(obs.rule).__name__ == "AB3"
     assert not any("has no" in n for n in notes)
-    ds = xr.open_dataset(tmp_path / "a" / "scores.nc", engine="scipy")
+    ds = xr.open_dataset(tmp_path / "a" / "scores.nc", engine="h5netcdf")
     assert ds["itae_freq"].dims == ("design", "freq_step") and list(ds["freq_step"].values) == [1.0, 2.0]
+    # CF units on every variable and numeric coordinate (NetCDF4)
+    for name in [*ds.data_vars, *ds.coords]:
+        if name != "design":
+            assert ds[name].attrs.get("units"), name
+    assert ds["itae_freq"].attrs["units"] == "Hz s2" and ds["freq_step"].attrs["units"] == "Hz"
+    assert ds["diverged"].attrs["units"] == "1"
     for d in ("closed_form", "tuned"):
         lin = res["linear"][d]
         assert lin["phase_margin_deg"] > 0 and lin["crossover_hz"] > 0 and 0 < lin["dominant_damping"] <= 1
@@ -711,6 +717,10 @@ def test_flux_observer_drive_job_runs_sensorless_on_the_spmsm(tmp_path, capsys):
     assert main(["tune", str(path), "--out", str(tmp_path / "o"), "--quiet"]) == 0
     res = _strict_json(tmp_path / "o" / "result.json")
     assert res["loop"] == "sensorless" and res["machine"] == "spmsm000"
+    # the envelope it was tuned for, stated (issue 26.4); its verification is `jaxobs envelope RESULT.json`
+    env = res["envelope"]
+    assert env["machine"] == "spmsm000" and env["speed_rpm"][0] > 0 and env["verified"] is None
+    assert "envelope.verified" in res["null_reasons"]
     assert res["gains"]["closed_form"]["k"] == pytest.approx(papers.SOIFO_K)
     for design in ("initial", "closed_form", "tuned"):
         assert res["scores"][design]["diverged"] == 0 and res["scores"][design]["lost_sync"] == 0
@@ -802,3 +812,10 @@ def test_every_drive_component_may_be_tuned_by_a_job():
     raw["drive"]["machine"] = "spmsm000"
     assert parse_job(raw).drive.machine == "spmsm000"
     assert load_job(Path(__file__).parents[1] / "tuning" / "presets" / "cleso.toml").drive.machine == "ipmsm002"
+
+
+def test_every_metric_has_cf_units():
+    """scores.nc labels each metric from METRIC_UNITS: a metric added without its units fails here."""
+    from tuning.objective import METRIC_UNITS, METRICS
+
+    assert set(METRIC_UNITS) == set(METRICS)

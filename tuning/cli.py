@@ -9,7 +9,7 @@
                                                            002 Fig. 4, 001 Fig. 14)
     jaxobs reproduce flux [--out DIR] [--force] [--json] [--quick]
                                                            paper 000's experiments, paper vs ours
-    jaxobs reproduce leso [--out DIR] [--force] [--json]   paper 002's experiments, paper vs ours
+    jaxobs reproduce leso [--out DIR] [--force] [--json] [--machine single|dual]   paper 002's experiments
     jaxobs study [STUDY.toml] [--out DIR] [--force] [--check] [--quiet]
                  [--coordinator HOST:PORT --num-processes N --process-id I | --distributed] [--timeout S]
                                                            robustness study → NetCDF, worst cases, figures
@@ -61,6 +61,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import shlex
 import sys
 import tempfile
@@ -79,13 +80,13 @@ from .cli_papers import DEMO_FILES as DEMO_FILES
 from .cli_papers import REPRODUCE_FILES as REPRODUCE_FILES
 from .cli_papers import closed_form_rows as closed_form_rows
 from .distributed import distributed_asked, distributed_study, join_distributed, refuse_unsplittable
+from .envelope import add_envelope_parser
 from .export import add_export_parser
 from .job import CHECKPOINT, load_job, load_recordings, run_job
 from .outdir import OutDir, atomic_path, atomic_write_text, safe_name
 from .study_file import load_study as _load_study
 from .study_file import study_fingerprint
 from .summary import print_summary
-
 
 STUDY_CHUNKS = "study.chunks"  # an FLL study's results while it runs (jaxobs.chunkstore), in --out
 
@@ -105,7 +106,7 @@ def _cmd_drive_study(name, designs, axes, opts, out: Path, quiet: bool, provenan
     fig = out / "drive_study.png"
     drive_study_figure(ds, fig)
     with atomic_path(out / "study.nc") as tmp:
-        ds.to_netcdf(tmp, engine="scipy")
+        ds.to_netcdf(tmp, engine="h5netcdf")
     n = int(ds.attrs["scenarios"])
     print(f"drive study {name}: {len(designs)} designs x {n} scenarios ({ds.attrs['sampling']}), sensorless")
     qs = [float(q) for q in ds["quantile"].values]
@@ -166,10 +167,12 @@ def _cmd_study(args) -> int:
     spec = _load_study(path)  # everything checked: tables, keys, ranges, sizes, result files
     name, designs, axes = spec.name, spec.designs, spec.axes
     opts = dict(spec.opts, kind=spec.kind, provenance=spec.provenance)
+    out = Path(args.out) if args.out else Path("out") / safe_name(str(name), "study")
     if args.check:
+        if args.out:  # what the real run would refuse (an explicit --out: the default one may not exist yet)
+            OutDir(out, ["study.nc"], force=args.force).check()
         print(f"{path}: OK — {spec.kind} study {name!r}, {len(designs)} designs x {spec.scenarios} scenarios")
         return 0
-    out = Path(args.out) if args.out else Path("out") / safe_name(str(name), "study")
     if rank is not None and rank[1] > 1:
         return distributed_study(name, designs, axes, opts, out, args, rank, _run_study)
     if spec.kind != "fll":
@@ -209,7 +212,7 @@ def _run_study(name, designs, axes, opts, out: Path, quiet: bool, store=None) ->
     atomic_write_text(out / "worst_cases.json", json.dumps(worst, indent=1))
     figs = study_figures(ds, out)
     with atomic_path(out / "study.nc") as tmp:  # last: a study.nc means a complete results folder
-        ds.to_netcdf(tmp, engine="scipy")
+        ds.to_netcdf(tmp, engine="h5netcdf")
     if store is not None:
         store.remove()  # the results are in study.nc: nothing is left to resume
     n = int(ds.attrs["scenarios"])
@@ -217,16 +220,18 @@ def _run_study(name, designs, axes, opts, out: Path, quiet: bool, store=None) ->
     if store is not None and store.resumed:
         print(f"resumed: {store.resumed} chunks of {store.total} were on disk from the stopped run")
     wd = max(len("design"), *(len(str(d)) for d in ds["design"].values)) + 2  # sized from the names
+    # each column with its unit; the phase in degrees, as in the figures (study.nc keeps rad)
+    cols = {"settling_freq": ("s", 1.0), "ripple_freq": ("Hz", 1.0), "rms_phase": ("deg", 180.0 / math.pi)}
     print(
         f"{'design':<{wd}}"
-        + "".join(f"{m + ' mean':>20}{'worst':>12}" for m in ("settling_freq", "ripple_freq", "rms_phase"))
+        + "".join(f"{f'{m} ({u}) mean':>25}{'worst':>10}" for m, (u, _) in cols.items())
         + f"{'diverged':>10}{'lost lock':>11}"
     )
     for d in ds["design"].values:
         sel = ds.sel(design=d)
         row = f"{str(d):<{wd}}"
-        for m in ("settling_freq", "ripple_freq", "rms_phase"):
-            row += f"{float(sel[m].mean()):>20.4g}{float(sel[m].max()):>12.4g}"
+        for m, (_, k) in cols.items():
+            row += f"{k * float(sel[m].mean()):>25.4g}{k * float(sel[m].max()):>10.4g}"
         print(row + f"{int(sel['diverged'].sum()):>10}{int(sel['lost_lock_count']):>11}")
     print(f"results: {out / 'study.nc'}, {out / 'worst_cases.json'}, {len(figs)} figures")
     return 0
@@ -240,7 +245,15 @@ def _cmd_tune(args) -> int:
     enable_x64()
     path = Path(args.job) if args.job else default_job_path()
     job = load_job(path)
+    out = Path(args.out) if args.out else Path("out") / safe_name(job.name)
+    products = ["result.json"]
+    if not args.resume:
+        products.append(CHECKPOINT)  # a fresh run would overwrite it: --resume, or --force to start over
+    resume = f"jaxobs tune {shlex.quote(str(path))} --out {shlex.quote(str(out))} --resume"
+    hint = f"an earlier run stopped here: continue it with `{resume}` (--force starts over and discards it)"
     if args.check:
+        if args.out:  # what the real run would refuse (an explicit --out: the default one may not exist yet)
+            OutDir(out, products, force=args.force, hints={CHECKPOINT: hint}).check()
         n = 1
         for v in job.scenarios.axes.values():
             n *= len(v)
@@ -251,12 +264,6 @@ def _cmd_tune(args) -> int:
             f"{drive}, solver {job.solver.name}"
         )
         return 0
-    out = Path(args.out) if args.out else Path("out") / safe_name(job.name)
-    products = ["result.json"]
-    if not args.resume:
-        products.append(CHECKPOINT)  # a fresh run would overwrite it: --resume, or --force to start over
-    resume = f"jaxobs tune {shlex.quote(str(path))} --out {shlex.quote(str(out))} --resume"
-    hint = f"an earlier run stopped here: continue it with `{resume}` (--force starts over and discards it)"
     with OutDir(out, products, force=args.force, hints={CHECKPOINT: hint}):
         args.log_dir = out
         args.on_interrupt = f"; continue with: {resume}"  # what Ctrl-C says (main)
@@ -354,6 +361,12 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--force", action="store_true", help="overwrite figures already in --out")
     r.add_argument("--json", action="store_true", help="print rows {experiment, observer, metric, unit, paper, ours}")
     r.add_argument("--quick", action="store_true", help="skip the long runs (20 r/min steady state, I-f start-up)")
+    r.add_argument(
+        "--machine",
+        choices=["single", "dual"],
+        default="single",
+        help="leso: 'dual' adds Figs 13-15 on the dual three-phase IPMSM (individual sets and VSD control)",
+    )
     r.set_defaults(func=cmd_reproduce)
 
     st = sub.add_parser(
@@ -391,6 +404,7 @@ def build_parser() -> argparse.ArgumentParser:
     st.set_defaults(func=_cmd_study)
 
     add_export_parser(sub)
+    add_envelope_parser(sub)
     return p
 
 

@@ -190,6 +190,8 @@ def cmd_reproduce(args) -> int:
 
 
 def _reproduce(args, out: Path) -> int:
+    if args.machine != "single" and args.paper != "leso":
+        raise ValueError(f"reproduce {args.paper}: --machine must be 'single' (the dual machine is paper 002's)")
     if args.paper == "flux":
         from jaxobs.plot import flux_circles_figure
         from jaxobs.reproduce.flux import OBSERVER_NAMES, run_flux_experiments
@@ -223,6 +225,11 @@ def _reproduce(args, out: Path) -> int:
         from jaxobs.reproduce.leso import LESO_NAMES, run_leso_experiments
 
         rows, traces = run_leso_experiments(progress=progress_of(args))
+        if args.machine == "dual":  # Figs 13-15 on the dual three-phase machine, beside the single one's
+            from jaxobs.reproduce.leso_dual import run_leso_dual
+
+            rows_dual, traces_dual = run_leso_dual(progress=progress_of(args))
+            rows, traces = rows + rows_dual, {**traces, **traces_dual}
         figs = _error_figures(
             traces,
             LESO_NAMES,

@@ -34,7 +34,16 @@ from jaxobs.sharding import batch_mesh
 from .aggregations import AbstractAggregation, Mean
 from .params import Parametrization
 
-__all__ = ["METRICS", "DRIVE_METRICS", "LOST_LOCK", "LOST_SYNC_DEG", "Term", "MetricContext", "Objective"]
+__all__ = [
+    "METRICS",
+    "METRIC_UNITS",
+    "DRIVE_METRICS",
+    "LOST_LOCK",
+    "LOST_SYNC_DEG",
+    "Term",
+    "MetricContext",
+    "Objective",
+]
 
 
 # --------------------------------------------------------------------------
@@ -157,6 +166,27 @@ METRICS: dict[str, Callable] = {
     "speed_noise_rpm": lambda sol, sig, ctx: _sample_noise(
         sol.outputs.obs.omega / sig.par.p * 30 / math.pi, _steady(sol, ctx)
     ),
+}
+# each metric's CF (UDUNITS) units, for scores.nc: errors of f̂ in Hz, of θ̂ in rad, speeds in r/min ("min-1"),
+# the integral criteria in their unit × s (IAE) or × s² (ITAE); tests/test_tuning.py checks every metric has one
+METRIC_UNITS: dict[str, str] = {
+    "itae_freq": "Hz s2",
+    "iae_freq": "Hz s",
+    "iae_phase": "rad s",
+    "itae_phase": "rad s2",
+    "settling_freq": "s",
+    "ripple_freq": "Hz",
+    "rms_freq_steady": "Hz",
+    "rms_phase_steady": "rad",
+    "iae_position": "rad s",
+    "rms_position_steady": "rad",
+    "ripple_position": "rad",
+    "settling_position": "s",
+    "bias_position": "rad",
+    "settling_speed": "s",
+    "peak_speed_dev": "min-1",
+    "rms_speed_steady": "min-1",
+    "speed_noise_rpm": "min-1",
 }
 # the per-scenario flag :meth:`Objective.per_scenario` adds to the metrics: the estimate ended far from the
 # truth (jaxobs.metrics.lost_lock_of: 45° / 10 % on signals, 90° on the drive, over the steady window)

@@ -62,26 +62,50 @@ class OutDir:
         self.hints = dict(hints or {})
         self._fd = None  # the lock file, flock'ed, while the folder is ours
 
-    def __enter__(self):
+    def check(self) -> None:
+        """What :meth:`__enter__` would refuse, without creating, locking or writing anything (``--check``):
+        a symlink, not a folder, not writable (the nearest existing folder above a new one), a product that
+        exists (without ``force``) or is a symlink.  An :class:`OutError` naming ``--out``; a lock held by a
+        running process is not checked (it may be gone by the real run)."""
+        p = self.path
+        self._check_folder()
+        if not p.exists():
+            parent = next((a for a in p.absolute().parents if a.exists()), None)
+            if parent is None or not parent.is_dir() or not os.access(parent, os.W_OK | os.X_OK):
+                raise OutError(f"--out {str(p)!r} cannot be created: {str(parent)!r} is not a writable folder")
+            return
+        if not os.access(p, os.W_OK | os.X_OK):
+            raise OutError(f"--out {str(p)!r} is not writable")
+        self._check_products()
+
+    def _check_folder(self):
         p = self.path
         if p.is_symlink():
             raise OutError(f"--out {str(p)!r} is a symlink: refusing to follow it")
         if p.exists() and not p.is_dir():
             raise OutError(f"--out {str(p)!r} exists and is not a folder")
+
+    def _check_products(self):
+        p = self.path
+        for name in (*self.products, LOCK):
+            f = p / name
+            if f.is_symlink():
+                raise OutError(f"{str(f)!r} is a symlink: refusing to write through it")
+        if not self.force:
+            for name in self.products:
+                if (p / name).exists():
+                    hint = self.hints.get(name, "use --force to overwrite it")
+                    raise OutError(f"{str(p / name)!r} exists: {hint}")
+
+    def __enter__(self):
+        p = self.path
+        self._check_folder()
         p.mkdir(parents=True, exist_ok=True)
         if not os.access(p, os.W_OK | os.X_OK):
             raise OutError(f"--out {str(p)!r} is not writable")
         self._lock()
         try:
-            for name in (*self.products, LOCK):
-                f = p / name
-                if f.is_symlink():
-                    raise OutError(f"{str(f)!r} is a symlink: refusing to write through it")
-            if not self.force:
-                for name in self.products:
-                    if (p / name).exists():
-                        hint = self.hints.get(name, "use --force to overwrite it")
-                        raise OutError(f"{str(p / name)!r} exists: {hint}")
+            self._check_products()
         except BaseException:
             self.release()
             raise

@@ -83,6 +83,7 @@ from .job import (
     JobError,
     available_memory,
     cap,
+    freq_step_range,
     get_field,
     job_drive,
     no_unknown,
@@ -386,12 +387,11 @@ def _parse_fll(raw: dict, st: dict, name: str, base: Path) -> StudySpec:
     if not 0 <= sample <= MAX_SCENARIOS:
         raise JobError("study.sample", f"must be in [0, {MAX_SCENARIOS}] (0: the full grid), got {show(sample)}")
     seed, chunk = _seed(st), _chunk(st, 2048)
-    # the frequency after the step stays in (0, 1/(4 ts)] of every design (the run takes the first's ω_n)
+    # the step is tied to the nominal frequency and the sample rate (the run takes the first design's ω_n)
     freq = float(next(iter(designs.values())).omega_n) / (2 * math.pi)
     if "recording" in st:  # [study.recording]: recorded voltages instead of the axes' grid
         return _fll_recordings(raw, st, name, base, designs, t_event, horizon, steady, band, results)
-    unit, (lo, hi) = FLL_AXIS_RANGES["freq_step"]
-    limits = {"freq_step": (unit, (max(lo, -freq * (1 - 1e-6)), min(hi, 0.25 / ts - freq)))}
+    limits = {"freq_step": (FLL_AXIS_RANGES["freq_step"][0], freq_step_range(freq, ts))}
     axes = _axes(raw, FLL_AXIS_RANGES, limits)
     n = _count(axes, sample)
     _check_steps(horizon, steady, ts, n, chunk, "fll")

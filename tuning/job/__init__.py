@@ -74,6 +74,7 @@ from .run import build_objective as build_objective
 from .run import run_job as run_job
 from .schema import AXIS_RANGES as AXIS_RANGES
 from .schema import available_memory as available_memory
+from .schema import freq_step_range as freq_step_range
 from .schema import load_job as load_job
 from .schema import parse_job as parse_job
 from .spec import DriveSpec as DriveSpec

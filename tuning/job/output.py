@@ -10,8 +10,11 @@ from pathlib import Path
 import numpy as np
 
 from jaxobs import metrics as M
+from jaxobs.drive import DRIVE_AXES
+from jaxobs.drive_study import CF_UNITS
+from jaxobs.study import AXIS_META
 
-from ..objective import LOST_SYNC_DEG
+from ..objective import LOST_SYNC_DEG, METRIC_UNITS
 from ..outdir import atomic_write_text
 from .spec import Job, ScenarioSpec
 
@@ -57,9 +60,26 @@ def at_bounds(job: Job, gains: dict) -> dict:
     return out
 
 
+# the EMF signals' axes (jaxobs.scenarios.emf_signals) in CF units; the grid signals' and the drive's come
+# from jaxobs.study.AXIS_META and jaxobs.drive.DRIVE_AXES
+_EMF_AXIS_UNITS = {"speed_hz": "Hz", "dc_alpha": "V", "dc_beta": "V", "h5": "1", "h7": "1", "phase_deg": "degree"}
+
+
+def _axis_units(name: str) -> str:
+    if name in AXIS_META:
+        return AXIS_META[name][0]
+    if name in _EMF_AXIS_UNITS:
+        return _EMF_AXIS_UNITS[name]
+    if name in DRIVE_AXES:
+        unit = DRIVE_AXES[name][0]
+        return CF_UNITS.get(unit, unit)
+    return "1"  # an index (scenario, recording)
+
+
 def scores_dataset(obj, names, combos, spec: ScenarioSpec, per: dict):
     """Per-scenario metrics of each design as an xarray Dataset: the grid's axes as dims (a full grid),
-    else one ``scenario`` dim with the axes as coordinates (sampled scenarios)."""
+    else one ``scenario`` dim with the axes as coordinates (sampled scenarios).  Every variable and numeric
+    coordinate carries CF ``units`` (:data:`tuning.objective.METRIC_UNITS`; flags ``1``)."""
     import xarray as xr
 
     designs = list(per)
@@ -86,6 +106,10 @@ def scores_dataset(obj, names, combos, spec: ScenarioSpec, per: dict):
     ds = xr.Dataset(data, coords=coords)
     ds["diverged"] = ds["diverged"].astype("int8")
     ds["lost_lock"] = ds["lost_lock"].astype("int8")
+    for key in keys:
+        ds[key].attrs["units"] = METRIC_UNITS[key]
+    # the weights carry the metrics' units (a term's weight is per its metric's unit): the total is a number
+    ds["total"].attrs.update(units="1", long_name="weighted objective of the scenario (the penalty where diverged)")
     ds.attrs["note"] = (
         "total: the weighted objective per scenario (the penalty where diverged); diverged: 1/0; lost_lock: 1 where "
         "the estimate ended far from the truth in the steady window (45 deg or 10 % on signals, 90 deg on the "
@@ -94,6 +118,10 @@ def scores_dataset(obj, names, combos, spec: ScenarioSpec, per: dict):
     if extra:
         ds["lost_sync"] = ds["lost_sync"].astype("int8")
         ds["lost_speed"] = ds["lost_speed"].astype("int8")
+    for key in ("diverged", "lost_lock", *extra):
+        ds[key].attrs["units"] = "1"
+    for name in (*names, *([] if grid else ["scenario"])):
+        ds[name].attrs["units"] = _axis_units(name)
         ds.attrs["note"] += f"; lost_sync: 1 where diverged or |position error| > {LOST_SYNC_DEG:g} deg (drive)"
         ds.attrs["note"] += (
             f"; lost_speed: 1 where diverged or the steady window's mean |speed - reference| > "
@@ -108,3 +136,28 @@ def recordings_provenance(job: Job) -> dict:
     if rec is None:
         return {}
     return {"recordings": [{"file": f, "sha256": h} for f, h in zip(rec.files, rec.sha256 or [None] * len(rec.files))]}
+
+
+def claimed_envelope(job: Job) -> dict | None:
+    """The operating envelope a drive job was tuned for (issue 26.4), from its scenarios: the speed range
+    (r/min, the grid's speeds and where its speed steps take them), the load range (N·m, with the load
+    steps), the other axes' ranges; ``None`` for a job that is not a simulated drive.  Where the designs hold
+    inside it is not computed after tuning (minutes on the presets): ``jaxobs envelope <result.json>`` maps it."""
+    spec = job.scenarios
+    if job.drive is None or spec.signal != "drive" or spec.recording is not None:
+        return None
+    axes = spec.axes
+    speeds = [float(v) for v in axes.get("speed_rpm", [600.0])]
+    after = [s + float(d) for s in speeds for d in axes.get("speed_step_rpm", [0.0])]
+    loads = [float(v) for v in axes.get("load_nm", [0.0])]
+    after_l = [ld + float(d) for ld in loads for d in axes.get("load_step_nm", [0.0])]
+    skip = ("speed_rpm", "speed_step_rpm", "load_nm", "load_step_nm")
+    return {
+        "speed_rpm": [min(speeds + after), max(speeds + after)],
+        "load_nm": [min(loads + after_l), max(loads + after_l)],
+        "other_axes": {k: [float(min(v)), float(max(v))] for k, v in axes.items() if k not in skip},
+        "machine": job.drive.machine,
+        "verified": None,
+        "verify_with": "jaxobs envelope <this result.json>: where initial, closed form and tuned hold, 1 % to 100 % "
+        "of rated speed x 0..rated torque",
+    }
