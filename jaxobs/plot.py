@@ -230,12 +230,77 @@ def _axis_label(ds, name: str) -> str:
     return f"{name} ({unit})" if unit and unit != "1" else name
 
 
-def study_figures(ds, out_dir):
-    """Heat-maps (mean over the other axes, first two axes) and distributions per metric; returns the paths.
+def _shared_norm(vals):
+    """One colour scale for every panel of a comparison: log where the positive values span more than a
+    decade (designs that differ by decades stay apart), else linear; (norm, is_log)."""
+    from matplotlib.colors import LogNorm, Normalize
 
-    One colour scale per metric across designs (one labelled colour bar) and one set of histogram bins,
-    so designs compare by eye; the rms phase error is shown in degrees.  Settling times that are censored
-    at the horizon (``settled`` False) are counted in the histogram's legend.
+    v = np.asarray(vals, dtype=float)
+    v = v[np.isfinite(v)]
+    if not v.size:
+        return Normalize(0.0, 1.0), False
+    lo, hi = float(v.min()), float(v.max())
+    if lo > 0 and hi / lo > 10.0:
+        return LogNorm(lo, hi), True
+    return Normalize(lo, hi if hi > lo else lo + 1.0), False
+
+
+def _study_heatmap(ds, da, unit, short, axes, designs):
+    a0, a1 = axes[0], axes[1]
+    others = [d for d in axes if d not in (a0, a1)]
+    rows = [("mean", da.mean(dim=others) if others else da)]
+    if others:  # the worst case over the hidden axes beside the mean
+        rows.append(("worst (max)", da.max(dim=others)))
+    norm, is_log = _shared_norm(np.concatenate([np.asarray(r).ravel() for _, r in rows]))
+    nx, ny = len(ds[a0]), len(ds[a1])
+    w = max(3.6, 0.55 * nx + 1.0)  # room for a value in each cell at 9 pt
+    fig, axs = _subplots(
+        len(rows),
+        len(designs),
+        figsize=(w * len(designs) + 1.4, 0.42 * ny * len(rows) + 1.6 * len(rows) + 0.6),
+        squeeze=False,
+    )
+    im = None
+    for r, (how, red) in enumerate(rows):
+        for c, d in enumerate(designs):
+            ax = axs[r, c]
+            arr = np.asarray(red.sel(design=d).transpose(a1, a0), dtype=float)
+            im = ax.imshow(arr, origin="lower", aspect="auto", norm=norm, cmap="viridis")
+            for (j, i), v in np.ndenumerate(arr):  # the value itself: colours alone hide 0.15 vs 0.115
+                if np.isfinite(v):
+                    light = norm(v) < 0.55  # white on the dark end of viridis
+                    ax.text(i, j, f"{v:.2g}", ha="center", va="center", fontsize=9, color="w" if light else "k")
+            ax.set_xticks(range(nx), [f"{v:g}" for v in ds[a0].values], fontsize=9)
+            ax.set_yticks(range(ny), [f"{v:g}" for v in ds[a1].values], fontsize=9)
+            if r == len(rows) - 1:
+                ax.set_xlabel(_axis_label(ds, a0), fontsize=10)
+            if c == 0:
+                ax.set_ylabel(f"{how}\n{_axis_label(ds, a1)}", fontsize=10)
+            ax.set_title(f"{d}: {how}", fontsize=10)
+    fig.subplots_adjust(left=0.07, right=0.88, top=0.86, bottom=0.12, wspace=0.22, hspace=0.4)
+    cax = fig.add_axes((0.9, 0.12, 0.012, 0.74))  # beside the panels, never over one
+    cb = fig.colorbar(im, cax=cax, label=f"{short} ({unit})" + (", log scale" if is_log else ""))
+    if is_log:  # plain numbers (0.2, 0.5, 1), not 2×10⁻¹
+        from matplotlib.ticker import FormatStrFormatter
+
+        cb.ax.yaxis.set_major_formatter(FormatStrFormatter("%g"))
+        cb.ax.yaxis.set_minor_formatter(FormatStrFormatter("%g"))
+    cb.ax.tick_params(which="both", labelsize=9)
+    cb.ax.yaxis.label.set_size(10)
+    how = f"mean and worst case over {', '.join(others)}" if others else "every scenario"
+    fig.suptitle(f"{short} ({unit}): {how}; one colour scale for every panel", fontsize=11)
+    return fig
+
+
+def study_figures(ds, out_dir):
+    """Heat-maps and distributions per metric; returns the paths.
+
+    Heat-maps (a grid of at least two axes): the first two axes, one column per design; the top row is the
+    mean over the other axes and, when there are others, the bottom row their worst case (the max), so a
+    bad corner the mean hides shows.  One colour scale per metric shared by every panel (log where the
+    values span more than a decade), one labelled colour bar, each cell's value written in it; labels
+    ≥ 9 pt.  The rms phase error is shown in degrees.  Histograms: one set of bins per metric; settling
+    times that are censored at the horizon (``settled`` False) are counted in the legend.
     """
     out = Path(out_dir)
     paths = []
@@ -245,26 +310,8 @@ def study_figures(ds, out_dir):
         da = ds[metric] * scale
         finite = np.asarray(da)[np.isfinite(np.asarray(da))]
         if len(axes) >= 2 and "sample" not in axes:
-            a0, a1 = axes[0], axes[1]
-            red = da.mean(dim=[d for d in axes if d not in (a0, a1)]) if len(axes) > 2 else da
-            vals = np.asarray(red)
-            vmin, vmax = (float(np.nanmin(vals)), float(np.nanmax(vals))) if np.isfinite(vals).any() else (0, 1)
-            fig, axs = _subplots(1, len(designs), figsize=(3.6 * len(designs) + 1.2, 3.4), squeeze=False)
-            for ax, d in zip(axs[0], designs):
-                arr = np.asarray(red.sel(design=d).transpose(a1, a0))
-                im = ax.imshow(arr, origin="lower", aspect="auto", vmin=vmin, vmax=vmax)
-                ax.set_xticks(range(len(ds[a0])), [f"{v:g}" for v in ds[a0].values], fontsize=7)
-                ax.set_yticks(range(len(ds[a1])), [f"{v:g}" for v in ds[a1].values], fontsize=7)
-                ax.set_xlabel(_axis_label(ds, a0))
-                ax.set_title(str(d), fontsize=9)
-            axs[0, 0].set_ylabel(_axis_label(ds, a1))
-            fig.subplots_adjust(left=0.1, right=0.86, top=0.8, bottom=0.16, wspace=0.25)
-            fig.colorbar(im, ax=list(axs[0]), label=f"{short} ({unit})")
-            others = [d for d in axes if d not in (a0, a1)]
-            how = f"mean over {', '.join(others)}" if others else "every scenario"
-            fig.suptitle(f"{short} ({unit}), {how}; one colour scale for all designs", fontsize=10)
             p = out / f"heatmap_{metric}.png"
-            fig.savefig(p, dpi=100)  # the colour bar spans the axes: no tight_layout
+            _study_heatmap(ds, da, unit, short, axes, designs).savefig(p, dpi=100)  # no tight_layout: the bar
             paths.append(p)
         fig, ax = _subplots(figsize=(6, 3.4))
         bins = np.histogram_bin_edges(finite, bins=30) if finite.size else 30
@@ -279,7 +326,8 @@ def study_figures(ds, out_dir):
         ax.set_xlabel(f"{short} ({unit})")
         ax.set_ylabel("scenarios")
         ax.set_title(f"{short} over {int(ds.attrs.get('scenarios', finite.size))} scenarios per design", fontsize=10)
-        ax.legend(fontsize=8)
+        ax.tick_params(labelsize=9)
+        ax.legend(fontsize=9)
         p = out / f"distribution_{metric}.png"
         _finish(fig, p, dpi=100)
         paths.append(p)
