@@ -523,3 +523,115 @@ def drive_study_figure(ds, path):
     if path is not None:
         fig.savefig(path, dpi=90)
     return fig
+
+
+# the envelope map's panels: variable -> (label, colour map, centred at 0)
+_ENVELOPE_PANELS = {
+    "margin": ("stability margin (1/s; < 0: unstable)", "RdBu", True),
+    "pos_err_max_deg": ("peak position error, late window (deg el.)", "viridis", False),
+    "pos_bias_deg": ("steady position bias (deg el.)", "PuOr", True),
+    "pos_ripple_deg": ("position-error ripple, rms (deg el.)", "viridis", False),
+}
+
+
+def _log_edges(x):
+    """Cell edges of centres ``x`` on a log axis (geometric midpoints; one centre: ±20 %)."""
+    x = np.asarray(x, dtype=float)
+    if x.size == 1:
+        return np.array([x[0] / 1.2, x[0] * 1.2])
+    mid = np.sqrt(x[1:] * x[:-1])
+    return np.concatenate([[x[0] ** 2 / mid[0]], mid, [x[-1] ** 2 / mid[-1]]])
+
+
+def _lin_edges(y):
+    y = np.asarray(y, dtype=float)
+    if y.size == 1:
+        return np.array([y[0] - 0.5, y[0] + 0.5])
+    mid = 0.5 * (y[1:] + y[:-1])
+    return np.concatenate([[2 * y[0] - mid[0]], mid, [2 * y[-1] - mid[-1]]])
+
+
+def _outline(ax, mask, xe, ye):
+    """The boundary of the cells where ``mask`` (speed × load) is true, drawn along the cells' edges."""
+    nx, ny = mask.shape
+    for i in range(nx):
+        for j in range(ny):
+            if not mask[i, j]:
+                continue
+            if i == 0 or not mask[i - 1, j]:
+                ax.plot([xe[i], xe[i]], [ye[j], ye[j + 1]], "k-", lw=1.8)
+            if i == nx - 1 or not mask[i + 1, j]:
+                ax.plot([xe[i + 1], xe[i + 1]], [ye[j], ye[j + 1]], "k-", lw=1.8)
+            if j == 0 or not mask[i, j - 1]:
+                ax.plot([xe[i], xe[i + 1]], [ye[j], ye[j]], "k-", lw=1.8)
+            if j == ny - 1 or not mask[i, j + 1]:
+                ax.plot([xe[i], xe[i + 1]], [ye[j + 1], ye[j + 1]], "k-", lw=1.8)
+
+
+def envelope_figure(ds, path):
+    """The envelope map (:func:`jaxobs.drive.envelope.envelope`): one row per metric, one column per design,
+    speed on a log axis against load; every row on ONE colour scale (shared by the designs), the region where
+    each design holds outlined in black and the points where it does not crossed.  With a mismatch dim each
+    cell shows the worst over it (lowest margin, largest error, holds only where it holds at every value)."""
+    designs = list(ds["design"].values)
+    extra = [d for d in ds["holds"].dims if d not in ("design", "speed_rpm", "load")]
+    worst = {"margin": "min", "pos_err_max_deg": "max", "pos_ripple_deg": "max"}
+
+    def reduce(name):
+        v = ds[name]
+        if name == "pos_bias_deg":  # the bias of largest magnitude, with its sign
+            return v.isel({extra[0]: abs(v).fillna(-1.0).argmax(extra[0])}) if extra else v
+        return getattr(v, worst.get(name, "min"))(extra) if extra else v
+
+    sp, ld = ds["speed_rpm"].values, ds["load"].values
+    xe, ye = _log_edges(sp), _lin_edges(ld)
+    rows = list(_ENVELOPE_PANELS)
+    from matplotlib.figure import Figure
+
+    # constrained layout: the shared colour bars span a row (tight_layout cannot place them)
+    fig = Figure(figsize=(3.0 * len(designs) + 1.6, 2.3 * len(rows) + 0.9), layout="constrained")
+    axs = fig.subplots(len(rows), len(designs), squeeze=False)
+    holds = reduce("holds") if not extra else ds["holds"].min(extra)
+    for r, name in enumerate(rows):
+        label, cmap, centred = _ENVELOPE_PANELS[name]
+        vals = np.asarray(reduce(name).transpose("design", "speed_rpm", "load").values, dtype=float)
+        fin = vals[np.isfinite(vals)]
+        if centred:
+            lim = float(np.percentile(np.abs(fin), 95)) if fin.size else 1.0
+            vmin, vmax = -max(lim, 1e-6), max(lim, 1e-6)
+        else:
+            vmin = 0.0
+            vmax = max(float(np.percentile(fin, 95)) if fin.size else 1.0, 1e-6)
+        mesh = None
+        for c, d in enumerate(designs):
+            ax = axs[r, c]
+            mesh = ax.pcolormesh(xe, ye, vals[c].T, cmap=cmap, vmin=vmin, vmax=vmax, shading="flat")
+            h = np.asarray(holds.sel(design=d).transpose("speed_rpm", "load").values, dtype=float)
+            _outline(ax, h >= 0.5, xe, ye)
+            bad = np.argwhere(h < 0.5)
+            ax.plot(sp[bad[:, 0]], ld[bad[:, 1]], "x", color="k", ms=4, mew=0.8)
+            ax.set_xscale("log")
+            ax.set_xlim(xe[0], xe[-1])
+            ax.set_ylim(ye[0], ye[-1])
+            ax.tick_params(labelsize=7)
+            if r == 0:
+                n_h, n = int(h.sum()), h.size
+                ax.set_title(f"{d}\nholds at {n_h}/{n} points", fontsize=9)
+            if r == len(rows) - 1:
+                ax.set_xlabel("speed (r/min, log)", fontsize=8)
+            if c == 0:
+                ax.set_ylabel("load (N·m)", fontsize=8)
+        cb = fig.colorbar(mesh, ax=list(axs[r]), shrink=0.95, pad=0.01)
+        cb.set_label(label, fontsize=7)
+        cb.ax.tick_params(labelsize=7)
+    bound = ds.attrs.get("bound_deg", float("nan"))
+    title = (
+        f"operating envelope, sensorless\noutlined: holds (stable, synchronous, peak error <= {bound:g} deg); "
+        "x: fails; white: lost lock"
+    )
+    if extra:
+        title += f"; worst over {', '.join(extra)}"
+    fig.suptitle(title, fontsize=9)
+    if path is not None:
+        fig.savefig(path, dpi=110)
+    return fig

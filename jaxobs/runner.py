@@ -32,7 +32,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import sharding
-from ._simulate import simulate
+from ._simulate import AbstractSave, SaveAll, simulate
 from .progress import Progress
 from .scenarios import AbstractSampler
 
@@ -48,6 +48,7 @@ class _Task(NamedTuple):
     horizon: float
     mesh: Any  # None: one device, a plain vmap
     tile: int
+    save: AbstractSave = SaveAll()  # SaveFinal: a long horizon whose metrics read the final state alone
 
 
 @eqx.filter_jit
@@ -56,7 +57,7 @@ def _run_chunk(task: _Task, design, batch, aux):
     scenario, aux)``; one program for designs of one class (the gains are array leaves, ``aux`` is static)."""
 
     def one(sc):
-        return task.metrics(simulate(task.system_factory(design, sc), task.horizon), sc, aux)
+        return task.metrics(simulate(task.system_factory(design, sc), task.horizon, save=task.save), sc, aux)
 
     if task.mesh is None:
         return jax.vmap(one)(batch)
@@ -86,6 +87,7 @@ def run_scenarios(
     mesh=None,
     progress=False,
     label: str = "study",
+    save: AbstractSave = SaveAll(),
 ) -> StudyRun:
     """Simulate ``system_factory(design, scenario)`` for ``horizon`` s on every scenario, every design.
 
@@ -96,7 +98,8 @@ def run_scenarios(
     Python value of the design that the metrics need outside tracing (``None`` without ``static``; a new value
     compiles again).  ``progress``: ``True`` a tqdm bar on stderr naming each compilation, a callable
     ``progress(done, total)``, ``False`` nothing.  ``mesh``: a one-axis ``"batch"`` mesh (default
-    :func:`jaxobs.batch_mesh`).
+    :func:`jaxobs.batch_mesh`).  ``save``: what each run keeps (:class:`~jaxobs.SaveAll` by default;
+    :class:`~jaxobs.SaveFinal` for a long horizon whose system accumulates its own metrics in its state).
     """
     if not designs:
         raise ValueError(f"{label}: at least one design is required")
@@ -121,7 +124,7 @@ def run_scenarios(
         # places only its own devices' rows of each chunk (sharding.global_batch)
         scs = jax.tree.map(np.asarray, scs)
     static = (lambda design: None) if static is None else static
-    task = _Task(system_factory, metrics, float(horizon), mesh if n_dev > 1 else None, chunk // n_dev)
+    task = _Task(system_factory, metrics, float(horizon), mesh if n_dev > 1 else None, chunk // n_dev, save)
 
     values = {}
     compiled = set()

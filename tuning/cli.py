@@ -79,6 +79,7 @@ from .cli_papers import DEMO_FILES as DEMO_FILES
 from .cli_papers import REPRODUCE_FILES as REPRODUCE_FILES
 from .cli_papers import closed_form_rows as closed_form_rows
 from .distributed import distributed_asked, distributed_study, join_distributed, refuse_unsplittable
+from .envelope import add_envelope_parser
 from .export import add_export_parser
 from .job import CHECKPOINT, load_job, load_recordings, run_job
 from .outdir import OutDir, atomic_path, atomic_write_text, safe_name
@@ -373,6 +374,7 @@ def build_parser() -> argparse.ArgumentParser:
     st.set_defaults(func=_cmd_study)
 
     add_export_parser(sub)
+    add_envelope_parser(sub)
     return p
 
 

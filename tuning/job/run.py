@@ -22,7 +22,7 @@ from ..solvers import tune
 from ..structure import structure
 from .components import COMPONENTS
 from .drive import job_drive
-from .output import at_bounds, recordings_provenance, rule_spec, scores_dataset, write_json
+from .output import at_bounds, claimed_envelope, recordings_provenance, rule_spec, scores_dataset, write_json
 from .recordings import bind_recording
 from .scenarios import build_scenarios
 from .spec import Job, ScenarioSpec
@@ -171,6 +171,10 @@ def run_job(job: Job, out: Path, resume: bool = False, quiet: bool = False) -> d
             "Rs, Lq (LESOs) or Rs, L (flux observers) and the PLL's or FLL's initial speed (omega0_pll, omega0) "
             f"are set per scenario from its estimated machine ({BENCH_MACHINES[job.drive.machine]})"
         )
+        # the envelope it was tuned for (issue 26.4); where the designs hold is `jaxobs envelope RESULT.json`
+        result["envelope"] = claimed_envelope(job)
+        if result["envelope"] is not None:
+            nulls["envelope.verified"] = "not run after tuning: `jaxobs envelope <result.json>` maps it"
     if nulls:
         result["null_reasons"] = nulls
     result["lost_lock_tuned_only"] = {"tuning": _lost_only(per)}
