@@ -5,8 +5,8 @@
     jaxobs demo [--out DIR] [--force] [--json]             the FLL family on paper 001 Tests A–E
     jaxobs closed-form {sogi-fll,wpf,wif,cleso} [--name value ...] [--json]
                                                            closed-form gains, formula and source
-    jaxobs bode [--out DIR] [--force]                      the papers' Bode figures (000 Fig. 5,
-                                                           002 Fig. 4, 001 Fig. 14)
+    jaxobs bode [--out DIR] [--force] [--rad-per-s]        the papers' Bode figures (000 Fig. 5,
+                                                           002 Fig. 4, 001 Fig. 14), in Hz (or rad/s)
     jaxobs reproduce flux [--out DIR] [--force] [--json] [--quick]
                                                            paper 000's experiments, paper vs ours
     jaxobs reproduce leso [--out DIR] [--force] [--json] [--machine single|dual]   paper 002's experiments
@@ -351,6 +351,7 @@ def build_parser() -> argparse.ArgumentParser:
     b = sub.add_parser("bode", help="Bode figures of the papers' flux observers, LESOs and FLL loops", parents=[quiet])
     b.add_argument("--out", default="out/bode", help="folder for the figures (default: out/bode)")
     b.add_argument("--force", action="store_true", help="overwrite figures already in --out")
+    b.add_argument("--rad-per-s", action="store_true", help="frequency axis in rad/s (default: Hz)")
     b.set_defaults(func=cmd_bode)
 
     r = sub.add_parser("reproduce", help="reproduce a paper's experiments on the simulated drive", parents=[quiet])
