@@ -17,7 +17,7 @@ from tuning.cli import BODE_FILES, DEMO_FILES, REPRODUCE_FILES, build_parser, lo
 from tuning.results import load_result, tuned_component
 
 ROOT = Path(__file__).resolve().parents[1]
-COMMANDS = ("tune", "demo", "closed-form", "bode", "reproduce", "study", "export")
+COMMANDS = ("tune", "demo", "closed-form", "bode", "reproduce", "study", "export", "envelope")
 
 
 def _python(code_or_args, env_drop=(), env_add=None):

@@ -33,11 +33,19 @@ LAYERS = [
         "jaxobs.provenance",
         "jaxobs._cache",
         "jaxobs.drive.component",
+        "jaxobs.chunkstore",
     ),
     # integration rules (and check_rule)
     ("jaxobs._discretize",),
     # signals and plant: they produce the measurements
-    ("jaxobs.signals._waveforms", "jaxobs.signals._recordings", "jaxobs.drive.machine", "jaxobs.drive.hardware"),
+    (
+        "jaxobs.signals._waveforms",
+        "jaxobs.signals._recordings",
+        "jaxobs.drive.machine",
+        "jaxobs.drive.hardware",
+        "jaxobs.drive.latency",
+        "jaxobs.drive.weakening",
+    ),
     ("jaxobs.signals",),
     ("jaxobs.scenarios", "jaxobs.drive.plant", "jaxobs.drive.dual", "jaxobs.drive.control", "jaxobs.drive.scenario"),
     # observers: they estimate
@@ -71,10 +79,12 @@ LAYERS = [
         "jaxobs.reproduce.leso",
         "jaxobs.plot",
     ),
+    # the envelope map: the stability verdict and the long runs of a drive study, over the speed x load plane
+    ("jaxobs.drive.envelope",),
     ("jaxobs.reproduce.leso_dual",),
     ("jaxobs.reproduce",),
     # tuning: it changes gains (and exports the tuned observer)
-    ("tuning.outdir",),
+    ("tuning.outdir", "tuning.checkpoint"),
     # the C export's code generator (jaxpr -> C) is beside the rest: it knows no observer
     ("tuning.export.ir",),
     ("tuning.export.lower",),
@@ -85,6 +95,7 @@ LAYERS = [
     ("tuning.job.fields",),
     ("tuning.job.toml", "tuning.job.components", "tuning.job.spec"),
     ("tuning.job.recordings", "tuning.job.drive", "tuning.job.output"),
+    ("tuning.job.verify",),
     ("tuning.job.schema", "tuning.job.scenarios"),
     ("tuning.job.run",),
     ("tuning.job",),
@@ -94,7 +105,7 @@ LAYERS = [
     ("tuning.export.sources", "tuning.export.golden", "tuning.export.harness"),
     ("tuning.export.files",),
     ("tuning.export.command",),
-    ("tuning.export",),
+    ("tuning.export", "tuning.envelope"),
     ("tuning",),
     # the command line: the top layer (`jaxobs ...` and `python -m jaxobs`)
     ("tuning.cli_common", "tuning.summary", "tuning.distributed"),

@@ -717,6 +717,10 @@ def test_flux_observer_drive_job_runs_sensorless_on_the_spmsm(tmp_path, capsys):
     assert main(["tune", str(path), "--out", str(tmp_path / "o"), "--quiet"]) == 0
     res = _strict_json(tmp_path / "o" / "result.json")
     assert res["loop"] == "sensorless" and res["machine"] == "spmsm000"
+    # the envelope it was tuned for, stated (issue 26.4); its verification is `jaxobs envelope RESULT.json`
+    env = res["envelope"]
+    assert env["machine"] == "spmsm000" and env["speed_rpm"][0] > 0 and env["verified"] is None
+    assert "envelope.verified" in res["null_reasons"]
     assert res["gains"]["closed_form"]["k"] == pytest.approx(papers.SOIFO_K)
     for design in ("initial", "closed_form", "tuned"):
         assert res["scores"][design]["diverged"] == 0 and res["scores"][design]["lost_sync"] == 0

@@ -136,3 +136,28 @@ def recordings_provenance(job: Job) -> dict:
     if rec is None:
         return {}
     return {"recordings": [{"file": f, "sha256": h} for f, h in zip(rec.files, rec.sha256 or [None] * len(rec.files))]}
+
+
+def claimed_envelope(job: Job) -> dict | None:
+    """The operating envelope a drive job was tuned for (issue 26.4), from its scenarios: the speed range
+    (r/min, the grid's speeds and where its speed steps take them), the load range (N·m, with the load
+    steps), the other axes' ranges; ``None`` for a job that is not a simulated drive.  Where the designs hold
+    inside it is not computed after tuning (minutes on the presets): ``jaxobs envelope <result.json>`` maps it."""
+    spec = job.scenarios
+    if job.drive is None or spec.signal != "drive" or spec.recording is not None:
+        return None
+    axes = spec.axes
+    speeds = [float(v) for v in axes.get("speed_rpm", [600.0])]
+    after = [s + float(d) for s in speeds for d in axes.get("speed_step_rpm", [0.0])]
+    loads = [float(v) for v in axes.get("load_nm", [0.0])]
+    after_l = [ld + float(d) for ld in loads for d in axes.get("load_step_nm", [0.0])]
+    skip = ("speed_rpm", "speed_step_rpm", "load_nm", "load_step_nm")
+    return {
+        "speed_rpm": [min(speeds + after), max(speeds + after)],
+        "load_nm": [min(loads + after_l), max(loads + after_l)],
+        "other_axes": {k: [float(min(v)), float(max(v))] for k, v in axes.items() if k not in skip},
+        "machine": job.drive.machine,
+        "verified": None,
+        "verify_with": "jaxobs envelope <this result.json>: where initial, closed form and tuned hold, 1 % to 100 % "
+        "of rated speed x 0..rated torque",
+    }

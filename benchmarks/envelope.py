@@ -1,0 +1,56 @@
+"""The envelope map's cost (issue 26: 200 operating points × 3 designs in ≤ 60 s, compile included).
+
+    .venv/bin/python -m benchmarks.envelope [--speeds 20] [--loads 10] [--horizon 2]
+
+000's SPMSM on its bench drive, sensorless; three designs of the second-order SOIFO (the job's initial gains,
+000's closed form, and a third as a tuned one would be: another lam), so one program serves all three, as
+in `jaxobs envelope RESULT.json`.  No persistent compile cache: a fresh process compiles everything.  Prints
+the wall time with the machine's load average beside it (a shared machine: the number means little without
+it) and the envelope's own summary.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import time
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(prog="python -m benchmarks.envelope")
+    p.add_argument("--speeds", type=int, default=20)
+    p.add_argument("--loads", type=int, default=10)
+    p.add_argument("--horizon", type=float, default=2.0)
+    a = p.parse_args(argv)
+    import jax
+
+    jax.config.update("jax_enable_x64", True)
+    import jaxobs
+    from jaxobs.drive import bench_drive, bench_machine
+    from jaxobs.drive.envelope import default_loads, default_speeds, envelope
+
+    par = bench_machine("spmsm000")
+    designs = {
+        "initial": jaxobs.SecondOrderSOIFO(0.0, 1.0, 1.56, 3.11, 0.61, 100.0),
+        "closed_form": jaxobs.SecondOrderSOIFO(0.0, 1.0, 1.56, 3.11, 1.56**3 / (2 * 3.11), 100.0),
+        "tuned-like": jaxobs.SecondOrderSOIFO(0.0, 1.0, 1.8, 3.4, 0.9, 100.0),
+    }
+    speeds, loads = default_speeds(par, a.speeds), default_loads(par, a.loads)
+    load0 = os.getloadavg()
+    t0 = time.perf_counter()
+    ds = envelope(designs, machine=par, drive=bench_drive(par), speeds_rpm=speeds, loads_nm=loads, horizon=a.horizon)
+    wall = time.perf_counter() - t0
+    load1 = os.getloadavg()
+    n = len(speeds) * len(loads)
+    print(
+        f"envelope: {n} points x {len(designs)} designs, {a.horizon:g} s runs: {wall:.1f} s wall, compile included "
+        f"({os.cpu_count()} CPUs; 1-min load average {load0[0]:.1f} before, {load1[0]:.1f} after)"
+    )
+    for d in designs:
+        s = ds.sel(design=d)
+        print(f"  {d:<12} holds at {int(s['holds'].sum())}/{n}, stable at {int(s['stable'].sum())}/{n}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

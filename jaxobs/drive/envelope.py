@@ -1,0 +1,346 @@
+"""Where a sensorless design holds: its operating envelope over the speed × load plane (issue 26.3).
+
+    ds = envelope({"closed form": cf, "tuned": tuned}, machine=par, drive=drive)
+    ds["holds"].sel(design="tuned")            # stable ∧ synchronous ∧ error within the bound
+    ds["margin"].sel(design="tuned", load=0)   # 1/s, the slowest mode's decay rate
+
+At every operating point (speed × load, optionally × one mismatch axis) and for every design (an observer that
+closes the loop sensorless) it measures two things, each batched over the points in one ``jit(vmap)``:
+
+- **the stability margin** of the simulated, sampled loop (:func:`jaxobs.drive.stability.lyapunov`: the
+  largest non-neutral Lyapunov exponent of ``ClosedLoop.step``, linearized along its own orbit);
+- **a long simulation** (``horizon`` s, 2 by default) through the study runner
+  (:func:`jaxobs.runner.run_scenarios`), started steady and perturbed by a speed-reference step of
+  ``perturb`` (relative) at ``t_perturb`` s, so that an unstable point shows its growth within the horizon.
+  Nothing is stored per sample (:class:`jaxobs.SaveFinal`): the loop is wrapped in a system that keeps
+  running sums in its state — the position error's mean and mean square and its peak over the late window
+  ``[steady_from, horizon)``, the speed's peak deviation in the early window ``[t_perturb + 0.05, steady_from)``
+  and in the late one, and the mean |ωm − ωm*| and |ωm*| over the late window.
+
+A point is **synchronous** when the run stayed finite, kept lock (late peak position error ≤ 90° electrical,
+the drive studies' lost-lock tolerance), kept its speed (:func:`jaxobs.metrics.lost_speed`'s rule on the late
+window) and settled: its late peak speed deviation is under ``speed_tol`` and no larger than in the early
+window (the criterion the stability verdict was validated with, docs/stability.md).  It **holds** when it is
+stable (the Lyapunov verdict), synchronous and its late peak position error is within ``bound_deg``.
+
+Designs of one class share both compilations (their gains are array leaves).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import ClassVar, NamedTuple
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .. import AbstractSystem, SaveFinal
+from .. import metrics as M
+from ..drive_study import (
+    CF_UNITS,
+    DRIVE_GAIN_UNITS,
+    DRIVE_STUDY_AXES,
+    DRIVE_STUDY_AXIS_NAMES,
+    bind_observer,
+    drive_gains,
+    drive_scenarios,
+)
+from ..provenance import provenance
+from ..runner import run_scenarios
+from ..scenarios import Grid
+from ..sharding import batch_mesh
+from . import ClosedLoop, Drive, PMSMParams, drive_speed_limit_rpm
+from .stability import lyapunov
+
+__all__ = ["ENVELOPE_VARIABLES", "MISMATCH_AXES", "envelope", "default_speeds", "default_loads"]
+
+# the axes one may add as a third dim (relative errors of the assumed machine, the true inertia)
+MISMATCH_AXES = ("dRs", "dLd", "dLq", "dpsi", "dJ")
+# variable -> (units, long_name) of the per-point results
+ENVELOPE_VARIABLES = {
+    "margin": ("s-1", "stability margin: minus the largest non-neutral Lyapunov exponent of the sampled loop"),
+    "stable": ("1", "stable: margin > 0 and the orbit held its speed during the Lyapunov run (1: stable)"),
+    "orbit_speed_dev": ("1", "max |speed - reference| / |reference| during the Lyapunov run"),
+    "synchronous": ("1", "held synchronism over the long run: finite, locked, at speed, settled (1: held)"),
+    "lost_lock": ("1", "lost lock over the late window: diverged or position error > 90 deg electrical (1: lost)"),
+    "lost_speed": ("1", "lost speed over the late window: diverged, or mean |speed - ref| > 20 % of |ref| (1: lost)"),
+    "pos_err_max_deg": ("degree", "peak |position error| in the late window (electrical)"),
+    "pos_bias_deg": ("degree", "mean position error in the late window (electrical, signed): the steady bias"),
+    "pos_ripple_deg": ("degree", "rms of the position error about its mean in the late window (electrical)"),
+    "speed_dev_early_pct": ("percent", "peak |speed - reference| / |reference| in the early window"),
+    "speed_dev_late_pct": ("percent", "peak |speed - reference| / |reference| in the late window"),
+    "holds": ("1", "holds: stable, synchronous and peak position error within bound_deg (1: holds)"),
+}
+
+
+def default_speeds(machine: PMSMParams, n: int = 8) -> np.ndarray:
+    """``n`` speeds, r/min, log-spaced from 1 % of the machine's rated speed to the rated speed (or the drive's
+    voltage-limited speed, whichever is lower)."""
+    top = min(float(machine.n_rated), 0.98 * drive_speed_limit_rpm(machine))
+    return np.geomspace(0.01 * top, top, n)
+
+
+def default_loads(machine: PMSMParams, n: int = 4) -> np.ndarray:
+    """``n`` load torques, N·m, evenly from 0 to the machine's rated torque."""
+    return np.linspace(0.0, float(machine.T_rated), n)
+
+
+class _Watch(NamedTuple):
+    """Running sums of one long run (no trajectory is stored)."""
+
+    n: jax.Array  # samples in the late window
+    sum_e: jax.Array  # Σ position error, rad
+    sum_e2: jax.Array  # Σ position error², rad²
+    max_e: jax.Array  # max |position error|, rad
+    dev_early: jax.Array  # max |ωm − ωm*| / |ωm*| in the early window, 1
+    dev_late: jax.Array  # the same in the late window, 1
+    sum_dw: jax.Array  # Σ |ωm − ωm*|, rad/s, late window
+    sum_ref: jax.Array  # Σ |ωm*|, rad/s, late window
+
+
+class _Watched(AbstractSystem):
+    """A closed loop whose state carries the running sums of :class:`_Watch` (read from ``final_state``)."""
+
+    loop: ClosedLoop
+    k_early: int = eqx.field(static=True)  # first sample of the early window
+    k_late: int = eqx.field(static=True)  # first sample of the late window
+    unroll: ClassVar[int] = 1
+
+    @property
+    def ts(self) -> float:
+        return self.loop.ts
+
+    def init(self):
+        z = jnp.zeros((), jnp.result_type(float))
+        return self.loop.init(), _Watch(z, z, z, z, z, z, z, z)
+
+    def step(self, state, k):
+        s, w = state
+        new, out = self.loop.step(s, k)
+        e = M.wrap(out.obs.theta - out.theta_e)
+        dw = jnp.abs(out.omega_m - out.omega_m_ref)
+        ref = jnp.abs(out.omega_m_ref)
+        dev = dw / jnp.maximum(ref, 1e-9)
+        late = k >= self.k_late
+        early = (k >= self.k_early) & ~late
+        lf = late.astype(e.dtype)
+        w = _Watch(
+            n=w.n + lf,
+            sum_e=w.sum_e + lf * e,
+            sum_e2=w.sum_e2 + lf * e * e,
+            max_e=jnp.where(late, jnp.maximum(w.max_e, jnp.abs(e)), w.max_e),
+            dev_early=jnp.where(early, jnp.maximum(w.dev_early, dev), w.dev_early),
+            dev_late=jnp.where(late, jnp.maximum(w.dev_late, dev), w.dev_late),
+            sum_dw=w.sum_dw + lf * dw,
+            sum_ref=w.sum_ref + lf * ref,
+        )
+        return (new, w), jnp.zeros((), e.dtype)
+
+
+class _LongRun(NamedTuple):
+    """The long run's factory and metrics (one object: the runner's compilation is shared across calls)."""
+
+    drive: Drive
+    k_early: int
+    k_late: int
+    speed_tol: float
+
+    def system(self, obs, sc):
+        return _Watched(ClosedLoop(self.drive, bind_observer(obs, sc), sc), self.k_early, self.k_late)
+
+    def metrics(self, sol, _sc, _aux):
+        w = sol.final_state[1]
+        mean = w.sum_e / w.n
+        ripple = jnp.sqrt(jnp.maximum(w.sum_e2 / w.n - mean * mean, 0.0))
+        vals = {
+            "pos_err_max_deg": jnp.degrees(w.max_e),
+            "pos_bias_deg": jnp.degrees(mean),
+            "pos_ripple_deg": jnp.degrees(ripple),
+            "speed_dev_early_pct": 100 * w.dev_early,
+            "speed_dev_late_pct": 100 * w.dev_late,
+        }
+        finite = sol.ok & jnp.all(jnp.stack([jnp.isfinite(v) for v in vals.values()]))
+        floor = M.SPEED_FLOOR_RPM * math.pi / 30 * w.n
+        vals["lost_lock"] = ~finite | (w.max_e > math.radians(M.LOCK_TOL_DRIVE_DEG))
+        vals["lost_speed"] = ~finite | (w.sum_dw > jnp.maximum(M.SPEED_TOL * w.sum_ref, floor))
+        settled = (w.dev_late < self.speed_tol) & (w.dev_late <= jnp.maximum(w.dev_early, 1e-6))
+        vals["synchronous"] = ~vals["lost_lock"] & ~vals["lost_speed"] & settled
+        return vals
+
+
+@eqx.filter_jit
+def _stability(drive, obs, scs, kw: tuple):
+    """:func:`lyapunov` at every scenario of ``scs``, one program per observer class (gains are traced)."""
+    return jax.vmap(lambda sc: lyapunov(ClosedLoop(drive, bind_observer(obs, sc), sc), **dict(kw)))(scs)
+
+
+def _axis(name: str, vals, lo: float, hi: float, unit: str) -> np.ndarray:
+    arr = np.asarray(vals, dtype=float)
+    if arr.ndim != 1 or arr.size < 1 or not np.all(np.isfinite(arr)) or np.any(arr < lo) or np.any(arr > hi):
+        raise ValueError(f"envelope: {name} must be a non-empty list of numbers in [{lo:g}, {hi:g}] {unit}")
+    if np.any(np.diff(arr) <= 0):
+        raise ValueError(f"envelope: {name} must be strictly increasing")
+    return arr
+
+
+def envelope(
+    designs: dict,
+    *,
+    machine: PMSMParams,
+    drive: Drive,
+    speeds_rpm=None,
+    loads_nm=None,
+    mismatch: tuple | None = None,
+    horizon: float = 2.0,
+    steady_from: float | None = None,
+    perturb: float = 0.02,
+    t_perturb: float = 0.05,
+    bound_deg: float = 30.0,
+    speed_tol: float = 0.01,
+    stability: dict | None = None,
+    seed: int = 0,
+    chunk_size: int = 256,
+    progress=None,
+):
+    """The operating envelope of every design (name -> drive observer closing ``drive``'s loop sensorless).
+
+    ``speeds_rpm`` (r/min, > 0; default :func:`default_speeds`), ``loads_nm`` (N·m; default
+    :func:`default_loads`); ``mismatch``: ``(axis, values)`` with axis one of :data:`MISMATCH_AXES` (relative,
+    1), a third dim.  ``horizon`` (s, ≥ 0.5) of the long run, its late window from ``steady_from`` (s; default
+    horizon/2); ``perturb`` (relative, in [0, 0.2]): the speed-reference step at ``t_perturb`` (s).
+    ``bound_deg`` (deg electrical): the late peak position error a holding point may have; ``speed_tol``
+    (relative): the late peak speed deviation a synchronous point may have.  ``stability``: keyword arguments
+    of :func:`~jaxobs.drive.stability.lyapunov` (settle, warmup, window, n_dirs, tol).  ``progress`` as in
+    :func:`jaxobs.runner.run_scenarios`.  Returns an ``xarray.Dataset`` with dims ``("design", "speed_rpm",
+    "load"[, axis])`` and the variables of :data:`ENVELOPE_VARIABLES` (booleans stored as int8 0/1).
+    """
+    import xarray as xr
+
+    if not designs:
+        raise ValueError("envelope: at least one design is required")
+    if not drive.sensorless or drive.startup is not None:
+        raise ValueError("envelope: drive must be sensorless and start steady (Drive(sensorless=True, startup=None))")
+    n_max = drive_speed_limit_rpm(machine)
+    speeds = _axis("speeds_rpm", default_speeds(machine) if speeds_rpm is None else speeds_rpm, 1.0, n_max, "r/min")
+    lo_l, hi_l = DRIVE_STUDY_AXES["load_nm"][1]
+    loads = _axis("loads_nm", default_loads(machine) if loads_nm is None else loads_nm, lo_l, hi_l, "N·m")
+    if not (math.isfinite(horizon) and 0.5 <= horizon <= 20.0):
+        raise ValueError(f"envelope: horizon must be in [0.5, 20] s, got {horizon!r}")
+    steady_from = 0.5 * horizon if steady_from is None else float(steady_from)
+    if not (0.0 < t_perturb < steady_from < horizon):
+        raise ValueError(
+            f"envelope: need 0 < t_perturb < steady_from < horizon, got {t_perturb!r}, {steady_from!r}, {horizon!r}"
+        )
+    for name, v, lo, hi in (("perturb", perturb, 0.0, 0.2), ("bound_deg", bound_deg, 0.1, 90.0),
+                            ("speed_tol", speed_tol, 1e-4, 1.0)):  # fmt: skip
+        if not (lo <= float(v) <= hi):
+            raise ValueError(f"envelope: {name} must be in [{lo:g}, {hi:g}], got {v!r}")
+    axes = {"speed_rpm": speeds, "load_nm": loads}
+    if mismatch is not None:
+        if not (isinstance(mismatch, tuple) and len(mismatch) == 2 and mismatch[0] in MISMATCH_AXES):
+            raise ValueError(f"envelope: mismatch must be (axis, values) with axis one of {', '.join(MISMATCH_AXES)}")
+        m_lo, m_hi = DRIVE_STUDY_AXES[mismatch[0]][1]
+        axes[mismatch[0]] = _axis(f"mismatch {mismatch[0]}", mismatch[1], m_lo, m_hi, "(relative)")
+    kw = {"settle": 0.2, "warmup": 0.1, "window": 0.4, "n_dirs": 3, **(stability or {})}
+    unknown = set(kw) - {"settle", "warmup", "window", "n_dirs", "tol"}
+    if unknown:
+        raise ValueError(
+            f"envelope: stability has unknown keys {sorted(unknown)}; allowed: settle, warmup, window, n_dirs, tol"
+        )
+
+    sampler = Grid(axes)
+    names, points = sampler.names, sampler.points()
+
+    # the long runs: each point's speed reference steps by perturb × its speed at t_perturb
+    def build(nm, pts):
+        combos = [(*p, perturb * p[0]) for p in pts]
+        return drive_scenarios(machine, (*nm, "speed_step_rpm"), combos, seed=seed, t_event=t_perturb)
+
+    ts = drive.ts
+    long = _LongRun(drive, int(round((t_perturb + 0.05) / ts)), int(round(steady_from / ts)), float(speed_tol))
+    run = run_scenarios(
+        designs,
+        sampler,
+        long.system,
+        long.metrics,
+        horizon=float(horizon),
+        build=build,
+        chunk_size=chunk_size,
+        mesh=batch_mesh(jax.devices()[:1]),
+        progress=progress,
+        label="envelope",
+        save=SaveFinal(),
+    )
+    # the stability margins: constant profiles (no step), one jit(vmap) per observer class
+    scs = drive_scenarios(machine, names, points, seed=seed)
+    stab = {d: jax.device_get(_stability(drive, obs, scs, tuple(sorted(kw.items())))) for d, obs in designs.items()}
+
+    dnames = list(designs)
+    shape = (len(dnames), *(len(axes[n]) for n in names))
+
+    def grid(get):
+        return np.stack([np.asarray(get(d)) for d in dnames]).reshape(shape)
+
+    res = {
+        "margin": grid(lambda d: stab[d].margin),
+        "stable": grid(lambda d: stab[d].stable),
+        "orbit_speed_dev": grid(lambda d: stab[d].speed_dev),
+    }
+    for k in ("synchronous", "lost_lock", "lost_speed", "pos_err_max_deg", "pos_bias_deg", "pos_ripple_deg"):
+        res[k] = grid(lambda d, k=k: run.values[d][k])
+    for k in ("speed_dev_early_pct", "speed_dev_late_pct"):
+        res[k] = grid(lambda d, k=k: run.values[d][k])
+    lost = res["lost_lock"].astype(bool)
+    for k in ("pos_err_max_deg", "pos_bias_deg", "pos_ripple_deg"):
+        res[k] = np.where(lost, np.nan, res[k])  # a lost point has no steady error to speak of
+    err_ok = np.nan_to_num(res["pos_err_max_deg"], nan=np.inf) <= bound_deg
+    res["holds"] = res["stable"].astype(bool) & res["synchronous"].astype(bool) & err_ok
+
+    dims = ("design", "speed_rpm", "load", *names[2:])
+    coords = {
+        "design": ("design", dnames, {"long_name": "observer design (closing the loop sensorless)"}),
+        "speed_rpm": ("speed_rpm", speeds, {"units": "min-1", "long_name": DRIVE_STUDY_AXIS_NAMES["speed_rpm"]}),
+        "load": ("load", loads, {"units": "N m", "long_name": DRIVE_STUDY_AXIS_NAMES["load_nm"]}),
+    }
+    if mismatch is not None:
+        ax = mismatch[0]
+        coords[ax] = (
+            ax,
+            axes[ax],
+            {
+                "units": CF_UNITS.get(DRIVE_STUDY_AXES[ax][0], DRIVE_STUDY_AXES[ax][0]),
+                "long_name": DRIVE_STUDY_AXIS_NAMES[ax],
+            },
+        )
+    data = {}
+    for k, (unit, long_name) in ENVELOPE_VARIABLES.items():
+        v = res[k]
+        v = v.astype(np.int8) if v.dtype == bool else v.astype(float)
+        data[k] = (dims, v, {"units": unit, "long_name": long_name})
+    gains = {d: drive_gains(obs) for d, obs in designs.items()}
+    gnames = [g for g in DRIVE_GAIN_UNITS if any(g in gains[d] for d in dnames)]
+    # one variable per gain, each with its own CF units (as the drive studies write them)
+    for g in gnames:
+        data[f"gain_{g}"] = (
+            ("design",),
+            np.asarray([gains[d].get(g, np.nan) for d in dnames], dtype=float),
+            {"units": DRIVE_GAIN_UNITS[g], "long_name": f"observer gain {g} (NaN: the design has no such gain)"},
+        )
+    ds = xr.Dataset(data, coords=coords)
+    ds.attrs.update(
+        horizon=float(horizon),
+        steady_from=steady_from,
+        perturb=float(perturb),
+        t_perturb=float(t_perturb),
+        bound_deg=float(bound_deg),
+        speed_tol=float(speed_tol),
+        seed=seed,
+        **{f"stability_{k}": float(v) for k, v in kw.items()},
+    )
+    for f in ("Rs", "Ld", "Lq", "psi_f", "p", "J", "T_rated", "n_rated"):
+        ds.attrs[f"machine_{f}"] = float(getattr(machine, f))
+    ds.attrs.update(drive_ts=float(drive.ts))
+    ds.attrs.update(provenance("jaxobs.drive.envelope.envelope"))
+    return ds

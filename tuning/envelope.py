@@ -1,0 +1,147 @@
+"""``jaxobs envelope (JOB.toml | RESULT.json)``: the operating envelope of a drive job's designs.
+
+For a drive job file, its initial and closed-form designs; for a ``jaxobs tune`` result.json of a drive job,
+its initial, closed-form and tuned designs (the result's own values).  The job's machine and drive (the
+bench FOC), always sensorless and started steady whatever the job's loop and start: the envelope is where the
+observer can close the loop.  Writes ``envelope.nc`` (NetCDF, :func:`jaxobs.drive.envelope.envelope`) and
+``envelope.png`` (:func:`jaxobs.plot.envelope_figure`) under ``--out``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+from pathlib import Path
+
+from .job import COMPONENTS, JobError, job_drive, load_job, parse_job
+from .outdir import OutDir, atomic_path, safe_name
+
+ENVELOPE_FILES = ("envelope.nc", "envelope.png")
+
+
+def envelope_designs(path: Path):
+    """(job, {design name: observer}) of a job file or of a result.json (its job and its values)."""
+    if path.suffix == ".json":
+        try:
+            result = json.loads(path.read_text())
+        except ValueError as e:
+            raise ValueError(f"{path}: not a JSON result file ({e})") from None
+        if not isinstance(result, dict) or "job" not in result or "values" not in result:
+            raise ValueError(f"{path}: not a `jaxobs tune` result.json (no 'job' or 'values')")
+        job = parse_job(result["job"], path.parent)
+        ctor = COMPONENTS[job.component].ctor
+        designs = {k: ctor(**v) for k, v in result["values"].items() if v is not None}
+    else:
+        job = load_job(path)
+        info = COMPONENTS[job.component]
+        initial = info.ctor(**job.values)
+        cf = info.closed_form(initial)
+        closed = info.ctor(**{**job.values, **{g.name: float(cf[g.name]) for g in job.gains}})
+        designs = {"initial": initial, "closed_form": closed}
+    if job.drive is None or job.scenarios.signal != "drive":
+        raise JobError(
+            "scenarios.signal", f"must be 'drive' for an envelope (a drive job), got {job.scenarios.signal!r}"
+        )
+    return job, designs
+
+
+def _count(low: int, high: int):
+    def parse(text: str) -> int:
+        try:
+            v = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"must be an integer in [{low}, {high}], got {text!r}") from None
+        if not low <= v <= high:
+            raise argparse.ArgumentTypeError(f"must be an integer in [{low}, {high}], got {v}")
+        return v
+
+    return parse
+
+
+def _seconds(text: str) -> float:
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be a number of seconds in [0.5, 20], got {text!r}") from None
+    if not 0.5 <= v <= 20.0:
+        raise argparse.ArgumentTypeError(f"must be a number of seconds in [0.5, 20], got {v:g}")
+    return v
+
+
+def cli_envelope(args) -> int:
+    import jax
+
+    jax.config.update("jax_enable_x64", True)
+    from jaxobs import drive as D
+    from jaxobs.drive.envelope import default_loads, default_speeds, envelope
+    from jaxobs.plot import envelope_figure
+
+    path = Path(args.source)
+    job, designs = envelope_designs(path)
+    spec = dataclasses.replace(job.drive, loop="sensorless", start="steady", handover=0.0)
+    par = D.bench_machine(spec.machine)
+    drive = job_drive(spec)
+    speeds, loads = default_speeds(par, args.speeds), default_loads(par, args.loads)
+    n = len(speeds) * len(loads)
+    what = (
+        f"{path}: {job.component} on {spec.machine}, designs {', '.join(designs)}; {len(speeds)} speeds "
+        f"{speeds[0]:.4g}..{speeds[-1]:.4g} r/min x {len(loads)} loads 0..{loads[-1]:.4g} N·m = {n} points, "
+        f"{args.horizon:g} s runs"
+    )
+    if args.check:
+        print(f"{what}: OK")
+        return 0
+    out = Path(args.out) if args.out else Path("out") / f"envelope-{safe_name(job.name)}"
+    with OutDir(out, ENVELOPE_FILES, force=args.force):
+        args.log_dir = out
+        ds = envelope(
+            designs,
+            machine=par,
+            drive=drive,
+            speeds_rpm=speeds,
+            loads_nm=loads,
+            horizon=args.horizon,
+            progress=False if args.quiet else "auto",
+        )
+        ds.attrs.update(source=str(path), job_name=job.name, component=job.component, machine=spec.machine)
+        if job.sha256:
+            ds.attrs["job_sha256"] = job.sha256
+        with atomic_path(out / "envelope.png") as tmp:
+            envelope_figure(ds, tmp)
+        with atomic_path(out / "envelope.nc") as tmp:
+            ds.to_netcdf(tmp, engine="h5netcdf")
+    print(what)
+    wd = max(len("design"), *(len(d) for d in designs)) + 2
+    head = f"{'design':<{wd}}{'holds':>9}{'stable':>9}{'sync':>9}{'min margin 1/s':>16}"
+    print(head + f"{'lowest r/min held at all loads':>32}")
+    for d in designs:
+        s = ds.sel(design=d)
+        all_loads = s["holds"].astype(bool).all("load")
+        low = float(s["speed_rpm"][all_loads].min()) if bool(all_loads.any()) else float("nan")
+        print(
+            f"{d:<{wd}}{int(s['holds'].sum()):>5}/{n:<3}{int(s['stable'].sum()):>5}/{n:<3}"
+            f"{int(s['synchronous'].sum()):>5}/{n:<3}{float(s['margin'].min()):>16.4g}{low:>32.4g}"
+        )
+    print(f"results: {out / 'envelope.nc'}, {out / 'envelope.png'}")
+    return 0
+
+
+def add_envelope_parser(subparsers) -> argparse.ArgumentParser:
+    """Add ``jaxobs envelope`` to the CLI's subparsers."""
+    e = subparsers.add_parser(
+        "envelope", help="where a drive job's designs hold: stability and synchronism over speed x load"
+    )
+    e.add_argument("source", help="a drive job file (TOML) or a `jaxobs tune` result.json of one")
+    e.add_argument("--out", help="results folder (default: out/envelope-<job name>)")
+    e.add_argument(
+        "--speeds", type=_count(2, 64), default=8, help="speeds, log-spaced 1 %%..100 %% of rated (default 8)"
+    )
+    e.add_argument("--loads", type=_count(1, 32), default=4, help="loads, 0..rated torque (default 4)")
+    e.add_argument("--horizon", type=_seconds, default=2.0, help="long-run horizon, s (default 2)")
+    e.add_argument("--check", action="store_true", help="validate the source and print what would run")
+    e.add_argument("--force", action="store_true", help="overwrite an envelope already in --out")
+    e.add_argument("--quiet", action="store_true", help="no progress on stderr")
+    e.add_argument("--no-cache", action="store_true", help="do not keep compiled programs on disk")
+    e.set_defaults(func=cli_envelope)
+    return e
