@@ -33,11 +33,19 @@ LAYERS = [
         "jaxobs.provenance",
         "jaxobs._cache",
         "jaxobs.drive.component",
+        "jaxobs.chunkstore",
     ),
     # integration rules (and check_rule)
     ("jaxobs._discretize",),
     # signals and plant: they produce the measurements
-    ("jaxobs.signals._waveforms", "jaxobs.signals._recordings", "jaxobs.drive.machine", "jaxobs.drive.hardware"),
+    (
+        "jaxobs.signals._waveforms",
+        "jaxobs.signals._recordings",
+        "jaxobs.drive.machine",
+        "jaxobs.drive.hardware",
+        "jaxobs.drive.latency",
+        "jaxobs.drive.weakening",
+    ),
     ("jaxobs.signals",),
     ("jaxobs.scenarios", "jaxobs.drive.plant", "jaxobs.drive.dual", "jaxobs.drive.control", "jaxobs.drive.scenario"),
     # observers: they estimate
@@ -87,6 +95,7 @@ LAYERS = [
     ("tuning.job.fields",),
     ("tuning.job.toml", "tuning.job.components", "tuning.job.spec"),
     ("tuning.job.recordings", "tuning.job.drive", "tuning.job.output"),
+    ("tuning.job.verify",),
     ("tuning.job.schema", "tuning.job.scenarios"),
     ("tuning.job.run",),
     ("tuning.job",),
