@@ -32,6 +32,68 @@ def _finish(fig, path, dpi=110):
     return fig
 
 
+def _mark_event(ax, t, text: str) -> None:
+    """A dotted vertical line at ``t`` named ``text`` (rotated, at the top of ``ax``)."""
+    from matplotlib.transforms import blended_transform_factory
+
+    ax.axvline(t, color="0.3", lw=0.8, ls=":")
+    if text:
+        tr = blended_transform_factory(ax.transData, ax.transAxes)
+        ax.text(
+            t,
+            0.97,
+            text,
+            transform=tr,
+            rotation=90,
+            ha="right",
+            va="top",
+            fontsize=8,
+            color="0.15",
+            bbox={"fc": "white", "ec": "none", "alpha": 0.85, "pad": 1.0},  # readable over a trace
+        )
+
+
+def _fll_event_text(test: str) -> str:
+    """What happens at the event of paper 001's Test ``test``, in words (papers.TESTS_001)."""
+    spec = papers.TESTS_001.get(test, {})
+    words = {
+        "freq_step": lambda v: f"frequency step {v:+g} Hz",
+        "phase_jump_deg": lambda v: f"phase jump {v:+g}°",
+        "sag": lambda v: f"sag {v:g} p.u.",
+        "harmonics_scale": lambda v: "harmonics on",
+        "dc": lambda v: f"dc {v:g} p.u. on",
+        "sub_amplitude": lambda v: f"{v:g} p.u. subharmonic on",
+    }
+    return ", ".join(words[k](v) for k, v in spec.items() if k in words) or "event"
+
+
+def drive_events(t, out, t_from: float = 0.0):
+    """The events of a drive run, from its outputs: [(time s, what)] for each load-torque change (applied,
+    removed, stepped), each start of a speed-reference ramp or step (and its target), and the I-f start-up's
+    hand-over to the observer; from ``t_from`` on."""
+    t = np.asarray(t)
+    events = []
+    load = np.asarray(out.load)
+    tol = 1e-6 * max(1.0, float(np.nanmax(np.abs(load)))) if load.size else 1.0
+    for k in np.flatnonzero(np.abs(np.diff(load)) > tol):
+        a, b = float(load[k]), float(load[k + 1])
+        what = "load removed" if abs(b) <= tol else "load applied" if abs(a) <= tol else "load step"
+        events.append((t[k + 1], f"{what}: {a:.3g} → {b:.3g} N·m"))
+    ref = np.asarray(out.omega_m_ref) * 30 / math.pi
+    moving = np.abs(np.diff(ref)) > 1e-6 * max(1.0, float(np.nanmax(np.abs(ref))))
+    starts = np.flatnonzero(moving & ~np.concatenate([[False], moving[:-1]]))
+    for k in starts:
+        end = k + 1
+        while end < len(moving) and moving[end]:
+            end += 1
+        kind = "step" if end == k + 1 else "ramp"
+        events.append((t[k + 1] if kind == "step" else t[k], f"speed ref. {kind} to {ref[end]:.4g} r/min"))
+    mode = np.asarray(getattr(out, "mode", np.ones_like(t)))
+    for k in np.flatnonzero((mode[:-1] == 0) & (mode[1:] == 1)):
+        events.append((t[k + 1], "I-f hand-over to the observer"))
+    return sorted((float(te), w) for te, w in events if te >= t_from)
+
+
 def fll_demo_figure(traces, tests, t_event, path=None):
     """Frequency estimate and phase error of each FLL for each test (rows = tests)."""
     fig, axes = _subplots(len(tests), 2, figsize=(11, 2.2 * len(tests)), sharex=False, squeeze=False)
@@ -47,8 +109,10 @@ def fll_demo_figure(traces, tests, t_event, path=None):
     for i, test in enumerate(tests):
         axes[i, 0].set_ylabel(f"Test {test}\nf̂ (Hz)")
         axes[i, 1].set_ylabel("θ̂ − θ (deg)")
+        what = _fll_event_text(test)
         for ax in axes[i]:
             ax.grid(True, alpha=0.3)
+            _mark_event(ax, 0.0, what)
     axes[-1, 0].set_xlabel("time after event (ms)")
     axes[-1, 1].set_xlabel("time after event (ms)")
     axes[0, 0].legend(fontsize=8)
@@ -262,6 +326,9 @@ def position_error_figure(sol, names, title, path=None, t_from: float = 0.0):
     ax_e.legend(fontsize=8, ncol=2)
     for ax in (ax_s, ax_e):
         ax.grid(True, alpha=0.3)
+    for te, what in drive_events(t, sol.outputs, t_from):  # every event marked, named above
+        _mark_event(ax_s, te, what)
+        _mark_event(ax_e, te, "")
     fig.suptitle(title, fontsize=10)
     return _finish(fig, path)
 
