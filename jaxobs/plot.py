@@ -58,13 +58,13 @@ def _fll_event_text(test: str) -> str:
     spec = papers.TESTS_001.get(test, {})
     words = {
         "freq_step": lambda v: f"frequency step {v:+g} Hz",
-        "phase_jump_deg": lambda v: f"phase jump {v:+g}°",
+        "phase_jump_deg": lambda v: f"{v:+g}° jump",
         "sag": lambda v: f"sag {v:g} p.u.",
         "harmonics_scale": lambda v: "harmonics on",
         "dc": lambda v: f"dc {v:g} p.u. on",
         "sub_amplitude": lambda v: f"{v:g} p.u. subharmonic on",
     }
-    return ", ".join(words[k](v) for k, v in spec.items() if k in words) or "event"
+    return " + ".join(words[k](v) for k, v in spec.items() if k in words) or "event"
 
 
 def drive_events(t, out, t_from: float = 0.0):
