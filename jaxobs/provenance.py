@@ -1,14 +1,17 @@
 """Provenance: what made a result, stamped the same way on every study Dataset and tuning result.
 
 One function for the versions (:func:`versions`), one for the NetCDF attributes of a study
-(:func:`provenance`), one for a file's digest (:func:`sha256`).  Nothing here changes between two
+(:func:`provenance`), one for a file's digest (:func:`sha256`), and the one reader of every input file
+(:func:`read_file`: job TOML, result.json, checkpoints, CSV recordings).  Nothing here changes between two
 identical runs (no time, no host name), so identical runs still write identical bytes.
 """
 
 from __future__ import annotations
 
 import hashlib
+import os
 import platform
+import stat
 from importlib.metadata import PackageNotFoundError
 from importlib.metadata import version as _pkg_version
 from pathlib import Path
@@ -16,7 +19,7 @@ from pathlib import Path
 import jax
 import numpy as np
 
-__all__ = ["PACKAGES", "provenance", "sha256", "versions"]
+__all__ = ["PACKAGES", "provenance", "read_file", "sha256", "versions"]
 
 # the packages whose versions a result records (xarray writes the Datasets; equinox holds the designs)
 PACKAGES = ("jaxobs", "jax", "jaxlib", "equinox", "numpy", "xarray")
@@ -39,6 +42,34 @@ def versions() -> dict:
     out["python"] = platform.python_version()
     out["x64"] = bool(jax.config.jax_enable_x64)
     return out
+
+
+def read_file(path, max_bytes: int) -> bytes:
+    """The bytes of the regular file at ``path``, at most ``max_bytes`` of them; else a one-line ``ValueError``
+    (``cannot read 'P' (reason)``, ``'P': not a file``, ``'P': more than the limit of N bytes``) that a
+    caller prefixes with the field or argument that named the file.
+
+    A FIFO, a device or a directory is refused before it is opened (``os.stat``), and the file is opened
+    with ``O_NONBLOCK`` and checked again on its descriptor (``os.fstat``): a FIFO swapped in between the
+    two calls cannot block the process, and ``/dev/zero`` cannot fill its memory."""
+    p = os.fspath(path)
+    shown = repr(p if len(p) <= 120 else p[:117] + "...")
+    try:
+        st = os.stat(p)
+        if not stat.S_ISREG(st.st_mode):
+            raise ValueError(f"{shown}: not a file (only regular files are read: no FIFO, device or folder)")
+        if st.st_size > max_bytes:
+            raise ValueError(f"{shown}: {st.st_size} bytes, more than the limit of {max_bytes} bytes")
+        fd = os.open(p, os.O_RDONLY | os.O_NONBLOCK | getattr(os, "O_CLOEXEC", 0))
+        with os.fdopen(fd, "rb") as f:
+            if not stat.S_ISREG(os.fstat(f.fileno()).st_mode):
+                raise ValueError(f"{shown}: not a file (only regular files are read: no FIFO, device or folder)")
+            data = f.read(max_bytes + 1)  # + 1: a file that grew after the stat is still caught
+    except OSError as e:
+        raise ValueError(f"cannot read {shown} ({e.strerror or type(e).__name__})") from None
+    if len(data) > max_bytes:
+        raise ValueError(f"{shown}: more than the limit of {max_bytes} bytes")
+    return data
 
 
 def sha256(data: bytes | str | Path) -> str:

@@ -88,6 +88,7 @@ def run_scenarios(
     progress=False,
     label: str = "study",
     save: AbstractSave = SaveAll(),
+    sink=None,
 ) -> StudyRun:
     """Simulate ``system_factory(design, scenario)`` for ``horizon`` s on every scenario, every design.
 
@@ -100,6 +101,11 @@ def run_scenarios(
     ``progress(done, total)``, ``False`` nothing.  ``mesh``: a one-axis ``"batch"`` mesh (default
     :func:`jaxobs.batch_mesh`).  ``save``: what each run keeps (:class:`~jaxobs.SaveAll` by default;
     :class:`~jaxobs.SaveFinal` for a long horizon whose system accumulates its own metrics in its state).
+
+    ``sink``: where each chunk's values go instead of memory (a :class:`jaxobs.chunkstore.ChunkStore`):
+    ``sink.start(n=, chunk=, devices=, designs=)`` once, then per design and chunk ``sink.done(design, i)``
+    (True: on disk already, skipped) or ``sink.put(design, i, values)`` with the chunk's real rows; the
+    returned ``values`` is then ``None`` (read them back from the sink).
     """
     if not designs:
         raise ValueError(f"{label}: at least one design is required")
@@ -126,7 +132,9 @@ def run_scenarios(
     static = (lambda design: None) if static is None else static
     task = _Task(system_factory, metrics, float(horizon), mesh if n_dev > 1 else None, chunk // n_dev, save)
 
-    values = {}
+    if sink is not None:
+        sink.start(n=n, chunk=chunk, devices=n_dev, designs=list(designs))
+    values = None if sink is not None else {}
     compiled = set()
     with Progress(progress, n * len(designs), label, unit="scenario") as bar:
         for dname, design in designs.items():
@@ -137,14 +145,23 @@ def run_scenarios(
             key = (type(design), aux)
             parts = []
             for start in range(0, n + pad, chunk):
+                rows = min(chunk, n - start)
+                if sink is not None and sink.done(dname, start // chunk):
+                    bar.update(rows)  # computed by an earlier, interrupted run
+                    continue
                 batch = jax.tree.map(lambda x: x[start : start + chunk], scs)
                 if n_dev > 1:
                     batch = sharding.global_batch(batch, mesh)
-                new = start == 0 and key not in compiled
+                new = key not in compiled  # the first chunk this run computes
                 bar.stage(f"{dname} (compiling, then {chunk} scenarios a chunk)" if new else dname)
                 # the per-scenario results, whole, on every process (an all-gather when the mesh spans processes)
-                parts.append(sharding.gather_batch(_run_chunk(task, design, batch, aux)))
+                got = sharding.gather_batch(_run_chunk(task, design, batch, aux))
                 compiled.add(key)
-                bar.update(min(chunk, n - start))
-            values[dname] = {k: np.concatenate([p[k] for p in parts])[:n] for k in parts[0]}
+                if sink is None:
+                    parts.append(got)
+                else:  # streamed: nothing of it is held once it is on disk
+                    sink.put(dname, start // chunk, {k: np.asarray(v)[:rows] for k, v in got.items()})
+                bar.update(rows)
+            if sink is None:
+                values[dname] = {k: np.concatenate([p[k] for p in parts])[:n] for k in parts[0]}
     return StudyRun(points, values)

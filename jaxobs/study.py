@@ -140,6 +140,7 @@ def run_study(
     progress=False,
     return_seconds=False,
     mesh=None,
+    store=None,
 ):
     """Simulate every design on every scenario; returns an ``xarray.Dataset`` (see module doc).
 
@@ -150,6 +151,9 @@ def run_study(
     time of the runs (kept out of the Dataset, so two identical studies write identical files).  ``mesh``:
     the devices each chunk is split over, a one-axis ``"batch"`` mesh (default ``jaxobs.batch_mesh()``,
     every device of every process; ``jaxobs.batch_mesh(jax.devices()[:1])`` keeps to one device).
+    ``store``: a :class:`jaxobs.chunkstore.ChunkStore`: each chunk's values go to disk as it finishes (none
+    held during the run), chunks already there (an interrupted run's, ``resume=True``) are not run again, and
+    the Dataset is laid out from the store: the same Dataset as without one.
     """
     import xarray as xr
 
@@ -196,9 +200,11 @@ def run_study(
         mesh=mesh,
         progress=progress,
         label="study",
+        sink=store,
     )
     n = len(run.points)
-    results = {d: (v, v["ok"]) for d, v in run.values.items()}
+    values = run.values if store is None else {d: store.load(d) for d in designs}
+    results = {d: (v, v["ok"]) for d, v in values.items()}
     dnames = list(designs)
     dims, shape, coords = sampler.layout(_axis_meta)
     dims = ("design", *dims)

@@ -37,7 +37,14 @@ LAYERS = [
     # integration rules (and check_rule)
     ("jaxobs._discretize",),
     # signals and plant: they produce the measurements
-    ("jaxobs.signals._waveforms", "jaxobs.signals._recordings", "jaxobs.drive.machine", "jaxobs.drive.hardware"),
+    (
+        "jaxobs.signals._waveforms",
+        "jaxobs.signals._recordings",
+        "jaxobs.drive.machine",
+        "jaxobs.drive.hardware",
+        "jaxobs.drive.latency",
+        "jaxobs.drive.weakening",
+    ),
     ("jaxobs.signals",),
     ("jaxobs.scenarios", "jaxobs.drive.plant", "jaxobs.drive.dual", "jaxobs.drive.control", "jaxobs.drive.scenario"),
     # observers: they estimate
@@ -76,7 +83,7 @@ LAYERS = [
     ("jaxobs.reproduce.leso_dual",),
     ("jaxobs.reproduce",),
     # tuning: it changes gains (and exports the tuned observer)
-    ("tuning.outdir",),
+    ("tuning.outdir", "tuning.checkpoint"),
     # the C export's code generator (jaxpr -> C) is beside the rest: it knows no observer
     ("tuning.export.ir",),
     ("tuning.export.lower",),

@@ -5,8 +5,8 @@
     jaxobs demo [--out DIR] [--force] [--json]             the FLL family on paper 001 Tests A–E
     jaxobs closed-form {sogi-fll,wpf,wif,cleso} [--name value ...] [--json]
                                                            closed-form gains, formula and source
-    jaxobs bode [--out DIR] [--force]                      the papers' Bode figures (000 Fig. 5,
-                                                           002 Fig. 4, 001 Fig. 14)
+    jaxobs bode [--out DIR] [--force] [--rad-per-s]        the papers' Bode figures (000 Fig. 5,
+                                                           002 Fig. 4, 001 Fig. 14), in Hz (or rad/s)
     jaxobs reproduce flux [--out DIR] [--force] [--json] [--quick]
                                                            paper 000's experiments, paper vs ours
     jaxobs reproduce leso [--out DIR] [--force] [--json] [--machine single|dual]   paper 002's experiments
@@ -71,6 +71,7 @@ from pathlib import Path
 
 import jaxobs
 from jaxobs import use_compile_cache, use_host_devices
+from jaxobs.chunkstore import ChunkStore
 
 from .cli_common import enable_x64, progress_of
 from .cli_papers import BODE_FILES as BODE_FILES
@@ -84,7 +85,10 @@ from .export import add_export_parser
 from .job import CHECKPOINT, load_job, load_recordings, run_job
 from .outdir import OutDir, atomic_path, atomic_write_text, safe_name
 from .study_file import load_study as _load_study
+from .study_file import study_fingerprint
 from .summary import print_summary
+
+STUDY_CHUNKS = "study.chunks"  # an FLL study's results while it runs (jaxobs.chunkstore), in --out
 
 
 def load_study(path):
@@ -123,7 +127,7 @@ def _cmd_drive_study(name, designs, axes, opts, out: Path, quiet: bool, provenan
     return 0
 
 
-def _recording_study(designs: dict, *, recording, t_event, horizon, steady_from, band_hz, progress, **_):
+def _recording_study(designs: dict, *, recording, t_event, horizon, steady_from, band_hz, progress, store=None, **_):
     """Every FLL design on every recording of ``[study.recording]``: :func:`jaxobs.study.run_study` with a
     :class:`jaxobs.scenarios.Recordings` sampler (dims (design, recording), the files' sha256); (Dataset, s)."""
     import jax
@@ -142,6 +146,7 @@ def _recording_study(designs: dict, *, recording, t_event, horizon, steady_from,
         band_hz=band_hz,
         progress=progress,
         return_seconds=True,
+        store=store,
         mesh=jaxobs.batch_mesh(jax.devices()[:1]),
     )
 
@@ -153,6 +158,8 @@ def _cmd_study(args) -> int:
     # What cannot be split over processes is refused before joining: a process that refuses after joining
     # leaves the others waiting for it.
     rank = None
+    if args.resume and distributed_asked(args):
+        raise ValueError("--resume: a study split over processes is not checkpointed; run it in one process")
     if distributed_asked(args):
         refuse_unsplittable(path)  # --check too: a file that passes --check is one the run accepts
         if not args.check:
@@ -168,12 +175,25 @@ def _cmd_study(args) -> int:
         return 0
     if rank is not None and rank[1] > 1:
         return distributed_study(name, designs, axes, opts, out, args, rank, _run_study)
-    with OutDir(out, ["study.nc"], force=args.force):
+    if spec.kind != "fll":
+        if args.resume:
+            raise ValueError(f"--resume: {spec.kind} studies are not checkpointed (FLL studies are)")
+        with OutDir(out, ["study.nc"], force=args.force):
+            args.log_dir = out
+            return _run_study(name, designs, axes, opts, out, args.quiet)
+    # an FLL study writes each chunk's results under study.chunks/ as it finishes (jaxobs.chunkstore): a
+    # kill loses at most the chunks being computed, and --resume continues from the last complete one
+    resume = f"jaxobs study {shlex.quote(str(path))} --out {shlex.quote(str(out))} --resume"
+    hint = f"an earlier run stopped here: continue it with `{resume}` (--force starts over and discards it)"
+    products = ["study.nc"] + ([] if args.resume else [STUDY_CHUNKS])
+    with OutDir(out, products, force=args.force, hints={STUDY_CHUNKS: hint}):
         args.log_dir = out
-        return _run_study(name, designs, axes, opts, out, args.quiet)
+        args.on_interrupt = f"; continue with: {resume}"  # what Ctrl-C says (main)
+        store = ChunkStore(out / STUDY_CHUNKS, study_fingerprint(spec), resume=args.resume)
+        return _run_study(name, designs, axes, opts, out, args.quiet, store=store)
 
 
-def _run_study(name, designs, axes, opts, out: Path, quiet: bool) -> int:
+def _run_study(name, designs, axes, opts, out: Path, quiet: bool, store=None) -> int:
     from jaxobs.plot import study_figures
     from jaxobs.study import STUDY_METRICS, run_study, worst_cases
 
@@ -181,18 +201,24 @@ def _run_study(name, designs, axes, opts, out: Path, quiet: bool) -> int:
     if opts.pop("kind", "fll") == "drive":
         return _cmd_drive_study(name, designs, axes, opts, out, quiet, provenance)
     if opts.get("recording") is not None:  # [study.recording]: the recordings are the scenarios
-        ds, seconds = _recording_study(designs, progress=progress_of(quiet=quiet), **opts)
+        ds, seconds = _recording_study(designs, progress=progress_of(quiet=quiet), store=store, **opts)
     else:
         opts.pop("recording", None)
-        ds, seconds = run_study(designs, axes, progress=progress_of(quiet=quiet), return_seconds=True, **opts)
+        ds, seconds = run_study(
+            designs, axes, progress=progress_of(quiet=quiet), return_seconds=True, store=store, **opts
+        )
     ds.attrs.update(provenance)  # the study file's and the result files' sha256
     worst = {m: worst_cases(ds, m, 3) for m in STUDY_METRICS}
     atomic_write_text(out / "worst_cases.json", json.dumps(worst, indent=1))
     figs = study_figures(ds, out)
     with atomic_path(out / "study.nc") as tmp:  # last: a study.nc means a complete results folder
         ds.to_netcdf(tmp, engine="h5netcdf")
+    if store is not None:
+        store.remove()  # the results are in study.nc: nothing is left to resume
     n = int(ds.attrs["scenarios"])
     print(f"study {name}: {len(designs)} designs x {n} scenarios in {seconds:.1f} s")
+    if store is not None and store.resumed:
+        print(f"resumed: {store.resumed} chunks of {store.total} were on disk from the stopped run")
     wd = max(len("design"), *(len(str(d)) for d in ds["design"].values)) + 2  # sized from the names
     # each column with its unit; the phase in degrees, as in the figures (study.nc keeps rad)
     cols = {"settling_freq": ("s", 1.0), "ripple_freq": ("Hz", 1.0), "rms_phase": ("deg", 180.0 / math.pi)}
@@ -325,6 +351,7 @@ def build_parser() -> argparse.ArgumentParser:
     b = sub.add_parser("bode", help="Bode figures of the papers' flux observers, LESOs and FLL loops", parents=[quiet])
     b.add_argument("--out", default="out/bode", help="folder for the figures (default: out/bode)")
     b.add_argument("--force", action="store_true", help="overwrite figures already in --out")
+    b.add_argument("--rad-per-s", action="store_true", help="frequency axis in rad/s (default: Hz)")
     b.set_defaults(func=cmd_bode)
 
     r = sub.add_parser("reproduce", help="reproduce a paper's experiments on the simulated drive", parents=[quiet])
@@ -352,6 +379,11 @@ def build_parser() -> argparse.ArgumentParser:
     st.add_argument("--out", help="results folder (default: out/<study name>)")
     st.add_argument("--force", action="store_true", help="overwrite a study.nc already in --out")
     st.add_argument("--check", action="store_true", help="validate the study file (every range, the sizes) and exit")
+    st.add_argument(
+        "--resume",
+        action="store_true",
+        help=f"continue an FLL study that was stopped, from the chunks in --out/{STUDY_CHUNKS} (the same study only)",
+    )
     dist = st.add_argument_group(
         "distributed run",
         "one process of a study split over processes (jaxobs.init_distributed): give all three, or "

@@ -148,7 +148,7 @@ def cmd_bode(args) -> int:
     from jaxobs.plot import paper_bode_figures
 
     with CommandOut(args, BODE_FILES) as out:
-        figs = paper_bode_figures(out)
+        figs = paper_bode_figures(out, hz=not args.rad_per_s)
     for p in figs:
         print(p)
     return 0

@@ -14,30 +14,129 @@ Errors are ``ValueError``s of one line that name the file and the field.
 from __future__ import annotations
 
 import json
+import math
+import re
 from pathlib import Path
+
+from jaxobs.provenance import read_file
 
 from .job import COMPONENTS, parse_job
 
-__all__ = ["load_result", "tuned_component"]
+__all__ = ["MAX_RESULT_BYTES", "MAX_RESULT_DEPTH", "check_result", "load_result", "tuned_component"]
+
+MAX_RESULT_BYTES = 16 * 2**20  # a result.json larger than this is refused before it is parsed
+MAX_RESULT_DEPTH = 64  # nesting of arrays and objects (run_job writes about 6)
+
+_JSON_STRING = re.compile(r'"(?:[^"\\]|\\.)*"')
+GAIN_SETS = ("initial", "closed_form", "tuned")
 
 
-def load_result(path) -> dict:
-    """The parsed ``result.json`` of a tuning run (checked for the fields :func:`tuned_component` needs)."""
-    where = f"result file {str(path)!r}"
-    try:
-        res = json.loads(Path(path).read_text())
-    except OSError as e:
-        raise ValueError(f"{where}: cannot read: {e.strerror}") from None
-    except json.JSONDecodeError as e:
-        raise ValueError(f"{where}: not valid JSON: {e}") from None
+def check_nesting(text: str, where: str) -> None:
+    """Refuse JSON nested deeper than :data:`MAX_RESULT_DEPTH` before it is parsed (the parser recurses on
+    nesting: 100 000 × ``[`` was a RecursionError).  A scan of the brackets outside strings, no recursion."""
+    depth = 0
+    for m in re.finditer(r"[\[\]{}]", _JSON_STRING.sub('""', text)):
+        depth += 1 if m.group() in "[{" else -1
+        if depth > MAX_RESULT_DEPTH:
+            raise ValueError(f"{where}: nested deeper than {MAX_RESULT_DEPTH} levels")
+
+
+def _no_constant(name: str):
+    raise ValueError(f"{name} is not a JSON number")
+
+
+def _is_number(v) -> bool:
+    """A JSON number (int or float, not a bool, not a string) that is finite."""
+    return type(v) in (int, float) and math.isfinite(v)
+
+
+def _table(v, where: str, what: str) -> dict:
+    if not isinstance(v, dict):
+        raise ValueError(f"{where}: {what} must be a table, got {type(v).__name__}")
+    return v
+
+
+def _numbers(table: dict, allowed, where: str, what: str) -> None:
+    for k, v in table.items():
+        if k not in allowed:
+            raise ValueError(
+                f"{where}: {what}.{str(k)[:40]} is not a value of the component (allowed: {', '.join(allowed)})"
+            )
+        if not _is_number(v):
+            raise ValueError(f"{where}: {what}.{k} must be a finite number, got {json.dumps(v)[:40]}")
+
+
+def check_result(res, where: str = "result") -> dict:
+    """The one schema of a ``result.json`` read back (by ``study`` and ``export``); ``ValueError`` of one line
+    naming the field.  ``component``: a known component; ``job``: a table (its ``job.component``, when
+    given, the same component; its ``[component]`` values of that component, finite numbers); ``gains``:
+    a table of ``initial`` / ``closed_form`` / ``tuned``, each null or a non-empty table of that component's
+    values, finite JSON numbers (``"lam": "12337"`` is refused); ``gains.tuned`` null only when nothing was
+    tuned (status ``diverged`` or ``overflow``); ``ts`` a number > 0, ``omega_n`` a number or null, ``scores``
+    a table when given."""
     if not isinstance(res, dict):
         raise ValueError(f"{where}: not a tuning result (a JSON object with job, component and gains)")
     for key in ("job", "component", "gains"):
         if key not in res:
             raise ValueError(f"{where}: not a tuning result (no {key!r})")
-    if not isinstance(res["gains"], dict) or not isinstance(res["gains"].get("tuned"), dict):
+    comp = res["component"]
+    if not isinstance(comp, str) or comp not in COMPONENTS:
+        raise ValueError(
+            f"{where}: component {json.dumps(comp)[:40].replace(chr(34), chr(39))} is not a jaxobs component"
+        )
+    allowed = tuple(COMPONENTS[comp].defaults)
+    job = _table(res["job"], where, "job")
+    named = _table(job.get("job", {}), where, "job.job").get("component", comp)
+    if named != comp:
+        raise ValueError(f"{where}: component {comp!r} differs from the job's job.component {str(named)[:40]!r}")
+    _numbers(_table(job.get("component", {}), where, "job.component"), allowed, where, "job.component")
+    gains = _table(res["gains"], where, "gains")
+    status = res.get("status")
+    if status is not None and not isinstance(status, str):
+        raise ValueError(f"{where}: status must be a string, got {type(status).__name__}")
+    for name, table in gains.items():
+        if name not in GAIN_SETS:
+            raise ValueError(f"{where}: gains.{str(name)[:40]} is not one of {', '.join(GAIN_SETS)}")
+        if table is None:
+            continue
+        if not _table(table, where, f"gains.{name}"):
+            raise ValueError(f"{where}: gains.{name} is empty (a table of the tuned gains' values)")
+        _numbers(table, allowed, where, f"gains.{name}")
+    if "tuned" not in gains or (gains["tuned"] is None and status not in ("diverged", "overflow")):
         raise ValueError(f"{where}: gains.tuned must be a table of gain values")
+    if "ts" in res and not (_is_number(res["ts"]) and res["ts"] > 0):
+        raise ValueError(f"{where}: ts must be a sample time > 0 s, got {json.dumps(res['ts'])[:40]}")
+    if res.get("omega_n") is not None and not _is_number(res["omega_n"]):
+        raise ValueError(f"{where}: omega_n must be a finite number or null, got {json.dumps(res['omega_n'])[:40]}")
+    if "scores" in res:  # (the rule is checked where it is read: tuning.export's parse_rule)
+        _table(res["scores"], where, "scores")
+    for name, sc in res.get("scores", {}).items():
+        if sc is not None:
+            _table(sc, where, f"scores.{str(name)[:40]}")
+    for key in ("machine", "loop"):
+        if res.get(key) is not None and not isinstance(res[key], str):
+            raise ValueError(f"{where}: {key} must be a string, got {type(res[key]).__name__}")
     return res
+
+
+def load_result(path) -> dict:
+    """The parsed ``result.json`` of a tuning run, checked against :func:`check_result`'s schema.  Read as a
+    regular file of at most :data:`MAX_RESULT_BYTES`, its nesting checked before the JSON parser sees it."""
+    where = f"result file {str(path)[:120]!r}"
+    try:
+        data = read_file(Path(path), MAX_RESULT_BYTES)
+    except ValueError as e:
+        raise ValueError(f"result file: {e}") from None
+    try:
+        text = data.decode()
+    except UnicodeDecodeError as e:
+        raise ValueError(f"{where}: not UTF-8 text (byte {e.start})") from None
+    check_nesting(text, where)
+    try:
+        res = json.loads(text, parse_constant=_no_constant)
+    except (json.JSONDecodeError, ValueError, RecursionError) as e:
+        raise ValueError(f"{where}: not valid JSON: {str(e)[:80]}") from None
+    return check_result(res, where)
 
 
 def tuned_component(result: dict):
@@ -47,6 +146,8 @@ def tuned_component(result: dict):
     then the job's ``[component]`` table), so the design equals the one the
     run tuned and scored.
     """
+    if result["gains"]["tuned"] is None:
+        raise ValueError(f"result: gains.tuned is null (status {result.get('status')!r}): nothing was tuned")
     job = parse_job(result["job"])
     if job.component != result["component"]:
         raise ValueError(f"result: component {result['component']!r} differs from the job's {job.component!r}")

@@ -32,7 +32,9 @@ import optax
 import optimistix as optx
 
 from jaxobs.progress import Progress
+from jaxobs.provenance import read_file
 
+from .checkpoint import DIGEST, MAX_CHECKPOINT_BYTES, check_state, content_digest
 from .outdir import atomic_write_bytes
 
 __all__ = [
@@ -133,36 +135,43 @@ _replace = os.replace  # the rename that publishes a checkpoint (a test kills ru
 
 def _save_checkpoint(path: Path, it, theta, opt_state, best_theta, best_value, history, since_best, fingerprint):
     """One file, written to a temp file and renamed: θ, the optimizer state, the best point, and the
-    metadata (iteration, history, the job's fingerprint) as a JSON string inside the same npz."""
+    metadata (iteration, history, the job's fingerprint) as a JSON string inside the same npz, and the
+    sha256 of all of it (:mod:`tuning.checkpoint`).  ``best_value`` is null until a stable design is found."""
     leaves = jax.tree.leaves(opt_state)
     arrays = {f"arr_{i}": np.asarray(x) for i, x in enumerate(leaves)}  # np.savez's names for positional arrays
     meta = dict(
         format=CHECKPOINT_FORMAT,
         job_sha256=fingerprint,
         iteration=it,
-        best_value=best_value,
+        best_value=best_value if math.isfinite(best_value) else None,  # strict JSON: no Infinity
         since_best=since_best,
         history=history,
         n_leaves=len(leaves),
     )
-    buf = io.BytesIO()
-    np.savez(
-        buf, meta=np.asarray(json.dumps(meta)), theta=np.asarray(theta), best_theta=np.asarray(best_theta), **arrays
+    entries = dict(
+        meta=np.asarray(json.dumps(meta, allow_nan=False)),
+        theta=np.asarray(theta),
+        best_theta=np.asarray(best_theta),
+        **arrays,
     )
+    buf = io.BytesIO()
+    np.savez(buf, **entries, **{DIGEST: np.asarray(content_digest(entries))})
     # a random, O_EXCL|O_NOFOLLOW temp name beside the checkpoint, renamed by _replace (looked up now: tests
     # patch it to kill a run between the write and the rename)
     atomic_write_bytes(path, buf.getvalue(), replace=_replace)
 
 
-CHECKPOINT_FORMAT = "jaxobs-checkpoint-1"
+CHECKPOINT_FORMAT = "jaxobs-checkpoint-2"  # 2: a content digest, best_value null (not Infinity) before a best
 
 
-def _load_checkpoint(path: Path, opt_state_template, fingerprint: str | None):
+def _load_checkpoint(path: Path, opt_state_template, fingerprint: str | None, theta_shape=None):
     """(meta, θ, best θ, optimizer state) of a checkpoint, or a one-line :class:`CheckpointError`.
 
-    The job's fingerprint is checked right after the metadata, before any array is read: another job's
-    checkpoint (other gains, so other array shapes) is reported as "belongs to another job", never as a
-    corrupt file."""
+    Read as a regular file of at most :data:`~tuning.checkpoint.MAX_CHECKPOINT_BYTES` (a FIFO cannot block
+    the run).  The content digest is checked first, then the job's fingerprint, before any array is
+    interpreted: another job's checkpoint (other gains, so other array shapes) is reported as "belongs to
+    another job", never as a corrupt file.  Then the state itself (:func:`tuning.checkpoint.check_state`:
+    finite θ and best θ of ``theta_shape``, a history as long as the iteration, ...)."""
 
     def corrupt(e):
         return CheckpointError(
@@ -171,14 +180,24 @@ def _load_checkpoint(path: Path, opt_state_template, fingerprint: str | None):
         )
 
     try:
-        data = np.load(path, allow_pickle=False)
-    except Exception as e:  # a torn, truncated or foreign file: one line, never a traceback
+        raw = read_file(path, MAX_CHECKPOINT_BYTES)
+    except ValueError as e:  # missing between the test and the read, a FIFO, a device, too large
+        raise CheckpointError(f"--resume: checkpoint {e}; delete it or run without --resume and with --force") from None
+    try:
+        data = np.load(io.BytesIO(raw), allow_pickle=False)
+    except Exception as e:  # a torn, truncated, foreign or special file: one line, never a traceback
         raise corrupt(e) from None
     with data:
         try:
-            meta = json.loads(str(data["meta"]))
+            # a deflated npz could expand far beyond the file: the entries' sizes are read before their bytes
+            if sum(i.file_size for i in data.zip.infolist()) > MAX_CHECKPOINT_BYTES:
+                raise ValueError(f"its arrays hold more than {MAX_CHECKPOINT_BYTES} bytes")
+            entries = {k: data[k] for k in data.files}
+            if DIGEST not in entries or str(entries[DIGEST]) != content_digest(entries):
+                raise ValueError("its content digest does not match (edited or damaged)")
+            meta = json.loads(str(entries["meta"]), parse_constant=_no_constant)
             if not isinstance(meta, dict) or meta.get("format") != CHECKPOINT_FORMAT:
-                raise ValueError("not a jaxobs checkpoint")
+                raise ValueError(f"not a {CHECKPOINT_FORMAT} checkpoint")
         except Exception as e:
             raise corrupt(e) from None
         if fingerprint is not None and meta.get("job_sha256") != fingerprint:
@@ -197,9 +216,15 @@ def _load_checkpoint(path: Path, opt_state_template, fingerprint: str | None):
             shapes = [np.shape(x) for x in jax.tree.leaves(opt_state_template)]
             if [tuple(x.shape) for x in leaves] != [tuple(s) for s in shapes] or theta.shape != best_theta.shape:
                 raise ValueError("array shapes differ from the job's")
+            check_state(meta, theta, best_theta, leaves, theta.shape if theta_shape is None else theta_shape)
         except Exception as e:
             raise corrupt(e) from None
+    meta["best_value"] = math.inf if meta["best_value"] is None else meta["best_value"]
     return meta, theta, best_theta, opt_state
+
+
+def _no_constant(name: str):
+    raise ValueError(f"{name} is not JSON")
 
 
 class AbstractSolver(abc.ABC):
@@ -277,7 +302,7 @@ class OptaxSolver(AbstractSolver):
         if resume and checkpoint is not None and not checkpoint.exists():
             print(f"jaxobs: --resume: no checkpoint {str(checkpoint)!r}: starting fresh", file=sys.stderr, flush=True)
         elif resume and checkpoint is not None:
-            meta, theta, best_theta, opt_state = _load_checkpoint(checkpoint, opt_state, fingerprint)
+            meta, theta, best_theta, opt_state = _load_checkpoint(checkpoint, opt_state, fingerprint, np.shape(theta0))
             start, best_value, since_best, history = (
                 meta["iteration"],
                 meta["best_value"],
@@ -300,8 +325,10 @@ class OptaxSolver(AbstractSolver):
             value = float(value)
             history.append(_entry(objective, it, value, ndiv, theta))
             # a design that diverges in some scenario is never a candidate, whatever its (penalized) value
-            improved = ndiv == 0 and (
-                (not math.isfinite(best_value)) or value < best_value - self.tol * abs(best_value)
+            improved = (
+                ndiv == 0
+                and math.isfinite(value)  # a NaN objective is never a best (it would compare false forever)
+                and ((not math.isfinite(best_value)) or value < best_value - self.tol * abs(best_value))
             )
             if improved:
                 best_value, best_theta, since_best = value, theta, 0

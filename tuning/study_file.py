@@ -61,6 +61,7 @@ it (nothing is written there), and its content never reaches an error message.
 from __future__ import annotations
 
 import inspect
+import json
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -70,7 +71,7 @@ from jaxobs import linear
 from jaxobs.drive import BENCH_MACHINES, bench_machine
 from jaxobs.drive_study import DRIVE_STUDY_AXES
 from jaxobs.observers import AbstractFluxObserver
-from jaxobs.provenance import sha256
+from jaxobs.provenance import sha256, versions
 from jaxobs.study import STUDY_AXES
 
 from .job import (
@@ -93,7 +94,15 @@ from .job import (
 )
 from .results import load_result, tuned_component
 
-__all__ = ["StudySpec", "load_study", "parse_study", "FLL_CLOSED_FORMS", "FLL_COMPONENTS", "DRIVE_OBSERVERS"]
+__all__ = [
+    "StudySpec",
+    "load_study",
+    "parse_study",
+    "study_fingerprint",
+    "FLL_CLOSED_FORMS",
+    "FLL_COMPONENTS",
+    "DRIVE_OBSERVERS",
+]
 
 WHAT = "study file"
 FLL_CLOSED_FORMS = {
@@ -162,6 +171,19 @@ def load_study(path) -> StudySpec:
     spec = parse_study(raw, base=path.resolve().parent)
     spec.provenance = {"study_file": path.name, "study_sha256": sha256(data), **spec.provenance}
     return spec
+
+
+def study_fingerprint(spec: StudySpec) -> str:
+    """What a study's chunks (``--resume``) are checked against, as a job's checkpoint is: the sha256 of the
+    study file, of every result file and recording it reads, and of the versions that compute it (another
+    JAX may give other last bits, and a resumed study must equal one run in one go)."""
+    rec = spec.opts.get("recording")
+    what = {
+        "provenance": {k: v for k, v in spec.provenance.items() if k != "study_file"},
+        "recordings": list(getattr(rec, "sha256", None) or ()),
+        "versions": versions(),
+    }
+    return sha256(json.dumps(what, sort_keys=True, default=str).encode())
 
 
 def parse_study(raw: dict, base: Path | None = None) -> StudySpec:

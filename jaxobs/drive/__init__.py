@@ -37,6 +37,11 @@ from .hardware import Inverter as Inverter
 from .hardware import InverterInput as InverterInput
 from .hardware import SensorInput as SensorInput
 from .hardware import Sensors as Sensors
+from .latency import AtSample as AtSample
+from .latency import AtUse as AtUse
+from .latency import Latency as Latency
+from .latency import PeriodStart as PeriodStart
+from .latency import PWMCentre as PWMCentre
 from .loop import ClosedLoop as ClosedLoop
 from .loop import Drive as Drive
 from .loop import DriveOutput as DriveOutput
@@ -64,3 +69,4 @@ from .scenario import Profile as Profile
 from .scenario import Scenario as Scenario
 from .scenario import grid as grid
 from .scenario import scenario_batch as scenario_batch
+from .weakening import VoltageFeedbackFW as VoltageFeedbackFW

@@ -21,6 +21,7 @@ import math
 from .. import papers
 from .control import FOC, IfStartup
 from .hardware import Inverter
+from .latency import Latency
 from .loop import Drive
 from .machine import PMSMParams, ipmsm_paper002, spmsm_paper000
 
@@ -60,17 +61,24 @@ def bench_drive(
     startup: IfStartup | None = None,
     alpha_s: float | None = None,
     ts: float | None = None,
+    latency: Latency | None = None,
+    inverter: Inverter | None = None,
+    **foc_kw,
 ) -> Drive:
     """The bench's drive on ``machine`` (the machine the FOC assumes): IMC current loop at
     2π·BENCH_CURRENT_HZ rad/s, I-P speed loop at ``alpha_s`` (rad/s; default 2π·BENCH_SPEED_HZ).
 
     ``sensorless``: the observer closes the loop (from ``handover`` s on, after ``settle`` s of unscored
     settling); ``startup``: an I-f start-up from standstill (:meth:`IfStartup.for_machine`) or None (each
-    scenario starts steady); ``ts``: the control period (s; default the FOC's)."""
+    scenario starts steady); ``ts``: the control period (s; default the FOC's); ``latency`` and ``inverter``: as
+    :class:`Drive` takes them (defaults: the historical timing, 540 V); ``foc_kw``: :class:`FOC`'s options
+    (``advance``, ``field_weakening``, ``speed_schedule``, ...)."""
     alpha_s = 2 * math.pi * papers.BENCH_SPEED_HZ if alpha_s is None else alpha_s
-    kw = {} if ts is None else {"ts": ts}
+    kw = dict(foc_kw) if ts is None else {"ts": ts, **foc_kw}
     foc = FOC.imc(machine, alpha_c=2 * math.pi * papers.BENCH_CURRENT_HZ, alpha_s=alpha_s, **kw)
-    return Drive(foc, sensorless=sensorless, handover=handover, settle=settle, startup=startup)
+    return Drive(
+        foc, inverter, sensorless=sensorless, handover=handover, settle=settle, startup=startup, latency=latency
+    )
 
 
 # The sudden-load limit of a synchronous machine held by a current vector (the equal-area criterion): a torque

@@ -23,6 +23,14 @@ current limit (speed loop) or the voltage limit (current loop) is reached.
 
 i_d* = 0 by default; ``id_mode="mtpa"`` gives the IPMSM's maximum torque per
 ampere, i_d = ψf/(2(Lq − Ld)) − √(ψf²/(4(Lq − Ld)²) + i_q²) (i_d = 0 for Ld = Lq).
+``field_weakening=VoltageFeedbackFW()`` adds a negative i_d above base speed
+(:mod:`jaxobs.drive.weakening`); off by default.
+
+Delay compensation: the voltage computed from the samples at τ_k acts ``advance``
+periods later on average (1.5 with sampling at the period start and one period of
+computation: :mod:`jaxobs.drive.latency`), so the controller rotates its output
+ahead by ``advance`` × ω̂e T_s; ``advance = 0`` is no compensation
+(``delay_compensation=False``, the old flag, is ``advance=0``).
 
 I-f start-up from standstill (:class:`IfStartup`; the design and its reasons):
 
@@ -82,6 +90,7 @@ from .._math import safe_norm2, wrap
 from .._validate import check_nonnegative, check_positive, check_real, check_sample_time
 from .component import AbstractComponent
 from .machine import RPM, PMSMParams
+from .weakening import VoltageFeedbackFW
 
 __all__ = ["FOC", "FOCInput", "FOCOutput", "IfStartup", "ControllerState", "OperatingPoint"]
 
@@ -197,6 +206,7 @@ class ControllerState(eqx.Module):
     t_agree: jax.Array  # I-f: how long the given position has agreed with the I-f frame, s
     t_closed: jax.Array  # time since the switch, s
     id_hand: jax.Array  # the d-current at the switch (in the given frame), A
+    id_fw: jax.Array  # field weakening's Δi_d (≤ 0; 0 without field weakening), A
 
 
 class FOCInput(NamedTuple):
@@ -251,10 +261,12 @@ class FOC(AbstractComponent):
     ts: float = eqx.field(static=True)  # current-loop period, s
     speed_every: int = eqx.field(static=True)  # speed loop runs every this many periods
     id_mode: Literal["zero", "mtpa"] = eqx.field(static=True)
-    delay_compensation: bool = eqx.field(static=True)
+    delay_compensation: bool = eqx.field(static=True)  # advance != 0
+    advance: float = eqx.field(static=True)  # output rotated ahead by advance·ω̂e·T_s (delay compensation), periods
     outer: Literal["speed", "current"] = eqx.field(static=True)  # "current": the reference is i_q*, A
     setpoint_weight: float = eqx.field(static=True)  # b in k_pω (b ω* − ω): 0 = I-P (no overshoot), 1 = PI
     speed_schedule: float = eqx.field(static=True)  # N > 0: speed-loop bandwidth min(α_s, |ωe*|/N); 0: fixed
+    field_weakening: VoltageFeedbackFW | None  # None: i_d* is the policy's (zero or MTPA)
     est: PMSMParams | None  # the machine the controller assumes
     u_max: jax.Array | None  # voltage limit for anti-windup, V
     startup: IfStartup | None  # I-f start-up (None: closed loop from t = 0)
@@ -273,6 +285,8 @@ class FOC(AbstractComponent):
         speed_every=10,
         id_mode="zero",
         delay_compensation=True,
+        advance=None,
+        field_weakening=None,
         outer="speed",
         setpoint_weight=0.0,
         speed_schedule=0.0,
@@ -302,7 +316,17 @@ class FOC(AbstractComponent):
         if id_mode not in ("zero", "mtpa"):
             raise ValueError(f"{own}.id_mode must be 'zero' or 'mtpa', got {id_mode!r}")
         self.id_mode = id_mode
-        self.delay_compensation = bool(delay_compensation)
+        if advance is None:
+            advance = 1.5 if delay_compensation else 0.0
+        if isinstance(advance, bool) or not (0.0 <= float(advance) <= 3.0):
+            raise ValueError(f"{own}.advance must be a number of periods in [0, 3], got {advance!r}")
+        self.advance = float(advance)
+        self.delay_compensation = self.advance != 0.0
+        if field_weakening is not None and not isinstance(field_weakening, VoltageFeedbackFW):
+            raise ValueError(
+                f"{own}.field_weakening must be a VoltageFeedbackFW or None, got {type(field_weakening).__name__}"
+            )
+        self.field_weakening = field_weakening
         if outer not in ("speed", "current"):
             raise ValueError(f"{own}.outer must be 'speed' or 'current', got {outer!r}")
         self.outer = outer
@@ -374,7 +398,9 @@ class FOC(AbstractComponent):
         """
         z = jnp.zeros_like(self.kp_d)
         mode = jnp.asarray(1 if self.startup is None else 0, dtype=jnp.int32)
-        rest = dict(theta_f=z + theta_f0, omega_f=z, t_at_switch=z, mode=mode, d_lp=z, t_agree=z, t_closed=z, id_hand=z)
+        rest = dict(
+            theta_f=z + theta_f0, omega_f=z, t_at_switch=z, mode=mode, d_lp=z, t_agree=z, t_closed=z, id_hand=z, id_fw=z
+        )
         if op is None or self.startup is not None:
             return ControllerState(int_d=z, int_q=z, int_w=z, iq_ref=z, **rest)
         est = self.est
@@ -509,6 +535,10 @@ class FOC(AbstractComponent):
             iq_ref = jnp.clip(omega_m_ref, -self.i_max, self.i_max)
             int_w = cs.int_w
         id_ref = self._id_ref(est, iq_ref)
+        fw = self.field_weakening
+        if fw is not None:
+            id_ref = id_ref + cs.id_fw
+            iq_ref = fw.limit_iq(iq_ref, id_ref, self.i_max)
         int_d0, int_q0 = cs.int_d, cs.int_q
         if startup is not None:
             # I-f: I_f on the I-f frame's q axis; after the switch the d-current blends from the I-f vector's
@@ -540,9 +570,10 @@ class FOC(AbstractComponent):
         scale = jnp.where(sat, u_max / jnp.maximum(mag, 1e-12), 1.0)
         int_d = jnp.where(sat, int_d0, int_d0 + self.ki_d * e_d * ts)
         int_q = jnp.where(sat, int_q0, int_q0 + self.ki_q * e_q * ts)
+        id_fw = cs.id_fw if fw is None else fw.update(cs.id_fw, mag, u_max, w_e, est.Ld, self.i_max, ts)
         u_d, u_q = u_d * scale, u_q * scale
-        # the voltage is applied one period later, for a period: rotate by 1.5 ωe Ts
-        th_out = th + (1.5 * w_e * ts if self.delay_compensation else 0.0)
+        # the voltage is applied later (1.5 periods on average by default, jaxobs.drive.latency): rotate ahead
+        th_out = th + (self.advance * w_e * ts if self.advance != 0.0 else 0.0)
         co, so = jnp.cos(th_out), jnp.sin(th_out)
         u_a = co * u_d - so * u_q
         u_b = so * u_d + co * u_q
@@ -559,6 +590,7 @@ class FOC(AbstractComponent):
             t_agree=t_agree,
             t_closed=t_closed,
             id_hand=id_hand,
+            id_fw=id_fw,
         )
         return new, FOCOutput(
             u_a=u_a, u_b=u_b, id_ref=id_ref, iq_ref=iq_ref, theta=jnp.where(mode == 1, theta, theta_f)

@@ -24,6 +24,11 @@ One step is one control period T_s (10 kHz by default), as on a DSP:
    converges — or an I-f start-up) and computes the voltage to apply over
    [t_{k+1}, t_{k+2}], which the inverter limits.
 
+That is the default timing, ``Drive(latency=Latency())``.  :class:`~jaxobs.drive.Latency` moves the
+sample to the PWM centre (the plant is then integrated in two half periods and sampled between them), makes
+the computation instantaneous or one period long, and compares the estimates with the rotor at their own
+time stamp or while the voltage computed from them acts (:mod:`jaxobs.drive.latency`).
+
 Each piece is a step component of its own (plant, sensors, FOC, inverter,
 observer); this module only wires them.  The speed-reference and load
 profiles are the system's ``input(k)``, which ``jaxobs.simulate`` evaluates a
@@ -45,6 +50,7 @@ from .._validate import check_sample_time
 from ..observers import AbstractDriveObserver
 from .control import FOC, ControllerState, FOCInput, IfStartup, OperatingPoint
 from .hardware import Inverter, InverterInput, SensorInput
+from .latency import Latency
 from .machine import dq_to_ab
 from .plant import PMSM, PlantInput, PlantState
 from .scenario import Scenario
@@ -63,9 +69,20 @@ class Drive(eqx.Module):
     sensorless: bool = eqx.field(static=True)
     handover: float = eqx.field(static=True)  # sensorless: encoder until this time (s), observer after
     settle: float = eqx.field(static=True)  # steady start: the observer's unscored settling phase before t = 0, s
+    latency: Latency = eqx.field(static=True)  # sampling, computation delay, comparison instant (jaxobs.drive.latency)
 
     def __init__(
-        self, foc, inverter=None, *, startup=None, n_sub=2, rule=None, sensorless=False, handover=0.0, settle=0.2
+        self,
+        foc,
+        inverter=None,
+        *,
+        startup=None,
+        n_sub=2,
+        rule=None,
+        sensorless=False,
+        handover=0.0,
+        settle=0.2,
+        latency=None,
     ):
         if not isinstance(foc, FOC):
             raise ValueError(f"Drive.foc must be a FOC, got {type(foc).__name__}")
@@ -85,6 +102,12 @@ class Drive(eqx.Module):
         if not (0.0 <= settle <= 10.0):
             raise ValueError(f"Drive.settle must be in [0, 10] s, got {settle!r}")
         self.settle = float(settle)
+        latency = Latency() if latency is None else latency
+        if not isinstance(latency, Latency):
+            raise ValueError(f"Drive.latency must be a jaxobs.drive.Latency or None, got {type(latency).__name__}")
+        if latency.sample_offset and n_sub % 2:
+            raise ValueError(f"Drive.n_sub must be even to sample at the PWM centre, got {n_sub!r}")
+        self.latency = latency
 
     @property
     def ts(self) -> float:
@@ -100,6 +123,9 @@ class LoopState(NamedTuple):
     sensors: jax.Array  # the sensors' noise key
     u_a: jax.Array  # the voltage to apply over the coming period (computed last period), V
     u_b: jax.Array
+    # (u_α, u_β) computed but due one period after the coming one (a two-period pipeline: Latency with
+    # PWM-centre sampling and a one-period computation), V; None otherwise
+    pending: Any = None
 
 
 class LoopInput(NamedTuple):
@@ -114,7 +140,8 @@ class DriveOutput(NamedTuple):
     """One control period's signals at t_k (under ``simulate``: each with the samples as leading axis)."""
 
     t: jax.Array  # sample time t_k, s
-    theta_e: jax.Array  # true electrical angle, rad, wrapped to (−π, π]
+    theta_e: jax.Array  # true electrical angle the estimates are compared with, rad, wrapped to (−π, π]: at t_k by
+    # default; at the sample instant, or while the voltage computed from it acts (drive.latency.compare)
     theta_e_hat: jax.Array  # angle the controller used (encoder, observer or I-f), rad, wrapped
     omega_m: jax.Array  # true mechanical speed, rad/s
     omega_m_hat: jax.Array  # speed the speed loop used, rad/s
@@ -178,6 +205,18 @@ class ClosedLoop(AbstractSystem):
         d, sc = self.drive, self.scenario
         # the constructor's checks pass traced leaves through (jaxobs._validate)
         return PMSM(sc.par, d.inverter, sc.dead_time, ts=d.ts, n_sub=d.n_sub, rule=d.rule)
+
+    @property
+    def _half_plant(self) -> PMSM:
+        """The plant over half a period (sampling at the PWM centre: two halves per period, the same substeps)."""
+        d, sc = self.drive, self.scenario
+        return PMSM(sc.par, d.inverter, sc.dead_time, ts=d.ts / 2, n_sub=d.n_sub // 2, rule=d.rule)
+
+    @property
+    def _lag(self) -> float:
+        """Periods by which the voltage acts behind the angle the FOC rotated it to: the use delay less the
+        FOC's advance (0 by default: 1.5 − 1.5).  A steady start's current-PI integrators absorb it."""
+        return self.drive.latency.use_delay - self.drive.foc.advance
 
     @property
     def controller(self) -> FOC:
@@ -245,20 +284,33 @@ class ClosedLoop(AbstractSystem):
                     op = self.operating_point(jnp.where(jnp.abs(offset) < jnp.pi / 2, offset, 0.0))
                     obs, offset = self._settled_observer(op)
         plant = self.plant.init(op)
-        u_a, u_b = self._steady_voltage(op, op.theta_e)
         inverter = self.drive.inverter
+        lat, w_e = self.drive.latency, sc.par.p * op.omega_m
+        ctrl_op = op
+        if self._lag != 0.0:
+            # the voltage acts _lag periods behind the FOC's angle: its integrators hold the needed voltage
+            # rotated ahead by that much, so that the voltage applied is centred on the rotor's period
+            u_d, u_q = dq_to_ab(op.u_d, op.u_q, self._lag * w_e * self.ts)
+            ctrl_op = op._replace(u_d=u_d, u_q=u_q)
+        # the voltage of the coming period (for a pipeline of 0: of the period just ended, what the observer
+        # is told at the first sample) and, for a pipeline of 2, the one after it
+        u_a, u_b = self._steady_voltage(op, op.theta_e + min(lat.pipeline - 1, 0) * w_e * self.ts)
         _, u = inverter.step(inverter.init(op), InverterInput(u_a, u_b))
+        pending = None
+        if lat.pipeline == 2:
+            u_a, u_b = self._steady_voltage(op, op.theta_e + w_e * self.ts)
+            _, pending = inverter.step(inverter.init(op), InverterInput(u_a, u_b))
+            pending = jnp.stack([pending.u_a, pending.u_b])
         sensors = sc.sensors.init(op, key=sc.key)
-        return LoopState(plant=plant, ctrl=foc.init(op), obs=obs, sensors=sensors, u_a=u.u_a, u_b=u.u_b)
+        return LoopState(
+            plant=plant, ctrl=foc.init(ctrl_op), obs=obs, sensors=sensors, u_a=u.u_a, u_b=u.u_b, pending=pending
+        )
 
     def _steady_voltage(self, op: OperatingPoint, theta):
-        """(u_α, u_β) applied over the period that starts where the rotor is at ``theta``, at steady state.
-
-        The FOC computed it one period earlier and rotated it by its delay compensation (1.5 ω_e T_s ahead
-        of the angle it had then), so it is centred at θ + ω_e T_s/2; without compensation, at θ − ω_e T_s.
-        """
+        """(u_α, u_β) applied over the period that starts where the rotor is at ``theta``, at steady state:
+        centred at θ + ω_e T_s/2 (the FOC's integrators absorb what its delay compensation leaves, init)."""
         w_e = self.scenario.par.p * op.omega_m
-        lead = (0.5 if self.drive.foc.delay_compensation else -1.0) * w_e * self.ts
+        lead = 0.5 * w_e * self.ts
         return dq_to_ab(op.u_d, op.u_q, theta + lead)
 
     def _settled_observer(self, op: OperatingPoint):
@@ -283,12 +335,15 @@ class ClosedLoop(AbstractSystem):
         if n == 0:
             return state, jnp.zeros_like(w_e)
         tail = max(1, n // 4)
+        lat = self.drive.latency
 
         def settle_step(carry, k):
             s, acc = carry
             th = op.theta_e + w_e * (k * ts)
+            u_a, u_b = self._steady_voltage(op, th + min(lat.pipeline - 1, 0) * w_e * ts)
+            if lat.sample_offset:  # the currents (and the angle compared) at the sample instant
+                th = th + lat.sample_offset * w_e * ts
             i_a, i_b = dq_to_ab(op.i_d, op.i_q, th)
-            u_a, u_b = self._steady_voltage(op, th)
             _, meas = sc.sensors.step(sc.key, SensorInput(k, u_a, u_b, i_a, i_b))
             s, out = obs.step(s, meas)
             err = out.theta - th
@@ -308,21 +363,32 @@ class ClosedLoop(AbstractSystem):
         # differently (last-bit differences), and a user's own scan of this step must
         # give exactly what simulate gives.  They are a handful of compares per step.
         x = LoopInput(k=k, omega_m_ref=sc.speed_ref(t), load=sc.load(t))
-        plant_state, y = self.plant.step(state.plant, PlantInput(state.u_a, state.u_b, x.load))
-        key, meas = sc.sensors.step(state.sensors, SensorInput(k, state.u_a, state.u_b, y.i_a, y.i_b))
+        lat = drive.latency
+        # ys: the machine at the sample instant; y: at t_k (the outputs).  The sensors are told the voltage
+        # in state.u: that of this period (pipeline ≥ 1), or of the one just ended (pipeline 0).
+        if lat.sample_offset:
+            held = PlantInput(state.u_a, state.u_b, x.load)
+            mid, y = self._half_plant.step(state.plant, held)
+            plant_state, ys = self._half_plant.step(mid, held)
+        elif lat.pipeline == 0:
+            y = ys = self.plant.output(state.plant.x)  # integrated below, under the voltage computed now
+        else:
+            plant_state, y = self.plant.step(state.plant, PlantInput(state.u_a, state.u_b, x.load))
+            ys = y
+        key, meas = sc.sensors.step(state.sensors, SensorInput(k, state.u_a, state.u_b, ys.i_a, ys.i_b))
         if self.observer is not None:
             obs_state, obs_out = self.observer.step(state.obs, meas)
         else:
             obs_state, obs_out = None, None
-        w_e = sc.par.p * y.omega_m
+        w_e = sc.par.p * ys.omega_m
         if drive.sensorless:
             # before the hand-over time the encoder runs the drive while the observer converges
             use_obs = t >= drive.handover
-            th_c = jnp.where(use_obs, obs_out.theta, y.theta_e)
+            th_c = jnp.where(use_obs, obs_out.theta, ys.theta_e)
             w_e_c = jnp.where(use_obs, obs_out.omega, w_e)
             w_m_c = w_e_c / sc.par.p
         else:
-            th_c, w_e_c, w_m_c = y.theta_e, w_e, y.omega_m
+            th_c, w_e_c, w_m_c = ys.theta_e, w_e, ys.omega_m
         ctrl, c = self.controller.step(state.ctrl, FOCInput(k, meas.i_a, meas.i_b, th_c, w_e_c, w_m_c, x.omega_m_ref))
         if drive.startup is not None and isinstance(self.observer, AbstractDriveObserver):
             # While the I-f runs, the observer's speed estimate (FLL centre frequency, PLL integrator) is held
@@ -334,9 +400,18 @@ class ClosedLoop(AbstractSystem):
             seeded = self.observer.seed_speed(obs_state, ctrl.omega_f)
             obs_state = jax.tree.map(lambda a, b: jnp.where(ctrl.mode == 0, a, b), seeded, obs_state)
         _, u_next = drive.inverter.step(drive.inverter.init(), InverterInput(c.u_a, c.u_b))  # stateless
+        applied, pending = state, None  # the voltage over [t_k, t_{k+1}] (as u_a, u_b) and the one after it
+        if lat.pipeline == 0:  # computed from this period's sample, applied at once (an ideal controller)
+            plant_state, _ = self.plant.step(state.plant, PlantInput(u_next.u_a, u_next.u_b, x.load))
+            applied = u_next
+        elif lat.pipeline == 2:
+            u_next, pending = InverterInput(state.pending[0], state.pending[1]), jnp.stack([u_next.u_a, u_next.u_b])
+        lead = lat.compare_lead
+        # the rotor at the comparison instant, extrapolated from the sample at its speed (latency module doc)
+        theta_cmp = ys.theta_e if lead == 0.0 else ys.theta_e + w_e * (lead * self.ts)
         out = DriveOutput(
             t=t,
-            theta_e=wrap(y.theta_e),
+            theta_e=wrap(theta_cmp),
             theta_e_hat=wrap(c.theta),
             omega_m=y.omega_m,
             omega_m_hat=w_m_c,
@@ -345,8 +420,8 @@ class ClosedLoop(AbstractSystem):
             i_q=y.i_q,
             i_a=y.i_a,
             i_b=y.i_b,
-            u_a=state.u_a,
-            u_b=state.u_b,
+            u_a=applied.u_a,
+            u_b=applied.u_b,
             torque=y.torque,
             load=x.load,
             id_ref=c.id_ref,
@@ -354,5 +429,7 @@ class ClosedLoop(AbstractSystem):
             mode=ctrl.mode,
             obs=obs_out,
         )
-        new = LoopState(plant=plant_state, ctrl=ctrl, obs=obs_state, sensors=key, u_a=u_next.u_a, u_b=u_next.u_b)
+        new = LoopState(
+            plant=plant_state, ctrl=ctrl, obs=obs_state, sensors=key, u_a=u_next.u_a, u_b=u_next.u_b, pending=pending
+        )
         return new, out

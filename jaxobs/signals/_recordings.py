@@ -6,6 +6,7 @@ from __future__ import annotations
 import csv
 import errno
 import math
+import re
 from pathlib import Path
 
 import equinox as eqx
@@ -15,6 +16,7 @@ import numpy as np
 
 from .._measurements import DriveInput
 from .._validate import check_real, check_sample_time, static_float
+from ..provenance import read_file
 
 
 class SampledSignal(eqx.Module):
@@ -193,32 +195,48 @@ MAX_CSV_BYTES = 64 * 2**20  # a recording file larger than this is refused (from
 _RATE_SLACK = 1.01  # a recording's interval may exceed ts by 1 % (clock jitter) before it is "too slow"
 
 
+# a number as Python's float() reads it, less its leniencies: no "1_0" (read as 10), no surrounding junk;
+# nan / inf pass here and are refused by the finiteness check with their column and row
+_NUMBER = re.compile(r"\s*[+-]?(?:(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?|nan|inf|infinity)\s*", re.I)
+MAX_CSV_FIELD = 1000  # characters in one CSV field (csv.field_size_limit while a recording is read)
+
+
+def _number(x: str) -> float:
+    if len(x) > MAX_CSV_FIELD or not _NUMBER.fullmatch(x):
+        raise ValueError(x[:40])
+    return float(x)
+
+
 def _csv_table(path, max_bytes):
     """(header or None, float array (rows, columns)) of a CSV file; ValueError naming the problem."""
     p = Path(path)
     if not p.exists() and not p.is_symlink():  # what Python says of a missing file (issue 29), one line
         raise FileNotFoundError(errno.ENOENT, f"recording {str(p)!r}: no such file")
+    try:  # a regular file only (no FIFO, no device), at most max_bytes (jaxobs.provenance.read_file)
+        data = read_file(p, max_bytes)
+    except ValueError as e:
+        msg = str(e)
+        msg = msg.replace("cannot read", "cannot read it:") if msg.startswith("cannot read") else msg
+        raise ValueError(f"recording {str(p)!r}: {msg}") from None
     try:
-        size = p.stat().st_size
-    except OSError as e:
-        raise ValueError(f"recording {str(p)!r}: cannot read it ({e.strerror})") from None
-    if not p.is_file():
-        raise ValueError(f"recording {str(p)!r}: not a file")
-    if size > max_bytes:
-        raise ValueError(f"recording {str(p)!r}: {size} bytes, more than the limit of {max_bytes} bytes")
-    try:
-        text = p.read_text()
+        text = data.decode()
     except UnicodeDecodeError:
         raise ValueError(f"recording {str(p)!r}: not UTF-8 text") from None
-    except OSError as e:
-        raise ValueError(f"recording {str(p)!r}: cannot read it ({e.strerror})") from None
     lines = [(n, ln) for n, ln in enumerate(text.splitlines(), 1) if ln.strip() and not ln.lstrip().startswith("#")]
     if not lines:
         raise ValueError(f"recording {str(p)!r}: no data rows")
-    rows = list(csv.reader(ln for _, ln in lines))
+    limit = csv.field_size_limit(MAX_CSV_FIELD)  # a field over the limit is a csv.Error, reported below
+    try:
+        reader = csv.reader((ln for _, ln in lines), strict=True)
+        rows = list(reader)
+    except csv.Error as e:  # a field too large, an unterminated quote: the line it was read from
+        lineno = lines[min(max(reader.line_num, 1), len(lines)) - 1][0]
+        raise ValueError(f"recording {str(p)!r}: line {lineno}: not CSV ({str(e)[:80]})") from None
+    finally:
+        csv.field_size_limit(limit)
     header = None
     try:
-        [float(x) for x in rows[0]]
+        [_number(x) for x in rows[0]]
     except ValueError:
         header = [x.strip() for x in rows[0]]
         rows, lines = rows[1:], lines[1:]
@@ -230,7 +248,7 @@ def _csv_table(path, max_bytes):
         if len(row) != width:
             raise ValueError(f"recording {str(p)!r}: line {lineno} has {len(row)} fields, the file {width}")
         try:
-            out[r] = [float(x) for x in row]
+            out[r] = [_number(x) for x in row]
         except ValueError:
             raise ValueError(f"recording {str(p)!r}: line {lineno} holds a field that is not a number") from None
     return header, out

@@ -6,7 +6,9 @@ import re
 import tomllib
 from pathlib import Path
 
-from .fields import JobError, cap
+from jaxobs.provenance import read_file
+
+from .fields import JobError
 
 MAX_FILE_BYTES = 1_000_000  # a job file larger than this is refused before it is parsed
 
@@ -50,14 +52,10 @@ def _depth(obj) -> int:
 def read_toml(path, what: str = "job file") -> tuple[dict, bytes]:
     """A TOML file's table and bytes, or a :class:`JobError` of one line: unreadable, larger than
     :data:`MAX_FILE_BYTES`, not UTF-8, nested deeper than :data:`MAX_DEPTH`, not TOML."""
-    path = Path(path)
-    try:
-        with open(path, "rb") as f:
-            data = f.read(MAX_FILE_BYTES + 1)
-    except OSError as e:
-        raise JobError(what, f"cannot read {cap(str(path), 80)!r}: {e.strerror}") from None
-    if len(data) > MAX_FILE_BYTES:
-        raise JobError(what, f"larger than {MAX_FILE_BYTES} bytes")
+    try:  # a regular file only (no FIFO, no device), at most MAX_FILE_BYTES
+        data = read_file(Path(path), MAX_FILE_BYTES)
+    except ValueError as e:
+        raise JobError(what, str(e)) from None
     try:
         text = data.decode()
     except UnicodeDecodeError as e:

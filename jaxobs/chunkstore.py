@@ -1,0 +1,166 @@
+"""A study's per-scenario results on disk, chunk by chunk: a kill loses at most the chunks being computed.
+
+    store = ChunkStore(out / "study.chunks", fingerprint, resume=True)
+    ds = run_study(designs, axes, store=store)    # skips the chunks already on disk, writes the others
+
+The folder holds ``meta.json`` (the study's fingerprint, the number of scenarios, the chunk size, the
+device count and the designs) and one HDF5 file per finished chunk, ``<design index>.<chunk index>.h5``
+(one dataset per metric, that chunk's real rows only).  Each chunk file is written under a random temp
+name (``tempfile.mkstemp``: ``O_EXCL``), flushed, fsync'ed and renamed: a chunk file that exists is
+complete, and a kill mid-write leaves only a temp file, which the next open removes.
+
+Why one file per chunk and not one growing NetCDF4/HDF5 file: HDF5 updates its metadata in place and has
+no journal, so a process killed while writing can leave the whole file unreadable, every finished chunk
+with it; a rename is atomic.  Zarr would be one file per chunk too, but is one more dependency for what a
+folder of small HDF5 files does (h5py is already here for NetCDF4 through h5netcdf).
+
+The fingerprint (the caller's: for ``jaxobs study``, the study file's and its inputs' sha256 with the
+versions that compute it) is checked before any chunk is read: another study's chunks are refused in one
+line, and so is a store made with another chunk size or device count (the chunks would not line up, and a
+device's share of a chunk may differ in the last bit).  The chunk values are those an uninterrupted run
+computes (the same compiled program on the same inputs), so a resumed study's Dataset is identical to one
+run in one go.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["ChunkStore"]
+
+META = "meta.json"
+
+
+class ChunkStore:
+    """The chunk files of one study run in the folder ``path`` (the runner's sink: ``start``, ``done``, ``put``).
+
+    ``resume=False`` starts over (the folder's chunks are removed at :meth:`start`); ``resume=True`` keeps
+    the chunks of the same study (same ``fingerprint``, scenarios, chunk size, devices, designs) and
+    refuses any other store with a ``ValueError`` of one line.
+    """
+
+    def __init__(self, path, fingerprint: str, *, resume: bool = False):
+        self.path = Path(path)
+        self.fingerprint = str(fingerprint)
+        self.resume = bool(resume)
+        self.designs: list = []
+        self.n = 0
+        self.chunk = 0
+        self.resumed = 0  # chunks found on disk at start (0: a fresh run)
+        self.total = 0  # chunks of the whole run, every design
+
+    def _refuse(self, why: str):
+        raise ValueError(
+            f"--resume: checkpoint {str(self.path)!r} {why}; delete it or run without --resume and with --force"
+        )
+
+    def start(self, *, n: int, chunk: int, devices: int, designs: list, metrics: list | None = None) -> None:
+        """Open the store for a run of ``n`` scenarios in chunks of ``chunk`` on ``devices`` devices."""
+        meta = {
+            "fingerprint": self.fingerprint,
+            "scenarios": int(n),
+            "chunk": int(chunk),
+            "devices": int(devices),
+            "designs": [str(d) for d in designs],
+        }
+        p = self.path
+        if p.is_symlink() or (p.exists() and not p.is_dir()):
+            raise ValueError(f"{str(p)!r} is not a folder of study chunks: refusing to use it")
+        if self.resume and (p / META).exists():
+            try:
+                if (p / META).stat().st_size > 1 << 20 or not (p / META).is_file():
+                    raise ValueError("not a small regular file")
+                old = json.loads((p / META).read_text())
+                if not isinstance(old, dict):
+                    raise ValueError("not a JSON object")
+            except (OSError, ValueError) as e:
+                self._refuse(f"is corrupt or unreadable ({type(e).__name__}: {str(e)[:80]})")
+            if old.get("fingerprint") != self.fingerprint:
+                got = str(old.get("fingerprint"))[:12]
+                self._refuse(f"belongs to another study (sha256 {got}…, this study {self.fingerprint[:12]}…)")
+            for key in ("scenarios", "chunk", "devices", "designs"):
+                if old.get(key) != meta[key]:
+                    self._refuse(f"was made with {key} = {old.get(key)!r}, this run has {meta[key]!r}")
+            for f in p.iterdir():  # what a kill left mid-write
+                if f.name.endswith(".tmp"):
+                    f.unlink(missing_ok=True)
+        else:
+            if self.resume and p.exists() and any(p.iterdir()):
+                self._refuse("has no meta.json")
+            if not self.resume and p.exists():
+                shutil.rmtree(p)
+            p.mkdir(parents=True, exist_ok=True)
+            _atomic_write(p / META, lambda tmp: Path(tmp).write_text(json.dumps(meta, indent=1)))
+        self.designs, self.n, self.chunk = list(meta["designs"]), int(n), int(chunk)
+        self.resumed = sum(1 for f in p.iterdir() if f.suffix == ".h5")
+        self.total = len(self.designs) * -(-self.n // self.chunk)
+
+    def _file(self, design, i: int) -> Path:
+        return self.path / f"{self.designs.index(str(design))}.{int(i)}.h5"
+
+    def done(self, design, i: int) -> bool:
+        """Whether chunk ``i`` of ``design`` is on disk (complete: chunk files appear only by a rename)."""
+        return self._file(design, i).exists()
+
+    def put(self, design, i: int, values: dict) -> None:
+        """Chunk ``i`` of ``design``: ``values[name]``, that chunk's real rows (no padding)."""
+        import h5py
+
+        def write(tmp):
+            with h5py.File(tmp, "w", track_order=True) as f:
+                for k in sorted(values):
+                    f.create_dataset(k, data=np.asarray(values[k]))
+
+        _atomic_write(self._file(design, i), write)
+
+    def load(self, design) -> dict:
+        """Every scenario's values of ``design``, in order: the chunks concatenated (a missing one refused)."""
+        import h5py
+
+        parts = []
+        n_chunks = -(-self.n // self.chunk)
+        for i in range(n_chunks):
+            f = self._file(design, i)
+            rows = min(self.chunk, self.n - i * self.chunk)
+            try:
+                with h5py.File(f, "r") as h:
+                    part = {k: h[k][()] for k in h}
+            except OSError as e:
+                raise ValueError(f"study chunk {str(f)!r} is missing or unreadable ({str(e)[:80]})") from None
+            if parts and set(part) != set(parts[0]) or any(np.shape(v) != (rows,) for v in part.values()):
+                raise ValueError(f"study chunk {str(f)!r} does not match the study (keys or rows)")
+            parts.append(part)
+        return {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
+
+    def remove(self) -> None:
+        """The folder and its chunks (once the study's results are written)."""
+        shutil.rmtree(self.path, ignore_errors=True)
+
+
+def _atomic_write(path: Path, write) -> None:
+    """``write(tmp)`` to a fresh temp file beside ``path`` (random name, ``O_EXCL``), fsync'ed, renamed over
+    ``path``, then the folder fsync'ed so that the rename survives a crash; the temp file goes on failure."""
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    os.close(fd)
+    try:
+        write(tmp)
+        fd = os.open(tmp, os.O_RDONLY)
+        try:
+            os.fsync(fd)
+        finally:
+            os.close(fd)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    dfd = os.open(path.parent, os.O_RDONLY)
+    try:
+        os.fsync(dfd)
+    finally:
+        os.close(dfd)

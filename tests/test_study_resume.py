@@ -1,0 +1,155 @@
+"""Studies that survive a kill: chunk by chunk on disk (jaxobs.chunkstore), `jaxobs study --resume` after
+kill -9 at random instants gives a study.nc byte-identical to an uninterrupted run's (issue 30.7)."""
+
+import os
+import random
+import signal
+import subprocess
+import sys
+import time
+
+import jax
+import numpy as np
+import pytest
+import xarray as xr
+
+import jaxobs
+from jaxobs import linear
+from jaxobs.chunkstore import ChunkStore
+from jaxobs.study import run_study
+from tuning.cli import STUDY_CHUNKS, main
+
+# one scenario a chunk: many chunks, so that a kill lands mid-run and a resume has chunks to skip
+TINY = """
+[study]
+name = "tiny"
+t_event = 0.02
+horizon = 0.05
+chunk_size = 1
+
+[designs.SOGI-FLL]
+closed_form = "sogi-fll"
+[designs.WIF]
+closed_form = "wif"
+
+[axes]
+freq_step = [-1.0, 1.0, 2.0]
+dc = [0.0, 0.05, 0.1]
+harmonics_scale = [0.0, 1.0]
+"""
+
+
+def test_store_writes_whole_chunks_and_refuses_another_run(tmp_path):
+    s = ChunkStore(tmp_path / "c", "f" * 64)
+    s.start(n=5, chunk=2, devices=1, designs=["a", "b"])
+    assert s.total == 6 and s.resumed == 0
+    for i, (lo, hi) in enumerate(((0, 2), (2, 4), (4, 5))):
+        assert not s.done("b", i)
+        s.put("b", i, {"x": np.arange(lo, hi, dtype=float), "ok": np.ones(hi - lo, bool)})
+        assert s.done("b", i) and not s.done("a", i)
+    got = s.load("b")
+    assert got["x"].tolist() == [0, 1, 2, 3, 4] and got["ok"].dtype == bool
+    with pytest.raises(ValueError, match="missing or unreadable"):
+        s.load("a")
+    (tmp_path / "c" / ".0.0.h5.x.tmp").write_bytes(b"half")  # what a kill mid-write leaves
+    r = ChunkStore(tmp_path / "c", "f" * 64, resume=True)
+    r.start(n=5, chunk=2, devices=1, designs=["a", "b"])
+    assert r.resumed == 3 and not list((tmp_path / "c").glob("*.tmp"))
+    for key, kw in (("chunk", dict(chunk=3)), ("devices", dict(devices=2)), ("designs", dict(designs=["a"]))):
+        args = dict(n=5, chunk=2, devices=1, designs=["a", "b"]) | kw
+        with pytest.raises(ValueError, match=f"made with {key} = "):
+            ChunkStore(tmp_path / "c", "f" * 64, resume=True).start(**args)
+    with pytest.raises(ValueError, match="belongs to another study") as e:
+        ChunkStore(tmp_path / "c", "0" * 64, resume=True).start(n=5, chunk=2, devices=1, designs=["a", "b"])
+    assert "\n" not in str(e.value)
+    (tmp_path / "c" / "meta.json").write_text("{not json")
+    with pytest.raises(ValueError, match="corrupt or unreadable"):
+        ChunkStore(tmp_path / "c", "f" * 64, resume=True).start(n=5, chunk=2, devices=1, designs=["a", "b"])
+    # without resume: a fresh start, the old chunks gone
+    ChunkStore(tmp_path / "c", "f" * 64).start(n=5, chunk=2, devices=1, designs=["a", "b"])
+    assert sorted(p.name for p in (tmp_path / "c").iterdir()) == ["meta.json"]
+
+
+def test_run_study_from_a_partial_store_equals_one_run(tmp_path):
+    """Chunks lost (as to a kill) are computed again, the others read back: the same Dataset as no store."""
+    designs = {"sogi": linear.sogi_fll_closed_form(), "wif": linear.wif_closed_form()}
+    axes = {"freq_step": [-1.0, 1.0, 2.0], "dc": [0.0, 0.1]}
+    kw = dict(t_event=0.02, horizon=0.05, chunk_size=2, mesh=jaxobs.batch_mesh(jax.devices()[:1]))
+    ref = run_study(designs, axes, **kw)
+    store = ChunkStore(tmp_path / "c", "fp")
+    first = run_study(designs, axes, store=store, **kw)
+    xr.testing.assert_identical(first, ref)
+    for f in ("0.1.h5", "1.0.h5", "1.2.h5"):
+        (tmp_path / "c" / f).unlink()
+    store = ChunkStore(tmp_path / "c", "fp", resume=True)
+    again = run_study(designs, axes, store=store, **kw)
+    assert store.resumed == 3 and store.total == 6
+    xr.testing.assert_identical(again, ref)
+    for v in ref.data_vars:
+        np.testing.assert_array_equal(again[v].values, ref[v].values)
+
+
+def test_a_partial_study_names_resume_and_another_studys_chunks_are_refused(tmp_path, capsys):
+    path = tmp_path / "tiny.toml"
+    path.write_text(TINY)
+    out = tmp_path / "o"
+    ChunkStore(out / STUDY_CHUNKS, "another study").start(n=18, chunk=1, devices=1, designs=["SOGI-FLL", "WIF"])
+    assert main(["study", str(path), "--out", str(out), "--quiet"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "--resume" in err and "--force" in err and "\n" not in err
+    assert main(["study", str(path), "--out", str(out), "--quiet", "--resume"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "belongs to another study" in err and "\n" not in err and not (out / "study.nc").exists()
+    dist = ["--coordinator", "localhost:1", "--num-processes", "2", "--process-id", "0"]
+    assert main(["study", str(path), "--out", str(out), "--resume", *dist]) == 2
+    assert "not checkpointed" in capsys.readouterr().err
+
+
+def _cli(*args):
+    return [sys.executable, "-m", "tuning.cli", "study", *map(str, args), "--quiet"]
+
+
+def _kill_and_resume(tmp_path, instants: int, seed: int):
+    path = tmp_path / "tiny.toml"
+    path.write_text(TINY)
+    ref = tmp_path / "ref"
+    t0 = time.time()
+    proc = subprocess.Popen(_cli(path, "--out", ref), stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    first = None
+    while proc.poll() is None:  # how long the chunks take: the kill instants are drawn inside it
+        if first is None and any((ref / STUDY_CHUNKS).glob("*.h5")):
+            first = time.time()
+        time.sleep(0.01)
+    assert proc.returncode == 0, proc.stderr.read().decode()
+    span = time.time() - (first or t0)
+    assert not (ref / STUDY_CHUNKS).exists()  # removed once study.nc is written
+    rng = random.Random(seed)
+    killed_mid_run = 0
+    for k in range(instants):
+        out = tmp_path / f"k{k}"
+        proc = subprocess.Popen(_cli(path, "--out", out), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        deadline = time.time() + 300
+        while not any((out / STUDY_CHUNKS).glob("*.h5")) and proc.poll() is None and time.time() < deadline:
+            time.sleep(0.005)
+        time.sleep(rng.uniform(0.0, 0.9 * span))
+        if proc.poll() is None:
+            os.kill(proc.pid, signal.SIGKILL)
+            killed_mid_run += not (out / "study.nc").exists()
+        proc.wait()
+        res = subprocess.run(_cli(path, "--out", out, "--resume"), capture_output=True, text=True, check=False)
+        if (out / "study.nc").exists() and res.returncode == 2:
+            assert "exists" in res.stderr  # the kill came after the end: nothing to resume
+        else:
+            assert res.returncode == 0, res.stderr
+        assert (out / "study.nc").read_bytes() == (ref / "study.nc").read_bytes(), f"instant {k}"
+        assert not (out / STUDY_CHUNKS).exists()
+    assert killed_mid_run >= 1, "no kill landed while the study ran"
+
+
+def test_kill_9_at_2_random_instants_then_resume_is_byte_identical(tmp_path):
+    _kill_and_resume(tmp_path, 2, seed=1)
+
+
+@pytest.mark.slow
+def test_kill_9_at_10_random_instants_then_resume_is_byte_identical(tmp_path):
+    _kill_and_resume(tmp_path, 10, seed=2)

@@ -1,0 +1,290 @@
+"""Nothing trusted that should not be (issue 30): what a run reads is verified and bounded.
+
+Each test here is a defect found on the code before it (the issue's list): a checkpoint resumed with NaN in
+θ, a forged history, a FIFO at the checkpoint's path, a CSV field over the csv module's limit, ..."""
+
+from __future__ import annotations
+
+import io
+import json
+import os
+import threading
+
+import numpy as np
+import pytest
+
+from jaxobs.provenance import read_file
+from tests.test_outputs import _run
+from tuning.checkpoint import DIGEST, content_digest
+from tuning.solvers import CheckpointError
+
+# --------------------------------------------------------------------------
+# the one reader: regular files only, bounded
+# --------------------------------------------------------------------------
+
+
+def _in_thread(fn, timeout=20):
+    """fn() in a thread: (finished, its exception or None); a FIFO read that blocks never finishes."""
+    box = {}
+
+    def go():
+        try:
+            fn()
+        except BaseException as e:  # noqa: BLE001 - reported to the test
+            box["e"] = e
+
+    t = threading.Thread(target=go, daemon=True)
+    t.start()
+    t.join(timeout)
+    return not t.is_alive(), box.get("e")
+
+
+def test_read_file_refuses_fifos_devices_folders_and_big_files(tmp_path):
+    fifo = tmp_path / "fifo"
+    os.mkfifo(fifo)
+    done, e = _in_thread(lambda: read_file(fifo, 100))
+    assert done and isinstance(e, ValueError) and "not a file" in str(e)
+    for p in ("/dev/zero", tmp_path):
+        with pytest.raises(ValueError, match="not a file"):
+            read_file(p, 100)
+    (tmp_path / "big").write_bytes(b"x" * 101)
+    with pytest.raises(ValueError, match="more than the limit of 100 bytes"):
+        read_file(tmp_path / "big", 100)
+    with pytest.raises(ValueError, match="cannot read"):
+        read_file(tmp_path / "none", 100)
+    assert read_file(tmp_path / "big", 101) == b"x" * 101
+
+
+# --------------------------------------------------------------------------
+# checkpoints: a content digest, and a state a run could have written
+# --------------------------------------------------------------------------
+
+
+def _entries(path):
+    with np.load(path, allow_pickle=False) as d:
+        return {k: d[k] for k in d.files}
+
+
+def _write(path, entries, redigest=True):
+    entries = {k: v for k, v in entries.items() if k != DIGEST}
+    digest = {DIGEST: np.asarray(content_digest(entries))} if redigest else {}
+    buf = io.BytesIO()
+    np.savez(buf, **entries, **digest)
+    path.write_bytes(buf.getvalue())
+
+
+def _forge(path, redigest=True, theta=None, best_theta=None, **meta_changes):
+    e = _entries(path)
+    meta = json.loads(str(e["meta"]))
+    meta.update(meta_changes)
+    e["meta"] = np.asarray(json.dumps(meta))
+    if theta is not None:
+        e["theta"] = theta
+    if best_theta is not None:
+        e["best_theta"] = best_theta
+    if not redigest:  # keep the old digest: what a hand edit leaves
+        old = e.pop(DIGEST)
+        e[DIGEST] = old
+        buf = io.BytesIO()
+        np.savez(buf, **e)
+        path.write_bytes(buf.getvalue())
+        return
+    _write(path, e)
+
+
+def test_checkpoint_content_digest_refuses_an_edited_history(tmp_path):
+    """A forged history changed the status to no_improvement (issue 30): now the digest refuses it."""
+    ckpt = tmp_path / "c.npz"
+    _run(ckpt)
+    meta = json.loads(str(_entries(ckpt)["meta"]))
+    hist = meta["history"]
+    hist[0]["value"] = -1e9
+    _forge(ckpt, redigest=False, history=hist)
+    with pytest.raises(CheckpointError, match="content digest does not match") as e:
+        _run(ckpt, resume=True)
+    assert "\n" not in str(e.value)
+    e = _entries(ckpt)  # a checkpoint without a digest (the old format) is refused too
+    e.pop(DIGEST)
+    buf = io.BytesIO()
+    np.savez(buf, **e)
+    ckpt.write_bytes(buf.getvalue())
+    with pytest.raises(CheckpointError, match="content digest"):
+        _run(ckpt, resume=True)
+
+
+def _bad_states(meta):
+    """(name, forged fields) of states no run writes, each consistent with its own digest."""
+    it = meta["iteration"]
+    nan2 = np.asarray([np.nan, 0.0])
+    short = meta["history"][:-1]
+    renumbered = [dict(h, iteration=h["iteration"] + 1) for h in meta["history"]]
+    return [
+        ("theta NaN", dict(theta=nan2), "theta is not finite"),
+        ("best theta NaN", dict(best_theta=nan2), "best_theta is not finite"),
+        ("theta shape", dict(theta=np.zeros(3)), "shape"),
+        ("best NaN", dict(best_value=float("nan")), "NaN is not JSON"),
+        ("best inf", dict(best_value=1e400), "Infinity is not JSON"),
+        ("best string", dict(best_value="1.0"), "best_value must be a finite number"),
+        ("best not in history", dict(best_value=-123.0), "not the value of a stable design"),
+        ("since_best > iteration", dict(since_best=it + 1), "since_best"),
+        ("since_best negative", dict(since_best=-1), "since_best"),
+        ("iteration float", dict(iteration=float(it)), "iteration must be an integer"),
+        ("history short", dict(history=short), f"holds {it - 1} entries"),
+        ("history renumbered", dict(history=renumbered), "history entry 0"),
+        ("history not a list", dict(history={}), "history holds dict"),
+    ]
+
+
+@pytest.mark.parametrize("case", range(13))
+def test_checkpoint_state_is_validated_on_load(tmp_path, case):
+    """A NaN θ resumed to exit 0 with a tuned design that diverged everywhere (issue 30); a NaN best value
+    changed the tuned gain.  Each forged state, though its digest matches, is refused in one line."""
+    ckpt = tmp_path / "c.npz"
+    _run(ckpt)
+    meta = json.loads(str(_entries(ckpt)["meta"]))
+    name, change, match = _bad_states(meta)[case]
+    arrays = {k: change.pop(k) for k in ("theta", "best_theta") if k in change}
+    _forge(ckpt, **arrays, **change)
+    with pytest.raises(CheckpointError, match=match) as e:
+        _run(ckpt, resume=True)
+    assert "\n" not in str(e.value), name
+
+
+def test_checkpoint_fifo_does_not_block_resume(tmp_path):
+    """`mkfifo OUT/checkpoint.npz; jaxobs tune --resume` blocked forever (issue 30)."""
+    ckpt = tmp_path / "c.npz"
+    os.mkfifo(ckpt)
+    done, e = _in_thread(lambda: _run(ckpt, resume=True))
+    assert done and isinstance(e, CheckpointError) and "not a file" in str(e)
+
+
+# --------------------------------------------------------------------------
+# result.json read back by `study` and `export`: one schema, bounded before parsing
+# --------------------------------------------------------------------------
+
+
+def _result(**changes):
+    """A minimal SOGIFLLWIF result (the fields study and export read), with ``changes`` applied."""
+    res = {
+        "job": {"job": {"name": "t", "component": "SOGIFLLWIF"}, "component": {"k1": 1.7}},
+        "component": "SOGIFLLWIF",
+        "gains": {"tuned": {"lam": 9000.0}},
+    }
+    res.update(changes)
+    return res
+
+
+# (name, result.json text, expected message); each was accepted, coerced or a traceback before (issue 30)
+BAD_RESULTS = [
+    ("nested 100000", "[" * 100_000 + "]" * 100_000, "nested deeper than 64"),
+    ("nested in an object", '{"job": ' + "[" * 70 + "]" * 70 + "}", "nested deeper than 64"),
+    ("lam a string", json.dumps(_result(gains={"tuned": {"lam": "12337"}})), "gains.tuned.lam must be a finite number"),
+    ("lam a bool", json.dumps(_result(gains={"tuned": {"lam": True}})), "gains.tuned.lam must be a finite number"),
+    ("lam NaN", json.dumps(_result(gains={"tuned": {"lam": float("nan")}})), "NaN is not a JSON number"),
+    ("lam 1e999", json.dumps(_result()).replace("9000.0", "1e999"), "gains.tuned.lam must be a finite number"),
+    ("tuned empty", json.dumps(_result(gains={"tuned": {}})), "gains.tuned is empty"),
+    ("tuned missing", json.dumps(_result(gains={"initial": {"lam": 1e4}})), "gains.tuned must be a table"),
+    ("tuned null, tuned", json.dumps(_result(gains={"tuned": None}, status="converged")), "gains.tuned must be"),
+    ("unknown gain", json.dumps(_result(gains={"tuned": {"gamma": 1.0}})), "gains.tuned.gamma is not a value"),
+    ("unknown gain set", json.dumps(_result(gains={"tuned": {"lam": 1.0}, "best": {}})), "gains.best is not one"),
+    ("SOGI-FLL relabelled", json.dumps(_result(gains={"tuned": {"k": 1.0, "lam": 9e3}})), "gains.tuned.k is not"),
+    (
+        "component differs from the job's",
+        json.dumps(_result(job={"job": {"component": "SOGIFLL"}})),
+        "differs from the job's job.component",
+    ),
+    ("component CLESO", json.dumps(_result(component="CLESO")), "differs from the job's"),
+    ("component unknown", json.dumps(_result(component="X")), "component 'X' is not a jaxobs component"),
+    ("component a list", json.dumps(_result(component=[1])), "is not a jaxobs component"),
+    ("job a string", json.dumps(_result(job="SOGIFLLWIF")), "job must be a table, got str"),
+    ("job.component a list", json.dumps(_result(job={"component": [1]})), "job.component must be a table"),
+    ("job value a string", json.dumps(_result(job={"component": {"k1": "1.7"}})), "job.component.k1 must be"),
+    ("ts a string", json.dumps(_result(ts="1e-4")), "ts must be a sample time"),
+    ("ts negative", json.dumps(_result(ts=-1e-4)), "ts must be a sample time"),
+    ("omega_n a string", json.dumps(_result(omega_n="314")), "omega_n must be a finite number"),
+    ("scores a list", json.dumps(_result(scores=[])), "scores must be a table"),
+    ("a list", "[]", "not a tuning result"),
+    ("no gains", json.dumps({"job": {}, "component": "SOGIFLLWIF"}), "no 'gains'"),
+    ("not JSON", "{", "not valid JSON"),
+    ("not UTF-8", b"\xff\xfe{}", "not UTF-8"),
+]
+
+
+@pytest.mark.parametrize("name, text, match", BAD_RESULTS, ids=[b[0] for b in BAD_RESULTS])
+def test_result_json_schema(tmp_path, name, text, match):
+    from tuning.results import load_result
+
+    p = tmp_path / "result.json"
+    (p.write_bytes if isinstance(text, bytes) else p.write_text)(text)
+    with pytest.raises(ValueError, match=match) as e:
+        load_result(p)
+    assert "\n" not in str(e.value) and len(str(e.value)) < 400
+
+
+def test_result_json_special_and_large_files(tmp_path):
+    from tuning.results import MAX_RESULT_BYTES, load_result
+
+    fifo = tmp_path / "fifo.json"
+    os.mkfifo(fifo)
+    done, e = _in_thread(lambda: load_result(fifo))
+    assert done and isinstance(e, ValueError) and "not a file" in str(e)
+    big = tmp_path / "big.json"
+    with open(big, "wb") as f:
+        f.truncate(MAX_RESULT_BYTES + 1)
+    with pytest.raises(ValueError, match="more than the limit"):
+        load_result(big)
+    ok = tmp_path / "ok.json"
+    ok.write_text(json.dumps(_result()))
+    assert load_result(ok)["gains"]["tuned"] == {"lam": 9000.0}
+
+
+@pytest.mark.parametrize("cmd", ["export", "study"])
+@pytest.mark.parametrize("case", ["nested 100000", "lam a string", "tuned empty", "job a string", "component CLESO"])
+def test_result_json_errors_are_one_line_exit_2_in_export_and_study(tmp_path, capsys, cmd, case):
+    """`export` and `study` read a result through the one schema: one line, exit 2 (a RecursionError,
+    TypeError or AttributeError before, or a string accepted as a gain)."""
+    from tuning.cli import main
+
+    text = dict((b[0], b[1]) for b in BAD_RESULTS)[case]
+    (tmp_path / "result.json").write_text(text)
+    if cmd == "export":
+        argv = ["export", str(tmp_path / "result.json"), "--out", str(tmp_path / "x"), "--quiet", "--no-cache"]
+    else:
+        (tmp_path / "s.toml").write_text('[designs.t]\nresult = "result.json"\n[axes]\ndc = [0.0]\n')
+        argv = ["study", str(tmp_path / "s.toml"), "--check", "--no-cache"]
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and err.startswith("jaxobs: error:"), err
+
+
+# --------------------------------------------------------------------------
+# CSV recordings: csv errors in one line, strict numbers
+# --------------------------------------------------------------------------
+
+BAD_CSV = [
+    ("field over 131072", "t,x\n0," + "1" * 140_000 + "\n", "line 2: not CSV"),
+    ("unterminated quote", 't,x\n0,"1\n1,2\n', "not CSV"),
+    ("1_0", "t,x\n0,1_0\n1,2\n", "line 2 holds a field that is not a number"),
+    ("0x10", "t,x\n0,0x10\n1,2\n", "not a number"),
+    ("a long number", "t,x\n0," + "1" * 2000 + "\n1,2\n", "line 2: not CSV"),
+]
+
+
+@pytest.mark.parametrize("name, text, match", BAD_CSV, ids=[b[0] for b in BAD_CSV])
+def test_csv_errors_are_one_line(tmp_path, name, text, match):
+    import jaxobs
+
+    p = tmp_path / "r.csv"
+    p.write_text(text)
+    with pytest.raises(ValueError, match=match) as e:
+        jaxobs.SampledSignal.from_csv(p, time_column="t")
+    assert "\n" not in str(e.value) and str(p) in str(e.value)
+
+
+def test_csv_fifo_is_refused(tmp_path):
+    import jaxobs
+
+    p = tmp_path / "r.csv"
+    os.mkfifo(p)
+    done, e = _in_thread(lambda: jaxobs.SampledSignal.from_csv(p, time_column="t"))
+    assert done and isinstance(e, ValueError) and "not a file" in str(e)
