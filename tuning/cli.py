@@ -39,6 +39,8 @@ Every failure ends the program with one line on stderr.  Exit statuses:
   writable, locked by another process, results there without ``--force``), a checkpoint that ``--resume``
   cannot use (corrupt, or another job's);
 - 3: ``tune`` only: every design tried diverged (status ``diverged``, nothing tuned);
+- 4: ``tune`` only: status ``unsafe``: the tuned design lost stability or synchronism inside the job's
+  ``[envelope]`` where the closed form holds (its results are written; the warning names the points);
 - 130: interrupted (Ctrl-C).
 
 Every command that writes (``tune``, ``study``, ``demo``, ``bode``, ``reproduce``, ``export``) writes only
@@ -82,7 +84,7 @@ from .cli_papers import closed_form_rows as closed_form_rows
 from .distributed import distributed_asked, distributed_study, join_distributed, refuse_unsplittable
 from .envelope import add_envelope_parser
 from .export import add_export_parser
-from .job import CHECKPOINT, load_job, load_recordings, run_job
+from .job import CHECKPOINT, UNSAFE_EXIT, load_job, load_recordings, run_job
 from .outdir import OutDir, atomic_path, atomic_write_text, safe_name
 from .study_file import load_study as _load_study
 from .study_file import study_fingerprint
@@ -273,7 +275,7 @@ def _cmd_tune(args) -> int:
     except (OSError, ValueError):
         timing = {}
     print_summary(result, out, timing)
-    return 3 if result["status"] == "diverged" else 0
+    return {"diverged": 3, "unsafe": UNSAFE_EXIT}.get(result["status"], 0)
 
 
 class _Parser(argparse.ArgumentParser):

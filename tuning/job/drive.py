@@ -100,14 +100,19 @@ def job_drive(spec: DriveSpec | None = None):
     par = D.bench_machine(spec.machine)
     startup = D.IfStartup.for_machine(par) if spec.start == "standstill" else None  # [drive] start
     return D.bench_drive(
-        par, sensorless=spec.loop == "sensorless", handover=spec.handover, settle=spec.settle, startup=startup
+        par,
+        sensorless=spec.loop == "sensorless",
+        handover=spec.handover,
+        settle=spec.settle,
+        startup=startup,
+        speed_schedule=spec.speed_schedule,
     )
 
 
 def parse_drive(dt: dict, comp: str, scen: ScenarioSpec) -> DriveSpec:
     """``[drive]`` of a drive job of component ``comp`` (its table ``dt``) on the scenarios ``scen``."""
     info = COMPONENTS[comp]
-    no_unknown(dt, ("loop", "handover", "settle", "start", "machine"), "drive")
+    no_unknown(dt, ("loop", "handover", "settle", "start", "machine", "speed_schedule"), "drive")
     loop = get_field(dt, "loop", "drive.loop", str, "sensorless")
     if loop not in ("sensorless", "sensored"):
         raise JobError("drive.loop", f"must be 'sensorless' or 'sensored', got {show(loop)}")
@@ -125,4 +130,10 @@ def parse_drive(dt: dict, comp: str, scen: ScenarioSpec) -> DriveSpec:
             "drive.machine",
             f"{comp} cannot run on {machine} ({BENCH_MACHINES[machine]}); allowed: {', '.join(info.machines)}",
         )
-    return parse_start(dt, DriveSpec(loop, handover, settle, machine=machine), scen)
+    # the FOC's speed-loop schedule (FOC.speed_gains): 0 off; N keeps the speed loop N times slower than ωe,
+    # the flux observers' low-speed fix (docs/stability.md: N = 6 holds 400 and 200 r/min on 000's SPMSM)
+    schedule = get_field(dt, "speed_schedule", "drive.speed_schedule", float, 0.0)
+    if not 0.0 <= schedule <= 1000.0:
+        raise JobError("drive.speed_schedule", f"must be 0 (off) or a ratio in (0, 1000], got {schedule:g}")
+    spec = DriveSpec(loop, handover, settle, machine=machine, speed_schedule=schedule)
+    return parse_start(dt, spec, scen)
