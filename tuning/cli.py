@@ -291,19 +291,23 @@ def _host_port(text: str) -> str:
     return text
 
 
-def _int_at_least(low: int):
-    """argparse type: an integer >= ``low``."""
+def _int_at_least(low: int, high: int):
+    """argparse type: an integer in ``low..high`` (its digits bounded before conversion)."""
 
     def parse(text: str) -> int:
         try:
-            v = int(text)
+            v = int(text) if len(text) <= 20 else None
         except ValueError:
             v = None
-        if v is None or v < low:
-            raise argparse.ArgumentTypeError(f"must be an integer >= {low}, got {text!r}")
+        if v is None or not low <= v <= high:
+            raise argparse.ArgumentTypeError(f"must be an integer >= {low} and <= {high}, got {text[:30]!r}")
         return v
 
     return parse
+
+
+MAX_PROCESSES = 65_536  # --num-processes
+MAX_TIMEOUT_S = 86_400  # --timeout: a day (2147483648 overflowed JAX's timer: a TypeError)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -392,14 +396,18 @@ def build_parser() -> argparse.ArgumentParser:
         "--distributed to take them from the environment (JAX_COORDINATOR_ADDRESS, SLURM's srun, Open MPI)",
     )
     dist.add_argument("--coordinator", type=_host_port, metavar="HOST:PORT", help="process 0's address and a free port")
-    dist.add_argument("--num-processes", type=_int_at_least(1), metavar="N", help="the number of processes, >= 1")
-    dist.add_argument("--process-id", type=_int_at_least(0), metavar="I", help="this process's index, 0..N-1")
+    dist.add_argument(
+        "--num-processes", type=_int_at_least(1, MAX_PROCESSES), metavar="N", help="the number of processes, >= 1"
+    )
+    dist.add_argument(
+        "--process-id", type=_int_at_least(0, MAX_PROCESSES - 1), metavar="I", help="this process's index, 0..N-1"
+    )
     dist.add_argument(
         "--distributed", action="store_true", help="join a distributed run; what is not given, the environment gives"
     )
     dist.add_argument(
         "--timeout",
-        type=_int_at_least(1),
+        type=_int_at_least(1, MAX_TIMEOUT_S),
         metavar="S",
         help="seconds to wait for every process to join (default 300); then a process other than 0 that found "
         "no process 0 exits 2 with one line, and a process 0 left alone is aborted by JAX (exit 134)",
