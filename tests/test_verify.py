@@ -337,3 +337,28 @@ def test_a_5000_digit_integer_in_a_job_names_its_field(tmp_path, capsys):
     job = tmp_path / "job.toml"
     job.write_text(text.replace("seed = 0", "seed = " + "9" * 5000))
     _one_line_exit_2(capsys, ["tune", str(job), "--check", "--no-cache"], "job.seed: a number of 5000 digits")
+
+
+# --------------------------------------------------------------------------
+# studies apply the jobs' physical ranges (one validator: tuning.job.check_speed_axes)
+# --------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    "machine, axes, field",
+    [
+        ("ipmsm002", "speed_rpm = [600.0, 5000.0]", "axes.speed_rpm[1]"),
+        ("spmsm000", "speed_rpm = [600.0, 3000.0]", "axes.speed_rpm[1]"),
+        ("ipmsm002", "speed_rpm = [600.0]\nspeed_step_rpm = [1000.0]", "axes.speed_step_rpm[0]"),
+    ],
+)
+def test_drive_study_speeds_within_the_inverter_limit(tmp_path, capsys, machine, axes, field):
+    """A drive study with speed_rpm = [600, 5000] on ipmsm002 passed --check, though jobs refuse anything
+    above 1323 r/min (issue 30)."""
+    comp = "CLESO" if machine == "ipmsm002" else "SOIFO"
+    study = tmp_path / "s.toml"
+    study.write_text(
+        f'[study]\nkind = "drive"\nmachine = "{machine}"\nhorizon = 0.2\n'
+        f'[designs.a]\nclosed_form = "{comp}"\n[axes]\n{axes}\n'
+    )
+    _one_line_exit_2(capsys, ["study", str(study), "--check", "--no-cache"], f"{field}: ")

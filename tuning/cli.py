@@ -117,15 +117,22 @@ def _cmd_drive_study(name, designs, axes, opts, out: Path, quiet: bool, provenan
     wd = max(len("design"), *(len(str(d)) for d in ds["design"].values)) + 2
     wm = max(len(x) for x in labels.values()) + 2
     head = f"{'design':<{wd}}{'metric':<{wm}}" + "".join(f"{'q' + format(q, 'g'):>10}" for q in qs)
-    head += f"{'lost lock':>11}"
+    head += f"{'diverged':>10}{'lost lock':>11}{'lost speed':>12}"
     print(head)
+    warnings = []
     for d in ds["design"].values:
         lost = int(ds["lost_lock_count"].sel(design=d))
+        div = int(ds["diverged"].sel(design=d).sum())
+        speed = int(ds["lost_speed_count"].sel(design=d))
         for m in DRIVE_STUDY_METRICS:
             vals = ds[f"{m}_q"].sel(design=d).values
             row = f"{str(d):<{wd}}{labels[m]:<{wm}}" + "".join(f"{v:>10.4g}" for v in vals)
-            print(row + f"{lost:>11}")
+            print(row + f"{div:>10}{lost:>11}{speed:>12}")
+        if div or lost or speed:  # on stderr too: a summary piped away still says what was lost
+            warnings.append(f"{d}: diverged in {div}, lost lock in {lost}, lost speed in {speed} of {n} scenarios")
     print(f"results: {out / 'study.nc'}, {fig}")
+    for w in warnings:
+        print(f"jaxobs: warning: {w}", file=sys.stderr)
     return 0
 
 
@@ -236,6 +243,10 @@ def _run_study(name, designs, axes, opts, out: Path, quiet: bool, store=None) ->
             row += f"{k * float(sel[m].mean()):>25.4g}{k * float(sel[m].max()):>10.4g}"
         print(row + f"{int(sel['diverged'].sum()):>10}{int(sel['lost_lock_count']):>11}")
     print(f"results: {out / 'study.nc'}, {out / 'worst_cases.json'}, {len(figs)} figures")
+    for d in ds["design"].values:  # on stderr too: a summary piped away still says what was lost
+        div, lost = int(ds["diverged"].sel(design=d).sum()), int(ds["lost_lock_count"].sel(design=d))
+        if div or lost:
+            print(f"jaxobs: warning: {d}: diverged in {div}, lost lock in {lost} of {n} scenarios", file=sys.stderr)
     return 0
 
 
