@@ -56,19 +56,58 @@ def fll_demo_figure(traces, tests, t_event, path=None):
     return _finish(fig, path)
 
 
-def bode_figure(tfs: dict, omega, title: str, path=None, hz: bool = True, mark=None):
+# one look per trace, so a trace never hides under another: widths fall as the dashes rise, and markers
+# (spaced along the curve, matplotlib's float markevery) tell overlapping curves apart
+_TRACE_STYLES = (
+    {"ls": "-", "lw": 2.6},
+    {"ls": "--", "lw": 1.7, "marker": "o", "ms": 4, "markevery": 0.07},
+    {"ls": "-.", "lw": 1.5, "marker": "s", "ms": 3.5, "markevery": (0.035, 0.07)},
+    {"ls": ":", "lw": 1.8, "marker": "^", "ms": 4, "markevery": (0.02, 0.07)},
+)
+
+
+def resonance_grid(tfs, omega, n: int = 241, damping_ratio: float = 0.3):
+    """``omega`` (rad/s) refined around every lightly damped pole of ``tfs`` (a dict or a list of
+    :class:`~jaxobs.linear.TransferFunction`), sorted and unique.
+
+    A pole σ + jω_p with |σ| < ``damping_ratio``·|ω_p| makes a peak (or a notch, with a zero beside it)
+    about |σ| rad/s wide at ω = ω_p (the sign matters for a complex-coefficient filter, whose response is
+    not symmetric).  The GI-LESO's at ±50 Hz (σ ≈ −8.8 rad/s) swings ±1.1 dB within a few rad/s: a log grid
+    spaced ~1 % in ω draws it within 0.04 dB but only just; around each such pole ``n`` points
+    ω_p + |σ|·sinh(u), u uniform in [−8, 8] (steps of |σ|/15 at the peak, out to ~1500 |σ|), draw its
+    shape to 0.005 dB (tests/test_figures.py), kept inside the range of ``omega`` and on its side of zero."""
+    omega = np.asarray(omega, dtype=float)
+    lo, hi = float(omega.min()), float(omega.max())
+    u = np.sinh(np.linspace(-8.0, 8.0, n))
+    extra = [omega]
+    for tf in tfs.values() if isinstance(tfs, dict) else tfs:
+        for pk in np.atleast_1d(np.asarray(tf.poles())):
+            sigma, wp = abs(float(pk.real)), float(pk.imag)
+            if not (0 < sigma < damping_ratio * abs(wp)):
+                continue
+            w = wp + sigma * u
+            w = w[(w >= lo) & (w <= hi) & (np.sign(w) == np.sign(wp))]
+            extra.append(w)
+    return np.unique(np.concatenate(extra))
+
+
+def bode_figure(tfs: dict, omega, title: str, path=None, hz: bool = True, mark=None, refine: bool = True):
     """Bode magnitude (dB) and phase (deg) of several transfer functions on one grid.
 
-    Complex-coefficient filters are plotted over negative and positive frequency
-    when ``omega`` contains both signs (their response is not conjugate-symmetric).
+    The frequency axis is in Hz (``hz=False``: rad/s); ``omega`` is in rad/s either way, refined around
+    lightly damped poles (:func:`resonance_grid`; ``refine=False`` keeps it as given).  Each trace has its
+    own line style and markers, so one lying on another stays visible.  Complex-coefficient filters are
+    plotted over negative and positive frequency when ``omega`` contains both signs (their response is
+    not conjugate-symmetric).
     """
-    omega = np.asarray(omega)
+    omega = resonance_grid(tfs, omega) if refine else np.asarray(omega)
     x = omega / (2 * math.pi) if hz else omega
     fig, (ax_m, ax_p) = _subplots(2, 1, figsize=(7.5, 6), sharex=True)
-    for name, tf in tfs.items():
+    for i, (name, tf) in enumerate(tfs.items()):
         mag, ph = linear.bode(tf, omega)
-        ax_m.plot(x, np.asarray(mag), lw=1.3, label=name)
-        ax_p.plot(x, np.asarray(ph), lw=1.3, label=name)
+        style = _TRACE_STYLES[i % len(_TRACE_STYLES)]
+        ax_m.plot(x, np.asarray(mag), label=name, color=f"C{i}", **style)
+        ax_p.plot(x, np.asarray(ph), label=name, color=f"C{i}", **style)
     if np.all(omega > 0):
         ax_m.set_xscale("log")
     if mark is not None:
@@ -79,13 +118,14 @@ def bode_figure(tfs: dict, omega, title: str, path=None, hz: bool = True, mark=N
     ax_p.set_xlabel("frequency (Hz)" if hz else "ω (rad/s)")
     for ax in (ax_m, ax_p):
         ax.grid(True, which="both", alpha=0.3)
-    ax_m.legend(fontsize=8)
+    ax_m.legend(fontsize=9)
     ax_m.set_title(title)
     return _finish(fig, path)
 
 
-def paper_bode_figures(out_dir):
-    """The three Bode figures of the papers: 000 Fig. 5, 002 Fig. 4, 001 Fig. 14. Returns the paths."""
+def paper_bode_figures(out_dir, hz: bool = True):
+    """The three Bode figures of the papers: 000 Fig. 5, 002 Fig. 4, 001 Fig. 14, over frequency in Hz
+    (``hz=False``: rad/s). Returns the paths."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     paths = []
@@ -99,7 +139,7 @@ def paper_bode_figures(out_dir):
         f"second-order SOIFO (K1 = {K1:g}, K2 = {K2:g})": linear.sosoifo_tf(K1, K2, w1),
     }
     p = out / "bode_flux_observers_000_fig5.png"
-    bode_figure(flux, np.logspace(0, 5, 2000), "Paper 000 Fig. 5: flux observers ψ̂/e", p, mark=w1)
+    bode_figure(flux, np.logspace(0, 5, 2000), "Paper 000 Fig. 5: flux observers ψ̂/e", p, hz=hz, mark=w1)
     paths.append(p)
     # 002 Fig. 4 / Table II (two-sided, the FA-LESO is complex)
     we = papers.LESO_TABLE_II_OMEGA_E
@@ -110,12 +150,27 @@ def paper_bode_figures(out_dir):
         ),
         "FA-LESO (k1 = 10π, k2 = 100π)": linear.faleso_tf(papers.FALESO_K1, papers.FALESO_K2, we),
     }
-    wpos = np.logspace(0, 4.5, 1200)
+    # down to 1e-3 rad/s: the FA-LESO has a pole-zero pair near dc (zero at −k1/k2 = −0.1 rad/s, a pole
+    # at ≈ −k1/(k2 − jω̂e)), a real 3 dB step within ±0.02 Hz that a grid starting at 1 rad/s drew as a
+    # glitch at 0 Hz; the symlog axis's linear part (±1 mHz, ±0.01 rad/s) is narrower than that step
+    wpos = np.logspace(-3, 4.5, 1800)
     omega = np.concatenate([-wpos[::-1], wpos])
     p = out / "bode_lesos_002_fig4.png"
-    fig = bode_figure(leso, omega, "Paper 002 Fig. 4: LESOs ê/e at ω̂e = 100π (two-sided)", None, mark=we)
+    fig = bode_figure(leso, omega, "Paper 002 Fig. 4: LESOs ê/e at ω̂e = 100π (two-sided)", None, hz=hz, mark=we)
     for ax in fig.axes:
-        ax.set_xscale("symlog", linthresh=10)
+        ax.set_xscale("symlog", linthresh=1e-3 if hz else 1e-2)
+    # a zoom on +50 Hz: the GI-LESO's ±1 dB there is its response (a pole-zero pair), not a sampling spike
+    ax_m = fig.axes[0]
+    ins = ax_m.inset_axes((0.13, 0.08, 0.3, 0.42))
+    wz = 2 * math.pi * np.linspace(40.0, 60.0, 801)
+    for i, tf in enumerate(leso.values()):
+        style = {k: v for k, v in _TRACE_STYLES[i].items() if k not in ("marker", "ms", "markevery")}
+        ins.plot(wz / (2 * math.pi) if hz else wz, np.asarray(linear.bode(tf, wz)[0]), color=f"C{i}", **style)
+    ins.axvline(we / (2 * math.pi) if hz else we, color="k", lw=0.6, ls=":")
+    ins.set_title("zoom, magnitude (dB): 40–60 Hz" if hz else "zoom, magnitude (dB): 2π·40–2π·60 rad/s", fontsize=8)
+    ins.tick_params(labelsize=8)
+    ins.grid(True, alpha=0.3)
+    ax_m.legend(fontsize=9, loc="lower right", bbox_to_anchor=(0.86, 0.02))
     _finish(fig, p)
     paths.append(p)
     # 001 Fig. 14: open loops θ̂/(θ − θ̂), Table I gains
@@ -127,7 +182,12 @@ def paper_bode_figures(out_dir):
     }
     p = out / "bode_fll_open_loop_001_fig14.png"
     bode_figure(
-        fll, np.logspace(0, 4, 1500), "Paper 001 Fig. 14: FLL open loops, Table I gains", p, mark=papers.WIF_OMEGA_C
+        fll,
+        np.logspace(0, 4, 1500),
+        "Paper 001 Fig. 14: FLL open loops, Table I gains",
+        p,
+        hz=hz,
+        mark=papers.WIF_OMEGA_C,
     )
     paths.append(p)
     return paths
@@ -230,12 +290,77 @@ def _axis_label(ds, name: str) -> str:
     return f"{name} ({unit})" if unit and unit != "1" else name
 
 
-def study_figures(ds, out_dir):
-    """Heat-maps (mean over the other axes, first two axes) and distributions per metric; returns the paths.
+def _shared_norm(vals):
+    """One colour scale for every panel of a comparison: log where the positive values span more than a
+    decade (designs that differ by decades stay apart), else linear; (norm, is_log)."""
+    from matplotlib.colors import LogNorm, Normalize
 
-    One colour scale per metric across designs (one labelled colour bar) and one set of histogram bins,
-    so designs compare by eye; the rms phase error is shown in degrees.  Settling times that are censored
-    at the horizon (``settled`` False) are counted in the histogram's legend.
+    v = np.asarray(vals, dtype=float)
+    v = v[np.isfinite(v)]
+    if not v.size:
+        return Normalize(0.0, 1.0), False
+    lo, hi = float(v.min()), float(v.max())
+    if lo > 0 and hi / lo > 10.0:
+        return LogNorm(lo, hi), True
+    return Normalize(lo, hi if hi > lo else lo + 1.0), False
+
+
+def _study_heatmap(ds, da, unit, short, axes, designs):
+    a0, a1 = axes[0], axes[1]
+    others = [d for d in axes if d not in (a0, a1)]
+    rows = [("mean", da.mean(dim=others) if others else da)]
+    if others:  # the worst case over the hidden axes beside the mean
+        rows.append(("worst (max)", da.max(dim=others)))
+    norm, is_log = _shared_norm(np.concatenate([np.asarray(r).ravel() for _, r in rows]))
+    nx, ny = len(ds[a0]), len(ds[a1])
+    w = max(3.6, 0.55 * nx + 1.0)  # room for a value in each cell at 9 pt
+    fig, axs = _subplots(
+        len(rows),
+        len(designs),
+        figsize=(w * len(designs) + 1.4, 0.42 * ny * len(rows) + 1.6 * len(rows) + 0.6),
+        squeeze=False,
+    )
+    im = None
+    for r, (how, red) in enumerate(rows):
+        for c, d in enumerate(designs):
+            ax = axs[r, c]
+            arr = np.asarray(red.sel(design=d).transpose(a1, a0), dtype=float)
+            im = ax.imshow(arr, origin="lower", aspect="auto", norm=norm, cmap="viridis")
+            for (j, i), v in np.ndenumerate(arr):  # the value itself: colours alone hide 0.15 vs 0.115
+                if np.isfinite(v):
+                    light = norm(v) < 0.55  # white on the dark end of viridis
+                    ax.text(i, j, f"{v:.2g}", ha="center", va="center", fontsize=9, color="w" if light else "k")
+            ax.set_xticks(range(nx), [f"{v:g}" for v in ds[a0].values], fontsize=9)
+            ax.set_yticks(range(ny), [f"{v:g}" for v in ds[a1].values], fontsize=9)
+            if r == len(rows) - 1:
+                ax.set_xlabel(_axis_label(ds, a0), fontsize=10)
+            if c == 0:
+                ax.set_ylabel(f"{how}\n{_axis_label(ds, a1)}", fontsize=10)
+            ax.set_title(f"{d}: {how}", fontsize=10)
+    fig.subplots_adjust(left=0.07, right=0.88, top=0.86, bottom=0.12, wspace=0.22, hspace=0.4)
+    cax = fig.add_axes((0.9, 0.12, 0.012, 0.74))  # beside the panels, never over one
+    cb = fig.colorbar(im, cax=cax, label=f"{short} ({unit})" + (", log scale" if is_log else ""))
+    if is_log:  # plain numbers (0.2, 0.5, 1), not 2×10⁻¹
+        from matplotlib.ticker import FormatStrFormatter
+
+        cb.ax.yaxis.set_major_formatter(FormatStrFormatter("%g"))
+        cb.ax.yaxis.set_minor_formatter(FormatStrFormatter("%g"))
+    cb.ax.tick_params(which="both", labelsize=9)
+    cb.ax.yaxis.label.set_size(10)
+    how = f"mean and worst case over {', '.join(others)}" if others else "every scenario"
+    fig.suptitle(f"{short} ({unit}): {how}; one colour scale for every panel", fontsize=11)
+    return fig
+
+
+def study_figures(ds, out_dir):
+    """Heat-maps and distributions per metric; returns the paths.
+
+    Heat-maps (a grid of at least two axes): the first two axes, one column per design; the top row is the
+    mean over the other axes and, when there are others, the bottom row their worst case (the max), so a
+    bad corner the mean hides shows.  One colour scale per metric shared by every panel (log where the
+    values span more than a decade), one labelled colour bar, each cell's value written in it; labels
+    ≥ 9 pt.  The rms phase error is shown in degrees.  Histograms: one set of bins per metric; settling
+    times that are censored at the horizon (``settled`` False) are counted in the legend.
     """
     out = Path(out_dir)
     paths = []
@@ -245,26 +370,8 @@ def study_figures(ds, out_dir):
         da = ds[metric] * scale
         finite = np.asarray(da)[np.isfinite(np.asarray(da))]
         if len(axes) >= 2 and "sample" not in axes:
-            a0, a1 = axes[0], axes[1]
-            red = da.mean(dim=[d for d in axes if d not in (a0, a1)]) if len(axes) > 2 else da
-            vals = np.asarray(red)
-            vmin, vmax = (float(np.nanmin(vals)), float(np.nanmax(vals))) if np.isfinite(vals).any() else (0, 1)
-            fig, axs = _subplots(1, len(designs), figsize=(3.6 * len(designs) + 1.2, 3.4), squeeze=False)
-            for ax, d in zip(axs[0], designs):
-                arr = np.asarray(red.sel(design=d).transpose(a1, a0))
-                im = ax.imshow(arr, origin="lower", aspect="auto", vmin=vmin, vmax=vmax)
-                ax.set_xticks(range(len(ds[a0])), [f"{v:g}" for v in ds[a0].values], fontsize=7)
-                ax.set_yticks(range(len(ds[a1])), [f"{v:g}" for v in ds[a1].values], fontsize=7)
-                ax.set_xlabel(_axis_label(ds, a0))
-                ax.set_title(str(d), fontsize=9)
-            axs[0, 0].set_ylabel(_axis_label(ds, a1))
-            fig.subplots_adjust(left=0.1, right=0.86, top=0.8, bottom=0.16, wspace=0.25)
-            fig.colorbar(im, ax=list(axs[0]), label=f"{short} ({unit})")
-            others = [d for d in axes if d not in (a0, a1)]
-            how = f"mean over {', '.join(others)}" if others else "every scenario"
-            fig.suptitle(f"{short} ({unit}), {how}; one colour scale for all designs", fontsize=10)
             p = out / f"heatmap_{metric}.png"
-            fig.savefig(p, dpi=100)  # the colour bar spans the axes: no tight_layout
+            _study_heatmap(ds, da, unit, short, axes, designs).savefig(p, dpi=100)  # no tight_layout: the bar
             paths.append(p)
         fig, ax = _subplots(figsize=(6, 3.4))
         bins = np.histogram_bin_edges(finite, bins=30) if finite.size else 30
@@ -279,7 +386,8 @@ def study_figures(ds, out_dir):
         ax.set_xlabel(f"{short} ({unit})")
         ax.set_ylabel("scenarios")
         ax.set_title(f"{short} over {int(ds.attrs.get('scenarios', finite.size))} scenarios per design", fontsize=10)
-        ax.legend(fontsize=8)
+        ax.tick_params(labelsize=9)
+        ax.legend(fontsize=9)
         p = out / f"distribution_{metric}.png"
         _finish(fig, p, dpi=100)
         paths.append(p)
@@ -513,7 +621,10 @@ def envelope_figure(ds, path):
                 ax.set_xlabel("speed (r/min, log)", fontsize=8)
             if c == 0:
                 ax.set_ylabel("load (N·m)", fontsize=8)
-        cb = fig.colorbar(mesh, ax=list(axs[r]), shrink=0.95, pad=0.01)
+        # the scale is the 95th percentile (a lost point would swamp the rest): arrows mark values beyond it
+        lo_x, hi_x = bool(fin.size and fin.min() < vmin), bool(fin.size and fin.max() > vmax)
+        extend = {(True, True): "both", (True, False): "min", (False, True): "max"}.get((lo_x, hi_x), "neither")
+        cb = fig.colorbar(mesh, ax=list(axs[r]), shrink=0.95, pad=0.01, extend=extend)
         cb.set_label(label, fontsize=7)
         cb.ax.tick_params(labelsize=7)
     bound = ds.attrs.get("bound_deg", float("nan"))
