@@ -179,9 +179,14 @@ def _cmd_study(args) -> int:
     name, designs, axes = spec.name, spec.designs, spec.axes
     opts = dict(spec.opts, kind=spec.kind, provenance=spec.provenance)
     out = Path(args.out) if args.out else Path("out") / safe_name(str(name), "study")
+    # an FLL study writes each chunk's results under study.chunks/ as it finishes (jaxobs.chunkstore): a
+    # kill loses at most the chunks being computed, and --resume continues from the last complete one
+    resume = f"jaxobs study {shlex.quote(str(path))} --out {shlex.quote(str(out))} --resume"
+    hint = f"an earlier run stopped here: continue it with `{resume}` (--force starts over and discards it)"
+    products = ["study.nc"] + ([] if args.resume or spec.kind != "fll" else [STUDY_CHUNKS])
     if args.check:
         if args.out:  # what the real run would refuse (an explicit --out: the default one may not exist yet)
-            OutDir(out, ["study.nc"], force=args.force).check()
+            OutDir(out, products, force=args.force, hints={STUDY_CHUNKS: hint}).check()
         print(f"{path}: OK — {spec.kind} study {name!r}, {len(designs)} designs x {spec.scenarios} scenarios")
         return 0
     if rank is not None and rank[1] > 1:
@@ -192,11 +197,6 @@ def _cmd_study(args) -> int:
         with OutDir(out, ["study.nc"], force=args.force):
             args.log_dir = out
             return _run_study(name, designs, axes, opts, out, args.quiet)
-    # an FLL study writes each chunk's results under study.chunks/ as it finishes (jaxobs.chunkstore): a
-    # kill loses at most the chunks being computed, and --resume continues from the last complete one
-    resume = f"jaxobs study {shlex.quote(str(path))} --out {shlex.quote(str(out))} --resume"
-    hint = f"an earlier run stopped here: continue it with `{resume}` (--force starts over and discards it)"
-    products = ["study.nc"] + ([] if args.resume else [STUDY_CHUNKS])
     with OutDir(out, products, force=args.force, hints={STUDY_CHUNKS: hint}):
         args.log_dir = out
         args.on_interrupt = f"; continue with: {resume}"  # what Ctrl-C says (main)
