@@ -47,6 +47,7 @@ import numpy as np
 
 from ._discretize import Knots
 from ._loop import AbstractCheckpoint, AutoCheckpoint, check_unroll, run_loop
+from ._measurements import DriveInput
 from ._system import AbstractSystem
 from ._time import SampleTime
 from ._validate import check_sample_time
@@ -317,10 +318,10 @@ class OnSignal(AbstractSystem):
         return u, path, truth
 
     def _sample_offset(self) -> int | None:
-        """The index of sample 0's time in a :class:`SampledSignal` on this system's sample grid (same
-        interval, t0 on a sample instant), else None."""
+        """The index of sample 0's time in a recording (:class:`SampledSignal`, :class:`DriveRecording`) on this
+        system's sample grid (same interval, t0 on a sample instant), else None."""
         sig = self.signal
-        if self.knots or not isinstance(sig, SampledSignal):
+        if self.knots or not isinstance(sig, (SampledSignal, DriveRecording)):
             return None
         ts = float(self.ts)
         if abs(sig.ts - ts) > 1e-12 * ts:
@@ -331,9 +332,9 @@ class OnSignal(AbstractSystem):
     def input_block(self, kb):
         """``input`` at the consecutive sample indices ``kb`` (leading axis the block), computed together.
 
-        A recording on this system's own sample grid (a :class:`SampledSignal` with the observer's
-        interval) is read as one contiguous slice of each sample array: at those instants
-        ``SampledSignal.__call__`` snaps to the sample, so the values are the same (in float32 a
+        A recording on this system's own sample grid (a :class:`SampledSignal` or :class:`DriveRecording`
+        with the observer's interval) is read as one contiguous slice of each sample array: at those
+        instants the recording's ``__call__`` snaps to the sample, so the values are the same (in float32 a
         sample time t_k rounded by more than SNAP of an interval reads a blend of neighbours there, the
         exact sample here).  Under ``vmap`` over recordings the slice is a block of B rows, where a
         per-step read (``input`` mapped over the block) gathers one column per step.  Anything else
@@ -348,8 +349,16 @@ class OnSignal(AbstractSystem):
         def read(a):
             return jnp.moveaxis(jax.lax.dynamic_slice_in_dim(a, start, size, axis=-1), -1, 0)
 
-        u = read(self.signal.samples)
         sig = self.signal
+        if isinstance(sig, DriveRecording):
+            m = read(sig.samples)  # (block, 4): u_α, u_β, i_α, i_β
+            u = DriveInput(u_a=m[:, 0], u_b=m[:, 1], i_a=m[:, 2], i_b=m[:, 3])
+            truth = None
+            if self.has_truth:  # DriveRecording.theta / omega / fundamental_amplitude at the samples
+                amp = jnp.sqrt(u.u_a * u.u_a + u.u_b * u.u_b)
+                truth = SignalTruth(read(sig.theta_e), read(sig.omega_e), amp)
+            return u, u, truth
+        u = read(sig.samples)
         truth = SignalTruth(*(read(a) for a in sig.truth)) if sig.truth is not None else None
         return u, u, truth
 

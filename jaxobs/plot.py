@@ -621,7 +621,10 @@ def envelope_figure(ds, path):
                 ax.set_xlabel("speed (r/min, log)", fontsize=8)
             if c == 0:
                 ax.set_ylabel("load (N·m)", fontsize=8)
-        cb = fig.colorbar(mesh, ax=list(axs[r]), shrink=0.95, pad=0.01)
+        # the scale is the 95th percentile (a lost point would swamp the rest): arrows mark values beyond it
+        lo_x, hi_x = bool(fin.size and fin.min() < vmin), bool(fin.size and fin.max() > vmax)
+        extend = {(True, True): "both", (True, False): "min", (False, True): "max"}.get((lo_x, hi_x), "neither")
+        cb = fig.colorbar(mesh, ax=list(axs[r]), shrink=0.95, pad=0.01, extend=extend)
         cb.set_label(label, fontsize=7)
         cb.ax.tick_params(labelsize=7)
     bound = ds.attrs.get("bound_deg", float("nan"))

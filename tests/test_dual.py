@@ -189,15 +189,24 @@ def test_faleso_closes_the_loop_on_the_mode_s_observer_input(mode):
 # --- jaxobs reproduce leso --machine dual -------------------------------------------------------------------
 
 
-def test_reproduce_leso_dual_rows():
+def test_reproduce_leso_dual_rows(tmp_path):
     """Figs 13-15 on the dual machine: the FA-LESO attenuates the first set's 5th/7th most; under VSD the
-    αβ subspace carries none (002: "negligible"); every run finite and the FA-LESO's angle held."""
-    from jaxobs.reproduce.leso_dual import DUAL_EXPERIMENTS, run_leso_dual
+    αβ subspace carries none (002: "negligible"); every run finite and the FA-LESO's angle held; each
+    experiment's figure draws (the CLI's --machine dual figures)."""
+    from jaxobs.plot import position_error_figure
+    from jaxobs.reproduce.leso import LESO_NAMES
+    from jaxobs.reproduce.leso_dual import DUAL_EXPERIMENTS, DUAL_LOAD_STEP, run_leso_dual
+    from tuning.cli_papers import REPRODUCE_DUAL_FILES
 
-    rows, _ = run_leso_dual()
+    rows, traces = run_leso_dual()
+    keys = [e[0] for e in DUAL_EXPERIMENTS] + [DUAL_LOAD_STEP]
+    assert list(traces) == keys and len(REPRODUCE_DUAL_FILES) == len(keys)
+    for key, fname in zip(keys, REPRODUCE_DUAL_FILES):
+        position_error_figure(traces[key], LESO_NAMES, key, tmp_path / fname, t_from=0.4)
+    assert sorted(p.name for p in tmp_path.glob("*.png")) == sorted(REPRODUCE_DUAL_FILES)
     by = {(r["experiment"], r["observer"], r["metric"]): r for r in rows}
     assert len(rows) == len(DUAL_EXPERIMENTS) * (3 * 2 + 4) + 2
-    step = "dual VSD load step 0-80 % at 600 r/min"
+    step = DUAL_LOAD_STEP
     assert by[(step, "drive", "finite")]["ours"] is True and by[(step, "FA-LESO", "max_abs")]["paper"] == 3.2
     assert 1.0 < by[(step, "FA-LESO", "max_abs")]["ours"] < 45.0  # the PLL's acceleration error, bounded
     for name, mode, *_ in DUAL_EXPERIMENTS:

@@ -33,6 +33,7 @@ LAYERS = [
         "jaxobs.provenance",
         "jaxobs._cache",
         "jaxobs.drive.component",
+        "jaxobs.chunkstore",
     ),
     # integration rules (and check_rule)
     ("jaxobs._discretize",),
@@ -94,6 +95,7 @@ LAYERS = [
     ("tuning.job.fields",),
     ("tuning.job.toml", "tuning.job.components", "tuning.job.spec"),
     ("tuning.job.recordings", "tuning.job.drive", "tuning.job.output"),
+    ("tuning.job.verify",),
     ("tuning.job.schema", "tuning.job.scenarios"),
     ("tuning.job.run",),
     ("tuning.job",),

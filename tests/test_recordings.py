@@ -157,6 +157,20 @@ def test_drive_recording_runs_a_flux_observer_open_loop_against_the_encoder():
     e_bad = np.degrees(np.asarray(M.wrap(jaxobs.simulate(jaxobs.OnSignal(bad, rec_w), 0.3).outputs.obs.theta)))
     e_bad = np.degrees(np.asarray(M.wrap(np.radians(e_bad) - np.asarray(sol.outputs.truth.theta))))
     assert np.sqrt(np.mean(e_bad[steady] ** 2)) > 2 * np.sqrt(np.mean(err[steady] ** 2))
+    # the throughput loop (SaveFinal) reads the recording a block at a time (OnSignal.input_block, one slice
+    # per block): the same samples and truth as the per-step read (the amplitude |u_ab| to its last bit: XLA
+    # contracts the vectorized sum of squares differently), and the same running cost
+    system = jaxobs.OnSignal(obs, rec_w)
+    assert system._sample_offset() == 0
+    ks = jnp.arange(5, 133, dtype=jnp.int32)
+    for a, b in zip(jax.tree.leaves(system.input_block(ks)), jax.tree.leaves(jax.lax.map(system.input, ks))):
+        np.testing.assert_allclose(a, b, rtol=4e-16, atol=0)
+
+    def cost(o):
+        return M.wrap(o.obs.theta - o.truth.theta) ** 2 + 1e-3 * o.truth.amplitude + 1e-6 * o.u.i_b
+
+    fast = jaxobs.simulate(system, 0.3, save=jaxobs.SaveFinal(cost=cost))
+    np.testing.assert_allclose(fast.cost, jaxobs.simulate(system, 0.3, save=jaxobs.SaveAll(cost=cost)).cost, rtol=1e-12)
 
 
 def test_shipped_grid_recording_is_reproducible():

@@ -288,3 +288,77 @@ def test_csv_fifo_is_refused(tmp_path):
     os.mkfifo(p)
     done, e = _in_thread(lambda: jaxobs.SampledSignal.from_csv(p, time_column="t"))
     assert done and isinstance(e, ValueError) and "not a file" in str(e)
+
+
+# --------------------------------------------------------------------------
+# bounded: every size a flag or a number in a file can set ends in one line naming it, exit 2
+# --------------------------------------------------------------------------
+
+
+def _one_line_exit_2(capsys, argv, match):
+    """``jaxobs ARGV`` exits 2 (returned, or argparse's SystemExit) with ``match`` on stderr's last line, and
+    nothing but argparse's usage before it."""
+    from tuning.cli import main
+
+    try:
+        rc = main(argv)
+    except SystemExit as e:  # argparse: usage, then one error line
+        rc = e.code
+    assert rc == 2
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert match in lines[-1] and all(ln.startswith(("usage:", " ")) for ln in lines[:-1]), lines
+
+
+@pytest.mark.parametrize(
+    "argv, match",
+    [
+        (["export", "--design", "wif", "--steps", "100000000"], "--steps must be in 10000..2000000"),
+        (["export", "--design", "wif", "--ts", "1e-300"], "--ts must be a sample time in [1e-09, 1] s"),
+        (["export", "--design", "wif", "--ts", "10"], "--ts must be a sample time"),
+        (["study", "s.toml", "--coordinator", "localhost:1", "--num-processes", "2", "--process-id", "1",
+          "--timeout", "2147483648"], "--timeout: must be an integer >= 1 and <= 86400"),
+        (["study", "s.toml", "--num-processes", "9" * 5000], "--num-processes: must be an integer >= 1"),
+    ],
+)  # fmt: skip
+def test_flag_sizes_are_bounded(tmp_path, capsys, argv, match):
+    """`export --steps 100000000` wrote 6.3 GB; `--ts 1e-300` underflowed to 0 in float32 and --check said OK;
+    `--timeout 2147483648` was a TypeError (issue 30)."""
+    if argv[0] == "export":
+        argv = [*argv, "--out", str(tmp_path / "x"), "--no-cache"]
+    _one_line_exit_2(capsys, argv, match)
+
+
+def test_a_5000_digit_integer_in_a_job_names_its_field(tmp_path, capsys):
+    """ "Exceeds the limit (4300 digits)", naming no field (issue 30)."""
+    from importlib import resources
+
+    text = (resources.files("tuning") / "presets" / "wif_robust.toml").read_text()
+    assert "seed = 0" in text
+    job = tmp_path / "job.toml"
+    job.write_text(text.replace("seed = 0", "seed = " + "9" * 5000))
+    _one_line_exit_2(capsys, ["tune", str(job), "--check", "--no-cache"], "job.seed: a number of 5000 digits")
+
+
+# --------------------------------------------------------------------------
+# studies apply the jobs' physical ranges (one validator: tuning.job.check_speed_axes)
+# --------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    "machine, axes, field",
+    [
+        ("ipmsm002", "speed_rpm = [600.0, 5000.0]", "axes.speed_rpm[1]"),
+        ("spmsm000", "speed_rpm = [600.0, 3000.0]", "axes.speed_rpm[1]"),
+        ("ipmsm002", "speed_rpm = [600.0]\nspeed_step_rpm = [1000.0]", "axes.speed_step_rpm[0]"),
+    ],
+)
+def test_drive_study_speeds_within_the_inverter_limit(tmp_path, capsys, machine, axes, field):
+    """A drive study with speed_rpm = [600, 5000] on ipmsm002 passed --check, though jobs refuse anything
+    above 1323 r/min (issue 30)."""
+    comp = "CLESO" if machine == "ipmsm002" else "SOIFO"
+    study = tmp_path / "s.toml"
+    study.write_text(
+        f'[study]\nkind = "drive"\nmachine = "{machine}"\nhorizon = 0.2\n'
+        f'[designs.a]\nclosed_form = "{comp}"\n[axes]\n{axes}\n'
+    )
+    _one_line_exit_2(capsys, ["study", str(study), "--check", "--no-cache"], f"{field}: ")

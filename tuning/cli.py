@@ -39,6 +39,8 @@ Every failure ends the program with one line on stderr.  Exit statuses:
   writable, locked by another process, results there without ``--force``), a checkpoint that ``--resume``
   cannot use (corrupt, or another job's);
 - 3: ``tune`` only: every design tried diverged (status ``diverged``, nothing tuned);
+- 4: ``tune`` only: status ``unsafe``: the tuned design lost stability or synchronism inside the job's
+  ``[envelope]`` where the closed form holds (its results are written; the warning names the points);
 - 130: interrupted (Ctrl-C).
 
 Every command that writes (``tune``, ``study``, ``demo``, ``bode``, ``reproduce``, ``export``) writes only
@@ -82,7 +84,7 @@ from .cli_papers import closed_form_rows as closed_form_rows
 from .distributed import distributed_asked, distributed_study, join_distributed, refuse_unsplittable
 from .envelope import add_envelope_parser
 from .export import add_export_parser
-from .job import CHECKPOINT, load_job, load_recordings, run_job
+from .job import CHECKPOINT, UNSAFE_EXIT, load_job, load_recordings, run_job
 from .outdir import OutDir, atomic_path, atomic_write_text, safe_name
 from .study_file import load_study as _load_study
 from .study_file import study_fingerprint
@@ -115,15 +117,22 @@ def _cmd_drive_study(name, designs, axes, opts, out: Path, quiet: bool, provenan
     wd = max(len("design"), *(len(str(d)) for d in ds["design"].values)) + 2
     wm = max(len(x) for x in labels.values()) + 2
     head = f"{'design':<{wd}}{'metric':<{wm}}" + "".join(f"{'q' + format(q, 'g'):>10}" for q in qs)
-    head += f"{'lost lock':>11}"
+    head += f"{'diverged':>10}{'lost lock':>11}{'lost speed':>12}"
     print(head)
+    warnings = []
     for d in ds["design"].values:
         lost = int(ds["lost_lock_count"].sel(design=d))
+        div = int(ds["diverged"].sel(design=d).sum())
+        speed = int(ds["lost_speed_count"].sel(design=d))
         for m in DRIVE_STUDY_METRICS:
             vals = ds[f"{m}_q"].sel(design=d).values
             row = f"{str(d):<{wd}}{labels[m]:<{wm}}" + "".join(f"{v:>10.4g}" for v in vals)
-            print(row + f"{lost:>11}")
+            print(row + f"{div:>10}{lost:>11}{speed:>12}")
+        if div or lost or speed:  # on stderr too: a summary piped away still says what was lost
+            warnings.append(f"{d}: diverged in {div}, lost lock in {lost}, lost speed in {speed} of {n} scenarios")
     print(f"results: {out / 'study.nc'}, {fig}")
+    for w in warnings:
+        print(f"jaxobs: warning: {w}", file=sys.stderr)
     return 0
 
 
@@ -234,6 +243,10 @@ def _run_study(name, designs, axes, opts, out: Path, quiet: bool, store=None) ->
             row += f"{k * float(sel[m].mean()):>25.4g}{k * float(sel[m].max()):>10.4g}"
         print(row + f"{int(sel['diverged'].sum()):>10}{int(sel['lost_lock_count']):>11}")
     print(f"results: {out / 'study.nc'}, {out / 'worst_cases.json'}, {len(figs)} figures")
+    for d in ds["design"].values:  # on stderr too: a summary piped away still says what was lost
+        div, lost = int(ds["diverged"].sel(design=d).sum()), int(ds["lost_lock_count"].sel(design=d))
+        if div or lost:
+            print(f"jaxobs: warning: {d}: diverged in {div}, lost lock in {lost} of {n} scenarios", file=sys.stderr)
     return 0
 
 
@@ -273,7 +286,7 @@ def _cmd_tune(args) -> int:
     except (OSError, ValueError):
         timing = {}
     print_summary(result, out, timing)
-    return 3 if result["status"] == "diverged" else 0
+    return {"diverged": 3, "unsafe": UNSAFE_EXIT}.get(result["status"], 0)
 
 
 class _Parser(argparse.ArgumentParser):
@@ -289,19 +302,23 @@ def _host_port(text: str) -> str:
     return text
 
 
-def _int_at_least(low: int):
-    """argparse type: an integer >= ``low``."""
+def _int_at_least(low: int, high: int):
+    """argparse type: an integer in ``low..high`` (its digits bounded before conversion)."""
 
     def parse(text: str) -> int:
         try:
-            v = int(text)
+            v = int(text) if len(text) <= 20 else None
         except ValueError:
             v = None
-        if v is None or v < low:
-            raise argparse.ArgumentTypeError(f"must be an integer >= {low}, got {text!r}")
+        if v is None or not low <= v <= high:
+            raise argparse.ArgumentTypeError(f"must be an integer >= {low} and <= {high}, got {text[:30]!r}")
         return v
 
     return parse
+
+
+MAX_PROCESSES = 65_536  # --num-processes
+MAX_TIMEOUT_S = 86_400  # --timeout: a day (2147483648 overflowed JAX's timer: a TypeError)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -390,14 +407,18 @@ def build_parser() -> argparse.ArgumentParser:
         "--distributed to take them from the environment (JAX_COORDINATOR_ADDRESS, SLURM's srun, Open MPI)",
     )
     dist.add_argument("--coordinator", type=_host_port, metavar="HOST:PORT", help="process 0's address and a free port")
-    dist.add_argument("--num-processes", type=_int_at_least(1), metavar="N", help="the number of processes, >= 1")
-    dist.add_argument("--process-id", type=_int_at_least(0), metavar="I", help="this process's index, 0..N-1")
+    dist.add_argument(
+        "--num-processes", type=_int_at_least(1, MAX_PROCESSES), metavar="N", help="the number of processes, >= 1"
+    )
+    dist.add_argument(
+        "--process-id", type=_int_at_least(0, MAX_PROCESSES - 1), metavar="I", help="this process's index, 0..N-1"
+    )
     dist.add_argument(
         "--distributed", action="store_true", help="join a distributed run; what is not given, the environment gives"
     )
     dist.add_argument(
         "--timeout",
-        type=_int_at_least(1),
+        type=_int_at_least(1, MAX_TIMEOUT_S),
         metavar="S",
         help="seconds to wait for every process to join (default 300); then a process other than 0 that found "
         "no process 0 exits 2 with one line, and a process 0 left alone is aborted by JAX (exit 134)",

@@ -29,6 +29,13 @@ REPRODUCE_FILES = {
     ),
     "leso": ("leso_position_error_600rpm.png", "leso_speed_ramp.png", "leso_load_step.png"),
 }
+# ``reproduce leso --machine dual`` adds these (jaxobs.reproduce.leso_dual's experiments, in its order)
+REPRODUCE_DUAL_FILES = (
+    "leso_dual_individual_300rpm.png",
+    "leso_dual_individual_600rpm.png",
+    "leso_dual_vsd_600rpm.png",
+    "leso_dual_load_step.png",
+)
 
 
 def cmd_demo(args) -> int:
@@ -184,14 +191,15 @@ def cmd_reproduce(args) -> int:
     enable_x64()
     if args.paper not in REPRODUCE_FILES:
         raise ValueError(f"reproduce: unknown paper {args.paper!r}")
+    if args.machine != "single" and args.paper != "leso":
+        raise ValueError(f"reproduce {args.paper}: --machine must be 'single' (the dual machine is paper 002's)")
     args.out = args.out or f"out/reproduce-{args.paper}"
-    with CommandOut(args, REPRODUCE_FILES[args.paper]) as out:
+    files = REPRODUCE_FILES[args.paper] + (REPRODUCE_DUAL_FILES if args.machine == "dual" else ())
+    with CommandOut(args, files) as out:
         return _reproduce(args, out)
 
 
 def _reproduce(args, out: Path) -> int:
-    if args.machine != "single" and args.paper != "leso":
-        raise ValueError(f"reproduce {args.paper}: --machine must be 'single' (the dual machine is paper 002's)")
     if args.paper == "flux":
         from jaxobs.plot import flux_circles_figure
         from jaxobs.reproduce.flux import OBSERVER_NAMES, run_flux_experiments
@@ -246,6 +254,12 @@ def _reproduce(args, out: Path) -> int:
             ),
             out,
         )
+        if args.machine == "dual":
+            from jaxobs.reproduce.leso_dual import DUAL_EXPERIMENTS, DUAL_LOAD_STEP
+
+            keys = [e[0] for e in DUAL_EXPERIMENTS] + [DUAL_LOAD_STEP]
+            specs = zip(keys, REPRODUCE_DUAL_FILES, (0.4,) * len(keys), strict=True)
+            figs += _error_figures(traces, LESO_NAMES, "002, dual three-phase", specs, out)
         return _emit_rows(
             rows, figs, args.json, "Paper 002 (LESOs) experiments on the simulated IPMSM drive — paper vs ours"
         )

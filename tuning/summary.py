@@ -88,7 +88,14 @@ def print_summary(result: dict, out: Path, timing: dict | None = None):
     for name, b in result.get("at_bound", {}).items():
         msg = f"warning: tuned {name} = {b['value']:.6g} is within 1 % of its {b['bound']} bound {b['limit']:g}"
         print(f"jaxobs: {msg}", file=sys.stderr)
-    if result["status"] == "budget":
+    ver = result.get("verification")
+    if ver is not None:
+        n = {d: v["failed_points"] for d, v in ver["designs"].items()}
+        line = ", ".join(f"{d.replace('_', ' ')} fails {k}" for d, k in n.items())
+        print(f"verified over {ver['horizon_s']:g} s at {len(ver['points'])} envelope points: {line}")
+    if result["status"] == "unsafe":
+        print(f"jaxobs: warning: UNSAFE: {result['reason']} (verification in result.json)", file=sys.stderr)
+    if result.get("tuning_status", result["status"]) == "budget":
         print(
             f"jaxobs: warning: the solver's budget ran out before its stopping rule ({result['reason']}): "
             "the tuned gains may not be an optimum (raise solver.steps)",

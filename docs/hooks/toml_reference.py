@@ -229,6 +229,12 @@ NOTES = {
     "recording.time_column": ("string or integer", "", "a column of seconds (name or 0-based index)"),
     "recording.columns": ("list of strings or integers", "see below", "the signal's columns (names or indices)"),
     "recording.truth": ("list of strings or integers", "see below", "the reference columns (names or indices)"),
+    "envelope.speed_rpm": (
+        "[lo, hi] numbers",
+        "the tuning grid's span",
+        "r/min, 1 <= lo <= hi <= the machine's drive speed limit (2835 on spmsm000, 1323 on ipmsm002)",
+    ),
+    "envelope.load_nm": ("[lo, hi] numbers", "the tuning grid's span", "N·m, 0 <= lo <= hi <= 3 × rated torque"),
 }
 
 
@@ -390,6 +396,19 @@ def reference_markdown() -> str:
             'Drive jobs only (`scenarios.signal = "drive"`). Machines: '
             + ", ".join(f"`{m}`" for m in BENCH_MACHINES)
             + ".",
+        )
+    )
+    out.append(
+        _table(
+            "[envelope]",
+            allowed_keys(parse, d, ("envelope",), drive_job.parent),
+            "envelope",
+            index,
+            None,
+            "Sensorless drive jobs, optional: the envelope the design claims. After tuning, initial, closed form "
+            "and tuned run at 3 speeds × 2 loads of it over `horizon` s, with the Lyapunov verdict at the same "
+            "points (`verification` in result.json); a tuned design failing where the closed form holds is "
+            'status `"unsafe"`, exit 4.',
         )
     )
     out.append(_table("[objective]", allowed_keys(parse, g, ("objective",), grid_job.parent), "objective", index, None))

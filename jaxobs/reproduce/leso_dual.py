@@ -30,7 +30,7 @@ from ..metrics import harmonic_amplitude
 from ..progress import Progress
 from .leso import LESO_NAMES, leso_bank
 
-__all__ = ["DUAL_EXPERIMENTS", "run_leso_dual"]
+__all__ = ["DUAL_EXPERIMENTS", "DUAL_LOAD_STEP", "run_leso_dual"]
 
 # (name, current control, r/min, load as a fraction of rated, 002's (5th, 7th) % per LESO or None)
 DUAL_EXPERIMENTS = (
@@ -38,6 +38,8 @@ DUAL_EXPERIMENTS = (
     ("dual individual sets 600 r/min 40 % load", "individual", 600, 0.4, ((4.1, 4.5), (2.7, 2.9), (0.6, 0.7))),
     ("dual VSD 600 r/min 80 % load", "vsd", 600, 0.8, None),
 )
+# Fig. 17 on the dual machine under VSD control
+DUAL_LOAD_STEP = "dual VSD load step 0-80 % at 600 r/min"
 
 
 def _simulate(machine, mode, rpm0, speed_ref, load, t1):
@@ -82,7 +84,7 @@ def run_leso_dual(progress=None, t1: float = 1.0, dynamics: bool = True):
         rows.append(dict(experiment=name, observer="drive", metric="xy_rms", unit="A", paper=None, ours=ixy))
         bar.update()
     if dynamics:
-        name = "dual VSD load step 0-80 % at 600 r/min"
+        name = DUAL_LOAD_STEP
         bar.stage(f"{name} (1.2 s)")
         load = D.Scenario.load_steps([0.0, 0.6, 0.9], [0.0, 0.8 * rated, 0.0])
         sol = _simulate(machine, "vsd", 600, D.Profile.constant(600 * D.RPM), load, 1.2)

@@ -16,7 +16,7 @@ from jaxobs.observers import (
 
 from ..outdir import OutDir
 from .files import EXPORT_FILES, export_observer
-from .golden import MIN_STEPS, recording_bench
+from .golden import MAX_STEPS, MIN_STEPS, recording_bench
 from .harness import CFLAGS, TOLERANCE, compile_and_check
 from .sources import DESIGNS, RULES, observer_from_design, observer_from_result, rebuild
 
@@ -52,13 +52,19 @@ def add_export_parser(subparsers) -> argparse.ArgumentParser:
     return e
 
 
+MIN_TS, MAX_TS = 1e-9, 1.0  # --ts, s: a normal float32, a sample rate from 1 Hz to 1 GHz
+
+
 def cli_export(args) -> int:
     """``jaxobs export``: 0 on success, 1 if --check finds the C off the golden vectors; bad input raises ValueError."""
     jax.config.update("jax_enable_x64", True)  # the closed forms in double, as `jaxobs closed-form` computes them
     if (args.result is None) == (args.design is None):
         raise ValueError("export: give a result.json or --design (one of them)")
-    if args.ts is not None and not (math.isfinite(args.ts) and args.ts > 0):
-        raise ValueError(f"--ts must be a sample time > 0 s, got {args.ts}")
+    if args.ts is not None and not (math.isfinite(args.ts) and MIN_TS <= args.ts <= MAX_TS):
+        # float32 C: 1e-300 underflowed to 0 and --check said OK
+        raise ValueError(f"--ts must be a sample time in [{MIN_TS:g}, {MAX_TS:g}] s, got {args.ts}")
+    if not MIN_STEPS <= args.steps <= MAX_STEPS:  # every golden record: bounded work, bounded golden.csv
+        raise ValueError(f"--steps must be in {MIN_STEPS}..{MAX_STEPS}, got {args.steps}")
     # the output folder is checked and locked before any work (tuning.outdir): no symlinks, one writer,
     # an existing export kept unless --force
     with OutDir(Path(args.out), EXPORT_FILES, force=getattr(args, "force", False)):

@@ -19,6 +19,7 @@ from jaxobs.progress import Progress
 from ..outdir import atomic_path, atomic_write_text
 from .codegen import CStep, gain_macro, generate, is_angle, leaf_name, reference, rule_doc, statics, write_c
 from .golden import (
+    MAX_STEPS,
     MIN_STEPS,
     assumed_machine,
     drive_recording,
@@ -77,6 +78,8 @@ def export_observer(
     if signal is None or (isinstance(signal, str) and signal == "synthetic" and kind == "drive"):
         if not (isinstance(n_steps, int) and n_steps >= MIN_STEPS):
             raise ValueError(f"export: n_steps must be an integer >= {MIN_STEPS}, got {n_steps!r}")
+        if n_steps > MAX_STEPS:  # a bound on the work and on golden.csv's size
+            raise ValueError(f"export: n_steps must be <= {MAX_STEPS}, got {n_steps}")
     if signal is None and kind == "signal":
         # an FLL's nominal frequency when it has one, else 50 Hz
         f0 = float(getattr(obs32, "omega_n", 2 * math.pi * 50.0)) / (2 * math.pi)

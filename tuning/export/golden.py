@@ -25,6 +25,7 @@ from jaxobs.observers import (
 from .codegen import CStep
 
 MIN_STEPS = 10_000  # the golden record is at least this long
+MAX_STEPS = 2_000_000  # and at most this long (about 100 MB of golden.csv; 10^8 wrote 6.3 GB before)
 
 
 def fll_test_signal(ts: float, n_steps: int, f0: float = 50.0, amplitude: float = 1.0):

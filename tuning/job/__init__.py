@@ -2,7 +2,8 @@
 
 The modules, lowest first: ``fields`` (JobError, typed getters), ``toml`` (safe reading), ``components``
 (what can be tuned), ``spec`` (the parsed job as data), ``recordings`` and ``drive`` (their tables),
-``schema`` (the whole file), ``scenarios`` (the batched signals), ``output`` (what is written), ``run``.
+``verify`` (``[envelope]`` and the long-horizon verification after tuning), ``schema`` (the whole file),
+``scenarios`` (the batched signals), ``output`` (what is written), ``run``.
 
 A job file::
 
@@ -40,6 +41,11 @@ A job file::
     [drive]                          # drive jobs only (scenarios.signal = "drive")
     loop = "sensorless"              # sensorless (the tuned observer closes the loop) | sensored
     machine = "spmsm000"             # ipmsm002 | spmsm000; default: the component's (LESOs 002, flux 000)
+    speed_schedule = 6.0             # the FOC's speed loop at min(α_s, |ωe*|/N); 0 (default): off
+    [envelope]                       # drive jobs: the envelope claimed, verified after tuning (verify)
+    speed_rpm = [200.0, 2000.0]      # [lo, hi]; default: the span of the tuning grid
+    load_nm = [0.0, 5.0]
+    horizon = 2.0                    # s, each verification run
 
     [objective]
     terms = [{ metric = "itae_freq", weight = 1.0 }]
@@ -57,6 +63,7 @@ A job file::
 
 from .components import COMPONENTS as COMPONENTS
 from .components import ComponentInfo as ComponentInfo
+from .drive import check_speed_axes as check_speed_axes
 from .drive import job_drive as job_drive
 from .fields import MAX_SCENARIOS as MAX_SCENARIOS
 from .fields import MAX_STEPS as MAX_STEPS
@@ -82,3 +89,6 @@ from .spec import Job as Job
 from .spec import RecordingSpec as RecordingSpec
 from .spec import ScenarioSpec as ScenarioSpec
 from .toml import read_toml as read_toml
+from .verify import UNSAFE_EXIT as UNSAFE_EXIT
+from .verify import EnvelopeSpec as EnvelopeSpec
+from .verify import verify_designs as verify_designs

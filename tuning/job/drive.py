@@ -74,21 +74,27 @@ def parse_start(dt: dict, drive: DriveSpec, scen) -> DriveSpec:
 
 
 def check_drive_speeds(spec: ScenarioSpec, where: str, machine: str) -> None:
-    """speed_rpm and speed_rpm + speed_step_rpm (every combination of the grid) within ± the machine's
-    :func:`jaxobs.drive.drive_speed_limit_rpm`, at --check time."""
-    speeds, steps = spec.axes.get("speed_rpm"), spec.axes.get("speed_step_rpm", [0.0])
+    """A drive job's grid (``where``.grid) through :func:`check_speed_axes`, at --check time."""
+    check_speed_axes(spec.axes, f"{where}.grid", machine)
+
+
+def check_speed_axes(axes: dict, where: str, machine: str) -> None:
+    """The one check of drive speeds, for jobs and studies: ``speed_rpm`` and ``speed_rpm + speed_step_rpm``
+    (every combination of the axes, so every point a sampler draws inside their ranges too) within ± the
+    machine's :func:`jaxobs.drive.drive_speed_limit_rpm`; ``where``: the table holding the axes."""
+    speeds, steps = axes.get("speed_rpm"), axes.get("speed_step_rpm", [0.0])
     if not speeds:
         return
     n_max = D.drive_speed_limit_rpm(D.bench_machine(machine))
     rng = f"must be in [1, {n_max:.0f}] r/min on {machine} (its back EMF reaches the inverter's voltage limit there)"
     for i, x in enumerate(speeds):
         if abs(x) > n_max:
-            raise JobError(f"{where}.grid.speed_rpm[{i}]", f"{rng}, got {x:g}")
+            raise JobError(f"{where}.speed_rpm[{i}]", f"{rng}, got {x:g}")
     for j, d in enumerate(steps):
         after = max(speeds) + d if d >= 0 else min(speeds) + d  # the extreme speed after this step
         if abs(after) > n_max:
             raise JobError(
-                f"{where}.grid.speed_step_rpm[{j}]",
+                f"{where}.speed_step_rpm[{j}]",
                 f"speed_rpm + speed_step_rpm must be in [-{n_max:.0f}, {n_max:.0f}] r/min on {machine} (its back "
                 f"EMF reaches the inverter's voltage limit there), got {after:g}",
             )
@@ -100,14 +106,19 @@ def job_drive(spec: DriveSpec | None = None):
     par = D.bench_machine(spec.machine)
     startup = D.IfStartup.for_machine(par) if spec.start == "standstill" else None  # [drive] start
     return D.bench_drive(
-        par, sensorless=spec.loop == "sensorless", handover=spec.handover, settle=spec.settle, startup=startup
+        par,
+        sensorless=spec.loop == "sensorless",
+        handover=spec.handover,
+        settle=spec.settle,
+        startup=startup,
+        speed_schedule=spec.speed_schedule,
     )
 
 
 def parse_drive(dt: dict, comp: str, scen: ScenarioSpec) -> DriveSpec:
     """``[drive]`` of a drive job of component ``comp`` (its table ``dt``) on the scenarios ``scen``."""
     info = COMPONENTS[comp]
-    no_unknown(dt, ("loop", "handover", "settle", "start", "machine"), "drive")
+    no_unknown(dt, ("loop", "handover", "settle", "start", "machine", "speed_schedule"), "drive")
     loop = get_field(dt, "loop", "drive.loop", str, "sensorless")
     if loop not in ("sensorless", "sensored"):
         raise JobError("drive.loop", f"must be 'sensorless' or 'sensored', got {show(loop)}")
@@ -125,4 +136,10 @@ def parse_drive(dt: dict, comp: str, scen: ScenarioSpec) -> DriveSpec:
             "drive.machine",
             f"{comp} cannot run on {machine} ({BENCH_MACHINES[machine]}); allowed: {', '.join(info.machines)}",
         )
-    return parse_start(dt, DriveSpec(loop, handover, settle, machine=machine), scen)
+    # the FOC's speed-loop schedule (FOC.speed_gains): 0 off; N keeps the speed loop N times slower than ωe,
+    # the flux observers' low-speed fix (docs/stability.md: N = 6 holds 400 and 200 r/min on 000's SPMSM)
+    schedule = get_field(dt, "speed_schedule", "drive.speed_schedule", float, 0.0)
+    if not 0.0 <= schedule <= 1000.0:
+        raise JobError("drive.speed_schedule", f"must be 0 (off) or a ratio in (0, 1000], got {schedule:g}")
+    spec = DriveSpec(loop, handover, settle, machine=machine, speed_schedule=schedule)
+    return parse_start(dt, spec, scen)

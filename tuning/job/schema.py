@@ -18,6 +18,7 @@ from .fields import MAX_SCENARIOS, MAX_SOLVER_STEPS, MAX_STEPS, JobError, cap, g
 from .recordings import check_recording_job, parse_recording_scenarios
 from .spec import Job, ScenarioSpec
 from .toml import read_toml
+from .verify import parse_envelope
 
 # the physical range of every scenario axis (closed intervals unless noted), checked at --check time;
 # freq_step is checked against the component's nominal frequency, speed_hz against the sample rate.  (An
@@ -162,7 +163,8 @@ def parse_job(raw: dict, base: Path | None = None) -> Job:
 
     ``base``: the job file's folder, against which a recording's relative ``file`` is read (and then
     checked now: it exists, its columns, its rate); without it the files are read when the job runs."""
-    no_unknown(raw, ("job", "component", "gains", "scenarios", "holdout", "objective", "solver", "drive"), "job file")
+    keys = ("job", "component", "gains", "scenarios", "holdout", "objective", "solver", "drive", "envelope")
+    no_unknown(raw, keys, "job file")
     job_t = get_field(raw, "job", "job", dict, required=True)
     no_unknown(job_t, ("name", "component", "seed"), "job")
     name = get_field(job_t, "name", "job.name", str, "job")
@@ -238,6 +240,7 @@ def parse_job(raw: dict, base: Path | None = None) -> Job:
         drive = parse_drive(get_field(raw, "drive", "drive", dict, {}), comp, scen)
     elif "drive" in raw:
         raise JobError("drive", f"applies to drive jobs (scenarios.signal = 'drive'), not {scen.signal!r} signals")
+    envelope = parse_envelope(raw, scen, drive)
     holdout = None
     if "holdout" in raw:
         h = dict(get_field(raw, "holdout", "holdout", dict))
@@ -341,6 +344,7 @@ def parse_job(raw: dict, base: Path | None = None) -> Job:
         penalty=penalty,
         solver=strategies.solver(kind, **opts),
         drive=drive,
+        envelope=envelope,
     )
     check_recording_job(job, comp_t)
     return job

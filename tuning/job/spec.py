@@ -36,6 +36,7 @@ class Job:
     solver: AbstractSolver  # [solver], tuning.strategies
     sha256: str | None = None  # of the job file's bytes (load_job); None for a job built from a dict
     drive: DriveSpec | None = None  # signal = "drive" jobs: how the observer sits in the loop
+    envelope: object = None  # [envelope] (tuning.job.verify.EnvelopeSpec): verified after tuning; None: not
 
 
 @dataclass(frozen=True)
@@ -46,13 +47,16 @@ class DriveSpec:
     ``start``: ``"steady"`` (each scenario starts in its operating point) or ``"standstill"`` (from rest, by
     the I-f start-up :meth:`jaxobs.drive.IfStartup.for_machine` of the job's machine, then its hand-over);
     ``machine``: the drive's machine (:data:`BENCH_MACHINES`; by default the component's: the LESOs run
-    002's IPMSM, the flux observers 000's SPMSM)."""
+    002's IPMSM, the flux observers 000's SPMSM); ``speed_schedule``: the FOC's speed-loop schedule N (0 off;
+    N > 0: speed-loop bandwidth min(α_s, |ωe*|/N), so a flux observer's FLL, whose bandwidth scales with the
+    speed, can close the loop at low speed: docs/stability.md)."""
 
     loop: str = "sensorless"
     handover: float = 0.0
     settle: float = 0.2
     start: str = "steady"
     machine: str = "ipmsm002"  # a key of BENCH_MACHINES; a job's default is its component's first machine
+    speed_schedule: float = 0.0  # FOC.speed_schedule (0: off)
 
 
 @dataclass(frozen=True)

@@ -34,6 +34,27 @@ def check_nesting(text: str, what: str = "job file") -> None:
             raise JobError(what, f"line {n}: a dotted key of more than {MAX_DEPTH} parts")
 
 
+MAX_DIGITS = 1000  # digits in one number literal (Python refuses to convert an integer of more than 4300)
+_LONG_NUMBER = re.compile(r"[0-9_]{" + str(MAX_DIGITS + 1) + ",}")
+_HEADER = re.compile(r"\s*\[\[?\s*([^\]]+?)\s*\]\]?\s*$")
+
+
+def check_numbers(text: str, what: str = "job file") -> None:
+    """Refuse a number literal of more than :data:`MAX_DIGITS` digits before the parser converts it (a
+    5000-digit integer was "Exceeds the limit (4300 digits)", naming no field), naming its field: the
+    key on its line, under the table header above it."""
+    table = ""
+    for n, line in enumerate(_STRINGS.sub('""', text).splitlines(), 1):
+        if m := _HEADER.match(line):
+            table = m.group(1).replace(" ", "")
+        elif m := _LONG_NUMBER.search(line):
+            before = line[: m.start()]
+            key = before.split("=", 1)[0].strip() if "=" in before else ""  # none: an array's continuation line
+            field = ".".join(x for x in (table, key) if x) or what
+            digits = len(m.group().replace("_", ""))
+            raise JobError(field or what, f"a number of {digits} digits (at most {MAX_DIGITS}), line {n}")
+
+
 def _depth(obj) -> int:
     """Nesting depth of parsed TOML (iterative: no recursion on a deep value)."""
     best, stack = 0, [(obj, 0)]
@@ -61,12 +82,15 @@ def read_toml(path, what: str = "job file") -> tuple[dict, bytes]:
     except UnicodeDecodeError as e:
         raise JobError(what, f"not UTF-8 text: byte {e.start} is {data[e.start : e.start + 1]!r}") from None
     check_nesting(text, what)
+    check_numbers(text, what)
     try:
         raw = tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:
         raise JobError(what, f"not valid TOML: {e}") from None
     except RecursionError:
         raise JobError(what, f"nested deeper than {MAX_DEPTH} levels") from None
+    except ValueError as e:  # a conversion the parser's own checks let through: still one line, the file
+        raise JobError(what, f"not valid TOML: {str(e)[:80]}") from None
     if _depth(raw) > MAX_DEPTH:
         raise JobError(what, f"nested deeper than {MAX_DEPTH} levels")
     return raw, data

@@ -1,0 +1,162 @@
+"""``[envelope]`` of a drive job and the long-horizon verification after tuning (issue 26: tuning that cannot
+hide a failure).
+
+A design tuned and scored on its grid can run away a little outside it (the noise-tuned SOIFO ran away at
+400 r/min, two thirds of its grid's lowest speed).  So a drive job states the envelope it claims
+(``[envelope] speed_rpm = [lo, hi]``, ``load_nm = [lo, hi]``; by default the span of its tuning grid) and,
+after tuning, :func:`verify_designs` maps initial, closed form and tuned over a coarse grid of that
+envelope (3 speeds, lo, geometric middle and hi, × 2 loads, lo and hi) with the one envelope map,
+:func:`jaxobs.drive.envelope.envelope`: a long run (``[envelope] horizon``, 2 s by default) through the study
+runner, batched, and the simulator's own stability verdict (:func:`jaxobs.drive.stability.lyapunov`) at the
+same points, on the job's drive (its speed schedule) started steady, nominal machine.
+
+A point *passes* when the design holds synchronism there (the envelope's ``synchronous``: finite, locked,
+at speed and settled) and is stable (``stable``).  A tuned design that fails a point where the closed form
+passes is **unsafe** (:func:`unsafe_points`): the job's status becomes ``"unsafe"`` and ``jaxobs tune`` warns
+on stderr and exits 4 (:data:`UNSAFE_EXIT`; 3 stays "diverged", where nothing is tuned at all).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+
+from jaxobs import drive as D
+from jaxobs.drive.envelope import envelope
+
+from .drive import job_drive
+from .fields import JobError, get_field, no_unknown
+from .spec import DriveSpec, ScenarioSpec
+
+__all__ = ["EnvelopeSpec", "parse_envelope", "verify_designs", "unsafe_points", "UNSAFE_EXIT"]
+
+UNSAFE_EXIT = 4  # jaxobs tune's exit status for status "unsafe" (3 is "diverged": nothing tuned at all)
+MIN_HORIZON = 0.5  # s: jaxobs.drive.envelope.envelope's least; the presets run the default 2 s
+DEFAULT_HORIZON = 2.0  # s: a slowly growing low-speed oscillation shows within it (docs/stability.md)
+
+
+@dataclasses.dataclass(frozen=True)
+class EnvelopeSpec:
+    """The envelope a drive job claims: speeds (r/min) and loads (N·m) as [lo, hi]; ``horizon`` (s) of the
+    verification runs; ``settle``, ``window``: s, of the Lyapunov verdict (:func:`jaxobs.drive.stability.lyapunov`)."""
+
+    speed_rpm: tuple
+    load_nm: tuple
+    horizon: float = DEFAULT_HORIZON
+    settle: float = 0.2
+    window: float = 0.4
+
+    def points(self):
+        """The coarse verification grid: (speeds, loads), 3 × 2 (fewer where lo == hi)."""
+        lo, hi = self.speed_rpm
+        mid = math.sqrt(lo * hi) if lo > 0 else 0.5 * (lo + hi)
+        speeds = sorted({float(lo), float(mid), float(hi)})
+        loads = sorted({float(v) for v in self.load_nm})
+        return speeds, loads
+
+
+def _span(axes: dict, key: str, default: float) -> tuple:
+    vals = [abs(v) for v in axes.get(key, [default])]
+    return (min(vals), max(vals))
+
+
+def _range(tab: dict, key: str, lo: float, hi: float, unit: str, default: tuple) -> tuple:
+    where = f"envelope.{key}"
+    v = get_field(tab, key, where, list, list(default))
+    if len(v) != 2 or not all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in v):
+        raise JobError(where, f"must be [lo, hi] ({unit}), got {v!r}")
+    a, b = float(v[0]), float(v[1])
+    if not (lo <= a <= b <= hi):
+        raise JobError(where, f"must be [lo, hi] with {lo:g} <= lo <= hi <= {hi:g} {unit}, got [{a:g}, {b:g}]")
+    return (a, b)
+
+
+def parse_envelope(raw: dict, scen: ScenarioSpec, drive: DriveSpec | None) -> EnvelopeSpec | None:
+    """``[envelope]`` of a job (None without the table).  Only drive jobs on a sensorless loop have one: the
+    verification closes the loop through each design."""
+    if "envelope" not in raw:
+        return None
+    if drive is None:
+        raise JobError("envelope", f"applies to drive jobs (scenarios.signal = 'drive'), not {scen.signal!r} signals")
+    if scen.recording is not None:
+        raise JobError("envelope", "applies to drive jobs on simulated scenarios, not on recordings")
+    if drive.loop != "sensorless":
+        raise JobError("envelope", "applies to sensorless drive jobs (drive.loop = 'sensorless')")
+    tab = get_field(raw, "envelope", "envelope", dict)
+    no_unknown(tab, ("speed_rpm", "load_nm", "horizon", "settle", "window"), "envelope")
+    par = D.bench_machine(drive.machine)
+    n_max = D.drive_speed_limit_rpm(par)
+    speeds = _range(tab, "speed_rpm", 1.0, n_max, "r/min", _span(scen.axes, "speed_rpm", 600.0))
+    t_max = 3.0 * float(par.kt) * float(par.i_rated)  # generous: the FOC limits the current to 1.5 i_rated
+    loads = _range(tab, "load_nm", 0.0, t_max, "N·m", _span(scen.axes, "load_nm", 0.0))
+    horizon = get_field(tab, "horizon", "envelope.horizon", float, 2.0)  # DEFAULT_HORIZON
+    if not MIN_HORIZON <= horizon <= 10.0:
+        raise JobError("envelope.horizon", f"must be in [{MIN_HORIZON:g}, 10] s, got {horizon:g}")
+    settle = get_field(tab, "settle", "envelope.settle", float, 0.2)
+    if not 0.0 <= settle <= 5.0:
+        raise JobError("envelope.settle", f"must be in [0, 5] s, got {settle:g}")
+    window = get_field(tab, "window", "envelope.window", float, 0.4)
+    if not 0.01 <= window <= 5.0:
+        raise JobError("envelope.window", f"must be in [0.01, 5] s, got {window:g}")
+    return EnvelopeSpec(speeds, loads, horizon, settle, window)
+
+
+def verify_designs(designs: dict, env: EnvelopeSpec, drive_spec: DriveSpec) -> dict:
+    """Initial, closed form and tuned (``designs``: name -> drive observer) at the envelope's coarse grid over
+    ``env.horizon`` seconds, with their stability verdicts (:func:`jaxobs.drive.envelope.envelope`, the one
+    envelope map, on the job's drive started steady): the ``verification`` block of result.json."""
+    drive_spec = dataclasses.replace(drive_spec, start="steady", handover=0.0)  # operating points, started steady
+    drive = job_drive(drive_spec)
+    par = D.bench_machine(drive_spec.machine)
+    speeds, loads = env.points()
+    stab = {"settle": env.settle, "window": env.window}
+    ds = envelope(designs, machine=par, drive=drive, speeds_rpm=speeds, loads_nm=loads, horizon=env.horizon,
+                  stability=stab)  # fmt: skip
+    combos = [(s, ld) for s in speeds for ld in loads]
+    out = {
+        "envelope": {"speed_rpm": list(env.speed_rpm), "load_nm": list(env.load_nm)},
+        "horizon_s": env.horizon,
+        "speed_schedule": drive_spec.speed_schedule,
+        "points": [{"speed_rpm": s, "load_nm": ld} for s, ld in combos],
+        "passes_definition": "synchronous (jaxobs.drive.envelope: finite, locked within 90 deg electrical, at its "
+        "speed reference and settled after a 2 % speed-reference step, over the late window) and stable "
+        "(jaxobs.drive.stability.lyapunov: largest non-neutral Lyapunov exponent < 0, 1/s)",
+        "designs": {},
+    }
+    for name in designs:
+        rows = []
+        for s, ld in combos:
+            pt = ds.sel(design=name, speed_rpm=s, load=ld)
+            row = {"speed_rpm": s, "load_nm": ld}
+            for k in ("synchronous", "stable", "holds", "lost_lock", "lost_speed"):
+                row[k] = bool(pt[k])
+            row["margin_per_s"] = _num(pt["margin"])
+            for k in ("pos_err_max_deg", "pos_bias_deg", "pos_ripple_deg", "speed_dev_late_pct"):
+                row[k] = _num(pt[k])
+            row["passes"] = row["synchronous"] and row["stable"]
+            rows.append(row)
+        n_fail = sum(not r["passes"] for r in rows)
+        out["designs"][name] = {"passes_everywhere": n_fail == 0, "failed_points": n_fail, "points": rows}
+    out["unsafe_points"] = unsafe_points(out)
+    return out
+
+
+def _num(x):
+    """A JSON number, or None where it is not finite (a lost point's metrics are NaN)."""
+    v = float(np.asarray(x))
+    return v if math.isfinite(v) else None
+
+
+def unsafe_points(ver: dict) -> list:
+    """The points where the tuned design fails (loses synchronism or is not stable) and the closed form passes."""
+    des = ver["designs"]
+    if "tuned" not in des or "closed_form" not in des:
+        return []
+
+    return [
+        {"speed_rpm": t["speed_rpm"], "load_nm": t["load_nm"]}
+        for t, c in zip(des["tuned"]["points"], des["closed_form"]["points"], strict=True)
+        if c["passes"] and not t["passes"]
+    ]
