@@ -10,7 +10,7 @@
     jaxobs reproduce flux [--out DIR] [--force] [--json] [--quick]
                                                            paper 000's experiments, paper vs ours
     jaxobs reproduce leso [--out DIR] [--force] [--json] [--machine single|dual]   paper 002's experiments
-    jaxobs study [STUDY.toml] [--out DIR] [--force] [--check] [--quiet]
+    jaxobs study [STUDY.toml] [--out DIR] [--force] [--check] [--resume] [--quiet]
                  [--coordinator HOST:PORT --num-processes N --process-id I | --distributed] [--timeout S]
                                                            robustness study → NetCDF, worst cases, figures
     jaxobs export [RESULT.json | --design D] [--out DIR] [--force] [--check]
@@ -56,7 +56,9 @@ is refused before joining).  ``--timeout S`` (default 300): how long each proces
 a process other than 0 that finds no coordinator then exits 2 with one line, a process 0 left alone is
 aborted by JAX's runtime (exit 134).
 ``tune --resume`` continues from ``<out>/checkpoint.npz`` if it is this job's (the job file's sha256 is
-in it); with no checkpoint it says so in one line and starts fresh.
+in it); with no checkpoint it says so in one line and starts fresh.  ``study --resume`` (FLL studies in one
+process) continues from the chunks in ``<out>/study.chunks/`` if they are this study's (its files' and the
+versions' sha256): a study.nc byte-identical to an uninterrupted run's.
 """
 
 from __future__ import annotations
