@@ -203,3 +203,79 @@ def test_fuzzed_inputs_more_seeds(tmp_path):
     for seed in range(1, 6):
         _fuzz(list(result_mutations(seed)), tmp_path / "r.json", _result_as_a_study_reads_it, f"result.json {seed}")
         _fuzz(list(csv_mutations(seed)), tmp_path / "r.csv", _csv, f"CSV {seed}")
+
+
+# --------------------------------------------------------------------------
+# checkpoints: every forged or damaged one refused (all of these are invalid)
+# --------------------------------------------------------------------------
+
+
+def checkpoint_mutations(good: bytes, seed=0, n=200):
+    """(label, bytes) of checkpoints no run writes: a meta field or an array forged (with the digest
+    recomputed, or the old one kept), an entry dropped, the file truncated."""
+    import io
+
+    import numpy as np
+
+    from tuning.checkpoint import DIGEST, content_digest
+
+    with np.load(io.BytesIO(good), allow_pickle=False) as d:
+        base = {k: d[k] for k in d.files}
+    meta0 = json.loads(str(base["meta"]))
+    it = meta0["iteration"]
+    forged_meta = {
+        "iteration": [-1, "3", 1.5, None, it + 5, it - 1],
+        "since_best": [-1, it + 1, "0", None, 0.5],
+        "best_value": ["x", True, -5.0, [1.0]],
+        "history": [{}, [], meta0["history"][:-1], None, [None] * it],
+        "format": ["jaxobs-checkpoint-1", None],
+        "n_leaves": [-1, 10**6, "2"],
+    }
+    forged_arrays = {
+        "theta": [np.asarray([np.nan, 0.0]), np.asarray([np.inf, 0.0]), np.zeros(3), np.zeros(2, dtype=np.int64)],
+        "best_theta": [np.asarray([0.0, np.nan]), np.zeros((2, 2))],
+        "arr_1": [np.full_like(base["arr_1"], np.nan)],
+    }
+    rng = random.Random(seed)
+    for j in range(n):
+        e = dict(base)
+        kind = rng.choice(["meta", "meta", "array", "drop", "truncate", "stale digest"])
+        if kind == "truncate":
+            yield f"ckpt:truncate:{j}", good[: rng.randrange(len(good))]
+            continue
+        if kind == "drop":
+            e.pop(rng.choice([k for k in e if k != DIGEST]))
+        elif kind == "array":
+            k = rng.choice(list(forged_arrays))
+            e[k] = rng.choice(forged_arrays[k])
+        else:
+            k = rng.choice(list(forged_meta))
+            meta = dict(meta0, **{k: rng.choice(forged_meta[k])})
+            e["meta"] = np.asarray(json.dumps(meta))
+        if kind != "stale digest":
+            e[DIGEST] = np.asarray(content_digest(e))
+        else:  # a hand edit of the history that keeps the old digest
+            meta = dict(meta0, history=[dict(h, value=h["value"] - 1.0) for h in meta0["history"]])
+            e["meta"] = np.asarray(json.dumps(meta))
+        buf = io.BytesIO()
+        np.savez(buf, **e)
+        yield f"ckpt:{kind}:{j}", buf.getvalue()
+
+
+def test_fuzzed_checkpoints_are_all_refused(tmp_path):
+    from tests.test_outputs import _run
+    from tuning.solvers import CheckpointError
+
+    good = tmp_path / "good.npz"
+    _run(good)
+    cases = [(label, data, True) for label, data in checkpoint_mutations(good.read_bytes())]
+    ckpt = tmp_path / "c.npz"
+
+    def resume(path):
+        try:
+            _run(path, resume=True)
+        except CheckpointError as e:  # a ValueError: refused in one line
+            raise ValueError(str(e)) from None
+
+    counts = _fuzz(cases, ckpt, resume, "checkpoints")
+    assert counts["tried"] >= 200 and counts["accepted"] == 0
