@@ -278,6 +278,11 @@ def test_check_also_checks_out(tmp_path, capsys):
     assert "exists and is not a folder" in capsys.readouterr().err
     assert main(["study", "--check", "--out", str(tmp_path / "file" / "sub")]) == 2
     assert "cannot be created" in capsys.readouterr().err
+    (done / "study.nc").unlink()
+    (done / "study.chunks").mkdir()  # an interrupted study: the run names --resume, and so does --check
+    assert main(["study", "--check", "--out", str(done)]) == 2
+    assert "--resume" in capsys.readouterr().err
+    assert main(["study", "--check", "--out", str(done), "--resume"]) == 0
     fresh = tmp_path / "new" / "deeper"
     assert main(["tune", "--check", "--out", str(fresh)]) == 0
     assert main(["study", "--check", "--out", str(fresh)]) == 0

@@ -94,6 +94,7 @@ def test_cli_drive_study_writes_netcdf_with_the_axes(tmp_path, capsys):
     assert (out / "drive_study.png").stat().st_size > 10_000
     printed = capsys.readouterr().out
     assert "lost lock" in printed and "FA-LESO-tuned  pos_err_rms_deg (deg)" in printed  # columns apart
+    assert "diverged" in printed and "lost speed" in printed  # each design's losses, lost speed included
     for name in [*ds.data_vars, *ds.coords]:
         assert "long_name" in ds[name].attrs, name
         if name != "design":

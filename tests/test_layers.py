@@ -69,6 +69,9 @@ LAYERS = [
     ("jaxobs",),
     # the one study runner (samplers in jaxobs.scenarios)
     ("jaxobs.runner",),
+    # the figures' helpers and the Bode figures (jaxobs.plot re-exports them)
+    ("jaxobs._figure",),
+    ("jaxobs._plot_bode",),
     # the library's own applications: studies, the demo, the papers' reproductions, figures, benchmarks
     (
         "jaxobs.study",

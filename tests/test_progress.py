@@ -120,3 +120,28 @@ def test_export_reports_its_three_stages(tmp_path):
     export_observer(observer_from_design("wif"), tmp_path, n_steps=10_000, progress=lambda d, t: calls.append((d, t)))
     assert calls == [(1, 3), (2, 3), (3, 3)]
     assert (tmp_path / "golden.csv").exists()
+
+
+def test_reproduce_leso_progress_has_a_total(monkeypatch):
+    """`reproduce leso`'s bar counts its experiments out of a total (issue 29: it had none).  No simulation:
+    the first run is stopped at once, after the bar was made; each run() is one step of N_EXPERIMENTS."""
+    from jaxobs.reproduce import leso
+
+    made = []
+
+    class Recorder(leso.Progress):
+        def __init__(self, progress, total, desc, unit="it"):
+            made.append(total)
+            super().__init__(progress, total, desc, unit)
+
+    class Stop(Exception):
+        pass
+
+    def stop(*_a, **_k):
+        raise Stop
+
+    monkeypatch.setattr(leso, "Progress", Recorder)
+    monkeypatch.setattr(leso, "simulate", stop)
+    with pytest.raises(Stop):
+        leso.run_leso_experiments(progress=False)
+    assert made == [leso.N_EXPERIMENTS] and leso.N_EXPERIMENTS == 11

@@ -337,3 +337,53 @@ def test_a_5000_digit_integer_in_a_job_names_its_field(tmp_path, capsys):
     job = tmp_path / "job.toml"
     job.write_text(text.replace("seed = 0", "seed = " + "9" * 5000))
     _one_line_exit_2(capsys, ["tune", str(job), "--check", "--no-cache"], "job.seed: a number of 5000 digits")
+
+
+# --------------------------------------------------------------------------
+# studies apply the jobs' physical ranges (one validator: tuning.job.check_speed_axes)
+# --------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    "machine, axes, field",
+    [
+        ("ipmsm002", "speed_rpm = [600.0, 5000.0]", "axes.speed_rpm[1]"),
+        ("spmsm000", "speed_rpm = [600.0, 3000.0]", "axes.speed_rpm[1]"),
+        ("ipmsm002", "speed_rpm = [600.0]\nspeed_step_rpm = [1000.0]", "axes.speed_step_rpm[0]"),
+    ],
+)
+def test_drive_study_speeds_within_the_inverter_limit(tmp_path, capsys, machine, axes, field):
+    """A drive study with speed_rpm = [600, 5000] on ipmsm002 passed --check, though jobs refuse anything
+    above 1323 r/min (issue 30)."""
+    comp = "CLESO" if machine == "ipmsm002" else "SOIFO"
+    study = tmp_path / "s.toml"
+    study.write_text(
+        f'[study]\nkind = "drive"\nmachine = "{machine}"\nhorizon = 0.2\n'
+        f'[designs.a]\nclosed_form = "{comp}"\n[axes]\n{axes}\n'
+    )
+    _one_line_exit_2(capsys, ["study", str(study), "--check", "--no-cache"], f"{field}: ")
+
+
+# --------------------------------------------------------------------------
+# honest outcomes: an objective that overflows is not a system that diverged
+# --------------------------------------------------------------------------
+
+
+GOOD_TERMS = 'terms = [{ metric = "itae_freq", weight = 1.0 }]'
+
+
+def test_objective_overflow_is_its_own_outcome(tmp_path, capsys):
+    """weight = 1e308 exited 3 with "every design tried (5) diverged in >= 54 scenarios" while the scores
+    showed 0 diverged (issue 30): now status "overflow", a reason naming the weights, exit 3 (nothing tuned)."""
+    from tests.test_outputs import GOOD
+    from tuning.cli import main
+
+    job = tmp_path / "job.toml"
+    assert GOOD_TERMS in GOOD
+    terms = 'terms = [{ metric = "itae_freq", weight = 1e308 }, { metric = "ripple_freq", weight = 1e308 }]'
+    job.write_text(GOOD.replace('name = "../../escape"', 'name = "o"').replace(GOOD_TERMS, terms))
+    assert main(["tune", str(job), "--out", str(tmp_path / "o"), "--quiet"]) == 3
+    res = json.loads((tmp_path / "o" / "result.json").read_text())
+    assert res["status"] == "overflow" and "terms[1].weight = 1e+308" in res["reason"], res["reason"]
+    assert "diverged" not in res["reason"] and res["scores"]["initial"]["diverged"] == 0
+    assert "OVERFLOW" in capsys.readouterr().out

@@ -316,6 +316,13 @@ class Objective:
         agg_v, w = jax.value_and_grad(lambda vv: self.aggregation(vv))(v)
         return agg_v, w @ g, int(jnp.sum(~good))
 
+    def overflowed(self, theta, scored_good) -> int:
+        """Scenarios whose simulation and weighted metrics are finite (``scored_good``: :meth:`per_scenario`'s
+        mask at ``theta``) but whose tuning value or gradient is not: the objective overflows (a finite but
+        huge weight), which the solver counts with the diverged scenarios, though nothing diverged."""
+        _, _, good = self._vg(theta)
+        return int(jnp.sum(jnp.asarray(scored_good) & ~good))
+
     # --- reporting: a design scored on the scenarios by the one study runner (jaxobs.runner)
     def _system(self, theta, sig):
         """The system one scenario runs: the component at ``theta``, bound to the scenario, on its signal or

@@ -83,6 +83,7 @@ from .job import (
     JobError,
     available_memory,
     cap,
+    check_speed_axes,
     freq_step_range,
     get_field,
     job_drive,
@@ -529,6 +530,7 @@ def _parse_drive(raw: dict, st: dict, name: str, base: Path) -> StudySpec:
         raise JobError("study.sample", f"must be in [1, {MAX_SCENARIOS}] with sampling = {sampling!r}, got {sample}")
     seed, chunk = _seed(st), _chunk(st, 256)
     axes = _axes(raw, DRIVE_STUDY_AXES)
+    check_speed_axes(axes, "axes", machine)  # the jobs' check: speeds within the inverter's limit
     n = _count(axes, sample)
     _check_steps(horizon, steady, ts, n, chunk, "drive", extra_s=settle)
     opts = dict(

@@ -109,11 +109,16 @@ def _ramp_rows(name, sol, t, par, inv):
     ]
 
 
+# the runs below: 3 steady speeds, 2 harmonic loads, the speed ramp, the load step, 4 mismatches (the
+# progress bar's total; tests/test_progress.py checks a run makes exactly these many steps)
+N_EXPERIMENTS = 3 + 2 + 1 + 1 + 4
+
+
 def run_leso_experiments(progress=None):
     """Returns (rows, traces); rows {experiment, observer, metric, unit, paper, ours}.  ``progress``: one
     step per experiment, each named as it compiles and runs (:mod:`jaxobs.progress`)."""
     rows, traces = [], {}
-    bar = Progress(progress, None, "reproduce leso", unit="experiment")
+    bar = Progress(progress, N_EXPERIMENTS, "reproduce leso", unit="experiment")
 
     def run(name, par, est, rpm0, t1, speed_ref, load=None, handover=0.3, **drive_kw):
         we = par.p * rpm0 * D.RPM
