@@ -266,6 +266,7 @@ BAD_CSV = [
     ("unterminated quote", 't,x\n0,"1\n1,2\n', "not CSV"),
     ("1_0", "t,x\n0,1_0\n1,2\n", "line 2 holds a field that is not a number"),
     ("0x10", "t,x\n0,0x10\n1,2\n", "not a number"),
+    ("an Arabic-Indic digit", "t,x\n0,\u0661\n1,2\n", "line 2 holds a field that is not a number"),
     ("a long number", "t,x\n0," + "1" * 2000 + "\n1,2\n", "line 2: not CSV"),
 ]
 
