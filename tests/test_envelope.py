@@ -183,3 +183,38 @@ def test_preset_envelope_agrees_with_3s_simulations_at_low_speed(tmp_path):
         verdict = low["stable"].sel(design=d).values.ravel() == 1
         assert (verdict == sim[d]).all(), (d, points, verdict, sim[d])
     assert not low["stable"].all() and low["stable"].any()  # both kinds of verdict present
+
+
+@pytest.mark.parametrize(
+    "box, field",
+    [({"load_nm": (0.0, 5.0)}, "speed_rpm"), ({"speed_rpm": (300.0, 200.0)}, "low <= high"),
+     ({"speed_rpm": (300.0, 600.0), "dX": (0, 1)}, "unknown axes")],
+)  # fmt: skip
+def test_worst_case_bad_box_names_the_field(box, field):
+    from jaxobs.drive.envelope import worst_case
+
+    with pytest.raises(ValueError, match=field):
+        worst_case(CF, machine=PAR, drive=DRIVE, box=box)
+
+
+@pytest.mark.slow
+def test_worst_case_by_gradients_finds_the_grids_worst():
+    """Issue 26.7: projected gradient ascent of the Lyapunov exponent over speed 300..1200 r/min × load 0..10 N·m
+    × dRs ±30 % finds the closed form's worst point at least as bad as a 4 × 2 × 2 grid's worst (the low-speed
+    end, where the speed loop closed through the FLL goes unstable)."""
+    from jaxobs.drive.envelope import worst_case
+    from jaxobs.drive.stability import stability_sweep
+
+    box = {"speed_rpm": (300.0, 1200.0), "load_nm": (0.0, 10.0), "dRs": (-0.3, 0.3)}
+    kw = dict(settle=0.1, warmup=0.05, window=0.2, n_dirs=2)
+    res = worst_case(CF, machine=PAR, drive=DRIVE, box=box, starts=4, steps=4, stability=kw)
+    grid = [(s, ld, r) for s in (300.0, 600.0, 900.0, 1200.0) for ld in (0.0, 10.0) for r in (-0.3, 0.3)]
+    scs = drive_scenarios(PAR, ["speed_rpm", "load_nm", "dRs"], grid)
+    lam = np.asarray(
+        stability_sweep(lambda sc: jaxobs.drive.ClosedLoop(DRIVE, bind_observer(CF, sc), sc), scs, **kw).exponent
+    )
+    print("gradient worst", res["worst_x"], res["worst_exponent"], "grid worst", grid[int(np.argmax(lam))], lam.max())
+    assert lam.max() > 0  # the box reaches the unstable low-speed end
+    assert res["worst_exponent"] >= lam.max() - 1.0
+    assert res["worst_x"]["speed_rpm"] <= 400.0
+    assert res["path"].shape == (5, 4)

@@ -266,6 +266,7 @@ BAD_CSV = [
     ("unterminated quote", 't,x\n0,"1\n1,2\n', "not CSV"),
     ("1_0", "t,x\n0,1_0\n1,2\n", "line 2 holds a field that is not a number"),
     ("0x10", "t,x\n0,0x10\n1,2\n", "not a number"),
+    ("an Arabic-Indic digit", "t,x\n0,\u0661\n1,2\n", "line 2 holds a field that is not a number"),
     ("a long number", "t,x\n0," + "1" * 2000 + "\n1,2\n", "line 2: not CSV"),
 ]
 
@@ -362,3 +363,28 @@ def test_drive_study_speeds_within_the_inverter_limit(tmp_path, capsys, machine,
         f'[designs.a]\nclosed_form = "{comp}"\n[axes]\n{axes}\n'
     )
     _one_line_exit_2(capsys, ["study", str(study), "--check", "--no-cache"], f"{field}: ")
+
+
+# --------------------------------------------------------------------------
+# honest outcomes: an objective that overflows is not a system that diverged
+# --------------------------------------------------------------------------
+
+
+GOOD_TERMS = 'terms = [{ metric = "itae_freq", weight = 1.0 }]'
+
+
+def test_objective_overflow_is_its_own_outcome(tmp_path, capsys):
+    """weight = 1e308 exited 3 with "every design tried (5) diverged in >= 54 scenarios" while the scores
+    showed 0 diverged (issue 30): now status "overflow", a reason naming the weights, exit 3 (nothing tuned)."""
+    from tests.test_outputs import GOOD
+    from tuning.cli import main
+
+    job = tmp_path / "job.toml"
+    assert GOOD_TERMS in GOOD
+    terms = 'terms = [{ metric = "itae_freq", weight = 1e308 }, { metric = "ripple_freq", weight = 1e308 }]'
+    job.write_text(GOOD.replace('name = "../../escape"', 'name = "o"').replace(GOOD_TERMS, terms))
+    assert main(["tune", str(job), "--out", str(tmp_path / "o"), "--quiet"]) == 3
+    res = json.loads((tmp_path / "o" / "result.json").read_text())
+    assert res["status"] == "overflow" and "terms[1].weight = 1e+308" in res["reason"], res["reason"]
+    assert "diverged" not in res["reason"] and res["scores"]["initial"]["diverged"] == 0
+    assert "OVERFLOW" in capsys.readouterr().out

@@ -38,7 +38,8 @@ Every failure ends the program with one line on stderr.  Exit statuses:
   ``study --check`` check the whole file and stop), an output folder that cannot be used (a symlink, not
   writable, locked by another process, results there without ``--force``), a checkpoint that ``--resume``
   cannot use (corrupt, or another job's);
-- 3: ``tune`` only: every design tried diverged (status ``diverged``, nothing tuned);
+- 3: ``tune`` only: every design tried diverged (status ``diverged``, nothing tuned), or the objective
+  overflowed (status ``overflow``: a weight so large the objective is not finite; nothing tuned);
 - 4: ``tune`` only: status ``unsafe``: the tuned design lost stability or synchronism inside the job's
   ``[envelope]`` where the closed form holds (its results are written; the warning names the points);
 - 130: interrupted (Ctrl-C).
@@ -288,7 +289,7 @@ def _cmd_tune(args) -> int:
     except (OSError, ValueError):
         timing = {}
     print_summary(result, out, timing)
-    return {"diverged": 3, "unsafe": UNSAFE_EXIT}.get(result["status"], 0)
+    return {"diverged": 3, "overflow": 3, "unsafe": UNSAFE_EXIT}.get(result["status"], 0)
 
 
 class _Parser(argparse.ArgumentParser):
