@@ -21,7 +21,7 @@ import xarray as xr
 import jaxobs
 from jaxobs import linear
 from jaxobs.study import run_study
-from tuning.cli import main
+from jaxobs_tuning.cli import main
 
 ROOT = Path(__file__).resolve().parents[1]
 AXES = {"freq_step": [-2.0, 1.0], "dc": [0.0, 0.05, 0.1]}
@@ -45,7 +45,7 @@ _WORKER = (
         """
     import sys
     import jax
-    from tuning.cli import main
+    from jaxobs_tuning.cli import main
 
     import jaxobs.sharding as S
 
@@ -209,7 +209,7 @@ def test_study_cli_rejects_bad_distributed_options(capsys):
     ):
         try:
             rc = main(["study", "--out", "unused", *argv])
-        except SystemExit as e:  # argparse's error (tuning.cli._Parser): one line, then exit 2
+        except SystemExit as e:  # argparse's error (jaxobs_tuning.cli._Parser): one line, then exit 2
             rc = e.code
         assert rc == 2, argv
         err = capsys.readouterr().err.strip().splitlines()
@@ -246,7 +246,7 @@ def test_distributed_without_an_environment_names_what_to_set(tmp_path):
     # a subprocess: jax.distributed.initialize changes process-wide JAX state even when it refuses
     env = {k: v for k, v in os.environ.items() if not k.startswith(("JAX_COORDINATOR", "SLURM_", "OMPI_", "PMI"))}
     env.update(JAX_PLATFORMS="cpu", JAXOBS_HOST_DEVICES="1", PYTHONPATH=str(ROOT))
-    cmd = [sys.executable, "-m", "tuning.cli", "study", "--distributed", "--quiet", "--out", str(tmp_path / "o")]
+    cmd = [sys.executable, "-m", "jaxobs_tuning.cli", "study", "--distributed", "--quiet", "--out", str(tmp_path / "o")]
     r = subprocess.run(cmd, capture_output=True, text=True, env=env, cwd=ROOT, timeout=120, check=False)
     err = r.stderr.strip().splitlines()
     assert r.returncode == 2 and len(err) == 1, r.stderr
@@ -266,7 +266,7 @@ def test_processes_given_different_study_files_stop_before_computing(tmp_path):
     for pid in (0, 1):
         f = tmp_path / f"study{pid}.toml"
         f.write_text(STUDY_TOML if pid == 0 else STUDY_TOML.replace("dc = [0.0, 0.05, 0.1]", "dc = [0.0, 0.1]"))
-        cmd = [sys.executable, "-m", "tuning.cli", "study", str(f), "--out", str(tmp_path / "out"), "--quiet"]
+        cmd = [sys.executable, "-m", "jaxobs_tuning.cli", "study", str(f), "--out", str(tmp_path / "out"), "--quiet"]
         cmd += ["--coordinator", addr, "--num-processes", "2", "--process-id", str(pid), "--timeout", "60"]
         procs.append(subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env))
     try:
@@ -308,7 +308,7 @@ def test_a_process_given_another_process_count_stops_before_computing(tmp_path):
     f.write_text(STUDY_TOML)
     procs = []
     for pid, n in ((0, 2), (1, 3)):
-        cmd = [sys.executable, "-m", "tuning.cli", "study", str(f), "--out", str(tmp_path / "out"), "--quiet"]
+        cmd = [sys.executable, "-m", "jaxobs_tuning.cli", "study", str(f), "--out", str(tmp_path / "out"), "--quiet"]
         cmd += ["--coordinator", addr, "--num-processes", str(n), "--process-id", str(pid), "--timeout", "60"]
         procs.append(subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env))
     try:

@@ -11,16 +11,18 @@ import pytest
 import xarray as xr
 
 import jaxobs
+from jaxobs import papers
 from jaxobs.drive import bench_drive, bench_machine
 from jaxobs.drive.envelope import ENVELOPE_VARIABLES, envelope
 from jaxobs.drive_study import bind_observer, drive_scenarios
-from tuning.cli import main
-from tuning.job import load_job
-from tuning.job.output import claimed_envelope
+from jaxobs_tuning.cli import main
+from jaxobs_tuning.job import load_job
+from jaxobs_tuning.job.output import claimed_envelope
 
+K1, K2 = papers.SECOND_ORDER_SOIFO_K1, papers.SECOND_ORDER_SOIFO_K2  # 000's
 PAR = bench_machine("spmsm000")
 DRIVE = bench_drive(PAR)
-CF = jaxobs.SecondOrderSOIFO(0.0, 1.0, 1.56, 3.11, 1.56**3 / (2 * 3.11), 100.0)  # 000's closed form
+CF = jaxobs.SecondOrderSOIFO(0.0, 1.0, K1, K2, K1**3 / (2 * K2), 100.0)  # 000's closed form
 SOIFO = jaxobs.SOIFO(0.0, 1.0, 1.0, 0.6, 100.0)
 PRESET = Path(__file__).resolve().parents[1] / "tuning" / "presets" / "sosoifo.toml"
 SHORT = dict(settle=0.05, warmup=0.05, window=0.15)
@@ -30,7 +32,7 @@ SHORT = dict(settle=0.05, warmup=0.05, window=0.15)
 def small():
     """2 speeds × 2 loads × 2 designs of one class, short runs: 300 r/min is below the flux observers'
     low-speed limit (docs/stability.md: the speed loop closed through the FLL), 1000 r/min above it."""
-    designs = {"closed form": CF, "lam x2": jaxobs.SecondOrderSOIFO(0.0, 1.0, 1.56, 3.11, 1.22, 100.0)}
+    designs = {"closed form": CF, "lam x2": jaxobs.SecondOrderSOIFO(0.0, 1.0, K1, K2, 1.22, 100.0)}
     return envelope(designs, machine=PAR, drive=DRIVE, speeds_rpm=[300.0, 1000.0], loads_nm=[0.0, 5.0],
                     horizon=0.6, stability=SHORT)  # fmt: skip
 
@@ -177,7 +179,7 @@ def test_preset_envelope_agrees_with_3s_simulations_at_low_speed(tmp_path):
     low = ds.sel(speed_rpm=ds["speed_rpm"][ds["speed_rpm"] <= 600.0])
     points = [(float(s), float(ld)) for s in low["speed_rpm"].values for ld in low["load"].values]
     assert len(points) >= 12
-    designs = {"initial": jaxobs.SecondOrderSOIFO(0.0, 1.0, 1.56, 3.11, 0.61, 100.0), "closed_form": CF}
+    designs = {"initial": jaxobs.SecondOrderSOIFO(0.0, 1.0, K1, K2, 0.61, 100.0), "closed_form": CF}
     sim = _holds_3s(designs, points)
     for d in designs:
         verdict = low["stable"].sel(design=d).values.ravel() == 1

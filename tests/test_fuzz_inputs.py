@@ -1,5 +1,5 @@
 """Fuzzing what a run reads besides its job file (issue 30.8): result.json files fed to `study` and
-`export` (tuning.results.load_result, then tuned_component as a study builds it) and CSV recordings
+`export` (jaxobs_tuning.results.load_result, then tuned_component as a study builds it) and CSV recordings
 (jaxobs.signals.read_recording).  Every input ends accepted or refused with a one-line ValueError: never
 another exception (a traceback), never a hang, and never an input known to be invalid accepted
 ("accepted-invalid": a gain that is not a finite JSON number, an unknown gain or component, a CSV field
@@ -17,7 +17,7 @@ import time
 import pytest
 
 from jaxobs.signals import read_recording
-from tuning.results import load_result, tuned_component
+from jaxobs_tuning.results import load_result, tuned_component
 
 HANG_S = 10.0
 
@@ -26,14 +26,14 @@ RESULT = {
     "job": {
         "job": {"name": "t", "component": "SOGIFLLWIF"},
         "component": {"k1": 1.7},
-        "gains": {"lam": {"init": 11559.0, "lower": 1000.0, "upper": 1e5}},
+        "gains": {"lam": {"init": 11000.0, "lower": 1000.0, "upper": 1e5}},
         "scenarios": {"signal": "grid", "grid": {"dc": [0.0]}},
         "objective": {"terms": [{"metric": "itae_freq"}]},
     },
     "component": "SOGIFLLWIF",
     "ts": 1e-4,
     "omega_n": 314.159,
-    "gains": {"initial": {"lam": 11559.0}, "tuned": {"lam": 9000.0}, "closed_form": {"lam": 11559.3}},
+    "gains": {"initial": {"lam": 11000.0}, "tuned": {"lam": 9000.0}, "closed_form": {"lam": 11000.3}},
     "scores": {"tuned": {"objective": 0.1, "diverged": 0}},
 }
 
@@ -217,7 +217,7 @@ def checkpoint_mutations(good: bytes, seed=0, n=200):
 
     import numpy as np
 
-    from tuning.checkpoint import DIGEST, content_digest
+    from jaxobs_tuning.checkpoint import DIGEST, content_digest
 
     with np.load(io.BytesIO(good), allow_pickle=False) as d:
         base = {k: d[k] for k in d.files}
@@ -263,8 +263,8 @@ def checkpoint_mutations(good: bytes, seed=0, n=200):
 
 
 def test_fuzzed_checkpoints_are_all_refused(tmp_path):
+    from jaxobs_tuning.solvers import CheckpointError
     from tests.test_outputs import _run
-    from tuning.solvers import CheckpointError
 
     good = tmp_path / "good.npz"
     _run(good)

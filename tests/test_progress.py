@@ -9,9 +9,9 @@ import pytest
 import jaxobs
 from jaxobs.progress import Progress
 from jaxobs.study import run_study
-from tuning import strategies
-from tuning.cli import build_parser
-from tuning.solvers import tune
+from jaxobs_tuning import strategies
+from jaxobs_tuning.cli import build_parser
+from jaxobs_tuning.solvers import tune
 
 
 def test_progress_is_silent_by_default_a_bar_on_stderr_or_a_callback(capsys, monkeypatch):
@@ -114,7 +114,7 @@ def test_every_command_takes_quiet(argv):
 
 
 def test_export_reports_its_three_stages(tmp_path):
-    from tuning.export import export_observer, observer_from_design
+    from jaxobs_tuning.export import export_observer, observer_from_design
 
     calls = []
     export_observer(observer_from_design("wif"), tmp_path, n_steps=10_000, progress=lambda d, t: calls.append((d, t)))

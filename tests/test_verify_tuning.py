@@ -9,9 +9,9 @@ from pathlib import Path
 
 import pytest
 
-from tuning.cli import main
-from tuning.job import UNSAFE_EXIT, job_drive, load_job, parse_job
-from tuning.job.verify import EnvelopeSpec, unsafe_points
+from jaxobs_tuning.cli import main
+from jaxobs_tuning.job import UNSAFE_EXIT, job_drive, load_job, parse_job
+from jaxobs_tuning.job.verify import EnvelopeSpec, unsafe_points
 
 PRESETS = Path(__file__).parents[1] / "tuning" / "presets"
 DRIVE_PRESETS = ("cleso", "gileso", "faleso", "soifo", "sosoifo", "soifo_noise")
@@ -125,7 +125,7 @@ def test_a_tuned_design_failing_inside_its_envelope_is_unsafe_exit_4(tmp_path, c
     tuning and writes the verification block; a tuned design that then loses synchronism where the closed form
     passes (both forced here) turns the status to "unsafe", warns on stderr and exits 4; the solver's status stays in
     tuning_status."""
-    import tuning.job.run as run
+    import jaxobs_tuning.job.run as run
 
     real = run.verify_designs
     seen = {}
@@ -180,8 +180,8 @@ def test_stability_margin_is_a_differentiable_objective_term(monkeypatch):
     tiny Lyapunov run here: compile time)."""
     import jax.numpy as jnp
 
-    import tuning.objective as O
-    from tuning.job import build_objective
+    import jaxobs_tuning.objective as O
+    from jaxobs_tuning.job import build_objective
 
     monkeypatch.setattr(O, "MARGIN_KW", {"settle": 0.0, "warmup": 0.0, "window": 0.002, "n_dirs": 1})
     raw = _raw()

@@ -47,7 +47,7 @@ Every failure ends the program with one line on stderr.  Exit statuses:
 Every command that writes (``tune``, ``study``, ``demo``, ``bode``, ``reproduce``, ``export``) writes only
 under ``--out`` (``tune`` and ``study``: default ``./out/<name>``, the job's or study's name reduced to
 ``[A-Za-z0-9._-]``; the others ``./out/<command>``), checked and locked before any work: see
-:mod:`tuning.outdir` for the lock file, symlinks and ``--force``.
+:mod:`jaxobs_tuning.outdir` for the lock file, symlinks and ``--force``.
 ``study --coordinator HOST:PORT --num-processes N --process-id I`` (or ``--distributed``: from the
 environment, e.g. SLURM) runs one process of a study split over processes (:func:`jaxobs.init_distributed`,
 before the study file is loaded): process 0 alone checks, locks and writes ``--out``, prints the table and
@@ -97,7 +97,7 @@ STUDY_CHUNKS = "study.chunks"  # an FLL study's results while it runs (jaxobs.ch
 
 
 def load_study(path):
-    """A study file as (name, designs, axes, options): :func:`tuning.study_file.load_study`, checked in full."""
+    """A study file as (name, designs, axes, options): :func:`jaxobs_tuning.study_file.load_study`, checked in full."""
     spec = _load_study(path)
     return spec.name, spec.designs, spec.axes, dict(spec.opts, kind=spec.kind)
 
@@ -254,7 +254,7 @@ def _run_study(name, designs, axes, opts, out: Path, quiet: bool, store=None) ->
 
 
 def default_job_path() -> Path:
-    return Path(str(resources.files("tuning") / "presets" / "wif_robust.toml"))
+    return Path(str(resources.files("jaxobs_tuning") / "presets" / "wif_robust.toml"))
 
 
 def _cmd_tune(args) -> int:

@@ -30,7 +30,7 @@ def distributed_asked(args) -> bool:
 def refuse_unsplittable(path: Path) -> None:
     """Drive and recording studies run in one process: refused from the raw TOML, before JAX starts.
 
-    A file that does not parse passes here; :func:`tuning.study_file.load_study` reports it after joining
+    A file that does not parse passes here; :func:`jaxobs_tuning.study_file.load_study` reports it after joining
     (every process reads the same file, so every process stops with the same one-line error)."""
 
     try:

@@ -1,7 +1,7 @@
 """Objectives: a scenario batch × simulation × metric × aggregation over the batch.
 
 Per scenario the value is a weighted sum of metrics of one simulation; over the
-batch the values are combined by an aggregation object (:mod:`tuning.aggregations`:
+batch the values are combined by an aggregation object (:mod:`jaxobs_tuning.aggregations`:
 the mean, a smooth worst case (log-sum-exp with a temperature) or the CVaR, the
 mean of the worst (1 − α) fraction).
 
@@ -265,7 +265,7 @@ class Objective:
         """``component``: the module whose free gains ``param`` sets; ``scenarios``: the batch (leading axis
         the scenarios); ``horizon``: simulated seconds per scenario; ``terms``: the weighted metrics summed
         per scenario; ``ctx``: the metrics' event time, steady window and bands; ``aggregation``: how the
-        per-scenario values become one (:class:`~tuning.aggregations.Mean` by default); ``penalty``: the
+        per-scenario values become one (:class:`~jaxobs_tuning.aggregations.Mean` by default); ``penalty``: the
         value of a diverged scenario.  ``drive``: run each scenario (a drive Scenario) closed loop with
         this Drive, the component as its observer; ``bind(component, scenario)``: adapt the component to
         the scenario (the parameters an observer assumes, its initial speed) before the run."""
@@ -273,7 +273,9 @@ class Objective:
             if term.metric not in METRICS:
                 raise ValueError(f"objective metric {term.metric!r} is unknown; known: {', '.join(METRICS)}")
         if not isinstance(aggregation, AbstractAggregation):
-            raise ValueError(f"Objective.aggregation must be tuning.Mean(), SmoothMax() or CVaR(), got {aggregation!r}")
+            raise ValueError(
+                f"Objective.aggregation must be jaxobs_tuning.Mean(), SmoothMax() or CVaR(), got {aggregation!r}"
+            )
         self.component = component
         self.param = param
         self.scenarios = scenarios

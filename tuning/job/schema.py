@@ -1,4 +1,4 @@
-"""A job file checked in full (every error names its field) and parsed into a :class:`~tuning.job.spec.Job`."""
+"""A job file checked in full (every error names its field) and parsed into a :class:`~jaxobs_tuning.job.spec.Job`."""
 
 from __future__ import annotations
 
