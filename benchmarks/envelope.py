@@ -6,7 +6,7 @@
 000's closed form, and a third as a tuned one would be: another lam), so one program serves all three, as
 in `jaxobs envelope RESULT.json`.  No persistent compile cache: a fresh process compiles everything.  Prints
 the wall time with the machine's load average beside it (a shared machine: the number means little without
-it) and the envelope's own summary.
+it), the process's CPU time (what it would cost alone, summed over its threads) and the envelope's summary.
 """
 
 from __future__ import annotations
@@ -37,14 +37,15 @@ def main(argv=None) -> int:
     }
     speeds, loads = default_speeds(par, a.speeds), default_loads(par, a.loads)
     load0 = os.getloadavg()
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     ds = envelope(designs, machine=par, drive=bench_drive(par), speeds_rpm=speeds, loads_nm=loads, horizon=a.horizon)
-    wall = time.perf_counter() - t0
+    wall, cpu = time.perf_counter() - t0, time.process_time() - c0
     load1 = os.getloadavg()
     n = len(speeds) * len(loads)
     print(
-        f"envelope: {n} points x {len(designs)} designs, {a.horizon:g} s runs: {wall:.1f} s wall, compile included "
-        f"({os.cpu_count()} CPUs; 1-min load average {load0[0]:.1f} before, {load1[0]:.1f} after)"
+        f"envelope: {n} points x {len(designs)} designs, {a.horizon:g} s runs: {wall:.1f} s wall, {cpu:.1f} s CPU "
+        f"(this process, all threads), compile included ({os.cpu_count()} CPUs; 1-min load average {load0[0]:.1f} "
+        f"before, {load1[0]:.1f} after)"
     )
     for d in designs:
         s = ds.sel(design=d)

@@ -86,7 +86,7 @@ def tour() -> dict:
         rows = {"closed_form": _timed([j, "closed-form", "wif", "--quiet"], cwd)}
         rows["study"] = _timed([j, "study", "--out", "out/tour/study", "--quiet"], cwd)
         job = cwd / "short.toml"
-        text = (resources.files("tuning") / "presets" / "wif_robust.toml").read_text()
+        text = (resources.files("jaxobs_tuning") / "presets" / "wif_robust.toml").read_text()
         job.write_text(re.sub(r"(?m)^steps = \d+", "steps = 2", text))
         subprocess.run(
             [j, "tune", str(job), "--out", "out/tour/tune", "--quiet"],

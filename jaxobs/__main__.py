@@ -1,13 +1,13 @@
-"""``python -m jaxobs``: the ``jaxobs`` command line (``tuning.cli.main``, every command).
+"""``python -m jaxobs``: the ``jaxobs`` command line (``jaxobs_tuning.cli.main``, every command).
 
 An entry point, not part of the library: ``import jaxobs`` never runs this
 file, so the library still never imports ``tuning/`` (DESIGN.md: data flows one
 way).  Only running the package as a program reaches the top layer, as the
-``jaxobs`` console script (``tuning.cli:main``) does.
+``jaxobs`` console script (``jaxobs_tuning.cli:main``) does.
 """
 
 import sys
 
-from tuning.cli import main
+from jaxobs_tuning.cli import main
 
 sys.exit(main())

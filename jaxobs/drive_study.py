@@ -53,7 +53,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import metrics as M
-from .drive import DRIVE_AXES, RPM, ClosedLoop, Drive, PMSMParams, Profile, Scenario, scenario_batch
+from .drive import CF_UNITS, DRIVE_AXES, RPM, ClosedLoop, Drive, PMSMParams, Profile, Scenario, scenario_batch
 from .observers import AbstractDriveObserver
 from .provenance import provenance
 from .runner import run_scenarios
@@ -89,9 +89,6 @@ DRIVE_STUDY_METRICS = {
     "pos_bias_deg": ("deg", "|mean position error| in the steady window (electrical): the observer's steady lag"),
     "speed_dev_max_rpm": ("r/min", "peak |true speed - reference| after t_event (a load step's dip)"),
 }
-# the metrics' unit labels (the CLI's table) spelled as UDUNITS wants them in the NetCDF: CF readers parse
-# "degree" and "min-1" (revolutions per minute), not "deg" or "r/min"
-CF_UNITS = {"deg": "degree", "r/min": "min-1", "N·m": "N m"}
 QUANTILES = (0.5, 0.95, 0.99, 1.0)
 # axis -> what it is, in words (the NetCDF long_name and the figures' labels)
 DRIVE_STUDY_AXIS_NAMES = {name: what for name, (_, _, what) in DRIVE_AXES.items()}

@@ -84,7 +84,7 @@ __all__ = [
 
 # Sec. III-B (Fig. 5) and Sec. IV: "the experiential coefficients k, K1, and K2 are taken as
 # 1.414, 1.56, and 3.11", chosen so that "the setting time t_s of SOIFO and second-order SOIFO
-# are both kept as 0.018 s" (Sec. III-B; the paper does not define t_s: see tuning.targets).
+# are both kept as 0.018 s" (Sec. III-B; the paper does not define t_s: see jaxobs_tuning.targets).
 SOIFO_K = 1.414
 SECOND_ORDER_SOIFO_K1 = 1.56
 SECOND_ORDER_SOIFO_K2 = 3.11

@@ -66,6 +66,15 @@ def _run_chunk(task: _Task, design, batch, aux):
     return sharding.map_batch(one, batch, mesh=task.mesh, tile=task.tile)
 
 
+def _pad(x, rows: int):
+    """``x`` (a chunk's rows) padded to ``rows`` with copies of its last row: only the last chunk is short, so
+    only it is copied (padding every scenario array up front held a second copy of all of them)."""
+    if x.shape[0] == rows:
+        return x
+    xp = np if isinstance(x, np.ndarray) else jnp
+    return xp.concatenate([x, xp.repeat(x[-1:], rows - x.shape[0], axis=0)])
+
+
 class StudyRun(NamedTuple):
     """What :func:`run_scenarios` returns: the sampler's ``points`` (one tuple per scenario, in order) and
     ``values[design][name]``, a NumPy array with one value per scenario for every name the metrics return."""
@@ -123,8 +132,6 @@ def run_scenarios(
     # a chunk divides over the devices (padded up to a multiple of their count): every device gets an equal share
     chunk = -(-min(chunk_size, n) // n_dev) * n_dev
     pad = (-n) % chunk
-    if pad:
-        scs = jax.tree.map(lambda x: jnp.concatenate([x, jnp.repeat(x[-1:], pad, axis=0)]), scs)
     if n_dev > 1:
         # every process holds every scenario (built from the sampler's points, identically everywhere) and
         # places only its own devices' rows of each chunk (sharding.global_batch)
@@ -149,7 +156,7 @@ def run_scenarios(
                 if sink is not None and sink.done(dname, start // chunk):
                     bar.update(rows)  # computed by an earlier, interrupted run
                     continue
-                batch = jax.tree.map(lambda x: x[start : start + chunk], scs)
+                batch = jax.tree.map(lambda x: _pad(x[start : start + chunk], chunk), scs)
                 if n_dev > 1:
                     batch = sharding.global_batch(batch, mesh)
                 new = key not in compiled  # the first chunk this run computes

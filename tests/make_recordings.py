@@ -6,7 +6,7 @@
   plus white measurement noise of 0.005 p.u. (seeded).  Columns: t (s), v (p.u.), and the truth the
   FLL metrics compare against: theta (rad, wrapped), omega (rad/s), amplitude (p.u.).
 - ``drive_spmsm_1000rpm.csv``: u/i of paper 000's SPMSM in a sensored FOC drive
-  (tuning.export.drive_recording, ideal sensors) at 10 kHz for 0.3 s, 1000 r/min and 0.3 T_rated, +10 %
+  (jaxobs_tuning.export.drive_recording, ideal sensors) at 10 kHz for 0.3 s, 1000 r/min and 0.3 T_rated, +10 %
   speed reference at 0.1 s, load to 0.8 T_rated at 0.2 s.  Columns: t (s), u_a, u_b (V, applied over
   the period from t), i_a, i_b (A, sampled at t), theta_e (encoder, electrical rad, wrapped), omega_e
   (electrical rad/s).
@@ -42,7 +42,7 @@ def grid_table() -> tuple[str, np.ndarray]:
 def drive_table() -> tuple[str, np.ndarray]:
     import jaxobs
     from jaxobs import papers
-    from tuning.export import drive_recording
+    from jaxobs_tuning.export import drive_recording
 
     obs = jaxobs.SOIFO(Rs=0.0, L=1.0, k=papers.SOIFO_K, lam=0.5, omega0=1.0)  # only its family and ts matter here
     data, _ = drive_recording(obs, 3000, encoder=True)

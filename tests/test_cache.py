@@ -48,7 +48,7 @@ def test_cache_bad_input(tmp_path, restore_cache_config):
 
 _PROBE = """
 import sys
-from tuning import cli
+from jaxobs_tuning import cli
 real = cli.use_compile_cache
 cli.use_compile_cache = lambda: print("CACHE", real())
 sys.exit(cli.main(sys.argv[1:]))

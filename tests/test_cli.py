@@ -13,8 +13,8 @@ import pytest
 
 import jaxobs
 from jaxobs import papers
-from tuning.cli import BODE_FILES, DEMO_FILES, REPRODUCE_FILES, build_parser, load_study, main
-from tuning.results import load_result, tuned_component
+from jaxobs_tuning.cli import BODE_FILES, DEMO_FILES, REPRODUCE_FILES, build_parser, load_study, main
+from jaxobs_tuning.results import load_result, tuned_component
 
 ROOT = Path(__file__).resolve().parents[1]
 COMMANDS = ("tune", "demo", "closed-form", "bode", "reproduce", "study", "export", "envelope")
@@ -42,13 +42,21 @@ def test_python_m_jaxobs_lists_every_command_and_version():
 
 
 def test_console_script_is_the_one_parser():
-    """pyproject's ``jaxobs`` script is ``tuning.cli:main``, whose parser has every command."""
+    """pyproject's ``jaxobs`` script is ``jaxobs_tuning.cli:main``, whose parser has every command."""
     meta = tomllib.loads((ROOT / "pyproject.toml").read_text())
-    assert meta["project"]["scripts"] == {"jaxobs": "tuning.cli:main"}
+    assert meta["project"]["scripts"] == {"jaxobs": "jaxobs_tuning.cli:main"}
     assert jaxobs.__version__ == meta["project"]["version"]
     helptext = build_parser().format_help()
     assert all(c in helptext for c in COMMANDS) and "--version" in helptext
     assert not (ROOT / "jaxobs" / "cli.py").exists()
+    # every package folder is installed, tuning/ under its own name (pyproject's explicit list)
+    setup = meta["tool"]["setuptools"]
+    assert setup["package-dir"] == {"jaxobs": "jaxobs", "jaxobs_tuning": "tuning"}
+    folders = {".".join(p.relative_to(ROOT).parent.parts) for p in (ROOT / "jaxobs").rglob("__init__.py")} | {
+        ".".join(("jaxobs_tuning",) + p.relative_to(ROOT / "tuning").parent.parts)
+        for p in (ROOT / "tuning").rglob("__init__.py")
+    }
+    assert sorted(setup["packages"]) == sorted(folders)
 
 
 def test_import_jaxobs_leaves_the_environment_alone():
@@ -69,7 +77,7 @@ def test_library_never_imports_tuning():
         "for m in pkgutil.walk_packages(jaxobs.__path__, 'jaxobs.'):\n"
         "    if m.name != 'jaxobs.__main__':\n"
         "        importlib.import_module(m.name)\n"
-        "print(sorted(m for m in sys.modules if m == 'tuning' or m.startswith('tuning.')))\n"
+        "print(sorted(m for m in sys.modules if m.split('.')[0] in ('tuning', 'jaxobs_tuning')))\n"
     )
     p = _python(code)
     assert p.returncode == 0, p.stderr
@@ -213,7 +221,7 @@ def _result_json(tmp_path, component="SOGIFLLWIF", tuned=None):
 
 
 def test_study_design_from_a_tuning_result(tmp_path):
-    """tuning.results reads result.json; the study gets the tuned component (job values + tuned gains)."""
+    """jaxobs_tuning.results reads result.json; the study gets the tuned component (job values + tuned gains)."""
     obs = tuned_component(load_result(_result_json(tmp_path)))
     assert isinstance(obs, jaxobs.SOGIFLLWIF)
     assert (float(obs.k1), float(obs.k2), float(obs.lam)) == (
@@ -278,6 +286,11 @@ def test_check_also_checks_out(tmp_path, capsys):
     assert "exists and is not a folder" in capsys.readouterr().err
     assert main(["study", "--check", "--out", str(tmp_path / "file" / "sub")]) == 2
     assert "cannot be created" in capsys.readouterr().err
+    (done / "study.nc").unlink()
+    (done / "study.chunks").mkdir()  # an interrupted study: the run names --resume, and so does --check
+    assert main(["study", "--check", "--out", str(done)]) == 2
+    assert "--resume" in capsys.readouterr().err
+    assert main(["study", "--check", "--out", str(done), "--resume"]) == 0
     fresh = tmp_path / "new" / "deeper"
     assert main(["tune", "--check", "--out", str(fresh)]) == 0
     assert main(["study", "--check", "--out", str(fresh)]) == 0

@@ -21,7 +21,7 @@ import xarray as xr
 import jaxobs
 from jaxobs import linear
 from jaxobs.study import run_study
-from tuning.cli import main
+from jaxobs_tuning.cli import main
 
 ROOT = Path(__file__).resolve().parents[1]
 AXES = {"freq_step": [-2.0, 1.0], "dc": [0.0, 0.05, 0.1]}
@@ -45,7 +45,7 @@ _WORKER = (
         """
     import sys
     import jax
-    from tuning.cli import main
+    from jaxobs_tuning.cli import main
 
     import jaxobs.sharding as S
 
@@ -209,7 +209,7 @@ def test_study_cli_rejects_bad_distributed_options(capsys):
     ):
         try:
             rc = main(["study", "--out", "unused", *argv])
-        except SystemExit as e:  # argparse's error (tuning.cli._Parser): one line, then exit 2
+        except SystemExit as e:  # argparse's error (jaxobs_tuning.cli._Parser): one line, then exit 2
             rc = e.code
         assert rc == 2, argv
         err = capsys.readouterr().err.strip().splitlines()
@@ -246,7 +246,7 @@ def test_distributed_without_an_environment_names_what_to_set(tmp_path):
     # a subprocess: jax.distributed.initialize changes process-wide JAX state even when it refuses
     env = {k: v for k, v in os.environ.items() if not k.startswith(("JAX_COORDINATOR", "SLURM_", "OMPI_", "PMI"))}
     env.update(JAX_PLATFORMS="cpu", JAXOBS_HOST_DEVICES="1", PYTHONPATH=str(ROOT))
-    cmd = [sys.executable, "-m", "tuning.cli", "study", "--distributed", "--quiet", "--out", str(tmp_path / "o")]
+    cmd = [sys.executable, "-m", "jaxobs_tuning.cli", "study", "--distributed", "--quiet", "--out", str(tmp_path / "o")]
     r = subprocess.run(cmd, capture_output=True, text=True, env=env, cwd=ROOT, timeout=120, check=False)
     err = r.stderr.strip().splitlines()
     assert r.returncode == 2 and len(err) == 1, r.stderr
@@ -266,7 +266,7 @@ def test_processes_given_different_study_files_stop_before_computing(tmp_path):
     for pid in (0, 1):
         f = tmp_path / f"study{pid}.toml"
         f.write_text(STUDY_TOML if pid == 0 else STUDY_TOML.replace("dc = [0.0, 0.05, 0.1]", "dc = [0.0, 0.1]"))
-        cmd = [sys.executable, "-m", "tuning.cli", "study", str(f), "--out", str(tmp_path / "out"), "--quiet"]
+        cmd = [sys.executable, "-m", "jaxobs_tuning.cli", "study", str(f), "--out", str(tmp_path / "out"), "--quiet"]
         cmd += ["--coordinator", addr, "--num-processes", "2", "--process-id", str(pid), "--timeout", "60"]
         procs.append(subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env))
     try:
@@ -280,4 +280,46 @@ def test_processes_given_different_study_files_stop_before_computing(tmp_path):
         err = [line for line in se.strip().splitlines() if not line.startswith("[Gloo]")]
         assert p.returncode == 2 and len(err) == 1, f"process {pid}: rc {p.returncode}\n{so}\n{se[-3000:]}"
         assert "given different study files" in err[0] and "process(es) 1 differ" in err[0], err
+    assert not (tmp_path / "out" / "study.nc").exists()
+
+
+def test_a_coordinator_port_in_use_gets_one_line(tmp_path, capsys):
+    # process 0 with its port taken: JAX's "Failed to start RPC server" and a traceback before (issue 30)
+    import socket
+
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind(("", 0))
+        s.listen()
+        port = s.getsockname()[1]
+        dist = ["--coordinator", f"127.0.0.1:{port}", "--num-processes", "2", "--process-id", "0"]
+        assert main(["study", "--out", str(tmp_path / "o"), "--timeout", "1", "--quiet", *dist]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and f"port {port} is in use" in err[0], err
+
+
+@pytest.mark.slow  # two more processes, as the test above
+@pytest.mark.skipif(not _gloo_available(), reason="this jaxlib has no gloo CPU collectives")
+def test_a_process_given_another_process_count_stops_before_computing(tmp_path):
+    # a process given --num-processes 3 joined a 2-process run and reported "1 of 2", exit 0 (issue 30)
+    env = {k: v for k, v in os.environ.items() if k not in ("XLA_FLAGS", "JAX_NUM_CPU_DEVICES")}
+    env.update(JAX_PLATFORMS="cpu", JAXOBS_HOST_DEVICES="1", PYTHONPATH=str(ROOT))
+    addr = f"127.0.0.1:{_free_port()}"
+    f = tmp_path / "study.toml"
+    f.write_text(STUDY_TOML)
+    procs = []
+    for pid, n in ((0, 2), (1, 3)):
+        cmd = [sys.executable, "-m", "jaxobs_tuning.cli", "study", str(f), "--out", str(tmp_path / "out"), "--quiet"]
+        cmd += ["--coordinator", addr, "--num-processes", str(n), "--process-id", str(pid), "--timeout", "60"]
+        procs.append(subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env))
+    try:
+        outs = [p.communicate(timeout=120) for p in procs]
+    finally:
+        for p in procs:
+            if p.poll() is None:
+                p.kill()
+                p.wait()
+    for pid, (p, (so, se)) in enumerate(zip(procs, outs)):
+        err = [line for line in se.strip().splitlines() if not line.startswith("[Gloo]")]
+        assert p.returncode == 2 and len(err) == 1, f"process {pid}: rc {p.returncode}\n{so}\n{se[-3000:]}"
+        assert "--num-processes: process(es) 1 were given 3, the run has 2 processes" in err[0], err
     assert not (tmp_path / "out" / "study.nc").exists()

@@ -178,15 +178,15 @@ def _schema_keys(parse, raw: dict, base: Path, where=(), found=None) -> set:
 
 
 def test_toml_reference_lists_every_schema_key():
-    import tuning
-    from tuning import study_file
+    import jaxobs_tuning
+    from jaxobs_tuning import study_file
 
     ref = _reference()
     presets = ROOT / "tuning" / "presets"
     jobs = [p for p in sorted(presets.glob("*.toml")) if not p.name.startswith("study_")]
     studies = [*sorted(presets.glob("study_*.toml")), ROOT / "jaxobs" / "data" / "default_study.toml"]
     keys = set()
-    for files, parse in ((jobs, tuning.parse_job), (studies, study_file.parse_study)):
+    for files, parse in ((jobs, jaxobs_tuning.parse_job), (studies, study_file.parse_study)):
         for f in files:
             keys |= _schema_keys(parse, tomllib.loads(f.read_text()), f.parent)
     assert len(keys) > 50  # the probe found the schema (a changed error format would find nothing)
@@ -202,7 +202,7 @@ def test_toml_reference_lists_every_schema_key():
 
 
 def _resolves(name: str) -> bool:
-    """``jaxobs.x.y`` / ``tuning.x``: the longest importable module prefix, then attributes."""
+    """``jaxobs.x.y`` / ``jaxobs_tuning.x``: the longest importable module prefix, then attributes."""
     import importlib
 
     parts = name.split(".")
@@ -224,7 +224,7 @@ def test_docs_quote_names_and_files_that_exist():
     stale = []
     for page in [*PAGES, ROOT / "README.md"]:
         text = page.read_text()
-        for m in re.finditer(r"`((?:jaxobs|tuning)(?:\.[A-Za-z_]\w*)+)", text):
+        for m in re.finditer(r"`((?:jaxobs_tuning|jaxobs)(?:\.[A-Za-z_]\w*)+)", text):
             if not m.group(1).endswith("_") and not _resolves(m.group(1)):  # `jaxobs.papers.IF_*`: a family
                 stale.append(f"{page.name}: {m.group(1)}")
         for m in re.finditer(r"`((?:jaxobs|tuning|tests|benchmarks|notebooks)/[\w./-]+?)[`:\s]", text):

@@ -1,4 +1,4 @@
-"""The drive job's metrics (tuning.objective.METRICS) on a simulated load step: they measure what they say."""
+"""The drive job's metrics (jaxobs_tuning.objective.METRICS) on a simulated load step: they measure what they say."""
 
 import math
 
@@ -10,7 +10,7 @@ import jaxobs
 from jaxobs import drive as D
 from jaxobs import metrics as M
 from jaxobs.drive_study import bind_observer
-from tuning.objective import DRIVE_METRICS, METRICS, MetricContext
+from jaxobs_tuning.objective import DRIVE_METRICS, METRICS, MetricContext
 
 
 @pytest.fixture(scope="module")

@@ -15,9 +15,9 @@ import jaxobs
 from jaxobs import drive as D
 from jaxobs import papers
 from jaxobs.drive_study import QUANTILES, run_drive_study
-from tuning.cli import main
-from tuning.job import COMPONENTS, DriveSpec, JobError, job_drive
-from tuning.study_file import load_study
+from jaxobs_tuning.cli import main
+from jaxobs_tuning.job import COMPONENTS, DriveSpec, JobError, job_drive
+from jaxobs_tuning.study_file import load_study
 
 PAR = D.ipmsm_paper002()
 DRIVE = D.Drive(D.FOC.imc(PAR, alpha_c=2 * math.pi * 300, alpha_s=2 * math.pi * 5), sensorless=True)
@@ -94,6 +94,7 @@ def test_cli_drive_study_writes_netcdf_with_the_axes(tmp_path, capsys):
     assert (out / "drive_study.png").stat().st_size > 10_000
     printed = capsys.readouterr().out
     assert "lost lock" in printed and "FA-LESO-tuned  pos_err_rms_deg (deg)" in printed  # columns apart
+    assert "diverged" in printed and "lost speed" in printed  # each design's losses, lost speed included
     for name in [*ds.data_vars, *ds.coords]:
         assert "long_name" in ds[name].attrs, name
         if name != "design":
@@ -164,7 +165,7 @@ def _cleso_result(tmp_path, machine: str) -> Path:
 
 def test_a_study_runs_the_jobs_machine_and_drive(tmp_path):
     """One machine table: a study of a tuning result runs the machine, bench inertia and FOC of the job that
-    tuned it (jaxobs.drive.bench_machine / tuning.job.job_drive), and refuses another machine in one line."""
+    tuned it (jaxobs.drive.bench_machine / jaxobs_tuning.job.job_drive), and refuses another machine in one line."""
     res = _cleso_result(tmp_path, "spmsm000")
     st = tmp_path / "s.toml"
     st.write_text(STUDY_HEAD + f'[designs.tuned]\nresult = "{res.name}"\n[axes]\ndRs = [0.0]\n')

@@ -196,7 +196,7 @@ def test_reproduce_leso_dual_rows(tmp_path):
     from jaxobs.plot import position_error_figure
     from jaxobs.reproduce.leso import LESO_NAMES
     from jaxobs.reproduce.leso_dual import DUAL_EXPERIMENTS, DUAL_LOAD_STEP, run_leso_dual
-    from tuning.cli_papers import REPRODUCE_DUAL_FILES
+    from jaxobs_tuning.cli_papers import REPRODUCE_DUAL_FILES
 
     rows, traces = run_leso_dual()
     keys = [e[0] for e in DUAL_EXPERIMENTS] + [DUAL_LOAD_STEP]
@@ -221,7 +221,7 @@ def test_reproduce_leso_dual_rows(tmp_path):
 
 
 def test_reproduce_flux_refuses_the_dual_machine(tmp_path, capsys):
-    from tuning.cli import main
+    from jaxobs_tuning.cli import main
 
     assert main(["reproduce", "flux", "--machine", "dual", "--out", str(tmp_path)]) == 2
     assert "--machine" in capsys.readouterr().err

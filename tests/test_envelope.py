@@ -11,16 +11,18 @@ import pytest
 import xarray as xr
 
 import jaxobs
+from jaxobs import papers
 from jaxobs.drive import bench_drive, bench_machine
 from jaxobs.drive.envelope import ENVELOPE_VARIABLES, envelope
 from jaxobs.drive_study import bind_observer, drive_scenarios
-from tuning.cli import main
-from tuning.job import load_job
-from tuning.job.output import claimed_envelope
+from jaxobs_tuning.cli import main
+from jaxobs_tuning.job import load_job
+from jaxobs_tuning.job.output import claimed_envelope
 
+K1, K2 = papers.SECOND_ORDER_SOIFO_K1, papers.SECOND_ORDER_SOIFO_K2  # 000's
 PAR = bench_machine("spmsm000")
 DRIVE = bench_drive(PAR)
-CF = jaxobs.SecondOrderSOIFO(0.0, 1.0, 1.56, 3.11, 1.56**3 / (2 * 3.11), 100.0)  # 000's closed form
+CF = jaxobs.SecondOrderSOIFO(0.0, 1.0, K1, K2, K1**3 / (2 * K2), 100.0)  # 000's closed form
 SOIFO = jaxobs.SOIFO(0.0, 1.0, 1.0, 0.6, 100.0)
 PRESET = Path(__file__).resolve().parents[1] / "tuning" / "presets" / "sosoifo.toml"
 SHORT = dict(settle=0.05, warmup=0.05, window=0.15)
@@ -30,7 +32,7 @@ SHORT = dict(settle=0.05, warmup=0.05, window=0.15)
 def small():
     """2 speeds × 2 loads × 2 designs of one class, short runs: 300 r/min is below the flux observers'
     low-speed limit (docs/stability.md: the speed loop closed through the FLL), 1000 r/min above it."""
-    designs = {"closed form": CF, "lam x2": jaxobs.SecondOrderSOIFO(0.0, 1.0, 1.56, 3.11, 1.22, 100.0)}
+    designs = {"closed form": CF, "lam x2": jaxobs.SecondOrderSOIFO(0.0, 1.0, K1, K2, 1.22, 100.0)}
     return envelope(designs, machine=PAR, drive=DRIVE, speeds_rpm=[300.0, 1000.0], loads_nm=[0.0, 5.0],
                     horizon=0.6, stability=SHORT)  # fmt: skip
 
@@ -177,9 +179,44 @@ def test_preset_envelope_agrees_with_3s_simulations_at_low_speed(tmp_path):
     low = ds.sel(speed_rpm=ds["speed_rpm"][ds["speed_rpm"] <= 600.0])
     points = [(float(s), float(ld)) for s in low["speed_rpm"].values for ld in low["load"].values]
     assert len(points) >= 12
-    designs = {"initial": jaxobs.SecondOrderSOIFO(0.0, 1.0, 1.56, 3.11, 0.61, 100.0), "closed_form": CF}
+    designs = {"initial": jaxobs.SecondOrderSOIFO(0.0, 1.0, K1, K2, 0.61, 100.0), "closed_form": CF}
     sim = _holds_3s(designs, points)
     for d in designs:
         verdict = low["stable"].sel(design=d).values.ravel() == 1
         assert (verdict == sim[d]).all(), (d, points, verdict, sim[d])
     assert not low["stable"].all() and low["stable"].any()  # both kinds of verdict present
+
+
+@pytest.mark.parametrize(
+    "box, field",
+    [({"load_nm": (0.0, 5.0)}, "speed_rpm"), ({"speed_rpm": (300.0, 200.0)}, "low <= high"),
+     ({"speed_rpm": (300.0, 600.0), "dX": (0, 1)}, "unknown axes")],
+)  # fmt: skip
+def test_worst_case_bad_box_names_the_field(box, field):
+    from jaxobs.drive.envelope import worst_case
+
+    with pytest.raises(ValueError, match=field):
+        worst_case(CF, machine=PAR, drive=DRIVE, box=box)
+
+
+@pytest.mark.slow
+def test_worst_case_by_gradients_finds_the_grids_worst():
+    """Issue 26.7: projected gradient ascent of the Lyapunov exponent over speed 300..1200 r/min × load 0..10 N·m
+    × dRs ±30 % finds the closed form's worst point at least as bad as a 4 × 2 × 2 grid's worst (the low-speed
+    end, where the speed loop closed through the FLL goes unstable)."""
+    from jaxobs.drive.envelope import worst_case
+    from jaxobs.drive.stability import stability_sweep
+
+    box = {"speed_rpm": (300.0, 1200.0), "load_nm": (0.0, 10.0), "dRs": (-0.3, 0.3)}
+    kw = dict(settle=0.1, warmup=0.05, window=0.2, n_dirs=2)
+    res = worst_case(CF, machine=PAR, drive=DRIVE, box=box, starts=4, steps=4, stability=kw)
+    grid = [(s, ld, r) for s in (300.0, 600.0, 900.0, 1200.0) for ld in (0.0, 10.0) for r in (-0.3, 0.3)]
+    scs = drive_scenarios(PAR, ["speed_rpm", "load_nm", "dRs"], grid)
+    lam = np.asarray(
+        stability_sweep(lambda sc: jaxobs.drive.ClosedLoop(DRIVE, bind_observer(CF, sc), sc), scs, **kw).exponent
+    )
+    print("gradient worst", res["worst_x"], res["worst_exponent"], "grid worst", grid[int(np.argmax(lam))], lam.max())
+    assert lam.max() > 0  # the box reaches the unstable low-speed end
+    assert res["worst_exponent"] >= lam.max() - 1.0
+    assert res["worst_x"]["speed_rpm"] <= 400.0
+    assert res["path"].shape == (5, 4)

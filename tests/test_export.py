@@ -24,7 +24,7 @@ import pytest
 import jaxobs
 from jaxobs import linear, papers
 from jaxobs.drive import bench_machine
-from tuning.export import (
+from jaxobs_tuning.export import (
     MIN_STEPS,
     TOLERANCE,
     add_export_parser,
@@ -60,7 +60,7 @@ _README_TUNED = {"k1": 1.43718, "k2": 0.666805, "lam": 7871.22}
 
 def _default_job_result(tmp_path, **extra):
     """A result.json as `jaxobs tune` writes it for the default job (tuning/presets/wif_robust.toml)."""
-    raw = tomllib.loads((resources.files("tuning") / "presets" / "wif_robust.toml").read_text())
+    raw = tomllib.loads((resources.files("jaxobs_tuning") / "presets" / "wif_robust.toml").read_text())
     res = {
         "job": raw,
         "component": raw["job"]["component"],
@@ -355,8 +355,8 @@ def test_unsupported_components_and_bad_input_raise_clear_errors(tmp_path):
 def test_default_job_run_then_export_matches(tmp_path):
     """The real thing: `jaxobs tune` on the default job (about 40 s), then export of its result.json."""
     _need_cc()
-    from tuning import load_job, run_job
-    from tuning.cli import default_job_path
+    from jaxobs_tuning import load_job, run_job
+    from jaxobs_tuning.cli import default_job_path
 
     run_job(load_job(default_job_path()), tmp_path / "tune", quiet=True)
     assert _cli(["export", str(tmp_path / "tune" / "result.json"), "--out", str(tmp_path / "c")]) == 0
@@ -547,7 +547,7 @@ def test_the_export_runs_its_c_in_python_before_writing(tmp_path, monkeypatch):
     """Without a C compiler too: the emitted statements run on float32 numpy scalars at random states and
     inputs and must give the JAX step's new state and outputs, so a code generator that turns a subtraction
     into an addition writes nothing."""
-    from tuning.export.lower import Emitter
+    from jaxobs_tuning.export.lower import Emitter
 
     binary = Emitter.binary
     monkeypatch.setattr(Emitter, "binary", lambda self, p, a, b: binary(self, "add" if p == "sub" else p, a, b))

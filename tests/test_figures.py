@@ -92,3 +92,29 @@ def test_bode_grid_resolves_the_gi_leso_resonance_and_traces_stay_distinct():
     assert lines[0].get_linewidth() > lines[1].get_linewidth()  # the one beneath is wider: it shows
     assert fig.axes[1].get_xlabel() == "frequency (Hz)"
     assert plot.bode_figure({"gi": gi}, wpos, "t", hz=False).axes[1].get_xlabel() == "ω (rad/s)"
+
+
+def test_drive_events_are_found_and_named():
+    """Every event of a drive run from its outputs: the load applied and removed (leso_load_step.png's 0.6 s
+    and 0.9 s), a speed-reference ramp and a step with their targets, the I-f hand-over (position_error_figure
+    marks and names each)."""
+    from types import SimpleNamespace
+
+    t = np.arange(0, 1.2, 1e-3)
+    load = np.where((t >= 0.6) & (t < 0.9), 24.0, 0.0)
+    rpm = np.where(t < 0.2, 300.0, np.where(t < 0.4, 300.0 + (t - 0.2) / 0.2 * 300.0, 600.0))
+    rpm = np.where(t >= 1.0, 500.0, rpm)
+    mode = (t >= 0.1).astype(int)
+    out = SimpleNamespace(load=load, omega_m_ref=rpm * np.pi / 30, mode=mode)
+    ev = plot.drive_events(t, out)
+    names = [w for _, w in ev]
+    assert names == [
+        "I-f hand-over to the observer",
+        "speed ref. ramp to 600 r/min",
+        "load applied: 0 → 24 N·m",
+        "load removed: 24 → 0 N·m",
+        "speed ref. step to 500 r/min",
+    ], names
+    times = [te for te, _ in ev]
+    assert np.allclose(times, [0.1, 0.2, 0.6, 0.9, 1.0], atol=1.5e-3)
+    assert [w for _, w in plot.drive_events(t, out, t_from=0.5)][0].startswith("load applied")

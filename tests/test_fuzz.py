@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-from tuning.cli import main
+from jaxobs_tuning.cli import main
 
 PRESETS = Path(__file__).parents[1] / "tuning" / "presets"
 JOBS = sorted(p for p in PRESETS.glob("*.toml") if not p.name.startswith("study_"))
@@ -337,7 +337,7 @@ STUDY_MUST_FAIL = [
     ("drive: speed 0", DRIVE_STUDY.replace("speed_rpm = [", "speed_rpm = [0.0, "), "axes.speed_rpm[0]"),
     ("drive: unknown axis", DRIVE_STUDY.replace("[axes]", "[axes]\nspin = [1.0]"), "axes.spin"),
     ("drive: unknown key", DRIVE_STUDY.replace("[axes]", "[drive]\nalpha = 1.0\n[axes]"), "drive.alpha"),
-    # the FOC is the drive jobs' (tuning.job.job_drive): a study cannot choose another
+    # the FOC is the drive jobs' (jaxobs_tuning.job.job_drive): a study cannot choose another
     ("drive: bandwidth", DRIVE_STUDY.replace("[axes]", "[drive]\nalpha_c_hz = 300.0\n[axes]"), "drive.alpha_c_hz"),
     ("drive: settle", DRIVE_STUDY.replace("[axes]", "[drive]\nsettle = 100.0\n[axes]"), "drive.settle"),
     ("drive: machine", DRIVE_STUDY.replace('"ipmsm002"', '"mine"'), "study.machine"),

@@ -61,7 +61,7 @@ def test_ctrl_c_names_resume_and_rerun_names_resume_first(tmp_path):
 
 
 def test_no_command_lists_the_commands(capsys):
-    from tuning.cli import main
+    from jaxobs_tuning.cli import main
 
     assert main([]) == 2
     err = capsys.readouterr().err
@@ -70,7 +70,7 @@ def test_no_command_lists_the_commands(capsys):
 
 
 def test_closed_form_error_names_the_flag(capsys):
-    from tuning.cli import main
+    from jaxobs_tuning.cli import main
 
     assert main(["closed-form", "wif", "--b", "-1"]) == 2
     err = capsys.readouterr().err.strip()

@@ -131,6 +131,29 @@ def test_parameter_mismatch_against_eqs_42_43(which, factor):
         assert abs(err) < 0.01
 
 
+def test_cleso_closing_the_loop_holds_half_load_at_600rpm():
+    """002 Sec. V-B: with the C-LESO closing the loop, "the half-rated load test cannot be completed" at
+    600 r/min. Not reproduced: on our bench (assumed machine, harmonics a5/a7, 10x inertia) the C-LESO holds
+    it. Measured: speed within 0.37 r/min of 600, position error 22.8° at most (its steady lag, 23° in 002
+    Fig. 11 too), while the FA-LESO riding along errs by < 0.1°. The primary really is the C-LESO: its lag
+    is in the FOC's frame, so the FA-LESO sees the true angle and the C-LESO lags."""
+    par = D.bench_machine("ipmsm002", a5=A5, a7=A7)
+    sc = D.Scenario(
+        par,
+        speed_ref=D.Profile.constant(600 * D.RPM),
+        load=D.Profile.constant(0.5 * float(par.T_rated)),
+        omega_m0=600 * D.RPM,
+    )
+    bank = leso_bank(par, par.p * 600 * D.RPM, primary=0)
+    sol = jaxobs.simulate(D.ClosedLoop(D.bench_drive(par, handover=0.3), bank, sc), 1.0)
+    m = np.asarray(sol.t) >= 0.6
+    assert bool(sol.ok)
+    assert np.max(np.abs(np.asarray(sol.outputs.speed_rpm)[m] - 600.0)) < 2.0
+    err = [np.degrees(np.abs(np.asarray(wrap(o.theta - sol.outputs.theta_e))[m])).max() for o in sol.outputs.obs.each]
+    assert 15.0 < err[0] < 30.0, err
+    assert err[2] < 1.0, err
+
+
 def test_pll_loop_through_the_faleso_is_stable():
     """Our PLL (ω_b = 2π·15 rad/s, ζ = 1/√2) closed through the FA-LESO's envelope response: stable by the
     generalized Routh test at 25, 50 and 70 Hz, crossover 136 rad/s with 40.5° phase margin."""

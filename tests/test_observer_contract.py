@@ -1,7 +1,8 @@
 """The one drive-observer contract (issue 28): every observer subclasses AbstractObserver; a drive observer is
 bound to a machine and a speed by its one ``bind`` and starts with ``init_at`` / ``seed_speed``.
 
-The old bindings (drive_study.bind_observer's body, tuning.export.bind_to_drive, tuning.job._bind_recording,
+The old bindings (drive_study.bind_observer's body, jaxobs_tuning.export.bind_to_drive,
+jaxobs_tuning.job._bind_recording,
 the reproductions' constructors) are written out here as they were, and ``bind`` is checked against them,
 clamp included, with the two deliberate differences named where they are tested."""
 
@@ -129,7 +130,7 @@ def test_bind_sets_only_its_bound_fields_and_keeps_dtypes():
     assert all(x.dtype == jnp.float32 for x in jax.tree.leaves(bound))
     assert float(bound.L) == pytest.approx(float(SPMSM.Ld)) and float(bound.k) == float(obs32.k)
     assert LESOS["CLESO"]().bind(IPMSM, 1.0).Lq == IPMSM.Lq  # a LESO takes Lq (its model's inductance)
-    # est_par None: a recording gives the speed, not the machine (old tuning.job._bind_recording)
+    # est_par None: a recording gives the speed, not the machine (old jaxobs_tuning.job._bind_recording)
     leso = LESOS["FALESO"]()
     only = leso.bind(None, -42.0)
     assert float(only.omega0_pll) == -42.0 and float(only.Rs) == float(leso.Rs) and float(only.Lq) == 1.0
@@ -138,12 +139,12 @@ def test_bind_sets_only_its_bound_fields_and_keeps_dtypes():
 
 
 def test_the_export_binding_now_clamps():
-    """Behaviour change (a bug fix): tuning.export.bind_to_drive set a flux observer's omega0 to ω_e unclamped
+    """Behaviour change (a bug fix): jaxobs_tuning.export.bind_to_drive set a flux observer's omega0 to ω_e unclamped
     (0 at standstill: a SOGI centre frequency SOIFO refuses); bind clamps it as the studies did.  At the
     recordings' speeds (1000 r/min) the two agree."""
     obs = FLL_FLUX["SOIFO"]()
 
-    def old_export(o, machine, rpm):  # tuning.export.bind_to_drive before the contract
+    def old_export(o, machine, rpm):  # jaxobs_tuning.export.bind_to_drive before the contract
         we = float(rpm) * math.pi / 30 * int(machine.p)
         vals = (machine.Rs, machine.Ld, we)
         vals = tuple(jnp.asarray(v, jnp.result_type(getattr(o, n))) for n, v in zip(("Rs", "L", "omega0"), vals))

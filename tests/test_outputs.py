@@ -15,12 +15,12 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from tuning import solvers, strategies
-from tuning.cli import main
-from tuning.outdir import LOCK, OutDir, OutError, atomic_path, atomic_write_bytes, safe_name
-from tuning.params import GainSpec, Parametrization
-from tuning.solvers import CheckpointError, tune
-from tuning.summary import print_summary
+from jaxobs_tuning import solvers, strategies
+from jaxobs_tuning.cli import main
+from jaxobs_tuning.outdir import LOCK, OutDir, OutError, atomic_path, atomic_write_bytes, safe_name
+from jaxobs_tuning.params import GainSpec, Parametrization
+from jaxobs_tuning.solvers import CheckpointError, tune
+from jaxobs_tuning.summary import print_summary
 
 # --------------------------------------------------------------------------
 # containment
@@ -159,7 +159,7 @@ def test_internal_error_is_one_line_with_a_log(tmp_path, capsys, monkeypatch):
     def boom(*a, **k):
         raise RuntimeError("boom")
 
-    monkeypatch.setattr("tuning.cli.run_job", boom)
+    monkeypatch.setattr("jaxobs_tuning.cli.run_job", boom)
     assert main(["tune", str(path), "--out", str(tmp_path / "o")]) == 1
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "error.log" in err[0]

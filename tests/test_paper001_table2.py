@@ -17,7 +17,7 @@ import pytest
 
 import jaxobs
 import jaxobs.linear as L
-from tuning.export.codegen import generate
+from jaxobs_tuning.export.codegen import generate
 
 # 001 Table II: (×, ÷, ±, inverse tangent, square root, integrators)
 TABLE_II = {"SOGI-FLL": (7, 2, 3, 1, 1, 3), "SOGI-FLL-WPF": (10, 2, 5, 1, 1, 5), "SOGI-FLL-WIF": (10, 2, 5, 1, 1, 5)}

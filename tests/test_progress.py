@@ -9,9 +9,9 @@ import pytest
 import jaxobs
 from jaxobs.progress import Progress
 from jaxobs.study import run_study
-from tuning import strategies
-from tuning.cli import build_parser
-from tuning.solvers import tune
+from jaxobs_tuning import strategies
+from jaxobs_tuning.cli import build_parser
+from jaxobs_tuning.solvers import tune
 
 
 def test_progress_is_silent_by_default_a_bar_on_stderr_or_a_callback(capsys, monkeypatch):
@@ -114,9 +114,34 @@ def test_every_command_takes_quiet(argv):
 
 
 def test_export_reports_its_three_stages(tmp_path):
-    from tuning.export import export_observer, observer_from_design
+    from jaxobs_tuning.export import export_observer, observer_from_design
 
     calls = []
     export_observer(observer_from_design("wif"), tmp_path, n_steps=10_000, progress=lambda d, t: calls.append((d, t)))
     assert calls == [(1, 3), (2, 3), (3, 3)]
     assert (tmp_path / "golden.csv").exists()
+
+
+def test_reproduce_leso_progress_has_a_total(monkeypatch):
+    """`reproduce leso`'s bar counts its experiments out of a total (issue 29: it had none).  No simulation:
+    the first run is stopped at once, after the bar was made; each run() is one step of N_EXPERIMENTS."""
+    from jaxobs.reproduce import leso
+
+    made = []
+
+    class Recorder(leso.Progress):
+        def __init__(self, progress, total, desc, unit="it"):
+            made.append(total)
+            super().__init__(progress, total, desc, unit)
+
+    class Stop(Exception):
+        pass
+
+    def stop(*_a, **_k):
+        raise Stop
+
+    monkeypatch.setattr(leso, "Progress", Recorder)
+    monkeypatch.setattr(leso, "simulate", stop)
+    with pytest.raises(Stop):
+        leso.run_leso_experiments(progress=False)
+    assert made == [leso.N_EXPERIMENTS] and leso.N_EXPERIMENTS == 16

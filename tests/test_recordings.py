@@ -193,7 +193,7 @@ def test_shipped_grid_recording_is_reproducible():
 def test_recording_job_runs_tiny(tmp_path):
     """tuning/presets/recording_wif.toml (the grid recording) runs two solver steps end to end: scores
     against the recording's truth, the recording's sha256 in result.json, one scenario."""
-    from tuning.job import load_job, run_job
+    from jaxobs_tuning.job import load_job, run_job
 
     job = load_job(ROOT / "tuning" / "presets" / "recording_wif.toml")
     job.solver = dataclasses.replace(job.solver, steps=2)
@@ -209,7 +209,7 @@ def test_recording_job_runs_tiny(tmp_path):
 
 @pytest.mark.slow
 def test_drive_recording_job_runs_tiny(tmp_path):
-    from tuning.job import load_job, run_job
+    from jaxobs_tuning.job import load_job, run_job
 
     job = load_job(ROOT / "tuning" / "presets" / "recording_sosoifo.toml")
     job.solver = dataclasses.replace(job.solver, steps=2)
@@ -241,7 +241,7 @@ def _job_copy(tmp_path, name="recording_wif.toml"):
     ],
 )
 def test_recording_job_errors_name_the_field(tmp_path, capsys, old, new, field, words):
-    from tuning.cli import main
+    from jaxobs_tuning.cli import main
 
     path = _job_copy(tmp_path)
     text = path.read_text()
@@ -255,8 +255,8 @@ def test_recording_job_errors_name_the_field(tmp_path, capsys, old, new, field, 
 def test_responses_plot_names_a_recording_scenario_by_its_file(tmp_path):
     """responses.png's title names a recording job's scenario by its file, not "recording = 0"; a grid
     job's scenario keeps its axis values."""
-    from tuning.job import load_job
-    from tuning.report import _describe
+    from jaxobs_tuning.job import load_job
+    from jaxobs_tuning.report import _describe
 
     job = load_job(_job_copy(tmp_path))
     assert _describe(job.scenarios, 0) == "scenario #0: recording grid_50_51hz.csv"
@@ -265,8 +265,8 @@ def test_responses_plot_names_a_recording_scenario_by_its_file(tmp_path):
 
 
 def test_recording_job_checks_size_and_the_closed_loop_metrics(tmp_path, capsys, monkeypatch):
-    from tuning.cli import main
-    from tuning.job import recordings as J
+    from jaxobs_tuning.cli import main
+    from jaxobs_tuning.job import recordings as J
 
     path = _job_copy(tmp_path)
     monkeypatch.setattr(J, "MAX_RECORDING_BYTES", 1000)
@@ -284,7 +284,7 @@ def test_study_file_on_a_recording(tmp_path, capsys):
     designs run on the recording, study.nc has dims (design, recording) with units and the file's sha256."""
     import xarray as xr
 
-    from tuning.cli import main
+    from jaxobs_tuning.cli import main
 
     path = _job_copy(tmp_path, "study_recording_fll.toml")
     text = path.read_text()

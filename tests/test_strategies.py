@@ -8,8 +8,8 @@ import optax
 import optimistix as optx
 import pytest
 
-from tuning import CVaR, Mean, Objective, OptaxSolver, OptimistixSolver, SmoothMax, strategies, tune
-from tuning.solvers import as_solver
+from jaxobs_tuning import CVaR, Mean, Objective, OptaxSolver, OptimistixSolver, SmoothMax, strategies, tune
+from jaxobs_tuning.solvers import as_solver
 
 
 def test_aggregations_on_a_hand_made_batch():

@@ -16,7 +16,7 @@ import jaxobs
 from jaxobs import linear, papers
 from jaxobs import metrics as M
 from jaxobs.study import run_study, worst_cases
-from tuning.cli import main
+from jaxobs_tuning.cli import main
 
 AXES = {"freq_step": [-2.0, 1.0], "dc": [0.0, 0.1], "phase_jump_deg": [0.0, 30.0]}
 

@@ -17,7 +17,7 @@ import jaxobs
 from jaxobs import linear
 from jaxobs.chunkstore import ChunkStore
 from jaxobs.study import run_study
-from tuning.cli import STUDY_CHUNKS, main
+from jaxobs_tuning.cli import STUDY_CHUNKS, main
 
 # one scenario a chunk: many chunks, so that a kill lands mid-run and a resume has chunks to skip
 TINY = """
@@ -106,7 +106,7 @@ def test_a_partial_study_names_resume_and_another_studys_chunks_are_refused(tmp_
 
 
 def _cli(*args):
-    return [sys.executable, "-m", "tuning.cli", "study", *map(str, args), "--quiet"]
+    return [sys.executable, "-m", "jaxobs_tuning.cli", "study", *map(str, args), "--quiet"]
 
 
 def _kill_and_resume(tmp_path, instants: int, seed: int):

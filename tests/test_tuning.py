@@ -20,7 +20,7 @@ import pytest
 import jaxobs
 from jaxobs import drive as D
 from jaxobs import linear, papers
-from tuning import (
+from jaxobs_tuning import (
     GainSpec,
     Objective,
     Parametrization,
@@ -28,11 +28,11 @@ from tuning import (
     load_job,
     tune,
 )
-from tuning.cli import main
-from tuning.job import JobError, parse_job
-from tuning.objective import MetricContext
-from tuning.solvers import OptaxSolver
-from tuning.targets import flux_settling_time, lambda_for_damping, match_settling_time
+from jaxobs_tuning.cli import main
+from jaxobs_tuning.job import JobError, parse_job
+from jaxobs_tuning.objective import MetricContext
+from jaxobs_tuning.solvers import OptaxSolver
+from jaxobs_tuning.targets import flux_settling_time, lambda_for_damping, match_settling_time
 
 W_N = papers.FLL_OMEGA_N
 
@@ -174,7 +174,7 @@ def test_bad_job_files_exit_2_with_one_line_naming_the_field(tmp_path, edit, fie
     path = tmp_path / "job.toml"
     path.write_text(edit(GOOD))
     p = subprocess.run(
-        [sys.executable, "-m", "tuning.cli", "tune", str(path), "--check"], capture_output=True, text=True
+        [sys.executable, "-m", "jaxobs_tuning.cli", "tune", str(path), "--check"], capture_output=True, text=True
     )
     assert p.returncode == 2, p.stderr
     lines = p.stderr.strip().splitlines()
@@ -304,12 +304,12 @@ def test_kill_9_then_resume_gives_the_same_gains(tmp_path):
     path.write_text(KILL)
     ref_out, out = tmp_path / "ref", tmp_path / "killed"
     subprocess.run(
-        [sys.executable, "-m", "tuning.cli", "tune", str(path), "--out", str(ref_out), "--quiet"],
+        [sys.executable, "-m", "jaxobs_tuning.cli", "tune", str(path), "--out", str(ref_out), "--quiet"],
         check=True,
         capture_output=True,
     )
     proc = subprocess.Popen(
-        [sys.executable, "-m", "tuning.cli", "tune", str(path), "--out", str(out), "--quiet"],
+        [sys.executable, "-m", "jaxobs_tuning.cli", "tune", str(path), "--out", str(out), "--quiet"],
         stdout=subprocess.DEVNULL,
         stderr=subprocess.DEVNULL,
     )
@@ -326,7 +326,7 @@ def test_kill_9_then_resume_gives_the_same_gains(tmp_path):
     proc.wait()
     assert not (out / "result.json").exists()
     subprocess.run(
-        [sys.executable, "-m", "tuning.cli", "tune", str(path), "--out", str(out), "--resume", "--quiet"],
+        [sys.executable, "-m", "jaxobs_tuning.cli", "tune", str(path), "--out", str(out), "--resume", "--quiet"],
         check=True,
         capture_output=True,
     )
@@ -360,18 +360,23 @@ def test_drive_speeds_are_checked_against_the_jobs_machine(tmp_path, capsys):
         assert D.drive_speed_limit_rpm(D.bench_machine(name)) == pytest.approx(n_max, rel=1e-12)
     assert 1.3 * papers.IPMSM_002["n_rated"] < D.drive_speed_limit_rpm(D.bench_machine("ipmsm002")) < 1e4
     cleso = (presets / "cleso.toml").read_text()
+
+    def grid(text, old, new):  # in [scenarios.grid] (the [envelope] table has a load_nm line too)
+        head, sep, tail = text.partition("[scenarios.grid]")
+        return head + sep + tail.replace(old, new, 1)
+
     soifo = (presets / "soifo.toml").read_text()
     cases = [  # (job text, None if it passes, else the field and the range the one-line error names)
         (cleso.replace("[300.0, 600.0, 840.0]", "[84000.0]"), "scenarios.grid.speed_rpm[0]", "[1, 1323] r/min"),
         (cleso.replace("[300.0, 600.0, 840.0]", "[300.0, 1400.0]"), "scenarios.grid.speed_rpm[1]", "ipmsm002"),
         (cleso.replace("[300.0, 600.0, 840.0]", "[1300.0]"), None, None),
         (
-            cleso.replace("load_nm = [0.0, 15.0]", "speed_step_rpm = [-100.0, 600.0]"),
+            grid(cleso, "load_nm = [0.0, 15.0]", "speed_step_rpm = [-100.0, 600.0]"),
             "scenarios.grid.speed_step_rpm[1]",
             "got 1440",
         ),
-        (cleso.replace("load_nm = [0.0, 15.0]", "speed_step_rpm = [-1700.0]"), "speed_step_rpm[0]", "got -1400"),
-        (cleso.replace("load_nm = [0.0, 15.0]", "speed_step_rpm = [-1000.0, 400.0]"), None, None),
+        (grid(cleso, "load_nm = [0.0, 15.0]", "speed_step_rpm = [-1700.0]"), "speed_step_rpm[0]", "got -1400"),
+        (grid(cleso, "load_nm = [0.0, 15.0]", "speed_step_rpm = [-1000.0, 400.0]"), None, None),
         (soifo.replace("[600.0, 1200.0, 2000.0]", "[2800.0]"), None, None),  # the SPMSM allows 2835 r/min
         (soifo.replace("[600.0, 1200.0, 2000.0]", "[2900.0]"), "scenarios.grid.speed_rpm[0]", "[1, 2835] r/min"),
     ]
@@ -481,7 +486,7 @@ def test_two_runs_write_byte_identical_results_that_rebuild_the_design(tmp_path)
 
     import xarray as xr
 
-    from tuning.export import observer_from_result
+    from jaxobs_tuning.export import observer_from_result
 
     path = tmp_path / "job.toml"
     path.write_text(GOOD)
@@ -521,7 +526,7 @@ def test_two_runs_write_byte_identical_results_that_rebuild_the_design(tmp_path)
 def test_wif_structure_of_the_symmetric_optimum():
     """At 001's WIF gains the linear model gives the symmetric optimum back: PM 45°, crossover 18.8 Hz,
     ζ = 1/√2 for the pair, b = 1 + √2 and λ = 2ωc²/b at the design's k1, k2."""
-    from tuning.structure import structure
+    from jaxobs_tuning.structure import structure
 
     s = structure("SOGIFLLWIF", dict(k1=papers.WIF_K1, k2=papers.WIF_K2, lam=papers.WIF_LAM, omega_n=W_N))
     assert s["phase_margin_deg"] == pytest.approx(45.0, abs=0.1)
@@ -552,7 +557,7 @@ def test_leso_structure_is_linearized_at_the_jobs_machine_speed(tmp_path):
     """A LESO job's linear structure is taken at its first speed_rpm in electrical rad/s on the job's own machine:
     300 r/min is 5 · 10π rad/s on 002's IPMSM (p = 5) and 3 · 10π on 000's SPMSM (p = 3).  (It used 002's pole
     pairs for every LESO job, so a LESO on the SPMSM was linearized at 5/3 of its speed.)"""
-    from tuning.structure import structure
+    from jaxobs_tuning.structure import structure
 
     text = (Path(__file__).parents[1] / "tuning" / "presets" / "faleso.toml").read_text()
     for machine, p in (("ipmsm002", 5), ("spmsm000", 3)):
@@ -570,7 +575,7 @@ def test_dominant_damping_leaves_out_the_poles_a_zero_cancels():
     rad/s (damping 0.0007) with a zero pair 0.03 rad/s away: a doublet left out of the dominant damping, which
     becomes the real dominant mode's (the oracle: python-control after minreal); a loop without a doublet
     (the SOGI-FLL's) is unchanged: nothing cancelled, the oracle without minreal."""
-    from tuning.structure import structure
+    from jaxobs_tuning.structure import structure
 
     job = load_job(Path(__file__).parents[1] / "tuning" / "presets" / "faleso.toml")
     v = job.values
@@ -602,8 +607,8 @@ def test_sosoifo_structure_gives_the_settling_time_k1_rule_at_its_k2():
     design's K2: at 000's K2 = 3.11 the smallest K1 that settles as fast is 0.949 (000 chose 1.56, 17.2 ms);
     just below it the settling is slower; at K2 = 1 no K1 settles as fast (the envelope decays at K2ω'/4).
     The settling times scale as 1/ω0; K1 does not."""
-    from tuning.structure import structure
-    from tuning.targets import k1_for_settling_time_at_k2, soifo_settling_time
+    from jaxobs_tuning.structure import structure
+    from jaxobs_tuning.targets import k1_for_settling_time_at_k2, soifo_settling_time
 
     w1 = papers.FLUX_FIG5_OMEGA
     target = soifo_settling_time(papers.SOIFO_K, w1)
@@ -650,10 +655,11 @@ def test_bfgs_records_every_iteration_with_a_readable_reason(tmp_path, capsys):
 
 
 def test_report_names_scenarios_in_the_objectives_order():
-    """responses.png names its scenario by the values tuning.report enumerates: the job's own order, grid or sampled."""
-    from tuning.job import load_job
-    from tuning.job.scenarios import scenario_points
-    from tuning.report import scenario_values
+    """responses.png names its scenario by the values jaxobs_tuning.report enumerates: the job's own order, grid or
+    sampled."""
+    from jaxobs_tuning.job import load_job
+    from jaxobs_tuning.job.scenarios import scenario_points
+    from jaxobs_tuning.report import scenario_values
 
     job = load_job(Path(__file__).parents[1] / "tuning" / "presets" / "wif_robust.toml")
     assert scenario_values(job.scenarios) == scenario_points(job.scenarios)
@@ -790,7 +796,7 @@ def test_every_drive_component_may_be_tuned_by_a_job():
     000's SPMSM."""
     import tomllib
 
-    from tuning.job import COMPONENTS, parse_job
+    from jaxobs_tuning.job import COMPONENTS, parse_job
 
     want = {
         "CLESO": {"omega0", "kp_pll", "ki_pll"},
@@ -816,6 +822,6 @@ def test_every_drive_component_may_be_tuned_by_a_job():
 
 def test_every_metric_has_cf_units():
     """scores.nc labels each metric from METRIC_UNITS: a metric added without its units fails here."""
-    from tuning.objective import METRIC_UNITS, METRICS
+    from jaxobs_tuning.objective import METRIC_UNITS, METRICS
 
     assert set(METRIC_UNITS) == set(METRICS)

@@ -14,9 +14,9 @@ import numpy as np
 import pytest
 
 from jaxobs.provenance import read_file
+from jaxobs_tuning.checkpoint import DIGEST, content_digest
+from jaxobs_tuning.solvers import CheckpointError
 from tests.test_outputs import _run
-from tuning.checkpoint import DIGEST, content_digest
-from tuning.solvers import CheckpointError
 
 # --------------------------------------------------------------------------
 # the one reader: regular files only, bounded
@@ -212,7 +212,7 @@ BAD_RESULTS = [
 
 @pytest.mark.parametrize("name, text, match", BAD_RESULTS, ids=[b[0] for b in BAD_RESULTS])
 def test_result_json_schema(tmp_path, name, text, match):
-    from tuning.results import load_result
+    from jaxobs_tuning.results import load_result
 
     p = tmp_path / "result.json"
     (p.write_bytes if isinstance(text, bytes) else p.write_text)(text)
@@ -222,7 +222,7 @@ def test_result_json_schema(tmp_path, name, text, match):
 
 
 def test_result_json_special_and_large_files(tmp_path):
-    from tuning.results import MAX_RESULT_BYTES, load_result
+    from jaxobs_tuning.results import MAX_RESULT_BYTES, load_result
 
     fifo = tmp_path / "fifo.json"
     os.mkfifo(fifo)
@@ -243,7 +243,7 @@ def test_result_json_special_and_large_files(tmp_path):
 def test_result_json_errors_are_one_line_exit_2_in_export_and_study(tmp_path, capsys, cmd, case):
     """`export` and `study` read a result through the one schema: one line, exit 2 (a RecursionError,
     TypeError or AttributeError before, or a string accepted as a gain)."""
-    from tuning.cli import main
+    from jaxobs_tuning.cli import main
 
     text = dict((b[0], b[1]) for b in BAD_RESULTS)[case]
     (tmp_path / "result.json").write_text(text)
@@ -266,6 +266,7 @@ BAD_CSV = [
     ("unterminated quote", 't,x\n0,"1\n1,2\n', "not CSV"),
     ("1_0", "t,x\n0,1_0\n1,2\n", "line 2 holds a field that is not a number"),
     ("0x10", "t,x\n0,0x10\n1,2\n", "not a number"),
+    ("an Arabic-Indic digit", "t,x\n0,\u0661\n1,2\n", "line 2 holds a field that is not a number"),
     ("a long number", "t,x\n0," + "1" * 2000 + "\n1,2\n", "line 2: not CSV"),
 ]
 
@@ -298,7 +299,7 @@ def test_csv_fifo_is_refused(tmp_path):
 def _one_line_exit_2(capsys, argv, match):
     """``jaxobs ARGV`` exits 2 (returned, or argparse's SystemExit) with ``match`` on stderr's last line, and
     nothing but argparse's usage before it."""
-    from tuning.cli import main
+    from jaxobs_tuning.cli import main
 
     try:
         rc = main(argv)
@@ -332,8 +333,58 @@ def test_a_5000_digit_integer_in_a_job_names_its_field(tmp_path, capsys):
     """ "Exceeds the limit (4300 digits)", naming no field (issue 30)."""
     from importlib import resources
 
-    text = (resources.files("tuning") / "presets" / "wif_robust.toml").read_text()
+    text = (resources.files("jaxobs_tuning") / "presets" / "wif_robust.toml").read_text()
     assert "seed = 0" in text
     job = tmp_path / "job.toml"
     job.write_text(text.replace("seed = 0", "seed = " + "9" * 5000))
     _one_line_exit_2(capsys, ["tune", str(job), "--check", "--no-cache"], "job.seed: a number of 5000 digits")
+
+
+# --------------------------------------------------------------------------
+# studies apply the jobs' physical ranges (one validator: jaxobs_tuning.job.check_speed_axes)
+# --------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    "machine, axes, field",
+    [
+        ("ipmsm002", "speed_rpm = [600.0, 5000.0]", "axes.speed_rpm[1]"),
+        ("spmsm000", "speed_rpm = [600.0, 3000.0]", "axes.speed_rpm[1]"),
+        ("ipmsm002", "speed_rpm = [600.0]\nspeed_step_rpm = [1000.0]", "axes.speed_step_rpm[0]"),
+    ],
+)
+def test_drive_study_speeds_within_the_inverter_limit(tmp_path, capsys, machine, axes, field):
+    """A drive study with speed_rpm = [600, 5000] on ipmsm002 passed --check, though jobs refuse anything
+    above 1323 r/min (issue 30)."""
+    comp = "CLESO" if machine == "ipmsm002" else "SOIFO"
+    study = tmp_path / "s.toml"
+    study.write_text(
+        f'[study]\nkind = "drive"\nmachine = "{machine}"\nhorizon = 0.2\n'
+        f'[designs.a]\nclosed_form = "{comp}"\n[axes]\n{axes}\n'
+    )
+    _one_line_exit_2(capsys, ["study", str(study), "--check", "--no-cache"], f"{field}: ")
+
+
+# --------------------------------------------------------------------------
+# honest outcomes: an objective that overflows is not a system that diverged
+# --------------------------------------------------------------------------
+
+
+GOOD_TERMS = 'terms = [{ metric = "itae_freq", weight = 1.0 }]'
+
+
+def test_objective_overflow_is_its_own_outcome(tmp_path, capsys):
+    """weight = 1e308 exited 3 with "every design tried (5) diverged in >= 54 scenarios" while the scores
+    showed 0 diverged (issue 30): now status "overflow", a reason naming the weights, exit 3 (nothing tuned)."""
+    from jaxobs_tuning.cli import main
+    from tests.test_outputs import GOOD
+
+    job = tmp_path / "job.toml"
+    assert GOOD_TERMS in GOOD
+    terms = 'terms = [{ metric = "itae_freq", weight = 1e308 }, { metric = "ripple_freq", weight = 1e308 }]'
+    job.write_text(GOOD.replace('name = "../../escape"', 'name = "o"').replace(GOOD_TERMS, terms))
+    assert main(["tune", str(job), "--out", str(tmp_path / "o"), "--quiet"]) == 3
+    res = json.loads((tmp_path / "o" / "result.json").read_text())
+    assert res["status"] == "overflow" and "terms[1].weight = 1e+308" in res["reason"], res["reason"]
+    assert "diverged" not in res["reason"] and res["scores"]["initial"]["diverged"] == 0
+    assert "OVERFLOW" in capsys.readouterr().out

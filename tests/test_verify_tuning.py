@@ -9,9 +9,9 @@ from pathlib import Path
 
 import pytest
 
-from tuning.cli import main
-from tuning.job import UNSAFE_EXIT, job_drive, load_job, parse_job
-from tuning.job.verify import EnvelopeSpec, unsafe_points
+from jaxobs_tuning.cli import main
+from jaxobs_tuning.job import UNSAFE_EXIT, job_drive, load_job, parse_job
+from jaxobs_tuning.job.verify import EnvelopeSpec, unsafe_points
 
 PRESETS = Path(__file__).parents[1] / "tuning" / "presets"
 DRIVE_PRESETS = ("cleso", "gileso", "faleso", "soifo", "sosoifo", "soifo_noise")
@@ -125,7 +125,7 @@ def test_a_tuned_design_failing_inside_its_envelope_is_unsafe_exit_4(tmp_path, c
     tuning and writes the verification block; a tuned design that then loses synchronism where the closed form
     passes (both forced here) turns the status to "unsafe", warns on stderr and exits 4; the solver's status stays in
     tuning_status."""
-    import tuning.job.run as run
+    import jaxobs_tuning.job.run as run
 
     real = run.verify_designs
     seen = {}
@@ -171,3 +171,41 @@ def test_every_drive_preset_states_its_envelope_and_a_holdout_outside_its_grid()
         loads = set(h.get("load_nm", [0.0])) - set(g.get("load_nm", [0.0]))
         assert lower or loads, name
         assert job.envelope.speed_rpm[0] <= min(h.get("speed_rpm", [600.0])), name
+
+
+@pytest.mark.slow  # the reverse-mode compile through lyapunov: ~6.5 min cold on 2 shared cores, ~1 min cached
+def test_stability_margin_is_a_differentiable_objective_term(monkeypatch):
+    """metric = "stability_margin": the Lyapunov exponent (1/s, minus the margin) of the loop each scenario
+    closes, weighted into the objective with a finite gradient; reported per scenario like any metric (a
+    tiny Lyapunov run here: compile time)."""
+    import jax.numpy as jnp
+
+    import jaxobs_tuning.objective as O
+    from jaxobs_tuning.job import build_objective
+
+    monkeypatch.setattr(O, "MARGIN_KW", {"settle": 0.0, "warmup": 0.0, "window": 0.002, "n_dirs": 1})
+    raw = _raw()
+    del raw["envelope"]
+    raw["objective"]["terms"].append({"metric": "stability_margin", "weight": 1e-3})
+    job = parse_job(raw)
+    obj, _ = build_objective(job)
+    theta = obj.param.theta0()
+    v, g = obj.value_and_grad(theta)
+    assert jnp.isfinite(v) and jnp.all(jnp.isfinite(g)) and jnp.any(g != 0)
+    mets, total, good = obj.per_scenario(theta)
+    lam = float(mets["stability_margin"][0])
+    assert bool(good[0]) and math.isfinite(lam)
+    assert float(total[0]) == pytest.approx(float(mets["rms_position_steady"][0]) + 1e-3 * lam, rel=1e-9)
+
+
+def test_stability_margin_needs_a_steady_start():
+    """An I-f start has no operating point to linearize about: the term is refused, naming it."""
+    raw = _raw()
+    del raw["envelope"]
+    raw["objective"]["terms"].append({"metric": "stability_margin", "weight": 1e-3})
+    raw["drive"]["start"] = "standstill"
+    raw["scenarios"].update(horizon=0.6, steady_from=0.5)
+    with pytest.raises(ValueError, match=r"objective.terms\[1\].metric.*steady"):
+        parse_job(raw)
+    raw["drive"]["start"] = "steady"
+    assert parse_job(raw).terms[1].metric == "stability_margin"

@@ -3,7 +3,7 @@
 Each is a small object with the method that aggregates (``aggregation(values)``), as optax's
 transformations carry their update: :class:`Mean`, :class:`SmoothMax` (a smooth worst case) and
 :class:`CVaR` (the mean of the worst fraction).  A TOML job names one (``objective.aggregate``) and
-:mod:`tuning.strategies` maps the name to the object.
+:mod:`jaxobs_tuning.strategies` maps the name to the object.
 """
 
 from __future__ import annotations

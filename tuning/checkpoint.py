@@ -1,6 +1,6 @@
 """What a checkpoint must hold to be resumed: its own content digest, and a consistent state.
 
-A checkpoint (``tuning.solvers``) is one npz: ``meta`` (a JSON string: format, the job's fingerprint,
+A checkpoint (``jaxobs_tuning.solvers``) is one npz: ``meta`` (a JSON string: format, the job's fingerprint,
 iteration, best value, iterations since the best, history), ``theta``, ``best_theta``, the optimizer
 state's leaves ``arr_0 ...``, and ``sha256``: the digest of all of these.  The job's fingerprint says
 *which job* a checkpoint belongs to; the content digest says the file is the one the solver wrote (a torn

@@ -10,7 +10,7 @@
     jaxobs reproduce flux [--out DIR] [--force] [--json] [--quick]
                                                            paper 000's experiments, paper vs ours
     jaxobs reproduce leso [--out DIR] [--force] [--json] [--machine single|dual]   paper 002's experiments
-    jaxobs study [STUDY.toml] [--out DIR] [--force] [--check] [--quiet]
+    jaxobs study [STUDY.toml] [--out DIR] [--force] [--check] [--resume] [--quiet]
                  [--coordinator HOST:PORT --num-processes N --process-id I | --distributed] [--timeout S]
                                                            robustness study → NetCDF, worst cases, figures
     jaxobs export [RESULT.json | --design D] [--out DIR] [--force] [--check]
@@ -38,7 +38,8 @@ Every failure ends the program with one line on stderr.  Exit statuses:
   ``study --check`` check the whole file and stop), an output folder that cannot be used (a symlink, not
   writable, locked by another process, results there without ``--force``), a checkpoint that ``--resume``
   cannot use (corrupt, or another job's);
-- 3: ``tune`` only: every design tried diverged (status ``diverged``, nothing tuned);
+- 3: ``tune`` only: every design tried diverged (status ``diverged``, nothing tuned), or the objective
+  overflowed (status ``overflow``: a weight so large the objective is not finite; nothing tuned);
 - 4: ``tune`` only: status ``unsafe``: the tuned design lost stability or synchronism inside the job's
   ``[envelope]`` where the closed form holds (its results are written; the warning names the points);
 - 130: interrupted (Ctrl-C).
@@ -46,7 +47,7 @@ Every failure ends the program with one line on stderr.  Exit statuses:
 Every command that writes (``tune``, ``study``, ``demo``, ``bode``, ``reproduce``, ``export``) writes only
 under ``--out`` (``tune`` and ``study``: default ``./out/<name>``, the job's or study's name reduced to
 ``[A-Za-z0-9._-]``; the others ``./out/<command>``), checked and locked before any work: see
-:mod:`tuning.outdir` for the lock file, symlinks and ``--force``.
+:mod:`jaxobs_tuning.outdir` for the lock file, symlinks and ``--force``.
 ``study --coordinator HOST:PORT --num-processes N --process-id I`` (or ``--distributed``: from the
 environment, e.g. SLURM) runs one process of a study split over processes (:func:`jaxobs.init_distributed`,
 before the study file is loaded): process 0 alone checks, locks and writes ``--out``, prints the table and
@@ -56,7 +57,9 @@ is refused before joining).  ``--timeout S`` (default 300): how long each proces
 a process other than 0 that finds no coordinator then exits 2 with one line, a process 0 left alone is
 aborted by JAX's runtime (exit 134).
 ``tune --resume`` continues from ``<out>/checkpoint.npz`` if it is this job's (the job file's sha256 is
-in it); with no checkpoint it says so in one line and starts fresh.
+in it); with no checkpoint it says so in one line and starts fresh.  ``study --resume`` (FLL studies in one
+process) continues from the chunks in ``<out>/study.chunks/`` if they are this study's (its files' and the
+versions' sha256): a study.nc byte-identical to an uninterrupted run's.
 """
 
 from __future__ import annotations
@@ -94,7 +97,7 @@ STUDY_CHUNKS = "study.chunks"  # an FLL study's results while it runs (jaxobs.ch
 
 
 def load_study(path):
-    """A study file as (name, designs, axes, options): :func:`tuning.study_file.load_study`, checked in full."""
+    """A study file as (name, designs, axes, options): :func:`jaxobs_tuning.study_file.load_study`, checked in full."""
     spec = _load_study(path)
     return spec.name, spec.designs, spec.axes, dict(spec.opts, kind=spec.kind)
 
@@ -117,15 +120,22 @@ def _cmd_drive_study(name, designs, axes, opts, out: Path, quiet: bool, provenan
     wd = max(len("design"), *(len(str(d)) for d in ds["design"].values)) + 2
     wm = max(len(x) for x in labels.values()) + 2
     head = f"{'design':<{wd}}{'metric':<{wm}}" + "".join(f"{'q' + format(q, 'g'):>10}" for q in qs)
-    head += f"{'lost lock':>11}"
+    head += f"{'diverged':>10}{'lost lock':>11}{'lost speed':>12}"
     print(head)
+    warnings = []
     for d in ds["design"].values:
         lost = int(ds["lost_lock_count"].sel(design=d))
+        div = int(ds["diverged"].sel(design=d).sum())
+        speed = int(ds["lost_speed_count"].sel(design=d))
         for m in DRIVE_STUDY_METRICS:
             vals = ds[f"{m}_q"].sel(design=d).values
             row = f"{str(d):<{wd}}{labels[m]:<{wm}}" + "".join(f"{v:>10.4g}" for v in vals)
-            print(row + f"{lost:>11}")
+            print(row + f"{div:>10}{lost:>11}{speed:>12}")
+        if div or lost or speed:  # on stderr too: a summary piped away still says what was lost
+            warnings.append(f"{d}: diverged in {div}, lost lock in {lost}, lost speed in {speed} of {n} scenarios")
     print(f"results: {out / 'study.nc'}, {fig}")
+    for w in warnings:
+        print(f"jaxobs: warning: {w}", file=sys.stderr)
     return 0
 
 
@@ -170,9 +180,14 @@ def _cmd_study(args) -> int:
     name, designs, axes = spec.name, spec.designs, spec.axes
     opts = dict(spec.opts, kind=spec.kind, provenance=spec.provenance)
     out = Path(args.out) if args.out else Path("out") / safe_name(str(name), "study")
+    # an FLL study writes each chunk's results under study.chunks/ as it finishes (jaxobs.chunkstore): a
+    # kill loses at most the chunks being computed, and --resume continues from the last complete one
+    resume = f"jaxobs study {shlex.quote(str(path))} --out {shlex.quote(str(out))} --resume"
+    hint = f"an earlier run stopped here: continue it with `{resume}` (--force starts over and discards it)"
+    products = ["study.nc"] + ([] if args.resume or spec.kind != "fll" else [STUDY_CHUNKS])
     if args.check:
         if args.out:  # what the real run would refuse (an explicit --out: the default one may not exist yet)
-            OutDir(out, ["study.nc"], force=args.force).check()
+            OutDir(out, products, force=args.force, hints={STUDY_CHUNKS: hint}).check()
         print(f"{path}: OK — {spec.kind} study {name!r}, {len(designs)} designs x {spec.scenarios} scenarios")
         return 0
     if rank is not None and rank[1] > 1:
@@ -183,11 +198,6 @@ def _cmd_study(args) -> int:
         with OutDir(out, ["study.nc"], force=args.force):
             args.log_dir = out
             return _run_study(name, designs, axes, opts, out, args.quiet)
-    # an FLL study writes each chunk's results under study.chunks/ as it finishes (jaxobs.chunkstore): a
-    # kill loses at most the chunks being computed, and --resume continues from the last complete one
-    resume = f"jaxobs study {shlex.quote(str(path))} --out {shlex.quote(str(out))} --resume"
-    hint = f"an earlier run stopped here: continue it with `{resume}` (--force starts over and discards it)"
-    products = ["study.nc"] + ([] if args.resume else [STUDY_CHUNKS])
     with OutDir(out, products, force=args.force, hints={STUDY_CHUNKS: hint}):
         args.log_dir = out
         args.on_interrupt = f"; continue with: {resume}"  # what Ctrl-C says (main)
@@ -236,11 +246,15 @@ def _run_study(name, designs, axes, opts, out: Path, quiet: bool, store=None) ->
             row += f"{k * float(sel[m].mean()):>25.4g}{k * float(sel[m].max()):>10.4g}"
         print(row + f"{int(sel['diverged'].sum()):>10}{int(sel['lost_lock_count']):>11}")
     print(f"results: {out / 'study.nc'}, {out / 'worst_cases.json'}, {len(figs)} figures")
+    for d in ds["design"].values:  # on stderr too: a summary piped away still says what was lost
+        div, lost = int(ds["diverged"].sel(design=d).sum()), int(ds["lost_lock_count"].sel(design=d))
+        if div or lost:
+            print(f"jaxobs: warning: {d}: diverged in {div}, lost lock in {lost} of {n} scenarios", file=sys.stderr)
     return 0
 
 
 def default_job_path() -> Path:
-    return Path(str(resources.files("tuning") / "presets" / "wif_robust.toml"))
+    return Path(str(resources.files("jaxobs_tuning") / "presets" / "wif_robust.toml"))
 
 
 def _cmd_tune(args) -> int:
@@ -275,7 +289,7 @@ def _cmd_tune(args) -> int:
     except (OSError, ValueError):
         timing = {}
     print_summary(result, out, timing)
-    return {"diverged": 3, "unsafe": UNSAFE_EXIT}.get(result["status"], 0)
+    return {"diverged": 3, "overflow": 3, "unsafe": UNSAFE_EXIT}.get(result["status"], 0)
 
 
 class _Parser(argparse.ArgumentParser):

@@ -8,7 +8,7 @@ from .outdir import OutDir
 
 
 class CommandOut(OutDir):
-    """``with CommandOut(args, files) as out``: ``--out`` checked and locked before any work (tuning.outdir), its
+    """``with CommandOut(args, files) as out``: ``--out`` checked and locked before any work (jaxobs_tuning.outdir), its
     path as the value; an internal error's log goes there."""
 
     def __init__(self, args, files):

@@ -27,7 +27,17 @@ REPRODUCE_FILES = {
         "position_error_speed_variation.png",
         "position_error_du_alpha_5V.png",
     ),
-    "leso": ("leso_position_error_600rpm.png", "leso_speed_ramp.png", "leso_load_step.png"),
+    "leso": (
+        "leso_position_error_600rpm.png",
+        "leso_speed_ramp.png",
+        "leso_load_step.png",
+        # 002 Figs 16-17 (a)-(b): the C- and GI-LESO closing the loop; Sec. V-B's half-load C-LESO test
+        "leso_speed_ramp_cleso_closing.png",
+        "leso_speed_ramp_gileso_closing.png",
+        "leso_load_step_cleso_closing.png",
+        "leso_load_step_gileso_closing.png",
+        "leso_half_load_600rpm_cleso_closing.png",
+    ),
 }
 # ``reproduce leso --machine dual`` adds these (jaxobs.reproduce.leso_dual's experiments, in its order)
 REPRODUCE_DUAL_FILES = (
@@ -247,9 +257,14 @@ def _reproduce(args, out: Path) -> int:
                     "steady 600 r/min no load",
                     "speed ramp 300-600-840-600-300 r/min",
                     "load step 0-80 % at 600 r/min",
+                    "speed ramp 300-600-840-600-300 r/min, C-LESO closing the loop",
+                    "speed ramp 300-600-840-600-300 r/min, GI-LESO closing the loop",
+                    "load step 0-80 % at 600 r/min, C-LESO closing the loop",
+                    "load step 0-80 % at 600 r/min, GI-LESO closing the loop",
+                    "half load 600 r/min, C-LESO closing the loop",
                 ),
                 REPRODUCE_FILES["leso"],
-                (0.4, 0.4, 0.4),
+                (0.4,) * 8,
                 strict=True,
             ),
             out,

@@ -6,9 +6,11 @@ anyone computes; every process checks that all were given the same study (sha256
 from __future__ import annotations
 
 import contextlib
+import errno
 import hashlib
 import json
 import os
+import socket
 import sys
 from pathlib import Path
 
@@ -28,7 +30,7 @@ def distributed_asked(args) -> bool:
 def refuse_unsplittable(path: Path) -> None:
     """Drive and recording studies run in one process: refused from the raw TOML, before JAX starts.
 
-    A file that does not parse passes here; :func:`tuning.study_file.load_study` reports it after joining
+    A file that does not parse passes here; :func:`jaxobs_tuning.study_file.load_study` reports it after joining
     (every process reads the same file, so every process stops with the same one-line error)."""
 
     try:
@@ -73,6 +75,8 @@ def join_distributed(args):
             "process(es); if they do not come, JAX aborts it (exit 134)",
             file=sys.stderr,
         )
+    if args.process_id == 0 and args.coordinator is not None:
+        _check_port_free(args.coordinator)
     try:
         return jaxobs.init_distributed(*given, timeout=timeout)
     except ValueError as e:  # what JAX could not find: name the CLI's options and variables, not the function's
@@ -82,6 +86,20 @@ def join_distributed(args):
             "(with --num-processes and --process-id), launch under SLURM's srun or Open MPI's mpirun, "
             "or give --coordinator, --num-processes and --process-id"
         ) from None
+
+
+def _check_port_free(coordinator: str) -> None:
+    """Process 0 serves the coordinator on every interface at the port: a port in use made JAX fail with
+    "Failed to start RPC server" and a traceback.  Bound once here (and released) to say so in one line."""
+    port = int(coordinator.rpartition(":")[2])
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        try:
+            s.bind(("", port))
+        except OSError as e:
+            if e.errno == errno.EADDRINUSE:
+                raise ValueError(
+                    f"--coordinator {coordinator}: port {port} is in use on this machine: pick a free port"
+                ) from None
 
 
 @contextlib.contextmanager
@@ -121,13 +139,23 @@ def distributed_study(name, designs, axes, opts, out: Path, args, rank, write) -
         # collectives, whose gloo prints a line on the C++ stdout: to stderr, stdout is results.
         prov = {k: v for k, v in (opts.get("provenance") or {}).items() if k != "study_file"}
         digest = hashlib.sha256(json.dumps(prov, sort_keys=True, default=str).encode()).digest()
+        # with the process count each was given: one given --num-processes 3 joined a 2-process run, exit 0
+        claimed = count if args.num_processes is None else args.num_processes
+        mine = np.concatenate([np.frombuffer(digest[:16], dtype=np.int32), np.asarray([claimed], dtype=np.int32)])
         with _stdout_to_stderr():
             ok = int(multihost_utils.broadcast_one_to_all(np.int32(failure is None)))
-            digests = np.asarray(multihost_utils.process_allgather(np.frombuffer(digest[:16], dtype=np.int32)))
+            gathered = np.asarray(multihost_utils.process_allgather(mine))
+        digests, counts = gathered[:, :-1], gathered[:, -1]
         if failure is not None:
             raise failure
         if not ok:
             raise ValueError("process 0 cannot use its --out (its error says why); nothing computed")
+        wrong = [i for i, c in enumerate(counts) if c != count]
+        if wrong:
+            raise ValueError(
+                f"--num-processes: process(es) {', '.join(map(str, wrong))} were given "
+                f"{', '.join(str(int(counts[i])) for i in wrong)}, the run has {count} processes; nothing computed"
+            )
         differ = [i for i, d in enumerate(digests) if not np.array_equal(d, digests[0])]
         if differ:
             raise ValueError(

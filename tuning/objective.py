@@ -1,7 +1,7 @@
 """Objectives: a scenario batch × simulation × metric × aggregation over the batch.
 
 Per scenario the value is a weighted sum of metrics of one simulation; over the
-batch the values are combined by an aggregation object (:mod:`tuning.aggregations`:
+batch the values are combined by an aggregation object (:mod:`jaxobs_tuning.aggregations`:
 the mean, a smooth worst case (log-sum-exp with a temperature) or the CVaR, the
 mean of the worst (1 − α) fraction).
 
@@ -27,6 +27,7 @@ import jax.numpy as jnp
 from jaxobs import OnSignal, simulate
 from jaxobs import metrics as M
 from jaxobs.drive import ClosedLoop
+from jaxobs.drive.stability import lyapunov
 from jaxobs.runner import run_scenarios
 from jaxobs.scenarios import Given
 from jaxobs.sharding import batch_mesh
@@ -167,6 +168,22 @@ METRICS: dict[str, Callable] = {
         sol.outputs.obs.omega / sig.par.p * 30 / math.pi, _steady(sol, ctx)
     ),
 }
+
+# The stability margin as a term (issue 26): not a function of one simulation but of the closed loop itself,
+# jaxobs.drive.stability.lyapunov's largest non-neutral exponent (1/s) at the scenario (from its steady
+# start; an event at t_event falls inside the settle), differentiable with respect to the gains.  The term's
+# value is that exponent, minus the margin, so minimizing it raises the margin; give it a small weight
+# (rad against 1/s).  Short runs (compile time and cost: the step's jvp in n_dirs directions): enough to
+# rank designs by their slowest mode, not a verdict (the envelope's verification gives that).
+STABILITY_MARGIN = "stability_margin"
+MARGIN_KW = {"settle": 0.1, "warmup": 0.05, "window": 0.2, "n_dirs": 2}
+
+
+def _needs_system(sol, sig, ctx):
+    raise ValueError(f"{STABILITY_MARGIN} is computed from the closed loop (Objective), not from a simulation")
+
+
+METRICS[STABILITY_MARGIN] = _needs_system
 # each metric's CF (UDUNITS) units, for scores.nc: errors of f̂ in Hz, of θ̂ in rad, speeds in r/min ("min-1"),
 # the integral criteria in their unit × s (IAE) or × s² (ITAE); tests/test_tuning.py checks every metric has one
 METRIC_UNITS: dict[str, str] = {
@@ -187,6 +204,7 @@ METRIC_UNITS: dict[str, str] = {
     "peak_speed_dev": "min-1",
     "rms_speed_steady": "min-1",
     "speed_noise_rpm": "min-1",
+    STABILITY_MARGIN: "s-1",
 }
 # the per-scenario flag :meth:`Objective.per_scenario` adds to the metrics: the estimate ended far from the
 # truth (jaxobs.metrics.lost_lock_of: 45° / 10 % on signals, 90° on the drive, over the steady window)
@@ -199,6 +217,7 @@ DRIVE_METRICS = (
     "peak_speed_dev",
     "rms_speed_steady",
     "speed_noise_rpm",
+    STABILITY_MARGIN,
 )
 
 # Loss of synchronism of a drive observer, a per-scenario flag (never fatal): its simulation diverged, or
@@ -246,7 +265,7 @@ class Objective:
         """``component``: the module whose free gains ``param`` sets; ``scenarios``: the batch (leading axis
         the scenarios); ``horizon``: simulated seconds per scenario; ``terms``: the weighted metrics summed
         per scenario; ``ctx``: the metrics' event time, steady window and bands; ``aggregation``: how the
-        per-scenario values become one (:class:`~tuning.aggregations.Mean` by default); ``penalty``: the
+        per-scenario values become one (:class:`~jaxobs_tuning.aggregations.Mean` by default); ``penalty``: the
         value of a diverged scenario.  ``drive``: run each scenario (a drive Scenario) closed loop with
         this Drive, the component as its observer; ``bind(component, scenario)``: adapt the component to
         the scenario (the parameters an observer assumes, its initial speed) before the run."""
@@ -254,7 +273,9 @@ class Objective:
             if term.metric not in METRICS:
                 raise ValueError(f"objective metric {term.metric!r} is unknown; known: {', '.join(METRICS)}")
         if not isinstance(aggregation, AbstractAggregation):
-            raise ValueError(f"Objective.aggregation must be tuning.Mean(), SmoothMax() or CVaR(), got {aggregation!r}")
+            raise ValueError(
+                f"Objective.aggregation must be jaxobs_tuning.Mean(), SmoothMax() or CVaR(), got {aggregation!r}"
+            )
         self.component = component
         self.param = param
         self.scenarios = scenarios
@@ -285,10 +306,22 @@ class Objective:
             return simulate(ClosedLoop(self.drive, comp, sig), self.horizon)
         return simulate(OnSignal(comp, sig), self.horizon)
 
+    def _exponent(self, comp, sig):
+        """:data:`STABILITY_MARGIN`'s value: the largest non-neutral Lyapunov exponent (1/s) of the loop that
+        ``comp`` (bound to ``sig``) closes, :data:`MARGIN_KW`."""
+        if self.bind is not None:
+            comp = self.bind(comp, sig)
+        return lyapunov(ClosedLoop(self.drive, comp, sig), **MARGIN_KW).exponent
+
+    def _term(self, term, comp, sol, sig):
+        if term.metric == STABILITY_MARGIN:
+            return self._exponent(comp, sig)
+        return METRICS[term.metric](sol, sig, self.ctx)
+
     def _one(self, theta, sig):
         comp = self.param.apply(self.component, theta)
         sol = self._simulate(comp, sig)
-        vals = [term.weight * METRICS[term.metric](sol, sig, self.ctx) for term in self.terms]
+        vals = [term.weight * self._term(term, comp, sol, sig) for term in self.terms]
         return sum(vals), sol.ok
 
     def _per_scenario_value_and_grad(self, theta):
@@ -316,6 +349,13 @@ class Objective:
         agg_v, w = jax.value_and_grad(lambda vv: self.aggregation(vv))(v)
         return agg_v, w @ g, int(jnp.sum(~good))
 
+    def overflowed(self, theta, scored_good) -> int:
+        """Scenarios whose simulation and weighted metrics are finite (``scored_good``: :meth:`per_scenario`'s
+        mask at ``theta``) but whose tuning value or gradient is not: the objective overflows (a finite but
+        huge weight), which the solver counts with the diverged scenarios, though nothing diverged."""
+        _, _, good = self._vg(theta)
+        return int(jnp.sum(jnp.asarray(scored_good) & ~good))
+
     # --- reporting: a design scored on the scenarios by the one study runner (jaxobs.runner)
     def _system(self, theta, sig):
         """The system one scenario runs: the component at ``theta``, bound to the scenario, on its signal or
@@ -326,7 +366,7 @@ class Objective:
         return ClosedLoop(self.drive, comp, sig) if self.drive is not None else OnSignal(comp, sig)
 
     def _scenario_metrics(self, sol, sig, _aux):
-        mets = {term.metric: METRICS[term.metric](sol, sig, self.ctx) for term in self.terms}
+        mets = {t.metric: METRICS[t.metric](sol, sig, self.ctx) for t in self.terms if t.metric != STABILITY_MARGIN}
         # far from the truth over the steady window (jaxobs.metrics, "lost lock"): reported, not tuned on
         mets[LOST_LOCK] = M.lost_lock_of(sol, self.ctx.steady_from, signal=sig)
         if self.drive is not None:
@@ -352,7 +392,14 @@ class Objective:
             label="scores",
         )
         mets = dict(run.values["design"])
+        if any(t.metric == STABILITY_MARGIN for t in self.terms):  # of the loop, not of the run: one jit(vmap)
+            mets[STABILITY_MARGIN] = self._exponents(theta, scenarios)
         return mets, mets.pop(_OK)
+
+    @eqx.filter_jit
+    def _exponents(self, theta, scenarios):
+        comp = self.param.apply(self.component, theta)
+        return jax.vmap(lambda sig: self._exponent(comp, sig))(scenarios)
 
     def per_scenario(self, theta, scenarios=None):
         """Each scenario's metrics (and its :data:`LOST_LOCK` flag), its weighted total (the penalty where

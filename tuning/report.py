@@ -30,7 +30,7 @@ _STYLE = {"initial": dict(ls="--", lw=1.2, zorder=3), "closed_form": dict(lw=1.6
 def scenario_values(spec) -> tuple[list, list]:
     """The axis names and the value tuple of every scenario of a job's ``ScenarioSpec``, in the objective's order.
 
-    The same enumeration as the scenarios' builder (``tuning.job``): the Cartesian grid, or ``sample``
+    The same enumeration as the scenarios' builder (``jaxobs_tuning.job``): the Cartesian grid, or ``sample``
     random points drawn (seeded) between each axis' smallest and largest value.
     """
     names = list(spec.axes)

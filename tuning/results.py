@@ -108,7 +108,7 @@ def check_result(res, where: str = "result") -> dict:
         raise ValueError(f"{where}: ts must be a sample time > 0 s, got {json.dumps(res['ts'])[:40]}")
     if res.get("omega_n") is not None and not _is_number(res["omega_n"]):
         raise ValueError(f"{where}: omega_n must be a finite number or null, got {json.dumps(res['omega_n'])[:40]}")
-    if "scores" in res:  # (the rule is checked where it is read: tuning.export's parse_rule)
+    if "scores" in res:  # (the rule is checked where it is read: jaxobs_tuning.export's parse_rule)
         _table(res["scores"], where, "scores")
     for name, sc in res.get("scores", {}).items():
         if sc is not None:
@@ -142,7 +142,7 @@ def load_result(path) -> dict:
 def tuned_component(result: dict):
     """The tuned component of a result: the job's component values with the tuned gains set.
 
-    The job's values are rebuilt by :func:`tuning.parse_job` (its defaults,
+    The job's values are rebuilt by :func:`jaxobs_tuning.parse_job` (its defaults,
     then the job's ``[component]`` table), so the design equals the one the
     run tuned and scored.
     """

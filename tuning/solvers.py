@@ -3,7 +3,7 @@
 ``tune(objective, optimizer)`` takes an optax ``GradientTransformation`` (``optax.adam(0.1)``), an
 optimistix minimiser (``optx.BFGS(rtol, atol)``) or a solver object that holds one with its stopping
 rule (:class:`OptaxSolver`, :class:`OptimistixSolver`); each solver runs its own loop (``solver.run``).
-A TOML job names its optimizer and schedule, and :mod:`tuning.strategies` maps the names to these objects.
+A TOML job names its optimizer and schedule, and :mod:`jaxobs_tuning.strategies` maps the names to these objects.
 
 The optax loop is a Python loop over *iterations* (each one a compiled
 value-and-gradient of the whole scenario batch), so that it can report
@@ -136,7 +136,7 @@ _replace = os.replace  # the rename that publishes a checkpoint (a test kills ru
 def _save_checkpoint(path: Path, it, theta, opt_state, best_theta, best_value, history, since_best, fingerprint):
     """One file, written to a temp file and renamed: θ, the optimizer state, the best point, and the
     metadata (iteration, history, the job's fingerprint) as a JSON string inside the same npz, and the
-    sha256 of all of it (:mod:`tuning.checkpoint`).  ``best_value`` is null until a stable design is found."""
+    sha256 of all of it (:mod:`jaxobs_tuning.checkpoint`).  ``best_value`` is null until a stable design is found."""
     leaves = jax.tree.leaves(opt_state)
     arrays = {f"arr_{i}": np.asarray(x) for i, x in enumerate(leaves)}  # np.savez's names for positional arrays
     meta = dict(
@@ -167,10 +167,10 @@ CHECKPOINT_FORMAT = "jaxobs-checkpoint-2"  # 2: a content digest, best_value nul
 def _load_checkpoint(path: Path, opt_state_template, fingerprint: str | None, theta_shape=None):
     """(meta, θ, best θ, optimizer state) of a checkpoint, or a one-line :class:`CheckpointError`.
 
-    Read as a regular file of at most :data:`~tuning.checkpoint.MAX_CHECKPOINT_BYTES` (a FIFO cannot block
+    Read as a regular file of at most :data:`~jaxobs_tuning.checkpoint.MAX_CHECKPOINT_BYTES` (a FIFO cannot block
     the run).  The content digest is checked first, then the job's fingerprint, before any array is
     interpreted: another job's checkpoint (other gains, so other array shapes) is reported as "belongs to
-    another job", never as a corrupt file.  Then the state itself (:func:`tuning.checkpoint.check_state`:
+    another job", never as a corrupt file.  Then the state itself (:func:`jaxobs_tuning.checkpoint.check_state`:
     finite θ and best θ of ``theta_shape``, a history as long as the iteration, ...)."""
 
     def corrupt(e):

@@ -170,7 +170,7 @@ def _flux(name: str, v: dict) -> tuple[dict, dict]:
 
 
 def _k1_rule(K1: float, K2: float, omega0: float, why: dict) -> dict:
-    """000's settling-time rule re-evaluated at this K2 (tuning.targets.k1_for_settling_time_at_k2).
+    """000's settling-time rule re-evaluated at this K2 (jaxobs_tuning.targets.k1_for_settling_time_at_k2).
 
     Both envelope models depend on ω't only, so the K1 found at ω' = 100π holds at any ω0, and
     the settling times scale as 100π/ω0.  About 3 s for the first design of a process (one

@@ -1,6 +1,6 @@
 """Study files (``jaxobs study FILE``): read and check everything before a single scenario runs.
 
-The same machinery as job files (:mod:`tuning.job`): the size, nesting and encoding are checked before the
+The same machinery as job files (:mod:`jaxobs_tuning.job`): the size, nesting and encoding are checked before the
 TOML is parsed; every table and key is known (an unknown one is refused in one line that names it and the
 allowed ones); every number is finite and in its physical range; the scenario count, the time steps and
 the memory of one chunk are bounded.  ``jaxobs study FILE --check`` stops there.
@@ -43,7 +43,7 @@ A drive study::
     [drive]
     settle = 0.2                   # s, the observer's unscored settling phase before t = 0
     [designs.C-LESO]
-    closed_form = "CLESO"          # a drive component's closed-form gains (tuning.job.COMPONENTS)
+    closed_form = "CLESO"          # a drive component's closed-form gains (jaxobs_tuning.job.COMPONENTS)
     [designs.tuned]
     result = "out/cleso/result.json"
     [designs.mine]
@@ -83,6 +83,7 @@ from .job import (
     JobError,
     available_memory,
     cap,
+    check_speed_axes,
     freq_step_range,
     get_field,
     job_drive,
@@ -165,7 +166,7 @@ class StudySpec:
 
 
 def load_study(path) -> StudySpec:
-    """Read, check and build a study file; errors are one-line :class:`~tuning.job.JobError`\\ s (exit 2)."""
+    """Read, check and build a study file; errors are one-line :class:`~jaxobs_tuning.job.JobError`\\ s (exit 2)."""
     path = Path(path)
     raw, data = read_toml(path, WHAT)  # size, nesting and encoding checked before parsing
     spec = parse_study(raw, base=path.resolve().parent)
@@ -402,7 +403,7 @@ def _parse_fll(raw: dict, st: dict, name: str, base: Path) -> StudySpec:
 
 
 def _fll_recordings(raw, st, name, base, designs, t_event, horizon, steady, band, results) -> StudySpec:
-    """``[study.recording]``: the keys of a job's ``[scenarios.recording]`` (:mod:`tuning.job`), every file
+    """``[study.recording]``: the keys of a job's ``[scenarios.recording]`` (:mod:`jaxobs_tuning.job`), every file
     read and checked now at the designs' one sample time; no ``[axes]``, ``sample`` or ``chunk_size``."""
     for key in ("sample", "chunk_size"):
         if key in st:
@@ -436,7 +437,7 @@ def _result_machine(res: dict) -> str | None:
 def _parse_drive(raw: dict, st: dict, name: str, base: Path) -> StudySpec:
     no_unknown(st, _DRIVE_STUDY_KEYS, "study")
     dr = get_field(raw, "drive", "drive", dict, {})
-    # the FOC is the drive jobs' (tuning.job.job_drive: the bench's IMC current and I-P speed loops), so a tuned
+    # the FOC is the drive jobs' (jaxobs_tuning.job.job_drive: the bench's IMC current and I-P speed loops), so a tuned
     # result is scored on the drive that tuned it; only the observer's unscored settling phase is the study's
     no_unknown(dr, ("settle",), "drive")
     settle = get_field(dr, "settle", "drive.settle", float, 0.2)
@@ -529,6 +530,7 @@ def _parse_drive(raw: dict, st: dict, name: str, base: Path) -> StudySpec:
         raise JobError("study.sample", f"must be in [1, {MAX_SCENARIOS}] with sampling = {sampling!r}, got {sample}")
     seed, chunk = _seed(st), _chunk(st, 256)
     axes = _axes(raw, DRIVE_STUDY_AXES)
+    check_speed_axes(axes, "axes", machine)  # the jobs' check: speeds within the inverter's limit
     n = _count(axes, sample)
     _check_steps(horizon, steady, ts, n, chunk, "drive", extra_s=settle)
     opts = dict(

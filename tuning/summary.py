@@ -43,6 +43,8 @@ def print_summary(result: dict, out: Path, timing: dict | None = None):
     print(f"  {result['reason']}")
     if result["status"] == "diverged":
         print("DIVERGED: no gains are reported as tuned (every design tried diverged in some tuning scenario)")
+    if result["status"] == "overflow":
+        print("OVERFLOW: no gains are reported as tuned (the objective is not finite: lower its weights)")
     names = list(g["initial"])
     print(f"{'gain':<22}{heads}")
     for n in names:

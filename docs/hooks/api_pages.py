@@ -19,7 +19,7 @@ PAGES = {
     "observers": "jaxobs.observers",
     "linear": "jaxobs.linear",
     "metrics": "jaxobs.metrics",
-    "tuning": "tuning",
+    "tuning": "jaxobs_tuning",
 }
 
 
@@ -34,7 +34,7 @@ def public_names(modname: str) -> list[str]:
     own = []
     for n in names:
         origin = getattr(getattr(mod, n), "__module__", modname) or modname
-        if origin.split(".")[0] in ("jaxobs", "tuning") or not callable(getattr(mod, n)):
+        if origin.split(".")[0] in ("jaxobs", "jaxobs_tuning") or not callable(getattr(mod, n)):
             own.append(n)
     return own
 

@@ -1,6 +1,7 @@
 """MkDocs hook: the TOML reference (docs page ``toml-reference.md``), generated from the job and study schema.
 
-The schema is the validator itself (``tuning.parse_job``, ``tuning.study_file.parse_study``), so the reference is
+The schema is the validator itself (``jaxobs_tuning.parse_job``, ``jaxobs_tuning.study_file.parse_study``), so the
+reference is
 built from it at every docs build and cannot drift:
 
 - the keys of each table are what the validator allows: a probe key is put into the table of a valid job or study
@@ -287,9 +288,10 @@ class _Names:
     def __init__(self, *names: str):
         import pkgutil
 
-        import tuning
+        import jaxobs_tuning
 
-        mods = [tuning] + [importlib.import_module(m.name) for m in pkgutil.walk_packages(tuning.__path__, "tuning.")]
+        pkgs = pkgutil.walk_packages(jaxobs_tuning.__path__, "jaxobs_tuning.")
+        mods = [jaxobs_tuning] + [importlib.import_module(m.name) for m in pkgs]
         for name in names:
             found = [vars(m)[name] for m in mods if name in vars(m)]
             if not found:
@@ -299,7 +301,7 @@ class _Names:
 
 def reference_markdown() -> str:
     sys.path.insert(0, str(ROOT))
-    import tuning
+    import jaxobs_tuning
     from jaxobs.drive import BENCH_MACHINES  # the drive jobs' and studies' machines
 
     # the schema's public tables wherever a refactor puts them (tuning's modules are being split): each name is
@@ -310,7 +312,7 @@ def reference_markdown() -> str:
     index = SourceIndex(ROOT / "tuning")
     presets = ROOT / "tuning" / "presets"
     grid_job, drive_job, rec_job = presets / "wif_robust.toml", presets / "faleso.toml", presets / "recording_wif.toml"
-    parse = tuning.parse_job
+    parse = jaxobs_tuning.parse_job
     g, d, r = _load(grid_job), _load(drive_job), _load(rec_job)
     gain = next(iter(g["gains"]))
     out = [
@@ -330,9 +332,9 @@ def reference_markdown() -> str:
     top = allowed_keys(parse, g, (), grid_job.parent)
     out.append(_table("top level", top, "", index, None, "The tables of a job file."))
     out.append(_table("[job]", allowed_keys(parse, g, ("job",), grid_job.parent), "job", index, None))
-    comps = ", ".join(f"`{c}`" for c in tuning.COMPONENTS)
+    comps = ", ".join(f"`{c}`" for c in jaxobs_tuning.COMPONENTS)
     comp_lines = ["| component | tunable gains | other constructor values (defaults) |", "|---|---|---|"]
-    for name, info in tuning.COMPONENTS.items():
+    for name, info in jaxobs_tuning.COMPONENTS.items():
         gains = ", ".join(f"`{k}`" for k in info.gains)
         vals = ", ".join(f"`{k}` = {v:g}" for k, v in info.defaults.items() if isinstance(v, (int, float)))
         comp_lines.append(f"| `{name}` | {gains} | {vals} |")
@@ -420,7 +422,7 @@ def reference_markdown() -> str:
             "objective.terms[0]",
             index,
             None,
-            "Metrics: " + ", ".join(f"`{m}`" for m in tuning.METRICS) + ".",
+            "Metrics: " + ", ".join(f"`{m}`" for m in jaxobs_tuning.METRICS) + ".",
         )
     )
     out.append(_table("[solver]", allowed_keys(parse, g, ("solver",), grid_job.parent), "solver", index, None))

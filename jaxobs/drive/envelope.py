@@ -54,7 +54,15 @@ from ..sharding import batch_mesh
 from . import ClosedLoop, Drive, PMSMParams, drive_speed_limit_rpm
 from .stability import lyapunov
 
-__all__ = ["ENVELOPE_VARIABLES", "MISMATCH_AXES", "envelope", "default_speeds", "default_loads"]
+__all__ = [
+    "ENVELOPE_VARIABLES",
+    "MISMATCH_AXES",
+    "WORST_AXES",
+    "envelope",
+    "default_speeds",
+    "default_loads",
+    "worst_case",
+]
 
 # the axes one may add as a third dim (relative errors of the assumed machine, the true inertia)
 MISMATCH_AXES = ("dRs", "dLd", "dLq", "dpsi", "dJ")
@@ -344,3 +352,86 @@ def envelope(
     ds.attrs.update(drive_ts=float(drive.ts))
     ds.attrs.update(provenance("jaxobs.drive.envelope.envelope"))
     return ds
+
+
+# --------------------------------------------------------------------------
+# the worst case by gradients (issue 26.7)
+# --------------------------------------------------------------------------
+
+# the box's axes a gradient search moves: the operating point and the assumed resistance
+WORST_AXES = ("speed_rpm", "load_nm", "dRs")
+
+
+def _point(base, par: PMSMParams, x):
+    """``base`` (one scenario, constant profiles) moved to x = (speed r/min, load N·m, dRs), traceably."""
+    w = x[0] * jnp.pi / 30
+    return eqx.tree_at(
+        lambda s: (s.speed_ref.values, s.load.values, s.omega_m0, s.est_par.Rs),
+        base,
+        (jnp.full_like(base.speed_ref.values, w), jnp.full_like(base.load.values, x[1]), w, par.Rs * (1 + x[2])),
+    )
+
+
+@eqx.filter_jit
+def _exponent_and_grad(drive, obs, base, par, xs, kw: tuple):
+    def expo(x):
+        sc = _point(base, par, x)
+        return lyapunov(ClosedLoop(drive, bind_observer(obs, sc), sc), **dict(kw)).exponent
+
+    return jax.vmap(jax.value_and_grad(expo))(xs)
+
+
+def worst_case(
+    obs,
+    *,
+    machine: PMSMParams,
+    drive: Drive,
+    box: dict,
+    starts: int = 4,
+    steps: int = 6,
+    step_frac: float = 0.1,
+    stability: dict | None = None,
+    seed: int = 0,
+) -> dict:
+    """The operating point in ``box`` where ``obs`` is least stable, by projected gradient ascent of the
+    largest non-neutral Lyapunov exponent (1/s) from ``starts`` Latin-hypercube points (one ``vmap``), ``steps`` steps.
+
+    ``box``: ``{axis: (low, high)}`` over :data:`WORST_AXES` (speed r/min, load N·m, dRs relative); an axis left
+    out is held at its low end (speed: required).  Each step moves every coordinate by ``step_frac`` of its
+    range along the sign of its gradient (the exponent's scale differs by decades between the axes, so the
+    sign, not the size, is used) and clips to the box.  The gradient is reverse mode through the linearized
+    loop: its compilation is long (minutes).  Returns ``{"x": (starts, 3), "exponent": (starts,), "path":
+    (steps + 1, starts), "worst_x", "worst_exponent"}`` (NumPy; the worst over every step of every start).
+    """
+    if "speed_rpm" not in box:
+        raise ValueError("worst_case: box must give speed_rpm = (low, high), r/min")
+    unknown = set(box) - set(WORST_AXES)
+    if unknown:
+        raise ValueError(f"worst_case: box has unknown axes {sorted(unknown)}; allowed: {', '.join(WORST_AXES)}")
+    lo = np.array([float(box.get(a, (0.0, 0.0))[0]) for a in WORST_AXES])
+    hi = np.array([float(box.get(a, (0.0, 0.0))[1]) for a in WORST_AXES])
+    if not (np.all(np.isfinite(lo)) and np.all(hi >= lo) and lo[0] >= 1.0):
+        raise ValueError("worst_case: every box axis must be a finite (low, high) with low <= high; speed >= 1 r/min")
+    if not (isinstance(starts, int) and starts >= 1 and isinstance(steps, int) and steps >= 0):
+        raise ValueError("worst_case: starts must be an integer >= 1 and steps >= 0")
+    kw = tuple(sorted({"settle": 0.1, "warmup": 0.05, "window": 0.2, "n_dirs": 2, **(stability or {})}.items()))
+    base = jax.tree.map(lambda v: v[0], drive_scenarios(machine, ["speed_rpm"], [(float(lo[0]),)]))
+    # Latin-hypercube starts: each axis's range cut into ``starts`` strata, one start in each (a random pairing)
+    rng = np.random.default_rng(seed)
+    u = (np.stack([rng.permutation(starts) for _ in WORST_AXES], axis=1) + rng.uniform(size=(starts, 3))) / starts
+    x = lo + (hi - lo) * u
+    path, points = [], []
+    for _ in range(steps + 1):
+        v, g = jax.device_get(_exponent_and_grad(drive, obs, base, machine, jnp.asarray(x), kw))
+        path.append(np.asarray(v))
+        points.append(x.copy())
+        x = np.clip(x + step_frac * (hi - lo) * np.sign(np.nan_to_num(g) * (hi - lo)), lo, hi)
+    path_a, pts = np.stack(path), np.stack(points)
+    i, j = np.unravel_index(np.nanargmax(np.where(np.isfinite(path_a), path_a, np.inf)), path_a.shape)
+    return {
+        "x": pts[-1],
+        "exponent": path_a[-1],
+        "path": path_a,
+        "worst_x": dict(zip(WORST_AXES, pts[i, j].tolist())),
+        "worst_exponent": float(path_a[i, j]),
+    }

@@ -26,7 +26,7 @@ from .._validate import as_float, check_nonnegative, check_real
 from .hardware import Sensors
 from .machine import RPM, PMSMParams
 
-__all__ = ["Profile", "Scenario", "Batch", "grid", "scenario_batch", "DRIVE_AXES", "GRID_AXES"]
+__all__ = ["Profile", "Scenario", "Batch", "grid", "scenario_batch", "DRIVE_AXES", "GRID_AXES", "CF_UNITS"]
 
 
 class Profile(eqx.Module):
@@ -141,6 +141,33 @@ class Scenario(eqx.Module):
         return Profile(times, torques, kind="step")
 
 
+# unit labels (tables, figures) spelled as UDUNITS wants them in a NetCDF file: CF readers parse "degree"
+# and "min-1" (revolutions per minute), not "deg" or "r/min"
+CF_UNITS = {"deg": "degree", "r/min": "min-1", "N·m": "N m"}
+# CF units of the drive's outputs (DriveOutput's fields) and of the observers' common ones, for to_xarray
+_OUTPUT_UNITS = {
+    "t": "s",
+    "theta_e": "rad",
+    "theta_e_hat": "rad",
+    "omega_m": "rad s-1",
+    "omega_m_hat": "rad s-1",
+    "omega_m_ref": "rad s-1",
+    "i_d": "A",
+    "i_q": "A",
+    "i_a": "A",
+    "i_b": "A",
+    "u_a": "V",
+    "u_b": "V",
+    "torque": "N m",
+    "load": "N m",
+    "id_ref": "A",
+    "iq_ref": "A",
+    "mode": "1",
+    "obs_theta": "rad",
+    "obs_omega": "rad s-1",
+}
+
+
 class Batch(eqx.Module):
     """A batched Scenario with the names and coordinates of its axes (row-major over ``dims``)."""
 
@@ -155,6 +182,48 @@ class Batch(eqx.Module):
     @property
     def size(self):
         return int(np.prod(self.shape))
+
+    def to_xarray(self, outputs):
+        """The results of a ``vmap`` over :attr:`scenarios` as an ``xarray.Dataset`` with the grid's dims.
+
+        ``outputs``: a PyTree (a :class:`~jaxobs.drive.DriveOutput`, a dict of metrics, ...) whose array
+        leaves have the batch as leading axis (:attr:`size` rows, row-major over :attr:`dims`).  Each leaf
+        becomes a variable named by its path (``omega_m``, ``obs_theta``; None leaves are skipped) with dims
+        ``dims`` for one value per scenario, ``(*dims, "time")`` for a trace when ``outputs`` has a ``t``
+        field shared by every scenario (the ``time`` coordinate, s), else ``<name>_dim<k>`` axes.  The grid's
+        axes are coordinates with their CF units; the drive's outputs carry theirs (rad, rad s-1, A, V,
+        N m).  Raises ValueError when a leaf's leading axis is not the batch."""
+        import xarray as xr
+
+        leaves = jax.tree_util.tree_flatten_with_path(outputs)[0]
+        named = {}
+        for path, leaf in leaves:
+            name = "_".join(str(getattr(k, "name", getattr(k, "key", getattr(k, "idx", k)))) for k in path)
+            arr = np.asarray(leaf)
+            if arr.ndim == 0 or arr.shape[0] != self.size:
+                raise ValueError(
+                    f"to_xarray: {name or 'outputs'} has shape {arr.shape}; its leading axis must be the batch "
+                    f"({self.size} scenarios, dims {self.dims})"
+                )
+            named[name or "value"] = arr.reshape(*self.shape, *arr.shape[1:])
+        coords = {
+            d: (d, list(c), {"units": CF_UNITS.get(DRIVE_AXES[d][0], DRIVE_AXES[d][0]), "long_name": DRIVE_AXES[d][2]})
+            for d, c in zip(self.dims, self.coords)
+        }
+        t = named.get("t")
+        if t is not None and t.ndim == len(self.dims) + 1:
+            flat = t.reshape(-1, t.shape[-1])
+            if np.all(flat == flat[0]):  # one time base (the usual vmap over scenarios): a coordinate
+                named.pop("t")
+                coords["time"] = ("time", flat[0], {"units": "s", "long_name": "sample time"})
+        data = {}
+        nd = len(self.dims)
+        for name, arr in named.items():
+            n_t = len(coords["time"][1]) if "time" in coords else -1
+            extra = [("time" if k == 0 and arr.shape[nd] == n_t else f"{name}_dim{k}") for k in range(arr.ndim - nd)]
+            attrs = {"units": _OUTPUT_UNITS[name]} if name in _OUTPUT_UNITS else {}
+            data[name] = ((*self.dims, *extra), arr, attrs)
+        return xr.Dataset(data, coords=coords)
 
 
 # The one table of drive-scenario axes: axis -> (unit, allowed range, what it is).  Studies, tuning jobs

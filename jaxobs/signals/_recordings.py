@@ -195,9 +195,12 @@ MAX_CSV_BYTES = 64 * 2**20  # a recording file larger than this is refused (from
 _RATE_SLACK = 1.01  # a recording's interval may exceed ts by 1 % (clock jitter) before it is "too slow"
 
 
-# a number as Python's float() reads it, less its leniencies: no "1_0" (read as 10), no surrounding junk;
-# nan / inf pass here and are refused by the finiteness check with their column and row
-_NUMBER = re.compile(r"\s*[+-]?(?:(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?|nan|inf|infinity)\s*", re.I)
+# a number as Python's float() reads it, less its leniencies: no "1_0" (read as 10), no non-ASCII digits
+# ("١" is 1 to float()), no surrounding junk; nan / inf pass here and are refused by the finiteness check
+# with their column and row
+_NUMBER = re.compile(
+    r"\s*[+-]?(?:(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?|nan|inf|infinity)\s*", re.I | re.ASCII
+)
 MAX_CSV_FIELD = 1000  # characters in one CSV field (csv.field_size_limit while a recording is read)
 
 

@@ -7,7 +7,7 @@ writes to DIR:
 
 - ``observer.h`` / ``observer.c``: ``jx_state``, ``jx_init(&s)``, ``jx_step(&s, u, y)``,
   ``JX_NU`` / ``JX_NY`` inputs and outputs per step.  The step is the JAX step itself,
-  generated from the jaxpr of ``observer.step`` (:mod:`tuning.export.codegen`): the rule,
+  generated from the jaxpr of ``observer.step`` (:mod:`jaxobs_tuning.export.codegen`): the rule,
   the back EMF, the drive observers' memory of the previous sample and the step
   convention of :mod:`jaxobs.observers.base` are whatever the Python does, so any
   observer that follows the contract exports, a user's own included.  ``jx_state`` is the

@@ -110,7 +110,7 @@ class CStep:
     ops_steady: dict
     ops_worst: dict
     has_branch: bool
-    block: list  # the statements of the body (tuning.export.ir)
+    block: list  # the statements of the body (jaxobs_tuning.export.ir)
 
     def run(self, state: list, u) -> tuple[list, np.ndarray]:
         """The emitted step on numpy scalars: ``state`` the values of the state leaves (as ``Leaf.value``),
@@ -331,7 +331,7 @@ def write_c(obs32, step: CStep, kind: str, source: str, notes) -> tuple[str, str
     rule = rule_doc(getattr(obs32, "rule", None))
     opts = ", ".join(f"{k}={v!r}" for k, v in rule.items() if k not in ("name", "description"))
     header = f"""/* observer.h -- {component} exported by `jaxobs export` (float32, C99), generated from the jaxpr of
- * its step (tuning.export.codegen): the same operations as the JAX step, in the same order.
+ * its step (jaxobs_tuning.export.codegen): the same operations as the JAX step, in the same order.
  *
  * {reference(obs32)}.
  * Design: {source}.{note_lines}

@@ -1,5 +1,5 @@
 """``jaxobs export``: its arguments (:func:`add_export_parser`, wired into the one parser by
-:mod:`tuning.cli`) and what it runs (:func:`cli_export`)."""
+:mod:`jaxobs_tuning.cli`) and what it runs (:func:`cli_export`)."""
 
 from __future__ import annotations
 
@@ -65,7 +65,7 @@ def cli_export(args) -> int:
         raise ValueError(f"--ts must be a sample time in [{MIN_TS:g}, {MAX_TS:g}] s, got {args.ts}")
     if not MIN_STEPS <= args.steps <= MAX_STEPS:  # every golden record: bounded work, bounded golden.csv
         raise ValueError(f"--steps must be in {MIN_STEPS}..{MAX_STEPS}, got {args.steps}")
-    # the output folder is checked and locked before any work (tuning.outdir): no symlinks, one writer,
+    # the output folder is checked and locked before any work (jaxobs_tuning.outdir): no symlinks, one writer,
     # an existing export kept unless --force
     with OutDir(Path(args.out), EXPORT_FILES, force=getattr(args, "force", False)):
         args.log_dir = Path(args.out)

@@ -1,6 +1,6 @@
 """The export itself: :func:`export_observer` generates the C of an observer's step
-(:mod:`tuning.export.codegen`), checks it in Python, computes its golden vectors
-(:mod:`tuning.export.golden`) and writes the five files."""
+(:mod:`jaxobs_tuning.export.codegen`), checks it in Python, computes its golden vectors
+(:mod:`jaxobs_tuning.export.golden`) and writes the five files."""
 
 from __future__ import annotations
 
@@ -112,7 +112,7 @@ def export_observer(
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    # each file to a temp file, then renamed (tuning.outdir): a symlink there is replaced, never followed
+    # each file to a temp file, then renamed (jaxobs_tuning.outdir): a symlink there is replaced, never followed
     atomic_write_text(out / "observer.h", header)
     atomic_write_text(out / "observer.c", source_c)
     atomic_write_text(out / "test_main.c", harness_text())

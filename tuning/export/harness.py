@@ -17,7 +17,7 @@ CFLAGS = ("-std=c99", "-O2", "-Wall", "-Werror", "-pedantic")
 
 
 def harness_text() -> str:
-    return (resources.files("tuning.export") / "test_main.c").read_text()
+    return (resources.files("jaxobs_tuning.export") / "test_main.c").read_text()
 
 
 def compile_and_check(out_dir, *, cc: str | None = None, extra_flags=()) -> float:

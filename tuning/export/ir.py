@@ -1,6 +1,6 @@
 """The C the code generator writes, as data: scalars (names or literals), statements, and what is done with
 them once the walk is over (dead code dropped, operations counted, text written).  See
-:mod:`tuning.export.codegen`.
+:mod:`jaxobs_tuning.export.codegen`.
 """
 
 from __future__ import annotations

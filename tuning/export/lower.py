@@ -1,6 +1,6 @@
 """The jaxpr's primitives as C: :class:`Walker` reads a jaxpr equation by equation into an :class:`Emitter`,
-which writes the statements of :mod:`tuning.export.ir`.  What each primitive becomes is in
-:mod:`tuning.export.codegen`'s module doc; :data:`SUPPORTED` lists them.
+which writes the statements of :mod:`jaxobs_tuning.export.ir`.  What each primitive becomes is in
+:mod:`jaxobs_tuning.export.codegen`'s module doc; :data:`SUPPORTED` lists them.
 """
 
 from __future__ import annotations
@@ -167,7 +167,7 @@ class Emitter:
 
     def let(self, expr: str, dtype, deps: tuple, op: str, const: bool, truth=None, *, fn, args) -> S:
         """``const T t<n> = expr;`` (or the earlier local with the same expression); ``fn(*args)`` computes it
-        on numpy scalars (:func:`tuning.export.ir.evaluate`)."""
+        on numpy scalars (:func:`jaxobs_tuning.export.ir.evaluate`)."""
         key = (ctype(dtype), expr)
         if key in self.memo:
             return self.memo[key]

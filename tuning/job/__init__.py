@@ -63,6 +63,7 @@ A job file::
 
 from .components import COMPONENTS as COMPONENTS
 from .components import ComponentInfo as ComponentInfo
+from .drive import check_speed_axes as check_speed_axes
 from .drive import job_drive as job_drive
 from .fields import MAX_SCENARIOS as MAX_SCENARIOS
 from .fields import MAX_STEPS as MAX_STEPS

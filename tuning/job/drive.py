@@ -74,21 +74,27 @@ def parse_start(dt: dict, drive: DriveSpec, scen) -> DriveSpec:
 
 
 def check_drive_speeds(spec: ScenarioSpec, where: str, machine: str) -> None:
-    """speed_rpm and speed_rpm + speed_step_rpm (every combination of the grid) within ± the machine's
-    :func:`jaxobs.drive.drive_speed_limit_rpm`, at --check time."""
-    speeds, steps = spec.axes.get("speed_rpm"), spec.axes.get("speed_step_rpm", [0.0])
+    """A drive job's grid (``where``.grid) through :func:`check_speed_axes`, at --check time."""
+    check_speed_axes(spec.axes, f"{where}.grid", machine)
+
+
+def check_speed_axes(axes: dict, where: str, machine: str) -> None:
+    """The one check of drive speeds, for jobs and studies: ``speed_rpm`` and ``speed_rpm + speed_step_rpm``
+    (every combination of the axes, so every point a sampler draws inside their ranges too) within ± the
+    machine's :func:`jaxobs.drive.drive_speed_limit_rpm`; ``where``: the table holding the axes."""
+    speeds, steps = axes.get("speed_rpm"), axes.get("speed_step_rpm", [0.0])
     if not speeds:
         return
     n_max = D.drive_speed_limit_rpm(D.bench_machine(machine))
     rng = f"must be in [1, {n_max:.0f}] r/min on {machine} (its back EMF reaches the inverter's voltage limit there)"
     for i, x in enumerate(speeds):
         if abs(x) > n_max:
-            raise JobError(f"{where}.grid.speed_rpm[{i}]", f"{rng}, got {x:g}")
+            raise JobError(f"{where}.speed_rpm[{i}]", f"{rng}, got {x:g}")
     for j, d in enumerate(steps):
         after = max(speeds) + d if d >= 0 else min(speeds) + d  # the extreme speed after this step
         if abs(after) > n_max:
             raise JobError(
-                f"{where}.grid.speed_step_rpm[{j}]",
+                f"{where}.speed_step_rpm[{j}]",
                 f"speed_rpm + speed_step_rpm must be in [-{n_max:.0f}, {n_max:.0f}] r/min on {machine} (its back "
                 f"EMF reaches the inverter's voltage limit there), got {after:g}",
             )

@@ -20,7 +20,8 @@ from .spec import Job, ScenarioSpec
 
 
 def rule_spec(rule) -> dict:
-    """A discretization rule as JSON that :func:`tuning.export.parse_rule` reads back: ``{"name": ..., options}``."""
+    """A discretization rule as JSON that :func:`jaxobs_tuning.export.parse_rule` reads back:
+    ``{"name": ..., options}``."""
     opts = {f.name: getattr(rule, f.name) for f in dataclasses.fields(rule)}
     return {"name": type(rule).__name__, **{k: v for k, v in opts.items() if isinstance(v, (bool, int, float, str))}}
 
@@ -79,7 +80,7 @@ def _axis_units(name: str) -> str:
 def scores_dataset(obj, names, combos, spec: ScenarioSpec, per: dict):
     """Per-scenario metrics of each design as an xarray Dataset: the grid's axes as dims (a full grid),
     else one ``scenario`` dim with the axes as coordinates (sampled scenarios).  Every variable and numeric
-    coordinate carries CF ``units`` (:data:`tuning.objective.METRIC_UNITS`; flags ``1``)."""
+    coordinate carries CF ``units`` (:data:`jaxobs_tuning.objective.METRIC_UNITS`; flags ``1``)."""
     import xarray as xr
 
     designs = list(per)

@@ -156,11 +156,21 @@ def run_job(job: Job, out: Path, resume: bool = False, quiet: bool = False) -> d
     bar = Progress(not quiet and "auto", n_scored, "score", unit="design")
     per = _score_designs(obj, thetas, bar, "")
     scores = {k: (obj.summarize(*per[k]) if k in per else None) for k in gains}
+    status, reason = res.status, res.reason
+    if status == "diverged" and (n_over := obj.overflowed(theta0, per["initial"][2])):
+        # nothing diverged: the simulations and the scored metrics are finite, the objective's value or
+        # gradient is not (issue 30: a weight of 1e308 was reported as divergence of the system)
+        weights = ", ".join(f"terms[{i}].weight = {t.weight:g}" for i, t in enumerate(job.terms))
+        status = "overflow"
+        reason = (
+            f"the objective overflows: its value or gradient is not finite in {n_over} of {len(combos)} "
+            f"scenarios whose simulation is finite (objective.{weights}): lower the weights; nothing is tuned"
+        )
     bar.stage("linear structure of each design (margins, poles)")
     lin = {k: (None if v is None else structure(job.component, v, job)) for k, v in values.items()}
     result = {
-        "status": res.status,
-        "reason": res.reason,
+        "status": status,
+        "reason": reason,
         "job": job.raw,
         "job_sha256": job.sha256,
         "component": job.component,
@@ -185,7 +195,11 @@ def run_job(job: Job, out: Path, resume: bool = False, quiet: bool = False) -> d
     if "omega_n" not in job.values:
         nulls["omega_n"] = f"{job.component} has no nominal frequency omega_n"
     if gains["tuned"] is None:
-        why = "status 'diverged': every design tried diverged in some tuning scenario, so nothing is tuned"
+        why = (
+            "status 'overflow': the objective overflows, so nothing is tuned"
+            if status == "overflow"
+            else "status 'diverged': every design tried diverged in some tuning scenario, so nothing is tuned"
+        )
         for key in ("gains.tuned", "values.tuned", "scores.tuned", "linear.tuned", "lost_lock_tuned_only"):
             nulls[key] = why
     if job.drive is not None:
@@ -196,7 +210,9 @@ def run_job(job: Job, out: Path, resume: bool = False, quiet: bool = False) -> d
         )
         # the envelope it was tuned for (issue 26.4); where the designs hold is `jaxobs envelope RESULT.json`
         result["envelope"] = claimed_envelope(job)
-        if result["envelope"] is not None:
+        if result["envelope"] is not None and job.envelope is not None:  # [envelope]: checked after tuning
+            result["envelope"]["verified"] = "see 'verification' (the job's [envelope] grid, after tuning)"
+        elif result["envelope"] is not None:
             nulls["envelope.verified"] = "not run after tuning: `jaxobs envelope <result.json>` maps it"
     if nulls:
         result["null_reasons"] = nulls

@@ -1,4 +1,4 @@
-"""A job file checked in full (every error names its field) and parsed into a :class:`~tuning.job.spec.Job`."""
+"""A job file checked in full (every error names its field) and parsed into a :class:`~jaxobs_tuning.job.spec.Job`."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ from jaxobs.drive_study import DRIVE_STUDY_AXES
 from jaxobs.provenance import sha256
 
 from .. import strategies
-from ..objective import DRIVE_METRICS, METRICS, Term
+from ..objective import DRIVE_METRICS, METRICS, STABILITY_MARGIN, Term
 from ..params import GainSpec
 from .components import COMPONENTS, W_N
 from .drive import check_drive_speeds, check_standstill, parse_drive
@@ -276,6 +276,8 @@ def parse_job(raw: dict, base: Path | None = None) -> Job:
             raise JobError(f"{where}.metric", f"{show(metric)} needs the closed-loop drive, not {comp} ({scen.signal})")
         if (scen.signal != "grid") == grid_only:
             raise JobError(f"{where}.metric", f"{show(metric)} does not apply to {comp} ({scen.signal} signals)")
+        if metric == STABILITY_MARGIN and drive is not None and drive.start != "steady":
+            raise JobError(f"{where}.metric", "stability_margin needs drive.start = 'steady' (an operating point)")
         weight = get_field(t, "weight", f"{where}.weight", float, 1.0)
         if weight <= 0:
             raise JobError(f"{where}.weight", f"must be > 0, got {weight}")

@@ -31,12 +31,12 @@ class Job:
     scenarios: ScenarioSpec
     holdout: ScenarioSpec | None
     terms: list
-    aggregation: AbstractAggregation  # objective.aggregate (with alpha, temperature), tuning.strategies
+    aggregation: AbstractAggregation  # objective.aggregate (with alpha, temperature), jaxobs_tuning.strategies
     penalty: float
-    solver: AbstractSolver  # [solver], tuning.strategies
+    solver: AbstractSolver  # [solver], jaxobs_tuning.strategies
     sha256: str | None = None  # of the job file's bytes (load_job); None for a job built from a dict
     drive: DriveSpec | None = None  # signal = "drive" jobs: how the observer sits in the loop
-    envelope: object = None  # [envelope] (tuning.job.verify.EnvelopeSpec): verified after tuning; None: not
+    envelope: object = None  # [envelope] (jaxobs_tuning.job.verify.EnvelopeSpec): verified after tuning; None: not
 
 
 @dataclass(frozen=True)
