@@ -5,7 +5,8 @@ A system is an ``equinox.Module`` with a sample time ``ts`` and two pure methods
 into ``input(k)`` (the outside world at sample k) and ``advance(state, x)``,
 ``step(state, k) == advance(state, input(k))``, which lets the loop evaluate
 inputs a block of steps at a time.  :class:`~jaxobs.OnSignal` and
-:class:`~jaxobs.drive.ClosedLoop` are the two systems that ship with jaxobs.
+:class:`~jaxobs.drive.ClosedLoop` (and the dual three-phase drive's :class:`~jaxobs.drive.dual_loop.DualClosedLoop`)
+are the systems that ship with jaxobs.
 """
 
 from __future__ import annotations

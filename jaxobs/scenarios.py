@@ -6,7 +6,7 @@ One place, below both the studies (:mod:`jaxobs.study`, :mod:`jaxobs.drive_study
 ``n`` points inside the axes' [min, max], one ``sample`` dim with the axes as coordinates along it;
 :class:`Given`: a batch given whole, one ``scenario`` dim; :class:`Recordings`: recorded signals, one
 ``recording`` dim); a *builder* turns the points into a
-batched scenario PyTree (:func:`grid_signals` here, :func:`jaxobs.drive.scenarios` for the drive), and
+batched scenario PyTree (:func:`grid_signals` here, :func:`jaxobs.drive.scenario_batch` for the drive), and
 :func:`jaxobs.runner.run_scenarios` runs every design on it.
 
 Grid signals (the FLL family): single-phase :class:`~jaxobs.GridSignal` s with an event

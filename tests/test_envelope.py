@@ -16,7 +16,7 @@ from jaxobs.drive import bench_drive, bench_machine
 from jaxobs.drive.envelope import ENVELOPE_VARIABLES, envelope
 from jaxobs.drive_study import bind_observer, drive_scenarios
 from jaxobs_tuning.cli import main
-from jaxobs_tuning.job import load_job
+from jaxobs_tuning.job import job_drive, load_job
 from jaxobs_tuning.job.output import claimed_envelope
 
 K1, K2 = papers.SECOND_ORDER_SOIFO_K1, papers.SECOND_ORDER_SOIFO_K2  # 000's
@@ -143,10 +143,10 @@ def test_claimed_envelope_of_a_drive_job():
     assert claimed_envelope(load_job(fll)) is None
 
 
-def _holds_3s(designs, points):
-    """The stability doc's criterion on a 3 s simulation, independent of the envelope's running sums: a
-    +2 % speed-reference step at 0.05 s; holds when the peak speed deviation in [2, 3] s is under 1 % and no
-    larger than in [0.1, 1] s."""
+def _holds_3s(designs, points, drive=DRIVE):
+    """The stability doc's criterion on a 3 s simulation of ``drive``, independent of the envelope's running
+    sums: a +2 % speed-reference step at 0.05 s; holds when the peak speed deviation in [2, 3] s is under 1 %
+    and no larger than in [0.1, 1] s."""
     out = {}
     sc = drive_scenarios(PAR, ["speed_rpm", "load_nm", "speed_step_rpm"],
                          [(s, ld, 0.02 * s) for s, ld in points], t_event=0.05)  # fmt: skip
@@ -154,7 +154,7 @@ def _holds_3s(designs, points):
     @jax.jit
     def run(obs, sc):
         def one(sc):
-            o = jaxobs.simulate(jaxobs.drive.ClosedLoop(DRIVE, bind_observer(obs, sc), sc), 3.0).outputs
+            o = jaxobs.simulate(jaxobs.drive.ClosedLoop(drive, bind_observer(obs, sc), sc), 3.0).outputs
             dev = jnp.abs(o.omega_m - o.omega_m_ref) / jnp.abs(o.omega_m_ref)
             early = jnp.max(jnp.where((o.t >= 0.1) & (o.t < 1.0), dev, 0.0))
             late = jnp.max(jnp.where(o.t >= 2.0, dev, 0.0))
@@ -180,10 +180,24 @@ def test_preset_envelope_agrees_with_3s_simulations_at_low_speed(tmp_path):
     points = [(float(s), float(ld)) for s in low["speed_rpm"].values for ld in low["load"].values]
     assert len(points) >= 12
     designs = {"initial": jaxobs.SecondOrderSOIFO(0.0, 1.0, K1, K2, 0.61, 100.0), "closed_form": CF}
-    sim = _holds_3s(designs, points)
+    # the preset's own drive (its [drive] table: the speed loop scheduled on the reference, speed_schedule),
+    # as the envelope runs it
+    sim = _holds_3s(designs, points, drive=job_drive(load_job(PRESET).drive))
     for d in designs:
         verdict = low["stable"].sel(design=d).values.ravel() == 1
-        assert (verdict == sim[d]).all(), (d, points, verdict, sim[d])
+        # The exponent describes the steady orbit.  With the scheduled speed loop (bandwidth |p ω*|/6) the
+        # loaded steady start at 144 r/min is not steady (measured 2026-11-25: a 22–54 % speed dip during
+        # the Lyapunov run, orbit_speed_dev), so there the tool measures no orbit and says "not stable",
+        # while the 3 s criterion forgives the dip (the drive recovers by 2 s).  Compared: the points whose
+        # run stayed on its orbit (the tool's own validity condition, speed_dev < 0.2); elsewhere the
+        # envelope must claim nothing (conservative).  Below 144 r/min under load the drive does not hold
+        # either way; the disagreements are the loaded points at 144 r/min alone.
+        on_orbit = low["orbit_speed_dev"].sel(design=d).values.ravel() < 0.2
+        assert (verdict == sim[d])[on_orbit].all(), (d, points, verdict, sim[d], on_orbit)
+        assert verdict[on_orbit].any() and not verdict[on_orbit].all()  # both verdicts among the compared
+        assert not verdict[~on_orbit].any() and not (low["holds"].sel(design=d).values.ravel()[~on_orbit]).any()
+        disagree = {points[i][0] for i in np.flatnonzero(verdict != sim[d])}
+        assert disagree <= {float(low["speed_rpm"][3])}, (d, disagree)
     assert not low["stable"].all() and low["stable"].any()  # both kinds of verdict present
 
 
