@@ -159,6 +159,21 @@ def drive_gains(obs) -> dict:
     return {g: float(getattr(obs, g)) for g in DRIVE_GAIN_UNITS if g in fields}
 
 
+def gain_variables(designs: dict) -> dict:
+    """The designs' gains as Dataset variables ``gain_<name>`` over ``design``, each with its own CF units (NaN
+    where a design has no such gain): what drive studies and envelopes write."""
+    gains = {d: drive_gains(obs) for d, obs in designs.items()}
+    return {
+        f"gain_{g}": (
+            ("design",),
+            np.asarray([gains[d].get(g, np.nan) for d in designs], dtype=float),
+            {"units": DRIVE_GAIN_UNITS[g], "long_name": f"observer gain {g} (NaN: the design has no such gain)"},
+        )
+        for g in DRIVE_GAIN_UNITS
+        if any(g in gains[d] for d in designs)
+    }
+
+
 def run_drive_study(
     designs: dict,
     axes: dict,
@@ -251,8 +266,6 @@ def run_drive_study(
         qs,
         {"units": "1", "long_name": "quantile over the scenarios that kept lock (1: the worst)"},
     )
-    gains = {d: drive_gains(obs) for d, obs in designs.items()}
-    gnames = [g for g in DRIVE_GAIN_UNITS if any(g in gains[d] for d in dnames)]
     data = {}
     for k, (label, long_name) in DRIVE_STUDY_METRICS.items():
         unit = CF_UNITS.get(label, label)  # the label's UDUNITS spelling in the file
@@ -296,13 +309,7 @@ def run_drive_study(
         div.reshape((len(dnames), *shape)).astype(np.int8),
         {"units": "1", "long_name": "simulation diverged or a metric is not finite (1: its metrics are NaN)"},
     )
-    # one variable per gain, each with its own CF units (jaxobs.study does the same)
-    for g in gnames:
-        data[f"gain_{g}"] = (
-            ("design",),
-            np.asarray([gains[d].get(g, np.nan) for d in dnames], dtype=float),
-            {"units": DRIVE_GAIN_UNITS[g], "long_name": f"observer gain {g} (NaN: the design has no such gain)"},
-        )
+    data.update(gain_variables({d: designs[d] for d in dnames}))  # one variable per gain (jaxobs.study too)
     ds = xr.Dataset(data, coords=coords)
     ds.attrs.update(
         horizon=horizon, steady_from=steady_from, t_event=t_event, scenarios=n, sampling=sampling, seed=seed

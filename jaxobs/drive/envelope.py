@@ -40,12 +40,11 @@ from .. import AbstractSystem, SaveFinal
 from .. import metrics as M
 from ..drive_study import (
     CF_UNITS,
-    DRIVE_GAIN_UNITS,
     DRIVE_STUDY_AXES,
     DRIVE_STUDY_AXIS_NAMES,
     bind_observer,
-    drive_gains,
     drive_scenarios,
+    gain_variables,
 )
 from ..provenance import provenance
 from ..runner import run_scenarios
@@ -327,15 +326,7 @@ def envelope(
         v = res[k]
         v = v.astype(np.int8) if v.dtype == bool else v.astype(float)
         data[k] = (dims, v, {"units": unit, "long_name": long_name})
-    gains = {d: drive_gains(obs) for d, obs in designs.items()}
-    gnames = [g for g in DRIVE_GAIN_UNITS if any(g in gains[d] for d in dnames)]
-    # one variable per gain, each with its own CF units (as the drive studies write them)
-    for g in gnames:
-        data[f"gain_{g}"] = (
-            ("design",),
-            np.asarray([gains[d].get(g, np.nan) for d in dnames], dtype=float),
-            {"units": DRIVE_GAIN_UNITS[g], "long_name": f"observer gain {g} (NaN: the design has no such gain)"},
-        )
+    data.update(gain_variables({d: designs[d] for d in dnames}))  # as the drive studies write them
     ds = xr.Dataset(data, coords=coords)
     ds.attrs.update(
         horizon=float(horizon),

@@ -83,6 +83,28 @@ def _speed_err_rpm(sol, i, par, m):
     return float(np.max(np.abs(np.asarray(o.obs.each[i].omega) / par.p - np.asarray(o.omega_m))[m]) * 30 / math.pi)
 
 
+def _closing_rows(name, sol, i, par, m, paper_deg, paper_rpm):
+    """The peak position error (deg) and speed-estimate error (r/min) of observer ``i`` where ``m``."""
+    return [
+        dict(
+            experiment=name,
+            observer=LESO_NAMES[i],
+            metric="max_abs",
+            unit="deg",
+            paper=paper_deg,
+            ours=float(np.abs(_err_deg(sol, i)[m]).max()),
+        ),
+        dict(
+            experiment=name,
+            observer=LESO_NAMES[i],
+            metric="max_speed_err",
+            unit="r/min",
+            paper=paper_rpm,
+            ours=_speed_err_rpm(sol, i, par, m),
+        ),
+    ]
+
+
 def _ramp_rows(name, sol, t, par, inv, i=2):
     """The speed ramp's rows: observer ``i``'s peak error and speed error after 0.6 s (002 Fig. 16: 4.5° is the
     FA-LESO's, 13 r/min all three's), and the field weakening's work: the peak voltage |u|/u_max and the most
@@ -91,22 +113,7 @@ def _ramp_rows(name, sol, t, par, inv, i=2):
     o = sol.outputs
     u_pu = np.hypot(np.asarray(o.u_a), np.asarray(o.u_b)) / float(inv.u_max)
     return [
-        dict(
-            experiment=name,
-            observer=LESO_NAMES[i],
-            metric="max_abs",
-            unit="deg",
-            paper=4.5 if i == 2 else None,
-            ours=float(np.abs(_err_deg(sol, i)[m]).max()),
-        ),
-        dict(
-            experiment=name,
-            observer=LESO_NAMES[i],
-            metric="max_speed_err",
-            unit="r/min",
-            paper=13.0,
-            ours=_speed_err_rpm(sol, i, par, m),
-        ),
+        *_closing_rows(name, sol, i, par, m, 4.5 if i == 2 else None, 13.0),
         dict(experiment=name, observer="drive", metric="max_u", unit="u_max", paper=None, ours=float(u_pu.max())),
         dict(experiment=name, observer="drive", metric="min_id", unit="A", paper=None, ours=float(np.min(o.i_d))),
         dict(
@@ -248,24 +255,7 @@ def run_leso_experiments(progress=None):
             primary=i,
         )
         m = t >= 0.55
-        rows += [
-            dict(
-                experiment=name,
-                observer=LESO_NAMES[i],
-                metric="max_abs",
-                unit="deg",
-                paper=3.2 if i == 2 else None,
-                ours=float(np.abs(_err_deg(sol, i)[m]).max()),
-            ),
-            dict(
-                experiment=name,
-                observer=LESO_NAMES[i],
-                metric="max_speed_err",
-                unit="r/min",
-                paper=5.0,
-                ours=_speed_err_rpm(sol, i, par, m),
-            ),
-        ]
+        rows += _closing_rows(name, sol, i, par, m, 3.2 if i == 2 else None, 5.0)
 
     # --- Rs and Lq mismatch at 300 r/min, rated load (Fig. 18), against eqs (42)-(43)
     we = par.p * 300 * D.RPM
