@@ -169,10 +169,8 @@ class StepCheckpoint(AbstractReverseCheckpoint):
         return self
 
     def scan(self, step, carry, xs, n, unroll, xs_map=None):
-        step = jax.checkpoint(step, prevent_cse=False)
-        if xs_map is None:
-            return jax.lax.scan(step, carry, xs, length=n, unroll=min(unroll, n))
-        return scan_blocks(step, carry, xs, n, block_size(n, INPUT_BLOCK, unroll), unroll, xs_map)
+        # NoCheckpoint's loop over the checkpointed step
+        return NoCheckpoint().scan(jax.checkpoint(step, prevent_cse=False), carry, xs, n, unroll, xs_map)
 
 
 class ChunkCheckpoint(AbstractReverseCheckpoint):
