@@ -54,8 +54,8 @@ before the study file is loaded): process 0 alone checks, locks and writes ``--o
 shows progress; the others compute their share, print one line and exit 0; when process 0 cannot use
 ``--out`` every process ends with exit 2 before computing.  FLL studies only (a drive or recording study
 is refused before joining).  ``--timeout S`` (default 300): how long each process waits for the others;
-a process other than 0 that finds no coordinator then exits 2 with one line, a process 0 left alone is
-aborted by JAX's runtime (exit 134).
+a process other than 0 that finds no coordinator, or another program listening at its port, then exits 2
+with one line, a process 0 left alone is aborted by JAX's runtime (exit 134).
 ``tune --resume`` continues from ``<out>/checkpoint.npz`` if it is this job's (the job file's sha256 is
 in it); with no checkpoint it says so in one line and starts fresh.  ``study --resume`` (FLL studies in one
 process) continues from the chunks in ``<out>/study.chunks/`` if they are this study's (its files' and the
