@@ -1,8 +1,9 @@
 """Paper 002's Figs 13-15 on its dual three-phase IPMSM: ``jaxobs reproduce leso --machine dual``.
 
-The machine is :func:`jaxobs.drive.dual_ipmsm_paper002` (ASSUMED: jaxobs.papers, DUAL_LLS_002): two of the
-single IPMSM's sets on one shaft, each phase's BEMF with the 5th/7th harmonics a5, a7 of
-:mod:`jaxobs.reproduce.leso` (papers.IPMSM_002_A5/A7), Lls = papers.DUAL_LLS_002.  The three LESOs
+The machine is :func:`jaxobs.drive.dual_ipmsm_paper002`: two of the single IPMSM's sets on one shaft, its xy
+inductance Lls and each phase's 5th/7th BEMF harmonics a5, a7 fitted on the C-LESO rows below (jaxobs.papers,
+DUAL_LLS_002, DUAL_A5_002, DUAL_A7_002: Lls on the 600/300 r/min ratio, a5 and a7 on 300 r/min; everything
+else here is then a prediction).  The three LESOs
 (002 Table II's gains, an ObserverBank with the FA-LESO closing the loop after an encoder hand-over at
 0.3 s) run:
 
