@@ -37,6 +37,9 @@ REPRODUCE_FILES = {
         "leso_load_step_cleso_closing.png",
         "leso_load_step_gileso_closing.png",
         "leso_half_load_600rpm_cleso_closing.png",
+        # 002 Fig. 18: the observer's R̂s, then L̂q, ramped by ±0.5 p.u. at rated load
+        "leso_fig18_rs_ramp.png",
+        "leso_fig18_lq_ramp.png",
     ),
 }
 # ``reproduce leso`` (``--machine dual``, its default) adds these: jaxobs.reproduce.leso_dual's DUAL_EXPERIMENTS and
@@ -254,7 +257,7 @@ def _reproduce(args, out: Path) -> int:
             "Paper 000 (second-order SOIFO) experiments on the simulated SPMSM drive — paper vs ours",
         )
     if args.paper == "leso":
-        from jaxobs.reproduce.leso import LESO_NAMES, run_leso_experiments
+        from jaxobs.reproduce.leso import FIG18_NAMES, LESO_NAMES, run_leso_experiments
 
         rows, traces = run_leso_experiments(progress=progress_of(args))
         if args.machine == "dual":  # 002's dual three-phase machine, beside the single one
@@ -276,9 +279,10 @@ def _reproduce(args, out: Path) -> int:
                     "load step 0-80 % at 600 r/min, C-LESO closing the loop",
                     "load step 0-80 % at 600 r/min, GI-LESO closing the loop",
                     "half load 600 r/min, C-LESO closing the loop",
+                    *FIG18_NAMES.values(),
                 ),
                 REPRODUCE_FILES["leso"],
-                (0.4,) * 8,
+                (0.4,) * 8 + (0.0,) * 2,
                 strict=True,
             ),
             out,
