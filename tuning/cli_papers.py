@@ -37,14 +37,24 @@ REPRODUCE_FILES = {
         "leso_load_step_cleso_closing.png",
         "leso_load_step_gileso_closing.png",
         "leso_half_load_600rpm_cleso_closing.png",
+        # 002 Fig. 18: the observer's R̂s, then L̂q, ramped by ±0.5 p.u. at rated load
+        "leso_fig18_rs_ramp.png",
+        "leso_fig18_lq_ramp.png",
     ),
 }
-# ``reproduce leso --machine dual`` adds these (jaxobs.reproduce.leso_dual's experiments, in its order)
+# ``reproduce leso`` (``--machine dual``, its default) adds these: jaxobs.reproduce.leso_dual's DUAL_EXPERIMENTS and
+# then DUAL_DYNAMICS, in their order
 REPRODUCE_DUAL_FILES = (
     "leso_dual_individual_300rpm.png",
     "leso_dual_individual_600rpm.png",
     "leso_dual_vsd_600rpm.png",
+    "leso_dual_speed_ramp.png",
+    "leso_dual_speed_ramp_cleso_closing.png",
+    "leso_dual_speed_ramp_gileso_closing.png",
     "leso_dual_load_step.png",
+    "leso_dual_load_step_cleso_closing.png",
+    "leso_dual_load_step_gileso_closing.png",
+    "leso_dual_speed_ramp_330V_encoder.png",
 )
 
 
@@ -197,14 +207,21 @@ def _error_figures(traces, names, paper: str, specs, out: Path):
     return paths
 
 
-def cmd_reproduce(args) -> int:
-    enable_x64()
+def reproduce_files(args) -> tuple:
+    """The figures ``reproduce`` writes; settles ``args.machine`` (None: "dual" for leso, "single" for flux)."""
     if args.paper not in REPRODUCE_FILES:
         raise ValueError(f"reproduce: unknown paper {args.paper!r}")
+    if args.machine is None:  # 002's machine is the dual three-phase IPMSM: its rows come by default
+        args.machine = "dual" if args.paper == "leso" else "single"
     if args.machine != "single" and args.paper != "leso":
         raise ValueError(f"reproduce {args.paper}: --machine must be 'single' (the dual machine is paper 002's)")
+    return REPRODUCE_FILES[args.paper] + (REPRODUCE_DUAL_FILES if args.machine == "dual" else ())
+
+
+def cmd_reproduce(args) -> int:
+    enable_x64()
+    files = reproduce_files(args)
     args.out = args.out or f"out/reproduce-{args.paper}"
-    files = REPRODUCE_FILES[args.paper] + (REPRODUCE_DUAL_FILES if args.machine == "dual" else ())
     with CommandOut(args, files) as out:
         return _reproduce(args, out)
 
@@ -240,10 +257,10 @@ def _reproduce(args, out: Path) -> int:
             "Paper 000 (second-order SOIFO) experiments on the simulated SPMSM drive — paper vs ours",
         )
     if args.paper == "leso":
-        from jaxobs.reproduce.leso import LESO_NAMES, run_leso_experiments
+        from jaxobs.reproduce.leso import FIG18_NAMES, LESO_NAMES, run_leso_experiments
 
         rows, traces = run_leso_experiments(progress=progress_of(args))
-        if args.machine == "dual":  # Figs 13-15 on the dual three-phase machine, beside the single one's
+        if args.machine == "dual":  # 002's dual three-phase machine, beside the single one
             from jaxobs.reproduce.leso_dual import run_leso_dual
 
             rows_dual, traces_dual = run_leso_dual(progress=progress_of(args))
@@ -262,17 +279,18 @@ def _reproduce(args, out: Path) -> int:
                     "load step 0-80 % at 600 r/min, C-LESO closing the loop",
                     "load step 0-80 % at 600 r/min, GI-LESO closing the loop",
                     "half load 600 r/min, C-LESO closing the loop",
+                    *FIG18_NAMES.values(),
                 ),
                 REPRODUCE_FILES["leso"],
-                (0.4,) * 8,
+                (0.4,) * 8 + (0.0,) * 2,
                 strict=True,
             ),
             out,
         )
         if args.machine == "dual":
-            from jaxobs.reproduce.leso_dual import DUAL_EXPERIMENTS, DUAL_LOAD_STEP
+            from jaxobs.reproduce.leso_dual import DUAL_DYNAMICS, DUAL_EXPERIMENTS
 
-            keys = [e[0] for e in DUAL_EXPERIMENTS] + [DUAL_LOAD_STEP]
+            keys = [e[0] for e in DUAL_EXPERIMENTS] + list(DUAL_DYNAMICS)
             specs = zip(keys, REPRODUCE_DUAL_FILES, (0.4,) * len(keys), strict=True)
             figs += _error_figures(traces, LESO_NAMES, "002, dual three-phase", specs, out)
         return _emit_rows(
