@@ -9,7 +9,7 @@
                                                            002 Fig. 4, 001 Fig. 14), in Hz (or rad/s)
     jaxobs reproduce flux [--out DIR] [--force] [--json] [--quick]
                                                            paper 000's experiments, paper vs ours
-    jaxobs reproduce leso [--out DIR] [--force] [--json] [--machine single|dual]   paper 002's experiments
+    jaxobs reproduce leso [--out DIR] [--force] [--json] [--machine dual|single]   paper 002's experiments
     jaxobs study [STUDY.toml] [--out DIR] [--force] [--check] [--resume] [--quiet]
                  [--coordinator HOST:PORT --num-processes N --process-id I | --distributed] [--timeout S]
                                                            robustness study → NetCDF, worst cases, figures
@@ -378,8 +378,9 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument(
         "--machine",
         choices=["single", "dual"],
-        default="single",
-        help="leso: 'dual' adds Figs 13-15 on the dual three-phase IPMSM (individual sets and VSD control)",
+        default=None,
+        help="leso: 'dual' (the default) adds 002's dual three-phase IPMSM (Figs 13-15, individual sets and VSD"
+        " control; the ramp and the load step with each LESO closing the loop); 'single': the single machine only",
     )
     r.set_defaults(func=cmd_reproduce)
 
