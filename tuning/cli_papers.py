@@ -8,6 +8,7 @@ import re
 from pathlib import Path
 
 from jaxobs import linear, papers
+from jaxobs.reproduce.figures import FLUX_FIGURES
 
 from .cli_common import CommandOut, enable_x64, progress_of
 from .outdir import atomic_path
@@ -26,6 +27,8 @@ REPRODUCE_FILES = {
         "position_error_load_step.png",
         "position_error_speed_variation.png",
         "position_error_du_alpha_5V.png",
+        # 000 Figs 12-23 in the paper's layout (jaxobs.reproduce.figures; --quick skips 20 r/min and the I-f start)
+        *(spec[1] for spec in FLUX_FIGURES),
     ),
     "leso": (
         "leso_position_error_600rpm.png",
@@ -228,6 +231,7 @@ def cmd_reproduce(args) -> int:
 
 def _reproduce(args, out: Path) -> int:
     if args.paper == "flux":
+        from jaxobs import drive as D
         from jaxobs.plot import flux_circles_figure
         from jaxobs.reproduce.flux import OBSERVER_NAMES, run_flux_experiments
 
@@ -244,12 +248,16 @@ def _reproduce(args, out: Path) -> int:
             "000",
             zip(
                 ("load step 10 N·m at 2000 r/min", "speed 400-2000-400 r/min", "du_alpha = 5 V at 1000 r/min"),
-                files[2:],
+                files[2:5],
                 (0.3, 0.8, 0.8),
                 strict=True,
             ),
             out,
         )
+        from jaxobs.reproduce.figures import flux_figures
+
+        par = D.bench_machine("spmsm000")
+        figs += flux_figures(traces, OBSERVER_NAMES, par.p, float(par.psi_f), out)
         return _emit_rows(
             rows,
             figs,
