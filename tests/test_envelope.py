@@ -185,19 +185,18 @@ def test_preset_envelope_agrees_with_3s_simulations_at_low_speed(tmp_path):
     sim = _holds_3s(designs, points, drive=job_drive(load_job(PRESET).drive))
     for d in designs:
         verdict = low["stable"].sel(design=d).values.ravel() == 1
-        # The exponent describes the steady orbit.  With the scheduled speed loop (bandwidth |p ω*|/6) the
-        # loaded steady start at 144 r/min is not steady (measured 2026-11-25: a 22–54 % speed dip during
-        # the Lyapunov run, orbit_speed_dev), so there the tool measures no orbit and says "not stable",
-        # while the 3 s criterion forgives the dip (the drive recovers by 2 s).  Compared: the points whose
-        # run stayed on its orbit (the tool's own validity condition, speed_dev < 0.2); elsewhere the
-        # envelope must claim nothing (conservative).  Below 144 r/min under load the drive does not hold
-        # either way; the disagreements are the loaded points at 144 r/min alone.
-        on_orbit = low["orbit_speed_dev"].sel(design=d).values.ravel() < 0.2
-        assert (verdict == sim[d])[on_orbit].all(), (d, points, verdict, sim[d], on_orbit)
-        assert verdict[on_orbit].any() and not verdict[on_orbit].all()  # both verdicts among the compared
-        assert not verdict[~on_orbit].any() and not (low["holds"].sel(design=d).values.ravel()[~on_orbit]).any()
-        disagree = {points[i][0] for i in np.flatnonzero(verdict != sim[d])}
-        assert disagree <= {float(low["speed_rpm"][3])}, (d, disagree)
+        # The exponent describes the steady orbit after the settle (orbit_speed_dev counts from there).  A
+        # point whose exponent lies within the window's resolution is marginal (jaxobs.drive.stability): the
+        # tool claims neither verdict there, and the envelope does not hold it.  Before the resolution and
+        # the settle rule (2026-11-25) the loaded 144 r/min points of the scheduled preset were "not
+        # stable" by a 22–54 % dip of the steady start inside the settle while the 3 s runs recovered; now
+        # their orbit is measured after the settle, and its exponent (+3.9 /s) is within its resolution
+        # (4.7–8.8 /s: the orbit still drifts 5–10 % in speed), so they are marginal.  Compared: every
+        # resolved point (stable or unstable, including those whose run left its orbit: unstable).
+        resolved = low["marginal"].sel(design=d).values.ravel() == 0
+        assert (verdict == sim[d])[resolved].all(), (d, points, verdict, sim[d], resolved)
+        assert verdict[resolved].any() and not verdict[resolved].all()  # both verdicts among the compared
+        assert not (low["holds"].sel(design=d).values.ravel()[~resolved]).any()
     assert not low["stable"].all() and low["stable"].any()  # both kinds of verdict present
 
 

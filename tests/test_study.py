@@ -17,6 +17,7 @@ from jaxobs import linear, papers
 from jaxobs import metrics as M
 from jaxobs.study import run_study, worst_cases
 from jaxobs_tuning.cli import main
+from jaxobs_tuning.summary import study_warnings
 
 AXES = {"freq_step": [-2.0, 1.0], "dc": [0.0, 0.1], "phase_jump_deg": [0.0, 30.0]}
 
@@ -213,6 +214,30 @@ def test_lost_lock_and_diverged_scenarios_are_flagged_and_listed_first():
         ("nan", True, True),
     ]
     assert worst[-1]["value"] is None and json.loads(json.dumps(worst, allow_nan=False)) == worst
+    # what `jaxobs study` prints on stderr after its table: the designs that lost anything, nothing of the others
+    assert study_warnings(ds) == [
+        "false lock: diverged in 0, lost lock in 2 of 2 scenarios",
+        "nan: diverged in 2, lost lock in 2 of 2 scenarios",
+    ]
+
+
+def test_study_warnings_on_stderr_name_what_each_design_lost(tmp_path, capsys):
+    """Untested before (issue 30): noise of 10 p.u. makes both designs lose lock in that scenario; the warnings
+    go to stderr (one line a design, after the table), stdout keeps the table alone."""
+    study = tmp_path / "w.toml"
+    study.write_text(
+        '[study]\nname = "w"\nt_event = 0.02\nhorizon = 0.05\n[designs.SOGI-FLL]\nclosed_form = "sogi-fll"\n'
+        '[designs.WIF]\nclosed_form = "wif"\n[axes]\nfreq_step = [1.0]\nnoise = [0.0, 10.0]\n'
+    )
+    assert main(["study", str(study), "--out", str(tmp_path / "o"), "--quiet"]) == 0
+    got = capsys.readouterr()
+    assert got.err.splitlines() == [
+        "jaxobs: warning: SOGI-FLL: diverged in 0, lost lock in 1 of 2 scenarios",
+        "jaxobs: warning: WIF: diverged in 0, lost lock in 1 of 2 scenarios",
+    ]
+    assert "jaxobs: warning" not in got.out
+    rows = [line.split() for line in got.out.splitlines() if line.startswith(("SOGI-FLL", "WIF"))]
+    assert [r[-2:] for r in rows] == [["0", "1"], ["0", "1"]]  # the table's diverged and lost lock columns
 
 
 def test_worst_cases_put_diverged_scenarios_first():
@@ -294,6 +319,46 @@ def test_the_runner_takes_any_sampler_factory_and_metrics():
     )
     np.testing.assert_allclose(run.values["a"]["rms"], ds["rms_phase"].sel(design="a").values, rtol=1e-12)
     assert bool(jnp.all(jnp.isfinite(run.values["a"]["rms"])))
+
+
+def test_scenarios_built_a_chunk_at_a_time_are_the_whole_batchs():
+    """A builder that takes ``first`` is called per chunk with the index of the chunk's first point (the
+    memory of the scenarios is one chunk's, issue 31.5); its noise keys are the whole batch's, so a noisy
+    study gives the same values in chunks of 3 as in one chunk, designs of two classes included; a bad axis
+    value is refused before anything runs."""
+    from jaxobs.runner import run_scenarios
+    from jaxobs.scenarios import Random, grid_signals
+
+    designs = {"SOGI-FLL": linear.sogi_fll_closed_form(), "WIF": linear.wif_closed_form()}
+    sampler = Random({"noise": [0.0, 0.2], "freq_step": [-1.0, 1.0]}, 7, seed=3)
+    one = run_study(designs, sampler, horizon=0.15, t_event=0.05, chunk_size=7, seed=5)
+    chunks = run_study(designs, sampler, horizon=0.15, t_event=0.05, chunk_size=3, seed=5)
+    for k in ("rms_phase", "ripple_freq", "settling_freq"):
+        np.testing.assert_array_equal(chunks[k].values, one[k].values)
+    whole = grid_signals(sampler.names, sampler.points(), 0.05, 50.0, seed=5)
+    calls = []
+
+    def build(names, pts, first):
+        calls.append((first, len(pts)))
+        got = grid_signals(names, pts, 0.05, 50.0, seed=5, first=first)
+        rows = min(len(pts), 7 - first)  # the padded rows copy the last point, not its key
+        np.testing.assert_array_equal(np.asarray(got.key)[:rows], np.asarray(whole.key)[first : first + rows])
+        return got
+
+    run_scenarios(
+        {"a": designs["WIF"]},
+        sampler,
+        jaxobs.OnSignal,
+        lambda sol, _s, _a: {"w": sol.outputs.obs.omega[-1]},
+        horizon=0.01,
+        build=build,
+        chunk_size=3,
+    )
+    assert calls == [(0, 3), (3, 3), (6, 3)]
+    ran = []
+    with pytest.raises(ValueError, match="grid axis sag must be <= 0.999"):
+        run_study(designs, {"sag": [0.0, 0.5, 1.5]}, chunk_size=1, progress=lambda done, _n: ran.append(done))
+    assert ran == []  # the last chunk's bad value, refused before the first chunk ran
 
 
 def test_provenance_versions_and_digests(tmp_path):

@@ -160,7 +160,7 @@ class DualPMSMParams(eqx.Module):
 
 
 def dual_ipmsm_paper002(J=None, **overrides) -> DualPMSMParams:
-    """002's dual three-phase IPMSM (ASSUMED: our copy lacks its machine table; :data:`papers.DUAL_IPMSM_002`).
+    """002's dual three-phase IPMSM (ASSUMED: our copy lacks its machine table; papers.IPMSM_002 per set).
 
     Two of the single IPMSM's sets on one shaft: per phase the single machine's Rs, Ld, Lq, ψf, so each set
     is :func:`jaxobs.drive.bench_machine` ``("ipmsm002")`` (harmonics aside) when both carry the same current;

@@ -224,9 +224,13 @@ class DualOutput(NamedTuple):
     i_b2: jax.Array
     torque: jax.Array  # N·m
     load: jax.Array  # N·m
-    id_ref: jax.Array  # A (per set / αβ)
+    id_ref: jax.Array  # A (per set / αβ; field weakening's Δi_d included)
     iq_ref: jax.Array
     obs: Any  # the observer's outputs (None with the encoder)
+    u_a1: jax.Array  # each set's voltage applied over [t_k, t_{k+1}] (set 1's frame, limited), V
+    u_b1: jax.Array
+    u_a2: jax.Array
+    u_b2: jax.Array
 
     @property
     def speed_rpm(self):
@@ -356,6 +360,10 @@ class DualClosedLoop(AbstractSystem):
             id_ref=c.id_ref,
             iq_ref=c.iq_ref,
             obs=obs_out,
+            u_a1=u[0],
+            u_b1=u[1],
+            u_a2=u[2],
+            u_b2=u[3],
         )
         return DualLoopState(plant=plant_state, ctrl=ctrl, obs=obs_state, sensors=key, u=u_next), out
 

@@ -260,7 +260,12 @@ class ClosedLoop(AbstractSystem):
             z = jnp.zeros((), plant.x.dtype)
             obs = None if self.observer is None else self.observer.init()
             ctrl = foc.init(op, theta_f0=sc.theta_e0 - jnp.pi / 2)
-            return LoopState(plant=plant, ctrl=ctrl, obs=obs, sensors=sc.sensors.init(op, key=sc.key), u_a=z, u_b=z)
+            # at rest no voltage is pending either: a pipeline of 2 holds a zero one (it was None, and the
+            # step indexed it: an I-f start on the PWM-centre timing failed)
+            pending = jnp.zeros((2,), z.dtype) if self.drive.latency.pipeline == 2 else None
+            return LoopState(
+                plant=plant, ctrl=ctrl, obs=obs, sensors=sc.sensors.init(op, key=sc.key), u_a=z, u_b=z, pending=pending
+            )
         op = self.operating_point()
         obs = None
         if self.observer is not None:
