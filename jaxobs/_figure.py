@@ -17,3 +17,24 @@ def _finish(fig, path, dpi=110):
     if path is not None:
         fig.savefig(path, dpi=dpi)
     return fig
+
+
+def _mark_event(ax, t, text: str) -> None:
+    """A dotted vertical line at ``t`` named ``text`` (rotated, at the top of ``ax``)."""
+    from matplotlib.transforms import blended_transform_factory
+
+    ax.axvline(t, color="0.3", lw=0.8, ls=":")
+    if text:
+        tr = blended_transform_factory(ax.transData, ax.transAxes)
+        ax.text(
+            t,
+            0.97,
+            text,
+            transform=tr,
+            rotation=90,
+            ha="right",
+            va="top",
+            fontsize=8,
+            color="0.15",
+            bbox={"fc": "white", "ec": "none", "alpha": 0.85, "pad": 1.0},  # readable over a trace
+        )

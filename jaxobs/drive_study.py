@@ -189,6 +189,7 @@ def run_drive_study(
     chunk_size: int = 256,
     progress=None,
     mesh=None,
+    store=None,
 ):
     """Run every design (a drive observer closing ``drive``'s loop) on every scenario; an ``xarray.Dataset``.
 
@@ -197,6 +198,9 @@ def run_drive_study(
     on stderr (each design's compilation named), a callable ``progress(done, total)`` called after
     each chunk, ``None``/``False`` nothing (:mod:`jaxobs.progress`).  ``mesh``: the devices each chunk is
     split over (:func:`jaxobs.runner.run_scenarios`; default one device, as before the runner was shared).
+    ``store``: a :class:`jaxobs.chunkstore.ChunkStore`, as in :func:`jaxobs.study.run_study`: each chunk's
+    values go to disk as it finishes, the chunks already there are not run again, and the Dataset is laid
+    out from the store (the same Dataset as without one).
     """
     import xarray as xr
 
@@ -253,9 +257,11 @@ def run_drive_study(
         mesh=batch_mesh(jax.devices()[:1]) if mesh is None else mesh,
         progress=progress,
         label="drive study",
+        sink=store,
     )
     n = len(run.points)
-    results = {d: (v, v["lost"], v["diverged"], v["off"]) for d, v in run.values.items()}
+    values = run.values if store is None else {d: store.load(d) for d in designs}
+    results = {d: (v, v["lost"], v["diverged"], v["off"]) for d, v in values.items()}
     dnames = list(designs)
     dims, shape, coords = sampler.layout(_axis_meta)
     dims = ("design", *dims)

@@ -14,31 +14,13 @@ from pathlib import Path
 import numpy as np
 
 from . import metrics, papers
-from ._figure import _finish, _subplots
+from ._figure import _finish, _mark_event, _subplots
 from ._plot_bode import bode_figure as bode_figure
 from ._plot_bode import paper_bode_figures as paper_bode_figures
 from ._plot_bode import resonance_grid as resonance_grid
-
-
-def _mark_event(ax, t, text: str) -> None:
-    """A dotted vertical line at ``t`` named ``text`` (rotated, at the top of ``ax``)."""
-    from matplotlib.transforms import blended_transform_factory
-
-    ax.axvline(t, color="0.3", lw=0.8, ls=":")
-    if text:
-        tr = blended_transform_factory(ax.transData, ax.transAxes)
-        ax.text(
-            t,
-            0.97,
-            text,
-            transform=tr,
-            rotation=90,
-            ha="right",
-            va="top",
-            fontsize=8,
-            color="0.15",
-            bbox={"fc": "white", "ec": "none", "alpha": 0.85, "pad": 1.0},  # readable over a trace
-        )
+from ._plot_paper import Panel as Panel
+from ._plot_paper import Series as Series
+from ._plot_paper import paper_figure as paper_figure
 
 
 def _fll_event_text(test: str) -> str:

@@ -12,11 +12,19 @@ The library prints nothing unless asked: a long function (a study, a paper's rep
 
 :meth:`Progress.stage` names what runs now ("compiling SOGIFLL", an experiment's name), so that the
 first compilation, which can take tens of seconds, is announced instead of silent.
+
+While a bar is drawn, what Python would print on stderr beside it goes through ``tqdm.write`` (on its own
+line above the bar, which is then redrawn) instead of into the bar's line: warnings (``warnings.warn``),
+and log records that reach the console (the root logger's console handlers, and logging's last resort,
+which JAX's loggers reach by default).  Both are restored when the bar closes.
 """
 
 from __future__ import annotations
 
+import contextlib
+import logging
 import sys
+import warnings
 
 __all__ = ["Progress", "check_progress"]
 
@@ -43,6 +51,7 @@ class Progress:
             from tqdm import tqdm
 
             self._bar = tqdm(total=total, desc=desc, unit=unit, file=sys.stderr, dynamic_ncols=True, leave=True)
+            self._routed = _route_to_bars(tqdm)
 
     def stage(self, text: str) -> None:
         """Name what runs now (shown at once in the bar's description)."""
@@ -61,6 +70,7 @@ class Progress:
 
     def close(self) -> None:
         if self._bar is not None:
+            self._routed.close()  # warnings and logging as they were
             self._bar.close()
             self._bar = None
 
@@ -69,3 +79,51 @@ class Progress:
 
     def __exit__(self, *exc) -> None:
         self.close()
+
+
+class _BarLogHandler(logging.Handler):
+    """A log record written by ``tqdm.write`` (above the bars) where the console handler ``like`` wrote it
+    (stderr for logging's last resort), with its level and format."""
+
+    def __init__(self, tqdm_cls, like: logging.StreamHandler | None):
+        super().__init__(logging.WARNING if like is None else like.level)
+        self.tqdm_cls = tqdm_cls
+        self.like = like
+        if like is not None and like.formatter is not None:
+            self.setFormatter(like.formatter)
+
+    def emit(self, record):
+        try:
+            # read at each record: logging's last resort writes to whatever sys.stderr is now
+            stream = sys.stderr if self.like is None else self.like.stream
+            self.tqdm_cls.write(self.format(record), file=stream)
+        except Exception:
+            self.handleError(record)
+
+
+def _route_to_bars(tqdm_cls) -> contextlib.ExitStack:
+    """Warnings and console log records through ``tqdm_cls.write`` until the returned stack is closed (module
+    doc).  Bars nest (a study's inside a command's): each restores what it found, the innermost first."""
+    stack = contextlib.ExitStack()
+    shown = warnings.showwarning
+
+    def show(message, category, filename, lineno, file=None, line=None):
+        if file is not None and file is not sys.stderr:  # a warning sent to a file of its own: as before
+            return shown(message, category, filename, lineno, file, line)
+        text = warnings.formatwarning(message, category, filename, lineno, line)
+        tqdm_cls.write(text, file=sys.stderr, end="")
+
+    warnings.showwarning = show
+    stack.callback(setattr, warnings, "showwarning", shown)
+    last = logging.lastResort
+    logging.lastResort = _BarLogHandler(tqdm_cls, last)
+    stack.callback(setattr, logging, "lastResort", last)
+    root = logging.getLogger()
+    for h in list(root.handlers):
+        if isinstance(h, logging.StreamHandler) and h.stream in (sys.stderr, sys.stdout):
+            bar_h = _BarLogHandler(tqdm_cls, h)
+            root.removeHandler(h)
+            root.addHandler(bar_h)
+            stack.callback(root.addHandler, h)
+            stack.callback(root.removeHandler, bar_h)
+    return stack

@@ -307,15 +307,24 @@ def _wait_for_coordinator(coordinator: str, timeout: int, deadline: float) -> No
 
     Without it a missing process 0 is found only by JAX's C++ runtime, which aborts the process;
     this gives a Python error (``ConnectionError``; the CLI prints it in one line).  A process 0
-    whose peers never come cannot be caught this way: JAX aborts it after ``timeout``."""
+    whose peers never come cannot be caught this way: JAX aborts it after ``timeout``.
+
+    What listens there must also be a JAX coordinator: another program on the port (process 0 could not
+    start then) made JAX's runtime abort this process after ``timeout`` with a C++ stack dump.  The
+    coordinator is a gRPC server, so it speaks HTTP/2: given a client's connection preface it answers with
+    a SETTINGS frame at once (RFC 9113, 3.4).  A listener that answers anything else, closes, or says
+    nothing within 10 s (or what is left of ``timeout``) is refused in one line naming the port."""
     import socket
 
     host, _, port = coordinator.rpartition(":")
     host = host.strip("[]")  # "[::1]:1234"
     while True:
         try:
-            with socket.create_connection((host, int(port)), timeout=min(5.0, timeout)):
+            with socket.create_connection((host, int(port)), timeout=min(5.0, timeout)) as s:
+                _expect_http2(s, coordinator, max(1.0, min(10.0, deadline - time.monotonic())))
                 return
+        except _NotCoordinator:
+            raise
         except OSError as e:
             if time.monotonic() >= deadline:
                 raise ConnectionError(
@@ -323,6 +332,38 @@ def _wait_for_coordinator(coordinator: str, timeout: int, deadline: float) -> No
                     f"({e.strerror or e}); start every process of the run together"
                 ) from None
             time.sleep(0.25)
+
+
+# the client's HTTP/2 connection preface (RFC 9113, 3.4), then an empty SETTINGS frame
+_HTTP2_PREFACE = b"PRI * HTTP/2.0\r\n\r\nSM\r\n\r\n" + bytes([0, 0, 0, 4, 0, 0, 0, 0, 0])
+
+
+def _expect_http2(s, coordinator: str, wait: float) -> None:
+    """Whether the peer of socket ``s`` answers the HTTP/2 preface with a SETTINGS frame (its 9-byte header:
+    type 4 at byte 3) within ``wait`` s; raises ``ConnectionError`` (not an ``OSError`` the caller retries
+    on) naming the port otherwise."""
+    _, _, port = coordinator.rpartition(":")
+    head = b""
+    try:
+        s.settimeout(wait)
+        s.sendall(_HTTP2_PREFACE)
+        while len(head) < 9:
+            got = s.recv(9 - len(head))
+            if not got:
+                break
+            head += got
+    except OSError:  # a timeout or a reset: checked below, as a wrong answer
+        pass
+    if len(head) < 9 or head[3] != 4:
+        said = f"answered {head!r}" if head else f"said nothing within {wait:.0f} s, or closed the connection"
+        raise _NotCoordinator(
+            f"init_distributed: what listens at {coordinator} is not a JAX coordinator (it {said}); another "
+            f"program holds port {port}: give the run a free port"
+        )
+
+
+class _NotCoordinator(ConnectionError):
+    """Something listens at the coordinator's address but is not JAX's coordinator (never retried)."""
 
 
 def global_batch(tree, mesh: Mesh | None = None):

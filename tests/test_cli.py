@@ -203,7 +203,16 @@ def test_reproduce_flux_quick_json(tmp_path, capsys):
     lpf = by[("du_alpha = 5 V at 1000 r/min", "LPF", "flux_offset")]
     assert lpf["paper"] == 0.05 and lpf["ours"] == pytest.approx(0.05, rel=0.02)
     assert by[("speed 400-2000-400 r/min", "second-order SOIFO", "max_abs")]["ours"] < 0.2
-    assert sorted(p.name for p in tmp_path.glob("*.png")) == sorted(REPRODUCE_FILES["flux"])
+    # paper vs ours: every row with a paper number within its stated tolerance or explained
+    # (jaxobs.reproduce.compare); the experiments run with 000's sampling delay, the load step's SOIFOs
+    # carrying its 2.5 samples (0.157 rad at 2000 r/min)
+    for r in rows:
+        if r["paper"] is not None and not isinstance(r["ours"], bool):
+            assert r["tolerance"] > 0 and (r["within"] or r["explanation"]), r
+    assert by[("load step 10 N·m at 2000 r/min", "second-order SOIFO", "max_abs")]["within"]
+    # --quick skips 20 r/min and the I-f start: their figures are not drawn
+    skipped = {"fig16_17_flux_position_20rpm.png", "fig20_if_start_low_speed.png"}
+    assert sorted(p.name for p in tmp_path.glob("*.png")) == sorted(set(REPRODUCE_FILES["flux"]) - skipped)
 
 
 def _result_json(tmp_path, component="SOGIFLLWIF", tuned=None):

@@ -297,6 +297,35 @@ def test_a_coordinator_port_in_use_gets_one_line(tmp_path, capsys):
     assert len(err) == 1 and f"port {port} is in use" in err[0], err
 
 
+def test_a_non_jax_listener_on_the_coordinator_port_gets_one_line(tmp_path, capsys):
+    # process 1 found something listening and joined: JAX's runtime aborted it after its timeout with a C++
+    # stack dump (issue 30).  A plain listener that says nothing, and one that answers HTTP/1, each end it in one
+    # line naming the port, exit 2, before JAX is touched
+    import threading
+
+    for answer in (None, b"HTTP/1.1 400 Bad Request\r\n\r\n"):
+        with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+            s.bind(("127.0.0.1", 0))
+            s.listen()
+            port = s.getsockname()[1]
+            if answer is not None:
+
+                def serve(s=s, answer=answer):
+                    conn, _ = s.accept()
+                    with conn:
+                        conn.sendall(answer)
+
+                threading.Thread(target=serve, daemon=True).start()
+            dist = ["--coordinator", f"127.0.0.1:{port}", "--num-processes", "2", "--process-id", "1"]
+            t0 = time.monotonic()
+            assert main(["study", "--out", str(tmp_path / "o"), "--timeout", "3", "--quiet", *dist]) == 2
+            assert time.monotonic() - t0 < 30
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and "is not a JAX coordinator" in err[0] and f"port {port}" in err[0], err
+        assert ("answered b'HTTP/1.1" in err[0]) == (answer is not None), err
+    assert not (tmp_path / "o").exists()
+
+
 @pytest.mark.slow  # two more processes, as the test above
 @pytest.mark.skipif(not _gloo_available(), reason="this jaxlib has no gloo CPU collectives")
 def test_a_process_given_another_process_count_stops_before_computing(tmp_path):

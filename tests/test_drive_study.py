@@ -18,6 +18,7 @@ from jaxobs.drive_study import QUANTILES, run_drive_study
 from jaxobs_tuning.cli import main
 from jaxobs_tuning.job import COMPONENTS, DriveSpec, JobError, job_drive
 from jaxobs_tuning.study_file import load_study
+from jaxobs_tuning.summary import study_warnings
 
 PAR = D.ipmsm_paper002()
 DRIVE = D.Drive(D.FOC.imc(PAR, alpha_c=2 * math.pi * 300, alpha_s=2 * math.pi * 5), sensorless=True)
@@ -114,6 +115,34 @@ def test_cli_drive_study_writes_netcdf_with_the_axes(tmp_path, capsys):
     bad = tmp_path / "bad.toml"
     bad.write_text(_small_preset(tmp_path).read_text().replace("[axes]", "[axes]\nhorizn = [1.0]"))
     assert main(["study", str(bad), "--out", str(out)]) == 2
+
+
+def test_drive_study_warnings_name_lost_speed_on_stderr(tmp_path, capsys):
+    """Untested before (issue 30): a C-LESO of 30 rad/s loses lock and speed in every scenario, the closed form
+    in none; stderr names lost speed beside lost lock, one line a design that lost anything."""
+    study = tmp_path / "d.toml"
+    study.write_text(
+        '[study]\nkind = "drive"\nname = "d"\nmachine = "ipmsm002"\nhorizon = 0.04\n'
+        '[designs.C-LESO]\nclosed_form = "CLESO"\n[designs.C-LESO-slow]\ncomponent = "CLESO"\nomega0 = 30.0\n'
+        "[axes]\nspeed_rpm = [600.0]\ndRs = [-0.2, 0.2]\n"
+    )
+    assert main(["study", str(study), "--out", str(tmp_path / "o"), "--quiet"]) == 0
+    got = capsys.readouterr()
+    assert got.err.splitlines() == [
+        "jaxobs: warning: C-LESO-slow: diverged in 0, lost lock in 2, lost speed in 2 of 2 scenarios"
+    ]
+    assert "jaxobs: warning" not in got.out
+    # lost speed alone (the case the summary once left out: "lost lock 0", lost_speed = 1 in study.nc)
+    ds = xr.Dataset(
+        {
+            "diverged": (("design", "speed_rpm"), np.zeros((2, 2), np.int8)),
+            "lost_lock_count": (("design",), np.array([0, 0])),
+            "lost_speed_count": (("design",), np.array([0, 1])),
+        },
+        coords={"design": ["a", "b"], "speed_rpm": [600.0, 1300.0]},
+        attrs={"scenarios": 2},
+    )
+    assert study_warnings(ds) == ["b: diverged in 0, lost lock in 0, lost speed in 1 of 2 scenarios"]
 
 
 @pytest.mark.slow

@@ -6,6 +6,7 @@ import matplotlib
 matplotlib.use("Agg")
 
 import numpy as np
+import pytest
 import xarray as xr
 from matplotlib.colors import LogNorm
 
@@ -118,3 +119,38 @@ def test_drive_events_are_found_and_named():
     times = [te for te, _ in ev]
     assert np.allclose(times, [0.1, 0.2, 0.6, 0.9, 1.0], atol=1.5e-3)
     assert [w for _, w in plot.drive_events(t, out, t_from=0.5)][0].startswith("load applied")
+
+
+def test_paper_figure_layout():
+    """The papers' layout (jaxobs.plot.paper_figure): one column per method headed (a), (b), ...; in each the
+    same panels, every y label with its unit; the actual trace black and dashed under the estimate; the
+    shared rows on one scale, the error's on its own and through zero (a steady −0.157 rad reads as its
+    distance from zero); every event a line in each panel, named once, in the top one."""
+    t = np.linspace(0.0, 0.1, 201)
+    cols = []
+    for name, bias in (("SOIFO", -0.157), ("LPF", 0.6)):
+        th = np.mod(628.0 * t, 2 * np.pi)
+        cols.append(
+            (
+                name,
+                [
+                    plot.Panel("θ̂e, θe (rad)", (plot.Series("θe", th, actual=True), plot.Series("θ̂e", th + bias))),
+                    plot.Panel("θ̂e − θe (rad)", (plot.Series("error", np.full_like(t, bias)),), zero=True),
+                ],
+            )
+        )
+    fig = plot.paper_figure(t, cols, "title", events=[(0.05, "load applied: 0 → 10 N·m")], shared=(0,))
+    axes = np.array(fig.axes).reshape(2, 2)
+    assert [ax.get_title() for ax in axes[0]] == ["(a) SOIFO", "(b) LPF"]
+    assert all(ax.get_ylabel().endswith("(rad)") for ax in axes.ravel())
+    actual = axes[0, 0].get_lines()[0]
+    assert actual.get_color() == "k" and actual.get_linestyle() == "--"
+    assert axes[0, 0].get_ylim() == axes[0, 1].get_ylim()
+    lo, hi = axes[1, 0].get_ylim()
+    assert lo < -0.157 and hi > 0.0 and hi - lo < 0.3, (lo, hi)
+    lo, hi = axes[1, 1].get_ylim()
+    assert lo < 0.0 < 0.6 < hi, (lo, hi)
+    named = [[tx.get_text() for tx in ax.texts] for ax in axes.ravel()]
+    assert named == [["load applied: 0 → 10 N·m"], ["load applied: 0 → 10 N·m"], [], []]
+    with pytest.raises(ValueError, match="same panels"):
+        plot.paper_figure(t, [cols[0], ("x", cols[1][1][:1])], "title")

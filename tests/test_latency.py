@@ -89,3 +89,27 @@ def test_latency_arithmetic_and_bad_options():
     # the old flag is the advance: True 1.5 periods, False none
     assert D.FOC.imc(PAR, alpha_c=1e3, alpha_s=30.0, delay_compensation=False).advance == 0.0
     assert D.FOC.imc(PAR, alpha_c=1e3, alpha_s=30.0).advance == 1.5
+
+
+def test_if_start_up_runs_on_a_two_period_pipeline():
+    """An I-f start-up from rest on 000's DSP timing (pipeline 2) runs: the pending voltage starts at zero
+    (it started as None and the first step failed: TypeError 'NoneType' object is not subscriptable), and
+    the rotor follows the I-f frequency up to 20 r/min in 0.3 s, as on the default timing."""
+    we = PAR.p * 20 * D.RPM
+    start = D.IfStartup(i_f=4.0, accel=we / 0.2, omega_switch=we, hold=1.0)
+    sc = D.Scenario(PAR, speed_ref=D.Profile.constant(20 * D.RPM), omega_m0=0.0)
+    obs = SecondOrderSOIFO(
+        PAR.Rs,
+        PAR.Ld,
+        papers.SECOND_ORDER_SOIFO_K1,
+        papers.SECOND_ORDER_SOIFO_K2,
+        linear.second_order_soifo_lambda(papers.SECOND_ORDER_SOIFO_K1, papers.SECOND_ORDER_SOIFO_K2),
+        omega0=we,
+    )
+    speeds = []
+    for latency, advance in ((PAPER, 0.0), (D.Latency(), 1.5)):
+        drive = D.bench_drive(PAR, startup=start, latency=latency, advance=advance)
+        sol = jaxobs.simulate(D.ClosedLoop(drive, obs, sc), 0.3)
+        assert sol.ok
+        speeds.append(float(np.asarray(sol.outputs.speed_rpm)[-1]))
+    assert speeds[0] == pytest.approx(20.0, abs=2.0) and speeds[0] == pytest.approx(speeds[1], abs=1.0), speeds

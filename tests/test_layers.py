@@ -71,8 +71,8 @@ LAYERS = [
     # the one study runner (samplers in jaxobs.scenarios)
     ("jaxobs.runner",),
     # the figures' helpers and the Bode figures (jaxobs.plot re-exports them)
-    ("jaxobs._figure",),
-    ("jaxobs._plot_bode",),
+    ("jaxobs._figure", "jaxobs.reproduce.compare"),
+    ("jaxobs._plot_bode", "jaxobs._plot_paper"),
     # the library's own applications: studies, the demo, the papers' reproductions, figures, benchmarks
     (
         "jaxobs.study",
@@ -85,7 +85,7 @@ LAYERS = [
     ),
     # the envelope map: the stability verdict and the long runs of a drive study, over the speed x load plane
     ("jaxobs.drive.envelope",),
-    ("jaxobs.reproduce.leso_dual",),
+    ("jaxobs.reproduce.leso_dual", "jaxobs.reproduce.figures"),
     ("jaxobs.reproduce",),
     # tuning: it changes gains (and exports the tuned observer)
     ("jaxobs_tuning.outdir", "jaxobs_tuning.checkpoint"),

@@ -144,4 +144,33 @@ def test_reproduce_leso_progress_has_a_total(monkeypatch):
     monkeypatch.setattr(leso, "simulate", stop)
     with pytest.raises(Stop):
         leso.run_leso_experiments(progress=False)
-    assert made == [leso.N_EXPERIMENTS] and leso.N_EXPERIMENTS == 16
+    assert made == [leso.N_EXPERIMENTS] and leso.N_EXPERIMENTS == 18
+
+
+def test_warnings_and_log_records_during_a_bar_get_lines_of_their_own(capsys):
+    """A warning or a log record printed while a bar was drawn went into the bar's line (issue 29): through
+    tqdm.write it gets a line of its own and the bar is redrawn after it; both are as before once it closes."""
+    import logging
+    import re
+    import warnings
+
+    shown, last = warnings.showwarning, logging.lastResort
+    log = logging.getLogger("jaxobs.tests.progress")  # a logger with no handler: logging's last resort, as JAX's
+    log.propagate = False
+    try:
+        with Progress(True, 2, "bar") as p:
+            p.update()
+            with warnings.catch_warnings():
+                warnings.simplefilter("always")
+                warnings.warn("careful", UserWarning, stacklevel=1)
+            log.warning("from a logger")
+            p.update()
+        assert warnings.showwarning is shown and logging.lastResort is last
+    finally:
+        log.propagate = True
+    err = capsys.readouterr().err
+    lines = re.split(r"[\r\n]", err)
+    for what in ("from a logger", "UserWarning: careful"):
+        line = next(x for x in lines if what in x)
+        assert "1/2" not in line and "bar" not in line.replace("test_progress", ""), err
+    assert "2/2" in err[err.index("from a logger") :]  # the bar goes on below the messages

@@ -17,6 +17,7 @@ from jaxobs import linear, papers
 from jaxobs import metrics as M
 from jaxobs.study import run_study, worst_cases
 from jaxobs_tuning.cli import main
+from jaxobs_tuning.summary import study_warnings
 
 AXES = {"freq_step": [-2.0, 1.0], "dc": [0.0, 0.1], "phase_jump_deg": [0.0, 30.0]}
 
@@ -213,6 +214,30 @@ def test_lost_lock_and_diverged_scenarios_are_flagged_and_listed_first():
         ("nan", True, True),
     ]
     assert worst[-1]["value"] is None and json.loads(json.dumps(worst, allow_nan=False)) == worst
+    # what `jaxobs study` prints on stderr after its table: the designs that lost anything, nothing of the others
+    assert study_warnings(ds) == [
+        "false lock: diverged in 0, lost lock in 2 of 2 scenarios",
+        "nan: diverged in 2, lost lock in 2 of 2 scenarios",
+    ]
+
+
+def test_study_warnings_on_stderr_name_what_each_design_lost(tmp_path, capsys):
+    """Untested before (issue 30): noise of 10 p.u. makes both designs lose lock in that scenario; the warnings
+    go to stderr (one line a design, after the table), stdout keeps the table alone."""
+    study = tmp_path / "w.toml"
+    study.write_text(
+        '[study]\nname = "w"\nt_event = 0.02\nhorizon = 0.05\n[designs.SOGI-FLL]\nclosed_form = "sogi-fll"\n'
+        '[designs.WIF]\nclosed_form = "wif"\n[axes]\nfreq_step = [1.0]\nnoise = [0.0, 10.0]\n'
+    )
+    assert main(["study", str(study), "--out", str(tmp_path / "o"), "--quiet"]) == 0
+    got = capsys.readouterr()
+    assert got.err.splitlines() == [
+        "jaxobs: warning: SOGI-FLL: diverged in 0, lost lock in 1 of 2 scenarios",
+        "jaxobs: warning: WIF: diverged in 0, lost lock in 1 of 2 scenarios",
+    ]
+    assert "jaxobs: warning" not in got.out
+    rows = [line.split() for line in got.out.splitlines() if line.startswith(("SOGI-FLL", "WIF"))]
+    assert [r[-2:] for r in rows] == [["0", "1"], ["0", "1"]]  # the table's diverged and lost lock columns
 
 
 def test_worst_cases_put_diverged_scenarios_first():

@@ -1,6 +1,8 @@
 """Studies that survive a kill: chunk by chunk on disk (jaxobs.chunkstore), `jaxobs study --resume` after
-kill -9 at random instants gives a study.nc byte-identical to an uninterrupted run's (issue 30.7)."""
+kill -9 at random instants gives a study.nc byte-identical to an uninterrupted run's (issue 30.7), for FLL
+and drive studies."""
 
+import math
 import os
 import random
 import signal
@@ -14,8 +16,10 @@ import pytest
 import xarray as xr
 
 import jaxobs
+from jaxobs import drive as D
 from jaxobs import linear
 from jaxobs.chunkstore import ChunkStore
+from jaxobs.drive_study import run_drive_study
 from jaxobs.study import run_study
 from jaxobs_tuning.cli import STUDY_CHUNKS, main
 
@@ -36,6 +40,27 @@ closed_form = "wif"
 freq_step = [-1.0, 1.0, 2.0]
 dc = [0.0, 0.05, 0.1]
 harmonics_scale = [0.0, 1.0]
+"""
+
+# a drive study (two designs of one class: one compilation), one scenario a chunk: 8 chunks
+TINY_DRIVE = """
+[study]
+kind = "drive"
+name = "tiny-drive"
+machine = "ipmsm002"
+horizon = 0.04
+chunk_size = 1
+
+[designs.C-LESO]
+closed_form = "CLESO"
+[designs.C-LESO-tuned]
+component = "CLESO"
+omega0 = 6976.04
+
+[axes]
+speed_rpm = [600.0]
+dRs = [-0.2, 0.2]
+dLq = [-0.2, 0.2]
 """
 
 
@@ -89,6 +114,28 @@ def test_run_study_from_a_partial_store_equals_one_run(tmp_path):
         np.testing.assert_array_equal(again[v].values, ref[v].values)
 
 
+def test_run_drive_study_from_a_partial_store_equals_one_run(tmp_path):
+    """As for FLL studies: the drive study's chunks lost to a kill are computed again, the others read back."""
+    par = D.ipmsm_paper002()
+    drive = D.Drive(D.FOC.imc(par, alpha_c=2 * math.pi * 300, alpha_s=2 * math.pi * 5), sensorless=True)
+    designs = {"a": jaxobs.CLESO(par.Rs, par.Lq), "b": jaxobs.CLESO(par.Rs, par.Lq, omega0=4000.0)}
+    axes = {"speed_rpm": [600.0], "dRs": [-0.2, 0.2], "dLq": [0.0, 0.2]}
+    kw = dict(machine=par, drive=drive, horizon=0.03, chunk_size=2)
+    ref = run_drive_study(designs, axes, **kw)
+    assert ref.sizes["dRs"] == 2 and not bool(np.isnan(ref["pos_err_rms_deg"].values).any())
+    store = ChunkStore(tmp_path / "c", "fp")
+    xr.testing.assert_identical(run_drive_study(designs, axes, store=store, **kw), ref)
+    assert sorted(f.name for f in (tmp_path / "c").glob("*.h5")) == ["0.0.h5", "0.1.h5", "1.0.h5", "1.1.h5"]
+    for f in ("0.1.h5", "1.0.h5"):
+        (tmp_path / "c" / f).unlink()
+    store = ChunkStore(tmp_path / "c", "fp", resume=True)
+    again = run_drive_study(designs, axes, store=store, **kw)
+    assert store.resumed == 2 and store.total == 4
+    xr.testing.assert_identical(again, ref)
+    for v in ref.data_vars:
+        np.testing.assert_array_equal(again[v].values, ref[v].values)
+
+
 def test_a_partial_study_names_resume_and_another_studys_chunks_are_refused(tmp_path, capsys):
     path = tmp_path / "tiny.toml"
     path.write_text(TINY)
@@ -100,7 +147,7 @@ def test_a_partial_study_names_resume_and_another_studys_chunks_are_refused(tmp_
     assert main(["study", str(path), "--out", str(out), "--quiet", "--resume"]) == 2
     err = capsys.readouterr().err.strip()
     assert "belongs to another study" in err and "\n" not in err and not (out / "study.nc").exists()
-    dist = ["--coordinator", "localhost:1", "--num-processes", "2", "--process-id", "0"]
+    dist = ["--coordinator", "localhost:1", "--num-processes", "2", "--process-id", "0"]  # refused before joining
     assert main(["study", str(path), "--out", str(out), "--resume", *dist]) == 2
     assert "not checkpointed" in capsys.readouterr().err
 
@@ -109,9 +156,9 @@ def _cli(*args):
     return [sys.executable, "-m", "jaxobs_tuning.cli", "study", *map(str, args), "--quiet"]
 
 
-def _kill_and_resume(tmp_path, instants: int, seed: int):
+def _kill_and_resume(tmp_path, instants: int, seed: int, study: str = TINY):
     path = tmp_path / "tiny.toml"
-    path.write_text(TINY)
+    path.write_text(study)
     ref = tmp_path / "ref"
     t0 = time.time()
     proc = subprocess.Popen(_cli(path, "--out", ref), stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
@@ -148,6 +195,11 @@ def _kill_and_resume(tmp_path, instants: int, seed: int):
 
 def test_kill_9_at_2_random_instants_then_resume_is_byte_identical(tmp_path):
     _kill_and_resume(tmp_path, 2, seed=1)
+
+
+def test_kill_9_of_a_drive_study_then_resume_is_byte_identical(tmp_path):
+    # drive studies were all or nothing: --resume was refused ("drive studies are not checkpointed")
+    _kill_and_resume(tmp_path, 2, seed=3, study=TINY_DRIVE)
 
 
 @pytest.mark.slow

@@ -155,6 +155,10 @@ def test_a_tuned_design_failing_inside_its_envelope_is_unsafe_exit_4(tmp_path, c
         (p,) = d["points"]
         assert p["synchronous"] and not p["lost_lock"] and p["pos_err_max_deg"] < 5.0
         assert isinstance(p["stable"], bool) and p["passes"] == p["stable"] and math.isfinite(p["margin_per_s"])
+        # a verdict within the window's resolution is marginal, never stable (a 0.02 s window resolves little)
+        assert isinstance(p["marginal"], bool) and not (p["marginal"] and p["stable"])
+        assert p["resolution_per_s"] is not None and p["resolution_per_s"] >= 0.0
+        assert p["marginal"] == (abs(p["margin_per_s"]) <= p["resolution_per_s"])
     assert ver["unsafe_points"] == []
     assert res["verification"]["unsafe_points"] == [{"speed_rpm": 1000.0, "load_nm": 2.0}]
 

@@ -9,7 +9,7 @@
                                                            002 Fig. 4, 001 Fig. 14), in Hz (or rad/s)
     jaxobs reproduce flux [--out DIR] [--force] [--json] [--quick]
                                                            paper 000's experiments, paper vs ours
-    jaxobs reproduce leso [--out DIR] [--force] [--json] [--machine single|dual]   paper 002's experiments
+    jaxobs reproduce leso [--out DIR] [--force] [--json] [--machine dual|single]   paper 002's experiments
     jaxobs study [STUDY.toml] [--out DIR] [--force] [--check] [--resume] [--quiet]
                  [--coordinator HOST:PORT --num-processes N --process-id I | --distributed] [--timeout S]
                                                            robustness study → NetCDF, worst cases, figures
@@ -54,12 +54,12 @@ before the study file is loaded): process 0 alone checks, locks and writes ``--o
 shows progress; the others compute their share, print one line and exit 0; when process 0 cannot use
 ``--out`` every process ends with exit 2 before computing.  FLL studies only (a drive or recording study
 is refused before joining).  ``--timeout S`` (default 300): how long each process waits for the others;
-a process other than 0 that finds no coordinator then exits 2 with one line, a process 0 left alone is
-aborted by JAX's runtime (exit 134).
+a process other than 0 that finds no coordinator, or another program listening at its port, then exits 2
+with one line, a process 0 left alone is aborted by JAX's runtime (exit 134).
 ``tune --resume`` continues from ``<out>/checkpoint.npz`` if it is this job's (the job file's sha256 is
-in it); with no checkpoint it says so in one line and starts fresh.  ``study --resume`` (FLL studies in one
-process) continues from the chunks in ``<out>/study.chunks/`` if they are this study's (its files' and the
-versions' sha256): a study.nc byte-identical to an uninterrupted run's.
+in it); with no checkpoint it says so in one line and starts fresh.  ``study --resume`` (FLL and drive
+studies, in one process) continues from the chunks in ``<out>/study.chunks/`` if they are this study's (its
+files' and the versions' sha256): a study.nc byte-identical to an uninterrupted run's.
 """
 
 from __future__ import annotations
@@ -91,9 +91,9 @@ from .job import CHECKPOINT, UNSAFE_EXIT, load_job, load_recordings, run_job
 from .outdir import OutDir, atomic_path, atomic_write_text, safe_name
 from .study_file import load_study as _load_study
 from .study_file import study_fingerprint
-from .summary import print_summary
+from .summary import print_summary, study_warnings
 
-STUDY_CHUNKS = "study.chunks"  # an FLL study's results while it runs (jaxobs.chunkstore), in --out
+STUDY_CHUNKS = "study.chunks"  # a study's results while it runs (jaxobs.chunkstore), in --out
 
 
 def load_study(path):
@@ -102,18 +102,22 @@ def load_study(path):
     return spec.name, spec.designs, spec.axes, dict(spec.opts, kind=spec.kind)
 
 
-def _cmd_drive_study(name, designs, axes, opts, out: Path, quiet: bool, provenance=None) -> int:
+def _cmd_drive_study(name, designs, axes, opts, out: Path, quiet: bool, provenance=None, store=None) -> int:
     from jaxobs.drive_study import DRIVE_STUDY_METRICS, run_drive_study
     from jaxobs.plot import drive_study_figure
 
-    ds = run_drive_study(designs, axes, progress=progress_of(quiet=quiet), **opts)
+    ds = run_drive_study(designs, axes, progress=progress_of(quiet=quiet), store=store, **opts)
     ds.attrs.update(provenance or {})  # the study file's and the result files' sha256, the machine
     fig = out / "drive_study.png"
     drive_study_figure(ds, fig)
-    with atomic_path(out / "study.nc") as tmp:
+    with atomic_path(out / "study.nc") as tmp:  # last: a study.nc means a complete results folder
         ds.to_netcdf(tmp, engine="h5netcdf")
+    if store is not None:
+        store.remove()  # the results are in study.nc: nothing is left to resume
     n = int(ds.attrs["scenarios"])
     print(f"drive study {name}: {len(designs)} designs x {n} scenarios ({ds.attrs['sampling']}), sensorless")
+    if store is not None and store.resumed:
+        print(f"resumed: {store.resumed} chunks of {store.total} were on disk from the stopped run")
     qs = [float(q) for q in ds["quantile"].values]
     # columns sized from their content (long design names and metric labels never run together)
     labels = {m: f"{m} ({u})" for m, (u, _) in DRIVE_STUDY_METRICS.items()}
@@ -122,7 +126,6 @@ def _cmd_drive_study(name, designs, axes, opts, out: Path, quiet: bool, provenan
     head = f"{'design':<{wd}}{'metric':<{wm}}" + "".join(f"{'q' + format(q, 'g'):>10}" for q in qs)
     head += f"{'diverged':>10}{'lost lock':>11}{'lost speed':>12}"
     print(head)
-    warnings = []
     for d in ds["design"].values:
         lost = int(ds["lost_lock_count"].sel(design=d))
         div = int(ds["diverged"].sel(design=d).sum())
@@ -131,10 +134,8 @@ def _cmd_drive_study(name, designs, axes, opts, out: Path, quiet: bool, provenan
             vals = ds[f"{m}_q"].sel(design=d).values
             row = f"{str(d):<{wd}}{labels[m]:<{wm}}" + "".join(f"{v:>10.4g}" for v in vals)
             print(row + f"{div:>10}{lost:>11}{speed:>12}")
-        if div or lost or speed:  # on stderr too: a summary piped away still says what was lost
-            warnings.append(f"{d}: diverged in {div}, lost lock in {lost}, lost speed in {speed} of {n} scenarios")
     print(f"results: {out / 'study.nc'}, {fig}")
-    for w in warnings:
+    for w in study_warnings(ds):  # on stderr too: a summary piped away still says what was lost
         print(f"jaxobs: warning: {w}", file=sys.stderr)
     return 0
 
@@ -180,11 +181,11 @@ def _cmd_study(args) -> int:
     name, designs, axes = spec.name, spec.designs, spec.axes
     opts = dict(spec.opts, kind=spec.kind, provenance=spec.provenance)
     out = Path(args.out) if args.out else Path("out") / safe_name(str(name), "study")
-    # an FLL study writes each chunk's results under study.chunks/ as it finishes (jaxobs.chunkstore): a
+    # a study writes each chunk's results under study.chunks/ as it finishes (jaxobs.chunkstore): a
     # kill loses at most the chunks being computed, and --resume continues from the last complete one
     resume = f"jaxobs study {shlex.quote(str(path))} --out {shlex.quote(str(out))} --resume"
     hint = f"an earlier run stopped here: continue it with `{resume}` (--force starts over and discards it)"
-    products = ["study.nc"] + ([] if args.resume or spec.kind != "fll" else [STUDY_CHUNKS])
+    products = ["study.nc"] + ([] if args.resume else [STUDY_CHUNKS])
     if args.check:
         if args.out:  # what the real run would refuse (an explicit --out: the default one may not exist yet)
             OutDir(out, products, force=args.force, hints={STUDY_CHUNKS: hint}).check()
@@ -192,12 +193,6 @@ def _cmd_study(args) -> int:
         return 0
     if rank is not None and rank[1] > 1:
         return distributed_study(name, designs, axes, opts, out, args, rank, _run_study)
-    if spec.kind != "fll":
-        if args.resume:
-            raise ValueError(f"--resume: {spec.kind} studies are not checkpointed (FLL studies are)")
-        with OutDir(out, ["study.nc"], force=args.force):
-            args.log_dir = out
-            return _run_study(name, designs, axes, opts, out, args.quiet)
     with OutDir(out, products, force=args.force, hints={STUDY_CHUNKS: hint}):
         args.log_dir = out
         args.on_interrupt = f"; continue with: {resume}"  # what Ctrl-C says (main)
@@ -211,7 +206,7 @@ def _run_study(name, designs, axes, opts, out: Path, quiet: bool, store=None) ->
 
     provenance = opts.pop("provenance", None) or {}
     if opts.pop("kind", "fll") == "drive":
-        return _cmd_drive_study(name, designs, axes, opts, out, quiet, provenance)
+        return _cmd_drive_study(name, designs, axes, opts, out, quiet, provenance, store)
     if opts.get("recording") is not None:  # [study.recording]: the recordings are the scenarios
         ds, seconds = _recording_study(designs, progress=progress_of(quiet=quiet), store=store, **opts)
     else:
@@ -246,10 +241,8 @@ def _run_study(name, designs, axes, opts, out: Path, quiet: bool, store=None) ->
             row += f"{k * float(sel[m].mean()):>25.4g}{k * float(sel[m].max()):>10.4g}"
         print(row + f"{int(sel['diverged'].sum()):>10}{int(sel['lost_lock_count']):>11}")
     print(f"results: {out / 'study.nc'}, {out / 'worst_cases.json'}, {len(figs)} figures")
-    for d in ds["design"].values:  # on stderr too: a summary piped away still says what was lost
-        div, lost = int(ds["diverged"].sel(design=d).sum()), int(ds["lost_lock_count"].sel(design=d))
-        if div or lost:
-            print(f"jaxobs: warning: {d}: diverged in {div}, lost lock in {lost} of {n} scenarios", file=sys.stderr)
+    for w in study_warnings(ds):  # on stderr too: a summary piped away still says what was lost
+        print(f"jaxobs: warning: {w}", file=sys.stderr)
     return 0
 
 
@@ -385,8 +378,9 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument(
         "--machine",
         choices=["single", "dual"],
-        default="single",
-        help="leso: 'dual' adds Figs 13-15 on the dual three-phase IPMSM (individual sets and VSD control)",
+        default=None,
+        help="leso: 'dual' (the default) adds 002's dual three-phase IPMSM (Figs 13-15, individual sets and VSD"
+        " control; the ramp and the load step with each LESO closing the loop); 'single': the single machine only",
     )
     r.set_defaults(func=cmd_reproduce)
 

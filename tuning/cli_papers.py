@@ -8,6 +8,7 @@ import re
 from pathlib import Path
 
 from jaxobs import linear, papers
+from jaxobs.reproduce.figures import FLUX_FIGURES
 
 from .cli_common import CommandOut, enable_x64, progress_of
 from .outdir import atomic_path
@@ -26,6 +27,8 @@ REPRODUCE_FILES = {
         "position_error_load_step.png",
         "position_error_speed_variation.png",
         "position_error_du_alpha_5V.png",
+        # 000 Figs 12-23 in the paper's layout (jaxobs.reproduce.figures; --quick skips 20 r/min and the I-f start)
+        *(spec[1] for spec in FLUX_FIGURES),
     ),
     "leso": (
         "leso_position_error_600rpm.png",
@@ -37,14 +40,24 @@ REPRODUCE_FILES = {
         "leso_load_step_cleso_closing.png",
         "leso_load_step_gileso_closing.png",
         "leso_half_load_600rpm_cleso_closing.png",
+        # 002 Fig. 18: the observer's R̂s, then L̂q, ramped by ±0.5 p.u. at rated load
+        "leso_fig18_rs_ramp.png",
+        "leso_fig18_lq_ramp.png",
     ),
 }
-# ``reproduce leso --machine dual`` adds these (jaxobs.reproduce.leso_dual's experiments, in its order)
+# ``reproduce leso`` (``--machine dual``, its default) adds these: jaxobs.reproduce.leso_dual's DUAL_EXPERIMENTS and
+# then DUAL_DYNAMICS, in their order
 REPRODUCE_DUAL_FILES = (
     "leso_dual_individual_300rpm.png",
     "leso_dual_individual_600rpm.png",
     "leso_dual_vsd_600rpm.png",
+    "leso_dual_speed_ramp.png",
+    "leso_dual_speed_ramp_cleso_closing.png",
+    "leso_dual_speed_ramp_gileso_closing.png",
     "leso_dual_load_step.png",
+    "leso_dual_load_step_cleso_closing.png",
+    "leso_dual_load_step_gileso_closing.png",
+    "leso_dual_speed_ramp_330V_encoder.png",
 )
 
 
@@ -197,20 +210,28 @@ def _error_figures(traces, names, paper: str, specs, out: Path):
     return paths
 
 
-def cmd_reproduce(args) -> int:
-    enable_x64()
+def reproduce_files(args) -> tuple:
+    """The figures ``reproduce`` writes; settles ``args.machine`` (None: "dual" for leso, "single" for flux)."""
     if args.paper not in REPRODUCE_FILES:
         raise ValueError(f"reproduce: unknown paper {args.paper!r}")
+    if args.machine is None:  # 002's machine is the dual three-phase IPMSM: its rows come by default
+        args.machine = "dual" if args.paper == "leso" else "single"
     if args.machine != "single" and args.paper != "leso":
         raise ValueError(f"reproduce {args.paper}: --machine must be 'single' (the dual machine is paper 002's)")
+    return REPRODUCE_FILES[args.paper] + (REPRODUCE_DUAL_FILES if args.machine == "dual" else ())
+
+
+def cmd_reproduce(args) -> int:
+    enable_x64()
+    files = reproduce_files(args)
     args.out = args.out or f"out/reproduce-{args.paper}"
-    files = REPRODUCE_FILES[args.paper] + (REPRODUCE_DUAL_FILES if args.machine == "dual" else ())
     with CommandOut(args, files) as out:
         return _reproduce(args, out)
 
 
 def _reproduce(args, out: Path) -> int:
     if args.paper == "flux":
+        from jaxobs import drive as D
         from jaxobs.plot import flux_circles_figure
         from jaxobs.reproduce.flux import OBSERVER_NAMES, run_flux_experiments
 
@@ -227,12 +248,16 @@ def _reproduce(args, out: Path) -> int:
             "000",
             zip(
                 ("load step 10 N·m at 2000 r/min", "speed 400-2000-400 r/min", "du_alpha = 5 V at 1000 r/min"),
-                files[2:],
+                files[2:5],
                 (0.3, 0.8, 0.8),
                 strict=True,
             ),
             out,
         )
+        from jaxobs.reproduce.figures import flux_figures
+
+        par = D.bench_machine("spmsm000")
+        figs += flux_figures(traces, OBSERVER_NAMES, par.p, float(par.psi_f), out)
         return _emit_rows(
             rows,
             figs,
@@ -240,10 +265,10 @@ def _reproduce(args, out: Path) -> int:
             "Paper 000 (second-order SOIFO) experiments on the simulated SPMSM drive — paper vs ours",
         )
     if args.paper == "leso":
-        from jaxobs.reproduce.leso import LESO_NAMES, run_leso_experiments
+        from jaxobs.reproduce.leso import FIG18_NAMES, LESO_NAMES, run_leso_experiments
 
         rows, traces = run_leso_experiments(progress=progress_of(args))
-        if args.machine == "dual":  # Figs 13-15 on the dual three-phase machine, beside the single one's
+        if args.machine == "dual":  # 002's dual three-phase machine, beside the single one
             from jaxobs.reproduce.leso_dual import run_leso_dual
 
             rows_dual, traces_dual = run_leso_dual(progress=progress_of(args))
@@ -262,17 +287,18 @@ def _reproduce(args, out: Path) -> int:
                     "load step 0-80 % at 600 r/min, C-LESO closing the loop",
                     "load step 0-80 % at 600 r/min, GI-LESO closing the loop",
                     "half load 600 r/min, C-LESO closing the loop",
+                    *FIG18_NAMES.values(),
                 ),
                 REPRODUCE_FILES["leso"],
-                (0.4,) * 8,
+                (0.4,) * 8 + (0.0,) * 2,
                 strict=True,
             ),
             out,
         )
         if args.machine == "dual":
-            from jaxobs.reproduce.leso_dual import DUAL_EXPERIMENTS, DUAL_LOAD_STEP
+            from jaxobs.reproduce.leso_dual import DUAL_DYNAMICS, DUAL_EXPERIMENTS
 
-            keys = [e[0] for e in DUAL_EXPERIMENTS] + [DUAL_LOAD_STEP]
+            keys = [e[0] for e in DUAL_EXPERIMENTS] + list(DUAL_DYNAMICS)
             specs = zip(keys, REPRODUCE_DUAL_FILES, (0.4,) * len(keys), strict=True)
             figs += _error_figures(traces, LESO_NAMES, "002, dual three-phase", specs, out)
         return _emit_rows(

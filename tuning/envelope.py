@@ -3,7 +3,8 @@
 For a drive job file, its initial and closed-form designs; for a ``jaxobs tune`` result.json of a drive job,
 its initial, closed-form and tuned designs (the result's own values).  The job's machine and drive (the
 bench FOC), always sensorless and started steady whatever the job's loop and start: the envelope is where the
-observer can close the loop.  Writes ``envelope.nc`` (NetCDF, :func:`jaxobs.drive.envelope.envelope`) and
+observer can close the loop; the Lyapunov verdict with the job's ``[envelope]`` settle and window
+where it has one.  Writes ``envelope.nc`` (NetCDF, :func:`jaxobs.drive.envelope.envelope`) and
 ``envelope.png`` (:func:`jaxobs.plot.envelope_figure`) under ``--out``.
 """
 
@@ -84,10 +85,14 @@ def cli_envelope(args) -> int:
     drive = job_drive(spec)
     speeds, loads = default_speeds(par, args.speeds), default_loads(par, args.loads)
     n = len(speeds) * len(loads)
+    # the job's own Lyapunov settle and window where it states them ([envelope]: the presets need 1 s at the low
+    # end), else the library's defaults (settle 0.2 s, window 0.4 s)
+    env = job.envelope
+    stab = {} if env is None else {"settle": env.settle, "window": env.window}
     what = (
         f"{path}: {job.component} on {spec.machine}, designs {', '.join(designs)}; {len(speeds)} speeds "
         f"{speeds[0]:.4g}..{speeds[-1]:.4g} r/min x {len(loads)} loads 0..{loads[-1]:.4g} N·m = {n} points, "
-        f"{args.horizon:g} s runs"
+        f"{args.horizon:g} s runs" + (f", Lyapunov settle {env.settle:g} s, window {env.window:g} s" if env else "")
     )
     if args.check:
         print(f"{what}: OK")
@@ -102,6 +107,7 @@ def cli_envelope(args) -> int:
             speeds_rpm=speeds,
             loads_nm=loads,
             horizon=args.horizon,
+            stability=stab,
             progress=False if args.quiet else "auto",
         )
         ds.attrs.update(source=str(path), job_name=job.name, component=job.component, machine=spec.machine)
@@ -113,14 +119,14 @@ def cli_envelope(args) -> int:
             ds.to_netcdf(tmp, engine="h5netcdf")
     print(what)
     wd = max(len("design"), *(len(d) for d in designs)) + 2
-    head = f"{'design':<{wd}}{'holds':>9}{'stable':>9}{'sync':>9}{'min margin 1/s':>16}"
+    head = f"{'design':<{wd}}{'holds':>9}{'stable':>9}{'marginal':>9}{'sync':>9}{'min margin 1/s':>16}"
     print(head + f"{'lowest r/min held at all loads':>32}")
     for d in designs:
         s = ds.sel(design=d)
         all_loads = s["holds"].astype(bool).all("load")
         low = float(s["speed_rpm"][all_loads].min()) if bool(all_loads.any()) else float("nan")
         print(
-            f"{d:<{wd}}{int(s['holds'].sum()):>5}/{n:<3}{int(s['stable'].sum()):>5}/{n:<3}"
+            f"{d:<{wd}}{int(s['holds'].sum()):>5}/{n:<3}{int(s['stable'].sum()):>5}/{n:<3}{int(s['marginal'].sum()):>5}/{n:<3}"
             f"{int(s['synchronous'].sum()):>5}/{n:<3}{float(s['margin'].min()):>16.4g}{low:>32.4g}"
         )
     print(f"results: {out / 'envelope.nc'}, {out / 'envelope.png'}")

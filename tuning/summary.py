@@ -1,4 +1,5 @@
-"""The summary ``jaxobs tune`` prints: gains, linear structure and scores of the three designs, warnings."""
+"""The summaries' warnings and the one ``jaxobs tune`` prints: gains, linear structure and scores of the three
+designs, warnings.  :func:`study_warnings`: what a study lost, per design, for ``jaxobs study``'s stderr."""
 
 from __future__ import annotations
 
@@ -104,3 +105,23 @@ def print_summary(result: dict, out: Path, timing: dict | None = None):
             file=sys.stderr,
         )
     print(f"results: {out / 'result.json'} (history.json, timing.json, scores.nc)")
+
+
+def study_warnings(ds) -> list[str]:
+    """One line per design of a study's Dataset (FLL or drive) that diverged, lost lock or (drive studies,
+    ``lost_speed_count``) missed its speed reference in any scenario: ``"<design>: diverged in D, lost lock in
+    L[, lost speed in S] of N scenarios"``; none for a design that lost nothing.  ``jaxobs study`` prints them
+    on stderr after its table, so that a summary piped away still says what was lost."""
+    n = int(ds.attrs["scenarios"])
+    drive = "lost_speed_count" in ds
+    lines = []
+    for d in ds["design"].values:
+        div, lost = int(ds["diverged"].sel(design=d).sum()), int(ds["lost_lock_count"].sel(design=d))
+        speed = int(ds["lost_speed_count"].sel(design=d)) if drive else 0
+        if div or lost or speed:
+            lines.append(
+                f"{d}: diverged in {div}, lost lock in {lost}"
+                + (f", lost speed in {speed}" if drive else "")
+                + f" of {n} scenarios"
+            )
+    return lines

@@ -67,6 +67,7 @@ from .scenario import CF_UNITS as CF_UNITS
 from .scenario import DRIVE_AXES as DRIVE_AXES
 from .scenario import GRID_AXES as GRID_AXES
 from .scenario import Batch as Batch
+from .scenario import ParameterDrift as ParameterDrift
 from .scenario import Profile as Profile
 from .scenario import Scenario as Scenario
 from .scenario import grid as grid

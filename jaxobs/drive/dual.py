@@ -160,17 +160,18 @@ class DualPMSMParams(eqx.Module):
 
 
 def dual_ipmsm_paper002(J=None, **overrides) -> DualPMSMParams:
-    """002's dual three-phase IPMSM (ASSUMED: our copy lacks its machine table; :data:`papers.DUAL_IPMSM_002`).
+    """002's dual three-phase IPMSM (ASSUMED: our copy lacks its machine table; papers.IPMSM_002 per set).
 
-    Two of the single IPMSM's sets on one shaft: per phase the single machine's Rs, Ld, Lq, ψf and its
-    5th/7th BEMF harmonics (papers.IPMSM_002_A5/A7, calibrated on Fig. 13's C-LESO), so each set is
-    :func:`jaxobs.drive.bench_machine` ``("ipmsm002")`` when both carry the same current; twice its bench
-    inertia, friction and rated torque (60 N·m at 8.9 A per phase); Lls = papers.DUAL_LLS_002.
+    Two of the single IPMSM's sets on one shaft: per phase the single machine's Rs, Ld, Lq, ψf, so each set
+    is :func:`jaxobs.drive.bench_machine` ``("ipmsm002")`` (harmonics aside) when both carry the same current;
+    twice its bench inertia, friction and rated torque (60 N·m at 8.9 A per phase).  The xy inductance
+    Lls = papers.DUAL_LLS_002 and the 5th/7th BEMF harmonics a5, a7 = papers.DUAL_A5_002/DUAL_A7_002 are
+    fitted on 002's C-LESO numbers under individual-set control (Figs 13-14: papers.py says how).
     ``J`` defaults to twice papers.BENCH_J_002 (the bench); ``overrides`` go to the αβ PMSMParams,
     except ``Lls``.
     """
     kw = dict(papers.IPMSM_002)
-    kw.update(a5=papers.IPMSM_002_A5, a7=papers.IPMSM_002_A7)
+    kw.update(a5=papers.DUAL_A5_002, a7=papers.DUAL_A7_002)
     kw.update(J=2 * papers.BENCH_J_002 if J is None else J, B=2 * kw["B"], T_rated=2 * kw["T_rated"])
     lls = overrides.pop("Lls", papers.DUAL_LLS_002)
     kw.update(overrides)

@@ -16,10 +16,14 @@ speed loop, dq current PIs with decoupling, delay compensation, anti-windup):
   and the mutual coupling through the other set is left to the PIs, as in ref. [6].  Both FOCs run the
   same speed loop on the same inputs, so they hold the same i_q* (each set carries half the torque).
   The common mode (xy = 0) then has the bandwidth α_c (L + Lls)/(2L) and the differential mode (the
-  xy currents) α_c (L + Lls)/(2 Lls): 3.5 α_c on q with the assumed machine.  At the single bench's
-  α_c = 2π·300 rad/s that crossover, 6600 rad/s, leaves 33° of phase margin to the 1.5-sample delay
-  (runs stay stable: 0.59 A rms xy at 300 r/min half load); half of it leaves 62° (1.16 A rms xy), the
-  dual bench's default for this mode (:func:`dual_bench_drive`).
+  xy currents) α_c (L + Lls)/(2 Lls): 1.83 α_c on q with the assumed machine (Lls = 4.5 mH).  At the
+  single bench's α_c = 2π·300 rad/s that crossover, 3460 rad/s, leaves 60° of phase margin to the
+  1.5-sample delay; both modes use that α_c (:func:`dual_bench_drive`).
+  Nothing here acts on the 5th/7th: 002 adds no harmonic control to the individual sets (ref. [6]'s
+  two-individual control is dq PIs per set, which pass the 6ωe ripple the 5th/7th make in each set's dq
+  frame), and its point in Figs 13-14 is to show the LESOs facing them.  The PIs' gain at 6ωe still
+  shrinks the xy currents (0.44 A rms at 300 r/min half load, 0.90 A at 600 r/min 40 %); what remains is in
+  set 1's equivalent BEMF as (L̂q − Lls) di_xy/dt (jaxobs.papers, DUAL_LLS_002).
 
 The observer (``DriveInput``) is chosen by the mode: set 1's measured voltage and current under
 ``"individual"`` (002: "the LESOs are only applied to the first set"), the VSD αβ ones under ``"vsd"``.
@@ -125,8 +129,8 @@ class DualFOC(AbstractComponent):
         """IMC current loops at ``alpha_c`` rad/s and the double-pole speed loop at ``alpha_s`` on ``est``.
 
         "vsd": :meth:`FOC.imc` on ``est.per_set()``, xy PIs k_p = α_c L̂ls, k_i = α_c R̂s.  "individual":
-        :meth:`FOC.imc` on ``est.set_self()``; pass a lower ``alpha_c`` there (module doc: the differential
-        mode runs (L̂q + L̂ls)/(2 L̂ls) times faster: module doc; the dual bench uses half the single bench's).
+        :meth:`FOC.imc` on ``est.set_self()``; its differential mode runs (L̂q + L̂ls)/(2 L̂ls) times faster
+        than ``alpha_c`` (module doc): lower ``alpha_c`` on a machine of small L̂ls.
         """
         if not isinstance(est, DualPMSMParams):
             raise ValueError(f"DualFOC.imc: est must be a DualPMSMParams, got {type(est).__name__}")
@@ -220,9 +224,13 @@ class DualOutput(NamedTuple):
     i_b2: jax.Array
     torque: jax.Array  # N·m
     load: jax.Array  # N·m
-    id_ref: jax.Array  # A (per set / αβ)
+    id_ref: jax.Array  # A (per set / αβ; field weakening's Δi_d included)
     iq_ref: jax.Array
     obs: Any  # the observer's outputs (None with the encoder)
+    u_a1: jax.Array  # each set's voltage applied over [t_k, t_{k+1}] (set 1's frame, limited), V
+    u_b1: jax.Array
+    u_a2: jax.Array
+    u_b2: jax.Array
 
     @property
     def speed_rpm(self):
@@ -352,19 +360,31 @@ class DualClosedLoop(AbstractSystem):
             id_ref=c.id_ref,
             iq_ref=c.iq_ref,
             obs=obs_out,
+            u_a1=u[0],
+            u_b1=u[1],
+            u_a2=u[2],
+            u_b2=u[3],
         )
         return DualLoopState(plant=plant_state, ctrl=ctrl, obs=obs_state, sensors=key, u=u_next), out
 
 
 def dual_bench_drive(
-    machine: DualPMSMParams, *, mode="vsd", sensorless=True, handover=0.2, alpha_s=None, n_sub=2
+    machine: DualPMSMParams,
+    *,
+    mode="vsd",
+    sensorless=True,
+    handover=0.2,
+    alpha_s=None,
+    alpha_c=None,
+    n_sub=2,
+    inverter: Inverter | None = None,
+    **foc_kw,
 ) -> DualDrive:
     """The single IPMSM bench's drive (:func:`jaxobs.drive.bench_drive`) on the dual machine ``machine`` (what
-    the controller assumes): the speed loop at ``alpha_s`` (default 2π·papers.BENCH_SPEED_HZ rad/s); IMC
-    current loops at 2π·papers.BENCH_CURRENT_HZ rad/s under "vsd", half that under "individual" (its
-    differential mode runs 3.5× faster than α_c on the assumed machine: 62° of phase margin instead of 33°,
-    module doc)."""
-    alpha_c = 2 * math.pi * papers.BENCH_CURRENT_HZ * (1.0 if mode == "vsd" else 0.5)
+    the controller assumes): the speed loop at ``alpha_s`` (default 2π·papers.BENCH_SPEED_HZ rad/s), IMC
+    current loops at ``alpha_c`` (default 2π·papers.BENCH_CURRENT_HZ rad/s) in either mode, ``inverter``
+    (default 540 V) for both sets, ``foc_kw`` :class:`FOC`'s options (``field_weakening``, ...)."""
+    alpha_c = 2 * math.pi * papers.BENCH_CURRENT_HZ if alpha_c is None else alpha_c
     alpha_s = 2 * math.pi * papers.BENCH_SPEED_HZ if alpha_s is None else alpha_s
-    ctrl = DualFOC.imc(machine, alpha_c, alpha_s, mode=mode)
-    return DualDrive(ctrl, sensorless=sensorless, handover=handover, n_sub=n_sub)
+    ctrl = DualFOC.imc(machine, alpha_c, alpha_s, mode=mode, **foc_kw)
+    return DualDrive(ctrl, inverter, sensorless=sensorless, handover=handover, n_sub=n_sub)

@@ -69,8 +69,13 @@ MISMATCH_AXES = ("dRs", "dLd", "dLq", "dpsi", "dJ")
 # variable -> (units, long_name) of the per-point results
 ENVELOPE_VARIABLES = {
     "margin": ("s-1", "stability margin: minus the largest non-neutral Lyapunov exponent of the sampled loop"),
-    "stable": ("1", "stable: margin > 0 and the orbit held its speed during the Lyapunov run (1: stable)"),
-    "orbit_speed_dev": ("1", "max |speed - reference| / |reference| during the Lyapunov run"),
+    "stable": ("1", "stable: margin - resolution > 0 and the orbit held its speed during the Lyapunov run (1: stable)"),
+    "marginal": (
+        "1",
+        "marginal: |margin| within its resolution, the orbit held its speed: neither verdict (1: marginal)",
+    ),
+    "resolution": ("s-1", "resolution of the margin: spread of the exponent over the Lyapunov window's thirds"),
+    "orbit_speed_dev": ("1", "max |speed - reference| / |reference| during the Lyapunov run after its settle"),
     "synchronous": ("1", "held synchronism over the long run: finite, locked, at speed, settled (1: held)"),
     "lost_lock": ("1", "lost lock over the late window: diverged or position error > 90 deg electrical (1: lost)"),
     "lost_speed": ("1", "lost speed over the late window: diverged, or mean |speed - ref| > 20 % of |ref| (1: lost)"),
@@ -323,6 +328,8 @@ def envelope(
     res = {
         "margin": grid(lambda d: stab[d].margin),
         "stable": grid(lambda d: stab[d].stable),
+        "marginal": grid(lambda d: stab[d].marginal),
+        "resolution": grid(lambda d: stab[d].resolution),
         "orbit_speed_dev": grid(lambda d: stab[d].speed_dev),
     }
     for k in ("synchronous", "lost_lock", "lost_speed", "pos_err_max_deg", "pos_bias_deg", "pos_ripple_deg"):

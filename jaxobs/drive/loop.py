@@ -294,7 +294,12 @@ class ClosedLoop(AbstractSystem):
             z = jnp.zeros((), plant.x.dtype)
             obs = None if self.observer is None else self.observer.init()
             ctrl = foc.init(op, theta_f0=sc.theta_e0 - jnp.pi / 2)
-            return LoopState(plant=plant, ctrl=ctrl, obs=obs, sensors=sc.sensors.init(op, key=sc.key), u_a=z, u_b=z)
+            # at rest no voltage is pending either: a pipeline of 2 holds a zero one (it was None, and the
+            # step indexed it: an I-f start on the PWM-centre timing failed)
+            pending = jnp.zeros((2,), z.dtype) if self.drive.latency.pipeline == 2 else None
+            return LoopState(
+                plant=plant, ctrl=ctrl, obs=obs, sensors=sc.sensors.init(op, key=sc.key), u_a=z, u_b=z, pending=pending
+            )
         op = self.operating_point()
         obs = None
         if self.observer is not None:
@@ -340,6 +345,16 @@ class ClosedLoop(AbstractSystem):
             plant=plant, ctrl=foc.init(ctrl_op), obs=obs, sensors=sensors, u_a=u.u_a, u_b=u.u_b, pending=pending
         )
 
+    def _observer_at(self, t):
+        """The observer assuming the scenario's machine at time ``t`` (s): itself, or rebound by its one binding
+        to ``est_par`` under the scenario's drift (:class:`~jaxobs.drive.ParameterDrift`; 002 Fig. 18).  The
+        speed given to bind() only sets the initial-speed field, which no step reads."""
+        drift = self.scenario.est_drift
+        if drift is None or not isinstance(self.observer, AbstractDriveObserver):
+            return self.observer
+        sc = self.scenario
+        return self.observer.bind(drift.at(sc.est_par, t), sc.par.p * sc.omega_m0)
+
     def _steady_voltage(self, op: OperatingPoint, theta):
         """(u_α, u_β) applied over the period that starts where the rotor is at ``theta``, at steady state:
         centred at θ + ω_e T_s/2 (the FOC's integrators absorb what its delay compensation leaves, init)."""
@@ -361,7 +376,7 @@ class ClosedLoop(AbstractSystem):
         the circular mean over the last quarter of the phase (sensor noise and
         ripple averaged out), 0 without a settling phase.
         """
-        sc, obs, ts = self.scenario, self.observer, self.ts
+        sc, obs, ts = self.scenario, self._observer_at(0.0), self.ts
         w_e = sc.par.p * op.omega_m
         # a drive observer starts at the true speed (its contract); any other observer (a probe) from its init()
         state = obs.init_at(w_e) if isinstance(obs, AbstractDriveObserver) else obs.init()
@@ -411,7 +426,7 @@ class ClosedLoop(AbstractSystem):
             ys = y
         key, meas = sc.sensors.step(state.sensors, SensorInput(k, state.u_a, state.u_b, ys.i_a, ys.i_b))
         if self.observer is not None:
-            obs_state, obs_out = self.observer.step(state.obs, meas)
+            obs_state, obs_out = self._observer_at(t).step(state.obs, meas)
         else:
             obs_state, obs_out = None, None
         w_e = sc.par.p * ys.omega_m

@@ -26,7 +26,17 @@ from .._validate import as_float, check_nonnegative, check_real
 from .hardware import Sensors
 from .machine import RPM, PMSMParams
 
-__all__ = ["Profile", "Scenario", "Batch", "grid", "scenario_batch", "DRIVE_AXES", "GRID_AXES", "CF_UNITS"]
+__all__ = [
+    "Profile",
+    "ParameterDrift",
+    "Scenario",
+    "Batch",
+    "grid",
+    "scenario_batch",
+    "DRIVE_AXES",
+    "GRID_AXES",
+    "CF_UNITS",
+]
 
 
 class Profile(eqx.Module):
@@ -79,6 +89,50 @@ class Profile(eqx.Module):
         return jnp.where(idx < 0, self.values[0], v0 + frac * (v1 - v0))
 
 
+class ParameterDrift(eqx.Module):
+    """The observer's assumed machine as a function of time: each given parameter of ``est_par`` scaled by a
+    :class:`Profile` of relative values (1 = as ``est_par`` says), ``Scenario(est_drift=...)``.
+
+    002 Fig. 18 ramps the observer's R̂s and L̂q by ±0.5 p.u. during a run at rated load: the DSP's parameter
+    values change, the machine does not.  So the drift moves what the *observer* assumes (rebound each period
+    by its one binding, :meth:`jaxobs.observers.AbstractDriveObserver.bind`); the FOC keeps ``est_par``, so that
+    the position error is the observer's alone.  The factors are leaves: a drift is differentiable and
+    batches like any profile; evaluated inside the step (a few compares), no loop over time.
+    """
+
+    Rs: Profile | None  # R̂s(t)/R̂s, 1
+    Ld: Profile | None  # L̂d(t)/L̂d, 1
+    Lq: Profile | None  # L̂q(t)/L̂q, 1
+    psi_f: Profile | None  # ψ̂f(t)/ψ̂f, 1
+
+    def __init__(self, Rs=None, Ld=None, Lq=None, psi_f=None):
+        for name, prof in (("Rs", Rs), ("Ld", Ld), ("Lq", Lq), ("psi_f", psi_f)):
+            if prof is not None and not isinstance(prof, Profile):
+                raise ValueError(f"ParameterDrift.{name} must be a Profile of relative values or None")
+            if prof is not None and not bool(np.all(np.asarray(prof.values) > 0)):
+                raise ValueError(f"ParameterDrift.{name} must stay > 0 (a relative factor), got {prof.values}")
+        if Rs is None and Ld is None and Lq is None and psi_f is None:
+            raise ValueError("ParameterDrift needs at least one of Rs, Ld, Lq, psi_f")
+        self.Rs, self.Ld, self.Lq, self.psi_f = Rs, Ld, Lq, psi_f
+
+    @classmethod
+    def ramps(cls, name: str, times, factors) -> ParameterDrift:
+        """One parameter (``"Rs"``, ``"Ld"``, ``"Lq"`` or ``"psi_f"``) ramped linearly through ``factors`` (1)
+        at ``times`` (s)."""
+        if name not in ("Rs", "Ld", "Lq", "psi_f"):
+            raise ValueError(f"ParameterDrift.ramps: name must be one of Rs, Ld, Lq, psi_f, got {name!r}")
+        return cls(**{name: Profile(times, factors, kind="linear")})
+
+    def at(self, est: PMSMParams, t) -> PMSMParams:
+        """``est`` with the drifting parameters at time ``t`` (s)."""
+        names = tuple(n for n in ("Rs", "Ld", "Lq", "psi_f") if getattr(self, n) is not None)
+        return eqx.tree_at(
+            lambda q: tuple(getattr(q, n) for n in names),
+            est,
+            tuple(getattr(est, n) * getattr(self, n)(t) for n in names),
+        )
+
+
 class Scenario(eqx.Module):
     par: PMSMParams  # the machine as it is
     est_par: PMSMParams  # the machine as controller and observer assume it
@@ -89,6 +143,7 @@ class Scenario(eqx.Module):
     key: jax.Array  # PRNG key (noise)
     omega_m0: jax.Array  # initial mechanical speed, rad/s
     theta_e0: jax.Array  # initial electrical angle, rad
+    est_drift: ParameterDrift | None  # the observer's assumed machine over time (None: est_par throughout)
 
     def __init__(
         self,
@@ -101,6 +156,7 @@ class Scenario(eqx.Module):
         seed=0,
         omega_m0=0.0,
         theta_e0=0.0,
+        est_drift=None,
     ):
         if not isinstance(par, PMSMParams):
             raise ValueError(f"Scenario.par must be a PMSMParams, got {type(par).__name__}")
@@ -115,6 +171,9 @@ class Scenario(eqx.Module):
         self.key = jax.random.PRNGKey(seed) if not isinstance(seed, jax.Array) else seed
         self.omega_m0 = check_real("omega_m0", omega_m0, owner="Scenario")
         self.theta_e0 = check_real("theta_e0", theta_e0, owner="Scenario")
+        if est_drift is not None and not isinstance(est_drift, ParameterDrift):
+            raise ValueError(f"Scenario.est_drift must be a ParameterDrift or None, got {type(est_drift).__name__}")
+        self.est_drift = est_drift
 
     @staticmethod
     def speed_rpm(times, rpms, ramp=0.0):

@@ -42,7 +42,7 @@ from ..metrics import harmonic_amplitude, wrap
 from ..observers import CLESO, FALESO, GILESO, ObserverBank
 from ..progress import Progress
 
-__all__ = ["LESO_NAMES", "leso_bank", "run_leso_experiments"]
+__all__ = ["FIG18_NAMES", "LESO_NAMES", "leso_bank", "run_leso_experiments"]
 
 LESO_NAMES = ("C-LESO", "GI-LESO", "FA-LESO")
 # 002 Table II's gains and our ASSUMED harmonic content, under short names; jaxobs.papers is their home.
@@ -127,10 +127,78 @@ def _ramp_rows(name, sol, t, par, inv, i=2):
     ]
 
 
-# the runs below: 3 steady speeds, 2 harmonic loads, the speed ramp, the load step, 4 mismatches (the
-# progress bar's total; tests/test_progress.py checks a run makes exactly these many steps)
+# 002 Fig. 18: the observer's R̂s, then L̂q, ramped 1 → 1.5 → 0.5 → 1 p.u. during one run at rated load,
+# 300 r/min (jaxobs.drive.ParameterDrift; the FOC keeps the nominal machine).  Times (s) and factors (p.u.);
+# the plateaus [0.85, 1.0) s at 1.5 and [1.95, 2.1) s at 0.5 p.u. are scored after 0.15 s of settling.
+FIG18_TIMES = (0.0, 0.3, 0.7, 1.0, 1.8, 2.1, 2.5)
+FIG18_FACTORS = (1.0, 1.0, 1.5, 1.5, 0.5, 0.5, 1.0)
+FIG18_PLATEAUS = ((1.5, 0.85, 1.0), (0.5, 1.95, 2.1))
+FIG18_T1 = 2.6
+FIG18_NAMES = {
+    "Rs": "Fig. 18 (a): R̂s ramped 1-1.5-0.5-1 p.u., rated load, 300 r/min",
+    "Lq": "Fig. 18 (b): L̂q ramped 1-1.5-0.5-1 p.u., rated load, 300 r/min",
+}
+
+
+def _fig18_rows(run, par):
+    """002 Fig. 18 closing the loop on the FA-LESO: its mean error on each plateau of the ramped R̂s or L̂q,
+    beside eqs (42)-(43) at the currents measured there (Δ = true − assumed), and the FA-LESO's |êα| on the
+    plateaus relative to the nominal one (002: "hardly changes")."""
+    rows = []
+    we = par.p * 300 * D.RPM
+    e_ex = we * float(par.psi_f)  # E_ex at i_d = 0 (eqs 42-43)
+    for which, name in FIG18_NAMES.items():
+        drift = D.ParameterDrift.ramps(which, FIG18_TIMES, FIG18_FACTORS)
+        sol, t = run(
+            name,
+            par,
+            par,
+            300,
+            FIG18_T1,
+            D.Profile.constant(300 * D.RPM),
+            load=D.Profile.constant(float(par.T_rated)),
+            est_drift=drift,
+        )
+        o = sol.outputs
+        err = _err_deg(sol, 2)
+        e_a = np.asarray(o.obs.each[2].e_a)
+        nominal = (t >= 0.15) & (t < 0.3)
+        amp0 = np.ptp(e_a[nominal]) / 2
+        for factor, a, b in FIG18_PLATEAUS:
+            m = (t >= a) & (t < b)
+            delta = (1.0 - factor) * float(getattr(par, which))
+            i_d, i_q = float(np.mean(np.asarray(o.i_d)[m])), float(np.mean(np.asarray(o.i_q)[m]))
+            if which == "Rs":
+                pred = math.degrees(float(linear.position_error_rs(delta, i_d, i_q, e_ex)))
+            else:
+                pred = math.degrees(float(linear.position_error_lq(delta, i_d, i_q, e_ex, we)))
+            tag = f"{factor:g}pu"
+            rows += [
+                dict(
+                    experiment=name,
+                    observer="FA-LESO",
+                    metric=f"mean_error_{tag}",
+                    unit="deg",
+                    paper=0.0 if which == "Rs" else None,
+                    ours=float(np.mean(err[m])),
+                ),
+                dict(experiment=name, observer="FA-LESO", metric=f"eq42_43_{tag}", unit="deg", paper=None, ours=pred),
+                dict(
+                    experiment=name,
+                    observer="FA-LESO",
+                    metric=f"e_amp_{tag}",
+                    unit="1",
+                    paper=None,
+                    ours=float(np.ptp(e_a[m]) / 2 / amp0),
+                ),
+            ]
+    return rows
+
+
+# the runs below: 3 steady speeds, 2 harmonic loads, the speed ramp, the load step, 4 mismatches, Fig. 18's
+# two ramps (the progress bar's total; tests/test_progress.py checks a run makes exactly these many steps)
 # (the ramp and the load step once per closing observer, and the C-LESO closing at half load)
-N_EXPERIMENTS = 3 + 2 + 1 + 3 + 3 + 4
+N_EXPERIMENTS = 3 + 2 + 1 + 3 + 3 + 4 + 2
 
 
 def run_leso_experiments(progress=None):
@@ -139,9 +207,9 @@ def run_leso_experiments(progress=None):
     rows, traces = [], {}
     bar = Progress(progress, N_EXPERIMENTS, "reproduce leso", unit="experiment")
 
-    def run(name, par, est, rpm0, t1, speed_ref, load=None, handover=0.3, primary=2, **drive_kw):
+    def run(name, par, est, rpm0, t1, speed_ref, load=None, handover=0.3, primary=2, est_drift=None, **drive_kw):
         we = par.p * rpm0 * D.RPM
-        sc = D.Scenario(par, est_par=est, speed_ref=speed_ref, load=load, omega_m0=rpm0 * D.RPM)
+        sc = D.Scenario(par, est_par=est, speed_ref=speed_ref, load=load, omega_m0=rpm0 * D.RPM, est_drift=est_drift)
         bar.stage(f"{name} ({t1:g} s)")
         drive = D.bench_drive(par, handover=handover, **drive_kw)
         sol = simulate(D.ClosedLoop(drive, leso_bank(est, we, primary=primary), sc), t1)
@@ -282,6 +350,8 @@ def run_leso_experiments(progress=None):
             pred = math.degrees(float(linear.position_error_lq(delta[1], id_hat, iq_hat, e_ex, we)))
         rows.append(dict(experiment=name, observer="FA-LESO", metric="mean_error", unit="deg", paper=None, ours=err))
         rows.append(dict(experiment=name, observer="FA-LESO", metric="eq42_43", unit="deg", paper=None, ours=pred))
+
+    rows += _fig18_rows(run, par)
 
     for name, sol in traces.items():
         rows.append(

@@ -11,9 +11,11 @@ runner, batched, and the simulator's own stability verdict (:func:`jaxobs.drive.
 same points, on the job's drive (its speed schedule) started steady, nominal machine.
 
 A point *passes* when the design holds synchronism there (the envelope's ``synchronous``: finite, locked,
-at speed and settled) and is stable (``stable``).  A tuned design that fails a point where the closed form
-passes is **unsafe** (:func:`unsafe_points`): the job's status becomes ``"unsafe"`` and ``jaxobs tune`` warns
-on stderr and exits 4 (:data:`UNSAFE_EXIT`; 3 stays "diverged", where nothing is tuned at all).
+at speed and settled) and is stable (``stable``: resolved, the exponent below 0 by more than its
+resolution; a ``marginal`` point, within it, does not pass: the window could not tell).  A tuned design
+that fails a point where the closed form passes is **unsafe** (:func:`unsafe_points`): the job's status
+becomes ``"unsafe"`` and ``jaxobs tune`` warns on stderr and exits 4 (:data:`UNSAFE_EXIT`; 3 stays
+"diverged", where nothing is tuned at all).
 """
 
 from __future__ import annotations
@@ -122,7 +124,8 @@ def verify_designs(designs: dict, env: EnvelopeSpec, drive_spec: DriveSpec) -> d
         "points": [{"speed_rpm": s, "load_nm": ld} for s, ld in combos],
         "passes_definition": "synchronous (jaxobs.drive.envelope: finite, locked within 90 deg electrical, at its "
         "speed reference and settled after a 2 % speed-reference step, over the late window) and stable "
-        "(jaxobs.drive.stability.lyapunov: largest non-neutral Lyapunov exponent < 0, 1/s)",
+        "(jaxobs.drive.stability.lyapunov: largest non-neutral Lyapunov exponent below 0 by more than its "
+        "resolution, 1/s; within it the point is 'marginal', which does not pass)",
         "designs": {},
     }
     for name in designs:
@@ -130,9 +133,10 @@ def verify_designs(designs: dict, env: EnvelopeSpec, drive_spec: DriveSpec) -> d
         for s, ld in combos:
             pt = ds.sel(design=name, speed_rpm=s, load=ld)
             row = {"speed_rpm": s, "load_nm": ld}
-            for k in ("synchronous", "stable", "holds", "lost_lock", "lost_speed"):
+            for k in ("synchronous", "stable", "marginal", "holds", "lost_lock", "lost_speed"):
                 row[k] = bool(pt[k])
             row["margin_per_s"] = _num(pt["margin"])
+            row["resolution_per_s"] = _num(pt["resolution"])
             for k in ("pos_err_max_deg", "pos_bias_deg", "pos_ripple_deg", "speed_dev_late_pct"):
                 row[k] = _num(pt[k])
             row["passes"] = row["synchronous"] and row["stable"]

@@ -1,0 +1,115 @@
+"""The drive in float64 vs float32: speed, accuracy, and each beside its batch-inner numba kernel (issue 31.3).
+
+    python -m benchmarks.drive_f64 [--batch 1024] [--horizon 0.05] [--rounds 3] [--no-numba]
+
+The drive workload of ``make bench`` (:func:`benchmarks.workloads.jax_drive`: paper 000's SPMSM closed
+loop, sensorless on the second-order SOIFO + FLL, the per-scenario running cost wrap(θ̂ − θ)²) in both
+precisions in this one process (``jax_enable_x64`` switched between them, as ``python -m benchmarks`` does),
+and the batch-inner numba kernel of each (``numba-inner``, the ratios' reference; compiled before timing,
+1–2 minutes each).  The four implementations are timed interleaved, best of ``--rounds``, so every ratio
+compares timings taken side by side; the load average is printed at the start and the end.
+
+Accuracy: float32's per-scenario costs against float64's (relative error: median and worst over the
+batch), and the same for numba's float32 against numba's float64: what the cheaper precision costs in
+the number a tuning run optimizes.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import sys
+from functools import partial
+
+os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")  # numba's idle threads sleep (benchmarks/__main__.py)
+
+import jax
+import numpy as np
+
+import jaxobs
+
+from . import baselines
+from . import workloads as W
+from .run import best_time, numba_available
+
+DTYPES = {"f32": np.float32, "f64": np.float64}
+
+
+def _rel(a, b) -> tuple[float, float]:
+    """Median and worst |a − b| / |b| over the batch."""
+    a, b = np.asarray(a, np.float64), np.asarray(b, np.float64)
+    r = np.abs(a - b) / np.maximum(np.abs(b), np.finfo(np.float64).tiny)
+    return float(np.median(r)), float(np.max(r))
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(prog="python -m benchmarks.drive_f64", description=__doc__.split("\n")[0])
+    p.add_argument("--batch", type=int, default=1024, help="scenarios (default 1024)")
+    p.add_argument("--horizon", type=float, default=0.05, help="seconds simulated (10 kHz; default 0.05)")
+    p.add_argument("--rounds", type=int, default=3, help="interleaved timing rounds, best of (default 3)")
+    p.add_argument("--no-numba", action="store_true", help="leave out the numba kernels")
+    p.add_argument("--json", action="store_true", help="print the result as JSON")
+    a = p.parse_args(argv)
+    jaxobs.use_host_devices()
+    jaxobs.use_compile_cache()
+    load0 = os.getloadavg()
+    have_numba = numba_available() and not a.no_numba
+    n = round(a.horizon / W.TS)
+    fns, costs = {}, {}
+    for dt in DTYPES:
+        jax.config.update("jax_enable_x64", dt == "f64")
+        fn, args = W.jax_drive(a.batch, a.horizon)
+        costs[("jaxobs", dt)] = np.asarray(jax.block_until_ready(fn(args)))  # compiled, warm
+        # the switch is read when a function is traced: each closure keeps its own precision's program
+        fns[("jaxobs", dt)] = (dt, partial(fn, args))
+        if have_numba:
+            w = np.asarray(W.drive_setup(a.batch)[3], DTYPES[dt])
+            run = baselines.numba_drive(DTYPES[dt], True, inner=True)
+            run(np.ones(2, DTYPES[dt]), 3)  # compile
+            costs[("numba-inner", dt)] = np.asarray(run(w, n))
+            fns[("numba-inner", dt)] = (dt, partial(run, w, n))
+    best = {k: math.inf for k in fns}
+    for _ in range(a.rounds):
+        for k, (dt, f) in fns.items():
+            jax.config.update("jax_enable_x64", dt == "f64")
+            best[k] = min(best[k], best_time(f, 1))
+    jax.config.update("jax_enable_x64", True)
+    res = {
+        "batch": a.batch,
+        "horizon_s": a.horizon,
+        "steps": n,
+        "devices": len(jax.devices()),
+        "load_avg": [round(load0[0], 2), round(os.getloadavg()[0], 2)],
+        "steps_per_s": {f"{i} {dt}": a.batch * n / t for (i, dt), t in best.items()},
+    }
+    ratios = {"jaxobs f32 / f64 time": best[("jaxobs", "f32")] / best[("jaxobs", "f64")]}
+    if have_numba:
+        ratios["numba f32 / f64 time"] = best[("numba-inner", "f32")] / best[("numba-inner", "f64")]
+        for dt in DTYPES:
+            ratios[f"jaxobs / numba-inner {dt} (speed)"] = best[("numba-inner", dt)] / best[("jaxobs", dt)]
+    res["ratios"] = ratios
+    acc = {"jaxobs f32 vs f64 cost (median, worst rel.)": _rel(costs[("jaxobs", "f32")], costs[("jaxobs", "f64")])}
+    if have_numba:
+        acc["numba f32 vs f64 cost"] = _rel(costs[("numba-inner", "f32")], costs[("numba-inner", "f64")])
+        acc["jaxobs f64 vs numba f64 cost"] = _rel(costs[("jaxobs", "f64")], costs[("numba-inner", "f64")])
+    res["accuracy"] = acc
+    if a.json:
+        print(json.dumps(res, indent=1))
+        return 0
+    print(
+        f"drive, batch {a.batch}, {a.horizon:g} s ({n} steps), {res['devices']} host devices, "
+        f"load average {res['load_avg'][0]} at the start, {res['load_avg'][1]} at the end"
+    )
+    for k, v in res["steps_per_s"].items():
+        print(f"  {k:18s} {v / 1e6:8.2f} M scenario-steps/s")
+    for k, v in ratios.items():
+        print(f"  {k}: {v:.2f}")
+    for k, (med, worst) in acc.items():
+        print(f"  {k}: median {med:.2e}, worst {worst:.2e}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

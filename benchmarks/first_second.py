@@ -1,0 +1,166 @@
+"""Time to result: a command's first run with an empty compilation cache, then its second (issue 31.1).
+
+    python -m benchmarks.first_second [--runs 2] [--cmd NAME ...] [--keep-cache DIR]
+
+Each command runs ``--runs`` times in fresh processes (``python -m jaxobs_tuning.cli ...``) sharing one
+compilation cache folder (``JAXOBS_CACHE_DIR``) that starts empty: run 1 compiles everything, the later runs
+read what the persistent cache kept.  Reported per run: the wall time, the CPU time the process used
+(user + system, ``resource.getrusage(RUSAGE_CHILDREN)``: on a shared machine this moves far less with the
+load than the wall time does), the cache folder's size after it, and the 1-minute load average at its start
+and end.  The ratio run 2 / run 1 is given for both times; ``make run``'s target is ≤ 0.40 and ≤ 25 s warm.
+
+Where a run's time goes, from JAX's own monitoring events (``jax.monitoring``, time spans; nested spans of
+one kind counted once): *trace* (Python tracing of jitted functions to jaxprs), *lower* (jaxpr → StableHLO,
+which the persistent cache needs for its key), *compile* (XLA compilation, or the cache's read on a hit),
+and the rest of the wall time (*run + Python*: the computations themselves, imports, I/O, figures).  The
+persistent cache keeps only the *compile* part: tracing and lowering are paid by every process.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import resource
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+# name -> the command line's arguments (after `jaxobs`); OUT is replaced by a fresh output folder
+COMMANDS = {
+    "make-run": ["tune", "--out", "OUT", "--force", "--quiet"],
+    "study-fll": ["study", "--out", "OUT", "--force", "--quiet"],
+    "reproduce-leso": ["reproduce", "leso", "--out", "OUT", "--force"],
+}
+
+
+_PHASES = {
+    "trace_s": "/jax/core/compile/jaxpr_trace_duration",
+    "lower_s": "/jax/core/compile/jaxpr_to_mlir_module_duration",
+    "compile_s": "/jax/core/compile/backend_compile_duration",
+}
+
+
+def _union(spans: list[tuple[float, float]]) -> float:
+    """Seconds covered by ``spans`` (a span inside another, a nested jit's trace, counted once)."""
+    total, end = 0.0, -float("inf")
+    for a, b in sorted(spans):
+        if b > end:
+            total += b - max(a, end)
+            end = b
+    return total
+
+
+def _worker(report: str, argv: list[str]) -> int:
+    """Run the command line in this process with JAX's compile events recorded; the phases to ``report``."""
+    t0 = time.time()
+    import jax.monitoring
+
+    spans: dict[str, list] = {k: [] for k in _PHASES}
+    kinds = {v: k for k, v in _PHASES.items()}
+
+    def on_span(event, start, end, **_):
+        if event in kinds:
+            spans[kinds[event]].append((start, end))
+
+    jax.monitoring.register_event_time_span_listener(on_span)
+    from jaxobs_tuning.cli import main
+
+    rc = main(argv)
+    phases = {k: round(_union(v), 2) for k, v in spans.items()}
+    phases["jits"] = len(spans["compile_s"])
+    phases["in_process_s"] = round(time.time() - t0, 2)
+    Path(report).write_text(json.dumps(phases))
+    return rc
+
+
+def _dir_size(path: Path) -> int:
+    return sum(f.stat().st_size for f in path.rglob("*") if f.is_file())
+
+
+def _one(args: list[str], env: dict, out: Path) -> dict:
+    report = out.with_suffix(".phases.json")
+    # this file run as a script: with --tree, jaxobs and jaxobs_tuning come from that tree's PYTHONPATH
+    argv = [sys.executable, str(Path(__file__).resolve()), "--worker", str(report)]
+    argv += [str(out) if a == "OUT" else a for a in args]
+    r0 = resource.getrusage(resource.RUSAGE_CHILDREN)
+    load0 = os.getloadavg()[0]
+    t0 = time.perf_counter()
+    proc = subprocess.run(argv, env=env, capture_output=True, text=True)
+    wall = time.perf_counter() - t0
+    r1 = resource.getrusage(resource.RUSAGE_CHILDREN)
+    if proc.returncode not in (0, 3, 4):
+        sys.stderr.write(proc.stdout[-2000:] + proc.stderr[-4000:])
+        raise SystemExit(f"{' '.join(argv)} exited {proc.returncode}")
+    cpu = (r1.ru_utime - r0.ru_utime) + (r1.ru_stime - r0.ru_stime)
+    row = {"wall_s": round(wall, 2), "cpu_s": round(cpu, 2), "load": [round(load0, 1), round(os.getloadavg()[0], 1)]}
+    return {**row, **json.loads(report.read_text())}
+
+
+def main(argv=None) -> int:
+    argv = sys.argv[1:] if argv is None else list(argv)
+    if argv[:1] == ["--worker"]:
+        return _worker(argv[1], argv[2:])
+    p = argparse.ArgumentParser(prog="python -m benchmarks.first_second", description=__doc__.split("\n")[0])
+    p.add_argument("--cmd", nargs="+", default=["make-run"], choices=sorted(COMMANDS), help="commands to time")
+    p.add_argument("--runs", type=int, default=2, help="runs per command (the first with an empty cache)")
+    p.add_argument("--keep-cache", help="use (and keep) this cache folder instead of a temporary one")
+    p.add_argument(
+        "--tree",
+        nargs="+",
+        help="source trees to compare (each its own cache; their runs interleaved: run 1 of each, then run 2 "
+        "...); default: the installed jaxobs",
+    )
+    p.add_argument("--json", action="store_true", help="print the rows as JSON")
+    a = p.parse_args(argv)
+    rows = []
+    with tempfile.TemporaryDirectory(prefix="jaxobs-first-second-") as tmp:
+        trees = {}
+        for j, tree in enumerate(a.tree or [None]):
+            env = dict(os.environ)
+            if tree is not None:  # the tree's jaxobs, and its tuning/ as jaxobs_tuning (the installed layout)
+                pp = Path(tmp) / f"pp-{j}"
+                pp.mkdir()
+                (pp / "jaxobs_tuning").symlink_to(Path(tree).resolve() / "tuning")
+                env["PYTHONPATH"] = f"{Path(tree).resolve()}{os.pathsep}{pp}"
+            trees[tree or "installed"] = env
+        for name in a.cmd:
+            caches = {}
+            for t in trees:
+                cache = Path(a.keep_cache) if a.keep_cache else Path(tmp) / f"cache-{name}-{len(caches)}"
+                shutil.rmtree(cache, ignore_errors=True)
+                caches[t] = cache
+            for i in range(1, a.runs + 1):
+                for t, env in trees.items():
+                    env = {**env, "JAXOBS_CACHE_DIR": str(caches[t])}
+                    out = Path(tmp) / f"out-{name}-{len(rows)}"
+                    row = {"command": name, "tree": t, "run": i, **_one(COMMANDS[name], env, out)}
+                    row["cache_mib"] = round(_dir_size(caches[t]) / 2**20, 1)
+                    rows.append(row)
+                    print(json.dumps(row), file=sys.stderr, flush=True)
+    if a.json:
+        print(json.dumps(rows, indent=1))
+        return 0
+    print(
+        "| command | tree | run | wall (s) | CPU (s) | wall / run 1 | CPU / run 1 | trace (s) | lower (s) | compile or "
+        "cache read (s) | run + Python (s) | cache (MiB) | load (start, end) |"
+    )
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+    first = {}
+    for r in rows:
+        f = first.setdefault((r["command"], r["tree"]), r)
+        print(
+            f"| {r['command']} | {r['tree']} | {r['run']} | {r['wall_s']:.1f} | {r['cpu_s']:.1f} | "
+            f"{r['wall_s'] / f['wall_s']:.2f} | "
+            f"{r['cpu_s'] / f['cpu_s']:.2f} | {r['trace_s']:.1f} | {r['lower_s']:.1f} | {r['compile_s']:.1f} | "
+            f"{r['wall_s'] - r['trace_s'] - r['lower_s'] - r['compile_s']:.1f} | {r['cache_mib']:.1f} | "
+            f"{r['load'][0]:.1f}, {r['load'][1]:.1f} |"
+        )
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

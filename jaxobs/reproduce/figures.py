@@ -1,0 +1,135 @@
+"""The reproduced experiments drawn in their paper's layout (:func:`jaxobs.plot.paper_figure`): one column
+per method as the paper's (a), (b), (c) ..., estimated over actual and the error, with units.
+
+Each figure is a row of a table (:data:`FLUX_FIGURES`): the experiment's trace key (as
+:func:`jaxobs.reproduce.flux.run_flux_experiments` names it), the file, the paper's figure, the methods drawn,
+the panels, and the time window.  The panels of paper 000's figures:
+
+- ``position``: θ̂e over θe (rad, wrapped to [0, 2π)) and the error θ̂e − θe (rad): Figs 12, 15, 17;
+- ``dynamic``: the speed estimate over the speed (r/min) and the error (rad): Figs 18–20;
+- ``flux``: ψ̂α, ψ̂β over the rotor's ψf cos θe, ψf sin θe (Wb), θ̂e over θe and the error: Figs 16, 21–23.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+
+from ..metrics import wrap
+from ..plot import Panel, Series, drive_events, paper_figure
+
+__all__ = ["FLUX_FIGURES", "flux_figure", "flux_figures"]
+
+_ALL = ("integrator", "LPF", "SOIFO", "second-order SOIFO")
+_THREE = ("LPF", "SOIFO", "second-order SOIFO")
+_SOSO = ("second-order SOIFO",)
+
+# (trace key, file, paper's figure, methods, panels, window): the window (s) is (start, stop), a negative
+# start counting back from the run's end
+FLUX_FIGURES = (
+    ("steady 2000 r/min", "fig12_position_2000rpm.png", "Fig. 12", _ALL, "position", (-0.02, None)),
+    ("steady 400 r/min", "fig15_position_400rpm.png", "Fig. 15", _ALL, "position", (-0.05, None)),
+    ("steady 20 r/min", "fig16_17_flux_position_20rpm.png", "Figs 16–17", _SOSO, "flux", (-2.0, None)),
+    ("speed 400-2000-400 r/min", "fig18_speed_variation.png", "Fig. 18", _THREE, "dynamic", (0.8, None)),
+    ("load step 10 N·m at 2000 r/min", "fig19_load_step_2000rpm.png", "Fig. 19", _THREE, "dynamic", (0.3, None)),
+    (
+        "load step 10 N·m at 2000 r/min, dead time 1 µs",
+        "fig19_load_step_2000rpm_dead_time.png",
+        "Fig. 19",
+        _THREE,
+        "dynamic",
+        (0.3, None),
+    ),
+    (
+        "I-f start, 20 -> 200 r/min, 0.5 N·m step",
+        "fig20_if_start_low_speed.png",
+        "Fig. 20",
+        _SOSO,
+        "dynamic",
+        (0, None),
+    ),
+    ("du_alpha = 5 V at 1000 r/min", "fig21_du_alpha_5V.png", "Fig. 21", _THREE, "flux", (-0.06, None)),
+    (
+        "du_alpha = 5 V at 1000 r/min, dead time 1 µs",
+        "fig21_du_alpha_5V_dead_time.png",
+        "Fig. 21",
+        _THREE,
+        "flux",
+        (-0.06, None),
+    ),
+    ("di_beta = 1.5 A at 1000 r/min", "fig22_di_beta_1.5A.png", "Fig. 22", _THREE, "flux", (-0.06, None)),
+    (
+        "di_beta = 1.5 A at 1000 r/min, dead time 1 µs",
+        "fig22_di_beta_1.5A_dead_time.png",
+        "Fig. 22",
+        _THREE,
+        "flux",
+        (-0.06, None),
+    ),
+    ("Rs_est = 0.4 Rs0, 10 N·m, 1000 r/min", "fig23_rs_mismatch.png", "Fig. 23", _THREE, "flux", (-0.06, None)),
+)
+
+
+def _panels(sol, i, kind, mask, p, psi_f):
+    o = sol.outputs.obs.each[i]
+    th = np.asarray(sol.outputs.theta_e)[mask]
+    th_hat = np.asarray(o.theta)[mask]
+    err = Panel("θ̂e − θe (rad)", (Series("error", np.asarray(wrap(th_hat - th))),), zero=True)
+    angle = Panel(
+        "θ̂e, θe (rad)",
+        (Series("θe", np.mod(th, 2 * math.pi), actual=True), Series("θ̂e", np.mod(th_hat, 2 * math.pi))),
+    )
+    if kind == "position":
+        return [angle, err]
+    if kind == "dynamic":
+        speed = Panel(
+            "speed (r/min)",
+            (
+                Series("actual", np.asarray(sol.outputs.speed_rpm)[mask], actual=True),
+                Series("estimated", np.asarray(o.omega)[mask] / p * 30 / math.pi),
+            ),
+        )
+        return [speed, err]
+    flux = Panel(
+        "ψ̂α, ψ̂β (Wb)",
+        (
+            Series("ψα", psi_f * np.cos(th), actual=True),
+            Series("ψβ", psi_f * np.sin(th), actual=True),
+            Series("ψ̂α", np.asarray(o.psi_a)[mask]),
+            Series("ψ̂β", np.asarray(o.psi_b)[mask]),
+        ),
+    )
+    return [flux, angle, err]
+
+
+def flux_figure(sol, spec, names, p: int, psi_f: float, path=None):
+    """Draw one row of :data:`FLUX_FIGURES` from the run ``sol`` whose bank holds the observers ``names``
+    (:data:`jaxobs.reproduce.flux.OBSERVER_NAMES`); ``p`` pole pairs, ``psi_f`` the rotor flux (Wb)."""
+    key, _, fig, methods, kind, (start, stop) = spec
+    t = np.asarray(sol.t)
+    t0 = t[-1] + start if start < 0 else start
+    t1 = t[-1] if stop is None else stop
+    mask = (t >= t0) & (t <= t1)
+    columns = [(m, _panels(sol, names.index(m), kind, mask, p, psi_f)) for m in methods]
+    events = drive_events(t[mask], sol.outputs._replace(**_sliced(sol.outputs, mask)), float(t0))
+    shared = tuple(range(len(columns[0][1]) - 1))  # every panel but the error's
+    return paper_figure(t[mask], columns, f"Paper 000 {fig} (ours): {key}", path, events=events, shared=shared)
+
+
+def _sliced(out, mask):
+    """The fields :func:`jaxobs.plot.drive_events` reads, cut to the drawn window."""
+    return {k: np.asarray(getattr(out, k))[mask] for k in ("load", "omega_m_ref", "mode")}
+
+
+def flux_figures(traces, names, p: int, psi_f: float, out: Path):
+    """Every row of :data:`FLUX_FIGURES` whose experiment ran (``traces``: key → run), drawn to ``out``;
+    returns the paths written."""
+    paths = []
+    for spec in FLUX_FIGURES:
+        if spec[0] in traces:
+            path = Path(out) / spec[1]
+            flux_figure(traces[spec[0]], spec, names, p, psi_f, path)
+            paths.append(path)
+    return paths
