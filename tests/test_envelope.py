@@ -175,8 +175,8 @@ def _holds_3s(designs, points, drive=DRIVE):
 def test_preset_envelope_agrees_with_3s_simulations_at_low_speed(tmp_path):
     """Must show (issue 26.3): `jaxobs envelope tuning/presets/sosoifo.toml --out DIR` writes the NetCDF
     (speed_rpm and load dims, a stability variable) whose verdicts agree with 3 s simulations at every low-speed
-    point (≤ 600 r/min: 20 to 537 r/min × 0 to 14 N·m), and (issue 26.6) every point starts steady: the speed
-    within 0.5 % of its reference from t = 0 over the Lyapunov run."""
+    point (≤ 600 r/min: 20 to 537 r/min × 0 to 14 N·m), every verdict resolved, and every orbit within 0.5 % of
+    its speed reference over the Lyapunov run (the start itself: tests/test_stability.py, loaded 144 r/min)."""
     out = tmp_path / "env"
     assert main(["envelope", str(PRESET), "--out", str(out), "--quiet"]) == 0
     ds = xr.load_dataset(out / "envelope.nc", engine="h5netcdf")
@@ -192,13 +192,17 @@ def test_preset_envelope_agrees_with_3s_simulations_at_low_speed(tmp_path):
     sim = _holds_3s(designs, points, drive=drive)
     for d in designs:
         verdict = low["stable"].sel(design=d).values.ravel() == 1
-        # Every point's orbit is steady from t = 0 (before the settle scaled with the speed, the loaded points at
-        # 144 r/min dipped 22-54 % and only the on-orbit points could be compared).
+        # Every point's orbit is steady (before the settle scaled with the speed, the loaded points at 144 r/min
+        # dipped 22-54 % and only the on-orbit points could be compared).
         assert (low["orbit_speed_dev"].sel(design=d).values < 5e-3).all(), low["orbit_speed_dev"].sel(design=d)
-        marginal = low["marginal"].sel(design=d).values.ravel() == 1
-        print(d, "margin", low["margin"].sel(design=d).values.ravel(), "resolution",
-              low["resolution"].sel(design=d).values.ravel(), "marginal", marginal, "sim", sim[d])  # fmt: skip
-        assert (verdict == sim[d])[~marginal].all(), (d, points, verdict, sim[d], marginal)
+        # Every verdict is resolved (the Lyapunov window spans 12/α of the slowest speed loop: 11.5 s at 20 r/min,
+        # jaxobs.drive.envelope) and agrees with the 3 s run, at every point.
+        assert not low["marginal"].sel(design=d).any(), (
+            d,
+            low["margin"].sel(design=d),
+            low["resolution"].sel(design=d),
+        )
+        assert (verdict == sim[d]).all(), (d, points, verdict, sim[d])
     # With speed_schedule = 6 the second-order SOIFO is stable at every low-speed point, down to 20 r/min at rated
     # load; the unstable verdicts (the bench's fixed 5 Hz loop below ~420 r/min) are held against 3 s runs in
     # tests/test_stability.py::test_verdict_agrees_with_3s_simulations.

@@ -282,16 +282,17 @@ def envelope(
     w_es = [machine.p * float(s) * 2.0 * math.pi / 60.0 for s in speeds]
     holdable = [w for s, w in zip(speeds, w_es) if w >= 4.0 * _speed_bandwidth(drive, machine, float(s))]
     drive = drive.settled_for(holdable[0] if holdable else w_es[-1])
-    # The Lyapunov run spans the slowest speed loop: with the loop scheduled on the speed (FOC.speed_schedule)
+    # The Lyapunov run spans the slowest speed loop.  With the loop scheduled on the speed (FOC.speed_schedule)
     # its bandwidth α is |p ω*|/N at the lowest speed, 1.05 rad/s at 20 r/min on 000's SPMSM, and its slowest
-    # mode there a weakly damped pair −0.60 ± 2.67j 1/s (linear_speed_loop).  A window shorter than about
-    # a period of that pair sees its growth oscillate, not its decay: measured with 000's second-order SOIFO
-    # at 20 r/min, +0.41 1/s over a 1 s window, −0.31 over 3 s (docs/stability.md).  So the window is at
-    # least π/α and the warm-up 0.5/α (3.0 s and 0.48 s there; 0.1 s and 0.016 s for the bench's fixed 5 Hz
-    # loop, below the defaults: no change).
+    # mode there a weakly damped pair −0.60 ± 2.67j 1/s (linear_speed_loop; period 2.5/α at N = 6).  A window
+    # whose thirds are shorter than that period sees the pair's wobble, not its decay (the resolution,
+    # jaxobs.drive.stability).  Measured with 000's second-order SOIFO at 20 r/min, no load: over 3 s (π/α)
+    # −0.29 ± 1.8 1/s (marginal), over 7.6 s (8/α) −0.58 ± 0.57, over 12 s −0.600 ± 0.13 (the linear model:
+    # −0.601).  So the window is at least 12/α and the warm-up 1/α (11.5 s and 1 s there; 0.38 s and 0.03 s
+    # for the bench's fixed 5 Hz loop, below the defaults: no change).
     alpha = _speed_bandwidth(drive, machine, float(speeds[0]))
-    kw["window"] = max(float(kw["window"]), math.pi / alpha)
-    kw["warmup"] = max(float(kw["warmup"]), 0.5 / alpha)
+    kw["window"] = max(float(kw["window"]), 12.0 / alpha)
+    kw["warmup"] = max(float(kw["warmup"]), 1.0 / alpha)
     sampler = Grid(axes)
     names, points = sampler.names, sampler.points()
 
