@@ -46,7 +46,8 @@ $(DOCS_STAMP): $(STAMP)
 	$(VENV)/bin/python -m pip install --quiet -e ".[test,bench,docs]"
 	touch $(DOCS_STAMP)
 
-# EXECUTE=1: run the notebooks while building, so their figures are on the pages (they are stored without outputs)
+# The notebooks are rendered with their stored outputs (python notebooks/execute.py); EXECUTE=1 runs them again
+# while building (minutes)
 docs: $(DOCS_STAMP)
 	NO_MKDOCS_2_WARNING=1 JAXOBS_DOCS_EXECUTE=$(if $(EXECUTE),true,false) $(VENV)/bin/mkdocs build --strict --quiet
 

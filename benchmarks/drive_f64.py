@@ -12,6 +12,9 @@ compares timings taken side by side; the load average is printed at the start an
 Accuracy: float32's per-scenario costs against float64's (relative error: median and worst over the
 batch), and the same for numba's float32 against numba's float64: what the cheaper precision costs in
 the number a tuning run optimizes.
+
+Where float64 loses (``--ops``, seconds): the cost of one element of each operation the drive's step is
+made of, XLA's (a jitted loop over a (1024,) array) beside numba's scalar libm calls, in both precisions.
 """
 
 from __future__ import annotations
@@ -44,14 +47,81 @@ def _rel(a, b) -> tuple[float, float]:
     return float(np.median(r)), float(np.max(r))
 
 
+OPS = {
+    "sin": lambda m, x: m.sin(x),
+    "cos": lambda m, x: m.cos(x),
+    "atan2": lambda m, x: m.arctan2(x, 1.3 - x) if m is not math else math.atan2(x, 1.3 - x),
+    "exp": lambda m, x: m.exp(-x),
+    "sqrt": lambda m, x: m.sqrt(x + 1.0),
+    "divide": lambda m, x: 1.0 / (x + 1.5),
+    "multiply-add": lambda m, x: x * 0.999 + 0.001,
+}
+
+
+def op_costs(batch: int = 1024, n: int = 2000, rounds: int = 5) -> dict:
+    """ns per element of each of :data:`OPS`: XLA (``y = op(y)·0.5 + 0.25``, n times over a (batch,) array in
+    one jitted loop) and numba (the same loop, scalar ``math`` calls), float32 and float64, interleaved."""
+    import jax.numpy as jnp
+
+    fns = {}
+    for name, op in OPS.items():
+        for dt in DTYPES:
+            jax.config.update("jax_enable_x64", dt == "f64")
+            x = jnp.linspace(0.1, 0.9, batch, dtype=DTYPES[dt])
+            f = jax.jit(lambda x, op=op: jax.lax.fori_loop(0, n, lambda i, y: op(jnp, y) * 0.5 + 0.25, x))
+            jax.block_until_ready(f(x))
+            fns[("XLA", name, dt)] = (dt, partial(f, x))
+    if numba_available():
+        import numba
+
+        scalar = {  # the transcendental calls, as numba's kernels make them; the rest vectorizes in both
+            "sin": numba.njit(lambda v: math.sin(v)),
+            "cos": numba.njit(lambda v: math.cos(v)),
+            "atan2": numba.njit(lambda v: math.atan2(v, 1.3 - v)),
+        }
+        for name, one in scalar.items():
+
+            def make(one):
+                @numba.njit(error_model="numpy")
+                def loop(x):
+                    y = x.copy()
+                    for _ in range(n):
+                        for j in range(y.shape[0]):
+                            y[j] = one(y[j]) * 0.5 + 0.25
+                    return y
+
+                return loop
+
+            loop = make(one)
+            for dt in DTYPES:
+                x = np.linspace(0.1, 0.9, batch).astype(DTYPES[dt])
+                loop(x)
+                fns[("numba", name, dt)] = (dt, partial(loop, x))
+    best = {k: math.inf for k in fns}
+    for _ in range(rounds):
+        for k, (dt, f) in fns.items():
+            jax.config.update("jax_enable_x64", dt == "f64")
+            best[k] = min(best[k], best_time(f, 1))
+    jax.config.update("jax_enable_x64", True)
+    return {f"{i} {name} {dt}": t / (batch * n) * 1e9 for (i, name, dt), t in best.items()}
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(prog="python -m benchmarks.drive_f64", description=__doc__.split("\n")[0])
     p.add_argument("--batch", type=int, default=1024, help="scenarios (default 1024)")
     p.add_argument("--horizon", type=float, default=0.05, help="seconds simulated (10 kHz; default 0.05)")
     p.add_argument("--rounds", type=int, default=3, help="interleaved timing rounds, best of (default 3)")
     p.add_argument("--no-numba", action="store_true", help="leave out the numba kernels")
+    p.add_argument("--ops", action="store_true", help="only the per-operation costs (ns a value), XLA beside numba")
     p.add_argument("--json", action="store_true", help="print the result as JSON")
     a = p.parse_args(argv)
+    if a.ops:
+        load0 = os.getloadavg()[0]
+        costs = op_costs()
+        print(f"ns per value (load average {load0:.1f} at the start, {os.getloadavg()[0]:.1f} at the end)")
+        for k, v in costs.items():
+            print(f"  {k:24s} {v:7.2f}")
+        return 0
     jaxobs.use_host_devices()
     jaxobs.use_compile_cache()
     load0 = os.getloadavg()

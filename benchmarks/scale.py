@@ -1,6 +1,7 @@
-"""Scale: an FLL study of 10⁴ … 10⁶ scenarios, results streamed to disk chunk by chunk (issue 31.5).
+"""Scale: an FLL study of 10⁴ … 10⁶ scenarios, or a drive study, results streamed to disk chunk by chunk (issue 31.5).
 
     python -m benchmarks.scale [--scenarios 10000 100000] [--horizon 0.01] [--held]
+    python -m benchmarks.scale --kind drive [--scenarios 10000 100000] [--horizon 0.005]
 
 Each size runs in a fresh process (so its peak RSS is its own): ``run_study`` of the SOGI-FLL-WIF on
 random scenarios (4 axes), float64, chunks of 2048, one device, with a :class:`jaxobs.chunkstore.ChunkStore`
@@ -8,7 +9,11 @@ in a temporary folder (each chunk's metrics to disk as it finishes, as ``jaxobs 
 Dataset written as study.nc (NetCDF4, h5netcdf).  ``--held``: without the store (every chunk's values held
 in memory until the end), for comparison.  Reported: the wall time of the study (compilation included, from
 the persistent cache when warm), scenarios/s, the peak RSS of the process (``resource.getrusage``) and the
-1-minute load average at the start (the machine may be shared).  A short horizon keeps the runs short:
+1-minute load average at the start (the machine may be shared).  ``--kind drive``: ``run_drive_study`` of
+paper 000's second-order SOIFO closing the loop of its SPMSM (the drive jobs' bench, ``spmsm000``),
+sensorless, on Sobol points over speed × load × Rs mismatch × voltage noise (``study_flux_drive.toml``'s
+axes), float64, chunks of 1024, one device, streamed the same way; its settling pass before t = 0 is
+the drive's own, so even a short horizon runs several hundred steps a scenario.  A short horizon keeps the runs short:
 what is measured is the runner's overhead and memory, not the loop's pace (``make bench`` has that).
 """
 
@@ -25,9 +30,35 @@ import time
 from pathlib import Path
 
 AXES = {"freq_step": [-3.0, 3.0], "phase_jump_deg": [-60.0, 60.0], "dc": [0.0, 0.1], "harmonics_scale": [0.0, 2.0]}
+SETTLE = 0.01  # s: the drive's settling pass before t = 0 (the jobs' 0.2 s would be 40x the horizon)
+DRIVE_AXES = {"speed_rpm": [400.0, 2000.0], "load_nm": [0.0, 10.0], "dRs": [-0.5, 0.5], "u_noise": [0.0, 2.0]}
 
 
-def _worker(scenarios: int, horizon: float, held: bool) -> None:
+def _drive_study(scenarios: int, horizon: float, store, mesh):
+    import jaxobs
+    from jaxobs import drive as D
+    from jaxobs import linear, papers
+    from jaxobs.drive_study import run_drive_study
+
+    par = D.bench_machine("spmsm000")
+    k1, k2 = papers.SECOND_ORDER_SOIFO_K1, papers.SECOND_ORDER_SOIFO_K2
+    lam = linear.second_order_soifo_lambda(k1, k2)
+    obs = jaxobs.SecondOrderSOIFO(par.Rs, par.Ld, k1, k2, lam, omega0=par.p * 1000 * D.RPM)  # bound per scenario
+    return run_drive_study(
+        {"second-order-SOIFO": obs},
+        DRIVE_AXES,
+        machine=par,
+        drive=D.bench_drive(par, settle=SETTLE),
+        horizon=horizon,
+        sampling="sobol",
+        sample=scenarios,
+        chunk_size=1024,
+        store=store,
+        mesh=mesh,
+    )
+
+
+def _worker(scenarios: int, horizon: float, held: bool, kind: str = "fll") -> None:
     import jax
 
     jax.config.update("jax_enable_x64", True)
@@ -40,16 +71,20 @@ def _worker(scenarios: int, horizon: float, held: bool) -> None:
     with tempfile.TemporaryDirectory(prefix="jaxobs-scale-") as tmp:
         store = None if held else ChunkStore(Path(tmp) / "study.chunks", "scale")
         t0 = time.perf_counter()
-        ds = run_study(
-            {"WIF": linear.wif_closed_form()},
-            AXES,
-            sample=scenarios,
-            chunk_size=2048,
-            t_event=horizon / 2,
-            horizon=horizon,
-            store=store,
-            mesh=jaxobs.batch_mesh(jax.devices()[:1]),
-        )
+        mesh = jaxobs.batch_mesh(jax.devices()[:1])
+        if kind == "drive":
+            ds = _drive_study(scenarios, horizon, store, mesh)
+        else:
+            ds = run_study(
+                {"WIF": linear.wif_closed_form()},
+                AXES,
+                sample=scenarios,
+                chunk_size=2048,
+                t_event=horizon / 2,
+                horizon=horizon,
+                store=store,
+                mesh=mesh,
+            )
         study_s = time.perf_counter() - t0
         ds.to_netcdf(Path(tmp) / "study.nc", engine="h5netcdf")
         total_s = time.perf_counter() - t0
@@ -57,6 +92,7 @@ def _worker(scenarios: int, horizon: float, held: bool) -> None:
     print(
         json.dumps(
             {
+                "kind": kind,
                 "scenarios": scenarios,
                 "streamed": not held,
                 "study_s": round(study_s, 2),
@@ -71,15 +107,20 @@ def _worker(scenarios: int, horizon: float, held: bool) -> None:
 def main(argv=None) -> None:
     p = argparse.ArgumentParser(prog="python -m benchmarks.scale", description=__doc__.split("\n")[0])
     p.add_argument("--scenarios", type=int, nargs="+", default=[10_000, 100_000], help="study sizes, one process each")
-    p.add_argument("--horizon", type=float, default=0.01, help="seconds simulated per scenario (event at half)")
+    p.add_argument("--kind", choices=("fll", "drive"), default="fll", help="an FLL study or a drive study")
+    p.add_argument(
+        "--horizon", type=float, help="seconds simulated per scenario (FLL: default 0.01, event at half; drive: 0.005)"
+    )
     p.add_argument("--held", action="store_true", help="hold every chunk in memory (no store), for comparison")
     p.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)
     a = p.parse_args(argv)
+    horizon = a.horizon if a.horizon is not None else (0.005 if a.kind == "drive" else 0.01)
     if a.worker:
-        return _worker(a.scenarios[0], a.horizon, a.held)
-    print(f"load average (1 min) {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores; horizon {a.horizon} s")
+        return _worker(a.scenarios[0], horizon, a.held, a.kind)
+    print(f"load average (1 min) {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores; horizon {horizon} s")
     for n in a.scenarios:
-        cmd = [sys.executable, "-m", "benchmarks.scale", "--worker", "--scenarios", str(n), "--horizon", str(a.horizon)]
+        cmd = [sys.executable, "-m", "benchmarks.scale", "--worker", "--scenarios", str(n), "--horizon", str(horizon)]
+        cmd += ["--kind", a.kind]
         subprocess.run(cmd + (["--held"] if a.held else []), check=True)
 
 

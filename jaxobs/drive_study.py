@@ -128,9 +128,12 @@ def _check_axes(axes: dict):
             raise ValueError(f"axes.{name} must be a non-empty list of numbers in [{lo:g}, {hi:g}] {unit}")
 
 
-def drive_scenarios(machine: PMSMParams, names, combos, *, seed: int = 0, t_event: float = 0.0) -> Scenario:
+def drive_scenarios(
+    machine: PMSMParams, names, combos, *, seed: int = 0, t_event: float = 0.0, first: int = 0
+) -> Scenario:
     """A batched Scenario (leading axis len(combos)), one per combination of the named axes' values
-    (:func:`jaxobs.drive.scenario_batch` on ``machine``, noise keys from ``seed``).
+    (:func:`jaxobs.drive.scenario_batch` on ``machine``, noise keys from ``seed``; ``first``: the index of
+    ``combos[0]`` among all the scenarios, for a chunk built on its own).
 
     Each starts steady at ``speed_rpm`` (600 r/min without the axis) and ``load_nm``; the speed reference
     and the load step by ``speed_step_rpm`` and ``load_step_nm`` at ``t_event`` (s; both 0 by default: no event).
@@ -140,7 +143,7 @@ def drive_scenarios(machine: PMSMParams, names, combos, *, seed: int = 0, t_even
     two = Profile([0.0, t_event], [600.0 * RPM] * 2, kind="step")  # before / after the event
     zero = Profile([0.0, t_event], [0.0, 0.0], kind="step")
     base = Scenario(machine, speed_ref=two, load=zero, omega_m0=600.0 * RPM)
-    return scenario_batch(base, names, combos, seed=seed, t_event=t_event)
+    return scenario_batch(base, names, combos, seed=seed, t_event=t_event, first=first)
 
 
 def bind_observer(obs, sc: Scenario):
@@ -252,7 +255,10 @@ def run_drive_study(
         lambda obs, s: ClosedLoop(drive, bind_observer(obs, s), s),
         metrics_of,
         horizon=horizon,
-        build=lambda names, points: drive_scenarios(machine, names, points, seed=seed, t_event=t_event),
+        # built a chunk at a time (the axes are checked above, so no chunk can refuse its points)
+        build=lambda names, points, first: drive_scenarios(
+            machine, names, points, seed=seed, t_event=t_event, first=first
+        ),
         chunk_size=chunk_size,
         mesh=batch_mesh(jax.devices()[:1]) if mesh is None else mesh,
         progress=progress,

@@ -11,7 +11,10 @@ system factories (a design and one scenario → a system, :class:`jaxobs.Abstrac
 an ``xarray.Dataset`` (:meth:`jaxobs.scenarios.AbstractSampler.layout`).
 
 The scenarios run ``chunk_size`` at a time (the last chunk padded with copies of the last scenario, so one
-compilation serves all chunks) in one ``jit``: a ``vmap`` on one device; split over ``mesh`` (default
+compilation serves all chunks) in one ``jit``.  A builder that takes ``first`` (the index of its first point:
+``build(names, points, first=i)``, which seeds scenario i's noise from i) is called chunk by chunk, so the
+batched scenarios are held one chunk at a time (memory O(chunk), not O(scenarios)); one that does not is
+called once for all points: a ``vmap`` on one device; split over ``mesh`` (default
 :func:`jaxobs.batch_mesh`, every device of every process) with :func:`jaxobs.map_batch` on several, each
 chunk padded up to a multiple of the device count.  Several processes (:func:`jaxobs.init_distributed`,
 then the same call in each): every process builds every scenario (from the sampler's points, the same
@@ -22,6 +25,7 @@ fields (a closed form and a tuned one) share one compilation: their gains are ar
 
 from __future__ import annotations
 
+import inspect
 import math
 from collections.abc import Callable, Hashable
 from typing import Any, NamedTuple
@@ -34,7 +38,7 @@ import numpy as np
 from . import sharding
 from ._simulate import AbstractSave, SaveAll, simulate
 from .progress import Progress
-from .scenarios import AbstractSampler
+from .scenarios import AbstractSampler, Given
 
 __all__ = ["StudyRun", "run_scenarios"]
 
@@ -75,11 +79,23 @@ def _pad(x, rows: int):
     return xp.concatenate([x, xp.repeat(x[-1:], rows - x.shape[0], axis=0)])
 
 
-class StudyRun(NamedTuple):
-    """What :func:`run_scenarios` returns: the sampler's ``points`` (one tuple per scenario, in order) and
-    ``values[design][name]``, a NumPy array with one value per scenario for every name the metrics return."""
+def _builds_chunks(sampler: AbstractSampler, build) -> bool:
+    """Whether the scenarios are built a chunk at a time: a sampler of points (not one that holds its batch)
+    and a builder with a ``first`` parameter (the index of its first point, which its noise keys need)."""
+    if build is None or isinstance(sampler, Given):
+        return False
+    try:
+        return "first" in inspect.signature(build).parameters
+    except (TypeError, ValueError):  # a callable without a signature: built once, as before
+        return False
 
-    points: list
+
+class StudyRun(NamedTuple):
+    """What :func:`run_scenarios` returns: the sampler's ``points`` (an (n, axes) float array, one row per
+    scenario, in order: :meth:`~jaxobs.scenarios.AbstractSampler.array`) and ``values[design][name]``, a
+    NumPy array with one value per scenario for every name the metrics return."""
+
+    points: np.ndarray
     values: dict
 
 
@@ -102,7 +118,10 @@ def run_scenarios(
     """Simulate ``system_factory(design, scenario)`` for ``horizon`` s on every scenario, every design.
 
     ``build(names, points)``: the batched scenario PyTree (leading axis one per point) of a sampler's points;
-    a sampler that holds its scenarios (:class:`~jaxobs.scenarios.Given`, ``Recordings``) needs none.
+    a sampler that holds its scenarios (:class:`~jaxobs.scenarios.Given`, ``Recordings``) needs none.  A
+    builder with a ``first`` parameter is called per chunk, ``build(names, chunk_points, first=index of the
+    chunk's first point)``, the last chunk's points padded with copies of its last (so every chunk has one
+    shape); it must check its points as a whole-batch call would (a bad value then stops the run at its chunk).
     ``metrics(sol, scenario, aux)``: a dict of per-scenario scalars of one run's :class:`~jaxobs.Solution` on
     ``scenario``, ``aux = static(design)`` a hashable
     Python value of the design that the metrics need outside tracing (``None`` without ``static``; a new value
@@ -124,51 +143,68 @@ def run_scenarios(
         raise ValueError(f"horizon must be a finite number of seconds > 0, got {horizon!r}")
     if mesh is not None and not (isinstance(mesh, jax.sharding.Mesh) and mesh.axis_names == (sharding.AXIS,)):
         raise ValueError(f"mesh must be a one-axis jax.sharding.Mesh named 'batch' (jaxobs.batch_mesh), got {mesh!r}")
-    points = sampler.points()
-    scs = sampler.scenarios(build, points)
-    n = len(points)
+    by_chunk = _builds_chunks(sampler, build)
+    # the points as one float array (8 bytes a value, not a Python tuple per scenario); a builder gets
+    # tuples, of its chunk's points or of all
+    points = sampler.array()
+    n = points.shape[0]
+    scs = None if by_chunk else sampler.scenarios(build, list(map(tuple, points.tolist())))
     mesh = sharding.batch_mesh() if mesh is None else mesh
     n_dev = mesh.devices.size
     # a chunk divides over the devices (padded up to a multiple of their count): every device gets an equal share
     chunk = -(-min(chunk_size, n) // n_dev) * n_dev
     pad = (-n) % chunk
-    if n_dev > 1:
+    if n_dev > 1 and scs is not None:
         # every process holds every scenario (built from the sampler's points, identically everywhere) and
         # places only its own devices' rows of each chunk (sharding.global_batch)
         scs = jax.tree.map(np.asarray, scs)
     static = (lambda design: None) if static is None else static
     task = _Task(system_factory, metrics, float(horizon), mesh if n_dev > 1 else None, chunk // n_dev, save)
 
+    def chunk_of(start: int):
+        """The chunk at ``start``, ``chunk`` rows (the last padded with copies of its last scenario)."""
+        if by_chunk:  # built now and dropped after its chunk: only one chunk's scenarios are ever held
+            pts = list(map(tuple, points[start : start + chunk].tolist()))
+            batch = build(sampler.names, pts + [pts[-1]] * (chunk - len(pts)), first=start)
+        else:
+            batch = jax.tree.map(lambda x: _pad(x[start : start + chunk], chunk), scs)
+        if n_dev > 1:
+            batch = sharding.global_batch(jax.tree.map(np.asarray, batch), mesh)
+        return batch
+
     if sink is not None:
         sink.start(n=n, chunk=chunk, devices=n_dev, designs=list(designs))
     values = None if sink is not None else {}
+    parts = {dname: [] for dname in designs}
     compiled = set()
+    gains = {}
+    for dname, design in designs.items():
+        aux = static(design)
+        if n_dev > 1:
+            # the gains as host values: each process passes its own copy, the same on all, to the global jit
+            design = jax.tree.map(lambda x: np.asarray(x) if eqx.is_array(x) else x, design)
+        gains[dname] = (design, aux, (type(design), aux))
     with Progress(progress, n * len(designs), label, unit="scenario") as bar:
-        for dname, design in designs.items():
-            aux = static(design)
-            if n_dev > 1:
-                # the gains as host values: each process passes its own copy, the same on all, to the global jit
-                design = jax.tree.map(lambda x: np.asarray(x) if eqx.is_array(x) else x, design)
-            key = (type(design), aux)
-            parts = []
-            for start in range(0, n + pad, chunk):
-                rows = min(chunk, n - start)
+        # chunks outside, designs inside: a chunk built per chunk serves every design
+        for start in range(0, n + pad, chunk):
+            rows = min(chunk, n - start)
+            batch = None
+            for dname, (design, aux, key) in gains.items():
                 if sink is not None and sink.done(dname, start // chunk):
                     bar.update(rows)  # computed by an earlier, interrupted run
                     continue
-                batch = jax.tree.map(lambda x: _pad(x[start : start + chunk], chunk), scs)
-                if n_dev > 1:
-                    batch = sharding.global_batch(batch, mesh)
+                batch = chunk_of(start) if batch is None else batch
                 new = key not in compiled  # the first chunk this run computes
                 bar.stage(f"{dname} (compiling, then {chunk} scenarios a chunk)" if new else dname)
                 # the per-scenario results, whole, on every process (an all-gather when the mesh spans processes)
                 got = sharding.gather_batch(_run_chunk(task, design, batch, aux))
                 compiled.add(key)
                 if sink is None:
-                    parts.append(got)
+                    parts[dname].append(got)
                 else:  # streamed: nothing of it is held once it is on disk
                     sink.put(dname, start // chunk, {k: np.asarray(v)[:rows] for k, v in got.items()})
                 bar.update(rows)
-            if sink is None:
-                values[dname] = {k: np.concatenate([p[k] for p in parts])[:n] for k in parts[0]}
+    if sink is None:
+        for dname, ps in parts.items():
+            values[dname] = {k: np.concatenate([p[k] for p in ps])[:n] for k in ps[0]}
     return StudyRun(points, values)

@@ -103,13 +103,14 @@ class NoisyGridSignal(eqx.Module):
 _AXIS_LOWER = {"sag": 0.0, "harmonics_scale": 0.0, "sub_amplitude": 0.0, "noise": 0.0}
 
 
-def grid_signals(names, combos, t_event: float, freq: float, *, seed: int = 0):
+def grid_signals(names, combos, t_event: float, freq: float, *, seed: int = 0, first: int = 0):
     """Batched :class:`NoisyGridSignal` for ``combos`` (tuples of values for the axes ``names``).
 
     Vectorized — the leaves are set as arrays, no constructor runs per scenario — and
     checked as :class:`GridSignal` would check one scenario: a ``ValueError`` names the axis.
     Shared by studies (:func:`jaxobs.study.run_study`) and by tuning jobs on grid signals.  Scenario i's
-    noise key is ``fold_in(PRNGKey(seed), i)``: the study's (or job's) seed drives its noise.
+    noise key is ``fold_in(PRNGKey(seed), i)``: the study's (or job's) seed drives its noise; ``first``: the
+    index of ``combos[0]`` among all the scenarios (a chunk built on its own has the keys it has in the whole).
     """
     names = list(names)
     for name in names:
@@ -151,7 +152,7 @@ def grid_signals(names, combos, t_event: float, freq: float, *, seed: int = 0):
     out = eqx.tree_at(lambda s: s.clean, batched, c)
     if "noise" in cols:
         out = eqx.tree_at(lambda s: s.noise, out, jnp.asarray(cols["noise"]))
-    keys = jax.vmap(lambda i: jax.random.fold_in(jax.random.PRNGKey(seed), i))(jnp.arange(n))
+    keys = jax.vmap(lambda i: jax.random.fold_in(jax.random.PRNGKey(seed), i))(first + jnp.arange(n))
     return eqx.tree_at(lambda s: s.key, out, keys)
 
 
@@ -213,6 +214,13 @@ class AbstractSampler:
     def points(self) -> list[tuple]:
         raise NotImplementedError
 
+    def array(self) -> np.ndarray:
+        """The points as one (n, axes) float array: 8 bytes a value where :meth:`points` holds a tuple of
+        Python floats (about 180 bytes a scenario of four axes); what :func:`jaxobs.runner.run_scenarios`
+        keeps while a study runs."""
+        pts = self.points()
+        return np.asarray(pts, dtype=float).reshape(len(pts), len(self.names))
+
     def layout(self, axis_meta) -> tuple[tuple, tuple, dict]:
         raise NotImplementedError
 
@@ -239,6 +247,11 @@ class Grid(AbstractSampler):
 
     def points(self) -> list[tuple]:
         return list(itertools.product(*(list(map(float, self.axes[n])) for n in self.names)))
+
+    def array(self) -> np.ndarray:
+        # itertools.product's order (the last axis fastest), without a tuple per point
+        cols = np.meshgrid(*(np.asarray(self.axes[n], dtype=float) for n in self.names), indexing="ij")
+        return np.stack([c.reshape(-1) for c in cols], axis=1)
 
     def layout(self, axis_meta):
         shape = tuple(len(self.axes[n]) for n in self.names)
@@ -271,11 +284,20 @@ class _Drawn(AbstractSampler):
         hi = np.array([self.axes[k].max() for k in self.names], dtype=float)
         return lo, hi
 
+    def array(self) -> np.ndarray:
+        """The points as one (n, axes) float array (8 bytes a value; :meth:`points` is these rows as tuples)."""
+        raise NotImplementedError
+
+    def points(self) -> list[tuple]:
+        return list(map(tuple, self.array().tolist()))
+
     def layout(self, axis_meta):
-        pts = self.points()
+        # the coordinates straight from the array: a list of n tuples of Python floats took ~180 bytes a
+        # scenario, at the end of a study where its values are held too (the peak of a 10⁶-scenario study)
+        pts = self.array()
         coords = {"sample": ("sample", np.arange(len(pts)), {"units": "1", "long_name": self.sample_long_name})}
         for i, k in enumerate(self.names):
-            coords[k] = ("sample", np.asarray([c[i] for c in pts], dtype=float), axis_meta(k))
+            coords[k] = ("sample", np.ascontiguousarray(pts[:, i]), axis_meta(k))
         return ("sample",), (len(pts),), coords
 
 
@@ -284,17 +306,18 @@ class Random(_Drawn):
 
     sampling: ClassVar[str] = "random"
 
-    def points(self) -> list[tuple]:
-        rng = np.random.default_rng(self.seed)
+    def array(self) -> np.ndarray:
+        # one vectorized draw: the same numbers as n × axes scalar draws in that order (row-major), without a
+        # Python loop over the points
         lo, hi = self._bounds()
-        return [tuple(rng.uniform(a, b) for a, b in zip(lo, hi)) for _ in range(self.n)]
+        return np.random.default_rng(self.seed).uniform(lo, hi, size=(self.n, len(self.names)))
 
 
-def _qmc_points(self, u) -> list[tuple]:
+def _qmc_points(self, u) -> np.ndarray:
     lo, hi = self._bounds()
     # u · (hi − lo) + lo, the arithmetic of scipy.stats.qmc.scale, which refuses an axis of one value
     # (min = max); such an axis stays at its value
-    return [tuple(r) for r in u * (hi - lo) + lo]
+    return u * (hi - lo) + lo
 
 
 class Sobol(_Drawn):
@@ -303,7 +326,7 @@ class Sobol(_Drawn):
     sampling: ClassVar[str] = "sobol"
     sample_long_name: ClassVar[str] = "scenario drawn by sobol"
 
-    def points(self) -> list[tuple]:
+    def array(self) -> np.ndarray:
         from scipy.stats import qmc
 
         return _qmc_points(self, qmc.Sobol(len(self.names), scramble=True, seed=self.seed).random(self.n))
@@ -315,7 +338,7 @@ class LHS(_Drawn):
     sampling: ClassVar[str] = "lhs"
     sample_long_name: ClassVar[str] = "scenario drawn by lhs"
 
-    def points(self) -> list[tuple]:
+    def array(self) -> np.ndarray:
         from scipy.stats import qmc
 
         return _qmc_points(self, qmc.LatinHypercube(len(self.names), seed=self.seed).random(self.n))

@@ -60,7 +60,7 @@ from . import metrics as M
 from ._simulate import OnSignal
 from .provenance import provenance
 from .runner import run_scenarios
-from .scenarios import GRID_SIGNAL_AXES, AbstractSampler, Grid, Random, Recordings, grid_signals
+from .scenarios import GRID_SIGNAL_AXES, LHS, AbstractSampler, Grid, Random, Recordings, Sobol, grid_signals
 
 __all__ = ["STUDY_AXES", "STUDY_METRICS", "study_metrics", "run_study", "worst_cases"]
 
@@ -187,6 +187,12 @@ def run_study(
         m["ok"] = sol.ok & jnp.all(jnp.stack([jnp.isfinite(m[k]) for k in STUDY_METRICS]))
         return m
 
+    if isinstance(sampler, (Grid, Random, Sobol, LHS)):
+        # the signals are built a chunk at a time (jaxobs.runner): a bad axis value is refused here, before
+        # anything runs, by building the two scenarios of every axis's least and greatest values (each of
+        # grid_signals's checks is a bound on one axis, so these two pass only if every point inside does)
+        ends = [tuple(float(f(sampler.axes[k])) for k in sampler.names) for f in (np.min, np.max)]
+        grid_signals(sampler.names, ends, t_event, freq)
     t0 = time.time()
     run = run_scenarios(
         designs,
@@ -194,7 +200,7 @@ def run_study(
         OnSignal,
         metrics,
         horizon=horizon,
-        build=lambda names, points: grid_signals(names, points, t_event, freq, seed=seed),
+        build=lambda names, points, first: grid_signals(names, points, t_event, freq, seed=seed, first=first),
         static=n_period,
         chunk_size=chunk_size,
         mesh=mesh,

@@ -321,6 +321,46 @@ def test_the_runner_takes_any_sampler_factory_and_metrics():
     assert bool(jnp.all(jnp.isfinite(run.values["a"]["rms"])))
 
 
+def test_scenarios_built_a_chunk_at_a_time_are_the_whole_batchs():
+    """A builder that takes ``first`` is called per chunk with the index of the chunk's first point (the
+    memory of the scenarios is one chunk's, issue 31.5); its noise keys are the whole batch's, so a noisy
+    study gives the same values in chunks of 3 as in one chunk, designs of two classes included; a bad axis
+    value is refused before anything runs."""
+    from jaxobs.runner import run_scenarios
+    from jaxobs.scenarios import Random, grid_signals
+
+    designs = {"SOGI-FLL": linear.sogi_fll_closed_form(), "WIF": linear.wif_closed_form()}
+    sampler = Random({"noise": [0.0, 0.2], "freq_step": [-1.0, 1.0]}, 7, seed=3)
+    one = run_study(designs, sampler, horizon=0.15, t_event=0.05, chunk_size=7, seed=5)
+    chunks = run_study(designs, sampler, horizon=0.15, t_event=0.05, chunk_size=3, seed=5)
+    for k in ("rms_phase", "ripple_freq", "settling_freq"):
+        np.testing.assert_array_equal(chunks[k].values, one[k].values)
+    whole = grid_signals(sampler.names, sampler.points(), 0.05, 50.0, seed=5)
+    calls = []
+
+    def build(names, pts, first):
+        calls.append((first, len(pts)))
+        got = grid_signals(names, pts, 0.05, 50.0, seed=5, first=first)
+        rows = min(len(pts), 7 - first)  # the padded rows copy the last point, not its key
+        np.testing.assert_array_equal(np.asarray(got.key)[:rows], np.asarray(whole.key)[first : first + rows])
+        return got
+
+    run_scenarios(
+        {"a": designs["WIF"]},
+        sampler,
+        jaxobs.OnSignal,
+        lambda sol, _s, _a: {"w": sol.outputs.obs.omega[-1]},
+        horizon=0.01,
+        build=build,
+        chunk_size=3,
+    )
+    assert calls == [(0, 3), (3, 3), (6, 3)]
+    ran = []
+    with pytest.raises(ValueError, match="grid axis sag must be <= 0.999"):
+        run_study(designs, {"sag": [0.0, 0.5, 1.5]}, chunk_size=1, progress=lambda done, _n: ran.append(done))
+    assert ran == []  # the last chunk's bad value, refused before the first chunk ran
+
+
 def test_provenance_versions_and_digests(tmp_path):
     from jaxobs.provenance import provenance, sha256, versions
 

@@ -14,7 +14,7 @@ from .cli_common import CommandOut, enable_x64, progress_of
 from .outdir import atomic_path
 
 # the files each command writes under --out (refused there without --force; jaxobs.plot names them)
-DEMO_FILES = ("fll_tests_A_E.png",)
+DEMO_FILES = ("fll_tests_A_E.png",) + tuple(f"fll_test_{t}.png" for t in "ABCDE123")  # 001's layout, one a test
 
 
 BODE_FILES = ("bode_flux_observers_000_fig5.png", "bode_lesos_002_fig4.png", "bode_fll_open_loop_001_fig14.png")
@@ -65,6 +65,7 @@ def cmd_demo(args) -> int:
     enable_x64()
     from jaxobs.demo import DEMO_TESTS, fll_demo, format_table
     from jaxobs.plot import fll_demo_figure
+    from jaxobs.reproduce.figures import fll_figure
 
     if args.t_event <= 0:
         raise ValueError(f"--t-event must be > 0 s, got {args.t_event}")
@@ -73,6 +74,12 @@ def cmd_demo(args) -> int:
         fig_path = out / DEMO_FILES[0]
         with atomic_path(fig_path) as tmp:
             fll_demo_figure(traces, DEMO_TESTS, args.t_event, tmp)
+        # each test in paper 001's layout (Tests A-E of Sec. VI, and Sec. V's Tests 1-3 run for their figures)
+        _, traces_123 = fll_demo(t_event=args.t_event, progress=progress_of(args), tests=("1", "2", "3"))
+        for tests, tr in ((DEMO_TESTS, traces), (("1", "2", "3"), traces_123)):
+            for i, test in enumerate(tests):
+                with atomic_path(out / f"fll_test_{test}.png") as tmp:
+                    fll_figure(tr, i, test, args.t_event, tmp)
     if args.json:
         print(json.dumps(rows, indent=1))
     else:

@@ -323,7 +323,9 @@ def _held(prof: Profile, v) -> Profile:
     return eqx.tree_at(lambda q: q.values, prof, jnp.broadcast_to(v[:, None], prof.values.shape))
 
 
-def scenario_batch(base: Scenario, names, points, *, seed: int | None = None, t_event: float = 0.0) -> Scenario:
+def scenario_batch(
+    base: Scenario, names, points, *, seed: int | None = None, t_event: float = 0.0, first: int = 0
+) -> Scenario:
     """``base`` with a leading axis, one scenario per point (a tuple of values for the axes ``names``,
     :data:`DRIVE_AXES`), built vectorized (no constructor per scenario).
 
@@ -332,7 +334,9 @@ def scenario_batch(base: Scenario, names, points, *, seed: int | None = None, t_
     make the reference and the load step profiles (the value before, plus the step from ``t_event`` s on).
     The mismatch axes set the assumed machine from the true one; a noise axis makes the sensors noisy.
     The noise key: ``PRNGKey(v)`` of a ``seed`` axis, else ``fold_in(PRNGKey(seed), i)`` of scenario i when
-    ``seed`` is given, else the base's.  A ``ValueError`` names an unknown axis or a value out of range.
+    ``seed`` is given, else the base's (``first``: the index of ``points[0]`` among all the scenarios, so a
+    chunk built on its own has the keys it has in the whole).  A ``ValueError`` names an unknown axis or a
+    value out of range.
     """
     names = tuple(names)
     if not (math.isfinite(t_event) and t_event >= 0):
@@ -400,7 +404,7 @@ def scenario_batch(base: Scenario, names, points, *, seed: int | None = None, t_
         keys = jax.vmap(jax.random.PRNGKey)(jnp.asarray(cols["seed"].astype(np.int64)))
         sc = eqx.tree_at(lambda s: s.key, sc, keys)
     elif seed is not None:
-        keys = jax.vmap(lambda i: jax.random.fold_in(jax.random.PRNGKey(seed), i))(jnp.arange(b))
+        keys = jax.vmap(lambda i: jax.random.fold_in(jax.random.PRNGKey(seed), i))(first + jnp.arange(b))
         sc = eqx.tree_at(lambda s: s.key, sc, keys)
     return sc
 
