@@ -8,7 +8,7 @@ import re
 from pathlib import Path
 
 from jaxobs import linear, papers
-from jaxobs.reproduce.figures import FLUX_FIGURES
+from jaxobs.reproduce.figures import FLUX_FIGURES, LESO_FIGURES
 
 from .cli_common import CommandOut, enable_x64, progress_of
 from .outdir import atomic_path
@@ -43,6 +43,8 @@ REPRODUCE_FILES = {
         # 002 Fig. 18: the observer's R̂s, then L̂q, ramped by ±0.5 p.u. at rated load
         "leso_fig18_rs_ramp.png",
         "leso_fig18_lq_ramp.png",
+        # 002 Figs 16-17 in the paper's layout (jaxobs.reproduce.figures)
+        *(spec[1] for spec in LESO_FIGURES),
     ),
 }
 # ``reproduce leso`` (``--machine dual``, its default) adds these: jaxobs.reproduce.leso_dual's DUAL_EXPERIMENTS and
@@ -296,12 +298,20 @@ def _reproduce(args, out: Path) -> int:
                     "half load 600 r/min, C-LESO closing the loop",
                     *FIG18_NAMES.values(),
                 ),
-                REPRODUCE_FILES["leso"],
+                REPRODUCE_FILES["leso"][: -len(LESO_FIGURES)],
                 (0.4,) * 8 + (0.0,) * 2,
                 strict=True,
             ),
             out,
         )
+        from jaxobs import drive as D
+        from jaxobs.reproduce.figures import drive_figure
+
+        p = D.bench_machine("ipmsm002").p
+        for key, fname, fig, methods, kind, window in LESO_FIGURES:
+            title = f"Paper 002 {fig} (ours): {key}, the FA-LESO closing the loop"
+            figs.append(out / fname)
+            drive_figure(traces[key], LESO_NAMES, methods, kind, window, title, p, path=figs[-1])
         if args.machine == "dual":
             from jaxobs.reproduce.leso_dual import DUAL_DYNAMICS, DUAL_EXPERIMENTS
 

@@ -23,7 +23,7 @@ import numpy as np
 from ..metrics import wrap
 from ..plot import Panel, Series, drive_events, fll_event_text, paper_figure
 
-__all__ = ["FLUX_FIGURES", "drive_figure", "flux_figure", "flux_figures", "fll_figure"]
+__all__ = ["FLUX_FIGURES", "LESO_FIGURES", "drive_figure", "flux_figure", "flux_figures", "fll_figure"]
 
 _ALL = ("integrator", "LPF", "SOIFO", "second-order SOIFO")
 _THREE = ("LPF", "SOIFO", "second-order SOIFO")
@@ -72,6 +72,21 @@ FLUX_FIGURES = (
         (-0.06, None),
     ),
     ("Rs_est = 0.4 Rs0, 10 N·m, 1000 r/min", "fig23_rs_mismatch.png", "Fig. 23", _THREE, "flux", (-0.06, None)),
+)
+
+
+# Paper 002's Figs 16-17 (the FA-LESO closing the loop; each LESO's estimate beside it), as FLUX_FIGURES
+_LESO = ("C-LESO", "GI-LESO", "FA-LESO")
+LESO_FIGURES = (
+    (
+        "speed ramp 300-600-840-600-300 r/min",
+        "leso_fig16_speed_ramp_layout.png",
+        "Fig. 16",
+        _LESO,
+        "dynamic",
+        (0.4, None),
+    ),
+    ("load step 0-80 % at 600 r/min", "leso_fig17_load_step_layout.png", "Fig. 17", _LESO, "dynamic", (0.4, None)),
 )
 
 
