@@ -93,3 +93,31 @@ def test_sensorless_field_weakening_holds_with_the_speed_loop_the_model_prescrib
     assert np.max(np.abs(rpm[-2000:] - 840.0)) < 5.0, (rpm[-2000:].min(), rpm[-2000:].max())
     assert err.max() < 6.0, err.max()
     assert i_d[-2000:].mean() < -6.0  # the field weakening is acting
+
+
+def _cleso_closing_speed_band(load_pu):
+    """The speed band (r/min, after 0.6 s) of the harmonic bench with the C-LESO closing the loop at 600 r/min
+    and a 10 Hz speed loop (sensorless from 0.3 s)."""
+    from jaxobs.reproduce.leso import leso_bank
+
+    hpar = D.bench_machine("ipmsm002", a5=papers.IPMSM_002_A5, a7=papers.IPMSM_002_A7)
+    sc = D.Scenario(
+        hpar,
+        speed_ref=D.Profile.constant(600 * D.RPM),
+        load=D.Profile.constant(load_pu * float(hpar.T_rated)),
+        omega_m0=600 * D.RPM,
+    )
+    drive = D.bench_drive(hpar, handover=0.3, alpha_s=2 * math.pi * 10.0)
+    sol = jaxobs.simulate(D.ClosedLoop(drive, leso_bank(hpar, hpar.p * 600 * D.RPM, primary=0), sc), 1.0)
+    rpm = np.asarray(sol.outputs.speed_rpm)[np.asarray(sol.t) >= 0.6]
+    return float(np.ptp(rpm))
+
+
+@pytest.mark.slow
+def test_cleso_closing_fails_with_a_fast_speed_loop_but_load_steadies_it():
+    """002's C-LESO fails at half load and runs at 40 % (Sec. V-B).  Ours, with the speed loop at 10 Hz,
+    oscillates at every load, and *less* with load (docs/papers.md: with i_d* = 0 the C-LESO's steady lag
+    puts +i_q sin|δ0| on the d axis, the stabilizing sign): the paper's load dependence is not in our model."""
+    no_load, half = _cleso_closing_speed_band(0.0), _cleso_closing_speed_band(0.5)
+    assert half > 60.0, half  # fails (±5 % of 600 r/min and more) at half load, as 002's did ...
+    assert no_load > half + 50.0, (no_load, half)  # ... but worse without load, unlike 002
