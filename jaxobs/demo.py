@@ -73,22 +73,25 @@ def _run_batch(observer, signals, t1):
     return jax.vmap(lambda s: simulate(OnSignal(observer, s), t1))(signals)
 
 
-def fll_demo(t_event: float = 0.2, steady_delay: float = 1.0, steady_len: float = 1.0, flls=None, progress=None):
+def fll_demo(
+    t_event: float = 0.2, steady_delay: float = 1.0, steady_len: float = 1.0, flls=None, progress=None, tests=DEMO_TESTS
+):
     """Run the demo; returns (rows, traces).
 
     rows: list of dicts {test, fll, settle_ms, settle_cycles, settle2_cycles,
     freq_peak_hz, phase_overshoot_deg, amp_overshoot_pu, freq_pp_hz, phase_pp_deg, amp_pp_pu, ok};
     traces: {fll: Solution batched over tests}.
     ``progress``: one step per FLL, each named as it compiles and runs (:mod:`jaxobs.progress`).
+    ``tests``: paper 001's tests to run (keys of :data:`jaxobs.papers.TESTS_001`; default A–E, Sec. VI).
     """
     flls = table_i_flls() if flls is None else flls
-    signals = stack([paper001_test(name, t_event=t_event) for name in DEMO_TESTS])
+    signals = stack([paper001_test(name, t_event=t_event) for name in tests])
     t1 = t_event + steady_delay + steady_len
     f_n = 50.0
     rows, traces = [], {}
     bar = Progress(progress, len(flls), "demo", unit="FLL")
     for fll_name, obs in flls.items():
-        bar.stage(f"{fll_name} on Tests {', '.join(DEMO_TESTS)} (compiling, then {t1:g} s each)")
+        bar.stage(f"{fll_name} on Tests {', '.join(tests)} (compiling, then {t1:g} s each)")
         sol = _run_batch(obs, signals, t1)
         traces[fll_name] = sol
         bar.update()
@@ -100,7 +103,7 @@ def fll_demo(t_event: float = 0.2, steady_delay: float = 1.0, steady_len: float 
         steady = (t >= t_event + steady_delay) & (t < t_event + steady_delay + steady_len)
         transient = (t >= t_event) & (t < t_event + steady_delay)
         nan3 = dict.fromkeys(("freq_peak_hz", "phase_overshoot_deg", "amp_overshoot_pu"), math.nan)
-        for i, test in enumerate(DEMO_TESTS):
+        for i, test in enumerate(tests):
             settle = {5: math.nan, 2: math.nan}
             for pct in settle:
                 if test == "A":

@@ -193,7 +193,8 @@ DUAL_LLS_002 = 4.5e-3
 # machine's, fitted the same way), by the xy currents' share above.
 DUAL_A5_002 = 0.0615
 DUAL_A7_002 = 0.0751
-# ASSUMED: the type-2 PLL after each LESO, ω_b = 2π·15 rad/s (our copy lacks 002's PLL section).
+# ASSUMED: the type-2 PLL after each LESO, ω_b = 2π·15 rad/s (our copy lacks 002's PLL section).  002's speed
+# ramp pair (4.5°, 13 r/min) supports it: ours at 15 Hz gives 4.1°, 13.2 r/min (docs/papers.md).
 LESO_PLL_HZ = 15.0
 # ASSUMED: the damping of our type-2 PLLs, pole placement k_p = 2ζω_b, k_i = ω_b² (jaxobs.linear.pll_gains).
 PLL_ZETA = 1 / math.sqrt(2)

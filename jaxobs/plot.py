@@ -23,7 +23,7 @@ from ._plot_paper import Series as Series
 from ._plot_paper import paper_figure as paper_figure
 
 
-def _fll_event_text(test: str) -> str:
+def fll_event_text(test: str) -> str:
     """What happens at the event of paper 001's Test ``test``, in words (papers.TESTS_001)."""
     spec = papers.TESTS_001.get(test, {})
     words = {
@@ -79,7 +79,7 @@ def fll_demo_figure(traces, tests, t_event, path=None):
     for i, test in enumerate(tests):
         axes[i, 0].set_ylabel(f"Test {test}\nf̂ (Hz)")
         axes[i, 1].set_ylabel("θ̂ − θ (deg)")
-        what = _fll_event_text(test)
+        what = fll_event_text(test)
         for ax in axes[i]:
             ax.grid(True, alpha=0.3)
             _mark_event(ax, 0.0, what)

@@ -24,6 +24,8 @@ from jaxobs.study import run_study
 from jaxobs_tuning.cli import main
 
 ROOT = Path(__file__).resolve().parents[1]
+# the processes import this checkout, and what this process was given before it (a worktree's own tuning/)
+PYTHONPATH = os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])
 AXES = {"freq_step": [-2.0, 1.0], "dc": [0.0, 0.05, 0.1]}
 # 6 scenarios in chunks of 4 over 2 devices: two chunks, the last padded (2 scenarios of 4 are copies)
 OPTS = {"t_event": 0.1, "horizon": 0.2, "chunk_size": 4}
@@ -116,7 +118,11 @@ def test_study_over_two_processes_equals_one_process(tmp_path):
     toml.write_text(STUDY_TOML)
     out = tmp_path / "out"
     env = {k: v for k, v in os.environ.items() if k not in ("XLA_FLAGS", "JAX_NUM_CPU_DEVICES")}
-    env.update(JAX_PLATFORMS="cpu", JAXOBS_HOST_DEVICES="1", PYTHONPATH=str(ROOT))
+    env.update(
+        JAX_PLATFORMS="cpu",
+        JAXOBS_HOST_DEVICES="1",
+        PYTHONPATH=PYTHONPATH,
+    )
     cache = os.environ.get("JAXOBS_TEST_CACHE", str(Path.home() / ".cache" / "jaxobs" / "jax-tests"))
     if cache:  # the test suite's persistent compilation cache (tests/conftest.py): it changes no number
         env.update(JAX_COMPILATION_CACHE_DIR=cache, JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS="1.0")
@@ -245,7 +251,11 @@ def test_a_process_whose_coordinator_never_comes_gets_one_line(tmp_path, capsys)
 def test_distributed_without_an_environment_names_what_to_set(tmp_path):
     # a subprocess: jax.distributed.initialize changes process-wide JAX state even when it refuses
     env = {k: v for k, v in os.environ.items() if not k.startswith(("JAX_COORDINATOR", "SLURM_", "OMPI_", "PMI"))}
-    env.update(JAX_PLATFORMS="cpu", JAXOBS_HOST_DEVICES="1", PYTHONPATH=str(ROOT))
+    env.update(
+        JAX_PLATFORMS="cpu",
+        JAXOBS_HOST_DEVICES="1",
+        PYTHONPATH=PYTHONPATH,
+    )
     cmd = [sys.executable, "-m", "jaxobs_tuning.cli", "study", "--distributed", "--quiet", "--out", str(tmp_path / "o")]
     r = subprocess.run(cmd, capture_output=True, text=True, env=env, cwd=ROOT, timeout=120, check=False)
     err = r.stderr.strip().splitlines()
@@ -260,7 +270,11 @@ def test_processes_given_different_study_files_stop_before_computing(tmp_path):
     # different files would give different chunk shapes, on which gloo aborts both processes (a C++ dump);
     # the command line compares the files' sha256 right after joining and ends each process in one line
     env = {k: v for k, v in os.environ.items() if k not in ("XLA_FLAGS", "JAX_NUM_CPU_DEVICES")}
-    env.update(JAX_PLATFORMS="cpu", JAXOBS_HOST_DEVICES="1", PYTHONPATH=str(ROOT))
+    env.update(
+        JAX_PLATFORMS="cpu",
+        JAXOBS_HOST_DEVICES="1",
+        PYTHONPATH=PYTHONPATH,
+    )
     addr = f"127.0.0.1:{_free_port()}"
     procs = []
     for pid in (0, 1):
@@ -331,7 +345,11 @@ def test_a_non_jax_listener_on_the_coordinator_port_gets_one_line(tmp_path, caps
 def test_a_process_given_another_process_count_stops_before_computing(tmp_path):
     # a process given --num-processes 3 joined a 2-process run and reported "1 of 2", exit 0 (issue 30)
     env = {k: v for k, v in os.environ.items() if k not in ("XLA_FLAGS", "JAX_NUM_CPU_DEVICES")}
-    env.update(JAX_PLATFORMS="cpu", JAXOBS_HOST_DEVICES="1", PYTHONPATH=str(ROOT))
+    env.update(
+        JAX_PLATFORMS="cpu",
+        JAXOBS_HOST_DEVICES="1",
+        PYTHONPATH=PYTHONPATH,
+    )
     addr = f"127.0.0.1:{_free_port()}"
     f = tmp_path / "study.toml"
     f.write_text(STUDY_TOML)
@@ -352,3 +370,69 @@ def test_a_process_given_another_process_count_stops_before_computing(tmp_path):
         assert p.returncode == 2 and len(err) == 1, f"process {pid}: rc {p.returncode}\n{so}\n{se[-3000:]}"
         assert "--num-processes: process(es) 1 were given 3, the run has 2 processes" in err[0], err
     assert not (tmp_path / "out" / "study.nc").exists()
+
+
+# 2 designs x 16 scenarios in chunks of 2 (one scenario a process): 16 chunks, so that a kill lands mid-run
+RESUME_TOML = (
+    STUDY_TOML.replace("chunk_size = 4", "chunk_size = 2")
+    .replace("[axes]", '[designs.WIF]\nclosed_form = "wif"\n[axes]')
+    .replace("dc = [0.0, 0.05, 0.1]", "dc = [0.0, 0.02, 0.04, 0.06, 0.08, 0.1, 0.12, 0.14]")
+)
+
+
+@pytest.mark.slow  # three runs of two processes
+@pytest.mark.skipif(not _gloo_available(), reason="this jaxlib has no gloo CPU collectives")
+def test_a_study_over_two_processes_killed_then_resumed_is_byte_identical(tmp_path):
+    # a study split over processes was all or nothing: --resume was refused ("not checkpointed").  Process 0
+    # writes each chunk; on --resume it tells the other which chunks are on disk, and both skip them
+    from jaxobs_tuning.cli import STUDY_CHUNKS
+
+    env = {k: v for k, v in os.environ.items() if k not in ("XLA_FLAGS", "JAX_NUM_CPU_DEVICES")}
+    env.update(
+        JAX_PLATFORMS="cpu",
+        JAXOBS_HOST_DEVICES="1",
+        PYTHONPATH=PYTHONPATH,
+    )
+    f = tmp_path / "study.toml"
+    f.write_text(RESUME_TOML)
+
+    def launch(out, *extra):
+        addr = f"127.0.0.1:{_free_port()}"
+        cmd = [sys.executable, "-m", "jaxobs_tuning.cli", "study", str(f), "--out", str(out), "--quiet", *extra]
+        cmd += ["--coordinator", addr, "--num-processes", "2", "--timeout", "60"]
+        return [
+            subprocess.Popen(
+                [*cmd, "--process-id", str(pid)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env
+            )
+            for pid in (0, 1)
+        ]
+
+    def finish(procs):
+        try:
+            outs = [p.communicate(timeout=180) for p in procs]
+        finally:
+            for p in procs:
+                if p.poll() is None:
+                    p.kill()
+                    p.wait()
+        for pid, (p, (so, se)) in enumerate(zip(procs, outs)):
+            assert p.returncode == 0, f"process {pid}: rc {p.returncode}\n{so}\n{se[-3000:]}"
+        return outs
+
+    finish(launch(tmp_path / "ref"))
+    out = tmp_path / "out"
+    procs = launch(out)
+    deadline = time.time() + 180
+    while not list((out / STUDY_CHUNKS).glob("*.h5")) and time.time() < deadline:
+        time.sleep(0.005)
+    for p in procs:  # both at once, as a lost node or a scheduler's kill would
+        p.kill()
+    for p in procs:
+        p.communicate()
+    done = len(list((out / STUDY_CHUNKS).glob("*.h5")))
+    assert not (out / "study.nc").exists() and 1 <= done < 16, done
+    outs = finish(launch(out, "--resume"))
+    assert f"resumed: {done} chunks of 16" in outs[0][0], outs[0]
+    assert "process 1 of 2 computed its share" in outs[1][0]
+    assert (out / "study.nc").read_bytes() == (tmp_path / "ref" / "study.nc").read_bytes()
+    assert not (out / STUDY_CHUNKS).exists()

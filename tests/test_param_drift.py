@@ -96,3 +96,8 @@ def test_bad_drifts():
         D.ParameterDrift(Rs=1.5)
     with pytest.raises(ValueError, match="est_drift must be a ParameterDrift"):
         D.Scenario(PAR, est_drift=D.Profile.constant(1.0))
+    # the dual machine's loop does not rebind its observers: it refuses a drift rather than ignoring it
+    m = D.dual_ipmsm_paper002()
+    sc = D.Scenario(m.per_set(), est_drift=D.ParameterDrift(Lq=D.Profile.constant(1.5)))
+    with pytest.raises(ValueError, match="est_drift must be None"):
+        D.DualClosedLoop(D.dual_bench_drive(m, sensorless=False), None, sc, m)

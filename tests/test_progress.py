@@ -144,7 +144,7 @@ def test_reproduce_leso_progress_has_a_total(monkeypatch):
     monkeypatch.setattr(leso, "simulate", stop)
     with pytest.raises(Stop):
         leso.run_leso_experiments(progress=False)
-    assert made == [leso.N_EXPERIMENTS] and leso.N_EXPERIMENTS == 18
+    assert made == [leso.N_EXPERIMENTS] and leso.N_EXPERIMENTS == 19
 
 
 def test_warnings_and_log_records_during_a_bar_get_lines_of_their_own(capsys):

@@ -58,8 +58,9 @@ a process other than 0 that finds no coordinator, or another program listening a
 with one line, a process 0 left alone is aborted by JAX's runtime (exit 134).
 ``tune --resume`` continues from ``<out>/checkpoint.npz`` if it is this job's (the job file's sha256 is
 in it); with no checkpoint it says so in one line and starts fresh.  ``study --resume`` (FLL and drive
-studies, in one process) continues from the chunks in ``<out>/study.chunks/`` if they are this study's (its
-files' and the versions' sha256): a study.nc byte-identical to an uninterrupted run's.
+studies; a study split over processes too, every process given ``--resume``) continues from the chunks in
+``<out>/study.chunks/`` if they are this study's (its files' and the versions' sha256, the same device
+count): a study.nc byte-identical to an uninterrupted run's.
 """
 
 from __future__ import annotations
@@ -171,8 +172,6 @@ def _cmd_study(args) -> int:
     # What cannot be split over processes is refused before joining: a process that refuses after joining
     # leaves the others waiting for it.
     rank = None
-    if args.resume and distributed_asked(args):
-        raise ValueError("--resume: a study split over processes is not checkpointed; run it in one process")
     if distributed_asked(args):
         refuse_unsplittable(path)  # --check too: a file that passes --check is one the run accepts
         if not args.check:
@@ -184,6 +183,8 @@ def _cmd_study(args) -> int:
     # a study writes each chunk's results under study.chunks/ as it finishes (jaxobs.chunkstore): a
     # kill loses at most the chunks being computed, and --resume continues from the last complete one
     resume = f"jaxobs study {shlex.quote(str(path))} --out {shlex.quote(str(out))} --resume"
+    if distributed_asked(args):  # every process is given --resume (process 0 tells the others what is done)
+        resume = "every process of the run again, each with --resume"
     hint = f"an earlier run stopped here: continue it with `{resume}` (--force starts over and discards it)"
     products = ["study.nc"] + ([] if args.resume else [STUDY_CHUNKS])
     if args.check:
@@ -191,12 +192,14 @@ def _cmd_study(args) -> int:
             OutDir(out, products, force=args.force, hints={STUDY_CHUNKS: hint}).check()
         print(f"{path}: OK — {spec.kind} study {name!r}, {len(designs)} designs x {spec.scenarios} scenarios")
         return 0
+    outdir = OutDir(out, products, force=args.force, hints={STUDY_CHUNKS: hint})
+    store = ChunkStore(out / STUDY_CHUNKS, study_fingerprint(spec), resume=args.resume)
     if rank is not None and rank[1] > 1:
-        return distributed_study(name, designs, axes, opts, out, args, rank, _run_study)
-    with OutDir(out, products, force=args.force, hints={STUDY_CHUNKS: hint}):
-        args.log_dir = out
         args.on_interrupt = f"; continue with: {resume}"  # what Ctrl-C says (main)
-        store = ChunkStore(out / STUDY_CHUNKS, study_fingerprint(spec), resume=args.resume)
+        return distributed_study(name, designs, axes, opts, out, args, rank, _run_study, outdir, store)
+    with outdir:
+        args.log_dir = out
+        args.on_interrupt = f"; continue with: {resume}"
         return _run_study(name, designs, axes, opts, out, args.quiet, store=store)
 
 

@@ -8,13 +8,13 @@ import re
 from pathlib import Path
 
 from jaxobs import linear, papers
-from jaxobs.reproduce.figures import FLUX_FIGURES
+from jaxobs.reproduce.figures import FLUX_FIGURES, LESO_FIGURES
 
 from .cli_common import CommandOut, enable_x64, progress_of
 from .outdir import atomic_path
 
 # the files each command writes under --out (refused there without --force; jaxobs.plot names them)
-DEMO_FILES = ("fll_tests_A_E.png",)
+DEMO_FILES = ("fll_tests_A_E.png",) + tuple(f"fll_test_{t}.png" for t in "ABCDE123")  # 001's layout, one a test
 
 
 BODE_FILES = ("bode_flux_observers_000_fig5.png", "bode_lesos_002_fig4.png", "bode_fll_open_loop_001_fig14.png")
@@ -43,6 +43,8 @@ REPRODUCE_FILES = {
         # 002 Fig. 18: the observer's R̂s, then L̂q, ramped by ±0.5 p.u. at rated load
         "leso_fig18_rs_ramp.png",
         "leso_fig18_lq_ramp.png",
+        # 002 Figs 16-17 in the paper's layout (jaxobs.reproduce.figures)
+        *(spec[1] for spec in LESO_FIGURES),
     ),
 }
 # ``reproduce leso`` (``--machine dual``, its default) adds these: jaxobs.reproduce.leso_dual's DUAL_EXPERIMENTS and
@@ -65,6 +67,7 @@ def cmd_demo(args) -> int:
     enable_x64()
     from jaxobs.demo import DEMO_TESTS, fll_demo, format_table
     from jaxobs.plot import fll_demo_figure
+    from jaxobs.reproduce.figures import fll_figure
 
     if args.t_event <= 0:
         raise ValueError(f"--t-event must be > 0 s, got {args.t_event}")
@@ -73,6 +76,12 @@ def cmd_demo(args) -> int:
         fig_path = out / DEMO_FILES[0]
         with atomic_path(fig_path) as tmp:
             fll_demo_figure(traces, DEMO_TESTS, args.t_event, tmp)
+        # each test in paper 001's layout (Tests A-E of Sec. VI, and Sec. V's Tests 1-3 run for their figures)
+        _, traces_123 = fll_demo(t_event=args.t_event, progress=progress_of(args), tests=("1", "2", "3"))
+        for tests, tr in ((DEMO_TESTS, traces), (("1", "2", "3"), traces_123)):
+            for i, test in enumerate(tests):
+                with atomic_path(out / f"fll_test_{test}.png") as tmp:
+                    fll_figure(tr, i, test, args.t_event, tmp)
     if args.json:
         print(json.dumps(rows, indent=1))
     else:
@@ -289,12 +298,20 @@ def _reproduce(args, out: Path) -> int:
                     "half load 600 r/min, C-LESO closing the loop",
                     *FIG18_NAMES.values(),
                 ),
-                REPRODUCE_FILES["leso"],
+                REPRODUCE_FILES["leso"][: -len(LESO_FIGURES)],
                 (0.4,) * 8 + (0.0,) * 2,
                 strict=True,
             ),
             out,
         )
+        from jaxobs import drive as D
+        from jaxobs.reproduce.figures import drive_figure
+
+        p = D.bench_machine("ipmsm002").p
+        for key, fname, fig, methods, kind, window in LESO_FIGURES:
+            title = f"Paper 002 {fig} (ours): {key}, the FA-LESO closing the loop"
+            figs.append(out / fname)
+            drive_figure(traces[key], LESO_NAMES, methods, kind, window, title, p, path=figs[-1])
         if args.machine == "dual":
             from jaxobs.reproduce.leso_dual import DUAL_DYNAMICS, DUAL_EXPERIMENTS
 

@@ -17,7 +17,6 @@ from pathlib import Path
 import jaxobs
 
 from .job import JobError, read_toml
-from .outdir import OutDir
 from .study_file import WHAT
 
 
@@ -115,10 +114,81 @@ def _stdout_to_stderr():
         os.close(saved)
 
 
-def distributed_study(name, designs, axes, opts, out: Path, args, rank, write) -> int:
+class _ShareComputed(Exception):
+    """Raised by :meth:`SharedChunks.load` in a process other than 0: its share is computed and nothing is left
+    for it to do (process 0 lays the study out from its store and writes it)."""
+
+
+class SharedChunks:
+    """The runner's sink (:func:`jaxobs.runner.run_scenarios`) in each process of a study split over processes.
+
+    Every process must skip the same chunks (a chunk is computed by all of them together, in collectives), but
+    only process 0 holds the study's :class:`jaxobs.chunkstore.ChunkStore` (``store``; ``None`` elsewhere): at
+    :meth:`start` it opens it (checking an earlier run's chunks) and broadcasts which chunks are on disk, or
+    that it cannot use them, so that every process stops with one line instead of waiting in a collective.
+    Process 0 writes each chunk and lays the study out from the store; the others hold nothing, and their
+    :meth:`load`, reached once every collective is done, ends their run (:class:`_ShareComputed`)."""
+
+    def __init__(self, store, pid: int):
+        self.store, self.pid = store, pid
+        self.mask = None
+        self.designs: list = []
+
+    def start(self, *, n: int, chunk: int, devices: int, designs: list) -> None:
+        import numpy as np
+        from jax.experimental import multihost_utils
+
+        self.designs = [str(d) for d in designs]
+        mask = np.zeros((len(designs), -(-int(n) // int(chunk))), np.int32)
+        failure = None
+        if self.store is not None:
+            try:
+                self.store.start(n=n, chunk=chunk, devices=devices, designs=designs)
+                mask[:] = [[self.store.done(d, i) for i in range(mask.shape[1])] for d in designs]
+            except ValueError as e:
+                failure = e
+        with _stdout_to_stderr():
+            flat = np.append(mask.ravel(), np.int32(failure is not None))
+            got = np.asarray(multihost_utils.broadcast_one_to_all(flat))
+        if failure is not None:
+            raise failure
+        if got[-1]:
+            raise ValueError("process 0 cannot use its study.chunks (its error says why); nothing computed")
+        self.mask = got[:-1].reshape(mask.shape)
+
+    def done(self, design, i: int) -> bool:
+        return bool(self.mask[self.designs.index(str(design)), i])
+
+    def put(self, design, i: int, values: dict) -> None:
+        if self.store is not None:
+            self.store.put(design, i, values)
+
+    def load(self, design) -> dict:
+        if self.store is None:
+            raise _ShareComputed
+        return self.store.load(design)
+
+    @property
+    def resumed(self) -> int:
+        return 0 if self.store is None else self.store.resumed
+
+    @property
+    def total(self) -> int:
+        return 0 if self.store is None else self.store.total
+
+    def remove(self) -> None:
+        if self.store is not None:
+            self.store.remove()
+
+
+def distributed_study(name, designs, axes, opts, out: Path, args, rank, write, outdir, store) -> int:
     """One process of a study split over processes: every process computes its share of every chunk
-    (jaxobs.study.run_study), process 0 alone checks, locks and writes ``--out`` (and shows progress) by
-    ``write(name, designs, axes, opts, out, quiet)``, the single-process study of the command line."""
+    (jaxobs.study.run_study), process 0 alone checks and locks ``--out`` (``outdir``, an
+    :class:`~jaxobs_tuning.outdir.OutDir`) and writes it (and shows progress) by
+    ``write(name, designs, axes, opts, out, quiet, store=)``, the single-process study of the command line.
+    ``store``: process 0's :class:`jaxobs.chunkstore.ChunkStore` (unused in the others), shared as
+    :class:`SharedChunks`: a kill loses at most the chunks being computed, and ``--resume`` (every process
+    given it) continues from process 0's chunks."""
     import numpy as np
     from jax.experimental import multihost_utils
 
@@ -129,7 +199,7 @@ def distributed_study(name, designs, axes, opts, out: Path, args, rank, write) -
         failure = None
         if pid == 0:
             try:
-                stack.enter_context(OutDir(out, ["study.nc"], force=args.force))
+                stack.enter_context(outdir)
                 args.log_dir = out
             except Exception as e:  # told to the others first, so that none of them waits for it in a collective
                 failure = e
@@ -163,8 +233,11 @@ def distributed_study(name, designs, axes, opts, out: Path, args, rank, write) -
                 f"{', '.join(map(str, differ))} differ from process 0; give every process the same; nothing computed"
             )
         if pid == 0:
-            return write(name, designs, axes, opts, out, args.quiet)
+            return write(name, designs, axes, opts, out, args.quiet, store=SharedChunks(store, 0))
         kw = {k: v for k, v in opts.items() if k not in ("kind", "provenance", "recording")}
-        run_study(designs, axes, progress=False, **kw)
+        try:
+            run_study(designs, axes, progress=False, store=SharedChunks(None, pid), **kw)
+        except _ShareComputed:
+            pass
         print(f"study {name}: process {pid} of {count} computed its share; process 0 writes the results")
         return 0

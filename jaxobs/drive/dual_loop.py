@@ -267,6 +267,8 @@ class DualClosedLoop(AbstractSystem):
             raise ValueError("DualClosedLoop: a sensorless drive needs an observer (observer=None is the encoder)")
         if scenario.est_par.p != machine.p:
             raise ValueError(f"DualClosedLoop.scenario.est_par.p must equal the machine's p ({machine.p})")
+        if scenario.est_drift is not None:  # not wired here (ClosedLoop rebinds its observer): refuse, not ignore
+            raise ValueError("DualClosedLoop.scenario.est_drift must be None (parameter drift runs on ClosedLoop)")
         self.drive, self.observer, self.scenario, self.machine = drive, observer, scenario, machine
 
     @property

@@ -63,6 +63,9 @@ from ._models import (
     faleso_pll_loop as faleso_pll_loop,
 )
 from ._models import (
+    faleso_speed_loop_poles as faleso_speed_loop_poles,
+)
+from ._models import (
     faleso_tf as faleso_tf,
 )
 from ._models import (

@@ -55,6 +55,7 @@ __all__ = [
     "cleso_closed_form",
     "faleso_is_stable",
     "faleso_pll_loop",
+    "faleso_speed_loop_poles",
     "position_error_rs",
     "position_error_lq",
 ]
@@ -236,6 +237,46 @@ def cleso_closed_form(omega0, Rs, Lq) -> CLESOGains:
     lq = check_positive("Lq", Lq, "cleso_closed_form")
     mu = rs / lq
     return CLESOGains(l1=2 * w0 - mu, l2=w0**2, omega0=w0)
+
+
+def faleso_speed_loop_poles(k1, k2, omega_e, kp, ki, kp_w, ki_w, *, p, psi_f, Ld, Lq, J, i_d=0.0, i_q=0.0):
+    """Poles (rad/s) of a sensorless drive's speed loop closed through the FA-LESO and its PLL, linearized at
+    the operating point ω_e (rad/s), (i_d, i_q) (A) with the estimate unbiased (the FA-LESO's, δ0 = 0).
+
+    The loop (ideal current control; I-P speed loop on the PLL's integrator ω̂, as :class:`jaxobs.drive.FOC`):
+
+    - the PLL sees the rotor angle θ through the FA-LESO's envelope response H_φ (:func:`faleso_pll_loop`):
+      θ̂ = C H_φ θ/(1 + C), C = (k_p s + k_i)/s², and ω̂ = (k_i/s)(H_φ θ − θ̂);
+    - the speed loop (k_pω, k_iω, on the mechanical ω̂/p) sets i_q* = −(k_pω + k_iω/s) ω̂/p;
+    - the controller's frame is δ = θ̂ − θ ahead of the rotor's, so the rotor carries
+      i_q,rotor ≈ i_q* + i_d δ and i_d,rotor ≈ i_d − i_q δ: the torque T = 1.5p(ψf i_q + (Ld − Lq) i_d i_q)
+      moves by K_q i_q* + K_δ δ with K_q = 1.5p(ψf + (Ld − Lq) i_d), K_δ = 1.5p(ψf i_d + (Ld − Lq)(i_d² − i_q²));
+    - J s² θ = p T.
+
+    K_δ is the path field weakening opens: with i_d < 0 a lagging estimate (δ < 0) *adds* torque, which
+    accelerates the rotor, which makes the PLL lag more (its acceleration error).  With H_φ = N/D,
+    P = s² + k_p s + k_i and Q = k_p s + k_i, H_φ − θ̂/θ = N s²/(D P) and θ̂/θ − 1 = (Q N − P D)/(P D), so
+    eliminating θ̂ and ω̂ (times p P D) leaves J s² P D + K_q k_i (k_pω s + k_iω) N − p K_δ (Q N − P D) = 0.
+    Its roots include the FA-LESO's slow, lightly damped mode near ±jω_e, which the phase hardly excites (a
+    near pole–zero cancellation in H_φ); the speed loop's own modes have |Im| well below ω_e.
+    """
+    g = faleso_tf(k1, k2, omega_e)
+    jw = 1j * as_float(omega_e)
+    hh = TransferFunction(_poly_shift(g.num, jw), _poly_shift(g.den, jw))
+    n_c, d_c = hh.num, hh.den
+    # H_φ = (H + H̄)/2 = (N D̄ + N̄ D)/(2 D D̄): real polynomials
+    nn = jnp.real(jnp.polymul(n_c, jnp.conj(d_c)) + jnp.polymul(jnp.conj(n_c), d_c)) / 2
+    dd = jnp.real(jnp.polymul(d_c, jnp.conj(d_c)))
+    kq = 1.5 * p * (psi_f + (Ld - Lq) * i_d)
+    kd = 1.5 * p * (psi_f * i_d + (Ld - Lq) * (i_d * i_d - i_q * i_q))
+    one, zero = jnp.ones_like(as_float(kp)), jnp.zeros_like(as_float(kp))
+    pp = jnp.stack([one, kp * one, ki * one])
+    qq = jnp.stack([kp * one, ki * one])
+    t1 = J * jnp.polymul(jnp.polymul(jnp.stack([one, zero, zero]), pp), dd)  # J s² P D
+    t2 = kq * ki * jnp.polymul(jnp.stack([kp_w * one, ki_w * one]), nn)  # K_q k_i (k_pω s + k_iω) N
+    t3 = -p * kd * jnp.polysub(jnp.polymul(qq, nn), jnp.polymul(pp, dd))  # −p K_δ (Q N − P D)
+    poly = jnp.polyadd(jnp.polyadd(t1, t2), t3)
+    return jnp.roots(poly, strip_zeros=False)
 
 
 def position_error_rs(delta_rs, i_d, i_q, e_ex):

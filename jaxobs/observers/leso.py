@@ -30,7 +30,11 @@ the loop the phase seen by the PLL is filtered by the FA-LESO's envelope respons
 stability with the complex Routh test and its phase margin.  ω̂ is fed back to
 the GI-LESO's resonance and to the FA-LESO's rotation term: a frequency-adaptation
 loop, stable here because the PLL is slower (ω_b = 2π·15 rad/s by default) than
-the LESO (k2 = 100π).
+the LESO (k2 = 100π).  Why 15 Hz: 002's speed ramp (4.5°, 13 r/min) pins it — a type-2 PLL's
+speed-to-angle error ratio grows with ω_b, and ours at 15 Hz gives 4.1°, 13.2 r/min, at 30 Hz 1.2°,
+5.7 r/min — and it keeps 40.5° of phase margin through the FA-LESO (23.6° at 30 Hz).  Its price: a
+5 Hz speed loop closed through it is barely damped (ζ ≈ 0.07 at 10 Hz), and unstable under field
+weakening (:func:`jaxobs.linear.faleso_speed_loop_poles`; docs/papers.md, paper 002's load step).
 
 Sampling.  Like the flux observers, at t_k the observer integrates the period
 [t_{k−1}, t_k] with the voltage applied over it (held) and the current

@@ -8,6 +8,9 @@ the panels, and the time window.  The panels of paper 000's figures:
 - ``position``: θ̂e over θe (rad, wrapped to [0, 2π)) and the error θ̂e − θe (rad): Figs 12, 15, 17;
 - ``dynamic``: the speed estimate over the speed (r/min) and the error (rad): Figs 18–20;
 - ``flux``: ψ̂α, ψ̂β over the rotor's ψf cos θe, ψf sin θe (Wb), θ̂e over θe and the error: Figs 16, 21–23.
+
+Paper 001's Tests 1–3 and A–E (:func:`fll_figure`): a column per FLL, f̂ over f (Hz), V̂ over V (p.u.) and
+the phase error (deg), around the test's event.
 """
 
 from __future__ import annotations
@@ -18,9 +21,9 @@ from pathlib import Path
 import numpy as np
 
 from ..metrics import wrap
-from ..plot import Panel, Series, drive_events, paper_figure
+from ..plot import Panel, Series, drive_events, fll_event_text, paper_figure
 
-__all__ = ["FLUX_FIGURES", "flux_figure", "flux_figures"]
+__all__ = ["FLUX_FIGURES", "LESO_FIGURES", "drive_figure", "flux_figure", "flux_figures", "fll_figure"]
 
 _ALL = ("integrator", "LPF", "SOIFO", "second-order SOIFO")
 _THREE = ("LPF", "SOIFO", "second-order SOIFO")
@@ -72,6 +75,21 @@ FLUX_FIGURES = (
 )
 
 
+# Paper 002's Figs 16-17 (the FA-LESO closing the loop; each LESO's estimate beside it), as FLUX_FIGURES
+_LESO = ("C-LESO", "GI-LESO", "FA-LESO")
+LESO_FIGURES = (
+    (
+        "speed ramp 300-600-840-600-300 r/min",
+        "leso_fig16_speed_ramp_layout.png",
+        "Fig. 16",
+        _LESO,
+        "dynamic",
+        (0.4, None),
+    ),
+    ("load step 0-80 % at 600 r/min", "leso_fig17_load_step_layout.png", "Fig. 17", _LESO, "dynamic", (0.4, None)),
+)
+
+
 def _panels(sol, i, kind, mask, p, psi_f):
     o = sol.outputs.obs.each[i]
     th = np.asarray(sol.outputs.theta_e)[mask]
@@ -104,10 +122,13 @@ def _panels(sol, i, kind, mask, p, psi_f):
     return [flux, angle, err]
 
 
-def flux_figure(sol, spec, names, p: int, psi_f: float, path=None):
-    """Draw one row of :data:`FLUX_FIGURES` from the run ``sol`` whose bank holds the observers ``names``
-    (:data:`jaxobs.reproduce.flux.OBSERVER_NAMES`); ``p`` pole pairs, ``psi_f`` the rotor flux (Wb)."""
-    key, _, fig, methods, kind, (start, stop) = spec
+def drive_figure(sol, names, methods, kind, window, title, p: int, psi_f: float | None = None, path=None):
+    """A drive run in its paper's layout: a column for each of ``methods`` (names in ``names``, the order of
+    the run's observer bank), the panels of ``kind`` (module doc; ``flux`` needs the rotor flux ``psi_f``, Wb),
+    over ``window`` = (start, stop) s (a negative start counts back from the end, stop None: the end); ``p``
+    pole pairs.  The events of the window are named.  Any bank's run: paper 000's flux observers, paper 002's
+    LESOs (whose outputs have ``theta`` and ``omega`` too: ``position`` and ``dynamic``)."""
+    start, stop = window
     t = np.asarray(sol.t)
     t0 = t[-1] + start if start < 0 else start
     t1 = t[-1] if stop is None else stop
@@ -115,7 +136,14 @@ def flux_figure(sol, spec, names, p: int, psi_f: float, path=None):
     columns = [(m, _panels(sol, names.index(m), kind, mask, p, psi_f)) for m in methods]
     events = drive_events(t[mask], sol.outputs._replace(**_sliced(sol.outputs, mask)), float(t0))
     shared = tuple(range(len(columns[0][1]) - 1))  # every panel but the error's
-    return paper_figure(t[mask], columns, f"Paper 000 {fig} (ours): {key}", path, events=events, shared=shared)
+    return paper_figure(t[mask], columns, title, path, events=events, shared=shared)
+
+
+def flux_figure(sol, spec, names, p: int, psi_f: float, path=None):
+    """Draw one row of :data:`FLUX_FIGURES` from the run ``sol`` whose bank holds the observers ``names``
+    (:data:`jaxobs.reproduce.flux.OBSERVER_NAMES`); ``p`` pole pairs, ``psi_f`` the rotor flux (Wb)."""
+    key, _, fig, methods, kind, window = spec
+    return drive_figure(sol, names, methods, kind, window, f"Paper 000 {fig} (ours): {key}", p, psi_f, path)
 
 
 def _sliced(out, mask):
@@ -133,3 +161,35 @@ def flux_figures(traces, names, p: int, psi_f: float, out: Path):
             flux_figure(traces[spec[0]], spec, names, p, psi_f, path)
             paths.append(path)
     return paths
+
+
+def fll_figure(traces, i: int, test: str, t_event: float, path=None, span: float | None = None):
+    """Paper 001's Test ``test`` in its layout: ``traces`` {FLL name: run batched over tests} (as
+    :func:`jaxobs.demo.fll_demo` returns them), ``i`` the test's index in the batch, the event at ``t_event``
+    (s); drawn from 50 ms before it to ``span`` s after (default 0.3 s for a step, 1.2 s for a steady
+    disturbance)."""
+    span = (0.3 if test in ("1", "2", "3", "A", "B") else 1.2) if span is None else span
+    columns, t_shown = [], None
+    for name, sol in traces.items():
+        t = np.asarray(sol.t[i])
+        mask = (t >= t_event - 0.05) & (t <= t_event + span)
+        out = sol.outputs
+        err = np.degrees(np.asarray(wrap(out.obs.theta[i] - out.truth.theta[i])))
+        f = Panel(
+            "f̂, f (Hz)",
+            (
+                Series("f", np.asarray(out.truth.omega[i])[mask] / (2 * math.pi), actual=True),
+                Series("f̂", np.asarray(out.obs.omega[i])[mask] / (2 * math.pi)),
+            ),
+        )
+        v = Panel(
+            "V̂, V (p.u.)",
+            (
+                Series("V", np.asarray(out.truth.amplitude[i])[mask], actual=True),
+                Series("V̂", np.asarray(out.obs.amplitude[i])[mask]),
+            ),
+        )
+        columns.append((name, [f, v, Panel("θ̂ − θ (deg)", (Series("error", err[mask]),), zero=True)]))
+        t_shown = t[mask]
+    title = f"Paper 001 Test {test} (ours): {fll_event_text(test)} at t = {t_event:g} s"
+    return paper_figure(t_shown, columns, title, path, events=[(t_event, fll_event_text(test))], shared=(0, 1, 2))

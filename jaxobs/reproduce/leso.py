@@ -127,6 +127,46 @@ def _ramp_rows(name, sol, t, par, inv, i=2):
     ]
 
 
+def _speed_mode_rows(name, par, rpm, i_d, speed_hz=papers.BENCH_SPEED_HZ):
+    """The least damped pole of the bench's speed loop (I-P at 2π·``speed_hz`` rad/s) closed through the
+    FA-LESO's PLL at ``rpm`` and i_d (A) (:func:`jaxobs.linear.faleso_speed_loop_poles`): its damping ratio
+    and frequency (Hz)."""
+    kp, ki = linear.pll_gains(2 * math.pi * papers.LESO_PLL_HZ)
+    a = 2 * math.pi * speed_hz
+    kp_w, ki_w = 2 * a * float(par.J) / float(par.kt), a * a * float(par.J) / float(par.kt)
+    we = par.p * rpm * D.RPM
+    r = np.asarray(
+        linear.faleso_speed_loop_poles(
+            K1_FA, K2_FA, we, kp, ki, kp_w, ki_w,
+            p=par.p, psi_f=float(par.psi_f), Ld=float(par.Ld), Lq=float(par.Lq), J=float(par.J), i_d=i_d,
+        )
+    )  # fmt: skip
+    r = r[np.abs(r.imag) < we / 2]  # without the FA-LESO's slow mode at ±jωe
+    m = r[np.argmax(r.real)]
+    return [
+        dict(
+            experiment=name,
+            observer="drive",
+            metric="speed_mode_zeta",
+            unit="1",
+            paper=None,
+            ours=float(-m.real / abs(m)),
+        ),
+        dict(
+            experiment=name,
+            observer="drive",
+            metric="speed_mode_hz",
+            unit="Hz",
+            paper=None,
+            ours=float(abs(m.imag) / (2 * math.pi)),
+        ),
+    ]
+
+
+# The speed loop (Hz) of the sensorless ramp on a 330 V link: half the bench's, so that the speed loop closed
+# through the 15 Hz PLL stays damped with the field weakening's i_d (jaxobs.linear.faleso_speed_loop_poles).
+SENSORLESS_FW_SPEED_HZ = 2.5
+
 # 002 Fig. 18: the observer's R̂s, then L̂q, ramped 1 → 1.5 → 0.5 → 1 p.u. during one run at rated load,
 # 300 r/min (jaxobs.drive.ParameterDrift; the FOC keeps the nominal machine).  Times (s) and factors (p.u.);
 # the plateaus [0.85, 1.0) s at 1.5 and [1.95, 2.1) s at 0.5 p.u. are scored after 0.15 s of settling.
@@ -195,10 +235,11 @@ def _fig18_rows(run, par):
     return rows
 
 
-# the runs below: 3 steady speeds, 2 harmonic loads, the speed ramp, the load step, 4 mismatches, Fig. 18's
-# two ramps (the progress bar's total; tests/test_progress.py checks a run makes exactly these many steps)
+# the runs below: 3 steady speeds, 2 harmonic loads, the speed ramp (and on 330 V), the load step, 4
+# mismatches, Fig. 18's two ramps (the progress bar's total; tests/test_progress.py checks a run makes
+# exactly these many steps)
 # (the ramp and the load step once per closing observer, and the C-LESO closing at half load)
-N_EXPERIMENTS = 3 + 2 + 1 + 3 + 3 + 4 + 2
+N_EXPERIMENTS = 3 + 2 + 1 + 3 + 1 + 3 + 4 + 2
 
 
 def run_leso_experiments(progress=None):
@@ -309,6 +350,20 @@ def run_leso_experiments(progress=None):
         sol, t = run(name, par, par, 300, 3.6, prof, inverter=inv, field_weakening=D.VoltageFeedbackFW(), primary=i)
         rows += _ramp_rows(name, sol, t, par, inv, i)
 
+    # --- the same ramp on a 330 V link, where the field weakening acts at 840 r/min (i_d ≈ −6.4 A), the
+    # FA-LESO closing the loop.  With the bench's 5 Hz speed loop the drive leaves 840 r/min (a lagging
+    # estimate turns the negative i_d into accelerating torque: the speed loop's 9.4 Hz pair has Re s > 0,
+    # rows speed_mode_*); the speed loop at 2.5 Hz (SENSORLESS_FW_SPEED_HZ) is damped there and holds.
+    inv = D.Inverter(udc=330.0)
+    name = "speed ramp 300-600-840-600-300 r/min, 330 V dc link, speed loop 2.5 Hz"
+    sol, t = run(
+        name, par, par, 300, 3.6, prof, inverter=inv, field_weakening=D.VoltageFeedbackFW(),
+        alpha_s=2 * math.pi * SENSORLESS_FW_SPEED_HZ,
+    )  # fmt: skip
+    rows += _ramp_rows(name, sol, t, par, inv, 2)
+    rows += _speed_mode_rows(name, par, 840, -6.4, SENSORLESS_FW_SPEED_HZ)
+    rows += _speed_mode_rows(name + " (at the bench's 5 Hz)", par, 840, -6.4)
+
     # --- load step 0 -> 80 % -> 0 at 600 r/min (Fig. 17): 3.2° is the FA-LESO's, 5 r/min all three's
     for i in (2, 0, 1):
         name = closing("load step 0-80 % at 600 r/min", i)
@@ -324,6 +379,21 @@ def run_leso_experiments(progress=None):
         )
         m = t >= 0.55
         rows += _closing_rows(name, sol, i, par, m, 3.2 if i == 2 else None, 5.0)
+        if i == 2:
+            # the FA-LESO's own part: the error of its BEMF's angle, before the PLL (docs/papers.md)
+            o = sol.outputs
+            emf = np.degrees(np.asarray(wrap(o.obs.each[2].theta_emf - o.theta_e)))
+            rows.append(
+                dict(
+                    experiment=name,
+                    observer="FA-LESO",
+                    metric="max_abs_emf",
+                    unit="deg",
+                    paper=None,
+                    ours=float(np.abs(emf[m]).max()),
+                )
+            )
+            rows += _speed_mode_rows(name, par, 600, 0.0)
 
     # --- Rs and Lq mismatch at 300 r/min, rated load (Fig. 18), against eqs (42)-(43)
     we = par.p * 300 * D.RPM
