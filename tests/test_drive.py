@@ -392,6 +392,21 @@ def test_sensorless_steady_start_holds_the_speed_within_half_a_percent_from_t0(n
         np.testing.assert_allclose(err[:, -1], err[:, 0], atol=0.05)
 
 
+def test_settled_for_gives_the_observer_ten_electrical_periods_at_the_lowest_speed():
+    """Drive.settled_for(ω_e): the steady start's settling phase covers SETTLE_PERIODS (10) electrical periods at
+    ω_e, the flux observers' time constants scaling with 1/ω_e (docs/stability.md); never shorter than the
+    drive's own settle; the rest of the drive unchanged; bad speeds named."""
+    par, drive = _bench("spmsm000")
+    w_e = par.p * 20 * D.RPM  # 20 r/min: 2π rad/s
+    longer = drive.settled_for(w_e)
+    assert D.SETTLE_PERIODS == 10.0 and longer.settle == pytest.approx(10 * 2 * math.pi / w_e, rel=1e-12)
+    assert (longer.foc, longer.sensorless, longer.handover, longer.n_sub) == (drive.foc, True, 0.0, drive.n_sub)
+    assert drive.settled_for(par.p * 2000 * D.RPM) is drive  # 0.01 s needed: the 0.2 s default stays
+    for bad in (0.0, -1.0, float("nan"), 0.5):  # 0.5 rad/s would need 126 s (> 60 s)
+        with pytest.raises(ValueError, match="omega_e_min"):
+            drive.settled_for(bad)
+
+
 def test_operating_point_under_an_angle_offset_carries_the_load_in_the_controllers_frame():
     """FOC.operating_point with the controller's frame 30° behind the rotor's (a lagging observer): the references
     (i_d* = 0, i_q*) rotated by −30° carry the load, and FOC.init's integrators produce the machine's voltage in

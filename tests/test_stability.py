@@ -8,6 +8,7 @@ the exponent's derivative in a gain against central differences.
 
 import math
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -15,7 +16,7 @@ import pytest
 
 import jaxobs
 from jaxobs import papers
-from jaxobs.drive import FOC, ClosedLoop, Drive, spmsm_paper000
+from jaxobs.drive import FOC, ClosedLoop, Drive, FOCInput, dq_to_ab, spmsm_paper000
 from jaxobs.drive.stability import (
     fll_frequency_soifo,
     fll_frequency_sosoifo,
@@ -251,7 +252,10 @@ def test_speed_schedule_makes_the_flux_observers_stable_at_400_and_200_rpm():
 
     @jax.jit
     def exponents(drive):
-        return jax.vmap(lambda sc: lyapunov(ClosedLoop(drive, bind_observer(obs, sc), sc)))(scs)
+        # the presets' settle and window (tuning/presets/sosoifo.toml [envelope]): the default 0.4 s window left
+        # both scheduled points marginal (−10.4 ± 18.7 and −6.1 ± 24.7 1/s) once verdicts carried a resolution
+        kw = dict(settle=0.5, window=1.0)
+        return jax.vmap(lambda sc: lyapunov(ClosedLoop(drive, bind_observer(obs, sc), sc), **kw))(scs)
 
     fixed = exponents(_drive())
     foc = FOC.imc(par, 2 * math.pi * papers.BENCH_CURRENT_HZ, ALPHA_S, speed_schedule=6.0)
@@ -259,3 +263,95 @@ def test_speed_schedule_makes_the_flux_observers_stable_at_400_and_200_rpm():
     assert not np.any(np.asarray(fixed.stable)), np.asarray(fixed.exponent)
     assert np.all(np.asarray(scheduled.stable)), np.asarray(scheduled.exponent)
     assert np.all(np.asarray(scheduled.exponent) < -3.0), np.asarray(scheduled.exponent)
+
+
+def test_scheduled_speed_loop_is_bumpless_on_a_reference_step():
+    """FOC(speed_schedule=N) moves k_pω with the reference; the integrator takes up that change, so a reference
+    step does not step the I-P's output −k_pω ω̂ + ∫ (before the fix a +2 % step at 20 r/min cut i_q* by 2 % of
+    k_pω ω̂: the speed first fell, and under load that kick lost the drive, docs/stability.md).  The gain the
+    next samples use is the new one."""
+    par = _machine()
+    foc = FOC.imc(par, 2 * math.pi * papers.BENCH_CURRENT_HZ, ALPHA_S, speed_schedule=6.0).bind(par, 300.0)
+    w = 20.0 * math.pi / 30
+    op = foc.operating_point(par, w, w, 0.0, 4.67)
+    cs = foc.init(op)
+    i_a, i_b = dq_to_ab(op.i_d, op.i_q, 0.0)  # the rotor at θe = 0, on its operating point
+
+    def out(ref):  # a speed-loop sample (k = 0) with the reference at ``ref``
+        return foc.step(cs, FOCInput(0, i_a, i_b, 0.0, par.p * w, w, ref))
+
+    s0, o0 = out(w)
+    s1, o1 = out(1.02 * w)
+    kp0, kp1 = float(foc.speed_gains(w)[0]), float(foc.speed_gains(1.02 * w)[0])
+    assert kp1 == pytest.approx(1.02 * kp0, rel=1e-12)  # the schedule moved the gain...
+    assert float(o1.iq_ref) == pytest.approx(float(o0.iq_ref), abs=1e-12)  # ...and the output did not jump
+    assert abs((kp1 - kp0) * w) > 1e-5  # the jump the schedule would have made
+    assert float(s1.kp_w) == pytest.approx(kp1, rel=1e-12) and float(s0.kp_w) == pytest.approx(kp0, rel=1e-12)
+
+
+@pytest.mark.slow
+def test_sosoifo_holds_20_rpm_sensorless_from_a_settled_start():
+    """Paper 000 Figs 16-17: the second-order SOIFO sensorless at 20 r/min (1 % of rated), no load.  With the speed
+    loop scheduled at ωe*/6 and the observer settled over 10 electrical periods (Drive.settled_for), a 3 s run
+    holds |ω/ω* − 1| ≤ 0.5 % from t = 0 and the position error within 1°; the Lyapunov verdict over a window of
+    12/α (11.5 s) is stable and resolved, at the linear model's slowest pole (−0.60 1/s).  The 0.2 s default settle (0.2
+    periods) starts the observer 41° off and leaves the band: the weakly damped ring of the issue."""
+    par = _machine()
+    foc = FOC.imc(par, 2 * math.pi * papers.BENCH_CURRENT_HZ, ALPHA_S, speed_schedule=6.0)
+    w_e = par.p * 20.0 * math.pi / 30
+    settled = Drive(foc, sensorless=True).settled_for(w_e)
+    assert settled.settle == pytest.approx(10 * 2 * math.pi / w_e)
+    sc = _one(_scenarios([(20.0, 0.0)]))
+    obs = bind_observer(_sosoifo(), sc)
+
+    def band(drive):
+        o = jaxobs.simulate(ClosedLoop(drive, obs, sc), 3.0).outputs
+        dev = jnp.max(jnp.abs(o.omega_m / o.omega_m_ref - 1.0))
+        return dev, jnp.degrees(jnp.max(jnp.abs(jaxobs.metrics.wrap(o.obs.theta - o.theta_e))))
+
+    dev, err = (float(x) for x in eqx.filter_jit(band)(settled))
+    assert dev <= 5e-3 and err <= 1.0, (dev, err)
+    dev0, err0 = (float(x) for x in eqx.filter_jit(band)(Drive(foc, sensorless=True)))
+    assert dev0 > 5e-3 and err0 > 10.0, (dev0, err0)  # the 0.2 s settle: outside the band
+    alpha = 2 * float(foc.speed_gains(20.0 * math.pi / 30)[1] / foc.speed_gains(20.0 * math.pi / 30)[0])
+    # the window envelope() uses at its lowest speed: 12/α (11.5 s), so that its thirds span the slow pair
+    r = jax.jit(lambda s: lyapunov(ClosedLoop(settled, obs, s), settle=0.5, warmup=1 / alpha, window=12 / alpha))(sc)
+    kt = float(par.kt)
+    kp, ki = (float(g) for g in foc.speed_gains(20.0 * math.pi / 30))
+    fll = fll_frequency_sosoifo(papers.SECOND_ORDER_SOIFO_K1, papers.SECOND_ORDER_SOIFO_K2, float(obs.lam), w_e)
+    lin = linear_speed_loop(fll, J=float(par.J), kt=kt, kp_w=kp, ki_w=ki)
+    slowest = float(jnp.max(lin.loop_poles.real))
+    print(
+        f"20 r/min: dev {dev:.2e} err {err:.3f} deg; 0.2 s settle: dev {dev0:.3f} err {err0:.1f} deg; "
+        f"exponent {float(r.exponent):+.3f} ± {float(r.resolution):.3f} 1/s (linear {slowest:+.3f}), "
+        f"orbit dev {float(r.speed_dev):.1e}"
+    )
+    assert bool(lin.loop_stable) and slowest == pytest.approx(-0.60, abs=0.02), slowest
+    assert bool(r.stable) and float(r.speed_dev) < 5e-3, (float(r.exponent), float(r.resolution), float(r.speed_dev))
+    assert abs(float(r.exponent) - slowest) < 0.1, (float(r.exponent), slowest)
+
+
+@pytest.mark.slow
+def test_loaded_low_speed_steady_start_is_steady_from_t0():
+    """Issue 26.6 at low speed: the sosoifo preset's drive (speed_schedule = 6) at 144 r/min, 0 to 14 N·m, started
+    steady with the observer settled over 10 electrical periods (Drive.settled_for: 1.4 s) holds |ω/ω* − 1| ≤ 0.5 %
+    from t = 0.  With the 0.2 s default (1.4 periods) the observer started 14° off and the loaded points dipped
+    10-54 % (the envelope's "not steady" loaded 144 r/min points)."""
+    par = _machine()
+    foc = FOC.imc(par, 2 * math.pi * papers.BENCH_CURRENT_HZ, ALPHA_S, speed_schedule=6.0)
+    scs = _scenarios([(144.0, ld) for ld in (0.0, 4.67, 9.33, 14.0)])
+    obs = _sosoifo()
+
+    @eqx.filter_jit
+    def dev(drive):
+        def one(sc):
+            o = jaxobs.simulate(ClosedLoop(drive, bind_observer(obs, sc), sc), 0.5).outputs
+            return jnp.max(jnp.abs(o.omega_m / o.omega_m_ref - 1.0))
+
+        return jax.vmap(one)(scs)
+
+    settled = np.asarray(dev(Drive(foc, sensorless=True).settled_for(par.p * 144.0 * math.pi / 30)))
+    short = np.asarray(dev(Drive(foc, sensorless=True)))
+    print("144 r/min max |w/w* - 1|: settled", settled, "0.2 s settle", short)
+    assert np.all(settled <= 5e-3), settled
+    assert np.all(short[1:] > 0.05), short  # the loaded points of the old start

@@ -42,6 +42,7 @@ from .latency import AtUse as AtUse
 from .latency import Latency as Latency
 from .latency import PeriodStart as PeriodStart
 from .latency import PWMCentre as PWMCentre
+from .loop import SETTLE_PERIODS as SETTLE_PERIODS
 from .loop import ClosedLoop as ClosedLoop
 from .loop import Drive as Drive
 from .loop import DriveOutput as DriveOutput

@@ -207,6 +207,7 @@ class ControllerState(eqx.Module):
     t_closed: jax.Array  # time since the switch, s
     id_hand: jax.Array  # the d-current at the switch (in the given frame), A
     id_fw: jax.Array  # field weakening's Δi_d (≤ 0; 0 without field weakening), A
+    kp_w: jax.Array  # the speed loop's k_pω at its last sample (a scheduled gain's bumpless change), A/(rad/s)
 
 
 class FOCInput(NamedTuple):
@@ -401,6 +402,7 @@ class FOC(AbstractComponent):
         rest = dict(
             theta_f=z + theta_f0, omega_f=z, t_at_switch=z, mode=mode, d_lp=z, t_agree=z, t_closed=z, id_hand=z, id_fw=z
         )
+        rest["kp_w"] = z + self.speed_gains(jnp.zeros_like(z) if op is None else op.omega_m_ref)[0]
         if op is None or self.startup is not None:
             return ControllerState(int_d=z, int_q=z, int_w=z, iq_ref=z, **rest)
         est = self.est
@@ -525,6 +527,13 @@ class FOC(AbstractComponent):
         run_speed = (k % self.speed_every) == 0
         tw = ts * self.speed_every
         e_w = omega_m_ref - omega_m
+        if self.speed_schedule > 0:
+            # Bumpless schedule: the integrator takes up the change of k_pω (b ω* − ω̂).  Without it a +2 % reference
+            # step cut the I-P's −k_pω ω̂ + ∫ by 2 % of k_pω ω̂, and at 20 r/min under load that kick lost the drive
+            # (docs/stability.md).  Not at the I-f switch, where the integrator is set afresh.
+            bump = (cs.kp_w - kp_w) * (self.setpoint_weight * omega_m_ref - omega_m)
+            keep = run_speed & closed if startup is None else run_speed & closed & ~switch
+            int_w0 = int_w0 + jnp.where(keep, bump, 0.0)
         unsat = kp_w * (self.setpoint_weight * omega_m_ref - omega_m) + int_w0
         iq_sat = jnp.clip(unsat, -self.i_max, self.i_max)
         # conditional integration: freeze while saturated and the error pushes further
@@ -591,6 +600,7 @@ class FOC(AbstractComponent):
             t_closed=t_closed,
             id_hand=id_hand,
             id_fw=id_fw,
+            kp_w=jnp.where(run_speed, kp_w, cs.kp_w),
         )
         return new, FOCOutput(
             u_a=u_a, u_b=u_b, id_ref=id_ref, iq_ref=iq_ref, theta=jnp.where(mode == 1, theta, theta_f)

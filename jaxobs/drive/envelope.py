@@ -51,6 +51,7 @@ from ..runner import run_scenarios
 from ..scenarios import Grid
 from ..sharding import batch_mesh
 from . import ClosedLoop, Drive, PMSMParams, drive_speed_limit_rpm
+from .loop import SETTLE_PERIODS
 from .stability import lyapunov
 
 __all__ = [
@@ -188,6 +189,14 @@ def _stability(drive, obs, scs, kw: tuple):
     return jax.vmap(lambda sc: lyapunov(ClosedLoop(drive, bind_observer(obs, sc), sc), **dict(kw)))(scs)
 
 
+def _speed_bandwidth(drive: Drive, machine: PMSMParams, speed_rpm: float) -> float:
+    """The speed loop's double-pole bandwidth α = 2 k_iω / k_pω (rad/s) at ``speed_rpm``: α_s, or less where
+    the FOC schedules it on the speed (FOC.speed_gains)."""
+    foc = drive.foc.bind(machine if drive.foc.est is None else drive.foc.est, drive.inverter.u_max)
+    kp, ki = foc.speed_gains(jnp.asarray(speed_rpm * 2.0 * math.pi / 60.0))
+    return 2.0 * float(ki) / float(kp)
+
+
 def _axis(name: str, vals, lo: float, hi: float, unit: str) -> np.ndarray:
     arr = np.asarray(vals, dtype=float)
     if arr.ndim != 1 or arr.size < 1 or not np.all(np.isfinite(arr)) or np.any(arr < lo) or np.any(arr > hi):
@@ -235,7 +244,9 @@ def envelope(
     if not drive.sensorless or drive.startup is not None:
         raise ValueError("envelope: drive must be sensorless and start steady (Drive(sensorless=True, startup=None))")
     n_max = drive_speed_limit_rpm(machine)
-    speeds = _axis("speeds_rpm", default_speeds(machine) if speeds_rpm is None else speeds_rpm, 1.0, n_max, "r/min")
+    # the lowest speed whose steady start (Drive.settled_for) fits the 60 s settle limit: SETTLE_PERIODS / p r/min
+    n_min = max(1.0, SETTLE_PERIODS / machine.p)
+    speeds = _axis("speeds_rpm", default_speeds(machine) if speeds_rpm is None else speeds_rpm, n_min, n_max, "r/min")
     lo_l, hi_l = DRIVE_STUDY_AXES["load_nm"][1]
     loads = _axis("loads_nm", default_loads(machine) if loads_nm is None else loads_nm, lo_l, hi_l, "N·m")
     if not (math.isfinite(horizon) and 0.5 <= horizon <= 20.0):
@@ -262,6 +273,26 @@ def envelope(
             f"envelope: stability has unknown keys {sorted(unknown)}; allowed: settle, warmup, window, n_dirs, tol"
         )
 
+    # A steady start at every point the loop can hold: the observer settles over SETTLE_PERIODS electrical periods
+    # (Drive.settled_for) of the lowest speed whose speed loop is slow enough for a speed estimate scaling with
+    # ω_e (a flux observer's FLL) to close it stably, ω_e ≥ 4 α (the linear boundary is 4.2-5.4 α,
+    # docs/stability.md).  With 0.2 s the flux observers started 14-41° off below 150 r/min under the scheduled
+    # loop.  Below that speed the loop cannot hold with such an observer whatever its start, and settling there
+    # for 10 periods would cost 3x the whole envelope (the settle is 2 passes, and the Lyapunov run's jvp).
+    w_es = [machine.p * float(s) * 2.0 * math.pi / 60.0 for s in speeds]
+    holdable = [w for s, w in zip(speeds, w_es) if w >= 4.0 * _speed_bandwidth(drive, machine, float(s))]
+    drive = drive.settled_for(holdable[0] if holdable else w_es[-1])
+    # The Lyapunov run spans the slowest speed loop.  With the loop scheduled on the speed (FOC.speed_schedule)
+    # its bandwidth α is |p ω*|/N at the lowest speed, 1.05 rad/s at 20 r/min on 000's SPMSM, and its slowest
+    # mode there a weakly damped pair −0.60 ± 2.67j 1/s (linear_speed_loop; period 2.5/α at N = 6).  A window
+    # whose thirds are shorter than that period sees the pair's wobble, not its decay (the resolution,
+    # jaxobs.drive.stability).  Measured with 000's second-order SOIFO at 20 r/min, no load: over 3 s (π/α)
+    # −0.29 ± 1.8 1/s (marginal), over 7.6 s (8/α) −0.58 ± 0.57, over 12 s −0.600 ± 0.13 (the linear model:
+    # −0.601).  So the window is at least 12/α and the warm-up 1/α (11.5 s and 1 s there; 0.38 s and 0.03 s
+    # for the bench's fixed 5 Hz loop, below the defaults: no change).
+    alpha = _speed_bandwidth(drive, machine, float(speeds[0]))
+    kw["window"] = max(float(kw["window"]), 12.0 / alpha)
+    kw["warmup"] = max(float(kw["warmup"]), 1.0 / alpha)
     sampler = Grid(axes)
     names, points = sampler.names, sampler.points()
 
@@ -347,7 +378,7 @@ def envelope(
     )
     for f in ("Rs", "Ld", "Lq", "psi_f", "p", "J", "T_rated", "n_rated"):
         ds.attrs[f"machine_{f}"] = float(getattr(machine, f))
-    ds.attrs.update(drive_ts=float(drive.ts))
+    ds.attrs.update(drive_ts=float(drive.ts), drive_settle=float(drive.settle))
     ds.attrs.update(provenance("jaxobs.drive.envelope.envelope"))
     return ds
 

@@ -37,6 +37,8 @@ block of steps at a time.
 
 from __future__ import annotations
 
+import dataclasses
+import math
 from typing import Any, ClassVar, NamedTuple
 
 import equinox as eqx
@@ -55,7 +57,16 @@ from .machine import dq_to_ab
 from .plant import PMSM, PlantInput, PlantState
 from .scenario import Scenario
 
-__all__ = ["Drive", "ClosedLoop", "LoopState", "DriveOutput", "LoopInput"]
+__all__ = ["Drive", "ClosedLoop", "LoopState", "DriveOutput", "LoopInput", "SETTLE_PERIODS"]
+
+# Electrical periods of steady measurements a sensorless steady start gives an observer whose settling scales
+# with the speed (Drive.settled_for).  The flux observers' filters and FLL have every time constant ∝ 1/ω_e
+# (jaxobs.observers.flux): the slowest pole of 000's second-order SOGI is −0.243 ω_e, so 10 periods (62.8 rad)
+# leave e^(−0.243·62.8) ≈ 2e-7 of its start-up transient.  Measured with 000's closed-form second-order SOIFO
+# (speed_schedule = 6, no load, docs/stability.md): the angle error at t = 0 at 20 r/min is 41° after 0.2 s
+# (0.2 periods), 4.1° after 3 s, 0.23° after 6 s and 0.002° after 10 s (10 periods); at 144 r/min 14° after
+# 0.2 s and 0.003° after 1.5 s (10.8 periods).
+SETTLE_PERIODS = 10.0
 
 
 class Drive(eqx.Module):
@@ -99,8 +110,8 @@ class Drive(eqx.Module):
         if not (handover >= 0.0):
             raise ValueError(f"Drive.handover must be >= 0 s, got {handover!r}")
         self.handover = float(handover)
-        if not (0.0 <= settle <= 10.0):
-            raise ValueError(f"Drive.settle must be in [0, 10] s, got {settle!r}")
+        if not (0.0 <= settle <= 60.0):
+            raise ValueError(f"Drive.settle must be in [0, 60] s, got {settle!r}")
         self.settle = float(settle)
         latency = Latency() if latency is None else latency
         if not isinstance(latency, Latency):
@@ -112,6 +123,29 @@ class Drive(eqx.Module):
     @property
     def ts(self) -> float:
         return self.foc.ts
+
+    def settled_for(self, omega_e_min: float) -> Drive:
+        """This drive with its settling phase (``settle``) at least :data:`SETTLE_PERIODS` electrical periods
+        long at the lowest electrical speed it will start at, ``omega_e_min`` (rad/s, > 0; a Python number:
+        the phase's length is static).
+
+        A steady start is only steady when the observer has settled.  The flux observers' time constants scale
+        with 1/ω_e, so the default 0.2 s is 0.2 electrical periods at 20 r/min on 000's SPMSM: the observer
+        starts 41° off and the drive rings for seconds (docs/stability.md, "20 r/min").  The phase is only
+        observer steps on synthetic measurements (cheap: 10 s of it costs about what 0.1 s of the loop does).
+        """
+        w = float(omega_e_min)
+        if not (math.isfinite(w) and w > 0.0):
+            raise ValueError(f"Drive.settled_for: omega_e_min must be a speed > 0 rad/s, got {omega_e_min!r}")
+        need = SETTLE_PERIODS * 2.0 * math.pi / w
+        if need <= self.settle:
+            return self
+        if need > 60.0:
+            raise ValueError(
+                f"Drive.settled_for: omega_e_min must be >= {SETTLE_PERIODS * 2 * math.pi / 60.0:.3g} rad/s "
+                f"({SETTLE_PERIODS:g} periods within the 60 s settle limit), got {w!r}"
+            )
+        return dataclasses.replace(self, settle=need)
 
 
 class LoopState(NamedTuple):
