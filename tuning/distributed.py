@@ -176,6 +176,10 @@ class SharedChunks:
     def total(self) -> int:
         return 0 if self.store is None else self.store.total
 
+    def retire(self) -> None:
+        if self.store is not None:
+            self.store.retire()
+
     def remove(self) -> None:
         if self.store is not None:
             self.store.remove()
