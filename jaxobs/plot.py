@@ -77,7 +77,7 @@ def fll_demo_figure(traces, tests, t_event, path=None):
             axes[i, 0].plot(1e3 * (t[m] - t_event), f_hat[i][m], lw=1, label=name)
             axes[i, 1].plot(1e3 * (t[m] - t_event), err[i][m], lw=1, label=name)
     for i, test in enumerate(tests):
-        axes[i, 0].set_ylabel(f"Test {test}\n$\\hat{{f}}$ (Hz)")  # mathtext: U+0302 drifts off the f
+        axes[i, 0].set_ylabel(f"Test {test}\n$\\hat{{\\mathrm{{f}}}}$ (Hz)")  # mathtext: U+0302 drifts off the f
         axes[i, 1].set_ylabel("θ̂ − θ (deg)")
         what = fll_event_text(test)
         for ax in axes[i]:

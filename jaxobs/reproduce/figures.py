@@ -177,10 +177,10 @@ def fll_figure(traces, i: int, test: str, t_event: float, path=None, span: float
         err = np.degrees(np.asarray(wrap(out.obs.theta[i] - out.truth.theta[i])))
         f = Panel(
             # mathtext's hat: DejaVu's combining circumflex (U+0302) hides in the f's hook, so "f̂" drew as "f"
-            r"$\hat{f}$, f (Hz)",
+            r"$\hat{\mathrm{f}}$, f (Hz)",
             (
                 Series("f", np.asarray(out.truth.omega[i])[mask] / (2 * math.pi), actual=True),
-                Series(r"$\hat{f}$", np.asarray(out.obs.omega[i])[mask] / (2 * math.pi)),
+                Series(r"$\hat{\mathrm{f}}$", np.asarray(out.obs.omega[i])[mask] / (2 * math.pi)),
             ),
         )
         v = Panel(
