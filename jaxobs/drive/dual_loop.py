@@ -29,9 +29,13 @@ The observer (``DriveInput``) is chosen by the mode: set 1's measured voltage an
 ``"individual"`` (002: "the LESOs are only applied to the first set"), the VSD αβ ones under ``"vsd"``.
 
 :class:`DualClosedLoop` is :class:`~jaxobs.drive.ClosedLoop`'s wiring for this machine (same step
-order: plant at t_k, sensors, observer, controller, inverter) with a steady start only: the machine
-at the scenario's speed and load (each set carrying half), the FOC integrators holding it, the observer
-from ``init_at(ω_e)`` converging on the encoder-run drive until ``drive.handover``.  No I-f start-up.
+order: plant at t_k, sensors, observer, controller, inverter), sharing its machinery through
+:class:`~jaxobs.drive.loop.AbstractDriveLoop`: the observer rebound each period under ``scenario.est_drift``,
+the encoder/observer hand-over, and the steady start: the machine at the scenario's speed and load (each set
+carrying half), the FOC integrators holding it, the observer settled on it for ``drive.settle`` s (0 by
+default: from ``init_at(ω_e)``, converging on the encoder-run drive until ``drive.handover``) and, closing
+the loop from t = 0, started where it settles.  The timing is the default one (no Latency); no I-f start-up
+(DualFOC has none).
 The scenario gives the profiles, sensors (applied to each set; set 2's noise from another key), dead
 time and ``est_par`` (what the observers assume: the per-set machine); the true machine is ``machine``.
 """
@@ -49,13 +53,13 @@ from .. import papers
 from .._discretize import RK4, AbstractRule, check_rule
 from .._math import wrap
 from .._measurements import DriveInput
-from .._system import AbstractSystem
 from .._validate import check_nonnegative, check_positive
-from ..observers import AbstractDriveObserver
 from .component import AbstractComponent
 from .control import FOC, ControllerState, FOCInput, OperatingPoint
 from .dual import DualPlantInput, DualPlantState, DualPMSM, DualPMSMParams, sets_to_vsd, vsd_to_sets
 from .hardware import Inverter
+from .latency import Latency
+from .loop import AbstractDriveLoop, settled_for
 from .machine import dq_to_ab
 from .scenario import Scenario
 
@@ -181,8 +185,11 @@ class DualDrive(eqx.Module):
     rule: AbstractRule = eqx.field(static=True)
     sensorless: bool = eqx.field(static=True)
     handover: float = eqx.field(static=True)  # sensorless: encoder until this time (s), observer after
+    # steady start: the observer's unscored settling phase before t = 0, s (Drive.settle; 0 here by default:
+    # the observer starts from init_at(ω_e) and converges on the encoder-run drive until the hand-over)
+    settle: float = eqx.field(static=True)
 
-    def __init__(self, ctrl, inverter=None, *, n_sub=2, rule=None, sensorless=False, handover=0.2):
+    def __init__(self, ctrl, inverter=None, *, n_sub=2, rule=None, sensorless=False, handover=0.2, settle=0.0):
         if not isinstance(ctrl, DualFOC):
             raise ValueError(f"DualDrive.ctrl must be a DualFOC, got {type(ctrl).__name__}")
         self.ctrl = ctrl
@@ -195,10 +202,24 @@ class DualDrive(eqx.Module):
         if not (0.0 <= handover <= 100.0):
             raise ValueError(f"DualDrive.handover must be in [0, 100] s, got {handover!r}")
         self.handover = float(handover)
+        if not (0.0 <= settle <= 60.0):
+            raise ValueError(f"DualDrive.settle must be in [0, 60] s, got {settle!r}")
+        self.settle = float(settle)
 
     @property
     def ts(self) -> float:
         return self.ctrl.foc.ts
+
+    @property
+    def latency(self) -> Latency:
+        """The dual loop's timing, always the default one (:class:`~jaxobs.drive.Latency`): the sample at t_k,
+        the voltage computed from it applied one period later."""
+        return Latency()
+
+    def settled_for(self, omega_e_min: float) -> DualDrive:
+        """This drive with its settling phase at least :data:`~jaxobs.drive.loop.SETTLE_PERIODS` electrical
+        periods at ``omega_e_min`` rad/s (:meth:`jaxobs.drive.Drive.settled_for`)."""
+        return settled_for(self, omega_e_min)
 
     @property
     def mode(self) -> str:
@@ -245,7 +266,7 @@ class DualLoopState(NamedTuple):
     u: tuple  # (u_a1, u_b1, u_a2, u_b2) to apply over the coming period, V
 
 
-class DualClosedLoop(AbstractSystem):
+class DualClosedLoop(AbstractDriveLoop):
     """The dual drive ``drive`` on the dual machine ``machine`` running ``scenario`` with ``observer``
     (None: the encoder).  ``scenario.par`` is not used (the true machine is ``machine``)."""
 
@@ -267,13 +288,15 @@ class DualClosedLoop(AbstractSystem):
             raise ValueError("DualClosedLoop: a sensorless drive needs an observer (observer=None is the encoder)")
         if scenario.est_par.p != machine.p:
             raise ValueError(f"DualClosedLoop.scenario.est_par.p must equal the machine's p ({machine.p})")
-        if scenario.est_drift is not None:  # not wired here (ClosedLoop rebinds its observer): refuse, not ignore
-            raise ValueError("DualClosedLoop.scenario.est_drift must be None (parameter drift runs on ClosedLoop)")
         self.drive, self.observer, self.scenario, self.machine = drive, observer, scenario, machine
 
     @property
     def ts(self) -> float:
         return self.drive.ts
+
+    @property
+    def pole_pairs(self):
+        return self.machine.p
 
     @property
     def plant(self) -> DualPMSM:
@@ -287,27 +310,31 @@ class DualClosedLoop(AbstractSystem):
         foc = c.foc.bind(c.foc.est, self.drive.inverter.u_max, None)
         return eqx.tree_at(lambda q: q.foc, c, foc)
 
-    def operating_point(self) -> OperatingPoint:
+    def operating_point(self, offset=0.0) -> OperatingPoint:
         """The steady state at the scenario's initial speed and load: each set carries half the load
-        (the FOC's operating point on the per-set machine), zero xy current."""
+        (the FOC's operating point on the per-set machine, its frame ``offset`` rad ahead of the rotor's),
+        zero xy current."""
         sc = self.scenario
         return self.controller.foc.operating_point(
-            self.machine.per_set(), sc.omega_m0, sc.speed_ref(0.0), sc.theta_e0, sc.load(0.0) / 2
+            self.machine.per_set(), sc.omega_m0, sc.speed_ref(0.0), sc.theta_e0, sc.load(0.0) / 2, offset
         )
 
-    def init(self) -> DualLoopState:
-        sc, foc = self.scenario, self.controller
-        op = self.operating_point()
-        plant = self.plant.init(op)
+    def _steady_voltage(self, op: OperatingPoint, theta):
+        """Each set's (u_α, u_β) at steady state (zero xy: the αβ voltage) over the period that starts where the
+        rotor is at ``theta``, computed a period before with the delay compensation: centred half a period on."""
         w_e = self.machine.p * op.omega_m
-        # the first period's voltage, computed at t_{−1} with the delay compensation: centred half a period on
-        lead = (0.5 if foc.foc.delay_compensation else -1.0) * w_e * self.ts
-        u_a, u_b = self.drive.inverter.limit(*dq_to_ab(op.u_d, op.u_q, op.theta_e + lead))
-        obs = None
-        if self.observer is not None:
-            obs = (
-                self.observer.init_at(w_e) if isinstance(self.observer, AbstractDriveObserver) else self.observer.init()
-            )
+        lead = (0.5 if self.drive.ctrl.foc.delay_compensation else -1.0) * w_e * self.ts
+        return dq_to_ab(op.u_d, op.u_q, theta + lead)
+
+    def init(self) -> DualLoopState:
+        """The steady start (:meth:`AbstractDriveLoop._steady_start`): the machine at the scenario's speed and
+        load, the observer settled on it for ``drive.settle`` s (from ``init_at(ω_e)`` when 0) on one set's
+        steady measurements, which are the αβ ones (xy = 0; under "vsd" the sensor noise of the mean of two
+        sets is √2 lower than what it settles on), and, sensorless without a hand-over, where it settles."""
+        sc, foc = self.scenario, self.controller
+        op, obs = self._steady_start(self.operating_point())
+        plant = self.plant.init(op)
+        u_a, u_b = self.drive.inverter.limit(*self._steady_voltage(op, op.theta_e))
         key = sc.sensors.init(op, key=sc.key)
         return DualLoopState(plant=plant, ctrl=foc.init(op), obs=obs, sensors=key, u=(u_a, u_b, u_a, u_b))
 
@@ -326,18 +353,8 @@ class DualClosedLoop(AbstractSystem):
             ua, ub, _, _ = sets_to_vsd(m1[0], m1[1], m2[0], m2[1])
             ia, ib, _, _ = sets_to_vsd(m1[2], m1[3], m2[2], m2[3])
             obs_in = DriveInput(ua, ub, ia, ib)
-        if self.observer is not None:
-            obs_state, obs_out = self.observer.step(state.obs, obs_in)
-        else:
-            obs_state, obs_out = None, None
-        w_e = self.machine.p * y.omega_m
-        if drive.sensorless:
-            use_obs = t >= drive.handover
-            th_c = jnp.where(use_obs, obs_out.theta, y.theta_e)
-            w_e_c = jnp.where(use_obs, obs_out.omega, w_e)
-            w_m_c = w_e_c / self.machine.p
-        else:
-            th_c, w_e_c, w_m_c = y.theta_e, w_e, y.omega_m
+        obs_state, obs_out = self._observe(state.obs, obs_in, t)
+        th_c, w_e_c, w_m_c = self._feedback(t, obs_out, y.theta_e, self.machine.p * y.omega_m, y.omega_m)
         ctrl, c = self.controller.step(
             state.ctrl, DualFOCInput(k, m1[2], m1[3], m2[2], m2[3], th_c, w_e_c, w_m_c, w_ref)
         )
