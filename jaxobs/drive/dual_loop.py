@@ -42,6 +42,7 @@ time and ``est_par`` (what the observers assume: the per-set machine); the true 
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from typing import Any, ClassVar, Literal, NamedTuple
 
@@ -51,7 +52,7 @@ import jax.numpy as jnp
 
 from .. import papers
 from .._discretize import RK4, AbstractRule, check_rule
-from .._math import wrap
+from .._math import safe_norm2, wrap
 from .._measurements import DriveInput
 from .._validate import check_nonnegative, check_positive
 from .component import AbstractComponent
@@ -117,19 +118,26 @@ class DualFOC(AbstractComponent):
     kp_xy: jax.Array  # V/A
     ki_xy: jax.Array  # V/(A·s)
     mode: Literal["vsd", "individual"] = eqx.field(static=True)
+    # the voltage the field weakening holds at its margin under "vsd": "ab", the αβ voltage (the FOC's own
+    # |u*|), or "set", each set's |z_αβ ± conj(z_xy)| (the larger), what each inverter must deliver (002's
+    # ref. [32] budgets the xy voltage too).  "individual" is per set either way (each set's FOC limits its own).
+    fw_voltage: Literal["ab", "set"] = eqx.field(static=True)
 
-    def __init__(self, foc, kp_xy=1.0, ki_xy=0.0, *, mode="vsd"):
+    def __init__(self, foc, kp_xy=1.0, ki_xy=0.0, *, mode="vsd", fw_voltage="ab"):
         if not isinstance(foc, FOC):
             raise ValueError(f"DualFOC.foc must be a FOC, got {type(foc).__name__}")
         if mode not in ("vsd", "individual"):
             raise ValueError(f"DualFOC.mode must be 'vsd' or 'individual', got {mode!r}")
+        if fw_voltage not in ("ab", "set"):
+            raise ValueError(f"DualFOC.fw_voltage must be 'ab' or 'set', got {fw_voltage!r}")
         self.foc = foc
         self.kp_xy = check_positive("kp_xy", kp_xy, "DualFOC")
         self.ki_xy = check_nonnegative("ki_xy", ki_xy, "DualFOC")
         self.mode = mode
+        self.fw_voltage = fw_voltage
 
     @classmethod
-    def imc(cls, est: DualPMSMParams, alpha_c, alpha_s, *, mode="vsd", **kw) -> DualFOC:
+    def imc(cls, est: DualPMSMParams, alpha_c, alpha_s, *, mode="vsd", fw_voltage="ab", **kw) -> DualFOC:
         """IMC current loops at ``alpha_c`` rad/s and the double-pole speed loop at ``alpha_s`` on ``est``.
 
         "vsd": :meth:`FOC.imc` on ``est.per_set()``, xy PIs k_p = α_c L̂ls, k_i = α_c R̂s.  "individual":
@@ -142,7 +150,7 @@ class DualFOC(AbstractComponent):
             raise ValueError(f"DualFOC.mode must be 'vsd' or 'individual', got {mode!r}")
         machine = est.per_set() if mode == "vsd" else est.set_self()
         foc = FOC.imc(machine, alpha_c, alpha_s, **kw)
-        return cls(foc, alpha_c * est.Lls, alpha_c * est.m.Rs, mode=mode)
+        return cls(foc, alpha_c * est.Lls, alpha_c * est.m.Rs, mode=mode, fw_voltage=fw_voltage)
 
     def init(self, op: OperatingPoint | None = None) -> DualFOCState:
         """The integrators that hold the drive at ``op`` (per set; zero xy), zeros for None."""
@@ -164,6 +172,13 @@ class DualFOC(AbstractComponent):
             int_x, u_x = self._xy_pi(cs.int_x, i_x, ts, foc.u_max)
             int_y, u_y = self._xy_pi(cs.int_y, i_y, ts, foc.u_max)
             u = vsd_to_sets(o.u_a, o.u_b, u_x, u_y)
+            fw = foc.field_weakening
+            if self.fw_voltage == "set" and fw is not None:
+                # the FOC's Δi_d update redone on the sets' voltage: the αβ one after the FOC's limit (a
+                # saturated αβ voltage already puts a set at or above u_max, so Δi_d still grows), plus xy
+                mag = jnp.maximum(safe_norm2(u[0], u[1]), safe_norm2(u[2], u[3]))
+                id_fw = fw.update(cs.main.id_fw, mag, foc.u_max, w_e, foc.est.Ld, foc.i_max, ts)
+                main = dataclasses.replace(main, id_fw=id_fw)
             new = DualFOCState(main=main, second=cs.second, int_x=int_x, int_y=int_y)
             return new, DualFOCOutput(*u, o.id_ref, o.iq_ref, o.theta)
         main, o1 = foc.step(cs.main, FOCInput(k, inp.i_a1, inp.i_b1, th, w_e, w_m, ref))
@@ -391,8 +406,10 @@ def dual_bench_drive(
     machine: DualPMSMParams,
     *,
     mode="vsd",
+    fw_voltage="ab",
     sensorless=True,
     handover=0.2,
+    settle=0.0,
     alpha_s=None,
     alpha_c=None,
     n_sub=2,
@@ -402,8 +419,10 @@ def dual_bench_drive(
     """The single IPMSM bench's drive (:func:`jaxobs.drive.bench_drive`) on the dual machine ``machine`` (what
     the controller assumes): the speed loop at ``alpha_s`` (default 2π·papers.BENCH_SPEED_HZ rad/s), IMC
     current loops at ``alpha_c`` (default 2π·papers.BENCH_CURRENT_HZ rad/s) in either mode, ``inverter``
-    (default 540 V) for both sets, ``foc_kw`` :class:`FOC`'s options (``field_weakening``, ...)."""
+    (default 540 V) for both sets, ``settle`` the observer's settling phase before t = 0 (s, :class:`DualDrive`),
+    ``fw_voltage`` the voltage the field weakening budgets (:class:`DualFOC`), ``foc_kw`` :class:`FOC`'s options
+    (``field_weakening``, ...)."""
     alpha_c = 2 * math.pi * papers.BENCH_CURRENT_HZ if alpha_c is None else alpha_c
     alpha_s = 2 * math.pi * papers.BENCH_SPEED_HZ if alpha_s is None else alpha_s
-    ctrl = DualFOC.imc(machine, alpha_c, alpha_s, mode=mode, **foc_kw)
-    return DualDrive(ctrl, inverter, sensorless=sensorless, handover=handover, n_sub=n_sub)
+    ctrl = DualFOC.imc(machine, alpha_c, alpha_s, mode=mode, fw_voltage=fw_voltage, **foc_kw)
+    return DualDrive(ctrl, inverter, sensorless=sensorless, handover=handover, settle=settle, n_sub=n_sub)
