@@ -252,7 +252,10 @@ def test_speed_schedule_makes_the_flux_observers_stable_at_400_and_200_rpm():
 
     @jax.jit
     def exponents(drive):
-        return jax.vmap(lambda sc: lyapunov(ClosedLoop(drive, bind_observer(obs, sc), sc)))(scs)
+        # the presets' settle and window (tuning/presets/sosoifo.toml [envelope]): the default 0.4 s window left
+        # both scheduled points marginal (−10.4 ± 18.7 and −6.1 ± 24.7 1/s) once verdicts carried a resolution
+        kw = dict(settle=0.5, window=1.0)
+        return jax.vmap(lambda sc: lyapunov(ClosedLoop(drive, bind_observer(obs, sc), sc), **kw))(scs)
 
     fixed = exponents(_drive())
     foc = FOC.imc(par, 2 * math.pi * papers.BENCH_CURRENT_HZ, ALPHA_S, speed_schedule=6.0)
