@@ -72,6 +72,11 @@ class ChunkStore:
         p = self.path
         if p.is_symlink() or (p.exists() and not p.is_dir()):
             raise ValueError(f"{str(p)!r} is not a folder of study chunks: refusing to use it")
+        trash = self._trash()
+        if self.resume and not p.exists() and (trash / META).is_file():
+            # killed after retire() and before study.nc's rename: the chunks are all there, under the trash name
+            os.replace(trash, p)
+        shutil.rmtree(trash, ignore_errors=True)  # a removal a kill cut short (study.nc written)
         if self.resume and (p / META).exists():
             try:
                 if (p / META).stat().st_size > 1 << 20 or not (p / META).is_file():
@@ -91,8 +96,12 @@ class ChunkStore:
                 if f.name.endswith(".tmp"):
                     f.unlink(missing_ok=True)
         else:
-            if self.resume and p.exists() and any(p.iterdir()):
+            # a kill while meta.json was written (before any chunk) leaves the folder empty or a temp file in it
+            if self.resume and p.exists() and any(not f.name.endswith(".tmp") for f in p.iterdir()):
                 self._refuse("has no meta.json")
+            if self.resume and p.exists():
+                for f in p.iterdir():
+                    f.unlink(missing_ok=True)
             if not self.resume and p.exists():
                 shutil.rmtree(p)
             p.mkdir(parents=True, exist_ok=True)
@@ -138,9 +147,26 @@ class ChunkStore:
             parts.append(part)
         return {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
 
+    def _trash(self) -> Path:
+        return self.path.with_name(f".{self.path.name}.removed")
+
+    def retire(self) -> None:
+        """Move the folder out of the way in one atomic rename, once the study's results are written to their
+        temp file and before that file's rename (then :meth:`remove`).
+
+        The results file and the folder cannot change together, and a kill between the two steps must not leave
+        both (a ``--resume`` would be refused for the results, with the chunks left behind) nor neither with the
+        chunks lost: killed after this rename and before the results', the next ``--resume`` renames the folder
+        back (:meth:`start`) and lays the study out from its chunks.  Killed while :meth:`remove` deletes, the
+        hidden leftover is no product and the next :meth:`start` deletes it."""
+        if self.path.exists():
+            shutil.rmtree(self._trash(), ignore_errors=True)
+            os.replace(self.path, self._trash())
+
     def remove(self) -> None:
-        """The folder and its chunks (once the study's results are written)."""
+        """The folder and its chunks (once the study's results are written; after :meth:`retire` or not)."""
         shutil.rmtree(self.path, ignore_errors=True)
+        shutil.rmtree(self._trash(), ignore_errors=True)
 
 
 def _atomic_write(path: Path, write) -> None:

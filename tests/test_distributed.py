@@ -236,6 +236,35 @@ def test_study_cli_refuses_what_cannot_be_split_before_joining(tmp_path, capsys)
     assert not (tmp_path / "o").exists()
 
 
+def test_process_0_that_cannot_join_gets_one_line(tmp_path, capsys, monkeypatch):
+    """Process 0 given --coordinator localhost:1 --resume (no --check) from main() after a JAX computation
+    ended in an internal error, exit 1 (JAX's RuntimeError: it must be joined before JAX starts); a port this
+    user may not serve (port 1 but as root) made JAX fail to start its service, an internal error too."""
+    import errno
+
+    import jax
+
+    jax.numpy.zeros(1).block_until_ready()  # JAX started: main() below cannot join (and so never waits)
+    study = tmp_path / "s.toml"
+    study.write_text('[designs.a]\nclosed_form = "sogi-fll"\n[axes]\ndc = [0.0]\n')
+    dist = ["--coordinator", "localhost:1", "--num-processes", "2", "--process-id", "0", "--timeout", "1"]
+    argv = ["study", str(study), "--out", str(tmp_path / "o"), "--resume", "--quiet", *dist]
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "this process cannot join the distributed run" in err[0], err
+    assert "--coordinator/--num-processes/--process-id" in err[0] and "fresh `jaxobs study`" in err[0]
+
+    def refused(self, addr):
+        raise PermissionError(errno.EACCES, "Permission denied")
+
+    monkeypatch.setattr(socket.socket, "bind", refused)  # what a user without root gets for port 1
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--coordinator localhost:1: port 1 is privileged here" in err[0], err
+    assert "pick a free port in " in err[0] and "..65535" in err[0]
+    assert not (tmp_path / "o").exists()
+
+
 def test_a_process_whose_coordinator_never_comes_gets_one_line(tmp_path, capsys):
     # process 1 checks that process 0 listens before JAX's runtime would abort it: exit 2, one line
     dist = ["--coordinator", f"127.0.0.1:{_free_port()}", "--num-processes", "2", "--process-id", "1"]

@@ -153,6 +153,62 @@ def test_a_partial_study_names_resume_and_another_studys_chunks_are_refused(tmp_
     assert "OK" in capsys.readouterr().out
 
 
+def test_store_killed_while_written_or_removed_resumes(tmp_path):
+    """Every instant a kill can cut the store's own writes: meta.json half written (a temp file only), after
+    retire() (the chunks under the hidden name, no results yet), remove() cut short (a hidden leftover)."""
+    args = dict(n=3, chunk=1, devices=1, designs=["a"])
+    (tmp_path / "c").mkdir()
+    (tmp_path / "c" / ".meta.json.x.tmp").write_text("{")  # killed inside start(): was "has no meta.json"
+    s = ChunkStore(tmp_path / "c", "fp", resume=True)
+    s.start(**args)
+    assert s.resumed == 0 and sorted(f.name for f in (tmp_path / "c").iterdir()) == ["meta.json"]
+    for i in range(3):
+        s.put("a", i, {"x": np.full(1, float(i))})
+    s.retire()  # then killed before the results' rename: neither the folder nor the results
+    assert not (tmp_path / "c").exists()
+    r = ChunkStore(tmp_path / "c", "fp", resume=True)
+    r.start(**args)
+    assert r.resumed == 3 and r.load("a")["x"].tolist() == [0.0, 1.0, 2.0]
+    r.retire()
+    (tmp_path / ".c.removed" / "meta.json").unlink()  # remove() cut short: what is left is no store
+    ChunkStore(tmp_path / "c", "fp", resume=True).start(**args)
+    assert sorted(f.name for f in tmp_path.iterdir()) == ["c"]
+    ChunkStore(tmp_path / "c", "fp").retire()
+    ChunkStore(tmp_path / "c", "fp").remove()
+    assert not list(tmp_path.iterdir())
+
+
+def test_a_kill_between_the_chunks_and_study_nc_resumes(tmp_path, capsys, monkeypatch):
+    """The slow kill test's rare failure, at its instant: killed after study.nc's rename and before the chunks
+    were removed, a --resume was refused ("study.nc exists") with study.chunks left beside it; killed the other
+    way round, the chunks are lost.  Now the chunks move aside before study.nc appears (ChunkStore.retire)."""
+    import contextlib
+
+    import jaxobs_tuning.cli as cli
+
+    path = tmp_path / "tiny.toml"
+    path.write_text(TINY)
+    ref, out = tmp_path / "ref", tmp_path / "o"
+    assert main(["study", str(path), "--out", str(ref), "--quiet"]) == 0
+    real = cli.atomic_path
+
+    @contextlib.contextmanager
+    def killed_before_rename(p):
+        with real(p) as tmp:
+            yield tmp
+            raise KeyboardInterrupt  # as a kill -9 there: study.nc not renamed, its temp folder gone
+
+    monkeypatch.setattr(cli, "atomic_path", killed_before_rename)
+    assert main(["study", str(path), "--out", str(out), "--quiet"]) == 130
+    assert not (out / "study.nc").exists() and not (out / STUDY_CHUNKS).exists()
+    monkeypatch.setattr(cli, "atomic_path", real)
+    capsys.readouterr()
+    assert main(["study", str(path), "--out", str(out), "--quiet", "--resume"]) == 0
+    assert "resumed: 36 chunks of 36" in capsys.readouterr().out
+    assert (out / "study.nc").read_bytes() == (ref / "study.nc").read_bytes()
+    assert sorted(f.name for f in out.iterdir() if f.name.startswith((".study", "study"))) == ["study.nc"]
+
+
 def _cli(*args):
     return [sys.executable, "-m", "jaxobs_tuning.cli", "study", *map(str, args), "--quiet"]
 

@@ -113,6 +113,8 @@ def _cmd_drive_study(name, designs, axes, opts, out: Path, quiet: bool, provenan
     drive_study_figure(ds, fig)
     with atomic_path(out / "study.nc") as tmp:  # last: a study.nc means a complete results folder
         ds.to_netcdf(tmp, engine="h5netcdf")
+        if store is not None:
+            store.retire()  # before study.nc's rename: never both on disk (a --resume refused, chunks left)
     if store is not None:
         store.remove()  # the results are in study.nc: nothing is left to resume
     n = int(ds.attrs["scenarios"])
@@ -223,6 +225,8 @@ def _run_study(name, designs, axes, opts, out: Path, quiet: bool, store=None) ->
     figs = study_figures(ds, out)
     with atomic_path(out / "study.nc") as tmp:  # last: a study.nc means a complete results folder
         ds.to_netcdf(tmp, engine="h5netcdf")
+        if store is not None:
+            store.retire()  # before study.nc's rename: never both on disk (a --resume refused, chunks left)
     if store is not None:
         store.remove()  # the results are in study.nc: nothing is left to resume
     n = int(ds.attrs["scenarios"])

@@ -78,6 +78,14 @@ def join_distributed(args):
         _check_port_free(args.coordinator)
     try:
         return jaxobs.init_distributed(*given, timeout=timeout)
+    except RuntimeError as e:
+        # JAX's own, raised before it waits for anyone: this process started JAX already (main() called
+        # from Python after a JAX computation, or a second join) or its coordinator service did not start
+        jax_says = " ".join(str(e).split())[:160].rstrip(".")
+        raise ValueError(
+            f"--coordinator/--num-processes/--process-id: this process cannot join the distributed run "
+            f"({jax_says}); run each process as a fresh `jaxobs study` command"
+        ) from None
     except ValueError as e:  # what JAX could not find: name the CLI's options and variables, not the function's
         jax_says = str(e.__context__ or e).rstrip(".")  # init_distributed raises from JAX's own ValueError
         raise ValueError(
@@ -99,6 +107,20 @@ def _check_port_free(coordinator: str) -> None:
                 raise ValueError(
                     f"--coordinator {coordinator}: port {port} is in use on this machine: pick a free port"
                 ) from None
+            if e.errno in (errno.EACCES, errno.EPERM):  # JAX failed on it with an internal error
+                low = _unprivileged_port_start()
+                raise ValueError(
+                    f"--coordinator {coordinator}: port {port} is privileged here (this user may serve "
+                    f"{low}..65535 only): pick a free port in {low}..65535"
+                ) from None
+
+
+def _unprivileged_port_start() -> int:
+    """The lowest port a user without CAP_NET_BIND_SERVICE may bind (Linux's sysctl; 1024 elsewhere)."""
+    try:
+        return int(Path("/proc/sys/net/ipv4/ip_unprivileged_port_start").read_text())
+    except (OSError, ValueError):
+        return 1024
 
 
 @contextlib.contextmanager
@@ -175,6 +197,10 @@ class SharedChunks:
     @property
     def total(self) -> int:
         return 0 if self.store is None else self.store.total
+
+    def retire(self) -> None:
+        if self.store is not None:
+            self.store.retire()
 
     def remove(self) -> None:
         if self.store is not None:

@@ -50,11 +50,14 @@ from .loop import LoopInput as LoopInput
 from .loop import LoopState as LoopState
 from .machine import RPM as RPM
 from .machine import PMSMParams as PMSMParams
+from .machine import QSaturation as QSaturation
 from .machine import ab_to_dq as ab_to_dq
 from .machine import bemf_ab as bemf_ab
 from .machine import bemf_dq as bemf_dq
 from .machine import dq_to_ab as dq_to_ab
 from .machine import ipmsm_paper002 as ipmsm_paper002
+from .machine import lq_apparent as lq_apparent
+from .machine import lq_incremental as lq_incremental
 from .machine import plant_vf as plant_vf
 from .machine import spmsm_paper000 as spmsm_paper000
 from .machine import torque as torque

@@ -23,6 +23,17 @@ a5, a7 of the fundamental EMF):
 power balance, Te·ωm = (3/2) Re(e_dq i_dq*) + reluctance term:
 
     Te = (3/2) p [ψf Re(j(1 + a5 e^{−j6θe} + a7 e^{j6θe}) i_dq*) + (Ld − Lq) i_d i_q].
+
+Optional q-axis saturation (``PMSMParams(q_sat=QSaturation(i_sat, n))``, off by default; no
+cross-saturation): the q flux ψq = Lq(i_q) i_q with the apparent inductance
+
+    Lq(i_q) = Lq / (1 + (|i_q|/i_sat)^n)^(1/n)
+
+so ψq rises monotonically and levels off at Lq·i_sat.  The q equation then carries the incremental
+inductance dψq/di_q = Lq / (1 + (|i_q|/i_sat)^n)^(1 + 1/n) (always > 0, so the plant stays well posed at any
+current), the d equation's ωe ψq and the torque's reluctance term the apparent one; with ψq a function of
+i_q alone the co-energy torque is (3/2) p (ψd i_q − ψq i_d), the formula above with Lq(i_q).  ``Lq`` stays the
+unsaturated (small-current) value, the one an observer or FOC tuned on nameplate data assumes.
 """
 
 from __future__ import annotations
@@ -37,7 +48,61 @@ import jax.numpy as jnp
 from .. import papers
 from .._validate import check_nonnegative, check_positive, check_real
 
-__all__ = ["PMSMParams", "spmsm_paper000", "ipmsm_paper002", "plant_vf", "torque", "bemf_dq", "bemf_ab"]
+__all__ = [
+    "PMSMParams",
+    "QSaturation",
+    "lq_apparent",
+    "lq_incremental",
+    "spmsm_paper000",
+    "ipmsm_paper002",
+    "plant_vf",
+    "torque",
+    "bemf_dq",
+    "bemf_ab",
+]
+
+
+class QSaturation(eqx.Module):
+    """q-axis saturation Lq(i_q) = Lq / (1 + (|i_q|/i_sat)^n)^(1/n) (module doc).  ``i_sat`` (A, peak, > 0):
+    the current at which the apparent Lq has fallen to 2^(−1/n) of its small-current value; ``n`` (>= 1, 1):
+    the knee's sharpness.  Both leaves: differentiable.  E.g. ``QSaturation.at(0.8, i_rated)``: Lq down 20 %
+    at the rated current."""
+
+    i_sat: jax.Array  # A (> 0)
+    n: jax.Array  # 1 (>= 1)
+
+    def __init__(self, i_sat, n=2.0):
+        own = "QSaturation"
+        self.i_sat = check_positive("i_sat", i_sat, own)
+        self.n = check_real("n", n, lower=1.0, lower_open=False, upper=16.0, owner=own)
+
+    @classmethod
+    def at(cls, ratio, i_q, n=2.0) -> QSaturation:
+        """The saturation whose apparent Lq is ``ratio`` (in (0, 1)) of the small-current one at ``i_q`` (A)."""
+        ratio, i_q, n = float(ratio), float(i_q), float(n)
+        if not 0.0 < ratio < 1.0:
+            raise ValueError(f"QSaturation.at: ratio must be in (0, 1), got {ratio}")
+        if not i_q > 0.0:
+            raise ValueError(f"QSaturation.at: i_q must be > 0 A, got {i_q}")
+        return cls(i_q / (ratio**-n - 1.0) ** (1.0 / n), n)
+
+    def factor(self, i_q):
+        """(1 + (|i_q|/i_sat)^n) as an array (1 at i_q = 0)."""
+        return 1.0 + (jnp.abs(i_q) / self.i_sat) ** self.n
+
+
+def lq_apparent(par: PMSMParams, i_q):
+    """ψq / i_q, H: ``par.Lq`` without saturation (exactly, not a limit), else Lq / factor^(1/n)."""
+    if par.q_sat is None:
+        return par.Lq
+    return par.Lq * par.q_sat.factor(i_q) ** (-1.0 / par.q_sat.n)
+
+
+def lq_incremental(par: PMSMParams, i_q):
+    """dψq / di_q, H: ``par.Lq`` without saturation, else Lq / factor^(1 + 1/n)."""
+    if par.q_sat is None:
+        return par.Lq
+    return par.Lq * par.q_sat.factor(i_q) ** (-1.0 - 1.0 / par.q_sat.n)
 
 
 class PMSMParams(eqx.Module):
@@ -54,9 +119,15 @@ class PMSMParams(eqx.Module):
     T_rated: jax.Array  # rated torque, N·m (> 0)
     n_rated: jax.Array  # rated speed, r/min (> 0)
     p: int = eqx.field(static=True)  # pole pairs
+    # q-axis saturation of the machine (None: linear, Lq constant; a None field adds no leaf, so a machine
+    # without it is the same pytree, and computes the same numbers, as before the option existed)
+    q_sat: QSaturation | None = None
 
-    def __init__(self, Rs, Ld, Lq, psi_f, J, p, *, B=0.0, a5=0.0, a7=0.0, T_rated=1.0, n_rated=1000.0):
+    def __init__(self, Rs, Ld, Lq, psi_f, J, p, *, B=0.0, a5=0.0, a7=0.0, T_rated=1.0, n_rated=1000.0, q_sat=None):
         own = "PMSMParams"
+        if q_sat is not None and not isinstance(q_sat, QSaturation):
+            raise ValueError(f"{own}.q_sat must be a QSaturation or None, got {type(q_sat).__name__}")
+        self.q_sat = q_sat
         self.Rs = check_nonnegative("Rs", Rs, own)
         self.Ld = check_positive("Ld", Ld, own)
         self.Lq = check_positive("Lq", Lq, own)
@@ -151,7 +222,7 @@ def torque(par: PMSMParams, i_d, i_q, theta_e):
     # Re(j h i*) with h = re + j im, i = i_d + j i_q:  j h = −im + j re;
     # Re((−im + j re)(i_d − j i_q)) = −im i_d + re i_q
     pm = par.psi_f * (re * i_q - im * i_d)
-    return 1.5 * par.p * (pm + (par.Ld - par.Lq) * i_d * i_q)
+    return 1.5 * par.p * (pm + (par.Ld - lq_apparent(par, i_q)) * i_d * i_q)
 
 
 def plant_vf(par: PMSMParams, x, u_ab, t_load):
@@ -162,8 +233,8 @@ def plant_vf(par: PMSMParams, x, u_ab, t_load):
     u_d = c * u_ab[0] + s * u_ab[1]
     u_q = -s * u_ab[0] + c * u_ab[1]
     e_d, e_q = bemf_dq(par, w_e, th)
-    di_d = (u_d - par.Rs * i_d + w_e * par.Lq * i_q - e_d) / par.Ld
-    di_q = (u_q - par.Rs * i_q - w_e * par.Ld * i_d - e_q) / par.Lq
+    di_d = (u_d - par.Rs * i_d + w_e * lq_apparent(par, i_q) * i_q - e_d) / par.Ld
+    di_q = (u_q - par.Rs * i_q - w_e * par.Ld * i_d - e_q) / lq_incremental(par, i_q)
     te = torque(par, i_d, i_q, th)
     dw = (te - t_load - par.B * w_m) / par.J
     return jnp.stack([di_d, di_q, dw, w_e])
