@@ -13,7 +13,7 @@ from jaxobs import linear, papers
 from jaxobs._simulate import simulate
 from jaxobs.drive import dual, dual_loop
 from jaxobs.metrics import harmonic_amplitude
-from jaxobs.observers import FALESO
+from jaxobs.observers import CLESO, FALESO
 
 TH = dual.PHASE_ANGLES
 rng = np.random.default_rng(0)
@@ -125,6 +125,13 @@ def test_bad_input_names_the_field():
         dual_loop.dual_bench_drive(m, mode="six-step")
     with pytest.raises(ValueError, match="DualPMSM.par"):
         dual.DualPMSM(m.m)
+    with pytest.raises(ValueError, match="DualFOC.fw_voltage must be 'ab' or 'set'"):
+        dual_loop.dual_bench_drive(m, fw_voltage="phase")
+    with pytest.raises(ValueError, match=r"DualDrive.settle must be in \[0, 60\] s"):
+        dual_loop.dual_bench_drive(m, settle=-1.0)
+    with pytest.raises(ValueError, match="DualDrive.settled_for: omega_e_min must be a speed > 0"):
+        dual_loop.dual_bench_drive(m).settled_for(0.0)
+    assert dual_loop.dual_bench_drive(m).settled_for(2 * math.pi * 100).settle == pytest.approx(0.1)
 
 
 # --- closed loop --------------------------------------------------------------------------------------------
@@ -184,6 +191,34 @@ def test_faleso_closes_the_loop_on_the_mode_s_observer_input(mode):
     else:
         # Figs 13-14: the first set's equivalent BEMF carries them, the FA-LESO attenuates but shows them
         assert min(h57) > 0.5
+
+
+def test_a_biased_observer_closing_from_t0_starts_where_it_settles():
+    """The dual loop's steady start is ClosedLoop's (jaxobs.drive.loop.AbstractDriveLoop): the C-LESO, which
+    lags, closing the loop from t = 0 after settling starts at its own steady error and the speed holds;
+    without the settling (settle=0, the default) it starts at the rotor's angle and the drive dips."""
+    m = dual.dual_ipmsm_paper002()
+    est = m.per_set()
+    we = m.p * 300 * D.RPM
+    kp, ki = linear.pll_gains(2 * math.pi * papers.LESO_PLL_HZ)
+    obs = CLESO(est.Rs, est.Lq, papers.LESO_OMEGA0, kp, ki, we)
+    sc = D.Scenario(
+        est,
+        speed_ref=D.Profile.constant(300 * D.RPM),
+        load=D.Profile.constant(0.5 * float(m.m.T_rated)),
+        omega_m0=300 * D.RPM,
+    )
+    res = {}
+    for settle in (0.2, 0.0):
+        drv = dual_loop.dual_bench_drive(m, mode="vsd", handover=0.0, settle=settle)
+        o = simulate(dual_loop.DualClosedLoop(drv, obs, sc, m), 0.05).outputs
+        err = np.degrees(np.angle(np.exp(1j * (np.asarray(o.theta_e_hat) - np.asarray(o.theta_e)))))
+        res[settle] = (float(np.abs(np.asarray(o.speed_rpm) - 300).max()), err)
+    dip, err = res[0.2]
+    # measured: 1.04 r/min (the xy currents' start, as with the encoder), the error -11.4° throughout
+    assert dip < 2.0 and err[:50].mean() < -5.0 and np.ptp(err) < 0.5
+    dip0, err0 = res[0.0]
+    assert dip0 > 10.0 and abs(err0[0]) < 0.1  # measured 14.7 r/min; the error grows from 0 to its lag
 
 
 # --- jaxobs reproduce leso --machine dual -------------------------------------------------------------------
@@ -257,20 +292,36 @@ def test_reproduce_leso_dual_transients_each_leso_closing(tmp_path):
 
 def test_field_weakening_on_the_dual_loop_holds_840_rpm_at_330_v():
     """Encoder, VSD, 330 V (base speed ≈ 808 r/min): with VoltageFeedbackFW the drive holds 840 r/min on a
-    negative i_d, the αβ voltage near the 0.95 margin; without it the voltage limit holds it well below."""
+    negative i_d, the αβ voltage near the 0.95 margin; without it the voltage limit holds it well below.
+    Budgeting the αβ voltage (fw_voltage="ab") leaves each set on its own limit (the xy voltage on top);
+    fw_voltage="set" holds each set's voltage at the margin instead, on a deeper i_d."""
     m = dual.dual_ipmsm_paper002()
     inv = D.Inverter(udc=330.0)
     sc = D.Scenario(m.per_set(), speed_ref=D.Profile.constant(840 * D.RPM), omega_m0=780 * D.RPM)
     res = {}
-    for fw in (D.VoltageFeedbackFW(), None):
-        drv = dual_loop.dual_bench_drive(m, mode="vsd", sensorless=False, inverter=inv, field_weakening=fw)
+    for key, fw, fwv in (
+        ("ab", D.VoltageFeedbackFW(), "ab"),
+        ("none", None, "ab"),
+        ("set", D.VoltageFeedbackFW(), "set"),
+    ):
+        drv = dual_loop.dual_bench_drive(
+            m, mode="vsd", sensorless=False, inverter=inv, field_weakening=fw, fw_voltage=fwv
+        )
         o = simulate(dual_loop.DualClosedLoop(drv, None, sc, m), 1.0).outputs
         last = slice(-1000, None)
-        u_ab = np.hypot(np.asarray(o.u_a1 + o.u_a2), np.asarray(o.u_b1 + o.u_b2))[last] / 2 / float(inv.u_max)
-        res[fw is None] = (float(o.speed_rpm[last].mean()), float(o.i_d[last].mean()), float(u_ab.max()))
-    (w_fw, id_fw, u_fw), (w_no, id_no, _) = res[False], res[True]
+        um = float(inv.u_max)
+        u_ab = np.hypot(np.asarray(o.u_a1 + o.u_a2), np.asarray(o.u_b1 + o.u_b2))[last] / 2 / um
+        u_set = np.maximum(np.hypot(o.u_a1, o.u_b1), np.hypot(o.u_a2, o.u_b2))[last] / um
+        res[key] = (float(o.speed_rpm[last].mean()), float(o.i_d[last].mean()), float(u_ab.max()), u_set)
+    (w_fw, id_fw, u_fw, set_fw), (w_no, id_no, _, _) = res["ab"], res["none"]
     assert w_fw == pytest.approx(840.0, abs=1.0) and id_fw < -2.0 and 0.9 < u_fw < 0.97
     assert w_no < 830.0 and abs(id_no) < 0.5
+    # measured: "ab" has a set at u_max 72 % of the last 0.1 s; "set" holds them at 0.950 mean, 0.987 max,
+    # i_d −11.1 A against −7.3 A
+    assert (set_fw > 0.999).mean() > 0.5
+    w_s, id_s, _, set_s = res["set"]
+    assert w_s == pytest.approx(840.0, abs=1.0) and id_s < id_fw - 2.0
+    assert set_s.max() < 0.995 and set_s.mean() == pytest.approx(0.95, abs=0.005)
 
 
 def test_reproduce_leso_runs_the_dual_machine_by_default():

@@ -96,8 +96,29 @@ def test_bad_drifts():
         D.ParameterDrift(Rs=1.5)
     with pytest.raises(ValueError, match="est_drift must be a ParameterDrift"):
         D.Scenario(PAR, est_drift=D.Profile.constant(1.0))
-    # the dual machine's loop does not rebind its observers: it refuses a drift rather than ignoring it
+
+
+def test_the_dual_loop_rebinds_its_observer_under_the_drift():
+    """DualClosedLoop shares ClosedLoop's rebinding (jaxobs.drive.loop.AbstractDriveLoop): a constant 1.5 L̂q
+    drift is the observer bound to 1.5 L̂q from the start, and not the nominal observer."""
     m = D.dual_ipmsm_paper002()
-    sc = D.Scenario(m.per_set(), est_drift=D.ParameterDrift(Lq=D.Profile.constant(1.5)))
-    with pytest.raises(ValueError, match="est_drift must be None"):
-        D.DualClosedLoop(D.dual_bench_drive(m, sensorless=False), None, sc, m)
+    est = m.per_set()
+    we = m.p * 300 * D.RPM
+    obs = FALESO(0.0, 1.0, papers.FALESO_K1, papers.FALESO_K2)
+
+    def run(est_obs, drift):
+        sc = D.Scenario(
+            est,
+            speed_ref=D.Profile.constant(300 * D.RPM),
+            load=D.Profile.constant(0.5 * float(m.m.T_rated)),
+            omega_m0=300 * D.RPM,
+            est_drift=drift,
+        )
+        loop = D.DualClosedLoop(D.dual_bench_drive(m, sensorless=False), obs.bind(est_obs, we), sc, m)
+        return jaxobs.simulate(loop, 0.03).outputs.obs.theta
+
+    drifted = run(est, D.ParameterDrift(Lq=D.Profile.constant(1.5)))
+    bound = run(eqx.tree_at(lambda q: q.Lq, est, 1.5 * est.Lq), None)
+    nominal = run(est, None)
+    assert float(jnp.abs(wrap(drifted - bound)).max()) < 1e-4
+    assert float(jnp.abs(wrap(drifted - nominal))[-100:].mean()) > 1e-3

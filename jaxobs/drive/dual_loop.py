@@ -29,15 +29,20 @@ The observer (``DriveInput``) is chosen by the mode: set 1's measured voltage an
 ``"individual"`` (002: "the LESOs are only applied to the first set"), the VSD αβ ones under ``"vsd"``.
 
 :class:`DualClosedLoop` is :class:`~jaxobs.drive.ClosedLoop`'s wiring for this machine (same step
-order: plant at t_k, sensors, observer, controller, inverter) with a steady start only: the machine
-at the scenario's speed and load (each set carrying half), the FOC integrators holding it, the observer
-from ``init_at(ω_e)`` converging on the encoder-run drive until ``drive.handover``.  No I-f start-up.
+order: plant at t_k, sensors, observer, controller, inverter), sharing its machinery through
+:class:`~jaxobs.drive.loop.AbstractDriveLoop`: the observer rebound each period under ``scenario.est_drift``,
+the encoder/observer hand-over, and the steady start: the machine at the scenario's speed and load (each set
+carrying half), the FOC integrators holding it, the observer settled on it for ``drive.settle`` s (0 by
+default: from ``init_at(ω_e)``, converging on the encoder-run drive until ``drive.handover``) and, closing
+the loop from t = 0, started where it settles.  The timing is the default one (no Latency); no I-f start-up
+(DualFOC has none).
 The scenario gives the profiles, sensors (applied to each set; set 2's noise from another key), dead
 time and ``est_par`` (what the observers assume: the per-set machine); the true machine is ``machine``.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from typing import Any, ClassVar, Literal, NamedTuple
 
@@ -47,15 +52,15 @@ import jax.numpy as jnp
 
 from .. import papers
 from .._discretize import RK4, AbstractRule, check_rule
-from .._math import wrap
+from .._math import safe_norm2, wrap
 from .._measurements import DriveInput
-from .._system import AbstractSystem
 from .._validate import check_nonnegative, check_positive
-from ..observers import AbstractDriveObserver
 from .component import AbstractComponent
 from .control import FOC, ControllerState, FOCInput, OperatingPoint
 from .dual import DualPlantInput, DualPlantState, DualPMSM, DualPMSMParams, sets_to_vsd, vsd_to_sets
 from .hardware import Inverter
+from .latency import Latency
+from .loop import AbstractDriveLoop, settled_for
 from .machine import dq_to_ab
 from .scenario import Scenario
 
@@ -113,19 +118,26 @@ class DualFOC(AbstractComponent):
     kp_xy: jax.Array  # V/A
     ki_xy: jax.Array  # V/(A·s)
     mode: Literal["vsd", "individual"] = eqx.field(static=True)
+    # the voltage the field weakening holds at its margin under "vsd": "ab", the αβ voltage (the FOC's own
+    # |u*|), or "set", each set's |z_αβ ± conj(z_xy)| (the larger), what each inverter must deliver (002's
+    # ref. [32] budgets the xy voltage too).  "individual" is per set either way (each set's FOC limits its own).
+    fw_voltage: Literal["ab", "set"] = eqx.field(static=True)
 
-    def __init__(self, foc, kp_xy=1.0, ki_xy=0.0, *, mode="vsd"):
+    def __init__(self, foc, kp_xy=1.0, ki_xy=0.0, *, mode="vsd", fw_voltage="ab"):
         if not isinstance(foc, FOC):
             raise ValueError(f"DualFOC.foc must be a FOC, got {type(foc).__name__}")
         if mode not in ("vsd", "individual"):
             raise ValueError(f"DualFOC.mode must be 'vsd' or 'individual', got {mode!r}")
+        if fw_voltage not in ("ab", "set"):
+            raise ValueError(f"DualFOC.fw_voltage must be 'ab' or 'set', got {fw_voltage!r}")
         self.foc = foc
         self.kp_xy = check_positive("kp_xy", kp_xy, "DualFOC")
         self.ki_xy = check_nonnegative("ki_xy", ki_xy, "DualFOC")
         self.mode = mode
+        self.fw_voltage = fw_voltage
 
     @classmethod
-    def imc(cls, est: DualPMSMParams, alpha_c, alpha_s, *, mode="vsd", **kw) -> DualFOC:
+    def imc(cls, est: DualPMSMParams, alpha_c, alpha_s, *, mode="vsd", fw_voltage="ab", **kw) -> DualFOC:
         """IMC current loops at ``alpha_c`` rad/s and the double-pole speed loop at ``alpha_s`` on ``est``.
 
         "vsd": :meth:`FOC.imc` on ``est.per_set()``, xy PIs k_p = α_c L̂ls, k_i = α_c R̂s.  "individual":
@@ -138,7 +150,7 @@ class DualFOC(AbstractComponent):
             raise ValueError(f"DualFOC.mode must be 'vsd' or 'individual', got {mode!r}")
         machine = est.per_set() if mode == "vsd" else est.set_self()
         foc = FOC.imc(machine, alpha_c, alpha_s, **kw)
-        return cls(foc, alpha_c * est.Lls, alpha_c * est.m.Rs, mode=mode)
+        return cls(foc, alpha_c * est.Lls, alpha_c * est.m.Rs, mode=mode, fw_voltage=fw_voltage)
 
     def init(self, op: OperatingPoint | None = None) -> DualFOCState:
         """The integrators that hold the drive at ``op`` (per set; zero xy), zeros for None."""
@@ -160,6 +172,13 @@ class DualFOC(AbstractComponent):
             int_x, u_x = self._xy_pi(cs.int_x, i_x, ts, foc.u_max)
             int_y, u_y = self._xy_pi(cs.int_y, i_y, ts, foc.u_max)
             u = vsd_to_sets(o.u_a, o.u_b, u_x, u_y)
+            fw = foc.field_weakening
+            if self.fw_voltage == "set" and fw is not None:
+                # the FOC's Δi_d update redone on the sets' voltage: the αβ one after the FOC's limit (a
+                # saturated αβ voltage already puts a set at or above u_max, so Δi_d still grows), plus xy
+                mag = jnp.maximum(safe_norm2(u[0], u[1]), safe_norm2(u[2], u[3]))
+                id_fw = fw.update(cs.main.id_fw, mag, foc.u_max, w_e, foc.est.Ld, foc.i_max, ts)
+                main = dataclasses.replace(main, id_fw=id_fw)
             new = DualFOCState(main=main, second=cs.second, int_x=int_x, int_y=int_y)
             return new, DualFOCOutput(*u, o.id_ref, o.iq_ref, o.theta)
         main, o1 = foc.step(cs.main, FOCInput(k, inp.i_a1, inp.i_b1, th, w_e, w_m, ref))
@@ -181,8 +200,11 @@ class DualDrive(eqx.Module):
     rule: AbstractRule = eqx.field(static=True)
     sensorless: bool = eqx.field(static=True)
     handover: float = eqx.field(static=True)  # sensorless: encoder until this time (s), observer after
+    # steady start: the observer's unscored settling phase before t = 0, s (Drive.settle; 0 here by default:
+    # the observer starts from init_at(ω_e) and converges on the encoder-run drive until the hand-over)
+    settle: float = eqx.field(static=True)
 
-    def __init__(self, ctrl, inverter=None, *, n_sub=2, rule=None, sensorless=False, handover=0.2):
+    def __init__(self, ctrl, inverter=None, *, n_sub=2, rule=None, sensorless=False, handover=0.2, settle=0.0):
         if not isinstance(ctrl, DualFOC):
             raise ValueError(f"DualDrive.ctrl must be a DualFOC, got {type(ctrl).__name__}")
         self.ctrl = ctrl
@@ -195,10 +217,24 @@ class DualDrive(eqx.Module):
         if not (0.0 <= handover <= 100.0):
             raise ValueError(f"DualDrive.handover must be in [0, 100] s, got {handover!r}")
         self.handover = float(handover)
+        if not (0.0 <= settle <= 60.0):
+            raise ValueError(f"DualDrive.settle must be in [0, 60] s, got {settle!r}")
+        self.settle = float(settle)
 
     @property
     def ts(self) -> float:
         return self.ctrl.foc.ts
+
+    @property
+    def latency(self) -> Latency:
+        """The dual loop's timing, always the default one (:class:`~jaxobs.drive.Latency`): the sample at t_k,
+        the voltage computed from it applied one period later."""
+        return Latency()
+
+    def settled_for(self, omega_e_min: float) -> DualDrive:
+        """This drive with its settling phase at least :data:`~jaxobs.drive.loop.SETTLE_PERIODS` electrical
+        periods at ``omega_e_min`` rad/s (:meth:`jaxobs.drive.Drive.settled_for`)."""
+        return settled_for(self, omega_e_min)
 
     @property
     def mode(self) -> str:
@@ -245,7 +281,7 @@ class DualLoopState(NamedTuple):
     u: tuple  # (u_a1, u_b1, u_a2, u_b2) to apply over the coming period, V
 
 
-class DualClosedLoop(AbstractSystem):
+class DualClosedLoop(AbstractDriveLoop):
     """The dual drive ``drive`` on the dual machine ``machine`` running ``scenario`` with ``observer``
     (None: the encoder).  ``scenario.par`` is not used (the true machine is ``machine``)."""
 
@@ -267,13 +303,15 @@ class DualClosedLoop(AbstractSystem):
             raise ValueError("DualClosedLoop: a sensorless drive needs an observer (observer=None is the encoder)")
         if scenario.est_par.p != machine.p:
             raise ValueError(f"DualClosedLoop.scenario.est_par.p must equal the machine's p ({machine.p})")
-        if scenario.est_drift is not None:  # not wired here (ClosedLoop rebinds its observer): refuse, not ignore
-            raise ValueError("DualClosedLoop.scenario.est_drift must be None (parameter drift runs on ClosedLoop)")
         self.drive, self.observer, self.scenario, self.machine = drive, observer, scenario, machine
 
     @property
     def ts(self) -> float:
         return self.drive.ts
+
+    @property
+    def pole_pairs(self):
+        return self.machine.p
 
     @property
     def plant(self) -> DualPMSM:
@@ -287,27 +325,31 @@ class DualClosedLoop(AbstractSystem):
         foc = c.foc.bind(c.foc.est, self.drive.inverter.u_max, None)
         return eqx.tree_at(lambda q: q.foc, c, foc)
 
-    def operating_point(self) -> OperatingPoint:
+    def operating_point(self, offset=0.0) -> OperatingPoint:
         """The steady state at the scenario's initial speed and load: each set carries half the load
-        (the FOC's operating point on the per-set machine), zero xy current."""
+        (the FOC's operating point on the per-set machine, its frame ``offset`` rad ahead of the rotor's),
+        zero xy current."""
         sc = self.scenario
         return self.controller.foc.operating_point(
-            self.machine.per_set(), sc.omega_m0, sc.speed_ref(0.0), sc.theta_e0, sc.load(0.0) / 2
+            self.machine.per_set(), sc.omega_m0, sc.speed_ref(0.0), sc.theta_e0, sc.load(0.0) / 2, offset
         )
 
-    def init(self) -> DualLoopState:
-        sc, foc = self.scenario, self.controller
-        op = self.operating_point()
-        plant = self.plant.init(op)
+    def _steady_voltage(self, op: OperatingPoint, theta):
+        """Each set's (u_α, u_β) at steady state (zero xy: the αβ voltage) over the period that starts where the
+        rotor is at ``theta``, computed a period before with the delay compensation: centred half a period on."""
         w_e = self.machine.p * op.omega_m
-        # the first period's voltage, computed at t_{−1} with the delay compensation: centred half a period on
-        lead = (0.5 if foc.foc.delay_compensation else -1.0) * w_e * self.ts
-        u_a, u_b = self.drive.inverter.limit(*dq_to_ab(op.u_d, op.u_q, op.theta_e + lead))
-        obs = None
-        if self.observer is not None:
-            obs = (
-                self.observer.init_at(w_e) if isinstance(self.observer, AbstractDriveObserver) else self.observer.init()
-            )
+        lead = (0.5 if self.drive.ctrl.foc.delay_compensation else -1.0) * w_e * self.ts
+        return dq_to_ab(op.u_d, op.u_q, theta + lead)
+
+    def init(self) -> DualLoopState:
+        """The steady start (:meth:`AbstractDriveLoop._steady_start`): the machine at the scenario's speed and
+        load, the observer settled on it for ``drive.settle`` s (from ``init_at(ω_e)`` when 0) on one set's
+        steady measurements, which are the αβ ones (xy = 0; under "vsd" the sensor noise of the mean of two
+        sets is √2 lower than what it settles on), and, sensorless without a hand-over, where it settles."""
+        sc, foc = self.scenario, self.controller
+        op, obs = self._steady_start(self.operating_point())
+        plant = self.plant.init(op)
+        u_a, u_b = self.drive.inverter.limit(*self._steady_voltage(op, op.theta_e))
         key = sc.sensors.init(op, key=sc.key)
         return DualLoopState(plant=plant, ctrl=foc.init(op), obs=obs, sensors=key, u=(u_a, u_b, u_a, u_b))
 
@@ -326,18 +368,8 @@ class DualClosedLoop(AbstractSystem):
             ua, ub, _, _ = sets_to_vsd(m1[0], m1[1], m2[0], m2[1])
             ia, ib, _, _ = sets_to_vsd(m1[2], m1[3], m2[2], m2[3])
             obs_in = DriveInput(ua, ub, ia, ib)
-        if self.observer is not None:
-            obs_state, obs_out = self.observer.step(state.obs, obs_in)
-        else:
-            obs_state, obs_out = None, None
-        w_e = self.machine.p * y.omega_m
-        if drive.sensorless:
-            use_obs = t >= drive.handover
-            th_c = jnp.where(use_obs, obs_out.theta, y.theta_e)
-            w_e_c = jnp.where(use_obs, obs_out.omega, w_e)
-            w_m_c = w_e_c / self.machine.p
-        else:
-            th_c, w_e_c, w_m_c = y.theta_e, w_e, y.omega_m
+        obs_state, obs_out = self._observe(state.obs, obs_in, t)
+        th_c, w_e_c, w_m_c = self._feedback(t, obs_out, y.theta_e, self.machine.p * y.omega_m, y.omega_m)
         ctrl, c = self.controller.step(
             state.ctrl, DualFOCInput(k, m1[2], m1[3], m2[2], m2[3], th_c, w_e_c, w_m_c, w_ref)
         )
@@ -374,8 +406,10 @@ def dual_bench_drive(
     machine: DualPMSMParams,
     *,
     mode="vsd",
+    fw_voltage="ab",
     sensorless=True,
     handover=0.2,
+    settle=0.0,
     alpha_s=None,
     alpha_c=None,
     n_sub=2,
@@ -385,8 +419,10 @@ def dual_bench_drive(
     """The single IPMSM bench's drive (:func:`jaxobs.drive.bench_drive`) on the dual machine ``machine`` (what
     the controller assumes): the speed loop at ``alpha_s`` (default 2π·papers.BENCH_SPEED_HZ rad/s), IMC
     current loops at ``alpha_c`` (default 2π·papers.BENCH_CURRENT_HZ rad/s) in either mode, ``inverter``
-    (default 540 V) for both sets, ``foc_kw`` :class:`FOC`'s options (``field_weakening``, ...)."""
+    (default 540 V) for both sets, ``settle`` the observer's settling phase before t = 0 (s, :class:`DualDrive`),
+    ``fw_voltage`` the voltage the field weakening budgets (:class:`DualFOC`), ``foc_kw`` :class:`FOC`'s options
+    (``field_weakening``, ...)."""
     alpha_c = 2 * math.pi * papers.BENCH_CURRENT_HZ if alpha_c is None else alpha_c
     alpha_s = 2 * math.pi * papers.BENCH_SPEED_HZ if alpha_s is None else alpha_s
-    ctrl = DualFOC.imc(machine, alpha_c, alpha_s, mode=mode, **foc_kw)
-    return DualDrive(ctrl, inverter, sensorless=sensorless, handover=handover, n_sub=n_sub)
+    ctrl = DualFOC.imc(machine, alpha_c, alpha_s, mode=mode, fw_voltage=fw_voltage, **foc_kw)
+    return DualDrive(ctrl, inverter, sensorless=sensorless, handover=handover, settle=settle, n_sub=n_sub)

@@ -37,6 +37,7 @@ block of steps at a time.
 
 from __future__ import annotations
 
+import abc
 import dataclasses
 import math
 from typing import Any, ClassVar, NamedTuple
@@ -57,7 +58,7 @@ from .machine import dq_to_ab
 from .plant import PMSM, PlantInput, PlantState
 from .scenario import Scenario
 
-__all__ = ["Drive", "ClosedLoop", "LoopState", "DriveOutput", "LoopInput", "SETTLE_PERIODS"]
+__all__ = ["Drive", "AbstractDriveLoop", "ClosedLoop", "LoopState", "DriveOutput", "LoopInput", "SETTLE_PERIODS"]
 
 # Electrical periods of steady measurements a sensorless steady start gives an observer whose settling scales
 # with the speed (Drive.settled_for).  The flux observers' filters and FLL have every time constant ∝ 1/ω_e
@@ -134,18 +135,26 @@ class Drive(eqx.Module):
         starts 41° off and the drive rings for seconds (docs/stability.md, "20 r/min").  The phase is only
         observer steps on synthetic measurements (cheap: 10 s of it costs about what 0.1 s of the loop does).
         """
-        w = float(omega_e_min)
-        if not (math.isfinite(w) and w > 0.0):
-            raise ValueError(f"Drive.settled_for: omega_e_min must be a speed > 0 rad/s, got {omega_e_min!r}")
-        need = SETTLE_PERIODS * 2.0 * math.pi / w
-        if need <= self.settle:
-            return self
-        if need > 60.0:
-            raise ValueError(
-                f"Drive.settled_for: omega_e_min must be >= {SETTLE_PERIODS * 2 * math.pi / 60.0:.3g} rad/s "
-                f"({SETTLE_PERIODS:g} periods within the 60 s settle limit), got {w!r}"
-            )
-        return dataclasses.replace(self, settle=need)
+        return settled_for(self, omega_e_min)
+
+
+def settled_for(drive, omega_e_min: float):
+    """``drive`` (a :class:`Drive` or a :class:`~jaxobs.drive.dual_loop.DualDrive`: anything with a ``settle``
+    field, s) with its settling phase at least :data:`SETTLE_PERIODS` electrical periods long at
+    ``omega_e_min`` rad/s (:meth:`Drive.settled_for`)."""
+    name = type(drive).__name__
+    w = float(omega_e_min)
+    if not (math.isfinite(w) and w > 0.0):
+        raise ValueError(f"{name}.settled_for: omega_e_min must be a speed > 0 rad/s, got {omega_e_min!r}")
+    need = SETTLE_PERIODS * 2.0 * math.pi / w
+    if need <= drive.settle:
+        return drive
+    if need > 60.0:
+        raise ValueError(
+            f"{name}.settled_for: omega_e_min must be >= {SETTLE_PERIODS * 2 * math.pi / 60.0:.3g} rad/s "
+            f"({SETTLE_PERIODS:g} periods within the 60 s settle limit), got {w!r}"
+        )
+    return dataclasses.replace(drive, settle=need)
 
 
 class LoopState(NamedTuple):
@@ -199,7 +208,132 @@ class DriveOutput(NamedTuple):
         return self.omega_m * 60 / (2 * jnp.pi)
 
 
-class ClosedLoop(AbstractSystem):
+class AbstractDriveLoop(AbstractSystem):
+    """What every closed drive loop shares (:class:`ClosedLoop`, the dual three-phase
+    :class:`~jaxobs.drive.dual_loop.DualClosedLoop`), each done once here: the observer rebound under the
+    scenario's ``est_drift`` each period, its settling phase before t = 0 and the steady start where a
+    biased observer settles, and the angle and speed the controller is given (encoder, or the observer from
+    ``drive.handover``).  A subclass has ``drive`` (with ``settle``, ``sensorless``, ``handover``,
+    ``latency``), ``observer`` and ``scenario``, and gives :attr:`pole_pairs`, :meth:`operating_point` and
+    :meth:`_steady_voltage`."""
+
+    # passes of the observer's settling phase before t = 0 in a sensorless steady start: the first measures
+    # the observer's steady angle error, the next settle it on the operating point under that error (init)
+    settle_passes: ClassVar[int] = 2
+
+    @property
+    @abc.abstractmethod
+    def pole_pairs(self):
+        """The true machine's pole pairs."""
+
+    @abc.abstractmethod
+    def operating_point(self, offset=0.0) -> OperatingPoint:
+        """The steady state the scenario starts in, the controller's frame ``offset`` rad ahead of the rotor's."""
+
+    @abc.abstractmethod
+    def _steady_voltage(self, op: OperatingPoint, theta):
+        """(u_α, u_β) applied at steady state over the period that starts where the rotor is at ``theta``, V."""
+
+    def _steady_start(self, op: OperatingPoint):
+        """The operating point a steady start begins at and the observer's state there (None with the encoder):
+        the observer settled on ``op`` (:meth:`_settled_observer`), and, when it closes the loop from t = 0,
+        on the operating point under its own steady angle error."""
+        obs = None
+        if self.observer is not None:
+            obs, offset = self._settled_observer(op)
+            if self.drive.sensorless and self.drive.handover <= 0.0:
+                # A biased observer (the LPF's steady lead, a LESO's lag) closes the loop from t = 0, so the drive
+                # settles with the FOC's frame at the observer's steady angle error, not at the rotor's: the
+                # currents that carry the load are its references rotated by that error (FOC.operating_point).
+                # Started on the encoder's operating point instead, the drive dipped 2–6.6 % in speed at ~16 ms
+                # (issue 26).  So the error measured on the first settling gives the operating point, and the
+                # observer settles again on it (each pass from its own start, init_at: a settled observer fed
+                # a step of the currents' phase sees an L·di/dt spike).  The error of a LESO or an LPF with the
+                # machine it assumes is the phase of its filter at ω_e, whatever the currents: two passes are
+                # its fixed point.  With an L̂q error the error depends on i_q, and each pass brings the start
+                # closer; measured on the IPMSM bench, L̂q ±20 %, 5 and 15 N·m, 300 and 1000 r/min, max |ω/ω* − 1|
+                # over 0.15 s: C-LESO 2.9 % (one pass, the old start), 0.016 % (two), 0.001 % (three); FA-LESO
+                # 0.069 %, 0.005 %, 0.005 %.  Two passes: 0.2 s more of observer steps per scenario.
+                for _ in range(self.settle_passes - 1):
+                    # beyond 90° no current in the observer's frame carries the load (it brakes): no steady
+                    # state to start in, so such an observer (not locked in its settling) starts as before
+                    op = self.operating_point(jnp.where(jnp.abs(offset) < jnp.pi / 2, offset, 0.0))
+                    obs, offset = self._settled_observer(op)
+        return op, obs
+
+    def _observe(self, obs_state, meas, t):
+        """The observer's step at time ``t`` (s) on ``meas`` (a DriveInput): (state, outputs); Nones for the
+        encoder."""
+        if self.observer is None:
+            return None, None
+        return self._observer_at(t).step(obs_state, meas)
+
+    def _feedback(self, t, obs_out, theta_e, omega_e, omega_m):
+        """The angle (rad), electrical and mechanical speeds (rad/s) the controller uses at time ``t``: the
+        encoder's ``theta_e``, ``omega_e``, ``omega_m``, or, sensorless from ``drive.handover`` on, the observer's."""
+        drive = self.drive
+        if not drive.sensorless:
+            return theta_e, omega_e, omega_m
+        # before the hand-over time the encoder runs the drive while the observer converges
+        use_obs = t >= drive.handover
+        th_c = jnp.where(use_obs, obs_out.theta, theta_e)
+        w_e_c = jnp.where(use_obs, obs_out.omega, omega_e)
+        return th_c, w_e_c, w_e_c / self.pole_pairs
+
+    def _observer_at(self, t):
+        """The observer assuming the scenario's machine at time ``t`` (s): itself, or rebound by its one binding
+        to ``est_par`` under the scenario's drift (:class:`~jaxobs.drive.ParameterDrift`; 002 Fig. 18).  The
+        speed given to bind() only sets the initial-speed field, which no step reads."""
+        drift = self.scenario.est_drift
+        if drift is None or not isinstance(self.observer, AbstractDriveObserver):
+            return self.observer
+        sc = self.scenario
+        return self.observer.bind(drift.at(sc.est_par, t), self.pole_pairs * sc.omega_m0)
+
+    def _settled_observer(self, op: OperatingPoint):
+        """The observer after ``drive.settle`` seconds on the steady operating point (a phase before t = 0,
+        unscored), and its steady angle error θ̂e − θe, rad.
+
+        A drive observer (:class:`~jaxobs.observers.AbstractDriveObserver`) starts from
+        ``observer.init_at(ω_e)`` (its speed estimate at the true speed) and steps on the measurements the sensors give
+        of the steady machine over k = −n … −1 (offsets, gain errors and noise
+        included; θ_k = θ_e0 + ω_e k T_s, the voltage of each period centred at
+        θ_k + ω_e T_s/2 as the delay compensation applies it).  So its filters,
+        FLL and PLL are locked when the scored horizon starts, by the observer's
+        own dynamics rather than by a formula per observer.  The angle error is
+        the circular mean over the last quarter of the phase (sensor noise and
+        ripple averaged out), 0 without a settling phase.
+        """
+        sc, obs, ts = self.scenario, self._observer_at(0.0), self.ts
+        w_e = self.pole_pairs * op.omega_m
+        # a drive observer starts at the true speed (its contract); any other observer (a probe) from its init()
+        state = obs.init_at(w_e) if isinstance(obs, AbstractDriveObserver) else obs.init()
+        n = int(round(self.drive.settle / ts))
+        if n == 0:
+            return state, jnp.zeros_like(w_e)
+        tail = max(1, n // 4)
+        lat = self.drive.latency
+
+        def settle_step(carry, k):
+            s, acc = carry
+            th = op.theta_e + w_e * (k * ts)
+            u_a, u_b = self._steady_voltage(op, th + min(lat.pipeline - 1, 0) * w_e * ts)
+            if lat.sample_offset:  # the currents (and the angle compared) at the sample instant
+                th = th + lat.sample_offset * w_e * ts
+            i_a, i_b = dq_to_ab(op.i_d, op.i_q, th)
+            _, meas = sc.sensors.step(sc.key, SensorInput(k, u_a, u_b, i_a, i_b))
+            s, out = obs.step(s, meas)
+            err = out.theta - th
+            counted = k >= -tail
+            acc = acc + jnp.where(counted, jnp.stack([jnp.cos(err), jnp.sin(err)]), 0.0)
+            return (s, acc), None
+
+        acc0 = jnp.zeros((2,), jnp.result_type(w_e, float))
+        (state, acc), _ = jax.lax.scan(settle_step, (state, acc0), jnp.arange(-n, 0, dtype=jnp.int32))
+        return state, jnp.arctan2(acc[1], acc[0])
+
+
+class ClosedLoop(AbstractDriveLoop):
     """The drive ``drive`` running ``scenario``, with ``observer`` (or the encoder when None): a system."""
 
     drive: Drive
@@ -210,9 +344,6 @@ class ClosedLoop(AbstractSystem):
     # unrolling it made XLA's CPU fusion duplicate work (forward 3.1 → 1.3 M
     # scenario-steps/s at 2) and its reverse-mode compile blow up (> 200 s).
     unroll: ClassVar[int] = 1
-    # passes of the observer's settling phase before t = 0 in a sensorless steady start: the first measures
-    # the observer's steady angle error, the next settle it on the operating point under that error (init)
-    settle_passes: ClassVar[int] = 2
 
     def __init__(self, drive: Drive, observer, scenario: Scenario):
         if not isinstance(drive, Drive):
@@ -231,6 +362,10 @@ class ClosedLoop(AbstractSystem):
     @property
     def ts(self) -> float:
         return self.drive.ts
+
+    @property
+    def pole_pairs(self):
+        return self.scenario.par.p
 
     # --- the parts, bound to this scenario
     @property
@@ -300,28 +435,7 @@ class ClosedLoop(AbstractSystem):
             return LoopState(
                 plant=plant, ctrl=ctrl, obs=obs, sensors=sc.sensors.init(op, key=sc.key), u_a=z, u_b=z, pending=pending
             )
-        op = self.operating_point()
-        obs = None
-        if self.observer is not None:
-            obs, offset = self._settled_observer(op)
-            if self.drive.sensorless and self.drive.handover <= 0.0:
-                # A biased observer (the LPF's steady lead, a LESO's lag) closes the loop from t = 0, so the drive
-                # settles with the FOC's frame at the observer's steady angle error, not at the rotor's: the
-                # currents that carry the load are its references rotated by that error (FOC.operating_point).
-                # Started on the encoder's operating point instead, the drive dipped 2–6.6 % in speed at ~16 ms
-                # (issue 26).  So the error measured on the first settling gives the operating point, and the
-                # observer settles again on it (each pass from its own start, init_at: a settled observer fed
-                # a step of the currents' phase sees an L·di/dt spike).  The error of a LESO or an LPF with the
-                # machine it assumes is the phase of its filter at ω_e, whatever the currents: two passes are
-                # its fixed point.  With an L̂q error the error depends on i_q, and each pass brings the start
-                # closer; measured on the IPMSM bench, L̂q ±20 %, 5 and 15 N·m, 300 and 1000 r/min, max |ω/ω* − 1|
-                # over 0.15 s: C-LESO 2.9 % (one pass, the old start), 0.016 % (two), 0.001 % (three); FA-LESO
-                # 0.069 %, 0.005 %, 0.005 %.  Two passes: 0.2 s more of observer steps per scenario.
-                for _ in range(self.settle_passes - 1):
-                    # beyond 90° no current in the observer's frame carries the load (it brakes): no steady
-                    # state to start in, so such an observer (not locked in its settling) starts as before
-                    op = self.operating_point(jnp.where(jnp.abs(offset) < jnp.pi / 2, offset, 0.0))
-                    obs, offset = self._settled_observer(op)
+        op, obs = self._steady_start(self.operating_point())
         plant = self.plant.init(op)
         inverter = self.drive.inverter
         lat, w_e = self.drive.latency, sc.par.p * op.omega_m
@@ -345,64 +459,12 @@ class ClosedLoop(AbstractSystem):
             plant=plant, ctrl=foc.init(ctrl_op), obs=obs, sensors=sensors, u_a=u.u_a, u_b=u.u_b, pending=pending
         )
 
-    def _observer_at(self, t):
-        """The observer assuming the scenario's machine at time ``t`` (s): itself, or rebound by its one binding
-        to ``est_par`` under the scenario's drift (:class:`~jaxobs.drive.ParameterDrift`; 002 Fig. 18).  The
-        speed given to bind() only sets the initial-speed field, which no step reads."""
-        drift = self.scenario.est_drift
-        if drift is None or not isinstance(self.observer, AbstractDriveObserver):
-            return self.observer
-        sc = self.scenario
-        return self.observer.bind(drift.at(sc.est_par, t), sc.par.p * sc.omega_m0)
-
     def _steady_voltage(self, op: OperatingPoint, theta):
         """(u_α, u_β) applied over the period that starts where the rotor is at ``theta``, at steady state:
         centred at θ + ω_e T_s/2 (the FOC's integrators absorb what its delay compensation leaves, init)."""
         w_e = self.scenario.par.p * op.omega_m
         lead = 0.5 * w_e * self.ts
         return dq_to_ab(op.u_d, op.u_q, theta + lead)
-
-    def _settled_observer(self, op: OperatingPoint):
-        """The observer after ``drive.settle`` seconds on the steady operating point (a phase before t = 0,
-        unscored), and its steady angle error θ̂e − θe, rad.
-
-        A drive observer (:class:`~jaxobs.observers.AbstractDriveObserver`) starts from
-        ``observer.init_at(ω_e)`` (its speed estimate at the true speed) and steps on the measurements the sensors give
-        of the steady machine over k = −n … −1 (offsets, gain errors and noise
-        included; θ_k = θ_e0 + ω_e k T_s, the voltage of each period centred at
-        θ_k + ω_e T_s/2 as the delay compensation applies it).  So its filters,
-        FLL and PLL are locked when the scored horizon starts, by the observer's
-        own dynamics rather than by a formula per observer.  The angle error is
-        the circular mean over the last quarter of the phase (sensor noise and
-        ripple averaged out), 0 without a settling phase.
-        """
-        sc, obs, ts = self.scenario, self._observer_at(0.0), self.ts
-        w_e = sc.par.p * op.omega_m
-        # a drive observer starts at the true speed (its contract); any other observer (a probe) from its init()
-        state = obs.init_at(w_e) if isinstance(obs, AbstractDriveObserver) else obs.init()
-        n = int(round(self.drive.settle / ts))
-        if n == 0:
-            return state, jnp.zeros_like(w_e)
-        tail = max(1, n // 4)
-        lat = self.drive.latency
-
-        def settle_step(carry, k):
-            s, acc = carry
-            th = op.theta_e + w_e * (k * ts)
-            u_a, u_b = self._steady_voltage(op, th + min(lat.pipeline - 1, 0) * w_e * ts)
-            if lat.sample_offset:  # the currents (and the angle compared) at the sample instant
-                th = th + lat.sample_offset * w_e * ts
-            i_a, i_b = dq_to_ab(op.i_d, op.i_q, th)
-            _, meas = sc.sensors.step(sc.key, SensorInput(k, u_a, u_b, i_a, i_b))
-            s, out = obs.step(s, meas)
-            err = out.theta - th
-            counted = k >= -tail
-            acc = acc + jnp.where(counted, jnp.stack([jnp.cos(err), jnp.sin(err)]), 0.0)
-            return (s, acc), None
-
-        acc0 = jnp.zeros((2,), jnp.result_type(w_e, float))
-        (state, acc), _ = jax.lax.scan(settle_step, (state, acc0), jnp.arange(-n, 0, dtype=jnp.int32))
-        return state, jnp.arctan2(acc[1], acc[0])
 
     def step(self, state: LoopState, k) -> tuple[LoopState, DriveOutput]:
         drive, sc = self.drive, self.scenario
@@ -425,19 +487,9 @@ class ClosedLoop(AbstractSystem):
             plant_state, y = self.plant.step(state.plant, PlantInput(state.u_a, state.u_b, x.load))
             ys = y
         key, meas = sc.sensors.step(state.sensors, SensorInput(k, state.u_a, state.u_b, ys.i_a, ys.i_b))
-        if self.observer is not None:
-            obs_state, obs_out = self._observer_at(t).step(state.obs, meas)
-        else:
-            obs_state, obs_out = None, None
+        obs_state, obs_out = self._observe(state.obs, meas, t)
         w_e = sc.par.p * ys.omega_m
-        if drive.sensorless:
-            # before the hand-over time the encoder runs the drive while the observer converges
-            use_obs = t >= drive.handover
-            th_c = jnp.where(use_obs, obs_out.theta, ys.theta_e)
-            w_e_c = jnp.where(use_obs, obs_out.omega, w_e)
-            w_m_c = w_e_c / sc.par.p
-        else:
-            th_c, w_e_c, w_m_c = ys.theta_e, w_e, ys.omega_m
+        th_c, w_e_c, w_m_c = self._feedback(t, obs_out, ys.theta_e, w_e, ys.omega_m)
         ctrl, c = self.controller.step(state.ctrl, FOCInput(k, meas.i_a, meas.i_b, th_c, w_e_c, w_m_c, x.omega_m_ref))
         if drive.startup is not None and isinstance(self.observer, AbstractDriveObserver):
             # While the I-f runs, the observer's speed estimate (FLL centre frequency, PLL integrator) is held
