@@ -9,7 +9,10 @@ speed loop, dq current PIs with decoupling, delay compensation, anti-windup):
   u_xy = k_p,xy e + k_i,xy ∫e with IMC gains k_p,xy = α_c L̂ls, k_i,xy = α_c R̂s.  The xy disturbance is
   the BEMF's 5th/7th harmonics, at 5ωe and 7ωe in the stationary xy frame: a PI there attenuates it by
   its loop gain, it does not cancel it (resonant or rotating-frame xy controllers would; 002 does not
-  say which it used).  Each set's voltage is then z_αβ ± conj(z_xy).
+  say which it used).  Each set's voltage is then z_αβ ± conj(z_xy).  Field weakening (the FOC's
+  ``field_weakening``) holds the αβ voltage at its margin by default (``fw_voltage="ab"``), which leaves each set
+  on its own limit when the xy voltage adds on top; ``fw_voltage="set"`` holds the larger set voltage there
+  instead (002's ref. [32]; docs/papers.md, 330 V).
 - ``"individual"``: two individual sets (002 Figs 13-14; ref [6]).  Each set has its own dq frame, set 2's
   30° behind set 1's in its own Clarke coordinates (θ_e − π/6: its a-axis is 30° ahead), and its own
   FOC PI state; the gains are the IMC design on one set's self inductances (:meth:`DualPMSMParams.set_self`)
