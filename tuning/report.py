@@ -73,14 +73,12 @@ def write_report(out: Path, job, obj, thetas: dict, history: list):
     worst = int(np.argmax(np.asarray(per)))
     sig = jax.tree.map(lambda x: x[worst], obj.scenarios)
     fig, axes = _subplots(2, 1, figsize=(8, 5.5), sharex=True)
-    drive = False  # a drive's error is the electrical position's, an FLL's the grid phase's: the labels say which
     for label, th in thetas.items():
         style = _STYLE.get(label, dict(lw=1))
         comp = obj.param.apply(obj.component, th)
         sol = obj._simulate(comp, sig)
         t, so = np.asarray(sol.t), sol.outputs
         if hasattr(so, "theta_e"):  # drive: observer speed and position error
-            drive = True
             axes[0].plot(t, np.asarray(so.obs.omega) / (2 * math.pi), label=label, **style)
             axes[1].plot(t, np.degrees(np.asarray(wrap(so.obs.theta - so.theta_e))), label=label, **style)
         elif so.truth is not None:
@@ -90,9 +88,11 @@ def write_report(out: Path, job, obj, thetas: dict, history: list):
             axes[0].plot(t, np.asarray(so.obs.omega) / (2 * math.pi), label=label, **style)
             err = wrap(so.obs.theta - (sig.omega1 * sol.t + sig.phase - math.pi / 2))
             axes[1].plot(t, np.degrees(np.asarray(err)), label=label, **style)
-    if drive:
-        axes[0].set_ylabel("estimated electrical frequency (Hz)")
-        axes[1].set_ylabel("position error θ̂e − θe (deg el.)")
+    # an FLL's ("grid") error is the grid voltage's phase; a flux observer's or a drive's (on an "emf" recording or
+    # closing the loop) is the rotor's electrical position: the labels say which
+    if job.scenarios.signal != "grid":
+        axes[0].set_ylabel("speed estimate ω̂e/2π (Hz)")
+        axes[1].set_ylabel("position error (deg el.)")
     else:
         axes[0].set_ylabel("estimated frequency (Hz)")
         axes[1].set_ylabel("phase error θ̂ − θ (deg)")
