@@ -77,7 +77,7 @@ def fll_demo_figure(traces, tests, t_event, path=None):
             axes[i, 0].plot(1e3 * (t[m] - t_event), f_hat[i][m], lw=1, label=name)
             axes[i, 1].plot(1e3 * (t[m] - t_event), err[i][m], lw=1, label=name)
     for i, test in enumerate(tests):
-        axes[i, 0].set_ylabel(f"Test {test}\nf̂ (Hz)")
+        axes[i, 0].set_ylabel(f"Test {test}\n$\\hat{{\\mathrm{{f}}}}$ (Hz)")  # mathtext: U+0302 drifts off the f
         axes[i, 1].set_ylabel("θ̂ − θ (deg)")
         what = fll_event_text(test)
         for ax in axes[i]:
@@ -485,6 +485,8 @@ def envelope_figure(ds, path):
 
     sp, ld = ds["speed_rpm"].values, ds["load"].values
     xe, ye = _log_edges(sp), _lin_edges(ld)
+    # at most 8 tick labels an axis (every k-th grid value), so that 3 inches of panel stay legible
+    xtick, ytick = slice(None, None, -(-sp.size // 8)), slice(None, None, -(-ld.size // 8))
     rows = list(_ENVELOPE_PANELS)
     from matplotlib.figure import Figure
 
@@ -513,6 +515,11 @@ def envelope_figure(ds, path):
             ax.set_xscale("log")
             ax.set_xlim(xe[0], xe[-1])
             ax.set_ylim(ye[0], ye[-1])
+            # ticks at the grid's own speeds and loads: each cell is centred on a point run, and its outer
+            # edges (a negative load, a speed above rated) are only the cells' extent, not points run
+            ax.set_xticks(sp[xtick], [f"{v:.0f}" if v >= 100 else f"{v:.3g}" for v in sp[xtick]], minor=False)
+            ax.set_xticks([], minor=True)
+            ax.set_yticks(ld[ytick], [f"{v:.3g}" for v in ld[ytick]])
             ax.tick_params(labelsize=7)
             if r == 0:
                 n_h, n = int(h.sum()), h.size

@@ -125,6 +125,8 @@ def test_bad_input_names_the_field():
         dual_loop.dual_bench_drive(m, mode="six-step")
     with pytest.raises(ValueError, match="DualPMSM.par"):
         dual.DualPMSM(m.m)
+    with pytest.raises(ValueError, match="DualDrive.startup must be an IfStartup or None"):
+        dual_loop.dual_bench_drive(m, startup=0.1)
     with pytest.raises(ValueError, match="DualFOC.fw_voltage must be 'ab' or 'set'"):
         dual_loop.dual_bench_drive(m, fw_voltage="phase")
     with pytest.raises(ValueError, match=r"DualDrive.settle must be in \[0, 60\] s"):
@@ -219,6 +221,28 @@ def test_a_biased_observer_closing_from_t0_starts_where_it_settles():
     assert dip < 2.0 and err[:50].mean() < -5.0 and np.ptp(err) < 0.5
     dip0, err0 = res[0.0]
     assert dip0 > 10.0 and abs(err0[0]) < 0.1  # measured 14.7 r/min; the error grows from 0 to its lag
+
+
+def test_if_startup_from_standstill_hands_over_to_the_faleso():
+    """The dual loop shares ClosedLoop's I-f start-up (IfStartup on each set's FOC, the observer held at the
+    I-f frequency): from standstill the drive switches to the FA-LESO once the ramp and hold are done and
+    runs at the reference on it."""
+    m = dual.dual_ipmsm_paper002()
+    est = m.per_set()
+    kp, ki = linear.pll_gains(2 * math.pi * papers.LESO_PLL_HZ)
+    obs = FALESO(est.Rs, est.Lq, papers.FALESO_K1, papers.FALESO_K2, kp, ki)
+    sc = D.Scenario(est, speed_ref=D.Profile.constant(300 * D.RPM), omega_m0=300 * D.RPM)
+    drv = dual_loop.dual_bench_drive(m, mode="vsd", handover=0.0, startup=D.IfStartup.for_machine(est))
+    o = simulate(dual_loop.DualClosedLoop(drv, obs, sc, m), 1.0).outputs
+    mode, speed = np.asarray(o.mode), np.asarray(o.speed_rpm)
+    assert speed[0] == 0.0 and mode[0] == 0
+    # measured: the switch at 0.586 s (if_handover_earliest 0.587 s), 299.6 r/min over the last 0.1 s
+    # (the speed loop still ringing: 36 r/min peak to peak, 14 at 1.5 s), the angle error 0.02° mean
+    t_switch = float(np.argmax(mode == 1)) * 1e-4
+    assert 0.5 < t_switch < 0.7 and mode[int(t_switch * 1e4) :].all()
+    assert abs(speed[-1000:].mean() - 300) < 2.0
+    err = np.degrees(np.angle(np.exp(1j * (np.asarray(o.obs.theta) - np.asarray(o.theta_e)))))[-1000:]
+    assert abs(err.mean()) < 0.5
 
 
 # --- jaxobs reproduce leso --machine dual -------------------------------------------------------------------

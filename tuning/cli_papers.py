@@ -87,7 +87,8 @@ def cmd_demo(args) -> int:
     else:
         print("Paper 001 FLLs with Table I gains on Tests A–E (float64, AB3 at 10 kHz)")
         print(format_table(rows))
-        print(f"figure: {fig_path}")
+        # every figure written, not only the overview: a user looks for the per-test ones too
+        print(f"figures: {fig_path}, and one per test in paper 001's layout: {', '.join(DEMO_FILES[1:])}")
     return 0 if all(r["ok"] for r in rows) else 1
 
 

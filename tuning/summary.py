@@ -104,7 +104,9 @@ def print_summary(result: dict, out: Path, timing: dict | None = None):
             "the tuned gains may not be an optimum (raise solver.steps)",
             file=sys.stderr,
         )
-    print(f"results: {out / 'result.json'} (history.json, timing.json, scores.nc)")
+    # every file the run wrote beside result.json (the held-out scores and the two figures too, where written)
+    beside = ("history.json", "timing.json", "scores.nc", "holdout_scores.nc", "convergence.png", "responses.png")
+    print(f"results: {out / 'result.json'} ({', '.join(n for n in beside if (out / n).exists())})")
 
 
 def study_warnings(ds) -> list[str]:

@@ -9,7 +9,10 @@ speed loop, dq current PIs with decoupling, delay compensation, anti-windup):
   u_xy = k_p,xy e + k_i,xy ∫e with IMC gains k_p,xy = α_c L̂ls, k_i,xy = α_c R̂s.  The xy disturbance is
   the BEMF's 5th/7th harmonics, at 5ωe and 7ωe in the stationary xy frame: a PI there attenuates it by
   its loop gain, it does not cancel it (resonant or rotating-frame xy controllers would; 002 does not
-  say which it used).  Each set's voltage is then z_αβ ± conj(z_xy).
+  say which it used).  Each set's voltage is then z_αβ ± conj(z_xy).  Field weakening (the FOC's
+  ``field_weakening``) holds the αβ voltage at its margin by default (``fw_voltage="ab"``), which leaves each set
+  on its own limit when the xy voltage adds on top; ``fw_voltage="set"`` holds the larger set voltage there
+  instead (002's ref. [32]; docs/papers.md, 330 V).
 - ``"individual"``: two individual sets (002 Figs 13-14; ref [6]).  Each set has its own dq frame, set 2's
   30° behind set 1's in its own Clarke coordinates (θ_e − π/6: its a-axis is 30° ahead), and its own
   FOC PI state; the gains are the IMC design on one set's self inductances (:meth:`DualPMSMParams.set_self`)
@@ -34,8 +37,9 @@ order: plant at t_k, sensors, observer, controller, inverter), sharing its machi
 the encoder/observer hand-over, and the steady start: the machine at the scenario's speed and load (each set
 carrying half), the FOC integrators holding it, the observer settled on it for ``drive.settle`` s (0 by
 default: from ``init_at(ω_e)``, converging on the encoder-run drive until ``drive.handover``) and, closing
-the loop from t = 0, started where it settles.  The timing is the default one (no Latency); no I-f start-up
-(DualFOC has none).
+the loop from t = 0, started where it settles; or, with ``DualDrive(startup=IfStartup(...))``, from
+standstill through the I-f ramp (both sets' FOCs run it; the observer held at the I-f frequency).  The timing
+is the default one (no Latency).
 The scenario gives the profiles, sensors (applied to each set; set 2's noise from another key), dead
 time and ``est_par`` (what the observers assume: the per-set machine); the true machine is ``machine``.
 """
@@ -56,7 +60,7 @@ from .._math import safe_norm2, wrap
 from .._measurements import DriveInput
 from .._validate import check_nonnegative, check_positive
 from .component import AbstractComponent
-from .control import FOC, ControllerState, FOCInput, OperatingPoint
+from .control import FOC, ControllerState, FOCInput, IfStartup, OperatingPoint
 from .dual import DualPlantInput, DualPlantState, DualPMSM, DualPMSMParams, sets_to_vsd, vsd_to_sets
 from .hardware import Inverter
 from .latency import Latency
@@ -152,11 +156,13 @@ class DualFOC(AbstractComponent):
         foc = FOC.imc(machine, alpha_c, alpha_s, **kw)
         return cls(foc, alpha_c * est.Lls, alpha_c * est.m.Rs, mode=mode, fw_voltage=fw_voltage)
 
-    def init(self, op: OperatingPoint | None = None) -> DualFOCState:
-        """The integrators that hold the drive at ``op`` (per set; zero xy), zeros for None."""
-        cs = self.foc.init(op)
+    def init(self, op: OperatingPoint | None = None, *, theta_f0=0.0) -> DualFOCState:
+        """The integrators that hold the drive at ``op`` (per set; zero xy), zeros for None; with the FOC's
+        I-f start-up its angle at ``theta_f0`` (rad; set 2's FOC, in its own frame, 30° behind)."""
+        cs = self.foc.init(op, theta_f0=theta_f0)
+        second = cs if self.foc.startup is None else self.foc.init(op, theta_f0=theta_f0 - math.pi / 6)
         z = jnp.zeros_like(cs.int_d)
-        return DualFOCState(main=cs, second=cs, int_x=z, int_y=z)
+        return DualFOCState(main=cs, second=second, int_x=z, int_y=z)
 
     def _xy_pi(self, int_, i, ts, u_max):
         e = -i
@@ -196,6 +202,7 @@ class DualDrive(eqx.Module):
 
     ctrl: DualFOC
     inverter: Inverter
+    startup: IfStartup | None
     n_sub: int = eqx.field(static=True)
     rule: AbstractRule = eqx.field(static=True)
     sensorless: bool = eqx.field(static=True)
@@ -204,11 +211,16 @@ class DualDrive(eqx.Module):
     # the observer starts from init_at(ω_e) and converges on the encoder-run drive until the hand-over)
     settle: float = eqx.field(static=True)
 
-    def __init__(self, ctrl, inverter=None, *, n_sub=2, rule=None, sensorless=False, handover=0.2, settle=0.0):
+    def __init__(
+        self, ctrl, inverter=None, *, startup=None, n_sub=2, rule=None, sensorless=False, handover=0.2, settle=0.0
+    ):
         if not isinstance(ctrl, DualFOC):
             raise ValueError(f"DualDrive.ctrl must be a DualFOC, got {type(ctrl).__name__}")
         self.ctrl = ctrl
         self.inverter = Inverter() if inverter is None else inverter
+        if startup is not None and not isinstance(startup, IfStartup):
+            raise ValueError(f"DualDrive.startup must be an IfStartup or None, got {type(startup).__name__}")
+        self.startup = startup
         if isinstance(n_sub, bool) or not isinstance(n_sub, int) or n_sub < 1:
             raise ValueError(f"DualDrive.n_sub must be an integer >= 1, got {n_sub!r}")
         self.n_sub = n_sub
@@ -267,6 +279,7 @@ class DualOutput(NamedTuple):
     u_b1: jax.Array
     u_a2: jax.Array
     u_b2: jax.Array
+    mode: jax.Array  # 0: I-f start-up, 1: closed loop
 
     @property
     def speed_rpm(self):
@@ -320,9 +333,10 @@ class DualClosedLoop(AbstractDriveLoop):
 
     @property
     def controller(self) -> DualFOC:
-        """The DualFOC with its FOC bound to the machine it was tuned on and the inverters' voltage limit."""
+        """The DualFOC with its FOC bound to the machine it was tuned on, the inverters' voltage limit and the
+        drive's I-f start-up."""
         c = self.drive.ctrl
-        foc = c.foc.bind(c.foc.est, self.drive.inverter.u_max, None)
+        foc = c.foc.bind(c.foc.est, self.drive.inverter.u_max, self.drive.startup)
         return eqx.tree_at(lambda q: q.foc, c, foc)
 
     def operating_point(self, offset=0.0) -> OperatingPoint:
@@ -347,6 +361,14 @@ class DualClosedLoop(AbstractDriveLoop):
         steady measurements, which are the αβ ones (xy = 0; under "vsd" the sensor noise of the mean of two
         sets is √2 lower than what it settles on), and, sensorless without a hand-over, where it settles."""
         sc, foc = self.scenario, self.controller
+        if self.drive.startup is not None:
+            # from standstill, as ClosedLoop.init: all zeros, the I-f angle at θ_e0 − 90° (the parked rotor)
+            op = OperatingPoint.at_rest(sc.theta_e0)
+            plant = self.plant.init(op)
+            z = jnp.zeros((), plant.x.dtype)
+            obs = None if self.observer is None else self.observer.init()
+            ctrl = foc.init(op, theta_f0=sc.theta_e0 - jnp.pi / 2)
+            return DualLoopState(plant=plant, ctrl=ctrl, obs=obs, sensors=sc.sensors.init(op, key=sc.key), u=(z,) * 4)
         op, obs = self._steady_start(self.operating_point())
         plant = self.plant.init(op)
         u_a, u_b = self.drive.inverter.limit(*self._steady_voltage(op, op.theta_e))
@@ -373,6 +395,7 @@ class DualClosedLoop(AbstractDriveLoop):
         ctrl, c = self.controller.step(
             state.ctrl, DualFOCInput(k, m1[2], m1[3], m2[2], m2[3], th_c, w_e_c, w_m_c, w_ref)
         )
+        obs_state = self._seed_observer(obs_state, ctrl.main)
         u_next = (*inv.limit(c.u_a1, c.u_b1), *inv.limit(c.u_a2, c.u_b2))
         out = DualOutput(
             t=t,
@@ -398,6 +421,7 @@ class DualClosedLoop(AbstractDriveLoop):
             u_b1=u[1],
             u_a2=u[2],
             u_b2=u[3],
+            mode=ctrl.main.mode,
         )
         return DualLoopState(plant=plant_state, ctrl=ctrl, obs=obs_state, sensors=key, u=u_next), out
 
@@ -409,6 +433,7 @@ def dual_bench_drive(
     fw_voltage="ab",
     sensorless=True,
     handover=0.2,
+    startup: IfStartup | None = None,
     settle=0.0,
     alpha_s=None,
     alpha_c=None,
@@ -420,9 +445,12 @@ def dual_bench_drive(
     the controller assumes): the speed loop at ``alpha_s`` (default 2π·papers.BENCH_SPEED_HZ rad/s), IMC
     current loops at ``alpha_c`` (default 2π·papers.BENCH_CURRENT_HZ rad/s) in either mode, ``inverter``
     (default 540 V) for both sets, ``settle`` the observer's settling phase before t = 0 (s, :class:`DualDrive`),
-    ``fw_voltage`` the voltage the field weakening budgets (:class:`DualFOC`), ``foc_kw`` :class:`FOC`'s options
+    ``startup`` an I-f start-up from standstill (:class:`~jaxobs.drive.IfStartup`, per set) or None, ``fw_voltage``
+    the voltage the field weakening budgets (:class:`DualFOC`), ``foc_kw`` :class:`FOC`'s options
     (``field_weakening``, ...)."""
     alpha_c = 2 * math.pi * papers.BENCH_CURRENT_HZ if alpha_c is None else alpha_c
     alpha_s = 2 * math.pi * papers.BENCH_SPEED_HZ if alpha_s is None else alpha_s
     ctrl = DualFOC.imc(machine, alpha_c, alpha_s, mode=mode, fw_voltage=fw_voltage, **foc_kw)
-    return DualDrive(ctrl, inverter, sensorless=sensorless, handover=handover, settle=settle, n_sub=n_sub)
+    return DualDrive(
+        ctrl, inverter, startup=startup, sensorless=sensorless, handover=handover, settle=settle, n_sub=n_sub
+    )

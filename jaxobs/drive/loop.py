@@ -213,9 +213,9 @@ class AbstractDriveLoop(AbstractSystem):
     :class:`~jaxobs.drive.dual_loop.DualClosedLoop`), each done once here: the observer rebound under the
     scenario's ``est_drift`` each period, its settling phase before t = 0 and the steady start where a
     biased observer settles, and the angle and speed the controller is given (encoder, or the observer from
-    ``drive.handover``).  A subclass has ``drive`` (with ``settle``, ``sensorless``, ``handover``,
-    ``latency``), ``observer`` and ``scenario``, and gives :attr:`pole_pairs`, :meth:`operating_point` and
-    :meth:`_steady_voltage`."""
+    ``drive.handover``), the observer held at the I-f frequency during an I-f start-up.  A subclass has
+    ``drive`` (with ``settle``, ``sensorless``, ``handover``, ``latency``, ``startup``), ``observer`` and
+    ``scenario``, and gives :attr:`pole_pairs`, :meth:`operating_point` and :meth:`_steady_voltage`."""
 
     # passes of the observer's settling phase before t = 0 in a sensorless steady start: the first measures
     # the observer's steady angle error, the next settle it on the operating point under that error (init)
@@ -279,6 +279,20 @@ class AbstractDriveLoop(AbstractSystem):
         th_c = jnp.where(use_obs, obs_out.theta, theta_e)
         w_e_c = jnp.where(use_obs, obs_out.omega, omega_e)
         return th_c, w_e_c, w_e_c / self.pole_pairs
+
+    def _seed_observer(self, obs_state, ctrl: ControllerState):
+        """The observer's state held at the I-f frequency while the drive's I-f start-up runs (``ctrl.mode``
+        0), released at the switch; ``obs_state`` itself without a start-up or a drive observer."""
+        if self.drive.startup is None or not isinstance(self.observer, AbstractDriveObserver):
+            return obs_state
+        # While the I-f runs, the observer's speed estimate (FLL centre frequency, PLL integrator) is held
+        # at the I-f frequency, the rotor's mean speed; released at the switch.  Without it the flux
+        # observers' FLLs never left their initial 1 rad/s: their gain is lam·ω̂² (frequency-normalized,
+        # jaxobs.observers.flux), so at ω̂ = 1 rad/s they adapt in ~1 s, while the I-f ramp takes 0.1 s —
+        # the SOGIs, centred at 1 rad/s, then gave a flux of the wrong phase and amplitude and the drive
+        # ran away at the hand-over.  A DSP knows ω_f too: it is the FLL's feed-forward, not a cheat.
+        seeded = self.observer.seed_speed(obs_state, ctrl.omega_f)
+        return jax.tree.map(lambda a, b: jnp.where(ctrl.mode == 0, a, b), seeded, obs_state)
 
     def _observer_at(self, t):
         """The observer assuming the scenario's machine at time ``t`` (s): itself, or rebound by its one binding
@@ -491,15 +505,7 @@ class ClosedLoop(AbstractDriveLoop):
         w_e = sc.par.p * ys.omega_m
         th_c, w_e_c, w_m_c = self._feedback(t, obs_out, ys.theta_e, w_e, ys.omega_m)
         ctrl, c = self.controller.step(state.ctrl, FOCInput(k, meas.i_a, meas.i_b, th_c, w_e_c, w_m_c, x.omega_m_ref))
-        if drive.startup is not None and isinstance(self.observer, AbstractDriveObserver):
-            # While the I-f runs, the observer's speed estimate (FLL centre frequency, PLL integrator) is held
-            # at the I-f frequency, the rotor's mean speed; released at the switch.  Without it the flux
-            # observers' FLLs never left their initial 1 rad/s: their gain is lam·ω̂² (frequency-normalized,
-            # jaxobs.observers.flux), so at ω̂ = 1 rad/s they adapt in ~1 s, while the I-f ramp takes 0.1 s —
-            # the SOGIs, centred at 1 rad/s, then gave a flux of the wrong phase and amplitude and the drive
-            # ran away at the hand-over.  A DSP knows ω_f too: it is the FLL's feed-forward, not a cheat.
-            seeded = self.observer.seed_speed(obs_state, ctrl.omega_f)
-            obs_state = jax.tree.map(lambda a, b: jnp.where(ctrl.mode == 0, a, b), seeded, obs_state)
+        obs_state = self._seed_observer(obs_state, ctrl)
         _, u_next = drive.inverter.step(drive.inverter.init(), InverterInput(c.u_a, c.u_b))  # stateless
         applied, pending = state, None  # the voltage over [t_k, t_{k+1}] (as u_a, u_b) and the one after it
         if lat.pipeline == 0:  # computed from this period's sample, applied at once (an ideal controller)

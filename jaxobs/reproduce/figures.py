@@ -176,10 +176,11 @@ def fll_figure(traces, i: int, test: str, t_event: float, path=None, span: float
         out = sol.outputs
         err = np.degrees(np.asarray(wrap(out.obs.theta[i] - out.truth.theta[i])))
         f = Panel(
-            "f̂, f (Hz)",
+            # mathtext's hat: DejaVu's combining circumflex (U+0302) hides in the f's hook, so "f̂" drew as "f"
+            r"$\hat{\mathrm{f}}$, f (Hz)",
             (
                 Series("f", np.asarray(out.truth.omega[i])[mask] / (2 * math.pi), actual=True),
-                Series("f̂", np.asarray(out.obs.omega[i])[mask] / (2 * math.pi)),
+                Series(r"$\hat{\mathrm{f}}$", np.asarray(out.obs.omega[i])[mask] / (2 * math.pi)),
             ),
         )
         v = Panel(
