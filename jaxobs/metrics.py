@@ -27,6 +27,12 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._math import wrap as wrap
+from .drive.dual_loop import DualOutput
+from .drive.loop import DriveOutput
+
+# The outputs whose truth is the rotor's electrical angle θe (the closed-loop drives), against those whose truth
+# is a signal's (a recording's ``truth``, or an EMFSignal's flux angle).
+_DRIVE_OUTPUTS = (DriveOutput, DualOutput)
 
 __all__ = [
     "wrap",
@@ -55,6 +61,7 @@ __all__ = [
     "settled",
     "lost_lock",
     "lost_lock_of",
+    "position_error",
     "lost_speed",
     "SPEED_TOL",
     "SPEED_FLOOR_RPM",
@@ -360,23 +367,48 @@ def lost_lock_of(sol, steady_from=None, *, signal=None, tol_deg=None, freq_tol=L
     obs = getattr(out, "obs", None)
     if obs is None or not hasattr(obs, "theta"):
         raise ValueError("lost_lock_of: the outputs hold no observer estimate (obs.theta): nothing to lock")
-    if hasattr(out, "theta_e"):  # the closed-loop drive's DriveOutput
+    if isinstance(out, _DRIVE_OUTPUTS):
         tol = LOCK_TOL_DRIVE_DEG if tol_deg is None else tol_deg
         return lost_lock(obs.theta, out.theta_e, mask, math.radians(tol))
     tol = math.radians(LOCK_TOL_DEG if tol_deg is None else tol_deg)
-    truth = getattr(out, "truth", None)
-    if truth is not None:
-        theta, omega = truth.theta, truth.omega
-    elif signal is not None and hasattr(signal, "flux_angle"):
-        theta = signal.flux_angle(t)
-        omega = jnp.broadcast_to(jnp.expand_dims(jnp.asarray(signal.omega1), -1), jnp.shape(obs.omega))
-    else:
-        raise ValueError(
-            "lost_lock_of: the signal reports no truth; pass signal= an EMFSignal (its flux angle is the truth)"
-        )
+    theta, omega = _truth(sol, signal, "lost_lock_of")
     if freq_tol is None:
         return lost_lock(obs.theta, theta, mask, tol)
     return lost_lock(obs.theta, theta, mask, tol, omega_hat=obs.omega, omega=omega, freq_tol=freq_tol)
+
+
+def _truth(sol, signal, caller):
+    """The true angle (rad) and frequency (rad/s) of an observer on a signal: the outputs' own ``truth`` (a
+    ``GridSignal`` or a recording), else ``signal=``'s rotor-flux angle ω1 t + φ1 − π/2 (an ``EMFSignal``:
+    ψ lags e by 90°)."""
+    out = sol.outputs
+    truth = getattr(out, "truth", None)
+    if truth is not None:
+        return truth.theta, truth.omega
+    flux_angle = getattr(signal, "flux_angle", None)
+    if flux_angle is None:
+        raise ValueError(
+            f"{caller}: the signal reports no truth; pass signal= an EMFSignal (its flux angle is the truth)"
+        )
+    omega = jnp.broadcast_to(jnp.expand_dims(jnp.asarray(signal.omega1), -1), jnp.shape(out.obs.omega))
+    return flux_angle(sol.t), omega
+
+
+def position_error(sol, signal=None):
+    """The observer's position error θ̂ − θ (rad, wrapped to (−π, π]) along a simulation's trajectory.
+
+    The truth is the rotor's electrical angle θe for the closed-loop drives (``ClosedLoop``,
+    ``DualClosedLoop``), the outputs' ``truth`` for an observer on a signal that reports one (a
+    ``GridSignal``, a recording with its encoder angle), else the rotor-flux angle of ``signal=`` (an
+    ``EMFSignal``).  Works under ``jit``/``vmap``.
+    """
+    out = getattr(sol, "outputs", None)
+    if out is None:
+        raise ValueError("position_error: needs the trajectory (simulate with save=SaveAll(), the default)")
+    if isinstance(out, _DRIVE_OUTPUTS):
+        return wrap(out.obs.theta - out.theta_e)
+    theta, _ = _truth(sol, signal, "position_error")
+    return wrap(out.obs.theta - theta)
 
 
 def smooth_peak_to_peak(x, mask, temperature):

@@ -54,7 +54,8 @@ LAYERS = [
     ("jaxobs.observers.sogi", "jaxobs.observers.fll", "jaxobs.observers.flux", "jaxobs.observers.leso"),
     ("jaxobs.observers",),
     # the closed loop composes the drive's parts with a drive observer (its contract, observers.base)
-    ("jaxobs.drive.loop", "jaxobs.drive.dual_loop"),
+    ("jaxobs.drive.loop",),
+    ("jaxobs.drive.dual_loop",),  # shares the loop's base, AbstractDriveLoop
     ("jaxobs.drive.bench",),
     ("jaxobs.drive",),
     # the one loop over a system, and sharding a batch over devices

@@ -197,6 +197,14 @@ def test_lost_lock_of_a_simulation_under_jit():
         jaxobs.lost_lock_of(sol)
     with pytest.raises(ValueError, match="SaveAll"):
         jaxobs.lost_lock_of(jaxobs.simulate(jaxobs.OnSignal(obs, emf), 0.01, save=jaxobs.SaveFinal()))
+    # position_error: the same truths, one function (the objective's and the report's position error)
+    err = M.position_error(sol, emf)
+    assert float(jnp.max(jnp.abs(err - M.wrap(sol.outputs.obs.theta - emf.flux_angle(sol.t))))) == 0.0
+    with pytest.raises(ValueError, match="EMFSignal"):
+        M.position_error(sol)
+    grid = jaxobs.simulate(jaxobs.OnSignal(good, sig), 0.05)
+    want = M.wrap(grid.outputs.obs.theta - grid.outputs.truth.theta)
+    assert float(jnp.max(jnp.abs(M.position_error(grid) - want))) == 0.0
 
 
 # --------------------------------------------------------------------------

@@ -71,13 +71,9 @@ def _phase_err(sol):
 
 
 def _position_err(sol, sig):
-    """Position error of an observer: on the drive, θ̂e − θe; on an EMF signal, ψ lags e by 90°."""
-    out = sol.outputs
-    if hasattr(out, "theta_e"):  # the closed-loop drive's DriveOutput
-        return M.wrap(out.obs.theta - out.theta_e)
-    if getattr(out, "truth", None) is not None:  # a recording of u/i with its encoder angle
-        return M.wrap(out.obs.theta - out.truth.theta)
-    return M.wrap(out.obs.theta - (sig.omega1 * sol.t + sig.phase - math.pi / 2))
+    """Position error of an observer (rad): on the drive θ̂e − θe; on a signal, against its truth
+    (:func:`jaxobs.metrics.position_error`)."""
+    return M.position_error(sol, sig)
 
 
 def _scored_position_err(sol, sig, ctx):

@@ -9,7 +9,7 @@ from pathlib import Path
 import jax
 import numpy as np
 
-from jaxobs.metrics import wrap
+from jaxobs.metrics import position_error
 
 from .outdir import atomic_path
 
@@ -78,22 +78,34 @@ def write_report(out: Path, job, obj, thetas: dict, history: list):
         comp = obj.param.apply(obj.component, th)
         sol = obj._simulate(comp, sig)
         t, so = np.asarray(sol.t), sol.outputs
-        if hasattr(so, "theta_e"):  # drive: observer speed and position error
-            axes[0].plot(t, np.asarray(so.obs.omega) / (2 * math.pi), label=label, **style)
-            axes[1].plot(t, np.degrees(np.asarray(wrap(so.obs.theta - so.theta_e))), label=label, **style)
-        elif so.truth is not None:
-            axes[0].plot(t, np.asarray(so.obs.omega) / (2 * math.pi), label=label, **style)
-            axes[1].plot(t, np.degrees(np.asarray(wrap(so.obs.theta - so.truth.theta))), label=label, **style)
-        else:
-            axes[0].plot(t, np.asarray(so.obs.omega) / (2 * math.pi), label=label, **style)
-            err = wrap(so.obs.theta - (sig.omega1 * sol.t + sig.phase - math.pi / 2))
-            axes[1].plot(t, np.degrees(np.asarray(err)), label=label, **style)
-    axes[0].set_ylabel("estimated frequency (Hz)")
-    axes[1].set_ylabel("phase / position error (deg)")
+        axes[0].plot(t, np.asarray(so.obs.omega) / (2 * math.pi), label=label, **style)
+        err = position_error(sol, sig)
+        axes[1].plot(t, np.degrees(np.asarray(err)), label=label, **style)
+    # an FLL's ("grid") error is the grid voltage's phase; a flux observer's or a drive's (on an "emf" recording or
+    # closing the loop) is the rotor's electrical position: the labels say which
+    if job.scenarios.signal != "grid":
+        axes[0].set_ylabel("speed estimate ω̂e/2π (Hz)")
+        axes[1].set_ylabel("position error (deg el.)")
+    else:
+        axes[0].set_ylabel("estimated frequency (Hz)")
+        axes[1].set_ylabel("phase error θ̂ − θ (deg)")
     axes[1].set_xlabel("time (s)")
     axes[0].legend(fontsize=8)
+    t_event = float(job.scenarios.t_event)  # the scenario's steps and jumps (the title's values) happen here
     for ax in axes:
         ax.grid(True, alpha=0.3)
+        if t_event > 0:
+            ax.axvline(t_event, color="0.3", lw=0.8, ls=":")
+    if t_event > 0:
+        axes[1].annotate(
+            f"events at t = {t_event:g} s",
+            (t_event, 0.03),
+            xycoords=("data", "axes fraction"),
+            xytext=(4, 0),
+            textcoords="offset points",
+            fontsize=8,
+            color="0.3",
+        )
     fig.suptitle(
         f"{job.name}: closed form vs tuned on the closed form's worst scenario\n{_describe(job.scenarios, worst)}",
         fontsize=10,
