@@ -122,6 +122,19 @@ def test_the_bound_speed_is_where_init_at_starts(name):
         assert _leaves_equal(obs.seed_speed(obs.init(), w), obs.init_at(w))
 
 
+@pytest.mark.parametrize("name", [*FLL_FLUX, *PLL_FLUX, *LESOS])
+def test_init_aligned_sets_only_a_pll_angle(name):
+    """A steady start's settling phase starts the observer at the rotor's angle where it has an angle state of its
+    own (a LESO's PLL θ̂, wrapped), and is init_at elsewhere (a flux observer's angle comes from its filters)."""
+    obs = {**FLL_FLUX, **PLL_FLUX, **LESOS}[name]()
+    aligned, at = obs.init_aligned(300.0, 7.0), obs.init_at(300.0)
+    if name in LESOS:
+        assert float(aligned.x[obs.n_leso]) == pytest.approx(7.0 - 2 * math.pi)
+        assert _leaves_equal(eqx.tree_at(lambda s: s.x, aligned, aligned.x.at[obs.n_leso].set(0.0)), at)
+    else:
+        assert _leaves_equal(aligned, at)
+
+
 def test_bind_sets_only_its_bound_fields_and_keeps_dtypes():
     obs32 = jax.tree.map(lambda x: x.astype(jnp.float32) if eqx.is_inexact_array(x) else x, FLL_FLUX["SOIFO"]())
     bound = obs32.bind(SPMSM, 314.0)

@@ -309,7 +309,8 @@ class AbstractDriveLoop(AbstractSystem):
         unscored), and its steady angle error θ̂e − θe, rad.
 
         A drive observer (:class:`~jaxobs.observers.AbstractDriveObserver`) starts from
-        ``observer.init_at(ω_e)`` (its speed estimate at the true speed) and steps on the measurements the sensors give
+        ``observer.init_aligned(ω_e, θ_e)`` (its speed estimate at the true speed, a PLL's angle at the rotor's)
+        and steps on the measurements the sensors give
         of the steady machine over k = −n … −1 (offsets, gain errors and noise
         included; θ_k = θ_e0 + ω_e k T_s, the voltage of each period centred at
         θ_k + ω_e T_s/2 as the delay compensation applies it).  So its filters,
@@ -325,6 +326,11 @@ class AbstractDriveLoop(AbstractSystem):
         n = int(round(self.drive.settle / ts))
         if n == 0:
             return state, jnp.zeros_like(w_e)
+        if isinstance(obs, AbstractDriveObserver):
+            # and, settling, with its angle state (a PLL's) at the rotor's angle where the phase starts (the
+            # state before the step to t_−n): from 0 instead, the PLL's first error was θ_e0 − ω_e·settle, any
+            # angle, and the settled observer depended erratically on the settle's length (init_aligned)
+            state = obs.init_aligned(w_e, wrap(op.theta_e - w_e * ((n + 1) * ts)))
         tail = max(1, n // 4)
         lat = self.drive.latency
 

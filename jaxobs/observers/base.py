@@ -164,6 +164,13 @@ class AbstractDriveObserver(AbstractObserver):
     def init_at(self, omega_e):
         """The initial state with the speed estimate at ``omega_e`` (rad/s): a steady start's settling phase."""
 
+    def init_aligned(self, omega_e, theta_e):
+        """The initial state of a steady start's settling phase: :meth:`init_at` (speed estimate at ``omega_e``,
+        rad/s) with, where the observer has an angle state of its own (a LESO's PLL θ̂), that angle at the
+        rotor's ``theta_e`` (rad) when the phase starts.  An angle derived from filter states that start at zero
+        (the flux observers') has nothing to set: this default."""
+        return self.init_at(omega_e)
+
     @abc.abstractmethod
     def seed_speed(self, state, omega_e):
         """``state`` with its speed estimate set to ``omega_e`` (rad/s): an I-f start-up holds it at the I-f
@@ -210,6 +217,9 @@ class ObserverBank(AbstractDriveObserver):
 
     def init_at(self, omega_e):
         return tuple(o.init_at(omega_e) for o in self.observers)
+
+    def init_aligned(self, omega_e, theta_e):
+        return tuple(o.init_aligned(omega_e, theta_e) for o in self.observers)
 
     def seed_speed(self, state, omega_e):
         return tuple(o.seed_speed(s, omega_e) for o, s in zip(self.observers, state))
