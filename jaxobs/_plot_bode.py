@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from . import linear, papers
-from ._figure import _finish, _subplots
+from ._figure import _finish, _mark_event, _subplots
 
 # one look per trace, so a trace never hides under another: widths fall as the dashes rise, and markers
 # (spaced along the curve, matplotlib's float markevery) tell overlapping curves apart
@@ -46,14 +46,16 @@ def resonance_grid(tfs, omega, n: int = 241, damping_ratio: float = 0.3):
     return np.unique(np.concatenate(extra))
 
 
-def bode_figure(tfs: dict, omega, title: str, path=None, hz: bool = True, mark=None, refine: bool = True):
+def bode_figure(
+    tfs: dict, omega, title: str, path=None, hz: bool = True, mark=None, refine: bool = True, mark_text: str = ""
+):
     """Bode magnitude (dB) and phase (deg) of several transfer functions on one grid.
 
     The frequency axis is in Hz (``hz=False``: rad/s); ``omega`` is in rad/s either way, refined around
     lightly damped poles (:func:`resonance_grid`; ``refine=False`` keeps it as given).  Each trace has its
     own line style and markers, so one lying on another stays visible.  Complex-coefficient filters are
     plotted over negative and positive frequency when ``omega`` contains both signs (their response is
-    not conjugate-symmetric).
+    not conjugate-symmetric).  ``mark`` (rad/s) draws a dotted line there, named ``mark_text`` on the magnitude.
     """
     omega = resonance_grid(tfs, omega) if refine else np.asarray(omega)
     x = omega / (2 * math.pi) if hz else omega
@@ -65,9 +67,9 @@ def bode_figure(tfs: dict, omega, title: str, path=None, hz: bool = True, mark=N
         ax_p.plot(x, np.asarray(ph), label=name, color=f"C{i}", **style)
     if np.all(omega > 0):
         ax_m.set_xscale("log")
-    if mark is not None:
-        for ax in (ax_m, ax_p):
-            ax.axvline(mark / (2 * math.pi) if hz else mark, color="k", lw=0.6, ls=":")
+    if mark is not None:  # named: a reader should not have to guess what the dotted line is
+        _mark_event(ax_m, mark / (2 * math.pi) if hz else mark, mark_text)
+        _mark_event(ax_p, mark / (2 * math.pi) if hz else mark, "")
     ax_m.set_ylabel("magnitude (dB)")
     ax_p.set_ylabel("phase (deg)")
     ax_p.set_xlabel("frequency (Hz)" if hz else "ω (rad/s)")
@@ -76,6 +78,11 @@ def bode_figure(tfs: dict, omega, title: str, path=None, hz: bool = True, mark=N
     ax_m.legend(fontsize=9)
     ax_m.set_title(title)
     return _finish(fig, path)
+
+
+def _freq(w: float, hz: bool) -> str:
+    """``w`` (rad/s) as the axis shows it: Hz, or rad/s."""
+    return f"{w / (2 * math.pi):.3g} Hz" if hz else f"{w:.4g} rad/s"
 
 
 def paper_bode_figures(out_dir, hz: bool = True):
@@ -89,12 +96,13 @@ def paper_bode_figures(out_dir, hz: bool = True):
     k, K1, K2 = papers.SOIFO_K, papers.SECOND_ORDER_SOIFO_K1, papers.SECOND_ORDER_SOIFO_K2
     flux = {
         "pure integrator": linear.integrator_flux_tf(),
-        f"LPF (ωc = {papers.LPF_OMEGA_C:g})": linear.lpf_flux_tf(papers.LPF_OMEGA_C),
+        f"LPF (ωc = {papers.LPF_OMEGA_C:g} rad/s)": linear.lpf_flux_tf(papers.LPF_OMEGA_C),
         f"SOIFO (k = {k:g})": linear.soifo_tf(k, w1),
         f"second-order SOIFO (K1 = {K1:g}, K2 = {K2:g})": linear.sosoifo_tf(K1, K2, w1),
     }
     p = out / "bode_flux_observers_000_fig5.png"
-    bode_figure(flux, np.logspace(0, 5, 2000), "Paper 000 Fig. 5: flux observers ψ̂/e", p, hz=hz, mark=w1)
+    title = "Paper 000 Fig. 5: flux observers ψ̂/e"
+    bode_figure(flux, np.logspace(0, 5, 2000), title, p, hz=hz, mark=w1, mark_text=f"ω' = {_freq(w1, hz)}")
     paths.append(p)
     # 002 Fig. 4 / Table II (two-sided, the FA-LESO is complex)
     we = papers.LESO_TABLE_II_OMEGA_E
@@ -111,7 +119,8 @@ def paper_bode_figures(out_dir, hz: bool = True):
     wpos = np.logspace(-3, 4.5, 1800)
     omega = np.concatenate([-wpos[::-1], wpos])
     p = out / "bode_lesos_002_fig4.png"
-    fig = bode_figure(leso, omega, "Paper 002 Fig. 4: LESOs ê/e at ω̂e = 100π (two-sided)", None, hz=hz, mark=we)
+    title = "Paper 002 Fig. 4: LESOs ê/e at ω̂e = 100π (two-sided)"
+    fig = bode_figure(leso, omega, title, None, hz=hz, mark=we, mark_text=f"ω̂e = {_freq(we, hz)}")
     for ax in fig.axes:
         ax.set_xscale("symlog", linthresh=1e-3 if hz else 1e-2)
     # a zoom on +50 Hz: the GI-LESO's ±1 dB there is its response (a pole-zero pair), not a sampling spike
@@ -143,6 +152,7 @@ def paper_bode_figures(out_dir, hz: bool = True):
         p,
         hz=hz,
         mark=papers.WIF_OMEGA_C,
+        mark_text=f"designed crossover {_freq(papers.WIF_OMEGA_C, hz)}",
     )
     paths.append(p)
     return paths
