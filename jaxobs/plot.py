@@ -468,11 +468,27 @@ def _outline(ax, mask, xe, ye):
                 ax.plot([xe[i], xe[i + 1]], [ye[j + 1], ye[j + 1]], "k-", lw=1.8)
 
 
+def _fail_marks(ds, d, extra, h):
+    """Where design ``d`` fails (``h`` < 0.5, speed × load), split by the first reason, each with its marker:
+    ((mask, "x") not synchronous, (mask, "o") synchronous but not resolved stable, (mask, "+") the rest: peak
+    error over the bound).  With a mismatch dim a point fails a test if it fails it at any value."""
+
+    def every(name):
+        v = ds[name].sel(design=d).astype(bool)
+        return np.asarray((v.all(extra) if extra else v).transpose("speed_rpm", "load").values, dtype=bool)
+
+    fails = h < 0.5
+    unsync = fails & ~every("synchronous")
+    unstable = fails & ~unsync & ~every("stable")
+    return ((unsync, "x"), (unstable, "o"), (fails & ~unsync & ~unstable, "+"))
+
+
 def envelope_figure(ds, path):
     """The envelope map (:func:`jaxobs.drive.envelope.envelope`): one row per metric, one column per design,
     speed on a log axis against load; every row on ONE colour scale (shared by the designs), the region where
-    each design holds outlined in black and the points where it does not crossed.  With a mismatch dim each
-    cell shows the worst over it (lowest margin, largest error, holds only where it holds at every value)."""
+    each design holds outlined in black, and each point where it does not marked by why (x: not synchronous,
+    o: not resolved stable, +: peak error over the bound).  With a mismatch dim each cell shows the worst over
+    it (lowest margin, largest error, holds only where it holds at every value)."""
     designs = list(ds["design"].values)
     extra = [d for d in ds["holds"].dims if d not in ("design", "speed_rpm", "load")]
     worst = {"margin": "min", "pos_err_max_deg": "max", "pos_ripple_deg": "max"}
@@ -510,8 +526,11 @@ def envelope_figure(ds, path):
             mesh = ax.pcolormesh(xe, ye, vals[c].T, cmap=cmap, vmin=vmin, vmax=vmax, shading="flat")
             h = np.asarray(holds.sel(design=d).transpose("speed_rpm", "load").values, dtype=float)
             _outline(ax, h >= 0.5, xe, ye)
-            bad = np.argwhere(h < 0.5)
-            ax.plot(sp[bad[:, 0]], ld[bad[:, 1]], "x", color="k", ms=4, mew=0.8)
+            # each failing point marked by why it fails (the first reason of: not synchronous, not resolved
+            # stable, error over the bound): a crossed point whose panels all look benign was a puzzle
+            for mask, marker in _fail_marks(ds, d, extra, h):
+                bad = np.argwhere(mask)
+                ax.plot(sp[bad[:, 0]], ld[bad[:, 1]], marker, color="k", ms=4, mew=0.8, mfc="none")
             ax.set_xscale("log")
             ax.set_xlim(xe[0], xe[-1])
             ax.set_ylim(ye[0], ye[-1])
@@ -537,7 +556,7 @@ def envelope_figure(ds, path):
     bound = ds.attrs.get("bound_deg", float("nan"))
     title = (
         f"operating envelope, sensorless\noutlined: holds (stable, synchronous, peak error <= {bound:g} deg); "
-        "x: fails; white: lost lock"
+        "white: lost lock\nfails: x not synchronous, o not resolved stable, + peak error over the bound"
     )
     if extra:
         title += f"; worst over {', '.join(extra)}"

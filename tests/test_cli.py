@@ -56,7 +56,17 @@ def test_console_script_is_the_one_parser():
         ".".join(("jaxobs_tuning",) + p.relative_to(ROOT / "tuning").parent.parts)
         for p in (ROOT / "tuning").rglob("__init__.py")
     }
-    assert sorted(setup["packages"]) == sorted(folders)
+
+    # and the only other entries are data-only folders (listed so that setuptools does not warn): real folders
+    # that hold package data and no Python
+    def folder(name):
+        top, *rest = name.split(".")
+        return ROOT.joinpath({"jaxobs": "jaxobs", "jaxobs_tuning": "tuning"}[top], *rest)
+
+    data = set(setup["packages"]) - folders
+    assert all(folder(d).is_dir() and not list(folder(d).glob("*.py")) for d in data), data
+    assert sorted(set(setup["packages"]) - data) == sorted(folders)
+    assert len(setup["packages"]) == len(set(setup["packages"]))
 
 
 def test_import_jaxobs_leaves_the_environment_alone():

@@ -93,6 +93,7 @@ ALLOWED: dict = {
     "tests/test_papers.py": (PAPER_LITERALS, "this guard's own list of the papers' numbers"),
     "tests/test_cli.py": (_TABLE_I, "oracle: the printed closed form against 001 Table I; a job file's text"),
     "tests/test_tuning.py": (_TABLE_I | {"1+√2"}, "oracle: the closed form, its crossover and b against 001"),
+    "tests/test_tuning_results.py": (_TABLE_I | {"1+√2"}, "oracle: as test_tuning.py, its tests split off"),
     "tests/test_export.py": (_TABLE_I, "a result.json's text, as a tuning run writes it"),
     "tests/test_fuzz.py": (_TABLE_I, "a job file's text, as a user writes it"),
 }

@@ -429,8 +429,8 @@ def build_parser() -> argparse.ArgumentParser:
     )
     st.set_defaults(func=_cmd_study)
 
-    add_export_parser(sub)
-    add_envelope_parser(sub)
+    add_export_parser(sub, parents=[quiet])
+    add_envelope_parser(sub, parents=[quiet])
     return p
 
 

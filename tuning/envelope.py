@@ -140,10 +140,13 @@ def cli_envelope(args) -> int:
     return 0
 
 
-def add_envelope_parser(subparsers) -> argparse.ArgumentParser:
-    """Add ``jaxobs envelope`` to the CLI's subparsers."""
+def add_envelope_parser(subparsers, parents=()) -> argparse.ArgumentParser:
+    """Add ``jaxobs envelope`` to the CLI's subparsers; ``parents``: the options every command shares (--quiet,
+    --no-cache)."""
     e = subparsers.add_parser(
-        "envelope", help="where a drive job's designs hold: stability and synchronism over speed x load"
+        "envelope",
+        help="where a drive job's designs hold: stability and synchronism over speed x load",
+        parents=list(parents),
     )
     e.add_argument("source", help="a drive job file (TOML) or a `jaxobs tune` result.json of one")
     e.add_argument("--out", help="results folder (default: out/envelope-<job name>)")
@@ -154,7 +157,8 @@ def add_envelope_parser(subparsers) -> argparse.ArgumentParser:
     e.add_argument("--horizon", type=_seconds, default=2.0, help="long-run horizon, s (default 2)")
     e.add_argument("--check", action="store_true", help="validate the source and print what would run")
     e.add_argument("--force", action="store_true", help="overwrite an envelope already in --out")
-    e.add_argument("--quiet", action="store_true", help="no progress on stderr")
-    e.add_argument("--no-cache", action="store_true", help="do not keep compiled programs on disk")
+    if not parents:  # a parser of its own (tests build one): the shared options, briefly
+        e.add_argument("--quiet", action="store_true", help="no progress on stderr")
+        e.add_argument("--no-cache", action="store_true", help="do not keep compiled programs on disk")
     e.set_defaults(func=cli_envelope)
     return e

@@ -181,7 +181,7 @@ def _needs_system(sol, sig, ctx):
 
 METRICS[STABILITY_MARGIN] = _needs_system
 # each metric's CF (UDUNITS) units, for scores.nc: errors of f̂ in Hz, of θ̂ in rad, speeds in r/min ("min-1"),
-# the integral criteria in their unit × s (IAE) or × s² (ITAE); tests/test_tuning.py checks every metric has one
+# the integral criteria in their unit × s (IAE) or × s² (ITAE); tests/test_tuning_results.py checks every metric has one
 METRIC_UNITS: dict[str, str] = {
     "itae_freq": "Hz s2",
     "iae_freq": "Hz s",

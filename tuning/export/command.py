@@ -21,10 +21,12 @@ from .harness import CFLAGS, TOLERANCE, compile_and_check
 from .sources import DESIGNS, RULES, observer_from_design, observer_from_result, rebuild
 
 
-def add_export_parser(subparsers) -> argparse.ArgumentParser:
-    """Add ``jaxobs export`` to the CLI's subparsers."""
-    e = subparsers.add_parser("export", help="an observer as C99 float32 with golden vectors and a test harness")
-    e.add_argument("--no-cache", action="store_true", help="do not keep compiled programs on disk")
+def add_export_parser(subparsers, parents=()) -> argparse.ArgumentParser:
+    """Add ``jaxobs export`` to the CLI's subparsers; ``parents``: the options every command shares (--quiet,
+    --no-cache), so that their help reads the same in each command."""
+    e = subparsers.add_parser(
+        "export", help="an observer as C99 float32 with golden vectors and a test harness", parents=list(parents)
+    )
     e.add_argument("result", nargs="?", help="a `jaxobs tune` result.json (its tuned gains)")
     e.add_argument("--design", choices=list(DESIGNS), help="a closed-form design instead of a result")
     e.add_argument("--out", default="out/export", help="folder for the files (default: out/export)")
@@ -46,8 +48,10 @@ def add_export_parser(subparsers) -> argparse.ArgumentParser:
         "own Rs, L",
     )
     e.add_argument("--check", action="store_true", help="compile with cc and replay the golden vectors")
-    e.add_argument("--quiet", action="store_true", help="no progress on stderr")
     e.add_argument("--force", action="store_true", help="overwrite an export already in --out")
+    if not parents:  # a parser of its own (tests build one): the shared options, briefly
+        e.add_argument("--quiet", action="store_true", help="no progress on stderr")
+        e.add_argument("--no-cache", action="store_true", help="do not keep compiled programs on disk")
     e.set_defaults(func=cli_export)
     return e
 
