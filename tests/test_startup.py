@@ -320,14 +320,18 @@ def test_standstill_jobs_score_the_position_error_from_the_hand_over_on():
 
     import jax.numpy as jnp
 
+    from jaxobs.drive import DriveOutput
     from jaxobs_tuning.objective import METRICS, MetricContext, _lost_sync
+
+    def drive_output(**fields):  # a closed loop's outputs: the metrics take θe as the truth by its type
+        return DriveOutput(**(dict.fromkeys(DriveOutput._fields) | fields))
 
     t = jnp.linspace(0.0, 1.0, 1001)
     err = jnp.where(t < 0.4, 1.65, 0.01)  # 95° during I-f, 0.6° after
     ctx = MetricContext(t_event=0.0, steady_from=0.7)
 
     def sol(mode):
-        out = SimpleNamespace(theta_e=jnp.zeros_like(t), obs=SimpleNamespace(theta=err), mode=mode)
+        out = drive_output(theta_e=jnp.zeros_like(t), obs=SimpleNamespace(theta=err), mode=mode)
         return SimpleNamespace(t=t, outputs=out)
 
     handed = sol(jnp.where(t < 0.4, 0, 1))
@@ -338,7 +342,7 @@ def test_standstill_jobs_score_the_position_error_from_the_hand_over_on():
     assert bool(_lost_sync(steady, None, ctx))
     never = SimpleNamespace(
         t=t,
-        outputs=SimpleNamespace(
+        outputs=drive_output(
             theta_e=jnp.zeros_like(t),
             obs=SimpleNamespace(theta=jnp.full_like(t, 1.7)),
             mode=jnp.zeros_like(t, dtype=jnp.int32),
