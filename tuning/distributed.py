@@ -263,7 +263,7 @@ def distributed_study(name, designs, axes, opts, out: Path, args, rank, write, o
         kw = {k: v for k, v in opts.items() if k not in ("kind", "provenance", "recording")}
         try:
             run_study(designs, axes, progress=False, store=SharedChunks(None, pid), **kw)
-        except _ShareComputed:
-            pass
+        except _ShareComputed:  # the normal end of a process other than 0: its chunks are computed and shared;
+            pass  # laying out and writing the study is process 0's (SharedChunks.load raises it)
         print(f"study {name}: process {pid} of {count} computed its share; process 0 writes the results")
         return 0
