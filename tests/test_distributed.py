@@ -87,6 +87,25 @@ def _free_port() -> int:
         return s.getsockname()[1]
 
 
+def _process_env() -> dict:
+    """The environment of a study process: one CPU device, this checkout first on the path."""
+    env = {k: v for k, v in os.environ.items() if k not in ("XLA_FLAGS", "JAX_NUM_CPU_DEVICES")}
+    env.update(JAX_PLATFORMS="cpu", JAXOBS_HOST_DEVICES="1", PYTHONPATH=PYTHONPATH)
+    return env
+
+
+def _communicate(procs, timeout: float) -> list[tuple[str, str]]:
+    """Each process's (stdout, stderr); a process still running after (one left waiting for its peer in a
+    collective) is killed."""
+    try:
+        return [p.communicate(timeout=timeout) for p in procs]
+    finally:
+        for p in procs:
+            if p.poll() is None:
+                p.kill()
+                p.wait()
+
+
 def _gloo_available() -> bool:
     try:
         from jax._src.lib import _jax
@@ -117,12 +136,7 @@ def test_study_over_two_processes_equals_one_process(tmp_path):
     toml = tmp_path / "study.toml"
     toml.write_text(STUDY_TOML)
     out = tmp_path / "out"
-    env = {k: v for k, v in os.environ.items() if k not in ("XLA_FLAGS", "JAX_NUM_CPU_DEVICES")}
-    env.update(
-        JAX_PLATFORMS="cpu",
-        JAXOBS_HOST_DEVICES="1",
-        PYTHONPATH=PYTHONPATH,
-    )
+    env = _process_env()
     cache = os.environ.get("JAXOBS_TEST_CACHE", str(Path.home() / ".cache" / "jaxobs" / "jax-tests"))
     if cache:  # the test suite's persistent compilation cache (tests/conftest.py): it changes no number
         env.update(JAX_COMPILATION_CACHE_DIR=cache, JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS="1.0")
@@ -139,15 +153,7 @@ def test_study_over_two_processes_equals_one_process(tmp_path):
         )
         for pid in (0, 1)
     ]
-    outs = []
-    try:
-        for p in procs:
-            outs.append(p.communicate(timeout=300))
-    finally:
-        for p in procs:  # a process left waiting for its peer in a collective
-            if p.poll() is None:
-                p.kill()
-                p.wait()
+    outs = _communicate(procs, timeout=300)
     for pid, (p, (so, se)) in enumerate(zip(procs, outs)):
         assert p.returncode == 0 and f"WORKER-DONE {pid}" in so, f"process {pid}:\n{so[-2000:]}\n{se[-3000:]}"
     # the command line: process 0 wrote the results and printed the table, process 1 one line
@@ -298,12 +304,7 @@ def test_distributed_without_an_environment_names_what_to_set(tmp_path):
 def test_processes_given_different_study_files_stop_before_computing(tmp_path):
     # different files would give different chunk shapes, on which gloo aborts both processes (a C++ dump);
     # the command line compares the files' sha256 right after joining and ends each process in one line
-    env = {k: v for k, v in os.environ.items() if k not in ("XLA_FLAGS", "JAX_NUM_CPU_DEVICES")}
-    env.update(
-        JAX_PLATFORMS="cpu",
-        JAXOBS_HOST_DEVICES="1",
-        PYTHONPATH=PYTHONPATH,
-    )
+    env = _process_env()
     addr = f"127.0.0.1:{_free_port()}"
     procs = []
     for pid in (0, 1):
@@ -312,13 +313,7 @@ def test_processes_given_different_study_files_stop_before_computing(tmp_path):
         cmd = [sys.executable, "-m", "jaxobs_tuning.cli", "study", str(f), "--out", str(tmp_path / "out"), "--quiet"]
         cmd += ["--coordinator", addr, "--num-processes", "2", "--process-id", str(pid), "--timeout", "60"]
         procs.append(subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env))
-    try:
-        outs = [p.communicate(timeout=120) for p in procs]
-    finally:
-        for p in procs:
-            if p.poll() is None:
-                p.kill()
-                p.wait()
+    outs = _communicate(procs, timeout=120)
     for pid, (p, (so, se)) in enumerate(zip(procs, outs)):
         err = [line for line in se.strip().splitlines() if not line.startswith("[Gloo]")]
         assert p.returncode == 2 and len(err) == 1, f"process {pid}: rc {p.returncode}\n{so}\n{se[-3000:]}"
@@ -373,12 +368,7 @@ def test_a_non_jax_listener_on_the_coordinator_port_gets_one_line(tmp_path, caps
 @pytest.mark.skipif(not _gloo_available(), reason="this jaxlib has no gloo CPU collectives")
 def test_a_process_given_another_process_count_stops_before_computing(tmp_path):
     # a process given --num-processes 3 joined a 2-process run and reported "1 of 2", exit 0 (issue 30)
-    env = {k: v for k, v in os.environ.items() if k not in ("XLA_FLAGS", "JAX_NUM_CPU_DEVICES")}
-    env.update(
-        JAX_PLATFORMS="cpu",
-        JAXOBS_HOST_DEVICES="1",
-        PYTHONPATH=PYTHONPATH,
-    )
+    env = _process_env()
     addr = f"127.0.0.1:{_free_port()}"
     f = tmp_path / "study.toml"
     f.write_text(STUDY_TOML)
@@ -387,13 +377,7 @@ def test_a_process_given_another_process_count_stops_before_computing(tmp_path):
         cmd = [sys.executable, "-m", "jaxobs_tuning.cli", "study", str(f), "--out", str(tmp_path / "out"), "--quiet"]
         cmd += ["--coordinator", addr, "--num-processes", str(n), "--process-id", str(pid), "--timeout", "60"]
         procs.append(subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env))
-    try:
-        outs = [p.communicate(timeout=120) for p in procs]
-    finally:
-        for p in procs:
-            if p.poll() is None:
-                p.kill()
-                p.wait()
+    outs = _communicate(procs, timeout=120)
     for pid, (p, (so, se)) in enumerate(zip(procs, outs)):
         err = [line for line in se.strip().splitlines() if not line.startswith("[Gloo]")]
         assert p.returncode == 2 and len(err) == 1, f"process {pid}: rc {p.returncode}\n{so}\n{se[-3000:]}"
@@ -416,12 +400,7 @@ def test_a_study_over_two_processes_killed_then_resumed_is_byte_identical(tmp_pa
     # writes each chunk; on --resume it tells the other which chunks are on disk, and both skip them
     from jaxobs_tuning.cli import STUDY_CHUNKS
 
-    env = {k: v for k, v in os.environ.items() if k not in ("XLA_FLAGS", "JAX_NUM_CPU_DEVICES")}
-    env.update(
-        JAX_PLATFORMS="cpu",
-        JAXOBS_HOST_DEVICES="1",
-        PYTHONPATH=PYTHONPATH,
-    )
+    env = _process_env()
     f = tmp_path / "study.toml"
     f.write_text(RESUME_TOML)
 
@@ -437,13 +416,7 @@ def test_a_study_over_two_processes_killed_then_resumed_is_byte_identical(tmp_pa
         ]
 
     def finish(procs):
-        try:
-            outs = [p.communicate(timeout=180) for p in procs]
-        finally:
-            for p in procs:
-                if p.poll() is None:
-                    p.kill()
-                    p.wait()
+        outs = _communicate(procs, timeout=180)
         for pid, (p, (so, se)) in enumerate(zip(procs, outs)):
             assert p.returncode == 0, f"process {pid}: rc {p.returncode}\n{so}\n{se[-3000:]}"
         return outs
