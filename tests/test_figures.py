@@ -154,3 +154,56 @@ def test_paper_figure_layout():
     assert named == [["load applied: 0 → 10 N·m"], ["load applied: 0 → 10 N·m"], [], []]
     with pytest.raises(ValueError, match="same panels"):
         plot.paper_figure(t, [cols[0], ("x", cols[1][1][:1])], "title")
+
+
+def test_a_one_column_figure_wraps_its_title_inside_the_figure():
+    """002's 330 V ramp is drawn for the FA-LESO alone (one column, 6.5 in wide): its long title wraps instead
+    of running off both edges."""
+    t = np.linspace(0.0, 1.0, 101)
+    panel = plot.Panel("θ̂e − θe (rad)", (plot.Series("error", 0.01 * t),), zero=True)
+    title = "Paper 002 Fig. 16 (ours): speed ramp 300-600-840-600-300 r/min, 330 V dc link, speed loop 2.5 Hz, "
+    fig = plot.paper_figure(t, [("FA-LESO", [panel])], title + "the FA-LESO closing the loop")
+    fig.canvas.draw()
+    (sup,) = [tx for tx in fig.texts if tx.get_text().startswith("Paper 002")]
+    assert "\n" in sup.get_text()
+    box, whole = sup.get_window_extent(), fig.bbox
+    assert box.x0 >= whole.x0 and box.x1 <= whole.x1, (box, whole)
+
+
+def test_the_weakening_layout_draws_i_d_under_its_reference():
+    """jaxobs.reproduce.figures' ``weakening`` panels: the speed estimate over the speed, the drive's i_d over
+    i_d* (A), then the error, as 002's ramp on a 330 V link is drawn (LESO_FIGURES)."""
+    from typing import NamedTuple
+
+    from jaxobs.reproduce.figures import LESO_FIGURES, drive_figure
+
+    class Obs(NamedTuple):
+        theta: np.ndarray
+        omega: np.ndarray
+
+    class Out(NamedTuple):
+        theta_e: np.ndarray
+        speed_rpm: np.ndarray
+        omega_m_ref: np.ndarray
+        load: np.ndarray
+        mode: np.ndarray
+        i_d: np.ndarray
+        id_ref: np.ndarray
+        obs: object
+
+    class Sol(NamedTuple):
+        t: np.ndarray
+        outputs: Out
+
+    t = np.linspace(0.0, 1.0, 1001)
+    w = 2 * np.pi * 50 * np.ones_like(t)
+    i_d = np.minimum(0.0, -6.0 * (t - 0.5))
+    each = (Obs(100 * np.pi * t - 0.05, w),) * 3
+    out = Out(
+        100 * np.pi * t, w / 5 * 30 / np.pi, w / 5, 0 * t, 1 + 0 * t, i_d, i_d + 0.1, type("B", (), {"each": each})
+    )
+    spec = [s for s in LESO_FIGURES if s[4] == "weakening"]
+    assert len(spec) == 1 and spec[0][3] == ("FA-LESO",)
+    fig = drive_figure(Sol(t, out), ("C-LESO", "GI-LESO", "FA-LESO"), *spec[0][3:], "title", p=5)
+    assert [ax.get_ylabel() for ax in fig.axes] == ["speed (r/min)", "i_d, i_d* (A)", "θ̂e − θe (rad)"]
+    assert fig.axes[1].get_ylim()[0] < -3.0 and fig.axes[1].get_ylim()[1] >= 0.0
