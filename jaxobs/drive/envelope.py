@@ -36,7 +36,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .. import AbstractSystem, SaveFinal
+from .. import AbstractSystem, SaveFinal, kept_jit
 from .. import metrics as M
 from ..drive_study import (
     CF_UNITS,
@@ -52,7 +52,7 @@ from ..scenarios import Grid
 from ..sharding import batch_mesh
 from . import ClosedLoop, Drive, PMSMParams, drive_speed_limit_rpm
 from .loop import SETTLE_PERIODS
-from .stability import lyapunov
+from .stability import Stability, lyapunov
 
 __all__ = [
     "ENVELOPE_VARIABLES",
@@ -183,10 +183,23 @@ class _LongRun(NamedTuple):
         return vals
 
 
-@eqx.filter_jit
-def _stability(drive, obs, scs, kw: tuple):
-    """:func:`lyapunov` at every scenario of ``scs``, one program per observer class (gains are traced)."""
-    return jax.vmap(lambda sc: lyapunov(ClosedLoop(drive, bind_observer(obs, sc), sc), **dict(kw)))(scs)
+def _stability_fields(drive, obs, scs, kw: tuple):
+    """:func:`lyapunov` at every scenario of ``scs``, one program per observer class (gains are traced); its
+    fields as a plain tuple, which a kept program (:func:`jaxobs.kept_jit`) can return."""
+    return tuple(jax.vmap(lambda sc: lyapunov(ClosedLoop(drive, bind_observer(obs, sc), sc), **dict(kw)))(scs))
+
+
+_stability_jit = eqx.filter_jit(_stability_fields)
+_KEPT: dict = {}  # trace key -> its kept program, one per process
+
+
+def _stability(drive, obs, scs, kw: tuple, trace_key: str | None = None):
+    if trace_key is None:
+        return Stability(*_stability_jit(drive, obs, scs, kw))
+    key = f"envelope.stability|{trace_key}|{kw!r}"
+    if key not in _KEPT:
+        _KEPT[key] = kept_jit(_stability_fields, key)
+    return Stability(*_KEPT[key](drive, obs, scs, kw))
 
 
 def _speed_bandwidth(drive: Drive, machine: PMSMParams, speed_rpm: float) -> float:
@@ -224,6 +237,7 @@ def envelope(
     seed: int = 0,
     chunk_size: int = 256,
     progress=None,
+    trace_key: str | None = None,
 ):
     """The operating envelope of every design (name -> drive observer closing ``drive``'s loop sensorless).
 
@@ -234,7 +248,9 @@ def envelope(
     ``bound_deg`` (deg electrical): the late peak position error a holding point may have; ``speed_tol``
     (relative): the late peak speed deviation a synchronous point may have.  ``stability``: keyword arguments
     of :func:`~jaxobs.drive.stability.lyapunov` (settle, warmup, window, n_dirs, tol).  ``progress`` as in
-    :func:`jaxobs.runner.run_scenarios`.  Returns an ``xarray.Dataset`` with dims ``("design", "speed_rpm",
+    :func:`jaxobs.runner.run_scenarios`.  ``trace_key``: a string naming every argument here (the command
+    line: its source file's digest and options): the long runs' and the margins' traced programs are kept
+    across processes (:func:`jaxobs.kept_jit`).  Returns an ``xarray.Dataset`` with dims ``("design", "speed_rpm",
     "load"[, axis])`` and the variables of :data:`ENVELOPE_VARIABLES` (booleans stored as int8 0/1).
     """
     import xarray as xr
@@ -315,10 +331,12 @@ def envelope(
         progress=progress,
         label="envelope",
         save=SaveFinal(),
+        trace_key=None if trace_key is None else f"envelope|{trace_key}",
     )
     # the stability margins: constant profiles (no step), one jit(vmap) per observer class
     scs = drive_scenarios(machine, names, points, seed=seed)
-    stab = {d: jax.device_get(_stability(drive, obs, scs, tuple(sorted(kw.items())))) for d, obs in designs.items()}
+    kws = tuple(sorted(kw.items()))
+    stab = {d: jax.device_get(_stability(drive, obs, scs, kws, trace_key)) for d, obs in designs.items()}
 
     dnames = list(designs)
     shape = (len(dnames), *(len(axes[n]) for n in names))
