@@ -85,8 +85,8 @@ def cli_envelope(args) -> int:
     drive = job_drive(spec)
     speeds, loads = default_speeds(par, args.speeds), default_loads(par, args.loads)
     n = len(speeds) * len(loads)
-    # the job's own settle and window where it states them ([envelope]), else the library's defaults (settle 0.2 s,
-    # window 0.4 s)
+    # the job's own settle and (shortest) window where it states them ([envelope]), else the library's defaults
+    # (jaxobs.drive.envelope.STABILITY_METHODS: settle 0.2 s, windows of at least 0.2 s)
     env = job.envelope
     stab = {} if env is None else {"settle": env.settle, "window": env.window}
     what = (
@@ -100,8 +100,7 @@ def cli_envelope(args) -> int:
         w = 1.02 * 60.0 / (float(par.p) * float(speeds[0]))
         win = "" if env is None else f", Floquet settle {env.settle:g} s"
         print(
-            f"{what}{win}, window {max(w, env.window if env else 0.4):.3g} s (an electrical period at the "
-            "lowest speed): OK"
+            f"{what}{win}, windows of whole electrical periods, up to {max(w, 2.0):.3g} s (one at the lowest speed): OK"
         )
         return 0
     out = Path(args.out) if args.out else Path("out") / f"envelope-{safe_name(job.name)}"
@@ -126,7 +125,8 @@ def cli_envelope(args) -> int:
             ds.to_netcdf(tmp, engine="h5netcdf")
     a = ds.attrs  # what ran: the stretched window and warm-up, and the steady start's settle (Drive.settled_for)
     print(
-        f"{what}, Floquet verdict: settle {a['stability_settle']:.3g} s, window {a['stability_window']:.3g} s; "
+        f"{what}, Floquet verdict: settle {a['stability_settle']:.3g} s, windows {a['stability_window']:.3g} s up to "
+        f"{a['stability_max_window']:.3g} s (whole electrical periods); "
         f"observers settled {a['drive_settle']:.3g} s before each run"
     )
     wd = max(len("design"), *(len(d) for d in designs)) + 2

@@ -194,7 +194,8 @@ def floquet(
     system: ClosedLoop,
     *,
     settle: float = 0.2,
-    window: float = 1.0,
+    window: float = 0.2,
+    max_window: float = 2.0,
     n_report: int = 3,
     tol: float = 0.0,
 ) -> Stability:
@@ -207,11 +208,11 @@ def floquet(
     Why whole periods make M a monodromy matrix without knowing the state's frames.  At a constant speed the
     loop's orbit turns with θe; the state (αβ filters, the held voltage, angles) is the same after every
     electrical period T_e, provided the sampled loop's own period (the speed loop's ``speed_every`` samples,
-    h) fits it.  So the speed is moved to the nearest one where m·T_e = N·h for whole m and N, N ≤ the
-    window's blocks and m as many periods as the window holds (N ≥ window/2h): a relative change of at most
-    h/window (0.1 % for a 1 s window and the 1 kHz speed loop), returned as ``speed_scale``.  On that
-    periodic orbit M = ∂x(t0 + m T_e)/∂x(t0) is the monodromy matrix; its eigenvalues μ are the Floquet
-    multipliers and log|μ|/(m T_e) the Lyapunov exponents, each exactly, however close two of them are.
+    h) fits it.  So the window is the fewest electrical periods m that last at least ``window`` seconds, N =
+    round(m T_e/h) speed-loop periods, and the speed is moved to where m T_e' = N h exactly: a relative change
+    of at most h/(2 window) (0.25 % for 0.2 s and the 1 kHz speed loop).  On that periodic orbit
+    M = ∂x(t0 + m T_e')/∂x(t0) is the monodromy matrix; its eigenvalues μ are the Floquet multipliers and
+    log|μ|/(m T_e') the Lyapunov exponents, each exactly, however close two of them are.
 
     The neutral multiplier.  The orbit from θe0 + δ is the same orbit shifted (rotation equivariance, or a
     phase along it where harmonics or the dead time break the symmetry), so v = ∂x(t0)/∂θe0 (one ``jvp``
@@ -219,41 +220,46 @@ def floquet(
     eigenvalues of P M P with P = I − v vᵀ/vᵀv are those of M less the neutral 1 (and a 0): no eigenvector
     matching.  Components the step only copies are masked as in :func:`lyapunov`.
 
-    ``resolution`` (1/s) says how periodic the orbit really was: |log|vᵀMv/vᵀv|| + |P M v|/|v|, over m T_e:
-    0 on an exact periodic orbit; larger where the settle left the loop off its orbit, where the profiles
-    are not constant, or where the window is shorter than one electrical period (then it is inf: the window
-    must span T_e at the lowest speed; at 20 r/min on 000's SPMSM, 1 s).  ``stable``, ``marginal`` and
-    ``speed_dev`` as in :func:`lyapunov`; ``exponents`` are the ``n_report`` largest non-neutral
-    log|μ|/(m T_e), largest first.
+    ``resolution`` (1/s) says how periodic the orbit really was: δ = |log|vᵀMv/vᵀv|| + |P M v|/|v| (0 on an
+    exact periodic orbit) moves the top multiplier μ's rate by about δ/(|μ| m T_e'); larger where the settle
+    left the loop off its orbit or where the profiles
+    are not constant; inf where one electrical period is longer than ``max_window`` (the point is then
+    ``marginal``: not resolved).  ``stable``, ``marginal`` and ``speed_dev`` as in :func:`lyapunov` (the
+    deviation over the window); ``exponents`` are the ``n_report`` largest non-neutral log|μ|/(m T_e'),
+    largest first.
 
-    Cost: every state component is a tangent direction (n of them, ``jax.vmap`` of ``jax.jvp``) over the
-    window, after a settle that carries one (the neutral).  M is accumulated with a scalar normalization each
-    block (it is a product of thousands of Jacobians).  Differentiable in the gains where the top
-    non-neutral multiplier is simple (``jnp.linalg.eig``'s derivative; CPU only, as ``eig`` is).
+    Cost: every state component is a tangent direction (n of them, ``jax.vmap`` of ``jax.jvp``), over the
+    point's own window (a ``while_loop``: under ``vmap`` a batch runs as long as its longest window, so batch
+    points of similar speed together, as :func:`jaxobs.drive.envelope.envelope` does), after a settle that
+    carries one (the neutral).  M is accumulated with a scalar normalization each block (a product of
+    thousands of Jacobians).  Differentiable in the gains by forward mode (``jax.jacfwd``; reverse mode does
+    not pass a ``while_loop``) where the top non-neutral multiplier is simple; ``eigvals`` runs on the CPU.
     """
     if not isinstance(system, ClosedLoop):
         raise ValueError(f"floquet: system must be a jaxobs.drive.ClosedLoop, got {type(system).__name__}")
     if system.drive.startup is not None:
         raise ValueError("floquet: system.drive.startup must be None (an operating point, started steady)")
-    for name, v, lo in (("settle", settle, 0.0), ("window", window, 1e-3)):
+    for name, v, lo in (("settle", settle, 0.0), ("window", window, 1e-3), ("max_window", max_window, 1e-3)):
         if not (lo <= float(v) <= 100.0):
             raise ValueError(f"floquet: {name} must be in [{lo:g}, 100] s, got {v!r}")
+    if float(max_window) < float(window):
+        raise ValueError(f"floquet: max_window must be >= window ({window!r} s), got {max_window!r}")
     if isinstance(n_report, bool) or not isinstance(n_report, int) or not 1 <= n_report <= 16:
         raise ValueError(f"floquet: n_report must be an integer in [1, 16], got {n_report!r}")
     ts, blk = system.ts, system.drive.foc.speed_every
     h = ts * blk
     n_settle = max(int(round(settle / h)), 0)
-    n_max = max(int(round(window / h)), 2)
+    n_max = max(int(round(max_window / h)), 2)
 
-    # the nearest speed with m electrical periods in N whole speed-loop periods (N ≤ n_max, as many periods
-    # as fit): ω' = ω · m T_e / (N h)
+    # the window: m electrical periods, the fewest lasting ``window``; N whole speed-loop periods; the speed
+    # moved so that they coincide, ω' = ω · m T_e / (N h)
     sc = system.scenario
     w_ref = jnp.abs(sc.speed_ref(0.0))
     t_e = 2.0 * jnp.pi / jnp.maximum(system.pole_pairs * w_ref, 1e-9)
-    span = n_max * h
-    covered = t_e <= span * (1.0 + 0.5 / n_max)
-    m = jnp.maximum(jnp.floor(span / t_e), 1.0)
-    n_win = jnp.clip(jnp.round(m * t_e / h), 1.0, float(n_max))
+    m = jnp.maximum(jnp.ceil(window / t_e - 1e-9), 1.0)
+    n_win = jnp.maximum(jnp.round(m * t_e / h), 1.0)
+    covered = n_win <= n_max
+    n_win = jnp.minimum(n_win, float(n_max))
     scale = jnp.where(covered, m * t_e / (n_win * h), 1.0)
     system = eqx.tree_at(
         lambda s: (s.scenario.speed_ref.values, s.scenario.omega_m0),
@@ -277,69 +283,72 @@ def floquet(
         v, r, _ = _split(new)
         return v, (r, out)
 
-    def tangent_block(carry, j, active):
-        """One speed-loop period: the state and the tangent columns ``t`` (n × d) through ``blk`` samples."""
-        vec, rest, t = carry
+    def tangent_block(vec, rest, t, j):
+        """One speed-loop period: the state and the tangent columns ``t`` (n × d) through ``blk`` samples;
+        also the peak speed deviation and the tangents after the first sample."""
 
         def one(c, i):
             v, r, tt = c
-            k = j * blk + i
             v1, t1, (r1, out) = jax.vmap(
-                lambda d: jax.jvp(lambda vv: step_vec(vv, r, k), (v,), (d,), has_aux=True),
+                lambda d: jax.jvp(lambda vv: step_vec(vv, r, j * blk + i), (v,), (d,), has_aux=True),
                 in_axes=1,
                 out_axes=(None, 1, None),
             )(tt)
             dev = jnp.abs(out.omega_m - out.omega_m_ref) / jnp.maximum(ref, 1e-6)
             return (v1, r1, t1), (dev, t1)
 
-        (vec, rest, t1), (dev, ts_) = jax.lax.scan(one, (vec, rest, t), jnp.arange(blk))
-        return (vec, rest, jnp.where(active, t1, t)), (jnp.max(dev), ts_[0])
+        (vec, rest, t), (dev, tts) = jax.lax.scan(one, (vec, rest, t), jnp.arange(blk))
+        return vec, rest, t, jnp.max(dev), tts[0]
 
-    # the settle: the neutral direction alone, from t = 0 (so it is ∂x/∂θe0 exactly)
+    # the settle: the neutral direction alone, from t = 0 (so it is ∂x/∂θe0 exactly); its own speed excursion
+    # is not the orbit's (the rule of lyapunov)
     def settle_block(carry, j):
-        (vec, rest, t), (dev, _) = tangent_block(carry, j, True)
-        return (vec, rest, t), dev
+        vec, rest, t, _, _ = tangent_block(*carry, j)
+        return (vec, rest, t), None
 
-    (vec, rest, v), dev_settle = jax.lax.scan(settle_block, (vec0, rest0, neutral0[:, None]), jnp.arange(n_settle))
-    del dev_settle  # the settle's own speed excursion is not the orbit's (lyapunov: the same rule)
+    (vec, rest, v), _ = jax.lax.scan(settle_block, (vec0, rest0, neutral0[:, None]), jnp.arange(n_settle))
     v = v[:, 0]
 
-    # the window: every direction, from the identity at t0, frozen after n_win blocks; a scalar normalization
-    # each block keeps the product finite (log scale accumulated), and the first step's Jacobian finds the
-    # components the step only copies (a unit row)
-    def window_block(carry, j):
-        vec, rest, w, log_s, mask = carry
-        active = j < n_win
-        (vec, rest, w1), (dev, first) = tangent_block((vec, rest, w), n_settle + j, active)
-        mask = jnp.where(j == 0, jnp.any(first != jnp.eye(n, dtype=first.dtype), axis=1), mask)
-        nrm = jnp.sqrt(jnp.sum(w1 * w1))
-        nrm = jnp.where(active & (nrm > 0) & jnp.isfinite(nrm), nrm, 1.0)
-        return (vec, rest, w1 / nrm, log_s + jnp.log(nrm), mask), jnp.where(active, dev, 0.0)
-
+    # the window: every direction, from the identity at t0, for the point's own N blocks; a scalar
+    # normalization each block keeps the product finite (its log accumulated), and the first step's Jacobian
+    # finds the components the step only copies (a unit row)
     eye = jnp.eye(n, dtype=vec0.dtype)
-    init = (vec, rest, eye, jnp.zeros((), vec0.dtype), jnp.ones((n,), bool))
-    (_, _, w, log_s, mask), dev = jax.lax.scan(window_block, init, jnp.arange(n_max))
+
+    def body(c):
+        j, vec, rest, w, log_s, mask, dev = c
+        vec, rest, w, d, first = tangent_block(vec, rest, w, n_settle + j)
+        mask = jnp.where(j == 0, jnp.any(first != eye, axis=1), mask)
+        nrm = jnp.sqrt(jnp.sum(w * w))
+        nrm = jnp.where((nrm > 0) & jnp.isfinite(nrm), nrm, 1.0)
+        return j + 1, vec, rest, w / nrm, log_s + jnp.log(nrm), mask, jnp.maximum(dev, d)
+
+    z = jnp.zeros((), vec0.dtype)
+    init = (jnp.zeros((), jnp.int32), vec, rest, eye, z, jnp.ones((n,), bool), z)
+    _, _, _, w, log_s, mask, dev = jax.lax.while_loop(lambda c: c[0] < n_win, body, init)
     period = n_win * h
     keep = mask.astype(w.dtype)
     w = w * keep[:, None] * keep[None, :]
-    v = v * keep
-    vn = v / jnp.maximum(jnp.linalg.norm(v), 1e-300)
+    vn = v * keep
+    vn = vn / jnp.maximum(jnp.linalg.norm(vn), 1e-300)
     proj = eye - jnp.outer(vn, vn)
     mu = jnp.linalg.eigvals(proj @ w @ proj)
-    logs = jnp.log(jnp.maximum(jnp.abs(mu), 1e-300)) + log_s
-    rates = -jnp.sort(-logs.real) / period
+    rates = -jnp.sort(-(jnp.log(jnp.maximum(jnp.abs(mu), 1e-300)) + log_s)) / period
     # how periodic the orbit was: the neutral direction must come back to itself (M v = v)
     wv = w @ vn
     along = jnp.dot(vn, wv)
-    res_n = (
-        jnp.abs(jnp.log(jnp.maximum(jnp.abs(along), 1e-300)) + log_s)
-        + jnp.linalg.norm(wv - along * vn) * jnp.exp(log_s)
-    ) / period
+    off = jnp.abs(jnp.log(jnp.maximum(jnp.abs(along), 1e-300)) + log_s) + jnp.linalg.norm(wv - along * vn) * jnp.exp(
+        log_s
+    )
     lam = rates[0]
     finite = jnp.isfinite(lam) & jnp.all(jnp.isfinite(w))
     lam = jnp.where(finite, lam, jnp.inf)
-    res = jnp.where(finite & covered, jax.lax.stop_gradient(res_n), jnp.inf)
-    speed_dev = jnp.where(finite, jnp.max(dev), jnp.inf)
+    # the resolution: an error δ in M (the orbit off periodic by that much) moves a multiplier μ by about δ,
+    # its rate by δ/(|μ| T): relative to the top non-neutral multiplier, small for a slow mode and large for a
+    # fast one (at 1000 r/min on 000's bench, μ = 2e-5 over 0.5 s: δ = 3e-6 reads ±0.3 /s on −21.5 /s, and two
+    # windows gave −21.496 and −21.500).  An uncertainty of the estimate, not a property a tuner should move.
+    rel = off * jnp.exp(-jnp.clip(lam, -700.0 / period, 700.0 / period) * period)
+    res = jnp.where(finite & covered, jax.lax.stop_gradient(rel / period), jnp.inf)
+    speed_dev = jnp.where(finite, dev, jnp.inf)
     held = speed_dev < 0.2
     return Stability(
         exponent=lam,
