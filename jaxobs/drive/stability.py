@@ -391,10 +391,15 @@ def slope_fit(acc: jax.Array, dt: float) -> tuple[jax.Array, jax.Array]:
     return slope, spread
 
 
-def stability_sweep(make_system: Callable, scenarios, **kw) -> Stability:
-    """:func:`lyapunov` at every scenario of a batch, one ``jit(vmap)``: ``make_system(scenario)`` gives the
-    ClosedLoop (bind the observer to the scenario there); ``kw`` go to :func:`lyapunov`."""
-    return jax.jit(jax.vmap(lambda sc: lyapunov(make_system(sc), **kw)))(scenarios)
+def stability_sweep(make_system: Callable, scenarios, *, method: str = "lyapunov", **kw) -> Stability:
+    """:func:`lyapunov` (or, ``method="floquet"``, :func:`floquet`) at every scenario of a batch, one
+    ``jit(vmap)``: ``make_system(scenario)`` gives the ClosedLoop (bind the observer to the scenario there);
+    ``kw`` go to that function.  For ``floquet`` a batch runs as long as its slowest point's period: batch
+    points of similar speed together."""
+    if method not in ("lyapunov", "floquet"):
+        raise ValueError(f"stability_sweep: method must be 'lyapunov' or 'floquet', got {method!r}")
+    fn = lyapunov if method == "lyapunov" else floquet
+    return jax.jit(jax.vmap(lambda sc: fn(make_system(sc), **kw)))(scenarios)
 
 
 # --------------------------------------------------------------------------
