@@ -56,7 +56,10 @@ def _describe(spec, index: int) -> str:
     return f"scenario #{index}: {values}"
 
 
-def write_report(out: Path, job, obj, thetas: dict, history: list):
+def write_report(out: Path, job, obj, thetas: dict, history: list, closed_form_totals=None):
+    """convergence.png and responses.png in ``out``.  ``closed_form_totals``: the closed form's per-scenario
+    totals on ``obj``'s scenarios (:meth:`Objective.per_scenario`'s second value), where the caller has them
+    (else they are computed again); the responses show the scenario where it does worst."""
     # convergence
     if history:
         fig, ax = _subplots(figsize=(6, 3.5))
@@ -69,7 +72,7 @@ def write_report(out: Path, job, obj, thetas: dict, history: list):
         with atomic_path(out / "convergence.png") as tmp:
             fig.savefig(tmp, dpi=110)
     # responses on the scenario where the closed form does worst
-    per = obj.per_scenario(thetas["closed_form"])[1]
+    per = obj.per_scenario(thetas["closed_form"])[1] if closed_form_totals is None else closed_form_totals
     worst = int(np.argmax(np.asarray(per)))
     sig = jax.tree.map(lambda x: x[worst], obj.scenarios)
     fig, axes = _subplots(2, 1, figsize=(8, 5.5), sharex=True)
