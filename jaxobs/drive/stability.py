@@ -221,8 +221,8 @@ def floquet(
     matching.  Components the step only copies are masked as in :func:`lyapunov`.
 
     ``resolution`` (1/s) says how periodic the orbit really was: δ = |log|vᵀMv/vᵀv|| + |P M v|/|v| (0 on an
-    exact periodic orbit) moves the top multiplier μ's rate by about δ/(|μ| m T_e'); larger where the settle
-    left the loop off its orbit or where the profiles
+    exact periodic orbit) may move the top multiplier μ by about δ, its rate by log(1 + δ/|μ|)/(m T_e'); larger
+    where the settle left the loop off its orbit or where the profiles
     are not constant; inf where one electrical period is longer than ``max_window`` (the point is then
     ``marginal``: not resolved).  ``stable``, ``marginal`` and ``speed_dev`` as in :func:`lyapunov` (the
     deviation over the window); ``exponents`` are the ``n_report`` largest non-neutral log|μ|/(m T_e'),
@@ -342,12 +342,13 @@ def floquet(
     lam = rates[0]
     finite = jnp.isfinite(lam) & jnp.all(jnp.isfinite(w))
     lam = jnp.where(finite, lam, jnp.inf)
-    # the resolution: an error δ in M (the orbit off periodic by that much) moves a multiplier μ by about δ,
-    # its rate by δ/(|μ| T): relative to the top non-neutral multiplier, small for a slow mode and large for a
-    # fast one (at 1000 r/min on 000's bench, μ = 2e-5 over 0.5 s: δ = 3e-6 reads ±0.3 /s on −21.5 /s, and two
-    # windows gave −21.496 and −21.500).  An uncertainty of the estimate, not a property a tuner should move.
+    # the resolution: an error δ in M (the orbit off periodic by that much) moves a multiplier by up to about δ,
+    # so the top non-neutral one is at most |μ| + δ: its rate at most log(|μ| + δ)/T, log(1 + δ/|μ|)/T above
+    # the estimate.  ≈ δ/T for a slow mode (|μ| near 1); for a fast one the same δ is a larger share of its
+    # tiny μ (000's SOIFO at 1000 r/min, settled 0.2 s: μ = 5e-5 over 0.5 s, δ = 3e-3, so −19.9 ± 8.5 /s: still
+    # stable, as a 3 s run is).  An uncertainty of the estimate, not a property a tuner should move.
     rel = off * jnp.exp(-jnp.clip(lam, -700.0 / period, 700.0 / period) * period)
-    res = jnp.where(finite & covered, jax.lax.stop_gradient(rel / period), jnp.inf)
+    res = jnp.where(finite & covered, jax.lax.stop_gradient(jnp.log1p(rel) / period), jnp.inf)
     speed_dev = jnp.where(finite, dev, jnp.inf)
     held = speed_dev < 0.2
     return Stability(
