@@ -151,7 +151,7 @@ def run_scenarios(
     returned ``values`` is then ``None`` (read them back from the sink).
 
     ``trace_key``: a string that names everything static about ``system_factory`` and ``metrics`` beyond
-    their code (a job's digest): on one device, each chunk's traced program is then kept across processes
+    their code (a job's digest): in one process, each chunk's traced program is then kept across processes
     (:func:`jaxobs.kept_jit`, where :func:`jaxobs.use_compile_cache` set its folder).
     """
     if not designs:
@@ -216,7 +216,7 @@ def run_scenarios(
                 new = key not in compiled  # the first chunk this run computes
                 bar.stage(f"{dname} (compiling, then {chunk} scenarios a chunk)" if new else dname)
                 # the per-scenario results, whole, on every process (an all-gather when the mesh spans processes)
-                run = _run_chunk if trace_key is None or n_dev > 1 else _kept_chunk(trace_key, task, aux)
+                run = _run_chunk if trace_key is None or jax.process_count() > 1 else _kept_chunk(trace_key, task, aux)
                 got = sharding.gather_batch(run(task, design, batch, aux))
                 compiled.add(key)
                 if sink is None:

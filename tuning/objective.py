@@ -288,6 +288,8 @@ class Objective:
         # the scenarios and the component are constants of the program (self is static): the key names them
         vg = self._per_scenario_value_and_grad
         self._vg = eqx.filter_jit(vg) if trace_key is None else kept_jit(vg, f"objective.vg|{trace_key}")
+        resp = self._response
+        self.response = eqx.filter_jit(resp) if trace_key is None else kept_jit(resp, f"objective.resp|{trace_key}")
 
         @jax.custom_jvp
         def value(theta):
@@ -358,6 +360,13 @@ class Objective:
         huge weight), which the solver counts with the diverged scenarios, though nothing diverged."""
         _, _, good = self._vg(theta)
         return int(jnp.sum(jnp.asarray(scored_good) & ~good))
+
+    def _response(self, theta, sig):
+        """One scenario's run at ``theta`` as the report draws it: the sample times (s), the observer's
+        frequency estimate ``obs.omega`` (rad/s) and its position error θ̂ − θ (rad,
+        :func:`jaxobs.metrics.position_error`); one program for every design (``response``)."""
+        sol = self._simulate(self.param.apply(self.component, theta), sig)
+        return sol.t, sol.outputs.obs.omega, M.position_error(sol, sig)
 
     # --- reporting: a design scored on the scenarios by the one study runner (jaxobs.runner)
     def _system(self, theta, sig):

@@ -9,8 +9,6 @@ from pathlib import Path
 import jax
 import numpy as np
 
-from jaxobs.metrics import position_error
-
 from .outdir import atomic_path
 
 
@@ -78,12 +76,9 @@ def write_report(out: Path, job, obj, thetas: dict, history: list, closed_form_t
     fig, axes = _subplots(2, 1, figsize=(8, 5.5), sharex=True)
     for label, th in thetas.items():
         style = _STYLE.get(label, dict(lw=1))
-        comp = obj.param.apply(obj.component, th)
-        sol = obj._simulate(comp, sig)
-        t, so = np.asarray(sol.t), sol.outputs
-        axes[0].plot(t, np.asarray(so.obs.omega) / (2 * math.pi), label=label, **style)
-        err = position_error(sol, sig)
-        axes[1].plot(t, np.degrees(np.asarray(err)), label=label, **style)
+        t, omega, err = (np.asarray(x) for x in obj.response(th, sig))
+        axes[0].plot(t, omega / (2 * math.pi), label=label, **style)
+        axes[1].plot(t, np.degrees(err), label=label, **style)
     # an FLL's ("grid") error is the grid voltage's phase; a flux observer's or a drive's (on an "emf" recording or
     # closing the loop) is the rotor's electrical position: the labels say which
     if job.scenarios.signal != "grid":
