@@ -99,7 +99,7 @@ def _verify(job: Job, values: dict, result: dict, quiet: bool) -> None:
         print(f"jaxobs: verifying the designs over {env.horizon:g} s across the envelope", file=sys.stderr)
     info = COMPONENTS[job.component]
     designs = {k: info.ctor(**v) for k, v in values.items() if v is not None}
-    ver = verify_designs(designs, job.envelope, job.drive, trace_key=f"{job_fingerprint(job)}|verify")
+    ver = verify_designs(designs, job.envelope, job.drive)
     result["verification"] = ver
     result["tuning_status"] = result["status"]
     if ver["unsafe_points"]:

@@ -106,18 +106,20 @@ def parse_envelope(raw: dict, scen: ScenarioSpec, drive: DriveSpec | None) -> En
     return EnvelopeSpec(speeds, loads, horizon, settle, window)
 
 
-def verify_designs(designs: dict, env: EnvelopeSpec, drive_spec: DriveSpec, trace_key: str | None = None) -> dict:
+def verify_designs(designs: dict, env: EnvelopeSpec, drive_spec: DriveSpec) -> dict:
     """Initial, closed form and tuned (``designs``: name -> drive observer) at the envelope's coarse grid over
     ``env.horizon`` seconds, with their stability verdicts (:func:`jaxobs.drive.envelope.envelope`, the one
-    envelope map, on the job's drive started steady): the ``verification`` block of result.json.  ``trace_key``:
-    what made every argument (the job's digest): the map's traced programs are kept (:func:`jaxobs.kept_jit`)."""
+    envelope map, on the job's drive started steady): the ``verification`` block of result.json."""
     drive_spec = dataclasses.replace(drive_spec, start="steady", handover=0.0)  # operating points, started steady
     drive = job_drive(drive_spec)
     par = D.bench_machine(drive_spec.machine)
     speeds, loads = env.points()
     stab = {"settle": env.settle, "window": env.window}
+    # the map's traced programs kept across runs (jaxobs.kept_jit): the two specs (plain frozen dataclasses) name
+    # everything that builds the drive, the machine and the points; the designs' gains are the programs' arrays
+    key = f"verify|{env!r}|{drive_spec!r}"
     ds = envelope(designs, machine=par, drive=drive, speeds_rpm=speeds, loads_nm=loads, horizon=env.horizon,
-                  stability=stab, trace_key=trace_key)  # fmt: skip
+                  stability=stab, trace_key=key)  # fmt: skip
     combos = [(s, ld) for s in speeds for ld in loads]
     out = {
         "envelope": {"speed_rpm": list(env.speed_rpm), "load_nm": list(env.load_nm)},
