@@ -90,10 +90,14 @@ def _lib_version(name: str) -> str:
 
 
 def _environment() -> str:
-    libs = ",".join(f"{n}={_lib_version(n)}" for n in _LIBS)
+    if "libs" not in _digests:  # read once: importlib.metadata costs ~1 ms a package, and this runs every call
+        _digests["libs"] = ",".join(f"{n}={_lib_version(n)}" for n in _LIBS)
+    libs = _digests["libs"]
     opts = ",".join(f"{o}={getattr(jax.config, o, None)!r}" for o in _OPTIONS)
     dev = jax.devices()[0]
-    return f"{libs};{opts};{dev.platform};{getattr(dev, 'device_kind', '')};{sys.version_info[:2]}"
+    # the device count too: a program split over two host devices is another program than one device's
+    kind = f"{dev.platform};{getattr(dev, 'device_kind', '')};{jax.device_count()};{jax.process_count()}"
+    return f"{libs};{opts};{kind};{sys.version_info[:2]}"
 
 
 class _Kept:
