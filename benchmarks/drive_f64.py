@@ -156,17 +156,17 @@ def main(argv=None) -> int:
         jax.config.update("jax_enable_x64", dt == "f64")
         variants = [("jaxobs", None)] + ([("jaxobs-xla-trig", _xla_sincos)] if a.xla_trig else [])
         for name, patch in variants:
-            saved = [m.sincos for m in _callers_of_sincos()]
-            if patch is not None:
-                for m in _callers_of_sincos():
-                    m.sincos = patch
+            mods = _callers_of_sincos() if patch is not None else ()
+            saved = [m.sincos for m in mods]
+            for m in mods:
+                m.sincos = patch
             try:
                 jax.clear_caches()  # simulate's traces are cached by its arguments: trace this variant afresh
                 fn, args = W.jax_drive(a.batch, a.horizon)
                 # compiled ahead of time, so that the program stays this variant's once the patch is undone
                 fn = fn.lower(args).compile()
             finally:
-                for m, f in zip(_callers_of_sincos(), saved):
+                for m, f in zip(mods, saved):
                     m.sincos = f
             costs[(name, dt)] = np.asarray(jax.block_until_ready(fn(args)))  # compiled, warm
             # the switch is read when a function is traced: each closure keeps its own precision's program

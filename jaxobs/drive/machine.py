@@ -195,9 +195,16 @@ def ipmsm_paper002(**overrides) -> PMSMParams:
     return PMSMParams(**kw)
 
 
-def _harmonic_factor(par: PMSMParams, theta_e):
-    """1 + a5 e^{−j6θ} + a7 e^{j6θ} as (re, im)."""
-    s6, c6 = sincos(6 * theta_e)
+def _harmonic_factor(par: PMSMParams, sc):
+    """1 + a5 e^{−j6θ} + a7 e^{j6θ} as (re, im), from ``sc`` = (sin θ, cos θ).
+
+    e^{j6θ} = (e^{jθ})⁶ by two squarings and a product (e^{j2θ}, e^{j3θ}, e^{j6θ}): no second sine and
+    cosine per angle.  Inside the plant's vector field XLA evaluates this once per state component it
+    stacks, in scalar code (jaxobs._trig), where a polynomial sine costs several times these six products."""
+    s, c = sc
+    c2, s2 = c * c - s * s, 2.0 * s * c
+    c3, s3 = c2 * c - s2 * s, s2 * c + c2 * s
+    c6, s6 = c3 * c3 - s3 * s3, 2.0 * s3 * c3
     re = 1.0 + (par.a5 + par.a7) * c6
     im = (par.a7 - par.a5) * s6
     return re, im
@@ -221,7 +228,7 @@ def _torque(par: PMSMParams, i_d, i_q, h):
 
 def bemf_dq(par: PMSMParams, omega_e, theta_e):
     """e_dq = j ωe ψf (1 + a5 e^{−j6θ} + a7 e^{j6θ}), returns (e_d, e_q)."""
-    return _bemf_dq(par, omega_e, _harmonic_factor(par, theta_e))
+    return _bemf_dq(par, omega_e, _harmonic_factor(par, sincos(theta_e)))
 
 
 def bemf_ab(par: PMSMParams, omega_e, theta_e):
@@ -232,7 +239,7 @@ def bemf_ab(par: PMSMParams, omega_e, theta_e):
 
 def torque(par: PMSMParams, i_d, i_q, theta_e):
     """Electromagnetic torque, N·m (see module doc)."""
-    return _torque(par, i_d, i_q, _harmonic_factor(par, theta_e))
+    return _torque(par, i_d, i_q, _harmonic_factor(par, sincos(theta_e)))
 
 
 def plant_vf(par: PMSMParams, x, u_ab, t_load, sc=None):
@@ -242,8 +249,7 @@ def plant_vf(par: PMSMParams, x, u_ab, t_load, sc=None):
     w_e = par.p * w_m
     s, c = sincos(th) if sc is None else sc
     u_d, u_q = rotate(u_ab[0], u_ab[1], -s, c)
-    # one harmonic factor (one sine and cosine of 6θe) for both the BEMF and the torque
-    h = _harmonic_factor(par, th)
+    h = _harmonic_factor(par, (s, c))  # one for both the BEMF and the torque
     e_d, e_q = _bemf_dq(par, w_e, h)
     di_d = (u_d - par.Rs * i_d + w_e * lq_apparent(par, i_q) * i_q - e_d) / par.Ld
     di_q = (u_q - par.Rs * i_q - w_e * par.Ld * i_d - e_q) / lq_incremental(par, i_q)
