@@ -29,11 +29,24 @@ import tempfile
 import time
 from pathlib import Path
 
+PRESETS = Path(__file__).resolve().parents[1] / "tuning" / "presets"
+
 # name -> the command line's arguments (after `jaxobs`); OUT is replaced by a fresh output folder
 COMMANDS = {
     "make-run": ["tune", "--out", "OUT", "--force", "--quiet"],
+    # a drive preset: the C-LESO on the IPMSM (30 Adam steps, 2 s horizon), verified over its envelope
+    "drive-preset": ["tune", str(PRESETS / "cleso.toml"), "--out", "OUT", "--force", "--quiet"],
     "study-fll": ["study", "--out", "OUT", "--force", "--quiet"],
+    "study-drive": ["study", str(PRESETS / "study_flux_drive.toml"), "--out", "OUT", "--force", "--quiet"],
+    "reproduce-flux": ["reproduce", "flux", "--quick", "--out", "OUT", "--force"],
     "reproduce-leso": ["reproduce", "leso", "--out", "OUT", "--force"],
+    # the envelope's smallest map: 2 speeds x 1 load of the SOIFO preset, 0.5 s runs
+    "envelope": [
+        "envelope",
+        str(PRESETS / "soifo.toml"),
+        *("--speeds", "2", "--loads", "1", "--horizon", "0.5"),
+        *("--out", "OUT", "--force", "--quiet"),
+    ],
 }
 
 

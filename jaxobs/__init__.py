@@ -59,6 +59,7 @@ from ._simulate import Solution as Solution
 from ._simulate import simulate as simulate
 from ._system import AbstractSystem as AbstractSystem
 from ._time import SampleTime as SampleTime
+from ._traced import kept_jit as kept_jit
 from .metrics import lost_lock_of as lost_lock_of
 
 # observers: the FLL family (001), the flux observers (000), the LESOs (002), and the contract
@@ -159,6 +160,7 @@ __all__ = [
     "shard_batch",
     "map_batch",
     "use_compile_cache",
+    "kept_jit",
     "__version__",
 ]
 

@@ -26,6 +26,8 @@ from pathlib import Path
 
 import jax
 
+from ._traced import set_traced_dir
+
 __all__ = ["use_compile_cache", "CACHE_ENV"]
 
 CACHE_ENV = "JAXOBS_CACHE_DIR"
@@ -37,13 +39,16 @@ def _default_dir() -> Path:
     return Path(base) / "jaxobs" / "jax"
 
 
-def use_compile_cache(path: str | os.PathLike | None = None, *, min_compile_s: float = 0.0) -> Path | None:
+def use_compile_cache(
+    path: str | os.PathLike | None = None, *, min_compile_s: float = 0.0, keep_traces: bool = True
+) -> Path | None:
     """Keep JAX's compiled programs in ``path`` (default: ``$JAXOBS_CACHE_DIR``, else the user's cache folder).
 
     Returns the folder, or ``None`` where the cache is off (``JAXOBS_CACHE_DIR`` set to ``off``, ``0`` or an
     empty string, with no ``path`` given).  Call it before the computations whose compilations should be
     kept; it may be called again to move the cache.  ``min_compile_s`` (s, ≥ 0): compilations shorter than
-    this are not written (default: every one).
+    this are not written (default: every one).  ``keep_traces``: the programs of :func:`jaxobs.kept_jit` keep
+    their traces too, in ``<folder>/traced`` (``jaxobs._traced``: a second process skips tracing and lowering).
     """
     if isinstance(min_compile_s, bool) or not isinstance(min_compile_s, int | float) or not min_compile_s >= 0:
         raise ValueError(f"use_compile_cache: min_compile_s must be a number >= 0 (seconds), got {min_compile_s!r}")
@@ -63,4 +68,5 @@ def use_compile_cache(path: str | os.PathLike | None = None, *, min_compile_s: f
         ) from None
     jax.config.update("jax_compilation_cache_dir", str(folder))
     jax.config.update("jax_persistent_cache_min_compile_time_secs", float(min_compile_s))
+    set_traced_dir(folder / "traced" if keep_traces else None)
     return folder

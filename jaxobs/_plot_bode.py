@@ -85,6 +85,22 @@ def _freq(w: float, hz: bool) -> str:
     return f"{w / (2 * math.pi):.3g} Hz" if hz else f"{w:.4g} rad/s"
 
 
+def _two_sided_ticks(ax, linthresh: float, x_max: float) -> None:
+    """A symlog frequency axis labelled every other decade, as plain numbers (−1000, −10, −0.1, 0, 0.1, ...),
+    the decades between as unlabelled minor ticks: a label at every decade of both signs (−10³ … 10³ and
+    −10⁰ written out) ran into its neighbours."""
+    from matplotlib.ticker import FixedLocator, FuncFormatter
+
+    top = int(math.floor(math.log10(x_max)))
+    low = int(math.ceil(math.log10(linthresh))) + 1  # the first decade clear of the linear part
+    labelled = list(range(top, low - 1, -2))
+    minor = [10.0**k for k in range(low, top + 1) if k not in labelled]
+    major = sorted([0.0] + [sg * 10.0**k for k in labelled for sg in (-1.0, 1.0)])
+    ax.xaxis.set_major_locator(FixedLocator(major))
+    ax.xaxis.set_minor_locator(FixedLocator(sorted(minor + [-m for m in minor])))
+    ax.xaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}".replace("-", "−")))
+
+
 def paper_bode_figures(out_dir, hz: bool = True):
     """The three Bode figures of the papers: 000 Fig. 5, 002 Fig. 4, 001 Fig. 14, over frequency in Hz
     (``hz=False``: rad/s). Returns the paths."""
@@ -121,8 +137,11 @@ def paper_bode_figures(out_dir, hz: bool = True):
     p = out / "bode_lesos_002_fig4.png"
     title = "Paper 002 Fig. 4: LESOs ê/e at ω̂e = 100π (two-sided)"
     fig = bode_figure(leso, omega, title, None, hz=hz, mark=we, mark_text=f"ω̂e = {_freq(we, hz)}")
+    lin = 1e-3 if hz else 1e-2
+    x_max = float(np.max(omega)) / (2 * math.pi) if hz else float(np.max(omega))
     for ax in fig.axes:
-        ax.set_xscale("symlog", linthresh=1e-3 if hz else 1e-2)
+        ax.set_xscale("symlog", linthresh=lin)
+        _two_sided_ticks(ax, lin, x_max)
     # a zoom on +50 Hz: the GI-LESO's ±1 dB there is its response (a pole-zero pair), not a sampling spike
     ax_m = fig.axes[0]
     ins = ax_m.inset_axes((0.13, 0.08, 0.3, 0.42))

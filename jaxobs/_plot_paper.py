@@ -6,6 +6,7 @@ say what goes in the panels: this module only draws.
 
 from __future__ import annotations
 
+import textwrap
 from typing import NamedTuple
 
 import numpy as np
@@ -82,5 +83,7 @@ def paper_figure(t, columns, title, path=None, events=(), t_unit: str = "s", sha
         lows, highs = zip(*(axes[i, j].get_ylim() for j in range(ncol)), strict=True)
         for j in range(ncol):
             axes[i, j].set_ylim(min(lows), max(highs))
-    fig.suptitle(title, fontsize=10)
+    # wrapped to the figure's width (about 12 characters an inch at 10 pt): a one-column figure's title ran off
+    # both edges
+    fig.suptitle(textwrap.fill(title, width=int(12 * fig.get_figwidth())), fontsize=10)
     return _finish(fig, path)

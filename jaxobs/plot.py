@@ -109,16 +109,20 @@ def flux_circles_figure(sol, names, title, path=None, last: float = 0.1):
     return _finish(fig, path)
 
 
-def _clipped_range(peaks: dict, ratio: float = 3.0, lost: float = 30.0):
-    """The observers that have lost track and would flatten the others: from the largest peak |error| (deg)
-    down, each peak above ``lost`` degrees and more than ``ratio`` times the next one is left out of the
-    y-range (at least one observer stays in).  Returns (clipped names, the largest peak kept)."""
+def _clipped_range(peaks: dict, spans: dict | None = None, ratio: float = 3.0, lost: float = 30.0, swept=120.0):
+    """The observers that have lost track and would flatten the others, left out of the y-range (at least one
+    observer stays in): each whose error sweeps ``swept`` degrees or more peak to peak (``spans``, deg: a pure
+    integrator's circle through the origin saws ±90°, whatever the others' errors, as the LPF's 38° lead beside
+    it in 000's speed ramp, which stays in range: it has not lost track); where none sweeps, from the largest
+    peak |error| (deg) down, each peak above ``lost`` degrees and more than ``ratio`` times the next one.
+    Returns (clipped names, the largest peak kept)."""
     order = sorted(peaks, key=peaks.get, reverse=True)
-    clipped = []
-    for hi, lo in zip(order, order[1:]):
-        if not (peaks[hi] > lost and peaks[hi] > ratio * peaks[lo]):
-            break
-        clipped.append(hi)
+    clipped = [n for n in order[:-1] if spans is not None and spans[n] >= swept]
+    if not clipped:
+        for hi, lo in zip(order, order[1:]):
+            if not (peaks[hi] > lost and peaks[hi] > ratio * peaks[lo]):
+                break
+            clipped.append(hi)
     return clipped, max(peaks[n] for n in order if n not in clipped)
 
 
@@ -148,10 +152,14 @@ def position_error_figure(sol, names, title, path=None, t_from: float = 0.0):
         for name, o in zip(names, sol.outputs.obs.each)
     }
     peaks = {n: float(np.nanmax(np.abs(e))) if e.size and np.isfinite(e).any() else 0.0 for n, e in errs.items()}
-    clipped, top = _clipped_range(peaks) if len(peaks) > 1 else ([], max(peaks.values(), default=1.0))
+    spans = {n: float(np.ptp(e[np.isfinite(e)])) if np.isfinite(e).any() else 0.0 for n, e in errs.items()}
+    clipped, top = _clipped_range(peaks, spans) if len(peaks) > 1 else ([], max(peaks.values(), default=1.0))
     for name, err in errs.items():
-        label = f"{name} (clipped: peaks ±{peaks[name]:.0f}°)" if name in clipped else name
-        ax_e.plot(t[m], err, lw=0.8, label=label)
+        if name in clipped:  # drawn faint and behind: its sawtooth would still cross the others' range
+            label = f"{name} (clipped: peaks ±{peaks[name]:.0f}°)"
+            ax_e.plot(t[m], err, lw=0.5, alpha=0.35, zorder=1, label=label)
+        else:
+            ax_e.plot(t[m], err, lw=0.8, zorder=2, label=name)
     lim = min(1.15 * top, 185.0) if top > 0 else 1.0
     ax_e.set_ylim(-lim, lim)
     ax_e.set_ylabel("θ̂e − θe (deg)")
@@ -205,6 +213,25 @@ def _shared_norm(vals):
     return Normalize(lo, hi if hi > lo else lo + 1.0), False
 
 
+def _log_ticks(lo: float, hi: float) -> list:
+    """Labelled values of a log colour bar over [lo, hi] (> 0): 1-2-5 per decade (1 per decade beyond three
+    decades), and each end itself, rounded inwards to two digits, where no tick lies within 0.1 decade of
+    it.  Matplotlib's own labelled only whole decades (and, with minor labels, 0.07 0.08 0.09 0.1 crowded at
+    one end): a bar from 0.013 to 0.09 had no label at all below its top."""
+    subs = (1, 2, 5) if math.log10(hi / lo) <= 3 else (1,)
+    ticks = [
+        m * 10.0**k
+        for k in range(math.floor(math.log10(lo)), math.ceil(math.log10(hi)) + 1)
+        for m in subs
+        if lo <= m * 10.0**k <= hi
+    ]
+    for end, rnd in ((lo, math.ceil), (hi, math.floor)):
+        if not ticks or min(abs(math.log10(end / v)) for v in ticks) > 0.1:
+            step = 10.0 ** (math.floor(math.log10(end)) - 1)
+            ticks.append(float(f"{rnd(end / step) * step:.2g}"))
+    return sorted(ticks)
+
+
 def _study_heatmap(ds, da, unit, short, axes, designs):
     a0, a1 = axes[0], axes[1]
     others = [d for d in axes if d not in (a0, a1)]
@@ -237,14 +264,18 @@ def _study_heatmap(ds, da, unit, short, axes, designs):
             if c == 0:
                 ax.set_ylabel(f"{how}\n{_axis_label(ds, a1)}", fontsize=10)
             ax.set_title(f"{d}: {how}", fontsize=10)
-    fig.subplots_adjust(left=0.07, right=0.88, top=0.86, bottom=0.12, wspace=0.22, hspace=0.4)
+    # 1.1 in on the left for the row's two-line label ("mean" / the axis) and its ticks: 7 % of the width cut
+    # "mean" and "worst (max)" off a two-design figure's edge
+    left = min(0.2, 1.1 / fig.get_figwidth())
+    fig.subplots_adjust(left=left, right=0.88, top=0.86, bottom=0.12, wspace=0.22, hspace=0.4)
     cax = fig.add_axes((0.9, 0.12, 0.012, 0.74))  # beside the panels, never over one
     cb = fig.colorbar(im, cax=cax, label=f"{short} ({unit})" + (", log scale" if is_log else ""))
-    if is_log:  # plain numbers (0.2, 0.5, 1), not 2×10⁻¹
-        from matplotlib.ticker import FormatStrFormatter
+    if is_log:  # plain numbers (0.2, 0.5, 1), not 2×10⁻¹, on 1-2-5 ticks and both ends (_log_ticks)
+        from matplotlib.ticker import FixedLocator, FormatStrFormatter, NullFormatter
 
+        cb.ax.yaxis.set_major_locator(FixedLocator(_log_ticks(norm.vmin, norm.vmax)))
         cb.ax.yaxis.set_major_formatter(FormatStrFormatter("%g"))
-        cb.ax.yaxis.set_minor_formatter(FormatStrFormatter("%g"))
+        cb.ax.yaxis.set_minor_formatter(NullFormatter())
     cb.ax.tick_params(which="both", labelsize=9)
     cb.ax.yaxis.label.set_size(10)
     how = f"mean and worst case over {', '.join(others)}" if others else "every scenario"

@@ -37,6 +37,7 @@ import numpy as np
 
 from . import sharding
 from ._simulate import AbstractSave, SaveAll, simulate
+from ._traced import kept_jit
 from .progress import Progress
 from .scenarios import AbstractSampler, Given
 
@@ -55,8 +56,7 @@ class _Task(NamedTuple):
     save: AbstractSave = SaveAll()  # SaveFinal: a long horizon whose metrics read the final state alone
 
 
-@eqx.filter_jit
-def _run_chunk(task: _Task, design, batch, aux):
+def _chunk(task: _Task, design, batch, aux):
     """Every scenario of ``batch`` (one chunk): ``metrics(simulate(system_factory(design, scenario), horizon),
     scenario, aux)``; one program for designs of one class (the gains are array leaves, ``aux`` is static)."""
 
@@ -68,6 +68,22 @@ def _run_chunk(task: _Task, design, batch, aux):
     # each device's share in one piece (tile = the share): the same per-device program as one device's
     # vmap, no lax.map around it; scenarios are independent, so nothing is communicated
     return sharding.map_batch(one, batch, mesh=task.mesh, tile=task.tile)
+
+
+_run_chunk = eqx.filter_jit(_chunk)
+# run_scenarios(trace_key=...) on one device: the chunk's program kept across processes (jaxobs.kept_jit), one
+# per key and process, so that the designs and calls of one process share its read-back program
+_KEPT: dict = {}
+
+
+def _kept_chunk(trace_key: str, task: _Task, aux):
+    # the mesh (None: one device's plain vmap) and the tile are static parts of the chunk's program
+    mesh = None if task.mesh is None else dict(task.mesh.shape)
+    key = f"run_scenarios|{trace_key}|{task.horizon!r}|{task.save!r}|{aux!r}|{mesh}|{task.tile}"
+    packages = tuple({f.__module__.split(".")[0] for f in (task.system_factory, task.metrics)})
+    if key not in _KEPT:
+        _KEPT[key] = kept_jit(_chunk, key, packages=packages)
+    return _KEPT[key]
 
 
 def _pad(x, rows: int):
@@ -114,6 +130,7 @@ def run_scenarios(
     label: str = "study",
     save: AbstractSave = SaveAll(),
     sink=None,
+    trace_key: str | None = None,
 ) -> StudyRun:
     """Simulate ``system_factory(design, scenario)`` for ``horizon`` s on every scenario, every design.
 
@@ -134,6 +151,10 @@ def run_scenarios(
     ``sink.start(n=, chunk=, devices=, designs=)`` once, then per design and chunk ``sink.done(design, i)``
     (True: on disk already, skipped) or ``sink.put(design, i, values)`` with the chunk's real rows; the
     returned ``values`` is then ``None`` (read them back from the sink).
+
+    ``trace_key``: a string that names everything static about ``system_factory`` and ``metrics`` beyond
+    their code (a job's digest): in one process, each chunk's traced program is then kept across processes
+    (:func:`jaxobs.kept_jit`, where :func:`jaxobs.use_compile_cache` set its folder).
     """
     if not designs:
         raise ValueError(f"{label}: at least one design is required")
@@ -197,7 +218,8 @@ def run_scenarios(
                 new = key not in compiled  # the first chunk this run computes
                 bar.stage(f"{dname} (compiling, then {chunk} scenarios a chunk)" if new else dname)
                 # the per-scenario results, whole, on every process (an all-gather when the mesh spans processes)
-                got = sharding.gather_batch(_run_chunk(task, design, batch, aux))
+                run = _run_chunk if trace_key is None or jax.process_count() > 1 else _kept_chunk(trace_key, task, aux)
+                got = sharding.gather_batch(run(task, design, batch, aux))
                 compiled.add(key)
                 if sink is None:
                     parts[dname].append(got)

@@ -1,4 +1,4 @@
-"""The envelope map (issue 26.3): the Lyapunov verdict and the long runs over speed × load, the CLI's NetCDF
+"""The envelope map (issue 26.3): the Floquet stability verdict and the long runs over speed × load, the CLI's NetCDF
 and figure, and (slow) the preset's verdicts against 3 s simulations at the low-speed points."""
 
 import json
@@ -25,7 +25,7 @@ DRIVE = bench_drive(PAR)
 CF = jaxobs.SecondOrderSOIFO(0.0, 1.0, K1, K2, K1**3 / (2 * K2), 100.0)  # 000's closed form
 SOIFO = jaxobs.SOIFO(0.0, 1.0, 1.0, 0.6, 100.0)
 PRESET = Path(__file__).resolve().parents[1] / "tuning" / "presets" / "sosoifo.toml"
-SHORT = dict(settle=0.05, warmup=0.05, window=0.15)
+SHORT = dict(settle=0.05, window=0.15)  # the Floquet verdict (its window stretched to a period of the lowest speed)
 
 
 @pytest.fixture(scope="module")

@@ -154,3 +154,136 @@ def test_paper_figure_layout():
     assert named == [["load applied: 0 → 10 N·m"], ["load applied: 0 → 10 N·m"], [], []]
     with pytest.raises(ValueError, match="same panels"):
         plot.paper_figure(t, [cols[0], ("x", cols[1][1][:1])], "title")
+
+
+def test_a_one_column_figure_wraps_its_title_inside_the_figure():
+    """002's 330 V ramp is drawn for the FA-LESO alone (one column, 6.5 in wide): its long title wraps instead
+    of running off both edges."""
+    t = np.linspace(0.0, 1.0, 101)
+    panel = plot.Panel("θ̂e − θe (rad)", (plot.Series("error", 0.01 * t),), zero=True)
+    title = "Paper 002 Fig. 16 (ours): speed ramp 300-600-840-600-300 r/min, 330 V dc link, speed loop 2.5 Hz, "
+    fig = plot.paper_figure(t, [("FA-LESO", [panel])], title + "the FA-LESO closing the loop")
+    fig.draw_without_rendering()
+    (sup,) = [tx for tx in fig.texts if tx.get_text().startswith("Paper 002")]
+    assert "\n" in sup.get_text()
+    box, whole = sup.get_window_extent(), fig.bbox
+    assert box.x0 >= whole.x0 and box.x1 <= whole.x1, (box, whole)
+
+
+def test_the_weakening_layout_draws_i_d_under_its_reference():
+    """jaxobs.reproduce.figures' ``weakening`` panels: the speed estimate over the speed, the drive's i_d over
+    i_d* (A), then the error, as 002's ramp on a 330 V link is drawn (LESO_FIGURES)."""
+    from typing import NamedTuple
+
+    from jaxobs.reproduce.figures import LESO_FIGURES, drive_figure
+
+    class Obs(NamedTuple):
+        theta: np.ndarray
+        omega: np.ndarray
+
+    class Out(NamedTuple):
+        theta_e: np.ndarray
+        speed_rpm: np.ndarray
+        omega_m_ref: np.ndarray
+        load: np.ndarray
+        mode: np.ndarray
+        i_d: np.ndarray
+        id_ref: np.ndarray
+        obs: object
+
+    class Sol(NamedTuple):
+        t: np.ndarray
+        outputs: Out
+
+    t = np.linspace(0.0, 1.0, 1001)
+    w = 2 * np.pi * 50 * np.ones_like(t)
+    i_d = np.minimum(0.0, -6.0 * (t - 0.5))
+    each = (Obs(100 * np.pi * t - 0.05, w),) * 3
+    out = Out(
+        100 * np.pi * t, w / 5 * 30 / np.pi, w / 5, 0 * t, 1 + 0 * t, i_d, i_d + 0.1, type("B", (), {"each": each})
+    )
+    spec = [s for s in LESO_FIGURES if s[4] == "weakening"]
+    assert len(spec) == 1 and spec[0][3] == ("FA-LESO",)
+    fig = drive_figure(Sol(t, out), ("C-LESO", "GI-LESO", "FA-LESO"), *spec[0][3:], "title", p=5)
+    assert [ax.get_ylabel() for ax in fig.axes] == ["speed (r/min)", "i_d, i_d* (A)", "θ̂e − θe (rad)"]
+    assert fig.axes[1].get_ylim()[0] < -3.0 and fig.axes[1].get_ylim()[1] >= 0.0
+
+
+def test_log_colour_bar_labels_both_ends():
+    """A log heat-map scale is labelled on 1-2-5 values and at both ends (a bar from 0.013 up had no label
+    below 0.1; 0.07 0.08 0.09 0.1 crowded where it had)."""
+    fig = _heatmap(_study({"a": np.full((2, 3, 2), 0.0134), "b": np.full((2, 3, 2), 1.52)}))
+    (bar,) = [ax for ax in fig.axes if not ax.images and ax.get_ylabel().startswith("ripple")]
+    fig.draw_without_rendering()
+    labels = [(tk.get_position()[1], tk.get_text()) for tk in bar.yaxis.get_majorticklabels() if tk.get_text()]
+    values = [float(txt) for _, txt in labels]
+    assert values == [0.014, 0.02, 0.05, 0.1, 0.2, 0.5, 1.0, 1.5], values
+    assert not [tk for tk in bar.yaxis.get_minorticklabels() if tk.get_text()]
+    assert plot._log_ticks(0.013, 0.09) == [0.013, 0.02, 0.05, 0.09]
+    assert plot._log_ticks(1e-4, 10.0) == [1e-4, 1e-3, 1e-2, 0.1, 1.0, 10.0]  # beyond 3 decades: 1 per decade
+
+
+def test_the_row_labels_of_a_heat_map_stay_inside_the_figure():
+    fig = _heatmap(_study({"a": np.full((2, 3, 2), 0.1), "b": np.full((2, 3, 2), 0.2)}))
+    fig.draw_without_rendering()
+    for ax in fig.axes:
+        if ax.images and ax.get_ylabel():
+            assert ax.yaxis.label.get_window_extent().x0 >= 0.0, ax.get_ylabel()
+
+
+def test_an_observer_that_sweeps_is_clipped_and_a_steady_lead_kept():
+    """000's speed ramp: the pure integrator saws ±90° (its circle through the origin), the LPF leads 37°
+    steadily, the SOIFOs err by 10°.  The integrator leaves the y-range (drawn faint, named clipped); the LPF
+    stays: it has not lost track, and the SOIFOs read on ±43°, not on ±100°."""
+    from typing import NamedTuple
+
+    class Obs(NamedTuple):
+        theta: np.ndarray
+
+    class Out(NamedTuple):
+        theta_e: np.ndarray
+        speed_rpm: np.ndarray
+        omega_m_ref: np.ndarray
+        load: np.ndarray
+        mode: np.ndarray
+        obs: object
+
+    class Sol(NamedTuple):
+        t: np.ndarray
+        outputs: Out
+
+    t = np.linspace(0.0, 1.0, 2001)
+    th = 2 * np.pi * 30 * t
+    saw = np.radians(90.0) * (2 * ((8 * t) % 1.0) - 1.0)
+    errs = (saw, np.radians(37.0), np.radians(-10.0) * np.ones_like(t), np.radians(-9.0) * np.ones_like(t))
+    each = tuple(Obs(th + e) for e in errs)
+    ref = np.full_like(t, 400 * np.pi / 30)
+    out = Out(th, ref * 30 / np.pi, ref, 0 * t, 1 + 0 * t, type("B", (), {"each": each}))
+    names = ("integrator", "LPF", "SOIFO", "second-order SOIFO")
+    fig = plot.position_error_figure(Sol(t, out), names, "title")
+    ax_e = fig.axes[1]
+    lo, hi = ax_e.get_ylim()
+    assert hi == pytest.approx(1.15 * 37.0, rel=1e-3) and lo == -hi
+    legend = [tx.get_text() for tx in ax_e.get_legend().get_texts()]
+    assert legend[0].startswith("integrator (clipped") and legend[1:] == list(names[1:])
+    assert ax_e.get_lines()[0].get_alpha() < 0.5
+
+
+def test_two_sided_bode_axis_is_labelled_every_other_decade():
+    """002 Fig. 4's symlog axis (Hz): −1000 … 1000 every other decade in plain numbers, the decades between
+    unlabelled, so no two labels meet."""
+    import matplotlib.pyplot as plt
+
+    from jaxobs._plot_bode import _two_sided_ticks
+
+    fig, ax = plt.subplots(figsize=(7.5, 3))
+    x = np.concatenate([-np.logspace(-3, 3.7, 50)[::-1], np.logspace(-3, 3.7, 50)])
+    ax.plot(x, np.zeros_like(x))
+    ax.set_xscale("symlog", linthresh=1e-3)
+    _two_sided_ticks(ax, 1e-3, 10**3.7)
+    fig.draw_without_rendering()
+    labels = [tk for tk in ax.get_xticklabels() if tk.get_text()]
+    assert [tk.get_text() for tk in labels] == ["−1000", "−10", "−0.1", "0", "0.1", "10", "1000"]
+    boxes = [tk.get_window_extent() for tk in labels]
+    assert all(a.x1 < b.x0 for a, b in zip(boxes, boxes[1:]))
+    plt.close(fig)

@@ -3,15 +3,16 @@
 For a drive job file, its initial and closed-form designs; for a ``jaxobs tune`` result.json of a drive job,
 its initial, closed-form and tuned designs (the result's own values).  The job's machine and drive (the
 bench FOC), always sensorless and started steady whatever the job's loop and start: the envelope is where the
-observer can close the loop; the Lyapunov verdict with the job's ``[envelope]`` settle and window
-where it has one.  Writes ``envelope.nc`` (NetCDF, :func:`jaxobs.drive.envelope.envelope`) and
-``envelope.png`` (:func:`jaxobs.plot.envelope_figure`) under ``--out``.
+observer can close the loop; the Floquet stability verdict (:func:`jaxobs.drive.stability.floquet`) with the
+job's ``[envelope]`` settle and window where it has one.  Writes ``envelope.nc`` (NetCDF,
+:func:`jaxobs.drive.envelope.envelope`) and ``envelope.png`` (:func:`jaxobs.plot.envelope_figure`) under ``--out``.
 """
 
 from __future__ import annotations
 
 import argparse
 import dataclasses
+import hashlib
 import json
 from pathlib import Path
 
@@ -70,6 +71,13 @@ def _seconds(text: str) -> float:
     return v
 
 
+def _trace_key(path: Path, args) -> str:
+    """The source file's sha256 (a job file or a result.json, and what it names: a recording's digest is in the
+    job's) with the options that shape the map: every argument :func:`jaxobs.drive.envelope.envelope` gets."""
+    digest = hashlib.sha256(path.read_bytes()).hexdigest()
+    return f"{digest}|speeds={args.speeds}|loads={args.loads}|horizon={args.horizon!r}"
+
+
 def cli_envelope(args) -> int:
     import jax
 
@@ -85,8 +93,8 @@ def cli_envelope(args) -> int:
     drive = job_drive(spec)
     speeds, loads = default_speeds(par, args.speeds), default_loads(par, args.loads)
     n = len(speeds) * len(loads)
-    # the job's own Lyapunov settle and window where it states them ([envelope]: the presets need 1 s at the low
-    # end), else the library's defaults (settle 0.2 s, window 0.4 s)
+    # the job's own settle and (shortest) window where it states them ([envelope]), else the library's defaults
+    # (jaxobs.drive.envelope.STABILITY_METHODS: settle 0.2 s, windows of at least 0.2 s)
     env = job.envelope
     stab = {} if env is None else {"settle": env.settle, "window": env.window}
     what = (
@@ -95,10 +103,13 @@ def cli_envelope(args) -> int:
         f"{args.horizon:g} s runs"
     )
     if args.check:
-        # the window is only a floor: envelope() stretches it to 12/α of the lowest speed's speed loop (11.5 s at
-        # 20 r/min on sosoifo's scheduled loop), which is most of a map's cost; printing "window 1 s" undersold it
-        win = "" if env is None else f", Lyapunov settle {env.settle:g} s, window at least {env.window:g} s"
-        print(f"{what}{win and win + ' (stretched to 12/α of the lowest speed loop)'}: OK")
+        # the window is only a floor: envelope() stretches it to one electrical period of the lowest speed (the
+        # Floquet verdict's whole periods: 1.0 s at 20 r/min on 000's SPMSM), most of a map's cost
+        w = 1.02 * 60.0 / (float(par.p) * float(speeds[0]))
+        win = "" if env is None else f", Floquet settle {env.settle:g} s"
+        print(
+            f"{what}{win}, windows of whole electrical periods, up to {max(w, 2.0):.3g} s (one at the lowest speed): OK"
+        )
         return 0
     out = Path(args.out) if args.out else Path("out") / f"envelope-{safe_name(job.name)}"
     with OutDir(out, ENVELOPE_FILES, force=args.force):
@@ -112,6 +123,8 @@ def cli_envelope(args) -> int:
             horizon=args.horizon,
             stability=stab,
             progress=False if args.quiet else "auto",
+            # the traced programs kept across runs (jaxobs.kept_jit) under what made every argument above
+            trace_key=_trace_key(path, args),
         )
         ds.attrs.update(source=str(path), job_name=job.name, component=job.component, machine=spec.machine)
         if job.sha256:
@@ -122,8 +135,9 @@ def cli_envelope(args) -> int:
             ds.to_netcdf(tmp, engine="h5netcdf")
     a = ds.attrs  # what ran: the stretched window and warm-up, and the steady start's settle (Drive.settled_for)
     print(
-        f"{what}, Lyapunov settle {a['stability_settle']:.3g} s, warm-up {a['stability_warmup']:.3g} s, window "
-        f"{a['stability_window']:.3g} s; observers settled {a['drive_settle']:.3g} s before each run"
+        f"{what}, Floquet verdict: settle {a['stability_settle']:.3g} s, windows {a['stability_window']:.3g} s up to "
+        f"{a['stability_max_window']:.3g} s (whole electrical periods); "
+        f"observers settled {a['drive_settle']:.3g} s before each run"
     )
     wd = max(len("design"), *(len(d) for d in designs)) + 2
     head = f"{'design':<{wd}}{'holds':>9}{'stable':>9}{'marginal':>9}{'sync':>9}{'min margin 1/s':>16}"

@@ -24,7 +24,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from jaxobs import OnSignal, simulate
+from jaxobs import OnSignal, kept_jit, simulate
 from jaxobs import metrics as M
 from jaxobs.drive import ClosedLoop
 from jaxobs.drive.stability import lyapunov
@@ -257,6 +257,7 @@ class Objective:
         penalty: float = 1e3,
         drive=None,
         bind=None,
+        trace_key: str | None = None,
     ):
         """``component``: the module whose free gains ``param`` sets; ``scenarios``: the batch (leading axis
         the scenarios); ``horizon``: simulated seconds per scenario; ``terms``: the weighted metrics summed
@@ -264,7 +265,10 @@ class Objective:
         per-scenario values become one (:class:`~jaxobs_tuning.aggregations.Mean` by default); ``penalty``: the
         value of a diverged scenario.  ``drive``: run each scenario (a drive Scenario) closed loop with
         this Drive, the component as its observer; ``bind(component, scenario)``: adapt the component to
-        the scenario (the parameters an observer assumes, its initial speed) before the run."""
+        the scenario (the parameters an observer assumes, its initial speed) before the run.  ``trace_key``: a
+        string naming everything that built this objective (a job's digest and which of its scenario sets):
+        with it, the value-and-gradient's and the scoring's traced programs are kept across processes
+        (:func:`jaxobs.kept_jit`, where :func:`jaxobs.use_compile_cache` set a folder)."""
         for term in terms:
             if term.metric not in METRICS:
                 raise ValueError(f"objective metric {term.metric!r} is unknown; known: {', '.join(METRICS)}")
@@ -280,7 +284,12 @@ class Objective:
         self.ctx = ctx
         self.aggregation, self.penalty = aggregation, float(penalty)
         self.drive, self.bind = drive, bind
-        self._vg = eqx.filter_jit(self._per_scenario_value_and_grad)
+        self.trace_key = trace_key
+        # the scenarios and the component are constants of the program (self is static): the key names them
+        vg = self._per_scenario_value_and_grad
+        self._vg = eqx.filter_jit(vg) if trace_key is None else kept_jit(vg, f"objective.vg|{trace_key}")
+        resp = self._response
+        self.response = eqx.filter_jit(resp) if trace_key is None else kept_jit(resp, f"objective.resp|{trace_key}")
 
         @jax.custom_jvp
         def value(theta):
@@ -352,6 +361,13 @@ class Objective:
         _, _, good = self._vg(theta)
         return int(jnp.sum(jnp.asarray(scored_good) & ~good))
 
+    def _response(self, theta, sig):
+        """One scenario's run at ``theta`` as the report draws it: the sample times (s), the observer's
+        frequency estimate ``obs.omega`` (rad/s) and its position error θ̂ − θ (rad,
+        :func:`jaxobs.metrics.position_error`); one program for every design (``response``)."""
+        sol = self._simulate(self.param.apply(self.component, theta), sig)
+        return sol.t, sol.outputs.obs.omega, M.position_error(sol, sig)
+
     # --- reporting: a design scored on the scenarios by the one study runner (jaxobs.runner)
     def _system(self, theta, sig):
         """The system one scenario runs: the component at ``theta``, bound to the scenario, on its signal or
@@ -386,6 +402,7 @@ class Objective:
             chunk_size=given.n,
             mesh=batch_mesh(jax.devices()[:1]),
             label="scores",
+            trace_key=None if self.trace_key is None else f"objective.scores|{self.trace_key}",
         )
         mets = dict(run.values["design"])
         if any(t.metric == STABILITY_MARGIN for t in self.terms):  # of the loop, not of the run: one jit(vmap)

@@ -9,8 +9,6 @@ from pathlib import Path
 import jax
 import numpy as np
 
-from jaxobs.metrics import position_error
-
 from .outdir import atomic_path
 
 
@@ -56,7 +54,10 @@ def _describe(spec, index: int) -> str:
     return f"scenario #{index}: {values}"
 
 
-def write_report(out: Path, job, obj, thetas: dict, history: list):
+def write_report(out: Path, job, obj, thetas: dict, history: list, closed_form_totals=None):
+    """convergence.png and responses.png in ``out``.  ``closed_form_totals``: the closed form's per-scenario
+    totals on ``obj``'s scenarios (:meth:`Objective.per_scenario`'s second value), where the caller has them
+    (else they are computed again); the responses show the scenario where it does worst."""
     # convergence
     if history:
         fig, ax = _subplots(figsize=(6, 3.5))
@@ -69,18 +70,15 @@ def write_report(out: Path, job, obj, thetas: dict, history: list):
         with atomic_path(out / "convergence.png") as tmp:
             fig.savefig(tmp, dpi=110)
     # responses on the scenario where the closed form does worst
-    per = obj.per_scenario(thetas["closed_form"])[1]
+    per = obj.per_scenario(thetas["closed_form"])[1] if closed_form_totals is None else closed_form_totals
     worst = int(np.argmax(np.asarray(per)))
     sig = jax.tree.map(lambda x: x[worst], obj.scenarios)
     fig, axes = _subplots(2, 1, figsize=(8, 5.5), sharex=True)
     for label, th in thetas.items():
         style = _STYLE.get(label, dict(lw=1))
-        comp = obj.param.apply(obj.component, th)
-        sol = obj._simulate(comp, sig)
-        t, so = np.asarray(sol.t), sol.outputs
-        axes[0].plot(t, np.asarray(so.obs.omega) / (2 * math.pi), label=label, **style)
-        err = position_error(sol, sig)
-        axes[1].plot(t, np.degrees(np.asarray(err)), label=label, **style)
+        t, omega, err = (np.asarray(x) for x in obj.response(th, sig))
+        axes[0].plot(t, omega / (2 * math.pi), label=label, **style)
+        axes[1].plot(t, np.degrees(err), label=label, **style)
     # an FLL's ("grid") error is the grid voltage's phase; a flux observer's or a drive's (on an "emf" recording or
     # closing the loop) is the rotor's electrical position: the labels say which
     if job.scenarios.signal != "grid":

@@ -25,11 +25,10 @@ from __future__ import annotations
 
 import math
 
-import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
-from jaxobs import linear, papers
+from jaxobs import kept_jit, linear, papers
 from jaxobs.drive import bench_machine
 
 from .targets import _settling_at_k2, k1_for_settling_time_at_k2, soifo_settling_time
@@ -42,12 +41,19 @@ STRUCTURE_FIELDS = ("phase_margin_deg", "crossover_hz", "gain_margin_db", "domin
 # One compiled program per loop shape (the designs of a job share it; the persistent compilation cache keeps
 # it across runs): run eagerly, margins dispatched every operation on its own and traced its two vmapped Newton
 # root finds anew per design, 5 s of the default job's 20 s warm run on 2 cores; the same numbers bit for bit.
-_margins_of = eqx.filter_jit(linear.margins)
+def _margin_values(loop):
+    """The margins this table reads, as a tuple of arrays: a program :func:`jaxobs.kept_jit` can keep."""
+    m = linear.margins(loop)
+    return m.phase_margin, m.omega_gc, m.gain_margin
+
+
+# the loop's coefficients are its array leaves: the code names everything else, so a second process reads the
+# traced program back instead of tracing the two vmapped root finds again (1-2 s of a warm default job)
+_margins_of = kept_jit(_margin_values, "structure.margins")
 
 
 def _margins(loop) -> dict:
-    m = _margins_of(loop)
-    pm, wgc, gm = float(m.phase_margin), float(m.omega_gc), float(m.gain_margin)
+    pm, wgc, gm = (float(x) for x in _margins_of(loop))
     out, why = {}, {}
     out["phase_margin_deg"] = pm if math.isfinite(pm) else None
     out["crossover_hz"] = wgc / (2 * math.pi) if math.isfinite(wgc) else None

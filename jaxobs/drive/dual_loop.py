@@ -10,9 +10,9 @@ speed loop, dq current PIs with decoupling, delay compensation, anti-windup):
   the BEMF's 5th/7th harmonics, at 5ωe and 7ωe in the stationary xy frame: a PI there attenuates it by
   its loop gain, it does not cancel it (resonant or rotating-frame xy controllers would; 002 does not
   say which it used).  Each set's voltage is then z_αβ ± conj(z_xy).  Field weakening (the FOC's
-  ``field_weakening``) holds the αβ voltage at its margin by default (``fw_voltage="ab"``), which leaves each set
-  on its own limit when the xy voltage adds on top; ``fw_voltage="set"`` holds the larger set voltage there
-  instead (002's ref. [32]; docs/papers.md, 330 V).
+  ``field_weakening``) holds the larger set voltage at its margin by default (``fw_voltage="set"``, what each
+  inverter delivers: 002's ref. [32] budgets the xy voltage too); ``fw_voltage="ab"`` holds the αβ voltage
+  there instead, which leaves each set on its own limit when the xy voltage adds on top (docs/papers.md, 330 V).
 - ``"individual"``: two individual sets (002 Figs 13-14; ref [6]).  Each set has its own dq frame, set 2's
   30° behind set 1's in its own Clarke coordinates (θ_e − π/6: its a-axis is 30° ahead), and its own
   FOC PI state; the gains are the IMC design on one set's self inductances (:meth:`DualPMSMParams.set_self`)
@@ -35,11 +35,11 @@ The observer (``DriveInput``) is chosen by the mode: set 1's measured voltage an
 order: plant at t_k, sensors, observer, controller, inverter), sharing its machinery through
 :class:`~jaxobs.drive.loop.AbstractDriveLoop`: the observer rebound each period under ``scenario.est_drift``,
 the encoder/observer hand-over, and the steady start: the machine at the scenario's speed and load (each set
-carrying half), the FOC integrators holding it, the observer settled on it for ``drive.settle`` s (0 by
-default: from ``init_at(ω_e)``, converging on the encoder-run drive until ``drive.handover``) and, closing
-the loop from t = 0, started where it settles; or, with ``DualDrive(startup=IfStartup(...))``, from
-standstill through the I-f ramp (both sets' FOCs run it; the observer held at the I-f frequency).  The timing
-is the default one (no Latency).
+carrying half), the FOC integrators holding it, the observer settled on it for ``drive.settle`` s (0.2 by
+default, as :class:`~jaxobs.drive.Drive`'s; with 0 it starts from ``init_at(ω_e)`` and converges on the
+encoder-run drive until ``drive.handover``) and, closing the loop from t = 0, started where it settles; or,
+with ``DualDrive(startup=IfStartup(...))``, from standstill through the I-f ramp (both sets' FOCs run it; the
+observer held at the I-f frequency).  The timing is the default one (no Latency).
 The scenario gives the profiles, sensors (applied to each set; set 2's noise from another key), dead
 time and ``est_par`` (what the observers assume: the per-set machine); the true machine is ``machine``.
 """
@@ -122,12 +122,17 @@ class DualFOC(AbstractComponent):
     kp_xy: jax.Array  # V/A
     ki_xy: jax.Array  # V/(A·s)
     mode: Literal["vsd", "individual"] = eqx.field(static=True)
-    # the voltage the field weakening holds at its margin under "vsd": "ab", the αβ voltage (the FOC's own
-    # |u*|), or "set", each set's |z_αβ ± conj(z_xy)| (the larger), what each inverter must deliver (002's
-    # ref. [32] budgets the xy voltage too).  "individual" is per set either way (each set's FOC limits its own).
+    # the voltage the field weakening holds at its margin under "vsd": "set", each set's |z_αβ ± conj(z_xy)|
+    # (the larger), or "ab", the αβ voltage (the FOC's own |u*|).  "set" is the default because it is the
+    # voltage the inverters must deliver: each set's inverter clips its own |u| at u_max, and the xy PIs'
+    # voltage rides on the αβ one, so budgeting only αβ leaves a set clipped whenever xy is not zero (on
+    # 330 V at 840 r/min, 72 % of the time: the clipped set's current loop then loses its authority, which
+    # is what field weakening's margin exists to prevent).  002's ref. [32] budgets the whole phase voltage,
+    # xy included, which "set" does; "ab" stays for comparison (docs/papers.md, 330 V).  "individual" is per
+    # set either way (each set's FOC limits its own).
     fw_voltage: Literal["ab", "set"] = eqx.field(static=True)
 
-    def __init__(self, foc, kp_xy=1.0, ki_xy=0.0, *, mode="vsd", fw_voltage="ab"):
+    def __init__(self, foc, kp_xy=1.0, ki_xy=0.0, *, mode="vsd", fw_voltage="set"):
         if not isinstance(foc, FOC):
             raise ValueError(f"DualFOC.foc must be a FOC, got {type(foc).__name__}")
         if mode not in ("vsd", "individual"):
@@ -141,7 +146,7 @@ class DualFOC(AbstractComponent):
         self.fw_voltage = fw_voltage
 
     @classmethod
-    def imc(cls, est: DualPMSMParams, alpha_c, alpha_s, *, mode="vsd", fw_voltage="ab", **kw) -> DualFOC:
+    def imc(cls, est: DualPMSMParams, alpha_c, alpha_s, *, mode="vsd", fw_voltage="set", **kw) -> DualFOC:
         """IMC current loops at ``alpha_c`` rad/s and the double-pole speed loop at ``alpha_s`` on ``est``.
 
         "vsd": :meth:`FOC.imc` on ``est.per_set()``, xy PIs k_p = α_c L̂ls, k_i = α_c R̂s.  "individual":
@@ -207,12 +212,13 @@ class DualDrive(eqx.Module):
     rule: AbstractRule = eqx.field(static=True)
     sensorless: bool = eqx.field(static=True)
     handover: float = eqx.field(static=True)  # sensorless: encoder until this time (s), observer after
-    # steady start: the observer's unscored settling phase before t = 0, s (Drive.settle; 0 here by default:
-    # the observer starts from init_at(ω_e) and converges on the encoder-run drive until the hand-over)
+    # steady start: the observer's unscored settling phase before t = 0, s (Drive.settle, and its default 0.2:
+    # with 0 the observer starts from init_at(ω_e) and its own start-up transient runs into the scored horizon
+    # while the encoder runs the drive until the hand-over, a transient the single loop does not have)
     settle: float = eqx.field(static=True)
 
     def __init__(
-        self, ctrl, inverter=None, *, startup=None, n_sub=2, rule=None, sensorless=False, handover=0.2, settle=0.0
+        self, ctrl, inverter=None, *, startup=None, n_sub=2, rule=None, sensorless=False, handover=0.2, settle=0.2
     ):
         if not isinstance(ctrl, DualFOC):
             raise ValueError(f"DualDrive.ctrl must be a DualFOC, got {type(ctrl).__name__}")
@@ -430,11 +436,11 @@ def dual_bench_drive(
     machine: DualPMSMParams,
     *,
     mode="vsd",
-    fw_voltage="ab",
+    fw_voltage="set",
     sensorless=True,
     handover=0.2,
     startup: IfStartup | None = None,
-    settle=0.0,
+    settle=0.2,
     alpha_s=None,
     alpha_c=None,
     n_sub=2,

@@ -7,8 +7,10 @@
 At every operating point (speed × load, optionally × one mismatch axis) and for every design (an observer that
 closes the loop sensorless) it measures two things, each batched over the points in one ``jit(vmap)``:
 
-- **the stability margin** of the simulated, sampled loop (:func:`jaxobs.drive.stability.lyapunov`: the
-  largest non-neutral Lyapunov exponent of ``ClosedLoop.step``, linearized along its own orbit);
+- **the stability margin** of the simulated, sampled loop (:func:`jaxobs.drive.stability.floquet`: the
+  largest non-neutral Floquet multiplier of ``ClosedLoop.step`` over whole electrical periods of its own
+  orbit, as a decay rate; or, with ``stability={"method": "lyapunov"}``, the largest non-neutral Lyapunov
+  exponent fitted over a window, :func:`jaxobs.drive.stability.lyapunov`);
 - **a long simulation** (``horizon`` s, 2 by default) through the study runner
   (:func:`jaxobs.runner.run_scenarios`), started steady and perturbed by a speed-reference step of
   ``perturb`` (relative) at ``t_perturb`` s, so that an unstable point shows its growth within the horizon.
@@ -21,7 +23,7 @@ A point is **synchronous** when the run stayed finite, kept lock (late peak posi
 the drive studies' lost-lock tolerance), kept its speed (:func:`jaxobs.metrics.lost_speed`'s rule on the late
 window) and settled: its late peak speed deviation is under ``speed_tol`` and no larger than in the early
 window (the criterion the stability verdict was validated with, docs/stability.md).  It **holds** when it is
-stable (the Lyapunov verdict), synchronous and its late peak position error is within ``bound_deg``.
+stable (the stability verdict), synchronous and its late peak position error is within ``bound_deg``.
 
 Designs of one class share both compilations (their gains are array leaves).
 """
@@ -36,7 +38,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .. import AbstractSystem, SaveFinal
+from .. import AbstractSystem, SaveFinal, kept_jit
 from .. import metrics as M
 from ..drive_study import (
     CF_UNITS,
@@ -52,11 +54,12 @@ from ..scenarios import Grid
 from ..sharding import batch_mesh
 from . import ClosedLoop, Drive, PMSMParams, drive_speed_limit_rpm
 from .loop import SETTLE_PERIODS
-from .stability import lyapunov
+from .stability import Stability, floquet, lyapunov
 
 __all__ = [
     "ENVELOPE_VARIABLES",
     "MISMATCH_AXES",
+    "STABILITY_METHODS",
     "WORST_AXES",
     "envelope",
     "default_speeds",
@@ -68,14 +71,24 @@ __all__ = [
 MISMATCH_AXES = ("dRs", "dLd", "dLq", "dpsi", "dJ")
 # variable -> (units, long_name) of the per-point results
 ENVELOPE_VARIABLES = {
-    "margin": ("s-1", "stability margin: minus the largest non-neutral Lyapunov exponent of the sampled loop"),
-    "stable": ("1", "stable: margin - resolution > 0 and the orbit held its speed during the Lyapunov run (1: stable)"),
+    "margin": (
+        "s-1",
+        "stability margin: minus the largest non-neutral exponent of the sampled loop (log|Floquet multiplier|/period)",
+    ),
+    "stable": (
+        "1",
+        "stable: margin - resolution > 0 and the orbit held its speed during the linearized run (1: stable)",
+    ),
     "marginal": (
         "1",
         "marginal: |margin| within its resolution, the orbit held its speed: neither verdict (1: marginal)",
     ),
-    "resolution": ("s-1", "resolution of the margin: spread of the exponent over the Lyapunov window's thirds"),
-    "orbit_speed_dev": ("1", "max |speed - reference| / |reference| during the Lyapunov run after its settle"),
+    "resolution": (
+        "s-1",
+        "resolution of the margin: how far the orbit was from periodic (floquet), or the exponent's spread over "
+        "the window's thirds (lyapunov)",
+    ),
+    "orbit_speed_dev": ("1", "max |speed - reference| / |reference| during the linearized run after its settle"),
     "synchronous": ("1", "held synchronism over the long run: finite, locked, at speed, settled (1: held)"),
     "lost_lock": ("1", "lost lock over the late window: diverged or position error > 90 deg electrical (1: lost)"),
     "lost_speed": ("1", "lost speed over the late window: diverged, or mean |speed - ref| > 20 % of |ref| (1: lost)"),
@@ -183,10 +196,31 @@ class _LongRun(NamedTuple):
         return vals
 
 
-@eqx.filter_jit
-def _stability(drive, obs, scs, kw: tuple):
-    """:func:`lyapunov` at every scenario of ``scs``, one program per observer class (gains are traced)."""
-    return jax.vmap(lambda sc: lyapunov(ClosedLoop(drive, bind_observer(obs, sc), sc), **dict(kw)))(scs)
+# the stability verdict's options, by method: its defaults (envelope), and what each accepts
+STABILITY_METHODS = {
+    "floquet": {"settle": 0.2, "window": 0.2, "max_window": 2.0, "tol": 0.0, "n_report": 3},
+    "lyapunov": {"settle": 0.2, "warmup": 0.1, "window": 0.4, "n_dirs": 3, "tol": 0.0},
+}
+
+
+def _stability_fields(drive, obs, scs, method: str, kw: tuple):
+    """The stability verdict (:func:`floquet` or :func:`lyapunov`) at every scenario of ``scs``, one program per
+    observer class (gains are traced); its fields as a plain tuple, which a kept program can return."""
+    fn = floquet if method == "floquet" else lyapunov
+    return tuple(jax.vmap(lambda sc: fn(ClosedLoop(drive, bind_observer(obs, sc), sc), **dict(kw)))(scs))
+
+
+_stability_jit = eqx.filter_jit(_stability_fields)
+_KEPT: dict = {}  # trace key -> its kept program (jaxobs.kept_jit), one per process
+
+
+def _stability(drive, obs, scs, method: str, kw: tuple, trace_key: str | None = None) -> Stability:
+    if trace_key is None:
+        return Stability(*_stability_jit(drive, obs, scs, method, kw))
+    key = f"envelope.stability|{trace_key}|{method}|{kw!r}"
+    if key not in _KEPT:
+        _KEPT[key] = kept_jit(_stability_fields, key)
+    return Stability(*_KEPT[key](drive, obs, scs, method, kw))
 
 
 def _speed_bandwidth(drive: Drive, machine: PMSMParams, speed_rpm: float) -> float:
@@ -224,6 +258,7 @@ def envelope(
     seed: int = 0,
     chunk_size: int = 256,
     progress=None,
+    trace_key: str | None = None,
 ):
     """The operating envelope of every design (name -> drive observer closing ``drive``'s loop sensorless).
 
@@ -232,9 +267,13 @@ def envelope(
     1), a third dim.  ``horizon`` (s, ≥ 0.5) of the long run, its late window from ``steady_from`` (s; default
     horizon/2); ``perturb`` (relative, in [0, 0.2]): the speed-reference step at ``t_perturb`` (s).
     ``bound_deg`` (deg electrical): the late peak position error a holding point may have; ``speed_tol``
-    (relative): the late peak speed deviation a synchronous point may have.  ``stability``: keyword arguments
-    of :func:`~jaxobs.drive.stability.lyapunov` (settle, warmup, window, n_dirs, tol).  ``progress`` as in
-    :func:`jaxobs.runner.run_scenarios`.  Returns an ``xarray.Dataset`` with dims ``("design", "speed_rpm",
+    (relative): the late peak speed deviation a synchronous point may have.  ``stability``: ``method``
+    ("floquet", the default, or "lyapunov") and that function's keyword arguments
+    (:func:`~jaxobs.drive.stability.floquet`: settle, window, tol, n_report;
+    :func:`~jaxobs.drive.stability.lyapunov`: settle, warmup, window, n_dirs, tol).  ``progress`` as in
+    :func:`jaxobs.runner.run_scenarios`.  ``trace_key``: a string naming every argument here (the command
+    line: its source file's digest and options): the long runs' and the verdicts' traced programs are kept
+    across processes (:func:`jaxobs.kept_jit`).  Returns an ``xarray.Dataset`` with dims ``("design", "speed_rpm",
     "load"[, axis])`` and the variables of :data:`ENVELOPE_VARIABLES` (booleans stored as int8 0/1).
     """
     import xarray as xr
@@ -266,11 +305,16 @@ def envelope(
             raise ValueError(f"envelope: mismatch must be (axis, values) with axis one of {', '.join(MISMATCH_AXES)}")
         m_lo, m_hi = DRIVE_STUDY_AXES[mismatch[0]][1]
         axes[mismatch[0]] = _axis(f"mismatch {mismatch[0]}", mismatch[1], m_lo, m_hi, "(relative)")
-    kw = {"settle": 0.2, "warmup": 0.1, "window": 0.4, "n_dirs": 3, **(stability or {})}
-    unknown = set(kw) - {"settle", "warmup", "window", "n_dirs", "tol"}
+    stability = dict(stability or {})
+    method = stability.pop("method", "floquet")
+    if method not in STABILITY_METHODS:
+        raise ValueError(f"envelope: stability method must be one of {', '.join(STABILITY_METHODS)}, got {method!r}")
+    kw = {**STABILITY_METHODS[method], **stability}
+    unknown = set(kw) - set(STABILITY_METHODS[method])
     if unknown:
         raise ValueError(
-            f"envelope: stability has unknown keys {sorted(unknown)}; allowed: settle, warmup, window, n_dirs, tol"
+            f"envelope: stability has unknown keys {sorted(unknown)} for method {method!r}; allowed: "
+            f"method, {', '.join(STABILITY_METHODS[method])}"
         )
 
     # A steady start at every point the loop can hold: the observer settles over SETTLE_PERIODS electrical periods
@@ -290,9 +334,17 @@ def envelope(
     # −0.29 ± 1.8 1/s (marginal), over 7.6 s (8/α) −0.58 ± 0.57, over 12 s −0.600 ± 0.13 (the linear model:
     # −0.601).  So the window is at least 12/α and the warm-up 1/α (11.5 s and 1 s there; 0.38 s and 0.03 s
     # for the bench's fixed 5 Hz loop, below the defaults: no change).
-    alpha = _speed_bandwidth(drive, machine, float(speeds[0]))
-    kw["window"] = max(float(kw["window"]), 12.0 / alpha)
-    kw["warmup"] = max(float(kw["warmup"]), 1.0 / alpha)
+    #
+    # The Floquet verdict needs none of that: each point's window is its own whole electrical periods (floquet:
+    # they make the transition matrix a monodromy matrix), so the longest must hold one period of the lowest
+    # speed (2 % more: the speed's move to whole speed-loop periods), and the answer is exact however slow the
+    # mode.  Its cost follows each point's period: the points are batched by speed (below).
+    if method == "lyapunov":
+        alpha = _speed_bandwidth(drive, machine, float(speeds[0]))
+        kw["window"] = max(float(kw["window"]), 12.0 / alpha)
+        kw["warmup"] = max(float(kw["warmup"]), 1.0 / alpha)
+    else:
+        kw["max_window"] = max(float(kw["max_window"]), float(kw["window"]), 1.02 * 2.0 * math.pi / w_es[0])
     sampler = Grid(axes)
     names, points = sampler.names, sampler.points()
 
@@ -315,10 +367,27 @@ def envelope(
         progress=progress,
         label="envelope",
         save=SaveFinal(),
+        trace_key=None if trace_key is None else f"envelope|{trace_key}",
     )
     # the stability margins: constant profiles (no step), one jit(vmap) per observer class
     scs = drive_scenarios(machine, names, points, seed=seed)
-    stab = {d: jax.device_get(_stability(drive, obs, scs, tuple(sorted(kw.items())))) for d, obs in designs.items()}
+    kwt = tuple(sorted(kw.items()))
+    # one batch per speed (every load and mismatch at it, the same shape: one program), so that a batch runs
+    # as long as its own points' windows (floquet's while_loop), not the lowest speed's
+    spd = np.asarray(points)[:, 0]
+    groups = [np.flatnonzero(spd == v) for v in np.unique(spd)]
+    if method != "floquet" or len({len(g) for g in groups}) != 1:
+        groups = [np.arange(len(spd))]
+
+    def verdicts(obs):
+        parts = [
+            jax.device_get(_stability(drive, obs, jax.tree.map(lambda x: x[g], scs), method, kwt, trace_key))
+            for g in groups
+        ]
+        order = np.argsort(np.concatenate(groups))
+        return jax.tree.map(lambda *xs: np.concatenate(xs)[order], *parts)
+
+    stab = {d: verdicts(obs) for d, obs in designs.items()}
 
     dnames = list(designs)
     shape = (len(dnames), *(len(axes[n]) for n in names))
@@ -375,6 +444,7 @@ def envelope(
         speed_tol=float(speed_tol),
         seed=seed,
         **{f"stability_{k}": float(v) for k, v in kw.items()},
+        stability_method=method,
     )
     for f in ("Rs", "Ld", "Lq", "psi_f", "p", "J", "T_rated", "n_rated"):
         ds.attrs[f"machine_{f}"] = float(getattr(machine, f))

@@ -65,7 +65,7 @@ from ..linear import TransferFunction, sogi_fll_model, wif_model
 from .loop import ClosedLoop
 
 __all__ = ["Stability", "lyapunov", "stability_sweep", "LinearVerdict", "linear_speed_loop", "fll_frequency_soifo"]
-__all__ += ["fll_frequency_sosoifo", "slope_fit"]
+__all__ += ["fll_frequency_sosoifo", "slope_fit", "floquet"]
 
 
 class Stability(NamedTuple):
@@ -190,6 +190,178 @@ def lyapunov(
     )
 
 
+def floquet(
+    system: ClosedLoop,
+    *,
+    settle: float = 0.2,
+    window: float = 0.2,
+    max_window: float = 2.0,
+    n_report: int = 3,
+    tol: float = 0.0,
+) -> Stability:
+    """The largest non-neutral Floquet multiplier of ``system``'s closed loop over whole electrical periods.
+
+    Where :func:`lyapunov` fits the growth of a few tracked directions (and cannot resolve a slow mode from
+    its neighbours within a finite window: the FA-LESO's integral state, ≈ k1/k2 = 0.1 /s), this forms the
+    whole state transition matrix M over an exact period of the orbit and takes its eigenvalues.
+
+    Why whole periods make M a monodromy matrix without knowing the state's frames.  At a constant speed the
+    loop's orbit turns with θe; the state (αβ filters, the held voltage, angles) is the same after every
+    electrical period T_e, provided the sampled loop's own period (the speed loop's ``speed_every`` samples,
+    h) fits it.  So the window is the fewest electrical periods m that last at least ``window`` seconds, N =
+    round(m T_e/h) speed-loop periods, and the speed is moved to where m T_e' = N h exactly: a relative change
+    of at most h/(2 window) (0.25 % for 0.2 s and the 1 kHz speed loop).  On that periodic orbit
+    M = ∂x(t0 + m T_e')/∂x(t0) is the monodromy matrix; its eigenvalues μ are the Floquet multipliers and
+    log|μ|/(m T_e') the Lyapunov exponents, each exactly, however close two of them are.
+
+    The neutral multiplier.  The orbit from θe0 + δ is the same orbit shifted (rotation equivariance, or a
+    phase along it where harmonics or the dead time break the symmetry), so v = ∂x(t0)/∂θe0 (one ``jvp``
+    through ``init`` and the settle) has M v = v.  In a basis [v, v⊥] M is block-triangular, so the
+    eigenvalues of P M P with P = I − v vᵀ/vᵀv are those of M less the neutral 1 (and a 0): no eigenvector
+    matching.  Components the step only copies are masked as in :func:`lyapunov`.
+
+    ``resolution`` (1/s) says how periodic the orbit really was: δ = |log|vᵀMv/vᵀv|| + |P M v|/|v| (0 on an
+    exact periodic orbit) may move the top multiplier μ by about δ, its rate by log(1 + δ/|μ|)/(m T_e'); larger
+    where the settle left the loop off its orbit or where the profiles
+    are not constant; inf where one electrical period is longer than ``max_window`` (the point is then
+    ``marginal``: not resolved).  ``stable``, ``marginal`` and ``speed_dev`` as in :func:`lyapunov` (the
+    deviation over the window); ``exponents`` are the ``n_report`` largest non-neutral log|μ|/(m T_e'),
+    largest first.
+
+    Cost: every state component is a tangent direction (n of them, ``jax.vmap`` of ``jax.jvp``), over the
+    point's own window (a ``while_loop``: under ``vmap`` a batch runs as long as its longest window, so batch
+    points of similar speed together, as :func:`jaxobs.drive.envelope.envelope` does), after a settle that
+    carries one (the neutral).  M is accumulated with a scalar normalization each block (a product of
+    thousands of Jacobians).  Differentiable in the gains by forward mode (``jax.jacfwd``; reverse mode does
+    not pass a ``while_loop``) where the top non-neutral multiplier is simple; ``eigvals`` runs on the CPU.
+    """
+    if not isinstance(system, ClosedLoop):
+        raise ValueError(f"floquet: system must be a jaxobs.drive.ClosedLoop, got {type(system).__name__}")
+    if system.drive.startup is not None:
+        raise ValueError("floquet: system.drive.startup must be None (an operating point, started steady)")
+    for name, v, lo in (("settle", settle, 0.0), ("window", window, 1e-3), ("max_window", max_window, 1e-3)):
+        if not (lo <= float(v) <= 100.0):
+            raise ValueError(f"floquet: {name} must be in [{lo:g}, 100] s, got {v!r}")
+    if float(max_window) < float(window):
+        raise ValueError(f"floquet: max_window must be >= window ({window!r} s), got {max_window!r}")
+    if isinstance(n_report, bool) or not isinstance(n_report, int) or not 1 <= n_report <= 16:
+        raise ValueError(f"floquet: n_report must be an integer in [1, 16], got {n_report!r}")
+    ts, blk = system.ts, system.drive.foc.speed_every
+    h = ts * blk
+    n_settle = max(int(round(settle / h)), 0)
+    n_max = max(int(round(max_window / h)), 2)
+
+    # the window: m electrical periods, the fewest lasting ``window``; N whole speed-loop periods; the speed
+    # moved so that they coincide, ω' = ω · m T_e / (N h)
+    sc = system.scenario
+    w_ref = jnp.abs(sc.speed_ref(0.0))
+    t_e = 2.0 * jnp.pi / jnp.maximum(system.pole_pairs * w_ref, 1e-9)
+    m = jnp.maximum(jnp.ceil(window / t_e - 1e-9), 1.0)
+    n_win = jnp.maximum(jnp.round(m * t_e / h), 1.0)
+    covered = n_win <= n_max
+    n_win = jnp.minimum(n_win, float(n_max))
+    scale = jnp.where(covered, m * t_e / (n_win * h), 1.0)
+    system = eqx.tree_at(
+        lambda s: (s.scenario.speed_ref.values, s.scenario.omega_m0),
+        system,
+        (sc.speed_ref.values * scale, sc.omega_m0 * scale),
+    )
+
+    def initial(theta0):
+        return eqx.tree_at(lambda s: s.scenario.theta_e0, system, theta0).init()
+
+    th0 = system.scenario.theta_e0
+    x0, dx0 = jax.jvp(initial, (th0,), (jnp.ones_like(th0),))
+    vec0, rest0, unravel = _split(x0)
+    is_float = jax.tree.map(eqx.is_inexact_array, x0)
+    neutral0, _ = ravel_pytree(eqx.filter(dx0, is_float))
+    n = vec0.shape[0]
+    ref = jnp.abs(system.scenario.speed_ref(0.0))
+
+    def step_vec(vec, rest, k):
+        new, out = system.step(eqx.combine(unravel(vec), rest), k)
+        v, r, _ = _split(new)
+        return v, (r, out)
+
+    def tangent_block(vec, rest, t, j):
+        """One speed-loop period: the state and the tangent columns ``t`` (n × d) through ``blk`` samples;
+        also the peak speed deviation and the tangents after the first sample."""
+
+        def one(c, i):
+            v, r, tt = c
+            v1, t1, (r1, out) = jax.vmap(
+                lambda d: jax.jvp(lambda vv: step_vec(vv, r, j * blk + i), (v,), (d,), has_aux=True),
+                in_axes=1,
+                out_axes=(None, 1, None),
+            )(tt)
+            dev = jnp.abs(out.omega_m - out.omega_m_ref) / jnp.maximum(ref, 1e-6)
+            return (v1, r1, t1), (dev, t1)
+
+        (vec, rest, t), (dev, tts) = jax.lax.scan(one, (vec, rest, t), jnp.arange(blk))
+        return vec, rest, t, jnp.max(dev), tts[0]
+
+    # the settle: the neutral direction alone, from t = 0 (so it is ∂x/∂θe0 exactly); its own speed excursion
+    # is not the orbit's (the rule of lyapunov)
+    def settle_block(carry, j):
+        vec, rest, t, _, _ = tangent_block(*carry, j)
+        return (vec, rest, t), None
+
+    (vec, rest, v), _ = jax.lax.scan(settle_block, (vec0, rest0, neutral0[:, None]), jnp.arange(n_settle))
+    v = v[:, 0]
+
+    # the window: every direction, from the identity at t0, for the point's own N blocks; a scalar
+    # normalization each block keeps the product finite (its log accumulated), and the first step's Jacobian
+    # finds the components the step only copies (a unit row)
+    eye = jnp.eye(n, dtype=vec0.dtype)
+
+    def body(c):
+        j, vec, rest, w, log_s, mask, dev = c
+        vec, rest, w, d, first = tangent_block(vec, rest, w, n_settle + j)
+        mask = jnp.where(j == 0, jnp.any(first != eye, axis=1), mask)
+        nrm = jnp.sqrt(jnp.sum(w * w))
+        nrm = jnp.where((nrm > 0) & jnp.isfinite(nrm), nrm, 1.0)
+        return j + 1, vec, rest, w / nrm, log_s + jnp.log(nrm), mask, jnp.maximum(dev, d)
+
+    z = jnp.zeros((), vec0.dtype)
+    init = (jnp.zeros((), jnp.int32), vec, rest, eye, z, jnp.ones((n,), bool), z)
+    _, _, _, w, log_s, mask, dev = jax.lax.while_loop(lambda c: c[0] < n_win, body, init)
+    period = n_win * h
+    keep = mask.astype(w.dtype)
+    w = w * keep[:, None] * keep[None, :]
+    vn = v * keep
+    vn = vn / jnp.maximum(jnp.linalg.norm(vn), 1e-300)
+    proj = eye - jnp.outer(vn, vn)
+    mu = jnp.linalg.eigvals(proj @ w @ proj)
+    rates = -jnp.sort(-(jnp.log(jnp.maximum(jnp.abs(mu), 1e-300)) + log_s)) / period
+    # how periodic the orbit was: the neutral direction must come back to itself (M v = v)
+    wv = w @ vn
+    along = jnp.dot(vn, wv)
+    off = jnp.abs(jnp.log(jnp.maximum(jnp.abs(along), 1e-300)) + log_s) + jnp.linalg.norm(wv - along * vn) * jnp.exp(
+        log_s
+    )
+    lam = rates[0]
+    finite = jnp.isfinite(lam) & jnp.all(jnp.isfinite(w))
+    lam = jnp.where(finite, lam, jnp.inf)
+    # the resolution: an error δ in M (the orbit off periodic by that much) moves a multiplier by up to about δ,
+    # so the top non-neutral one is at most |μ| + δ: its rate at most log(|μ| + δ)/T, log(1 + δ/|μ|)/T above
+    # the estimate.  ≈ δ/T for a slow mode (|μ| near 1); for a fast one the same δ is a larger share of its
+    # tiny μ (000's SOIFO at 1000 r/min, settled 0.2 s: μ = 5e-5 over 0.5 s, δ = 3e-3, so −19.9 ± 8.5 /s: still
+    # stable, as a 3 s run is).  An uncertainty of the estimate, not a property a tuner should move.
+    rel = off * jnp.exp(-jnp.clip(lam, -700.0 / period, 700.0 / period) * period)
+    res = jnp.where(finite & covered, jax.lax.stop_gradient(jnp.log1p(rel) / period), jnp.inf)
+    speed_dev = jnp.where(finite, dev, jnp.inf)
+    held = speed_dev < 0.2
+    return Stability(
+        exponent=lam,
+        exponents=jnp.where(finite, rates[:n_report], jnp.inf),
+        margin=-lam,
+        stable=(-lam - res > tol) & held,
+        speed_dev=speed_dev,
+        resolution=res,
+        marginal=(jnp.abs(-lam - tol) <= res) & held & finite,
+    )
+
+
 def _weighted_slope(acc, t, w):
     """Least-squares slope of each column of ``acc`` against ``t`` over the samples where ``w`` is 1."""
     n = w.sum()
@@ -220,10 +392,15 @@ def slope_fit(acc: jax.Array, dt: float) -> tuple[jax.Array, jax.Array]:
     return slope, spread
 
 
-def stability_sweep(make_system: Callable, scenarios, **kw) -> Stability:
-    """:func:`lyapunov` at every scenario of a batch, one ``jit(vmap)``: ``make_system(scenario)`` gives the
-    ClosedLoop (bind the observer to the scenario there); ``kw`` go to :func:`lyapunov`."""
-    return jax.jit(jax.vmap(lambda sc: lyapunov(make_system(sc), **kw)))(scenarios)
+def stability_sweep(make_system: Callable, scenarios, *, method: str = "lyapunov", **kw) -> Stability:
+    """:func:`lyapunov` (or, ``method="floquet"``, :func:`floquet`) at every scenario of a batch, one
+    ``jit(vmap)``: ``make_system(scenario)`` gives the ClosedLoop (bind the observer to the scenario there);
+    ``kw`` go to that function.  For ``floquet`` a batch runs as long as its slowest point's period: batch
+    points of similar speed together."""
+    if method not in ("lyapunov", "floquet"):
+        raise ValueError(f"stability_sweep: method must be 'lyapunov' or 'floquet', got {method!r}")
+    fn = lyapunov if method == "lyapunov" else floquet
+    return jax.jit(jax.vmap(lambda sc: fn(make_system(sc), **kw)))(scenarios)
 
 
 # --------------------------------------------------------------------------

@@ -239,7 +239,9 @@ def cleso_closed_form(omega0, Rs, Lq) -> CLESOGains:
     return CLESOGains(l1=2 * w0 - mu, l2=w0**2, omega0=w0)
 
 
-def faleso_speed_loop_poles(k1, k2, omega_e, kp, ki, kp_w, ki_w, *, p, psi_f, Ld, Lq, J, i_d=0.0, i_q=0.0):
+def faleso_speed_loop_poles(
+    k1, k2, omega_e, kp, ki, kp_w, ki_w, *, p, psi_f, Ld, Lq, J, i_d=0.0, i_q=0.0, adaptation: bool = False
+):
     """Poles (rad/s) of a sensorless drive's speed loop closed through the FA-LESO and its PLL, linearized at
     the operating point ω_e (rad/s), (i_d, i_q) (A) with the estimate unbiased (the FA-LESO's, δ0 = 0).
 
@@ -259,6 +261,18 @@ def faleso_speed_loop_poles(k1, k2, omega_e, kp, ki, kp_w, ki_w, *, p, psi_f, Ld
     eliminating θ̂ and ω̂ (times p P D) leaves J s² P D + K_q k_i (k_pω s + k_iω) N − p K_δ (Q N − P D) = 0.
     Its roots include the FA-LESO's slow, lightly damped mode near ±jω_e, which the phase hardly excites (a
     near pole–zero cancellation in H_φ); the speed loop's own modes have |Im| well below ω_e.
+
+    ``adaptation`` (static) adds the FA-LESO's frequency adaptation, the PLL's ω̂ fed back into the LESO, which
+    the loop above leaves out (the FA-LESO at a frozen ω̂ = ω_e).  It does not vanish: G_FA(jω̂; ω̂) = 1 for every
+    ω̂, but the carrier is at the rotor's ω_e, and ∂G_FA(jω_e; ω̂)/∂ω̂ = j/k2 (≈), an angle shift of δω̂/k2.  In
+    error form (ε = x̂1 − i, z = ∫ε, matched machine) ε̇ = (jω̂ − k2)ε − k1 z + e/L̂q and ê = L̂q(k2 ε + k1 z),
+    so δω̂ forces ε̇ by j δω̂ ε0, ε0 = jω_e e/(L̂q(k1 + jω_e k2)) the carrier's steady ε: an equivalent BEMF
+    c δω̂ e with c = −ω_e/(k1 + jω_e k2), reaching ê through G_FA.  Its angle part is
+    H_ω = (cH − c̄H̄)/(2j) = N_ω/D (H the envelope response, as for H_φ), so the PLL detects H_φ θ + H_ω ω̂, and
+    P D becomes R = P D − k_i s N_ω: J s² R + K_q k_i (k_pω s + k_iω) N − p K_δ (Q N − R) = 0.  Checked against
+    the simulated dual drive (docs/papers.md, "the ringing after the I-f hand-over"): with the speed loop run every
+    period and a 1.5 kHz current loop, the simulated pair is 10.93 Hz, σ = 1.33 /s, this 11.05 Hz, 1.01 /s; with
+    the simulated FA-LESO's ω̂ frozen at ω_e 9.83 Hz, 4.70 /s, and without ``adaptation`` 9.95 Hz, 4.23 /s.
     """
     g = faleso_tf(k1, k2, omega_e)
     jw = 1j * as_float(omega_e)
@@ -272,9 +286,14 @@ def faleso_speed_loop_poles(k1, k2, omega_e, kp, ki, kp_w, ki_w, *, p, psi_f, Ld
     one, zero = jnp.ones_like(as_float(kp)), jnp.zeros_like(as_float(kp))
     pp = jnp.stack([one, kp * one, ki * one])
     qq = jnp.stack([kp * one, ki * one])
-    t1 = J * jnp.polymul(jnp.polymul(jnp.stack([one, zero, zero]), pp), dd)  # J s² P D
+    rr = jnp.polymul(pp, dd)  # P D
+    if adaptation:  # R = P D − k_i s N_ω (docstring)
+        c = -as_float(omega_e) / (k1 + jw * k2)
+        n_w = jnp.real((c * jnp.polymul(n_c, jnp.conj(d_c)) - jnp.conj(c) * jnp.polymul(jnp.conj(n_c), d_c)) / 2j)
+        rr = jnp.polysub(rr, ki * jnp.polymul(jnp.stack([one, zero]), n_w))
+    t1 = J * jnp.polymul(jnp.stack([one, zero, zero]), rr)  # J s² R (R = P D without adaptation)
     t2 = kq * ki * jnp.polymul(jnp.stack([kp_w * one, ki_w * one]), nn)  # K_q k_i (k_pω s + k_iω) N
-    t3 = -p * kd * jnp.polysub(jnp.polymul(qq, nn), jnp.polymul(pp, dd))  # −p K_δ (Q N − P D)
+    t3 = -p * kd * jnp.polysub(jnp.polymul(qq, nn), rr)  # −p K_δ (Q N − R)
     poly = jnp.polyadd(jnp.polyadd(t1, t2), t3)
     return jnp.roots(poly, strip_zeros=False)
 
@@ -307,9 +326,10 @@ def faleso_pll_loop(k1, k2, omega_e, kp, ki) -> TransferFunction:
     A small phase modulation δ of the BEMF reaches the FA-LESO's output through its
     envelope response H(s) = G_FA(s + jωe) (complex); the angle the PLL detects is
     filtered by H_φ(s) = (H(s) + H̄(s))/2, H̄ with conjugated coefficients.  The type-2 PLL
-    closes L(s) = H_φ(s)(k_p s + k_i)/s².  (The frequency-adaptation path — ω̂ fed back to
-    the FA-LESO — vanishes to first order at the operating point, since G_FA(jω̂) = 1
-    for every ω̂.)
+    closes L(s) = H_φ(s)(k_p s + k_i)/s².  The frequency-adaptation path (ω̂ fed back to the
+    FA-LESO) is left out: the FA-LESO at a frozen ω̂ = ω_e.  It does not vanish to first order
+    (G_FA(jω̂) = 1 for every ω̂, but the carrier is at ω_e: an angle shift of about δω̂/k2;
+    :func:`faleso_speed_loop_poles` with ``adaptation=True`` has it).
     """
     g = faleso_tf(k1, k2, omega_e)
     jw = 1j * as_float(omega_e)

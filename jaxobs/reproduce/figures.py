@@ -6,7 +6,8 @@ Each figure is a row of a table (:data:`FLUX_FIGURES`): the experiment's trace k
 the panels, and the time window.  The panels of paper 000's figures:
 
 - ``position``: θ̂e over θe (rad, wrapped to [0, 2π)) and the error θ̂e − θe (rad): Figs 12, 15, 17;
-- ``dynamic``: the speed estimate over the speed (r/min) and the error (rad): Figs 18–20;
+- ``dynamic``: the speed estimate over the speed (r/min) and the error (rad): Figs 18–20 (and 002's Figs 16–17;
+  ``weakening`` adds the drive's i_d over its reference between them, A: 002's ramp on a 330 V link);
 - ``flux``: ψ̂α, ψ̂β over the rotor's ψf cos θe, ψf sin θe (Wb), θ̂e over θe and the error: Figs 16, 21–23.
 
 Paper 001's Tests 1–3 and A–E (:func:`fll_figure`): a column per FLL, f̂ over f (Hz), V̂ over V (p.u.) and
@@ -87,6 +88,17 @@ LESO_FIGURES = (
         (0.4, None),
     ),
     ("load step 0-80 % at 600 r/min", "leso_fig17_load_step_layout.png", "Fig. 17", _LESO, "dynamic", (0.4, None)),
+    # the ramp on a 330 V link, where the field weakening acts at 840 r/min (its i_d drawn beneath), the FA-LESO
+    # closing the loop on a 2.5 Hz speed loop (jaxobs.reproduce.leso, SENSORLESS_FW_SPEED_HZ); the only LESO
+    # closing it, so its column alone
+    (
+        "speed ramp 300-600-840-600-300 r/min, 330 V dc link, speed loop 2.5 Hz",
+        "leso_fig16_speed_ramp_330V_layout.png",
+        "Fig. 16",
+        ("FA-LESO",),
+        "weakening",
+        (0.4, None),
+    ),
 )
 
 
@@ -101,7 +113,7 @@ def _panels(sol, i, kind, mask, p, psi_f):
     )
     if kind == "position":
         return [angle, err]
-    if kind == "dynamic":
+    if kind in ("dynamic", "weakening"):
         speed = Panel(
             "speed (r/min)",
             (
@@ -109,7 +121,18 @@ def _panels(sol, i, kind, mask, p, psi_f):
                 Series("estimated", np.asarray(o.omega)[mask] / p * 30 / math.pi),
             ),
         )
-        return [speed, err]
+        if kind == "dynamic":
+            return [speed, err]
+        # the field weakening's work: the drive's i_d beside its reference (the same in every column)
+        i_d = Panel(
+            "i_d, i_d* (A)",
+            (
+                Series("i_d*", np.asarray(sol.outputs.id_ref)[mask], actual=True),
+                Series("i_d", np.asarray(sol.outputs.i_d)[mask]),
+            ),
+            zero=True,
+        )
+        return [speed, i_d, err]  # the error last, as in every kind (drive_figure shares the others' scales)
     flux = Panel(
         "ψ̂α, ψ̂β (Wb)",
         (

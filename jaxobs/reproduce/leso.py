@@ -10,8 +10,9 @@ Set-up and assumptions (our copy of 002 lacks the machine table and the PLL sect
   :mod:`jaxobs.drive.weakening`).  With the assumed machine and the 540 V dc link, 840 r/min (198 V of
   back EMF against u_max = 312 V) is below base speed, so the field weakening is engaged but idle (the
   rows ``max_u`` and ``min_id`` show it); 002 gives no dc-link voltage.  On a 330 V link it acts
-  (tests/test_weakening.py, encoder-driven); sensorless on the FA-LESO there the ramp is not yet held
-  (docs/papers.md).
+  (tests/test_weakening.py, encoder-driven); sensorless on the FA-LESO there the ramp holds with the speed
+  loop at 2.5 Hz (SENSORLESS_FW_SPEED_HZ; docs/papers.md), drawn in the paper's layout with its i_d
+  (jaxobs.reproduce.figures.LESO_FIGURES).
 - Observers with 002 Table II's gains: C-LESO ω0 = 500π; GI-LESO ω0 = 500π,
   K_r = 2ω0², ωc = π; FA-LESO k1 = 10π, k2 = 100π; each with our PLL
   (ω_b = 2π·15 rad/s, ζ = 1/√2, pole placement).

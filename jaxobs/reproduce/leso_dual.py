@@ -22,7 +22,8 @@ runs keep the plain names, the others carry ", C-LESO closing the loop" etc., as
   below the assumed machine's base speed (198 V of back EMF per set against u_max = 312 V: the row
   ``max_u`` ≈ 0.64), so it is idle there (``min_id`` ≈ 0).  Where it matters, on a 330 V link (u_max =
   190.5 V, base speed ≈ 808 r/min), the same ramp runs once more on the encoder with the LESOs observing,
-  and the field weakening holds 840 r/min (``min_id`` < 0, ``max_u`` at its 0.95 margin);
+  and the field weakening holds 840 r/min (``min_id`` < 0; it budgets each set's voltage, ``fw_voltage="set"``:
+  ``max_u`` near its 0.95 margin, never at the limit);
 - the load step 0-80 %-0 at 600 r/min (Fig. 17).
 
 Rows: the 5th/7th content of each LESO's α BEMF estimate (% of its fundamental, ten electrical
@@ -30,7 +31,8 @@ periods at the end of 1 s) beside 002's, the FA-LESO's mean and peak-to-peak pos
 the rms xy current (A); for the transients the closing LESO's peak position error (deg) and speed-estimate
 error (r/min) after 0.6 s (ramp) or 0.55 s (load step) beside 002's 4.5° / 13 r/min and 3.2° / 5 r/min
 (the degrees are the FA-LESO's, the r/min all three's), and for the ramps the peak voltage |u|/u_max of
-either set and of the αβ subspace (what the field weakening holds at 0.95; the sets add their xy voltage),
+either set (what the field weakening holds at 0.95, ``fw_voltage="set"``) and of the αβ subspace (each set adds
+its xy voltage to it),
 the most negative i_d (A) and the peak speed (r/min); "finite" for every run.  Loads are fractions of the
 dual machine's rated torque.
 """
@@ -95,7 +97,7 @@ def _ramp_rows(name, sol, i, machine, inv, paper_deg, paper_rpm):
     ua1, ub1, ua2, ub2 = (np.asarray(v) for v in (o.u_a1, o.u_b1, o.u_a2, o.u_b2))
     u_max = float(inv.u_max)
     u_set = float(np.maximum(np.hypot(ua1, ub1), np.hypot(ua2, ub2)).max()) / u_max
-    # the αβ voltage, what the field weakening regulates (to 0.95 u_max); each set adds its xy voltage on top
+    # the αβ voltage (the field weakening holds the larger set voltage at 0.95 u_max); each set adds its xy on top
     u_ab = float(np.hypot(ua1 + ua2, ub1 + ub2).max()) / 2 / u_max
 
     def row(metric, unit, paper, ours):

@@ -41,6 +41,9 @@ def build_objective(job: Job, spec: ScenarioSpec | None = None):
     bind = bind_observer if drive is not None else None  # the scenario's assumed machine and speed
     if spec.recording is not None:  # the observer runs open loop on the recorded u/i or voltage
         drive, bind = None, (bind_recording if spec.signal != "grid" else None)
+    # what the objective's traced programs are kept under (jaxobs.kept_jit): the job (its file's digest, its
+    # recordings') and which of its scenario sets; none for another spec
+    which = "scenarios" if spec is job.scenarios else "holdout" if spec is job.holdout else None
     obj = Objective(
         comp,
         param,
@@ -52,6 +55,7 @@ def build_objective(job: Job, spec: ScenarioSpec | None = None):
         penalty=job.penalty,
         drive=drive,
         bind=bind,
+        trace_key=None if which is None else f"{job_fingerprint(job)}|{which}",
     )
     return obj, (names, combos)
 
@@ -231,7 +235,8 @@ def run_job(job: Job, out: Path, resume: bool = False, quiet: bool = False) -> d
     with atomic_path(out / "scores.nc") as tmp:
         scores_dataset(obj, names, combos, job.scenarios, per).to_netcdf(tmp, engine="h5netcdf")
     write_json(out / "history.json", res.history)
-    write_report(out, job, obj, thetas, res.history)
+    # the closed form's totals scored above: the report's worst scenario without scoring it a second time
+    write_report(out, job, obj, thetas, res.history, closed_form_totals=per["closed_form"][1])
     timing = {"total_s": time.time() - t0, **res.timing, "iterations": res.iterations}
     atomic_write_text(out / "timing.json", json.dumps(timing, indent=1) + "\n")
     write_json(out / "result.json", result)  # last: a result.json means a complete results folder

@@ -7,7 +7,7 @@ A design tuned and scored on its grid can run away a little outside it (the nois
 after tuning, :func:`verify_designs` maps initial, closed form and tuned over a coarse grid of that
 envelope (3 speeds, lo, geometric middle and hi, × 2 loads, lo and hi) with the one envelope map,
 :func:`jaxobs.drive.envelope.envelope`: a long run (``[envelope] horizon``, 2 s by default) through the study
-runner, batched, and the simulator's own stability verdict (:func:`jaxobs.drive.stability.lyapunov`) at the
+runner, batched, and the simulator's own stability verdict (:func:`jaxobs.drive.stability.floquet`) at the
 same points, on the job's drive (its speed schedule) started steady, nominal machine.
 
 A point *passes* when the design holds synchronism there (the envelope's ``synchronous``: finite, locked,
@@ -42,7 +42,8 @@ DEFAULT_HORIZON = 2.0  # s: a slowly growing low-speed oscillation shows within 
 @dataclasses.dataclass(frozen=True)
 class EnvelopeSpec:
     """The envelope a drive job claims: speeds (r/min) and loads (N·m) as [lo, hi]; ``horizon`` (s) of the
-    verification runs; ``settle``, ``window``: s, of the Lyapunov verdict (:func:`jaxobs.drive.stability.lyapunov`)."""
+    verification runs; ``settle``, ``window``: s, of the stability verdict (:func:`jaxobs.drive.stability.floquet`;
+    the window is lengthened to one electrical period of the lowest speed where it is shorter)."""
 
     speed_rpm: tuple
     load_nm: tuple
@@ -114,8 +115,11 @@ def verify_designs(designs: dict, env: EnvelopeSpec, drive_spec: DriveSpec) -> d
     par = D.bench_machine(drive_spec.machine)
     speeds, loads = env.points()
     stab = {"settle": env.settle, "window": env.window}
+    # the map's traced programs kept across runs (jaxobs.kept_jit): the two specs (plain frozen dataclasses) name
+    # everything that builds the drive, the machine and the points; the designs' gains are the programs' arrays
+    key = f"verify|{env!r}|{drive_spec!r}"
     ds = envelope(designs, machine=par, drive=drive, speeds_rpm=speeds, loads_nm=loads, horizon=env.horizon,
-                  stability=stab)  # fmt: skip
+                  stability=stab, trace_key=key)  # fmt: skip
     combos = [(s, ld) for s in speeds for ld in loads]
     out = {
         "envelope": {"speed_rpm": list(env.speed_rpm), "load_nm": list(env.load_nm)},
@@ -124,8 +128,9 @@ def verify_designs(designs: dict, env: EnvelopeSpec, drive_spec: DriveSpec) -> d
         "points": [{"speed_rpm": s, "load_nm": ld} for s, ld in combos],
         "passes_definition": "synchronous (jaxobs.drive.envelope: finite, locked within 90 deg electrical, at its "
         "speed reference and settled after a 2 % speed-reference step, over the late window) and stable "
-        "(jaxobs.drive.stability.lyapunov: largest non-neutral Lyapunov exponent below 0 by more than its "
-        "resolution, 1/s; within it the point is 'marginal', which does not pass)",
+        "(jaxobs.drive.stability.floquet: the largest non-neutral Floquet multiplier over whole electrical "
+        "periods, as a rate log|mu|/T, below 0 by more than its resolution, 1/s; within it the point is "
+        "'marginal', which does not pass)",
         "designs": {},
     }
     for name in designs:

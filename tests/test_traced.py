@@ -1,0 +1,118 @@
+"""Traced programs kept across processes (jaxobs.kept_jit; issue 31: a warm run skips tracing and lowering)."""
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import jaxobs
+from jaxobs import _traced
+
+
+@pytest.fixture
+def traced(tmp_path):
+    before = _traced.traced_dir()
+    _traced.set_traced_dir(tmp_path / "traced")
+    yield tmp_path / "traced"
+    _traced.set_traced_dir(before)
+
+
+class _Gain(eqx.Module):
+    k: jax.Array
+    n: int = eqx.field(static=True)
+
+
+def _counted():
+    calls = []
+
+    def f(g, x):
+        calls.append(1)  # runs only while tracing
+        y = x
+        for _ in range(g.n):
+            y = jnp.sin(g.k * y) + jnp.exp(-y * y)
+        return {"y": y, "s": (jnp.sum(y), jnp.cumsum(y))}
+
+    return f, calls
+
+
+def test_kept_equals_jit_and_a_new_process_does_not_trace(traced):
+    g, x = _Gain(jnp.asarray(1.3), 3), jnp.linspace(-2.0, 2.0, 37)
+    ref = eqx.filter_jit(_counted()[0])(g, x)
+    f, calls = _counted()
+    got = jaxobs.kept_jit(f, "test-key")(g, x)
+    assert jax.tree.structure(got) == jax.tree.structure(ref)
+    for a, b in zip(jax.tree.leaves(got), jax.tree.leaves(ref)):
+        assert np.array_equal(np.asarray(a), np.asarray(b))  # bit for bit
+    assert len(list(traced.iterdir())) == 1 and calls == [1]
+    # another process: a new kept_jit of new code objects reads the program back, never tracing f
+    f2, calls2 = _counted()
+    again = jaxobs.kept_jit(f2, "test-key")(g, jnp.asarray(np.asarray(x) * 0.5))
+    assert calls2 == []
+    ref2 = eqx.filter_jit(_counted()[0])(g, x * 0.5)
+    assert all(
+        np.array_equal(np.asarray(a), np.asarray(b)) for a, b in zip(jax.tree.leaves(again), jax.tree.leaves(ref2))
+    )
+
+
+def test_kept_keys_on_key_shape_and_static_fields(traced):
+    g, x = _Gain(jnp.asarray(1.3), 3), jnp.linspace(-2.0, 2.0, 37)
+    jaxobs.kept_jit(_counted()[0], "a")(g, x)
+    jaxobs.kept_jit(_counted()[0], "b")(g, x)  # another key
+    jaxobs.kept_jit(_counted()[0], "a")(g, x[:5])  # another shape
+    f, calls = _counted()
+    out = jaxobs.kept_jit(f, "a")(_Gain(jnp.asarray(1.3), 2), x)  # a static field in the tree: another program
+    assert calls == [1] and len(list(traced.iterdir())) == 4
+    assert np.array_equal(np.asarray(out["y"]), np.asarray(eqx.filter_jit(_counted()[0])(_Gain(1.3, 2), x)["y"]))
+
+
+def test_kept_off_without_folder_and_unexportable_falls_back(tmp_path, traced):
+    g, x = _Gain(jnp.asarray(0.7), 1), jnp.arange(4.0)
+    _traced.set_traced_dir(None)
+    f, calls = _counted()
+    k = jaxobs.kept_jit(f, "off")
+    k(g, x), k(g, x)
+    assert calls == [1] and not traced.exists()  # a plain jit: traced once in this process, nothing written
+    _traced.set_traced_dir(traced)
+    out = jaxobs.kept_jit(lambda g, x: _Gain(g.k * x, 2), "module-out")(g, x)  # an output of a custom class
+    assert isinstance(out, _Gain) and np.array_equal(np.asarray(out.k), np.asarray(g.k * x))
+    assert not traced.exists() or not list(traced.iterdir())
+    with pytest.raises(ValueError, match="key must be a non-empty string"):
+        jaxobs.kept_jit(f, "")
+
+
+def test_kept_corrupt_file_is_exported_again(traced):
+    g, x = _Gain(jnp.asarray(1.1), 2), jnp.linspace(0.0, 1.0, 9)
+    jaxobs.kept_jit(_counted()[0], "c")(g, x)
+    (path,) = traced.iterdir()
+    path.write_bytes(b"not a program")
+    f, calls = _counted()
+    out = jaxobs.kept_jit(f, "c")(g, x)
+    assert calls == [1] and path.stat().st_size > 100
+    assert np.array_equal(np.asarray(out["y"]), np.asarray(eqx.filter_jit(_counted()[0])(g, x)["y"]))
+
+
+def test_use_compile_cache_sets_the_traced_folder(tmp_path, monkeypatch):
+    before = (jax.config.jax_compilation_cache_dir, jax.config.jax_persistent_cache_min_compile_time_secs)
+    kept = _traced.traced_dir()
+    try:
+        assert jaxobs.use_compile_cache(tmp_path / "c") == tmp_path / "c"
+        assert _traced.traced_dir() == tmp_path / "c" / "traced"
+        jaxobs.use_compile_cache(tmp_path / "d", keep_traces=False)
+        assert _traced.traced_dir() is None
+    finally:
+        jax.config.update("jax_compilation_cache_dir", before[0])
+        jax.config.update("jax_persistent_cache_min_compile_time_secs", before[1])
+        _traced.set_traced_dir(kept)
+
+
+def test_the_folder_keeps_the_most_recently_used(tmp_path):
+    import os
+
+    for i in range(5):
+        f = tmp_path / f"{i}.jaxexport"
+        f.write_bytes(b"x")
+        os.utime(f, (1000 + i, 1000 + i))
+    os.utime(tmp_path / "0.jaxexport", (2000, 2000))  # read back lately
+    _traced._trim(tmp_path, keep=3)
+    assert sorted(f.name for f in tmp_path.iterdir()) == ["0.jaxexport", "3.jaxexport", "4.jaxexport"]
