@@ -14,7 +14,13 @@ batch), and the same for numba's float32 against numba's float64: what the cheap
 the number a tuning run optimizes.
 
 Where float64 loses (``--ops``, seconds): the cost of one element of each operation the drive's step is
-made of, XLA's (a jitted loop over a (1024,) array) beside numba's scalar libm calls, in both precisions.
+made of, XLA's (a jitted loop over a (1024,) array) beside numba's scalar libm calls, in both precisions,
+and ``jaxobs._trig.sincos`` (the drive's sine and cosine) beside XLA's pair.
+
+``--xla-trig`` adds the row ``jaxobs-xla-trig``: the same drive with XLA's own ``sin``/``cos`` in place of
+``jaxobs._trig.sincos`` (the modules that call it are patched while that row is traced and compiled), the
+before/after of issue 31.3 timed in the same rounds.  ``--dtypes f64`` leaves float32 out (one numba
+compile instead of two).
 """
 
 from __future__ import annotations
@@ -32,6 +38,7 @@ import jax
 import numpy as np
 
 import jaxobs
+from jaxobs._trig import sincos
 
 from . import baselines
 from . import workloads as W
@@ -51,6 +58,8 @@ OPS = {
     "sin": lambda m, x: m.sin(x),
     "cos": lambda m, x: m.cos(x),
     "atan2": lambda m, x: m.arctan2(x, 1.3 - x) if m is not math else math.atan2(x, 1.3 - x),
+    "sin+cos": lambda m, x: m.sin(x) + m.cos(x),
+    "sincos (jaxobs)": lambda m, x: sum(sincos(x)),  # float64: jaxobs._trig's polynomial; float32: XLA's pair
     "exp": lambda m, x: m.exp(-x),
     "sqrt": lambda m, x: m.sqrt(x + 1.0),
     "divide": lambda m, x: 1.0 / (x + 1.5),
@@ -106,12 +115,27 @@ def op_costs(batch: int = 1024, n: int = 2000, rounds: int = 5) -> dict:
     return {f"{i} {name} {dt}": t / (batch * n) * 1e9 for (i, name, dt), t in best.items()}
 
 
+def _xla_sincos(x):
+    import jax.numpy as jnp
+
+    return jnp.sin(x), jnp.cos(x)
+
+
+def _callers_of_sincos():
+    """The modules whose drive code calls ``jaxobs._trig.sincos`` (patched for ``--xla-trig``)."""
+    from jaxobs.drive import control, machine, plant
+
+    return (control, machine, plant)
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(prog="python -m benchmarks.drive_f64", description=__doc__.split("\n")[0])
     p.add_argument("--batch", type=int, default=1024, help="scenarios (default 1024)")
     p.add_argument("--horizon", type=float, default=0.05, help="seconds simulated (10 kHz; default 0.05)")
     p.add_argument("--rounds", type=int, default=3, help="interleaved timing rounds, best of (default 3)")
     p.add_argument("--no-numba", action="store_true", help="leave out the numba kernels")
+    p.add_argument("--dtypes", nargs="+", choices=list(DTYPES), default=list(DTYPES), help="precisions (default both)")
+    p.add_argument("--xla-trig", action="store_true", help="add jaxobs with XLA's sin/cos (the A/B of issue 31.3)")
     p.add_argument("--ops", action="store_true", help="only the per-operation costs (ns a value), XLA beside numba")
     p.add_argument("--json", action="store_true", help="print the result as JSON")
     a = p.parse_args(argv)
@@ -128,12 +152,25 @@ def main(argv=None) -> int:
     have_numba = numba_available() and not a.no_numba
     n = round(a.horizon / W.TS)
     fns, costs = {}, {}
-    for dt in DTYPES:
+    for dt in a.dtypes:
         jax.config.update("jax_enable_x64", dt == "f64")
-        fn, args = W.jax_drive(a.batch, a.horizon)
-        costs[("jaxobs", dt)] = np.asarray(jax.block_until_ready(fn(args)))  # compiled, warm
-        # the switch is read when a function is traced: each closure keeps its own precision's program
-        fns[("jaxobs", dt)] = (dt, partial(fn, args))
+        variants = [("jaxobs", None)] + ([("jaxobs-xla-trig", _xla_sincos)] if a.xla_trig else [])
+        for name, patch in variants:
+            mods = _callers_of_sincos() if patch is not None else ()
+            saved = [m.sincos for m in mods]
+            for m in mods:
+                m.sincos = patch
+            try:
+                jax.clear_caches()  # simulate's traces are cached by its arguments: trace this variant afresh
+                fn, args = W.jax_drive(a.batch, a.horizon)
+                # compiled ahead of time, so that the program stays this variant's once the patch is undone
+                fn = fn.lower(args).compile()
+            finally:
+                for m, f in zip(mods, saved):
+                    m.sincos = f
+            costs[(name, dt)] = np.asarray(jax.block_until_ready(fn(args)))  # compiled, warm
+            # the switch is read when a function is traced: each closure keeps its own precision's program
+            fns[(name, dt)] = (dt, partial(fn, args))
         if have_numba:
             w = np.asarray(W.drive_setup(a.batch)[3], DTYPES[dt])
             run = baselines.numba_drive(DTYPES[dt], True, inner=True)
@@ -154,16 +191,31 @@ def main(argv=None) -> int:
         "load_avg": [round(load0[0], 2), round(os.getloadavg()[0], 2)],
         "steps_per_s": {f"{i} {dt}": a.batch * n / t for (i, dt), t in best.items()},
     }
-    ratios = {"jaxobs f32 / f64 time": best[("jaxobs", "f32")] / best[("jaxobs", "f64")]}
+    both = len(a.dtypes) == 2
+    ratios = {"jaxobs f32 / f64 time": best[("jaxobs", "f32")] / best[("jaxobs", "f64")]} if both else {}
     if have_numba:
-        ratios["numba f32 / f64 time"] = best[("numba-inner", "f32")] / best[("numba-inner", "f64")]
-        for dt in DTYPES:
+        if both:
+            ratios["numba f32 / f64 time"] = best[("numba-inner", "f32")] / best[("numba-inner", "f64")]
+        for dt in a.dtypes:
             ratios[f"jaxobs / numba-inner {dt} (speed)"] = best[("numba-inner", dt)] / best[("jaxobs", dt)]
+            if a.xla_trig:
+                ratios[f"jaxobs-xla-trig / numba-inner {dt} (speed)"] = (
+                    best[("numba-inner", dt)] / best[("jaxobs-xla-trig", dt)]
+                )
+    if a.xla_trig:
+        for dt in a.dtypes:
+            ratios[f"jaxobs / jaxobs-xla-trig {dt} (speed)"] = best[("jaxobs-xla-trig", dt)] / best[("jaxobs", dt)]
     res["ratios"] = ratios
-    acc = {"jaxobs f32 vs f64 cost (median, worst rel.)": _rel(costs[("jaxobs", "f32")], costs[("jaxobs", "f64")])}
-    if have_numba:
+    acc = {}
+    if both:
+        acc["jaxobs f32 vs f64 cost (median, worst rel.)"] = _rel(costs[("jaxobs", "f32")], costs[("jaxobs", "f64")])
+    if have_numba and both:
         acc["numba f32 vs f64 cost"] = _rel(costs[("numba-inner", "f32")], costs[("numba-inner", "f64")])
+    if have_numba and "f64" in a.dtypes:
         acc["jaxobs f64 vs numba f64 cost"] = _rel(costs[("jaxobs", "f64")], costs[("numba-inner", "f64")])
+    if a.xla_trig:
+        for dt in a.dtypes:
+            acc[f"jaxobs vs jaxobs-xla-trig {dt} cost"] = _rel(costs[("jaxobs", dt)], costs[("jaxobs-xla-trig", dt)])
     res["accuracy"] = acc
     if a.json:
         print(json.dumps(res, indent=1))

@@ -21,6 +21,7 @@ A program run through ``Exported.call`` gives the same numbers bit for bit as th
 ``eqx.filter_jit``) where no folder is set: :func:`jaxobs.use_compile_cache` sets it (the command
 line, unless ``--no-cache`` or ``JAXOBS_CACHE_DIR=off``), or where a program cannot be exported
 (a host callback, an output that is not arrays in tuples, lists and dicts): then it is traced as before.
+The folder keeps the :data:`MAX_KEPT` most recently used programs (an edited source makes new keys).
 """
 
 from __future__ import annotations
@@ -35,6 +36,7 @@ from pathlib import Path
 
 import equinox as eqx
 import jax
+from jax import export  # serialization needs flatbuffers (a dependency)
 
 __all__ = ["kept_jit", "set_traced_dir", "traced_dir"]
 
@@ -90,10 +92,14 @@ def _lib_version(name: str) -> str:
 
 
 def _environment() -> str:
-    libs = ",".join(f"{n}={_lib_version(n)}" for n in _LIBS)
+    if "libs" not in _digests:  # read once: importlib.metadata costs ~1 ms a package, and this runs every call
+        _digests["libs"] = ",".join(f"{n}={_lib_version(n)}" for n in _LIBS)
+    libs = _digests["libs"]
     opts = ",".join(f"{o}={getattr(jax.config, o, None)!r}" for o in _OPTIONS)
     dev = jax.devices()[0]
-    return f"{libs};{opts};{dev.platform};{getattr(dev, 'device_kind', '')};{sys.version_info[:2]}"
+    # the device count too: a program split over two host devices is another program than one device's
+    kind = f"{dev.platform};{getattr(dev, 'device_kind', '')};{jax.device_count()};{jax.process_count()}"
+    return f"{libs};{opts};{kind};{sys.version_info[:2]}"
 
 
 class _Kept:
@@ -120,10 +126,9 @@ class _Kept:
         return self.jitted(*args) if run is None else run(*leaves)
 
     def _program(self, path: Path, leaves, tree, static):
-        from jax import export  # serialization needs flatbuffers (a dependency)
-
         try:
             exp = export.deserialize(bytearray(path.read_bytes()))
+            os.utime(path)  # recently used: the last to go when the folder is trimmed
         except Exception:  # absent, unreadable or corrupt (flatbuffers raises what it meets): exported anew
             exp = None
 
@@ -144,9 +149,32 @@ class _Kept:
                 with os.fdopen(fd, "wb") as f:
                     f.write(blob)
                 os.replace(tmp, path)  # whole or absent: a concurrent reader never sees half a file
+                _trim(path.parent)
             except OSError:  # a read-only cache: the program still runs, the next process traces again
                 pass
-        return jax.jit(exp.call)
+        run = jax.jit(exp.call)
+        if exp.nr_devices != 1:
+            return run
+        # an exported program's results are committed to their device, so a later call that passes them back
+        # (the solver's θ) would differ in its arguments' placement from the first and compile the program a
+        # second time; placing every argument on the device first gives one placement, one compilation
+        dev = jax.devices()[0]
+        return lambda *xs: run(*jax.device_put(xs, dev))
+
+
+# Every edit of the source is a new key, so the folder keeps at most this many programs (the least recently
+# used go first): the default job keeps 7, a study 2-3, each 10-100 kB.
+MAX_KEPT = 1000
+
+
+def _trim(folder: Path, keep: int = MAX_KEPT) -> None:
+    """Delete the least recently used programs of ``folder`` beyond ``keep`` (another process may race: ignored)."""
+    try:
+        files = sorted(folder.glob("*.jaxexport"), key=lambda f: f.stat().st_mtime)
+        for f in files[: max(0, len(files) - keep)]:
+            f.unlink(missing_ok=True)
+    except OSError:
+        pass
 
 
 def kept_jit(fn, key: str, *, packages: tuple[str, ...] = ()):

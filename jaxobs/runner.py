@@ -77,7 +77,9 @@ _KEPT: dict = {}
 
 
 def _kept_chunk(trace_key: str, task: _Task, aux):
-    key = f"run_scenarios|{trace_key}|{task.horizon!r}|{task.save!r}|{aux!r}"
+    # the mesh (None: one device's plain vmap) and the tile are static parts of the chunk's program
+    mesh = None if task.mesh is None else dict(task.mesh.shape)
+    key = f"run_scenarios|{trace_key}|{task.horizon!r}|{task.save!r}|{aux!r}|{mesh}|{task.tile}"
     packages = tuple({f.__module__.split(".")[0] for f in (task.system_factory, task.metrics)})
     if key not in _KEPT:
         _KEPT[key] = kept_jit(_chunk, key, packages=packages)

@@ -27,6 +27,7 @@ LAYERS = [
     # foundations: no project imports
     (
         "jaxobs._math",
+        "jaxobs._trig",
         "jaxobs._validate",
         "jaxobs.papers",
         "jaxobs._measurements",

@@ -153,7 +153,7 @@ def test_grad_of_phase_margin_and_crossover_match_finite_differences():
         return L.margins(_wif_loop(*x)).omega_gc
 
     for fn in (pm, wc):
-        g = np.asarray(jax.grad(fn)(x0))
+        g = np.asarray(jax.jit(jax.grad(fn))(x0))  # one program (eagerly, each root find compiles on its own)
         fjit = jax.jit(fn)
         for i in range(3):
             h = 1e-6 * float(x0[i])
@@ -223,8 +223,12 @@ def test_symmetric_optimum_recovered_by_optimization():
         m = L.margins(loop(best_gain(log_wz), log_wz), grid_size=800)
         return jnp.log(m.omega_gc / wc_target)
 
-    log_wz = optx.root_find(crossover_miss, optx.Newton(rtol=1e-9, atol=1e-9), jnp.log(30.0), max_steps=40).value
-    log_k2 = best_gain(log_wz)
+    @jax.jit  # one program for the root find and the inner optimum at its root (apart: 15.7 -> 13.7 CPU-s cold)
+    def solve():
+        log_wz = optx.root_find(crossover_miss, optx.Newton(rtol=1e-9, atol=1e-9), jnp.log(30.0), max_steps=40).value
+        return log_wz, best_gain(log_wz)
+
+    log_wz, log_k2 = solve()
     k2 = float(jnp.exp(log_k2))
     lam = float(jnp.exp(log_k2) * W1 * jnp.exp(log_wz))
     assert k2 == pytest.approx(k2_so, rel=1e-3)

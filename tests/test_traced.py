@@ -104,3 +104,15 @@ def test_use_compile_cache_sets_the_traced_folder(tmp_path, monkeypatch):
         jax.config.update("jax_compilation_cache_dir", before[0])
         jax.config.update("jax_persistent_cache_min_compile_time_secs", before[1])
         _traced.set_traced_dir(kept)
+
+
+def test_the_folder_keeps_the_most_recently_used(tmp_path):
+    import os
+
+    for i in range(5):
+        f = tmp_path / f"{i}.jaxexport"
+        f.write_bytes(b"x")
+        os.utime(f, (1000 + i, 1000 + i))
+    os.utime(tmp_path / "0.jaxexport", (2000, 2000))  # read back lately
+    _traced._trim(tmp_path, keep=3)
+    assert sorted(f.name for f in tmp_path.iterdir()) == ["0.jaxexport", "3.jaxexport", "4.jaxexport"]

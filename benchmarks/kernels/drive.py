@@ -279,7 +279,7 @@ def drive_block(X0, O0, S0, W, P, M, OB, C, lo, hi, n, t_s, every, F, out):
 
     The state lives in rows (plant (4, m), observer (9, m), loop state (11, m)); each period runs
     :func:`drive_step` over the block's scenarios, a column loaded into thread-local scratch and stored
-    back.  Without a vector math library (numba here has no SVML) the ~16 sines, cosines and arctangents
+    back.  Without a vector math library (numba here has no SVML) the ~40 sines, cosines and arctangents
     per period stay scalar calls, so this loop does not vectorize: it is the batch-inner form of the
     scalar kernel, measured beside it.
     """

@@ -87,9 +87,10 @@ import jax.numpy as jnp
 
 from .. import papers
 from .._math import safe_norm2, wrap
+from .._trig import sincos
 from .._validate import check_nonnegative, check_positive, check_real, check_sample_time
 from .component import AbstractComponent
-from .machine import RPM, PMSMParams
+from .machine import RPM, PMSMParams, rotate
 from .weakening import VoltageFeedbackFW
 
 __all__ = ["FOC", "FOCInput", "FOCOutput", "IfStartup", "ControllerState", "OperatingPoint"]
@@ -232,8 +233,7 @@ class FOCOutput(NamedTuple):
 
 def _rotate(x_d, x_q, angle):
     """(x_d, x_q) seen from a frame ``angle`` behind: R(angle)·(x_d, x_q)."""
-    c, s = jnp.cos(angle), jnp.sin(angle)
-    return c * x_d - s * x_q, s * x_d + c * x_q
+    return rotate(x_d, x_q, *sincos(angle))
 
 
 def _torque_dq(par: PMSMParams, i_d, i_q):
@@ -511,8 +511,9 @@ class FOC(AbstractComponent):
             mode = jnp.where(switch, 1, cs.mode)
             t_closed = jnp.where(cs.mode == 1, cs.t_closed + ts, 0.0)  # 0 at the switch
             # bumpless: the I-f vector (I_f along θ_f + 90°) seen from the given frame
-            iq_hand = startup.i_f * jnp.cos(delta)
-            id_hand = jnp.where(switch, -startup.i_f * jnp.sin(delta), cs.id_hand)
+            sd, cd = sincos(delta)  # also rotates the integrators below
+            iq_hand = startup.i_f * cd
+            id_hand = jnp.where(switch, -startup.i_f * sd, cs.id_hand)
             # the speed PI's output k_pω(b ω* − ω̂) + ∫ starts at iq_hand
             int_w0 = jnp.where(switch, iq_hand - kp_w * (self.setpoint_weight * omega_m_ref - omega_m), cs.int_w)
             iq_held = jnp.where(switch, iq_hand, cs.iq_ref)
@@ -557,18 +558,17 @@ class FOC(AbstractComponent):
             int_w = jnp.where(closed, int_w, cs.int_w)
             # the current PIs' integrators into the new frame, so that the voltage vector is continuous:
             # u = ∫ + decoupling, rotated by Δ from θ_f to θ̂, minus the decoupling computed in θ̂
-            cf, sf = jnp.cos(theta_f), jnp.sin(theta_f)
+            sf, cf = sincos(theta_f)
             idf, iqf = cf * i_a + sf * i_b, -sf * i_a + cf * i_b
-            ch, sh = jnp.cos(theta), jnp.sin(theta)
+            sh, ch = sincos(theta)
             idh, iqh = ch * i_a + sh * i_b, -sh * i_a + ch * i_b
             vd = cs.int_d - omega_f * est.Lq * iqf
             vq = cs.int_q + omega_f * (est.Ld * idf + est.psi_f)
-            cd, sd = jnp.cos(delta), jnp.sin(delta)
             int_d0 = jnp.where(switch, cd * vd - sd * vq + omega_e * est.Lq * iqh, cs.int_d)
             int_q0 = jnp.where(switch, sd * vd + cd * vq - omega_e * (est.Ld * idh + est.psi_f), cs.int_q)
 
         # --- current loop
-        c, s = jnp.cos(th), jnp.sin(th)
+        s, c = sincos(th)
         i_d = c * i_a + s * i_b
         i_q = -s * i_a + c * i_b
         e_d, e_q = id_ref - i_d, iq_ref - i_q
@@ -583,7 +583,7 @@ class FOC(AbstractComponent):
         u_d, u_q = u_d * scale, u_q * scale
         # the voltage is applied later (1.5 periods on average by default, jaxobs.drive.latency): rotate ahead
         th_out = th + (self.advance * w_e * ts if self.advance != 0.0 else 0.0)
-        co, so = jnp.cos(th_out), jnp.sin(th_out)
+        so, co = sincos(th_out)
         u_a = co * u_d - so * u_q
         u_b = so * u_d + co * u_q
         new = ControllerState(

@@ -38,7 +38,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .. import AbstractSystem, SaveFinal
+from .. import AbstractSystem, SaveFinal, kept_jit
 from .. import metrics as M
 from ..drive_study import (
     CF_UNITS,
@@ -54,7 +54,7 @@ from ..scenarios import Grid
 from ..sharding import batch_mesh
 from . import ClosedLoop, Drive, PMSMParams, drive_speed_limit_rpm
 from .loop import SETTLE_PERIODS
-from .stability import floquet, lyapunov
+from .stability import Stability, floquet, lyapunov
 
 __all__ = [
     "ENVELOPE_VARIABLES",
@@ -203,12 +203,24 @@ STABILITY_METHODS = {
 }
 
 
-@eqx.filter_jit
-def _stability(drive, obs, scs, method: str, kw: tuple):
+def _stability_fields(drive, obs, scs, method: str, kw: tuple):
     """The stability verdict (:func:`floquet` or :func:`lyapunov`) at every scenario of ``scs``, one program per
-    observer class (gains are traced)."""
+    observer class (gains are traced); its fields as a plain tuple, which a kept program can return."""
     fn = floquet if method == "floquet" else lyapunov
-    return jax.vmap(lambda sc: fn(ClosedLoop(drive, bind_observer(obs, sc), sc), **dict(kw)))(scs)
+    return tuple(jax.vmap(lambda sc: fn(ClosedLoop(drive, bind_observer(obs, sc), sc), **dict(kw)))(scs))
+
+
+_stability_jit = eqx.filter_jit(_stability_fields)
+_KEPT: dict = {}  # trace key -> its kept program (jaxobs.kept_jit), one per process
+
+
+def _stability(drive, obs, scs, method: str, kw: tuple, trace_key: str | None = None) -> Stability:
+    if trace_key is None:
+        return Stability(*_stability_jit(drive, obs, scs, method, kw))
+    key = f"envelope.stability|{trace_key}|{method}|{kw!r}"
+    if key not in _KEPT:
+        _KEPT[key] = kept_jit(_stability_fields, key)
+    return Stability(*_KEPT[key](drive, obs, scs, method, kw))
 
 
 def _speed_bandwidth(drive: Drive, machine: PMSMParams, speed_rpm: float) -> float:
@@ -246,6 +258,7 @@ def envelope(
     seed: int = 0,
     chunk_size: int = 256,
     progress=None,
+    trace_key: str | None = None,
 ):
     """The operating envelope of every design (name -> drive observer closing ``drive``'s loop sensorless).
 
@@ -258,7 +271,9 @@ def envelope(
     ("floquet", the default, or "lyapunov") and that function's keyword arguments
     (:func:`~jaxobs.drive.stability.floquet`: settle, window, tol, n_report;
     :func:`~jaxobs.drive.stability.lyapunov`: settle, warmup, window, n_dirs, tol).  ``progress`` as in
-    :func:`jaxobs.runner.run_scenarios`.  Returns an ``xarray.Dataset`` with dims ``("design", "speed_rpm",
+    :func:`jaxobs.runner.run_scenarios`.  ``trace_key``: a string naming every argument here (the command
+    line: its source file's digest and options): the long runs' and the verdicts' traced programs are kept
+    across processes (:func:`jaxobs.kept_jit`).  Returns an ``xarray.Dataset`` with dims ``("design", "speed_rpm",
     "load"[, axis])`` and the variables of :data:`ENVELOPE_VARIABLES` (booleans stored as int8 0/1).
     """
     import xarray as xr
@@ -352,6 +367,7 @@ def envelope(
         progress=progress,
         label="envelope",
         save=SaveFinal(),
+        trace_key=None if trace_key is None else f"envelope|{trace_key}",
     )
     # the stability margins: constant profiles (no step), one jit(vmap) per observer class
     scs = drive_scenarios(machine, names, points, seed=seed)
@@ -364,7 +380,10 @@ def envelope(
         groups = [np.arange(len(spd))]
 
     def verdicts(obs):
-        parts = [jax.device_get(_stability(drive, obs, jax.tree.map(lambda x: x[g], scs), method, kwt)) for g in groups]
+        parts = [
+            jax.device_get(_stability(drive, obs, jax.tree.map(lambda x: x[g], scs), method, kwt, trace_key))
+            for g in groups
+        ]
         order = np.argsort(np.concatenate(groups))
         return jax.tree.map(lambda *xs: np.concatenate(xs)[order], *parts)
 

@@ -46,6 +46,7 @@ import jax
 import jax.numpy as jnp
 
 from .. import papers
+from .._trig import sincos
 from .._validate import check_nonnegative, check_positive, check_real
 
 __all__ = [
@@ -194,60 +195,84 @@ def ipmsm_paper002(**overrides) -> PMSMParams:
     return PMSMParams(**kw)
 
 
-def _harmonic_factor(par: PMSMParams, theta_e):
-    """1 + a5 e^{−j6θ} + a7 e^{j6θ} as (re, im)."""
-    c6, s6 = jnp.cos(6 * theta_e), jnp.sin(6 * theta_e)
+def _harmonic_factor(par: PMSMParams, sc):
+    """1 + a5 e^{−j6θ} + a7 e^{j6θ} as (re, im), from ``sc`` = (sin θ, cos θ).
+
+    e^{j6θ} = (e^{jθ})⁶ by two squarings and a product (e^{j2θ}, e^{j3θ}, e^{j6θ}): no second sine and
+    cosine per angle.  Inside the plant's vector field XLA evaluates this once per state component it
+    stacks, in scalar code (jaxobs._trig), where a polynomial sine costs several times these six products."""
+    s, c = sc
+    c2, s2 = c * c - s * s, 2.0 * s * c
+    c3, s3 = c2 * c - s2 * s, s2 * c + c2 * s
+    c6, s6 = c3 * c3 - s3 * s3, 2.0 * s3 * c3
     re = 1.0 + (par.a5 + par.a7) * c6
     im = (par.a7 - par.a5) * s6
     return re, im
 
 
-def bemf_dq(par: PMSMParams, omega_e, theta_e):
-    """e_dq = j ωe ψf (1 + a5 e^{−j6θ} + a7 e^{j6θ}), returns (e_d, e_q)."""
-    re, im = _harmonic_factor(par, theta_e)
+def _bemf_dq(par: PMSMParams, omega_e, h):
+    """e_dq = j ωe ψf h for the harmonic factor h = (re, im) of :func:`_harmonic_factor`."""
+    re, im = h
     k = omega_e * par.psi_f
     return -k * im, k * re
 
 
-def bemf_ab(par: PMSMParams, omega_e, theta_e):
-    """e_ab = e_dq e^{jθe}, returns (e_α, e_β)."""
-    ed, eq = bemf_dq(par, omega_e, theta_e)
-    c, s = jnp.cos(theta_e), jnp.sin(theta_e)
-    return ed * c - eq * s, ed * s + eq * c
-
-
-def torque(par: PMSMParams, i_d, i_q, theta_e):
-    """Electromagnetic torque, N·m (see module doc)."""
-    re, im = _harmonic_factor(par, theta_e)
+def _torque(par: PMSMParams, i_d, i_q, h):
+    """Torque (N·m) for the harmonic factor h = (re, im) of :func:`_harmonic_factor`."""
+    re, im = h
     # Re(j h i*) with h = re + j im, i = i_d + j i_q:  j h = −im + j re;
     # Re((−im + j re)(i_d − j i_q)) = −im i_d + re i_q
     pm = par.psi_f * (re * i_q - im * i_d)
     return 1.5 * par.p * (pm + (par.Ld - lq_apparent(par, i_q)) * i_d * i_q)
 
 
-def plant_vf(par: PMSMParams, x, u_ab, t_load):
-    """dx/dt for x = [i_d, i_q, ωm, θe] under stationary-frame voltage ``u_ab = (u_α, u_β)``."""
+def bemf_dq(par: PMSMParams, omega_e, theta_e):
+    """e_dq = j ωe ψf (1 + a5 e^{−j6θ} + a7 e^{j6θ}), returns (e_d, e_q)."""
+    return _bemf_dq(par, omega_e, _harmonic_factor(par, sincos(theta_e)))
+
+
+def bemf_ab(par: PMSMParams, omega_e, theta_e):
+    """e_ab = e_dq e^{jθe}, returns (e_α, e_β)."""
+    ed, eq = bemf_dq(par, omega_e, theta_e)
+    return dq_to_ab(ed, eq, theta_e)
+
+
+def torque(par: PMSMParams, i_d, i_q, theta_e):
+    """Electromagnetic torque, N·m (see module doc)."""
+    return _torque(par, i_d, i_q, _harmonic_factor(par, sincos(theta_e)))
+
+
+def plant_vf(par: PMSMParams, x, u_ab, t_load, sc=None):
+    """dx/dt for x = [i_d, i_q, ωm, θe] under stationary-frame voltage ``u_ab = (u_α, u_β)``; ``sc``: (sin θe,
+    cos θe) when the caller has them already (:func:`jaxobs.drive.plant.plant_field`), else computed here."""
     i_d, i_q, w_m, th = x[0], x[1], x[2], x[3]
     w_e = par.p * w_m
-    c, s = jnp.cos(th), jnp.sin(th)
-    u_d = c * u_ab[0] + s * u_ab[1]
-    u_q = -s * u_ab[0] + c * u_ab[1]
-    e_d, e_q = bemf_dq(par, w_e, th)
+    s, c = sincos(th) if sc is None else sc
+    u_d, u_q = rotate(u_ab[0], u_ab[1], -s, c)
+    h = _harmonic_factor(par, (s, c))  # one for both the BEMF and the torque
+    e_d, e_q = _bemf_dq(par, w_e, h)
     di_d = (u_d - par.Rs * i_d + w_e * lq_apparent(par, i_q) * i_q - e_d) / par.Ld
     di_q = (u_q - par.Rs * i_q - w_e * par.Ld * i_d - e_q) / lq_incremental(par, i_q)
-    te = torque(par, i_d, i_q, th)
+    te = _torque(par, i_d, i_q, h)
     dw = (te - t_load - par.B * w_m) / par.J
     return jnp.stack([di_d, di_q, dw, w_e])
 
 
+def rotate(x, y, s, c):
+    """(x, y) rotated by the angle whose sine and cosine are ``s``, ``c``: (c x − s y, s x + c y)."""
+    return c * x - s * y, s * x + c * y
+
+
 def dq_to_ab(d, q, theta):
-    c, s = jnp.cos(theta), jnp.sin(theta)
-    return d * c - q * s, d * s + q * c
+    """(α, β) of the rotor-frame (d, q) seen at the electrical angle ``theta`` (rad): inverse Park."""
+    s, c = sincos(theta)
+    return rotate(d, q, s, c)
 
 
 def ab_to_dq(a, b, theta):
-    c, s = jnp.cos(theta), jnp.sin(theta)
-    return a * c + b * s, -a * s + b * c
+    """(d, q) of the stationary (α, β) in the frame at the electrical angle ``theta`` (rad): Park."""
+    s, c = sincos(theta)
+    return rotate(a, b, -s, c)
 
 
 RPM = 2 * math.pi / 60.0  # r/min → rad/s

@@ -25,19 +25,21 @@ import jax.numpy as jnp
 
 from .._discretize import RK4, AbstractRule, Held, check_rule
 from .._math import wrap
+from .._trig import sincos
 from .._validate import check_nonnegative, check_sample_time
 from .component import AbstractComponent
 from .hardware import Inverter
-from .machine import PMSMParams, dq_to_ab, plant_vf, torque
+from .machine import PMSMParams, dq_to_ab, plant_vf, rotate, torque
 
 __all__ = ["PMSM", "PlantInput", "PlantOutput", "PlantState", "plant_field"]
 
 
 def plant_field(par: PMSMParams, inverter: Inverter, dead_time, x, inp):
     """Plant vector field with the inverter's dead-time error; ``inp = (u_α, u_β, T_L)`` (applied, limited)."""
-    i_a, i_b = dq_to_ab(x[0], x[1], x[3])
+    sc = sincos(x[3])  # one sine and cosine of θe for the currents' and the voltage's transforms
+    i_a, i_b = rotate(x[0], x[1], *sc)
     du_a, du_b = inverter.dead_time_error(dead_time, i_a, i_b)
-    return plant_vf(par, x, (inp[0] + du_a, inp[1] + du_b), inp[2])
+    return plant_vf(par, x, (inp[0] + du_a, inp[1] + du_b), inp[2], sc=sc)
 
 
 class PlantInput(NamedTuple):
