@@ -1,6 +1,6 @@
 """The envelope map's cost (issue 26: 200 operating points × 3 designs in ≤ 60 s, compile included).
 
-    .venv/bin/python -m benchmarks.envelope [--speeds 20] [--loads 10] [--horizon 2]
+    .venv/bin/python -m benchmarks.envelope [--speeds 20] [--loads 10] [--horizon 2] [--method floquet|lyapunov]
 
 000's SPMSM on its bench drive, sensorless; three designs of the second-order SOIFO (the job's initial gains,
 000's closed form, and a third as a tuned one would be: another lam), so one program serves all three, as
@@ -21,6 +21,7 @@ def main(argv=None) -> int:
     p.add_argument("--speeds", type=int, default=20)
     p.add_argument("--loads", type=int, default=10)
     p.add_argument("--horizon", type=float, default=2.0)
+    p.add_argument("--method", choices=("floquet", "lyapunov"), default="floquet", help="the stability verdict")
     a = p.parse_args(argv)
     import jax
 
@@ -38,12 +39,14 @@ def main(argv=None) -> int:
     speeds, loads = default_speeds(par, a.speeds), default_loads(par, a.loads)
     load0 = os.getloadavg()
     t0, c0 = time.perf_counter(), time.process_time()
-    ds = envelope(designs, machine=par, drive=bench_drive(par), speeds_rpm=speeds, loads_nm=loads, horizon=a.horizon)
+    ds = envelope(designs, machine=par, drive=bench_drive(par), speeds_rpm=speeds, loads_nm=loads, horizon=a.horizon,
+                  stability={"method": a.method})  # fmt: skip
     wall, cpu = time.perf_counter() - t0, time.process_time() - c0
     load1 = os.getloadavg()
     n = len(speeds) * len(loads)
     print(
-        f"envelope: {n} points x {len(designs)} designs, {a.horizon:g} s runs: {wall:.1f} s wall, {cpu:.1f} s CPU "
+        f"envelope ({a.method}): {n} points x {len(designs)} designs, {a.horizon:g} s runs: {wall:.1f} s wall, "
+        f"{cpu:.1f} s CPU "
         f"(this process, all threads), compile included ({os.cpu_count()} CPUs; 1-min load average {load0[0]:.1f} "
         f"before, {load1[0]:.1f} after)"
     )

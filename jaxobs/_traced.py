@@ -152,7 +152,14 @@ class _Kept:
                 _trim(path.parent)
             except OSError:  # a read-only cache: the program still runs, the next process traces again
                 pass
-        return jax.jit(exp.call)
+        run = jax.jit(exp.call)
+        if exp.nr_devices != 1:
+            return run
+        # an exported program's results are committed to their device, so a later call that passes them back
+        # (the solver's θ) would differ in its arguments' placement from the first and compile the program a
+        # second time; placing every argument on the device first gives one placement, one compilation
+        dev = jax.devices()[0]
+        return lambda *xs: run(*jax.device_put(xs, dev))
 
 
 # Every edit of the source is a new key, so the folder keeps at most this many programs (the least recently

@@ -185,7 +185,8 @@ def test_lost_lock_of_a_simulation_under_jit():
         return jaxobs.lost_lock_of(sol), jaxobs.lost_lock_of(sol, 0.3, freq_tol=None), sol.ok
 
     assert [bool(x) for x in run(good.k, good.lam)] == [False, False, True]
-    lost, lost_angle, ok = run(20.0, 1e4)
+    # arrays of the gains' own dtype and weak type: Python floats (weakly typed) would compile run again
+    lost, lost_angle, ok = run(jnp.full_like(good.k, 20.0), jnp.full_like(good.lam, 1e4))
     assert bool(ok) and bool(lost) and bool(lost_angle)  # finite, "ok", and far from the truth
     # a flux observer on a back EMF (no truth in the outputs): the signal's flux angle is the truth
     emf = jaxobs.signals.EMFSignal(A1=100.0, omega1=2 * math.pi * 50)

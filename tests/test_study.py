@@ -192,12 +192,17 @@ def test_lost_lock_and_diverged_scenarios_are_flagged_and_listed_first():
     """A false lock (k = 20, λ = 1e4: finite, 115 rad/s against 326.7) is flagged lost_lock but not diverged;
     a NaN gain diverges (lost_lock too); the closed form holds lock.  worst_cases lists the diverged first."""
     import equinox as eqx
+    import jax.numpy as jnp
 
     good = linear.sogi_fll_closed_form()
     designs = {
         "closed form": good,
-        "false lock": eqx.tree_at(lambda o: (o.k, o.lam), good, (20.0, 1e4)),  # the constructor would refuse
-        "nan": eqx.tree_at(lambda o: o.lam, good, float("nan")),
+        # the constructor would refuse these; set as arrays of the closed form's own dtype (a Python float
+        # would be a static field: one more compilation per design)
+        "false lock": eqx.tree_at(
+            lambda o: (o.k, o.lam), good, (jnp.full_like(good.k, 20.0), jnp.full_like(good.lam, 1e4))
+        ),
+        "nan": eqx.tree_at(lambda o: o.lam, good, jnp.full_like(good.lam, float("nan"))),
     }
     ds = run_study(designs, {"freq_step": [-1.0, 2.0]}, progress=False)
     assert ds["lost_lock"].dtype == np.int8 and ds["lost_lock"].dims == ("design", "freq_step")
