@@ -251,7 +251,7 @@ def test_grad_of_speed_error_wrt_speed_pi_gain_matches_finite_differences():
         return jnp.mean((sol.outputs.omega_m - sol.outputs.omega_m_ref) ** 2)
 
     k0 = FOC.kp_w
-    g = float(jax.grad(loss)(k0))
+    g = float(jax.jit(jax.grad(loss))(k0))  # one program (eagerly: the forward and backward passes apart)
     f = jax.jit(loss)
     h = 1e-6 * float(k0)
     fd = (float(f(k0 + h)) - float(f(k0 - h))) / (2 * h)

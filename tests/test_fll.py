@@ -305,6 +305,6 @@ def test_gradients_stay_finite_through_the_zero_initial_state():
             metrics.wrap(out.obs.theta - out.truth.theta) ** 2
         )
 
-    g = eqx.filter_grad(loss)(obs)
+    g = eqx.filter_jit(eqx.filter_grad(loss))(obs)  # one program (eagerly: forward and backward apart)
     assert np.isfinite(float(g.k)) and np.isfinite(float(g.lam))
     assert float(g.k) != 0.0

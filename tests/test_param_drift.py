@@ -48,12 +48,20 @@ def _plateau_errors(sol):
     return out
 
 
+def _ramp(name):
+    """A drift of ``name`` along FACTORS, the other of R̂s and L̂q held at 1 (no drift: the next test): both
+    runs have one form, so the closed loop compiles once for the two."""
+    ramp = getattr(D.ParameterDrift.ramps(name, TIMES, FACTORS), name)
+    ones = D.Profile(TIMES, [1.0] * len(TIMES), kind="linear")
+    return D.ParameterDrift(Rs=ramp if name == "Rs" else ones, Lq=ramp if name == "Lq" else ones)
+
+
 def test_rs_ramp_leaves_the_error_unmoved_and_lq_ramp_follows_eq_43():
-    sol = _run(D.ParameterDrift.ramps("Rs", TIMES, FACTORS))
+    sol = _run(_ramp("Rs"))
     assert bool(sol.ok)
     for factor, err, _, _ in _plateau_errors(sol):
         assert abs(err) < 0.05, (factor, err)  # eq (42) at i_d = 0: no error, whatever R̂s
-    sol = _run(D.ParameterDrift.ramps("Lq", TIMES, FACTORS))
+    sol = _run(_ramp("Lq"))
     assert bool(sol.ok)
     e_ex = WE * float(PAR.psi_f)
     for factor, err, i_d, i_q in _plateau_errors(sol):

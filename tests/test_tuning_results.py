@@ -437,3 +437,26 @@ def test_every_metric_has_cf_units():
     from jaxobs_tuning.objective import METRIC_UNITS, METRICS
 
     assert set(METRIC_UNITS) == set(METRICS)
+
+
+def test_report_marks_events_only_where_the_scenario_has_one_and_draws_a_negative_objective(tmp_path):
+    """responses.png marks "events at t_event" only where the worst scenario steps (cleso.toml has no event and
+    showed the mark over its trace); convergence.png of an objective that goes negative (sosoifo.toml's margin
+    term) was an empty log axis: it is linear there, log where every value is positive."""
+    from jaxobs_tuning.report import _has_event, convergence_figure
+
+    drive = load_job(Path(__file__).resolve().parents[1] / "tuning" / "presets" / "cleso.toml").scenarios
+    assert drive.signal == "drive" and "load_step_nm" not in drive.axes
+    assert not any(_has_event(drive, i) for i in range(4))
+    stepped = dataclasses.replace(drive, axes={**drive.axes, "load_step_nm": [0.0, 10.0]})
+    n = math.prod(len(v) for v in stepped.axes.values())
+    flags = [_has_event(stepped, i) for i in range(n)]
+    assert any(flags) and not all(flags)  # the scenarios with a 10 N·m step, not those with none
+    grid = load_job(Path(__file__).resolve().parents[1] / "tuning" / "presets" / "sogi_fll.toml").scenarios
+    assert grid.signal == "grid" and any(_has_event(grid, i) for i in range(3))
+    for values, scale in (([0.3, -0.01, -0.012], "linear"), ([0.3, 0.1, 0.02], "log")):
+        fig = convergence_figure([{"iteration": i, "value": v} for i, v in enumerate(values)], "x", tmp_path / "c.png")
+        (ax,) = fig.axes
+        assert ax.get_yscale() == scale and (tmp_path / "c.png").stat().st_size > 0
+        lo, hi = ax.get_ylim()
+        assert lo <= min(values) and hi >= max(values)  # every value drawn inside the axis

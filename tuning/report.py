@@ -54,21 +54,51 @@ def _describe(spec, index: int) -> str:
     return f"scenario #{index}: {values}"
 
 
+# the axes whose non-zero value is an event at t_event: a grid signal's disturbances (jaxobs.signals: every one
+# switches on at t_event) and a drive's reference and load steps (jaxobs.drive_study)
+_EVENT_AXES = {
+    "grid": ("freq_step", "phase_jump_deg", "sag", "dc", "harmonics_scale", "sub_amplitude"),
+    "drive": ("speed_step_rpm", "load_step_nm"),
+}
+
+
+def _has_event(spec, index: int) -> bool:
+    """Whether scenario ``index`` of ``spec`` changes at t_event (True where the signal kind's events are not
+    listed: the mark is then kept, as before)."""
+    axes = _EVENT_AXES.get(spec.signal)
+    if axes is None:
+        return True
+    names, combos = scenario_values(spec)
+    if index >= len(combos):
+        return True
+    return any(n in axes and float(v) != 0.0 for n, v in zip(names, combos[index]))
+
+
+def convergence_figure(history: list, name: str, path: Path):
+    """The objective against the iteration (``history``: dicts with "iteration" and "value") into ``path``."""
+    fig, ax = _subplots(figsize=(6, 3.5))
+    it, val = [h["iteration"] for h in history], [h["value"] for h in history]
+    ax.plot(it, val, lw=1.2)
+    # a log scale where every value is positive; an objective with a margin term (sosoifo.toml) goes negative,
+    # and a log axis drew nothing at all
+    if min(val) > 0:
+        ax.set_yscale("log")
+    ax.set_xlabel("iteration")
+    ax.set_ylabel("objective")
+    ax.set_title(f"{name}: convergence")
+    ax.grid(True, which="both", alpha=0.3)
+    fig.tight_layout()
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=110)
+    return fig
+
+
 def write_report(out: Path, job, obj, thetas: dict, history: list, closed_form_totals=None):
     """convergence.png and responses.png in ``out``.  ``closed_form_totals``: the closed form's per-scenario
     totals on ``obj``'s scenarios (:meth:`Objective.per_scenario`'s second value), where the caller has them
     (else they are computed again); the responses show the scenario where it does worst."""
-    # convergence
     if history:
-        fig, ax = _subplots(figsize=(6, 3.5))
-        ax.semilogy([h["iteration"] for h in history], [h["value"] for h in history], lw=1.2)
-        ax.set_xlabel("iteration")
-        ax.set_ylabel("objective")
-        ax.set_title(f"{job.name}: convergence")
-        ax.grid(True, which="both", alpha=0.3)
-        fig.tight_layout()
-        with atomic_path(out / "convergence.png") as tmp:
-            fig.savefig(tmp, dpi=110)
+        convergence_figure(history, job.name, out / "convergence.png")
     # responses on the scenario where the closed form does worst
     per = obj.per_scenario(thetas["closed_form"])[1] if closed_form_totals is None else closed_form_totals
     worst = int(np.argmax(np.asarray(per)))
@@ -89,7 +119,8 @@ def write_report(out: Path, job, obj, thetas: dict, history: list, closed_form_t
         axes[1].set_ylabel("phase error θ̂ − θ (deg)")
     axes[1].set_xlabel("time (s)")
     axes[0].legend(fontsize=8)
-    t_event = float(job.scenarios.t_event)  # the scenario's steps and jumps (the title's values) happen here
+    # the scenario's steps and jumps (the title's values) happen here; none marked where it has none (cleso.toml)
+    t_event = float(job.scenarios.t_event) if _has_event(job.scenarios, worst) else 0.0
     for ax in axes:
         ax.grid(True, alpha=0.3)
         if t_event > 0:
