@@ -87,6 +87,39 @@ def _split(state):
     return vec, rest, unravel
 
 
+def _check(fn: str, system, spans) -> None:
+    """The checks both verdicts make: a steady ClosedLoop, and each (name, value, lowest) span in [lowest, 100] s."""
+    if not isinstance(system, ClosedLoop):
+        raise ValueError(f"{fn}: system must be a jaxobs.drive.ClosedLoop, got {type(system).__name__}")
+    if system.drive.startup is not None:
+        raise ValueError(f"{fn}: system.drive.startup must be None (an operating point, started steady)")
+    for name, v, lo in spans:
+        if not (lo <= float(v) <= 100.0):
+            raise ValueError(f"{fn}: {name} must be in [{lo:g}, 100] s, got {v!r}")
+
+
+def _start(system: ClosedLoop):
+    """The loop's steady start (its float vector and the rest), the neutral direction ∂x0/∂θe0 (one ``jvp``
+    through ``init``), and the step on the float vector: (vec, rest, k) -> (vec, (rest, output))."""
+
+    def initial(theta0):
+        return eqx.tree_at(lambda m: m.scenario.theta_e0, system, theta0).init()
+
+    th0 = system.scenario.theta_e0
+    x0, dx0 = jax.jvp(initial, (th0,), (jnp.ones_like(th0),))
+    vec0, rest0, unravel = _split(x0)
+    is_float = jax.tree.map(eqx.is_inexact_array, x0)
+    neutral, _ = ravel_pytree(eqx.filter(dx0, is_float))
+
+    def step_vec(vec, rest, k):
+        """One period on the float part; the rest (noise key, flags) rides along, constant for the tangents."""
+        new, out = system.step(eqx.combine(unravel(vec), rest), k)
+        v, r, _ = _split(new)
+        return v, (r, out)
+
+    return vec0, rest0, neutral, step_vec
+
+
 def lyapunov(
     system: ClosedLoop,
     *,
@@ -105,38 +138,18 @@ def lyapunov(
     The scenario's profiles should be constant over the run (an operating point); the loop starts in its
     steady state (no I-f start-up: ``drive.startup`` must be None).
     """
-    if not isinstance(system, ClosedLoop):
-        raise ValueError(f"lyapunov: system must be a jaxobs.drive.ClosedLoop, got {type(system).__name__}")
-    if system.drive.startup is not None:
-        raise ValueError("lyapunov: system.drive.startup must be None (an operating point, started steady)")
-    for name, v, lo in (("settle", settle, 0.0), ("warmup", warmup, 0.0), ("window", window, 1e-3)):
-        if not (lo <= float(v) <= 100.0):
-            raise ValueError(f"lyapunov: {name} must be in [{lo:g}, 100] s, got {v!r}")
+    _check("lyapunov", system, (("settle", settle, 0.0), ("warmup", warmup, 0.0), ("window", window, 1e-3)))
     if isinstance(n_dirs, bool) or not isinstance(n_dirs, int) or not 1 <= n_dirs <= 16:
         raise ValueError(f"lyapunov: n_dirs must be an integer in [1, 16], got {n_dirs!r}")
     ts, blk = system.ts, system.drive.foc.speed_every
     n_settle, n_warm, n_win = (max(int(round(v / (ts * blk))), 0) for v in (settle, warmup, window))
     n_win = max(n_win, 6)  # three thirds of at least two periods each (the resolution)
 
-    def initial(theta0):
-        s = eqx.tree_at(lambda m: m.scenario.theta_e0, system, theta0)
-        return s.init()
-
-    th0 = system.scenario.theta_e0
-    x0, dx0 = jax.jvp(initial, (th0,), (jnp.ones_like(th0),))
-    vec0, rest0, unravel = _split(x0)
-    is_float = jax.tree.map(eqx.is_inexact_array, x0)
-    neutral, _ = ravel_pytree(eqx.filter(dx0, is_float))
+    vec0, rest0, neutral, step_vec = _start(system)
     n = vec0.shape[0]
     rand = jax.random.normal(jax.random.PRNGKey(seed), (n, n_dirs), dtype=vec0.dtype)
     q0 = jnp.concatenate([neutral[:, None], rand], axis=1)
     ref = jnp.abs(system.scenario.speed_ref(0.0))
-
-    def step_vec(vec, rest, k):
-        """One period on the float part; the rest (noise key, flags) rides along, constant for the tangents."""
-        new, out = system.step(eqx.combine(unravel(vec), rest), k)
-        v, r, _ = _split(new)
-        return v, (r, out)
 
     # One scan, one copy of the linearized step (settle, warm-up and window alike: compile time).  The
     # neutral column is propagated from t = 0, so it is d x_k/dθe0 exactly; QR every block keeps the
@@ -202,7 +215,8 @@ def floquet(
     """The largest non-neutral Floquet multiplier of ``system``'s closed loop over whole electrical periods.
 
     Where :func:`lyapunov` fits the growth of a few tracked directions (and cannot resolve a slow mode from
-    its neighbours within a finite window: the FA-LESO's integral state, ≈ k1/k2 = 0.1 /s), this forms the
+    its neighbours within a finite window: the FA-LESO's integral state, −k1 k2/(k2² + ωe²) ≈ −0.05 to
+    −0.1 /s for 002's Table II), this forms the
     whole state transition matrix M over an exact period of the orbit and takes its eigenvalues.
 
     Why whole periods make M a monodromy matrix without knowing the state's frames.  At a constant speed the
@@ -222,11 +236,10 @@ def floquet(
 
     ``resolution`` (1/s) says how periodic the orbit really was: δ = |log|vᵀMv/vᵀv|| + |P M v|/|v| (0 on an
     exact periodic orbit) may move the top multiplier μ by about δ, its rate by log(1 + δ/|μ|)/(m T_e'); larger
-    where the settle left the loop off its orbit or where the profiles
-    are not constant; inf where one electrical period is longer than ``max_window`` (the point is then
-    ``marginal``: not resolved).  ``stable``, ``marginal`` and ``speed_dev`` as in :func:`lyapunov` (the
-    deviation over the window); ``exponents`` are the ``n_report`` largest non-neutral log|μ|/(m T_e'),
-    largest first.
+    where the settle left the loop off its orbit or where the profiles are not constant; inf where one
+    electrical period is longer than ``max_window`` (the point is then ``marginal``: not resolved).
+    ``stable``, ``marginal`` and ``speed_dev`` as in :func:`lyapunov` (the deviation over the window);
+    ``exponents`` are the ``n_report`` largest non-neutral log|μ|/(m T_e'), largest first.
 
     Cost: every state component is a tangent direction (n of them, ``jax.vmap`` of ``jax.jvp``), over the
     point's own window (a ``while_loop``: under ``vmap`` a batch runs as long as its longest window, so batch
@@ -235,13 +248,7 @@ def floquet(
     thousands of Jacobians).  Differentiable in the gains by forward mode (``jax.jacfwd``; reverse mode does
     not pass a ``while_loop``) where the top non-neutral multiplier is simple; ``eigvals`` runs on the CPU.
     """
-    if not isinstance(system, ClosedLoop):
-        raise ValueError(f"floquet: system must be a jaxobs.drive.ClosedLoop, got {type(system).__name__}")
-    if system.drive.startup is not None:
-        raise ValueError("floquet: system.drive.startup must be None (an operating point, started steady)")
-    for name, v, lo in (("settle", settle, 0.0), ("window", window, 1e-3), ("max_window", max_window, 1e-3)):
-        if not (lo <= float(v) <= 100.0):
-            raise ValueError(f"floquet: {name} must be in [{lo:g}, 100] s, got {v!r}")
+    _check("floquet", system, (("settle", settle, 0.0), ("window", window, 1e-3), ("max_window", max_window, 1e-3)))
     if float(max_window) < float(window):
         raise ValueError(f"floquet: max_window must be >= window ({window!r} s), got {max_window!r}")
     if isinstance(n_report, bool) or not isinstance(n_report, int) or not 1 <= n_report <= 16:
@@ -267,21 +274,9 @@ def floquet(
         (sc.speed_ref.values * scale, sc.omega_m0 * scale),
     )
 
-    def initial(theta0):
-        return eqx.tree_at(lambda s: s.scenario.theta_e0, system, theta0).init()
-
-    th0 = system.scenario.theta_e0
-    x0, dx0 = jax.jvp(initial, (th0,), (jnp.ones_like(th0),))
-    vec0, rest0, unravel = _split(x0)
-    is_float = jax.tree.map(eqx.is_inexact_array, x0)
-    neutral0, _ = ravel_pytree(eqx.filter(dx0, is_float))
+    vec0, rest0, neutral0, step_vec = _start(system)
     n = vec0.shape[0]
     ref = jnp.abs(system.scenario.speed_ref(0.0))
-
-    def step_vec(vec, rest, k):
-        new, out = system.step(eqx.combine(unravel(vec), rest), k)
-        v, r, _ = _split(new)
-        return v, (r, out)
 
     def tangent_block(vec, rest, t, j):
         """One speed-loop period: the state and the tangent columns ``t`` (n × d) through ``blk`` samples;
