@@ -25,10 +25,12 @@ horizon = 0.1
 freq_step = [-2.0, 2.0]
 [objective]
 terms = [{ metric = "itae_freq", weight = 1.0 }]
-[solver]
-kind = "adam"
-learning_rate = 0.01
+[solver]                # runs until interrupted: no stopping rule can end it between its first checkpoint
+kind = "adam"           # and the SIGINT (under load the test's SIGINT came after adam had stopped on its
+learning_rate = 0.01    # own patience, and the process exited 0)
 steps = 100000
+patience = 100000
+tol = 0.0
 """
 
 
