@@ -369,12 +369,9 @@ class DualClosedLoop(AbstractDriveLoop):
         sc, foc = self.scenario, self.controller
         if self.drive.startup is not None:
             # from standstill, as ClosedLoop.init: all zeros, the I-f angle at θ_e0 − 90° (the parked rotor)
-            op = OperatingPoint.at_rest(sc.theta_e0)
-            plant = self.plant.init(op)
+            _, plant, obs, ctrl, sensors = self._rest_start()
             z = jnp.zeros((), plant.x.dtype)
-            obs = None if self.observer is None else self.observer.init()
-            ctrl = foc.init(op, theta_f0=sc.theta_e0 - jnp.pi / 2)
-            return DualLoopState(plant=plant, ctrl=ctrl, obs=obs, sensors=sc.sensors.init(op, key=sc.key), u=(z,) * 4)
+            return DualLoopState(plant=plant, ctrl=ctrl, obs=obs, sensors=sensors, u=(z,) * 4)
         op, obs = self._steady_start(self.operating_point())
         plant = self.plant.init(op)
         u_a, u_b = self.drive.inverter.limit(*self._steady_voltage(op, op.theta_e))

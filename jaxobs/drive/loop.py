@@ -280,6 +280,16 @@ class AbstractDriveLoop(AbstractSystem):
         w_e_c = jnp.where(use_obs, obs_out.omega, omega_e)
         return th_c, w_e_c, w_e_c / self.pole_pairs
 
+    def _rest_start(self):
+        """The parts of an I-f start-up from standstill, for both loops' ``init``: the operating point at rest,
+        the plant, the observer's own initial state, the controller with the I-f angle at θ_e0 − 90° (the
+        rotor parked on the current vector, where an alignment phase leaves it) and the sensors."""
+        sc = self.scenario
+        op = OperatingPoint.at_rest(sc.theta_e0)
+        obs = None if self.observer is None else self.observer.init()
+        ctrl = self.controller.init(op, theta_f0=sc.theta_e0 - jnp.pi / 2)
+        return op, self.plant.init(op), obs, ctrl, sc.sensors.init(op, key=sc.key)
+
     def _seed_observer(self, obs_state, ctrl: ControllerState):
         """The observer's state held at the I-f frequency while the drive's I-f start-up runs (``ctrl.mode``
         0), released at the switch; ``obs_state`` itself without a start-up or a drive observer."""
@@ -444,17 +454,12 @@ class ClosedLoop(AbstractDriveLoop):
         foc = self.controller
         # every component starts from one operating point, by the one convention (jaxobs.drive.component)
         if self.drive.startup is not None:
-            op = OperatingPoint.at_rest(sc.theta_e0)
-            plant = self.plant.init(op)
+            _, plant, obs, ctrl, sensors = self._rest_start()
             z = jnp.zeros((), plant.x.dtype)
-            obs = None if self.observer is None else self.observer.init()
-            ctrl = foc.init(op, theta_f0=sc.theta_e0 - jnp.pi / 2)
             # at rest no voltage is pending either: a pipeline of 2 holds a zero one (it was None, and the
             # step indexed it: an I-f start on the PWM-centre timing failed)
             pending = jnp.zeros((2,), z.dtype) if self.drive.latency.pipeline == 2 else None
-            return LoopState(
-                plant=plant, ctrl=ctrl, obs=obs, sensors=sc.sensors.init(op, key=sc.key), u_a=z, u_b=z, pending=pending
-            )
+            return LoopState(plant=plant, ctrl=ctrl, obs=obs, sensors=sensors, u_a=z, u_b=z, pending=pending)
         op, obs = self._steady_start(self.operating_point())
         plant = self.plant.init(op)
         inverter = self.drive.inverter
