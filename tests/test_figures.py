@@ -1,6 +1,8 @@
 """The figures compare what they exist for (issue 29): one scale per comparison, the worst case beside the
 mean, readable labels.  Built from small synthetic Datasets: no simulation."""
 
+from typing import NamedTuple
+
 import matplotlib
 
 matplotlib.use("Agg")
@@ -11,6 +13,32 @@ import xarray as xr
 from matplotlib.colors import LogNorm
 
 from jaxobs import plot
+
+
+# a drive solution as the figures read it (jaxobs.reproduce.figures, jaxobs.plot): hand-made, a known answer
+class _Obs(NamedTuple):
+    theta: np.ndarray
+    omega: np.ndarray | None = None
+
+
+class _Each(NamedTuple):  # a bank of observers' outputs (.each)
+    each: tuple
+
+
+class _Out(NamedTuple):
+    theta_e: np.ndarray
+    speed_rpm: np.ndarray
+    omega_m_ref: np.ndarray
+    load: np.ndarray
+    mode: np.ndarray
+    obs: _Each
+    i_d: np.ndarray | None = None
+    id_ref: np.ndarray | None = None
+
+
+class _Sol(NamedTuple):
+    t: np.ndarray
+    outputs: _Out
 
 
 def _study(values_by_design: dict) -> xr.Dataset:
@@ -173,38 +201,16 @@ def test_a_one_column_figure_wraps_its_title_inside_the_figure():
 def test_the_weakening_layout_draws_i_d_under_its_reference():
     """jaxobs.reproduce.figures' ``weakening`` panels: the speed estimate over the speed, the drive's i_d over
     i_d* (A), then the error, as 002's ramp on a 330 V link is drawn (LESO_FIGURES)."""
-    from typing import NamedTuple
-
     from jaxobs.reproduce.figures import LESO_FIGURES, drive_figure
-
-    class Obs(NamedTuple):
-        theta: np.ndarray
-        omega: np.ndarray
-
-    class Out(NamedTuple):
-        theta_e: np.ndarray
-        speed_rpm: np.ndarray
-        omega_m_ref: np.ndarray
-        load: np.ndarray
-        mode: np.ndarray
-        i_d: np.ndarray
-        id_ref: np.ndarray
-        obs: object
-
-    class Sol(NamedTuple):
-        t: np.ndarray
-        outputs: Out
 
     t = np.linspace(0.0, 1.0, 1001)
     w = 2 * np.pi * 50 * np.ones_like(t)
     i_d = np.minimum(0.0, -6.0 * (t - 0.5))
-    each = (Obs(100 * np.pi * t - 0.05, w),) * 3
-    out = Out(
-        100 * np.pi * t, w / 5 * 30 / np.pi, w / 5, 0 * t, 1 + 0 * t, i_d, i_d + 0.1, type("B", (), {"each": each})
-    )
+    each = (_Obs(100 * np.pi * t - 0.05, w),) * 3
+    out = _Out(100 * np.pi * t, w / 5 * 30 / np.pi, w / 5, 0 * t, 1 + 0 * t, _Each(each), i_d=i_d, id_ref=i_d + 0.1)
     spec = [s for s in LESO_FIGURES if s[4] == "weakening"]
     assert len(spec) == 1 and spec[0][3] == ("FA-LESO",)
-    fig = drive_figure(Sol(t, out), ("C-LESO", "GI-LESO", "FA-LESO"), *spec[0][3:], "title", p=5)
+    fig = drive_figure(_Sol(t, out), ("C-LESO", "GI-LESO", "FA-LESO"), *spec[0][3:], "title", p=5)
     assert [ax.get_ylabel() for ax in fig.axes] == ["speed (r/min)", "i_d, i_d* (A)", "θ̂e − θe (rad)"]
     assert fig.axes[1].get_ylim()[0] < -3.0 and fig.axes[1].get_ylim()[1] >= 0.0
 
@@ -235,32 +241,15 @@ def test_an_observer_that_sweeps_is_clipped_and_a_steady_lead_kept():
     """000's speed ramp: the pure integrator saws ±90° (its circle through the origin), the LPF leads 37°
     steadily, the SOIFOs err by 10°.  The integrator leaves the y-range (drawn faint, named clipped); the LPF
     stays: it has not lost track, and the SOIFOs read on ±43°, not on ±100°."""
-    from typing import NamedTuple
-
-    class Obs(NamedTuple):
-        theta: np.ndarray
-
-    class Out(NamedTuple):
-        theta_e: np.ndarray
-        speed_rpm: np.ndarray
-        omega_m_ref: np.ndarray
-        load: np.ndarray
-        mode: np.ndarray
-        obs: object
-
-    class Sol(NamedTuple):
-        t: np.ndarray
-        outputs: Out
-
     t = np.linspace(0.0, 1.0, 2001)
     th = 2 * np.pi * 30 * t
     saw = np.radians(90.0) * (2 * ((8 * t) % 1.0) - 1.0)
     errs = (saw, np.radians(37.0), np.radians(-10.0) * np.ones_like(t), np.radians(-9.0) * np.ones_like(t))
-    each = tuple(Obs(th + e) for e in errs)
+    each = tuple(_Obs(th + e) for e in errs)
     ref = np.full_like(t, 400 * np.pi / 30)
-    out = Out(th, ref * 30 / np.pi, ref, 0 * t, 1 + 0 * t, type("B", (), {"each": each}))
+    out = _Out(th, ref * 30 / np.pi, ref, 0 * t, 1 + 0 * t, _Each(each))
     names = ("integrator", "LPF", "SOIFO", "second-order SOIFO")
-    fig = plot.position_error_figure(Sol(t, out), names, "title")
+    fig = plot.position_error_figure(_Sol(t, out), names, "title")
     ax_e = fig.axes[1]
     lo, hi = ax_e.get_ylim()
     assert hi == pytest.approx(1.15 * 37.0, rel=1e-3) and lo == -hi
