@@ -116,15 +116,29 @@ class AbstractSave(eqx.Module):
 
 
 class SaveAll(AbstractSave):
-    """Keep every step's outputs (``sol.outputs``, leading axis the samples) and the final state."""
+    """Keep every step's outputs (``sol.outputs``, leading axis the samples) and the final state.
 
+    ``fast=False`` (the default) scans ``system.step`` plainly: a user's own ``lax.scan`` of it gives the
+    same numbers bit for bit.  ``fast=True`` runs the loop made fast (jaxobs._loop: inputs a block of steps
+    at a time, state vectors split, multistep start-ups peeled, unrolled), as :class:`SaveFinal` always
+    does: the same outputs to rounding (1e-12 relative), in about half the time where the input is costly
+    (a harmonic signal) or under differentiation (the tuning objective runs this way).
+    """
+
+    fast: bool = eqx.field(static=True, default=False)
     keeps_outputs: ClassVar[bool] = True
+
+    def __check_init__(self):
+        super().__check_init__()
+        if not isinstance(self.fast, bool):
+            raise ValueError(f"SaveAll.fast must be True or False, got {self.fast!r}")
 
 
 class SaveFinal(AbstractSave):
     """Keep only the final state, ``ok`` and the running cost: a long horizon stores no trajectory."""
 
     keeps_outputs: ClassVar[bool] = False
+    fast: ClassVar[bool] = True  # always the loop made fast (jaxobs._loop)
 
 
 # ---------------------------------------------------------------------------
@@ -448,13 +462,14 @@ def simulate(
     # Two loops, one result.  With SaveAll the body is exactly the system's step
     # (plus the cost), scanned plainly: a user's own lax.scan of system.step gives
     # the same numbers bit for bit (tested).  With SaveFinal (throughput: tuning,
-    # benchmarks, studies of long horizons) the loop is made fast (jaxobs._loop:
+    # benchmarks, studies of long horizons) and SaveAll(fast=True) (the tuning
+    # objective's trajectories) the loop is made fast (jaxobs._loop:
     # inputs a block of steps at a time, multistep start-ups peeled, state vectors
     # split, unrolled).  Those rewrites change which operations XLA fuses, and
     # XLA's CPU backend always contracts a·b + c into a fused multiply-add where it
     # fuses, so the two loops agree to rounding (1e-12 relative, tests/test_perf.py),
     # not to the last bit.
-    fast = not save.keeps_outputs
+    fast = save.fast
     blocked = fast and hasattr(system, "input") and hasattr(system, "advance")
     advance = system.advance if blocked else system.step
     # lax.map, not vmap: each block's inputs are computed by the same scalar code as in the step
@@ -476,7 +491,8 @@ def simulate(
         return _Carry(state, jnp.zeros((), dtype))
 
     if save.keeps_outputs:
-        _check_memory(jax.eval_shape(lambda k: body(carry_fn(), k)[1], ks[0]), n)
+        x_one = (lambda k: jax.tree.map(lambda a: a[0], xs_map(k[None]))) if xs_map is not None else (lambda k: k)
+        _check_memory(jax.eval_shape(lambda k: body(carry_fn(), x_one(k))[1], ks[0]), n)
     final, outputs = run_loop(
         body,
         None,

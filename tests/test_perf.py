@@ -60,6 +60,28 @@ def test_streaming_cost_modes_equal_the_plain_trajectory(kind, wif_batch):
         assert sol.outputs is None and bool(jnp.all(sol.ok))
 
 
+def test_save_all_fast_keeps_every_output_of_the_plain_trajectory(wif_batch):
+    """SaveAll(fast=True) (the tuning objective's trajectories): the fast loop with every step's outputs gives
+    the plain scan's outputs, final state and ok to rounding (the AB3 SOGI-FLL-WIF: peeled start-up, blocked
+    inputs, split state, unrolled); a bad flag is a ValueError naming it."""
+    obs = B.fll_observer("sogi-fll-wif")
+
+    def run(save):
+        return jax.jit(jax.vmap(lambda s: jaxobs.simulate(jaxobs.OnSignal(obs, s), T1, save=save)))(wif_batch)
+
+    ref, got = run(jaxobs.SaveAll()), run(jaxobs.SaveAll(fast=True))
+    np.testing.assert_array_equal(got.t, ref.t)
+    assert jax.tree.structure(got.outputs) == jax.tree.structure(ref.outputs)
+    for a, b in zip(jax.tree.leaves(got.outputs), jax.tree.leaves(ref.outputs)):
+        assert a.shape == b.shape
+        np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-12)
+    for a, b in zip(jax.tree.leaves(got.final_state), jax.tree.leaves(ref.final_state)):
+        np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-12)
+    assert bool(jnp.all(got.ok))
+    with pytest.raises(ValueError, match="SaveAll.fast"):
+        jaxobs.SaveAll(fast=1)
+
+
 def test_run_loop_is_a_scan():
     """Split carry, peeled start-up, unrolling and chunking return exactly lax.scan's carry and outputs."""
 

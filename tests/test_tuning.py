@@ -115,6 +115,45 @@ def test_diverging_candidates_give_a_finite_penalty_and_gradient():
     assert float(jax.jvp(obj.value, (param.theta0(),), (jnp.ones(1),))[1]) == pytest.approx(float(g_ok[0]))
 
 
+def test_forward_mode_gradient_equals_reverse_mode_and_central_differences(monkeypatch):
+    """The objective's gradient by forward mode (up to FORWARD_MAX gains, objective module doc) against the
+    same objective in reverse mode and against central differences: a harmonic (Test C) signal, two
+    scenarios, three gains, the itae and ripple terms of the default job, CVaR over the scenarios."""
+    import jaxobs_tuning.objective as O
+    from jaxobs_tuning.aggregations import CVaR
+
+    sigs = jaxobs.stack([jaxobs.paper001_test(n, t_event=0.05) for n in ("A", "C")])
+    comp = linear.wif_closed_form()
+    param = Parametrization([GainSpec(n, float(getattr(comp, n)), 0.1, 1e6) for n in ("k1", "k2", "lam")])
+    theta = param.theta0() + jnp.asarray([0.1, -0.05, 0.2])  # off the closed form: every term moves
+
+    def objective():
+        return Objective(
+            comp,
+            param,
+            sigs,
+            horizon=0.15,
+            terms=[Term("itae_freq"), Term("ripple_freq", 0.01)],
+            ctx=MetricContext(0.05, 0.1),
+            aggregation=CVaR(0.5),
+        )
+
+    fwd = objective()
+    assert fwd._forward_mode(theta)
+    v_f, g_f = fwd.value_and_grad(theta)
+    monkeypatch.setattr(O, "FORWARD_MAX", 0)
+    rev = objective()
+    assert not rev._forward_mode(theta)
+    v_r, g_r = rev.value_and_grad(theta)
+    assert float(v_f) == pytest.approx(float(v_r), rel=1e-12)
+    np.testing.assert_allclose(np.asarray(g_f), np.asarray(g_r), rtol=1e-9)
+    value = jax.jit(fwd.value)
+    for i in range(3):
+        e = jnp.zeros(3).at[i].set(1e-5)
+        fd = (float(value(theta + e)) - float(value(theta - e))) / 2e-5
+        assert float(g_f[i]) == pytest.approx(fd, rel=1e-4), (i, float(g_f[i]), fd)
+
+
 def test_per_scenario_scores_flag_a_lost_lock_that_does_not_diverge():
     """k = 20 with λ = 1e4 settles at 115 rad/s against the true 326.7: finite (not diverged, its score a
     number), but lost lock in both scenarios; k = 0.7 holds lock.  summarize counts them (diverged included)."""

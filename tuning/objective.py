@@ -12,6 +12,20 @@ scenario cannot poison the gradient of the others.  This is why the gradient
 is assembled per scenario (``vmap`` of ``value_and_grad``) and exposed through
 a ``jax.custom_jvp``: optax (reverse mode) and optimistix (forward or reverse)
 both see the sanitized derivative.
+
+Gradients.  A scenario's gradient is taken in forward mode when the job has at most :data:`FORWARD_MAX`
+gains (every preset: 1–3): one tangent per gain pushed through the simulation beside its one primal run,
+nothing stored per step.  Reverse mode through a whole trajectory stores the carry of every step and
+runs it again backwards; on this CPU it cost 2.1× forward mode on a drive job (000's SOIFO, 6 scenarios ×
+1.2 s: 605 vs 290 ms, compile 10.0 vs 6.0 s) and 1.5× on the default FLL job (72 × 0.4 s; 2026-11-25,
+docs/performance.md).  The two agree to rounding (tests/test_tuning.py).  With more gains, or with the
+stability-margin term (its Lyapunov exponents come from the loop's own tangents, a reverse-mode program),
+reverse mode.  An observer on a signal is simulated by the loop made fast (``SaveAll(fast=True)``: its
+inputs a block at a time, the same outputs as the plain scan to rounding; the default job's forward-mode
+evaluation 60 → 25 ms with the harmonic signal's cosines of jaxobs.signals), for the scoring and the
+figures too, so that they score what the solver tuned.  The closed-loop drive keeps the plain scan: the
+fast loop made its forward-mode evaluation slower (290 → 352 ms, compile 6.0 → 8.1 s; it has no block
+of inputs to gain, and its unrolled step compiles longer).
 """
 
 from __future__ import annotations
@@ -24,7 +38,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from jaxobs import OnSignal, kept_jit, simulate
+from jaxobs import OnSignal, SaveAll, kept_jit, simulate
 from jaxobs import metrics as M
 from jaxobs.drive import ClosedLoop
 from jaxobs.drive.stability import lyapunov
@@ -46,6 +60,9 @@ __all__ = [
     "Objective",
 ]
 
+
+# the gradient by forward mode up to this many gains (module doc, "Gradients")
+FORWARD_MAX = 8
 
 # --------------------------------------------------------------------------
 # per-scenario metrics (smooth where the exact one has no useful gradient)
@@ -285,6 +302,8 @@ class Objective:
         self.aggregation, self.penalty = aggregation, float(penalty)
         self.drive, self.bind = drive, bind
         self.trace_key = trace_key
+        # every step's outputs; an observer on a signal through the loop made fast, the drive plainly (module doc)
+        self._save = SaveAll(fast=drive is None)
         # the scenarios and the component are constants of the program (self is static): the key names them
         vg = self._per_scenario_value_and_grad
         self._vg = eqx.filter_jit(vg) if trace_key is None else kept_jit(vg, f"objective.vg|{trace_key}")
@@ -305,11 +324,7 @@ class Objective:
 
     # --- single scenario
     def _simulate(self, comp, sig):
-        if self.bind is not None:
-            comp = self.bind(comp, sig)
-        if self.drive is not None:
-            return simulate(ClosedLoop(self.drive, comp, sig), self.horizon)
-        return simulate(OnSignal(comp, sig), self.horizon)
+        return simulate(self._bound_system(comp, sig), self.horizon, save=self._save)
 
     def _exponent(self, comp, sig):
         """:data:`STABILITY_MARGIN`'s value: the largest non-neutral Lyapunov exponent (1/s) of the loop that
@@ -329,9 +344,21 @@ class Objective:
         vals = [term.weight * self._term(term, comp, sol, sig) for term in self.terms]
         return sum(vals), sol.ok
 
+    def _forward_mode(self, theta) -> bool:
+        """The gradient by forward mode (module doc, "Gradients"): up to :data:`FORWARD_MAX` gains and no
+        stability-margin term."""
+        return theta.size <= FORWARD_MAX and not any(t.metric == STABILITY_MARGIN for t in self.terms)
+
     def _per_scenario_value_and_grad(self, theta):
         def vg(sig):
-            (v, ok), g = jax.value_and_grad(self._one, has_aux=True)(theta, sig)
+            if self._forward_mode(theta):
+                one = lambda th: self._one(th, sig)  # noqa: E731
+                # one tangent per gain, pushed beside one primal run (vmap over the basis; the primal unbatched)
+                (v, ok), (g, _) = jax.vmap(lambda d: jax.jvp(one, (theta,), (d,)), out_axes=((None, None), (0, 0)))(
+                    jnp.eye(theta.size, dtype=theta.dtype)
+                )
+            else:
+                (v, ok), g = jax.value_and_grad(self._one, has_aux=True)(theta, sig)
             return v, ok, g
 
         v, ok, g = jax.vmap(vg)(self.scenarios)
@@ -369,13 +396,16 @@ class Objective:
         return sol.t, sol.outputs.obs.omega, M.position_error(sol, sig)
 
     # --- reporting: a design scored on the scenarios by the one study runner (jaxobs.runner)
-    def _system(self, theta, sig):
-        """The system one scenario runs: the component at ``theta``, bound to the scenario, on its signal or
-        closing the drive's loop (what :meth:`_simulate` simulates)."""
-        comp = self.param.apply(self.component, theta)
+    def _bound_system(self, comp, sig):
+        """The system one scenario runs: ``comp`` bound to the scenario, on its signal or closing the drive's
+        loop."""
         if self.bind is not None:
             comp = self.bind(comp, sig)
         return ClosedLoop(self.drive, comp, sig) if self.drive is not None else OnSignal(comp, sig)
+
+    def _system(self, theta, sig):
+        """The system one scenario runs at ``theta`` (what :meth:`_simulate` simulates)."""
+        return self._bound_system(self.param.apply(self.component, theta), sig)
 
     def _scenario_metrics(self, sol, sig, _aux):
         mets = {t.metric: METRICS[t.metric](sol, sig, self.ctx) for t in self.terms if t.metric != STABILITY_MARGIN}
@@ -402,6 +432,7 @@ class Objective:
             chunk_size=given.n,
             mesh=batch_mesh(jax.devices()[:1]),
             label="scores",
+            save=self._save,
             trace_key=None if self.trace_key is None else f"objective.scores|{self.trace_key}",
         )
         mets = dict(run.values["design"])
