@@ -373,9 +373,15 @@ def test_drive_study_speeds_within_the_inverter_limit(tmp_path, capsys, machine,
 GOOD_TERMS = 'terms = [{ metric = "itae_freq", weight = 1.0 }]'
 
 
-def test_objective_overflow_is_its_own_outcome(tmp_path, capsys):
+def test_objective_overflow_is_its_own_outcome(tmp_path, capsys, monkeypatch):
     """weight = 1e308 exited 3 with "every design tried (5) diverged in >= 54 scenarios" while the scores
-    showed 0 diverged (issue 30): now status "overflow", a reason naming the weights, exit 3 (nothing tuned)."""
+    showed 0 diverged (issue 30): now status "overflow", a reason naming the weights, exit 3 (nothing tuned).
+
+    The gradient of this objective is finite (about 1e306) and forward mode, the objective's default for a
+    few gains, computes it: the job is scored (1.3e307) and its figures drawn (the convergence plot's log
+    axis once overflowed there).  Reverse mode overflows inside its cotangents, which carry the weight
+    back through every step: that run reaches the overflow outcome."""
+    import jaxobs_tuning.objective as O
     from jaxobs_tuning.cli import main
     from tests.test_outputs import GOOD
 
@@ -383,6 +389,14 @@ def test_objective_overflow_is_its_own_outcome(tmp_path, capsys):
     assert GOOD_TERMS in GOOD
     terms = 'terms = [{ metric = "itae_freq", weight = 1e308 }, { metric = "ripple_freq", weight = 1e308 }]'
     job.write_text(GOOD.replace('name = "../../escape"', 'name = "o"').replace(GOOD_TERMS, terms))
+    assert main(["tune", str(job), "--out", str(tmp_path / "f"), "--quiet"]) == 0
+    res = json.loads((tmp_path / "f" / "result.json").read_text())
+    assert res["status"] != "overflow" and 1e306 < res["scores"]["initial"]["objective"] < 1.8e308
+    assert (tmp_path / "f" / "convergence.png").stat().st_size > 0
+    capsys.readouterr()
+    monkeypatch.setattr(O, "FORWARD_MAX", 0)  # reverse mode
+    # another job file (its digest keys the kept traced programs, jaxobs.kept_jit: not the forward-mode ones)
+    job.write_text(job.read_text().replace('name = "o"', 'name = "o-reverse"'))
     assert main(["tune", str(job), "--out", str(tmp_path / "o"), "--quiet"]) == 3
     res = json.loads((tmp_path / "o" / "result.json").read_text())
     assert res["status"] == "overflow" and "terms[1].weight = 1e+308" in res["reason"], res["reason"]

@@ -80,8 +80,10 @@ def convergence_figure(history: list, name: str, path: Path):
     it, val = [h["iteration"] for h in history], [h["value"] for h in history]
     ax.plot(it, val, lw=1.2)
     # a log scale where every value is positive; an objective with a margin term (sosoifo.toml) goes negative,
-    # and a log axis drew nothing at all
-    if min(val) > 0:
+    # and a log axis drew nothing at all.  Not near the largest double either: a log axis pads its range by
+    # decades, and a run at 1.3e307 (weights of 1e308, tuned in forward mode) made matplotlib's tick
+    # locator overflow (an internal error after the results were computed)
+    if min(val) > 0 and max(val) < 1e300:
         ax.set_yscale("log")
     ax.set_xlabel("iteration")
     ax.set_ylabel("objective")
