@@ -33,8 +33,10 @@ lint: $(STAMP)
 	$(VENV)/bin/ruff check .
 	$(VENV)/bin/ruff format --check .
 
-# The full benchmark run (over 30 min on 2 cores with the batch-inner numba kernels, benchmarks/README.md), results in benchmarks/results/<date>.json; run from the
-# repository root (benchmarks/ is not part of the installed package). Quick look: .venv/bin/python -m benchmarks --quick
+# The full benchmark run (over 30 min on 2 cores, benchmarks/README.md): the throughput rows with the batch-inner numba
+# kernels (~29 min), then time to result (make run cold and warm) and scale (FLL 10^6, drive 10^5 scenarios), ~2 min
+# together on a quiet machine; results in benchmarks/results/<date>.json; run from the repository root (benchmarks/
+# is not part of the installed package). Quick look: .venv/bin/python -m benchmarks --quick (throughput only)
 bench: $(STAMP)
 	$(VENV)/bin/python -m benchmarks --out benchmarks/results/$$(date +%Y-%m-%d).json
 

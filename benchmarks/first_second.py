@@ -14,6 +14,9 @@ one kind counted once): *trace* (Python tracing of jitted functions to jaxprs), 
 which the persistent cache needs for its key), *compile* (XLA compilation, or the cache's read on a hit),
 and the rest of the wall time (*run + Python*: the computations themselves, imports, I/O, figures).  The
 persistent cache keeps only the *compile* part: tracing and lowering are paid by every process.
+
+:func:`measure` gives the rows and :func:`table` the Markdown table; ``make bench`` (``python -m benchmarks``)
+calls them for ``make-run``, two runs, after its throughput rows (:mod:`benchmarks.extra`).
 """
 
 from __future__ import annotations
@@ -113,6 +116,77 @@ def _one(args: list[str], env: dict, out: Path) -> dict:
     return {**row, **json.loads(report.read_text())}
 
 
+def measure(
+    cmds=("make-run",),
+    runs: int = 2,
+    trees: list[str] | None = None,
+    keep_cache: str | None = None,
+    log=None,
+) -> list[dict]:
+    """First and later runs of each of ``cmds`` (names of :data:`COMMANDS`), ``runs`` each; one row a run.
+
+    ``trees``: source trees to compare (each its own cache, their runs interleaved), default the installed
+    jaxobs; ``keep_cache``: use (and keep) this cache folder instead of a temporary one; ``log``: called with
+    each row as it is measured (default: its JSON on stderr).  A row: ``command``, ``tree``, ``run``,
+    ``wall_s``, ``cpu_s``, ``load`` (1-min load average at its start and end), the phases ``trace_s``,
+    ``lower_s``, ``compile_s`` (s), ``jits``, ``in_process_s`` and ``cache_mib`` (the cache after it).
+    """
+    unknown = [c for c in cmds if c not in COMMANDS]
+    if unknown:
+        raise ValueError(f"first_second: unknown command(s) {unknown}; known: {sorted(COMMANDS)}")
+    if log is None:
+
+        def log(row):
+            print(json.dumps(row), file=sys.stderr, flush=True)
+
+    rows = []
+    with tempfile.TemporaryDirectory(prefix="jaxobs-first-second-") as tmp:
+        envs = {}
+        for j, tree in enumerate(trees or [None]):
+            env = dict(os.environ)
+            if tree is not None:  # the tree's jaxobs, and its tuning/ as jaxobs_tuning (the installed layout)
+                pp = Path(tmp) / f"pp-{j}"
+                pp.mkdir()
+                (pp / "jaxobs_tuning").symlink_to(Path(tree).resolve() / "tuning")
+                env["PYTHONPATH"] = f"{Path(tree).resolve()}{os.pathsep}{pp}"
+            envs[tree or "installed"] = env
+        for name in cmds:
+            caches = {}
+            for t in envs:
+                cache = Path(keep_cache) if keep_cache else Path(tmp) / f"cache-{name}-{len(caches)}"
+                shutil.rmtree(cache, ignore_errors=True)
+                caches[t] = cache
+            for i in range(1, runs + 1):
+                for t, env in envs.items():
+                    env = {**env, "JAXOBS_CACHE_DIR": str(caches[t])}
+                    out = Path(tmp) / f"out-{name}-{len(rows)}"
+                    row = {"command": name, "tree": t, "run": i, **_one(COMMANDS[name], env, out)}
+                    row["cache_mib"] = round(_dir_size(caches[t]) / 2**20, 1)
+                    rows.append(row)
+                    log(row)
+    return rows
+
+
+def table(rows: list[dict]) -> str:
+    """The rows of :func:`measure` as a Markdown table, each run's times also over its command's run 1."""
+    lines = [
+        "| command | tree | run | wall (s) | CPU (s) | wall / run 1 | CPU / run 1 | trace (s) | lower (s) | compile or "
+        "cache read (s) | run + Python (s) | cache (MiB) | load (start, end) |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    first = {}
+    for r in rows:
+        f = first.setdefault((r["command"], r["tree"]), r)
+        lines.append(
+            f"| {r['command']} | {r['tree']} | {r['run']} | {r['wall_s']:.1f} | {r['cpu_s']:.1f} | "
+            f"{r['wall_s'] / f['wall_s']:.2f} | "
+            f"{r['cpu_s'] / f['cpu_s']:.2f} | {r['trace_s']:.1f} | {r['lower_s']:.1f} | {r['compile_s']:.1f} | "
+            f"{r['wall_s'] - r['trace_s'] - r['lower_s'] - r['compile_s']:.1f} | {r['cache_mib']:.1f} | "
+            f"{r['load'][0]:.1f}, {r['load'][1]:.1f} |"
+        )
+    return "\n".join(lines)
+
+
 def main(argv=None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
     if argv[:1] == ["--worker"]:
@@ -129,49 +203,11 @@ def main(argv=None) -> int:
     )
     p.add_argument("--json", action="store_true", help="print the rows as JSON")
     a = p.parse_args(argv)
-    rows = []
-    with tempfile.TemporaryDirectory(prefix="jaxobs-first-second-") as tmp:
-        trees = {}
-        for j, tree in enumerate(a.tree or [None]):
-            env = dict(os.environ)
-            if tree is not None:  # the tree's jaxobs, and its tuning/ as jaxobs_tuning (the installed layout)
-                pp = Path(tmp) / f"pp-{j}"
-                pp.mkdir()
-                (pp / "jaxobs_tuning").symlink_to(Path(tree).resolve() / "tuning")
-                env["PYTHONPATH"] = f"{Path(tree).resolve()}{os.pathsep}{pp}"
-            trees[tree or "installed"] = env
-        for name in a.cmd:
-            caches = {}
-            for t in trees:
-                cache = Path(a.keep_cache) if a.keep_cache else Path(tmp) / f"cache-{name}-{len(caches)}"
-                shutil.rmtree(cache, ignore_errors=True)
-                caches[t] = cache
-            for i in range(1, a.runs + 1):
-                for t, env in trees.items():
-                    env = {**env, "JAXOBS_CACHE_DIR": str(caches[t])}
-                    out = Path(tmp) / f"out-{name}-{len(rows)}"
-                    row = {"command": name, "tree": t, "run": i, **_one(COMMANDS[name], env, out)}
-                    row["cache_mib"] = round(_dir_size(caches[t]) / 2**20, 1)
-                    rows.append(row)
-                    print(json.dumps(row), file=sys.stderr, flush=True)
+    rows = measure(a.cmd, a.runs, a.tree, a.keep_cache)
     if a.json:
         print(json.dumps(rows, indent=1))
         return 0
-    print(
-        "| command | tree | run | wall (s) | CPU (s) | wall / run 1 | CPU / run 1 | trace (s) | lower (s) | compile or "
-        "cache read (s) | run + Python (s) | cache (MiB) | load (start, end) |"
-    )
-    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
-    first = {}
-    for r in rows:
-        f = first.setdefault((r["command"], r["tree"]), r)
-        print(
-            f"| {r['command']} | {r['tree']} | {r['run']} | {r['wall_s']:.1f} | {r['cpu_s']:.1f} | "
-            f"{r['wall_s'] / f['wall_s']:.2f} | "
-            f"{r['cpu_s'] / f['cpu_s']:.2f} | {r['trace_s']:.1f} | {r['lower_s']:.1f} | {r['compile_s']:.1f} | "
-            f"{r['wall_s'] - r['trace_s'] - r['lower_s'] - r['compile_s']:.1f} | {r['cache_mib']:.1f} | "
-            f"{r['load'][0]:.1f}, {r['load'][1]:.1f} |"
-        )
+    print(table(rows))
     return 0
 
 

@@ -15,6 +15,9 @@ sensorless, on Sobol points over speed × load × Rs mismatch × voltage noise (
 axes), float64, chunks of 1024, one device, streamed the same way; its settling pass before t = 0 is
 the drive's own, so even a short horizon runs several hundred steps a scenario.  A short horizon keeps the runs short:
 what is measured is the runner's overhead and memory, not the loop's pace (``make bench`` has that).
+
+:func:`measure` gives the rows and :func:`table` the Markdown table; ``make bench`` (``python -m benchmarks``)
+calls them for the FLL at 10⁶ scenarios and the drive at 10⁵ after its throughput rows (:mod:`benchmarks.extra`).
 """
 
 from __future__ import annotations
@@ -31,6 +34,7 @@ from pathlib import Path
 
 AXES = {"freq_step": [-3.0, 3.0], "phase_jump_deg": [-60.0, 60.0], "dc": [0.0, 0.1], "harmonics_scale": [0.0, 2.0]}
 SETTLE = 0.01  # s: the drive's settling pass before t = 0 (the jobs' 0.2 s would be 40x the horizon)
+ROOT = Path(__file__).resolve().parents[1]  # the repository root
 DRIVE_AXES = {"speed_rpm": [400.0, 2000.0], "load_nm": [0.0, 10.0], "dRs": [-0.5, 0.5], "u_noise": [0.0, 2.0]}
 
 
@@ -104,6 +108,58 @@ def _worker(scenarios: int, horizon: float, held: bool, kind: str = "fll") -> No
     )
 
 
+def default_horizon(kind: str) -> float:
+    """Seconds simulated per scenario when none is given: FLL 0.01 (event at half), drive 0.005."""
+    return 0.005 if kind == "drive" else 0.01
+
+
+def measure(scenarios, kind: str = "fll", horizon: float | None = None, held: bool = False, log=print) -> list[dict]:
+    """One study per size in ``scenarios``, each in a fresh process (its peak RSS its own); one row a size.
+
+    A row is the worker's (``kind``, ``scenarios``, ``streamed``, ``study_s``, ``with_netcdf_s`` (s),
+    ``scenarios_per_s``, ``peak_rss_mib``) with ``horizon`` (s) and ``load`` (the 1-minute load average at
+    its start and end) added.  ``log`` gets the load line first, then each worker's JSON line as it ends.
+    """
+    if kind not in ("fll", "drive"):
+        raise ValueError(f"scale: kind must be 'fll' or 'drive', got {kind!r}")
+    horizon = default_horizon(kind) if horizon is None else horizon
+    log(f"load average (1 min) {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores; horizon {horizon} s")
+    rows = []
+    for n in scenarios:
+        cmd = [sys.executable, "-m", "benchmarks.scale", "--worker", "--scenarios", str(n), "--horizon", str(horizon)]
+        cmd += ["--kind", kind]
+        load0 = os.getloadavg()[0]
+        # stdout read back (the worker's last line is its JSON row), stderr passed through; from the repository
+        # root, where `-m benchmarks.scale` is found wherever the caller runs
+        proc = subprocess.run(
+            cmd + (["--held"] if held else []), check=True, stdout=subprocess.PIPE, text=True, cwd=ROOT
+        )
+        line = proc.stdout.strip().splitlines()[-1]
+        log(line)
+        row = json.loads(line)
+        row["horizon"] = horizon
+        row["load"] = [round(load0, 1), round(os.getloadavg()[0], 1)]
+        rows.append(row)
+    return rows
+
+
+def table(rows: list[dict]) -> str:
+    """The rows of :func:`measure` as a Markdown table (docs/performance.md, Scale)."""
+    lines = [
+        "| study | scenarios | horizon (s) | streamed | study (s) | with study.nc (s) | scenarios/s | peak RSS (MiB) "
+        "| load (start, end) |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
+    for r in rows:
+        load = r.get("load") or ("", "")
+        lines.append(
+            f"| {r['kind']} | {r['scenarios']:,} | {r.get('horizon', '')} | {'yes' if r['streamed'] else 'no'} | "
+            f"{r['study_s']:.1f} | {r['with_netcdf_s']:.1f} | {r['scenarios_per_s']:,} | {r['peak_rss_mib']:,} | "
+            f"{load[0]}, {load[1]} |"
+        )
+    return "\n".join(lines)
+
+
 def main(argv=None) -> None:
     p = argparse.ArgumentParser(prog="python -m benchmarks.scale", description=__doc__.split("\n")[0])
     p.add_argument("--scenarios", type=int, nargs="+", default=[10_000, 100_000], help="study sizes, one process each")
@@ -114,14 +170,10 @@ def main(argv=None) -> None:
     p.add_argument("--held", action="store_true", help="hold every chunk in memory (no store), for comparison")
     p.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)
     a = p.parse_args(argv)
-    horizon = a.horizon if a.horizon is not None else (0.005 if a.kind == "drive" else 0.01)
+    horizon = a.horizon if a.horizon is not None else default_horizon(a.kind)
     if a.worker:
         return _worker(a.scenarios[0], horizon, a.held, a.kind)
-    print(f"load average (1 min) {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores; horizon {horizon} s")
-    for n in a.scenarios:
-        cmd = [sys.executable, "-m", "benchmarks.scale", "--worker", "--scenarios", str(n), "--horizon", str(horizon)]
-        cmd += ["--kind", a.kind]
-        subprocess.run(cmd + (["--held"] if a.held else []), check=True)
+    measure(a.scenarios, a.kind, horizon, a.held)
 
 
 if __name__ == "__main__":

@@ -67,3 +67,100 @@ def test_bench_quick_json(tmp_path):
     assert set(res["compile_s"]) == {"sogi-fll-wif", "drive-sosoifo"}
     # the bench process gave JAX one host device per usable core
     assert len(res["devices"]) == len(os.sched_getaffinity(0))  # jaxobs.use_host_devices(): one per usable core
+
+
+# The full run's parts after the throughput rows (issue 31): the command line and the tables, the measurements
+# themselves replaced by given rows (each runs minutes: benchmarks/README.md)
+def test_bench_parts_from_the_command_line(capsys):
+    from benchmarks.__main__ import parse_args
+
+    assert parse_args([]).parts == ("throughput", "time-to-result", "scale")
+    assert parse_args(["--quick"]).parts == ("throughput",)
+    assert parse_args(["--only", "scale", "time-to-result"]).parts == ("time-to-result", "scale")
+    assert parse_args(["--no-scale"]).parts == ("throughput", "time-to-result")
+    assert parse_args(["--no-time-to-result", "--no-scale", "--batches", "1024"]).parts == ("throughput",)
+    for bad in (
+        ["--quick", "--only", "scale"],
+        ["--only", "scale", "--no-scale"],
+        ["--only", "scale", "--batches", "1024"],
+        ["--only", "time-to-result", "--no-serial"],
+        ["--only", "speed"],
+    ):
+        with pytest.raises(SystemExit) as e:
+            parse_args(bad)
+        assert e.value.code == 2, bad
+    capsys.readouterr()
+
+
+TTR_ROWS = [
+    {"command": "make-run", "tree": "installed", "run": i, "wall_s": w, "cpu_s": c, "load": [1.0, 1.5]}
+    | {"trace_s": 2.0, "lower_s": 1.0, "compile_s": k, "jits": 9, "in_process_s": w - 1, "cache_mib": 0.9}
+    for i, w, c, k in ((1, 50.0, 30.0, 20.0), (2, 20.0, 12.0, 2.0))
+]
+
+
+def _scale_row(kind, n):
+    return {"kind": kind, "scenarios": n, "streamed": True, "study_s": 60.0, "with_netcdf_s": 62.5}
+
+
+def test_bench_only_time_to_result_and_scale(monkeypatch, tmp_path, capsys):
+    from benchmarks import __main__ as bench
+    from benchmarks import first_second, scale
+
+    calls = []
+
+    def fake_ttr(cmds, runs, log=None):
+        calls.append(("time-to-result", tuple(cmds), runs))
+        for r in TTR_ROWS:
+            log(r)
+        return TTR_ROWS
+
+    def fake_scale(scenarios, kind, log=print):
+        calls.append(("scale", kind, tuple(scenarios)))
+        return [
+            _scale_row(kind, n) | {"scenarios_per_s": 16000, "peak_rss_mib": 581, "horizon": 0.01, "load": [2.0, 2.5]}
+            for n in scenarios
+        ]
+
+    def no_throughput(**kw):
+        raise AssertionError("--only time-to-result scale ran the throughput rows")
+
+    monkeypatch.setattr(first_second, "measure", fake_ttr)
+    monkeypatch.setattr(scale, "measure", fake_scale)
+    monkeypatch.setattr(bench, "run_bench", no_throughput)
+    out = tmp_path / "bench.json"
+    assert bench.main(["--only", "time-to-result", "scale", "--out", str(out)]) == 0
+    # the sizes issue 31 asks for: make run twice; FLL at 10⁶ scenarios, drive at 10⁵
+    assert calls == [("time-to-result", ("make-run",), 2), ("scale", "fll", (10**6,)), ("scale", "drive", (10**5,))]
+    res = json.loads(out.read_text())
+    assert res["time_to_result"] == TTR_ROWS
+    assert [(r["kind"], r["scenarios"], r["peak_rss_mib"]) for r in res["scale"]] == [
+        ("fll", 10**6, 581),
+        ("drive", 10**5, 581),
+    ]
+    assert "rows" not in res and set(res["parts_s"]) == {"time-to-result", "scale"}
+    text = capsys.readouterr().out
+    lines = text.splitlines()
+    # the time-to-result table: run 2 over run 1, wall 20 / 50 and CPU 12 / 30; the rest = wall - the phases
+    assert "| make-run | installed | 2 | 20.0 | 12.0 | 0.40 | 0.40 | 2.0 | 1.0 | 2.0 | 15.0 | 0.9 | 1.0, 1.5 |" in lines
+    assert "| fll | 1,000,000 | 0.01 | yes | 60.0 | 62.5 | 16,000 | 581 | 2.0, 2.5 |" in lines
+    assert "| drive | 100,000 | 0.01 | yes | 60.0 | 62.5 | 16,000 | 581 | 2.0, 2.5 |" in lines
+    assert text.index("time to result") < text.index("scale (")
+
+
+def test_bench_a_failed_part_keeps_the_others(monkeypatch, tmp_path, capsys):
+    from benchmarks import __main__ as bench
+    from benchmarks import first_second, scale
+
+    def broken(*a, **kw):
+        raise subprocess.CalledProcessError(1, ["python", "-m", "benchmarks.scale"])
+
+    monkeypatch.setattr(first_second, "measure", lambda cmds, runs, log=None: TTR_ROWS)
+    monkeypatch.setattr(scale, "measure", broken)
+    out = tmp_path / "bench.json"
+    assert bench.main(["--only", "time-to-result", "scale", "--json", "--out", str(out)]) == 1
+    res = json.loads(out.read_text())
+    assert res == json.loads(capsys.readouterr().out)
+    assert res["time_to_result"] == TTR_ROWS
+    assert res["scale"]["error"].startswith("CalledProcessError")
+    assert "failed" in bench.extra.tables(res)
