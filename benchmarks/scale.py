@@ -8,7 +8,7 @@ random scenarios (4 axes), float64, chunks of 2048, one device, with a :class:`j
 in a temporary folder (each chunk's metrics to disk as it finishes, as ``jaxobs study`` does), then the
 Dataset written as study.nc (NetCDF4, h5netcdf).  ``--held``: without the store (every chunk's values held
 in memory until the end), for comparison.  Reported: the wall time of the study (compilation included, from
-the persistent cache when warm), scenarios/s, the peak RSS of the process (``resource.getrusage``) and the
+the persistent cache when warm), scenarios/s, the peak RSS of the process (its VmHWM: see ``_peak_rss_mib``) and the
 1-minute load average at the start (the machine may be shared).  ``--kind drive``: ``run_drive_study`` of
 paper 000's second-order SOIFO closing the loop of its SPMSM (the drive jobs' bench, ``spmsm000``),
 sensorless, on Sobol points over speed × load × Rs mismatch × voltage noise (``study_flux_drive.toml``'s
@@ -62,6 +62,21 @@ def _drive_study(scenarios: int, horizon: float, store, mesh):
     )
 
 
+def _peak_rss_mib() -> float:
+    """This process's peak resident memory, MiB: Linux's VmHWM (/proc/self/status), the high-water mark of
+    this program's own memory.  Not ``getrusage``'s ru_maxrss: Linux keeps that across fork and exec, so a
+    worker started by ``make bench`` after its throughput part (a parent at 9.9 GB after the 10 s reverse-mode
+    gradient) reported the parent's 9 902 MiB as its own.  Elsewhere ru_maxrss (KiB on Linux, bytes on macOS)."""
+    try:
+        for line in Path("/proc/self/status").read_text().splitlines():
+            if line.startswith("VmHWM:"):
+                return int(line.split()[1]) / 1024  # kB
+    except OSError:
+        pass
+    rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    return rss / 2**20 if sys.platform == "darwin" else rss / 1024
+
+
 def _worker(scenarios: int, horizon: float, held: bool, kind: str = "fll") -> None:
     import jax
 
@@ -92,7 +107,7 @@ def _worker(scenarios: int, horizon: float, held: bool, kind: str = "fll") -> No
         study_s = time.perf_counter() - t0
         ds.to_netcdf(Path(tmp) / "study.nc", engine="h5netcdf")
         total_s = time.perf_counter() - t0
-    rss_mib = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024  # Linux: KiB
+    rss_mib = _peak_rss_mib()
     print(
         json.dumps(
             {
