@@ -35,11 +35,12 @@ exact, r is held as hi + lo as above (π/2 known to 8·10⁻²⁰), and Cephes's
 for lo.  Accuracy (tests/test_trig.py, against NumPy's float64 rounded to float32): at most 1 ulp on 10⁶
 random angles in ±10³ rad (and in ±10⁴ and ±4, measured), and 0 ulp on the float32 nearest each multiple
 of π/2 up to 10³ and its 16 neighbours either side, where XLA's ``sin`` and ``cos`` are off by 1 ulp.
-Below 2⁻¹² sin x is x itself, subnormals included (XLA's CPU code flushes float32 subnormals in its
-arithmetic).  Beyond 2¹³·π/2 the error grows as ulp(x), and above 2²¹ rad (a spacing of 1/4 rad) the
-result is NaN.  On 10⁶ values (jit, this machine) its cosine takes 0.9 ns a value (sine and cosine
-together 1.1 ns), XLA's float32 ``cos`` 3.6 ns.  Other dtypes (float16, bfloat16) keep XLA's ``sin`` and
-``cos``.
+Beyond 2¹³·π/2 the error grows as ulp(x); above 2²¹ rad (a spacing of 1/4 rad) the result is NaN.  A
+float32 subnormal's sine is ±0, not the subnormal: XLA's CPU code flushes float32 subnormals in its
+arithmetic, and taking x itself after the division by one below made the float32 and float64 drives 3×
+slower (the select was copied into every consumer fusion with all it reads).  On 10⁶ values (jit, this
+machine) its cosine takes 0.9 ns a value (sine and cosine together 1.1 ns), XLA's float32 ``cos`` 3.6 ns.
+Other dtypes (float16, bfloat16) keep XLA's ``sin`` and ``cos``.
 
 Derivatives: a ``custom_jvp`` that uses ``sincos`` itself (d sin = cos dx, d cos = −sin dx), so every
 order of derivative is the same function.
@@ -170,13 +171,11 @@ def _sincos_jit(x):
     if x.dtype == jnp.float64:
         n, hi, lo = _reduce(x, _P1, _P2, _P3, _P4, _TWO_OVER_PI)
         ks, kc = _kernel_sin(hi, lo), _kernel_cos(hi, lo)
-        limit, tiny = _LIMIT, 0.0
+        limit = _LIMIT
     else:  # float32 (sincos sends no other dtype)
         n, hi, lo = _reduce(x, _Q1, _Q2, _Q3, _Q4, _TWO_OVER_PI32)
         ks, kc = _kernel_sin32(hi, lo), _kernel_cos32(hi, lo)
-        # below 2⁻¹² sin x rounds to x (x²/6 < half an ulp), and XLA's CPU code flushes float32 subnormals
-        # to zero in the arithmetic: x itself keeps them (sin of 1e-44 is 1e-44, not 0)
-        limit, tiny = _LIMIT32, 2.0**-12
+        limit = _LIMIT32
     # quadrant q = n mod 4: sin x = sin r, cos r, −sin r, −cos r; cos x = cos r, −sin r, −cos r, sin r
     q = (n - 4.0 * jnp.floor(n * 0.25)).astype(jnp.int32)
     odd = (q & 1) == 1
@@ -184,6 +183,7 @@ def _sincos_jit(x):
     c = jnp.where(odd, ks, kc)
     s = jnp.where((q & 2) == 2, -s, s)
     c = jnp.where(((q + 1) & 2) == 2, -c, c)
+    s = jnp.where(x == 0.0, x, s)  # sin(−0) = −0 (the reduction's additions return +0)
     ok = jnp.abs(x) <= limit
     # Divided by one (1 + 0·x, which XLA does not fold): XLA's fusion counts a division as expensive and
     # does not copy an expensive value into each of its consumers, so sin and cos are computed once per
@@ -191,10 +191,7 @@ def _sincos_jit(x):
     # fusion that reads it, among them the plant's state-derivative stacks, which its CPU backend emits as
     # scalar loops, one per stacked component: the float64 drive ran 3.5× slower than with XLA's own sine.
     one = 1.0 + 0.0 * x
-    s = jnp.where(ok, s, jnp.nan) / one
-    # sin(−0) = −0 (the reduction's additions return +0); after the division, which would flush a subnormal
-    s = jnp.where(jnp.abs(x) <= tiny, x, s)
-    return s, jnp.where(ok, c, jnp.nan) / one
+    return jnp.where(ok, s, jnp.nan) / one, jnp.where(ok, c, jnp.nan) / one
 
 
 @_sincos.defjvp
