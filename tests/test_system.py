@@ -144,3 +144,21 @@ def test_simulate_rejects_bad_horizons_and_strategies():
         jaxobs.OnSignal(jaxobs.linear.sogi_fll_closed_form(), 3.0)
     with pytest.raises(ValueError, match="ClosedLoop.scenario"):
         D.ClosedLoop(D.Drive(FOC), None, PAR)
+
+
+def test_final_ok_reads_the_final_state_only():
+    """Solution.final_ok (the tuning objective's divergence flag): the final state finite, per scenario under
+    vmap; a run that blows up is not final_ok, one that does not is, and with SaveFinal it equals ok."""
+    sigs = jaxobs.stack([jaxobs.paper001_test("A", t_event=0.05) for _ in range(2)])
+    # forward Euler at 1 kHz: k = 40 blows up (test_tuning's diverging candidates), k = 0.7 does not
+    good, bad = (jaxobs.SOGIFLL(k=k, lam=12000.0, rule=jaxobs.Euler(), ts=1e-3) for k in (0.7, 40.0))
+
+    def flags(obs, save):
+        sol = jax.vmap(lambda s: jaxobs.simulate(jaxobs.OnSignal(obs, s), 0.2, save=save))(sigs)
+        return np.asarray(jax.vmap(lambda x: x.final_ok)(sol)), np.asarray(sol.ok)
+
+    for obs, want in ((good, True), (bad, False)):
+        fin, ok = flags(obs, jaxobs.SaveAll())
+        assert fin.shape == (2,) and np.all(fin == want) and np.all(ok == want)
+        fin, ok = flags(obs, jaxobs.SaveFinal())
+        assert np.array_equal(fin, ok)

@@ -350,9 +350,7 @@ class Objective:
         # kept every output of the loop alive, those no metric reads included (an evaluation of the default job
         # 47 -> 33 ms, of soifo.toml's drive job 290 -> 150 ms).  The scores' diverged counts keep sol.ok
         # (_scenario_metrics).
-        leaves = [x for x in jax.tree.leaves(sol.final_state) if jnp.issubdtype(x.dtype, jnp.inexact)]
-        finite = jnp.all(jnp.stack([jnp.all(jnp.isfinite(x)) for x in leaves]))
-        return sum(vals), finite
+        return sum(vals), sol.final_ok
 
     def _forward_mode(self, theta) -> bool:
         """The gradient by forward mode (module doc, "Gradients"): up to :data:`FORWARD_MAX` gains and no
