@@ -587,7 +587,8 @@ def envelope_figure(ds, path):
     bound = ds.attrs.get("bound_deg", float("nan"))
     title = (
         f"operating envelope, sensorless\noutlined: holds (stable, synchronous, peak error <= {bound:g} deg); "
-        "white: lost lock\nfails: x not synchronous, o not resolved stable, + peak error over the bound"
+        "white: lost lock\nfails: x not synchronous (lost lock, off speed or not settled), o not resolved stable, "
+        "+ peak error over the bound"
     )
     if extra:
         title += f"; worst over {', '.join(extra)}"
