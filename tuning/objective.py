@@ -331,9 +331,7 @@ class Objective:
     def _exponent(self, comp, sig):
         """:data:`STABILITY_MARGIN`'s value: the largest non-neutral Lyapunov exponent (1/s) of the loop that
         ``comp`` (bound to ``sig``) closes, :data:`MARGIN_KW`."""
-        if self.bind is not None:
-            comp = self.bind(comp, sig)
-        return lyapunov(ClosedLoop(self.drive, comp, sig), **MARGIN_KW).exponent
+        return lyapunov(self._bound_system(comp, sig), **MARGIN_KW).exponent  # a drive job: the closed loop
 
     def _term(self, term, comp, sol, sig):
         if term.metric == STABILITY_MARGIN:
