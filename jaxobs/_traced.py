@@ -102,6 +102,47 @@ def _environment() -> str:
     return f"{libs};{opts};{kind};{sys.version_info[:2]}"
 
 
+_registered: list[bool] = []
+
+
+def _register_outputs() -> None:
+    """Let kept programs return jaxobs's step outputs: ``jax.export`` serializes a NamedTuple only once its type
+    is registered (once per process, before the first export or read)."""
+    if _registered:
+        return
+    from ._measurements import DriveInput
+    from ._simulate import SignalOutput, SignalTruth
+    from .drive.control import FOCOutput
+    from .drive.dual import DualPlantOutput
+    from .drive.dual_loop import DualFOCOutput, DualOutput
+    from .drive.loop import DriveOutput
+    from .drive.plant import PlantOutput
+    from .observers.base import BankOutput
+    from .observers.fll import FLLOutput
+    from .observers.flux import FluxOutput
+    from .observers.leso import LESOOutput
+    from .observers.sogi import QSGOutput
+
+    for cls in (
+        DriveInput,
+        SignalOutput,
+        SignalTruth,
+        FOCOutput,
+        DualPlantOutput,
+        DualFOCOutput,
+        DualOutput,
+        DriveOutput,
+        PlantOutput,
+        BankOutput,
+        FLLOutput,
+        FluxOutput,
+        LESOOutput,
+        QSGOutput,
+    ):
+        export.register_namedtuple_serialization(cls, serialized_name=f"{cls.__module__}.{cls.__qualname__}")
+    _registered.append(True)
+
+
 class _Kept:
     """``eqx.filter_jit(fn)``, with the traced program kept in :func:`traced_dir` under ``key``."""
 
@@ -115,6 +156,7 @@ class _Kept:
         folder = traced_dir()
         if folder is None:
             return self.jitted(*args)
+        _register_outputs()
         dynamic, static = eqx.partition(args, eqx.is_array)
         leaves, tree = jax.tree.flatten(dynamic)
         avals = ";".join(f"{x.shape}{x.dtype}{'w' if getattr(x, 'weak_type', False) else ''}" for x in leaves)

@@ -141,7 +141,7 @@ def test_reproduce_leso_progress_has_a_total(monkeypatch):
         raise Stop
 
     monkeypatch.setattr(leso, "Progress", Recorder)
-    monkeypatch.setattr(leso, "simulate", stop)
+    monkeypatch.setattr(leso, "run_kept", stop)
     with pytest.raises(Stop):
         leso.run_leso_experiments(progress=False)
     assert made == [leso.N_EXPERIMENTS] and leso.N_EXPERIMENTS == 19

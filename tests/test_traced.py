@@ -116,3 +116,31 @@ def test_the_folder_keeps_the_most_recently_used(tmp_path):
     os.utime(tmp_path / "0.jaxexport", (2000, 2000))  # read back lately
     _traced._trim(tmp_path, keep=3)
     assert sorted(f.name for f in tmp_path.iterdir()) == ["0.jaxexport", "3.jaxexport", "4.jaxexport"]
+
+
+def test_a_reproduction_run_is_kept_with_its_namedtuple_outputs(traced, monkeypatch):
+    """The reproductions' drive runs (jaxobs.reproduce._run.run_kept) return the step outputs, NamedTuples
+    nested in NamedTuples: exported (one program written, not the plain-jit fallback) and read back by a
+    later process, bit for bit simulate's t, outputs and ok."""
+    from jaxobs import drive as D
+    from jaxobs.reproduce import _run
+    from jaxobs.reproduce.flux import flux_bank
+
+    par = D.bench_machine("spmsm000")
+    w0 = par.p * 400 * D.RPM
+    sc = D.Scenario(par, speed_ref=D.Profile.constant(400 * D.RPM), omega_m0=400 * D.RPM)
+    system = D.ClosedLoop(D.bench_drive(par, handover=0.001), flux_bank(par, w0), sc)
+    ref = jaxobs.simulate(system, 0.003)
+    monkeypatch.setattr(_run, "_KEPT", {})
+    got = _run.run_kept(system, 0.003, "test")
+    assert len(list(traced.iterdir())) == 1  # exported: the outputs' NamedTuples are registered
+    _run.run_kept(system, 0.002, "test")  # another horizon: another program
+    assert len(list(traced.iterdir())) == 2
+    monkeypatch.setattr(_run, "_KEPT", {})  # a later process: read back, not traced
+    monkeypatch.setattr(_run, "simulate", lambda *a: pytest.fail("traced again"))
+    again = _run.run_kept(system, 0.003, "test")
+    for run in (got, again):
+        assert jax.tree.structure(run.outputs) == jax.tree.structure(ref.outputs)
+        for a, b in zip(jax.tree.leaves((run.t, run.outputs, run.ok)), jax.tree.leaves((ref.t, ref.outputs, ref.ok))):
+            assert np.array_equal(np.asarray(a), np.asarray(b))  # bit for bit
+    assert len(list(traced.iterdir())) == 2

@@ -44,7 +44,6 @@ import numpy as np
 
 from .. import drive as D
 from .. import linear, papers
-from .._simulate import simulate
 from ..metrics import wrap
 from ..observers import (
     SOIFO,
@@ -54,6 +53,7 @@ from ..observers import (
     SecondOrderSOIFO,
 )
 from ..progress import Progress
+from ._run import run_kept
 from .compare import annotate
 
 __all__ = ["OBSERVER_NAMES", "flux_bank", "run_flux_experiments"]
@@ -212,7 +212,7 @@ def run_flux_experiments(quick: bool = False, progress=None):
         drive = D.bench_drive(par, handover=handover, startup=startup, alpha_s=alpha_s, **foc_kw)
         if startup is None:  # the observers settled over 10 electrical periods first (10 s at 20 r/min)
             drive = drive.settled_for(par.p * rpm0 * D.RPM)
-        sol = simulate(D.ClosedLoop(drive, flux_bank(est, w0, lpf_omega_c=lpf_omega_c), sc), t1)
+        sol = run_kept(D.ClosedLoop(drive, flux_bank(est, w0, lpf_omega_c=lpf_omega_c), sc), t1, f"flux|{name}")
         traces[name] = sol
         t = np.asarray(sol.t)
         bar.update()

@@ -38,10 +38,10 @@ import numpy as np
 
 from .. import drive as D
 from .. import linear, papers
-from .._simulate import simulate
 from ..metrics import harmonic_amplitude, wrap
 from ..observers import CLESO, FALESO, GILESO, ObserverBank
 from ..progress import Progress
+from ._run import run_kept
 
 __all__ = ["FIG18_NAMES", "LESO_NAMES", "leso_bank", "run_leso_experiments"]
 
@@ -254,7 +254,7 @@ def run_leso_experiments(progress=None):
         sc = D.Scenario(par, est_par=est, speed_ref=speed_ref, load=load, omega_m0=rpm0 * D.RPM, est_drift=est_drift)
         bar.stage(f"{name} ({t1:g} s)")
         drive = D.bench_drive(par, handover=handover, **drive_kw)
-        sol = simulate(D.ClosedLoop(drive, leso_bank(est, we, primary=primary), sc), t1)
+        sol = run_kept(D.ClosedLoop(drive, leso_bank(est, we, primary=primary), sc), t1, f"leso|{name}")
         traces[name] = sol
         t = np.asarray(sol.t)
         bar.update()

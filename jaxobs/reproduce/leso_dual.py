@@ -44,9 +44,9 @@ import math
 import numpy as np
 
 from .. import drive as D
-from .._simulate import simulate
 from ..metrics import harmonic_amplitude
 from ..progress import Progress
+from ._run import run_kept
 from .leso import LESO_NAMES, _closing_rows, leso_bank
 
 __all__ = ["DUAL_EXPERIMENTS", "DUAL_RAMP", "DUAL_LOAD_STEP", "DUAL_RAMP_FW", "DUAL_DYNAMICS", "run_leso_dual"]
@@ -77,12 +77,12 @@ DUAL_DYNAMICS = (
 _RAMP = dict(t=[0.0, 0.6, 1.4, 2.2, 3.0], rpm=[300, 600, 840, 600, 300], t1=3.6)
 
 
-def _simulate(machine, mode, rpm0, speed_ref, load, t1, primary=2, sensorless=True, **drive_kw):
+def _simulate(name, machine, mode, rpm0, speed_ref, load, t1, primary=2, sensorless=True, **drive_kw):
     est = machine.per_set()  # what the observers assume: one set, the single IPMSM
     drive = D.dual_bench_drive(machine, mode=mode, sensorless=sensorless, handover=0.3, **drive_kw)
     sc = D.Scenario(est, speed_ref=speed_ref, load=load, omega_m0=rpm0 * D.RPM)
     bank = leso_bank(est, machine.p * rpm0 * D.RPM, primary=primary)
-    return simulate(D.DualClosedLoop(drive, bank, sc, machine), t1)
+    return run_kept(D.DualClosedLoop(drive, bank, sc, machine), t1, f"leso_dual|{name}")
 
 
 def _fa_error_deg(sol):
@@ -123,7 +123,7 @@ def run_leso_dual(progress=None, t1: float = 1.0, dynamics: bool = True):
     for name, mode, rpm, frac, paper in DUAL_EXPERIMENTS:
         bar.stage(f"{name} ({t1:g} s)")
         we = machine.p * rpm * D.RPM
-        sol = _simulate(machine, mode, rpm, D.Profile.constant(rpm * D.RPM), D.Profile.constant(frac * rated), t1)
+        sol = _simulate(name, machine, mode, rpm, D.Profile.constant(rpm * D.RPM), D.Profile.constant(frac * rated), t1)
         traces[name] = sol
         o, t = sol.outputs, np.asarray(sol.t)
         n_per = int(round(2 * math.pi / we / float(t[1] - t[0])))
@@ -151,14 +151,14 @@ def run_leso_dual(progress=None, t1: float = 1.0, dynamics: bool = True):
         for i in (2, 0, 1):
             name = _closing(DUAL_RAMP, i)
             bar.stage(f"{name} ({_RAMP['t1']:g} s)")
-            sol = _simulate(machine, "vsd", 300, ramp, None, _RAMP["t1"], i, inverter=inv, field_weakening=fw)
+            sol = _simulate(name, machine, "vsd", 300, ramp, None, _RAMP["t1"], i, inverter=inv, field_weakening=fw)
             traces[name] = sol
             rows += _ramp_rows(name, sol, i, machine, inv, 4.5 if i == 2 else None, 13.0)
             bar.update()
         for i in (2, 0, 1):
             name = _closing(DUAL_LOAD_STEP, i)
             bar.stage(f"{name} (1.2 s)")
-            sol = _simulate(machine, "vsd", 600, w600, step, 1.2, i)
+            sol = _simulate(name, machine, "vsd", 600, w600, step, 1.2, i)
             traces[name] = sol
             rows += _closing_rows(name, sol, i, machine, np.asarray(sol.t) >= 0.55, 3.2 if i == 2 else None, 5.0)
             bar.update()
@@ -166,7 +166,7 @@ def run_leso_dual(progress=None, t1: float = 1.0, dynamics: bool = True):
         name = DUAL_RAMP_FW
         bar.stage(f"{name} ({_RAMP['t1']:g} s)")
         sol = _simulate(
-            machine, "vsd", 300, ramp, None, _RAMP["t1"], sensorless=False, inverter=inv330, field_weakening=fw
+            name, machine, "vsd", 300, ramp, None, _RAMP["t1"], sensorless=False, inverter=inv330, field_weakening=fw
         )
         traces[name] = sol
         rows += _ramp_rows(name, sol, 2, machine, inv330, None, None)

@@ -1,0 +1,48 @@
+"""The reproductions' simulations, their traced programs kept across processes (issue 31, time to result).
+
+A reproduction runs a few dozen drive simulations, each its own program: in a second ``jaxobs reproduce
+leso`` the persistent compilation cache found every compilation, yet 14 s of its 36 s went to tracing
+them again (``python -m benchmarks.first_second``, 2026-11-25).  :func:`run_kept` runs one through
+:func:`jaxobs.kept_jit`, which keeps the traced and lowered program under a key (the command line turns
+it on with the compile cache; from Python, :func:`jaxobs.use_compile_cache` does).  The key names
+what the program bakes in: the experiment's name, the horizon, and the system's values that are not
+arrays (its Python numbers); the system's static fields, the arrays' shapes and the source of jaxobs
+are added by ``kept_jit``.  The run gives the same numbers bit for bit as ``simulate`` (tests/test_traced.py).
+"""
+
+from __future__ import annotations
+
+from typing import Any, NamedTuple
+
+import equinox as eqx
+import jax
+
+from .._simulate import simulate
+from .._traced import kept_jit
+
+__all__ = ["Run", "run_kept"]
+
+
+class Run(NamedTuple):
+    """What a reproduction reads of a simulation (:class:`jaxobs.Solution`'s fields of the same names)."""
+
+    t: jax.Array
+    outputs: Any
+    ok: jax.Array
+
+
+_KEPT: dict = {}  # key -> its kept program, one per process
+
+
+def run_kept(system, t1: float, name: str) -> Run:
+    """``simulate(system, t1)`` as a :class:`Run`, its program kept across processes under ``name`` (module doc)."""
+    values = jax.tree.leaves(eqx.filter(system, eqx.is_array, inverse=True))
+    key = f"reproduce|{name}|{t1!r}|{values!r}"
+    if key not in _KEPT:
+
+        def run(s):
+            sol = simulate(s, t1)
+            return sol.t, sol.outputs, sol.ok
+
+        _KEPT[key] = kept_jit(run, key)
+    return Run(*_KEPT[key](system))
