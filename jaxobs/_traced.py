@@ -20,7 +20,8 @@ A program run through ``Exported.call`` gives the same numbers bit for bit as th
 (tests/test_traced.py; result.json of the default job compared byte for byte).  Off (plain
 ``eqx.filter_jit``) where no folder is set: :func:`jaxobs.use_compile_cache` sets it (the command
 line, unless ``--no-cache`` or ``JAXOBS_CACHE_DIR=off``), or where a program cannot be exported
-(a host callback, an output that is not arrays in tuples, lists and dicts): then it is traced as before.
+(a host callback, an output that is not arrays in tuples, lists, dicts and registered NamedTuples): then it
+is traced as before.
 The folder keeps the :data:`MAX_KEPT` most recently used programs (an edited source makes new keys).
 """
 
@@ -102,47 +103,6 @@ def _environment() -> str:
     return f"{libs};{opts};{kind};{sys.version_info[:2]}"
 
 
-_registered: list[bool] = []
-
-
-def _register_outputs() -> None:
-    """Let kept programs return jaxobs's step outputs: ``jax.export`` serializes a NamedTuple only once its type
-    is registered (once per process, before the first export or read)."""
-    if _registered:
-        return
-    from ._measurements import DriveInput
-    from ._simulate import SignalOutput, SignalTruth
-    from .drive.control import FOCOutput
-    from .drive.dual import DualPlantOutput
-    from .drive.dual_loop import DualFOCOutput, DualOutput
-    from .drive.loop import DriveOutput
-    from .drive.plant import PlantOutput
-    from .observers.base import BankOutput
-    from .observers.fll import FLLOutput
-    from .observers.flux import FluxOutput
-    from .observers.leso import LESOOutput
-    from .observers.sogi import QSGOutput
-
-    for cls in (
-        DriveInput,
-        SignalOutput,
-        SignalTruth,
-        FOCOutput,
-        DualPlantOutput,
-        DualFOCOutput,
-        DualOutput,
-        DriveOutput,
-        PlantOutput,
-        BankOutput,
-        FLLOutput,
-        FluxOutput,
-        LESOOutput,
-        QSGOutput,
-    ):
-        export.register_namedtuple_serialization(cls, serialized_name=f"{cls.__module__}.{cls.__qualname__}")
-    _registered.append(True)
-
-
 class _Kept:
     """``eqx.filter_jit(fn)``, with the traced program kept in :func:`traced_dir` under ``key``."""
 
@@ -156,7 +116,6 @@ class _Kept:
         folder = traced_dir()
         if folder is None:
             return self.jitted(*args)
-        _register_outputs()
         dynamic, static = eqx.partition(args, eqx.is_array)
         leaves, tree = jax.tree.flatten(dynamic)
         avals = ";".join(f"{x.shape}{x.dtype}{'w' if getattr(x, 'weak_type', False) else ''}" for x in leaves)
@@ -226,7 +185,8 @@ def kept_jit(fn, key: str, *, packages: tuple[str, ...] = ()):
     arguments' shapes and dtypes or the source of ``jaxobs``, of ``fn``'s top package and of ``packages``
     (top-level package names, e.g. ``("jaxobs_tuning",)`` for code that made a closure ``fn`` calls):
     a job's digest, the values a closure captured.  Called with positional arguments only; the outputs
-    must be arrays in tuples, lists and dicts to be kept (else the call traces every time, as a plain jit).
+    must be arrays in tuples, lists, dicts and NamedTuples registered for ``jax.export`` (the drive's step
+    outputs are, by :mod:`jaxobs.reproduce._run`) to be kept (else the call traces every time, as a plain jit).
     """
     if not isinstance(key, str) or not key:
         raise ValueError(f"kept_jit: key must be a non-empty string, got {key!r}")

@@ -75,7 +75,7 @@ LAYERS = [
     # the one study runner (samplers in jaxobs.scenarios)
     ("jaxobs.runner",),
     # the figures' helpers and the Bode figures (jaxobs.plot re-exports them)
-    ("jaxobs._figure", "jaxobs.reproduce.compare"),
+    ("jaxobs._figure", "jaxobs.reproduce.compare", "jaxobs.reproduce._run"),
     ("jaxobs._plot_bode", "jaxobs._plot_paper"),
     # the library's own applications: studies, the demo, the papers' reproductions, figures, benchmarks
     (

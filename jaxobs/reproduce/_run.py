@@ -16,9 +16,21 @@ from typing import Any, NamedTuple
 
 import equinox as eqx
 import jax
+from jax import export
 
-from .._simulate import simulate
+from .._measurements import DriveInput
+from .._simulate import SignalOutput, SignalTruth, simulate
 from .._traced import kept_jit
+from ..drive.control import FOCOutput
+from ..drive.dual import DualPlantOutput
+from ..drive.dual_loop import DualFOCOutput, DualOutput
+from ..drive.loop import DriveOutput
+from ..drive.plant import PlantOutput
+from ..observers.base import BankOutput
+from ..observers.fll import FLLOutput
+from ..observers.flux import FluxOutput
+from ..observers.leso import LESOOutput
+from ..observers.sogi import QSGOutput
 
 __all__ = ["Run", "run_kept"]
 
@@ -32,6 +44,26 @@ class Run(NamedTuple):
 
 
 _KEPT: dict = {}  # key -> its kept program, one per process
+
+# a kept program's outputs are serialized with it: jax.export writes a NamedTuple only once its type is registered
+# (once per process, here at import, before any program is exported or read back)
+for _cls in (
+    DriveOutput,
+    FOCOutput,
+    PlantOutput,
+    DriveInput,
+    BankOutput,
+    FluxOutput,
+    LESOOutput,
+    FLLOutput,
+    QSGOutput,
+    SignalOutput,
+    SignalTruth,
+    DualOutput,
+    DualFOCOutput,
+    DualPlantOutput,
+):
+    export.register_namedtuple_serialization(_cls, serialized_name=f"{_cls.__module__}.{_cls.__qualname__}")
 
 
 def run_kept(system, t1: float, name: str) -> Run:
