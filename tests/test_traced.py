@@ -119,28 +119,57 @@ def test_the_folder_keeps_the_most_recently_used(tmp_path):
 
 
 def test_a_reproduction_run_is_kept_with_its_namedtuple_outputs(traced, monkeypatch):
-    """The reproductions' drive runs (jaxobs.reproduce._run.run_kept) return the step outputs, NamedTuples
-    nested in NamedTuples: exported (one program written, not the plain-jit fallback) and read back by a
-    later process, bit for bit simulate's t, outputs and ok."""
-    from jaxobs import drive as D
+    """jaxobs.reproduce._run.run_kept returns a run's step outputs, NamedTuples nested in NamedTuples: exported
+    (a program written, not the plain-jit fallback) and read back by a later process, bit for bit simulate's
+    t, outputs and ok.  An FLL on a grid signal (SignalOutput of FLLOutput and SignalTruth): a cheap compile."""
     from jaxobs.reproduce import _run
-    from jaxobs.reproduce.flux import flux_bank
 
-    par = D.bench_machine("spmsm000")
-    w0 = par.p * 400 * D.RPM
-    sc = D.Scenario(par, speed_ref=D.Profile.constant(400 * D.RPM), omega_m0=400 * D.RPM)
-    system = D.ClosedLoop(D.bench_drive(par, handover=0.001), flux_bank(par, w0), sc)
-    ref = jaxobs.simulate(system, 0.003)
+    obs = jaxobs.SOGIFLL(1.414, 5e4, ts=1e-4)
+    system = jaxobs.OnSignal(obs, jaxobs.GridSignal(1.0, 50.5, t_event=0.005, freq_step=1.0))
+    ref = jaxobs.simulate(system, 0.01)
     monkeypatch.setattr(_run, "_KEPT", {})
-    got = _run.run_kept(system, 0.003, "test")
+    got = _run.run_kept(system, 0.01, "test")
     assert len(list(traced.iterdir())) == 1  # exported: the outputs' NamedTuples are registered
-    _run.run_kept(system, 0.002, "test")  # another horizon: another program
-    assert len(list(traced.iterdir())) == 2
     monkeypatch.setattr(_run, "_KEPT", {})  # a later process: read back, not traced
     monkeypatch.setattr(_run, "simulate", lambda *a: pytest.fail("traced again"))
-    again = _run.run_kept(system, 0.003, "test")
+    again = _run.run_kept(system, 0.01, "test")
     for run in (got, again):
         assert jax.tree.structure(run.outputs) == jax.tree.structure(ref.outputs)
         for a, b in zip(jax.tree.leaves((run.t, run.outputs, run.ok)), jax.tree.leaves((ref.t, ref.outputs, ref.ok))):
             assert np.array_equal(np.asarray(a), np.asarray(b))  # bit for bit
-    assert len(list(traced.iterdir())) == 2
+    assert len(list(traced.iterdir())) == 1
+
+
+@pytest.mark.parametrize("machine", ["single", "dual"])
+def test_the_reproductions_drive_outputs_are_exportable(machine):
+    """Every NamedTuple a reproduction's drive run returns (DriveOutput or DualOutput, with the bank's, the
+    FOC's and the plant's outputs inside) is registered for jax.export (jaxobs.reproduce._run): the program
+    is exported and its outputs' tree comes back from the serialized bytes.  Traced and lowered, not compiled."""
+    from jax import export
+
+    from jaxobs import drive as D
+    from jaxobs.reproduce import _run  # noqa: F401  (registers the NamedTuples)
+    from jaxobs.reproduce.leso import leso_bank
+
+    if machine == "single":
+        par = D.bench_machine("ipmsm002")
+        sc = D.Scenario(par, speed_ref=D.Profile.constant(300 * D.RPM), omega_m0=300 * D.RPM)
+        system = D.ClosedLoop(D.bench_drive(par, handover=0.001), leso_bank(par, par.p * 300 * D.RPM), sc)
+    else:
+        m = D.dual_ipmsm_paper002()
+        est = m.per_set()
+        sc = D.Scenario(est, speed_ref=D.Profile.constant(300 * D.RPM), omega_m0=300 * D.RPM)
+        drive = D.dual_bench_drive(m, mode="vsd", sensorless=True, handover=0.001)
+        system = D.DualClosedLoop(drive, leso_bank(est, m.p * 300 * D.RPM), sc, m)
+    dyn, static = eqx.partition(system, eqx.is_array)
+    leaves, tree = jax.tree.flatten(dyn)
+
+    def run(*xs):  # as kept_jit exports: the arguments flattened, the outputs as run_kept returns them
+        sol = jaxobs.simulate(eqx.combine(jax.tree.unflatten(tree, xs), static), 0.001)
+        return sol.t, sol.outputs, sol.ok
+
+    exp = export.export(jax.jit(run))(*leaves)
+    back = export.deserialize(exp.serialize())
+    assert back.out_tree == exp.out_tree
+    outputs = back.out_tree.unflatten(range(back.out_tree.num_leaves))[1]
+    assert type(outputs).__name__ == ("DriveOutput" if machine == "single" else "DualOutput")
