@@ -109,9 +109,9 @@ def write_report(out: Path, job, obj, thetas: dict, history: list, closed_form_t
     for label, th in thetas.items():
         style = _STYLE.get(label, dict(lw=1))
         t, omega, err = (np.asarray(x) for x in obj.response(th, sig))
-        # the legend in words ("closed form"), the designs' keys in result.json with an underscore
-        axes[0].plot(t, omega / (2 * math.pi), label=label.replace("_", " "), **style)
-        axes[1].plot(t, np.degrees(err), label=label, **style)
+        name = label.replace("_", " ")  # in words ("closed form"); result.json's keys have an underscore
+        axes[0].plot(t, omega / (2 * math.pi), label=name, **style)
+        axes[1].plot(t, np.degrees(err), label=name, **style)
     # an FLL's ("grid") error is the grid voltage's phase; a flux observer's or a drive's (on an "emf" recording or
     # closing the loop) is the rotor's electrical position: the labels say which
     if job.scenarios.signal != "grid":
