@@ -279,6 +279,7 @@ def run_loop(
     xs_map: Callable[[Any], Any] | None = None,
     peel: bool = True,
     carry_fn: Callable[[], Any] | None = None,
+    fill: Callable[[Any, Any, Any], Any] | None = None,
 ):
     """``lax.scan(body, carry, xs, length=n)``, made fast and cheap to differentiate (module doc).
 
@@ -293,6 +294,11 @@ def run_loop(
     to their inputs (leading axis the block) and is evaluated a block at a
     time (module doc, point 5): the simulations pass sample indices and the
     signal as ``xs_map``.  ``checkpoint`` runs the loop (module doc, point 4).
+
+    ``fill``: with ``xs`` the per-step inputs themselves (no ``xs_map``), the loop does not slice them for
+    its peeled start-up: ``fill(c0, c1, c2)`` turns the carries before and after the start-up's two steps
+    into a steady carry at step 0 whose steps repeat them (module doc, point 6;
+    :func:`jaxobs._discretize.ab3_steady_from_start`), and the steady loop runs every row.
     """
     unroll = check_unroll(unroll)
     checkpoint = check_checkpoint(checkpoint)
@@ -314,5 +320,5 @@ def run_loop(
         init, carry = (lambda _: carry_fn()), ()
     else:
         init = lambda c: c  # noqa: E731
-    loop = Loop(body, init, n, unroll, split, xs_map, peel, has_outputs)
+    loop = Loop(body, init, n, unroll, split, xs_map, peel, has_outputs, fill)
     return checkpoint.loop(loop, carry, xs)

@@ -37,7 +37,8 @@ class Loop(NamedTuple):
 
     ``init(carry)`` builds the initial carry from the loop's carry argument (the carry itself, or — with
     ``run_loop(carry_fn=...)`` — a function of nothing, called inside the strategy's loop: jaxobs._loop,
-    point 4); ``has_outputs``: the body returns per-step outputs (not ``None``).
+    point 4); ``has_outputs``: the body returns per-step outputs (not ``None``); ``fill``: the start-up
+    steps' carries ``(c0, c1, c2)`` to a steady carry at step 0 (jaxobs._loop, point 6), or ``None``.
     """
 
     body: Callable[[Any, Any], tuple[Any, Any]]
@@ -48,6 +49,7 @@ class Loop(NamedTuple):
     xs_map: Callable[[Any], Any] | None
     peel: bool
     has_outputs: bool
+    fill: Callable[[Any, Any, Any], Any] | None = None
 
 
 # ---------------------------------------------------------------------------
@@ -128,6 +130,16 @@ def run_steps(loop: Loop, strategy, carry, xs):
         return strat.scan(inner, c, xs_part, m, unroll, xs_map)
 
     p = min(startup_steps(carry), n) if loop.peel else 0
+    if p == 2 and n > p and loop.fill is not None and xs is not None and xs_map is None:
+        # inputs as scan rows (point 6): the start-up's steps taken on their own, then the steady loop over
+        # every row from sample 0, its history filled so that its first steps repeat the start-up's
+        cs = [carry]
+        for k in range(p):
+            cs.append(body(cs[-1], jax.tree.map(lambda a, k=k: a[k], xs))[0])
+        steady = loop.fill(*cs)
+        if steady is not None:
+            c, ys = scan(strategy, wrap(steady), xs, n, loop.unroll)
+            return to_started(unwrap(c)), ys
     ys_head = None
     if p:
         head = None if xs is None else jax.tree.map(lambda a: a[:p], xs)

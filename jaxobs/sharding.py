@@ -83,6 +83,7 @@ __all__ = [
     "batch_mesh",
     "shard_batch",
     "batch_size",
+    "batch_axes",
     "map_batch",
     "use_host_devices",
     "init_distributed",
@@ -169,11 +170,38 @@ def batch_mesh(devices=None) -> Mesh:
     return Mesh(np.asarray(devs), (AXIS,))
 
 
+def _declares_axis(x) -> bool:
+    """A node that says which axis of its leaves is the scenario axis (a ``batch_axis`` integer attribute)."""
+    ax = getattr(x, "batch_axis", None) if not isinstance(x, (np.ndarray, jax.Array)) else None
+    return isinstance(ax, int) and not isinstance(ax, bool)
+
+
+def batch_axes(tree):
+    """Which axis of each leaf is the scenario axis: ``tree``'s structure down to the nodes that declare one
+    (a ``batch_axis`` attribute: a time-major :class:`~jaxobs.signals.SampledSignal` says 1), 0 elsewhere.
+    A prefix of ``tree``, as ``jax.vmap``'s ``in_axes`` takes it."""
+    return jax.tree.map(lambda x: x.batch_axis if _declares_axis(x) else 0, tree, is_leaf=_declares_axis)
+
+
+def _leaf_axes(tree) -> list[tuple[object, int]]:
+    """(leaf, its scenario axis) for every leaf of ``tree``."""
+    out = []
+    for node, ax in zip(jax.tree.leaves(tree, is_leaf=_declares_axis), jax.tree.leaves(batch_axes(tree)), strict=True):
+        out += [(x, ax) for x in jax.tree.leaves(node)] if _declares_axis(node) else [(node, ax)]
+    return out
+
+
 def batch_size(tree) -> int:
-    sizes = {np.shape(x)[0] for x in jax.tree.leaves(tree) if np.ndim(x) >= 1}
+    """The number of scenarios in ``tree``: every array leaf's scenario axis (the leading one, or the axis its
+    node declares: :func:`batch_axes`) must have it."""
+    sizes = {np.shape(x)[ax] for x, ax in _leaf_axes(tree) if np.ndim(x) > ax}
     if len(sizes) != 1:
-        raise ValueError(f"a batch needs one common leading axis on every array leaf, got sizes {sorted(sizes)}")
+        raise ValueError(f"a batch needs one common scenario axis on every array leaf, got sizes {sorted(sizes)}")
     return sizes.pop()
+
+
+def _spec(ax: int) -> PartitionSpec:
+    return PartitionSpec(*([None] * ax), AXIS)
 
 
 def shard_batch(tree, mesh: Mesh | None = None):
@@ -189,9 +217,14 @@ def shard_batch(tree, mesh: Mesh | None = None):
     if n_dev == 1 or b % n_dev:
         dev = mesh.devices.flat[0]
         return jax.tree.map(lambda x: jax.device_put(x, dev), tree)
-    split = NamedSharding(mesh, PartitionSpec(AXIS))
     rep = NamedSharding(mesh, PartitionSpec())
-    return jax.tree.map(lambda x: jax.device_put(x, split if np.ndim(x) >= 1 else rep), tree)
+
+    def put(node, ax):
+        return jax.tree.map(
+            lambda x: jax.device_put(x, NamedSharding(mesh, _spec(ax)) if np.ndim(x) > ax else rep), node
+        )
+
+    return jax.tree.map(put, tree, batch_axes(tree), is_leaf=_declares_axis)
 
 
 # Scenarios per tile per device in map_batch: the share of one device in a
@@ -215,15 +248,24 @@ def map_batch(fn, tree, *, mesh: Mesh | None = None, tile: int = TILE):
     ``check_vma=False``: the simulation loops start from unvarying constants
     (zero running costs, an observer's initial state) that meet per-device
     values in their carries; every value here is per-device anyway.
+
+    A node of the batch may declare another scenario axis (:func:`batch_axes`: a time-major
+    :class:`~jaxobs.signals.SampledSignal`, leaves ``(n, B)``, is mapped along axis 1).  A batch with
+    such a node runs each device's share whole, untiled: a tile of a time-major array is a strided
+    copy of every row, and the share's loop reads one contiguous row per step anyway.
     """
     if not (isinstance(tile, int) and tile >= 1):
         raise ValueError(f"map_batch: tile must be an integer >= 1, got {tile!r}")
-    if any(np.ndim(x) == 0 for x in jax.tree.leaves(tree)):
+    if any(np.ndim(x) <= ax for x, ax in _leaf_axes(tree)):
         raise ValueError("map_batch: every array leaf of the batch needs the leading scenario axis (got a scalar leaf)")
     mesh = batch_mesh() if mesh is None else mesh
     b = batch_size(tree)
+    axes = batch_axes(tree)
+    leading = all(ax == 0 for ax in jax.tree.leaves(axes))
 
     def local(t):
+        if not leading:
+            return jax.vmap(fn, in_axes=(axes,))(t)
         if batch_size(t) <= tile:
             # one tile: the share's loop runs as it is (module doc: a one-iteration lax.map around it
             # ran the float32 SOGI-FLL at 0.4x the speed)
@@ -233,9 +275,8 @@ def map_batch(fn, tree, *, mesh: Mesh | None = None, tile: int = TILE):
     n_dev = mesh.devices.size
     if n_dev == 1 or b % n_dev:
         return local(tree)
-    return jax.shard_map(
-        local, mesh=mesh, in_specs=PartitionSpec(AXIS), out_specs=PartitionSpec(AXIS), check_vma=False
-    )(tree)
+    in_specs = jax.tree.map(_spec, axes)
+    return jax.shard_map(local, mesh=mesh, in_specs=(in_specs,), out_specs=PartitionSpec(AXIS), check_vma=False)(tree)
 
 
 def init_distributed(
@@ -374,20 +415,24 @@ def global_batch(tree, mesh: Mesh | None = None):
     (``jax.make_array_from_callback``), so nothing crosses between processes.  In one process this
     is :func:`shard_batch` with the split required.
     """
-    if any(np.ndim(x) == 0 for x in jax.tree.leaves(tree)):
+    if any(np.ndim(x) <= ax for x, ax in _leaf_axes(tree)):
         raise ValueError("global_batch: every array leaf of the batch needs the leading scenario axis (got a scalar)")
     mesh = batch_mesh() if mesh is None else mesh
     n_dev = mesh.devices.size
     b = batch_size(tree)
     if b % n_dev:
         raise ValueError(f"global_batch: the batch ({b}) must divide over the mesh's {n_dev} devices (pad it)")
-    split = NamedSharding(mesh, PartitionSpec(AXIS))
 
-    def put(x):
-        x = np.asarray(x)
-        return jax.make_array_from_callback(x.shape, split, lambda idx: x[idx])
+    def put(node, ax):
+        split = NamedSharding(mesh, _spec(ax))
 
-    return jax.tree.map(put, tree)
+        def one(x):
+            x = np.asarray(x)
+            return jax.make_array_from_callback(x.shape, split, lambda idx: x[idx])
+
+        return jax.tree.map(one, node)
+
+    return jax.tree.map(put, tree, batch_axes(tree), is_leaf=_declares_axis)
 
 
 def gather_batch(tree):

@@ -39,19 +39,40 @@ class SampledSignal(eqx.Module):
     This is also how a benchmark feeds *precomputed* inputs: the waveform is
     generated once, outside the timed function, and the loop only reads it,
     a block of steps at a time (``SaveFinal``: :mod:`jaxobs._loop`, point 5).
+
+    A batch of recordings may be stored **time-major** instead
+    (``batch_inner=True``: ``samples`` and each truth array shaped ``(n, B)``,
+    row k holding every scenario's sample k, the layout a recorder or a
+    NumPy study writes column per channel).  :func:`jaxobs.map_batch` then maps
+    the batch along its inner axis, and the throughput loop (``SaveFinal``,
+    ``SaveAll(fast=True)``) takes the rows as its scan inputs where they lie:
+    one contiguous ``(B,)`` row per step, nothing gathered or transposed
+    (:mod:`jaxobs._loop`, point 6).  A device's share of a time-major batch runs
+    whole (``map_batch`` does not tile it).  The plain loop (``SaveAll()``)
+    gives the same numbers by reading the samples back through ``sig(t)``,
+    which under ``vmap`` moves the batch axis to the front: correct, slower.
     """
 
     samples: jax.Array  # u_k, shape (..., n)
     truth: tuple | None  # (θ_k, ω_k, V_k), each shaped like samples, or None
     ts: float = eqx.field(static=True)  # sample interval, s
     t0: float = eqx.field(static=True)  # time of the first sample, s (static, so a horizon is checked when traced)
+    batch_inner: bool = eqx.field(static=True)  # a time-major batch: leaves (n, B), mapped along their inner axis
 
     SNAP = 1e-3  # fraction of a sample interval treated as "on" a sample instant
 
-    def __init__(self, samples, ts, t0=0.0, *, truth=None):
+    def __init__(self, samples, ts, t0=0.0, *, truth=None, batch_inner=False):
         own = "SampledSignal"
         samples = check_real("samples", samples, owner=own)
-        if samples.ndim < 1 or samples.shape[-1] < 2:
+        if not isinstance(batch_inner, bool):
+            raise ValueError(f"{own}.batch_inner must be True or False, got {batch_inner!r}")
+        if batch_inner:
+            if samples.ndim != 2 or samples.shape[0] < 2 or samples.shape[1] < 1:
+                raise ValueError(
+                    f"{own}.samples of a time-major batch (batch_inner=True) must be shaped (n, B) with n >= 2 "
+                    f"samples and B >= 1 scenarios, got shape {samples.shape}"
+                )
+        elif samples.ndim < 1 or samples.shape[-1] < 2:
             raise ValueError(
                 f"{own}.samples must hold at least 2 samples along its last axis, got shape {samples.shape}"
             )
@@ -73,10 +94,16 @@ class SampledSignal(eqx.Module):
                         f"{own}.truth.{name} must have the shape of samples {samples.shape}, got {a.shape}"
                     )
         self.truth = truth
+        self.batch_inner = batch_inner
+
+    @property
+    def batch_axis(self) -> int:
+        """The axis of the leaves that :func:`jaxobs.map_batch` maps over: 1 for a time-major batch, else 0."""
+        return 1 if self.batch_inner else 0
 
     @property
     def n(self) -> int:
-        return self.samples.shape[-1]
+        return self.samples.shape[0] if self.batch_inner else self.samples.shape[-1]
 
     @property
     def has_truth(self) -> bool:
@@ -88,6 +115,8 @@ class SampledSignal(eqx.Module):
         return self.t0 + self.ts * (self.n - 1)
 
     def _read(self, arr, t):
+        if self.batch_inner:  # (n, B) read as (B, n); a no-op on one scenario's (n,) under vmap
+            arr = jnp.moveaxis(arr, 0, -1)
         return _read_samples(arr, t, self.t0, self.ts, self.SNAP)
 
     def __call__(self, t):
