@@ -196,7 +196,10 @@ def batch_size(tree) -> int:
     node declares: :func:`batch_axes`) must have it."""
     sizes = {np.shape(x)[ax] for x, ax in _leaf_axes(tree) if np.ndim(x) > ax}
     if len(sizes) != 1:
-        raise ValueError(f"a batch needs one common scenario axis on every array leaf, got sizes {sorted(sizes)}")
+        raise ValueError(
+            "a batch needs one common leading axis (its scenario axis; a time-major node's inner axis) on every "
+            f"array leaf, got sizes {sorted(sizes)}"
+        )
     return sizes.pop()
 
 

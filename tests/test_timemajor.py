@@ -1,0 +1,163 @@
+"""Time-major recordings (``SampledSignal(batch_inner=True)``, leaves (n, B)): the loop reads them as scan rows
+(jaxobs._loop, point 6) and computes what the scenario-major batch computes; nothing is transposed or sliced."""
+
+import re
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import jaxobs
+from benchmarks import workloads as W
+from jaxobs._discretize import AB3State, ab3_steady_from_start
+from jaxobs.sharding import batch_axes, batch_size
+
+TS = W.TS
+N = 600  # samples in each recording
+
+
+def _recordings(b, n=N):
+    """b recordings of a grid voltage, 49-51 Hz and 0.8-1.2 p.u. with a 5th harmonic, and their truth:
+    (the scenario-major batch, leaves (b, n); the same samples time-major, leaves (n, b))."""
+    t = TS * np.arange(n)[:, None]
+    f, a = np.linspace(49.0, 51.0, b), np.linspace(0.8, 1.2, b)
+    th = 2 * np.pi * f * t + 0.3
+    u = a * np.cos(th) + 0.05 * np.cos(5 * th)
+    truth = (th, np.broadcast_to(2 * np.pi * f, (n, b)), np.broadcast_to(a, (n, b)))
+    time_major = jaxobs.SampledSignal(u, TS, truth=truth, batch_inner=True)
+    by_scenario = jax.vmap(lambda u, th, om, a: jaxobs.SampledSignal(u, TS, truth=(th, om, a)))(
+        jnp.asarray(u.T), *(jnp.asarray(np.ascontiguousarray(x.T)) for x in truth)
+    )
+    return by_scenario, time_major
+
+
+@pytest.fixture(scope="module")
+def recs():
+    return _recordings(6)
+
+
+def _run(obs, t1, save, t0=0.0):
+    def one(s):
+        return jaxobs.simulate(jaxobs.OnSignal(obs, s, t0=t0), t1, save=save)
+
+    return jax.jit(lambda b: jaxobs.map_batch(one, b))
+
+
+@pytest.mark.parametrize("kind", ["sogi-fll", "sogi-fll-wif"])
+def test_time_major_batch_computes_what_the_scenario_major_batch_computes(kind, recs):
+    """Costs, final states and every output agree to rounding (1e-12): the rows loop fills the AB3 start-up
+    into a steady history instead of peeling it, which moves the last bits only."""
+    by_scenario, time_major = recs
+    obs = W.fll_observer(kind)
+    for save in (jaxobs.SaveFinal(cost=W.fll_cost), jaxobs.SaveAll(fast=True, cost=W.fll_cost)):
+        f = _run(obs, (N - 1) * TS, save)
+        a, b = f(by_scenario), f(time_major)
+        assert a.cost.shape == b.cost.shape == (6,)
+        np.testing.assert_allclose(b.cost, a.cost, rtol=1e-12)
+        assert np.ptp(np.asarray(a.cost)) > 1e-3 * np.max(np.abs(a.cost))  # the scenarios differ
+        for x, y in zip(jax.tree.leaves((a.final_state, a.outputs)), jax.tree.leaves((b.final_state, b.outputs))):
+            np.testing.assert_allclose(y, x, rtol=1e-12, atol=1e-12 * float(np.max(np.abs(x))))
+        assert bool(np.all(b.ok))
+
+
+def test_plain_loop_and_offsets_on_a_time_major_batch(recs):
+    """SaveAll() (the plain step, reading samples through sig(t)) gives the rows loop's numbers; a horizon that
+    starts 5 samples in and ends before the recording does reads the rows [5, 5 + n) (a static slice)."""
+    _, time_major = recs
+    obs = W.fll_observer("sogi-fll")
+    t0, t1 = 5 * TS, 5 * TS + 401 * TS  # 401 steps: odd, so the rows loop runs without unrolling
+    fast = _run(obs, t1, jaxobs.SaveFinal(cost=W.fll_cost), t0=t0)(time_major)
+    plain = _run(obs, t1, jaxobs.SaveAll(cost=W.fll_cost), t0=t0)(time_major)
+    np.testing.assert_allclose(fast.cost, plain.cost, rtol=1e-12)
+    system = jaxobs.OnSignal(obs, jax.tree.map(lambda a: a[:, 0], time_major), t0=t0)
+    u, _, truth = system.input_rows(401)
+    np.testing.assert_array_equal(u, time_major.samples[5:406, 0])
+    np.testing.assert_array_equal(truth.omega, time_major.truth[1][5:406, 0])
+
+
+def test_rows_are_read_where_they_lie():
+    """The compiled program of a time-major batch holds no transposed (B, n) copy of the recording and no
+    (n - 2, B) slice of it: the loop reads row k of the (n, B) array the caller gave."""
+    _, time_major = _recordings(8, 1000)
+    obs = W.fll_observer("sogi-fll")
+    f = _run(obs, 1000 * TS, jaxobs.SaveFinal(cost=W.fll_cost))
+    hlo = f.lower(time_major).compile().as_text()
+    shapes = set(re.findall(r"f64\[(\d+),(\d+)\]", hlo))
+    assert ("1000", "8") in shapes or ("1000", "4") in shapes  # the rows, whole or a device's share
+    assert not {("8", "1000"), ("4", "1000"), ("998", "8"), ("998", "4")} & shapes, sorted(shapes)
+
+
+def test_gradient_through_a_time_major_batch(recs):
+    """d(Σ cost)/d(k, λ) through the rows loop equals the scenario-major batch's (forward sensitivities on
+    both) and reverse mode's on the rows loop."""
+    by_scenario, time_major = recs
+    obs0 = W.fll_observer("sogi-fll")
+
+    def total(gains, batch, checkpoint=jaxobs.AutoCheckpoint()):
+        obs = eqx.tree_at(lambda o: (o.k, o.lam), obs0, gains)
+
+        def one(s):
+            sol = jaxobs.simulate(
+                jaxobs.OnSignal(obs, s), 300 * TS, save=jaxobs.SaveFinal(cost=W.fll_cost), checkpoint=checkpoint
+            )
+            return sol.cost
+
+        return jnp.sum(jaxobs.map_batch(one, batch))
+
+    gains = (jnp.asarray(obs0.k), jnp.asarray(obs0.lam))
+    g_s = jax.jit(jax.grad(total))(gains, by_scenario)
+    g_t = jax.jit(jax.grad(total))(gains, time_major)
+    g_r = jax.jit(jax.grad(lambda g, b: total(g, b, jaxobs.StepCheckpoint())))(gains, time_major)
+    for a, b, c in zip(g_s, g_t, g_r):
+        assert abs(float(a)) > 0
+        np.testing.assert_allclose(b, a, rtol=1e-9)
+        np.testing.assert_allclose(c, a, rtol=1e-9)
+
+
+def test_filled_history_repeats_the_start_up():
+    """ab3_steady_from_start: two steady AB3 steps from x₀ with the filled history land on the start-up's x₁
+    and x₂ (to rounding); a carry whose AB3 state is not a component's (x, rule) gets None (peel as before)."""
+    obs = W.fll_observer("sogi-fll-wif")
+    u = jnp.cos(2 * jnp.pi * 50.0 * TS * jnp.arange(3.0)) * 1.2
+    c0 = obs.init(u[0])
+    c1, _ = obs.step(c0, u[0])
+    c2, _ = obs.step(c1, u[1])
+    steady = ab3_steady_from_start(c0, c1, c2, h=TS)
+    assert steady.rule.n is None
+    s1, _ = obs.step(steady, u[0])
+    s2, _ = obs.step(s1, u[1])
+    for got, want in ((s1.x, c1.x), (s2.x, c2.x)):
+        np.testing.assert_allclose(got, want, rtol=0, atol=1e-13 * float(jnp.max(jnp.abs(want))))
+    np.testing.assert_allclose(s2.rule.f1, c2.rule.f1, rtol=1e-12)
+    bare = (c0.rule, c0.x)  # an AB3 state outside any component
+    assert ab3_steady_from_start(bare, (c1.rule, c1.x), (c2.rule, c2.x), h=TS) is None
+    assert isinstance(c2.rule, AB3State)
+
+
+def test_batch_axes_and_sharding_of_a_time_major_batch(recs):
+    _, time_major = recs
+    gains = jnp.linspace(1.0, 2.0, 6)
+    assert batch_axes((time_major, gains)) == (1, 0)
+    assert batch_size((time_major, gains)) == 6
+    placed = jaxobs.shard_batch((time_major, gains))
+    assert placed[0].samples.shape == (N, 6)
+    if len(jax.devices()) > 1 and 6 % len(jax.devices()) == 0:
+        assert placed[0].samples.sharding.spec == jax.sharding.PartitionSpec(None, "batch")
+    got = jax.jit(lambda b: jaxobs.map_batch(lambda t: t[0].samples[3] * t[1], b))((time_major, gains))
+    np.testing.assert_array_equal(got, time_major.samples[3] * gains)
+    with pytest.raises(ValueError, match="common leading axis"):
+        batch_size((time_major, jnp.ones(5)))
+
+
+def test_time_major_signal_rejects_bad_input():
+    with pytest.raises(ValueError, match=r"samples of a time-major batch .* \(n, B\)"):
+        jaxobs.SampledSignal(np.ones(10), TS, batch_inner=True)
+    with pytest.raises(ValueError, match=r"batch_inner must be True or False"):
+        jaxobs.SampledSignal(np.ones((10, 2)), TS, batch_inner=1)
+    with pytest.raises(ValueError, match=r"truth.amplitude must have the shape of samples"):
+        jaxobs.SampledSignal(np.ones((10, 2)), TS, batch_inner=True, truth=(np.ones((10, 2)),) * 2 + (np.ones((2, 10)),))
+    sig = jaxobs.SampledSignal(np.arange(20.0).reshape(10, 2), TS, batch_inner=True)
+    assert sig.n == 10 and sig.t_end == pytest.approx(9 * TS)
+    np.testing.assert_array_equal(sig(3 * TS), [6.0, 7.0])  # the batch object read at a sample instant
