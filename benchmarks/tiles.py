@@ -1,11 +1,13 @@
-"""Why the precomputed FLL rows fall off at batch 8192 (README, Performance): tile size and input layout.
+"""Why the precomputed FLL rows fell off at batch 8192 with scenario-major recordings: tile size and input layout.
 
     python -m benchmarks.tiles [--dtype f32|f64] [--batch 8192]
 
 Precomputed SOGI-FLL, 1 s at 10 kHz, M scenario-steps/s, best of 3, in one process:
 
-- ``tiles``: jaxobs's loop under :func:`jaxobs.map_batch` on every host device, the tile 256 … the
-  whole device share, beside the hand-written JAX scan (:func:`benchmarks.workloads.jax_hand_fll`);
+- ``tiles``: jaxobs's loop under :func:`jaxobs.map_batch` on every host device over scenario-major
+  recordings, the tile 256 … the whole device share, and over the same samples as a time-major batch
+  (``SampledSignal(batch_inner=True)``: rows, each device's share whole), beside the hand-written JAX
+  scan (:func:`benchmarks.workloads.jax_hand_fll`);
 - ``layout``: one device, the whole batch under one ``vmap``: the samples scenario-major (batch, n) as
   jaxobs stores them, the same samples stored time-major (n, batch) and ``vmap``-ed with
   ``in_axes=1``, and ``map_batch``'s 512-tiles of the scenario-major array;
@@ -66,17 +68,19 @@ def main(argv=None) -> None:
         return jaxobs.simulate(jaxobs.OnSignal(obs, s), W.FLL_T1, save=jaxobs.SaveFinal(cost=W.fll_cost)).cost
 
     B = a.batch
-    _, sharded = W.jax_fll("sogi-fll", B, "precomputed")
+    _, sharded = W.jax_fll("sogi-fll", B, "precomputed", layout="scenario")
     rows = {}
     for tile in sorted({t for t in (256, 512, 1024, 2048) if t < B // ndev} | {B // ndev}):
         f = jax.jit(lambda b, tile=tile: jaxobs.map_batch(one, b, tile=tile))
         rows[f"tile {tile}"] = _rate(lambda f=f: f(sharded), B, n)
+    rows_fn, rows_batch = W.jax_fll("sogi-fll", B, "precomputed")  # time-major: each device's share whole
+    rows["time-major rows"] = _rate(lambda: rows_fn(rows_batch), B, n)
     hand, hargs = W.jax_hand_fll(B)
     rows["jax-hand"] = _rate(lambda: hand(*hargs), B, n)
     print(f"{a.dtype} batch {B}, {ndev} devices:", ", ".join(f"{k} {v:.0f}" for k, v in rows.items()))
 
     b1 = B // ndev  # one device's share, on one device
-    _, sig = W.jax_fll("sogi-fll", b1, "precomputed", shard=False)
+    _, sig = W.jax_fll("sogi-fll", b1, "precomputed", shard=False, layout="scenario")
     sig_t = jax.tree.map(lambda x: jnp.asarray(x.T) if x.ndim == 2 else x, sig)
     axes = jax.tree.map(lambda x: 1 if x.ndim == 2 else 0, sig)
     dev0 = jaxobs.batch_mesh(jax.devices()[:1])

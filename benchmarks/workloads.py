@@ -96,36 +96,46 @@ def fll_cost(o):
     return d * d
 
 
-def _batched(one, shard: bool):
-    """The jitted batch function: sharded over every device and tiled (``map_batch``), or plain ``vmap``."""
+def _batched(one, shard: bool, batch=None):
+    """The jitted batch function: sharded over every device and tiled (``map_batch``), or plain ``vmap`` (along
+    each node's scenario axis: :func:`jaxobs.batch_axes`)."""
     if shard:
         return jax.jit(lambda b: jaxobs.map_batch(one, b))
-    return jax.jit(jax.vmap(one))
+    axes = 0 if batch is None else jaxobs.batch_axes(batch)
+    return jax.jit(jax.vmap(one, in_axes=(axes,)))
 
 
-def jax_fll(kind: str, batch: int, inputs: str, t1: float = FLL_T1, shard: bool = True):
+def jax_fll(kind: str, batch: int, inputs: str, t1: float = FLL_T1, shard: bool = True, layout: str = "time"):
     """(jitted function, its batch argument): per-scenario running costs of the FLL workload.
 
     ``inputs="loop"``: the grid signal is generated inside the loop.
     ``inputs="precomputed"``: the waveform and its true frequency are sampled
     once, before the timed function (as the baselines get them: the same
-    arrays), and the loop reads them back from a :class:`jaxobs.SampledSignal`,
-    a block of steps at a time.
+    arrays), and the loop reads them back from a :class:`jaxobs.SampledSignal`:
+    with ``layout="time"`` (the default, the layout the baselines read) a time-major batch
+    (``batch_inner=True``, leaves (n, B)) whose rows the loop takes one per step; with
+    ``layout="scenario"`` a batch of scenario-major recordings (leaves (B, n)), read a block of steps
+    at a time.
     """
     obs = fll_observer(kind)
     dtype = jnp.result_type(float)
+    if layout not in ("time", "scenario"):
+        raise ValueError(f"layout must be 'time' or 'scenario', got {layout!r}")
     if inputs == "loop":
         sig = grid_signal_batch(fll_scenarios(batch), dtype)
     elif inputs == "precomputed":
         u, truth = _fll_samples(fll_scenarios(batch), round(t1 / TS), dtype)
-        sig = jax.vmap(lambda u, th, om, a: jaxobs.SampledSignal(u, TS, truth=(th, om, a)))(u, *truth)
+        if layout == "time":
+            sig = jaxobs.SampledSignal(u.T, TS, truth=tuple(a.T for a in truth), batch_inner=True)
+        else:
+            sig = jax.vmap(lambda u, th, om, a: jaxobs.SampledSignal(u, TS, truth=(th, om, a)))(u, *truth)
     else:
         raise ValueError(f"inputs must be 'loop' or 'precomputed', got {inputs!r}")
 
     def one(s):
         return jaxobs.simulate(jaxobs.OnSignal(obs, s), t1, save=jaxobs.SaveFinal(cost=fll_cost)).cost
 
-    return _batched(one, shard), (jaxobs.shard_batch(sig) if shard else sig)
+    return _batched(one, shard, sig), (jaxobs.shard_batch(sig) if shard else sig)
 
 
 @functools.partial(jax.jit, static_argnums=(1, 2))

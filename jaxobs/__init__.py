@@ -80,6 +80,7 @@ from .observers import PureIntegratorFlux as PureIntegratorFlux
 from .observers import SecondOrderSOIFO as SecondOrderSOIFO
 from .sharding import batch_mesh as batch_mesh
 from .sharding import init_distributed as init_distributed
+from .sharding import batch_axes as batch_axes
 from .sharding import map_batch as map_batch
 from .sharding import shard_batch as shard_batch
 from .sharding import use_host_devices as use_host_devices
@@ -158,6 +159,7 @@ __all__ = [
     "init_distributed",
     "batch_mesh",
     "shard_batch",
+    "batch_axes",
     "map_batch",
     "use_compile_cache",
     "kept_jit",
