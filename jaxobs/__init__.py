@@ -78,9 +78,9 @@ from .observers import LPFFlux as LPFFlux
 from .observers import ObserverBank as ObserverBank
 from .observers import PureIntegratorFlux as PureIntegratorFlux
 from .observers import SecondOrderSOIFO as SecondOrderSOIFO
+from .sharding import batch_axes as batch_axes
 from .sharding import batch_mesh as batch_mesh
 from .sharding import init_distributed as init_distributed
-from .sharding import batch_axes as batch_axes
 from .sharding import map_batch as map_batch
 from .sharding import shard_batch as shard_batch
 from .sharding import use_host_devices as use_host_devices

@@ -157,7 +157,9 @@ def test_time_major_signal_rejects_bad_input():
     with pytest.raises(ValueError, match=r"batch_inner must be True or False"):
         jaxobs.SampledSignal(np.ones((10, 2)), TS, batch_inner=1)
     with pytest.raises(ValueError, match=r"truth.amplitude must have the shape of samples"):
-        jaxobs.SampledSignal(np.ones((10, 2)), TS, batch_inner=True, truth=(np.ones((10, 2)),) * 2 + (np.ones((2, 10)),))
+        jaxobs.SampledSignal(
+            np.ones((10, 2)), TS, batch_inner=True, truth=(np.ones((10, 2)),) * 2 + (np.ones((2, 10)),)
+        )
     sig = jaxobs.SampledSignal(np.arange(20.0).reshape(10, 2), TS, batch_inner=True)
     assert sig.n == 10 and sig.t_end == pytest.approx(9 * TS)
     np.testing.assert_array_equal(sig(3 * TS), [6.0, 7.0])  # the batch object read at a sample instant
