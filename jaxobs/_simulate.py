@@ -332,8 +332,9 @@ class OnSignal(AbstractSystem):
         return self.time(k) + offset if offset else self.time(k)
 
     def init(self):
-        if self._rows_offset() is not None:  # sample 0 read where it lies (a dynamic read would move the batch)
-            return self.observer.init(self.signal.samples[self._rows_offset()])
+        off = self._rows_offset()
+        if off is not None:  # sample 0 read where it lies (a dynamic read would move the batch axis)
+            return self.observer.init(self.row_input(jax.tree.map(lambda a: a[off], self._rows()))[0])
         if getattr(self.signal, "accepts_sample_time", False):
             return self.observer.init(self.signal(self._at(0)))
         return self.observer.init(self.signal(jnp.asarray(self.t0, jnp.result_type(float))))
@@ -364,28 +365,38 @@ class OnSignal(AbstractSystem):
         return round(off) if abs(off - round(off)) <= 1e-9 else None
 
     def _rows_offset(self) -> int | None:
-        """The sample offset when this system's inputs are a time-major :class:`SampledSignal` batch's rows."""
-        if isinstance(self.signal, SampledSignal) and self.signal.batch_inner:
+        """The sample offset when this system's inputs are a time-major recording batch's rows."""
+        if getattr(self.signal, "batch_inner", False):
             return self._sample_offset()
         return None
 
+    def _rows(self):
+        """The recording's arrays with time leading: (samples, truth arrays or None)."""
+        sig = self.signal
+        if isinstance(sig, DriveRecording):
+            return sig.samples, sig.theta_e, sig.omega_e
+        return sig.samples, sig.truth
+
     def input_rows(self, n: int):
-        """The inputs of all ``n`` steps as scan rows (leading axis n), or ``None``: for a time-major
-        :class:`SampledSignal` batch on this system's sample grid (``batch_inner=True``), its samples
-        ``[off, off + n)``; under ``map_batch`` each is read a contiguous ``(B,)`` row per step
-        (:mod:`jaxobs._loop`, point 6).  A static slice, so the batch axis stays inner; with the horizon the
-        whole recording, no slice at all."""
+        """The rows of all ``n`` steps (leading axis n; :meth:`row_input` makes a step's input of one), or
+        ``None``: for a time-major recording batch on this system's sample grid (``batch_inner=True``), its
+        arrays' rows ``[off, off + n)``.  Under ``map_batch`` the loop reads them one contiguous row per step
+        (:mod:`jaxobs._loop`, point 6): a static slice keeps the batch axis inner, and with the horizon the
+        whole recording there is no slice at all."""
         off = self._rows_offset()
         if off is None:
             return None
-        sig = self.signal
+        return jax.tree.map(lambda a: a if (off == 0 and a.shape[0] == n) else a[off : off + n], self._rows())
 
-        def rows(a):
-            return a if (off == 0 and a.shape[0] == n) else a[off : off + n]
-
-        u = rows(sig.samples)
-        truth = SignalTruth(*(rows(a) for a in sig.truth)) if sig.truth is not None else None
-        return u, u, truth
+    def row_input(self, row):
+        """``input(k)`` from row k of :meth:`input_rows` (the same values: the recording snaps to its samples)."""
+        if isinstance(self.signal, DriveRecording):
+            m, th, om = row
+            u = DriveInput(u_a=m[0], u_b=m[1], i_a=m[2], i_b=m[3])
+            truth = SignalTruth(th, om, jnp.sqrt(u.u_a * u.u_a + u.u_b * u.u_b)) if th is not None else None
+            return u, u, truth
+        u, truth = row
+        return u, u, (SignalTruth(*truth) if truth is not None else None)
 
     def input_block(self, kb):
         """``input`` at the consecutive sample indices ``kb`` (leading axis the block), computed together.
@@ -532,6 +543,9 @@ def simulate(
             unroll = min(getattr(system, "rows_unroll", unroll), n)
             while n % unroll:  # a remainder would be split off the rows: a copy of the horizon
                 unroll -= 1
+
+    if rows is not None:
+        advance = lambda state, row: system.advance(state, system.row_input(row))  # noqa: E731
 
     def body(carry, x):
         state, out = advance(carry.state, x)

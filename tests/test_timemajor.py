@@ -72,9 +72,11 @@ def test_plain_loop_and_offsets_on_a_time_major_batch(recs):
     plain = _run(obs, t1, jaxobs.SaveAll(cost=W.fll_cost), t0=t0)(time_major)
     np.testing.assert_allclose(fast.cost, plain.cost, rtol=1e-12)
     system = jaxobs.OnSignal(obs, jax.tree.map(lambda a: a[:, 0], time_major), t0=t0)
-    u, _, truth = system.input_rows(401)
+    u, truth = system.input_rows(401)
     np.testing.assert_array_equal(u, time_major.samples[5:406, 0])
-    np.testing.assert_array_equal(truth.omega, time_major.truth[1][5:406, 0])
+    np.testing.assert_array_equal(truth[1], time_major.truth[1][5:406, 0])
+    u7, _, truth7 = system.row_input(jax.tree.map(lambda a: a[7], (u, truth)))
+    assert float(u7) == float(time_major.samples[12, 0]) and float(truth7.omega) == float(time_major.truth[1][12, 0])
 
 
 def test_rows_are_read_where_they_lie():
@@ -163,3 +165,44 @@ def test_time_major_signal_rejects_bad_input():
     sig = jaxobs.SampledSignal(np.arange(20.0).reshape(10, 2), TS, batch_inner=True)
     assert sig.n == 10 and sig.t_end == pytest.approx(9 * TS)
     np.testing.assert_array_equal(sig(3 * TS), [6.0, 7.0])  # the batch object read at a sample instant
+
+
+def test_time_major_drive_recordings_compute_what_scenario_major_ones_compute():
+    """Three drive recordings (the shipped one, its currents scaled by 0.97 and 1.03), as a scenario-major
+    batch and as a time-major one (``DriveRecording(batch_inner=True)``, leaves (n, B, 4) and (n, B)): 000's
+    second-order SOIFO by RK4 (its default: no start-up to fill) and by AB3 (the filled history on a drive
+    observer's state, which carries the previous sample's current beside x) gives the same costs."""
+    from pathlib import Path
+
+    from jaxobs import drive as D
+    from jaxobs import metrics as M
+    from jaxobs import papers
+
+    csv = Path(__file__).resolve().parents[1] / "tuning" / "presets" / "recordings" / "drive_spmsm_1000rpm.csv"
+    rec = jaxobs.DriveRecording.from_csv(csv, time_column="t", theta_e="theta_e", omega_e="omega_e")
+    m = np.asarray(rec.samples)  # (4, n)
+    scale = np.array([0.97, 1.0, 1.03])
+    chans = [np.outer(m[c], np.ones(3)) * (scale if c >= 2 else 1.0) for c in range(4)]  # each (n, 3)
+    th, om = (np.outer(np.asarray(a), np.ones(3)) for a in (rec.theta_e, rec.omega_e))
+    time_major = jaxobs.DriveRecording(*chans, rec.ts, theta_e=th, omega_e=om, batch_inner=True)
+    by_scenario = jaxobs.DriveRecording(*(c.T for c in chans), rec.ts, theta_e=th.T, omega_e=om.T)
+    assert time_major.samples.shape == (rec.n, 3, 4) and time_major.n == rec.n
+    np.testing.assert_array_equal(time_major(5 * rec.ts).i_a, by_scenario(5 * rec.ts).i_a)
+
+    par = D.spmsm_paper000()
+    k1, k2 = papers.SECOND_ORDER_SOIFO_K1, papers.SECOND_ORDER_SOIFO_K2
+
+    def cost(o):
+        return M.wrap(o.obs.theta - o.truth.theta) ** 2 + 1e-3 * o.truth.amplitude + 1e-6 * o.u.i_b
+
+    for rule in (None, jaxobs.AB3()):
+        obs = jaxobs.SecondOrderSOIFO(par.Rs, par.Ld, k1, k2, k1**3 / (2 * k2), 2 * np.pi * 50, rule=rule)
+        for save in (jaxobs.SaveFinal(cost=cost), jaxobs.SaveAll(cost=cost)):
+            f = jax.jit(
+                lambda b, obs=obs, save=save: jaxobs.map_batch(
+                    lambda r: jaxobs.simulate(jaxobs.OnSignal(obs, r), 0.2, save=save).cost, b
+                )
+            )
+            a, b = f(by_scenario), f(time_major)
+            np.testing.assert_allclose(b, a, rtol=1e-12)
+            assert np.ptp(np.asarray(a)) > 1e-4 * np.max(np.abs(a))

@@ -434,24 +434,37 @@ class DriveRecording(eqx.Module):
     Leaves may carry a leading batch axis (recordings of one length).
     """
 
-    samples: jax.Array  # (..., 4, n): u_α, u_β (V), i_α, i_β (A)
-    theta_e: jax.Array | None  # (..., n) encoder electrical angle, rad (unwrapped), or None
-    omega_e: jax.Array | None  # (..., n) electrical speed, rad/s, or None
+    samples: jax.Array  # (..., 4, n): u_α, u_β (V), i_α, i_β (A); a time-major batch (n, B, 4)
+    theta_e: jax.Array | None  # (..., n) encoder electrical angle, rad (unwrapped), or None; time-major (n, B)
+    omega_e: jax.Array | None  # (..., n) electrical speed, rad/s, or None; time-major (n, B)
     ts: float = eqx.field(static=True)
     t0: float = eqx.field(static=True)
+    batch_inner: bool = eqx.field(static=True)  # a time-major batch (SampledSignal's batch_inner)
 
     SNAP = SampledSignal.SNAP
 
-    def __init__(self, u_a, u_b, i_a, i_b, ts, *, theta_e=None, omega_e=None, t0=0.0):
+    def __init__(self, u_a, u_b, i_a, i_b, ts, *, theta_e=None, omega_e=None, t0=0.0, batch_inner=False):
+        """``batch_inner=True``: u_a ... i_b (and theta_e, omega_e) are a batch stored time-major, each (n, B),
+        read by the throughput loop a row per step as :class:`SampledSignal`'s time-major batches are."""
         own = "DriveRecording"
+        if not isinstance(batch_inner, bool):
+            raise ValueError(f"{own}.batch_inner must be True or False, got {batch_inner!r}")
         arrs = [check_real(nm, a, owner=own) for nm, a in zip(("u_a", "u_b", "i_a", "i_b"), (u_a, u_b, i_a, i_b))]
         shape = arrs[0].shape
-        if len(shape) < 1 or shape[-1] < 2:
+        if batch_inner and (len(shape) != 2 or shape[0] < 2 or shape[1] < 1):
+            raise ValueError(
+                f"{own}.u_a of a time-major batch (batch_inner=True) must be shaped (n, B) with n >= 2 samples "
+                f"and B >= 1 scenarios, got shape {shape}"
+            )
+        if not batch_inner and (len(shape) < 1 or shape[-1] < 2):
             raise ValueError(f"{own}.u_a must hold at least 2 samples along its last axis, got shape {shape}")
         for nm, a in zip(("u_b", "i_a", "i_b"), arrs[1:]):
             if a.shape != shape:
                 raise ValueError(f"{own}.{nm} must have the shape of u_a {shape}, got {a.shape}")
-        self.samples = jnp.stack(arrs, axis=-2)
+        # time-major: (n, B, 4), so that one scenario's rows are (n, 4) with the batch at axis 1, where
+        # lax.scan keeps a batched input's batch axis (another place would be a transpose of the recording)
+        self.samples = jnp.stack(arrs, axis=-1 if batch_inner else -2)
+        self.batch_inner = batch_inner
         self.ts = check_sample_time("ts", ts, own)
         self.t0 = static_float(check_real("t0", t0, owner=own), t0)
         if theta_e is None and omega_e is not None:
@@ -461,15 +474,20 @@ class DriveRecording(eqx.Module):
             if theta_e.shape != shape:
                 raise ValueError(f"{own}.theta_e must have the shape of u_a {shape}, got {theta_e.shape}")
             if omega_e is None:  # the angle's derivative: centred differences (one-sided at the ends)
-                omega_e = jnp.gradient(theta_e, self.ts, axis=-1)
+                omega_e = jnp.gradient(theta_e, self.ts, axis=0 if batch_inner else -1)
             omega_e = check_real("omega_e", omega_e, owner=own)
             if omega_e.shape != shape:
                 raise ValueError(f"{own}.omega_e must have the shape of u_a {shape}, got {omega_e.shape}")
         self.theta_e, self.omega_e = theta_e, omega_e
 
     @property
+    def batch_axis(self) -> int:
+        """The axis of the leaves that :func:`jaxobs.map_batch` maps over: 1 for a time-major batch, else 0."""
+        return 1 if self.batch_inner else 0
+
+    @property
     def n(self) -> int:
-        return self.samples.shape[-1]
+        return self.samples.shape[0] if self.batch_inner else self.samples.shape[-1]
 
     @property
     def t_end(self) -> float:
@@ -480,19 +498,24 @@ class DriveRecording(eqx.Module):
     def has_truth(self) -> bool:
         return self.theta_e is not None
 
+    def _read(self, arr, t):
+        if self.batch_inner:  # time first: read it last (a scenario's (n, 4) as (4, n); a batch's as (B, 4, n))
+            arr = jnp.moveaxis(arr, 0, -1)
+        return _read_samples(arr, t, self.t0, self.ts, self.SNAP)
+
     def __call__(self, t):
-        x = _read_samples(self.samples, t, self.t0, self.ts, self.SNAP)
+        x = self._read(self.samples, t)
         return DriveInput(u_a=x[..., 0], u_b=x[..., 1], i_a=x[..., 2], i_b=x[..., 3])
 
     def theta(self, t):
         if self.theta_e is None:
             raise ValueError("DriveRecording was built without theta_e (the encoder angle)")
-        return _read_samples(self.theta_e, t, self.t0, self.ts, self.SNAP)
+        return self._read(self.theta_e, t)
 
     def omega(self, t):
         if self.omega_e is None:
             raise ValueError("DriveRecording was built without theta_e (the encoder angle)")
-        return _read_samples(self.omega_e, t, self.t0, self.ts, self.SNAP)
+        return self._read(self.omega_e, t)
 
     def fundamental_amplitude(self, t):
         m = self(t)
