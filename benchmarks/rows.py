@@ -52,8 +52,8 @@ def main(argv=None) -> int:
                 for inputs in a.inputs:
                     fn, args = W.jax_fll(kind, batch, inputs, a.horizon)
                     group = {"jaxobs": partial(fn, args)}
-                    if kind == "sogi-fll" and inputs == "precomputed":
-                        hand, hargs = W.jax_hand_fll(batch, a.horizon)
+                    if inputs == "precomputed":
+                        hand, hargs = W.jax_hand_fll(batch, a.horizon, kind)
                         group["jax-hand"] = partial(hand, *hargs)
                     run = baselines.numba_fll_inner(kind, dtype, inputs)
                     run(*baselines.fll_inner_args(kind, 2, dtype, inputs, 3))  # compile

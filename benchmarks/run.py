@@ -1,7 +1,7 @@
 """Timing, the result rows, the text table: scenario-steps per second of jaxobs beside NumPy and numba.
 
 Implementations: ``jaxobs`` (:mod:`benchmarks.workloads`: ``jit`` of
-:func:`jaxobs.map_batch` over ``simulate``); ``jax-hand`` (the precomputed SOGI-FLL hand-written in JAX: one
+:func:`jaxobs.map_batch` over ``simulate``); ``jax-hand`` (each precomputed FLL hand-written in JAX: one
 scan over time-major rows, :func:`benchmarks.workloads.jax_hand_fll`, equal to jaxobs; it separates what is
 jaxobs's loop from what is XLA's CPU code generation); ``numba-inner``, the reference of
 the ratios (the batch the inner SIMD loop over time-major arrays, threads over
@@ -153,9 +153,9 @@ def run_bench(
                 for inputs in ("loop", "precomputed"):
                     fn, args = W.jax_fll(kind, batch, inputs, fll_t1)
                     group = {"jaxobs": partial(fn, args)}
-                    if kind == "sogi-fll" and inputs == "precomputed":
+                    if inputs == "precomputed":
                         # the same program hand-written in JAX: XLA's pace on the minimal step
-                        hand, hargs = W.jax_hand_fll(batch, fll_t1)
+                        hand, hargs = W.jax_hand_fll(batch, fll_t1, kind)
                         group["jax-hand"] = partial(hand, *hargs)
                     if have_numba:
                         run = baselines.numba_fll_inner(kind, dtype, inputs)

@@ -320,27 +320,56 @@ def grad_temp_mb(kind: str = "sogi-fll", batch: int = 1024, t1: float = 10.0, ch
 # ---------------------------------------------------------------------------
 
 
-def _sogi_fll_field(obs):
-    """The SOGI-FLL's vector field on state rows (y, q, ω) — the formulas of jaxobs.SOGIFLL.f / kernels.f_sogifll."""
-    k, lam, vf2 = obs.k, obs.lam, obs.v_floor * obs.v_floor
+def _fll_field(kind: str, obs):
+    """The FLL's vector field on state rows (the last one ω̂) — the formulas of jaxobs's ``f`` and of
+    benchmarks.kernels.fll (f_sogifll, f_wpf, f_wif with fll_error="input")."""
+    vf2 = obs.v_floor * obs.v_floor
+    if kind == "sogi-fll":
+        k, lam = obs.k, obs.lam
 
-    def f(y, q, w, u):
-        e = u - y
-        return w * (k * e - q), w * y, -lam * e * q / jnp.maximum(y * y + q * q, vf2)
+        def f(y, q, w, u):
+            e = u - y
+            return w * (k * e - q), w * y, -lam * e * q / jnp.maximum(y * y + q * q, vf2)
 
+    elif kind == "sogi-fll-wpf":
+        k1, k2, lam = obs.k1, obs.k2, obs.lam
+
+        def f(p, qp, y, q, w, u):
+            return (
+                w * (k1 * (u - p) - qp),
+                w * p,
+                w * (k2 * (p - y) - q),
+                w * y,
+                -lam * (p - y) * q / jnp.maximum(y * y + q * q, vf2),
+            )
+
+    elif kind == "sogi-fll-wif":
+        k1, k2, lam = obs.k1, obs.k2, obs.lam
+
+        def f(za, zb, y, q, w, u):
+            return (
+                w * (k1 * (k2 * (u - y) - za) - zb),
+                w * za,
+                w * (za - q),
+                w * y,
+                -(lam / k2) * za * q / jnp.maximum(y * y + q * q, vf2),
+            )
+
+    else:
+        raise ValueError(f"FLL workload must be one of {FLL_KINDS}, got {kind!r}")
     return f
 
 
-def sogi_fll_tuple_step(obs, h):
+def fll_tuple_step(kind: str, obs, h):
     """jax-hand's steady AB3 step on state rows: ``step((x, f1, f2, acc), (u, ω)) -> (carry, None)`` with x, f1,
-    f2 tuples of the (y, q, ω̂) rows and acc the running sum of (ω̂ − ω)² (the output at t_k is the state before
-    the update, as in jaxobs.AbstractObserver.step)."""
-    f = _sogi_fll_field(obs)
+    f2 tuples of the state's rows (ω̂ last) and acc the running sum of (ω̂ − ω)² (the output at t_k is the state
+    before the update, as in jaxobs.AbstractObserver.step)."""
+    f = _fll_field(kind, obs)
 
     def step(c, row):
         x, f1, f2, acc = c
         uu, ww = row
-        d = x[2] - ww
+        d = x[-1] - ww
         f0 = f(*x, uu)
         x = tuple(xi + (h / 12) * (23 * a - 16 * b + 5 * cc) for xi, a, b, cc in zip(x, f0, f1, f2))
         return (x, f0, f1, acc + d * d), None
@@ -348,8 +377,13 @@ def sogi_fll_tuple_step(obs, h):
     return step
 
 
-def jax_hand_fll(batch: int, t1: float = FLL_T1):
-    """(jitted function, its arguments): the precomputed SOGI-FLL workload hand-written in JAX as a performance
+def sogi_fll_tuple_step(obs, h):
+    """:func:`fll_tuple_step` of the SOGI-FLL (benchmarks.tiles)."""
+    return fll_tuple_step("sogi-fll", obs, h)
+
+
+def jax_hand_fll(batch: int, t1: float = FLL_T1, kind: str = "sogi-fll"):
+    """(jitted function, its arguments): the precomputed FLL workload hand-written in JAX as a performance
     engineer would write it for XLA — the inputs time-major (n, B), every state component and AB3 history entry
     its own (B,) row, one plain ``lax.scan`` over time with the batch the inner dimension, the batch split over
     the host devices with ``shard_map`` along it, each device running its whole share.
@@ -362,7 +396,7 @@ def jax_hand_fll(batch: int, t1: float = FLL_T1):
     from jax.sharding import NamedSharding
     from jax.sharding import PartitionSpec as P
 
-    kind, dtype = "sogi-fll", jnp.result_type(float)
+    dtype = jnp.result_type(float)
     obs = fll_observer(kind)
     n = round(t1 / TS)
     u, truth = _fll_samples(fll_scenarios(batch), n, dtype)
@@ -377,14 +411,15 @@ def jax_hand_fll(batch: int, t1: float = FLL_T1):
         return jax.vmap(one)(sig)
 
     x, f1, f2, acc = start(sig)
+    S = x.shape[1]  # state components: 3 for the SOGI-FLL, 5 for the WPF and the WIF
     h = jnp.asarray(TS, dtype)
-    step = sogi_fll_tuple_step(obs, h)
+    step = fll_tuple_step(kind, obs, h)
 
     def kernel(x, f1, f2, acc, U, OM):
         (_, _, _, acc), _ = jax.lax.scan(step, (x, f1, f2, acc), (U, OM))
         return h * acc
 
-    rows = lambda a: tuple(a.T)  # noqa: E731  (B, 3) -> three (B,) rows
+    rows = lambda a: tuple(a.T)  # noqa: E731  (B, S) -> S (B,) rows
     devs = jax.devices()
     mesh = jaxobs.batch_mesh(devs if batch % len(devs) == 0 else devs[:1])  # as shard_batch: uneven runs whole
     spec_b, spec_tb = P("batch"), P(None, "batch")
@@ -392,7 +427,7 @@ def jax_hand_fll(batch: int, t1: float = FLL_T1):
         jax.shard_map(
             kernel,
             mesh=mesh,
-            in_specs=((spec_b,) * 3, (spec_b,) * 3, (spec_b,) * 3, spec_b, spec_tb, spec_tb),
+            in_specs=((spec_b,) * S, (spec_b,) * S, (spec_b,) * S, spec_b, spec_tb, spec_tb),
             out_specs=spec_b,
             check_vma=False,
         )

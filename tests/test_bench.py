@@ -57,9 +57,11 @@ def test_bench_quick_json(tmp_path):
     rows = res["rows"]
     assert {"workload", "impl", "dtype", "batch", "steps_per_s", "ratio_vs_numba_inner"} <= set(rows[0])
     # quick: float64, batch 1024, jaxobs beside the batch-inner numba kernels (the ratios' reference), NumPy and
-    # the hand-written JAX kernel (precomputed SOGI-FLL only)
+    # the hand-written JAX kernels (every precomputed FLL)
     assert {r["impl"] for r in rows} == {"jaxobs", "jax-hand", "numba-inner", "numpy"}
-    assert {(r["workload"], r["inputs"]) for r in rows if r["impl"] == "jax-hand"} == {("sogi-fll", "precomputed")}
+    assert {(r["workload"], r["inputs"]) for r in rows if r["impl"] == "jax-hand"} == {
+        (k, "precomputed") for k in {r["workload"] for r in rows} if k in W.FLL_KINDS
+    }
     assert {r["dtype"] for r in rows} == {"f64"} and {r["batch"] for r in rows} == {1024}
     assert res["ceilings"]["bandwidth_gbs"] > 0
     assert all(r["steps_per_s"] > 0 for r in rows)

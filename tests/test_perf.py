@@ -388,11 +388,12 @@ def test_recording_is_read_a_block_at_a_time():
             np.testing.assert_array_equal(a, b)
 
 
-def test_hand_written_jax_kernel_equals_jaxobs():
-    """The bench's `jax-hand` row (benchmarks.workloads.jax_hand_fll: the precomputed SOGI-FLL written directly
-    as one scan over time-major rows) computes jaxobs's costs, past the event at 0.2 s where the scenarios part."""
-    fn, args = B.jax_fll("sogi-fll", 4, "precomputed", 0.25, shard=False)
+@pytest.mark.parametrize("kind", B.FLL_KINDS)
+def test_hand_written_jax_kernel_equals_jaxobs(kind):
+    """The bench's `jax-hand` rows (benchmarks.workloads.jax_hand_fll: each precomputed FLL written directly
+    as one scan over time-major rows) compute jaxobs's costs, past the event at 0.2 s where the scenarios part."""
+    fn, args = B.jax_fll(kind, 4, "precomputed", 0.25, shard=False)
     ref = np.asarray(fn(args))
-    hand, hargs = B.jax_hand_fll(4, 0.25)
+    hand, hargs = B.jax_hand_fll(4, 0.25, kind)
     np.testing.assert_allclose(np.asarray(hand(*hargs)), ref, rtol=1e-10)
     assert np.ptp(ref) > 1e-3 * np.max(np.abs(ref))
