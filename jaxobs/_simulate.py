@@ -440,15 +440,31 @@ class OnSignal(AbstractSystem):
         return self.advance(state, self.input(k))
 
     def check_horizon(self, n: int):
-        """A recording cannot be read outside its samples (it holds its end values, which would be a lie)."""
+        """A recording cannot be read outside its samples (it holds its end values, which would be a lie); a
+        time-major batch runs one scenario at a time (under map_batch, or a vmap along its inner axis)."""
         sig = self.signal
+        inner = isinstance(sig, (SampledSignal, DriveRecording)) and sig.batch_inner
+        if inner and sig.samples.ndim != (1 if isinstance(sig, SampledSignal) else 2):  # a scenario's (n,), (n, 4)
+            raise ValueError(
+                f"simulate: OnSignal.signal is a time-major batch of {sig.samples.shape[1]} recordings "
+                f"({type(sig).__name__}(batch_inner=True), samples {sig.samples.shape}) and simulate runs one: "
+                "map it with jaxobs.map_batch(fn, batch) or jax.vmap(fn, in_axes=(jaxobs.batch_axes(batch),))"
+            )
         if isinstance(sig, (SampledSignal, DriveRecording)):
             t_last = self.t0 + self.ts * (n - 1)
             tol = SampledSignal.SNAP * sig.ts
             if self.t0 < sig.t0 - tol or t_last > sig.t_end + tol:
+                # jax.vmap's default in_axes=0 maps a time-major batch along time: each "recording" is then
+                # one sample of every scenario, B samples long, which this check is the first to see
+                hint = (
+                    f" (if this time-major batch was mapped by jax.vmap's default in_axes=0, each scenario here is "
+                    f"one row of it, {sig.n} samples: use jaxobs.map_batch or in_axes=(jaxobs.batch_axes(batch),))"
+                    if inner
+                    else ""
+                )
                 raise ValueError(
                     f"simulate: the horizon [t0, t0 + ts*(n-1)] = [{self.t0:g}, {t_last:g}] s must lie inside the "
-                    f"{type(sig).__name__}'s samples [{sig.t0:g}, {sig.t_end:g}] s"
+                    f"{type(sig).__name__}'s samples [{sig.t0:g}, {sig.t_end:g}] s{hint}"
                 )
 
 

@@ -167,6 +167,30 @@ def test_time_major_signal_rejects_bad_input():
     np.testing.assert_array_equal(sig(3 * TS), [6.0, 7.0])  # the batch object read at a sample instant
 
 
+def test_a_time_major_batch_simulated_whole_or_mapped_along_time_is_refused():
+    """simulate runs one scenario: a time-major batch given to it unmapped, or mapped along time by jax.vmap's
+    default in_axes=0 (each "recording" then one row, B samples long), is a ValueError naming the remedy."""
+    _, time_major = _recordings(3, 200)
+    obs = W.fll_observer("sogi-fll")
+
+    def run(s):
+        return jaxobs.simulate(jaxobs.OnSignal(obs, s), 100 * TS, save=jaxobs.SaveFinal(cost=W.fll_cost)).cost
+
+    with pytest.raises(ValueError, match=r"OnSignal.signal is a time-major batch of 3 recordings .*batch_axes"):
+        run(time_major)
+    u = np.asarray(time_major.samples)
+    drive_batch = jaxobs.DriveRecording(u, u, u, u, TS, batch_inner=True)
+    with pytest.raises(ValueError, match=r"time-major batch of 3 recordings \(DriveRecording"):
+        jaxobs.OnSignal(W.fll_observer("sogi-fll"), drive_batch).check_horizon(100)
+    with pytest.raises(
+        ValueError,
+        match=r"must lie inside .*default in_axes=0, each scenario here is one row of it, 3 samples",
+    ):
+        jax.vmap(run)(time_major)
+    got = jax.vmap(run, in_axes=(batch_axes(time_major),))(time_major)  # the remedy the messages name
+    np.testing.assert_allclose(got, jax.jit(lambda b: jaxobs.map_batch(run, b))(time_major), rtol=1e-12)
+
+
 def test_time_major_drive_recordings_compute_what_scenario_major_ones_compute():
     """Three drive recordings (the shipped one, its currents scaled by 0.97 and 1.03), as a scenario-major
     batch and as a time-major one (``DriveRecording(batch_inner=True)``, leaves (n, B, 4) and (n, B)): 000's
