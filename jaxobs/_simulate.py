@@ -366,7 +366,7 @@ class OnSignal(AbstractSystem):
 
     def _rows_offset(self) -> int | None:
         """The sample offset when this system's inputs are a time-major recording batch's rows."""
-        if getattr(self.signal, "batch_inner", False):
+        if isinstance(self.signal, (SampledSignal, DriveRecording)) and self.signal.batch_inner:
             return self._sample_offset()
         return None
 
@@ -450,21 +450,22 @@ class OnSignal(AbstractSystem):
                 f"({type(sig).__name__}(batch_inner=True), samples {sig.samples.shape}) and simulate runs one: "
                 "map it with jaxobs.map_batch(fn, batch) or jax.vmap(fn, in_axes=(jaxobs.batch_axes(batch),))"
             )
+        if inner and sig.samples.shape[0] != sig.n_time:
+            # jax.vmap's default in_axes=0 maps a time-major batch along time: each "recording" is then one
+            # sample of every scenario; the recording's length, kept static, tells
+            raise ValueError(
+                f"simulate: OnSignal.signal is a time-major batch mapped along its time axis (each scenario sees "
+                f"{sig.samples.shape[0]} values of a recording of {sig.n_time} samples; jax.vmap's default "
+                "in_axes=0 does that): map it with jaxobs.map_batch(fn, batch) or "
+                "jax.vmap(fn, in_axes=(jaxobs.batch_axes(batch),))"
+            )
         if isinstance(sig, (SampledSignal, DriveRecording)):
             t_last = self.t0 + self.ts * (n - 1)
             tol = SampledSignal.SNAP * sig.ts
             if self.t0 < sig.t0 - tol or t_last > sig.t_end + tol:
-                # jax.vmap's default in_axes=0 maps a time-major batch along time: each "recording" is then
-                # one sample of every scenario, B samples long, which this check is the first to see
-                hint = (
-                    f" (if this time-major batch was mapped by jax.vmap's default in_axes=0, each scenario here is "
-                    f"one row of it, {sig.n} samples: use jaxobs.map_batch or in_axes=(jaxobs.batch_axes(batch),))"
-                    if inner
-                    else ""
-                )
                 raise ValueError(
                     f"simulate: the horizon [t0, t0 + ts*(n-1)] = [{self.t0:g}, {t_last:g}] s must lie inside the "
-                    f"{type(sig).__name__}'s samples [{sig.t0:g}, {sig.t_end:g}] s{hint}"
+                    f"{type(sig).__name__}'s samples [{sig.t0:g}, {sig.t_end:g}] s"
                 )
 
 

@@ -183,10 +183,14 @@ def test_a_time_major_batch_simulated_whole_or_mapped_along_time_is_refused():
     with pytest.raises(ValueError, match=r"time-major batch of 3 recordings \(DriveRecording"):
         jaxobs.OnSignal(W.fll_observer("sogi-fll"), drive_batch).check_horizon(100)
     with pytest.raises(
-        ValueError,
-        match=r"must lie inside .*default in_axes=0, each scenario here is one row of it, 3 samples",
+        ValueError, match=r"mapped along its time axis \(each scenario sees 3 values of a recording of 200"
     ):
-        jax.vmap(run)(time_major)
+        jax.vmap(run)(time_major)  # B = 3 < the 100 steps: the horizon check would have caught it too
+    wide = jaxobs.SampledSignal(np.ones((50, 120)), TS, batch_inner=True)  # B = 120 > 40 steps: only this check
+    with pytest.raises(ValueError, match=r"each scenario sees 120 values of a recording of 50 samples.*batch_axes"):
+        jax.vmap(lambda s: jaxobs.simulate(jaxobs.OnSignal(obs, s), 40 * TS).ok)(wide)
+    with pytest.raises(ValueError, match=r"stack: .*time-major batch"):
+        jaxobs.stack([time_major, time_major])
     got = jax.vmap(run, in_axes=(batch_axes(time_major),))(time_major)  # the remedy the messages name
     np.testing.assert_allclose(got, jax.jit(lambda b: jaxobs.map_batch(run, b))(time_major), rtol=1e-12)
 

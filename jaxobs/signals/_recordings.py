@@ -58,6 +58,7 @@ class SampledSignal(eqx.Module):
     ts: float = eqx.field(static=True)  # sample interval, s
     t0: float = eqx.field(static=True)  # time of the first sample, s (static, so a horizon is checked when traced)
     batch_inner: bool = eqx.field(static=True)  # a time-major batch: leaves (n, B), mapped along their inner axis
+    n_time: int | None = eqx.field(static=True)  # a time-major batch's n, kept to check a scenario's view (simulate)
 
     SNAP = 1e-3  # fraction of a sample interval treated as "on" a sample instant
 
@@ -95,6 +96,7 @@ class SampledSignal(eqx.Module):
                     )
         self.truth = truth
         self.batch_inner = batch_inner
+        self.n_time = int(samples.shape[0]) if batch_inner else None
 
     @property
     def batch_axis(self) -> int:
@@ -440,6 +442,7 @@ class DriveRecording(eqx.Module):
     ts: float = eqx.field(static=True)
     t0: float = eqx.field(static=True)
     batch_inner: bool = eqx.field(static=True)  # a time-major batch (SampledSignal's batch_inner)
+    n_time: int | None = eqx.field(static=True)  # a time-major batch's n (SampledSignal's n_time)
 
     SNAP = SampledSignal.SNAP
 
@@ -465,6 +468,7 @@ class DriveRecording(eqx.Module):
         # lax.scan keeps a batched input's batch axis (another place would be a transpose of the recording)
         self.samples = jnp.stack(arrs, axis=-1 if batch_inner else -2)
         self.batch_inner = batch_inner
+        self.n_time = int(shape[0]) if batch_inner else None
         self.ts = check_sample_time("ts", ts, own)
         self.t0 = static_float(check_real("t0", t0, owner=own), t0)
         if theta_e is None and omega_e is not None:

@@ -196,6 +196,16 @@ def stack(modules):
     modules = list(modules)
     if not modules:
         raise ValueError("stack needs at least one module")
+
+    def declares(x):  # a node that says its scenario axis is not the leading one (jaxobs.batch_axes)
+        ax = getattr(x, "batch_axis", None)
+        return isinstance(ax, int) and not isinstance(ax, bool) and ax != 0
+
+    if any(declares(x) for m in modules for x in jax.tree.leaves(m, is_leaf=declares)):
+        raise ValueError(
+            "stack: a time-major batch (batch_inner=True) is a batch already; put its recordings side by side "
+            "along the inner axis instead (one (n, B) array per field) and build one batch"
+        )
     return jax.tree.map(lambda *xs: jnp.stack(xs), *modules)
 
 
