@@ -51,7 +51,11 @@ def test_ctrl_c_names_resume_and_rerun_names_resume_first(tmp_path):
         assert time.monotonic() < deadline, "no checkpoint within 240 s"
         time.sleep(0.2)
     p.send_signal(signal.SIGINT)
-    err = p.communicate(timeout=120)[1]
+    try:
+        err = p.communicate(timeout=120)[1]
+    except subprocess.TimeoutExpired:  # what it was doing, for the failure's message
+        p.kill()
+        raise AssertionError(f"still running 120 s after SIGINT; stderr:\n{p.communicate()[1][-3000:]}") from None
     assert p.returncode == 130, err
     last = err.strip().splitlines()[-1]
     assert last == f"jaxobs: interrupted; continue with: jaxobs tune {job} --out {out} --resume", err
@@ -77,3 +81,32 @@ def test_closed_form_error_names_the_flag(capsys):
     assert main(["closed-form", "wif", "--b", "-1"]) == 2
     err = capsys.readouterr().err.strip()
     assert err == "jaxobs: error: --b must be finite and > 1, got -1", err
+
+
+def test_a_ctrl_c_swallowed_by_a_finalizer_is_raised_again(monkeypatch):
+    """A KeyboardInterrupt raised inside a finalizer is printed and dropped by Python; under the command line's
+    handler (jaxobs_tuning.interrupt) the next check() raises it again, and outside it nothing is recorded."""
+    from jaxobs_tuning import interrupt
+
+    class Finalized:
+        def __del__(self):
+            os.kill(os.getpid(), signal.SIGINT)  # the handler runs here, inside the finalizer
+            time.sleep(0.01)
+
+    dropped = []  # what Python reports as "Exception ignored in ..."
+    monkeypatch.setattr(sys, "unraisablehook", lambda u: dropped.append(u.exc_type))
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        with interrupt.installed():
+            Finalized()  # collected at once: its KeyboardInterrupt is dropped
+            assert dropped == [KeyboardInterrupt]
+            try:
+                interrupt.check()
+            except KeyboardInterrupt:
+                pass
+            else:
+                raise AssertionError("the swallowed Ctrl-C was not raised again")
+        assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # put back
+        interrupt.check()  # cleared on leaving
+    finally:
+        signal.signal(signal.SIGINT, previous)
