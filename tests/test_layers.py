@@ -92,7 +92,7 @@ LAYERS = [
     ("jaxobs.reproduce.leso_dual", "jaxobs.reproduce.figures"),
     ("jaxobs.reproduce",),
     # tuning: it changes gains (and exports the tuned observer)
-    ("jaxobs_tuning.outdir", "jaxobs_tuning.checkpoint", "jaxobs_tuning.interrupt"),
+    ("jaxobs_tuning.outdir", "jaxobs_tuning.checkpoint"),
     # the C export's code generator (jaxpr -> C) is beside the rest: it knows no observer
     ("jaxobs_tuning.export.ir",),
     ("jaxobs_tuning.export.lower",),

@@ -79,7 +79,6 @@ import jaxobs
 from jaxobs import use_compile_cache, use_host_devices
 from jaxobs.chunkstore import ChunkStore
 
-from . import interrupt
 from .cli_common import enable_x64, progress_of
 from .cli_papers import BODE_FILES as BODE_FILES
 from .cli_papers import CF_OPTIONS, cmd_bode, cmd_closed_form, cmd_demo, cmd_reproduce
@@ -450,8 +449,7 @@ def main(argv=None) -> int:
             return 2
         if not getattr(args, "no_cache", False):
             use_compile_cache()  # before any compilation: compiled programs are reused by the next process
-        with interrupt.installed():  # a Ctrl-C swallowed by a finalizer is raised again (jaxobs_tuning.interrupt)
-            return args.func(args)
+        return args.func(args)
     except ValueError as e:  # bad input, job-file errors (JobError) included: one line, exit 2
         print(f"jaxobs: error: {e}", file=sys.stderr)
         return 2

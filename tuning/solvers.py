@@ -34,7 +34,6 @@ import optimistix as optx
 from jaxobs.progress import Progress
 from jaxobs.provenance import read_file
 
-from . import interrupt
 from .checkpoint import DIGEST, MAX_CHECKPOINT_BYTES, check_state, content_digest
 from .outdir import atomic_write_bytes
 
@@ -322,7 +321,6 @@ class OptaxSolver(AbstractSolver):
         if start:
             bar.update(start)
         for it in range(start, self.steps):
-            interrupt.check()  # a Ctrl-C that a finalizer swallowed ends the run here
             value, grad, ndiv = objective.value_grad_diverged(theta)
             value = float(value)
             history.append(_entry(objective, it, value, ndiv, theta))
