@@ -101,7 +101,7 @@ def main(argv=None) -> None:
     from jax.sharding import PartitionSpec as P
 
     h = jnp.asarray(W.TS, jnp.result_type(float))
-    tuple_step = W.sogi_fll_tuple_step(obs, h)  # jax-hand's own step
+    tuple_step = W.fll_tuple_step("sogi-fll", obs, h)  # jax-hand's own step
 
     def stacked_step(c, row):  # the same AB3 step on jaxobs's stacked state, through obs.f
         x, f1, f2, acc = c

@@ -377,11 +377,6 @@ def fll_tuple_step(kind: str, obs, h):
     return step
 
 
-def sogi_fll_tuple_step(obs, h):
-    """:func:`fll_tuple_step` of the SOGI-FLL (benchmarks.tiles)."""
-    return fll_tuple_step("sogi-fll", obs, h)
-
-
 def jax_hand_fll(batch: int, t1: float = FLL_T1, kind: str = "sogi-fll"):
     """(jitted function, its arguments): the precomputed FLL workload hand-written in JAX as a performance
     engineer would write it for XLA — the inputs time-major (n, B), every state component and AB3 history entry

@@ -552,17 +552,15 @@ def simulate(
     else:
         xs_map = None
     # a time-major batch of recordings: its rows are the scan's inputs (jaxobs._loop, point 6)
-    rows = system.input_rows(n) if blocked and hasattr(system, "input_rows") else None
+    rows = system.input_rows(n) if fast and isinstance(system, OnSignal) else None
     fill = None
     if rows is not None:
         xs_map, fill = None, functools.partial(ab3_steady_from_start, h=float(ts))
+        advance = lambda state, row: system.advance(state, system.row_input(row))  # noqa: E731
         if unroll_arg is None:
-            unroll = min(getattr(system, "rows_unroll", unroll), n)
+            unroll = min(system.rows_unroll, n)
             while n % unroll:  # a remainder would be split off the rows: a copy of the horizon
                 unroll -= 1
-
-    if rows is not None:
-        advance = lambda state, row: system.advance(state, system.row_input(row))  # noqa: E731
 
     def body(carry, x):
         state, out = advance(carry.state, x)

@@ -19,7 +19,46 @@ from .._validate import check_real, check_sample_time, static_float
 from ..provenance import read_file
 
 
-class SampledSignal(eqx.Module):
+class _Recording(eqx.Module):
+    """What the two recordings share: samples on a uniform grid t₀ + k·ts, read back by :func:`_read_samples`,
+    and the layout of a batch of them: scenario-major (time last), or time-major (``n_time`` set: the
+    recordings' length, time first and the scenarios inner; :class:`SampledSignal`'s doc)."""
+
+    samples: eqx.AbstractVar[jax.Array]
+    ts: eqx.AbstractVar[float]
+    t0: eqx.AbstractVar[float]
+    # a time-major batch's n, else None: static, so that a scenario's view of the batch is checked when traced
+    # (simulate refuses one mapped along time)
+    n_time: eqx.AbstractVar[int | None]
+
+    SNAP = 1e-3  # fraction of a sample interval treated as "on" a sample instant
+
+    @property
+    def batch_inner(self) -> bool:
+        """A time-major batch (built with ``batch_inner=True``)."""
+        return self.n_time is not None
+
+    @property
+    def batch_axis(self) -> int:
+        """The axis of the leaves that :func:`jaxobs.map_batch` maps over: 1 for a time-major batch, else 0."""
+        return 1 if self.batch_inner else 0
+
+    @property
+    def n(self) -> int:
+        return self.samples.shape[0] if self.batch_inner else self.samples.shape[-1]
+
+    @property
+    def t_end(self) -> float:
+        """Time of the last sample, s."""
+        return self.t0 + self.ts * (self.n - 1)
+
+    def _read(self, arr, t):
+        if self.batch_inner:  # time first: read it last (one scenario's (n,) or (n, 4) as (n,) or (4, n))
+            arr = jnp.moveaxis(arr, 0, -1)
+        return _read_samples(arr, t, self.t0, self.ts, self.SNAP)
+
+
+class SampledSignal(_Recording):
     """A signal given by its samples u_k = u(t₀ + k·ts): a recording, or a waveform computed once.
 
     ``sig(t)`` reads the samples back by linear interpolation; a time within
@@ -57,10 +96,7 @@ class SampledSignal(eqx.Module):
     truth: tuple | None  # (θ_k, ω_k, V_k), each shaped like samples, or None
     ts: float = eqx.field(static=True)  # sample interval, s
     t0: float = eqx.field(static=True)  # time of the first sample, s (static, so a horizon is checked when traced)
-    batch_inner: bool = eqx.field(static=True)  # a time-major batch: leaves (n, B), mapped along their inner axis
-    n_time: int | None = eqx.field(static=True)  # a time-major batch's n, kept to check a scenario's view (simulate)
-
-    SNAP = 1e-3  # fraction of a sample interval treated as "on" a sample instant
+    n_time: int | None = eqx.field(static=True)  # a time-major batch (batch_inner=True): its n; else None
 
     def __init__(self, samples, ts, t0=0.0, *, truth=None, batch_inner=False):
         own = "SampledSignal"
@@ -95,31 +131,11 @@ class SampledSignal(eqx.Module):
                         f"{own}.truth.{name} must have the shape of samples {samples.shape}, got {a.shape}"
                     )
         self.truth = truth
-        self.batch_inner = batch_inner
         self.n_time = int(samples.shape[0]) if batch_inner else None
-
-    @property
-    def batch_axis(self) -> int:
-        """The axis of the leaves that :func:`jaxobs.map_batch` maps over: 1 for a time-major batch, else 0."""
-        return 1 if self.batch_inner else 0
-
-    @property
-    def n(self) -> int:
-        return self.samples.shape[0] if self.batch_inner else self.samples.shape[-1]
 
     @property
     def has_truth(self) -> bool:
         return self.truth is not None
-
-    @property
-    def t_end(self) -> float:
-        """Time of the last sample, s."""
-        return self.t0 + self.ts * (self.n - 1)
-
-    def _read(self, arr, t):
-        if self.batch_inner:  # (n, B) read as (B, n); a no-op on one scenario's (n,) under vmap
-            arr = jnp.moveaxis(arr, 0, -1)
-        return _read_samples(arr, t, self.t0, self.ts, self.SNAP)
 
     def __call__(self, t):
         return self._read(self.samples, t)
@@ -423,7 +439,7 @@ def read_recording(
     }
 
 
-class DriveRecording(eqx.Module):
+class DriveRecording(_Recording):
     """A recording of a drive's measurements, (u_α, u_β, i_α, i_β) per sample, for a drive observer run open
     loop (``jaxobs.OnSignal(observer, recording)``), with the encoder's electrical angle when known.
 
@@ -441,10 +457,7 @@ class DriveRecording(eqx.Module):
     omega_e: jax.Array | None  # (..., n) electrical speed, rad/s, or None; time-major (n, B)
     ts: float = eqx.field(static=True)
     t0: float = eqx.field(static=True)
-    batch_inner: bool = eqx.field(static=True)  # a time-major batch (SampledSignal's batch_inner)
-    n_time: int | None = eqx.field(static=True)  # a time-major batch's n (SampledSignal's n_time)
-
-    SNAP = SampledSignal.SNAP
+    n_time: int | None = eqx.field(static=True)  # a time-major batch (batch_inner=True): its n; else None
 
     def __init__(self, u_a, u_b, i_a, i_b, ts, *, theta_e=None, omega_e=None, t0=0.0, batch_inner=False):
         """``batch_inner=True``: u_a ... i_b (and theta_e, omega_e) are a batch stored time-major, each (n, B),
@@ -467,7 +480,6 @@ class DriveRecording(eqx.Module):
         # time-major: (n, B, 4), so that one scenario's rows are (n, 4) with the batch at axis 1, where
         # lax.scan keeps a batched input's batch axis (another place would be a transpose of the recording)
         self.samples = jnp.stack(arrs, axis=-1 if batch_inner else -2)
-        self.batch_inner = batch_inner
         self.n_time = int(shape[0]) if batch_inner else None
         self.ts = check_sample_time("ts", ts, own)
         self.t0 = static_float(check_real("t0", t0, owner=own), t0)
@@ -485,27 +497,8 @@ class DriveRecording(eqx.Module):
         self.theta_e, self.omega_e = theta_e, omega_e
 
     @property
-    def batch_axis(self) -> int:
-        """The axis of the leaves that :func:`jaxobs.map_batch` maps over: 1 for a time-major batch, else 0."""
-        return 1 if self.batch_inner else 0
-
-    @property
-    def n(self) -> int:
-        return self.samples.shape[0] if self.batch_inner else self.samples.shape[-1]
-
-    @property
-    def t_end(self) -> float:
-        """Time of the last sample, s."""
-        return self.t0 + self.ts * (self.n - 1)
-
-    @property
     def has_truth(self) -> bool:
         return self.theta_e is not None
-
-    def _read(self, arr, t):
-        if self.batch_inner:  # time first: read it last (a scenario's (n, 4) as (4, n); a batch's as (B, 4, n))
-            arr = jnp.moveaxis(arr, 0, -1)
-        return _read_samples(arr, t, self.t0, self.ts, self.SNAP)
 
     def __call__(self, t):
         x = self._read(self.samples, t)
