@@ -71,8 +71,8 @@ def test_bench_quick_json(tmp_path):
     assert len(res["devices"]) == len(os.sched_getaffinity(0))  # jaxobs.use_host_devices(): one per usable core
 
 
-# The full run's parts after the throughput rows (issue 31): the command line and the tables, the measurements
-# themselves replaced by given rows (each runs minutes: benchmarks/README.md)
+# The full run's parts after the throughput rows (time to result and scale): the command line and the tables,
+# the measurements themselves replaced by given rows (each runs minutes: benchmarks/README.md)
 def test_bench_parts_from_the_command_line(capsys):
     from benchmarks.__main__ import parse_args
 
@@ -132,7 +132,7 @@ def test_bench_only_time_to_result_and_scale(monkeypatch, tmp_path, capsys):
     monkeypatch.setattr(bench, "run_bench", no_throughput)
     out = tmp_path / "bench.json"
     assert bench.main(["--only", "time-to-result", "scale", "--out", str(out)]) == 0
-    # the sizes issue 31 asks for: make run twice; FLL at 10⁶ scenarios, drive at 10⁵
+    # the full run's sizes: make run twice; FLL at 10⁶ scenarios, drive at 10⁵
     assert calls == [("time-to-result", ("make-run",), 2), ("scale", "fll", (10**6,)), ("scale", "drive", (10**5,))]
     res = json.loads(out.read_text())
     assert res["time_to_result"] == TTR_ROWS

@@ -294,7 +294,7 @@ def test_study_result_paths_are_relative_to_the_study_file(tmp_path, monkeypatch
 
 
 def test_check_also_checks_out(tmp_path, capsys):
-    """``--check`` refuses an ``--out`` the real run would refuse (issue 29): a folder with the results of
+    """``--check`` refuses an ``--out`` the real run would refuse: a folder with the results of
     an earlier run, a file in its place, a folder that cannot be created; a fresh folder passes, and
     ``--check`` creates nothing."""
     done = tmp_path / "done"

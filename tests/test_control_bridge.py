@@ -1,4 +1,4 @@
-"""jaxobs.linear <-> python-control (issue 29): real transfer functions convert both ways and give
+"""jaxobs.linear <-> python-control: real transfer functions convert both ways and give
 python-control's own frequency response and poles; complex ones are refused with one line; bode can
 return python-control's conventions.  float64 (conftest)."""
 

@@ -322,7 +322,7 @@ def test_processes_given_different_study_files_stop_before_computing(tmp_path):
 
 
 def test_a_coordinator_port_in_use_gets_one_line(tmp_path, capsys):
-    # process 0 with its port taken: JAX's "Failed to start RPC server" and a traceback before (issue 30)
+    # process 0 with its port taken: one line, not JAX's "Failed to start RPC server" and a traceback
     import socket
 
     with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
@@ -336,8 +336,8 @@ def test_a_coordinator_port_in_use_gets_one_line(tmp_path, capsys):
 
 
 def test_a_non_jax_listener_on_the_coordinator_port_gets_one_line(tmp_path, capsys):
-    # process 1 found something listening and joined: JAX's runtime aborted it after its timeout with a C++
-    # stack dump (issue 30).  A plain listener that says nothing, and one that answers HTTP/1, each end it in one
+    # a process that finds something listening and joins would have JAX's runtime abort it after its timeout
+    # with a C++ stack dump.  A plain listener that says nothing, and one that answers HTTP/1, each end it in one
     # line naming the port, exit 2, before JAX is touched
     import threading
 
@@ -367,7 +367,7 @@ def test_a_non_jax_listener_on_the_coordinator_port_gets_one_line(tmp_path, caps
 @pytest.mark.slow  # two more processes, as the test above
 @pytest.mark.skipif(not _gloo_available(), reason="this jaxlib has no gloo CPU collectives")
 def test_a_process_given_another_process_count_stops_before_computing(tmp_path):
-    # a process given --num-processes 3 joined a 2-process run and reported "1 of 2", exit 0 (issue 30)
+    # a process given --num-processes 3 must not join a 2-process run (and report "1 of 2", exit 0)
     env = _process_env()
     addr = f"127.0.0.1:{_free_port()}"
     f = tmp_path / "study.toml"

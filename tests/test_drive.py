@@ -301,7 +301,7 @@ def test_bad_sample_times_and_settings():
 
 
 # --------------------------------------------------------------------------
-# steady starts (DESIGN.md: no transient nobody asked for)
+# steady starts (no transient nobody asked for)
 # --------------------------------------------------------------------------
 
 
@@ -364,8 +364,9 @@ def _steady_start_run(name, horizon=0.1):
 
 
 # measured (float64, 0.1 s): max |ω/ω* − 1| over (300, 0), (300, 5), (1000, 0), (1000, 5) r/min, N·m, and the
-# position error at t = 0 -> the end; before the steady start under the observer's error (issue 26) the LPF
-# dipped 6.6 % at 300 r/min and lost the 5 N·m case (79 %), the C-LESO 2.2 %, the GI-LESO 0.80 %:
+# position error at t = 0 -> the end; started on the encoder's operating point instead (the steady start without
+# the observer's error) the LPF dips 6.6 % at 300 r/min and loses the 5 N·m case (79 %), the C-LESO 2.2 %, the
+# GI-LESO 0.80 %:
 # LPFFlux  ≤ 6e-5, 46.7° (300) and 17.7° (1000) constant; CLESO ≤ 1e-5, −11.4° and −36.9° constant;
 # GILESO ≤ 2.5e-3, −5.0 -> −4.3° and −17.2 -> −15.0° (its generalized integrator, ωc = π rad/s, is still
 # settling after the 0.2 s phase: the error drifts on, −13.0° at 1 s, and the speed follows by ≤ 0.26 %;

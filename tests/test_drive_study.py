@@ -118,7 +118,7 @@ def test_cli_drive_study_writes_netcdf_with_the_axes(tmp_path, capsys):
 
 
 def test_drive_study_warnings_name_lost_speed_on_stderr(tmp_path, capsys):
-    """Untested before (issue 30): a C-LESO of 30 rad/s loses lock and speed in every scenario, the closed form
+    """A C-LESO of 30 rad/s loses lock and speed in every scenario, the closed form
     in none; stderr names lost speed beside lost lock, one line a design that lost anything.  Over 0.08 s: over
     0.04 s one scenario had not yet lost its speed once the settling phase started the PLL at the rotor's angle
     (init_aligned; from 0 rad the slow LESO's start was worse)."""

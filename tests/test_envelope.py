@@ -1,4 +1,4 @@
-"""The envelope map (issue 26.3): the Floquet stability verdict and the long runs over speed × load, the CLI's NetCDF
+"""The envelope map: the Floquet stability verdict and the long runs over speed × load, the CLI's NetCDF
 and figure, and (slow) the preset's verdicts against 3 s simulations at the low-speed points."""
 
 import json
@@ -174,7 +174,7 @@ def _holds_3s(designs, points, drive=DRIVE):
 
 @pytest.mark.slow
 def test_preset_envelope_agrees_with_3s_simulations_at_low_speed(tmp_path):
-    """Must show (issue 26.3): `jaxobs envelope tuning/presets/sosoifo.toml --out DIR` writes the NetCDF
+    """`jaxobs envelope tuning/presets/sosoifo.toml --out DIR` writes the NetCDF
     (speed_rpm and load dims, a stability variable) whose verdicts agree with 3 s simulations at every low-speed
     point (≤ 600 r/min: 20 to 537 r/min × 0 to 14 N·m), every verdict resolved, and every orbit within 0.5 % of
     its speed reference over the Lyapunov run (the start itself: tests/test_stability.py, loaded 144 r/min)."""

@@ -1,4 +1,4 @@
-"""The figures compare what they exist for (issue 29): one scale per comparison, the worst case beside the
+"""The figures compare what they exist for: one scale per comparison, the worst case beside the
 mean, readable labels.  Built from small synthetic Datasets: no simulation."""
 
 from typing import NamedTuple

@@ -1,4 +1,4 @@
-"""Results in the field's formats (issue 29): drive batch results as an xarray Dataset with the grid's dims."""
+"""Results in the field's formats: drive batch results as an xarray Dataset with the grid's dims."""
 
 import jax
 import jax.numpy as jnp

@@ -299,7 +299,7 @@ STUDY_MUST_FAIL = [
     ("sag 2.0", S.replace("dc = [0.0, 0.025, 0.05, 0.075, 0.1]", "sag = [2.0]"), "axes.sag[0]"),
     ("freq_step -60 Hz", S.replace("freq_step = [-3.0,", "freq_step = [-60.0,"), "axes.freq_step[0]"),
     ("freq_step past ts", S.replace("freq_step = [-3.0,", "freq_step = [3000.0,"), "axes.freq_step[0]"),
-    # tied to the nominal frequency (issue 29): a 600 Hz step on a 50 Hz grid is under the sampling limit
+    # tied to the nominal frequency: a 600 Hz step on a 50 Hz grid is under the sampling limit
     ("freq_step 600 Hz", S.replace("freq_step = [-3.0,", "freq_step = [600.0,"), "axes.freq_step[0]"),
     ("negative noise", MIXED.replace("noise = [0.0, 0.01]", "noise = [-0.1]"), "axes.noise[0]"),
     ("nan in an axis", S.replace("dc = [0.0,", "dc = [nan,"), "axes.dc[0]"),

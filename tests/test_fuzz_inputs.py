@@ -1,4 +1,4 @@
-"""Fuzzing what a run reads besides its job file (issue 30.8): result.json files fed to `study` and
+"""Fuzzing what a run reads besides its job file: result.json files fed to `study` and
 `export` (jaxobs_tuning.results.load_result, then tuned_component as a study builds it) and CSV recordings
 (jaxobs.signals.read_recording).  Every input ends accepted or refused with a one-line ValueError: never
 another exception (a traceback), never a hang, and never an input known to be invalid accepted

@@ -1,5 +1,5 @@
-"""Ctrl-C on `jaxobs tune` says how to continue, and rerunning over the checkpoint names --resume first
-(issue 29).  A real SIGINT to a real process, not a raised KeyboardInterrupt."""
+"""Ctrl-C on `jaxobs tune` says how to continue, and rerunning over the checkpoint names --resume first.
+A real SIGINT to a real process, not a raised KeyboardInterrupt."""
 
 import os
 import signal

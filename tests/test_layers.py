@@ -1,4 +1,4 @@
-"""Data flows one way (DESIGN.md): signals and plant produce measurements → observers estimate →
+"""Data flows one way (docs/architecture.md): signals and plant produce measurements → observers estimate →
 metrics score → tuning changes gains → the command line runs it all.
 
 The import statements of every module in jaxobs/ and tuning/ are parsed (nothing is imported) and

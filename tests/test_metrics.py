@@ -209,7 +209,7 @@ def test_lost_lock_of_a_simulation_under_jit():
 
 
 # --------------------------------------------------------------------------
-# drive metrics (issue 26): settling to the own final value, speed against its reference, load-step dip
+# drive metrics: settling to the own final value, speed against its reference, load-step dip
 # --------------------------------------------------------------------------
 
 

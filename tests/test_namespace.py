@@ -1,4 +1,4 @@
-"""The user API: ``jaxobs.__all__`` is what a notebook user reads (issue 28)."""
+"""The user API: ``jaxobs.__all__`` is what a notebook user reads."""
 
 import importlib
 import pkgutil

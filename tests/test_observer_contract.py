@@ -1,4 +1,4 @@
-"""The one drive-observer contract (issue 28): every observer subclasses AbstractObserver; a drive observer is
+"""The one drive-observer contract: every observer subclasses AbstractObserver; a drive observer is
 bound to a machine and a speed by its one ``bind`` and starts with ``init_at`` / ``seed_speed``.
 
 The old bindings (drive_study.bind_observer's body, jaxobs_tuning.export.bind_to_drive,

@@ -1,5 +1,5 @@
 """Paper 001 Table II (operations and integrators of the SOGI-FLL, -WPF, -WIF) beside the operation counts of
-the C that `jaxobs export` generates from each observer's step (issue 27.6).
+the C that `jaxobs export` generates from each observer's step.
 
 Table II counts a continuous-time block diagram: its integrators apart, and no integration rule.  The C is
 the sampled step under a rule, so the comparison takes the forward-Euler step, whose integration is exactly one

@@ -123,7 +123,7 @@ def test_export_reports_its_three_stages(tmp_path):
 
 
 def test_reproduce_leso_progress_has_a_total(monkeypatch):
-    """`reproduce leso`'s bar counts its experiments out of a total (issue 29: it had none).  No simulation:
+    """`reproduce leso`'s bar counts its experiments out of a total.  No simulation:
     the first run is stopped at once, after the bar was made; each run() is one step of N_EXPERIMENTS."""
     from jaxobs.reproduce import leso
 
@@ -148,8 +148,9 @@ def test_reproduce_leso_progress_has_a_total(monkeypatch):
 
 
 def test_warnings_and_log_records_during_a_bar_get_lines_of_their_own(capsys):
-    """A warning or a log record printed while a bar was drawn went into the bar's line (issue 29): through
-    tqdm.write it gets a line of its own and the bar is redrawn after it; both are as before once it closes."""
+    """A warning or a log record printed while a bar is drawn does not go into the bar's line: through
+    tqdm.write it gets a line of its own and the bar is redrawn after it; warnings.showwarning and logging.lastResort
+    are restored once it closes."""
     import logging
     import re
     import warnings

@@ -76,7 +76,7 @@ def test_encoder_loop_exponent_is_the_designed_speed_pole():
 def test_floquet_finds_the_faleso_slow_root_where_a_window_cannot():
     """The FA-LESO's slowest mode is its integral state: the root of s² + (k2 − jωe)s + k1 (002 eqs 21-22,
     jaxobs.linear.faleso_tf) nearest 0, −k1 k2/(k2² + ωe²) ≈ −0.094 and −0.050 1/s at 150 and 600 r/min for
-    Table II's gains, which a 1-4 s Lyapunov window left unresolved (issue 26).  With the encoder closing the
+    Table II's gains, which a 1-4 s Lyapunov window leaves unresolved.  With the encoder closing the
     loop the observer only watches, so the sampled loop's slowest non-neutral multiplier over whole periods
     is that root: within 1 %.  The PLL is slowed 0.3× here because its ω̂ enters the LESO's rotation term
     jω̂ε (the steady ε is not 0), which the LESO-alone model leaves out: measured at 600 r/min −0.04997

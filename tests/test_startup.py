@@ -1,4 +1,4 @@
-"""I-f start-up from standstill and the hand-over to the observer, for every drive observer (issue 17, item 1).
+"""I-f start-up from standstill and the hand-over to the observer, for every drive observer.
 
 Each run: standstill, I-f (``IfStartup.for_machine``: parked rotor, raised-cosine ramp to 20 % of rated speed,
 hold, agreement, bumpless hand-over), the observer closing the loop at the switch speed, then a ramp of the

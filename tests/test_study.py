@@ -227,7 +227,7 @@ def test_lost_lock_and_diverged_scenarios_are_flagged_and_listed_first():
 
 
 def test_study_warnings_on_stderr_name_what_each_design_lost(tmp_path, capsys):
-    """Untested before (issue 30): noise of 10 p.u. makes both designs lose lock in that scenario; the warnings
+    """Noise of 10 p.u. makes both designs lose lock in that scenario; the warnings
     go to stderr (one line a design, after the table), stdout keeps the table alone."""
     study = tmp_path / "w.toml"
     study.write_text(
@@ -328,7 +328,7 @@ def test_the_runner_takes_any_sampler_factory_and_metrics():
 
 def test_scenarios_built_a_chunk_at_a_time_are_the_whole_batchs():
     """A builder that takes ``first`` is called per chunk with the index of the chunk's first point (the
-    memory of the scenarios is one chunk's, issue 31.5); its noise keys are the whole batch's, so a noisy
+    memory of the scenarios is one chunk's); its noise keys are the whole batch's, so a noisy
     study gives the same values in chunks of 3 as in one chunk, designs of two classes included; a bad axis
     value is refused before anything runs."""
     from jaxobs.runner import run_scenarios

@@ -1,5 +1,5 @@
 """Studies that survive a kill: chunk by chunk on disk (jaxobs.chunkstore), `jaxobs study --resume` after
-kill -9 at random instants gives a study.nc byte-identical to an uninterrupted run's (issue 30.7), for FLL
+kill -9 at random instants gives a study.nc byte-identical to an uninterrupted run's, for FLL
 and drive studies."""
 
 import math

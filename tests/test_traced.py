@@ -1,4 +1,4 @@
-"""Traced programs kept across processes (jaxobs.kept_jit; issue 31: a warm run skips tracing and lowering)."""
+"""Traced programs kept across processes (jaxobs.kept_jit: a warm run skips tracing and lowering)."""
 
 import equinox as eqx
 import jax

@@ -1,6 +1,6 @@
 """What a tuning job reports: an honest outcome (diverged, at a bound, never NaN), the linear structure of
-the tuned design, byte-identical reproducible results, BFGS's iterations (issue 18); and the flux observers
-of paper 000 tuned as sensorless drive jobs on its SPMSM (issue 17).  Split from tests/test_tuning.py."""
+the tuned design, byte-identical reproducible results, BFGS's iterations; and the flux observers
+of paper 000 tuned as sensorless drive jobs on its SPMSM.  Tuning itself and the job files: tests/test_tuning.py."""
 
 import dataclasses
 import json
@@ -23,7 +23,7 @@ W_N = papers.FLL_OMEGA_N
 
 
 # --------------------------------------------------------------------------
-# honest outcome, linear structure, reproducible results, BFGS (issue 18)
+# honest outcome, linear structure, reproducible results, BFGS
 # --------------------------------------------------------------------------
 
 UNSTABLE = GOOD.replace(
@@ -280,7 +280,7 @@ def test_report_names_scenarios_in_the_objectives_order():
 
 
 # --------------------------------------------------------------------------
-# flux observers of paper 000 as sensorless drive jobs on its SPMSM (issue 17)
+# flux observers of paper 000 as sensorless drive jobs on its SPMSM
 # --------------------------------------------------------------------------
 
 FLUX_DRIVE = """
@@ -335,7 +335,7 @@ def test_flux_observer_drive_job_runs_sensorless_on_the_spmsm(tmp_path, capsys):
     assert main(["tune", str(path), "--out", str(tmp_path / "o"), "--quiet"]) == 0
     res = _strict_json(tmp_path / "o" / "result.json")
     assert res["loop"] == "sensorless" and res["machine"] == "spmsm000"
-    # the envelope it was tuned for, stated (issue 26.4); its verification is `jaxobs envelope RESULT.json`
+    # the envelope it was tuned for, stated; its verification is `jaxobs envelope RESULT.json`
     env = res["envelope"]
     assert env["machine"] == "spmsm000" and env["speed_rpm"][0] > 0 and env["verified"] is None
     assert "envelope.verified" in res["null_reasons"]

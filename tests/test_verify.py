@@ -1,7 +1,7 @@
-"""Nothing trusted that should not be (issue 30): what a run reads is verified and bounded.
+"""Nothing trusted that should not be: what a run reads is verified and bounded.
 
-Each test here is a defect found on the code before it (the issue's list): a checkpoint resumed with NaN in
-θ, a forged history, a FIFO at the checkpoint's path, a CSV field over the csv module's limit, ..."""
+Each test here is an input that a run must refuse in one line, or bound: a checkpoint resumed with NaN in θ, a
+forged history, a FIFO at the checkpoint's path, a CSV field over the csv module's limit, ..."""
 
 from __future__ import annotations
 
@@ -93,7 +93,7 @@ def _forge(path, redigest=True, theta=None, best_theta=None, **meta_changes):
 
 
 def test_checkpoint_content_digest_refuses_an_edited_history(tmp_path):
-    """A forged history changed the status to no_improvement (issue 30): now the digest refuses it."""
+    """A forged history that changes the status to no_improvement: the digest refuses it."""
     ckpt = tmp_path / "c.npz"
     _run(ckpt)
     meta = json.loads(str(_entries(ckpt)["meta"]))
@@ -137,8 +137,8 @@ def _bad_states(meta):
 
 @pytest.mark.parametrize("case", range(13))
 def test_checkpoint_state_is_validated_on_load(tmp_path, case):
-    """A NaN θ resumed to exit 0 with a tuned design that diverged everywhere (issue 30); a NaN best value
-    changed the tuned gain.  Each forged state, though its digest matches, is refused in one line."""
+    """A NaN θ would resume to exit 0 with a tuned design that diverges everywhere; a NaN best value would
+    change the tuned gain.  Each forged state, though its digest matches, is refused in one line."""
     ckpt = tmp_path / "c.npz"
     _run(ckpt)
     meta = json.loads(str(_entries(ckpt)["meta"]))
@@ -151,7 +151,7 @@ def test_checkpoint_state_is_validated_on_load(tmp_path, case):
 
 
 def test_checkpoint_fifo_does_not_block_resume(tmp_path):
-    """`mkfifo OUT/checkpoint.npz; jaxobs tune --resume` blocked forever (issue 30)."""
+    """`mkfifo OUT/checkpoint.npz; jaxobs tune --resume` is refused in one line, not blocked on forever."""
     ckpt = tmp_path / "c.npz"
     os.mkfifo(ckpt)
     done, e = _in_thread(lambda: _run(ckpt, resume=True))
@@ -174,7 +174,7 @@ def _result(**changes):
     return res
 
 
-# (name, result.json text, expected message); each was accepted, coerced or a traceback before (issue 30)
+# (name, result.json text, expected message): each refused in one line, not accepted, coerced or a traceback
 BAD_RESULTS = [
     ("nested 100000", "[" * 100_000 + "]" * 100_000, "nested deeper than 64"),
     ("nested in an object", '{"job": ' + "[" * 70 + "]" * 70 + "}", "nested deeper than 64"),
@@ -322,15 +322,15 @@ def _one_line_exit_2(capsys, argv, match):
     ],
 )  # fmt: skip
 def test_flag_sizes_are_bounded(tmp_path, capsys, argv, match):
-    """`export --steps 100000000` wrote 6.3 GB; `--ts 1e-300` underflowed to 0 in float32 and --check said OK;
-    `--timeout 2147483648` was a TypeError (issue 30)."""
+    """Unbounded, `export --steps 100000000` writes 6.3 GB, `--ts 1e-300` underflows to 0 in float32 (and
+    --check says OK) and `--timeout 2147483648` is a TypeError: each is refused in one line naming the flag."""
     if argv[0] == "export":
         argv = [*argv, "--out", str(tmp_path / "x"), "--no-cache"]
     _one_line_exit_2(capsys, argv, match)
 
 
 def test_a_5000_digit_integer_in_a_job_names_its_field(tmp_path, capsys):
-    """ "Exceeds the limit (4300 digits)", naming no field (issue 30)."""
+    """A 5000-digit integer is refused naming its field, not with Python's "Exceeds the limit (4300 digits)"."""
     from importlib import resources
 
     text = (resources.files("jaxobs_tuning") / "presets" / "wif_robust.toml").read_text()
@@ -354,8 +354,8 @@ def test_a_5000_digit_integer_in_a_job_names_its_field(tmp_path, capsys):
     ],
 )
 def test_drive_study_speeds_within_the_inverter_limit(tmp_path, capsys, machine, axes, field):
-    """A drive study with speed_rpm = [600, 5000] on ipmsm002 passed --check, though jobs refuse anything
-    above 1323 r/min (issue 30)."""
+    """A drive study's speeds are held to the inverter's limit at --check, as a job's are (ipmsm002: nothing
+    above 1323 r/min)."""
     comp = "CLESO" if machine == "ipmsm002" else "SOIFO"
     study = tmp_path / "s.toml"
     study.write_text(
@@ -374,8 +374,8 @@ GOOD_TERMS = 'terms = [{ metric = "itae_freq", weight = 1.0 }]'
 
 
 def test_objective_overflow_is_its_own_outcome(tmp_path, capsys, monkeypatch):
-    """weight = 1e308 exited 3 with "every design tried (5) diverged in >= 54 scenarios" while the scores
-    showed 0 diverged (issue 30): now status "overflow", a reason naming the weights, exit 3 (nothing tuned).
+    """weight = 1e308 is status "overflow", a reason naming the weights, exit 3 (nothing tuned): not "every design
+    tried (5) diverged in >= 54 scenarios" while the scores show 0 diverged.
 
     The gradient of this objective is finite (about 1e306) and forward mode, the objective's default for a
     few gains, computes it: the job is scored (1.3e307) and its figures drawn (the convergence plot's log

@@ -1,4 +1,4 @@
-"""Tuning that cannot hide a failure (issue 26): ``[drive] speed_schedule``, ``[envelope]``, the long-horizon
+"""Tuning that cannot hide a failure: ``[drive] speed_schedule``, ``[envelope]``, the long-horizon
 verification after tuning and the ``unsafe`` status (exit 4)."""
 
 from __future__ import annotations
