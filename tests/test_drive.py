@@ -429,7 +429,7 @@ def test_operating_point_under_an_angle_offset_carries_the_load_in_the_controlle
     w_e, u_dc, u_qc = par.p * w, c * op.u_d + s * op.u_q, -s * op.u_d + c * op.u_q
     assert float(cs.int_d - w_e * par.Lq * i_qc) == pytest.approx(float(u_dc), rel=1e-9)
     assert float(cs.int_q + w_e * (par.Ld * i_dc + par.psi_f)) == pytest.approx(float(u_qc), rel=1e-9)
-    # without an offset it is the rotor frame's operating point, as before
+    # without an offset it is the rotor frame's operating point
     op0 = foc.operating_point(par, w, w, 0.0, 10.0)
     assert float(op0.offset) == 0.0 and float(op0.i_d) == pytest.approx(0.0, abs=1e-12)
 

@@ -103,7 +103,7 @@ def test_floquet_finds_the_faleso_slow_root_where_a_window_cannot():
 
 def test_floquet_agrees_with_long_lyapunov_windows_near_the_boundary():
     """000's closed-form second-order SOIFO on the bench's fixed 5 Hz loop crosses 0 near 411 r/min.  The
-    Lyapunov exponent over 2 s windows (docs/stability.md, measured 2026-11-25) gave +0.51 ± 0.10 at 400 r/min,
+    Lyapunov exponent over 2 s windows (docs/stability.md) measures +0.51 ± 0.10 at 400 r/min,
     −0.32 ± 0.04 at 410, −1.26 ± 0.04 at 420 and −21.51 at 1000; the Floquet verdict over ≥ 0.5 s matches each
     within the two resolutions, and resolves 410 r/min, which a 0.4 s Lyapunov window calls marginal."""
     scs = _scenarios([(400.0, 0.0), (410.0, 0.0), (420.0, 0.0), (1000.0, 0.0)])
@@ -185,7 +185,7 @@ def test_slope_fit_resolution_covers_a_known_wobble():
 @pytest.mark.slow  # 60 s on a quiet machine, 256 s at load 12
 def test_near_neutral_point_is_marginal_and_a_longer_window_resolves_it():
     """000's closed-form second-order SOIFO on the unscheduled 5 Hz bench loop crosses 0 near 411 r/min
-    (docs/stability.md).  Measured 2026-11-25 (settle 0.2 s, warm-up 0.1 s): at 410 r/min a 0.4 s window
+    (docs/stability.md).  Measured (settle 0.2 s, warm-up 0.1 s): at 410 r/min a 0.4 s window
     gives −0.25 ± 0.84 /s (a 2 s window: −0.31), so neither verdict: marginal.  At 400 r/min +0.57 ± 0.43:
     unstable.  At 1000 r/min −21.5 ± 0.03: stable.  A 1 s window at 410 r/min: −0.32 ± 0.16, resolved stable."""
     scs = _scenarios([(400.0, 0.0), (410.0, 0.0), (1000.0, 0.0)])
@@ -271,9 +271,9 @@ def test_exponent_gradient_matches_finite_differences():
 
     The finite-window exponent is smooth between mode crossings (the two slowest exponents cross near
     lam = 0.64 here) but curves on the scale of 0.01 in lam, so a central difference of h = 0.01 is not the
-    oracle: measured 2026-11-25 at lam = 0.60, forward mode −70.8548 against central differences −75.22
+    oracle: measured at lam = 0.60, forward mode −70.8548 against central differences −75.22
     (h = 1e-2), −70.903 (1e-3), −70.8553 (1e-4), −70.85485 (1e-5): they converge to it.  (With h = 0.01 at
-    0.61 and 0.62 the gap was 9 % and 7 %.)  So h = 1e-4, and 1e-3 relative."""
+    0.61 and 0.62 the gap is 9 % and 7 %.)  So h = 1e-4, and 1e-3 relative."""
     sc = _one(_scenarios([(600.0, 0.0)]))
     d = _drive()
 

@@ -120,7 +120,7 @@ def test_gradient_through_a_time_major_batch(recs):
 
 def test_filled_history_repeats_the_start_up():
     """ab3_steady_from_start: two steady AB3 steps from x₀ with the filled history land on the start-up's x₁
-    and x₂ (to rounding); a carry whose AB3 state is not a component's (x, rule) gets None (peel as before)."""
+    and x₂ (to rounding); a carry whose AB3 state is not a component's (x, rule) gets None (its start-up is peeled)."""
     obs = W.fll_observer("sogi-fll-wif")
     u = jnp.cos(2 * jnp.pi * 50.0 * TS * jnp.arange(3.0)) * 1.2
     c0 = obs.init(u[0])

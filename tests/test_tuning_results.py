@@ -204,9 +204,9 @@ def test_dominant_damping_leaves_out_the_poles_a_zero_cancels():
     pair = [z for z in cancelled if abs(abs(z.imag) - we) < 1.0]
     assert len(pair) == 2 and all(-z.real / abs(z) < 1e-3 for z in pair)  # the ~0.0007 pair
     raw, _, _ = _oracle_dominant(loop.num, loop.den)
-    assert raw < 1e-3  # what was reported before: the doublet
+    assert raw < 1e-3  # without the cancellation the dominant pair would be the doublet
     assert fa["stable"] is True and len(fa["poles"]) == 6  # every pole still listed
-    # no doublet: unchanged (001's WIF, whose closed loop has a zero: ζ = 1/√2 for its pair, as before)
+    # no doublet: unchanged (001's WIF, whose closed loop has a zero: ζ = 1/√2 for its pair)
     wif = structure("SOGIFLLWIF", dict(k1=papers.WIF_K1, k2=papers.WIF_K2, lam=papers.WIF_LAM, omega_n=W_N))
     model = linear.wif_model(papers.WIF_K1, papers.WIF_K2, papers.WIF_LAM, W_N).frequency
     assert wif["cancelled_poles"] == []
