@@ -1,4 +1,4 @@
-"""The drive in float64 vs float32: speed, accuracy, and each beside its batch-inner numba kernel (issue 31.3).
+"""The drive in float64 vs float32: speed, accuracy, and each beside its batch-inner numba kernel.
 
     python -m benchmarks.drive_f64 [--batch 1024] [--horizon 0.05] [--rounds 3] [--no-numba]
 
@@ -19,8 +19,8 @@ and ``jaxobs._trig.sincos`` (the drive's sine and cosine) beside XLA's pair.
 
 ``--xla-trig`` adds the row ``jaxobs-xla-trig``: the same drive with XLA's own ``sin``/``cos`` in place of
 ``jaxobs._trig.sincos`` (the modules that call it are patched while that row is traced and compiled), the
-before/after of issue 31.3 timed in the same rounds.  ``--dtypes f64`` leaves float32 out (one numba
-compile instead of two).
+A/B of jaxobs's own sine and cosine against XLA's, timed in the same rounds.  ``--dtypes f64`` leaves float32
+out (one numba compile instead of two).
 """
 
 from __future__ import annotations
@@ -135,7 +135,7 @@ def main(argv=None) -> int:
     p.add_argument("--rounds", type=int, default=3, help="interleaved timing rounds, best of (default 3)")
     p.add_argument("--no-numba", action="store_true", help="leave out the numba kernels")
     p.add_argument("--dtypes", nargs="+", choices=list(DTYPES), default=list(DTYPES), help="precisions (default both)")
-    p.add_argument("--xla-trig", action="store_true", help="add jaxobs with XLA's sin/cos (the A/B of issue 31.3)")
+    p.add_argument("--xla-trig", action="store_true", help="add jaxobs with XLA's sin/cos (an A/B of jaxobs's sincos)")
     p.add_argument("--ops", action="store_true", help="only the per-operation costs (ns a value), XLA beside numba")
     p.add_argument("--json", action="store_true", help="print the result as JSON")
     a = p.parse_args(argv)

@@ -1,4 +1,4 @@
-"""The envelope map's cost (issue 26: 200 operating points × 3 designs in ≤ 60 s, compile included).
+"""The envelope map's cost (target: 200 operating points × 3 designs in ≤ 60 s, compile included).
 
     .venv/bin/python -m benchmarks.envelope [--speeds 20] [--loads 10] [--horizon 2] [--method floquet|lyapunov]
 

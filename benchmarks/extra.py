@@ -1,4 +1,4 @@
-"""The full run's parts after the throughput rows: time to result and scale (issue 31).
+"""The full run's parts after the throughput rows: time to result and scale.
 
 - ``time-to-result``: :func:`benchmarks.first_second.measure` of ``make run``'s job (``make-run``), two runs
   in fresh processes sharing a compilation cache that starts empty: the first compiles, the second reads the
@@ -18,8 +18,8 @@ from collections.abc import Callable
 from . import first_second, scale
 
 PARTS = ("throughput", "time-to-result", "scale")
-TIME_TO_RESULT = {"cmds": ("make-run",), "runs": 2}  # issue 31.1: make run's first and second run
-SCALE = (("fll", 1_000_000), ("drive", 100_000))  # issue 31.5: 10⁶ FLL and 10⁵ drive scenarios
+TIME_TO_RESULT = {"cmds": ("make-run",), "runs": 2}  # make run's first and second run
+SCALE = (("fll", 1_000_000), ("drive", 100_000))  # 10⁶ FLL and 10⁵ drive scenarios
 
 
 def time_to_result(log: Callable[[str], None] = print) -> list[dict]:

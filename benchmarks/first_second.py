@@ -1,4 +1,4 @@
-"""Time to result: a command's first run with an empty compilation cache, then its second (issue 31.1).
+"""Time to result: a command's first run with an empty compilation cache, then its second.
 
     python -m benchmarks.first_second [--runs 2] [--cmd NAME ...] [--keep-cache DIR]
 

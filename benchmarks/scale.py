@@ -1,4 +1,4 @@
-"""Scale: an FLL study of 10⁴ … 10⁶ scenarios, or a drive study, results streamed to disk chunk by chunk (issue 31.5).
+"""Scale: an FLL study of 10⁴ … 10⁶ scenarios, or a drive study, results streamed to disk chunk by chunk.
 
     python -m benchmarks.scale [--scenarios 10000 100000] [--horizon 0.01] [--held]
     python -m benchmarks.scale --kind drive [--scenarios 10000 100000] [--horizon 0.005]

@@ -108,7 +108,7 @@ def _route_to_bars(tqdm_cls) -> contextlib.ExitStack:
     shown = warnings.showwarning
 
     def show(message, category, filename, lineno, file=None, line=None):
-        if file is not None and file is not sys.stderr:  # a warning sent to a file of its own: as before
+        if file is not None and file is not sys.stderr:  # a warning sent to a file of its own goes there
             return shown(message, category, filename, lineno, file, line)
         text = warnings.formatwarning(message, category, filename, lineno, line)
         tqdm_cls.write(text, file=sys.stderr, end="")

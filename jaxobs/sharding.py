@@ -1,4 +1,4 @@
-"""Scenario batches sharded over devices (DESIGN.md "Scenarios and batches").
+"""Scenario batches sharded over devices.
 
 A batch is a PyTree whose leaves carry a leading scenario axis.  Scenarios
 never talk to each other, so the batch splits over a one-axis

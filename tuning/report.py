@@ -64,7 +64,7 @@ _EVENT_AXES = {
 
 def _has_event(spec, index: int) -> bool:
     """Whether scenario ``index`` of ``spec`` changes at t_event (True where the signal kind's events are not
-    listed: the mark is then kept, as before)."""
+    listed: the mark is then kept)."""
     axes = _EVENT_AXES.get(spec.signal)
     if axes is None:
         return True

@@ -67,7 +67,7 @@ class TuneResult:
     timing: dict = field(default_factory=dict)
 
     @property
-    def stopped(self) -> str:  # the old name of the outcome
+    def stopped(self) -> str:  # an alias of ``status``
         return self.status
 
 

@@ -193,7 +193,7 @@ NUMBA_FLL_PRE = njit_variants(fll_batch_pre)
 # batch-inner kernels: the batch as the inner (SIMD) loop, threads over batch blocks
 # ---------------------------------------------------------------------------
 #
-# How a performance engineer writes these loops (issue 21).  The kernels above run one scenario at a
+# How a performance engineer writes these loops.  The kernels above run one scenario at a
 # time (the time loop inside, scalars): every step is a dependent chain of a few dozen operations, and
 # nothing vectorizes.  Here the time loop is the outer one and the batch the inner one, over
 # time-major inputs (n, B) and a state kept as one row of B values per component, so each step is a

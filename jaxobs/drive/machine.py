@@ -121,7 +121,7 @@ class PMSMParams(eqx.Module):
     n_rated: jax.Array  # rated speed, r/min (> 0)
     p: int = eqx.field(static=True)  # pole pairs
     # q-axis saturation of the machine (None: linear, Lq constant; a None field adds no leaf, so a machine
-    # without it is the same pytree, and computes the same numbers, as before the option existed)
+    # without it is the same pytree, and computes the same numbers, as one built without this field)
     q_sat: QSaturation | None = None
 
     def __init__(self, Rs, Ld, Lq, psi_f, J, p, *, B=0.0, a5=0.0, a7=0.0, T_rated=1.0, n_rated=1000.0, q_sat=None):

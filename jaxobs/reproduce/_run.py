@@ -1,8 +1,8 @@
-"""The reproductions' simulations, their traced programs kept across processes (issue 31, time to result).
+"""The reproductions' simulations, their traced programs kept across processes (time to result).
 
 A reproduction runs a few dozen drive simulations, each its own program: in a second ``jaxobs reproduce
 leso`` the persistent compilation cache found every compilation, yet 14 s of its 36 s went to tracing
-them again (``python -m benchmarks.first_second``, 2026-11-25).  :func:`run_kept` runs one through
+them again (measured with ``python -m benchmarks.first_second``).  :func:`run_kept` runs one through
 :func:`jaxobs.kept_jit`, which keeps the traced and lowered program under a key (the command line turns
 it on with the compile cache; from Python, :func:`jaxobs.use_compile_cache` does).  The key names
 what the program bakes in: the experiment's name, the horizon, and the system's values that are not

@@ -21,7 +21,7 @@ import math
 __all__ = ["RELATIVE", "ABSOLUTE", "annotate"]
 
 # the fraction of the paper's number that still matches, by unit: 30 % for numbers read off scope traces
-# (the threshold for "a difference to explain"), 5 % for a speed the paper's drive is set to
+# (the threshold for "a difference to explain"), 5 % for a speed the paper's drive is set to
 RELATIVE = {"rad": 0.30, "Wb": 0.30, "ωe·Ts": 0.30, "r/min": 0.05}
 # where the paper prints "none" (0): the largest value a scope trace would show as nothing (000 Figs 21-22
 # are drawn at about 1 rad and 0.2 Wb per division: 5 % and 2.5 % of a division)

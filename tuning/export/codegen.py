@@ -276,7 +276,7 @@ _STEP_DOC = {
 
 
 def reference(observer) -> str:
-    """The first line of the observer's docstring: its paper and equations (DESIGN.md: every observer says)."""
+    """The first line of the observer's docstring: its paper and equations (every observer's docstring names them)."""
     doc = (type(observer).__doc__ or "").strip().splitlines()
     return doc[0].rstrip(".") if doc else type(observer).__name__
 

@@ -140,7 +140,7 @@ def recordings_provenance(job: Job) -> dict:
 
 
 def claimed_envelope(job: Job) -> dict | None:
-    """The operating envelope a drive job was tuned for (issue 26.4), from its scenarios: the speed range
+    """The operating envelope a drive job was tuned for, from its scenarios: the speed range
     (r/min, the grid's speeds and where its speed steps take them), the load range (N·m, with the load
     steps), the other axes' ranges; ``None`` for a job that is not a simulated drive.  Where the designs hold
     inside it is not computed after tuning (minutes on the presets): ``jaxobs envelope <result.json>`` maps it."""

@@ -163,7 +163,7 @@ def run_job(job: Job, out: Path, resume: bool = False, quiet: bool = False) -> d
     status, reason = res.status, res.reason
     if status == "diverged" and (n_over := obj.overflowed(theta0, per["initial"][2])):
         # nothing diverged: the simulations and the scored metrics are finite, the objective's value or
-        # gradient is not (issue 30: a weight of 1e308 was reported as divergence of the system)
+        # gradient is not (a weight of 1e308): not a divergence of the system
         weights = ", ".join(f"terms[{i}].weight = {t.weight:g}" for i, t in enumerate(job.terms))
         status = "overflow"
         reason = (
@@ -212,7 +212,7 @@ def run_job(job: Job, out: Path, resume: bool = False, quiet: bool = False) -> d
             "Rs, Lq (LESOs) or Rs, L (flux observers) and the PLL's or FLL's initial speed (omega0_pll, omega0) "
             f"are set per scenario from its estimated machine ({BENCH_MACHINES[job.drive.machine]})"
         )
-        # the envelope it was tuned for (issue 26.4); where the designs hold is `jaxobs envelope RESULT.json`
+        # the envelope it was tuned for; where the designs hold is `jaxobs envelope RESULT.json`
         result["envelope"] = claimed_envelope(job)
         if result["envelope"] is not None and job.envelope is not None:  # [envelope]: checked after tuning
             result["envelope"]["verified"] = "see 'verification' (the job's [envelope] grid, after tuning)"

@@ -1,5 +1,5 @@
-"""``[envelope]`` of a drive job and the long-horizon verification after tuning (issue 26: tuning that cannot
-hide a failure).
+"""``[envelope]`` of a drive job and the long-horizon verification after tuning: tuning that cannot
+hide a failure.
 
 A design tuned and scored on its grid can run away a little outside it (the noise-tuned SOIFO ran away at
 400 r/min, two thirds of its grid's lowest speed).  So a drive job states the envelope it claims
