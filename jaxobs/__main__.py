@@ -1,8 +1,8 @@
 """``python -m jaxobs``: the ``jaxobs`` command line (``jaxobs_tuning.cli.main``, every command).
 
 An entry point, not part of the library: ``import jaxobs`` never runs this
-file, so the library still never imports ``tuning/`` (DESIGN.md: data flows one
-way).  Only running the package as a program reaches the top layer, as the
+file, so the library still never imports ``tuning/`` (data flows one
+way: docs/architecture.md).  Only running the package as a program reaches the top layer, as the
 ``jaxobs`` console script (``jaxobs_tuning.cli:main``) does.
 """
 

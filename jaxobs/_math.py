@@ -29,5 +29,5 @@ def safe_atan2(y, x):
 
 
 def wrap(a):
-    """Angle wrapped to (−π, π] (electrical angles and angle errors, DESIGN.md "Metrics")."""
+    """Angle wrapped to (−π, π] (electrical angles and angle errors)."""
     return jnp.pi - jnp.mod(jnp.pi - a, 2 * jnp.pi)

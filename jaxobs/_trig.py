@@ -27,7 +27,7 @@ product is no longer exact and the error grows as the argument's own spacing ulp
 itself is no better known); above 2⁵⁰ rad (a spacing of 1/4 rad) the result is NaN rather than a number
 that looks like a sine.  Infinite or NaN in, NaN out, as ``jnp.sin``.
 
-float32 (issue 31; it works with ``jax_enable_x64`` off, where float64 does not exist) is the same
+float32 (it works with ``jax_enable_x64`` off, where float64 does not exist) is the same
 algorithm in float32 arithmetic: π/2 = Q1 + Q2 + Q3 + Q4, the first three π/2's leading bits cut at 12
 significant bits (8, 10 and 11 of them nonzero), so for |n| < 2¹³ (|x| < 1.2·10⁴) n·Q1, n·Q2, n·Q3 are
 exact, r is held as hi + lo as above (π/2 known to 8·10⁻²⁰), and Cephes's float32 minimax polynomials

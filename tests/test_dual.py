@@ -396,7 +396,7 @@ def test_field_weakening_on_the_dual_loop_holds_840_rpm_at_330_v():
 
 
 def test_reproduce_leso_runs_the_dual_machine_by_default():
-    """Issue 27's must-show: `jaxobs reproduce leso` includes 002's dual machine unless --machine single."""
+    """`jaxobs reproduce leso` includes 002's dual machine unless --machine single."""
     from jaxobs_tuning.cli import build_parser
     from jaxobs_tuning.cli_papers import REPRODUCE_DUAL_FILES, REPRODUCE_FILES, reproduce_files
 

@@ -223,7 +223,7 @@ def test_worst_case_bad_box_names_the_field(box, field):
 
 @pytest.mark.slow
 def test_worst_case_by_gradients_finds_the_grids_worst():
-    """Issue 26.7: projected gradient ascent of the Lyapunov exponent over speed 300..1200 r/min × load 0..10 N·m
+    """Projected gradient ascent of the Lyapunov exponent over speed 300..1200 r/min × load 0..10 N·m
     × dRs ±30 % finds the closed form's worst point at least as bad as a 4 × 2 × 2 grid's worst (the low-speed
     end, where the speed loop closed through the FLL goes unstable)."""
     from jaxobs.drive.envelope import worst_case

@@ -416,10 +416,10 @@ def test_sosoifo_holds_20_rpm_sensorless_from_a_settled_start():
 
 @pytest.mark.slow
 def test_loaded_low_speed_steady_start_is_steady_from_t0():
-    """Issue 26.6 at low speed: the sosoifo preset's drive (speed_schedule = 6) at 144 r/min, 0 to 14 N·m, started
+    """At low speed, the sosoifo preset's drive (speed_schedule = 6) at 144 r/min, 0 to 14 N·m, started
     steady with the observer settled over 10 electrical periods (Drive.settled_for: 1.4 s) holds |ω/ω* − 1| ≤ 0.5 %
-    from t = 0.  With the 0.2 s default (1.4 periods) the observer started 14° off and the loaded points dipped
-    10-54 % (the envelope's "not steady" loaded 144 r/min points)."""
+    from t = 0.  With the 0.2 s default (1.4 periods) the observer starts 14° off and the loaded points dip
+    10-54 %."""
     par = _machine()
     foc = FOC.imc(par, 2 * math.pi * papers.BENCH_CURRENT_HZ, ALPHA_S, speed_schedule=6.0)
     scs = _scenarios([(144.0, ld) for ld in (0.0, 4.67, 9.33, 14.0)])
@@ -441,11 +441,11 @@ def test_loaded_low_speed_steady_start_is_steady_from_t0():
 
 
 def test_leso_steady_start_does_not_depend_on_the_settle_length():
-    """Issue 26: the GI-LESO that tuning/presets/gileso.toml tunes, at 150 r/min and 15 N·m on 002's IPMSM, started
-    steady after a settle of 0.2 s or 0.338 s (37f306e's 10 periods of 355 r/min, what its verification used)
-    holds |ω/ω* − 1| ≤ 0.5 % over its first 0.1 s.  Its PLL started the settling phase at θ̂ = 0 whatever
-    the rotor's angle, and the settled observer depended erratically on the settle's length: 43 % and 65 %
-    (a reversal), and the preset's verification called the design not stable there (init_aligned)."""
+    """The GI-LESO that tuning/presets/gileso.toml tunes, at 150 r/min and 15 N·m on 002's IPMSM, started
+    steady after a settle of 0.2 s or 0.338 s (10 periods of 355 r/min) holds |ω/ω* − 1| ≤ 0.5 % over its
+    first 0.1 s: its PLL starts the settling phase at the rotor's angle (init_aligned).  Started at θ̂ = 0
+    whatever the rotor's angle, the settled observer depends erratically on the settle's length: dips of 43 %
+    and 65 % (a reversal), and a verification that calls the design not stable there."""
     par = bench_machine("ipmsm002")
     sc = _one(drive_scenarios(par, ("speed_rpm", "load_nm"), [(150.0, 15.0)], seed=0))
     obs = bind_observer(GILESO(par.Rs, par.Lq, omega0=932.27, omega_c=3.8557, kp_pll=135.04, ki_pll=19991.9), sc)

@@ -1,4 +1,4 @@
-"""The base of the drive's step components: plant, sensors, inverter, controller (DESIGN.md).
+"""The base of the drive's step components: plant, sensors, inverter, controller.
 
 Each is an immutable ``equinox.Module`` with the contract of every dynamic piece,
 and one ``init`` convention:
