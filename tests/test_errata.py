@@ -58,7 +58,7 @@ def test_000_eq30_cites_eq17_but_evaluates_eq15():
 def test_000_eq19_holds_only_at_the_centre_frequency():
     """Eq (19) (as eq 14 does) evaluates every denominator term of Q1 at s = jω' but K1K2ω'²s², then cancels
     to ω'/s.  Read at s = jω' its algebra is right (Q1(jω') = −j, as an integrator's ω'/s there); the "= ω'/s"
-    is not an identity in s.  No slip in our copy beyond that device (the issue listed one: none found)."""
+    is not an identity in s.  No slip in our copy beyond that device."""
 
     def q1(s):
         return K1 * K2 * W**3 * s / (s**4 + K2 * W * s**3 + (2 + K1 * K2) * W**2 * s**2 + K2 * W**3 * s + W**4)

@@ -314,7 +314,7 @@ def _starter(out, log, barrier):
     os._exit(0)
 
 
-# 100 trials (the count) in the slow suite: ~35 s on a loaded 2-core machine, mostly forking a
+# 100 trials in the slow suite: ~35 s on a loaded 2-core machine, mostly forking a
 # process that has JAX loaded; 10 in the fast suite
 @pytest.mark.parametrize("trials", [10, pytest.param(100, marks=pytest.mark.slow)])
 def test_six_concurrent_starters_never_hold_the_lock_together(tmp_path, trials):

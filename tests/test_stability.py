@@ -378,7 +378,7 @@ def test_sosoifo_holds_20_rpm_sensorless_from_a_settled_start():
     loop scheduled at ωe*/6 and the observer settled over 10 electrical periods (Drive.settled_for), a 3 s run
     holds |ω/ω* − 1| ≤ 0.5 % from t = 0 and the position error within 1°; the Lyapunov verdict over a window of
     12/α (11.5 s) is stable and resolved, at the linear model's slowest pole (−0.60 1/s).  The 0.2 s default settle (0.2
-    periods) starts the observer 41° off and leaves the band: the weakly damped ring of the issue."""
+    periods) starts the observer 41° off and leaves the band: the weakly damped ring of a start that is not settled."""
     par = _machine()
     foc = FOC.imc(par, 2 * math.pi * papers.BENCH_CURRENT_HZ, ALPHA_S, speed_schedule=6.0)
     w_e = par.p * 20.0 * math.pi / 30
