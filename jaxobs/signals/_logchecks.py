@@ -160,3 +160,42 @@ def check_balance(log, layout, cols):
                 f"recording {log.path!r}: columns {cols[role]!r} are unbalanced (negative sequence {100 * N / P:.2g} % "
                 "of the positive: a gain mismatch between phases)"
             )
+
+
+def _model_voltage(machine, th, ia, ib, ts):
+    """The mean voltage over each period [t_k, t_k+1] that the machine's flux-linkage equation asks for:
+    Rs (i_k + i_k+1)/2 + (ψ_k+1 − ψ_k)/ts, ψ = R(θ)(Ld i_d + ψ_f, Lq i_q) (exact but for the trapezoid of ∫i)."""
+    c, s = np.cos(th), np.sin(th)
+    i_d, i_q = c * ia + s * ib, -s * ia + c * ib
+    p_d, p_q = machine.Ld * i_d + machine.psi_f, machine.Lq * i_q
+    pa, pb = c * p_d - s * p_q, s * p_d + c * p_q
+    ua = machine.Rs * (ia[:-1] + ia[1:]) / 2 + np.diff(pa) / ts
+    ub = machine.Rs * (ib[:-1] + ib[1:]) / 2 + np.diff(pb) / ts
+    return ua, ub
+
+
+def check_timing(log, machine, cols):
+    """Warn when the voltage columns match the machine's model best one or two periods later: the controller's
+    references logged at t_k, declared as applied (a bias of ω_e·ts in every estimate).  On a clean log of
+    000's SPMSM the shift by one period raises the mean squared residual 5e5-fold (2.4e-5 → 12.7 V²); parameter
+    errors and dead time raise the unshifted residual, so the warning asks for the shifted one to be under half."""
+    err = np.zeros(4)
+    for sl in _windows(log.n):
+        th = np.asarray(log.theta_e[sl])
+        ia, ib, ua, ub = (np.asarray(a[sl]) for a in (log.i_a, log.i_b, log.u_a, log.u_b))
+        ma, mb = _model_voltage(machine, th, ia, ib, log.ts)
+        n = ma.size - 3
+        if n < 10:
+            continue
+        for j, s in enumerate((0, 1, 2, -1)):
+            a = 1 if s < 0 else 0
+            err[j] += np.mean(
+                (ua[a : a + n] - ma[a + s : a + s + n]) ** 2 + (ub[a : a + n] - mb[a + s : a + s + n]) ** 2
+            )
+    best = int(np.argmin(err))
+    if best in (1, 2) and err[best] < 0.5 * err[0]:
+        log.warnings.append(
+            f"recording {log.path!r}: columns {cols['voltage']!r} match the machine's model best {best} period(s) "
+            "later: references logged at t_k? (declare voltage_timing = 'reference', voltage_delay = "
+            f"{best}; as applied they bias every estimate by {best}·ω_e·ts)"
+        )

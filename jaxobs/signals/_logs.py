@@ -31,6 +31,9 @@ Each check is a one-line ``ValueError`` (a mistake that makes every estimate wro
 - **power direction** (with the machine's parameters): the mean electrical input power 3/2 ⟨u·i⟩ against
   the machine's 3/2 Rs⟨|i|²⟩ + T_e ω_m from the measured currents in the truth angle's frame; opposite signs
   are refused (a voltage or current sign, or the wrong frame);
+- **voltage timing** (with the machine's parameters): the voltage columns against the mean voltage over each
+  period that the machine's flux-linkage equation asks for, shifted by 0, 1 or 2 periods; a best match one or
+  two periods late is a warning that the references were logged as applied voltages;
 - **phase balance** (abc inputs): a DC offset above 2 % of the phase amplitude, or a gain mismatch between
   phases above 3 %, is a warning; three phases that do not sum to zero (5 % of the amplitude) an error.
 """
@@ -50,7 +53,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..provenance import read_file
-from ._logchecks import check_angle_unit, check_balance, check_power, check_sequence, check_speed
+from ._logchecks import check_angle_unit, check_balance, check_power, check_sequence, check_speed, check_timing
 from ._recordings import DriveRecording, _column
 
 # --------------------------------------------------------------------------------------------------------------
@@ -316,8 +319,8 @@ _PRECISION: dict = {}
 def _stream_columns(path, layout, header, wanted: list[int], width: int, folder):
     """Parse the file in chunks of :data:`CHUNK_ROWS` rows into one disk-backed float64 column per wanted index.
 
-    Returns (dict index → np.memmap, rows).  Each chunk is written to the columns' files as it is parsed, so the
-    process holds one chunk at a time.
+    Returns (dict index → a column read a block at a time, rows).  Each chunk is written to the columns' files as
+    it is parsed, so the process holds one chunk at a time.
     """
     import pandas as pd
 
@@ -358,7 +361,7 @@ def _stream_columns(path, layout, header, wanted: list[int], width: int, folder)
     out = {}
     for i in wanted:
         fn = os.path.join(folder, f"c{i}.f8")
-        out[i] = np.memmap(fn, dtype=np.float64, mode="r", shape=(rows,)) if rows else np.zeros(0)
+        out[i] = _Column(fn, rows)
     return out, rows
 
 
@@ -376,12 +379,12 @@ class LogData:
     dropped by a reference voltage's delay shift it), ``warnings`` the checks' warnings.
     """
 
-    u_a: np.ndarray
-    u_b: np.ndarray
-    i_a: np.ndarray
-    i_b: np.ndarray
-    theta_e: np.ndarray | None
-    omega_e: np.ndarray | None
+    u_a: _Column
+    u_b: _Column
+    i_a: _Column
+    i_b: _Column
+    theta_e: _Column | None
+    omega_e: _Column | None
     ts: float
     t0: float
     path: str
@@ -416,8 +419,52 @@ def _col_index(spec, header, width, path, role):
     return _column(spec, header, width, path, role)
 
 
+class _Column:
+    """A float64 column on disk, read a block at a time (``col[a:b]``, np.fromfile) or whole (``np.asarray(col)``).
+
+    Not a memory map: a mapped window faults in the pages around it (the kernel's read-ahead), which over a
+    10^7-row log's 96 check windows kept 264 MiB resident; a read keeps only what it returns.
+    """
+
+    def __init__(self, fn, n):
+        self.fn, self.n = fn, n
+
+    @property
+    def shape(self):
+        return (self.n,)
+
+    def __len__(self):
+        return self.n
+
+    def __array__(self, dtype=None, copy=None):
+        a = self[0 : self.n]
+        return a if dtype is None else a.astype(dtype)
+
+    def __getitem__(self, sl: slice | int):
+        if not isinstance(sl, slice):
+            return float(self[slice(int(sl), int(sl) + 1)][0])
+        a, b = max(sl.start or 0, 0), min(self.n if sl.stop is None else sl.stop, self.n)
+        with open(self.fn, "rb") as f:
+            return np.fromfile(f, dtype=np.float64, count=max(b - a, 0), offset=8 * a)
+
+
+class _Writer:
+    """A float64 column written block after block, then read back as a :class:`_Column`."""
+
+    def __init__(self, folder, name, n):
+        self.fn, self.n = os.path.join(folder, name + ".f8"), n
+        self.f = open(self.fn, "wb")
+
+    def __setitem__(self, sl, x):
+        self.f.write(np.ascontiguousarray(x, dtype=np.float64).tobytes())
+
+    def done(self):
+        self.f.close()
+        return _Column(self.fn, self.n)
+
+
 def _out(folder, name, n):
-    return np.lib.format.open_memmap(os.path.join(folder, name + ".npy"), mode="w+", dtype=np.float64, shape=(n,))
+    return _Writer(folder, name, n)
 
 
 def _blocks(n, size=CHUNK_ROWS):
@@ -600,9 +647,9 @@ def read_drive_log(
             prev, offset = x[-1], u[-1] - x[-1]
         if om is not None:
             om[sl] = np.asarray(raw[idx[("omega", 0)]][src]) * s_unit
-    for a in (*out.values(), th, om):
-        if a is not None:
-            a.flush()
+    out = {k: w.done() for k, w in out.items()}
+    th = None if th is None else th.done()
+    om = None if om is None else om.done()
     if amp_sq > 0 and math.sqrt(sum_sq / amp_sq) > 0.05:
         raise ValueError(
             f"recording {p!r}: the three current columns {', '.join(name[idx[('current', k)]] for k in range(3))!r} "
@@ -625,6 +672,7 @@ def read_drive_log(
         check_sequence(log, layout, cols)
         if machine is not None:
             check_power(log, machine, cols)
+            check_timing(log, machine, cols)
     if layout.current_frame == "abc" or layout.voltage_frame == "abc":
         check_balance(log, layout, cols)
     for w in warn:
