@@ -45,11 +45,13 @@ LAYERS = [
     (
         "jaxobs.signals._waveforms",
         "jaxobs.signals._recordings",
+        "jaxobs.signals._logchecks",
         "jaxobs.drive.machine",
         "jaxobs.drive.hardware",
         "jaxobs.drive.latency",
         "jaxobs.drive.weakening",
     ),
+    ("jaxobs.signals._logs",),  # drive logs: a declared layout read into DriveRecordings
     ("jaxobs.signals",),
     ("jaxobs.scenarios", "jaxobs.drive.plant", "jaxobs.drive.dual", "jaxobs.drive.control", "jaxobs.drive.scenario"),
     # observers: they estimate

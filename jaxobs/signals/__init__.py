@@ -23,6 +23,10 @@ built by :func:`paper001_test`.
 """
 
 from .._time import SampleTime as SampleTime
+from ._logs import LogData as LogData
+from ._logs import RecordingLayout as RecordingLayout
+from ._logs import RecordingWarning as RecordingWarning
+from ._logs import read_drive_log as read_drive_log
 from ._recordings import MAX_CSV_BYTES as MAX_CSV_BYTES
 from ._recordings import DriveRecording as DriveRecording
 from ._recordings import RecordingColumnError as RecordingColumnError
