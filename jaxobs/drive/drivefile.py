@@ -675,7 +675,11 @@ def _lowest_speeds(p: int, alpha_s: float, schedule: float, w_est: float) -> dic
                     ("LESOs (CLESO, GILESO, FALESO)", papers.LESO_PLL_HZ)):  # fmt: skip
         wb = 2 * math.pi * hz
         if alpha_s <= wb / ESTIMATE_RATIO * (1 + 1e-12):
-            out[fam] = (floor, f"PLL at {hz:g} Hz ≥ 3 α_s at any speed; floor: the steady start's settle")
+            out[fam] = (
+                floor,
+                f"no bound from the speed loop (its {hz:g} Hz PLL ≥ 3 α_s); shown: the steady start's "
+                f"floor, {SETTLE_PERIODS:g} periods within a 60 s settle",
+            )
         else:
             out[fam] = (None, f"none: α_s > 1/3 of its {hz:g} Hz PLL (lower speed_bandwidth_hz)")
     return out
