@@ -64,6 +64,10 @@ def test_the_issue_file_passes_and_prints_the_derived_values(tmp_path, capsys):
     assert d["field_weakening"] is False and f.drive.foc.field_weakening is None
     assert d["speed_every"] == 16 and f.drive.ts == 1 / 16000.0
     assert d["i_char"] == pytest.approx(0.11 / 0.0028, rel=1e-12)
+    # without field weakening the highest speed to ask for is where the back EMF alone reaches u_dc/√3
+    assert (
+        d["speed_limit_rpm"] == d["max_speed_rpm"] == pytest.approx(320 / math.sqrt(3) / 0.11 / 4 * 60 / (2 * math.pi))
+    )
     # the FLL flux observers close the loop from ωe = 4.3 α_s (docs/stability.md)
     fll = f.lowest_speeds["FLL flux observers (SOIFO, SecondOrderSOIFO)"][0]
     assert fll == pytest.approx(4.3 * d["alpha_s"] / 4 * 60 / (2 * math.pi), rel=1e-12)
@@ -141,6 +145,7 @@ def test_u_dc_with_field_weakening_is_checked_within_the_current_circle(tmp_path
     f = read_drive(path)
     assert f.derived["field_weakening"].value is True and f.drive.foc.field_weakening is not None
     assert f.derived["u_rated_point_fw"].value <= 220 / math.sqrt(3)
+    assert f.derived["speed_limit_rpm"].value == f.derived["max_speed_fw_rpm"].value
     path.write_text(ISSUE.replace("u_dc = 320.0", "u_dc = 100.0"))
     with pytest.raises(ValueError, match=r"^inverter\.u_dc: must be >= .* with field weakening"):
         read_drive(path)

@@ -16,7 +16,18 @@ from jaxobs.drive import read_drive
 
 _SECTIONS = (
     ("machine", ("kt", "i_char", "tau_d", "tau_q", "t_accel", "i_rated_point")),
-    ("speeds", ("u_max", "u_rated_point", "u_rated_point_fw", "base_speed_rpm", "max_speed_rpm", "max_speed_fw_rpm")),
+    (
+        "speeds",
+        (
+            "u_max",
+            "u_rated_point",
+            "u_rated_point_fw",
+            "base_speed_rpm",
+            "max_speed_rpm",
+            "max_speed_fw_rpm",
+            "speed_limit_rpm",
+        ),
+    ),
     ("timing", ("ts", "use_delay", "advance", "speed_every")),
     ("current loop", ("alpha_c", "alpha_c_ts", "current_phase_margin", "kp_d", "ki_d", "kp_q", "ki_q")),
     ("speed loop", ("alpha_s", "omega_est", "speed_schedule", "kp_w", "ki_w")),
@@ -48,7 +59,9 @@ def cmd_drive_check(args) -> int:
         print(f"{title}:")
         for k, r in rows:
             seen.add(k)
-            hz = f" ({r.value / (2 * math.pi):.4g} Hz)" if r.unit == "rad/s" and k.startswith(("alpha", "omega")) else ""
+            hz = (
+                f" ({r.value / (2 * math.pi):.4g} Hz)" if r.unit == "rad/s" and k.startswith(("alpha", "omega")) else ""
+            )
             mark = "*" if r.given else " "
             print(f"  {mark}{k:<20} {_fmt(r.value):>12} {r.unit:<10}{hz}  {r.rule}")
     rest = [k for k in f.derived if k not in seen]

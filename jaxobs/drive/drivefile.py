@@ -487,6 +487,8 @@ def drive_from_table(raw: dict, name: str = "drive") -> DriveFile:
     fw_needed = u_rated > u_max
     fw = ctl.get("field_weakening", fw_needed)
     rec("field_weakening", fw, "", "on when the rated point needs |u| > u_dc/√3", "field_weakening" in ctl)
+    rec("speed_limit_rpm", _rpm(w_fw if fw else u_max / m["psi_f"], p), "r/min",
+        "the highest speed to ask for: max_speed_fw_rpm with field weakening, else max_speed_rpm")  # fmt: skip
     if fw_needed:
         id_top = min(i_d_r, 0.0)
         u_fw = _fw_voltage(m, w_rated, m["rated_torque_nm"], i_max, id_top) if fw else math.inf
