@@ -40,7 +40,7 @@ LAYERS = [
         "jaxobs.chunkstore",
     ),
     # integration rules (and check_rule)
-    ("jaxobs._discretize",),
+    ("jaxobs._discretize", "jaxobs.safetoml"),
     # signals and plant: they produce the measurements
     (
         "jaxobs.signals._waveforms",
@@ -60,7 +60,8 @@ LAYERS = [
     ("jaxobs.observers",),
     # the closed loop composes the drive's parts with a drive observer (its contract, observers.base)
     ("jaxobs.drive.loop",),
-    ("jaxobs.drive.dual_loop",),  # shares the loop's base, AbstractDriveLoop
+    # the dual loop shares the loop's base, AbstractDriveLoop; a drive file builds a machine and a Drive
+    ("jaxobs.drive.dual_loop", "jaxobs.drive.drivefile"),
     ("jaxobs.drive.bench",),
     ("jaxobs.drive",),
     # the one loop over a system, and sharding a batch over devices
@@ -119,7 +120,7 @@ LAYERS = [
     ("jaxobs_tuning",),
     # the command line: the top layer (`jaxobs ...` and `python -m jaxobs`)
     ("jaxobs_tuning.cli_common", "jaxobs_tuning.summary", "jaxobs_tuning.distributed"),
-    ("jaxobs_tuning.cli_papers",),
+    ("jaxobs_tuning.cli_papers", "jaxobs_tuning.cli_drive"),
     ("jaxobs_tuning.cli",),
     ("jaxobs.__main__",),
 ]

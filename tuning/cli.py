@@ -15,6 +15,7 @@
                                                            robustness study → NetCDF, worst cases, figures
     jaxobs export [RESULT.json | --design D] [--out DIR] [--force] [--check]
                                                            the observer as C99 float32 with golden vectors
+    jaxobs drive check DRIVE.toml                          a drive file checked, and what follows from it
     jaxobs --version
 
 Every command takes ``--quiet``: without it the long ones show their progress on stderr when it is a
@@ -80,6 +81,7 @@ from jaxobs import use_compile_cache, use_host_devices
 from jaxobs.chunkstore import ChunkStore
 
 from .cli_common import enable_x64, progress_of
+from .cli_drive import add_drive_parser
 from .cli_papers import BODE_FILES as BODE_FILES
 from .cli_papers import CF_OPTIONS, cmd_bode, cmd_closed_form, cmd_demo, cmd_reproduce
 from .cli_papers import DEMO_FILES as DEMO_FILES
@@ -434,6 +436,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     add_export_parser(sub, parents=[quiet])
     add_envelope_parser(sub, parents=[quiet])
+    add_drive_parser(sub, parents=[quiet])
     return p
 
 

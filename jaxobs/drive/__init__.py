@@ -1,6 +1,6 @@
 """The PMSM drive: machine, plant, inverter, sensors, FOC, I-f start-up, scenarios, the closed loop and the
-simulated benches (:mod:`jaxobs.drive.bench`), and paper 002's dual three-phase IPMSM (:mod:`jaxobs.drive.dual`,
-:mod:`jaxobs.drive.dual_loop`).
+simulated benches (:mod:`jaxobs.drive.bench`), a drive declared in a TOML file (:func:`load_drive`), and
+paper 002's dual three-phase IPMSM (:mod:`jaxobs.drive.dual`, :mod:`jaxobs.drive.dual_loop`).
 
 Every dynamic piece is a step component (``init``/``step``): :class:`PMSM`,
 :class:`Inverter`, :class:`Sensors`, :class:`FOC`, and the system that wires
@@ -22,6 +22,9 @@ from .control import FOCInput as FOCInput
 from .control import FOCOutput as FOCOutput
 from .control import IfStartup as IfStartup
 from .control import OperatingPoint as OperatingPoint
+from .drivefile import DriveFile as DriveFile
+from .drivefile import load_drive as load_drive
+from .drivefile import read_drive as read_drive
 from .dual import DualPMSM as DualPMSM
 from .dual import DualPMSMParams as DualPMSMParams
 from .dual import dual_ipmsm_paper002 as dual_ipmsm_paper002

@@ -1,96 +1,37 @@
-"""TOML files read safely: size, encoding and nesting checked before the parser sees them."""
+"""TOML files read safely: size, encoding and nesting checked before the parser sees them
+(:mod:`jaxobs.safetoml`), each refusal a :class:`JobError` naming the field."""
 
 from __future__ import annotations
 
-import re
-import tomllib
-from pathlib import Path
-
-from jaxobs.provenance import read_file
+from jaxobs import safetoml
+from jaxobs.safetoml import MAX_DEPTH as MAX_DEPTH
+from jaxobs.safetoml import MAX_DIGITS as MAX_DIGITS
+from jaxobs.safetoml import MAX_FILE_BYTES as MAX_FILE_BYTES
+from jaxobs.safetoml import TomlFieldError
 
 from .fields import JobError
 
-MAX_FILE_BYTES = 1_000_000  # a job file larger than this is refused before it is parsed
-
-
-MAX_DEPTH = 20  # nesting of tables, arrays and dotted keys
-
-
-_STRINGS = re.compile(r'"""(?:[^\\]|\\.)*?"""|\'\'\'.*?\'\'\'|"(?:[^"\\\n]|\\.)*"|\'[^\'\n]*\'|#[^\n]*', re.S)
-
 
 def check_nesting(text: str, what: str = "job file") -> None:
-    """Refuse TOML nested deeper than :data:`MAX_DEPTH` (arrays, inline tables, dotted keys) before it is
-    parsed: the parser recurses on nesting and builds one table per dotted-key part."""
-    bare = _STRINGS.sub('""', text)
-    depth = 0
-    for m in re.finditer(r"[\[\]{}]", bare):
-        depth += 1 if m.group() in "[{" else -1
-        if depth > MAX_DEPTH + 2:  # + 2: a [[table]] header's brackets
-            raise JobError(what, f"nested deeper than {MAX_DEPTH} levels (arrays / inline tables)")
-    for n, line in enumerate(bare.splitlines(), 1):
-        key = line.split("=", 1)[0] if "=" in line else line
-        if key.count(".") > MAX_DEPTH:
-            raise JobError(what, f"line {n}: a dotted key of more than {MAX_DEPTH} parts")
-
-
-MAX_DIGITS = 1000  # digits in one number literal (Python refuses to convert an integer of more than 4300)
-_LONG_NUMBER = re.compile(r"[0-9_]{" + str(MAX_DIGITS + 1) + ",}")
-_HEADER = re.compile(r"\s*\[\[?\s*([^\]]+?)\s*\]\]?\s*$")
+    """:func:`jaxobs.safetoml.check_nesting`, refusing with a :class:`JobError`."""
+    try:
+        safetoml.check_nesting(text, what)
+    except TomlFieldError as e:
+        raise JobError(e.field, e.message) from None
 
 
 def check_numbers(text: str, what: str = "job file") -> None:
-    """Refuse a number literal of more than :data:`MAX_DIGITS` digits before the parser converts it (a
-    5000-digit integer was "Exceeds the limit (4300 digits)", naming no field), naming its field: the
-    key on its line, under the table header above it."""
-    table = ""
-    for n, line in enumerate(_STRINGS.sub('""', text).splitlines(), 1):
-        if m := _HEADER.match(line):
-            table = m.group(1).replace(" ", "")
-        elif m := _LONG_NUMBER.search(line):
-            before = line[: m.start()]
-            key = before.split("=", 1)[0].strip() if "=" in before else ""  # none: an array's continuation line
-            field = ".".join(x for x in (table, key) if x) or what
-            digits = len(m.group().replace("_", ""))
-            raise JobError(field or what, f"a number of {digits} digits (at most {MAX_DIGITS}), line {n}")
-
-
-def _depth(obj) -> int:
-    """Nesting depth of parsed TOML (iterative: no recursion on a deep value)."""
-    best, stack = 0, [(obj, 0)]
-    while stack:
-        o, d = stack.pop()
-        best = max(best, d)
-        if d > MAX_DEPTH + 1:
-            break
-        if isinstance(o, dict):
-            stack.extend((v, d + 1) for v in o.values())
-        elif isinstance(o, list):
-            stack.extend((v, d + 1) for v in o)
-    return best
+    """:func:`jaxobs.safetoml.check_numbers`, refusing with a :class:`JobError`."""
+    try:
+        safetoml.check_numbers(text, what)
+    except TomlFieldError as e:
+        raise JobError(e.field, e.message) from None
 
 
 def read_toml(path, what: str = "job file") -> tuple[dict, bytes]:
-    """A TOML file's table and bytes, or a :class:`JobError` of one line: unreadable, larger than
-    :data:`MAX_FILE_BYTES`, not UTF-8, nested deeper than :data:`MAX_DEPTH`, not TOML."""
-    try:  # a regular file only (no FIFO, no device), at most MAX_FILE_BYTES
-        data = read_file(Path(path), MAX_FILE_BYTES)
-    except ValueError as e:
-        raise JobError(what, str(e)) from None
+    """A TOML file's table and bytes (:func:`jaxobs.safetoml.read_toml`), or a :class:`JobError` of one line:
+    unreadable, larger than :data:`MAX_FILE_BYTES`, not UTF-8, nested deeper than :data:`MAX_DEPTH`, not TOML."""
     try:
-        text = data.decode()
-    except UnicodeDecodeError as e:
-        raise JobError(what, f"not UTF-8 text: byte {e.start} is {data[e.start : e.start + 1]!r}") from None
-    check_nesting(text, what)
-    check_numbers(text, what)
-    try:
-        raw = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as e:
-        raise JobError(what, f"not valid TOML: {e}") from None
-    except RecursionError:
-        raise JobError(what, f"nested deeper than {MAX_DEPTH} levels") from None
-    except ValueError as e:  # a conversion the parser's own checks let through: still one line, the file
-        raise JobError(what, f"not valid TOML: {str(e)[:80]}") from None
-    if _depth(raw) > MAX_DEPTH:
-        raise JobError(what, f"nested deeper than {MAX_DEPTH} levels")
-    return raw, data
+        return safetoml.read_toml(path, what)
+    except TomlFieldError as e:
+        raise JobError(e.field, e.message) from None

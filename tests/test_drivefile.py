@@ -1,0 +1,187 @@
+"""Drive files (jaxobs.drive.drivefile) and `jaxobs drive check`: the issue's exact keys, broken files (one line
+naming the key), the shipped benches equal to bench_machine / bench_drive leaf by leaf, a machine from public
+data.  No simulation: every test here is cheap."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import jax
+import numpy as np
+import pytest
+
+import jaxobs
+from jaxobs.drive import bench_drive, bench_machine, load_drive, read_drive
+from jaxobs_tuning.cli import main
+
+ROOT = Path(__file__).parents[1]
+DATA = Path(jaxobs.__file__).parent / "data"
+TEKNIC = ROOT / "docs" / "examples" / "teknic_m2310p.toml"
+
+# the issue's file, exactly its keys
+ISSUE = """\
+[machine]
+p = 4                      # pole pairs
+Rs = 0.45                  # Ω
+Ld = 0.0028                # H
+Lq = 0.0041                # H
+psi_f = 0.11               # Wb, peak (amplitude-invariant)
+J = 0.0012                 # kg·m²
+rated_speed_rpm = 3000
+rated_torque_nm = 3.2
+rated_current_a = 4.0      # rms phase current
+[inverter]
+u_dc = 320.0               # V
+f_sample_hz = 16000.0      # control and PWM period = 1/f_sample_hz
+"""
+
+
+def _check(tmp_path, text, capsys):
+    path = tmp_path / "drive.toml"
+    path.write_text(text)
+    rc = main(["drive", "check", "--no-cache", str(path)])
+    out, err = capsys.readouterr()
+    return rc, out, err
+
+
+def test_the_issue_file_passes_and_prints_the_derived_values(tmp_path, capsys):
+    rc, out, err = _check(tmp_path, ISSUE, capsys)
+    assert rc == 0, err
+    keys = "base_speed_rpm max_speed_rpm max_speed_fw_rpm i_char tau_d tau_q alpha_c alpha_s kp_d ki_q kp_w ki_w"
+    for key in (*keys.split(), "i_max", "id_policy", "field_weakening", "if_current"):
+        assert f" {key} " in out, key
+    assert "lowest speed at which each observer family closes the speed loop" in out
+    f = read_drive(tmp_path / "drive.toml")
+    d = {k: v.value for k, v in f.derived.items()}
+    # the rules, recomputed: IMC at a 60° phase margin with 1.5 periods of delay at 16 kHz
+    assert d["alpha_c"] == pytest.approx((math.pi / 6) / (1.5 / 16000.0), rel=1e-12)
+    assert d["current_phase_margin"] == pytest.approx(60.0, rel=1e-12)
+    # a decade below the current loop, or a third of the 15 Hz PLL: the PLL binds
+    assert d["alpha_s"] == pytest.approx(min(d["alpha_c"] / 10, 2 * math.pi * 15 / 3), rel=1e-12)
+    assert d["i_max"] == pytest.approx(1.5 * math.sqrt(2) * 4.0, rel=1e-12)
+    assert d["id_policy"] == "mtpa" and f.drive.foc.id_mode == "mtpa"  # Lq > Ld
+    assert d["field_weakening"] is False and f.drive.foc.field_weakening is None
+    assert d["speed_every"] == 16 and f.drive.ts == 1 / 16000.0
+    assert d["i_char"] == pytest.approx(0.11 / 0.0028, rel=1e-12)
+    # without field weakening the highest speed to ask for is where the back EMF alone reaches u_dc/√3
+    assert (
+        d["speed_limit_rpm"] == d["max_speed_rpm"] == pytest.approx(320 / math.sqrt(3) / 0.11 / 4 * 60 / (2 * math.pi))
+    )
+    # the FLL flux observers close the loop from ωe = 4.3 α_s (docs/stability.md)
+    fll = f.lowest_speeds["FLL flux observers (SOIFO, SecondOrderSOIFO)"][0]
+    assert fll == pytest.approx(4.3 * d["alpha_s"] / 4 * 60 / (2 * math.pi), rel=1e-12)
+    # the base speed is where the rated point's |u| reaches u_dc/√3, at MTPA's currents: the least |i| of
+    # rated torque, found here by brute force over i_d
+    i_d = np.linspace(-3.0, 0.0, 300_001)
+    i_q = 3.2 / (1.5 * 4 * (0.11 + (0.0028 - 0.0041) * i_d))
+    k = np.argmin(np.hypot(i_d, i_q))
+    assert d["i_rated_point"] == pytest.approx(np.hypot(i_d[k], i_q[k]), rel=1e-9)
+    w = d["base_speed_rpm"] * 4 * 2 * math.pi / 60
+    u = math.hypot(0.45 * i_d[k] - w * 0.0041 * i_q[k], 0.45 * i_q[k] + w * (0.0028 * i_d[k] + 0.11))
+    assert u == pytest.approx(320 / math.sqrt(3), rel=1e-5)  # the grid's i_d step, 1e-5 A
+
+
+BROKEN = {
+    "negative inductance": ("Ld = 0.0028", "Ld = -0.0028", "machine.Ld"),
+    "zero inductance": ("Lq = 0.0041", "Lq = 0.0", "machine.Lq"),
+    "fractional p": ("p = 4 ", "p = 4.5 ", "machine.p"),
+    "p zero": ("p = 4 ", "p = 0 ", "machine.p"),
+    "u_dc too low": ("u_dc = 320.0", "u_dc = 150.0", "inverter.u_dc"),
+    "unknown key": ("J = 0.0012", "J = 0.0012\nJm = 1.0", "machine.Jm"),
+    "unknown table": ("[inverter]", "[motor]\nx = 1\n[inverter]", "motor"),
+    "missing required": ("psi_f = 0.11", "", "machine.psi_f"),
+    "bandwidth too high": (
+        "f_sample_hz = 16000.0",
+        "f_sample_hz = 16000.0\n[control]\ncurrent_bandwidth_hz = 2500.0",
+        "control.current_bandwidth_hz",
+    ),  # fmt: skip
+    "speed loop above the current loop": (
+        "f_sample_hz = 16000.0",
+        "f_sample_hz = 16000.0\n[control]\ncurrent_bandwidth_hz = 300.0\nspeed_bandwidth_hz = 100.0",
+        "control.speed_bandwidth_hz",
+    ),
+    "sampling too slow": ("f_sample_hz = 16000.0", "f_sample_hz = 50.0", "inverter.f_sample_hz"),
+    "rated torque beyond the current limit": (
+        "rated_torque_nm = 3.2",
+        "rated_torque_nm = 9.0",
+        "machine.rated_torque_nm",
+    ),
+    "string for a number": ("Rs = 0.45", 'Rs = "0.45"', "machine.Rs"),
+    "ADC range below the limit": (
+        "f_sample_hz = 16000.0",
+        "f_sample_hz = 16000.0\n[sensors]\nadc_bits = 12\nadc_range_a = 2.0",
+        "sensors.adc_range_a",
+    ),  # fmt: skip
+    "id policy": ("f_sample_hz = 16000.0", 'f_sample_hz = 16000.0\n[control]\nid_policy = "max"', "control.id_policy"),
+    "startup above rated speed": (
+        "f_sample_hz = 16000.0",
+        "f_sample_hz = 16000.0\n[startup]\nswitch_rpm = 4000.0",
+        "startup.switch_rpm",
+    ),  # fmt: skip
+}
+
+
+@pytest.mark.parametrize("case", sorted(BROKEN))
+def test_a_broken_file_gives_one_line_naming_the_key(case, tmp_path, capsys):
+    old, new, key = BROKEN[case]
+    assert old in ISSUE
+    rc, out, err = _check(tmp_path, ISSUE.replace(old, new, 1), capsys)
+    assert rc == 2, out
+    assert err.count("\n") == 1 and err.startswith("jaxobs: error: "), err
+    assert key in err, err
+
+
+def test_a_file_over_1_mb_is_refused_before_it_is_parsed(tmp_path, capsys):
+    rc, _, err = _check(tmp_path, ISSUE + "#" * 1_000_001 + "\n", capsys)
+    assert rc == 2 and err.count("\n") == 1 and "drive file" in err and "1000000 bytes" in err, err
+
+
+def test_u_dc_with_field_weakening_is_checked_within_the_current_circle(tmp_path):
+    # 160 V: the rated point needs more than u_dc/√3 (so field weakening goes on), and within the current limit a
+    # negative i_d reaches it; 100 V: no i_d within the circle does (one line naming u_dc and the least voltage)
+    path = tmp_path / "d.toml"
+    path.write_text(ISSUE.replace("u_dc = 320.0", "u_dc = 220.0"))
+    f = read_drive(path)
+    assert f.derived["field_weakening"].value is True and f.drive.foc.field_weakening is not None
+    assert f.derived["u_rated_point_fw"].value <= 220 / math.sqrt(3)
+    assert f.derived["speed_limit_rpm"].value == f.derived["max_speed_fw_rpm"].value
+    path.write_text(ISSUE.replace("u_dc = 320.0", "u_dc = 100.0"))
+    with pytest.raises(ValueError, match=r"^inverter\.u_dc: must be >= .* with field weakening"):
+        read_drive(path)
+
+
+def _leaves_equal(a, b):
+    la, ta = jax.tree_util.tree_flatten(a)
+    lb, tb = jax.tree_util.tree_flatten(b)
+    assert ta == tb  # the same structure and the same static fields (ts, speed_every, id_mode, latency, ...)
+    for x, y in zip(la, lb, strict=True):
+        np.testing.assert_allclose(np.asarray(x), np.asarray(y), rtol=1e-12, atol=0)
+
+
+@pytest.mark.parametrize("name", ["spmsm000", "ipmsm002"])
+def test_the_shipped_bench_files_build_the_benches(name):
+    machine, drive = load_drive(DATA / f"{name}.toml")
+    ref = bench_machine(name)
+    _leaves_equal(machine, ref)
+    _leaves_equal(drive, bench_drive(ref))
+    f = read_drive(DATA / f"{name}.toml")
+    assert f.name == name and f.warnings == ()
+    text = (DATA / f"{name}.toml").read_text()
+    assert "ASSUMED" in text  # the values the papers leave open are marked
+
+
+def test_a_machine_from_public_data_differs_from_both_benches_and_loads():
+    f = read_drive(TEKNIC)
+    m, ts, udc = f.machine, f.drive.ts, float(f.drive.inverter.udc)
+    for name in ("spmsm000", "ipmsm002"):
+        b = bench_machine(name)
+        bd = bench_drive(b)
+        assert m.p != b.p and ts != bd.ts and udc != float(bd.inverter.udc)
+        for leaf in ("Rs", "Ld", "Lq", "psi_f", "J"):
+            assert float(getattr(m, leaf)) != float(getattr(b, leaf)), leaf
+    # its 24 V link leaves the rated point little headroom: the check says so
+    assert any(w.startswith("inverter.u_dc") for w in f.warnings)
+    # quantization adds σ = LSB/√12 of a 12-bit ADC over ±16.5 A
+    assert float(f.sensors.i_noise) == pytest.approx(2 * 16.5 / 4096 / math.sqrt(12), rel=1e-12)
+    assert f.derived["encoder_angle_step"].value == pytest.approx(360 * 4 / 4000, rel=1e-12)
