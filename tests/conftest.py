@@ -12,6 +12,12 @@ command line keeps them (jaxobs._cache): with only those over 1 s kept, the smal
 ones (metrics, eager operations, the linear analysis) were compiled again in every
 process; tests/test_fll.py cached went 14.0 -> 10.4 CPU-s, cold unchanged.  The
 cache changes no number: a cached executable is the same program.
+
+Every test process has one CPU device unless a test asks for more: ``JAXOBS_HOST_DEVICES=1``, which
+``jaxobs.use_host_devices`` (and so the command line) reads, here and in the processes tests start.  A
+study's chunks are padded to a multiple of the device count, so a count taken from the machine's cores
+(the command line's default) made chunk counts depend on the machine, and on whether the command line
+was the first JAX computation of its pytest worker.
 """
 
 import os
@@ -20,6 +26,7 @@ from pathlib import Path
 import jax
 
 jax.config.update("jax_enable_x64", True)
+os.environ["JAXOBS_HOST_DEVICES"] = "1"
 
 _cache = os.environ.get("JAXOBS_TEST_CACHE", str(Path.home() / ".cache" / "jaxobs" / "jax-tests"))
 # the command line run in a subprocess (tests/test_cli.py, ...) keeps its compilations in the same folder

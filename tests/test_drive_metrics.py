@@ -27,18 +27,19 @@ def cleso_load_step():
 
 def test_settling_position_settles_a_lagging_observer_and_bias_position_is_its_lag(cleso_load_step):
     """The C-LESO lags by ~23° at 600 r/min (its steady bias): settled to 0 within 1° it never settles (the old
-    settling_position, censored at the horizon), settled to its own final value it does, within the first 0.3 s."""
+    settling_position, censored at the horizon), settled to its own final value it does, 0.099 s after the step."""
     sol, sc, ctx = cleso_load_step
     err = M.wrap(sol.outputs.obs.theta - sol.outputs.theta_e)
     steady = sol.t >= ctx.steady_from
     band = math.radians(ctx.band_deg)
     assert float(M.settling_time(sol.t, err, 0.0, band, ctx.t_event)) == pytest.approx(0.6 - 1e-4 - ctx.t_event)
     exact = float(M.settling_to_steady(sol.t, err, band, steady, ctx.t_event))
-    assert 0.0 < exact < 0.3
+    # measured 0.0987 s; 1 ms (10 samples) for last-bit differences elsewhere moving the band's last crossing
+    assert exact == pytest.approx(0.0987, abs=1e-3)
     tuned_on = float(METRICS["settling_position"](sol, sc, ctx))
     assert tuned_on == pytest.approx(exact, abs=0.02)  # the smooth surrogate (temperature 1 ms, sharpness band/20)
     bias = float(METRICS["bias_position"](sol, sc, ctx))
-    assert 20.0 < math.degrees(bias) < 25.0
+    assert math.degrees(bias) == pytest.approx(22.63, abs=0.05)  # measured 22.626°: the C-LESO's lag at 600 r/min
     assert bias == pytest.approx(abs(float(M.steady_mean(err, steady))), rel=1e-12)
 
 
@@ -47,7 +48,7 @@ def test_settling_speed_is_the_true_speed_against_its_reference_and_peak_speed_d
     rpm, ref = (np.asarray(x) * 30 / math.pi for x in (sol.outputs.omega_m, sol.outputs.omega_m_ref))
     after = np.asarray(sol.t) >= ctx.t_event
     dip = np.max(np.abs(rpm - ref)[after])
-    assert 5.0 < dip < 20.0  # a dip after the step (measured 10.7 r/min)
+    assert dip == pytest.approx(13.01, abs=0.05)  # the dip after the step: measured 13.01 r/min
     assert float(METRICS["peak_speed_dev"](sol, sc, ctx)) == pytest.approx(dip, abs=0.05)
     outside = np.nonzero((np.abs(rpm - ref) > ctx.band_rpm) & after)[0]
     recovery = float(sol.t[outside[-1] + 1]) - ctx.t_event  # back within ±5 r/min for good

@@ -259,7 +259,7 @@ def test_if_startup_from_standstill_hands_over_to_the_faleso():
     # measured: the switch at 0.586 s (if_handover_earliest 0.587 s), 299.6 r/min over 0.9-1.0 s (the speed
     # loop still ringing: 36 r/min peak to peak, 14 at 1.4-1.5 s), the angle error 0.02° mean
     t_switch = float(np.argmax(mode == 1)) * 1e-4
-    assert 0.5 < t_switch < 0.7 and mode[int(t_switch * 1e4) :].all()
+    assert t_switch == pytest.approx(0.586, abs=2e-3) and mode[int(t_switch * 1e4) :].all()
     late = (t >= 0.9) & (t < 1.0)
     assert abs(speed[late].mean() - 300) < 2.0
     err = np.degrees(np.angle(np.exp(1j * (np.asarray(o.obs.theta) - np.asarray(o.theta_e)))))[late]
@@ -350,7 +350,9 @@ def test_reproduce_leso_dual_transients_each_leso_closing(tmp_path):
         assert by[(ramp, "drive", "max_speed")]["ours"] == pytest.approx(840.0, abs=5.0)  # each closing holds it
         # 540 V: 840 r/min is below base speed; the field weakening stays idle (i_d only tracks its zero)
         assert by[(ramp, "drive", "max_u_ab")]["ours"] < 0.8 and by[(ramp, "drive", "min_id")]["ours"] > -1.0
-        assert 1.0 < by[(step, obs, "max_abs")]["ours"] < 45.0  # steady lag + the PLL's acceleration error
+        # steady lag + the PLL's acceleration error: measured 36.55° (C-LESO), 26.96° (GI-LESO), 19.81° (FA-LESO)
+        peak = {"C-LESO": 36.55, "GI-LESO": 26.96, "FA-LESO": 19.81}[obs]
+        assert by[(step, obs, "max_abs")]["ours"] == pytest.approx(peak, abs=0.05)
     # FA-LESO closing: 002's ramp peak (4.1 against 4.5 deg); C-LESO / GI-LESO peaks are their steady lags and more
     assert by[(DUAL_RAMP, "FA-LESO", "max_abs")]["ours"] < 6.0
     # 330 V: the field weakening holds 840 r/min with negative i_d, each set's voltage near its 0.95 margin

@@ -150,7 +150,7 @@ def test_cleso_closing_the_loop_holds_half_load_at_600rpm():
     assert bool(sol.ok)
     assert np.max(np.abs(np.asarray(sol.outputs.speed_rpm)[m] - 600.0)) < 2.0
     err = [np.degrees(np.abs(np.asarray(wrap(o.theta - sol.outputs.theta_e))[m])).max() for o in sol.outputs.obs.each]
-    assert 15.0 < err[0] < 30.0, err
+    assert err[0] == pytest.approx(22.8, abs=0.5), err  # measured 22.8°: its steady lag (002 Fig. 11: 23°)
     assert err[2] < 1.0, err
 
 

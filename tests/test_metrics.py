@@ -47,7 +47,10 @@ def test_smooth_max_and_peak_to_peak_converge():
 def test_overshoot_iae_itae():
     x = _response(T)
     os_ = float(M.overshoot(x, 1.0, 0.0, T >= 0.2))
-    assert 0.0 < os_ < 0.6
+    # by hand: x − 1 = −e^(−u/τ) cos(40u) peaks where tan(40u) = −1/(40τ), at 40u = π − atan(1/2), where it is
+    # e^(−u/τ) · 2/√5 = 0.2344426; the 0.1 ms grid misses the peak by at most ½|x''|(dt/2)² < 1e-6
+    u = (math.pi - math.atan(0.5)) / 40
+    assert os_ == pytest.approx(math.exp(-u / 0.05) * 2 / math.sqrt(5), abs=1e-6)
     e = jnp.where(T >= 0.2, jnp.exp(-(T - 0.2) / 0.05), 0.0)
     assert float(M.iae(T, e, 0.2)) == pytest.approx(0.05 * (1 - math.exp(-16)), rel=2e-3)
     assert float(M.itae(T, e, 0.2)) == pytest.approx(0.05**2, rel=2e-3)

@@ -326,6 +326,11 @@ _SHARD_SCRIPT = textwrap.dedent(
     four = run_study(designs, axes, horizon=0.2)
     for k in one.data_vars:
         np.testing.assert_allclose(four[k].values, one[k].values, rtol=1e-12, atol=0, err_msg=k)
+    # a time-major batch (time first, scenarios second) is split along its second axis
+    tm = jaxobs.SampledSignal(np.ones((50, 8)), 1e-4, batch_inner=True)
+    placed = jaxobs.shard_batch((tm, jax.numpy.linspace(1.0, 2.0, 8)))
+    assert placed[0].samples.sharding.spec == jax.sharding.PartitionSpec(None, "batch"), placed[0].samples.sharding
+    assert placed[1].sharding.spec == jax.sharding.PartitionSpec("batch"), placed[1].sharding
     print("SHARDED-EQUALS-SINGLE")
     """
 )

@@ -145,8 +145,9 @@ def test_batch_axes_and_sharding_of_a_time_major_batch(recs):
     assert batch_size((time_major, gains)) == 6
     placed = jaxobs.shard_batch((time_major, gains))
     assert placed[0].samples.shape == (N, 6)
-    if len(jax.devices()) > 1 and 6 % len(jax.devices()) == 0:
-        assert placed[0].samples.sharding.spec == jax.sharding.PartitionSpec(None, "batch")
+    # the suite's one device (conftest.py): the batch placed whole; its split on its second axis is checked in
+    # tests/test_perf.py's process of 4 host devices
+    assert placed[0].samples.sharding.device_set == {jax.devices()[0]}
     got = jax.jit(lambda b: jaxobs.map_batch(lambda t: t[0].samples[3] * t[1], b))((time_major, gains))
     np.testing.assert_array_equal(got, time_major.samples[3] * gains)
     with pytest.raises(ValueError, match="common leading axis"):

@@ -132,6 +132,11 @@ class CheckpointError(ValueError):
 
 _replace = os.replace  # the rename that publishes a checkpoint (a test kills runs here)
 
+# Testing hook: when set, OptaxSolver.run calls it with the iteration's number before each iteration (before
+# its evaluation).  The test suite sets it to raise KeyboardInterrupt at iteration i, as a Ctrl-C at that point
+# would, to stop runs at chosen iterations without timing a signal (tests/test_interrupt.py).
+_at_iteration = None
+
 
 def _save_checkpoint(path: Path, it, theta, opt_state, best_theta, best_value, history, since_best, fingerprint):
     """One file, written to a temp file and renamed: θ, the optimizer state, the best point, and the
@@ -293,7 +298,8 @@ class OptaxSolver(AbstractSolver):
         """``checkpoint``: one npz file, rewritten atomically every ``checkpoint_every`` iterations, holding
         ``fingerprint`` (the job's sha256).  ``resume``: continue from it; a checkpoint of another job, or a
         corrupt one, raises :class:`CheckpointError` (one line); no checkpoint at all: one line on stderr
-        and a fresh start."""
+        and a fresh start.  Testing hook: the module's ``_at_iteration``, when set, is called with each
+        iteration's number before that iteration; what it raises ends the run there."""
         t_start = time.time()
         opt = self.optimizer
         theta = theta0
@@ -321,6 +327,8 @@ class OptaxSolver(AbstractSolver):
         if start:
             bar.update(start)
         for it in range(start, self.steps):
+            if _at_iteration is not None:
+                _at_iteration(it)
             value, grad, ndiv = objective.value_grad_diverged(theta)
             value = float(value)
             history.append(_entry(objective, it, value, ndiv, theta))
