@@ -475,9 +475,8 @@ def _write_error_log(out) -> str:
     if out is not None:
         try:
             path = Path(out) / "error.log"
-            if not path.is_symlink():
-                path.write_text(text)
-                return str(path)
+            atomic_write_text(path, text)  # renamed over the name: a link there is replaced, never written through
+            return str(path)
         except OSError:
             pass
     try:
