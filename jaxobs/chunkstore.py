@@ -31,11 +31,16 @@ from pathlib import Path
 
 import numpy as np
 
-from .files import atomic_path, atomic_write_text, is_temp, remove_temps
+from .files import atomic_path, atomic_write_text, remove_temps
 
 __all__ = ["ChunkStore"]
 
 META = "meta.json"
+
+
+def _partial(name: str) -> bool:
+    """A temp entry (the store's folder is written by the store alone): what a kill mid-write leaves."""
+    return name.endswith(".tmp")
 
 
 class ChunkStore:
@@ -93,10 +98,10 @@ class ChunkStore:
             for key in ("scenarios", "chunk", "devices", "designs"):
                 if old.get(key) != meta[key]:
                     self._refuse(f"was made with {key} = {old.get(key)!r}, this run has {meta[key]!r}")
-            remove_temps(p)  # what a kill left mid-write
+            remove_temps(p, _partial)  # what a kill left mid-write
         else:
             # a kill while meta.json was written (before any chunk) leaves the folder empty or a temp entry in it
-            if self.resume and p.exists() and any(not is_temp(f.name) for f in p.iterdir()):
+            if self.resume and p.exists() and any(not _partial(f.name) for f in p.iterdir()):
                 self._refuse("has no meta.json")
             if p.exists():
                 shutil.rmtree(p)

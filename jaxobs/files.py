@@ -130,13 +130,15 @@ class atomic_path:
         return False
 
 
-def remove_temps(folder) -> list[str]:
-    """Remove the temp entries a killed writer left in ``folder`` (:func:`is_temp` names: files, and folders
-    with what they hold; a symlink is removed itself, never followed).  The caller must be the folder's only
-    writer (the command line holds its lock).
+def remove_temps(folder, match=is_temp) -> list[str]:
+    """Remove the temp entries a killed writer left in ``folder`` (files, and folders with what they hold; a
+    symlink is removed itself, never followed).  The caller must be the folder's only writer (the command
+    line holds its lock).
 
     Args:
         folder: the folder to clean; a missing one has nothing to remove.
+        match: which names are temp entries (:func:`is_temp`; a folder only its owner writes may take every
+            name ending in ``.tmp``).
 
     Returns:
         The names removed.
@@ -148,7 +150,7 @@ def remove_temps(folder) -> list[str]:
     except (FileNotFoundError, NotADirectoryError):
         return removed
     for e in entries:
-        if not is_temp(e.name):
+        if not match(e.name):
             continue
         try:
             if e.is_dir(follow_symlinks=False):
