@@ -111,6 +111,17 @@ class ChunkStore:
         self.resumed = sum(1 for f in p.iterdir() if f.suffix == ".h5")
         self.total = len(self.designs) * -(-self.n // self.chunk)
 
+    def has_chunks(self) -> bool:
+        """Whether a finished chunk is on disk (in the folder, or in the folder :meth:`retire` moved aside):
+        something a ``--resume`` continues from."""
+        for folder in (self.path, self._trash()):
+            try:
+                if any(f.name.endswith(".h5") and not _partial(f.name) for f in folder.iterdir()):
+                    return True
+            except OSError:
+                continue
+        return False
+
     def _file(self, design, i: int) -> Path:
         return self.path / f"{self.designs.index(str(design))}.{int(i)}.h5"
 

@@ -197,13 +197,13 @@ def _cmd_study(args) -> int:
     outdir = OutDir(out, products, force=args.force, hints={STUDY_CHUNKS: hint})
     store = ChunkStore(out / STUDY_CHUNKS, study_fingerprint(spec), resume=args.resume)
     if rank is not None and rank[1] > 1:
-        args.on_interrupt = f"; continue with: {resume}"  # what Ctrl-C says (main)
+        args.on_interrupt = _resume_hint(resume, store.has_chunks)  # what Ctrl-C says (main)
         return distributed_study(name, designs, axes, opts, out, args, rank, _run_study, outdir, store)
     # one process: the chunks' traced programs are kept across runs under the study's digest (jaxobs.kept_jit)
     opts["trace_key"] = store.fingerprint
     with outdir:
         args.log_dir = out
-        args.on_interrupt = f"; continue with: {resume}"
+        args.on_interrupt = _resume_hint(resume, store.has_chunks)
         return _run_study(name, designs, axes, opts, out, args.quiet, store=store)
 
 
@@ -285,7 +285,7 @@ def _cmd_tune(args) -> int:
         return 0
     with OutDir(out, products, force=args.force, hints={CHECKPOINT: hint}):
         args.log_dir = out
-        args.on_interrupt = f"; continue with: {resume}"  # what Ctrl-C says (main)
+        args.on_interrupt = _resume_hint(resume, (out / CHECKPOINT).is_file)  # what Ctrl-C says (main)
         result = run_job(job, out, resume=args.resume, quiet=args.quiet)
     try:
         timing = json.loads((out / "timing.json").read_text())
@@ -458,15 +458,32 @@ def main(argv=None) -> int:
         print(f"jaxobs: error: {e.strerror or e}{where}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
-        # on a line of its own: a progress bar may hold the terminal's current line
-        start = "\n" if sys.stderr.isatty() else ""
-        print(f"{start}jaxobs: interrupted{getattr(args, 'on_interrupt', '')}", file=sys.stderr)
+        from jaxobs.progress import close_all
+
+        # the bars closed first (tqdm draws a bar as it closes: nothing is drawn after the line below), which
+        # ends their line; else on a line of its own, a bar may hold the terminal's current line
+        start = "" if close_all() or not sys.stderr.isatty() else "\n"
+        print(f"{start}jaxobs: interrupted{_interrupt_hint(args)}", file=sys.stderr)
         return 130
     except (Exception, MemoryError) as e:  # an internal error: the traceback to a log, one line here
         log = _write_error_log(getattr(args, "log_dir", None))
         what = "out of memory" if isinstance(e, MemoryError) else f"internal error ({type(e).__name__})"
         print(f"jaxobs: {what}: {' '.join(str(e).split())[:120]} — traceback in {log}", file=sys.stderr)
         return 1
+
+
+def _resume_hint(resume: str, saved):
+    """What Ctrl-C adds to "interrupted" (``args.on_interrupt``): the command that continues the run, only
+    when ``saved()`` finds something on disk to continue from (interrupted before a checkpoint: nothing)."""
+    return lambda: f"; continue with: {resume}" if saved() else ""
+
+
+def _interrupt_hint(args) -> str:
+    hint = getattr(args, "on_interrupt", "")
+    try:
+        return hint() if callable(hint) else hint
+    except OSError:
+        return ""
 
 
 def _write_error_log(out) -> str:
