@@ -112,7 +112,7 @@ def _check_bounds(job: Job, table: dict, where: str, what: str, closed: bool) ->
         )
 
 
-def check_result(res, where: str = "result", base: Path | None = None) -> dict:
+def check_result(res, where: str = "result") -> dict:
     """The one schema of a ``result.json`` read back (by ``study`` and ``export``); ``ValueError`` of one line
     naming the field.  ``component``: a known component; ``job``: a table (its ``job.component``, when
     given, the same component; its ``[component]`` values of that component, finite numbers); ``gains``:
@@ -120,7 +120,7 @@ def check_result(res, where: str = "result", base: Path | None = None) -> dict:
     values, finite JSON numbers (``"lam": "12337"`` is refused); ``gains.tuned`` null only when nothing was
     tuned (status ``diverged`` or ``overflow``), and at least one design; ``values`` (when given) the same
     for every constructor value of each design; ``ts`` a number > 0, ``omega_n`` a number or null, ``scores``
-    a table when given.  The job must parse (:func:`jaxobs_tuning.parse_job`, recordings read from ``base``)
+    a table when given.  The job must parse (:func:`jaxobs_tuning.parse_job`, its recordings not read)
     and the free gains of ``gains`` and ``values`` lie inside its bounds (``initial`` and ``tuned``; the
     closed form, reported exactly, inside them or equal to the job's own closed form).  The other keys are
     reports, not read back."""
@@ -180,7 +180,9 @@ def check_result(res, where: str = "result", base: Path | None = None) -> dict:
             _numbers(table, allowed, where, f"values.{name}")
         if not any(t is not None for t in values.values()):
             raise ValueError(f"{where}: values holds no design (initial, closed_form and tuned all null or absent)")
-    parsed = parse_job(job, base)  # a JobError (a ValueError of one line) names the job's field
+    # a JobError (a ValueError of one line) names the job's field; its recordings are not read (no base folder:
+    # a result.json lies elsewhere than its job file)
+    parsed = parse_job(job)
     for top in ("gains", "values"):
         for name, table in (res.get(top) or {}).items():
             if table is not None:
@@ -205,7 +207,7 @@ def load_result(path) -> dict:
         res = json.loads(text, parse_constant=_no_constant)
     except (json.JSONDecodeError, ValueError, RecursionError) as e:
         raise ValueError(f"{where}: not valid JSON: {str(e)[:80]}") from None
-    return check_result(res, where, Path(path).parent)
+    return check_result(res, where)
 
 
 def result_designs(result: dict, where: str = "result") -> dict:
