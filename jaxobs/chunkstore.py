@@ -116,7 +116,7 @@ class ChunkStore:
         something a ``--resume`` continues from."""
         for folder in (self.path, self._trash()):
             try:
-                if any(f.name.endswith(".h5") and not _partial(f.name) for f in folder.iterdir()):
+                if any(f.suffix == ".h5" for f in folder.iterdir()):
                     return True
             except OSError:
                 continue

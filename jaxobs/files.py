@@ -100,8 +100,8 @@ class atomic_path:
 
     ``tmp`` has ``p``'s name (a writer that picks its format by the suffix sees it) in a fresh folder
     ``.<name>.<random>.tmp`` beside ``p`` (module doc).  The folder goes on every exit path; the file keeps
-    the mode its writer gave it (0o666 less the umask).  A block that writes nothing at ``tmp`` leaves ``p``
-    as it was.
+    the mode its writer gave it (0o666 less the umask).  A block that raises, or writes no regular file at
+    ``tmp`` (an ``OSError`` then), leaves ``p`` as it was.
     """
 
     def __init__(self, path):

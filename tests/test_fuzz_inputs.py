@@ -17,6 +17,7 @@ from pathlib import Path
 
 import pytest
 
+from jaxobs import papers
 from jaxobs.signals import read_recording
 from jaxobs_tuning.results import load_result, tuned_component
 
@@ -289,7 +290,7 @@ def test_fuzzed_checkpoints_are_all_refused(tmp_path):
 
 COMMANDS = ("envelope", "export", "study")
 ALL = frozenset(COMMANDS)
-CLESO_CF = 1570.7963267948965  # the C-LESO job's closed form, outside nothing: inside [200, 10000]
+CLESO_CF = papers.LESO_OMEGA0  # the C-LESO job's closed form (002 Table II), inside its bounds [200, 10000]
 
 
 def _drive_result() -> dict:
@@ -298,7 +299,7 @@ def _drive_result() -> dict:
 
     job = load_job(PRESETS / "cleso.toml")
     fixed = {k: float(v) for k, v in job.values.items()}
-    gains = {"initial": {"omega0": 1570.8}, "closed_form": {"omega0": CLESO_CF}, "tuned": {"omega0": 2000.0}}
+    gains = {"initial": {"omega0": job.gains[0].init}, "closed_form": {"omega0": CLESO_CF}, "tuned": {"omega0": 2000.0}}
     return {
         "status": "converged",
         "job": job.raw,

@@ -166,7 +166,13 @@ def test_checkpoint_fifo_does_not_block_resume(tmp_path):
 def _result(**changes):
     """A minimal SOGIFLLWIF result (the fields study and export read), with ``changes`` applied."""
     res = {
-        "job": {"job": {"name": "t", "component": "SOGIFLLWIF"}, "component": {"k1": 1.7}},
+        "job": {
+            "job": {"name": "t", "component": "SOGIFLLWIF"},
+            "component": {"k1": 1.7},
+            "gains": {"lam": {"init": 11559.0, "lower": 1000.0, "upper": 1e5}},
+            "scenarios": {"signal": "grid", "grid": {"dc": [0.0]}},
+            "objective": {"terms": [{"metric": "itae_freq"}]},
+        },
         "component": "SOGIFLLWIF",
         "gains": {"tuned": {"lam": 9000.0}},
     }
@@ -203,6 +209,11 @@ BAD_RESULTS = [
     ("ts negative", json.dumps(_result(ts=-1e-4)), "ts must be a sample time"),
     ("omega_n a string", json.dumps(_result(omega_n="314")), "omega_n must be a finite number"),
     ("scores a list", json.dumps(_result(scores=[])), "scores must be a table"),
+    ("lam off its bounds", json.dumps(_result(gains={"tuned": {"lam": 1e6}})), r"lam = 1e\+06 is outside .*\[1000, 100000\]"),
+    ("no design", json.dumps(_result(gains={"tuned": None, "initial": None}, status="diverged")), "holds no design"),
+    ("values a list", json.dumps(_result(values=[])), "values must be a table"),
+    ("values a string gain", json.dumps(_result(values={"tuned": {"lam": "9e3"}})), "values.tuned.lam must be"),
+    ("job unparseable", json.dumps(_result(job={"job": {"component": "SOGIFLLWIF"}})), "job.name|scenarios|objective"),
     ("a list", "[]", "not a tuning result"),
     ("no gains", json.dumps({"job": {}, "component": "SOGIFLLWIF"}), "no 'gains'"),
     ("not JSON", "{", "not valid JSON"),
