@@ -443,7 +443,8 @@ def test_cli_binds_a_flux_result_to_the_recording_machine(tmp_path, capsys):
     (Rs = 0.8, L = 5 mH, omega0 at 1000 r/min) and matches; --record synthetic keeps the result's Rs, L."""
     _need_cc()
     path = tmp_path / "soifo.json"
-    path.write_text(json.dumps({"component": "SOIFO", "job": _preset_job("soifo.toml"), "gains": {"tuned": {"k": 1.3}}}))
+    res = {"component": "SOIFO", "job": _preset_job("soifo.toml"), "gains": {"tuned": {"k": 1.3}}}
+    path.write_text(json.dumps(res))
     assert _cli(["export", str(path), "--out", str(tmp_path / "d"), "--check"]) == 0
     out = capsys.readouterr().out
     assert "bound to the recording's machine: Rs = 0.8, L = 0.005, omega0 = 314.159" in out and ": OK" in out

@@ -116,8 +116,8 @@ def _check_bounds(job: Job, table: dict, where: str, what: str, closed: bool) ->
 
 
 def check_result(res, where: str = "result") -> dict:
-    """The one schema of a ``result.json`` read back (by ``study``, ``export``, ``envelope``); ``ValueError`` of one line
-    naming the field.  ``component``: a known component; ``job``: a table (its ``job.component``, when
+    """The one schema of a ``result.json`` read back (by ``study``, ``export``, ``envelope``); ``ValueError`` of one
+    line naming the field.  ``component``: a known component; ``job``: a table (its ``job.component``, when
     given, the same component; its ``[component]`` values of that component, finite numbers); ``gains``:
     a table of ``initial`` / ``closed_form`` / ``tuned``, each null or a non-empty table of that component's
     values, finite JSON numbers (``"lam": "12337"`` is refused); ``gains.tuned`` null only when nothing was
