@@ -430,7 +430,8 @@ def _interrupted(saves: bool):
     def run_job(job, out, resume=False, quiet=False):
         if saves:
             (out / "checkpoint.npz").write_bytes(b"ckpt")
-        Progress(True, 10, "tune").update(3)
+        bar = Progress(True, 10, "tune")  # referenced by this frame, which the traceback keeps alive
+        bar.update(3)
         raise KeyboardInterrupt
 
     return run_job
