@@ -2,6 +2,10 @@
 
 from __future__ import annotations
 
+import os
+
+from .files import atomic_path
+
 
 def _subplots(*args, figsize, **kwargs):
     """``pyplot.subplots`` without pyplot: (figure, axes) on a plain Figure."""
@@ -14,9 +18,20 @@ def _subplots(*args, figsize, **kwargs):
 def _finish(fig, path, dpi=110):
     """Lay out and save to ``path`` (if given); the figure is returned for notebooks."""
     fig.tight_layout()
-    if path is not None:
-        fig.savefig(path, dpi=dpi)
+    _save(fig, path, dpi)
     return fig
+
+
+def _save(fig, path, dpi) -> None:
+    """``fig`` to ``path`` (if given) through :class:`jaxobs.files.atomic_path`: a temp file renamed over it,
+    never written through a link; a file object given as ``path`` is written as it is."""
+    if path is None:
+        return
+    if not isinstance(path, (str, os.PathLike)):
+        fig.savefig(path, dpi=dpi)
+        return
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=dpi)
 
 
 def _mark_event(ax, t, text: str) -> None:

@@ -5,9 +5,9 @@
 
 The folder holds ``meta.json`` (the study's fingerprint, the number of scenarios, the chunk size, the
 device count and the designs) and one HDF5 file per finished chunk, ``<design index>.<chunk index>.h5``
-(one dataset per metric, that chunk's real rows only).  Each chunk file is written under a random temp
-name (``tempfile.mkstemp``: ``O_EXCL``), flushed, fsync'ed and renamed: a chunk file that exists is
-complete, and a kill mid-write leaves only a temp file, which the next open removes.
+(one dataset per metric, that chunk's real rows only).  Each chunk file is written in a temp folder beside
+it, fsync'ed and renamed (:mod:`jaxobs.files`): a chunk file that exists is complete, and a kill mid-write
+leaves only a temp entry, which the next open removes.
 
 Why one file per chunk and not one growing NetCDF4/HDF5 file: HDF5 updates its metadata in place and has
 no journal, so a process killed while writing can leave the whole file unreadable, every finished chunk
@@ -27,14 +27,20 @@ from __future__ import annotations
 import json
 import os
 import shutil
-import tempfile
 from pathlib import Path
 
 import numpy as np
 
+from .files import atomic_path, atomic_write_text, remove_temps
+
 __all__ = ["ChunkStore"]
 
 META = "meta.json"
+
+
+def _partial(name: str) -> bool:
+    """A temp entry (the store's folder is written by the store alone): what a kill mid-write leaves."""
+    return name.endswith(".tmp")
 
 
 class ChunkStore:
@@ -92,23 +98,29 @@ class ChunkStore:
             for key in ("scenarios", "chunk", "devices", "designs"):
                 if old.get(key) != meta[key]:
                     self._refuse(f"was made with {key} = {old.get(key)!r}, this run has {meta[key]!r}")
-            for f in p.iterdir():  # what a kill left mid-write
-                if f.name.endswith(".tmp"):
-                    f.unlink(missing_ok=True)
+            remove_temps(p, _partial)  # what a kill left mid-write
         else:
-            # a kill while meta.json was written (before any chunk) leaves the folder empty or a temp file in it
-            if self.resume and p.exists() and any(not f.name.endswith(".tmp") for f in p.iterdir()):
+            # a kill while meta.json was written (before any chunk) leaves the folder empty or a temp entry in it
+            if self.resume and p.exists() and any(not _partial(f.name) for f in p.iterdir()):
                 self._refuse("has no meta.json")
-            if self.resume and p.exists():
-                for f in p.iterdir():
-                    f.unlink(missing_ok=True)
-            if not self.resume and p.exists():
+            if p.exists():
                 shutil.rmtree(p)
             p.mkdir(parents=True, exist_ok=True)
-            _atomic_write(p / META, lambda tmp: Path(tmp).write_text(json.dumps(meta, indent=1)))
+            atomic_write_text(p / META, json.dumps(meta, indent=1))
         self.designs, self.n, self.chunk = list(meta["designs"]), int(n), int(chunk)
         self.resumed = sum(1 for f in p.iterdir() if f.suffix == ".h5")
         self.total = len(self.designs) * -(-self.n // self.chunk)
+
+    def has_chunks(self) -> bool:
+        """Whether a finished chunk is on disk (in the folder, or in the folder :meth:`retire` moved aside):
+        something a ``--resume`` continues from."""
+        for folder in (self.path, self._trash()):
+            try:
+                if any(f.suffix == ".h5" for f in folder.iterdir()):
+                    return True
+            except OSError:
+                continue
+        return False
 
     def _file(self, design, i: int) -> Path:
         return self.path / f"{self.designs.index(str(design))}.{int(i)}.h5"
@@ -121,12 +133,9 @@ class ChunkStore:
         """Chunk ``i`` of ``design``: ``values[name]``, that chunk's real rows (no padding)."""
         import h5py
 
-        def write(tmp):
-            with h5py.File(tmp, "w", track_order=True) as f:
-                for k in sorted(values):
-                    f.create_dataset(k, data=np.asarray(values[k]))
-
-        _atomic_write(self._file(design, i), write)
+        with atomic_path(self._file(design, i)) as tmp, h5py.File(tmp, "w", track_order=True) as f:
+            for k in sorted(values):
+                f.create_dataset(k, data=np.asarray(values[k]))
 
     def load(self, design) -> dict:
         """Every scenario's values of ``design``, in order: the chunks concatenated (a missing one refused)."""
@@ -167,26 +176,3 @@ class ChunkStore:
         """The folder and its chunks (once the study's results are written; after :meth:`retire` or not)."""
         shutil.rmtree(self.path, ignore_errors=True)
         shutil.rmtree(self._trash(), ignore_errors=True)
-
-
-def _atomic_write(path: Path, write) -> None:
-    """``write(tmp)`` to a fresh temp file beside ``path`` (random name, ``O_EXCL``), fsync'ed, renamed over
-    ``path``, then the folder fsync'ed so that the rename survives a crash; the temp file goes on failure."""
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    os.close(fd)
-    try:
-        write(tmp)
-        fd = os.open(tmp, os.O_RDONLY)
-        try:
-            os.fsync(fd)
-        finally:
-            os.close(fd)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-    dfd = os.open(path.parent, os.O_RDONLY)
-    try:
-        os.fsync(dfd)
-    finally:
-        os.close(dfd)

@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from . import metrics, papers
-from ._figure import _finish, _mark_event, _subplots
+from ._figure import _finish, _mark_event, _save, _subplots
 from ._plot_bode import bode_figure as bode_figure
 from ._plot_bode import paper_bode_figures as paper_bode_figures
 from ._plot_bode import resonance_grid as resonance_grid
@@ -302,7 +302,7 @@ def study_figures(ds, out_dir):
         finite = np.asarray(da)[np.isfinite(np.asarray(da))]
         if len(axes) >= 2 and "sample" not in axes:
             p = out / f"heatmap_{metric}.png"
-            _study_heatmap(ds, da, unit, short, axes, designs).savefig(p, dpi=100)  # no tight_layout: the bar
+            _save(_study_heatmap(ds, da, unit, short, axes, designs), p, 100)  # no tight_layout: the bar
             paths.append(p)
         fig, ax = _subplots(figsize=(6, 3.4))
         bins = np.histogram_bin_edges(finite, bins=30) if finite.size else 30
@@ -451,8 +451,7 @@ def drive_study_figure(ds, path):
         fontsize=10,
     )
     fig.tight_layout(rect=(0, 0.035, 1, 1))
-    if path is not None:
-        fig.savefig(path, dpi=90)
+    _save(fig, path, 90)
     return fig
 
 
@@ -593,6 +592,5 @@ def envelope_figure(ds, path):
     if extra:
         title += f"; worst over {', '.join(extra)}"
     fig.suptitle(title, fontsize=9)
-    if path is not None:
-        fig.savefig(path, dpi=110)
+    _save(fig, path, 110)
     return fig

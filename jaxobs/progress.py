@@ -25,8 +25,11 @@ import contextlib
 import logging
 import sys
 import warnings
+import weakref
 
-__all__ = ["Progress", "check_progress"]
+__all__ = ["Progress", "check_progress", "close_all"]
+
+_OPEN: weakref.WeakSet = weakref.WeakSet()  # the Progress objects whose bar is drawn now (close_all)
 
 
 def check_progress(progress, owner: str = "progress"):
@@ -52,6 +55,7 @@ class Progress:
 
             self._bar = tqdm(total=total, desc=desc, unit=unit, file=sys.stderr, dynamic_ncols=True, leave=True)
             self._routed = _route_to_bars(tqdm)
+            _OPEN.add(self)
 
     def stage(self, text: str) -> None:
         """Name what runs now (shown at once in the bar's description)."""
@@ -73,12 +77,23 @@ class Progress:
             self._routed.close()  # warnings and logging as they were
             self._bar.close()
             self._bar = None
+            _OPEN.discard(self)
 
     def __enter__(self) -> Progress:
         return self
 
     def __exit__(self, *exc) -> None:
         self.close()
+
+
+def close_all() -> int:
+    """Close every bar still drawn (a call interrupted by Ctrl-C leaves its bars open until they
+    are collected, and tqdm redraws a bar when it closes): the command line calls it before its last line, so
+    that nothing is drawn after that line.  Returns how many bars were closed."""
+    bars = list(_OPEN)
+    for p in bars:
+        p.close()
+    return len(bars)
 
 
 class _BarLogHandler(logging.Handler):

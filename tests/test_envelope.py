@@ -125,7 +125,10 @@ def test_cli_envelope_writes_netcdf_and_figure(tmp_path, capsys):
     values = {k: float(v) for k, v in job.values.items()}
     res = tmp_path / "result.json"
     tuned = {**values, "lam": 0.7}
-    res.write_text(json.dumps({"job": job.raw, "values": {"initial": values, "closed_form": values, "tuned": tuned}}))
+    free = [g.name for g in job.gains]
+    designs = {"initial": values, "closed_form": values, "tuned": tuned}
+    gains = {k: {g: v[g] for g in free} for k, v in designs.items()}
+    res.write_text(json.dumps({"job": job.raw, "component": job.component, "gains": gains, "values": designs}))
     assert main(["envelope", str(res), "--check"]) == 0
     assert "designs initial, closed_form, tuned" in capsys.readouterr().out
 

@@ -58,6 +58,12 @@ def _cli(argv):
 _README_TUNED = {"k1": 1.43718, "k2": 0.666805, "lam": 7871.22}
 
 
+def _preset_job(name: str) -> dict:
+    """A preset job as a result.json holds it, with an empty ``[component]`` (the component's defaults)."""
+    raw = tomllib.loads((resources.files("jaxobs_tuning") / "presets" / name).read_text())
+    return {**raw, "component": {}}
+
+
 def _default_job_result(tmp_path, **extra):
     """A result.json as `jaxobs tune` writes it for the default job (tuning/presets/wif_robust.toml)."""
     raw = tomllib.loads((resources.files("jaxobs_tuning") / "presets" / "wif_robust.toml").read_text())
@@ -227,7 +233,7 @@ def test_leso_result_says_what_the_job_binds_per_scenario(tmp_path):
         json.dumps(
             {
                 "component": "CLESO",
-                "job": {"component": {}},
+                "job": _preset_job("cleso.toml"),
                 "gains": {"tuned": {"omega0": 1200.0, "kp_pll": 130.0, "ki_pll": 8000.0}},
             }
         )
@@ -437,7 +443,8 @@ def test_cli_binds_a_flux_result_to_the_recording_machine(tmp_path, capsys):
     (Rs = 0.8, L = 5 mH, omega0 at 1000 r/min) and matches; --record synthetic keeps the result's Rs, L."""
     _need_cc()
     path = tmp_path / "soifo.json"
-    path.write_text(json.dumps({"component": "SOIFO", "job": {"component": {}}, "gains": {"tuned": {"k": 1.3}}}))
+    res = {"component": "SOIFO", "job": _preset_job("soifo.toml"), "gains": {"tuned": {"k": 1.3}}}
+    path.write_text(json.dumps(res))
     assert _cli(["export", str(path), "--out", str(tmp_path / "d"), "--check"]) == 0
     out = capsys.readouterr().out
     assert "bound to the recording's machine: Rs = 0.8, L = 0.005, omega0 = 314.159" in out and ": OK" in out

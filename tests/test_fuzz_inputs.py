@@ -13,13 +13,16 @@ import json
 import math
 import random
 import time
+from pathlib import Path
 
 import pytest
 
+from jaxobs import papers
 from jaxobs.signals import read_recording
 from jaxobs_tuning.results import load_result, tuned_component
 
 HANG_S = 10.0  # CPU seconds of this process (time.process_time): other processes' load does not stretch them
+PRESETS = Path(__file__).parents[1] / "tuning" / "presets"
 
 RESULT = {
     "status": "converged",
@@ -279,3 +282,219 @@ def test_fuzzed_checkpoints_are_all_refused(tmp_path):
 
     counts = _fuzz(cases, ckpt, resume, "checkpoints")
     assert counts["tried"] >= 200 and counts["accepted"] == 0
+
+
+# --------------------------------------------------------------------------
+# result files through the command line: envelope, export and study share one reader
+# --------------------------------------------------------------------------
+
+COMMANDS = ("envelope", "export", "study")
+ALL = frozenset(COMMANDS)
+CLESO_CF = papers.LESO_OMEGA0  # the C-LESO job's closed form (002 Table II), inside its bounds [200, 10000]
+
+
+def _drive_result() -> dict:
+    """A result.json of the C-LESO preset job as run_job writes it (the fields any command reads back)."""
+    from jaxobs_tuning.job import load_job
+
+    job = load_job(PRESETS / "cleso.toml")
+    fixed = {k: float(v) for k, v in job.values.items()}
+    gains = {"initial": {"omega0": job.gains[0].init}, "closed_form": {"omega0": CLESO_CF}, "tuned": {"omega0": 2000.0}}
+    return {
+        "status": "converged",
+        "job": job.raw,
+        "component": "CLESO",
+        "loop": "sensorless",
+        "machine": "ipmsm002",
+        "ts": float(fixed.pop("ts", 1e-4)),
+        "omega_n": None,
+        "gains": gains,
+        "values": {k: {**fixed, **g} for k, g in gains.items()},
+        "scores": {"tuned": {"objective": 0.1, "diverged": 0}},
+    }
+
+
+def _number_ok(path, v) -> bool:
+    """Whether a number ``v`` at leaf ``path`` is valid for every command (False: refused by all)."""
+    if path[-1] == "omega0" and path[0] in ("gains", "values"):
+        if path[1] == "closed_form" and math.isclose(v, CLESO_CF, rel_tol=1e-6):
+            return True
+        return 200.0 <= v <= 10000.0
+    return True
+
+
+def cli_result_mutations(seed=0, n=120):
+    """(label, bytes, refused_by): the commands that must refuse the file (empty: any outcome but a traceback;
+    a valid file is accepted by all three)."""
+    rng = random.Random(seed)
+    base = _drive_result()
+    strict = [("gains", g, "omega0") for g in ("initial", "closed_form", "tuned")]
+    strict += [("values", g, k) for g in ("initial", "closed_form", "tuned") for k in base["values"]["tuned"]]
+    strict += [("ts",), ("omega_n",)]
+    for j in range(n):
+        res = copy.deepcopy(base)
+        kind = rng.choice(["value", "value", "value", "number", "drop", "gain", "bounds", "component", "token",
+                           "truncate", "valid"])  # fmt: skip
+        path = rng.choice(strict)
+        refused = ALL
+        if kind == "value":
+            v, number = rng.choice(BAD_VALUES)
+            _set(res, path, v)
+            if number:
+                refused = ALL if not _number_ok(path, v) else frozenset()
+                refused = refused if path != ("ts",) or v > 0 else ALL
+            elif path == ("omega_n",) and v is None:
+                refused = frozenset()
+        elif kind == "number":  # a finite number: inside or outside the bounds
+            v = rng.choice([150.0, 199.9, 200.0, 5000.0, 10000.0, 10001.0, 1e308, -3.0, 1e-9])
+            path = rng.choice(strict[:3] + [p for p in strict if p[-1] == "omega0"])
+            _set(res, path, v)
+            refused = frozenset() if _number_ok(path, v) else ALL
+        elif kind == "drop":
+            path = rng.choice([("gains",), ("values",), ("job",), ("component",), ("gains", "tuned"),
+                               ("values", "tuned"), ("values", "initial"), ("scores",), ("status",)])  # fmt: skip
+            parent = res
+            for k in path[:-1]:
+                parent = parent[k]
+            del parent[path[-1]]
+            refused = {
+                ("values",): frozenset({"envelope"}),
+                ("values", "tuned"): frozenset(),
+                ("values", "initial"): frozenset(),
+                ("scores",): frozenset(),
+                ("status",): frozenset(),
+            }.get(path, ALL)
+        elif kind == "gain":
+            table = res[rng.choice(["gains", "values"])][rng.choice(["initial", "closed_form", "tuned"])]
+            table[rng.choice(["K1", "gamma", "", "omega0 ", "k1"])] = 1.0
+        elif kind == "bounds":  # the job's bounds moved off the stored gains (or made unparseable)
+            g = res["job"]["gains"]["omega0"]
+            g.update(rng.choice([{"upper": 1800.0}, {"lower": 1600.0, "init": 1700.0}, {"lower": "200"}]))
+        elif kind == "component":
+            res["component"] = rng.choice(["FALESO", "SOGIFLL", "X", "cleso", ""])
+        elif kind == "token":
+            _set(res, path, "@@")
+            tok = rng.choice(_TOKENS)
+            data = json.dumps(res).replace('"@@"', tok).encode()
+            yield f"cli:{kind}:{'.'.join(path)}:{j}", data, ALL
+            continue
+        elif kind == "truncate":
+            full = json.dumps(res).encode()
+            yield f"cli:{kind}:{j}", full[: rng.randrange(len(full))], ALL
+            continue
+        else:  # valid: another design inside the bounds, a report key, the keys reordered
+            res["values"]["tuned"]["omega0"] = res["gains"]["tuned"]["omega0"] = rng.uniform(200.0, 10000.0)
+            res["notes"] = {"anything": [1, "two", None]}
+            res = dict(reversed(list(res.items())))
+            refused = frozenset()
+        yield f"cli:{kind}:{'.'.join(path)}:{j}", json.dumps(res).encode(), refused
+    yield "cli:values-list", json.dumps({**base, "values": [1.0]}).encode(), frozenset({"envelope"})
+    yield "cli:values-empty", json.dumps({**base, "values": {}}).encode(), frozenset({"envelope"})
+    yield "cli:deep-200000", b"[" * 200_000 + b"]" * 200_000, ALL
+    yield "cli:bad-utf8", json.dumps(base).encode().replace(b"cleso", b"cl\xffso", 1), ALL
+    yield "cli:empty", b"", ALL
+
+
+class _Accepted(BaseException):
+    """Raised once `jaxobs export` has read its result: the export itself is not what is fuzzed."""
+
+
+def _fuzz_cli(cases, tmp_path, capsys, monkeypatch, what):
+    """Each file through envelope --check, export (stopped once read) and study --check, in process."""
+    from jaxobs_tuning.cli import main
+    from jaxobs_tuning.export import command
+
+    real = command.observer_from_result
+
+    def read_then_stop(*a, **k):
+        real(*a, **k)
+        raise _Accepted
+
+    monkeypatch.setattr(command, "observer_from_result", read_then_stop)
+    res = tmp_path / "result.json"
+    study = tmp_path / "study.toml"
+    study.write_text(
+        '[study]\nkind = "drive"\nname = "f"\nmachine = "ipmsm002"\nhorizon = 0.2\n'
+        '[designs.T]\nresult = "result.json"\n[axes]\nspeed_rpm = [300.0]\nload_nm = [0.0]\n'
+    )
+    argv = {
+        "envelope": ["envelope", str(res), "--check", "--no-cache"],
+        "export": ["export", str(res), "--out", str(tmp_path / "x"), "--force", "--quiet", "--no-cache"],
+        "study": ["study", str(study), "--check", "--out", str(tmp_path / "s"), "--no-cache"],
+    }
+    counts = dict(files=0, runs=0, accepted=0, refused=0, tracebacks=0, hangs=0, accepted_invalid=0)
+    bad = []
+    for label, data, refused_by in cases:
+        res.write_bytes(data)
+        counts["files"] += 1
+        for cmd in COMMANDS:
+            t0 = time.perf_counter()
+            try:
+                rc = main(argv[cmd])
+            except _Accepted:
+                rc = 0
+            except BaseException as e:  # noqa: BLE001 - counted: a traceback
+                rc = f"{type(e).__name__}: {str(e)[:160]}"
+            err = capsys.readouterr().err.strip()
+            counts["runs"] += 1
+            if rc == 0:
+                counts["accepted"] += 1
+                if cmd in refused_by:
+                    counts["accepted_invalid"] += 1
+                    bad.append(f"{cmd} {label}: accepted")
+            elif rc == 2 and len(err.splitlines()) == 1 and err.startswith("jaxobs: error: ") and len(err) < 400:
+                counts["refused"] += 1
+            else:
+                counts["tracebacks"] += 1
+                bad.append(f"{cmd} {label}: exit {rc}: {err[:200]!r}")
+            if time.perf_counter() - t0 > HANG_S:
+                counts["hangs"] += 1
+                bad.append(f"{cmd} {label}: {time.perf_counter() - t0:.1f} s")
+    print(f"{what}: " + ", ".join(f"{k} {v}" for k, v in counts.items()))
+    assert not bad, bad[:10]
+    return counts
+
+
+def test_fuzzed_result_files_through_envelope_export_and_study(tmp_path, capsys, monkeypatch):
+    """At least 300 mutated result files, each read by the three commands: 0 tracebacks, 0 accepted invalid."""
+    cases = list(cli_result_mutations())
+    counts = _fuzz_cli(cases, tmp_path, capsys, monkeypatch, "result files x (envelope, export, study)")
+    with capsys.disabled():
+        print(f"\nresult files x (envelope, export, study): {counts}")
+    assert counts["files"] >= 100 and counts["runs"] >= 300
+    assert counts["accepted"] >= 3 * sum(1 for _, _, r in cases if not r) // 2  # the valid ones run
+
+
+@pytest.mark.parametrize(
+    "label, edit, field",
+    [
+        ("values as a list", lambda r: r.update(values=[1.0]), "values must be a table"),
+        ("values.initial as a list", lambda r: r["values"].update(initial=[1.0]), "values.initial must be a table"),
+        ("a gain as a table", lambda r: r["values"]["tuned"].update(omega0={"v": 1.0}), "values.tuned.omega0"),
+        ("an unknown gain", lambda r: r["values"]["tuned"].update(K1=1.0), "values.tuned.K1 is not a value"),
+        ("a gain as a string", lambda r: r["values"]["tuned"].update(omega0="1.56"), "values.tuned.omega0"),
+        ("a gain as a bool", lambda r: r["values"]["tuned"].update(omega0=True), "values.tuned.omega0"),
+        ("no design", lambda r: r.update(values={}), "values holds no design"),
+        ("off its bounds", lambda r: r["values"]["tuned"].update(omega0=1e308), "[200, 10000]"),
+        ("the gains off their bounds", lambda r: r["gains"]["tuned"].update(omega0=1e308), "gains.tuned.omega0"),
+    ],
+    ids=lambda v: v if isinstance(v, str) and " " in v else "",
+)
+def test_malformed_results_are_one_line_exit_2_from_envelope(tmp_path, capsys, label, edit, field):
+    from jaxobs_tuning.cli import main
+
+    res = _drive_result()
+    edit(res)
+    (tmp_path / "result.json").write_text(json.dumps(res))
+    assert main(["envelope", str(tmp_path / "result.json"), "--check", "--no-cache"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and field in err[0], err
+
+
+def test_deep_result_is_one_line_exit_2_from_envelope(tmp_path, capsys):
+    from jaxobs_tuning.cli import main
+
+    (tmp_path / "result.json").write_bytes(b"[" * 200_000 + b"]" * 200_000)
+    assert main(["envelope", str(tmp_path / "result.json"), "--check", "--no-cache"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "nested deeper than 64" in err[0]

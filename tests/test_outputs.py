@@ -385,3 +385,84 @@ def test_temp_files_cannot_be_redirected(tmp_path):
             raise RuntimeError
     assert not (out / "failed.png").exists()
     assert all(p.is_symlink() for p in out.iterdir() if p.name.startswith("."))
+
+
+# --------------------------------------------------------------------------
+# a killed run's litter; Ctrl-C's last line
+# --------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("force", [False, True], ids=["resumed", "forced"])
+def test_temp_litter_of_a_killed_run_is_removed_by_the_next_run(tmp_path, force):
+    """The temp entries a kill leaves (a writer's folder ``.scores.nc.<8>.tmp``, a file ``.result.json.<12 hex>.tmp``,
+    a link planted at such a name) go when the next run locks the folder, resumed or forced; other files stay,
+    and nothing a link points to is touched."""
+    out, outside = tmp_path / "o", tmp_path / "outside.txt"
+    out.mkdir()
+    outside.write_text("keep")
+    (out / ".scores.nc.ab_cd123.tmp").mkdir()
+    (out / ".scores.nc.ab_cd123.tmp" / "scores.nc").write_bytes(b"half")
+    (out / ".result.json.0123456789ab.tmp").write_bytes(b"half")
+    (out / ".history.json.fedcba987654.tmp").symlink_to(outside)
+    (out / "checkpoint.npz").write_bytes(b"ckpt")
+    (out / "notes.tmp").write_text("mine")
+    (out / ".notes").write_text("mine")
+    with OutDir(out, ["result.json"], force=force):
+        assert sorted(p.name for p in out.iterdir()) == [".jaxobs.lock", ".notes", "checkpoint.npz", "notes.tmp"]
+    assert outside.read_text() == "keep"
+
+
+def test_a_hard_link_at_the_lock_is_not_written_through(tmp_path):
+    out, outside = tmp_path / "o", tmp_path / "outside.txt"
+    out.mkdir()
+    outside.write_text("keep")
+    os.link(outside, out / LOCK)
+    with OutDir(out, []):
+        assert (out / LOCK).stat().st_nlink == 1 and not os.path.samefile(out / LOCK, outside)
+    assert outside.read_text() == "keep" and outside.stat().st_nlink == 1
+
+
+def _interrupted(saves: bool):
+    """run_job stand-in: a progress bar left open (as a call cut short by Ctrl-C leaves it), a checkpoint
+    written first or not, then Ctrl-C."""
+    from jaxobs.progress import Progress
+
+    def run_job(job, out, resume=False, quiet=False):
+        if saves:
+            (out / "checkpoint.npz").write_bytes(b"ckpt")
+        bar = Progress(True, 10, "tune")  # referenced by this frame, which the traceback keeps alive
+        bar.update(3)
+        raise KeyboardInterrupt
+
+    return run_job
+
+
+@pytest.mark.parametrize("saves", [False, True], ids=["no checkpoint", "checkpoint"])
+def test_ctrl_c_names_resume_only_with_a_checkpoint_and_draws_nothing_after(tmp_path, capsys, monkeypatch, saves):
+    import gc
+
+    path = tmp_path / "job.toml"
+    path.write_text(GOOD)
+    monkeypatch.setattr("jaxobs_tuning.cli.run_job", _interrupted(saves))
+    assert main(["tune", str(path), "--out", str(tmp_path / "o")]) == 130
+    err = capsys.readouterr().err
+    assert err.endswith("\n") and err.splitlines()[-1].startswith("jaxobs: interrupted"), err
+    assert ("continue with: jaxobs tune" in err.splitlines()[-1]) == saves
+    assert err.count("--resume") == int(saves)
+    gc.collect()
+    assert capsys.readouterr().err == ""  # the bar was closed before the line: nothing drawn after it
+
+
+def test_a_study_store_has_chunks_to_resume_only_once_one_is_written(tmp_path):
+    from jaxobs.chunkstore import ChunkStore
+
+    s = ChunkStore(tmp_path / "c", "f" * 64)
+    assert not s.has_chunks()
+    s.start(n=4, chunk=2, devices=1, designs=["a"])
+    assert not s.has_chunks()  # meta.json alone: nothing to continue from
+    s.put("a", 0, {"x": np.arange(2)})
+    assert s.has_chunks()
+    s.retire()
+    assert s.has_chunks()  # moved aside before study.nc's rename: a --resume puts it back
+    s.remove()
+    assert not s.has_chunks()

@@ -166,7 +166,13 @@ def test_checkpoint_fifo_does_not_block_resume(tmp_path):
 def _result(**changes):
     """A minimal SOGIFLLWIF result (the fields study and export read), with ``changes`` applied."""
     res = {
-        "job": {"job": {"name": "t", "component": "SOGIFLLWIF"}, "component": {"k1": 1.7}},
+        "job": {
+            "job": {"name": "t", "component": "SOGIFLLWIF"},
+            "component": {"k1": 1.7},
+            "gains": {"lam": {"init": 11000.0, "lower": 1000.0, "upper": 1e5}},
+            "scenarios": {"signal": "grid", "grid": {"dc": [0.0]}},
+            "objective": {"terms": [{"metric": "itae_freq"}]},
+        },
         "component": "SOGIFLLWIF",
         "gains": {"tuned": {"lam": 9000.0}},
     }
@@ -203,6 +209,11 @@ BAD_RESULTS = [
     ("ts negative", json.dumps(_result(ts=-1e-4)), "ts must be a sample time"),
     ("omega_n a string", json.dumps(_result(omega_n="314")), "omega_n must be a finite number"),
     ("scores a list", json.dumps(_result(scores=[])), "scores must be a table"),
+    ("lam off its bounds", json.dumps(_result(gains={"tuned": {"lam": 1e6}})), r"1e\+06 is outside .*1000, 100000"),
+    ("no design", json.dumps(_result(gains={"tuned": None, "initial": None}, status="diverged")), "holds no design"),
+    ("values a list", json.dumps(_result(values=[])), "values must be a table"),
+    ("values a string gain", json.dumps(_result(values={"tuned": {"lam": "9e3"}})), "values.tuned.lam must be"),
+    ("job unparseable", json.dumps(_result(job={"job": {"component": "SOGIFLLWIF"}})), r"missing \(required\)"),
     ("a list", "[]", "not a tuning result"),
     ("no gains", json.dumps({"job": {}, "component": "SOGIFLLWIF"}), "no 'gains'"),
     ("not JSON", "{", "not valid JSON"),
@@ -402,3 +413,39 @@ def test_objective_overflow_is_its_own_outcome(tmp_path, capsys, monkeypatch):
     assert res["status"] == "overflow" and "terms[1].weight = 1e+308" in res["reason"], res["reason"]
     assert "diverged" not in res["reason"] and res["scores"]["initial"]["diverged"] == 0
     assert "OVERFLOW" in capsys.readouterr().out
+
+
+class _OverflowsAt:
+    """A stand-in objective whose gradient overflows from iteration ``at`` on (a finite value, a finite run)."""
+
+    def __init__(self, at: int):
+        from jaxobs_tuning.params import GainSpec, Parametrization
+
+        self.param = Parametrization([GainSpec("a", 2.0, 0.1, 50.0)])
+        self.at, self.calls = at, 0
+
+    def value_grad_diverged_overflowed(self, theta):
+        import jax.numpy as jnp
+
+        n = self.calls
+        self.calls += 1
+        return jnp.sum(theta**2), 2 * theta, int(n >= self.at), int(n >= self.at)
+
+    def value_grad_diverged(self, theta):
+        return self.value_grad_diverged_overflowed(theta)[:3]
+
+
+@pytest.mark.parametrize("at", [0, 3, 6])
+def test_overflow_is_checked_at_every_iteration_and_stays_the_outcome(at):
+    """An objective that overflows at a later iterate (or the last, scored after the loop) ends the run there
+    with status "overflow" and nothing tuned, not "converged" on the designs before it."""
+    from jaxobs_tuning import solvers, strategies
+
+    cfg = strategies.solver("adam", learning_rate=0.1, steps=6, patience=100, progress_every=1)
+    obj = _OverflowsAt(at)
+    res = solvers.tune(obj, cfg, obj.param.theta0(), quiet=True)
+    assert res.status == "overflow" and res.theta is None and res.best_iteration is None
+    assert res.iterations == at and len(res.history) == at + 1
+    assert f"overflows at iteration {at}" in res.reason
+    never = solvers.tune(_OverflowsAt(99), cfg, obj.param.theta0(), quiet=True)
+    assert never.status != "overflow" and never.theta is not None

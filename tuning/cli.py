@@ -199,13 +199,13 @@ def _cmd_study(args) -> int:
     outdir = OutDir(out, products, force=args.force, hints={STUDY_CHUNKS: hint})
     store = ChunkStore(out / STUDY_CHUNKS, study_fingerprint(spec), resume=args.resume)
     if rank is not None and rank[1] > 1:
-        args.on_interrupt = f"; continue with: {resume}"  # what Ctrl-C says (main)
+        args.on_interrupt = _resume_hint(resume, store.has_chunks)  # what Ctrl-C says (main)
         return distributed_study(name, designs, axes, opts, out, args, rank, _run_study, outdir, store)
     # one process: the chunks' traced programs are kept across runs under the study's digest (jaxobs.kept_jit)
     opts["trace_key"] = store.fingerprint
     with outdir:
         args.log_dir = out
-        args.on_interrupt = f"; continue with: {resume}"
+        args.on_interrupt = _resume_hint(resume, store.has_chunks)
         return _run_study(name, designs, axes, opts, out, args.quiet, store=store)
 
 
@@ -287,7 +287,7 @@ def _cmd_tune(args) -> int:
         return 0
     with OutDir(out, products, force=args.force, hints={CHECKPOINT: hint}):
         args.log_dir = out
-        args.on_interrupt = f"; continue with: {resume}"  # what Ctrl-C says (main)
+        args.on_interrupt = _resume_hint(resume, (out / CHECKPOINT).is_file)  # what Ctrl-C says (main)
         result = run_job(job, out, resume=args.resume, quiet=args.quiet)
     try:
         timing = json.loads((out / "timing.json").read_text())
@@ -461,9 +461,12 @@ def main(argv=None) -> int:
         print(f"jaxobs: error: {e.strerror or e}{where}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
-        # on a line of its own: a progress bar may hold the terminal's current line
-        start = "\n" if sys.stderr.isatty() else ""
-        print(f"{start}jaxobs: interrupted{getattr(args, 'on_interrupt', '')}", file=sys.stderr)
+        from jaxobs.progress import close_all
+
+        # the bars closed first (tqdm draws a bar as it closes: nothing is drawn after the line below), which
+        # ends their line; else on a line of its own, a bar may hold the terminal's current line
+        start = "" if close_all() or not sys.stderr.isatty() else "\n"
+        print(f"{start}jaxobs: interrupted{_interrupt_hint(args)}", file=sys.stderr)
         return 130
     except (Exception, MemoryError) as e:  # an internal error: the traceback to a log, one line here
         log = _write_error_log(getattr(args, "log_dir", None))
@@ -472,15 +475,28 @@ def main(argv=None) -> int:
         return 1
 
 
+def _resume_hint(resume: str, saved):
+    """What Ctrl-C adds to "interrupted" (``args.on_interrupt``): the command that continues the run, only
+    when ``saved()`` finds something on disk to continue from (interrupted before a checkpoint: nothing)."""
+    return lambda: f"; continue with: {resume}" if saved() else ""
+
+
+def _interrupt_hint(args) -> str:
+    hint = getattr(args, "on_interrupt", "")
+    try:
+        return hint() if callable(hint) else hint
+    except OSError:
+        return ""
+
+
 def _write_error_log(out) -> str:
     """The current exception's traceback to ``<out>/error.log`` (else a temporary file); its path."""
     text = traceback.format_exc()
     if out is not None:
         try:
             path = Path(out) / "error.log"
-            if not path.is_symlink():
-                path.write_text(text)
-                return str(path)
+            atomic_write_text(path, text)  # renamed over the name: a link there is replaced, never written through
+            return str(path)
         except OSError:
             pass
     try:

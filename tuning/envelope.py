@@ -13,27 +13,21 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import hashlib
-import json
 from pathlib import Path
 
 from .job import COMPONENTS, JobError, job_drive, load_job, parse_job
 from .outdir import OutDir, atomic_path, safe_name
+from .results import load_result, result_designs
 
 ENVELOPE_FILES = ("envelope.nc", "envelope.png")
 
 
 def envelope_designs(path: Path):
     """(job, {design name: observer}) of a job file or of a result.json (its job and its values)."""
-    if path.suffix == ".json":
-        try:
-            result = json.loads(path.read_text())
-        except ValueError as e:
-            raise ValueError(f"{path}: not a JSON result file ({e})") from None
-        if not isinstance(result, dict) or "job" not in result or "values" not in result:
-            raise ValueError(f"{path}: not a `jaxobs tune` result.json (no 'job' or 'values')")
+    if path.suffix == ".json":  # the one reader of result files (jaxobs_tuning.results), as study and export
+        result = load_result(path)
         job = parse_job(result["job"], path.parent)
-        ctor = COMPONENTS[job.component].ctor
-        designs = {k: ctor(**v) for k, v in result["values"].items() if v is not None}
+        designs = result_designs(result, f"result file {str(path)[:120]!r}")
     else:
         job = load_job(path)
         info = COMPONENTS[job.component]

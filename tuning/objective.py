@@ -368,13 +368,15 @@ class Objective:
             return v, ok, g
 
         v, ok, g = jax.vmap(vg)(self.scenarios)
-        good = ok & jnp.isfinite(v) & jnp.all(jnp.isfinite(g), axis=-1)
+        g_finite = jnp.all(jnp.isfinite(g), axis=-1)
+        good = ok & jnp.isfinite(v) & g_finite
+        over = ok & jnp.isfinite(v) & ~g_finite  # a finite run and value, a gradient that overflowed
         v = jnp.where(good, v, self.penalty)
         g = jnp.where(good[:, None], g, 0.0)
-        return v, g, good
+        return v, g, good, over
 
     def _aggregate_with_grad(self, theta):
-        v, g, _ = self._vg(theta)
+        v, g, _, _ = self._vg(theta)
         agg_v, w = jax.value_and_grad(lambda vv: self.aggregation(vv))(v)
         return agg_v, w @ g
 
@@ -383,15 +385,25 @@ class Objective:
 
     def value_grad_diverged(self, theta):
         """The objective, its gradient and how many scenarios diverged, from one batch evaluation."""
-        v, g, good = self._vg(theta)
+        return self.value_grad_diverged_overflowed(theta)[:3]
+
+    def value_grad_diverged_overflowed(self, theta):
+        """:meth:`value_grad_diverged` and how many scenarios overflowed: a finite simulation and value, a
+        gradient that is not finite (a finite but huge weight; counted with the diverged ones too).  When the
+        aggregate or its gradient is not finite though every scenario's value is, every scenario counts."""
+        v, g, good, over = self._vg(theta)
         agg_v, w = jax.value_and_grad(lambda vv: self.aggregation(vv))(v)
-        return agg_v, w @ g, int(jnp.sum(~good))
+        grad = w @ g
+        n_over = int(jnp.sum(over))
+        if not (bool(jnp.isfinite(agg_v)) and bool(jnp.all(jnp.isfinite(grad)))):
+            n_over = int(v.shape[0])
+        return agg_v, grad, int(jnp.sum(~good)), n_over
 
     def overflowed(self, theta, scored_good) -> int:
         """Scenarios whose simulation and weighted metrics are finite (``scored_good``: :meth:`per_scenario`'s
         mask at ``theta``) but whose tuning value or gradient is not: the objective overflows (a finite but
         huge weight), which the solver counts with the diverged scenarios, though nothing diverged."""
-        _, _, good = self._vg(theta)
+        _, _, good, _ = self._vg(theta)
         return int(jnp.sum(jnp.asarray(scored_good) & ~good))
 
     def _response(self, theta, sig):

@@ -11,7 +11,11 @@ at a time (a lock file), no silent overwrite, every file written to a temp file 
   concurrent starters hold the lock at once in 11 of 100 trials.)  A holder removes the file while it still
   holds the lock; a starter that locked a file which is no longer the one at the path starts again.  A lock
   that cannot be written (a full disk) is removed again, and the error names the file.
+- A lock file with another name (a hard link planted at ``.jaxobs.lock``) is unlinked, never written.
 - Existing results (``result.json``, ``study.nc``, a checkpoint) are not overwritten without ``--force``.
+- Every file is written by :mod:`jaxobs.files` (a temp entry beside it, renamed over it: a symlink or hard
+  link at its name is replaced, never written through); the temp entries a killed run left are removed once
+  the folder is locked and its checks pass, whether the run resumes, is forced or starts afresh.
 """
 
 from __future__ import annotations
@@ -20,11 +24,10 @@ import errno
 import fcntl
 import os
 import re
-import secrets
-import shutil
 import socket
-import tempfile
 from pathlib import Path
+
+from jaxobs.files import atomic_path, atomic_write_bytes, atomic_write_text, remove_temps
 
 __all__ = ["OutError", "safe_name", "OutDir", "atomic_write_bytes", "atomic_write_text", "atomic_path"]
 
@@ -106,6 +109,7 @@ class OutDir:
         self._lock()
         try:
             self._check_products()
+            remove_temps(p)  # a killed run's temp files and folders (jaxobs.files)
         except BaseException:
             self.release()
             raise
@@ -136,6 +140,10 @@ class OutDir:
             if not same:
                 os.close(fd)
                 continue
+            if os.fstat(fd).st_nlink != 1:  # a hard link to a file elsewhere: unlink the name, never write it
+                lock.unlink(missing_ok=True)
+                os.close(fd)
+                continue
             try:
                 os.ftruncate(fd, 0)
                 data = f"{os.getpid()} {socket.gethostname()}\n".encode()
@@ -157,62 +165,4 @@ class OutDir:
 
     def __exit__(self, *exc):
         self.release()
-        return False
-
-
-def atomic_write_bytes(path: Path, data: bytes, replace=os.replace) -> None:
-    """``data`` to a temp file beside ``path``, flushed, then renamed over it (a symlink there is replaced,
-    never followed).  The file gets the mode a plain ``open(path, "w")`` would give it (0o666 less the
-    umask): the temp file is created with ``os.open(..., 0o666)`` and ``O_EXCL``, not ``tempfile.mkstemp``
-    (which always makes 0600 files), so no umask has to be read (``os.umask`` can only be read by setting it,
-    which races with other threads)."""
-    path = Path(path)
-    flags = os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_NOFOLLOW", 0) | getattr(os, "O_BINARY", 0)
-    for _ in range(100):
-        tmp = str(path.parent / f".{path.name}.{secrets.token_hex(6)}.tmp")
-        try:
-            fd = os.open(tmp, flags, 0o666)
-            break
-        except FileExistsError:
-            continue
-    else:
-        raise FileExistsError(f"no free temp file name beside {str(path)!r}")
-    try:
-        with os.fdopen(fd, "wb") as f:
-            f.write(data)
-            f.flush()
-            os.fsync(f.fileno())
-        replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-
-
-def atomic_write_text(path: Path, text: str) -> None:
-    atomic_write_bytes(path, text.encode())
-
-
-class atomic_path:
-    """``with atomic_path(p) as tmp: write(tmp)``: ``tmp`` is renamed to ``p`` when the block succeeds.
-
-    ``tmp`` lies in a fresh folder that ``tempfile.mkdtemp`` made beside ``p`` (random name, ``O_EXCL``, mode
-    0700), so no name in it can be guessed or pre-created as a symlink by anyone else, whatever the writer
-    (matplotlib, xarray) does when it opens the file.  The folder goes on every exit path; the file keeps the
-    mode its writer gave it (0o666 less the umask).
-    """
-
-    def __init__(self, path: Path):
-        self.path = Path(path)
-        self._dir = None
-
-    def __enter__(self) -> Path:
-        self._dir = Path(tempfile.mkdtemp(prefix=f".{self.path.name}.", suffix=".tmp", dir=self.path.parent))
-        return self._dir / self.path.name
-
-    def __exit__(self, et, ev, tb):
-        try:
-            if et is None:
-                os.replace(self._dir / self.path.name, self.path)
-        finally:
-            shutil.rmtree(self._dir, ignore_errors=True)
         return False

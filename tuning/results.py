@@ -8,7 +8,9 @@ wrote it; the library only ever receives the component itself::
     obs = tuned_component(load_result("out/wif-robust/result.json"))
     ds = run_study({"tuned": obs}, axes)            # jaxobs.study.run_study
 
-Errors are ``ValueError``s of one line that name the file and the field.
+Every command that reads a result back (``study``, ``export``, ``envelope``) reads it through
+:func:`load_result`: a regular file of bounded size and nesting, then :func:`check_result`'s schema, the
+gains inside the job's bounds.  Errors are ``ValueError``s of one line that name the file and the field.
 """
 
 from __future__ import annotations
@@ -20,15 +22,24 @@ from pathlib import Path
 
 from jaxobs.provenance import read_file
 
-from .job import COMPONENTS, parse_job
+from .job import COMPONENTS, Job, parse_job
 
-__all__ = ["MAX_RESULT_BYTES", "MAX_RESULT_DEPTH", "check_result", "load_result", "tuned_component"]
+__all__ = [
+    "MAX_RESULT_BYTES",
+    "MAX_RESULT_DEPTH",
+    "check_result",
+    "load_result",
+    "result_designs",
+    "tuned_component",
+]
 
 MAX_RESULT_BYTES = 16 * 2**20  # a result.json larger than this is refused before it is parsed
 MAX_RESULT_DEPTH = 64  # nesting of arrays and objects (run_job writes about 6)
 
 _JSON_STRING = re.compile(r'"(?:[^"\\]|\\.)*"')
 GAIN_SETS = ("initial", "closed_form", "tuned")
+BOUND_SLACK = 1e-9  # relative: a gain tuned to its bound comes back through exp(log(bound)), a rounding off
+CLOSED_FORM_RTOL = 1e-6  # a closed form outside the bounds must be the job's own (float32 or float64 alike)
 
 
 def check_nesting(text: str, where: str) -> None:
@@ -66,14 +77,56 @@ def _numbers(table: dict, allowed, where: str, what: str) -> None:
             raise ValueError(f"{where}: {what}.{k} must be a finite number, got {json.dumps(v)[:40]}")
 
 
+def _inside(v: float, lower, upper) -> bool:
+    lo_ok = lower is None or v >= lower - BOUND_SLACK * abs(lower)
+    return lo_ok and (upper is None or v <= upper + BOUND_SLACK * abs(upper))
+
+
+def _job_closed_form(job: Job) -> dict:
+    """The closed form the run reported for ``job`` (run_job: the component of the job's values)."""
+    info = COMPONENTS[job.component]
+    cf = info.closed_form(info.ctor(**job.values))
+    return {g.name: float(cf[g.name]) for g in job.gains}
+
+
+def _check_bounds(job: Job, table: dict, where: str, what: str, closed: bool) -> None:
+    """The job's free gains in ``table`` inside their bounds (a log gain > 0); a closed form, reported exactly,
+    may lie outside them only as the job's own closed form."""
+    cf = None
+    for g in job.gains:
+        if g.name not in table:
+            continue
+        v = float(table[g.name])
+        if _inside(v, g.lower, g.upper) and (not g.log or v > 0):
+            continue
+        if closed:
+            try:
+                cf = _job_closed_form(job) if cf is None else cf
+            except (ArithmeticError, TypeError, ValueError):  # no closed form at these values: not the job's
+                cf = {}
+            if g.name in cf and math.isclose(v, cf[g.name], rel_tol=CLOSED_FORM_RTOL):
+                continue
+        lo = "-inf" if g.lower is None else f"{g.lower:g}"
+        hi = "inf" if g.upper is None else f"{g.upper:g}"
+        lo = "0 (exclusive: a log gain)" if g.log and g.lower is None else lo
+        extra = " and is not the job's closed form" if closed else ""
+        raise ValueError(
+            f"{where}: {what}.{g.name} = {v:.6g} is outside the job's bounds [{lo}, {hi}] (job.gains.{g.name}){extra}"
+        )
+
+
 def check_result(res, where: str = "result") -> dict:
-    """The one schema of a ``result.json`` read back (by ``study`` and ``export``); ``ValueError`` of one line
-    naming the field.  ``component``: a known component; ``job``: a table (its ``job.component``, when
+    """The one schema of a ``result.json`` read back (by ``study``, ``export``, ``envelope``); ``ValueError`` of one
+    line naming the field.  ``component``: a known component; ``job``: a table (its ``job.component``, when
     given, the same component; its ``[component]`` values of that component, finite numbers); ``gains``:
     a table of ``initial`` / ``closed_form`` / ``tuned``, each null or a non-empty table of that component's
     values, finite JSON numbers (``"lam": "12337"`` is refused); ``gains.tuned`` null only when nothing was
-    tuned (status ``diverged`` or ``overflow``); ``ts`` a number > 0, ``omega_n`` a number or null, ``scores``
-    a table when given."""
+    tuned (status ``diverged`` or ``overflow``), and at least one design; ``values`` (when given) the same
+    for every constructor value of each design; ``ts`` a number > 0, ``omega_n`` a number or null, ``scores``
+    a table when given.  The job must parse (:func:`jaxobs_tuning.parse_job`, its recordings not read)
+    and the free gains of ``gains`` and ``values`` lie inside its bounds (``initial`` and ``tuned``; the
+    closed form, reported exactly, inside them or equal to the job's own closed form).  The other keys are
+    reports, not read back."""
     if not isinstance(res, dict):
         raise ValueError(f"{where}: not a tuning result (a JSON object with job, component and gains)")
     for key in ("job", "component", "gains"):
@@ -116,6 +169,27 @@ def check_result(res, where: str = "result") -> dict:
     for key in ("machine", "loop"):
         if res.get(key) is not None and not isinstance(res[key], str):
             raise ValueError(f"{where}: {key} must be a string, got {type(res[key]).__name__}")
+    if not any(t is not None for t in gains.values()):
+        raise ValueError(f"{where}: gains holds no design (initial, closed_form and tuned all null or absent)")
+    if "values" in res:  # every constructor value of each design (what `jaxobs envelope` builds)
+        values = _table(res["values"], where, "values")
+        for name, table in values.items():
+            if name not in GAIN_SETS:
+                raise ValueError(f"{where}: values.{str(name)[:40]} is not one of {', '.join(GAIN_SETS)}")
+            if table is None:
+                continue
+            if not _table(table, where, f"values.{name}"):
+                raise ValueError(f"{where}: values.{name} is empty (a table of the design's values)")
+            _numbers(table, allowed, where, f"values.{name}")
+        if not any(t is not None for t in values.values()):
+            raise ValueError(f"{where}: values holds no design (initial, closed_form and tuned all null or absent)")
+    # a JobError (a ValueError of one line) names the job's field; its recordings are not read (no base folder:
+    # a result.json lies elsewhere than its job file)
+    parsed = parse_job(job)
+    for top in ("gains", "values"):
+        for name, table in (res.get(top) or {}).items():
+            if table is not None:
+                _check_bounds(parsed, table, where, f"{top}.{name}", closed=name == "closed_form")
     return res
 
 
@@ -137,6 +211,27 @@ def load_result(path) -> dict:
     except (json.JSONDecodeError, ValueError, RecursionError) as e:
         raise ValueError(f"{where}: not valid JSON: {str(e)[:80]}") from None
     return check_result(res, where)
+
+
+def result_designs(result: dict, where: str = "result") -> dict:
+    """Every design of a checked result (:func:`load_result`) by its constructor values: {name: component}.
+
+    Raises:
+        ValueError: no ``values`` table (not a ``jaxobs tune`` result.json), or values a constructor refuses.
+    """
+    values = result.get("values")
+    if not isinstance(values, dict):
+        raise ValueError(f"{where}: no 'values' (each design's constructor values): not a `jaxobs tune` result.json")
+    ctor = COMPONENTS[result["component"]].ctor
+    designs = {}
+    for name, v in values.items():
+        if v is None:
+            continue
+        try:
+            designs[name] = ctor(**v)
+        except (TypeError, ArithmeticError) as e:
+            raise ValueError(f"{where}: values.{name}: {' '.join(str(e).split())[:120]}") from None
+    return designs
 
 
 def tuned_component(result: dict):

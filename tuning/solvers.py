@@ -53,9 +53,9 @@ __all__ = [
 @dataclass
 class TuneResult:
     """What a solver found.  ``theta`` is the best design that diverged in no tuning scenario (``None``
-    when no design tried was stable: ``status == "diverged"``); ``history`` has one entry per point
-    evaluated (iteration, objective, diverged scenarios, gains); ``status`` is one of
-    ``converged | budget | no_improvement | diverged`` and ``reason`` says why in words."""
+    when no design tried was stable: ``status == "diverged"``, or when the objective overflowed: ``"overflow"``);
+    ``history`` has one entry per point evaluated (iteration, objective, diverged scenarios, gains); ``status``
+    is one of ``converged | budget | no_improvement | diverged | overflow`` and ``reason`` says why in words."""
 
     theta: jax.Array | None
     value: float
@@ -71,7 +71,7 @@ class TuneResult:
         return self.status
 
 
-STATUSES = ("converged", "budget", "no_improvement", "diverged")
+STATUSES = ("converged", "budget", "no_improvement", "diverged", "overflow")
 
 
 def _entry(objective, it, value, diverged, theta) -> dict:
@@ -111,6 +111,33 @@ def _bar(solver: AbstractSolver, quiet: bool) -> Progress:
     bar = Progress("auto" if not quiet else False, solver.steps, f"tune ({solver.name})", unit="step")
     bar.stage("compiling the objective and its gradient (once; tens of seconds for a drive)")
     return bar
+
+
+def _evaluate(objective, theta):
+    """(value, gradient, diverged, overflowed) at ``theta``: an objective without an overflow count (a user's
+    own, with ``value_grad_diverged`` only) never overflows."""
+    both = getattr(objective, "value_grad_diverged_overflowed", None)
+    if both is not None:
+        return both(theta)
+    return (*objective.value_grad_diverged(theta), 0)
+
+
+def _overflow_result(history: list, it: int, n_over: int, seconds: float) -> TuneResult:
+    """The outcome of a run whose objective overflowed at iteration ``it``: status ``overflow``, nothing tuned
+    (checked at every iteration; the run stops there, and no other outcome replaces it)."""
+    return TuneResult(
+        theta=None,
+        value=math.nan,
+        iterations=it,
+        history=history,
+        status="overflow",
+        reason=(
+            f"the objective overflows at iteration {it}: its value or gradient is not finite in {n_over} "
+            "scenarios whose simulation is finite"
+        ),
+        best_iteration=None,
+        timing=dict(solver_s=seconds),
+    )
 
 
 def _show(bar: Progress, i: int, solver: AbstractSolver, value, best, diverged, first: bool) -> None:
@@ -326,12 +353,16 @@ class OptaxSolver(AbstractSolver):
         bar = _bar(self, quiet)
         if start:
             bar.update(start)
+        overflow = None  # (iteration, scenarios) where the objective overflowed: the run stops, nothing tuned
         for it in range(start, self.steps):
             if _at_iteration is not None:
                 _at_iteration(it)
-            value, grad, ndiv = objective.value_grad_diverged(theta)
+            value, grad, ndiv, nover = _evaluate(objective, theta)
             value = float(value)
             history.append(_entry(objective, it, value, ndiv, theta))
+            if nover:
+                overflow = (it, nover)
+                break
             # a design that diverges in some scenario is never a candidate, whatever its (penalized) value
             improved = (
                 ndiv == 0
@@ -355,9 +386,13 @@ class OptaxSolver(AbstractSolver):
         else:
             it = self.steps
         bar.close()
+        if overflow is not None:
+            return _overflow_result(history, *overflow, time.time() - t_start)
         if not early:  # the last update is scored too: keep it if it is stable and better
-            value, _, ndiv = objective.value_grad_diverged(theta)
+            value, _, ndiv, nover = _evaluate(objective, theta)
             history.append(_entry(objective, it, float(value), ndiv, theta))
+            if nover:
+                return _overflow_result(history, it, nover, time.time() - t_start)
             if ndiv == 0 and float(value) < best_value:
                 best_value, best_theta = float(value), theta
         # the loop's best (first to reach best_value, the early-stop test's choice)
@@ -425,9 +460,12 @@ class OptimistixSolver(AbstractSolver):
         terminate = eqx.filter_jit(lambda y, st: solver.terminate(fn, y, None, {}, st, tags))
         y = theta0
         bar = _bar(self, quiet)
-        value, _, ndiv = objective.value_grad_diverged(y)
-        bar.stage(f"compiling {type(solver).__name__}'s step")
+        value, _, ndiv, nover = _evaluate(objective, y)
         history = [_entry(objective, 0, value, ndiv, y)]
+        if nover:
+            bar.close()
+            return _overflow_result(history, 0, nover, time.time() - t_start)
+        bar.stage(f"compiling {type(solver).__name__}'s step")
         best_value = float(value) if ndiv == 0 else math.inf
         result, n = optx.RESULTS.nonlinear_max_steps_reached, 0
         for n in range(1, self.steps + 1):
@@ -438,8 +476,11 @@ class OptimistixSolver(AbstractSolver):
             y_new, state, _ = step(y, state)
             if not bool(jnp.all(y_new == y)):  # an accepted step: record the new iterate
                 y = y_new
-                value, _, ndiv = objective.value_grad_diverged(y)
+                value, _, ndiv, nover = _evaluate(objective, y)
                 history.append(_entry(objective, n, value, ndiv, y))
+                if nover:
+                    bar.close()
+                    return _overflow_result(history, n, nover, time.time() - t_start)
                 if ndiv == 0:
                     best_value = min(best_value, float(value))
             _show(bar, n, self, history[-1]["value"], best_value, history[-1]["diverged"], n == 1)

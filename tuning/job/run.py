@@ -161,15 +161,20 @@ def run_job(job: Job, out: Path, resume: bool = False, quiet: bool = False) -> d
     per = _score_designs(obj, thetas, bar, "")
     scores = {k: (obj.summarize(*per[k]) if k in per else None) for k in gains}
     status, reason = res.status, res.reason
-    if status == "diverged" and (n_over := obj.overflowed(theta0, per["initial"][2])):
+    n_over = obj.overflowed(theta0, per["initial"][2]) if status == "diverged" else 0
+    if status == "overflow" or n_over:
         # nothing diverged: the simulations and the scored metrics are finite, the objective's value or
-        # gradient is not (a weight of 1e308): not a divergence of the system
+        # gradient is not (a weight of 1e308 is no divergence of the system).  The solver checks every
+        # iteration and stops at the first overflow; the initial design's scores check it once more.
         weights = ", ".join(f"terms[{i}].weight = {t.weight:g}" for i, t in enumerate(job.terms))
-        status = "overflow"
-        reason = (
-            f"the objective overflows: its value or gradient is not finite in {n_over} of {len(combos)} "
-            f"scenarios whose simulation is finite (objective.{weights}): lower the weights; nothing is tuned"
+        where = (
+            reason
+            if status == "overflow"
+            else f"the objective overflows: its value or gradient is not finite in {n_over} of {len(combos)} "
+            "scenarios whose simulation is finite"
         )
+        status = "overflow"
+        reason = f"{where} (objective.{weights}): lower the weights; nothing is tuned"
     bar.stage("linear structure of each design (margins, poles)")
     lin = {k: (None if v is None else structure(job.component, v, job)) for k, v in values.items()}
     result = {
