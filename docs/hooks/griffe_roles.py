@@ -56,7 +56,7 @@ def _walk(start, start_path: str, parts: list[str]) -> str | None:
             attr = attr.__func__
         if isinstance(attr, types.ModuleType) or inspect.isclass(attr):
             ident = _canonical(attr, f"{ident}.{name}")
-        elif inspect.isfunction(attr) and getattr(attr, "__qualname__", "").split(".")[0] != getattr(obj, "__name__", ""):
+        elif inspect.isfunction(attr) and not inspect.isclass(obj):  # a function a module re-exports
             ident = _canonical(attr, f"{ident}.{name}")
         else:
             ident = f"{ident}.{name}"
