@@ -48,6 +48,9 @@ def _built_site() -> Path:
     site = ROOT / "site"
     if not (site / "index.html").exists():
         pytest.skip("no built site in site/ (make docs); the slow suite builds one (test_site_in_a_browser)")
+    sources = [ROOT / "mkdocs.yml", *(ROOT / "docs" / "hooks").glob("*.py")]
+    if (site / "index.html").stat().st_mtime < max(p.stat().st_mtime for p in sources):
+        pytest.skip("site/ is older than mkdocs.yml or docs/hooks/: rebuild it with make docs")
     return site
 
 
