@@ -4,13 +4,16 @@
 PYTHON ?= python3
 VENV   := .venv
 STAMP  := $(VENV)/.installed-stamp
+# setuptools warns on every editable install whose package folder is named otherwise (tuning/ is jaxobs_tuning)
+# that a folder named like the package could shadow it; none is (tests/test_cli.py checks the package list)
+PIP    := PYTHONWARNINGS="ignore:Editable installation" $(VENV)/bin/python -m pip
 
-.PHONY: run test test-slow lint bench docs clean
+.PHONY: run test test-slow lint bench docs docs-serve clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
-	$(VENV)/bin/python -m pip install --quiet --upgrade pip
-	$(VENV)/bin/python -m pip install --quiet -e ".[test,bench]"
+	$(PIP) install --quiet --upgrade pip
+	$(PIP) install --quiet -e ".[test,bench]"
 	touch $(STAMP)
 
 run: $(STAMP)
@@ -45,13 +48,18 @@ bench: $(STAMP)
 # reference and the API pages are generated while it builds (docs/hooks/).
 DOCS_STAMP := $(VENV)/.docs-stamp
 $(DOCS_STAMP): $(STAMP)
-	$(VENV)/bin/python -m pip install --quiet -e ".[test,bench,docs]"
+	$(PIP) install --quiet -e ".[test,bench,docs]"
 	touch $(DOCS_STAMP)
 
 # The notebooks are rendered with their stored outputs (python notebooks/execute.py); EXECUTE=1 runs them again
 # while building (minutes)
 docs: $(DOCS_STAMP)
 	NO_MKDOCS_2_WARNING=1 JAXOBS_DOCS_EXECUTE=$(if $(EXECUTE),true,false) $(VENV)/bin/mkdocs build --strict --quiet
+
+# The site served at http://127.0.0.1:8000, rebuilt when a page or docstring changes (site/index.html opened as a
+# file works as well: use_directory_urls is off, search is offline)
+docs-serve: $(DOCS_STAMP)
+	NO_MKDOCS_2_WARNING=1 JAXOBS_DOCS_EXECUTE=false $(VENV)/bin/mkdocs serve --dev-addr 127.0.0.1:8000
 
 clean:
 	rm -rf $(VENV) out site .pytest_cache

@@ -1,6 +1,6 @@
 """Execute the notebooks in place, storing their outputs: the documentation site renders them as stored.
 
-    python notebooks/execute.py                  # all four (minutes: the full grids, not the CI's small ones)
+    python notebooks/execute.py                  # all of them (minutes: the full grids, not the CI's small ones)
     python notebooks/execute.py 03_leso_robustness.ipynb
 
 Run it after changing a notebook, or code whose results a notebook shows.  Each notebook is executed at
@@ -54,6 +54,9 @@ def execute(path: Path) -> float:
     seconds = time.time() - t0
     ran = {k: v for k, v in versions().items() if k != "x64"}  # x64 is set by each notebook, not here
     nb.metadata["jaxobs"] = {"code_sha256": code_sha256(nb), "versions": ran}
+    # no widget state: for it the site would load the widgets' JavaScript from a CDN; the site is offline, and the
+    # gain sliders' widget cell shows no output there (mkdocs.yml, remove_tag_config)
+    nb.metadata.pop("widgets", None)
     nbformat.write(nb, path)
     return seconds
 

@@ -64,7 +64,7 @@ def _same_line(got: str, want: str) -> bool:
 def test_notebooks_store_the_outputs_of_their_current_code():
     """The site shows what is stored: every code cell executed, no error, a figure, and the stamp of the code
     that produced them (a cell edited without re-executing fails here)."""
-    assert len(NOTEBOOKS) == 4
+    assert len(NOTEBOOKS) == 5
     for path in NOTEBOOKS:
         nb = nbformat.read(path, as_version=4)
         code = [c for c in nb.cells if c.cell_type == "code"]

@@ -1,9 +1,11 @@
 """Tuning jobs: objectives, gain parametrizations, optimizers (optax, optimistix), TOML jobs, CLI, results.
 
+```python
 from jaxobs_tuning import load_job, run_job
 from jaxobs_tuning import Objective, tune, CVaR
     # in Python: tune(Objective(..., aggregation=CVaR(0.9)), optax.adam(0.1))
 from jaxobs_tuning import load_result, tuned_component     # a run's result.json back as a component
+```
 """
 
 from .aggregations import AbstractAggregation as AbstractAggregation

@@ -437,7 +437,19 @@ def build_parser() -> argparse.ArgumentParser:
     add_export_parser(sub, parents=[quiet])
     add_envelope_parser(sub, parents=[quiet])
     add_drive_parser(sub, parents=[quiet])
+    _describe(sub)
     return p
+
+
+def _describe(sub) -> None:
+    """Each subcommand's ``--help`` opens with its one-line summary (the ``help=`` the command list shows)."""
+    for action in sub._choices_actions:
+        parser = sub.choices[action.dest]
+        if parser.description is None and action.help:
+            parser.description = action.help[0].upper() + action.help[1:] + "."
+        for nested in parser._subparsers._group_actions if parser._subparsers else ():
+            if isinstance(nested, argparse._SubParsersAction):
+                _describe(nested)
 
 
 def main(argv=None) -> int:

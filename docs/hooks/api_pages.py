@@ -4,9 +4,14 @@ A package re-exports its public names from private modules (``from ._loop import
 such aliases as public members of the package, so ``::: jaxobs`` alone would render the module docstring only.
 Each page therefore lists the names the module offers at build time (its ``__all__``, else every name not starting
 with ``_`` that is not a submodule), each rendered by mkdocstrings from its docstring: a name added to or removed
-from a module appears on or leaves its page at the next build."""
+from a module appears on or leaves its page at the next build.
+
+Submodules and data tables (a dict, list or tuple: ``COMPONENTS``, ``METRICS``) are left out: their repr is no
+reference. The components' registry is a table generated here instead (:func:`components_markdown`), read through
+:func:`component_registry`."""
 
 import importlib
+import math
 import sys
 import types
 from pathlib import Path
@@ -36,19 +41,63 @@ def public_names(modname: str) -> list[str]:
         origin = getattr(getattr(mod, n), "__module__", modname) or modname
         if origin.split(".")[0] in ("jaxobs", "jaxobs_tuning") or not callable(getattr(mod, n)):
             own.append(n)
-    return own
+    return [n for n in own if not isinstance(getattr(mod, n), (types.ModuleType, dict, list, tuple, set, frozenset))]
+
+
+def component_registry() -> dict:
+    """The tunable components, name -> info with ``ctor``, ``gains``, ``defaults``, ``closed_form``,
+    ``closed_form_source`` and ``signal``: the one place the components' table reads the registry from."""
+    from jaxobs_tuning.job.components import COMPONENTS
+
+    return COMPONENTS
+
+
+def gain_unit(info, gain: str) -> str:
+    """A gain's unit (UDUNITS): the FLL studies' table for grid components, the drive studies' for the others."""
+    if info.signal == "grid":
+        from jaxobs.study import GAIN_UNITS
+    else:
+        from jaxobs.drive_study import DRIVE_GAIN_UNITS as GAIN_UNITS
+    return GAIN_UNITS.get(gain, "")
+
+
+def components_markdown() -> str:
+    """The components' table: tunable gains with their units and closed-form values, and the closed form's source."""
+    rows = [
+        "| component | signal | tunable gain | unit | closed form | source of the closed form |",
+        "|---|---|---|---|---|---|",
+    ]
+    for name, info in component_registry().items():
+        cf = info.closed_form(info.ctor(**info.defaults))
+        for i, g in enumerate(info.gains):
+            first = i == 0
+            value = float(cf[g]) if g in cf else math.nan
+            rows.append(
+                f"| {f'`{name}`' if first else ''} | {info.signal if first else ''} | `{g}` | {gain_unit(info, g)} "
+                f"| {value:.6g} | {info.closed_form_source if first else ''} |"
+            )
+    return "\n".join(rows)
 
 
 def page(modname: str) -> str:
     lines = [
-        f"# `{modname}`",
-        "",
         f"::: {modname}",
         "    options:",
         "      members: false",
-        "      show_root_heading: false",
+        "      show_root_heading: true",
+        "      heading_level: 1",
         "",
     ]
+    if modname == "jaxobs_tuning":
+        lines += [
+            "## Components",
+            "",
+            "The components a job tunes (`job.component`, `jaxobs_tuning.COMPONENTS`): each tunable gain with its",
+            "unit (`1`: dimensionless) and the value of the closed-form design a job starts from and compares with.",
+            "",
+            components_markdown(),
+            "",
+        ]
     mod = sys.modules[modname]
     for n in public_names(modname):
         path = f"{modname}.{n}"

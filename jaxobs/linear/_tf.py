@@ -342,6 +342,18 @@ class Margins(eqx.Module):
     omega_gc: jax.Array  # gain crossover, rad/s (nan if none)
     omega_pc: jax.Array  # phase crossover, rad/s (nan if none)
 
+    def __repr__(self) -> str:
+        """The margins as numbers (``Margins(gain_margin=2.5, phase_margin=45.1 deg, ...)``); batched or traced
+        margins print as equinox prints a module (their shapes)."""
+        try:
+            v = [float(x) for x in (self.gain_margin, self.phase_margin, self.omega_gc, self.omega_pc)]
+        except (TypeError, jax.errors.ConcretizationTypeError):  # a batch (not a scalar), or a tracer
+            return eqx.tree_pformat(self)
+        return (
+            f"Margins(gain_margin={v[0]:.6g}, phase_margin={v[1]:.6g} deg, "
+            f"omega_gc={v[2]:.6g} rad/s, omega_pc={v[3]:.6g} rad/s)"
+        )
+
 
 def _default_grid(tf: TransferFunction, n: int):
     """Log-spaced grid wide enough to hold every crossover.
