@@ -8,6 +8,7 @@ from pathlib import Path
 
 from jaxobs.drive_study import DRIVE_STUDY_AXES
 from jaxobs.provenance import sha256
+from jaxobs.registry import canonical_key
 
 from .. import strategies
 from ..objective import DRIVE_METRICS, METRICS, STABILITY_MARGIN, Term
@@ -185,9 +186,10 @@ def parse_job(raw: dict, base: Path | None = None) -> Job:
     values = dict(info.defaults)
     comp_t = get_field(raw, "component", "component", dict, {})
     for k in comp_t:
-        if k not in info.defaults:
+        key = canonical_key(info.ctor, k)  # a flux observer's omega_init may be written omega0
+        if key not in info.defaults:
             raise JobError(f"component.{k}", f"unknown for {comp}; allowed: {', '.join(info.defaults)}")
-        values[k] = get_field(comp_t, k, f"component.{k}", float)
+        values[key] = get_field(comp_t, k, f"component.{k}", float)
     try:
         ts = float(info.ctor(**values).ts)
     except (ValueError, ArithmeticError, TypeError) as e:
