@@ -11,6 +11,7 @@ from ._cores import sogi2_tustin_coefficients as sogi2_tustin_coefficients
 from ._gains import GainInfo as GainInfo
 from ._gains import gain as gain
 from ._gains import gain_fields as gain_fields
+from ._gains import gain_table as gain_table
 from ._rules import pll_gains as pll_gains
 from ._rules import second_order_soifo_lambda as second_order_soifo_lambda
 from ._rules import sogi_fll_lambda as sogi_fll_lambda

@@ -24,7 +24,7 @@ from typing import NamedTuple
 
 import equinox as eqx
 
-__all__ = ["GainInfo", "gain", "gain_fields"]
+__all__ = ["GainInfo", "gain", "gain_fields", "gain_table"]
 
 _KEY = "jaxobs_gain"
 
@@ -71,3 +71,31 @@ def gain_fields(cls) -> dict[str, GainInfo]:
     if not dataclasses.is_dataclass(cls):
         return {}
     return {f.name: GainInfo(name=f.name, **f.metadata[_KEY]) for f in dataclasses.fields(cls) if _KEY in f.metadata}
+
+
+def gain_table(designs: dict) -> dict[str, GainInfo]:
+    """The gains of several designs (name -> observer), each name once, in the order they first appear.
+
+    A study writes one variable per gain name, with that gain's units; every design that has a gain of that
+    name must give it the same units.
+
+    Args:
+        designs: design name -> observer.
+
+    Returns:
+        gain name -> the :class:`GainInfo` of its first design.
+
+    Raises:
+        ValueError: two designs' gains of one name with different units.
+    """
+    table, owner = {}, {}
+    for dname, obs in designs.items():
+        for g, info in gain_fields(obs).items():
+            if g not in table:
+                table[g], owner[g] = info, dname
+            elif table[g].units != info.units:
+                raise ValueError(
+                    f"designs: gain {g} is in {table[g].units!r} in design {owner[g]!r} and in {info.units!r} in "
+                    f"{dname!r} ({type(obs).__name__}); a study's designs must give one gain name one unit"
+                )
+    return table
