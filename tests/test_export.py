@@ -313,7 +313,7 @@ def test_drive_observer_files(tmp_path):
     assert "float u_prev[2];" in h and "float i_prev[2];" in h and "int started;" in h
     data = np.loadtxt(tmp_path / "golden.csv", delimiter=",", skiprows=1)
     assert data[0, 1] == 0 and data[0, 3] == 0 and data[1, 3] == 0 and data[0, 0] != 0  # beta off in period 1
-    assert np.float32(data[0, 7]) == np.float32(obs.omega0)  # omega output of the initial state
+    assert np.float32(data[0, 7]) == np.float32(obs.omega_init)  # omega output of the initial state
     assert data[1, 7] > 0 and np.all(data[0, 4:6] == 0)
     assert c["angle_outputs"] == ["theta"] and "first period on alpha only" in c["golden"]["signal"]
     assert set(c["ops_per_step"]) == {"steady"}  # RK4: no branch

@@ -24,7 +24,7 @@ from .verify import parse_envelope
 # the physical range of every scenario axis (closed intervals unless noted), checked at --check time;
 # freq_step is checked against the component's nominal frequency, speed_hz against the sample rate.  (An
 # "omega0_error" EMF axis was accepted and ignored: removed.  The flux observers start their FLL at
-# omega0 = 2π·50 Hz whatever speed_hz is, so speed_hz already sets the initial frequency error.)
+# omega_init = 2π·50 Hz whatever speed_hz is, so speed_hz already sets the initial frequency error.)
 # The largest frequency step, as a fraction of the nominal frequency: a "50 Hz" grid at 25 Hz or 75 Hz is
 # another grid (tune for that nominal), and an FLL's normalized gains are set at its ω_n.  Grid codes ask
 # far less (EN 50160: ±1 %; ride-through 47–52 Hz); a study may still sweep well beyond them.  Before
