@@ -25,6 +25,7 @@ from .observers import (
     SOGIFLLWIF,
     SOGIFLLWPF,
     SOIFO,
+    AbstractFluxObserver,
     LPFFlux,
     PureIntegratorFlux,
     SecondOrderSOIFO,
@@ -77,16 +78,15 @@ class Registered:
         return (self.signal, "drive") if self.machines and self.signal != "drive" else (self.signal,)
 
 
-# Keys that name a field by another name on input: the flux observers' initial speed was written ``omega0``
-# in job files' [component] tables and result.json's values (a LESO's ω0 is its bandwidth, a gain).
+# Keys that name a field by another name on input: job files' [component] tables and result.json's values may
+# name a flux observer's initial speed ``omega0`` (its field is ``omega_init``: a LESO's ω0 is its bandwidth).
 KEY_ALIASES = {"omega0": "omega_init"}
-_FLUX_ALIASES = {cls: KEY_ALIASES for cls in (SOIFO, SecondOrderSOIFO, LPFFlux, PureIntegratorFlux)}
 
 
 def canonical_key(cls, key: str) -> str:
-    """The field a key names for ``cls``: a key of :data:`KEY_ALIASES` where ``cls`` has the new field (the flux
-    observers), else the key itself."""
-    return _FLUX_ALIASES.get(cls, {}).get(key, key)
+    """The field a key names for ``cls``: for a flux observer, a key of :data:`KEY_ALIASES` names the field it
+    maps to; any other key names itself."""
+    return KEY_ALIASES.get(key, key) if issubclass(cls, AbstractFluxObserver) else key
 
 
 W_N = papers.FLL_OMEGA_N

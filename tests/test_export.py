@@ -440,7 +440,7 @@ def test_cli_binds_a_flux_result_to_the_recording_machine(tmp_path, capsys):
     path.write_text(json.dumps({"component": "SOIFO", "job": {"component": {}}, "gains": {"tuned": {"k": 1.3}}}))
     assert _cli(["export", str(path), "--out", str(tmp_path / "d"), "--check"]) == 0
     out = capsys.readouterr().out
-    assert "bound to the recording's machine: Rs = 0.8, L = 0.005, omega0 = 314.159" in out and ": OK" in out
+    assert "bound to the recording's machine: Rs = 0.8, L = 0.005, omega_init = 314.159" in out and ": OK" in out
     c = json.loads((tmp_path / "d" / "coefficients.json").read_text())
     assert c["gains"]["Rs"]["value"] == float(np.float32(0.8)) and "sensored FOC drive" in c["golden"]["signal"]
     assert _cli(["export", str(path), "--out", str(tmp_path / "s"), "--record", "synthetic", "--check"]) == 0

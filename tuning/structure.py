@@ -31,7 +31,7 @@ import numpy as np
 from jaxobs import kept_jit, linear, papers
 from jaxobs.drive import bench_machine
 from jaxobs.observers import CLESO, FALESO, AbstractFluxObserver
-from jaxobs.registry import REGISTRY
+from jaxobs.registry import REGISTRY, canonical_key
 
 from .targets import _settling_at_k2, k1_for_settling_time_at_k2, soifo_settling_time
 
@@ -176,23 +176,23 @@ def _flux(name: str, v: dict) -> tuple[dict, dict]:
         rule = {"rule": "lam = K1^3/(2 K2), at this K1, K2", "lam_rule": linear.second_order_soifo_lambda(K1, K2)}
         rule.update(_k1_rule(K1, K2, w, why))
     rule["lam_over_rule"] = lam / rule["lam_rule"]
-    out["model"] = "000 eqs (15), (20): the filter psi/e at omega0 (poles and damping are the filter's)"  # ω' = ω̂
+    out["model"] = "000 eqs (15), (20): the filter psi/e at omega_init (poles and damping are the filter's)"
     out["closed_form_rule"] = rule
     return out, why
 
 
-def _k1_rule(K1: float, K2: float, omega0: float, why: dict) -> dict:
+def _k1_rule(K1: float, K2: float, omega_init: float, why: dict) -> dict:
     """000's settling-time rule re-evaluated at this K2 (jaxobs_tuning.targets.k1_for_settling_time_at_k2).
 
-    Both envelope models depend on ω't only, so the K1 found at ω' = 100π holds at any ω0, and
-    the settling times scale as 100π/ω0.  About 3 s for the first design of a process (one
+    Both envelope models depend on ω't only, so the K1 found at ω' = 100π holds at any ω' (the design's
+    ``omega_init``), and the settling times scale as 100π/ω'.  About 3 s for the first design of a process (one
     compile), 0.1 s for the next.
     """
     w = papers.FLUX_FIG5_OMEGA
     target = soifo_settling_time(papers.SOIFO_K, w)
     k1 = k1_for_settling_time_at_k2(target, K2, w)
     own = float(_settling_at(K1, K2, w))
-    scale = w / omega0 if omega0 > 0 else float("nan")
+    scale = w / omega_init if omega_init > 0 else float("nan")
     out = {
         "k1_rule_doc": "000: equal 2 % settling time of the amplitude envelope (001 eqs 18, 30) with the SOIFO at "
         "k = 1.414, at this K2: the smallest K1 that settles as fast (at fixed K2 the settling time is not "
@@ -205,7 +205,7 @@ def _k1_rule(K1: float, K2: float, omega0: float, why: dict) -> dict:
     if k1 is None:
         why["k1_rule"] = why["k1_over_rule"] = (
             f"no K1 in [0.05, 20] settles within the SOIFO's {1e3 * target * scale:.3g} ms at K2 = {K2:.4g} "
-            f"(the envelope decays at K2 omega0/4 whatever K1 is)"
+            f"(the envelope decays at K2 omega_init/4 whatever K1 is)"
         )
     return out
 
@@ -276,6 +276,8 @@ def structure(component: str, values: dict, job=None) -> dict:
     # flux observer's filter, a LESO's PLL loop (the C-LESO's and the FA-LESO's: 002 gives them)
     entry = REGISTRY.get(component)
     cls = entry.cls if entry is not None else None
+    if cls is not None:  # a result.json's values may name a flux observer's omega_init omega0
+        values = {canonical_key(cls, k): v for k, v in values.items()}
     try:
         if cls in (CLESO, FALESO):
             out, why = _leso(component, values, job)
