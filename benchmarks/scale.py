@@ -47,7 +47,7 @@ def _drive_study(scenarios: int, horizon: float, store, mesh):
     par = D.bench_machine("spmsm000")
     k1, k2 = papers.SECOND_ORDER_SOIFO_K1, papers.SECOND_ORDER_SOIFO_K2
     lam = linear.second_order_soifo_lambda(k1, k2)
-    obs = jaxobs.SecondOrderSOIFO(par.Rs, par.Ld, k1, k2, lam, omega0=par.p * 1000 * D.RPM)  # bound per scenario
+    obs = jaxobs.SecondOrderSOIFO(par.Rs, par.Ld, k1, k2, lam, omega_init=par.p * 1000 * D.RPM)  # bound per scenario
     return run_drive_study(
         {"second-order-SOIFO": obs},
         DRIVE_AXES,

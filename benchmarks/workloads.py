@@ -183,7 +183,7 @@ def drive_setup(batch: int):
     par = D.bench_machine("spmsm000")
     drive = D.bench_drive(par, handover=0.05)
     obs = jaxobs.SecondOrderSOIFO(
-        par.Rs, par.Ld, K1, K2, second_order_soifo_lambda(K1, K2), omega0=par.p * 1000 * D.RPM
+        par.Rs, par.Ld, K1, K2, second_order_soifo_lambda(K1, K2), omega_init=par.p * 1000 * D.RPM
     )
     rpm = np.linspace(500.0, 2000.0, batch) if batch > 1 else np.array([1000.0])
     base = D.Scenario(par, load=D.Profile([0.0, 0.1], [0.0, 5.0], kind="step"), omega_m0=1000 * D.RPM, dead_time=2e-6)

@@ -45,7 +45,6 @@ identical runs.
 
 from __future__ import annotations
 
-import dataclasses
 import math
 
 import jax
@@ -54,7 +53,7 @@ import numpy as np
 
 from . import metrics as M
 from .drive import CF_UNITS, DRIVE_AXES, RPM, ClosedLoop, Drive, PMSMParams, Profile, Scenario, scenario_batch
-from .observers import AbstractDriveObserver
+from .observers import AbstractDriveObserver, gain_fields, gain_table
 from .provenance import provenance
 from .runner import run_scenarios
 from .scenarios import LHS, Grid, Sobol
@@ -66,7 +65,6 @@ __all__ = [
     "DRIVE_STUDY_AXES",
     "DRIVE_STUDY_AXIS_NAMES",
     "DRIVE_STUDY_METRICS",
-    "DRIVE_GAIN_UNITS",
     "QUANTILES",
     "run_drive_study",
     "drive_scenarios",
@@ -92,23 +90,6 @@ DRIVE_STUDY_METRICS = {
 QUANTILES = (0.5, 0.95, 0.99, 1.0)
 # axis -> what it is, in words (the NetCDF long_name and the figures' labels)
 DRIVE_STUDY_AXIS_NAMES = {name: what for name, (_, _, what) in DRIVE_AXES.items()}
-# a drive observer's gains (the tuned ones; the assumed machine and the initial speeds are bound per scenario)
-# and their units: the LESOs of 002 (FA-LESO: ê/e = (k2 s + k1)/(s² + (k2 − jω̂e)s + k1)), the normalized PLLs
-# (ω̂ = kp·err + ki∫err, err in rad), the flux observers of 000 (k, K1, K2, lam dimensionless: lam is the
-# frequency-normalized FLL gain, jaxobs.observers.flux)
-DRIVE_GAIN_UNITS = {
-    "omega0": "rad s-1",
-    "K_r": "s-2",
-    "omega_c": "rad s-1",
-    "k1": "s-2",
-    "k2": "s-1",
-    "k": "1",
-    "K1": "1",
-    "K2": "1",
-    "lam": "1",
-    "kp_pll": "s-1",
-    "ki_pll": "s-2",
-}
 
 
 def _axis_meta(name: str) -> dict:
@@ -155,25 +136,23 @@ def bind_observer(obs, sc: Scenario):
 
 
 def drive_gains(obs) -> dict:
-    """A drive observer's gains (name -> float): its fields named in :data:`DRIVE_GAIN_UNITS`, less what a study
-    binds per scenario (``bound_fields``: a flux observer's ``omega0`` is its initial speed, a LESO's its
-    bandwidth, a gain)."""
-    fields = {f.name for f in dataclasses.fields(obs)} - set(type(obs).bound_fields)
-    return {g: float(getattr(obs, g)) for g in DRIVE_GAIN_UNITS if g in fields}
+    """A drive observer's gains (name -> float): its gain fields (:func:`jaxobs.observers.gain_fields`; what a
+    study binds per scenario, ``bound_fields``, is none)."""
+    return {g: float(getattr(obs, g)) for g in gain_fields(obs)}
 
 
 def gain_variables(designs: dict) -> dict:
     """The designs' gains as Dataset variables ``gain_<name>`` over ``design``, each with its own CF units (NaN
     where a design has no such gain): what drive studies and envelopes write."""
     gains = {d: drive_gains(obs) for d, obs in designs.items()}
+    table = gain_table(designs)  # each gain's units are its field's (jaxobs.observers.gain)
     return {
         f"gain_{g}": (
             ("design",),
             np.asarray([gains[d].get(g, np.nan) for d in designs], dtype=float),
-            {"units": DRIVE_GAIN_UNITS[g], "long_name": f"observer gain {g} (NaN: the design has no such gain)"},
+            {"units": info.units, "long_name": f"observer gain {g} (NaN: the design has no such gain)"},
         )
-        for g in DRIVE_GAIN_UNITS
-        if any(g in gains[d] for d in designs)
+        for g, info in table.items()
     }
 
 

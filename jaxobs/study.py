@@ -58,6 +58,7 @@ import numpy as np
 
 from . import metrics as M
 from ._simulate import OnSignal
+from .observers import gain_table
 from .provenance import provenance
 from .runner import run_scenarios
 from .scenarios import GRID_SIGNAL_AXES, LHS, AbstractSampler, Grid, Random, Recordings, Sobol, grid_signals
@@ -88,8 +89,6 @@ LOST_LOCK_LONG_NAME = (
     f"lost lock: diverged, or in the steady window a phase error > {M.LOCK_TOL_DEG:g} deg or a mean frequency "
     f"error > {100 * M.LOCK_FREQ_TOL:g} % (1: lost)"
 )
-GAIN_NAMES = ("k", "k1", "k2", "lam")
-GAIN_UNITS = {"k": "1", "k1": "1", "k2": "1", "lam": "rad2 s-2"}  # jaxobs.observers.fll: λ in rad²/s²
 
 
 def study_metrics(sol, t_event: float, steady_from: float, band_hz: float, n_period: int) -> dict:
@@ -219,7 +218,7 @@ def run_study(
     dims, shape, coords = sampler.layout(_axis_meta)
     dims = ("design", *dims)
     coords["design"] = ("design", dnames, {"long_name": "observer design"})
-    gains_present = [g for g in GAIN_NAMES if any(hasattr(o, g) for o in designs.values())]
+    gains_present = gain_table(designs)  # each gain's units are its field's (jaxobs.observers.gain)
     data = {}
     for k in STUDY_METRICS:
         arr = np.stack([np.where(results[d][1], results[d][0][k], np.nan).reshape(shape) for d in dnames])
@@ -252,7 +251,7 @@ def run_study(
         data[f"gain_{g}"] = (
             ("design",),
             np.asarray([float(getattr(obs, g)) if hasattr(obs, g) else np.nan for obs in designs.values()]),
-            _meta(GAIN_UNITS[g], f"observer gain {g} (NaN: the design has no such gain)"),
+            _meta(gains_present[g].units, f"observer gain {g} (NaN: the design has no such gain)"),
         )
     ds = xr.Dataset(data, coords=coords)
     ds.attrs.update(

@@ -44,7 +44,7 @@ def drive_table() -> tuple[str, np.ndarray]:
     from jaxobs import papers
     from jaxobs_tuning.export import drive_recording
 
-    obs = jaxobs.SOIFO(Rs=0.0, L=1.0, k=papers.SOIFO_K, lam=0.5, omega0=1.0)  # only its family and ts matter here
+    obs = jaxobs.SOIFO(Rs=0.0, L=1.0, k=papers.SOIFO_K, lam=0.5, omega_init=1.0)  # only its family and ts matter here
     data, _ = drive_recording(obs, 3000, encoder=True)
     t = np.arange(data.shape[0]) * float(obs.ts)
     return "t,u_a,u_b,i_a,i_b,theta_e,omega_e", np.concatenate([t[:, None], data.astype(np.float64)], axis=1)

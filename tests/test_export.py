@@ -319,7 +319,7 @@ def test_drive_observer_files(tmp_path):
     assert "float u_prev[2];" in h and "float i_prev[2];" in h and "int started;" in h
     data = np.loadtxt(tmp_path / "golden.csv", delimiter=",", skiprows=1)
     assert data[0, 1] == 0 and data[0, 3] == 0 and data[1, 3] == 0 and data[0, 0] != 0  # beta off in period 1
-    assert np.float32(data[0, 7]) == np.float32(obs.omega0)  # omega output of the initial state
+    assert np.float32(data[0, 7]) == np.float32(obs.omega_init)  # omega output of the initial state
     assert data[1, 7] > 0 and np.all(data[0, 4:6] == 0)
     assert c["angle_outputs"] == ["theta"] and "first period on alpha only" in c["golden"]["signal"]
     assert set(c["ops_per_step"]) == {"steady"}  # RK4: no branch
@@ -447,7 +447,7 @@ def test_cli_binds_a_flux_result_to_the_recording_machine(tmp_path, capsys):
     path.write_text(json.dumps(res))
     assert _cli(["export", str(path), "--out", str(tmp_path / "d"), "--check"]) == 0
     out = capsys.readouterr().out
-    assert "bound to the recording's machine: Rs = 0.8, L = 0.005, omega0 = 314.159" in out and ": OK" in out
+    assert "bound to the recording's machine: Rs = 0.8, L = 0.005, omega_init = 314.159" in out and ": OK" in out
     c = json.loads((tmp_path / "d" / "coefficients.json").read_text())
     assert c["gains"]["Rs"]["value"] == float(np.float32(0.8)) and "sensored FOC drive" in c["golden"]["signal"]
     assert _cli(["export", str(path), "--out", str(tmp_path / "s"), "--record", "synthetic", "--check"]) == 0

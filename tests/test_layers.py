@@ -56,7 +56,7 @@ LAYERS = [
     ("jaxobs.signals",),
     ("jaxobs.scenarios", "jaxobs.drive.plant", "jaxobs.drive.dual", "jaxobs.drive.control", "jaxobs.drive.scenario"),
     # observers: they estimate
-    ("jaxobs.observers._cores", "jaxobs.observers.base"),
+    ("jaxobs.observers._cores", "jaxobs.observers._gains", "jaxobs.observers._rules", "jaxobs.observers.base"),
     ("jaxobs.observers.sogi", "jaxobs.observers.fll", "jaxobs.observers.flux", "jaxobs.observers.leso"),
     ("jaxobs.observers",),
     # the closed loop composes the drive's parts with a drive observer (its contract, observers.base)
@@ -77,7 +77,7 @@ LAYERS = [
     ("jaxobs.linear",),
     ("jaxobs",),
     # the one study runner (samplers in jaxobs.scenarios)
-    ("jaxobs.runner",),
+    ("jaxobs.runner", "jaxobs.registry"),
     # the figures' helpers and the Bode figures (jaxobs.plot re-exports them)
     ("jaxobs._figure", "jaxobs.reproduce.compare", "jaxobs.reproduce._run"),
     ("jaxobs._plot_bode", "jaxobs._plot_paper"),

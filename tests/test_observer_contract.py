@@ -63,7 +63,7 @@ def _old_bind_observer(obs, sc):
     est, w_e = sc.est_par, sc.est_par.p * sc.omega_m0
     if hasattr(obs, "Lq"):
         return eqx.tree_at(lambda o: (o.Rs, o.Lq, o.omega0_pll), obs, (est.Rs, est.Lq, w_e))
-    return eqx.tree_at(lambda o: (o.Rs, o.L, o.omega0), obs, (est.Rs, est.Ld, jnp.maximum(jnp.abs(w_e), 1.0)))
+    return eqx.tree_at(lambda o: (o.Rs, o.L, o.omega_init), obs, (est.Rs, est.Ld, jnp.maximum(jnp.abs(w_e), 1.0)))
 
 
 def _scenario(par, rpm, scale=(1.0, 1.0, 1.0)):
@@ -107,7 +107,7 @@ def test_a_pll_flux_observer_starts_at_the_signed_speed(name):
         sc = _scenario(SPMSM, rpm)
         w = float(sc.est_par.p * sc.omega_m0)
         bound = bind_observer(obs, sc)
-        assert float(bound.omega0) == w != float(_old_bind_observer(obs, sc).omega0)
+        assert float(bound.omega_init) == w != float(_old_bind_observer(obs, sc).omega_init)
 
 
 @pytest.mark.parametrize("name", [*FLL_FLUX, *PLL_FLUX, *LESOS])
@@ -139,7 +139,7 @@ def test_bind_sets_only_its_bound_fields_and_keeps_dtypes():
     obs32 = jax.tree.map(lambda x: x.astype(jnp.float32) if eqx.is_inexact_array(x) else x, FLL_FLUX["SOIFO"]())
     bound = obs32.bind(SPMSM, 314.0)
     changed = {f for f in type(obs32).bound_fields if float(getattr(bound, f)) != float(getattr(obs32, f))}
-    assert changed == {"Rs", "L", "omega0"} == set(type(obs32).bound_fields)
+    assert changed == {"Rs", "L", "omega_init"} == set(type(obs32).bound_fields)
     assert all(x.dtype == jnp.float32 for x in jax.tree.leaves(bound))
     assert float(bound.L) == pytest.approx(float(SPMSM.Ld)) and float(bound.k) == float(obs32.k)
     assert LESOS["CLESO"]().bind(IPMSM, 1.0).Lq == IPMSM.Lq  # a LESO takes Lq (its model's inductance)
@@ -148,7 +148,7 @@ def test_bind_sets_only_its_bound_fields_and_keeps_dtypes():
     only = leso.bind(None, -42.0)
     assert float(only.omega0_pll) == -42.0 and float(only.Rs) == float(leso.Rs) and float(only.Lq) == 1.0
     soifo = FLL_FLUX["SOIFO"]()
-    assert float(soifo.bind(None, -0.5).omega0) == 1.0 and float(soifo.bind(None, -0.5).L) == 1.0
+    assert float(soifo.bind(None, -0.5).omega_init) == 1.0 and float(soifo.bind(None, -0.5).L) == 1.0
 
 
 def test_the_export_binding_now_clamps():
@@ -160,11 +160,11 @@ def test_the_export_binding_now_clamps():
     def old_export(o, machine, rpm):  # jaxobs_tuning.export.bind_to_drive before the contract
         we = float(rpm) * math.pi / 30 * int(machine.p)
         vals = (machine.Rs, machine.Ld, we)
-        vals = tuple(jnp.asarray(v, jnp.result_type(getattr(o, n))) for n, v in zip(("Rs", "L", "omega0"), vals))
-        return eqx.tree_at(lambda x: (x.Rs, x.L, x.omega0), o, vals)
+        vals = tuple(jnp.asarray(v, jnp.result_type(getattr(o, n))) for n, v in zip(("Rs", "L", "omega_init"), vals))
+        return eqx.tree_at(lambda x: (x.Rs, x.L, x.omega_init), o, vals)
 
     assert _leaves_equal(obs.bind(SPMSM, 1000.0 * math.pi / 30 * int(SPMSM.p)), old_export(obs, SPMSM, 1000.0))
-    assert float(old_export(obs, SPMSM, 0.0).omega0) == 0.0 and float(obs.bind(SPMSM, 0.0).omega0) == 1.0
+    assert float(old_export(obs, SPMSM, 0.0).omega_init) == 0.0 and float(obs.bind(SPMSM, 0.0).omega_init) == 1.0
 
 
 def test_the_reproductions_banks_are_their_old_constructions():
@@ -195,8 +195,11 @@ def test_the_reproductions_banks_are_their_old_constructions():
 
 
 def test_drive_gains_leave_out_the_bound_fields():
-    """A flux observer's omega0 is its start speed (bound), a C-LESO's omega0 its bandwidth (a gain)."""
-    assert "omega0" not in drive_gains(FLL_FLUX["SOIFO"]()) and set(drive_gains(FLL_FLUX["SOIFO"]())) == {"k", "lam"}
+    """A flux observer's omega_init is its start speed (bound), a C-LESO's omega0 its bandwidth (a gain)."""
+    assert "omega_init" not in drive_gains(FLL_FLUX["SOIFO"]()) and set(drive_gains(FLL_FLUX["SOIFO"]())) == {
+        "k",
+        "lam",
+    }
     assert set(drive_gains(LESOS["CLESO"]())) == {"omega0", "kp_pll", "ki_pll"}
     assert issubclass(type(FLL_FLUX["SOIFO"]()), AbstractFluxObserver)
     assert issubclass(type(LESOS["CLESO"]()), AbstractLESO)

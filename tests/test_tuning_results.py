@@ -226,7 +226,7 @@ def test_sosoifo_structure_gives_the_settling_time_k1_rule_at_its_k2():
     target = soifo_settling_time(papers.SOIFO_K, w1)
     assert target == pytest.approx(float(flux_settling_time((papers.SOIFO_K,), w1)), rel=1e-6)
     K1, K2 = papers.SECOND_ORDER_SOIFO_K1, papers.SECOND_ORDER_SOIFO_K2
-    v = dict(K1=K1, K2=K2, lam=K1**3 / (2 * K2), omega0=w1)
+    v = dict(K1=K1, K2=K2, lam=K1**3 / (2 * K2), omega_init=w1)
     t0 = time.process_time()  # this process's CPU seconds: other processes' load does not stretch them
     rule = structure("SecondOrderSOIFO", v)["closed_form_rule"]
     assert time.process_time() - t0 < 30  # ~3 s (one compile): a bound on the search, not on the machine

@@ -8,6 +8,7 @@ import re
 from pathlib import Path
 
 from jaxobs import linear, papers
+from jaxobs.registry import registered
 from jaxobs.reproduce.figures import FLUX_FIGURES, LESO_FIGURES
 
 from .cli_common import CommandOut, enable_x64, progress_of
@@ -92,6 +93,8 @@ def cmd_demo(args) -> int:
     return 0 if all(r["ok"] for r in rows) else 1
 
 
+# each closed form's command-line inputs, by its alias in jaxobs.registry (the FLLs': their class's closed_form
+# arguments; the C-LESO's: 002 eq (16)'s ω0 and the machine's Rs and Lq, whose l1, l2 it prints)
 CF_OPTIONS = {
     "sogi-fll": ("k", "omega_n", "zeta"),
     "wpf": ("omega_n", "zeta"),
@@ -108,7 +111,7 @@ def closed_form_rows(design: str, values: dict) -> dict:
         k = values.get("k", papers.SOGI_FLL_K)
         wn = values.get("omega_n", papers.FLL_OMEGA_N)
         zeta = values.get("zeta", papers.FLL_ZETA)
-        obs = linear.sogi_fll_closed_form(k=k, omega_n=wn, zeta=zeta)
+        obs = registered(design).cls.closed_form(k=k, omega_n=wn, zeta=zeta)
         gains = [
             ("k", float(obs.k), "chosen (001 uses 1/√2)", "001 Sec. II-B"),
             ("lam", float(obs.lam), "λ = k²ωn²/(8ζ²)", "001 eq (22)"),
@@ -117,7 +120,7 @@ def closed_form_rows(design: str, values: dict) -> dict:
     elif design == "wpf":
         wn = values.get("omega_n", papers.FLL_OMEGA_N)
         zeta = values.get("zeta", papers.FLL_ZETA)
-        obs = linear.wpf_closed_form(omega_n=wn, zeta=zeta)
+        obs = registered(design).cls.closed_form(omega_n=wn, zeta=zeta)
         gains = [
             ("k1", float(obs.k1), "k1 = √2 (prefilter ζ = 1/√2)", "001 eq (26)"),
             ("k2", float(obs.k2), "k2 = k1 (amplitude poles coincide)", "001 Sec. III-B"),
@@ -128,7 +131,7 @@ def closed_form_rows(design: str, values: dict) -> dict:
         wc = values.get("omega_c", papers.WIF_OMEGA_C)
         b = values.get("b", papers.WIF_B)
         wn = values.get("omega_n", papers.FLL_OMEGA_N)
-        obs = linear.wif_closed_form(omega_c=wc, b=b, omega_n=wn)
+        obs = registered(design).cls.closed_form(omega_c=wc, b=b, omega_n=wn)
         pm = math.degrees(float(linear.symmetric_optimum_pm(b)))
         gains = [
             ("k1", float(obs.k1), "k1 = 2bωc/ωn", "001 eq (34)"),
@@ -171,8 +174,10 @@ def cmd_closed_form(args) -> int:
         values[name] = v
     try:
         res = closed_form_rows(args.design, values)
-    except ValueError as e:  # name the flag the user typed (wif_closed_form.b -> --b), not the function's field
-        raise ValueError(re.sub(r"\b\w+_closed_form\.(\w+)", lambda m: "--" + m[1].replace("_", "-"), str(e))) from None
+    except ValueError as e:  # name the flag the user typed (SOGIFLLWIF.closed_form.b -> --b), not the argument
+        raise ValueError(
+            re.sub(r"\b\w+\.closed_form\.(\w+)", lambda m: "--" + m[1].replace("_", "-"), str(e))
+        ) from None
     if args.json:
         print(json.dumps(res, indent=1))
     else:

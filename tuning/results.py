@@ -21,6 +21,7 @@ import re
 from pathlib import Path
 
 from jaxobs.provenance import read_file
+from jaxobs.registry import KEY_ALIASES, canonical_key
 
 from .job import COMPONENTS, Job, parse_job
 
@@ -137,7 +138,8 @@ def check_result(res, where: str = "result") -> dict:
         raise ValueError(
             f"{where}: component {json.dumps(comp)[:40].replace(chr(34), chr(39))} is not a jaxobs component"
         )
-    allowed = tuple(COMPONENTS[comp].defaults)
+    ctor = COMPONENTS[comp].ctor  # a flux observer's job.component may name omega_init as omega0
+    allowed = tuple(COMPONENTS[comp].defaults) + tuple(k for k in KEY_ALIASES if canonical_key(ctor, k) != k)
     job = _table(res["job"], where, "job")
     named = _table(job.get("job", {}), where, "job.job").get("component", comp)
     if named != comp:

@@ -30,6 +30,8 @@ import numpy as np
 
 from jaxobs import kept_jit, linear, papers
 from jaxobs.drive import bench_machine
+from jaxobs.observers import CLESO, FALESO, AbstractFluxObserver
+from jaxobs.registry import REGISTRY, canonical_key
 
 from .targets import _settling_at_k2, k1_for_settling_time_at_k2, soifo_settling_time
 
@@ -119,23 +121,20 @@ def _na(out: dict, why: dict, reason: str, *fields):
 
 def _fll(name: str, v: dict) -> tuple[dict, dict]:
     wn = float(v["omega_n"])
+    model = REGISTRY[name].model(v)  # 001's small-signal model of this FLL
     if name == "SOGIFLL":
-        k, lam = float(v["k"]), float(v["lam"])
-        model = linear.sogi_fll_model(k, lam, wn)
+        k = float(v["k"])
         rule = {
             "rule": "001 eq (22): lam = k^2 omega_n^2 / (8 zeta^2), zeta = 1/sqrt(2), at this k",
             "lam_rule": float(linear.sogi_fll_lambda(k, wn)),
         }
     elif name == "SOGIFLLWPF":
-        k1, k2, lam = float(v["k1"]), float(v["k2"]), float(v["lam"])
-        model = linear.wpf_model(k1, k2, lam, wn)
         rule = {
             "rule": "001 eq (29): lam = 2 (zeta + 1) omega_n^2 / (2 zeta + 1)^3 (it assumes k1 = k2 = sqrt(2))",
             "lam_rule": float(linear.wpf_lambda(wn)),
         }
     else:
-        k1, k2, lam = float(v["k1"]), float(v["k2"]), float(v["lam"])
-        model = linear.wif_model(k1, k2, lam, wn)
+        k1, k2 = float(v["k1"]), float(v["k2"])
         b, wc = k1 / k2, k2 * wn / 2
         rule = {
             "rule": "001 eq (34), symmetric optimum at this k1, k2: b = k1/k2, omega_c = k2 omega_n/2, "
@@ -157,7 +156,7 @@ def _fll(name: str, v: dict) -> tuple[dict, dict]:
 
 
 def _flux(name: str, v: dict) -> tuple[dict, dict]:
-    w = float(v["omega0"])
+    w = float(v["omega_init"])
     out, why = {}, {}
     _na(
         out,
@@ -169,31 +168,31 @@ def _flux(name: str, v: dict) -> tuple[dict, dict]:
     )
     if name == "SOIFO":
         k, lam = float(v["k"]), float(v["lam"])
-        out.update(_poles(linear.soifo_tf(k, w)))
+        out.update(_poles(REGISTRY[name].model(v)))
         rule = {"rule": "lam = k^2/4 (001 eq 22 normalized), at this k", "lam_rule": linear.soifo_lambda(k)}
     else:
         K1, K2, lam = float(v["K1"]), float(v["K2"]), float(v["lam"])
-        out.update(_poles(linear.sosoifo_tf(K1, K2, w)))
+        out.update(_poles(REGISTRY[name].model(v)))
         rule = {"rule": "lam = K1^3/(2 K2), at this K1, K2", "lam_rule": linear.second_order_soifo_lambda(K1, K2)}
         rule.update(_k1_rule(K1, K2, w, why))
     rule["lam_over_rule"] = lam / rule["lam_rule"]
-    out["model"] = "000 eqs (15), (20): the filter psi/e at omega0 (poles and damping are the filter's)"
+    out["model"] = "000 eqs (15), (20): the filter psi/e at omega_init (poles and damping are the filter's)"
     out["closed_form_rule"] = rule
     return out, why
 
 
-def _k1_rule(K1: float, K2: float, omega0: float, why: dict) -> dict:
+def _k1_rule(K1: float, K2: float, omega_init: float, why: dict) -> dict:
     """000's settling-time rule re-evaluated at this K2 (jaxobs_tuning.targets.k1_for_settling_time_at_k2).
 
-    Both envelope models depend on ω't only, so the K1 found at ω' = 100π holds at any ω0, and
-    the settling times scale as 100π/ω0.  About 3 s for the first design of a process (one
+    Both envelope models depend on ω't only, so the K1 found at ω' = 100π holds at any ω' (the design's
+    ``omega_init``), and the settling times scale as 100π/ω'.  About 3 s for the first design of a process (one
     compile), 0.1 s for the next.
     """
     w = papers.FLUX_FIG5_OMEGA
     target = soifo_settling_time(papers.SOIFO_K, w)
     k1 = k1_for_settling_time_at_k2(target, K2, w)
     own = float(_settling_at(K1, K2, w))
-    scale = w / omega0 if omega0 > 0 else float("nan")
+    scale = w / omega_init if omega_init > 0 else float("nan")
     out = {
         "k1_rule_doc": "000: equal 2 % settling time of the amplitude envelope (001 eqs 18, 30) with the SOIFO at "
         "k = 1.414, at this K2: the smallest K1 that settles as fast (at fixed K2 the settling time is not "
@@ -206,7 +205,7 @@ def _k1_rule(K1: float, K2: float, omega0: float, why: dict) -> dict:
     if k1 is None:
         why["k1_rule"] = why["k1_over_rule"] = (
             f"no K1 in [0.05, 20] settles within the SOIFO's {1e3 * target * scale:.3g} ms at K2 = {K2:.4g} "
-            f"(the envelope decays at K2 omega0/4 whatever K1 is)"
+            f"(the envelope decays at K2 omega_init/4 whatever K1 is)"
         )
     return out
 
@@ -273,13 +272,19 @@ def _leso(name: str, v: dict, job) -> tuple[dict, dict]:
 
 def structure(component: str, values: dict, job=None) -> dict:
     """The linear structure of a design (see the module docstring); ``values``: every constructor value."""
+    # the paper's small-signal model of the class (jaxobs.registry), analysed by its family: an FLL's loop, a
+    # flux observer's filter, a LESO's PLL loop (the C-LESO's and the FA-LESO's: 002 gives them)
+    entry = REGISTRY.get(component)
+    cls = entry.cls if entry is not None else None
+    if cls is not None:  # a result.json's values may name a flux observer's omega_init omega0
+        values = {canonical_key(cls, k): v for k, v in values.items()}
     try:
-        if component in ("SOGIFLL", "SOGIFLLWPF", "SOGIFLLWIF"):
-            out, why = _fll(component, values)
-        elif component in ("SOIFO", "SecondOrderSOIFO"):
-            out, why = _flux(component, values)
-        elif component in ("CLESO", "FALESO"):
+        if cls in (CLESO, FALESO):
             out, why = _leso(component, values, job)
+        elif entry is not None and entry.model is not None and issubclass(cls, AbstractFluxObserver):
+            out, why = _flux(component, values)
+        elif entry is not None and entry.model is not None:
+            out, why = _fll(component, values)
         else:
             out, why = {}, {}
             _na(out, why, f"no small-signal model of {component} in jaxobs.linear", *STRUCTURE_FIELDS)

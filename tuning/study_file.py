@@ -66,12 +66,11 @@ import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import jaxobs
-from jaxobs import linear
 from jaxobs.drive import BENCH_MACHINES, bench_machine
 from jaxobs.drive_study import DRIVE_STUDY_AXES
 from jaxobs.observers import AbstractFluxObserver
 from jaxobs.provenance import sha256, versions
+from jaxobs.registry import REGISTRY, canonical_key
 from jaxobs.study import STUDY_AXES
 
 from .job import (
@@ -106,13 +105,10 @@ __all__ = [
 ]
 
 WHAT = "study file"
-FLL_CLOSED_FORMS = {
-    "sogi-fll": linear.sogi_fll_closed_form,
-    "wpf": linear.wpf_closed_form,
-    "wif": linear.wif_closed_form,
-}
-FLL_COMPONENTS = ("SOGIFLL", "SOGIFLLWPF", "SOGIFLLWIF")
-DRIVE_OBSERVERS = ("CLESO", "GILESO", "FALESO", "PureIntegratorFlux", "LPFFlux", "SOIFO", "SecondOrderSOIFO")
+# the designs a study may name, from jaxobs.registry: the FLLs (and their closed forms' aliases), the drive observers
+FLL_CLOSED_FORMS = {a: e.cls.closed_form for e in REGISTRY.values() if e.signal == "grid" for a in e.aliases}
+FLL_COMPONENTS = tuple(name for name, e in REGISTRY.items() if e.signal == "grid")
+DRIVE_OBSERVERS = tuple(name for name, e in REGISTRY.items() if "drive" in e.signals)
 # the drive jobs' machines (jaxobs.drive.BENCH_MACHINES: the same names, bench inertias and FOC), so a study
 # scores a tuned result on the drive that tuned it
 MACHINES = tuple(BENCH_MACHINES)
@@ -300,12 +296,15 @@ def _results_attr(results: dict) -> dict:
 def _ctor_params(ctor, exclude=()) -> dict:
     """The constructor's settable parameters: name -> default (inspect.Parameter.empty: required)."""
     sig = inspect.signature(ctor)
-    return {n: p.default for n, p in sig.parameters.items() if n not in ("rule", *exclude)}
+    # a key another field is accepted under (a flux observer's omega0, its omega_init) is no parameter of its own
+    return {
+        n: p.default for n, p in sig.parameters.items() if n not in ("rule", *exclude) and canonical_key(ctor, n) == n
+    }
 
 
 def _component(spec: dict, where: str, comp: str, exclude=(), fixed=None):
     """A component from its gains: known keys (typos named), each of its default's type, then the constructor."""
-    ctor = getattr(jaxobs, comp)
+    ctor = REGISTRY[comp].cls
     params = _ctor_params(ctor, exclude)
     no_unknown(spec, ("component", *params), where)
     kw = {}
@@ -475,7 +474,7 @@ def _parse_drive(raw: dict, st: dict, name: str, base: Path) -> StudySpec:
             raise JobError(f"{where}.component", f"must be one of {', '.join(DRIVE_OBSERVERS)}, got {show(comp)}")
         # the bound fields (Rs, the inductance, the start speed) are placeholders: the study binds each
         # scenario's assumed machine and speed (AbstractDriveObserver.bind); the drive's ts rules
-        ctor = getattr(jaxobs, comp)
+        ctor = REGISTRY[comp].cls
         par = bench_machine("spmsm000" if issubclass(ctor, AbstractFluxObserver) else "ipmsm002")
         fixed = dict(zip(ctor.bound_fields, (0.0, 1.0, 1.0)))  # valid for the constructor, then bound
         return _component(spec, where, comp, (*ctor.bound_fields, "ts"), fixed).bind(par, 0.0)

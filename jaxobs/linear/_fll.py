@@ -10,7 +10,15 @@ import equinox as eqx
 import jax.numpy as jnp
 
 from .. import papers
-from .._validate import as_float, check_positive, check_real
+from ..observers import (
+    pll_gains,
+    second_order_soifo_lambda,
+    sogi_fll_lambda,
+    soifo_lambda,
+    symmetric_optimum_pm,
+    wif_symmetric_optimum,
+    wpf_lambda,
+)
 from ..observers.fll import SOGIFLL, SOGIFLLWIF, SOGIFLLWPF
 from ._tf import TransferFunction
 
@@ -96,70 +104,25 @@ def wif_model(k1, k2, lam, omega_n) -> FLLModel:
 
 
 # --------------------------------------------------------------------------
-# closed-form tuning rules of paper 001
+# closed-form tuning rules: the observers' own (jaxobs.observers), by their function names
 # --------------------------------------------------------------------------
 
 
-def sogi_fll_lambda(k, omega_n, zeta=papers.FLL_ZETA):
-    """001 eq (22): λ = k² ωn² / (8 ζ²)  (= k² ωn² / 4 at ζ = 1/√2)."""
-    return k**2 * omega_n**2 / (8 * zeta**2)
-
-
-def wpf_lambda(omega_n, zeta=papers.FLL_ZETA):
-    """001 eq (29), with k1 = k2 = √2: λ = 2 (ζ + 1) ωn² / (2ζ + 1)³."""
-    return 2 * (zeta + 1) * omega_n**2 / (2 * zeta + 1) ** 3
-
-
-def wif_symmetric_optimum(b, omega_c, omega_n):
-    """001 eq (34): k1 = 2 b ωc / ωn, k2 = 2 ωc / ωn, λ = 2 ωc² / b."""
-    return 2 * b * omega_c / omega_n, 2 * omega_c / omega_n, 2 * omega_c**2 / b
-
-
-def soifo_lambda(k):
-    """The SOIFO's FLL gain ``lam`` (dimensionless: 000's FLL is frequency-normalized, λ(ω̂) = lam·ω̂²,
-    :mod:`jaxobs.observers.flux`): 001 eq (22) at ζ = 1/√2 with ωn → 1, lam = k²/4, the same damping at
-    every speed."""
-    return k**2 / 4
-
-
-def second_order_soifo_lambda(K1, K2):
-    """The second-order SOIFO's FLL gain ``lam`` (dimensionless, as :func:`soifo_lambda`): 001's symmetric
-    optimum (eq 34) frequency-normalized, in 000's names (the WIF's k1 = K2, k2 = K1) with b = K2/K1:
-    lam = K1³/(2 K2)."""
-    return K1**3 / (2 * K2)
-
-
-def pll_gains(bandwidth, zeta=papers.PLL_ZETA):
-    """Type-2 PLL on a normalized error: k_p = 2ζω_b, k_i = ω_b² (θ̂/θ = (k_p s + k_i)/(s² + k_p s + k_i))."""
-    return 2 * zeta * bandwidth, bandwidth**2
-
-
-def symmetric_optimum_pm(b):
-    """001 eq (39): phase margin of the symmetric optimum, rad."""
-    return jnp.arctan((b**2 - 1) / (2 * b))
-
-
 def sogi_fll_closed_form(k=papers.SOGI_FLL_K, omega_n=papers.FLL_OMEGA_N, zeta=papers.FLL_ZETA, **kw):
-    """A :class:`~jaxobs.SOGIFLL` tuned by 001 eq (22) (Table I: k = 1/√2, λ = 12337)."""
-    check_positive("k", k, "sogi_fll_closed_form")
-    check_positive("zeta", zeta, "sogi_fll_closed_form")
-    return SOGIFLL(k=k, lam=sogi_fll_lambda(as_float(k), as_float(omega_n), zeta), omega_n=omega_n, **kw)
+    """A :class:`~jaxobs.SOGIFLL` tuned by 001 eq (22) (Table I: k = 1/√2, λ = 12337): :meth:`SOGIFLL.closed_form`."""
+    return SOGIFLL.closed_form(k=k, omega_n=omega_n, zeta=zeta, **kw)
 
 
 def wpf_closed_form(omega_n=papers.FLL_OMEGA_N, zeta=papers.FLL_ZETA, **kw):
-    """A :class:`~jaxobs.SOGIFLLWPF` tuned by 001 eq (29) (Table I: k1 = k2 = √2, λ = 23948)."""
-    check_positive("zeta", zeta, "wpf_closed_form")
-    lam = wpf_lambda(as_float(omega_n), zeta)
-    return SOGIFLLWPF(k1=papers.WPF_K1, k2=papers.WPF_K2, lam=lam, omega_n=omega_n, **kw)
+    """A :class:`~jaxobs.SOGIFLLWPF` tuned by 001 eq (29) (Table I: k1 = k2 = √2, λ = 23948):
+    :meth:`SOGIFLLWPF.closed_form`."""
+    return SOGIFLLWPF.closed_form(omega_n=omega_n, zeta=zeta, **kw)
 
 
 def wif_closed_form(omega_c=papers.WIF_OMEGA_C, b=papers.WIF_B, omega_n=papers.FLL_OMEGA_N, **kw):
-    """A :class:`~jaxobs.SOGIFLLWIF` tuned by the symmetric optimum, 001 eq (34).
+    """A :class:`~jaxobs.SOGIFLLWIF` tuned by the symmetric optimum, 001 eq (34): :meth:`SOGIFLLWIF.closed_form`.
 
     Defaults are 001's: b = 1 + √2 (ζ = 1/√2, PM = 45°), ωc = 2π·18.8 rad/s
     (Table I: k1 = 1.815, k2 = 0.752, λ = 11559).
     """
-    check_real("b", b, lower=1.0, owner="wif_closed_form")
-    check_positive("omega_c", omega_c, "wif_closed_form")
-    k1, k2, lam = wif_symmetric_optimum(as_float(b), as_float(omega_c), as_float(omega_n))
-    return SOGIFLLWIF(k1=k1, k2=k2, lam=lam, omega_n=omega_n, **kw)
+    return SOGIFLLWIF.closed_form(omega_c=omega_c, b=b, omega_n=omega_n, **kw)

@@ -2,10 +2,23 @@
 
 :class:`AbstractObserver` is every observer; :class:`AbstractVectorFieldObserver` the ones given by a vector
 field (FLL family, SOGIs); :class:`AbstractDriveObserver` the drive observers (flux observers, LESOs,
-:class:`ObserverBank`), bound to a machine and a speed by their one ``bind`` method.
+:class:`ObserverBank`), bound to a machine and a speed by their one ``bind`` method.  Each observer declares its
+gains with :func:`gain` (units, role, bounds, the paper's symbol; :func:`gain_fields` lists them), and each one a
+paper tunes has a ``closed_form`` classmethod: the paper's rule (the rules' arithmetic: ``sogi_fll_lambda``, ...).
 """
 
 from ._cores import sogi2_tustin_coefficients as sogi2_tustin_coefficients
+from ._gains import GainInfo as GainInfo
+from ._gains import gain as gain
+from ._gains import gain_fields as gain_fields
+from ._gains import gain_table as gain_table
+from ._rules import pll_gains as pll_gains
+from ._rules import second_order_soifo_lambda as second_order_soifo_lambda
+from ._rules import sogi_fll_lambda as sogi_fll_lambda
+from ._rules import soifo_lambda as soifo_lambda
+from ._rules import symmetric_optimum_pm as symmetric_optimum_pm
+from ._rules import wif_symmetric_optimum as wif_symmetric_optimum
+from ._rules import wpf_lambda as wpf_lambda
 from .base import AbstractDriveObserver as AbstractDriveObserver
 from .base import AbstractObserver as AbstractObserver
 from .base import AbstractVectorFieldObserver as AbstractVectorFieldObserver

@@ -56,14 +56,18 @@ def sogi_vf(y, q, v, w, k):
     return gi_vf(y, q, k * (v - y), w)
 
 
-def sogi2_vf(za, zb, y, q, v, w, K1, K2):
+def sogi2_vf(za, zb, y, q, v, w, k_err, k_damp):
     """Second-order SOGI (000 eqs 17–18): returns (ża, żb, ẏ, q̇).
 
     ``(y, q)`` are the filtered in-phase and quadrature outputs (v', qv');
     ``(za, zb)`` are the first GI's outputs.  ``za`` is the input of the output
     GI, used by the WIF frequency detector.
+
+    The gains are named by what they do, since the papers name them the other way round: ``k_err``
+    multiplies the error v − y (000's K1, 001's k2) and ``k_damp`` the damping term (000's K2, 001's k1):
+    the filter is k_err k_damp / (x² + k_damp x + k_err k_damp).
     """
-    dza, dzb = gi_vf(za, zb, K2 * (K1 * (v - y) - za), w)
+    dza, dzb = gi_vf(za, zb, k_damp * (k_err * (v - y) - za), w)
     dy, dq = gi_vf(y, q, za, w)
     return dza, dzb, dy, dq
 

@@ -3,7 +3,8 @@
 All three take a single-phase signal v(t) = V cos θ and estimate the in-phase
 and quadrature components, amplitude V̂, phase θ̂ = atan2(qv', v') (001 eq 10)
 and frequency ω̂ (rad/s).  Gains are named as in paper 001 (k, k1, k2, λ=lam),
-so tuning jobs can name them.
+so tuning jobs can name them; each is declared with its units and symbol (:func:`jaxobs.observers.gain`).
+Each class's ``closed_form`` is its paper's tuning rule (001 eqs 22, 29, 34).
 
 State layout (flat arrays, integrators in the order of 001 Table II):
 
@@ -23,9 +24,11 @@ import jax.numpy as jnp
 from .. import papers
 from .._discretize import AB3, AbstractRule, check_rule
 from .._math import safe_atan2, safe_norm2
-from .._validate import check_positive, check_sample_time
+from .._validate import as_float, check_positive, check_real, check_sample_time
 from .._validate import static_float as _static_float
 from ._cores import fll_rate, sogi2_vf, sogi_vf
+from ._gains import gain
+from ._rules import sogi_fll_lambda, wif_symmetric_optimum, wpf_lambda
 from .base import AbstractVectorFieldObserver
 
 __all__ = ["FLLOutput", "SOGIFLL", "SOGIFLLWPF", "SOGIFLLWIF"]
@@ -37,6 +40,10 @@ class FLLOutput(NamedTuple):
     amplitude: jax.Array  # V̂ = sqrt(v'² + qv'²)
     theta: jax.Array  # θ̂ = atan2(qv', v'), rad, in (−π, π]
     omega: jax.Array  # ω̂, rad/s
+
+
+def _lam():
+    return gain(units="rad2 s-2", role="fll", long_name="FLL gain", symbol="001: λ")
 
 
 def _fll_output(y, q, w):
@@ -60,8 +67,8 @@ class SOGIFLL(AbstractVectorFieldObserver):
         v_floor: floor of V̂ in the FLL normalization (input units, > 0).
     """
 
-    k: jax.Array
-    lam: jax.Array
+    k: jax.Array = gain(units="1", role="sogi", long_name="SOGI gain", symbol="001: k")
+    lam: jax.Array = _lam()
     omega_n: jax.Array
     ts: float = eqx.field(static=True)
     rule: AbstractRule = eqx.field(static=True)
@@ -74,6 +81,26 @@ class SOGIFLL(AbstractVectorFieldObserver):
         self.ts = check_sample_time("ts", ts, "SOGIFLL")
         self.rule = check_rule(AB3() if rule is None else rule, "SOGIFLL")
         self.v_floor = _static_float(check_positive("v_floor", v_floor, "SOGIFLL"), v_floor)
+
+    @classmethod
+    def closed_form(cls, k=papers.SOGI_FLL_K, omega_n=papers.FLL_OMEGA_N, zeta=papers.FLL_ZETA, **kw) -> SOGIFLL:
+        """The SOGI-FLL tuned by 001 eq (22): λ = k² ωn² / (8 ζ²) (Table I: k = 1/√2, λ = 12337).
+
+        Args:
+            k: SOGI gain (> 0; 001 chooses 1/√2).
+            omega_n: nominal frequency, rad/s (> 0).
+            zeta: damping ratio of the FLL's small-signal model (> 0).
+            **kw: the constructor's keywords (``ts``, ``rule``, ``v_floor``).
+
+        Returns:
+            The :class:`SOGIFLL`.
+
+        Raises:
+            ValueError: a value out of its range.
+        """
+        check_positive("k", k, "SOGIFLL.closed_form")
+        check_positive("zeta", zeta, "SOGIFLL.closed_form")
+        return cls(k=k, lam=sogi_fll_lambda(as_float(k), as_float(omega_n), zeta), omega_n=omega_n, **kw)
 
     def f(self, x, u):
         y, q, w = x[0], x[1], x[2]
@@ -105,9 +132,9 @@ class SOGIFLLWPF(AbstractVectorFieldObserver):
     001 eqs (24)–(25).  Tuning (eq 29): k1 = k2 = √2, λ = 2(ζ+1)ωn²/(2ζ+1)³.
     """
 
-    k1: jax.Array
-    k2: jax.Array
-    lam: jax.Array
+    k1: jax.Array = gain(units="1", role="prefilter", long_name="prefilter SOGI gain", symbol="001: k1")
+    k2: jax.Array = gain(units="1", role="sogi", long_name="SOGI gain of the SOGI-FLL", symbol="001: k2")
+    lam: jax.Array = _lam()
     omega_n: jax.Array
     ts: float = eqx.field(static=True)
     rule: AbstractRule = eqx.field(static=True)
@@ -121,6 +148,26 @@ class SOGIFLLWPF(AbstractVectorFieldObserver):
         self.ts = check_sample_time("ts", ts, "SOGIFLLWPF")
         self.rule = check_rule(AB3() if rule is None else rule, "SOGIFLLWPF")
         self.v_floor = _static_float(check_positive("v_floor", v_floor, "SOGIFLLWPF"), v_floor)
+
+    @classmethod
+    def closed_form(cls, omega_n=papers.FLL_OMEGA_N, zeta=papers.FLL_ZETA, **kw) -> SOGIFLLWPF:
+        """The SOGI-FLL-WPF tuned by 001 eq (29): k1 = k2 = √2 (eq 26), λ = 2 (ζ + 1) ωn² / (2ζ + 1)³
+        (Table I: λ = 23948).
+
+        Args:
+            omega_n: nominal frequency, rad/s (> 0).
+            zeta: damping ratio of the FLL's small-signal model (> 0).
+            **kw: the constructor's keywords (``ts``, ``rule``, ``v_floor``).
+
+        Returns:
+            The :class:`SOGIFLLWPF`.
+
+        Raises:
+            ValueError: a value out of its range.
+        """
+        check_positive("zeta", zeta, "SOGIFLLWPF.closed_form")
+        lam = wpf_lambda(as_float(omega_n), zeta)
+        return cls(k1=papers.WPF_K1, k2=papers.WPF_K2, lam=lam, omega_n=omega_n, **kw)
 
     def f(self, x, u):
         p, qp, y, q, w = x[0], x[1], x[2], x[3], x[4]
@@ -178,9 +225,10 @@ class SOGIFLLWIF(AbstractVectorFieldObserver):
     Tuning (eq 34, symmetric optimum): k1 = 2bωc/ωn, k2 = 2ωc/ωn, λ = 2ωc²/b.
     """
 
-    k1: jax.Array
-    k2: jax.Array
-    lam: jax.Array
+    # 001 eq (30): k1 sets the envelope's damping term, k2 the loop gain (000's K2 and K1)
+    k1: jax.Array = gain(units="1", role="sogi", long_name="in-loop filter damping gain", symbol="001: k1")
+    k2: jax.Array = gain(units="1", role="sogi", long_name="in-loop filter gain", symbol="001: k2")
+    lam: jax.Array = _lam()
     omega_n: jax.Array
     ts: float = eqx.field(static=True)
     rule: AbstractRule = eqx.field(static=True)
@@ -199,10 +247,31 @@ class SOGIFLLWIF(AbstractVectorFieldObserver):
             raise ValueError(f"SOGIFLLWIF.fll_error must be 'input' or 'residual', got {fll_error!r}")
         self.fll_error = fll_error
 
+    @classmethod
+    def closed_form(cls, omega_c=papers.WIF_OMEGA_C, b=papers.WIF_B, omega_n=papers.FLL_OMEGA_N, **kw) -> SOGIFLLWIF:
+        """The SOGI-FLL-WIF tuned by the symmetric optimum, 001 eq (34): k1 = 2bωc/ωn, k2 = 2ωc/ωn,
+        λ = 2ωc²/b; its phase margin is atan((b² − 1)/(2b)) (eq 39).
+
+        Args:
+            omega_c: crossover of the FLL loop, rad/s (> 0; 001: 2π·18.8).
+            b: the symmetric optimum's factor (> 1; 001: 1 + √2, ζ = 1/√2, PM = 45°).
+            omega_n: nominal frequency, rad/s (> 0).
+            **kw: the constructor's keywords (``ts``, ``rule``, ``v_floor``, ``fll_error``).
+
+        Returns:
+            The :class:`SOGIFLLWIF` (Table I: k1 = 1.815, k2 = 0.752, λ = 11559).
+
+        Raises:
+            ValueError: a value out of its range.
+        """
+        check_real("b", b, lower=1.0, owner="SOGIFLLWIF.closed_form")
+        check_positive("omega_c", omega_c, "SOGIFLLWIF.closed_form")
+        k1, k2, lam = wif_symmetric_optimum(as_float(b), as_float(omega_c), as_float(omega_n))
+        return cls(k1=k1, k2=k2, lam=lam, omega_n=omega_n, **kw)
+
     def f(self, x, u):
         za, zb, y, q, w = x[0], x[1], x[2], x[3], x[4]
-        # Golestan's (k1, k2) = Xu's (K2, K1).
-        dza, dzb, dy, dq = sogi2_vf(za, zb, y, q, u, w, K1=self.k2, K2=self.k1)
+        dza, dzb, dy, dq = sogi2_vf(za, zb, y, q, u, w, k_err=self.k2, k_damp=self.k1)
         if self.fll_error == "input":
             dw = fll_rate(za, q, y, self.lam / self.k2, self.v_floor)
         else:

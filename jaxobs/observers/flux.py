@@ -43,21 +43,32 @@ frequency normalization of Rodriguez et al., which keeps every root of the
 FLL's small-signal polynomial proportional to ω̂ and the damping independent
 of speed.  001's damping rule λ = k²ωn²/4 becomes lam = k²/4 (ζ = 1/√2 at every
 speed); the WIF's symmetric optimum λ = 2ωc²/b becomes lam = 2(ωc/ω̂)²/b.
+
+Names.  ``lam`` keeps the name of the FLL gain it normalizes (001's λ, which 000's Γ draws): it is the same
+gain of the same loop, divided by ω̂², so it keeps the name and carries its own unit ("1", against the
+FLLs' rad²/s²) in its field's metadata (:func:`jaxobs.observers.gain_fields`); a gain is (class, name).  The
+speed the FLL or PLL starts from is ``omega_init``: 002's ω0 names a LESO's bandwidth, a gain, while this is
+a bound field (``bind`` sets it per scenario), so it takes a name no gain has.  The constructors accept
+``omega0=`` for it, as job files and result.json files written with that key give it.
 """
 
 from __future__ import annotations
 
 import abc
+import math
 from typing import ClassVar, Literal, NamedTuple
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 
+from .. import papers
 from .._discretize import RK4, AbstractRule, check_rule
 from .._math import safe_atan2
 from .._validate import check_nonnegative, check_positive, check_sample_time
 from ._cores import pll_vf, quadrature_error, safe_sq_amplitude, sogi2_tustin_coefficients, sogi2_vf, sogi_vf
+from ._gains import gain
+from ._rules import pll_gains, second_order_soifo_lambda, soifo_lambda
 from .base import AbstractDriveObserver, DriveObserverState, replace_leaves
 
 __all__ = ["FluxOutput", "AbstractFluxObserver", "PureIntegratorFlux", "LPFFlux", "SOIFO", "SecondOrderSOIFO"]
@@ -83,11 +94,11 @@ class AbstractFluxObserver(AbstractDriveObserver):
 
     Rs: eqx.AbstractVar[jax.Array]
     L: eqx.AbstractVar[jax.Array]
-    omega0: eqx.AbstractVar[jax.Array]
+    omega_init: eqx.AbstractVar[jax.Array]
     ts: eqx.AbstractVar[float]
     rule: eqx.AbstractVar[AbstractRule]
 
-    bound_fields: ClassVar[tuple[str, ...]] = ("Rs", "L", "omega0")
+    bound_fields: ClassVar[tuple[str, ...]] = ("Rs", "L", "omega_init")
     _speed_index: ClassVar[int]  # the speed estimate's place in the state
 
     @abc.abstractmethod
@@ -97,8 +108,8 @@ class AbstractFluxObserver(AbstractDriveObserver):
     def bind(self, est_par, omega_e) -> AbstractFluxObserver:
         w = self.start_speed(omega_e)
         if est_par is None:
-            return replace_leaves(self, omega0=w)
-        return replace_leaves(self, Rs=est_par.Rs, L=est_par.Ld, omega0=w)
+            return replace_leaves(self, omega_init=w)
+        return replace_leaves(self, Rs=est_par.Rs, L=est_par.Ld, omega_init=w)
 
     def init(self, u0=None) -> DriveObserverState:
         return self._init_from(self.initial_state())
@@ -143,11 +154,33 @@ def _check_common(obj, Rs, L, ts, rule, name):
     obj.rule = check_rule(RK4() if rule is None else rule, name)
 
 
-def _check_pll(obj, kp_pll, ki_pll, omega0, psi_floor, name):
+def _omega_init(omega_init, omega0, name):
+    """The initial speed given as ``omega_init`` or as ``omega0`` (job files' and result.json's key)."""
+    if omega0 is None:
+        return omega_init
+    if omega_init is not None:
+        raise ValueError(f"{name}: give the initial speed once, as omega_init (omega0 is the same field)")
+    return omega0
+
+
+def _check_pll(obj, kp_pll, ki_pll, omega_init, psi_floor, name):
     obj.kp_pll = check_positive("kp_pll", kp_pll, name)
     obj.ki_pll = check_positive("ki_pll", ki_pll, name)
-    obj.omega0 = jnp.asarray(omega0, dtype=obj.kp_pll.dtype)
+    obj.omega_init = jnp.asarray(omega_init, dtype=obj.kp_pll.dtype)
     obj.psi_floor = float(psi_floor)
+
+
+def _kp():
+    return gain(units="s-1", role="pll", long_name="PLL proportional gain", symbol="k_p (ours: 2ζω_b)")
+
+
+def _ki():
+    return gain(units="s-2", role="pll", long_name="PLL integral gain", symbol="k_i (ours: ω_b²)")
+
+
+def _lam_normalized():
+    # lam·ω̂² is 001's λ (module doc, "Names"): dimensionless, where the FLLs' λ is in rad²/s²
+    return gain(units="1", role="fll", long_name="frequency-normalized FLL gain, λ/ω̂²", symbol="000: Γ, λ/ω̂²")
 
 
 class _PLLFluxBase(AbstractFluxObserver):
@@ -165,7 +198,7 @@ class _PLLFluxBase(AbstractFluxObserver):
 
     def initial_state(self):
         z = jnp.zeros_like(self.kp_pll)
-        return jnp.stack([z, z, z, self.omega0])
+        return jnp.stack([z, z, z, self.omega_init])
 
     def _pll_rates(self, x):
         err = quadrature_error(x[0], x[1], x[2], self.psi_floor)
@@ -177,16 +210,17 @@ class PureIntegratorFlux(_PLLFluxBase):
 
     Rs: jax.Array
     L: jax.Array
-    kp_pll: jax.Array
-    ki_pll: jax.Array
-    omega0: jax.Array  # initial PLL speed, rad/s
+    kp_pll: jax.Array = _kp()
+    ki_pll: jax.Array = _ki()
+    omega_init: jax.Array  # initial PLL speed, rad/s
     ts: float = eqx.field(static=True)
     rule: AbstractRule = eqx.field(static=True)
     psi_floor: float = eqx.field(static=True)
 
-    def __init__(self, Rs, L, kp_pll, ki_pll, omega0=0.0, *, ts=1e-4, rule=None, psi_floor=1e-4):
+    def __init__(self, Rs, L, kp_pll, ki_pll, omega_init=None, *, ts=1e-4, rule=None, psi_floor=1e-4, omega0=None):
+        omega_init = _omega_init(omega_init, omega0, "PureIntegratorFlux")
         _check_common(self, Rs, L, ts, rule, "PureIntegratorFlux")
-        _check_pll(self, kp_pll, ki_pll, omega0, psi_floor, "PureIntegratorFlux")
+        _check_pll(self, kp_pll, ki_pll, 0.0 if omega_init is None else omega_init, psi_floor, "PureIntegratorFlux")
 
     def f(self, x, e):
         return jnp.stack([e[0], e[1], *self._pll_rates(x)])
@@ -206,22 +240,66 @@ class LPFFlux(_PLLFluxBase):
 
     Rs: jax.Array
     L: jax.Array
-    omega_c: jax.Array
-    kp_pll: jax.Array
-    ki_pll: jax.Array
-    omega0: jax.Array
+    omega_c: jax.Array = gain(units="rad s-1", role="filter", long_name="low-pass cut-off", symbol="000: ωc")
+    kp_pll: jax.Array = _kp()
+    ki_pll: jax.Array = _ki()
+    omega_init: jax.Array  # initial PLL speed, rad/s
     ts: float = eqx.field(static=True)
     rule: AbstractRule = eqx.field(static=True)
     compensate: bool = eqx.field(static=True)
     psi_floor: float = eqx.field(static=True)
 
     def __init__(
-        self, Rs, L, omega_c, kp_pll, ki_pll, omega0=0.0, *, compensate=False, ts=1e-4, rule=None, psi_floor=1e-4
+        self,
+        Rs,
+        L,
+        omega_c,
+        kp_pll,
+        ki_pll,
+        omega_init=None,
+        *,
+        compensate=False,
+        ts=1e-4,
+        rule=None,
+        psi_floor=1e-4,
+        omega0=None,
     ):
+        omega_init = _omega_init(omega_init, omega0, "LPFFlux")
         _check_common(self, Rs, L, ts, rule, "LPFFlux")
         self.omega_c = check_positive("omega_c", omega_c, "LPFFlux")
-        _check_pll(self, kp_pll, ki_pll, omega0, psi_floor, "LPFFlux")
+        _check_pll(self, kp_pll, ki_pll, 0.0 if omega_init is None else omega_init, psi_floor, "LPFFlux")
         self.compensate = bool(compensate)
+
+    @classmethod
+    def closed_form(
+        cls,
+        omega_c=papers.LPF_OMEGA_C,
+        pll_hz=papers.FLUX_PLL_HZ,
+        Rs=papers.SPMSM_000["Rs"],
+        L=papers.SPMSM_000["Ld"],
+        omega_init=0.0,
+        **kw,
+    ) -> LPFFlux:
+        """000's LPF estimator, uncompensated as in 000 Fig. 5 (ωc = 100 rad/s), with its type-2 PLL placed at
+        ω_b = 2π·``pll_hz`` (k_p = 2ζω_b, k_i = ω_b², ζ = 1/√2; ASSUMED: 000 gives no PLL).
+
+        Args:
+            omega_c: the low-pass cut-off, rad/s (> 0).
+            pll_hz: the PLL's bandwidth, Hz (> 0).
+            Rs: assumed stator resistance, ohm (>= 0; ``bind`` sets it per scenario).
+            L: assumed inductance, H (> 0; ``bind`` sets it).
+            omega_init: the PLL's initial speed, rad/s (``bind`` sets it).
+            **kw: the constructor's keywords.
+
+        Returns:
+            The :class:`LPFFlux`.
+
+        Raises:
+            ValueError: a value out of its range.
+        """
+        check_positive("pll_hz", pll_hz, "LPFFlux.closed_form")
+        kp, ki = pll_gains(2 * math.pi * pll_hz)
+        return cls(Rs, L, omega_c, float(kp), float(ki), omega_init, **kw)
 
     def f(self, x, e):
         return jnp.stack([e[0] - self.omega_c * x[0], e[1] - self.omega_c * x[1], *self._pll_rates(x)])
@@ -278,27 +356,48 @@ class SOIFO(_FLLFluxBase):
 
     Rs: jax.Array
     L: jax.Array
-    k: jax.Array
-    lam: jax.Array
-    omega0: jax.Array  # initial FLL frequency, rad/s (> 0)
+    k: jax.Array = gain(units="1", role="sogi", long_name="SOGI gain", symbol="000: k")
+    lam: jax.Array = _lam_normalized()
+    omega_init: jax.Array  # initial FLL frequency, rad/s (> 0)
     ts: float = eqx.field(static=True)
     rule: AbstractRule = eqx.field(static=True)
     v_floor: float = eqx.field(static=True)
     omega_min: float = eqx.field(static=True)
 
-    def __init__(self, Rs, L, k, lam, omega0, *, ts=1e-4, rule=None, v_floor=1e-2, omega_min=1.0):
+    def __init__(self, Rs, L, k, lam, omega_init=None, *, ts=1e-4, rule=None, v_floor=1e-2, omega_min=1.0, omega0=None):
+        omega_init = _omega_init(omega_init, omega0, "SOIFO")
         _check_common(self, Rs, L, ts, rule, "SOIFO")
         self.k = check_positive("k", k, "SOIFO")
         self.lam = check_positive("lam", lam, "SOIFO")
-        self.omega0 = check_positive("omega0", omega0, "SOIFO")
+        self.omega_init = check_positive("omega_init", omega_init, "SOIFO")
         self.v_floor = float(v_floor)
         self.omega_min = float(omega_min)
+
+    @classmethod
+    def closed_form(cls, k=papers.SOIFO_K, Rs=0.0, L=1.0, omega_init=papers.FLL_OMEGA_N, **kw) -> SOIFO:
+        """The SOIFO at 000's k = 1.414 with the FLL damped by 001 eq (22) frequency-normalized: lam = k²/4
+        (ζ = 1/√2 at every speed, module doc).
+
+        Args:
+            k: SOGI gain (> 0).
+            Rs: assumed stator resistance, ohm (>= 0; ``bind`` sets it per scenario).
+            L: assumed inductance, H (> 0; ``bind`` sets it).
+            omega_init: the FLL's initial frequency, rad/s (> 0; ``bind`` sets it).
+            **kw: the constructor's keywords.
+
+        Returns:
+            The :class:`SOIFO`.
+
+        Raises:
+            ValueError: a value out of its range.
+        """
+        return cls(Rs, L, k, soifo_lambda(k), omega_init, **kw)
 
     _speed_index: ClassVar[int] = 4  # the FLL's ω̂ (a SOGI's centre frequency: > 0)
 
     def initial_state(self):
         z = jnp.zeros_like(self.k)
-        return jnp.stack([z, z, z, z, self.omega0])
+        return jnp.stack([z, z, z, z, self.omega_init])
 
     def f(self, x, e):
         ya, qa, yb, qb, w = x[0], x[1], x[2], x[3], x[4]
@@ -338,10 +437,10 @@ class SecondOrderSOIFO(_FLLFluxBase):
 
     Rs: jax.Array
     L: jax.Array
-    K1: jax.Array
-    K2: jax.Array
-    lam: jax.Array
-    omega0: jax.Array
+    K1: jax.Array = gain(units="1", role="sogi", long_name="second-order SOGI error gain", symbol="000: K1")
+    K2: jax.Array = gain(units="1", role="sogi", long_name="second-order SOGI damping gain", symbol="000: K2")
+    lam: jax.Array = _lam_normalized()
+    omega_init: jax.Array  # initial FLL frequency, rad/s (> 0)
     ts: float = eqx.field(static=True)
     rule: AbstractRule = eqx.field(static=True)
     discretization: Literal["rule", "paper"] = eqx.field(static=True)
@@ -349,13 +448,27 @@ class SecondOrderSOIFO(_FLLFluxBase):
     omega_min: float = eqx.field(static=True)
 
     def __init__(
-        self, Rs, L, K1, K2, lam, omega0, *, ts=1e-4, rule=None, discretization="rule", v_floor=1e-2, omega_min=1.0
+        self,
+        Rs,
+        L,
+        K1,
+        K2,
+        lam,
+        omega_init=None,
+        *,
+        ts=1e-4,
+        rule=None,
+        discretization="rule",
+        v_floor=1e-2,
+        omega_min=1.0,
+        omega0=None,
     ):
+        omega_init = _omega_init(omega_init, omega0, "SecondOrderSOIFO")
         _check_common(self, Rs, L, ts, rule, "SecondOrderSOIFO")
         self.K1 = check_positive("K1", K1, "SecondOrderSOIFO")
         self.K2 = check_positive("K2", K2, "SecondOrderSOIFO")
         self.lam = check_positive("lam", lam, "SecondOrderSOIFO")
-        self.omega0 = check_positive("omega0", omega0, "SecondOrderSOIFO")
+        self.omega_init = check_positive("omega_init", omega_init, "SecondOrderSOIFO")
         if discretization not in ("rule", "paper"):
             raise ValueError(f"SecondOrderSOIFO.discretization must be 'rule' or 'paper', got {discretization!r}")
         self.discretization = discretization
@@ -364,16 +477,45 @@ class SecondOrderSOIFO(_FLLFluxBase):
 
     _speed_index: ClassVar[int] = 8  # the FLL's ω̂
 
+    @classmethod
+    def closed_form(
+        cls,
+        K1=papers.SECOND_ORDER_SOIFO_K1,
+        K2=papers.SECOND_ORDER_SOIFO_K2,
+        Rs=0.0,
+        L=1.0,
+        omega_init=papers.FLL_OMEGA_N,
+        **kw,
+    ) -> SecondOrderSOIFO:
+        """The second-order SOIFO at 000's K1 = 1.56, K2 = 3.11 with the FLL of 001's symmetric optimum (eq 34)
+        frequency-normalized, in 000's names (b = K2/K1): lam = K1³/(2 K2).
+
+        Args:
+            K1: error gain (> 0).
+            K2: damping gain (> 0).
+            Rs: assumed stator resistance, ohm (>= 0; ``bind`` sets it per scenario).
+            L: assumed inductance, H (> 0; ``bind`` sets it).
+            omega_init: the FLL's initial frequency, rad/s (> 0; ``bind`` sets it).
+            **kw: the constructor's keywords (``discretization``, ...).
+
+        Returns:
+            The :class:`SecondOrderSOIFO`.
+
+        Raises:
+            ValueError: a value out of its range.
+        """
+        return cls(Rs, L, K1, K2, second_order_soifo_lambda(K1, K2), omega_init, **kw)
+
     def initial_state(self):
         z = jnp.zeros_like(self.K1)
         n = 8
-        return jnp.concatenate([jnp.zeros((n,), z.dtype), self.omega0[None]])
+        return jnp.concatenate([jnp.zeros((n,), z.dtype), self.omega_init[None]])
 
     # --- continuous form -----------------------------------------------------
     def f(self, x, e):
         w = x[8]
-        ax = sogi2_vf(x[0], x[1], x[2], x[3], e[0], w, self.K1, self.K2)
-        bx = sogi2_vf(x[4], x[5], x[6], x[7], e[1], w, self.K1, self.K2)
+        ax = sogi2_vf(x[0], x[1], x[2], x[3], e[0], w, k_err=self.K1, k_damp=self.K2)
+        bx = sogi2_vf(x[4], x[5], x[6], x[7], e[1], w, k_err=self.K1, k_damp=self.K2)
         num = x[0] * x[3] + x[4] * x[7]
         lam = self.lam * w * w  # frequency-normalized FLL gain (module doc)
         return jnp.stack([*ax, *bx, -(lam / self.K1) * num / _fll_norm(x[2], x[3], x[6], x[7], e, self.v_floor)])

@@ -56,6 +56,8 @@ from .._discretize import RK4, AbstractRule, Knots, check_rule
 from .._math import safe_atan2, wrap
 from .._validate import check_nonnegative, check_positive, check_sample_time
 from ._cores import pll_vf
+from ._gains import gain
+from ._rules import pll_gains
 from .base import AbstractDriveObserver, DriveObserverState, replace_leaves
 
 __all__ = ["LESOOutput", "AbstractLESO", "CLESO", "GILESO", "FALESO"]
@@ -174,12 +176,27 @@ def _common(obj, Rs, Lq, kp_pll, ki_pll, omega0_pll, ts, rule, e_floor, name):
     obj.e_floor = float(e_floor)
 
 
-# The PLL defaults: pole placement at ω_b = 2π·papers.LESO_PLL_HZ with ζ = papers.PLL_ZETA = 1/√2, the
-# same arithmetic as jaxobs.linear.pll_gains (not importable here: linear sits above the observers), so a
-# LESO's defaults are the tuning jobs' closed form exactly.  (They used ζ = 0.7071 until the papers'
-# constants were consolidated: k_p 1e-5 lower.)
-_W_PLL = 2 * math.pi * papers.LESO_PLL_HZ
-_DEFAULT_PLL = (2 * papers.PLL_ZETA * _W_PLL, _W_PLL**2)
+# The PLL defaults: pole placement at ω_b = 2π·papers.LESO_PLL_HZ with ζ = papers.PLL_ZETA = 1/√2, so a LESO's
+# defaults are its closed form exactly.
+_DEFAULT_PLL = pll_gains(2 * math.pi * papers.LESO_PLL_HZ)
+_RS, _LQ = papers.IPMSM_002["Rs"], papers.IPMSM_002["Lq"]
+
+
+def _kp():
+    return gain(units="s-1", role="pll", long_name="PLL proportional gain", symbol="k_p (ours: 2ζω_b)")
+
+
+def _ki():
+    return gain(units="s-2", role="pll", long_name="PLL integral gain", symbol="k_i (ours: ω_b²)")
+
+
+def _omega0():
+    return gain(units="rad s-1", role="leso", long_name="LESO bandwidth", symbol="002: ω0")
+
+
+def _pll_closed_form(pll_hz, owner):
+    check_positive("pll_hz", pll_hz, owner)
+    return tuple(float(g) for g in pll_gains(2 * math.pi * pll_hz))
 
 
 class CLESO(AbstractLESO):
@@ -187,9 +204,9 @@ class CLESO(AbstractLESO):
 
     Rs: jax.Array
     Lq: jax.Array
-    omega0: jax.Array  # LESO bandwidth, rad/s
-    kp_pll: jax.Array
-    ki_pll: jax.Array
+    omega0: jax.Array = _omega0()
+    kp_pll: jax.Array = _kp()
+    ki_pll: jax.Array = _ki()
     omega0_pll: jax.Array  # initial PLL speed, rad/s
     ts: float = eqx.field(static=True)
     rule: AbstractRule = eqx.field(static=True)
@@ -212,6 +229,30 @@ class CLESO(AbstractLESO):
         _common(self, Rs, Lq, kp_pll, ki_pll, omega0_pll, ts, rule, e_floor, "CLESO")
         self.omega0 = check_positive("omega0", omega0, "CLESO")
 
+    @classmethod
+    def closed_form(
+        cls, omega0=papers.LESO_OMEGA0, pll_hz=papers.LESO_PLL_HZ, Rs=_RS, Lq=_LQ, omega0_pll=0.0, **kw
+    ) -> CLESO:
+        """The C-LESO of 002 Table II (ω0 = 500π; l1 = 2ω0 − μ, l2 = ω0², eq 16) with its PLL placed at
+        ω_b = 2π·``pll_hz`` (k_p = 2ζω_b, k_i = ω_b², ζ = 1/√2).
+
+        Args:
+            omega0: LESO bandwidth, rad/s (> 0).
+            pll_hz: the PLL's bandwidth, Hz (> 0).
+            Rs: assumed stator resistance, ohm (>= 0; ``bind`` sets it per scenario).
+            Lq: assumed q-axis inductance, H (> 0; ``bind`` sets it).
+            omega0_pll: the PLL's initial speed, rad/s (``bind`` sets it).
+            **kw: the constructor's keywords.
+
+        Returns:
+            The :class:`CLESO`.
+
+        Raises:
+            ValueError: a value out of its range.
+        """
+        kp, ki = _pll_closed_form(pll_hz, "CLESO.closed_form")
+        return cls(Rs, Lq, omega0, kp, ki, omega0_pll, **kw)
+
     def leso(self, xl, u, i, w):
         mu, b0 = self.mu, 1.0 / self.Lq
         l1, l2 = 2 * self.omega0 - mu, self.omega0**2
@@ -227,12 +268,14 @@ class GILESO(AbstractLESO):
 
     Rs: jax.Array
     Lq: jax.Array
-    omega0: jax.Array
-    K_r: jax.Array  # GI gain (002 Table II: 2ω0²)
-    omega_c: jax.Array  # GI damping (002 Table II: π)
-    kp_pll: jax.Array
-    ki_pll: jax.Array
-    omega0_pll: jax.Array
+    omega0: jax.Array = _omega0()
+    K_r: jax.Array = gain(units="s-2", role="leso", long_name="generalized integrator gain", symbol="002: K_r")
+    omega_c: jax.Array = gain(
+        units="rad s-1", role="leso", long_name="generalized integrator damping", symbol="002: ωc"
+    )
+    kp_pll: jax.Array = _kp()
+    ki_pll: jax.Array = _ki()
+    omega0_pll: jax.Array  # initial PLL speed, rad/s
     ts: float = eqx.field(static=True)
     rule: AbstractRule = eqx.field(static=True)
     e_floor: float = eqx.field(static=True)
@@ -258,6 +301,40 @@ class GILESO(AbstractLESO):
         self.K_r = check_positive("K_r", 2 * float(omega0) ** 2 if K_r is None else K_r, "GILESO")
         self.omega_c = check_positive("omega_c", omega_c, "GILESO")
 
+    @classmethod
+    def closed_form(
+        cls,
+        omega0=papers.LESO_OMEGA0,
+        K_r=papers.GILESO_K_R,
+        omega_c=papers.GILESO_OMEGA_C,
+        pll_hz=papers.LESO_PLL_HZ,
+        Rs=_RS,
+        Lq=_LQ,
+        omega0_pll=0.0,
+        **kw,
+    ) -> GILESO:
+        """The GI-LESO of 002 Table II (ω0 = 500π, K_r = 2ω0², ωc = π; eqs 29–30) with its PLL placed at
+        ω_b = 2π·``pll_hz`` (k_p = 2ζω_b, k_i = ω_b², ζ = 1/√2).
+
+        Args:
+            omega0: LESO bandwidth, rad/s (> 0).
+            K_r: generalized integrator gain, s⁻² (> 0).
+            omega_c: generalized integrator damping, rad/s (> 0).
+            pll_hz: the PLL's bandwidth, Hz (> 0).
+            Rs: assumed stator resistance, ohm (>= 0; ``bind`` sets it per scenario).
+            Lq: assumed q-axis inductance, H (> 0; ``bind`` sets it).
+            omega0_pll: the PLL's initial speed, rad/s (``bind`` sets it).
+            **kw: the constructor's keywords.
+
+        Returns:
+            The :class:`GILESO`.
+
+        Raises:
+            ValueError: a value out of its range.
+        """
+        kp, ki = _pll_closed_form(pll_hz, "GILESO.closed_form")
+        return cls(Rs, Lq, omega0, K_r, omega_c, kp, ki, omega0_pll, **kw)
+
     def leso(self, xl, u, i, w):
         mu, b0 = self.mu, 1.0 / self.Lq
         l1 = 2 * self.omega0 - mu
@@ -273,13 +350,15 @@ class GILESO(AbstractLESO):
 class FALESO(AbstractLESO):
     """Frequency-adaptive complex-coefficient LESO (002 eqs 25–28)."""
 
+    # 002's names: ê/e = (k2 s + k1)/(s² + (k2 − jω̂e)s + k1), so k1 is in s⁻² and k2 in s⁻¹ (001's WIF k1,
+    # k2, dimensionless, are other gains: a gain is (class, name), jaxobs.observers.gain_fields)
     Rs: jax.Array
     Lq: jax.Array
-    k1: jax.Array
-    k2: jax.Array
-    kp_pll: jax.Array
-    ki_pll: jax.Array
-    omega0_pll: jax.Array
+    k1: jax.Array = gain(units="s-2", role="leso", long_name="FA-LESO integral gain", symbol="002: k1")
+    k2: jax.Array = gain(units="s-1", role="leso", long_name="FA-LESO proportional gain", symbol="002: k2")
+    kp_pll: jax.Array = _kp()
+    ki_pll: jax.Array = _ki()
+    omega0_pll: jax.Array  # initial PLL speed, rad/s
     ts: float = eqx.field(static=True)
     rule: AbstractRule = eqx.field(static=True)
     e_floor: float = eqx.field(static=True)
@@ -303,6 +382,31 @@ class FALESO(AbstractLESO):
         # 002 eq (24): stable iff k1 > 0 and k2 > 0 (generalized Routh test)
         self.k1 = check_positive("k1", k1, "FALESO")
         self.k2 = check_positive("k2", k2, "FALESO")
+
+    @classmethod
+    def closed_form(
+        cls, k1=papers.FALESO_K1, k2=papers.FALESO_K2, pll_hz=papers.LESO_PLL_HZ, Rs=_RS, Lq=_LQ, omega0_pll=0.0, **kw
+    ) -> FALESO:
+        """The FA-LESO of 002 Table II (k1 = 10π, k2 = 100π; stable iff k1, k2 > 0, eq 24) with its PLL placed
+        at ω_b = 2π·``pll_hz`` (k_p = 2ζω_b, k_i = ω_b², ζ = 1/√2).
+
+        Args:
+            k1: integral gain, s⁻² (> 0).
+            k2: proportional gain, s⁻¹ (> 0).
+            pll_hz: the PLL's bandwidth, Hz (> 0).
+            Rs: assumed stator resistance, ohm (>= 0; ``bind`` sets it per scenario).
+            Lq: assumed q-axis inductance, H (> 0; ``bind`` sets it).
+            omega0_pll: the PLL's initial speed, rad/s (``bind`` sets it).
+            **kw: the constructor's keywords.
+
+        Returns:
+            The :class:`FALESO`.
+
+        Raises:
+            ValueError: a value out of its range.
+        """
+        kp, ki = _pll_closed_form(pll_hz, "FALESO.closed_form")
+        return cls(Rs, Lq, k1, k2, kp, ki, omega0_pll, **kw)
 
     def leso(self, xl, u, i, w):
         mu, b0 = self.mu, 1.0 / self.Lq

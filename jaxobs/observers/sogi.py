@@ -18,6 +18,7 @@ from .. import papers
 from .._discretize import AbstractRule, Tustin, check_rule
 from .._validate import check_positive, check_sample_time
 from ._cores import sogi2_vf, sogi_vf
+from ._gains import gain
 from .base import AbstractVectorFieldObserver
 
 __all__ = ["QSGOutput", "SOGI", "SOGI2"]
@@ -31,7 +32,7 @@ class QSGOutput(NamedTuple):
 class SOGI(AbstractVectorFieldObserver):
     """SOGI-QSG at fixed ω' (000 eqs 12–13; 001 eqs 1–2): D = kω's/(s²+kω's+ω'²)."""
 
-    k: jax.Array
+    k: jax.Array = gain(units="1", role="sogi", long_name="SOGI gain", symbol="001: k")
     omega: jax.Array
     ts: float = eqx.field(static=True)
     rule: AbstractRule = eqx.field(static=True)
@@ -56,8 +57,8 @@ class SOGI(AbstractVectorFieldObserver):
 class SOGI2(AbstractVectorFieldObserver):
     """Second-order SOGI at fixed ω' (000 eqs 17–18), gains K1, K2 in paper 000's naming."""
 
-    K1: jax.Array
-    K2: jax.Array
+    K1: jax.Array = gain(units="1", role="sogi", long_name="second-order SOGI error gain", symbol="000: K1")
+    K2: jax.Array = gain(units="1", role="sogi", long_name="second-order SOGI damping gain", symbol="000: K2")
     omega: jax.Array
     ts: float = eqx.field(static=True)
     rule: AbstractRule = eqx.field(static=True)
@@ -70,7 +71,7 @@ class SOGI2(AbstractVectorFieldObserver):
         self.rule = check_rule(Tustin() if rule is None else rule, "SOGI2")
 
     def f(self, x, u):
-        return jnp.stack(sogi2_vf(x[0], x[1], x[2], x[3], u, self.omega, self.K1, self.K2))
+        return jnp.stack(sogi2_vf(x[0], x[1], x[2], x[3], u, self.omega, k_err=self.K1, k_damp=self.K2))
 
     def output(self, x):
         return QSGOutput(v_alpha=x[2], v_beta=x[3])

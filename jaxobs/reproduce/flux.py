@@ -91,13 +91,13 @@ def flux_bank(
     :data:`OBSERVER_NAMES` of the one that closes the loop (default the second-order SOIFO); ``lpf_omega_c``:
     the LPF's corner, rad/s (default Fig. 5's)."""
     kp, ki = linear.pll_gains(2 * math.pi * papers.FLUX_PLL_HZ)
-    # Rs = 0, L = 1 and omega0 = 1 rad/s are placeholders: bind() sets the assumed machine and the start speed
+    # Rs = 0, L = 1 and omega_init = 1 rad/s are placeholders: bind() sets the assumed machine and the start speed
     bank = ObserverBank(
         (
             PureIntegratorFlux(0.0, 1.0, kp, ki),
             LPFFlux(0.0, 1.0, lpf_omega_c, kp, ki),
-            SOIFO(0.0, 1.0, k, lam_soifo, omega0=1.0),
-            SecondOrderSOIFO(0.0, 1.0, K1_, K2_, lam_sosoifo, omega0=1.0),
+            SOIFO(0.0, 1.0, k, lam_soifo, omega_init=1.0),
+            SecondOrderSOIFO(0.0, 1.0, K1_, K2_, lam_sosoifo, omega_init=1.0),
         ),
         primary=primary,
     )

@@ -9,15 +9,13 @@ import re
 from pathlib import Path
 
 from jaxobs import AB3, RK4, Euler, Tustin
+from jaxobs.registry import REGISTRY, canonical_key
 
 from ..job import COMPONENTS
 from ..results import load_result
 
-DESIGNS = {  # closed forms, as `jaxobs closed-form` computes them (defaults: paper 001 Table I)
-    "sogi-fll": ("sogi_fll_closed_form", "001 eq (22): k = 1/√2, λ = k²ωn²/(8ζ²), ζ = 1/√2"),
-    "wpf": ("wpf_closed_form", "001 eq (29): k1 = k2 = √2, λ = 2(ζ+1)ωn²/(2ζ+1)³, ζ = 1/√2"),
-    "wif": ("wif_closed_form", "001 eq (34), symmetric optimum: b = 1+√2, ωc = 2π·18.8 rad/s"),
-}
+# the closed forms `export --design` names (the FLLs' aliases in jaxobs.registry): alias -> (class, its rule)
+DESIGNS = {a: (e.cls, e.closed_form_rule) for e in REGISTRY.values() if e.signal == "grid" for a in e.aliases}
 
 
 RULES = {"euler": Euler, "tustin": Tustin, "ab3": AB3, "rk4": RK4}
@@ -74,7 +72,7 @@ def observer_from_result(path, *, gains: str = "tuned", notes: list | None = Non
             "(export --gains closed_form instead)"
         )
     values = dict(info.defaults)
-    values.update(res.get("job", {}).get("component", {}))
+    values.update({canonical_key(info.ctor, k): v for k, v in res.get("job", {}).get("component", {}).items()})
     values.update(table)
     kw = {}
     name = info.ctor.__name__
@@ -91,8 +89,8 @@ def observer_from_result(path, *, gains: str = "tuned", notes: list | None = Non
         kw["rule"] = parse_rule(res["rule"], "result.json rule")
     else:
         notes.append(f"result.json has no 'rule': the {name} default {type(probe.rule).__name__} is used")
-    if info.bind is not None or res.get("loop") is not None:  # a drive job bound these per scenario
-        # LESOs: Rs, Lq and the PLL's initial speed; flux observers: Rs, L and the FLL's or PLL's omega0
+    if info.signal == "drive" or res.get("loop") is not None:  # a drive job bound these per scenario
+        # LESOs: Rs, Lq and the PLL's initial speed; flux observers: Rs, L and the FLL's or PLL's omega_init
         keys = type(probe).bound_fields
         bound = ", ".join(f"{k} = {float(getattr(probe, k)):g}" for k in keys)
         notes.append(f"the job sets {', '.join(keys)} per scenario; exported with {bound}")
@@ -103,12 +101,10 @@ def observer_from_result(path, *, gains: str = "tuned", notes: list | None = Non
 
 
 def observer_from_design(name: str, **kw):
-    """A closed-form design by name (``sogi-fll``, ``wpf``, ``wif``); ``kw`` go to its jaxobs.linear function."""
-    from jaxobs import linear
-
+    """A closed-form design by name (``sogi-fll``, ``wpf``, ``wif``): its class's ``closed_form(**kw)``."""
     if name not in DESIGNS:
         raise ValueError(f"design must be one of {', '.join(DESIGNS)}, got {name!r}")
-    return getattr(linear, DESIGNS[name][0])(**kw)
+    return DESIGNS[name][0].closed_form(**kw)
 
 
 def rebuild(obs, **kw):

@@ -214,7 +214,7 @@ def run_job(job: Job, out: Path, resume: bool = False, quiet: bool = False) -> d
     if job.drive is not None:
         result["machine"] = job.drive.machine
         result["values_note"] = (
-            "Rs, Lq (LESOs) or Rs, L (flux observers) and the PLL's or FLL's initial speed (omega0_pll, omega0) "
+            "Rs, Lq (LESOs) or Rs, L (flux observers) and the PLL's or FLL's initial speed (omega0_pll, omega_init) "
             f"are set per scenario from its estimated machine ({BENCH_MACHINES[job.drive.machine]})"
         )
         # the envelope it was tuned for; where the designs hold is `jaxobs envelope RESULT.json`

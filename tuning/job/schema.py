@@ -8,6 +8,7 @@ from pathlib import Path
 
 from jaxobs.drive_study import DRIVE_STUDY_AXES
 from jaxobs.provenance import sha256
+from jaxobs.registry import canonical_key
 
 from .. import strategies
 from ..objective import DRIVE_METRICS, METRICS, STABILITY_MARGIN, Term
@@ -23,7 +24,7 @@ from .verify import parse_envelope
 # the physical range of every scenario axis (closed intervals unless noted), checked at --check time;
 # freq_step is checked against the component's nominal frequency, speed_hz against the sample rate.  (An
 # "omega0_error" EMF axis was accepted and ignored: removed.  The flux observers start their FLL at
-# omega0 = 2π·50 Hz whatever speed_hz is, so speed_hz already sets the initial frequency error.)
+# omega_init = 2π·50 Hz whatever speed_hz is, so speed_hz already sets the initial frequency error.)
 # The largest frequency step, as a fraction of the nominal frequency: a "50 Hz" grid at 25 Hz or 75 Hz is
 # another grid (tune for that nominal), and an FLL's normalized gains are set at its ω_n.  Grid codes ask
 # far less (EN 50160: ±1 %; ride-through 47–52 Hz); a study may still sweep well beyond them.  Before
@@ -185,9 +186,10 @@ def parse_job(raw: dict, base: Path | None = None) -> Job:
     values = dict(info.defaults)
     comp_t = get_field(raw, "component", "component", dict, {})
     for k in comp_t:
-        if k not in info.defaults:
+        key = canonical_key(info.ctor, k)  # a flux observer's omega_init may be written omega0
+        if key not in info.defaults:
             raise JobError(f"component.{k}", f"unknown for {comp}; allowed: {', '.join(info.defaults)}")
-        values[k] = get_field(comp_t, k, f"component.{k}", float)
+        values[key] = get_field(comp_t, k, f"component.{k}", float)
     try:
         ts = float(info.ctor(**values).ts)
     except (ValueError, ArithmeticError, TypeError) as e:

@@ -1,0 +1,101 @@
+"""Gains as fields with metadata: :func:`gain` declares one, :func:`gain_fields` lists a class's.
+
+A gain is an array field of an observer that a tuner may change.  Its metadata travels with the field, so a
+study's NetCDF variable, a tuning job's bounds and the C export's comments all read one record
+(:class:`GainInfo`):
+
+- ``units``: CF/UDUNITS, e.g. ``"1"``, ``"rad s-1"``, ``"rad2 s-2"``;
+- ``role``: the part of the observer the gain belongs to (``"sogi"``, ``"prefilter"``, ``"fll"``, ``"pll"``,
+  ``"leso"``, ``"filter"``);
+- ``bounds``: the open interval the constructor accepts, (lower, upper);
+- ``long_name``: what it is, in words;
+- ``symbol``: the paper's symbol, with the paper ("001: λ").
+
+Names follow the papers (001's k, k1, k2, λ; 000's K1, K2; 002's ω0, k1, k2, K_r, ωc), so one name may denote
+different gains in two families (001's WIF k1 and 002's FA-LESO k1): a gain is (class, name), and its
+:class:`GainInfo` says which it is.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from typing import NamedTuple
+
+import equinox as eqx
+
+__all__ = ["GainInfo", "gain", "gain_fields", "gain_table"]
+
+_KEY = "jaxobs_gain"
+
+
+class GainInfo(NamedTuple):
+    """A gain's metadata (module doc)."""
+
+    name: str
+    units: str
+    role: str
+    bounds: tuple[float, float]
+    long_name: str
+    symbol: str
+
+
+def gain(*, units: str, role: str, long_name: str, symbol: str, bounds=(0.0, math.inf), **kwargs):
+    """An observer field that is a gain: ``eqx.field`` with its :class:`GainInfo` in the field's metadata.
+
+    Args:
+        units: CF/UDUNITS units (``"1"`` when dimensionless).
+        role: the part of the observer the gain belongs to.
+        long_name: what the gain is, in words.
+        symbol: the paper's symbol and the paper, e.g. ``"001: λ"``.
+        bounds: the open interval (lower, upper) of valid values.
+        **kwargs: passed to :func:`equinox.field`.
+
+    Returns:
+        A dataclass field for the observer's class body.
+    """
+    meta = {_KEY: dict(units=units, role=role, bounds=tuple(bounds), long_name=long_name, symbol=symbol)}
+    return eqx.field(metadata={**kwargs.pop("metadata", {}), **meta}, **kwargs)
+
+
+def gain_fields(cls) -> dict[str, GainInfo]:
+    """The gains of an observer class (or instance), in field order, each with its :class:`GainInfo`.
+
+    Args:
+        cls: an observer class or an instance of one.
+
+    Returns:
+        name -> :class:`GainInfo` for every field declared with :func:`gain`.
+    """
+    cls = cls if isinstance(cls, type) else type(cls)
+    if not dataclasses.is_dataclass(cls):
+        return {}
+    return {f.name: GainInfo(name=f.name, **f.metadata[_KEY]) for f in dataclasses.fields(cls) if _KEY in f.metadata}
+
+
+def gain_table(designs: dict) -> dict[str, GainInfo]:
+    """The gains of several designs (name -> observer), each name once, in the order they first appear.
+
+    A study writes one variable per gain name, with that gain's units; every design that has a gain of that
+    name must give it the same units.
+
+    Args:
+        designs: design name -> observer.
+
+    Returns:
+        gain name -> the :class:`GainInfo` of its first design.
+
+    Raises:
+        ValueError: two designs' gains of one name with different units.
+    """
+    table, owner = {}, {}
+    for dname, obs in designs.items():
+        for g, info in gain_fields(obs).items():
+            if g not in table:
+                table[g], owner[g] = info, dname
+            elif table[g].units != info.units:
+                raise ValueError(
+                    f"designs: gain {g} is in {table[g].units!r} in design {owner[g]!r} and in {info.units!r} in "
+                    f"{dname!r} ({type(obs).__name__}); a study's designs must give one gain name one unit"
+                )
+    return table

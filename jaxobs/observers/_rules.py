@@ -1,0 +1,60 @@
+"""The papers' closed-form tuning rules as plain arithmetic: what each observer's ``closed_form`` evaluates.
+
+They sit beside the observers (below :mod:`jaxobs.linear`, which re-exports them) so that an observer class owns
+its closed form without importing the linear analysis above it.
+"""
+
+from __future__ import annotations
+
+import jax.numpy as jnp
+
+from .. import papers
+
+__all__ = [
+    "sogi_fll_lambda",
+    "wpf_lambda",
+    "wif_symmetric_optimum",
+    "soifo_lambda",
+    "second_order_soifo_lambda",
+    "symmetric_optimum_pm",
+    "pll_gains",
+]
+
+
+def sogi_fll_lambda(k, omega_n, zeta=papers.FLL_ZETA):
+    """001 eq (22): λ = k² ωn² / (8 ζ²)  (= k² ωn² / 4 at ζ = 1/√2)."""
+    return k**2 * omega_n**2 / (8 * zeta**2)
+
+
+def wpf_lambda(omega_n, zeta=papers.FLL_ZETA):
+    """001 eq (29), with k1 = k2 = √2: λ = 2 (ζ + 1) ωn² / (2ζ + 1)³."""
+    return 2 * (zeta + 1) * omega_n**2 / (2 * zeta + 1) ** 3
+
+
+def wif_symmetric_optimum(b, omega_c, omega_n):
+    """001 eq (34): k1 = 2 b ωc / ωn, k2 = 2 ωc / ωn, λ = 2 ωc² / b."""
+    return 2 * b * omega_c / omega_n, 2 * omega_c / omega_n, 2 * omega_c**2 / b
+
+
+def soifo_lambda(k):
+    """The SOIFO's FLL gain ``lam`` (dimensionless: 000's FLL is frequency-normalized, λ(ω̂) = lam·ω̂²,
+    :mod:`jaxobs.observers.flux`): 001 eq (22) at ζ = 1/√2 with ωn → 1, lam = k²/4, the same damping at
+    every speed."""
+    return k**2 / 4
+
+
+def second_order_soifo_lambda(K1, K2):
+    """The second-order SOIFO's FLL gain ``lam`` (dimensionless, as :func:`soifo_lambda`): 001's symmetric
+    optimum (eq 34) frequency-normalized, in 000's names (the WIF's k1 = K2, k2 = K1) with b = K2/K1:
+    lam = K1³/(2 K2)."""
+    return K1**3 / (2 * K2)
+
+
+def pll_gains(bandwidth, zeta=papers.PLL_ZETA):
+    """Type-2 PLL on a normalized error: k_p = 2ζω_b, k_i = ω_b² (θ̂/θ = (k_p s + k_i)/(s² + k_p s + k_i))."""
+    return 2 * zeta * bandwidth, bandwidth**2
+
+
+def symmetric_optimum_pm(b):
+    """001 eq (39): phase margin of the symmetric optimum, rad."""
+    return jnp.arctan((b**2 - 1) / (2 * b))
