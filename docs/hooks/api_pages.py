@@ -53,12 +53,11 @@ def component_registry() -> dict:
 
 
 def gain_unit(info, gain: str) -> str:
-    """A gain's unit (UDUNITS): the FLL studies' table for grid components, the drive studies' for the others."""
-    if info.signal == "grid":
-        from jaxobs.study import GAIN_UNITS
-    else:
-        from jaxobs.drive_study import DRIVE_GAIN_UNITS as GAIN_UNITS
-    return GAIN_UNITS.get(gain, "")
+    """A gain's unit (UDUNITS), from the observer class's own field metadata (jaxobs.observers.gain_fields)."""
+    from jaxobs.observers import gain_fields
+
+    g = gain_fields(info.ctor).get(gain)
+    return "" if g is None else g.units
 
 
 def components_markdown() -> str:
