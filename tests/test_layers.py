@@ -81,14 +81,16 @@ LAYERS = [
     (
         "jaxobs.study",
         "jaxobs.drive_study",
-        "jaxobs.drive.stability",
         "jaxobs.demo",
         "jaxobs.reproduce.flux",
         "jaxobs.reproduce.leso",
         "jaxobs.plot",
     ),
-    # the envelope map: the stability verdict and the long runs of a drive study, over the speed x load plane
-    ("jaxobs.drive.envelope",),
+    # analyses above the studies they run: the package (no imports), the closed loop's stability verdict, then
+    # the envelope map (the stability verdict and the long runs of a drive study, over the speed x load plane)
+    ("jaxobs.analysis",),
+    ("jaxobs.analysis.stability",),
+    ("jaxobs.analysis.envelope",),
     ("jaxobs.reproduce.leso_dual", "jaxobs.reproduce.figures"),
     ("jaxobs.reproduce",),
     # tuning: it changes gains (and exports the tuned observer)
@@ -337,3 +339,17 @@ def test_the_private_import_check_sees_one(tmp_path, monkeypatch):
         "the private module jaxobs._validate",
         "the private module jaxobs._math",
     ], found
+
+
+def test_the_drive_imports_nothing_above_it():
+    """``jaxobs/drive/`` holds the drive only: its modules import the drive's parts and what lies below the
+    package ``jaxobs.drive`` (signals, observers, the rules), never a study, the loop runner or an analysis."""
+    top = RANK["jaxobs.drive"]
+    bad = [
+        f"{name}:{line} imports {target}"
+        for name in MODULES
+        if name == "jaxobs.drive" or name.startswith("jaxobs.drive.")
+        for target, line, _ in _imports(name)
+        if target in RANK and RANK[target] > top
+    ]
+    assert not bad, "\n".join(bad)

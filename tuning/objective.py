@@ -41,8 +41,8 @@ import jax.numpy as jnp
 
 from jaxobs import OnSignal, SaveAll, kept_jit, simulate
 from jaxobs import metrics as M
+from jaxobs.analysis.stability import lyapunov
 from jaxobs.drive import ClosedLoop
-from jaxobs.drive.stability import lyapunov
 from jaxobs.runner import run_scenarios
 from jaxobs.scenarios import Given
 from jaxobs.sharding import batch_mesh
@@ -184,7 +184,7 @@ METRICS: dict[str, Callable] = {
 }
 
 # The stability margin as a term (issue 26): not a function of one simulation but of the closed loop itself,
-# jaxobs.drive.stability.lyapunov's largest non-neutral exponent (1/s) at the scenario (from its steady
+# jaxobs.analysis.stability.lyapunov's largest non-neutral exponent (1/s) at the scenario (from its steady
 # start; an event at t_event falls inside the settle), differentiable with respect to the gains.  The term's
 # value is that exponent, minus the margin, so minimizing it raises the margin; give it a small weight
 # (rad against 1/s).  Short runs (compile time and cost: the step's jvp in n_dirs directions): enough to

@@ -7,10 +7,10 @@
 At every operating point (speed × load, optionally × one mismatch axis) and for every design (an observer that
 closes the loop sensorless) it measures two things, each batched over the points in one ``jit(vmap)``:
 
-- **the stability margin** of the simulated, sampled loop (:func:`jaxobs.drive.stability.floquet`: the
+- **the stability margin** of the simulated, sampled loop (:func:`jaxobs.analysis.stability.floquet`: the
   largest non-neutral Floquet multiplier of ``ClosedLoop.step`` over whole electrical periods of its own
   orbit, as a decay rate; or, with ``stability={"method": "lyapunov"}``, the largest non-neutral Lyapunov
-  exponent fitted over a window, :func:`jaxobs.drive.stability.lyapunov`);
+  exponent fitted over a window, :func:`jaxobs.analysis.stability.lyapunov`);
 - **a long simulation** (``horizon`` s, 2 by default) through the study runner
   (:func:`jaxobs.runner.run_scenarios`), started steady and perturbed by a speed-reference step of
   ``perturb`` (relative) at ``t_perturb`` s, so that an unstable point shows its growth within the horizon.
@@ -40,6 +40,7 @@ import numpy as np
 
 from .. import AbstractSystem, SaveFinal, kept_jit
 from .. import metrics as M
+from ..drive import SETTLE_PERIODS, ClosedLoop, Drive, PMSMParams, drive_speed_limit_rpm
 from ..drive_study import (
     CF_UNITS,
     DRIVE_STUDY_AXES,
@@ -52,8 +53,6 @@ from ..provenance import provenance
 from ..runner import run_scenarios
 from ..scenarios import Grid
 from ..sharding import batch_mesh
-from . import ClosedLoop, Drive, PMSMParams, drive_speed_limit_rpm
-from .loop import SETTLE_PERIODS
 from .stability import Stability, floquet, lyapunov
 
 __all__ = [
@@ -269,8 +268,8 @@ def envelope(
     ``bound_deg`` (deg electrical): the late peak position error a holding point may have; ``speed_tol``
     (relative): the late peak speed deviation a synchronous point may have.  ``stability``: ``method``
     ("floquet", the default, or "lyapunov") and that function's keyword arguments
-    (:func:`~jaxobs.drive.stability.floquet`: settle, window, tol, n_report;
-    :func:`~jaxobs.drive.stability.lyapunov`: settle, warmup, window, n_dirs, tol).  ``progress`` as in
+    (:func:`~jaxobs.analysis.stability.floquet`: settle, window, tol, n_report;
+    :func:`~jaxobs.analysis.stability.lyapunov`: settle, warmup, window, n_dirs, tol).  ``progress`` as in
     :func:`jaxobs.runner.run_scenarios`.  ``trace_key``: a string naming every argument here (the command
     line: its source file's digest and options): the long runs' and the verdicts' traced programs are kept
     across processes (:func:`jaxobs.kept_jit`).  Returns an ``xarray.Dataset`` with dims ``("design", "speed_rpm",
@@ -330,7 +329,7 @@ def envelope(
     # its bandwidth α is |p ω*|/N at the lowest speed, 1.05 rad/s at 20 r/min on 000's SPMSM, and its slowest
     # mode there a weakly damped pair −0.60 ± 2.67j 1/s (linear_speed_loop; period 2.5/α at N = 6).  A window
     # whose thirds are shorter than that period sees the pair's wobble, not its decay (the resolution,
-    # jaxobs.drive.stability).  Measured with 000's second-order SOIFO at 20 r/min, no load: over 3 s (π/α)
+    # jaxobs.analysis.stability).  Measured with 000's second-order SOIFO at 20 r/min, no load: over 3 s (π/α)
     # −0.29 ± 1.8 1/s (marginal), over 7.6 s (8/α) −0.58 ± 0.57, over 12 s −0.600 ± 0.13 (the linear model:
     # −0.601).  So the window is at least 12/α and the warm-up 1/α (11.5 s and 1 s there; 0.38 s and 0.03 s
     # for the bench's fixed 5 Hz loop, below the defaults: no change).
@@ -449,7 +448,7 @@ def envelope(
     for f in ("Rs", "Ld", "Lq", "psi_f", "p", "J", "T_rated", "n_rated"):
         ds.attrs[f"machine_{f}"] = float(getattr(machine, f))
     ds.attrs.update(drive_ts=float(drive.ts), drive_settle=float(drive.settle))
-    ds.attrs.update(provenance("jaxobs.drive.envelope.envelope"))
+    ds.attrs.update(provenance("jaxobs.analysis.envelope.envelope"))
     return ds
 
 
