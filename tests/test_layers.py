@@ -38,6 +38,7 @@ LAYERS = [
         "jaxobs._cache",
         "jaxobs.drive.component",
         "jaxobs.chunkstore",
+        "jaxobs.quantities",
     ),
     # integration rules (and check_rule)
     ("jaxobs._discretize",),
@@ -72,20 +73,21 @@ LAYERS = [
     ("jaxobs.linear._models", "jaxobs.linear._fll"),
     ("jaxobs.linear",),
     ("jaxobs",),
-    # the one study runner (samplers in jaxobs.scenarios)
-    ("jaxobs.runner",),
+    # the one study runner (samplers in jaxobs.scenarios), and the scenario families (their axes, batches, systems)
+    ("jaxobs.runner", "jaxobs.families"),
     # the figures' helpers and the Bode figures (jaxobs.plot re-exports them)
     ("jaxobs._figure", "jaxobs.reproduce.compare", "jaxobs.reproduce._run"),
     ("jaxobs._plot_bode", "jaxobs._plot_paper"),
     # the library's own applications: studies, the demo, the papers' reproductions, figures, benchmarks
     (
         "jaxobs.study",
-        "jaxobs.drive_study",
         "jaxobs.demo",
         "jaxobs.reproduce.flux",
         "jaxobs.reproduce.leso",
         "jaxobs.plot",
     ),
+    # the drive study: a preset of jaxobs.study.study
+    ("jaxobs.drive_study",),
     # analyses above the studies they run: the package (no imports), the closed loop's stability verdict, then
     # the envelope map (the stability verdict and the long runs of a drive study, over the speed x load plane)
     ("jaxobs.analysis",),

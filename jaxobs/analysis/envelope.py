@@ -41,14 +41,8 @@ import numpy as np
 from .. import AbstractSystem, SaveFinal, kept_jit
 from .. import metrics as M
 from ..drive import SETTLE_PERIODS, ClosedLoop, Drive, PMSMParams, drive_speed_limit_rpm
-from ..drive_study import (
-    CF_UNITS,
-    DRIVE_STUDY_AXES,
-    DRIVE_STUDY_AXIS_NAMES,
-    bind_observer,
-    drive_scenarios,
-    gain_variables,
-)
+from ..drive_study import gain_variables
+from ..families import DRIVE_STUDY_AXES, DriveScenarios
 from ..provenance import provenance
 from ..runner import run_scenarios
 from ..scenarios import Grid
@@ -167,13 +161,13 @@ class _Watched(AbstractSystem):
 class _LongRun(NamedTuple):
     """The long run's factory and metrics (one object: the runner's compilation is shared across calls)."""
 
-    drive: Drive
+    family: DriveScenarios
     k_early: int
     k_late: int
     speed_tol: float
 
     def system(self, obs, sc):
-        return _Watched(ClosedLoop(self.drive, bind_observer(obs, sc), sc), self.k_early, self.k_late)
+        return _Watched(self.family.system(obs, sc), self.k_early, self.k_late)
 
     def metrics(self, sol, _sc, _aux):
         w = sol.final_state[1]
@@ -206,7 +200,8 @@ def _stability_fields(drive, obs, scs, method: str, kw: tuple):
     """The stability verdict (:func:`floquet` or :func:`lyapunov`) at every scenario of ``scs``, one program per
     observer class (gains are traced); its fields as a plain tuple, which a kept program can return."""
     fn = floquet if method == "floquet" else lyapunov
-    return tuple(jax.vmap(lambda sc: fn(ClosedLoop(drive, bind_observer(obs, sc), sc), **dict(kw)))(scs))
+    family = DriveScenarios(None, drive)  # the system alone: its machine is the scenarios'
+    return tuple(jax.vmap(lambda sc: fn(family.system(obs, sc), **dict(kw)))(scs))
 
 
 _stability_jit = eqx.filter_jit(_stability_fields)
@@ -285,7 +280,7 @@ def envelope(
     # the lowest speed whose steady start (Drive.settled_for) fits the 60 s settle limit: SETTLE_PERIODS / p r/min
     n_min = max(1.0, SETTLE_PERIODS / machine.p)
     speeds = _axis("speeds_rpm", default_speeds(machine) if speeds_rpm is None else speeds_rpm, n_min, n_max, "r/min")
-    lo_l, hi_l = DRIVE_STUDY_AXES["load_nm"][1]
+    lo_l, hi_l = DRIVE_STUDY_AXES["load_nm"].range
     loads = _axis("loads_nm", default_loads(machine) if loads_nm is None else loads_nm, lo_l, hi_l, "N·m")
     if not (math.isfinite(horizon) and 0.5 <= horizon <= 20.0):
         raise ValueError(f"envelope: horizon must be in [0.5, 20] s, got {horizon!r}")
@@ -302,7 +297,7 @@ def envelope(
     if mismatch is not None:
         if not (isinstance(mismatch, tuple) and len(mismatch) == 2 and mismatch[0] in MISMATCH_AXES):
             raise ValueError(f"envelope: mismatch must be (axis, values) with axis one of {', '.join(MISMATCH_AXES)}")
-        m_lo, m_hi = DRIVE_STUDY_AXES[mismatch[0]][1]
+        m_lo, m_hi = DRIVE_STUDY_AXES[mismatch[0]].range
         axes[mismatch[0]] = _axis(f"mismatch {mismatch[0]}", mismatch[1], m_lo, m_hi, "(relative)")
     stability = dict(stability or {})
     method = stability.pop("method", "floquet")
@@ -348,12 +343,13 @@ def envelope(
     names, points = sampler.names, sampler.points()
 
     # the long runs: each point's speed reference steps by perturb × its speed at t_perturb
+    family = DriveScenarios(machine, drive, t_event=t_perturb, seed=seed)
+
     def build(nm, pts):
-        combos = [(*p, perturb * p[0]) for p in pts]
-        return drive_scenarios(machine, (*nm, "speed_step_rpm"), combos, seed=seed, t_event=t_perturb)
+        return family.build((*nm, "speed_step_rpm"), [(*p, perturb * p[0]) for p in pts])
 
     ts = drive.ts
-    long = _LongRun(drive, int(round((t_perturb + 0.05) / ts)), int(round(steady_from / ts)), float(speed_tol))
+    long = _LongRun(family, int(round((t_perturb + 0.05) / ts)), int(round(steady_from / ts)), float(speed_tol))
     run = run_scenarios(
         designs,
         sampler,
@@ -369,7 +365,7 @@ def envelope(
         trace_key=None if trace_key is None else f"envelope|{trace_key}",
     )
     # the stability margins: constant profiles (no step), one jit(vmap) per observer class
-    scs = drive_scenarios(machine, names, points, seed=seed)
+    scs = DriveScenarios(machine, drive, seed=seed).build(names, points)
     kwt = tuple(sorted(kw.items()))
     # one batch per speed (every load and mismatch at it, the same shape: one program), so that a batch runs
     # as long as its own points' windows (floquet's while_loop), not the lowest speed's
@@ -414,19 +410,11 @@ def envelope(
     dims = ("design", "speed_rpm", "load", *names[2:])
     coords = {
         "design": ("design", dnames, {"long_name": "observer design (closing the loop sensorless)"}),
-        "speed_rpm": ("speed_rpm", speeds, {"units": "min-1", "long_name": DRIVE_STUDY_AXIS_NAMES["speed_rpm"]}),
-        "load": ("load", loads, {"units": "N m", "long_name": DRIVE_STUDY_AXIS_NAMES["load_nm"]}),
+        "speed_rpm": ("speed_rpm", speeds, DRIVE_STUDY_AXES["speed_rpm"].attrs),
+        "load": ("load", loads, DRIVE_STUDY_AXES["load_nm"].attrs),
     }
     if mismatch is not None:
-        ax = mismatch[0]
-        coords[ax] = (
-            ax,
-            axes[ax],
-            {
-                "units": CF_UNITS.get(DRIVE_STUDY_AXES[ax][0], DRIVE_STUDY_AXES[ax][0]),
-                "long_name": DRIVE_STUDY_AXIS_NAMES[ax],
-            },
-        )
+        coords[mismatch[0]] = (mismatch[0], axes[mismatch[0]], DRIVE_STUDY_AXES[mismatch[0]].attrs)
     data = {}
     for k, (unit, long_name) in ENVELOPE_VARIABLES.items():
         v = res[k]
@@ -474,7 +462,7 @@ def _point(base, par: PMSMParams, x):
 def _exponent_and_grad(drive, obs, base, par, xs, kw: tuple):
     def expo(x):
         sc = _point(base, par, x)
-        return lyapunov(ClosedLoop(drive, bind_observer(obs, sc), sc), **dict(kw)).exponent
+        return lyapunov(DriveScenarios(par, drive).system(obs, sc), **dict(kw)).exponent
 
     return jax.vmap(jax.value_and_grad(expo))(xs)
 
@@ -513,7 +501,7 @@ def worst_case(
     if not (isinstance(starts, int) and starts >= 1 and isinstance(steps, int) and steps >= 0):
         raise ValueError("worst_case: starts must be an integer >= 1 and steps >= 0")
     kw = tuple(sorted({"settle": 0.1, "warmup": 0.05, "window": 0.2, "n_dirs": 2, **(stability or {})}.items()))
-    base = jax.tree.map(lambda v: v[0], drive_scenarios(machine, ["speed_rpm"], [(float(lo[0]),)]))
+    base = jax.tree.map(lambda v: v[0], DriveScenarios(machine, drive).build(["speed_rpm"], [(float(lo[0]),)]))
     # Latin-hypercube starts: each axis's range cut into ``starts`` strata, one start in each (a random pairing)
     rng = np.random.default_rng(seed)
     u = (np.stack([rng.permutation(starts) for _ in WORST_AXES], axis=1) + rng.uniform(size=(starts, 3))) / starts
