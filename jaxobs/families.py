@@ -121,6 +121,12 @@ class AbstractScenarios(eqx.Module):
         """The system ``design`` runs on one ``scenario`` (a :class:`jaxobs.AbstractSystem`)."""
 
     @classmethod
+    def of(cls, *, t_event: float = 0.0, seed: int = 0, freq: float = 50.0, machine=None, drive=None):
+        """The family with these options, each family taking the ones it has: ``t_event`` (s), ``seed`` (the
+        noise keys), ``freq`` (Hz, a grid's nominal frequency), ``machine`` and ``drive`` (the drive's)."""
+        return cls()
+
+    @classmethod
     def limits(cls, freq_n: float, ts: float) -> dict:
         """Axes whose allowed range depends on the design: name -> (low, high), inside the axis's own range.
         ``freq_n``: the design's nominal frequency (Hz), ``ts``: its sample time (s)."""
@@ -156,6 +162,13 @@ class GridSignals(AbstractScenarios):
     axes: ClassVar[dict] = GRID_SIGNAL_AXES
     closed_loop: ClassVar[bool] = False
     bytes_per_step: ClassVar[int] = 512
+    # a recording of it: the voltage column; the truth columns (phase rad, ω rad/s, amplitude), how many
+    recording_columns: ClassVar[tuple] = (("v",), ("theta", "omega", "amplitude"))
+    truth_counts: ClassVar[tuple] = (3,)
+
+    @classmethod
+    def of(cls, *, t_event: float = 0.0, seed: int = 0, freq: float = 50.0, machine=None, drive=None):
+        return cls(t_event, freq, seed)
 
     def build(self, names, points, first: int = 0):
         return grid_signals(names, points, self.t_event, self.freq, seed=self.seed, first=first)
@@ -181,6 +194,9 @@ class EMFSignals(AbstractScenarios):
     axes: ClassVar[dict] = EMF_SIGNAL_AXES
     closed_loop: ClassVar[bool] = False
     bytes_per_step: ClassVar[int] = 512
+    # a recording of a drive: u and i; the truth columns (encoder angle rad [, speed rad/s]), how many
+    recording_columns: ClassVar[tuple] = (("u_a", "u_b", "i_a", "i_b"), ("theta_e", "omega_e"))
+    truth_counts: ClassVar[tuple] = (1, 2)
 
     def build(self, names, points, first: int = 0):
         return emf_signals(names, points)
@@ -209,6 +225,12 @@ class DriveScenarios(AbstractScenarios):
     axes: ClassVar[dict] = DRIVE_STUDY_AXES
     closed_loop: ClassVar[bool] = True
     bytes_per_step: ClassVar[int] = 2048
+    recording_columns: ClassVar[tuple] = EMFSignals.recording_columns
+    truth_counts: ClassVar[tuple] = EMFSignals.truth_counts
+
+    @classmethod
+    def of(cls, *, t_event: float = 0.0, seed: int = 0, freq: float = 50.0, machine=None, drive=None):
+        return cls(machine, drive, t_event=t_event, seed=seed)
 
     def build(self, names, points, first: int = 0):
         return drive_scenarios(self.machine, names, points, seed=self.seed, t_event=self.t_event, first=first)

@@ -41,7 +41,7 @@ def envelope_designs(path: Path):
         cf = info.closed_form(initial)
         closed = info.ctor(**{**job.values, **{g.name: float(cf[g.name]) for g in job.gains}})
         designs = {"initial": initial, "closed_form": closed}
-    if job.drive is None or job.scenarios.signal != "drive":
+    if job.drive is None or not job.scenarios.family.closed_loop:
         raise JobError(
             "scenarios.signal", f"must be 'drive' for an envelope (a drive job), got {job.scenarios.signal!r}"
         )

@@ -42,7 +42,7 @@ import jax.numpy as jnp
 from jaxobs import OnSignal, SaveAll, kept_jit, simulate
 from jaxobs import metrics as M
 from jaxobs.analysis.stability import lyapunov
-from jaxobs.drive import ClosedLoop
+from jaxobs.families import AbstractScenarios
 from jaxobs.runner import run_scenarios
 from jaxobs.scenarios import Given
 from jaxobs.sharding import batch_mesh
@@ -273,17 +273,17 @@ class Objective:
         ctx: MetricContext,
         aggregation: AbstractAggregation = Mean(),
         penalty: float = 1e3,
-        drive=None,
-        bind=None,
+        family: AbstractScenarios | None = None,
         trace_key: str | None = None,
     ):
         """``component``: the module whose free gains ``param`` sets; ``scenarios``: the batch (leading axis
         the scenarios); ``horizon``: simulated seconds per scenario; ``terms``: the weighted metrics summed
         per scenario; ``ctx``: the metrics' event time, steady window and bands; ``aggregation``: how the
         per-scenario values become one (:class:`~jaxobs_tuning.aggregations.Mean` by default); ``penalty``: the
-        value of a diverged scenario.  ``drive``: run each scenario (a drive Scenario) closed loop with
-        this Drive, the component as its observer; ``bind(component, scenario)``: adapt the component to
-        the scenario (the parameters an observer assumes, its initial speed) before the run.  ``trace_key``: a
+        value of a diverged scenario.  ``family``: the scenarios' family (:mod:`jaxobs.families`), which makes the
+        system the component runs on each scenario (bound to it: the machine an observer assumes, its initial
+        speed; closing the drive's loop for :class:`~jaxobs.families.DriveScenarios`); None: the component runs
+        on each scenario, a signal, as it is.  ``trace_key``: a
         string naming everything that built this objective (a job's digest and which of its scenario sets):
         with it, the value-and-gradient's and the scoring's traced programs are kept across processes
         (:func:`jaxobs.kept_jit`, where :func:`jaxobs.use_compile_cache` set a folder)."""
@@ -301,11 +301,11 @@ class Objective:
         self.terms = list(terms)
         self.ctx = ctx
         self.aggregation, self.penalty = aggregation, float(penalty)
-        self.drive, self.bind = drive, bind
+        self.family = family
         self.trace_key = trace_key
         # the solver's runs: every step's outputs, an observer on a signal through the loop made fast, the drive
         # plainly (module doc); the scoring and the figures run once per design, where compile time counts
-        self._save = SaveAll(fast=drive is None)
+        self._save = SaveAll(fast=not self.closed_loop)
         # the scenarios and the component are constants of the program (self is static): the key names them
         vg = self._per_scenario_value_and_grad
         self._vg = eqx.filter_jit(vg) if trace_key is None else kept_jit(vg, f"objective.vg|{trace_key}")
@@ -323,6 +323,11 @@ class Objective:
             return v, jnp.dot(g, tdot)
 
         self.value = value
+
+    @property
+    def closed_loop(self) -> bool:
+        """Whether the component closes the drive's loop (the drive's metrics and flags apply)."""
+        return self.family is not None and self.family.closed_loop
 
     # --- single scenario
     def _simulate(self, comp, sig, save=SaveAll()):
@@ -403,11 +408,9 @@ class Objective:
 
     # --- reporting: a design scored on the scenarios by the one study runner (jaxobs.runner)
     def _bound_system(self, comp, sig):
-        """The system one scenario runs: ``comp`` bound to the scenario, on its signal or closing the drive's
-        loop."""
-        if self.bind is not None:
-            comp = self.bind(comp, sig)
-        return ClosedLoop(self.drive, comp, sig) if self.drive is not None else OnSignal(comp, sig)
+        """The system one scenario runs: the family's (``comp`` bound to the scenario, on its signal or closing
+        the drive's loop), or ``comp`` on the signal as it is."""
+        return OnSignal(comp, sig) if self.family is None else self.family.system(comp, sig)
 
     def _system(self, theta, sig):
         """The system one scenario runs at ``theta`` (what :meth:`_simulate` simulates)."""
@@ -417,7 +420,7 @@ class Objective:
         mets = {t.metric: METRICS[t.metric](sol, sig, self.ctx) for t in self.terms if t.metric != STABILITY_MARGIN}
         # far from the truth over the steady window (jaxobs.metrics, "lost lock"): reported, not tuned on
         mets[LOST_LOCK] = M.lost_lock_of(sol, self.ctx.steady_from, signal=sig)
-        if self.drive is not None:
+        if self.closed_loop:
             mets["lost_sync"] = _lost_sync(sol, sig, self.ctx)
             # the drive does not follow its speed reference over the steady window (jaxobs.metrics,
             # "lost speed"): e.g. a standstill start that runs backwards with a locked observer

@@ -76,7 +76,7 @@ class ComponentInfo:
     @property
     def signals(self) -> tuple:
         """The scenario signals this component runs on, its default first."""
-        return (self.signal, "drive") if self.machines and self.signal != "drive" else (self.signal,)
+        return tuple(dict.fromkeys((self.signal, "drive"))) if self.machines else (self.signal,)
 
 
 # A LESO's extended-EMF model (002 eqs 4–5) holds on a non-salient machine too (Ld = Lq), so the LESOs
