@@ -77,3 +77,14 @@ class Metric:
     exact: Callable | None = None
     smooth: Callable | None = None
     closed_loop: bool = False
+
+    def __call__(self, sol, scenario, ctx):
+        """The form a gradient is taken of: ``smooth``, or ``exact`` where the metric has no smooth form.
+
+        Raises:
+            ValueError: the metric has neither form (it is not a function of one run).
+        """
+        form = self.smooth if self.smooth is not None else self.exact
+        if form is None:
+            raise ValueError(f"metric {self.name} is not a function of one run (it has no exact or smooth form)")
+        return form(sol, scenario, ctx)
