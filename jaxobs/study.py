@@ -404,7 +404,7 @@ def study(
     horizon: float,
     ctx: StudyContext = StudyContext(),
     flags: tuple = (DIVERGED,),
-    mask: str = "diverged",
+    mask: str | None = "diverged",
     quantiles: tuple = (),
     static: Callable | None = None,
     gains: dict | None = None,
@@ -427,7 +427,8 @@ def study(
         horizon: s, of every run.
         ctx: what the metrics read (:class:`StudyContext`); ``ctx.n_period`` is ``static(design)`` where given.
         flags: the per-scenario flags (:class:`Flag`), stored as variables in this order (``diverged`` among them).
-        mask: the flag whose scenarios' metrics are NaN (``diverged``, or ``lost_lock``: no steady error to speak of).
+        mask: the flag whose scenarios' metrics are NaN (``diverged``, or ``lost_lock``: no steady error to speak
+            of); None: every metric as computed.
         quantiles: quantiles over each design's unmasked scenarios, ``<metric>_q`` (dims design, quantile).
         static: a hashable Python value of a design that the metrics need outside tracing (:class:`StudyContext`'s
             ``n_period``); None: ``ctx`` as given.
@@ -488,7 +489,12 @@ def study(
         )
     data = {}
     for m in metrics:
-        vals = np.stack([np.where(values[d][mask], np.nan, values[d][m.name]) for d in dnames])  # (design, n)
+        vals = np.stack(
+            [
+                values[d][m.name] if mask is None else np.where(values[d][mask], np.nan, values[d][m.name])
+                for d in dnames
+            ]
+        )  # (design, n)
         data[m.name] = (dims, vals.reshape((len(dnames), *shape)), {"units": m.units, "long_name": m.long_name})
         if quantiles:
             qs = np.asarray(quantiles)

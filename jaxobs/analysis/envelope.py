@@ -42,11 +42,12 @@ from .. import AbstractSystem, SaveFinal, kept_jit
 from .. import metrics as M
 from ..drive import SETTLE_PERIODS, ClosedLoop, Drive, PMSMParams, drive_speed_limit_rpm
 from ..drive_study import gain_variables
-from ..families import DRIVE_STUDY_AXES, DriveScenarios
+from ..families import DRIVE_STUDY_AXES, AbstractScenarios, DriveScenarios
 from ..provenance import provenance
-from ..runner import run_scenarios
+from ..quantities import Metric
 from ..scenarios import Grid
 from ..sharding import batch_mesh
+from ..study import Flag, study
 from .stability import Stability, floquet, lyapunov
 
 __all__ = [
@@ -158,35 +159,71 @@ class _Watched(AbstractSystem):
         return (new, w), jnp.zeros((), e.dtype)
 
 
-class _LongRun(NamedTuple):
-    """The long run's factory and metrics (one object: the runner's compilation is shared across calls)."""
+class _LongRuns(AbstractScenarios):
+    """The long runs' scenarios: the drive's (``family``), each point's speed reference stepping by ``perturb``
+    × its speed at the family's ``t_event``, the loop wrapped in :class:`_Watched` (its running sums)."""
 
     family: DriveScenarios
-    k_early: int
-    k_late: int
-    speed_tol: float
+    perturb: float = eqx.field(static=True)
+    k_early: int = eqx.field(static=True)
+    k_late: int = eqx.field(static=True)
 
-    def system(self, obs, sc):
-        return _Watched(self.family.system(obs, sc), self.k_early, self.k_late)
+    signal: ClassVar[str] = "drive"
+    axes: ClassVar[dict] = DRIVE_STUDY_AXES
+    closed_loop: ClassVar[bool] = True
+    bytes_per_step: ClassVar[int] = 2048
 
-    def metrics(self, sol, _sc, _aux):
-        w = sol.final_state[1]
-        mean = w.sum_e / w.n
-        ripple = jnp.sqrt(jnp.maximum(w.sum_e2 / w.n - mean * mean, 0.0))
-        vals = {
-            "pos_err_max_deg": jnp.degrees(w.max_e),
-            "pos_bias_deg": jnp.degrees(mean),
-            "pos_ripple_deg": jnp.degrees(ripple),
-            "speed_dev_early_pct": 100 * w.dev_early,
-            "speed_dev_late_pct": 100 * w.dev_late,
-        }
-        finite = sol.ok & jnp.all(jnp.stack([jnp.isfinite(v) for v in vals.values()]))
-        floor = M.SPEED_FLOOR_RPM * math.pi / 30 * w.n
-        vals["lost_lock"] = ~finite | (w.max_e > math.radians(M.LOCK_TOL_DRIVE_DEG))
-        vals["lost_speed"] = ~finite | (w.sum_dw > jnp.maximum(M.SPEED_TOL * w.sum_ref, floor))
-        settled = (w.dev_late < self.speed_tol) & (w.dev_late <= jnp.maximum(w.dev_early, 1e-6))
-        vals["synchronous"] = ~vals["lost_lock"] & ~vals["lost_speed"] & settled
-        return vals
+    def build(self, names, points, first: int = 0):
+        steps = [(*p, self.perturb * p[0]) for p in points]
+        return self.family.build((*names, "speed_step_rpm"), steps, first=first)
+
+    def system(self, design, scenario):
+        return _Watched(self.family.system(design, scenario), self.k_early, self.k_late)
+
+
+def _sums(sol):
+    """The long run's running sums (:class:`_Watch`), its mean position error and the ripple about it (rad)."""
+    w = sol.final_state[1]
+    mean = w.sum_e / w.n
+    return w, mean, jnp.sqrt(jnp.maximum(w.sum_e2 / w.n - mean * mean, 0.0))
+
+
+def _var(name: str, form) -> Metric:
+    return Metric(name, *ENVELOPE_VARIABLES[name], exact=form, closed_loop=True)
+
+
+# the long run's metrics, read from its final state (units and long names: ENVELOPE_VARIABLES)
+LONG_RUN_METRICS = (
+    _var("pos_err_max_deg", lambda sol, sc, ctx: jnp.degrees(_sums(sol)[0].max_e)),
+    _var("pos_bias_deg", lambda sol, sc, ctx: jnp.degrees(_sums(sol)[1])),
+    _var("pos_ripple_deg", lambda sol, sc, ctx: jnp.degrees(_sums(sol)[2])),
+    _var("speed_dev_early_pct", lambda sol, sc, ctx: 100 * _sums(sol)[0].dev_early),
+    _var("speed_dev_late_pct", lambda sol, sc, ctx: 100 * _sums(sol)[0].dev_late),
+)
+
+
+def _lock_lost(sol, sc, ctx):
+    return _sums(sol)[0].max_e > math.radians(M.LOCK_TOL_DRIVE_DEG)
+
+
+def _speed_lost(sol, sc, ctx):
+    w = _sums(sol)[0]
+    return w.sum_dw > jnp.maximum(M.SPEED_TOL * w.sum_ref, M.SPEED_FLOOR_RPM * math.pi / 30 * w.n)
+
+
+def _long_run_flags(speed_tol: float) -> tuple:
+    """lost_lock, lost_speed (diverged included) and synchronous: finite, locked, at speed and settled (its late
+    peak speed deviation under ``speed_tol`` and no larger than in the early window)."""
+
+    def synchronous(sol, sc, ctx):
+        w = _sums(sol)[0]
+        settled = (w.dev_late < speed_tol) & (w.dev_late <= jnp.maximum(w.dev_early, 1e-6))
+        return ~_lock_lost(sol, sc, ctx) & ~_speed_lost(sol, sc, ctx) & settled
+
+    return tuple(
+        Flag(name, ENVELOPE_VARIABLES[name][1], form, diverged=name != "synchronous")
+        for name, form in (("lost_lock", _lock_lost), ("lost_speed", _speed_lost), ("synchronous", synchronous))
+    )
 
 
 # the stability verdict's options, by method: its defaults (envelope), and what each accepts
@@ -342,27 +379,25 @@ def envelope(
     sampler = Grid(axes)
     names, points = sampler.names, sampler.points()
 
-    # the long runs: each point's speed reference steps by perturb × its speed at t_perturb
-    family = DriveScenarios(machine, drive, t_event=t_perturb, seed=seed)
-
-    def build(nm, pts):
-        return family.build((*nm, "speed_step_rpm"), [(*p, perturb * p[0]) for p in pts])
-
+    # the long runs, a study: each point's speed reference steps by perturb × its speed at t_perturb; nothing
+    # stored per sample (SaveFinal), the wrapped loop's running sums read from its final state
     ts = drive.ts
-    long = _LongRun(family, int(round((t_perturb + 0.05) / ts)), int(round(steady_from / ts)), float(speed_tol))
-    run = run_scenarios(
+    family = DriveScenarios(machine, drive, t_event=t_perturb, seed=seed)
+    long = _LongRuns(family, float(perturb), int(round((t_perturb + 0.05) / ts)), int(round(steady_from / ts)))
+    runs = study(
         designs,
+        long,
         sampler,
-        long.system,
-        long.metrics,
+        LONG_RUN_METRICS,
         horizon=float(horizon),
-        build=build,
+        flags=_long_run_flags(float(speed_tol)),
+        mask=None,  # a lost point's errors are masked below, its speed deviations kept
+        save=SaveFinal(),
         chunk_size=chunk_size,
         mesh=batch_mesh(jax.devices()[:1]),
         progress=progress,
-        label="envelope",
-        save=SaveFinal(),
         trace_key=None if trace_key is None else f"envelope|{trace_key}",
+        label="envelope",
     )
     # the stability margins: constant profiles (no step), one jit(vmap) per observer class
     scs = DriveScenarios(machine, drive, seed=seed).build(names, points)
@@ -397,10 +432,10 @@ def envelope(
         "resolution": grid(lambda d: stab[d].resolution),
         "orbit_speed_dev": grid(lambda d: stab[d].speed_dev),
     }
-    for k in ("synchronous", "lost_lock", "lost_speed", "pos_err_max_deg", "pos_bias_deg", "pos_ripple_deg"):
-        res[k] = grid(lambda d, k=k: run.values[d][k])
-    for k in ("speed_dev_early_pct", "speed_dev_late_pct"):
-        res[k] = grid(lambda d, k=k: run.values[d][k])
+    for k in ("synchronous", "lost_lock", "lost_speed"):  # flags: int8 in the study, booleans here
+        res[k] = runs[k].values.astype(bool)
+    for m in LONG_RUN_METRICS:
+        res[m.name] = runs[m.name].values
     lost = res["lost_lock"].astype(bool)
     for k in ("pos_err_max_deg", "pos_bias_deg", "pos_ripple_deg"):
         res[k] = np.where(lost, np.nan, res[k])  # a lost point has no steady error to speak of
