@@ -396,7 +396,7 @@ def _fll_recordings(raw, st, name, base, designs, t_event, horizon, steady, band
     if len(ts) != 1:
         raise JobError("designs", f"a study on recordings needs one sample time for all designs, got {ts}")
     spec = parse_recording_scenarios(
-        {"recording": st["recording"]}, "study", "grid", t_event, horizon, steady, 0, ts[0], base
+        {"recording": st["recording"]}, "study", GridSignals, t_event, horizon, steady, 0, ts[0], base
     )
     opts = dict(t_event=t_event, horizon=horizon, steady_from=steady, band_hz=band, recording=spec.recording)
     return StudySpec(name, "fll", designs, {}, opts, len(spec.recording.files), _results_attr(results))

@@ -35,10 +35,11 @@ def _col_spec(v, field: str):
     return v
 
 
-def parse_recording_scenarios(tab, where, signal, t_event, horizon, steady, seed, ts, base) -> ScenarioSpec:
-    """``[<where>.recording]``: the file(s), the time base, the columns; read and checked now when the job
-    file's folder is known (``base``): exists, at most :data:`MAX_RECORDING_BYTES`, the columns present,
-    finite, time strictly increasing, sampled at least at 1/ts, long enough for the horizon."""
+def parse_recording_scenarios(tab, where, kind, t_event, horizon, steady, seed, ts, base) -> ScenarioSpec:
+    """``[<where>.recording]`` of recordings that stand for the family ``kind`` (:mod:`jaxobs.families`): the
+    file(s), the time base, the columns; read and checked now when the job file's folder is known (``base``):
+    exists, at most :data:`MAX_RECORDING_BYTES`, the columns present, finite, time strictly increasing, sampled
+    at least at 1/ts, long enough for the horizon."""
     w = f"{where}.recording"
     if "grid" in tab or "sample" in tab:
         key = "grid" if "grid" in tab else "sample"
@@ -58,7 +59,7 @@ def parse_recording_scenarios(tab, where, signal, t_event, horizon, steady, seed
     rate = get_field(rec, "sample_rate", f"{w}.sample_rate", float)
     if rate is not None and not 0 < rate <= 1e9:
         raise JobError(f"{w}.sample_rate", f"must be in (0, 1e9] Hz, got {rate:g}")
-    family = RecordedSignals(FAMILIES[signal])
+    family = RecordedSignals(kind)
     cols_default, truth_default = (list(c) for c in family.kind.recording_columns)
     cols, truth = rec.get("columns", cols_default), rec.get("truth", truth_default)
     n_truth = family.kind.truth_counts  # grid: theta, omega, amplitude; u/i: theta_e [, omega_e]
@@ -97,7 +98,7 @@ def parse_recording_scenarios(tab, where, signal, t_event, horizon, steady, seed
             digests.append(sha256(Path(path)))
         spec = dataclasses.replace(spec, sha256=tuple(digests))
     axes = {"recording": [float(i) for i in range(len(files))]}
-    return ScenarioSpec(signal, t_event, horizon, steady, axes, 0, seed, recording=spec)
+    return ScenarioSpec(kind.signal, t_event, horizon, steady, axes, 0, seed, recording=spec)
 
 
 def _column_field(w: str, e, spec: RecordingSpec) -> str:

@@ -91,6 +91,7 @@ def parse_scenarios(
     if signal not in signals:
         need = " or ".join(f"'{x}'" for x in signals)
         raise JobError(f"{where}.signal", f"the component needs {need} signals, got {show(signal)}")
+    family = FAMILIES[signal]  # the one place a job's signal name becomes its family
     t_event = get_field(tab, "t_event", f"{where}.t_event", float, 0.1)
     horizon = get_field(tab, "horizon", f"{where}.horizon", float, 0.4)
     if t_event < 0:
@@ -103,10 +104,9 @@ def parse_scenarios(
     if not (0 <= steady < horizon):
         raise JobError(f"{where}.steady_from", f"must be in [0, horizon), got {steady:g}")
     if "recording" in tab:
-        return parse_recording_scenarios(tab, where, signal, t_event, horizon, steady, seed, ts, base)
+        return parse_recording_scenarios(tab, where, family, t_event, horizon, steady, seed, ts, base)
     grid = get_field(tab, "grid", f"{where}.grid", dict, required=True)
     # freq_step is tied to the nominal frequency and the sample rate, speed_hz to the sample rate
-    family = FAMILIES[signal]
     axes = axes_field(grid, family, f"{where}.grid", family.limits(freq_n, ts))
     sample = get_field(tab, "sample", f"{where}.sample", int, 0)
     if not 0 <= sample <= MAX_SCENARIOS:
