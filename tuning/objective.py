@@ -32,7 +32,7 @@ has no block of inputs to gain, and its unrolled step compiles longer).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import equinox as eqx
 import jax
@@ -133,8 +133,18 @@ def _lost_sync(sol, sig, ctx):
 
 @dataclass(frozen=True)
 class Term:
-    metric: str
+    """One weighted term of the objective: ``metric`` (a :class:`~jaxobs.quantities.Metric`, or the name of one in
+    :data:`METRICS`; kept as its name, the Metric in :attr:`measure`) times ``weight`` (per the metric's unit)."""
+
+    metric: str | Metric
     weight: float = 1.0
+    measure: Metric | None = field(default=None, compare=False, repr=False)
+
+    def __post_init__(self):
+        m = self.metric if isinstance(self.metric, Metric) else METRICS.get(self.metric)
+        object.__setattr__(self, "measure", m)
+        if isinstance(self.metric, Metric):
+            object.__setattr__(self, "metric", self.metric.name)
 
 
 # --------------------------------------------------------------------------
@@ -171,7 +181,7 @@ class Objective:
         with it, the value-and-gradient's and the scoring's traced programs are kept across processes
         (:func:`jaxobs.kept_jit`, where :func:`jaxobs.use_compile_cache` set a folder)."""
         for term in terms:
-            if term.metric not in METRICS:
+            if term.measure is None:
                 raise ValueError(f"objective metric {term.metric!r} is unknown; known: {', '.join(METRICS)}")
         if not isinstance(aggregation, AbstractAggregation):
             raise ValueError(
@@ -224,7 +234,7 @@ class Objective:
     def _term(self, term, comp, sol, sig):
         if term.metric == STABILITY_MARGIN:
             return self._exponent(comp, sig)
-        return METRICS[term.metric](sol, sig, self.ctx)
+        return term.measure(sol, sig, self.ctx)
 
     def _one(self, theta, sig):
         comp = self.param.apply(self.component, theta)
@@ -300,7 +310,7 @@ class Objective:
         return self._bound_system(self.param.apply(self.component, theta), sig)
 
     def _scenario_metrics(self, sol, sig, _aux):
-        mets = {t.metric: METRICS[t.metric](sol, sig, self.ctx) for t in self.terms if t.metric != STABILITY_MARGIN}
+        mets = {t.metric: t.measure(sol, sig, self.ctx) for t in self.terms if t.metric != STABILITY_MARGIN}
         # far from the truth over the steady window (jaxobs.metrics, "lost lock"): reported, not tuned on
         mets[LOST_LOCK] = M.lost_lock_of(sol, self.ctx.steady_from, signal=sig)
         if self.closed_loop:
