@@ -277,9 +277,11 @@ def _table(
 
 def _axes_table(title: str, ranges: dict, intro: str) -> str:
     lines = [f"### `{title}`", "", intro, "", "| axis | unit | range |", "|---|---|---|"]
+    from jaxobs.quantities import text_unit
+
     for name, axis in ranges.items():  # jaxobs.quantities.Axis records
         lo, hi = axis.range
-        lines.append(f"| `{name}` | {axis.units} | [{lo:g}, {hi:g}] |")
+        lines.append(f"| `{name}` | {text_unit(axis.units)} | [{lo:g}, {hi:g}] |")
     return "\n".join(lines) + "\n"
 
 
