@@ -27,8 +27,8 @@ def main(argv=None) -> int:
 
     jax.config.update("jax_enable_x64", True)
     import jaxobs
+    from jaxobs.analysis.envelope import default_loads, default_speeds, envelope
     from jaxobs.drive import bench_drive, bench_machine
-    from jaxobs.drive.envelope import default_loads, default_speeds, envelope
 
     par = bench_machine("spmsm000")
     designs = {

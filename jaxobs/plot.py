@@ -514,7 +514,7 @@ def _fail_marks(ds, d, extra, h):
 
 
 def envelope_figure(ds, path):
-    """The envelope map (:func:`jaxobs.drive.envelope.envelope`): one row per metric, one column per design,
+    """The envelope map (:func:`jaxobs.analysis.envelope.envelope`): one row per metric, one column per design,
     speed on a log axis against load; every row on ONE colour scale (shared by the designs), the region where
     each design holds outlined in black, and each point where it does not marked by why (x: not synchronous,
     o: not resolved stable, +: peak error over the bound).  With a mismatch dim each cell shows the worst over

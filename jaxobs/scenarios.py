@@ -35,6 +35,7 @@ import numpy as np
 
 from ._time import SampleTime, time_value
 from .papers import TEST_C_HARMONICS
+from .quantities import Axis
 from .signals import EMFSignal, GridSignal, stack
 
 __all__ = [
@@ -52,16 +53,20 @@ __all__ = [
     "grid_signals",
 ]
 
-GRID_SIGNAL_AXES = (
-    "freq_step",
-    "phase_jump_deg",
-    "sag",
-    "dc",
-    "harmonics_scale",
-    "sub_amplitude",
-    "phase_deg",
-    "noise",
-)
+# the grid signals' axes (the FLL family): one Axis each (CF units, the range a study or a job may give)
+GRID_SIGNAL_AXES: dict[str, Axis] = {
+    a.name: a
+    for a in (
+        Axis("freq_step", "Hz", (-1e4, 1e4), "frequency step at the event"),
+        Axis("phase_jump_deg", "degree", (-360.0, 360.0), "phase jump at the event"),
+        Axis("sag", "1", (0.0, 0.999), "voltage sag depth at the event (p.u.)"),
+        Axis("dc", "1", (-10.0, 10.0), "dc offset (p.u. of the fundamental)"),
+        Axis("harmonics_scale", "1", (0.0, 100.0), "harmonic distortion (multiple of 001 Test C's spectrum)"),
+        Axis("sub_amplitude", "1", (0.0, 10.0), "1 Hz subharmonic amplitude (p.u.)"),
+        Axis("phase_deg", "degree", (-360.0, 360.0), "initial phase"),
+        Axis("noise", "1", (0.0, 10.0), "white measurement noise standard deviation (p.u.)"),
+    )
+}
 
 
 class NoisyGridSignal(eqx.Module):
@@ -156,7 +161,18 @@ def grid_signals(names, combos, t_event: float, freq: float, *, seed: int = 0, f
     return eqx.tree_at(lambda s: s.key, out, keys)
 
 
-EMF_SIGNAL_AXES = ("speed_hz", "dc_alpha", "dc_beta", "h5", "h7", "phase_deg")
+# the back EMFs' axes (the flux observers without a drive)
+EMF_SIGNAL_AXES: dict[str, Axis] = {
+    a.name: a
+    for a in (
+        Axis("speed_hz", "Hz", (1e-3, 1e4), "electrical frequency of the back EMF (100 V at 50 Hz)"),
+        Axis("dc_alpha", "V", (-1e4, 1e4), "dc offset of the back EMF, alpha axis"),
+        Axis("dc_beta", "V", (-1e4, 1e4), "dc offset of the back EMF, beta axis"),
+        Axis("h5", "1", (0.0, 10.0), "negative-sequence 5th harmonic (multiple of the fundamental)"),
+        Axis("h7", "1", (0.0, 10.0), "positive-sequence 7th harmonic (multiple of the fundamental)"),
+        Axis("phase_deg", "degree", (-360.0, 360.0), "initial phase"),
+    )
+}
 
 
 def emf_signals(names, combos):

@@ -12,8 +12,8 @@ import xarray as xr
 
 import jaxobs
 from jaxobs import papers
+from jaxobs.analysis.envelope import ENVELOPE_VARIABLES, envelope
 from jaxobs.drive import bench_drive, bench_machine
-from jaxobs.drive.envelope import ENVELOPE_VARIABLES, envelope
 from jaxobs.drive_study import bind_observer, drive_scenarios
 from jaxobs_tuning.cli import main
 from jaxobs_tuning.job import job_drive, load_job
@@ -200,7 +200,7 @@ def test_preset_envelope_agrees_with_3s_simulations_at_low_speed(tmp_path):
         # dipped 22-54 % and only the on-orbit points could be compared).
         assert (low["orbit_speed_dev"].sel(design=d).values < 5e-3).all(), low["orbit_speed_dev"].sel(design=d)
         # Every verdict is resolved (the Lyapunov window spans 12/α of the slowest speed loop: 11.5 s at 20 r/min,
-        # jaxobs.drive.envelope) and agrees with the 3 s run, at every point.
+        # jaxobs.analysis.envelope) and agrees with the 3 s run, at every point.
         assert not low["marginal"].sel(design=d).any(), (
             d,
             low["margin"].sel(design=d),
@@ -218,7 +218,7 @@ def test_preset_envelope_agrees_with_3s_simulations_at_low_speed(tmp_path):
      ({"speed_rpm": (300.0, 600.0), "dX": (0, 1)}, "unknown axes")],
 )  # fmt: skip
 def test_worst_case_bad_box_names_the_field(box, field):
-    from jaxobs.drive.envelope import worst_case
+    from jaxobs.analysis.envelope import worst_case
 
     with pytest.raises(ValueError, match=field):
         worst_case(CF, machine=PAR, drive=DRIVE, box=box)
@@ -229,8 +229,8 @@ def test_worst_case_by_gradients_finds_the_grids_worst():
     """Projected gradient ascent of the Lyapunov exponent over speed 300..1200 r/min × load 0..10 N·m
     × dRs ±30 % finds the closed form's worst point at least as bad as a 4 × 2 × 2 grid's worst (the low-speed
     end, where the speed loop closed through the FLL goes unstable)."""
-    from jaxobs.drive.envelope import worst_case
-    from jaxobs.drive.stability import stability_sweep
+    from jaxobs.analysis.envelope import worst_case
+    from jaxobs.analysis.stability import stability_sweep
 
     box = {"speed_rpm": (300.0, 1200.0), "load_nm": (0.0, 10.0), "dRs": (-0.3, 0.3)}
     kw = dict(settle=0.1, warmup=0.05, window=0.2, n_dirs=2)

@@ -39,6 +39,7 @@ LAYERS = [
         "jaxobs._cache",
         "jaxobs.drive.component",
         "jaxobs.chunkstore",
+        "jaxobs.quantities",
     ),
     # integration rules (and check_rule)
     ("jaxobs._discretize", "jaxobs.safetoml"),
@@ -76,23 +77,27 @@ LAYERS = [
     ("jaxobs.linear._models", "jaxobs.linear._fll"),
     ("jaxobs.linear",),
     ("jaxobs",),
-    # the one study runner (samplers in jaxobs.scenarios)
-    ("jaxobs.runner", "jaxobs.registry"),
+    # the one study runner (samplers in jaxobs.scenarios), the scenario families (their axes, batches, systems)
+    # and the registry of observer classes
+    ("jaxobs.runner", "jaxobs.families", "jaxobs.registry"),
     # the figures' helpers and the Bode figures (jaxobs.plot re-exports them)
     ("jaxobs._figure", "jaxobs.reproduce.compare", "jaxobs.reproduce._run"),
     ("jaxobs._plot_bode", "jaxobs._plot_paper"),
     # the library's own applications: studies, the demo, the papers' reproductions, figures, benchmarks
     (
         "jaxobs.study",
-        "jaxobs.drive_study",
-        "jaxobs.drive.stability",
         "jaxobs.demo",
         "jaxobs.reproduce.flux",
         "jaxobs.reproduce.leso",
         "jaxobs.plot",
     ),
-    # the envelope map: the stability verdict and the long runs of a drive study, over the speed x load plane
-    ("jaxobs.drive.envelope",),
+    # the drive study: a preset of jaxobs.study.study
+    ("jaxobs.drive_study",),
+    # analyses above the studies they run: the package (no imports), the closed loop's stability verdict, then
+    # the envelope map (the stability verdict and the long runs of a drive study, over the speed x load plane)
+    ("jaxobs.analysis",),
+    ("jaxobs.analysis.stability",),
+    ("jaxobs.analysis.envelope",),
     ("jaxobs.reproduce.leso_dual", "jaxobs.reproduce.figures"),
     ("jaxobs.reproduce",),
     # tuning: it changes gains (and exports the tuned observer)
@@ -341,3 +346,17 @@ def test_the_private_import_check_sees_one(tmp_path, monkeypatch):
         "the private module jaxobs._validate",
         "the private module jaxobs._math",
     ], found
+
+
+def test_the_drive_imports_nothing_above_it():
+    """``jaxobs/drive/`` holds the drive only: its modules import the drive's parts and what lies below the
+    package ``jaxobs.drive`` (signals, observers, the rules), never a study, the loop runner or an analysis."""
+    top = RANK["jaxobs.drive"]
+    bad = [
+        f"{name}:{line} imports {target}"
+        for name in MODULES
+        if name == "jaxobs.drive" or name.startswith("jaxobs.drive.")
+        for target, line, _ in _imports(name)
+        if target in RANK and RANK[target] > top
+    ]
+    assert not bad, "\n".join(bad)

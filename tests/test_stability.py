@@ -1,4 +1,4 @@
-"""Closed-loop stability from the simulated loop (jaxobs.drive.stability) and the linear view beside it.
+"""Closed-loop stability from the simulated loop (jaxobs.analysis.stability) and the linear view beside it.
 
 Fast: the encoder loop's exponent is the speed loop's designed double pole −α_s (a known answer); the
 linear speed loop through the FLL is the design at G = 1 and loses stability at low speed.  Slow: the
@@ -16,8 +16,7 @@ import pytest
 
 import jaxobs
 from jaxobs import papers
-from jaxobs.drive import FOC, ClosedLoop, Drive, FOCInput, bench_drive, bench_machine, dq_to_ab, spmsm_paper000
-from jaxobs.drive.stability import (
+from jaxobs.analysis.stability import (
     fll_frequency_soifo,
     fll_frequency_sosoifo,
     floquet,
@@ -25,6 +24,7 @@ from jaxobs.drive.stability import (
     lyapunov,
     slope_fit,
 )
+from jaxobs.drive import FOC, ClosedLoop, Drive, FOCInput, bench_drive, bench_machine, dq_to_ab, spmsm_paper000
 from jaxobs.drive_study import bind_observer, drive_scenarios
 from jaxobs.linear import TransferFunction, faleso_tf
 from jaxobs.observers import FALESO, GILESO

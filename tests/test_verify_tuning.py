@@ -121,7 +121,7 @@ def test_unsafe_points_are_where_the_tuned_fails_and_the_closed_form_holds():
 
 
 def test_a_tuned_design_failing_inside_its_envelope_is_unsafe_exit_4(tmp_path, capsys, monkeypatch):
-    """The real verification (jaxobs.drive.envelope.envelope, 0.5 s, a short Lyapunov window) runs after
+    """The real verification (jaxobs.analysis.envelope.envelope, 0.5 s, a short Lyapunov window) runs after
     tuning and writes the verification block; a tuned design that then loses synchronism where the closed form
     passes (both forced here) turns the status to "unsafe", warns on stderr and exits 4; the solver's status stays in
     tuning_status."""

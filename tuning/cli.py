@@ -108,6 +108,8 @@ def load_study(path):
 def _cmd_drive_study(name, designs, axes, opts, out: Path, quiet: bool, provenance=None, store=None) -> int:
     from jaxobs.drive_study import DRIVE_STUDY_METRICS, run_drive_study
     from jaxobs.plot import drive_study_figure
+    from jaxobs.quantities import text_unit
+    from jaxobs.study import METRICS
 
     ds = run_drive_study(designs, axes, progress=progress_of(quiet=quiet), store=store, **opts)
     ds.attrs.update(provenance or {})  # the study file's and the result files' sha256, the machine
@@ -125,7 +127,7 @@ def _cmd_drive_study(name, designs, axes, opts, out: Path, quiet: bool, provenan
         print(f"resumed: {store.resumed} chunks of {store.total} were on disk from the stopped run")
     qs = [float(q) for q in ds["quantile"].values]
     # columns sized from their content (long design names and metric labels never run together)
-    labels = {m: f"{m} ({u})" for m, (u, _) in DRIVE_STUDY_METRICS.items()}
+    labels = {m: f"{m} ({text_unit(METRICS[m].units)})" for m in DRIVE_STUDY_METRICS}
     wd = max(len("design"), *(len(str(d)) for d in ds["design"].values)) + 2
     wm = max(len(x) for x in labels.values()) + 2
     head = f"{'design':<{wd}}{'metric':<{wm}}" + "".join(f"{'q' + format(q, 'g'):>10}" for q in qs)
@@ -150,11 +152,12 @@ def _recording_study(designs: dict, *, recording, t_event, horizon, steady_from,
     :class:`jaxobs.scenarios.Recordings` sampler (dims (design, recording), the files' sha256); (Dataset, s)."""
     import jax
 
+    from jaxobs.families import GridSignals, RecordedSignals
     from jaxobs.scenarios import Recordings
     from jaxobs.study import run_study
 
     rec = recording
-    sampler = Recordings(load_recordings(rec, "grid"), rec.files, rec.sha256)
+    sampler = Recordings(load_recordings(rec, RecordedSignals(GridSignals)), rec.files, rec.sha256)
     return run_study(
         designs,
         sampler,

@@ -3,9 +3,9 @@
 For a drive job file, its initial and closed-form designs; for a ``jaxobs tune`` result.json of a drive job,
 its initial, closed-form and tuned designs (the result's own values).  The job's machine and drive (the
 bench FOC), always sensorless and started steady whatever the job's loop and start: the envelope is where the
-observer can close the loop; the Floquet stability verdict (:func:`jaxobs.drive.stability.floquet`) with the
+observer can close the loop; the Floquet stability verdict (:func:`jaxobs.analysis.stability.floquet`) with the
 job's ``[envelope]`` settle and window where it has one.  Writes ``envelope.nc`` (NetCDF,
-:func:`jaxobs.drive.envelope.envelope`) and ``envelope.png`` (:func:`jaxobs.plot.envelope_figure`) under ``--out``.
+:func:`jaxobs.analysis.envelope.envelope`) and ``envelope.png`` (:func:`jaxobs.plot.envelope_figure`) under ``--out``.
 """
 
 from __future__ import annotations
@@ -35,7 +35,7 @@ def envelope_designs(path: Path):
         cf = info.closed_form(initial)
         closed = info.ctor(**{**job.values, **{g.name: float(cf[g.name]) for g in job.gains}})
         designs = {"initial": initial, "closed_form": closed}
-    if job.drive is None or job.scenarios.signal != "drive":
+    if job.drive is None or not job.scenarios.family.closed_loop:
         raise JobError(
             "scenarios.signal", f"must be 'drive' for an envelope (a drive job), got {job.scenarios.signal!r}"
         )
@@ -67,7 +67,7 @@ def _seconds(text: str) -> float:
 
 def _trace_key(path: Path, args) -> str:
     """The source file's sha256 (a job file or a result.json, and what it names: a recording's digest is in the
-    job's) with the options that shape the map: every argument :func:`jaxobs.drive.envelope.envelope` gets."""
+    job's) with the options that shape the map: every argument :func:`jaxobs.analysis.envelope.envelope` gets."""
     digest = hashlib.sha256(path.read_bytes()).hexdigest()
     return f"{digest}|speeds={args.speeds}|loads={args.loads}|horizon={args.horizon!r}"
 
@@ -77,7 +77,7 @@ def cli_envelope(args) -> int:
 
     jax.config.update("jax_enable_x64", True)
     from jaxobs import drive as D
-    from jaxobs.drive.envelope import default_loads, default_speeds, envelope
+    from jaxobs.analysis.envelope import default_loads, default_speeds, envelope
     from jaxobs.plot import envelope_figure
 
     path = Path(args.source)
@@ -88,7 +88,7 @@ def cli_envelope(args) -> int:
     speeds, loads = default_speeds(par, args.speeds), default_loads(par, args.loads)
     n = len(speeds) * len(loads)
     # the job's own settle and (shortest) window where it states them ([envelope]), else the library's defaults
-    # (jaxobs.drive.envelope.STABILITY_METHODS: settle 0.2 s, windows of at least 0.2 s)
+    # (jaxobs.analysis.envelope.STABILITY_METHODS: settle 0.2 s, windows of at least 0.2 s)
     env = job.envelope
     stab = {} if env is None else {"settle": env.settle, "window": env.window}
     what = (

@@ -32,8 +32,7 @@ has no block of inputs to gain, and its unrolled step compiles longer).
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import equinox as eqx
 import jax
@@ -41,11 +40,14 @@ import jax.numpy as jnp
 
 from jaxobs import OnSignal, SaveAll, kept_jit, simulate
 from jaxobs import metrics as M
-from jaxobs.drive import ClosedLoop
-from jaxobs.drive.stability import lyapunov
+from jaxobs.analysis.stability import lyapunov
+from jaxobs.families import AbstractScenarios
+from jaxobs.quantities import Metric
 from jaxobs.runner import run_scenarios
 from jaxobs.scenarios import Given
 from jaxobs.sharding import batch_mesh
+from jaxobs.study import METRICS as TABLE
+from jaxobs.study import StudyContext, scored_position_error
 
 from .aggregations import AbstractAggregation, Mean
 from .params import Parametrization
@@ -66,125 +68,14 @@ __all__ = [
 FORWARD_MAX = 8
 
 # --------------------------------------------------------------------------
-# per-scenario metrics (smooth where the exact one has no useful gradient)
+# per-scenario metrics: the one table's (jaxobs.study.METRICS), in their smooth forms where they have one
 # --------------------------------------------------------------------------
 
+# what the metrics read beside the run (event, steady window, bands, temperature)
+MetricContext = StudyContext
 
-@dataclass(frozen=True)
-class MetricContext:
-    t_event: float
-    steady_from: float  # start of the steady window, s
-    band_hz: float = 0.05
-    temperature: float = 1e-3  # smooth max/settling temperature, s (or units of the metric)
-    band_deg: float = 2.0  # settling_position's band around the error's own final value, electrical degrees
-    band_rpm: float = 5.0  # settling_speed's band around the speed reference, r/min (mechanical)
-
-
-def _freq_err_hz(sol):
-    return (sol.outputs.obs.omega - sol.outputs.truth.omega) / (2 * math.pi)
-
-
-def _phase_err(sol):
-    return M.wrap(sol.outputs.obs.theta - sol.outputs.truth.theta)
-
-
-def _position_err(sol, sig):
-    """Position error of an observer (rad): on the drive θ̂e − θe; on a signal, against its truth
-    (:func:`jaxobs.metrics.position_error`)."""
-    return M.position_error(sol, sig)
-
-
-def _scored_position_err(sol, sig, ctx):
-    """:func:`_position_err` as the metrics score it.  A drive started from standstill runs on the I-f angle
-    until its hand-over (the FOC's ``mode`` 0 → 1); the observer is not in the loop then and may sit ~90° off
-    while it converges at low speed (measured: the I-f phase was 0.12 of a 0.124 ``iae_position``), which is
-    the start-up's doing, not the observer's.  So its error counts from the hand-over on (a steady start is in
-    mode 1 from t = 0: unchanged).  Inside the steady window it always counts: a drive that has not handed
-    over by then is scored (and flagged lost_sync) on its real error, never rewarded with a zero."""
-    err = _position_err(sol, sig)
-    mode = getattr(sol.outputs, "mode", None)
-    if mode is None:
-        return err
-    return jnp.where((mode == 1) | _steady(sol, ctx), err, 0.0)
-
-
-def _speed_err_rpm(sol, sc):
-    """Speed-estimate error of a drive observer, ω̂e/p − ωm, in r/min (mechanical); ``sc`` the drive Scenario."""
-    out = sol.outputs
-    return (out.obs.omega / sc.par.p - out.omega_m) * 30 / math.pi
-
-
-def _rpm(omega_m):
-    """Mechanical speed, rad/s -> r/min."""
-    return omega_m * 30 / math.pi
-
-
-def _sample_noise(x, mask):
-    """rms of the sample-to-sample change over √2: the standard deviation of white noise on ``x``,
-    blind to its slow variations (a speed estimate's high-frequency noise)."""
-    return M.rms(jnp.diff(x) / math.sqrt(2.0), mask[1:])
-
-
-def _steady(sol, ctx):
-    return sol.t >= ctx.steady_from
-
-
-METRICS: dict[str, Callable] = {
-    # FLL family on grid signals
-    "itae_freq": lambda sol, sig, ctx: M.itae(sol.t, _freq_err_hz(sol), ctx.t_event),
-    "iae_freq": lambda sol, sig, ctx: M.iae(sol.t, _freq_err_hz(sol), ctx.t_event),
-    "iae_phase": lambda sol, sig, ctx: M.iae(sol.t, _phase_err(sol), ctx.t_event),
-    "itae_phase": lambda sol, sig, ctx: M.itae(sol.t, _phase_err(sol), ctx.t_event),
-    "settling_freq": lambda sol, sig, ctx: M.smooth_settling_time(
-        sol.t,
-        sol.outputs.obs.omega / (2 * math.pi),
-        sol.outputs.truth.omega[-1] / (2 * math.pi),
-        ctx.band_hz,
-        ctx.t_event,
-        temperature=ctx.temperature,
-    ),
-    "ripple_freq": lambda sol, sig, ctx: M.smooth_peak_to_peak(_freq_err_hz(sol), _steady(sol, ctx), 1e-3),
-    "rms_freq_steady": lambda sol, sig, ctx: M.rms(_freq_err_hz(sol), _steady(sol, ctx)),
-    "rms_phase_steady": lambda sol, sig, ctx: M.rms(_phase_err(sol), _steady(sol, ctx)),
-    # flux observers on EMF signals
-    "iae_position": lambda sol, sig, ctx: M.iae(sol.t, _scored_position_err(sol, sig, ctx), ctx.t_event),
-    "rms_position_steady": lambda sol, sig, ctx: M.rms(_position_err(sol, sig), _steady(sol, ctx)),
-    "ripple_position": lambda sol, sig, ctx: M.smooth_peak_to_peak(_position_err(sol, sig), _steady(sol, ctx), 1e-4),
-    # drive observers in the closed loop (the scenario is a drive Scenario): settling after a load or
-    # speed step at t_event, and the noise the estimates carry (DESIGN.md "Metrics": smooth for gradients).
-    # settling_position settles to a band around the error's own final value (its mean over the steady
-    # window), so a steady lag settles; the lag is bias_position.  Before issue 26 it settled to 0 within
-    # the band, and a biased observer never settled (the whole window for C-LESO and GI-LESO).
-    "settling_position": lambda sol, sig, ctx: M.smooth_settling_to_steady(
-        sol.t,
-        _scored_position_err(sol, sig, ctx),
-        math.radians(ctx.band_deg),
-        _steady(sol, ctx),
-        ctx.t_event,
-        temperature=ctx.temperature,
-    ),
-    "bias_position": lambda sol, sig, ctx: jnp.abs(M.steady_mean(_position_err(sol, sig), _steady(sol, ctx))),
-    # the true speed against its reference (r/min), not the speed estimate's error (as it was before issue 26):
-    # after a speed step its settling, after a load step its recovery time; and the peak deviation after it
-    "settling_speed": lambda sol, sig, ctx: M.smooth_settling_to_reference(
-        sol.t,
-        _rpm(sol.outputs.omega_m),
-        _rpm(sol.outputs.omega_m_ref),
-        ctx.band_rpm,
-        ctx.t_event,
-        temperature=ctx.temperature,
-    ),
-    "peak_speed_dev": lambda sol, sig, ctx: M.smooth_peak_deviation(
-        sol.t, _rpm(sol.outputs.omega_m), _rpm(sol.outputs.omega_m_ref), ctx.t_event, temperature=ctx.temperature
-    ),
-    "rms_speed_steady": lambda sol, sig, ctx: M.rms(_speed_err_rpm(sol, sig), _steady(sol, ctx)),
-    "speed_noise_rpm": lambda sol, sig, ctx: _sample_noise(
-        sol.outputs.obs.omega / sig.par.p * 30 / math.pi, _steady(sol, ctx)
-    ),
-}
-
-# The stability margin as a term (issue 26): not a function of one simulation but of the closed loop itself,
-# jaxobs.drive.stability.lyapunov's largest non-neutral exponent (1/s) at the scenario (from its steady
+# The stability margin as a term: not a function of one simulation but of the closed loop itself,
+# jaxobs.analysis.stability.lyapunov's largest non-neutral exponent (1/s) at the scenario (from its steady
 # start; an event at t_event falls inside the settle), differentiable with respect to the gains.  The term's
 # value is that exponent, minus the margin, so minimizing it raises the margin; give it a small weight
 # (rad against 1/s).  Short runs (compile time and cost: the step's jvp in n_dirs directions): enough to
@@ -192,51 +83,43 @@ METRICS: dict[str, Callable] = {
 STABILITY_MARGIN = "stability_margin"
 MARGIN_KW = {"settle": 0.1, "warmup": 0.05, "window": 0.2, "n_dirs": 2}
 
-
-def _needs_system(sol, sig, ctx):
-    raise ValueError(f"{STABILITY_MARGIN} is computed from the closed loop (Objective), not from a simulation")
-
-
-METRICS[STABILITY_MARGIN] = _needs_system
-# each metric's CF (UDUNITS) units, for scores.nc: errors of f̂ in Hz, of θ̂ in rad, speeds in r/min ("min-1"),
-# the integral criteria in their unit × s (IAE) or × s² (ITAE); tests/test_tuning_results.py checks every metric has one
-METRIC_UNITS: dict[str, str] = {
-    "itae_freq": "Hz s2",
-    "iae_freq": "Hz s",
-    "iae_phase": "rad s",
-    "itae_phase": "rad s2",
-    "settling_freq": "s",
-    "ripple_freq": "Hz",
-    "rms_freq_steady": "Hz",
-    "rms_phase_steady": "rad",
-    "iae_position": "rad s",
-    "rms_position_steady": "rad",
-    "ripple_position": "rad",
-    "settling_position": "s",
-    "bias_position": "rad",
-    "settling_speed": "s",
-    "peak_speed_dev": "min-1",
-    "rms_speed_steady": "min-1",
-    "speed_noise_rpm": "min-1",
-    STABILITY_MARGIN: "s-1",
+# the metrics a job may tune on (name -> jaxobs.quantities.Metric, called as its smooth form): the FLL family's
+# on grid signals, the flux observers' on EMF signals, the drive observers' in the closed loop
+METRICS: dict[str, Metric] = {
+    k: TABLE[k]
+    for k in (
+        "itae_freq",
+        "iae_freq",
+        "iae_phase",
+        "itae_phase",
+        "settling_freq",
+        "ripple_freq",
+        "rms_freq_steady",
+        "rms_phase_steady",
+        "iae_position",
+        "rms_position_steady",
+        "ripple_position",
+        "settling_position",
+        "bias_position",
+        "settling_speed",
+        "peak_speed_dev",
+        "rms_speed_steady",
+        "speed_noise_rpm",
+        STABILITY_MARGIN,
+    )
 }
+# each metric's CF (UDUNITS) units, for scores.nc (the Metric's)
+METRIC_UNITS: dict[str, str] = {k: m.units for k, m in METRICS.items()}
 # the per-scenario flag :meth:`Objective.per_scenario` adds to the metrics: the estimate ended far from the
 # truth (jaxobs.metrics.lost_lock_of: 45° / 10 % on signals, 90° on the drive, over the steady window)
 LOST_LOCK = "lost_lock"
 _OK = " ok"  # the simulation's own flag among a scenario's metrics (a name no metric has)
 # metrics that need the closed-loop drive (signal = "drive" jobs)
-DRIVE_METRICS = (
-    "settling_position",
-    "settling_speed",
-    "peak_speed_dev",
-    "rms_speed_steady",
-    "speed_noise_rpm",
-    STABILITY_MARGIN,
-)
+DRIVE_METRICS = tuple(k for k, m in METRICS.items() if m.closed_loop)
 
 # Loss of synchronism of a drive observer, a per-scenario flag (never fatal): its simulation diverged, or
 # |θ̂e − θe| exceeded this anywhere in the scored horizon [0, horizon) (the settling phase before t = 0 is
-# not scored, nor a standstill start's I-f phase before its hand-over: _scored_position_err).
+# not scored, nor a standstill start's I-f phase before its hand-over: jaxobs.study.scored_position_error).
 # jaxobs.drive_study flags the same threshold over its steady window only; a job has events (speed and
 # load steps), and a pole slip during one is a loss of synchronism even if the observer locks again
 # afterwards.
@@ -244,14 +127,24 @@ LOST_SYNC_DEG = 90.0
 
 
 def _lost_sync(sol, sig, ctx):
-    err = jnp.abs(_scored_position_err(sol, sig, ctx))  # from the hand-over on (standstill starts)
+    err = jnp.abs(scored_position_error(sol, sig, ctx))  # from the hand-over on (standstill starts)
     return jnp.max(jnp.where(jnp.isfinite(err), err, jnp.inf)) > math.radians(LOST_SYNC_DEG)
 
 
 @dataclass(frozen=True)
 class Term:
-    metric: str
+    """One weighted term of the objective: ``metric`` (a :class:`~jaxobs.quantities.Metric`, or the name of one in
+    :data:`METRICS`; kept as its name, the Metric in :attr:`measure`) times ``weight`` (per the metric's unit)."""
+
+    metric: str | Metric
     weight: float = 1.0
+    measure: Metric | None = field(default=None, compare=False, repr=False)
+
+    def __post_init__(self):
+        m = self.metric if isinstance(self.metric, Metric) else METRICS.get(self.metric)
+        object.__setattr__(self, "measure", m)
+        if isinstance(self.metric, Metric):
+            object.__setattr__(self, "metric", self.metric.name)
 
 
 # --------------------------------------------------------------------------
@@ -273,22 +166,22 @@ class Objective:
         ctx: MetricContext,
         aggregation: AbstractAggregation = Mean(),
         penalty: float = 1e3,
-        drive=None,
-        bind=None,
+        family: AbstractScenarios | None = None,
         trace_key: str | None = None,
     ):
         """``component``: the module whose free gains ``param`` sets; ``scenarios``: the batch (leading axis
         the scenarios); ``horizon``: simulated seconds per scenario; ``terms``: the weighted metrics summed
         per scenario; ``ctx``: the metrics' event time, steady window and bands; ``aggregation``: how the
         per-scenario values become one (:class:`~jaxobs_tuning.aggregations.Mean` by default); ``penalty``: the
-        value of a diverged scenario.  ``drive``: run each scenario (a drive Scenario) closed loop with
-        this Drive, the component as its observer; ``bind(component, scenario)``: adapt the component to
-        the scenario (the parameters an observer assumes, its initial speed) before the run.  ``trace_key``: a
+        value of a diverged scenario.  ``family``: the scenarios' family (:mod:`jaxobs.families`), which makes the
+        system the component runs on each scenario (bound to it: the machine an observer assumes, its initial
+        speed; closing the drive's loop for :class:`~jaxobs.families.DriveScenarios`); None: the component runs
+        on each scenario, a signal, as it is.  ``trace_key``: a
         string naming everything that built this objective (a job's digest and which of its scenario sets):
         with it, the value-and-gradient's and the scoring's traced programs are kept across processes
         (:func:`jaxobs.kept_jit`, where :func:`jaxobs.use_compile_cache` set a folder)."""
         for term in terms:
-            if term.metric not in METRICS:
+            if term.measure is None:
                 raise ValueError(f"objective metric {term.metric!r} is unknown; known: {', '.join(METRICS)}")
         if not isinstance(aggregation, AbstractAggregation):
             raise ValueError(
@@ -301,11 +194,11 @@ class Objective:
         self.terms = list(terms)
         self.ctx = ctx
         self.aggregation, self.penalty = aggregation, float(penalty)
-        self.drive, self.bind = drive, bind
+        self.family = family
         self.trace_key = trace_key
         # the solver's runs: every step's outputs, an observer on a signal through the loop made fast, the drive
         # plainly (module doc); the scoring and the figures run once per design, where compile time counts
-        self._save = SaveAll(fast=drive is None)
+        self._save = SaveAll(fast=not self.closed_loop)
         # the scenarios and the component are constants of the program (self is static): the key names them
         vg = self._per_scenario_value_and_grad
         self._vg = eqx.filter_jit(vg) if trace_key is None else kept_jit(vg, f"objective.vg|{trace_key}")
@@ -324,6 +217,11 @@ class Objective:
 
         self.value = value
 
+    @property
+    def closed_loop(self) -> bool:
+        """Whether the component closes the drive's loop (the drive's metrics and flags apply)."""
+        return self.family is not None and self.family.closed_loop
+
     # --- single scenario
     def _simulate(self, comp, sig, save=SaveAll()):
         return simulate(self._bound_system(comp, sig), self.horizon, save=save)
@@ -336,7 +234,7 @@ class Objective:
     def _term(self, term, comp, sol, sig):
         if term.metric == STABILITY_MARGIN:
             return self._exponent(comp, sig)
-        return METRICS[term.metric](sol, sig, self.ctx)
+        return term.measure(sol, sig, self.ctx)
 
     def _one(self, theta, sig):
         comp = self.param.apply(self.component, theta)
@@ -415,26 +313,24 @@ class Objective:
 
     # --- reporting: a design scored on the scenarios by the one study runner (jaxobs.runner)
     def _bound_system(self, comp, sig):
-        """The system one scenario runs: ``comp`` bound to the scenario, on its signal or closing the drive's
-        loop."""
-        if self.bind is not None:
-            comp = self.bind(comp, sig)
-        return ClosedLoop(self.drive, comp, sig) if self.drive is not None else OnSignal(comp, sig)
+        """The system one scenario runs: the family's (``comp`` bound to the scenario, on its signal or closing
+        the drive's loop), or ``comp`` on the signal as it is."""
+        return OnSignal(comp, sig) if self.family is None else self.family.system(comp, sig)
 
     def _system(self, theta, sig):
         """The system one scenario runs at ``theta`` (what :meth:`_simulate` simulates)."""
         return self._bound_system(self.param.apply(self.component, theta), sig)
 
     def _scenario_metrics(self, sol, sig, _aux):
-        mets = {t.metric: METRICS[t.metric](sol, sig, self.ctx) for t in self.terms if t.metric != STABILITY_MARGIN}
+        mets = {t.metric: t.measure(sol, sig, self.ctx) for t in self.terms if t.metric != STABILITY_MARGIN}
         # far from the truth over the steady window (jaxobs.metrics, "lost lock"): reported, not tuned on
         mets[LOST_LOCK] = M.lost_lock_of(sol, self.ctx.steady_from, signal=sig)
-        if self.drive is not None:
+        if self.closed_loop:
             mets["lost_sync"] = _lost_sync(sol, sig, self.ctx)
             # the drive does not follow its speed reference over the steady window (jaxobs.metrics,
             # "lost speed"): e.g. a standstill start that runs backwards with a locked observer
             out = sol.outputs
-            mets["lost_speed"] = M.lost_speed(out.omega_m, out.omega_m_ref, _steady(sol, self.ctx))
+            mets["lost_speed"] = M.lost_speed(out.omega_m, out.omega_m_ref, sol.t >= self.ctx.steady_from)
         return {**mets, _OK: sol.ok}
 
     def _per_scenario_metrics(self, theta, scenarios):

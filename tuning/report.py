@@ -9,6 +9,8 @@ from pathlib import Path
 import jax
 import numpy as np
 
+from jaxobs.families import GridSignals
+
 from .outdir import atomic_path
 
 
@@ -114,7 +116,7 @@ def write_report(out: Path, job, obj, thetas: dict, history: list, closed_form_t
         axes[1].plot(t, np.degrees(err), label=name, **style)
     # an FLL's ("grid") error is the grid voltage's phase; a flux observer's or a drive's (on an "emf" recording or
     # closing the loop) is the rotor's electrical position: the labels say which
-    if job.scenarios.signal != "grid":
+    if job.scenarios.family is not GridSignals:
         axes[0].set_ylabel("speed estimate ω̂e/2π (Hz)")
         axes[1].set_ylabel("position error (deg el.)")
     else:

@@ -27,7 +27,7 @@ A FLL study::
     k = 1.0
     lam = 20000.0
 
-    [axes]                         # jaxobs.study.STUDY_AXES, each a non-empty list of numbers in its range
+    [axes]                         # jaxobs.families.GridSignals.axes, each a non-empty list of numbers in its range
     freq_step = [-2.0, 2.0]
 
 A drive study::
@@ -49,7 +49,7 @@ A drive study::
     [designs.mine]
     component = "FALESO"
     k1 = 16.1
-    [axes]                         # jaxobs.drive_study.DRIVE_STUDY_AXES
+    [axes]                         # jaxobs.families.DriveScenarios.axes
     dRs = [-0.2, 0.2]
 
 ``result`` paths: a relative path is read relative to the folder of the study file (not the working
@@ -67,23 +67,21 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from jaxobs.drive import BENCH_MACHINES, bench_machine
-from jaxobs.drive_study import DRIVE_STUDY_AXES
+from jaxobs.families import DriveScenarios, GridSignals
 from jaxobs.observers import AbstractFluxObserver
 from jaxobs.provenance import sha256, versions
 from jaxobs.registry import REGISTRY, canonical_key
-from jaxobs.study import STUDY_AXES
 
 from .job import (
-    AXIS_RANGES,
     COMPONENTS,
     MAX_SCENARIOS,
     MAX_STEPS,
     DriveSpec,
     JobError,
     available_memory,
+    axes_field,
     cap,
     check_speed_axes,
-    freq_step_range,
     get_field,
     job_drive,
     no_unknown,
@@ -112,8 +110,6 @@ DRIVE_OBSERVERS = tuple(name for name, e in REGISTRY.items() if "drive" in e.sig
 # the drive jobs' machines (jaxobs.drive.BENCH_MACHINES: the same names, bench inertias and FOC), so a study
 # scores a tuned result on the drive that tuned it
 MACHINES = tuple(BENCH_MACHINES)
-# the study's scenario axes and their physical ranges: the tuning jobs' grid axes, and the noise level
-FLL_AXIS_RANGES = {k: {**AXIS_RANGES["grid"], "noise": ("pu", (0.0, 10.0))}[k] for k in STUDY_AXES}
 MAX_CHUNK = 100_000
 # bytes one scenario keeps per time step while a chunk runs (every step's outputs and the metrics' temporaries,
 # float64): an estimate for the memory check, not a measurement
@@ -204,22 +200,9 @@ def parse_study(raw: dict, base: Path | None = None) -> StudySpec:
 # --------------------------------------------------------------------------------------------------
 
 
-def _axes(raw: dict, ranges: dict, limits: dict | None = None) -> dict:
-    """``[axes]``: known names, non-empty lists of finite numbers inside each axis's range."""
-    axes_t = get_field(raw, "axes", "axes", dict, {})
-    if not axes_t:
-        raise JobError("axes", f"at least one axis is required; allowed: {', '.join(ranges)}")
-    axes = {}
-    for k in axes_t:
-        if k not in ranges:
-            raise JobError(f"axes.{cap(str(k), 40)}", f"unknown axis; allowed: {', '.join(ranges)}")
-        v = axes[k] = get_field(axes_t, k, f"axes.{k}", list)
-        unit, (lo, hi) = (limits or {}).get(k, ranges[k])
-        for i, x in enumerate(v):
-            if not lo <= x <= hi:
-                u = "" if unit == "1" else f" {unit}"
-                raise JobError(f"axes.{k}[{i}]", f"must be in [{lo:g}, {hi:g}]{u}, got {x:g}")
-    return axes
+def _axes(raw: dict, family, limits: dict | None = None) -> dict:
+    """``[axes]``: known names (the family's), non-empty lists of finite numbers inside each axis's range."""
+    return axes_field(get_field(raw, "axes", "axes", dict, {}), family, "axes", limits)
 
 
 def _count(axes: dict, sample: int) -> int:
@@ -391,8 +374,7 @@ def _parse_fll(raw: dict, st: dict, name: str, base: Path) -> StudySpec:
     freq = float(next(iter(designs.values())).omega_n) / (2 * math.pi)
     if "recording" in st:  # [study.recording]: recorded voltages instead of the axes' grid
         return _fll_recordings(raw, st, name, base, designs, t_event, horizon, steady, band, results)
-    limits = {"freq_step": (FLL_AXIS_RANGES["freq_step"][0], freq_step_range(freq, ts))}
-    axes = _axes(raw, FLL_AXIS_RANGES, limits)
+    axes = _axes(raw, GridSignals, GridSignals.limits(freq, ts))
     n = _count(axes, sample)
     _check_steps(horizon, steady, ts, n, chunk, "fll")
     opts = dict(
@@ -413,7 +395,7 @@ def _fll_recordings(raw, st, name, base, designs, t_event, horizon, steady, band
     if len(ts) != 1:
         raise JobError("designs", f"a study on recordings needs one sample time for all designs, got {ts}")
     spec = parse_recording_scenarios(
-        {"recording": st["recording"]}, "study", "grid", t_event, horizon, steady, 0, ts[0], base
+        {"recording": st["recording"]}, "study", GridSignals, t_event, horizon, steady, 0, ts[0], base
     )
     opts = dict(t_event=t_event, horizon=horizon, steady_from=steady, band_hz=band, recording=spec.recording)
     return StudySpec(name, "fll", designs, {}, opts, len(spec.recording.files), _results_attr(results))
@@ -528,7 +510,7 @@ def _parse_drive(raw: dict, st: dict, name: str, base: Path) -> StudySpec:
     if sampling != "grid" and not 1 <= sample <= MAX_SCENARIOS:
         raise JobError("study.sample", f"must be in [1, {MAX_SCENARIOS}] with sampling = {sampling!r}, got {sample}")
     seed, chunk = _seed(st), _chunk(st, 256)
-    axes = _axes(raw, DRIVE_STUDY_AXES)
+    axes = _axes(raw, DriveScenarios)
     check_speed_axes(axes, "axes", machine)  # the jobs' check: speeds within the inverter's limit
     n = _count(axes, sample)
     _check_steps(horizon, steady, ts, n, chunk, "drive", extra_s=settle)

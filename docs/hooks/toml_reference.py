@@ -277,8 +277,11 @@ def _table(
 
 def _axes_table(title: str, ranges: dict, intro: str) -> str:
     lines = [f"### `{title}`", "", intro, "", "| axis | unit | range |", "|---|---|---|"]
-    for name, (unit, (lo, hi)) in ranges.items():
-        lines.append(f"| `{name}` | {'1' if unit == '1' else unit} | [{lo:g}, {hi:g}] |")
+    from jaxobs.quantities import text_unit
+
+    for name, axis in ranges.items():  # jaxobs.quantities.Axis records
+        lo, hi = axis.range
+        lines.append(f"| `{name}` | {text_unit(axis.units)} | [{lo:g}, {hi:g}] |")
     return "\n".join(lines) + "\n"
 
 
@@ -307,7 +310,7 @@ def reference_markdown() -> str:
     # the schema's public tables wherever a refactor puts them (tuning's modules are being split): each name is
     # looked up in tuning's submodules, the first that defines it wins
     job_mod = _Names("AXIS_RANGES", "RECORDING_COLUMNS")
-    study_file = _Names("parse_study", "FLL_CLOSED_FORMS", "DRIVE_OBSERVERS", "FLL_COMPONENTS", "FLL_AXIS_RANGES")
+    study_file = _Names("parse_study", "FLL_CLOSED_FORMS", "DRIVE_OBSERVERS", "FLL_COMPONENTS")
 
     index = SourceIndex(ROOT / "tuning")
     presets = ROOT / "tuning" / "presets"
@@ -521,10 +524,10 @@ def reference_markdown() -> str:
         + "\n".join(rows)
         + "\n"
     )
-    out.append(_axes_table('[axes] (kind = "fll")', study_file.FLL_AXIS_RANGES, "Each a list of values."))
-    from jaxobs.drive_study import DRIVE_STUDY_AXES
+    from jaxobs.families import DriveScenarios, GridSignals
 
-    out.append(_axes_table('[axes] (kind = "drive")', DRIVE_STUDY_AXES, "Each a list of values."))
+    out.append(_axes_table('[axes] (kind = "fll")', GridSignals.axes, "Each a list of values."))
+    out.append(_axes_table('[axes] (kind = "drive")', DriveScenarios.axes, "Each a list of values."))
     return "\n".join(out)
 
 

@@ -69,9 +69,7 @@ from .plant import PlantInput as PlantInput
 from .plant import PlantOutput as PlantOutput
 from .plant import PlantState as PlantState
 from .plant import plant_field as plant_field
-from .scenario import CF_UNITS as CF_UNITS
 from .scenario import DRIVE_AXES as DRIVE_AXES
-from .scenario import GRID_AXES as GRID_AXES
 from .scenario import Batch as Batch
 from .scenario import ParameterDrift as ParameterDrift
 from .scenario import Profile as Profile

@@ -23,6 +23,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._validate import as_float, check_nonnegative, check_real
+from ..quantities import Axis, text_unit
 from .hardware import Sensors
 from .machine import RPM, PMSMParams
 
@@ -34,8 +35,6 @@ __all__ = [
     "grid",
     "scenario_batch",
     "DRIVE_AXES",
-    "GRID_AXES",
-    "CF_UNITS",
 ]
 
 
@@ -200,9 +199,6 @@ class Scenario(eqx.Module):
         return Profile(times, torques, kind="step")
 
 
-# unit labels (tables, figures) spelled as UDUNITS wants them in a NetCDF file: CF readers parse "degree"
-# and "min-1" (revolutions per minute), not "deg" or "r/min"
-CF_UNITS = {"deg": "degree", "r/min": "min-1", "N·m": "N m"}
 # CF units of the drive's outputs (DriveOutput's fields) and of the observers' common ones, for to_xarray
 _OUTPUT_UNITS = {
     "t": "s",
@@ -265,10 +261,7 @@ class Batch(eqx.Module):
                     f"({self.size} scenarios, dims {self.dims})"
                 )
             named[name or "value"] = arr.reshape(*self.shape, *arr.shape[1:])
-        coords = {
-            d: (d, list(c), {"units": CF_UNITS.get(DRIVE_AXES[d][0], DRIVE_AXES[d][0]), "long_name": DRIVE_AXES[d][2]})
-            for d, c in zip(self.dims, self.coords)
-        }
+        coords = {d: (d, list(c), DRIVE_AXES[d].attrs) for d, c in zip(self.dims, self.coords)}
         t = named.get("t")
         if t is not None and t.ndim == len(self.dims) + 1:
             flat = t.reshape(-1, t.shape[-1])
@@ -285,30 +278,32 @@ class Batch(eqx.Module):
         return xr.Dataset(data, coords=coords)
 
 
-# The one table of drive-scenario axes: axis -> (unit, allowed range, what it is).  Studies, tuning jobs
-# and D.grid take these names; relative mismatches are of the assumed machine against the true one
+# The one table of drive-scenario axes: one Axis each (CF units, allowed range, what it is).  Studies, tuning
+# jobs and D.grid take these names; relative mismatches are of the assumed machine against the true one
 # (est = true · (1 + v)), ``dJ`` moves the true inertia (the controller keeps the nominal one).
-DRIVE_AXES: dict[str, tuple[str, tuple[float, float], str]] = {
-    "speed_rpm": ("r/min", (1.0, 1e5), "speed (and its reference before the event)"),
-    "load_nm": ("N·m", (-1e4, 1e4), "load torque before the event"),
-    "speed_step_rpm": ("r/min", (-1e5, 1e5), "step of the speed reference at t_event"),
-    "load_step_nm": ("N·m", (-1e4, 1e4), "step of the load torque at t_event"),
-    "dRs": ("1", (-0.95, 10.0), "relative error of the assumed stator resistance Rs"),
-    "dL": ("1", (-0.95, 10.0), "relative error of both assumed inductances Ld and Lq"),
-    "dLd": ("1", (-0.95, 10.0), "relative error of the assumed d-axis inductance Ld"),
-    "dLq": ("1", (-0.95, 10.0), "relative error of the assumed q-axis inductance Lq"),
-    "dpsi": ("1", (-0.95, 10.0), "relative error of the assumed PM flux linkage"),
-    "dJ": ("1", (-0.95, 100.0), "relative change of the true inertia (controller: nominal)"),
-    "i_noise": ("A", (0.0, 1e3), "current-sensor noise (standard deviation)"),
-    "u_noise": ("V", (0.0, 1e4), "voltage-sensor noise (standard deviation)"),
-    "dead_time": ("s", (0.0, 1e-4), "inverter dead time"),
-    "u_offset_alpha": ("V", (-1e4, 1e4), "voltage-sensor offset, alpha axis"),
-    "u_offset_beta": ("V", (-1e4, 1e4), "voltage-sensor offset, beta axis"),
-    "i_offset_alpha": ("A", (-1e3, 1e3), "current-sensor offset, alpha axis"),
-    "i_offset_beta": ("A", (-1e3, 1e3), "current-sensor offset, beta axis"),
-    "seed": ("1", (0.0, 2.0**31 - 1), "noise seed (PRNGKey(seed) of the scenario)"),
+DRIVE_AXES: dict[str, Axis] = {
+    a.name: a
+    for a in (
+        Axis("speed_rpm", "min-1", (1.0, 1e5), "speed (and its reference before the event)"),
+        Axis("load_nm", "N m", (-1e4, 1e4), "load torque before the event"),
+        Axis("speed_step_rpm", "min-1", (-1e5, 1e5), "step of the speed reference at t_event"),
+        Axis("load_step_nm", "N m", (-1e4, 1e4), "step of the load torque at t_event"),
+        Axis("dRs", "1", (-0.95, 10.0), "relative error of the assumed stator resistance Rs"),
+        Axis("dL", "1", (-0.95, 10.0), "relative error of both assumed inductances Ld and Lq"),
+        Axis("dLd", "1", (-0.95, 10.0), "relative error of the assumed d-axis inductance Ld"),
+        Axis("dLq", "1", (-0.95, 10.0), "relative error of the assumed q-axis inductance Lq"),
+        Axis("dpsi", "1", (-0.95, 10.0), "relative error of the assumed PM flux linkage"),
+        Axis("dJ", "1", (-0.95, 100.0), "relative change of the true inertia (controller: nominal)"),
+        Axis("i_noise", "A", (0.0, 1e3), "current-sensor noise (standard deviation)"),
+        Axis("u_noise", "V", (0.0, 1e4), "voltage-sensor noise (standard deviation)"),
+        Axis("dead_time", "s", (0.0, 1e-4), "inverter dead time"),
+        Axis("u_offset_alpha", "V", (-1e4, 1e4), "voltage-sensor offset, alpha axis"),
+        Axis("u_offset_beta", "V", (-1e4, 1e4), "voltage-sensor offset, beta axis"),
+        Axis("i_offset_alpha", "A", (-1e3, 1e3), "current-sensor offset, alpha axis"),
+        Axis("i_offset_beta", "A", (-1e3, 1e3), "current-sensor offset, beta axis"),
+        Axis("seed", "1", (0.0, 2.0**31 - 1), "noise seed (PRNGKey(seed) of the scenario)"),
+    )
 }
-GRID_AXES = tuple(DRIVE_AXES)  # the names D.grid takes
 
 
 def _two_knots(b: int, t_event: float, before, after) -> Profile:
@@ -349,7 +344,7 @@ def scenario_batch(
     b = len(points)
     cols = {n: np.asarray([p[i] for p in points], dtype=float).reshape(b) for i, n in enumerate(names)}
     for name, c in cols.items():
-        unit, (lo, hi), _ = DRIVE_AXES[name]
+        (lo, hi), unit = DRIVE_AXES[name].range, text_unit(DRIVE_AXES[name].units)
         if not np.all(np.isfinite(c)) or np.any(c < lo) or np.any(c > hi):
             raise ValueError(f"grid axis {name} must be in [{lo:g}, {hi:g}] {unit}")
     if ({"i_noise", "u_noise"} & set(names)) and not base.sensors.noisy:

@@ -22,7 +22,6 @@ import jax.scipy.linalg as jsl
 import optimistix as optx
 
 from .._validate import as_float
-from ..metrics import settling_time
 
 __all__ = [
     "TransferFunction",
@@ -236,9 +235,15 @@ class TransferFunction(eqx.Module):
 
     def settling_time(self, t, band=0.02):
         """Step-response settling time to within ``band`` of the final value (exact on the grid)."""
-        y = self.step(t)
+        y = jnp.real(self.step(t))
         final = self.dcgain()
-        return settling_time(t - t[0], jnp.real(y), jnp.real(final), band * jnp.abs(final))
+        # the first sample from which |y − final| stays within the band (0 if it never leaves it; the record's
+        # length if it never settles): jaxobs.metrics.settling_time's arithmetic, here below the metrics
+        outside = jnp.abs(y - jnp.real(final)) > band * jnp.abs(final)
+        last_out = jnp.max(jnp.where(outside, jnp.arange(y.shape[-1]), -1), axis=-1)
+        tt = t - t[0]
+        settled_at = jnp.where(last_out < 0, 0.0, tt[jnp.minimum(last_out + 1, y.shape[-1] - 1)])
+        return jnp.where(jnp.isfinite(jnp.real(final)) & jnp.isfinite(band * jnp.abs(final)), settled_at, jnp.nan)
 
 
 def _as_tf(x) -> TransferFunction:

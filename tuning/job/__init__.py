@@ -68,6 +68,7 @@ from .drive import job_drive as job_drive
 from .fields import MAX_SCENARIOS as MAX_SCENARIOS
 from .fields import MAX_STEPS as MAX_STEPS
 from .fields import JobError as JobError
+from .fields import axes_field as axes_field
 from .fields import cap as cap
 from .fields import get_field as get_field
 from .fields import no_unknown as no_unknown

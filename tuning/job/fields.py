@@ -101,3 +101,26 @@ def no_unknown(table: dict, allowed, where: str):
     for key in table:
         if key not in allowed:
             raise JobError(f"{where}.{cap(str(key), 40)}", f"unknown key; allowed: {', '.join(allowed)}")
+
+
+def axes_field(tab: dict, family, where: str, limits: dict | None = None) -> dict:
+    """``tab`` (axis name -> list of numbers) checked against the axes of ``family`` (a scenario family,
+    :mod:`jaxobs.families`): known names, each a list of numbers inside its range, narrowed by ``limits``
+    (name -> (low, high), :meth:`~jaxobs.families.AbstractScenarios.limits`).
+
+    Raises:
+        JobError: naming ``where``, ``where.<axis>`` or ``where.<axis>[i]`` and the allowed range.
+    """
+    allowed = family.axes
+    if not tab:
+        raise JobError(where, f"at least one axis is required; allowed: {', '.join(allowed)}")
+    axes = {}
+    for k in tab:
+        if k not in allowed:
+            raise JobError(f"{where}.{cap(str(k), 40)}", f"unknown axis; allowed: {', '.join(allowed)}")
+        v = axes[k] = get_field(tab, k, f"{where}.{k}", list)
+        lo, hi = (limits or {}).get(k, allowed[k].range)
+        for i, x in enumerate(v):
+            if not lo <= x <= hi:
+                raise JobError(f"{where}.{k}[{i}]", f"must be in {allowed[k].text(lo, hi)}, got {x:g}")
+    return axes

@@ -10,9 +10,6 @@ from pathlib import Path
 import numpy as np
 
 from jaxobs import metrics as M
-from jaxobs.drive import DRIVE_AXES
-from jaxobs.drive_study import CF_UNITS
-from jaxobs.study import AXIS_META
 
 from ..objective import LOST_SYNC_DEG, METRIC_UNITS
 from ..outdir import atomic_write_text
@@ -61,22 +58,6 @@ def at_bounds(job: Job, gains: dict) -> dict:
     return out
 
 
-# the EMF signals' axes (jaxobs.scenarios.emf_signals) in CF units; the grid signals' and the drive's come
-# from jaxobs.study.AXIS_META and jaxobs.drive.DRIVE_AXES
-_EMF_AXIS_UNITS = {"speed_hz": "Hz", "dc_alpha": "V", "dc_beta": "V", "h5": "1", "h7": "1", "phase_deg": "degree"}
-
-
-def _axis_units(name: str) -> str:
-    if name in AXIS_META:
-        return AXIS_META[name][0]
-    if name in _EMF_AXIS_UNITS:
-        return _EMF_AXIS_UNITS[name]
-    if name in DRIVE_AXES:
-        unit = DRIVE_AXES[name][0]
-        return CF_UNITS.get(unit, unit)
-    return "1"  # an index (scenario, recording)
-
-
 def scores_dataset(obj, names, combos, spec: ScenarioSpec, per: dict):
     """Per-scenario metrics of each design as an xarray Dataset: the grid's axes as dims (a full grid),
     else one ``scenario`` dim with the axes as coordinates (sampled scenarios).  Every variable and numeric
@@ -95,7 +76,7 @@ def scores_dataset(obj, names, combos, spec: ScenarioSpec, per: dict):
         coords.update({n: ("scenario", [c[i] for c in combos]) for i, n in enumerate(names)})
     data = {}
     keys = [t.metric for t in obj.terms]
-    extra = ("lost_sync", "lost_speed") if obj.drive is not None else ()
+    extra = ("lost_sync", "lost_speed") if obj.closed_loop else ()
     for key in (*keys, "total", "diverged", "lost_lock", *extra):
         rows = []
         for d in designs:
@@ -122,7 +103,8 @@ def scores_dataset(obj, names, combos, spec: ScenarioSpec, per: dict):
     for key in ("diverged", "lost_lock", *extra):
         ds[key].attrs["units"] = "1"
     for name in (*names, *([] if grid else ["scenario"])):
-        ds[name].attrs["units"] = _axis_units(name)
+        # the family's axis (CF units); an index (scenario, recording) is a number
+        ds[name].attrs["units"] = spec.family.axes[name].units if name in spec.family.axes else "1"
         ds.attrs["note"] += f"; lost_sync: 1 where diverged or |position error| > {LOST_SYNC_DEG:g} deg (drive)"
         ds.attrs["note"] += (
             f"; lost_speed: 1 where diverged or the steady window's mean |speed - reference| > "
@@ -145,7 +127,7 @@ def claimed_envelope(job: Job) -> dict | None:
     steps), the other axes' ranges; ``None`` for a job that is not a simulated drive.  Where the designs hold
     inside it is not computed after tuning (minutes on the presets): ``jaxobs envelope <result.json>`` maps it."""
     spec = job.scenarios
-    if job.drive is None or spec.signal != "drive" or spec.recording is not None:
+    if job.drive is None or not spec.family.closed_loop or spec.recording is not None:
         return None
     axes = spec.axes
     speeds = [float(v) for v in axes.get("speed_rpm", [600.0])]

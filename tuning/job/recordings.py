@@ -9,6 +9,7 @@ import equinox as eqx
 import jax
 
 import jaxobs
+from jaxobs.families import FAMILIES, RecordedSignals
 from jaxobs.observers import AbstractFluxObserver
 from jaxobs.provenance import sha256
 from jaxobs.signals import stack
@@ -24,12 +25,8 @@ MAX_RECORDING_BYTES = 8 * 2**20  # a recording file of a job or study larger tha
 MAX_RECORDINGS = 64  # files of one [scenarios.recording]
 
 
-# what each kind of job reads from a recording: its signal columns and its truth columns (defaults)
-RECORDING_COLUMNS = {
-    "grid": (["v"], ["theta", "omega", "amplitude"]),  # v; true phase (rad), ω (rad/s), amplitude
-    "emf": (["u_a", "u_b", "i_a", "i_b"], ["theta_e", "omega_e"]),  # u/i; encoder angle (rad), speed (rad/s)
-    "drive": (["u_a", "u_b", "i_a", "i_b"], ["theta_e", "omega_e"]),
-}
+# what each kind of job reads from a recording: its signal columns and its truth columns (defaults), the family's
+RECORDING_COLUMNS = {name: family.recording_columns for name, family in FAMILIES.items()}
 
 
 def _col_spec(v, field: str):
@@ -38,10 +35,11 @@ def _col_spec(v, field: str):
     return v
 
 
-def parse_recording_scenarios(tab, where, signal, t_event, horizon, steady, seed, ts, base) -> ScenarioSpec:
-    """``[<where>.recording]``: the file(s), the time base, the columns; read and checked now when the job
-    file's folder is known (``base``): exists, at most :data:`MAX_RECORDING_BYTES`, the columns present,
-    finite, time strictly increasing, sampled at least at 1/ts, long enough for the horizon."""
+def parse_recording_scenarios(tab, where, kind, t_event, horizon, steady, seed, ts, base) -> ScenarioSpec:
+    """``[<where>.recording]`` of recordings that stand for the family ``kind`` (:mod:`jaxobs.families`): the
+    file(s), the time base, the columns; read and checked now when the job file's folder is known (``base``):
+    exists, at most :data:`MAX_RECORDING_BYTES`, the columns present, finite, time strictly increasing, sampled
+    at least at 1/ts, long enough for the horizon."""
     w = f"{where}.recording"
     if "grid" in tab or "sample" in tab:
         key = "grid" if "grid" in tab else "sample"
@@ -61,9 +59,10 @@ def parse_recording_scenarios(tab, where, signal, t_event, horizon, steady, seed
     rate = get_field(rec, "sample_rate", f"{w}.sample_rate", float)
     if rate is not None and not 0 < rate <= 1e9:
         raise JobError(f"{w}.sample_rate", f"must be in (0, 1e9] Hz, got {rate:g}")
-    cols_default, truth_default = RECORDING_COLUMNS[signal]
+    family = RecordedSignals(kind)
+    cols_default, truth_default = (list(c) for c in family.kind.recording_columns)
     cols, truth = rec.get("columns", cols_default), rec.get("truth", truth_default)
-    n_truth = (3,) if signal == "grid" else (1, 2)  # grid: theta, omega, amplitude; u/i: theta_e [, omega_e]
+    n_truth = family.kind.truth_counts  # grid: theta, omega, amplitude; u/i: theta_e [, omega_e]
     for key, v, n_ok in (("columns", cols, (len(cols_default),)), ("truth", truth, n_truth)):
         if not isinstance(v, list) or len(v) not in n_ok:
             raise JobError(f"{w}.{key}", f"must be a list of {' or '.join(map(str, n_ok))} column(s), got {show(v)}")
@@ -84,7 +83,7 @@ def parse_recording_scenarios(tab, where, signal, t_event, horizon, steady, seed
             if size > MAX_RECORDING_BYTES:
                 raise JobError(field, f"{files[i]!r} is {size} bytes, more than {MAX_RECORDING_BYTES} (8 MiB)")
             try:
-                sig = _load_one(spec, signal, path)
+                sig = _load_one(spec, family, path)
             except jaxobs.signals.RecordingColumnError as e:  # a column not in the file: the key that named it
                 raise JobError(_column_field(w, e, spec), str(e).replace(path, files[i])) from None
             except ValueError as e:
@@ -99,7 +98,7 @@ def parse_recording_scenarios(tab, where, signal, t_event, horizon, steady, seed
             digests.append(sha256(Path(path)))
         spec = dataclasses.replace(spec, sha256=tuple(digests))
     axes = {"recording": [float(i) for i in range(len(files))]}
-    return ScenarioSpec(signal, t_event, horizon, steady, axes, 0, seed, recording=spec)
+    return ScenarioSpec(kind.signal, t_event, horizon, steady, axes, 0, seed, recording=spec)
 
 
 def _column_field(w: str, e, spec: RecordingSpec) -> str:
@@ -111,26 +110,17 @@ def _column_field(w: str, e, spec: RecordingSpec) -> str:
     return f"{w}.{key}[{listed.index(e.spec)}]" if e.spec in listed else f"{w}.{key}"
 
 
-def _load_one(spec: RecordingSpec, signal: str, path: str):
+def _load_one(spec: RecordingSpec, family: RecordedSignals, path: str):
     kw = dict(time_column=spec.time_column, sample_rate=spec.sample_rate, ts=spec.ts, max_bytes=MAX_RECORDING_BYTES)
-    if signal == "grid":
-        return jaxobs.SampledSignal.from_csv(path, columns=spec.columns[0], truth=spec.truth, **kw)
-    truth = dict(zip(("theta_e", "omega_e"), spec.truth))
-    return jaxobs.DriveRecording.from_csv(path, columns=spec.columns, **truth, **kw)
+    return family.read(path, spec.columns, spec.truth, **kw)
 
 
-def load_recordings(spec: RecordingSpec, signal: str):
-    """The recordings of a job as one batched signal (each cut to the shortest, all read at ``spec.ts``)."""
-    sigs = [_load_one(spec, signal, p) for p in spec.paths]
+def load_recordings(spec: RecordingSpec, family: RecordedSignals):
+    """The recordings of a job as one batched signal (each cut to the shortest, all read at ``spec.ts``), read
+    as ``family`` (:class:`jaxobs.families.RecordedSignals`) reads them."""
+    sigs = [_load_one(spec, family, p) for p in spec.paths]
     n = min(s.n for s in sigs)
     return stack(jax.tree.map(lambda x: x[..., :n] if eqx.is_array(x) else x, s) for s in sigs)
-
-
-def bind_recording(obs, rec):
-    """A drive observer on a recording starts from the recorded speed at t = 0 (the encoder's, as a drive job's
-    observer starts from the scenario's true speed), by its one binding: ``est_par`` None keeps the job's own
-    Rs and L (a recording gives the speed, not the machine)."""
-    return obs.bind(None, rec.omega_e[..., 0])
 
 
 def check_recording_job(job, comp_t: dict) -> None:
@@ -145,7 +135,7 @@ def check_recording_job(job, comp_t: dict) -> None:
                     f"{t.metric!r} needs the closed-loop drive; a recording runs the observer open loop "
                     "(use iae_position, rms_position_steady, ripple_position)",
                 )
-        if spec.signal != "grid" and issubclass(COMPONENTS[job.component].ctor, AbstractFluxObserver):
+        if RecordedSignals(spec.family).binds and issubclass(COMPONENTS[job.component].ctor, AbstractFluxObserver):
             for k in ("Rs", "L"):
                 if k not in comp_t:
                     raise JobError(

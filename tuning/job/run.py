@@ -11,7 +11,6 @@ from pathlib import Path
 import numpy as np
 
 from jaxobs.drive import BENCH_MACHINES
-from jaxobs.drive_study import bind_observer
 from jaxobs.progress import Progress
 from jaxobs.provenance import versions
 
@@ -24,8 +23,7 @@ from ..structure import structure
 from .components import COMPONENTS
 from .drive import job_drive
 from .output import at_bounds, claimed_envelope, recordings_provenance, rule_spec, scores_dataset, write_json
-from .recordings import bind_recording
-from .scenarios import build_scenarios
+from .scenarios import build_scenarios, job_family
 from .spec import Job, ScenarioSpec
 from .verify import verify_designs
 
@@ -34,13 +32,13 @@ def build_objective(job: Job, spec: ScenarioSpec | None = None):
     spec = job.scenarios if spec is None else spec
     comp = COMPONENTS[job.component].ctor(**job.values)
     machine = job.drive.machine if job.drive is not None else "ipmsm002"
-    scen, names, combos = build_scenarios(spec, job.values, machine)
+    drive = job_drive(job.drive) if spec.family.closed_loop and spec.recording is None else None
+    # the family makes each scenario's system: the observer bound to it (a drive scenario's assumed machine and
+    # speed, a recording's speed), on its signal or closing the drive's loop
+    family = job_family(spec, job.values, drive, machine)
+    scen, names, combos = build_scenarios(spec, family)
     ctx = MetricContext(t_event=spec.t_event, steady_from=spec.steady_from)
     param = Parametrization(job.gains)
-    drive = job_drive(job.drive) if spec.signal == "drive" else None
-    bind = bind_observer if drive is not None else None  # the scenario's assumed machine and speed
-    if spec.recording is not None:  # the observer runs open loop on the recorded u/i or voltage
-        drive, bind = None, (bind_recording if spec.signal != "grid" else None)
     # what the objective's traced programs are kept under (jaxobs.kept_jit): the job (its file's digest, its
     # recordings') and which of its scenario sets; none for another spec
     which = "scenarios" if spec is job.scenarios else "holdout" if spec is job.holdout else None
@@ -53,8 +51,7 @@ def build_objective(job: Job, spec: ScenarioSpec | None = None):
         ctx=ctx,
         aggregation=job.aggregation,
         penalty=job.penalty,
-        drive=drive,
-        bind=bind,
+        family=family,
         trace_key=None if which is None else f"{job_fingerprint(job)}|{which}",
     )
     return obj, (names, combos)

@@ -1,12 +1,13 @@
-"""A job's scenarios as a batched signal: grid points or samples of its axes, built by the library's builders."""
+"""A job's scenarios: its family (:mod:`jaxobs.families`, named by ``scenarios.signal``) and the batch it builds
+from grid points or samples of its axes."""
 
 from __future__ import annotations
 
 import math
 
 from jaxobs import drive as D
-from jaxobs.drive_study import drive_scenarios
-from jaxobs.scenarios import Grid, Random, emf_signals, grid_signals
+from jaxobs.families import AbstractScenarios, RecordedSignals
+from jaxobs.scenarios import Grid, Random
 
 from .components import W_N
 from .recordings import load_recordings
@@ -21,26 +22,22 @@ def scenario_points(spec: ScenarioSpec):
     return list(sampler.names), sampler.points()
 
 
-def _drive_scenarios(names, combos, seed=0, t_event=0.0, machine="ipmsm002"):
-    """The machine's bench (:func:`jaxobs.drive.bench_machine`) for every combination; each starts steady at
-    its speed, and the speed_step_rpm / load_step_nm axes step the reference and the load at t_event."""
-    return drive_scenarios(D.bench_machine(machine), names, combos, seed=seed, t_event=t_event)
+def job_family(spec: ScenarioSpec, values: dict, drive=None, machine: str = "ipmsm002") -> AbstractScenarios:
+    """The family of a job's scenario set: its recordings (:class:`~jaxobs.families.RecordedSignals`), or the
+    family ``spec.signal`` names with the job's event, seed, nominal frequency (``values["omega_n"]``), machine
+    (:data:`jaxobs.drive.BENCH_MACHINES`) and ``drive``."""
+    if spec.recording is not None:
+        return RecordedSignals(spec.family)
+    freq = float(values.get("omega_n", W_N)) / (2 * math.pi)
+    return spec.family.of(
+        t_event=spec.t_event, seed=spec.seed, freq=freq, machine=D.bench_machine(machine), drive=drive
+    )
 
 
-def build_scenarios(spec: ScenarioSpec, values: dict, machine: str = "ipmsm002"):
-    """A batched signal for every combination of the axes (or ``sample`` random ones); ``machine``: a drive
-    job's (:data:`jaxobs.drive.BENCH_MACHINES`)."""
+def build_scenarios(spec: ScenarioSpec, family: AbstractScenarios):
+    """The batched scenarios of every combination of the axes (or ``sample`` random ones), built by ``family``
+    (:func:`job_family`), or the job's recordings; with the axes' names and the points."""
     names, combos = scenario_points(spec)
     if spec.recording is not None:
-        return load_recordings(spec.recording, spec.signal), names, combos
-    if spec.signal == "drive":
-        return _drive_scenarios(names, combos, spec.seed, spec.t_event, machine), names, combos
-    if spec.signal == "grid":
-        return (
-            grid_signals(
-                names, combos, spec.t_event, float(values.get("omega_n", W_N)) / (2 * math.pi), seed=spec.seed
-            ),
-            names,
-            combos,
-        )
-    return emf_signals(names, combos), names, combos  # back EMFs for the flux observers
+        return load_recordings(spec.recording, family), names, combos
+    return family.build(names, combos), names, combos

@@ -6,7 +6,7 @@ import math
 import os
 from pathlib import Path
 
-from jaxobs.drive_study import DRIVE_STUDY_AXES
+from jaxobs.families import FAMILIES, GridSignals
 from jaxobs.provenance import sha256
 from jaxobs.registry import canonical_key
 
@@ -15,57 +15,30 @@ from ..objective import DRIVE_METRICS, METRICS, STABILITY_MARGIN, Term
 from ..params import GainSpec
 from .components import COMPONENTS, W_N
 from .drive import check_drive_speeds, check_standstill, parse_drive
-from .fields import MAX_SCENARIOS, MAX_SOLVER_STEPS, MAX_STEPS, JobError, cap, get_field, no_unknown, show
+from .fields import (
+    MAX_SCENARIOS,
+    MAX_SOLVER_STEPS,
+    MAX_STEPS,
+    JobError,
+    axes_field,
+    cap,
+    get_field,
+    no_unknown,
+    show,
+)
 from .recordings import check_recording_job, parse_recording_scenarios
 from .spec import Job, ScenarioSpec
 from .toml import read_toml
 from .verify import parse_envelope
 
-# the physical range of every scenario axis (closed intervals unless noted), checked at --check time;
-# freq_step is checked against the component's nominal frequency, speed_hz against the sample rate.  (An
-# "omega0_error" EMF axis was accepted and ignored: removed.  The flux observers start their FLL at
-# omega_init = 2π·50 Hz whatever speed_hz is, so speed_hz already sets the initial frequency error.)
-# The largest frequency step, as a fraction of the nominal frequency: a "50 Hz" grid at 25 Hz or 75 Hz is
-# another grid (tune for that nominal), and an FLL's normalized gains are set at its ω_n.  Grid codes ask
-# far less (EN 50160: ±1 %; ride-through 47–52 Hz); a study may still sweep well beyond them.  Before
-# issue 29 only the sampling limit held, and a 600 Hz step on a 50 Hz grid passed --check.
-MAX_FREQ_STEP_FRACTION = 0.5
+# the scenario axes and their ranges: each family's (jaxobs.families); a job's signal names its family
+AXIS_RANGES = {name: family.axes for name, family in FAMILIES.items()}
 
 
 def freq_step_range(freq_n: float, ts: float) -> tuple[float, float]:
-    """The allowed ``freq_step`` (Hz) on a grid of nominal frequency ``freq_n`` (Hz) sampled every ``ts`` s:
-    at most :data:`MAX_FREQ_STEP_FRACTION` of ``freq_n`` either way, and below the sampling limit
-    (the frequency after the step stays under 1/(4 ts))."""
-    lo, hi = AXIS_RANGES["grid"]["freq_step"][1]
-    step = MAX_FREQ_STEP_FRACTION * freq_n
-    return max(lo, -step), min(hi, step, 0.25 / ts - freq_n)
-
-
-AXIS_RANGES = {
-    "grid": {
-        "freq_step": ("Hz", (-1e4, 1e4)),
-        "phase_jump_deg": ("deg", (-360.0, 360.0)),
-        "sag": ("1", (0.0, 0.999)),
-        "dc": ("pu", (-10.0, 10.0)),
-        "harmonics_scale": ("1", (0.0, 100.0)),
-        "sub_amplitude": ("pu", (0.0, 10.0)),
-        "phase_deg": ("deg", (-360.0, 360.0)),
-    },
-    "emf": {
-        "speed_hz": ("Hz", (1e-3, 1e4)),
-        "dc_alpha": ("V", (-1e4, 1e4)),
-        "dc_beta": ("V", (-1e4, 1e4)),
-        "h5": ("1", (0.0, 10.0)),
-        "h7": ("1", (0.0, 10.0)),
-        "phase_deg": ("deg", (-360.0, 360.0)),
-    },
-    "drive": DRIVE_STUDY_AXES,
-}
-
-
-# bytes a simulation keeps per scenario and time step while its gradient is taken (states, outputs and
-# their cotangents, float64): an estimate for the memory check, not a measurement
-BYTES_PER_STEP = {"grid": 512, "emf": 512, "drive": 2048}
+    """The allowed ``freq_step`` (Hz) on a grid of nominal frequency ``freq_n`` (Hz) sampled every ``ts`` s
+    (:meth:`jaxobs.families.GridSignals.limits`)."""
+    return GridSignals.limits(freq_n, ts)["freq_step"]
 
 
 def available_memory() -> int:
@@ -97,7 +70,7 @@ def check_size(spec: ScenarioSpec, where: str, ts: float, extra_s: float = 0.0) 
             f"{where}.steady_from",
             f"the steady window [{spec.steady_from:g}, {spec.horizon:g}) s holds fewer than 10 samples of {ts:g} s",
         )
-    need = steps * n_scen * BYTES_PER_STEP[spec.signal]
+    need = steps * n_scen * spec.family.bytes_per_step
     have = available_memory()
     if need > have:
         raise JobError(
@@ -114,11 +87,12 @@ def parse_scenarios(
     tab = get_field({"s": tab}, "s", where, dict)
     no_unknown(tab, ("signal", "t_event", "horizon", "steady_from", "grid", "sample", "seed", "recording"), where)
     signal = get_field(tab, "signal", f"{where}.signal", str, signals[0])
-    if signal not in ("grid", "emf", "drive"):
+    if signal not in FAMILIES:
         raise JobError(f"{where}.signal", f"must be 'grid', 'emf' or 'drive', got {show(signal)}")
     if signal not in signals:
         need = " or ".join(f"'{x}'" for x in signals)
         raise JobError(f"{where}.signal", f"the component needs {need} signals, got {show(signal)}")
+    family = FAMILIES[signal]  # the one place a job's signal name becomes its family
     t_event = get_field(tab, "t_event", f"{where}.t_event", float, 0.1)
     horizon = get_field(tab, "horizon", f"{where}.horizon", float, 0.4)
     if t_event < 0:
@@ -131,25 +105,10 @@ def parse_scenarios(
     if not (0 <= steady < horizon):
         raise JobError(f"{where}.steady_from", f"must be in [0, horizon), got {steady:g}")
     if "recording" in tab:
-        return parse_recording_scenarios(tab, where, signal, t_event, horizon, steady, seed, ts, base)
+        return parse_recording_scenarios(tab, where, family, t_event, horizon, steady, seed, ts, base)
     grid = get_field(tab, "grid", f"{where}.grid", dict, required=True)
-    allowed = AXIS_RANGES[signal]
-    axes = {}
-    if not grid:
-        raise JobError(f"{where}.grid", f"at least one axis is required; allowed: {', '.join(allowed)}")
-    for k in grid:
-        if k not in allowed:
-            raise JobError(f"{where}.grid.{cap(k, 40)}", f"unknown axis; allowed: {', '.join(allowed)}")
-        v = axes[k] = get_field(grid, k, f"{where}.grid.{k}", list)
-        unit, (lo, hi) = allowed[k]
-        if signal == "grid" and k == "freq_step":  # tied to the nominal frequency and the sample rate
-            lo, hi = freq_step_range(freq_n, ts)
-        if signal == "emf" and k == "speed_hz":
-            hi = min(hi, 0.25 / ts)
-        for i, x in enumerate(v):
-            if not lo <= x <= hi:
-                u = "" if unit == "1" else f" {unit}"
-                raise JobError(f"{where}.grid.{k}[{i}]", f"must be in [{lo:g}, {hi:g}]{u}, got {x:g}")
+    # freq_step is tied to the nominal frequency and the sample rate, speed_hz to the sample rate
+    axes = axes_field(grid, family, f"{where}.grid", family.limits(freq_n, ts))
     sample = get_field(tab, "sample", f"{where}.sample", int, 0)
     if not 0 <= sample <= MAX_SCENARIOS:
         raise JobError(f"{where}.sample", f"must be in [0, {MAX_SCENARIOS}] (0: the full grid), got {show(sample)}")
@@ -238,7 +197,7 @@ def parse_job(raw: dict, base: Path | None = None) -> Job:
         get_field(raw, "scenarios", "scenarios", dict, required=True), "scenarios", info.signals, seed, freq_n, ts, base
     )
     drive = None
-    if scen.signal == "drive":
+    if scen.family.closed_loop:
         drive = parse_drive(get_field(raw, "drive", "drive", dict, {}), comp, scen)
     elif "drive" in raw:
         raise JobError("drive", f"applies to drive jobs (scenarios.signal = 'drive'), not {scen.signal!r} signals")
@@ -274,9 +233,9 @@ def parse_job(raw: dict, base: Path | None = None) -> Job:
         if metric not in METRICS:
             raise JobError(f"{where}.metric", f"unknown metric {show(metric)}; known: {', '.join(METRICS)}")
         grid_only = metric.endswith(("_freq", "_phase", "freq_steady", "phase_steady"))
-        if metric in DRIVE_METRICS and scen.signal != "drive":
+        if metric in DRIVE_METRICS and not scen.family.closed_loop:
             raise JobError(f"{where}.metric", f"{show(metric)} needs the closed-loop drive, not {comp} ({scen.signal})")
-        if (scen.signal != "grid") == grid_only:
+        if (scen.family is not GridSignals) == grid_only:
             raise JobError(f"{where}.metric", f"{show(metric)} does not apply to {comp} ({scen.signal} signals)")
         if metric == STABILITY_MARGIN and drive is not None and drive.start != "steady":
             raise JobError(f"{where}.metric", "stability_margin needs drive.start = 'steady' (an operating point)")

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from jaxobs.families import FAMILIES
+
 from ..aggregations import AbstractAggregation
 from ..solvers import AbstractSolver
 
@@ -18,6 +20,12 @@ class ScenarioSpec:
     sample: int  # 0: full grid; n > 0: n random combinations (seeded)
     seed: int
     recording: RecordingSpec | None = None  # [scenarios.recording]: recorded signals instead of a grid
+
+    @property
+    def family(self) -> type:
+        """The scenario family ``signal`` names (:data:`jaxobs.families.FAMILIES`: the one place the name is
+        read); a recording stands for this family's signals."""
+        return FAMILIES[self.signal]
 
 
 @dataclass

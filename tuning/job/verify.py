@@ -6,8 +6,8 @@ A design tuned and scored on its grid can run away a little outside it (the nois
 (``[envelope] speed_rpm = [lo, hi]``, ``load_nm = [lo, hi]``; by default the span of its tuning grid) and,
 after tuning, :func:`verify_designs` maps initial, closed form and tuned over a coarse grid of that
 envelope (3 speeds, lo, geometric middle and hi, × 2 loads, lo and hi) with the one envelope map,
-:func:`jaxobs.drive.envelope.envelope`: a long run (``[envelope] horizon``, 2 s by default) through the study
-runner, batched, and the simulator's own stability verdict (:func:`jaxobs.drive.stability.floquet`) at the
+:func:`jaxobs.analysis.envelope.envelope`: a long run (``[envelope] horizon``, 2 s by default) through the study
+runner, batched, and the simulator's own stability verdict (:func:`jaxobs.analysis.stability.floquet`) at the
 same points, on the job's drive (its speed schedule) started steady, nominal machine.
 
 A point *passes* when the design holds synchronism there (the envelope's ``synchronous``: finite, locked,
@@ -26,7 +26,7 @@ import math
 import numpy as np
 
 from jaxobs import drive as D
-from jaxobs.drive.envelope import envelope
+from jaxobs.analysis.envelope import envelope
 
 from .drive import job_drive
 from .fields import JobError, get_field, no_unknown
@@ -35,14 +35,14 @@ from .spec import DriveSpec, ScenarioSpec
 __all__ = ["EnvelopeSpec", "parse_envelope", "verify_designs", "unsafe_points", "UNSAFE_EXIT"]
 
 UNSAFE_EXIT = 4  # jaxobs tune's exit status for status "unsafe" (3 is "diverged": nothing tuned at all)
-MIN_HORIZON = 0.5  # s: jaxobs.drive.envelope.envelope's least; the presets run the default 2 s
+MIN_HORIZON = 0.5  # s: jaxobs.analysis.envelope.envelope's least; the presets run the default 2 s
 DEFAULT_HORIZON = 2.0  # s: a slowly growing low-speed oscillation shows within it (docs/stability.md)
 
 
 @dataclasses.dataclass(frozen=True)
 class EnvelopeSpec:
     """The envelope a drive job claims: speeds (r/min) and loads (N·m) as [lo, hi]; ``horizon`` (s) of the
-    verification runs; ``settle``, ``window``: s, of the stability verdict (:func:`jaxobs.drive.stability.floquet`;
+    verification runs; ``settle``, ``window``: s, of the stability verdict (:func:`jaxobs.analysis.stability.floquet`;
     the window is lengthened to one electrical period of the lowest speed where it is shorter)."""
 
     speed_rpm: tuple
@@ -108,7 +108,7 @@ def parse_envelope(raw: dict, scen: ScenarioSpec, drive: DriveSpec | None) -> En
 
 def verify_designs(designs: dict, env: EnvelopeSpec, drive_spec: DriveSpec) -> dict:
     """Initial, closed form and tuned (``designs``: name -> drive observer) at the envelope's coarse grid over
-    ``env.horizon`` seconds, with their stability verdicts (:func:`jaxobs.drive.envelope.envelope`, the one
+    ``env.horizon`` seconds, with their stability verdicts (:func:`jaxobs.analysis.envelope.envelope`, the one
     envelope map, on the job's drive started steady): the ``verification`` block of result.json."""
     drive_spec = dataclasses.replace(drive_spec, start="steady", handover=0.0)  # operating points, started steady
     drive = job_drive(drive_spec)
@@ -126,9 +126,9 @@ def verify_designs(designs: dict, env: EnvelopeSpec, drive_spec: DriveSpec) -> d
         "horizon_s": env.horizon,
         "speed_schedule": drive_spec.speed_schedule,
         "points": [{"speed_rpm": s, "load_nm": ld} for s, ld in combos],
-        "passes_definition": "synchronous (jaxobs.drive.envelope: finite, locked within 90 deg electrical, at its "
+        "passes_definition": "synchronous (jaxobs.analysis.envelope: finite, locked within 90 deg electrical, at its "
         "speed reference and settled after a 2 % speed-reference step, over the late window) and stable "
-        "(jaxobs.drive.stability.floquet: the largest non-neutral Floquet multiplier over whole electrical "
+        "(jaxobs.analysis.stability.floquet: the largest non-neutral Floquet multiplier over whole electrical "
         "periods, as a rate log|mu|/T, below 0 by more than its resolution, 1/s; within it the point is "
         "'marginal', which does not pass)",
         "designs": {},

@@ -7,10 +7,10 @@
 At every operating point (speed × load, optionally × one mismatch axis) and for every design (an observer that
 closes the loop sensorless) it measures two things, each batched over the points in one ``jit(vmap)``:
 
-- **the stability margin** of the simulated, sampled loop (:func:`jaxobs.drive.stability.floquet`: the
+- **the stability margin** of the simulated, sampled loop (:func:`jaxobs.analysis.stability.floquet`: the
   largest non-neutral Floquet multiplier of ``ClosedLoop.step`` over whole electrical periods of its own
   orbit, as a decay rate; or, with ``stability={"method": "lyapunov"}``, the largest non-neutral Lyapunov
-  exponent fitted over a window, :func:`jaxobs.drive.stability.lyapunov`);
+  exponent fitted over a window, :func:`jaxobs.analysis.stability.lyapunov`);
 - **a long simulation** (``horizon`` s, 2 by default) through the study runner
   (:func:`jaxobs.runner.run_scenarios`), started steady and perturbed by a speed-reference step of
   ``perturb`` (relative) at ``t_perturb`` s, so that an unstable point shows its growth within the horizon.
@@ -40,20 +40,14 @@ import numpy as np
 
 from .. import AbstractSystem, SaveFinal, kept_jit
 from .. import metrics as M
-from ..drive_study import (
-    CF_UNITS,
-    DRIVE_STUDY_AXES,
-    DRIVE_STUDY_AXIS_NAMES,
-    bind_observer,
-    drive_scenarios,
-    gain_variables,
-)
+from ..drive import SETTLE_PERIODS, ClosedLoop, Drive, PMSMParams, drive_speed_limit_rpm
+from ..drive_study import gain_variables
+from ..families import DRIVE_STUDY_AXES, AbstractScenarios, DriveScenarios
 from ..provenance import provenance
-from ..runner import run_scenarios
+from ..quantities import Metric
 from ..scenarios import Grid
 from ..sharding import batch_mesh
-from . import ClosedLoop, Drive, PMSMParams, drive_speed_limit_rpm
-from .loop import SETTLE_PERIODS
+from ..study import Flag, study
 from .stability import Stability, floquet, lyapunov
 
 __all__ = [
@@ -165,35 +159,71 @@ class _Watched(AbstractSystem):
         return (new, w), jnp.zeros((), e.dtype)
 
 
-class _LongRun(NamedTuple):
-    """The long run's factory and metrics (one object: the runner's compilation is shared across calls)."""
+class _LongRuns(AbstractScenarios):
+    """The long runs' scenarios: the drive's (``family``), each point's speed reference stepping by ``perturb``
+    × its speed at the family's ``t_event``, the loop wrapped in :class:`_Watched` (its running sums)."""
 
-    drive: Drive
-    k_early: int
-    k_late: int
-    speed_tol: float
+    family: DriveScenarios
+    perturb: float = eqx.field(static=True)
+    k_early: int = eqx.field(static=True)
+    k_late: int = eqx.field(static=True)
 
-    def system(self, obs, sc):
-        return _Watched(ClosedLoop(self.drive, bind_observer(obs, sc), sc), self.k_early, self.k_late)
+    signal: ClassVar[str] = "drive"
+    axes: ClassVar[dict] = DRIVE_STUDY_AXES
+    closed_loop: ClassVar[bool] = True
+    bytes_per_step: ClassVar[int] = 2048
 
-    def metrics(self, sol, _sc, _aux):
-        w = sol.final_state[1]
-        mean = w.sum_e / w.n
-        ripple = jnp.sqrt(jnp.maximum(w.sum_e2 / w.n - mean * mean, 0.0))
-        vals = {
-            "pos_err_max_deg": jnp.degrees(w.max_e),
-            "pos_bias_deg": jnp.degrees(mean),
-            "pos_ripple_deg": jnp.degrees(ripple),
-            "speed_dev_early_pct": 100 * w.dev_early,
-            "speed_dev_late_pct": 100 * w.dev_late,
-        }
-        finite = sol.ok & jnp.all(jnp.stack([jnp.isfinite(v) for v in vals.values()]))
-        floor = M.SPEED_FLOOR_RPM * math.pi / 30 * w.n
-        vals["lost_lock"] = ~finite | (w.max_e > math.radians(M.LOCK_TOL_DRIVE_DEG))
-        vals["lost_speed"] = ~finite | (w.sum_dw > jnp.maximum(M.SPEED_TOL * w.sum_ref, floor))
-        settled = (w.dev_late < self.speed_tol) & (w.dev_late <= jnp.maximum(w.dev_early, 1e-6))
-        vals["synchronous"] = ~vals["lost_lock"] & ~vals["lost_speed"] & settled
-        return vals
+    def build(self, names, points, first: int = 0):
+        steps = [(*p, self.perturb * p[0]) for p in points]
+        return self.family.build((*names, "speed_step_rpm"), steps, first=first)
+
+    def system(self, design, scenario):
+        return _Watched(self.family.system(design, scenario), self.k_early, self.k_late)
+
+
+def _sums(sol):
+    """The long run's running sums (:class:`_Watch`), its mean position error and the ripple about it (rad)."""
+    w = sol.final_state[1]
+    mean = w.sum_e / w.n
+    return w, mean, jnp.sqrt(jnp.maximum(w.sum_e2 / w.n - mean * mean, 0.0))
+
+
+def _var(name: str, form) -> Metric:
+    return Metric(name, *ENVELOPE_VARIABLES[name], exact=form, closed_loop=True)
+
+
+# the long run's metrics, read from its final state (units and long names: ENVELOPE_VARIABLES)
+LONG_RUN_METRICS = (
+    _var("pos_err_max_deg", lambda sol, sc, ctx: jnp.degrees(_sums(sol)[0].max_e)),
+    _var("pos_bias_deg", lambda sol, sc, ctx: jnp.degrees(_sums(sol)[1])),
+    _var("pos_ripple_deg", lambda sol, sc, ctx: jnp.degrees(_sums(sol)[2])),
+    _var("speed_dev_early_pct", lambda sol, sc, ctx: 100 * _sums(sol)[0].dev_early),
+    _var("speed_dev_late_pct", lambda sol, sc, ctx: 100 * _sums(sol)[0].dev_late),
+)
+
+
+def _lock_lost(sol, sc, ctx):
+    return _sums(sol)[0].max_e > math.radians(M.LOCK_TOL_DRIVE_DEG)
+
+
+def _speed_lost(sol, sc, ctx):
+    w = _sums(sol)[0]
+    return w.sum_dw > jnp.maximum(M.SPEED_TOL * w.sum_ref, M.SPEED_FLOOR_RPM * math.pi / 30 * w.n)
+
+
+def _long_run_flags(speed_tol: float) -> tuple:
+    """lost_lock, lost_speed (diverged included) and synchronous: finite, locked, at speed and settled (its late
+    peak speed deviation under ``speed_tol`` and no larger than in the early window)."""
+
+    def synchronous(sol, sc, ctx):
+        w = _sums(sol)[0]
+        settled = (w.dev_late < speed_tol) & (w.dev_late <= jnp.maximum(w.dev_early, 1e-6))
+        return ~_lock_lost(sol, sc, ctx) & ~_speed_lost(sol, sc, ctx) & settled
+
+    return tuple(
+        Flag(name, ENVELOPE_VARIABLES[name][1], form, diverged=name != "synchronous")
+        for name, form in (("lost_lock", _lock_lost), ("lost_speed", _speed_lost), ("synchronous", synchronous))
+    )
 
 
 # the stability verdict's options, by method: its defaults (envelope), and what each accepts
@@ -207,7 +237,8 @@ def _stability_fields(drive, obs, scs, method: str, kw: tuple):
     """The stability verdict (:func:`floquet` or :func:`lyapunov`) at every scenario of ``scs``, one program per
     observer class (gains are traced); its fields as a plain tuple, which a kept program can return."""
     fn = floquet if method == "floquet" else lyapunov
-    return tuple(jax.vmap(lambda sc: fn(ClosedLoop(drive, bind_observer(obs, sc), sc), **dict(kw)))(scs))
+    family = DriveScenarios(None, drive)  # the system alone: its machine is the scenarios'
+    return tuple(jax.vmap(lambda sc: fn(family.system(obs, sc), **dict(kw)))(scs))
 
 
 _stability_jit = eqx.filter_jit(_stability_fields)
@@ -269,8 +300,8 @@ def envelope(
     ``bound_deg`` (deg electrical): the late peak position error a holding point may have; ``speed_tol``
     (relative): the late peak speed deviation a synchronous point may have.  ``stability``: ``method``
     ("floquet", the default, or "lyapunov") and that function's keyword arguments
-    (:func:`~jaxobs.drive.stability.floquet`: settle, window, tol, n_report;
-    :func:`~jaxobs.drive.stability.lyapunov`: settle, warmup, window, n_dirs, tol).  ``progress`` as in
+    (:func:`~jaxobs.analysis.stability.floquet`: settle, window, tol, n_report;
+    :func:`~jaxobs.analysis.stability.lyapunov`: settle, warmup, window, n_dirs, tol).  ``progress`` as in
     :func:`jaxobs.runner.run_scenarios`.  ``trace_key``: a string naming every argument here (the command
     line: its source file's digest and options): the long runs' and the verdicts' traced programs are kept
     across processes (:func:`jaxobs.kept_jit`).  Returns an ``xarray.Dataset`` with dims ``("design", "speed_rpm",
@@ -286,7 +317,7 @@ def envelope(
     # the lowest speed whose steady start (Drive.settled_for) fits the 60 s settle limit: SETTLE_PERIODS / p r/min
     n_min = max(1.0, SETTLE_PERIODS / machine.p)
     speeds = _axis("speeds_rpm", default_speeds(machine) if speeds_rpm is None else speeds_rpm, n_min, n_max, "r/min")
-    lo_l, hi_l = DRIVE_STUDY_AXES["load_nm"][1]
+    lo_l, hi_l = DRIVE_STUDY_AXES["load_nm"].range
     loads = _axis("loads_nm", default_loads(machine) if loads_nm is None else loads_nm, lo_l, hi_l, "N·m")
     if not (math.isfinite(horizon) and 0.5 <= horizon <= 20.0):
         raise ValueError(f"envelope: horizon must be in [0.5, 20] s, got {horizon!r}")
@@ -303,7 +334,7 @@ def envelope(
     if mismatch is not None:
         if not (isinstance(mismatch, tuple) and len(mismatch) == 2 and mismatch[0] in MISMATCH_AXES):
             raise ValueError(f"envelope: mismatch must be (axis, values) with axis one of {', '.join(MISMATCH_AXES)}")
-        m_lo, m_hi = DRIVE_STUDY_AXES[mismatch[0]][1]
+        m_lo, m_hi = DRIVE_STUDY_AXES[mismatch[0]].range
         axes[mismatch[0]] = _axis(f"mismatch {mismatch[0]}", mismatch[1], m_lo, m_hi, "(relative)")
     stability = dict(stability or {})
     method = stability.pop("method", "floquet")
@@ -330,7 +361,7 @@ def envelope(
     # its bandwidth α is |p ω*|/N at the lowest speed, 1.05 rad/s at 20 r/min on 000's SPMSM, and its slowest
     # mode there a weakly damped pair −0.60 ± 2.67j 1/s (linear_speed_loop; period 2.5/α at N = 6).  A window
     # whose thirds are shorter than that period sees the pair's wobble, not its decay (the resolution,
-    # jaxobs.drive.stability).  Measured with 000's second-order SOIFO at 20 r/min, no load: over 3 s (π/α)
+    # jaxobs.analysis.stability).  Measured with 000's second-order SOIFO at 20 r/min, no load: over 3 s (π/α)
     # −0.29 ± 1.8 1/s (marginal), over 7.6 s (8/α) −0.58 ± 0.57, over 12 s −0.600 ± 0.13 (the linear model:
     # −0.601).  So the window is at least 12/α and the warm-up 1/α (11.5 s and 1 s there; 0.38 s and 0.03 s
     # for the bench's fixed 5 Hz loop, below the defaults: no change).
@@ -348,29 +379,28 @@ def envelope(
     sampler = Grid(axes)
     names, points = sampler.names, sampler.points()
 
-    # the long runs: each point's speed reference steps by perturb × its speed at t_perturb
-    def build(nm, pts):
-        combos = [(*p, perturb * p[0]) for p in pts]
-        return drive_scenarios(machine, (*nm, "speed_step_rpm"), combos, seed=seed, t_event=t_perturb)
-
+    # the long runs, a study: each point's speed reference steps by perturb × its speed at t_perturb; nothing
+    # stored per sample (SaveFinal), the wrapped loop's running sums read from its final state
     ts = drive.ts
-    long = _LongRun(drive, int(round((t_perturb + 0.05) / ts)), int(round(steady_from / ts)), float(speed_tol))
-    run = run_scenarios(
+    family = DriveScenarios(machine, drive, t_event=t_perturb, seed=seed)
+    long = _LongRuns(family, float(perturb), int(round((t_perturb + 0.05) / ts)), int(round(steady_from / ts)))
+    runs = study(
         designs,
+        long,
         sampler,
-        long.system,
-        long.metrics,
+        LONG_RUN_METRICS,
         horizon=float(horizon),
-        build=build,
+        flags=_long_run_flags(float(speed_tol)),
+        mask=None,  # a lost point's errors are masked below, its speed deviations kept
+        save=SaveFinal(),
         chunk_size=chunk_size,
         mesh=batch_mesh(jax.devices()[:1]),
         progress=progress,
-        label="envelope",
-        save=SaveFinal(),
         trace_key=None if trace_key is None else f"envelope|{trace_key}",
+        label="envelope",
     )
     # the stability margins: constant profiles (no step), one jit(vmap) per observer class
-    scs = drive_scenarios(machine, names, points, seed=seed)
+    scs = DriveScenarios(machine, drive, seed=seed).build(names, points)
     kwt = tuple(sorted(kw.items()))
     # one batch per speed (every load and mismatch at it, the same shape: one program), so that a batch runs
     # as long as its own points' windows (floquet's while_loop), not the lowest speed's
@@ -402,10 +432,10 @@ def envelope(
         "resolution": grid(lambda d: stab[d].resolution),
         "orbit_speed_dev": grid(lambda d: stab[d].speed_dev),
     }
-    for k in ("synchronous", "lost_lock", "lost_speed", "pos_err_max_deg", "pos_bias_deg", "pos_ripple_deg"):
-        res[k] = grid(lambda d, k=k: run.values[d][k])
-    for k in ("speed_dev_early_pct", "speed_dev_late_pct"):
-        res[k] = grid(lambda d, k=k: run.values[d][k])
+    for k in ("synchronous", "lost_lock", "lost_speed"):  # flags: int8 in the study, booleans here
+        res[k] = runs[k].values.astype(bool)
+    for m in LONG_RUN_METRICS:
+        res[m.name] = runs[m.name].values
     lost = res["lost_lock"].astype(bool)
     for k in ("pos_err_max_deg", "pos_bias_deg", "pos_ripple_deg"):
         res[k] = np.where(lost, np.nan, res[k])  # a lost point has no steady error to speak of
@@ -415,19 +445,11 @@ def envelope(
     dims = ("design", "speed_rpm", "load", *names[2:])
     coords = {
         "design": ("design", dnames, {"long_name": "observer design (closing the loop sensorless)"}),
-        "speed_rpm": ("speed_rpm", speeds, {"units": "min-1", "long_name": DRIVE_STUDY_AXIS_NAMES["speed_rpm"]}),
-        "load": ("load", loads, {"units": "N m", "long_name": DRIVE_STUDY_AXIS_NAMES["load_nm"]}),
+        "speed_rpm": ("speed_rpm", speeds, DRIVE_STUDY_AXES["speed_rpm"].attrs),
+        "load": ("load", loads, DRIVE_STUDY_AXES["load_nm"].attrs),
     }
     if mismatch is not None:
-        ax = mismatch[0]
-        coords[ax] = (
-            ax,
-            axes[ax],
-            {
-                "units": CF_UNITS.get(DRIVE_STUDY_AXES[ax][0], DRIVE_STUDY_AXES[ax][0]),
-                "long_name": DRIVE_STUDY_AXIS_NAMES[ax],
-            },
-        )
+        coords[mismatch[0]] = (mismatch[0], axes[mismatch[0]], DRIVE_STUDY_AXES[mismatch[0]].attrs)
     data = {}
     for k, (unit, long_name) in ENVELOPE_VARIABLES.items():
         v = res[k]
@@ -449,7 +471,7 @@ def envelope(
     for f in ("Rs", "Ld", "Lq", "psi_f", "p", "J", "T_rated", "n_rated"):
         ds.attrs[f"machine_{f}"] = float(getattr(machine, f))
     ds.attrs.update(drive_ts=float(drive.ts), drive_settle=float(drive.settle))
-    ds.attrs.update(provenance("jaxobs.drive.envelope.envelope"))
+    ds.attrs.update(provenance("jaxobs.analysis.envelope.envelope"))
     return ds
 
 
@@ -475,7 +497,7 @@ def _point(base, par: PMSMParams, x):
 def _exponent_and_grad(drive, obs, base, par, xs, kw: tuple):
     def expo(x):
         sc = _point(base, par, x)
-        return lyapunov(ClosedLoop(drive, bind_observer(obs, sc), sc), **dict(kw)).exponent
+        return lyapunov(DriveScenarios(par, drive).system(obs, sc), **dict(kw)).exponent
 
     return jax.vmap(jax.value_and_grad(expo))(xs)
 
@@ -514,7 +536,7 @@ def worst_case(
     if not (isinstance(starts, int) and starts >= 1 and isinstance(steps, int) and steps >= 0):
         raise ValueError("worst_case: starts must be an integer >= 1 and steps >= 0")
     kw = tuple(sorted({"settle": 0.1, "warmup": 0.05, "window": 0.2, "n_dirs": 2, **(stability or {})}.items()))
-    base = jax.tree.map(lambda v: v[0], drive_scenarios(machine, ["speed_rpm"], [(float(lo[0]),)]))
+    base = jax.tree.map(lambda v: v[0], DriveScenarios(machine, drive).build(["speed_rpm"], [(float(lo[0]),)]))
     # Latin-hypercube starts: each axis's range cut into ``starts`` strata, one start in each (a random pairing)
     rng = np.random.default_rng(seed)
     u = (np.stack([rng.permutation(starts) for _ in WORST_AXES], axis=1) + rng.uniform(size=(starts, 3))) / starts

@@ -61,8 +61,8 @@ import jax
 import jax.numpy as jnp
 from jax.flatten_util import ravel_pytree
 
+from ..drive import ClosedLoop
 from ..linear import TransferFunction, sogi_fll_model, wif_model
-from .loop import ClosedLoop
 
 __all__ = ["Stability", "lyapunov", "stability_sweep", "LinearVerdict", "linear_speed_loop", "fll_frequency_soifo"]
 __all__ += ["fll_frequency_sosoifo", "slope_fit", "floquet"]
@@ -243,7 +243,7 @@ def floquet(
 
     Cost: every state component is a tangent direction (n of them, ``jax.vmap`` of ``jax.jvp``), over the
     point's own window (a ``while_loop``: under ``vmap`` a batch runs as long as its longest window, so batch
-    points of similar speed together, as :func:`jaxobs.drive.envelope.envelope` does), after a settle that
+    points of similar speed together, as :func:`jaxobs.analysis.envelope.envelope` does), after a settle that
     carries one (the neutral).  M is accumulated with a scalar normalization each block (a product of
     thousands of Jacobians).  Differentiable in the gains by forward mode (``jax.jacfwd``; reverse mode does
     not pass a ``while_loop``) where the top non-neutral multiplier is simple; ``eigvals`` runs on the CPU.
