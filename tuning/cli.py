@@ -1,4 +1,4 @@
-"""The ``jaxobs`` command line: the one parser, with every command (DESIGN.md: the top layer).
+"""The ``jaxobs`` command line: the one parser, with every command (the top layer).
 
     jaxobs tune [JOB.toml] [--out DIR] [--resume] [--check] [--quiet]
                                                            gradient tuning job (default: embedded WIF job)

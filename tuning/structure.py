@@ -249,7 +249,7 @@ def _leso(name: str, v: dict, job) -> tuple[dict, dict]:
         why["routh_stable"] = "no Routh test for the C-LESO in the papers (its poles are real, at -omega0)"
         out["routh_stable"] = None
     out["omega_e"] = we
-    # Scope (measured, issue 17 review): this is the observer's loop alone.  In a sensorless job the PLL's
+    # Scope (measured): this is the observer's loop alone.  In a sensorless job the PLL's
     # θ̂ and ω̂ close the FOC's current and speed loops, and an Lq mismatch makes the LESO's angle error
     # depend on i_q, which the speed loop sets from ω̂: a second loop (speed loop -> i_q -> θ̂ error -> ω̂
     # -> speed loop) that this model leaves open.  The tuned FA-LESO of faleso.toml (0.3 s horizon) had

@@ -1,4 +1,4 @@
-"""Where a sensorless design holds: its operating envelope over the speed × load plane (issue 26.3).
+"""Where a sensorless design holds: its operating envelope over the speed × load plane.
 
     ds = envelope({"closed form": cf, "tuned": tuned}, machine=par, drive=drive)
     ds["holds"].sel(design="tuned")            # stable ∧ synchronous ∧ error within the bound
@@ -476,7 +476,7 @@ def envelope(
 
 
 # --------------------------------------------------------------------------
-# the worst case by gradients (issue 26.7)
+# the worst case by gradients
 # --------------------------------------------------------------------------
 
 # the box's axes a gradient search moves: the operating point and the assumed resistance

@@ -116,7 +116,7 @@ __all__ = ["FOC", "FOCInput", "FOCOutput", "IfStartup", "ControllerState", "Oper
 
 
 class OperatingPoint(NamedTuple):
-    """A steady operating point of the drive (the true machine), to start a scenario in (DESIGN.md).
+    """A steady operating point of the drive (the true machine), to start a scenario in.
 
     At steady state the currents sit at their references and the speed at its
     reference; the PI integrators hold what the loop needs to stay there.  The

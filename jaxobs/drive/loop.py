@@ -1,7 +1,7 @@
 """The closed-loop drive as a system: PMSM + inverter + sensors + FOC (+ observer), one step per control period.
 
 ``ClosedLoop(drive, observer, scenario)`` has the contract of every dynamic
-piece (DESIGN.md): ``init()`` and ``step(state, k)`` with ``k`` the sample
+piece (docs/architecture.md, section 2): ``init()`` and ``step(state, k)`` with ``k`` the sample
 index, so a user can scan it themselves::
 
     system = jaxobs.drive.ClosedLoop(drive, None, scenario)      # None: the encoder
@@ -245,8 +245,8 @@ class AbstractDriveLoop(AbstractSystem):
                 # A biased observer (the LPF's steady lead, a LESO's lag) closes the loop from t = 0, so the drive
                 # settles with the FOC's frame at the observer's steady angle error, not at the rotor's: the
                 # currents that carry the load are its references rotated by that error (FOC.operating_point).
-                # Started on the encoder's operating point instead, the drive dipped 2–6.6 % in speed at ~16 ms
-                # (issue 26).  So the error measured on the first settling gives the operating point, and the
+                # Started on the encoder's operating point instead, the drive dips 2–6.6 % in speed at ~16 ms.
+                # So the error measured on the first settling gives the operating point, and the
                 # observer settles again on it (each pass from its own start, init_at: a settled observer fed
                 # a step of the currents' phase sees an L·di/dt spike).  The error of a LESO or an LPF with the
                 # machine it assumes is the phase of its filter at ω_e, whatever the currents: two passes are
@@ -434,8 +434,8 @@ class ClosedLoop(AbstractDriveLoop):
         """The loop at t = 0: a steady start, or standstill with an I-f start-up.
 
         Without a start-up the scenario starts in the steady state of its
-        initial speed and the load at t = 0 (DESIGN.md: no transient nobody
-        asked for): the machine carries the currents that balance the load,
+        initial speed and the load at t = 0 (a scenario tests what it claims: no
+        transient nobody asked for): the machine carries the currents that balance the load,
         the FOC's integrators hold them (:meth:`FOC.init`), the voltage of the
         period that starts at t = 0 is the steady one (computed at t_{−1}, so
         rotated to θ_e0 + ω_e T_s/2 by the delay compensation), and the

@@ -1,4 +1,4 @@
-"""The step-function contract shared by every observer (DESIGN.md).
+"""The step-function contract shared by every observer (docs/architecture.md, section 2).
 
 An observer is an immutable ``equinox.Module`` holding its gains as array
 leaves, with pure ``init`` and ``step``:

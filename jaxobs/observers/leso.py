@@ -114,8 +114,8 @@ class AbstractLESO(AbstractDriveObserver):
         (θ_e0 − ω_e·settle, any angle), and near 180° (the sine detector's unstable point) it pulls in slowly
         and erratically.  So the observer a steady start handed over depended on the settle's length: the
         tuned GI-LESO of tuning/presets/gileso.toml at 150 r/min, 15 N·m settled 0.2 s ended its second pass
-        with ω̂e near 0 (78.5 rad/s true; its start then dipped 43 % in speed), and settled 0.338 s (37f306e's
-        10 periods of 355 r/min) 0.5 rad/s off, its start dipping 65 % and reversing (issue 26).
+        with ω̂e near 0 (78.5 rad/s true; its start then dipped 43 % in speed), and settled 0.338 s (10
+        periods of 355 r/min) 0.5 rad/s off, its start dipping 65 % and reversing.
         """
         x0 = self.initial_state().at[self.n_leso].set(wrap(theta_e))
         return self._init_from(x0.at[self.n_leso + 1].set(omega_e))
