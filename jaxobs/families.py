@@ -36,7 +36,7 @@ from .drive import RPM, ClosedLoop, Drive, PMSMParams, Profile, Scenario, scenar
 from .observers import AbstractDriveObserver
 from .quantities import Axis
 from .scenarios import EMF_SIGNAL_AXES, GRID_SIGNAL_AXES, emf_signals, grid_signals
-from .signals import DriveRecording, SampledSignal
+from .signals import DriveRecording, RecordingLayout, SampledSignal, read_drive_log
 
 __all__ = [
     "AbstractScenarios",
@@ -265,12 +265,58 @@ class RecordedSignals(AbstractScenarios):
         # Rs and L (a recording gives the speed, not the machine)
         return OnSignal(design.bind(None, scenario.omega_e[..., 0]) if self.binds else design, scenario)
 
-    def read(self, path: str, columns, truth, **kw):
-        """One recording file: a :class:`~jaxobs.SampledSignal` (a grid voltage: ``columns[0]``, ``truth`` the
-        phase, frequency and amplitude columns) or a :class:`~jaxobs.DriveRecording` (u and i; ``truth`` the
-        encoder's angle and speed).  ``kw``: the reader's time base (``time_column``, ``sample_rate``, ``ts``)."""
+    def read(self, path: str, columns, truth, *, layout=None, machine=None, windows=None, **kw):
+        """One recording file as scenarios.
+
+        Args:
+            path: the CSV file.
+            columns: a grid voltage's column (``columns[0]``), or the voltage then the current columns, two each
+                (u_α, u_β, i_α, i_β, or in ``layout``'s frames) or three each (``abc``).
+            truth: the phase, frequency and amplitude columns (grid), or the encoder's angle and speed.
+            layout: what a drive log's columns hold (:class:`jaxobs.signals.RecordingLayout`; default the
+                sidecar ``<path>.toml``, else the observers' own form).
+            machine: a :class:`~jaxobs.drive.PMSMParams` for the log's power and timing checks, or None.
+            windows: ``(count, n)``: ``count`` windows of ``n`` samples spread evenly over a drive log, each a
+                scenario starting at its own speed; None: the whole file.
+            **kw: the time base (``time_column``, ``sample_rate``, ``ts``) and ``max_bytes``.
+
+        Returns:
+            A :class:`~jaxobs.SampledSignal` (a grid voltage), a :class:`~jaxobs.DriveRecording` (u and i), or a
+            list of ``count`` of them (``windows``).
+
+        Raises:
+            ValueError: what :func:`jaxobs.signals.read_drive_log` or ``from_csv`` refuses, in one line; a
+                declared layout on a log sampled at another rate than ``ts``.
+        """
         if not self.binds:
             return SampledSignal.from_csv(path, columns=columns[0], truth=truth, **kw)
+        ts = kw.get("ts")
+        log = read_drive_log(
+            path,
+            voltages=columns[: len(columns) // 2],  # 2 + 2 columns, or 3 + 3 (abc)
+            currents=columns[len(columns) // 2 :],
+            theta_e=truth[0],
+            omega_e=truth[1] if len(truth) > 1 else None,
+            time_column=kw.get("time_column"),
+            sample_rate=kw.get("sample_rate"),
+            layout=layout,
+            machine=machine,
+            max_bytes=kw.get("max_bytes"),
+        )
+        if ts is None or abs(log.ts - ts) <= 1e-9 * ts:
+            if windows is None:
+                return log.recording()
+            count, n = windows
+            if log.n < n:
+                raise ValueError(f"recording {str(path)!r}: {log.n} samples, fewer than a window's {n}")
+            starts = [round(i * (log.n - n) / max(count - 1, 1)) for i in range(count)]
+            return [log.recording(a, n) for a in starts]
+        # another rate: resampled by the small reader (the checks above have run on the file as it is)
+        if (layout is not None and layout != RecordingLayout()) or windows is not None:
+            raise ValueError(
+                f"recording {str(path)!r}: sampled at {1 / log.ts:.6g} Hz, not at the observer's {1 / ts:.6g} Hz: a "
+                "declared layout or windows read the log at its own rate (resample it, or set ts)"
+            )
         return DriveRecording.from_csv(path, columns=columns, **dict(zip(("theta_e", "omega_e"), truth)), **kw)
 
 

@@ -73,6 +73,7 @@ import shlex
 import sys
 import tempfile
 import traceback
+import warnings
 from importlib import resources
 from pathlib import Path
 
@@ -283,6 +284,8 @@ def _cmd_tune(args) -> int:
             n *= len(v)
         n = job.scenarios.sample or n
         drive = "" if job.drive is None else f", {job.drive.loop} drive on {job.drive.machine}"
+        if job.scenarios.recording is not None:  # the observer runs open loop on the files, whatever the signal
+            drive = f", open loop on {len(job.scenarios.recording.files)} recording(s)"
         print(
             f"{path}: OK — {job.component}, free gains {', '.join(g.name for g in job.gains)}, {n} scenarios"
             f"{drive}, solver {job.solver.name}"
@@ -459,6 +462,15 @@ def main(argv=None) -> int:
     """Run the command line (``argv`` defaults to ``sys.argv[1:]``); returns the exit status."""
     parser = build_parser()
     args = None
+    shown = warnings.showwarning
+
+    def one_line(message, category, *a, **k):  # a recording's warning (RecordingWarning) as the tool's own line
+        if category.__name__ == "RecordingWarning":
+            print(f"jaxobs: warning: {message}", file=sys.stderr)
+        else:
+            shown(message, category, *a, **k)
+
+    warnings.showwarning = one_line
     try:
         use_host_devices()  # before any JAX computation: one CPU device per usable core
         args = parser.parse_args(argv)
@@ -488,6 +500,8 @@ def main(argv=None) -> int:
         what = "out of memory" if isinstance(e, MemoryError) else f"internal error ({type(e).__name__})"
         print(f"jaxobs: {what}: {' '.join(str(e).split())[:120]} — traceback in {log}", file=sys.stderr)
         return 1
+    finally:
+        warnings.showwarning = shown
 
 
 def _resume_hint(resume: str, saved):

@@ -325,8 +325,9 @@ def scenario_batch(
     :data:`DRIVE_AXES`), built vectorized (no constructor per scenario).
 
     ``speed_rpm`` holds the speed reference at the value and *starts the machine there* (``omega_m0``: the
-    scenario starts steady: no start-up transient nobody asked for); ``load_nm`` holds the load; ``speed_step_rpm`` and ``load_step_nm``
-    make the reference and the load step profiles (the value before, plus the step from ``t_event`` s on).
+    scenario starts steady: no start-up transient nobody asked for); ``load_nm`` holds the load;
+    ``speed_step_rpm`` and ``load_step_nm`` make the reference and the load step profiles (the value before,
+    plus the step from ``t_event`` s on).
     The mismatch axes set the assumed machine from the true one; a noise axis makes the sensors noisy.
     The noise key: ``PRNGKey(v)`` of a ``seed`` axis, else ``fold_in(PRNGKey(seed), i)`` of scenario i when
     ``seed`` is given, else the base's (``first``: the index of ``points[0]`` among all the scenarios, so a

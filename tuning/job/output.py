@@ -13,6 +13,7 @@ from jaxobs import metrics as M
 
 from ..objective import LOST_SYNC_DEG, METRIC_UNITS
 from ..outdir import atomic_write_text
+from .recordings import recording_labels
 from .spec import Job, ScenarioSpec
 
 
@@ -70,6 +71,8 @@ def scores_dataset(obj, names, combos, spec: ScenarioSpec, per: dict):
         dims = ("design", *names)
         shape = tuple(len(spec.axes[n]) for n in names)
         coords = {"design": designs, **{n: list(spec.axes[n]) for n in names}}
+        if spec.recording is not None:  # a recording is named by its file (a log's window: file@index)
+            coords["recording"] = recording_labels(spec.recording, spec.horizon)
     else:
         dims, shape = ("design", "scenario"), (len(combos),)
         coords = {"design": designs, "scenario": np.arange(len(combos))}
@@ -103,7 +106,10 @@ def scores_dataset(obj, names, combos, spec: ScenarioSpec, per: dict):
     for key in ("diverged", "lost_lock", *extra):
         ds[key].attrs["units"] = "1"
     for name in (*names, *([] if grid else ["scenario"])):
-        # the family's axis (CF units); an index (scenario, recording) is a number
+        if name == "recording" and spec.recording is not None:
+            ds[name].attrs["long_name"] = "recording (its file; a window of a log: file@index)"
+            continue
+        # the family's axis (CF units); an index (scenario) is a number
         ds[name].attrs["units"] = spec.family.axes[name].units if name in spec.family.axes else "1"
         ds.attrs["note"] += f"; lost_sync: 1 where diverged or |position error| > {LOST_SYNC_DEG:g} deg (drive)"
         ds.attrs["note"] += (
@@ -113,12 +119,28 @@ def scores_dataset(obj, names, combos, spec: ScenarioSpec, per: dict):
     return ds
 
 
-def recordings_provenance(job: Job) -> dict:
-    """``{"recordings": [{"file", "sha256"}, ...]}`` of a job on recordings (else nothing)."""
+def recordings_provenance(job: Job, scenarios=None) -> dict:
+    """``{"recordings": [{"file", "sha256", "scenarios": [{"name", "omega_start"}, ...]}, ...]}`` of a job on
+    recordings (else nothing): each file, and each of its scenarios with the speed it starts from (rad/s,
+    electrical: the encoder's, or a grid recording's true frequency, at its first sample), read from the batch
+    ``scenarios`` when given.  The observer's own initial speed does not apply: it is bound to these."""
     rec = job.scenarios.recording
     if rec is None:
         return {}
-    return {"recordings": [{"file": f, "sha256": h} for f, h in zip(rec.files, rec.sha256 or [None] * len(rec.files))]}
+    labels = recording_labels(rec, job.scenarios.horizon)
+    starts = [None] * len(labels)
+    if scenarios is not None:
+        w = getattr(scenarios, "omega_e", None)
+        if w is None and getattr(scenarios, "truth", None) is not None:
+            w = scenarios.truth[1]
+        if w is not None:
+            starts = [float(x) for x in np.asarray(w)[..., 0].reshape(-1)]
+    per = max(rec.windows, 1)
+    out = []
+    for i, (f, h) in enumerate(zip(rec.files, rec.sha256 or [None] * len(rec.files))):
+        sc = [{"name": labels[i * per + k], "omega_start": starts[i * per + k]} for k in range(per)]
+        out.append({"file": f, "sha256": h, "scenarios": sc})
+    return {"recordings": out, "loop_note": "open loop on recordings: each scenario starts at its own speed"}
 
 
 def claimed_envelope(job: Job) -> dict | None:

@@ -3,23 +3,31 @@
 from __future__ import annotations
 
 import dataclasses
+import re
 from pathlib import Path
 
 import equinox as eqx
 import jax
 
 import jaxobs
+from jaxobs.drive import bench_machine, load_drive
 from jaxobs.families import FAMILIES, RecordedSignals
 from jaxobs.observers import AbstractFluxObserver
 from jaxobs.provenance import sha256
-from jaxobs.signals import stack
+from jaxobs.signals import RecordingLayout, stack
 
 from ..objective import DRIVE_METRICS
 from .components import COMPONENTS
 from .fields import JobError, cap, get_field, no_unknown, show
 from .spec import RecordingSpec, ScenarioSpec
 
-MAX_RECORDING_BYTES = 8 * 2**20  # a recording file of a job or study larger than this is refused
+# a recording file of a job or study larger than this is refused: a grid voltage read whole (SampledSignal.from_csv,
+# in memory), a drive log read in chunks into columns on disk (jaxobs.signals.read_drive_log: its memory does not
+# grow with the file; 10^7 rows of 7 columns are about 600 MiB of CSV)
+MAX_RECORDING_BYTES = 64 * 2**20
+MAX_LOG_BYTES = 4 * 2**30
+MAX_WINDOWS = 256  # windows of one drive log (scenarios.recording.windows)
+RECORDING_KEYS = ("file", "time_column", "sample_rate", "columns", "truth", "layout", "trim", "windows", "machine")
 
 
 MAX_RECORDINGS = 64  # files of one [scenarios.recording]
@@ -45,7 +53,7 @@ def parse_recording_scenarios(tab, where, kind, t_event, horizon, steady, seed, 
         key = "grid" if "grid" in tab else "sample"
         raise JobError(f"{where}.{key}", "does not apply with a recording: the recordings are the scenarios")
     rec = get_field(tab, "recording", w, dict)
-    no_unknown(rec, ("file", "time_column", "sample_rate", "columns", "truth"), w)
+    no_unknown(rec, RECORDING_KEYS, w)
     files = rec.get("file")
     if isinstance(files, str):
         files = [files]
@@ -63,14 +71,21 @@ def parse_recording_scenarios(tab, where, kind, t_event, horizon, steady, seed, 
     cols_default, truth_default = (list(c) for c in family.kind.recording_columns)
     cols, truth = rec.get("columns", cols_default), rec.get("truth", truth_default)
     n_truth = family.kind.truth_counts  # grid: theta, omega, amplitude; u/i: theta_e [, omega_e]
-    for key, v, n_ok in (("columns", cols, (len(cols_default),)), ("truth", truth, n_truth)):
+    n_cols = (4, 6) if family.binds else (len(cols_default),)  # u/i: 2 + 2, or 3 + 3 phase columns (abc)
+    for key, v, n_ok in (("columns", cols, n_cols), ("truth", truth, n_truth)):
         if not isinstance(v, list) or len(v) not in n_ok:
             raise JobError(f"{w}.{key}", f"must be a list of {' or '.join(map(str, n_ok))} column(s), got {show(v)}")
         for i, c in enumerate(v):
             _col_spec(c, f"{w}.{key}[{i}]")
     root = Path.cwd() if base is None else Path(base)
     paths = tuple(str(Path(f) if Path(f).is_absolute() else root / f) for f in files)
-    spec = RecordingSpec(tuple(files), paths, tcol, rate, tuple(cols), tuple(truth), ts)
+    layout, windows, machine, mname = _log_options(rec, w, family, cols, root, base is not None)
+    trim = get_field(rec, "trim", f"{w}.trim", bool, False)
+    spec = RecordingSpec(
+        tuple(files), paths, tcol, rate, tuple(cols), tuple(truth), ts, layout=layout, trim=trim, windows=windows,
+        machine=machine, machine_name=mname,
+    )  # fmt: skip
+    lengths = []
     if base is not None:
         digests = []
         for i, path in enumerate(paths):
@@ -80,15 +95,17 @@ def parse_recording_scenarios(tab, where, kind, t_event, horizon, steady, seed, 
             except OSError as e:
                 msg = f"cannot read {cap(files[i], 80)!r} (relative to the job file): {e.strerror}"
                 raise JobError(field, msg) from None
-            if size > MAX_RECORDING_BYTES:
-                raise JobError(field, f"{files[i]!r} is {size} bytes, more than {MAX_RECORDING_BYTES} (8 MiB)")
+            cap_bytes = MAX_LOG_BYTES if family.binds else MAX_RECORDING_BYTES
+            if size > cap_bytes:
+                raise JobError(field, f"{files[i]!r} is {size} bytes, more than {cap_bytes} ({cap_bytes >> 20} MiB)")
             try:
-                sig = _load_one(spec, family, path)
+                sig = _load_one(spec, family, path, need=int(round(horizon / ts)) + 1)
             except jaxobs.signals.RecordingColumnError as e:  # a column not in the file: the key that named it
                 raise JobError(_column_field(w, e, spec), str(e).replace(path, files[i])) from None
             except ValueError as e:
                 raise JobError(field, str(e).replace(path, files[i])) from None
             need = int(round(horizon / ts))
+            sig = sig[0] if isinstance(sig, list) else sig
             if sig.n < need:
                 raise JobError(
                     f"{where}.horizon",
@@ -96,9 +113,56 @@ def parse_recording_scenarios(tab, where, kind, t_event, horizon, steady, seed, 
                     f"({(sig.n - 1) * ts:.6g} s)",
                 )
             digests.append(sha256(Path(path)))
+            lengths.append(sig.n if not spec.windows else need)
         spec = dataclasses.replace(spec, sha256=tuple(digests))
-    axes = {"recording": [float(i) for i in range(len(files))]}
+    if len({n for n in lengths}) > 1 and not trim and not windows:
+        shown = ", ".join(f"{f} {n}" for f, n in zip(files, lengths))
+        raise JobError(
+            f"{w}.trim",
+            f"the recordings are of different lengths ({shown} samples of {ts:g} s): set trim = true to cut "
+            "them to the shortest",
+        )
+    axes = {"recording": [float(i) for i in range(len(files) * max(windows, 1))]}
     return ScenarioSpec(kind.signal, t_event, horizon, steady, axes, 0, seed, recording=spec)
+
+
+def _log_options(rec: dict, w: str, family: RecordedSignals, cols, root: Path, load: bool):
+    """A drive log's ``layout`` (table), ``windows`` (count) and ``machine`` (a bench machine's name, or a drive
+    file relative to the job), checked; the grid kind takes none of them."""
+    keys = [k for k in ("layout", "windows", "machine") if k in rec]
+    if keys and not family.binds:
+        raise JobError(f"{w}.{keys[0]}", "applies to drive logs (u and i), not to a grid voltage")
+    layout = None
+    if "layout" in rec:
+        try:
+            layout = RecordingLayout.from_table(get_field(rec, "layout", f"{w}.layout", dict), f"{w}.layout")
+        except ValueError as e:  # "<w>.layout.<key>: ..." or "<w>.layout.<key> must be ...": the key, then why
+            m = re.match(rf"({re.escape(w)}\.layout\.\w+):? (.*)", str(e))
+            raise JobError(*(m.groups() if m else (f"{w}.layout", str(e)))) from None
+        three = layout.voltage_frame == "abc" and layout.current_frame == "abc"
+        if len(cols) == 6 and not three:
+            raise JobError(f"{w}.columns", "6 columns are three voltage and three current phases: layout abc for both")
+    elif len(cols) == 6:
+        raise JobError(f"{w}.columns", "6 columns are three voltage and three current phases: declare them in layout")
+    windows = get_field(rec, "windows", f"{w}.windows", int, 0)
+    if "windows" in rec and not 1 <= windows <= MAX_WINDOWS:
+        raise JobError(f"{w}.windows", f"must be a count in 1..{MAX_WINDOWS}, got {windows}")
+    machine = name = None
+    if "machine" in rec:
+        name = get_field(rec, "machine", f"{w}.machine", str)
+        if name.endswith(".toml"):
+            if load:
+                p = Path(name) if Path(name).is_absolute() else root / name
+                try:
+                    machine = load_drive(p)[0]
+                except (OSError, ValueError) as e:
+                    raise JobError(f"{w}.machine", f"{cap(name, 80)!r}: {e}") from None
+        else:
+            try:
+                machine = bench_machine(name)
+            except ValueError as e:
+                raise JobError(f"{w}.machine", str(e)) from None
+    return layout, windows, machine, name
 
 
 def _column_field(w: str, e, spec: RecordingSpec) -> str:
@@ -110,15 +174,35 @@ def _column_field(w: str, e, spec: RecordingSpec) -> str:
     return f"{w}.{key}[{listed.index(e.spec)}]" if e.spec in listed else f"{w}.{key}"
 
 
-def _load_one(spec: RecordingSpec, family: RecordedSignals, path: str):
-    kw = dict(time_column=spec.time_column, sample_rate=spec.sample_rate, ts=spec.ts, max_bytes=MAX_RECORDING_BYTES)
-    return family.read(path, spec.columns, spec.truth, **kw)
+def _load_one(spec: RecordingSpec, family: RecordedSignals, path: str, need: int | None = None):
+    """One file's scenario (or its ``spec.windows`` windows of ``need`` samples, a list)."""
+    kw = dict(time_column=spec.time_column, sample_rate=spec.sample_rate, ts=spec.ts)
+    if not family.binds:
+        return family.read(path, spec.columns, spec.truth, max_bytes=MAX_RECORDING_BYTES, **kw)
+    windows = (spec.windows, need) if spec.windows else None
+    return family.read(
+        path, spec.columns, spec.truth, layout=spec.layout, machine=spec.machine, windows=windows,
+        max_bytes=MAX_LOG_BYTES, **kw,
+    )  # fmt: skip
 
 
-def load_recordings(spec: RecordingSpec, family: RecordedSignals):
-    """The recordings of a job as one batched signal (each cut to the shortest, all read at ``spec.ts``), read
-    as ``family`` (:class:`jaxobs.families.RecordedSignals`) reads them."""
-    sigs = [_load_one(spec, family, p) for p in spec.paths]
+def recording_labels(spec: RecordingSpec, horizon: float) -> list[str]:
+    """The scenarios' names: each file's name, or ``file@t`` for the windows of a drive log (t: the window's
+    start, s)."""
+    if not spec.windows:
+        return list(spec.files)
+    return [f"{f}@{k}" for f in spec.files for k in range(spec.windows)]
+
+
+def load_recordings(spec: RecordingSpec, family: RecordedSignals, horizon: float | None = None):
+    """The recordings of a job as one batched signal, all read at ``spec.ts``, as ``family``
+    (:class:`jaxobs.families.RecordedSignals`) reads them: whole files of one length (cut to the shortest with
+    ``spec.trim``), or each drive log's ``spec.windows`` windows of the horizon."""
+    need = None if horizon is None else int(round(horizon / spec.ts)) + 1
+    sigs = []
+    for p in spec.paths:
+        got = _load_one(spec, family, p, need)
+        sigs += got if isinstance(got, list) else [got]
     n = min(s.n for s in sigs)
     return stack(jax.tree.map(lambda x: x[..., :n] if eqx.is_array(x) else x, s) for s in sigs)
 

@@ -180,7 +180,9 @@ def run_job(job: Job, out: Path, resume: bool = False, quiet: bool = False) -> d
         "job": job.raw,
         "job_sha256": job.sha256,
         "component": job.component,
-        "loop": None if job.drive is None else job.drive.loop,
+        "loop": "open loop on recordings"
+        if job.scenarios.recording is not None
+        else (None if job.drive is None else job.drive.loop),
         "start": None if job.drive is None else job.drive.start,
         "ts": float(obj.component.ts),
         "rule": rule_spec(obj.component.rule),
@@ -192,7 +194,7 @@ def run_job(job: Job, out: Path, resume: bool = False, quiet: bool = False) -> d
         "scores": scores,
         "linear": lin,
         "scenarios": {"axes": names, "count": len(combos)},
-        **recordings_provenance(job),
+        **recordings_provenance(job, obj.scenarios),
         "iterations": res.iterations,
         "best_iteration": res.best_iteration,
         "versions": versions(),

@@ -39,5 +39,5 @@ def build_scenarios(spec: ScenarioSpec, family: AbstractScenarios):
     (:func:`job_family`), or the job's recordings; with the axes' names and the points."""
     names, combos = scenario_points(spec)
     if spec.recording is not None:
-        return load_recordings(spec.recording, family), names, combos
+        return load_recordings(spec.recording, family, spec.horizon), names, combos
     return family.build(names, combos), names, combos

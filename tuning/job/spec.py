@@ -79,3 +79,8 @@ class RecordingSpec:
     truth: tuple
     ts: float
     sha256: tuple = ()  # of each file's bytes, when checked at parse time
+    layout: object = None  # a jaxobs.signals.RecordingLayout (what a drive log's columns hold), or None
+    trim: bool = False  # recordings of different lengths cut to the shortest (else refused)
+    windows: int = 0  # > 0: this many windows of the horizon spread over each drive log, each a scenario
+    machine: object = None  # a PMSMParams for a drive log's power and timing checks, or None
+    machine_name: str | None = None  # as the job names it (a bench machine or a drive file)
