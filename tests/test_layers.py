@@ -40,7 +40,7 @@ LAYERS = [
         "jaxobs.chunkstore",
     ),
     # integration rules (and check_rule)
-    ("jaxobs._discretize",),
+    ("jaxobs._discretize", "jaxobs.signals._base"),
     # signals and plant: they produce the measurements
     (
         "jaxobs.signals._waveforms",
