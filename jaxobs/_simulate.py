@@ -215,16 +215,18 @@ class AbstractSave(eqx.Module):
 
     def _plain(self, system, n, *, keep, checkpoint, state0) -> Solution:
         """The system's step scanned plainly: a user's own ``lax.scan(system.step, ...)`` gives these numbers."""
-        feed = LoopInputs(jnp.arange(n, dtype=jnp.int32), system.step)
+        feed = lambda ks: LoopInputs(ks, system.step)  # noqa: E731
         return _solve(self.cost, system, n, feed, fast=False, keep=keep, checkpoint=checkpoint, state0=state0)
 
     def _throughput(self, system, n, *, keep, checkpoint, state0, unroll) -> Solution:
         """The throughput loop (:mod:`jaxobs._loop`) over the inputs the system declares: the plain scan's numbers to
         rounding (1e-12 relative)."""
         system = system.throughput()
-        feed = system.loop_inputs(n)
-        if unroll is not None:
-            feed = feed._replace(unroll=unroll)
+
+        def feed(ks):
+            inputs = system.loop_inputs(ks)
+            return inputs if unroll is None else inputs._replace(unroll=unroll)
+
         return _solve(self.cost, system, n, feed, fast=True, keep=keep, checkpoint=checkpoint, state0=state0)
 
 
@@ -259,8 +261,9 @@ class SaveFinal(AbstractSave):
         return self._throughput(system, n, keep=False, checkpoint=checkpoint, state0=state0, unroll=unroll)
 
 
-def _solve(cost, system, n: int, feed: LoopInputs, *, fast: bool, keep: bool, checkpoint, state0) -> Solution:
-    """The loop of ``n`` steps fed by ``feed``, with the running cost; the outputs kept when ``keep``.
+def _solve(cost, system, n: int, feed: Callable, *, fast: bool, keep: bool, checkpoint, state0) -> Solution:
+    """The loop of ``n`` steps fed by ``feed(ks)`` (:class:`~jaxobs._system.LoopInputs` at the sample indices ks),
+    with the running cost; the outputs kept when ``keep``.
 
     With ``fast`` the loop is made fast (jaxobs._loop: inputs a block of steps at a time, multistep start-ups
     peeled, state vectors split, unrolled).  Those rewrites change which operations XLA fuses, and XLA's CPU
@@ -269,6 +272,8 @@ def _solve(cost, system, n: int, feed: LoopInputs, *, fast: bool, keep: bool, ch
     """
     ts, t0 = float(system.ts), float(system.t0)
     dtype = jnp.result_type(float)
+    ks = jnp.arange(n, dtype=jnp.int32)
+    feed = feed(ks)
 
     def body(carry, x):
         state, out = feed.advance(carry.state, x)
@@ -303,7 +308,7 @@ def _solve(cost, system, n: int, feed: LoopInputs, *, fast: bool, keep: bool, ch
     )
     total = None if cost is None else ts * final.acc
     ok = all_finite(outputs) if keep else all_finite(final)
-    t = (t0 + ts * jnp.arange(n, dtype=jnp.int32).astype(dtype)) if keep else None
+    t = (t0 + ts * ks.astype(dtype)) if keep else None
     return Solution(t=t, outputs=outputs, final_state=final.state, ok=ok, cost=total)
 
 
@@ -483,9 +488,9 @@ class OnSignal(AbstractSystem):
     def step(self, state, k):
         return self.advance(state, self.input(k))
 
-    def loop_inputs(self, n: int) -> LoopInputs:
+    def loop_inputs(self, ks) -> LoopInputs:
         """The sample indices, their inputs computed a block at a time (:meth:`input_block`)."""
-        return LoopInputs(jnp.arange(n, dtype=jnp.int32), self.advance, xs_map=self.input_block, unroll=self.unroll)
+        return LoopInputs(ks, self.advance, xs_map=self.input_block, unroll=self.unroll)
 
     def check_horizon(self, n: int):
         """The signal must be readable over the horizon (a recording inside its samples, a time-major batch one
@@ -580,8 +585,9 @@ class OnRows(AbstractSystem):
     def check_horizon(self, n: int):
         self.system.check_horizon(n)
 
-    def loop_inputs(self, n: int) -> LoopInputs:
+    def loop_inputs(self, ks) -> LoopInputs:
         """The rows as the scan's inputs, the start-up filled (:mod:`jaxobs._loop`, point 6)."""
+        n = ks.shape[0]
         unroll = min(self.unroll, n)
         while n % unroll:  # a remainder would be split off the rows: a copy of the horizon
             unroll -= 1

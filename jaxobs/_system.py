@@ -7,9 +7,10 @@ reads is declared here with a default, so that ``simulate`` asks rather than pro
 - ``t0``: the time of sample 0 (0 s);
 - ``unroll``: the loop unrolling the system prefers (1; :mod:`jaxobs._loop`, point 3);
 - ``check_horizon(n)``: refuse a run of n steps the system cannot make (accepts every n);
-- ``loop_inputs(n)``: how the throughput loop feeds the steps (:class:`LoopInputs`; by default the sample
-  indices, each step ``step(state, k)``); a system whose step splits into the outside world's input at
-  sample k and ``advance(state, x)`` feeds the inputs a block at a time (:class:`~jaxobs.OnSignal`);
+- ``loop_inputs(ks)``: how the throughput loop feeds the steps at the sample indices ``ks``
+  (:class:`LoopInputs`; by default the indices themselves, each step ``step(state, k)``); a system whose
+  step splits into the outside world's input at sample k and ``advance(state, x)`` feeds the inputs a
+  block at a time (:class:`~jaxobs.OnSignal`);
 - ``throughput()``: the system the throughput loop runs in this one's place, with the same numbers to
   rounding (itself; an observer on a time-major recording batch runs as its rows system).
 
@@ -24,7 +25,7 @@ from collections.abc import Callable
 from typing import Any, ClassVar, NamedTuple
 
 import equinox as eqx
-import jax.numpy as jnp
+import jax
 
 __all__ = ["AbstractSystem", "LoopInputs"]
 
@@ -77,9 +78,10 @@ class AbstractSystem(eqx.Module):
     def check_horizon(self, n: int) -> None:
         """Refuse (``ValueError``) a run of ``n`` steps from sample 0 that this system cannot make; any by default."""
 
-    def loop_inputs(self, n: int) -> LoopInputs:
-        """How the throughput loop feeds the ``n`` steps: by default the sample indices, ``step`` on each."""
-        return LoopInputs(jnp.arange(n, dtype=jnp.int32), self.step, unroll=self.unroll)
+    def loop_inputs(self, ks: jax.Array) -> LoopInputs:
+        """How the throughput loop feeds the steps at the sample indices ``ks`` (int32, 0 to n − 1): by default the
+        indices themselves, ``step`` on each."""
+        return LoopInputs(ks, self.step, unroll=self.unroll)
 
     def throughput(self) -> AbstractSystem:
         """The system the throughput loop (``SaveFinal``, ``SaveAll(fast=True)``) runs in this one's place: the
