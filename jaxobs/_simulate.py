@@ -495,7 +495,7 @@ class OnSignal(AbstractSystem):
     def check_horizon(self, n: int):
         """The signal must be readable over the horizon (a recording inside its samples, a time-major batch one
         scenario at a time: :meth:`jaxobs.AbstractSignal.check_window`)."""
-        self.signal.check_window(self.t0, self.t0 + self.ts * (n - 1), "simulate: OnSignal.signal")
+        self.signal.check_window(self.t0, self.t0 + self.ts * (n - 1), "OnSignal.signal")
 
     def throughput(self) -> AbstractSystem:
         """:class:`OnRows` on a time-major recording batch (its scenario axis inner, ``batch_axis`` 1) on this

@@ -9,7 +9,8 @@ defaults, what the rest of jaxobs reads from it instead of probing for it:
 - ``has_flux_angle``: ``flux_angle(t)`` and ``flux_omega(t)`` are the rotor-flux angle and its rate that a flux
   observer's estimate is compared with (an EMF's truth);
 - ``batch_axis``: the axis of its leaves that a batch of it maps over (:func:`jaxobs.batch_axes`);
-- ``check_window(t0, t_last, owner)``: refuse a horizon the signal cannot be read over (a recording's).
+- ``check_window(t0, t_last, owner)``: refuse a simulation's horizon the signal cannot be read over (a
+  recording's), naming the signal as ``owner`` (e.g. ``"OnSignal.signal"``).
 
 A plain function of time is wrapped as a :class:`FunctionSignal` (no truth, no sample time).
 """
@@ -62,8 +63,8 @@ class AbstractSignal(eqx.Module):
         raise ValueError(f"{type(self).__name__} has no flux angle")
 
     def check_window(self, t0: float, t_last: float, owner: str) -> None:
-        """Refuse (``ValueError``, naming ``owner``) a run that reads the signal at t0, t0 + ts, ..., ``t_last``
-        (s) where it cannot be read; every horizon is readable by default."""
+        """Refuse (``ValueError``, naming the signal as ``owner``) a simulation that reads the signal at t0,
+        t0 + ts, ..., ``t_last`` (s) where it cannot be read; every horizon is readable by default."""
 
 
 class FunctionSignal(AbstractSignal):

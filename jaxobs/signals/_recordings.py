@@ -60,7 +60,7 @@ class _Recording(AbstractSignal):
         time-major batch is read one scenario at a time (under map_batch, or a vmap along its inner axis)."""
         if self.batch_inner and self.samples.ndim != self.scenario_ndim:
             raise ValueError(
-                f"{owner} is a time-major batch of {self.samples.shape[1]} recordings "
+                f"simulate: {owner} is a time-major batch of {self.samples.shape[1]} recordings "
                 f"({type(self).__name__}(batch_inner=True), samples {self.samples.shape}) and simulate runs one: "
                 "map it with jaxobs.map_batch(fn, batch) or jax.vmap(fn, in_axes=(jaxobs.batch_axes(batch),))"
             )
@@ -68,7 +68,7 @@ class _Recording(AbstractSignal):
             # jax.vmap's default in_axes=0 maps a time-major batch along time: each "recording" is then one
             # sample of every scenario; the recording's length, kept static, tells
             raise ValueError(
-                f"{owner} is a time-major batch mapped along its time axis (each scenario sees "
+                f"simulate: {owner} is a time-major batch mapped along its time axis (each scenario sees "
                 f"{self.samples.shape[0]} values of a recording of {self.n_time} samples; jax.vmap's default "
                 "in_axes=0 does that): map it with jaxobs.map_batch(fn, batch) or "
                 "jax.vmap(fn, in_axes=(jaxobs.batch_axes(batch),))"
