@@ -86,6 +86,7 @@ from .sharding import shard_batch as shard_batch
 from .sharding import use_host_devices as use_host_devices
 
 # test signals and recordings
+from .signals import AbstractSignal as AbstractSignal
 from .signals import DriveRecording as DriveRecording
 from .signals import EMFSignal as EMFSignal
 from .signals import GridSignal as GridSignal
@@ -146,6 +147,7 @@ __all__ = [
     "FALESO",
     "ObserverBank",
     # signals
+    "AbstractSignal",
     "GridSignal",
     "EMFSignal",
     "SampledSignal",

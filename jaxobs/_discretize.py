@@ -35,7 +35,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-__all__ = ["Held", "Knots", "AbstractRule", "Euler", "Tustin", "AB3", "RK4", "check_rule"]
+__all__ = ["Held", "Knots", "AbstractRule", "AbstractMultistepState", "Euler", "Tustin", "AB3", "RK4", "check_rule"]
 
 VectorField = Callable[[jax.Array, Any], jax.Array]
 
@@ -257,7 +257,23 @@ def solve_small(a, b):
     return jnp.stack(x)
 
 
-class AB3State(eqx.Module):
+class AbstractMultistepState(eqx.Module):
+    """A rule state whose first ``startup_steps`` steps differ from the rest (a multistep rule's start-up): the
+    loop peels them off and runs the rest in the state's branch-free ``steady()`` form (:mod:`jaxobs._loop`,
+    point 2)."""
+
+    startup_steps: eqx.AbstractClassVar[int]
+
+    @abc.abstractmethod
+    def steady(self) -> AbstractMultistepState:
+        """The same state, declared past its start-up (valid once ``startup_steps`` steps have been taken)."""
+
+    @abc.abstractmethod
+    def started(self) -> AbstractMultistepState:
+        """The state in its general form again: undoes :meth:`steady`."""
+
+
+class AB3State(AbstractMultistepState):
     f1: jax.Array  # f at the previous sample,     shape = x.shape
     f2: jax.Array  # f two samples back,           shape = x.shape
     n: jax.Array | None  # samples taken so far (int32 scalar); None once past the start-up ("steady")

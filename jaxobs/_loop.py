@@ -100,7 +100,7 @@ checks each against the plain scan, to 1e-12 or tighter):
    M scenario-steps/s against the hand-written JAX scan (``jax-hand``), same
    run: batch 8192 float32 1073 vs 973, float64 657 vs 616 (the scenario-major
    block read: 575–618 and 330–344); batch 1024 float32 746 vs 484, float64
-   505 vs 422.  The unroll over rows is ``OnSignal.rows_unroll`` (2).
+   505 vs 422.  The unroll over rows is ``OnRows.unroll`` (2).
 
 A seventh rewrite was tried and deleted: evaluating the step's jaxpr with every small
 state vector held as its elements (a ``SCALARIZE`` switch, off by default), so that
@@ -250,8 +250,7 @@ class AutoCheckpoint(AbstractCheckpoint):
     forward_max: int = eqx.field(static=True, default=8)
 
     def __check_init__(self):
-        for name in ("chunk_above", "forward_max"):
-            v = getattr(self, name)
+        for name, v in (("chunk_above", self.chunk_above), ("forward_max", self.forward_max)):
             if isinstance(v, bool) or not isinstance(v, int) or v < 0:
                 raise ValueError(f"AutoCheckpoint.{name} must be an integer >= 0, got {v!r}")
 

@@ -1,7 +1,6 @@
 """The one time loop: ``jaxobs.simulate(system, t1)`` runs any *system*.
 
-A system is an ``equinox.Module`` with a sample time ``ts`` and two pure methods
-(DESIGN.md, "Systems and the one loop")::
+A system is an ``equinox.Module`` with a sample time ``ts`` and two pure methods::
 
     state = system.init()
     state, out = system.step(state, k)      # k: the sample index (int32 scalar)
@@ -13,17 +12,19 @@ so that a user's own scan gives exactly what ``simulate`` returns::
 
 Two systems ship with jaxobs: :class:`OnSignal` (an observer fed a test signal
 or a recording) and :class:`jaxobs.drive.ClosedLoop` (the PMSM drive, with an
-observer or the encoder).  A system may split its step into ``input(k)`` (what
-the outside world supplies at sample k: signal samples, speed and load
-profiles) and ``advance(state, x)``, with ``step(state, k) == advance(state,
-input(k))``; ``simulate`` then evaluates the inputs a block of steps at a time,
-vectorized (:mod:`jaxobs._loop`, point 5), which is what makes long horizons
-fast on CPU.
+observer or the encoder).  What else the loop reads of a system is declared by
+:class:`~jaxobs.AbstractSystem` with defaults (``t0``, ``unroll``,
+``check_horizon``, ``loop_inputs``, ``throughput``).  :class:`OnSignal` feeds its
+inputs a block of steps at a time, vectorized (:mod:`jaxobs._loop`, point 5),
+which is what makes long horizons fast on CPU; on a time-major recording batch
+its throughput loop runs as :class:`OnRows`, whose inputs are the batch's rows
+(point 6).
 
 What to keep and how reverse-mode AD stores the loop are strategy objects,
 as diffrax passes ``SaveAt`` and adjoints: :class:`SaveAll` / :class:`SaveFinal`
-(each with an optional running cost) and the checkpoint strategies of
-:mod:`jaxobs._loop` (:class:`AutoCheckpoint` by default).  ``simulate`` is a
+(each with an optional running cost), each running the loop it needs
+(``save.run``), and the checkpoint strategies of :mod:`jaxobs._loop`
+(:class:`AutoCheckpoint` by default).  ``simulate`` is a
 ``filter_jit``-ed function of PyTrees: ``jax.vmap`` over a batch of systems
 (scenarios, gains) and ``jax.grad`` through it apply unchanged.  Gains stay
 leaves of the system.
@@ -34,6 +35,7 @@ A simulation that diverges is reported by ``sol.ok`` (per scenario under
 
 from __future__ import annotations
 
+import abc
 import functools
 import math
 import os
@@ -49,10 +51,11 @@ import numpy as np
 from ._discretize import Knots, ab3_steady_from_start
 from ._loop import AbstractCheckpoint, AutoCheckpoint, check_unroll, run_loop
 from ._measurements import DriveInput
-from ._system import AbstractSystem
+from ._system import AbstractSystem, LoopInputs
 from ._time import SampleTime
 from ._validate import check_sample_time
-from .signals import DriveRecording, EMFSignal, SampledSignal
+from .observers import AbstractObserver
+from .signals import AbstractSignal, DriveRecording, EMFSignal, FunctionSignal, SampledSignal
 
 __all__ = [
     "simulate",
@@ -61,6 +64,7 @@ __all__ = [
     "SaveAll",
     "SaveFinal",
     "OnSignal",
+    "OnRows",
     "SignalTruth",
     "SignalOutput",
     "n_samples",
@@ -89,57 +93,6 @@ def _warn_float32():
         PrecisionWarning,
         stacklevel=3,
     )
-
-
-# ---------------------------------------------------------------------------
-# what to save
-# ---------------------------------------------------------------------------
-
-
-class AbstractSave(eqx.Module):
-    """What ``simulate`` keeps: every step's outputs, or only the end; optionally a running cost.
-
-    ``cost(out) -> scalar`` is evaluated on every step's output ``out`` (the
-    system's output type: :class:`SignalOutput` for :class:`OnSignal`, the
-    drive's ``DriveOutput`` for ``ClosedLoop``); ``sol.cost`` is its integral
-    ts·Σ cost — the streaming form of an ISE-type objective, whose gradient
-    over a long horizon needs no trajectory.
-    """
-
-    cost: Callable | None = eqx.field(static=True, default=None)
-    keeps_outputs: ClassVar[bool]
-
-    def __check_init__(self):
-        if self.cost is not None and not callable(self.cost):
-            raise ValueError(
-                f"{type(self).__name__}.cost must be a callable cost(out) -> scalar or None, got {self.cost!r}"
-            )
-
-
-class SaveAll(AbstractSave):
-    """Keep every step's outputs (``sol.outputs``, leading axis the samples) and the final state.
-
-    ``fast=False`` (the default) scans ``system.step`` plainly: a user's own ``lax.scan`` of it gives the
-    same numbers bit for bit.  ``fast=True`` runs the loop made fast (jaxobs._loop: inputs a block of steps
-    at a time, state vectors split, multistep start-ups peeled, unrolled), as :class:`SaveFinal` always
-    does: the same outputs to rounding (1e-12 relative), in about half the time where the input is costly
-    (a harmonic signal) or under differentiation (the tuning objective runs this way).
-    """
-
-    fast: bool = eqx.field(static=True, default=False)
-    keeps_outputs: ClassVar[bool] = True
-
-    def __check_init__(self):
-        super().__check_init__()
-        if not isinstance(self.fast, bool):
-            raise ValueError(f"SaveAll.fast must be True or False, got {self.fast!r}")
-
-
-class SaveFinal(AbstractSave):
-    """Keep only the final state, ``ok`` and the running cost: a long horizon stores no trajectory."""
-
-    keeps_outputs: ClassVar[bool] = False
-    fast: ClassVar[bool] = True  # always the loop made fast (jaxobs._loop)
 
 
 # ---------------------------------------------------------------------------
@@ -224,6 +177,142 @@ def _check_memory(out_shape, n: int):
 
 
 # ---------------------------------------------------------------------------
+# what to save: each strategy runs the loop it needs
+# ---------------------------------------------------------------------------
+
+
+class _Carry(NamedTuple):
+    state: Any
+    acc: jax.Array
+
+
+class AbstractSave(eqx.Module):
+    """What ``simulate`` keeps: every step's outputs, or only the end; optionally a running cost.
+
+    ``cost(out) -> scalar`` is evaluated on every step's output ``out`` (the
+    system's output type: :class:`SignalOutput` for :class:`OnSignal`, the
+    drive's ``DriveOutput`` for ``ClosedLoop``); ``sol.cost`` is its integral
+    ts·Σ cost — the streaming form of an ISE-type objective, whose gradient
+    over a long horizon needs no trajectory.
+
+    Each strategy runs its own loop (:meth:`run`), as diffrax's adjoints do: the plain scan of the system's
+    step, or the throughput loop (:mod:`jaxobs._loop`) over the inputs the system declares
+    (:meth:`jaxobs.AbstractSystem.loop_inputs`).
+    """
+
+    cost: Callable | None = eqx.field(static=True, default=None)
+
+    def __check_init__(self):
+        if self.cost is not None and not callable(self.cost):
+            raise ValueError(
+                f"{type(self).__name__}.cost must be a callable cost(out) -> scalar or None, got {self.cost!r}"
+            )
+
+    @abc.abstractmethod
+    def run(self, system: AbstractSystem, n: int, *, checkpoint, state0, unroll: int | None) -> Solution:
+        """``n`` steps of ``system`` from sample 0 (``state0``, or ``system.init()``), stored for reverse-mode AD
+        as ``checkpoint`` says; ``unroll`` (None: the system's) for the throughput loop."""
+
+    def _plain(self, system, n, *, keep, checkpoint, state0) -> Solution:
+        """The system's step scanned plainly: a user's own ``lax.scan(system.step, ...)`` gives these numbers."""
+        feed = lambda ks: LoopInputs(ks, system.step)  # noqa: E731
+        return _solve(self.cost, system, n, feed, fast=False, keep=keep, checkpoint=checkpoint, state0=state0)
+
+    def _throughput(self, system, n, *, keep, checkpoint, state0, unroll) -> Solution:
+        """The throughput loop (:mod:`jaxobs._loop`) over the inputs the system declares: the plain scan's numbers to
+        rounding (1e-12 relative)."""
+        system = system.throughput()
+
+        def feed(ks):
+            inputs = system.loop_inputs(ks)
+            return inputs if unroll is None else inputs._replace(unroll=unroll)
+
+        return _solve(self.cost, system, n, feed, fast=True, keep=keep, checkpoint=checkpoint, state0=state0)
+
+
+class SaveAll(AbstractSave):
+    """Keep every step's outputs (``sol.outputs``, leading axis the samples) and the final state.
+
+    ``fast=False`` (the default) scans ``system.step`` plainly: a user's own ``lax.scan`` of it gives the
+    same numbers bit for bit.  ``fast=True`` runs the loop made fast (jaxobs._loop: inputs a block of steps
+    at a time, state vectors split, multistep start-ups peeled, unrolled), as :class:`SaveFinal` always
+    does: the same outputs to rounding (1e-12 relative), in about half the time where the input is costly
+    (a harmonic signal) or under differentiation (the tuning objective runs this way).
+    """
+
+    fast: bool = eqx.field(static=True, default=False)
+
+    def __check_init__(self):
+        super().__check_init__()
+        if not isinstance(self.fast, bool):
+            raise ValueError(f"SaveAll.fast must be True or False, got {self.fast!r}")
+
+    def run(self, system, n, *, checkpoint, state0, unroll):
+        if self.fast:
+            return self._throughput(system, n, keep=True, checkpoint=checkpoint, state0=state0, unroll=unroll)
+        return self._plain(system, n, keep=True, checkpoint=checkpoint, state0=state0)
+
+
+class SaveFinal(AbstractSave):
+    """Keep only the final state, ``ok`` and the running cost: a long horizon stores no trajectory.  Always the
+    throughput loop (:mod:`jaxobs._loop`)."""
+
+    def run(self, system, n, *, checkpoint, state0, unroll):
+        return self._throughput(system, n, keep=False, checkpoint=checkpoint, state0=state0, unroll=unroll)
+
+
+def _solve(cost, system, n: int, feed: Callable, *, fast: bool, keep: bool, checkpoint, state0) -> Solution:
+    """The loop of ``n`` steps fed by ``feed(ks)`` (:class:`~jaxobs._system.LoopInputs` at the sample indices ks),
+    with the running cost; the outputs kept when ``keep``.
+
+    With ``fast`` the loop is made fast (jaxobs._loop: inputs a block of steps at a time, multistep start-ups
+    peeled, state vectors split, unrolled).  Those rewrites change which operations XLA fuses, and XLA's CPU
+    backend always contracts a·b + c into a fused multiply-add where it fuses, so the two loops agree to
+    rounding (1e-12 relative, tests/test_perf.py), not to the last bit.
+    """
+    ts, t0 = float(system.ts), float(system.t0)
+    dtype = jnp.result_type(float)
+    ks = jnp.arange(n, dtype=jnp.int32)
+    feed = feed(ks)
+
+    def body(carry, x):
+        state, out = feed.advance(carry.state, x)
+        acc = carry.acc if cost is None else carry.acc + cost(out)
+        return _Carry(state, acc), (out if keep else None)
+
+    # Without state0 the loop builds the initial state itself (carry_fn): a gain that also sets the initial
+    # state (an FLL's omega_n) is then one direction of the forward sensitivities, not one per state component.
+    def carry_fn():
+        state = system.init() if state0 is None else state0
+        return _Carry(state, jnp.zeros((), dtype))
+
+    if keep:
+
+        def one_output(first):  # the outputs of step 0 (shapes only)
+            x = jax.tree.map(lambda a: a[0], first if feed.xs_map is None else feed.xs_map(first))
+            return body(carry_fn(), x)[1]
+
+        _check_memory(jax.eval_shape(one_output, jax.tree.map(lambda a: a[:1], feed.xs)), n)
+    final, outputs = run_loop(
+        body,
+        None,
+        feed.xs,
+        n,
+        unroll=feed.unroll if fast else 1,
+        checkpoint=checkpoint,
+        xs_map=feed.xs_map,
+        split=fast,
+        peel=fast,
+        carry_fn=carry_fn,
+        fill=feed.fill,
+    )
+    total = None if cost is None else ts * final.acc
+    ok = all_finite(outputs) if keep else all_finite(final)
+    t = (t0 + ts * ks.astype(dtype)) if keep else None
+    return Solution(t=t, outputs=outputs, final_state=final.state, ok=ok, cost=total)
+
+
+# ---------------------------------------------------------------------------
 # an observer on a signal
 # ---------------------------------------------------------------------------
 
@@ -253,19 +342,21 @@ class OnSignal(AbstractSystem):
     a :class:`SignalOutput`.
 
     Args:
-        observer: any module with ``init(u0)``/``step`` and a sample time ``ts``.
-        signal: callable ``signal(t)`` (a :class:`~jaxobs.signals.GridSignal`,
-            :class:`~jaxobs.signals.EMFSignal`, :class:`~jaxobs.signals.SampledSignal`...);
-            with ``theta``/``omega``/``fundamental_amplitude`` methods its truth is reported.
+        observer: a :class:`~jaxobs.AbstractObserver` (``init(u0)``, ``step``, a sample time ``ts``).
+        signal: a :class:`~jaxobs.AbstractSignal` (a :class:`~jaxobs.signals.GridSignal`,
+            :class:`~jaxobs.signals.EMFSignal`, :class:`~jaxobs.signals.SampledSignal`...), whose truth is
+            reported where it declares one (``has_truth``); or a plain function ``signal(t)`` (wrapped as a
+            :class:`~jaxobs.signals.FunctionSignal`: no truth).
         t0: time of sample 0, s.
         knots: give the rule the input at the period's start, middle and end.
 
     The observer starts from ``observer.init(u(t0))``; to start elsewhere, pass
-    ``state0=`` to :func:`simulate`.
+    ``state0=`` to :func:`simulate`.  On a time-major recording batch on the observer's sample grid the
+    throughput loop runs :class:`OnRows` in its place (:meth:`throughput`).
     """
 
-    observer: Any
-    signal: Any
+    observer: AbstractObserver
+    signal: AbstractSignal
     t0: float = eqx.field(static=True)
     knots: bool = eqx.field(static=True)
 
@@ -276,20 +367,16 @@ class OnSignal(AbstractSystem):
     # fusion chain more steps into kernels that each recompute the AB3 sums of the steps before (16 ran
     # at a fifth of the speed of 4).
     unroll: ClassVar[int] = 3
-    # ... and over the rows of a time-major batch (jaxobs._loop point 6), where a step reads one row and nothing
-    # else: 2, measured against 1, 2, 3 and 4 (SOGI-FLL, precomputed, 2 host devices, 1 s at 10 kHz, M
-    # scenario-steps/s, one run each): batch 8192 f32 u1 884-893 / u2 1095-1104 / u3 365-390 / u4 1160-1165,
-    # f64 u2 646-648 / u4 416-510; batch 1024 f32 u2 773-781 / u4 929-944, f64 u2 485-513 / u4 557-568.  4 is
-    # faster in three of the four and loses a third in the fourth; 2 is never far from the best.  An unroll that
-    # does not divide the horizon makes lax.scan split off the remainder, a copy of the whole horizon's rows
-    # (u3 above): simulate lowers it to the next divisor.
-    rows_unroll: ClassVar[int] = 2
 
     def __init__(self, observer, signal, *, t0=0.0, knots=False):
-        if not (hasattr(observer, "init") and hasattr(observer, "step") and hasattr(observer, "ts")):
-            raise ValueError(f"OnSignal.observer must have init, step and ts, got {type(observer).__name__}")
-        if not callable(signal):
-            raise ValueError(f"OnSignal.signal must be callable signal(t), got {type(signal).__name__}")
+        if not isinstance(observer, AbstractObserver):
+            raise ValueError(
+                f"OnSignal.observer must be a jaxobs.AbstractObserver (init, step, ts), got {type(observer).__name__}"
+            )
+        if not isinstance(signal, AbstractSignal):
+            if not callable(signal):
+                raise ValueError(f"OnSignal.signal must be callable signal(t), got {type(signal).__name__}")
+            signal = FunctionSignal(signal)
         check_sample_time("ts", observer.ts, type(observer).__name__)
         if isinstance(t0, bool) or not isinstance(t0, (int, float)) or not np.isfinite(t0):
             raise ValueError(f"OnSignal.t0 must be a finite number of seconds, got {t0!r}")
@@ -314,10 +401,8 @@ class OnSignal(AbstractSystem):
 
     @property
     def has_truth(self) -> bool:
-        sig = self.signal
-        return getattr(sig, "has_truth", True) and all(
-            hasattr(sig, a) for a in ("theta", "omega", "fundamental_amplitude")
-        )
+        """The signal reports its truth (``SignalOutput.truth`` is filled in)."""
+        return self.signal.has_truth
 
     def time(self, k):
         """t_k = t0 + k·ts (in the default float dtype)."""
@@ -327,15 +412,12 @@ class OnSignal(AbstractSystem):
         """The time of sample k (+ a static offset) as the signal takes it: a :class:`SampleTime` (the
         exact index, so that a float32 phase stays accurate at any horizon: jaxobs._time) for signals
         that accept one, else the float t_k + offset."""
-        if getattr(self.signal, "accepts_sample_time", False):
+        if self.signal.accepts_sample_time:
             return SampleTime(jnp.asarray(k, jnp.int32), self.ts, self.t0 + offset)
         return self.time(k) + offset if offset else self.time(k)
 
     def init(self):
-        off = self._rows_offset()
-        if off is not None:  # sample 0 read where it lies (a dynamic read would move the batch axis)
-            return self.observer.init(self.row_input(jax.tree.map(lambda a: a[off], self._rows()))[0])
-        if getattr(self.signal, "accepts_sample_time", False):
+        if self.signal.accepts_sample_time:
             return self.observer.init(self.signal(self._at(0)))
         return self.observer.init(self.signal(jnp.asarray(self.t0, jnp.result_type(float))))
 
@@ -363,40 +445,6 @@ class OnSignal(AbstractSystem):
             return None
         off = (self.t0 - sig.t0) / ts
         return round(off) if abs(off - round(off)) <= 1e-9 else None
-
-    def _rows_offset(self) -> int | None:
-        """The sample offset when this system's inputs are a time-major recording batch's rows."""
-        if isinstance(self.signal, (SampledSignal, DriveRecording)) and self.signal.batch_inner:
-            return self._sample_offset()
-        return None
-
-    def _rows(self):
-        """The recording's arrays with time leading: (samples, truth arrays or None)."""
-        sig = self.signal
-        if isinstance(sig, DriveRecording):
-            return sig.samples, sig.theta_e, sig.omega_e
-        return sig.samples, sig.truth
-
-    def input_rows(self, n: int):
-        """The rows of all ``n`` steps (leading axis n; :meth:`row_input` makes a step's input of one), or
-        ``None``: for a time-major recording batch on this system's sample grid (``batch_inner=True``), its
-        arrays' rows ``[off, off + n)``.  Under ``map_batch`` the loop reads them one contiguous row per step
-        (:mod:`jaxobs._loop`, point 6): a static slice keeps the batch axis inner, and with the horizon the
-        whole recording there is no slice at all."""
-        off = self._rows_offset()
-        if off is None:
-            return None
-        return jax.tree.map(lambda a: a if (off == 0 and a.shape[0] == n) else a[off : off + n], self._rows())
-
-    def row_input(self, row):
-        """``input(k)`` from row k of :meth:`input_rows` (the same values: the recording snaps to its samples)."""
-        if isinstance(self.signal, DriveRecording):
-            m, th, om = row
-            u = DriveInput(u_a=m[0], u_b=m[1], i_a=m[2], i_b=m[3])
-            truth = SignalTruth(th, om, jnp.sqrt(u.u_a * u.u_a + u.u_b * u.u_b)) if th is not None else None
-            return u, u, truth
-        u, truth = row
-        return u, u, (SignalTruth(*truth) if truth is not None else None)
 
     def input_block(self, kb):
         """``input`` at the consecutive sample indices ``kb`` (leading axis the block), computed together.
@@ -432,6 +480,7 @@ class OnSignal(AbstractSystem):
         return u, u, truth
 
     def advance(self, state, x):
+        """One step on the input ``x`` of :meth:`input`: ``step(state, k) == advance(state, input(k))``."""
         u, path, truth = x
         state, out = self.observer.step(state, path)
         return state, SignalOutput(u=u, obs=out, truth=truth)
@@ -439,44 +488,120 @@ class OnSignal(AbstractSystem):
     def step(self, state, k):
         return self.advance(state, self.input(k))
 
+    def loop_inputs(self, ks) -> LoopInputs:
+        """The sample indices, their inputs computed a block at a time (:meth:`input_block`)."""
+        return LoopInputs(ks, self.advance, xs_map=self.input_block, unroll=self.unroll)
+
     def check_horizon(self, n: int):
-        """A recording cannot be read outside its samples (it holds its end values, which would be a lie); a
-        time-major batch runs one scenario at a time (under map_batch, or a vmap along its inner axis)."""
-        sig = self.signal
-        inner = isinstance(sig, (SampledSignal, DriveRecording)) and sig.batch_inner
-        if inner and sig.samples.ndim != (1 if isinstance(sig, SampledSignal) else 2):  # a scenario's (n,), (n, 4)
+        """The signal must be readable over the horizon (a recording inside its samples, a time-major batch one
+        scenario at a time: :meth:`jaxobs.AbstractSignal.check_window`)."""
+        self.signal.check_window(self.t0, self.t0 + self.ts * (n - 1), "OnSignal.signal")
+
+    def throughput(self) -> AbstractSystem:
+        """:class:`OnRows` on a time-major recording batch (its scenario axis inner, ``batch_axis`` 1) on this
+        system's sample grid; this system otherwise."""
+        if self.signal.batch_axis != 0 and self._sample_offset() is not None:
+            return OnRows(self)
+        return self
+
+
+class OnRows(AbstractSystem):
+    """An observer on a time-major recording batch, fed the batch's rows: the throughput loop's form of
+    :class:`OnSignal` on one (:meth:`OnSignal.throughput`).
+
+    A batch of recordings stored time-major (``SampledSignal(batch_inner=True)``,
+    ``DriveRecording(batch_inner=True)``: leaves (n, B), row k every scenario's sample k) is mapped along its
+    inner axis (``jaxobs.map_batch``), and its rows are the scan's inputs (:mod:`jaxobs._loop`, point 6):
+    ``lax.scan`` keeps a batched input's batch axis where time-major rows have it, so each step reads one
+    contiguous (B,) row.  AB3's start-up is filled into a steady history
+    (:func:`jaxobs._discretize.ab3_steady_from_start`) instead of peeled, since ``xs[2:]`` would copy the
+    horizon.  The numbers are :class:`OnSignal`'s to rounding; ``step`` is its step.
+
+    Args:
+        system: the :class:`OnSignal` whose signal is a time-major recording batch on its sample grid.
+    """
+
+    system: OnSignal
+
+    # the unroll over the rows (jaxobs._loop point 6), where a step reads one row and nothing else: 2, measured
+    # against 1, 2, 3 and 4 (SOGI-FLL, precomputed, 2 host devices, 1 s at 10 kHz, M scenario-steps/s, one run
+    # each): batch 8192 f32 u1 884-893 / u2 1095-1104 / u3 365-390 / u4 1160-1165, f64 u2 646-648 / u4 416-510;
+    # batch 1024 f32 u2 773-781 / u4 929-944, f64 u2 485-513 / u4 557-568.  4 is faster in three of the four and
+    # loses a third in the fourth; 2 is never far from the best.  An unroll that does not divide the horizon makes
+    # lax.scan split off the remainder, a copy of the whole horizon's rows (u3 above): loop_inputs lowers it to
+    # the next divisor.
+    unroll: ClassVar[int] = 2
+
+    def __init__(self, system: OnSignal):
+        if not isinstance(system, OnSignal) or system.signal.batch_axis == 0 or system._sample_offset() is None:
             raise ValueError(
-                f"simulate: OnSignal.signal is a time-major batch of {sig.samples.shape[1]} recordings "
-                f"({type(sig).__name__}(batch_inner=True), samples {sig.samples.shape}) and simulate runs one: "
-                "map it with jaxobs.map_batch(fn, batch) or jax.vmap(fn, in_axes=(jaxobs.batch_axes(batch),))"
+                "OnRows.system must be an OnSignal on a time-major recording batch (batch_inner=True) on its "
+                f"sample grid, got {type(system).__name__}"
             )
-        if inner and sig.samples.shape[0] != sig.n_time:
-            # jax.vmap's default in_axes=0 maps a time-major batch along time: each "recording" is then one
-            # sample of every scenario; the recording's length, kept static, tells
-            raise ValueError(
-                f"simulate: OnSignal.signal is a time-major batch mapped along its time axis (each scenario sees "
-                f"{sig.samples.shape[0]} values of a recording of {sig.n_time} samples; jax.vmap's default "
-                "in_axes=0 does that): map it with jaxobs.map_batch(fn, batch) or "
-                "jax.vmap(fn, in_axes=(jaxobs.batch_axes(batch),))"
-            )
-        if isinstance(sig, (SampledSignal, DriveRecording)):
-            t_last = self.t0 + self.ts * (n - 1)
-            tol = SampledSignal.SNAP * sig.ts
-            if self.t0 < sig.t0 - tol or t_last > sig.t_end + tol:
-                raise ValueError(
-                    f"simulate: the horizon [t0, t0 + ts*(n-1)] = [{self.t0:g}, {t_last:g}] s must lie inside the "
-                    f"{type(sig).__name__}'s samples [{sig.t0:g}, {sig.t_end:g}] s"
-                )
+        self.system = system
+
+    @property
+    def ts(self) -> float:
+        return self.system.ts
+
+    @property
+    def t0(self) -> float:
+        return self.system.t0
+
+    def _rows(self):
+        """The recording's arrays with time leading: (samples, truth arrays or None)."""
+        sig = self.system.signal
+        if isinstance(sig, DriveRecording):
+            return sig.samples, sig.theta_e, sig.omega_e
+        return sig.samples, sig.truth
+
+    def input_rows(self, n: int):
+        """The rows of all ``n`` steps (leading axis n; :meth:`row_input` makes a step's input of one): the
+        recording's arrays' rows ``[off, off + n)``, off the index of sample 0.  Under ``map_batch`` the loop
+        reads them one contiguous row per step (:mod:`jaxobs._loop`, point 6): a static slice keeps the batch
+        axis inner, and with the horizon the whole recording there is no slice at all."""
+        off = self.system._sample_offset()
+        return jax.tree.map(lambda a: a if (off == 0 and a.shape[0] == n) else a[off : off + n], self._rows())
+
+    def row_input(self, row):
+        """``OnSignal.input(k)`` from row k of :meth:`input_rows` (the same values: the recording snaps to its
+        samples)."""
+        if isinstance(self.system.signal, DriveRecording):
+            m, th, om = row
+            u = DriveInput(u_a=m[0], u_b=m[1], i_a=m[2], i_b=m[3])
+            truth = SignalTruth(th, om, jnp.sqrt(u.u_a * u.u_a + u.u_b * u.u_b)) if th is not None else None
+            return u, u, truth
+        u, truth = row
+        return u, u, (SignalTruth(*truth) if truth is not None else None)
+
+    def init(self):
+        # sample 0 read where it lies (a dynamic read would move the batch axis)
+        off = self.system._sample_offset()
+        return self.system.observer.init(self.row_input(jax.tree.map(lambda a: a[off], self._rows()))[0])
+
+    def step(self, state, k):
+        return self.system.step(state, k)
+
+    def check_horizon(self, n: int):
+        self.system.check_horizon(n)
+
+    def loop_inputs(self, ks) -> LoopInputs:
+        """The rows as the scan's inputs, the start-up filled (:mod:`jaxobs._loop`, point 6)."""
+        n = ks.shape[0]
+        unroll = min(self.unroll, n)
+        while n % unroll:  # a remainder would be split off the rows: a copy of the horizon
+            unroll -= 1
+        return LoopInputs(
+            self.input_rows(n),
+            lambda state, row: self.system.advance(state, self.row_input(row)),
+            fill=functools.partial(ab3_steady_from_start, h=float(self.ts)),
+            unroll=unroll,
+        )
 
 
 # ---------------------------------------------------------------------------
 # the loop
 # ---------------------------------------------------------------------------
-
-
-class _Carry(NamedTuple):
-    state: Any
-    acc: jax.Array
 
 
 @eqx.filter_jit
@@ -494,112 +619,42 @@ def simulate(
 
     Args:
         system: a :class:`~jaxobs.AbstractSystem`, with ``ts``, ``init()`` and ``step(state, k)``
-            (:class:`OnSignal`, :class:`jaxobs.drive.ClosedLoop`, or your own subclass); ``t0`` read from
-            ``system.t0`` when it has one.
+            (:class:`OnSignal`, :class:`jaxobs.drive.ClosedLoop`, or your own subclass), starting at its ``t0``.
         t1: end of the horizon, s (static: it fixes the number of steps n = round((t1 − t0)/ts)).
-        save: :class:`SaveAll` (default) or :class:`SaveFinal`, each with an optional running cost.
+        save: :class:`SaveAll` (default) or :class:`SaveFinal`, each with an optional running cost; it runs
+            the loop (``save.run``).
         checkpoint: how reverse-mode AD stores the loop (:class:`~jaxobs.AutoCheckpoint` by default;
             :class:`~jaxobs.NoCheckpoint`, :class:`~jaxobs.StepCheckpoint`,
             :class:`~jaxobs.ChunkCheckpoint`, :class:`~jaxobs.ForwardSensitivity`); results are identical.
         state0: the state to start from (default ``system.init()``), e.g. a previous ``sol.final_state``.
         throw: raise if the run is not ``ok``, instead of only reporting it.
-        unroll: loop unrolling of the :class:`SaveFinal` loop (static; default the system's ``unroll``
-            attribute, else 1).
+        unroll: loop unrolling of the throughput loop (:class:`SaveFinal`, ``SaveAll(fast=True)``; static;
+            default the system's, :meth:`~jaxobs.AbstractSystem.loop_inputs`).
 
     Returns:
         A :class:`Solution`: ``t``, ``outputs`` (the stacked step outputs), ``final_state``, ``ok``, ``cost``.
 
     Raises:
-        ValueError: a bad horizon (not finite, shorter than one sample, more than 2^31 − 1 steps),
-            a trajectory larger than the free memory, or bad strategy objects.
+        ValueError: a bad horizon (not finite, shorter than one sample, more than 2^31 − 1 steps, outside a
+            recording), a trajectory larger than the free memory, or bad strategy objects.
     """
     if not isinstance(system, AbstractSystem):
-        hint = " (an observer runs on a signal as jaxobs.OnSignal(observer, signal))" if hasattr(system, "step") else ""
+        hint = " (an observer runs on a signal as jaxobs.OnSignal(observer, signal))"
         raise ValueError(
             f"simulate: system must be a jaxobs.AbstractSystem (ts, init(), step(state, k)), "
-            f"got {type(system).__name__}{hint}"
+            f"got {type(system).__name__}{hint if isinstance(system, AbstractObserver) else ''}"
         )
     if not isinstance(save, AbstractSave):
         raise ValueError(f"simulate: save must be SaveAll(...) or SaveFinal(...), got {save!r}")
     _warn_float32()  # at trace time: the first call of a process always traces
     ts = check_sample_time("ts", system.ts, type(system).__name__)
-    t0 = float(getattr(system, "t0", 0.0))
-    n = n_samples(t1, ts, t0)
-    unroll_arg = unroll
-    unroll = check_unroll(getattr(system, "unroll", 1) if unroll is None else unroll)
-    if hasattr(system, "check_horizon"):
-        system.check_horizon(n)
-    dtype = jnp.result_type(float)
-    ks = jnp.arange(n, dtype=jnp.int32)
-    cost = save.cost
-    # Two loops, one result.  With SaveAll the body is exactly the system's step
-    # (plus the cost), scanned plainly: a user's own lax.scan of system.step gives
-    # the same numbers bit for bit (tested).  With SaveFinal (throughput: tuning,
-    # benchmarks, studies of long horizons) and SaveAll(fast=True) (the tuning
-    # objective's trajectories) the loop is made fast (jaxobs._loop:
-    # inputs a block of steps at a time, multistep start-ups peeled, state vectors
-    # split, unrolled).  Those rewrites change which operations XLA fuses, and
-    # XLA's CPU backend always contracts a·b + c into a fused multiply-add where it
-    # fuses, so the two loops agree to rounding (1e-12 relative, tests/test_perf.py),
-    # not to the last bit.
-    fast = save.fast
-    blocked = fast and hasattr(system, "input") and hasattr(system, "advance")
-    advance = system.advance if blocked else system.step
-    # lax.map, not vmap: each block's inputs are computed by the same scalar code as in the step
-    # (a system may read a block at once: OnSignal.input_block)
-    if blocked:
-        xs_map = system.input_block if hasattr(system, "input_block") else (lambda kb: jax.lax.map(system.input, kb))
-    else:
-        xs_map = None
-    # a time-major batch of recordings: its rows are the scan's inputs (jaxobs._loop, point 6)
-    rows = system.input_rows(n) if fast and isinstance(system, OnSignal) else None
-    fill = None
-    if rows is not None:
-        xs_map, fill = None, functools.partial(ab3_steady_from_start, h=float(ts))
-        advance = lambda state, row: system.advance(state, system.row_input(row))  # noqa: E731
-        if unroll_arg is None:
-            unroll = min(system.rows_unroll, n)
-            while n % unroll:  # a remainder would be split off the rows: a copy of the horizon
-                unroll -= 1
-
-    def body(carry, x):
-        state, out = advance(carry.state, x)
-        acc = carry.acc if cost is None else carry.acc + cost(out)
-        return _Carry(state, acc), (out if save.keeps_outputs else None)
-
-    # Without state0 the loop builds the initial state itself (carry_fn): a gain that also sets the initial
-    # state (an FLL's omega_n) is then one direction of the forward sensitivities, not one per state component.
-    def carry_fn():
-        state = system.init() if state0 is None else state0
-        return _Carry(state, jnp.zeros((), dtype))
-
-    if save.keeps_outputs:
-        if rows is not None:
-            x_one = lambda k: jax.tree.map(lambda a: a[0], rows)  # noqa: E731
-        elif xs_map is not None:
-            x_one = lambda k: jax.tree.map(lambda a: a[0], xs_map(k[None]))  # noqa: E731
-        else:
-            x_one = lambda k: k  # noqa: E731
-        _check_memory(jax.eval_shape(lambda k: body(carry_fn(), x_one(k))[1], ks[0]), n)
-    final, outputs = run_loop(
-        body,
-        None,
-        ks if rows is None else rows,
-        n,
-        unroll=unroll if fast else 1,
-        checkpoint=checkpoint,
-        xs_map=xs_map,
-        split=fast,
-        peel=fast,
-        carry_fn=carry_fn,
-        fill=fill,
-    )
-    total = None if cost is None else ts * final.acc
-    ok = all_finite(outputs) if save.keeps_outputs else all_finite(final)
-    final_state = final.state
+    n = n_samples(t1, ts, float(system.t0))
+    check_unroll(system.unroll if unroll is None else unroll)
+    system.check_horizon(n)
+    sol = save.run(system, n, checkpoint=checkpoint, state0=state0, unroll=unroll)
     if throw:
-        final_state = eqx.error_if(final_state, ~ok, "simulation diverged: non-finite output")
-        if save.keeps_outputs:
-            outputs = eqx.error_if(outputs, ~ok, "simulation diverged: non-finite output")
-    t = (t0 + ts * ks.astype(dtype)) if save.keeps_outputs else None
-    return Solution(t=t, outputs=outputs, final_state=final_state, ok=ok, cost=total)
+        msg = "simulation diverged: non-finite output"
+        final_state = eqx.error_if(sol.final_state, ~sol.ok, msg)
+        outputs = None if sol.outputs is None else eqx.error_if(sol.outputs, ~sol.ok, msg)
+        sol = Solution(t=sol.t, outputs=outputs, final_state=final_state, ok=sol.ok, cost=sol.cost)
+    return sol

@@ -15,6 +15,8 @@ from typing import Any, NamedTuple
 import jax
 import jax.numpy as jnp
 
+from ._discretize import AbstractMultistepState
+
 __all__ = [
     "Loop",
     "run_steps",
@@ -90,7 +92,7 @@ def _join(tree):
 
 
 def _has_steady(x):
-    return hasattr(x, "steady") and hasattr(x, "startup_steps")
+    return isinstance(x, AbstractMultistepState)
 
 
 def startup_steps(carry) -> int:

@@ -1,26 +1,56 @@
-"""The system contract: what ``jaxobs.simulate`` runs and what a user can ``lax.scan`` (DESIGN.md).
+"""The system contract: what ``jaxobs.simulate`` runs and what a user can ``lax.scan``.
 
 A system is an ``equinox.Module`` with a sample time ``ts`` and two pure methods,
-``init()`` and ``step(state, k)`` (k the sample index).  It may split its step
-into ``input(k)`` (the outside world at sample k) and ``advance(state, x)``,
-``step(state, k) == advance(state, input(k))``, which lets the loop evaluate
-inputs a block of steps at a time.  :class:`~jaxobs.OnSignal` and
-:class:`~jaxobs.drive.ClosedLoop` (and the dual three-phase drive's :class:`~jaxobs.drive.dual_loop.DualClosedLoop`)
-are the systems that ship with jaxobs.
+``init()`` and ``step(state, k)`` (k the sample index).  Everything else the loop
+reads is declared here with a default, so that ``simulate`` asks rather than probes:
+
+- ``t0``: the time of sample 0 (0 s);
+- ``unroll``: the loop unrolling the system prefers (1; :mod:`jaxobs._loop`, point 3);
+- ``check_horizon(n)``: refuse a run of n steps the system cannot make (accepts every n);
+- ``loop_inputs(ks)``: how the throughput loop feeds the steps at the sample indices ``ks``
+  (:class:`LoopInputs`; by default the indices themselves, each step ``step(state, k)``); a system whose
+  step splits into the outside world's input at sample k and ``advance(state, x)`` feeds the inputs a
+  block at a time (:class:`~jaxobs.OnSignal`);
+- ``throughput()``: the system the throughput loop runs in this one's place, with the same numbers to
+  rounding (itself; an observer on a time-major recording batch runs as its rows system).
+
+:class:`~jaxobs.OnSignal` and :class:`~jaxobs.drive.ClosedLoop` (and the dual three-phase drive's
+:class:`~jaxobs.drive.dual_loop.DualClosedLoop`) are the systems that ship with jaxobs.
 """
 
 from __future__ import annotations
 
 import abc
-from typing import Any
+from collections.abc import Callable
+from typing import Any, ClassVar, NamedTuple
 
 import equinox as eqx
+import jax
 
-__all__ = ["AbstractSystem"]
+__all__ = ["AbstractSystem", "LoopInputs"]
+
+
+class LoopInputs(NamedTuple):
+    """How the throughput loop feeds a system's n steps (:func:`jaxobs._loop.run_loop`'s arguments).
+
+    Attributes:
+        xs: the per-step values, leading axis n (the sample indices, or a time-major batch's rows).
+        advance: ``advance(state, x) -> (state, outputs)``, the step on one step's input.
+        xs_map: a block of ``xs`` (leading axis the block) to the block's inputs, evaluated a block at a
+            time (:mod:`jaxobs._loop`, point 5), or None: ``advance`` takes ``xs[k]`` itself.
+        fill: the peeled start-up's carries to a steady carry at step 0 (:mod:`jaxobs._loop`, point 6), or None.
+        unroll: the loop unrolling (simulate's ``unroll=`` overrides it).
+    """
+
+    xs: Any
+    advance: Callable[[Any, Any], tuple[Any, Any]]
+    xs_map: Callable[[Any], Any] | None = None
+    fill: Callable[[Any, Any, Any], Any] | None = None
+    unroll: int = 1
 
 
 class AbstractSystem(eqx.Module):
-    """Base of the systems ``jaxobs.simulate`` runs: ``ts``, ``init()``, ``step(state, k)``.
+    """Base of the systems ``jaxobs.simulate`` runs: ``ts``, ``init()``, ``step(state, k)``; the rest has defaults.
 
     Systems hash by identity.  ``jax.lax.scan(system.step, ...)`` hashes the
     function it is given (a cache key in JAX's tracing), and an equinox bound
@@ -29,7 +59,8 @@ class AbstractSystem(eqx.Module):
     trace, never a wrong one).
     """
 
-    unroll: eqx.AbstractClassVar[int]  # preferred loop unrolling (jaxobs._loop point 3)
+    t0: ClassVar[float] = 0.0  # time of sample 0, s (a system that starts elsewhere has a field)
+    unroll: ClassVar[int] = 1  # preferred loop unrolling (jaxobs._loop point 3)
 
     @property
     @abc.abstractmethod
@@ -43,6 +74,19 @@ class AbstractSystem(eqx.Module):
     @abc.abstractmethod
     def step(self, state, k) -> tuple[Any, Any]:
         """One sample period: (state at k + 1, outputs at t_k)."""
+
+    def check_horizon(self, n: int) -> None:
+        """Refuse (``ValueError``) a run of ``n`` steps from sample 0 that this system cannot make; any by default."""
+
+    def loop_inputs(self, ks: jax.Array) -> LoopInputs:
+        """How the throughput loop feeds the steps at the sample indices ``ks`` (int32, 0 to n − 1): by default the
+        indices themselves, ``step`` on each."""
+        return LoopInputs(ks, self.step, unroll=self.unroll)
+
+    def throughput(self) -> AbstractSystem:
+        """The system the throughput loop (``SaveFinal``, ``SaveAll(fast=True)``) runs in this one's place: the
+        same outputs to rounding, fed differently (this one by default)."""
+        return self
 
     def __hash__(self) -> int:
         return id(self)

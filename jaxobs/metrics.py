@@ -27,11 +27,14 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._math import wrap as wrap
+from ._simulate import SignalOutput, Solution
 from .drive.dual_loop import DualOutput
 from .drive.loop import DriveOutput
+from .signals import AbstractSignal
 
-# The outputs whose truth is the rotor's electrical angle θe (the closed-loop drives), against those whose truth
-# is a signal's (a recording's ``truth``, or an EMFSignal's flux angle).
+# The outputs whose truth is the rotor's electrical angle θe (the closed-loop drives: their field theta_e), against
+# those whose truth is a signal's (SignalOutput's field truth, or the flux angle of an EMFSignal passed beside).
+# Each declares the observer's estimate as its field obs (None without an observer).
 _DRIVE_OUTPUTS = (DriveOutput, DualOutput)
 
 __all__ = [
@@ -355,18 +358,14 @@ def lost_lock_of(sol, steady_from=None, *, signal=None, tol_deg=None, freq_tol=L
     ``simulate``, are unchanged.  ``tol_deg`` overrides the angle tolerance, ``freq_tol=None`` drops the
     frequency test.
     """
-    out = getattr(sol, "outputs", None)
-    if out is None:
-        raise ValueError("lost_lock_of: needs the trajectory (simulate with save=SaveAll(), the default)")
+    out = _estimated(sol, "lost_lock_of")
     t = sol.t
     if steady_from is None:
         steady_from = t[..., 0] + 0.75 * (t[..., -1] - t[..., 0])
         mask = t >= jnp.expand_dims(steady_from, -1)
     else:
         mask = t >= steady_from
-    obs = getattr(out, "obs", None)
-    if obs is None or not hasattr(obs, "theta"):
-        raise ValueError("lost_lock_of: the outputs hold no observer estimate (obs.theta): nothing to lock")
+    obs = out.obs
     if isinstance(out, _DRIVE_OUTPUTS):
         tol = LOCK_TOL_DRIVE_DEG if tol_deg is None else tol_deg
         return lost_lock(obs.theta, out.theta_e, mask, math.radians(tol))
@@ -377,21 +376,29 @@ def lost_lock_of(sol, steady_from=None, *, signal=None, tol_deg=None, freq_tol=L
     return lost_lock(obs.theta, theta, mask, tol, omega_hat=obs.omega, omega=omega, freq_tol=freq_tol)
 
 
+def _estimated(sol, caller):
+    """The outputs of a trajectory that hold an observer's estimate: an observer on a signal's
+    (:class:`~jaxobs.SignalOutput`) or a closed-loop drive's with an observer; a ValueError otherwise."""
+    if not isinstance(sol, Solution) or sol.outputs is None:
+        raise ValueError(f"{caller}: needs the trajectory (simulate with save=SaveAll(), the default)")
+    out = sol.outputs
+    if not isinstance(out, (SignalOutput, *_DRIVE_OUTPUTS)) or out.obs is None:
+        raise ValueError(f"{caller}: the outputs hold no observer estimate (obs.theta): nothing to compare")
+    return out
+
+
 def _truth(sol, signal, caller):
     """The true angle (rad) and frequency (rad/s) of an observer on a signal: the outputs' own ``truth`` (a
     ``GridSignal`` or a recording), else ``signal=``'s rotor-flux angle ω1 t + φ1 − π/2 (an ``EMFSignal``:
     ψ lags e by 90°)."""
-    out = sol.outputs
-    truth = getattr(out, "truth", None)
+    truth = sol.outputs.truth
     if truth is not None:
         return truth.theta, truth.omega
-    flux_angle = getattr(signal, "flux_angle", None)
-    if flux_angle is None:
+    if not (isinstance(signal, AbstractSignal) and signal.has_flux_angle):
         raise ValueError(
             f"{caller}: the signal reports no truth; pass signal= an EMFSignal (its flux angle is the truth)"
         )
-    omega = jnp.broadcast_to(jnp.expand_dims(jnp.asarray(signal.omega1), -1), jnp.shape(out.obs.omega))
-    return flux_angle(sol.t), omega
+    return signal.flux_angle(sol.t), signal.flux_omega(sol.t)
 
 
 def position_error(sol, signal=None):
@@ -402,9 +409,7 @@ def position_error(sol, signal=None):
     ``GridSignal``, a recording with its encoder angle), else the rotor-flux angle of ``signal=`` (an
     ``EMFSignal``).  Works under ``jit``/``vmap``.
     """
-    out = getattr(sol, "outputs", None)
-    if out is None:
-        raise ValueError("position_error: needs the trajectory (simulate with save=SaveAll(), the default)")
+    out = _estimated(sol, "position_error")
     if isinstance(out, _DRIVE_OUTPUTS):
         return wrap(out.obs.theta - out.theta_e)
     theta, _ = _truth(sol, signal, "position_error")

@@ -36,7 +36,7 @@ import numpy as np
 from ._time import SampleTime, time_value
 from .papers import TEST_C_HARMONICS
 from .quantities import Axis
-from .signals import EMFSignal, GridSignal, stack
+from .signals import AbstractSignal, EMFSignal, GridSignal, stack
 
 __all__ = [
     "EMF_SIGNAL_AXES",
@@ -69,7 +69,7 @@ GRID_SIGNAL_AXES: dict[str, Axis] = {
 }
 
 
-class NoisyGridSignal(eqx.Module):
+class NoisyGridSignal(AbstractSignal):
     """A :class:`GridSignal` plus white measurement noise (std ``noise``, seeded per scenario).
 
     The noise of sample k is drawn from ``fold_in(key, k)``: white in time, the same sample for the
@@ -83,6 +83,7 @@ class NoisyGridSignal(eqx.Module):
     key: jax.Array
 
     accepts_sample_time: ClassVar[bool] = True  # passed on to the clean signal (exact float32 phase)
+    has_truth: ClassVar[bool] = True  # the clean signal's
 
     def __call__(self, t):
         tv = time_value(t)

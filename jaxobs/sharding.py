@@ -79,6 +79,8 @@ import jax
 import numpy as np
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
+from .signals import AbstractSignal
+
 __all__ = [
     "batch_mesh",
     "shard_batch",
@@ -171,14 +173,13 @@ def batch_mesh(devices=None) -> Mesh:
 
 
 def _declares_axis(x) -> bool:
-    """A node that says which axis of its leaves is the scenario axis (a ``batch_axis`` integer attribute)."""
-    ax = getattr(x, "batch_axis", None) if not isinstance(x, (np.ndarray, jax.Array)) else None
-    return isinstance(ax, int) and not isinstance(ax, bool)
+    """A node that says which axis of its leaves is the scenario axis: a signal (its declared ``batch_axis``)."""
+    return isinstance(x, AbstractSignal)
 
 
 def batch_axes(tree):
     """Which axis of each leaf is the scenario axis: ``tree``'s structure down to the nodes that declare one
-    (a ``batch_axis`` attribute: a time-major :class:`~jaxobs.signals.SampledSignal` says 1), 0 elsewhere.
+    (a signal's ``batch_axis``: a time-major :class:`~jaxobs.signals.SampledSignal` says 1), 0 elsewhere.
     A prefix of ``tree``, as ``jax.vmap``'s ``in_axes`` takes it."""
     return jax.tree.map(lambda x: x.batch_axis if _declares_axis(x) else 0, tree, is_leaf=_declares_axis)
 

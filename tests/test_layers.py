@@ -42,7 +42,7 @@ LAYERS = [
         "jaxobs.quantities",
     ),
     # integration rules (and check_rule)
-    ("jaxobs._discretize", "jaxobs.safetoml"),
+    ("jaxobs._discretize", "jaxobs.safetoml", "jaxobs.signals._base"),
     # signals and plant: they produce the measurements
     (
         "jaxobs.signals._waveforms",

@@ -12,6 +12,7 @@ import pytest
 import jaxobs
 from benchmarks import workloads as W
 from jaxobs._discretize import AB3State, ab3_steady_from_start
+from jaxobs._simulate import OnRows
 from jaxobs.sharding import batch_axes, batch_size
 
 TS = W.TS
@@ -71,7 +72,8 @@ def test_plain_loop_and_offsets_on_a_time_major_batch(recs):
     fast = _run(obs, t1, jaxobs.SaveFinal(cost=W.fll_cost), t0=t0)(time_major)
     plain = _run(obs, t1, jaxobs.SaveAll(cost=W.fll_cost), t0=t0)(time_major)
     np.testing.assert_allclose(fast.cost, plain.cost, rtol=1e-12)
-    system = jaxobs.OnSignal(obs, jax.tree.map(lambda a: a[:, 0], time_major), t0=t0)
+    system = jaxobs.OnSignal(obs, jax.tree.map(lambda a: a[:, 0], time_major), t0=t0).throughput()
+    assert isinstance(system, OnRows)  # the throughput loop's system: the rows
     u, truth = system.input_rows(401)
     np.testing.assert_array_equal(u, time_major.samples[5:406, 0])
     np.testing.assert_array_equal(truth[1], time_major.truth[1][5:406, 0])

@@ -1,6 +1,7 @@
 """Test waveforms for signal-level observers, as scan-friendly functions of time, and recordings.
 
-Waveforms in ``_waveforms`` (GridSignal, EMFSignal, paper001_test, stack); recorded signals and their
+The contract in ``_base`` (AbstractSignal: what a signal declares; FunctionSignal: a plain function of time);
+waveforms in ``_waveforms`` (GridSignal, EMFSignal, paper001_test, stack); recorded signals and their
 CSV reader in ``_recordings`` (SampledSignal, DriveRecording, read_recording).
 
 A :class:`GridSignal` is a PyTree whose leaves (amplitude, frequency, event
@@ -23,6 +24,8 @@ built by :func:`paper001_test`.
 """
 
 from .._time import SampleTime as SampleTime
+from ._base import AbstractSignal as AbstractSignal
+from ._base import FunctionSignal as FunctionSignal
 from ._logs import LogData as LogData
 from ._logs import RecordingLayout as RecordingLayout
 from ._logs import RecordingWarning as RecordingWarning

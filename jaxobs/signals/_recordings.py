@@ -8,6 +8,7 @@ import errno
 import math
 import re
 from pathlib import Path
+from typing import ClassVar
 
 import equinox as eqx
 import jax
@@ -17,9 +18,10 @@ import numpy as np
 from .._measurements import DriveInput
 from .._validate import check_real, check_sample_time, static_float
 from ..provenance import read_file
+from ._base import AbstractSignal
 
 
-class _Recording(eqx.Module):
+class _Recording(AbstractSignal):
     """What the two recordings share: samples on a uniform grid t₀ + k·ts, read back by :func:`_read_samples`,
     and the layout of a batch of them: scenario-major (time last), or time-major (``n_time`` set: the
     recordings' length, time first and the scenarios inner; :class:`SampledSignal`'s doc)."""
@@ -30,6 +32,7 @@ class _Recording(eqx.Module):
     # a time-major batch's n, else None: static, so that a scenario's view of the batch is checked when traced
     # (simulate refuses one mapped along time)
     n_time: eqx.AbstractVar[int | None]
+    scenario_ndim: eqx.AbstractClassVar[int]  # the dimensions of one scenario's samples
 
     SNAP = 1e-3  # fraction of a sample interval treated as "on" a sample instant
 
@@ -51,6 +54,31 @@ class _Recording(eqx.Module):
     def t_end(self) -> float:
         """Time of the last sample, s."""
         return self.t0 + self.ts * (self.n - 1)
+
+    def check_window(self, t0: float, t_last: float, owner: str) -> None:
+        """A recording cannot be read outside its samples (it holds its end values, which would be a lie); a
+        time-major batch is read one scenario at a time (under map_batch, or a vmap along its inner axis)."""
+        if self.batch_inner and self.samples.ndim != self.scenario_ndim:
+            raise ValueError(
+                f"simulate: {owner} is a time-major batch of {self.samples.shape[1]} recordings "
+                f"({type(self).__name__}(batch_inner=True), samples {self.samples.shape}) and simulate runs one: "
+                "map it with jaxobs.map_batch(fn, batch) or jax.vmap(fn, in_axes=(jaxobs.batch_axes(batch),))"
+            )
+        if self.batch_inner and self.samples.shape[0] != self.n_time:
+            # jax.vmap's default in_axes=0 maps a time-major batch along time: each "recording" is then one
+            # sample of every scenario; the recording's length, kept static, tells
+            raise ValueError(
+                f"simulate: {owner} is a time-major batch mapped along its time axis (each scenario sees "
+                f"{self.samples.shape[0]} values of a recording of {self.n_time} samples; jax.vmap's default "
+                "in_axes=0 does that): map it with jaxobs.map_batch(fn, batch) or "
+                "jax.vmap(fn, in_axes=(jaxobs.batch_axes(batch),))"
+            )
+        tol = self.SNAP * self.ts
+        if t0 < self.t0 - tol or t_last > self.t_end + tol:
+            raise ValueError(
+                f"simulate: the horizon [t0, t0 + ts*(n-1)] = [{t0:g}, {t_last:g}] s must lie inside the "
+                f"{type(self).__name__}'s samples [{self.t0:g}, {self.t_end:g}] s"
+            )
 
     def _read(self, arr, t):
         if self.batch_inner:  # time first: read it last (one scenario's (n,) or (n, 4) as (n,) or (4, n))
@@ -97,6 +125,7 @@ class SampledSignal(_Recording):
     ts: float = eqx.field(static=True)  # sample interval, s
     t0: float = eqx.field(static=True)  # time of the first sample, s (static, so a horizon is checked when traced)
     n_time: int | None = eqx.field(static=True)  # a time-major batch (batch_inner=True): its n; else None
+    scenario_ndim: ClassVar[int] = 1  # u_k: (n,)
 
     def __init__(self, samples, ts, t0=0.0, *, truth=None, batch_inner=False):
         own = "SampledSignal"
@@ -458,6 +487,7 @@ class DriveRecording(_Recording):
     ts: float = eqx.field(static=True)
     t0: float = eqx.field(static=True)
     n_time: int | None = eqx.field(static=True)  # a time-major batch (batch_inner=True): its n; else None
+    scenario_ndim: ClassVar[int] = 2  # (n, 4) time-major, (4, n) scenario-major
 
     def __init__(self, u_a, u_b, i_a, i_b, ts, *, theta_e=None, omega_e=None, t0=0.0, batch_inner=False):
         """``batch_inner=True``: u_a ... i_b (and theta_e, omega_e) are a batch stored time-major, each (n, B),

@@ -33,9 +33,10 @@ from .._measurements import DriveInput
 from .._time import SampleTime, cycles, exact_phase, frac_mul, time_value
 from .._trig import sincos
 from .._validate import as_float, check_nonnegative, check_positive, check_real, check_sample_time
+from ._base import AbstractSignal
 
 
-class GridSignal(eqx.Module):
+class GridSignal(AbstractSignal):
     """Single-phase test voltage with a settle-then-disturb event (see module doc)."""
 
     amplitude: jax.Array  # V₀ before the event (input units, > 0)
@@ -94,6 +95,7 @@ class GridSignal(eqx.Module):
 
     # OnSignal passes a SampleTime (the sample index) instead of the rounded float t_k
     accepts_sample_time: ClassVar[bool] = True
+    has_truth: ClassVar[bool] = True
 
     def _on(self, t):
         t = time_value(t)
@@ -198,8 +200,7 @@ def stack(modules):
         raise ValueError("stack needs at least one module")
 
     def declares(x):  # a node that says its scenario axis is not the leading one (jaxobs.batch_axes)
-        ax = getattr(x, "batch_axis", None)
-        return isinstance(ax, int) and not isinstance(ax, bool) and ax != 0
+        return isinstance(x, AbstractSignal) and x.batch_axis != 0
 
     if any(declares(x) for m in modules for x in jax.tree.leaves(m, is_leaf=declares)):
         raise ValueError(
@@ -209,7 +210,7 @@ def stack(modules):
     return jax.tree.map(lambda *xs: jnp.stack(xs), *modules)
 
 
-class EMFSignal(eqx.Module):
+class EMFSignal(AbstractSignal):
     """A two-axis back EMF for testing flux observers without a drive (000 eq 8).
 
     e_ab(t) = A0 + A1 e^{j(ω1 t + φ1)}·(−j) … written per axis as
@@ -232,6 +233,7 @@ class EMFSignal(eqx.Module):
     ts: float = eqx.field(static=True)  # the observer's sample time (OnSignal checks they agree)
 
     accepts_sample_time: ClassVar[bool] = True
+    has_flux_angle: ClassVar[bool] = True  # its truth is the flux angle (the metrics' signal=)
 
     def __init__(self, A1, omega1, phase=0.0, dc=(0.0, 0.0), harmonics=None, ts=1e-4):
         own = "EMFSignal"
@@ -292,6 +294,10 @@ class EMFSignal(eqx.Module):
             c = cycles(self.omega1, t, 1 / (2 * math.pi))
             return 2 * jnp.pi * (c - jax.lax.stop_gradient(jnp.round(c))) + self.phase - jnp.pi / 2
         return self.omega1 * time_value(t) + self.phase - jnp.pi / 2
+
+    def flux_omega(self, t):
+        """ω1, rad/s, shaped like ``t`` (times on the last axis, a batch's ω1 on the leading ones)."""
+        return jnp.broadcast_to(jnp.expand_dims(jnp.asarray(self.omega1), -1), jnp.shape(time_value(t)))
 
     def __call__(self, t):
         ea, eb = self.emf(t)
