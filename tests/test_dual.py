@@ -395,13 +395,91 @@ def test_field_weakening_on_the_dual_loop_holds_840_rpm_at_330_v():
     assert set_s.max() < 0.995 and set_s.mean() == pytest.approx(0.95, abs=0.005)
 
 
+def _fw_speed_pair(i_d, speed_hz=2.5, rpm=840):
+    """The sensorless speed loop's least damped pair (rad/s) at ``i_d`` (A): the per-set machine's speed loop
+    closed through the FA-LESO's 15 Hz PLL (jaxobs.linear.faleso_speed_loop_poles; each set is the single
+    machine on half the rotor, so the single bench's model)."""
+    par = D.bench_machine("ipmsm002")
+    kp, ki = linear.pll_gains(2 * math.pi * papers.LESO_PLL_HZ)
+    a = 2 * math.pi * speed_hz
+    kp_w, ki_w = 2 * a * float(par.J) / float(par.kt), a * a * float(par.J) / float(par.kt)
+    we = par.p * rpm * D.RPM
+    r = np.asarray(
+        linear.faleso_speed_loop_poles(
+            papers.FALESO_K1, papers.FALESO_K2, we, kp, ki, kp_w, ki_w,
+            p=par.p, psi_f=float(par.psi_f), Ld=float(par.Ld), Lq=float(par.Lq), J=float(par.J), i_d=i_d,
+        )
+    )  # fmt: skip
+    r = r[np.abs(r.imag) < we / 2]
+    return r[np.argmax(r.real)]
+
+
+def test_field_weakening_depth_decides_the_sensorless_speed_loop():
+    """Why the dual drive's field weakening budgets the αβ voltage by default: on 330 V at 840 r/min with the
+    2.5 Hz speed loop, "ab" settles at i_d = −7.3 A and "set" at −11.8 A (the xy voltage fitted under the
+    margin too); the speed loop's pair through the PLL crosses into Re s > 0 near −9.5 A."""
+    assert _fw_speed_pair(-7.29).real < -4.0  # measured −4.85 /s
+    assert _fw_speed_pair(-11.1).real > 2.0  # +3.46 /s
+    assert _fw_speed_pair(-9.0).real < 0.0 < _fw_speed_pair(-10.0).real
+
+
+def test_sensorless_dual_field_weakening_holds_840_rpm_by_default():
+    """The FA-LESO closing the dual drive (VSD) on 330 V at 840 r/min, speed loop 2.5 Hz, the default
+    field-weakening budget: the drive holds 840 r/min (measured 840.0 ± 0.05 r/min, 0.01°, i_d −7.29 A).
+    With fw_voltage="set" (the budget that was the default) the same run leaves 840 r/min: 801–942 r/min over
+    0.6–1.5 s, growing at +3.9 /s into a 774–972 r/min cycle."""
+    from jaxobs.reproduce.leso import leso_bank
+
+    m = dual.dual_ipmsm_paper002()
+    est = m.per_set()
+    inv = D.Inverter(udc=330.0)
+    drv = dual_loop.dual_bench_drive(
+        m, sensorless=True, handover=0.3, inverter=inv, alpha_s=2 * math.pi * 2.5, field_weakening=D.VoltageFeedbackFW()
+    )
+    assert drv.ctrl.fw_voltage == "ab"
+    sc = D.Scenario(est, speed_ref=D.Profile.constant(840 * D.RPM), omega_m0=840 * D.RPM)
+    o = simulate(dual_loop.DualClosedLoop(drv, leso_bank(est, m.p * 840 * D.RPM), sc, m), 1.0).outputs
+    late = np.asarray(o.t) >= 0.6
+    rpm = np.asarray(o.speed_rpm)[late]
+    err = np.degrees(np.abs(np.angle(np.exp(1j * (np.asarray(o.theta_e_hat) - np.asarray(o.theta_e))))))[late]
+    assert np.max(np.abs(rpm - 840.0)) < 1.0, (rpm.min(), rpm.max())
+    assert err.max() < 1.0 and np.asarray(o.i_d)[late].mean() < -6.0
+
+
+def test_dual_steady_start_under_field_weakening():
+    """The dual loop's steady start at 840 r/min on 330 V (encoder, 10 N·m) begins field-weakened: Δi_d in the
+    FOC's integrator, i_d at the αβ voltage's margin.  Over 0.2 s the xy currents build up from zero and a set
+    reaching its inverter's limit deepens i_d a little (measured: 838.4–840.0 r/min, i_d −6.86 → −7.69 A)."""
+    m = dual.dual_ipmsm_paper002()
+    inv = D.Inverter(udc=330.0)
+    drv = dual_loop.dual_bench_drive(
+        m, sensorless=False, inverter=inv, alpha_s=2 * math.pi * 2.5, field_weakening=D.VoltageFeedbackFW()
+    )
+    sc = D.Scenario(
+        m.per_set(), speed_ref=D.Profile.constant(840 * D.RPM), omega_m0=840 * D.RPM, load=D.Profile.constant(10.0)
+    )
+    loop = dual_loop.DualClosedLoop(drv, None, sc, m)
+    op = loop.operating_point()
+    assert float(op.id_fw) < -5.0 and float(loop.init().ctrl.main.id_fw) == pytest.approx(float(op.id_fw))
+    o = simulate(loop, 0.2).outputs
+    rpm, i_d = np.asarray(o.speed_rpm), np.asarray(o.i_d)
+    assert np.max(np.abs(rpm - 840.0)) < 3.0, (rpm.min(), rpm.max())
+    assert np.max(np.abs(i_d - float(op.i_d))) < 1.5, (i_d.min(), i_d.max(), float(op.i_d))
+    assert np.max(np.abs(i_d[:20] - float(op.i_d))) < 0.05  # at the start: steady, not from i_d = 0
+
+
 def test_reproduce_leso_runs_the_dual_machine_by_default():
     """`jaxobs reproduce leso` includes 002's dual machine unless --machine single."""
     from jaxobs_tuning.cli import build_parser
-    from jaxobs_tuning.cli_papers import REPRODUCE_DUAL_FILES, REPRODUCE_FILES, reproduce_files
+    from jaxobs_tuning.cli_papers import (
+        REPRODUCE_DUAL_FILES,
+        REPRODUCE_DUAL_LAYOUT_FILES,
+        REPRODUCE_FILES,
+        reproduce_files,
+    )
 
     for argv, files in (
-        (["reproduce", "leso"], REPRODUCE_FILES["leso"] + REPRODUCE_DUAL_FILES),
+        (["reproduce", "leso"], REPRODUCE_FILES["leso"] + REPRODUCE_DUAL_FILES + REPRODUCE_DUAL_LAYOUT_FILES),
         (["reproduce", "leso", "--machine", "single"], REPRODUCE_FILES["leso"]),
         (["reproduce", "flux"], REPRODUCE_FILES["flux"]),
     ):
