@@ -96,6 +96,10 @@ _LESO_ROWS = [
 ]  # fmt: skip
 
 
+# the dual 330 V ramp, the FA-LESO closing on the 2.5 Hz speed loop: peak error (deg), speed error (r/min)
+DUAL_FW_MEASURED = (3.55, 11.1)
+
+
 def _dual_rows():
     from jaxobs.reproduce.leso_dual import DUAL_EXPERIMENTS, DUAL_LOAD_STEP, DUAL_RAMP_FW
 

@@ -415,7 +415,8 @@ class FOC(AbstractComponent):
         At a steady operating point the errors are zero, so the current PIs'
         outputs are their integrators plus the decoupling terms (computed with
         the *assumed* machine), which must equal the voltage the true machine
-        needs; the speed PI's output, k_pω (b ω* − ω) + ∫, must equal i_q.
+        needs; the speed PI's output, k_pω (b ω* − ω) + ∫, must equal i_q.  The field
+        weakening's integrator starts at the operating point's Δi_d (``op.id_fw``).
         With an I-f start-up the drive starts from standstill: zeros, and the
         I-f angle at ``theta_f0`` (ClosedLoop: θ_e0 − 90°, the parked rotor).
         """
