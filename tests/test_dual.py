@@ -315,6 +315,11 @@ def test_reproduce_leso_dual_rows():
                 # the calibration (papers.DUAL_LLS_002, DUAL_A5_002/A7): the C-LESO meets 002 at 300 r/min
                 # (a5, a7 fitted there: 5.42 / 5.87 %) and at 600 r/min (Lls fitted on the ratio: 4.20 / 4.49 %)
                 assert c == pytest.approx(by[(name, "C-LESO", h)]["paper"], rel=0.05)
+    # paper vs ours: within the tolerance or explained (the GI- and FA-LESO's harmonics are not within)
+    for r in rows:
+        assert (r["within"] is None) == (r["paper"] is None) and (r["within"] is not False or r["explanation"]), r
+    assert by[(DUAL_EXPERIMENTS[0][0], "C-LESO", "h5")]["within"]
+    assert not by[(DUAL_EXPERIMENTS[0][0], "FA-LESO", "h5")]["within"]
 
 
 @pytest.mark.slow
