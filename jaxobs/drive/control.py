@@ -471,8 +471,9 @@ class FOC(AbstractComponent):
         """
         w_e = par.p * omega_m
 
-        def rotor_currents(iq, dfw=0.0):
-            return _rotate(self._id_ref(self.est, iq) + dfw, iq, offset)
+        def rotor_currents(iq, dfw=None):  # dfw: field weakening's Δi_d (None: the policy's i_d alone)
+            i_d = self._id_ref(self.est, iq)
+            return _rotate(i_d if dfw is None else i_d + dfw, iq, offset)
 
         def voltage(i_d, i_q):
             return par.Rs * i_d - w_e * par.Lq * i_q, par.Rs * i_q + w_e * (par.Ld * i_d + par.psi_f)
@@ -491,7 +492,7 @@ class FOC(AbstractComponent):
             iq_max = self.iq_limit(self.est)[0]
             return jnp.clip(i_q, -iq_max, iq_max)
 
-        i_q = solve_iq(0.0)
+        i_q = solve_iq(None)
         i_d, i_q = rotor_currents(i_q)
         u_d, u_q = voltage(i_d, i_q)
         id_fw = 0.0
@@ -503,7 +504,7 @@ class FOC(AbstractComponent):
                 ud, uq = voltage(*rotor_currents(iq, dfw))
                 return ud * ud + uq * uq - target2
 
-            dfw, iq = jnp.zeros_like(i_q), solve_iq(0.0)
+            dfw, iq = jnp.zeros_like(i_q), solve_iq(None)
             for _ in range(8):  # Newton on Δi_d (|u|² is a convex quadratic in it), then i_q* for the torque
                 f, df = jax.jvp(lambda d: excess(d, iq), (dfw,), (jnp.ones_like(dfw),))
                 dfw = jnp.clip(dfw - f / jnp.where(jnp.abs(df) > 1e-12, df, 1.0), -self.i_max, 0.0)
