@@ -245,7 +245,8 @@ N_EXPERIMENTS = 3 + 2 + 1 + 3 + 1 + 3 + 4 + 2
 
 
 def run_leso_experiments(progress=None):
-    """Returns (rows, traces); rows {experiment, observer, metric, unit, paper, ours}.  ``progress``: one
+    """Returns (rows, traces); rows {experiment, observer, metric, unit, paper, ours, tolerance, within,
+    explanation} (:mod:`jaxobs.reproduce.compare`, :data:`EXPLANATIONS`).  ``progress``: one
     step per experiment, each named as it compiles and runs (:mod:`jaxobs.progress`)."""
     rows, traces = [], {}
     bar = Progress(progress, N_EXPERIMENTS, "reproduce leso", unit="experiment")

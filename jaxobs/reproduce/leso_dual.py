@@ -125,7 +125,8 @@ def _ramp_rows(name, sol, i, machine, inv, paper_deg, paper_rpm):
 
 def run_leso_dual(progress=None, t1: float = 1.0, dynamics: bool = True):
     """Returns (rows, traces) for :data:`DUAL_EXPERIMENTS` (``t1`` s each) and, with ``dynamics``, the
-    transients of :data:`DUAL_DYNAMICS` (module doc), rows as :func:`run_leso_experiments`'s."""
+    transients of :data:`DUAL_DYNAMICS` (module doc), rows as :func:`run_leso_experiments`'s (explained by
+    :data:`DUAL_EXPLANATIONS`)."""
     rows, traces = [], {}
     n = len(DUAL_EXPERIMENTS) + (len(DUAL_DYNAMICS) if dynamics else 0)
     bar = Progress(progress, n, "reproduce leso (dual)", unit="experiment")
