@@ -223,12 +223,25 @@ def test_reproduce_flux_quick_json(tmp_path, capsys):
     # (jaxobs.reproduce.compare); the experiments run with 000's sampling delay, the load step's SOIFOs
     # carrying its 2.5 samples (0.157 rad at 2000 r/min)
     for r in rows:
+        assert "within" in r and (r["within"] is not False or r["explanation"]), r
         if r["paper"] is not None and not isinstance(r["ours"], bool):
             assert r["tolerance"] > 0 and (r["within"] or r["explanation"]), r
     assert by[("load step 10 N·m at 2000 r/min", "second-order SOIFO", "max_abs")]["within"]
     # --quick skips 20 r/min and the I-f start: their figures are not drawn
     skipped = {"fig16_17_flux_position_20rpm.png", "fig20_if_start_low_speed.png"}
     assert sorted(p.name for p in tmp_path.glob("*.png")) == sorted(set(REPRODUCE_FILES["flux"]) - skipped)
+
+
+@pytest.mark.slow
+def test_reproduce_leso_json_rows_are_within_or_explained(tmp_path, capsys):
+    """The paper-002 reproduction, single and dual machine (tens of minutes on two cores): every row carries
+    `within`; every row outside its tolerance names its cause (jaxobs.reproduce.compare)."""
+    main(["reproduce", "leso", "--json", "--out", str(tmp_path)])
+    rows = json.loads(capsys.readouterr().out)
+    for r in rows:
+        assert {"paper", "ours", "tolerance", "within", "explanation"} <= set(r), r
+        assert (r["within"] is None) == (r["paper"] is None), r
+        assert r["within"] is not False or r["explanation"], r
 
 
 def _result_json(tmp_path, component="SOGIFLLWIF", tuned=None):

@@ -315,6 +315,11 @@ def test_reproduce_leso_dual_rows():
                 # the calibration (papers.DUAL_LLS_002, DUAL_A5_002/A7): the C-LESO meets 002 at 300 r/min
                 # (a5, a7 fitted there: 5.42 / 5.87 %) and at 600 r/min (Lls fitted on the ratio: 4.20 / 4.49 %)
                 assert c == pytest.approx(by[(name, "C-LESO", h)]["paper"], rel=0.05)
+    # paper vs ours: within the tolerance or explained (the GI- and FA-LESO's harmonics are not within)
+    for r in rows:
+        assert (r["within"] is None) == (r["paper"] is None) and (r["within"] is not False or r["explanation"]), r
+    assert by[(DUAL_EXPERIMENTS[0][0], "C-LESO", "h5")]["within"]
+    assert not by[(DUAL_EXPERIMENTS[0][0], "FA-LESO", "h5")]["within"]
 
 
 @pytest.mark.slow
@@ -355,55 +360,102 @@ def test_reproduce_leso_dual_transients_each_leso_closing(tmp_path):
         assert by[(step, obs, "max_abs")]["ours"] == pytest.approx(peak, abs=0.05)
     # FA-LESO closing: 002's ramp peak (4.1 against 4.5 deg); C-LESO / GI-LESO peaks are their steady lags and more
     assert by[(DUAL_RAMP, "FA-LESO", "max_abs")]["ours"] < 6.0
-    # 330 V: the field weakening holds 840 r/min with negative i_d, each set's voltage near its 0.95 margin
-    # (fw_voltage="set", the default; measured −11.1 A, sets 0.992 u_max peak, αβ 0.898)
+    # 330 V, the FA-LESO closing on the 2.5 Hz speed loop: the field weakening holds 840 r/min with negative i_d,
+    # the αβ voltage near its 0.95 margin (fw_voltage="ab"; measured 3.55° / 11.1 r/min against 002's 4.5° /
+    # 13, i_d −7.18 A, αβ 0.964 u_max, 838.7 r/min at the end of the plateau)
     fw = DUAL_RAMP_FW
-    assert by[(fw, "drive", "max_speed")]["ours"] == pytest.approx(840.0, abs=2.0)
-    assert by[(fw, "drive", "min_id")]["ours"] < -3.0 and by[(fw, "drive", "max_u_ab")]["ours"] < 1.0
-    assert by[(fw, "drive", "max_u")]["ours"] < 0.999  # never at the limit (the old "ab" budget sat at 1.000)
+    assert by[(fw, "FA-LESO", "max_abs")]["within"] and by[(fw, "FA-LESO", "max_speed_err")]["within"]
+    assert by[(fw, "drive", "max_speed")]["ours"] == pytest.approx(840.0, abs=5.0)
+    assert by[(fw, "drive", "min_id")]["ours"] < -5.0 and by[(fw, "drive", "max_u_ab")]["ours"] < 0.98
+    for r in rows:
+        assert r["within"] is not False or r["explanation"], r
 
 
-def test_field_weakening_on_the_dual_loop_holds_840_rpm_at_330_v():
-    """Encoder, VSD, 330 V (base speed ≈ 808 r/min): with VoltageFeedbackFW the drive holds 840 r/min on a
-    negative i_d, the αβ voltage near the 0.95 margin; without it the voltage limit holds it well below.
-    Budgeting the αβ voltage (fw_voltage="ab") leaves each set on its own limit (the xy voltage on top);
-    fw_voltage="set" holds each set's voltage at the margin instead, on a deeper i_d."""
+def _fw_speed_pair(i_d, speed_hz=2.5, rpm=840):
+    """The sensorless speed loop's least damped pair (rad/s) at ``i_d`` (A): the per-set machine's speed loop
+    closed through the FA-LESO's 15 Hz PLL (jaxobs.linear.faleso_speed_loop_poles; each set is the single
+    machine on half the rotor, so the single bench's model)."""
+    par = D.bench_machine("ipmsm002")
+    kp, ki = linear.pll_gains(2 * math.pi * papers.LESO_PLL_HZ)
+    a = 2 * math.pi * speed_hz
+    kp_w, ki_w = 2 * a * float(par.J) / float(par.kt), a * a * float(par.J) / float(par.kt)
+    we = par.p * rpm * D.RPM
+    r = np.asarray(
+        linear.faleso_speed_loop_poles(
+            papers.FALESO_K1, papers.FALESO_K2, we, kp, ki, kp_w, ki_w,
+            p=par.p, psi_f=float(par.psi_f), Ld=float(par.Ld), Lq=float(par.Lq), J=float(par.J), i_d=i_d,
+        )
+    )  # fmt: skip
+    r = r[np.abs(r.imag) < we / 2]
+    return r[np.argmax(r.real)]
+
+
+def test_field_weakening_depth_decides_the_sensorless_speed_loop():
+    """Why the dual drive's field weakening budgets the αβ voltage by default: on 330 V at 840 r/min with the
+    2.5 Hz speed loop, "ab" settles at i_d = −7.3 A and "set" at −11.8 A (the xy voltage fitted under the
+    margin too); the speed loop's pair through the PLL crosses into Re s > 0 near −9.5 A."""
+    assert _fw_speed_pair(-7.29).real < -4.0  # measured −4.85 /s
+    assert _fw_speed_pair(-11.1).real > 2.0  # +3.46 /s
+    assert _fw_speed_pair(-9.0).real < 0.0 < _fw_speed_pair(-10.0).real
+
+
+def test_sensorless_dual_field_weakening_holds_840_rpm_by_default():
+    """The FA-LESO closing the dual drive (VSD) on 330 V at 840 r/min, speed loop 2.5 Hz, the default
+    field-weakening budget: the drive holds 840 r/min (measured 840.0 ± 0.05 r/min, 0.01°, i_d −7.29 A).
+    With fw_voltage="set" (the budget that was the default) the same run leaves 840 r/min: 801–942 r/min over
+    0.6–1.5 s, growing at +3.9 /s into a 774–972 r/min cycle."""
+    from jaxobs.reproduce.leso import leso_bank
+
+    m = dual.dual_ipmsm_paper002()
+    est = m.per_set()
+    inv = D.Inverter(udc=330.0)
+    drv = dual_loop.dual_bench_drive(
+        m, sensorless=True, handover=0.3, inverter=inv, alpha_s=2 * math.pi * 2.5, field_weakening=D.VoltageFeedbackFW()
+    )
+    assert drv.ctrl.fw_voltage == "ab"
+    sc = D.Scenario(est, speed_ref=D.Profile.constant(840 * D.RPM), omega_m0=840 * D.RPM)
+    o = simulate(dual_loop.DualClosedLoop(drv, leso_bank(est, m.p * 840 * D.RPM), sc, m), 1.0).outputs
+    late = np.asarray(o.t) >= 0.6
+    rpm = np.asarray(o.speed_rpm)[late]
+    err = np.degrees(np.abs(np.angle(np.exp(1j * (np.asarray(o.theta_e_hat) - np.asarray(o.theta_e))))))[late]
+    assert np.max(np.abs(rpm - 840.0)) < 1.0, (rpm.min(), rpm.max())
+    assert err.max() < 1.0 and np.asarray(o.i_d)[late].mean() < -6.0
+
+
+def test_dual_steady_start_under_field_weakening():
+    """The dual loop's steady start at 840 r/min on 330 V (encoder, 10 N·m) begins field-weakened: Δi_d in the
+    FOC's integrator, i_d at the αβ voltage's margin.  Over 0.2 s the xy currents build up from zero and a set
+    reaching its inverter's limit deepens i_d a little (measured: 838.4–840.0 r/min, i_d −6.86 → −7.69 A)."""
     m = dual.dual_ipmsm_paper002()
     inv = D.Inverter(udc=330.0)
-    sc = D.Scenario(m.per_set(), speed_ref=D.Profile.constant(840 * D.RPM), omega_m0=780 * D.RPM)
-    res = {}
-    for key, fw, fwv in (
-        ("ab", D.VoltageFeedbackFW(), "ab"),
-        ("none", None, "ab"),
-        ("set", D.VoltageFeedbackFW(), "set"),
-    ):
-        drv = dual_loop.dual_bench_drive(
-            m, mode="vsd", sensorless=False, inverter=inv, field_weakening=fw, fw_voltage=fwv
-        )
-        o = simulate(dual_loop.DualClosedLoop(drv, None, sc, m), 1.0).outputs
-        last = slice(-1000, None)
-        um = float(inv.u_max)
-        u_ab = np.hypot(np.asarray(o.u_a1 + o.u_a2), np.asarray(o.u_b1 + o.u_b2))[last] / 2 / um
-        u_set = np.maximum(np.hypot(o.u_a1, o.u_b1), np.hypot(o.u_a2, o.u_b2))[last] / um
-        res[key] = (float(o.speed_rpm[last].mean()), float(o.i_d[last].mean()), float(u_ab.max()), u_set)
-    (w_fw, id_fw, u_fw, set_fw), (w_no, id_no, _, _) = res["ab"], res["none"]
-    assert w_fw == pytest.approx(840.0, abs=1.0) and id_fw < -2.0 and 0.9 < u_fw < 0.97
-    assert w_no < 830.0 and abs(id_no) < 0.5
-    # measured: "ab" has a set at u_max 72 % of the last 0.1 s; "set" holds them at 0.950 mean, 0.987 max,
-    # i_d −11.1 A against −7.3 A
-    assert (set_fw > 0.999).mean() > 0.5
-    w_s, id_s, _, set_s = res["set"]
-    assert w_s == pytest.approx(840.0, abs=1.0) and id_s < id_fw - 2.0
-    assert set_s.max() < 0.995 and set_s.mean() == pytest.approx(0.95, abs=0.005)
+    drv = dual_loop.dual_bench_drive(
+        m, sensorless=False, inverter=inv, alpha_s=2 * math.pi * 2.5, field_weakening=D.VoltageFeedbackFW()
+    )
+    sc = D.Scenario(
+        m.per_set(), speed_ref=D.Profile.constant(840 * D.RPM), omega_m0=840 * D.RPM, load=D.Profile.constant(10.0)
+    )
+    loop = dual_loop.DualClosedLoop(drv, None, sc, m)
+    op = loop.operating_point()
+    assert float(op.id_fw) < -5.0 and float(loop.init().ctrl.main.id_fw) == pytest.approx(float(op.id_fw))
+    o = simulate(loop, 0.2).outputs
+    rpm, i_d = np.asarray(o.speed_rpm), np.asarray(o.i_d)
+    assert np.max(np.abs(rpm - 840.0)) < 3.0, (rpm.min(), rpm.max())
+    assert np.max(np.abs(i_d - float(op.i_d))) < 1.5, (i_d.min(), i_d.max(), float(op.i_d))
+    assert np.max(np.abs(i_d[:20] - float(op.i_d))) < 0.05  # at the start: steady, not from i_d = 0
 
 
 def test_reproduce_leso_runs_the_dual_machine_by_default():
     """`jaxobs reproduce leso` includes 002's dual machine unless --machine single."""
     from jaxobs_tuning.cli import build_parser
-    from jaxobs_tuning.cli_papers import REPRODUCE_DUAL_FILES, REPRODUCE_FILES, reproduce_files
+    from jaxobs_tuning.cli_papers import (
+        REPRODUCE_DUAL_FILES,
+        REPRODUCE_DUAL_LAYOUT_FILES,
+        REPRODUCE_FILES,
+        reproduce_files,
+    )
 
     for argv, files in (
-        (["reproduce", "leso"], REPRODUCE_FILES["leso"] + REPRODUCE_DUAL_FILES),
+        (["reproduce", "leso"], REPRODUCE_FILES["leso"] + REPRODUCE_DUAL_FILES + REPRODUCE_DUAL_LAYOUT_FILES),
         (["reproduce", "leso", "--machine", "single"], REPRODUCE_FILES["leso"]),
         (["reproduce", "flux"], REPRODUCE_FILES["flux"]),
     ):

@@ -60,8 +60,10 @@ REPRODUCE_DUAL_FILES = (
     "leso_dual_load_step.png",
     "leso_dual_load_step_cleso_closing.png",
     "leso_dual_load_step_gileso_closing.png",
-    "leso_dual_speed_ramp_330V_encoder.png",
+    "leso_dual_speed_ramp_330V.png",
 )
+# and the 330 V ramp in 002's Fig. 16 layout (speed, i_d under its reference, the FA-LESO's error)
+REPRODUCE_DUAL_LAYOUT_FILES = ("leso_dual_fig16_speed_ramp_330V_layout.png",)
 
 
 def cmd_demo(args) -> int:
@@ -233,7 +235,8 @@ def reproduce_files(args) -> tuple:
         args.machine = "dual" if args.paper == "leso" else "single"
     if args.machine != "single" and args.paper != "leso":
         raise ValueError(f"reproduce {args.paper}: --machine must be 'single' (the dual machine is paper 002's)")
-    return REPRODUCE_FILES[args.paper] + (REPRODUCE_DUAL_FILES if args.machine == "dual" else ())
+    dual = REPRODUCE_DUAL_FILES + REPRODUCE_DUAL_LAYOUT_FILES
+    return REPRODUCE_FILES[args.paper] + (dual if args.machine == "dual" else ())
 
 
 def cmd_reproduce(args) -> int:
@@ -324,6 +327,13 @@ def _reproduce(args, out: Path) -> int:
             keys = [e[0] for e in DUAL_EXPERIMENTS] + list(DUAL_DYNAMICS)
             specs = zip(keys, REPRODUCE_DUAL_FILES, (0.4,) * len(keys), strict=True)
             figs += _error_figures(traces, LESO_NAMES, "002, dual three-phase", specs, out)
+            from jaxobs.reproduce.leso_dual import DUAL_RAMP_FW
+
+            figs.append(out / REPRODUCE_DUAL_LAYOUT_FILES[0])
+            title = f"Paper 002 Fig. 16 (ours): {DUAL_RAMP_FW}, the FA-LESO closing the loop"
+            drive_figure(
+                traces[DUAL_RAMP_FW], LESO_NAMES, ("FA-LESO",), "weakening", (0.4, None), title, p, path=figs[-1]
+            )
         return _emit_rows(
             rows, figs, args.json, "Paper 002 (LESOs) experiments on the simulated IPMSM drive — paper vs ours"
         )

@@ -134,6 +134,9 @@ class OperatingPoint(NamedTuple):
     u_d: jax.Array  # rotor-frame voltage the true machine needs there, V
     u_q: jax.Array
     offset: jax.Array | float = 0.0  # the controller's angle minus the rotor's, rad (0: encoder or unbiased)
+    # field weakening's Δi_d there (≤ 0, A): the controller's i_d* is the policy's plus it (0 without field
+    # weakening, or below base speed)
+    id_fw: jax.Array | float = 0.0
 
     @classmethod
     def at_rest(cls, theta_e) -> OperatingPoint:
@@ -412,7 +415,8 @@ class FOC(AbstractComponent):
         At a steady operating point the errors are zero, so the current PIs'
         outputs are their integrators plus the decoupling terms (computed with
         the *assumed* machine), which must equal the voltage the true machine
-        needs; the speed PI's output, k_pω (b ω* − ω) + ∫, must equal i_q.
+        needs; the speed PI's output, k_pω (b ω* − ω) + ∫, must equal i_q.  The field
+        weakening's integrator starts at the operating point's Δi_d (``op.id_fw``).
         With an I-f start-up the drive starts from standstill: zeros, and the
         I-f angle at ``theta_f0`` (ClosedLoop: θ_e0 − 90°, the parked rotor).
         """
@@ -437,6 +441,8 @@ class FOC(AbstractComponent):
         else:
             gain = self.speed_gains(op.omega_m_ref)[0]
             int_w = self.iq_lin(est, i_q) - gain * (self.setpoint_weight * op.omega_m_ref - op.omega_m)
+        if self.field_weakening is not None:
+            rest["id_fw"] = z + op.id_fw
         return ControllerState(int_d=z + int_d, int_q=z + int_q, int_w=z + int_w, iq_ref=z + i_q, **rest)
 
     def operating_point(self, par: PMSMParams, omega_m, omega_m_ref, theta_e, t_load, offset=0.0) -> OperatingPoint:
@@ -453,27 +459,64 @@ class FOC(AbstractComponent):
         With ``outer="current"`` the reference *is* i_q*.  The voltage is the true
         machine's steady rotor-frame voltage (the BEMF harmonics, which average
         out, are left out).
+
+        With field weakening (and the voltage limit bound) the operating point is the
+        field-weakened one where the policy's would ask for more than the margin m u_max:
+        i_d* = i_d,policy(i_q*) + Δi_d with Δi_d ≤ 0 such that |u| = m u_max
+        (:class:`VoltageFeedbackFW`'s equilibrium; |u| is the same in the controller's
+        frame and the rotor's), jointly with the torque balance (Newton on Δi_d and
+        i_q* in turn, from Δi_d = 0), i_q* limited to the current circle's rest,
+        Δi_d to [−i_max, 0].  Below base speed Δi_d = 0 and the point is the
+        policy's, unchanged.
         """
         w_e = par.p * omega_m
 
-        def rotor_currents(iq):
-            return _rotate(self._id_ref(self.est, iq), iq, offset)
+        def rotor_currents(iq, dfw=None):  # dfw: field weakening's Δi_d (None: the policy's i_d alone)
+            i_d = self._id_ref(self.est, iq)
+            return _rotate(i_d if dfw is None else i_d + dfw, iq, offset)
 
-        if self.outer == "current":
-            iq_max = self.iq_limit(self.est)[0]
-            i_q = jnp.clip(omega_m_ref, -iq_max, iq_max)
-        else:
-            need = t_load + par.B * omega_m
+        def voltage(i_d, i_q):
+            return par.Rs * i_d - w_e * par.Lq * i_q, par.Rs * i_q + w_e * (par.Ld * i_d + par.psi_f)
+
+        need = t_load + par.B * omega_m
+
+        def solve_iq(dfw):
+            if self.outer == "current":
+                iq_max = self.iq_limit(self.est)[0]
+                return jnp.clip(omega_m_ref, -iq_max, iq_max)
             # |offset| < 90° where a steady state exists; the floor keeps a wilder offset finite
             i_q = need / (1.5 * par.p * par.psi_f * jnp.maximum(jnp.cos(offset), 0.1))
             for _ in range(4):  # Newton on T_e(i_q*) − need
-                te, dte = jax.jvp(lambda iq: _torque_dq(par, *rotor_currents(iq)), (i_q,), (jnp.ones_like(i_q),))
+                te, dte = jax.jvp(lambda iq: _torque_dq(par, *rotor_currents(iq, dfw)), (i_q,), (jnp.ones_like(i_q),))
                 i_q = i_q - (te - need) / dte
             iq_max = self.iq_limit(self.est)[0]
-            i_q = jnp.clip(i_q, -iq_max, iq_max)
+            return jnp.clip(i_q, -iq_max, iq_max)
+
+        i_q = solve_iq(None)
         i_d, i_q = rotor_currents(i_q)
-        u_d = par.Rs * i_d - w_e * par.Lq * i_q
-        u_q = par.Rs * i_q + w_e * (par.Ld * i_d + par.psi_f)
+        u_d, u_q = voltage(i_d, i_q)
+        id_fw = 0.0
+        fw = self.field_weakening
+        if fw is not None and self.u_max is not None:
+            target2 = (fw.margin * self.u_max) ** 2
+
+            def excess(dfw, iq):  # |u|² − (m u_max)² at Δi_d = dfw
+                ud, uq = voltage(*rotor_currents(iq, dfw))
+                return ud * ud + uq * uq - target2
+
+            dfw, iq = jnp.zeros_like(i_q), solve_iq(None)
+            for _ in range(8):  # Newton on Δi_d (|u|² is a convex quadratic in it), then i_q* for the torque
+                f, df = jax.jvp(lambda d: excess(d, iq), (dfw,), (jnp.ones_like(dfw),))
+                dfw = jnp.clip(dfw - f / jnp.where(jnp.abs(df) > 1e-12, df, 1.0), -self.i_max, 0.0)
+                iq = solve_iq(dfw)
+                i_d_ref = self._id_ref(self.est, iq) + dfw
+                iq = fw.limit_iq(iq, i_d_ref, self.i_max)
+            weakened = u_d * u_d + u_q * u_q > target2
+            fd, fq = rotor_currents(iq, dfw)
+            fud, fuq = voltage(fd, fq)
+            i_d, i_q = jnp.where(weakened, fd, i_d), jnp.where(weakened, fq, i_q)
+            u_d, u_q = jnp.where(weakened, fud, u_d), jnp.where(weakened, fuq, u_q)
+            id_fw = jnp.where(weakened, dfw, 0.0)
         z = jnp.zeros_like(w_e)
         return OperatingPoint(
             omega_m=z + omega_m,
@@ -485,6 +528,7 @@ class FOC(AbstractComponent):
             u_d=u_d,
             u_q=u_q,
             offset=z + offset,
+            id_fw=z + id_fw,
         )
 
     def _id_ref(self, est: PMSMParams, iq):

@@ -10,9 +10,10 @@ speed loop, dq current PIs with decoupling, delay compensation, anti-windup):
   the BEMF's 5th/7th harmonics, at 5ωe and 7ωe in the stationary xy frame: a PI there attenuates it by
   its loop gain, it does not cancel it (resonant or rotating-frame xy controllers would; 002 does not
   say which it used).  Each set's voltage is then z_αβ ± conj(z_xy).  Field weakening (the FOC's
-  ``field_weakening``) holds the larger set voltage at its margin by default (``fw_voltage="set"``, what each
-  inverter delivers: 002's ref. [32] budgets the xy voltage too); ``fw_voltage="ab"`` holds the αβ voltage
-  there instead, which leaves each set on its own limit when the xy voltage adds on top (docs/papers.md, 330 V).
+  ``field_weakening``) holds the αβ voltage, the FOC's own |u*|, at its margin by default (``fw_voltage="ab"``);
+  ``fw_voltage="set"`` holds the larger set voltage |z_αβ ± conj(z_xy)| there instead, on a deeper i_d: the xy
+  voltage rides on top of the αβ one.  Sensorless that deeper i_d costs the speed loop its damping (the
+  :class:`DualFOC` field's comment has the numbers; docs/papers.md, 330 V).
 - ``"individual"``: two individual sets (002 Figs 13-14; ref [6]).  Each set has its own dq frame, set 2's
   30° behind set 1's in its own Clarke coordinates (θ_e − π/6: its a-axis is 30° ahead), and its own
   FOC PI state; the gains are the IMC design on one set's self inductances (:meth:`DualPMSMParams.set_self`)
@@ -122,17 +123,24 @@ class DualFOC(AbstractComponent):
     kp_xy: jax.Array  # V/A
     ki_xy: jax.Array  # V/(A·s)
     mode: Literal["vsd", "individual"] = eqx.field(static=True)
-    # the voltage the field weakening holds at its margin under "vsd": "set", each set's |z_αβ ± conj(z_xy)|
-    # (the larger), or "ab", the αβ voltage (the FOC's own |u*|).  "set" is the default because it is the
-    # voltage the inverters must deliver: each set's inverter clips its own |u| at u_max, and the xy PIs'
-    # voltage rides on the αβ one, so budgeting only αβ leaves a set clipped whenever xy is not zero (on
-    # 330 V at 840 r/min, 72 % of the time: the clipped set's current loop then loses its authority, which
-    # is what field weakening's margin exists to prevent).  002's ref. [32] budgets the whole phase voltage,
-    # xy included, which "set" does; "ab" stays for comparison (docs/papers.md, 330 V).  "individual" is per
-    # set either way (each set's FOC limits its own).
+    # the voltage the field weakening holds at its margin under "vsd": "ab", the αβ voltage (the FOC's own
+    # |u*|), or "set", each set's |z_αβ ± conj(z_xy)| (the larger).  Both loops have the same gain (the xy
+    # voltage does not depend on i_d: ∂|u|/∂i_d ≈ ω̂e L̂d either way, a first-order loop at α_fw, 20 Hz) and
+    # neither sees the observer's angle error (|u| is a magnitude); they differ in the i_d they settle on.
+    # "set" fits the xy PIs' voltage under the margin too, which takes a deeper i_d, and a lagging estimate
+    # turns i_d into accelerating torque (K_δ = 1.5 p ψf i_d): on 330 V at 840 r/min, FA-LESO closing, speed
+    # loop 2.5 Hz, "set" settles at i_d = −11.8 A, where the speed loop's pair through the PLL has
+    # Re s = +3.5 /s (jaxobs.linear.faleso_speed_loop_poles at −11.1 A; −4.9 /s at "ab"'s −7.3 A; the
+    # crossing is at −9.5 A), and the drive falls into a 601–973 r/min limit cycle; "ab" holds
+    # 840.0 r/min within 0.01°.  The depth is the cause, not the signal: "ab" with margin 0.90 (i_d −10.1 A)
+    # grows at +4.8 /s and with 0.88 (−11.5 A) cycles over 594–945 r/min; "set" with margin 1.0 (−8.1 A)
+    # holds (tests/test_dual.py).  So "ab" is the default; it leaves a set at its inverter's limit part of
+    # the time (71 % at 840 r/min on 330 V: that set's current loop then has no voltage in reserve).  002
+    # does not say which voltage its field weakening (its ref. [32]) budgets.  "individual" is per set either
+    # way (each set's FOC limits its own).
     fw_voltage: Literal["ab", "set"] = eqx.field(static=True)
 
-    def __init__(self, foc, kp_xy=1.0, ki_xy=0.0, *, mode="vsd", fw_voltage="set"):
+    def __init__(self, foc, kp_xy=1.0, ki_xy=0.0, *, mode="vsd", fw_voltage="ab"):
         if not isinstance(foc, FOC):
             raise ValueError(f"DualFOC.foc must be a FOC, got {type(foc).__name__}")
         if mode not in ("vsd", "individual"):
@@ -146,7 +154,7 @@ class DualFOC(AbstractComponent):
         self.fw_voltage = fw_voltage
 
     @classmethod
-    def imc(cls, est: DualPMSMParams, alpha_c, alpha_s, *, mode="vsd", fw_voltage="set", **kw) -> DualFOC:
+    def imc(cls, est: DualPMSMParams, alpha_c, alpha_s, *, mode="vsd", fw_voltage="ab", **kw) -> DualFOC:
         """IMC current loops at ``alpha_c`` rad/s and the double-pole speed loop at ``alpha_s`` on ``est``.
 
         "vsd": :meth:`FOC.imc` on ``est.per_set()``, xy PIs k_p = α_c L̂ls, k_i = α_c R̂s.  "individual":
@@ -348,7 +356,11 @@ class DualClosedLoop(AbstractDriveLoop):
     def operating_point(self, offset=0.0) -> OperatingPoint:
         """The steady state at the scenario's initial speed and load: each set carries half the load
         (the FOC's operating point on the per-set machine, its frame ``offset`` rad ahead of the rotor's),
-        zero xy current."""
+        zero xy current.  Above base speed with field weakening it is the field-weakened one (the αβ voltage at
+        the margin, :meth:`FOC.operating_point`): exact for ``fw_voltage="ab"`` until the xy currents build up
+        from zero (the 5th/7th BEMF drive them; where a set then reaches its inverter's limit the αβ voltage it
+        delivers falls short, and i_d settles deeper: −7.29 A against the start's −6.43 A at 840 r/min, no load,
+        330 V); ``fw_voltage="set"`` settles deeper still (the xy voltage under the margin too)."""
         sc = self.scenario
         return self.controller.foc.operating_point(
             self.machine.per_set(), sc.omega_m0, sc.speed_ref(0.0), sc.theta_e0, sc.load(0.0) / 2, offset
@@ -433,7 +445,7 @@ def dual_bench_drive(
     machine: DualPMSMParams,
     *,
     mode="vsd",
-    fw_voltage="set",
+    fw_voltage="ab",
     sensorless=True,
     handover=0.2,
     startup: IfStartup | None = None,

@@ -14,8 +14,9 @@ dividing by it makes the loop from Δi_d to |u*| a first-order loop of bandwidth
 current PIs room to regulate.  It is off by default (``field_weakening=None``: i_d* is the policy's, 0 or MTPA).
 
 |u*| is the current PIs' reference before the controller's own limit, available at the end of a period, so
-Δi_d acts from the next period on (a one-period lag, negligible against 1/α_fw).  A steady start keeps
-Δi_d = 0: scenarios that start above base speed start from an infeasible operating point and settle.
+Δi_d acts from the next period on (a one-period lag, negligible against 1/α_fw).  A steady start above base
+speed starts at this loop's equilibrium, |u*| = m u_max (:meth:`jaxobs.drive.FOC.operating_point` solves
+Δi_d with the torque balance; :meth:`jaxobs.drive.FOC.init` starts the integrator there).
 """
 
 from __future__ import annotations

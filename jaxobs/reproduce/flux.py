@@ -410,7 +410,9 @@ _LPF_STEP = (
     "the LPF's corner and a lighter bench, together: with ωc = 360 rad/s (which fits the paper's steady LPF "
     "errors) and 3x Table II's J instead of 10x the LPF peaks at 0.96 rad (the SOIFOs 0.39 / 0.35); with "
     "the LPF closing the loop on 5x J at 0.88, oscillating as the paper's does (the SOIFOs 0.26 / 0.24); "
-    "each alone stays under 0.5 rad; the paper gives neither its corner nor its inertia"
+    "each alone stays under 0.5 rad (docs/papers.md, Paper 000 (e)); the paper gives neither its corner nor its "
+    "inertia.  Unexplained: the last 0.34 rad (1.3 against 0.96 at best): no combination measured reaches 1.3 "
+    "and keeps the drive (closing on 3x J loses it)"
 )
 _INERTIA = (
     "the step's dynamic error rides on the 0.157 rad delay: the assumed bench inertia (10x Table II's J) "
@@ -425,7 +427,9 @@ _OFFSET_RIPPLE = (
 _DI_OFFSET = (
     "the drive regulates the measured current, so the machine carries the −1.5 A: the observers see only "
     "its Rs·Δi (1.2 V); the inverter turns that dc current into a dc voltage error the observers integrate "
-    "(rows ', dead time 1 µs': offsets 0.078 / 0.042 Wb, ripples 0.48 / 0.26 rad): the right way, overshooting"
+    "(rows ', dead time 1 µs': offsets 0.078 / 0.042 Wb, ripples 0.48 / 0.26 rad): the right way, overshooting. "
+    "Unexplained: no one dead time fits both, without it offsets and ripples are 2.5-7x low, with 1 µs the "
+    "ripples fit and the offsets are 2.5x high; the paper's inverter (its dead time, its compensation) is not given"
 )
 EXPLANATIONS = {
     (_S2000, "LPF", "max_abs"): _LPF_CORNER,
