@@ -193,7 +193,6 @@ def run_drive_study(
     progress=None,
     mesh=None,
     store=None,
-    trace_key=None,
 ):
     """Run every design (a drive observer closing ``drive``'s loop) on every scenario; an ``xarray.Dataset``.
 
@@ -265,8 +264,6 @@ def run_drive_study(
         progress=progress,
         label="drive study",
         sink=store,
-        # a string naming every argument here (a study file's digest): the chunks' traced program is kept
-        trace_key=None if trace_key is None else f"run_drive_study|{trace_key}",
     )
     n = len(run.points)
     values = run.values if store is None else {d: store.load(d) for d in designs}

@@ -141,7 +141,6 @@ def run_study(
     return_seconds=False,
     mesh=None,
     store=None,
-    trace_key=None,
 ):
     """Simulate every design on every scenario; returns an ``xarray.Dataset`` (see module doc).
 
@@ -154,9 +153,7 @@ def run_study(
     every device of every process; ``jaxobs.batch_mesh(jax.devices()[:1])`` keeps to one device).
     ``store``: a :class:`jaxobs.chunkstore.ChunkStore`: each chunk's values go to disk as it finishes (none
     held during the run), chunks already there (an interrupted run's, ``resume=True``) are not run again, and
-    the Dataset is laid out from the store: the same Dataset as without one.  ``trace_key``: a string naming
-    every argument here (a study file's digest): the chunks' traced program is kept across processes
-    (:func:`jaxobs.run_scenarios`'s ``trace_key``).
+    the Dataset is laid out from the store: the same Dataset as without one.
     """
     import xarray as xr
 
@@ -210,7 +207,6 @@ def run_study(
         progress=progress,
         label="study",
         sink=store,
-        trace_key=None if trace_key is None else f"run_study|{trace_key}",
     )
     n = len(run.points)
     values = run.values if store is None else {d: store.load(d) for d in designs}

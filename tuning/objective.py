@@ -262,6 +262,10 @@ class Term:
 class Objective:
     """value(θ), value_and_grad(θ) and per-scenario scores for a component and a scenario batch."""
 
+    # what its programs bake in (the key of a kept program, jaxobs.kept_jit): the rest is made from these
+    kept_fields = ("component", "param", "scenarios", "horizon", "terms", "ctx", "aggregation", "penalty", "drive",
+                   "bind", "_save")  # fmt: skip
+
     def __init__(
         self,
         component,
@@ -275,7 +279,6 @@ class Objective:
         penalty: float = 1e3,
         drive=None,
         bind=None,
-        trace_key: str | None = None,
     ):
         """``component``: the module whose free gains ``param`` sets; ``scenarios``: the batch (leading axis
         the scenarios); ``horizon``: simulated seconds per scenario; ``terms``: the weighted metrics summed
@@ -283,10 +286,9 @@ class Objective:
         per-scenario values become one (:class:`~jaxobs_tuning.aggregations.Mean` by default); ``penalty``: the
         value of a diverged scenario.  ``drive``: run each scenario (a drive Scenario) closed loop with
         this Drive, the component as its observer; ``bind(component, scenario)``: adapt the component to
-        the scenario (the parameters an observer assumes, its initial speed) before the run.  ``trace_key``: a
-        string naming everything that built this objective (a job's digest and which of its scenario sets):
-        with it, the value-and-gradient's and the scoring's traced programs are kept across processes
-        (:func:`jaxobs.kept_jit`, where :func:`jaxobs.use_compile_cache` set a folder)."""
+        the scenario (the parameters an observer assumes, its initial speed) before the run.  The
+        value-and-gradient's and the scoring's traced programs are kept across processes where
+        :func:`jaxobs.use_compile_cache` set a folder (:func:`jaxobs.kept_jit`, keyed on :attr:`kept_fields`)."""
         for term in terms:
             if term.metric not in METRICS:
                 raise ValueError(f"objective metric {term.metric!r} is unknown; known: {', '.join(METRICS)}")
@@ -302,15 +304,12 @@ class Objective:
         self.ctx = ctx
         self.aggregation, self.penalty = aggregation, float(penalty)
         self.drive, self.bind = drive, bind
-        self.trace_key = trace_key
         # the solver's runs: every step's outputs, an observer on a signal through the loop made fast, the drive
         # plainly (module doc); the scoring and the figures run once per design, where compile time counts
         self._save = SaveAll(fast=drive is None)
-        # the scenarios and the component are constants of the program (self is static): the key names them
-        vg = self._per_scenario_value_and_grad
-        self._vg = eqx.filter_jit(vg) if trace_key is None else kept_jit(vg, f"objective.vg|{trace_key}")
-        resp = self._response
-        self.response = eqx.filter_jit(resp) if trace_key is None else kept_jit(resp, f"objective.resp|{trace_key}")
+        # the scenarios and the component are constants of the program (self is static): kept_fields name them
+        self._vg = kept_jit(self._per_scenario_value_and_grad)
+        self.response = kept_jit(self._response)
 
         @jax.custom_jvp
         def value(theta):
@@ -438,7 +437,6 @@ class Objective:
             chunk_size=given.n,
             mesh=batch_mesh(jax.devices()[:1]),
             label="scores",
-            trace_key=None if self.trace_key is None else f"objective.scores|{self.trace_key}",
         )
         mets = dict(run.values["design"])
         if any(t.metric == STABILITY_MARGIN for t in self.terms):  # of the loop, not of the run: one jit(vmap)

@@ -41,9 +41,6 @@ def build_objective(job: Job, spec: ScenarioSpec | None = None):
     bind = bind_observer if drive is not None else None  # the scenario's assumed machine and speed
     if spec.recording is not None:  # the observer runs open loop on the recorded u/i or voltage
         drive, bind = None, (bind_recording if spec.signal != "grid" else None)
-    # what the objective's traced programs are kept under (jaxobs.kept_jit): the job (its file's digest, its
-    # recordings') and which of its scenario sets; none for another spec
-    which = "scenarios" if spec is job.scenarios else "holdout" if spec is job.holdout else None
     obj = Objective(
         comp,
         param,
@@ -55,7 +52,6 @@ def build_objective(job: Job, spec: ScenarioSpec | None = None):
         penalty=job.penalty,
         drive=drive,
         bind=bind,
-        trace_key=None if which is None else f"{job_fingerprint(job)}|{which}",
     )
     return obj, (names, combos)
 
