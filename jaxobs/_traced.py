@@ -311,17 +311,19 @@ def traced_dir() -> Path | None:
 
 # --- the key
 def _package_digest(top: str) -> str:
-    """sha256 over every ``.py`` file (relative path and bytes) of the top-level package or module ``top``."""
+    """sha256 over every ``.py`` file (relative path and bytes) of the top-level package or module ``top``; an empty
+    string where no file holds it (an interactive session, ``python -c``)."""
     if top not in _digests:
-        mod = sys.modules.get(top)
-        file = getattr(mod, "__file__", None)
+        file = getattr(sys.modules.get(top), "__file__", None)
         h = hashlib.sha256(top.encode())
-        if file is not None:
-            path = Path(file).resolve()
+        try:
+            path = Path(file).resolve(strict=True)
             files = sorted(path.parent.rglob("*.py")) if path.name == "__init__.py" else [path]
             for f in files:
                 h.update(str(f.relative_to(path.parent)).encode() + b"\0" + f.read_bytes() + b"\0")
-        _digests[top] = h.hexdigest() if file is not None else ""
+            _digests[top] = h.hexdigest()
+        except (TypeError, OSError):
+            _digests[top] = ""
     return _digests[top]
 
 
@@ -348,16 +350,27 @@ class _NoKey(Exception):
 
 class _Digest:
     """A stable sha256 of Python values: the same in every process for equal values (no ``id``, no ``repr`` of an
-    object); arrays by value (``avals=False``) or by shape, dtype and weak type (``avals=True``)."""
+    object).  Arrays by value (``avals=False``), or with ``avals=True`` by shape, dtype and weak type where they are
+    a program's inputs (leaves of the pytree given: containers, NamedTuples, an equinox Module's fields that are not
+    static) and by value where they are its constants (held by a function, an object or a static field)."""
 
     def __init__(self, avals: bool):
         self.h = hashlib.sha256()
         self.avals = avals
         self.packages: set[str] = set()
-        self.seen: dict[int, int] = {}
+        self.seen: dict[tuple[int, bool], int] = {}
 
     def hexdigest(self) -> str:
         return self.h.hexdigest()
+
+    def constant(self, *objs) -> None:
+        """``objs`` as constants of the program: their arrays by value."""
+        avals, self.avals = self.avals, False
+        try:
+            for obj in objs:
+                self.add(obj)
+        finally:
+            self.avals = avals
 
     def put(self, tag: str, text: str = "") -> None:
         self.h.update(f"{tag}:{len(text)}:{text};".encode())
@@ -413,31 +426,29 @@ class _Digest:
             self.named(t)
             self.put("enum", obj.name)
             return
-        if id(obj) in self.seen:  # a cycle, or the same object again
-            self.put("again", str(self.seen[id(obj)]))
+        mark = (id(obj), self.avals)  # as an input, or as a constant (its arrays by value)
+        if mark in self.seen:  # a cycle, or the same object again
+            self.put("again", str(self.seen[mark]))
             return
-        self.seen[id(obj)] = len(self.seen)
+        self.seen[mark] = len(self.seen)
         if isinstance(obj, types.FunctionType):
             if self.named(obj) and "<locals>" not in obj.__qualname__ and not obj.__closure__:
                 return  # a library's function: its version names it
             self.code(obj.__code__)
-            for part in (obj.__defaults__, obj.__kwdefaults__):
-                self.add(part)
+            self.constant(obj.__defaults__, obj.__kwdefaults__)
             for cell in obj.__closure__ or ():
                 try:
-                    self.add(cell.cell_contents)
+                    self.constant(cell.cell_contents)
                 except ValueError:  # an empty cell
                     self.put("empty")
             return
         if isinstance(obj, types.MethodType):
             self.put("method")
-            self.add(obj.__func__)
-            self.add(obj.__self__)
+            self.constant(obj.__func__, obj.__self__)
             return
         if isinstance(obj, functools.partial):
             self.put("partial")
-            for part in (obj.func, obj.args, obj.keywords):
-                self.add(part)
+            self.constant(obj.func, obj.args, obj.keywords)
             return
         if isinstance(obj, (types.BuiltinFunctionType, np.ufunc)):
             self.named(obj)
@@ -458,7 +469,7 @@ class _Digest:
         if isinstance(obj, (set, frozenset)):
             subs = []
             for x in obj:
-                d = _Digest(self.avals)
+                d = _Digest(avals=False)
                 d.add(x)
                 self.packages |= d.packages
                 subs.append(d.hexdigest())
@@ -466,9 +477,14 @@ class _Digest:
             return
         if dataclasses.is_dataclass(obj):  # equinox Modules (their bound methods too) and dataclasses
             self.named(t)
+            pytree = isinstance(obj, eqx.Module)  # a plain dataclass is a static leaf: its arrays are constants
             for f in dataclasses.fields(obj):
                 self.put("field", f.name)
-                self.add(getattr(obj, f.name, None))
+                value = getattr(obj, f.name, None)
+                if pytree and not f.metadata.get("static", False):
+                    self.add(value)
+                else:
+                    self.constant(value)
             return
         if isinstance(obj, jax.sharding.Mesh):
             self.put("mesh", repr(tuple(obj.axis_names)) + repr(obj.devices.shape))
@@ -479,12 +495,12 @@ class _Digest:
             self.named(t)
             for name in fields:
                 self.put("field", name)
-                self.add(getattr(obj, name))
+                self.constant(getattr(obj, name))
             return
         wrapped = getattr(obj, "__wrapped__", None)  # jax's jitted functions, custom_jvp, ...
         if wrapped is not None:
             self.named(t)
-            self.add(wrapped)
+            self.constant(wrapped)
             return
         raise _NoKey(f"a value of type {t.__module__}.{t.__qualname__}")
 
