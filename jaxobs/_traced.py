@@ -390,12 +390,30 @@ class _Digest:
         self.put("named", f"{module}:{name}")
         return top in _NAMED
 
-    def code(self, co: types.CodeType) -> None:
+    def code(self, co: types.CodeType, names: dict) -> None:
+        """A function's code, and the module constants it reads (``names``: its globals): a constant changed at run
+        time (a test's monkeypatch) is then another key, as an edited file is."""
         self.put("code", co.co_name)
         self.h.update(co.co_code)
         self.put("names", ",".join(co.co_names))
+        for name in co.co_names:
+            value = names.get(name, _ABSENT)
+            if value is not _ABSENT and _plain(value):
+                self.put("global", name)
+                self.constant(value)
         for c in co.co_consts:
-            self.code(c) if isinstance(c, types.CodeType) else self.add(c)
+            self.code(c, names) if isinstance(c, types.CodeType) else self.add(c)
+
+    def methods(self, cls: type) -> None:
+        """The code of every method of ``cls`` and its bases defined outside the libraries."""
+        for klass in cls.__mro__:
+            if (getattr(klass, "__module__", "") or "").split(".")[0] in _NAMED:
+                continue
+            for name, v in sorted(vars(klass).items()):
+                f = getattr(v, "__func__", v)  # staticmethod, classmethod
+                if isinstance(f, types.FunctionType):
+                    self.put("method", name)
+                    self.code(f.__code__, f.__globals__)
 
     def add(self, obj) -> None:  # noqa: C901  (one case per kind of value)
         t = type(obj)
@@ -434,7 +452,7 @@ class _Digest:
         if isinstance(obj, types.FunctionType):
             if self.named(obj) and "<locals>" not in obj.__qualname__ and not obj.__closure__:
                 return  # a library's function: its version names it
-            self.code(obj.__code__)
+            self.code(obj.__code__, obj.__globals__)
             self.constant(obj.__defaults__, obj.__kwdefaults__)
             for cell in obj.__closure__ or ():
                 try:
@@ -493,6 +511,7 @@ class _Digest:
         fields = getattr(t, "kept_fields", None)
         if isinstance(fields, tuple):  # an object that names the attributes its programs depend on
             self.named(t)
+            self.methods(t)
             for name in fields:
                 self.put("field", name)
                 self.constant(getattr(obj, name))
@@ -503,6 +522,20 @@ class _Digest:
             self.constant(wrapped)
             return
         raise _NoKey(f"a value of type {t.__module__}.{t.__qualname__}")
+
+
+_ABSENT = object()
+
+
+def _plain(value, depth: int = 0) -> bool:
+    """Whether ``value`` is a module constant made of numbers and strings (what a key can hold)."""
+    if value is None or type(value) in (bool, int, float, complex, str, bytes):
+        return True
+    if depth < 3 and type(value) in (tuple, list, frozenset):
+        return len(value) <= 64 and all(_plain(v, depth + 1) for v in value)
+    if depth < 3 and type(value) is dict:
+        return len(value) <= 64 and all(_plain(k, depth + 1) and _plain(v, depth + 1) for k, v in value.items())
+    return False
 
 
 def _is_array(x) -> bool:
@@ -589,7 +622,7 @@ class _Kept:
             key = self.full_key(args)
         except _NoKey:
             return None
-        name = hashlib.sha256(json.dumps(key, sort_keys=True).encode()).hexdigest()
+        name = _entry_name(key)
         if not fresh and name in cache.programs:
             return cache.programs[name]
         arrays = [x for x in leaves if _is_array(x)]
@@ -623,6 +656,11 @@ class _Kept:
         prog = _Program(exp, from_disk)
         cache.programs[name] = prog
         return prog
+
+
+def _entry_name(key: dict) -> str:
+    """The file name (less its suffix) of the program kept under ``key``."""
+    return hashlib.sha256(json.dumps(key, sort_keys=True).encode()).hexdigest()
 
 
 def _check_inputs(exp, arrays) -> str | None:
