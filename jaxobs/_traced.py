@@ -525,6 +525,7 @@ class _Digest:
 
 
 _ABSENT = object()
+_LOCAL = 16  # the static values a kept function remembers, the most recent
 
 
 def _plain(value, depth: int = 0) -> bool:
@@ -566,7 +567,9 @@ class _Kept:
         self.fn, self.key = fn, key
         self.jitted = eqx.filter_jit(fn)
         self._fn_key: tuple[str, frozenset] | None = None
-        self.local: dict = {}  # (tree, static leaves and avals) -> the _Program (None: a plain jit), this process
+        # (tree, static leaves and avals) -> the _Program (None: a plain jit) in this process; the most recent few
+        # only, since the static leaves may hold large objects (an objective's scenarios): a miss costs a digest
+        self.local: dict = {}
 
     def _function_key(self) -> tuple[str, frozenset]:
         if self._fn_key is None:  # once: the function, its closure and bound object do not change
@@ -599,8 +602,10 @@ class _Kept:
         arrays = [x for x in leaves if _is_array(x)]
         local = (tree, tuple((x.shape, x.dtype, getattr(x, "weak_type", False)) if _is_array(x) else x for x in leaves))
         try:
-            prog = self.local[local] if local in self.local else self._program(cache, args, leaves, tree)
-            self.local[local] = prog
+            prog = self.local.pop(local) if local in self.local else self._program(cache, args, leaves, tree)
+            self.local[local] = prog  # the most recent last
+            while len(self.local) > _LOCAL:
+                del self.local[next(iter(self.local))]
         except (TypeError, ValueError):  # a static value that cannot be hashed or compared: what jit makes of it
             return self.jitted(*args)
         if prog is None:
