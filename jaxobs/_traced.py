@@ -253,7 +253,7 @@ def _unpack(data: bytes) -> tuple[dict | None, bytes]:
         return None, b""
     try:
         header = json.loads(data[n + 8 : n + 8 + size])
-    except ValueError:
+    except (ValueError, RecursionError):  # not JSON, or nested past the parser's depth
         return None, b""
     return (header if isinstance(header, dict) else None), data[n + 8 + size :]
 

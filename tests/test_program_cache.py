@@ -6,6 +6,7 @@ replaced, and the numbers are the clean run's; a folder others may write to and 
 import os
 import signal
 import stat
+import struct
 
 import equinox as eqx
 import jax
@@ -240,6 +241,16 @@ def test_an_entry_over_the_size_cap_is_recomputed(folder, capsys):
     _process(folder, max_bytes=64)
     assert _same(jaxobs.kept_jit(value)(X, 2), _clean(value))
     assert "larger than 64 bytes" in _warned_once(capsys, folder)
+
+
+def test_a_header_nested_past_the_parsers_depth_is_recomputed(folder, capsys):
+    value = _job(2.0)[0]
+    name = _kept_once(folder, value)
+    nested = b"[" * 200_000 + b"]" * 200_000
+    (folder / name).write_bytes(_traced._MAGIC + struct.pack("<Q", len(nested)) + nested)
+    _process(folder)
+    assert _same(jaxobs.kept_jit(value)(X, 2), _clean(value))
+    assert "corrupt" in _warned_once(capsys, folder)
 
 
 def test_one_line_for_several_problems(folder, capsys):
