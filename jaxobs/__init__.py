@@ -59,7 +59,9 @@ from ._simulate import Solution as Solution
 from ._simulate import simulate as simulate
 from ._system import AbstractSystem as AbstractSystem
 from ._time import SampleTime as SampleTime
+from ._traced import ProgramCache as ProgramCache
 from ._traced import kept_jit as kept_jit
+from ._traced import set_program_cache as set_program_cache
 from .metrics import lost_lock_of as lost_lock_of
 
 # observers: the FLL family (001), the flux observers (000), the LESOs (002), and the contract
@@ -165,6 +167,8 @@ __all__ = [
     "map_batch",
     "use_compile_cache",
     "kept_jit",
+    "ProgramCache",
+    "set_program_cache",
     "__version__",
 ]
 

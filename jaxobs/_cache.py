@@ -1,4 +1,4 @@
-"""JAX's persistent compilation cache, in one call (issue 31: compiled once per machine).
+"""JAX's persistent compilation cache, in one call: compiled once per machine.
 
 Every new process compiles its programs again: a drive closed loop takes several
 seconds of XLA work, a tuning job tens.  JAX can keep compiled executables on disk
@@ -26,7 +26,7 @@ from pathlib import Path
 
 import jax
 
-from ._traced import set_traced_dir
+from ._traced import ProgramCache, set_program_cache
 
 __all__ = ["use_compile_cache", "CACHE_ENV"]
 
@@ -48,7 +48,8 @@ def use_compile_cache(
     empty string, with no ``path`` given).  Call it before the computations whose compilations should be
     kept; it may be called again to move the cache.  ``min_compile_s`` (s, ≥ 0): compilations shorter than
     this are not written (default: every one).  ``keep_traces``: the programs of :func:`jaxobs.kept_jit` keep
-    their traces too, in ``<folder>/traced`` (``jaxobs._traced``: a second process skips tracing and lowering).
+    their traces too, in ``<folder>/traced`` (a :class:`jaxobs.ProgramCache`: a second process skips tracing and
+    lowering).  The folders are created with mode 0700 (only the user may read them).
     """
     if isinstance(min_compile_s, bool) or not isinstance(min_compile_s, int | float) or not min_compile_s >= 0:
         raise ValueError(f"use_compile_cache: min_compile_s must be a number >= 0 (seconds), got {min_compile_s!r}")
@@ -60,7 +61,7 @@ def use_compile_cache(
     else:
         folder = Path(path).expanduser()
     try:
-        folder.mkdir(parents=True, exist_ok=True)
+        folder.mkdir(mode=0o700, parents=True, exist_ok=True)
     except OSError as e:
         raise ValueError(
             f"{CACHE_ENV}: cannot create the compilation cache folder {str(folder)!r} ({e.strerror or e}); "
@@ -68,5 +69,5 @@ def use_compile_cache(
         ) from None
     jax.config.update("jax_compilation_cache_dir", str(folder))
     jax.config.update("jax_persistent_cache_min_compile_time_secs", float(min_compile_s))
-    set_traced_dir(folder / "traced" if keep_traces else None)
+    set_program_cache(ProgramCache(folder / "traced" if keep_traces else None))
     return folder

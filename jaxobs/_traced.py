@@ -1,48 +1,74 @@
-"""Traced programs kept across processes (issue 31: compiled once per machine, traced once too).
+"""Traced programs kept across processes: compiled once per machine, traced once too.
 
 JAX's persistent compilation cache (:func:`jaxobs.use_compile_cache`) keeps XLA's work, but it keys
 on the lowered program, so every new process still traces each jitted function to a jaxpr and lowers
 it to StableHLO before it can look the executable up: for the default tuning job, 2-4 s of a 10 s warm
 run (the objective's value-and-gradient, the scoring, the margins).  :func:`kept_jit` keeps that
-work too.  The first call with a given key exports the program (``jax.export``: the traced and lowered
-StableHLO, serialized) to ``<cache folder>/traced/``; a later process reads it back and runs it
-(``Exported.call``), which compiles, or reads from the compilation cache, the same program.
+work too.  The first call exports the program (``jax.export``: the traced and lowered StableHLO,
+serialized) to the folder of the :class:`ProgramCache` in use; a later process reads it back and runs
+it (``Exported.call``), which compiles, or reads from the compilation cache, the same program.
 
-The key is the caller's word for everything static the function depends on (the job file's digest,
-say: the scenarios and the component a closure holds are baked into the program as constants).  To
-it are added the source of the packages the code comes from (every ``.py`` file of ``jaxobs`` and of
-the function's top package: an edited file is a new key), the versions of JAX and the libraries that
-trace, the JAX options that change a trace, and the arrays' shapes, dtypes and tree structure.  What
-the key does not name must not change the program: a call site without such a key uses plain
-``eqx.filter_jit``.
+The key is computed, not named by the caller.  It covers what can reach the program:
 
-A program run through ``Exported.call`` gives the same numbers bit for bit as the plain jit
-(tests/test_traced.py; result.json of the default job compared byte for byte).  Off (plain
-``eqx.filter_jit``) where no folder is set: :func:`jaxobs.use_compile_cache` sets it (the command
-line, unless ``--no-cache`` or ``JAXOBS_CACHE_DIR=off``), or where a program cannot be exported
-(a host callback, an output that is not arrays in tuples, lists, dicts and registered NamedTuples): then it
-is traced as before.
-The folder keeps the :data:`MAX_KEPT` most recently used programs (an edited source makes new keys).
+- the function: its code, and the values its closure, its defaults and its bound object hold (arrays
+  by value: a closure's arrays are constants of the program); an object that is neither a dataclass,
+  an equinox Module, a container, a number nor a string names its defining attributes in a
+  ``kept_fields`` class attribute, else the program is not kept (a plain ``eqx.filter_jit``);
+- the static half of every argument (``eqx.partition``'s: Python numbers, strings, static fields,
+  callables, digested as above) and the tree structure, shape, dtype and weak type of every array;
+- the caller's optional ``key`` string;
+- the source of every package the code above comes from (each ``.py`` file of ``jaxobs`` and of the
+  packages of the functions and classes met: an edited file is a new key), the versions of JAX and
+  the libraries that trace, the JAX options that change a trace, the device kind and count.
+
+A kept program is one file ``<sha256 of the key>.jaxexport`` holding its whole key, the sha256 of
+its serialized program and the digest of its output structure.  A read goes through ``O_NOFOLLOW``
+and ``fstat`` (a regular file of at most ``max_bytes``, never a symlink, a FIFO or a folder); the key,
+the content digest, the program's input tree and avals and its output structure must all match.
+Anything else (a mismatch, a corrupt file, a failed deserialization, a read-back program that fails
+at its first run) is reported once per process in one line on stderr naming the folder, and the
+program is traced again and its entry replaced: the cache can make a run faster, never different.
+Entries are written to a uniquely named ``*.tmp`` file in the same folder and renamed; a temp file
+is removed when its rename fails, and trimming removes stale ones a killed process left.
+
+The folder is created with mode 0700.  A folder that others may write to and that the user does not
+own is not used (as ssh and pip refuse such files), and the warning says so.  Off (plain
+``eqx.filter_jit``) where no folder is set: :func:`jaxobs.use_compile_cache` sets one (the command line,
+unless ``--no-cache`` or ``JAXOBS_CACHE_DIR=off``); off too where a program cannot be exported (a host
+callback, an output that is not arrays in tuples, lists, dicts and registered NamedTuples), in a traced
+context, and across several processes.  A program run through ``Exported.call`` gives the same numbers bit
+for bit as the plain jit (tests/test_traced.py; result.json of the default job compared byte for byte).
 """
 
 from __future__ import annotations
 
+import dataclasses
+import enum
+import functools
 import hashlib
+import json
 import os
+import stat
+import struct
 import sys
 import tempfile
+import time
+import types
 from importlib.metadata import PackageNotFoundError
 from importlib.metadata import version as _pkg_version
 from pathlib import Path
 
 import equinox as eqx
 import jax
+import numpy as np
 from jax import export  # serialization needs flatbuffers (a dependency)
 
-__all__ = ["kept_jit", "set_traced_dir", "traced_dir"]
+__all__ = ["ProgramCache", "kept_jit", "program_cache", "set_program_cache", "set_traced_dir", "traced_dir"]
 
-# the libraries whose code runs while a jaxobs program is traced
+# the libraries whose code runs while a jaxobs program is traced: their versions are in the key, their
+# functions and classes are named by module and name
 _LIBS = ("jax", "jaxlib", "equinox", "diffrax", "optax", "optimistix", "lineax", "numpy")
+_NAMED = frozenset((*_LIBS, "scipy", "jaxtyping", *sys.stdlib_module_names))
 # the JAX options that change what a trace produces
 _OPTIONS = (
     "jax_enable_x64",
@@ -56,33 +82,249 @@ _OPTIONS = (
     "jax_debug_infs",
     "jax_disable_jit",
 )
+# Every edit of the source is a new key, so the folder keeps at most this many programs (the least recently
+# used go first): the default job keeps 7, a study 2-3, each 10-100 kB (more where a closure's arrays are
+# constants of the program).
+MAX_KEPT = 1000
+MAX_BYTES = 256 * 2**20  # the largest entry read back
+_STALE_TMP_S = 3600.0  # a temp file this old is a killed writer's: trimming removes it
+_MAGIC = b"jaxobs kept program 2\n"
+_SUFFIX = ".jaxexport"
 
-_state: dict = {"dir": None}
 _digests: dict[str, str] = {}
 
 
+class ProgramCache:
+    """Where :func:`kept_jit` keeps its programs, and how many: the one cache policy.
+
+    Args:
+        folder: the folder the programs are kept in (created with mode 0700); ``None``: off, every
+            :func:`kept_jit` is a plain ``eqx.filter_jit``.
+        max_kept: how many programs the folder keeps (the least recently used go first), ≥ 1.
+        max_bytes: the largest entry that is read back (bytes, ≥ 1); a larger one is traced again.
+
+    Raises:
+        ValueError: ``max_kept`` or ``max_bytes`` is not a positive integer.
+
+    It also holds this process's programs, read back or exported, by their key (``programs``), so that
+    every caller of one program shares it.
+    """
+
+    def __init__(
+        self, folder: str | os.PathLike | None = None, *, max_kept: int = MAX_KEPT, max_bytes: int = MAX_BYTES
+    ):
+        for name, v in (("max_kept", max_kept), ("max_bytes", max_bytes)):
+            if isinstance(v, bool) or not isinstance(v, int) or v < 1:
+                raise ValueError(f"ProgramCache: {name} must be an integer >= 1, got {v!r}")
+        self.folder = None if folder is None else Path(folder)
+        self.max_kept, self.max_bytes = max_kept, max_bytes
+        self.programs: dict[str, _Program] = {}
+        self._warned = False
+        self._checked: bool | None = None  # the folder made and its owner checked (None: not yet)
+
+    @property
+    def enabled(self) -> bool:
+        """Whether programs are kept: a folder is set, and it is safe to use."""
+        return self.folder is not None and self._usable()
+
+    def __repr__(self) -> str:
+        return f"ProgramCache({None if self.folder is None else str(self.folder)!r}, max_kept={self.max_kept})"
+
+    def warn(self, what: str) -> None:
+        """Report a problem of the folder, once per process, in one line on stderr."""
+        if not self._warned:
+            self._warned = True
+            print(f"jaxobs: warning: program cache {str(self.folder)!r}: {what}", file=sys.stderr, flush=True)
+
+    def _usable(self) -> bool:
+        if self._checked is None:
+            self._checked = self._check_folder()
+        return self._checked
+
+    def _check_folder(self) -> bool:
+        try:
+            self.folder.mkdir(mode=0o700, parents=True, exist_ok=True)
+            st = os.stat(self.folder)
+        except OSError as e:  # read-only or missing: the programs run, traced in this process
+            self.warn(f"cannot be created ({e.strerror or e}): not used")
+            return False
+        if not stat.S_ISDIR(st.st_mode):
+            self.warn("is not a folder: not used")
+            return False
+        if st.st_uid != os.getuid() and st.st_mode & (stat.S_IWGRP | stat.S_IWOTH):
+            self.warn(f"owned by uid {st.st_uid} and writable by others: not used (programs are traced anew)")
+            return False
+        return True
+
+    # --- one entry
+    def path(self, name: str) -> Path:
+        return self.folder / f"{name}{_SUFFIX}"
+
+    def read(self, name: str, key: dict) -> tuple[export.Exported | None, str | None]:
+        """The program kept under ``name`` if its file holds ``key`` and its own digest; else why not (None: absent)."""
+        path = self.path(name)
+        try:
+            fd = os.open(path, os.O_RDONLY | os.O_NOFOLLOW | os.O_NONBLOCK | getattr(os, "O_CLOEXEC", 0))
+        except FileNotFoundError:
+            return None, None
+        except OSError as e:
+            return None, f"{path.name} cannot be read ({e.strerror or e})"
+        try:
+            st = os.fstat(fd)
+            if not stat.S_ISREG(st.st_mode):
+                return None, f"{path.name} is not a regular file"
+            if st.st_size > self.max_bytes:
+                return None, f"{path.name} is larger than {self.max_bytes} bytes"
+            data = _read_all(fd, st.st_size)
+            try:
+                os.utime(fd)  # recently used: the last to go when the folder is trimmed
+            except OSError:
+                pass
+        except OSError as e:
+            return None, f"{path.name} cannot be read ({e.strerror or e})"
+        finally:
+            os.close(fd)
+        header, blob = _unpack(data)
+        if header is None:
+            return None, f"{path.name} is not a kept program (corrupt)"
+        if header.get("key") != key:
+            return None, f"{path.name} holds another program's key"
+        if header.get("sha256") != hashlib.sha256(blob).hexdigest():
+            return None, f"{path.name} does not match its digest (corrupt)"
+        try:
+            exp = export.deserialize(bytearray(blob))
+        except Exception as e:  # flatbuffers and JAX raise what they meet
+            return None, f"{path.name} cannot be deserialized ({type(e).__name__})"
+        if header.get("out") != _out_signature(exp):
+            return None, f"{path.name} has another output structure than its key"
+        return exp, None
+
+    def write(self, name: str, key: dict, exp: export.Exported) -> None:
+        """Keep ``exp`` under ``name``: whole or absent (a temp file renamed), its temp file removed if that fails."""
+        if not self._usable():
+            return
+        blob = exp.serialize()
+        header = {
+            "key": key,
+            "sha256": hashlib.sha256(blob).hexdigest(),
+            "out": _out_signature(export.deserialize(blob)),
+        }
+        data = _pack(header, bytes(blob))
+        tmp = None
+        try:
+            fd, tmp = tempfile.mkstemp(dir=self.folder, prefix=f"{name}.", suffix=".tmp")
+            with os.fdopen(fd, "wb") as f:
+                f.write(data)
+            os.replace(tmp, self.path(name))  # a concurrent reader never sees half a file
+            tmp = None
+        except OSError as e:  # read-only, full, or something not a file in the way: still runs, traced anew
+            self.warn(f"{name}{_SUFFIX} cannot be written ({e.strerror or e})")
+        finally:
+            if tmp is not None:
+                try:
+                    os.unlink(tmp)
+                except OSError:
+                    pass
+        _trim(self.folder, self.max_kept)
+
+
+def _read_all(fd: int, size: int) -> bytes:
+    parts, left = [], size
+    while left > 0:
+        b = os.read(fd, min(left, 1 << 20))
+        if not b:
+            break
+        parts.append(b)
+        left -= len(b)
+    return b"".join(parts)
+
+
+def _pack(header: dict, blob: bytes) -> bytes:
+    head = json.dumps(header, sort_keys=True, separators=(",", ":")).encode()
+    return _MAGIC + struct.pack("<Q", len(head)) + head + blob
+
+
+def _unpack(data: bytes) -> tuple[dict | None, bytes]:
+    n = len(_MAGIC)
+    if not data.startswith(_MAGIC) or len(data) < n + 8:
+        return None, b""
+    (size,) = struct.unpack("<Q", data[n : n + 8])
+    if size > len(data) - n - 8:
+        return None, b""
+    try:
+        header = json.loads(data[n + 8 : n + 8 + size])
+    except (ValueError, RecursionError):  # not JSON, or nested past the parser's depth
+        return None, b""
+    return (header if isinstance(header, dict) else None), data[n + 8 + size :]
+
+
+def _out_signature(exp) -> str:
+    avals = ";".join(f"{a.shape}{a.dtype}" for a in exp.out_avals)
+    return hashlib.sha256(f"{exp.out_tree}|{avals}|{exp.nr_devices}".encode()).hexdigest()
+
+
+def _trim(folder: Path, keep: int = MAX_KEPT) -> None:
+    """Delete the least recently used programs of ``folder`` beyond ``keep``, and temp files a killed writer left
+    (older than an hour: a live writer's is seconds old).  Another process may race: ignored."""
+    try:
+        kept, now = [], time.time()
+        with os.scandir(folder) as it:
+            for e in it:
+                if not e.is_file(follow_symlinks=False):
+                    continue
+                t = e.stat(follow_symlinks=False).st_mtime
+                if e.name.endswith(_SUFFIX):
+                    kept.append((t, e.path))
+                elif e.name.endswith(".tmp") and now - t > _STALE_TMP_S:
+                    os.unlink(e.path)
+        kept.sort()
+        for _, p in kept[: max(0, len(kept) - keep)]:
+            os.unlink(p)
+    except OSError:
+        pass
+
+
+_state: dict = {"cache": ProgramCache(None)}
+
+
+def set_program_cache(cache: ProgramCache | None) -> None:
+    """Use ``cache`` for every :func:`kept_jit` from now on (``None``: off)."""
+    if cache is not None and not isinstance(cache, ProgramCache):
+        raise ValueError(f"set_program_cache: cache must be a jaxobs.ProgramCache or None, got {cache!r}")
+    _state["cache"] = ProgramCache(None) if cache is None else cache
+
+
+def program_cache() -> ProgramCache:
+    """The :class:`ProgramCache` in use."""
+    return _state["cache"]
+
+
 def set_traced_dir(folder: str | os.PathLike | None) -> None:
-    """Keep exported programs in ``folder`` (``None``: do not; every :func:`kept_jit` traces as a plain jit)."""
-    _state["dir"] = None if folder is None else Path(folder)
+    """Keep exported programs in ``folder`` (a new :class:`ProgramCache`; ``None``: off)."""
+    set_program_cache(ProgramCache(folder))
 
 
 def traced_dir() -> Path | None:
     """The folder exported programs are kept in, or ``None`` (off)."""
-    return _state["dir"]
+    return program_cache().folder
 
 
-def _package_digest(package: str) -> str:
-    """sha256 over every ``.py`` file (relative path and bytes) of the installed package ``package``."""
-    if package not in _digests:
-        mod = sys.modules.get(package)
-        h = hashlib.sha256(package.encode())
-        files = getattr(mod, "__file__", None)
-        if files is not None:
-            root = Path(files).resolve().parent
-            for f in sorted(root.rglob("*.py")):
-                h.update(str(f.relative_to(root)).encode() + b"\0" + f.read_bytes() + b"\0")
-        _digests[package] = h.hexdigest()
-    return _digests[package]
+# --- the key
+def _package_digest(top: str) -> str:
+    """sha256 over every ``.py`` file (relative path and bytes) of the top-level package or module ``top``; an empty
+    string where no file holds it (an interactive session, ``python -c``)."""
+    if top not in _digests:
+        file = getattr(sys.modules.get(top), "__file__", None)
+        h = hashlib.sha256(top.encode())
+        try:
+            path = Path(file).resolve(strict=True)
+            files = sorted(path.parent.rglob("*.py")) if path.name == "__init__.py" else [path]
+            for f in files:
+                h.update(str(f.relative_to(path.parent)).encode() + b"\0" + f.read_bytes() + b"\0")
+            _digests[top] = h.hexdigest()
+        except (TypeError, OSError):
+            _digests[top] = ""
+    return _digests[top]
 
 
 def _lib_version(name: str) -> str:
@@ -93,102 +335,364 @@ def _lib_version(name: str) -> str:
 
 
 def _environment() -> str:
-    if "libs" not in _digests:  # read once: importlib.metadata costs ~1 ms a package, and this runs every call
+    if "libs" not in _digests:  # read once: importlib.metadata costs ~1 ms a package
         _digests["libs"] = ",".join(f"{n}={_lib_version(n)}" for n in _LIBS)
-    libs = _digests["libs"]
     opts = ",".join(f"{o}={getattr(jax.config, o, None)!r}" for o in _OPTIONS)
     dev = jax.devices()[0]
     # the device count too: a program split over two host devices is another program than one device's
     kind = f"{dev.platform};{getattr(dev, 'device_kind', '')};{jax.device_count()};{jax.process_count()}"
-    return f"{libs};{opts};{kind};{sys.version_info[:2]}"
+    return f"{_digests['libs']};{opts};{kind};{sys.version_info[:2]}"
+
+
+class _NoKey(Exception):
+    """A value the key cannot be computed from: the program is not kept."""
+
+
+class _Digest:
+    """A stable sha256 of Python values: the same in every process for equal values (no ``id``, no ``repr`` of an
+    object).  Arrays by value (``avals=False``), or with ``avals=True`` by shape, dtype and weak type where they are
+    a program's inputs (leaves of the pytree given: containers, NamedTuples, an equinox Module's fields that are not
+    static) and by value where they are its constants (held by a function, an object or a static field)."""
+
+    def __init__(self, avals: bool):
+        self.h = hashlib.sha256()
+        self.avals = avals
+        self.packages: set[str] = set()
+        self.seen: dict[tuple[int, bool], int] = {}
+
+    def hexdigest(self) -> str:
+        return self.h.hexdigest()
+
+    def constant(self, *objs) -> None:
+        """``objs`` as constants of the program: their arrays by value."""
+        avals, self.avals = self.avals, False
+        try:
+            for obj in objs:
+                self.add(obj)
+        finally:
+            self.avals = avals
+
+    def put(self, tag: str, text: str = "") -> None:
+        self.h.update(f"{tag}:{len(text)}:{text};".encode())
+
+    def named(self, obj) -> bool:
+        """A function or class by where it is defined: its package's source is in the key.  Whether it is a library's
+        (named by its module and name alone: the library's version is in the key)."""
+        module = getattr(obj, "__module__", None)
+        name = getattr(obj, "__qualname__", None) or getattr(obj, "__name__", None)
+        if not isinstance(module, str) or not isinstance(name, str):
+            raise _NoKey(f"{obj!r} has no module and name")
+        top = module.split(".")[0]
+        if top not in _NAMED:
+            if not _package_digest(top):  # defined where no file holds it (an interactive session)
+                raise _NoKey(f"{module}.{name} has no source file")
+            self.packages.add(top)
+        self.put("named", f"{module}:{name}")
+        return top in _NAMED
+
+    def code(self, co: types.CodeType, names: dict) -> None:
+        """A function's code, and the module constants it reads (``names``: its globals): a constant changed at run
+        time (a test's monkeypatch) is then another key, as an edited file is."""
+        self.put("code", co.co_name)
+        self.h.update(co.co_code)
+        self.put("names", ",".join(co.co_names))
+        for name in co.co_names:
+            value = names.get(name, _ABSENT)
+            if value is not _ABSENT and _plain(value):
+                self.put("global", name)
+                self.constant(value)
+        for c in co.co_consts:
+            self.code(c, names) if isinstance(c, types.CodeType) else self.add(c)
+
+    def methods(self, cls: type) -> None:
+        """The code of every method of ``cls`` and its bases defined outside the libraries."""
+        for klass in cls.__mro__:
+            if (getattr(klass, "__module__", "") or "").split(".")[0] in _NAMED:
+                continue
+            for name, v in sorted(vars(klass).items()):
+                f = getattr(v, "__func__", v)  # staticmethod, classmethod
+                if isinstance(f, types.FunctionType):
+                    self.put("method", name)
+                    self.code(f.__code__, f.__globals__)
+
+    def add(self, obj) -> None:  # noqa: C901  (one case per kind of value)
+        t = type(obj)
+        if obj is None or obj is Ellipsis or t in (bool, int, float, complex, str):
+            self.put(t.__name__, repr(obj))
+            return
+        if t is bytes:
+            self.put("bytes", obj.hex())
+            return
+        if isinstance(obj, jax.core.Tracer):
+            raise _NoKey("a traced value")
+        if isinstance(obj, np.dtype):
+            self.put("dtype", obj.str)
+            return
+        if eqx.is_array(obj) or isinstance(obj, np.generic):
+            weak = bool(getattr(obj, "weak_type", False))
+            a = np.asarray(obj)
+            if a.dtype == object:
+                raise _NoKey("an object array")
+            self.put("array", f"{a.dtype.str}{a.shape}{weak}")
+            if not self.avals:
+                self.h.update(np.ascontiguousarray(a).tobytes())
+            return
+        if isinstance(obj, type):
+            self.named(obj)
+            return
+        if isinstance(obj, enum.Enum):
+            self.named(t)
+            self.put("enum", obj.name)
+            return
+        mark = (id(obj), self.avals)  # as an input, or as a constant (its arrays by value)
+        if mark in self.seen:  # a cycle, or the same object again
+            self.put("again", str(self.seen[mark]))
+            return
+        self.seen[mark] = len(self.seen)
+        if isinstance(obj, types.FunctionType):
+            if self.named(obj) and "<locals>" not in obj.__qualname__ and not obj.__closure__:
+                return  # a library's function: its version names it
+            self.code(obj.__code__, obj.__globals__)
+            self.constant(obj.__defaults__, obj.__kwdefaults__)
+            for cell in obj.__closure__ or ():
+                try:
+                    self.constant(cell.cell_contents)
+                except ValueError:  # an empty cell
+                    self.put("empty")
+            return
+        if isinstance(obj, types.MethodType):
+            self.put("method")
+            self.constant(obj.__func__, obj.__self__)
+            return
+        if isinstance(obj, functools.partial):
+            self.put("partial")
+            self.constant(obj.func, obj.args, obj.keywords)
+            return
+        if isinstance(obj, (types.BuiltinFunctionType, np.ufunc)):
+            self.named(obj)
+            return
+        if isinstance(obj, (tuple, list)):
+            self.named(t)
+            self.put("items", str(len(obj)))
+            for x in obj:
+                self.add(x)
+            return
+        if isinstance(obj, dict):
+            self.named(t)
+            self.put("items", str(len(obj)))
+            for k, v in obj.items():  # in order: a pytree's order
+                self.add(k)
+                self.add(v)
+            return
+        if isinstance(obj, (set, frozenset)):
+            subs = []
+            for x in obj:
+                d = _Digest(avals=False)
+                d.add(x)
+                self.packages |= d.packages
+                subs.append(d.hexdigest())
+            self.put("set", ",".join(sorted(subs)))
+            return
+        if dataclasses.is_dataclass(obj):  # equinox Modules (their bound methods too) and dataclasses
+            self.named(t)
+            pytree = isinstance(obj, eqx.Module)  # a plain dataclass is a static leaf: its arrays are constants
+            for f in dataclasses.fields(obj):
+                self.put("field", f.name)
+                value = getattr(obj, f.name, None)
+                if pytree and not f.metadata.get("static", False):
+                    self.add(value)
+                else:
+                    self.constant(value)
+            return
+        if isinstance(obj, jax.sharding.Mesh):
+            self.put("mesh", repr(tuple(obj.axis_names)) + repr(obj.devices.shape))
+            self.put("devices", ",".join(f"{d.platform}{d.id}" for d in obj.devices.flat))
+            return
+        fields = getattr(t, "kept_fields", None)
+        if isinstance(fields, tuple):  # an object that names the attributes its programs depend on
+            self.named(t)
+            self.methods(t)
+            for name in fields:
+                self.put("field", name)
+                self.constant(getattr(obj, name))
+            return
+        wrapped = getattr(obj, "__wrapped__", None)  # jax's jitted functions, custom_jvp, ...
+        if wrapped is not None:
+            self.named(t)
+            self.constant(wrapped)
+            return
+        raise _NoKey(f"a value of type {t.__module__}.{t.__qualname__}")
+
+
+_ABSENT = object()
+_LOCAL = 16  # the static values a kept function remembers, the most recent
+
+
+def _plain(value, depth: int = 0) -> bool:
+    """Whether ``value`` is a module constant made of numbers and strings (what a key can hold)."""
+    if value is None or type(value) in (bool, int, float, complex, str, bytes):
+        return True
+    if depth < 3 and type(value) in (tuple, list, frozenset):
+        return len(value) <= 64 and all(_plain(v, depth + 1) for v in value)
+    if depth < 3 and type(value) is dict:
+        return len(value) <= 64 and all(_plain(k, depth + 1) and _plain(v, depth + 1) for k, v in value.items())
+    return False
+
+
+def _is_array(x) -> bool:
+    return eqx.is_array(x)
+
+
+class _Program:
+    """A kept program as this process runs it: ``run(*arrays)``, and whether it came from the folder (its first run
+    may still fail: then it is traced anew)."""
+
+    def __init__(self, exp: export.Exported, from_disk: bool):
+        self.from_disk = from_disk
+        call = jax.jit(exp.call)
+        if exp.nr_devices != 1:
+            self.run = call
+        else:
+            # an exported program's results are committed to their device, so a later call that passes them back
+            # (the solver's θ) would differ in its arguments' placement from the first and compile the program a
+            # second time; placing every argument on the device first gives one placement, one compilation
+            dev = jax.devices()[0]
+            self.run = lambda *xs: call(*jax.device_put(xs, dev))
 
 
 class _Kept:
-    """``eqx.filter_jit(fn)``, with the traced program kept in :func:`traced_dir` under ``key``."""
+    """``eqx.filter_jit(fn)``, with the traced program kept by :func:`program_cache` under its computed key."""
 
-    def __init__(self, fn, key: str, packages: tuple[str, ...]):
+    def __init__(self, fn, key: str):
         self.fn, self.key = fn, key
-        self.packages = tuple(sorted({"jaxobs", *packages}))
         self.jitted = eqx.filter_jit(fn)
-        self.programs: dict[str, object] = {}  # full key -> a jitted Exported.call (None: not exportable)
+        self._fn_key: tuple[str, frozenset] | None = None
+        # (tree, static leaves and avals) -> the _Program (None: a plain jit) in this process; the most recent few
+        # only, since the static leaves may hold large objects (an objective's scenarios): a miss costs a digest
+        self.local: dict = {}
+
+    def _function_key(self) -> tuple[str, frozenset]:
+        if self._fn_key is None:  # once: the function, its closure and bound object do not change
+            d = _Digest(avals=False)
+            d.add(self.fn)
+            self._fn_key = (d.hexdigest(), frozenset(d.packages))
+        return self._fn_key
+
+    def full_key(self, args) -> dict:
+        """Everything the program depends on (module doc); raises ``_NoKey`` where that cannot be computed."""
+        fn_digest, fn_packages = self._function_key()
+        d = _Digest(avals=True)
+        d.add(args)
+        packages = sorted({"jaxobs", *fn_packages, *d.packages})
+        return {
+            "caller": self.key,
+            "function": fn_digest,
+            "arguments": d.hexdigest(),
+            "sources": {p: _package_digest(p) for p in packages},
+            "environment": _environment(),
+        }
 
     def __call__(self, *args):
-        folder = traced_dir()
-        if folder is None:
+        cache = program_cache()
+        if not cache.enabled or jax.process_count() > 1:
             return self.jitted(*args)
-        dynamic, static = eqx.partition(args, eqx.is_array)
-        leaves, tree = jax.tree.flatten(dynamic)
-        avals = ";".join(f"{x.shape}{x.dtype}{'w' if getattr(x, 'weak_type', False) else ''}" for x in leaves)
-        parts = [self.key, _environment(), str(tree), avals, *(_package_digest(p) for p in self.packages)]
-        full = hashlib.sha256("\n".join(parts).encode()).hexdigest()
-        if full not in self.programs:
-            self.programs[full] = self._program(folder / f"{full}.jaxexport", leaves, tree, static)
-        run = self.programs[full]
-        return self.jitted(*args) if run is None else run(*leaves)
-
-    def _program(self, path: Path, leaves, tree, static):
+        leaves, tree = jax.tree.flatten(args)
+        if any(isinstance(x, jax.core.Tracer) for x in leaves):  # inside another trace: part of its program
+            return self.jitted(*args)
+        arrays = [x for x in leaves if _is_array(x)]
+        local = (tree, tuple((x.shape, x.dtype, getattr(x, "weak_type", False)) if _is_array(x) else x for x in leaves))
         try:
-            exp = export.deserialize(bytearray(path.read_bytes()))
-            os.utime(path)  # recently used: the last to go when the folder is trimmed
-        except Exception:  # absent, unreadable or corrupt (flatbuffers raises what it meets): exported anew
-            exp = None
+            prog = self.local.pop(local) if local in self.local else self._program(cache, args, leaves, tree)
+            self.local[local] = prog  # the most recent last
+            while len(self.local) > _LOCAL:
+                del self.local[next(iter(self.local))]
+        except (TypeError, ValueError):  # a static value that cannot be hashed or compared: what jit makes of it
+            return self.jitted(*args)
+        if prog is None:
+            return self.jitted(*args)
+        if not prog.from_disk:
+            return prog.run(*arrays)
+        try:
+            out = prog.run(*arrays)
+        except Exception as e:  # a read-back program that cannot be compiled or run: traced anew
+            cache.warn(f"a kept program failed to run ({type(e).__name__}): traced again and replaced")
+            prog = self._program(cache, args, leaves, tree, fresh=True)
+            self.local[local] = prog
+            return self.jitted(*args) if prog is None else prog.run(*arrays)
+        prog.from_disk = False  # it ran: a later failure is the computation's own
+        return out
 
-        def flat(*xs):
-            return self.fn(*eqx.combine(jax.tree.unflatten(tree, xs), static))
-
+    def _program(self, cache: ProgramCache, args, leaves, tree, fresh: bool = False) -> _Program | None:
+        try:
+            key = self.full_key(args)
+        except _NoKey:
+            return None
+        name = _entry_name(key)
+        if not fresh and name in cache.programs:
+            return cache.programs[name]
+        arrays = [x for x in leaves if _is_array(x)]
+        exp = None
+        if not fresh:
+            exp, why = cache.read(name, key)
+            if exp is not None:
+                why = _check_inputs(exp, arrays)
+                exp = None if why else exp
+            if why:
+                cache.warn(f"{why}: traced again and replaced")
+        from_disk = exp is not None
         if exp is None:
+            statics = [None if _is_array(x) else x for x in leaves]
+            where = [i for i, x in enumerate(leaves) if _is_array(x)]
+
+            def flat(*xs):
+                full = list(statics)
+                for i, x in zip(where, xs):
+                    full[i] = x
+                return self.fn(*jax.tree.unflatten(tree, full))
+
             try:
-                exp = export.export(jax.jit(flat))(*leaves)
-                blob = exp.serialize()
+                exp = export.export(jax.jit(flat))(*arrays)
+                exp.serialize()
             except Exception:
-                # not exportable (a host callback, an output of custom classes): a plain jit, as before (a
-                # real error in fn is raised there)
+                # not exportable (a host callback, an output of custom classes): a plain jit (a real error in fn is
+                # raised there)
                 return None
-            try:
-                path.parent.mkdir(parents=True, exist_ok=True)
-                fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=".tmp-", suffix=".jaxexport")
-                with os.fdopen(fd, "wb") as f:
-                    f.write(blob)
-                os.replace(tmp, path)  # whole or absent: a concurrent reader never sees half a file
-                _trim(path.parent)
-            except OSError:  # a read-only cache: the program still runs, the next process traces again
-                pass
-        run = jax.jit(exp.call)
-        if exp.nr_devices != 1:
-            return run
-        # an exported program's results are committed to their device, so a later call that passes them back
-        # (the solver's θ) would differ in its arguments' placement from the first and compile the program a
-        # second time; placing every argument on the device first gives one placement, one compilation
-        dev = jax.devices()[0]
-        return lambda *xs: run(*jax.device_put(xs, dev))
+            cache.write(name, key, exp)
+        prog = _Program(exp, from_disk)
+        cache.programs[name] = prog
+        return prog
 
 
-# Every edit of the source is a new key, so the folder keeps at most this many programs (the least recently
-# used go first): the default job keeps 7, a study 2-3, each 10-100 kB.
-MAX_KEPT = 1000
+def _entry_name(key: dict) -> str:
+    """The file name (less its suffix) of the program kept under ``key``."""
+    return hashlib.sha256(json.dumps(key, sort_keys=True).encode()).hexdigest()
 
 
-def _trim(folder: Path, keep: int = MAX_KEPT) -> None:
-    """Delete the least recently used programs of ``folder`` beyond ``keep`` (another process may race: ignored)."""
-    try:
-        files = sorted(folder.glob("*.jaxexport"), key=lambda f: f.stat().st_mtime)
-        for f in files[: max(0, len(files) - keep)]:
-            f.unlink(missing_ok=True)
-    except OSError:
-        pass
+def _check_inputs(exp, arrays) -> str | None:
+    """Why a read-back program does not take these arrays (None: it does)."""
+    if exp.in_tree != jax.tree.structure((tuple(arrays), {})):
+        return "a kept program has another input structure than its key"
+    if [(a.shape, a.dtype) for a in exp.in_avals] != [(x.shape, x.dtype) for x in arrays]:
+        return "a kept program has other input shapes than its key"
+    return None
 
 
-def kept_jit(fn, key: str, *, packages: tuple[str, ...] = ()):
-    """``eqx.filter_jit(fn)`` whose traced and lowered program is kept across processes under ``key``.
+def kept_jit(fn, key: str | None = None):
+    """``eqx.filter_jit(fn)`` whose traced and lowered program is kept across processes (module doc).
 
-    ``key`` (a string) must name everything static that ``fn`` depends on and that is not in its array
-    arguments' shapes and dtypes or the source of ``jaxobs``, of ``fn``'s top package and of ``packages``
-    (top-level package names, e.g. ``("jaxobs_tuning",)`` for code that made a closure ``fn`` calls):
-    a job's digest, the values a closure captured.  Called with positional arguments only; the outputs
-    must be arrays in tuples, lists, dicts and NamedTuples registered for ``jax.export`` (the drive's step
-    outputs are, by :mod:`jaxobs.reproduce._run`) to be kept (else the call traces every time, as a plain jit).
+    Args:
+        fn: the function; called with positional arguments only.  Its outputs must be arrays in tuples,
+            lists, dicts and NamedTuples registered for ``jax.export`` (the drive's step outputs are, by
+            :mod:`jaxobs.reproduce._run`) to be kept; else each process traces it, as a plain jit.
+        key: an optional name added to the computed key (a non-empty string).  The key already covers ``fn``'s
+            code, closure and bound object, the static half of every argument and the arrays' avals.
+
+    Returns:
+        A callable with ``fn``'s signature and results.
+
+    Raises:
+        ValueError: ``key`` is not a non-empty string.
     """
-    if not isinstance(key, str) or not key:
+    if key is not None and (not isinstance(key, str) or not key):
         raise ValueError(f"kept_jit: key must be a non-empty string, got {key!r}")
-    top = (getattr(fn, "__module__", None) or "jaxobs").split(".")[0]
-    return _Kept(fn, key, (top, *packages))
+    return _Kept(fn, key or "")

@@ -151,7 +151,6 @@ def run_drive_study(
     progress=None,
     mesh=None,
     store=None,
-    trace_key=None,
 ):
     """Run every design (a drive observer closing ``drive``'s loop) on every scenario; an ``xarray.Dataset``.
 
@@ -207,7 +206,5 @@ def run_drive_study(
         mesh=batch_mesh(jax.devices()[:1]) if mesh is None else mesh,
         progress=progress,
         store=store,
-        # a string naming every argument here (a study file's digest): the chunks' traced program is kept
-        trace_key=None if trace_key is None else f"run_drive_study|{trace_key}",
         label="drive study",
     )

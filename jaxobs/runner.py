@@ -70,20 +70,9 @@ def _chunk(task: _Task, design, batch, aux):
     return sharding.map_batch(one, batch, mesh=task.mesh, tile=task.tile)
 
 
-_run_chunk = eqx.filter_jit(_chunk)
-# run_scenarios(trace_key=...) on one device: the chunk's program kept across processes (jaxobs.kept_jit), one
-# per key and process, so that the designs and calls of one process share its read-back program
-_KEPT: dict = {}
-
-
-def _kept_chunk(trace_key: str, task: _Task, aux):
-    # the mesh (None: one device's plain vmap) and the tile are static parts of the chunk's program
-    mesh = None if task.mesh is None else dict(task.mesh.shape)
-    key = f"run_scenarios|{trace_key}|{task.horizon!r}|{task.save!r}|{aux!r}|{mesh}|{task.tile}"
-    packages = tuple({f.__module__.split(".")[0] for f in (task.system_factory, task.metrics)})
-    if key not in _KEPT:
-        _KEPT[key] = kept_jit(_chunk, key, packages=packages)
-    return _KEPT[key]
+# the chunk's program, kept across processes where jaxobs.use_compile_cache set a folder (jaxobs.kept_jit: its key
+# is the task's functions and values, the design's static fields and the arrays' shapes)
+_run_chunk = kept_jit(_chunk)
 
 
 def _pad(x, rows: int):
@@ -130,7 +119,6 @@ def run_scenarios(
     label: str = "study",
     save: AbstractSave = SaveAll(),
     sink=None,
-    trace_key: str | None = None,
 ) -> StudyRun:
     """Simulate ``system_factory(design, scenario)`` for ``horizon`` s on every scenario, every design.
 
@@ -150,11 +138,8 @@ def run_scenarios(
     ``sink``: where each chunk's values go instead of memory (a :class:`jaxobs.chunkstore.ChunkStore`):
     ``sink.start(n=, chunk=, devices=, designs=)`` once, then per design and chunk ``sink.done(design, i)``
     (True: on disk already, skipped) or ``sink.put(design, i, values)`` with the chunk's real rows; the
-    returned ``values`` is then ``None`` (read them back from the sink).
-
-    ``trace_key``: a string that names everything static about ``system_factory`` and ``metrics`` beyond
-    their code (a job's digest): in one process, each chunk's traced program is then kept across processes
-    (:func:`jaxobs.kept_jit`, where :func:`jaxobs.use_compile_cache` set its folder).
+    returned ``values`` is then ``None`` (read them back from the sink).  Each chunk's traced program is kept
+    across processes where :func:`jaxobs.use_compile_cache` set a folder (:func:`jaxobs.kept_jit`).
     """
     if not designs:
         raise ValueError(f"{label}: at least one design is required")
@@ -218,8 +203,7 @@ def run_scenarios(
                 new = key not in compiled  # the first chunk this run computes
                 bar.stage(f"{dname} (compiling, then {chunk} scenarios a chunk)" if new else dname)
                 # the per-scenario results, whole, on every process (an all-gather when the mesh spans processes)
-                run = _run_chunk if trace_key is None or jax.process_count() > 1 else _kept_chunk(trace_key, task, aux)
-                got = sharding.gather_batch(run(task, design, batch, aux))
+                got = sharding.gather_batch(_run_chunk(task, design, batch, aux))
                 compiled.add(key)
                 if sink is None:
                     parts[dname].append(got)

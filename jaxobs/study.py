@@ -415,7 +415,6 @@ def study(
     mesh=None,
     progress=False,
     store=None,
-    trace_key: str | None = None,
     label: str = "study",
 ):
     """Every design on every scenario of ``sampler``, drawn from the family ``scenarios``; an ``xarray.Dataset``.
@@ -435,7 +434,7 @@ def study(
             ``n_period``); None: ``ctx`` as given.
         gains: the designs' gain variables (``gain_<name>`` -> (dims, values, attrs)), stored as given.
         attrs: the Dataset's attributes (the options, the provenance).
-        save, chunk_size, mesh, progress, store, trace_key, label: as :func:`jaxobs.runner.run_scenarios` takes them
+        save, chunk_size, mesh, progress, store, label: as :func:`jaxobs.runner.run_scenarios` takes them
             (``store``: a :class:`jaxobs.chunkstore.ChunkStore`, the Dataset laid out from it).
 
     Returns:
@@ -474,7 +473,6 @@ def study(
         label=label,
         save=save,
         sink=store,
-        trace_key=trace_key,
     )
     values = run.values if store is None else {d: store.load(d) for d in designs}
     dnames = list(designs)
@@ -578,7 +576,6 @@ def run_study(
     return_seconds=False,
     mesh=None,
     store=None,
-    trace_key=None,
 ):
     """Simulate every FLL design on every scenario; returns an ``xarray.Dataset`` (see module doc):
     :func:`study` on :class:`~jaxobs.families.GridSignals` (or a :class:`~jaxobs.scenarios.Recordings`
@@ -593,9 +590,7 @@ def run_study(
     every device of every process; ``jaxobs.batch_mesh(jax.devices()[:1])`` keeps to one device).
     ``store``: a :class:`jaxobs.chunkstore.ChunkStore`: each chunk's values go to disk as it finishes (none
     held during the run), chunks already there (an interrupted run's, ``resume=True``) are not run again, and
-    the Dataset is laid out from the store: the same Dataset as without one.  ``trace_key``: a string naming
-    every argument here (a study file's digest): the chunks' traced program is kept across processes
-    (:func:`jaxobs.run_scenarios`'s ``trace_key``).
+    the Dataset is laid out from the store: the same Dataset as without one.
     """
     if not designs:
         raise ValueError("run_study needs at least one design")
@@ -679,7 +674,6 @@ def run_study(
         mesh=mesh,
         progress=progress,
         store=store,
-        trace_key=None if trace_key is None else f"run_study|{trace_key}",
     )
     seconds = time.time() - t0
     return (ds, seconds) if return_seconds else ds

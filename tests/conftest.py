@@ -24,6 +24,7 @@ import os
 from pathlib import Path
 
 import jax
+import pytest
 
 jax.config.update("jax_enable_x64", True)
 os.environ["JAXOBS_HOST_DEVICES"] = "1"
@@ -35,3 +36,13 @@ os.environ["JAXOBS_CACHE_DIR"] = _cache or "off"
 if _cache:
     jax.config.update("jax_compilation_cache_dir", _cache)
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
+
+
+@pytest.fixture(autouse=True)
+def _no_program_cache_after():
+    """The command line run in this process (``main``) sets a program cache (jaxobs.use_compile_cache): off again
+    after the test, so that what one test kept is not what the next one runs."""
+    yield
+    from jaxobs._traced import set_program_cache
+
+    set_program_cache(None)

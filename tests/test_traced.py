@@ -46,6 +46,7 @@ def test_kept_equals_jit_and_a_new_process_does_not_trace(traced):
         assert np.array_equal(np.asarray(a), np.asarray(b))  # bit for bit
     assert len(list(traced.iterdir())) == 1 and calls == [1]
     # another process: a new kept_jit of new code objects reads the program back, never tracing f
+    _traced.set_traced_dir(traced)
     f2, calls2 = _counted()
     again = jaxobs.kept_jit(f2, "test-key")(g, jnp.asarray(np.asarray(x) * 0.5))
     assert calls2 == []
@@ -81,15 +82,17 @@ def test_kept_off_without_folder_and_unexportable_falls_back(tmp_path, traced):
         jaxobs.kept_jit(f, "")
 
 
-def test_kept_corrupt_file_is_exported_again(traced):
+def test_kept_corrupt_file_is_exported_again(traced, capsys):
     g, x = _Gain(jnp.asarray(1.1), 2), jnp.linspace(0.0, 1.0, 9)
     jaxobs.kept_jit(_counted()[0], "c")(g, x)
     (path,) = traced.iterdir()
     path.write_bytes(b"not a program")
+    _traced.set_traced_dir(traced)  # another process
     f, calls = _counted()
     out = jaxobs.kept_jit(f, "c")(g, x)
     assert calls == [1] and path.stat().st_size > 100
     assert np.array_equal(np.asarray(out["y"]), np.asarray(eqx.filter_jit(_counted()[0])(g, x)["y"]))
+    assert "is not a kept program (corrupt)" in capsys.readouterr().err
 
 
 def test_use_compile_cache_sets_the_traced_folder(tmp_path, monkeypatch):
@@ -98,6 +101,7 @@ def test_use_compile_cache_sets_the_traced_folder(tmp_path, monkeypatch):
     try:
         assert jaxobs.use_compile_cache(tmp_path / "c") == tmp_path / "c"
         assert _traced.traced_dir() == tmp_path / "c" / "traced"
+        assert (tmp_path / "c").stat().st_mode & 0o777 == 0o700  # the user's alone
         jaxobs.use_compile_cache(tmp_path / "d", keep_traces=False)
         assert _traced.traced_dir() is None
     finally:
@@ -127,12 +131,13 @@ def test_a_reproduction_run_is_kept_with_its_namedtuple_outputs(traced, monkeypa
     obs = jaxobs.SOGIFLL(1.2, 4e4, ts=1e-4)  # any gains: the program, not the design, is under test
     system = jaxobs.OnSignal(obs, jaxobs.GridSignal(1.0, 50.5, t_event=0.005, freq_step=1.0))
     ref = jaxobs.simulate(system, 0.01)
-    monkeypatch.setattr(_run, "_KEPT", {})
-    got = _run.run_kept(system, 0.01, "test")
+    monkeypatch.setattr(_run, "_simulated_kept", jaxobs.kept_jit(_run._simulated))
+    got = _run.run_kept(system, 0.01)
     assert len(list(traced.iterdir())) == 1  # exported: the outputs' NamedTuples are registered
-    monkeypatch.setattr(_run, "_KEPT", {})  # a later process: read back, not traced
+    _traced.set_traced_dir(traced)  # a later process: read back, not traced
+    monkeypatch.setattr(_run, "_simulated_kept", jaxobs.kept_jit(_run._simulated))
     monkeypatch.setattr(_run, "simulate", lambda *a: pytest.fail("traced again"))
-    again = _run.run_kept(system, 0.01, "test")
+    again = _run.run_kept(system, 0.01)
     for run in (got, again):
         assert jax.tree.structure(run.outputs) == jax.tree.structure(ref.outputs)
         for a, b in zip(jax.tree.leaves((run.t, run.outputs, run.ok)), jax.tree.leaves((ref.t, ref.outputs, ref.ok))):

@@ -205,8 +205,6 @@ def _cmd_study(args) -> int:
     if rank is not None and rank[1] > 1:
         args.on_interrupt = _resume_hint(resume, store.has_chunks)  # what Ctrl-C says (main)
         return distributed_study(name, designs, axes, opts, out, args, rank, _run_study, outdir, store)
-    # one process: the chunks' traced programs are kept across runs under the study's digest (jaxobs.kept_jit)
-    opts["trace_key"] = store.fingerprint
     with outdir:
         args.log_dir = out
         args.on_interrupt = _resume_hint(resume, store.has_chunks)
@@ -221,7 +219,6 @@ def _run_study(name, designs, axes, opts, out: Path, quiet: bool, store=None) ->
     if opts.pop("kind", "fll") == "drive":
         return _cmd_drive_study(name, designs, axes, opts, out, quiet, provenance, store)
     if opts.get("recording") is not None:  # [study.recording]: the recordings are the scenarios
-        opts.pop("trace_key", None)
         ds, seconds = _recording_study(designs, progress=progress_of(quiet=quiet), store=store, **opts)
     else:
         opts.pop("recording", None)

@@ -13,6 +13,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import hashlib
+import json
 from pathlib import Path
 
 from .job import COMPONENTS, JobError, job_drive, load_job, parse_job
@@ -65,13 +66,6 @@ def _seconds(text: str) -> float:
     return v
 
 
-def _trace_key(path: Path, args) -> str:
-    """The source file's sha256 (a job file or a result.json, and what it names: a recording's digest is in the
-    job's) with the options that shape the map: every argument :func:`jaxobs.analysis.envelope.envelope` gets."""
-    digest = hashlib.sha256(path.read_bytes()).hexdigest()
-    return f"{digest}|speeds={args.speeds}|loads={args.loads}|horizon={args.horizon!r}"
-
-
 def cli_envelope(args) -> int:
     import jax
 
@@ -117,8 +111,6 @@ def cli_envelope(args) -> int:
             horizon=args.horizon,
             stability=stab,
             progress=False if args.quiet else "auto",
-            # the traced programs kept across runs (jaxobs.kept_jit) under what made every argument above
-            trace_key=_trace_key(path, args),
         )
         ds.attrs.update(source=str(path), job_name=job.name, component=job.component, machine=spec.machine)
         if job.sha256:

@@ -155,6 +155,10 @@ class Term:
 class Objective:
     """value(θ), value_and_grad(θ) and per-scenario scores for a component and a scenario batch."""
 
+    # what its programs bake in (the key of a kept program, jaxobs.kept_jit): the rest is made from these
+    kept_fields = ("component", "param", "scenarios", "horizon", "terms", "ctx", "aggregation", "penalty", "family",
+                   "_save")  # fmt: skip
+
     def __init__(
         self,
         component,
@@ -167,7 +171,6 @@ class Objective:
         aggregation: AbstractAggregation = Mean(),
         penalty: float = 1e3,
         family: AbstractScenarios | None = None,
-        trace_key: str | None = None,
     ):
         """``component``: the module whose free gains ``param`` sets; ``scenarios``: the batch (leading axis
         the scenarios); ``horizon``: simulated seconds per scenario; ``terms``: the weighted metrics summed
@@ -176,10 +179,9 @@ class Objective:
         value of a diverged scenario.  ``family``: the scenarios' family (:mod:`jaxobs.families`), which makes the
         system the component runs on each scenario (bound to it: the machine an observer assumes, its initial
         speed; closing the drive's loop for :class:`~jaxobs.families.DriveScenarios`); None: the component runs
-        on each scenario, a signal, as it is.  ``trace_key``: a
-        string naming everything that built this objective (a job's digest and which of its scenario sets):
-        with it, the value-and-gradient's and the scoring's traced programs are kept across processes
-        (:func:`jaxobs.kept_jit`, where :func:`jaxobs.use_compile_cache` set a folder)."""
+        on each scenario, a signal, as it is.  The value-and-gradient's and the scoring's traced programs are
+        kept across processes where :func:`jaxobs.use_compile_cache` set a folder (:func:`jaxobs.kept_jit`,
+        keyed on :attr:`kept_fields`)."""
         for term in terms:
             if term.measure is None:
                 raise ValueError(f"objective metric {term.metric!r} is unknown; known: {', '.join(METRICS)}")
@@ -195,15 +197,12 @@ class Objective:
         self.ctx = ctx
         self.aggregation, self.penalty = aggregation, float(penalty)
         self.family = family
-        self.trace_key = trace_key
         # the solver's runs: every step's outputs, an observer on a signal through the loop made fast, the drive
         # plainly (module doc); the scoring and the figures run once per design, where compile time counts
         self._save = SaveAll(fast=not self.closed_loop)
-        # the scenarios and the component are constants of the program (self is static): the key names them
-        vg = self._per_scenario_value_and_grad
-        self._vg = eqx.filter_jit(vg) if trace_key is None else kept_jit(vg, f"objective.vg|{trace_key}")
-        resp = self._response
-        self.response = eqx.filter_jit(resp) if trace_key is None else kept_jit(resp, f"objective.resp|{trace_key}")
+        # the scenarios and the component are constants of the program (self is static): kept_fields name them
+        self._vg = kept_jit(self._per_scenario_value_and_grad)
+        self.response = kept_jit(self._response)
 
         @jax.custom_jvp
         def value(theta):
@@ -346,7 +345,6 @@ class Objective:
             chunk_size=given.n,
             mesh=batch_mesh(jax.devices()[:1]),
             label="scores",
-            trace_key=None if self.trace_key is None else f"objective.scores|{self.trace_key}",
         )
         mets = dict(run.values["design"])
         if any(t.metric == STABILITY_MARGIN for t in self.terms):  # of the loop, not of the run: one jit(vmap)

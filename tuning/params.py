@@ -68,6 +68,8 @@ def _softplus_inv(y: float) -> float:
 class Parametrization:
     """Maps an unconstrained vector θ to the free gains of a component."""
 
+    kept_fields = ("specs",)  # what a kept program that applies it bakes in (jaxobs.kept_jit)
+
     def __init__(self, specs: list[GainSpec]):
         self.specs = list(specs)
         self.names = [s.name for s in self.specs]

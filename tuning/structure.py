@@ -49,9 +49,9 @@ def _margin_values(loop):
     return m.phase_margin, m.omega_gc, m.gain_margin
 
 
-# the loop's coefficients are its array leaves: the code names everything else, so a second process reads the
-# traced program back instead of tracing the two vmapped root finds again (1-2 s of a warm default job)
-_margins_of = kept_jit(_margin_values, "structure.margins")
+# a second process reads the traced program back instead of tracing the two vmapped root finds again (1-2 s of a
+# warm default job)
+_margins_of = kept_jit(_margin_values)
 
 
 def _margins(loop) -> dict:

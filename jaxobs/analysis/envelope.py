@@ -241,17 +241,11 @@ def _stability_fields(drive, obs, scs, method: str, kw: tuple):
     return tuple(jax.vmap(lambda sc: fn(family.system(obs, sc), **dict(kw)))(scs))
 
 
-_stability_jit = eqx.filter_jit(_stability_fields)
-_KEPT: dict = {}  # trace key -> its kept program (jaxobs.kept_jit), one per process
+_stability_jit = kept_jit(_stability_fields)  # kept across processes where a folder is set
 
 
-def _stability(drive, obs, scs, method: str, kw: tuple, trace_key: str | None = None) -> Stability:
-    if trace_key is None:
-        return Stability(*_stability_jit(drive, obs, scs, method, kw))
-    key = f"envelope.stability|{trace_key}|{method}|{kw!r}"
-    if key not in _KEPT:
-        _KEPT[key] = kept_jit(_stability_fields, key)
-    return Stability(*_KEPT[key](drive, obs, scs, method, kw))
+def _stability(drive, obs, scs, method: str, kw: tuple) -> Stability:
+    return Stability(*_stability_jit(drive, obs, scs, method, kw))
 
 
 def _speed_bandwidth(drive: Drive, machine: PMSMParams, speed_rpm: float) -> float:
@@ -289,7 +283,6 @@ def envelope(
     seed: int = 0,
     chunk_size: int = 256,
     progress=None,
-    trace_key: str | None = None,
 ):
     """The operating envelope of every design (name -> drive observer closing ``drive``'s loop sensorless).
 
@@ -302,10 +295,10 @@ def envelope(
     ("floquet", the default, or "lyapunov") and that function's keyword arguments
     (:func:`~jaxobs.analysis.stability.floquet`: settle, window, tol, n_report;
     :func:`~jaxobs.analysis.stability.lyapunov`: settle, warmup, window, n_dirs, tol).  ``progress`` as in
-    :func:`jaxobs.runner.run_scenarios`.  ``trace_key``: a string naming every argument here (the command
-    line: its source file's digest and options): the long runs' and the verdicts' traced programs are kept
-    across processes (:func:`jaxobs.kept_jit`).  Returns an ``xarray.Dataset`` with dims ``("design", "speed_rpm",
-    "load"[, axis])`` and the variables of :data:`ENVELOPE_VARIABLES` (booleans stored as int8 0/1).
+    :func:`jaxobs.runner.run_scenarios`.  The long runs' and the verdicts' traced programs are kept across
+    processes where a folder is set (:func:`jaxobs.kept_jit`).  Returns an ``xarray.Dataset`` with dims
+    ``("design", "speed_rpm", "load"[, axis])`` and the variables of :data:`ENVELOPE_VARIABLES` (booleans stored
+    as int8 0/1).
     """
     import xarray as xr
 
@@ -396,7 +389,6 @@ def envelope(
         chunk_size=chunk_size,
         mesh=batch_mesh(jax.devices()[:1]),
         progress=progress,
-        trace_key=None if trace_key is None else f"envelope|{trace_key}",
         label="envelope",
     )
     # the stability margins: constant profiles (no step), one jit(vmap) per observer class
@@ -410,10 +402,7 @@ def envelope(
         groups = [np.arange(len(spd))]
 
     def verdicts(obs):
-        parts = [
-            jax.device_get(_stability(drive, obs, jax.tree.map(lambda x: x[g], scs), method, kwt, trace_key))
-            for g in groups
-        ]
+        parts = [jax.device_get(_stability(drive, obs, jax.tree.map(lambda x: x[g], scs), method, kwt)) for g in groups]
         order = np.argsort(np.concatenate(groups))
         return jax.tree.map(lambda *xs: np.concatenate(xs)[order], *parts)
 

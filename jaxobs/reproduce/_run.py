@@ -2,19 +2,18 @@
 
 A reproduction runs a few dozen drive simulations, each its own program: in a second ``jaxobs reproduce
 leso`` the persistent compilation cache found every compilation, yet 14 s of its 36 s went to tracing
-them again (measured with ``python -m benchmarks.first_second``).  :func:`run_kept` runs one through
-:func:`jaxobs.kept_jit`, which keeps the traced and lowered program under a key (the command line turns
-it on with the compile cache; from Python, :func:`jaxobs.use_compile_cache` does).  The key names
-what the program bakes in: the experiment's name, the horizon, and the system's values that are not
-arrays (its Python numbers); the system's static fields, the arrays' shapes and the source of jaxobs
-are added by ``kept_jit``.  The run gives the same numbers bit for bit as ``simulate`` (tests/test_traced.py).
+them again (``python -m benchmarks.first_second``).  :func:`run_kept` runs one through
+:func:`jaxobs.kept_jit`, which keeps the traced and lowered program (the command line turns it on with
+the compile cache; from Python, :func:`jaxobs.use_compile_cache` does).  Its key is what the program bakes
+in: the horizon and the system's values that are not arrays (its Python numbers and static fields), the
+arrays' shapes and the source of jaxobs.  The run gives the same numbers bit for bit as ``simulate``
+(tests/test_traced.py).
 """
 
 from __future__ import annotations
 
 from typing import Any, NamedTuple
 
-import equinox as eqx
 import jax
 from jax import export
 
@@ -43,8 +42,6 @@ class Run(NamedTuple):
     ok: jax.Array
 
 
-_KEPT: dict = {}  # key -> its kept program, one per process
-
 # a kept program's outputs are serialized with it: jax.export writes a NamedTuple only once its type is registered
 # (once per process, here at import, before any program is exported or read back)
 for _cls in (
@@ -66,15 +63,14 @@ for _cls in (
     export.register_namedtuple_serialization(_cls, serialized_name=f"{_cls.__module__}.{_cls.__qualname__}")
 
 
-def run_kept(system, t1: float, name: str) -> Run:
-    """``simulate(system, t1)`` as a :class:`Run`, its program kept across processes under ``name`` (module doc)."""
-    values = jax.tree.leaves(eqx.filter(system, eqx.is_array, inverse=True))
-    key = f"reproduce|{name}|{t1!r}|{values!r}"
-    if key not in _KEPT:
+def _simulated(system, t1: float):
+    sol = simulate(system, t1)
+    return sol.t, sol.outputs, sol.ok
 
-        def run(s):
-            sol = simulate(s, t1)
-            return sol.t, sol.outputs, sol.ok
 
-        _KEPT[key] = kept_jit(run, key)
-    return Run(*_KEPT[key](system))
+_simulated_kept = kept_jit(_simulated)
+
+
+def run_kept(system, t1: float) -> Run:
+    """``simulate(system, t1)`` as a :class:`Run`, its program kept across processes (module doc)."""
+    return Run(*_simulated_kept(system, float(t1)))

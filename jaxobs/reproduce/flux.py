@@ -212,7 +212,7 @@ def run_flux_experiments(quick: bool = False, progress=None):
         drive = D.bench_drive(par, handover=handover, startup=startup, alpha_s=alpha_s, **foc_kw)
         if startup is None:  # the observers settled over 10 electrical periods first (10 s at 20 r/min)
             drive = drive.settled_for(par.p * rpm0 * D.RPM)
-        sol = run_kept(D.ClosedLoop(drive, flux_bank(est, w0, lpf_omega_c=lpf_omega_c), sc), t1, f"flux|{name}")
+        sol = run_kept(D.ClosedLoop(drive, flux_bank(est, w0, lpf_omega_c=lpf_omega_c), sc), t1)
         traces[name] = sol
         t = np.asarray(sol.t)
         bar.update()

@@ -256,7 +256,7 @@ def run_leso_experiments(progress=None):
         sc = D.Scenario(par, est_par=est, speed_ref=speed_ref, load=load, omega_m0=rpm0 * D.RPM, est_drift=est_drift)
         bar.stage(f"{name} ({t1:g} s)")
         drive = D.bench_drive(par, handover=handover, **drive_kw)
-        sol = run_kept(D.ClosedLoop(drive, leso_bank(est, we, primary=primary), sc), t1, f"leso|{name}")
+        sol = run_kept(D.ClosedLoop(drive, leso_bank(est, we, primary=primary), sc), t1)
         traces[name] = sol
         t = np.asarray(sol.t)
         bar.update()

@@ -93,7 +93,7 @@ def _simulate(name, machine, mode, rpm0, speed_ref, load, t1, primary=2, sensorl
     drive = D.dual_bench_drive(machine, mode=mode, sensorless=sensorless, handover=0.3, **drive_kw)
     sc = D.Scenario(est, speed_ref=speed_ref, load=load, omega_m0=rpm0 * D.RPM)
     bank = leso_bank(est, machine.p * rpm0 * D.RPM, primary=primary)
-    return run_kept(D.DualClosedLoop(drive, bank, sc, machine), t1, f"leso_dual|{name}")
+    return run_kept(D.DualClosedLoop(drive, bank, sc, machine), t1)
 
 
 def _fa_error_deg(sol):

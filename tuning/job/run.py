@@ -39,9 +39,6 @@ def build_objective(job: Job, spec: ScenarioSpec | None = None):
     scen, names, combos = build_scenarios(spec, family)
     ctx = MetricContext(t_event=spec.t_event, steady_from=spec.steady_from)
     param = Parametrization(job.gains)
-    # what the objective's traced programs are kept under (jaxobs.kept_jit): the job (its file's digest, its
-    # recordings') and which of its scenario sets; none for another spec
-    which = "scenarios" if spec is job.scenarios else "holdout" if spec is job.holdout else None
     obj = Objective(
         comp,
         param,
@@ -52,7 +49,6 @@ def build_objective(job: Job, spec: ScenarioSpec | None = None):
         aggregation=job.aggregation,
         penalty=job.penalty,
         family=family,
-        trace_key=None if which is None else f"{job_fingerprint(job)}|{which}",
     )
     return obj, (names, combos)
 

@@ -115,11 +115,8 @@ def verify_designs(designs: dict, env: EnvelopeSpec, drive_spec: DriveSpec) -> d
     par = D.bench_machine(drive_spec.machine)
     speeds, loads = env.points()
     stab = {"settle": env.settle, "window": env.window}
-    # the map's traced programs kept across runs (jaxobs.kept_jit): the two specs (plain frozen dataclasses) name
-    # everything that builds the drive, the machine and the points; the designs' gains are the programs' arrays
-    key = f"verify|{env!r}|{drive_spec!r}"
     ds = envelope(designs, machine=par, drive=drive, speeds_rpm=speeds, loads_nm=loads, horizon=env.horizon,
-                  stability=stab, trace_key=key)  # fmt: skip
+                  stability=stab)  # fmt: skip
     combos = [(s, ld) for s in speeds for ld in loads]
     out = {
         "envelope": {"speed_rpm": list(env.speed_rpm), "load_nm": list(env.load_nm)},
