@@ -12,8 +12,6 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import hashlib
-import json
 from pathlib import Path
 
 from .job import COMPONENTS, JobError, job_drive, load_job, parse_job
