@@ -69,7 +69,8 @@ class Metric:
     """One metric: ``name``, CF ``units``, ``long_name``, and its forms: ``exact(sol, scenario, ctx)`` (what a
     study or a report gives) and ``smooth(sol, scenario, ctx)`` (what a gradient is taken of; the exact one
     where that has a useful gradient), each a scalar of one run.  ``closed_loop``: it needs the closed-loop
-    drive (a speed, a reference), not an observer on a signal."""
+    drive (a speed, a reference), not an observer on a signal; ``needs_truth``: it needs an observer on a signal that
+    reports its truth (a recording with its encoder: :class:`jaxobs.SignalTruth`)."""
 
     name: str
     units: str
@@ -77,6 +78,7 @@ class Metric:
     exact: Callable | None = None
     smooth: Callable | None = None
     closed_loop: bool = False
+    needs_truth: bool = False
 
     def __call__(self, sol, scenario, ctx):
         """The form a gradient is taken of: ``smooth``, or ``exact`` where the metric has no smooth form.

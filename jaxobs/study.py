@@ -367,6 +367,28 @@ METRICS: dict[str, Metric] = {
             exact=lambda sol, sc, ctx: M.rms(_speed_err_rpm(sol, sc), _steady(sol, ctx)),
             closed_loop=True,
         ),
+        # the speed estimate of an observer run open loop on a signal that carries its truth (a drive log with its
+        # encoder, jaxobs.DriveRecording): electrical rad/s, as the recording gives it (its pole pairs are not known)
+        Metric(
+            "rms_speed_error_steady",
+            "rad s-1",
+            "steady rms electrical speed-estimate error against the recorded speed",
+            exact=lambda sol, sc, ctx: M.rms(sol.outputs.obs.omega - sol.outputs.truth.omega, _steady(sol, ctx)),
+            needs_truth=True,
+        ),
+        Metric(
+            "peak_speed_error",
+            "rad s-1",
+            "peak |electrical speed-estimate error| after the event, against the recorded speed",
+            exact=lambda sol, sc, ctx: M.peak_deviation(
+                sol.t, sol.outputs.obs.omega, sol.outputs.truth.omega, ctx.t_event
+            ),
+            # a soft maximum within 0.1·(1 + log n) rad/s of the peak (n: the samples after the event)
+            smooth=lambda sol, sc, ctx: M.smooth_peak_deviation(
+                sol.t, sol.outputs.obs.omega, sol.outputs.truth.omega, ctx.t_event, temperature=0.1
+            ),
+            needs_truth=True,
+        ),
         # not a function of one run but of the closed loop itself: jaxobs.analysis.stability.lyapunov's largest
         # non-neutral exponent (1/s) at the scenario, which the objective computes
         Metric(

@@ -105,6 +105,8 @@ METRICS: dict[str, Metric] = {
         "peak_speed_dev",
         "rms_speed_steady",
         "speed_noise_rpm",
+        "rms_speed_error_steady",
+        "peak_speed_error",
         STABILITY_MARGIN,
     )
 }

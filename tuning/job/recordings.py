@@ -217,7 +217,7 @@ def check_recording_job(job, comp_t: dict) -> None:
                 raise JobError(
                     f"objective.terms[{i}].metric",
                     f"{t.metric!r} needs the closed-loop drive; a recording runs the observer open loop "
-                    "(use iae_position, rms_position_steady, ripple_position)",
+                    "(use iae_position, rms_position_steady, ripple_position, rms_speed_error_steady, peak_speed_error)",
                 )
         if RecordedSignals(spec.family).binds and issubclass(COMPONENTS[job.component].ctor, AbstractFluxObserver):
             for k in ("Rs", "L"):

@@ -233,6 +233,11 @@ def parse_job(raw: dict, base: Path | None = None) -> Job:
         if metric not in METRICS:
             raise JobError(f"{where}.metric", f"unknown metric {show(metric)}; known: {', '.join(METRICS)}")
         grid_only = metric.endswith(("_freq", "_phase", "freq_steady", "phase_steady"))
+        if METRICS[metric].needs_truth and scen.recording is None:
+            raise JobError(
+                f"{where}.metric",
+                f"{show(metric)} compares the estimate with a recording's truth: it needs [scenarios.recording]",
+            )
         if metric in DRIVE_METRICS and not scen.family.closed_loop:
             raise JobError(f"{where}.metric", f"{show(metric)} needs the closed-loop drive, not {comp} ({scen.signal})")
         if (scen.family is not GridSignals) == grid_only:
