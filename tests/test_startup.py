@@ -320,6 +320,7 @@ def test_standstill_jobs_score_the_position_error_from_the_hand_over_on():
 
     import jax.numpy as jnp
 
+    from jaxobs import Solution
     from jaxobs.drive import DriveOutput
     from jaxobs_tuning.objective import METRICS, MetricContext, _lost_sync
 
@@ -330,9 +331,11 @@ def test_standstill_jobs_score_the_position_error_from_the_hand_over_on():
     err = jnp.where(t < 0.4, 1.65, 0.01)  # 95° during I-f, 0.6° after
     ctx = MetricContext(t_event=0.0, steady_from=0.7)
 
+    def solution(outputs):  # a trajectory as simulate returns it (the metrics take a Solution)
+        return Solution(t=t, outputs=outputs, final_state=None, ok=jnp.asarray(True), cost=None)
+
     def sol(mode):
-        out = drive_output(theta_e=jnp.zeros_like(t), obs=SimpleNamespace(theta=err), mode=mode)
-        return SimpleNamespace(t=t, outputs=out)
+        return solution(drive_output(theta_e=jnp.zeros_like(t), obs=SimpleNamespace(theta=err), mode=mode))
 
     handed = sol(jnp.where(t < 0.4, 0, 1))
     assert float(METRICS["iae_position"](handed, None, ctx)) == pytest.approx(0.01 * 0.6, rel=0.02)
@@ -340,13 +343,12 @@ def test_standstill_jobs_score_the_position_error_from_the_hand_over_on():
     steady = sol(jnp.ones_like(t, dtype=jnp.int32))  # a steady start: every sample counts
     assert float(METRICS["iae_position"](steady, None, ctx)) == pytest.approx(1.65 * 0.4 + 0.01 * 0.6, rel=0.02)
     assert bool(_lost_sync(steady, None, ctx))
-    never = SimpleNamespace(
-        t=t,
-        outputs=drive_output(
+    never = solution(
+        drive_output(
             theta_e=jnp.zeros_like(t),
             obs=SimpleNamespace(theta=jnp.full_like(t, 1.7)),
             mode=jnp.zeros_like(t, dtype=jnp.int32),
-        ),
+        )
     )
     assert float(METRICS["rms_position_steady"](never, None, ctx)) == pytest.approx(1.7, rel=1e-4)
     assert bool(_lost_sync(never, None, ctx))  # 97° in the steady window

@@ -347,7 +347,10 @@ def build_parser() -> argparse.ArgumentParser:
         "so a second run skips most of XLA's work; JAXOBS_CACHE_DIR=off turns it off too)",
     )
     t = sub.add_parser(
-        "tune", help="gradient-based gain tuning from a TOML job (default: embedded WIF job)", parents=[quiet]
+        "tune",
+        help="gradient-based gain tuning from a TOML job (default: embedded WIF job)",
+        description="Gradient-based gain tuning from a TOML job (default: embedded WIF job).",
+        parents=[quiet],
     )
     t.add_argument("job", nargs="?", help="job file (TOML); default: the embedded robust SOGI-FLL-WIF job")
     t.add_argument("--out", help="results folder (default: out/<job name>)")
@@ -356,14 +359,24 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--force", action="store_true", help="overwrite results (and a checkpoint) already in --out")
     t.set_defaults(func=_cmd_tune)
 
-    d = sub.add_parser("demo", help="FLL family (SOGI-FLL, -WPF, -WIF) on paper 001 Tests A-E", parents=[quiet])
+    d = sub.add_parser(
+        "demo",
+        help="FLL family (SOGI-FLL, -WPF, -WIF) on paper 001 Tests A-E",
+        description="FLL family (SOGI-FLL, -WPF, -WIF) on paper 001 Tests A-E.",
+        parents=[quiet],
+    )
     d.add_argument("--out", default="out/demo", help="folder for the figure (default: out/demo)")
     d.add_argument("--force", action="store_true", help="overwrite the figure already in --out")
     d.add_argument("--json", action="store_true", help="print the table as JSON rows")
     d.add_argument("--t-event", type=float, default=0.2, help="time of the test event, s (default 0.2)")
     d.set_defaults(func=cmd_demo)
 
-    c = sub.add_parser("closed-form", help="closed-form gains with formula and source equation", parents=[quiet])
+    c = sub.add_parser(
+        "closed-form",
+        help="closed-form gains with formula and source equation",
+        description="Closed-form gains with formula and source equation.",
+        parents=[quiet],
+    )
     c.add_argument("design", choices=list(CF_OPTIONS), help="which design rule")
     c.add_argument("--k", type=float, help="SOGI gain k (sogi-fll)")
     c.add_argument("--omega-n", dest="omega_n", type=float, help="nominal frequency, rad/s (default 100π)")
@@ -376,13 +389,23 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--json", action="store_true", help="print JSON")
     c.set_defaults(func=cmd_closed_form)
 
-    b = sub.add_parser("bode", help="Bode figures of the papers' flux observers, LESOs and FLL loops", parents=[quiet])
+    b = sub.add_parser(
+        "bode",
+        help="Bode figures of the papers' flux observers, LESOs and FLL loops",
+        description="Bode figures of the papers' flux observers, LESOs and FLL loops.",
+        parents=[quiet],
+    )
     b.add_argument("--out", default="out/bode", help="folder for the figures (default: out/bode)")
     b.add_argument("--force", action="store_true", help="overwrite figures already in --out")
     b.add_argument("--rad-per-s", action="store_true", help="frequency axis in rad/s (default: Hz)")
     b.set_defaults(func=cmd_bode)
 
-    r = sub.add_parser("reproduce", help="reproduce a paper's experiments on the simulated drive", parents=[quiet])
+    r = sub.add_parser(
+        "reproduce",
+        help="reproduce a paper's experiments on the simulated drive",
+        description="Reproduce a paper's experiments on the simulated drive.",
+        parents=[quiet],
+    )
     r.add_argument(
         "paper", choices=["flux", "leso"], help="flux: paper 000 (rotor-flux observers); leso: paper 002 (LESOs)"
     )
@@ -402,6 +425,7 @@ def build_parser() -> argparse.ArgumentParser:
     st = sub.add_parser(
         "study",
         help="robustness study of FLL or sensorless-drive designs over a scenario grid (xarray/NetCDF)",
+        description="Robustness study of FLL or sensorless-drive designs over a scenario grid (xarray/NetCDF).",
         parents=[quiet],
     )
     st.add_argument("study", nargs="?", help="study file (TOML); default: the FLL family's closed forms")
@@ -440,19 +464,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_export_parser(sub, parents=[quiet])
     add_envelope_parser(sub, parents=[quiet])
     add_drive_parser(sub, parents=[quiet])
-    _describe(sub)
     return p
-
-
-def _describe(sub) -> None:
-    """Each subcommand's ``--help`` opens with its one-line summary (the ``help=`` the command list shows)."""
-    for action in sub._choices_actions:
-        parser = sub.choices[action.dest]
-        if parser.description is None and action.help:
-            parser.description = action.help[0].upper() + action.help[1:] + "."
-        for nested in parser._subparsers._group_actions if parser._subparsers else ():
-            if isinstance(nested, argparse._SubParsersAction):
-                _describe(nested)
 
 
 def main(argv=None) -> int:

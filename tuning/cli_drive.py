@@ -81,9 +81,18 @@ def cmd_drive_check(args) -> int:
 
 def add_drive_parser(subparsers, parents=()) -> argparse.ArgumentParser:
     """Add ``jaxobs drive check`` to the CLI's subparsers; ``parents``: the options every command shares."""
-    d = subparsers.add_parser("drive", help="drive files: check one and print what follows from it")
+    d = subparsers.add_parser(
+        "drive",
+        help="drive files: check one and print what follows from it",
+        description="Drive files: check one and print what follows from it.",
+    )
     sub = d.add_subparsers(dest="drive_cmd", metavar="ACTION", required=True, parser_class=type(d))
-    c = sub.add_parser("check", help="validate a drive file and print its derived values", parents=list(parents))
+    c = sub.add_parser(
+        "check",
+        help="validate a drive file and print its derived values",
+        description="Validate a drive file and print its derived values.",
+        parents=list(parents),
+    )
     c.add_argument("file", help="a drive file (TOML)")
     c.set_defaults(func=cmd_drive_check)
     return d

@@ -144,6 +144,7 @@ def add_envelope_parser(subparsers, parents=()) -> argparse.ArgumentParser:
     e = subparsers.add_parser(
         "envelope",
         help="where a drive job's designs hold: stability and synchronism over speed x load",
+        description="Where a drive job's designs hold: stability and synchronism over speed x load.",
         parents=list(parents),
     )
     e.add_argument("source", help="a drive job file (TOML) or a `jaxobs tune` result.json of one")

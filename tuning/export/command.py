@@ -25,7 +25,10 @@ def add_export_parser(subparsers, parents=()) -> argparse.ArgumentParser:
     """Add ``jaxobs export`` to the CLI's subparsers; ``parents``: the options every command shares (--quiet,
     --no-cache), so that their help reads the same in each command."""
     e = subparsers.add_parser(
-        "export", help="an observer as C99 float32 with golden vectors and a test harness", parents=list(parents)
+        "export",
+        help="an observer as C99 float32 with golden vectors and a test harness",
+        description="An observer as C99 float32 with golden vectors and a test harness.",
+        parents=list(parents),
     )
     e.add_argument("result", nargs="?", help="a `jaxobs tune` result.json (its tuned gains)")
     e.add_argument("--design", choices=list(DESIGNS), help="a closed-form design instead of a result")

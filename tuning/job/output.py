@@ -13,7 +13,6 @@ from jaxobs import metrics as M
 
 from ..objective import LOST_SYNC_DEG, METRIC_UNITS
 from ..outdir import atomic_write_text
-from .recordings import recording_labels
 from .spec import Job, ScenarioSpec
 
 
@@ -72,7 +71,7 @@ def scores_dataset(obj, names, combos, spec: ScenarioSpec, per: dict):
         shape = tuple(len(spec.axes[n]) for n in names)
         coords = {"design": designs, **{n: list(spec.axes[n]) for n in names}}
         if spec.recording is not None:  # a recording is named by its file (a log's window: file@index)
-            coords["recording"] = recording_labels(spec.recording, spec.horizon)
+            coords["recording"] = spec.recording.labels()
     else:
         dims, shape = ("design", "scenario"), (len(combos),)
         coords = {"design": designs, "scenario": np.arange(len(combos))}
@@ -127,7 +126,7 @@ def recordings_provenance(job: Job, scenarios=None) -> dict:
     rec = job.scenarios.recording
     if rec is None:
         return {}
-    labels = recording_labels(rec, job.scenarios.horizon)
+    labels = rec.labels()
     starts = [None] * len(labels)
     if scenarios is not None:
         w = getattr(scenarios, "omega_e", None)

@@ -186,14 +186,6 @@ def _load_one(spec: RecordingSpec, family: RecordedSignals, path: str, need: int
     )  # fmt: skip
 
 
-def recording_labels(spec: RecordingSpec, horizon: float) -> list[str]:
-    """The scenarios' names: each file's name, or ``file@t`` for the windows of a drive log (t: the window's
-    start, s)."""
-    if not spec.windows:
-        return list(spec.files)
-    return [f"{f}@{k}" for f in spec.files for k in range(spec.windows)]
-
-
 def load_recordings(spec: RecordingSpec, family: RecordedSignals, horizon: float | None = None):
     """The recordings of a job as one batched signal, all read at ``spec.ts``, as ``family``
     (:class:`jaxobs.families.RecordedSignals`) reads them: whole files of one length (cut to the shortest with
@@ -216,8 +208,8 @@ def check_recording_job(job, comp_t: dict) -> None:
             if t.metric in DRIVE_METRICS:
                 raise JobError(
                     f"objective.terms[{i}].metric",
-                    f"{t.metric!r} needs the closed-loop drive; a recording runs the observer open loop "
-                    "(use iae_position, rms_position_steady, ripple_position, rms_speed_error_steady, peak_speed_error)",
+                    f"{t.metric!r} needs the closed-loop drive; a recording runs the observer open loop (use "
+                    "iae_position, rms_position_steady, ripple_position, rms_speed_error_steady, peak_speed_error)",
                 )
         if RecordedSignals(spec.family).binds and issubclass(COMPONENTS[job.component].ctor, AbstractFluxObserver):
             for k in ("Rs", "L"):

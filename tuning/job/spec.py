@@ -84,3 +84,9 @@ class RecordingSpec:
     windows: int = 0  # > 0: this many windows of the horizon spread over each drive log, each a scenario
     machine: object = None  # a PMSMParams for a drive log's power and timing checks, or None
     machine_name: str | None = None  # as the job names it (a bench machine or a drive file)
+
+    def labels(self) -> list[str]:
+        """The scenarios' names: each file's name, or ``file@k`` for the k-th window of a drive log."""
+        if not self.windows:
+            return list(self.files)
+        return [f"{f}@{k}" for f in self.files for k in range(self.windows)]
