@@ -87,7 +87,8 @@ class Registered:
         is_dual = hasattr(machine, "per_set")
         if is_dual and not self.dual:
             return f"{self.name} does not run on a dual three-phase machine: {self.why_not_dual}"
-        ld, lq = float(machine.Ld), float(machine.Lq)
+        m = machine.per_set() if is_dual else machine
+        ld, lq = float(m.Ld), float(m.Lq)
         if abs(lq - ld) > 1e-9 * max(ld, lq) and not self.salient:
             why = self.why_not_salient
             return f"{self.name} does not run on a salient machine (Ld = {ld:.4g} H, Lq = {lq:.4g} H): {why}"

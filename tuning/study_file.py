@@ -424,7 +424,7 @@ def _parse_drive(raw: dict, st: dict, name: str, base: Path) -> StudySpec:
     dr = get_field(raw, "drive", "drive", dict, {})
     # the FOC is the drive jobs' (jaxobs_tuning.job.job_drive: the bench's IMC current and I-P speed loops), so a tuned
     # result is scored on the drive that tuned it; only the observer's unscored settling phase is the study's
-    no_unknown(dr, ("settle", "file", *DRIVE_TABLES), "drive")
+    no_unknown(dr, ("settle", "file", "name", "description", *DRIVE_TABLES), "drive")
     settle = get_field(dr, "settle", "drive.settle", float, 0.2)
     if not 0 <= settle <= 10:
         raise JobError("drive.settle", f"must be in [0, 10] s, got {settle:g}")

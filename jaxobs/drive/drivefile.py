@@ -234,6 +234,8 @@ class DriveFile:
     Attributes:
         name: the file's ``name`` (or its stem).
         description: the file's ``description`` (or its name).
+        foc_kw: :meth:`FOC.imc`'s keywords as derived (:meth:`drive_for` rebuilds the FOC from them).
+        table: the file's tables as read (``[machine]``, ``[inverter]``, ...): a job's result keeps them inline.
         machine: the machine, true and assumed alike.
         drive: the sensorless drive on it, starting steady (``Drive(sensorless=True)``, 0.2 s settle).
         sensors: the file's sensor errors (quantization as noise).
@@ -253,6 +255,7 @@ class DriveFile:
     warnings: tuple
     description: str = ""
     foc_kw: dict = dataclasses.field(default_factory=dict, repr=False)
+    table: dict = dataclasses.field(default_factory=dict, repr=False)
 
     @property
     def ts(self) -> float:
@@ -713,6 +716,7 @@ def drive_from_table(raw: dict, name: str = "drive") -> DriveFile:
         warnings=tuple(warn),
         description=str(raw.get("description", raw.get("name", name))),
         foc_kw=foc_kw,
+        table={k: raw[k] for k in DRIVE_FILE_KEYS if k in raw},
     )
 
 

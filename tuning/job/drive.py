@@ -122,6 +122,7 @@ def job_drive(spec: DriveSpec | None = None):
 
 DRIVE_TABLES = ("machine", "inverter", "control", "sensors", "startup")  # a drive file's tables, inline
 _DRIVE_KEYS = ("loop", "handover", "settle", "start", "machine", "file", "speed_schedule", *DRIVE_TABLES[1:])
+_INLINE_TOP = ("name", "description")  # an inline drive's label and description (a drive file's top-level keys)
 
 
 def drive_source(dt: dict, default: str, base: Path | None, where: str = "drive") -> tuple[str, DriveFile | None]:
@@ -152,11 +153,14 @@ def drive_source(dt: dict, default: str, base: Path | None, where: str = "drive"
         except ValueError as e:
             raise JobError(f"{where}.file", f"{name!r}: {e}") from None
         return f.name, f
+    for k in _INLINE_TOP:
+        if k in dt and not inline:
+            raise JobError(f"{where}.{k}", "applies to a drive given inline ([drive.machine], [drive.inverter], ...)")
     if inline:
         if "machine" not in inline:
             raise JobError(f"{where}.machine", "missing: inline drive tables need [drive.machine] (the drive file's)")
         try:
-            f = drive_from_table(inline, "inline")
+            f = drive_from_table({**inline, **{k: dt[k] for k in _INLINE_TOP if k in dt}}, "inline")
         except ValueError as e:
             raise JobError(where, str(e)) from None
         return f.name, f
@@ -170,11 +174,18 @@ def drive_source(dt: dict, default: str, base: Path | None, where: str = "drive"
     return machine, None
 
 
+def inline_drive(dt: dict, file: DriveFile) -> dict:
+    """``[drive]`` (``dt``) with its drive file's tables inline instead of ``file = ...`` (and its name and
+    description): what a result keeps, so that it reads the same drive wherever it is moved."""
+    out = {k: v for k, v in dt.items() if k != "file"}
+    return {**out, "name": file.name, "description": file.description, **file.table}
+
+
 def parse_drive(dt: dict, comp: str, scen: ScenarioSpec, base: Path | None = None) -> DriveSpec:
     """``[drive]`` of a drive job of component ``comp`` (its table ``dt``) on the scenarios ``scen``; ``base``:
     the job file's folder (a relative ``file``)."""
     info = COMPONENTS[comp]
-    no_unknown(dt, _DRIVE_KEYS, "drive")
+    no_unknown(dt, (*_DRIVE_KEYS, *_INLINE_TOP), "drive")
     loop = get_field(dt, "loop", "drive.loop", str, "sensorless")
     if loop not in ("sensorless", "sensored"):
         raise JobError("drive.loop", f"must be 'sensorless' or 'sensored', got {show(loop)}")

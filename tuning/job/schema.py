@@ -14,7 +14,7 @@ from .. import strategies
 from ..objective import DRIVE_METRICS, METRICS, STABILITY_MARGIN, Term
 from ..params import GainSpec
 from .components import COMPONENTS, W_N
-from .drive import check_drive_speeds, check_standstill, parse_drive
+from .drive import check_drive_speeds, check_standstill, inline_drive, parse_drive
 from .fields import (
     MAX_SCENARIOS,
     MAX_SOLVER_STEPS,
@@ -298,6 +298,8 @@ def parse_job(raw: dict, base: Path | None = None) -> Job:
         raise JobError(
             "solver.schedule", f"must be {strategies.one_of(strategies.SCHEDULES)}, got {show(opts['schedule'])}"
         )
+    if drive is not None and drive.file is not None and "file" in raw["drive"]:
+        raw = {**raw, "drive": inline_drive(raw["drive"], drive.file)}  # a result reads it wherever it moves
     job = Job(
         raw=raw,
         name=name,
