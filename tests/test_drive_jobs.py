@@ -91,7 +91,7 @@ def test_the_speed_grid_is_checked_against_the_files_speed_limit(tmp_path):
 
 
 def test_a_bad_drive_table_is_one_line_naming_the_field(tmp_path):
-    with pytest.raises(JobError, match=r"^drive\.file: 'missing\.toml': cannot be read"):
+    with pytest.raises(JobError, match=r"^drive\.file: 'missing\.toml': drive file: cannot read"):
         load_job(_job(tmp_path, drive='file = "missing.toml"'))
     with pytest.raises(JobError, match=r"^drive\.machine: must be one of ipmsm002, spmsm000"):
         load_job(_job(tmp_path, drive='machine = "teknic"'))
