@@ -14,6 +14,7 @@ from jaxobs.drive import bench_machine, dual_ipmsm_paper002, read_drive
 from jaxobs.registry import REGISTRY
 from jaxobs_tuning.cli import main
 from jaxobs_tuning.job import JobError, job_drive, load_job, parse_job
+from jaxobs_tuning.study_file import load_study
 
 EXAMPLES = Path(__file__).resolve().parent.parent / "docs" / "examples"
 TEKNIC = EXAMPLES / "teknic_m2310p.toml"
@@ -153,3 +154,32 @@ def test_tune_envelope_and_export_run_on_a_users_drive_file(tmp_path, capsys):
     assert "drive file teknic_m2310p" in coeffs["golden"]["signal"]
     if shutil.which("cc") is not None:
         assert "OK" in text
+
+
+STUDY = """
+[study]
+kind = "drive"
+horizon = 0.05
+[drive]
+file = "teknic.toml"
+[designs.cf]
+closed_form = "CLESO"
+[axes]
+speed_rpm = [{speed}]
+"""
+
+
+def test_a_drive_study_runs_the_users_drive_file(tmp_path):
+    shutil.copy(TEKNIC, tmp_path / "teknic.toml")
+    st = tmp_path / "s.toml"
+    st.write_text(STUDY.format(speed="1000.0"))
+    spec = load_study(st)
+    assert spec.provenance["machine"].startswith("teknic_m2310p:")
+    assert int(spec.opts["machine"].p) == 4 and float(spec.opts["drive"].ts) == pytest.approx(5e-5, rel=1e-15)
+    assert float(spec.designs["cf"].ts) == pytest.approx(5e-5, rel=1e-15)  # the closed form at the drive's period
+    st.write_text(STUDY.format(speed="6000.0"))
+    with pytest.raises(JobError, match=r"^axes\.speed_rpm\[0\]: must be in \[1, 5172\] r/min on teknic_m2310p"):
+        load_study(st)
+    st.write_text(STUDY.format(speed="1000.0").replace("[study]\n", '[study]\nmachine = "ipmsm002"\n'))
+    with pytest.raises(JobError, match=r"^study\.machine: give study\.machine or the \[drive\] file"):
+        load_study(st)
