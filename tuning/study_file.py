@@ -505,6 +505,8 @@ def _parse_drive(raw: dict, st: dict, name: str, base: Path) -> StudySpec:
     except (ValueError, ArithmeticError) as e:
         raise JobError("drive", str(e)) from None
     provenance = {"machine": f"{machine}: {df.description}", **_results_attr(results)}
+    if file is not None:  # the drive file's tables as read: the study's record, and what --resume checks
+        provenance["drive_file"] = json.dumps(file.table, sort_keys=True, ensure_ascii=False)
     horizon = get_field(st, "horizon", "study.horizon", float, 0.3)
     if not horizon > 0:
         raise JobError("study.horizon", f"must be > 0 s, got {horizon:g}")
@@ -537,6 +539,7 @@ def _parse_drive(raw: dict, st: dict, name: str, base: Path) -> StudySpec:
     opts = dict(
         machine=par,
         drive=drive,
+        sensors=None if file is None else file.sensors,  # a shipped bench's: ideal
         horizon=horizon,
         steady_from=steady,
         t_event=t_event,
