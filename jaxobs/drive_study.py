@@ -141,6 +141,7 @@ def run_drive_study(
     *,
     machine: PMSMParams,
     drive: Drive,
+    sensors=None,
     horizon: float = 0.3,
     steady_from: float | None = None,
     t_event: float = 0.0,
@@ -159,6 +160,8 @@ def run_drive_study(
     on stderr (each design's compilation named), a callable ``progress(done, total)`` called after
     each chunk, ``None``/``False`` nothing (:mod:`jaxobs.progress`).  ``mesh``: the devices each chunk is
     split over (:func:`jaxobs.runner.run_scenarios`; default one device).
+    ``sensors``: the drive's :class:`~jaxobs.drive.Sensors` (a drive file's), or None: ideal; the noise and
+    offset axes set their own.
     ``store``: a :class:`jaxobs.chunkstore.ChunkStore`, as in :func:`jaxobs.study.run_study`: each chunk's
     values go to disk as it finishes, the chunks already there are not run again, and the Dataset is laid
     out from the store (the same Dataset as without one).
@@ -192,7 +195,7 @@ def run_drive_study(
     return study(
         designs,
         # built a chunk at a time (the axes are checked above, so no chunk can refuse its points)
-        DriveScenarios(machine, drive, t_event=t_event, seed=seed),
+        DriveScenarios(machine, drive, t_event=t_event, seed=seed, sensors=sensors),
         sampler,
         [METRICS[k] for k in DRIVE_STUDY_METRICS],
         horizon=horizon,

@@ -32,7 +32,7 @@ import equinox as eqx
 
 from ._simulate import OnSignal
 from .drive import DRIVE_AXES as _ALL_DRIVE_AXES
-from .drive import RPM, ClosedLoop, Drive, PMSMParams, Profile, Scenario, scenario_batch
+from .drive import RPM, ClosedLoop, Drive, PMSMParams, Profile, Scenario, Sensors, scenario_batch
 from .observers import AbstractDriveObserver
 from .quantities import Axis
 from .scenarios import EMF_SIGNAL_AXES, GRID_SIGNAL_AXES, emf_signals, grid_signals
@@ -78,11 +78,19 @@ def bind_observer(obs, sc: Scenario):
 
 
 def drive_scenarios(
-    machine: PMSMParams, names, combos, *, seed: int = 0, t_event: float = 0.0, first: int = 0
+    machine: PMSMParams,
+    names,
+    combos,
+    *,
+    seed: int = 0,
+    t_event: float = 0.0,
+    first: int = 0,
+    sensors: Sensors | None = None,
 ) -> Scenario:
     """A batched Scenario (leading axis len(combos)), one per combination of the named axes' values
     (:func:`jaxobs.drive.scenario_batch` on ``machine``, noise keys from ``seed``; ``first``: the index of
-    ``combos[0]`` among all the scenarios, for a chunk built on its own).
+    ``combos[0]`` among all the scenarios, for a chunk built on its own; ``sensors``: the drive's, or None:
+    ideal; the noise and offset axes set their own).
 
     Each starts steady at ``speed_rpm`` (600 r/min without the axis) and ``load_nm``; the speed reference
     and the load step by ``speed_step_rpm`` and ``load_step_nm`` at ``t_event`` (s; both 0 by default: no event).
@@ -94,7 +102,7 @@ def drive_scenarios(
         raise ValueError(f"t_event must be a finite number of seconds >= 0, got {t_event!r}")
     two = Profile([0.0, t_event], [600.0 * RPM] * 2, kind="step")  # before / after the event
     zero = Profile([0.0, t_event], [0.0, 0.0], kind="step")
-    base = Scenario(machine, speed_ref=two, load=zero, omega_m0=600.0 * RPM)
+    base = Scenario(machine, speed_ref=two, load=zero, omega_m0=600.0 * RPM, sensors=sensors)
     return scenario_batch(base, names, combos, seed=seed, t_event=t_event, first=first)
 
 
@@ -121,9 +129,10 @@ class AbstractScenarios(eqx.Module):
         """The system ``design`` runs on one ``scenario`` (a :class:`jaxobs.AbstractSystem`)."""
 
     @classmethod
-    def of(cls, *, t_event: float = 0.0, seed: int = 0, freq: float = 50.0, machine=None, drive=None):
+    def of(cls, *, t_event: float = 0.0, seed: int = 0, freq: float = 50.0, machine=None, drive=None, sensors=None):
         """The family with these options, each family taking the ones it has: ``t_event`` (s), ``seed`` (the
-        noise keys), ``freq`` (Hz, a grid's nominal frequency), ``machine`` and ``drive`` (the drive's)."""
+        noise keys), ``freq`` (Hz, a grid's nominal frequency), ``machine``, ``drive`` and ``sensors`` (the
+        drive's: a drive file's :class:`~jaxobs.drive.Sensors`, or None: ideal)."""
         return cls()
 
     @classmethod
@@ -167,7 +176,7 @@ class GridSignals(AbstractScenarios):
     truth_counts: ClassVar[tuple] = (3,)
 
     @classmethod
-    def of(cls, *, t_event: float = 0.0, seed: int = 0, freq: float = 50.0, machine=None, drive=None):
+    def of(cls, *, t_event: float = 0.0, seed: int = 0, freq: float = 50.0, machine=None, drive=None, sensors=None):
         return cls(t_event, freq, seed)
 
     def build(self, names, points, first: int = 0):
@@ -220,6 +229,7 @@ class DriveScenarios(AbstractScenarios):
     drive: Drive
     t_event: float = eqx.field(static=True, default=0.0)
     seed: int = eqx.field(static=True, default=0)
+    sensors: Sensors | None = None  # a drive file's sensors (None: ideal), the noise axes' base
 
     signal: ClassVar[str] = "drive"
     axes: ClassVar[dict] = DRIVE_STUDY_AXES
@@ -229,11 +239,13 @@ class DriveScenarios(AbstractScenarios):
     truth_counts: ClassVar[tuple] = EMFSignals.truth_counts
 
     @classmethod
-    def of(cls, *, t_event: float = 0.0, seed: int = 0, freq: float = 50.0, machine=None, drive=None):
-        return cls(machine, drive, t_event=t_event, seed=seed)
+    def of(cls, *, t_event: float = 0.0, seed: int = 0, freq: float = 50.0, machine=None, drive=None, sensors=None):
+        return cls(machine, drive, t_event=t_event, seed=seed, sensors=sensors)
 
     def build(self, names, points, first: int = 0):
-        return drive_scenarios(self.machine, names, points, seed=self.seed, t_event=self.t_event, first=first)
+        return drive_scenarios(
+            self.machine, names, points, seed=self.seed, t_event=self.t_event, first=first, sensors=self.sensors
+        )
 
     def system(self, design, scenario):
         return ClosedLoop(self.drive, bind_observer(design, scenario), scenario)

@@ -42,8 +42,11 @@ class Registered:
     Attributes:
         cls: the observer class.
         signal: the scenarios a tuning job runs it on by default: ``"grid"``, ``"emf"`` or ``"drive"``.
-        machines: the bench machines a drive job may run it on (``jaxobs.drive.BENCH_MACHINES``), the default
-            first; empty: no drive jobs.
+        machines: the shipped drive files (``jaxobs.drive.SHIPPED_DRIVES``) a drive job may name for it, the
+            default first; empty: no drive jobs.  A drive file of the user's is checked by :meth:`refusal`.
+        salient: whether it runs on a salient machine (Ld ≠ Lq).
+        dual: whether it runs on a dual three-phase machine (its αβ subspace, :mod:`jaxobs.drive.dual`).
+        why_not_salient, why_not_dual: the one-line reason of a refusal.
         defaults: a job's constructor values before its ``[component]`` and ``[gains]`` tables.
         closed_form_source: the paper's equations and table of the closed form, in one line.
         closed_form_rule: the closed form's formulas, in one line (the export's source line).
@@ -59,6 +62,10 @@ class Registered:
     closed_form_source: str = ""
     closed_form_rule: str = ""
     machines: tuple = ()
+    salient: bool = True
+    dual: bool = False
+    why_not_salient: str = ""
+    why_not_dual: str = ""
     aliases: tuple = ()
     tunable: bool = True
     model: Callable[[dict], Any] | None = None
@@ -71,6 +78,21 @@ class Registered:
     def gains(self) -> tuple:
         """The gains a job may tune: the class's gain fields (:func:`jaxobs.observers.gain_fields`)."""
         return tuple(gain_fields(self.cls))
+
+    def refusal(self, machine) -> str | None:
+        """Why this component cannot run on ``machine`` (a :class:`~jaxobs.drive.PMSMParams` or a dual
+        machine's :class:`~jaxobs.drive.DualPMSMParams`), in one line; None where it can."""
+        if not self.machines:
+            return f"{self.name} runs on no drive (it is not a drive observer)"
+        is_dual = hasattr(machine, "per_set")
+        if is_dual and not self.dual:
+            return f"{self.name} does not run on a dual three-phase machine: {self.why_not_dual}"
+        m = machine.per_set() if is_dual else machine
+        ld, lq = float(m.Ld), float(m.Lq)
+        if abs(lq - ld) > 1e-9 * max(ld, lq) and not self.salient:
+            why = self.why_not_salient
+            return f"{self.name} does not run on a salient machine (Ld = {ld:.4g} H, Lq = {lq:.4g} H): {why}"
+        return None
 
     @property
     def signals(self) -> tuple:
@@ -92,8 +114,19 @@ def canonical_key(cls, key: str) -> str:
 W_N = papers.FLL_OMEGA_N
 # A LESO's extended-EMF model (002 eqs 4–5) holds on a non-salient machine too (Ld = Lq), so the LESOs
 # may run on 000's SPMSM; the flux observers may not run on the IPMSM: their back EMF u − R̂s i − L̂ di/dt
-# with one inductance is not dψ_f/dt on a salient machine.
+# with one inductance is not dψ_f/dt on a salient machine.  They are refused there rather than run on the
+# active flux ψ_a = ψ_s − Lq i (sinusoidal on any PMSM): that is another observer, whose amplitude
+# ψf + (Ld − Lq) i_d moves with the load, so 000's closed forms (normalized by a constant flux) and its
+# stability boundaries (docs/stability.md) would not hold for it, and no paper here gives its gains.
 _LESO_MACHINES = ("ipmsm002", "spmsm000")
+_FLUX_SUPPORT = dict(
+    salient=False,
+    why_not_salient="000's rotor-flux observers assume Ld = Lq (their back EMF u − Rs i − L di/dt has one L)",
+    why_not_dual="000's observers are derived and checked on a three-phase machine only",
+)
+# 002's LESOs run on either: they are 002's observers of a dual three-phase IPMSM (its αβ subspace,
+# jaxobs.reproduce.leso_dual) and their extended EMF holds with Ld ≠ Lq (002 eqs 4–5)
+_LESO_SUPPORT = dict(salient=True, dual=True)
 
 
 def _pll(hz) -> dict:
@@ -140,6 +173,7 @@ _ENTRIES = (
         closed_form_source="000 (k = 1.414), lam = k²/4",
         closed_form_rule="000: k = 1.414; lam = k²/4 (001 eq 22, frequency-normalized)",
         machines=("spmsm000",),
+        **_FLUX_SUPPORT,
         model=lambda v: linear.soifo_tf(float(v["k"]), float(v["omega_init"])),
     ),
     Registered(
@@ -156,6 +190,7 @@ _ENTRIES = (
         closed_form_source="000 (K1 = 1.56, K2 = 3.11), lam = K1³/(2K2)",
         closed_form_rule="000: K1 = 1.56, K2 = 3.11; lam = K1³/(2K2) (001 eq 34, frequency-normalized)",
         machines=("spmsm000",),
+        **_FLUX_SUPPORT,
         model=lambda v: linear.sosoifo_tf(float(v["K1"]), float(v["K2"]), float(v["omega_init"])),
     ),
     # 000's LPF flux estimator ψ̂ = ê/(s + ωc), uncompensated as in 000 Fig. 5, with the type-2 PLL (ASSUMED,
@@ -170,6 +205,7 @@ _ENTRIES = (
         closed_form_source="000 Fig. 5 (omega_c = 100 rad/s), PLL pole placement omega_b = 2 pi 20 (ASSUMED)",
         closed_form_rule="000 Fig. 5: omega_c = 100 rad/s; PLL kp = 2ζω_b, ki = ω_b², ω_b = 2π·20 (ASSUMED)",
         machines=("spmsm000",),
+        **_FLUX_SUPPORT,
     ),
     # The pure integrator is no job component: its flux starts from zero, so its circle is offset by the flux
     # at its start (000's "unknown integral initial value") and θ̂ is wrong by up to 90° whatever its PLL
@@ -179,6 +215,7 @@ _ENTRIES = (
         signal="drive",
         defaults=dict(Rs=papers.SPMSM_000["Rs"], L=papers.SPMSM_000["Ld"]),
         machines=("spmsm000",),
+        **_FLUX_SUPPORT,
         tunable=False,
     ),
     Registered(
@@ -188,6 +225,7 @@ _ENTRIES = (
         closed_form_source="002 Table II (ω0 = 500π), PLL pole placement ω_b = 2π·15",
         closed_form_rule="002 eq (16), Table II: l1 = 2ω0 − μ, l2 = ω0², ω0 = 500π; PLL ω_b = 2π·15",
         machines=_LESO_MACHINES,
+        **_LESO_SUPPORT,
         aliases=("cleso",),
     ),
     Registered(
@@ -197,6 +235,7 @@ _ENTRIES = (
         closed_form_source="002 Table II (ω0 = 500π, K_r = 2ω0², ωc = π), PLL pole placement ω_b = 2π·15",
         closed_form_rule="002 Table II: ω0 = 500π, K_r = 2ω0², ωc = π; PLL ω_b = 2π·15",
         machines=_LESO_MACHINES,
+        **_LESO_SUPPORT,
     ),
     Registered(
         FALESO,
@@ -205,6 +244,7 @@ _ENTRIES = (
         closed_form_source="002 Table II (k1 = 10π, k2 = 100π), PLL pole placement ω_b = 2π·15",
         closed_form_rule="002 Table II: k1 = 10π, k2 = 100π; PLL ω_b = 2π·15",
         machines=_LESO_MACHINES,
+        **_LESO_SUPPORT,
     ),
 )
 

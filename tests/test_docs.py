@@ -63,9 +63,11 @@ def _jaxobs_exe() -> str:
 
 
 def _run_cli(cmd: str, cwd: Path) -> subprocess.CompletedProcess:
-    """``cmd`` in ``cwd`` as a reader runs it at the repository's root (``tuning/presets/...`` resolves)."""
-    if not (cwd / "tuning").exists():
-        (cwd / "tuning").symlink_to(ROOT / "tuning")
+    """``cmd`` in ``cwd`` as a reader runs it at the repository's root (``tuning/presets/...`` and
+    ``docs/examples/...`` resolve)."""
+    for d in ("tuning", "docs"):
+        if not (cwd / d).exists():
+            (cwd / d).symlink_to(ROOT / d)
     env = {**os.environ, "COLUMNS": "100"}  # argparse wraps its help to the terminal's width
     return subprocess.run(
         [_jaxobs_exe(), *cmd.split()[1:]], capture_output=True, text=True, cwd=cwd, timeout=1800, check=False, env=env

@@ -21,13 +21,21 @@ from .results import load_result, result_designs
 ENVELOPE_FILES = ("envelope.nc", "envelope.png")
 
 
-def envelope_designs(path: Path):
-    """(job, {design name: observer}) of a job file or of a result.json (its job and its values)."""
+def envelope_designs(path: Path, drive: str | None = None):
+    """(job, {design name: observer}) of a job file or of a result.json (its job and its values); ``drive``: a
+    drive file that replaces the result's job's (a result keeps its job's drive file inline)."""
     if path.suffix == ".json":  # the one reader of result files (jaxobs_tuning.results), as study and export
         result = load_result(path)
-        job = parse_job(result["job"], path.parent)
+        raw = result["job"]
+        if drive is not None:
+            keep = {k: v for k, v in raw.get("drive", {}).items() if not isinstance(v, dict) and k != "machine"}
+            keep = {k: v for k, v in keep.items() if k not in ("file", "name", "description")}
+            raw = {**raw, "drive": {**keep, "file": str(Path(drive).resolve())}}
+        job = parse_job(raw, path.parent)
         designs = result_designs(result, f"result file {str(path)[:120]!r}")
     else:
+        if drive is not None:
+            raise JobError("--drive", "applies to a result.json; a job file names its drive file ([drive] file)")
         job = load_job(path)
         info = COMPONENTS[job.component]
         initial = info.ctor(**job.values)
@@ -68,14 +76,13 @@ def cli_envelope(args) -> int:
     import jax
 
     jax.config.update("jax_enable_x64", True)
-    from jaxobs import drive as D
     from jaxobs.analysis.envelope import default_loads, default_speeds, envelope
     from jaxobs.plot import envelope_figure
 
     path = Path(args.source)
-    job, designs = envelope_designs(path)
+    job, designs = envelope_designs(path, getattr(args, "drive", None))
     spec = dataclasses.replace(job.drive, loop="sensorless", start="steady", handover=0.0)
-    par = D.bench_machine(spec.machine)
+    par = spec.drive_file.machine
     drive = job_drive(spec)
     speeds, loads = default_speeds(par, args.speeds), default_loads(par, args.loads)
     n = len(speeds) * len(loads)
@@ -149,6 +156,7 @@ def add_envelope_parser(subparsers, parents=()) -> argparse.ArgumentParser:
     )
     e.add_argument("source", help="a drive job file (TOML) or a `jaxobs tune` result.json of one")
     e.add_argument("--out", help="results folder (default: out/envelope-<job name>)")
+    e.add_argument("--drive", help="a drive file (TOML) to map a result.json on (default: the result's job's drive)")
     e.add_argument(
         "--speeds", type=_count(2, 64), default=8, help="speeds, log-spaced 1 %%..100 %% of rated (default 8)"
     )

@@ -182,7 +182,8 @@ def check_result(res, where: str = "result") -> dict:
                 continue
             if not _table(table, where, f"values.{name}"):
                 raise ValueError(f"{where}: values.{name} is empty (a table of the design's values)")
-            _numbers(table, allowed, where, f"values.{name}")
+            # and the sample period where the job's drive file sets it (its 1/f_sample_hz)
+            _numbers(table, (*allowed, "ts"), where, f"values.{name}")
         if not any(t is not None for t in values.values()):
             raise ValueError(f"{where}: values holds no design (initial, closed_form and tuned all null or absent)")
     # a JobError (a ValueError of one line) names the job's field; its recordings are not read (no base folder:

@@ -218,11 +218,11 @@ def _settling_at(K1, K2, omega):
 
 def _drive_speed(job) -> float:
     """The electrical speed (rad/s) the drive jobs linearize at: the first scenario's speed (600 r/min default)
-    times the pole pairs of the job's machine (``[drive] machine``; 002's IPMSM without a job)."""
+    times the pole pairs of the job's machine (its drive file; 002's IPMSM without a job)."""
     rpm = (job.scenarios.axes.get("speed_rpm") if job is not None else None) or [600.0]
     rpm = rpm[0]
-    machine = job.drive.machine if job is not None and job.drive is not None else "ipmsm002"
-    return rpm * math.pi / 30 * bench_machine(machine).p
+    machine = job.drive.drive_file.machine if job is not None and job.drive is not None else bench_machine("ipmsm002")
+    return rpm * math.pi / 30 * machine.p
 
 
 def _leso(name: str, v: dict, job) -> tuple[dict, dict]:

@@ -34,7 +34,7 @@ A drive study::
 
     [study]
     kind = "drive"
-    machine = "ipmsm002"           # jaxobs.drive.BENCH_MACHINES (the jobs' machines, bench inertia and FOC);
+    machine = "ipmsm002"           # a shipped drive file (jaxobs.drive.SHIPPED_DRIVES, the jobs' benches);
                                    # default: the machine a result design was tuned on, else the first design's
     horizon = 0.3                  # s
     steady_from = 0.15             # s (default horizon / 2)
@@ -42,6 +42,8 @@ A drive study::
     sampling = "grid"              # grid | sobol | lhs (with sample = n)
     [drive]
     settle = 0.2                   # s, the observer's unscored settling phase before t = 0
+    # file = "my_drive.toml"       # or the user's drive file (relative to the study file), instead of
+                                   # study.machine; or its tables inline: [drive.machine], [drive.inverter], ...
     [designs.C-LESO]
     closed_form = "CLESO"          # a drive component's closed-form gains (jaxobs_tuning.job.COMPONENTS)
     [designs.tuned]
@@ -66,7 +68,7 @@ import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from jaxobs.drive import BENCH_MACHINES, bench_machine
+from jaxobs.drive import SHIPPED_DRIVES, bench_machine, shipped_drive
 from jaxobs.families import DriveScenarios, GridSignals
 from jaxobs.observers import AbstractFluxObserver
 from jaxobs.provenance import sha256, versions
@@ -74,6 +76,7 @@ from jaxobs.registry import REGISTRY, canonical_key
 
 from .job import (
     COMPONENTS,
+    DRIVE_TABLES,
     MAX_SCENARIOS,
     MAX_STEPS,
     DriveSpec,
@@ -82,6 +85,7 @@ from .job import (
     axes_field,
     cap,
     check_speed_axes,
+    drive_source,
     get_field,
     job_drive,
     no_unknown,
@@ -107,9 +111,9 @@ WHAT = "study file"
 FLL_CLOSED_FORMS = {a: e.cls.closed_form for e in REGISTRY.values() if e.signal == "grid" for a in e.aliases}
 FLL_COMPONENTS = tuple(name for name, e in REGISTRY.items() if e.signal == "grid")
 DRIVE_OBSERVERS = tuple(name for name, e in REGISTRY.items() if "drive" in e.signals)
-# the drive jobs' machines (jaxobs.drive.BENCH_MACHINES: the same names, bench inertias and FOC), so a study
-# scores a tuned result on the drive that tuned it
-MACHINES = tuple(BENCH_MACHINES)
+# the drive jobs' shipped drive files (jaxobs.drive.SHIPPED_DRIVES: the same names, bench inertias and FOC), so a
+# study scores a tuned result on the drive that tuned it
+MACHINES = tuple(SHIPPED_DRIVES)
 MAX_CHUNK = 100_000
 # bytes one scenario keeps per time step while a chunk runs (every step's outputs and the metrics' temporaries,
 # float64): an estimate for the memory check, not a measurement
@@ -420,10 +424,19 @@ def _parse_drive(raw: dict, st: dict, name: str, base: Path) -> StudySpec:
     dr = get_field(raw, "drive", "drive", dict, {})
     # the FOC is the drive jobs' (jaxobs_tuning.job.job_drive: the bench's IMC current and I-P speed loops), so a tuned
     # result is scored on the drive that tuned it; only the observer's unscored settling phase is the study's
-    no_unknown(dr, ("settle",), "drive")
+    no_unknown(dr, ("settle", "file", "name", "description", *DRIVE_TABLES), "drive")
     settle = get_field(dr, "settle", "drive.settle", float, 0.2)
     if not 0 <= settle <= 10:
         raise JobError("drive.settle", f"must be in [0, 10] s, got {settle:g}")
+    # the user's drive file ([drive] file, or its tables inline), else a shipped one (study.machine)
+    file = None
+    if isinstance(dr.get("machine"), str):
+        raise JobError("drive.machine", "a shipped machine is named by study.machine; [drive.machine] is a table")
+    if "file" in dr or any(isinstance(dr.get(k), dict) for k in DRIVE_TABLES):
+        if "machine" in st:
+            raise JobError("study.machine", "give study.machine or the [drive] file (or its tables), not both")
+        file_name, file = drive_source(dr, "", base)
+    ts_file = None if file is None else file.ts  # the designs run at the drive file's period
     tuned_on = {}  # "designs.NAME" -> the machine its result was tuned on
     results = {}  # design -> its result file and sha256
 
@@ -447,6 +460,8 @@ def _parse_drive(raw: dict, st: dict, name: str, base: Path) -> StudySpec:
                 raise JobError(f"{where}.closed_form", f"must be one of {allowed}, got {show(comp)}")
             info = COMPONENTS[comp]
             values = {**info.defaults, **info.closed_form(info.ctor(**info.defaults))}
+            if ts_file is not None:
+                values["ts"] = ts_file
             try:
                 return info.ctor(**values)
             except (ValueError, TypeError, ArithmeticError) as e:
@@ -465,26 +480,33 @@ def _parse_drive(raw: dict, st: dict, name: str, base: Path) -> StudySpec:
     # the machine: study.machine, else the one the results were tuned on, else the first design's default
     first = type(next(iter(designs.values()))).__name__
     default = next(iter(tuned_on.values()), None) or COMPONENTS.get(first, COMPONENTS["CLESO"]).machines[0]
-    machine = get_field(st, "machine", "study.machine", str, default)
-    if machine not in MACHINES:
+    machine = file_name if file is not None else get_field(st, "machine", "study.machine", str, default)
+    if file is None and machine not in MACHINES:
         raise JobError("study.machine", f"must be one of {', '.join(MACHINES)}, got {show(machine)}")
     for where, m in tuned_on.items():
         if m != machine:
             raise JobError(f"{where}.result", f"was tuned on {m}, the study runs {machine}: give study.machine = {m!r}")
+    df = shipped_drive(machine) if file is None else file
     for dname, obs in designs.items():
         comp = type(obs).__name__
-        if comp in COMPONENTS and machine not in COMPONENTS[comp].machines:
+        why = REGISTRY[comp].refusal(df.machine) if file is not None and comp in REGISTRY else None
+        if file is None and comp in COMPONENTS and machine not in COMPONENTS[comp].machines:
+            why = f"{comp} cannot run on {machine} ({df.description}); allowed: {', '.join(COMPONENTS[comp].machines)}"
+        if why is not None:
+            raise JobError(f"designs.{cap(str(dname), 40)}", why)
+        if file is not None and abs(float(obs.ts) - df.ts) > 1e-12 * df.ts:
             raise JobError(
                 f"designs.{cap(str(dname), 40)}",
-                f"{comp} cannot run on {machine} ({BENCH_MACHINES[machine]}); "
-                f"allowed: {', '.join(COMPONENTS[comp].machines)}",
+                f"runs at ts = {float(obs.ts):g} s, the drive file at {df.ts:g} s (1/f_sample_hz): they must agree",
             )
-    par = bench_machine(machine)
+    par = df.machine
     try:
-        drive = job_drive(DriveSpec(loop="sensorless", settle=settle, machine=machine))
+        drive = job_drive(DriveSpec(loop="sensorless", settle=settle, machine=machine, file=file))
     except (ValueError, ArithmeticError) as e:
         raise JobError("drive", str(e)) from None
-    provenance = {"machine": f"{machine}: {BENCH_MACHINES[machine]}", **_results_attr(results)}
+    provenance = {"machine": f"{machine}: {df.description}", **_results_attr(results)}
+    if file is not None:  # the drive file's tables as read: the study's record, and what --resume checks
+        provenance["drive_file"] = json.dumps(file.table, sort_keys=True, ensure_ascii=False)
     horizon = get_field(st, "horizon", "study.horizon", float, 0.3)
     if not horizon > 0:
         raise JobError("study.horizon", f"must be > 0 s, got {horizon:g}")
@@ -511,12 +533,13 @@ def _parse_drive(raw: dict, st: dict, name: str, base: Path) -> StudySpec:
         raise JobError("study.sample", f"must be in [1, {MAX_SCENARIOS}] with sampling = {sampling!r}, got {sample}")
     seed, chunk = _seed(st), _chunk(st, 256)
     axes = _axes(raw, DriveScenarios)
-    check_speed_axes(axes, "axes", machine)  # the jobs' check: speeds within the inverter's limit
+    check_speed_axes(axes, "axes", machine, file)  # the jobs' check: speeds within the inverter's limit
     n = _count(axes, sample)
     _check_steps(horizon, steady, ts, n, chunk, "drive", extra_s=settle)
     opts = dict(
         machine=par,
         drive=drive,
+        sensors=None if file is None else file.sensors,  # a shipped bench's: ideal
         horizon=horizon,
         steady_from=steady,
         t_event=t_event,

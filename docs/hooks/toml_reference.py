@@ -305,7 +305,7 @@ class _Names:
 def reference_markdown() -> str:
     sys.path.insert(0, str(ROOT))
     import jaxobs_tuning
-    from jaxobs.drive import BENCH_MACHINES  # the drive jobs' and studies' machines
+    from jaxobs.drive import SHIPPED_DRIVES  # the drive jobs' and studies' shipped drive files
 
     # the schema's public tables wherever a refactor puts them (tuning's modules are being split): each name is
     # looked up in tuning's submodules, the first that defines it wins
@@ -398,9 +398,9 @@ def reference_markdown() -> str:
             "drive",
             index,
             None,
-            'Drive jobs only (`scenarios.signal = "drive"`). Machines: '
-            + ", ".join(f"`{m}`" for m in BENCH_MACHINES)
-            + ".",
+            'Drive jobs only (`scenarios.signal = "drive"`). Shipped machines: '
+            + ", ".join(f"`{m}`" for m in SHIPPED_DRIVES)
+            + '; or a drive file (`file = "my_drive.toml"`, or its tables inline: see `jaxobs drive check`).',
         )
     )
     out.append(
@@ -463,7 +463,7 @@ def reference_markdown() -> str:
             "study",
             index,
             "drive",
-            "A sensorless-drive study. Machines: " + ", ".join(f"`{m}`" for m in BENCH_MACHINES) + ".",
+            "A sensorless-drive study. Machines: " + ", ".join(f"`{m}`" for m in SHIPPED_DRIVES) + ".",
         )
     )
     out.append(

@@ -8,13 +8,14 @@ them with an observer, :class:`ClosedLoop`, which ``jaxobs.simulate`` runs.
 """
 
 from .._measurements import DriveInput as DriveInput
-from .bench import BENCH_MACHINES as BENCH_MACHINES
 from .bench import IF_SUDDEN_LOAD_PU as IF_SUDDEN_LOAD_PU
+from .bench import SHIPPED_DRIVES as SHIPPED_DRIVES
 from .bench import bench_drive as bench_drive
 from .bench import bench_machine as bench_machine
 from .bench import drive_speed_limit_rpm as drive_speed_limit_rpm
 from .bench import if_handover_earliest as if_handover_earliest
 from .bench import if_load_limit as if_load_limit
+from .bench import shipped_drive as shipped_drive
 from .component import AbstractComponent as AbstractComponent
 from .control import FOC as FOC
 from .control import ControllerState as ControllerState
@@ -23,6 +24,7 @@ from .control import FOCOutput as FOCOutput
 from .control import IfStartup as IfStartup
 from .control import OperatingPoint as OperatingPoint
 from .drivefile import DriveFile as DriveFile
+from .drivefile import drive_from_table as drive_from_table
 from .drivefile import load_drive as load_drive
 from .drivefile import read_drive as read_drive
 from .dual import DualPMSM as DualPMSM

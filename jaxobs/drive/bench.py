@@ -1,8 +1,10 @@
 """The simulated benches: the papers' machines on their benches' inertia, the FOC they run, and what the
 I-f start-up and the inverter allow on them.
 
-One builder for every caller (drive jobs and studies in ``tuning/``, ``jaxobs.reproduce``, the C export's
-recordings): :func:`bench_machine` by name (:data:`BENCH_MACHINES`), :func:`bench_drive` on a machine.
+The two benches are two drive files shipped with the package (``jaxobs/data/<name>.toml``, each value with its
+source, ASSUMED ones marked): :data:`SHIPPED_DRIVES` maps a name to its file, :func:`shipped_drive` reads it
+(:func:`jaxobs.drive.read_drive`, the same checks as any drive file), :func:`bench_machine` is its machine.
+:func:`bench_drive` builds the benches' FOC on any machine (the mismatched machines of ``jaxobs.reproduce``).
 
 - ``"spmsm000"``: 000 Table II's SPMSM (p = 3).  Table II's J = 3.78e-4 kg·m² is the motor's; the bench
   couples a load machine, so we ASSUME a total J = :data:`jaxobs.papers.BENCH_J_000` (10×).
@@ -16,40 +18,63 @@ speed loop α_s = 2π·:data:`~jaxobs.papers.BENCH_SPEED_HZ` rad/s (:meth:`jaxob
 
 from __future__ import annotations
 
+import functools
 import math
+from pathlib import Path
 
 from .. import papers
 from .control import FOC, IfStartup
+from .drivefile import DriveFile, read_drive
 from .hardware import Inverter
 from .latency import Latency
 from .loop import Drive
-from .machine import PMSMParams, ipmsm_paper002, spmsm_paper000
+from .machine import PMSMParams
 
 __all__ = [
-    "BENCH_MACHINES",
     "IF_SUDDEN_LOAD_PU",
+    "SHIPPED_DRIVES",
     "bench_drive",
     "bench_machine",
     "drive_speed_limit_rpm",
     "if_handover_earliest",
     "if_load_limit",
+    "shipped_drive",
 ]
 
-# name -> what it is (for messages and provenance)
-BENCH_MACHINES = {
-    "ipmsm002": "paper 002's IPMSM (ASSUMED, papers.IPMSM_002), J = papers.BENCH_J_002",
-    "spmsm000": "paper 000's SPMSM (Table II, papers.SPMSM_000), J = papers.BENCH_J_000",
-}
-_PRESETS = {"ipmsm002": (ipmsm_paper002, papers.BENCH_J_002), "spmsm000": (spmsm_paper000, papers.BENCH_J_000)}
+_DATA = Path(__file__).resolve().parent.parent / "data"
+# the drive files shipped with the package: name -> its file (jaxobs/data)
+SHIPPED_DRIVES = {"ipmsm002": _DATA / "ipmsm002.toml", "spmsm000": _DATA / "spmsm000.toml"}
+
+
+@functools.cache
+def shipped_drive(name: str) -> DriveFile:
+    """The shipped drive file ``name`` (a key of :data:`SHIPPED_DRIVES`), read and checked once.
+
+    Raises:
+        ValueError: an unknown name, in one line naming the shipped ones.
+    """
+    if name not in SHIPPED_DRIVES:
+        raise ValueError(f"machine must be one of {', '.join(SHIPPED_DRIVES)} or a drive file (.toml), got {name!r}")
+    return read_drive(SHIPPED_DRIVES[name])
 
 
 def bench_machine(name: str = "ipmsm002", **overrides) -> PMSMParams:
-    """The :class:`PMSMParams` of a bench (a key of :data:`BENCH_MACHINES`) on its bench's inertia (kg·m²);
-    ``overrides``: other parameters (e.g. ``a5``, ``a7`` or a mismatched ``Rs``), as the presets take them."""
-    if name not in _PRESETS:
-        raise ValueError(f"bench_machine: name must be one of {', '.join(BENCH_MACHINES)}, got {name!r}")
-    ctor, inertia = _PRESETS[name]
-    return ctor(**{"J": inertia, **overrides})
+    """The machine of the shipped drive file ``name`` (a key of :data:`SHIPPED_DRIVES`), on its bench's inertia
+    (kg·m²); ``overrides``: other parameters (e.g. ``a5``, ``a7`` or a mismatched ``Rs``), as the presets take
+    them.
+
+    Raises:
+        ValueError: an unknown name or a refused parameter.
+    """
+    m = shipped_drive(name).machine
+    if not overrides:
+        return m
+    kw = dict(Rs=m.Rs, Ld=m.Ld, Lq=m.Lq, psi_f=m.psi_f, J=m.J, p=m.p, B=m.B, a5=m.a5, a7=m.a7, T_rated=m.T_rated,
+              n_rated=m.n_rated, q_sat=m.q_sat)  # fmt: skip
+    unknown = set(overrides) - set(kw)
+    if unknown:
+        raise ValueError(f"bench_machine: unknown parameter(s) {', '.join(sorted(unknown))}; allowed: {', '.join(kw)}")
+    return PMSMParams(**{**kw, **overrides})
 
 
 def bench_drive(
@@ -88,9 +113,9 @@ def bench_drive(
 IF_SUDDEN_LOAD_PU = 0.7246
 
 
-def if_load_limit(machine: PMSMParams, dJ: float = 0.0) -> float:
-    """The largest load (N·m) that ``machine`` may carry during its I-f start-up
-    (:meth:`IfStartup.for_machine`), with its inertia scaled by ``1 + dJ``.
+def if_load_limit(machine: PMSMParams, dJ: float = 0.0, startup: IfStartup | None = None) -> float:
+    """The largest load (N·m) that ``machine`` may carry during its I-f start-up (``startup``, default
+    :meth:`IfStartup.for_machine`: a drive file states its own), with its inertia scaled by ``1 + dJ``.
 
     During I-f the rotor is held by the current vector I_f only: its torque is at most T_max = K_t I_f (the
     magnet torque; an IPMSM's reluctance torque is left out).  The load is on from t = 0 (a step), so the
@@ -102,7 +127,7 @@ def if_load_limit(machine: PMSMParams, dJ: float = 0.0) -> float:
 
     On 000's SPMSM bench: 0.7246 · 7.0 − 1.25 − 0 = 3.82 N·m; measured with the SOIFO at 1000 r/min, 4.5 N·m
     still started and 5.0 N·m ran backwards (−320 r/min, flagged lost_speed): sufficient, not necessary."""
-    s = IfStartup.for_machine(machine)
+    s = IfStartup.for_machine(machine) if startup is None else startup
     a_peak_m = float(s.accel) / machine.p * (2.0 if s.smooth else 1.0)  # mechanical, rad/s²
     w_sw_m = float(s.omega_switch) / machine.p
     return (
@@ -112,19 +137,21 @@ def if_load_limit(machine: PMSMParams, dJ: float = 0.0) -> float:
     )
 
 
-def if_handover_earliest(machine: PMSMParams) -> float:
-    """The earliest time (s) the I-f start-up of ``machine`` can hand over: the ramp to the switch speed,
-    then both the hold and the agreement's dwell at it (they run at the same time)."""
-    s = IfStartup.for_machine(machine)
+def if_handover_earliest(machine: PMSMParams, startup: IfStartup | None = None) -> float:
+    """The earliest time (s) the I-f start-up of ``machine`` (``startup``, default
+    :meth:`IfStartup.for_machine`) can hand over: the ramp to the switch speed, then both the hold and the
+    agreement's dwell at it (they run at the same time)."""
+    s = IfStartup.for_machine(machine) if startup is None else startup
     return float(s.omega_switch / s.accel) + max(float(s.hold), float(s.dwell))
 
 
-def drive_speed_limit_rpm(machine: PMSMParams) -> float:
+def drive_speed_limit_rpm(machine: PMSMParams, inverter: Inverter | None = None) -> float:
     """The highest speed (r/min, either direction) a drive may ask of ``machine``: the speed at which the
-    back EMF alone, ωe ψf, reaches the inverter's voltage limit u_max = U_dc/√3 (the default
-    :class:`Inverter`).  Above it the FOC cannot hold even zero current, as field weakening is not modelled
-    (i_d* is 0 or MTPA, never negative for flux weakening): the machine would run away from its reference.
+    back EMF alone, ωe ψf, reaches the inverter's voltage limit u_max = U_dc/√3 (``inverter``, default the
+    benches' :class:`Inverter`; a drive file states its own: ``DriveFile.derived["speed_limit_rpm"]``).
+    Above it an FOC without field weakening (i_d* is 0 or MTPA, never negative) cannot hold even zero current:
+    the machine would run away from its reference.
     It is a no-load bound (load adds Rs·i and ωe·Lq·i to the voltage), so it is necessary, not sufficient:
     ipmsm002 1323 r/min (2.2 × its 600 r/min rating), spmsm000 2835 r/min (1.4 × 2000 r/min)."""
-    w_e = float(Inverter().u_max) / float(machine.psi_f)  # rad/s electrical
+    w_e = float((Inverter() if inverter is None else inverter).u_max) / float(machine.psi_f)  # rad/s electrical
     return w_e / machine.p * 60.0 / (2 * math.pi)

@@ -11,6 +11,7 @@ The file (SI units, or the unit in the key's name; ``[machine]``'s keys from ``p
 ``[inverter]``'s ``u_dc`` and ``f_sample_hz`` are required, everything else optional)::
 
     name = "my drive"          # optional, a label
+    description = "..."        # optional, one line: what the drive is (results and messages quote it)
     [machine]
     p = 4                      # pole pairs
     Rs = 0.45                  # Ω
@@ -213,7 +214,7 @@ DRIVE_FILE_KEYS: dict[str, dict[str, _Key]] = {
         "speed_tol": _Key(_F, 0.0, 1.0, lo_open=True, unit="1"),
     },
 }
-_TOP = ("name",)
+_TOP = ("name", "description")
 
 
 class Derived(NamedTuple):
@@ -232,6 +233,9 @@ class DriveFile:
 
     Attributes:
         name: the file's ``name`` (or its stem).
+        description: the file's ``description`` (or its name).
+        foc_kw: :meth:`FOC.imc`'s keywords as derived (:meth:`drive_for` rebuilds the FOC from them).
+        table: the file's tables as read (``[machine]``, ``[inverter]``, ...): a job's result keeps them inline.
         machine: the machine, true and assumed alike.
         drive: the sensorless drive on it, starting steady (``Drive(sensorless=True)``, 0.2 s settle).
         sensors: the file's sensor errors (quantization as noise).
@@ -249,6 +253,56 @@ class DriveFile:
     derived: dict
     lowest_speeds: dict
     warnings: tuple
+    description: str = ""
+    foc_kw: dict = dataclasses.field(default_factory=dict, repr=False)
+    table: dict = dataclasses.field(default_factory=dict, repr=False)
+
+    @property
+    def ts(self) -> float:
+        """The control and PWM period (s): 1/``inverter.f_sample_hz``."""
+        return float(self.drive.ts)
+
+    @property
+    def speed_limit_rpm(self) -> float:
+        """The highest speed (r/min) a drive may be asked for (``derived["speed_limit_rpm"]``)."""
+        return float(self.derived["speed_limit_rpm"].value)
+
+    def drive_for(
+        self,
+        *,
+        sensorless: bool = True,
+        handover: float = 0.0,
+        settle: float = 0.2,
+        standstill: bool = False,
+        speed_schedule: float | None = None,
+    ) -> Drive:
+        """This file's drive as a run needs it: the same machine, inverter, timing and controller.
+
+        Args:
+            sensorless: the observer closes the loop (else the encoder, the observer beside it).
+            handover: the observer closes it from this time on (s).
+            settle: the observer's unscored settling phase before t = 0 (s).
+            standstill: start from rest by :attr:`startup` (else each scenario starts steady).
+            speed_schedule: the FOC's speed-loop schedule N (:class:`FOC`), or None: the file's.
+
+        Returns:
+            The :class:`Drive`.
+        """
+        d = self.drive
+        foc = d.foc
+        if speed_schedule is not None and float(speed_schedule) != float(foc.speed_schedule):
+            foc = FOC.imc(self.machine, **{**self.foc_kw, "speed_schedule": float(speed_schedule)})
+        return Drive(
+            foc,
+            d.inverter,
+            startup=self.startup if standstill else None,
+            n_sub=d.n_sub,
+            rule=d.rule,
+            sensorless=sensorless,
+            handover=handover,
+            settle=settle,
+            latency=d.latency,
+        )
 
 
 def _value(table: dict, tname: str, key: str, spec: _Key):
@@ -583,8 +637,7 @@ def drive_from_table(raw: dict, name: str = "drive") -> DriveFile:
         fw_obj = VoltageFeedbackFW(2 * math.pi * ctl.get("fw_bandwidth_hz", 20.0), ctl.get("fw_margin", 0.95))
     advance = ctl.get("advance", n_use)
     rec("advance", advance, "periods", "the timing's use delay (Latency.use_delay)", "advance" in ctl)
-    foc = FOC.imc(
-        machine,
+    foc_kw = dict(
         alpha_c=alpha_c,
         alpha_s=alpha_s,
         i_max=i_max,
@@ -596,6 +649,7 @@ def drive_from_table(raw: dict, name: str = "drive") -> DriveFile:
         setpoint_weight=ctl.get("setpoint_weight", 0.0),
         speed_schedule=schedule,
     )
+    foc = FOC.imc(machine, **foc_kw)
     for g in ("kp_d", "ki_d", "kp_q", "ki_q", "kp_w", "ki_w"):
         unit = {"kp": "V/A", "ki": "V/(A·s)"}[g[:2]] if g[-1] != "w" else {"kp": "A·s/rad", "ki": "A/rad"}[g[:2]]
         rule = "IMC: α_c L̂, α_c R̂s" if g[-1] != "w" else "double pole at −α_s: 2α_s Ĵ/K_t, α_s² Ĵ/K_t"
@@ -660,6 +714,9 @@ def drive_from_table(raw: dict, name: str = "drive") -> DriveFile:
         derived=d,
         lowest_speeds=lowest,
         warnings=tuple(warn),
+        description=str(raw.get("description", raw.get("name", name))),
+        foc_kw=foc_kw,
+        table={k: raw[k] for k in DRIVE_FILE_KEYS if k in raw},
     )
 
 

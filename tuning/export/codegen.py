@@ -362,6 +362,7 @@ extern "C" {{
 #define JX_NU {len(step.input_names)} /* inputs per step */
 #define JX_NY {len(step.output_names)} /* outputs per step */
 #define JX_Y_IS_ANGLE {{{angle_mask}}} /* outputs compared modulo 2 pi */
+#define JX_TS {float(obs32.ts)!r}f /* sample period, s: call jx_step once per period (a drive's 1/f_sample_hz) */
 
 /* the JAX step's state, leaf by leaf (pytree paths joined by '_') */
 typedef struct {{

@@ -10,11 +10,15 @@ from pathlib import Path
 
 import jax
 
+from jaxobs.drive import read_drive
 from jaxobs.observers import (
     AbstractDriveObserver,
 )
+from jaxobs.registry import REGISTRY
 
+from ..job import parse_job
 from ..outdir import OutDir
+from ..results import load_result
 from .files import EXPORT_FILES, export_observer
 from .golden import MAX_STEPS, MIN_STEPS, recording_bench
 from .harness import CFLAGS, TOLERANCE, compile_and_check
@@ -50,6 +54,11 @@ def add_export_parser(subparsers, parents=()) -> argparse.ArgumentParser:
         "the observer bound to its Rs, L and speed (default), or the synthesized PMSM signal on the observer's "
         "own Rs, L",
     )
+    e.add_argument(
+        "--drive",
+        help="a drive file (TOML): the C runs at its ts and the golden record is a sensored run of it (default: "
+        "the result's job's drive file, else the bench of the observer's family)",
+    )
     e.add_argument("--check", action="store_true", help="compile with cc and replay the golden vectors")
     e.add_argument("--force", action="store_true", help="overwrite an export already in --out")
     if not parents:  # a parser of its own (tests build one): the shared options, briefly
@@ -79,6 +88,17 @@ def cli_export(args) -> int:
         return _export(args)
 
 
+def _drive_file(args):
+    """The drive file of an export: ``--drive``, else the result's job's own drive file (a result keeps it
+    inline), else None (a shipped bench, or no drive: the recording runs on the observer family's bench)."""
+    if getattr(args, "drive", None):
+        return read_drive(args.drive)
+    if args.result is None:
+        return None
+    job = parse_job(load_result(args.result)["job"])
+    return None if job.drive is None else job.drive.file
+
+
 def _export(args) -> int:
     notes: list = []
     kw = {}
@@ -96,8 +116,26 @@ def _export(args) -> int:
         obs = observer_from_design(args.design, **kw)
         source = f"closed form {args.design}, {DESIGNS[args.design][1]}"
     signal = None
+    df = _drive_file(args)
+    record_drive = None
+    if df is not None:
+        why = REGISTRY[type(obs).__name__].refusal(df.machine) if type(obs).__name__ in REGISTRY else None
+        if why is not None:
+            raise ValueError(f"export: {why}")
+        if args.ts is not None and abs(args.ts - df.ts) > 1e-12 * df.ts:
+            raise ValueError(
+                f"--ts must be the drive file's {df.ts:g} s (1/f_sample_hz) with a drive file, got {args.ts:g}"
+            )
+        if abs(float(obs.ts) - df.ts) > 1e-12 * df.ts:
+            notes.append(f"ts = {df.ts:g} s: the drive file's {df.name} (1/f_sample_hz), not {float(obs.ts):g} s")
+            obs = rebuild(obs, ts=df.ts)
     if isinstance(obs, AbstractDriveObserver) and args.record == "drive":
-        machine, rpm = recording_bench(obs)
+        if df is None:
+            machine, rpm = recording_bench(obs)
+        else:  # a sensored run of the drive file, at half its rated speed (the benches' 1000 of 2000, 300 of 600)
+            machine, rpm = df.machine, 0.5 * float(df.machine.n_rated)
+            drive = df.drive_for(sensorless=False, settle=0.0)
+            record_drive = dict(machine=machine, rpm=rpm, drive=drive, label=f"drive file {df.name}")
         obs = obs.bind(machine, rpm * math.pi / 30 * int(machine.p))  # the one binding (its clamp included)
         r_name, l_name, speed = type(obs).bound_fields
         notes = [n for n in notes if "sets Rs, Lq" not in n]
@@ -111,7 +149,14 @@ def _export(args) -> int:
     elif isinstance(obs, AbstractDriveObserver):
         signal = "synthetic"
     coeffs = export_observer(
-        obs, args.out, n_steps=args.steps, signal=signal, source=source, notes=notes, progress=not args.quiet and "auto"
+        obs,
+        args.out,
+        n_steps=args.steps,
+        signal=signal,
+        source=source,
+        notes=notes,
+        progress=not args.quiet and "auto",
+        record_drive=record_drive,
     )
     out = Path(args.out)
     o = coeffs["ops_per_step"]

@@ -38,7 +38,15 @@ EXPORT_FILES = ("observer.h", "observer.c", "test_main.c", "golden.csv", "coeffi
 
 
 def export_observer(
-    observer, out_dir, *, n_steps: int = 12_000, signal=None, source: str = "", notes=(), progress=None
+    observer,
+    out_dir,
+    *,
+    n_steps: int = 12_000,
+    signal=None,
+    source: str = "",
+    notes=(),
+    progress=None,
+    record_drive: dict | None = None,
 ) -> dict:
     """Write ``observer`` as C99 float32 with its golden vectors into ``out_dir``; returns coefficients.json's content.
 
@@ -56,6 +64,8 @@ def export_observer(
             own Rs and L.  The default recording runs on its bench (:func:`jaxobs.drive.bench_machine`): export the
             observer bound to it (``observer.bind``) to get that machine's Rs and L in the C.
         source: where the design comes from (a result file, a closed form), for the header.
+        record_drive: the drive a drive observer's default recording runs on instead of its bench:
+            :func:`drive_recording`'s ``machine``, ``rpm``, ``drive`` and ``label`` (a drive file's).
         notes: lines recorded in the header and coefficients.json (e.g. defaults used).
         progress: its three stages (C generated, the test record, the golden vectors), each named as
             it runs (:mod:`jaxobs.progress`: ``True`` a tqdm bar on stderr, or a callable).
@@ -85,7 +95,7 @@ def export_observer(
         f0 = float(getattr(obs32, "omega_n", 2 * math.pi * 50.0)) / (2 * math.pi)
         u, signal_doc = fll_test_signal(obs32.ts, n_steps, f0)
     elif signal is None:
-        u, signal_doc = drive_recording(observer, n_steps, start=record_start(obs32))
+        u, signal_doc = drive_recording(observer, n_steps, start=record_start(obs32), **(record_drive or {}))
     elif isinstance(signal, str) and signal == "synthetic" and kind == "drive":
         rs, ls = assumed_machine(obs32)
         u, signal_doc = drive_test_signal(

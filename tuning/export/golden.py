@@ -157,6 +157,8 @@ def drive_recording(
     speed_step: float = 0.1,
     start: str = "",
     encoder: bool = False,
+    drive=None,
+    label: str | None = None,
 ):
     """The (u_α, u_β, i_α, i_β) a drive observer is fed in a sensored FOC drive, ``n_steps`` samples at its ts.
 
@@ -180,6 +182,10 @@ def drive_recording(
     ψf (cos θe0, sin θe0), divided by ts to the first voltage (the pure integrator's initial value);
     ``"alpha"`` zeroes the β components of the first voltage and the first two currents (a few
     per cent of their amplitude at θe0 = π/2: 5 % of the voltage, the ω_e L i_q drop; 3 % of the current).
+
+    ``drive``: the sensored :class:`jaxobs.drive.Drive` to record (a drive file's,
+    :meth:`jaxobs.drive.DriveFile.drive_for`; its ts must be the observer's), default the benches' FOC on
+    ``machine``; ``label``: the drive's name in the description (default the bench's).
 
     ``encoder=True`` appends two columns, the true electrical angle θe (rad, wrapped) and speed ωe
     (rad/s) at t_k: what an encoder would record beside u and i (the shipped example recording,
@@ -205,7 +211,13 @@ def drive_recording(
         omega_m0=rpm * D.RPM,
         theta_e0=math.pi / 2,
     )
-    drive = D.bench_drive(machine, sensorless=False, settle=0.0, ts=ts)  # the encoder closes the loop
+    if drive is None:
+        drive = D.bench_drive(machine, sensorless=False, settle=0.0, ts=ts)  # the encoder closes the loop
+    elif drive.sensorless or abs(float(drive.ts) - ts) > 1e-12 * ts:
+        raise ValueError(
+            f"drive_recording: the drive must be sensored and run at the observer's ts = {ts:g} s, got "
+            f"{'sensorless' if drive.sensorless else 'sensored'} at {float(drive.ts):g} s"
+        )
     sol = jaxobs.simulate(D.ClosedLoop(drive, _Tap(), scenario), n_steps * ts)
     m = sol.outputs.obs
     data = np.stack([np.asarray(m.u_a), np.asarray(m.u_b), np.asarray(m.i_a), np.asarray(m.i_b)], axis=1)
@@ -223,7 +235,7 @@ def drive_recording(
         raise ValueError(f"drive_recording: the drive gave {data.shape[0]} finite rows of {n_steps}")
     we = rpm * math.pi / 30 * int(machine.p)
     doc = (
-        f"sensored FOC drive ({_bench_of(observer)[2]}: Rs = {float(machine.Rs):g} ohm, "
+        f"sensored FOC drive ({_bench_of(observer)[2] if label is None else label}: Rs = {float(machine.Rs):g} ohm, "
         f"Ld = {float(machine.Ld):g} H, Lq = {float(machine.Lq):g} H, psi = {float(machine.psi_f):g} Wb, "
         f"p = {int(machine.p)}), steady start at {rpm:g} r/min ({we / (2 * math.pi):g} Hz electrical) and "
         f"{load[0]:g} T_rated, speed reference {speed_step:+.0%} at {t1:g} s, load to {load[1]:g} T_rated at "

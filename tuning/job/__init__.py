@@ -40,7 +40,9 @@ A job file::
 
     [drive]                          # drive jobs only (scenarios.signal = "drive")
     loop = "sensorless"              # sensorless (the tuned observer closes the loop) | sensored
-    machine = "spmsm000"             # ipmsm002 | spmsm000; default: the component's (LESOs 002, flux 000)
+    machine = "spmsm000"             # ipmsm002 | spmsm000 (shipped drive files); default: the component's
+    # file = "my_drive.toml"         # or the user's drive file (relative to the job), or its tables inline:
+                                     # [drive.machine], [drive.inverter], ... (jaxobs.drive.read_drive)
     speed_schedule = 6.0             # the FOC's speed loop at min(α_s, |ωe*|/N); 0 (default): off
     [envelope]                       # drive jobs: the envelope claimed, verified after tuning (verify)
     speed_rpm = [200.0, 2000.0]      # [lo, hi]; default: the span of the tuning grid
@@ -63,7 +65,9 @@ A job file::
 
 from .components import COMPONENTS as COMPONENTS
 from .components import ComponentInfo as ComponentInfo
+from .drive import DRIVE_TABLES as DRIVE_TABLES
 from .drive import check_speed_axes as check_speed_axes
+from .drive import drive_source as drive_source
 from .drive import job_drive as job_drive
 from .fields import MAX_SCENARIOS as MAX_SCENARIOS
 from .fields import MAX_STEPS as MAX_STEPS

@@ -1,13 +1,15 @@
-"""``[drive]`` of a drive job: the loop, the start (steady or the I-f start-up, with what it can carry), the
-machine's speed range, and the drive the job runs (:func:`job_drive`, on :func:`jaxobs.drive.bench_drive`)."""
+"""``[drive]`` of a drive job: the drive file (a shipped one by name, the user's by ``file``, or its tables
+inline), the loop, the start (steady or the I-f start-up, with what it can carry), the drive's speed range, and
+the drive the job runs (:func:`job_drive`, :meth:`jaxobs.drive.DriveFile.drive_for`)."""
 
 from __future__ import annotations
 
 import dataclasses
 import math
+from pathlib import Path
 
 from jaxobs import drive as D
-from jaxobs.drive import BENCH_MACHINES
+from jaxobs.drive import SHIPPED_DRIVES, DriveFile, drive_from_table, read_drive, shipped_drive
 
 from .components import COMPONENTS
 from .fields import JobError, get_field, no_unknown, show
@@ -17,11 +19,11 @@ from .spec import DriveSpec, ScenarioSpec
 def check_standstill(drive: DriveSpec, spec: ScenarioSpec, where: str) -> None:
     """What an I-f start-up can do, checked before any run (``--check`` too): the load it must carry, the
     speed reference it hands over to, and a steady window after its hand-over."""
-    par = D.bench_machine(drive.machine)
-    s = D.IfStartup.for_machine(par)
+    df = drive.drive_file
+    par, s = df.machine, df.startup
     axes = spec.axes
     rpm_sw = float(s.omega_switch) / par.p * 30 / math.pi
-    t_ho = D.if_handover_earliest(par)
+    t_ho = D.if_handover_earliest(par, s)
     if spec.steady_from < t_ho:
         raise JobError(
             f"{where}.steady_from",
@@ -38,7 +40,7 @@ def check_standstill(drive: DriveSpec, spec: ScenarioSpec, where: str) -> None:
             f"speed_step_rpm), got {low:g}",
         )
     dj = max(axes.get("dJ", [0.0]))
-    limit = D.if_load_limit(par, dj)
+    limit = D.if_load_limit(par, dj, s)
     load = max(abs(v) for v in axes.get("load_nm", [0.0]))
     if spec.t_event < t_ho:  # a load step during the start-up is carried by it too
         load += max(abs(v) for v in axes.get("load_step_nm", [0.0]))
@@ -73,20 +75,25 @@ def parse_start(dt: dict, drive: DriveSpec, scen) -> DriveSpec:
     return drive
 
 
-def check_drive_speeds(spec: ScenarioSpec, where: str, machine: str) -> None:
+def check_drive_speeds(spec: ScenarioSpec, where: str, drive: DriveSpec) -> None:
     """A drive job's grid (``where``.grid) through :func:`check_speed_axes`, at --check time."""
-    check_speed_axes(spec.axes, f"{where}.grid", machine)
+    check_speed_axes(spec.axes, f"{where}.grid", drive.machine, drive.drive_file)
 
 
-def check_speed_axes(axes: dict, where: str, machine: str) -> None:
+def check_speed_axes(axes: dict, where: str, machine: str, file: DriveFile | None = None) -> None:
     """The one check of drive speeds, for jobs and studies: ``speed_rpm`` and ``speed_rpm + speed_step_rpm``
-    (every combination of the axes, so every point a sampler draws inside their ranges too) within ± the
-    machine's :func:`jaxobs.drive.drive_speed_limit_rpm`; ``where``: the table holding the axes."""
+    (every combination of the axes, so every point a sampler draws inside their ranges too) within ± the drive
+    file's speed limit (:attr:`jaxobs.drive.DriveFile.speed_limit_rpm`: where the back EMF reaches the
+    inverter's voltage limit, past field weakening's reach where it is on); ``machine``: the drive's name,
+    ``file``: its drive file (None: the shipped ``machine``); ``where``: the table holding the axes."""
     speeds, steps = axes.get("speed_rpm"), axes.get("speed_step_rpm", [0.0])
     if not speeds:
         return
-    n_max = D.drive_speed_limit_rpm(D.bench_machine(machine))
-    rng = f"must be in [1, {n_max:.0f}] r/min on {machine} (its back EMF reaches the inverter's voltage limit there)"
+    file = shipped_drive(machine) if file is None else file
+    n_max = file.speed_limit_rpm
+    fw = file.derived["field_weakening"].value
+    why = "its back EMF reaches the inverter's voltage limit there" + (" with field weakening" if fw else "")
+    rng = f"must be in [1, {n_max:.0f}] r/min on {machine} ({why})"
     for i, x in enumerate(speeds):
         if abs(x) > n_max:
             raise JobError(f"{where}.speed_rpm[{i}]", f"{rng}, got {x:g}")
@@ -95,30 +102,90 @@ def check_speed_axes(axes: dict, where: str, machine: str) -> None:
         if abs(after) > n_max:
             raise JobError(
                 f"{where}.speed_step_rpm[{j}]",
-                f"speed_rpm + speed_step_rpm must be in [-{n_max:.0f}, {n_max:.0f}] r/min on {machine} (its back "
-                f"EMF reaches the inverter's voltage limit there), got {after:g}",
+                f"speed_rpm + speed_step_rpm must be in [-{n_max:.0f}, {n_max:.0f}] r/min on {machine} ({why}), "
+                f"got {after:g}",
             )
 
 
 def job_drive(spec: DriveSpec | None = None):
-    """The drive a ``signal = "drive"`` job runs: FOC on its machine's bench; sensorless by default (``spec``)."""
+    """The drive a ``signal = "drive"`` job runs: its drive file's (:meth:`jaxobs.drive.DriveFile.drive_for`);
+    sensorless by default (``spec``)."""
     spec = DriveSpec() if spec is None else spec
-    par = D.bench_machine(spec.machine)
-    startup = D.IfStartup.for_machine(par) if spec.start == "standstill" else None  # [drive] start
-    return D.bench_drive(
-        par,
+    return spec.drive_file.drive_for(
         sensorless=spec.loop == "sensorless",
         handover=spec.handover,
         settle=spec.settle,
-        startup=startup,
+        standstill=spec.start == "standstill",
         speed_schedule=spec.speed_schedule,
     )
 
 
-def parse_drive(dt: dict, comp: str, scen: ScenarioSpec) -> DriveSpec:
-    """``[drive]`` of a drive job of component ``comp`` (its table ``dt``) on the scenarios ``scen``."""
+DRIVE_TABLES = ("machine", "inverter", "control", "sensors", "startup")  # a drive file's tables, inline
+_DRIVE_KEYS = ("loop", "handover", "settle", "start", "machine", "file", "speed_schedule", *DRIVE_TABLES[1:])
+_INLINE_TOP = ("name", "description")  # an inline drive's label and description (a drive file's top-level keys)
+
+
+def drive_source(dt: dict, default: str, base: Path | None, where: str = "drive") -> tuple[str, DriveFile | None]:
+    """The drive file a ``[drive]`` table (``dt``, at ``where``) names: ``machine = "<shipped name>"``
+    (:data:`jaxobs.drive.SHIPPED_DRIVES`), ``file = "<path.toml>"`` (relative to ``base``, the job's or
+    study's folder, else the working folder), or a drive file's tables inline (``[drive.machine]``,
+    ``[drive.inverter]``, ...); ``default``: the shipped name without any.
+
+    Returns:
+        ``(name, file)``: the drive's name, and its checked :class:`~jaxobs.drive.DriveFile` (None: shipped).
+
+    Raises:
+        JobError: naming the field: an unknown shipped name, an unreadable or refused file (its one line).
+    """
+    inline = {k: dt[k] for k in DRIVE_TABLES if isinstance(dt.get(k), dict)}
+    named = isinstance(dt.get("machine"), str)
+    if "file" in dt and (named or inline):
+        raise JobError(f"{where}.file", "give a drive file, a shipped machine or the tables inline, one of them")
+    if inline and named:
+        raise JobError(f"{where}.machine", "a shipped machine's name or the drive file's tables inline, not both")
+    if "file" in dt:
+        name = get_field(dt, "file", f"{where}.file", str)
+        path = Path(name) if Path(name).is_absolute() or base is None else Path(base) / name
+        try:
+            f = read_drive(path)
+        except OSError as e:
+            raise JobError(f"{where}.file", f"{name!r}: cannot be read ({e.strerror or e})") from None
+        except ValueError as e:
+            raise JobError(f"{where}.file", f"{name!r}: {e}") from None
+        return f.name, f
+    for k in _INLINE_TOP:
+        if k in dt and not inline:
+            raise JobError(f"{where}.{k}", "applies to a drive given inline ([drive.machine], [drive.inverter], ...)")
+    if inline:
+        if "machine" not in inline:
+            raise JobError(f"{where}.machine", "missing: inline drive tables need [drive.machine] (the drive file's)")
+        try:
+            f = drive_from_table({**inline, **{k: dt[k] for k in _INLINE_TOP if k in dt}}, "inline")
+        except ValueError as e:
+            raise JobError(where, str(e)) from None
+        return f.name, f
+    machine = get_field(dt, "machine", f"{where}.machine", str, default)
+    if machine not in SHIPPED_DRIVES:
+        raise JobError(
+            f"{where}.machine",
+            f"must be one of {', '.join(SHIPPED_DRIVES)} (shipped drive files), or give file = 'my_drive.toml', "
+            f"got {show(machine)}",
+        )
+    return machine, None
+
+
+def inline_drive(dt: dict, file: DriveFile) -> dict:
+    """``[drive]`` (``dt``) with its drive file's tables inline instead of ``file = ...`` (and its name and
+    description): what a result keeps, so that it reads the same drive wherever it is moved."""
+    out = {k: v for k, v in dt.items() if k != "file"}
+    return {**out, "name": file.name, "description": file.description, **file.table}
+
+
+def parse_drive(dt: dict, comp: str, scen: ScenarioSpec, base: Path | None = None) -> DriveSpec:
+    """``[drive]`` of a drive job of component ``comp`` (its table ``dt``) on the scenarios ``scen``; ``base``:
+    the job file's folder (a relative ``file``)."""
     info = COMPONENTS[comp]
-    no_unknown(dt, ("loop", "handover", "settle", "start", "machine", "speed_schedule"), "drive")
+    no_unknown(dt, (*_DRIVE_KEYS, *_INLINE_TOP), "drive")
     loop = get_field(dt, "loop", "drive.loop", str, "sensorless")
     if loop not in ("sensorless", "sensored"):
         raise JobError("drive.loop", f"must be 'sensorless' or 'sensored', got {show(loop)}")
@@ -128,18 +195,23 @@ def parse_drive(dt: dict, comp: str, scen: ScenarioSpec) -> DriveSpec:
     settle = get_field(dt, "settle", "drive.settle", float, 0.2)
     if not 0.0 <= settle <= 10.0:
         raise JobError("drive.settle", f"must be in [0, 10] s, got {settle:g}")
-    machine = get_field(dt, "machine", "drive.machine", str, info.machines[0])
-    if machine not in BENCH_MACHINES:
-        raise JobError("drive.machine", f"must be one of {', '.join(BENCH_MACHINES)}, got {show(machine)}")
-    if machine not in info.machines:
+    machine, file = drive_source(dt, info.machines[0], base)
+    if file is None and machine not in info.machines:
         raise JobError(
             "drive.machine",
-            f"{comp} cannot run on {machine} ({BENCH_MACHINES[machine]}); allowed: {', '.join(info.machines)}",
+            f"{comp} cannot run on {machine} ({shipped_drive(machine).description}); allowed: "
+            f"{', '.join(info.machines)}",
         )
+    if file is not None:
+        why = info.entry.refusal(file.machine)
+        if why is not None:
+            raise JobError("drive.file" if "file" in dt else "drive.machine", why)
     # the FOC's speed-loop schedule (FOC.speed_gains): 0 off; N keeps the speed loop N times slower than ωe,
-    # the flux observers' low-speed fix (docs/stability.md: N = 6 holds 400 and 200 r/min on 000's SPMSM)
-    schedule = get_field(dt, "speed_schedule", "drive.speed_schedule", float, 0.0)
+    # the flux observers' low-speed fix (docs/stability.md: N = 6 holds 400 and 200 r/min on 000's SPMSM);
+    # without the key, the drive file's ([control] speed_schedule)
+    file_schedule = float((shipped_drive(machine) if file is None else file).foc_kw["speed_schedule"])
+    schedule = get_field(dt, "speed_schedule", "drive.speed_schedule", float, file_schedule)
     if not 0.0 <= schedule <= 1000.0:
         raise JobError("drive.speed_schedule", f"must be 0 (off) or a ratio in (0, 1000], got {schedule:g}")
-    spec = DriveSpec(loop, handover, settle, machine=machine, speed_schedule=schedule)
+    spec = DriveSpec(loop, handover, settle, machine=machine, speed_schedule=schedule, file=file)
     return parse_start(dt, spec, scen)

@@ -10,7 +10,6 @@ from pathlib import Path
 
 import numpy as np
 
-from jaxobs.drive import BENCH_MACHINES
 from jaxobs.progress import Progress
 from jaxobs.provenance import versions
 
@@ -31,11 +30,10 @@ from .verify import verify_designs
 def build_objective(job: Job, spec: ScenarioSpec | None = None):
     spec = job.scenarios if spec is None else spec
     comp = COMPONENTS[job.component].ctor(**job.values)
-    machine = job.drive.machine if job.drive is not None else "ipmsm002"
     drive = job_drive(job.drive) if spec.family.closed_loop and spec.recording is None else None
     # the family makes each scenario's system: the observer bound to it (a drive scenario's assumed machine and
     # speed, a recording's speed), on its signal or closing the drive's loop
-    family = job_family(spec, job.values, drive, machine)
+    family = job_family(spec, job.values, drive, job.drive)
     scen, names, combos = build_scenarios(spec, family)
     ctx = MetricContext(t_event=spec.t_event, steady_from=spec.steady_from)
     param = Parametrization(job.gains)
@@ -210,7 +208,7 @@ def run_job(job: Job, out: Path, resume: bool = False, quiet: bool = False) -> d
         result["machine"] = job.drive.machine
         result["values_note"] = (
             "Rs, Lq (LESOs) or Rs, L (flux observers) and the PLL's or FLL's initial speed (omega0_pll, omega_init) "
-            f"are set per scenario from its estimated machine ({BENCH_MACHINES[job.drive.machine]})"
+            f"are set per scenario from its estimated machine ({job.drive.drive_file.description})"
         )
         # the envelope it was tuned for; where the designs hold is `jaxobs envelope RESULT.json`
         result["envelope"] = claimed_envelope(job)

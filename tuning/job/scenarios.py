@@ -5,13 +5,12 @@ from __future__ import annotations
 
 import math
 
-from jaxobs import drive as D
 from jaxobs.families import AbstractScenarios, RecordedSignals
 from jaxobs.scenarios import Grid, Random
 
 from .components import W_N
 from .recordings import load_recordings
-from .spec import ScenarioSpec
+from .spec import DriveSpec, ScenarioSpec
 
 
 def scenario_points(spec: ScenarioSpec):
@@ -22,15 +21,17 @@ def scenario_points(spec: ScenarioSpec):
     return list(sampler.names), sampler.points()
 
 
-def job_family(spec: ScenarioSpec, values: dict, drive=None, machine: str = "ipmsm002") -> AbstractScenarios:
+def job_family(spec: ScenarioSpec, values: dict, drive=None, drive_spec: DriveSpec | None = None) -> AbstractScenarios:
     """The family of a job's scenario set: its recordings (:class:`~jaxobs.families.RecordedSignals`), or the
-    family ``spec.signal`` names with the job's event, seed, nominal frequency (``values["omega_n"]``), machine
-    (:data:`jaxobs.drive.BENCH_MACHINES`) and ``drive``."""
+    family ``spec.signal`` names with the job's event, seed, nominal frequency (``values["omega_n"]``), the
+    machine and sensors of its drive file (``drive_spec``; None: the shipped ``ipmsm002``) and ``drive``."""
     if spec.recording is not None:
         return RecordedSignals(spec.family)
     freq = float(values.get("omega_n", W_N)) / (2 * math.pi)
+    df = DriveSpec().drive_file if drive_spec is None else drive_spec.drive_file
+    sensors = None if drive_spec is None or drive_spec.file is None else df.sensors  # shipped: ideal sensors
     return spec.family.of(
-        t_event=spec.t_event, seed=spec.seed, freq=freq, machine=D.bench_machine(machine), drive=drive
+        t_event=spec.t_event, seed=spec.seed, freq=freq, machine=df.machine, drive=drive, sensors=sensors
     )
 
 

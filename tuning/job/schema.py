@@ -14,7 +14,7 @@ from .. import strategies
 from ..objective import DRIVE_METRICS, METRICS, STABILITY_MARGIN, Term
 from ..params import GainSpec
 from .components import COMPONENTS, W_N
-from .drive import check_drive_speeds, check_standstill, parse_drive
+from .drive import check_drive_speeds, check_standstill, inline_drive, parse_drive
 from .fields import (
     MAX_SCENARIOS,
     MAX_SOLVER_STEPS,
@@ -198,7 +198,12 @@ def parse_job(raw: dict, base: Path | None = None) -> Job:
     )
     drive = None
     if scen.family.closed_loop:
-        drive = parse_drive(get_field(raw, "drive", "drive", dict, {}), comp, scen)
+        drive = parse_drive(get_field(raw, "drive", "drive", dict, {}), comp, scen, base)
+        d_ts = drive.drive_file.ts
+        if abs(d_ts - ts) > 1e-12 * ts:  # the observer runs at the drive's period (its file's f_sample_hz)
+            values["ts"] = d_ts
+            ts = float(info.ctor(**values).ts)
+            scen = parse_scenarios(raw["scenarios"], "scenarios", info.signals, seed, freq_n, ts, base)
     elif "drive" in raw:
         raise JobError("drive", f"applies to drive jobs (scenarios.signal = 'drive'), not {scen.signal!r} signals")
     envelope = parse_envelope(raw, scen, drive)
@@ -216,7 +221,7 @@ def parse_job(raw: dict, base: Path | None = None) -> Job:
         if spec is not None:
             check_size(spec, where, ts, settle)
             if drive is not None:
-                check_drive_speeds(spec, where, drive.machine)
+                check_drive_speeds(spec, where, drive)
 
     obj_t = get_field(raw, "objective", "objective", dict, required=True)
     no_unknown(obj_t, ("terms", "aggregate", "alpha", "temperature", "penalty"), "objective")
@@ -298,6 +303,8 @@ def parse_job(raw: dict, base: Path | None = None) -> Job:
         raise JobError(
             "solver.schedule", f"must be {strategies.one_of(strategies.SCHEDULES)}, got {show(opts['schedule'])}"
         )
+    if drive is not None and drive.file is not None and "file" in raw["drive"]:
+        raw = {**raw, "drive": inline_drive(raw["drive"], drive.file)}  # a result reads it wherever it moves
     job = Job(
         raw=raw,
         name=name,

@@ -2,8 +2,9 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
+from jaxobs.drive import shipped_drive
 from jaxobs.families import FAMILIES
 
 from ..aggregations import AbstractAggregation
@@ -54,8 +55,10 @@ class DriveSpec:
     the observer estimates beside it); ``settle`` (s): the observer's unscored settling phase before t = 0;
     ``start``: ``"steady"`` (each scenario starts in its operating point) or ``"standstill"`` (from rest, by
     the I-f start-up :meth:`jaxobs.drive.IfStartup.for_machine` of the job's machine, then its hand-over);
-    ``machine``: the drive's machine (:data:`BENCH_MACHINES`; by default the component's: the LESOs run
-    002's IPMSM, the flux observers 000's SPMSM); ``speed_schedule``: the FOC's speed-loop schedule N (0 off;
+    ``machine``: the drive's name (a shipped drive file, :data:`jaxobs.drive.SHIPPED_DRIVES`, by default the
+    component's: the LESOs run 002's IPMSM, the flux observers 000's SPMSM; or the name of the user's drive
+    file); ``file``: the user's checked drive file (:class:`jaxobs.drive.DriveFile`: ``[drive] file = ...`` or
+    its tables inline), None for a shipped one; ``speed_schedule``: the FOC's speed-loop schedule N (0 off;
     N > 0: speed-loop bandwidth min(α_s, |ωe*|/N), so a flux observer's FLL, whose bandwidth scales with the
     speed, can close the loop at low speed: docs/stability.md)."""
 
@@ -63,8 +66,14 @@ class DriveSpec:
     handover: float = 0.0
     settle: float = 0.2
     start: str = "steady"
-    machine: str = "ipmsm002"  # a key of BENCH_MACHINES; a job's default is its component's first machine
+    machine: str = "ipmsm002"  # a key of SHIPPED_DRIVES or a drive file's name; a job's default: its component's
     speed_schedule: float = 0.0  # FOC.speed_schedule (0: off)
+    file: object = field(default=None, compare=False)  # a jaxobs.drive.DriveFile, or None: the shipped `machine`
+
+    @property
+    def drive_file(self):
+        """The checked drive file this drive runs (:class:`jaxobs.drive.DriveFile`)."""
+        return shipped_drive(self.machine) if self.file is None else self.file
 
 
 @dataclass(frozen=True)

@@ -25,7 +25,6 @@ import math
 
 import numpy as np
 
-from jaxobs import drive as D
 from jaxobs.analysis.envelope import envelope
 
 from .drive import job_drive
@@ -89,8 +88,8 @@ def parse_envelope(raw: dict, scen: ScenarioSpec, drive: DriveSpec | None) -> En
         raise JobError("envelope", "applies to sensorless drive jobs (drive.loop = 'sensorless')")
     tab = get_field(raw, "envelope", "envelope", dict)
     no_unknown(tab, ("speed_rpm", "load_nm", "horizon", "settle", "window"), "envelope")
-    par = D.bench_machine(drive.machine)
-    n_max = D.drive_speed_limit_rpm(par)
+    par = drive.drive_file.machine
+    n_max = drive.drive_file.speed_limit_rpm
     speeds = _range(tab, "speed_rpm", 1.0, n_max, "r/min", _span(scen.axes, "speed_rpm", 600.0))
     t_max = 3.0 * float(par.kt) * float(par.i_rated)  # generous: the FOC limits the current to 1.5 i_rated
     loads = _range(tab, "load_nm", 0.0, t_max, "N·m", _span(scen.axes, "load_nm", 0.0))
@@ -112,7 +111,7 @@ def verify_designs(designs: dict, env: EnvelopeSpec, drive_spec: DriveSpec) -> d
     envelope map, on the job's drive started steady): the ``verification`` block of result.json."""
     drive_spec = dataclasses.replace(drive_spec, start="steady", handover=0.0)  # operating points, started steady
     drive = job_drive(drive_spec)
-    par = D.bench_machine(drive_spec.machine)
+    par = drive_spec.drive_file.machine
     speeds, loads = env.points()
     stab = {"settle": env.settle, "window": env.window}
     ds = envelope(designs, machine=par, drive=drive, speeds_rpm=speeds, loads_nm=loads, horizon=env.horizon,
