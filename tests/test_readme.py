@@ -43,7 +43,8 @@ def test_readme_tour_runs_as_written(tmp_path):
     """The tour's commands, in order, in a fresh folder (as a reader runs them after `source .venv/bin/activate`)."""
     jaxobs = Path(sys.executable).with_name("jaxobs")
     cmds = [ln for b in BASH_BLOCKS for ln in _jaxobs_lines(b) if not ln.startswith("jaxobs --help")]
-    (tmp_path / "tuning").symlink_to(ROOT / "tuning")  # a reader runs the tour in the clone: tuning/presets/...
+    for folder in ("tuning", "docs"):  # a reader runs the tour in the clone: tuning/presets/..., docs/examples/...
+        (tmp_path / folder).symlink_to(ROOT / folder)
     assert any(c.startswith("jaxobs tune") for c in cmds) and any(c.startswith("jaxobs export") for c in cmds)
     for cmd in cmds:
         if cmd.startswith("jaxobs export") and shutil.which("cc") is None:
