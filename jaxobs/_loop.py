@@ -6,7 +6,7 @@ rounding (XLA may fuse the same arithmetic differently; tests/test_perf.py
 checks each against the plain scan, to 1e-12 or tighter):
 
 1. **Split state vectors.**  A component's state is a flat array (the rules
-   work on flat arrays, DESIGN.md).  Under ``vmap`` it becomes (batch, n_states)
+   work on flat arrays).  Under ``vmap`` it becomes (batch, n_states)
    and every step ends in ``jnp.stack``.  XLA's CPU loop fusion computes a
    concatenated output element by element, so every expression shared by the
    components of ẋ (the input's cos, the FLL's normalization) was evaluated

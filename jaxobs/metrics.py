@@ -421,7 +421,7 @@ def smooth_peak_to_peak(x, mask, temperature):
 
 
 # --------------------------------------------------------------------------
-# drive metrics that measure what their names say (issue 26): a settling to the signal's own final value,
+# drive metrics that measure what their names say: a settling to the signal's own final value,
 # the true speed against its reference, the peak deviation after a load step
 # --------------------------------------------------------------------------
 

@@ -6,8 +6,6 @@ scanned.  Text only: nothing is imported."""
 import re
 from pathlib import Path
 
-import pytest
-
 ROOT = Path(__file__).resolve().parents[1]
 SCANNED = ("docs", "tuning", "jaxobs", "tests")  # tuning/ holds the presets
 SUFFIXES = {".py", ".md", ".toml", ".yml", ".yaml", ".txt", ".ipynb", ".json", ".cfg", ".ini", ".c", ".h"}
@@ -15,30 +13,6 @@ ISSUE = re.compile(r"\bissues? #?[0-9]", re.IGNORECASE)
 DESIGN = re.compile(r"\bDESIGN\.md\b")
 # a test function named on a user page or in a preset: `test_x` or tests/test_x.py::test_y (a file name is fine)
 TEST_NAME = re.compile(r"::test_\w+|`test_\w+`(?!\.)")
-
-# Files that other work restructures; their remaining sites are removed once that work is merged.
-PENDING = {
-    "docs/architecture.md",
-    "jaxobs/_cache.py",
-    "jaxobs/_loop.py",
-    "jaxobs/_simulate.py",
-    "jaxobs/_system.py",
-    "jaxobs/_traced.py",
-    "jaxobs/drive/control.py",
-    "jaxobs/drive/envelope.py",
-    "jaxobs/drive/loop.py",
-    "jaxobs/drive/scenario.py",
-    "jaxobs/drive_study.py",
-    "jaxobs/metrics.py",
-    "jaxobs/observers/base.py",
-    "jaxobs/observers/leso.py",
-    "jaxobs/signals/_recordings.py",
-    "jaxobs/signals/_waveforms.py",
-    "tuning/cli.py",
-    "tuning/job/schema.py",
-    "tuning/objective.py",
-    "tuning/structure.py",
-}
 
 
 def _files(folders=SCANNED):
@@ -76,22 +50,14 @@ def test_the_patterns_find_what_they_are_for(tmp_path):
     assert sum(len(list(_files((f,)))) for f in SCANNED) > 100
 
 
-def test_no_issue_numbers_or_design_md_outside_pending_files():
-    files = [p for p in _files() if _rel(p) not in PENDING]
-    sites = _sites(ISSUE, files) + _sites(DESIGN, files)
+def test_no_issue_numbers_or_design_md_anywhere():
+    sites = _sites(ISSUE, list(_files())) + _sites(DESIGN, list(_files()))
     why = "cite no issue numbers and no design file outside the repository (state the fact or the reason):\n"
     assert not sites, why + "\n".join(sites)
 
 
-@pytest.mark.xfail(strict=False, reason="the lead removes the remaining sites after merging")
-def test_no_issue_numbers_or_design_md_anywhere():
-    files = list(_files())
-    sites = _sites(ISSUE, files) + _sites(DESIGN, files)
-    assert not sites, "\n".join(sites)
-
-
 def test_no_test_function_names_on_user_pages_or_presets():
-    files = [p for p in (ROOT / "docs").glob("*.md") if _rel(p) not in PENDING]
+    files = sorted((ROOT / "docs").glob("*.md"))
     files += sorted((ROOT / "tuning" / "presets").glob("*.toml"))
     sites = _sites(TEST_NAME, files)
     assert not sites, "name the test file, not the test function:\n" + "\n".join(sites)

@@ -289,7 +289,7 @@ def _number(x: str) -> float:
 def _csv_table(path, max_bytes):
     """(header or None, float array (rows, columns)) of a CSV file; ValueError naming the problem."""
     p = Path(path)
-    if not p.exists() and not p.is_symlink():  # what Python says of a missing file (issue 29), one line
+    if not p.exists() and not p.is_symlink():  # what Python says of a missing file, in one line
         raise FileNotFoundError(errno.ENOENT, f"recording {str(p)!r}: no such file")
     try:  # a regular file only (no FIFO, no device), at most max_bytes (jaxobs.provenance.read_file)
         data = read_file(p, max_bytes)

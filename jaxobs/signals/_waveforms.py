@@ -137,7 +137,7 @@ class GridSignal(AbstractSignal):
         The recurrence's error grows with h: 1.1e-14 absolute at h = 13 over 10⁶ angles up to 10³ rad, where
         ``cos(h*th)`` was off by up to 3.6e-12, the product h·θ rounded (tests/test_signals.py).  float32
         takes ``sincos``'s cosine of each multiple (its float32 polynomial: 0.5 ns a value against 4.6 ns for
-        XLA's float32 ``cos`` here, issue 31).
+        XLA's float32 ``cos`` here).
         """
         if jnp.result_type(th) != jnp.float64:
             return {h: sincos(h * th)[1] for h in (1, *orders)}
