@@ -8,7 +8,7 @@ STAMP  := $(VENV)/.installed-stamp
 # that a folder named like the package could shadow it; none is (tests/test_cli.py checks the package list)
 PIP    := PYTHONWARNINGS="ignore:Editable installation" $(VENV)/bin/python -m pip
 
-.PHONY: run test test-slow lint bench docs docs-serve clean
+.PHONY: run test test-slow test-repro lint bench docs docs-serve clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -24,12 +24,16 @@ run: $(STAMP)
 # -n auto: one pytest worker per core (pytest-xdist); XLA compiles on one thread, so two workers on two cores
 # halve the wall time.  Compilations are cached across runs (tests/conftest.py).
 test: $(STAMP)
-	@$(VENV)/bin/python -m pytest -m "not slow" -n auto; rc=$$?; \
+	@$(VENV)/bin/python -m pytest -m "not slow and not repro" -n auto; rc=$$?; \
 	if [ $$rc -eq 5 ]; then echo "make test: pytest collected no tests"; exit 1; fi; exit $$rc
 
 test-slow: $(STAMP)
 	@$(VENV)/bin/python -m pytest -m slow -n auto; rc=$$?; \
 	if [ $$rc -eq 5 ]; then echo "make test-slow: no slow tests"; exit 0; fi; exit $$rc
+
+# a paper's whole reproduction through the command line (tens of minutes): not in CI's budget
+test-repro: $(STAMP)
+	$(VENV)/bin/python -m pytest -m repro -n auto
 
 # ruff: lint and formatting (line length 120), as CI runs it
 lint: $(STAMP)

@@ -232,10 +232,12 @@ def test_reproduce_flux_quick_json(tmp_path, capsys):
     assert sorted(p.name for p in tmp_path.glob("*.png")) == sorted(set(REPRODUCE_FILES["flux"]) - skipped)
 
 
-@pytest.mark.slow
+@pytest.mark.repro
 def test_reproduce_leso_json_rows_are_within_or_explained(tmp_path, capsys):
-    """The paper-002 reproduction, single and dual machine (tens of minutes on two cores): every row carries
-    `within`; every row outside its tolerance names its cause (jaxobs.reproduce.compare)."""
+    """The paper-002 reproduction, single and dual machine (tens of minutes on two cores, beyond CI's budget: `make
+    test-repro`; the slow suite checks the dual runs' rows and tests/test_papers_rows.py every row as last
+    measured): every row carries `within`; every row outside its tolerance names its cause
+    (jaxobs.reproduce.compare)."""
     main(["reproduce", "leso", "--json", "--out", str(tmp_path)])
     rows = json.loads(capsys.readouterr().out)
     for r in rows:
