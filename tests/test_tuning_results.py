@@ -17,6 +17,7 @@ from jaxobs import linear, papers
 from jaxobs_tuning import load_job
 from jaxobs_tuning.cli import main
 from jaxobs_tuning.targets import flux_settling_time
+from tests.cfcheck import assert_cf18
 from tests.test_tuning import GOOD
 
 W_N = papers.FLL_OMEGA_N
@@ -118,6 +119,7 @@ def test_two_runs_write_byte_identical_results_that_rebuild_the_design(tmp_path)
     obs = observer_from_result(tmp_path / "a" / "result.json", notes=notes)
     assert float(obs.lam) == res["gains"]["tuned"]["lam"] and obs.ts == res["ts"] and type(obs.rule).__name__ == "AB3"
     assert not any("has no" in n for n in notes)
+    assert_cf18(tmp_path / "a" / "scores.nc")  # CF 1.8: compliance-checker, attributes, types
     ds = xr.open_dataset(tmp_path / "a" / "scores.nc", engine="h5netcdf")
     assert ds["itae_freq"].dims == ("design", "freq_step") and list(ds["freq_step"].values) == [1.0, 2.0]
     # CF units on every variable and numeric coordinate (NetCDF4)

@@ -228,7 +228,8 @@ def run_job(job: Job, out: Path, resume: bool = False, quiet: bool = False) -> d
         result["holdout"]["count"] = len(hc)
         result["lost_lock_tuned_only"]["holdout"] = _lost_only(hper)
         with atomic_path(out / "holdout_scores.nc") as tmp:
-            scores_dataset(hobj, hn, hc, job.holdout, hper).to_netcdf(tmp, engine="h5netcdf")
+            scores = scores_dataset(hobj, hn, hc, job.holdout, hper, title="jaxobs tune: per-scenario scores, held out")
+            scores.to_netcdf(tmp, engine="h5netcdf")
     bar.close()
     if job.envelope is not None:  # the long-horizon verification across the envelope the job claims
         _verify(job, values, result, quiet)
