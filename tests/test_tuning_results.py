@@ -462,3 +462,36 @@ def test_report_marks_events_only_where_the_scenario_has_one_and_draws_a_negativ
         assert ax.get_yscale() == scale and (tmp_path / "c.png").stat().st_size > 0
         lo, hi = ax.get_ylim()
         assert lo <= min(values) and hi >= max(values)  # every value drawn inside the axis
+
+
+def test_convergence_marks_the_best_iteration_and_responses_note_designs_drawn_on_one_line(tmp_path):
+    """convergence.png: the objective's definition under the axis and the tuned design's iteration starred (the
+    least stable value where the result names none); responses.png's legend says when a design's curves lie on
+    another's (an initial design at the closed form), with how far apart their gains are."""
+    from jaxobs_tuning.aggregations import CVaR
+    from jaxobs_tuning.objective import Term
+    from jaxobs_tuning.report import _coincide, convergence_figure, objective_text
+
+    runs = [(3.0, 0), (0.5, 2), (1.0, 0), (2.0, 0)]  # (objective, diverged scenarios)
+    hist = [{"iteration": i, "value": v, "diverged": d} for i, (v, d) in enumerate(runs)]
+    for best, want in ((None, 2), (3, 3)):  # iteration 1 diverged in two scenarios: never the best
+        fig = convergence_figure(hist, "x", tmp_path / "c.png", "J = mean of 1·itae_freq", best)
+        (ax,) = fig.axes
+        star = [ln for ln in ax.lines if ln.get_marker() == "*"]
+        assert len(star) == 1 and list(star[0].get_xdata()) == [want]
+        assert ax.get_legend().get_texts()[1].get_text().startswith(f"best: iteration {want}, J = ")
+        assert ax.get_ylabel() == "objective J (1)" and "J = mean of 1·itae_freq" in [t.get_text() for t in fig.texts]
+
+    class _Obj:
+        aggregation, penalty = CVaR(0.9), 1e3
+        terms = [Term("itae_freq", 1.0), Term("ripple_freq", 0.01)]
+
+    text = objective_text(_Obj())
+    assert text.startswith("J = CVaR (α = 0.9: the mean of the worst 10 %) over the scenarios of 1·itae_freq + ")
+    assert "0.01·ripple_freq" in text and "penalty 1000" in text
+    f = np.sin(np.linspace(0, 6, 50))
+    traces = {"initial": (f, f), "closed_form": (f + 1e-6, f), "tuned": (1.5 * f, f)}
+    gains = {"initial": {"lam": 100.0}, "closed_form": {"lam": 100.0001}, "tuned": {"lam": 150.0}}
+    assert _coincide(traces, gains) == {"closed_form": " (on the initial line: gains within 0.0001 %)"}
+    same = _coincide({"a": (f,), "b": (f,)}, {"a": {"k": 1.0}, "b": {"k": 1.0}})
+    assert same == {"b": " (on the a line: the same gains)"}

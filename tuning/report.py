@@ -110,7 +110,7 @@ def convergence_figure(history: list, name: str, path: Path, objective: str | No
         best: the iteration whose design is the tuned one (the result's ``best_iteration``); None: the least
             value among the iterations that diverged in no scenario (none marked where every one diverged).
     """
-    fig, ax = _subplots(figsize=(6.4, 4.2 if objective else 3.5))
+    fig, ax = _subplots(figsize=(6.4, 4.0 if objective else 3.5))
     it, val = [h["iteration"] for h in history], [h["value"] for h in history]
     ax.plot(it, val, lw=1.2, marker=".", ms=4, label="objective J at each iteration")
     # a log scale where every value is positive; an objective with a margin term (sosoifo.toml) goes negative,
@@ -135,22 +135,36 @@ def convergence_figure(history: list, name: str, path: Path, objective: str | No
     ax.legend(fontsize=8)
     if objective:
         fig.text(0.5, 0.015, objective, ha="center", va="bottom", fontsize=8, color="0.2")
-    fig.tight_layout(rect=(0, 0.13 if objective else 0, 1, 1))
+    fig.tight_layout(rect=(0, 0.09 if objective else 0, 1, 1))
     with atomic_path(path) as tmp:
         fig.savefig(tmp, dpi=110)
     return fig
 
 
-def _same_as(thetas: dict) -> dict:
-    """{label: the earlier label with the same gains} (an initial design that is the closed form draws exactly
-    on it: the legend says so)."""
+def _coincide(traces: dict, gains: dict, tol: float = 1e-3) -> dict:
+    """{label: what its legend entry adds} for each design drawn on an earlier one's line (an initial design at
+    the closed form, a tuned one that did not move): every trace within ``tol`` of its panel's span of the
+    earlier design's, so only one line shows.  The note names that design and how far apart the gains are.
+
+    Args:
+        traces: {label: (frequency, error)}, the curves drawn, in the legend's order.
+        gains: {label: {gain: value}}.
+    """
     out, seen = {}, []
-    for label, th in thetas.items():
-        a = np.asarray(th, dtype=float)
-        twin = next((k for k, b in seen if a.shape == b.shape and np.array_equal(a, b)), None)
-        if twin is not None:
-            out[label] = twin
-        seen.append((label, a))
+    for label, curves in traces.items():
+        for other in seen:
+            near = all(
+                np.max(np.abs(a - b)) <= tol * max(float(np.ptp(b)), 1e-300)
+                for a, b in zip(curves, traces[other])
+                if np.all(np.isfinite(a)) and np.all(np.isfinite(b))
+            )
+            if near:
+                g, h = gains[label], gains[other]
+                rel = max((abs(g[k] - h[k]) / max(abs(h[k]), 1e-300) for k in g), default=0.0)
+                how = "the same gains" if rel == 0 else f"gains within {100 * rel:.2g} %"
+                out[label] = f" (on the {other.replace('_', ' ')} line: {how})"
+                break
+        seen.append(label)
     return out
 
 
@@ -166,15 +180,17 @@ def write_report(out: Path, job, obj, thetas: dict, history: list, closed_form_t
     worst = int(np.argmax(np.asarray(per)))
     sig = jax.tree.map(lambda x: x[worst], obj.scenarios)
     fig, axes = _subplots(2, 1, figsize=(8, 5.5), sharex=True)
-    twins = _same_as(thetas)
+    drawn, times = {}, {}
     for label, th in thetas.items():
+        times[label], omega, err = (np.asarray(x) for x in obj.response(th, sig))
+        drawn[label] = (omega / (2 * math.pi), np.degrees(err))
+    gains = {label: {k: float(v) for k, v in obj.param.values(th).items()} for label, th in thetas.items()}
+    notes = _coincide(drawn, gains)  # a dashed line exactly on another: the legend says why
+    for label, (freq, err) in drawn.items():
         style = _STYLE.get(label, dict(lw=1))
-        t, omega, err = (np.asarray(x) for x in obj.response(th, sig))
         name = label.replace("_", " ")  # in words ("closed form"); result.json's keys have an underscore
-        if label in twins:  # drawn exactly on the other: the legend says why only one line shows
-            name += f" (= {twins[label].replace('_', ' ')}: the same gains, on its line)"
-        axes[0].plot(t, omega / (2 * math.pi), label=name, **style)
-        axes[1].plot(t, np.degrees(err), label=name, **style)
+        axes[0].plot(times[label], freq, label=name + notes.get(label, ""), **style)
+        axes[1].plot(times[label], err, label=name + notes.get(label, ""), **style)
     # an FLL's ("grid") error is the grid voltage's phase; a flux observer's or a drive's (on an "emf" recording or
     # closing the loop) is the rotor's electrical position: the labels say which
     if job.scenarios.family is not GridSignals:
