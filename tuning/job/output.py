@@ -118,7 +118,7 @@ def scores_dataset(obj, names, combos, spec: ScenarioSpec, per: dict, title: str
             f"{100 * M.SPEED_TOL:g} % of the mean |reference| (at least {M.SPEED_FLOOR_RPM:g} r/min) (drive)"
         )
     what = "observer design (closing the loop sensorless)" if obj.closed_loop else "observer design"
-    ds["design"].attrs["long_name"] = f"{what}: initial, closed form, tuned"
+    ds["design"].attrs["long_name"] = f"{what}: its initial, closed-form or tuned gains"
     for name in names:
         if name == "recording" and spec.recording is not None:  # named by its file (a string label: no unit)
             ds[name].attrs["long_name"] = "recording (its file; a window of a log: file@index)"
