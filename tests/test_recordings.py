@@ -217,6 +217,7 @@ def test_drive_recording_job_runs_tiny(tmp_path):
     res = run_job(job, tmp_path / "o", quiet=True)
     s = res["scores"]["initial"]
     assert s["diverged"] == 0 and s["rms_position_steady_mean"] < math.radians(5.0)
+    assert_cf18(tmp_path / "o" / "scores.nc")  # a drive job's: lost_sync and lost_speed among the flags
 
 
 def _job_copy(tmp_path, name="recording_wif.toml"):
