@@ -9,6 +9,7 @@ returned with ``path=None`` displays in Jupyter as the value of a cell.
 from __future__ import annotations
 
 import math
+import re
 from pathlib import Path
 
 import numpy as np
@@ -21,6 +22,7 @@ from ._plot_bode import resonance_grid as resonance_grid
 from ._plot_paper import Panel as Panel
 from ._plot_paper import Series as Series
 from ._plot_paper import paper_figure as paper_figure
+from .quantities import text_unit
 
 
 def fll_event_text(test: str) -> str:
@@ -193,9 +195,19 @@ _AXIS_UNITS = {
 }
 
 
+def _axis_words(ds, name: str, short: bool = False) -> str:
+    """An axis in words: its ``long_name`` (the Axis record's, :mod:`jaxobs.quantities`), or its name where the
+    Dataset has none; ``short``: without the closing parenthesis (a title lists several)."""
+    words = str(ds[name].attrs.get("long_name") or name)
+    return re.sub(r"\s*\([^()]*\)$", "", words) if short else words
+
+
 def _axis_label(ds, name: str) -> str:
-    unit = _AXIS_UNITS.get(name) or ds[name].attrs.get("units", "")
-    return f"{name} ({unit})" if unit and unit != "1" else name
+    """An axis's label: its long name and its unit (none for a dimensionless one, whose long name says p.u.)."""
+    units = ds[name].attrs.get("units")
+    unit = text_unit(units) if units else _AXIS_UNITS.get(name, "")
+    words = _axis_words(ds, name)
+    return f"{words} ({unit})" if unit and unit != "1" else words
 
 
 def _shared_norm(vals):
@@ -261,13 +273,11 @@ def _study_heatmap(ds, da, unit, short, axes, designs):
             ax.set_yticks(range(ny), [f"{v:g}" for v in ds[a1].values], fontsize=9)
             if r == len(rows) - 1:
                 ax.set_xlabel(_axis_label(ds, a0), fontsize=10)
-            if c == 0:
-                ax.set_ylabel(f"{how}\n{_axis_label(ds, a1)}", fontsize=10)
+            if c == 0:  # the axis alone: the row (mean, worst) is each panel's title
+                ax.set_ylabel(_axis_label(ds, a1), fontsize=10, wrap=True)
             ax.set_title(f"{d}: {how}", fontsize=10)
-    # 1.1 in on the left for the row's two-line label ("mean" / the axis) and its ticks: 7 % of the width cut
-    # "mean" and "worst (max)" off a two-design figure's edge
-    left = min(0.2, 1.1 / fig.get_figwidth())
-    fig.subplots_adjust(left=left, right=0.88, top=0.86, bottom=0.12, wspace=0.22, hspace=0.4)
+    left = min(0.2, 1.0 / fig.get_figwidth())  # 1 in for the axis's label and its ticks
+    fig.subplots_adjust(left=left, right=0.88, top=0.84, bottom=0.12, wspace=0.22, hspace=0.4)
     cax = fig.add_axes((0.9, 0.12, 0.012, 0.74))  # beside the panels, never over one
     cb = fig.colorbar(im, cax=cax, label=f"{short} ({unit})" + (", log scale" if is_log else ""))
     if is_log:  # plain numbers (0.2, 0.5, 1), not 2×10⁻¹, on 1-2-5 ticks and both ends (_log_ticks)
@@ -278,8 +288,9 @@ def _study_heatmap(ds, da, unit, short, axes, designs):
         cb.ax.yaxis.set_minor_formatter(NullFormatter())
     cb.ax.tick_params(which="both", labelsize=9)
     cb.ax.yaxis.label.set_size(10)
-    how = f"mean and worst case over {', '.join(others)}" if others else "every scenario"
-    fig.suptitle(f"{short} ({unit}): {how}; one colour scale for every panel", fontsize=11)
+    over = ", ".join(_axis_words(ds, a, short=True) for a in others)
+    how = f"mean and worst case over the {over}" if others else "every scenario"
+    fig.suptitle(f"{short} ({unit}): {how}\none colour scale for every panel", fontsize=11)
     return fig
 
 
@@ -518,7 +529,16 @@ def envelope_figure(ds, path):
     speed on a log axis against load; every row on ONE colour scale (shared by the designs), the region where
     each design holds outlined in black, and each point where it does not marked by why (x: not synchronous,
     o: not resolved stable, +: peak error over the bound).  With a mismatch dim each cell shows the worst over
-    it (lowest margin, largest error, holds only where it holds at every value)."""
+    it (lowest margin, largest error, holds only where it holds at every value).  A point that lost lock has no
+    steady error: its cells in the error panels are hatched grey, apart from every colour scale.  The marks,
+    the outline and the hatching have a legend of their own under the panels, independent of the colour
+    bars."""
+    from matplotlib.lines import Line2D
+    from matplotlib.patches import Patch, Rectangle
+    from matplotlib.patheffects import withStroke
+
+    halo = [withStroke(linewidth=2.2, foreground="w")]  # a mark stays visible on the darkest cells
+
     designs = list(ds["design"].values)
     extra = [d for d in ds["holds"].dims if d not in ("design", "speed_rpm", "load")]
     worst = {"margin": "min", "pos_err_max_deg": "max", "pos_ripple_deg": "max"}
@@ -553,14 +573,20 @@ def envelope_figure(ds, path):
         mesh = None
         for c, d in enumerate(designs):
             ax = axs[r, c]
-            mesh = ax.pcolormesh(xe, ye, vals[c].T, cmap=cmap, vmin=vmin, vmax=vmax, shading="flat")
+            # under the cells: a cell without a value (lost lock: no steady error) shows hatched grey, never a
+            # colour of the scale (white is 0 on the centred ones)
+            ax.add_patch(
+                Rectangle((xe[0], ye[0]), xe[-1] - xe[0], ye[-1] - ye[0], facecolor="0.88", edgecolor="0.55",
+                          hatch="///", lw=0, zorder=0)
+            )  # fmt: skip
+            mesh = ax.pcolormesh(xe, ye, vals[c].T, cmap=cmap, vmin=vmin, vmax=vmax, shading="flat", zorder=1)
             h = np.asarray(holds.sel(design=d).transpose("speed_rpm", "load").values, dtype=float)
             _outline(ax, h >= 0.5, xe, ye)
             # each failing point marked by why it fails (the first reason of: not synchronous, not resolved
             # stable, error over the bound): a crossed point whose panels all look benign was a puzzle
             for mask, marker in _fail_marks(ds, d, extra, h):
                 bad = np.argwhere(mask)
-                ax.plot(sp[bad[:, 0]], ld[bad[:, 1]], marker, color="k", ms=4, mew=0.8, mfc="none")
+                ax.plot(sp[bad[:, 0]], ld[bad[:, 1]], marker, color="k", ms=4, mew=0.8, mfc="none", path_effects=halo)
             ax.set_xscale("log")
             ax.set_xlim(xe[0], xe[-1])
             ax.set_ylim(ye[0], ye[-1])
@@ -572,7 +598,7 @@ def envelope_figure(ds, path):
             ax.tick_params(labelsize=7)
             if r == 0:
                 n_h, n = int(h.sum()), h.size
-                ax.set_title(f"{d}\nholds at {n_h}/{n} points", fontsize=9)
+                ax.set_title(f"{str(d).replace('_', ' ')}\nholds at {n_h}/{n} points", fontsize=9)
             if r == len(rows) - 1:
                 ax.set_xlabel("speed (r/min, log)", fontsize=8)
             if c == 0:
@@ -584,13 +610,18 @@ def envelope_figure(ds, path):
         cb.set_label(label, fontsize=7)
         cb.ax.tick_params(labelsize=7)
     bound = ds.attrs.get("bound_deg", float("nan"))
-    title = (
-        f"operating envelope, sensorless\noutlined: holds (stable, synchronous, peak error <= {bound:g} deg); "
-        "white: lost lock\nfails: x not synchronous (lost lock, off speed or not settled), o not resolved stable, "
-        "+ peak error over the bound"
-    )
+    mark = dict(color="k", ls="none", ms=5, mew=0.8, mfc="none")
+    handles = [
+        Line2D([], [], color="k", lw=1.8, label=f"outline: holds (stable, synchronous, peak error <= {bound:g} deg)"),
+        Line2D([], [], marker="x", label="fails: not synchronous (lost lock, off speed or not settled)", **mark),
+        Line2D([], [], marker="o", label="fails: not resolved stable", **mark),
+        Line2D([], [], marker="+", label="fails: peak error over the bound", **mark),
+        Patch(facecolor="0.88", edgecolor="0.55", hatch="///", lw=0, label="no value: lost lock (no steady error)"),
+    ]
+    fig.legend(handles=handles, loc="outside lower center", ncol=2, fontsize=7, frameon=False)
+    title = "operating envelope, sensorless"
     if extra:
-        title += f"; worst over {', '.join(extra)}"
+        title += f"; worst over {', '.join(_axis_words(ds, a, short=True) for a in extra)}"
     fig.suptitle(title, fontsize=9)
     _save(fig, path, 110)
     return fig

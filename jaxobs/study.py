@@ -71,7 +71,7 @@ from . import metrics as M
 from ._simulate import AbstractSave, SaveAll
 from .families import AbstractScenarios, GridSignals, RecordedSignals
 from .observers import gain_table
-from .provenance import provenance
+from .provenance import cf_dataset, provenance
 from .quantities import Metric
 from .runner import run_scenarios
 from .scenarios import GRID_SIGNAL_AXES, LHS, AbstractSampler, Grid, Random, Recordings, Sobol
@@ -461,7 +461,8 @@ def study(
 
     Returns:
         The Dataset: dims ``("design", *sampler dims)``, a variable per metric and flag, ``<flag>_count`` per
-        design, the quantiles, the gains; every variable and numeric coordinate with CF ``units`` and ``long_name``.
+        design, the quantiles, the gains; every variable and numeric coordinate with CF ``units`` and ``long_name``,
+        the CF-1.8 global attributes (:func:`jaxobs.provenance.cf_dataset`).
     """
     import xarray as xr
 
@@ -535,13 +536,13 @@ def study(
         if f.count is not None:
             data[f"{f.name}_count"] = (
                 ("design",),
-                flag.reshape(len(dnames), -1).sum(axis=1).astype(np.int64),
+                flag.reshape(len(dnames), -1).sum(axis=1).astype(np.int32),  # CF 1.8 has no int64
                 {"units": "1", "long_name": f.count},
             )
     data.update(gains or {})
     ds = xr.Dataset(data, coords=coords)
     ds.attrs.update(scenarios=len(run.points), **(attrs or {}))
-    return ds
+    return cf_dataset(ds, f"jaxobs {label}: every design on every scenario, its metrics and flags")
 
 
 def _axis_meta(scenarios: AbstractScenarios, name: str) -> dict:

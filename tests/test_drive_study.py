@@ -19,6 +19,7 @@ from jaxobs_tuning.cli import main
 from jaxobs_tuning.job import COMPONENTS, DriveSpec, JobError, job_drive
 from jaxobs_tuning.study_file import load_study
 from jaxobs_tuning.summary import study_warnings
+from tests.cfcheck import assert_cf18
 
 PAR = D.ipmsm_paper002()
 DRIVE = D.Drive(D.FOC.imc(PAR, alpha_c=2 * math.pi * 300, alpha_s=2 * math.pi * 5), sensorless=True)
@@ -90,6 +91,7 @@ def test_cli_drive_study_writes_netcdf_with_the_axes(tmp_path, capsys):
     out, again = tmp_path / "out", tmp_path / "again"
     small = _small_preset(tmp_path)
     assert main(["study", str(small), "--out", str(out), "--quiet"]) == 0
+    assert_cf18(out / "study.nc")  # CF 1.8: compliance-checker, attributes, types
     ds = xr.load_dataset(out / "study.nc", engine="h5netcdf")
     assert {"dRs", "dLq"} <= set(ds["pos_err_rms_deg"].dims) and "quantile" in ds.coords
     assert (out / "drive_study.png").stat().st_size > 10_000

@@ -18,6 +18,7 @@ from jaxobs.drive_study import bind_observer, drive_scenarios
 from jaxobs_tuning.cli import main
 from jaxobs_tuning.job import job_drive, load_job
 from jaxobs_tuning.job.output import claimed_envelope
+from tests.cfcheck import assert_cf18
 
 K1, K2 = papers.SECOND_ORDER_SOIFO_K1, papers.SECOND_ORDER_SOIFO_K2  # 000's
 PAR = bench_machine("spmsm000")
@@ -112,6 +113,7 @@ def test_cli_envelope_writes_netcdf_and_figure(tmp_path, capsys):
     out = tmp_path / "env"
     args = ["envelope", str(PRESET), "--out", str(out), "--speeds", "2", "--loads", "1", "--horizon", "0.5"]
     assert main([*args, "--quiet"]) == 0
+    assert_cf18(out / "envelope.nc")  # CF 1.8: compliance-checker, attributes, types
     ds = xr.load_dataset(out / "envelope.nc", engine="h5netcdf")
     assert {"speed_rpm", "load"} <= set(ds["margin"].dims) and "stable" in ds
     assert list(ds["design"].values) == ["initial", "closed_form"]

@@ -276,3 +276,62 @@ def test_two_sided_bode_axis_is_labelled_every_other_decade():
     boxes = [tk.get_window_extent() for tk in labels]
     assert all(a.x1 < b.x0 for a, b in zip(boxes, boxes[1:]))
     plt.close(fig)
+
+
+def _envelope() -> xr.Dataset:
+    """An envelope-shaped Dataset (jaxobs.analysis.envelope): 3 speeds x 2 loads; "tuned" lost lock at 10 r/min
+    and load 0 (no steady error), is not resolved stable at 10 r/min and load 5, and its peak error is over the
+    bound at 100 r/min and load 5."""
+    speeds, loads = [10.0, 100.0, 1000.0], [0.0, 5.0]
+    ones = np.ones((2, 3, 2))
+    sync, stable, err = ones.copy(), ones.copy(), np.full((2, 3, 2), 2.0)
+    sync[1, 0, 0], stable[1, 0, 1], err[1, 1, 1] = 0.0, 0.0, 45.0
+    err[1, 0, 0] = np.nan
+    holds = sync * stable * (np.nan_to_num(err, nan=99.0) <= 30.0)
+    dims = ("design", "speed_rpm", "load")
+    data = {
+        "margin": (dims, np.where(stable > 0, 5.0, -1.0)),
+        "pos_err_max_deg": (dims, err),
+        "pos_bias_deg": (dims, np.where(np.isnan(err), np.nan, 0.5)),
+        "pos_ripple_deg": (dims, np.where(np.isnan(err), np.nan, 0.2)),
+        "holds": (dims, holds.astype(np.int8)),
+        "stable": (dims, stable.astype(np.int8)),
+        "synchronous": (dims, sync.astype(np.int8)),
+    }
+    coords = {"design": ["closed_form", "tuned"], "speed_rpm": speeds, "load": loads}
+    return xr.Dataset(data, coords=coords, attrs={"bound_deg": 30.0})
+
+
+def test_envelope_fail_marks_have_a_legend_of_their_own_and_lost_cells_are_hatched(tmp_path):
+    """The marks, the outline and the lost-lock cells are explained by a legend independent of the colour bars
+    (white is 0 on the centred scales, so it cannot also mean "lost lock")."""
+    fig = plot.envelope_figure(_envelope(), tmp_path / "e.png")
+    (legend,) = fig.legends
+    labels = [t.get_text() for t in legend.get_texts()]
+    assert [lab.split(":")[0] for lab in labels] == ["outline", "fails", "fails", "fails", "no value"]
+    assert "not synchronous" in labels[1] and "not resolved stable" in labels[2] and "over the bound" in labels[3]
+    assert "lost lock" in labels[4] and "<= 30 deg" in labels[0]
+    assert "white" not in fig._suptitle.get_text()
+    panels = [ax for ax in fig.axes if ax.get_xscale() == "log"]  # the maps (not their colour bars)
+    assert all(any(p.get_hatch() == "///" for p in ax.patches) for ax in panels)  # under every panel's cells
+    # the tuned design's marks: x at (10, 0), o at (10, 5), + at (100, 5)
+    tuned = [ax for ax in panels if ax.get_title().startswith("tuned")][0]
+    marks = {ln.get_marker(): (list(ln.get_xdata()), list(ln.get_ydata())) for ln in tuned.lines if ln.get_marker()}
+    assert marks["x"] == ([10.0], [0.0]) and marks["o"] == ([10.0], [5.0]) and marks["+"] == ([100.0], [5.0])
+    assert tuned.get_title() == "tuned\nholds at 3/6 points"
+    assert [ax for ax in panels if ax.get_title()][0].get_title().startswith("closed form")  # in words
+
+
+def test_heat_map_labels_are_the_axes_long_names_one_line_each():
+    """Each row's label is its axis's long name and unit on one line (the row, mean or worst, is the panel's
+    title); the title names the hidden axes in words, never by their code names."""
+    ds = _study({"a": np.full((2, 3, 2), 0.1), "b": np.full((2, 3, 2), 0.2)})
+    ds["dc"].attrs["long_name"] = "dc offset (p.u. of the fundamental)"
+    ds["freq_step"].attrs["long_name"] = "frequency step at the event"
+    ds["harmonics_scale"].attrs["long_name"] = "harmonic distortion (multiple of 001 Test C's spectrum)"
+    fig = _heatmap(ds)
+    labels = [ax.get_ylabel() for ax in fig.axes if ax.images and ax.get_ylabel()]
+    assert labels == ["dc offset (p.u. of the fundamental)"] * 2
+    assert {ax.get_xlabel() for ax in fig.axes if ax.images and ax.get_xlabel()} == {"frequency step at the event (Hz)"}
+    title = fig._suptitle.get_text()
+    assert "over the harmonic distortion\n" in title and "harmonics_scale" not in title

@@ -14,6 +14,7 @@ import jaxobs
 from jaxobs import drive as D
 from jaxobs import metrics as M
 from jaxobs import papers
+from tests.cfcheck import assert_cf18
 
 ROOT = Path(__file__).resolve().parents[1]
 RECORDINGS = ROOT / "tuning" / "presets" / "recordings"
@@ -204,7 +205,7 @@ def test_recording_job_runs_tiny(tmp_path):
     for design in ("initial", "closed_form", "tuned"):
         s = res["scores"][design]
         assert s["diverged"] == 0 and 0 < s["itae_freq_mean"] < 0.01, (design, s)
-    assert (tmp_path / "o" / "scores.nc").exists()
+    assert_cf18(tmp_path / "o" / "scores.nc")  # CF 1.8, the recordings labelled by file
 
 
 @pytest.mark.slow
@@ -216,6 +217,7 @@ def test_drive_recording_job_runs_tiny(tmp_path):
     res = run_job(job, tmp_path / "o", quiet=True)
     s = res["scores"]["initial"]
     assert s["diverged"] == 0 and s["rms_position_steady_mean"] < math.radians(5.0)
+    assert_cf18(tmp_path / "o" / "scores.nc")  # a drive job's: lost_sync and lost_speed among the flags
 
 
 def _job_copy(tmp_path, name="recording_wif.toml"):

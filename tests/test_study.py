@@ -18,6 +18,7 @@ from jaxobs import metrics as M
 from jaxobs.study import run_study, worst_cases
 from jaxobs_tuning.cli import main
 from jaxobs_tuning.summary import study_warnings
+from tests.cfcheck import assert_cf18
 
 AXES = {"freq_step": [-2.0, 1.0], "dc": [0.0, 0.1], "phase_jump_deg": [0.0, 30.0]}
 
@@ -131,6 +132,7 @@ def test_study_cli_default(tmp_path, capsys):
     assert "3 designs x 200 scenarios" in out
     # the table labels its units (the phase in degrees, as the figures)
     assert "settling_freq (s) mean" in out and "ripple_freq (Hz) mean" in out and "rms_phase (deg) mean" in out
+    assert_cf18(tmp_path / "study.nc")  # CF 1.8: compliance-checker, attributes, types
     ds = xr.load_dataset(tmp_path / "study.nc", engine="h5netcdf")
     assert set(ds["design"].values) == {"SOGI-FLL", "SOGI-FLL-WPF", "SOGI-FLL-WIF"}
     worst = json.loads((tmp_path / "worst_cases.json").read_text())

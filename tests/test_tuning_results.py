@@ -17,6 +17,7 @@ from jaxobs import linear, papers
 from jaxobs_tuning import load_job
 from jaxobs_tuning.cli import main
 from jaxobs_tuning.targets import flux_settling_time
+from tests.cfcheck import assert_cf18
 from tests.test_tuning import GOOD
 
 W_N = papers.FLL_OMEGA_N
@@ -118,6 +119,7 @@ def test_two_runs_write_byte_identical_results_that_rebuild_the_design(tmp_path)
     obs = observer_from_result(tmp_path / "a" / "result.json", notes=notes)
     assert float(obs.lam) == res["gains"]["tuned"]["lam"] and obs.ts == res["ts"] and type(obs.rule).__name__ == "AB3"
     assert not any("has no" in n for n in notes)
+    assert_cf18(tmp_path / "a" / "scores.nc")  # CF 1.8: compliance-checker, attributes, types
     ds = xr.open_dataset(tmp_path / "a" / "scores.nc", engine="h5netcdf")
     assert ds["itae_freq"].dims == ("design", "freq_step") and list(ds["freq_step"].values) == [1.0, 2.0]
     # CF units on every variable and numeric coordinate (NetCDF4)
@@ -460,3 +462,36 @@ def test_report_marks_events_only_where_the_scenario_has_one_and_draws_a_negativ
         assert ax.get_yscale() == scale and (tmp_path / "c.png").stat().st_size > 0
         lo, hi = ax.get_ylim()
         assert lo <= min(values) and hi >= max(values)  # every value drawn inside the axis
+
+
+def test_convergence_marks_the_best_iteration_and_responses_note_designs_drawn_on_one_line(tmp_path):
+    """convergence.png: the objective's definition under the axis and the tuned design's iteration starred (the
+    least stable value where the result names none); responses.png's legend says when a design's curves lie on
+    another's (an initial design at the closed form), with how far apart their gains are."""
+    from jaxobs_tuning.aggregations import CVaR
+    from jaxobs_tuning.objective import Term
+    from jaxobs_tuning.report import _coincide, convergence_figure, objective_text
+
+    runs = [(3.0, 0), (0.5, 2), (1.0, 0), (2.0, 0)]  # (objective, diverged scenarios)
+    hist = [{"iteration": i, "value": v, "diverged": d} for i, (v, d) in enumerate(runs)]
+    for best, want in ((None, 2), (3, 3)):  # iteration 1 diverged in two scenarios: never the best
+        fig = convergence_figure(hist, "x", tmp_path / "c.png", "J = mean of 1·itae_freq", best)
+        (ax,) = fig.axes
+        star = [ln for ln in ax.lines if ln.get_marker() == "*"]
+        assert len(star) == 1 and list(star[0].get_xdata()) == [want]
+        assert ax.get_legend().get_texts()[1].get_text().startswith(f"best: iteration {want}, J = ")
+        assert ax.get_ylabel() == "objective J (1)" and "J = mean of 1·itae_freq" in [t.get_text() for t in fig.texts]
+
+    class _Obj:
+        aggregation, penalty = CVaR(0.9), 1e3
+        terms = [Term("itae_freq", 1.0), Term("ripple_freq", 0.01)]
+
+    text = objective_text(_Obj())
+    assert text.startswith("J = CVaR (α = 0.9: the mean of the worst 10 %) over the scenarios of 1·itae_freq + ")
+    assert "0.01·ripple_freq" in text and "penalty 1000" in text
+    f = np.sin(np.linspace(0, 6, 50))
+    traces = {"initial": (f, f), "closed_form": (f + 1e-6, f), "tuned": (1.5 * f, f)}
+    gains = {"initial": {"lam": 100.0}, "closed_form": {"lam": 100.0001}, "tuned": {"lam": 150.0}}
+    assert _coincide(traces, gains) == {"closed_form": " (on the initial line: gains within 0.0001 %)"}
+    same = _coincide({"a": (f,), "b": (f,)}, {"a": {"k": 1.0}, "b": {"k": 1.0}})
+    assert same == {"b": " (on the a line: the same gains)"}

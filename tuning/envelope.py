@@ -117,7 +117,8 @@ def cli_envelope(args) -> int:
             stability=stab,
             progress=False if args.quiet else "auto",
         )
-        ds.attrs.update(source=str(path), job_name=job.name, component=job.component, machine=spec.machine)
+        # source (CF: how the data were made) stays the library function; the job file is its own attribute
+        ds.attrs.update(job_file=str(path), job_name=job.name, component=job.component, machine=spec.machine)
         if job.sha256:
             ds.attrs["job_sha256"] = job.sha256
         with atomic_path(out / "envelope.png") as tmp:

@@ -11,6 +11,7 @@ import numpy as np
 
 from jaxobs.families import GridSignals
 
+from .aggregations import CVaR, Mean, SmoothMax
 from .outdir import atomic_path
 
 
@@ -76,44 +77,120 @@ def _has_event(spec, index: int) -> bool:
     return any(n in axes and float(v) != 0.0 for n, v in zip(names, combos[index]))
 
 
-def convergence_figure(history: list, name: str, path: Path):
-    """The objective against the iteration (``history``: dicts with "iteration" and "value") into ``path``."""
-    fig, ax = _subplots(figsize=(6, 3.5))
+def objective_text(objective) -> str:
+    """What an :class:`~jaxobs_tuning.objective.Objective` minimises, in words and symbols: ``J = <aggregate>
+    over the scenarios of w1·metric1 + ...``, a number (each weight is per its metric's unit), a diverged
+    scenario scoring the penalty."""
+    agg = objective.aggregation
+    if isinstance(agg, CVaR):
+        how = f"CVaR (α = {agg.alpha:g}: the mean of the worst {100 * (1 - agg.alpha):.3g} %)"
+    elif isinstance(agg, SmoothMax):
+        how = "smooth max" + ("" if agg.temperature is None else f" (T = {agg.temperature:g})")
+    elif isinstance(agg, Mean):
+        how = "mean"
+    else:
+        how = type(agg).__name__
+    terms = " + ".join(
+        f"{float(t.weight):g}·{t.metric if isinstance(t.metric, str) else t.metric.name}" for t in objective.terms
+    )
+    return (
+        f"J = {how} over the scenarios of {terms}\n(a number: each weight is per its metric's unit; "
+        f"a diverged scenario scores the penalty {float(objective.penalty):g})"
+    )
+
+
+def convergence_figure(history: list, name: str, path: Path, objective: str | None = None, best: int | None = None):
+    """The objective against the iteration into ``path``; the figure.
+
+    Args:
+        history: dicts with "iteration", "value" and "diverged" (the solvers' history).
+        name: the job's name (the title).
+        path: the PNG written.
+        objective: the objective's definition (:func:`objective_text`), printed under the axis; None: none.
+        best: the iteration whose design is the tuned one (the result's ``best_iteration``); None: the least
+            value among the iterations that diverged in no scenario (none marked where every one diverged).
+    """
+    fig, ax = _subplots(figsize=(6.4, 4.0 if objective else 3.5))
     it, val = [h["iteration"] for h in history], [h["value"] for h in history]
-    ax.plot(it, val, lw=1.2)
+    ax.plot(it, val, lw=1.2, marker=".", ms=4, label="objective J at each iteration")
     # a log scale where every value is positive; an objective with a margin term (sosoifo.toml) goes negative,
     # and a log axis drew nothing at all.  Not near the largest double either: a log axis pads its range by
     # decades, and a run at 1.3e307 (weights of 1e308, tuned in forward mode) made matplotlib's tick
     # locator overflow (an internal error after the results were computed)
     if min(val) > 0 and max(val) < 1e300:
         ax.set_yscale("log")
+    if best is None:
+        stable = [h for h in history if not h.get("diverged", 0) and math.isfinite(h["value"])]
+        best = min(stable, key=lambda h: h["value"])["iteration"] if stable else None
+    at = [h for h in history if h["iteration"] == best]
+    if at:
+        ax.plot(
+            [best], [at[0]["value"]], "*", color="C3", ms=13, zorder=4,
+            label=f"best: iteration {best}, J = {at[0]['value']:.4g} (the tuned design)",
+        )  # fmt: skip
     ax.set_xlabel("iteration")
-    ax.set_ylabel("objective")
+    ax.set_ylabel("objective J (1)")
     ax.set_title(f"{name}: convergence")
     ax.grid(True, which="both", alpha=0.3)
-    fig.tight_layout()
+    ax.legend(fontsize=8)
+    if objective:
+        fig.text(0.5, 0.015, objective, ha="center", va="bottom", fontsize=8, color="0.2")
+    fig.tight_layout(rect=(0, 0.09 if objective else 0, 1, 1))
     with atomic_path(path) as tmp:
         fig.savefig(tmp, dpi=110)
     return fig
 
 
-def write_report(out: Path, job, obj, thetas: dict, history: list, closed_form_totals=None):
+def _coincide(traces: dict, gains: dict, tol: float = 1e-3) -> dict:
+    """{label: what its legend entry adds} for each design drawn on an earlier one's line (an initial design at
+    the closed form, a tuned one that did not move): every trace within ``tol`` of its panel's span of the
+    earlier design's, so only one line shows.  The note names that design and how far apart the gains are.
+
+    Args:
+        traces: {label: (frequency, error)}, the curves drawn, in the legend's order.
+        gains: {label: {gain: value}}.
+    """
+    out, seen = {}, []
+    for label, curves in traces.items():
+        for other in seen:
+            near = all(
+                np.max(np.abs(a - b)) <= tol * max(float(np.ptp(b)), 1e-300)
+                for a, b in zip(curves, traces[other])
+                if np.all(np.isfinite(a)) and np.all(np.isfinite(b))
+            )
+            if near:
+                g, h = gains[label], gains[other]
+                rel = max((abs(g[k] - h[k]) / max(abs(h[k]), 1e-300) for k in g), default=0.0)
+                how = "the same gains" if rel == 0 else f"gains within {100 * rel:.2g} %"
+                out[label] = f" (on the {other.replace('_', ' ')} line: {how})"
+                break
+        seen.append(label)
+    return out
+
+
+def write_report(out: Path, job, obj, thetas: dict, history: list, closed_form_totals=None, best_iteration=None):
     """convergence.png and responses.png in ``out``.  ``closed_form_totals``: the closed form's per-scenario
     totals on ``obj``'s scenarios (:meth:`Objective.per_scenario`'s second value), where the caller has them
-    (else they are computed again); the responses show the scenario where it does worst."""
+    (else they are computed again); the responses show the scenario where it does worst.  ``best_iteration``:
+    the iteration of the tuned design, marked on convergence.png (None: the least stable value there)."""
     if history:
-        convergence_figure(history, job.name, out / "convergence.png")
+        convergence_figure(history, job.name, out / "convergence.png", objective_text(obj), best_iteration)
     # responses on the scenario where the closed form does worst
     per = obj.per_scenario(thetas["closed_form"])[1] if closed_form_totals is None else closed_form_totals
     worst = int(np.argmax(np.asarray(per)))
     sig = jax.tree.map(lambda x: x[worst], obj.scenarios)
     fig, axes = _subplots(2, 1, figsize=(8, 5.5), sharex=True)
+    drawn, times = {}, {}
     for label, th in thetas.items():
+        times[label], omega, err = (np.asarray(x) for x in obj.response(th, sig))
+        drawn[label] = (omega / (2 * math.pi), np.degrees(err))
+    gains = {label: {k: float(v) for k, v in obj.param.values(th).items()} for label, th in thetas.items()}
+    notes = _coincide(drawn, gains)  # a dashed line exactly on another: the legend says why
+    for label, (freq, err) in drawn.items():
         style = _STYLE.get(label, dict(lw=1))
-        t, omega, err = (np.asarray(x) for x in obj.response(th, sig))
         name = label.replace("_", " ")  # in words ("closed form"); result.json's keys have an underscore
-        axes[0].plot(t, omega / (2 * math.pi), label=name, **style)
-        axes[1].plot(t, np.degrees(err), label=name, **style)
+        axes[0].plot(times[label], freq, label=name + notes.get(label, ""), **style)
+        axes[1].plot(times[label], err, label=name + notes.get(label, ""), **style)
     # an FLL's ("grid") error is the grid voltage's phase; a flux observer's or a drive's (on an "emf" recording or
     # closing the loop) is the rotor's electrical position: the labels say which
     if job.scenarios.family is not GridSignals:

@@ -43,7 +43,7 @@ from .. import metrics as M
 from ..drive import SETTLE_PERIODS, ClosedLoop, Drive, PMSMParams, drive_speed_limit_rpm
 from ..drive_study import gain_variables
 from ..families import DRIVE_STUDY_AXES, AbstractScenarios, DriveScenarios
-from ..provenance import provenance
+from ..provenance import cf_dataset, provenance
 from ..quantities import Metric
 from ..scenarios import Grid
 from ..sharding import batch_mesh
@@ -461,7 +461,7 @@ def envelope(
         ds.attrs[f"machine_{f}"] = float(getattr(machine, f))
     ds.attrs.update(drive_ts=float(drive.ts), drive_settle=float(drive.settle))
     ds.attrs.update(provenance("jaxobs.analysis.envelope.envelope"))
-    return ds
+    return cf_dataset(ds, "jaxobs operating envelope: where each design holds over speed x load")
 
 
 # --------------------------------------------------------------------------

@@ -10,8 +10,9 @@ from pathlib import Path
 import numpy as np
 
 from jaxobs import metrics as M
+from jaxobs.provenance import cf_dataset
 
-from ..objective import LOST_SYNC_DEG, METRIC_UNITS
+from ..objective import LOST_SYNC_DEG, METRIC_UNITS, METRICS
 from ..outdir import atomic_write_text
 from .spec import Job, ScenarioSpec
 
@@ -58,10 +59,11 @@ def at_bounds(job: Job, gains: dict) -> dict:
     return out
 
 
-def scores_dataset(obj, names, combos, spec: ScenarioSpec, per: dict):
+def scores_dataset(obj, names, combos, spec: ScenarioSpec, per: dict, title: str = "jaxobs tune: per-scenario scores"):
     """Per-scenario metrics of each design as an xarray Dataset: the grid's axes as dims (a full grid),
-    else one ``scenario`` dim with the axes as coordinates (sampled scenarios).  Every variable and numeric
-    coordinate carries CF ``units`` (:data:`jaxobs_tuning.objective.METRIC_UNITS`; flags ``1``)."""
+    else one ``scenario`` dim with the axes as coordinates (sampled scenarios).  Every variable carries a
+    ``long_name`` and every numeric one CF ``units`` (the metrics': :data:`jaxobs_tuning.objective.METRICS`;
+    flags ``1``); the CF-1.8 global attributes, ``title`` among them (:func:`jaxobs.provenance.cf_dataset`)."""
     import xarray as xr
 
     designs = list(per)
@@ -88,34 +90,45 @@ def scores_dataset(obj, names, combos, spec: ScenarioSpec, per: dict):
             rows.append(np.asarray(x, dtype=float).reshape(shape))
         data[key] = (dims, np.stack(rows))
     ds = xr.Dataset(data, coords=coords)
-    ds["diverged"] = ds["diverged"].astype("int8")
-    ds["lost_lock"] = ds["lost_lock"].astype("int8")
     for key in keys:
-        ds[key].attrs["units"] = METRIC_UNITS[key]
+        ds[key].attrs.update(units=METRIC_UNITS[key], long_name=METRICS[key].long_name)
     # the weights carry the metrics' units (a term's weight is per its metric's unit): the total is a number
     ds["total"].attrs.update(units="1", long_name="weighted objective of the scenario (the penalty where diverged)")
+    flags = {
+        "diverged": "diverged: the simulation ended non-finite (1: diverged)",
+        "lost_lock": "lost lock: the estimate ended far from the truth in the steady window (45 deg or 10 % on "
+        "signals, 90 deg on the drive), or diverged (1: lost)",
+        "lost_sync": f"lost synchronism: diverged, or |position error| > {LOST_SYNC_DEG:g} deg (1: lost)",
+        "lost_speed": f"lost speed: diverged, or the steady window's mean |speed - reference| > "
+        f"{100 * M.SPEED_TOL:g} % of the mean |reference| (at least {M.SPEED_FLOOR_RPM:g} r/min) (1: lost)",
+    }
+    for key in ("diverged", "lost_lock", *extra):
+        ds[key] = ds[key].astype("int8")
+        ds[key].attrs.update(units="1", long_name=flags[key])
     ds.attrs["note"] = (
         "total: the weighted objective per scenario (the penalty where diverged); diverged: 1/0; lost_lock: 1 where "
         "the estimate ended far from the truth in the steady window (45 deg or 10 % on signals, 90 deg on the "
         "drive) or diverged"
     )
     if extra:
-        ds["lost_sync"] = ds["lost_sync"].astype("int8")
-        ds["lost_speed"] = ds["lost_speed"].astype("int8")
-    for key in ("diverged", "lost_lock", *extra):
-        ds[key].attrs["units"] = "1"
-    for name in (*names, *([] if grid else ["scenario"])):
-        if name == "recording" and spec.recording is not None:
-            ds[name].attrs["long_name"] = "recording (its file; a window of a log: file@index)"
-            continue
-        # the family's axis (CF units); an index (scenario) is a number
-        ds[name].attrs["units"] = spec.family.axes[name].units if name in spec.family.axes else "1"
         ds.attrs["note"] += f"; lost_sync: 1 where diverged or |position error| > {LOST_SYNC_DEG:g} deg (drive)"
         ds.attrs["note"] += (
             f"; lost_speed: 1 where diverged or the steady window's mean |speed - reference| > "
             f"{100 * M.SPEED_TOL:g} % of the mean |reference| (at least {M.SPEED_FLOOR_RPM:g} r/min) (drive)"
         )
-    return ds
+    what = "observer design (closing the loop sensorless)" if obj.closed_loop else "observer design"
+    ds["design"].attrs["long_name"] = f"{what}: its initial, closed-form or tuned gains"
+    for name in names:
+        if name == "recording" and spec.recording is not None:  # named by its file (a string label: no unit)
+            ds[name].attrs["long_name"] = "recording (its file; a window of a log: file@index)"
+        elif name in spec.family.axes:  # the family's axis: CF units and long name
+            ds[name].attrs.update(spec.family.axes[name].attrs)
+        else:
+            ds[name].attrs.update(units="1", long_name=name)
+    if not grid:
+        ds["scenario"].attrs.update(units="1", long_name=f"scenario: one of {len(combos)} random points of the axes")
+    ds.attrs["source"] = "jaxobs tune (jaxobs_tuning.run_job)"
+    return cf_dataset(ds, title)
 
 
 def recordings_provenance(job: Job, scenarios=None) -> dict:

@@ -226,7 +226,8 @@ def run_job(job: Job, out: Path, resume: bool = False, quiet: bool = False) -> d
         result["holdout"]["count"] = len(hc)
         result["lost_lock_tuned_only"]["holdout"] = _lost_only(hper)
         with atomic_path(out / "holdout_scores.nc") as tmp:
-            scores_dataset(hobj, hn, hc, job.holdout, hper).to_netcdf(tmp, engine="h5netcdf")
+            scores = scores_dataset(hobj, hn, hc, job.holdout, hper, title="jaxobs tune: per-scenario scores, held out")
+            scores.to_netcdf(tmp, engine="h5netcdf")
     bar.close()
     if job.envelope is not None:  # the long-horizon verification across the envelope the job claims
         _verify(job, values, result, quiet)
@@ -234,7 +235,9 @@ def run_job(job: Job, out: Path, resume: bool = False, quiet: bool = False) -> d
         scores_dataset(obj, names, combos, job.scenarios, per).to_netcdf(tmp, engine="h5netcdf")
     write_json(out / "history.json", res.history)
     # the closed form's totals scored above: the report's worst scenario without scoring it a second time
-    write_report(out, job, obj, thetas, res.history, closed_form_totals=per["closed_form"][1])
+    write_report(
+        out, job, obj, thetas, res.history, closed_form_totals=per["closed_form"][1], best_iteration=res.best_iteration
+    )
     timing = {"total_s": time.time() - t0, **res.timing, "iterations": res.iterations}
     atomic_write_text(out / "timing.json", json.dumps(timing, indent=1) + "\n")
     write_json(out / "result.json", result)  # last: a result.json means a complete results folder
