@@ -103,8 +103,10 @@ class AbstractRule(eqx.Module):
 
     ``init(f, x0, u)`` returns the rule's own state (multistep history, or
     ``None``); ``step(f, x, u, h, rule_state)`` returns the state after one
-    period ``h`` and the new rule state.  ``order`` is the global order of
-    accuracy for smooth inputs given as :class:`Knots`.
+    period ``h`` and the new rule state.
+
+    Attributes:
+        order: The global order of accuracy for smooth inputs given as :class:`Knots` (a class constant).
     """
 
     order: ClassVar[int]
@@ -201,6 +203,9 @@ class Tustin(AbstractRule):
     iteration already keeps the rule second order; the default of two leaves
     the residual far below the rule's own truncation error.  A linear field is
     solved exactly by the first iteration.
+
+    Attributes:
+        newton_iters: Newton iterations per step (an integer ≥ 1; static).
     """
 
     newton_iters: int = eqx.field(static=True, default=2)

@@ -211,6 +211,15 @@ class ForwardSensitivity(AbstractCheckpoint):
     The gradient costs about one forward pass per perturbed scalar's tangent;
     with more than ``max_scalars`` perturbed scalars the ``fallback`` strategy
     (reverse mode) runs instead.
+
+    Attributes:
+        max_scalars: The most perturbed scalars served by forward sensitivities (an integer ≥ 1; static).
+        fallback: The reverse-mode strategy (:class:`NoCheckpoint`, :class:`StepCheckpoint`,
+            :class:`ChunkCheckpoint`) run with more perturbed scalars (static).
+
+    Raises:
+        ValueError: ``max_scalars`` or ``fallback`` is out of range; or, when run, the loop has
+            per-step outputs (use ``save=SaveFinal(cost)``).
     """
 
     max_scalars: int = eqx.field(static=True, default=8)
@@ -244,6 +253,12 @@ class AutoCheckpoint(AbstractCheckpoint):
     Below ``chunk_above`` per-step checkpointing keeps the carries of every step
     (n × carry), which for 1 s at 10 kHz and batch 1024 is a few tens of MB —
     cheap, and a little faster than chunks.
+
+    Attributes:
+        chunk_above: Steps above which :class:`ChunkCheckpoint` replaces :class:`StepCheckpoint`
+            (an integer ≥ 0; static).
+        forward_max: The most perturbed scalars served by :class:`ForwardSensitivity`
+            (an integer ≥ 0, 0: never; static).
     """
 
     chunk_above: int = eqx.field(static=True, default=20_000)

@@ -198,6 +198,9 @@ class AbstractSave(eqx.Module):
     Each strategy runs its own loop (:meth:`run`), as diffrax's adjoints do: the plain scan of the system's
     step, or the throughput loop (:mod:`jaxobs._loop`) over the inputs the system declares
     (:meth:`jaxobs.AbstractSystem.loop_inputs`).
+
+    Attributes:
+        cost: ``cost(out) -> scalar``, or ``None`` (no running cost; static).
     """
 
     cost: Callable | None = eqx.field(static=True, default=None)
@@ -238,6 +241,10 @@ class SaveAll(AbstractSave):
     at a time, state vectors split, multistep start-ups peeled, unrolled), as :class:`SaveFinal` always
     does: the same outputs to rounding (1e-12 relative), in about half the time where the input is costly
     (a harmonic signal) or under differentiation (the tuning objective runs this way).
+
+    Attributes:
+        fast: Whether to run the throughput loop (static).
+        cost: ``cost(out) -> scalar``, or ``None`` (:class:`AbstractSave`; static).
     """
 
     fast: bool = eqx.field(static=True, default=False)
@@ -318,7 +325,13 @@ def _solve(cost, system, n: int, feed: Callable, *, fast: bool, keep: bool, chec
 
 
 class SignalTruth(NamedTuple):
-    """What a synthetic signal really is at a sample."""
+    """What a synthetic signal really is at a sample.
+
+    Attributes:
+        theta: The true fundamental phase, rad (unwrapped).
+        omega: The true fundamental frequency, rad/s.
+        amplitude: The true fundamental amplitude.
+    """
 
     theta: jax.Array  # true fundamental phase, rad (unwrapped)
     omega: jax.Array  # true fundamental frequency, rad/s
@@ -326,7 +339,13 @@ class SignalTruth(NamedTuple):
 
 
 class SignalOutput(NamedTuple):
-    """One step of :class:`OnSignal`: the input sample, the observer's outputs, and the truth."""
+    """One step of :class:`OnSignal`: the input sample, the observer's outputs, and the truth.
+
+    Attributes:
+        u: The input sample u(t_k) the observer was given.
+        obs: The observer's outputs at t_k (its NamedTuple).
+        truth: What the signal really is at t_k (a :class:`SignalTruth`; ``None`` if the signal cannot say).
+    """
 
     u: Any  # the input sample u(t_k) the observer was given
     obs: Any  # the observer's outputs at t_k (its NamedTuple)

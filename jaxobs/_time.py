@@ -55,6 +55,11 @@ class SampleTime(eqx.Module):
     Signals that know it (:class:`~jaxobs.signals.GridSignal`, :class:`~jaxobs.signals.EMFSignal`,
     :class:`~jaxobs.scenarios.NoisyGridSignal`) form their phase from it exactly in float32 (module doc);
     :class:`~jaxobs.OnSignal` passes one to such signals instead of the rounded float t_k.
+
+    Attributes:
+        k: The sample index (int32, any shape).
+        ts: The sample period (s, static).
+        t0: The time of sample 0 (s, static).
     """
 
     k: jax.Array  # the sample index (int32, any shape)
@@ -67,7 +72,14 @@ class SampleTime(eqx.Module):
 
 
 def time_value(t):
-    """The float time of ``t`` (a float array, or a :class:`SampleTime`)."""
+    """The float time of ``t``.
+
+    Args:
+        t: A float array, or a :class:`SampleTime`.
+
+    Returns:
+        ``t`` itself, or the :class:`SampleTime`'s rounded value.
+    """
     return t.value() if isinstance(t, SampleTime) else t
 
 

@@ -288,7 +288,14 @@ _state: dict = {"cache": ProgramCache(None)}
 
 
 def set_program_cache(cache: ProgramCache | None) -> None:
-    """Use ``cache`` for every :func:`kept_jit` from now on (``None``: off)."""
+    """Use ``cache`` for every :func:`kept_jit` from now on.
+
+    Args:
+        cache: The :class:`ProgramCache` to use, or ``None`` (off).
+
+    Raises:
+        ValueError: ``cache`` is neither a :class:`ProgramCache` nor ``None``.
+    """
     if cache is not None and not isinstance(cache, ProgramCache):
         raise ValueError(f"set_program_cache: cache must be a jaxobs.ProgramCache or None, got {cache!r}")
     _state["cache"] = ProgramCache(None) if cache is None else cache

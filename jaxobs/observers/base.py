@@ -188,6 +188,13 @@ class ObserverBank(AbstractDriveObserver):
 
     Lets one drive simulation compare observers on identical data (000's
     per-observer position errors) without them disturbing each other.
+
+    Attributes:
+        observers: The drive observers (a tuple of :class:`AbstractDriveObserver`).
+        primary: The index of the observer that closes the loop (static).
+
+    Raises:
+        ValueError: An entry is not a drive observer, or ``primary`` is out of range.
     """
 
     observers: tuple

@@ -206,7 +206,22 @@ class _PLLFluxBase(AbstractFluxObserver):
 
 
 class PureIntegratorFlux(_PLLFluxBase):
-    """ψ̂ = ∫ê dt (000 eq 6) with a type-2 PLL on ψ̂ for the speed.  State [ψα, ψβ, θ_pll, ω_pll]."""
+    """ψ̂ = ∫ê dt (000 eq 6) with a type-2 PLL on ψ̂ for the speed.  State [ψα, ψβ, θ_pll, ω_pll].
+
+    Args:
+        Rs: Assumed stator resistance, ohm (≥ 0; :meth:`bind` sets it per scenario).
+        L: Assumed inductance, H (> 0; :meth:`bind` sets it to the machine's Ld).
+        kp_pll: The PLL's proportional gain, 1/s (> 0).
+        ki_pll: The PLL's integral gain, 1/s² (> 0).
+        omega_init: The PLL's initial speed, rad/s (default 0; :meth:`bind` sets it).
+        ts: Sample time, s.
+        rule: Discretization rule (default :class:`~jaxobs.RK4`).
+        psi_floor: Floor of |ψ̂| in the PLL's normalized phase detector, Wb.
+        omega0: Another name of ``omega_init`` (the job files' key); give one of the two.
+
+    Raises:
+        ValueError: A value out of its range, or both ``omega_init`` and ``omega0`` given.
+    """
 
     Rs: jax.Array
     L: jax.Array
@@ -236,6 +251,22 @@ class LPFFlux(_PLLFluxBase):
     −atan(ωc/ω̂) (000 eq 11), using the PLL's ω̂ — the phase compensation that
     000 says the LPF "relies on rigidly".  State [ψα, ψβ, θ_pll, ω_pll]; the PLL
     tracks the uncompensated flux (a constant lead does not change its speed).
+
+    Args:
+        Rs: Assumed stator resistance, ohm (≥ 0; :meth:`bind` sets it per scenario).
+        L: Assumed inductance, H (> 0; :meth:`bind` sets it to the machine's Ld).
+        omega_c: The low-pass cut-off ωc, rad/s (> 0).
+        kp_pll: The PLL's proportional gain, 1/s (> 0).
+        ki_pll: The PLL's integral gain, 1/s² (> 0).
+        omega_init: The PLL's initial speed, rad/s (default 0; :meth:`bind` sets it).
+        compensate: Whether to apply 000 eq 11's magnitude and phase compensation.
+        ts: Sample time, s.
+        rule: Discretization rule (default :class:`~jaxobs.RK4`).
+        psi_floor: Floor of |ψ̂| in the PLL's normalized phase detector, Wb.
+        omega0: Another name of ``omega_init`` (the job files' key); give one of the two.
+
+    Raises:
+        ValueError: A value out of its range, or both ``omega_init`` and ``omega0`` given.
     """
 
     Rs: jax.Array
@@ -352,6 +383,21 @@ class SOIFO(_FLLFluxBase):
 
     State [yα, qα, yβ, qβ, ω̂].  FLL: ω̂̇ = −lam·ω̂² Σₓ (êₓ − yₓ) qₓ / Σₓ (yₓ² + qₓ²) (two SOGIs, one FLL;
     ``lam`` dimensionless, k²/4 for ζ = 1/√2).
+
+    Args:
+        Rs: Assumed stator resistance, ohm (≥ 0; :meth:`bind` sets it per scenario).
+        L: Assumed inductance, H (> 0; :meth:`bind` sets it to the machine's Ld).
+        k: SOGI gain (> 0).
+        lam: Frequency-normalized FLL gain λ/ω̂² (dimensionless, > 0).
+        omega_init: The FLL's initial frequency, rad/s (> 0; :meth:`bind` sets it).
+        ts: Sample time, s.
+        rule: Discretization rule (default :class:`~jaxobs.RK4`).
+        v_floor: Floor of the FLL normalization (V, > 0).
+        omega_min: Floor of |ω̂| in the outputs, which divide by it, rad/s.
+        omega0: Another name of ``omega_init`` (the job files' key); give one of the two.
+
+    Raises:
+        ValueError: A value out of its range, or both ``omega_init`` and ``omega0`` given.
     """
 
     Rs: jax.Array
@@ -433,6 +479,23 @@ class SecondOrderSOIFO(_FLLFluxBase):
       shared by D1 and Q1).  The direct form hides the first GI's output z_a, so
       this variant's FLL uses the SOGI-FLL error (ê − v′)qv′ on the outputs, and
       ω̂ is updated by forward Euler.  State [w_α(k−1..k−4), w_β(k−1..k−4), ω̂].
+
+    Args:
+        Rs: Assumed stator resistance, ohm (≥ 0; :meth:`bind` sets it per scenario).
+        L: Assumed inductance, H (> 0; :meth:`bind` sets it to the machine's Ld).
+        K1: Second-order SOGI error gain (000's K1, > 0).
+        K2: Second-order SOGI damping gain (000's K2, > 0).
+        lam: Frequency-normalized FLL gain λ/ω̂² (dimensionless, > 0).
+        omega_init: The FLL's initial frequency, rad/s (> 0; :meth:`bind` sets it).
+        ts: Sample time, s.
+        rule: Discretization rule (default :class:`~jaxobs.RK4`).
+        discretization: ``"rule"`` or ``"paper"``, as above.
+        v_floor: Floor of the FLL normalization (V, > 0).
+        omega_min: Floor of |ω̂| in the outputs, which divide by it, rad/s.
+        omega0: Another name of ``omega_init`` (the job files' key); give one of the two.
+
+    Raises:
+        ValueError: A value out of its range, or both ``omega_init`` and ``omega0`` given.
     """
 
     Rs: jax.Array

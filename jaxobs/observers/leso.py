@@ -200,7 +200,22 @@ def _pll_closed_form(pll_hz, owner):
 
 
 class CLESO(AbstractLESO):
-    """Conventional LESO (002 eqs 15–17), gains from the bandwidth ω0: l1 = 2ω0 − μ, l2 = ω0²."""
+    """Conventional LESO (002 eqs 15–17), gains from the bandwidth ω0: l1 = 2ω0 − μ, l2 = ω0².
+
+    Args:
+        Rs: Assumed stator resistance, ohm (≥ 0; :meth:`bind` sets it per scenario).
+        Lq: Assumed q-axis inductance, H (> 0; :meth:`bind` sets it).
+        omega0: LESO bandwidth ω0, rad/s (> 0).
+        kp_pll: The PLL's proportional gain, 1/s (> 0; default: placed at 2π·``papers.LESO_PLL_HZ``, ζ = 1/√2).
+        ki_pll: The PLL's integral gain, 1/s² (> 0; default as ``kp_pll``).
+        omega0_pll: The PLL's initial speed, rad/s (:meth:`bind` sets it).
+        ts: Sample time, s.
+        rule: Discretization rule (default :class:`~jaxobs.RK4`).
+        e_floor: Floor of |ê| in the PLL's normalized error, V.
+
+    Raises:
+        ValueError: A value out of its range.
+    """
 
     Rs: jax.Array
     Lq: jax.Array
@@ -264,7 +279,24 @@ class CLESO(AbstractLESO):
 
 
 class GILESO(AbstractLESO):
-    """LESO with a generalized integrator at ω̂e in its internal model (002 eqs 29–30)."""
+    """LESO with a generalized integrator at ω̂e in its internal model (002 eqs 29–30).
+
+    Args:
+        Rs: Assumed stator resistance, ohm (≥ 0; :meth:`bind` sets it per scenario).
+        Lq: Assumed q-axis inductance, H (> 0; :meth:`bind` sets it).
+        omega0: LESO bandwidth ω0, rad/s (> 0).
+        K_r: Generalized integrator gain, 1/s² (> 0; default 2ω0²).
+        omega_c: Generalized integrator damping ωc, rad/s (> 0).
+        kp_pll: The PLL's proportional gain, 1/s (> 0; default: placed at 2π·``papers.LESO_PLL_HZ``, ζ = 1/√2).
+        ki_pll: The PLL's integral gain, 1/s² (> 0; default as ``kp_pll``).
+        omega0_pll: The PLL's initial speed, rad/s (:meth:`bind` sets it).
+        ts: Sample time, s.
+        rule: Discretization rule (default :class:`~jaxobs.RK4`).
+        e_floor: Floor of |ê| in the PLL's normalized error, V.
+
+    Raises:
+        ValueError: A value out of its range.
+    """
 
     Rs: jax.Array
     Lq: jax.Array
@@ -348,7 +380,25 @@ class GILESO(AbstractLESO):
 
 
 class FALESO(AbstractLESO):
-    """Frequency-adaptive complex-coefficient LESO (002 eqs 25–28)."""
+    """Frequency-adaptive complex-coefficient LESO (002 eqs 25–28).
+
+    ê/e = (k2 s + k1)/(s² + (k2 − jω̂e)s + k1); stable iff k1 > 0 and k2 > 0 (002 eq 24).
+
+    Args:
+        Rs: Assumed stator resistance, ohm (≥ 0; :meth:`bind` sets it per scenario).
+        Lq: Assumed q-axis inductance, H (> 0; :meth:`bind` sets it).
+        k1: FA-LESO integral gain, 1/s² (> 0).
+        k2: FA-LESO proportional gain, 1/s (> 0).
+        kp_pll: The PLL's proportional gain, 1/s (> 0; default: placed at 2π·``papers.LESO_PLL_HZ``, ζ = 1/√2).
+        ki_pll: The PLL's integral gain, 1/s² (> 0; default as ``kp_pll``).
+        omega0_pll: The PLL's initial speed, rad/s (:meth:`bind` sets it).
+        ts: Sample time, s.
+        rule: Discretization rule (default :class:`~jaxobs.RK4`).
+        e_floor: Floor of |ê| in the PLL's normalized error, V.
+
+    Raises:
+        ValueError: A value out of its range.
+    """
 
     # 002's names: ê/e = (k2 s + k1)/(s² + (k2 − jω̂e)s + k1), so k1 is in s⁻² and k2 in s⁻¹ (001's WIF k1,
     # k2, dimensionless, are other gains: a gain is (class, name), jaxobs.observers.gain_fields)
