@@ -31,6 +31,15 @@ class AbstractSignal(eqx.Module):
 
     A subclass overrides what differs from the defaults: no sample time, no truth, no flux angle, the scenario
     axis leading, every horizon readable.
+
+    Attributes:
+        accepts_sample_time: Whether ``signal(t)`` takes a :class:`~jaxobs.SampleTime` (which
+            :class:`~jaxobs.OnSignal` then passes instead of the rounded float t_k).
+        has_truth: Whether the signal reports its true phase, frequency and amplitude (a recording's
+            depends on its data: a property there).
+        has_flux_angle: Whether the signal reports a true rotor-flux angle (the metrics' ``signal=``).
+        batch_axis: The scenario axis of the signal's leaves in a batch (a time-major recording batch's
+            is 1: a property there).
     """
 
     accepts_sample_time: ClassVar[bool] = False
@@ -63,12 +72,24 @@ class AbstractSignal(eqx.Module):
         raise ValueError(f"{type(self).__name__} has no flux angle")
 
     def check_window(self, t0: float, t_last: float, owner: str) -> None:
-        """Refuse (``ValueError``, naming the signal as ``owner``) a simulation that reads the signal at t0,
-        t0 + ts, ..., ``t_last`` (s) where it cannot be read; every horizon is readable by default."""
+        """Refuse a simulation that reads the signal where it cannot be read; every horizon is readable by default.
+
+        Args:
+            t0: The first time read, s.
+            t_last: The last time read (t0, t0 + ts, ..., t_last), s.
+            owner: The name the error gives the signal.
+
+        Raises:
+            ValueError: The signal cannot be read over [t0, t_last].
+        """
 
 
 class FunctionSignal(AbstractSignal):
-    """A plain function of time ``fn(t)`` (t in s) as a signal: no truth, a float time."""
+    """A plain function of time as a signal: no truth, a float time.
+
+    Attributes:
+        fn: The function ``fn(t)``, t in s.
+    """
 
     fn: Callable
 
