@@ -71,7 +71,22 @@ SETTLE_PERIODS = 10.0
 
 
 class Drive(eqx.Module):
-    """The drive hardware and controller: FOC, inverter, plant integration, optional I-f start-up."""
+    """The drive hardware and controller: FOC, inverter, plant integration, optional I-f start-up.
+
+    Args:
+        foc: The :class:`FOC`.
+        inverter: The :class:`Inverter` (default ``Inverter()``).
+        startup: An :class:`IfStartup`, or None (a steady start).
+        n_sub: Plant substeps per control period (an integer ≥ 1; even to sample at the PWM centre).
+        rule: The plant integration rule (default :class:`~jaxobs.RK4`).
+        sensorless: Whether the observer closes the loop.
+        handover: Sensorless: the encoder closes the loop until this time (s, ≥ 0), the observer after.
+        settle: A steady start's unscored settling phase of the observer before t = 0, s (in [0, 60]).
+        latency: Sampling, computation delay, comparison instant (:class:`Latency`; default ``Latency()``).
+
+    Raises:
+        ValueError: A value out of its range, naming the field.
+    """
 
     foc: FOC
     inverter: Inverter
