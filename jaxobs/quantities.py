@@ -57,7 +57,7 @@ class Axis:
         """``values`` as a float list, each finite and inside the range.
 
         Args:
-            values: The values (a number or a list).
+            values: The values (a list of numbers).
             where: The name errors give the table.
             low: Narrows the range's low end.
             high: Narrows the range's high end.
