@@ -62,7 +62,7 @@ class CVaR(AbstractAggregation):
     """Conditional value at risk: the mean of the largest ⌈(1 − α)·B⌉ values (at least one).
 
     Attributes:
-        alpha: α.
+        alpha: α, in [0, 1).
     """
 
     alpha: float = eqx.field(static=True, default=0.9)
