@@ -6,7 +6,12 @@ import math
 
 
 class JobError(ValueError):
-    """A problem with a job file; ``str()`` is one line naming the field, at most :data:`MAX_ERROR` characters."""
+    """A problem with a job file; ``str()`` is one line naming the field, at most :data:`MAX_ERROR` characters.
+
+    Args:
+        field: The field, as the job file spells its path (``drive.start``).
+        message: What is wrong, and the allowed range.
+    """
 
     def __init__(self, field: str, message: str):
         self.field = field

@@ -119,10 +119,19 @@ def parse_scenarios(
 
 
 def parse_job(raw: dict, base: Path | None = None) -> Job:
-    """Validate a job dict (the parsed TOML); raises :class:`JobError` naming the field.
+    """Validate a job dict (the parsed TOML).
 
-    ``base``: the job file's folder, against which a recording's relative ``file`` is read (and then
-    checked now: it exists, its columns, its rate); without it the files are read when the job runs."""
+    Args:
+        raw: The parsed job file.
+        base: The job file's folder, against which a recording's relative ``file`` is read (and then
+            checked now: it exists, its columns, its rate); without it the files are read when the job runs.
+
+    Returns:
+        The :class:`Job`.
+
+    Raises:
+        JobError: A field out of its range, naming the field.
+    """
     keys = ("job", "component", "gains", "scenarios", "holdout", "objective", "solver", "drive", "envelope")
     no_unknown(raw, keys, "job file")
     job_t = get_field(raw, "job", "job", dict, required=True)
@@ -326,7 +335,17 @@ def parse_job(raw: dict, base: Path | None = None) -> Job:
 
 
 def load_job(path) -> Job:
-    """Read, check and parse a job file (:func:`read_toml`, then :func:`parse_job`)."""
+    """Read, check and parse a job file (:func:`read_toml`, then :func:`parse_job`).
+
+    Args:
+        path: The job file.
+
+    Returns:
+        The :class:`Job`, with its ``sha256``.
+
+    Raises:
+        JobError: An unreadable file, or a field out of its range, naming the field.
+    """
     raw, data = read_toml(path)
     job = parse_job(raw, Path(path).parent)
     job.sha256 = sha256(data)
