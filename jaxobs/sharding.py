@@ -476,10 +476,18 @@ class _NotCoordinator(ConnectionError):
 def global_batch(tree, mesh: Mesh | None = None):
     """A batch that every process holds in full (the same values) as global arrays split over ``mesh``.
 
-    Every array leaf's leading (scenario) axis is split over ``mesh`` (default: every process's
-    devices), which must divide it; each process fills only its own devices' rows
-    (``jax.make_array_from_callback``), so nothing crosses between processes.  In one process this
-    is :func:`shard_batch` with the split required.
+    Each process fills only its own devices' rows (``jax.make_array_from_callback``), so nothing crosses
+    between processes.  In one process this is :func:`shard_batch` with the split required.
+
+    Args:
+        tree: The batch; every array leaf has the leading (scenario) axis.
+        mesh: The mesh (default: every process's devices), whose device count must divide the batch.
+
+    Returns:
+        ``tree`` as global arrays.
+
+    Raises:
+        ValueError: A leaf lacks the scenario axis, or the batch does not divide over the mesh.
     """
     if any(np.ndim(x) <= ax for x, ax in _leaf_axes(tree)):
         raise ValueError("global_batch: every array leaf of the batch needs the leading scenario axis (got a scalar)")
@@ -502,9 +510,17 @@ def global_batch(tree, mesh: Mesh | None = None):
 
 
 def gather_batch(tree):
-    """Every leaf of ``tree`` (per-scenario results, sharded over any devices) as a whole NumPy array, on
-    every process: a collective across processes (``multihost_utils.process_allgather``) when the
-    leaf spans several, else a plain copy to the host."""
+    """Every leaf of ``tree`` as a whole NumPy array, on every process.
+
+    A collective across processes (``multihost_utils.process_allgather``) where a leaf spans several, else a
+    plain copy to the host.
+
+    Args:
+        tree: Per-scenario results, sharded over any devices.
+
+    Returns:
+        ``tree`` with NumPy leaves.
+    """
     from jax.experimental import multihost_utils
 
     def get(x):

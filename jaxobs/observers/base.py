@@ -63,11 +63,26 @@ class AbstractObserver(eqx.Module):
 
     @abc.abstractmethod
     def init(self, u0=None) -> Any:
-        """The state at sample 0 (``u0``: the first input, for rules that need it; None otherwise)."""
+        """The state at sample 0.
+
+        Args:
+            u0: The first input, for rules that need it; None otherwise.
+
+        Returns:
+            The observer's state.
+        """
 
     @abc.abstractmethod
     def step(self, state, u) -> tuple[Any, Any]:
-        """One sample: (the state at n + 1, the named outputs at t_n)."""
+        """One sample.
+
+        Args:
+            state: The state at n.
+            u: The input at t_n.
+
+        Returns:
+            ``(the state at n + 1, the named outputs at t_n)``.
+        """
 
 
 class ObserverState(eqx.Module):
@@ -89,11 +104,26 @@ class AbstractVectorFieldObserver(AbstractObserver):
 
     @abc.abstractmethod
     def f(self, x: jax.Array, u) -> jax.Array:
-        """Continuous-time vector field dx/dt for input value ``u``."""
+        """Continuous-time vector field.
+
+        Args:
+            x: The flat state.
+            u: The input value.
+
+        Returns:
+            dx/dt.
+        """
 
     @abc.abstractmethod
     def output(self, x: jax.Array) -> Any:
-        """Named outputs (a NamedTuple) computed from the state ``x``."""
+        """Named outputs computed from the state.
+
+        Args:
+            x: The flat state.
+
+        Returns:
+            The outputs (a NamedTuple).
+        """
 
     @abc.abstractmethod
     def initial_state(self) -> jax.Array:
@@ -154,27 +184,60 @@ class AbstractDriveObserver(AbstractObserver):
 
     @abc.abstractmethod
     def bind(self, est_par, omega_e):
-        """This observer assuming the machine ``est_par`` (a :class:`jaxobs.drive.PMSMParams`: its Rs and the
-        inductance the family's model uses) and starting at the electrical speed ``omega_e`` (rad/s, signed):
-        its initial speed field is what :meth:`init_at` would start from.  ``est_par=None`` keeps the
-        observer's own machine and sets only the speed (a recording gives the speed, not the machine).
-        The gains are untouched; every value keeps its field's dtype."""
+        """This observer assuming a machine and starting at a speed.
+
+        Its initial speed field becomes what :meth:`init_at` would start from.  The gains are untouched; every
+        value keeps its field's dtype.
+
+        Args:
+            est_par: The machine assumed (a :class:`jaxobs.drive.PMSMParams`: its Rs and the inductance the
+                family's model uses); None keeps the observer's own machine and sets only the speed (a
+                recording gives the speed, not the machine).
+            omega_e: The electrical speed, rad/s, signed.
+
+        Returns:
+            The bound observer.
+        """
 
     @abc.abstractmethod
     def init_at(self, omega_e):
-        """The initial state with the speed estimate at ``omega_e`` (rad/s): a steady start's settling phase."""
+        """The initial state of a steady start's settling phase.
+
+        Args:
+            omega_e: The speed estimate's start, rad/s.
+
+        Returns:
+            The :class:`DriveObserverState`.
+        """
 
     def init_aligned(self, omega_e, theta_e):
-        """The initial state of a steady start's settling phase: :meth:`init_at` (speed estimate at ``omega_e``,
-        rad/s) with, where the observer has an angle state of its own (a LESO's PLL θ̂), that angle at the
-        rotor's ``theta_e`` (rad) when the phase starts.  An angle derived from filter states that start at zero
-        (the flux observers') has nothing to set: this default."""
+        """The initial state of a steady start's settling phase, aligned to the rotor.
+
+        :meth:`init_at` with, where the observer has an angle state of its own (a LESO's PLL θ̂), that angle
+        at the rotor's angle when the phase starts.  An angle derived from filter states that start at zero
+        (the flux observers') has nothing to set: this default.
+
+        Args:
+            omega_e: The speed estimate's start, rad/s.
+            theta_e: The rotor's electrical angle, rad.
+
+        Returns:
+            The :class:`DriveObserverState`.
+        """
         return self.init_at(omega_e)
 
     @abc.abstractmethod
     def seed_speed(self, state, omega_e):
-        """``state`` with its speed estimate set to ``omega_e`` (rad/s): an I-f start-up holds it at the I-f
-        frequency until the hand-over (a DSP knows that frequency: it is the FLL's or PLL's feed-forward)."""
+        """``state`` with its speed estimate set: an I-f start-up holds it at the I-f frequency until the
+        hand-over (a DSP knows that frequency: it is the FLL's or PLL's feed-forward).
+
+        Args:
+            state: The :class:`DriveObserverState`.
+            omega_e: The speed, rad/s.
+
+        Returns:
+            The state with its speed estimate at ``omega_e``.
+        """
 
 
 class BankOutput(NamedTuple):
