@@ -80,7 +80,8 @@ class ChunkStore:
             metrics: The metrics' names (accepted from the runner; the chunks hold whatever ``put`` gives).
 
         Raises:
-            ValueError: The folder is not a folder of study chunks, or (``resume``) it holds another study's.
+            ValueError: The folder is not a folder of study chunks, or (``resume``) it is corrupt or holds another
+                study's.
         """
         meta = {
             "fingerprint": self.fingerprint,
