@@ -78,6 +78,15 @@ def sogi2_tustin_coefficients(K1, K2, w, ts):
 
     The difference equations :class:`~jaxobs.SecondOrderSOIFO` runs with ``discretization="paper"``;
     :func:`jaxobs.linear.sogi2_tustin_paper` builds the discrete transfer functions from them.
+
+    Args:
+        K1: Second-order SOGI error gain.
+        K2: Second-order SOGI damping gain.
+        w: ω', rad/s.
+        ts: Ts, s.
+
+    Returns:
+        ``(a1…a4, D1 numerator, Q1 numerator)``, each in ascending powers of z⁻¹.
     """
     u = 2 * K1 * K2 * w**2 * ts**2
     v = 8 * K2 * w * ts

@@ -86,7 +86,12 @@ class AbstractObserver(eqx.Module):
 
 
 class ObserverState(eqx.Module):
-    """State of a vector-field observer: the flat state and the rule's own state."""
+    """State of a vector-field observer: the flat state and the rule's own state.
+
+    Attributes:
+        x: The flat state, shape (n_states,).
+        rule: The rule's state (multistep history) or None.
+    """
 
     x: jax.Array  # shape (n_states,)
     rule: Any  # rule state (multistep history) or None
@@ -148,6 +153,13 @@ class DriveObserverState(eqx.Module):
 
     One class for both families: each integrates the period [t_{k−1}, t_k] from the voltage applied over it
     and the currents at both ends, so each remembers the same three things.
+
+    Attributes:
+        x: The filter, LESO, FLL and PLL states (the observer's layout).
+        rule: The rule's state.
+        i_prev: (i_α, i_β) at the previous sample, A.
+        u_prev: (u_α, u_β) applied over the period that ends now, V.
+        started: False until one sample has been seen.
     """
 
     x: jax.Array  # filter, LESO, FLL and PLL states (the observer's layout)
@@ -241,6 +253,14 @@ class AbstractDriveObserver(AbstractObserver):
 
 
 class BankOutput(NamedTuple):
+    """An :class:`ObserverBank`'s outputs at a sample.
+
+    Attributes:
+        theta: The primary observer's θ̂e (what a sensorless controller uses).
+        omega: The primary observer's ω̂e.
+        each: Every observer's own outputs, in order.
+    """
+
     theta: Any  # the primary observer's θ̂e (what a sensorless controller uses)
     omega: Any  # the primary observer's ω̂e
     each: tuple  # every observer's own outputs, in order

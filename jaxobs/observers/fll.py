@@ -35,6 +35,16 @@ __all__ = ["FLLOutput", "SOGIFLL", "SOGIFLLWPF", "SOGIFLLWIF"]
 
 
 class FLLOutput(NamedTuple):
+    """An FLL's outputs at a sample.
+
+    Attributes:
+        v_alpha: The filtered in-phase signal v' (input units).
+        v_beta: The filtered quadrature signal qv' (input units).
+        amplitude: V̂ = sqrt(v'² + qv'²).
+        theta: θ̂ = atan2(qv', v'), rad, in (−π, π].
+        omega: ω̂, rad/s.
+    """
+
     v_alpha: jax.Array  # filtered in-phase signal v' (input units)
     v_beta: jax.Array  # filtered quadrature signal qv' (input units)
     amplitude: jax.Array  # V̂ = sqrt(v'² + qv'²)

@@ -75,6 +75,17 @@ __all__ = ["FluxOutput", "AbstractFluxObserver", "PureIntegratorFlux", "LPFFlux"
 
 
 class FluxOutput(NamedTuple):
+    """A flux observer's outputs at a sample.
+
+    Attributes:
+        psi_a: The estimated rotor flux, α, Wb.
+        psi_b: The estimated rotor flux, β, Wb.
+        theta: θ̂e = atan2(ψ̂β, ψ̂α), rad (000 eq 4).
+        omega: ω̂e, rad/s (signed).
+        e_a: The α back EMF fed to the filter over the last period, V.
+        e_b: The β back EMF, V.
+    """
+
     psi_a: jax.Array  # estimated rotor flux, α, Wb
     psi_b: jax.Array  # estimated rotor flux, β, Wb
     theta: jax.Array  # θ̂e = atan2(ψ̂β, ψ̂α), rad (000 eq 4)

@@ -64,6 +64,16 @@ __all__ = ["LESOOutput", "AbstractLESO", "CLESO", "GILESO", "FALESO"]
 
 
 class LESOOutput(NamedTuple):
+    """A LESO's outputs at a sample.
+
+    Attributes:
+        e_a: The estimated equivalent BEMF, α, V.
+        e_b: The estimated equivalent BEMF, β, V.
+        theta: θ̂e from the PLL, rad (wrapped).
+        omega: ω̂e from the PLL, rad/s.
+        theta_emf: The BEMF's own angle, atan2(−êα, êβ) (positive rotation), rad.
+    """
+
     e_a: jax.Array  # estimated equivalent BEMF, V
     e_b: jax.Array
     theta: jax.Array  # θ̂e from the PLL, rad (wrapped)

@@ -25,6 +25,13 @@ __all__ = ["QSGOutput", "SOGI", "SOGI2"]
 
 
 class QSGOutput(NamedTuple):
+    """A quadrature signal generator's outputs at a sample.
+
+    Attributes:
+        v_alpha: The in-phase output v' = D(s) v.
+        v_beta: The quadrature output qv' = Q(s) v.
+    """
+
     v_alpha: jax.Array  # in-phase output v' = D(s) v
     v_beta: jax.Array  # quadrature output qv' = Q(s) v
 
