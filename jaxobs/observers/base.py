@@ -102,6 +102,10 @@ class AbstractVectorFieldObserver(AbstractObserver):
 
     Subclasses define ``f``, ``output`` and ``initial_state``; the rule given at
     construction integrates ``f`` over each sample period ``ts``.
+
+    Attributes:
+        ts: Sample time, s.
+        rule: The discretization rule.
     """
 
     ts: eqx.AbstractVar[float]
@@ -144,7 +148,16 @@ class AbstractVectorFieldObserver(AbstractObserver):
         return ObserverState(x=x1, rule=rule_state), out
 
     def vector_field(self, t, x, signal):
-        """``f(t, x, args)`` for ``diffrax.ODETerm``: ``args`` is a signal, called at t."""
+        """``f(t, x, args)`` for ``diffrax.ODETerm``.
+
+        Args:
+            t: The time, s.
+            x: The flat state.
+            signal: The signal, called at t.
+
+        Returns:
+            dx/dt.
+        """
         return self.f(x, signal(t))
 
 

@@ -101,6 +101,13 @@ class AbstractFluxObserver(AbstractDriveObserver):
     the state (``_speed_index``) and the speed they start from (:meth:`start_speed`).  The model has one
     inductance ``L``: bound to a machine it takes the d-axis one, Ld (000's machine is non-salient; on a
     salient one u − R̂s i − L̂ di/dt is not dψf/dt, so the drive jobs run these on 000's SPMSM only).
+
+    Attributes:
+        Rs: Assumed stator resistance, ohm (:meth:`bind` sets it).
+        L: Assumed inductance, H (:meth:`bind` sets it to the machine's Ld).
+        omega_init: The speed estimate's start, rad/s (:meth:`bind` sets it).
+        ts: Sample time, s.
+        rule: Discretization rule.
     """
 
     Rs: eqx.AbstractVar[jax.Array]
@@ -114,7 +121,14 @@ class AbstractFluxObserver(AbstractDriveObserver):
 
     @abc.abstractmethod
     def start_speed(self, omega_e) -> jax.Array:
-        """The speed estimate (rad/s) the observer starts from, or is held at, when the rotor turns at ω_e."""
+        """The speed estimate the observer starts from, or is held at, when the rotor turns at ω_e.
+
+        Args:
+            omega_e: The rotor's electrical speed ω_e, rad/s.
+
+        Returns:
+            The speed estimate, rad/s.
+        """
 
     def bind(self, est_par, omega_e) -> AbstractFluxObserver:
         w = self.start_speed(omega_e)
@@ -126,12 +140,27 @@ class AbstractFluxObserver(AbstractDriveObserver):
         return self._init_from(self.initial_state())
 
     def init_at(self, omega_e) -> DriveObserverState:
-        """The initial state with the speed estimate at ω_e (rad/s): the start of a drive's settling phase."""
+        """The initial state with the speed estimate at ω_e: the start of a drive's settling phase.
+
+        Args:
+            omega_e: ω_e, rad/s.
+
+        Returns:
+            The :class:`DriveObserverState`.
+        """
         return self._init_from(self.initial_state().at[self._speed_index].set(self.start_speed(omega_e)))
 
     def seed_speed(self, state: DriveObserverState, omega_e) -> DriveObserverState:
         """``state`` with its speed estimate (FLL centre frequency or PLL speed) set to ω_e: an I-f start-up
-        holds it at the I-f frequency until the hand-over (jaxobs.drive.ClosedLoop)."""
+        holds it at the I-f frequency until the hand-over (jaxobs.drive.ClosedLoop).
+
+        Args:
+            state: The :class:`DriveObserverState`.
+            omega_e: ω_e, rad/s.
+
+        Returns:
+            The state with its speed estimate set.
+        """
         w = self.start_speed(omega_e)
         return eqx.tree_at(lambda s: s.x, state, state.x.at[self._speed_index].set(w))
 
@@ -154,7 +183,16 @@ class AbstractFluxObserver(AbstractDriveObserver):
         return new, self.output(x1, e)
 
     def vector_field(self, t, x, e_of_t):
-        """``f(t, x, args)`` for diffrax, ``args`` a function of t returning (e_α, e_β)."""
+        """``f(t, x, args)`` for diffrax.
+
+        Args:
+            t: The time, s.
+            x: The flat state.
+            e_of_t: A function of t returning (e_α, e_β).
+
+        Returns:
+            dx/dt.
+        """
         return self.f(x, e_of_t(t))
 
 
@@ -204,7 +242,14 @@ class _PLLFluxBase(AbstractFluxObserver):
     _speed_index: ClassVar[int] = 3  # the PLL's ω in the state
 
     def start_speed(self, omega_e):
-        """ω_e itself: a PLL's speed is signed and may be zero."""
+        """ω_e itself: a PLL's speed is signed and may be zero.
+
+        Args:
+            omega_e: ω_e, rad/s.
+
+        Returns:
+            ω_e, rad/s.
+        """
         return jnp.asarray(omega_e)
 
     def initial_state(self):
@@ -380,7 +425,14 @@ class _FLLFluxBase(AbstractFluxObserver):
     def start_speed(self, omega_e):
         """max(|ω_e|, omega_min): a SOGI cannot tell the direction (the sign comes from the flux's rotation,
         module doc) and its centre frequency must stay positive.  The floor is the observer's own
-        ``omega_min`` (1 rad/s by default), the one its outputs divide by, not a separate constant."""
+        ``omega_min`` (1 rad/s by default), the one its outputs divide by, not a separate constant.
+
+        Args:
+            omega_e: ω_e, rad/s.
+
+        Returns:
+            The FLL's start frequency, rad/s.
+        """
         return jnp.maximum(jnp.abs(omega_e), self.omega_min)
 
 
