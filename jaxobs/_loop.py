@@ -146,8 +146,16 @@ class AbstractCheckpoint(eqx.Module):
 
     @abc.abstractmethod
     def loop(self, loop: Loop, carry, xs):
-        """Run ``loop`` (:class:`jaxobs._steps.Loop`) from ``loop.init(carry)`` over ``xs``:
-        ``(final carry, stacked per-step outputs or None)``."""
+        """Run a loop from ``loop.init(carry)`` over ``xs``.
+
+        Args:
+            loop: The :class:`jaxobs._steps.Loop`.
+            carry: The initial carry.
+            xs: The per-step inputs.
+
+        Returns:
+            ``(final carry, stacked per-step outputs or None)``.
+        """
 
 
 class AbstractReverseCheckpoint(AbstractCheckpoint):
@@ -160,8 +168,19 @@ class AbstractReverseCheckpoint(AbstractCheckpoint):
 
     @abc.abstractmethod
     def scan(self, step, carry, xs, n: int, unroll: int, xs_map=None):
-        """``n`` (>= 1) steps of ``step`` over ``xs``; with ``xs_map`` each step sees ``xs_map`` of a block of
-        ``xs`` (jaxobs._loop, point 5)."""
+        """Scan ``step`` over ``xs``.
+
+        Args:
+            step: ``step(carry, x) -> (carry, out)``.
+            carry: The initial carry.
+            xs: The per-step inputs.
+            n: The steps (≥ 1).
+            unroll: The loop's unrolling.
+            xs_map: With it each step sees ``xs_map`` of a block of ``xs`` (jaxobs._loop, point 5).
+
+        Returns:
+            ``(final carry, stacked outputs)``, as ``lax.scan``.
+        """
 
     def loop(self, loop, carry, xs):
         return run_steps(loop, self, loop.init(carry), xs)
@@ -270,7 +289,14 @@ class AutoCheckpoint(AbstractCheckpoint):
                 raise ValueError(f"AutoCheckpoint.{name} must be an integer >= 0, got {v!r}")
 
     def pick(self, loop: Loop) -> AbstractCheckpoint:
-        """The strategy this loop runs under."""
+        """The strategy a loop runs under.
+
+        Args:
+            loop: The :class:`jaxobs._steps.Loop`.
+
+        Returns:
+            The :class:`AbstractCheckpoint`.
+        """
         reverse = ChunkCheckpoint() if loop.n > self.chunk_above else StepCheckpoint()
         if loop.has_outputs or self.forward_max == 0:
             return reverse

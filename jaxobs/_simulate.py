@@ -213,8 +213,18 @@ class AbstractSave(eqx.Module):
 
     @abc.abstractmethod
     def run(self, system: AbstractSystem, n: int, *, checkpoint, state0, unroll: int | None) -> Solution:
-        """``n`` steps of ``system`` from sample 0 (``state0``, or ``system.init()``), stored for reverse-mode AD
-        as ``checkpoint`` says; ``unroll`` (None: the system's) for the throughput loop."""
+        """Run ``n`` steps of ``system`` from sample 0.
+
+        Args:
+            system: The :class:`AbstractSystem`.
+            n: The steps.
+            checkpoint: How the loop is stored for reverse-mode AD (an :class:`AbstractCheckpoint`).
+            state0: The initial state, or None: ``system.init()``.
+            unroll: The throughput loop's unrolling (None: the system's).
+
+        Returns:
+            The :class:`Solution`.
+        """
 
     def _plain(self, system, n, *, keep, checkpoint, state0) -> Solution:
         """The system's step scanned plainly: a user's own ``lax.scan(system.step, ...)`` gives these numbers."""
@@ -262,7 +272,11 @@ class SaveAll(AbstractSave):
 
 class SaveFinal(AbstractSave):
     """Keep only the final state, ``ok`` and the running cost: a long horizon stores no trajectory.  Always the
-    throughput loop (:mod:`jaxobs._loop`)."""
+    throughput loop (:mod:`jaxobs._loop`).
+
+    Attributes:
+        cost: ``cost(out) -> scalar``, or ``None`` (no running cost; static).
+    """
 
     def run(self, system, n, *, checkpoint, state0, unroll):
         return self._throughput(system, n, keep=False, checkpoint=checkpoint, state0=state0, unroll=unroll)
@@ -424,7 +438,14 @@ class OnSignal(AbstractSystem):
         return self.signal.has_truth
 
     def time(self, k):
-        """t_k = t0 + k·ts (in the default float dtype)."""
+        """t_k = t0 + k·ts (in the default float dtype).
+
+        Args:
+            k: The sample index.
+
+        Returns:
+            t_k, s.
+        """
         return self.t0 + self.ts * jnp.asarray(k).astype(jnp.result_type(float))
 
     def _at(self, k, offset: float = 0.0):
@@ -441,7 +462,14 @@ class OnSignal(AbstractSystem):
         return self.observer.init(self.signal(jnp.asarray(self.t0, jnp.result_type(float))))
 
     def input(self, k):
-        """What the observer is given at sample k, and the truth there."""
+        """What the observer is given at sample k, and the truth there.
+
+        Args:
+            k: The sample index.
+
+        Returns:
+            ``(u, the rule's input path, truth)``.
+        """
         t = self._at(k)
         u = self.signal(t)
         path = (
@@ -475,6 +503,12 @@ class OnSignal(AbstractSystem):
         exact sample here).  Under ``vmap`` over recordings the slice is a block of B rows, where a
         per-step read (``input`` mapped over the block) gathers one column per step.  Anything else
         is ``input`` mapped over the block.
+
+        Args:
+            kb: The consecutive sample indices.
+
+        Returns:
+            :meth:`input`'s values with the block as leading axis.
         """
         off = self._sample_offset()
         if off is None:
@@ -499,7 +533,15 @@ class OnSignal(AbstractSystem):
         return u, u, truth
 
     def advance(self, state, x):
-        """One step on the input ``x`` of :meth:`input`: ``step(state, k) == advance(state, input(k))``."""
+        """One step on an input of :meth:`input`: ``step(state, k) == advance(state, input(k))``.
+
+        Args:
+            state: The observer's state.
+            x: :meth:`input`'s value.
+
+        Returns:
+            ``(the next state, the SignalOutput)``.
+        """
         u, path, truth = x
         state, out = self.observer.step(state, path)
         return state, SignalOutput(u=u, obs=out, truth=truth)
@@ -508,12 +550,26 @@ class OnSignal(AbstractSystem):
         return self.advance(state, self.input(k))
 
     def loop_inputs(self, ks) -> LoopInputs:
-        """The sample indices, their inputs computed a block at a time (:meth:`input_block`)."""
+        """The sample indices, their inputs computed a block at a time (:meth:`input_block`).
+
+        Args:
+            ks: The sample indices.
+
+        Returns:
+            The :class:`LoopInputs`.
+        """
         return LoopInputs(ks, self.advance, xs_map=self.input_block, unroll=self.unroll)
 
     def check_horizon(self, n: int):
         """The signal must be readable over the horizon (a recording inside its samples, a time-major batch one
-        scenario at a time: :meth:`jaxobs.AbstractSignal.check_window`)."""
+        scenario at a time: :meth:`jaxobs.AbstractSignal.check_window`).
+
+        Args:
+            n: The steps.
+
+        Raises:
+            ValueError: The signal cannot be read over the horizon.
+        """
         self.signal.check_window(self.t0, self.t0 + self.ts * (n - 1), "OnSignal.signal")
 
     def throughput(self) -> AbstractSystem:

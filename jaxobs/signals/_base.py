@@ -52,23 +52,58 @@ class AbstractSignal(eqx.Module):
         """The signal at time ``t`` (s, or a :class:`~jaxobs.SampleTime` where ``accepts_sample_time``)."""
 
     def theta(self, t):
-        """True fundamental phase, rad (where ``has_truth``)."""
+        """True fundamental phase (where ``has_truth``).
+
+        Args:
+            t: The time, s.
+
+        Returns:
+            θ(t), rad.
+        """
         raise ValueError(f"{type(self).__name__} reports no truth (theta)")
 
     def omega(self, t):
-        """True fundamental angular frequency, rad/s (where ``has_truth``)."""
+        """True fundamental angular frequency (where ``has_truth``).
+
+        Args:
+            t: The time, s.
+
+        Returns:
+            ω(t), rad/s.
+        """
         raise ValueError(f"{type(self).__name__} reports no truth (omega)")
 
     def fundamental_amplitude(self, t):
-        """True fundamental amplitude (where ``has_truth``)."""
+        """True fundamental amplitude (where ``has_truth``).
+
+        Args:
+            t: The time, s.
+
+        Returns:
+            The amplitude, in the signal's units.
+        """
         raise ValueError(f"{type(self).__name__} reports no truth (fundamental_amplitude)")
 
     def flux_angle(self, t):
-        """The true rotor-flux angle, rad (where ``has_flux_angle``)."""
+        """The true rotor-flux angle (where ``has_flux_angle``).
+
+        Args:
+            t: The time, s.
+
+        Returns:
+            The angle, rad.
+        """
         raise ValueError(f"{type(self).__name__} has no flux angle")
 
     def flux_omega(self, t):
-        """The true rotor-flux angle's rate, rad/s, shaped like ``t`` (where ``has_flux_angle``)."""
+        """The true rotor-flux angle's rate (where ``has_flux_angle``).
+
+        Args:
+            t: The times, s.
+
+        Returns:
+            The rate, rad/s, shaped like ``t``.
+        """
         raise ValueError(f"{type(self).__name__} has no flux angle")
 
     def check_window(self, t0: float, t_last: float, owner: str) -> None:

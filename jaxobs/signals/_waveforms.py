@@ -129,8 +129,15 @@ class GridSignal(AbstractSignal):
         return c - jax.lax.stop_gradient(jnp.round(c))
 
     def theta(self, t):
-        """True fundamental phase θ(t), rad: unwrapped in float64; in float32 from a :class:`SampleTime`,
-        reduced modulo 2π (an unwrapped float32 phase of 3·10⁴ rad is only good to 2 mrad)."""
+        """True fundamental phase θ(t): unwrapped in float64; in float32 from a :class:`SampleTime`,
+        reduced modulo 2π (an unwrapped float32 phase of 3·10⁴ rad is only good to 2 mrad).
+
+        Args:
+            t: The time, s, or a :class:`SampleTime`.
+
+        Returns:
+            θ(t), rad.
+        """
         if exact_phase(t, self.freq):
             return 2 * jnp.pi * self._cycles(t) + self.phase + self._on(t) * self.phase_jump
         t = time_value(t)
@@ -139,7 +146,14 @@ class GridSignal(AbstractSignal):
         return 2 * jnp.pi * self.freq * t + self.phase + on * (2 * jnp.pi * self.freq_step * dt + self.phase_jump)
 
     def omega(self, t):
-        """True fundamental angular frequency ω(t), rad/s."""
+        """True fundamental angular frequency.
+
+        Args:
+            t: The time, s, or a :class:`SampleTime`.
+
+        Returns:
+            ω(t), rad/s.
+        """
         return 2 * jnp.pi * (self.freq + self._on(t) * self.freq_step)
 
     def fundamental_amplitude(self, t):
@@ -341,15 +355,29 @@ class EMFSignal(AbstractSignal):
         return ea, eb
 
     def flux_angle(self, t):
-        """The true rotor-flux angle ω1 t + φ1 − π/2, rad (ψ lags e by 90°); in float32 from a
-        :class:`SampleTime`, reduced modulo 2π and exact (jaxobs._time)."""
+        """The true rotor-flux angle ω1 t + φ1 − π/2 (ψ lags e by 90°); in float32 from a
+        :class:`SampleTime`, reduced modulo 2π and exact (jaxobs._time).
+
+        Args:
+            t: The time, s, or a :class:`SampleTime`.
+
+        Returns:
+            The angle, rad.
+        """
         if exact_phase(t, self.omega1):
             c = cycles(self.omega1, t, 1 / (2 * math.pi))
             return 2 * jnp.pi * (c - jax.lax.stop_gradient(jnp.round(c))) + self.phase - jnp.pi / 2
         return self.omega1 * time_value(t) + self.phase - jnp.pi / 2
 
     def flux_omega(self, t):
-        """ω1, rad/s, shaped like ``t`` (times on the last axis, a batch's ω1 on the leading ones)."""
+        """The true rotor-flux angle's rate.
+
+        Args:
+            t: The times, s (on the last axis).
+
+        Returns:
+            ω1, rad/s, shaped like ``t`` (a batch's ω1 on the leading axes).
+        """
         return jnp.broadcast_to(jnp.expand_dims(jnp.asarray(self.omega1), -1), jnp.shape(time_value(t)))
 
     def __call__(self, t):
