@@ -59,6 +59,9 @@ class AbstractSignal(eqx.Module):
 
         Returns:
             θ(t), rad.
+
+        Raises:
+            ValueError: The signal reports no truth.
         """
         raise ValueError(f"{type(self).__name__} reports no truth (theta)")
 
@@ -70,6 +73,9 @@ class AbstractSignal(eqx.Module):
 
         Returns:
             ω(t), rad/s.
+
+        Raises:
+            ValueError: The signal reports no truth.
         """
         raise ValueError(f"{type(self).__name__} reports no truth (omega)")
 
@@ -81,6 +87,9 @@ class AbstractSignal(eqx.Module):
 
         Returns:
             The amplitude, in the signal's units.
+
+        Raises:
+            ValueError: The signal reports no truth.
         """
         raise ValueError(f"{type(self).__name__} reports no truth (fundamental_amplitude)")
 
@@ -92,6 +101,9 @@ class AbstractSignal(eqx.Module):
 
         Returns:
             The angle, rad.
+
+        Raises:
+            ValueError: The signal has no flux angle.
         """
         raise ValueError(f"{type(self).__name__} has no flux angle")
 
@@ -103,6 +115,9 @@ class AbstractSignal(eqx.Module):
 
         Returns:
             The rate, rad/s, shaped like ``t``.
+
+        Raises:
+            ValueError: The signal has no flux angle.
         """
         raise ValueError(f"{type(self).__name__} has no flux angle")
 
