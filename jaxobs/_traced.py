@@ -131,7 +131,11 @@ class ProgramCache:
         return f"ProgramCache({None if self.folder is None else str(self.folder)!r}, max_kept={self.max_kept})"
 
     def warn(self, what: str) -> None:
-        """Report a problem of the folder, once per process, in one line on stderr."""
+        """Report a problem of the folder, once per process, in one line on stderr.
+
+        Args:
+            what: The problem.
+        """
         if not self._warned:
             self._warned = True
             print(f"jaxobs: warning: program cache {str(self.folder)!r}: {what}", file=sys.stderr, flush=True)
@@ -161,7 +165,15 @@ class ProgramCache:
         return self.folder / f"{name}{_SUFFIX}"
 
     def read(self, name: str, key: dict) -> tuple[export.Exported | None, str | None]:
-        """The program kept under ``name`` if its file holds ``key`` and its own digest; else why not (None: absent)."""
+        """The program kept under a name, if its file holds the key and its own digest.
+
+        Args:
+            name: The program's file name.
+            key: The program's key.
+
+        Returns:
+            ``(the program, None)``, or ``(None, why not)``; ``(None, None)`` where there is no file.
+        """
         path = self.path(name)
         try:
             fd = os.open(path, os.O_RDONLY | os.O_NOFOLLOW | os.O_NONBLOCK | getattr(os, "O_CLOEXEC", 0))
@@ -200,7 +212,13 @@ class ProgramCache:
         return exp, None
 
     def write(self, name: str, key: dict, exp: export.Exported) -> None:
-        """Keep ``exp`` under ``name``: whole or absent (a temp file renamed), its temp file removed if that fails."""
+        """Keep a program: whole or absent (a temp file renamed), its temp file removed if that fails.
+
+        Args:
+            name: The program's file name.
+            key: The program's key.
+            exp: The exported program.
+        """
         if not self._usable():
             return
         blob = exp.serialize()

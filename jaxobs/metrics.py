@@ -677,7 +677,20 @@ def settling_to_steady(t, x, band, steady_mask, t_event=0.0):
 
 
 def smooth_settling_to_steady(t, x, band, steady_mask, t_event=0.0, temperature=None, sharpness=None):
-    """:func:`settling_to_steady` through :func:`smooth_settling_time` (the final value is a smooth mean too)."""
+    """:func:`settling_to_steady` through :func:`smooth_settling_time` (the final value is a smooth mean too).
+
+    Args:
+        t: The sample times, s.
+        x: The signal (samples along the last axis).
+        band: The band's half-width, in the units of ``x``.
+        steady_mask: The steady window (bool).
+        t_event: The event's time, s.
+        temperature: The soft maximum's temperature, s (default 2 samples).
+        sharpness: The sigmoid's width, in the units of ``x`` (default band/20).
+
+    Returns:
+        The smooth settling time, s (NaN where x is not finite in the window).
+    """
     final, bad = _own_final(x, steady_mask, "smooth_settling_to_steady")
     return _nan_where(bad, smooth_settling_time(t, x, final, band, t_event, temperature, sharpness))
 
@@ -702,7 +715,20 @@ def settling_to_reference(t, x, ref, band, t_event=0.0):
 
 
 def smooth_settling_to_reference(t, x, ref, band, t_event=0.0, temperature=None, sharpness=None):
-    """:func:`settling_to_reference` through :func:`smooth_settling_time`."""
+    """:func:`settling_to_reference` through :func:`smooth_settling_time`.
+
+    Args:
+        t: The sample times, s.
+        x: The signal (samples along the last axis).
+        ref: The reference, a signal or a constant in the units of ``x``.
+        band: The band's half-width, in the units of ``x``.
+        t_event: The event's time, s.
+        temperature: The soft maximum's temperature, s (default 2 samples).
+        sharpness: The sigmoid's width, in the units of ``x`` (default band/20).
+
+    Returns:
+        The smooth settling time, s.
+    """
     return smooth_settling_time(t, x - ref, 0.0, band, t_event, temperature, sharpness)
 
 

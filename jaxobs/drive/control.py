@@ -253,7 +253,14 @@ class IfStartup(eqx.Module):
         return cls(i_f, p * accel_m, p * rpm * RPM, **kw)
 
     def ramp(self, t):
-        """The I-f electrical frequency at time t from the start, rad/s."""
+        """The I-f electrical frequency.
+
+        Args:
+            t: The time from the start, s.
+
+        Returns:
+            The frequency, rad/s.
+        """
         tau = jnp.clip(t * self.accel / self.omega_switch, 0.0, 1.0)
         if self.smooth:
             tau = tau - jnp.sin(2 * jnp.pi * tau) / (2 * jnp.pi)
@@ -261,6 +268,25 @@ class IfStartup(eqx.Module):
 
 
 class ControllerState(eqx.Module):
+    """The FOC's state between two periods.
+
+    Attributes:
+        int_d: The d current-PI integrator, V.
+        int_q: The q current-PI integrator, V.
+        int_w: The speed-PI integrator, A.
+        iq_ref: The speed loop's output held between its samples, A.
+        theta_f: The I-f angle, rad.
+        omega_f: The I-f electrical frequency, rad/s.
+        t_at_switch: The time spent at the switch-over frequency, s.
+        mode: 0: I-f start-up, 1: closed loop on the given position.
+        d_lp: I-f: the offset θ_f − θ̂ low-passed over the dwell, rad.
+        t_agree: I-f: how long the given position has agreed with the I-f frame, s.
+        t_closed: The time since the switch, s.
+        id_hand: The d-current at the switch (in the given frame), A.
+        id_fw: Field weakening's Δi_d (≤ 0; 0 without field weakening), A.
+        kp_w: The speed loop's k_pω at its last sample (a scheduled gain's bumpless change), A/(rad/s).
+    """
+
     int_d: jax.Array  # current-PI integrators, V
     int_q: jax.Array
     int_w: jax.Array  # speed-PI integrator, A
@@ -300,6 +326,16 @@ class FOCInput(NamedTuple):
 
 
 class FOCOutput(NamedTuple):
+    """What the controller gives each period.
+
+    Attributes:
+        u_a: The α voltage to apply over the next period (before the inverter's limit), V.
+        u_b: The β voltage, V.
+        id_ref: The d current reference, A.
+        iq_ref: The q current reference, A.
+        theta: The angle the current loop used (given position, or the I-f angle in start-up), rad.
+    """
+
     u_a: jax.Array  # voltage to apply over the next period (before the inverter's limit), V
     u_b: jax.Array
     id_ref: jax.Array  # current references, A

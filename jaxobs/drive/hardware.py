@@ -114,13 +114,28 @@ class Inverter(AbstractComponent):
         return self.udc / _S3
 
     def limit(self, u_a, u_b):
-        """Scale the voltage vector back onto the circle |u| ≤ U_dc/√3 (direction kept)."""
+        """Scale the voltage vector back onto the circle |u| ≤ U_dc/√3 (direction kept).
+
+        Args:
+            u_a: u_α, V.
+            u_b: u_β, V.
+
+        Returns:
+            The limited ``(u_α, u_β)``, V.
+        """
         mag = safe_norm2(u_a, u_b)
         scale = jnp.where(mag > self.u_max, self.u_max / jnp.maximum(mag, 1e-12), 1.0)
         return u_a * scale, u_b * scale
 
     def init(self, op=None) -> None:
-        """No state (the operating point does not matter to an average-value model)."""
+        """No state (the operating point does not matter to an average-value model).
+
+        Args:
+            op: The operating point (unused).
+
+        Returns:
+            None.
+        """
         return None
 
     def step(self, state, inp: InverterInput) -> tuple[None, InverterInput]:
@@ -199,7 +214,18 @@ class Sensors(AbstractComponent):
                 raise ValueError(f"{own}.{name} must have two entries (α, β), got shape {getattr(self, name).shape}")
 
     def init(self, op=None, *, key=None):
-        """The noise key (``key``, default ``PRNGKey(0)``): the sensors' state, whatever the operating point."""
+        """The sensors' state, whatever the operating point: the noise key.
+
+        Args:
+            op: An :class:`OperatingPoint` or None (unused).
+            key: The noise key (default ``PRNGKey(0)``).
+
+        Returns:
+            The key.
+
+        Raises:
+            ValueError: ``op`` is neither an operating point nor None.
+        """
         if op is not None and not isinstance(op, tuple):  # a key passed where init(key) used to take it
             raise ValueError(
                 f"Sensors.init: op must be an OperatingPoint or None (the key is keyword-only), got {type(op).__name__}"

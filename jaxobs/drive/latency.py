@@ -55,7 +55,14 @@ class AtSample(eqx.Module):
     """Compare an estimate with the rotor at its own time stamp (the sample instant): the observer's error."""
 
     def lead(self, latency: Latency) -> float:
-        """How many periods after the sample instant the rotor's angle is taken."""
+        """How many periods after the sample instant the rotor's angle is taken.
+
+        Args:
+            latency: The drive's :class:`Latency`.
+
+        Returns:
+            The periods.
+        """
         return 0.0
 
 

@@ -106,7 +106,14 @@ class QSaturation(eqx.Module):
         return cls(i_q / (ratio**-n - 1.0) ** (1.0 / n), n)
 
     def factor(self, i_q):
-        """(1 + (|i_q|/i_sat)^n) as an array (1 at i_q = 0)."""
+        """The saturation's factor.
+
+        Args:
+            i_q: The q-axis current, A.
+
+        Returns:
+            (1 + (|i_q|/i_sat)^n) as an array (1 at i_q = 0).
+        """
         return 1.0 + (jnp.abs(i_q) / self.i_sat) ** self.n
 
 

@@ -90,6 +90,13 @@ class PlantOutput(NamedTuple):
 
 
 class PlantState(NamedTuple):
+    """The machine's state between two periods.
+
+    Attributes:
+        x: [i_d, i_q, ω_m, θ_e], shape (4,).
+        rule: The integration rule's own state (None for one-step rules).
+    """
+
     x: jax.Array  # [i_d, i_q, ω_m, θ_e], shape (4,)
     rule: Any  # the integration rule's own state (None for one-step rules)
 
@@ -129,7 +136,15 @@ class PMSM(AbstractComponent):
         self.rule = check_rule(RK4() if rule is None else rule, "PMSM")
 
     def field(self, x, inp):
-        """dx/dt at state ``x`` under ``inp = (u_α, u_β, T_L)``."""
+        """The vector field.
+
+        Args:
+            x: The state [i_d, i_q, ω_m, θ_e].
+            inp: ``(u_α, u_β, T_L)``.
+
+        Returns:
+            dx/dt.
+        """
         return plant_field(self.par, self.inverter, self.dead_time, x, inp)
 
     def init(self, op=None) -> PlantState:
