@@ -298,7 +298,14 @@ class AbstractDriveLoop(AbstractSystem):
 
     @abc.abstractmethod
     def operating_point(self, offset=0.0) -> OperatingPoint:
-        """The steady state the scenario starts in, the controller's frame ``offset`` rad ahead of the rotor's."""
+        """The steady state the scenario starts in.
+
+        Args:
+            offset: The controller's frame's lead over the rotor's, rad.
+
+        Returns:
+            The :class:`OperatingPoint`.
+        """
 
     @abc.abstractmethod
     def _steady_voltage(self, op: OperatingPoint, theta):

@@ -381,7 +381,17 @@ def plant_vf(par: PMSMParams, x, u_ab, t_load, sc=None):
 
 
 def rotate(x, y, s, c):
-    """(x, y) rotated by the angle whose sine and cosine are ``s``, ``c``: (c x − s y, s x + c y)."""
+    """A vector rotated by the angle whose sine and cosine are given.
+
+    Args:
+        x: The first component.
+        y: The second component.
+        s: The angle's sine.
+        c: The angle's cosine.
+
+    Returns:
+        (c x − s y, s x + c y).
+    """
     return c * x - s * y, s * x + c * y
 
 
