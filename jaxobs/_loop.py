@@ -342,22 +342,34 @@ def run_loop(
 ):
     """``lax.scan(body, carry, xs, length=n)``, made fast and cheap to differentiate (module doc).
 
-    ``carry_fn``: instead of ``carry`` (pass ``None``), a function of no arguments that builds the initial
-    carry; it is called inside the forward-sensitivity region, so a parameter that sets the initial state
-    (an FLL's ω_n) is one perturbed scalar there, not every state component it reaches (module doc, point 4).
+    Args:
+        body: ``body(carry, x) -> (carry, y)``; it sees the carry exactly as given (state vectors as arrays).
+        carry: The initial carry, or ``None`` with ``carry_fn``.
+        xs: The per-step inputs (leading axis ``n``), or ``None``.
+        n: The steps.
+        unroll: The loop's unrolling (module doc, point 3).
+        checkpoint: The strategy that runs the loop (module doc, point 4).
+        split: Whether to carry state vectors split (module doc, point 1).
+        xs_map: With it the body sees ``xs_map(xs)[k]`` at step k instead of ``xs[k]``, where ``xs_map`` maps
+            a block of steps' ``xs`` (leading axis the block) to their inputs (leading axis the block) and is
+            evaluated a block at a time (module doc, point 5): the simulations pass sample indices and the
+            signal as ``xs_map``.
+        peel: Whether to peel multistep start-ups (module doc, point 2).
+        carry_fn: Instead of ``carry`` (pass ``None``), a function of no arguments that builds the initial
+            carry; it is called inside the forward-sensitivity region, so a parameter that sets the initial
+            state (an FLL's ω_n) is one perturbed scalar there, not every state component it reaches (module
+            doc, point 4).
+        fill: With ``xs`` the per-step inputs themselves (no ``xs_map``), the loop does not slice them for its
+            peeled start-up: ``fill(c0, c1, c2)`` turns the carries before and after the start-up's two steps
+            into a steady carry at step 0 whose steps repeat them (module doc, point 6;
+            :func:`jaxobs._discretize.ab3_steady_from_start`), and the steady loop runs every row.
 
-    ``body(carry, x) -> (carry, y)`` sees the carry exactly as given (state
-    vectors as arrays); ``xs`` (or ``None``) has leading axis ``n``.  With
-    ``xs_map`` the body sees ``xs_map(xs)[k]`` at step k instead of ``xs[k]``,
-    where ``xs_map`` maps a block of steps' ``xs`` (leading axis the block)
-    to their inputs (leading axis the block) and is evaluated a block at a
-    time (module doc, point 5): the simulations pass sample indices and the
-    signal as ``xs_map``.  ``checkpoint`` runs the loop (module doc, point 4).
+    Returns:
+        ``(final carry, stacked per-step outputs or None)``.
 
-    ``fill``: with ``xs`` the per-step inputs themselves (no ``xs_map``), the loop does not slice them for
-    its peeled start-up: ``fill(c0, c1, c2)`` turns the carries before and after the start-up's two steps
-    into a steady carry at step 0 whose steps repeat them (module doc, point 6;
-    :func:`jaxobs._discretize.ab3_steady_from_start`), and the steady loop runs every row.
+    Raises:
+        ValueError: Both or neither of ``carry`` and ``carry_fn``, ``xs_map`` without ``xs``, or an invalid
+            ``unroll`` or ``checkpoint``.
     """
     unroll = check_unroll(unroll)
     checkpoint = check_checkpoint(checkpoint)
