@@ -131,7 +131,14 @@ class Solution(eqx.Module):
 
 
 def all_finite(tree) -> jax.Array:
-    """True when every floating-point leaf of ``tree`` is finite everywhere."""
+    """True when every floating-point leaf of ``tree`` is finite everywhere.
+
+    Args:
+        tree: A PyTree.
+
+    Returns:
+        A bool array.
+    """
     leaves = [x for x in jax.tree.leaves(tree) if jnp.issubdtype(jnp.result_type(x), jnp.inexact)]
     return jnp.all(jnp.stack([jnp.all(jnp.isfinite(x)) for x in leaves])) if leaves else jnp.asarray(True)
 

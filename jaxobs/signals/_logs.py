@@ -412,6 +412,13 @@ class LogData:
     def recording(self, start: int = 0, n: int | None = None) -> DriveRecording:
         """Rows ``start`` … ``start + n − 1`` as a :class:`jaxobs.DriveRecording` (the whole log by default).
 
+        Args:
+            start: The first row.
+            n: The rows (default: to the end).
+
+        Returns:
+            The :class:`jaxobs.DriveRecording`.
+
         Raises:
             ValueError: a window outside the log.
         """
