@@ -308,7 +308,11 @@ def solve_small(a, b):
 class AbstractMultistepState(eqx.Module):
     """A rule state whose first ``startup_steps`` steps differ from the rest (a multistep rule's start-up): the
     loop peels them off and runs the rest in the state's branch-free ``steady()`` form (:mod:`jaxobs._loop`,
-    point 2)."""
+    point 2).
+
+    Attributes:
+        startup_steps: The start-up's steps (a class attribute).
+    """
 
     startup_steps: eqx.AbstractClassVar[int]
 

@@ -638,10 +638,18 @@ class OnRows(AbstractSystem):
         return sig.samples, sig.truth
 
     def input_rows(self, n: int):
-        """The rows of all ``n`` steps (leading axis n; :meth:`row_input` makes a step's input of one): the
-        recording's arrays' rows ``[off, off + n)``, off the index of sample 0.  Under ``map_batch`` the loop
-        reads them one contiguous row per step (:mod:`jaxobs._loop`, point 6): a static slice keeps the batch
-        axis inner, and with the horizon the whole recording there is no slice at all."""
+        """The rows of all steps: the recording's arrays' rows ``[off, off + n)``, off the index of sample 0.
+
+        Under ``map_batch`` the loop reads them one contiguous row per step (:mod:`jaxobs._loop`, point 6): a
+        static slice keeps the batch axis inner, and with the horizon the whole recording there is no slice at
+        all.
+
+        Args:
+            n: The steps.
+
+        Returns:
+            The rows (leading axis n; :meth:`row_input` makes a step's input of one).
+        """
         off = self.system._sample_offset()
         return jax.tree.map(lambda a: a if (off == 0 and a.shape[0] == n) else a[off : off + n], self._rows())
 

@@ -325,7 +325,11 @@ def program_cache() -> ProgramCache:
 
 
 def set_traced_dir(folder: str | os.PathLike | None) -> None:
-    """Keep exported programs in ``folder`` (a new :class:`ProgramCache`; ``None``: off)."""
+    """Keep exported programs in a folder (a new :class:`ProgramCache`).
+
+    Args:
+        folder: The folder, or ``None``: off.
+    """
     set_program_cache(ProgramCache(folder))
 
 
@@ -416,8 +420,13 @@ class _Digest:
         return top in _NAMED
 
     def code(self, co: types.CodeType, names: dict) -> None:
-        """A function's code, and the module constants it reads (``names``: its globals): a constant changed at run
-        time (a test's monkeypatch) is then another key, as an edited file is."""
+        """Hash a function's code, and the module constants it reads: a constant changed at run time (a test's
+        monkeypatch) is then another key, as an edited file is.
+
+        Args:
+            co: The function's code object.
+            names: Its globals.
+        """
         self.put("code", co.co_name)
         self.h.update(co.co_code)
         self.put("names", ",".join(co.co_names))

@@ -187,6 +187,13 @@ def replace_leaves(module, **values):
 
     The cast keeps a float32 observer float32 when it is bound to a float64 machine (the C export rounds
     the observer to float32 first) and keeps ``lax.scan`` carries' dtypes fixed.
+
+    Args:
+        module: The module.
+        **values: field name -> value.
+
+    Returns:
+        The module with the fields set.
     """
     names = tuple(values)
     new = tuple(jnp.asarray(values[n], dtype=jnp.result_type(getattr(module, n))) for n in names)
