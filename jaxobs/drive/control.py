@@ -179,7 +179,7 @@ class IfStartup(eqx.Module):
         hold: The least time spent at ``omega_switch`` before switching (lets an observer converge), s.
         blend: After the switch, the time over which the d-current goes from the I-f vector's to the i_d
             policy, s.
-        tol: Agreement: |Δ − Δ̄| of the offset Δ = θ_f − θ̂ (the load angle), rad (in [0, 3.15]).
+        tol: Agreement: |Δ − Δ̄| of the offset Δ = θ_f − θ̂ (the load angle), rad (in (0, 3.15]).
         speed_tol: Agreement: |ω̂ − ω_f| / ω_f (> 0).
         dwell: The time agreement must hold (and Δ̄ is Δ low-passed over it), s (> 0).
         smooth: A raised-cosine ramp (continuous acceleration); False: linear.
