@@ -42,14 +42,23 @@ def _default_dir() -> Path:
 def use_compile_cache(
     path: str | os.PathLike | None = None, *, min_compile_s: float = 0.0, keep_traces: bool = True
 ) -> Path | None:
-    """Keep JAX's compiled programs in ``path`` (default: ``$JAXOBS_CACHE_DIR``, else the user's cache folder).
+    """Keep JAX's compiled programs in a folder, across processes.
 
-    Returns the folder, or ``None`` where the cache is off (``JAXOBS_CACHE_DIR`` set to ``off``, ``0`` or an
-    empty string, with no ``path`` given).  Call it before the computations whose compilations should be
-    kept; it may be called again to move the cache.  ``min_compile_s`` (s, ≥ 0): compilations shorter than
-    this are not written (default: every one).  ``keep_traces``: the programs of :func:`jaxobs.kept_jit` keep
-    their traces too, in ``<folder>/traced`` (a :class:`jaxobs.ProgramCache`: a second process skips tracing and
-    lowering).  The folders are created with mode 0700 (only the user may read them).
+    Call it before the computations whose compilations should be kept; it may be called again to move
+    the cache.  The folders are created with mode 0700 (only the user may read them).
+
+    Args:
+        path: The folder (default: ``$JAXOBS_CACHE_DIR``, else the user's cache folder).
+        min_compile_s: Seconds (≥ 0); compilations shorter than this are not written (default: every one).
+        keep_traces: Whether the programs of :func:`jaxobs.kept_jit` keep their traces too, in
+            ``<folder>/traced`` (a :class:`jaxobs.ProgramCache`: a second process skips tracing and lowering).
+
+    Returns:
+        The folder, or ``None`` where the cache is off (``JAXOBS_CACHE_DIR`` set to ``off``, ``0`` or an
+        empty string, with no ``path`` given).
+
+    Raises:
+        ValueError: ``min_compile_s`` is not a number ≥ 0, or the folder cannot be created.
     """
     if isinstance(min_compile_s, bool) or not isinstance(min_compile_s, int | float) or not min_compile_s >= 0:
         raise ValueError(f"use_compile_cache: min_compile_s must be a number >= 0 (seconds), got {min_compile_s!r}")

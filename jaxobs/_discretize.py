@@ -53,7 +53,11 @@ class AbstractInputPath(eqx.Module):
 
 
 class Held(AbstractInputPath):
-    """Zero-order hold of one sample ``u``."""
+    """Zero-order hold of one sample.
+
+    Attributes:
+        u: The sample.
+    """
 
     u: Any
 
@@ -68,6 +72,11 @@ class Knots(AbstractInputPath):
     ``at(s)`` is the quadratic through the three knots; at s = 0, 1/2, 1 the
     Lagrange weights are exactly (1, 0, 0), (0, 1, 0), (0, 0, 1) in floating
     point, so RK4 and Tustin see the exact knot values.
+
+    Attributes:
+        u0: The input at the period's start.
+        um: The input at its middle.
+        u1: The input at its end.
     """
 
     u0: Any
@@ -89,7 +98,14 @@ class Knots(AbstractInputPath):
 
 
 def as_path(u) -> AbstractInputPath:
-    """A bare input sample means zero-order hold."""
+    """A bare input sample means zero-order hold.
+
+    Args:
+        u: An :class:`AbstractInputPath`, or a bare sample.
+
+    Returns:
+        ``u``, or :class:`Held` of it.
+    """
     return u if isinstance(u, AbstractInputPath) else Held(u)
 
 
@@ -103,8 +119,10 @@ class AbstractRule(eqx.Module):
 
     ``init(f, x0, u)`` returns the rule's own state (multistep history, or
     ``None``); ``step(f, x, u, h, rule_state)`` returns the state after one
-    period ``h`` and the new rule state.  ``order`` is the global order of
-    accuracy for smooth inputs given as :class:`Knots`.
+    period ``h`` and the new rule state.
+
+    Attributes:
+        order: The global order of accuracy for smooth inputs given as :class:`Knots` (a class constant).
     """
 
     order: ClassVar[int]
@@ -169,7 +187,17 @@ class RK4(AbstractRule):
 
 
 def diffrax_rk4_step(f: VectorField, x, u, h):
-    """One classic RK4 step through diffrax's ERK machinery (the reference for :class:`RK4`)."""
+    """One classic RK4 step through diffrax's ERK machinery (the reference for :class:`RK4`).
+
+    Args:
+        f: The vector field ``f(x, u)``.
+        x: The state.
+        u: The input (a path, or a bare sample: held).
+        h: The step, s.
+
+    Returns:
+        The state after the step.
+    """
     solver = _DiffraxClassicRK4()
     term = _diffrax_term(f, as_path(u), h)
     state = solver.init(term, 0.0, h, x, None)
@@ -178,7 +206,17 @@ def diffrax_rk4_step(f: VectorField, x, u, h):
 
 
 def rk4_step(f: VectorField, x, path: AbstractInputPath, h):
-    """Plain classic RK4 step (used to start AB3, which has no history yet)."""
+    """Plain classic RK4 step (used to start AB3, which has no history yet).
+
+    Args:
+        f: The vector field ``f(x, u)``.
+        x: The state.
+        path: The input over the period.
+        h: The step, s.
+
+    Returns:
+        The state after the step.
+    """
     k1 = f(x, path.at(0.0))
     k2 = f(x + 0.5 * h * k1, path.at(0.5))
     k3 = f(x + 0.5 * h * k2, path.at(0.5))
@@ -201,6 +239,9 @@ class Tustin(AbstractRule):
     iteration already keeps the rule second order; the default of two leaves
     the residual far below the rule's own truncation error.  A linear field is
     solved exactly by the first iteration.
+
+    Attributes:
+        newton_iters: Newton iterations per step (an integer ≥ 1; static).
     """
 
     newton_iters: int = eqx.field(static=True, default=2)
@@ -236,6 +277,13 @@ def solve_small(a, b):
     elementwise code vectorizes across a vmapped batch; a batched LAPACK call
     per scenario made the Tustin rule 40× slower on CPU.  Falls back to
     ``jnp.linalg.solve`` above 12 states.
+
+    Args:
+        a: The matrix, (n, n).
+        b: The right-hand side, (n,).
+
+    Returns:
+        x.
     """
     n = a.shape[0]
     if n > 12:
@@ -260,7 +308,11 @@ def solve_small(a, b):
 class AbstractMultistepState(eqx.Module):
     """A rule state whose first ``startup_steps`` steps differ from the rest (a multistep rule's start-up): the
     loop peels them off and runs the rest in the state's branch-free ``steady()`` form (:mod:`jaxobs._loop`,
-    point 2)."""
+    point 2).
+
+    Attributes:
+        startup_steps: The start-up's steps (a class attribute).
+    """
 
     startup_steps: eqx.AbstractClassVar[int]
 
@@ -341,10 +393,8 @@ def _is_ab3_component(node) -> bool:
 
 
 def ab3_steady_from_start(c0, c1, c2, h: float):
-    """``c0`` (the carry at sample 0) with every AB3 component's history replaced by one under which two
-    *steady* AB3 steps from its x₀ land on the x₁ and x₂ that the RK4 start-up took it to (``c1``, ``c2``:
-    the carries after the start-up's two steps); ``None`` when the carry holds an AB3 state that is not a
-    component's ``(x, rule)`` pair (then the caller peels the start-up as before).
+    """The carry at sample 0 with every AB3 component's history replaced by one under which two *steady* AB3
+    steps from its x₀ land on the x₁ and x₂ that the RK4 start-up took it to.
 
     Why: a loop whose inputs are scan rows cannot start its steady loop at sample 2 without slicing its
     inputs (``xs[2:]``, a copy of the whole horizon, :mod:`jaxobs._loop` point 6).  With the start-up's
@@ -354,8 +404,17 @@ def ab3_steady_from_start(c0, c1, c2, h: float):
         f₋₁ = A = (12/h (x₂ − x₁) − 23 F₁ + 16 F₀) / 5,    f₋₂ = B = (12/h (x₁ − x₀) − 23 F₀ + 16 A) / 5;
 
     in floating point to the rounding of x (the increment x₁ − x₀ is formed and added back, an error of an
-    ulp of x; tests/test_perf.py compares with the peeled loop to 1e-12 in float64).  ``h`` must be the step
-    every AB3 component takes per sample (an observer on a signal: its ``ts``).
+    ulp of x; tests/test_perf.py compares with the peeled loop to 1e-12 in float64).
+
+    Args:
+        c0: The carry at sample 0.
+        c1: The carry after the start-up's first step.
+        c2: The carry after its second step.
+        h: The step every AB3 component takes per sample (an observer on a signal: its ``ts``).
+
+    Returns:
+        The carry, or ``None`` when it holds an AB3 state that is not a component's ``(x, rule)`` pair (then
+        the caller peels the start-up).
     """
     n_ab3 = sum(1 for x in jax.tree.leaves(c0, is_leaf=lambda n: isinstance(n, AB3State)) if isinstance(x, AB3State))
     n_comp = sum(1 for x in jax.tree.leaves(c0, is_leaf=_is_ab3_component) if _is_ab3_component(x))
@@ -376,7 +435,18 @@ def ab3_steady_from_start(c0, c1, c2, h: float):
 
 
 def check_rule(rule, owner: str) -> AbstractRule:
-    """A component's ``rule`` must be a discretization rule object."""
+    """A component's ``rule`` must be a discretization rule object.
+
+    Args:
+        rule: The rule.
+        owner: The component's name in the error.
+
+    Returns:
+        ``rule``.
+
+    Raises:
+        ValueError: ``rule`` is not an :class:`AbstractRule`.
+    """
     if not isinstance(rule, AbstractRule):
         raise ValueError(
             f"{owner}.rule must be a discretization rule (jaxobs.Euler(), Tustin(), AB3(), RK4()), got {rule!r}"

@@ -146,8 +146,16 @@ class AbstractCheckpoint(eqx.Module):
 
     @abc.abstractmethod
     def loop(self, loop: Loop, carry, xs):
-        """Run ``loop`` (:class:`jaxobs._steps.Loop`) from ``loop.init(carry)`` over ``xs``:
-        ``(final carry, stacked per-step outputs or None)``."""
+        """Run a loop from ``loop.init(carry)`` over ``xs``.
+
+        Args:
+            loop: The :class:`jaxobs._steps.Loop`.
+            carry: The initial carry.
+            xs: The per-step inputs.
+
+        Returns:
+            ``(final carry, stacked per-step outputs or None)``.
+        """
 
 
 class AbstractReverseCheckpoint(AbstractCheckpoint):
@@ -160,8 +168,19 @@ class AbstractReverseCheckpoint(AbstractCheckpoint):
 
     @abc.abstractmethod
     def scan(self, step, carry, xs, n: int, unroll: int, xs_map=None):
-        """``n`` (>= 1) steps of ``step`` over ``xs``; with ``xs_map`` each step sees ``xs_map`` of a block of
-        ``xs`` (jaxobs._loop, point 5)."""
+        """Scan ``step`` over ``xs``.
+
+        Args:
+            step: ``step(carry, x) -> (carry, out)``.
+            carry: The initial carry.
+            xs: The per-step inputs.
+            n: The steps (≥ 1).
+            unroll: The loop's unrolling.
+            xs_map: With it each step sees ``xs_map`` of a block of ``xs`` (jaxobs._loop, point 5).
+
+        Returns:
+            ``(final carry, stacked outputs)``, as ``lax.scan``.
+        """
 
     def loop(self, loop, carry, xs):
         return run_steps(loop, self, loop.init(carry), xs)
@@ -211,6 +230,15 @@ class ForwardSensitivity(AbstractCheckpoint):
     The gradient costs about one forward pass per perturbed scalar's tangent;
     with more than ``max_scalars`` perturbed scalars the ``fallback`` strategy
     (reverse mode) runs instead.
+
+    Attributes:
+        max_scalars: The most perturbed scalars served by forward sensitivities (an integer ≥ 1; static).
+        fallback: The reverse-mode strategy (:class:`NoCheckpoint`, :class:`StepCheckpoint`,
+            :class:`ChunkCheckpoint`) run with more perturbed scalars (static).
+
+    Raises:
+        ValueError: ``max_scalars`` or ``fallback`` is out of range; or, when run, the loop has
+            per-step outputs (use ``save=SaveFinal(cost)``).
     """
 
     max_scalars: int = eqx.field(static=True, default=8)
@@ -244,6 +272,12 @@ class AutoCheckpoint(AbstractCheckpoint):
     Below ``chunk_above`` per-step checkpointing keeps the carries of every step
     (n × carry), which for 1 s at 10 kHz and batch 1024 is a few tens of MB —
     cheap, and a little faster than chunks.
+
+    Attributes:
+        chunk_above: Steps above which :class:`ChunkCheckpoint` replaces :class:`StepCheckpoint`
+            (an integer ≥ 0; static).
+        forward_max: The most perturbed scalars served by :class:`ForwardSensitivity`
+            (an integer ≥ 0, 0: never; static).
     """
 
     chunk_above: int = eqx.field(static=True, default=20_000)
@@ -255,7 +289,14 @@ class AutoCheckpoint(AbstractCheckpoint):
                 raise ValueError(f"AutoCheckpoint.{name} must be an integer >= 0, got {v!r}")
 
     def pick(self, loop: Loop) -> AbstractCheckpoint:
-        """The strategy this loop runs under."""
+        """The strategy a loop runs under.
+
+        Args:
+            loop: The :class:`jaxobs._steps.Loop`.
+
+        Returns:
+            The :class:`AbstractCheckpoint`.
+        """
         reverse = ChunkCheckpoint() if loop.n > self.chunk_above else StepCheckpoint()
         if loop.has_outputs or self.forward_max == 0:
             return reverse
@@ -301,22 +342,34 @@ def run_loop(
 ):
     """``lax.scan(body, carry, xs, length=n)``, made fast and cheap to differentiate (module doc).
 
-    ``carry_fn``: instead of ``carry`` (pass ``None``), a function of no arguments that builds the initial
-    carry; it is called inside the forward-sensitivity region, so a parameter that sets the initial state
-    (an FLL's ω_n) is one perturbed scalar there, not every state component it reaches (module doc, point 4).
+    Args:
+        body: ``body(carry, x) -> (carry, y)``; it sees the carry exactly as given (state vectors as arrays).
+        carry: The initial carry, or ``None`` with ``carry_fn``.
+        xs: The per-step inputs (leading axis ``n``), or ``None``.
+        n: The steps.
+        unroll: The loop's unrolling (module doc, point 3).
+        checkpoint: The strategy that runs the loop (module doc, point 4).
+        split: Whether to carry state vectors split (module doc, point 1).
+        xs_map: With it the body sees ``xs_map(xs)[k]`` at step k instead of ``xs[k]``, where ``xs_map`` maps
+            a block of steps' ``xs`` (leading axis the block) to their inputs (leading axis the block) and is
+            evaluated a block at a time (module doc, point 5): the simulations pass sample indices and the
+            signal as ``xs_map``.
+        peel: Whether to peel multistep start-ups (module doc, point 2).
+        carry_fn: Instead of ``carry`` (pass ``None``), a function of no arguments that builds the initial
+            carry; it is called inside the forward-sensitivity region, so a parameter that sets the initial
+            state (an FLL's ω_n) is one perturbed scalar there, not every state component it reaches (module
+            doc, point 4).
+        fill: With ``xs`` the per-step inputs themselves (no ``xs_map``), the loop does not slice them for its
+            peeled start-up: ``fill(c0, c1, c2)`` turns the carries before and after the start-up's two steps
+            into a steady carry at step 0 whose steps repeat them (module doc, point 6;
+            :func:`jaxobs._discretize.ab3_steady_from_start`), and the steady loop runs every row.
 
-    ``body(carry, x) -> (carry, y)`` sees the carry exactly as given (state
-    vectors as arrays); ``xs`` (or ``None``) has leading axis ``n``.  With
-    ``xs_map`` the body sees ``xs_map(xs)[k]`` at step k instead of ``xs[k]``,
-    where ``xs_map`` maps a block of steps' ``xs`` (leading axis the block)
-    to their inputs (leading axis the block) and is evaluated a block at a
-    time (module doc, point 5): the simulations pass sample indices and the
-    signal as ``xs_map``.  ``checkpoint`` runs the loop (module doc, point 4).
+    Returns:
+        ``(final carry, stacked per-step outputs or None)``.
 
-    ``fill``: with ``xs`` the per-step inputs themselves (no ``xs_map``), the loop does not slice them for
-    its peeled start-up: ``fill(c0, c1, c2)`` turns the carries before and after the start-up's two steps
-    into a steady carry at step 0 whose steps repeat them (module doc, point 6;
-    :func:`jaxobs._discretize.ab3_steady_from_start`), and the steady loop runs every row.
+    Raises:
+        ValueError: Both or neither of ``carry`` and ``carry_fn``, ``xs_map`` without ``xs``, or an invalid
+            ``unroll`` or ``checkpoint``.
     """
     unroll = check_unroll(unroll)
     checkpoint = check_checkpoint(checkpoint)

@@ -29,5 +29,12 @@ def safe_atan2(y, x):
 
 
 def wrap(a):
-    """Angle wrapped to (−π, π] (electrical angles and angle errors)."""
+    """Angle wrapped to (−π, π] (electrical angles and angle errors).
+
+    Args:
+        a: The angle, rad.
+
+    Returns:
+        The wrapped angle, rad.
+    """
     return jnp.pi - jnp.mod(jnp.pi - a, 2 * jnp.pi)

@@ -15,7 +15,14 @@ __all__ = ["DriveInput"]
 
 
 class DriveInput(NamedTuple):
-    """Measured stationary-frame voltage (V) and current (A) at one sample."""
+    """Measured stationary-frame voltage and current at one sample (module doc).
+
+    Attributes:
+        u_a: u_α, the voltage applied over the period that starts at the sample, V.
+        u_b: u_β, V.
+        i_a: i_α at the sample, A.
+        i_b: i_β at the sample, A.
+    """
 
     u_a: jax.Array
     u_b: jax.Array

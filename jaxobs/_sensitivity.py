@@ -69,9 +69,19 @@ class _Reverse(eqx.Module):
 
 
 def sensitivity_loop(conv, max_scalars: int, consts, carry, xs):
-    """``conv(carry, xs, *consts)`` (a closure-converted loop) whose reverse-mode derivative is computed by
-    forward sensitivities when at most ``max_scalars`` input scalars are perturbed (else by reverse mode
-    through ``conv``)."""
+    """A closure-converted loop whose reverse-mode derivative is computed by forward sensitivities.
+
+    Args:
+        conv: ``conv(carry, xs, *consts)``, the closure-converted loop.
+        max_scalars: The most perturbed input scalars served by forward sensitivities (else reverse mode
+            through ``conv``).
+        consts: The loop's closed-over arrays.
+        carry: The initial carry.
+        xs: The per-step inputs.
+
+    Returns:
+        ``conv(carry, xs, *consts)``.
+    """
     return _loop(conv, max_scalars, consts, carry, xs)
 
 
@@ -145,10 +155,6 @@ _loop.defvjp(_loop_fwd, _loop_bwd, symbolic_zeros=True)
 def multi_jvp(fun, primals, basis):
     """``fun(*primals)`` and its JVPs along each direction of ``basis``, in one pass.
 
-    ``basis`` has one array per primal, its leading axis the directions.
-
-    Returns ``(y, jac)``, each leaf of ``jac`` with the directions as its leading axis.
-
     Up to ``NESTED_MAX`` directions, by nested ``jax.jvp`` — the tangent along
     direction k is the k-th level's tangent of the primal — with every mixed
     higher-order term removed by dead-code elimination before anything is
@@ -158,6 +164,14 @@ def multi_jvp(fun, primals, basis):
     tangents beside (batch,)-shaped primals, which XLA's CPU fusion keeps in
     separate kernels: measured on the SOGI-FLL (gains k, λ; float64, batch
     1024, 2 devices), value_and_grad / forward 3.0 by vmap, 2.05 nested.
+
+    Args:
+        fun: The function.
+        primals: Its arguments.
+        basis: One array per primal, its leading axis the directions.
+
+    Returns:
+        ``(y, jac)``, each leaf of ``jac`` with the directions as its leading axis.
     """
     n_dirs = int(np.shape(basis[0])[0])
     if 1 <= n_dirs <= NESTED_MAX:

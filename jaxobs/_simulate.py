@@ -131,7 +131,14 @@ class Solution(eqx.Module):
 
 
 def all_finite(tree) -> jax.Array:
-    """True when every floating-point leaf of ``tree`` is finite everywhere."""
+    """True when every floating-point leaf of ``tree`` is finite everywhere.
+
+    Args:
+        tree: A PyTree.
+
+    Returns:
+        A bool array.
+    """
     leaves = [x for x in jax.tree.leaves(tree) if jnp.issubdtype(jnp.result_type(x), jnp.inexact)]
     return jnp.all(jnp.stack([jnp.all(jnp.isfinite(x)) for x in leaves])) if leaves else jnp.asarray(True)
 
@@ -198,6 +205,9 @@ class AbstractSave(eqx.Module):
     Each strategy runs its own loop (:meth:`run`), as diffrax's adjoints do: the plain scan of the system's
     step, or the throughput loop (:mod:`jaxobs._loop`) over the inputs the system declares
     (:meth:`jaxobs.AbstractSystem.loop_inputs`).
+
+    Attributes:
+        cost: ``cost(out) -> scalar``, or ``None`` (no running cost; static).
     """
 
     cost: Callable | None = eqx.field(static=True, default=None)
@@ -210,8 +220,18 @@ class AbstractSave(eqx.Module):
 
     @abc.abstractmethod
     def run(self, system: AbstractSystem, n: int, *, checkpoint, state0, unroll: int | None) -> Solution:
-        """``n`` steps of ``system`` from sample 0 (``state0``, or ``system.init()``), stored for reverse-mode AD
-        as ``checkpoint`` says; ``unroll`` (None: the system's) for the throughput loop."""
+        """Run ``n`` steps of ``system`` from sample 0.
+
+        Args:
+            system: The :class:`AbstractSystem`.
+            n: The steps.
+            checkpoint: How the loop is stored for reverse-mode AD (an :class:`AbstractCheckpoint`).
+            state0: The initial state, or None: ``system.init()``.
+            unroll: The throughput loop's unrolling (None: the system's).
+
+        Returns:
+            The :class:`Solution`.
+        """
 
     def _plain(self, system, n, *, keep, checkpoint, state0) -> Solution:
         """The system's step scanned plainly: a user's own ``lax.scan(system.step, ...)`` gives these numbers."""
@@ -238,6 +258,10 @@ class SaveAll(AbstractSave):
     at a time, state vectors split, multistep start-ups peeled, unrolled), as :class:`SaveFinal` always
     does: the same outputs to rounding (1e-12 relative), in about half the time where the input is costly
     (a harmonic signal) or under differentiation (the tuning objective runs this way).
+
+    Attributes:
+        fast: Whether to run the throughput loop (static).
+        cost: ``cost(out) -> scalar``, or ``None`` (:class:`AbstractSave`; static).
     """
 
     fast: bool = eqx.field(static=True, default=False)
@@ -255,7 +279,11 @@ class SaveAll(AbstractSave):
 
 class SaveFinal(AbstractSave):
     """Keep only the final state, ``ok`` and the running cost: a long horizon stores no trajectory.  Always the
-    throughput loop (:mod:`jaxobs._loop`)."""
+    throughput loop (:mod:`jaxobs._loop`).
+
+    Attributes:
+        cost: ``cost(out) -> scalar``, or ``None`` (no running cost; static).
+    """
 
     def run(self, system, n, *, checkpoint, state0, unroll):
         return self._throughput(system, n, keep=False, checkpoint=checkpoint, state0=state0, unroll=unroll)
@@ -318,7 +346,13 @@ def _solve(cost, system, n: int, feed: Callable, *, fast: bool, keep: bool, chec
 
 
 class SignalTruth(NamedTuple):
-    """What a synthetic signal really is at a sample."""
+    """What a synthetic signal really is at a sample.
+
+    Attributes:
+        theta: The true fundamental phase, rad (unwrapped).
+        omega: The true fundamental frequency, rad/s.
+        amplitude: The true fundamental amplitude.
+    """
 
     theta: jax.Array  # true fundamental phase, rad (unwrapped)
     omega: jax.Array  # true fundamental frequency, rad/s
@@ -326,7 +360,13 @@ class SignalTruth(NamedTuple):
 
 
 class SignalOutput(NamedTuple):
-    """One step of :class:`OnSignal`: the input sample, the observer's outputs, and the truth."""
+    """One step of :class:`OnSignal`: the input sample, the observer's outputs, and the truth.
+
+    Attributes:
+        u: The input sample u(t_k) the observer was given.
+        obs: The observer's outputs at t_k (its NamedTuple).
+        truth: What the signal really is at t_k (a :class:`SignalTruth`; ``None`` if the signal cannot say).
+    """
 
     u: Any  # the input sample u(t_k) the observer was given
     obs: Any  # the observer's outputs at t_k (its NamedTuple)
@@ -405,7 +445,14 @@ class OnSignal(AbstractSystem):
         return self.signal.has_truth
 
     def time(self, k):
-        """t_k = t0 + k·ts (in the default float dtype)."""
+        """t_k = t0 + k·ts (in the default float dtype).
+
+        Args:
+            k: The sample index.
+
+        Returns:
+            t_k, s.
+        """
         return self.t0 + self.ts * jnp.asarray(k).astype(jnp.result_type(float))
 
     def _at(self, k, offset: float = 0.0):
@@ -422,7 +469,14 @@ class OnSignal(AbstractSystem):
         return self.observer.init(self.signal(jnp.asarray(self.t0, jnp.result_type(float))))
 
     def input(self, k):
-        """What the observer is given at sample k, and the truth there."""
+        """What the observer is given at sample k, and the truth there.
+
+        Args:
+            k: The sample index.
+
+        Returns:
+            ``(u, the rule's input path, truth)``.
+        """
         t = self._at(k)
         u = self.signal(t)
         path = (
@@ -456,6 +510,12 @@ class OnSignal(AbstractSystem):
         exact sample here).  Under ``vmap`` over recordings the slice is a block of B rows, where a
         per-step read (``input`` mapped over the block) gathers one column per step.  Anything else
         is ``input`` mapped over the block.
+
+        Args:
+            kb: The consecutive sample indices.
+
+        Returns:
+            :meth:`input`'s values with the block as leading axis.
         """
         off = self._sample_offset()
         if off is None:
@@ -480,7 +540,15 @@ class OnSignal(AbstractSystem):
         return u, u, truth
 
     def advance(self, state, x):
-        """One step on the input ``x`` of :meth:`input`: ``step(state, k) == advance(state, input(k))``."""
+        """One step on an input of :meth:`input`: ``step(state, k) == advance(state, input(k))``.
+
+        Args:
+            state: The observer's state.
+            x: :meth:`input`'s value.
+
+        Returns:
+            ``(the next state, the SignalOutput)``.
+        """
         u, path, truth = x
         state, out = self.observer.step(state, path)
         return state, SignalOutput(u=u, obs=out, truth=truth)
@@ -489,12 +557,26 @@ class OnSignal(AbstractSystem):
         return self.advance(state, self.input(k))
 
     def loop_inputs(self, ks) -> LoopInputs:
-        """The sample indices, their inputs computed a block at a time (:meth:`input_block`)."""
+        """The sample indices, their inputs computed a block at a time (:meth:`input_block`).
+
+        Args:
+            ks: The sample indices.
+
+        Returns:
+            The :class:`LoopInputs`.
+        """
         return LoopInputs(ks, self.advance, xs_map=self.input_block, unroll=self.unroll)
 
     def check_horizon(self, n: int):
         """The signal must be readable over the horizon (a recording inside its samples, a time-major batch one
-        scenario at a time: :meth:`jaxobs.AbstractSignal.check_window`)."""
+        scenario at a time: :meth:`jaxobs.AbstractSignal.check_window`).
+
+        Args:
+            n: The steps.
+
+        Raises:
+            ValueError: The signal cannot be read over the horizon.
+        """
         self.signal.check_window(self.t0, self.t0 + self.ts * (n - 1), "OnSignal.signal")
 
     def throughput(self) -> AbstractSystem:
@@ -556,10 +638,18 @@ class OnRows(AbstractSystem):
         return sig.samples, sig.truth
 
     def input_rows(self, n: int):
-        """The rows of all ``n`` steps (leading axis n; :meth:`row_input` makes a step's input of one): the
-        recording's arrays' rows ``[off, off + n)``, off the index of sample 0.  Under ``map_batch`` the loop
-        reads them one contiguous row per step (:mod:`jaxobs._loop`, point 6): a static slice keeps the batch
-        axis inner, and with the horizon the whole recording there is no slice at all."""
+        """The rows of all steps: the recording's arrays' rows ``[off, off + n)``, off the index of sample 0.
+
+        Under ``map_batch`` the loop reads them one contiguous row per step (:mod:`jaxobs._loop`, point 6): a
+        static slice keeps the batch axis inner, and with the horizon the whole recording there is no slice at
+        all.
+
+        Args:
+            n: The steps.
+
+        Returns:
+            The rows (leading axis n; :meth:`row_input` makes a step's input of one).
+        """
         off = self.system._sample_offset()
         return jax.tree.map(lambda a: a if (off == 0 and a.shape[0] == n) else a[off : off + n], self._rows())
 

@@ -37,10 +37,19 @@ _SPLIT_MAX = 64  # 1-D leaves up to this size are carried as tuples of scalars
 class Loop(NamedTuple):
     """One call of :func:`jaxobs._loop.run_loop`: what every strategy's ``loop`` is given.
 
-    ``init(carry)`` builds the initial carry from the loop's carry argument (the carry itself, or — with
-    ``run_loop(carry_fn=...)`` — a function of nothing, called inside the strategy's loop: jaxobs._loop,
-    point 4); ``has_outputs``: the body returns per-step outputs (not ``None``); ``fill``: the start-up
-    steps' carries ``(c0, c1, c2)`` to a steady carry at step 0 (jaxobs._loop, point 6), or ``None``.
+    Attributes:
+        body: ``body(carry, x) -> (carry, y)``.
+        init: ``init(carry)`` builds the initial carry from the loop's carry argument (the carry itself, or —
+            with ``run_loop(carry_fn=...)`` — a function of nothing, called inside the strategy's loop:
+            jaxobs._loop, point 4).
+        n: The steps.
+        unroll: The loop's unrolling.
+        split: Whether state vectors are carried split (jaxobs._loop, point 1).
+        xs_map: Maps a block of ``xs`` to the steps' inputs, or ``None``.
+        peel: Whether multistep start-ups are peeled (jaxobs._loop, point 2).
+        has_outputs: The body returns per-step outputs (not ``None``).
+        fill: The start-up steps' carries ``(c0, c1, c2)`` to a steady carry at step 0 (jaxobs._loop, point 6),
+            or ``None``.
     """
 
     body: Callable[[Any, Any], tuple[Any, Any]]
@@ -96,7 +105,14 @@ def _has_steady(x):
 
 
 def startup_steps(carry) -> int:
-    """How many leading steps must run before every rule state in ``carry`` can go steady."""
+    """How many leading steps must run before every rule state in a carry can go steady.
+
+    Args:
+        carry: The loop's carry.
+
+    Returns:
+        The steps (0 without multistep states).
+    """
     states = [s for s in jax.tree.leaves(carry, is_leaf=_has_steady) if _has_steady(s)]
     return max((s.startup_steps for s in states), default=0)
 
@@ -114,6 +130,15 @@ def run_steps(loop: Loop, strategy, carry, xs):
     """The ``loop.n`` steps from ``carry`` (already built: ``loop.init`` applied), stored for reverse-mode
     AD as ``strategy`` says: its ``scan(step, carry, xs, n, unroll, xs_map)`` runs the steps, and the
     start-up steps peeled off run under ``strategy.startup`` (a few steps: never chunked), not unrolled.
+
+    Args:
+        loop: The :class:`Loop`.
+        strategy: The reverse-mode strategy (:class:`jaxobs._loop.AbstractReverseCheckpoint`).
+        carry: The initial carry.
+        xs: The per-step inputs.
+
+    Returns:
+        ``(final carry, stacked per-step outputs or None)``.
     """
     body, n, xs_map = loop.body, loop.n, loop.xs_map
     if loop.split:
@@ -172,6 +197,19 @@ def scan_blocks(step, carry, xs, n: int, size: int, unroll: int, xs_map=None, ch
     together, vectorized, before its steps run.  ``checkpoint_blocks``: each block under
     ``jax.checkpoint`` (the outer scan stores one carry per block, and the backward pass recomputes each
     block once).
+
+    Args:
+        step: ``step(carry, x) -> (carry, out)``.
+        carry: The initial carry.
+        xs: The per-step inputs.
+        n: The steps (≥ 1).
+        size: Steps per block.
+        unroll: The inner loop's unrolling.
+        xs_map: Maps a block of ``xs`` to its steps' inputs, or ``None``.
+        checkpoint_blocks: Whether each block runs under ``jax.checkpoint``.
+
+    Returns:
+        ``(final carry, stacked outputs)``, as ``lax.scan``.
     """
     xs_map = (lambda x: x) if xs_map is None else xs_map
     q, r = divmod(n, size)
@@ -206,6 +244,14 @@ def block_size(n: int, target: int, unroll: int) -> int:
     of the step costs compile time (a drive step takes seconds to compile).
     Without such a divisor (within a factor 2 of ``target``), ``target``
     rounded to a multiple of ``unroll``; the remainder then runs without unrolling.
+
+    Args:
+        n: The steps.
+        target: The preferred block size.
+        unroll: The loop's unrolling.
+
+    Returns:
+        The block size.
     """
     if n <= 2 * target:
         return n

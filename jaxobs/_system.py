@@ -73,14 +73,35 @@ class AbstractSystem(eqx.Module):
 
     @abc.abstractmethod
     def step(self, state, k) -> tuple[Any, Any]:
-        """One sample period: (state at k + 1, outputs at t_k)."""
+        """One sample period.
+
+        Args:
+            state: The state at k.
+            k: The sample index.
+
+        Returns:
+            ``(state at k + 1, outputs at t_k)``.
+        """
 
     def check_horizon(self, n: int) -> None:
-        """Refuse (``ValueError``) a run of ``n`` steps from sample 0 that this system cannot make; any by default."""
+        """Refuse a run this system cannot make; any by default.
+
+        Args:
+            n: The steps from sample 0.
+
+        Raises:
+            ValueError: The system cannot run ``n`` steps.
+        """
 
     def loop_inputs(self, ks: jax.Array) -> LoopInputs:
-        """How the throughput loop feeds the steps at the sample indices ``ks`` (int32, 0 to n − 1): by default the
-        indices themselves, ``step`` on each."""
+        """How the throughput loop feeds the steps: by default the indices themselves, ``step`` on each.
+
+        Args:
+            ks: The sample indices (int32, 0 to n − 1).
+
+        Returns:
+            The :class:`LoopInputs`.
+        """
         return LoopInputs(ks, self.step, unroll=self.unroll)
 
     def throughput(self) -> AbstractSystem:

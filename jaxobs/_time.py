@@ -55,6 +55,11 @@ class SampleTime(eqx.Module):
     Signals that know it (:class:`~jaxobs.signals.GridSignal`, :class:`~jaxobs.signals.EMFSignal`,
     :class:`~jaxobs.scenarios.NoisyGridSignal`) form their phase from it exactly in float32 (module doc);
     :class:`~jaxobs.OnSignal` passes one to such signals instead of the rounded float t_k.
+
+    Attributes:
+        k: The sample index (int32, any shape).
+        ts: The sample period (s, static).
+        t0: The time of sample 0 (s, static).
     """
 
     k: jax.Array  # the sample index (int32, any shape)
@@ -67,12 +72,27 @@ class SampleTime(eqx.Module):
 
 
 def time_value(t):
-    """The float time of ``t`` (a float array, or a :class:`SampleTime`)."""
+    """The float time of ``t``.
+
+    Args:
+        t: A float array, or a :class:`SampleTime`.
+
+    Returns:
+        ``t`` itself, or the :class:`SampleTime`'s rounded value.
+    """
     return t.value() if isinstance(t, SampleTime) else t
 
 
 def exact_phase(t, *leaves) -> bool:
-    """Whether to form phases by :func:`cycles`: ``t`` is a SampleTime and the arithmetic is float32."""
+    """Whether to form phases by :func:`cycles`: ``t`` is a SampleTime and the arithmetic is float32.
+
+    Args:
+        t: A float time, or a :class:`SampleTime`.
+        *leaves: The other operands, whose dtypes join ``t``'s.
+
+    Returns:
+        Whether phases are formed by :func:`cycles`.
+    """
     if not isinstance(t, SampleTime):
         return False
     return jnp.result_type(t.value(), *leaves) == jnp.float32
@@ -129,7 +149,13 @@ def cycles(rate, t, scale: float = 1.0):
     """rate·scale·t in cycles: reduced to [−½, ½] and exact (module doc) when ``t`` is a float32
     :class:`SampleTime`; else the plain product (float64, or a float time).
 
-    ``rate`` is a frequency in Hz (scale 1) or rad/s (scale 1/(2π)); ``scale`` is static.
+    Args:
+        rate: A frequency in Hz (scale 1) or rad/s (scale 1/(2π)).
+        t: A float time, or a :class:`SampleTime`.
+        scale: The rate's scale to Hz (static).
+
+    Returns:
+        rate·scale·t, cycles.
     """
     tv = time_value(t)
     naive = rate * (scale * tv)
@@ -144,7 +170,15 @@ def cycles(rate, t, scale: float = 1.0):
 
 
 def frac_mul(x, y):
-    """x·y modulo 1 in [−½, ½], exact before the last rounding, for float32 x, y (straight-through tangent)."""
+    """x·y modulo 1 in [−½, ½], exact before the last rounding, for float32 x, y (straight-through tangent).
+
+    Args:
+        x: A float32 factor.
+        y: A float32 factor.
+
+    Returns:
+        x·y modulo 1, in [−½, ½].
+    """
     naive = x * y
     xs, ys = jax.lax.stop_gradient(x), jax.lax.stop_gradient(y)
     acc = _Sum()

@@ -131,7 +131,11 @@ class ProgramCache:
         return f"ProgramCache({None if self.folder is None else str(self.folder)!r}, max_kept={self.max_kept})"
 
     def warn(self, what: str) -> None:
-        """Report a problem of the folder, once per process, in one line on stderr."""
+        """Report a problem of the folder, once per process, in one line on stderr.
+
+        Args:
+            what: The problem.
+        """
         if not self._warned:
             self._warned = True
             print(f"jaxobs: warning: program cache {str(self.folder)!r}: {what}", file=sys.stderr, flush=True)
@@ -161,7 +165,15 @@ class ProgramCache:
         return self.folder / f"{name}{_SUFFIX}"
 
     def read(self, name: str, key: dict) -> tuple[export.Exported | None, str | None]:
-        """The program kept under ``name`` if its file holds ``key`` and its own digest; else why not (None: absent)."""
+        """The program kept under a name, if its file holds the key and its own digest.
+
+        Args:
+            name: The program's file name.
+            key: The program's key.
+
+        Returns:
+            ``(the program, None)``, or ``(None, why not)``; ``(None, None)`` where there is no file.
+        """
         path = self.path(name)
         try:
             fd = os.open(path, os.O_RDONLY | os.O_NOFOLLOW | os.O_NONBLOCK | getattr(os, "O_CLOEXEC", 0))
@@ -200,7 +212,13 @@ class ProgramCache:
         return exp, None
 
     def write(self, name: str, key: dict, exp: export.Exported) -> None:
-        """Keep ``exp`` under ``name``: whole or absent (a temp file renamed), its temp file removed if that fails."""
+        """Keep a program: whole or absent (a temp file renamed), its temp file removed if that fails.
+
+        Args:
+            name: The program's file name.
+            key: The program's key.
+            exp: The exported program.
+        """
         if not self._usable():
             return
         blob = exp.serialize()
@@ -288,7 +306,14 @@ _state: dict = {"cache": ProgramCache(None)}
 
 
 def set_program_cache(cache: ProgramCache | None) -> None:
-    """Use ``cache`` for every :func:`kept_jit` from now on (``None``: off)."""
+    """Use ``cache`` for every :func:`kept_jit` from now on.
+
+    Args:
+        cache: The :class:`ProgramCache` to use, or ``None`` (off).
+
+    Raises:
+        ValueError: ``cache`` is neither a :class:`ProgramCache` nor ``None``.
+    """
     if cache is not None and not isinstance(cache, ProgramCache):
         raise ValueError(f"set_program_cache: cache must be a jaxobs.ProgramCache or None, got {cache!r}")
     _state["cache"] = ProgramCache(None) if cache is None else cache
@@ -300,7 +325,11 @@ def program_cache() -> ProgramCache:
 
 
 def set_traced_dir(folder: str | os.PathLike | None) -> None:
-    """Keep exported programs in ``folder`` (a new :class:`ProgramCache`; ``None``: off)."""
+    """Keep exported programs in a folder (a new :class:`ProgramCache`).
+
+    Args:
+        folder: The folder, or ``None``: off.
+    """
     set_program_cache(ProgramCache(folder))
 
 
@@ -391,8 +420,13 @@ class _Digest:
         return top in _NAMED
 
     def code(self, co: types.CodeType, names: dict) -> None:
-        """A function's code, and the module constants it reads (``names``: its globals): a constant changed at run
-        time (a test's monkeypatch) is then another key, as an edited file is."""
+        """Hash a function's code, and the module constants it reads: a constant changed at run time (a test's
+        monkeypatch) is then another key, as an edited file is.
+
+        Args:
+            co: The function's code object.
+            names: Its globals.
+        """
         self.put("code", co.co_name)
         self.h.update(co.co_code)
         self.put("names", ",".join(co.co_names))

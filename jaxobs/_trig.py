@@ -95,9 +95,15 @@ _LIMIT32 = 2.0**21  # rad: beyond it NaN (module doc)
 
 
 def sincos(x):
-    """(sin x, cos x) of an angle ``x`` in rad (any shape): in float64 and float32 the vectorizable version of
-    the module doc (float64: at most 1 ulp from libm's for |x| ≤ 10⁵; float32: see the module doc), in any
-    other dtype XLA's ``sin`` and ``cos``."""
+    """(sin x, cos x): in float64 and float32 the vectorizable version of the module doc (float64: at most 1 ulp
+    from libm's for |x| ≤ 10⁵; float32: see the module doc), in any other dtype XLA's ``sin`` and ``cos``.
+
+    Args:
+        x: The angle, rad (any shape).
+
+    Returns:
+        ``(sin x, cos x)``.
+    """
     x = jnp.asarray(x)
     if x.dtype not in (jnp.float64, jnp.float32):
         return jnp.sin(x), jnp.cos(x)

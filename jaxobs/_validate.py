@@ -29,8 +29,19 @@ def as_float(x):
 def check_real(name: str, x, *, lower=None, upper=None, lower_open=True, owner=""):
     """Check that every element of ``x`` is finite and inside the given range.
 
-    ``lower_open`` makes the lower bound strict (``x > lower``); otherwise
-    ``x >= lower``.  Returns ``x`` converted to a float array.
+    Args:
+        name: The field's name in the error.
+        x: The value (any shape).
+        lower: The lower bound, or None.
+        upper: The upper bound, or None.
+        lower_open: Whether the lower bound is strict (``x > lower``); otherwise ``x >= lower``.
+        owner: The class or function the error names.
+
+    Returns:
+        ``x`` converted to a float array.
+
+    Raises:
+        ValueError: A concrete element that is not finite or out of range, naming the field.
     """
     where = f"{owner}.{name}" if owner else name
     if _is_concrete(x):

@@ -46,9 +46,12 @@ def _partial(name: str) -> bool:
 class ChunkStore:
     """The chunk files of one study run in the folder ``path`` (the runner's sink: ``start``, ``done``, ``put``).
 
-    ``resume=False`` starts over (the folder's chunks are removed at :meth:`start`); ``resume=True`` keeps
-    the chunks of the same study (same ``fingerprint``, scenarios, chunk size, devices, designs) and
-    refuses any other store with a ``ValueError`` of one line.
+    Args:
+        path: The folder.
+        fingerprint: The study's fingerprint.
+        resume: False starts over (the folder's chunks are removed at :meth:`start`); True keeps the chunks
+            of the same study (same ``fingerprint``, scenarios, chunk size, devices, designs) and refuses any
+            other store with a ``ValueError`` of one line.
     """
 
     def __init__(self, path, fingerprint: str, *, resume: bool = False):
@@ -67,7 +70,19 @@ class ChunkStore:
         )
 
     def start(self, *, n: int, chunk: int, devices: int, designs: list, metrics: list | None = None) -> None:
-        """Open the store for a run of ``n`` scenarios in chunks of ``chunk`` on ``devices`` devices."""
+        """Open the store for a run.
+
+        Args:
+            n: The scenarios.
+            chunk: Scenarios per chunk.
+            devices: The devices the run splits each chunk over.
+            designs: The designs' names.
+            metrics: The metrics' names (accepted from the runner; the chunks hold whatever ``put`` gives).
+
+        Raises:
+            ValueError: The folder is not a folder of study chunks, or (``resume``) it is corrupt or holds another
+                study's.
+        """
         meta = {
             "fingerprint": self.fingerprint,
             "scenarios": int(n),
@@ -126,11 +141,25 @@ class ChunkStore:
         return self.path / f"{self.designs.index(str(design))}.{int(i)}.h5"
 
     def done(self, design, i: int) -> bool:
-        """Whether chunk ``i`` of ``design`` is on disk (complete: chunk files appear only by a rename)."""
+        """Whether a chunk is on disk (complete: chunk files appear only by a rename).
+
+        Args:
+            design: The design's name.
+            i: The chunk's index.
+
+        Returns:
+            Whether chunk ``i`` of ``design`` is on disk.
+        """
         return self._file(design, i).exists()
 
     def put(self, design, i: int, values: dict) -> None:
-        """Chunk ``i`` of ``design``: ``values[name]``, that chunk's real rows (no padding)."""
+        """Write one chunk.
+
+        Args:
+            design: The design's name.
+            i: The chunk's index.
+            values: ``values[name]``, that chunk's real rows (no padding).
+        """
         import h5py
 
         with atomic_path(self._file(design, i)) as tmp, h5py.File(tmp, "w", track_order=True) as f:
@@ -138,7 +167,17 @@ class ChunkStore:
                 f.create_dataset(k, data=np.asarray(values[k]))
 
     def load(self, design) -> dict:
-        """Every scenario's values of ``design``, in order: the chunks concatenated (a missing one refused)."""
+        """Every scenario's values of a design, in order: the chunks concatenated.
+
+        Args:
+            design: The design's name.
+
+        Returns:
+            name -> one value per scenario.
+
+        Raises:
+            ValueError: A chunk is missing, unreadable or does not match the study.
+        """
         import h5py
 
         parts = []

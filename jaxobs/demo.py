@@ -76,13 +76,20 @@ def _run_batch(observer, signals, t1):
 def fll_demo(
     t_event: float = 0.2, steady_delay: float = 1.0, steady_len: float = 1.0, flls=None, progress=None, tests=DEMO_TESTS
 ):
-    """Run the demo; returns (rows, traces).
+    """Run the demo: the FLLs on paper 001's tests.
 
-    rows: list of dicts {test, fll, settle_ms, settle_cycles, settle2_cycles,
-    freq_peak_hz, phase_overshoot_deg, amp_overshoot_pu, freq_pp_hz, phase_pp_deg, amp_pp_pu, ok};
-    traces: {fll: Solution batched over tests}.
-    ``progress``: one step per FLL, each named as it compiles and runs (:mod:`jaxobs.progress`).
-    ``tests``: paper 001's tests to run (keys of :data:`jaxobs.papers.TESTS_001`; default A–E, Sec. VI).
+    Args:
+        t_event: The tests' event time, s.
+        steady_delay: The time from the event to the steady window, s.
+        steady_len: The steady window's length, s.
+        flls: name -> FLL (default Table I's FLLs).
+        progress: One step per FLL, each named as it compiles and runs (:mod:`jaxobs.progress`).
+        tests: Paper 001's tests to run (keys of :data:`jaxobs.papers.TESTS_001`; default A–E, Sec. VI).
+
+    Returns:
+        ``(rows, traces)``: rows a list of dicts {test, fll, settle_ms, settle_cycles, settle2_cycles,
+        freq_peak_hz, phase_overshoot_deg, amp_overshoot_pu, freq_pp_hz, phase_pp_deg, amp_pp_pu, ok};
+        traces {fll: Solution batched over tests}.
     """
     flls = table_i_flls() if flls is None else flls
     signals = stack([paper001_test(name, t_event=t_event) for name in tests])

@@ -69,6 +69,13 @@ def bind_observer(obs, sc: Scenario):
     """The observer bound to the scenario's assumed machine and initial speed: ``obs.bind(est_par, p̂·ω_m0)``
     (:meth:`jaxobs.observers.AbstractDriveObserver.bind`, the one binding).
 
+    Args:
+        obs: A drive observer.
+        sc: The :class:`~jaxobs.drive.Scenario`.
+
+    Returns:
+        The bound observer.
+
     Raises:
         ValueError: ``obs`` is not a drive observer.
     """
@@ -88,12 +95,23 @@ def drive_scenarios(
     sensors: Sensors | None = None,
 ) -> Scenario:
     """A batched Scenario (leading axis len(combos)), one per combination of the named axes' values
-    (:func:`jaxobs.drive.scenario_batch` on ``machine``, noise keys from ``seed``; ``first``: the index of
-    ``combos[0]`` among all the scenarios, for a chunk built on its own; ``sensors``: the drive's, or None:
-    ideal; the noise and offset axes set their own).
+    (:func:`jaxobs.drive.scenario_batch` on ``machine``).
 
     Each starts steady at ``speed_rpm`` (600 r/min without the axis) and ``load_nm``; the speed reference
-    and the load step by ``speed_step_rpm`` and ``load_step_nm`` at ``t_event`` (s; both 0 by default: no event).
+    and the load step by ``speed_step_rpm`` and ``load_step_nm`` at ``t_event`` (both 0 by default: no event).
+
+    Args:
+        machine: The true machine.
+        names: The axes, of :data:`jaxobs.drive.DRIVE_AXES`.
+        combos: One tuple of values per scenario, in ``names`` order.
+        seed: The seed of the noise keys.
+        t_event: The time of the steps, s (≥ 0).
+        first: The index of ``combos[0]`` among all the scenarios, for a chunk built on its own.
+        sensors: The drive's :class:`~jaxobs.drive.Sensors`, or None: ideal; the noise and offset axes set
+            their own.
+
+    Returns:
+        The batched :class:`~jaxobs.drive.Scenario`.
 
     Raises:
         ValueError: ``t_event`` is negative or not finite, or an axis or value is refused by ``scenario_batch``.
@@ -109,9 +127,11 @@ def drive_scenarios(
 class AbstractScenarios(eqx.Module):
     """A family of scenarios: its axes, its batches, and the system a design runs on one of its scenarios.
 
-    Class attributes: ``signal`` (the name a job file gives it, ``scenarios.signal``), ``axes`` (name ->
-    :class:`~jaxobs.quantities.Axis`), ``closed_loop`` (the design closes the drive's loop: the drive's
-    metrics apply), ``bytes_per_step`` (an estimate of the memory a gradient keeps per scenario and step).
+    Attributes:
+        signal: The name a job file gives it, ``scenarios.signal`` (a class attribute).
+        axes: name -> :class:`~jaxobs.quantities.Axis` (a class attribute).
+        closed_loop: Whether the design closes the drive's loop: the drive's metrics apply (a class attribute).
+        bytes_per_step: An estimate of the memory a gradient keeps per scenario and step (a class attribute).
     """
 
     signal: eqx.AbstractClassVar[str]
@@ -121,29 +141,71 @@ class AbstractScenarios(eqx.Module):
 
     @abc.abstractmethod
     def build(self, names, points, first: int = 0):
-        """The batched scenarios of ``points`` (tuples of values for the axes ``names``); ``first``: the index
-        of ``points[0]`` among all the scenarios (a chunk built on its own seeds its noise as in the whole)."""
+        """The batched scenarios of ``points``.
+
+        Args:
+            names: The axes.
+            points: Tuples of values for the axes ``names``.
+            first: The index of ``points[0]`` among all the scenarios (a chunk built on its own seeds its
+                noise as in the whole).
+
+        Returns:
+            The batched scenarios (leading axis one per point).
+        """
 
     @abc.abstractmethod
     def system(self, design, scenario):
-        """The system ``design`` runs on one ``scenario`` (a :class:`jaxobs.AbstractSystem`)."""
+        """The system ``design`` runs on one ``scenario``.
+
+        Args:
+            design: The observer.
+            scenario: One scenario of this family.
+
+        Returns:
+            The :class:`jaxobs.AbstractSystem`.
+        """
 
     @classmethod
     def of(cls, *, t_event: float = 0.0, seed: int = 0, freq: float = 50.0, machine=None, drive=None, sensors=None):
-        """The family with these options, each family taking the ones it has: ``t_event`` (s), ``seed`` (the
-        noise keys), ``freq`` (Hz, a grid's nominal frequency), ``machine``, ``drive`` and ``sensors`` (the
-        drive's: a drive file's :class:`~jaxobs.drive.Sensors`, or None: ideal)."""
+        """The family with these options, each family taking the ones it has.
+
+        Args:
+            t_event: The event's time, s.
+            seed: The seed of the noise keys.
+            freq: A grid's nominal frequency, Hz.
+            machine: The drive's true machine.
+            drive: The :class:`~jaxobs.drive.Drive`.
+            sensors: The drive's: a drive file's :class:`~jaxobs.drive.Sensors`, or None: ideal.
+
+        Returns:
+            The family.
+        """
         return cls()
 
     @classmethod
     def limits(cls, freq_n: float, ts: float) -> dict:
-        """Axes whose allowed range depends on the design: name -> (low, high), inside the axis's own range.
-        ``freq_n``: the design's nominal frequency (Hz), ``ts``: its sample time (s)."""
+        """Axes whose allowed range depends on the design.
+
+        Args:
+            freq_n: The design's nominal frequency, Hz.
+            ts: Its sample time, s.
+
+        Returns:
+            name -> (low, high), inside the axis's own range.
+        """
         return {}
 
     @classmethod
     def check_axes(cls, axes: dict, where: str = "axes", limits: dict | None = None) -> dict:
-        """``axes`` (name -> values) checked against :attr:`axes` (and ``limits``, name -> (low, high)).
+        """``axes`` checked against :attr:`axes` (and ``limits``).
+
+        Args:
+            axes: name -> values.
+            where: The name errors give the table.
+            limits: name -> (low, high), narrowing the axes' ranges.
+
+        Returns:
+            name -> the checked values.
 
         Raises:
             ValueError: naming ``where.<axis>`` for an unknown axis, an empty list or a value out of range.
@@ -160,8 +222,13 @@ class AbstractScenarios(eqx.Module):
 
 
 class GridSignals(AbstractScenarios):
-    """Single-phase grid voltages (:func:`jaxobs.scenarios.grid_signals`): the nominal ``freq`` (Hz), an
-    event at ``t_event`` (s), white noise seeded per scenario from ``seed``; the design runs on the signal."""
+    """Single-phase grid voltages (:func:`jaxobs.scenarios.grid_signals`); the design runs on the signal.
+
+    Attributes:
+        t_event: The event's time, s.
+        freq: The nominal frequency, Hz.
+        seed: The seed of the white noise, drawn per scenario.
+    """
 
     t_event: float = eqx.field(static=True)
     freq: float = eqx.field(static=True)
@@ -187,9 +254,16 @@ class GridSignals(AbstractScenarios):
 
     @classmethod
     def limits(cls, freq_n: float, ts: float) -> dict:
-        """``freq_step`` (Hz) on a grid of nominal frequency ``freq_n`` sampled every ``ts`` s: at most
-        :data:`MAX_FREQ_STEP_FRACTION` of ``freq_n`` either way, and below the sampling limit (the frequency
-        after the step stays under 1/(4 ts))."""
+        """``freq_step`` (Hz): at most :data:`MAX_FREQ_STEP_FRACTION` of ``freq_n`` either way, and below the
+        sampling limit (the frequency after the step stays under 1/(4 ts)).
+
+        Args:
+            freq_n: The grid's nominal frequency, Hz.
+            ts: The sample time, s.
+
+        Returns:
+            ``{"freq_step": (low, high)}``.
+        """
         lo, hi = cls.axes["freq_step"].range
         step = MAX_FREQ_STEP_FRACTION * freq_n
         return {"freq_step": (max(lo, -step), min(hi, step, 0.25 / ts - freq_n))}
@@ -215,15 +289,32 @@ class EMFSignals(AbstractScenarios):
 
     @classmethod
     def limits(cls, freq_n: float, ts: float) -> dict:
-        """``speed_hz`` below the sampling limit 1/(4 ts)."""
+        """``speed_hz`` below the sampling limit 1/(4 ts).
+
+        Args:
+            freq_n: The design's nominal frequency, Hz.
+            ts: The sample time, s.
+
+        Returns:
+            ``{"speed_hz": (low, high)}``.
+        """
         lo, hi = cls.axes["speed_hz"].range
         return {"speed_hz": (lo, min(hi, 0.25 / ts))}
 
 
 class DriveScenarios(AbstractScenarios):
-    """The sensorless drive on ``machine``: each scenario (:func:`drive_scenarios`) starts steady; the speed
-    reference and the load step at ``t_event`` (s); noise keys from ``seed``.  The design closes ``drive``'s
-    loop, bound to the scenario's assumed machine and speed (:func:`bind_observer`)."""
+    """The sensorless drive on ``machine``: each scenario (:func:`drive_scenarios`) starts steady.
+
+    The design closes ``drive``'s loop, bound to the scenario's assumed machine and speed
+    (:func:`bind_observer`).
+
+    Attributes:
+        machine: The true machine.
+        drive: The :class:`~jaxobs.drive.Drive`.
+        t_event: The time the speed reference and the load step, s.
+        seed: The seed of the noise keys.
+        sensors: A drive file's sensors (None: ideal), the noise axes' base.
+    """
 
     machine: PMSMParams
     drive: Drive
@@ -253,9 +344,13 @@ class DriveScenarios(AbstractScenarios):
 
 class RecordedSignals(AbstractScenarios):
     """Recorded signals with their truth columns, given whole (a sampler that holds them:
-    :class:`jaxobs.scenarios.Recordings`).  ``kind``: the family the recordings stand for: a grid voltage
-    (:class:`GridSignals`: the design runs on the recorded voltage) or a drive's u and i (:class:`EMFSignals`,
-    :class:`DriveScenarios`: a drive observer, bound to the recorded speed at t = 0, runs open loop on them)."""
+    :class:`jaxobs.scenarios.Recordings`).
+
+    Attributes:
+        kind: The family the recordings stand for: a grid voltage (:class:`GridSignals`: the design runs on
+            the recorded voltage) or a drive's u and i (:class:`EMFSignals`, :class:`DriveScenarios`: a drive
+            observer, bound to the recorded speed at t = 0, runs open loop on them).
+    """
 
     kind: type = eqx.field(static=True)
 

@@ -31,7 +31,14 @@ _TEMP = re.compile(r"\..+\.([0-9a-f]{12}|[a-z0-9_]{8})\.tmp")
 
 
 def is_temp(name: str) -> bool:
-    """Whether ``name`` is a temp entry this module (or ``tempfile`` with its prefix and suffix) makes."""
+    """Whether a name is a temp entry this module (or ``tempfile`` with its prefix and suffix) makes.
+
+    Args:
+        name: A file or folder name.
+
+    Returns:
+        Whether it is such a temp entry.
+    """
     return _TEMP.fullmatch(name) is not None
 
 
@@ -91,7 +98,12 @@ def atomic_write_bytes(path, data: bytes, replace=os.replace) -> None:
 
 
 def atomic_write_text(path, text: str) -> None:
-    """``text`` (UTF-8) to ``path`` through :func:`atomic_write_bytes`."""
+    """Write text (UTF-8) to a file through :func:`atomic_write_bytes`.
+
+    Args:
+        path: The file.
+        text: The text.
+    """
     atomic_write_bytes(path, text.encode())
 
 

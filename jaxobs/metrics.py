@@ -108,7 +108,18 @@ def _nan_where(bad, x):
 
 
 def moving_average(x, n: int):
-    """Causal moving average over the last ``n`` samples (fewer at the start)."""
+    """Causal moving average over the last ``n`` samples (fewer at the start).
+
+    Args:
+        x: The samples, along the last axis.
+        n: The window, samples (≥ 1).
+
+    Returns:
+        The moving average, shaped like ``x``.
+
+    Raises:
+        ValueError: ``n`` < 1.
+    """
     if int(n) < 1:
         raise ValueError(f"moving_average window n must be >= 1 samples, got {n!r}")
     n = int(n)
@@ -119,7 +130,16 @@ def moving_average(x, n: int):
 
 
 def window_mask(t, start, stop=None):
-    """Boolean mask of samples with start <= t < stop."""
+    """Boolean mask of samples with start <= t < stop.
+
+    Args:
+        t: The sample times, s.
+        start: The window's start, s (included).
+        stop: The window's end, s (excluded); ``None``: to the end.
+
+    Returns:
+        The mask, shaped like ``t``.
+    """
     m = t >= start
     if stop is not None:
         m = m & (t < stop)
@@ -129,10 +149,21 @@ def window_mask(t, start, stop=None):
 def settling_time(t, x, final, band, t_event=0.0):
     """Time after ``t_event`` from which |x − final| stays within ``band`` (exact).
 
-    ``final`` and ``band`` are in the units of ``x`` (use band = 0.05·|step|
-    for a 5 % band).  Returns 0 if x never leaves the band after the event,
-    and ``t[-1] − t_event`` if it has not settled by the end of the record —
-    a censored value, which :func:`settled` tells apart.
+    Args:
+        t: The sample times, s.
+        x: The signal (samples along the last axis).
+        final: The final value, in the units of ``x`` (finite).
+        band: The band's half-width, in the units of ``x`` (≥ 0; use band = 0.05·|step| for a 5 % band).
+        t_event: The event's time, s.
+
+    Returns:
+        The settling time, s: 0 if x never leaves the band after the event, and ``t[-1] − t_event`` if it
+        has not settled by the end of the record — a censored value, which :func:`settled` tells apart.
+        NaN for a traced bad ``band`` or ``final``.
+
+    Raises:
+        ValueError: A concrete non-finite or negative ``band``, a non-finite ``final``, or ``t_event``
+            after the last sample.
     """
     bad = _check_band("settling_time", final, band)
     after = _after(t, t_event, "settling_time")
@@ -149,8 +180,21 @@ def settled(t, x, final, band, t_event=0.0, min_hold=0.0):
 
     False marks :func:`settling_time` values that are censored at the horizon (the
     signal was still outside the band at the last sample, or settled less than
-    ``min_hold`` before the end).  Checks its arguments as :func:`settling_time` does
-    (a traced bad band or empty window gives False).
+    ``min_hold`` before the end).
+
+    Args:
+        t: The sample times, s.
+        x: The signal (samples along the last axis).
+        final: The final value, in the units of ``x``.
+        band: The band's half-width, in the units of ``x`` (≥ 0).
+        t_event: The event's time, s.
+        min_hold: The least time inside the band at the end, s.
+
+    Returns:
+        A bool per scenario (a traced bad band or empty window gives False).
+
+    Raises:
+        ValueError: As :func:`settling_time`, for concrete arguments.
     """
     bad = _check_band("settled", final, band)
     after = _after(t, t_event, "settled")
@@ -165,7 +209,18 @@ def settled(t, x, final, band, t_event=0.0, min_hold=0.0):
 
 
 def peak_to_peak(x, mask):
-    """max − min of ``x`` over the samples where ``mask`` is true."""
+    """max − min of ``x`` over the samples where ``mask`` is true.
+
+    Args:
+        x: The signal (samples along the last axis).
+        mask: The window (bool, shaped like ``x``).
+
+    Returns:
+        The peak-to-peak value, in the units of ``x`` (NaN for a traced empty window).
+
+    Raises:
+        ValueError: A concrete empty window.
+    """
     count = _window(mask, "peak_to_peak")
     hi = jnp.max(jnp.where(mask, x, -jnp.inf), axis=-1)
     lo = jnp.min(jnp.where(mask, x, jnp.inf), axis=-1)
@@ -173,7 +228,18 @@ def peak_to_peak(x, mask):
 
 
 def steady_mean(x, mask):
-    """Mean of ``x`` over the samples where ``mask`` is true."""
+    """Mean of ``x`` over the samples where ``mask`` is true.
+
+    Args:
+        x: The signal (samples along the last axis).
+        mask: The window (bool, shaped like ``x``).
+
+    Returns:
+        The mean, in the units of ``x`` (NaN for a traced empty window).
+
+    Raises:
+        ValueError: A concrete empty window.
+    """
     count = _window(mask, "steady_mean")
     return jnp.sum(jnp.where(mask, x, 0.0), axis=-1) / jnp.where(count == 0, jnp.nan, count)
 
@@ -188,7 +254,20 @@ def rms(x, mask):
 
 
 def overshoot(x, final, initial, mask=None):
-    """Peak excursion beyond ``final`` in the direction of the step, as a fraction of |final − initial|."""
+    """Peak excursion beyond ``final`` in the direction of the step, as a fraction of |final − initial|.
+
+    Args:
+        x: The signal (samples along the last axis).
+        final: The value after the step.
+        initial: The value before the step.
+        mask: The window to look in (bool, shaped like ``x``); ``None``: every sample.
+
+    Returns:
+        The overshoot, ≥ 0 (a fraction; NaN for a traced empty window).
+
+    Raises:
+        ValueError: A concrete empty window.
+    """
     step = final - initial
     beyond = (x - final) * jnp.sign(step)
     if mask is not None:
@@ -199,14 +278,38 @@ def overshoot(x, final, initial, mask=None):
 
 
 def iae(t, e, t_event=0.0):
-    """∫|e| dt after ``t_event`` (rectangle rule on the sample grid)."""
+    """∫|e| dt after ``t_event`` (rectangle rule on the sample grid).
+
+    Args:
+        t: The sample times, s (uniform).
+        e: The error (samples along the last axis).
+        t_event: The event's time, s.
+
+    Returns:
+        The integral, in the units of ``e`` times s.
+
+    Raises:
+        ValueError: ``t_event`` after the last sample (concrete).
+    """
     dt = t[1] - t[0]
     after = _after(t, t_event, "iae")
     return _nan_where(~jnp.any(after, axis=-1), jnp.sum(jnp.where(after, jnp.abs(e), 0.0), axis=-1) * dt)
 
 
 def itae(t, e, t_event=0.0):
-    """∫(t − t_event)|e| dt after ``t_event``."""
+    """∫(t − t_event)|e| dt after ``t_event`` (rectangle rule on the sample grid).
+
+    Args:
+        t: The sample times, s (uniform).
+        e: The error (samples along the last axis).
+        t_event: The event's time, s.
+
+    Returns:
+        The integral, in the units of ``e`` times s².
+
+    Raises:
+        ValueError: ``t_event`` after the last sample (concrete).
+    """
     dt = t[1] - t[0]
     after = _after(t, t_event, "itae")
     val = jnp.sum(jnp.where(after, (t - t_event) * jnp.abs(e), 0.0), axis=-1) * dt
@@ -218,6 +321,18 @@ def harmonic_amplitude(t, x, omega, mask=None):
 
     Exact for a sinusoid when the window holds whole periods of every component
     present; ``omega = 0`` gives the mean (the dc offset).
+
+    Args:
+        t: The sample times, s.
+        x: The signal (samples along the last axis).
+        omega: The angular frequency, rad/s.
+        mask: The window (bool, shaped like ``x``); ``None``: every sample.
+
+    Returns:
+        The amplitude, in the units of ``x``.
+
+    Raises:
+        ValueError: A concrete empty window.
     """
     if mask is not None:
         _window(mask, "harmonic_amplitude")
@@ -230,12 +345,30 @@ def harmonic_amplitude(t, x, omega, mask=None):
 
 
 def flux_offset(psi_a, psi_b, mask):
-    """dc offset of an estimated flux circle, |mean ψ̂_ab| over the masked samples (whole periods)."""
+    """dc offset of an estimated flux circle, |mean ψ̂_ab| over the masked samples (whole periods).
+
+    Args:
+        psi_a: ψ̂α, Wb.
+        psi_b: ψ̂β, Wb.
+        mask: The window (bool; whole periods).
+
+    Returns:
+        The offset, Wb.
+    """
     return jnp.sqrt(steady_mean(psi_a, mask) ** 2 + steady_mean(psi_b, mask) ** 2)
 
 
 def flux_imbalance(psi_a, psi_b, mask):
-    """Difference of the α and β flux amplitudes (half peak-to-peak each) over the masked samples."""
+    """Difference of the α and β flux amplitudes (half peak-to-peak each) over the masked samples.
+
+    Args:
+        psi_a: ψ̂α, Wb.
+        psi_b: ψ̂β, Wb.
+        mask: The window (bool).
+
+    Returns:
+        The α amplitude minus the β amplitude, Wb.
+    """
     return 0.5 * (peak_to_peak(psi_a, mask) - peak_to_peak(psi_b, mask))
 
 
@@ -245,7 +378,20 @@ def flux_imbalance(psi_a, psi_b, mask):
 
 
 def smooth_max(x, temperature, mask=None, axis=-1):
-    """temperature·log Σ exp(x/temperature) − temperature·log n: between max − T log n and max."""
+    """temperature·log Σ exp(x/temperature) − temperature·log n: between max − T log n and max.
+
+    Args:
+        x: The values.
+        temperature: T, in the units of ``x`` (> 0); T → 0 recovers the maximum.
+        mask: The samples to take (bool, shaped like ``x``); ``None``: every one.
+        axis: The axis reduced.
+
+    Returns:
+        The soft maximum (NaN where no sample is taken).
+
+    Raises:
+        ValueError: A concrete empty mask.
+    """
     if mask is not None:
         _window(jnp.moveaxis(jnp.asarray(mask), axis, -1) if _concrete(mask) else mask, "smooth_max")
         x = jnp.where(mask, x, -jnp.inf)
@@ -255,16 +401,39 @@ def smooth_max(x, temperature, mask=None, axis=-1):
 
 
 def smooth_abs(x, eps):
-    """√(x² + ε²) − ε: |x| as ε → 0, smooth at 0."""
+    """√(x² + ε²) − ε: |x| as ε → 0, smooth at 0.
+
+    Args:
+        x: The values.
+        eps: ε, in the units of ``x``.
+
+    Returns:
+        The smooth |x|, shaped like ``x``.
+    """
     return jnp.sqrt(x * x + eps * eps) - eps
 
 
 def smooth_settling_time(t, x, final, band, t_event=0.0, temperature=None, sharpness=None):
     """Smooth settling time: a soft maximum over samples of (t − t_event)·σ((|x − final| − band)/sharpness).
 
-    As ``temperature`` (s) and ``sharpness`` (units of x) go to 0 it tends to the
+    As ``temperature`` and ``sharpness`` go to 0 it tends to the
     time of the last sample outside the band, i.e. :func:`settling_time` minus
-    one sample.  Defaults: temperature = 2 samples, sharpness = band/20.
+    one sample.
+
+    Args:
+        t: The sample times, s.
+        x: The signal (samples along the last axis).
+        final: The final value, in the units of ``x``.
+        band: The band's half-width, in the units of ``x`` (≥ 0).
+        t_event: The event's time, s.
+        temperature: The soft maximum's temperature, s (default 2 samples).
+        sharpness: The sigmoid's width, in the units of ``x`` (default band/20).
+
+    Returns:
+        The smooth settling time, s (NaN for a traced bad band).
+
+    Raises:
+        ValueError: As :func:`settling_time`, for concrete arguments.
     """
     bad = _check_band("smooth_settling_time", final, band)
     after = _after(t, t_event, "smooth_settling_time")
@@ -302,9 +471,22 @@ def lost_lock(theta_hat, theta, window_mask, tol_rad=math.pi / 4, *, omega_hat=N
     estimate stays within a few degrees of the truth there, even under distortion; one that slips
     cycles, locks to the wrong frequency or diverges (NaN counts as far) sweeps through every angle.
     The default tolerance, 45° (π/4 rad, :data:`LOCK_TOL_DEG`), is far above any locked steady error
-    of the FLL family and far below a slip (the definition: the comment above).  Returns a bool per
-    scenario (leading axes); a concrete empty window raises, a traced one gives True (lock cannot be
-    confirmed).
+    of the FLL family and far below a slip (the definition: the comment above).
+
+    Args:
+        theta_hat: The estimated angle θ̂, rad.
+        theta: The true angle θ, rad.
+        window_mask: The final (steady) window (bool).
+        tol_rad: The angle tolerance, rad.
+        omega_hat: The estimated frequency ω̂, rad/s (for the frequency test).
+        omega: The true frequency ω, rad/s (for the frequency test).
+        freq_tol: The frequency tolerance, a fraction of the mean |ω|; ``None``: no frequency test.
+
+    Returns:
+        A bool per scenario (leading axes); a traced empty window gives True (lock cannot be confirmed).
+
+    Raises:
+        ValueError: A concrete empty window, or ``freq_tol`` without ``omega_hat`` and ``omega``.
     """
     count = _window(window_mask, "lost_lock")
     near = jnp.abs(wrap(theta_hat - theta)) <= tol_rad  # False for NaN
@@ -332,8 +514,21 @@ SPEED_FLOOR_RPM = 20.0
 
 def lost_speed(omega_m, omega_m_ref, window_mask, rel_tol=SPEED_TOL, floor_rpm=SPEED_FLOOR_RPM):
     """Whether a drive lost its speed: the window's mean |ωm − ωm*| > max(``rel_tol`` × mean |ωm*|,
-    ``floor_rpm``) (speeds in rad/s, mechanical; ``floor_rpm`` in r/min), or it is not finite.  Returns a bool
-    per scenario (leading axes); a concrete empty window raises, a traced one gives True."""
+    ``floor_rpm``), or it is not finite.
+
+    Args:
+        omega_m: The mechanical speed ωm, rad/s.
+        omega_m_ref: The speed reference ωm*, rad/s.
+        window_mask: The steady window (bool).
+        rel_tol: The tolerance, a fraction of the mean |ωm*|.
+        floor_rpm: The least tolerance, r/min.
+
+    Returns:
+        A bool per scenario (leading axes); a traced empty window gives True.
+
+    Raises:
+        ValueError: A concrete empty window.
+    """
     count = _window(window_mask, "lost_speed")
     n = jnp.maximum(count, 1)
     err = jnp.sum(jnp.where(window_mask, jnp.abs(omega_m - omega_m_ref), 0.0), axis=-1) / n
@@ -354,9 +549,21 @@ def lost_lock_of(sol, steady_from=None, *, signal=None, tol_deg=None, freq_tol=L
       its rotor-flux angle ω1 t + φ1 − π/2, ω̂ against ω1;
     - the closed-loop drive (``ClosedLoop`` with an observer): θ̂e against θe (90° electrical).
 
-    Works under ``jit``/``vmap`` (a bool per scenario).  It reads the outputs only: the solution, and
-    ``simulate``, are unchanged.  ``tol_deg`` overrides the angle tolerance, ``freq_tol=None`` drops the
-    frequency test.
+    Works under ``jit``/``vmap``.  It reads the outputs only: the solution, and ``simulate``, are unchanged.
+
+    Args:
+        sol: The :class:`~jaxobs.Solution` (saved with ``SaveAll``).
+        steady_from: The start of the final window, s (default: the last quarter of the record).
+        signal: The :class:`~jaxobs.signals.EMFSignal` an observer ran on (its flux angle is the truth).
+        tol_deg: The angle tolerance, degrees (default :data:`LOCK_TOL_DEG`, or
+            :data:`LOCK_TOL_DRIVE_DEG` for a drive).
+        freq_tol: The frequency tolerance, a fraction of the true frequency; ``None`` drops the frequency test.
+
+    Returns:
+        A bool per scenario.
+
+    Raises:
+        ValueError: No trajectory or no observer estimate in ``sol``, or no truth to compare with.
     """
     out = _estimated(sol, "lost_lock_of")
     t = sol.t
@@ -408,6 +615,16 @@ def position_error(sol, signal=None):
     ``DualClosedLoop``), the outputs' ``truth`` for an observer on a signal that reports one (a
     ``GridSignal``, a recording with its encoder angle), else the rotor-flux angle of ``signal=`` (an
     ``EMFSignal``).  Works under ``jit``/``vmap``.
+
+    Args:
+        sol: The :class:`~jaxobs.Solution` (saved with ``SaveAll``).
+        signal: The :class:`~jaxobs.signals.EMFSignal` an observer ran on, where the outputs carry no truth.
+
+    Returns:
+        θ̂ − θ along the trajectory, rad.
+
+    Raises:
+        ValueError: No trajectory or no observer estimate in ``sol``, or no truth to compare with.
     """
     out = _estimated(sol, "position_error")
     if isinstance(out, _DRIVE_OUTPUTS):
@@ -439,41 +656,116 @@ def settling_to_steady(t, x, band, steady_mask, t_event=0.0):
 
     The final value is the mean of x over ``steady_mask`` (the steady window), so a signal that settles
     to a bias settles: an observer's steady angle lag (the C-LESO's 11–37° on the IPMSM bench) is not a
-    failure to settle.  Report the bias apart, ``steady_mean(x, steady_mask)``.  ``band`` in the units of
-    x.  Censored at ``t[-1] − t_event`` as :func:`settling_time`; NaN where x is not finite in the window.
+    failure to settle.  Report the bias apart, ``steady_mean(x, steady_mask)``.
+
+    Args:
+        t: The sample times, s.
+        x: The signal (samples along the last axis).
+        band: The band's half-width, in the units of ``x``.
+        steady_mask: The steady window (bool).
+        t_event: The event's time, s.
+
+    Returns:
+        The settling time, s; censored at ``t[-1] − t_event`` as :func:`settling_time`; NaN where x is not
+        finite in the window.
+
+    Raises:
+        ValueError: A concrete empty window, or as :func:`settling_time`.
     """
     final, bad = _own_final(x, steady_mask, "settling_to_steady")
     return _nan_where(bad, settling_time(t, x, final, band, t_event))
 
 
 def smooth_settling_to_steady(t, x, band, steady_mask, t_event=0.0, temperature=None, sharpness=None):
-    """:func:`settling_to_steady` through :func:`smooth_settling_time` (the final value is a smooth mean too)."""
+    """:func:`settling_to_steady` through :func:`smooth_settling_time` (the final value is a smooth mean too).
+
+    Args:
+        t: The sample times, s.
+        x: The signal (samples along the last axis).
+        band: The band's half-width, in the units of ``x``.
+        steady_mask: The steady window (bool).
+        t_event: The event's time, s.
+        temperature: The soft maximum's temperature, s (default 2 samples).
+        sharpness: The sigmoid's width, in the units of ``x`` (default band/20).
+
+    Returns:
+        The smooth settling time, s (NaN where x is not finite in the window).
+    """
     final, bad = _own_final(x, steady_mask, "smooth_settling_to_steady")
     return _nan_where(bad, smooth_settling_time(t, x, final, band, t_event, temperature, sharpness))
 
 
 def settling_to_reference(t, x, ref, band, t_event=0.0):
-    """Time after ``t_event`` from which |x − ref| stays within ``band`` (exact): a quantity against its
-    reference, e.g. the drive's true speed ωm against ωm* after a speed step.  After a load step it is the
-    *recovery time*: from the step until the speed is back within the band for good.  ``ref`` is a signal
-    (or a constant) in the units of x; censored at ``t[-1] − t_event`` as :func:`settling_time`."""
+    """Time after ``t_event`` from which |x − ref| stays within ``band`` (exact).
+
+    A quantity against its reference, e.g. the drive's true speed ωm against ωm* after a speed step.  After
+    a load step it is the *recovery time*: from the step until the speed is back within the band for good.
+
+    Args:
+        t: The sample times, s.
+        x: The signal (samples along the last axis).
+        ref: The reference, a signal or a constant in the units of ``x``.
+        band: The band's half-width, in the units of ``x``.
+        t_event: The event's time, s.
+
+    Returns:
+        The settling time, s; censored at ``t[-1] − t_event`` as :func:`settling_time`.
+    """
     return settling_time(t, x - ref, 0.0, band, t_event)
 
 
 def smooth_settling_to_reference(t, x, ref, band, t_event=0.0, temperature=None, sharpness=None):
-    """:func:`settling_to_reference` through :func:`smooth_settling_time`."""
+    """:func:`settling_to_reference` through :func:`smooth_settling_time`.
+
+    Args:
+        t: The sample times, s.
+        x: The signal (samples along the last axis).
+        ref: The reference, a signal or a constant in the units of ``x``.
+        band: The band's half-width, in the units of ``x``.
+        t_event: The event's time, s.
+        temperature: The soft maximum's temperature, s (default 2 samples).
+        sharpness: The sigmoid's width, in the units of ``x`` (default band/20).
+
+    Returns:
+        The smooth settling time, s.
+    """
     return smooth_settling_time(t, x - ref, 0.0, band, t_event, temperature, sharpness)
 
 
 def peak_deviation(t, x, ref, t_event=0.0):
-    """max |x − ref| after ``t_event`` (exact): the speed dip (or rise) after a load step, in the units of x."""
+    """max |x − ref| after ``t_event`` (exact): the speed dip (or rise) after a load step.
+
+    Args:
+        t: The sample times, s.
+        x: The signal (samples along the last axis).
+        ref: The reference, a signal or a constant in the units of ``x``.
+        t_event: The event's time, s.
+
+    Returns:
+        The peak deviation, in the units of ``x``.
+
+    Raises:
+        ValueError: ``t_event`` after the last sample (concrete).
+    """
     after = _after(t, t_event, "peak_deviation")
     dev = jnp.max(jnp.where(after, jnp.abs(x - ref), -jnp.inf), axis=-1)
     return _nan_where(~jnp.any(after, axis=-1), dev)
 
 
 def smooth_peak_deviation(t, x, ref, t_event=0.0, temperature=1e-3):
-    """:func:`peak_deviation` as a soft maximum (``temperature`` in the units of x) of a smooth |x − ref|
-    (ε = ``temperature``): within ``temperature``·(1 + log n) below the exact peak, n the samples after the event."""
+    """:func:`peak_deviation` as a soft maximum of a smooth |x − ref| (ε = ``temperature``).
+
+    Within ``temperature``·(1 + log n) below the exact peak, n the samples after the event.
+
+    Args:
+        t: The sample times, s.
+        x: The signal (samples along the last axis).
+        ref: The reference, a signal or a constant in the units of ``x``.
+        t_event: The event's time, s.
+        temperature: The soft maximum's temperature and the smooth |·|'s ε, in the units of ``x``.
+
+    Returns:
+        The smooth peak deviation, in the units of ``x``.
+    """
     after = _after(t, t_event, "smooth_peak_deviation")
     return smooth_max(smooth_abs(x - ref, temperature), temperature, mask=after)

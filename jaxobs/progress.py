@@ -33,14 +33,32 @@ _OPEN: weakref.WeakSet = weakref.WeakSet()  # the Progress objects whose bar is 
 
 
 def check_progress(progress, owner: str = "progress"):
-    """``progress`` if it is None, a bool, ``"auto"`` or a callable; else a ValueError naming it."""
+    """Check a ``progress=`` argument.
+
+    Args:
+        progress: None, a bool, ``"auto"`` or a callable ``progress(done, total)`` (module doc).
+        owner: The argument's name in the error.
+
+    Returns:
+        ``progress``.
+
+    Raises:
+        ValueError: ``progress`` is none of these.
+    """
     if progress is None or isinstance(progress, bool) or callable(progress) or progress == "auto":
         return progress
     raise ValueError(f"{owner} must be True, False, None, 'auto' or a callable progress(done, total), got {progress!r}")
 
 
 class Progress:
-    """One progress report of ``total`` units (``None``: unknown), as ``progress`` asks (module doc)."""
+    """One progress report, as ``progress`` asks (module doc).
+
+    Args:
+        progress: None, a bool, ``"auto"`` or a callable ``progress(done, total)``.
+        total: The units of work (``None``: unknown).
+        desc: The bar's description.
+        unit: The unit's name.
+    """
 
     def __init__(self, progress, total: int | None, desc: str, unit: str = "it"):
         progress = check_progress(progress)
@@ -63,7 +81,12 @@ class Progress:
             self._bar.set_description_str(f"{self.desc}: {text}" if text else self.desc, refresh=True)
 
     def update(self, n: int = 1, **postfix) -> None:
-        """``n`` more units done; ``postfix`` values are shown after the bar (objective, best, ...)."""
+        """Report more units done.
+
+        Args:
+            n: The units done since the last call.
+            **postfix: Values shown after the bar (objective, best, ...).
+        """
         self.done += n
         if self._bar is not None:
             if postfix:
@@ -89,7 +112,11 @@ class Progress:
 def close_all() -> int:
     """Close every bar still drawn (a call interrupted by Ctrl-C leaves its bars open until they
     are collected, and tqdm redraws a bar when it closes): the command line calls it before its last line, so
-    that nothing is drawn after that line.  Returns how many bars were closed."""
+    that nothing is drawn after that line.
+
+    Returns:
+        How many bars were closed.
+    """
     bars = list(_OPEN)
     for p in bars:
         p.close()

@@ -21,15 +21,27 @@ _TEXT = {"degree": "deg", "min-1": "r/min", "N m": "N·m"}
 
 
 def text_unit(units: str) -> str:
-    """``units`` (a UDUNITS string) as a message or a figure's label spells it: ``min-1`` -> ``r/min``,
-    ``degree`` -> ``deg``, ``N m`` -> ``N·m``; any other unchanged."""
+    """A unit as a message or a figure's label spells it.
+
+    Args:
+        units: A UDUNITS string.
+
+    Returns:
+        ``min-1`` -> ``r/min``, ``degree`` -> ``deg``, ``N m`` -> ``N·m``; any other unchanged.
+    """
     return _TEXT.get(units, units)
 
 
 @dataclass(frozen=True)
 class Axis:
-    """One axis of a scenario family: ``name``, its CF ``units``, the closed ``range`` (low, high) its values may
-    take, and ``long_name`` (what it is: the NetCDF coordinate's ``long_name``, a figure's label)."""
+    """One axis of a scenario family.
+
+    Attributes:
+        name: The axis's name.
+        units: Its CF units.
+        range: The closed range (low, high) its values may take.
+        long_name: What it is: the NetCDF coordinate's ``long_name``, a figure's label.
+    """
 
     name: str
     units: str
@@ -42,7 +54,16 @@ class Axis:
         return {"units": self.units, "long_name": self.long_name}
 
     def check(self, values, where: str = "axes", *, low: float | None = None, high: float | None = None):
-        """``values`` as a float list, each finite and inside the range (narrowed by ``low``/``high`` where given).
+        """``values`` as a float list, each finite and inside the range.
+
+        Args:
+            values: The values (a list of numbers).
+            where: The name errors give the table.
+            low: Narrows the range's low end.
+            high: Narrows the range's high end.
+
+        Returns:
+            The values as a list of floats.
 
         Raises:
             ValueError: naming ``where`` and the allowed range, for an empty list or a value outside it.
@@ -57,8 +78,15 @@ class Axis:
         return vals
 
     def text(self, low: float | None = None, high: float | None = None) -> str:
-        """The range (narrowed by ``low``/``high`` where given) with its unit, as a message says it:
-        ``[1, 1e+05] r/min``; a dimensionless axis without a unit."""
+        """The range with its unit, as a message says it.
+
+        Args:
+            low: Narrows the range's low end.
+            high: Narrows the range's high end.
+
+        Returns:
+            E.g. ``[1, 1e+05] r/min``; a dimensionless axis without a unit.
+        """
         lo = self.range[0] if low is None else low
         hi = self.range[1] if high is None else high
         return f"[{lo:g}, {hi:g}]" + ("" if self.units == "1" else f" {text_unit(self.units)}")
@@ -66,11 +94,19 @@ class Axis:
 
 @dataclass(frozen=True)
 class Metric:
-    """One metric: ``name``, CF ``units``, ``long_name``, and its forms: ``exact(sol, scenario, ctx)`` (what a
-    study or a report gives) and ``smooth(sol, scenario, ctx)`` (what a gradient is taken of; the exact one
-    where that has a useful gradient), each a scalar of one run.  ``closed_loop``: it needs the closed-loop
-    drive (a speed, a reference), not an observer on a signal; ``needs_truth``: it needs an observer on a signal that
-    reports its truth (a recording with its encoder: :class:`jaxobs.SignalTruth`)."""
+    """One metric and its forms, each a scalar of one run.
+
+    Attributes:
+        name: The metric's name.
+        units: Its CF units.
+        long_name: What it is.
+        exact: ``exact(sol, scenario, ctx)``: what a study or a report gives.
+        smooth: ``smooth(sol, scenario, ctx)``: what a gradient is taken of (the exact one where that has a
+            useful gradient).
+        closed_loop: It needs the closed-loop drive (a speed, a reference), not an observer on a signal.
+        needs_truth: It needs an observer on a signal that reports its truth (a recording with its encoder:
+            :class:`jaxobs.SignalTruth`).
+    """
 
     name: str
     units: str

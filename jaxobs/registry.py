@@ -46,7 +46,8 @@ class Registered:
             default first; empty: no drive jobs.  A drive file of the user's is checked by :meth:`refusal`.
         salient: whether it runs on a salient machine (Ld ≠ Lq).
         dual: whether it runs on a dual three-phase machine (its αβ subspace, :mod:`jaxobs.drive.dual`).
-        why_not_salient, why_not_dual: the one-line reason of a refusal.
+        why_not_salient: the one-line reason of a refusal on a salient machine.
+        why_not_dual: the one-line reason of a refusal on a dual three-phase machine.
         defaults: a job's constructor values before its ``[component]`` and ``[gains]`` tables.
         closed_form_source: the paper's equations and table of the closed form, in one line.
         closed_form_rule: the closed form's formulas, in one line (the export's source line).
@@ -80,8 +81,14 @@ class Registered:
         return tuple(gain_fields(self.cls))
 
     def refusal(self, machine) -> str | None:
-        """Why this component cannot run on ``machine`` (a :class:`~jaxobs.drive.PMSMParams` or a dual
-        machine's :class:`~jaxobs.drive.DualPMSMParams`), in one line; None where it can."""
+        """Why this component cannot run on ``machine``.
+
+        Args:
+            machine: A :class:`~jaxobs.drive.PMSMParams` or a dual machine's :class:`~jaxobs.drive.DualPMSMParams`.
+
+        Returns:
+            The reason, in one line; None where it can run.
+        """
         if not self.machines:
             return f"{self.name} runs on no drive (it is not a drive observer)"
         is_dual = hasattr(machine, "per_set")
@@ -106,8 +113,15 @@ KEY_ALIASES = {"omega0": "omega_init"}
 
 
 def canonical_key(cls, key: str) -> str:
-    """The field a key names for ``cls``: for a flux observer, a key of :data:`KEY_ALIASES` names the field it
-    maps to; any other key names itself."""
+    """The field a key names for ``cls``.
+
+    Args:
+        cls: The observer class.
+        key: The key (of a job file's ``[component]`` table or a result's values).
+
+    Returns:
+        For a flux observer, the field a key of :data:`KEY_ALIASES` maps to; any other key itself.
+    """
     return KEY_ALIASES.get(key, key) if issubclass(cls, AbstractFluxObserver) else key
 
 
@@ -254,6 +268,12 @@ _BY_ALIAS = {a: e for e in _ENTRIES for a in e.aliases}
 
 def registered(name: str) -> Registered:
     """The entry of a class name (``"SOGIFLLWIF"``) or an alias (``"wif"``).
+
+    Args:
+        name: The class name or alias.
+
+    Returns:
+        The :class:`Registered` entry.
 
     Raises:
         ValueError: an unknown name, with the known ones.

@@ -96,9 +96,14 @@ def _builds_chunks(sampler: AbstractSampler, build) -> bool:
 
 
 class StudyRun(NamedTuple):
-    """What :func:`run_scenarios` returns: the sampler's ``points`` (an (n, axes) float array, one row per
-    scenario, in order: :meth:`~jaxobs.scenarios.AbstractSampler.array`) and ``values[design][name]``, a
-    NumPy array with one value per scenario for every name the metrics return."""
+    """What :func:`run_scenarios` returns.
+
+    Attributes:
+        points: The sampler's points, an (n, axes) float array, one row per scenario, in order
+            (:meth:`~jaxobs.scenarios.AbstractSampler.array`).
+        values: ``values[design][name]``, a NumPy array with one value per scenario for every name the
+            metrics return (None with a ``sink``).
+    """
 
     points: np.ndarray
     values: dict
@@ -122,24 +127,41 @@ def run_scenarios(
 ) -> StudyRun:
     """Simulate ``system_factory(design, scenario)`` for ``horizon`` s on every scenario, every design.
 
-    ``build(names, points)``: the batched scenario PyTree (leading axis one per point) of a sampler's points;
-    a sampler that holds its scenarios (:class:`~jaxobs.scenarios.Given`, ``Recordings``) needs none.  A
-    builder with a ``first`` parameter is called per chunk, ``build(names, chunk_points, first=index of the
-    chunk's first point)``, the last chunk's points padded with copies of its last (so every chunk has one
-    shape); it must check its points as a whole-batch call would (a bad value then stops the run at its chunk).
-    ``metrics(sol, scenario, aux)``: a dict of per-scenario scalars of one run's :class:`~jaxobs.Solution` on
-    ``scenario``, ``aux = static(design)`` a hashable
-    Python value of the design that the metrics need outside tracing (``None`` without ``static``; a new value
-    compiles again).  ``progress``: ``True`` a tqdm bar on stderr naming each compilation, a callable
-    ``progress(done, total)``, ``False`` nothing.  ``mesh``: a one-axis ``"batch"`` mesh (default
-    :func:`jaxobs.batch_mesh`).  ``save``: what each run keeps (:class:`~jaxobs.SaveAll` by default;
-    :class:`~jaxobs.SaveFinal` for a long horizon whose system accumulates its own metrics in its state).
+    Each chunk's traced program is kept across processes where :func:`jaxobs.use_compile_cache` set a folder
+    (:func:`jaxobs.kept_jit`).
 
-    ``sink``: where each chunk's values go instead of memory (a :class:`jaxobs.chunkstore.ChunkStore`):
-    ``sink.start(n=, chunk=, devices=, designs=)`` once, then per design and chunk ``sink.done(design, i)``
-    (True: on disk already, skipped) or ``sink.put(design, i, values)`` with the chunk's real rows; the
-    returned ``values`` is then ``None`` (read them back from the sink).  Each chunk's traced program is kept
-    across processes where :func:`jaxobs.use_compile_cache` set a folder (:func:`jaxobs.kept_jit`).
+    Args:
+        designs: name -> design (an observer).
+        sampler: The scenarios' points (:class:`~jaxobs.scenarios.AbstractSampler`).
+        system_factory: ``system_factory(design, scenario)``, the system one design runs on one scenario.
+        metrics: ``metrics(sol, scenario, aux)``: a dict of per-scenario scalars of one run's
+            :class:`~jaxobs.Solution` on ``scenario``, ``aux = static(design)``.
+        horizon: The simulated time, s (finite, > 0).
+        build: ``build(names, points)``: the batched scenario PyTree (leading axis one per point) of a
+            sampler's points; a sampler that holds its scenarios (:class:`~jaxobs.scenarios.Given`,
+            ``Recordings``) needs none.  A builder with a ``first`` parameter is called per chunk,
+            ``build(names, chunk_points, first=index of the chunk's first point)``, the last chunk's points
+            padded with copies of its last (so every chunk has one shape); it must check its points as a
+            whole-batch call would (a bad value then stops the run at its chunk).
+        static: ``static(design)``, a hashable Python value of the design that the metrics need outside
+            tracing (``None`` without ``static``; a new value compiles again).
+        chunk_size: Scenarios per chunk (an integer ≥ 1).
+        mesh: A one-axis ``"batch"`` mesh (default :func:`jaxobs.batch_mesh`).
+        progress: ``True`` a tqdm bar on stderr naming each compilation, a callable ``progress(done, total)``,
+            ``False`` nothing.
+        label: The run's name in messages.
+        save: What each run keeps (:class:`~jaxobs.SaveAll` by default; :class:`~jaxobs.SaveFinal` for a long
+            horizon whose system accumulates its own metrics in its state).
+        sink: Where each chunk's values go instead of memory (a :class:`jaxobs.chunkstore.ChunkStore`):
+            ``sink.start(n=, chunk=, devices=, designs=)`` once, then per design and chunk
+            ``sink.done(design, i)`` (True: on disk already, skipped) or ``sink.put(design, i, values)`` with
+            the chunk's real rows.
+
+    Returns:
+        The :class:`StudyRun`; its ``values`` is ``None`` with a ``sink`` (read them back from the sink).
+
+    Raises:
+        ValueError: No designs, or ``chunk_size``, ``horizon`` or ``mesh`` out of range.
     """
     if not designs:
         raise ValueError(f"{label}: at least one design is required")

@@ -21,8 +21,12 @@ MAX_DIGITS = 1000  # digits in one number literal (Python refuses to convert an 
 
 
 class TomlFieldError(ValueError):
-    """A refused TOML file: ``field`` (the key at fault, or the file's role) and ``message``; ``str()`` is
-    ``"field: message"`` on one line."""
+    """A refused TOML file; ``str()`` is ``"field: message"`` on one line.
+
+    Args:
+        field: The key at fault, or the file's role.
+        message: What is wrong.
+    """
 
     def __init__(self, field: str, message: str):
         self.field, self.message = field, message
@@ -35,6 +39,10 @@ _STRINGS = re.compile(r'"""(?:[^\\]|\\.)*?"""|\'\'\'.*?\'\'\'|"(?:[^"\\\n]|\\.)*
 def check_nesting(text: str, what: str = "job file") -> None:
     """Refuse TOML nested deeper than :data:`MAX_DEPTH` (arrays, inline tables, dotted keys) before it is
     parsed: the parser recurses on nesting and builds one table per dotted-key part.
+
+    Args:
+        text: The TOML text.
+        what: The file's role, as the error names it.
 
     Raises:
         TomlFieldError: naming ``what``.

@@ -76,6 +76,13 @@ class NoisyGridSignal(AbstractSignal):
     same k however the loop evaluates it (one step at a time, or a block of steps at once).  Given a
     float time instead of a :class:`~jaxobs.SampleTime` (no sample index), one independent draw per
     element of ``t`` is made from ``key``.
+
+    Attributes:
+        clean: The :class:`GridSignal`.
+        noise: The noise's standard deviation, in the signal's units.
+        key: The PRNG key of the scenario's noise.
+        accepts_sample_time: True: passed on to the clean signal (exact float32 phase).
+        has_truth: True: the clean signal's.
     """
 
     clean: GridSignal
@@ -110,13 +117,27 @@ _AXIS_LOWER = {"sag": 0.0, "harmonics_scale": 0.0, "sub_amplitude": 0.0, "noise"
 
 
 def grid_signals(names, combos, t_event: float, freq: float, *, seed: int = 0, first: int = 0):
-    """Batched :class:`NoisyGridSignal` for ``combos`` (tuples of values for the axes ``names``).
+    """Batched :class:`NoisyGridSignal` for ``combos``.
 
     Vectorized — the leaves are set as arrays, no constructor runs per scenario — and
-    checked as :class:`GridSignal` would check one scenario: a ``ValueError`` names the axis.
-    Shared by studies (:func:`jaxobs.study.run_study`) and by tuning jobs on grid signals.  Scenario i's
-    noise key is ``fold_in(PRNGKey(seed), i)``: the study's (or job's) seed drives its noise; ``first``: the
-    index of ``combos[0]`` among all the scenarios (a chunk built on its own has the keys it has in the whole).
+    checked as :class:`GridSignal` would check one scenario.  Shared by studies
+    (:func:`jaxobs.study.run_study`) and by tuning jobs on grid signals.
+
+    Args:
+        names: The axes, of :data:`GRID_SIGNAL_AXES`.
+        combos: One tuple of values per scenario, in ``names`` order.
+        t_event: The event's time, s.
+        freq: The nominal frequency, Hz.
+        seed: Scenario i's noise key is ``fold_in(PRNGKey(seed), i)``: the study's (or job's) seed drives
+            its noise.
+        first: The index of ``combos[0]`` among all the scenarios (a chunk built on its own has the keys it
+            has in the whole).
+
+    Returns:
+        The batched :class:`NoisyGridSignal` (leading axis one per scenario).
+
+    Raises:
+        ValueError: An unknown axis or a value out of its range, naming the axis.
     """
     names = list(names)
     for name in names:
@@ -177,11 +198,22 @@ EMF_SIGNAL_AXES: dict[str, Axis] = {
 
 
 def emf_signals(names, combos):
-    """Batched :class:`~jaxobs.EMFSignal` for ``combos`` (tuples of values for the axes ``names``, of
-    :data:`EMF_SIGNAL_AXES`): a back EMF proportional to speed, 100 V at 50 Hz (``speed_hz``, default 50 Hz),
-    with dc offsets ``dc_alpha``, ``dc_beta`` (V), a negative-sequence 5th and a positive-sequence 7th
-    harmonic of ``h5``, ``h7`` × the fundamental, from the initial phase ``phase_deg``.  An unknown axis is a
-    ``ValueError`` naming it; the values are checked by :class:`~jaxobs.EMFSignal`."""
+    """Batched :class:`~jaxobs.EMFSignal` for ``combos``.
+
+    A back EMF proportional to speed, 100 V at 50 Hz (``speed_hz``, default 50 Hz), with dc offsets
+    ``dc_alpha``, ``dc_beta`` (V), a negative-sequence 5th and a positive-sequence 7th harmonic of ``h5``,
+    ``h7`` × the fundamental, from the initial phase ``phase_deg``.
+
+    Args:
+        names: The axes, of :data:`EMF_SIGNAL_AXES`.
+        combos: One tuple of values per scenario, in ``names`` order.
+
+    Returns:
+        The batched :class:`~jaxobs.EMFSignal` (leading axis one per scenario).
+
+    Raises:
+        ValueError: An unknown axis (naming it), or a value :class:`~jaxobs.EMFSignal` refuses.
+    """
     names = list(names)
     for name in names:
         if name not in EMF_SIGNAL_AXES:
@@ -220,10 +252,16 @@ def _axes_dict(axes) -> dict:
 
 
 class AbstractSampler:
-    """The points of a study: ``names`` (the axes), ``points()`` (one tuple of values per scenario, in
-    ``names`` order), ``sampling`` (the Dataset's attribute) and ``layout(axis_meta)``: the dims after
-    ``design``, the shape the per-scenario values take, and the coordinates, each with the attributes
-    ``axis_meta(name)`` gives (``units``, ``long_name``)."""
+    """The points of a study.
+
+    ``points()`` gives one tuple of values per scenario, in ``names`` order; ``layout(axis_meta)`` the dims
+    after ``design``, the shape the per-scenario values take, and the coordinates, each with the attributes
+    ``axis_meta(name)`` gives (``units``, ``long_name``).
+
+    Attributes:
+        names: The axes.
+        sampling: The Dataset's ``sampling`` attribute.
+    """
 
     names: tuple
     sampling: str
@@ -242,7 +280,18 @@ class AbstractSampler:
         raise NotImplementedError
 
     def scenarios(self, build, points: list):
-        """The batched scenario PyTree of ``points`` (this sampler's): ``build(names, points)``."""
+        """The batched scenario PyTree of ``points`` (this sampler's): ``build(names, points)``.
+
+        Args:
+            build: ``build(names, points)``, the scenario builder.
+            points: Points of this sampler.
+
+        Returns:
+            The batched scenario PyTree.
+
+        Raises:
+            ValueError: No ``build``.
+        """
         if build is None:
             raise ValueError(f"a {type(self).__name__} sampler needs a scenario builder (build=...)")
         return build(self.names, points)
@@ -250,7 +299,14 @@ class AbstractSampler:
 
 @dataclass(frozen=True, eq=False)
 class Grid(AbstractSampler):
-    """Every combination of the axes' values (row-major: the last axis fastest); dims = the axes."""
+    """Every combination of the axes' values (row-major: the last axis fastest); dims = the axes.
+
+    Args:
+        axes: ``{axis name: values}``, each with at least one value.
+
+    Raises:
+        ValueError: An empty ``axes``, or an axis without values.
+    """
 
     axes: dict
     sampling: ClassVar[str] = "grid"
@@ -319,7 +375,16 @@ class _Drawn(AbstractSampler):
 
 
 class Random(_Drawn):
-    """``n`` points drawn uniformly (``numpy.random.default_rng(seed)``, one axis after another per point)."""
+    """``n`` points drawn uniformly (``numpy.random.default_rng(seed)``, one axis after another per point).
+
+    Args:
+        axes: ``{axis name: values}``; each axis is drawn between its values' minimum and maximum.
+        n: The number of points (an integer ≥ 1).
+        seed: The generator's seed (an integer).
+
+    Raises:
+        ValueError: An empty ``axes``, an axis without values, ``n`` < 1 or a seed that is not an integer.
+    """
 
     sampling: ClassVar[str] = "random"
 
@@ -338,7 +403,16 @@ def _qmc_points(self, u) -> np.ndarray:
 
 
 class Sobol(_Drawn):
-    """``n`` points of a scrambled Sobol sequence (``scipy.stats.qmc.Sobol``, seeded by ``seed``)."""
+    """``n`` points of a scrambled Sobol sequence (``scipy.stats.qmc.Sobol``, seeded by ``seed``).
+
+    Args:
+        axes: ``{axis name: values}``; each axis is drawn between its values' minimum and maximum.
+        n: The number of points (an integer ≥ 1).
+        seed: The generator's seed (an integer).
+
+    Raises:
+        ValueError: An empty ``axes``, an axis without values, ``n`` < 1 or a seed that is not an integer.
+    """
 
     sampling: ClassVar[str] = "sobol"
     sample_long_name: ClassVar[str] = "scenario drawn by sobol"
@@ -350,7 +424,16 @@ class Sobol(_Drawn):
 
 
 class LHS(_Drawn):
-    """``n`` points of a Latin hypercube (``scipy.stats.qmc.LatinHypercube``, seeded by ``seed``)."""
+    """``n`` points of a Latin hypercube (``scipy.stats.qmc.LatinHypercube``, seeded by ``seed``).
+
+    Args:
+        axes: ``{axis name: values}``; each axis is drawn between its values' minimum and maximum.
+        n: The number of points (an integer ≥ 1).
+        seed: The generator's seed (an integer).
+
+    Raises:
+        ValueError: An empty ``axes``, an axis without values, ``n`` < 1 or a seed that is not an integer.
+    """
 
     sampling: ClassVar[str] = "lhs"
     sample_long_name: ClassVar[str] = "scenario drawn by lhs"
@@ -362,8 +445,16 @@ class LHS(_Drawn):
 
 
 class Given(AbstractSampler):
-    """Scenarios given whole: ``batch`` a batched scenario PyTree (leading axis one per scenario), laid out
-    along one dim ``dim`` with ``labels`` as its coordinate (default 0, 1, ...)."""
+    """Scenarios given whole, laid out along one dim.
+
+    Args:
+        batch: A batched scenario PyTree (leading axis one per scenario).
+        labels: The dim's coordinate, one per scenario (default 0, 1, ...).
+        dim: The dim's name.
+
+    Raises:
+        ValueError: The leaves disagree on the leading axis, or the labels are not one per scenario.
+    """
 
     names: ClassVar[tuple] = ()
     sampling: ClassVar[str] = "given"
@@ -390,9 +481,17 @@ class Given(AbstractSampler):
 
 
 class Recordings(Given):
-    """Recorded signals: ``signals`` batched (leading axis one per recording, e.g. :func:`jaxobs.signals.stack`
-    of :class:`~jaxobs.SampledSignal` s), ``files`` their names (the ``recording`` coordinate), ``sha256``
-    their digests (the Dataset's ``recordings_sha256``)."""
+    """Recorded signals, laid out along the dim ``recording``.
+
+    Args:
+        signals: The recordings, batched (leading axis one per recording, e.g. :func:`jaxobs.signals.stack`
+            of :class:`~jaxobs.SampledSignal` s).
+        files: Their names (the ``recording`` coordinate).
+        sha256: Their digests (the Dataset's ``recordings_sha256``).
+
+    Raises:
+        ValueError: No recordings, or as :class:`Given`.
+    """
 
     sampling: ClassVar[str] = "recordings"
 

@@ -117,23 +117,30 @@ _warned_late = False
 
 
 def use_host_devices(n: int | None = None) -> int:
-    """Make JAX's CPU backend expose ``n`` devices, so a sharded batch uses ``n`` cores; returns the count.
+    """Make JAX's CPU backend expose ``n`` devices, so a sharded batch uses ``n`` cores.
 
     Call it before the first JAX computation (importing jax and jaxobs is fine):
     it sets JAX's public option ``jax_num_cpu_devices``, which JAX reads when it
-    starts its backends.  ``n`` defaults to the usable cores
-    (``os.sched_getaffinity``, which honours CPU affinity and cpusets; else
-    ``os.cpu_count()``).  With ``n=None`` the environment variable
-    ``JAXOBS_HOST_DEVICES``, read at each call, replaces that default: an
-    integer n ≥ 1, or ``1`` for off (JAX's configuration is left as it is).
-    An explicit ``--xla_force_host_platform_device_count`` in ``XLA_FLAGS``
-    also wins over the default (it is read, never written).  An explicit ``n``
-    wins over both.
+    starts its backends.  If JAX has already started its backends the count can
+    no longer change: the first such call warns (``RuntimeWarning``), and every
+    such call returns the number of CPU devices JAX has.  Only the CPU backend is
+    affected; a GPU backend keeps its devices.
 
-    If JAX has already started its backends the count can no longer change: the
-    first such call warns (``RuntimeWarning``), and every such call returns the
-    number of CPU devices JAX has.  Only the CPU backend is affected; a GPU
-    backend keeps its devices.
+    Args:
+        n: The device count, an integer ≥ 1.  Defaults to the usable cores
+            (``os.sched_getaffinity``, which honours CPU affinity and cpusets; else
+            ``os.cpu_count()``).  With ``n=None`` the environment variable
+            ``JAXOBS_HOST_DEVICES``, read at each call, replaces that default: an
+            integer n ≥ 1, or ``1`` for off (JAX's configuration is left as it is).
+            An explicit ``--xla_force_host_platform_device_count`` in ``XLA_FLAGS``
+            also wins over the default (it is read, never written).  An explicit
+            ``n`` wins over both.
+
+    Returns:
+        The number of CPU devices JAX will have (or has, once its backends started).
+
+    Raises:
+        ValueError: ``n`` or ``JAXOBS_HOST_DEVICES`` is not an integer ≥ 1.
     """
     global _warned_late
     if n is None:
@@ -165,7 +172,17 @@ def use_host_devices(n: int | None = None) -> int:
 
 
 def batch_mesh(devices=None) -> Mesh:
-    """A one-axis mesh named ``"batch"`` over ``devices`` (default: all of ``jax.devices()``)."""
+    """A one-axis mesh named ``"batch"`` over ``devices``.
+
+    Args:
+        devices: The devices of the mesh (default: all of ``jax.devices()``).
+
+    Returns:
+        A ``jax.sharding.Mesh`` with the one axis ``"batch"``.
+
+    Raises:
+        ValueError: ``devices`` is empty.
+    """
     devs = jax.devices() if devices is None else list(devices)
     if not devs:
         raise ValueError("batch_mesh needs at least one device")
@@ -178,9 +195,16 @@ def _declares_axis(x) -> bool:
 
 
 def batch_axes(tree):
-    """Which axis of each leaf is the scenario axis: ``tree``'s structure down to the nodes that declare one
-    (a signal's ``batch_axis``: a time-major :class:`~jaxobs.signals.SampledSignal` says 1), 0 elsewhere.
-    A prefix of ``tree``, as ``jax.vmap``'s ``in_axes`` takes it."""
+    """Which axis of each leaf is the scenario axis.
+
+    Args:
+        tree: A batch (a PyTree of arrays and signals).
+
+    Returns:
+        ``tree``'s structure down to the nodes that declare a scenario axis, holding that axis (a
+        signal's ``batch_axis``: a time-major :class:`~jaxobs.signals.SampledSignal` says 1), and 0
+        elsewhere.  A prefix of ``tree``, as ``jax.vmap``'s ``in_axes`` takes it.
+    """
     return jax.tree.map(lambda x: x.batch_axis if _declares_axis(x) else 0, tree, is_leaf=_declares_axis)
 
 
@@ -193,8 +217,18 @@ def _leaf_axes(tree) -> list[tuple[object, int]]:
 
 
 def batch_size(tree) -> int:
-    """The number of scenarios in ``tree``: every array leaf's scenario axis (the leading one, or the axis its
-    node declares: :func:`batch_axes`) must have it."""
+    """The number of scenarios in a batch.
+
+    Args:
+        tree: A batch; every array leaf's scenario axis (the leading one, or the axis its node
+            declares: :func:`batch_axes`) must have the same length.
+
+    Returns:
+        That common length.
+
+    Raises:
+        ValueError: The array leaves disagree on the length of their scenario axis.
+    """
     sizes = {np.shape(x)[ax] for x, ax in _leaf_axes(tree) if np.ndim(x) > ax}
     if len(sizes) != 1:
         raise ValueError(
@@ -214,6 +248,13 @@ def shard_batch(tree, mesh: Mesh | None = None):
     A batch that does not divide evenly over the devices (or a mesh of one device)
     is placed on the mesh's first device, whole: padding would change what a
     per-scenario reduction sees.  Scalar leaves are replicated.
+
+    Args:
+        tree: The batch (its scenario axes as :func:`batch_axes` gives them).
+        mesh: The mesh to split over (default: :func:`batch_mesh` over all devices).
+
+    Returns:
+        ``tree`` with its leaves placed on the mesh's devices.
     """
     mesh = batch_mesh() if mesh is None else mesh
     n_dev = mesh.devices.size
@@ -241,8 +282,7 @@ TILE = 512
 def map_batch(fn, tree, *, mesh: Mesh | None = None, tile: int = TILE):
     """``vmap(fn)(tree)`` computed per device of ``mesh``, ``tile`` scenarios at a time.
 
-    ``fn`` maps one scenario (a slice of every leaf's leading axis) to a PyTree;
-    call ``map_batch`` inside ``jit``.  The batch is split over the mesh with
+    Call ``map_batch`` inside ``jit``.  The batch is split over the mesh with
     ``shard_map`` (no communication: scenarios are independent), and each
     device runs its share in tiles of ``tile`` scenarios with
     ``lax.map(..., batch_size=tile)`` (the last tile may be short).  A batch that
@@ -257,6 +297,18 @@ def map_batch(fn, tree, *, mesh: Mesh | None = None, tile: int = TILE):
     :class:`~jaxobs.signals.SampledSignal`, leaves ``(n, B)``, is mapped along axis 1).  A batch with
     such a node runs each device's share whole, untiled: a tile of a time-major array is a strided
     copy of every row, and the share's loop reads one contiguous row per step anyway.
+
+    Args:
+        fn: Maps one scenario (a slice of every leaf's leading axis) to a PyTree.
+        tree: The batch; every array leaf has the scenario axis.
+        mesh: The mesh to split over (default: :func:`batch_mesh` over all devices).
+        tile: Scenarios per tile per device, an integer ≥ 1.
+
+    Returns:
+        ``vmap(fn)(tree)``: ``fn``'s PyTree with a leading scenario axis on every leaf.
+
+    Raises:
+        ValueError: ``tile`` is not an integer ≥ 1, or an array leaf lacks the scenario axis.
     """
     if not (isinstance(tile, int) and tile >= 1):
         raise ValueError(f"map_batch: tile must be an integer >= 1, got {tile!r}")
@@ -292,25 +344,35 @@ def init_distributed(
 ):
     """Join a run of several processes (``jax.distributed.initialize``); call it in every process, first.
 
-    ``coordinator`` is process 0's ``"HOST:PORT"`` (a free port there; every process gives the same),
-    ``num_processes`` the count N ≥ 1 and ``process_id`` this process's index in ``0 … N-1``.  Left
-    out (``None``), JAX fills them in from the environment: ``JAX_COORDINATOR_ADDRESS``, or a cluster
-    launcher it detects (SLURM's ``srun``, Open MPI's ``mpirun``), which also gives each process its
-    GPU(s) there.  Call it before the first JAX computation (``jax.devices()`` counts), once per
-    process; :func:`use_host_devices` may come before it.
+    Call it before the first JAX computation (``jax.devices()`` counts), once per process;
+    :func:`use_host_devices` may come before it.  Left out (``None``), the first three arguments are
+    filled in by JAX from the environment: ``JAX_COORDINATOR_ADDRESS``, or a cluster launcher it
+    detects (SLURM's ``srun``, Open MPI's ``mpirun``), which also gives each process its GPU(s) there.
 
     On the CPU backend the processes' collectives (the gather of a study's results) need an
     implementation: this sets ``jax_cpu_collectives_implementation`` to ``"gloo"`` (TCP, in jaxlib)
     unless it names one already (``"mpi"``); a GPU backend uses NCCL and ignores the option.
     Afterwards ``jax.devices()`` lists every process's devices, ``jax.local_devices()`` this
     process's, and :func:`jaxobs.study.run_study` splits each chunk of scenarios over all of them.
-    Returns ``(process_id, num_processes)`` as JAX sees them.  JAX raises ``RuntimeError`` for a
-    second call or one after its backends started.  ``timeout`` (seconds, ≥ 1) is how long every
-    process waits for the others to join (``initialization_timeout``): a process still missing a
-    peer then is aborted by JAX's C++ runtime (SIGABRT, exit status 134, a stack dump on stderr; jax
-    0.10 raises nothing Python could catch), so launch all N processes together.  A process other
-    than 0 given ``coordinator`` first waits (up to ``timeout``) for process 0 to listen there and
-    raises ``ConnectionError`` if it never does, before JAX is touched.
+
+    Args:
+        coordinator: Process 0's ``"HOST:PORT"`` (a free port there; every process gives the same).
+            A process other than 0 given it first waits (up to ``timeout``) for process 0 to listen
+            there, before JAX is touched.
+        num_processes: The count N ≥ 1 of processes.
+        process_id: This process's index in ``0 … N-1``.
+        timeout: Seconds (≥ 1) every process waits for the others to join
+            (``initialization_timeout``): a process still missing a peer then is aborted by JAX's C++
+            runtime (SIGABRT, exit status 134, a stack dump on stderr; jax 0.10 raises nothing Python
+            could catch), so launch all N processes together.
+
+    Returns:
+        ``(process_id, num_processes)`` as JAX sees them.
+
+    Raises:
+        ValueError: An argument is out of its range.
+        ConnectionError: Process 0 never listened at ``coordinator`` within ``timeout``.
+        RuntimeError: (from JAX) A second call, or one after JAX's backends started.
     """
     if isinstance(timeout, bool) or not isinstance(timeout, int) or timeout < 1:
         raise ValueError(f"init_distributed: timeout must be an integer >= 1 (seconds), got {timeout!r}")
@@ -414,10 +476,18 @@ class _NotCoordinator(ConnectionError):
 def global_batch(tree, mesh: Mesh | None = None):
     """A batch that every process holds in full (the same values) as global arrays split over ``mesh``.
 
-    Every array leaf's leading (scenario) axis is split over ``mesh`` (default: every process's
-    devices), which must divide it; each process fills only its own devices' rows
-    (``jax.make_array_from_callback``), so nothing crosses between processes.  In one process this
-    is :func:`shard_batch` with the split required.
+    Each process fills only its own devices' rows (``jax.make_array_from_callback``), so nothing crosses
+    between processes.  In one process this is :func:`shard_batch` with the split required.
+
+    Args:
+        tree: The batch; every array leaf has the leading (scenario) axis.
+        mesh: The mesh (default: every process's devices), whose device count must divide the batch.
+
+    Returns:
+        ``tree`` as global arrays.
+
+    Raises:
+        ValueError: A leaf lacks the scenario axis, or the batch does not divide over the mesh.
     """
     if any(np.ndim(x) <= ax for x, ax in _leaf_axes(tree)):
         raise ValueError("global_batch: every array leaf of the batch needs the leading scenario axis (got a scalar)")
@@ -440,9 +510,17 @@ def global_batch(tree, mesh: Mesh | None = None):
 
 
 def gather_batch(tree):
-    """Every leaf of ``tree`` (per-scenario results, sharded over any devices) as a whole NumPy array, on
-    every process: a collective across processes (``multihost_utils.process_allgather``) when the
-    leaf spans several, else a plain copy to the host."""
+    """Every leaf of ``tree`` as a whole NumPy array, on every process.
+
+    A collective across processes (``multihost_utils.process_allgather``) where a leaf spans several, else a
+    plain copy to the host.
+
+    Args:
+        tree: Per-scenario results, sharded over any devices.
+
+    Returns:
+        ``tree`` with NumPy leaves.
+    """
     from jax.experimental import multihost_utils
 
     def get(x):

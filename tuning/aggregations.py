@@ -36,10 +36,12 @@ class Mean(AbstractAggregation):
 
 
 class SmoothMax(AbstractAggregation):
-    """A smooth worst case: T·log Σ exp(v/T) at T = ``temperature`` (in the units of the values),
+    """A smooth worst case: T·log Σ exp(v/T) at T = ``temperature``,
     between the largest value and it plus T·log B (an upper bound of the worst case, tight as T → 0).
 
-    ``temperature=None``: 1 % of the values' mean magnitude (a constant under differentiation).
+    Attributes:
+        temperature: T, in the units of the values; None: 1 % of the values' mean magnitude (a constant
+            under differentiation).
     """
 
     temperature: float | None = eqx.field(static=True, default=None)
@@ -57,7 +59,11 @@ class SmoothMax(AbstractAggregation):
 
 
 class CVaR(AbstractAggregation):
-    """Conditional value at risk: the mean of the largest ⌈(1 − α)·B⌉ values (at least one)."""
+    """Conditional value at risk: the mean of the largest ⌈(1 − α)·B⌉ values (at least one).
+
+    Attributes:
+        alpha: α, in [0, 1).
+    """
 
     alpha: float = eqx.field(static=True, default=0.9)
 

@@ -468,7 +468,14 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv=None) -> int:
-    """Run the command line (``argv`` defaults to ``sys.argv[1:]``); returns the exit status."""
+    """Run the command line.
+
+    Args:
+        argv: The arguments (default ``sys.argv[1:]``).
+
+    Returns:
+        The exit status.
+    """
     parser = build_parser()
     args = None
     shown = warnings.showwarning

@@ -80,7 +80,15 @@ def cmd_drive_check(args) -> int:
 
 
 def add_drive_parser(subparsers, parents=()) -> argparse.ArgumentParser:
-    """Add ``jaxobs drive check`` to the CLI's subparsers; ``parents``: the options every command shares."""
+    """Add ``jaxobs drive check`` to the CLI's subparsers.
+
+    Args:
+        subparsers: The CLI's subparsers.
+        parents: The parsers of the options every command shares.
+
+    Returns:
+        The ``drive`` parser.
+    """
     d = subparsers.add_parser(
         "drive",
         help="drive files: check one and print what follows from it",

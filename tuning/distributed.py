@@ -149,7 +149,12 @@ class SharedChunks:
     :meth:`start` it opens it (checking an earlier run's chunks) and broadcasts which chunks are on disk, or
     that it cannot use them, so that every process stops with one line instead of waiting in a collective.
     Process 0 writes each chunk and lays the study out from the store; the others hold nothing, and their
-    :meth:`load`, reached once every collective is done, ends their run (:class:`_ShareComputed`)."""
+    :meth:`load`, reached once every collective is done, ends their run (:class:`_ShareComputed`).
+
+    Args:
+        store: Process 0's :class:`jaxobs.chunkstore.ChunkStore`; ``None`` elsewhere.
+        pid: This process's index.
+    """
 
     def __init__(self, store, pid: int):
         self.store, self.pid = store, pid
@@ -212,9 +217,26 @@ def distributed_study(name, designs, axes, opts, out: Path, args, rank, write, o
     (jaxobs.study.run_study), process 0 alone checks and locks ``--out`` (``outdir``, an
     :class:`~jaxobs_tuning.outdir.OutDir`) and writes it (and shows progress) by
     ``write(name, designs, axes, opts, out, quiet, store=)``, the single-process study of the command line.
-    ``store``: process 0's :class:`jaxobs.chunkstore.ChunkStore` (unused in the others), shared as
-    :class:`SharedChunks`: a kill loses at most the chunks being computed, and ``--resume`` (every process
-    given it) continues from process 0's chunks."""
+    A kill loses at most the chunks being computed, and ``--resume`` (every process given it) continues from
+    process 0's chunks.
+
+    Args:
+        name: The study's name.
+        designs: name -> design.
+        axes: name -> values.
+        opts: The study's other options.
+        out: The output (``--out``).
+        args: The command line's arguments.
+        rank: ``(process index, process count)``.
+        write: ``write(name, designs, axes, opts, out, quiet, store=)``, the single-process study of the
+            command line.
+        outdir: The :class:`~jaxobs_tuning.outdir.OutDir` process 0 checks and locks.
+        store: Process 0's :class:`jaxobs.chunkstore.ChunkStore` (unused in the others), shared as
+            :class:`SharedChunks`.
+
+    Returns:
+        The exit status.
+    """
     import numpy as np
     from jax.experimental import multihost_utils
 

@@ -135,8 +135,14 @@ def _lost_sync(sol, sig, ctx):
 
 @dataclass(frozen=True)
 class Term:
-    """One weighted term of the objective: ``metric`` (a :class:`~jaxobs.quantities.Metric`, or the name of one in
-    :data:`METRICS`; kept as its name, the Metric in :attr:`measure`) times ``weight`` (per the metric's unit)."""
+    """One weighted term of the objective: a metric times its weight.
+
+    Attributes:
+        metric: A :class:`~jaxobs.quantities.Metric`, or the name of one in :data:`METRICS`; kept as its name,
+            the Metric in :attr:`measure`.
+        weight: The weight, per the metric's unit.
+        measure: The :class:`~jaxobs.quantities.Metric` itself.
+    """
 
     metric: str | Metric
     weight: float = 1.0
@@ -155,7 +161,26 @@ class Term:
 
 
 class Objective:
-    """value(θ), value_and_grad(θ) and per-scenario scores for a component and a scenario batch."""
+    """value(θ), value_and_grad(θ) and per-scenario scores for a component and a scenario batch.
+
+    The value-and-gradient's and the scoring's traced programs are kept across processes where
+    :func:`jaxobs.use_compile_cache` set a folder (:func:`jaxobs.kept_jit`, keyed on :attr:`kept_fields`).
+
+    Args:
+        component: The module whose free gains ``param`` sets.
+        param: The :class:`~jaxobs_tuning.params.Parametrization` of the free gains.
+        scenarios: The batch (leading axis the scenarios).
+        horizon: Simulated seconds per scenario.
+        terms: The weighted metrics (:class:`Term`) summed per scenario.
+        ctx: The metrics' event time, steady window and bands.
+        aggregation: How the per-scenario values become one (:class:`~jaxobs_tuning.aggregations.Mean` by
+            default).
+        penalty: The value of a diverged scenario.
+        family: The scenarios' family (:mod:`jaxobs.families`), which makes the system the component runs on
+            each scenario (bound to it: the machine an observer assumes, its initial speed; closing the
+            drive's loop for :class:`~jaxobs.families.DriveScenarios`); None: the component runs on each
+            scenario, a signal, as it is.
+    """
 
     # what its programs bake in (the key of a kept program, jaxobs.kept_jit): the rest is made from these
     kept_fields = ("component", "param", "scenarios", "horizon", "terms", "ctx", "aggregation", "penalty", "family",
@@ -174,16 +199,6 @@ class Objective:
         penalty: float = 1e3,
         family: AbstractScenarios | None = None,
     ):
-        """``component``: the module whose free gains ``param`` sets; ``scenarios``: the batch (leading axis
-        the scenarios); ``horizon``: simulated seconds per scenario; ``terms``: the weighted metrics summed
-        per scenario; ``ctx``: the metrics' event time, steady window and bands; ``aggregation``: how the
-        per-scenario values become one (:class:`~jaxobs_tuning.aggregations.Mean` by default); ``penalty``: the
-        value of a diverged scenario.  ``family``: the scenarios' family (:mod:`jaxobs.families`), which makes the
-        system the component runs on each scenario (bound to it: the machine an observer assumes, its initial
-        speed; closing the drive's loop for :class:`~jaxobs.families.DriveScenarios`); None: the component runs
-        on each scenario, a signal, as it is.  The value-and-gradient's and the scoring's traced programs are
-        kept across processes where :func:`jaxobs.use_compile_cache` set a folder (:func:`jaxobs.kept_jit`,
-        keyed on :attr:`kept_fields`)."""
         for term in terms:
             if term.measure is None:
                 raise ValueError(f"objective metric {term.metric!r} is unknown; known: {', '.join(METRICS)}")
@@ -283,13 +298,27 @@ class Objective:
         return self._aggregate_with_grad(theta)
 
     def value_grad_diverged(self, theta):
-        """The objective, its gradient and how many scenarios diverged, from one batch evaluation."""
+        """The objective, its gradient and how many scenarios diverged, from one batch evaluation.
+
+        Args:
+            theta: The free gains' vector.
+
+        Returns:
+            ``(value, gradient, diverged count)``.
+        """
         return self.value_grad_diverged_overflowed(theta)[:3]
 
     def value_grad_diverged_overflowed(self, theta):
         """:meth:`value_grad_diverged` and how many scenarios overflowed: a finite simulation and value, a
         gradient that is not finite (a finite but huge weight; counted with the diverged ones too).  When the
-        aggregate or its gradient is not finite though every scenario's value is, every scenario counts."""
+        aggregate or its gradient is not finite though every scenario's value is, every scenario counts.
+
+        Args:
+            theta: The free gains' vector.
+
+        Returns:
+            ``(value, gradient, diverged count, overflowed count)``.
+        """
         v, g, good, over = self._vg(theta)
         agg_v, w = jax.value_and_grad(lambda vv: self.aggregation(vv))(v)
         grad = w @ g
@@ -301,7 +330,15 @@ class Objective:
     def overflowed(self, theta, scored_good) -> int:
         """Scenarios whose simulation and weighted metrics are finite (``scored_good``: :meth:`per_scenario`'s
         mask at ``theta``) but whose tuning value or gradient is not: the objective overflows (a finite but
-        huge weight), which the solver counts with the diverged scenarios, though nothing diverged."""
+        huge weight), which the solver counts with the diverged scenarios, though nothing diverged.
+
+        Args:
+            theta: The free gains' vector.
+            scored_good: :meth:`per_scenario`'s good mask at ``theta``.
+
+        Returns:
+            The number of such scenarios.
+        """
         _, _, good, _ = self._vg(theta)
         return int(jnp.sum(jnp.asarray(scored_good) & ~good))
 
@@ -363,7 +400,16 @@ class Objective:
         diverged) and the good mask — no gradient.
 
         On the drive the metrics hold ``lost_sync`` too: diverged, or |θ̂e − θe| > :data:`LOST_SYNC_DEG`; and
-        ``lost_speed``: diverged, or the drive missed its speed reference (:func:`jaxobs.metrics.lost_speed`)."""
+        ``lost_speed``: diverged, or the drive missed its speed reference (:func:`jaxobs.metrics.lost_speed`).
+
+        Args:
+            theta: The free gains' vector.
+            scenarios: The batch (default: the tuning set).
+
+        Returns:
+            ``(metrics, total, good)``: metric name -> per-scenario values, the weighted totals (the penalty
+            where diverged), and the good mask.
+        """
         scenarios = self.scenarios if scenarios is None else scenarios
         mets, ok = self._per_scenario_metrics(theta, scenarios)
         total = sum(term.weight * mets[term.metric] for term in self.terms)
@@ -374,12 +420,29 @@ class Objective:
         return mets, jnp.where(good, total, self.penalty), good
 
     def scores(self, theta, scenarios=None) -> dict:
-        """Objective and each metric's mean and worst over ``scenarios`` (default: the tuning set)."""
+        """Objective and each metric's mean and worst over ``scenarios``.
+
+        Args:
+            theta: The free gains' vector.
+            scenarios: The batch (default: the tuning set).
+
+        Returns:
+            The summary dict (:meth:`summarize`).
+        """
         return self.summarize(*self.per_scenario(theta, scenarios))
 
     def summarize(self, mets, total, good) -> dict:
         """:meth:`scores` from :meth:`per_scenario`'s output.  Where every scenario diverged the metrics'
-        means and worsts are ``None`` (there is nothing to average), and ``"null_reason"`` says why."""
+        means and worsts are ``None`` (there is nothing to average), and ``"null_reason"`` says why.
+
+        Args:
+            mets: metric name -> per-scenario values.
+            total: The per-scenario weighted totals.
+            good: The good mask.
+
+        Returns:
+            The summary dict.
+        """
         out = {
             "objective": float(self.aggregation(total)),
             "diverged": int(jnp.sum(~good)),

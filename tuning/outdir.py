@@ -39,7 +39,15 @@ class OutError(ValueError):
 
 
 def safe_name(name: str, default: str = "job") -> str:
-    """``name`` as one folder name: characters outside ``[A-Za-z0-9._-]`` become ``_``, leading dots go."""
+    """A name as one folder name: characters outside ``[A-Za-z0-9._-]`` become ``_``, leading dots go.
+
+    Args:
+        name: The name.
+        default: The folder name where nothing but ``_`` would remain.
+
+    Returns:
+        The folder name (at most 100 characters).
+    """
     s = re.sub(r"[^A-Za-z0-9._-]", "_", str(name))[:100].lstrip(".")
     return s if s.strip("_") else default
 
@@ -54,11 +62,17 @@ def _read_holder(fd: int) -> str:
 
 
 class OutDir:
-    """The results folder of one run: checked, locked, released (a context manager)."""
+    """The results folder of one run: checked, locked, released (a context manager).
+
+    Args:
+        path: The folder.
+        products: The files a run writes there.
+        force: Whether existing products may be replaced.
+        hints: product name -> what to say instead of "use --force" when it exists (a checkpoint names
+            ``--resume`` first: --force would discard the work it holds).
+    """
 
     def __init__(self, path: Path, products=(), force: bool = False, hints: dict | None = None):
-        """``hints``: product name -> what to say instead of "use --force" when it exists (a checkpoint names
-        ``--resume`` first: --force would discard the work it holds)."""
         self.path = Path(path)
         self.products = tuple(products)
         self.force = force

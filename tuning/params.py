@@ -24,6 +24,16 @@ __all__ = ["GainSpec", "Parametrization"]
 
 @dataclass(frozen=True)
 class GainSpec:
+    """One free gain: its name, initial value, bounds and scale (module doc).
+
+    Attributes:
+        name: The gain's field name.
+        init: Its initial value.
+        lower: Its lower bound (in the gain's units), or None.
+        upper: Its upper bound (in the gain's units), or None.
+        log: Whether to optimize log g (positive gains: multiplicative steps).
+    """
+
     name: str
     init: float
     lower: float | None = None
@@ -66,7 +76,11 @@ def _softplus_inv(y: float) -> float:
 
 
 class Parametrization:
-    """Maps an unconstrained vector θ to the free gains of a component."""
+    """Maps an unconstrained vector θ to the free gains of a component.
+
+    Args:
+        specs: The free gains (:class:`GainSpec`), in θ's order.
+    """
 
     kept_fields = ("specs",)  # what a kept program that applies it bakes in (jaxobs.kept_jit)
 

@@ -197,8 +197,20 @@ def check_result(res, where: str = "result") -> dict:
 
 
 def load_result(path) -> dict:
-    """The parsed ``result.json`` of a tuning run, checked against :func:`check_result`'s schema.  Read as a
-    regular file of at most :data:`MAX_RESULT_BYTES`, its nesting checked before the JSON parser sees it."""
+    """The parsed ``result.json`` of a tuning run, checked against :func:`check_result`'s schema.
+
+    Read as a regular file of at most :data:`MAX_RESULT_BYTES`, its nesting checked before the JSON parser
+    sees it.
+
+    Args:
+        path: The ``result.json``.
+
+    Returns:
+        The result, a dict.
+
+    Raises:
+        ValueError: An unreadable, oversized, non-UTF-8 or invalid file, or one that fails the schema.
+    """
     where = f"result file {str(path)[:120]!r}"
     try:
         data = read_file(Path(path), MAX_RESULT_BYTES)
@@ -243,6 +255,15 @@ def tuned_component(result: dict):
     The job's values are rebuilt by :func:`jaxobs_tuning.parse_job` (its defaults,
     then the job's ``[component]`` table), so the design equals the one the
     run tuned and scored.
+
+    Args:
+        result: A result (:func:`load_result`).
+
+    Returns:
+        The tuned component.
+
+    Raises:
+        ValueError: Nothing was tuned (``gains.tuned`` is null), or the result's job names another component.
     """
     if result["gains"]["tuned"] is None:
         raise ValueError(f"result: gains.tuned is null (status {result.get('status')!r}): nothing was tuned")

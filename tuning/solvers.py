@@ -52,10 +52,19 @@ __all__ = [
 
 @dataclass
 class TuneResult:
-    """What a solver found.  ``theta`` is the best design that diverged in no tuning scenario (``None``
-    when no design tried was stable: ``status == "diverged"``, or when the objective overflowed: ``"overflow"``);
-    ``history`` has one entry per point evaluated (iteration, objective, diverged scenarios, gains); ``status``
-    is one of ``converged | budget | no_improvement | diverged | overflow`` and ``reason`` says why in words."""
+    """What a solver found.
+
+    Attributes:
+        theta: The best design that diverged in no tuning scenario (``None`` when no design tried was stable:
+            ``status == "diverged"``, or when the objective overflowed: ``"overflow"``).
+        value: Its objective.
+        iterations: The iterations run.
+        history: One entry per point evaluated (iteration, objective, diverged scenarios, gains).
+        status: One of ``converged | budget | no_improvement | diverged | overflow``.
+        reason: Why, in words.
+        best_iteration: The iteration of the best design, or None.
+        timing: ``{"solver_s": seconds}``.
+    """
 
     theta: jax.Array | None
     value: float
@@ -81,10 +90,23 @@ def _entry(objective, it, value, diverged, theta) -> dict:
 def decide_status(
     history: list, finished: bool, tol: float, finished_reason: str, budget_reason: str, best: int | None = None
 ):
-    """(status, reason, best entry index) from the history: the best design is the least objective among
-    the points that diverged in no scenario; none: ``diverged``; the initial point best (no relative
-    improvement > ``tol``): ``no_improvement``; else ``converged`` if the solver ``finished`` by its own
-    test, ``budget`` if it ran out of steps.  ``best``: the solver's own choice of best stable entry."""
+    """The status of a run from its history.
+
+    The best design is the least objective among the points that diverged in no scenario; none:
+    ``diverged``; the initial point best (no relative improvement > ``tol``): ``no_improvement``; else
+    ``converged`` if the solver ``finished`` by its own test, ``budget`` if it ran out of steps.
+
+    Args:
+        history: The run's entries (iteration, objective, diverged scenarios, gains).
+        finished: Whether the solver stopped by its own test.
+        tol: The relative improvement that counts.
+        finished_reason: The reason given for ``converged``.
+        budget_reason: The reason given for ``budget``.
+        best: The solver's own choice of best stable entry.
+
+    Returns:
+        ``(status, reason, best entry index)``.
+    """
     stable = [i for i, h in enumerate(history) if h["diverged"] == 0]
     n_div = sum(1 for h in history if h["diverged"] > 0)
     if not stable:
@@ -264,8 +286,11 @@ class AbstractSolver(abc.ABC):
 
     Every solver records one history entry per point it evaluates and picks its best design with
     :func:`decide_status` (the least objective among the designs that diverged in no scenario).
-    Fields every solver has: ``steps`` (iteration budget), ``tol`` (relative improvement that counts),
-    ``progress_every`` (iterations between progress figures), ``name`` (shown in progress and reports).
+    Attributes:
+        name: Shown in progress and reports.
+        steps: The iteration budget.
+        tol: The relative improvement that counts.
+        progress_every: Iterations between progress figures.
     """
 
     name: str
@@ -284,7 +309,21 @@ class AbstractSolver(abc.ABC):
         quiet: bool = False,
         fingerprint: str | None = None,
     ) -> TuneResult:
-        """Minimise ``objective`` (``value_grad_diverged(θ)``, ``param``) from θ0."""
+        """Minimise ``objective`` from θ0.
+
+        Args:
+            objective: The :class:`~jaxobs_tuning.objective.Objective` (``value_grad_diverged(θ)``, ``param``).
+            theta0: The initial θ.
+            checkpoint: One npz file, rewritten atomically every ``checkpoint_every`` iterations, holding
+                ``fingerprint``.
+            resume: Continue from ``checkpoint``; a checkpoint of another job, or a corrupt one, raises
+                :class:`CheckpointError` (one line); no checkpoint at all: one line on stderr and a fresh start.
+            quiet: No progress lines.
+            fingerprint: The job's sha256, kept in the checkpoint.
+
+        Returns:
+            The :class:`TuneResult`.
+        """
 
 
 def _check_budget(owner: str, steps, tol, progress_every) -> None:
@@ -300,8 +339,14 @@ class OptaxSolver(AbstractSolver):
     """An optax ``GradientTransformation`` run as a Python loop over iterations, each a compiled
     value-and-gradient of the whole batch, with early stopping and checkpoints.
 
-    ``patience``: stop after this many iterations without a relative improvement > ``tol``;
-    ``checkpoint_every``: iterations between checkpoints (when :meth:`run` is given a file).
+    Attributes:
+        optimizer: The optax ``GradientTransformation``.
+        steps: The iteration budget (≥ 1).
+        patience: Stop after this many iterations without a relative improvement > ``tol`` (≥ 1).
+        tol: The relative improvement that counts.
+        checkpoint_every: Iterations between checkpoints, when :meth:`run` is given a file (≥ 1).
+        progress_every: Iterations between progress figures.
+        name: Shown in progress and reports.
     """
 
     optimizer: optax.GradientTransformation
@@ -322,11 +367,27 @@ class OptaxSolver(AbstractSolver):
                 raise ValueError(f"OptaxSolver.{fld} must be an integer >= 1, got {v!r}")
 
     def run(self, objective, theta0, *, checkpoint=None, resume=False, quiet=False, fingerprint=None) -> TuneResult:
-        """``checkpoint``: one npz file, rewritten atomically every ``checkpoint_every`` iterations, holding
-        ``fingerprint`` (the job's sha256).  ``resume``: continue from it; a checkpoint of another job, or a
-        corrupt one, raises :class:`CheckpointError` (one line); no checkpoint at all: one line on stderr
-        and a fresh start.  Testing hook: the module's ``_at_iteration``, when set, is called with each
-        iteration's number before that iteration; what it raises ends the run there."""
+        """Minimise ``objective`` from θ0, with checkpoints.
+
+        Testing hook: the module's ``_at_iteration``, when set, is called with each iteration's number before
+        that iteration; what it raises ends the run there.
+
+        Args:
+            objective: The :class:`~jaxobs_tuning.objective.Objective` (``value_grad_diverged(θ)``, ``param``).
+            theta0: The initial θ.
+            checkpoint: One npz file, rewritten atomically every ``checkpoint_every`` iterations, holding
+                ``fingerprint``.
+            resume: Continue from ``checkpoint``; a checkpoint of another job, or a corrupt one, raises
+                :class:`CheckpointError` (one line); no checkpoint at all: one line on stderr and a fresh start.
+            quiet: No progress lines.
+            fingerprint: The job's sha256, kept in the checkpoint.
+
+        Returns:
+            The :class:`TuneResult`.
+
+        Raises:
+            CheckpointError: ``resume`` with a checkpoint of another job, or a corrupt one.
+        """
         t_start = time.time()
         opt = self.optimizer
         theta = theta0
@@ -436,7 +497,15 @@ class OptimistixSolver(AbstractSolver):
     """An optimistix minimiser (``optx.BFGS(rtol, atol)``, ...) run step by step (init / step /
     terminate), so that every accepted iterate is recorded and progress is shown; it stops by its own
     test or after ``steps`` steps.  Each recorded iterate is scored once more for its diverged count.
-    No checkpoints (a run is short); ``tol`` is the relative improvement :func:`decide_status` counts."""
+    No checkpoints (a run is short).
+
+    Attributes:
+        minimiser: The optimistix minimiser.
+        steps: The step budget.
+        tol: The relative improvement :func:`decide_status` counts.
+        progress_every: Steps between progress figures.
+        name: Shown in progress and reports.
+    """
 
     minimiser: optx.AbstractMinimiser
     steps: int = 100
@@ -506,9 +575,18 @@ class OptimistixSolver(AbstractSolver):
 
 
 def as_solver(optimizer) -> AbstractSolver:
-    """A solver object for ``optimizer``: a solver itself, an optax ``GradientTransformation`` (in an
-    :class:`OptaxSolver` with its default stopping rule) or an optimistix minimiser (in an
-    :class:`OptimistixSolver`)."""
+    """A solver object for ``optimizer``.
+
+    Args:
+        optimizer: A solver itself, an optax ``GradientTransformation`` (in an :class:`OptaxSolver` with its
+            default stopping rule) or an optimistix minimiser (in an :class:`OptimistixSolver`).
+
+    Returns:
+        The :class:`AbstractSolver`.
+
+    Raises:
+        ValueError: ``optimizer`` is none of these.
+    """
     if isinstance(optimizer, AbstractSolver):
         return optimizer
     if isinstance(optimizer, optax.GradientTransformation):
@@ -531,9 +609,21 @@ def tune(
     quiet: bool = False,
     fingerprint: str | None = None,
 ) -> TuneResult:
-    """Minimise ``objective`` with ``optimizer`` (see :func:`as_solver`) from θ0 (default
-    ``objective.param.theta0()``); the best design is the best one that diverged in no scenario
-    (:func:`decide_status`).  ``checkpoint``/``resume``/``fingerprint``: see :meth:`OptaxSolver.run`."""
+    """Minimise ``objective`` with ``optimizer``; the best design is the best one that diverged in no scenario
+    (:func:`decide_status`).
+
+    Args:
+        objective: The :class:`~jaxobs_tuning.objective.Objective`.
+        optimizer: A solver, an optax ``GradientTransformation`` or an optimistix minimiser (:func:`as_solver`).
+        theta0: The initial θ (default ``objective.param.theta0()``).
+        checkpoint: See :meth:`OptaxSolver.run`.
+        resume: See :meth:`OptaxSolver.run`.
+        quiet: No progress lines.
+        fingerprint: See :meth:`OptaxSolver.run`.
+
+    Returns:
+        The :class:`TuneResult`.
+    """
     solver = as_solver(optimizer)
     theta0 = objective.param.theta0() if theta0 is None else theta0
     return solver.run(objective, theta0, checkpoint=checkpoint, resume=resume, quiet=quiet, fingerprint=fingerprint)

@@ -47,7 +47,19 @@ def one_of(names) -> str:
 
 
 def aggregation(name: str, *, alpha: float = 0.9, temperature: float | None = None):
-    """The aggregation named ``name`` (:data:`AGGREGATIONS`)."""
+    """The aggregation named ``name`` (:data:`AGGREGATIONS`).
+
+    Args:
+        name: ``"mean"``, ``"max"`` or ``"cvar"``.
+        alpha: :class:`~jaxobs_tuning.aggregations.CVaR`'s α.
+        temperature: :class:`~jaxobs_tuning.aggregations.SmoothMax`'s temperature.
+
+    Returns:
+        The :class:`~jaxobs_tuning.aggregations.AbstractAggregation`.
+
+    Raises:
+        ValueError: An unknown name.
+    """
     if name not in AGGREGATIONS:
         raise ValueError(f"objective.aggregate must be {one_of(AGGREGATIONS)}, got {name!r}")
     return AGGREGATIONS[name](alpha, temperature)
@@ -64,7 +76,25 @@ def solver(
     checkpoint_every: int = 5,
     progress_every: int = 1,
 ):
-    """The solver named ``kind`` (:data:`SOLVER_KINDS`) with a job's ``[solver]`` settings; ``name`` is the kind."""
+    """The solver named ``kind`` with a job's ``[solver]`` settings; its ``name`` is the kind.
+
+    Args:
+        kind: A name of :data:`SOLVER_KINDS`: an optax transformation (:data:`OPTAX`) or an optimistix
+            minimiser (:data:`MINIMISERS`).
+        learning_rate: The optax solver's learning rate.
+        schedule: The learning rate over the iterations (:data:`SCHEDULES`).
+        steps: The iteration budget.
+        patience: The optax solver's patience (:class:`~jaxobs_tuning.solvers.OptaxSolver`).
+        tol: The relative improvement that counts (and a minimiser's tolerance).
+        checkpoint_every: Iterations between the optax solver's checkpoints.
+        progress_every: Iterations between progress figures.
+
+    Returns:
+        The :class:`~jaxobs_tuning.solvers.AbstractSolver`.
+
+    Raises:
+        ValueError: An unknown kind or schedule.
+    """
     if kind in OPTAX:
         if schedule not in SCHEDULES:
             raise ValueError(f"solver.schedule must be {one_of(SCHEDULES)}, got {schedule!r}")

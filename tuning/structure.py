@@ -271,7 +271,17 @@ def _leso(name: str, v: dict, job) -> tuple[dict, dict]:
 
 
 def structure(component: str, values: dict, job=None) -> dict:
-    """The linear structure of a design (see the module docstring); ``values``: every constructor value."""
+    """The linear structure of a design (see the module docstring).
+
+    Args:
+        component: The registered class name.
+        values: Every constructor value.
+        job: The job (its scenarios' first speed and its drive file's machine set a drive observer's operating
+            point), or None (600 r/min on 002's IPMSM).
+
+    Returns:
+        The structure's fields, with ``"not_available"``: field -> why, where some could not be given.
+    """
     # the paper's small-signal model of the class (jaxobs.registry), analysed by its family: an FLL's loop, a
     # flux observer's filter, a LESO's PLL loop (the C-LESO's and the FA-LESO's: 002 gives them)
     entry = REGISTRY.get(component)

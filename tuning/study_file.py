@@ -148,7 +148,18 @@ STEP_AXES = ("speed_step_rpm", "load_step_nm")
 
 @dataclass
 class StudySpec:
-    """A checked study file: ``run_study`` / ``run_drive_study`` take ``designs``, ``axes`` and ``opts``."""
+    """A checked study file: ``run_study`` / ``run_drive_study`` take ``designs``, ``axes`` and ``opts``.
+
+    Attributes:
+        name: The study's name.
+        kind: ``"fll"`` or ``"drive"``.
+        designs: name -> design.
+        axes: name -> values.
+        opts: The runner's other options.
+        scenarios: The scenario count.
+        provenance: NetCDF attributes: the sha256 of the study file and of every result file it reads (names
+            relative to the study file, as written there), and the drive study's machine.
+    """
 
     name: str
     kind: str  # "fll" | "drive"
@@ -162,7 +173,17 @@ class StudySpec:
 
 
 def load_study(path) -> StudySpec:
-    """Read, check and build a study file; errors are one-line :class:`~jaxobs_tuning.job.JobError`\\ s (exit 2)."""
+    """Read, check and build a study file.
+
+    Args:
+        path: The study file.
+
+    Returns:
+        The :class:`StudySpec`.
+
+    Raises:
+        JobError: One line naming the field (exit 2).
+    """
     path = Path(path)
     raw, data = read_toml(path, WHAT)  # size, nesting and encoding checked before parsing
     spec = parse_study(raw, base=path.resolve().parent)
@@ -184,7 +205,18 @@ def study_fingerprint(spec: StudySpec) -> str:
 
 
 def parse_study(raw: dict, base: Path | None = None) -> StudySpec:
-    """Check a parsed study file; ``base`` is the folder relative ``result`` paths are read from."""
+    """Check a parsed study file.
+
+    Args:
+        raw: The parsed TOML.
+        base: The folder relative ``result`` paths are read from (default the working folder).
+
+    Returns:
+        The :class:`StudySpec`.
+
+    Raises:
+        JobError: A field out of its range, naming it.
+    """
     base = Path.cwd() if base is None else Path(base)
     st = get_field(raw, "study", "study", dict, {})
     kind = get_field(st, "kind", "study.kind", str, "fll")

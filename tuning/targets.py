@@ -58,7 +58,17 @@ __all__ = [
 
 
 def lambda_for_damping(k, omega_n, zeta=1 / math.sqrt(2), lam0=None):
-    """λ such that the SOGI-FLL's linear model s² + (kωn/2)s + λ/2 has damping ``zeta``."""
+    """λ such that the SOGI-FLL's linear model s² + (kωn/2)s + λ/2 has damping ``zeta``.
+
+    Args:
+        k: SOGI gain.
+        omega_n: Nominal frequency ωn, rad/s.
+        zeta: The damping ζ.
+        lam0: The Levenberg–Marquardt start, rad²/s² (default 0.3 k² ωn²: an underdamped start).
+
+    Returns:
+        λ, rad²/s².
+    """
 
     def residual(log_lam, args):
         lam = jnp.exp(log_lam)
@@ -98,7 +108,22 @@ def _last_crossing(t, curve, band):
 
 
 def flux_settling_time(gains, omega, band=0.02, definition="envelope", t_end=0.12, n=24001):
-    """Settling time of a SOIFO (``gains = (k,)``) or second-order SOIFO (``gains = (K1, K2)``), see the module doc."""
+    """Settling time of a SOIFO or a second-order SOIFO (module doc).
+
+    Args:
+        gains: ``(k,)`` for a SOIFO, ``(K1, K2)`` for a second-order SOIFO.
+        omega: ω', rad/s.
+        band: The band, a fraction.
+        definition: ``"envelope"`` or ``"transient"`` (module doc).
+        t_end: The simulated time, s.
+        n: The time grid's samples.
+
+    Returns:
+        The settling time, s.
+
+    Raises:
+        ValueError: An unknown ``definition``.
+    """
     t = np.linspace(0.0, t_end, n)  # concrete: the exact discretization needs a static step
     if definition == "envelope":
         tf = _envelope_tf(gains, omega)
@@ -114,6 +139,18 @@ def match_settling_time(target, omega, coupling=2.0, band=0.02, lower=1.0, upper
 
     An optimistix bisection; for the envelope definition the settling time falls
     monotonically as K1 grows (ωn ∝ K1 at fixed ζ), so the bracket [1, 2.5] holds one root.
+
+    Args:
+        target: The settling time, s.
+        omega: ω', rad/s.
+        coupling: K2/K1.
+        band: The band, a fraction.
+        lower: The bracket's lower end of K1.
+        upper: The bracket's upper end of K1.
+        definition: ``"envelope"`` or ``"transient"`` (module doc).
+
+    Returns:
+        K1.
     """
 
     def miss(k1, args):
@@ -128,7 +165,16 @@ def match_settling_time(target, omega, coupling=2.0, band=0.02, lower=1.0, upper
 
 def soifo_settling_time(k, omega, band=0.02):
     """The SOIFO's envelope settling time in closed form: its model (kω'/2)/(s + kω'/2) is first order, so
-    |step − 1| = exp(−kω't/2) and t_s = 2 ln(1/band)/(kω') (17.6 ms at 000's k = 1.414, ω' = 100π)."""
+    |step − 1| = exp(−kω't/2) and t_s = 2 ln(1/band)/(kω') (17.6 ms at 000's k = 1.414, ω' = 100π).
+
+    Args:
+        k: SOGI gain.
+        omega: ω', rad/s.
+        band: The band, a fraction.
+
+    Returns:
+        t_s, s.
+    """
     return 2 * math.log(1 / band) / (k * omega)
 
 
@@ -146,6 +192,19 @@ def k1_for_settling_time_at_k2(target, K2, omega, band=0.02, lower=0.05, upper=2
     spaced), then ``levels − 1`` finer grids in the bracket of the first crossing: every level is
     one call of the same compiled, vmapped settling time (about 3 s to compile, 30 ms a call),
     and the bracket shrinks by n − 1 each time (4 levels: relative width < 1e-6).
+
+    Args:
+        target: The settling time, s.
+        K2: The second-order SOGI damping gain.
+        omega: ω', rad/s.
+        band: The band, a fraction.
+        lower: The lowest K1 tried.
+        upper: The highest K1 tried.
+        n: The grid's points per level.
+        levels: The grids tried.
+
+    Returns:
+        K1, or None where no K1 in [lower, upper] settles as fast.
     """
     grid = np.geomspace(lower, upper, n)
     hit = None

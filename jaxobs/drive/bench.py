@@ -48,7 +48,13 @@ SHIPPED_DRIVES = {"ipmsm002": _DATA / "ipmsm002.toml", "spmsm000": _DATA / "spms
 
 @functools.cache
 def shipped_drive(name: str) -> DriveFile:
-    """The shipped drive file ``name`` (a key of :data:`SHIPPED_DRIVES`), read and checked once.
+    """The shipped drive file ``name``, read and checked once.
+
+    Args:
+        name: A key of :data:`SHIPPED_DRIVES`.
+
+    Returns:
+        The :class:`DriveFile`.
 
     Raises:
         ValueError: an unknown name, in one line naming the shipped ones.
@@ -59,9 +65,14 @@ def shipped_drive(name: str) -> DriveFile:
 
 
 def bench_machine(name: str = "ipmsm002", **overrides) -> PMSMParams:
-    """The machine of the shipped drive file ``name`` (a key of :data:`SHIPPED_DRIVES`), on its bench's inertia
-    (kg·m²); ``overrides``: other parameters (e.g. ``a5``, ``a7`` or a mismatched ``Rs``), as the presets take
-    them.
+    """The machine of a shipped drive file, on its bench's inertia (kg·m²).
+
+    Args:
+        name: A key of :data:`SHIPPED_DRIVES`.
+        **overrides: Other parameters (e.g. ``a5``, ``a7`` or a mismatched ``Rs``), as the presets take them.
+
+    Returns:
+        The :class:`PMSMParams`.
 
     Raises:
         ValueError: an unknown name or a refused parameter.
@@ -90,14 +101,24 @@ def bench_drive(
     inverter: Inverter | None = None,
     **foc_kw,
 ) -> Drive:
-    """The bench's drive on ``machine`` (the machine the FOC assumes): IMC current loop at
-    2π·BENCH_CURRENT_HZ rad/s, I-P speed loop at ``alpha_s`` (rad/s; default 2π·BENCH_SPEED_HZ).
+    """The bench's drive: IMC current loop at 2π·BENCH_CURRENT_HZ rad/s, I-P speed loop at ``alpha_s``.
 
-    ``sensorless``: the observer closes the loop (from ``handover`` s on, after ``settle`` s of unscored
-    settling); ``startup``: an I-f start-up from standstill (:meth:`IfStartup.for_machine`) or None (each
-    scenario starts steady); ``ts``: the control period (s; default the FOC's); ``latency`` and ``inverter``: as
-    :class:`Drive` takes them (defaults: the historical timing, 540 V); ``foc_kw``: :class:`FOC`'s options
-    (``advance``, ``field_weakening``, ``speed_schedule``, ...)."""
+    Args:
+        machine: The machine the FOC assumes.
+        sensorless: Whether the observer closes the loop.
+        handover: The time from which the observer closes the loop, s.
+        settle: The observer's unscored settling before t = 0, s.
+        startup: An I-f start-up from standstill (:meth:`IfStartup.for_machine`), or None (each scenario
+            starts steady).
+        alpha_s: The speed loop's bandwidth, rad/s (default 2π·BENCH_SPEED_HZ).
+        ts: The control period, s (default the FOC's).
+        latency: As :class:`Drive` takes it (default :class:`Latency`'s timing).
+        inverter: As :class:`Drive` takes it (default a 540 V :class:`Inverter`).
+        **foc_kw: :class:`FOC`'s options (``advance``, ``field_weakening``, ``speed_schedule``, ...).
+
+    Returns:
+        The :class:`Drive`.
+    """
     alpha_s = 2 * math.pi * papers.BENCH_SPEED_HZ if alpha_s is None else alpha_s
     kw = dict(foc_kw) if ts is None else {"ts": ts, **foc_kw}
     foc = FOC.imc(machine, alpha_c=2 * math.pi * papers.BENCH_CURRENT_HZ, alpha_s=alpha_s, **kw)
@@ -114,8 +135,7 @@ IF_SUDDEN_LOAD_PU = 0.7246
 
 
 def if_load_limit(machine: PMSMParams, dJ: float = 0.0, startup: IfStartup | None = None) -> float:
-    """The largest load (N·m) that ``machine`` may carry during its I-f start-up (``startup``, default
-    :meth:`IfStartup.for_machine`: a drive file states its own), with its inertia scaled by ``1 + dJ``.
+    """The largest load that ``machine`` may carry during its I-f start-up.
 
     During I-f the rotor is held by the current vector I_f only: its torque is at most T_max = K_t I_f (the
     magnet torque; an IPMSM's reluctance torque is left out).  The load is on from t = 0 (a step), so the
@@ -126,7 +146,16 @@ def if_load_limit(machine: PMSMParams, dJ: float = 0.0, startup: IfStartup | Non
         T_L ≤ 0.7246 K_t I_f − J (1 + dJ) a_peak − B ω_m,sw.
 
     On 000's SPMSM bench: 0.7246 · 7.0 − 1.25 − 0 = 3.82 N·m; measured with the SOIFO at 1000 r/min, 4.5 N·m
-    still started and 5.0 N·m ran backwards (−320 r/min, flagged lost_speed): sufficient, not necessary."""
+    still started and 5.0 N·m ran backwards (−320 r/min, flagged lost_speed): sufficient, not necessary.
+
+    Args:
+        machine: The machine.
+        dJ: The relative inertia error: the inertia is scaled by ``1 + dJ``.
+        startup: The I-f start-up (default :meth:`IfStartup.for_machine`: a drive file states its own).
+
+    Returns:
+        The load limit, N·m.
+    """
     s = IfStartup.for_machine(machine) if startup is None else startup
     a_peak_m = float(s.accel) / machine.p * (2.0 if s.smooth else 1.0)  # mechanical, rad/s²
     w_sw_m = float(s.omega_switch) / machine.p
@@ -138,20 +167,38 @@ def if_load_limit(machine: PMSMParams, dJ: float = 0.0, startup: IfStartup | Non
 
 
 def if_handover_earliest(machine: PMSMParams, startup: IfStartup | None = None) -> float:
-    """The earliest time (s) the I-f start-up of ``machine`` (``startup``, default
-    :meth:`IfStartup.for_machine`) can hand over: the ramp to the switch speed, then both the hold and the
-    agreement's dwell at it (they run at the same time)."""
+    """The earliest time the I-f start-up of ``machine`` can hand over.
+
+    The ramp to the switch speed, then both the hold and the agreement's dwell at it (they run at the same
+    time).
+
+    Args:
+        machine: The machine.
+        startup: The I-f start-up (default :meth:`IfStartup.for_machine`).
+
+    Returns:
+        The time, s.
+    """
     s = IfStartup.for_machine(machine) if startup is None else startup
     return float(s.omega_switch / s.accel) + max(float(s.hold), float(s.dwell))
 
 
 def drive_speed_limit_rpm(machine: PMSMParams, inverter: Inverter | None = None) -> float:
-    """The highest speed (r/min, either direction) a drive may ask of ``machine``: the speed at which the
-    back EMF alone, ωe ψf, reaches the inverter's voltage limit u_max = U_dc/√3 (``inverter``, default the
-    benches' :class:`Inverter`; a drive file states its own: ``DriveFile.derived["speed_limit_rpm"]``).
-    Above it an FOC without field weakening (i_d* is 0 or MTPA, never negative) cannot hold even zero current:
+    """The highest speed a drive may ask of ``machine``.
+
+    The speed at which the back EMF alone, ωe ψf, reaches the inverter's voltage limit u_max = U_dc/√3 (a
+    drive file states its own: ``DriveFile.derived["speed_limit_rpm"]``).  Above it an FOC without field
+    weakening (i_d* is 0 or MTPA, never negative) cannot hold even zero current:
     the machine would run away from its reference.
     It is a no-load bound (load adds Rs·i and ωe·Lq·i to the voltage), so it is necessary, not sufficient:
-    ipmsm002 1323 r/min (2.2 × its 600 r/min rating), spmsm000 2835 r/min (1.4 × 2000 r/min)."""
+    ipmsm002 1323 r/min (2.2 × its 600 r/min rating), spmsm000 2835 r/min (1.4 × 2000 r/min).
+
+    Args:
+        machine: The machine.
+        inverter: The inverter (default the benches' :class:`Inverter`).
+
+    Returns:
+        The speed, r/min (either direction).
+    """
     w_e = float((Inverter() if inverter is None else inverter).u_max) / float(machine.psi_f)  # rad/s electrical
     return w_e / machine.p * 60.0 / (2 * math.pi)

@@ -29,8 +29,23 @@ class AbstractComponent(eqx.Module):
 
     @abc.abstractmethod
     def init(self, op=None) -> Any:
-        """The state at the operating point ``op`` (an ``OperatingPoint``; None: at rest at θe = 0)."""
+        """The state at an operating point.
+
+        Args:
+            op: An ``OperatingPoint``; None: at rest at θe = 0.
+
+        Returns:
+            The component's state.
+        """
 
     @abc.abstractmethod
     def step(self, state, inp) -> tuple[Any, Any]:
-        """One control period: (the next state, the outputs)."""
+        """One control period.
+
+        Args:
+            state: The component's state.
+            inp: Its input.
+
+        Returns:
+            ``(the next state, the outputs)``.
+        """

@@ -123,6 +123,19 @@ class OperatingPoint(NamedTuple):
     controller's frame may sit ``offset`` ahead of the rotor's (a biased
     observer closing the loop): its references are then met in its own frame,
     and the rotor-frame currents below are those references rotated by ``offset``.
+
+    Attributes:
+        omega_m: The mechanical speed, rad/s.
+        omega_m_ref: The speed reference at t = 0, rad/s.
+        theta_e: The electrical angle at t = 0, rad.
+        t_load: The load torque at t = 0, N·m.
+        i_d: The rotor-frame d current, A.
+        i_q: The rotor-frame q current, A.
+        u_d: The rotor-frame d voltage the true machine needs there, V.
+        u_q: The rotor-frame q voltage, V.
+        offset: The controller's angle minus the rotor's, rad (0: encoder or unbiased).
+        id_fw: Field weakening's Δi_d there (≤ 0, A): the controller's i_d* is the policy's plus it (0
+            without field weakening, or below base speed).
     """
 
     omega_m: jax.Array  # mechanical speed, rad/s
@@ -140,8 +153,15 @@ class OperatingPoint(NamedTuple):
 
     @classmethod
     def at_rest(cls, theta_e) -> OperatingPoint:
-        """The machine at standstill at the electrical angle ``theta_e`` (rad): no speed, current, load or
-        voltage (where an I-f start-up starts, the rotor parked by its alignment)."""
+        """The machine at standstill: no speed, current, load or voltage (where an I-f start-up starts, the
+        rotor parked by its alignment).
+
+        Args:
+            theta_e: The electrical angle, rad.
+
+        Returns:
+            The :class:`OperatingPoint`.
+        """
         theta_e = jnp.asarray(theta_e, dtype=jnp.result_type(theta_e, float))
         z = jnp.zeros_like(theta_e)
         return cls(omega_m=z, omega_m_ref=z, theta_e=theta_e, t_load=z, i_d=z, i_q=z, u_d=z, u_q=z)
@@ -151,6 +171,21 @@ class IfStartup(eqx.Module):
     """I-f start-up from standstill, then a hand-over to the given position (module doc, steps 1–5).
 
     :meth:`for_machine` gives the defaults we use for a machine (``jaxobs.papers``, IF_*).
+
+    Args:
+        i_f: The current amplitude during start-up, A (> 0).
+        accel: The mean ramp rate of the electrical frequency, rad/s² (> 0).
+        omega_switch: The electrical speed at which control switches to the given position, rad/s (> 0).
+        hold: The least time spent at ``omega_switch`` before switching (lets an observer converge), s.
+        blend: After the switch, the time over which the d-current goes from the I-f vector's to the i_d
+            policy, s.
+        tol: Agreement: |Δ − Δ̄| of the offset Δ = θ_f − θ̂ (the load angle), rad (in (0, 3.15]).
+        speed_tol: Agreement: |ω̂ − ω_f| / ω_f (> 0).
+        dwell: The time agreement must hold (and Δ̄ is Δ low-passed over it), s (> 0).
+        smooth: A raised-cosine ramp (continuous acceleration); False: linear.
+
+    Raises:
+        ValueError: A value out of its range, naming the field.
     """
 
     i_f: jax.Array  # current amplitude during start-up, A (> 0)
@@ -198,6 +233,15 @@ class IfStartup(eqx.Module):
         a limit cycle (230–610 r/min) with α_s = 2π·5 rad/s after a switch at 200 r/min (10 %) on the SPMSM
         bench, and ±1 % at 400 r/min (ω_e,sw ≥ 4 α_s).  Through a LESO's 15 Hz PLL the loop rang ±11 % at
         60 r/min (10 %) on the IPMSM bench and ±3 % at 120 r/min.  Hence 20 % by default.
+
+        Args:
+            par: The machine the controller assumes.
+            rpm_switch: The switch speed, r/min (default papers.IF_SWITCH_PU × rated speed).
+            i_f: The start-up current, A (default papers.IF_CURRENT_PU × the rated current).
+            **kw: Other :class:`IfStartup` keywords.
+
+        Returns:
+            The :class:`IfStartup`.
         """
         i_rated, kt, J, p = float(par.i_rated), float(par.kt), float(par.J), par.p
         i_f = papers.IF_CURRENT_PU * i_rated if i_f is None else float(i_f)
@@ -209,7 +253,14 @@ class IfStartup(eqx.Module):
         return cls(i_f, p * accel_m, p * rpm * RPM, **kw)
 
     def ramp(self, t):
-        """The I-f electrical frequency at time t from the start, rad/s."""
+        """The I-f electrical frequency.
+
+        Args:
+            t: The time from the start, s.
+
+        Returns:
+            The frequency, rad/s.
+        """
         tau = jnp.clip(t * self.accel / self.omega_switch, 0.0, 1.0)
         if self.smooth:
             tau = tau - jnp.sin(2 * jnp.pi * tau) / (2 * jnp.pi)
@@ -217,6 +268,25 @@ class IfStartup(eqx.Module):
 
 
 class ControllerState(eqx.Module):
+    """The FOC's state between two periods.
+
+    Attributes:
+        int_d: The d current-PI integrator, V.
+        int_q: The q current-PI integrator, V.
+        int_w: The speed-PI integrator, A.
+        iq_ref: The speed loop's output held between its samples, A.
+        theta_f: The I-f angle, rad.
+        omega_f: The I-f electrical frequency, rad/s.
+        t_at_switch: The time spent at the switch-over frequency, s.
+        mode: 0: I-f start-up, 1: closed loop on the given position.
+        d_lp: I-f: the offset θ_f − θ̂ low-passed over the dwell, rad.
+        t_agree: I-f: how long the given position has agreed with the I-f frame, s.
+        t_closed: The time since the switch, s.
+        id_hand: The d-current at the switch (in the given frame), A.
+        id_fw: Field weakening's Δi_d (≤ 0; 0 without field weakening), A.
+        kp_w: The speed loop's k_pω at its last sample (a scheduled gain's bumpless change), A/(rad/s).
+    """
+
     int_d: jax.Array  # current-PI integrators, V
     int_q: jax.Array
     int_w: jax.Array  # speed-PI integrator, A
@@ -234,7 +304,17 @@ class ControllerState(eqx.Module):
 
 
 class FOCInput(NamedTuple):
-    """What the controller is given at sample ``k``."""
+    """What the controller is given at sample ``k``.
+
+    Attributes:
+        k: The sample index (the speed loop runs when k % speed_every == 0).
+        i_a: The measured stationary-frame α current, A.
+        i_b: The measured β current, A.
+        theta: The electrical angle the controller uses (encoder or observer), rad.
+        omega_e: The electrical speed it uses (decoupling, delay compensation), rad/s.
+        omega_m: The mechanical speed the speed loop uses, rad/s.
+        omega_m_ref: The speed reference, rad/s (i_q* in A when ``outer="current"``).
+    """
 
     k: jax.Array  # sample index (the speed loop runs when k % speed_every == 0)
     i_a: jax.Array  # measured stationary-frame currents, A
@@ -246,6 +326,16 @@ class FOCInput(NamedTuple):
 
 
 class FOCOutput(NamedTuple):
+    """What the controller gives each period.
+
+    Attributes:
+        u_a: The α voltage to apply over the next period (before the inverter's limit), V.
+        u_b: The β voltage, V.
+        id_ref: The d current reference, A.
+        iq_ref: The q current reference, A.
+        theta: The angle the current loop used (given position, or the I-f angle in start-up), rad.
+    """
+
     u_a: jax.Array  # voltage to apply over the next period (before the inverter's limit), V
     u_b: jax.Array
     id_ref: jax.Array  # current references, A
@@ -272,6 +362,30 @@ class FOC(AbstractComponent):
     :meth:`imc` sets ``est``; :class:`~jaxobs.drive.ClosedLoop` binds the
     scenario's assumed machine, the inverter's limit and the drive's start-up
     with :meth:`bind` before it steps.
+
+    Args:
+        kp_d: d current loop's proportional gain, V/A (> 0).
+        ki_d: d current loop's integral gain, V/(A·s) (≥ 0).
+        kp_q: q current loop's proportional gain, V/A (> 0).
+        ki_q: q current loop's integral gain, V/(A·s) (≥ 0).
+        kp_w: Speed loop's proportional gain, A/(rad/s), mechanical speed (> 0).
+        ki_w: Speed loop's integral gain, A/rad (≥ 0).
+        i_max: The current-vector limit, A (> 0).
+        ts: The current-loop period, s.
+        speed_every: The speed loop runs every this many periods (an integer ≥ 1).
+        id_mode: The i_d* policy: ``"zero"`` or ``"mtpa"``.
+        delay_compensation: Whether to rotate the output ahead (the default ``advance`` 1.5 periods, else 0).
+        advance: The output is rotated ahead by advance·ω̂e·T_s (delay compensation), periods in [0, 3].
+        field_weakening: A :class:`VoltageFeedbackFW`, or None: i_d* is the policy's (zero or MTPA).
+        outer: ``"speed"``, or ``"current"``: the reference is i_q*, A.
+        setpoint_weight: b in k_pω (b ω* − ω), in [0, 1]: 0 = I-P (no overshoot), 1 = PI.
+        speed_schedule: N > 0: the speed-loop bandwidth is min(α_s, |ωe*|/N) (:meth:`speed_gains`); 0: fixed.
+        est: The machine the controller assumes (:class:`PMSMParams`), or None until :meth:`bind`.
+        u_max: The voltage limit for anti-windup, V, or None until :meth:`bind`.
+        startup: An :class:`IfStartup` (None: closed loop from t = 0).
+
+    Raises:
+        ValueError: A value out of its range, naming the field.
     """
 
     kp_d: jax.Array  # V/A
@@ -364,7 +478,15 @@ class FOC(AbstractComponent):
     def imc(cls, est_par: PMSMParams, alpha_c, alpha_s, i_max=None, **kw):
         """IMC current gains (k_p = α_c L̂, k_i = α_c R̂s) and double-pole speed gains at −α_s.
 
-        ``i_max`` defaults to 1.5× the rated current.
+        Args:
+            est_par: The machine the controller assumes.
+            alpha_c: The current loops' bandwidth α_c, rad/s.
+            alpha_s: The speed loop's double pole α_s, rad/s.
+            i_max: The current-vector limit, A (default 1.5× the rated current).
+            **kw: Other :class:`FOC` keywords.
+
+        Returns:
+            The :class:`FOC`.
         """
         alpha_c = check_positive("alpha_c", alpha_c, "FOC.imc")
         alpha_s = check_positive("alpha_s", alpha_s, "FOC.imc")
@@ -391,6 +513,12 @@ class FOC(AbstractComponent):
         α_s = 2 k_iω/k_pω to min(α_s, |p ω_m*|/N), so k_pω scales by r = min(1, |p ω_m*|/(N α_s)) and k_iω
         by r².  Scheduled on the reference, an outside signal: scheduled on ω̂ the I-P's proportional term
         k_pω(ω̂) ω̂ would double its own small-signal gain.  At ω_m* = 0 the speed loop holds its output.
+
+        Args:
+            omega_m_ref: The mechanical speed reference ω_m*, rad/s.
+
+        Returns:
+            ``(k_pω, k_iω)``.
         """
         if self.speed_schedule <= 0:
             return self.kp_w, self.ki_w
@@ -402,15 +530,22 @@ class FOC(AbstractComponent):
         return self.kp_w * r, self.ki_w * r * r
 
     def bind(self, est: PMSMParams, u_max, startup: IfStartup | None = None) -> FOC:
-        """This controller with its assumed machine, voltage limit and start-up set (no checks: traced-safe)."""
+        """This controller with its assumed machine, voltage limit and start-up set (no checks: traced-safe).
+
+        Args:
+            est: The machine the controller assumes.
+            u_max: The voltage limit, V.
+            startup: The I-f start-up, or None.
+
+        Returns:
+            The :class:`FOC`.
+        """
         return eqx.tree_at(
             lambda f: (f.est, f.u_max, f.startup), self, (est, u_max, startup), is_leaf=lambda x: x is None
         )
 
     def init(self, op: OperatingPoint | None = None, *, theta_f0=0.0) -> ControllerState:
         """Zero integrators (``op=None``), or the integrators that hold the drive at ``op`` (a steady start).
-
-        ``theta_f0`` (keyword-only extra, rad): the I-f angle to start from when the FOC has a start-up.
 
         At a steady operating point the errors are zero, so the current PIs'
         outputs are their integrators plus the decoupling terms (computed with
@@ -419,6 +554,13 @@ class FOC(AbstractComponent):
         weakening's integrator starts at the operating point's Δi_d (``op.id_fw``).
         With an I-f start-up the drive starts from standstill: zeros, and the
         I-f angle at ``theta_f0`` (ClosedLoop: θ_e0 − 90°, the parked rotor).
+
+        Args:
+            op: The :class:`OperatingPoint`, or None.
+            theta_f0: The I-f angle to start from when the FOC has a start-up, rad.
+
+        Returns:
+            The :class:`ControllerState`.
         """
         z = jnp.zeros_like(self.kp_d)
         mode = jnp.asarray(1 if self.startup is None else 0, dtype=jnp.int32)
@@ -468,6 +610,17 @@ class FOC(AbstractComponent):
         i_q* in turn, from Δi_d = 0), i_q* limited to the current circle's rest,
         Δi_d to [−i_max, 0].  Below base speed Δi_d = 0 and the point is the
         policy's, unchanged.
+
+        Args:
+            par: The true machine.
+            omega_m: The mechanical speed ω_m, rad/s.
+            omega_m_ref: The speed reference, rad/s (i_q* in A with ``outer="current"``).
+            theta_e: The electrical angle, rad.
+            t_load: The load torque T_L, N·m.
+            offset: The controller's angle minus the rotor's, rad.
+
+        Returns:
+            The :class:`OperatingPoint`.
         """
         w_e = par.p * omega_m
 
@@ -552,6 +705,13 @@ class FOC(AbstractComponent):
         for i_q > 0 under MTPA (the reluctance term grows as i_q², then i_q), so from i_lin, where it is at or
         above the target, the steps fall monotonically; on a machine with Lq = 4 Ld at 2× its rated torque the
         torque's error is 8e-6 after 3 steps, 2e-11 after 4 and rounding after 5.
+
+        Args:
+            est: The machine the controller assumes.
+            iq_lin: The speed loop's output, A (K̂_t units).
+
+        Returns:
+            i_q*, A.
         """
         if self.id_mode == "zero":
             return iq_lin
@@ -563,17 +723,31 @@ class FOC(AbstractComponent):
         return iq
 
     def iq_lin(self, est: PMSMParams, iq):
-        """The speed loop's output (A, K̂_t units) that asks for the current i_q under the policy: the inverse of
-        :meth:`mtpa_iq`."""
+        """The speed loop's output that asks for the current i_q under the policy: the inverse of :meth:`mtpa_iq`.
+
+        Args:
+            est: The machine the controller assumes.
+            iq: The q current, A.
+
+        Returns:
+            The speed loop's output, A (K̂_t units).
+        """
         if self.id_mode == "zero":
             return iq
         return self._policy_torque(est, iq) / est.kt
 
     def iq_limit(self, est: PMSMParams):
-        """(|i_q*| on the policy's curve at |i| = i_max, the speed loop's output limit in K̂_t units), A.
+        """The current limits of the speed loop under the policy.
 
         MTPA on the circle |i| = I: i_d = (ψf − √(ψf² + 8 ΔL² I²))/(4 ΔL), ΔL = Lq − Ld (the torque
-        (ψf − ΔL i_d)·√(I² − i_d²) at its maximum over i_d), i_q = √(I² − i_d²)."""
+        (ψf − ΔL i_d)·√(I² − i_d²) at its maximum over i_d), i_q = √(I² − i_d²).
+
+        Args:
+            est: The machine the controller assumes.
+
+        Returns:
+            ``(|i_q*| on the policy's curve at |i| = i_max, the speed loop's output limit in K̂_t units)``, A.
+        """
         if self.id_mode == "zero":
             return self.i_max, self.i_max
         dl = est.Lq - est.Ld
@@ -586,9 +760,14 @@ class FOC(AbstractComponent):
     def step(self, cs: ControllerState, inp: FOCInput) -> tuple[ControllerState, FOCOutput]:
         """One current-loop period: the voltage to apply over the next period.
 
-        ``inp.theta``/``omega_e``/``omega_m``: the position and speeds the controller
-        uses (encoder or observer); ``inp.omega_m_ref`` is the speed reference
-        (rad/s), or i_q* (A) when ``outer="current"``.
+        Args:
+            cs: The :class:`ControllerState`.
+            inp: The :class:`FOCInput`: ``inp.theta``/``omega_e``/``omega_m`` are the position and speeds the
+                controller uses (encoder or observer); ``inp.omega_m_ref`` is the speed reference (rad/s), or
+                i_q* (A) when ``outer="current"``.
+
+        Returns:
+            ``(the next ControllerState, the FOCOutput)``.
         """
         if self.est is None or self.u_max is None:
             raise ValueError(

@@ -218,8 +218,14 @@ _TOP = ("name", "description")
 
 
 class Derived(NamedTuple):
-    """One value that follows from a drive file: ``value`` in ``unit``, ``rule`` (how, and its source),
-    ``given`` (True: the file set it)."""
+    """One value that follows from a drive file.
+
+    Attributes:
+        value: The value, in ``unit``.
+        unit: Its unit.
+        rule: How it follows, and its source.
+        given: True: the file set it.
+    """
 
     value: float | str
     unit: str

@@ -98,7 +98,14 @@ VSD_AMPLITUDE = vsd_matrix() / math.sqrt(3.0)
 
 
 def phases_to_vsd(x6):
-    """Six phase quantities (last axis: a1, b1, c1, a2, b2, c2) → (α, β, x, y, o1, o2), amplitude invariant."""
+    """Six phase quantities → VSD coordinates, amplitude invariant.
+
+    Args:
+        x6: The phase quantities, last axis (a1, b1, c1, a2, b2, c2).
+
+    Returns:
+        (α, β, x, y, o1, o2) along the last axis.
+    """
     return jnp.asarray(x6) @ jnp.asarray(VSD_AMPLITUDE.T)
 
 
@@ -108,23 +115,46 @@ def vsd_to_phases(v6):
 
 
 def sets_to_vsd(a1, b1, a2, b2):
-    """The two sets' Clarke vectors (both in set 1's stationary frame) → (α, β, x, y): z_αβ = (s1 + s2)/2,
-    z_xy = conj(s1 − s2)/2 (module doc)."""
+    """The two sets' Clarke vectors → VSD: z_αβ = (s1 + s2)/2, z_xy = conj(s1 − s2)/2 (module doc).
+
+    Args:
+        a1: Set 1's α component (set 1's stationary frame).
+        b1: Set 1's β component.
+        a2: Set 2's α component (set 1's stationary frame).
+        b2: Set 2's β component.
+
+    Returns:
+        ``(α, β, x, y)``.
+    """
     return (a1 + a2) / 2, (b1 + b2) / 2, (a1 - a2) / 2, (b2 - b1) / 2
 
 
 def vsd_to_sets(a, b, x, y):
-    """(α, β, x, y) → the two sets' Clarke vectors (a1, b1, a2, b2): s1,2 = z_αβ ± conj(z_xy)."""
+    """VSD → the two sets' Clarke vectors: s1,2 = z_αβ ± conj(z_xy).
+
+    Args:
+        a: α.
+        b: β.
+        x: x.
+        y: y.
+
+    Returns:
+        ``(a1, b1, a2, b2)``, both sets in set 1's stationary frame.
+    """
     return a + x, b - y, a - x, b + y
 
 
 class DualPMSMParams(eqx.Module):
     """A dual three-phase PMSM (SI, amplitude-invariant VSD variables).
 
-    ``m`` is the αβ subspace as a :class:`PMSMParams`: per-phase Rs, the VSD
-    inductances Ld, Lq, ψf (peak phase flux), each phase's BEMF harmonics a5,
-    a7 (they land in xy), and the *whole* machine's J, B, rated torque and speed.
-    ``Lls`` is the xy-subspace inductance (the leakage), H.
+    Args:
+        m: The αβ subspace as a :class:`PMSMParams`: per-phase Rs, the VSD inductances Ld, Lq, ψf (peak
+            phase flux), each phase's BEMF harmonics a5, a7 (they land in xy), and the *whole* machine's J,
+            B, rated torque and speed.
+        Lls: The xy-subspace inductance (the leakage), H (> 0).
+
+    Raises:
+        ValueError: A value of the wrong type or out of its range.
     """
 
     m: PMSMParams
@@ -167,8 +197,13 @@ def dual_ipmsm_paper002(J=None, **overrides) -> DualPMSMParams:
     twice its bench inertia, friction and rated torque (60 N·m at 8.9 A per phase).  The xy inductance
     Lls = papers.DUAL_LLS_002 and the 5th/7th BEMF harmonics a5, a7 = papers.DUAL_A5_002/DUAL_A7_002 are
     fitted on 002's C-LESO numbers under individual-set control (Figs 13-14: papers.py says how).
-    ``J`` defaults to twice papers.BENCH_J_002 (the bench); ``overrides`` go to the αβ PMSMParams,
-    except ``Lls``.
+
+    Args:
+        J: The inertia, kg·m² (default twice papers.BENCH_J_002, the bench).
+        **overrides: Keywords of the αβ :class:`PMSMParams`, and ``Lls``.
+
+    Returns:
+        The :class:`DualPMSMParams`.
     """
     kw = dict(papers.IPMSM_002)
     kw.update(a5=papers.DUAL_A5_002, a7=papers.DUAL_A7_002)
@@ -188,7 +223,15 @@ def pm_flux_vsd(par: DualPMSMParams, theta_e):
 
 
 def dual_torque(par: DualPMSMParams, x):
-    """Electromagnetic torque at state ``x``, N·m (module doc)."""
+    """Electromagnetic torque (module doc).
+
+    Args:
+        par: The machine.
+        x: The state [i_d, i_q, i_x, i_y, ω_m, θ_e].
+
+    Returns:
+        The torque, N·m.
+    """
     m = par.m
     i_d, i_q, i_x, i_y, th = x[0], x[1], x[2], x[3], x[5]
     k_a, k_b, k_x, k_y = pm_flux_vsd(par, th)
@@ -198,7 +241,17 @@ def dual_torque(par: DualPMSMParams, x):
 
 
 def dual_vf(par: DualPMSMParams, x, u_vsd, t_load):
-    """dx/dt for x = [i_d, i_q, i_x, i_y, ω_m, θ_e] under ``u_vsd = (u_α, u_β, u_x, u_y)``."""
+    """The dual machine's vector field.
+
+    Args:
+        par: The machine.
+        x: The state [i_d, i_q, i_x, i_y, ω_m, θ_e].
+        u_vsd: ``(u_α, u_β, u_x, u_y)``, V.
+        t_load: The load torque, N·m.
+
+    Returns:
+        dx/dt.
+    """
     m = par.m
     i_d, i_q, i_x, i_y, w_m, th = x[0], x[1], x[2], x[3], x[4], x[5]
     w_e = m.p * w_m
@@ -214,7 +267,15 @@ def dual_vf(par: DualPMSMParams, x, u_vsd, t_load):
 
 
 class DualPlantInput(NamedTuple):
-    """What drives the machine over one period: each set's applied Clarke voltage (set 1's frame), V."""
+    """What drives the machine over one period: each set's applied Clarke voltage (set 1's frame).
+
+    Attributes:
+        u_a1: Set 1's α voltage, V.
+        u_b1: Set 1's β voltage, V.
+        u_a2: Set 2's α voltage, V.
+        u_b2: Set 2's β voltage, V.
+        t_load: The load torque, N·m.
+    """
 
     u_a1: jax.Array
     u_b1: jax.Array
@@ -224,7 +285,21 @@ class DualPlantInput(NamedTuple):
 
 
 class DualPlantOutput(NamedTuple):
-    """The machine at t_k."""
+    """The machine at t_k.
+
+    Attributes:
+        i_d: The αβ subspace's rotor-frame d current, A.
+        i_q: The αβ subspace's rotor-frame q current, A.
+        i_x: The xy subspace's x current, A.
+        i_y: The xy subspace's y current, A.
+        omega_m: The mechanical speed, rad/s.
+        theta_e: The electrical angle, rad, wrapped.
+        i_a1: Set 1's α current (set 1's stationary frame), A.
+        i_b1: Set 1's β current, A.
+        i_a2: Set 2's α current (set 1's stationary frame), A.
+        i_b2: Set 2's β current, A.
+        torque: The electromagnetic torque, N·m.
+    """
 
     i_d: jax.Array  # αβ subspace, rotor frame, A
     i_q: jax.Array
@@ -245,8 +320,19 @@ class DualPlantState(NamedTuple):
 
 
 class DualPMSM(AbstractComponent):
-    """The dual machine ``par`` behind two inverters (one per set, the same ``inverter``, dead time
-    ``dead_time`` each, its error added per set inside the vector field), integrated per control period."""
+    """The dual machine ``par`` behind two inverters, integrated per control period.
+
+    Args:
+        par: The :class:`DualPMSMParams`.
+        inverter: The :class:`Inverter` of each set (one per set, the same).
+        dead_time: The dead time of each set, s; its error is added per set inside the vector field.
+        ts: The control period, s.
+        n_sub: Substeps per period (an integer ≥ 1).
+        rule: The integration rule (default :class:`~jaxobs.RK4`).
+
+    Raises:
+        ValueError: A value out of its range, naming the field.
+    """
 
     par: DualPMSMParams
     inverter: Inverter
@@ -268,12 +354,27 @@ class DualPMSM(AbstractComponent):
         self.rule = check_rule(RK4() if rule is None else rule, "DualPMSM")
 
     def set_currents(self, x):
-        """Each set's Clarke currents (a1, b1, a2, b2) at state ``x``."""
+        """Each set's Clarke currents at state ``x``.
+
+        Args:
+            x: The state [i_d, i_q, i_x, i_y, ω_m, θ_e].
+
+        Returns:
+            ``(i_a1, i_b1, i_a2, i_b2)``, A.
+        """
         i_a, i_b = dq_to_ab(x[0], x[1], x[5])
         return vsd_to_sets(i_a, i_b, x[2], x[3])
 
     def field(self, x, inp):
-        """dx/dt under ``inp = (u_a1, u_b1, u_a2, u_b2, T_L)`` (applied, limited; dead time added here)."""
+        """The vector field under the inverters.
+
+        Args:
+            x: The state [i_d, i_q, i_x, i_y, ω_m, θ_e].
+            inp: ``(u_a1, u_b1, u_a2, u_b2, T_L)`` (applied, limited; dead time added here).
+
+        Returns:
+            dx/dt.
+        """
         i_a1, i_b1, i_a2, i_b2 = self.set_currents(x)
         d_a1, d_b1 = self.inverter.dead_time_error(self.dead_time, i_a1, i_b1)
         # set 2's own phases are 30° ahead: its dead-time error is set 1's formula in its own frame
@@ -285,8 +386,15 @@ class DualPMSM(AbstractComponent):
         return dual_vf(self.par, x, u, inp[4])
 
     def init(self, op=None) -> DualPlantState:
-        """The machine at the operating point ``op`` (an OperatingPoint: its αβ currents i_d, i_q, speed and
-        angle; zero xy current), or at rest at θe = 0 (None)."""
+        """The machine's initial state.
+
+        Args:
+            op: An :class:`OperatingPoint` (its αβ currents i_d, i_q, speed and angle; zero xy current), or
+                None: at rest at θe = 0.
+
+        Returns:
+            The plant state.
+        """
         dtype = jnp.result_type(self.par.m.Rs, float)
         vals = (0.0,) * 6 if op is None else (op.i_d, op.i_q, 0.0, 0.0, op.omega_m, op.theta_e)
         x0 = jnp.stack([jnp.asarray(v, dtype) for v in vals])

@@ -40,19 +40,41 @@ def ab_to_abc(a, b):
 
 
 def clarke_abc_to_ab(xa, xb, xc):
-    """Amplitude-invariant Clarke transform."""
+    """Amplitude-invariant Clarke transform.
+
+    Args:
+        xa: Phase a.
+        xb: Phase b.
+        xc: Phase c.
+
+    Returns:
+        ``(α, β)``.
+    """
     return (2.0 / 3.0) * (xa - 0.5 * (xb + xc)), (xb - xc) / _S3
 
 
 class InverterInput(NamedTuple):
-    """The commanded stationary-frame voltage, V."""
+    """The commanded stationary-frame voltage.
+
+    Attributes:
+        u_a: u_α, V.
+        u_b: u_β, V.
+    """
 
     u_a: jax.Array
     u_b: jax.Array
 
 
 class SensorInput(NamedTuple):
-    """The true quantities a sensor set measures at sample ``k``."""
+    """The true quantities a sensor set measures at sample ``k``.
+
+    Attributes:
+        k: The sample index (the noise is a function of the key and k).
+        u_a: The α voltage applied over the period that starts at t_k, V.
+        u_b: The β voltage, V.
+        i_a: The stationary-frame α current at t_k, A.
+        i_b: The β current at t_k, A.
+    """
 
     k: jax.Array  # sample index (the noise is a function of the key and k)
     u_a: jax.Array  # voltage applied over the period that starts at t_k, V
@@ -68,6 +90,14 @@ class Inverter(AbstractComponent):
     voltage it can apply (the command limited to |u| ≤ U_dc/√3).  The dead-time
     error depends on the instantaneous current, so the plant adds it inside its
     vector field (:class:`~jaxobs.drive.PMSM`).
+
+    Args:
+        udc: The dc-link voltage, V (> 0).
+        f_pwm: The switching frequency, Hz (> 0).
+        i_smooth: The tanh width for the dead-time sign, A (0: the exact sign).
+
+    Raises:
+        ValueError: A value out of its range, naming the field.
     """
 
     udc: jax.Array  # dc-link voltage, V (> 0)
@@ -84,13 +114,28 @@ class Inverter(AbstractComponent):
         return self.udc / _S3
 
     def limit(self, u_a, u_b):
-        """Scale the voltage vector back onto the circle |u| ≤ U_dc/√3 (direction kept)."""
+        """Scale the voltage vector back onto the circle |u| ≤ U_dc/√3 (direction kept).
+
+        Args:
+            u_a: u_α, V.
+            u_b: u_β, V.
+
+        Returns:
+            The limited ``(u_α, u_β)``, V.
+        """
         mag = safe_norm2(u_a, u_b)
         scale = jnp.where(mag > self.u_max, self.u_max / jnp.maximum(mag, 1e-12), 1.0)
         return u_a * scale, u_b * scale
 
     def init(self, op=None) -> None:
-        """No state (the operating point does not matter to an average-value model)."""
+        """No state (the operating point does not matter to an average-value model).
+
+        Args:
+            op: The operating point (unused).
+
+        Returns:
+            None.
+        """
         return None
 
     def step(self, state, inp: InverterInput) -> tuple[None, InverterInput]:
@@ -102,7 +147,16 @@ class Inverter(AbstractComponent):
         return jnp.sign(i)
 
     def dead_time_error(self, dead_time, i_a, i_b):
-        """Stationary-frame voltage error of the dead time ``dead_time`` (s) at current i_ab."""
+        """Stationary-frame voltage error of the dead time at the current i_ab.
+
+        Args:
+            dead_time: The dead time, s.
+            i_a: The α current, A.
+            i_b: The β current, A.
+
+        Returns:
+            ``(Δu_α, Δu_β)``, V.
+        """
         du = self.udc * dead_time * self.f_pwm
         ia, ib, ic = ab_to_abc(i_a, i_b)
         return clarke_abc_to_ab(-du * self._sgn(ia), -du * self._sgn(ib), -du * self._sgn(ic))
@@ -122,6 +176,16 @@ class Sensors(AbstractComponent):
     voltage and current an observer is told; the noise of sample k is drawn
     from ``fold_in(key, k)``, so a run is reproducible, vmappable and the same
     whatever the loop's blocking.
+
+    Args:
+        i_offset: The current offsets (Δi_α, Δi_β), A.
+        u_offset: The voltage offsets (Δu_α, Δu_β), V.
+        i_gain_error: The current gain errors (ε_α, ε_β): the gains are 1 + ε (ε > −1).
+        i_noise: The current noise standard deviation, A (≥ 0).
+        u_noise: The voltage noise standard deviation, V (≥ 0).
+
+    Raises:
+        ValueError: A value out of its range, naming the field.
     """
 
     i_offset: jax.Array  # (Δi_α, Δi_β), A
@@ -150,7 +214,18 @@ class Sensors(AbstractComponent):
                 raise ValueError(f"{own}.{name} must have two entries (α, β), got shape {getattr(self, name).shape}")
 
     def init(self, op=None, *, key=None):
-        """The noise key (``key``, default ``PRNGKey(0)``): the sensors' state, whatever the operating point."""
+        """The sensors' state, whatever the operating point: the noise key.
+
+        Args:
+            op: An :class:`OperatingPoint` or None (unused).
+            key: The noise key (default ``PRNGKey(0)``).
+
+        Returns:
+            The key.
+
+        Raises:
+            ValueError: ``op`` is neither an operating point nor None.
+        """
         if op is not None and not isinstance(op, tuple):  # a key passed where init(key) used to take it
             raise ValueError(
                 f"Sensors.init: op must be an OperatingPoint or None (the key is keyword-only), got {type(op).__name__}"
@@ -161,7 +236,19 @@ class Sensors(AbstractComponent):
         return key, DriveInput(*self.measure(key, inp.k, inp.u_a, inp.u_b, inp.i_a, inp.i_b))
 
     def measure(self, key, k, u_a, u_b, i_a, i_b):
-        """Measured (u_α, u_β, i_α, i_β) at sample ``k``."""
+        """Measured (u_α, u_β, i_α, i_β) at sample ``k``.
+
+        Args:
+            key: The sensors' noise key.
+            k: The sample index.
+            u_a: The true α voltage, V.
+            u_b: The true β voltage, V.
+            i_a: The true α current, A.
+            i_b: The true β current, A.
+
+        Returns:
+            ``(u_α, u_β, i_α, i_β)`` as measured.
+        """
         if not self.noisy:
             return (
                 u_a + self.u_offset[0],

@@ -55,7 +55,14 @@ class AtSample(eqx.Module):
     """Compare an estimate with the rotor at its own time stamp (the sample instant): the observer's error."""
 
     def lead(self, latency: Latency) -> float:
-        """How many periods after the sample instant the rotor's angle is taken."""
+        """How many periods after the sample instant the rotor's angle is taken.
+
+        Args:
+            latency: The drive's :class:`Latency`.
+
+        Returns:
+            The periods.
+        """
         return 0.0
 
 
@@ -69,8 +76,19 @@ class AtUse(eqx.Module):
 
 class Latency(eqx.Module):
     """The sampling, computation and PWM-update timing of the drive's DSP (module doc), and the instant at
-    which its estimates are compared with the encoder.  The default is the project's historical timing:
-    sampling at the period start, one period of computation, estimates compared at their own time stamp."""
+    which its estimates are compared with the encoder.
+
+    The default timing: sampling at the period start, one period of computation, estimates compared at their
+    own time stamp.
+
+    Args:
+        sampling: :class:`PeriodStart` (default) or :class:`PWMCentre`.
+        compute_delay: c, the computation's periods (0 or 1).
+        compare: :class:`AtSample` (default) or :class:`AtUse`.
+
+    Raises:
+        ValueError: A value outside its choices, naming the field.
+    """
 
     sampling: PeriodStart | PWMCentre = eqx.field(static=True)
     compute_delay: int = eqx.field(static=True)  # c, periods (0 or 1)

@@ -71,7 +71,22 @@ SETTLE_PERIODS = 10.0
 
 
 class Drive(eqx.Module):
-    """The drive hardware and controller: FOC, inverter, plant integration, optional I-f start-up."""
+    """The drive hardware and controller: FOC, inverter, plant integration, optional I-f start-up.
+
+    Args:
+        foc: The :class:`FOC`.
+        inverter: The :class:`Inverter` (default ``Inverter()``).
+        startup: An :class:`IfStartup`, or None (a steady start).
+        n_sub: Plant substeps per control period (an integer ≥ 1; even to sample at the PWM centre).
+        rule: The plant integration rule (default :class:`~jaxobs.RK4`).
+        sensorless: Whether the observer closes the loop.
+        handover: Sensorless: the encoder closes the loop until this time (s, ≥ 0), the observer after.
+        settle: A steady start's unscored settling phase of the observer before t = 0, s (in [0, 60]).
+        latency: Sampling, computation delay, comparison instant (:class:`Latency`; default ``Latency()``).
+
+    Raises:
+        ValueError: A value out of its range, naming the field.
+    """
 
     foc: FOC
     inverter: Inverter
@@ -134,14 +149,30 @@ class Drive(eqx.Module):
         with 1/ω_e, so the default 0.2 s is 0.2 electrical periods at 20 r/min on 000's SPMSM: the observer
         starts 41° off and the drive rings for seconds (docs/stability.md, "20 r/min").  The phase is only
         observer steps on synthetic measurements (cheap: 10 s of it costs about what 0.1 s of the loop does).
+
+        Args:
+            omega_e_min: The lowest electrical speed the drive will start at, rad/s (> 0; a Python number: the
+                phase's length is static).
+
+        Returns:
+            The :class:`Drive` with its ``settle`` lengthened where needed.
         """
         return settled_for(self, omega_e_min)
 
 
 def settled_for(drive, omega_e_min: float):
-    """``drive`` (a :class:`Drive` or a :class:`~jaxobs.drive.dual_loop.DualDrive`: anything with a ``settle``
-    field, s) with its settling phase at least :data:`SETTLE_PERIODS` electrical periods long at
-    ``omega_e_min`` rad/s (:meth:`Drive.settled_for`)."""
+    """A drive with its settling phase at least :data:`SETTLE_PERIODS` electrical periods long.
+
+    As :meth:`Drive.settled_for`, for any drive.
+
+    Args:
+        drive: A :class:`Drive` or a :class:`~jaxobs.drive.dual_loop.DualDrive`: anything with a ``settle``
+            field, s.
+        omega_e_min: The lowest electrical speed it will start at, rad/s (> 0).
+
+    Returns:
+        ``drive`` with its ``settle`` lengthened where needed.
+    """
     name = type(drive).__name__
     w = float(omega_e_min)
     if not (math.isfinite(w) and w > 0.0):
@@ -158,7 +189,18 @@ def settled_for(drive, omega_e_min: float):
 
 
 class LoopState(NamedTuple):
-    """The closed loop's state between two periods."""
+    """The closed loop's state between two periods.
+
+    Attributes:
+        plant: The machine (and its rule's state).
+        ctrl: The FOC's integrators, held references, start-up.
+        obs: The observer's state (None with the encoder).
+        sensors: The sensors' noise key.
+        u_a: The α voltage to apply over the coming period (computed last period), V.
+        u_b: The β voltage, V.
+        pending: (u_α, u_β) computed but due one period after the coming one (a two-period pipeline:
+            :class:`Latency` with PWM-centre sampling and a one-period computation), V; None otherwise.
+    """
 
     plant: PlantState  # the machine (and its rule's state)
     ctrl: ControllerState  # the FOC's integrators, held references, start-up
@@ -172,7 +214,13 @@ class LoopState(NamedTuple):
 
 
 class LoopInput(NamedTuple):
-    """The outside world at sample k: the speed reference and the load torque."""
+    """The outside world at sample k: the speed reference and the load torque.
+
+    Attributes:
+        k: The sample index.
+        omega_m_ref: The mechanical speed reference, rad/s (i_q* in A when the FOC's outer loop is ``"current"``).
+        load: The load torque, N·m.
+    """
 
     k: jax.Array  # sample index
     omega_m_ref: jax.Array  # mechanical speed reference, rad/s (i_q* in A when the FOC's outer loop is 'current')
@@ -180,7 +228,29 @@ class LoopInput(NamedTuple):
 
 
 class DriveOutput(NamedTuple):
-    """One control period's signals at t_k (under ``simulate``: each with the samples as leading axis)."""
+    """One control period's signals at t_k (under ``simulate``: each with the samples as leading axis).
+
+    Attributes:
+        t: The sample time t_k, s.
+        theta_e: The true electrical angle the estimates are compared with, rad, wrapped to (−π, π]: at t_k by
+            default; at the sample instant, or while the voltage computed from it acts (``drive.latency.compare``).
+        theta_e_hat: The angle the controller used (encoder, observer or I-f), rad, wrapped.
+        omega_m: The true mechanical speed, rad/s.
+        omega_m_hat: The speed the speed loop used, rad/s.
+        omega_m_ref: The speed reference, rad/s.
+        i_d: The true rotor-frame d current, A.
+        i_q: The true rotor-frame q current, A.
+        i_a: The true stationary-frame α current, A.
+        i_b: The true stationary-frame β current, A.
+        u_a: The applied stationary-frame α voltage (before the dead-time error), V.
+        u_b: The applied β voltage, V.
+        torque: The electromagnetic torque, N·m.
+        load: The load torque, N·m.
+        id_ref: The d current reference, A.
+        iq_ref: The q current reference, A.
+        mode: 0: I-f start-up, 1: closed loop.
+        obs: The observer's outputs (None with the encoder).
+    """
 
     t: jax.Array  # sample time t_k, s
     theta_e: jax.Array  # true electrical angle the estimates are compared with, rad, wrapped to (−π, π]: at t_k by
@@ -228,7 +298,14 @@ class AbstractDriveLoop(AbstractSystem):
 
     @abc.abstractmethod
     def operating_point(self, offset=0.0) -> OperatingPoint:
-        """The steady state the scenario starts in, the controller's frame ``offset`` rad ahead of the rotor's."""
+        """The steady state the scenario starts in.
+
+        Args:
+            offset: The controller's frame's lead over the rotor's, rad.
+
+        Returns:
+            The :class:`OperatingPoint`.
+        """
 
     @abc.abstractmethod
     def _steady_voltage(self, op: OperatingPoint, theta):
@@ -364,7 +441,16 @@ class AbstractDriveLoop(AbstractSystem):
 
 
 class ClosedLoop(AbstractDriveLoop):
-    """The drive ``drive`` running ``scenario``, with ``observer`` (or the encoder when None): a system."""
+    """The drive ``drive`` running ``scenario``, with ``observer`` (or the encoder when None): a system.
+
+    Args:
+        drive: The :class:`Drive`.
+        observer: A drive observer (``init`` and ``step``), or None: the encoder.
+        scenario: The :class:`Scenario`.
+
+    Raises:
+        ValueError: An argument of the wrong type, or a sensorless drive without an observer.
+    """
 
     drive: Drive
     observer: Any
@@ -423,8 +509,14 @@ class ClosedLoop(AbstractDriveLoop):
         return self.drive.foc.bind(self.scenario.est_par, self.drive.inverter.u_max, self.drive.startup)
 
     def operating_point(self, offset=0.0) -> OperatingPoint:
-        """The steady state the scenario starts in: its initial speed, the load at t = 0, currents that carry it
-        (with the controller's frame ``offset`` rad ahead of the rotor's: :meth:`FOC.operating_point`)."""
+        """The steady state the scenario starts in: its initial speed, the load at t = 0, currents that carry it.
+
+        Args:
+            offset: The controller's frame's lead over the rotor's, rad (:meth:`FOC.operating_point`).
+
+        Returns:
+            The :class:`OperatingPoint`.
+        """
         sc = self.scenario
         return self.controller.operating_point(
             sc.par, sc.omega_m0, sc.speed_ref(0.0), sc.theta_e0, sc.load(0.0), offset

@@ -64,10 +64,19 @@ __all__ = [
 
 
 class QSaturation(eqx.Module):
-    """q-axis saturation Lq(i_q) = Lq / (1 + (|i_q|/i_sat)^n)^(1/n) (module doc).  ``i_sat`` (A, peak, > 0):
-    the current at which the apparent Lq has fallen to 2^(−1/n) of its small-current value; ``n`` (>= 1, 1):
-    the knee's sharpness.  Both leaves: differentiable.  E.g. ``QSaturation.at(0.8, i_rated)``: Lq down 20 %
-    at the rated current."""
+    """q-axis saturation Lq(i_q) = Lq / (1 + (|i_q|/i_sat)^n)^(1/n) (module doc).
+
+    Both arguments are leaves: differentiable.  E.g. ``QSaturation.at(0.8, i_rated)``: Lq down 20 % at the
+    rated current.
+
+    Args:
+        i_sat: The current at which the apparent Lq has fallen to 2^(−1/n) of its small-current value
+            (A, peak, > 0).
+        n: The knee's sharpness, in [1, 16].
+
+    Raises:
+        ValueError: A value out of its range.
+    """
 
     i_sat: jax.Array  # A (> 0)
     n: jax.Array  # 1 (>= 1)
@@ -79,7 +88,16 @@ class QSaturation(eqx.Module):
 
     @classmethod
     def at(cls, ratio, i_q, n=2.0) -> QSaturation:
-        """The saturation whose apparent Lq is ``ratio`` (in (0, 1)) of the small-current one at ``i_q`` (A)."""
+        """The saturation whose apparent Lq is ``ratio`` of the small-current one at ``i_q``.
+
+        Args:
+            ratio: The apparent Lq at ``i_q`` over the small-current one, in (0, 1).
+            i_q: The current, A (peak).
+            n: The knee's sharpness, in [1, 16].
+
+        Returns:
+            The :class:`QSaturation`.
+        """
         ratio, i_q, n = float(ratio), float(i_q), float(n)
         if not 0.0 < ratio < 1.0:
             raise ValueError(f"QSaturation.at: ratio must be in (0, 1), got {ratio}")
@@ -88,26 +106,69 @@ class QSaturation(eqx.Module):
         return cls(i_q / (ratio**-n - 1.0) ** (1.0 / n), n)
 
     def factor(self, i_q):
-        """(1 + (|i_q|/i_sat)^n) as an array (1 at i_q = 0)."""
+        """The saturation's factor.
+
+        Args:
+            i_q: The q-axis current, A.
+
+        Returns:
+            (1 + (|i_q|/i_sat)^n) as an array (1 at i_q = 0).
+        """
         return 1.0 + (jnp.abs(i_q) / self.i_sat) ** self.n
 
 
 def lq_apparent(par: PMSMParams, i_q):
-    """ψq / i_q, H: ``par.Lq`` without saturation (exactly, not a limit), else Lq / factor^(1/n)."""
+    """The apparent q-axis inductance ψq / i_q.
+
+    Args:
+        par: The machine.
+        i_q: The q-axis current, A.
+
+    Returns:
+        ψq / i_q, H: ``par.Lq`` without saturation (exactly, not a limit), else Lq / factor^(1/n).
+    """
     if par.q_sat is None:
         return par.Lq
     return par.Lq * par.q_sat.factor(i_q) ** (-1.0 / par.q_sat.n)
 
 
 def lq_incremental(par: PMSMParams, i_q):
-    """dψq / di_q, H: ``par.Lq`` without saturation, else Lq / factor^(1 + 1/n)."""
+    """The incremental q-axis inductance dψq / di_q.
+
+    Args:
+        par: The machine.
+        i_q: The q-axis current, A.
+
+    Returns:
+        dψq / di_q, H: ``par.Lq`` without saturation, else Lq / factor^(1 + 1/n).
+    """
     if par.q_sat is None:
         return par.Lq
     return par.Lq * par.q_sat.factor(i_q) ** (-1.0 - 1.0 / par.q_sat.n)
 
 
 class PMSMParams(eqx.Module):
-    """Machine parameters (SI).  ``p`` is static: it is a structural integer, not a gain."""
+    """Machine parameters (SI).  ``p`` is static: it is a structural integer, not a gain.
+
+    Args:
+        Rs: Stator resistance, Ω (≥ 0).
+        Ld: d-axis inductance, H (> 0).
+        Lq: q-axis inductance, H (> 0).
+        psi_f: PM flux linkage (peak, amplitude invariant), Wb (> 0).
+        J: Inertia, kg·m² (> 0).
+        p: Pole pairs (a positive integer; static).
+        B: Viscous friction, N·m·s/rad (≥ 0).
+        a5: 5th-harmonic BEMF amplitude / fundamental (negative sequence), in [0, 1].
+        a7: 7th-harmonic BEMF amplitude / fundamental (positive sequence), in [0, 1].
+        T_rated: Rated torque, N·m (> 0).
+        n_rated: Rated speed, r/min (> 0).
+        q_sat: The q-axis saturation (:class:`QSaturation`), or ``None`` (linear, Lq constant; a None field
+            adds no leaf, so a machine without it is the same pytree, and computes the same numbers, as one
+            built without this field).
+
+    Raises:
+        ValueError: A value out of its range, naming the field.
+    """
 
     Rs: jax.Array  # stator resistance, Ω (>= 0)
     Ld: jax.Array  # d-axis inductance, H (> 0)
@@ -157,7 +218,16 @@ class PMSMParams(eqx.Module):
         return self.T_rated / self.kt
 
     def with_mismatch(self, dRs=0.0, dL=0.0, dpsi=0.0):
-        """A copy with relative errors: Rs(1 + dRs), Ld, Lq (1 + dL), ψf (1 + dpsi) — what an estimate assumes."""
+        """A copy with relative errors — what an estimate assumes.
+
+        Args:
+            dRs: Relative error of Rs: Rs(1 + dRs).
+            dL: Relative error of Ld and Lq: Ld, Lq (1 + dL).
+            dpsi: Relative error of ψf: ψf (1 + dpsi).
+
+        Returns:
+            The :class:`PMSMParams` with the errors.
+        """
         return eqx.tree_at(
             lambda m: (m.Rs, m.Ld, m.Lq, m.psi_f),
             self,
@@ -167,7 +237,14 @@ class PMSMParams(eqx.Module):
 
 def spmsm_paper000(**overrides) -> PMSMParams:
     """Paper 000 Table II SPMSM: ψf = 0.35 Wb, 2000 r/min, 3 pole pairs, L = 5 mH, Rs = 0.8 Ω,
-    14 N·m, J = 3.78e-4 kg·m².  Friction is not given; B = 0 by default."""
+    14 N·m, J = 3.78e-4 kg·m².  Friction is not given; B = 0 by default.
+
+    Args:
+        **overrides: :class:`PMSMParams` keywords that replace the table's values.
+
+    Returns:
+        The :class:`PMSMParams`.
+    """
     kw = dict(papers.SPMSM_000)
     kw.update(overrides)
     return PMSMParams(**kw)
@@ -189,6 +266,12 @@ def ipmsm_paper002(**overrides) -> PMSMParams:
     the zero sequences and the mutual coupling between the two winding sets.
     002 Sec. V-B runs one set alone to expose the 5th and 7th BEMF harmonics;
     ``a5``/``a7`` model that case.
+
+    Args:
+        **overrides: :class:`PMSMParams` keywords that replace these values.
+
+    Returns:
+        The :class:`PMSMParams`.
     """
     kw = dict(papers.IPMSM_002)
     kw.update(overrides)
@@ -227,24 +310,63 @@ def _torque(par: PMSMParams, i_d, i_q, h):
 
 
 def bemf_dq(par: PMSMParams, omega_e, theta_e):
-    """e_dq = j ωe ψf (1 + a5 e^{−j6θ} + a7 e^{j6θ}), returns (e_d, e_q)."""
+    """The back EMF in the rotor frame, e_dq = j ωe ψf (1 + a5 e^{−j6θ} + a7 e^{j6θ}).
+
+    Args:
+        par: The machine.
+        omega_e: The electrical speed ωe, rad/s.
+        theta_e: The electrical angle θe, rad.
+
+    Returns:
+        ``(e_d, e_q)``, V.
+    """
     return _bemf_dq(par, omega_e, _harmonic_factor(par, sincos(theta_e)))
 
 
 def bemf_ab(par: PMSMParams, omega_e, theta_e):
-    """e_ab = e_dq e^{jθe}, returns (e_α, e_β)."""
+    """The back EMF in the stationary frame, e_ab = e_dq e^{jθe}.
+
+    Args:
+        par: The machine.
+        omega_e: The electrical speed ωe, rad/s.
+        theta_e: The electrical angle θe, rad.
+
+    Returns:
+        ``(e_α, e_β)``, V.
+    """
     ed, eq = bemf_dq(par, omega_e, theta_e)
     return dq_to_ab(ed, eq, theta_e)
 
 
 def torque(par: PMSMParams, i_d, i_q, theta_e):
-    """Electromagnetic torque, N·m (see module doc)."""
+    """Electromagnetic torque (see module doc).
+
+    Args:
+        par: The machine.
+        i_d: The d-axis current, A.
+        i_q: The q-axis current, A.
+        theta_e: The electrical angle θe, rad (the BEMF harmonics' torque ripple).
+
+    Returns:
+        The torque, N·m.
+    """
     return _torque(par, i_d, i_q, _harmonic_factor(par, sincos(theta_e)))
 
 
 def plant_vf(par: PMSMParams, x, u_ab, t_load, sc=None):
-    """dx/dt for x = [i_d, i_q, ωm, θe] under stationary-frame voltage ``u_ab = (u_α, u_β)``; ``sc``: (sin θe,
-    cos θe) when the caller has them already (:func:`jaxobs.drive.plant.plant_field`), else computed here."""
+    """The machine's vector field.
+
+    Args:
+        par: The machine.
+        x: The state [i_d, i_q, ωm, θe].
+        u_ab: The stationary-frame voltage ``(u_α, u_β)``, V.
+        t_load: The load torque, N·m.
+        sc: ``(sin θe, cos θe)`` when the caller has them already (:func:`jaxobs.drive.plant.plant_field`),
+            else computed here.
+
+    Returns:
+        dx/dt.
+    """
     i_d, i_q, w_m, th = x[0], x[1], x[2], x[3]
     w_e = par.p * w_m
     s, c = sincos(th) if sc is None else sc
@@ -259,18 +381,46 @@ def plant_vf(par: PMSMParams, x, u_ab, t_load, sc=None):
 
 
 def rotate(x, y, s, c):
-    """(x, y) rotated by the angle whose sine and cosine are ``s``, ``c``: (c x − s y, s x + c y)."""
+    """A vector rotated by the angle whose sine and cosine are given.
+
+    Args:
+        x: The first component.
+        y: The second component.
+        s: The angle's sine.
+        c: The angle's cosine.
+
+    Returns:
+        (c x − s y, s x + c y).
+    """
     return c * x - s * y, s * x + c * y
 
 
 def dq_to_ab(d, q, theta):
-    """(α, β) of the rotor-frame (d, q) seen at the electrical angle ``theta`` (rad): inverse Park."""
+    """Inverse Park: the (α, β) of a rotor-frame (d, q).
+
+    Args:
+        d: The d component.
+        q: The q component.
+        theta: The electrical angle, rad.
+
+    Returns:
+        ``(α, β)``.
+    """
     s, c = sincos(theta)
     return rotate(d, q, s, c)
 
 
 def ab_to_dq(a, b, theta):
-    """(d, q) of the stationary (α, β) in the frame at the electrical angle ``theta`` (rad): Park."""
+    """Park: the (d, q) of a stationary (α, β).
+
+    Args:
+        a: The α component.
+        b: The β component.
+        theta: The electrical angle of the frame, rad.
+
+    Returns:
+        ``(d, q)``.
+    """
     s, c = sincos(theta)
     return rotate(a, b, -s, c)
 

@@ -35,7 +35,18 @@ __all__ = ["PMSM", "PlantInput", "PlantOutput", "PlantState", "plant_field"]
 
 
 def plant_field(par: PMSMParams, inverter: Inverter, dead_time, x, inp):
-    """Plant vector field with the inverter's dead-time error; ``inp = (u_α, u_β, T_L)`` (applied, limited)."""
+    """Plant vector field with the inverter's dead-time error.
+
+    Args:
+        par: The machine.
+        inverter: The inverter.
+        dead_time: The dead time, s.
+        x: The plant state [i_d, i_q, ωm, θe].
+        inp: ``(u_α, u_β, T_L)``: the applied (limited) voltage, V, and the load torque, N·m.
+
+    Returns:
+        dx/dt.
+    """
     sc = sincos(x[3])  # one sine and cosine of θe for the currents' and the voltage's transforms
     i_a, i_b = rotate(x[0], x[1], *sc)
     du_a, du_b = inverter.dead_time_error(dead_time, i_a, i_b)
@@ -43,7 +54,13 @@ def plant_field(par: PMSMParams, inverter: Inverter, dead_time, x, inp):
 
 
 class PlantInput(NamedTuple):
-    """What drives the machine over one period."""
+    """What drives the machine over one period.
+
+    Attributes:
+        u_a: The applied stationary-frame voltage u_α (inverter-limited, before the dead-time error), V.
+        u_b: u_β, V.
+        t_load: The load torque, N·m.
+    """
 
     u_a: jax.Array  # applied stationary-frame voltage (inverter-limited, before the dead-time error), V
     u_b: jax.Array
@@ -51,7 +68,17 @@ class PlantInput(NamedTuple):
 
 
 class PlantOutput(NamedTuple):
-    """The machine at t_k."""
+    """The machine at t_k.
+
+    Attributes:
+        i_d: The rotor-frame d current, A.
+        i_q: The rotor-frame q current, A.
+        omega_m: The mechanical speed, rad/s.
+        theta_e: The electrical angle, rad (the state's: wrapped to (−π, π] after every period).
+        i_a: The stationary-frame α current, A.
+        i_b: The stationary-frame β current, A.
+        torque: The electromagnetic torque, N·m.
+    """
 
     i_d: jax.Array  # rotor-frame currents, A
     i_q: jax.Array
@@ -63,12 +90,31 @@ class PlantOutput(NamedTuple):
 
 
 class PlantState(NamedTuple):
+    """The machine's state between two periods.
+
+    Attributes:
+        x: [i_d, i_q, ω_m, θ_e], shape (4,).
+        rule: The integration rule's own state (None for one-step rules).
+    """
+
     x: jax.Array  # [i_d, i_q, ω_m, θ_e], shape (4,)
     rule: Any  # the integration rule's own state (None for one-step rules)
 
 
 class PMSM(AbstractComponent):
-    """The machine ``par`` behind an inverter with dead time ``dead_time``, integrated per control period."""
+    """The machine ``par`` behind an inverter with dead time ``dead_time``, integrated per control period.
+
+    Args:
+        par: The machine (:class:`PMSMParams`).
+        inverter: The inverter (default :class:`Inverter`).
+        dead_time: The dead time, s (≥ 0).
+        ts: The control period, s.
+        n_sub: Substeps per period (an integer ≥ 1).
+        rule: The integration rule (default :class:`~jaxobs.RK4`).
+
+    Raises:
+        ValueError: A value out of its range, naming the field.
+    """
 
     par: PMSMParams
     inverter: Inverter
@@ -90,12 +136,27 @@ class PMSM(AbstractComponent):
         self.rule = check_rule(RK4() if rule is None else rule, "PMSM")
 
     def field(self, x, inp):
-        """dx/dt at state ``x`` under ``inp = (u_α, u_β, T_L)``."""
+        """The vector field.
+
+        Args:
+            x: The state [i_d, i_q, ω_m, θ_e].
+            inp: ``(u_α, u_β, T_L)``.
+
+        Returns:
+            dx/dt.
+        """
         return plant_field(self.par, self.inverter, self.dead_time, x, inp)
 
     def init(self, op=None) -> PlantState:
-        """The machine at the operating point ``op`` (an OperatingPoint: its currents i_d, i_q, speed ω_m and
-        angle θ_e; an I-f start-up's is ``OperatingPoint.at_rest(θe0)``), or at rest at θe = 0 (None)."""
+        """The machine's initial state.
+
+        Args:
+            op: An :class:`OperatingPoint` (its currents i_d, i_q, speed ω_m and angle θ_e; an I-f start-up's
+                is ``OperatingPoint.at_rest(θe0)``), or None: at rest at θe = 0.
+
+        Returns:
+            The plant state.
+        """
         dtype = jnp.result_type(self.par.Rs, float)
         vals = (0.0, 0.0, 0.0, 0.0) if op is None else (op.i_d, op.i_q, op.omega_m, op.theta_e)
         x0 = jnp.stack([jnp.asarray(v, dtype) for v in vals])

@@ -42,6 +42,14 @@ class Profile(eqx.Module):
     """A piecewise profile of time: linear between breakpoints (``kind="linear"``) or held (``"step"``).
 
     Before the first breakpoint the first value holds, after the last the last.
+
+    Args:
+        times: The breakpoints, s (1-D, finite, non-decreasing).
+        values: The values at the breakpoints (1-D, finite, as long as ``times``).
+        kind: ``"linear"`` or ``"step"``.
+
+    Raises:
+        ValueError: Arrays of other shapes, non-finite or decreasing times, or an unknown ``kind``.
     """
 
     times: jax.Array  # s, non-decreasing
@@ -97,6 +105,15 @@ class ParameterDrift(eqx.Module):
     by its one binding, :meth:`jaxobs.observers.AbstractDriveObserver.bind`); the FOC keeps ``est_par``, so that
     the position error is the observer's alone.  The factors are leaves: a drift is differentiable and
     batches like any profile; evaluated inside the step (a few compares), no loop over time.
+
+    Args:
+        Rs: R̂s(t)/R̂s, a :class:`Profile` of relative values (> 0), or None (constant).
+        Ld: L̂d(t)/L̂d, likewise.
+        Lq: L̂q(t)/L̂q, likewise.
+        psi_f: ψ̂f(t)/ψ̂f, likewise.
+
+    Raises:
+        ValueError: No parameter given, or a profile that is not one of relative values > 0.
     """
 
     Rs: Profile | None  # R̂s(t)/R̂s, 1
@@ -116,14 +133,30 @@ class ParameterDrift(eqx.Module):
 
     @classmethod
     def ramps(cls, name: str, times, factors) -> ParameterDrift:
-        """One parameter (``"Rs"``, ``"Ld"``, ``"Lq"`` or ``"psi_f"``) ramped linearly through ``factors`` (1)
-        at ``times`` (s)."""
+        """One parameter ramped linearly through relative factors.
+
+        Args:
+            name: ``"Rs"``, ``"Ld"``, ``"Lq"`` or ``"psi_f"``.
+            times: The breakpoints, s.
+            factors: The relative values at the breakpoints (1 = as ``est_par`` says).
+
+        Returns:
+            The :class:`ParameterDrift`.
+        """
         if name not in ("Rs", "Ld", "Lq", "psi_f"):
             raise ValueError(f"ParameterDrift.ramps: name must be one of Rs, Ld, Lq, psi_f, got {name!r}")
         return cls(**{name: Profile(times, factors, kind="linear")})
 
     def at(self, est: PMSMParams, t) -> PMSMParams:
-        """``est`` with the drifting parameters at time ``t`` (s)."""
+        """``est`` with the drifting parameters at time ``t``.
+
+        Args:
+            est: The assumed machine.
+            t: The time, s.
+
+        Returns:
+            The :class:`PMSMParams` at ``t``.
+        """
         names = tuple(n for n in ("Rs", "Ld", "Lq", "psi_f") if getattr(self, n) is not None)
         return eqx.tree_at(
             lambda q: tuple(getattr(q, n) for n in names),
@@ -133,6 +166,26 @@ class ParameterDrift(eqx.Module):
 
 
 class Scenario(eqx.Module):
+    """One drive scenario: the machine, what the controller and observer assume, the references and disturbances.
+
+    Args:
+        par: The machine as it is (:class:`PMSMParams`).
+        est_par: The machine as controller and observer assume it (default ``par``; the same pole pairs).
+        speed_ref: The mechanical speed reference, rad/s (i_q* in A when the FOC's outer loop is
+            ``"current"``), a :class:`Profile` (default 0).
+        load: The load torque, N·m, a :class:`Profile` (default 0).
+        sensors: The :class:`Sensors` (default ideal).
+        dead_time: The inverter's dead time, s (≥ 0).
+        seed: The PRNG seed of the noise (an integer), or a PRNG key.
+        omega_m0: The initial mechanical speed, rad/s.
+        theta_e0: The initial electrical angle, rad.
+        est_drift: The observer's assumed machine over time (:class:`ParameterDrift`; None: ``est_par``
+            throughout).
+
+    Raises:
+        ValueError: A value of the wrong type or out of its range, naming the field.
+    """
+
     par: PMSMParams  # the machine as it is
     est_par: PMSMParams  # the machine as controller and observer assume it
     speed_ref: Profile  # mechanical speed reference, rad/s (i_q* in A when the FOC's outer loop is 'current')
@@ -178,8 +231,15 @@ class Scenario(eqx.Module):
     def speed_rpm(times, rpms, ramp=0.0):
         """Speed reference (r/min in, rad/s stored) changing to ``rpms[i]`` at ``times[i]``.
 
-        ``ramp = 0``: steps.  ``ramp > 0``: each change is a linear ramp lasting ``ramp`` seconds
-        (002's 300-600-840-600-300 r/min test is a ramp profile).
+        002's 300-600-840-600-300 r/min test is a ramp profile.
+
+        Args:
+            times: The times of the changes, s.
+            rpms: The speeds, r/min.
+            ramp: 0: steps; > 0: each change is a linear ramp lasting ``ramp`` seconds.
+
+        Returns:
+            The :class:`Profile`, rad/s.
         """
         if len(times) != len(rpms) or not times:
             raise ValueError("speed_rpm needs equally many (>= 1) times and speeds")
@@ -195,7 +255,15 @@ class Scenario(eqx.Module):
 
     @staticmethod
     def load_steps(times, torques):
-        """Load torque (N·m) stepping to ``torques[i]`` at ``times[i]``."""
+        """Load torque stepping to ``torques[i]`` at ``times[i]``.
+
+        Args:
+            times: The times of the steps, s.
+            torques: The torques, N·m.
+
+        Returns:
+            The :class:`Profile`.
+        """
         return Profile(times, torques, kind="step")
 
 
@@ -224,7 +292,13 @@ _OUTPUT_UNITS = {
 
 
 class Batch(eqx.Module):
-    """A batched Scenario with the names and coordinates of its axes (row-major over ``dims``)."""
+    """A batched Scenario with the names and coordinates of its axes (row-major over ``dims``).
+
+    Attributes:
+        scenarios: The batched :class:`Scenario` (leading axis one per scenario).
+        dims: The axes' names (static).
+        coords: Each axis's values (static).
+    """
 
     scenarios: Scenario
     dims: tuple[str, ...] = eqx.field(static=True)
@@ -241,13 +315,22 @@ class Batch(eqx.Module):
     def to_xarray(self, outputs):
         """The results of a ``vmap`` over :attr:`scenarios` as an ``xarray.Dataset`` with the grid's dims.
 
-        ``outputs``: a PyTree (a :class:`~jaxobs.drive.DriveOutput`, a dict of metrics, ...) whose array
-        leaves have the batch as leading axis (:attr:`size` rows, row-major over :attr:`dims`).  Each leaf
-        becomes a variable named by its path (``omega_m``, ``obs_theta``; None leaves are skipped) with dims
-        ``dims`` for one value per scenario, ``(*dims, "time")`` for a trace when ``outputs`` has a ``t``
-        field shared by every scenario (the ``time`` coordinate, s), else ``<name>_dim<k>`` axes.  The grid's
-        axes are coordinates with their CF units; the drive's outputs carry theirs (rad, rad s-1, A, V,
-        N m).  Raises ValueError when a leaf's leading axis is not the batch."""
+        Each leaf becomes a variable named by its path (``omega_m``, ``obs_theta``; None leaves are skipped)
+        with dims ``dims`` for one value per scenario, ``(*dims, "time")`` for a trace when ``outputs`` has a
+        ``t`` field shared by every scenario (the ``time`` coordinate, s), else ``<name>_dim<k>`` axes.  The
+        grid's axes are coordinates with their CF units; the drive's outputs carry theirs (rad, rad s-1, A, V,
+        N m).
+
+        Args:
+            outputs: A PyTree (a :class:`~jaxobs.drive.DriveOutput`, a dict of metrics, ...) whose array
+                leaves have the batch as leading axis (:attr:`size` rows, row-major over :attr:`dims`).
+
+        Returns:
+            The ``xarray.Dataset``.
+
+        Raises:
+            ValueError: A leaf's leading axis is not the batch.
+        """
         import xarray as xr
 
         leaves = jax.tree_util.tree_flatten_with_path(outputs)[0]
@@ -321,8 +404,7 @@ def _held(prof: Profile, v) -> Profile:
 def scenario_batch(
     base: Scenario, names, points, *, seed: int | None = None, t_event: float = 0.0, first: int = 0
 ) -> Scenario:
-    """``base`` with a leading axis, one scenario per point (a tuple of values for the axes ``names``,
-    :data:`DRIVE_AXES`), built vectorized (no constructor per scenario).
+    """``base`` with a leading axis, one scenario per point, built vectorized (no constructor per scenario).
 
     ``speed_rpm`` holds the speed reference at the value and *starts the machine there* (``omega_m0``: the
     scenario starts steady: no start-up transient nobody asked for); ``load_nm`` holds the load;
@@ -330,9 +412,22 @@ def scenario_batch(
     plus the step from ``t_event`` s on).
     The mismatch axes set the assumed machine from the true one; a noise axis makes the sensors noisy.
     The noise key: ``PRNGKey(v)`` of a ``seed`` axis, else ``fold_in(PRNGKey(seed), i)`` of scenario i when
-    ``seed`` is given, else the base's (``first``: the index of ``points[0]`` among all the scenarios, so a
-    chunk built on its own has the keys it has in the whole).  A ``ValueError`` names an unknown axis or a
-    value out of range.
+    ``seed`` is given, else the base's.
+
+    Args:
+        base: The :class:`Scenario` every point modifies.
+        names: The axes, of :data:`DRIVE_AXES`.
+        points: One tuple of values per scenario, in ``names`` order.
+        seed: The seed of the scenarios' noise keys (None: the base's key).
+        t_event: The time of the steps, s.
+        first: The index of ``points[0]`` among all the scenarios, so a chunk built on its own has the keys
+            it has in the whole.
+
+    Returns:
+        The batched :class:`Scenario`.
+
+    Raises:
+        ValueError: An unknown axis or a value out of range, naming it.
     """
     names = tuple(names)
     if not (math.isfinite(t_event) and t_event >= 0):
@@ -408,8 +503,19 @@ def scenario_batch(
 def grid(base: Scenario, *, t_event: float = 0.0, **axes: Sequence[float]) -> Batch:
     """Cartesian product of named axes applied to ``base``: ``grid(s, speed_rpm=[...], dRs=[...])``.
 
-    Known axes: :data:`DRIVE_AXES` (:func:`scenario_batch` says what each sets; ``speed_rpm`` also starts
-    each scenario at its speed).  The batch is flattened row-major (last axis fastest).
+    The batch is flattened row-major (last axis fastest).
+
+    Args:
+        base: The :class:`Scenario` every point modifies.
+        t_event: The time of the steps, s.
+        **axes: Values per axis, of :data:`DRIVE_AXES` (:func:`scenario_batch` says what each sets;
+            ``speed_rpm`` also starts each scenario at its speed).
+
+    Returns:
+        The :class:`Batch`.
+
+    Raises:
+        ValueError: An unknown axis or a value out of range, naming it.
     """
     for name, vals in axes.items():
         if name not in DRIVE_AXES:

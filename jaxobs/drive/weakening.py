@@ -31,7 +31,16 @@ __all__ = ["VoltageFeedbackFW"]
 
 
 class VoltageFeedbackFW(eqx.Module):
-    """Voltage-feedback field weakening (module doc): bandwidth ``alpha_fw`` (rad/s), margin ``margin``."""
+    """Voltage-feedback field weakening (module doc).
+
+    Args:
+        alpha_fw: The bandwidth of the Δi_d loop, rad/s (> 0).
+        margin: m, the fraction of u_max the voltage reference is held below, in (0, 1].
+        omega_min: The electrical speed floor of the gain's ω̂e, rad/s (> 0).
+
+    Raises:
+        ValueError: A value out of its range, naming the field.
+    """
 
     alpha_fw: jax.Array  # bandwidth of the Δi_d loop, rad/s (> 0)
     margin: jax.Array  # m: the fraction of u_max the voltage reference is held below, in (0, 1]
@@ -44,12 +53,34 @@ class VoltageFeedbackFW(eqx.Module):
         self.omega_min = check_positive("omega_min", omega_min, own)
 
     def update(self, id_fw, u_ref_mag, u_max, omega_e, Ld, i_max, ts):
-        """Δi_d (A) for the next period from this period's |u*| (V) and ω̂e (rad/s)."""
+        """Δi_d for the next period from this period's |u*| and ω̂e.
+
+        Args:
+            id_fw: This period's Δi_d, A.
+            u_ref_mag: |u*|, V.
+            u_max: The voltage limit, V.
+            omega_e: ω̂e, rad/s.
+            Ld: The assumed d-axis inductance, H.
+            i_max: The current-vector limit, A.
+            ts: The control period, s.
+
+        Returns:
+            Δi_d, A, in [−i_max, 0].
+        """
         gain = self.alpha_fw / (Ld * jnp.maximum(jnp.abs(omega_e), self.omega_min))
         return jnp.clip(id_fw + gain * (self.margin * u_max - u_ref_mag) * ts, -i_max, 0.0)
 
     @staticmethod
     def limit_iq(iq_ref, id_ref, i_max):
-        """i_q* within the current circle left by i_d*, A."""
+        """i_q* within the current circle left by i_d*.
+
+        Args:
+            iq_ref: i_q*, A.
+            id_ref: i_d*, A.
+            i_max: The current-vector limit, A.
+
+        Returns:
+            The limited i_q*, A.
+        """
         room = jnp.sqrt(jnp.maximum(i_max * i_max - id_ref * id_ref, 0.0))
         return jnp.clip(iq_ref, -room, room)

@@ -46,6 +46,15 @@ __all__ = [
 
 
 class FLLModel(eqx.Module):
+    """The small-signal model of an FLL (001).
+
+    Attributes:
+        amplitude: V̂/V.
+        phase: θ̂/θ.
+        frequency: ω̂/ω.
+        open_loop: θ̂/(θ − θ̂), the loop of 001 Fig. 14.
+    """
+
     amplitude: TransferFunction  # V̂/V
     phase: TransferFunction  # θ̂/θ
     frequency: TransferFunction  # ω̂/ω
@@ -53,7 +62,16 @@ class FLLModel(eqx.Module):
 
 
 def sogi_fll_model(k, lam, omega_n) -> FLLModel:
-    """001 eqs (18)–(20)."""
+    """The SOGI-FLL's small-signal model, 001 eqs (18)–(20).
+
+    Args:
+        k: SOGI gain.
+        lam: FLL gain λ, rad²/s².
+        omega_n: Nominal frequency ωn, rad/s.
+
+    Returns:
+        The :class:`FLLModel`.
+    """
     kw = k * omega_n / 2
     den = jnp.stack([jnp.ones_like(kw), kw, lam / 2])
     zero = jnp.zeros_like(kw)
@@ -72,6 +90,15 @@ def wpf_model(k1, k2, lam, omega_n) -> FLLModel:
     001 notes that Fig. 4 "does not have a standard form"; rearranged, the loop
     whose closed loop is (24) is L = T/(1 − T) = (b1b2 s + d)/(s² (s + b1 + b2)),
     b_i = k_iωn/2, d = k1λωn/4 — the open loop drawn in Fig. 14.
+
+    Args:
+        k1: Prefilter SOGI gain.
+        k2: SOGI gain of the SOGI-FLL.
+        lam: FLL gain λ, rad²/s².
+        omega_n: Nominal frequency ωn, rad/s.
+
+    Returns:
+        The :class:`FLLModel`.
     """
     b1, b2 = k1 * omega_n / 2, k2 * omega_n / 2
     one = jnp.ones_like(b1)
@@ -87,7 +114,17 @@ def wpf_model(k1, k2, lam, omega_n) -> FLLModel:
 
 
 def wif_model(k1, k2, lam, omega_n) -> FLLModel:
-    """001 eqs (30)–(32)."""
+    """The SOGI-FLL-WIF's small-signal model, 001 eqs (30)–(32).
+
+    Args:
+        k1: In-loop filter damping gain.
+        k2: In-loop filter gain.
+        lam: FLL gain λ, rad²/s².
+        omega_n: Nominal frequency ωn, rad/s.
+
+    Returns:
+        The :class:`FLLModel`.
+    """
     a = k1 * k2 * omega_n**2 / 4
     b = k1 * omega_n / 2
     d = k1 * lam * omega_n / 4
@@ -109,13 +146,32 @@ def wif_model(k1, k2, lam, omega_n) -> FLLModel:
 
 
 def sogi_fll_closed_form(k=papers.SOGI_FLL_K, omega_n=papers.FLL_OMEGA_N, zeta=papers.FLL_ZETA, **kw):
-    """A :class:`~jaxobs.SOGIFLL` tuned by 001 eq (22) (Table I: k = 1/√2, λ = 12337): :meth:`SOGIFLL.closed_form`."""
+    """A :class:`~jaxobs.SOGIFLL` tuned by 001 eq (22) (Table I: k = 1/√2, λ = 12337): :meth:`SOGIFLL.closed_form`.
+
+    Args:
+        k: SOGI gain.
+        omega_n: Nominal frequency ωn, rad/s.
+        zeta: Damping ζ.
+        **kw: The constructor's keywords.
+
+    Returns:
+        The :class:`~jaxobs.SOGIFLL`.
+    """
     return SOGIFLL.closed_form(k=k, omega_n=omega_n, zeta=zeta, **kw)
 
 
 def wpf_closed_form(omega_n=papers.FLL_OMEGA_N, zeta=papers.FLL_ZETA, **kw):
     """A :class:`~jaxobs.SOGIFLLWPF` tuned by 001 eq (29) (Table I: k1 = k2 = √2, λ = 23948):
-    :meth:`SOGIFLLWPF.closed_form`."""
+    :meth:`SOGIFLLWPF.closed_form`.
+
+    Args:
+        omega_n: Nominal frequency ωn, rad/s.
+        zeta: Damping ζ.
+        **kw: The constructor's keywords.
+
+    Returns:
+        The :class:`~jaxobs.SOGIFLLWPF`.
+    """
     return SOGIFLLWPF.closed_form(omega_n=omega_n, zeta=zeta, **kw)
 
 
@@ -124,5 +180,14 @@ def wif_closed_form(omega_c=papers.WIF_OMEGA_C, b=papers.WIF_B, omega_n=papers.F
 
     Defaults are 001's: b = 1 + √2 (ζ = 1/√2, PM = 45°), ωc = 2π·18.8 rad/s
     (Table I: k1 = 1.815, k2 = 0.752, λ = 11559).
+
+    Args:
+        omega_c: The crossover ωc, rad/s.
+        b: The symmetric optimum's ratio b.
+        omega_n: Nominal frequency ωn, rad/s.
+        **kw: The constructor's keywords.
+
+    Returns:
+        The :class:`~jaxobs.SOGIFLLWIF`.
     """
     return SOGIFLLWIF.closed_form(omega_c=omega_c, b=b, omega_n=omega_n, **kw)

@@ -66,17 +66,36 @@ __all__ = [
 
 
 def integrator_flux_tf() -> TransferFunction:
-    """Pure integrator 1/s (000 eq 6)."""
+    """Pure integrator 1/s (000 eq 6).
+
+    Returns:
+        The :class:`TransferFunction`.
+    """
     return TransferFunction([1.0], [1.0, 0.0])
 
 
 def lpf_flux_tf(omega_c) -> TransferFunction:
-    """Low-pass filter 1/(s + ωc) (000, Sec. II)."""
+    """Low-pass filter 1/(s + ωc) (000, Sec. II).
+
+    Args:
+        omega_c: ωc, rad/s.
+
+    Returns:
+        The :class:`TransferFunction`.
+    """
     return TransferFunction([1.0], jnp.stack([jnp.ones_like(as_float(omega_c)), as_float(omega_c)]))
 
 
 def soifo_tf(k, omega) -> TransferFunction:
-    """SOIFO (000 eq 15): (1/ω') Q(s) = k ω' / (s² + k ω' s + ω'²)."""
+    """SOIFO (000 eq 15): (1/ω') Q(s) = k ω' / (s² + k ω' s + ω'²).
+
+    Args:
+        k: SOGI gain.
+        omega: ω', rad/s.
+
+    Returns:
+        The :class:`TransferFunction`.
+    """
     k, w = as_float(k), as_float(omega)
     return TransferFunction(jnp.stack([k * w]), jnp.stack([jnp.ones_like(w), k * w, w * w]))
 
@@ -86,13 +105,31 @@ def _sogi2_den(K1, K2, w):
 
 
 def sosoifo_tf(K1, K2, omega) -> TransferFunction:
-    """Second-order SOIFO (000 eq 20): K1K2ω'² s / (s⁴ + K2ω's³ + (2+K1K2)ω'²s² + K2ω'³s + ω'⁴)."""
+    """Second-order SOIFO (000 eq 20): K1K2ω'² s / (s⁴ + K2ω's³ + (2+K1K2)ω'²s² + K2ω'³s + ω'⁴).
+
+    Args:
+        K1: Second-order SOGI error gain.
+        K2: Second-order SOGI damping gain.
+        omega: ω', rad/s.
+
+    Returns:
+        The :class:`TransferFunction`.
+    """
     K1, K2, w = as_float(K1), as_float(K2), as_float(omega)
     return TransferFunction(jnp.stack([K1 * K2 * w**2, jnp.zeros_like(w)]), _sogi2_den(K1, K2, w))
 
 
 def sogi2_tf(K1, K2, omega):
-    """Second-order SOGI outputs (000 eqs 17–18): (D1, Q1) = (v'/v, qv'/v)."""
+    """Second-order SOGI outputs (000 eqs 17–18).
+
+    Args:
+        K1: Second-order SOGI error gain.
+        K2: Second-order SOGI damping gain.
+        omega: ω', rad/s.
+
+    Returns:
+        ``(D1, Q1) = (v'/v, qv'/v)``, :class:`TransferFunction` s.
+    """
     K1, K2, w = as_float(K1), as_float(K2), as_float(omega)
     z = jnp.zeros_like(w)
     d1 = TransferFunction(jnp.stack([K1 * K2 * w**2, z, z]), _sogi2_den(K1, K2, w))
@@ -104,18 +141,43 @@ def flux_dc_gain(tf: TransferFunction):
     """Final value of ψ̂ for a unit dc back EMF: lim_{s→0} s·H(s)·(1/s) = H(0) (000 eqs 29, 36).
 
     Infinite for the pure integrator (the ramp A₀t of eq 10).
+
+    Args:
+        tf: The flux estimator's :class:`TransferFunction` H.
+
+    Returns:
+        H(0).
     """
     return tf.dcgain()
 
 
 def soifo_harmonic_factor(h, k):
-    """000 eq (16): amplitude of the h-th harmonic relative to a pure integrator, 1/√((1−h²)²/(k²h²) + 1)."""
+    """000 eq (16): amplitude of the h-th harmonic relative to a pure integrator, 1/√((1−h²)²/(k²h²) + 1).
+
+    Args:
+        h: The harmonic order.
+        k: SOGI gain.
+
+    Returns:
+        The factor.
+    """
     h = as_float(h)
     return 1.0 / jnp.sqrt((1 - h**2) ** 2 / (k**2 * h**2) + 1)
 
 
 def sosoifo_harmonic_factor(h, K1, K2):
-    """000 eq (21): 1/√([1 − h²(2+K1K2) + h⁴]²/(h²K1K2)² + (hK2 − h³K2)²/(h²K1K2)²)."""
+    """000 eq (21): 1/√([1 − h²(2+K1K2) + h⁴]²/(h²K1K2)² + (hK2 − h³K2)²/(h²K1K2)²).
+
+    The amplitude of the h-th harmonic relative to a pure integrator.
+
+    Args:
+        h: The harmonic order.
+        K1: Second-order SOGI error gain.
+        K2: Second-order SOGI damping gain.
+
+    Returns:
+        The factor.
+    """
     h = as_float(h)
     a = (1 - h**2 * (2 + K1 * K2) + h**4) / (h**2 * K1 * K2)
     b = (h * K2 - h**3 * K2) / (h**2 * K1 * K2)
@@ -128,6 +190,13 @@ def soifo_harmonic_phase(h, k):
     γ_h1 = arg H(jhω') + π/2 with H = kω'/(s² + kω's + ω'²), i.e. atan((1 − h²)/(kh)), as printed (the
     printed arctangent is in the right quadrant because kh > 0).  Eq (32)'s θ₁, the phase of H itself, is
     printed as atan(kω'ω_h/(ω_h² − ω'²)), which is π off for h > 1 (errata: docs/errata.md).
+
+    Args:
+        h: The harmonic order.
+        k: SOGI gain.
+
+    Returns:
+        γ_h1, rad.
     """
     h = as_float(h)
     return jnp.arctan2(1 - h**2, k * h)
@@ -141,6 +210,14 @@ def sosoifo_harmonic_phase(h, K1, K2):
     (ω'⁴ − h²(2+K1K2)ω'²ω_h² + ω_h⁴)): its denominator has an extra h² (the middle term is
     (2+K1K2)ω'²ω_h², i.e. h²(2+K1K2)ω'⁴), and a plain arctangent cannot give π − arg P, which lies near π
     for h > 1: the printed angle is 180° off there (errata: docs/errata.md; tests/test_errata.py).
+
+    Args:
+        h: The harmonic order.
+        K1: Second-order SOGI error gain.
+        K2: Second-order SOGI damping gain.
+
+    Returns:
+        γ_h2, rad.
     """
     h = as_float(h)
     re = 1 - h**2 * (2 + K1 * K2) + h**4
@@ -152,9 +229,15 @@ def lpf_compensation(omega_1, omega_c):
     """Gain and rotation that turn the LPF's output at ω1 into the integrator's (000 eq 11).
 
     The LPF passes the fundamental as A₁/√(ω₁² + ωc²) at −0.5π + θ₁ with
-    θ₁ = atan(ωc/ω₁), instead of the integrator's A₁/ω₁ at −0.5π.  Returns
-    (gain, phase) with gain·e^{j·phase}·H_LPF(jω₁) = 1/(jω₁), i.e.
-    gain = √(ω₁² + ωc²)/ω₁ and phase = −θ₁.  Needs ω₁, hence a speed estimate.
+    θ₁ = atan(ωc/ω₁), instead of the integrator's A₁/ω₁ at −0.5π.  Needs ω₁, hence a speed estimate.
+
+    Args:
+        omega_1: ω₁, rad/s.
+        omega_c: ωc, rad/s.
+
+    Returns:
+        ``(gain, phase)`` with gain·e^{j·phase}·H_LPF(jω₁) = 1/(jω₁), i.e.
+        gain = √(ω₁² + ωc²)/ω₁ and phase = −θ₁ (rad).
     """
     w1, wc = as_float(omega_1), as_float(omega_c)
     h = 1.0 / (1j * w1 + wc)
@@ -171,7 +254,14 @@ def sogi2_tustin_paper(K1, K2, omega, ts):
     a3 = (−64 + 2v − 2x + 4y)/Σ, a4 = (16 − v + w − x + y)/Σ with Σ = 16 + v + w + x + y;
     Q1(z) = b0 ω'Ts (1 + 2z⁻¹ − 2z⁻³ − z⁻⁴)/A(z),  D1(z) = 2b0 (1 − 2z⁻² + z⁻⁴)/A(z).
 
-    Returns (D1, Q1) as discrete transfer functions.
+    Args:
+        K1: Second-order SOGI error gain.
+        K2: Second-order SOGI damping gain.
+        omega: ω', rad/s.
+        ts: Ts, s.
+
+    Returns:
+        ``(D1, Q1)`` as :class:`DiscreteTransferFunction` s.
     """
     a, d_num, q_num = sogi2_tustin_coefficients(as_float(K1), as_float(K2), as_float(omega), ts)
     a = jnp.concatenate([jnp.ones((1,), a.dtype), a])
@@ -184,19 +274,45 @@ def sogi2_tustin_paper(K1, K2, omega, ts):
 
 
 def leso_tf(l1, l2, mu) -> TransferFunction:
-    """LESO with constant gains (002 eq 15): l2 / (s² + (μ + l1) s + l2)."""
+    """LESO with constant gains (002 eq 15): l2 / (s² + (μ + l1) s + l2).
+
+    Args:
+        l1: The first gain, 1/s.
+        l2: The second gain, 1/s².
+        mu: μ = Rs/Lq, 1/s.
+
+    Returns:
+        The :class:`TransferFunction`.
+    """
     l1, l2, mu = as_float(l1), as_float(l2), as_float(mu)
     return TransferFunction(jnp.stack([l2]), jnp.stack([jnp.ones_like(l2), mu + l1, l2]))
 
 
 def cleso_tf(omega0) -> TransferFunction:
-    """C-LESO with the gains of (16) (002 eq 17): ω0² / (s + ω0)²."""
+    """C-LESO with the gains of (16) (002 eq 17): ω0² / (s + ω0)².
+
+    Args:
+        omega0: The bandwidth ω0, rad/s.
+
+    Returns:
+        The :class:`TransferFunction`.
+    """
     w = as_float(omega0)
     return TransferFunction(jnp.stack([w * w]), jnp.stack([jnp.ones_like(w), 2 * w, w * w]))
 
 
 def gileso_tf(omega0, K_r, omega_c, omega_e) -> TransferFunction:
-    """GI-LESO (002 eqs 29–30): (G + ω0²)/(s² + 2ω0 s + G + ω0²), G = 2K_r ωc s/(s² + 2ωc s + ω̂e²)."""
+    """GI-LESO (002 eqs 29–30): (G + ω0²)/(s² + 2ω0 s + G + ω0²), G = 2K_r ωc s/(s² + 2ωc s + ω̂e²).
+
+    Args:
+        omega0: The bandwidth ω0, rad/s.
+        K_r: Generalized integrator gain, 1/s².
+        omega_c: Generalized integrator damping ωc, rad/s.
+        omega_e: ω̂e, rad/s.
+
+    Returns:
+        The :class:`TransferFunction`.
+    """
     w0, kr, wc, we = (as_float(a) for a in (omega0, K_r, omega_c, omega_e))
     one = jnp.ones_like(w0)
     gi_den = jnp.stack([one, 2 * wc, we * we])  # s² + 2ωc s + ω̂²
@@ -211,6 +327,14 @@ def faleso_tf(k1, k2, omega_e) -> TransferFunction:
 
     Acts on the complex vector e_α + j e_β: positive-sequence components are at
     +ω, the 5th harmonic (negative sequence) at −5ω̂e, the 7th at +7ω̂e.
+
+    Args:
+        k1: FA-LESO integral gain, 1/s².
+        k2: FA-LESO proportional gain, 1/s.
+        omega_e: ω̂e, rad/s.
+
+    Returns:
+        The complex-coefficient :class:`TransferFunction`.
     """
     k1, k2, we = as_float(k1), as_float(k2), as_float(omega_e)
     one = jnp.ones_like(k1)
@@ -218,12 +342,27 @@ def faleso_tf(k1, k2, omega_e) -> TransferFunction:
 
 
 def faleso_is_stable(k1, k2, omega_e):
-    """Generalized Routh test on 002 eq (22) (stable iff k1 > 0 and k2 > 0, eq 24)."""
+    """Generalized Routh test on 002 eq (22) (stable iff k1 > 0 and k2 > 0, eq 24).
+
+    Args:
+        k1: FA-LESO integral gain, 1/s².
+        k2: FA-LESO proportional gain, 1/s.
+        omega_e: ω̂e, rad/s.
+
+    Returns:
+        Whether the FA-LESO is stable.
+    """
     return is_hurwitz(faleso_tf(k1, k2, omega_e).den)
 
 
 class CLESOGains(eqx.Module):
-    """Constant LESO gains (002 eq 16) with the μ = Rs/Lq they were designed for."""
+    """Constant LESO gains (002 eq 16) with the μ = Rs/Lq they were designed for.
+
+    Attributes:
+        l1: 2ω0 − μ, 1/s.
+        l2: ω0², 1/s².
+        omega0: The bandwidth ω0, rad/s.
+    """
 
     l1: jax.Array
     l2: jax.Array
@@ -231,7 +370,19 @@ class CLESOGains(eqx.Module):
 
 
 def cleso_closed_form(omega0, Rs, Lq) -> CLESOGains:
-    """002 eq (16): l1 = 2ω0 − μ, l2 = ω0², μ = Rs/Lq; both poles at −ω0."""
+    """002 eq (16): l1 = 2ω0 − μ, l2 = ω0², μ = Rs/Lq; both poles at −ω0.
+
+    Args:
+        omega0: The bandwidth ω0, rad/s (> 0).
+        Rs: The stator resistance, Ω (≥ 0).
+        Lq: The q-axis inductance, H (> 0).
+
+    Returns:
+        :class:`CLESOGains`.
+
+    Raises:
+        ValueError: A value out of its range.
+    """
     w0 = check_positive("omega0", omega0, "cleso_closed_form")
     rs = check_real("Rs", Rs, lower=0.0, lower_open=False, owner="cleso_closed_form")
     lq = check_positive("Lq", Lq, "cleso_closed_form")
@@ -273,6 +424,26 @@ def faleso_speed_loop_poles(
     the simulated dual drive (docs/papers.md, "the ringing after the I-f hand-over"): with the speed loop run every
     period and a 1.5 kHz current loop, the simulated pair is 10.93 Hz, σ = 1.33 /s, this 11.05 Hz, 1.01 /s; with
     the simulated FA-LESO's ω̂ frozen at ω_e 9.83 Hz, 4.70 /s, and without ``adaptation`` 9.95 Hz, 4.23 /s.
+
+    Args:
+        k1: FA-LESO integral gain, 1/s².
+        k2: FA-LESO proportional gain, 1/s.
+        omega_e: The operating point's ω_e, rad/s.
+        kp: The PLL's proportional gain k_p, 1/s.
+        ki: The PLL's integral gain k_i, 1/s².
+        kp_w: The speed loop's k_pω.
+        ki_w: The speed loop's k_iω.
+        p: Pole pairs.
+        psi_f: ψf, Wb.
+        Ld: Ld, H.
+        Lq: Lq, H.
+        J: Inertia, kg·m².
+        i_d: The operating point's i_d, A.
+        i_q: The operating point's i_q, A.
+        adaptation: Whether to include the frequency adaptation (static).
+
+    Returns:
+        The poles, rad/s.
     """
     g = faleso_tf(k1, k2, omega_e)
     jw = 1j * as_float(omega_e)
@@ -299,12 +470,33 @@ def faleso_speed_loop_poles(
 
 
 def position_error_rs(delta_rs, i_d, i_q, e_ex):
-    """002 eq (42): Δθ = atan(−ΔRs î_d / (E_ex − ΔRs î_q)), rad."""
+    """002 eq (42): Δθ = atan(−ΔRs î_d / (E_ex − ΔRs î_q)), rad.
+
+    Args:
+        delta_rs: ΔRs, Ω.
+        i_d: î_d, A.
+        i_q: î_q, A.
+        e_ex: E_ex, V.
+
+    Returns:
+        Δθ, rad.
+    """
     return jnp.arctan2(-delta_rs * i_d, e_ex - delta_rs * i_q)
 
 
 def position_error_lq(delta_lq, i_d, i_q, e_ex, omega_e):
-    """002 eq (43): Δθ = atan(ΔLq î_q / (E_ex/ω̂e − ΔLq î_d)), rad."""
+    """002 eq (43): Δθ = atan(ΔLq î_q / (E_ex/ω̂e − ΔLq î_d)), rad.
+
+    Args:
+        delta_lq: ΔLq, H.
+        i_d: î_d, A.
+        i_q: î_q, A.
+        e_ex: E_ex, V.
+        omega_e: ω̂e, rad/s.
+
+    Returns:
+        Δθ, rad.
+    """
     return jnp.arctan2(delta_lq * i_q, e_ex / omega_e - delta_lq * i_d)
 
 
@@ -330,6 +522,16 @@ def faleso_pll_loop(k1, k2, omega_e, kp, ki) -> TransferFunction:
     FA-LESO) is left out: the FA-LESO at a frozen ω̂ = ω_e.  It does not vanish to first order
     (G_FA(jω̂) = 1 for every ω̂, but the carrier is at ω_e: an angle shift of about δω̂/k2;
     :func:`faleso_speed_loop_poles` with ``adaptation=True`` has it).
+
+    Args:
+        k1: FA-LESO integral gain, 1/s².
+        k2: FA-LESO proportional gain, 1/s.
+        omega_e: ωe, rad/s.
+        kp: The PLL's proportional gain, 1/s.
+        ki: The PLL's integral gain, 1/s².
+
+    Returns:
+        The open loop L(s), a :class:`TransferFunction`.
     """
     g = faleso_tf(k1, k2, omega_e)
     jw = 1j * as_float(omega_e)

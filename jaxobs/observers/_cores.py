@@ -47,12 +47,33 @@ import jax.numpy as jnp
 
 
 def gi_vf(y, q, x, w):
-    """Generalized integrator: returns (ẏ, q̇) for input ``x`` at centre ``w``."""
+    """Generalized integrator.
+
+    Args:
+        y: The in-phase state.
+        q: The quadrature state.
+        x: The input.
+        w: The centre frequency, rad/s.
+
+    Returns:
+        ``(ẏ, q̇)``.
+    """
     return w * (x - q), w * y
 
 
 def sogi_vf(y, q, v, w, k):
-    """SOGI: returns (ẏ, q̇) for input ``v``, gain ``k``, centre ``w`` (001 eqs 6–7)."""
+    """SOGI (001 eqs 6–7).
+
+    Args:
+        y: The in-phase output v'.
+        q: The quadrature output qv'.
+        v: The input.
+        w: The centre frequency, rad/s.
+        k: The SOGI gain.
+
+    Returns:
+        ``(ẏ, q̇)``.
+    """
     return gi_vf(y, q, k * (v - y), w)
 
 
@@ -66,6 +87,19 @@ def sogi2_vf(za, zb, y, q, v, w, k_err, k_damp):
     The gains are named by what they do, since the papers name them the other way round: ``k_err``
     multiplies the error v − y (000's K1, 001's k2) and ``k_damp`` the damping term (000's K2, 001's k1):
     the filter is k_err k_damp / (x² + k_damp x + k_err k_damp).
+
+    Args:
+        za: The first GI's in-phase output.
+        zb: The first GI's quadrature output.
+        y: The filtered in-phase output v'.
+        q: The filtered quadrature output qv'.
+        v: The input.
+        w: The centre frequency, rad/s.
+        k_err: The gain on the error v − y.
+        k_damp: The damping gain.
+
+    Returns:
+        ``(ża, żb, ẏ, q̇)``.
     """
     dza, dzb = gi_vf(za, zb, k_damp * (k_err * (v - y) - za), w)
     dy, dq = gi_vf(y, q, za, w)
@@ -78,6 +112,15 @@ def sogi2_tustin_coefficients(K1, K2, w, ts):
 
     The difference equations :class:`~jaxobs.SecondOrderSOIFO` runs with ``discretization="paper"``;
     :func:`jaxobs.linear.sogi2_tustin_paper` builds the discrete transfer functions from them.
+
+    Args:
+        K1: Second-order SOGI error gain.
+        K2: Second-order SOGI damping gain.
+        w: ω', rad/s.
+        ts: Ts, s.
+
+    Returns:
+        ``(a1…a4, D1 numerator, Q1 numerator)``, each in ascending powers of z⁻¹.
     """
     u = 2 * K1 * K2 * w**2 * ts**2
     v = 8 * K2 * w * ts
@@ -97,12 +140,31 @@ def safe_sq_amplitude(y, q, v_floor):
     """V̂² = y² + q², floored at ``v_floor²`` so the FLL normalization never divides by 0.
 
     The floor is exact above it (no bias once V̂ > v_floor).
+
+    Args:
+        y: The in-phase output.
+        q: The quadrature output.
+        v_floor: The floor of V̂.
+
+    Returns:
+        The floored V̂².
     """
     return jnp.maximum(y * y + q * q, v_floor * v_floor)
 
 
 def fll_rate(err, q, y, lam, v_floor):
-    """Normalized FLL, 001 eq (8): ω̂̇ = −λ · err · q / V̂²."""
+    """Normalized FLL, 001 eq (8): ω̂̇ = −λ · err · q / V̂².
+
+    Args:
+        err: The FLL's error.
+        q: The quadrature output.
+        y: The in-phase output.
+        lam: λ, rad²/s².
+        v_floor: The floor of V̂.
+
+    Returns:
+        ω̂̇, rad/s².
+    """
     return -lam * err * q / safe_sq_amplitude(y, q, v_floor)
 
 
@@ -114,12 +176,31 @@ def pll_vf(theta_p, omega_p, err, kp, ki):
     Linearized, θ_p/θ = (k_p s + k_i)/(s² + k_p s + k_i); the closed form
     k_p = 2ζω_b, k_i = ω_b² places both poles at natural frequency ω_b with
     damping ζ (:func:`jaxobs.linear.pll_gains`).
+
+    Args:
+        theta_p: θ_p, rad.
+        omega_p: ω_p, rad/s.
+        err: The normalized phase error.
+        kp: k_p, 1/s.
+        ki: k_i, 1/s².
+
+    Returns:
+        ``(θ̇_p, ω̇_p)``.
     """
     return omega_p + kp * err, ki * err
 
 
 def quadrature_error(x_a, x_b, theta_p, floor):
-    """Normalized quadrature phase detector for a vector (x_a, x_b) = |x|(cos θ, sin θ):
-    (x_b cos θ_p − x_a sin θ_p)/|x| = sin(θ − θ_p)."""
+    """Normalized quadrature phase detector for a vector (x_a, x_b) = |x|(cos θ, sin θ).
+
+    Args:
+        x_a: x_a.
+        x_b: x_b.
+        theta_p: θ_p, rad.
+        floor: The floor of |x|.
+
+    Returns:
+        (x_b cos θ_p − x_a sin θ_p)/|x| = sin(θ − θ_p).
+    """
     mag = jnp.sqrt(jnp.maximum(x_a * x_a + x_b * x_b, floor * floor))
     return (x_b * jnp.cos(theta_p) - x_a * jnp.sin(theta_p)) / mag

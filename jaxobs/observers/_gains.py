@@ -30,7 +30,16 @@ _KEY = "jaxobs_gain"
 
 
 class GainInfo(NamedTuple):
-    """A gain's metadata (module doc)."""
+    """A gain's metadata (module doc).
+
+    Attributes:
+        name: The field's name.
+        units: Its UDUNITS units.
+        role: The part of the observer the gain belongs to (``"sogi"``, ``"fll"``, ``"pll"``, ...).
+        bounds: The open interval (lower, upper) of valid values.
+        long_name: What it is.
+        symbol: The paper's symbol (``"001: λ"``).
+    """
 
     name: str
     units: str

@@ -22,39 +22,95 @@ __all__ = [
 
 
 def sogi_fll_lambda(k, omega_n, zeta=papers.FLL_ZETA):
-    """001 eq (22): λ = k² ωn² / (8 ζ²)  (= k² ωn² / 4 at ζ = 1/√2)."""
+    """001 eq (22): λ = k² ωn² / (8 ζ²)  (= k² ωn² / 4 at ζ = 1/√2).
+
+    Args:
+        k: SOGI gain.
+        omega_n: Nominal frequency ωn, rad/s.
+        zeta: Damping ζ.
+
+    Returns:
+        λ, rad²/s².
+    """
     return k**2 * omega_n**2 / (8 * zeta**2)
 
 
 def wpf_lambda(omega_n, zeta=papers.FLL_ZETA):
-    """001 eq (29), with k1 = k2 = √2: λ = 2 (ζ + 1) ωn² / (2ζ + 1)³."""
+    """001 eq (29), with k1 = k2 = √2: λ = 2 (ζ + 1) ωn² / (2ζ + 1)³.
+
+    Args:
+        omega_n: Nominal frequency ωn, rad/s.
+        zeta: Damping ζ.
+
+    Returns:
+        λ, rad²/s².
+    """
     return 2 * (zeta + 1) * omega_n**2 / (2 * zeta + 1) ** 3
 
 
 def wif_symmetric_optimum(b, omega_c, omega_n):
-    """001 eq (34): k1 = 2 b ωc / ωn, k2 = 2 ωc / ωn, λ = 2 ωc² / b."""
+    """001 eq (34): k1 = 2 b ωc / ωn, k2 = 2 ωc / ωn, λ = 2 ωc² / b.
+
+    Args:
+        b: The symmetric optimum's ratio b.
+        omega_c: The crossover ωc, rad/s.
+        omega_n: Nominal frequency ωn, rad/s.
+
+    Returns:
+        ``(k1, k2, λ)``.
+    """
     return 2 * b * omega_c / omega_n, 2 * omega_c / omega_n, 2 * omega_c**2 / b
 
 
 def soifo_lambda(k):
     """The SOIFO's FLL gain ``lam`` (dimensionless: 000's FLL is frequency-normalized, λ(ω̂) = lam·ω̂²,
     :mod:`jaxobs.observers.flux`): 001 eq (22) at ζ = 1/√2 with ωn → 1, lam = k²/4, the same damping at
-    every speed."""
+    every speed.
+
+    Args:
+        k: SOGI gain.
+
+    Returns:
+        lam.
+    """
     return k**2 / 4
 
 
 def second_order_soifo_lambda(K1, K2):
     """The second-order SOIFO's FLL gain ``lam`` (dimensionless, as :func:`soifo_lambda`): 001's symmetric
     optimum (eq 34) frequency-normalized, in 000's names (the WIF's k1 = K2, k2 = K1) with b = K2/K1:
-    lam = K1³/(2 K2)."""
+    lam = K1³/(2 K2).
+
+    Args:
+        K1: Second-order SOGI error gain.
+        K2: Second-order SOGI damping gain.
+
+    Returns:
+        lam.
+    """
     return K1**3 / (2 * K2)
 
 
 def pll_gains(bandwidth, zeta=papers.PLL_ZETA):
-    """Type-2 PLL on a normalized error: k_p = 2ζω_b, k_i = ω_b² (θ̂/θ = (k_p s + k_i)/(s² + k_p s + k_i))."""
+    """Type-2 PLL on a normalized error: k_p = 2ζω_b, k_i = ω_b² (θ̂/θ = (k_p s + k_i)/(s² + k_p s + k_i)).
+
+    Args:
+        bandwidth: ω_b, rad/s.
+        zeta: Damping ζ.
+
+    Returns:
+        ``(k_p, k_i)``, 1/s and 1/s².
+    """
     return 2 * zeta * bandwidth, bandwidth**2
 
 
 def symmetric_optimum_pm(b):
-    """001 eq (39): phase margin of the symmetric optimum, rad."""
+    """001 eq (39): phase margin of the symmetric optimum.
+
+    Args:
+        b: The symmetric optimum's ratio b.
+
+    Returns:
+        The phase margin, rad.
+    """
     return jnp.arctan((b**2 - 1) / (2 * b))

@@ -63,15 +63,35 @@ class AbstractObserver(eqx.Module):
 
     @abc.abstractmethod
     def init(self, u0=None) -> Any:
-        """The state at sample 0 (``u0``: the first input, for rules that need it; None otherwise)."""
+        """The state at sample 0.
+
+        Args:
+            u0: The first input, for rules that need it; None otherwise.
+
+        Returns:
+            The observer's state.
+        """
 
     @abc.abstractmethod
     def step(self, state, u) -> tuple[Any, Any]:
-        """One sample: (the state at n + 1, the named outputs at t_n)."""
+        """One sample.
+
+        Args:
+            state: The state at n.
+            u: The input at t_n.
+
+        Returns:
+            ``(the state at n + 1, the named outputs at t_n)``.
+        """
 
 
 class ObserverState(eqx.Module):
-    """State of a vector-field observer: the flat state and the rule's own state."""
+    """State of a vector-field observer: the flat state and the rule's own state.
+
+    Attributes:
+        x: The flat state, shape (n_states,).
+        rule: The rule's state (multistep history) or None.
+    """
 
     x: jax.Array  # shape (n_states,)
     rule: Any  # rule state (multistep history) or None
@@ -82,6 +102,10 @@ class AbstractVectorFieldObserver(AbstractObserver):
 
     Subclasses define ``f``, ``output`` and ``initial_state``; the rule given at
     construction integrates ``f`` over each sample period ``ts``.
+
+    Attributes:
+        ts: Sample time, s.
+        rule: The discretization rule.
     """
 
     ts: eqx.AbstractVar[float]
@@ -89,11 +113,26 @@ class AbstractVectorFieldObserver(AbstractObserver):
 
     @abc.abstractmethod
     def f(self, x: jax.Array, u) -> jax.Array:
-        """Continuous-time vector field dx/dt for input value ``u``."""
+        """Continuous-time vector field.
+
+        Args:
+            x: The flat state.
+            u: The input value.
+
+        Returns:
+            dx/dt.
+        """
 
     @abc.abstractmethod
     def output(self, x: jax.Array) -> Any:
-        """Named outputs (a NamedTuple) computed from the state ``x``."""
+        """Named outputs computed from the state.
+
+        Args:
+            x: The flat state.
+
+        Returns:
+            The outputs (a NamedTuple).
+        """
 
     @abc.abstractmethod
     def initial_state(self) -> jax.Array:
@@ -109,7 +148,16 @@ class AbstractVectorFieldObserver(AbstractObserver):
         return ObserverState(x=x1, rule=rule_state), out
 
     def vector_field(self, t, x, signal):
-        """``f(t, x, args)`` for ``diffrax.ODETerm``: ``args`` is a signal, called at t."""
+        """``f(t, x, args)`` for ``diffrax.ODETerm``.
+
+        Args:
+            t: The time, s.
+            x: The flat state.
+            signal: The signal, called at t.
+
+        Returns:
+            dx/dt.
+        """
         return self.f(x, signal(t))
 
 
@@ -118,6 +166,13 @@ class DriveObserverState(eqx.Module):
 
     One class for both families: each integrates the period [t_{k−1}, t_k] from the voltage applied over it
     and the currents at both ends, so each remembers the same three things.
+
+    Attributes:
+        x: The filter, LESO, FLL and PLL states (the observer's layout).
+        rule: The rule's state.
+        i_prev: (i_α, i_β) at the previous sample, A.
+        u_prev: (u_α, u_β) applied over the period that ends now, V.
+        started: False until one sample has been seen.
     """
 
     x: jax.Array  # filter, LESO, FLL and PLL states (the observer's layout)
@@ -132,6 +187,13 @@ def replace_leaves(module, **values):
 
     The cast keeps a float32 observer float32 when it is bound to a float64 machine (the C export rounds
     the observer to float32 first) and keeps ``lax.scan`` carries' dtypes fixed.
+
+    Args:
+        module: The module.
+        **values: field name -> value.
+
+    Returns:
+        The module with the fields set.
     """
     names = tuple(values)
     new = tuple(jnp.asarray(values[n], dtype=jnp.result_type(getattr(module, n))) for n in names)
@@ -154,30 +216,71 @@ class AbstractDriveObserver(AbstractObserver):
 
     @abc.abstractmethod
     def bind(self, est_par, omega_e):
-        """This observer assuming the machine ``est_par`` (a :class:`jaxobs.drive.PMSMParams`: its Rs and the
-        inductance the family's model uses) and starting at the electrical speed ``omega_e`` (rad/s, signed):
-        its initial speed field is what :meth:`init_at` would start from.  ``est_par=None`` keeps the
-        observer's own machine and sets only the speed (a recording gives the speed, not the machine).
-        The gains are untouched; every value keeps its field's dtype."""
+        """This observer assuming a machine and starting at a speed.
+
+        Its initial speed field becomes what :meth:`init_at` would start from.  The gains are untouched; every
+        value keeps its field's dtype.
+
+        Args:
+            est_par: The machine assumed (a :class:`jaxobs.drive.PMSMParams`: its Rs and the inductance the
+                family's model uses); None keeps the observer's own machine and sets only the speed (a
+                recording gives the speed, not the machine).
+            omega_e: The electrical speed, rad/s, signed.
+
+        Returns:
+            The bound observer.
+        """
 
     @abc.abstractmethod
     def init_at(self, omega_e):
-        """The initial state with the speed estimate at ``omega_e`` (rad/s): a steady start's settling phase."""
+        """The initial state of a steady start's settling phase.
+
+        Args:
+            omega_e: The speed estimate's start, rad/s.
+
+        Returns:
+            The :class:`DriveObserverState`.
+        """
 
     def init_aligned(self, omega_e, theta_e):
-        """The initial state of a steady start's settling phase: :meth:`init_at` (speed estimate at ``omega_e``,
-        rad/s) with, where the observer has an angle state of its own (a LESO's PLL θ̂), that angle at the
-        rotor's ``theta_e`` (rad) when the phase starts.  An angle derived from filter states that start at zero
-        (the flux observers') has nothing to set: this default."""
+        """The initial state of a steady start's settling phase, aligned to the rotor.
+
+        :meth:`init_at` with, where the observer has an angle state of its own (a LESO's PLL θ̂), that angle
+        at the rotor's angle when the phase starts.  An angle derived from filter states that start at zero
+        (the flux observers') has nothing to set: this default.
+
+        Args:
+            omega_e: The speed estimate's start, rad/s.
+            theta_e: The rotor's electrical angle, rad.
+
+        Returns:
+            The :class:`DriveObserverState`.
+        """
         return self.init_at(omega_e)
 
     @abc.abstractmethod
     def seed_speed(self, state, omega_e):
-        """``state`` with its speed estimate set to ``omega_e`` (rad/s): an I-f start-up holds it at the I-f
-        frequency until the hand-over (a DSP knows that frequency: it is the FLL's or PLL's feed-forward)."""
+        """``state`` with its speed estimate set: an I-f start-up holds it at the I-f frequency until the
+        hand-over (a DSP knows that frequency: it is the FLL's or PLL's feed-forward).
+
+        Args:
+            state: The :class:`DriveObserverState`.
+            omega_e: The speed, rad/s.
+
+        Returns:
+            The state with its speed estimate at ``omega_e``.
+        """
 
 
 class BankOutput(NamedTuple):
+    """An :class:`ObserverBank`'s outputs at a sample.
+
+    Attributes:
+        theta: The primary observer's θ̂e (what a sensorless controller uses).
+        omega: The primary observer's ω̂e.
+        each: Every observer's own outputs, in order.
+    """
+
     theta: Any  # the primary observer's θ̂e (what a sensorless controller uses)
     omega: Any  # the primary observer's ω̂e
     each: tuple  # every observer's own outputs, in order
@@ -188,6 +291,13 @@ class ObserverBank(AbstractDriveObserver):
 
     Lets one drive simulation compare observers on identical data (000's
     per-observer position errors) without them disturbing each other.
+
+    Attributes:
+        observers: The drive observers (a tuple of :class:`AbstractDriveObserver`).
+        primary: The index of the observer that closes the loop (static).
+
+    Raises:
+        ValueError: An entry is not a drive observer, or ``primary`` is out of range.
     """
 
     observers: tuple

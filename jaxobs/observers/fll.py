@@ -35,6 +35,16 @@ __all__ = ["FLLOutput", "SOGIFLL", "SOGIFLLWPF", "SOGIFLLWIF"]
 
 
 class FLLOutput(NamedTuple):
+    """An FLL's outputs at a sample.
+
+    Attributes:
+        v_alpha: The filtered in-phase signal v' (input units).
+        v_beta: The filtered quadrature signal qv' (input units).
+        amplitude: V̂ = sqrt(v'² + qv'²).
+        theta: θ̂ = atan2(qv', v'), rad, in (−π, π].
+        omega: ω̂, rad/s.
+    """
+
     v_alpha: jax.Array  # filtered in-phase signal v' (input units)
     v_beta: jax.Array  # filtered quadrature signal qv' (input units)
     amplitude: jax.Array  # V̂ = sqrt(v'² + qv'²)
@@ -61,10 +71,15 @@ class SOGIFLL(AbstractVectorFieldObserver):
     damping rule λ = k² ωn² / 4 for ζ = 1/√2 (eq 22).
 
     Args:
-        k: SOGI gain (> 0).  lam: FLL gain λ (> 0, rad²/s²).
-        omega_n: nominal frequency and initial ω̂ (rad/s, > 0).
-        ts: sample time (s).  rule: discretization rule (001 uses AB3).
-        v_floor: floor of V̂ in the FLL normalization (input units, > 0).
+        k: SOGI gain (> 0).
+        lam: FLL gain λ (> 0, rad²/s²).
+        omega_n: Nominal frequency and initial ω̂ (rad/s, > 0).
+        ts: Sample time (s).
+        rule: Discretization rule (default :class:`~jaxobs.AB3`, as 001 uses).
+        v_floor: Floor of V̂ in the FLL normalization (input units, > 0).
+
+    Raises:
+        ValueError: A value out of its range.
     """
 
     k: jax.Array = gain(units="1", role="sogi", long_name="SOGI gain", symbol="001: k")
@@ -130,6 +145,18 @@ class SOGIFLLWPF(AbstractVectorFieldObserver):
     by the SOGI-FLL while the FLL integrator sits after it, which gives the
     characteristic polynomial s³ + (k1+k2)ωn/2 s² + k1k2ωn²/4 s + k1λωn/4 of
     001 eqs (24)–(25).  Tuning (eq 29): k1 = k2 = √2, λ = 2(ζ+1)ωn²/(2ζ+1)³.
+
+    Args:
+        k1: Prefilter SOGI gain (> 0).
+        k2: SOGI gain of the SOGI-FLL (> 0).
+        lam: FLL gain λ (> 0, rad²/s²).
+        omega_n: Nominal frequency and initial ω̂ (rad/s, > 0).
+        ts: Sample time (s).
+        rule: Discretization rule (default :class:`~jaxobs.AB3`, as 001 uses).
+        v_floor: Floor of V̂ in the FLL normalization (input units, > 0).
+
+    Raises:
+        ValueError: A value out of its range.
     """
 
     k1: jax.Array = gain(units="1", role="prefilter", long_name="prefilter SOGI gain", symbol="001: k1")
@@ -223,6 +250,20 @@ class SOGIFLLWIF(AbstractVectorFieldObserver):
     (tests/test_fll.py checks both models against simulation).
 
     Tuning (eq 34, symmetric optimum): k1 = 2bωc/ωn, k2 = 2ωc/ωn, λ = 2ωc²/b.
+
+    Args:
+        k1: In-loop filter damping gain (001's k1, 000's K2; > 0).
+        k2: In-loop filter gain (001's k2, 000's K1; > 0).
+        lam: FLL gain λ (> 0, rad²/s²).
+        omega_n: Nominal frequency and initial ω̂ (rad/s, > 0).
+        ts: Sample time (s).
+        rule: Discretization rule (default :class:`~jaxobs.AB3`, as 001 uses).
+        v_floor: Floor of V̂ in the FLL normalization (input units, > 0).
+        fll_error: The frequency detector: ``"input"`` (the derived one, 001's small-signal model) or
+            ``"residual"`` (the SOGI-FLL's error on the outputs, for comparison).
+
+    Raises:
+        ValueError: A value out of its range.
     """
 
     # 001 eq (30): k1 sets the envelope's damping term, k2 the loop gain (000's K2 and K1)

@@ -75,6 +75,17 @@ __all__ = ["FluxOutput", "AbstractFluxObserver", "PureIntegratorFlux", "LPFFlux"
 
 
 class FluxOutput(NamedTuple):
+    """A flux observer's outputs at a sample.
+
+    Attributes:
+        psi_a: The estimated rotor flux, α, Wb.
+        psi_b: The estimated rotor flux, β, Wb.
+        theta: θ̂e = atan2(ψ̂β, ψ̂α), rad (000 eq 4).
+        omega: ω̂e, rad/s (signed).
+        e_a: The α back EMF fed to the filter over the last period, V.
+        e_b: The β back EMF, V.
+    """
+
     psi_a: jax.Array  # estimated rotor flux, α, Wb
     psi_b: jax.Array  # estimated rotor flux, β, Wb
     theta: jax.Array  # θ̂e = atan2(ψ̂β, ψ̂α), rad (000 eq 4)
@@ -90,6 +101,13 @@ class AbstractFluxObserver(AbstractDriveObserver):
     the state (``_speed_index``) and the speed they start from (:meth:`start_speed`).  The model has one
     inductance ``L``: bound to a machine it takes the d-axis one, Ld (000's machine is non-salient; on a
     salient one u − R̂s i − L̂ di/dt is not dψf/dt, so the drive jobs run these on 000's SPMSM only).
+
+    Attributes:
+        Rs: Assumed stator resistance, ohm (:meth:`bind` sets it).
+        L: Assumed inductance, H (:meth:`bind` sets it to the machine's Ld).
+        omega_init: The speed estimate's start, rad/s (:meth:`bind` sets it).
+        ts: Sample time, s.
+        rule: Discretization rule.
     """
 
     Rs: eqx.AbstractVar[jax.Array]
@@ -103,7 +121,14 @@ class AbstractFluxObserver(AbstractDriveObserver):
 
     @abc.abstractmethod
     def start_speed(self, omega_e) -> jax.Array:
-        """The speed estimate (rad/s) the observer starts from, or is held at, when the rotor turns at ω_e."""
+        """The speed estimate the observer starts from, or is held at, when the rotor turns at ω_e.
+
+        Args:
+            omega_e: The rotor's electrical speed ω_e, rad/s.
+
+        Returns:
+            The speed estimate, rad/s.
+        """
 
     def bind(self, est_par, omega_e) -> AbstractFluxObserver:
         w = self.start_speed(omega_e)
@@ -115,12 +140,27 @@ class AbstractFluxObserver(AbstractDriveObserver):
         return self._init_from(self.initial_state())
 
     def init_at(self, omega_e) -> DriveObserverState:
-        """The initial state with the speed estimate at ω_e (rad/s): the start of a drive's settling phase."""
+        """The initial state with the speed estimate at ω_e: the start of a drive's settling phase.
+
+        Args:
+            omega_e: ω_e, rad/s.
+
+        Returns:
+            The :class:`DriveObserverState`.
+        """
         return self._init_from(self.initial_state().at[self._speed_index].set(self.start_speed(omega_e)))
 
     def seed_speed(self, state: DriveObserverState, omega_e) -> DriveObserverState:
         """``state`` with its speed estimate (FLL centre frequency or PLL speed) set to ω_e: an I-f start-up
-        holds it at the I-f frequency until the hand-over (jaxobs.drive.ClosedLoop)."""
+        holds it at the I-f frequency until the hand-over (jaxobs.drive.ClosedLoop).
+
+        Args:
+            state: The :class:`DriveObserverState`.
+            omega_e: ω_e, rad/s.
+
+        Returns:
+            The state with its speed estimate set.
+        """
         w = self.start_speed(omega_e)
         return eqx.tree_at(lambda s: s.x, state, state.x.at[self._speed_index].set(w))
 
@@ -143,7 +183,16 @@ class AbstractFluxObserver(AbstractDriveObserver):
         return new, self.output(x1, e)
 
     def vector_field(self, t, x, e_of_t):
-        """``f(t, x, args)`` for diffrax, ``args`` a function of t returning (e_α, e_β)."""
+        """``f(t, x, args)`` for diffrax.
+
+        Args:
+            t: The time, s.
+            x: The flat state.
+            e_of_t: A function of t returning (e_α, e_β).
+
+        Returns:
+            dx/dt.
+        """
         return self.f(x, e_of_t(t))
 
 
@@ -193,7 +242,14 @@ class _PLLFluxBase(AbstractFluxObserver):
     _speed_index: ClassVar[int] = 3  # the PLL's ω in the state
 
     def start_speed(self, omega_e):
-        """ω_e itself: a PLL's speed is signed and may be zero."""
+        """ω_e itself: a PLL's speed is signed and may be zero.
+
+        Args:
+            omega_e: ω_e, rad/s.
+
+        Returns:
+            ω_e, rad/s.
+        """
         return jnp.asarray(omega_e)
 
     def initial_state(self):
@@ -206,7 +262,22 @@ class _PLLFluxBase(AbstractFluxObserver):
 
 
 class PureIntegratorFlux(_PLLFluxBase):
-    """ψ̂ = ∫ê dt (000 eq 6) with a type-2 PLL on ψ̂ for the speed.  State [ψα, ψβ, θ_pll, ω_pll]."""
+    """ψ̂ = ∫ê dt (000 eq 6) with a type-2 PLL on ψ̂ for the speed.  State [ψα, ψβ, θ_pll, ω_pll].
+
+    Args:
+        Rs: Assumed stator resistance, ohm (≥ 0; :meth:`bind` sets it per scenario).
+        L: Assumed inductance, H (> 0; :meth:`bind` sets it to the machine's Ld).
+        kp_pll: The PLL's proportional gain, 1/s (> 0).
+        ki_pll: The PLL's integral gain, 1/s² (> 0).
+        omega_init: The PLL's initial speed, rad/s (default 0; :meth:`bind` sets it).
+        ts: Sample time, s.
+        rule: Discretization rule (default :class:`~jaxobs.RK4`).
+        psi_floor: Floor of |ψ̂| in the PLL's normalized phase detector, Wb.
+        omega0: Another name of ``omega_init`` (the job files' key); give one of the two.
+
+    Raises:
+        ValueError: A value out of its range, or both ``omega_init`` and ``omega0`` given.
+    """
 
     Rs: jax.Array
     L: jax.Array
@@ -236,6 +307,22 @@ class LPFFlux(_PLLFluxBase):
     −atan(ωc/ω̂) (000 eq 11), using the PLL's ω̂ — the phase compensation that
     000 says the LPF "relies on rigidly".  State [ψα, ψβ, θ_pll, ω_pll]; the PLL
     tracks the uncompensated flux (a constant lead does not change its speed).
+
+    Args:
+        Rs: Assumed stator resistance, ohm (≥ 0; :meth:`bind` sets it per scenario).
+        L: Assumed inductance, H (> 0; :meth:`bind` sets it to the machine's Ld).
+        omega_c: The low-pass cut-off ωc, rad/s (> 0).
+        kp_pll: The PLL's proportional gain, 1/s (> 0).
+        ki_pll: The PLL's integral gain, 1/s² (> 0).
+        omega_init: The PLL's initial speed, rad/s (default 0; :meth:`bind` sets it).
+        compensate: Whether to apply 000 eq 11's magnitude and phase compensation.
+        ts: Sample time, s.
+        rule: Discretization rule (default :class:`~jaxobs.RK4`).
+        psi_floor: Floor of |ψ̂| in the PLL's normalized phase detector, Wb.
+        omega0: Another name of ``omega_init`` (the job files' key); give one of the two.
+
+    Raises:
+        ValueError: A value out of its range, or both ``omega_init`` and ``omega0`` given.
     """
 
     Rs: jax.Array
@@ -338,7 +425,14 @@ class _FLLFluxBase(AbstractFluxObserver):
     def start_speed(self, omega_e):
         """max(|ω_e|, omega_min): a SOGI cannot tell the direction (the sign comes from the flux's rotation,
         module doc) and its centre frequency must stay positive.  The floor is the observer's own
-        ``omega_min`` (1 rad/s by default), the one its outputs divide by, not a separate constant."""
+        ``omega_min`` (1 rad/s by default), the one its outputs divide by, not a separate constant.
+
+        Args:
+            omega_e: ω_e, rad/s.
+
+        Returns:
+            The FLL's start frequency, rad/s.
+        """
         return jnp.maximum(jnp.abs(omega_e), self.omega_min)
 
 
@@ -352,6 +446,21 @@ class SOIFO(_FLLFluxBase):
 
     State [yα, qα, yβ, qβ, ω̂].  FLL: ω̂̇ = −lam·ω̂² Σₓ (êₓ − yₓ) qₓ / Σₓ (yₓ² + qₓ²) (two SOGIs, one FLL;
     ``lam`` dimensionless, k²/4 for ζ = 1/√2).
+
+    Args:
+        Rs: Assumed stator resistance, ohm (≥ 0; :meth:`bind` sets it per scenario).
+        L: Assumed inductance, H (> 0; :meth:`bind` sets it to the machine's Ld).
+        k: SOGI gain (> 0).
+        lam: Frequency-normalized FLL gain λ/ω̂² (dimensionless, > 0).
+        omega_init: The FLL's initial frequency, rad/s (> 0; :meth:`bind` sets it).
+        ts: Sample time, s.
+        rule: Discretization rule (default :class:`~jaxobs.RK4`).
+        v_floor: Floor of the FLL normalization (V, > 0).
+        omega_min: Floor of |ω̂| in the outputs, which divide by it, rad/s.
+        omega0: Another name of ``omega_init`` (the job files' key); give one of the two.
+
+    Raises:
+        ValueError: A value out of its range, or both ``omega_init`` and ``omega0`` given.
     """
 
     Rs: jax.Array
@@ -433,6 +542,23 @@ class SecondOrderSOIFO(_FLLFluxBase):
       shared by D1 and Q1).  The direct form hides the first GI's output z_a, so
       this variant's FLL uses the SOGI-FLL error (ê − v′)qv′ on the outputs, and
       ω̂ is updated by forward Euler.  State [w_α(k−1..k−4), w_β(k−1..k−4), ω̂].
+
+    Args:
+        Rs: Assumed stator resistance, ohm (≥ 0; :meth:`bind` sets it per scenario).
+        L: Assumed inductance, H (> 0; :meth:`bind` sets it to the machine's Ld).
+        K1: Second-order SOGI error gain (000's K1, > 0).
+        K2: Second-order SOGI damping gain (000's K2, > 0).
+        lam: Frequency-normalized FLL gain λ/ω̂² (dimensionless, > 0).
+        omega_init: The FLL's initial frequency, rad/s (> 0; :meth:`bind` sets it).
+        ts: Sample time, s.
+        rule: Discretization rule (default :class:`~jaxobs.RK4`).
+        discretization: ``"rule"`` or ``"paper"``, as above.
+        v_floor: Floor of the FLL normalization (V, > 0).
+        omega_min: Floor of |ω̂| in the outputs, which divide by it, rad/s.
+        omega0: Another name of ``omega_init`` (the job files' key); give one of the two.
+
+    Raises:
+        ValueError: A value out of its range, or both ``omega_init`` and ``omega0`` given.
     """
 
     Rs: jax.Array

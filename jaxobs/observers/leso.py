@@ -64,6 +64,16 @@ __all__ = ["LESOOutput", "AbstractLESO", "CLESO", "GILESO", "FALESO"]
 
 
 class LESOOutput(NamedTuple):
+    """A LESO's outputs at a sample.
+
+    Attributes:
+        e_a: The estimated equivalent BEMF, α, V.
+        e_b: The estimated equivalent BEMF, β, V.
+        theta: θ̂e from the PLL, rad (wrapped).
+        omega: ω̂e from the PLL, rad/s.
+        theta_emf: The BEMF's own angle, atan2(−êα, êβ) (positive rotation), rad.
+    """
+
     e_a: jax.Array  # estimated equivalent BEMF, V
     e_b: jax.Array
     theta: jax.Array  # θ̂e from the PLL, rad (wrapped)
@@ -77,6 +87,17 @@ class AbstractLESO(AbstractDriveObserver):
     Subclasses give the LESO part (:meth:`leso`) and its number of states ``n_leso``; the PLL's θ̂ and ω̂
     follow them in the state.  The model (002 eqs 4–8) is written in the q-axis inductance: bound to a
     machine a LESO takes Lq (the extended EMF absorbs the saliency), and its PLL starts at the signed ω_e.
+
+    Attributes:
+        Rs: Assumed stator resistance, ohm (:meth:`bind` sets it).
+        Lq: Assumed q-axis inductance, H (:meth:`bind` sets it).
+        kp_pll: The PLL's proportional gain, 1/s.
+        ki_pll: The PLL's integral gain, 1/s².
+        omega0_pll: The PLL's initial speed, rad/s (:meth:`bind` sets it).
+        ts: Sample time, s.
+        rule: Discretization rule.
+        e_floor: Floor of |ê| in the PLL's normalized error, V.
+        n_leso: The LESO's states (the PLL's two follow; a class attribute).
     """
 
     Rs: eqx.AbstractVar[jax.Array]
@@ -104,7 +125,14 @@ class AbstractLESO(AbstractDriveObserver):
         return self._init_from(self.initial_state())
 
     def init_at(self, omega_e) -> DriveObserverState:
-        """The initial state with the PLL's speed at ω_e (rad/s): the start of a drive's settling phase."""
+        """The initial state with the PLL's speed at ω_e: the start of a drive's settling phase.
+
+        Args:
+            omega_e: ω_e, rad/s.
+
+        Returns:
+            The :class:`DriveObserverState`.
+        """
         return self._init_from(self.initial_state().at[self.n_leso + 1].set(omega_e))
 
     def init_aligned(self, omega_e, theta_e) -> DriveObserverState:
@@ -116,13 +144,28 @@ class AbstractLESO(AbstractDriveObserver):
         tuned GI-LESO of tuning/presets/gileso.toml at 150 r/min, 15 N·m settled 0.2 s ended its second pass
         with ω̂e near 0 (78.5 rad/s true; its start then dipped 43 % in speed), and settled 0.338 s (10
         periods of 355 r/min) 0.5 rad/s off, its start dipping 65 % and reversing.
+
+        Args:
+            omega_e: ω_e, rad/s.
+            theta_e: θ_e, rad.
+
+        Returns:
+            The :class:`DriveObserverState`.
         """
         x0 = self.initial_state().at[self.n_leso].set(wrap(theta_e))
         return self._init_from(x0.at[self.n_leso + 1].set(omega_e))
 
     def seed_speed(self, state: DriveObserverState, omega_e) -> DriveObserverState:
         """``state`` with the PLL's speed set to ω_e: an I-f start-up holds it at the I-f frequency until the
-        hand-over (jaxobs.drive.ClosedLoop)."""
+        hand-over (jaxobs.drive.ClosedLoop).
+
+        Args:
+            state: The :class:`DriveObserverState`.
+            omega_e: ω_e, rad/s.
+
+        Returns:
+            The state with the PLL's speed set.
+        """
         return eqx.tree_at(lambda s: s.x, state, state.x.at[self.n_leso + 1].set(omega_e))
 
     def _init_from(self, x0) -> DriveObserverState:
@@ -134,7 +177,17 @@ class AbstractLESO(AbstractDriveObserver):
 
     @abc.abstractmethod
     def leso(self, xl, u, i, w):
-        """The LESO part: (dx_leso/dt, ê) for the voltage u, current i (αβ) and the PLL's speed ω̂ = w."""
+        """The LESO part.
+
+        Args:
+            xl: The LESO's states.
+            u: The voltage (αβ), V.
+            i: The current (αβ), A.
+            w: The PLL's speed ω̂, rad/s.
+
+        Returns:
+            ``(dx_leso/dt, ê)``.
+        """
 
     def f(self, x, inp):
         u, i = inp
@@ -200,7 +253,22 @@ def _pll_closed_form(pll_hz, owner):
 
 
 class CLESO(AbstractLESO):
-    """Conventional LESO (002 eqs 15–17), gains from the bandwidth ω0: l1 = 2ω0 − μ, l2 = ω0²."""
+    """Conventional LESO (002 eqs 15–17), gains from the bandwidth ω0: l1 = 2ω0 − μ, l2 = ω0².
+
+    Args:
+        Rs: Assumed stator resistance, ohm (≥ 0; :meth:`bind` sets it per scenario).
+        Lq: Assumed q-axis inductance, H (> 0; :meth:`bind` sets it).
+        omega0: LESO bandwidth ω0, rad/s (> 0).
+        kp_pll: The PLL's proportional gain, 1/s (> 0; default: placed at 2π·``papers.LESO_PLL_HZ``, ζ = 1/√2).
+        ki_pll: The PLL's integral gain, 1/s² (> 0; default as ``kp_pll``).
+        omega0_pll: The PLL's initial speed, rad/s (:meth:`bind` sets it).
+        ts: Sample time, s.
+        rule: Discretization rule (default :class:`~jaxobs.RK4`).
+        e_floor: Floor of |ê| in the PLL's normalized error, V.
+
+    Raises:
+        ValueError: A value out of its range.
+    """
 
     Rs: jax.Array
     Lq: jax.Array
@@ -264,7 +332,24 @@ class CLESO(AbstractLESO):
 
 
 class GILESO(AbstractLESO):
-    """LESO with a generalized integrator at ω̂e in its internal model (002 eqs 29–30)."""
+    """LESO with a generalized integrator at ω̂e in its internal model (002 eqs 29–30).
+
+    Args:
+        Rs: Assumed stator resistance, ohm (≥ 0; :meth:`bind` sets it per scenario).
+        Lq: Assumed q-axis inductance, H (> 0; :meth:`bind` sets it).
+        omega0: LESO bandwidth ω0, rad/s (> 0).
+        K_r: Generalized integrator gain, 1/s² (> 0; default 2ω0²).
+        omega_c: Generalized integrator damping ωc, rad/s (> 0).
+        kp_pll: The PLL's proportional gain, 1/s (> 0; default: placed at 2π·``papers.LESO_PLL_HZ``, ζ = 1/√2).
+        ki_pll: The PLL's integral gain, 1/s² (> 0; default as ``kp_pll``).
+        omega0_pll: The PLL's initial speed, rad/s (:meth:`bind` sets it).
+        ts: Sample time, s.
+        rule: Discretization rule (default :class:`~jaxobs.RK4`).
+        e_floor: Floor of |ê| in the PLL's normalized error, V.
+
+    Raises:
+        ValueError: A value out of its range.
+    """
 
     Rs: jax.Array
     Lq: jax.Array
@@ -348,7 +433,25 @@ class GILESO(AbstractLESO):
 
 
 class FALESO(AbstractLESO):
-    """Frequency-adaptive complex-coefficient LESO (002 eqs 25–28)."""
+    """Frequency-adaptive complex-coefficient LESO (002 eqs 25–28).
+
+    ê/e = (k2 s + k1)/(s² + (k2 − jω̂e)s + k1); stable iff k1 > 0 and k2 > 0 (002 eq 24).
+
+    Args:
+        Rs: Assumed stator resistance, ohm (≥ 0; :meth:`bind` sets it per scenario).
+        Lq: Assumed q-axis inductance, H (> 0; :meth:`bind` sets it).
+        k1: FA-LESO integral gain, 1/s² (> 0).
+        k2: FA-LESO proportional gain, 1/s (> 0).
+        kp_pll: The PLL's proportional gain, 1/s (> 0; default: placed at 2π·``papers.LESO_PLL_HZ``, ζ = 1/√2).
+        ki_pll: The PLL's integral gain, 1/s² (> 0; default as ``kp_pll``).
+        omega0_pll: The PLL's initial speed, rad/s (:meth:`bind` sets it).
+        ts: Sample time, s.
+        rule: Discretization rule (default :class:`~jaxobs.RK4`).
+        e_floor: Floor of |ê| in the PLL's normalized error, V.
+
+    Raises:
+        ValueError: A value out of its range.
+    """
 
     # 002's names: ê/e = (k2 s + k1)/(s² + (k2 − jω̂e)s + k1), so k1 is in s⁻² and k2 in s⁻¹ (001's WIF k1,
     # k2, dimensionless, are other gains: a gain is (class, name), jaxobs.observers.gain_fields)

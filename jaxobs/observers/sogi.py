@@ -25,12 +25,29 @@ __all__ = ["QSGOutput", "SOGI", "SOGI2"]
 
 
 class QSGOutput(NamedTuple):
+    """A quadrature signal generator's outputs at a sample.
+
+    Attributes:
+        v_alpha: The in-phase output v' = D(s) v.
+        v_beta: The quadrature output qv' = Q(s) v.
+    """
+
     v_alpha: jax.Array  # in-phase output v' = D(s) v
     v_beta: jax.Array  # quadrature output qv' = Q(s) v
 
 
 class SOGI(AbstractVectorFieldObserver):
-    """SOGI-QSG at fixed ω' (000 eqs 12–13; 001 eqs 1–2): D = kω's/(s²+kω's+ω'²)."""
+    """SOGI-QSG at fixed ω' (000 eqs 12–13; 001 eqs 1–2): D = kω's/(s²+kω's+ω'²).
+
+    Args:
+        k: SOGI gain (> 0).
+        omega: The fixed centre frequency ω', rad/s (> 0).
+        ts: Sample time (s).
+        rule: Discretization rule (default :class:`~jaxobs.Tustin`).
+
+    Raises:
+        ValueError: A value out of its range.
+    """
 
     k: jax.Array = gain(units="1", role="sogi", long_name="SOGI gain", symbol="001: k")
     omega: jax.Array
@@ -55,7 +72,18 @@ class SOGI(AbstractVectorFieldObserver):
 
 
 class SOGI2(AbstractVectorFieldObserver):
-    """Second-order SOGI at fixed ω' (000 eqs 17–18), gains K1, K2 in paper 000's naming."""
+    """Second-order SOGI at fixed ω' (000 eqs 17–18), gains K1, K2 in paper 000's naming.
+
+    Args:
+        K1: Second-order SOGI error gain (> 0).
+        K2: Second-order SOGI damping gain (> 0).
+        omega: The fixed centre frequency ω', rad/s (> 0).
+        ts: Sample time (s).
+        rule: Discretization rule (default :class:`~jaxobs.Tustin`).
+
+    Raises:
+        ValueError: A value out of its range.
+    """
 
     K1: jax.Array = gain(units="1", role="sogi", long_name="second-order SOGI error gain", symbol="000: K1")
     K2: jax.Array = gain(units="1", role="sogi", long_name="second-order SOGI damping gain", symbol="000: K2")

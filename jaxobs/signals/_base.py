@@ -31,6 +31,15 @@ class AbstractSignal(eqx.Module):
 
     A subclass overrides what differs from the defaults: no sample time, no truth, no flux angle, the scenario
     axis leading, every horizon readable.
+
+    Attributes:
+        accepts_sample_time: Whether ``signal(t)`` takes a :class:`~jaxobs.SampleTime` (which
+            :class:`~jaxobs.OnSignal` then passes instead of the rounded float t_k).
+        has_truth: Whether the signal reports its true phase, frequency and amplitude (a recording's
+            depends on its data: a property there).
+        has_flux_angle: Whether the signal reports a true rotor-flux angle (the metrics' ``signal=``).
+        batch_axis: The scenario axis of the signal's leaves in a batch (a time-major recording batch's
+            is 1: a property there).
     """
 
     accepts_sample_time: ClassVar[bool] = False
@@ -43,32 +52,94 @@ class AbstractSignal(eqx.Module):
         """The signal at time ``t`` (s, or a :class:`~jaxobs.SampleTime` where ``accepts_sample_time``)."""
 
     def theta(self, t):
-        """True fundamental phase, rad (where ``has_truth``)."""
+        """True fundamental phase (where ``has_truth``).
+
+        Args:
+            t: The time, s.
+
+        Returns:
+            θ(t), rad.
+
+        Raises:
+            ValueError: The signal reports no truth.
+        """
         raise ValueError(f"{type(self).__name__} reports no truth (theta)")
 
     def omega(self, t):
-        """True fundamental angular frequency, rad/s (where ``has_truth``)."""
+        """True fundamental angular frequency (where ``has_truth``).
+
+        Args:
+            t: The time, s.
+
+        Returns:
+            ω(t), rad/s.
+
+        Raises:
+            ValueError: The signal reports no truth.
+        """
         raise ValueError(f"{type(self).__name__} reports no truth (omega)")
 
     def fundamental_amplitude(self, t):
-        """True fundamental amplitude (where ``has_truth``)."""
+        """True fundamental amplitude (where ``has_truth``).
+
+        Args:
+            t: The time, s.
+
+        Returns:
+            The amplitude, in the signal's units.
+
+        Raises:
+            ValueError: The signal reports no truth.
+        """
         raise ValueError(f"{type(self).__name__} reports no truth (fundamental_amplitude)")
 
     def flux_angle(self, t):
-        """The true rotor-flux angle, rad (where ``has_flux_angle``)."""
+        """The true rotor-flux angle (where ``has_flux_angle``).
+
+        Args:
+            t: The time, s.
+
+        Returns:
+            The angle, rad.
+
+        Raises:
+            ValueError: The signal has no flux angle.
+        """
         raise ValueError(f"{type(self).__name__} has no flux angle")
 
     def flux_omega(self, t):
-        """The true rotor-flux angle's rate, rad/s, shaped like ``t`` (where ``has_flux_angle``)."""
+        """The true rotor-flux angle's rate (where ``has_flux_angle``).
+
+        Args:
+            t: The times, s.
+
+        Returns:
+            The rate, rad/s, shaped like ``t``.
+
+        Raises:
+            ValueError: The signal has no flux angle.
+        """
         raise ValueError(f"{type(self).__name__} has no flux angle")
 
     def check_window(self, t0: float, t_last: float, owner: str) -> None:
-        """Refuse (``ValueError``, naming the signal as ``owner``) a simulation that reads the signal at t0,
-        t0 + ts, ..., ``t_last`` (s) where it cannot be read; every horizon is readable by default."""
+        """Refuse a simulation that reads the signal where it cannot be read; every horizon is readable by default.
+
+        Args:
+            t0: The first time read, s.
+            t_last: The last time read (t0, t0 + ts, ..., t_last), s.
+            owner: The name the error gives the signal.
+
+        Raises:
+            ValueError: The signal cannot be read over [t0, t_last].
+        """
 
 
 class FunctionSignal(AbstractSignal):
-    """A plain function of time ``fn(t)`` (t in s) as a signal: no truth, a float time."""
+    """A plain function of time as a signal: no truth, a float time.
+
+    Attributes:
+        fn: The function ``fn(t)``, t in s.
+    """
 
     fn: Callable
 

@@ -109,8 +109,13 @@ class RecordingLayout:
             loaded into the PWM at t_k+1, the usual single-update timing).
         voltage_angle: the column of the angle a ``"dq"`` voltage is turned by (in the angle's unit and
             kind); default the truth angle column.
-        current_unit, voltage_unit, angle_unit, speed_unit, time_unit: a key of :data:`UNITS`.
-        angle_kind, speed_kind: ``"electrical"`` or ``"mechanical"`` (needs ``pole_pairs``).
+        current_unit: the currents' unit, a key of :data:`UNITS`.
+        voltage_unit: the voltages' unit, a key of :data:`UNITS`.
+        angle_unit: the angle's unit, a key of :data:`UNITS`.
+        angle_kind: ``"electrical"`` or ``"mechanical"`` (needs ``pole_pairs``), for the angle.
+        speed_unit: the speed's unit, a key of :data:`UNITS`.
+        speed_kind: ``"electrical"`` or ``"mechanical"`` (needs ``pole_pairs``), for the speed.
+        time_unit: the time column's unit, a key of :data:`UNITS`.
         pole_pairs: the machine's pole pairs, for mechanical angles or speeds.
         delimiter: ``","``, ``";"``, ``"tab"`` or ``"space"``.
         decimal: ``"."`` or ``","`` (a decimal comma needs another delimiter).
@@ -373,10 +378,19 @@ def _stream_columns(path, layout, header, wanted: list[int], width: int, folder)
 @dataclasses.dataclass
 class LogData:
     """A drive log in the observers' form, held in disk-backed columns (the file's length costs disk, not
-    memory): ``u_a, u_b`` the α-β voltage applied over [t_k, t_k+1] (V), ``i_a, i_b`` the α-β currents at t_k
-    (A, amplitude-invariant), ``theta_e`` the unwrapped electrical angle (rad) and ``omega_e`` the electrical
-    speed (rad/s) or None, ``ts`` the sample interval (s), ``t0`` the time of the first kept row (s: rows
-    dropped by a reference voltage's delay shift it), ``warnings`` the checks' warnings.
+    memory).
+
+    Attributes:
+        u_a: The α voltage applied over [t_k, t_k+1], V.
+        u_b: The β voltage applied over [t_k, t_k+1], V.
+        i_a: The α current at t_k (A, amplitude-invariant).
+        i_b: The β current at t_k (A, amplitude-invariant).
+        theta_e: The unwrapped electrical angle (rad), or None.
+        omega_e: The electrical speed (rad/s), or None.
+        ts: The sample interval, s.
+        t0: The time of the first kept row (s: rows dropped by a reference voltage's delay shift it).
+        path: The file read.
+        warnings: The checks' warnings.
     """
 
     u_a: _Column
@@ -397,6 +411,13 @@ class LogData:
 
     def recording(self, start: int = 0, n: int | None = None) -> DriveRecording:
         """Rows ``start`` … ``start + n − 1`` as a :class:`jaxobs.DriveRecording` (the whole log by default).
+
+        Args:
+            start: The first row.
+            n: The rows (default: to the end).
+
+        Returns:
+            The :class:`jaxobs.DriveRecording`.
 
         Raises:
             ValueError: a window outside the log.

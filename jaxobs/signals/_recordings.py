@@ -118,6 +118,16 @@ class SampledSignal(_Recording):
     whole (``map_batch`` does not tile it).  The plain loop (``SaveAll()``)
     gives the same numbers by reading the samples back through ``sig(t)``,
     which under ``vmap`` moves the batch axis to the front: correct, slower.
+
+    Args:
+        samples: u_k, shape ``(..., n)`` (n ≥ 2), or ``(n, B)`` with ``batch_inner=True``.
+        ts: The sample interval, s.
+        t0: The time of the first sample, s (static, so a horizon is checked when traced).
+        truth: ``(θ_k, ω_k, V_k)``, each shaped like ``samples``, or ``None``.
+        batch_inner: Whether ``samples`` (and ``truth``) are a time-major batch ``(n, B)``.
+
+    Raises:
+        ValueError: A value out of its range or of the wrong shape, naming the field.
     """
 
     samples: jax.Array  # u_k, shape (..., n)
@@ -203,10 +213,12 @@ class SampledSignal(_Recording):
         row: sample 0 is t = 0.
 
         Args:
+            path: the CSV file.
             columns: the channel(s): a name (from the header) or a 0-based index, or a list of them
                 (several channels give a batch, samples shaped (channels, n), for ``vmap``); default:
                 the one column that is neither the time nor a truth column.
-            time_column / sample_rate: the time base (exactly one of them).
+            time_column: the time column (s, strictly increasing); exactly one of it and ``sample_rate``.
+            sample_rate: the rows' rate (Hz, uniform rows); exactly one of it and ``time_column``.
             ts: the observer's sample time, s.  ``None`` keeps the recording's own (uniform) rate.
                 Otherwise the recording is read at t_k = k·ts by linear interpolation (point
                 sampling, as the DSP's converter would: no anti-alias filter).  A recording sampled
@@ -217,6 +229,9 @@ class SampledSignal(_Recording):
                 (a reference instrument, or a synthetic record); the metrics that compare an estimate
                 with the truth need them.
             max_bytes: refuse a larger file (default :data:`MAX_CSV_BYTES`).
+
+        Returns:
+            The :class:`SampledSignal`.
 
         Raises:
             FileNotFoundError: no file at ``path``.
@@ -334,8 +349,15 @@ def _csv_table(path, max_bytes):
 
 
 class RecordingColumnError(ValueError):
-    """A column of a recording that is not there; ``role`` ("time", "signal" or "truth") and ``spec`` (the
-    name or index asked for) let a caller name the argument or job field that asked for it."""
+    """A column of a recording that is not there.
+
+    The role and the spec let a caller name the argument or job field that asked for the column.
+
+    Args:
+        msg: The message.
+        role: ``"time"``, ``"signal"`` or ``"truth"``.
+        spec: The column's name or index asked for.
+    """
 
     def __init__(self, msg: str, role: str, spec):
         super().__init__(msg)
@@ -376,11 +398,26 @@ def read_recording(
     """Read channels of a CSV recording and resample them to ``ts`` (the engine of :meth:`SampledSignal.from_csv`
     and :meth:`DriveRecording.from_csv`; their docstrings give the file format and the checks).
 
-    ``columns`` and ``extra`` are lists of column names or indices; ``angle`` names the columns among them
-    that are angles (unwrapped before interpolation, rad); ``averaged`` those that hold the average over the
-    period that starts at each row (a drive's applied voltage): resampled as the average over [t_k, t_k + ts]
-    of the recording held piecewise constant.  Returns ``{"columns": [arrays], "extra": [arrays], "ts": s,
-    "rate_hz": the recording's own rate, "duration": s, "names": [column names]}``.
+    Args:
+        path: The CSV file.
+        columns: A list of column names or indices: the channels.
+        time_column: The time column (s, strictly increasing), or ``None`` with ``sample_rate``.
+        sample_rate: The rows' rate, Hz (uniform rows), or ``None`` with ``time_column``.
+        ts: The sample time to resample to, s (``None``: the recording's own uniform rate).
+        extra: A list of further column names or indices (the truth columns).
+        angle: The columns among ``columns`` and ``extra`` that are angles (unwrapped before interpolation, rad).
+        averaged: The columns that hold the average over the period that starts at each row (a drive's
+            applied voltage): resampled as the average over [t_k, t_k + ts] of the recording held piecewise
+            constant.
+        max_bytes: Refuse a larger file (default :data:`MAX_CSV_BYTES`).
+
+    Returns:
+        ``{"columns": [arrays], "extra": [arrays], "ts": s, "rate_hz": the recording's own rate,
+        "duration": s, "names": [column names]}``.
+
+    Raises:
+        FileNotFoundError: No file at ``path``.
+        ValueError: An unreadable or invalid file (as :meth:`SampledSignal.from_csv` lists).
     """
     max_bytes = MAX_CSV_BYTES if max_bytes is None else int(max_bytes)
     header, table = _csv_table(path, max_bytes)
@@ -479,6 +516,21 @@ class DriveRecording(_Recording):
     speed (given, or the angle's centred difference), ``fundamental_amplitude`` the voltage vector's length
     |u_αβ|, so that ``jaxobs.metrics`` and the tuning objectives compare θ̂ with the encoder.
     Leaves may carry a leading batch axis (recordings of one length).
+
+    Args:
+        u_a: u_α, the voltage applied over [t_k, t_k+1], V, shape ``(..., n)``.
+        u_b: u_β, V.
+        i_a: i_α, the current sampled at t_k, A.
+        i_b: i_β, A.
+        ts: The sample interval, s.
+        theta_e: The encoder's electrical angle, rad (unwrapped or not), or ``None``.
+        omega_e: The electrical speed, rad/s, or ``None`` (the angle's centred difference).
+        t0: The time of the first sample, s.
+        batch_inner: Whether every array is a batch stored time-major, each ``(n, B)``, read by the
+            throughput loop a row per step as :class:`SampledSignal`'s time-major batches are.
+
+    Raises:
+        ValueError: A value out of its range or of the wrong shape, naming the field.
     """
 
     samples: jax.Array  # (..., 4, n): u_α, u_β (V), i_α, i_β (A); a time-major batch (n, B, 4)
@@ -490,8 +542,6 @@ class DriveRecording(_Recording):
     scenario_ndim: ClassVar[int] = 2  # (n, 4) time-major, (4, n) scenario-major
 
     def __init__(self, u_a, u_b, i_a, i_b, ts, *, theta_e=None, omega_e=None, t0=0.0, batch_inner=False):
-        """``batch_inner=True``: u_a ... i_b (and theta_e, omega_e) are a batch stored time-major, each (n, B),
-        read by the throughput loop a row per step as :class:`SampledSignal`'s time-major batches are."""
         own = "DriveRecording"
         if not isinstance(batch_inner, bool):
             raise ValueError(f"{own}.batch_inner must be True or False, got {batch_inner!r}")
@@ -565,12 +615,27 @@ class DriveRecording(_Recording):
     ) -> DriveRecording:
         """A drive recording from a CSV file (the format and the checks of :meth:`SampledSignal.from_csv`).
 
-        ``columns``: the four columns u_α, u_β (V), i_α, i_β (A), names or indices (default the names
-        ``u_a, u_b, i_a, i_b``); ``theta_e``: the encoder's electrical angle column (rad, wrapped or not),
-        ``omega_e``: an electrical speed column (rad/s; default the angle's derivative).  Resampled to
-        ``ts``: the currents and the angle by linear interpolation, the voltages as the average over
-        each new period [t_k, t_k + ts] of the recorded voltage held over its own periods (a voltage row
-        is what the inverter applied until the next row).
+        Resampled to ``ts``: the currents and the angle by linear interpolation, the voltages as the
+        average over each new period [t_k, t_k + ts] of the recorded voltage held over its own periods (a
+        voltage row is what the inverter applied until the next row).
+
+        Args:
+            path: The CSV file.
+            columns: The four columns u_α, u_β (V), i_α, i_β (A), names or indices (default the names
+                ``u_a, u_b, i_a, i_b``).
+            time_column: The time column (s, strictly increasing); exactly one of it and ``sample_rate``.
+            sample_rate: The rows' rate (Hz, uniform rows); exactly one of it and ``time_column``.
+            ts: The observer's sample time, s (``None``: the recording's own uniform rate).
+            theta_e: The encoder's electrical angle column (rad, wrapped or not), or ``None``.
+            omega_e: An electrical speed column (rad/s; default the angle's derivative).
+            max_bytes: Refuse a larger file (default :data:`MAX_CSV_BYTES`).
+
+        Returns:
+            The :class:`DriveRecording`.
+
+        Raises:
+            FileNotFoundError: No file at ``path``.
+            ValueError: An unreadable or invalid file (as :meth:`SampledSignal.from_csv` lists).
         """
         columns = list(columns)
         if len(columns) != 4:

@@ -37,7 +37,26 @@ from ._base import AbstractSignal
 
 
 class GridSignal(AbstractSignal):
-    """Single-phase test voltage with a settle-then-disturb event (see module doc)."""
+    """Single-phase test voltage with a settle-then-disturb event (see module doc).
+
+    Every disturbance switches on at ``t_event``.  Each array argument may carry a leading batch axis.
+
+    Args:
+        amplitude: V₀ before the event (input units, > 0).
+        freq: f₀, Hz (> 0).
+        phase: φ₀, rad.
+        t_event: tₑ, s (≥ 0).
+        freq_step: Δf, Hz (f₀ + Δf > 0).
+        phase_jump: Δφ, rad.
+        sag: The sag depth, a fraction of V₀ in [0, 0.999].
+        dc: The dc step, input units.
+        harmonics: ``{order: Vₕ}`` with integer orders ≥ 2 and magnitudes ≥ 0 (input units).
+        sub_amplitude: V_sub, input units (≥ 0).
+        sub_freq: f_sub, Hz (≥ 0).
+
+    Raises:
+        ValueError: A value out of its range, naming the field.
+    """
 
     amplitude: jax.Array  # V₀ before the event (input units, > 0)
     freq: jax.Array  # f₀, Hz (> 0)
@@ -110,8 +129,15 @@ class GridSignal(AbstractSignal):
         return c - jax.lax.stop_gradient(jnp.round(c))
 
     def theta(self, t):
-        """True fundamental phase θ(t), rad: unwrapped in float64; in float32 from a :class:`SampleTime`,
-        reduced modulo 2π (an unwrapped float32 phase of 3·10⁴ rad is only good to 2 mrad)."""
+        """True fundamental phase θ(t): unwrapped in float64; in float32 from a :class:`SampleTime`,
+        reduced modulo 2π (an unwrapped float32 phase of 3·10⁴ rad is only good to 2 mrad).
+
+        Args:
+            t: The time, s, or a :class:`SampleTime`.
+
+        Returns:
+            θ(t), rad.
+        """
         if exact_phase(t, self.freq):
             return 2 * jnp.pi * self._cycles(t) + self.phase + self._on(t) * self.phase_jump
         t = time_value(t)
@@ -120,7 +146,14 @@ class GridSignal(AbstractSignal):
         return 2 * jnp.pi * self.freq * t + self.phase + on * (2 * jnp.pi * self.freq_step * dt + self.phase_jump)
 
     def omega(self, t):
-        """True fundamental angular frequency ω(t), rad/s."""
+        """True fundamental angular frequency.
+
+        Args:
+            t: The time, s, or a :class:`SampleTime`.
+
+        Returns:
+            ω(t), rad/s.
+        """
         return 2 * jnp.pi * (self.freq + self._on(t) * self.freq_step)
 
     def fundamental_amplitude(self, t):
@@ -171,6 +204,19 @@ def paper001_test(name: str, *, freq=50.0, amplitude=1.0, t_event=0.2, phase=0.0
     1: +2 Hz step;  2: +20° phase jump;  3: 0.75 p.u. sag (depth);
     A: 50 → 52 Hz;  B: 0.5 p.u. sag with +60° jump;  C: harmonics 3–13 (THD ≈ 7.7 %);
     D: +0.1 p.u. dc step;  E: 0.1 p.u. 1 Hz sub-harmonic.
+
+    Args:
+        name: The test, one of ``"1"``, ``"2"``, ``"3"``, ``"A"`` … ``"E"`` (case-insensitive).
+        freq: The nominal frequency, Hz.
+        amplitude: The amplitude before the event (input units).
+        t_event: The time of the event, s.
+        phase: The initial phase, rad.
+
+    Returns:
+        The :class:`GridSignal`.
+
+    Raises:
+        ValueError: An unknown test name.
     """
     key = str(name).upper()
     if key not in papers.TESTS_001:
@@ -194,7 +240,17 @@ def paper001_test(name: str, *, freq=50.0, amplitude=1.0, t_event=0.2, phase=0.0
 
 
 def stack(modules):
-    """Stack equally-shaped modules (signals, observers, scenarios) along a new leading batch axis."""
+    """Stack equally-shaped modules (signals, observers, scenarios) along a new leading batch axis.
+
+    Args:
+        modules: The modules, of one structure and one shape per leaf.
+
+    Returns:
+        One module whose every leaf has the new leading axis.
+
+    Raises:
+        ValueError: No modules, or a module holds a time-major batch (a batch already).
+    """
     modules = list(modules)
     if not modules:
         raise ValueError("stack needs at least one module")
@@ -222,6 +278,17 @@ class EMFSignal(AbstractSignal):
     the drive, which tells the observer at t_k the voltage it applies over
     [t_k, t_{k+1}].  The true rotor flux (∫e with no dc) is A1/ω1 (sin, −cos)
     of the fundamental.
+
+    Args:
+        A1: The fundamental's amplitude (V, > 0).
+        omega1: The fundamental's angular frequency ω1, rad/s (> 0).
+        phase: φ1, rad.
+        dc: The offsets (A0α, A0β), V.
+        harmonics: ``{order: A_h}`` with signed nonzero integer orders (+7 positive, −5 negative sequence).
+        ts: The observer's sample time, s (:class:`~jaxobs.OnSignal` checks they agree).
+
+    Raises:
+        ValueError: A value out of its range, naming the field.
     """
 
     A1: jax.Array
@@ -288,15 +355,29 @@ class EMFSignal(AbstractSignal):
         return ea, eb
 
     def flux_angle(self, t):
-        """The true rotor-flux angle ω1 t + φ1 − π/2, rad (ψ lags e by 90°); in float32 from a
-        :class:`SampleTime`, reduced modulo 2π and exact (jaxobs._time)."""
+        """The true rotor-flux angle ω1 t + φ1 − π/2 (ψ lags e by 90°); in float32 from a
+        :class:`SampleTime`, reduced modulo 2π and exact (jaxobs._time).
+
+        Args:
+            t: The time, s, or a :class:`SampleTime`.
+
+        Returns:
+            The angle, rad.
+        """
         if exact_phase(t, self.omega1):
             c = cycles(self.omega1, t, 1 / (2 * math.pi))
             return 2 * jnp.pi * (c - jax.lax.stop_gradient(jnp.round(c))) + self.phase - jnp.pi / 2
         return self.omega1 * time_value(t) + self.phase - jnp.pi / 2
 
     def flux_omega(self, t):
-        """ω1, rad/s, shaped like ``t`` (times on the last axis, a batch's ω1 on the leading ones)."""
+        """The true rotor-flux angle's rate.
+
+        Args:
+            t: The times, s (on the last axis).
+
+        Returns:
+            ω1, rad/s, shaped like ``t`` (a batch's ω1 on the leading axes).
+        """
         return jnp.broadcast_to(jnp.expand_dims(jnp.asarray(self.omega1), -1), jnp.shape(time_value(t)))
 
     def __call__(self, t):

@@ -31,7 +31,14 @@ MAX_STEPS = 2_000_000  # and at most this long (about 100 MB of golden.csv; 10^8
 def fll_test_signal(ts: float, n_steps: int, f0: float = 50.0, amplitude: float = 1.0):
     """Unit sine at ``f0`` with a +2 Hz step at n/3 and a +40° phase jump at 2n/3 (GridSignal's settle-then-disturb).
 
-    Returns (samples as float32, shape (n_steps, 1), a one-line description).
+    Args:
+        ts: The sample time, s.
+        n_steps: The samples.
+        f0: The frequency, Hz.
+        amplitude: The amplitude.
+
+    Returns:
+        ``(samples as float32, shape (n_steps, 1), a one-line description)``.
     """
     t = np.arange(n_steps) * ts
     t1, t2 = (n_steps // 3) * ts, (2 * n_steps // 3) * ts
@@ -59,7 +66,7 @@ def drive_test_signal(
     θ(0) = π/2; i = I (−sin θ, cos θ) (q-axis current, I = min(5 A, ψ/(2L)) unless given),
     e = ω ψ (−sin θ, cos θ) (002 eq 5), u = R i + L di/dt + e.  ``u`` at sample k is the voltage applied
     over [t_k, t_k+1] (its period average: R i + e averaged over 8 midpoints, L Δi/ts exactly), as a drive
-    observer expects; ``i`` is sampled at t_k.  Returns (float32 array (n_steps, 4), a one-line description).
+    observer expects; ``i`` is sampled at t_k.
 
     ``start`` shapes the first period so that the outputs are well conditioned from the first step
     (otherwise a float32 implementation other than XLA's own, bit for bit, cannot be held to 1e-4 there):
@@ -71,6 +78,19 @@ def drive_test_signal(
       back EMF is on α only.  After a single back-EMF sample the two SOGIs of a SOIFO hold proportional
       states, the cross product whose sign gives the direction of rotation is 0 but for rounding, and
       the signed ω̂ is ±|ω̂| by chance; with a β-free first sample that product is exactly 0.
+
+    Args:
+        ts: The sample time, s.
+        n_steps: The samples.
+        omega: The electrical speed, rad/s.
+        Rs: The stator resistance, Ω.
+        L: The inductance, H.
+        psi: The rotor flux ψ, Wb.
+        current: The q-axis current I, A (default min(5 A, ψ/(2L))).
+        start: ``""``, ``"flux"`` or ``"alpha"``, as above.
+
+    Returns:
+        ``(float32 array (n_steps, 4), a one-line description)``.
     """
     if start not in ("", "flux", "alpha"):
         raise ValueError(f"drive_test_signal: start must be '', 'flux' or 'alpha', got {start!r}")
@@ -129,8 +149,15 @@ def _bench_of(observer) -> tuple:
 
 
 def recording_bench(observer):
-    """The machine (:func:`jaxobs.drive.bench_machine`: 000's SPMSM for the flux observers, 002's IPMSM for the
-    LESOs, on the drive jobs' bench inertia) and the speed (r/min) a drive observer's recording runs at."""
+    """The machine and the speed a drive observer's recording runs at.
+
+    Args:
+        observer: The drive observer.
+
+    Returns:
+        ``(machine, rpm)``: :func:`jaxobs.drive.bench_machine` (000's SPMSM for the flux observers, 002's IPMSM
+        for the LESOs, on the drive jobs' bench inertia) and the speed, r/min.
+    """
     from jaxobs.drive import bench_machine
 
     name, rpm, _ = _bench_of(observer)
@@ -172,9 +199,7 @@ def drive_recording(
     current is sampled at t_k: the drive observers' contract.  With ideal sensors they equal the
     outputs' u_a, u_b, i_a, i_b.
 
-    ``machine``: a :class:`jaxobs.drive.PMSMParams` (default: the bench of the observer's family,
-    :func:`jaxobs.drive.bench_machine`).  Export the observer bound to the same machine and speed
-    (``observer.bind(machine, ω_e)``).  Returns (float32 array (n_steps, 4), a one-line description).
+    Export the observer bound to the same machine and speed (``observer.bind(machine, ω_e)``).
 
     The rotor starts at θe = π/2, where the q-axis current and the back EMF lie on −α, so the
     β components of the first samples are small.  ``start`` shapes the first period as
@@ -183,13 +208,25 @@ def drive_recording(
     ``"alpha"`` zeroes the β components of the first voltage and the first two currents (a few
     per cent of their amplitude at θe0 = π/2: 5 % of the voltage, the ω_e L i_q drop; 3 % of the current).
 
-    ``drive``: the sensored :class:`jaxobs.drive.Drive` to record (a drive file's,
-    :meth:`jaxobs.drive.DriveFile.drive_for`; its ts must be the observer's), default the benches' FOC on
-    ``machine``; ``label``: the drive's name in the description (default the bench's).
+    Args:
+        observer: The drive observer.
+        n_steps: The samples, at the observer's ts.
+        machine: A :class:`jaxobs.drive.PMSMParams` (default: the bench of the observer's family,
+            :func:`jaxobs.drive.bench_machine`).
+        rpm: The speed, r/min (default the bench's).
+        load: The load before and after the step, × T_rated.
+        speed_step: The speed reference's relative step.
+        start: ``""``, ``"flux"`` or ``"alpha"``, as above.
+        encoder: Whether to append two columns, the true electrical angle θe (rad, wrapped) and speed ωe
+            (rad/s) at t_k: what an encoder would record beside u and i (the shipped example recording,
+            ``tuning/presets/recordings/``, is made this way).
+        drive: The sensored :class:`jaxobs.drive.Drive` to record (a drive file's,
+            :meth:`jaxobs.drive.DriveFile.drive_for`; its ts must be the observer's), default the benches'
+            FOC on ``machine``.
+        label: The drive's name in the description (default the bench's).
 
-    ``encoder=True`` appends two columns, the true electrical angle θe (rad, wrapped) and speed ωe
-    (rad/s) at t_k: what an encoder would record beside u and i (the shipped example recording,
-    ``tuning/presets/recordings/``, is made this way).
+    Returns:
+        ``(float32 array (n_steps, 4 or 6), a one-line description)``.
     """
     if start not in ("", "flux", "alpha"):
         raise ValueError(f"drive_recording: start must be '', 'flux' or 'alpha', got {start!r}")

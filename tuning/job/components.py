@@ -17,7 +17,11 @@ W_N = papers.FLL_OMEGA_N
 
 @dataclass(frozen=True)
 class ComponentInfo:
-    """A tunable component: its registry entry, read as a job reads it."""
+    """A tunable component: its registry entry, read as a job reads it.
+
+    Attributes:
+        entry: The :class:`jaxobs.registry.Registered` entry.
+    """
 
     entry: Registered
 
@@ -52,7 +56,14 @@ class ComponentInfo:
         return self.entry.closed_form_source
 
     def closed_form(self, component) -> dict:
-        """The closed-form gains (name -> float) at ``component``'s nominal frequency (the FLLs'), or the paper's."""
+        """The closed-form gains at a component's nominal frequency (the FLLs'), or the paper's.
+
+        Args:
+            component: An instance whose ``omega_n`` the closed form takes, or None.
+
+        Returns:
+            name -> float.
+        """
         return closed_form_gains(self.entry.name, component)
 
 

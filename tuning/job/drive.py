@@ -76,16 +76,36 @@ def parse_start(dt: dict, drive: DriveSpec, scen) -> DriveSpec:
 
 
 def check_drive_speeds(spec: ScenarioSpec, where: str, drive: DriveSpec) -> None:
-    """A drive job's grid (``where``.grid) through :func:`check_speed_axes`, at --check time."""
+    """A drive job's grid through :func:`check_speed_axes`, at --check time.
+
+    Args:
+        spec: The scenario set.
+        where: The table holding it (its ``.grid`` is checked).
+        drive: The job's ``[drive]``.
+
+    Raises:
+        JobError: A speed out of range, naming the field.
+    """
     check_speed_axes(spec.axes, f"{where}.grid", drive.machine, drive.drive_file)
 
 
 def check_speed_axes(axes: dict, where: str, machine: str, file: DriveFile | None = None) -> None:
-    """The one check of drive speeds, for jobs and studies: ``speed_rpm`` and ``speed_rpm + speed_step_rpm``
-    (every combination of the axes, so every point a sampler draws inside their ranges too) within ± the drive
-    file's speed limit (:attr:`jaxobs.drive.DriveFile.speed_limit_rpm`: where the back EMF reaches the
-    inverter's voltage limit, past field weakening's reach where it is on); ``machine``: the drive's name,
-    ``file``: its drive file (None: the shipped ``machine``); ``where``: the table holding the axes."""
+    """The one check of drive speeds, for jobs and studies.
+
+    ``speed_rpm`` and ``speed_rpm + speed_step_rpm`` (every combination of the axes, so every point a sampler
+    draws inside their ranges too) must lie within ± the drive file's speed limit
+    (:attr:`jaxobs.drive.DriveFile.speed_limit_rpm`: where the back EMF reaches the inverter's voltage limit,
+    past field weakening's reach where it is on).
+
+    Args:
+        axes: name -> values.
+        where: The table holding the axes.
+        machine: The drive's name.
+        file: Its drive file (None: the shipped ``machine``).
+
+    Raises:
+        JobError: A speed out of range, naming the field.
+    """
     speeds, steps = axes.get("speed_rpm"), axes.get("speed_step_rpm", [0.0])
     if not speeds:
         return
@@ -108,8 +128,14 @@ def check_speed_axes(axes: dict, where: str, machine: str, file: DriveFile | Non
 
 
 def job_drive(spec: DriveSpec | None = None):
-    """The drive a ``signal = "drive"`` job runs: its drive file's (:meth:`jaxobs.drive.DriveFile.drive_for`);
-    sensorless by default (``spec``)."""
+    """The drive a ``signal = "drive"`` job runs: its drive file's (:meth:`jaxobs.drive.DriveFile.drive_for`).
+
+    Args:
+        spec: The job's ``[drive]`` (default: ``DriveSpec()``, sensorless).
+
+    Returns:
+        The :class:`~jaxobs.drive.Drive`.
+    """
     spec = DriveSpec() if spec is None else spec
     return spec.drive_file.drive_for(
         sensorless=spec.loop == "sensorless",
@@ -126,10 +152,17 @@ _INLINE_TOP = ("name", "description")  # an inline drive's label and description
 
 
 def drive_source(dt: dict, default: str, base: Path | None, where: str = "drive") -> tuple[str, DriveFile | None]:
-    """The drive file a ``[drive]`` table (``dt``, at ``where``) names: ``machine = "<shipped name>"``
-    (:data:`jaxobs.drive.SHIPPED_DRIVES`), ``file = "<path.toml>"`` (relative to ``base``, the job's or
-    study's folder, else the working folder), or a drive file's tables inline (``[drive.machine]``,
-    ``[drive.inverter]``, ...); ``default``: the shipped name without any.
+    """The drive file a ``[drive]`` table names.
+
+    ``machine = "<shipped name>"`` (:data:`jaxobs.drive.SHIPPED_DRIVES`), ``file = "<path.toml>"``, or a drive
+    file's tables inline (``[drive.machine]``, ``[drive.inverter]``, ...).
+
+    Args:
+        dt: The ``[drive]`` table.
+        default: The shipped name without any.
+        base: The job's or study's folder, against which a relative ``file`` is read (None: the working
+            folder).
+        where: The table's name in errors.
 
     Returns:
         ``(name, file)``: the drive's name, and its checked :class:`~jaxobs.drive.DriveFile` (None: shipped).
@@ -175,15 +208,35 @@ def drive_source(dt: dict, default: str, base: Path | None, where: str = "drive"
 
 
 def inline_drive(dt: dict, file: DriveFile) -> dict:
-    """``[drive]`` (``dt``) with its drive file's tables inline instead of ``file = ...`` (and its name and
-    description): what a result keeps, so that it reads the same drive wherever it is moved."""
+    """``[drive]`` with its drive file's tables inline instead of ``file = ...`` (and its name and description):
+    what a result keeps, so that it reads the same drive wherever it is moved.
+
+    Args:
+        dt: The ``[drive]`` table.
+        file: Its drive file.
+
+    Returns:
+        The table with the drive inline.
+    """
     out = {k: v for k, v in dt.items() if k != "file"}
     return {**out, "name": file.name, "description": file.description, **file.table}
 
 
 def parse_drive(dt: dict, comp: str, scen: ScenarioSpec, base: Path | None = None) -> DriveSpec:
-    """``[drive]`` of a drive job of component ``comp`` (its table ``dt``) on the scenarios ``scen``; ``base``:
-    the job file's folder (a relative ``file``)."""
+    """``[drive]`` of a drive job.
+
+    Args:
+        dt: The ``[drive]`` table.
+        comp: The component's registered name.
+        scen: The job's scenarios.
+        base: The job file's folder (a relative ``file``).
+
+    Returns:
+        The :class:`DriveSpec`.
+
+    Raises:
+        JobError: A field out of its range, naming it.
+    """
     info = COMPONENTS[comp]
     no_unknown(dt, (*_DRIVE_KEYS, *_INLINE_TOP), "drive")
     loop = get_field(dt, "loop", "drive.loop", str, "sensorless")

@@ -6,7 +6,12 @@ import math
 
 
 class JobError(ValueError):
-    """A problem with a job file; ``str()`` is one line naming the field, at most :data:`MAX_ERROR` characters."""
+    """A problem with a job file; ``str()`` is one line naming the field, at most :data:`MAX_ERROR` characters.
+
+    Args:
+        field: The field, as the job file spells its path (``drive.start``).
+        message: What is wrong, and the allowed range.
+    """
 
     def __init__(self, field: str, message: str):
         self.field = field
@@ -87,7 +92,18 @@ def get_field(table: dict, key: str, field: str, kind, default=None, required=Fa
 
 
 def finite(v, field: str) -> float:
-    """``v`` as a finite float: an integer beyond the float range (10^309) or NaN / inf is an error."""
+    """A value as a finite float.
+
+    Args:
+        v: The value.
+        field: The field's name in errors.
+
+    Returns:
+        ``v`` as a float.
+
+    Raises:
+        JobError: An integer beyond the float range (10^309), or NaN / inf.
+    """
     try:
         f = float(v)
     except OverflowError:
@@ -104,9 +120,16 @@ def no_unknown(table: dict, allowed, where: str):
 
 
 def axes_field(tab: dict, family, where: str, limits: dict | None = None) -> dict:
-    """``tab`` (axis name -> list of numbers) checked against the axes of ``family`` (a scenario family,
-    :mod:`jaxobs.families`): known names, each a list of numbers inside its range, narrowed by ``limits``
-    (name -> (low, high), :meth:`~jaxobs.families.AbstractScenarios.limits`).
+    """Axes checked against a scenario family's: known names, each a list of numbers inside its range.
+
+    Args:
+        tab: Axis name -> list of numbers.
+        family: A scenario family (:mod:`jaxobs.families`).
+        where: The table's name in errors.
+        limits: name -> (low, high), narrowing the ranges (:meth:`~jaxobs.families.AbstractScenarios.limits`).
+
+    Returns:
+        name -> the checked values.
 
     Raises:
         JobError: naming ``where``, ``where.<axis>`` or ``where.<axis>[i]`` and the allowed range.

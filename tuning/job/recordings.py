@@ -44,10 +44,29 @@ def _col_spec(v, field: str):
 
 
 def parse_recording_scenarios(tab, where, kind, t_event, horizon, steady, seed, ts, base) -> ScenarioSpec:
-    """``[<where>.recording]`` of recordings that stand for the family ``kind`` (:mod:`jaxobs.families`): the
-    file(s), the time base, the columns; read and checked now when the job file's folder is known (``base``):
-    exists, at most :data:`MAX_RECORDING_BYTES`, the columns present, finite, time strictly increasing, sampled
-    at least at 1/ts, long enough for the horizon."""
+    """``[<where>.recording]``: the file(s), the time base, the columns.
+
+    Read and checked now when the job file's folder is known (``base``): exists, at most
+    :data:`MAX_RECORDING_BYTES`, the columns present, finite, time strictly increasing, sampled at least at
+    1/ts, long enough for the horizon.
+
+    Args:
+        tab: The scenario table holding ``recording``.
+        where: The scenario table's name in errors.
+        kind: The family the recordings stand for (:mod:`jaxobs.families`).
+        t_event: The event's time, s.
+        horizon: The simulated time, s.
+        steady: The steady window's start, s.
+        seed: The seed.
+        ts: The component's sample time, s.
+        base: The job file's folder, or None (the files are read when the job runs).
+
+    Returns:
+        The :class:`ScenarioSpec` with its :class:`RecordingSpec`.
+
+    Raises:
+        JobError: A field or file refused, naming the field.
+    """
     w = f"{where}.recording"
     if "grid" in tab or "sample" in tab:
         key = "grid" if "grid" in tab else "sample"
@@ -187,9 +206,19 @@ def _load_one(spec: RecordingSpec, family: RecordedSignals, path: str, need: int
 
 
 def load_recordings(spec: RecordingSpec, family: RecordedSignals, horizon: float | None = None):
-    """The recordings of a job as one batched signal, all read at ``spec.ts``, as ``family``
-    (:class:`jaxobs.families.RecordedSignals`) reads them: whole files of one length (cut to the shortest with
-    ``spec.trim``), or each drive log's ``spec.windows`` windows of the horizon."""
+    """The recordings of a job as one batched signal, all read at ``spec.ts``.
+
+    Whole files of one length (cut to the shortest with ``spec.trim``), or each drive log's ``spec.windows``
+    windows of the horizon.
+
+    Args:
+        spec: The :class:`RecordingSpec`.
+        family: The :class:`jaxobs.families.RecordedSignals` that reads them.
+        horizon: The simulated time, s (the windows' length).
+
+    Returns:
+        The batched signal.
+    """
     need = None if horizon is None else int(round(horizon / spec.ts)) + 1
     sigs = []
     for p in spec.paths:
@@ -200,7 +229,15 @@ def load_recordings(spec: RecordingSpec, family: RecordedSignals, horizon: float
 
 
 def check_recording_job(job, comp_t: dict) -> None:
-    """What a recording cannot give: the closed loop's metrics; a flux observer on u/i needs the machine's Rs, L."""
+    """What a recording cannot give: the closed loop's metrics; a flux observer on u/i needs the machine's Rs, L.
+
+    Args:
+        job: The parsed job.
+        comp_t: The job's ``[component]`` table.
+
+    Raises:
+        JobError: The job asks for either, naming the field.
+    """
     for spec, where in ((job.scenarios, "scenarios"), (job.holdout, "holdout")):
         if spec is None or spec.recording is None:
             continue

@@ -117,6 +117,15 @@ def run_job(job: Job, out: Path, resume: bool = False, quiet: bool = False) -> d
     ``result.json`` (outcome, gains, every constructor value, scores, linear structure, what is needed to
     rebuild the design) and ``history.json`` are byte-identical for two runs of one job; the timings go
     to ``timing.json``, the per-scenario scores to ``scores.nc`` (and ``holdout_scores.nc``).
+
+    Args:
+        job: The parsed :class:`Job`.
+        out: The results folder (created).
+        resume: Continue from the folder's checkpoint.
+        quiet: No progress lines.
+
+    Returns:
+        The result, as written to ``result.json``.
     """
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.time()

@@ -14,7 +14,14 @@ from .spec import DriveSpec, ScenarioSpec
 
 
 def scenario_points(spec: ScenarioSpec):
-    """The axes' names and the scenarios' points: the studies' samplers (a grid, or ``sample`` uniform draws)."""
+    """The axes' names and the scenarios' points: the studies' samplers (a grid, or ``sample`` uniform draws).
+
+    Args:
+        spec: The scenario set.
+
+    Returns:
+        ``(names, points)``.
+    """
     if not spec.axes:
         return [], [()]
     sampler = Random(spec.axes, spec.sample, spec.seed) if spec.sample else Grid(spec.axes)
@@ -22,9 +29,19 @@ def scenario_points(spec: ScenarioSpec):
 
 
 def job_family(spec: ScenarioSpec, values: dict, drive=None, drive_spec: DriveSpec | None = None) -> AbstractScenarios:
-    """The family of a job's scenario set: its recordings (:class:`~jaxobs.families.RecordedSignals`), or the
-    family ``spec.signal`` names with the job's event, seed, nominal frequency (``values["omega_n"]``), the
-    machine and sensors of its drive file (``drive_spec``; None: the shipped ``ipmsm002``) and ``drive``."""
+    """The family of a job's scenario set.
+
+    Args:
+        spec: The scenario set.
+        values: The component's constructor values (``values["omega_n"]``: the nominal frequency).
+        drive: The :class:`~jaxobs.drive.Drive` the family's scenarios run.
+        drive_spec: The job's ``[drive]``, whose drive file gives the machine and sensors (None: the shipped
+            ``ipmsm002``).
+
+    Returns:
+        Its recordings (:class:`~jaxobs.families.RecordedSignals`), or the family ``spec.signal`` names with the
+        job's event, seed, nominal frequency, machine, sensors and drive.
+    """
     if spec.recording is not None:
         return RecordedSignals(spec.family)
     freq = float(values.get("omega_n", W_N)) / (2 * math.pi)
@@ -36,8 +53,15 @@ def job_family(spec: ScenarioSpec, values: dict, drive=None, drive_spec: DriveSp
 
 
 def build_scenarios(spec: ScenarioSpec, family: AbstractScenarios):
-    """The batched scenarios of every combination of the axes (or ``sample`` random ones), built by ``family``
-    (:func:`job_family`), or the job's recordings; with the axes' names and the points."""
+    """The batched scenarios of every combination of the axes (or ``sample`` random ones), or the job's recordings.
+
+    Args:
+        spec: The scenario set.
+        family: The family that builds them (:func:`job_family`).
+
+    Returns:
+        ``(scenarios, names, points)``.
+    """
     names, combos = scenario_points(spec)
     if spec.recording is not None:
         return load_recordings(spec.recording, family, spec.horizon), names, combos

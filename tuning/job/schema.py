@@ -36,8 +36,15 @@ AXIS_RANGES = {name: family.axes for name, family in FAMILIES.items()}
 
 
 def freq_step_range(freq_n: float, ts: float) -> tuple[float, float]:
-    """The allowed ``freq_step`` (Hz) on a grid of nominal frequency ``freq_n`` (Hz) sampled every ``ts`` s
-    (:meth:`jaxobs.families.GridSignals.limits`)."""
+    """The allowed ``freq_step`` on a grid (:meth:`jaxobs.families.GridSignals.limits`).
+
+    Args:
+        freq_n: The grid's nominal frequency, Hz.
+        ts: The sample time, s.
+
+    Returns:
+        ``(low, high)``, Hz.
+    """
     return GridSignals.limits(freq_n, ts)["freq_step"]
 
 
@@ -56,7 +63,18 @@ def available_memory() -> int:
 
 
 def check_size(spec: ScenarioSpec, where: str, ts: float, extra_s: float = 0.0) -> None:
-    """Time steps, scenario count and the memory a simulation of the batch needs, at --check time."""
+    """Time steps, scenario count and the memory a simulation of the batch needs, at --check time.
+
+    Args:
+        spec: The scenario set.
+        where: The table's name in errors.
+        ts: The component's sample time, s.
+        extra_s: Simulated time beyond the horizon, s (a drive's settling phase).
+
+    Raises:
+        JobError: Too many scenarios or steps, a steady window of fewer than 10 samples, or more memory than
+            is available, naming the field.
+    """
     n_scen = spec.sample or math.prod(len(v) for v in spec.axes.values())  # a recording: one per file
     if n_scen > MAX_SCENARIOS:
         raise JobError(f"{where}.grid", f"{n_scen} scenarios (the product of the axes' lengths) > {MAX_SCENARIOS}")
@@ -83,7 +101,23 @@ def check_size(spec: ScenarioSpec, where: str, ts: float, extra_s: float = 0.0) 
 def parse_scenarios(
     tab: dict, where: str, signals: tuple, seed: int, freq_n: float, ts: float, base: Path | None = None
 ) -> ScenarioSpec:
-    """``signals``: the component's (its default first); ``base``: the job file's folder (recordings)."""
+    """A job's ``[scenarios]`` or ``[holdout]`` table.
+
+    Args:
+        tab: The table.
+        where: Its name in errors.
+        signals: The component's scenario signals (its default first).
+        seed: The job's seed (the default of the table's).
+        freq_n: The component's nominal frequency, Hz.
+        ts: The component's sample time, s.
+        base: The job file's folder (recordings).
+
+    Returns:
+        The :class:`ScenarioSpec`.
+
+    Raises:
+        JobError: A field out of its range, naming it.
+    """
     tab = get_field({"s": tab}, "s", where, dict)
     no_unknown(tab, ("signal", "t_event", "horizon", "steady_from", "grid", "sample", "seed", "recording"), where)
     signal = get_field(tab, "signal", f"{where}.signal", str, signals[0])
@@ -119,10 +153,19 @@ def parse_scenarios(
 
 
 def parse_job(raw: dict, base: Path | None = None) -> Job:
-    """Validate a job dict (the parsed TOML); raises :class:`JobError` naming the field.
+    """Validate a job dict (the parsed TOML).
 
-    ``base``: the job file's folder, against which a recording's relative ``file`` is read (and then
-    checked now: it exists, its columns, its rate); without it the files are read when the job runs."""
+    Args:
+        raw: The parsed job file.
+        base: The job file's folder, against which a recording's relative ``file`` is read (and then
+            checked now: it exists, its columns, its rate); without it the files are read when the job runs.
+
+    Returns:
+        The :class:`Job`.
+
+    Raises:
+        JobError: A field out of its range, naming the field.
+    """
     keys = ("job", "component", "gains", "scenarios", "holdout", "objective", "solver", "drive", "envelope")
     no_unknown(raw, keys, "job file")
     job_t = get_field(raw, "job", "job", dict, required=True)
@@ -326,7 +369,17 @@ def parse_job(raw: dict, base: Path | None = None) -> Job:
 
 
 def load_job(path) -> Job:
-    """Read, check and parse a job file (:func:`read_toml`, then :func:`parse_job`)."""
+    """Read, check and parse a job file (:func:`read_toml`, then :func:`parse_job`).
+
+    Args:
+        path: The job file.
+
+    Returns:
+        The :class:`Job`, with its ``sha256``.
+
+    Raises:
+        JobError: An unreadable file, or a field out of its range, naming the field.
+    """
     raw, data = read_toml(path)
     job = parse_job(raw, Path(path).parent)
     job.sha256 = sha256(data)

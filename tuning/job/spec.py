@@ -13,6 +13,19 @@ from ..solvers import AbstractSolver
 
 @dataclass
 class ScenarioSpec:
+    """A job's scenario set (``[scenarios]`` or ``[holdout]``).
+
+    Attributes:
+        signal: The scenario family's name (:data:`jaxobs.families.FAMILIES`).
+        t_event: The event's time, s.
+        horizon: The simulated time, s.
+        steady_from: The steady window's start, s.
+        axes: name -> list of values.
+        sample: 0: the full grid; n > 0: n random combinations (seeded).
+        seed: The seed of the sampling and the noise.
+        recording: ``[scenarios.recording]``: recorded signals instead of a grid, or None.
+    """
+
     signal: str
     t_event: float
     horizon: float
@@ -31,6 +44,26 @@ class ScenarioSpec:
 
 @dataclass
 class Job:
+    """A parsed job (:func:`jaxobs_tuning.parse_job`).
+
+    Attributes:
+        raw: The job file's tables as read.
+        name: The job's name.
+        component: The component's registered name.
+        seed: The job's seed.
+        values: The constructor values.
+        gains: The free gains (:class:`~jaxobs_tuning.params.GainSpec`).
+        scenarios: The tuning set.
+        holdout: The holdout set, or None.
+        terms: The objective's terms.
+        aggregation: ``objective.aggregate`` (with alpha, temperature; :mod:`jaxobs_tuning.strategies`).
+        penalty: The value of a diverged scenario.
+        solver: ``[solver]`` (:mod:`jaxobs_tuning.strategies`).
+        sha256: Of the job file's bytes (:func:`jaxobs_tuning.load_job`); None for a job built from a dict.
+        drive: ``signal = "drive"`` jobs: how the observer sits in the loop.
+        envelope: ``[envelope]`` (``jaxobs_tuning.job.verify.EnvelopeSpec``): verified after tuning; None: not.
+    """
+
     raw: dict
     name: str
     component: str
@@ -50,17 +83,26 @@ class Job:
 
 @dataclass(frozen=True)
 class DriveSpec:
-    """``[drive]`` of a drive job: ``loop = "sensorless"`` (the default: the tuned observer closes the loop,
-    from t = 0 after its settling phase, or from ``handover`` s on) or ``"sensored"`` (the encoder closes it and
-    the observer estimates beside it); ``settle`` (s): the observer's unscored settling phase before t = 0;
-    ``start``: ``"steady"`` (each scenario starts in its operating point) or ``"standstill"`` (from rest, by
-    the I-f start-up :meth:`jaxobs.drive.IfStartup.for_machine` of the job's machine, then its hand-over);
-    ``machine``: the drive's name (a shipped drive file, :data:`jaxobs.drive.SHIPPED_DRIVES`, by default the
-    component's: the LESOs run 002's IPMSM, the flux observers 000's SPMSM; or the name of the user's drive
-    file); ``file``: the user's checked drive file (:class:`jaxobs.drive.DriveFile`: ``[drive] file = ...`` or
-    its tables inline), None for a shipped one; ``speed_schedule``: the FOC's speed-loop schedule N (0 off;
-    N > 0: speed-loop bandwidth min(α_s, |ωe*|/N), so a flux observer's FLL, whose bandwidth scales with the
-    speed, can close the loop at low speed: docs/stability.md)."""
+    """``[drive]`` of a drive job.
+
+    Attributes:
+        loop: ``"sensorless"`` (the default: the tuned observer closes the loop, from t = 0 after its settling
+            phase, or from ``handover`` s on) or ``"sensored"`` (the encoder closes it and the observer
+            estimates beside it).
+        handover: The time from which the observer closes the loop, s.
+        settle: The observer's unscored settling phase before t = 0, s.
+        start: ``"steady"`` (each scenario starts in its operating point) or ``"standstill"`` (from rest, by
+            the I-f start-up :meth:`jaxobs.drive.IfStartup.for_machine` of the job's machine, then its
+            hand-over).
+        machine: The drive's name: a shipped drive file (:data:`jaxobs.drive.SHIPPED_DRIVES`, by default the
+            component's: the LESOs run 002's IPMSM, the flux observers 000's SPMSM), or the name of the
+            user's drive file.
+        speed_schedule: The FOC's speed-loop schedule N (0 off; N > 0: speed-loop bandwidth min(α_s, |ωe*|/N),
+            so a flux observer's FLL, whose bandwidth scales with the speed, can close the loop at low speed:
+            docs/stability.md).
+        file: The user's checked drive file (:class:`jaxobs.drive.DriveFile`: ``[drive] file = ...`` or its
+            tables inline), None for a shipped one.
+    """
 
     loop: str = "sensorless"
     handover: float = 0.0
@@ -78,7 +120,23 @@ class DriveSpec:
 
 @dataclass(frozen=True)
 class RecordingSpec:
-    """``[scenarios.recording]``: one scenario per file, read at the component's ``ts``."""
+    """``[scenarios.recording]``: one scenario per file, read at the component's ``ts``.
+
+    Attributes:
+        files: The files as written in the job file.
+        paths: The files resolved against the job file's folder (or the working folder).
+        time_column: A column name or index, or None.
+        sample_rate: Hz, when there is no time column.
+        columns: The signal's columns.
+        truth: The truth columns.
+        ts: The component's sample time, s.
+        sha256: Of each file's bytes, when checked at parse time.
+        layout: A :class:`jaxobs.signals.RecordingLayout` (what a drive log's columns hold), or None.
+        trim: Whether recordings of different lengths are cut to the shortest (else refused).
+        windows: > 0: this many windows of the horizon spread over each drive log, each a scenario.
+        machine: A :class:`~jaxobs.drive.PMSMParams` for a drive log's power and timing checks, or None.
+        machine_name: The machine as the job names it (a bench machine or a drive file).
+    """
 
     files: tuple  # as written in the job file
     paths: tuple  # resolved against the job file's folder (or the working folder)
