@@ -65,7 +65,7 @@ from ..drive import ClosedLoop
 from ..linear import TransferFunction, sogi_fll_model, wif_model
 
 __all__ = ["Stability", "lyapunov", "stability_sweep", "LinearVerdict", "linear_speed_loop", "fll_frequency_soifo"]
-__all__ += ["fll_frequency_sosoifo", "slope_fit", "floquet"]
+__all__ += ["fll_frequency_sosoifo", "slope_fit", "floquet", "OFF_ORBIT_DEV"]
 
 
 class Stability(NamedTuple):
@@ -78,6 +78,21 @@ class Stability(NamedTuple):
     speed_dev: jax.Array  # max |ωm − ωm*| / |ωm*| over warmup + window (the orbit itself, after the settle), 1
     resolution: jax.Array  # 1/s: spread of the exponent over the window's thirds, its uncertainty (module doc)
     marginal: jax.Array  # the orbit held its speed but |margin − tol| ≤ resolution: neither verdict (bool)
+    off_orbit: jax.Array  # the orbit left its operating point: speed_dev ≥ OFF_ORBIT_DEV after the settle (bool)
+    rate_bound: jax.Array  # off the orbit: a lower bound on the growth rate, 1/s (module doc); NaN on it
+
+
+# The speed deviation (relative, after the settle) past which the linearized run no longer follows the operating
+# point's orbit: the same threshold below which an orbit "held its speed" (stable needs it).
+OFF_ORBIT_DEV = 0.2
+
+
+def _orbit(lam, res, speed_dev):
+    """(resolution, off_orbit, rate_bound) from the top exponent ``lam``, its resolution ``res`` and the orbit's
+    speed deviation: off the orbit the resolution is NaN (no ±) and the rate a bound, max(lam − res, 0)."""
+    off = ~(speed_dev < OFF_ORBIT_DEV)
+    bound = jnp.where(jnp.isfinite(lam) & jnp.isfinite(res), jnp.maximum(lam - res, 0.0), jnp.inf)
+    return jnp.where(off, jnp.nan, res), off, jnp.where(off, bound, jnp.nan)
 
 
 def _split(state):
@@ -191,15 +206,18 @@ def lyapunov(
     # the top exponent's resolution: an uncertainty of the estimate, not a property a tuner should move
     res = jnp.where(finite, jax.lax.stop_gradient(resolution[top]), jnp.inf)
     speed_dev = jnp.where(jnp.isfinite(lam), jnp.max(dev), jnp.inf)
-    held = speed_dev < 0.2
+    held = speed_dev < OFF_ORBIT_DEV
+    res_on, off, bound = _orbit(lam, res, speed_dev)
     return Stability(
         exponent=lam,
         exponents=-jnp.sort(-slope),
         margin=-lam,
         stable=(-lam - res > tol) & held,
         speed_dev=speed_dev,
-        resolution=res,
+        resolution=res_on,
         marginal=(jnp.abs(-lam - tol) <= res) & held & finite,
+        off_orbit=off,
+        rate_bound=bound,
     )
 
 
@@ -345,15 +363,18 @@ def floquet(
     rel = off * jnp.exp(-jnp.clip(lam, -700.0 / period, 700.0 / period) * period)
     res = jnp.where(finite & covered, jax.lax.stop_gradient(jnp.log1p(rel) / period), jnp.inf)
     speed_dev = jnp.where(finite, dev, jnp.inf)
-    held = speed_dev < 0.2
+    held = speed_dev < OFF_ORBIT_DEV
+    res_on, off, bound = _orbit(lam, res, speed_dev)
     return Stability(
         exponent=lam,
         exponents=jnp.where(finite, rates[:n_report], jnp.inf),
         margin=-lam,
         stable=(-lam - res > tol) & held,
         speed_dev=speed_dev,
-        resolution=res,
+        resolution=res_on,
         marginal=(jnp.abs(-lam - tol) <= res) & held & finite,
+        off_orbit=off,
+        rate_bound=bound,
     )
 
 
