@@ -11,19 +11,33 @@ closes the loop sensorless) it measures two things, each batched over the points
   largest non-neutral Floquet multiplier of ``ClosedLoop.step`` over whole electrical periods of its own
   orbit, as a decay rate; or, with ``stability={"method": "lyapunov"}``, the largest non-neutral Lyapunov
   exponent fitted over a window, :func:`jaxobs.analysis.stability.lyapunov`);
-- **a long simulation** (``horizon`` s, 2 by default) through the study runner
-  (:func:`jaxobs.runner.run_scenarios`), started steady and perturbed by a speed-reference step of
-  ``perturb`` (relative) at ``t_perturb`` s, so that an unstable point shows its growth within the horizon.
+- **a long simulation** through the study runner (:func:`jaxobs.runner.run_scenarios`), started steady and
+  perturbed by a speed-reference pulse: ``perturb`` (relative) × the point's speed from ``t_perturb`` s for one
+  time constant 1/α of the point's speed loop, then back.  A pulse, not a step: a step would move the point
+  the late window watches (a +2 % step at 405 r/min, 5 N·m on the bench moves 000's second-order SOIFO from
+  a point where its loop grows at +0.16 /s onto the stable side of its boundary), and a step in either one
+  direction biases the verdict of a point just beside a boundary.  The horizon spans at least
+  :data:`HORIZON_TC` time constants 1/α of the slowest speed loop among the points (``horizon`` is its floor)
+  and the late window is its second half ``[steady_from, horizon)``.  The rule: the slowest closed-loop mode
+  is the speed loop's (α its double-pole bandwidth, :meth:`jaxobs.drive.FOC.speed_gains`; scheduled on the
+  speed at low speed, α = |p ω*|/N, where its slowest pair is −0.57 α ± 2.5 α j, docs/stability.md,
+  :func:`jaxobs.analysis.stability.linear_speed_loop`), so a response decays by e^-1.7 in 3/α: the early
+  window opens 3/α after the pulse ends, the late one at least 3/α after that.  At 20 r/min on 000's SPMSM
+  under the scheduled loop (α = 1.05 rad/s) the horizon is 11.5 s, where 2 s marked a holding point "not
+  synchronous" (the loop had not finished its step); under the bench's fixed 5 Hz loop (α = 31.4 rad/s) 2 s.
   Nothing is stored per sample (:class:`jaxobs.SaveFinal`): the loop is wrapped in a system that keeps
-  running sums in its state — the position error's mean and mean square and its peak over the late window
-  ``[steady_from, horizon)``, the speed's peak deviation in the early window ``[t_perturb + 0.05, steady_from)``
-  and in the late one, and the mean |ωm − ωm*| and |ωm*| over the late window.
+  running sums in its state — the position error's mean and mean square and its peak over the late window,
+  the speed's peak deviation in the early window ``[t_perturb + 4/α, steady_from)`` and in the late one, and
+  the mean |ωm − ωm*| and |ωm*| over the late window.
 
 A point is **synchronous** when the run stayed finite, kept lock (late peak position error ≤ 90° electrical,
 the drive studies' lost-lock tolerance), kept its speed (:func:`jaxobs.metrics.lost_speed`'s rule on the late
-window) and settled: its late peak speed deviation is under ``speed_tol`` and no larger than in the early
-window (the criterion the stability verdict was validated with, docs/stability.md).  It **holds** when it is
+window) and settled: its late peak speed deviation is under ``speed_tol`` and at most 2 % above the early window's
+(:data:`SETTLE_GROWTH`: a settled point's windows both see the same steady ripple, equal to within their
+sampling; a mode growing at λ shows as e^(λ·3/α), 1.15 for +0.14 /s under the 5 Hz loop).  It **holds** when it is
 stable (the stability verdict), synchronous and its late peak position error is within ``bound_deg``.
+Where the verdict's linearized run left its operating point (``off_orbit``) the point is unstable and its rate
+is a bound (``rate_bound``, :func:`jaxobs.analysis.stability.floquet`), not a margin ± a resolution.
 
 Designs of one class share both compilations (their gains are array leaves).
 """
@@ -58,6 +72,7 @@ __all__ = [
     "envelope",
     "default_speeds",
     "speed_limit_rpm",
+    "speed_pulse",
     "default_loads",
     "worst_case",
 ]
@@ -208,6 +223,22 @@ def _pulse_width(drive: Drive, machine: PMSMParams, speeds_rpm) -> np.ndarray:
     return np.array([PULSE_TC / alpha[float(v)] for v in np.asarray(speeds_rpm, float)])
 
 
+def speed_pulse(scenarios, t0: float, width, height: float):
+    """``scenarios`` (batched, each started steady at its speed reference ω0) with the reference pulsed:
+    ω0 (1 + ``height``) from ``t0`` s for ``width`` s (a number or one per scenario), then ω0 again.
+
+    Raises:
+        ValueError: ``t0`` or a width not a finite number of seconds > 0.
+    """
+    w0 = scenarios.speed_ref.values[:, 0]
+    width = np.broadcast_to(np.asarray(width, dtype=float), w0.shape)
+    if not (math.isfinite(t0) and t0 > 0.0 and np.all(np.isfinite(width)) and np.all(width > 0.0)):
+        raise ValueError(f"speed_pulse: t0 and width must be finite numbers of seconds > 0, got {t0!r}, {width!r}")
+    times = jnp.stack([jnp.zeros_like(w0), jnp.full_like(w0, t0), t0 + jnp.asarray(width, w0.dtype)], axis=1)
+    values = jnp.stack([w0, w0 * (1.0 + height), w0], axis=1)
+    return eqx.tree_at(lambda s: (s.speed_ref.times, s.speed_ref.values), scenarios, (times, values))
+
+
 class _LongRuns(AbstractScenarios):
     """The long runs' scenarios: the drive's (``family``), each point's speed reference pulsed by ``perturb`` ×
     its speed from the family's ``t_event`` for :data:`PULSE_TC` / α s and back (so the late window watches the
@@ -224,14 +255,9 @@ class _LongRuns(AbstractScenarios):
     bytes_per_step: ClassVar[int] = 2048
 
     def build(self, names, points, first: int = 0):
-        sc = self.family.build(names, points, first=first)
         fam = self.family
-        t0 = float(fam.t_event)
         width = _pulse_width(fam.drive, fam.machine, [p[0] for p in points])
-        w0 = sc.speed_ref.values[:, 0]
-        times = jnp.stack([jnp.zeros_like(w0), jnp.full_like(w0, t0), t0 + jnp.asarray(width, w0.dtype)], axis=1)
-        values = jnp.stack([w0, w0 * (1.0 + self.perturb), w0], axis=1)
-        return eqx.tree_at(lambda s: (s.speed_ref.times, s.speed_ref.values), sc, (times, values))
+        return speed_pulse(fam.build(names, points, first=first), float(fam.t_event), width, self.perturb)
 
     def system(self, design, scenario):
         ref = scenario.speed_ref
@@ -347,8 +373,11 @@ def envelope(
 
     ``speeds_rpm`` (r/min, > 0; default :func:`default_speeds`), ``loads_nm`` (N·m; default
     :func:`default_loads`); ``mismatch``: ``(axis, values)`` with axis one of :data:`MISMATCH_AXES` (relative,
-    1), a third dim.  ``horizon`` (s, ≥ 0.5) of the long run, its late window from ``steady_from`` (s; default
-    horizon/2); ``perturb`` (relative, in [0, 0.2]): the speed-reference step at ``t_perturb`` (s).
+    1), a third dim.  ``horizon`` (s, in [0.5, 20]): the long run's least horizon, stretched to
+    :data:`HORIZON_TC` time constants of the slowest speed loop (module doc; at most :data:`HORIZON_MAX`), its
+    late window from ``steady_from`` (s; default horizon/2, after the slowest point's early window opens);
+    ``perturb`` (relative, in [0, 0.2]): the speed-reference pulse's height, from ``t_perturb`` (s) for
+    :data:`PULSE_TC` / α at each point.
     ``bound_deg`` (deg electrical): the late peak position error a holding point may have; ``speed_tol``
     (relative): the late peak speed deviation a synchronous point may have.  ``stability``: ``method``
     ("floquet", the default, or "lyapunov") and that function's keyword arguments
@@ -357,7 +386,11 @@ def envelope(
     :func:`jaxobs.runner.run_scenarios`.  The long runs' and the verdicts' traced programs are kept across
     processes where a folder is set (:func:`jaxobs.kept_jit`).  Returns an ``xarray.Dataset`` with dims
     ``("design", "speed_rpm", "load"[, axis])`` and the variables of :data:`ENVELOPE_VARIABLES` (booleans stored
-    as int8 0/1).
+    as int8 0/1); its ``horizon`` and ``steady_from`` attributes are those that ran.
+
+    Raises:
+        ValueError: no design, a drive that is not sensorless or not started steady, or an argument out of its
+            range (the message names it and the range).
     """
     import xarray as xr
 
