@@ -130,6 +130,26 @@ def test_floquet_rejects_bad_options():
         floquet(object())
 
 
+def test_off_orbit_rate_is_a_bound_that_the_settled_rate_keeps():
+    """000's second-order SOIFO at 300 r/min, no load, R̂s 30 % low: unstable at about +7 /s.  After the
+    default 0.2 s settle the linearized run has left its operating point (its speed 72 % off), and the rate it
+    measures there (+2.7 to +4.9 /s, by the window) is not the point's: the verdict says ``off_orbit``, gives
+    no resolution and a lower bound on the rate.  From the settled start (no settle, a 0.1 s window) the run
+    stays on the orbit and measures the point's rate, +7.15 ± 0.30 /s; the bound is below it."""
+    d = _drive()
+    sc = _one(_scenarios([(300.0, 0.0, -0.3)], ("speed_rpm", "load_nm", "dRs")))
+    loop = ClosedLoop(d, bind_observer(_sosoifo(), sc), sc)
+    off = jax.jit(lambda: floquet(loop))()
+    on = jax.jit(lambda: floquet(loop, settle=0.0, window=0.1))()
+    assert bool(off.off_orbit) and float(off.speed_dev) > 0.5 and not bool(off.stable | off.marginal)
+    assert np.isnan(float(off.resolution)), off.resolution
+    assert 0.0 < float(off.rate_bound) <= float(off.exponent), (off.exponent, off.rate_bound)
+    assert not bool(on.off_orbit) and np.isnan(float(on.rate_bound)) and float(on.speed_dev) < 0.1
+    assert float(on.exponent) == pytest.approx(7.15, abs=0.3) and float(on.resolution) < 0.5
+    # the bound holds at the point: below the settled rate by more than the settled rate's resolution
+    assert float(off.rate_bound) < float(on.exponent) - float(on.resolution), (off.rate_bound, on.exponent)
+
+
 def test_linear_speed_loop_at_g1_is_the_design_and_fll_destabilizes_at_low_speed():
     par = _machine()
     foc = FOC.imc(par, 2 * math.pi * papers.BENCH_CURRENT_HZ, ALPHA_S)
