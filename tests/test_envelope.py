@@ -138,6 +138,11 @@ def test_cli_envelope_writes_netcdf_and_figure(tmp_path, capsys):
     res.write_text(json.dumps({"job": job.raw, "component": job.component, "gains": gains, "values": designs}))
     assert main(["envelope", str(res), "--check"]) == 0
     assert "designs initial, closed_form, tuned" in capsys.readouterr().out
+    # explicit speeds and loads; by default the speeds run from 1 % of rated to 98 % of the drive's limit
+    assert main(["envelope", str(PRESET), "--speeds", "20,50,100", "--loads", "0,2.5,5", "--check"]) == 0
+    assert "3 speeds 20..100 r/min x 3 loads 0..5 N·m = 9 points" in capsys.readouterr().out
+    assert main(["envelope", str(PRESET), "--check"]) == 0
+    assert "8 speeds 20..2779 r/min" in capsys.readouterr().out
 
 
 def test_cli_envelope_bad_input_is_one_line(tmp_path, capsys):
@@ -145,6 +150,16 @@ def test_cli_envelope_bad_input_is_one_line(tmp_path, capsys):
         main(["envelope", str(PRESET), "--speeds", "1", "--check"])
     assert e.value.code == 2
     assert "--speeds" in capsys.readouterr().err
+    for opt, bad in (("--speeds", "20,10"), ("--speeds", "20,x"), ("--loads", "0,-1"), ("--loads", "0.5")):
+        with pytest.raises(SystemExit) as e:
+            main(["envelope", str(PRESET), opt, bad, "--check"])
+        assert e.value.code == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert opt in err[-1] and "comma-separated" in err[-1], err
+    # past the drive's speed limit (2835 r/min on 000's SPMSM): one line naming the option and the limit
+    assert main(["envelope", str(PRESET), "--speeds", "20,5000", "--check"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--speeds" in err[0] and "2835" in err[0], err
     fll = Path(__file__).resolve().parents[1] / "tuning" / "presets" / "wif_robust.toml"
     assert main(["envelope", str(fll), "--check"]) == 2
     assert "scenarios.signal" in capsys.readouterr().err

@@ -101,7 +101,7 @@ ENVELOPE_VARIABLES = {
     "orbit_speed_dev": ("1", "max |speed - reference| / |reference| during the linearized run after its settle"),
     "off_orbit": (
         "1",
-        "off orbit: the linearized run left its operating point (orbit_speed_dev >= 0.2): unstable, its rate a "
+        "off orbit: the linearized run left its operating point (orbit_speed_dev >= 0.1): unstable, its rate a "
         "bound (1: off)",
     ),
     "rate_bound": (
