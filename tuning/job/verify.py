@@ -121,7 +121,7 @@ def verify_designs(designs: dict, env: EnvelopeSpec, drive_spec: DriveSpec) -> d
     combos = [(s, ld) for s in speeds for ld in loads]
     out = {
         "envelope": {"speed_rpm": list(env.speed_rpm), "load_nm": list(env.load_nm)},
-        "horizon_s": env.horizon,
+        "horizon_s": float(ds.attrs["horizon"]),  # the job's, stretched to the slowest speed loop (envelope)
         "speed_schedule": drive_spec.speed_schedule,
         "points": [{"speed_rpm": s, "load_nm": ld} for s, ld in combos],
         "passes_definition": "synchronous (jaxobs.analysis.envelope: finite, locked within 90 deg electrical, at its "
