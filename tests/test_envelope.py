@@ -173,10 +173,10 @@ def test_claimed_envelope_of_a_drive_job():
     assert claimed_envelope(load_job(fll)) is None
 
 
-def _holds_sim(designs, points, drive=DRIVE, horizon=3.0):
+def _holds_sim(designs, points, drive=DRIVE, horizon=3.0, height=0.02):
     """The stability doc's criterion on a simulation of ``drive`` over ``horizon`` s, independent of the
-    envelope's running sums: a +2 % speed-reference pulse at 0.05 s for one time constant 1/α of the point's
-    speed loop (FOC.speed_gains) and back; holds when the peak speed deviation over the second half is under
+    envelope's running sums: a speed-reference pulse of ``height`` (+2 %) at 0.05 s for one time constant 1/α
+    of the point's speed loop (FOC.speed_gains) and back; holds when the peak speed deviation over the second half is under
     1 % and at most 2 % above the peak from 3/α after the pulse to the half."""
     foc = drive.foc.bind(PAR, drive.inverter.u_max)
     alpha = []
@@ -184,7 +184,7 @@ def _holds_sim(designs, points, drive=DRIVE, horizon=3.0):
         kp, ki = foc.speed_gains(jnp.asarray(s * jaxobs.drive.RPM))
         alpha.append(2 * float(ki) / float(kp))
     width = 1.0 / np.asarray(alpha)
-    sc = speed_pulse(drive_scenarios(PAR, ["speed_rpm", "load_nm"], list(points)), 0.05, width, 0.02)
+    sc = speed_pulse(drive_scenarios(PAR, ["speed_rpm", "load_nm"], list(points)), 0.05, width, height)
     t_early = jnp.asarray(0.05 + 4 * width)
 
     @jax.jit
@@ -236,7 +236,12 @@ def test_preset_envelope_agrees_with_pulse_simulations_at_low_speed(tmp_path):
     # the envelope runs it: settled over 10 electrical periods of the lowest speed (10 s at 20 r/min)
     drive = job_drive(load_job(PRESET).drive).settled_for(PAR.p * points[0][0] * jaxobs.drive.RPM)
     assert drive.settle == pytest.approx(ds.attrs["drive_settle"], rel=1e-12)
-    sim = _holds_sim(designs, points, drive=drive, horizon=ds.attrs["horizon"])
+    # Floquet's verdict is local: compared with a pulse small enough to stay in the linear regime (0.5 %).  At
+    # 20 r/min and rated load a 2 % pulse (the map's) runs the machine away although the point is stable
+    # (docs/envelope.md): there the map says stable and not synchronous.
+    sim = _holds_sim(designs, points, drive=drive, horizon=ds.attrs["horizon"], height=0.005)
+    top = ds.sel(speed_rpm=points[0][0], load=float(ds["load"][-1]))
+    assert (top["stable"] == 1).all() and (top["synchronous"] == 0).all(), top
     for d in designs:
         verdict = low["stable"].sel(design=d).values.ravel() == 1
         # Every point's orbit is steady (before the settle scaled with the speed, the loaded points at 144 r/min
