@@ -176,8 +176,8 @@ def test_claimed_envelope_of_a_drive_job():
 def _holds_sim(designs, points, drive=DRIVE, horizon=3.0, height=0.02):
     """The stability doc's criterion on a simulation of ``drive`` over ``horizon`` s, independent of the
     envelope's running sums: a speed-reference pulse of ``height`` (+2 %) at 0.05 s for one time constant 1/α
-    of the point's speed loop (FOC.speed_gains) and back; holds when the peak speed deviation over the second half is under
-    1 % and at most 2 % above the peak from 3/α after the pulse to the half."""
+    of the point's speed loop (FOC.speed_gains) and back; holds when the peak speed deviation over the second
+    half is under 1 % and at most 2 % above the peak from 3/α after the pulse to the half."""
     foc = drive.foc.bind(PAR, drive.inverter.u_max)
     alpha = []
     for s, _ in points:
