@@ -178,6 +178,7 @@ def _holds_sim(designs, points, drive=DRIVE, horizon=3.0, height=0.02):
     envelope's running sums: a speed-reference pulse of ``height`` (+2 %) at 0.05 s for one time constant 1/α
     of the point's speed loop (FOC.speed_gains) and back; holds when the peak speed deviation over the second
     half is under 1 % and at most 2 % above the peak from 3/α after the pulse to the half."""
+    horizon = float(horizon)  # a static length (an attribute read back from NetCDF is a 0-d array)
     foc = drive.foc.bind(PAR, drive.inverter.u_max)
     alpha = []
     for s, _ in points:
