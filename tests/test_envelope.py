@@ -202,6 +202,7 @@ def _holds_sim(designs, points, drive=DRIVE, horizon=3.0, height=0.02):
     return {d: np.asarray(run(obs, sc, t_early)) for d, obs in designs.items()}
 
 
+@pytest.mark.slow  # the long runs' and the Floquet verdict's compiles and a 3 s simulation: 110 s on 2 shared cores
 def test_pulse_check_agrees_with_floquet_beside_the_boundary():
     """Three points within 2 % of 000's second-order SOIFO's low-speed boundary under the bench's fixed 5 Hz
     speed loop (near 407 r/min at 5 N·m: Floquet +0.5, +0.1 and −0.3 /s at 400, 405 and 410 r/min): the
