@@ -1,5 +1,6 @@
 """The envelope map: the Floquet stability verdict and the long runs over speed × load, the CLI's NetCDF
-and figure, and (slow) the preset's verdicts against 3 s simulations at the low-speed points."""
+and figure, the pulse check beside a boundary, and (slow) the preset's verdicts against pulse simulations at the
+low-speed points."""
 
 import json
 from pathlib import Path
@@ -12,7 +13,7 @@ import xarray as xr
 
 import jaxobs
 from jaxobs import papers
-from jaxobs.analysis.envelope import ENVELOPE_VARIABLES, envelope
+from jaxobs.analysis.envelope import ENVELOPE_VARIABLES, envelope, speed_pulse
 from jaxobs.drive import bench_drive, bench_machine
 from jaxobs.drive_study import bind_observer, drive_scenarios
 from jaxobs_tuning.cli import main
@@ -25,6 +26,7 @@ PAR = bench_machine("spmsm000")
 DRIVE = bench_drive(PAR)
 CF = jaxobs.SecondOrderSOIFO(0.0, 1.0, K1, K2, K1**3 / (2 * K2), 100.0)  # 000's closed form
 PRESET = Path(__file__).resolve().parents[1] / "tuning" / "presets" / "sosoifo.toml"
+ALPHA_BENCH = 2 * np.pi * papers.BENCH_SPEED_HZ  # the bench's fixed speed loop's double pole, rad/s
 SHORT = dict(settle=0.05, window=0.15)  # the Floquet verdict (its window stretched to a period of the lowest speed)
 
 
@@ -65,7 +67,9 @@ def test_small_envelope_dims_units_and_verdicts(small):
 
 def test_long_run_metrics_match_a_saved_trajectory(small):
     """The running sums (SaveFinal, no trajectory) against the same run saved whole."""
-    sc = drive_scenarios(PAR, ["speed_rpm", "load_nm", "speed_step_rpm"], [(1000.0, 5.0, 20.0)], t_event=0.05)
+    # the envelope's +2 % pulse for one time constant of the bench's fixed 5 Hz speed loop
+    width = 1.0 / ALPHA_BENCH
+    sc = speed_pulse(drive_scenarios(PAR, ["speed_rpm", "load_nm"], [(1000.0, 5.0)]), 0.05, width, 0.02)
     sc = jax.tree.map(lambda x: x[0], sc)
     # the envelope's drive, settled over 10 electrical periods (Drive.settled_for) of its lowest speed that the
     # fixed 5 Hz loop can hold with a flux observer (ωe ≥ 4α): 1000 r/min, so the 0.2 s default (recorded)
@@ -81,6 +85,9 @@ def test_long_run_metrics_match_a_saved_trajectory(small):
     o = sol.outputs
     dev = np.abs(np.asarray(o.omega_m - o.omega_m_ref)) / np.abs(np.asarray(o.omega_m_ref))
     assert float(cf["speed_dev_late_pct"]) == pytest.approx(100 * dev[late].max(), rel=1e-9)
+    k = np.arange(len(dev))  # the early window opens at the sample nearest 3/α after the pulse's end
+    early = (k >= round((0.05 + 4 * width) / drive.ts)) & ~late
+    assert float(cf["speed_dev_early_pct"]) == pytest.approx(100 * dev[early].max(), rel=1e-9)
 
 
 @pytest.mark.parametrize(
@@ -133,6 +140,11 @@ def test_cli_envelope_writes_netcdf_and_figure(tmp_path, capsys):
     res.write_text(json.dumps({"job": job.raw, "component": job.component, "gains": gains, "values": designs}))
     assert main(["envelope", str(res), "--check"]) == 0
     assert "designs initial, closed_form, tuned" in capsys.readouterr().out
+    # explicit speeds and loads; by default the speeds run from 1 % of rated to 98 % of the drive's limit
+    assert main(["envelope", str(PRESET), "--speeds", "20,50,100", "--loads", "0,2.5,5", "--check"]) == 0
+    assert "3 speeds 20..100 r/min x 3 loads 0..5 N·m = 9 points" in capsys.readouterr().out
+    assert main(["envelope", str(PRESET), "--check"]) == 0
+    assert "8 speeds 20..2779 r/min" in capsys.readouterr().out
 
 
 def test_cli_envelope_bad_input_is_one_line(tmp_path, capsys):
@@ -140,6 +152,16 @@ def test_cli_envelope_bad_input_is_one_line(tmp_path, capsys):
         main(["envelope", str(PRESET), "--speeds", "1", "--check"])
     assert e.value.code == 2
     assert "--speeds" in capsys.readouterr().err
+    for opt, bad in (("--speeds", "20,10"), ("--speeds", "20,x"), ("--loads", "0,-1"), ("--loads", "0.5")):
+        with pytest.raises(SystemExit) as e:
+            main(["envelope", str(PRESET), opt, bad, "--check"])
+        assert e.value.code == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert opt in err[-1] and "comma-separated" in err[-1], err
+    # past the drive's speed limit (2835 r/min on 000's SPMSM): one line naming the option and the limit
+    assert main(["envelope", str(PRESET), "--speeds", "20,5000", "--check"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--speeds" in err[0] and "2835" in err[0], err
     fll = Path(__file__).resolve().parents[1] / "tuning" / "presets" / "wif_robust.toml"
     assert main(["envelope", str(fll), "--check"]) == 2
     assert "scenarios.signal" in capsys.readouterr().err
@@ -153,35 +175,58 @@ def test_claimed_envelope_of_a_drive_job():
     assert claimed_envelope(load_job(fll)) is None
 
 
-def _holds_3s(designs, points, drive=DRIVE):
-    """The stability doc's criterion on a 3 s simulation of ``drive``, independent of the envelope's running
-    sums: a +2 % speed-reference step at 0.05 s; holds when the peak speed deviation in [2, 3] s is under 1 %
-    and no larger than in [0.1, 1] s."""
-    out = {}
-    sc = drive_scenarios(PAR, ["speed_rpm", "load_nm", "speed_step_rpm"],
-                         [(s, ld, 0.02 * s) for s, ld in points], t_event=0.05)  # fmt: skip
+def _holds_sim(designs, points, drive=DRIVE, horizon=3.0, height=0.02):
+    """The stability doc's criterion on a simulation of ``drive`` over ``horizon`` s, independent of the
+    envelope's running sums: a speed-reference pulse of ``height`` (+2 %) at 0.05 s for one time constant 1/α
+    of the point's speed loop (FOC.speed_gains) and back; holds when the peak speed deviation over the second
+    half is under 1 % and at most 2 % above the peak from 3/α after the pulse to the half."""
+    horizon = float(horizon)  # a static length (an attribute read back from NetCDF is a 0-d array)
+    foc = drive.foc.bind(PAR, drive.inverter.u_max)
+    alpha = []
+    for s, _ in points:
+        kp, ki = foc.speed_gains(jnp.asarray(s * jaxobs.drive.RPM))
+        alpha.append(2 * float(ki) / float(kp))
+    width = 1.0 / np.asarray(alpha)
+    sc = speed_pulse(drive_scenarios(PAR, ["speed_rpm", "load_nm"], list(points)), 0.05, width, height)
+    t_early = jnp.asarray(0.05 + 4 * width)
 
     @jax.jit
-    def run(obs, sc):
-        def one(sc):
-            o = jaxobs.simulate(jaxobs.drive.ClosedLoop(drive, bind_observer(obs, sc), sc), 3.0).outputs
+    def run(obs, sc, t_early):
+        def one(sc, te):
+            o = jaxobs.simulate(jaxobs.drive.ClosedLoop(drive, bind_observer(obs, sc), sc), horizon).outputs
             dev = jnp.abs(o.omega_m - o.omega_m_ref) / jnp.abs(o.omega_m_ref)
-            early = jnp.max(jnp.where((o.t >= 0.1) & (o.t < 1.0), dev, 0.0))
-            late = jnp.max(jnp.where(o.t >= 2.0, dev, 0.0))
-            return (late < 0.01) & (late <= early) & jnp.isfinite(late)
+            early = jnp.max(jnp.where((o.t >= te) & (o.t < 0.5 * horizon), dev, 0.0))
+            late = jnp.max(jnp.where(o.t >= 0.5 * horizon, dev, 0.0))
+            return (late < 0.01) & (late <= 1.02 * early) & jnp.isfinite(late)
 
-        return jax.vmap(one)(sc)
+        return jax.vmap(one)(sc, t_early)
 
-    for d, obs in designs.items():
-        out[d] = np.asarray(run(obs, sc))
-    return out
+    return {d: np.asarray(run(obs, sc, t_early)) for d, obs in designs.items()}
+
+
+@pytest.mark.slow  # the long runs' and the Floquet verdict's compiles and a 3 s simulation: 110 s on 2 shared cores
+def test_pulse_check_agrees_with_floquet_beside_the_boundary():
+    """Three points within 2 % of 000's second-order SOIFO's low-speed boundary under the bench's fixed 5 Hz
+    speed loop (near 407 r/min at 5 N·m: Floquet +0.5, +0.1 and −0.3 /s at 400, 405 and 410 r/min): the
+    envelope's pulse check (synchronous) and an independent 3 s pulse simulation agree with the Floquet verdict
+    at each, 405 r/min included, where a +2 % step moved the run to 413 r/min, the stable side, and the map
+    said synchronous."""
+    points = [400.0, 405.0, 410.0]
+    ds = envelope({"cf": CF}, machine=PAR, drive=DRIVE, speeds_rpm=points, loads_nm=[5.0], stability=dict(window=1.0))
+    cf = ds.sel(design="cf", load=5.0)
+    assert not cf["marginal"].any() and not cf["off_orbit"].any(), (cf["margin"].values, cf["resolution"].values)
+    stable = cf["stable"].values == 1
+    assert stable.tolist() == [False, False, True], cf["margin"].values
+    assert (cf["synchronous"].values == 1).tolist() == stable.tolist(), cf["speed_dev_late_pct"].values
+    assert _holds_sim({"cf": CF}, [(s, 5.0) for s in points])["cf"].tolist() == stable.tolist()
 
 
 @pytest.mark.slow
-def test_preset_envelope_agrees_with_3s_simulations_at_low_speed(tmp_path):
+def test_preset_envelope_agrees_with_pulse_simulations_at_low_speed(tmp_path):
     """`jaxobs envelope tuning/presets/sosoifo.toml --out DIR` writes the NetCDF
-    (speed_rpm and load dims, a stability variable) whose verdicts agree with 3 s simulations at every low-speed
-    point (≤ 600 r/min: 20 to 537 r/min × 0 to 14 N·m), every verdict resolved, and every orbit within 0.5 % of
+    (speed_rpm and load dims, a stability variable) whose verdicts agree with pulse simulations over the map's
+    horizon (12/α of the slowest speed loop: 11.5 s) at every low-speed point (≤ 600 r/min: 20 to 332 r/min × 0
+    to 14 N·m), every verdict resolved, and every orbit within 0.5 % of
     its speed reference over the Lyapunov run (the start itself: tests/test_stability.py, loaded 144 r/min)."""
     out = tmp_path / "env"
     assert main(["envelope", str(PRESET), "--out", str(out), "--quiet"]) == 0
@@ -189,20 +234,25 @@ def test_preset_envelope_agrees_with_3s_simulations_at_low_speed(tmp_path):
     assert {"speed_rpm", "load"} <= set(ds["stable"].dims)
     low = ds.sel(speed_rpm=ds["speed_rpm"][ds["speed_rpm"] <= 600.0])
     points = [(float(s), float(ld)) for s in low["speed_rpm"].values for ld in low["load"].values]
-    assert len(points) >= 24 and points[0][0] == pytest.approx(20.0)
+    assert len(points) >= 20 and points[0][0] == pytest.approx(20.0)
     designs = {"initial": jaxobs.SecondOrderSOIFO(0.0, 1.0, K1, K2, 0.61, 100.0), "closed_form": CF}
     # the preset's own drive (its [drive] table: the speed loop scheduled on the reference, speed_schedule), as
     # the envelope runs it: settled over 10 electrical periods of the lowest speed (10 s at 20 r/min)
     drive = job_drive(load_job(PRESET).drive).settled_for(PAR.p * points[0][0] * jaxobs.drive.RPM)
     assert drive.settle == pytest.approx(ds.attrs["drive_settle"], rel=1e-12)
-    sim = _holds_3s(designs, points, drive=drive)
+    # Floquet's verdict is local: compared with a pulse small enough to stay in the linear regime (0.5 %).  At
+    # 20 r/min and rated load a 2 % pulse (the map's) runs the machine away although the point is stable
+    # (docs/envelope.md): there the map says stable and not synchronous.
+    sim = _holds_sim(designs, points, drive=drive, horizon=ds.attrs["horizon"], height=0.005)
+    top = ds.sel(speed_rpm=points[0][0], load=float(ds["load"][-1]))
+    assert (top["stable"] == 1).all() and (top["synchronous"] == 0).all(), top
     for d in designs:
         verdict = low["stable"].sel(design=d).values.ravel() == 1
         # Every point's orbit is steady (before the settle scaled with the speed, the loaded points at 144 r/min
         # dipped 22-54 % and only the on-orbit points could be compared).
         assert (low["orbit_speed_dev"].sel(design=d).values < 5e-3).all(), low["orbit_speed_dev"].sel(design=d)
         # Every verdict is resolved (the Lyapunov window spans 12/α of the slowest speed loop: 11.5 s at 20 r/min,
-        # jaxobs.analysis.envelope) and agrees with the 3 s run, at every point.
+        # jaxobs.analysis.envelope) and agrees with the pulse simulation, at every point.
         assert not low["marginal"].sel(design=d).any(), (
             d,
             low["margin"].sel(design=d),
@@ -211,7 +261,7 @@ def test_preset_envelope_agrees_with_3s_simulations_at_low_speed(tmp_path):
         assert (verdict == sim[d]).all(), (d, points, verdict, sim[d])
     # With speed_schedule = 6 the second-order SOIFO is stable at every low-speed point, down to 20 r/min at rated
     # load; the unstable verdicts (the bench's fixed 5 Hz loop below ~420 r/min) are held against 3 s runs in
-    # tests/test_stability.py::test_verdict_agrees_with_3s_simulations.
+    # tests/test_stability.py::test_verdict_agrees_with_3s_pulse_simulations.
 
 
 @pytest.mark.parametrize(

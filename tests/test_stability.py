@@ -16,7 +16,9 @@ import pytest
 
 import jaxobs
 from jaxobs import papers
+from jaxobs.analysis.envelope import speed_pulse
 from jaxobs.analysis.stability import (
+    OFF_ORBIT_DEV,
     fll_frequency_soifo,
     fll_frequency_sosoifo,
     floquet,
@@ -129,6 +131,27 @@ def test_floquet_rejects_bad_options():
         floquet(object())
 
 
+@pytest.mark.slow  # two Floquet programs (the settle is static): 100 s to compile on the shared 2-core machine
+def test_off_orbit_rate_is_a_bound_that_the_settled_rate_keeps():
+    """000's second-order SOIFO at 300 r/min, no load, R̂s 30 % low: unstable at about +7 /s.  After the
+    default 0.2 s settle the linearized run has left its operating point (its speed 23 % off), and the rate it
+    measures there (+6.06 ± 1.53 /s) is not the point's: the verdict says ``off_orbit``, gives no resolution
+    and a lower bound on the rate.  From the settled start (no settle, a 0.1 s window) the run
+    stays on the orbit and measures the point's rate, +7.15 ± 0.30 /s; the bound is below it."""
+    d = _drive()
+    sc = _one(_scenarios([(300.0, 0.0, -0.3)], ("speed_rpm", "load_nm", "dRs")))
+    loop = ClosedLoop(d, bind_observer(_sosoifo(), sc), sc)
+    off = jax.jit(lambda: floquet(loop))()
+    on = jax.jit(lambda: floquet(loop, settle=0.0, window=0.1))()
+    assert bool(off.off_orbit) and float(off.speed_dev) > OFF_ORBIT_DEV and not bool(off.stable | off.marginal)
+    assert np.isnan(float(off.resolution)), off.resolution
+    assert 0.0 < float(off.rate_bound) <= float(off.exponent), (off.exponent, off.rate_bound)
+    assert not bool(on.off_orbit) and np.isnan(float(on.rate_bound)) and float(on.speed_dev) < OFF_ORBIT_DEV
+    assert float(on.exponent) == pytest.approx(7.15, abs=0.3) and float(on.resolution) < 0.5
+    # the bound holds at the point: below the settled rate by more than the settled rate's resolution
+    assert float(off.rate_bound) < float(on.exponent) - float(on.resolution), (off.rate_bound, on.exponent)
+
+
 def test_linear_speed_loop_at_g1_is_the_design_and_fll_destabilizes_at_low_speed():
     par = _machine()
     foc = FOC.imc(par, 2 * math.pi * papers.BENCH_CURRENT_HZ, ALPHA_S)
@@ -221,15 +244,16 @@ DESIGNS = {  # the closed forms of 000 and the noise-tuned SOIFO of soifo_noise.
 
 
 @pytest.mark.slow
-def test_verdict_agrees_with_3s_simulations():
+def test_verdict_agrees_with_3s_pulse_simulations():
     """30 operating points (5 speeds × 2 loads × 3 designs), 19 stable and 11 unstable: the verdict of
-    :func:`lyapunov` (a 0.7 s linearized run) against a 3 s simulation after a +5 r/min reference step,
-    wherever the verdict is resolved (not marginal); and :func:`floquet`'s (≥ 0.5 s) at every point.
-    The simulation holds when its speed deviation in [2, 3] s is under 1 % and no larger than in
-    [0.1, 1] s (a decaying response); otherwise it grew (a limit cycle or a run-away)."""
+    :func:`lyapunov` (a 0.7 s linearized run) against a 3 s simulation after a +2 % reference pulse of one
+    speed-loop time constant 1/α_s (a pulse, not a step: the run stays at its operating point), wherever the
+    verdict is resolved (not marginal); and :func:`floquet`'s (≥ 0.5 s) at every point.  The simulation holds
+    when its speed deviation in [2, 3] s is under 1 % and at most 2 % above its peak in [0.05 + 4/α_s, 1] s (a
+    decaying response; the 2 %: the steady ripple's peaks); otherwise it grew (a limit cycle or a run-away)."""
     combos = [(s, l) for s in SPEEDS for l in LOADS]
     scs = _scenarios(combos)
-    scs_step = _scenarios([c + (5.0,) for c in combos], ("speed_rpm", "load_nm", "speed_step_rpm"), t_event=0.05)
+    scs_step = speed_pulse(scs, 0.05, 1.0 / ALPHA_S, 0.02)
     d = _drive()
 
     @jax.jit
@@ -240,8 +264,8 @@ def test_verdict_agrees_with_3s_simulations():
             o = jaxobs.simulate(ClosedLoop(d, bind_observer(obs, sc), sc), 3.0, save=jaxobs.SaveAll()).outputs
             dev = jnp.abs(o.omega_m - o.omega_m_ref) / jnp.abs(o.omega_m_ref)
             dev = jnp.where(jnp.isfinite(dev), dev, jnp.inf)
-            early, late = dev[1000:10000].max(), dev[20000:].max()
-            return (late < 0.01) & (late <= early)
+            early, late = dev[int(round((0.05 + 4 / ALPHA_S) / d.ts)) : 10000].max(), dev[20000:].max()
+            return (late < 0.01) & (late <= 1.02 * early)
 
         fv = jax.vmap(lambda sc: floquet(ClosedLoop(d, bind_observer(obs, sc), sc), window=0.5))(scs)
         return lv.stable, lv.marginal, lv.exponent, lv.resolution, jax.vmap(sim)(scs_step), fv

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import math
 from pathlib import Path
 
 from .job import COMPONENTS, JobError, job_drive, load_job, parse_job
@@ -49,19 +50,6 @@ def envelope_designs(path: Path, drive: str | None = None):
     return job, designs
 
 
-def _count(low: int, high: int):
-    def parse(text: str) -> int:
-        try:
-            v = int(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"must be an integer in [{low}, {high}], got {text!r}") from None
-        if not low <= v <= high:
-            raise argparse.ArgumentTypeError(f"must be an integer in [{low}, {high}], got {v}")
-        return v
-
-    return parse
-
-
 def _seconds(text: str) -> float:
     try:
         v = float(text)
@@ -72,11 +60,40 @@ def _seconds(text: str) -> float:
     return v
 
 
+def _count_or_list(what: str, unit: str, low: int, high: int, floor: float):
+    """A count of values (an integer in [low, high]) or the values themselves, comma-separated (``20,50,100``;
+    one value with a trailing comma: ``400,``), finite, >= ``floor`` and strictly increasing."""
+    usage = f"must be a count in [{low}, {high}] or comma-separated {what} ({unit}, >= {floor:g}, increasing)"
+
+    def parse(text: str):
+        if "," not in text:
+            try:
+                v = int(text)
+            except ValueError:
+                raise argparse.ArgumentTypeError(f"{usage}, got {text[:40]!r}") from None
+            if not low <= v <= high:
+                raise argparse.ArgumentTypeError(f"{usage}, got {v}")
+            return v
+        try:
+            vals = [float(x) for x in text.split(",") if x.strip()]
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{usage}, got {text[:40]!r}") from None
+        if not vals or len(vals) > 256 or not all(math.isfinite(v) and v >= floor for v in vals):
+            raise argparse.ArgumentTypeError(f"{usage}, got {text[:40]!r}")
+        if any(b <= a for a, b in zip(vals, vals[1:])):
+            raise argparse.ArgumentTypeError(f"{usage}: not increasing, got {text[:40]!r}")
+        return tuple(vals)
+
+    return parse
+
+
 def cli_envelope(args) -> int:
     import jax
 
     jax.config.update("jax_enable_x64", True)
-    from jaxobs.analysis.envelope import default_loads, default_speeds, envelope
+    import numpy as np
+
+    from jaxobs.analysis.envelope import default_loads, default_speeds, envelope, speed_limit_rpm
     from jaxobs.plot import envelope_figure
 
     path = Path(args.source)
@@ -84,7 +101,16 @@ def cli_envelope(args) -> int:
     spec = dataclasses.replace(job.drive, loop="sensorless", start="steady", handover=0.0)
     par = spec.drive_file.machine
     drive = job_drive(spec)
-    speeds, loads = default_speeds(par, args.speeds), default_loads(par, args.loads)
+    # a count: the default axes (log-spaced speeds from 1 % of rated to the drive's limit, loads 0..rated); or
+    # the values themselves, within the drive's limit and the study's loads
+    if isinstance(args.speeds, tuple):
+        top = speed_limit_rpm(par, drive)
+        if args.speeds[-1] > top:
+            raise ValueError(f"--speeds: must be <= {top:.4g} r/min (the drive's speed limit), got {args.speeds[-1]:g}")
+        speeds = np.asarray(args.speeds)
+    else:
+        speeds = default_speeds(par, args.speeds, drive=drive)
+    loads = np.asarray(args.loads) if isinstance(args.loads, tuple) else default_loads(par, args.loads)
     n = len(speeds) * len(loads)
     # the job's own settle and (shortest) window where it states them ([envelope]), else the library's defaults
     # (jaxobs.analysis.envelope.STABILITY_METHODS: settle 0.2 s, windows of at least 0.2 s)
@@ -92,8 +118,8 @@ def cli_envelope(args) -> int:
     stab = {} if env is None else {"settle": env.settle, "window": env.window}
     what = (
         f"{path}: {job.component} on {spec.machine}, designs {', '.join(designs)}; {len(speeds)} speeds "
-        f"{speeds[0]:.4g}..{speeds[-1]:.4g} r/min x {len(loads)} loads 0..{loads[-1]:.4g} N·m = {n} points, "
-        f"{args.horizon:g} s runs"
+        f"{speeds[0]:.4g}..{speeds[-1]:.4g} r/min x {len(loads)} loads {loads[0]:.4g}..{loads[-1]:.4g} N·m = "
+        f"{n} points, runs of at least {args.horizon:g} s"
     )
     if args.check:
         # the window is only a floor: envelope() stretches it to one electrical period of the lowest speed (the
@@ -159,9 +185,18 @@ def add_envelope_parser(subparsers, parents=()) -> argparse.ArgumentParser:
     e.add_argument("--out", help="results folder (default: out/envelope-<job name>)")
     e.add_argument("--drive", help="a drive file (TOML) to map a result.json on (default: the result's job's drive)")
     e.add_argument(
-        "--speeds", type=_count(2, 64), default=8, help="speeds, log-spaced 1 %%..100 %% of rated (default 8)"
+        "--speeds",
+        type=_count_or_list("speeds", "r/min", 2, 64, 1.0),
+        default=8,
+        help="a count of speeds, log-spaced from 1 %% of rated to the drive's speed limit (default 8), or the "
+        "speeds, r/min, comma-separated (20,50,100)",
     )
-    e.add_argument("--loads", type=_count(1, 32), default=4, help="loads, 0..rated torque (default 4)")
+    e.add_argument(
+        "--loads",
+        type=_count_or_list("loads", "N·m", 1, 32, 0.0),
+        default=4,
+        help="a count of loads, 0..rated torque (default 4), or the loads, N·m, comma-separated (0,2.5,5)",
+    )
     e.add_argument("--horizon", type=_seconds, default=2.0, help="long-run horizon, s (default 2)")
     e.add_argument("--check", action="store_true", help="validate the source and print what would run")
     e.add_argument("--force", action="store_true", help="overwrite an envelope already in --out")

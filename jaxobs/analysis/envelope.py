@@ -11,19 +11,36 @@ closes the loop sensorless) it measures two things, each batched over the points
   largest non-neutral Floquet multiplier of ``ClosedLoop.step`` over whole electrical periods of its own
   orbit, as a decay rate; or, with ``stability={"method": "lyapunov"}``, the largest non-neutral Lyapunov
   exponent fitted over a window, :func:`jaxobs.analysis.stability.lyapunov`);
-- **a long simulation** (``horizon`` s, 2 by default) through the study runner
-  (:func:`jaxobs.runner.run_scenarios`), started steady and perturbed by a speed-reference step of
-  ``perturb`` (relative) at ``t_perturb`` s, so that an unstable point shows its growth within the horizon.
+- **a long simulation** through the study runner (:func:`jaxobs.runner.run_scenarios`), started steady and
+  perturbed by a speed-reference pulse: ``perturb`` (relative) × the point's speed from ``t_perturb`` s for one
+  time constant 1/α of the point's speed loop, then back.  A pulse, not a step: a step would move the point
+  the late window watches (a +2 % step at 405 r/min, 5 N·m on the bench moves 000's second-order SOIFO from
+  a point where its loop grows at +0.146 /s, Floquet, onto the stable side of its boundary near 407 r/min),
+  and a step in either one direction biases the verdict of a point just beside a boundary.  With the pulse
+  the check says not synchronous there (late peak speed deviation 1.40 % against 1.21 % early) and
+  synchronous at 410 r/min (−0.32 /s; 0.80 % against 1.07 %): tests/test_envelope.py.  The horizon spans at least
+  :data:`HORIZON_TC` time constants 1/α of the slowest speed loop among the points (``horizon`` is its floor)
+  and the late window is its second half ``[steady_from, horizon)``.  The rule: the slowest closed-loop mode
+  is the speed loop's (α its double-pole bandwidth, :meth:`jaxobs.drive.FOC.speed_gains`; scheduled on the
+  speed at low speed, α = |p ω*|/N, where its slowest pair is −0.57 α ± 2.5 α j, docs/stability.md,
+  :func:`jaxobs.analysis.stability.linear_speed_loop`), so a response decays by e^-1.7 in 3/α: the early
+  window opens 3/α after the pulse ends, the late one at least 3/α after that.  At 20 r/min on 000's SPMSM
+  under the scheduled loop (α = 1.05 rad/s) the horizon is 11.5 s, where 2 s marked a holding point "not
+  synchronous" (the loop had not finished its step); under the bench's fixed 5 Hz loop (α = 31.4 rad/s) 2 s.
   Nothing is stored per sample (:class:`jaxobs.SaveFinal`): the loop is wrapped in a system that keeps
-  running sums in its state — the position error's mean and mean square and its peak over the late window
-  ``[steady_from, horizon)``, the speed's peak deviation in the early window ``[t_perturb + 0.05, steady_from)``
-  and in the late one, and the mean |ωm − ωm*| and |ωm*| over the late window.
+  running sums in its state — the position error's mean and mean square and its peak over the late window,
+  the speed's peak deviation in the early window ``[t_perturb + 4/α, steady_from)`` and in the late one, and
+  the mean |ωm − ωm*| and |ωm*| over the late window.
 
 A point is **synchronous** when the run stayed finite, kept lock (late peak position error ≤ 90° electrical,
 the drive studies' lost-lock tolerance), kept its speed (:func:`jaxobs.metrics.lost_speed`'s rule on the late
-window) and settled: its late peak speed deviation is under ``speed_tol`` and no larger than in the early
-window (the criterion the stability verdict was validated with, docs/stability.md).  It **holds** when it is
-stable (the stability verdict), synchronous and its late peak position error is within ``bound_deg``.
+window) and settled: its late peak speed deviation is under ``speed_tol`` and at most 2 % above the early
+window's (:data:`SETTLE_GROWTH`: a settled point's windows both see the same steady ripple, equal to within
+their sampling; a mode growing at λ shows as about e^(λ (steady_from − early start)), 1.15 at 405 r/min
+above).  It **holds** when it is stable (the stability verdict), synchronous and its late peak position
+error is within ``bound_deg``.
+Where the verdict's linearized run left its operating point (``off_orbit``) the point is unstable and its rate
+is a bound (``rate_bound``, :func:`jaxobs.analysis.stability.floquet`), not a margin ± a resolution.
 
 Designs of one class share both compilations (their gains are array leaves).
 """
@@ -57,6 +74,8 @@ __all__ = [
     "WORST_AXES",
     "envelope",
     "default_speeds",
+    "speed_limit_rpm",
+    "speed_pulse",
     "default_loads",
     "worst_case",
 ]
@@ -80,10 +99,23 @@ ENVELOPE_VARIABLES = {
     "resolution": (
         "s-1",
         "resolution of the margin: how far the orbit was from periodic (floquet), or the exponent's spread over "
-        "the window's thirds (lyapunov)",
+        "the window's thirds (lyapunov); NaN off the orbit (off_orbit: the rate is a bound, rate_bound)",
     ),
     "orbit_speed_dev": ("1", "max |speed - reference| / |reference| during the linearized run after its settle"),
-    "synchronous": ("1", "held synchronism over the long run: finite, locked, at speed, settled (1: held)"),
+    "off_orbit": (
+        "1",
+        "off orbit: the linearized run left its operating point (orbit_speed_dev >= 0.1): unstable, its rate a "
+        "bound (1: off)",
+    ),
+    "rate_bound": (
+        "s-1",
+        "off the orbit: a lower bound on the growth rate, max(exponent - resolution, 0), measured along the "
+        "departed trajectory; NaN on the orbit",
+    ),
+    "synchronous": (
+        "1",
+        "held synchronism over the long run after a speed-reference pulse: finite, locked, at speed, settled (1: held)",
+    ),
     "lost_lock": ("1", "lost lock over the late window: diverged or position error > 90 deg electrical (1: lost)"),
     "lost_speed": ("1", "lost speed over the late window: diverged, or mean |speed - ref| > 20 % of |ref| (1: lost)"),
     "pos_err_max_deg": ("degree", "peak |position error| in the late window (electrical)"),
@@ -95,11 +127,29 @@ ENVELOPE_VARIABLES = {
 }
 
 
-def default_speeds(machine: PMSMParams, n: int = 8) -> np.ndarray:
-    """``n`` speeds, r/min, log-spaced from 1 % of the machine's rated speed to the rated speed (or the drive's
-    voltage-limited speed, whichever is lower)."""
-    top = min(float(machine.n_rated), 0.98 * drive_speed_limit_rpm(machine))
-    return np.geomspace(0.01 * top, top, n)
+def speed_limit_rpm(machine: PMSMParams, drive: Drive | None = None) -> float:
+    """The highest speed (r/min) ``drive`` may ask of ``machine`` at no load: where the back EMF reaches the
+    inverter's voltage limit u_max, ωe ψf = u_max, or with the FOC's field weakening on
+    (``FOC.field_weakening``) where the weakened flux does, ωe (ψf − Ld i_max) = u_max (the drive file's
+    ``speed_limit_rpm``, :mod:`jaxobs.drive.drivefile`; unbounded by the voltage where Ld i_max ≥ ψf, then
+    3 × rated speed).  ``drive=None``: the default inverter, no weakening
+    (:func:`jaxobs.drive.drive_speed_limit_rpm`)."""
+    if drive is None:
+        return drive_speed_limit_rpm(machine)
+    u_max, psi = float(drive.inverter.u_max), float(machine.psi_f)
+    flux = psi
+    if drive.foc.field_weakening is not None:
+        flux = psi - float(machine.Ld) * float(drive.foc.i_max)
+        if flux <= 0.0:
+            return 3.0 * float(machine.n_rated)
+    return u_max / flux / float(machine.p) * 60.0 / (2 * math.pi)
+
+
+def default_speeds(machine: PMSMParams, n: int = 8, drive: Drive | None = None) -> np.ndarray:
+    """``n`` speeds, r/min, log-spaced from 1 % of the machine's rated speed to the highest allowed speed,
+    98 % of :func:`speed_limit_rpm` (the drive's no-load voltage limit, with its field weakening where on)."""
+    top = 0.98 * speed_limit_rpm(machine, drive)
+    return np.geomspace(min(0.01 * float(machine.n_rated), 0.5 * top), top, n)
 
 
 def default_loads(machine: PMSMParams, n: int = 4) -> np.ndarray:
@@ -124,7 +174,7 @@ class _Watched(AbstractSystem):
     """A closed loop whose state carries the running sums of :class:`_Watch` (read from ``final_state``)."""
 
     loop: ClosedLoop
-    k_early: int = eqx.field(static=True)  # first sample of the early window
+    k_early: jax.Array  # first sample of the early window (per scenario: it follows the point's speed loop)
     k_late: int = eqx.field(static=True)  # first sample of the late window
     unroll: ClassVar[int] = 1
 
@@ -159,13 +209,47 @@ class _Watched(AbstractSystem):
         return (new, w), jnp.zeros((), e.dtype)
 
 
+# The long run's timing, in time constants 1/α of the speed loop at the point (α: its double-pole bandwidth,
+# FOC.speed_gains; scheduled on the speed, |p ω*|/N at low speed, docs/stability.md).  The slowest closed-loop
+# mode there is the speed loop's weakly damped pair, −0.57 α ± 2.5 α j (linear_speed_loop at N = 6: −0.60 ±
+# 2.67j 1/s at 20 r/min on 000's SPMSM, α = 1.05 rad/s); the fixed loop's double pole −α decays faster.
+PULSE_TC = 1.0  # the speed-reference pulse lasts 1/α: the loop follows it by most of its height
+EARLY_TC = 3.0  # the early window opens 3/α after the pulse ends: its transient has decayed to e^-1.7 = 0.18
+HORIZON_TC = 12.0  # the horizon spans at least 12/α of the slowest point after t_perturb: late window from 6/α
+HORIZON_MAX = 30.0  # s: the longest horizon the rule may ask for (1/α ≤ 2.5 s)
+SETTLE_GROWTH = 1.02  # a settled point's late peak deviation is at most 2 % above its early one (module doc)
+
+
+def _pulse_width(drive: Drive, machine: PMSMParams, speeds_rpm) -> np.ndarray:
+    """The speed-reference pulse's width at each speed, s: :data:`PULSE_TC` / α (α: :func:`_speed_bandwidth`)."""
+    alpha = {float(v): _speed_bandwidth(drive, machine, float(v)) for v in np.unique(np.asarray(speeds_rpm, float))}
+    return np.array([PULSE_TC / alpha[float(v)] for v in np.asarray(speeds_rpm, float)])
+
+
+def speed_pulse(scenarios, t0: float, width, height: float):
+    """``scenarios`` (batched, each started steady at its speed reference ω0) with the reference pulsed:
+    ω0 (1 + ``height``) from ``t0`` s for ``width`` s (a number or one per scenario), then ω0 again.
+
+    Raises:
+        ValueError: ``t0`` or a width not a finite number of seconds > 0.
+    """
+    w0 = scenarios.speed_ref.values[:, 0]
+    width = np.broadcast_to(np.asarray(width, dtype=float), w0.shape)
+    if not (math.isfinite(t0) and t0 > 0.0 and np.all(np.isfinite(width)) and np.all(width > 0.0)):
+        raise ValueError(f"speed_pulse: t0 and width must be finite numbers of seconds > 0, got {t0!r}, {width!r}")
+    times = jnp.stack([jnp.zeros_like(w0), jnp.full_like(w0, t0), t0 + jnp.asarray(width, w0.dtype)], axis=1)
+    values = jnp.stack([w0, w0 * (1.0 + height), w0], axis=1)
+    return eqx.tree_at(lambda s: (s.speed_ref.times, s.speed_ref.values), scenarios, (times, values))
+
+
 class _LongRuns(AbstractScenarios):
-    """The long runs' scenarios: the drive's (``family``), each point's speed reference stepping by ``perturb``
-    × its speed at the family's ``t_event``, the loop wrapped in :class:`_Watched` (its running sums)."""
+    """The long runs' scenarios: the drive's (``family``), each point's speed reference pulsed by ``perturb`` ×
+    its speed from the family's ``t_event`` for :data:`PULSE_TC` / α s and back (so the late window watches the
+    operating point itself, not one a step moved it to), the loop wrapped in :class:`_Watched` (its running sums;
+    the early window from :data:`EARLY_TC` / α after the pulse)."""
 
     family: DriveScenarios
     perturb: float = eqx.field(static=True)
-    k_early: int = eqx.field(static=True)
     k_late: int = eqx.field(static=True)
 
     signal: ClassVar[str] = "drive"
@@ -174,11 +258,15 @@ class _LongRuns(AbstractScenarios):
     bytes_per_step: ClassVar[int] = 2048
 
     def build(self, names, points, first: int = 0):
-        steps = [(*p, self.perturb * p[0]) for p in points]
-        return self.family.build((*names, "speed_step_rpm"), steps, first=first)
+        fam = self.family
+        width = _pulse_width(fam.drive, fam.machine, [p[0] for p in points])
+        return speed_pulse(fam.build(names, points, first=first), float(fam.t_event), width, self.perturb)
 
     def system(self, design, scenario):
-        return _Watched(self.family.system(design, scenario), self.k_early, self.k_late)
+        ref = scenario.speed_ref
+        t_end, width = ref.times[2], ref.times[2] - ref.times[1]
+        k_early = jnp.round((t_end + EARLY_TC / PULSE_TC * width) / self.family.drive.ts)
+        return _Watched(self.family.system(design, scenario), k_early, self.k_late)
 
 
 def _sums(sol):
@@ -213,11 +301,11 @@ def _speed_lost(sol, sc, ctx):
 
 def _long_run_flags(speed_tol: float) -> tuple:
     """lost_lock, lost_speed (diverged included) and synchronous: finite, locked, at speed and settled (its late
-    peak speed deviation under ``speed_tol`` and no larger than in the early window)."""
+    peak speed deviation under ``speed_tol`` and at most :data:`SETTLE_GROWTH` × the early window's)."""
 
     def synchronous(sol, sc, ctx):
         w = _sums(sol)[0]
-        settled = (w.dev_late < speed_tol) & (w.dev_late <= jnp.maximum(w.dev_early, 1e-6))
+        settled = (w.dev_late < speed_tol) & (w.dev_late <= SETTLE_GROWTH * jnp.maximum(w.dev_early, 1e-6))
         return ~_lock_lost(sol, sc, ctx) & ~_speed_lost(sol, sc, ctx) & settled
 
     return tuple(
@@ -288,8 +376,11 @@ def envelope(
 
     ``speeds_rpm`` (r/min, > 0; default :func:`default_speeds`), ``loads_nm`` (N·m; default
     :func:`default_loads`); ``mismatch``: ``(axis, values)`` with axis one of :data:`MISMATCH_AXES` (relative,
-    1), a third dim.  ``horizon`` (s, ≥ 0.5) of the long run, its late window from ``steady_from`` (s; default
-    horizon/2); ``perturb`` (relative, in [0, 0.2]): the speed-reference step at ``t_perturb`` (s).
+    1), a third dim.  ``horizon`` (s, in [0.5, 20]): the long run's least horizon, stretched to
+    :data:`HORIZON_TC` time constants of the slowest speed loop (module doc; at most :data:`HORIZON_MAX`), its
+    late window from ``steady_from`` (s; default horizon/2, after the slowest point's early window opens);
+    ``perturb`` (relative, in [0, 0.2]): the speed-reference pulse's height, from ``t_perturb`` (s) for
+    :data:`PULSE_TC` / α at each point.
     ``bound_deg`` (deg electrical): the late peak position error a holding point may have; ``speed_tol``
     (relative): the late peak speed deviation a synchronous point may have.  ``stability``: ``method``
     ("floquet", the default, or "lyapunov") and that function's keyword arguments
@@ -298,7 +389,11 @@ def envelope(
     :func:`jaxobs.runner.run_scenarios`.  The long runs' and the verdicts' traced programs are kept across
     processes where a folder is set (:func:`jaxobs.kept_jit`).  Returns an ``xarray.Dataset`` with dims
     ``("design", "speed_rpm", "load"[, axis])`` and the variables of :data:`ENVELOPE_VARIABLES` (booleans stored
-    as int8 0/1).
+    as int8 0/1); its ``horizon`` and ``steady_from`` attributes are those that ran.
+
+    Raises:
+        ValueError: no design, a drive that is not sensorless or not started steady, or an argument out of its
+            range (the message names it and the range).
     """
     import xarray as xr
 
@@ -306,18 +401,26 @@ def envelope(
         raise ValueError("envelope: at least one design is required")
     if not drive.sensorless or drive.startup is not None:
         raise ValueError("envelope: drive must be sensorless and start steady (Drive(sensorless=True, startup=None))")
-    n_max = drive_speed_limit_rpm(machine)
+    n_max = speed_limit_rpm(machine, drive)
     # the lowest speed whose steady start (Drive.settled_for) fits the 60 s settle limit: SETTLE_PERIODS / p r/min
     n_min = max(1.0, SETTLE_PERIODS / machine.p)
-    speeds = _axis("speeds_rpm", default_speeds(machine) if speeds_rpm is None else speeds_rpm, n_min, n_max, "r/min")
+    speeds = default_speeds(machine, drive=drive) if speeds_rpm is None else speeds_rpm
+    speeds = _axis("speeds_rpm", speeds, n_min, n_max, "r/min")
     lo_l, hi_l = DRIVE_STUDY_AXES["load_nm"].range
     loads = _axis("loads_nm", default_loads(machine) if loads_nm is None else loads_nm, lo_l, hi_l, "N·m")
     if not (math.isfinite(horizon) and 0.5 <= horizon <= 20.0):
         raise ValueError(f"envelope: horizon must be in [0.5, 20] s, got {horizon!r}")
+    if not (math.isfinite(t_perturb) and t_perturb > 0.0):
+        raise ValueError(f"envelope: t_perturb must be a number of seconds > 0, got {t_perturb!r}")
+    # the horizon spans HORIZON_TC time constants of the slowest speed loop among the points (its floor: horizon)
+    tc_max = max(_pulse_width(drive, machine, speeds)) / PULSE_TC
+    horizon = min(max(float(horizon), t_perturb + HORIZON_TC * tc_max), max(float(horizon), HORIZON_MAX))
     steady_from = 0.5 * horizon if steady_from is None else float(steady_from)
-    if not (0.0 < t_perturb < steady_from < horizon):
+    early_min = t_perturb + (PULSE_TC + EARLY_TC) * tc_max
+    if not (early_min < steady_from < horizon):
         raise ValueError(
-            f"envelope: need 0 < t_perturb < steady_from < horizon, got {t_perturb!r}, {steady_from!r}, {horizon!r}"
+            f"envelope: steady_from must be in ({early_min:.4g}, {horizon:.4g}) s (after the slowest point's pulse "
+            f"and early window, before the horizon), got {steady_from!r}"
         )
     for name, v, lo, hi in (("perturb", perturb, 0.0, 0.2), ("bound_deg", bound_deg, 0.1, 90.0),
                             ("speed_tol", speed_tol, 1e-4, 1.0)):  # fmt: skip
@@ -372,11 +475,11 @@ def envelope(
     sampler = Grid(axes)
     names, points = sampler.names, sampler.points()
 
-    # the long runs, a study: each point's speed reference steps by perturb × its speed at t_perturb; nothing
+    # the long runs, a study: each point's speed reference pulses by perturb × its speed at t_perturb; nothing
     # stored per sample (SaveFinal), the wrapped loop's running sums read from its final state
     ts = drive.ts
     family = DriveScenarios(machine, drive, t_event=t_perturb, seed=seed)
-    long = _LongRuns(family, float(perturb), int(round((t_perturb + 0.05) / ts)), int(round(steady_from / ts)))
+    long = _LongRuns(family, float(perturb), int(round(steady_from / ts)))
     runs = study(
         designs,
         long,
@@ -420,6 +523,8 @@ def envelope(
         "marginal": grid(lambda d: stab[d].marginal),
         "resolution": grid(lambda d: stab[d].resolution),
         "orbit_speed_dev": grid(lambda d: stab[d].speed_dev),
+        "off_orbit": grid(lambda d: stab[d].off_orbit),
+        "rate_bound": grid(lambda d: stab[d].rate_bound),
     }
     for k in ("synchronous", "lost_lock", "lost_speed"):  # flags: int8 in the study, booleans here
         res[k] = runs[k].values.astype(bool)
@@ -451,6 +556,7 @@ def envelope(
         steady_from=steady_from,
         perturb=float(perturb),
         t_perturb=float(t_perturb),
+        pulse_time_constants=PULSE_TC,
         bound_deg=float(bound_deg),
         speed_tol=float(speed_tol),
         seed=seed,

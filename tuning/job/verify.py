@@ -6,7 +6,8 @@ A design tuned and scored on its grid can run away a little outside it (the nois
 (``[envelope] speed_rpm = [lo, hi]``, ``load_nm = [lo, hi]``; by default the span of its tuning grid) and,
 after tuning, :func:`verify_designs` maps initial, closed form and tuned over a coarse grid of that
 envelope (3 speeds, lo, geometric middle and hi, × 2 loads, lo and hi) with the one envelope map,
-:func:`jaxobs.analysis.envelope.envelope`: a long run (``[envelope] horizon``, 2 s by default) through the study
+:func:`jaxobs.analysis.envelope.envelope`: a long run (``[envelope] horizon``, 2 s by default, stretched to the
+slowest speed loop's time constants) after a speed-reference pulse, so unbiased beside a boundary, through the study
 runner, batched, and the simulator's own stability verdict (:func:`jaxobs.analysis.stability.floquet`) at the
 same points, on the job's drive (its speed schedule) started steady, nominal machine.
 
@@ -119,11 +120,11 @@ def verify_designs(designs: dict, env: EnvelopeSpec, drive_spec: DriveSpec) -> d
     combos = [(s, ld) for s in speeds for ld in loads]
     out = {
         "envelope": {"speed_rpm": list(env.speed_rpm), "load_nm": list(env.load_nm)},
-        "horizon_s": env.horizon,
+        "horizon_s": float(ds.attrs["horizon"]),  # the job's, stretched to the slowest speed loop (envelope)
         "speed_schedule": drive_spec.speed_schedule,
         "points": [{"speed_rpm": s, "load_nm": ld} for s, ld in combos],
         "passes_definition": "synchronous (jaxobs.analysis.envelope: finite, locked within 90 deg electrical, at its "
-        "speed reference and settled after a 2 % speed-reference step, over the late window) and stable "
+        "speed reference and settled after a 2 % speed-reference pulse, over the late window) and stable "
         "(jaxobs.analysis.stability.floquet: the largest non-neutral Floquet multiplier over whole electrical "
         "periods, as a rate log|mu|/T, below 0 by more than its resolution, 1/s; within it the point is "
         "'marginal', which does not pass)",
