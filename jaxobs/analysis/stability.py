@@ -61,7 +61,7 @@ import jax
 import jax.numpy as jnp
 from jax.flatten_util import ravel_pytree
 
-from ..drive import ClosedLoop
+from ..drive import ClosedLoop, DualClosedLoop
 from ..linear import TransferFunction, sogi_fll_model, wif_model
 
 __all__ = ["Stability", "lyapunov", "stability_sweep", "LinearVerdict", "linear_speed_loop", "fll_frequency_soifo"]
@@ -88,14 +88,39 @@ def _split(state):
 
 
 def _check(fn: str, system, spans) -> None:
-    """The checks both verdicts make: a steady ClosedLoop, and each (name, value, lowest) span in [lowest, 100] s."""
-    if not isinstance(system, ClosedLoop):
-        raise ValueError(f"{fn}: system must be a jaxobs.drive.ClosedLoop, got {type(system).__name__}")
+    """The checks both verdicts make: a steady ClosedLoop or DualClosedLoop (:func:`_check_dual`), and each
+    (name, value, lowest) span in [lowest, 100] s."""
+    if isinstance(system, DualClosedLoop):
+        _check_dual(fn, system, dict((name, v) for name, v, _ in spans).get("settle", 0.0))
+    elif not isinstance(system, ClosedLoop):
+        raise ValueError(
+            f"{fn}: system must be a jaxobs.drive.ClosedLoop or DualClosedLoop, got {type(system).__name__}"
+        )
     if system.drive.startup is not None:
         raise ValueError(f"{fn}: system.drive.startup must be None (an operating point, started steady)")
     for name, v, lo in spans:
         if not (lo <= float(v) <= 100.0):
             raise ValueError(f"{fn}: {name} must be in [{lo:g}, 100] s, got {v!r}")
+
+
+def _check_dual(fn: str, system: DualClosedLoop, settle) -> None:
+    """The dual drive's verdict: its state is the whole :class:`~jaxobs.drive.dual_loop.DualLoopState` (both
+    sets' currents, the xy PIs, under "individual" set 2's FOC, the observer on set 1's or the αβ measurements),
+    its sampled period the :class:`~jaxobs.drive.DualFOC`'s speed loop (its FOC's ``speed_every``), its
+    electrical period that of ``machine.p`` (the 5th/7th harmonics and set 2's 30° all repeat over it).  A
+    sensorless one must hand over to the observer within the settle (``drive.handover`` ≤ ``settle``): the
+    window then sees the loop the observer closes, not the encoder's."""
+    if system.drive.sensorless and float(system.drive.handover) > float(settle):
+        raise ValueError(
+            f"{fn}: a sensorless DualClosedLoop needs drive.handover <= settle ({float(settle):g} s), "
+            f"got {system.drive.handover!r}"
+        )
+
+
+def _speed_every(system) -> int:
+    """Control periods per speed-loop period: the sampled loop's own period (a ClosedLoop's or a DualClosedLoop's)."""
+    foc = system.drive.ctrl.foc if isinstance(system, DualClosedLoop) else system.drive.foc
+    return foc.speed_every
 
 
 def _start(system: ClosedLoop):
@@ -141,7 +166,7 @@ def lyapunov(
     _check("lyapunov", system, (("settle", settle, 0.0), ("warmup", warmup, 0.0), ("window", window, 1e-3)))
     if isinstance(n_dirs, bool) or not isinstance(n_dirs, int) or not 1 <= n_dirs <= 16:
         raise ValueError(f"lyapunov: n_dirs must be an integer in [1, 16], got {n_dirs!r}")
-    ts, blk = system.ts, system.drive.foc.speed_every
+    ts, blk = system.ts, _speed_every(system)
     n_settle, n_warm, n_win = (max(int(round(v / (ts * blk))), 0) for v in (settle, warmup, window))
     n_win = max(n_win, 6)  # three thirds of at least two periods each (the resolution)
 
@@ -253,7 +278,7 @@ def floquet(
         raise ValueError(f"floquet: max_window must be >= window ({window!r} s), got {max_window!r}")
     if isinstance(n_report, bool) or not isinstance(n_report, int) or not 1 <= n_report <= 16:
         raise ValueError(f"floquet: n_report must be an integer in [1, 16], got {n_report!r}")
-    ts, blk = system.ts, system.drive.foc.speed_every
+    ts, blk = system.ts, _speed_every(system)
     h = ts * blk
     n_settle = max(int(round(settle / h)), 0)
     n_max = max(int(round(max_window / h)), 2)
