@@ -26,6 +26,14 @@ window (the criterion the stability verdict was validated with, docs/stability.m
 stable (the stability verdict), synchronous and its late peak position error is within ``bound_deg``.
 
 Designs of one class share both compilations (their gains are array leaves).
+
+The dual three-phase drive maps the same way: ``machine`` a :class:`~jaxobs.drive.DualPMSMParams` and ``drive`` a
+:class:`~jaxobs.drive.DualDrive` (either current-control mode, closed by the observer from t = 0), each point a
+:class:`~jaxobs.drive.DualClosedLoop` whose observer assumes one set (:meth:`DualPMSMParams.per_set`) and whose
+load is the whole machine's; the axes' defaults and limits come from the whole machine (``machine.m``).
+
+:func:`worst_case` searches a box of operating points and resistance mismatch for the least stable point: a grid,
+then a multi-start projected gradient ascent with a line search, each worst verified by Floquet and simulation.
 """
 
 from __future__ import annotations

@@ -123,9 +123,26 @@ def _speed_every(system) -> int:
     return foc.speed_every
 
 
+def _set_split(system, x0):
+    """Directions besides the rotation that the loop holds neutral, as tangents at its start (n × k, or None):
+    under the dual drive's "individual" mode the split of the speed integrators between the sets.  Both sets'
+    FOCs integrate the same speed error; a difference between their integrators splits i_q* between the sets (an
+    xy current), whose torque is the same to first order, so nothing restores it: a multiplier 1 (margin 0,
+    whatever the design).  Carried through the settle from that start it becomes the neutral eigenvector (the
+    other modes decay), and the verdicts take it out as they take out the rotation."""
+    if not (isinstance(system, DualClosedLoop) and system.drive.mode == "individual"):
+        return None
+    dyn, _ = eqx.partition(x0, eqx.is_inexact_array)
+    zeros = jax.tree.map(jnp.zeros_like, dyn)
+    one = jnp.ones_like(x0.ctrl.main.int_w)
+    split = eqx.tree_at(lambda s: (s.ctrl.main.int_w, s.ctrl.second.int_w), zeros, (one, -one))
+    return ravel_pytree(split)[0][:, None]
+
+
 def _start(system: ClosedLoop):
     """The loop's steady start (its float vector and the rest), the neutral direction ∂x0/∂θe0 (one ``jvp``
-    through ``init``), and the step on the float vector: (vec, rest, k) -> (vec, (rest, output))."""
+    through ``init``), the other neutral directions at the start (:func:`_set_split`, or None), and the step
+    on the float vector: (vec, rest, k) -> (vec, (rest, output))."""
 
     def initial(theta0):
         return eqx.tree_at(lambda m: m.scenario.theta_e0, system, theta0).init()
@@ -142,7 +159,7 @@ def _start(system: ClosedLoop):
         v, r, _ = _split(new)
         return v, (r, out)
 
-    return vec0, rest0, neutral, step_vec
+    return vec0, rest0, neutral, _set_split(system, x0), step_vec
 
 
 def lyapunov(
@@ -161,7 +178,9 @@ def lyapunov(
     ``n_dirs`` (≥ 1): tangent directions tracked besides the neutral one (2 or more resolves a complex pair
     smoothly).  ``tol``: 1/s, the margin a stable verdict needs.  ``seed``: the initial directions.
     The scenario's profiles should be constant over the run (an operating point); the loop starts in its
-    steady state (no I-f start-up: ``drive.startup`` must be None).
+    steady state (no I-f start-up: ``drive.startup`` must be None).  ``system`` is a
+    :class:`~jaxobs.drive.ClosedLoop` or a :class:`~jaxobs.drive.DualClosedLoop` (its state and periods:
+    :func:`_check_dual`).
     """
     _check("lyapunov", system, (("settle", settle, 0.0), ("warmup", warmup, 0.0), ("window", window, 1e-3)))
     if isinstance(n_dirs, bool) or not isinstance(n_dirs, int) or not 1 <= n_dirs <= 16:
@@ -170,10 +189,11 @@ def lyapunov(
     n_settle, n_warm, n_win = (max(int(round(v / (ts * blk))), 0) for v in (settle, warmup, window))
     n_win = max(n_win, 6)  # three thirds of at least two periods each (the resolution)
 
-    vec0, rest0, neutral, step_vec = _start(system)
+    vec0, rest0, neutral, split, step_vec = _start(system)
     n = vec0.shape[0]
     rand = jax.random.normal(jax.random.PRNGKey(seed), (n, n_dirs), dtype=vec0.dtype)
-    q0 = jnp.concatenate([neutral[:, None], rand], axis=1)
+    neutrals = neutral[:, None] if split is None else jnp.concatenate([neutral[:, None], split], axis=1)
+    q0 = jnp.concatenate([neutrals, rand], axis=1)
     ref = jnp.abs(system.scenario.speed_ref(0.0))
 
     # One scan, one copy of the linearized step (settle, warm-up and window alike: compile time).  The
@@ -202,7 +222,7 @@ def lyapunov(
 
         (vec, rest, w, mask), dev = jax.lax.scan(one, (vec, rest, q, mask), jnp.arange(blk))
         q, r = jnp.linalg.qr(w)
-        grow = jnp.log(jnp.abs(jnp.diagonal(r))[1:])
+        grow = jnp.log(jnp.abs(jnp.diagonal(r))[neutrals.shape[1] :])
         return (vec, rest, q, mask), (grow, jnp.max(dev))
 
     mask0 = jnp.ones((n,), bool)
@@ -272,6 +292,9 @@ def floquet(
     carries one (the neutral).  M is accumulated with a scalar normalization each block (a product of
     thousands of Jacobians).  Differentiable in the gains by forward mode (``jax.jacfwd``; reverse mode does
     not pass a ``while_loop``) where the top non-neutral multiplier is simple; ``eigvals`` runs on the CPU.
+
+    ``system`` is a :class:`~jaxobs.drive.ClosedLoop` or a :class:`~jaxobs.drive.DualClosedLoop`: the dual loop's
+    whole state, its speed loop's period, the dual machine's electrical period (:func:`_check_dual`).
     """
     _check("floquet", system, (("settle", settle, 0.0), ("window", window, 1e-3), ("max_window", max_window, 1e-3)))
     if float(max_window) < float(window):
@@ -299,7 +322,7 @@ def floquet(
         (sc.speed_ref.values * scale, sc.omega_m0 * scale),
     )
 
-    vec0, rest0, neutral0, step_vec = _start(system)
+    vec0, rest0, neutral0, split, step_vec = _start(system)
     n = vec0.shape[0]
     ref = jnp.abs(system.scenario.speed_ref(0.0))
 
@@ -326,8 +349,9 @@ def floquet(
         vec, rest, t, _, _ = tangent_block(*carry, j)
         return (vec, rest, t), None
 
-    (vec, rest, v), _ = jax.lax.scan(settle_block, (vec0, rest0, neutral0[:, None]), jnp.arange(n_settle))
-    v = v[:, 0]
+    t0 = neutral0[:, None] if split is None else jnp.concatenate([neutral0[:, None], split], axis=1)
+    (vec, rest, vs), _ = jax.lax.scan(settle_block, (vec0, rest0, t0), jnp.arange(n_settle))
+    v = vs[:, 0]
 
     # the window: every direction, from the identity at t0, for the point's own N blocks; a scalar
     # normalization each block keeps the product finite (its log accumulated), and the first step's Jacobian
@@ -350,7 +374,11 @@ def floquet(
     w = w * keep[:, None] * keep[None, :]
     vn = v * keep
     vn = vn / jnp.maximum(jnp.linalg.norm(vn), 1e-300)
-    proj = eye - jnp.outer(vn, vn)
+    if split is None:
+        proj = eye - jnp.outer(vn, vn)
+    else:  # every neutral direction out: P = I − Q Qᵀ, Q an orthonormal basis of them
+        q = jnp.linalg.qr(vs * keep[:, None])[0]
+        proj = eye - q @ q.T
     mu = jnp.linalg.eigvals(proj @ w @ proj)
     rates = -jnp.sort(-(jnp.log(jnp.maximum(jnp.abs(mu), 1e-300)) + log_s)) / period
     # how periodic the orbit was: the neutral direction must come back to itself (M v = v)
