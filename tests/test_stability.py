@@ -125,8 +125,8 @@ def test_floquet_on_the_dual_loop_finds_the_faleso_slow_root(mode):
     "vsd" the observer sees the αβ measurements, under "individual" set 1's, whose 5th/7th it filters (a forced
     input: the LESO is linear in it, so its root does not move).  Under "individual" the split of the speed
     integrators between the sets is neutral too (multiplier 1, :func:`jaxobs.analysis.stability._set_split`),
-    taken out as the rotation is: without that the margin was 0 ± 0.04 at every point.  Lyapunov on the same loop is finite and, over
-    0.3 s, cannot resolve that slow root: marginal or stable, never unstable."""
+    taken out as the rotation is: without that the margin was 0 ± 0.04 at every point.  Lyapunov on the same
+    loop is finite and, over 0.3 s, cannot resolve that slow root: marginal or stable, never unstable."""
     m = dual_ipmsm_paper002()
     est = m.per_set()
     obs = FALESO(est.Rs, est.Lq, kp_pll=0.3 * 133.3, ki_pll=0.09 * 8882.6)
