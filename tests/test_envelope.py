@@ -270,23 +270,21 @@ def test_worst_case_bad_box_names_the_field(box, field):
 
 
 @pytest.mark.slow
-def test_worst_case_by_gradients_finds_the_grids_worst():
-    """Projected gradient ascent of the Lyapunov exponent over speed 300..1200 r/min × load 0..10 N·m
-    × dRs ±30 % finds the closed form's worst point at least as bad as a 4 × 2 × 2 grid's worst (the low-speed
-    end, where the speed loop closed through the FLL goes unstable)."""
+def test_worst_case_on_the_box_matches_or_beats_the_grid_verified_by_simulation():
+    """000's closed form over 300–1200 r/min × 0–10 N·m × dRs ±30 % (slow: the search's program compiles for
+    minutes on a loaded machine).  The search starts from the grid's 2 worst points and 2 random ones, so it is at
+    least as bad as the grid's worst; both lie at the low-speed end, where the speed loop closed through the FLL
+    grows, and both are verified: Floquet and the simulations up and down say it grows, at rates within 1.5 /s of
+    each other (the simulated rate is fitted over a finite, saturating run)."""
     from jaxobs.analysis.envelope import worst_case
-    from jaxobs.analysis.stability import stability_sweep
 
     box = {"speed_rpm": (300.0, 1200.0), "load_nm": (0.0, 10.0), "dRs": (-0.3, 0.3)}
-    kw = dict(settle=0.1, warmup=0.05, window=0.2, n_dirs=2)
-    res = worst_case(CF, machine=PAR, drive=DRIVE, box=box, starts=4, steps=4, stability=kw)
-    grid = [(s, ld, r) for s in (300.0, 600.0, 900.0, 1200.0) for ld in (0.0, 10.0) for r in (-0.3, 0.3)]
-    scs = drive_scenarios(PAR, ["speed_rpm", "load_nm", "dRs"], grid)
-    lam = np.asarray(
-        stability_sweep(lambda sc: jaxobs.drive.ClosedLoop(DRIVE, bind_observer(CF, sc), sc), scs, **kw).exponent
-    )
-    print("gradient worst", res["worst_x"], res["worst_exponent"], "grid worst", grid[int(np.argmax(lam))], lam.max())
-    assert lam.max() > 0  # the box reaches the unstable low-speed end
-    assert res["worst_exponent"] >= lam.max() - 1.0
-    assert res["worst_x"]["speed_rpm"] <= 400.0
-    assert res["path"].shape == (5, 4)
+    res = worst_case(CF, machine=PAR, drive=DRIVE, box=box)
+    g, s = res["grid_worst"], res["search_worst"]
+    print("grid", g, "search", s, "evaluations", res["evaluations"], f"{res['seconds']:.0f} s")
+    assert s["exponent"] >= g["exponent"] and res["grid_exponent"].shape == (27,)
+    assert s["x"]["speed_rpm"] <= 400.0 and g["x"]["speed_rpm"] == 300.0
+    for f in (g, s):
+        assert f["floquet"] > f["floquet_resolution"] and f["sim_rate_up"] > 0 and f["sim_rate_down"] > 0, f
+        assert abs(f["sim_rate_up"] - f["floquet"]) < 1.5 and abs(f["sim_rate_down"] - f["floquet"]) < 1.5, f
+    assert res["path"].shape == (7, 4)
