@@ -605,6 +605,47 @@ def _simulated_rate(peaks, block_s: float, t_from: float, floor: float = 1e-5, c
     return float(np.polyfit(t[keep], np.log(p[keep]), 1)[0])
 
 
+def _ascend(evaluate, u, v, g, iters: int):
+    """Multi-start projected gradient ascent in the unit cube with a parallel backtracking (Armijo) line search
+    (:func:`worst_case` has the rule).  ``evaluate(points)`` gives the values and gradients at the rows of
+    ``points``; ``u``, ``v``, ``g``: the starts, their values and gradients (each start a row).  Returns the best
+    point evaluated, its value, and each start's value per round (iters + 1, starts)."""
+    u, v, g = u.copy(), v.copy(), g.copy()
+    n_starts, dim = u.shape
+    trust = np.full(n_starts, 0.25)
+    active = np.ones(n_starts, bool)
+    best_u, best_v = u[np.argmax(v)].copy(), float(np.max(v))
+    path = [v.copy()]
+    fr = np.asarray(_TRIALS)
+    for _ in range(iters):
+        if not active.any():
+            path.append(v.copy())
+            continue
+        # the projected gradient: a component pushing out of the box at a face the start lies on is dropped
+        # before the direction is normalized (else it takes the step's length and the clip then wastes it)
+        gp = np.where(((u <= 0.0) & (g < 0)) | ((u >= 1.0) & (g > 0)), 0.0, g)
+        d = gp / np.maximum(np.linalg.norm(gp, axis=1, keepdims=True), 1e-300)
+        trial = np.clip(u[:, None, :] + (trust[:, None] * fr)[:, :, None] * d[:, None, :], 0.0, 1.0)
+        tv, tg = evaluate(trial.reshape(-1, dim))
+        tv, tg = tv.reshape(n_starts, len(fr)), tg.reshape(n_starts, len(fr), -1)
+        gain = np.einsum("sj,stj->st", g, trial - u[:, None, :])
+        ok = (tv >= v[:, None] + _ARMIJO * gain) & (gain > 0)
+        for s in np.flatnonzero(active):
+            if tv[s].max() > best_v:
+                best_u, best_v = trial[s, int(np.argmax(tv[s]))].copy(), float(tv[s].max())
+            if ok[s].any():
+                j = int(np.argmax(np.where(ok[s], tv[s], -np.inf)))
+                step = np.linalg.norm(trial[s, j] - u[s])
+                u[s], v[s], g[s] = trial[s, j], tv[s, j], tg[s, j]
+                trust[s] = min(1.0, 2.0 * trust[s] * fr[j]) if j == 0 else trust[s] * fr[j]
+                active[s] = step >= 1e-3
+            else:
+                trust[s] /= 27.0
+                active[s] = trust[s] >= 1e-3 and np.linalg.norm(trial[s, 0] - u[s]) >= 1e-3
+        path.append(v.copy())
+    return best_u, best_v, np.stack(path)
+
+
 def worst_case(
     obs,
     *,
@@ -736,37 +777,7 @@ def worst_case(
         rv, rg = evaluate(rand_u)
         u, v, g = np.concatenate([u, rand_u]), np.concatenate([v, rv]), np.concatenate([g, rg])
     starts_u = u.copy()
-    trust = np.full(n_starts, 0.25)
-    active = np.ones(n_starts, bool)
-    best_u, best_v = u[np.argmax(v)].copy(), float(np.max(v))
-    path = [v.copy()]
-    fr = np.asarray(_TRIALS)
-    for _ in range(iters):
-        if not active.any():
-            path.append(v.copy())
-            continue
-        # the projected gradient: a component pushing out of the box at a face the start lies on is dropped
-        # before the direction is normalized (else it takes the step's length and the clip then wastes it)
-        gp = np.where(((u <= 0.0) & (g < 0)) | ((u >= 1.0) & (g > 0)), 0.0, g)
-        d = gp / np.maximum(np.linalg.norm(gp, axis=1, keepdims=True), 1e-300)
-        trial = np.clip(u[:, None, :] + (trust[:, None] * fr)[:, :, None] * d[:, None, :], 0.0, 1.0)
-        tv, tg = evaluate(trial.reshape(-1, len(WORST_AXES)))
-        tv, tg = tv.reshape(n_starts, len(fr)), tg.reshape(n_starts, len(fr), -1)
-        gain = np.einsum("sj,stj->st", g, trial - u[:, None, :])
-        ok = (tv >= v[:, None] + _ARMIJO * gain) & (gain > 0)
-        for s in np.flatnonzero(active):
-            if tv[s].max() > best_v:
-                best_u, best_v = trial[s, int(np.argmax(tv[s]))].copy(), float(tv[s].max())
-            if ok[s].any():
-                j = int(np.argmax(np.where(ok[s], tv[s], -np.inf)))
-                step = np.linalg.norm(trial[s, j] - u[s])
-                u[s], v[s], g[s] = trial[s, j], tv[s, j], tg[s, j]
-                trust[s] = min(1.0, 2.0 * trust[s] * fr[j]) if j == 0 else trust[s] * fr[j]
-                active[s] = step >= 1e-3
-            else:
-                trust[s] /= 27.0
-                active[s] = trust[s] >= 1e-3 and np.linalg.norm(trial[s, 0] - u[s]) >= 1e-3
-        path.append(v.copy())
+    best_u, best_v, path = _ascend(evaluate, u, v, g, iters)
     grid_i = int(np.argmax(grid_v))
     found = {
         "grid_worst": {"u": grid_u[grid_i], "exponent": float(grid_v[grid_i])},
@@ -794,7 +805,7 @@ def worst_case(
         "grid_x": lo + span * grid_u,
         "grid_exponent": grid_v,
         **found,
-        "path": np.stack(path),
+        "path": path,
         "starts_x": lo + span * starts_u,
         "evaluations": n_eval,
         "seconds": time.perf_counter() - t_start,
