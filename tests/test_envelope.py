@@ -264,6 +264,51 @@ def test_preset_envelope_agrees_with_pulse_simulations_at_low_speed(tmp_path):
     # tests/test_stability.py::test_verdict_agrees_with_3s_pulse_simulations.
 
 
+def _dual_faleso(mode, handover=0.0):
+    """002's dual machine, the bench's dual drive in ``mode`` (by default closed by the observer from t = 0, as the
+    envelope needs) and the FA-LESO with Table II's gains (unbound)."""
+    from jaxobs.drive import dual_bench_drive, dual_ipmsm_paper002
+    from jaxobs.observers import FALESO
+
+    kp, ki = jaxobs.linear.pll_gains(2 * np.pi * papers.LESO_PLL_HZ)
+    m = dual_ipmsm_paper002()
+    obs = FALESO(0.0, 1.0, papers.FALESO_K1, papers.FALESO_K2, kp, ki)
+    return m, dual_bench_drive(m, mode=mode, handover=handover), obs
+
+
+def test_dual_envelope_refuses_what_the_dual_loop_cannot_run():
+    m, drv, obs = _dual_faleso("vsd")
+    with pytest.raises(ValueError, match="DualPMSMParams"):
+        envelope({"FA": obs}, machine=m.per_set(), drive=drv, speeds_rpm=[300.0], loads_nm=[0.0])
+    with pytest.raises(ValueError, match="DualDrive"):
+        envelope({"FA": obs}, machine=m, drive=DRIVE, speeds_rpm=[300.0], loads_nm=[0.0])
+    with pytest.raises(ValueError, match="handover"):
+        envelope({"FA": obs}, machine=m, drive=_dual_faleso("vsd", 0.2)[1], speeds_rpm=[300.0], loads_nm=[0.0])
+    with pytest.raises(ValueError, match="dJ"):
+        envelope({"FA": obs}, machine=m, drive=drv, speeds_rpm=[300.0], loads_nm=[0.0], mismatch=("dJ", [0.0]))
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("mode", ["vsd", "individual"])
+def test_dual_envelope_maps_speed_by_load_in_both_modes(mode):
+    """The envelope of the FA-LESO closing 002's dual drive on a 2 × 2 grid (slow: the dual loop's verdict and long
+    run are two programs per mode, 3 min each on a loaded 2-core machine).  Every point holds, and the margin is
+    the FA-LESO's integral root −k1 k2/(k2² + ωe²) (jaxobs.linear.faleso_tf) within the verdict's resolution: the
+    slowest mode of the loop (measured under "vsd": 0.0767 ± 0.035 /s at 300 r/min, 0.0492 ± 0.036 at 600, the
+    model's 0.0862 and 0.0610 with the PLL's rotation term left out; 0.05 s settle)."""
+    m, drv, obs = _dual_faleso(mode)
+    ds = envelope({"FA-LESO": obs}, machine=m, drive=drv, speeds_rpm=[300.0, 600.0], loads_nm=[0.0, 10.0],
+                  horizon=0.6, stability=SHORT)  # fmt: skip
+    assert ds["holds"].dims == ("design", "speed_rpm", "load") and ds.attrs["drive_mode"] == mode
+    assert ds.attrs["machine_Lls"] == pytest.approx(float(m.Lls))
+    assert (ds["holds"] == 1).all() and (ds["stable"] == 1).all() and (ds["synchronous"] == 1).all(), ds["margin"]
+    for rpm in (300.0, 600.0):
+        w_e = m.p * rpm * np.pi / 30
+        root = float(np.max(np.asarray(jaxobs.linear.faleso_tf(papers.FALESO_K1, papers.FALESO_K2, w_e).poles()).real))
+        sel = ds.sel(design="FA-LESO", speed_rpm=rpm)
+        assert (np.abs(sel["margin"] + root) <= sel["resolution"]).all(), (rpm, sel["margin"].values, root)
+
+
 @pytest.mark.parametrize(
     "box, field",
     [({"load_nm": (0.0, 5.0)}, "speed_rpm"), ({"speed_rpm": (300.0, 200.0)}, "low <= high"),
@@ -276,24 +321,49 @@ def test_worst_case_bad_box_names_the_field(box, field):
         worst_case(CF, machine=PAR, drive=DRIVE, box=box)
 
 
+def test_worst_case_search_finds_an_interior_resonance_a_grid_misses():
+    """The search itself (worst_case's line-search ascent, :func:`jaxobs.analysis.envelope._ascend`) on a built
+    landscape whose worst is interior: a resonance peak 1/(1 + ((u₀ − 0.37)/0.08)²) along one axis, falling
+    0.5 along the other.  A 3 × 3 grid's worst is 0.275 at (0.5, 0); started there and from one random point the
+    search reaches the peak, 1.0 at (0.37, 0): 3.6 times the grid's worst, in 6 rounds."""
+    from jaxobs.analysis.envelope import _ascend
+
+    def evaluate(u):
+        r = (u[:, 0] - 0.37) / 0.08
+        peak = 1.0 / (1.0 + r * r)
+        grad0 = -2.0 * r / 0.08 * peak * peak
+        return peak - 0.5 * u[:, 1], np.stack([grad0, np.full(len(u), -0.5)], axis=1)
+
+    axis = np.linspace(0.0, 1.0, 3)
+    grid = np.stack(np.meshgrid(axis, axis, indexing="ij"), axis=-1).reshape(-1, 2)
+    gv, gg = evaluate(grid)
+    starts = np.stack([grid[np.argmax(gv)], [0.9, 0.6]])
+    v, g = evaluate(starts)
+    best_u, best_v, path = _ascend(evaluate, starts, v, g, 6)
+    assert gv.max() == pytest.approx(1.0 / (1.0 + (0.13 / 0.08) ** 2))
+    assert best_v > 0.999 and np.allclose(best_u, [0.37, 0.0], atol=5e-3), (best_u, best_v)
+    assert path.shape == (7, 2) and np.all(np.diff(path, axis=0) >= 0)  # Armijo: no start ever gets worse
+
+
 @pytest.mark.slow
-def test_worst_case_by_gradients_finds_the_grids_worst():
-    """Projected gradient ascent of the Lyapunov exponent over speed 300..1200 r/min × load 0..10 N·m
-    × dRs ±30 % finds the closed form's worst point at least as bad as a 4 × 2 × 2 grid's worst (the low-speed
-    end, where the speed loop closed through the FLL goes unstable)."""
+def test_worst_case_on_the_box_matches_or_beats_the_grid_verified_by_simulation():
+    """000's closed form over 300–1200 r/min × 0–10 N·m × dRs ±30 % (slow: the search's program compiles for
+    minutes on a loaded machine).  The search starts from the grid's 2 worst points and 2 random ones, so it is at
+    least as bad as the grid's worst; both lie at the low-speed end, where the speed loop closed through the FLL
+    grows, and both are verified: Floquet resolves it growing, and the simulations up and down grow too, at no less
+    than 0.6 of Floquet's rate (the simulated rate is fitted until the deviation saturates, which under load begins
+    early: measured at 300 r/min, 10 N·m, dRs −30 %: Floquet 7.89 ± 0.006 /s, simulations 6.31 and 6.85).
+    Measured: grid and search at that corner (Lyapunov 8.39 /s), 101 evaluations, 110–122 s with the
+    compilations (load 3.3–5.0 on 2 cores)."""
     from jaxobs.analysis.envelope import worst_case
-    from jaxobs.analysis.stability import stability_sweep
 
     box = {"speed_rpm": (300.0, 1200.0), "load_nm": (0.0, 10.0), "dRs": (-0.3, 0.3)}
-    kw = dict(settle=0.1, warmup=0.05, window=0.2, n_dirs=2)
-    res = worst_case(CF, machine=PAR, drive=DRIVE, box=box, starts=4, steps=4, stability=kw)
-    grid = [(s, ld, r) for s in (300.0, 600.0, 900.0, 1200.0) for ld in (0.0, 10.0) for r in (-0.3, 0.3)]
-    scs = drive_scenarios(PAR, ["speed_rpm", "load_nm", "dRs"], grid)
-    lam = np.asarray(
-        stability_sweep(lambda sc: jaxobs.drive.ClosedLoop(DRIVE, bind_observer(CF, sc), sc), scs, **kw).exponent
-    )
-    print("gradient worst", res["worst_x"], res["worst_exponent"], "grid worst", grid[int(np.argmax(lam))], lam.max())
-    assert lam.max() > 0  # the box reaches the unstable low-speed end
-    assert res["worst_exponent"] >= lam.max() - 1.0
-    assert res["worst_x"]["speed_rpm"] <= 400.0
-    assert res["path"].shape == (5, 4)
+    res = worst_case(CF, machine=PAR, drive=DRIVE, box=box)
+    g, s = res["grid_worst"], res["search_worst"]
+    print("grid", g, "search", s, "evaluations", res["evaluations"], f"{res['seconds']:.0f} s")
+    assert s["exponent"] >= g["exponent"] and res["grid_exponent"].shape == (27,)
+    assert s["x"]["speed_rpm"] <= 400.0 and g["x"]["speed_rpm"] == 300.0
+    for f in (g, s):
+        assert f["floquet"] > f["floquet_resolution"], f
+        assert min(f["sim_rate_up"], f["sim_rate_down"]) >= 0.6 * f["floquet"], f
+    assert res["path"].shape == (7, 4)

@@ -70,7 +70,7 @@ import jax
 import jax.numpy as jnp
 from jax.flatten_util import ravel_pytree
 
-from ..drive import ClosedLoop
+from ..drive import ClosedLoop, DualClosedLoop
 from ..linear import TransferFunction, sogi_fll_model, wif_model
 
 __all__ = ["Stability", "lyapunov", "stability_sweep", "LinearVerdict", "linear_speed_loop", "fll_frequency_soifo"]
@@ -115,9 +115,14 @@ def _split(state):
 
 
 def _check(fn: str, system, spans) -> None:
-    """The checks both verdicts make: a steady ClosedLoop, and each (name, value, lowest) span in [lowest, 100] s."""
-    if not isinstance(system, ClosedLoop):
-        raise ValueError(f"{fn}: system must be a jaxobs.drive.ClosedLoop, got {type(system).__name__}")
+    """The checks both verdicts make: a steady ClosedLoop or DualClosedLoop (:func:`_check_dual`), and each
+    (name, value, lowest) span in [lowest, 100] s."""
+    if isinstance(system, DualClosedLoop):
+        _check_dual(fn, system, dict((name, v) for name, v, _ in spans).get("settle", 0.0))
+    elif not isinstance(system, ClosedLoop):
+        raise ValueError(
+            f"{fn}: system must be a jaxobs.drive.ClosedLoop or DualClosedLoop, got {type(system).__name__}"
+        )
     if system.drive.startup is not None:
         raise ValueError(f"{fn}: system.drive.startup must be None (an operating point, started steady)")
     for name, v, lo in spans:
@@ -125,9 +130,46 @@ def _check(fn: str, system, spans) -> None:
             raise ValueError(f"{fn}: {name} must be in [{lo:g}, 100] s, got {v!r}")
 
 
+def _check_dual(fn: str, system: DualClosedLoop, settle) -> None:
+    """The dual drive's verdict: its state is the whole :class:`~jaxobs.drive.dual_loop.DualLoopState` (both
+    sets' currents, the xy PIs, under "individual" set 2's FOC, the observer on set 1's or the αβ measurements),
+    its sampled period the :class:`~jaxobs.drive.DualFOC`'s speed loop (its FOC's ``speed_every``), its
+    electrical period that of ``machine.p`` (the 5th/7th harmonics and set 2's 30° all repeat over it).  A
+    sensorless one must hand over to the observer within the settle (``drive.handover`` ≤ ``settle``): the
+    window then sees the loop the observer closes, not the encoder's."""
+    if system.drive.sensorless and float(system.drive.handover) > float(settle):
+        raise ValueError(
+            f"{fn}: a sensorless DualClosedLoop needs drive.handover <= settle ({float(settle):g} s), "
+            f"got {system.drive.handover!r}"
+        )
+
+
+def _speed_every(system) -> int:
+    """Control periods per speed-loop period: the sampled loop's own period (a ClosedLoop's or a DualClosedLoop's)."""
+    foc = system.drive.ctrl.foc if isinstance(system, DualClosedLoop) else system.drive.foc
+    return foc.speed_every
+
+
+def _set_split(system, x0):
+    """Directions besides the rotation that the loop holds neutral, as tangents at its start (n × k, or None):
+    under the dual drive's "individual" mode the split of the speed integrators between the sets.  Both sets'
+    FOCs integrate the same speed error; a difference between their integrators splits i_q* between the sets (an
+    xy current), whose torque is the same to first order, so nothing restores it: a multiplier 1 (margin 0,
+    whatever the design).  Carried through the settle from that start it becomes the neutral eigenvector (the
+    other modes decay), and the verdicts take it out as they take out the rotation."""
+    if not (isinstance(system, DualClosedLoop) and system.drive.mode == "individual"):
+        return None
+    dyn, _ = eqx.partition(x0, eqx.is_inexact_array)
+    zeros = jax.tree.map(jnp.zeros_like, dyn)
+    one = jnp.ones_like(x0.ctrl.main.int_w)
+    split = eqx.tree_at(lambda s: (s.ctrl.main.int_w, s.ctrl.second.int_w), zeros, (one, -one))
+    return ravel_pytree(split)[0][:, None]
+
+
 def _start(system: ClosedLoop):
     """The loop's steady start (its float vector and the rest), the neutral direction ∂x0/∂θe0 (one ``jvp``
-    through ``init``), and the step on the float vector: (vec, rest, k) -> (vec, (rest, output))."""
+    through ``init``), the other neutral directions at the start (:func:`_set_split`, or None), and the step
+    on the float vector: (vec, rest, k) -> (vec, (rest, output))."""
 
     def initial(theta0):
         return eqx.tree_at(lambda m: m.scenario.theta_e0, system, theta0).init()
@@ -144,7 +186,7 @@ def _start(system: ClosedLoop):
         v, r, _ = _split(new)
         return v, (r, out)
 
-    return vec0, rest0, neutral, step_vec
+    return vec0, rest0, neutral, _set_split(system, x0), step_vec
 
 
 def lyapunov(
@@ -163,19 +205,22 @@ def lyapunov(
     ``n_dirs`` (≥ 1): tangent directions tracked besides the neutral one (2 or more resolves a complex pair
     smoothly).  ``tol``: 1/s, the margin a stable verdict needs.  ``seed``: the initial directions.
     The scenario's profiles should be constant over the run (an operating point); the loop starts in its
-    steady state (no I-f start-up: ``drive.startup`` must be None).
+    steady state (no I-f start-up: ``drive.startup`` must be None).  ``system`` is a
+    :class:`~jaxobs.drive.ClosedLoop` or a :class:`~jaxobs.drive.DualClosedLoop` (its state and periods:
+    :func:`_check_dual`).
     """
     _check("lyapunov", system, (("settle", settle, 0.0), ("warmup", warmup, 0.0), ("window", window, 1e-3)))
     if isinstance(n_dirs, bool) or not isinstance(n_dirs, int) or not 1 <= n_dirs <= 16:
         raise ValueError(f"lyapunov: n_dirs must be an integer in [1, 16], got {n_dirs!r}")
-    ts, blk = system.ts, system.drive.foc.speed_every
+    ts, blk = system.ts, _speed_every(system)
     n_settle, n_warm, n_win = (max(int(round(v / (ts * blk))), 0) for v in (settle, warmup, window))
     n_win = max(n_win, 6)  # three thirds of at least two periods each (the resolution)
 
-    vec0, rest0, neutral, step_vec = _start(system)
+    vec0, rest0, neutral, split, step_vec = _start(system)
     n = vec0.shape[0]
     rand = jax.random.normal(jax.random.PRNGKey(seed), (n, n_dirs), dtype=vec0.dtype)
-    q0 = jnp.concatenate([neutral[:, None], rand], axis=1)
+    neutrals = neutral[:, None] if split is None else jnp.concatenate([neutral[:, None], split], axis=1)
+    q0 = jnp.concatenate([neutrals, rand], axis=1)
     ref = jnp.abs(system.scenario.speed_ref(0.0))
 
     # One scan, one copy of the linearized step (settle, warm-up and window alike: compile time).  The
@@ -204,7 +249,7 @@ def lyapunov(
 
         (vec, rest, w, mask), dev = jax.lax.scan(one, (vec, rest, q, mask), jnp.arange(blk))
         q, r = jnp.linalg.qr(w)
-        grow = jnp.log(jnp.abs(jnp.diagonal(r))[1:])
+        grow = jnp.log(jnp.abs(jnp.diagonal(r))[neutrals.shape[1] :])
         return (vec, rest, q, mask), (grow, jnp.max(dev))
 
     mask0 = jnp.ones((n,), bool)
@@ -277,13 +322,16 @@ def floquet(
     carries one (the neutral).  M is accumulated with a scalar normalization each block (a product of
     thousands of Jacobians).  Differentiable in the gains by forward mode (``jax.jacfwd``; reverse mode does
     not pass a ``while_loop``) where the top non-neutral multiplier is simple; ``eigvals`` runs on the CPU.
+
+    ``system`` is a :class:`~jaxobs.drive.ClosedLoop` or a :class:`~jaxobs.drive.DualClosedLoop`: the dual loop's
+    whole state, its speed loop's period, the dual machine's electrical period (:func:`_check_dual`).
     """
     _check("floquet", system, (("settle", settle, 0.0), ("window", window, 1e-3), ("max_window", max_window, 1e-3)))
     if float(max_window) < float(window):
         raise ValueError(f"floquet: max_window must be >= window ({window!r} s), got {max_window!r}")
     if isinstance(n_report, bool) or not isinstance(n_report, int) or not 1 <= n_report <= 16:
         raise ValueError(f"floquet: n_report must be an integer in [1, 16], got {n_report!r}")
-    ts, blk = system.ts, system.drive.foc.speed_every
+    ts, blk = system.ts, _speed_every(system)
     h = ts * blk
     n_settle = max(int(round(settle / h)), 0)
     n_max = max(int(round(max_window / h)), 2)
@@ -304,7 +352,7 @@ def floquet(
         (sc.speed_ref.values * scale, sc.omega_m0 * scale),
     )
 
-    vec0, rest0, neutral0, step_vec = _start(system)
+    vec0, rest0, neutral0, split, step_vec = _start(system)
     n = vec0.shape[0]
     ref = jnp.abs(system.scenario.speed_ref(0.0))
 
@@ -331,8 +379,9 @@ def floquet(
         vec, rest, t, _, _ = tangent_block(*carry, j)
         return (vec, rest, t), None
 
-    (vec, rest, v), _ = jax.lax.scan(settle_block, (vec0, rest0, neutral0[:, None]), jnp.arange(n_settle))
-    v = v[:, 0]
+    t0 = neutral0[:, None] if split is None else jnp.concatenate([neutral0[:, None], split], axis=1)
+    (vec, rest, vs), _ = jax.lax.scan(settle_block, (vec0, rest0, t0), jnp.arange(n_settle))
+    v = vs[:, 0]
 
     # the window: every direction, from the identity at t0, for the point's own N blocks; a scalar
     # normalization each block keeps the product finite (its log accumulated), and the first step's Jacobian
@@ -355,7 +404,11 @@ def floquet(
     w = w * keep[:, None] * keep[None, :]
     vn = v * keep
     vn = vn / jnp.maximum(jnp.linalg.norm(vn), 1e-300)
-    proj = eye - jnp.outer(vn, vn)
+    if split is None:
+        proj = eye - jnp.outer(vn, vn)
+    else:  # every neutral direction out: P = I − Q Qᵀ, Q an orthonormal basis of them
+        q = jnp.linalg.qr(vs * keep[:, None])[0]
+        proj = eye - q @ q.T
     mu = jnp.linalg.eigvals(proj @ w @ proj)
     rates = -jnp.sort(-(jnp.log(jnp.maximum(jnp.abs(mu), 1e-300)) + log_s)) / period
     # how periodic the orbit was: the neutral direction must come back to itself (M v = v)
