@@ -31,7 +31,7 @@ test-slow: $(STAMP)
 	@$(VENV)/bin/python -m pytest -m slow -n auto; rc=$$?; \
 	if [ $$rc -eq 5 ]; then echo "make test-slow: no slow tests"; exit 0; fi; exit $$rc
 
-# a paper's whole reproduction through the command line (tens of minutes): not in CI's budget
+# checks of many minutes, a paper's whole reproduction through the command line among them: not in CI's budget
 test-repro: $(STAMP)
 	$(VENV)/bin/python -m pytest -m repro -n auto
 
