@@ -124,7 +124,7 @@ def test_a_symlink_at_an_envelope_file_is_refused_before_any_work(tmp_path, caps
 @pytest.mark.slow  # a one-point map still compiles the Floquet verdict and the long run: about 2 min when loaded
 def test_links_at_every_name_of_envelope(tmp_path, capsys, monkeypatch):
     """The command's files from a one-point map (the envelope itself is tested in tests/test_envelope.py)."""
-    import jaxobs.drive.envelope as E
+    import jaxobs.analysis.envelope as E
 
     real = E.envelope
 
