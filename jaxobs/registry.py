@@ -17,6 +17,7 @@ from collections.abc import Callable
 from typing import Any
 
 from . import linear, papers
+from .drive import DualPMSMParams
 from .observers import (
     CLESO,
     FALESO,
@@ -91,7 +92,7 @@ class Registered:
         """
         if not self.machines:
             return f"{self.name} runs on no drive (it is not a drive observer)"
-        is_dual = hasattr(machine, "per_set")
+        is_dual = isinstance(machine, DualPMSMParams)
         if is_dual and not self.dual:
             return f"{self.name} does not run on a dual three-phase machine: {self.why_not_dual}"
         m = machine.per_set() if is_dual else machine

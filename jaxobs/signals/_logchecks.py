@@ -26,18 +26,12 @@ def _windows(n):
 def check_angle_unit(log, layout, cols, jumps):
     if not jumps or layout.angle_unit != "rad":
         return
-    big = np.abs(np.asarray(jumps)) / (1 if layout.angle_kind == "electrical" else 1)
-    med = float(np.median(big))
+    med = float(np.median(np.abs(np.asarray(jumps))))
     if abs(med - 360.0) < 18.0:
         raise ValueError(
             f"recording {log.path!r}: column {cols['theta']!r} wraps by about 360: it is in degrees (declare "
             "angle_unit = 'deg')"
         )
-
-
-_RATIOS = {  # speed column / dθ/dt when the speed (or the angle) is not what was declared
-    -1.0: "of the opposite sign to the angle's slope (a sign, or the angle's direction)",
-}
 
 
 def check_speed(log, layout, cols):
