@@ -65,6 +65,8 @@ def test_site_loads_nothing_from_the_network():
 def test_role_rendering():
     """The docs hook that renders the roles: a documented class becomes a cross-reference, ``~`` shortens the
     text, a name that resolves nowhere a code span, and the docstrings' roles are all of a form the hook knows."""
+    # the hook imports griffe, which comes with the docs extra (make docs): CI runs this file again after make docs
+    pytest.importorskip("griffe", reason="the docs extra is not installed (make docs installs it)")
     sys.path.insert(0, str(ROOT / "docs" / "hooks"))
     try:
         import griffe_roles
