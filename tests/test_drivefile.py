@@ -13,7 +13,7 @@ import pytest
 
 import jaxobs
 from jaxobs import papers
-from jaxobs.drive import bench_drive, bench_machine, ipmsm_paper002, load_drive, read_drive, spmsm_paper000
+from jaxobs.drive import Inverter, bench_drive, bench_machine, ipmsm_paper002, load_drive, read_drive, spmsm_paper000
 from jaxobs_tuning.cli import main
 
 ROOT = Path(__file__).parents[1]
@@ -120,14 +120,36 @@ BROKEN = {
         "f_sample_hz = 16000.0\n[startup]\nswitch_rpm = 4000.0",
         "startup.switch_rpm",
     ),  # fmt: skip
+    "dual without its xy inductance": (
+        "f_sample_hz = 16000.0",
+        'f_sample_hz = 16000.0\n[dual]\nmode = "vsd"',
+        "dual.Lls",
+    ),  # fmt: skip
+    "dual mode": ("f_sample_hz = 16000.0", 'f_sample_hz = 16000.0\n[dual]\nLls = 0.001\nmode = "both"', "dual.mode"),
+    "dual with another DSP timing": (
+        "f_sample_hz = 16000.0",
+        "f_sample_hz = 16000.0\ncompute_delay = 0\n[dual]\nLls = 0.001",
+        "inverter.compute_delay",
+    ),  # fmt: skip
+    "dual with q saturation": (
+        "rated_current_a = 4.0",
+        "rated_current_a = 4.0\nq_sat_current_a = 20.0",
+        "machine.q_sat_current_a",
+    ),  # fmt: skip (a dual file below: ISSUE_DUAL)
 }
+# the issue's file as a dual three-phase machine (two sets of the same phases on one shaft, twice the torque)
+ISSUE_DUAL = (
+    ISSUE.replace("rated_torque_nm = 3.2", "rated_torque_nm = 6.4").replace("J = 0.0012", "J = 0.0024")
+    + "[dual]\nLls = 0.0009\n"
+)
 
 
 @pytest.mark.parametrize("case", sorted(BROKEN))
 def test_a_broken_file_gives_one_line_naming_the_key(case, tmp_path, capsys):
     old, new, key = BROKEN[case]
-    assert old in ISSUE
-    rc, out, err = _check(tmp_path, ISSUE.replace(old, new, 1), capsys)
+    base = ISSUE_DUAL if case == "dual with q saturation" else ISSUE
+    assert old in base
+    rc, out, err = _check(tmp_path, base.replace(old, new, 1), capsys)
     assert rc == 2, out
     assert err.count("\n") == 1 and err.startswith("jaxobs: error: "), err
     assert key in err, err
@@ -188,3 +210,52 @@ def test_a_machine_from_public_data_differs_from_both_benches_and_loads():
     # quantization adds σ = LSB/√12 of a 12-bit ADC over ±16.5 A
     assert float(f.sensors.i_noise) == pytest.approx(2 * 16.5 / 4096 / math.sqrt(12), rel=1e-12)
     assert f.derived["encoder_angle_step"].value == pytest.approx(360 * 4 / 4000, rel=1e-12)
+
+
+DUAL_330V = ROOT / "docs" / "examples" / "ipmsm002_dual_330v.toml"
+
+
+def test_a_dual_drive_file_builds_002s_dual_bench_on_330_v():
+    """002's dual machine declared by a file ([dual]): the whole machine is jaxobs.drive.dual_ipmsm_paper002's,
+    the file's machine one set carrying half the rotor, and the drive the dual bench's on its 330 V link with field
+    weakening and the 2.5 Hz speed loop, leaf for leaf (the same derivation as the single benches' files)."""
+    from jaxobs.drive import DualDrive, VoltageFeedbackFW, dual_ipmsm_paper002
+    from jaxobs.drive.dual_loop import dual_bench_drive
+
+    f = read_drive(DUAL_330V)
+    ref = dual_ipmsm_paper002()
+    _leaves_equal(f.dual, ref)
+    _leaves_equal(f.machine, ref.per_set())
+    assert isinstance(f.drive, DualDrive) and f.drive.mode == "vsd" and f.drive.ctrl.fw_voltage == "ab"
+    bench = dual_bench_drive(ref, sensorless=True, handover=0.0, inverter=Inverter(udc=330.0),
+                             alpha_s=2 * math.pi * 2.5, field_weakening=VoltageFeedbackFW(),
+                             speed_every=10, advance=1.5, i_max=float(f.drive.ctrl.foc.i_max))  # fmt: skip
+    _leaves_equal(f.drive, bench)
+    assert f.derived["kp_xy"].value == pytest.approx(2 * math.pi * 300 * 0.0045, rel=1e-12)
+    # a run's drive: the same controller, the run's settle and hand-over
+    d = f.drive_for(settle=0.5, handover=0.1)
+    assert isinstance(d, DualDrive) and d.settle == 0.5 and d.handover == 0.1
+    _leaves_equal(d.ctrl, f.drive.ctrl)
+
+
+def test_the_dual_check_derives_on_one_set(tmp_path, capsys):
+    """``jaxobs drive check`` on a dual file says its values are one set's: the issue's machine twice on one shaft
+    (twice its J and rated torque) derives the single file's values, the xy loop's gains besides."""
+    rc, out, err = _check(tmp_path, ISSUE_DUAL, capsys)
+    assert rc == 0, err
+    assert "dual three-phase machine ([dual])" in out and " kp_xy " in out
+    (tmp_path / "single.toml").write_text(ISSUE)
+    single = read_drive(tmp_path / "single.toml")
+    dual = read_drive(tmp_path / "drive.toml")
+    for k in ("base_speed_rpm", "alpha_c", "alpha_s", "kp_w", "i_max", "i_rated_point"):
+        assert dual.derived[k].value == pytest.approx(single.derived[k].value, rel=1e-12), k
+    assert float(dual.dual.m.T_rated) == pytest.approx(6.4) and float(dual.machine.T_rated) == pytest.approx(3.2)
+
+
+def test_a_dual_drive_file_is_refused_by_tune_in_one_line(tmp_path, capsys):
+    """A job on a dual drive file: ``jaxobs tune --check`` exits 2 with one line naming drive.file (only the
+    envelope and the check run a dual drive)."""
+    job = ROOT / "docs" / "examples" / "ipmsm002_dual_faleso.toml"
+    rc = main(["tune", "--check", "--no-cache", str(job)])
+    out, err = capsys.readouterr()
+    assert rc == 2 and err.count("\n") == 1 and "drive.file" in err and "jaxobs envelope" in err, err

@@ -63,7 +63,9 @@ LAYERS = [
     # the closed loop composes the drive's parts with a drive observer (its contract, observers.base)
     ("jaxobs.drive.loop",),
     # the dual loop shares the loop's base, AbstractDriveLoop; a drive file builds a machine and a Drive
-    ("jaxobs.drive.dual_loop", "jaxobs.drive.drivefile"),
+    ("jaxobs.drive.dual_loop",),
+    ("jaxobs.drive._dualfile",),  # a drive file's [dual]: the dual machine and drive on one set's derivation
+    ("jaxobs.drive.drivefile",),
     ("jaxobs.drive.bench",),
     ("jaxobs.drive",),
     # the one loop over a system, and sharding a batch over devices

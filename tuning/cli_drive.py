@@ -51,6 +51,11 @@ def cmd_drive_check(args) -> int:
     """``jaxobs drive check``: print a drive file's derived values (module doc); 0, or a ``ValueError``."""
     f = read_drive(args.file)
     print(f"drive file {args.file}: {f.name}, valid")
+    if f.dual is not None:
+        print(
+            "dual three-phase machine ([dual]): every value below is one set's, carrying half of J, B and the "
+            "rated torque"
+        )
     seen = set()
     for title, keys in _SECTIONS:
         rows = [(k, f.derived[k]) for k in keys if k in f.derived]

@@ -99,18 +99,20 @@ def cli_envelope(args) -> int:
     path = Path(args.source)
     job, designs = envelope_designs(path, getattr(args, "drive", None))
     spec = dataclasses.replace(job.drive, loop="sensorless", start="steady", handover=0.0)
-    par = spec.drive_file.machine
-    drive = job_drive(spec)
+    # a dual three-phase drive file maps the whole dual machine (its [machine] per set is what observers assume)
+    par = spec.drive_file.machine if spec.drive_file.dual is None else spec.drive_file.dual
+    drive = job_drive(spec, dual=True)
+    ax = par if spec.drive_file.dual is None else par.m  # the whole machine's ratings, ψf and p set the axes
     # a count: the default axes (log-spaced speeds from 1 % of rated to the drive's limit, loads 0..rated); or
     # the values themselves, within the drive's limit and the study's loads
     if isinstance(args.speeds, tuple):
-        top = speed_limit_rpm(par, drive)
+        top = speed_limit_rpm(ax, drive)
         if args.speeds[-1] > top:
             raise ValueError(f"--speeds: must be <= {top:.4g} r/min (the drive's speed limit), got {args.speeds[-1]:g}")
         speeds = np.asarray(args.speeds)
     else:
-        speeds = default_speeds(par, args.speeds, drive=drive)
-    loads = np.asarray(args.loads) if isinstance(args.loads, tuple) else default_loads(par, args.loads)
+        speeds = default_speeds(ax, args.speeds, drive=drive)
+    loads = np.asarray(args.loads) if isinstance(args.loads, tuple) else default_loads(ax, args.loads)
     n = len(speeds) * len(loads)
     # the job's own settle and (shortest) window where it states them ([envelope]), else the library's defaults
     # (jaxobs.analysis.envelope.STABILITY_METHODS: settle 0.2 s, windows of at least 0.2 s)
@@ -124,7 +126,7 @@ def cli_envelope(args) -> int:
     if args.check:
         # the window is only a floor: envelope() stretches it to one electrical period of the lowest speed (the
         # Floquet verdict's whole periods: 1.0 s at 20 r/min on 000's SPMSM), most of a map's cost
-        w = 1.02 * 60.0 / (float(par.p) * float(speeds[0]))
+        w = 1.02 * 60.0 / (float(ax.p) * float(speeds[0]))
         win = "" if env is None else f", Floquet settle {env.settle:g} s"
         print(
             f"{what}{win}, windows of whole electrical periods, up to {max(w, 2.0):.3g} s (one at the lowest speed): OK"

@@ -144,7 +144,7 @@ ENVELOPE_VARIABLES = {
 }
 
 
-def speed_limit_rpm(machine: PMSMParams, drive: Drive | None = None) -> float:
+def speed_limit_rpm(machine: PMSMParams, drive: Drive | DualDrive | None = None) -> float:
     """The highest speed (r/min) ``drive`` may ask of ``machine`` at no load: where the back EMF reaches the
     inverter's voltage limit u_max, ωe ψf = u_max, or with the FOC's field weakening on
     (``FOC.field_weakening``) where the weakened flux does, ωe (ψf − Ld i_max) = u_max (the drive file's
@@ -155,8 +155,9 @@ def speed_limit_rpm(machine: PMSMParams, drive: Drive | None = None) -> float:
         return drive_speed_limit_rpm(machine)
     u_max, psi = float(drive.inverter.u_max), float(machine.psi_f)
     flux = psi
-    if drive.foc.field_weakening is not None:
-        flux = psi - float(machine.Ld) * float(drive.foc.i_max)
+    foc = drive.ctrl.foc if isinstance(drive, DualDrive) else drive.foc  # the dual drive: per phase, the same bound
+    if foc.field_weakening is not None:
+        flux = psi - float(machine.Ld) * float(foc.i_max)
         if flux <= 0.0:
             return 3.0 * float(machine.n_rated)
     return u_max / flux / float(machine.p) * 60.0 / (2 * math.pi)
@@ -460,8 +461,8 @@ def envelope(
         raise ValueError("envelope: drive must be sensorless and start steady (Drive(sensorless=True, startup=None))")
     dual = _dual_machine(machine, drive, mismatch)
     machine = machine if dual is None else dual.m  # the whole machine's ratings, ψf and p set the axes
-    # the single drive's limit with its inverter and field weakening; the dual drive's at the default inverter
-    n_max = speed_limit_rpm(machine, drive) if dual is None else drive_speed_limit_rpm(machine)
+    # the drive's limit with its inverter and field weakening (the dual drive's per phase: the same bound)
+    n_max = speed_limit_rpm(machine, drive)
     # the lowest speed whose steady start (Drive.settled_for) fits the 60 s settle limit: SETTLE_PERIODS / p r/min
     n_min = max(1.0, SETTLE_PERIODS / machine.p)
     speeds = default_speeds(machine, drive=drive) if speeds_rpm is None else speeds_rpm

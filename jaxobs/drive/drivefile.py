@@ -64,6 +64,10 @@ The file (SI units, or the unit in the key's name; ``[machine]``'s keys from ``p
     dwell_s = 0.02
     angle_tol_rad = 0.2
     speed_tol = 0.1
+    [dual]                     # a dual three-phase machine (jaxobs.drive._dualfile): [machine] is then the αβ
+    Lls = 0.0015               # subspace with the whole machine's J, B and rated torque; Lls the xy inductance, H
+    mode = "vsd"               # "vsd" (αβ + xy current PIs) or "individual" (a FOC per set)
+    fw_voltage = "ab"          # the voltage the field weakening budgets under "vsd": "ab" or "set" (DualFOC)
 
 Derived defaults (each recorded in :attr:`DriveFile.derived` with its rule):
 
@@ -94,6 +98,11 @@ Derived defaults (each recorded in :attr:`DriveFile.derived` with its rule):
   :mod:`jaxobs.drive.control`), at least 1.
 - **I-f start-up**: :meth:`IfStartup.for_machine` (rated torque, inertia: the ramp's torque and the rotor's
   swing), with ``[startup]``'s keys overriding.
+- **A dual machine** (``[dual]``): every value above is derived on one set carrying half of ``J``, ``B`` and the
+  rated torque (:meth:`DualPMSMParams.per_set`, what the observers and the speed loop are designed on); the xy
+  PIs get k_p = α_c L̂ls, k_i = α_c R̂s.  The dual loop runs the default timing and no q-axis saturation: a file
+  that asks for either is refused.  ``jaxobs envelope`` and ``jaxobs drive check`` take a dual file; the tuning
+  and study commands refuse it in one line.
 - **Sensors**: an ADC of b bits over ±R A adds its quantization as white noise of σ = (2R/2^b)/√12
   (Widrow's model, valid when the signal spans many steps), in quadrature with ``i_noise_a``; the encoder
   (ideal in the loop) gives 2π/(4 N) rad mechanical per edge and a speed step of that per speed-loop period.
@@ -110,7 +119,10 @@ import numpy as np
 
 from .. import papers
 from ..safetoml import TomlFieldError, read_toml
+from ._dualfile import dual_drive_file, halved
 from .control import FOC, IfStartup
+from .dual import DualPMSMParams
+from .dual_loop import DualDrive, DualFOC
 from .hardware import Inverter, Sensors
 from .latency import Latency, PeriodStart, PWMCentre
 from .loop import SETTLE_PERIODS, Drive
@@ -213,6 +225,12 @@ DRIVE_FILE_KEYS: dict[str, dict[str, _Key]] = {
         "angle_tol_rad": _Key(_F, 0.0, 3.14, lo_open=True, unit="rad"),
         "speed_tol": _Key(_F, 0.0, 1.0, lo_open=True, unit="1"),
     },
+    # a dual three-phase machine (jaxobs.drive._dualfile): the xy inductance and the current control's mode
+    "dual": {
+        "Lls": _Key(_F, 0.0, 10.0, lo_open=True, unit="H", required=True),
+        "mode": _Key("str", choices=("vsd", "individual")),
+        "fw_voltage": _Key("str", choices=("ab", "set")),
+    },
 }
 _TOP = ("name", "description")
 
@@ -249,6 +267,8 @@ class DriveFile:
         derived: name -> :class:`Derived`, in the order the check prints them.
         lowest_speeds: observer family -> (lowest speed in r/min or None where none, the rule).
         warnings: one line each.
+        dual: a ``[dual]`` file's whole dual three-phase machine (:class:`DualPMSMParams`; :attr:`machine` is
+            then one set carrying half the rotor and :attr:`drive` a :class:`DualDrive`), else None.
     """
 
     name: str
@@ -262,6 +282,7 @@ class DriveFile:
     description: str = ""
     foc_kw: dict = dataclasses.field(default_factory=dict, repr=False)
     table: dict = dataclasses.field(default_factory=dict, repr=False)
+    dual: DualPMSMParams | None = None
 
     @property
     def ts(self) -> float:
@@ -292,9 +313,26 @@ class DriveFile:
             speed_schedule: the FOC's speed-loop schedule N (:class:`FOC`), or None: the file's.
 
         Returns:
-            The :class:`Drive`.
+            The :class:`Drive` (a :class:`DualDrive` for a ``[dual]`` file, whose settle and hand-over it takes;
+            ``speed_schedule`` applies to both).
         """
         d = self.drive
+        if self.dual is not None:
+            ctrl = d.ctrl
+            if speed_schedule is not None and float(speed_schedule) != float(ctrl.foc.speed_schedule):
+                kw = {k: v for k, v in self.foc_kw.items() if k not in ("alpha_c", "alpha_s", "speed_schedule")}
+                ctrl = DualFOC.imc(self.dual, self.foc_kw["alpha_c"], self.foc_kw["alpha_s"], mode=ctrl.mode,
+                                   fw_voltage=ctrl.fw_voltage, speed_schedule=float(speed_schedule), **kw)  # fmt: skip
+            return DualDrive(
+                ctrl,
+                d.inverter,
+                startup=self.startup if standstill else None,
+                n_sub=d.n_sub,
+                rule=d.rule,
+                sensorless=sensorless,
+                handover=handover,
+                settle=settle,
+            )
         foc = d.foc
         if speed_schedule is not None and float(speed_schedule) != float(foc.speed_schedule):
             foc = FOC.imc(self.machine, **{**self.foc_kw, "speed_schedule": float(speed_schedule)})
@@ -373,7 +411,7 @@ def _tables(raw: dict) -> dict:
                 near = ", ".join(keys)
                 raise ValueError(f"{tname}.{k}: unknown key; allowed: {near}"[:300])
         for k, spec in keys.items():
-            if spec.required and k not in table:
+            if spec.required and k not in table and (tname in raw or tname != "dual"):  # [dual]: when present
                 raise ValueError(f"{tname}.{k}: missing (required)")
         out[tname] = {k: _value(table, tname, k, keys[k]) for k in table}
     return out
@@ -461,6 +499,12 @@ def drive_from_table(raw: dict, name: str = "drive") -> DriveFile:
         ValueError: one line naming the key and its allowed range.
     """
     t = _tables(raw)
+    if "dual" in raw:  # derived on one set carrying half the rotor, then the dual machine and drive on it
+        single = drive_from_table(halved(raw), name)
+        dual, drive, extra = dual_drive_file(single, raw, t["dual"])
+        derived = {**single.derived, **{k: Derived(*v) for k, v in extra.items()}}
+        table = {k: raw[k] for k in DRIVE_FILE_KEYS if k in raw}
+        return dataclasses.replace(single, dual=dual, drive=drive, derived=derived, table=table)
     m, inv, ctl, sen, st = t["machine"], t["inverter"], t["control"], t["sensors"], t["startup"]
     d: dict[str, Derived] = {}
     warn: list[str] = []

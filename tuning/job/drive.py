@@ -127,16 +127,27 @@ def check_speed_axes(axes: dict, where: str, machine: str, file: DriveFile | Non
             )
 
 
-def job_drive(spec: DriveSpec | None = None):
+def job_drive(spec: DriveSpec | None = None, *, dual: bool = False):
     """The drive a ``signal = "drive"`` job runs: its drive file's (:meth:`jaxobs.drive.DriveFile.drive_for`).
 
     Args:
         spec: The job's ``[drive]`` (default: ``DriveSpec()``, sensorless).
+        dual: The command maps a dual three-phase drive (``jaxobs envelope``); the others refuse a ``[dual]``
+            drive file.
 
     Returns:
-        The :class:`~jaxobs.drive.Drive`.
+        The :class:`~jaxobs.drive.Drive` (a :class:`~jaxobs.drive.DualDrive` where ``dual`` allows it).
+
+    Raises:
+        JobError: a ``[dual]`` drive file where ``dual`` is False.
     """
     spec = DriveSpec() if spec is None else spec
+    if spec.drive_file.dual is not None and not dual:
+        raise JobError(
+            "drive.file",
+            f"{spec.machine!r} is a dual three-phase drive ([dual]): `jaxobs envelope` and `jaxobs drive check` "
+            "take it; tune, study and verify run three-phase drives only",
+        )
     return spec.drive_file.drive_for(
         sensorless=spec.loop == "sensorless",
         handover=spec.handover,
