@@ -526,9 +526,9 @@ def test_envelope_of_a_dual_faleso_job_agrees_with_pulse_simulations(tmp_path):
 
     Measured: it holds at 150 r/min at both loads and at 840 r/min unloaded, with the margin the FA-LESO's
     integral root k1 k2/(k2² + ωe²) = 0.0338 /s at 840 r/min (the job's 1 s Floquet windows resolve it to
-    ±0.023 /s; 0.2 s windows left it marginal, ±0.089).  At 840 r/min and 30 N·m the sensorless drive does not
+    ±0.027 /s; 0.2 s windows left it marginal, ±0.089).  At 840 r/min and 30 N·m the sensorless drive does not
     hold (i_d −8.9 A, near the −9.5 A where the speed loop's pair through the PLL crosses; the encoder holds it):
-    Floquet −1.04 ± 0.25 /s, the simulations stay 5 % off the reference both ways."""
+    Floquet −1.25 ± 0.21 /s, the simulations stay 5 % off the reference both ways."""
     import dataclasses
 
     import jax
