@@ -797,8 +797,8 @@ def worst_case(
         k_grid: the grid's worst points that start the search (≥ 0).
         n_random: random interior starts (≥ 0; k_grid + n_random ≥ 1).
         iters: line-search rounds (≥ 0).
-        stability: :func:`~jaxobs.analysis.stability.lyapunov`'s options (default settle 0.1, warmup 0.05, window
-            0.2, n_dirs 2).
+        stability: :func:`~jaxobs.analysis.stability.lyapunov`'s options (default warmup 0.05, n_dirs 2, settle and
+            window 0.1 and 0.2 s or one electrical period of the box's lowest speed where that is longer).
         verify: None for the defaults ``{"horizon": 1.0, "perturb": 0.02, "settle": 0.05, "window": 0.2}`` (the
             simulations' s and relative step, :func:`floquet`'s settle and window: short, since at a point that
             grows at +7 /s a 0.2 s settle and 0.5 s window let the orbit leave the operating point, and the rate
@@ -841,7 +841,14 @@ def worst_case(
         ver.update(verify)
     if verify is not False and not (0.5 <= float(ver["horizon"]) <= 10.0 and 0.0 < float(ver["perturb"]) <= 0.2):
         raise ValueError("worst_case: verify horizon must be in [0.5, 10] s and perturb in (0, 0.2]")
-    kw = tuple(sorted({"settle": 0.1, "warmup": 0.05, "window": 0.2, "n_dirs": 2, **(stability or {})}.items()))
+    # the objective's settle and window cover at least one electrical period of the box's lowest speed.  A window
+    # shorter than the period fits the exponent to part of the orbit's own oscillation: 000's SOIFO closed form at
+    # 40 r/min (a 0.5 s period on spmsm000) read +14.3 ± 11.4 /s over 0.1 s + 0.2 s against Floquet's +6.83, which
+    # made the box's lowest speed look worst and hid the interior maximum near 126 r/min (+8.50); over one period
+    # (0.5 s + 0.5 s) it reads +7.44, and +8.56 at 126 r/min (tests/test_envelope.py)
+    t_e = 60.0 / (machine.p * float(lo[0]))
+    defaults = {"settle": max(0.1, t_e), "warmup": 0.05, "window": max(0.2, t_e), "n_dirs": 2}
+    kw = tuple(sorted({**defaults, **(stability or {})}.items()))
     # a steady start at every point of the box: the observer settled over SETTLE_PERIODS electrical periods of its
     # lowest speed (Drive.settled_for, as envelope's).  With the drive's 0.2 s at 250 r/min (6.7 periods) the
     # second-order SOIFO's run left its operating point within 0.3 s, and the short-window exponent there read
