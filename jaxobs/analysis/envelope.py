@@ -358,13 +358,14 @@ STABILITY_METHODS = {
 
 
 def _stability_fields(drive, obs, scs, method: str, kw: tuple, dual=None):
-    """The stability verdict (:func:`floquet` or :func:`lyapunov`) at every scenario of ``scs``, one program per
-    observer class (gains are traced); its fields as a plain tuple, which a kept program can return.  ``dual``:
-    the dual machine a :class:`DualDrive` runs."""
+    """The stability verdict (:func:`floquet` or :func:`lyapunov`) at every scenario of ``scs``, each closed by
+    its own row of ``obs`` (observers of one class stacked along a leading axis, as long as the batch: several
+    designs in one batch), one program per observer class and batch size (gains are traced); its fields as a
+    plain tuple, which a kept program can return.  ``dual``: the dual machine a :class:`DualDrive` runs."""
     fn = floquet if method == "floquet" else lyapunov
     # the system alone: its machine is the scenarios' (the dual one's true machine is ``dual``)
     family = DriveScenarios(None, drive) if dual is None else _DualScenarios(None, drive, dual=dual)
-    return tuple(jax.vmap(lambda sc: fn(family.system(obs, sc), **dict(kw)))(scs))
+    return tuple(jax.vmap(lambda o, sc: fn(family.system(o, sc), **dict(kw)))(obs, scs))
 
 
 _stability_jit = kept_jit(_stability_fields)  # kept across processes where a folder is set
@@ -565,14 +566,32 @@ def envelope(
     if method != "floquet" or len({len(g) for g in groups}) != 1:
         groups = [np.arange(len(spd))]
 
-    def verdicts(obs):
-        parts = [
-            jax.device_get(_stability(drive, obs, jax.tree.map(lambda x: x[g], scs), method, kwt, dual)) for g in groups
-        ]
-        order = np.argsort(np.concatenate(groups))
-        return jax.tree.map(lambda *xs: np.concatenate(xs)[order], *parts)
+    # the designs of one observer class (the same tree structure: only the gains differ) share each batch, stacked:
+    # one call per speed for all of them instead of one per design.  Measured on the ipmsm002 bench, C-LESO,
+    # 10 loads × 3 designs per call: 4.25 s against 5.56 s for three calls at 100 r/min (benchmarks/README.md)
+    classes: dict = {}
+    for d, obs in designs.items():
+        classes.setdefault(jax.tree.structure(obs), []).append(d)
 
-    stab = {d: verdicts(obs) for d, obs in designs.items()}
+    def verdicts(names_):
+        obs = [designs[d] for d in names_]
+        k = len(obs)
+        parts = []
+        for g in groups:
+            rows = jax.tree.map(lambda x: jnp.concatenate([x[g]] * k), scs)
+            stacked = jax.tree.map(lambda *x: jnp.repeat(jnp.stack([jnp.asarray(v) for v in x]), len(g), axis=0), *obs)
+            parts.append(jax.device_get(_stability(drive, stacked, rows, method, kwt, dual)))
+        order = np.argsort(np.concatenate(groups))
+        out = {}
+        for j, d in enumerate(names_):
+            cols = [jax.tree.map(lambda x, j=j, n=len(g): np.asarray(x)[j * n : (j + 1) * n], p)
+                    for p, g in zip(parts, groups)]  # fmt: skip
+            out[d] = jax.tree.map(lambda *xs: np.concatenate(xs)[order], *cols)
+        return out
+
+    stab = {}
+    for names_ in classes.values():
+        stab.update(verdicts(names_))
 
     dnames = list(designs)
     shape = (len(dnames), *(len(axes[n]) for n in names))
