@@ -10,6 +10,7 @@ import jax
 import numpy as np
 
 from jaxobs.families import GridSignals
+from jaxobs.quantities import text_unit
 
 from .aggregations import CVaR, Mean, SmoothMax
 from .outdir import atomic_path
@@ -42,19 +43,41 @@ def scenario_values(spec) -> tuple[list, list]:
     return names, list(itertools.product(*(spec.axes[n] for n in names)))
 
 
-_UNITS = {"freq_step": " Hz", "speed_hz": " Hz", "speed_rpm": " r/min", "dc": " p.u.", "sag": " p.u.", "noise": " p.u."}
+def _axis_text(family, name: str, value: float) -> str:
+    """One axis value as a figure's title states it: the axis's long name (before any parenthesis), the value and
+    its unit (:class:`jaxobs.quantities.Axis`; a dimensionless value alone)."""
+    axis = getattr(family, "axes", {}).get(name)
+    if axis is None:
+        return f"{name} = {value:.4g}"
+    label, _, note = axis.long_name.partition(" (")
+    note = note.rstrip(")")
+    unit = "" if axis.units in ("1", "") else f" {text_unit(axis.units)}"
+    if not unit and note.startswith("p.u."):  # "dc offset (p.u. of the fundamental)": 0.1 p.u.
+        unit = " p.u."
+    elif not unit and note.startswith("multiple of "):  # "harmonic distortion (multiple of ...)": 1 × ...
+        unit = f" × {note[len('multiple of ') :]}"
+    return f"{label} = {value:.4g}{unit}"
 
 
 def _describe(spec, index: int) -> str:
-    """The scenario's axis values, or for a job on recordings the recording's file name."""
+    """The scenario's axis values (their long names and units), or for a job on recordings the recording's file
+    name; a long line broken in two."""
     rec = getattr(spec, "recording", None)
     if rec is not None and index < len(rec.files):
         return f"scenario #{index}: recording {Path(rec.files[index]).name}"
     names, combos = scenario_values(spec)
     if not names or index >= len(combos):
         return f"scenario #{index}"
-    values = ", ".join(f"{n} = {v:.4g}{_UNITS.get(n, '')}" for n, v in zip(names, combos[index]))
-    return f"scenario #{index}: {values}"
+    family = getattr(spec, "family", None)
+    lines = [f"scenario #{index}:"]
+    for n, v in zip(names, combos[index]):  # lines of at most about 100 characters, broken between the axes
+        item = _axis_text(family, n, v)
+        if len(lines[-1]) + len(item) > 100:
+            lines[-1] += ","
+            lines.append(item)
+        else:
+            lines[-1] += (" " if lines[-1].endswith(":") else ", ") + item
+    return "\n".join(lines)
 
 
 # the axes whose non-zero value is an event at t_event: a grid signal's disturbances (jaxobs.signals: every one
