@@ -253,9 +253,37 @@ def test_the_dual_check_derives_on_one_set(tmp_path, capsys):
 
 
 def test_a_dual_drive_file_is_refused_by_tune_in_one_line(tmp_path, capsys):
-    """A job on a dual drive file: ``jaxobs tune --check`` exits 2 with one line naming drive.file (only the
+    """A job on a dual drive file: ``jaxobs tune --check`` exits 2 with one line naming [drive] (only the
     envelope and the check run a dual drive)."""
     job = ROOT / "docs" / "examples" / "ipmsm002_dual_faleso.toml"
     rc = main(["tune", "--check", "--no-cache", str(job)])
     out, err = capsys.readouterr()
-    assert rc == 2 and err.count("\n") == 1 and "drive.file" in err and "jaxobs envelope" in err, err
+    assert rc == 2 and err.count("\n") == 1 and err.startswith("jaxobs: error: drive: "), err
+    assert "jaxobs envelope" in err
+
+
+def test_individual_control_keeps_its_differential_current_loop_stable(tmp_path):
+    """Under mode = "individual" the differential (xy) current loop runs r = (L̂ + L̂ls)/(2 L̂ls) times faster than
+    α_c (jaxobs.drive._dualfile).  Left to the derivation, α_c is lowered by r so that it keeps the single rule's
+    60°; a given bandwidth leaving it under 30° is refused naming dual.mode, under 45° warned; Lls not below Ld and
+    fw_voltage under "individual" are warned."""
+    ind = ISSUE_DUAL + 'mode = "individual"\n'
+    r = (0.0041 + 0.0009) / (2 * 0.0009)
+    (tmp_path / "ind.toml").write_text(ind)
+    f = read_drive(tmp_path / "ind.toml")
+    (tmp_path / "single.toml").write_text(ISSUE)
+    single = read_drive(tmp_path / "single.toml")
+    assert f.derived["alpha_c"].value == pytest.approx(single.derived["alpha_c"].value / r, rel=1e-12)
+    assert f.derived["xy_phase_margin"].value == pytest.approx(60.0, rel=1e-9) and not f.derived["alpha_c"].given
+    assert f.drive.mode == "individual" and f.warnings == ()
+    given = ind.replace("f_sample_hz = 16000.0", "f_sample_hz = 16000.0\n[control]\ncurrent_bandwidth_hz = 500.0")
+    (tmp_path / "warn.toml").write_text(given)
+    w = read_drive(tmp_path / "warn.toml")
+    assert any(x.startswith("dual.mode:") for x in w.warnings), w.warnings
+    assert 40.0 < w.derived["xy_phase_margin"].value < 45.0
+    (tmp_path / "bad.toml").write_text(given.replace("500.0", "700.0"))
+    with pytest.raises(ValueError, match=r"^dual\.mode: 'individual' runs the differential current loop"):
+        read_drive(tmp_path / "bad.toml")
+    (tmp_path / "odd.toml").write_text(ind.replace("Lls = 0.0009", "Lls = 0.003") + 'fw_voltage = "set"\n')
+    odd = read_drive(tmp_path / "odd.toml")
+    assert {x.split(":")[0] for x in odd.warnings} == {"dual.Lls", "dual.fw_voltage"}, odd.warnings

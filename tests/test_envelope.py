@@ -312,7 +312,10 @@ def test_dual_envelope_maps_speed_by_load_in_both_modes(mode):
 @pytest.mark.parametrize(
     "box, field",
     [({"load_nm": (0.0, 5.0)}, "speed_rpm"), ({"speed_rpm": (300.0, 200.0)}, "low <= high"),
-     ({"speed_rpm": (300.0, 600.0), "dX": (0, 1)}, "unknown axes")],
+     ({"speed_rpm": (300.0, 600.0), "dX": (0, 1)}, "unknown axes"), ({"speed_rpm": 300.0}, r"box\['speed_rpm'\]"),
+     ({"speed_rpm": (300.0,)}, "pair"), ({"speed_rpm": ("a", 400.0)}, "two numbers"),
+     ({"speed_rpm": (300.0, 1e7)}, r"<= 28\d\d"), ({"speed_rpm": (300.0, 600.0), "dRs": (-5.0, 0.0)}, r"box\['dRs'\]"),
+     (None, "dict")],
 )  # fmt: skip
 def test_worst_case_bad_box_names_the_field(box, field):
     from jaxobs.analysis.envelope import worst_case

@@ -63,7 +63,10 @@ def _seconds(text: str) -> float:
 def _count_or_list(what: str, unit: str, low: int, high: int, floor: float):
     """A count of values (an integer in [low, high]) or the values themselves, comma-separated (``20,50,100``;
     one value with a trailing comma: ``400,``), finite, >= ``floor`` and strictly increasing."""
-    usage = f"must be a count in [{low}, {high}] or comma-separated {what} ({unit}, >= {floor:g}, increasing)"
+    usage = (
+        f"must be a count in [{low}, {high}] or comma-separated {what} ({unit}, >= {floor:g}, increasing; one value "
+        "with a trailing comma: 600,)"
+    )
 
     def parse(text: str):
         if "," not in text:
@@ -165,10 +168,10 @@ def cli_envelope(args) -> int:
     for d in designs:
         s = ds.sel(design=d)
         all_loads = s["holds"].astype(bool).all("load")
-        low = float(s["speed_rpm"][all_loads].min()) if bool(all_loads.any()) else float("nan")
+        low = f"{float(s['speed_rpm'][all_loads].min()):.4g}" if bool(all_loads.any()) else "none"
         print(
             f"{d:<{wd}}{int(s['holds'].sum()):>5}/{n:<3}{int(s['stable'].sum()):>5}/{n:<3}{int(s['marginal'].sum()):>5}/{n:<3}"
-            f"{int(s['synchronous'].sum()):>5}/{n:<3}{float(s['margin'].min()):>16.4g}{low:>32.4g}"
+            f"{int(s['synchronous'].sum()):>5}/{n:<3}{float(s['margin'].min()):>16.4g}{low:>32}"
         )
     print(f"results: {out / 'envelope.nc'}, {out / 'envelope.png'}")
     return 0

@@ -534,6 +534,8 @@ def _parse_drive(raw: dict, st: dict, name: str, base: Path) -> StudySpec:
     par = df.machine
     try:
         drive = job_drive(DriveSpec(loop="sensorless", settle=settle, machine=machine, file=file))
+    except JobError:  # names its own field
+        raise
     except (ValueError, ArithmeticError) as e:
         raise JobError("drive", str(e)) from None
     provenance = {"machine": f"{machine}: {df.description}", **_results_attr(results)}

@@ -837,15 +837,33 @@ def worst_case(
     import time
 
     t_start = time.perf_counter()
+    if not isinstance(box, dict):
+        raise ValueError(f"worst_case: box must be a dict {{axis: (low, high)}}, got {type(box).__name__}")
     if "speed_rpm" not in box:
         raise ValueError("worst_case: box must give speed_rpm = (low, high), r/min")
     unknown = set(box) - set(WORST_AXES)
     if unknown:
         raise ValueError(f"worst_case: box has unknown axes {sorted(unknown)}; allowed: {', '.join(WORST_AXES)}")
-    lo = np.array([float(box.get(a, (0.0, 0.0))[0]) for a in WORST_AXES])
-    hi = np.array([float(box.get(a, (0.0, 0.0))[1]) for a in WORST_AXES])
-    if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi)) and np.all(hi >= lo) and lo[0] >= 1.0):
-        raise ValueError("worst_case: every box axis must be a finite (low, high) with low <= high; speed >= 1 r/min")
+    # each axis within what a drive study allows (the speed up to the drive's limit, a positive resistance)
+    allowed = {"speed_rpm": (1.0, speed_limit_rpm(machine, drive)), "load_nm": DRIVE_STUDY_AXES["load_nm"].range,
+               "dRs": DRIVE_STUDY_AXES["dRs"].range}  # fmt: skip
+    lo, hi = np.zeros(len(WORST_AXES)), np.zeros(len(WORST_AXES))
+    for i, a in enumerate(WORST_AXES):
+        if a not in box:
+            continue
+        v = box[a]
+        if not isinstance(v, (tuple, list)) or len(v) != 2:
+            raise ValueError(f"worst_case: box[{a!r}] must be a (low, high) pair, got {v!r}"[:200])
+        try:
+            lo[i], hi[i] = float(v[0]), float(v[1])
+        except (TypeError, ValueError):
+            raise ValueError(f"worst_case: box[{a!r}] must be two numbers, got {v!r}"[:200]) from None
+        a_lo, a_hi = allowed[a]
+        if not (math.isfinite(lo[i]) and math.isfinite(hi[i]) and a_lo <= lo[i] <= hi[i] <= a_hi):
+            raise ValueError(
+                f"worst_case: box[{a!r}] must be finite with {a_lo:.4g} <= low <= high <= {a_hi:.4g}, got "
+                f"({lo[i]:g}, {hi[i]:g})"
+            )
     for name, v, least in (("grid", grid, 2), ("k_grid", k_grid, 0), ("n_random", n_random, 0), ("iters", iters, 0)):
         if isinstance(v, bool) or not isinstance(v, int) or v < least:
             raise ValueError(f"worst_case: {name} must be an integer >= {least}, got {v!r}")

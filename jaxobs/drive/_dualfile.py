@@ -19,9 +19,18 @@ its equations are the dual machine's, per set, and the observers and the speed l
 What the dual loop does not model is refused, one line each: a DSP timing other than the default (the dual loop
 samples at the period's start and applies one period later, :attr:`~jaxobs.drive.DualDrive.latency`) and the
 q-axis saturation (the dual plant's inductances are constant).
+
+The xy (differential) current loop.  Under "vsd" the xy PIs (k_p = α_c L̂ls, k_i = α_c R̂s) cross over at α_c, as
+the αβ loop does.  Under "individual" each set's FOC is designed on its self inductances (L̂ + L̂ls)/2
+(:meth:`~jaxobs.drive.DualFOC.imc`), which the differential mode sees as Lls: it crosses over at
+r α_c, r = (L̂ + L̂ls)/(2 L̂ls) with L̂ the larger of L̂d and L̂q, and keeps 90° − r α_c n T_s of phase margin.  A
+file that leaves ``current_bandwidth_hz`` to the derivation gets α_c lowered by r (the differential loop then
+keeps the single file's 60°); a given bandwidth whose differential margin is under 30° is refused, under 45° warned.
 """
 
 from __future__ import annotations
+
+import math
 
 import equinox as eqx
 
@@ -40,18 +49,40 @@ def halved(raw: dict) -> dict:
     return {**{k: v for k, v in raw.items() if k != "dual"}, "machine": m}
 
 
-def dual_drive_file(single, raw: dict, dual_table: dict):
+def individual_ratio(machine, lls: float) -> float:
+    """r = (L̂ + L̂ls)/(2 L̂ls), L̂ the larger of ``machine``'s Ld and Lq: how much faster than α_c the differential
+    current loop of "individual" control runs (module doc)."""
+    big = max(float(machine.Ld), float(machine.Lq))
+    return (big + float(lls)) / (2.0 * float(lls))
+
+
+def lowered_bandwidth(half: dict, single, dual_table: dict, pm_design: float) -> dict | None:
+    """``half`` with ``control.current_bandwidth_hz`` set to the derived α_c / r where "individual" control's
+    differential loop would otherwise keep less than ``pm_design`` degrees (module doc), else None."""
+    if dual_table.get("mode", "vsd") != "individual" or "current_bandwidth_hz" in half.get("control", {}):
+        return None
+    r = individual_ratio(single.machine, dual_table["Lls"])
+    alpha_c = float(single.foc_kw["alpha_c"])
+    n, ts = float(single.derived["use_delay"].value), single.ts
+    if r <= 1.0 or 90.0 - math.degrees(r * alpha_c * n * ts) >= pm_design:
+        return None
+    return {**half, "control": {**half.get("control", {}), "current_bandwidth_hz": alpha_c / r / (2 * math.pi)}}
+
+
+def dual_drive_file(single, raw: dict, dual_table: dict, *, lowered: bool = False, pm=(30.0, 45.0)):
     """The dual machine and drive on the per-set derivation ``single`` (the drive file of :func:`halved`).
 
     Args:
         single: The :class:`~jaxobs.drive.DriveFile` of one set carrying half the rotor.
         raw: The file's own tables.
         dual_table: ``[dual]``, its keys checked.
+        lowered: ``single``'s α_c was lowered for "individual" control (:func:`lowered_bandwidth`).
+        pm: The least phase margin of the differential loop (refused below), and the one warned below, deg.
 
     Returns:
-        ``(dual, drive, derived)``: the whole :class:`~jaxobs.drive.DualPMSMParams`, the sensorless
-        :class:`~jaxobs.drive.DualDrive` and the derived values, name -> ``(value, unit, rule, given)``, that
-        the dual file adds or replaces.
+        ``(dual, drive, derived, warnings)``: the whole :class:`~jaxobs.drive.DualPMSMParams`, the sensorless
+        :class:`~jaxobs.drive.DualDrive`, the derived values, name -> ``(value, unit, rule, given)``, that the
+        dual file adds or replaces, and its warnings (one line each).
 
     Raises:
         ValueError: one line naming the key the dual loop cannot run.
@@ -70,20 +101,53 @@ def dual_drive_file(single, raw: dict, dual_table: dict):
     dual = DualPMSMParams(whole, dual_table["Lls"])
     mode = dual_table.get("mode", "vsd")
     fw_voltage = dual_table.get("fw_voltage", "ab")
-    kw = {k: v for k, v in single.foc_kw.items() if k not in ("alpha_c", "alpha_s")}
-    ctrl = DualFOC.imc(dual, single.foc_kw["alpha_c"], single.foc_kw["alpha_s"], mode=mode, fw_voltage=fw_voltage, **kw)
-    d = single.drive
-    drive = DualDrive(ctrl, d.inverter, sensorless=True, handover=0.0, n_sub=d.n_sub, rule=d.rule)
-    derived = {}
-    derived["Lls"] = (float(dual.Lls), "H", "[dual] Lls: the xy-subspace inductance", True)
+    alpha_c = float(single.foc_kw["alpha_c"])
+    n, ts = float(single.derived["use_delay"].value), single.ts
+    warn = []
+    derived = {"Lls": (float(dual.Lls), "H", "[dual] Lls: the xy-subspace inductance", True)}
     mode_rule = "[dual] mode: 'vsd' (αβ + xy PIs) or 'individual' (a FOC per set)"
     derived["dual_mode"] = (mode, "", mode_rule, "mode" in dual_table)
-    fw_rule = "[dual] fw_voltage: the voltage the field weakening budgets (DualFOC)"
-    derived["fw_voltage"] = (fw_voltage, "", fw_rule, "fw_voltage" in dual_table)
+    if float(dual.Lls) >= min(float(per_set.Ld), float(per_set.Lq)):
+        warn.append(
+            f"dual.Lls: {float(dual.Lls):.4g} H is not below Ld and Lq ({float(per_set.Ld):.4g}, "
+            f"{float(per_set.Lq):.4g} H): the xy inductance is the stator's leakage, usually a small fraction of them"
+        )
+    if mode == "vsd":
+        fw_rule = "[dual] fw_voltage: the voltage the field weakening budgets (DualFOC)"
+        derived["fw_voltage"] = (fw_voltage, "", fw_rule, "fw_voltage" in dual_table)
+        pm_xy = 90.0 - math.degrees(alpha_c * n * ts)
+        xy_rule = "the xy PIs cross over at α_c: 90° − α_c n T_s"
+    else:
+        if "fw_voltage" in dual_table:
+            warn.append("dual.fw_voltage: ignored under mode = 'individual' (each set's FOC limits its own voltage)")
+        r = individual_ratio(per_set, dual.Lls)
+        pm_xy = 90.0 - math.degrees(r * alpha_c * n * ts)
+        xy_rule = f"the differential loop crosses over at r α_c, r = (L̂ + L̂ls)/(2 L̂ls) = {r:.3g}: 90° − r α_c n T_s"
+        if pm_xy < pm[0]:
+            a_max = math.radians(90.0 - pm[0]) / (r * n * ts)
+            raise ValueError(
+                f"dual.mode: 'individual' runs the differential current loop at {r:.3g} α_c, a phase margin of "
+                f"{pm_xy:.0f}° (at least {pm[0]:g}°): lower control.current_bandwidth_hz to <= "
+                f"{a_max / (2 * math.pi):.4g} Hz or use mode = 'vsd'"
+            )
+        if pm_xy < pm[1]:
+            warn.append(
+                f"dual.mode: 'individual''s differential current loop keeps {pm_xy:.0f}° of phase margin "
+                f"(< {pm[1]:g}°): it rings"
+            )
+        if lowered:
+            rule = f"IMC at the single rule's α_c / r (r = {r:.3g}): the differential loop keeps its phase margin"
+            derived["alpha_c"] = (alpha_c, "rad/s", rule, False)
+    derived["xy_phase_margin"] = (pm_xy, "deg", xy_rule, False)
+    kw = {k: v for k, v in single.foc_kw.items() if k not in ("alpha_c", "alpha_s")}
+    ctrl = DualFOC.imc(dual, alpha_c, single.foc_kw["alpha_s"], mode=mode, fw_voltage=fw_voltage, **kw)
+    d = single.drive
+    drive = DualDrive(ctrl, d.inverter, sensorless=True, handover=0.0, n_sub=d.n_sub, rule=d.rule)
     if mode == "individual":  # each set's current loops on its self inductances (L + Lls)/2 (DualFOC.imc)
         for g in ("kp_d", "ki_d", "kp_q", "ki_q"):
             old = single.derived[g]
             derived[g] = (float(getattr(ctrl.foc, g)), old.unit, "IMC on one set's self inductances (L̂ + L̂ls)/2")
-    derived["kp_xy"] = (float(ctrl.kp_xy), "V/A", "IMC: α_c L̂ls (the xy PIs, 'vsd')")
-    derived["ki_xy"] = (float(ctrl.ki_xy), "V/(A·s)", "IMC: α_c R̂s (the xy PIs, 'vsd')")
-    return dual, drive, derived
+    else:
+        derived["kp_xy"] = (float(ctrl.kp_xy), "V/A", "IMC: α_c L̂ls (the xy PIs)")
+        derived["ki_xy"] = (float(ctrl.ki_xy), "V/(A·s)", "IMC: α_c R̂s (the xy PIs)")
+    return dual, drive, derived, tuple(warn)

@@ -119,7 +119,7 @@ import numpy as np
 
 from .. import papers
 from ..safetoml import TomlFieldError, read_toml
-from ._dualfile import dual_drive_file, halved
+from ._dualfile import dual_drive_file, halved, lowered_bandwidth
 from .control import FOC, IfStartup
 from .dual import DualPMSMParams
 from .dual_loop import DualDrive, DualFOC
@@ -500,11 +500,18 @@ def drive_from_table(raw: dict, name: str = "drive") -> DriveFile:
     """
     t = _tables(raw)
     if "dual" in raw:  # derived on one set carrying half the rotor, then the dual machine and drive on it
-        single = drive_from_table(halved(raw), name)
-        dual, drive, extra = dual_drive_file(single, raw, t["dual"])
+        half = halved(raw)
+        single = drive_from_table(half, name)
+        lowered = lowered_bandwidth(half, single, t["dual"], PM_DESIGN_DEG)  # "individual": α_c for the xy loop
+        if lowered is not None:
+            single = drive_from_table(lowered, name)
+        dual, drive, extra, warned = dual_drive_file(
+            single, raw, t["dual"], lowered=lowered is not None, pm=(PM_MIN_DEG, PM_WARN_DEG)
+        )
         derived = {**single.derived, **{k: Derived(*v) for k, v in extra.items()}}
         table = {k: raw[k] for k in DRIVE_FILE_KEYS if k in raw}
-        return dataclasses.replace(single, dual=dual, drive=drive, derived=derived, table=table)
+        warnings = single.warnings + warned
+        return dataclasses.replace(single, dual=dual, drive=drive, derived=derived, table=table, warnings=warnings)
     m, inv, ctl, sen, st = t["machine"], t["inverter"], t["control"], t["sensors"], t["startup"]
     d: dict[str, Derived] = {}
     warn: list[str] = []
@@ -625,8 +632,10 @@ def drive_from_table(raw: dict, name: str = "drive") -> DriveFile:
             )
     else:
         alpha_c = a_cap
-    rec("alpha_c", alpha_c, "rad/s", f"IMC: (π/6)/(n T_s), phase margin {PM_DESIGN_DEG:g}° (Harnefors & Nee 1998)",
-        "current_bandwidth_hz" in ctl)  # fmt: skip
+    if "current_bandwidth_hz" in ctl:
+        rec("alpha_c", alpha_c, "rad/s", "2π·current_bandwidth_hz (IMC, Harnefors & Nee 1998)", True)
+    else:
+        rec("alpha_c", alpha_c, "rad/s", f"IMC: (π/6)/(n T_s), phase margin {PM_DESIGN_DEG:g}° (Harnefors & Nee 1998)")
     rec("current_phase_margin", pm_of(alpha_c), "deg", "90° − α_c n T_s (loop gain α_c e^(−s n T_s)/s)")
     rec("alpha_c_ts", alpha_c * ts, "rad", "α_c T_s")
     if pm_of(alpha_c) < PM_WARN_DEG:

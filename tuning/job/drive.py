@@ -144,9 +144,9 @@ def job_drive(spec: DriveSpec | None = None, *, dual: bool = False):
     spec = DriveSpec() if spec is None else spec
     if spec.drive_file.dual is not None and not dual:
         raise JobError(
-            "drive.file",
+            "drive",
             f"{spec.machine!r} is a dual three-phase drive ([dual]): `jaxobs envelope` and `jaxobs drive check` "
-            "take it; tune, study and verify run three-phase drives only",
+            "take it; tune and study run three-phase drives only",
         )
     return spec.drive_file.drive_for(
         sensorless=spec.loop == "sensorless",
@@ -157,7 +157,7 @@ def job_drive(spec: DriveSpec | None = None, *, dual: bool = False):
     )
 
 
-DRIVE_TABLES = ("machine", "inverter", "control", "sensors", "startup")  # a drive file's tables, inline
+DRIVE_TABLES = ("machine", "inverter", "control", "sensors", "startup", "dual")  # a drive file's tables, inline
 _DRIVE_KEYS = ("loop", "handover", "settle", "start", "machine", "file", "speed_schedule", *DRIVE_TABLES[1:])
 _INLINE_TOP = ("name", "description")  # an inline drive's label and description (a drive file's top-level keys)
 
