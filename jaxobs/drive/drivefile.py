@@ -317,36 +317,20 @@ class DriveFile:
             ``speed_schedule`` applies to both).
         """
         d = self.drive
+        new_schedule = speed_schedule is not None
+        common = dict(startup=self.startup if standstill else None, n_sub=d.n_sub, rule=d.rule,
+                      sensorless=sensorless, handover=handover, settle=settle)  # fmt: skip
         if self.dual is not None:
             ctrl = d.ctrl
-            if speed_schedule is not None and float(speed_schedule) != float(ctrl.foc.speed_schedule):
+            if new_schedule and float(speed_schedule) != float(ctrl.foc.speed_schedule):
                 kw = {k: v for k, v in self.foc_kw.items() if k not in ("alpha_c", "alpha_s", "speed_schedule")}
                 ctrl = DualFOC.imc(self.dual, self.foc_kw["alpha_c"], self.foc_kw["alpha_s"], mode=ctrl.mode,
                                    fw_voltage=ctrl.fw_voltage, speed_schedule=float(speed_schedule), **kw)  # fmt: skip
-            return DualDrive(
-                ctrl,
-                d.inverter,
-                startup=self.startup if standstill else None,
-                n_sub=d.n_sub,
-                rule=d.rule,
-                sensorless=sensorless,
-                handover=handover,
-                settle=settle,
-            )
+            return DualDrive(ctrl, d.inverter, **common)
         foc = d.foc
-        if speed_schedule is not None and float(speed_schedule) != float(foc.speed_schedule):
+        if new_schedule and float(speed_schedule) != float(foc.speed_schedule):
             foc = FOC.imc(self.machine, **{**self.foc_kw, "speed_schedule": float(speed_schedule)})
-        return Drive(
-            foc,
-            d.inverter,
-            startup=self.startup if standstill else None,
-            n_sub=d.n_sub,
-            rule=d.rule,
-            sensorless=sensorless,
-            handover=handover,
-            settle=settle,
-            latency=d.latency,
-        )
+        return Drive(foc, d.inverter, latency=d.latency, **common)
 
 
 def _value(table: dict, tname: str, key: str, spec: _Key):
