@@ -531,11 +531,10 @@ def test_envelope_of_a_dual_faleso_job_agrees_with_pulse_simulations(tmp_path):
     Floquet −1.25 ± 0.21 /s, the simulations stay 5 % off the reference both ways."""
     import dataclasses
 
-    import jax
     import xarray as xr
+    from pulses import pulse_held
 
-    from jaxobs.analysis.envelope import speed_pulse
-    from jaxobs.families import bind_observer, drive_scenarios
+    from jaxobs.families import bind_observer
     from jaxobs_tuning.cli import main
     from jaxobs_tuning.envelope import envelope_designs
     from jaxobs_tuning.job import job_drive
@@ -553,25 +552,11 @@ def test_envelope_of_a_dual_faleso_job_agrees_with_pulse_simulations(tmp_path):
     points = [(s, ld) for s in (150.0, 840.0) for ld in (0.0, 30.0)]
     drive = job_drive(spec, dual=True).settled_for(150.0 * D.RPM * par.p)
     foc = drive.ctrl.foc.bind(par, drive.inverter.u_max)
-    gains = [foc.speed_gains(jnp.asarray(s * D.RPM)) for s, _ in points]
-    width = np.array([float(kp) / (2 * float(ki)) for kp, ki in gains])  # 1/α of each point's speed loop
-    cf, horizon = designs["closed_form"], 3.0
 
     def held(height):
-        sc = speed_pulse(drive_scenarios(par, ["speed_rpm", "load_nm"], points), 0.05, width, height)
-
-        @jax.jit
-        def run(sc, te):
-            def one(sc, te):
-                o = simulate(dual_loop.DualClosedLoop(drive, bind_observer(cf, sc), sc, dual_m), horizon).outputs
-                dev = jnp.abs(o.omega_m - o.omega_m_ref) / jnp.abs(o.omega_m_ref)
-                early = jnp.max(jnp.where((o.t >= te) & (o.t < 0.5 * horizon), dev, 0.0))
-                late = jnp.max(jnp.where(o.t >= 0.5 * horizon, dev, 0.0))
-                return (late < 0.01) & (late <= 1.02 * early) & jnp.isfinite(late)
-
-            return jax.vmap(one)(sc, te)
-
-        return np.asarray(run(sc, jnp.asarray(0.05 + 4 * width))).tolist()
+        system = lambda obs, sc: dual_loop.DualClosedLoop(drive, bind_observer(obs, sc), sc, dual_m)  # noqa: E731
+        cf = {"closed_form": designs["closed_form"]}
+        return pulse_held(system, cf, par, foc, points, height=height)["closed_form"].tolist()
 
     verdict = [int(ds["holds"].sel(design="closed_form", speed_rpm=s, load=ld)) == 1 for s, ld in points]
     assert verdict == [True, True, True, False], ds["margin"].values

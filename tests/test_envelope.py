@@ -6,10 +6,10 @@ import json
 from pathlib import Path
 
 import jax
-import jax.numpy as jnp
 import numpy as np
 import pytest
 import xarray as xr
+from pulses import pulse_held
 
 import jaxobs
 from jaxobs import papers
@@ -176,32 +176,10 @@ def test_claimed_envelope_of_a_drive_job():
 
 
 def _holds_sim(designs, points, drive=DRIVE, horizon=3.0, height=0.02):
-    """The stability doc's criterion on a simulation of ``drive`` over ``horizon`` s, independent of the
-    envelope's running sums: a speed-reference pulse of ``height`` (+2 %) at 0.05 s for one time constant 1/α
-    of the point's speed loop (FOC.speed_gains) and back; holds when the peak speed deviation over the second
-    half is under 1 % and at most 2 % above the peak from 3/α after the pulse to the half."""
-    horizon = float(horizon)  # a static length (an attribute read back from NetCDF is a 0-d array)
+    """The pulse criterion (tests/pulses.py) on ``drive`` at ``points``, per design."""
     foc = drive.foc.bind(PAR, drive.inverter.u_max)
-    alpha = []
-    for s, _ in points:
-        kp, ki = foc.speed_gains(jnp.asarray(s * jaxobs.drive.RPM))
-        alpha.append(2 * float(ki) / float(kp))
-    width = 1.0 / np.asarray(alpha)
-    sc = speed_pulse(drive_scenarios(PAR, ["speed_rpm", "load_nm"], list(points)), 0.05, width, height)
-    t_early = jnp.asarray(0.05 + 4 * width)
-
-    @jax.jit
-    def run(obs, sc, t_early):
-        def one(sc, te):
-            o = jaxobs.simulate(jaxobs.drive.ClosedLoop(drive, bind_observer(obs, sc), sc), horizon).outputs
-            dev = jnp.abs(o.omega_m - o.omega_m_ref) / jnp.abs(o.omega_m_ref)
-            early = jnp.max(jnp.where((o.t >= te) & (o.t < 0.5 * horizon), dev, 0.0))
-            late = jnp.max(jnp.where(o.t >= 0.5 * horizon, dev, 0.0))
-            return (late < 0.01) & (late <= 1.02 * early) & jnp.isfinite(late)
-
-        return jax.vmap(one)(sc, t_early)
-
-    return {d: np.asarray(run(obs, sc, t_early)) for d, obs in designs.items()}
+    system = lambda obs, sc: jaxobs.drive.ClosedLoop(drive, bind_observer(obs, sc), sc)  # noqa: E731
+    return pulse_held(system, designs, PAR, foc, points, height=height, horizon=horizon)
 
 
 @pytest.mark.slow  # the long runs' and the Floquet verdict's compiles and a 3 s simulation: 110 s on 2 shared cores
