@@ -568,7 +568,7 @@ def envelope(
 
     # the designs of one observer class (the same tree structure: only the gains differ) share each batch, stacked:
     # one call per speed for all of them instead of one per design.  Measured on the ipmsm002 bench, C-LESO,
-    # 10 loads × 3 designs per call: 4.25 s against 5.56 s for three calls at 100 r/min (benchmarks/README.md)
+    # 10 loads × 3 designs per call: 4.25 s against 5.56 s for three calls at 100 r/min (docs/performance.md)
     classes: dict = {}
     for d, obs in designs.items():
         classes.setdefault(jax.tree.structure(obs), []).append(d)
@@ -576,10 +576,11 @@ def envelope(
     def verdicts(names_):
         obs = [designs[d] for d in names_]
         k = len(obs)
+        # every group has the same size (one speed's points, or all of them): one stacked copy of the gains
+        stacked = jax.tree.map(lambda *x: jnp.repeat(jnp.stack([jnp.asarray(v) for v in x]), len(groups[0]), 0), *obs)
         parts = []
         for g in groups:
             rows = jax.tree.map(lambda x: jnp.concatenate([x[g]] * k), scs)
-            stacked = jax.tree.map(lambda *x: jnp.repeat(jnp.stack([jnp.asarray(v) for v in x]), len(g), axis=0), *obs)
             parts.append(jax.device_get(_stability(drive, stacked, rows, method, kwt, dual)))
         order = np.argsort(np.concatenate(groups))
         out = {}
