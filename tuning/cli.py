@@ -91,7 +91,8 @@ from .cli_papers import closed_form_rows as closed_form_rows
 from .distributed import distributed_asked, distributed_study, join_distributed, refuse_unsplittable
 from .envelope import add_envelope_parser
 from .export import add_export_parser
-from .job import CHECKPOINT, UNSAFE_EXIT, job_drive, load_job, load_recordings, run_job
+from .job import CHECKPOINT, UNSAFE_EXIT, load_job, load_recordings, run_job
+from .job.drive import check_three_phase
 from .outdir import OutDir, atomic_path, atomic_write_text, safe_name
 from .study_file import load_study as _load_study
 from .study_file import study_fingerprint
@@ -268,7 +269,7 @@ def _cmd_tune(args) -> int:
     path = Path(args.job) if args.job else default_job_path()
     job = load_job(path)
     if job.drive is not None and job.scenarios.recording is None:
-        job_drive(job.drive)  # refuses a dual three-phase drive file (jaxobs envelope maps it) before any run
+        check_three_phase(job.drive)  # a dual drive file is the envelope's only, refused before any run
     out = Path(args.out) if args.out else Path("out") / safe_name(job.name)
     products = ["result.json"]
     if not args.resume:

@@ -127,6 +127,20 @@ def check_speed_axes(axes: dict, where: str, machine: str, file: DriveFile | Non
             )
 
 
+def check_three_phase(spec: DriveSpec) -> None:
+    """Refuse a dual three-phase drive file where a command runs three-phase drives only.
+
+    Raises:
+        JobError: ``spec``'s drive file has a ``[dual]`` table.
+    """
+    if spec.drive_file.dual is not None:
+        raise JobError(
+            "drive",
+            f"{spec.machine!r} is a dual three-phase drive ([dual]): `jaxobs envelope` and `jaxobs drive check` "
+            "take it; tune and study run three-phase drives only",
+        )
+
+
 def job_drive(spec: DriveSpec | None = None, *, dual: bool = False):
     """The drive a ``signal = "drive"`` job runs: its drive file's (:meth:`jaxobs.drive.DriveFile.drive_for`).
 
@@ -142,12 +156,8 @@ def job_drive(spec: DriveSpec | None = None, *, dual: bool = False):
         JobError: a ``[dual]`` drive file where ``dual`` is False.
     """
     spec = DriveSpec() if spec is None else spec
-    if spec.drive_file.dual is not None and not dual:
-        raise JobError(
-            "drive",
-            f"{spec.machine!r} is a dual three-phase drive ([dual]): `jaxobs envelope` and `jaxobs drive check` "
-            "take it; tune and study run three-phase drives only",
-        )
+    if not dual:
+        check_three_phase(spec)
     return spec.drive_file.drive_for(
         sensorless=spec.loop == "sensorless",
         handover=spec.handover,
