@@ -96,16 +96,18 @@ def fll_cost(o):
     return d * d
 
 
-def _batched(one, shard: bool, batch=None):
-    """The jitted batch function: sharded over every device and tiled (``map_batch``), or plain ``vmap`` (along
-    each node's scenario axis: :func:`jaxobs.batch_axes`)."""
+def _batched(one, shard: bool, batch=None, tile=None):
+    """The jitted batch function: sharded over every device and tiled (``map_batch``, its ``tile``), or plain
+    ``vmap`` (along each node's scenario axis: :func:`jaxobs.batch_axes`)."""
     if shard:
-        return jax.jit(lambda b: jaxobs.map_batch(one, b))
+        return jax.jit(lambda b: jaxobs.map_batch(one, b, tile=tile))
     axes = 0 if batch is None else jaxobs.batch_axes(batch)
     return jax.jit(jax.vmap(one, in_axes=(axes,)))
 
 
-def jax_fll(kind: str, batch: int, inputs: str, t1: float = FLL_T1, shard: bool = True, layout: str = "time"):
+def jax_fll(
+    kind: str, batch: int, inputs: str, t1: float = FLL_T1, shard: bool = True, layout: str = "time", tile=None
+):
     """(jitted function, its batch argument): per-scenario running costs of the FLL workload.
 
     ``inputs="loop"``: the grid signal is generated inside the loop.
@@ -135,7 +137,7 @@ def jax_fll(kind: str, batch: int, inputs: str, t1: float = FLL_T1, shard: bool 
     def one(s):
         return jaxobs.simulate(jaxobs.OnSignal(obs, s), t1, save=jaxobs.SaveFinal(cost=fll_cost)).cost
 
-    return _batched(one, shard, sig), (jaxobs.shard_batch(sig) if shard else sig)
+    return _batched(one, shard, sig, tile), (jaxobs.shard_batch(sig) if shard else sig)
 
 
 @functools.partial(jax.jit, static_argnums=(1, 2))
@@ -200,7 +202,7 @@ def drive_cost(s):
     return d * d
 
 
-def jax_drive(batch: int, t1: float = DRIVE_T1, shard: bool = True):
+def jax_drive(batch: int, t1: float = DRIVE_T1, shard: bool = True, tile=None):
     """(jitted function, its batch argument): per-scenario running costs of the drive workload.
 
     The closed loop evaluates its speed and load profiles inside its step (jaxobs.drive.loop), so the
@@ -211,7 +213,7 @@ def jax_drive(batch: int, t1: float = DRIVE_T1, shard: bool = True):
     def one(s):
         return jaxobs.simulate(D.ClosedLoop(drive, obs, s), t1, save=jaxobs.SaveFinal(cost=drive_cost)).cost
 
-    return _batched(one, shard), (jaxobs.shard_batch(sc) if shard else sc)
+    return _batched(one, shard, tile=tile), (jaxobs.shard_batch(sc) if shard else sc)
 
 
 def drive_initial(batch: int):

@@ -23,6 +23,8 @@ EMF signals (the flux observers without a drive): two-axis :class:`~jaxobs.EMFSi
 
 from __future__ import annotations
 
+import functools
+
 import itertools
 import math
 from dataclasses import dataclass
@@ -157,30 +159,39 @@ def grid_signals(names, combos, t_event: float, freq: float, *, seed: int = 0, f
                 f"grid axis freq_step must keep the frequency > 0 Hz, got freq + freq_step = {freq + col.min():g}"
             )
     clean = GridSignal(freq=freq, t_event=t_event, harmonics={h: 0.0 for h in TEST_C_HARMONICS})
-    base = NoisyGridSignal(clean, jnp.asarray(0.0), jax.random.PRNGKey(0))
-    batched = jax.tree.map(lambda x: jnp.broadcast_to(x, (n,) + jnp.shape(x)), base)
+    base = NoisyGridSignal(clean, np.zeros(()), np.zeros((2,), np.uint32))
+    # the batch is built in NumPy and put on the device once at the end: eagerly, each jnp broadcast and
+    # conversion here compiled a small XLA program of its own on a first run
+    batched = jax.tree.map(lambda x: np.broadcast_to(np.asarray(x), (n,) + np.shape(x)), base)
     cols = {name: np.asarray([c[i] for c in combos], dtype=float) for i, name in enumerate(names)}
     c = batched.clean
     if "freq_step" in cols:
-        c = eqx.tree_at(lambda s: s.freq_step, c, jnp.asarray(cols["freq_step"]))
+        c = eqx.tree_at(lambda s: s.freq_step, c, cols["freq_step"])
     if "phase_jump_deg" in cols:
-        c = eqx.tree_at(lambda s: s.phase_jump, c, jnp.asarray(np.radians(cols["phase_jump_deg"])))
+        c = eqx.tree_at(lambda s: s.phase_jump, c, np.radians(cols["phase_jump_deg"]))
     if "sag" in cols:
-        c = eqx.tree_at(lambda s: s.sag, c, jnp.asarray(cols["sag"]))
+        c = eqx.tree_at(lambda s: s.sag, c, cols["sag"])
     if "dc" in cols:
-        c = eqx.tree_at(lambda s: s.dc, c, jnp.asarray(cols["dc"]))
+        c = eqx.tree_at(lambda s: s.dc, c, cols["dc"])
     if "harmonics_scale" in cols:
         mags = np.asarray([TEST_C_HARMONICS[h] for h in c.orders])
-        c = eqx.tree_at(lambda s: s.harmonics, c, jnp.asarray(cols["harmonics_scale"][:, None] * mags[None, :]))
+        c = eqx.tree_at(lambda s: s.harmonics, c, cols["harmonics_scale"][:, None] * mags[None, :])
     if "sub_amplitude" in cols:
-        c = eqx.tree_at(lambda s: s.sub_amplitude, c, jnp.asarray(cols["sub_amplitude"]))
+        c = eqx.tree_at(lambda s: s.sub_amplitude, c, cols["sub_amplitude"])
     if "phase_deg" in cols:
-        c = eqx.tree_at(lambda s: s.phase, c, jnp.asarray(np.radians(cols["phase_deg"])))
+        c = eqx.tree_at(lambda s: s.phase, c, np.radians(cols["phase_deg"]))
     out = eqx.tree_at(lambda s: s.clean, batched, c)
     if "noise" in cols:
-        out = eqx.tree_at(lambda s: s.noise, out, jnp.asarray(cols["noise"]))
-    keys = jax.vmap(lambda i: jax.random.fold_in(jax.random.PRNGKey(seed), i))(first + jnp.arange(n))
-    return eqx.tree_at(lambda s: s.key, out, keys)
+        out = eqx.tree_at(lambda s: s.noise, out, cols["noise"])
+    real = jnp.result_type(float)  # float64 with jax_enable_x64, else float32: what jnp.asarray gave
+    out = jax.tree.map(lambda x: jax.device_put(x.astype(real) if np.issubdtype(x.dtype, np.floating) else x), out)
+    return eqx.tree_at(lambda s: s.key, out, _noise_keys(seed, first, n))
+
+
+@functools.partial(jax.jit, static_argnums=2)
+def _noise_keys(seed, first, n: int):
+    """Scenario i's noise key ``fold_in(PRNGKey(seed), first + i)`` for i < n: one program per batch size."""
+    return jax.vmap(lambda i: jax.random.fold_in(jax.random.PRNGKey(seed), i))(first + jnp.arange(n))
 
 
 # the back EMFs' axes (the flux observers without a drive)

@@ -196,6 +196,14 @@ def test_the_shipped_bench_files_build_the_benches(name):
     assert "ASSUMED" in text  # the values the papers leave open are marked
 
 
+def test_a_shipped_drive_takes_the_precision_in_force_when_it_is_asked_for():
+    # the files are read once per precision: parameters read under float32 must not reach a float64 drive (the
+    # loop's carry would change dtype in its first step, as a benchmark timing float32 then float64 found)
+    with jax.enable_x64(False):
+        assert bench_machine("spmsm000").Rs.dtype == np.float32
+    assert bench_machine("spmsm000").Rs.dtype == np.float64
+
+
 def test_a_machine_from_public_data_differs_from_both_benches_and_loads():
     f = read_drive(TEKNIC)
     m, ts, udc = f.machine, f.drive.ts, float(f.drive.inverter.udc)

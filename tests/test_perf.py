@@ -359,8 +359,21 @@ def test_map_batch_equals_vmap_with_a_short_last_tile_and_rejects_bad_input():
     np.testing.assert_array_equal(np.asarray(got["v"]), np.asarray(want["v"]))
     with pytest.raises(ValueError, match="tile"):
         jaxobs.map_batch(f, x, tile=0)
+    with pytest.raises(ValueError, match="tile"):
+        jaxobs.map_batch(f, x, tile=True)
     with pytest.raises(ValueError, match="scalar leaf"):
         jaxobs.map_batch(f, {"a": x["a"], "b": jnp.asarray(1.0)})
+
+
+def test_map_batch_tiles_on_cpus_and_runs_whole_shares_on_accelerators():
+    from types import SimpleNamespace
+
+    from jaxobs.sharding import TILE, _default_tile
+
+    cpu, gpu = SimpleNamespace(platform="cpu"), SimpleNamespace(platform="gpu")
+    assert _default_tile([cpu, cpu], 65536) == TILE
+    assert _default_tile([gpu], 65536) == 65536  # an H100 ran 16-19x faster whole than in tiles of 512
+    assert _default_tile(jax.devices(), 10**6) == TILE  # this test machine's CPU devices
 
 
 def test_shard_batch_leaves_uneven_batches_whole():

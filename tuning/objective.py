@@ -37,6 +37,7 @@ from dataclasses import dataclass, field
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from jaxobs import OnSignal, SaveAll, kept_jit, simulate
 from jaxobs import metrics as M
@@ -62,6 +63,21 @@ __all__ = [
     "MetricContext",
     "Objective",
 ]
+
+
+@eqx.filter_jit
+def _aggregate(aggregation, values):
+    """``aggregation(values)`` as one compiled program (eagerly, each of its jnp operations compiled alone)."""
+    return aggregation(values)
+
+
+@eqx.filter_jit
+def _aggregate_and_grad(aggregation, values, grads):
+    """The aggregate of the per-scenario ``values`` and its gradient through the per-scenario ``grads``
+    (rows): ``(A(v), ∂A/∂v · G)``, one compiled program."""
+    a, w = jax.value_and_grad(aggregation)(values)
+    return a, w @ grads
+
 
 
 # the gradient by forward mode up to this many gains (module doc, "Gradients")
@@ -291,8 +307,7 @@ class Objective:
 
     def _aggregate_with_grad(self, theta):
         v, g, _, _ = self._vg(theta)
-        agg_v, w = jax.value_and_grad(lambda vv: self.aggregation(vv))(v)
-        return agg_v, w @ g
+        return _aggregate_and_grad(self.aggregation, v, g)
 
     def value_and_grad(self, theta):
         return self._aggregate_with_grad(theta)
@@ -320,12 +335,13 @@ class Objective:
             ``(value, gradient, diverged count, overflowed count)``.
         """
         v, g, good, over = self._vg(theta)
-        agg_v, w = jax.value_and_grad(lambda vv: self.aggregation(vv))(v)
-        grad = w @ g
-        n_over = int(jnp.sum(over))
-        if not (bool(jnp.isfinite(agg_v)) and bool(jnp.all(jnp.isfinite(grad)))):
+        agg_v, grad = _aggregate_and_grad(self.aggregation, v, g)
+        # the counts on the host: each eager jnp reduction here was a program of its own to compile
+        good, over = np.asarray(good), np.asarray(over)
+        n_over = int(np.sum(over))
+        if not (np.isfinite(float(agg_v)) and np.all(np.isfinite(np.asarray(grad)))):
             n_over = int(v.shape[0])
-        return agg_v, grad, int(jnp.sum(~good)), n_over
+        return agg_v, grad, int(np.sum(~good)), n_over
 
     def overflowed(self, theta, scored_good) -> int:
         """Scenarios whose simulation and weighted metrics are finite (``scored_good``: :meth:`per_scenario`'s
@@ -340,7 +356,7 @@ class Objective:
             The number of such scenarios.
         """
         _, _, good, _ = self._vg(theta)
-        return int(jnp.sum(jnp.asarray(scored_good) & ~good))
+        return int(np.sum(np.asarray(scored_good) & ~np.asarray(good)))
 
     def _response(self, theta, sig):
         """One scenario's run at ``theta`` as the report draws it: the sample times (s), the observer's
@@ -387,7 +403,7 @@ class Objective:
         )
         mets = dict(run.values["design"])
         if any(t.metric == STABILITY_MARGIN for t in self.terms):  # of the loop, not of the run: one jit(vmap)
-            mets[STABILITY_MARGIN] = self._exponents(theta, scenarios)
+            mets[STABILITY_MARGIN] = np.asarray(self._exponents(theta, scenarios))
         return mets, mets.pop(_OK)
 
     @eqx.filter_jit
@@ -412,12 +428,16 @@ class Objective:
         """
         scenarios = self.scenarios if scenarios is None else scenarios
         mets, ok = self._per_scenario_metrics(theta, scenarios)
-        total = sum(term.weight * mets[term.metric] for term in self.terms)
-        good = ok & jnp.isfinite(total)
+        # NumPy from here (the runner's values are NumPy arrays): no gradient flows through the scores, and
+        # every eager jnp operation on them was a small XLA program compiled on a first run
+        mets = {k: np.asarray(v) for k, v in mets.items()}
+        with np.errstate(over="ignore", invalid="ignore"):  # a diverged scenario's inf/NaN: masked just below
+            total = sum(term.weight * mets[term.metric] for term in self.terms)
+        good = np.asarray(ok) & np.isfinite(total)
         for key in ("lost_sync", "lost_speed"):
             if key in mets:
                 mets = {**mets, key: mets[key] | ~good}
-        return mets, jnp.where(good, total, self.penalty), good
+        return mets, np.where(good, total, self.penalty), good
 
     def scores(self, theta, scenarios=None) -> dict:
         """Objective and each metric's mean and worst over ``scenarios``.
@@ -443,24 +463,27 @@ class Objective:
         Returns:
             The summary dict.
         """
+        # on the host, in NumPy, but the aggregation (one jitted program: it is the tuning objective's own)
+        mets = {k: np.asarray(v) for k, v in mets.items()}
+        total, good = np.asarray(total), np.asarray(good)
         out = {
-            "objective": float(self.aggregation(total)),
-            "diverged": int(jnp.sum(~good)),
+            "objective": float(_aggregate(self.aggregation, jnp.asarray(total))),
+            "diverged": int(np.sum(~good)),
         }
         if LOST_LOCK in mets:  # scenarios whose estimate ends far from the truth, the diverged ones included
-            out[LOST_LOCK] = int(jnp.sum(mets[LOST_LOCK] | ~good))
+            out[LOST_LOCK] = int(np.sum(mets[LOST_LOCK] | ~good))
         if "lost_sync" in mets:  # drive observers: scenarios that lost synchronism (diverged ones included)
-            out["lost_sync"] = int(jnp.sum(mets["lost_sync"]))
+            out["lost_sync"] = int(np.sum(mets["lost_sync"]))
         if "lost_speed" in mets:  # drive: mean |ωm − ωm*| > 20 % of |ωm*| in the steady window, or diverged
-            out["lost_speed"] = int(jnp.sum(mets["lost_speed"]))
+            out["lost_speed"] = int(np.sum(mets["lost_speed"]))
         for term in self.terms:
-            m = jnp.where(good, mets[term.metric], jnp.nan)
-            if bool(jnp.any(good)):
-                out[f"{term.metric}_mean"] = float(jnp.nanmean(m))
-                out[f"{term.metric}_worst"] = float(jnp.nanmax(m))
+            m = np.where(good, mets[term.metric], np.nan)
+            if bool(np.any(good)):
+                out[f"{term.metric}_mean"] = float(np.nanmean(m))
+                out[f"{term.metric}_worst"] = float(np.nanmax(m))
             else:
                 out[f"{term.metric}_mean"] = out[f"{term.metric}_worst"] = None
-        out["per_scenario_worst"] = float(jnp.max(total))
-        if not bool(jnp.any(good)):
+        out["per_scenario_worst"] = float(np.max(total))
+        if not bool(np.any(good)):
             out["null_reason"] = "every scenario diverged: the metrics' means and worsts are undefined"
         return out

@@ -201,7 +201,7 @@ def write_report(out: Path, job, obj, thetas: dict, history: list, closed_form_t
     # responses on the scenario where the closed form does worst
     per = obj.per_scenario(thetas["closed_form"])[1] if closed_form_totals is None else closed_form_totals
     worst = int(np.argmax(np.asarray(per)))
-    sig = jax.tree.map(lambda x: x[worst], obj.scenarios)
+    sig = jax.tree.map(lambda x: np.asarray(x)[worst], obj.scenarios)  # on the host: no gather to compile
     fig, axes = _subplots(2, 1, figsize=(8, 5.5), sharex=True)
     drawn, times = {}, {}
     for label, th in thetas.items():

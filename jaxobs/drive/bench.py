@@ -22,6 +22,8 @@ import functools
 import math
 from pathlib import Path
 
+import jax
+
 from .. import papers
 from .control import FOC, IfStartup
 from .drivefile import DriveFile, read_drive
@@ -46,9 +48,8 @@ _DATA = Path(__file__).resolve().parent.parent / "data"
 SHIPPED_DRIVES = {"ipmsm002": _DATA / "ipmsm002.toml", "spmsm000": _DATA / "spmsm000.toml"}
 
 
-@functools.cache
 def shipped_drive(name: str) -> DriveFile:
-    """The shipped drive file ``name``, read and checked once.
+    """The shipped drive file ``name``, read and checked once per precision.
 
     Args:
         name: A key of :data:`SHIPPED_DRIVES`.
@@ -61,6 +62,14 @@ def shipped_drive(name: str) -> DriveFile:
     """
     if name not in SHIPPED_DRIVES:
         raise ValueError(f"machine must be one of {', '.join(SHIPPED_DRIVES)} or a drive file (.toml), got {name!r}")
+    # keyed by the precision too: the file's arrays take the dtype of the moment they are read, and a process
+    # that switches jax_enable_x64 (a benchmark timing float32 then float64) must not get float32 parameters
+    # into a float64 drive (its loop's carry would change dtype in the first step)
+    return _read_shipped(name, bool(jax.config.jax_enable_x64))
+
+
+@functools.cache
+def _read_shipped(name: str, x64: bool) -> DriveFile:
     return read_drive(SHIPPED_DRIVES[name])
 
 

@@ -19,6 +19,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import jax.scipy.linalg as jsl
+import numpy as np
 import optimistix as optx
 
 from .._validate import as_float
@@ -350,6 +351,19 @@ def _polyadd(a, b):
 
 
 def _roots(c):
+    if not isinstance(c, jax.core.Tracer):
+        # concrete coefficients (a closed form's margins, a report): NumPy's companion eigenvalues on the host.
+        # Eagerly, each jnp step below compiled an XLA program of its own on a first run; under jit or a
+        # gradient the coefficients are traced and the jnp path runs
+        c = np.asarray(c)
+        c = c / c[0]
+        n = c.shape[0] - 1
+        if n == 0:
+            return jnp.zeros((0,), jnp.result_type(c, 1j))
+        comp = np.zeros((n, n), c.dtype)
+        comp[0, :] = -c[1:]
+        comp[1:, :-1] = np.eye(n - 1, dtype=c.dtype)
+        return jnp.asarray(np.linalg.eigvals(comp).astype(np.result_type(c, 1j)))
     c = c / c[0]
     n = c.shape[0] - 1
     if n == 0:

@@ -1,0 +1,108 @@
+"""Scenario-steps/s of the jaxobs workloads on this process's default JAX backend (a GPU, or the CPU).
+
+``python -m benchmarks.devices [--batches 1024 8192 65536] [--dtypes f32 f64] [--ways map_batch vmap] [--out FILE]``
+
+The rows are the throughput workloads of :mod:`benchmarks.workloads` as a user runs them — the SOGI-FLL 1 s
+(10 000 steps) with its grid signal generated in the loop and read back from precomputed time-major rows, and
+the sensorless drive 0.2 s (2 000 steps) — each compiled once and timed best of three after a warm-up call.
+Three ways to run a batch can be timed side by side (``--ways``): ``map_batch`` (:func:`jaxobs.map_batch` as
+it is called by default: the batch split over the devices, each share run ``jaxobs.sharding.TILE`` scenarios at a time
+on a CPU and whole on an accelerator), ``tiled`` (``map_batch`` with ``tile=jaxobs.sharding.TILE`` on any device) and
+``vmap`` (one ``jax.vmap`` over the whole batch).  Run it once on the CPU and once on a GPU (``JAX_PLATFORMS``
+chooses); docs/performance.md, "On a GPU", puts the two in one table.  Precomputed rows stop at batch 8192:
+their inputs are ``batch × 10 000`` samples of four arrays (2.6 GB in float64 at 8192).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import platform
+import time
+from pathlib import Path
+
+import jax
+
+import jaxobs
+
+from . import workloads as W
+
+
+def _best(fn, repeats: int = 3) -> float:
+    jax.block_until_ready(fn())  # compiled and warm
+    best = math.inf
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        jax.block_until_ready(fn())
+        best = min(best, time.perf_counter() - t0)
+    return best
+
+
+def rows(batches, dtypes, ways=("map_batch", "vmap"), log=print, out: Path | None = None) -> dict:
+    """Time every (workload, dtype, batch, way) row; returns the JSON-ready result (rewritten to ``out`` after
+    each row, so a run cut short keeps what it measured)."""
+    dev = jax.devices()[0]
+    res = {
+        "backend": jax.default_backend(),
+        "device": getattr(dev, "device_kind", str(dev)),
+        "devices": len(jax.devices()),
+        "host": platform.node(),
+        "cpus": os.cpu_count(),
+        "jax": jax.__version__,
+        "rows": [],
+    }
+    for dt in dtypes:
+        jax.config.update("jax_enable_x64", dt == "f64")
+        for batch in batches:
+            work = [("sogi-fll", "loop"), ("drive-sosoifo", "loop")]
+            if batch <= 8192:
+                work.insert(1, ("sogi-fll", "precomputed"))
+            for name, inputs in work:
+                for way in ways:
+                    shard = way != "vmap"
+                    tile = jaxobs.sharding.TILE if way == "tiled" else None
+                    t0 = time.perf_counter()
+                    try:
+                        if name == "drive-sosoifo":
+                            fn, args = W.jax_drive(batch, W.DRIVE_T1, shard=shard, tile=tile)
+                            n = round(W.DRIVE_T1 / W.TS)
+                        else:
+                            fn, args = W.jax_fll(name, batch, inputs, W.FLL_T1, shard=shard, tile=tile)
+                            n = round(W.FLL_T1 / W.TS)
+                        lowered = fn.lower(args)
+                        compiled = lowered.compile()
+                        compile_s = time.perf_counter() - t0
+                        t = _best(lambda c=compiled, a=args: c(a))
+                        row = dict(workload=name, inputs=inputs, dtype=dt, batch=batch, way=way,
+                                   steps_per_s=batch * n / t, run_s=t, compile_s=compile_s)
+                    except Exception as e:  # noqa: BLE001  (out of memory on a big batch: reported, not fatal)
+                        row = dict(workload=name, inputs=inputs, dtype=dt, batch=batch, way=way,
+                                   error=f"{type(e).__name__}: {str(e).splitlines()[0][:200]}")
+                    res["rows"].append(row)
+                    if "error" in row:
+                        log(f"{name:14s} {inputs:11s} {dt} {batch:6d} {way:9s}: {row['error']}")
+                    else:
+                        log(f"{name:14s} {inputs:11s} {dt} {batch:6d} {way:9s}: "
+                            f"{row['steps_per_s'] / 1e6:10.1f} M steps/s  (run {t:.3f} s, compile {compile_s:.1f} s)")
+                    if out is not None:
+                        out.write_text(json.dumps(res, indent=1))
+    return res
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(prog="python -m benchmarks.devices", description=__doc__.splitlines()[0])
+    p.add_argument("--batches", type=int, nargs="+", default=[1024, 8192, 65536])
+    p.add_argument("--dtypes", nargs="+", default=["f32", "f64"], choices=["f32", "f64"])
+    p.add_argument("--ways", nargs="+", default=["map_batch", "vmap"], choices=["map_batch", "tiled", "vmap"])
+    p.add_argument("--out", type=Path, default=None, help="the JSON result (rewritten after each row)")
+    a = p.parse_args(argv)
+    jaxobs.use_host_devices()  # before any computation: on a CPU, one JAX device per core, as `make bench`
+    res = rows(a.batches, a.dtypes, a.ways, out=a.out)
+    print(f"backend {res['backend']} ({res['device']}, {res['devices']} device(s), {res['cpus']} CPUs)")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
