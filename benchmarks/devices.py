@@ -75,20 +75,75 @@ def rows(batches, dtypes, ways=("map_batch", "vmap"), log=print, out: Path | Non
                         compiled = lowered.compile()
                         compile_s = time.perf_counter() - t0
                         t = _best(lambda c=compiled, a=args: c(a))
-                        row = dict(workload=name, inputs=inputs, dtype=dt, batch=batch, way=way,
-                                   steps_per_s=batch * n / t, run_s=t, compile_s=compile_s)
+                        row = dict(
+                            workload=name,
+                            inputs=inputs,
+                            dtype=dt,
+                            batch=batch,
+                            way=way,
+                            steps_per_s=batch * n / t,
+                            run_s=t,
+                            compile_s=compile_s,
+                        )
                     except Exception as e:  # noqa: BLE001  (out of memory on a big batch: reported, not fatal)
-                        row = dict(workload=name, inputs=inputs, dtype=dt, batch=batch, way=way,
-                                   error=f"{type(e).__name__}: {str(e).splitlines()[0][:200]}")
+                        row = dict(
+                            workload=name,
+                            inputs=inputs,
+                            dtype=dt,
+                            batch=batch,
+                            way=way,
+                            error=f"{type(e).__name__}: {str(e).splitlines()[0][:200]}",
+                        )
                     res["rows"].append(row)
                     if "error" in row:
                         log(f"{name:14s} {inputs:11s} {dt} {batch:6d} {way:9s}: {row['error']}")
                     else:
-                        log(f"{name:14s} {inputs:11s} {dt} {batch:6d} {way:9s}: "
-                            f"{row['steps_per_s'] / 1e6:10.1f} M steps/s  (run {t:.3f} s, compile {compile_s:.1f} s)")
+                        log(
+                            f"{name:14s} {inputs:11s} {dt} {batch:6d} {way:9s}: "
+                            f"{row['steps_per_s'] / 1e6:10.1f} M steps/s  (run {t:.3f} s, compile {compile_s:.1f} s)"
+                        )
                     if out is not None:
                         out.write_text(json.dumps(res, indent=1))
     return res
+
+
+def _times(x: float) -> str:
+    return f"{x:.1f}×" if x < 10 else f"{x:.0f}×"
+
+
+def _rows_of(path: Path, backend: str) -> list[dict]:
+    d = json.loads(path.read_text())
+    return d["rows"] if d.get("backend") == backend else []
+
+
+def table(gpu: list[dict], cpu: list[dict]) -> str:
+    """A Markdown table of the accelerator's rows (each row's best way, and ``map_batch`` as called by default)
+    beside the CPU's ``map_batch`` rows of the same workload, dtype and batch (the JSON results of two runs)."""
+    key = lambda r: (r["workload"], r["inputs"], r["dtype"], r["batch"])  # noqa: E731
+    cpu_rate = {key(r): r["steps_per_s"] for r in cpu if "error" not in r and r["way"] == "map_batch"}
+    best: dict = {}
+    default: dict = {}
+    for r in gpu:
+        if "error" in r:
+            continue
+        k = key(r)
+        best[k] = max(best.get(k, 0.0), r["steps_per_s"])
+        if r["way"] == "map_batch":
+            default[k] = r["steps_per_s"]
+    lines = [
+        "| workload | dtype | batch | GPU, best way (M/s) | GPU, `map_batch` (M/s) | CPU, `map_batch` (M/s) "
+        "| GPU / CPU |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    order = {"f32": 0, "f64": 1}
+    for k in sorted(best, key=lambda k: (k[0], k[1], order[k[2]], k[3])):
+        c = cpu_rate.get(k)
+        d = default.get(k)
+        lines.append(
+            f"| {k[0]} ({k[1]}) | {k[2]} | {k[3]} | {best[k] / 1e6:.0f} | {'' if d is None else f'{d / 1e6:.0f}'} | "
+            f"{'' if c is None else f'{c / 1e6:.1f}'} | {'' if c is None else _times(best[k] / c)} |"
+        )
+    return "\n".join(lines)
 
 
 def main(argv=None) -> int:
@@ -97,7 +152,21 @@ def main(argv=None) -> int:
     p.add_argument("--dtypes", nargs="+", default=["f32", "f64"], choices=["f32", "f64"])
     p.add_argument("--ways", nargs="+", default=["map_batch", "vmap"], choices=["map_batch", "tiled", "vmap"])
     p.add_argument("--out", type=Path, default=None, help="the JSON result (rewritten after each row)")
+    p.add_argument(
+        "--table",
+        nargs=2,
+        type=Path,
+        metavar=("GPU_JSONS", "CPU_JSON"),
+        default=None,
+        help="print the Markdown table of earlier results instead of measuring: a folder or file of the "
+        "accelerator's JSON results, and the CPU's",
+    )
     a = p.parse_args(argv)
+    if a.table is not None:
+        g, c = a.table
+        gpu = [r for f in (sorted(g.glob("*.json")) if g.is_dir() else [g]) for r in _rows_of(f, "gpu")]
+        print(table(gpu, json.loads(c.read_text())["rows"]))
+        return 0
     jaxobs.use_host_devices()  # before any computation: on a CPU, one JAX device per core, as `make bench`
     res = rows(a.batches, a.dtypes, a.ways, out=a.out)
     print(f"backend {res['backend']} ({res['device']}, {res['devices']} device(s), {res['cpus']} CPUs)")

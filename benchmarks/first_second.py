@@ -1,6 +1,6 @@
 """Time to result: a command's first run with an empty compilation cache, then its second.
 
-    python -m benchmarks.first_second [--runs 2] [--cmd NAME ...] [--keep-cache DIR]
+    python -m benchmarks.first_second [--runs 2] [--cmd NAME ...] [--tree BEFORE AFTER] [--result FILE] [--out F]
 
 Each command runs ``--runs`` times in fresh processes (``python -m jaxobs_tuning.cli ...``) sharing one
 compilation cache folder (``JAXOBS_CACHE_DIR``) that starts empty: run 1 compiles everything, the later runs
@@ -43,6 +43,17 @@ COMMANDS = {
     "study-drive": ["study", str(PRESETS / "study_flux_drive.toml"), "--out", "OUT", "--force", "--quiet"],
     "reproduce-flux": ["reproduce", "flux", "--quick", "--out", "OUT", "--force"],
     "reproduce-leso": ["reproduce", "leso", "--out", "OUT", "--force"],
+    # a drive result's envelope at its default size: 20 speeds x 10 loads x its 3 designs (RESULT: --result,
+    # e.g. the result.json of `jaxobs tune tuning/presets/cleso.toml`)
+    "envelope-200x3": [
+        "envelope",
+        "RESULT",
+        *("--speeds", "20", "--loads", "10"),
+        "--out",
+        "OUT",
+        "--force",
+        "--quiet",
+    ],
     # the envelope's smallest map: 2 speeds x 1 load of the SOIFO preset, 0.5 s runs
     "envelope": [
         "envelope",
@@ -97,11 +108,13 @@ def _dir_size(path: Path) -> int:
     return sum(f.stat().st_size for f in path.rglob("*") if f.is_file())
 
 
-def _one(args: list[str], env: dict, out: Path) -> dict:
+def _one(args: list[str], env: dict, out: Path, result: str | None = None) -> dict:
     report = out.with_suffix(".phases.json")
     # this file run as a script: with --tree, jaxobs and jaxobs_tuning come from that tree's PYTHONPATH
     argv = [sys.executable, str(Path(__file__).resolve()), "--worker", str(report)]
-    argv += [str(out) if a == "OUT" else a for a in args]
+    if "RESULT" in args and result is None:
+        raise ValueError("first_second: this command needs --result PATH (a drive job's result.json)")
+    argv += [str(out) if a == "OUT" else str(Path(result).resolve()) if a == "RESULT" else a for a in args]
     r0 = resource.getrusage(resource.RUSAGE_CHILDREN)
     load0 = os.getloadavg()[0]
     t0 = time.perf_counter()
@@ -122,12 +135,14 @@ def measure(
     trees: list[str] | None = None,
     keep_cache: str | None = None,
     log=None,
+    result: str | None = None,
 ) -> list[dict]:
     """First and later runs of each of ``cmds`` (names of :data:`COMMANDS`), ``runs`` each; one row a run.
 
     ``trees``: source trees to compare (each its own cache, their runs interleaved), default the installed
     jaxobs; ``keep_cache``: use (and keep) this cache folder instead of a temporary one; ``log``: called with
-    each row as it is measured (default: its JSON on stderr).  A row: ``command``, ``tree``, ``run``,
+    each row as it is measured (default: its JSON on stderr); ``result``: the result file of the commands
+    that read one (``envelope-200x3``).  A row: ``command``, ``tree``, ``run``,
     ``wall_s``, ``cpu_s``, ``load`` (1-min load average at its start and end), the phases ``trace_s``,
     ``lower_s``, ``compile_s`` (s), ``jits``, ``in_process_s`` and ``cache_mib`` (the cache after it).
     """
@@ -160,7 +175,7 @@ def measure(
                 for t, env in envs.items():
                     env = {**env, "JAXOBS_CACHE_DIR": str(caches[t])}
                     out = Path(tmp) / f"out-{name}-{len(rows)}"
-                    row = {"command": name, "tree": t, "run": i, **_one(COMMANDS[name], env, out)}
+                    row = {"command": name, "tree": t, "run": i, **_one(COMMANDS[name], env, out, result)}
                     row["cache_mib"] = round(_dir_size(caches[t]) / 2**20, 1)
                     rows.append(row)
                     log(row)
@@ -201,9 +216,17 @@ def main(argv=None) -> int:
         help="source trees to compare (each its own cache; their runs interleaved: run 1 of each, then run 2 "
         "...); default: the installed jaxobs",
     )
+    p.add_argument("--result", help="a drive job's result.json, for envelope-200x3")
+    p.add_argument("--out", help="also write the rows (and the load, the trees' commits) to this JSON file")
     p.add_argument("--json", action="store_true", help="print the rows as JSON")
     a = p.parse_args(argv)
-    rows = measure(a.cmd, a.runs, a.tree, a.keep_cache)
+    rows = measure(a.cmd, a.runs, a.tree, a.keep_cache, result=a.result)
+    if a.out:
+        commits = {}
+        for t in a.tree or []:
+            git = subprocess.run(["git", "-C", t, "rev-parse", "--short", "HEAD"], capture_output=True, text=True)
+            commits[t] = git.stdout.strip() or None
+        Path(a.out).write_text(json.dumps({"rows": rows, "trees": commits, "cpus": os.cpu_count()}, indent=1))
     if a.json:
         print(json.dumps(rows, indent=1))
         return 0

@@ -24,7 +24,6 @@ EMF signals (the flux observers without a drive): two-axis :class:`~jaxobs.EMFSi
 from __future__ import annotations
 
 import functools
-
 import itertools
 import math
 from dataclasses import dataclass

@@ -168,3 +168,25 @@ def test_bench_a_failed_part_keeps_the_others(monkeypatch, tmp_path, capsys):
     assert res["time_to_result"] == TTR_ROWS
     assert res["scale"]["error"].startswith("CalledProcessError")
     assert "failed" in bench.extra.tables(res)
+
+
+def test_the_gpu_table_pairs_each_accelerator_row_with_the_cpu_row_and_skips_failed_ones():
+    from benchmarks.devices import table
+
+    row = dict(workload="drive-sosoifo", inputs="loop", dtype="f64", batch=8192)
+    gpu = [
+        {**row, "way": "vmap", "steps_per_s": 112e6},
+        {**row, "way": "map_batch", "steps_per_s": 111e6},
+        {**row, "batch": 65536, "way": "vmap", "error": "TypeError: ..."},
+    ]
+    cpu = [{**row, "way": "map_batch", "steps_per_s": 7.5e6}, {**row, "way": "tiled", "steps_per_s": 1e9}]
+    lines = table(gpu, cpu).splitlines()
+    assert len(lines) == 3  # header, rule, one row: the failed row is left out
+    assert lines[2] == "| drive-sosoifo (loop) | f64 | 8192 | 112 | 111 | 7.5 | 15× |"
+
+
+def test_first_second_says_which_command_needs_a_result():
+    from benchmarks.first_second import COMMANDS, _one
+
+    with pytest.raises(ValueError, match="--result"):
+        _one(COMMANDS["envelope-200x3"], {}, Path("unused"))

@@ -79,7 +79,6 @@ def _aggregate_and_grad(aggregation, values, grads):
     return a, w @ grads
 
 
-
 # the gradient by forward mode up to this many gains (module doc, "Gradients")
 FORWARD_MAX = 8
 
