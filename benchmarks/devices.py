@@ -147,16 +147,31 @@ def table(gpu: list[dict], cpu: list[dict]) -> str:
 
 
 def main(argv=None) -> int:
-    p = argparse.ArgumentParser(prog="python -m benchmarks.devices", description=__doc__.splitlines()[0])
-    p.add_argument("--batches", type=int, nargs="+", default=[1024, 8192, 65536])
-    p.add_argument("--dtypes", nargs="+", default=["f32", "f64"], choices=["f32", "f64"])
-    p.add_argument("--ways", nargs="+", default=["map_batch", "vmap"], choices=["map_batch", "tiled", "vmap"])
-    p.add_argument("--out", type=Path, default=None, help="the JSON result (rewritten after each row)")
+    p = argparse.ArgumentParser(
+        prog="python -m benchmarks.devices",
+        description=__doc__.split("``python -m")[0].strip() + " JAX_PLATFORMS=cpu (or cuda) picks the backend.",
+    )
+    p.add_argument("--batches", type=int, nargs="+", default=[1024, 8192, 65536], help="default 1024 8192 65536")
+    p.add_argument("--dtypes", nargs="+", default=["f32", "f64"], choices=["f32", "f64"], help="default both")
+    p.add_argument(
+        "--ways",
+        nargs="+",
+        default=["map_batch", "vmap"],
+        choices=["map_batch", "tiled", "vmap"],
+        help="map_batch as called by default (tiles of 512 on a CPU, whole shares elsewhere), tiled (map_batch "
+        "with tiles of 512 on any device), vmap (one vmap of the whole batch); default map_batch vmap",
+    )
+    p.add_argument(
+        "--out",
+        type=Path,
+        default=None,
+        help="write the JSON result here (rewritten after each row; without it nothing is saved)",
+    )
     p.add_argument(
         "--table",
         nargs=2,
         type=Path,
-        metavar=("GPU_JSONS", "CPU_JSON"),
+        metavar=("GPU_RESULTS", "CPU_RESULT.json"),
         default=None,
         help="print the Markdown table of earlier results instead of measuring: a folder or file of the "
         "accelerator's JSON results, and the CPU's",
@@ -164,6 +179,10 @@ def main(argv=None) -> int:
     a = p.parse_args(argv)
     if a.table is not None:
         g, c = a.table
+        if not g.exists() or not c.is_file():
+            p.error(f"--table: {g if not g.exists() else c} is not a results file (or a folder of them)")
+        if json.loads(c.read_text()).get("backend") != "cpu":
+            p.error(f"--table: {c} is not a CPU run's result (its backend is not cpu)")
         gpu = [r for f in (sorted(g.glob("*.json")) if g.is_dir() else [g]) for r in _rows_of(f, "gpu")]
         print(table(gpu, json.loads(c.read_text())["rows"]))
         return 0

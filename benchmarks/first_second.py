@@ -207,9 +207,19 @@ def main(argv=None) -> int:
     if argv[:1] == ["--worker"]:
         return _worker(argv[1], argv[2:])
     p = argparse.ArgumentParser(prog="python -m benchmarks.first_second", description=__doc__.split("\n")[0])
-    p.add_argument("--cmd", nargs="+", default=["make-run"], choices=sorted(COMMANDS), help="commands to time")
+    p.add_argument(
+        "--cmd",
+        nargs="+",
+        default=["make-run"],
+        choices=sorted(COMMANDS),
+        help="commands to time (default make-run; each one's command line is in COMMANDS, this file)",
+    )
     p.add_argument("--runs", type=int, default=2, help="runs per command (the first with an empty cache)")
-    p.add_argument("--keep-cache", help="use (and keep) this cache folder instead of a temporary one")
+    p.add_argument(
+        "--keep-cache",
+        help="a cache folder to use instead of a temporary one: EMPTIED before each command's first run and kept "
+        "after (shared by every --tree); never point it at a cache you want to keep",
+    )
     p.add_argument(
         "--tree",
         nargs="+",
@@ -220,6 +230,8 @@ def main(argv=None) -> int:
     p.add_argument("--out", help="also write the rows (and the load, the trees' commits) to this JSON file")
     p.add_argument("--json", action="store_true", help="print the rows as JSON")
     a = p.parse_args(argv)
+    if any("RESULT" in COMMANDS[c] for c in a.cmd) and not a.result:
+        p.error("--result PATH is needed by: " + ", ".join(c for c in a.cmd if "RESULT" in COMMANDS[c]))
     rows = measure(a.cmd, a.runs, a.tree, a.keep_cache, result=a.result)
     if a.out:
         commits = {}

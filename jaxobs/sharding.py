@@ -70,6 +70,7 @@ That path is JAX's own and was not run here (no cluster: CPU processes only).
 from __future__ import annotations
 
 import math
+import numbers
 import os
 import re
 import time
@@ -312,7 +313,8 @@ def map_batch(fn, tree, *, mesh: Mesh | None = None, tile: int | None = None):
             devices, the whole share on a GPU or TPU.  Tiles keep a CPU core's working set in its caches; an
             accelerator wants every scenario of its share in each step's kernels (an H100 ran batch 8192,
             float32, 16–19× faster whole than in tiles of 512: the SOGI-FLL 390 against 20 M
-            scenario-steps/s, the drive 141 against 8.6; docs/performance.md, "On a GPU").
+            scenario-steps/s, the drive 141 against 8.6; docs/performance.md, "On a GPU").  A time-major
+            batch (:func:`batch_axes` not 0) runs each share whole whatever ``tile`` says.
 
     Returns:
         ``vmap(fn)(tree)``: ``fn``'s PyTree with a leading scenario axis on every leaf.
@@ -320,13 +322,14 @@ def map_batch(fn, tree, *, mesh: Mesh | None = None, tile: int | None = None):
     Raises:
         ValueError: ``tile`` is not an integer ≥ 1, or an array leaf lacks the scenario axis.
     """
-    if not (tile is None or (isinstance(tile, int) and not isinstance(tile, bool) and tile >= 1)):
+    if not (tile is None or (isinstance(tile, numbers.Integral) and not isinstance(tile, bool) and tile >= 1)):
         raise ValueError(f"map_batch: tile must be an integer >= 1 or None, got {tile!r}")
     if any(np.ndim(x) <= ax for x, ax in _leaf_axes(tree)):
         raise ValueError("map_batch: every array leaf of the batch needs the leading scenario axis (got a scalar leaf)")
     mesh = batch_mesh() if mesh is None else mesh
     if tile is None:
         tile = _default_tile(mesh.devices.flat, batch_size(tree))
+    tile = int(tile)
     b = batch_size(tree)
     axes = batch_axes(tree)
     leading = all(ax == 0 for ax in jax.tree.leaves(axes))

@@ -354,6 +354,9 @@ def test_map_batch_equals_vmap_with_a_short_last_tile_and_rejects_bad_input():
     x = {"a": jnp.linspace(0.0, 1.0, 7), "b": jnp.arange(14.0).reshape(7, 2)}
     want = jax.vmap(f)(x)
     got = jax.jit(lambda x: jaxobs.map_batch(f, x, tile=3))(x)  # tiles 3, 3, 1
+    np.testing.assert_array_equal(  # a NumPy integer is a tile size too
+        np.asarray(jax.jit(lambda x: jaxobs.map_batch(f, x, tile=np.int64(3)))(x)["v"]), np.asarray(got["v"])
+    )
     # sin over a tile of 3 and over 7 is vectorized differently by XLA: last-bit differences
     np.testing.assert_allclose(np.asarray(got["s"]), np.asarray(want["s"]), rtol=1e-14, atol=0)
     np.testing.assert_array_equal(np.asarray(got["v"]), np.asarray(want["v"]))
