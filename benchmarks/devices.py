@@ -17,10 +17,10 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import os
 import platform
 import time
+from functools import partial
 from pathlib import Path
 
 import jax
@@ -28,16 +28,7 @@ import jax
 import jaxobs
 
 from . import workloads as W
-
-
-def _best(fn, repeats: int = 3) -> float:
-    jax.block_until_ready(fn())  # compiled and warm
-    best = math.inf
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        jax.block_until_ready(fn())
-        best = min(best, time.perf_counter() - t0)
-    return best
+from .run import best_time
 
 
 def rows(batches, dtypes, ways=("map_batch", "vmap"), log=print, out: Path | None = None) -> dict:
@@ -63,6 +54,7 @@ def rows(batches, dtypes, ways=("map_batch", "vmap"), log=print, out: Path | Non
                 for way in ways:
                     shard = way != "vmap"
                     tile = jaxobs.sharding.TILE if way == "tiled" else None
+                    row = dict(workload=name, inputs=inputs, dtype=dt, batch=batch, way=way)
                     t0 = time.perf_counter()
                     try:
                         if name == "drive-sosoifo":
@@ -71,29 +63,14 @@ def rows(batches, dtypes, ways=("map_batch", "vmap"), log=print, out: Path | Non
                         else:
                             fn, args = W.jax_fll(name, batch, inputs, W.FLL_T1, shard=shard, tile=tile)
                             n = round(W.FLL_T1 / W.TS)
-                        lowered = fn.lower(args)
-                        compiled = lowered.compile()
+                        compiled = fn.lower(args).compile()
                         compile_s = time.perf_counter() - t0
-                        t = _best(lambda c=compiled, a=args: c(a))
-                        row = dict(
-                            workload=name,
-                            inputs=inputs,
-                            dtype=dt,
-                            batch=batch,
-                            way=way,
-                            steps_per_s=batch * n / t,
-                            run_s=t,
-                            compile_s=compile_s,
-                        )
+                        run = partial(compiled, args)
+                        jax.block_until_ready(run())  # warm
+                        t = best_time(run, 3)
+                        row.update(steps_per_s=batch * n / t, run_s=t, compile_s=compile_s)
                     except Exception as e:  # noqa: BLE001  (out of memory on a big batch: reported, not fatal)
-                        row = dict(
-                            workload=name,
-                            inputs=inputs,
-                            dtype=dt,
-                            batch=batch,
-                            way=way,
-                            error=f"{type(e).__name__}: {str(e).splitlines()[0][:200]}",
-                        )
+                        row["error"] = f"{type(e).__name__}: {str(e).splitlines()[0][:200]}"
                     res["rows"].append(row)
                     if "error" in row:
                         log(f"{name:14s} {inputs:11s} {dt} {batch:6d} {way:9s}: {row['error']}")

@@ -327,10 +327,8 @@ def map_batch(fn, tree, *, mesh: Mesh | None = None, tile: int | None = None):
     if any(np.ndim(x) <= ax for x, ax in _leaf_axes(tree)):
         raise ValueError("map_batch: every array leaf of the batch needs the leading scenario axis (got a scalar leaf)")
     mesh = batch_mesh() if mesh is None else mesh
-    if tile is None:
-        tile = _default_tile(mesh.devices.flat, batch_size(tree))
-    tile = int(tile)
     b = batch_size(tree)
+    tile = _default_tile(mesh.devices.flat, b) if tile is None else int(tile)
     axes = batch_axes(tree)
     leading = all(ax == 0 for ax in jax.tree.leaves(axes))
 

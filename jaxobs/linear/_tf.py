@@ -351,27 +351,19 @@ def _polyadd(a, b):
 
 
 def _roots(c):
-    if not isinstance(c, jax.core.Tracer):
-        # concrete coefficients (a closed form's margins, a report): NumPy's companion eigenvalues on the host.
-        # Eagerly, each jnp step below compiled an XLA program of its own on a first run; under jit or a
-        # gradient the coefficients are traced and the jnp path runs
-        c = np.asarray(c)
-        c = c / c[0]
-        n = c.shape[0] - 1
-        if n == 0:
-            return jnp.zeros((0,), jnp.result_type(c, 1j))
-        comp = np.zeros((n, n), c.dtype)
-        comp[0, :] = -c[1:]
-        comp[1:, :-1] = np.eye(n - 1, dtype=c.dtype)
-        return jnp.asarray(np.linalg.eigvals(comp).astype(np.result_type(c, 1j)))
+    # concrete coefficients (a closed form's margins, a report) take NumPy's companion eigenvalues on the host:
+    # eagerly, each jnp step compiled an XLA program of its own on a first run; under jit or a gradient the
+    # coefficients are traced and the same steps run in jnp
+    xp = jnp if isinstance(c, jax.core.Tracer) else np
+    c = xp.asarray(c)
     c = c / c[0]
     n = c.shape[0] - 1
     if n == 0:
         return jnp.zeros((0,), jnp.result_type(c, 1j))
-    comp = jnp.zeros((n, n), c.dtype).at[0, :].set(-c[1:])
-    if n > 1:
-        comp = comp.at[1:, :-1].set(jnp.eye(n - 1, dtype=c.dtype))
-    return jnp.linalg.eigvals(comp)
+    # the companion matrix: first row −c[1:], then the shifted identity [I_{n−1} | 0]
+    comp = xp.concatenate([-c[None, 1:], xp.eye(n - 1, n, dtype=c.dtype)], axis=0)
+    roots = xp.linalg.eigvals(comp)
+    return roots if xp is jnp else jnp.asarray(roots.astype(np.result_type(c, 1j)))
 
 
 # --------------------------------------------------------------------------
