@@ -271,3 +271,29 @@ def test_a_long_log_reads_at_flat_memory(tmp_path):
     big, size = _rss_of_reading(tmp_path, 10_000_000)
     print(f"peak RSS {small:.0f} MiB (1e5 rows), {big:.0f} MiB (1e7 rows, {size:.0f} MiB of CSV)")
     assert big - small < 120
+
+
+def test_a_byte_order_mark_is_no_part_of_the_first_column(tmp_path):
+    """A spreadsheet's UTF-8 export begins with a byte-order mark: the log reads as the same file without one."""
+    plain = _write(tmp_path / "plain.csv", _cols())
+    bom = tmp_path / "bom.csv"
+    bom.write_bytes(b"\xef\xbb\xbf" + plain.read_bytes())
+    a, b = _read(plain).recording(), _read(bom).recording()
+    for x, y in zip(jax.tree.leaves(a), jax.tree.leaves(b)):
+        np.testing.assert_array_equal(np.asarray(x), np.asarray(y))
+
+
+def test_a_missing_folder_for_the_columns_is_one_line(tmp_path):
+    with pytest.raises(ValueError, match="is not an existing folder"):
+        _read(DRIVE_CSV, folder=tmp_path / "missing")
+
+
+def test_provenance_hashes_a_file_in_blocks_to_the_digest_of_its_bytes(tmp_path):
+    import hashlib
+
+    from jaxobs.provenance import sha256
+
+    data = np.random.default_rng(0).bytes(3 * (1 << 20) + 17)  # over three blocks, the last one partial
+    f = tmp_path / "x.bin"
+    f.write_bytes(data)
+    assert sha256(f) == sha256(data) == hashlib.sha256(data).hexdigest()

@@ -237,7 +237,8 @@ def _first_lines(path, k=3):
     with open(path, "rb") as f:
         for n, raw in enumerate(f, 1):
             try:
-                ln = raw.decode()
+                # a UTF-8 byte-order mark (spreadsheet exports write one) is no part of the first column's name
+                ln = raw.decode("utf-8-sig" if n == 1 else "utf-8")
             except UnicodeDecodeError:
                 raise ValueError(f"recording {str(path)!r}: line {n}: not UTF-8 text") from None
             if ln.strip() and not ln.lstrip().startswith("#"):
@@ -294,7 +295,7 @@ def _header(path, layout):
 
 def _locate_bad_line(path, layout, width, skip_header):
     """The first data line that is not ``width`` numbers (called only after a failed parse)."""
-    with open(path, encoding="utf-8", errors="replace") as f:
+    with open(path, encoding="utf-8-sig", errors="replace") as f:
         seen_header = not skip_header
         for n, ln in enumerate(f, 1):
             if not ln.strip() or ln.lstrip().startswith("#"):
@@ -574,6 +575,10 @@ def read_drive_log(
     wanted = sorted(set(idx.values()))
 
     tmp = None
+    if folder is not None and not os.path.isdir(folder):
+        raise ValueError(
+            f"read_drive_log: folder {str(folder)!r} is not an existing folder (give one, or None for a temporary one)"
+        )
     if folder is None:
         tmp = tempfile.TemporaryDirectory(prefix="jaxobs-log-")
         folder = tmp.name
