@@ -297,3 +297,27 @@ def test_provenance_hashes_a_file_in_blocks_to_the_digest_of_its_bytes(tmp_path)
     f = tmp_path / "x.bin"
     f.write_bytes(data)
     assert sha256(f) == sha256(data) == hashlib.sha256(data).hexdigest()
+
+
+def test_rounded_time_stamps_run_on_the_observers_grid():
+    """A recording whose interval is the observer's to the reader's tolerance (time stamps printed to 12 digits:
+    ts = 9.99999999997669e-05 for 1e-4) runs as the exact one does: the same samples, the same estimates."""
+    from jaxobs.observers import SOIFO
+
+    c = _cols()
+    ts = float(c["t"][1] - c["t"][0])
+    args = (c["u_a"], c["u_b"], c["i_a"], c["i_b"])
+    exact = jaxobs.DriveRecording(*args, ts, theta_e=c["theta_e"])
+    rounded = jaxobs.DriveRecording(*args, ts * (1 - 2.331e-12), theta_e=c["theta_e"])
+    obs = SOIFO.closed_form(Rs=papers.SPMSM_000["Rs"], L=papers.SPMSM_000["Ld"], ts=ts)
+    t1 = 200 * ts
+    a = jaxobs.simulate(jaxobs.OnSignal(obs, exact), t1).outputs
+    b = jaxobs.simulate(jaxobs.OnSignal(obs, rounded), t1).outputs
+    for x, y in zip(jax.tree.leaves(a.obs), jax.tree.leaves(b.obs)):  # the estimates: the same samples, bit for bit
+        np.testing.assert_array_equal(np.asarray(x), np.asarray(y))
+    for x, y in zip(
+        jax.tree.leaves(a.truth), jax.tree.leaves(b.truth)
+    ):  # the truth: ω = dθ/dt over each ts (2.3e-12 apart)
+        np.testing.assert_allclose(np.asarray(x), np.asarray(y), rtol=1e-11)
+    with pytest.raises(ValueError, match="must equal the observer"):  # beyond the tolerance: refused
+        jaxobs.OnSignal(obs, jaxobs.DriveRecording(*args, ts * (1 + 1e-6), theta_e=c["theta_e"]))
