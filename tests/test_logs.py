@@ -321,3 +321,20 @@ def test_rounded_time_stamps_run_on_the_observers_grid():
         np.testing.assert_allclose(np.asarray(x), np.asarray(y), rtol=1e-11)
     with pytest.raises(ValueError, match="must equal the observer"):  # beyond the tolerance: refused
         jaxobs.OnSignal(obs, jaxobs.DriveRecording(*args, ts * (1 + 1e-6), theta_e=c["theta_e"]))
+
+
+@pytest.mark.parametrize(
+    "text, match",
+    [
+        ("[layout]\nx = " + "[" * 5000 + "]" * 5000 + "\n", "nested deeper"),
+        ("[layout]\ncurrent_frame = 'abc'\nz = 1" + "0" * 5000 + "\n", "digits"),
+        ("[layout]\ncurrent_frame = \xff\n", "not UTF-8"),
+    ],
+    ids=["deep nesting", "long number", "not utf-8"],
+)
+def test_a_hostile_sidecar_is_one_line(tmp_path, text, match):
+    csv = _write(tmp_path / "log.csv", _cols())
+    (tmp_path / "log.csv.toml").write_bytes(text.encode("latin-1"))
+    with pytest.raises(ValueError, match=match) as e:
+        RecordingLayout.sidecar(csv)
+    assert "\n" not in str(e.value) and "log.csv.toml" in str(e.value)

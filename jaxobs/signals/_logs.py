@@ -53,6 +53,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..provenance import read_file
+from ..safetoml import read_toml
 from ._logchecks import check_angle_unit, check_balance, check_power, check_sequence, check_speed, check_timing
 from ._recordings import DriveRecording, _column
 
@@ -193,14 +194,13 @@ class RecordingLayout:
         Raises:
             ValueError: an unreadable sidecar, or a bad key in it.
         """
-        import tomllib
-
         side = Path(str(csv_path) + ".toml")
         if not side.exists():
             return None
-        try:
-            doc = tomllib.loads(read_file(side, MAX_SIDECAR_BYTES).decode())
-        except (ValueError, UnicodeDecodeError) as e:
+        try:  # the size first (a sidecar is a few lines), then TOML read safely: nesting, number lengths, UTF-8
+            read_file(side, MAX_SIDECAR_BYTES)
+            doc, _ = read_toml(side, "file")
+        except ValueError as e:
             raise ValueError(f"recording sidecar {str(side)!r}: {e}") from None
         extra = set(doc) - {"layout"}
         if extra:
