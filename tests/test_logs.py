@@ -338,3 +338,18 @@ def test_a_hostile_sidecar_is_one_line(tmp_path, text, match):
     with pytest.raises(ValueError, match=match) as e:
         RecordingLayout.sidecar(csv)
     assert "\n" not in str(e.value) and "log.csv.toml" in str(e.value)
+
+
+def test_a_declared_voltage_delay_one_period_too_long_warns(tmp_path):
+    """References applied one period after they are logged, declared with a delay of 2: the voltages as read lag
+    the machine's model by a period (a bias of −ω_e·ts in every estimate): a warning naming the columns and the
+    delay to declare.  Declared right, the same file warns of nothing."""
+    c = _cols()
+    c["u_a"], c["u_b"] = np.roll(c["u_a"], -1), np.roll(c["u_b"], -1)  # row k: the reference applied from t_k+1
+    f = _write(tmp_path / "log.csv", c)
+    too_long = RecordingLayout(voltage_timing="reference", voltage_delay=2)
+    with pytest.warns(RecordingWarning, match=r"'u_a, u_b' match .* 1 period\(s\) earlier .*voltage_delay = 1;"):
+        _read(f, machine=D.spmsm_paper000(), layout=too_long)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        _read(f, machine=D.spmsm_paper000(), layout=RecordingLayout(voltage_timing="reference", voltage_delay=1))

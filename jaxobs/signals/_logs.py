@@ -698,7 +698,7 @@ def read_drive_log(
         check_sequence(log, layout, cols)
         if machine is not None:
             check_power(log, machine, cols)
-            check_timing(log, machine, cols)
+            check_timing(log, layout, machine, cols)
     if layout.current_frame == "abc" or layout.voltage_frame == "abc":
         check_balance(log, layout, cols)
     for w in warn:
