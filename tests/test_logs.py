@@ -353,3 +353,15 @@ def test_a_declared_voltage_delay_one_period_too_long_warns(tmp_path):
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         _read(f, machine=D.spmsm_paper000(), layout=RecordingLayout(voltage_timing="reference", voltage_delay=1))
+
+
+def test_a_file_cut_inside_its_last_line_is_refused_naming_the_line(tmp_path):
+    """A copy cut short inside a used field (the last ω read as 187 instead of 187.84) is an error naming the
+    line: a file must end its last line."""
+    text = _write(tmp_path / "whole.csv", _cols()).read_text()
+    n = text.count("\n")
+    for cut in (text.rstrip("\n")[:-8], text.rstrip("\n")):  # cut inside a field; whole but without a line end
+        f = tmp_path / "cut.csv"
+        f.write_text(cut)
+        with pytest.raises(ValueError, match=rf"line {n}, the last, has no line end: the file may be cut short"):
+            _read(f)

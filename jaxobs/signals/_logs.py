@@ -311,6 +311,25 @@ def _locate_bad_line(path, layout, width, skip_header):
     return "a line could not be read"
 
 
+def _check_last_line(path):
+    """Refuse a file that does not end with a line end: a copy cut short ends inside its last line, and a value cut
+    inside a field (``187.84`` read as ``187``) cannot be told from a whole one, so the line is named and the file
+    refused rather than read.  Every CSV writer of numpy, pandas, MATLAB and spreadsheets ends its last line."""
+    size = os.path.getsize(path)
+    if size == 0:
+        return
+    with open(path, "rb") as f:
+        f.seek(size - 1)
+        if f.read(1) in (b"\n", b"\r"):
+            return
+        f.seek(0)
+        n = sum(block.count(b"\n") for block in iter(lambda: f.read(1 << 20), b"")) + 1
+    raise ValueError(
+        f"recording {str(path)!r}: line {n}, the last, has no line end: the file may be cut short inside it (copy "
+        "it again; if the line is whole, end it with a line end)"
+    )
+
+
 def _pandas_precision():
     """The float Python's float() reads, so that a log gives the small reader's numbers to the last bit: pandas
     parses so by default from 3.0 on (and warns of the option), before that with float_precision="round_trip"."""
@@ -582,6 +601,7 @@ def read_drive_log(
     if folder is None:
         tmp = tempfile.TemporaryDirectory(prefix="jaxobs-log-")
         folder = tmp.name
+    _check_last_line(p)
     raw, rows = _stream_columns(p, layout, header, wanted, width, folder)
     if rows < 2 + (layout.voltage_delay if layout.voltage_timing == "reference" else 0):
         raise ValueError(f"recording {p!r}: {rows} sample(s); too few")
