@@ -2,6 +2,7 @@
 reader, and one test per silent mistake a log can carry, each now a one-line error or warning naming the column."""
 
 import math
+import re
 import subprocess
 import sys
 import textwrap
@@ -365,3 +366,53 @@ def test_a_file_cut_inside_its_last_line_is_refused_naming_the_line(tmp_path):
         f.write_text(cut)
         with pytest.raises(ValueError, match=rf"line {n}, the last, has no line end: the file may be cut short"):
             _read(f)
+
+
+def _abc(c):
+    """The log's currents as phases a and b (amplitude-invariant Clarke inverted)."""
+    c["i_a"], c["i_b"] = c["i_a"], -0.5 * c["i_a"] + S3 / 2 * c["i_b"]
+    return c
+
+
+def test_a_clean_phase_log_with_steps_warns_nothing(tmp_path):
+    """The shipped log holds a speed step at 0.1 s and a load step at 0.2 s; here its currents also double at
+    0.15 s, balanced (a clean step).  Read as phase currents, the balance check keeps to the windows whose
+    amplitude holds, and the log warns of no offset or unbalance (a window across the step read a DC offset of
+    2.2 %)."""
+    c = _abc(_cols())
+    step = np.where(c["t"] >= 0.15, 2.0, 1.0)
+    c["i_a"], c["i_b"] = c["i_a"] * step, c["i_b"] * step
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RecordingWarning)
+        log = _read(_write(tmp_path / "abc.csv", c), layout=RecordingLayout(current_frame="abc"))
+    assert log.warnings == []
+
+
+@pytest.mark.parametrize(
+    "frame, offset, gain, warned",
+    [
+        ("abc", 0.0, 0.035, r"gain mismatch of about 3\.[3-7] % between their phases"),
+        ("abc", 0.03, 0.0, r"DC offset of about (2\.[89]|3|3\.[0-2]) % of the amplitude on one of their phases"),
+        (
+            "alpha_beta",
+            0.05,
+            0.0,
+            r"DC offset of about (4\.[89]|5|5\.[0-2]) % of the amplitude on one of their channels",
+        ),
+        ("alpha_beta", 0.0, 0.04, r"gain mismatch of about (3\.[89]|4|4\.[0-2]) % between their channels"),
+        ("abc", 0.01, 0.01, None),  # below both thresholds
+    ],
+)
+def test_offsets_and_gain_errors_warn_with_their_size_in_either_frame(tmp_path, frame, offset, gain, warned):
+    c = {k: v[:1000] for k, v in _cols().items()}  # the steady 0.1 s before the speed step
+    c = _abc(c) if frame == "abc" else c
+    amp = float(np.max(np.abs(c["i_a"])))
+    c["i_a"] = (1 + gain) * c["i_a"] + offset * amp
+    with warnings.catch_warnings(record=True) as rec:
+        warnings.simplefilter("always", RecordingWarning)
+        _read(_write(tmp_path / "log.csv", c), layout=RecordingLayout(current_frame=frame))
+    text = " | ".join(str(w.message) for w in rec if isinstance(w.message, RecordingWarning))
+    if warned is None:
+        assert text == ""
+    else:
+        assert re.search(warned, text), text  # the size read back within 0.2 % (the clean log's own 0.16 %)

@@ -34,8 +34,9 @@ Each check is a one-line ``ValueError`` (a mistake that makes every estimate wro
 - **voltage timing** (with the machine's parameters): the voltage columns against the mean voltage over each
   period that the machine's flux-linkage equation asks for, shifted by 0, 1 or 2 periods; a best match one or
   two periods late is a warning that the references were logged as applied voltages;
-- **phase balance** (abc inputs): a DC offset above 2 % of the phase amplitude, or a gain mismatch between
-  phases above 3 %, is a warning; three phases that do not sum to zero (5 % of the amplitude) an error.
+- **balance** (abc and α-β inputs, on the windows whose amplitude holds, away from load and speed steps): a DC
+  offset above 2 % of the amplitude on one phase or channel, or a gain mismatch between them above 3 %, is a
+  warning; three phases that do not sum to zero (5 % of the amplitude) an error.
 """
 
 from __future__ import annotations
@@ -719,8 +720,7 @@ def read_drive_log(
         if machine is not None:
             check_power(log, machine, cols)
             check_timing(log, layout, machine, cols)
-    if layout.current_frame == "abc" or layout.voltage_frame == "abc":
-        check_balance(log, layout, cols)
+    check_balance(log, layout, cols, {"current": len(currents), "voltage": len(voltages)})
     for w in warn:
         warnings.warn(RecordingWarning(w), stacklevel=2)
     return log
