@@ -416,3 +416,15 @@ def test_offsets_and_gain_errors_warn_with_their_size_in_either_frame(tmp_path, 
         assert text == ""
     else:
         assert re.search(warned, text), text  # the size read back within 0.2 % (the clean log's own 0.16 %)
+
+
+def test_a_mechanical_angle_under_declared_phases_names_the_angle(tmp_path):
+    """Phase currents declared as such, with the angle column mechanical but read as electrical: the columns do
+    not turn with the angle, and the message names the angle's declaration, not the frame already declared."""
+    c = _abc(_cols())
+    c["theta_e"] = np.mod(np.unwrap(c["theta_e"]) / P, 2 * math.pi)
+    del c["omega_e"]
+    layout = RecordingLayout(current_frame="abc")
+    with pytest.raises(ValueError, match=r"the angle column 'theta_e' does not turn with them: .*angle_kind") as e:
+        _read(_write(tmp_path / "log.csv", c), omega_e=None, layout=layout)
+    assert "declare current_frame" not in str(e.value)

@@ -101,9 +101,20 @@ def check_sequence(log, layout, cols):
             )
         if ratio > 0.15:
             frame = "current_frame" if role == "current" else "voltage_frame"
+            declared = layout.current_frame if role == "current" else layout.voltage_frame
+            angle = (
+                f"the angle column {cols['theta']!r} does not turn with them: is it the mechanical angle (declare "
+                "angle_kind = 'mechanical' and pole_pairs), or in other units (angle_unit)?"
+            )
+            if declared != "alpha_beta":  # declared as phases already: the angle is the suspect
+                why = f"): {angle}"
+            elif 0.2 <= ratio <= 0.35:  # near the 0.27 of phase values read as α-β
+                why = f"; phase values read as α-β give 0.27): declare {frame} = 'abc'"
+            else:
+                why = f"): declare {frame} = 'abc' if they are phase values; else {angle}"
             raise ValueError(
                 f"recording {log.path!r}: columns {cols[role]!r} are not an α-β pair (negative sequence "
-                f"{ratio:.3g} times the positive; phase values read as α-β give 0.27): declare {frame} = 'abc'"
+                f"{ratio:.3g} times the positive{why}"
             )
 
 
