@@ -17,7 +17,7 @@ from jaxobs_tuning.cli import BODE_FILES, DEMO_FILES, REPRODUCE_FILES, build_par
 from jaxobs_tuning.results import load_result, tuned_component
 
 ROOT = Path(__file__).resolve().parents[1]
-COMMANDS = ("tune", "demo", "closed-form", "bode", "reproduce", "study", "export", "envelope", "drive")
+COMMANDS = ("tune", "demo", "closed-form", "bode", "reproduce", "study", "export", "envelope", "drive", "log")
 
 
 def _python(code_or_args, env_drop=(), env_add=None):

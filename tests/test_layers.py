@@ -128,7 +128,7 @@ LAYERS = [
     ("jaxobs_tuning",),
     # the command line: the top layer (`jaxobs ...` and `python -m jaxobs`)
     ("jaxobs_tuning.cli_common", "jaxobs_tuning.summary", "jaxobs_tuning.distributed"),
-    ("jaxobs_tuning.cli_papers", "jaxobs_tuning.cli_drive"),
+    ("jaxobs_tuning.cli_papers", "jaxobs_tuning.cli_drive", "jaxobs_tuning.cli_log"),
     ("jaxobs_tuning.cli",),
     ("jaxobs.__main__",),
 ]

@@ -83,6 +83,7 @@ from jaxobs.chunkstore import ChunkStore
 
 from .cli_common import enable_x64, progress_of
 from .cli_drive import add_drive_parser
+from .cli_log import add_log_parser
 from .cli_papers import BODE_FILES as BODE_FILES
 from .cli_papers import CF_OPTIONS, cmd_bode, cmd_closed_form, cmd_demo, cmd_reproduce
 from .cli_papers import DEMO_FILES as DEMO_FILES
@@ -467,6 +468,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_export_parser(sub, parents=[quiet])
     add_envelope_parser(sub, parents=[quiet])
     add_drive_parser(sub, parents=[quiet])
+    add_log_parser(sub, parents=[quiet])
     return p
 
 
