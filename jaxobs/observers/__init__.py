@@ -19,6 +19,7 @@ from ._gains import gain as gain
 from ._gains import gain_fields as gain_fields
 from ._gains import gain_row as gain_row
 from ._gains import gain_table as gain_table
+from ._rules import cleso_gains as cleso_gains
 from ._rules import pll_gains as pll_gains
 from ._rules import second_order_soifo_lambda as second_order_soifo_lambda
 from ._rules import sogi_fll_lambda as sogi_fll_lambda

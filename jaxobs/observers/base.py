@@ -69,6 +69,13 @@ class AbstractObserver(eqx.Module):
     (:mod:`jaxobs.observers._gains` states the convention).
     """
 
+    # Declared by the class, read by the applications (jaxobs.registry): why a tuning job may not name it
+    # ("" where it may), and the paper's small-signal model, (the jaxobs.linear function, the fields it takes
+    # in order), or None where the papers give none.  A name, not the function: jaxobs.linear sits above the
+    # observers (it analyses them), so an observer cannot import it.
+    why_not_tunable: ClassVar[str] = ""
+    small_signal_model: ClassVar[tuple[str, tuple[str, ...]] | None] = None
+
     def __check_init__(self):
         check_gains(self)
 
