@@ -353,7 +353,11 @@ def test_a_declared_voltage_delay_one_period_too_long_warns(tmp_path):
         _read(f, machine=D.spmsm_paper000(inertia="motor"), layout=too_long)
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        _read(f, machine=D.spmsm_paper000(inertia="motor"), layout=RecordingLayout(voltage_timing="reference", voltage_delay=1))
+        _read(
+            f,
+            machine=D.spmsm_paper000(inertia="motor"),
+            layout=RecordingLayout(voltage_timing="reference", voltage_delay=1),
+        )
 
 
 def test_a_file_cut_inside_its_last_line_is_refused_naming_the_line(tmp_path):
