@@ -4,14 +4,22 @@
 field (FLL family, SOGIs); :class:`AbstractDriveObserver` the drive observers (flux observers, LESOs,
 :class:`ObserverBank`), bound to a machine and a speed by their one ``bind`` method.  Each observer declares its
 gains with :func:`gain` (units, role, bounds, the paper's symbol; :func:`gain_fields` lists them), and each one a
-paper tunes has a ``closed_form`` classmethod: the paper's rule (the rules' arithmetic: ``sogi_fll_lambda``, ...).
+paper tunes has a closed form: ``closed_form_design`` gives a :class:`ClosedForm` (the observer with its inputs
+and :class:`DesignRow` s: name, value, units, formula, source) and ``closed_form`` its observer (the rules'
+arithmetic: ``sogi_fll_lambda``, ...).  :func:`check_gains` enforces every gain's declared bounds, once, after
+every constructor.
 """
 
 from ._cores import sogi2_tustin_coefficients as sogi2_tustin_coefficients
+from ._gains import ClosedForm as ClosedForm
+from ._gains import DesignRow as DesignRow
 from ._gains import GainInfo as GainInfo
+from ._gains import check_gains as check_gains
 from ._gains import gain as gain
 from ._gains import gain_fields as gain_fields
+from ._gains import gain_row as gain_row
 from ._gains import gain_table as gain_table
+from ._rules import cleso_gains as cleso_gains
 from ._rules import pll_gains as pll_gains
 from ._rules import second_order_soifo_lambda as second_order_soifo_lambda
 from ._rules import sogi_fll_lambda as sogi_fll_lambda

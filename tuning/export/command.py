@@ -114,7 +114,7 @@ def _export(args) -> int:
         source = f"{args.result} ({args.gains} gains)"
     else:
         obs = observer_from_design(args.design, **kw)
-        source = f"closed form {args.design}, {DESIGNS[args.design][1]}"
+        source = f"closed form {args.design}, {DESIGNS[args.design].closed_form_design().rule}"
     signal = None
     df = _drive_file(args)
     record_drive = None

@@ -14,8 +14,9 @@ from jaxobs.registry import REGISTRY, canonical_key
 from ..job import COMPONENTS
 from ..results import load_result
 
-# the closed forms `export --design` names (the FLLs' aliases in jaxobs.registry): alias -> (class, its rule)
-DESIGNS = {a: (e.cls, e.closed_form_rule) for e in REGISTRY.values() if e.signal == "grid" for a in e.aliases}
+# the closed forms `export --design` names (the FLLs' aliases in jaxobs.registry): alias -> class (its rule, the
+# source line, is its ClosedForm.rule, evaluated when a design is exported)
+DESIGNS = {a: e.cls for e in REGISTRY.values() if e.signal == "grid" for a in e.aliases}
 
 
 RULES = {"euler": Euler, "tustin": Tustin, "ab3": AB3, "rk4": RK4}
@@ -104,7 +105,7 @@ def observer_from_design(name: str, **kw):
     """A closed-form design by name (``sogi-fll``, ``wpf``, ``wif``): its class's ``closed_form(**kw)``."""
     if name not in DESIGNS:
         raise ValueError(f"design must be one of {', '.join(DESIGNS)}, got {name!r}")
-    return DESIGNS[name][0].closed_form(**kw)
+    return DESIGNS[name].closed_form(**kw)
 
 
 def rebuild(obs, **kw):
