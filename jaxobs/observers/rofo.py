@@ -171,9 +171,10 @@ class ReducedOrderFluxObserver(AbstractDriveObserver):
         ts: Sample time, s.
         psi_floor: Floor of |ψ̂a| in the error signal's division, Wb (> 0).
         omega0: Another name of ``omega_init`` (the flux observers' job-file key); give one of the two.
+        rule: None only: the step is its own update (a job or an export that rebuilds a component passes it).
 
     Raises:
-        ValueError: A value out of its range, or both ``omega_init`` and ``omega0`` given.
+        ValueError: A value out of its range, both ``omega_init`` and ``omega0`` given, or a rule.
     """
 
     Rs: jax.Array
@@ -202,6 +203,9 @@ class ReducedOrderFluxObserver(AbstractDriveObserver):
     omega_init: jax.Array  # the speed estimate's start, rad/s (signed)
     ts: float = eqx.field(static=True)
     psi_floor: float = eqx.field(static=True)
+    # no discretization rule: the step is its own update (module doc: the hold equivalent, exact where stated);
+    # jobs and the export read ``rule`` of every component, and None says so (the export's "none")
+    rule: ClassVar[None] = None
 
     # bind() sets these.  The first three keep the drive observers' order (resistance, inductance, start speed:
     # tuning/export reads them so); the machine's Lq and ψf follow.
@@ -222,8 +226,14 @@ class ReducedOrderFluxObserver(AbstractDriveObserver):
         ts=1e-4,
         psi_floor=1e-4,
         omega0=None,
+        rule=None,
     ):
         name = "ReducedOrderFluxObserver"
+        if rule is not None:
+            raise ValueError(
+                f"{name}.rule must be None (its step is an exact hold-equivalent update, not a rule's "
+                f"integration), got {type(rule).__name__}"
+            )
         if omega0 is not None:
             if omega_init is not None:
                 raise ValueError(f"{name}: give the initial speed once, as omega_init (omega0 is the same field)")
