@@ -94,6 +94,22 @@ def test_registered_and_runs_on_salient_and_non_salient_machines(name):
     assert jaxobs.ReducedOrderFluxObserver is ReducedOrderFluxObserver
 
 
+def test_the_lab_drive_file_is_motulators_machine():
+    """docs/examples/ipmsm_2p2kw_lab.toml: the 2.2-kW machine of motulator's examples, 8 kHz, 540 V, the 2π·200 rad/s
+    current loop and 2π·4 rad/s speed loop it gives, the observer's 50 Hz speed estimate; salient, MTPA, no field
+    weakening (the rated point needs 95 % of u_dc/√3: the check warns)."""
+    m, f = LAB.machine, LAB
+    want = dict(Rs=3.6, Ld=0.036, Lq=0.051, psi_f=0.545, J=0.015, T_rated=14.0, n_rated=1500.0)
+    for k, v in want.items():
+        assert float(getattr(m, k)) == pytest.approx(v, rel=1e-12), k
+    assert m.p == 3 and f.ts == pytest.approx(125e-6, rel=1e-12) and float(f.drive.inverter.udc) == 540.0
+    assert f.derived["alpha_c"].value == pytest.approx(2 * math.pi * 200, rel=1e-12)
+    assert f.derived["alpha_s"].value == pytest.approx(2 * math.pi * 4, rel=1e-12)
+    assert f.derived["omega_est"].value == pytest.approx(2 * math.pi * ROFO_ALPHA_O_HZ, rel=1e-12)
+    assert f.derived["i_max"].value == pytest.approx(1.5 * math.sqrt(2) * 4.3, rel=1e-12)
+    assert f.derived["id_policy"].value == "mtpa" and [w.split(":")[0] for w in f.warnings] == ["inverter.u_dc"]
+
+
 # --- the drive-observer contract --------------------------------------------------------------------------------
 
 
