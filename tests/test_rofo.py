@@ -297,7 +297,7 @@ def test_a_reversal_through_zero_holds(bench, rpm, peak_deg):
 @pytest.mark.parametrize(
     "bench, rpm, torque, peak_deg",
     [
-        (_lab, 15.0, 7.0, 2.0),  # measured: peak 0.69°, dip to −64.7 r/min (motulator's observer: 0.72°, −68 r/min)
+        (_lab, 15.0, 7.0, 2.0),  # measured: peak 0.67°, dip to −64.7 r/min (motulator's observer: 0.72°, −68 r/min)
         (_bench, 20.0, 7.0, 3.0),  # 000's SPMSM, 1 % of rated speed, half its torque: measured 2.35°, −249 r/min
     ],
     ids=["lab_ipmsm", "spmsm000"],
