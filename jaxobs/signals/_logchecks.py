@@ -168,12 +168,14 @@ def _model_voltage(machine, th, ia, ib, ts):
     return ua, ub
 
 
-def check_timing(log, machine, cols):
-    """Warn when the voltage columns match the machine's model best one or two periods later: the controller's
-    references logged at t_k, declared as applied (a bias of ω_e·ts in every estimate).  On a clean log of
-    000's SPMSM the shift by one period raises the mean squared residual 5e5-fold (2.4e-5 → 12.7 V²); parameter
-    errors and dead time raise the unshifted residual, so the warning asks for the shifted one to be under half."""
-    err = np.zeros(4)
+def check_timing(log, layout, machine, cols):
+    """Warn when the voltage columns, as declared, match the machine's model best at another period: later
+    (the controller's references logged at t_k declared as applied, or a declared delay too short) or earlier
+    (a declared delay too long).  Each bias every estimate by ω_e·ts per period.  On a clean log of 000's SPMSM
+    the shift by one period raises the mean squared residual 5e5-fold (2.4e-5 → 12.7 V²); parameter errors and
+    dead time raise the unshifted residual, so the warning asks for the shifted one to be under half."""
+    shifts = (0, 1, 2, -1)  # periods by which the model is compared later than the voltages
+    err = np.zeros(len(shifts))
     for sl in _windows(log.n):
         th = np.asarray(log.theta_e[sl])
         ia, ib, ua, ub = (np.asarray(a[sl]) for a in (log.i_a, log.i_b, log.u_a, log.u_b))
@@ -181,15 +183,23 @@ def check_timing(log, machine, cols):
         n = ma.size - 3
         if n < 10:
             continue
-        for j, s in enumerate((0, 1, 2, -1)):
+        for j, s in enumerate(shifts):
             a = 1 if s < 0 else 0
             err[j] += np.mean(
                 (ua[a : a + n] - ma[a + s : a + s + n]) ** 2 + (ub[a : a + n] - mb[a + s : a + s + n]) ** 2
             )
     best = int(np.argmin(err))
-    if best in (1, 2) and err[best] < 0.5 * err[0]:
-        log.warnings.append(
-            f"recording {log.path!r}: columns {cols['voltage']!r} match the machine's model best {best} period(s) "
-            "later: references logged at t_k? (declare voltage_timing = 'reference', voltage_delay = "
-            f"{best}; as applied they bias every estimate by {best}·ω_e·ts)"
-        )
+    if best == 0 or not err[best] < 0.5 * err[0]:
+        return
+    s = shifts[best]
+    declared = layout.voltage_delay if layout.voltage_timing == "reference" else 0
+    delay = declared + s  # the delay that makes the model match best
+    if delay <= 0:
+        fix = "declare voltage_timing = 'applied'"
+    else:
+        fix = f"declare voltage_timing = 'reference', voltage_delay = {delay}"
+    where = f"{s} period(s) later" if s > 0 else f"{-s} period(s) earlier"
+    log.warnings.append(
+        f"recording {log.path!r}: columns {cols['voltage']!r} match the machine's model best {where} than "
+        f"declared ({fix}; as declared they bias every estimate by {abs(s)}·ω_e·ts)"
+    )
