@@ -31,8 +31,10 @@ from .observers import (
     AbstractFluxObserver,
     LPFFlux,
     PureIntegratorFlux,
+    ReducedOrderFluxObserver,
     SecondOrderSOIFO,
     gain_fields,
+    rofo,
 )
 
 __all__ = ["Registered", "REGISTRY", "registered", "closed_form_gains", "canonical_key", "KEY_ALIASES"]
@@ -170,6 +172,15 @@ def _leso_defaults(**gains):
     return dict(Rs=papers.IPMSM_002["Rs"], Lq=papers.IPMSM_002["Lq"], **gains, **_pll(papers.LESO_PLL_HZ))
 
 
+def _rofo_defaults() -> dict:
+    # the closed form (ReducedOrderFluxObserver.closed_form) at the default ts, in Python floats; the machine's
+    # values are placeholders a drive job binds (002's IPMSM, the entry's default machine)
+    k_theta, k_omega = rofo.speed_gains(rofo.ROFO_ALPHA_O_HZ, 1e-4)
+    machine = {k: papers.IPMSM_002[k] for k in ("Rs", "Ld", "Lq", "psi_f")}
+    gains = dict(c_sigma=rofo.ROFO_C_SIGMA, zeta_inf=rofo.ROFO_ZETA_INF, k_theta=k_theta, k_omega=k_omega)
+    return {**machine, **gains}
+
+
 _ENTRIES = (
     Registered(
         SOGIFLL,
@@ -258,6 +269,26 @@ _ENTRIES = (
         aliases=("faleso",),
         machines=_LESO_MACHINES,
         **_LESO_SUPPORT,
+    ),
+    # The reduced-order flux observer of Hinkkanen et al. 2018 (jaxobs.observers.rofo): a stator-flux observer in
+    # estimated rotor coordinates with both inductances, so it runs on salient and non-salient machines.  Its
+    # gains are dimensionless or in rad/s (c_sigma scales with the bound machine's Rs/L), so one design holds on
+    # any machine; the defaults are its closed form at the default ts.  No small-signal model of it is in
+    # jaxobs.linear (its linearised poles are in the module doc).  Dual three-phase: not derived here.
+    Registered(
+        ReducedOrderFluxObserver,
+        signal="drive",
+        defaults=_rofo_defaults(),
+        closed_form_source="Hinkkanen et al., IEEE TIA 54(6) 2018, pole placement (jaxobs.observers.rofo)",
+        closed_form_rule=(
+            "k1 = c_σ Rs(1/Ld + 1/Lq)/2 + ζ∞|ω̂|, c_σ = 1/2, ζ∞ = 0.2; kθ = 2α', kω = α'², "
+            "α' = (1 − e^(−α_o Ts))/Ts, α_o = 2π·50 (motulator 0.18 defaults)"
+        ),
+        machines=_LESO_MACHINES,
+        salient=True,
+        dual=False,
+        why_not_dual="its error dynamics are derived for a three-phase machine only",
+        aliases=("rofo",),
     ),
 )
 

@@ -59,7 +59,13 @@ LAYERS = [
     # observers: they estimate
     ("jaxobs.observers._cores", "jaxobs.observers._gains", "jaxobs.observers._rules"),
     ("jaxobs.observers.base",),  # its one bound check is _gains'
-    ("jaxobs.observers.sogi", "jaxobs.observers.fll", "jaxobs.observers.flux", "jaxobs.observers.leso"),
+    (
+        "jaxobs.observers.sogi",
+        "jaxobs.observers.fll",
+        "jaxobs.observers.flux",
+        "jaxobs.observers.leso",
+        "jaxobs.observers.rofo",
+    ),
     ("jaxobs.observers",),
     # the closed loop composes the drive's parts with a drive observer (its contract, observers.base)
     ("jaxobs.drive.loop",),

@@ -35,7 +35,7 @@ from jaxobs_tuning.cli_papers import CF_DESIGNS, CF_OPTIONS
 from jaxobs_tuning.job import COMPONENTS, parse_job
 
 # what is not a gain: the machine and start speed bind() sets, and the FLLs' nominal frequency
-NOT_GAINS = {"Rs", "L", "Lq", "omega_init", "omega0_pll", "omega_n"}
+NOT_GAINS = {"Rs", "L", "Ld", "Lq", "psi_f", "omega_init", "omega0_pll", "omega_n"}
 UNITS = {"1", "s-1", "s-2", "rad s-1", "rad2 s-2"}
 
 
@@ -49,7 +49,7 @@ def test_every_array_field_is_a_gain_with_metadata_or_named(name):
     assert set(getattr(cls, "bound_fields", ())) & set(gains) == set(), name  # FLLs bind nothing
     for g, info in gains.items():
         assert info.name == g and info.units in UNITS, (name, g, info.units)
-        assert info.role in ("sogi", "prefilter", "fll", "pll", "leso", "filter"), (name, g)
+        assert info.role in ("sogi", "prefilter", "fll", "pll", "leso", "filter", "flux"), (name, g)
         assert info.long_name and info.symbol and info.bounds[0] < info.bounds[1], (name, g)
 
 
@@ -64,6 +64,7 @@ def test_the_jobs_tunable_gains_are_the_fields_gains():
         "CLESO": {"omega0", "kp_pll", "ki_pll"},
         "GILESO": {"omega0", "K_r", "omega_c", "kp_pll", "ki_pll"},
         "FALESO": {"k1", "k2", "kp_pll", "ki_pll"},
+        "ReducedOrderFluxObserver": {"c_sigma", "zeta_inf", "k_theta", "k_omega"},
     }
     assert {n: set(c.gains) for n, c in COMPONENTS.items()} == want
     assert "PureIntegratorFlux" in REGISTRY and not REGISTRY["PureIntegratorFlux"].tunable
@@ -88,6 +89,7 @@ def _old_closed_forms(omega_n):
     pll_flux = dict(zip(("kp_pll", "ki_pll"), (float(g) for g in linear.pll_gains(2 * math.pi * papers.FLUX_PLL_HZ))))
     k1, k2, lam = linear.wif_symmetric_optimum(papers.WIF_B, papers.WIF_OMEGA_C, omega_n)
     K1, K2 = papers.SECOND_ORDER_SOIFO_K1, papers.SECOND_ORDER_SOIFO_K2
+    a_o = -math.expm1(-2 * math.pi * 50.0 * 1e-4) / 1e-4  # the matched pole of α_o = 2π·50 at ts = 1e-4 s
     return {
         "SOGIFLL": {"k": papers.SOGI_FLL_K, "lam": float(linear.sogi_fll_lambda(papers.SOGI_FLL_K, omega_n))},
         "SOGIFLLWPF": {"k1": papers.WPF_K1, "k2": papers.WPF_K2, "lam": float(linear.wpf_lambda(omega_n))},
@@ -103,6 +105,8 @@ def _old_closed_forms(omega_n):
             **pll_leso,
         },
         "FALESO": {"k1": papers.FALESO_K1, "k2": papers.FALESO_K2, **pll_leso},
+        # Hinkkanen et al. 2018's observer (jaxobs.observers.rofo): motulator's defaults, kθ = 2α', kω = α'²
+        "ReducedOrderFluxObserver": {"c_sigma": 0.5, "zeta_inf": 0.2, "k_theta": 2 * a_o, "k_omega": a_o * a_o},
     }
 
 

@@ -1,4 +1,5 @@
-"""Observers: the SOGI-FLL family, the SOGIs, the flux observers of 000 and the LESOs of 002, on one contract.
+"""Observers: the SOGI-FLL family, the SOGIs, the flux observers of 000, the LESOs of 002 and the reduced-order
+flux observer (Hinkkanen et al. 2018, :mod:`jaxobs.observers.rofo`), on one contract.
 
 :class:`AbstractObserver` is every observer; :class:`AbstractVectorFieldObserver` the ones given by a vector
 field (FLL family, SOGIs); :class:`AbstractDriveObserver` the drive observers (flux observers, LESOs,
@@ -49,6 +50,8 @@ from .leso import FALESO as FALESO
 from .leso import GILESO as GILESO
 from .leso import AbstractLESO as AbstractLESO
 from .leso import LESOOutput as LESOOutput
+from .rofo import ReducedOrderFluxObserver as ReducedOrderFluxObserver
+from .rofo import ROFOOutput as ROFOOutput
 from .sogi import SOGI as SOGI
 from .sogi import SOGI2 as SOGI2
 from .sogi import QSGOutput as QSGOutput

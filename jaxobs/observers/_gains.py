@@ -6,7 +6,7 @@ study's NetCDF variable, a tuning job's bounds and the C export's comments all r
 
 - ``units``: CF/UDUNITS, e.g. ``"1"``, ``"rad s-1"``, ``"rad2 s-2"``;
 - ``role``: the part of the observer the gain belongs to (``"sogi"``, ``"prefilter"``, ``"fll"``, ``"pll"``,
-  ``"leso"``, ``"filter"``);
+  ``"leso"``, ``"filter"``, ``"flux"``: the reduced-order flux observer's flux gain);
 - ``bounds``: the open interval the constructor accepts, (lower, upper);
 - ``long_name``: what it is, in words;
 - ``symbol``: the paper's symbol, with the paper ("001: λ").

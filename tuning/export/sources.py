@@ -86,9 +86,9 @@ def observer_from_result(path, *, gains: str = "tuned", notes: list | None = Non
         kw["ts"] = float(res["ts"])
     else:
         notes.append(f"result.json has no 'ts': the {name} default ts = {probe.ts:g} s is used")
-    if "rule" in res:
+    if res.get("rule") is not None:
         kw["rule"] = parse_rule(res["rule"], "result.json rule")
-    else:
+    elif probe.rule is not None:  # a component without a rule (its step is its own update) has none to read
         notes.append(f"result.json has no 'rule': the {name} default {type(probe.rule).__name__} is used")
     if info.signal == "drive" or res.get("loop") is not None:  # a drive job bound these per scenario
         # LESOs: Rs, Lq and the PLL's initial speed; flux observers: Rs, L and the FLL's or PLL's omega_init
