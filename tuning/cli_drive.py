@@ -1,7 +1,9 @@
 """``jaxobs drive check DRIVE.toml``: a drive file checked in full, and what follows from it.
 
 It prints the machine's speeds (base speed, the highest speed at u_dc with and without field weakening), its
-characteristic current and time constants, the controller's bandwidths and gains as derived (each with its
+characteristic current and time constants, a saturation map's (``[machine.saturation]``) no-load flux, its Ld and
+Lq at no load and at the rated current's MTPA point (which it prints) and the constants the controller assumes, the
+controller's bandwidths and gains as derived (each with its
 rule, ``*`` where the file set it), the sensors' and the I-f start-up's values, the lowest speed at which
 each observer family closes the speed loop, and the warnings.  A bad file: one line naming the key, exit 2
 (the command line's ``ValueError``).
@@ -16,6 +18,23 @@ from jaxobs.drive import read_drive
 
 _SECTIONS = (
     ("machine", ("kt", "i_char", "tau_d", "tau_q", "t_accel", "i_rated_point")),
+    (
+        "saturation map ([machine.saturation]; inductances incremental unless marked secant)",
+        (
+            "nominal_L",
+            "sat_psi_f",
+            "sat_Ld0",
+            "sat_Lq0",
+            "sat_mtpa_id",
+            "sat_mtpa_iq",
+            "sat_mtpa_torque",
+            "sat_Ld_rated",
+            "sat_Lq_rated",
+            "sat_Ldq_rated",
+            "sat_Ld_sec",
+            "sat_Lq_sec",
+        ),
+    ),
     (
         "speeds",
         (

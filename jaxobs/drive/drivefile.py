@@ -127,6 +127,7 @@ from .hardware import Inverter, Sensors
 from .latency import Latency, PeriodStart, PWMCentre
 from .loop import SETTLE_PERIODS, Drive
 from .machine import RPM, PMSMParams, QSaturation
+from .saturation import NOMINAL_RULES, check_inverse, map_summary, saturation_from_table
 from .weakening import VoltageFeedbackFW
 
 __all__ = [
@@ -482,6 +483,8 @@ def drive_from_table(raw: dict, name: str = "drive") -> DriveFile:
     Raises:
         ValueError: one line naming the key and its allowed range.
     """
+    full_raw = raw
+    raw, sat, sat_rec = _machine_map(raw)
     t = _tables(raw)
     if "dual" in raw:  # derived on one set carrying half the rotor, then the dual machine and drive on it
         half = halved(raw)
@@ -504,13 +507,18 @@ def drive_from_table(raw: dict, name: str = "drive") -> DriveFile:
         d[key] = Derived(value, unit, rule, given)
         return value
 
+    for k, v in sat_rec.items():
+        rec(k, *v)
+
     p = m["p"]
     if "q_sat_n" in m and "q_sat_current_a" not in m:
         raise ValueError("machine.q_sat_n: needs machine.q_sat_current_a (the saturation's current)")
     q_sat = QSaturation(m["q_sat_current_a"], m.get("q_sat_n", 2.0)) if "q_sat_current_a" in m else None
+    if q_sat is not None and sat is not None:
+        raise ValueError("machine.q_sat_current_a: give either it (q-axis only) or [machine.saturation], not both")
     machine = PMSMParams(
         m["Rs"], m["Ld"], m["Lq"], m["psi_f"], m["J"], p, B=m.get("B", 0.0), a5=m.get("a5", 0.0),
-        a7=m.get("a7", 0.0), T_rated=m["rated_torque_nm"], n_rated=m["rated_speed_rpm"], q_sat=q_sat,
+        a7=m.get("a7", 0.0), T_rated=m["rated_torque_nm"], n_rated=m["rated_speed_rpm"], q_sat=q_sat, sat=sat,
     )  # fmt: skip
     w_rated = p * m["rated_speed_rpm"] * RPM  # electrical, rad/s
     kt = 1.5 * p * m["psi_f"]
@@ -759,8 +767,73 @@ def drive_from_table(raw: dict, name: str = "drive") -> DriveFile:
         warnings=tuple(warn),
         description=str(raw.get("description", raw.get("name", name))),
         foc_kw=foc_kw,
-        table={k: raw[k] for k in DRIVE_FILE_KEYS if k in raw},
+        table={k: full_raw[k] for k in DRIVE_FILE_KEYS if k in full_raw},
     )
+
+
+# the flux map's inversion residual allowed, relative to the current: 1000 roundings of the working precision
+_INV_TOL = 1e3 * float(np.finfo(np.float32).eps)
+
+
+def _machine_map(raw: dict):
+    """A file's ``[machine.saturation]`` (:func:`jaxobs.drive.saturation.saturation_from_table`): the tables without
+    it, with ``[machine]``'s missing Ld, Lq, psi_f filled from the map by its ``nominal`` rule, the map (or None),
+    and what the check prints of it (name -> (value, unit, rule, given)).
+
+    ``nominal`` (the constants the controller and the observers assume): "rated_secant" (default; the secant
+    inductances (ψd − ψf)/i_d, ψq/i_q at the rated current's MTPA point on the map, which give the map's flux, so
+    its torque and voltage, at that point), "rated_incremental" (∂ψd/∂i_d, ∂ψq/∂i_q there: the current loop's
+    plant), "no_load" (the incremental ones at i = 0); ψf is the map's no-load flux in each."""
+    mt = raw.get("machine")
+    if not isinstance(mt, dict) or "saturation" not in mt:
+        return raw, None, {}
+    if "dual" in raw:
+        raise ValueError("machine.saturation: a dual drive ([dual]) has no saturation map; remove it")
+    tbl = mt["saturation"]
+    sat = saturation_from_table(tbl)
+    nominal = tbl.get("nominal", "rated_secant")
+    if nominal not in NOMINAL_RULES:
+        raise ValueError(f"machine.saturation.nominal must be one of {', '.join(map(repr, NOMINAL_RULES))}, got "
+                         f"{_show(nominal)}")  # fmt: skip
+    mt = {k: v for k, v in mt.items() if k != "saturation"}
+    keys = DRIVE_FILE_KEYS["machine"]
+    for k in ("p", "rated_current_a"):
+        if k not in mt:
+            raise ValueError(f"machine.{k}: missing (required)")
+        mt[k] = _value(mt, "machine", k, keys[k])
+    i_rated = _S2 * mt["rated_current_a"]
+    summ = map_summary(sat, mt["p"], i_rated)
+    if not all(math.isfinite(v) for v in summ.values()) or check_inverse(sat, 3.0 * i_rated) > _INV_TOL:
+        raise ValueError(
+            "machine.saturation: the map's flux cannot be found from the current up to 3 × the rated current "
+            "(Newton's method did not converge): check the coefficients' units (A, Vs)"
+        )
+    pick = {"rated_secant": ("Ld_sec", "Lq_sec"), "rated_incremental": ("Ld_inc", "Lq_inc"),
+            "no_load": ("Ld0", "Lq0")}[nominal]  # fmt: skip
+    fill = {"Ld": summ[pick[0]], "Lq": summ[pick[1]], "psi_f": summ["psi_f"]}
+    missing = [k for k in fill if k not in mt]
+    if not missing and "nominal" in tbl:
+        raise ValueError("machine.saturation.nominal: machine.Ld, Lq and psi_f are all given; remove nominal or them")
+    for k in missing:
+        mt[k] = fill[k]
+    rule = f"from the map ({nominal})"
+    out = {
+        "sat_psi_f": (summ["psi_f"], "Wb", "the map's ψd at i = 0"),
+        "sat_Ld0": (summ["Ld0"], "H", "∂ψd/∂i_d at i = 0"),
+        "sat_Lq0": (summ["Lq0"], "H", "∂ψq/∂i_q at i = 0"),
+        "sat_mtpa_id": (summ["mtpa_id"], "A", "the map's MTPA at √2 rated_current_a: i_d"),
+        "sat_mtpa_iq": (summ["mtpa_iq"], "A", "the map's MTPA at √2 rated_current_a: i_q"),
+        "sat_mtpa_torque": (summ["mtpa_torque"], "N·m", "the map's torque there, 1.5 p (ψd i_q − ψq i_d)"),
+        "sat_Ld_rated": (summ["Ld_inc"], "H", "∂ψd/∂i_d at the rated MTPA point"),
+        "sat_Lq_rated": (summ["Lq_inc"], "H", "∂ψq/∂i_q at the rated MTPA point"),
+        "sat_Ldq_rated": (summ["Ldq_inc"], "H", "∂ψd/∂i_q at the rated MTPA point (cross-saturation)"),
+        "sat_Ld_sec": (summ["Ld_sec"], "H", "(ψd − ψf)/i_d at the rated MTPA point"),
+        "sat_Lq_sec": (summ["Lq_sec"], "H", "ψq/i_q at the rated MTPA point"),
+        "nominal_L": (f"Ld {mt['Ld']:.5g} H, Lq {mt['Lq']:.5g} H, psi_f {mt['psi_f']:.5g} Wb", "",
+                      f"what the controller and observers assume: {'given' if not missing else rule}"
+                      + (f" ({', '.join(missing)})" if missing and len(missing) < 3 else "")),
+    }  # fmt: skip
+    return {**raw, "machine": mt}, sat, {k: (*v, False) for k, v in out.items()}
 
 
 def _lowest_speeds(p: int, alpha_s: float, schedule: float, w_est: float) -> dict:

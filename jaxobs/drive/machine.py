@@ -35,6 +35,16 @@ inductance dψq/di_q = Lq / (1 + (|i_q|/i_sat)^n)^(1 + 1/n) (always > 0, so the 
 current), the d equation's ωe ψq and the torque's reluctance term the apparent one; with ψq a function of
 i_q alone the co-energy torque is (3/2) p (ψd i_q − ψq i_d), the formula above with Lq(i_q).  ``Lq`` stays the
 unsaturated (small-current) value, the one an observer or FOC tuned on nameplate data assumes.
+
+Saturation with cross-saturation (``PMSMParams(sat=AlgebraicSaturation(...))``, :mod:`jaxobs.drive.saturation`,
+off by default): the machine's currents are the map i(ψ) of its flux linkages, and the plant's state is then
+x = [ψd, ψq, ωm, θe] (:func:`plant_vf`), integrated as
+
+    dψ_dq/dt = u_dq − Rs i(ψ) − jωe ψ − e_h,    e_h = jωe ψf (a5 e^{−j6θe} + a7 e^{j6θe})
+
+(the PM's fundamental flux is inside the map's ψd; the harmonics, if declared, add their EMF), with the
+co-energy torque Te = (3/2) p [Im(ψ* i) + ψf Re(j (h − 1) i*)].  ``Ld``, ``Lq`` and ``psi_f`` stay the nominal
+constants a controller or observer assumes; the plant uses the map alone.  ``q_sat`` and ``sat`` are exclusive.
 """
 
 from __future__ import annotations
@@ -48,6 +58,7 @@ import jax.numpy as jnp
 
 from .._trig import sincos
 from .._validate import check_nonnegative, check_positive, check_real
+from .saturation import AlgebraicSaturation
 
 __all__ = [
     "PMSMParams",
@@ -58,6 +69,8 @@ __all__ = [
     "torque",
     "bemf_dq",
     "bemf_ab",
+    "state_currents",
+    "mapped_torque",
 ]
 
 
@@ -163,6 +176,9 @@ class PMSMParams(eqx.Module):
         q_sat: The q-axis saturation (:class:`QSaturation`), or ``None`` (linear, Lq constant; a None field
             adds no leaf, so a machine without it is the same pytree, and computes the same numbers, as one
             built without this field).
+        sat: The saturation map with cross-saturation (:class:`~jaxobs.drive.saturation.AlgebraicSaturation`),
+            or ``None`` (the default: no extra leaf, the plant's state in currents).  With it the plant's state
+            is in flux linkages (module doc).
 
     Raises:
         ValueError: A value out of its range, naming the field.
@@ -182,12 +198,20 @@ class PMSMParams(eqx.Module):
     # q-axis saturation of the machine (None: linear, Lq constant; a None field adds no leaf, so a machine
     # without it is the same pytree, and computes the same numbers, as one built without this field)
     q_sat: QSaturation | None = None
+    # saturation map with cross-saturation (None: none, no leaf; else the plant's state is in flux linkages)
+    sat: AlgebraicSaturation | None = None
 
-    def __init__(self, Rs, Ld, Lq, psi_f, J, p, *, B=0.0, a5=0.0, a7=0.0, T_rated=1.0, n_rated=1000.0, q_sat=None):
+    def __init__(self, Rs, Ld, Lq, psi_f, J, p, *, B=0.0, a5=0.0, a7=0.0, T_rated=1.0, n_rated=1000.0, q_sat=None,
+                 sat=None):  # fmt: skip
         own = "PMSMParams"
         if q_sat is not None and not isinstance(q_sat, QSaturation):
             raise ValueError(f"{own}.q_sat must be a QSaturation or None, got {type(q_sat).__name__}")
+        if sat is not None and not isinstance(sat, AlgebraicSaturation):
+            raise ValueError(f"{own}.sat must be an AlgebraicSaturation or None, got {type(sat).__name__}")
+        if sat is not None and q_sat is not None:
+            raise ValueError(f"{own}.sat: give either q_sat (q-axis only) or sat (the map), not both")
         self.q_sat = q_sat
+        self.sat = sat
         self.Rs = check_nonnegative("Rs", Rs, own)
         self.Ld = check_positive("Ld", Ld, own)
         self.Lq = check_positive("Lq", Lq, own)
@@ -293,6 +317,42 @@ def bemf_ab(par: PMSMParams, omega_e, theta_e):
     return dq_to_ab(ed, eq, theta_e)
 
 
+def _torque_mapped(par: PMSMParams, psi_d, psi_q, i_d, i_q, h):
+    """Torque (N·m) of a mapped machine: (3/2) p [ψd i_q − ψq i_d + ψf Re(j (h − 1) i*)] (module doc)."""
+    re, im = h
+    harm = par.psi_f * ((re - 1.0) * i_q - im * i_d)
+    return 1.5 * par.p * (psi_d * i_q - psi_q * i_d + harm)
+
+
+def state_currents(par: PMSMParams, x):
+    """The currents of a plant state (:func:`plant_vf`'s x).
+
+    Args:
+        par: The machine.
+        x: The state: [i_d, i_q, ...], or [ψd, ψq, ...] where the machine has a map (``par.sat``).
+
+    Returns:
+        ``(i_d, i_q)``, A.
+    """
+    if par.sat is None:
+        return x[0], x[1]
+    return par.sat.current(x[0], x[1])
+
+
+def mapped_torque(par: PMSMParams, x):
+    """The torque of a mapped machine's plant state x = [ψd, ψq, ωm, θe].
+
+    Args:
+        par: The machine (``par.sat`` set).
+        x: The state.
+
+    Returns:
+        The torque, N·m.
+    """
+    i_d, i_q = par.sat.current(x[0], x[1])
+    return _torque_mapped(par, x[0], x[1], i_d, i_q, _harmonic_factor(par, sincos(x[3])))
+
+
 def torque(par: PMSMParams, i_d, i_q, theta_e):
     """Electromagnetic torque (see module doc).
 
@@ -313,7 +373,7 @@ def plant_vf(par: PMSMParams, x, u_ab, t_load, sc=None):
 
     Args:
         par: The machine.
-        x: The state [i_d, i_q, ωm, θe].
+        x: The state [i_d, i_q, ωm, θe]; [ψd, ψq, ωm, θe] where the machine has a map (``par.sat``).
         u_ab: The stationary-frame voltage ``(u_α, u_β)``, V.
         t_load: The load torque, N·m.
         sc: ``(sin θe, cos θe)`` when the caller has them already (:func:`jaxobs.drive.plant.plant_field`),
@@ -322,11 +382,22 @@ def plant_vf(par: PMSMParams, x, u_ab, t_load, sc=None):
     Returns:
         dx/dt.
     """
-    i_d, i_q, w_m, th = x[0], x[1], x[2], x[3]
+    w_m, th = x[2], x[3]
     w_e = par.p * w_m
     s, c = sincos(th) if sc is None else sc
     u_d, u_q = rotate(u_ab[0], u_ab[1], -s, c)
     h = _harmonic_factor(par, (s, c))  # one for both the BEMF and the torque
+    if par.sat is not None:  # the state is the flux linkage (module doc)
+        psi_d, psi_q = x[0], x[1]
+        i_d, i_q = par.sat.current(psi_d, psi_q)
+        re, im = h
+        k = w_e * par.psi_f  # the harmonics' EMF, e_h = j ωe ψf (h − 1)
+        dpsi_d = u_d - par.Rs * i_d + w_e * psi_q + k * im
+        dpsi_q = u_q - par.Rs * i_q - w_e * psi_d - k * (re - 1.0)
+        te = _torque_mapped(par, psi_d, psi_q, i_d, i_q, h)
+        dw = (te - t_load - par.B * w_m) / par.J
+        return jnp.stack([dpsi_d, dpsi_q, dw, w_e])
+    i_d, i_q = x[0], x[1]
     e_d, e_q = _bemf_dq(par, w_e, h)
     di_d = (u_d - par.Rs * i_d + w_e * lq_apparent(par, i_q) * i_q - e_d) / par.Ld
     di_q = (u_q - par.Rs * i_q - w_e * par.Ld * i_d - e_q) / lq_incremental(par, i_q)

@@ -12,7 +12,11 @@ added inside the vector field) and the load torque at t_k.
 The vector field :meth:`PMSM.field` (:func:`plant_field`) is the same function
 ``diffrax.diffeqsolve`` runs as the high-accuracy reference (tests/test_drive.py).
 State x = [i_d (A), i_q (A), ω_m (rad/s, mechanical), θ_e (rad, electrical)];
-θ_e is wrapped to (−π, π] after every period.
+θ_e is wrapped to (−π, π] after every period.  A machine with a saturation map (``PMSMParams.sat``,
+:mod:`jaxobs.drive.saturation`) is integrated in its flux linkages instead, x = [ψd (Vs), ψq (Vs), ω_m, θ_e]:
+its map gives the current as an explicit function of the flux, so the vector field needs no inversion; the
+outputs are the currents as before, and :meth:`PMSM.init` starts from the flux of the operating point's
+currents (the map inverted by Newton's method, once).
 """
 
 from __future__ import annotations
@@ -29,7 +33,7 @@ from .._trig import sincos
 from .._validate import check_nonnegative, check_sample_time
 from .component import AbstractComponent
 from .hardware import Inverter
-from .machine import PMSMParams, dq_to_ab, plant_vf, rotate, torque
+from .machine import PMSMParams, dq_to_ab, mapped_torque, plant_vf, rotate, state_currents, torque
 
 __all__ = ["PMSM", "PlantInput", "PlantOutput", "PlantState", "plant_field"]
 
@@ -48,7 +52,7 @@ def plant_field(par: PMSMParams, inverter: Inverter, dead_time, x, inp):
         dx/dt.
     """
     sc = sincos(x[3])  # one sine and cosine of θe for the currents' and the voltage's transforms
-    i_a, i_b = rotate(x[0], x[1], *sc)
+    i_a, i_b = rotate(*state_currents(par, x), *sc)
     du_a, du_b = inverter.dead_time_error(dead_time, i_a, i_b)
     return plant_vf(par, x, (inp[0] + du_a, inp[1] + du_b), inp[2], sc=sc)
 
@@ -159,10 +163,16 @@ class PMSM(AbstractComponent):
         """
         dtype = jnp.result_type(self.par.Rs, float)
         vals = (0.0, 0.0, 0.0, 0.0) if op is None else (op.i_d, op.i_q, op.omega_m, op.theta_e)
+        if self.par.sat is not None:  # the state is the flux linkage of the operating point's currents
+            vals = (*self.par.sat.flux(vals[0], vals[1]), *vals[2:])
         x0 = jnp.stack([jnp.asarray(v, dtype) for v in vals])
         return PlantState(x=x0, rule=self.rule.init(self.field, x0, None))
 
     def output(self, x) -> PlantOutput:
+        if self.par.sat is not None:
+            i_d, i_q = state_currents(self.par, x)
+            i_a, i_b = dq_to_ab(i_d, i_q, x[3])
+            return PlantOutput(i_d, i_q, x[2], x[3], i_a, i_b, mapped_torque(self.par, x))
         i_d, i_q, w_m, th = x[0], x[1], x[2], x[3]
         i_a, i_b = dq_to_ab(i_d, i_q, th)
         return PlantOutput(i_d, i_q, w_m, th, i_a, i_b, torque(self.par, i_d, i_q, th))

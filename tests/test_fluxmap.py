@@ -1,0 +1,173 @@
+"""Saturation with cross-saturation (jaxobs.drive.saturation): the algebraic current map of Hinkkanen et al. 2017
+with Lelli et al. 2024's PM bridge, its inverse, the plant integrated in the flux linkages, gradients against
+finite differences, the drive file's [machine.saturation] and its one-line refusals."""
+
+from pathlib import Path
+from types import SimpleNamespace
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from jaxobs import drive as D
+from jaxobs.drive.drivefile import drive_from_table
+from jaxobs.drive.plant import PlantInput
+from jaxobs.drive.saturation import AlgebraicSaturation, check_inverse, map_mtpa, map_summary
+from jaxobs.safetoml import read_toml
+
+EXAMPLE = Path(__file__).resolve().parent.parent / "docs" / "examples" / "pmsyrm_5p6kw_sat.toml"
+# motulator's 5.6-kW PM-SyRM example map (docs/examples/pmsyrm_5p6kw_sat.toml)
+SAT = AlgebraicSaturation(3.96, 28.5, 4, 5.89, 2.67, 6, 41.5, 1, 1, psi_n=0.804, a_b=81.75, a_bp=1, W=2, k_q=0.1)
+I_RATED = 8.8 * np.sqrt(2)
+
+
+def _machine(sat=SAT, **kw):
+    return D.PMSMParams(0.63, 0.0214, 0.102, 0.4767, 0.05, 2, T_rated=29.7, n_rated=1800.0, sat=sat, **kw)
+
+
+def test_current_map_is_the_published_one_written_out():
+    """The map at one flux, against Hinkkanen et al. 2017's and Lelli et al. 2024's equations written here by hand."""
+    pd, pq = 0.6, -0.7
+    g_d = 3.96 + 28.5 * pd**4 + 41.5 / 3 * abs(pd) * abs(pq) ** 3
+    g_q = 5.89 + 2.67 * pq**6 + 41.5 / 3 * abs(pd) ** 3 * abs(pq)
+    pb = pd - 0.804
+    s2 = pb * pb + 0.1 * pq * pq
+    g_b = 81.75 * s2 / (1 + s2)
+    i_d, i_q = SAT.current(pd, pq)
+    np.testing.assert_allclose([i_d, i_q], [g_d * pd + g_b * pb, g_q * pq + 0.1 * g_b * pq], rtol=1e-13)
+
+
+def test_flux_map_inverts_the_current_map_and_its_inductances_are_symmetric():
+    """ψ(i) within rounding of the root up to 3 × the rated current; ∂ψ/∂i symmetric (a magnetic energy), Lq falls
+    with i_q (saturation) and the no-load flux is the root of i_d(ψd, 0)."""
+    assert check_inverse(SAT, 3 * I_RATED) < 1e-12
+    psi_f = float(SAT.no_load_flux())
+    assert abs(float(SAT.current(psi_f, 0.0)[0])) < 1e-12
+    lr = np.asarray(SAT.inductance(-8.7, 8.9))
+    assert lr[0, 1] == pytest.approx(lr[1, 0], rel=1e-10) and abs(lr[0, 1]) > 1e-4  # cross-saturation present
+    l0 = np.asarray(SAT.inductance(0.0, 0.0))
+    assert lr[1, 1] < 0.5 * l0[1, 1]  # q saturates: down more than half at the rated current
+
+
+def test_flux_map_gradient_matches_finite_differences():
+    """d ψ(i)/d(i, a_q0): the last-Newton-step derivative is the implicit function's."""
+
+    def f(v):
+        sat = eqx.tree_at(lambda s: s.a_q0, SAT, v[2])
+        pd, pq = sat.flux(v[0], v[1])
+        return pd + 2.0 * pq
+
+    v = jnp.array([-5.0, 11.0, 5.89])
+    g = np.asarray(jax.grad(f)(v))
+    h = 1e-6
+    fd = [(f(v.at[k].add(h)) - f(v.at[k].add(-h))) / (2 * h) for k in range(3)]
+    np.testing.assert_allclose(g, fd, rtol=1e-6)
+
+
+def test_plant_field_gradient_matches_finite_differences():
+    """The mapped plant's vector field is differentiable in its state and in the map's coefficients."""
+    par = _machine()
+    u = (120.0, -80.0)
+
+    def f(v):
+        p2 = eqx.tree_at(lambda m: (m.sat.a_dd, m.sat.a_dq), par, (v[4], v[5]))
+        return jnp.sum(D.plant_vf(p2, v[:4], u, 3.0) * jnp.array([1.0, 0.7, 0.01, 0.0]))
+
+    v = jnp.array([0.55, 0.6, 100.0, 0.4, 28.5, 41.5])
+    g = np.asarray(jax.grad(f)(v))
+    h = 1e-6
+    fd = np.array([(f(v.at[k].add(h)) - f(v.at[k].add(-h))) / (2 * h) for k in range(6)])
+    np.testing.assert_allclose(g, fd, rtol=1e-6, atol=1e-9)
+
+
+def test_linear_map_gives_the_constant_inductance_plant():
+    """A map with only a_d0 = 1/Ld, a_q0 = 1/Lq (a linear SyRM) integrated in its fluxes follows the current-state
+    plant of the same Ld, Lq with a vanishing ψf: the state conversions, outputs and initial state are wired right."""
+    ld, lq = 0.02, 0.05
+    lin = AlgebraicSaturation(1 / ld, 0.0, 0, 1 / lq, 0.0, 0)
+    kw = dict(T_rated=10.0, n_rated=1500.0)
+    mapped = D.PMSMParams(0.5, ld, lq, 1e-30, 0.01, 2, sat=lin, **kw)
+    plain = D.PMSMParams(0.5, ld, lq, 1e-30, 0.01, 2, **kw)
+    op = SimpleNamespace(i_d=-2.0, i_q=4.0, omega_m=50.0, theta_e=0.3)  # what PMSM.init reads of an OperatingPoint
+    outs = []
+    for par in (mapped, plain):
+        plant = D.PMSM(par, ts=1e-4, n_sub=4)
+        s = plant.init(op)
+        u = PlantInput(jnp.asarray(60.0), jnp.asarray(-40.0), jnp.asarray(0.5))
+        rows = []
+        for _ in range(50):
+            s, o = plant.step(s, u)
+            rows.append([o.i_d, o.i_q, o.omega_m, o.theta_e, o.torque])
+        outs.append(np.asarray(rows))
+    np.testing.assert_allclose(outs[0], outs[1], rtol=1e-9, atol=1e-11)
+    assert float(outs[0][0, 0]) == pytest.approx(-2.0, rel=1e-12)
+
+
+def test_no_map_keeps_the_pytree():
+    """A machine without a map has no extra leaf (the constant-inductance plant's pytree, so its numbers)."""
+    par = D.PMSMParams(0.5, 0.02, 0.05, 0.1, 0.01, 2)
+    assert par.sat is None and len(jax.tree_util.tree_leaves(par)) == 10
+
+
+def test_map_mtpa_is_the_torque_peak():
+    """The map's MTPA current angle gives more torque than its neighbours at the same |i|."""
+    i_d, i_q, te = map_mtpa(SAT, 2, I_RATED)
+    assert np.hypot(i_d, i_q) == pytest.approx(I_RATED, rel=1e-12)
+    b = np.arctan2(i_q, i_d)
+    for db in (-0.02, 0.02):
+        other = float(D.saturation.map_torque(SAT, 2, I_RATED * np.cos(b + db), I_RATED * np.sin(b + db)))
+        assert other < te
+    s = map_summary(SAT, 2, I_RATED)
+    assert s["Ld_sec"] * i_d + s["psi_f"] == pytest.approx(float(SAT.flux(i_d, i_q)[0]), rel=1e-12)
+
+
+def _raw():
+    raw, _ = read_toml(EXAMPLE, "drive file")
+    return raw
+
+
+def test_example_drive_file_fills_the_nominal_constants_from_the_map():
+    f = drive_from_table(_raw(), "x")
+    s = map_summary(f.machine.sat, 2, I_RATED)
+    assert float(f.machine.Ld) == pytest.approx(s["Ld_sec"], rel=1e-12)
+    assert float(f.machine.Lq) == pytest.approx(s["Lq_sec"], rel=1e-12)
+    assert float(f.machine.psi_f) == pytest.approx(s["psi_f"], rel=1e-12)
+    assert "sat_Lq_rated" in f.derived and f.derived["sat_Lq_rated"].value < f.derived["sat_Lq0"].value
+    assert f.table["machine"]["saturation"]["a_d0"] == 3.96  # the table a job keeps holds the map
+
+
+@pytest.mark.parametrize(
+    ("edit", "key"),
+    [
+        (lambda s: s.update(a_d0=-1.0), "machine.saturation.a_d0"),
+        (lambda s: s.update(a_qq=float("nan")), "machine.saturation.a_qq"),
+        (lambda s: s.update(S="4"), "machine.saturation.S"),
+        (lambda s: s.update(W=1.0), "machine.saturation.W"),
+        (lambda s: s.update(psi_d_table=[1.0]), "machine.saturation.psi_d_table"),
+        (lambda s: s.update(model="table"), "machine.saturation.model"),
+        (lambda s: s.update(nominal="rated"), "machine.saturation.nominal"),
+        (lambda s: s.update(psi_n=0.0), "machine.saturation.psi_n"),
+        (lambda s: s.pop("a_q0"), "machine.saturation.a_q0"),
+    ],
+)
+def test_bad_maps_are_one_line_errors_naming_the_key(edit, key):
+    raw = _raw()
+    edit(raw["machine"]["saturation"])
+    with pytest.raises(ValueError, match=key.replace(".", r"\.")) as e:
+        drive_from_table(raw, "x")
+    assert "\n" not in str(e.value)
+
+
+def test_saturation_and_q_saturation_are_exclusive_and_nominal_needs_a_missing_constant():
+    raw = _raw()
+    raw["machine"]["q_sat_current_a"] = 20.0
+    with pytest.raises(ValueError, match=r"machine\.q_sat_current_a"):
+        drive_from_table(raw, "x")
+    raw = _raw()
+    raw["machine"].update(Ld=0.02, Lq=0.1, psi_f=0.48)
+    with pytest.raises(ValueError, match=r"machine\.saturation\.nominal"):
+        drive_from_table(raw, "x")
+    with pytest.raises(ValueError, match="sat"):
+        _machine(q_sat=D.QSaturation(20.0))
