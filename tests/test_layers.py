@@ -42,7 +42,7 @@ LAYERS = [
         "jaxobs.quantities",
     ),
     # integration rules (and check_rule)
-    ("jaxobs._discretize", "jaxobs.safetoml", "jaxobs.signals._base"),
+    ("jaxobs._discretize", "jaxobs.safetoml", "jaxobs.signals._base", "jaxobs.drive.saturation"),
     # signals and plant: they produce the measurements
     (
         "jaxobs.signals._waveforms",
