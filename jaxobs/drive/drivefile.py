@@ -27,6 +27,23 @@ The file (SI units, or the unit in the key's name; ``[machine]``'s keys from ``p
     a7 = 0.0
     q_sat_current_a = 20.0     # q-axis saturation (QSaturation): the current at which Lq has fallen to 2^(−1/n)
     q_sat_n = 2.0
+    [machine.saturation]       # a saturation map with cross-saturation (jaxobs.drive.saturation): the plant uses
+    model = "algebraic"        # it; Hinkkanen et al. 2017's current map i(ψ) (+ Lelli et al. 2024's PM bridge)
+    nominal = "rated_secant"   # how [machine]'s omitted Ld, Lq, psi_f follow from the map: "rated_secant",
+    a_d0 = 3.96                # "rated_incremental" (at the rated current's MTPA point) or "no_load"
+    a_dd = 28.5                # A/Vs^(S+1); required: a_d0, a_dd, S, a_q0, a_qq, T (A and Vs throughout)
+    S = 4.0
+    a_q0 = 5.89
+    a_qq = 2.67
+    T = 6.0
+    a_dq = 41.5                # cross-saturation (default 0), exponents U = 1, V = 0 by default
+    U = 1.0
+    V = 1.0
+    psi_n = 0.804              # the PM bridge (default none: a SyRM): ψn (Vs), a_b, a_bp, W = 2, k_q
+    a_b = 81.75
+    a_bp = 1.0
+    W = 2.0
+    k_q = 0.1
     [inverter]
     u_dc = 320.0               # V
     f_sample_hz = 16000.0      # control and PWM period = 1/f_sample_hz
@@ -103,6 +120,11 @@ Derived defaults (each recorded in :attr:`DriveFile.derived` with its rule):
   PIs get k_p = α_c L̂ls, k_i = α_c R̂s.  The dual loop runs the default timing and no q-axis saturation: a file
   that asks for either is refused.  ``jaxobs envelope`` and ``jaxobs drive check`` take a dual file; the tuning
   and study commands refuse it in one line.
+- **A saturation map** (``[machine.saturation]``): the plant runs on the map (its state in flux linkages,
+  :mod:`jaxobs.drive.saturation`); the controller, the observers and every rule above use ``[machine]``'s Ld, Lq,
+  psi_f, where omitted the map's by the ``nominal`` rule.  The check prints the map's no-load flux, its Ld and Lq at
+  no load and at the rated current's MTPA point on the map, and that point; a map whose inverse ψ(i) does not
+  converge up to 3 × the rated current is refused.
 - **Sensors**: an ADC of b bits over ±R A adds its quantization as white noise of σ = (2R/2^b)/√12
   (Widrow's model, valid when the signal spans many steps), in quadrature with ``i_noise_a``; the encoder
   (ideal in the loop) gives 2π/(4 N) rad mechanical per edge and a speed step of that per speed-loop period.

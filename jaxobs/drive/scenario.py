@@ -377,6 +377,13 @@ DRIVE_AXES: dict[str, Axis] = {
         Axis("dLq", "1", (-0.95, 10.0), "relative error of the assumed q-axis inductance Lq"),
         Axis("dpsi", "1", (-0.95, 10.0), "relative error of the assumed PM flux linkage"),
         Axis("dJ", "1", (-0.95, 100.0), "relative change of the true inertia (controller: nominal)"),
+        Axis(
+            "dsat",
+            "1",
+            (-1.0, 10.0),
+            "relative change of the true machine's saturation (its map's a_dd, a_qq, a_dq; controller and "
+            "observers: the nominal constants); a machine with a saturation map only",
+        ),
         Axis("i_noise", "A", (0.0, 1e3), "current-sensor noise (standard deviation)"),
         Axis("u_noise", "V", (0.0, 1e4), "voltage-sensor noise (standard deviation)"),
         Axis("dead_time", "s", (0.0, 1e-4), "inverter dead time"),
@@ -474,6 +481,14 @@ def scenario_batch(
         est = eqx.tree_at(lambda p: p.psi_f, est, par.psi_f * (1 + col("dpsi")))
     if "dJ" in cols:  # the true inertia; the controller's stays nominal
         par = eqx.tree_at(lambda p: p.J, par, par.J * (1 + col("dJ")))
+    if "dsat" in cols:  # the true machine saturates more (or less: −1 leaves the map's unsaturated part)
+        if par.sat is None:
+            raise ValueError("grid axis dsat needs a machine with a saturation map ([machine.saturation])")
+        k = 1 + col("dsat")
+        sat = par.sat
+        par = eqx.tree_at(
+            lambda p: (p.sat.a_dd, p.sat.a_qq, p.sat.a_dq), par, (sat.a_dd * k, sat.a_qq * k, sat.a_dq * k)
+        )
     sc = eqx.tree_at(lambda s: (s.par, s.est_par), sc, (par, est))
     sens = sc.sensors
     for name in ("i_noise", "u_noise"):
