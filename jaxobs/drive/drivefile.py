@@ -492,12 +492,13 @@ def _rpm(w_e: float, p: int) -> float:
     return w_e / p / RPM
 
 
-def drive_from_table(raw: dict, name: str = "drive") -> DriveFile:
+def drive_from_table(raw: dict, name: str = "drive", base=None) -> DriveFile:
     """A :class:`DriveFile` from a parsed drive file's table (module doc).
 
     Args:
         raw: the file's tables (``tomllib`` output).
         name: the label when the table has no ``name``.
+        base: the folder a ``[machine.saturation]`` CSV name is relative to (the file's; None: the working one).
 
     Returns:
         The checked drive file.
@@ -506,7 +507,7 @@ def drive_from_table(raw: dict, name: str = "drive") -> DriveFile:
         ValueError: one line naming the key and its allowed range.
     """
     full_raw = raw
-    raw, sat, sat_rec = _machine_map(raw)
+    raw, sat, sat_rec = _machine_map(raw, base)
     t = _tables(raw)
     if "dual" in raw:  # derived on one set carrying half the rotor, then the dual machine and drive on it
         half = halved(raw)
@@ -797,7 +798,7 @@ def drive_from_table(raw: dict, name: str = "drive") -> DriveFile:
 _INV_TOL = 1e3 * float(np.finfo(np.float32).eps)
 
 
-def _machine_map(raw: dict):
+def _machine_map(raw: dict, base=None):
     """A file's ``[machine.saturation]`` (:func:`jaxobs.drive.saturation.saturation_from_table`): the tables without
     it, with ``[machine]``'s missing Ld, Lq, psi_f filled from the map by its ``nominal`` rule, the map (or None),
     and what the check prints of it (name -> (value, unit, rule, given)).
@@ -812,7 +813,7 @@ def _machine_map(raw: dict):
     if "dual" in raw:
         raise ValueError("machine.saturation: a dual drive ([dual]) has no saturation map; remove it")
     tbl = mt["saturation"]
-    sat = saturation_from_table(tbl)
+    sat = saturation_from_table(tbl, base)
     nominal = tbl.get("nominal", "rated_secant")
     if nominal not in NOMINAL_RULES:
         raise ValueError(f"machine.saturation.nominal must be one of {', '.join(map(repr, NOMINAL_RULES))}, got "
@@ -825,7 +826,8 @@ def _machine_map(raw: dict):
         mt[k] = _value(mt, "machine", k, keys[k])
     i_rated = _S2 * mt["rated_current_a"]
     summ = map_summary(sat, mt["p"], i_rated)
-    if not all(math.isfinite(v) for v in summ.values()) or check_inverse(sat, 3.0 * i_rated) > _INV_TOL:
+    bad_inverse = sat.state_is_flux and check_inverse(sat, 3.0 * i_rated) > _INV_TOL
+    if not all(math.isfinite(v) for v in summ.values()) or bad_inverse:
         raise ValueError(
             "machine.saturation: the map's flux cannot be found from the current up to 3 × the rated current "
             "(Newton's method did not converge): check the coefficients' units (A, Vs)"
@@ -899,7 +901,7 @@ def read_drive(path) -> DriveFile:
         raw, _ = read_toml(path, "drive file")
     except TomlFieldError as e:
         raise ValueError(str(e)) from None
-    return drive_from_table(raw, Path(path).stem)
+    return drive_from_table(raw, Path(path).stem, Path(path).parent)
 
 
 def load_drive(path) -> tuple[PMSMParams, Drive]:

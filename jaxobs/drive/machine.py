@@ -45,6 +45,9 @@ x = [ψd, ψq, ωm, θe] (:func:`plant_vf`), integrated as
 (the PM's fundamental flux is inside the map's ψd; the harmonics, if declared, add their EMF), with the
 co-energy torque Te = (3/2) p [Im(ψ* i) + ψf Re(j (h − 1) i*)].  ``Ld``, ``Lq`` and ``psi_f`` stay the nominal
 constants a controller or observer assumes; the plant uses the map alone.  ``q_sat`` and ``sat`` are exclusive.
+A map given as tables (``sat=FluxTable(...)``: ψ(i) interpolated bicubically) keeps the state in currents,
+di/dt = L(i)⁻¹ (u − Rs i − jωe ψ(i) − e_h) with L = ∂ψ/∂i the interpolant's incremental inductance matrix: the
+table gives ψ and L explicitly, so either way the vector field needs no inversion.
 """
 
 from __future__ import annotations
@@ -58,7 +61,7 @@ import jax.numpy as jnp
 
 from .._trig import sincos
 from .._validate import check_nonnegative, check_positive, check_real
-from .saturation import AlgebraicSaturation
+from .saturation import AlgebraicSaturation, FluxTable
 
 __all__ = [
     "PMSMParams",
@@ -199,15 +202,15 @@ class PMSMParams(eqx.Module):
     # without it is the same pytree, and computes the same numbers, as one built without this field)
     q_sat: QSaturation | None = None
     # saturation map with cross-saturation (None: none, no leaf; else the plant's state is in flux linkages)
-    sat: AlgebraicSaturation | None = None
+    sat: AlgebraicSaturation | FluxTable | None = None
 
     def __init__(self, Rs, Ld, Lq, psi_f, J, p, *, B=0.0, a5=0.0, a7=0.0, T_rated=1.0, n_rated=1000.0, q_sat=None,
                  sat=None):  # fmt: skip
         own = "PMSMParams"
         if q_sat is not None and not isinstance(q_sat, QSaturation):
             raise ValueError(f"{own}.q_sat must be a QSaturation or None, got {type(q_sat).__name__}")
-        if sat is not None and not isinstance(sat, AlgebraicSaturation):
-            raise ValueError(f"{own}.sat must be an AlgebraicSaturation or None, got {type(sat).__name__}")
+        if sat is not None and not isinstance(sat, (AlgebraicSaturation, FluxTable)):
+            raise ValueError(f"{own}.sat must be an AlgebraicSaturation, a FluxTable or None, got {type(sat).__name__}")
         if sat is not None and q_sat is not None:
             raise ValueError(f"{own}.sat: give either q_sat (q-axis only) or sat (the map), not both")
         self.q_sat = q_sat
@@ -334,7 +337,7 @@ def state_currents(par: PMSMParams, x):
     Returns:
         ``(i_d, i_q)``, A.
     """
-    if par.sat is None:
+    if par.sat is None or not par.sat.state_is_flux:
         return x[0], x[1]
     return par.sat.current(x[0], x[1])
 
@@ -349,8 +352,11 @@ def mapped_torque(par: PMSMParams, x):
     Returns:
         The torque, N·m.
     """
+    h = _harmonic_factor(par, sincos(x[3]))
+    if not par.sat.state_is_flux:  # a table: the state is the current
+        return _torque_mapped(par, *par.sat.flux(x[0], x[1]), x[0], x[1], h)
     i_d, i_q = par.sat.current(x[0], x[1])
-    return _torque_mapped(par, x[0], x[1], i_d, i_q, _harmonic_factor(par, sincos(x[3])))
+    return _torque_mapped(par, x[0], x[1], i_d, i_q, h)
 
 
 def torque(par: PMSMParams, i_d, i_q, theta_e):
@@ -387,6 +393,20 @@ def plant_vf(par: PMSMParams, x, u_ab, t_load, sc=None):
     s, c = sincos(th) if sc is None else sc
     u_d, u_q = rotate(u_ab[0], u_ab[1], -s, c)
     h = _harmonic_factor(par, (s, c))  # one for both the BEMF and the torque
+    if par.sat is not None and not par.sat.state_is_flux:  # a table ψ(i): the state is the current (module doc)
+        i_d, i_q = x[0], x[1]
+        psi_d, psi_q = par.sat.flux(i_d, i_q)
+        ell = par.sat.inductance(i_d, i_q)
+        re, im = h
+        k = w_e * par.psi_f
+        v_d = u_d - par.Rs * i_d + w_e * psi_q + k * im
+        v_q = u_q - par.Rs * i_q - w_e * psi_d - k * (re - 1.0)
+        det = ell[0, 0] * ell[1, 1] - ell[0, 1] * ell[1, 0]
+        di_d = (ell[1, 1] * v_d - ell[0, 1] * v_q) / det
+        di_q = (-ell[1, 0] * v_d + ell[0, 0] * v_q) / det
+        te = _torque_mapped(par, psi_d, psi_q, i_d, i_q, h)
+        dw = (te - t_load - par.B * w_m) / par.J
+        return jnp.stack([di_d, di_q, dw, w_e])
     if par.sat is not None:  # the state is the flux linkage (module doc)
         psi_d, psi_q = x[0], x[1]
         i_d, i_q = par.sat.current(psi_d, psi_q)

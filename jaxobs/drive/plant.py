@@ -12,11 +12,12 @@ added inside the vector field) and the load torque at t_k.
 The vector field :meth:`PMSM.field` (:func:`plant_field`) is the same function
 ``diffrax.diffeqsolve`` runs as the high-accuracy reference (tests/test_drive.py).
 State x = [i_d (A), i_q (A), ω_m (rad/s, mechanical), θ_e (rad, electrical)];
-θ_e is wrapped to (−π, π] after every period.  A machine with a saturation map (``PMSMParams.sat``,
+θ_e is wrapped to (−π, π] after every period.  A machine with an algebraic saturation map (``PMSMParams.sat``,
 :mod:`jaxobs.drive.saturation`) is integrated in its flux linkages instead, x = [ψd (Vs), ψq (Vs), ω_m, θ_e]:
 its map gives the current as an explicit function of the flux, so the vector field needs no inversion; the
 outputs are the currents as before, and :meth:`PMSM.init` starts from the flux of the operating point's
-currents (the map inverted by Newton's method, once).
+currents (the map inverted by Newton's method, once).  A map given as tables (``FluxTable``) keeps the
+state in currents (:mod:`jaxobs.drive.machine`).
 """
 
 from __future__ import annotations
@@ -163,13 +164,13 @@ class PMSM(AbstractComponent):
         """
         dtype = jnp.result_type(self.par.Rs, float)
         vals = (0.0, 0.0, 0.0, 0.0) if op is None else (op.i_d, op.i_q, op.omega_m, op.theta_e)
-        if self.par.sat is not None:  # the state is the flux linkage of the operating point's currents
+        if self.par.sat is not None and self.par.sat.state_is_flux:  # the flux linkage of the op's currents
             vals = (*self.par.sat.flux(vals[0], vals[1]), *vals[2:])
         x0 = jnp.stack([jnp.asarray(v, dtype) for v in vals])
         return PlantState(x=x0, rule=self.rule.init(self.field, x0, None))
 
     def output(self, x) -> PlantOutput:
-        if self.par.sat is not None:
+        if self.par.sat is not None:  # a map: the torque from its fluxes (the state: fluxes or currents)
             i_d, i_q = state_currents(self.par, x)
             i_a, i_b = dq_to_ab(i_d, i_q, x[3])
             return PlantOutput(i_d, i_q, x[2], x[3], i_a, i_b, mapped_torque(self.par, x))

@@ -40,6 +40,7 @@ import math
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from .._validate import check_nonnegative, check_positive, check_real
 
@@ -106,6 +107,7 @@ class AlgebraicSaturation(eqx.Module):
     a_b: jax.Array
     a_bp: jax.Array
     k_q: jax.Array
+    state_is_flux = True  # the plant integrates the flux linkages with this map (module doc)
     S: float = eqx.field(static=True)
     T: float = eqx.field(static=True)
     U: float = eqx.field(static=True)
@@ -261,19 +263,98 @@ SAT_KEYS = {
 _REQUIRED = ("a_d0", "a_dd", "S", "a_q0", "a_qq", "T")
 
 
-def saturation_from_table(tbl) -> AlgebraicSaturation:
+_CURRENT_UNITS = {"A": 1.0, "kA": 1e3}
+_FLUX_UNITS = {"Vs": 1.0, "Wb": 1.0, "mVs": 1e-3, "mWb": 1e-3}
+_TABLE_KEYS = ("model", "nominal", "current_unit", "flux_unit", "csv", "i_d", "i_q", "psi_d", "psi_q")
+
+
+def _table_map(tbl, base) -> FluxTable:
+    """``model = "table"``: ψd, ψq over an (i_d, i_q) grid, inline or from a CSV file, in declared units."""
+    own = "machine.saturation"
+    for k in tbl:
+        if k not in _TABLE_KEYS:
+            raise ValueError(f'{own}.{k}: unknown key with model = "table"; allowed: {", ".join(_TABLE_KEYS)}')
+    for k, units in (("current_unit", _CURRENT_UNITS), ("flux_unit", _FLUX_UNITS)):
+        if k not in tbl:
+            raise ValueError(f"{own}.{k}: missing (a table declares its units: one of {', '.join(units)})")
+        if tbl[k] not in units:
+            raise ValueError(f"{own}.{k} must be one of {', '.join(map(repr, units))}, got {tbl[k]!r}")
+    ki, kf = _CURRENT_UNITS[tbl["current_unit"]], _FLUX_UNITS[tbl["flux_unit"]]
+    inline = [k for k in ("i_d", "i_q", "psi_d", "psi_q") if k in tbl]
+    if "csv" in tbl:
+        if inline:
+            raise ValueError(f"{own}.csv: give either csv or the inline tables ({', '.join(inline)}), not both")
+        x, y, fd, fq = _read_csv(tbl["csv"], base)
+    else:
+        for k in ("i_d", "i_q", "psi_d", "psi_q"):
+            if k not in tbl:
+                raise ValueError(f'{own}.{k}: missing (model = "table" needs i_d, i_q, psi_d, psi_q, or csv)')
+        try:
+            x, y = np.asarray(tbl["i_d"], float), np.asarray(tbl["i_q"], float)
+            fd, fq = np.asarray(tbl["psi_d"], float), np.asarray(tbl["psi_q"], float)
+        except (TypeError, ValueError):
+            raise ValueError(f"{own}: i_d, i_q must be lists of numbers and psi_d, psi_q lists of rows of numbers (one "
+                             "row per i_d)") from None  # fmt: skip
+    return FluxTable(x * ki, y * ki, fd * kf, fq * kf, owner=own)
+
+
+def _read_csv(name, base):
+    """A CSV flux map: a header with the columns i_d, i_q, psi_d, psi_q (any order), one row per grid node."""
+    from pathlib import Path
+
+    own = "machine.saturation.csv"
+    if not isinstance(name, str):
+        raise ValueError(f"{own} must be a file name (a string), got {type(name).__name__}")
+    path = Path(name) if base is None or Path(name).is_absolute() else Path(base) / name
+    try:
+        text = path.read_text(encoding="utf-8")
+    except OSError as e:
+        raise ValueError(f"{own}: cannot read {path} ({e.strerror})") from None
+    lines = [ln for ln in text.splitlines() if ln.strip() and not ln.lstrip().startswith("#")]
+    head = [h.strip() for h in lines[0].split(",")] if lines else []
+    cols = ("i_d", "i_q", "psi_d", "psi_q")
+    if sorted(head) != sorted(cols):
+        raise ValueError(f"{own}: the header must name the columns i_d, i_q, psi_d, psi_q, got {', '.join(head)}")
+    try:
+        rows = np.array([[float(v) for v in ln.split(",")] for ln in lines[1:]], dtype=float)
+    except ValueError:
+        raise ValueError(f"{own}: every row must be {len(head)} numbers") from None
+    if rows.ndim != 2 or rows.shape[1] != 4:
+        raise ValueError(f"{own}: every row must be 4 numbers")
+    c = {h: rows[:, j] for j, h in enumerate(head)}
+    x, y = np.unique(c["i_d"]), np.unique(c["i_q"])
+    if len(rows) != len(x) * len(y):
+        raise ValueError(f"{own}: {len(rows)} rows for a {len(x)} × {len(y)} grid: every (i_d, i_q) node once")
+    fd, fq = np.full((len(x), len(y)), np.nan), np.full((len(x), len(y)), np.nan)
+    ix, iy = np.searchsorted(x, c["i_d"]), np.searchsorted(y, c["i_q"])
+    fd[ix, iy], fq[ix, iy] = c["psi_d"], c["psi_q"]
+    if np.isnan(fd).any():
+        raise ValueError(f"{own}: the rows do not cover the grid: every (i_d, i_q) node once")
+    return x, y, fd, fq
+
+
+def _short(v) -> str:
+    r = repr(v)
+    return r if len(r) <= 60 else r[:57] + "..."
+
+
+def saturation_from_table(tbl, base=None):
     """A drive file's ``[machine.saturation]`` table as the saturation model.
 
-    Keys: ``model = "algebraic"`` (the only model), ``nominal`` (read by the drive file: how ``[machine]``'s
-    missing Ld, Lq, psi_f follow from the map), and :data:`SAT_KEYS` (SI: the coefficients in A and Vs;
-    ``a_d0``, ``a_dd``, ``S``, ``a_q0``, ``a_qq``, ``T`` required, the cross-saturation and the PM bridge
-    optional: a_dq = 0, U = 1, V = 0, ψn = 0, a_b = 0, a_bp = 0, W = 2, k_q = 0).
+    ``model = "algebraic"`` (default): :data:`SAT_KEYS` (SI: the coefficients in A and Vs; ``a_d0``, ``a_dd``,
+    ``S``, ``a_q0``, ``a_qq``, ``T`` required, the cross-saturation and the PM bridge optional: a_dq = 0, U = 1,
+    V = 0, ψn = 0, a_b = 0, a_bp = 0, W = 2, k_q = 0).  ``model = "table"``: ``current_unit`` ("A", "kA") and
+    ``flux_unit`` ("Vs", "Wb", "mVs", "mWb") required, then either the inline ``i_d``, ``i_q`` (lists) and
+    ``psi_d``, ``psi_q`` (one row per i_d, one column per i_q) or ``csv`` (a file, relative to ``base``, with
+    the columns i_d, i_q, psi_d, psi_q, one row per grid node).  ``nominal`` is read by the drive file (how
+    ``[machine]``'s missing Ld, Lq, psi_f follow from the map).
 
     Args:
         tbl: The table (a dict).
+        base: The folder a ``csv`` name is relative to (the drive file's), or None (the working folder).
 
     Returns:
-        The :class:`AlgebraicSaturation`.
+        The :class:`AlgebraicSaturation` or :class:`FluxTable`.
 
     Raises:
         ValueError: One line naming the key ``machine.saturation.KEY`` and its allowed range.
@@ -281,10 +362,12 @@ def saturation_from_table(tbl) -> AlgebraicSaturation:
     own = "machine.saturation"
     if not isinstance(tbl, dict):
         raise ValueError(f"{own} must be a table ([machine.saturation]), got {type(tbl).__name__}")
-    tbl = {k: v for k, v in tbl.items() if k != "nominal"}  # read by the drive file (jaxobs.drive.drivefile)
     model = tbl.get("model", "algebraic")
+    if model == "table":
+        return _table_map(tbl, base)
+    tbl = {k: v for k, v in tbl.items() if k != "nominal"}  # read by the drive file (jaxobs.drive.drivefile)
     if model != "algebraic":
-        raise ValueError(f'{own}.model: must be "algebraic" (Hinkkanen et al. 2017, Lelli et al. 2024), got {model!r}')
+        raise ValueError(f'{own}.model must be "algebraic" or "table", got {_short(model)}')
     vals = {}
     for k, v in tbl.items():
         if k == "model":
@@ -346,7 +429,6 @@ def map_mtpa(sat: AlgebraicSaturation, p: int, i_abs: float):
     Returns:
         ``(i_d, i_q, torque)`` (A, A, N·m) as floats.
     """
-    import numpy as np
 
     def best(beta):
         te = np.asarray(map_torque(sat, p, i_abs * np.cos(beta), i_abs * np.sin(beta)))
@@ -386,8 +468,6 @@ def map_summary(sat: AlgebraicSaturation, p: int, i_rated: float) -> dict:
         ``mtpa_torque`` (N·m), ``Ld_inc``, ``Lq_inc``, ``Ldq_inc`` (incremental at that point, H), ``Ld_sec``
         ((ψd − ψf)/i_d), ``Lq_sec`` (ψq/i_q, H).
     """
-    import numpy as np
-
     i_d, i_q, te = map_mtpa(sat, p, i_rated)
     psi_f, l0, lr, psi_d, psi_q = (np.asarray(v) for v in _summary_jit(sat, i_d, i_q))
     psi_f, psi_d, psi_q = float(psi_f), float(psi_d), float(psi_q)
@@ -425,10 +505,141 @@ def check_inverse(sat: AlgebraicSaturation, i_max: float) -> float:
     Returns:
         The residual, relative to i_max.
     """
-    import numpy as np
-
     r, b = np.meshgrid(np.linspace(0.0, i_max, 9), np.linspace(-np.pi, np.pi, 25))
     i_d, i_q = r * np.cos(b), r * np.sin(b)
     j_d, j_q = _roundtrip_jit(sat, jnp.asarray(i_d, float), jnp.asarray(i_q, float))
     res = np.hypot(np.asarray(j_d) - i_d, np.asarray(j_q) - i_q)
     return float(np.nanmax(np.where(np.isfinite(res), res, np.inf))) / i_max
+
+
+def _slopes(f, x, axis):
+    """∂f/∂x along ``axis`` at the nodes: central differences inside, one-sided at the ends (non-uniform grids)."""
+    f = np.moveaxis(f, axis, 0)
+    d = np.empty_like(f)
+    h = np.diff(x)
+    d[0] = (f[1] - f[0]) / h[0]
+    d[-1] = (f[-1] - f[-2]) / h[-1]
+    if len(x) > 2:
+        d[1:-1] = (f[2:] - f[:-2]) / (x[2:] - x[:-2]).reshape((-1,) + (1,) * (f.ndim - 1))
+    return np.moveaxis(d, 0, axis)
+
+
+class FluxTable(eqx.Module):
+    """A flux map given as tables: ψd and ψq over a rectilinear (i_d, i_q) grid, interpolated bicubically.
+
+    The interpolant is cubic Hermite in each axis, with the nodes' slopes and cross slopes from finite differences
+    (central inside, one-sided at the edges): continuous with continuous first derivatives, so the incremental
+    inductances are continuous and the plant's vector field is differentiable.  Outside the grid it continues
+    linearly from the edge with the edge's gradient (C¹ across the edge).  The plant integrates the currents
+    with it (:func:`jaxobs.drive.machine.plant_vf`): the map gives ψ(i) and its Jacobian explicitly.
+
+    Args:
+        i_d: The d-axis grid, A (strictly increasing, ≥ 4 points).
+        i_q: The q-axis grid, A (strictly increasing, ≥ 4 points).
+        psi_d: ψd at the grid's nodes, Vs, shape (len(i_d), len(i_q)); strictly increasing in i_d.
+        psi_q: ψq at the nodes, Vs, same shape; strictly increasing in i_q.
+
+    Raises:
+        ValueError: A wrong shape, a non-finite value, an axis not increasing or a flux not monotonic.
+    """
+
+    i_d: jax.Array
+    i_q: jax.Array
+    coef_d: jax.Array  # (4, nd, nq): value, ∂/∂i_d, ∂/∂i_q, ∂²/∂i_d∂i_q at the nodes
+    coef_q: jax.Array
+    state_is_flux = False  # the plant integrates the currents with a table (class doc)
+
+    def __init__(self, i_d, i_q, psi_d, psi_q, owner="FluxTable"):
+        x, y = np.asarray(i_d, float), np.asarray(i_q, float)
+        fd, fq = np.asarray(psi_d, float), np.asarray(psi_q, float)
+        for name, a in (("i_d", x), ("i_q", y)):
+            if a.ndim != 1 or len(a) < 4:
+                raise ValueError(f"{owner}.{name} must be a list of at least 4 currents, got shape {a.shape}")
+            if not np.all(np.isfinite(a)) or not np.all(np.diff(a) > 0):
+                raise ValueError(f"{owner}.{name} must be finite and strictly increasing")
+        for name, f in (("psi_d", fd), ("psi_q", fq)):
+            if f.shape != (len(x), len(y)):
+                raise ValueError(f"{owner}.{name} must have shape (len(i_d), len(i_q)) = ({len(x)}, {len(y)}), "
+                                 f"got {f.shape}")  # fmt: skip
+            if not np.all(np.isfinite(f)):
+                raise ValueError(
+                    f"{owner}.{name} must be finite (a NaN or inf at node {np.argwhere(~np.isfinite(f))[0]})"
+                )
+        if not np.all(np.diff(fd, axis=0) > 0):
+            k = np.argwhere(np.diff(fd, axis=0) <= 0)[0]
+            raise ValueError(f"{owner}.psi_d must increase strictly with i_d (not at i_d = {x[k[0]]:g} .. "
+                             f"{x[k[0] + 1]:g} A, i_q = {y[k[1]]:g} A): a flux map is monotonic")  # fmt: skip
+        if not np.all(np.diff(fq, axis=1) > 0):
+            k = np.argwhere(np.diff(fq, axis=1) <= 0)[0]
+            raise ValueError(f"{owner}.psi_q must increase strictly with i_q (not at i_q = {y[k[1]]:g} .. "
+                             f"{y[k[1] + 1]:g} A, i_d = {x[k[0]]:g} A): a flux map is monotonic")  # fmt: skip
+
+        def coef(f):
+            fx, fy = _slopes(f, x, 0), _slopes(f, y, 1)
+            return np.stack([f, fx, fy, _slopes(fx, y, 1)])
+
+        self.i_d, self.i_q = jnp.asarray(x), jnp.asarray(y)
+        self.coef_d, self.coef_q = jnp.asarray(coef(fd)), jnp.asarray(coef(fq))
+
+    def _eval(self, c, i_d, i_q):
+        x, y = self.i_d, self.i_q
+        xc, yc = jnp.clip(i_d, x[0], x[-1]), jnp.clip(i_q, y[0], y[-1])
+        k = jnp.clip(jnp.searchsorted(x, xc, side="right") - 1, 0, len(x) - 2)
+        m = jnp.clip(jnp.searchsorted(y, yc, side="right") - 1, 0, len(y) - 2)
+        hx, hy = x[k + 1] - x[k], y[m + 1] - y[m]
+        t, u = (xc - x[k]) / hx, (yc - y[m]) / hy
+
+        def basis(s, h):  # values and slopes (per unit current) of the Hermite basis at s, and their derivatives
+            h0, h1 = 2 * s**3 - 3 * s**2 + 1, -2 * s**3 + 3 * s**2
+            g0, g1 = (s**3 - 2 * s**2 + s) * h, (s**3 - s**2) * h
+            dh0, dh1 = (6 * s**2 - 6 * s) / h, (-6 * s**2 + 6 * s) / h
+            dg0, dg1 = 3 * s**2 - 4 * s + 1, 3 * s**2 - 2 * s
+            return (h0, h1, g0, g1), (dh0, dh1, dg0, dg1)
+
+        (bx, dbx), (by, dby) = basis(t, hx), basis(u, hy)
+
+        def comb(bx, by):
+            out = 0.0
+            for ia, ha, ga in ((k, bx[0], bx[2]), (k + 1, bx[1], bx[3])):
+                for jb, hb, gb in ((m, by[0], by[2]), (m + 1, by[1], by[3])):
+                    out = out + (c[0, ia, jb] * ha * hb + c[1, ia, jb] * ga * hb + c[2, ia, jb] * ha * gb
+                                 + c[3, ia, jb] * ga * gb)  # fmt: skip
+            return out
+
+        val = comb(bx, by)
+        # outside the grid: on linearly with the edge's gradient (C¹ across the edge)
+        return val + comb(dbx, by) * (i_d - xc) + comb(bx, dby) * (i_q - yc)
+
+    def flux(self, i_d, i_q):
+        """The flux map ψ(i), interpolated.
+
+        Args:
+            i_d: The d-axis current, A.
+            i_q: The q-axis current, A.
+
+        Returns:
+            ``(ψd, ψq)``, Vs.
+        """
+        i_d, i_q = jnp.broadcast_arrays(jnp.asarray(i_d, float), jnp.asarray(i_q, float))
+        return self._eval(self.coef_d, i_d, i_q), self._eval(self.coef_q, i_d, i_q)
+
+    def inductance(self, i_d, i_q):
+        """The incremental inductance matrix ∂ψ/∂i of the interpolant.
+
+        Args:
+            i_d: The d-axis current, A.
+            i_q: The q-axis current, A.
+
+        Returns:
+            A (..., 2, 2) array, H.
+        """
+
+        def f(v):
+            return jnp.stack(self.flux(v[0], v[1]))
+
+        jac = jnp.vectorize(jax.jacfwd(f), signature="(2)->(2,2)")
+        return jac(jnp.stack(jnp.broadcast_arrays(jnp.asarray(i_d, float), jnp.asarray(i_q, float)), axis=-1))
+
+    def no_load_flux(self):
+        """ψd at zero current, Vs."""
+        return self.flux(0.0, 0.0)[0]

@@ -482,8 +482,9 @@ def scenario_batch(
     if "dJ" in cols:  # the true inertia; the controller's stays nominal
         par = eqx.tree_at(lambda p: p.J, par, par.J * (1 + col("dJ")))
     if "dsat" in cols:  # the true machine saturates more (or less: −1 leaves the map's unsaturated part)
-        if par.sat is None:
-            raise ValueError("grid axis dsat needs a machine with a saturation map ([machine.saturation])")
+        if par.sat is None or not par.sat.state_is_flux:
+            raise ValueError('grid axis dsat needs a machine with an algebraic saturation map ([machine.saturation] '
+                             'model = "algebraic")')  # fmt: skip
         k = 1 + col("dsat")
         sat = par.sat
         par = eqx.tree_at(
