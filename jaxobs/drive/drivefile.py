@@ -44,6 +44,10 @@ The file (SI units, or the unit in the key's name; ``[machine]``'s keys from ``p
     a_bp = 1.0
     W = 2.0
     k_q = 0.1
+                               # or model = "table": current_unit ("A", "kA") and flux_unit ("Vs", "Wb", "mVs",
+                               # "mWb") required; i_d = [...], i_q = [...], psi_d = [[...]], psi_q = [[...]] (one
+                               # row per i_d), or csv = "map.csv" (columns i_d, i_q, psi_d, psi_q; one row per
+                               # node; relative to the drive file); flux strictly increasing along its own axis
     [inverter]
     u_dc = 320.0               # V
     f_sample_hz = 16000.0      # control and PWM period = 1/f_sample_hz
