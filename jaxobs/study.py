@@ -69,14 +69,25 @@ import numpy as np
 
 from . import metrics as M
 from ._simulate import AbstractSave, SaveAll
-from .families import AbstractScenarios, GridSignals, RecordedSignals
+from .families import AbstractScenarios, GridSignals
+from .files import atomic_path
 from .observers import gain_table
 from .provenance import cf_dataset, provenance
 from .quantities import Metric
 from .runner import run_scenarios
-from .scenarios import GRID_SIGNAL_AXES, LHS, AbstractSampler, Grid, Random, Recordings, Sobol
+from .scenarios import GRID_SIGNAL_AXES, LHS, AbstractSampler, Grid, Random, Recordings, Sobol, sampler_of
 
-__all__ = ["Flag", "METRICS", "STUDY_AXES", "STUDY_METRICS", "StudyContext", "study", "run_study", "worst_cases"]
+__all__ = [
+    "Flag",
+    "METRICS",
+    "STUDY_AXES",
+    "STUDY_METRICS",
+    "StudyContext",
+    "study",
+    "run_study",
+    "worst_cases",
+    "write_study",
+]
 
 
 @dataclass(frozen=True)
@@ -588,52 +599,76 @@ def run_study(
     designs: dict,
     axes,
     *,
-    t_event=0.1,
+    family: GridSignals | None = None,
+    t_event=None,
     horizon=0.4,
     steady_from=None,
     band_hz=0.05,
+    sampling: str | None = None,
     sample=0,
-    seed=0,
+    seed=None,
     chunk_size=2048,
     progress=False,
     return_seconds=False,
     mesh=None,
     store=None,
 ):
-    """Simulate every FLL design on every scenario; returns an ``xarray.Dataset`` (see module doc):
-    :func:`study` on :class:`~jaxobs.families.GridSignals` (or a :class:`~jaxobs.scenarios.Recordings`
-    sampler's recorded voltages) with the FLL metrics.
+    """Simulate every FLL design on every scenario: :func:`study` on :class:`~jaxobs.families.GridSignals` (or a
+    :class:`~jaxobs.scenarios.Recordings` sampler's recorded voltages) with the FLL metrics (see module doc).
 
-    ``axes``: a dict of axis values (a :class:`~jaxobs.scenarios.Grid`, or with ``sample > 0`` a
-    :class:`~jaxobs.scenarios.Random` sample of that size seeded by ``seed``), or a sampler itself
-    (``Grid``, ``Random``, ``Sobol``, ``LHS``, or ``Recordings``: recorded signals with truth columns,
-    dims ``(design, recording)``).  With ``return_seconds=True`` returns ``(dataset, seconds)``, the wall
-    time of the runs (kept out of the Dataset, so two identical studies write identical files).  ``mesh``:
-    the devices each chunk is split over, a one-axis ``"batch"`` mesh (default ``jaxobs.batch_mesh()``,
-    every device of every process; ``jaxobs.batch_mesh(jax.devices()[:1])`` keeps to one device).
-    ``store``: a :class:`jaxobs.chunkstore.ChunkStore`: each chunk's values go to disk as it finishes (none
-    held during the run), chunks already there (an interrupted run's, ``resume=True``) are not run again, and
-    the Dataset is laid out from the store: the same Dataset as without one.
+    Args:
+        designs: name -> FLL.
+        axes: a dict of axis values, or a sampler itself (``Grid``, ``Random``, ``Sobol``, ``LHS``, or
+            ``Recordings``: recorded signals with truth columns, dims ``(design, recording)``), as
+            :func:`jaxobs.scenarios.sampler_of` takes them (with ``sampling``, ``sample`` and ``seed``).
+        family: the grid signals (:class:`~jaxobs.families.GridSignals`: their event, nominal frequency and
+            seed); None: built from ``t_event`` (default 0.1 s), ``seed`` (default 0) and the first design's
+            nominal frequency.
+        t_event: the event's time, s (with ``family``: its own).
+        horizon, steady_from, band_hz: the run's length, the steady window's start (default three quarters
+            of the way from ``t_event``) and the settling band, Hz.
+        sampling, sample, seed: how a dict of axes is sampled (:func:`jaxobs.scenarios.sampler_of`; ``seed``
+            with ``family``: its own).
+        chunk_size: scenarios per compiled call.
+        progress: ``True``: a tqdm bar; a callable ``progress(done, total)``.
+        return_seconds: also return the wall time of the runs (kept out of the Dataset, so two identical
+            studies write identical files).
+        mesh: the devices each chunk is split over, a one-axis ``"batch"`` mesh (default
+            ``jaxobs.batch_mesh()``, every device of every process, as every preset;
+            ``jaxobs.batch_mesh(jax.devices()[:1])`` keeps to one device).
+        store: a :class:`jaxobs.chunkstore.ChunkStore`: each chunk's values go to disk as it finishes, chunks
+            already there (an interrupted run's, ``resume=True``) are not run again, and the Dataset is laid
+            out from the store: the same Dataset as without one.
+
+    Returns:
+        The Dataset, or ``(dataset, seconds)`` with ``return_seconds``.
+
+    Raises:
+        ValueError: no designs, an axis or sampler refused, ``family`` given with ``t_event`` or ``seed``, or
+            ``horizon``, ``t_event`` or ``chunk_size`` out of range.
     """
     if not designs:
         raise ValueError("run_study needs at least one design")
-    if isinstance(axes, dict):
-        for name in axes:  # names and values are checked by grid_signals
-            if len(axes[name]) < 1:
-                raise ValueError(f"study axis {name!r} needs at least one value")
-        sampler = Random(axes, sample, seed) if sample else Grid(axes)
-    elif isinstance(axes, AbstractSampler):
-        sampler = axes
-    else:
-        raise ValueError(f"axes must be a dict of axis values or a sampler (jaxobs.scenarios), got {axes!r}")
+    if family is not None:
+        if not isinstance(family, GridSignals):
+            raise ValueError(f"run_study: family must be GridSignals (jaxobs.families), got {type(family).__name__}")
+        if t_event is not None or seed is not None:
+            raise ValueError("run_study: give family or t_event and seed, not both (the family holds its own)")
+        t_event, seed = family.t_event, family.seed
+    t_event = 0.1 if t_event is None else t_event
+    seed = 0 if seed is None else seed
+    sampler = sampler_of(axes, sampling=sampling, sample=sample, seed=seed)
     if not horizon > t_event >= 0:
         raise ValueError(f"horizon must exceed t_event >= 0, got t_event={t_event}, horizon={horizon}")
     if chunk_size < 1:
         raise ValueError(f"chunk_size must be >= 1, got {chunk_size}")
     steady_from = t_event + 0.75 * (horizon - t_event) if steady_from is None else steady_from
     recordings = isinstance(sampler, Recordings)
-    freq = float(next(iter(designs.values())).omega_n) / (2 * math.pi)
-    family = RecordedSignals(GridSignals) if recordings else GridSignals(t_event, freq, seed)
+    freq = float(next(iter(designs.values())).omega_n) / (2 * math.pi) if family is None else family.freq
+    if recordings:
+        family = GridSignals.recorded()
+    elif family is None:
+        family = GridSignals(t_event, freq, seed)
 
     def n_period(obs) -> int:
         # settle on the one-period average of f̂: one period of the grid's frequency (a recording's: the
@@ -734,3 +769,22 @@ def worst_cases(ds, metric: str, k: int = 5):
             item.update(design=str(d), metric=metric)
             out.append(item)
     return out
+
+
+def write_study(ds, path, store=None) -> None:
+    """The one study writer: ``ds`` as NetCDF4 at ``path`` (h5netcdf), written beside it and renamed over it
+    (:func:`jaxobs.files.atomic_path`), so a ``path`` that exists is a whole study.
+
+    Args:
+        ds: A study's Dataset (:func:`study`, a preset's).
+        path: The file (``study.nc``).
+        store: The :class:`jaxobs.chunkstore.ChunkStore` the study ran into, or None: retired before the rename
+            (never both on disk: a ``--resume`` would be refused, its chunks left) and removed after it
+            (the results are in ``path``: nothing is left to resume).
+    """
+    with atomic_path(path) as tmp:
+        ds.to_netcdf(tmp, engine="h5netcdf")
+        if store is not None:
+            store.retire()
+    if store is not None:
+        store.remove()

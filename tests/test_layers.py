@@ -54,6 +54,7 @@ LAYERS = [
         "jaxobs.drive.weakening",
     ),
     ("jaxobs.signals._logs",),  # drive logs: a declared layout read into DriveRecordings
+    ("jaxobs.signals._read",),  # the recordings reader: one file as a family's scenarios
     ("jaxobs.signals",),
     ("jaxobs.scenarios", "jaxobs.drive.plant", "jaxobs.drive.dual", "jaxobs.drive.control", "jaxobs.drive.scenario"),
     # observers: they estimate

@@ -69,7 +69,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from jaxobs.drive import SHIPPED_DRIVES, bench_machine, shipped_drive
-from jaxobs.families import DriveScenarios, GridSignals
+from jaxobs.families import AbstractScenarios, DriveScenarios, DriveSetting, GridSignals
 from jaxobs.observers import AbstractFluxObserver
 from jaxobs.provenance import sha256, versions
 from jaxobs.registry import REGISTRY, canonical_key
@@ -116,8 +116,7 @@ DRIVE_OBSERVERS = tuple(name for name, e in REGISTRY.items() if "drive" in e.sig
 MACHINES = tuple(SHIPPED_DRIVES)
 MAX_CHUNK = 100_000
 # bytes one scenario keeps per time step while a chunk runs (every step's outputs and the metrics' temporaries,
-# float64): an estimate for the memory check, not a measurement
-BYTES_PER_STEP = {"fll": 256, "drive": 1024}
+# float64): each family's study_bytes_per_step (jaxobs.families), an estimate for the memory check
 
 _FLL_STUDY_KEYS = (
     "kind",
@@ -148,11 +147,14 @@ STEP_AXES = ("speed_step_rpm", "load_step_nm")
 
 @dataclass
 class StudySpec:
-    """A checked study file: ``run_study`` / ``run_drive_study`` take ``designs``, ``axes`` and ``opts``.
+    """A checked study file: its preset (``run_study``, or ``run_drive_study`` for a family that closes the loop)
+    takes ``designs``, ``axes``, ``family`` and ``opts``.
 
     Attributes:
         name: The study's name.
-        kind: ``"fll"`` or ``"drive"``.
+        family: The scenarios' family (:mod:`jaxobs.families`): :class:`~jaxobs.families.GridSignals`, its
+            recordings (:meth:`~jaxobs.families.AbstractScenarios.recorded`), or
+            :class:`~jaxobs.families.DriveScenarios`, built by its own ``from_toml`` from ``[study]``.
         designs: name -> design.
         axes: name -> values.
         opts: The runner's other options.
@@ -162,7 +164,7 @@ class StudySpec:
     """
 
     name: str
-    kind: str  # "fll" | "drive"
+    family: AbstractScenarios
     designs: dict
     axes: dict
     opts: dict = field(default_factory=dict)
@@ -220,15 +222,23 @@ def parse_study(raw: dict, base: Path | None = None) -> StudySpec:
     base = Path.cwd() if base is None else Path(base)
     st = get_field(raw, "study", "study", dict, {})
     kind = get_field(st, "kind", "study.kind", str, "fll")
-    if kind not in ("fll", "drive"):
+    if kind not in KINDS:
         raise JobError("study.kind", f"must be 'fll' or 'drive', got {show(kind)}")
+    family, parse, default_name = KINDS[kind]  # the one place a study file's kind is read
     no_unknown(raw, ("study", "designs", "axes", "drive"), WHAT)  # every table a study file may have
-    if kind != "drive" and "drive" in raw:
+    if not family.closed_loop and "drive" in raw:
         raise JobError("drive", "applies to drive studies (study.kind = 'drive')")
-    name = get_field(st, "name", "study.name", str, "study" if kind == "fll" else "drive-study")
-    if kind == "drive":
-        return _parse_drive(raw, st, name, base)
-    return _parse_fll(raw, st, name, base)
+    return parse(raw, st, get_field(st, "name", "study.name", str, default_name), base)
+
+
+def _family(family: type[AbstractScenarios], st: dict, **run) -> AbstractScenarios:
+    """``family`` built by its own ``from_toml`` from ``[study]`` (its keys checked there, a ValueError naming
+    the field) and what the run gives it."""
+    try:
+        return family.from_toml(st, "study", **run)
+    except ValueError as e:  # "study.<key>: why"
+        field, _, why = str(e).partition(": ")
+        raise JobError(field, why or str(e)) from None
 
 
 # --------------------------------------------------------------------------------------------------
@@ -248,7 +258,7 @@ def _count(axes: dict, sample: int) -> int:
     return n
 
 
-def _check_steps(horizon: float, steady_from: float, ts: float, n: int, chunk: int, kind: str, extra_s=0.0) -> None:
+def _check_steps(horizon: float, steady_from: float, ts: float, n: int, chunk: int, family, extra_s=0.0) -> None:
     """Time steps of one run, the steady window's samples, and the memory of one chunk, against the machine."""
     if horizon < ts:
         raise JobError("study.horizon", f"shorter than one sample (ts = {ts:g} s), got {horizon:g} s")
@@ -260,7 +270,7 @@ def _check_steps(horizon: float, steady_from: float, ts: float, n: int, chunk: i
             "study.steady_from",
             f"the steady window [{steady_from:g}, {horizon:g}) s holds fewer than 10 samples of {ts:g} s",
         )
-    need = steps * min(n, chunk) * BYTES_PER_STEP[kind]
+    need = steps * min(n, chunk) * family.study_bytes_per_step
     have = available_memory()
     if need > have:
         raise JobError(
@@ -412,11 +422,10 @@ def _parse_fll(raw: dict, st: dict, name: str, base: Path) -> StudySpec:
         return _fll_recordings(raw, st, name, base, designs, t_event, horizon, steady, band, results)
     axes = _axes(raw, GridSignals, GridSignals.limits(freq, ts))
     n = _count(axes, sample)
-    _check_steps(horizon, steady, ts, n, chunk, "fll")
-    opts = dict(
-        t_event=t_event, horizon=horizon, steady_from=steady, band_hz=band, sample=sample, seed=seed, chunk_size=chunk
-    )
-    return StudySpec(name, "fll", designs, axes, opts, n, _results_attr(results))
+    family = _family(GridSignals, {"t_event": t_event, "seed": seed}, freq_n=freq)
+    _check_steps(horizon, steady, ts, n, chunk, family)
+    opts = dict(horizon=horizon, steady_from=steady, band_hz=band, sample=sample, chunk_size=chunk)
+    return StudySpec(name, family, designs, axes, opts, n, _results_attr(results))
 
 
 def _fll_recordings(raw, st, name, base, designs, t_event, horizon, steady, band, results) -> StudySpec:
@@ -434,7 +443,8 @@ def _fll_recordings(raw, st, name, base, designs, t_event, horizon, steady, band
         {"recording": st["recording"]}, "study", GridSignals, t_event, horizon, steady, 0, ts[0], base
     )
     opts = dict(t_event=t_event, horizon=horizon, steady_from=steady, band_hz=band, recording=spec.recording)
-    return StudySpec(name, "fll", designs, {}, opts, len(spec.recording.files), _results_attr(results))
+    family = GridSignals.recorded()  # the recordings stand for grid voltages
+    return StudySpec(name, family, designs, {}, opts, len(spec.recording.files), _results_attr(results))
 
 
 # --------------------------------------------------------------------------------------------------
@@ -569,17 +579,12 @@ def _parse_drive(raw: dict, st: dict, name: str, base: Path) -> StudySpec:
     axes = _axes(raw, DriveScenarios)
     check_speed_axes(axes, "axes", machine, file)  # the jobs' check: speeds within the inverter's limit
     n = _count(axes, sample)
-    _check_steps(horizon, steady, ts, n, chunk, "drive", extra_s=settle)
-    opts = dict(
-        machine=par,
-        drive=drive,
-        sensors=None if file is None else file.sensors,  # a shipped bench's: ideal
-        horizon=horizon,
-        steady_from=steady,
-        t_event=t_event,
-        sampling=sampling,
-        sample=sample,
-        seed=seed,
-        chunk_size=chunk,
-    )
-    return StudySpec(name, "drive", designs, axes, opts, n, provenance)
+    sensors = None if file is None else file.sensors  # a shipped bench's: ideal
+    family = _family(DriveScenarios, {"t_event": t_event, "seed": seed}, drive=DriveSetting(par, drive, sensors))
+    _check_steps(horizon, steady, ts, n, chunk, family, extra_s=settle)
+    opts = dict(horizon=horizon, steady_from=steady, sampling=sampling, sample=sample, chunk_size=chunk)
+    return StudySpec(name, family, designs, axes, opts, n, provenance)
+
+
+# a study file's ``study.kind`` -> (its family, its parser, its default name): the one place the kind is read
+KINDS = {"fll": (GridSignals, _parse_fll, "study"), "drive": (DriveScenarios, _parse_drive, "drive-study")}
