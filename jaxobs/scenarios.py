@@ -273,10 +273,12 @@ class AbstractSampler:
     Attributes:
         names: The axes.
         sampling: The Dataset's ``sampling`` attribute.
+        dim_attrs: The attributes of a dim of its own (a :class:`Given` batch's), which no family's axis names.
     """
 
     names: tuple
     sampling: str
+    dim_attrs: ClassVar[dict] = {}
 
     def points(self) -> list[tuple]:
         raise NotImplementedError
@@ -470,6 +472,8 @@ class Given(AbstractSampler):
 
     names: ClassVar[tuple] = ()
     sampling: ClassVar[str] = "given"
+    # the dim's attributes, where the family has no axis of its name (jaxobs.study.study)
+    dim_attrs: ClassVar[dict] = {"units": "1", "long_name": "scenario given whole (jaxobs.scenarios.Given)"}
 
     def __init__(self, batch, labels=None, dim: str = "scenario"):
         sizes = {int(np.shape(x)[0]) for x in jax.tree.leaves(batch) if np.ndim(x) > 0}
@@ -506,6 +510,7 @@ class Recordings(Given):
     """
 
     sampling: ClassVar[str] = "recordings"
+    dim_attrs: ClassVar[dict] = {"long_name": "recording file (relative to the study file)"}
 
     def __init__(self, signals, files, sha256=()):
         self.files = tuple(map(str, files))

@@ -510,7 +510,7 @@ def study(
     )
     values = run.values if store is None else {d: store.load(d) for d in designs}
     dnames = list(designs)
-    dims, shape, coords = sampler.layout(lambda name: _axis_meta(scenarios, name))
+    dims, shape, coords = sampler.layout(lambda name: _axis_meta(scenarios, sampler, name))
     dims = ("design", *dims)
     what = "observer design (closing the loop sensorless)" if scenarios.closed_loop else "observer design"
     coords["design"] = ("design", dnames, {"long_name": what})
@@ -556,12 +556,9 @@ def study(
     return cf_dataset(ds, f"jaxobs {label}: every design on every scenario, its metrics and flags")
 
 
-def _axis_meta(scenarios: AbstractScenarios, name: str) -> dict:
-    if name == "recording":
-        return {"long_name": "recording file (relative to the study file)"}
-    if name == "scenario":
-        return {"units": "1", "long_name": "scenario given whole (jaxobs.scenarios.Given)"}
-    return scenarios.axes[name].attrs
+def _axis_meta(scenarios: AbstractScenarios, sampler: AbstractSampler, name: str) -> dict:
+    # a family's axis, or a dim the sampler has of its own (a Given batch's, the recordings')
+    return scenarios.axes[name].attrs if name in scenarios.axes else dict(sampler.dim_attrs)
 
 
 # --------------------------------------------------------------------------

@@ -39,7 +39,7 @@ A drive study::
     horizon = 0.3                  # s
     steady_from = 0.15             # s (default horizon / 2)
     t_event = 0.15                 # s, the steps' instant (default horizon / 2 with a step axis, else 0)
-    sampling = "grid"              # grid | sobol | lhs (with sample = n)
+    sampling = "grid"              # grid | random | sobol | lhs (with sample = n; jaxobs.scenarios.SAMPLINGS)
     [drive]
     settle = 0.2                   # s, the observer's unscored settling phase before t = 0
     # file = "my_drive.toml"       # or the user's drive file (relative to the study file), instead of
@@ -69,10 +69,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from jaxobs.drive import SHIPPED_DRIVES, bench_machine, shipped_drive
-from jaxobs.families import AbstractScenarios, DriveScenarios, DriveSetting, GridSignals
+from jaxobs.families import FAMILIES, AbstractScenarios, DriveScenarios, DriveSetting, GridSignals
 from jaxobs.observers import AbstractFluxObserver
 from jaxobs.provenance import sha256, versions
 from jaxobs.registry import REGISTRY, canonical_key
+from jaxobs.scenarios import SAMPLINGS, Grid
 
 from .job import (
     COMPONENTS,
@@ -108,9 +109,12 @@ __all__ = [
 
 WHAT = "study file"
 # the designs a study may name, from jaxobs.registry: the FLLs (and their closed forms' aliases), the drive observers
-FLL_CLOSED_FORMS = {a: e.cls.closed_form for e in REGISTRY.values() if e.signal == "grid" for a in e.aliases}
-FLL_COMPONENTS = tuple(name for name, e in REGISTRY.items() if e.signal == "grid")
-DRIVE_OBSERVERS = tuple(name for name, e in REGISTRY.items() if "drive" in e.signals)
+# (a grid signal's design is no drive observer; a drive observer may run on a family that closes the loop)
+FLL_CLOSED_FORMS = {
+    a: e.cls.closed_form for e in REGISTRY.values() if not FAMILIES[e.signal].drive_observer for a in e.aliases
+}
+FLL_COMPONENTS = tuple(name for name, e in REGISTRY.items() if not FAMILIES[e.signal].drive_observer)
+DRIVE_OBSERVERS = tuple(name for name, e in REGISTRY.items() if any(FAMILIES[s].closed_loop for s in e.signals))
 # the drive jobs' shipped drive files (jaxobs.drive.SHIPPED_DRIVES: the same names, bench inertias and FOC), so a
 # study scores a tuned result on the drive that tuned it
 MACHINES = tuple(SHIPPED_DRIVES)
@@ -568,12 +572,15 @@ def _parse_drive(raw: dict, st: dict, name: str, base: Path) -> StudySpec:
     if not 0 <= t_event < horizon:
         raise JobError("study.t_event", f"must be in [0, horizon = {horizon:g}) s, got {t_event:g}")
     sampling = get_field(st, "sampling", "study.sampling", str, "grid")
-    if sampling not in ("grid", "sobol", "lhs"):
-        raise JobError("study.sampling", f"must be grid, sobol or lhs, got {show(sampling)}")
+    if sampling not in SAMPLINGS:  # the presets' one table (jaxobs.scenarios.sampler_of)
+        raise JobError("study.sampling", f"must be {', '.join(SAMPLINGS)}, got {show(sampling)}")
     sample = get_field(st, "sample", "study.sample", int, 0)
-    if sampling == "grid" and sample:
-        raise JobError("study.sample", "applies to sampling = 'sobol' or 'lhs' (a grid runs every combination)")
-    if sampling != "grid" and not 1 <= sample <= MAX_SCENARIOS:
+    drawn = SAMPLINGS[sampling] is not Grid
+    if not drawn and sample:
+        raise JobError(
+            "study.sample", "applies to sampling = 'random', 'sobol' or 'lhs' (a grid runs every combination)"
+        )
+    if drawn and not 1 <= sample <= MAX_SCENARIOS:
         raise JobError("study.sample", f"must be in [1, {MAX_SCENARIOS}] with sampling = {sampling!r}, got {sample}")
     seed, chunk = _seed(st), _chunk(st, 256)
     axes = _axes(raw, DriveScenarios)
