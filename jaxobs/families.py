@@ -1,8 +1,8 @@
 """Scenario families: what a study or a tuning job runs a design on, and the one place a design is bound.
 
-A family (:class:`AbstractScenarios`) declares its axes (one :class:`~jaxobs.quantities.Axis` each), builds
-a batch of scenarios from named points (:meth:`~AbstractScenarios.build`) and makes the system one design
-runs on one scenario (:meth:`~AbstractScenarios.system`): an observer on a signal, or an observer closing
+A family (:class:`AbstractFamily`) declares its axes (one :class:`~jaxobs.quantities.Axis` each), builds
+a batch of scenarios from named points (:meth:`~AbstractFamily.build`) and makes the system one design
+runs on one scenario (:meth:`~AbstractFamily.system`): an observer on a signal, or an observer closing
 the drive's loop, bound to the scenario's assumed machine.
 
     fam = GridSignals(t_event=0.1, freq=50.0)
@@ -19,11 +19,11 @@ The families:
   observer settled before t = 0), axes :data:`DRIVE_STUDY_AXES` (of :data:`jaxobs.drive.DRIVE_AXES`);
 - :class:`RecordedSignals`: recorded signals with their truth columns, given whole (one per file).
 
-Each family is built by its own class: its constructor, or :meth:`~AbstractScenarios.from_toml` from its TOML
-table (a job's ``[scenarios]``, a study file's ``[study]``: the keys it owns, :attr:`~AbstractScenarios.options`,
+Each family is built by its own class: its constructor, or :meth:`~AbstractFamily.from_toml` from its TOML
+table (a job's ``[scenarios]``, a study file's ``[study]``: the keys it owns, :attr:`~AbstractFamily.options`,
 each checked with a ``ValueError`` naming the field) and what the run gives it (the design's nominal frequency,
 the drive it closes).  A tuning job's ``scenarios.signal`` names its family: :data:`FAMILIES` maps the name to
-the class, once.  Recordings of a family's signals are :meth:`AbstractScenarios.recorded`: a
+the class, once.  Recordings of a family's signals are :meth:`AbstractFamily.recorded`: a
 :class:`RecordedSignals` that holds what the recordings are (their columns, whether a design binds to them), the
 files read by :func:`jaxobs.signals.read_recorded`.
 """
@@ -45,7 +45,7 @@ from .quantities import Axis
 from .scenarios import EMF_SIGNAL_AXES, GRID_SIGNAL_AXES, emf_signals, grid_signals
 
 __all__ = [
-    "AbstractScenarios",
+    "AbstractFamily",
     "DRIVE_STUDY_AXES",
     "DriveScenarios",
     "DriveSetting",
@@ -147,7 +147,7 @@ def _seed(table: Mapping, where: str) -> int:
     return int(v)
 
 
-class AbstractScenarios(eqx.Module):
+class AbstractFamily(eqx.Module):
     """A family of scenarios: its axes, its batches, and the system a design runs on one of its scenarios.
 
     Attributes:
@@ -198,14 +198,14 @@ class AbstractScenarios(eqx.Module):
         """
 
     @classmethod
-    @abc.abstractmethod
     def from_toml(cls, table: Mapping, where: str = "scenarios", *, freq_n: float = 50.0, drive=None):
         """The family from its TOML table and what the run gives it.
 
         The table is a job's ``[scenarios]`` or a study file's ``[study]``: the family reads its own keys
         (:attr:`options`), each checked here; the table's other keys are its reader's.  What is not in a TOML
         table comes from the run, the same two things for every family, each reading what it needs: the
-        design's nominal frequency and the drive the design closes.
+        design's nominal frequency and the drive the design closes.  A family that no file names (one built
+        from another, as the envelope's long runs are) keeps this refusal.
 
         Args:
             table: The TOML table (a mapping of plain values).
@@ -219,6 +219,7 @@ class AbstractScenarios(eqx.Module):
         Raises:
             ValueError: ``<where>.<key>`` out of its range, or a needed run input missing.
         """
+        raise ValueError(f"{where}: {cls.__name__} is not built from a TOML table")
 
     @classmethod
     def recorded(cls) -> RecordedSignals:
@@ -284,7 +285,7 @@ class DriveSetting(NamedTuple):
     sensors: Sensors | None = None
 
 
-class GridSignals(AbstractScenarios):
+class GridSignals(AbstractFamily):
     """Single-phase grid voltages (:func:`jaxobs.scenarios.grid_signals`); the design runs on the signal.
 
     Attributes:
@@ -360,7 +361,7 @@ class GridSignals(AbstractScenarios):
         return {"freq_step": (max(lo, -step), min(hi, step, 0.25 / ts - freq_n))}
 
 
-class EMFSignals(AbstractScenarios):
+class EMFSignals(AbstractFamily):
     """Two-axis back EMFs (:func:`jaxobs.scenarios.emf_signals`): 100 V at 50 Hz, proportional to speed; the
     design (a flux observer) runs on the signal."""
 
@@ -416,7 +417,7 @@ class EMFSignals(AbstractScenarios):
         return {"speed_hz": (lo, min(hi, 0.25 / ts))}
 
 
-class DriveScenarios(AbstractScenarios):
+class DriveScenarios(AbstractFamily):
     """The sensorless drive on ``machine``: each scenario (:func:`drive_scenarios`) starts steady.
 
     The design closes ``drive``'s loop, bound to the scenario's assumed machine and speed
@@ -482,9 +483,9 @@ class DriveScenarios(AbstractScenarios):
         return ClosedLoop(self.drive, bind_observer(design, scenario), scenario)
 
 
-class RecordedSignals(AbstractScenarios):
+class RecordedSignals(AbstractFamily):
     """Recorded signals with their truth columns, given whole (a sampler that holds them:
-    :class:`jaxobs.scenarios.Recordings`); made by the family they stand for (:meth:`AbstractScenarios.recorded`).
+    :class:`jaxobs.scenarios.Recordings`); made by the family they stand for (:meth:`AbstractFamily.recorded`).
 
     The files are read by :func:`jaxobs.signals.read_recorded`; the family holds what they are.
 
@@ -514,7 +515,7 @@ class RecordedSignals(AbstractScenarios):
 
     @classmethod
     def from_toml(cls, table: Mapping, where: str = "scenarios", *, freq_n: float = 50.0, drive=None):
-        """Recordings are made by the family they stand for (:meth:`AbstractScenarios.recorded`), their files
+        """Recordings are made by the family they stand for (:meth:`AbstractFamily.recorded`), their files
         described by the recording table's reader (``jaxobs_tuning.job.recordings``).
 
         Raises:
@@ -531,5 +532,9 @@ class RecordedSignals(AbstractScenarios):
         return OnSignal(design.bind(None, scenario.omega_e[..., 0]) if self.binds else design, scenario)
 
 
+# the base's first name, kept for code written against it: a family is not a batch of scenarios (docs/architecture.md,
+# "Scenario, family, sampler")
+AbstractScenarios = AbstractFamily
+
 # a job file's ``scenarios.signal`` -> its family (the one place the name is read)
-FAMILIES: dict[str, type[AbstractScenarios]] = {f.signal: f for f in (GridSignals, EMFSignals, DriveScenarios)}
+FAMILIES: dict[str, type[AbstractFamily]] = {f.signal: f for f in (GridSignals, EMFSignals, DriveScenarios)}

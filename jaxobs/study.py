@@ -69,7 +69,7 @@ import numpy as np
 
 from . import metrics as M
 from ._simulate import AbstractSave, SaveAll
-from .families import AbstractScenarios, GridSignals
+from .families import AbstractFamily, GridSignals
 from .files import atomic_path
 from .observers import gain_table
 from .provenance import cf_dataset, provenance
@@ -431,7 +431,7 @@ DIVERGED = Flag("diverged", "simulation diverged or a metric is not finite (1: i
 
 def study(
     designs: dict,
-    scenarios: AbstractScenarios,
+    scenarios: AbstractFamily,
     sampler: AbstractSampler,
     metrics,
     *,
@@ -556,7 +556,7 @@ def study(
     return cf_dataset(ds, f"jaxobs {label}: every design on every scenario, its metrics and flags")
 
 
-def _axis_meta(scenarios: AbstractScenarios, sampler: AbstractSampler, name: str) -> dict:
+def _axis_meta(scenarios: AbstractFamily, sampler: AbstractSampler, name: str) -> dict:
     # a family's axis, or a dim the sampler has of its own (a Given batch's, the recordings')
     return scenarios.axes[name].attrs if name in scenarios.axes else dict(sampler.dim_attrs)
 

@@ -11,7 +11,7 @@ import pytest
 from jaxobs import drive as D
 from jaxobs.families import (
     FAMILIES,
-    AbstractScenarios,
+    AbstractFamily,
     DriveScenarios,
     DriveSetting,
     EMFSignals,
@@ -26,7 +26,7 @@ ROOT = Path(__file__).parents[1]
 
 def test_each_family_is_built_by_its_own_from_toml():
     """Each family reads its own keys of a TOML table (the others are its reader's) and what the run gives it."""
-    assert not hasattr(AbstractScenarios, "of")  # no shared constructor taking every family's options
+    assert not hasattr(AbstractFamily, "of")  # no shared constructor taking every family's options
     table = {"t_event": 0.2, "seed": 7, "horizon": 1.0, "grid": {}}  # horizon, grid: the job reader's keys
     assert GridSignals.from_toml(table, freq_n=60.0) == GridSignals(0.2, 60.0, 7)
     assert GridSignals.from_toml({}, freq_n=50.0) == GridSignals(0.1, 50.0, 0)  # the jobs' defaults

@@ -42,7 +42,7 @@ import numpy as np
 from jaxobs import OnSignal, SaveAll, kept_jit, simulate
 from jaxobs import metrics as M
 from jaxobs.analysis.stability import lyapunov
-from jaxobs.families import AbstractScenarios
+from jaxobs.families import AbstractFamily
 from jaxobs.quantities import Metric
 from jaxobs.runner import run_scenarios
 from jaxobs.scenarios import Given
@@ -212,7 +212,7 @@ class Objective:
         ctx: MetricContext,
         aggregation: AbstractAggregation = Mean(),
         penalty: float = 1e3,
-        family: AbstractScenarios | None = None,
+        family: AbstractFamily | None = None,
     ):
         for term in terms:
             if term.measure is None:

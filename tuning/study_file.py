@@ -69,7 +69,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from jaxobs.drive import SHIPPED_DRIVES, bench_machine, shipped_drive
-from jaxobs.families import FAMILIES, AbstractScenarios, DriveScenarios, DriveSetting, GridSignals
+from jaxobs.families import FAMILIES, AbstractFamily, DriveScenarios, DriveSetting, GridSignals
 from jaxobs.observers import AbstractFluxObserver
 from jaxobs.provenance import sha256, versions
 from jaxobs.registry import REGISTRY, canonical_key
@@ -157,7 +157,7 @@ class StudySpec:
     Attributes:
         name: The study's name.
         family: The scenarios' family (:mod:`jaxobs.families`): :class:`~jaxobs.families.GridSignals`, its
-            recordings (:meth:`~jaxobs.families.AbstractScenarios.recorded`), or
+            recordings (:meth:`~jaxobs.families.AbstractFamily.recorded`), or
             :class:`~jaxobs.families.DriveScenarios`, built by its own ``from_toml`` from ``[study]``.
         designs: name -> design.
         axes: name -> values.
@@ -168,7 +168,7 @@ class StudySpec:
     """
 
     name: str
-    family: AbstractScenarios
+    family: AbstractFamily
     designs: dict
     axes: dict
     opts: dict = field(default_factory=dict)
@@ -235,7 +235,7 @@ def parse_study(raw: dict, base: Path | None = None) -> StudySpec:
     return parse(raw, st, get_field(st, "name", "study.name", str, default_name), base)
 
 
-def _family(family: type[AbstractScenarios], st: dict, **run) -> AbstractScenarios:
+def _family(family: type[AbstractFamily], st: dict, **run) -> AbstractFamily:
     """``family`` built by its own ``from_toml`` from ``[study]`` (its keys checked there, a ValueError naming
     the field) and what the run gives it."""
     try:

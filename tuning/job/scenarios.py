@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import math
 
-from jaxobs.families import AbstractScenarios, DriveSetting
+from jaxobs.families import AbstractFamily, DriveSetting
 from jaxobs.scenarios import Grid, Random
 
 from .components import W_N
@@ -28,7 +28,7 @@ def scenario_points(spec: ScenarioSpec):
     return list(sampler.names), sampler.points()
 
 
-def job_family(spec: ScenarioSpec, values: dict, drive=None, drive_spec: DriveSpec | None = None) -> AbstractScenarios:
+def job_family(spec: ScenarioSpec, values: dict, drive=None, drive_spec: DriveSpec | None = None) -> AbstractFamily:
     """The family of a job's scenario set.
 
     Args:
@@ -39,8 +39,8 @@ def job_family(spec: ScenarioSpec, values: dict, drive=None, drive_spec: DriveSp
             ``ipmsm002``).
 
     Returns:
-        Its recordings (:meth:`~jaxobs.families.AbstractScenarios.recorded`), or the family ``spec.signal`` names,
-        built by its own :meth:`~jaxobs.families.AbstractScenarios.from_toml` from the job's event and seed, the
+        Its recordings (:meth:`~jaxobs.families.AbstractFamily.recorded`), or the family ``spec.signal`` names,
+        built by its own :meth:`~jaxobs.families.AbstractFamily.from_toml` from the job's event and seed, the
         component's nominal frequency and, where there is one, the drive.
     """
     if spec.recording is not None:
@@ -55,7 +55,7 @@ def job_family(spec: ScenarioSpec, values: dict, drive=None, drive_spec: DriveSp
     return spec.family.from_toml(table, "scenarios", freq_n=freq, drive=setting)
 
 
-def build_scenarios(spec: ScenarioSpec, family: AbstractScenarios):
+def build_scenarios(spec: ScenarioSpec, family: AbstractFamily):
     """The batched scenarios of every combination of the axes (or ``sample`` random ones), or the job's recordings.
 
     Args:
