@@ -170,6 +170,9 @@ class AbstractFamily(eqx.Module):
     study_bytes_per_step: eqx.AbstractClassVar[int]
     drive_observer: eqx.AbstractClassVar[bool]
     options: eqx.AbstractClassVar[tuple]
+    # a recording of its signals: the default signal and truth columns (a family with ``truth_counts``, how many
+    # truth columns a recording may give); None: none stands for them
+    recording_columns: ClassVar[tuple | None] = None
 
     @abc.abstractmethod
     def build(self, names, points, first: int = 0):
@@ -227,7 +230,12 @@ class AbstractFamily(eqx.Module):
 
         Returns:
             The :class:`RecordedSignals`.
+
+        Raises:
+            ValueError: no recording stands for this family's signals.
         """
+        if cls.recording_columns is None:
+            raise ValueError(f"{cls.__name__}: no recording stands for its signals")
         cols, truth = cls.recording_columns
         return RecordedSignals(cls.signal, cols, truth, cls.truth_counts, cls.drive_observer)
 

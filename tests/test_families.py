@@ -65,6 +65,8 @@ def test_recordings_are_made_by_the_family_they_stand_for_and_hold_no_class():
     )
     assert emf.columns == drive.columns == ("u_a", "u_b", "i_a", "i_b") and emf.binds and drive.binds
     assert (grid.source, emf.source, drive.source) == ("grid", "emf", "drive")
+    with pytest.raises(ValueError, match="RecordedSignals: no recording stands for its signals"):
+        RecordedSignals.recorded()
     for rec in (grid, emf, drive):
         assert not any(isinstance(getattr(rec, f), type) for f in rec.__dataclass_fields__)
         assert not hasattr(rec, "read") and not hasattr(rec, "kind")

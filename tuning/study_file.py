@@ -119,8 +119,8 @@ DRIVE_OBSERVERS = tuple(name for name, e in REGISTRY.items() if any(FAMILIES[s].
 # study scores a tuned result on the drive that tuned it
 MACHINES = tuple(SHIPPED_DRIVES)
 MAX_CHUNK = 100_000
-# bytes one scenario keeps per time step while a chunk runs (every step's outputs and the metrics' temporaries,
-# float64): each family's study_bytes_per_step (jaxobs.families), an estimate for the memory check
+# (the bytes one scenario keeps per time step while a chunk runs, for the memory check: each family's
+# study_bytes_per_step, jaxobs.families)
 
 _FLL_STUDY_KEYS = (
     "kind",
