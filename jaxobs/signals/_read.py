@@ -7,6 +7,7 @@ timing and consistency checks), or resampled by the small reader when the log's 
 
 from __future__ import annotations
 
+from .._time import TS_REL_TOL
 from ._logs import RecordingLayout, read_drive_log
 from ._recordings import DriveRecording, SampledSignal
 
@@ -52,7 +53,7 @@ def read_recorded(path, columns, truth, *, drive: bool, layout=None, machine=Non
         machine=machine,
         max_bytes=kw.get("max_bytes"),
     )
-    if ts is None or abs(log.ts - ts) <= 1e-9 * ts:
+    if ts is None or abs(log.ts - ts) <= TS_REL_TOL * ts:  # the one sample-interval tolerance
         if windows is None:
             return log.recording()
         count, n = windows
