@@ -50,15 +50,13 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
-
 from . import metrics as M
 from .drive import Drive, PMSMParams
 from .families import DRIVE_STUDY_AXES, DriveScenarios, bind_observer, drive_scenarios
-from .observers import gain_fields, gain_table
+from .observers import gain_fields
 from .provenance import provenance
 from .scenarios import sampler_of
-from .study import DIVERGED, METRICS, Flag, StudyContext, study
+from .study import DIVERGED, METRICS, Flag, StudyContext, gain_variables, study
 
 __all__ = [
     "DRIVE_STUDY_AXES",
@@ -86,21 +84,6 @@ def drive_gains(obs) -> dict:
     """A drive observer's gains (name -> float): its gain fields (:func:`jaxobs.observers.gain_fields`; what a
     study binds per scenario, ``bound_fields``, is none)."""
     return {g: float(getattr(obs, g)) for g in gain_fields(obs)}
-
-
-def gain_variables(designs: dict) -> dict:
-    """The designs' gains as Dataset variables ``gain_<name>`` over ``design``, each with its own CF units (NaN
-    where a design has no such gain): what drive studies and envelopes write."""
-    gains = {d: drive_gains(obs) for d, obs in designs.items()}
-    table = gain_table(designs)  # each gain's units are its field's (jaxobs.observers.gain)
-    return {
-        f"gain_{g}": (
-            ("design",),
-            np.asarray([gains[d].get(g, np.nan) for d in designs], dtype=float),
-            {"units": info.units, "long_name": f"observer gain {g} (NaN: the design has no such gain)"},
-        )
-        for g, info in table.items()
-    }
 
 
 def _lost_lock(sol, sc, ctx):

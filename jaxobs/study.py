@@ -71,7 +71,7 @@ from . import metrics as M
 from ._simulate import AbstractSave, SaveAll
 from .families import AbstractFamily, GridSignals
 from .files import atomic_path
-from .observers import gain_table
+from .observers import gain_fields, gain_table
 from .provenance import cf_dataset, provenance
 from .quantities import Metric
 from .runner import run_scenarios
@@ -87,6 +87,7 @@ __all__ = [
     "run_study",
     "worst_cases",
     "write_study",
+    "gain_variables",
 ]
 
 
@@ -556,6 +557,33 @@ def study(
     return cf_dataset(ds, f"jaxobs {label}: every design on every scenario, its metrics and flags")
 
 
+def gain_variables(designs: dict) -> dict:
+    """The designs' gains as Dataset variables ``gain_<name>`` over ``design``: one variable per gain, so each
+    carries its own CF units (a (design, gain_name) array could only say "see gain_units", which no CF reader
+    understands); NaN where a design has no such gain.  What every preset and the envelope write.
+
+    Args:
+        designs: name -> observer.
+
+    Returns:
+        ``gain_<name>`` -> (dims, values, attrs), each gain's units its field's (:func:`jaxobs.observers.gain`).
+
+    Raises:
+        ValueError: two designs give one gain name different units (:func:`jaxobs.observers.gain_table`).
+    """
+    table = gain_table(designs)
+    # the gain fields alone: what a study binds per scenario (bound_fields) is none
+    gains = {d: {g: float(getattr(obs, g)) for g in gain_fields(obs)} for d, obs in designs.items()}
+    return {
+        f"gain_{g}": (
+            ("design",),
+            np.asarray([gains[d].get(g, np.nan) for d in designs], dtype=float),
+            {"units": info.units, "long_name": f"observer gain {g} (NaN: the design has no such gain)"},
+        )
+        for g, info in table.items()
+    }
+
+
 def _axis_meta(scenarios: AbstractFamily, sampler: AbstractSampler, name: str) -> dict:
     # a family's axis, or a dim the sampler has of its own (a Given batch's, the recordings')
     return scenarios.axes[name].attrs if name in scenarios.axes else dict(sampler.dim_attrs)
@@ -679,17 +707,7 @@ def run_study(
         # grid_signals's checks is a bound on one axis, so these two pass only if every point inside does)
         ends = [tuple(float(f(sampler.axes[k])) for k in sampler.names) for f in (np.min, np.max)]
         family.build(sampler.names, ends)
-    gains_present = gain_table(designs)  # each gain's units are its field's (jaxobs.observers.gain)
-    # one variable per gain, so each carries its own CF units (a (design, gain_name) array could only say
-    # "see gain_units", which no CF reader understands)
-    gains = {
-        f"gain_{g}": (
-            ("design",),
-            np.asarray([float(getattr(obs, g)) if hasattr(obs, g) else np.nan for obs in designs.values()]),
-            {"units": gains_present[g].units, "long_name": f"observer gain {g} (NaN: the design has no such gain)"},
-        )
-        for g in gains_present
-    }
+    gains = gain_variables(designs)
     what = "recordings on which the design lost lock" if recordings else "scenarios that lost lock"
     flags = (
         Flag(

@@ -75,13 +75,12 @@ from ..drive import (
     PMSMParams,
     drive_speed_limit_rpm,
 )
-from ..drive_study import gain_variables
 from ..families import DRIVE_STUDY_AXES, AbstractFamily, DriveScenarios, bind_observer
 from ..provenance import cf_dataset, provenance
 from ..quantities import Metric
 from ..scenarios import Grid
 from ..sharding import batch_mesh
-from ..study import Flag, study
+from ..study import Flag, gain_variables, study
 from .stability import Stability, floquet, lyapunov
 
 __all__ = [
