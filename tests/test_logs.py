@@ -47,7 +47,7 @@ def test_default_layout_reads_what_drive_recording_reads():
     old = jaxobs.DriveRecording.from_csv(DRIVE_CSV, time_column="t", theta_e="theta_e", omega_e="omega_e")
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # a clean log warns of nothing
-        log = _read(DRIVE_CSV, machine=D.spmsm_paper000())
+        log = _read(DRIVE_CSV, machine=D.spmsm_paper000(inertia="motor"))
     assert log.n == 3000 and log.warnings == []
     new = log.recording()
     for a, b in zip(jax.tree.leaves(old), jax.tree.leaves(new)):
@@ -56,7 +56,7 @@ def test_default_layout_reads_what_drive_recording_reads():
 
 
 def _sosoifo_theta(rec):
-    par = D.spmsm_paper000()
+    par = D.spmsm_paper000(inertia="motor")
     k1, k2 = papers.SECOND_ORDER_SOIFO_K1, papers.SECOND_ORDER_SOIFO_K2
     obs = jaxobs.SecondOrderSOIFO(par.Rs, par.Ld, k1, k2, k1**3 / (2 * k2), 2 * math.pi * 50)
     sol = jaxobs.simulate(jaxobs.OnSignal(obs, rec), 0.2)
@@ -149,7 +149,7 @@ MISTAKES = [
 def test_each_silent_mistake_is_refused_naming_the_column(tmp_path, which, match):
     path = _write(tmp_path / "log.csv", _mistake(_cols(), which))
     with pytest.raises(ValueError, match=match) as e:
-        _read(path, machine=D.spmsm_paper000())
+        _read(path, machine=D.spmsm_paper000(inertia="motor"))
     assert "\n" not in str(e.value)
 
 
@@ -191,7 +191,7 @@ def test_reference_voltages_declared_as_applied_warn(tmp_path):
     c = _cols()
     c["u_a"], c["u_b"] = np.roll(c["u_a"], -1), np.roll(c["u_b"], -1)
     with pytest.warns(RecordingWarning, match=r"columns 'u_a, u_b' match the machine's model best 1 period"):
-        _read(_write(tmp_path / "log.csv", c), machine=D.spmsm_paper000())
+        _read(_write(tmp_path / "log.csv", c), machine=D.spmsm_paper000(inertia="motor"))
 
 
 def test_three_phases_that_do_not_sum_to_zero(tmp_path):
@@ -350,10 +350,14 @@ def test_a_declared_voltage_delay_one_period_too_long_warns(tmp_path):
     f = _write(tmp_path / "log.csv", c)
     too_long = RecordingLayout(voltage_timing="reference", voltage_delay=2)
     with pytest.warns(RecordingWarning, match=r"'u_a, u_b' match .* 1 period\(s\) earlier .*voltage_delay = 1;"):
-        _read(f, machine=D.spmsm_paper000(), layout=too_long)
+        _read(f, machine=D.spmsm_paper000(inertia="motor"), layout=too_long)
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        _read(f, machine=D.spmsm_paper000(), layout=RecordingLayout(voltage_timing="reference", voltage_delay=1))
+        _read(
+            f,
+            machine=D.spmsm_paper000(inertia="motor"),
+            layout=RecordingLayout(voltage_timing="reference", voltage_delay=1),
+        )
 
 
 def test_a_file_cut_inside_its_last_line_is_refused_naming_the_line(tmp_path):
