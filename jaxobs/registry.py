@@ -11,7 +11,6 @@ short names of its closed form (``"sogi-fll"``), and the paper's small-signal mo
 from __future__ import annotations
 
 import dataclasses
-import inspect
 import math
 from collections.abc import Callable
 from typing import Any
@@ -297,7 +296,9 @@ def closed_form_gains(name: str, component=None) -> dict:
         gain name -> float.
     """
     entry = registered(name)
-    takes_omega_n = "omega_n" in inspect.signature(entry.cls.closed_form).parameters
-    kw = {"omega_n": float(component.omega_n)} if component is not None and takes_omega_n else {}
+    # a grid observer (the FLL family, 001) is designed at the grid's nominal frequency, which its closed form
+    # takes; the flux observers and the LESOs are designed at none
+    at_omega_n = component is not None and entry.signal == "grid"
+    kw = {"omega_n": float(component.omega_n)} if at_omega_n else {}
     obs = entry.cls.closed_form(**kw)
     return {g: float(getattr(obs, g)) for g in entry.gains}

@@ -107,7 +107,10 @@ LAYERS = [
     # the C export's code generator (jaxpr -> C) is beside the rest: it knows no observer
     ("jaxobs_tuning.export.ir",),
     ("jaxobs_tuning.export.lower",),
-    ("jaxobs_tuning.export.codegen", "jaxobs_tuning.params", "jaxobs_tuning.solvers", "jaxobs_tuning.aggregations"),
+    ("jaxobs_tuning.export.codegen", "jaxobs_tuning.params", "jaxobs_tuning.aggregations"),
+    # what a solver minimises (the objective's protocol), then the solvers
+    ("jaxobs_tuning.base",),
+    ("jaxobs_tuning.solvers",),
     ("jaxobs_tuning.strategies",),
     ("jaxobs_tuning.objective", "jaxobs_tuning.report", "jaxobs_tuning.targets"),
     ("jaxobs_tuning.structure",),

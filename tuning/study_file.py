@@ -505,8 +505,9 @@ def _parse_drive(raw: dict, st: dict, name: str, base: Path) -> StudySpec:
         # scenario's assumed machine and speed (AbstractDriveObserver.bind); the drive's ts rules
         ctor = REGISTRY[comp].cls
         par = bench_machine("spmsm000" if issubclass(ctor, AbstractFluxObserver) else "ipmsm002")
-        fixed = dict(zip(ctor.bound_fields, (0.0, 1.0, 1.0)))  # valid for the constructor, then bound
-        return _component(spec, where, comp, (*ctor.bound_fields, "ts"), fixed).bind(par, 0.0)
+        bound = ctor.bound_fields
+        fixed = {bound.resistance: 0.0, bound.inductance: 1.0, bound.speed: 1.0}  # valid for the ctor, then bound
+        return _component(spec, where, comp, (*bound.names, "ts"), fixed).bind(par, 0.0)
 
     designs = _designs(raw, build)
     # the machine: study.machine, else the one the results were tuned on, else the first design's default

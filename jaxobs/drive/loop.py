@@ -50,7 +50,7 @@ from .._discretize import RK4, AbstractRule, check_rule
 from .._math import wrap
 from .._system import AbstractSystem
 from .._validate import check_sample_time
-from ..observers import AbstractDriveObserver
+from ..observers import AbstractDriveObserver, AbstractObserver
 from .control import FOC, ControllerState, FOCInput, IfStartup, OperatingPoint
 from .hardware import Inverter, InverterInput, SensorInput
 from .latency import Latency
@@ -445,7 +445,8 @@ class ClosedLoop(AbstractDriveLoop):
 
     Args:
         drive: The :class:`Drive`.
-        observer: A drive observer (``init`` and ``step``), or None: the encoder.
+        observer: An observer (a :class:`~jaxobs.observers.AbstractObserver`, usually a drive observer), or
+            None: the encoder.
         scenario: The :class:`Scenario`.
 
     Raises:
@@ -453,7 +454,7 @@ class ClosedLoop(AbstractDriveLoop):
     """
 
     drive: Drive
-    observer: Any
+    observer: AbstractObserver | None
     scenario: Scenario
 
     # loop unrolling (jaxobs._loop point 3): 1, the drive step is large, and
@@ -466,8 +467,11 @@ class ClosedLoop(AbstractDriveLoop):
             raise ValueError(f"ClosedLoop.drive must be a jaxobs.drive.Drive, got {type(drive).__name__}")
         if not isinstance(scenario, Scenario):
             raise ValueError(f"ClosedLoop.scenario must be a jaxobs.drive.Scenario, got {type(scenario).__name__}")
-        if observer is not None and not (hasattr(observer, "init") and hasattr(observer, "step")):
-            raise ValueError(f"ClosedLoop.observer must have init and step (or be None), got {type(observer).__name__}")
+        if observer is not None and not isinstance(observer, AbstractObserver):
+            raise ValueError(
+                f"ClosedLoop.observer must be an observer (a jaxobs.observers.AbstractObserver: init and step) or "
+                f"None, got {type(observer).__name__}"
+            )
         if drive.sensorless and observer is None:
             raise ValueError("ClosedLoop: a sensorless drive needs an observer (observer=None is the encoder)")
         check_sample_time("ts", drive.ts, "Drive")

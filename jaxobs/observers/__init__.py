@@ -23,6 +23,7 @@ from .base import AbstractDriveObserver as AbstractDriveObserver
 from .base import AbstractObserver as AbstractObserver
 from .base import AbstractVectorFieldObserver as AbstractVectorFieldObserver
 from .base import BankOutput as BankOutput
+from .base import BoundFields as BoundFields
 from .base import DriveObserverState as DriveObserverState
 from .base import ObserverBank as ObserverBank
 from .base import ObserverState as ObserverState

@@ -69,7 +69,7 @@ from .._validate import check_nonnegative, check_positive, check_sample_time
 from ._cores import pll_vf, quadrature_error, safe_sq_amplitude, sogi2_tustin_coefficients, sogi2_vf, sogi_vf
 from ._gains import gain
 from ._rules import pll_gains, second_order_soifo_lambda, soifo_lambda
-from .base import AbstractDriveObserver, DriveObserverState, replace_leaves
+from .base import AbstractDriveObserver, BoundFields, DriveObserverState, replace_leaves
 
 __all__ = ["FluxOutput", "AbstractFluxObserver", "PureIntegratorFlux", "LPFFlux", "SOIFO", "SecondOrderSOIFO"]
 
@@ -116,7 +116,7 @@ class AbstractFluxObserver(AbstractDriveObserver):
     ts: eqx.AbstractVar[float]
     rule: eqx.AbstractVar[AbstractRule]
 
-    bound_fields: ClassVar[tuple[str, ...]] = ("Rs", "L", "omega_init")
+    bound_fields: ClassVar[BoundFields] = BoundFields(resistance="Rs", inductance="L", speed="omega_init")
     _speed_index: ClassVar[int]  # the speed estimate's place in the state
 
     @abc.abstractmethod

@@ -58,7 +58,7 @@ from .._validate import check_nonnegative, check_positive, check_sample_time
 from ._cores import pll_vf
 from ._gains import gain
 from ._rules import pll_gains
-from .base import AbstractDriveObserver, DriveObserverState, replace_leaves
+from .base import AbstractDriveObserver, BoundFields, DriveObserverState, replace_leaves
 
 __all__ = ["LESOOutput", "AbstractLESO", "CLESO", "GILESO", "FALESO"]
 
@@ -110,7 +110,7 @@ class AbstractLESO(AbstractDriveObserver):
     e_floor: eqx.AbstractVar[float]
     n_leso: eqx.AbstractClassVar[int]  # LESO states (the PLL's two follow)
 
-    bound_fields: ClassVar[tuple[str, ...]] = ("Rs", "Lq", "omega0_pll")
+    bound_fields: ClassVar[BoundFields] = BoundFields(resistance="Rs", inductance="Lq", speed="omega0_pll")
 
     def bind(self, est_par, omega_e) -> AbstractLESO:
         if est_par is None:

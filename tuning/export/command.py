@@ -137,7 +137,8 @@ def _export(args) -> int:
             drive = df.drive_for(sensorless=False, settle=0.0)
             record_drive = dict(machine=machine, rpm=rpm, drive=drive, label=f"drive file {df.name}")
         obs = obs.bind(machine, rpm * math.pi / 30 * int(machine.p))  # the one binding (its clamp included)
-        r_name, l_name, speed = type(obs).bound_fields
+        bound = type(obs).bound_fields
+        r_name, l_name, speed = bound.resistance, bound.inductance, bound.speed
         notes = [n for n in notes if "sets Rs, Lq" not in n]
         notes.append(
             f"bound to the recording's machine: {r_name} = {float(getattr(obs, r_name)):g}, "
