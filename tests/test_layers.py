@@ -103,14 +103,12 @@ LAYERS = [
     ("jaxobs.reproduce.leso_dual", "jaxobs.reproduce.figures"),
     ("jaxobs.reproduce",),
     # tuning: it changes gains (and exports the tuned observer)
-    ("jaxobs_tuning.outdir", "jaxobs_tuning.checkpoint"),
+    # the results folder, checkpoints, and what a solver minimises (the objective's protocol)
+    ("jaxobs_tuning.outdir", "jaxobs_tuning.checkpoint", "jaxobs_tuning.base"),
     # the C export's code generator (jaxpr -> C) is beside the rest: it knows no observer
     ("jaxobs_tuning.export.ir",),
     ("jaxobs_tuning.export.lower",),
-    ("jaxobs_tuning.export.codegen", "jaxobs_tuning.params", "jaxobs_tuning.aggregations"),
-    # what a solver minimises (the objective's protocol), then the solvers
-    ("jaxobs_tuning.base",),
-    ("jaxobs_tuning.solvers",),
+    ("jaxobs_tuning.export.codegen", "jaxobs_tuning.params", "jaxobs_tuning.solvers", "jaxobs_tuning.aggregations"),
     ("jaxobs_tuning.strategies",),
     ("jaxobs_tuning.objective", "jaxobs_tuning.report", "jaxobs_tuning.targets"),
     ("jaxobs_tuning.structure",),

@@ -93,7 +93,7 @@ def test_observer_ts_is_declared_and_required():
     assert "ts" not in {f.name for f in dataclasses.fields(ObserverBank)}
     bank = ObserverBank((jaxobs.SOIFO.closed_form(ts=2e-4),))
     assert bank.ts == 2e-4
-    assert [f.name for f in dataclasses.fields(jaxobs.SOGIFLL)][:2] == ["k", "lam"]  # field order unchanged
+    assert [f.name for f in dataclasses.fields(jaxobs.SOGIFLL)][:3] == ["ts", "rule", "k"]  # field order unchanged
 
 
 def test_ab3_components_are_found_by_class():

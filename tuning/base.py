@@ -4,15 +4,13 @@ The solvers (:mod:`jaxobs_tuning.solvers`) call only what it declares; :class:`j
 implements it for every job, and a user's own objective subclasses it.
 """
 
-from __future__ import annotations
-
+# no ``from __future__ import annotations``: equinox recognizes ``eqx.AbstractVar`` only in an evaluated
+# annotation (a string one is an ordinary field)
 import abc
 from typing import Any
 
 import equinox as eqx
 import jax
-
-from .params import Parametrization
 
 __all__ = ["AbstractObjective"]
 
@@ -30,7 +28,7 @@ class AbstractObjective(eqx.Module):
         param: The :class:`~jaxobs_tuning.params.Parametrization` of the free gains (θ ↔ gains).
     """
 
-    param: eqx.AbstractVar[Parametrization]
+    param: eqx.AbstractVar[Any]  # a jaxobs_tuning.params.Parametrization
 
     @abc.abstractmethod
     def value(self, theta, scenarios) -> jax.Array:
