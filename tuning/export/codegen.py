@@ -34,8 +34,6 @@ import equinox as eqx
 import jax
 import numpy as np
 
-from jaxobs._validate import key_part
-
 from .ir import Assign, If, Let, S, c_literal, count, ctype, deps, evaluate, ops_summary, prune, render
 from .lower import Emitter, Walker
 
@@ -57,11 +55,22 @@ __all__ = [
 # --------------------------------------------------------------------------------------------
 
 
+def _key_part(k):
+    """A key path entry's name, key or index (jaxobs.drive.scenario names its batch's leaves alike)."""
+    if isinstance(k, jax.tree_util.GetAttrKey):
+        return k.name
+    if isinstance(k, (jax.tree_util.DictKey, jax.tree_util.FlattenedIndexKey)):
+        return k.key
+    if isinstance(k, jax.tree_util.SequenceKey):
+        return k.idx
+    return k
+
+
 def leaf_name(path) -> str:
     """A pytree key path as a C identifier: ``.rule.f1`` -> ``rule_f1``, ``[0]`` (a tuple's) -> ``leaf0``."""
     parts = []
     for k in path:
-        parts.append(str(key_part(k)))
+        parts.append(str(_key_part(k)))
     name = re.sub(r"\W", "_", "_".join(parts)) or "value"
     return f"leaf{name}" if name[0].isdigit() else name
 
