@@ -505,8 +505,9 @@ def _parse_drive(raw: dict, st: dict, name: str, base: Path) -> StudySpec:
         # scenario's assumed machine and speed (AbstractDriveObserver.bind); the drive's ts rules
         ctor = REGISTRY[comp].cls
         par = bench_machine("spmsm000" if issubclass(ctor, AbstractFluxObserver) else "ipmsm002")
+        # valid for the constructor, then bound: 0 for the resistance, 1 for the rest
         bound = ctor.bound_fields
-        fixed = {bound.resistance: 0.0, bound.inductance: 1.0, bound.speed: 1.0}  # valid for the ctor, then bound
+        fixed = {f: (0.0 if f == bound.resistance else 1.0) for f in bound.names}
         return _component(spec, where, comp, (*bound.names, "ts"), fixed).bind(par, 0.0)
 
     designs = _designs(raw, build)

@@ -43,6 +43,7 @@ import jax
 import jax.numpy as jnp
 
 from .._discretize import AbstractRule, AbstractRuleCarry
+from ._gains import check_gains
 
 __all__ = [
     "AbstractObserver",
@@ -63,11 +64,28 @@ class AbstractObserver(eqx.Module):
     field of its own (every observer of the FLL, flux and LESO families) or with a property (an
     :class:`ObserverBank`'s is its primary's); a class that has neither cannot be constructed.
 
+    Gains are fields declared with :func:`~jaxobs.observers.gain`; after every constructor
+    ``__check_init__`` checks each against its declared bounds (:func:`~jaxobs.observers.check_gains`), so a
+    constructor does not check a gain's range by hand.  A class a paper tunes has a closed form: the
+    classmethods ``closed_form_design(**inputs) -> ClosedForm`` (the observer, its inputs and its rows: name,
+    value, units, formula, source equation) and ``closed_form(**inputs)``, its observer
+    (:mod:`jaxobs.observers._gains` states the convention).
+
     Attributes:
         ts: Sample time, s.
     """
 
     ts: eqx.AbstractVar[float]
+
+    # Declared by the class, read by the applications (jaxobs.registry): why a tuning job may not name it
+    # ("" where it may), and the paper's small-signal model, (the jaxobs.linear function, the fields it takes
+    # in order), or None where the papers give none.  A name, not the function: jaxobs.linear sits above the
+    # observers (it analyses them), so an observer cannot import it.
+    why_not_tunable: ClassVar[str] = ""
+    small_signal_model: ClassVar[tuple[str, tuple[str, ...]] | None] = None
+
+    def __check_init__(self):
+        check_gains(self)
 
     @abc.abstractmethod
     def init(self, u0=None) -> Any:
@@ -216,18 +234,21 @@ class BoundFields:
 
     Attributes:
         resistance: The assumed stator resistance's field (R̂s), or None where the observer assumes none.
-        inductance: The assumed inductance's field (a flux observer's L̂, a LESO's L̂q), or None.
+        inductance: The assumed inductance's field (a flux observer's L̂, a LESO's L̂q, the reduced-order
+            observer's L̂d), or None.
         speed: The initial speed's field (rad/s), or None.
+        more: Any other machine value it sets (the reduced-order observer's L̂q and ψ̂f).
     """
 
     resistance: str | None = None
     inductance: str | None = None
     speed: str | None = None
+    more: tuple[str, ...] = ()
 
     @property
     def names(self) -> tuple[str, ...]:
-        """The bound fields' names, resistance, inductance, speed, those present."""
-        return tuple(n for n in (self.resistance, self.inductance, self.speed) if n is not None)
+        """The bound fields' names: resistance, inductance, speed (those present), then ``more``."""
+        return (*(n for n in (self.resistance, self.inductance, self.speed) if n is not None), *self.more)
 
 
 class AbstractDriveObserver(AbstractObserver):
