@@ -380,7 +380,7 @@ def _speed_bandwidth(drive: Drive, machine: PMSMParams, speed_rpm: float) -> flo
     """The speed loop's double-pole bandwidth α = 2 k_iω / k_pω (rad/s) at ``speed_rpm``: α_s, or less where
     the FOC schedules it on the speed (FOC.speed_gains)."""
     foc = drive.ctrl.foc if isinstance(drive, DualDrive) else drive.foc
-    foc = foc.bind(machine if foc.est is None else foc.est, drive.inverter.u_max)
+    foc = foc.bind(foc.est, drive.inverter.u_max)
     kp, ki = foc.speed_gains(jnp.asarray(speed_rpm * 2.0 * math.pi / 60.0))
     return 2.0 * float(ki) / float(kp)
 
