@@ -17,7 +17,10 @@ The file (SI units, or the unit in the key's name; ``[machine]``'s keys from ``p
     Rs = 0.45                  # Ω
     Ld = 0.0028                # H
     Lq = 0.0041                # H
-    psi_f = 0.11               # Wb, peak (amplitude-invariant)
+    psi_f = 0.11               # Wb, peak (amplitude-invariant); or exactly one of the datasheet constants:
+    # ke_v_per_krpm_ll_rms = 37.6  # V per 1000 r/min, line to line, rms: ψf = Ke √2/√3 / (p 2π 1000/60)
+    # ke_v_per_krpm_ll_peak = 53.2 # V per 1000 r/min, line to line, peak: ψf = Ke/√3 / (p 2π 1000/60)
+    # kt_nm_per_a_rms = 0.93       # N·m per A rms: ψf = Kt / (1.5 √2 p)
     J = 0.0012                 # kg·m², everything on the shaft
     rated_speed_rpm = 3000
     rated_torque_nm = 3.2
@@ -27,6 +30,7 @@ The file (SI units, or the unit in the key's name; ``[machine]``'s keys from ``p
     a7 = 0.0
     q_sat_current_a = 20.0     # q-axis saturation (QSaturation): the current at which Lq has fallen to 2^(−1/n)
     q_sat_n = 2.0
+    max_speed_rpm = 9000.0     # the mechanical limit (speed_limit_rpm below)
     [inverter]
     u_dc = 320.0               # V
     f_sample_hz = 16000.0      # control and PWM period = 1/f_sample_hz
@@ -43,7 +47,7 @@ The file (SI units, or the unit in the key's name; ``[machine]``'s keys from ``p
     id_policy = "mtpa"         # "zero" or "mtpa"
     field_weakening = false    # VoltageFeedbackFW
     fw_bandwidth_hz = 20.0
-    fw_margin = 0.95
+    fw_margin = 0.95           # m: field weakening holds |u*| at m u_dc/√3, in [0.5, 1] (default 0.95)
     speed_schedule = 0.0       # N > 0: speed loop at min(α_s, |ωe*|/N) (docs/stability.md)
     setpoint_weight = 0.0      # b: 0 is I-P, 1 is PI
     advance = 1.5              # delay compensation, periods (default: the timing's use delay)
@@ -92,12 +96,25 @@ Derived defaults (each recorded in :attr:`DriveFile.derived` with its rule):
   project's :meth:`FOC.imc` default, 1.5 × rated).
 - **i_d policy**: MTPA where Lq > Ld (an IPMSM's reluctance torque), zero otherwise.
 - **Field weakening** on when the rated point (rated torque at rated speed, the policy's currents) needs a
-  voltage above the inverter's linear limit u_dc/√3; the file is refused when no i_d within the current
-  circle reaches the rated point under it.
+  voltage above ``fw_margin`` × u_dc/√3 (the voltage field weakening would hold it at), or when
+  ``max_speed_rpm`` lies above the speed where the back EMF alone reaches u_dc/√3; the file is refused when no
+  i_d within the current circle reaches the rated point under u_dc/√3.  ``fw_margin`` = 0.95 by default
+  (:data:`jaxobs.drive.weakening.FW_MARGIN`: 5 % of the voltage left to the current PIs).
+- **Speed limit** (one rule, :func:`speed_limit`; ``jaxobs drive check`` prints it, tune, study and envelope
+  use it): the no-load voltage bound, ωe ψf = u_dc/√3, or ωe (ψf − Ld i_max) = u_dc/√3 with field weakening;
+  within ``max_speed_rpm`` where given; where the voltage leaves the speed unbounded (ψf/Ld ≤ i_max) and no
+  ``max_speed_rpm`` is given, :data:`MECH_SPEED_PU` (3) × the rated speed, ASSUMED.
+- **ψf from a datasheet**: exactly one of ``psi_f``, ``ke_v_per_krpm_ll_rms``, ``ke_v_per_krpm_ll_peak``,
+  ``kt_nm_per_a_rms`` (:func:`~jaxobs.drive.psi_f_from_ke`, :func:`~jaxobs.drive.psi_f_from_kt`; the rule is
+  recorded with ``psi_f``).
+- **Tiny values**: every number has a floor (e.g. inductances ≥ 1e-8 H, torques and currents ≥ 1e-6, u_dc ≥
+  1 V); zero and subnormal values are one-line refusals, never a division by zero.
 - **Speed-loop period**: ``speed_every`` = round(f_s / 1 kHz) (000's DSP runs its speed loop at 1 kHz,
   :mod:`jaxobs.drive.control`), at least 1.
 - **I-f start-up**: :meth:`IfStartup.for_machine` (rated torque, inertia: the ramp's torque and the rotor's
-  swing), with ``[startup]``'s keys overriding.
+  swing), with ``[startup]``'s keys overriding; its current papers.IF_CURRENT_PU × the smaller of T_rated/K_t
+  and the rated peak √2 ``rated_current_a`` (an IPMSM carries its rated torque with less than T_rated/K_t), at
+  least 1 % of i_max.
 - **A dual machine** (``[dual]``): every value above is derived on one set carrying half of ``J``, ``B`` and the
   rated torque (:meth:`DualPMSMParams.per_set`, what the observers and the speed loop are designed on); the xy
   PIs get k_p = α_c L̂ls, k_i = α_c R̂s.  The dual loop runs the default timing and no q-axis saturation: a file
@@ -481,6 +498,12 @@ def _rpm(w_e: float, p: int) -> float:
     return w_e / p / RPM
 
 
+def _no_load_rpm(u_max: float, flux: float, p: int) -> float:
+    """The speed (r/min) where ωe · ``flux`` = u_max (inf for flux ≤ 0), in the one order of operations every
+    speed limit uses (the envelope's default speeds are 0.98 × it: the same bits everywhere)."""
+    return math.inf if flux <= 0.0 else u_max / flux / float(p) * 60.0 / (2 * math.pi)
+
+
 def speed_limit(p, psi_f, Ld, i_max, u_max, weakening, rated_speed_rpm, max_speed_rpm=None) -> tuple[float, str]:
     """The one speed limit of a drive (r/min, either direction) and its rule, which ``jaxobs drive check``
     prints and ``tune``, ``study`` and ``envelope`` use.
@@ -504,7 +527,7 @@ def speed_limit(p, psi_f, Ld, i_max, u_max, weakening, rated_speed_rpm, max_spee
         ``(limit, rule)``.
     """
     flux = psi_f - Ld * i_max if weakening else psi_f
-    n_v = math.inf if flux <= 0.0 else u_max / flux / p / RPM
+    n_v = _no_load_rpm(u_max, flux, p)
     why = "no-load ωe (ψf − Ld i_max) = u_max" if weakening else "no-load ωe ψf = u_max"
     if max_speed_rpm is not None:
         return min(n_v, float(max_speed_rpm)), f"min({why}, machine.max_speed_rpm)"
@@ -635,11 +658,9 @@ def drive_from_table(raw: dict, name: str = "drive") -> DriveFile:
     u_rated = rec("u_rated_point", _voltage(m, w_rated, i_d_r, i_q_r), "V", "steady |u| at rated torque and speed")
     rec("base_speed_rpm", _rpm(_base_speed(m, i_d_r, i_q_r, u_max), p), "r/min",
                  "the speed where rated torque's |u| reaches u_max")  # fmt: skip
-    n_emf = rec("max_speed_rpm", _rpm(u_max / m["psi_f"], p), "r/min",
+    n_emf = rec("max_speed_rpm", _no_load_rpm(u_max, m["psi_f"], p), "r/min",
                 "no-load speed where ωe ψf = u_max (no weakening)")  # fmt: skip
-    ld_imax = m["Ld"] * i_max
-    w_fw = math.inf if ld_imax >= m["psi_f"] else u_max / (m["psi_f"] - ld_imax)
-    rec("max_speed_fw_rpm", _rpm(w_fw, p), "r/min",
+    rec("max_speed_fw_rpm", _no_load_rpm(u_max, m["psi_f"] - m["Ld"] * i_max, p), "r/min",
         "no-load ωe (ψf − Ld i_max) = u_max (inf: i_char ≤ i_max, unbounded by the voltage)")  # fmt: skip
     fw_needed = u_rated > u_max
     margin = rec("fw_margin", ctl.get("fw_margin", FW_MARGIN), "1",
