@@ -49,7 +49,7 @@ def _check(tmp_path, text, capsys):
 def test_the_issue_file_passes_and_prints_the_derived_values(tmp_path, capsys):
     rc, out, err = _check(tmp_path, ISSUE, capsys)
     assert rc == 0, err
-    keys = "base_speed_rpm max_speed_rpm max_speed_fw_rpm i_char tau_d tau_q alpha_c alpha_s kp_d ki_q kp_w ki_w"
+    keys = "base_speed_rpm emf_speed_rpm max_speed_fw_rpm i_char tau_d tau_q alpha_c alpha_s kp_d ki_q kp_w ki_w"
     for key in (*keys.split(), "i_max", "id_policy", "field_weakening", "if_current"):
         assert f" {key} " in out, key
     assert "lowest speed at which each observer family closes the speed loop" in out
@@ -67,7 +67,7 @@ def test_the_issue_file_passes_and_prints_the_derived_values(tmp_path, capsys):
     assert d["i_char"] == pytest.approx(0.11 / 0.0028, rel=1e-12)
     # without field weakening the highest speed to ask for is where the back EMF alone reaches u_dc/√3
     assert (
-        d["speed_limit_rpm"] == d["max_speed_rpm"] == pytest.approx(320 / math.sqrt(3) / 0.11 / 4 * 60 / (2 * math.pi))
+        d["speed_limit_rpm"] == d["emf_speed_rpm"] == pytest.approx(320 / math.sqrt(3) / 0.11 / 4 * 60 / (2 * math.pi))
     )
     # the FLL flux observers close the loop from ωe = 4.3 α_s (docs/stability.md)
     fll = f.lowest_speeds["FLL flux observers (SOIFO, SecondOrderSOIFO)"][0]

@@ -658,7 +658,7 @@ def drive_from_table(raw: dict, name: str = "drive") -> DriveFile:
     u_rated = rec("u_rated_point", _voltage(m, w_rated, i_d_r, i_q_r), "V", "steady |u| at rated torque and speed")
     rec("base_speed_rpm", _rpm(_base_speed(m, i_d_r, i_q_r, u_max), p), "r/min",
                  "the speed where rated torque's |u| reaches u_max")  # fmt: skip
-    n_emf = rec("max_speed_rpm", _no_load_rpm(u_max, m["psi_f"], p), "r/min",
+    n_emf = rec("emf_speed_rpm", _no_load_rpm(u_max, m["psi_f"], p), "r/min",
                 "no-load speed where ωe ψf = u_max (no weakening)")  # fmt: skip
     rec("max_speed_fw_rpm", _no_load_rpm(u_max, m["psi_f"] - m["Ld"] * i_max, p), "r/min",
         "no-load ωe (ψf − Ld i_max) = u_max (inf: i_char ≤ i_max, unbounded by the voltage)")  # fmt: skip
@@ -668,7 +668,7 @@ def drive_from_table(raw: dict, name: str = "drive") -> DriveFile:
     fw_default = u_rated > margin * u_max or m.get("max_speed_rpm", 0.0) > n_emf
     fw = ctl.get("field_weakening", fw_default)
     rec("field_weakening", fw, "", "on when the rated point needs |u| > fw_margin × u_dc/√3, or machine.max_speed_rpm "
-        "lies above max_speed_rpm (the back EMF alone reaches u_max)", "field_weakening" in ctl)  # fmt: skip
+        "lies above emf_speed_rpm (where the back EMF alone reaches u_max)", "field_weakening" in ctl)  # fmt: skip
     limit, limit_rule = speed_limit(p, m["psi_f"], m["Ld"], i_max, u_max, fw, m["rated_speed_rpm"],
                                     m.get("max_speed_rpm"))  # fmt: skip
     rec("speed_limit_rpm", limit, "r/min", limit_rule, "max_speed_rpm" in m)
