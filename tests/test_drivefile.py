@@ -377,3 +377,16 @@ def test_if_current_respects_the_rated_current_and_fw_turns_on_at_its_margin():
         b = read_drive(DATA / f"{name}.toml")
         assert not b.derived["field_weakening"].value
         assert b.derived["if_current"].value == float(papers.IF_CURRENT_PU * b.machine.i_rated)
+
+
+def test_tune_and_study_refuse_a_speed_above_the_files_limit():
+    """tune and study check their speed axes against the file's one limit: 50 000 r/min on the traction IPMSM
+    (accepted before, when its limit was inf) is refused in one line naming the field and the rule."""
+    from jaxobs_tuning.job import JobError, check_speed_axes
+
+    f = read_drive(TRACTION)
+    with pytest.raises(
+        JobError, match=r"speed_rpm\[0\]: must be in \[1, 12000\] r/min on traction_ipmsm \(speed_limit_rpm"
+    ):
+        check_speed_axes({"speed_rpm": [50000.0]}, "scenarios.grid", "traction_ipmsm", f)
+    check_speed_axes({"speed_rpm": [11000.0]}, "scenarios.grid", "traction_ipmsm", f)

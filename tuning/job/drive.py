@@ -112,7 +112,7 @@ def check_speed_axes(axes: dict, where: str, machine: str, file: DriveFile | Non
         return
     file = shipped_drive(machine) if file is None else file
     n_max = file.speed_limit_rpm
-    why = f"the drive's speed limit, `jaxobs drive check`'s speed_limit_rpm: {file.derived['speed_limit_rpm'].rule}"
+    why = f"speed_limit_rpm, drive check: {file.derived['speed_limit_rpm'].rule}"
     rng = f"must be in [1, {n_max:.0f}] r/min on {machine} ({why})"
     for i, x in enumerate(speeds):
         if abs(x) > n_max:
