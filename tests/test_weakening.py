@@ -202,3 +202,26 @@ def test_a_foc_is_whole_when_built():
     with pytest.raises(ValueError, match="FOC.bind"):
         foc.bind(None, 300.0)
     assert float(foc.bind(PAR, 100.0).u_max) == 100.0
+
+
+def test_the_weakened_reference_has_finite_gradients_on_its_limits():
+    """On the stop, the circle and where no i_q fits the voltage (40 000 r/min) the reference's square roots have
+    masked arguments: the gradients with respect to Δi_d and ω̂e stay finite (no inf·0)."""
+    import jax
+    import jax.numpy as jnp
+
+    f = D.read_drive(TRACTION)
+    foc, est = f.drive.foc, f.machine
+    fw = foc.field_weakening
+
+    def total(dfw, w, iq):
+        d, q, _, _ = fw.references(est, foc._id_ref(est, iq), iq, dfw, w, foc.u_max, foc.i_max)
+        return d + q
+
+    for dfw in (-1e3, -60.0, 0.0):
+        for rpm in (0.0, 3000.0, 12000.0, 40000.0):
+            for iq in (0.0, 150.0, float(foc.iq_limit(est)[0])):
+                g = jax.grad(total, argnums=(0, 1, 2))(
+                    jnp.asarray(dfw), jnp.asarray(est.p * rpm * D.RPM), jnp.asarray(iq)
+                )
+                assert all(np.isfinite(float(x)) for x in g), (dfw, rpm, iq, g)

@@ -159,8 +159,9 @@ class VoltageFeedbackFW(eqx.Module):
 
     @staticmethod
     def limit_room(id_ref, i_max):
-        """√(i_max² − i_d*²): the q current the circle leaves, A."""
-        return jnp.sqrt(jnp.maximum(i_max * i_max - id_ref * id_ref, 0.0))
+        """√(i_max² − i_d*²): the q current the circle leaves, A (0 on and beyond the circle, with a finite
+        gradient there: the root of a masked argument)."""
+        return _safe_sqrt(i_max * i_max - id_ref * id_ref)
 
     @staticmethod
     def limit_iq(iq_ref, id_ref, i_max):
@@ -174,8 +175,14 @@ class VoltageFeedbackFW(eqx.Module):
         Returns:
             The limited i_q*, A.
         """
-        room = jnp.sqrt(jnp.maximum(i_max * i_max - id_ref * id_ref, 0.0))
+        room = _safe_sqrt(i_max * i_max - id_ref * id_ref)
         return jnp.clip(iq_ref, -room, room)
+
+
+def _safe_sqrt(x):
+    """√x for x > 0, else 0, differentiable everywhere (√ of a masked argument: no inf·0 in the gradient)."""
+    pos = x > 0
+    return jnp.where(pos, jnp.sqrt(jnp.where(pos, x, 1.0)), 0.0)
 
 
 def id_stop(est, id_policy, i_max):
@@ -208,7 +215,7 @@ def mtpv_iq(est, id_ref):
     inverse = est.Ld > est.Lq
     gap = jnp.where(inverse, est.Ld - est.Lq, 1.0)
     q2 = psi_d * psi_d + est.psi_f * est.Lq * psi_d / gap
-    bound = jnp.sqrt(jnp.where(q2 > 0, q2, 0.0)) / est.Lq
+    bound = _safe_sqrt(q2) / est.Lq
     bound = jnp.where(psi_d > 0, bound, 0.0)
     return jnp.where(inverse, bound, jnp.inf)
 
@@ -234,7 +241,7 @@ def voltage_iq_range(est, id_ref, omega_e, u_lim):
     ok = a > 1e-30
     a_s = jnp.where(ok, a, 1.0)
     disc = b * b - 4.0 * a_s * c
-    root = jnp.sqrt(jnp.where(disc > 0, disc, 0.0))
+    root = _safe_sqrt(disc)
     centre = -b / (2.0 * a_s)
     half = root / (2.0 * a_s)
     lo = jnp.where(ok, centre - half, -jnp.inf)
