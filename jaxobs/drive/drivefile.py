@@ -468,10 +468,11 @@ def _voltage(m: dict, w_e: float, i_d: float, i_q: float) -> float:
 
 def _fw_voltage(m: dict, w_e: float, torque: float, i_max: float, id_top: float) -> float:
     """The least |u| (V) at ω_e that carries ``torque`` within the current circle i_max with i_d ≤ ``id_top``
-    (field weakening: a more negative i_d); inf where no i_d does."""
+    (field weakening: a more negative i_d, down to where the FOC stops it, max(−i_max, −ψf/Ld):
+    :func:`jaxobs.drive.weakening.id_stop`); inf where no i_d does."""
     p, Ld, Lq, psi = m["p"], m["Ld"], m["Lq"], m["psi_f"]
     best = math.inf
-    for i_d in np.linspace(id_top, -i_max, 4001):
+    for i_d in np.linspace(id_top, max(-i_max, min(-psi / Ld, id_top)), 4001):  # to the FOC's stop (weakening)
         k = 1.5 * p * (psi + (Ld - Lq) * i_d)
         if k <= 0:
             continue
