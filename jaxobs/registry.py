@@ -128,15 +128,15 @@ def canonical_key(cls, key: str) -> str:
 
 W_N = papers.FLL_OMEGA_N
 # A LESO's extended-EMF model (002 eqs 4–5) holds on a non-salient machine too (Ld = Lq), so the LESOs
-# may run on 000's SPMSM; the flux observers may not run on the IPMSM: their back EMF u − R̂s i − L̂ di/dt
-# with one inductance is not dψ_f/dt on a salient machine.  They are refused there rather than run on the
-# active flux ψ_a = ψ_s − Lq i (sinusoidal on any PMSM): that is another observer, whose amplitude
-# ψf + (Ld − Lq) i_d moves with the load, so 000's closed forms (normalized by a constant flux) and its
-# stability boundaries (docs/stability.md) would not hold for it, and no paper here gives its gains.
+# may run on 000's SPMSM.  The flux observers run on a salient machine through the active flux
+# ψa = ψf + (Ld − Lq) i_d (jaxobs.observers.flux, "Salient machines": bound to a machine they take L̂q): their
+# filters and FLL/PLL normalizations do not depend on the flux amplitude, so 000's closed forms hold at every
+# steady point; what is new is that |ψa| moves with i_d (under MTPA it falls with the load, and an i_d step is
+# an amplitude step the filters pass with a transient), which 000's analysis and docs/stability.md, at constant
+# amplitude, do not cover.  Their drive jobs still default to 000's SPMSM.
 _LESO_MACHINES = ("ipmsm002", "spmsm000")
 _FLUX_SUPPORT = dict(
-    salient=False,
-    why_not_salient="000's rotor-flux observers assume Ld = Lq (their back EMF u − Rs i − L di/dt has one L)",
+    salient=True,
     why_not_dual="000's observers are derived and checked on a three-phase machine only",
 )
 # 002's LESOs run on either: they are 002's observers of a dual three-phase IPMSM (its αβ subspace,

@@ -58,6 +58,7 @@ LAYERS = [
     ("jaxobs.scenarios", "jaxobs.drive.plant", "jaxobs.drive.dual", "jaxobs.drive.control", "jaxobs.drive.scenario"),
     # observers: they estimate
     ("jaxobs.observers._cores", "jaxobs.observers._gains", "jaxobs.observers._rules", "jaxobs.observers.base"),
+    ("jaxobs.observers.speed",),
     ("jaxobs.observers.sogi", "jaxobs.observers.fll", "jaxobs.observers.flux", "jaxobs.observers.leso"),
     ("jaxobs.observers",),
     # the closed loop composes the drive's parts with a drive observer (its contract, observers.base)

@@ -44,3 +44,6 @@ from .leso import LESOOutput as LESOOutput
 from .sogi import SOGI as SOGI
 from .sogi import SOGI2 as SOGI2
 from .sogi import QSGOutput as QSGOutput
+from .speed import AbstractSpeedEstimator as AbstractSpeedEstimator
+from .speed import MechanicalSpeed as MechanicalSpeed
+from .speed import PLLSpeed as PLLSpeed

@@ -44,6 +44,25 @@ FLL's small-signal polynomial proportional to ω̂ and the damping independent
 of speed.  001's damping rule λ = k²ωn²/4 becomes lam = k²/4 (ζ = 1/√2 at every
 speed); the WIF's symmetric optimum λ = 2ωc²/b becomes lam = 2(ωc/ω̂)²/b.
 
+Salient machines: the active flux (Boldea, Paicu, Andreescu, "Active flux concept for motion-sensorless
+unified AC drives", IEEE Trans. Power Electron. 23(5), 2008).  In the rotor frame ψs = (Ld i_d + ψf) + j Lq i_q,
+so ψs − Lq i = (ψf + (Ld − Lq) i_d) e^{jθe}: the "active flux" ψa, aligned with the rotor's d axis on any PMSM.
+Bound to a machine, an observer takes L̂ = L̂q (:meth:`AbstractFluxObserver.bind`), so the back EMF it filters,
+u − R̂s i − L̂q di/dt = dψa/dt, is the active flux's, and θ̂ = atan2(ψ̂β, ψ̂α) is θe on a salient machine as on
+000's non-salient one (where Lq = Ld, ψa = ψf and nothing changes).  What that changes for 000's closed forms:
+
+- the filters (SOGI, second-order SOGI, LPF, integrator) are linear in e: their transfer functions (000 Table
+  III, eqs 15–21) and the angle they give at a steady point are unchanged;
+- the FLL is normalized by V̂² (``_fll_norm``) and its gain by ω̂² (above), the PLLs by |ψ̂|: none depends on the
+  flux amplitude, so the closed forms (001's damping rule, the WIF's symmetric optimum, the PLL's placement)
+  hold at every steady operating point as derived;
+- but the amplitude |ψa| = |ψf + (Ld − Lq) i_d| moves with i_d: under i_d* = 0 it is ψf (000's analysis holds
+  as is), under MTPA (Lq > Ld, i_d < 0) it falls with the load, and a step of i_d steps it.  The flux outputs
+  are then ψa, not ψf; a load step is an amplitude step (Ld − Lq)Δi_d of the filtered signal, which the
+  filters pass with their own step response — a transient angle error that 000's analysis (a constant
+  amplitude) does not cover, and the stability maps of docs/stability.md, drawn at constant amplitude,
+  do not either.  A machine whose ψa nears zero (strong saliency at high −i_d) leaves only the floors.
+
 Names.  ``lam`` keeps the name of the FLL gain it normalizes (001's λ, which 000's Γ draws): it is the same
 gain of the same loop, divided by ω̂², so it keeps the name and carries its own unit ("1", against the
 FLLs' rad²/s²) in its field's metadata (:func:`jaxobs.observers.gain_fields`); a gain is (class, name).  The
@@ -99,12 +118,13 @@ class AbstractFluxObserver(AbstractDriveObserver):
 
     Subclasses give the filter (``f``, ``output``, ``initial_state``), where their speed estimate sits in
     the state (``_speed_index``) and the speed they start from (:meth:`start_speed`).  The model has one
-    inductance ``L``: bound to a machine it takes the d-axis one, Ld (000's machine is non-salient; on a
-    salient one u − R̂s i − L̂ di/dt is not dψf/dt, so the drive jobs run these on 000's SPMSM only).
+    inductance ``L``: bound to a machine it takes the q-axis one, L̂q, so that on a salient machine the flux it
+    integrates is the active flux ψa = ψf + (Ld − Lq) i_d along the rotor's d axis (module doc, "Salient
+    machines"); on 000's non-salient machine Lq = Ld and nothing changes.
 
     Attributes:
         Rs: Assumed stator resistance, ohm (:meth:`bind` sets it).
-        L: Assumed inductance, H (:meth:`bind` sets it to the machine's Ld).
+        L: Assumed inductance, H (:meth:`bind` sets it to the machine's Lq: the active flux).
         omega_init: The speed estimate's start, rad/s (:meth:`bind` sets it).
         ts: Sample time, s.
         rule: Discretization rule.
@@ -134,7 +154,8 @@ class AbstractFluxObserver(AbstractDriveObserver):
         w = self.start_speed(omega_e)
         if est_par is None:
             return replace_leaves(self, omega_init=w)
-        return replace_leaves(self, Rs=est_par.Rs, L=est_par.Ld, omega_init=w)
+        # L̂q, not L̂d: the active flux (module doc, "Salient machines"); Lq = Ld on a non-salient machine
+        return replace_leaves(self, Rs=est_par.Rs, L=est_par.Lq, omega_init=w)
 
     def init(self, u0=None) -> DriveObserverState:
         return self._init_from(self.initial_state())
@@ -266,7 +287,7 @@ class PureIntegratorFlux(_PLLFluxBase):
 
     Args:
         Rs: Assumed stator resistance, ohm (≥ 0; :meth:`bind` sets it per scenario).
-        L: Assumed inductance, H (> 0; :meth:`bind` sets it to the machine's Ld).
+        L: Assumed inductance, H (> 0; :meth:`bind` sets it to the machine's Lq: the active flux).
         kp_pll: The PLL's proportional gain, 1/s (> 0).
         ki_pll: The PLL's integral gain, 1/s² (> 0).
         omega_init: The PLL's initial speed, rad/s (default 0; :meth:`bind` sets it).
@@ -310,7 +331,7 @@ class LPFFlux(_PLLFluxBase):
 
     Args:
         Rs: Assumed stator resistance, ohm (≥ 0; :meth:`bind` sets it per scenario).
-        L: Assumed inductance, H (> 0; :meth:`bind` sets it to the machine's Ld).
+        L: Assumed inductance, H (> 0; :meth:`bind` sets it to the machine's Lq: the active flux).
         omega_c: The low-pass cut-off ωc, rad/s (> 0).
         kp_pll: The PLL's proportional gain, 1/s (> 0).
         ki_pll: The PLL's integral gain, 1/s² (> 0).
@@ -449,7 +470,7 @@ class SOIFO(_FLLFluxBase):
 
     Args:
         Rs: Assumed stator resistance, ohm (≥ 0; :meth:`bind` sets it per scenario).
-        L: Assumed inductance, H (> 0; :meth:`bind` sets it to the machine's Ld).
+        L: Assumed inductance, H (> 0; :meth:`bind` sets it to the machine's Lq: the active flux).
         k: SOGI gain (> 0).
         lam: Frequency-normalized FLL gain λ/ω̂² (dimensionless, > 0).
         omega_init: The FLL's initial frequency, rad/s (> 0; :meth:`bind` sets it).
@@ -545,7 +566,7 @@ class SecondOrderSOIFO(_FLLFluxBase):
 
     Args:
         Rs: Assumed stator resistance, ohm (≥ 0; :meth:`bind` sets it per scenario).
-        L: Assumed inductance, H (> 0; :meth:`bind` sets it to the machine's Ld).
+        L: Assumed inductance, H (> 0; :meth:`bind` sets it to the machine's Lq: the active flux).
         K1: Second-order SOGI error gain (000's K1, > 0).
         K2: Second-order SOGI damping gain (000's K2, > 0).
         lam: Frequency-normalized FLL gain λ/ω̂² (dimensionless, > 0).
