@@ -133,8 +133,9 @@ W_N = papers.FLL_OMEGA_N
 # filters and FLL/PLL normalizations do not depend on the flux amplitude, so 000's closed forms hold at every
 # steady point; what is new is that |ψa| moves with i_d (under MTPA it falls with the load, and an i_d step is
 # an amplitude step the filters pass with a transient), which 000's analysis and docs/stability.md, at constant
-# amplitude, do not cover.  Their drive jobs still default to 000's SPMSM.
+# amplitude, do not cover.  Their drive jobs still default to 000's SPMSM and may name 002's IPMSM.
 _LESO_MACHINES = ("ipmsm002", "spmsm000")
+_FLUX_MACHINES = ("spmsm000", "ipmsm002")  # 000's SPMSM first: their drive jobs' default machine
 _FLUX_SUPPORT = dict(
     salient=True,
     why_not_dual="000's observers are derived and checked on a three-phase machine only",
@@ -187,7 +188,7 @@ _ENTRIES = (
         defaults=dict(Rs=0.0, L=1.0, k=papers.SOIFO_K, lam=0.5, omega_init=W_N),
         closed_form_source="000 (k = 1.414), lam = k²/4",
         closed_form_rule="000: k = 1.414; lam = k²/4 (001 eq 22, frequency-normalized)",
-        machines=("spmsm000",),
+        machines=_FLUX_MACHINES,
         **_FLUX_SUPPORT,
         model=lambda v: linear.soifo_tf(float(v["k"]), float(v["omega_init"])),
     ),
@@ -204,7 +205,7 @@ _ENTRIES = (
         ),
         closed_form_source="000 (K1 = 1.56, K2 = 3.11), lam = K1³/(2K2)",
         closed_form_rule="000: K1 = 1.56, K2 = 3.11; lam = K1³/(2K2) (001 eq 34, frequency-normalized)",
-        machines=("spmsm000",),
+        machines=_FLUX_MACHINES,
         **_FLUX_SUPPORT,
         model=lambda v: linear.sosoifo_tf(float(v["K1"]), float(v["K2"]), float(v["omega_init"])),
     ),
@@ -219,7 +220,7 @@ _ENTRIES = (
         ),
         closed_form_source="000 Fig. 5 (omega_c = 100 rad/s), PLL pole placement omega_b = 2 pi 20 (ASSUMED)",
         closed_form_rule="000 Fig. 5: omega_c = 100 rad/s; PLL kp = 2ζω_b, ki = ω_b², ω_b = 2π·20 (ASSUMED)",
-        machines=("spmsm000",),
+        machines=_FLUX_MACHINES,
         **_FLUX_SUPPORT,
     ),
     # The pure integrator is no job component: its flux starts from zero, so its circle is offset by the flux
@@ -229,7 +230,7 @@ _ENTRIES = (
         PureIntegratorFlux,
         signal="drive",
         defaults=dict(Rs=papers.SPMSM_000["Rs"], L=papers.SPMSM_000["Ld"]),
-        machines=("spmsm000",),
+        machines=_FLUX_MACHINES,
         **_FLUX_SUPPORT,
         tunable=False,
     ),

@@ -51,12 +51,14 @@ the error is 0.  What that means for the speed estimator (:mod:`jaxobs.observers
 
 - a PLL's ω̂̇ = k_i err is then ∝ ω̂|ω̂| near zero, so ω̂ = 0 is invariant: the PLL alone cannot carry ω̂ through
   zero.  Under a speed ramp of rate a (rad/s², electrical) its type-2 loop needs err = −a/k_i, which the fade
-  gives no lower than |ω̂| ≈ ω_f √(a/k_i) (for a/k_i ≪ 1): there ω̂ stalls, the rotor crosses zero alone and the
-  detector's sgn(ωe ω̂) = −1 drives the angle away.  The sign detector fails too, at the flip.  A back-EMF
-  observer holds no information at ωe = 0 (ê = 0); a PLL has no model to bridge the gap;
+  can give only while |ω̂| > ω_f √(a/k_i) (for a/k_i ≪ 1); below that ω̂ lags, decays towards 0 without crossing
+  it (ω̂̇ ∝ −ω̂²), the rotor crosses zero alone and the detector's sgn(ωe ω̂) = −1 drives the angle away
+  (tests/test_zero_speed.py: ω̂ never below 0 while the rotor reaches −300 r/min).  The sign detector slips
+  by π at the flip instead.  A back-EMF observer holds no information at ωe = 0 (ê = 0), and a PLL has no
+  model to bridge the gap;
 - a mechanical-model speed observer (:class:`~jaxobs.observers.speed.MechanicalSpeed`) carries ω̂ and θ̂
   through on the torque reference and the assumed inertia (and, without a torque reference, on its
-  acceleration state), and the faded detector re-engages it on the other side (tests/test_speed.py
+  acceleration state), and the faded detector re-engages it on the other side (tests/test_zero_speed.py
   measures the reversal).
 
 ``zero_fade`` is 0 by default: the fade moves every result at speed by ω_f²/ω̂² relative (2 % of the PLL's gain
