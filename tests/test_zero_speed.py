@@ -198,6 +198,26 @@ def test_sensorless_reversal_under_load_with_an_inertia_error_and_the_gileso_nee
     assert err.max() < 15.0 and speed[-1] == pytest.approx(-300.0, rel=0.02)
 
 
+@pytest.mark.parametrize("name", MACHINES)
+def test_the_lpf_flux_observer_takes_the_mechanical_speed_estimator(name):
+    """The PLL-type flux observers hold the same strategy: 000's LPF with a mechanical model bound to the
+    machine tracks a speed ramp (+300 → +100 r/min in 0.3 s, then held) as its PLL does; its states are
+    [ψα, ψβ, θ̂, ω̂, T̂L]."""
+    par = D.bench_machine(name)
+    w0 = par.p * 300 * D.RPM
+    psi = float(par.psi_f)
+    mech = LPFFlux.closed_form(speed=MechanicalSpeed.closed_form(ALPHA_O)).bind(par, w0)
+    assert float(mech.speed.J) == float(par.J) and mech.init_at(w0).x.shape == (5,)
+    n, ts = 5000, 1e-4
+    t = jnp.arange(n) * ts
+    w = jnp.clip(w0 - (2 * w0 / 3 / 0.3) * t, w0 / 3, w0)
+    th = jnp.concatenate([jnp.zeros(1), jnp.cumsum(0.5 * (w[1:] + w[:-1]) * ts)]) + 0.5 * w * ts
+    u = DriveInput(-w * psi * jnp.sin(th), w * psi * jnp.cos(th), jnp.zeros(n), jnp.zeros(n))
+    for obs in (LPFFlux.closed_form().bind(par, w0), mech):
+        _, out = jax.lax.scan(lambda s, x, obs=obs: obs.step(s, x), obs.init_at(w0), u)
+        assert float(out.omega[-1]) == pytest.approx(float(w[-1]), rel=1e-3)
+
+
 # ---- flux observers on a salient machine --------------------------------------------------------------------
 
 
@@ -303,4 +323,8 @@ def test_a_job_selects_the_speed_estimator(drive):
         with pytest.raises(JobError, match=rf"^{field}"):
             job(speed)
     with pytest.raises(JobError, match=r"^observer\.speed: only the LESOs"):
-        job('kind = "pll"', comp="LPFFlux")
+        job('kind = "pll"', comp="SOIFO")
+    with pytest.raises(JobError, match=r"^observer\.speed\.zero_fade: applies to the LESOs only"):
+        job('kind = "pll"\nzero_fade = 3.0', comp="LPFFlux")
+    lpf = job('kind = "mechanical"\nalpha_o = 60.0', comp="LPFFlux")
+    assert isinstance(LPFFlux(**lpf.values).speed, MechanicalSpeed)

@@ -85,10 +85,11 @@ from .. import papers
 from .._discretize import RK4, AbstractRule, check_rule
 from .._math import safe_atan2
 from .._validate import check_nonnegative, check_positive, check_sample_time
-from ._cores import pll_vf, quadrature_error, safe_sq_amplitude, sogi2_tustin_coefficients, sogi2_vf, sogi_vf
+from ._cores import quadrature_error, safe_sq_amplitude, sogi2_tustin_coefficients, sogi2_vf, sogi_vf
 from ._gains import gain
 from ._rules import pll_gains, second_order_soifo_lambda, soifo_lambda
 from .base import AbstractDriveObserver, DriveObserverState, replace_leaves
+from .speed import AbstractSpeedEstimator, speed_from_spec
 
 __all__ = ["FluxOutput", "AbstractFluxObserver", "PureIntegratorFlux", "LPFFlux", "SOIFO", "SecondOrderSOIFO"]
 
@@ -155,7 +156,10 @@ class AbstractFluxObserver(AbstractDriveObserver):
         if est_par is None:
             return replace_leaves(self, omega_init=w)
         # L̂q, not L̂d: the active flux (module doc, "Salient machines"); Lq = Ld on a non-salient machine
-        return replace_leaves(self, Rs=est_par.Rs, L=est_par.Lq, omega_init=w)
+        new = replace_leaves(self, Rs=est_par.Rs, L=est_par.Lq, omega_init=w)
+        speed = getattr(self, "speed", None)  # the PLL-type observers' speed estimator (jaxobs.observers.speed)
+        bound = None if speed is None else speed.bind(est_par)
+        return new if bound is speed else eqx.tree_at(lambda o: o.speed, new, bound)
 
     def init(self, u0=None) -> DriveObserverState:
         return self._init_from(self.initial_state())
@@ -198,7 +202,16 @@ class AbstractFluxObserver(AbstractDriveObserver):
 
     def step(self, state: DriveObserverState, u):
         e, i = self.back_emf(state, u)
-        x1, rs = self.rule.step(self.f, state.x, e, self.ts, state.rule)
+        f = self.f
+        if getattr(getattr(self, "speed", None), "uses_torque", False):
+            # a mechanical-model speed estimator reads the torque reference held over the period (0: none given)
+            tq = getattr(u, "T_ref", None)
+            tq = jnp.zeros((), state.x.dtype) if tq is None else jnp.asarray(tq, state.x.dtype)
+
+            def f(x, e):
+                return self.f(x, e, tq)
+
+        x1, rs = self.rule.step(f, state.x, e, self.ts, state.rule)
         x1 = jnp.where(state.started, x1, state.x)
         new = DriveObserverState(x=x1, rule=rs, i_prev=i, u_prev=jnp.stack([u.u_a, u.u_b]), started=jnp.asarray(True))
         return new, self.output(x1, e)
@@ -254,11 +267,15 @@ def _lam_normalized():
 
 
 class _PLLFluxBase(AbstractFluxObserver):
-    """Flux filters with state [ψα, ψβ, θ_pll, ω_pll]: a type-2 PLL on the estimated flux gives ω̂."""
+    """Flux filters with state [ψα, ψβ, θ̂, ω̂, ...]: a speed estimator (``speed``, jaxobs.observers.speed) on the
+    estimated flux's phase error gives θ̂ and ω̂: the type-2 PLL on ``kp_pll``, ``ki_pll`` by default, or a
+    mechanical model (its load-torque state follows ω̂).  The flux does not vanish at standstill, so the
+    detector needs no fade: quadrature_error normalizes by |ψ̂| (floored at ``psi_floor``)."""
 
     kp_pll: eqx.AbstractVar[jax.Array]
     ki_pll: eqx.AbstractVar[jax.Array]
     psi_floor: eqx.AbstractVar[float]
+    speed: eqx.AbstractVar[AbstractSpeedEstimator]
 
     _speed_index: ClassVar[int] = 3  # the PLL's ω in the state
 
@@ -275,11 +292,11 @@ class _PLLFluxBase(AbstractFluxObserver):
 
     def initial_state(self):
         z = jnp.zeros_like(self.kp_pll)
-        return jnp.stack([z, z, z, self.omega_init])
+        return jnp.concatenate([jnp.stack([z, z]), self.speed.initial_state(z, self.omega_init)])
 
-    def _pll_rates(self, x):
+    def _pll_rates(self, x, torque=0.0):
         err = quadrature_error(x[0], x[1], x[2], self.psi_floor)
-        return pll_vf(x[2], x[3], err, self.kp_pll, self.ki_pll)
+        return self.speed.vf(self, x[2:], err, torque)
 
 
 class PureIntegratorFlux(_PLLFluxBase):
@@ -295,6 +312,8 @@ class PureIntegratorFlux(_PLLFluxBase):
         rule: Discretization rule (default :class:`~jaxobs.RK4`).
         psi_floor: Floor of |ψ̂| in the PLL's normalized phase detector, Wb.
         omega0: Another name of ``omega_init`` (the job files' key); give one of the two.
+        speed: The speed extraction: an estimator or a record (:func:`~jaxobs.observers.speed.speed_from_spec`);
+            default :class:`~jaxobs.observers.speed.PLLSpeed` on ``kp_pll``, ``ki_pll``.
 
     Raises:
         ValueError: A value out of its range, or both ``omega_init`` and ``omega0`` given.
@@ -305,17 +324,21 @@ class PureIntegratorFlux(_PLLFluxBase):
     kp_pll: jax.Array = _kp()
     ki_pll: jax.Array = _ki()
     omega_init: jax.Array  # initial PLL speed, rad/s
+    speed: AbstractSpeedEstimator  # speed and position extraction (its states follow the flux's)
     ts: float = eqx.field(static=True)
     rule: AbstractRule = eqx.field(static=True)
     psi_floor: float = eqx.field(static=True)
 
-    def __init__(self, Rs, L, kp_pll, ki_pll, omega_init=None, *, ts=1e-4, rule=None, psi_floor=1e-4, omega0=None):
+    def __init__(
+        self, Rs, L, kp_pll, ki_pll, omega_init=None, *, ts=1e-4, rule=None, psi_floor=1e-4, omega0=None, speed=None
+    ):
         omega_init = _omega_init(omega_init, omega0, "PureIntegratorFlux")
         _check_common(self, Rs, L, ts, rule, "PureIntegratorFlux")
         _check_pll(self, kp_pll, ki_pll, 0.0 if omega_init is None else omega_init, psi_floor, "PureIntegratorFlux")
+        self.speed = speed_from_spec(speed, "PureIntegratorFlux.speed")
 
-    def f(self, x, e):
-        return jnp.stack([e[0], e[1], *self._pll_rates(x)])
+    def f(self, x, e, torque=0.0):
+        return jnp.concatenate([jnp.stack([e[0], e[1]]), self._pll_rates(x, torque)])
 
     def output(self, x, e):
         return FluxOutput(psi_a=x[0], psi_b=x[1], theta=safe_atan2(x[1], x[0]), omega=x[3], e_a=e[0], e_b=e[1])
@@ -341,6 +364,8 @@ class LPFFlux(_PLLFluxBase):
         rule: Discretization rule (default :class:`~jaxobs.RK4`).
         psi_floor: Floor of |ψ̂| in the PLL's normalized phase detector, Wb.
         omega0: Another name of ``omega_init`` (the job files' key); give one of the two.
+        speed: The speed extraction: an estimator or a record (:func:`~jaxobs.observers.speed.speed_from_spec`);
+            default :class:`~jaxobs.observers.speed.PLLSpeed` on ``kp_pll``, ``ki_pll``.
 
     Raises:
         ValueError: A value out of its range, or both ``omega_init`` and ``omega0`` given.
@@ -352,6 +377,7 @@ class LPFFlux(_PLLFluxBase):
     kp_pll: jax.Array = _kp()
     ki_pll: jax.Array = _ki()
     omega_init: jax.Array  # initial PLL speed, rad/s
+    speed: AbstractSpeedEstimator  # speed and position extraction (its states follow the flux's)
     ts: float = eqx.field(static=True)
     rule: AbstractRule = eqx.field(static=True)
     compensate: bool = eqx.field(static=True)
@@ -371,12 +397,14 @@ class LPFFlux(_PLLFluxBase):
         rule=None,
         psi_floor=1e-4,
         omega0=None,
+        speed=None,
     ):
         omega_init = _omega_init(omega_init, omega0, "LPFFlux")
         _check_common(self, Rs, L, ts, rule, "LPFFlux")
         self.omega_c = check_positive("omega_c", omega_c, "LPFFlux")
         _check_pll(self, kp_pll, ki_pll, 0.0 if omega_init is None else omega_init, psi_floor, "LPFFlux")
         self.compensate = bool(compensate)
+        self.speed = speed_from_spec(speed, "LPFFlux.speed")
 
     @classmethod
     def closed_form(
@@ -409,8 +437,9 @@ class LPFFlux(_PLLFluxBase):
         kp, ki = pll_gains(2 * math.pi * pll_hz)
         return cls(Rs, L, omega_c, float(kp), float(ki), omega_init, **kw)
 
-    def f(self, x, e):
-        return jnp.stack([e[0] - self.omega_c * x[0], e[1] - self.omega_c * x[1], *self._pll_rates(x)])
+    def f(self, x, e, torque=0.0):
+        filt = jnp.stack([e[0] - self.omega_c * x[0], e[1] - self.omega_c * x[1]])
+        return jnp.concatenate([filt, self._pll_rates(x, torque)])
 
     def output(self, x, e):
         pa, pb, w = x[0], x[1], x[3]

@@ -155,12 +155,13 @@ def parse_scenarios(
 
 
 def parse_observer_speed(raw: dict, info) -> dict:
-    """A job's ``[observer.speed]``: how a LESO extracts speed and position (jaxobs.observers.speed).
+    """A job's ``[observer.speed]``: how a LESO or a PLL-type flux observer extracts speed and position
+    (jaxobs.observers.speed).
 
-    ``kind = "pll"`` (the default: the LESO's PLL on its ``kp_pll``, ``ki_pll``) or ``"mechanical"`` (a
+    ``kind = "pll"`` (the default: the observer's PLL on its ``kp_pll``, ``ki_pll``) or ``"mechanical"`` (a
     mechanical-model speed observer with its three poles at −``alpha_o`` rad/s, its Ĵ, B̂ and p those of the
     drive's assumed machine); ``zero_fade`` (rad/s, ≥ 0) selects the phase detector's fade through zero speed
-    (0, the default: the sign detector).  The values are a record and a number, so a result file keeps them.
+    (a LESO's; 0, the default: the sign detector).  The values are a record and a number, so a result file keeps them.
 
     Args:
         raw: The parsed job file.
@@ -170,7 +171,7 @@ def parse_observer_speed(raw: dict, info) -> dict:
         The constructor keywords to add (``speed``, ``zero_fade``); empty without the table.
 
     Raises:
-        JobError: An unknown key or kind, a value out of its range, or a component that is not a LESO.
+        JobError: An unknown key or kind, a value out of its range, or a component without a speed estimator.
     """
     obs_t = get_field(raw, "observer", "observer", dict, {})
     no_unknown(obs_t, ("speed",), "observer")
@@ -178,9 +179,10 @@ def parse_observer_speed(raw: dict, info) -> dict:
         return {}
     sp = get_field(obs_t, "speed", "observer.speed", dict)
     no_unknown(sp, ("kind", "alpha_o", "zero_fade"), "observer.speed")
-    if not issubclass(info.ctor, AbstractLESO):
+    if "speed" not in getattr(info.ctor, "__dataclass_fields__", {}):
         raise JobError(
-            "observer.speed", f"only the LESOs (CLESO, GILESO, FALESO) take a speed estimator, not {info.entry.name}"
+            "observer.speed",
+            f"only the LESOs and the PLL-type flux observers (LPFFlux) take a speed estimator, not {info.entry.name}",
         )
     kind = get_field(sp, "kind", "observer.speed.kind", str, "pll")
     if kind not in SPEED_KINDS:
@@ -197,6 +199,8 @@ def parse_observer_speed(raw: dict, info) -> dict:
         out["speed"] = {"kind": kind}
     zf = get_field(sp, "zero_fade", "observer.speed.zero_fade", float, None)
     if zf is not None:
+        if not issubclass(info.ctor, AbstractLESO):
+            raise JobError("observer.speed.zero_fade", "applies to the LESOs only (a flux does not vanish at zero)")
         if zf < 0:
             raise JobError("observer.speed.zero_fade", f"must be >= 0 rad/s (0: the sign detector), got {show(zf)}")
         out["zero_fade"] = zf
