@@ -328,3 +328,21 @@ def test_a_job_selects_the_speed_estimator(drive):
         job('kind = "pll"\nzero_fade = 3.0', comp="LPFFlux")
     lpf = job('kind = "mechanical"\nalpha_o = 60.0', comp="LPFFlux")
     assert isinstance(LPFFlux(**lpf.values).speed, MechanicalSpeed)
+
+
+def test_the_c_export_refuses_a_mechanical_speed_estimator_and_a_bank_forwards_the_torque(tmp_path):
+    """The exported C step takes the four measurements only: a LESO with a mechanical model is refused by
+    name; in the loop an ObserverBank whose observers include one gets the torque reference."""
+    from jaxobs_tuning.export.files import export_observer
+
+    for name in MACHINES:
+        par = D.bench_machine(name)
+        obs = FALESO.closed_form(speed=MechanicalSpeed.closed_form(ALPHA_O)).bind(par, 100.0)
+        with pytest.raises(ValueError, match=r"^export: a mechanical-model speed estimator"):
+            export_observer(obs, tmp_path / name)
+        bank = jaxobs.ObserverBank((FALESO.closed_form().bind(par, 100.0), obs))
+        loop = D.ClosedLoop(D.bench_drive(par), bank, D.Scenario(par))
+        meas = DriveInput(*(jnp.zeros(()) for _ in range(4)))
+        assert loop._with_torque(meas, jnp.asarray(2.0)).T_ref is not None
+        alone = D.ClosedLoop(D.bench_drive(par), FALESO.closed_form().bind(par, 100.0), D.Scenario(par))
+        assert alone._with_torque(meas, jnp.asarray(2.0)) is meas  # a PLL: the measurements as they were

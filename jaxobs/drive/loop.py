@@ -351,8 +351,8 @@ class AbstractDriveLoop(AbstractSystem):
         (1.5 p (ψ̂f i_q* + (L̂d − L̂q) i_d*(i_q*) i_q*), field weakening's Δi_d left out), where the observer's
         speed estimator reads it (a mechanical model, jaxobs.observers.speed) and the controller is a
         :class:`FOC`; ``meas`` itself otherwise."""
-        speed = getattr(self.observer, "speed", None)
-        if iq_ref is None or not getattr(speed, "uses_torque", False):
+        parts = getattr(self.observer, "observers", (self.observer,))  # an ObserverBank: any of its observers
+        if iq_ref is None or not any(getattr(getattr(o, "speed", None), "uses_torque", False) for o in parts):
             return meas
         foc = self.controller
         if not isinstance(foc, FOC):  # the dual three-phase loop's controller: no torque reference (T* = 0)
