@@ -5,6 +5,8 @@ field (FLL family, SOGIs); :class:`AbstractDriveObserver` the drive observers (f
 :class:`ObserverBank`), bound to a machine and a speed by their one ``bind`` method.  Each observer declares its
 gains with :func:`gain` (units, role, bounds, the paper's symbol; :func:`gain_fields` lists them), and each one a
 paper tunes has a ``closed_form`` classmethod: the paper's rule (the rules' arithmetic: ``sogi_fll_lambda``, ...).
+A LESO and a PLL-type flux observer hold their speed and position extraction as a strategy
+(:class:`AbstractSpeedEstimator`: :class:`PLLSpeed`, :class:`MechanicalSpeed`; :mod:`jaxobs.observers.speed`).
 """
 
 from ._cores import sogi2_tustin_coefficients as sogi2_tustin_coefficients
