@@ -272,8 +272,8 @@ name = "zero"
 component = "{comp}"
 [observer.speed]
 {speed}
-[gains.kp_pll]
-init = 133.0
+[gains.{gain}]
+init = {init}
 [drive]
 {drive}
 [scenarios]
@@ -302,8 +302,8 @@ def test_a_job_selects_the_speed_estimator(drive):
     teknic = str(Path(__file__).resolve().parent.parent / "docs" / "examples" / "teknic_m2310p.toml")
     drive = drive.format(teknic=teknic)
 
-    def job(speed, comp="FALESO"):
-        return parse_job(tomllib.loads(_JOB.format(comp=comp, speed=speed, drive=drive)))
+    def job(speed, comp="FALESO", gain="k2", init=314.0):
+        return parse_job(tomllib.loads(_JOB.format(comp=comp, speed=speed, drive=drive, gain=gain, init=init)))
 
     j = job('kind = "mechanical"\nalpha_o = 60.0\nzero_fade = 20.0')
     assert j.values["speed"] == {"kind": "mechanical", "alpha_o": 60.0} and j.values["zero_fade"] == 20.0
@@ -322,11 +322,14 @@ def test_a_job_selects_the_speed_estimator(drive):
     ):
         with pytest.raises(JobError, match=rf"^{field}"):
             job(speed)
+    with pytest.raises(JobError, match=r"^gains\.kp_pll: the PLL's gains do nothing"):
+        job('kind = "mechanical"\nalpha_o = 60.0', gain="kp_pll", init=133.0)
+    assert job('kind = "pll"', gain="kp_pll", init=133.0).gains[0].name == "kp_pll"
     with pytest.raises(JobError, match=r"^observer\.speed: only the LESOs"):
-        job('kind = "pll"', comp="SOIFO")
+        job('kind = "pll"', comp="SOIFO", gain="k", init=1.4)
     with pytest.raises(JobError, match=r"^observer\.speed\.zero_fade: applies to the LESOs only"):
-        job('kind = "pll"\nzero_fade = 3.0', comp="LPFFlux")
-    lpf = job('kind = "mechanical"\nalpha_o = 60.0', comp="LPFFlux")
+        job('kind = "pll"\nzero_fade = 3.0', comp="LPFFlux", gain="omega_c", init=100.0)
+    lpf = job('kind = "mechanical"\nalpha_o = 60.0', comp="LPFFlux", gain="omega_c", init=100.0)
     assert isinstance(LPFFlux(**lpf.values).speed, MechanicalSpeed)
 
 

@@ -7,7 +7,7 @@ import os
 from pathlib import Path
 
 from jaxobs.families import FAMILIES, GridSignals
-from jaxobs.observers import AbstractLESO
+from jaxobs.observers import AbstractLESO, gain_fields
 from jaxobs.observers.speed import SPEED_KINDS
 from jaxobs.provenance import sha256
 from jaxobs.registry import canonical_key
@@ -291,6 +291,15 @@ def parse_job(raw: dict, base: Path | None = None) -> Job:
             raise JobError(f"{where}.init", f"{init:g} cannot be parametrized inside its bounds [{lower}, {upper}]")
         gains.append(g)
         values[gname] = init
+    speed_spec = values.get("speed")
+    if isinstance(speed_spec, dict) and speed_spec.get("kind") == "mechanical":
+        roles = gain_fields(info.ctor)
+        unused = [g.name for g in gains if roles[g.name].role == "pll"]
+        if unused:
+            raise JobError(
+                f"gains.{unused[0]}",
+                'the PLL\'s gains do nothing under [observer.speed] kind = "mechanical"; free another gain',
+            )
 
     scen = parse_scenarios(
         get_field(raw, "scenarios", "scenarios", dict, required=True), "scenarios", info.signals, seed, freq_n, ts, base
