@@ -98,6 +98,14 @@ def test_mechanical_closed_form_places_a_triple_pole_whatever_the_inertia(name):
         assert np.poly(np.asarray(A)) == pytest.approx(np.poly([-ALPHA_O] * 3), rel=1e-9)
 
 
+def test_the_mechanical_gains_are_declared_gains():
+    from jaxobs.observers import gain_fields
+
+    g = gain_fields(MechanicalSpeed)
+    assert set(g) == {"k1", "k2", "k3"} and [g[k].units for k in ("k1", "k2", "k3")] == ["s-1", "s-2", "s-3"]
+    assert all(i.role == "speed" and i.bounds[0] == 0.0 and i.long_name and i.symbol for i in g.values())
+
+
 def test_mechanical_bind_takes_the_assumed_machine():
     for name in MACHINES:
         par = D.bench_machine(name)
