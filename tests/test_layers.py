@@ -59,6 +59,7 @@ LAYERS = [
     # observers: they estimate
     ("jaxobs.observers._cores", "jaxobs.observers._gains", "jaxobs.observers._rules"),
     ("jaxobs.observers.base",),  # its one bound check is _gains'
+    ("jaxobs.observers.speed",),
     (
         "jaxobs.observers.sogi",
         "jaxobs.observers.fll",

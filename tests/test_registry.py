@@ -34,8 +34,9 @@ from jaxobs_tuning.cli import main
 from jaxobs_tuning.cli_papers import CF_DESIGNS, CF_OPTIONS
 from jaxobs_tuning.job import COMPONENTS, parse_job
 
-# what is not a gain: the machine and start speed bind() sets, and the FLLs' nominal frequency
-NOT_GAINS = {"Rs", "L", "Ld", "Lq", "psi_f", "omega_init", "omega0_pll", "omega_n"}
+# what is not a gain: the machine and start speed bind() sets, the FLLs' nominal frequency, and the speed
+# estimator a LESO or a PLL-type flux observer holds (a module whose gains are its own: tests/test_zero_speed.py)
+NOT_GAINS = {"Rs", "L", "Ld", "Lq", "psi_f", "omega_init", "omega0_pll", "omega_n", "speed"}
 UNITS = {"1", "s-1", "s-2", "rad s-1", "rad2 s-2"}
 
 

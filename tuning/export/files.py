@@ -76,10 +76,17 @@ def export_observer(
     bar.stage("generating the C from the jaxpr of the step")
     obs32 = float32_observer(observer)
     kind = "drive" if is_drive(obs32) else "signal"
+    if getattr(getattr(obs32, "speed", None), "uses_torque", False):
+        raise ValueError(
+            "export: a mechanical-model speed estimator (jaxobs.observers.speed.MechanicalSpeed) needs the torque "
+            "reference each period, which the exported step does not take; export the observer with its PLL"
+        )
+    # the four measurements (u_a, u_b, i_a, i_b): DriveInput's T_ref is None here, no input of the C step
+    names = list(DriveInput._fields[:4])
     with jax.enable_x64(False):
         u0 = zero_input(obs32)
         state0 = obs32.init(u0)
-        step = generate(obs32, state0, u0, input_names=list(DriveInput._fields) if kind == "drive" else ["v"])
+        step = generate(obs32, state0, u0, input_names=names if kind == "drive" else ["v"])
     component = type(obs32).__name__
     _self_check(obs32, step, state0)
     header, source_c = write_c(obs32, step, kind, source or f"{component} as given", notes, observer_rule(obs32))

@@ -163,7 +163,8 @@ def run_job(job: Job, out: Path, resume: bool = False, quiet: bool = False) -> d
         "closed_form": {g.name: float(cf[g.name]) for g in job.gains},
         "tuned": param.values(res.theta) if res.theta is not None else None,
     }
-    fixed = {k: float(v) for k, v in job.values.items() if k not in param.names}
+    # a LESO's [observer.speed] record stays a record (jaxobs.observers.speed.speed_from_spec)
+    fixed = {k: (v if isinstance(v, dict) else float(v)) for k, v in job.values.items() if k not in param.names}
     values = {k: (None if g is None else {**fixed, **g}) for k, g in gains.items()}
     n_scored = len(thetas) * (2 if job.holdout is not None else 1)
     bar = Progress(not quiet and "auto", n_scored, "score", unit="design")
