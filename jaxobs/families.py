@@ -132,9 +132,15 @@ class AbstractScenarios(eqx.Module):
         axes: name -> :class:`~jaxobs.quantities.Axis` (a class attribute).
         closed_loop: Whether the design closes the drive's loop: the drive's metrics apply (a class attribute).
         bytes_per_step: An estimate of the memory a gradient keeps per scenario and step (a class attribute).
+        metrics: Its default metrics, names in :data:`jaxobs.metrics.METRICS` (what its study reports; a class
+            attribute).
+        flags: Its default flags, boolean metrics of that table, in the order a study stores them (a class
+            attribute).
     """
 
     signal: eqx.AbstractClassVar[str]
+    metrics: eqx.AbstractClassVar[tuple[str, ...]]
+    flags: eqx.AbstractClassVar[tuple[str, ...]]
     axes: eqx.AbstractClassVar[dict]
     closed_loop: eqx.AbstractClassVar[bool]
     bytes_per_step: eqx.AbstractClassVar[int]
@@ -238,6 +244,8 @@ class GridSignals(AbstractScenarios):
     axes: ClassVar[dict] = GRID_SIGNAL_AXES
     closed_loop: ClassVar[bool] = False
     bytes_per_step: ClassVar[int] = 512
+    metrics: ClassVar[tuple[str, ...]] = ("settling_freq", "ripple_freq", "rms_phase_steady", "itae_freq", "iae_phase")
+    flags: ClassVar[tuple[str, ...]] = ("settled", "diverged", "lost_lock")
     # a recording of it: the voltage column; the truth columns (phase rad, ω rad/s, amplitude), how many
     recording_columns: ClassVar[tuple] = (("v",), ("theta", "omega", "amplitude"))
     truth_counts: ClassVar[tuple] = (3,)
@@ -277,6 +285,8 @@ class EMFSignals(AbstractScenarios):
     axes: ClassVar[dict] = EMF_SIGNAL_AXES
     closed_loop: ClassVar[bool] = False
     bytes_per_step: ClassVar[int] = 512
+    metrics: ClassVar[tuple[str, ...]] = ("iae_position", "rms_position_steady", "bias_position")
+    flags: ClassVar[tuple[str, ...]] = ("diverged", "lost_lock")
     # a recording of a drive: u and i; the truth columns (encoder angle rad [, speed rad/s]), how many
     recording_columns: ClassVar[tuple] = (("u_a", "u_b", "i_a", "i_b"), ("theta_e", "omega_e"))
     truth_counts: ClassVar[tuple] = (1, 2)
@@ -326,6 +336,15 @@ class DriveScenarios(AbstractScenarios):
     axes: ClassVar[dict] = DRIVE_STUDY_AXES
     closed_loop: ClassVar[bool] = True
     bytes_per_step: ClassVar[int] = 2048
+    metrics: ClassVar[tuple[str, ...]] = (
+        "rms_position_steady",
+        "peak_position_steady",
+        "rms_speed_estimate_steady",
+        "speed_noise",
+        "bias_position",
+        "peak_speed_deviation",
+    )
+    flags: ClassVar[tuple[str, ...]] = ("lost_lock", "lost_speed", "diverged")
     recording_columns: ClassVar[tuple] = EMFSignals.recording_columns
     truth_counts: ClassVar[tuple] = EMFSignals.truth_counts
 
@@ -358,6 +377,9 @@ class RecordedSignals(AbstractScenarios):
     axes: ClassVar[dict] = {}
     closed_loop: ClassVar[bool] = False
     bytes_per_step: ClassVar[int] = 512
+    # the one study on recordings is the FLL study's (jaxobs.study.run_study on a Recordings sampler)
+    metrics: ClassVar[tuple[str, ...]] = GridSignals.metrics
+    flags: ClassVar[tuple[str, ...]] = GridSignals.flags
 
     @property
     def binds(self) -> bool:

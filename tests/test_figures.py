@@ -288,7 +288,7 @@ def _envelope() -> xr.Dataset:
     sync[1, 0, 0], stable[1, 0, 1], err[1, 1, 1] = 0.0, 0.0, 45.0
     err[1, 0, 0] = np.nan
     holds = sync * stable * (np.nan_to_num(err, nan=99.0) <= 30.0)
-    dims = ("design", "speed_rpm", "load")
+    dims = ("design", "speed_rpm", "load_nm")
     data = {
         "margin": (dims, np.where(stable > 0, 5.0, -1.0)),
         "pos_err_max_deg": (dims, err),
@@ -298,7 +298,7 @@ def _envelope() -> xr.Dataset:
         "stable": (dims, stable.astype(np.int8)),
         "synchronous": (dims, sync.astype(np.int8)),
     }
-    coords = {"design": ["closed_form", "tuned"], "speed_rpm": speeds, "load": loads}
+    coords = {"design": ["closed_form", "tuned"], "speed_rpm": speeds, "load_nm": loads}
     return xr.Dataset(data, coords=coords, attrs={"bound_deg": 30.0})
 
 

@@ -167,7 +167,7 @@ def cli_envelope(args) -> int:
     print(head + f"{'lowest r/min held at all loads':>32}")
     for d in designs:
         s = ds.sel(design=d)
-        all_loads = s["holds"].astype(bool).all("load")
+        all_loads = s["holds"].astype(bool).all("load_nm")
         low = f"{float(s['speed_rpm'][all_loads].min()):.4g}" if bool(all_loads.any()) else "none"
         print(
             f"{d:<{wd}}{int(s['holds'].sum()):>5}/{n:<3}{int(s['stable'].sum()):>5}/{n:<3}{int(s['marginal'].sum()):>5}/{n:<3}"

@@ -2,7 +2,7 @@
 
     ds = envelope({"closed form": cf, "tuned": tuned}, machine=par, drive=drive)
     ds["holds"].sel(design="tuned")            # stable ∧ synchronous ∧ error within the bound
-    ds["margin"].sel(design="tuned", load=0)   # 1/s, the slowest mode's decay rate
+    ds["margin"].sel(design="tuned", load_nm=0)   # 1/s, the slowest mode's decay rate
 
 At every operating point (speed × load, optionally × one mismatch axis) and for every design (an observer that
 closes the loop sensorless) it measures two things, each batched over the points in one ``jit(vmap)``:
@@ -56,6 +56,7 @@ then a multi-start projected gradient ascent with a line search, each worst veri
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 from typing import ClassVar, NamedTuple
 
 import equinox as eqx
@@ -78,10 +79,9 @@ from ..drive import (
 from ..drive_study import gain_variables
 from ..families import DRIVE_STUDY_AXES, AbstractScenarios, DriveScenarios, bind_observer
 from ..provenance import cf_dataset, provenance
-from ..quantities import Metric
 from ..scenarios import Grid
 from ..sharding import batch_mesh
-from ..study import Flag, study
+from ..study import study
 from .stability import Stability, floquet, lyapunov
 
 __all__ = [
@@ -294,8 +294,8 @@ def _sums(sol):
     return w, mean, jnp.sqrt(jnp.maximum(w.sum_e2 / w.n - mean * mean, 0.0))
 
 
-def _var(name: str, form) -> Metric:
-    return Metric(name, *ENVELOPE_VARIABLES[name], exact=form, closed_loop=True)
+def _var(name: str, form) -> M.Metric:
+    return M.Metric(name, *ENVELOPE_VARIABLES[name], exact=form, closed_loop=True)
 
 
 # the long run's metrics, read from its final state (units and long names: ENVELOPE_VARIABLES)
@@ -309,27 +309,32 @@ LONG_RUN_METRICS = (
 
 
 def _lock_lost(sol, sc, ctx):
+    # the lost-lock flag's definition (jaxobs.metrics.lost_lock: |error| > 90 deg electrical somewhere in the window)
+    # read from the running maximum: the long run keeps no trajectory
     return _sums(sol)[0].max_e > math.radians(M.LOCK_TOL_DRIVE_DEG)
 
 
 def _speed_lost(sol, sc, ctx):
+    # jaxobs.metrics.lost_speed's definition from the running sums (the window's means are the sums over n)
     w = _sums(sol)[0]
     return w.sum_dw > jnp.maximum(M.SPEED_TOL * w.sum_ref, M.SPEED_FLOOR_RPM * math.pi / 30 * w.n)
 
 
 def _long_run_flags(speed_tol: float) -> tuple:
     """lost_lock, lost_speed (diverged included) and synchronous: finite, locked, at speed and settled (its late
-    peak speed deviation under ``speed_tol`` and at most :data:`SETTLE_GROWTH` × the early window's)."""
+    peak speed deviation under ``speed_tol`` and at most :data:`SETTLE_GROWTH` × the early window's).  The first two
+    are the metric table's flags (:data:`jaxobs.metrics.METRICS`) with the long run's forms, over its late window."""
 
     def synchronous(sol, sc, ctx):
         w = _sums(sol)[0]
         settled = (w.dev_late < speed_tol) & (w.dev_late <= SETTLE_GROWTH * jnp.maximum(w.dev_early, 1e-6))
         return ~_lock_lost(sol, sc, ctx) & ~_speed_lost(sol, sc, ctx) & settled
 
-    return tuple(
-        Flag(name, ENVELOPE_VARIABLES[name][1], form, diverged=name != "synchronous")
-        for name, form in (("lost_lock", _lock_lost), ("lost_speed", _speed_lost), ("synchronous", synchronous))
-    )
+    def table(name, form):
+        return replace(M.METRICS[name], exact=form, long_name=ENVELOPE_VARIABLES[name][1], count=None)
+
+    sync = M.Metric("synchronous", "1", ENVELOPE_VARIABLES["synchronous"][1], synchronous, kind="flag", diverged=False)
+    return table("lost_lock", _lock_lost), table("lost_speed", _speed_lost), sync
 
 
 class _DualScenarios(DriveScenarios):
@@ -447,7 +452,7 @@ def envelope(
     :func:`~jaxobs.analysis.stability.lyapunov`: settle, warmup, window, n_dirs, tol).  ``progress`` as in
     :func:`jaxobs.runner.run_scenarios`.  The long runs' and the verdicts' traced programs are kept across
     processes where a folder is set (:func:`jaxobs.kept_jit`).  Returns an ``xarray.Dataset`` with dims
-    ``("design", "speed_rpm", "load"[, axis])`` and the variables of :data:`ENVELOPE_VARIABLES` (booleans stored
+    ``("design", "speed_rpm", "load_nm"[, axis])`` and the variables of :data:`ENVELOPE_VARIABLES` (booleans stored
     as int8 0/1); its ``horizon`` and ``steady_from`` attributes are those that ran.
 
     Raises:
@@ -619,11 +624,11 @@ def envelope(
     err_ok = np.nan_to_num(res["pos_err_max_deg"], nan=np.inf) <= bound_deg
     res["holds"] = res["stable"].astype(bool) & res["synchronous"].astype(bool) & err_ok
 
-    dims = ("design", "speed_rpm", "load", *names[2:])
+    dims = ("design", "speed_rpm", "load_nm", *names[2:])
     coords = {
         "design": ("design", dnames, {"long_name": "observer design (closing the loop sensorless)"}),
         "speed_rpm": ("speed_rpm", speeds, DRIVE_STUDY_AXES["speed_rpm"].attrs),
-        "load": ("load", loads, DRIVE_STUDY_AXES["load_nm"].attrs),
+        "load_nm": ("load_nm", loads, DRIVE_STUDY_AXES["load_nm"].attrs),
     }
     if mismatch is not None:
         coords[mismatch[0]] = (mismatch[0], axes[mismatch[0]], DRIVE_STUDY_AXES[mismatch[0]].attrs)

@@ -12,7 +12,7 @@ import numpy as np
 from jaxobs import metrics as M
 from jaxobs.provenance import cf_dataset
 
-from ..objective import LOST_SYNC_DEG, METRIC_UNITS, METRICS
+from ..objective import METRIC_UNITS, METRICS
 from ..outdir import atomic_write_text
 from .spec import Job, ScenarioSpec
 
@@ -80,8 +80,8 @@ def scores_dataset(obj, names, combos, spec: ScenarioSpec, per: dict, title: str
         coords.update({n: ("scenario", [c[i] for c in combos]) for i, n in enumerate(names)})
     data = {}
     keys = [t.metric for t in obj.terms]
-    extra = ("lost_sync", "lost_speed") if obj.closed_loop else ()
-    for key in (*keys, "total", "diverged", "lost_lock", *extra):
+    flag_keys = ("diverged", *obj.flags)  # the table's flags (jaxobs.metrics.METRICS): lost_lock, the drive's too
+    for key in (*keys, "total", *flag_keys):
         rows = []
         for d in designs:
             mets, total, good = per[d]
@@ -94,28 +94,12 @@ def scores_dataset(obj, names, combos, spec: ScenarioSpec, per: dict, title: str
         ds[key].attrs.update(units=METRIC_UNITS[key], long_name=METRICS[key].long_name)
     # the weights carry the metrics' units (a term's weight is per its metric's unit): the total is a number
     ds["total"].attrs.update(units="1", long_name="weighted objective of the scenario (the penalty where diverged)")
-    flags = {
-        "diverged": "diverged: the simulation ended non-finite (1: diverged)",
-        "lost_lock": "lost lock: the estimate ended far from the truth in the steady window (45 deg or 10 % on "
-        "signals, 90 deg on the drive), or diverged (1: lost)",
-        "lost_sync": f"lost synchronism: diverged, or |position error| > {LOST_SYNC_DEG:g} deg (1: lost)",
-        "lost_speed": f"lost speed: diverged, or the steady window's mean |speed - reference| > "
-        f"{100 * M.SPEED_TOL:g} % of the mean |reference| (at least {M.SPEED_FLOOR_RPM:g} r/min) (1: lost)",
-    }
-    for key in ("diverged", "lost_lock", *extra):
+    for key in flag_keys:
         ds[key] = ds[key].astype("int8")
-        ds[key].attrs.update(units="1", long_name=flags[key])
-    ds.attrs["note"] = (
-        "total: the weighted objective per scenario (the penalty where diverged); diverged: 1/0; lost_lock: 1 where "
-        "the estimate ended far from the truth in the steady window (45 deg or 10 % on signals, 90 deg on the "
-        "drive) or diverged"
+        ds[key].attrs.update(units="1", long_name=M.METRICS[key].long_name)
+    ds.attrs["note"] = "total: the weighted objective per scenario (the penalty where diverged); " + "; ".join(
+        f"{key}: {M.METRICS[key].long_name}" for key in flag_keys
     )
-    if extra:
-        ds.attrs["note"] += f"; lost_sync: 1 where diverged or |position error| > {LOST_SYNC_DEG:g} deg (drive)"
-        ds.attrs["note"] += (
-            f"; lost_speed: 1 where diverged or the steady window's mean |speed - reference| > "
-            f"{100 * M.SPEED_TOL:g} % of the mean |reference| (at least {M.SPEED_FLOOR_RPM:g} r/min) (drive)"
-        )
     what = "observer design (closing the loop sensorless)" if obj.closed_loop else "observer design"
     ds["design"].attrs["long_name"] = f"{what}: its initial, closed-form or tuned gains"
     for name in names:

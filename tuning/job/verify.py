@@ -133,7 +133,7 @@ def verify_designs(designs: dict, env: EnvelopeSpec, drive_spec: DriveSpec) -> d
     for name in designs:
         rows = []
         for s, ld in combos:
-            pt = ds.sel(design=name, speed_rpm=s, load=ld)
+            pt = ds.sel(design=name, speed_rpm=s, load_nm=ld)
             row = {"speed_rpm": s, "load_nm": ld}
             for k in ("synchronous", "stable", "marginal", "holds", "lost_lock", "lost_speed"):
                 row[k] = bool(pt[k])
