@@ -139,8 +139,8 @@ class AbstractScenarios(eqx.Module):
     """
 
     signal: eqx.AbstractClassVar[str]
-    metrics: eqx.AbstractClassVar[tuple[str, ...]]
-    flags: eqx.AbstractClassVar[tuple[str, ...]]
+    metrics: eqx.AbstractClassVar[tuple]
+    flags: eqx.AbstractClassVar[tuple]
     axes: eqx.AbstractClassVar[dict]
     closed_loop: eqx.AbstractClassVar[bool]
     bytes_per_step: eqx.AbstractClassVar[int]

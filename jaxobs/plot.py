@@ -469,12 +469,12 @@ def drive_study_figure(ds, path):
     return fig
 
 
-# the envelope map's panels: variable -> (label, colour map, centred at 0)
+# the envelope map's panels: variable -> (label, colour map, centred at 0, scale to the shown unit: the file is SI)
 _ENVELOPE_PANELS = {
-    "margin": ("stability margin (1/s; < 0: unstable)", "RdBu", True),
-    "pos_err_max_deg": ("peak position error, late window (deg el.)", "viridis", False),
-    "pos_bias_deg": ("steady position bias (deg el.)", "PuOr", True),
-    "pos_ripple_deg": ("position-error ripple, rms (deg el.)", "viridis", False),
+    "margin": ("stability margin (1/s; < 0: unstable)", "RdBu", True, 1.0),
+    "peak_position_late": ("peak position error, late window (deg el.)", "viridis", False, 180.0 / math.pi),
+    "mean_position_late": ("steady position bias (deg el.)", "PuOr", True, 180.0 / math.pi),
+    "ripple_position_late": ("position-error ripple, rms (deg el.)", "viridis", False, 180.0 / math.pi),
 }
 
 
@@ -544,11 +544,11 @@ def envelope_figure(ds, path):
 
     designs = list(ds["design"].values)
     extra = [d for d in ds["holds"].dims if d not in ("design", "speed_rpm", "load_nm")]
-    worst = {"margin": "min", "pos_err_max_deg": "max", "pos_ripple_deg": "max"}
+    worst = {"margin": "min", "peak_position_late": "max", "ripple_position_late": "max"}
 
     def reduce(name):
         v = ds[name]
-        if name == "pos_bias_deg":  # the bias of largest magnitude, with its sign
+        if name == "mean_position_late":  # the bias of largest magnitude, with its sign
             return v.isel({extra[0]: abs(v).fillna(-1.0).argmax(extra[0])}) if extra else v
         return getattr(v, worst.get(name, "min"))(extra) if extra else v
 
@@ -564,8 +564,8 @@ def envelope_figure(ds, path):
     axs = fig.subplots(len(rows), len(designs), squeeze=False)
     holds = reduce("holds") if not extra else ds["holds"].min(extra)
     for r, name in enumerate(rows):
-        label, cmap, centred = _ENVELOPE_PANELS[name]
-        vals = np.asarray(reduce(name).transpose("design", "speed_rpm", "load_nm").values, dtype=float)
+        label, cmap, centred, scale = _ENVELOPE_PANELS[name]
+        vals = scale * np.asarray(reduce(name).transpose("design", "speed_rpm", "load_nm").values, dtype=float)
         fin = vals[np.isfinite(vals)]
         if centred:
             lim = float(np.percentile(np.abs(fin), 95)) if fin.size else 1.0

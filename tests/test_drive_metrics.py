@@ -1,4 +1,5 @@
-"""The drive job's metrics (jaxobs_tuning.objective.METRICS) on a simulated load step: they measure what they say."""
+"""The drive job's metrics (jaxobs_tuning.objective.TERM_METRICS) on a simulated load step: they measure what
+they say."""
 
 import math
 
@@ -10,7 +11,8 @@ import jaxobs
 from jaxobs import drive as D
 from jaxobs import metrics as M
 from jaxobs.drive_study import bind_observer
-from jaxobs_tuning.objective import DRIVE_METRICS, METRICS, MetricContext
+from jaxobs_tuning.objective import DRIVE_METRICS, MetricContext
+from jaxobs_tuning.objective import TERM_METRICS as METRICS
 
 
 @pytest.fixture(scope="module")

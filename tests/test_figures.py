@@ -291,9 +291,9 @@ def _envelope() -> xr.Dataset:
     dims = ("design", "speed_rpm", "load_nm")
     data = {
         "margin": (dims, np.where(stable > 0, 5.0, -1.0)),
-        "pos_err_max_deg": (dims, err),
-        "pos_bias_deg": (dims, np.where(np.isnan(err), np.nan, 0.5)),
-        "pos_ripple_deg": (dims, np.where(np.isnan(err), np.nan, 0.2)),
+        "peak_position_late": (dims, np.radians(err)),
+        "mean_position_late": (dims, np.where(np.isnan(err), np.nan, np.radians(0.5))),
+        "ripple_position_late": (dims, np.where(np.isnan(err), np.nan, np.radians(0.2))),
         "holds": (dims, holds.astype(np.int8)),
         "stable": (dims, stable.astype(np.int8)),
         "synchronous": (dims, sync.astype(np.int8)),

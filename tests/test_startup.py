@@ -323,7 +323,8 @@ def test_standstill_jobs_score_the_position_error_from_the_hand_over_on():
     from jaxobs import Solution
     from jaxobs.drive import DriveOutput
     from jaxobs.metrics import METRICS as TABLE
-    from jaxobs_tuning.objective import METRICS, MetricContext
+    from jaxobs_tuning.objective import TERM_METRICS as METRICS
+    from jaxobs_tuning.objective import MetricContext
 
     def drive_output(**fields):  # a closed loop's outputs: the metrics take θe as the truth by its type
         return DriveOutput(**(dict.fromkeys(DriveOutput._fields) | fields))

@@ -435,10 +435,13 @@ def test_every_drive_component_may_be_tuned_by_a_job():
 
 
 def test_every_metric_has_cf_units():
-    """scores.nc labels each metric from METRIC_UNITS: a metric added without its units fails here."""
-    from jaxobs_tuning.objective import METRIC_UNITS, METRICS
+    """scores.nc labels each metric with its entry's units: a term metric is every run and system entry of the one
+    table, each with units."""
+    from jaxobs.metrics import METRICS
+    from jaxobs_tuning.objective import TERM_METRICS
 
-    assert set(METRIC_UNITS) == set(METRICS)
+    assert set(TERM_METRICS) == {k for k, m in METRICS.items() if m.kind in ("run", "system")}
+    assert all(TERM_METRICS[k] is METRICS[k] and METRICS[k].units for k in TERM_METRICS)
 
 
 def test_report_marks_events_only_where_the_scenario_has_one_and_draws_a_negative_objective(tmp_path):

@@ -51,8 +51,7 @@ from .aggregations import AbstractAggregation, Mean
 from .params import Parametrization
 
 __all__ = [
-    "METRICS",
-    "METRIC_UNITS",
+    "TERM_METRICS",
     "DRIVE_METRICS",
     "LOST_LOCK",
     "LOST_SYNC_DEG",
@@ -91,12 +90,10 @@ FORWARD_MAX = 8
 # to rank designs by their slowest mode, not a verdict (the envelope's verification gives that).
 MARGIN_KW = {"settle": 0.1, "warmup": 0.05, "window": 0.2, "n_dirs": 2}
 
-# the metrics a job may tune on (a view of the table: its run and system metrics, not its flags; each called as its
+# the metrics a term may name (a view of the table: its run and system metrics, not its flags; each called as its
 # smooth form): the FLL family's on grid signals, the flux observers' on EMF signals, the drive observers' in the
 # closed loop
-METRICS: dict[str, Metric] = {k: m for k, m in M.METRICS.items() if m.kind != "flag"}
-# each metric's CF (UDUNITS) units, for scores.nc (the Metric's)
-METRIC_UNITS: dict[str, str] = {k: m.units for k, m in METRICS.items()}
+TERM_METRICS: dict[str, Metric] = {k: m for k, m in M.METRICS.items() if m.kind != "flag"}
 # the per-scenario flag :meth:`Objective.per_scenario` adds to the metrics: the estimate ended far from the
 # truth (the table's lost_lock: 45° / 10 % on signals, 90° on the drive, over the steady window)
 LOST_LOCK = "lost_lock"
@@ -104,7 +101,7 @@ LOST_LOCK = "lost_lock"
 DRIVE_FLAGS = ("lost_sync", "lost_speed")
 _OK = " ok"  # the simulation's own flag among a scenario's metrics (a name no metric has)
 # metrics that need the closed-loop drive (signal = "drive" jobs)
-DRIVE_METRICS = tuple(k for k, m in METRICS.items() if m.closed_loop)
+DRIVE_METRICS = tuple(k for k, m in TERM_METRICS.items() if m.closed_loop)
 
 # Loss of synchronism of a drive observer (the table's lost_sync), a per-scenario flag (never fatal): its simulation
 # diverged, or |θ̂e − θe| exceeded this anywhere in the scored horizon [0, horizon) (the settling phase before t = 0
@@ -117,7 +114,7 @@ class Term:
     """One weighted term of the objective: a metric times its weight.
 
     Attributes:
-        metric: A :class:`~jaxobs.metrics.Metric`, or the name of one in :data:`METRICS`; kept as its name,
+        metric: A :class:`~jaxobs.metrics.Metric`, or the name of one in :data:`TERM_METRICS`; kept as its name,
             the Metric in :attr:`measure`.  An old name (:data:`jaxobs.metrics.ALIASES`) is read as its new one
             with a :class:`DeprecationWarning`, the weight converted to the new units.
         weight: The weight, per the metric's unit.
@@ -133,7 +130,7 @@ class Term:
             name, scale = M.canonical(self.metric, "Term.metric")
             object.__setattr__(self, "metric", name)
             object.__setattr__(self, "weight", self.weight / scale)  # per the new unit: the same term
-        m = self.metric if isinstance(self.metric, Metric) else METRICS.get(self.metric)
+        m = self.metric if isinstance(self.metric, Metric) else TERM_METRICS.get(self.metric)
         object.__setattr__(self, "measure", m)
         if isinstance(self.metric, Metric):
             object.__setattr__(self, "metric", self.metric.name)
@@ -185,7 +182,7 @@ class Objective:
     ):
         for term in terms:
             if term.measure is None:
-                raise ValueError(f"objective metric {term.metric!r} is unknown; known: {', '.join(METRICS)}")
+                raise ValueError(f"objective metric {term.metric!r} is unknown; known: {', '.join(TERM_METRICS)}")
         if not isinstance(aggregation, AbstractAggregation):
             raise ValueError(
                 f"Objective.aggregation must be jaxobs_tuning.Mean(), SmoothMax() or CVaR(), got {aggregation!r}"

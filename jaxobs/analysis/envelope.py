@@ -135,11 +135,11 @@ ENVELOPE_VARIABLES = {
     ),
     "lost_lock": ("1", "lost lock over the late window: diverged or position error > 90 deg electrical (1: lost)"),
     "lost_speed": ("1", "lost speed over the late window: diverged, or mean |speed - ref| > 20 % of |ref| (1: lost)"),
-    "pos_err_max_deg": ("degree", "peak |position error| in the late window (electrical)"),
-    "pos_bias_deg": ("degree", "mean position error in the late window (electrical, signed): the steady bias"),
-    "pos_ripple_deg": ("degree", "rms of the position error about its mean in the late window (electrical)"),
-    "speed_dev_early_pct": ("percent", "peak |speed - reference| / |reference| in the early window"),
-    "speed_dev_late_pct": ("percent", "peak |speed - reference| / |reference| in the late window"),
+    "peak_position_late": ("rad", "peak |position error| in the late window (electrical)"),
+    "mean_position_late": ("rad", "mean position error in the late window (electrical, signed): the steady bias"),
+    "ripple_position_late": ("rad", "rms of the position error about its mean in the late window (electrical)"),
+    "peak_speed_deviation_early": ("1", "peak |speed - reference| / |reference| in the early window"),
+    "peak_speed_deviation_late": ("1", "peak |speed - reference| / |reference| in the late window"),
     "holds": ("1", "holds: stable, synchronous and peak position error within bound_deg (1: holds)"),
 }
 
@@ -274,6 +274,15 @@ class _LongRuns(AbstractScenarios):
     axes: ClassVar[dict] = DRIVE_STUDY_AXES
     closed_loop: ClassVar[bool] = True
     bytes_per_step: ClassVar[int] = 2048
+    # the long run's own metrics (LONG_RUN_METRICS, read from its running sums) and flags (_long_run_flags)
+    metrics: ClassVar[tuple[str, ...]] = (
+        "peak_position_late",
+        "mean_position_late",
+        "ripple_position_late",
+        "peak_speed_deviation_early",
+        "peak_speed_deviation_late",
+    )
+    flags: ClassVar[tuple[str, ...]] = ("lost_lock", "lost_speed", "synchronous", "diverged")
 
     def build(self, names, points, first: int = 0):
         fam = self.family
@@ -300,11 +309,11 @@ def _var(name: str, form) -> M.Metric:
 
 # the long run's metrics, read from its final state (units and long names: ENVELOPE_VARIABLES)
 LONG_RUN_METRICS = (
-    _var("pos_err_max_deg", lambda sol, sc, ctx: jnp.degrees(_sums(sol)[0].max_e)),
-    _var("pos_bias_deg", lambda sol, sc, ctx: jnp.degrees(_sums(sol)[1])),
-    _var("pos_ripple_deg", lambda sol, sc, ctx: jnp.degrees(_sums(sol)[2])),
-    _var("speed_dev_early_pct", lambda sol, sc, ctx: 100 * _sums(sol)[0].dev_early),
-    _var("speed_dev_late_pct", lambda sol, sc, ctx: 100 * _sums(sol)[0].dev_late),
+    _var("peak_position_late", lambda sol, sc, ctx: _sums(sol)[0].max_e),
+    _var("mean_position_late", lambda sol, sc, ctx: _sums(sol)[1]),
+    _var("ripple_position_late", lambda sol, sc, ctx: _sums(sol)[2]),
+    _var("peak_speed_deviation_early", lambda sol, sc, ctx: _sums(sol)[0].dev_early),
+    _var("peak_speed_deviation_late", lambda sol, sc, ctx: _sums(sol)[0].dev_late),
 )
 
 
@@ -619,9 +628,9 @@ def envelope(
     for m in LONG_RUN_METRICS:
         res[m.name] = runs[m.name].values
     lost = res["lost_lock"].astype(bool)
-    for k in ("pos_err_max_deg", "pos_bias_deg", "pos_ripple_deg"):
+    for k in ("peak_position_late", "mean_position_late", "ripple_position_late"):
         res[k] = np.where(lost, np.nan, res[k])  # a lost point has no steady error to speak of
-    err_ok = np.nan_to_num(res["pos_err_max_deg"], nan=np.inf) <= bound_deg
+    err_ok = np.nan_to_num(np.degrees(res["peak_position_late"]), nan=np.inf) <= bound_deg
     res["holds"] = res["stable"].astype(bool) & res["synchronous"].astype(bool) & err_ok
 
     dims = ("design", "speed_rpm", "load_nm", *names[2:])

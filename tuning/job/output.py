@@ -12,7 +12,7 @@ import numpy as np
 from jaxobs import metrics as M
 from jaxobs.provenance import cf_dataset
 
-from ..objective import METRIC_UNITS, METRICS
+from ..objective import TERM_METRICS
 from ..outdir import atomic_write_text
 from .spec import Job, ScenarioSpec
 
@@ -62,7 +62,7 @@ def at_bounds(job: Job, gains: dict) -> dict:
 def scores_dataset(obj, names, combos, spec: ScenarioSpec, per: dict, title: str = "jaxobs tune: per-scenario scores"):
     """Per-scenario metrics of each design as an xarray Dataset: the grid's axes as dims (a full grid),
     else one ``scenario`` dim with the axes as coordinates (sampled scenarios).  Every variable carries a
-    ``long_name`` and every numeric one CF ``units`` (the metrics': :data:`jaxobs_tuning.objective.METRICS`;
+    ``long_name`` and every numeric one CF ``units`` (the metrics': :data:`jaxobs_tuning.objective.TERM_METRICS`;
     flags ``1``); the CF-1.8 global attributes, ``title`` among them (:func:`jaxobs.provenance.cf_dataset`)."""
     import xarray as xr
 
@@ -91,7 +91,7 @@ def scores_dataset(obj, names, combos, spec: ScenarioSpec, per: dict, title: str
         data[key] = (dims, np.stack(rows))
     ds = xr.Dataset(data, coords=coords)
     for key in keys:
-        ds[key].attrs.update(units=METRIC_UNITS[key], long_name=METRICS[key].long_name)
+        ds[key].attrs.update(units=TERM_METRICS[key].units, long_name=TERM_METRICS[key].long_name)
     # the weights carry the metrics' units (a term's weight is per its metric's unit): the total is a number
     ds["total"].attrs.update(units="1", long_name="weighted objective of the scenario (the penalty where diverged)")
     for key in flag_keys:

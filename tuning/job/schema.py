@@ -12,7 +12,7 @@ from jaxobs.provenance import sha256
 from jaxobs.registry import canonical_key
 
 from .. import strategies
-from ..objective import DRIVE_METRICS, METRICS, Term
+from ..objective import DRIVE_METRICS, TERM_METRICS, Term
 from ..params import GainSpec
 from .components import COMPONENTS, W_N
 from .drive import check_drive_speeds, check_standstill, inline_drive, parse_drive
@@ -281,10 +281,10 @@ def parse_job(raw: dict, base: Path | None = None) -> Job:
         metric = get_field(t, "metric", f"{where}.metric", str, required=True)
         # an old name is read as its new one (one line of warning), its weight converted to the new units
         metric, scale = canonical(metric, f"{where}.metric")
-        if metric not in METRICS:
-            raise JobError(f"{where}.metric", f"unknown metric {show(metric)}; known: {', '.join(METRICS)}")
+        if metric not in TERM_METRICS:
+            raise JobError(f"{where}.metric", f"unknown metric {show(metric)}; known: {', '.join(TERM_METRICS)}")
         grid_only = metric.endswith(("_freq", "_phase", "freq_steady", "phase_steady"))
-        if METRICS[metric].needs_truth and scen.recording is None:
+        if TERM_METRICS[metric].needs_truth and scen.recording is None:
             raise JobError(
                 f"{where}.metric",
                 f"{show(metric)} compares the estimate with a recording's truth: it needs [scenarios.recording]",
@@ -293,7 +293,7 @@ def parse_job(raw: dict, base: Path | None = None) -> Job:
             raise JobError(f"{where}.metric", f"{show(metric)} needs the closed-loop drive, not {comp} ({scen.signal})")
         if (scen.family is not GridSignals) == grid_only:
             raise JobError(f"{where}.metric", f"{show(metric)} does not apply to {comp} ({scen.signal} signals)")
-        if METRICS[metric].kind == "system" and drive is not None and drive.start != "steady":
+        if TERM_METRICS[metric].kind == "system" and drive is not None and drive.start != "steady":
             raise JobError(f"{where}.metric", f"{metric} needs drive.start = 'steady' (an operating point)")
         weight = get_field(t, "weight", f"{where}.weight", float, 1.0)
         if weight <= 0:
