@@ -26,6 +26,8 @@ __all__ = [
     "REFERENCES",
     "cf_dataset",
     "cf_missing",
+    "design_index",
+    "design_names",
     "provenance",
     "read_file",
     "sha256",
@@ -183,3 +185,45 @@ def cf_missing(ds) -> list[str]:
         if ds[name].dtype.kind in "biuf" and not attrs.get("units"):
             out.append(f"{name}: no units")
     return out
+
+
+def design_index(ds):
+    """``ds`` as a NetCDF holds it: the ``design`` dimension's coordinate a numeric index (0, 1, ... as int32), the
+    designs' names a label variable ``design_label`` beside it (CF 1.8, 6.1: a string-valued auxiliary coordinate).
+    A string coordinate variable is not ordered, which CF checkers read as one that is not monotonic.
+    :func:`design_names` reads it back.
+
+    Args:
+        ds: an ``xarray.Dataset`` with a ``design`` coordinate of names (a study, scores, an envelope).
+
+    Returns:
+        A new Dataset (``ds`` itself where ``design`` is not a coordinate of names).
+    """
+    if "design" not in ds.coords or ds["design"].dtype.kind not in "OUS":
+        return ds
+    names = ds["design"]
+    what = names.attrs.get("long_name", "design")
+    out = ds.assign_coords(
+        design=("design", np.arange(names.size, dtype=np.int32), {"units": "1", "long_name": f"{what}: its index"}),
+        design_label=("design", [str(n) for n in names.values], {"long_name": f"{what}: its name"}),
+    )
+    out["design"].encoding["_FillValue"] = None
+    return out
+
+
+def design_names(ds):
+    """:func:`design_index`'s inverse: ``ds`` read from a NetCDF with the designs' names as the ``design``
+    coordinate again (``ds.sel(design="tuned")``); ``ds`` itself where it has no ``design_label``.
+
+    Args:
+        ds: an ``xarray.Dataset`` read from a NetCDF of jaxobs.
+
+    Returns:
+        The Dataset labelled by the designs' names.
+    """
+    if "design_label" not in ds.variables:
+        return ds
+    what = str(ds["design_label"].attrs.get("long_name", "design")).removesuffix(": its name")
+    return ds.drop_vars("design_label").assign_coords(
+        design=("design", [str(n) for n in ds["design_label"].values], {"long_name": what})
+    )

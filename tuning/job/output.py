@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from jaxobs import metrics as M
-from jaxobs.provenance import cf_dataset
+from jaxobs.provenance import cf_dataset, design_index
 
 from ..objective import TERM_METRICS
 from ..outdir import atomic_write_text
@@ -63,7 +63,8 @@ def scores_dataset(obj, names, combos, spec: ScenarioSpec, per: dict, title: str
     """Per-scenario metrics of each design as an xarray Dataset: the grid's axes as dims (a full grid),
     else one ``scenario`` dim with the axes as coordinates (sampled scenarios).  Every variable carries a
     ``long_name`` and every numeric one CF ``units`` (the metrics': :data:`jaxobs_tuning.objective.TERM_METRICS`;
-    flags ``1``); the CF-1.8 global attributes, ``title`` among them (:func:`jaxobs.provenance.cf_dataset`)."""
+    flags ``1``); the CF-1.8 global attributes, ``title`` among them (:func:`jaxobs.provenance.cf_dataset`); a
+    numeric ``design`` index and its label ``design_label`` (:func:`jaxobs.provenance.design_index`)."""
     import xarray as xr
 
     designs = list(per)
@@ -112,7 +113,8 @@ def scores_dataset(obj, names, combos, spec: ScenarioSpec, per: dict, title: str
     if not grid:
         ds["scenario"].attrs.update(units="1", long_name=f"scenario: one of {len(combos)} random points of the axes")
     ds.attrs["source"] = "jaxobs tune (jaxobs_tuning.run_job)"
-    return cf_dataset(ds, title)
+    # as the file holds it: a numeric design index, the names its label (jaxobs.provenance.design_names reads it back)
+    return design_index(cf_dataset(ds, title))
 
 
 def recordings_provenance(job: Job, scenarios=None) -> dict:
