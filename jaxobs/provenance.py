@@ -26,8 +26,8 @@ __all__ = [
     "REFERENCES",
     "cf_dataset",
     "cf_missing",
-    "design_index",
-    "design_names",
+    "by_label",
+    "cf_labels",
     "provenance",
     "read_file",
     "sha256",
@@ -187,43 +187,50 @@ def cf_missing(ds) -> list[str]:
     return out
 
 
-def design_index(ds):
-    """``ds`` as a NetCDF holds it: the ``design`` dimension's coordinate a numeric index (0, 1, ... as int32), the
-    designs' names a label variable ``design_label`` beside it (CF 1.8, 6.1: a string-valued auxiliary coordinate).
-    A string coordinate variable is not ordered, which CF checkers read as one that is not monotonic.
-    :func:`design_names` reads it back.
+def cf_labels(ds):
+    """``ds`` as a NetCDF holds it: each dimension whose coordinate is a list of names (``design``; ``recording``,
+    the files of a study or a job on recordings) gets a numeric index as its coordinate (0, 1, ... as int32), and
+    the names a label variable ``<dim>_label`` beside it (CF 1.8, 6.1: a string-valued auxiliary coordinate).  A
+    string coordinate variable is not ordered, which CF checkers read as one that is not monotonic (compliance-
+    checker's check raised on it).  :func:`by_label` reads a file back.
 
     Args:
-        ds: an ``xarray.Dataset`` with a ``design`` coordinate of names (a study, scores, an envelope).
+        ds: an ``xarray.Dataset`` (a study, scores, an envelope).
 
     Returns:
-        A new Dataset (``ds`` itself where ``design`` is not a coordinate of names).
+        A new Dataset (``ds`` itself where no dimension coordinate is a list of names).
     """
-    if "design" not in ds.coords or ds["design"].dtype.kind not in "OUS":
-        return ds
-    names = ds["design"]
-    what = names.attrs.get("long_name", "design")
-    out = ds.assign_coords(
-        design=("design", np.arange(names.size, dtype=np.int32), {"units": "1", "long_name": f"{what}: its index"}),
-        design_label=("design", [str(n) for n in names.values], {"long_name": f"{what}: its name"}),
-    )
-    out["design"].encoding["_FillValue"] = None
+    out = ds
+    for dim in list(ds.dims):
+        if dim not in ds.coords or ds[dim].dtype.kind not in "OUS":
+            continue
+        names = ds[dim]
+        what = names.attrs.get("long_name", dim)
+        out = out.assign_coords(
+            {
+                dim: (dim, np.arange(names.size, dtype=np.int32), {"units": "1", "long_name": f"{what}: its index"}),
+                f"{dim}_label": (dim, [str(n) for n in names.values], {"long_name": f"{what}: its name"}),
+            }
+        )
+        out[dim].encoding["_FillValue"] = None
     return out
 
 
-def design_names(ds):
-    """:func:`design_index`'s inverse: ``ds`` read from a NetCDF with the designs' names as the ``design``
-    coordinate again (``ds.sel(design="tuned")``); ``ds`` itself where it has no ``design_label``.
+def by_label(ds):
+    """:func:`cf_labels`'s inverse: ``ds`` read from a NetCDF with the names as the coordinates again
+    (``ds.sel(design="tuned")``); ``ds`` itself where it has no ``<dim>_label``.
 
     Args:
         ds: an ``xarray.Dataset`` read from a NetCDF of jaxobs.
 
     Returns:
-        The Dataset labelled by the designs' names.
+        The Dataset labelled by the names.
     """
-    if "design_label" not in ds.variables:
-        return ds
-    what = str(ds["design_label"].attrs.get("long_name", "design")).removesuffix(": its name")
-    return ds.drop_vars("design_label").assign_coords(
-        design=("design", [str(n) for n in ds["design_label"].values], {"long_name": what})
-    )
+    for dim in list(ds.dims):
+        label = f"{dim}_label"
+        if label not in ds.variables:
+            continue
+        what = str(ds[label].attrs.get("long_name", dim)).removesuffix(": its name")
+        names = [str(n) for n in ds[label].values]
+        ds = ds.drop_vars(label).assign_coords({dim: (dim, names, {"long_name": what})})
+    return ds

@@ -15,7 +15,7 @@ import jaxobs
 from jaxobs import drive as D
 from jaxobs import papers
 from jaxobs.drive_study import QUANTILES, run_drive_study
-from jaxobs.provenance import design_names
+from jaxobs.provenance import by_label
 from jaxobs_tuning.cli import main
 from jaxobs_tuning.job import COMPONENTS, DriveSpec, JobError, job_drive
 from jaxobs_tuning.study_file import load_study
@@ -94,7 +94,7 @@ def test_cli_drive_study_writes_netcdf_with_the_axes(tmp_path, capsys):
     small = _small_preset(tmp_path)
     assert main(["study", str(small), "--out", str(out), "--quiet"]) == 0
     assert_cf18(out / "study.nc")  # CF 1.8: compliance-checker, attributes, types
-    ds = design_names(xr.load_dataset(out / "study.nc", engine="h5netcdf"))
+    ds = by_label(xr.load_dataset(out / "study.nc", engine="h5netcdf"))
     assert {"dRs", "dLq"} <= set(ds["rms_position_steady"].dims) and "quantile" in ds.coords
     assert (out / "drive_study.png").stat().st_size > 10_000
     printed = capsys.readouterr().out
@@ -159,7 +159,7 @@ def test_the_leso_drive_preset_runs(tmp_path):
     """The shipped preset: 1024 scenarios per design, dRs and dLq dims and a quantile coordinate."""
     out = tmp_path / "leso"
     assert main(["study", str(PRESET), "--out", str(out), "--quiet"]) == 0
-    ds = design_names(xr.open_dataset(out / "study.nc", engine="h5netcdf"))
+    ds = by_label(xr.open_dataset(out / "study.nc", engine="h5netcdf"))
     assert ds.attrs["scenarios"] >= 1000 and {"dRs", "dLq"} <= set(ds.dims) and "quantile" in ds.coords
 
 

@@ -15,7 +15,7 @@ from jaxobs._simulate import simulate
 from jaxobs.drive import dual, dual_loop
 from jaxobs.metrics import harmonic_amplitude
 from jaxobs.observers import CLESO, FALESO
-from jaxobs.provenance import design_names
+from jaxobs.provenance import by_label
 
 TH = dual.PHASE_ANGLES
 rng = np.random.default_rng(0)
@@ -544,7 +544,7 @@ def test_envelope_of_a_dual_faleso_job_agrees_with_pulse_simulations(tmp_path):
     out = tmp_path / "env"
     rc = main(["envelope", str(job_file), "--speeds", "150,840", "--loads", "0,30", "--out", str(out), "--quiet"])
     assert rc == 0 and (out / "envelope.png").is_file()
-    ds = design_names(xr.open_dataset(out / "envelope.nc").load())
+    ds = by_label(xr.open_dataset(out / "envelope.nc").load())
     assert ds.attrs["machine"] == "ipmsm002_dual_330v" and "machine_Lls" in ds.attrs
 
     job, designs = envelope_designs(job_file)

@@ -17,7 +17,7 @@ from jaxobs import papers
 from jaxobs.analysis.envelope import ENVELOPE_VARIABLES, envelope, speed_pulse
 from jaxobs.drive import bench_drive, bench_machine
 from jaxobs.drive_study import bind_observer, drive_scenarios
-from jaxobs.provenance import design_names
+from jaxobs.provenance import by_label
 from jaxobs_tuning.cli import main
 from jaxobs_tuning.job import job_drive, load_job
 from jaxobs_tuning.job.output import claimed_envelope
@@ -123,7 +123,7 @@ def test_cli_envelope_writes_netcdf_and_figure(tmp_path, capsys):
     args = ["envelope", str(PRESET), "--out", str(out), "--speeds", "2", "--loads", "1", "--horizon", "0.5"]
     assert main([*args, "--quiet"]) == 0
     assert_cf18(out / "envelope.nc")  # CF 1.8: compliance-checker, attributes, types
-    ds = design_names(xr.load_dataset(out / "envelope.nc", engine="h5netcdf"))
+    ds = by_label(xr.load_dataset(out / "envelope.nc", engine="h5netcdf"))
     assert {"speed_rpm", "load_nm"} <= set(ds["margin"].dims) and "stable" in ds
     assert list(ds["design"].values) == ["initial", "closed_form"]
     assert ds.attrs["component"] == "SecondOrderSOIFO" and ds.attrs["machine"] == "spmsm000"
@@ -210,7 +210,7 @@ def test_preset_envelope_agrees_with_pulse_simulations_at_low_speed(tmp_path):
     its speed reference over the Lyapunov run (the start itself: tests/test_stability.py, loaded 144 r/min)."""
     out = tmp_path / "env"
     assert main(["envelope", str(PRESET), "--out", str(out), "--quiet"]) == 0
-    ds = design_names(xr.load_dataset(out / "envelope.nc", engine="h5netcdf"))
+    ds = by_label(xr.load_dataset(out / "envelope.nc", engine="h5netcdf"))
     assert {"speed_rpm", "load_nm"} <= set(ds["stable"].dims)
     low = ds.sel(speed_rpm=ds["speed_rpm"][ds["speed_rpm"] <= 600.0])
     points = [(float(s), float(ld)) for s in low["speed_rpm"].values for ld in low["load_nm"].values]

@@ -15,7 +15,7 @@ import xarray as xr
 import jaxobs
 from jaxobs import linear, papers
 from jaxobs import metrics as M
-from jaxobs.provenance import design_names
+from jaxobs.provenance import by_label
 from jaxobs.study import run_study, worst_cases
 from jaxobs_tuning.cli import main
 from jaxobs_tuning.summary import study_warnings
@@ -55,7 +55,7 @@ def test_dims_coords_and_values_match_single_runs(small_study):
 def test_netcdf_round_trip(small_study, tmp_path):
     _, ds = small_study
     ds.to_netcdf(tmp_path / "s.nc", engine="h5netcdf")
-    back = design_names(xr.load_dataset(tmp_path / "s.nc", engine="h5netcdf"))
+    back = by_label(xr.load_dataset(tmp_path / "s.nc", engine="h5netcdf"))
     assert back.identical(ds)
 
 
@@ -134,7 +134,7 @@ def test_study_cli_default(tmp_path, capsys):
     # the table labels its units (the phase in degrees, as the figures)
     assert "settling_freq (s) mean" in out and "ripple_freq (Hz) mean" in out and "rms_phase_steady (deg) mean" in out
     assert_cf18(tmp_path / "study.nc")  # CF 1.8: compliance-checker, attributes, types
-    ds = design_names(xr.load_dataset(tmp_path / "study.nc", engine="h5netcdf"))
+    ds = by_label(xr.load_dataset(tmp_path / "study.nc", engine="h5netcdf"))
     assert set(ds["design"].values) == {"SOGI-FLL", "SOGI-FLL-WPF", "SOGI-FLL-WIF"}
     worst = json.loads((tmp_path / "worst_cases.json").read_text())
     assert worst["ripple_freq"][0]["design"] == "SOGI-FLL"

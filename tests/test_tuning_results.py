@@ -14,7 +14,7 @@ import pytest
 
 from jaxobs import drive as D
 from jaxobs import linear, papers
-from jaxobs.provenance import design_names
+from jaxobs.provenance import by_label
 from jaxobs_tuning import load_job
 from jaxobs_tuning.cli import main
 from jaxobs_tuning.targets import flux_settling_time
@@ -121,7 +121,7 @@ def test_two_runs_write_byte_identical_results_that_rebuild_the_design(tmp_path)
     assert float(obs.lam) == res["gains"]["tuned"]["lam"] and obs.ts == res["ts"] and type(obs.rule).__name__ == "AB3"
     assert not any("has no" in n for n in notes)
     assert_cf18(tmp_path / "a" / "scores.nc")  # CF 1.8: compliance-checker, attributes, types
-    ds = design_names(xr.open_dataset(tmp_path / "a" / "scores.nc", engine="h5netcdf"))
+    ds = by_label(xr.open_dataset(tmp_path / "a" / "scores.nc", engine="h5netcdf"))
     assert ds["itae_freq"].dims == ("design", "freq_step") and list(ds["freq_step"].values) == [1.0, 2.0]
     # CF units on every variable and numeric coordinate (NetCDF4)
     for name in [*ds.data_vars, *ds.coords]:
@@ -351,7 +351,7 @@ def test_flux_observer_drive_job_runs_sensorless_on_the_spmsm(tmp_path, capsys):
     import xarray as xr
 
     with xr.open_dataset(tmp_path / "o" / "scores.nc") as ds:
-        ds = design_names(ds)
+        ds = by_label(ds)
         assert ds["lost_sync"].dims == ("design", "speed_rpm", "load_step_nm")
         assert int(ds["lost_sync"].sum()) == 0
         assert ds["lost_speed"].dims == ds["lost_sync"].dims and int(ds["lost_speed"].sum()) == 0

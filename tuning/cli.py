@@ -79,7 +79,7 @@ from pathlib import Path
 import jaxobs
 from jaxobs import use_compile_cache, use_host_devices
 from jaxobs.chunkstore import ChunkStore
-from jaxobs.provenance import design_index
+from jaxobs.provenance import cf_labels
 
 from .cli_common import enable_x64, progress_of
 from .cli_drive import add_drive_parser
@@ -118,7 +118,7 @@ def _cmd_drive_study(name, designs, axes, opts, out: Path, quiet: bool, provenan
     fig = out / "drive_study.png"
     drive_study_figure(ds, fig)
     with atomic_path(out / "study.nc") as tmp:  # last: a study.nc means a complete results folder
-        design_index(ds).to_netcdf(tmp, engine="h5netcdf")  # a numeric design index, the names its label
+        cf_labels(ds).to_netcdf(tmp, engine="h5netcdf")  # a numeric design index, the names its label
         if store is not None:
             store.retire()  # before study.nc's rename: never both on disk (a --resume refused, chunks left)
     if store is not None:
@@ -234,7 +234,7 @@ def _run_study(name, designs, axes, opts, out: Path, quiet: bool, store=None) ->
     atomic_write_text(out / "worst_cases.json", json.dumps(worst, indent=1))
     figs = study_figures(ds, out)
     with atomic_path(out / "study.nc") as tmp:  # last: a study.nc means a complete results folder
-        design_index(ds).to_netcdf(tmp, engine="h5netcdf")  # a numeric design index, the names its label
+        cf_labels(ds).to_netcdf(tmp, engine="h5netcdf")  # a numeric design index, the names its label
         if store is not None:
             store.retire()  # before study.nc's rename: never both on disk (a --resume refused, chunks left)
     if store is not None:

@@ -15,7 +15,7 @@ import dataclasses
 import math
 from pathlib import Path
 
-from jaxobs.provenance import design_index
+from jaxobs.provenance import cf_labels
 
 from .job import COMPONENTS, JobError, job_drive, load_job, parse_job
 from .outdir import OutDir, atomic_path, safe_name
@@ -157,7 +157,7 @@ def cli_envelope(args) -> int:
         with atomic_path(out / "envelope.png") as tmp:
             envelope_figure(ds, tmp)
         with atomic_path(out / "envelope.nc") as tmp:
-            design_index(ds).to_netcdf(tmp, engine="h5netcdf")  # a numeric design index, the names its label
+            cf_labels(ds).to_netcdf(tmp, engine="h5netcdf")  # a numeric design index, the names its label
     a = ds.attrs  # what ran: the stretched window and warm-up, and the steady start's settle (Drive.settled_for)
     print(
         f"{what}, Floquet verdict: settle {a['stability_settle']:.3g} s, windows {a['stability_window']:.3g} s up to "

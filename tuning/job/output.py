@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from jaxobs import metrics as M
-from jaxobs.provenance import cf_dataset, design_index
+from jaxobs.provenance import cf_dataset, cf_labels
 
 from ..objective import TERM_METRICS
 from ..outdir import atomic_write_text
@@ -64,7 +64,7 @@ def scores_dataset(obj, names, combos, spec: ScenarioSpec, per: dict, title: str
     else one ``scenario`` dim with the axes as coordinates (sampled scenarios).  Every variable carries a
     ``long_name`` and every numeric one CF ``units`` (the metrics': :data:`jaxobs_tuning.objective.TERM_METRICS`;
     flags ``1``); the CF-1.8 global attributes, ``title`` among them (:func:`jaxobs.provenance.cf_dataset`); a
-    numeric ``design`` index and its label ``design_label`` (:func:`jaxobs.provenance.design_index`)."""
+    numeric ``design`` index and its label ``design_label`` (:func:`jaxobs.provenance.cf_labels`)."""
     import xarray as xr
 
     designs = list(per)
@@ -113,8 +113,8 @@ def scores_dataset(obj, names, combos, spec: ScenarioSpec, per: dict, title: str
     if not grid:
         ds["scenario"].attrs.update(units="1", long_name=f"scenario: one of {len(combos)} random points of the axes")
     ds.attrs["source"] = "jaxobs tune (jaxobs_tuning.run_job)"
-    # as the file holds it: a numeric design index, the names its label (jaxobs.provenance.design_names reads it back)
-    return design_index(cf_dataset(ds, title))
+    # as the file holds it: a numeric design index, the names its label (jaxobs.provenance.by_label reads it back)
+    return cf_labels(cf_dataset(ds, title))
 
 
 def recordings_provenance(job: Job, scenarios=None) -> dict:
