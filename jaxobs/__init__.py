@@ -64,7 +64,8 @@ from ._traced import kept_jit as kept_jit
 from ._traced import set_program_cache as set_program_cache
 from .metrics import lost_lock_of as lost_lock_of
 
-# observers: the FLL family (001), the flux observers (000), the LESOs (002), and the contract
+# observers: the FLL family (001), the flux observers (000), the LESOs (002), the reduced-order flux observer
+# (Hinkkanen et al. 2018), and the contract
 from .observers import CLESO as CLESO
 from .observers import FALESO as FALESO
 from .observers import GILESO as GILESO
@@ -79,6 +80,7 @@ from .observers import AbstractObserver as AbstractObserver
 from .observers import LPFFlux as LPFFlux
 from .observers import ObserverBank as ObserverBank
 from .observers import PureIntegratorFlux as PureIntegratorFlux
+from .observers import ReducedOrderFluxObserver as ReducedOrderFluxObserver
 from .observers import SecondOrderSOIFO as SecondOrderSOIFO
 from .sharding import batch_axes as batch_axes
 from .sharding import batch_mesh as batch_mesh
@@ -147,6 +149,7 @@ __all__ = [
     "CLESO",
     "GILESO",
     "FALESO",
+    "ReducedOrderFluxObserver",
     "ObserverBank",
     # signals
     "AbstractSignal",

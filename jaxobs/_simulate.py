@@ -52,7 +52,7 @@ from ._discretize import Knots, ab3_steady_from_start
 from ._loop import AbstractCheckpoint, AutoCheckpoint, check_unroll, run_loop
 from ._measurements import DriveInput
 from ._system import AbstractSystem, LoopInputs
-from ._time import SampleTime
+from ._time import TS_REL_TOL, SampleTime
 from ._validate import check_sample_time
 from .observers import AbstractObserver
 from .signals import AbstractSignal, DriveRecording, EMFSignal, FunctionSignal, SampledSignal
@@ -421,7 +421,7 @@ class OnSignal(AbstractSystem):
         if isinstance(t0, bool) or not isinstance(t0, (int, float)) or not np.isfinite(t0):
             raise ValueError(f"OnSignal.t0 must be a finite number of seconds, got {t0!r}")
         if isinstance(signal, (EMFSignal, DriveRecording)) and not math.isclose(
-            signal.ts, float(observer.ts), rel_tol=1e-12
+            signal.ts, float(observer.ts), rel_tol=TS_REL_TOL
         ):
             # the voltage is the average over [t_k, t_k + ts] of the signal's ts: it must be the observer's
             fix = " (DriveRecording.from_csv(..., ts=observer.ts) resamples a recording)"
@@ -495,7 +495,7 @@ class OnSignal(AbstractSystem):
         if self.knots or not isinstance(sig, (SampledSignal, DriveRecording)):
             return None
         ts = float(self.ts)
-        if abs(sig.ts - ts) > 1e-12 * ts:
+        if abs(sig.ts - ts) > TS_REL_TOL * ts:
             return None
         off = (self.t0 - sig.t0) / ts
         return round(off) if abs(off - round(off)) <= 1e-9 else None

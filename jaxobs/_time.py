@@ -49,6 +49,13 @@ __all__ = ["SampleTime", "time_value", "exact_phase", "cycles", "frac_mul"]
 _MASK = np.uint32(0xFFFFF000)  # sign, exponent and the top 11 stored mantissa bits: 12 significant bits
 
 
+# The one tolerance on a sample interval, relative, from a log's reader to the run: a recording whose interval is
+# within it of the observer's is on the observer's grid and its samples are taken as they are, by index (a log's
+# time stamps printed to 12 digits give ts = 9.99999999997669e-05 for 1e-4).  Over the longest simulation a job
+# allows (10^7 samples) such a difference moves the last sample by 1e-2 of a period at most.
+TS_REL_TOL = 1e-9
+
+
 class SampleTime(eqx.Module):
     """The time of sample ``k``, t = t0 + k·ts, kept as the integer k and the static ts and t0.
 

@@ -102,11 +102,25 @@ def read_file(path, max_bytes: int) -> bytes:
     return data
 
 
+_HASH_BLOCK = 1 << 20  # bytes read at a time by sha256: a log of any size is hashed in flat memory
+
+
 def sha256(data: bytes | str | Path) -> str:
-    """The hex sha256 of ``data`` (bytes) or of the file at ``data`` (a path)."""
-    if not isinstance(data, bytes):
-        data = Path(data).read_bytes()
-    return hashlib.sha256(data).hexdigest()
+    """The hex sha256 of bytes, or of the file at a path, read in blocks of 1 MiB.
+
+    Args:
+        data: The bytes, or the path of a file.
+
+    Returns:
+        The digest as 64 hex characters.
+    """
+    if isinstance(data, bytes):
+        return hashlib.sha256(data).hexdigest()
+    h = hashlib.sha256()
+    with open(data, "rb") as f:
+        for block in iter(lambda: f.read(_HASH_BLOCK), b""):
+            h.update(block)
+    return h.hexdigest()
 
 
 def provenance(source: str, *, digests: dict | None = None) -> dict:

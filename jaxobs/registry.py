@@ -1,17 +1,19 @@
 """The one registry of observers: names and aliases to classes, with what jobs, studies and the export need.
 
-Each :class:`Registered` entry names an observer class (its gains and their units are the class's own,
-:func:`jaxobs.observers.gain_fields`; its closed form is the class's ``closed_form``) and adds what is not a
-property of the class: the signals and machines a tuning job runs it on, a job's initial values, the
-short names of its closed form (``"sogi-fll"``), and the paper's small-signal model that
-``jaxobs_tuning.structure`` evaluates.  ``jaxobs_tuning.job.COMPONENTS`` is a view of it; the command line
+Each :class:`Registered` entry names an observer class and adds only application facts: the signals and
+machines a tuning job runs it on, a job's initial values and the short names of its closed form
+(``"sogi-fll"``).  What belongs to the class is read from it: its gains and their units
+(:func:`jaxobs.observers.gain_fields`), its closed form with its formulas and sources (``closed_form_design``),
+whether a job may tune it (``why_not_tunable``) and which of :mod:`jaxobs.linear`'s small-signal models is its
+paper's (``small_signal_model``, evaluated by :meth:`Registered.model` for ``jaxobs_tuning.structure``).
+Every registered class has a closed form.  ``jaxobs_tuning.job.COMPONENTS`` is a view of it; the command line
 (``closed-form``, ``export --design``), study files and the export read it.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import inspect
+import functools
 import math
 from collections.abc import Callable
 from typing import Any
@@ -29,8 +31,10 @@ from .observers import (
     AbstractFluxObserver,
     LPFFlux,
     PureIntegratorFlux,
+    ReducedOrderFluxObserver,
     SecondOrderSOIFO,
     gain_fields,
+    rofo,
 )
 
 __all__ = ["Registered", "REGISTRY", "registered", "closed_form_gains", "canonical_key", "KEY_ALIASES"]
@@ -50,31 +54,46 @@ class Registered:
         why_not_salient: the one-line reason of a refusal on a salient machine.
         why_not_dual: the one-line reason of a refusal on a dual three-phase machine.
         defaults: a job's constructor values before its ``[component]`` and ``[gains]`` tables.
-        closed_form_source: the paper's equations and table of the closed form, in one line.
-        closed_form_rule: the closed form's formulas, in one line (the export's source line).
         aliases: short names of the closed form (``jaxobs closed-form``, study files, ``export --design``).
-        tunable: whether a tuning job may name it.
-        model: the paper's small-signal model at a design's constructor values, or None where the papers give
-            none (``jaxobs_tuning.structure``).
     """
 
     cls: type
     signal: str
     defaults: dict
-    closed_form_source: str = ""
-    closed_form_rule: str = ""
     machines: tuple = ()
     salient: bool = True
     dual: bool = False
     why_not_salient: str = ""
     why_not_dual: str = ""
     aliases: tuple = ()
-    tunable: bool = True
-    model: Callable[[dict], Any] | None = None
 
     @property
     def name(self) -> str:
         return self.cls.__name__
+
+    @property
+    def tunable(self) -> bool:
+        """Whether a tuning job may name it: the class declares why not (``why_not_tunable``) where it may not."""
+        return not self.cls.why_not_tunable
+
+    @property
+    def closed_form_source(self) -> str:
+        """The paper's equations and table of the class's closed form, in one line (its ``ClosedForm.source``)."""
+        return self.cls.closed_form_design().source
+
+    @property
+    def closed_form_rule(self) -> str:
+        """The closed form's source and formulas, in one line (its ``ClosedForm.rule``: the export's source line)."""
+        return self.cls.closed_form_design().rule
+
+    @property
+    def model(self) -> Callable[[dict], Any] | None:
+        """The paper's small-signal model at a design's constructor values (name -> value), or None where the
+        papers give none: the :mod:`jaxobs.linear` function the class names in ``small_signal_model``, called
+        with the fields it lists (``jaxobs_tuning.structure``)."""
+        if self.cls.small_signal_model is None:
+            return None
+        return functools.partial(_model_at, self.cls.small_signal_model)
 
     @property
     def gains(self) -> tuple:
@@ -153,43 +172,41 @@ def _leso_defaults(**gains):
     return dict(Rs=papers.IPMSM_002["Rs"], Lq=papers.IPMSM_002["Lq"], **gains, **_pll(papers.LESO_PLL_HZ))
 
 
+def _rofo_defaults() -> dict:
+    # the closed form (ReducedOrderFluxObserver.closed_form) at the default ts, in Python floats; the machine's
+    # values are placeholders a drive job binds (002's IPMSM, the entry's default machine)
+    k_theta, k_omega = rofo.speed_gains(rofo.ROFO_ALPHA_O_HZ, 1e-4)
+    machine = {k: papers.IPMSM_002[k] for k in ("Rs", "Ld", "Lq", "psi_f")}
+    gains = dict(c_sigma=rofo.ROFO_C_SIGMA, zeta_inf=rofo.ROFO_ZETA_INF, k_theta=k_theta, k_omega=k_omega)
+    return {**machine, **gains}
+
+
 _ENTRIES = (
     Registered(
         SOGIFLL,
         signal="grid",
         defaults=dict(k=papers.SOGI_FLL_K, lam=papers.SOGI_FLL_LAM, omega_n=W_N),
-        closed_form_source="001 eq (22), Table I",
-        closed_form_rule="001 eq (22): k = 1/√2, λ = k²ωn²/(8ζ²), ζ = 1/√2",
         aliases=("sogi-fll",),
-        model=lambda v: linear.sogi_fll_model(float(v["k"]), float(v["lam"]), float(v["omega_n"])),
     ),
     Registered(
         SOGIFLLWPF,
         signal="grid",
         defaults=dict(k1=papers.WPF_K1, k2=papers.WPF_K2, lam=papers.WPF_LAM, omega_n=W_N),
-        closed_form_source="001 eq (29), Table I",
-        closed_form_rule="001 eq (29): k1 = k2 = √2, λ = 2(ζ+1)ωn²/(2ζ+1)³, ζ = 1/√2",
         aliases=("wpf",),
-        model=lambda v: linear.wpf_model(float(v["k1"]), float(v["k2"]), float(v["lam"]), float(v["omega_n"])),
     ),
     Registered(
         SOGIFLLWIF,
         signal="grid",
         defaults=dict(k1=papers.WIF_K1, k2=papers.WIF_K2, lam=papers.WIF_LAM, omega_n=W_N),
-        closed_form_source="001 eq (34), Table I",
-        closed_form_rule="001 eq (34), symmetric optimum: b = 1+√2, ωc = 2π·18.8 rad/s",
         aliases=("wif",),
-        model=lambda v: linear.wif_model(float(v["k1"]), float(v["k2"]), float(v["lam"]), float(v["omega_n"])),
     ),
     Registered(
         SOIFO,
         signal="emf",
         defaults=dict(Rs=0.0, L=1.0, k=papers.SOIFO_K, lam=0.5, omega_init=W_N),
-        closed_form_source="000 (k = 1.414), lam = k²/4",
-        closed_form_rule="000: k = 1.414; lam = k²/4 (001 eq 22, frequency-normalized)",
+        aliases=("soifo",),
         machines=("spmsm000",),
         **_FLUX_SUPPORT,
-        model=lambda v: linear.soifo_tf(float(v["k"]), float(v["omega_init"])),
     ),
     Registered(
         SecondOrderSOIFO,
@@ -202,11 +219,9 @@ _ENTRIES = (
             lam=linear.second_order_soifo_lambda(papers.SECOND_ORDER_SOIFO_K1, papers.SECOND_ORDER_SOIFO_K2),
             omega_init=W_N,
         ),
-        closed_form_source="000 (K1 = 1.56, K2 = 3.11), lam = K1³/(2K2)",
-        closed_form_rule="000: K1 = 1.56, K2 = 3.11; lam = K1³/(2K2) (001 eq 34, frequency-normalized)",
+        aliases=("second-order-soifo",),
         machines=("spmsm000",),
         **_FLUX_SUPPORT,
-        model=lambda v: linear.sosoifo_tf(float(v["K1"]), float(v["K2"]), float(v["omega_init"])),
     ),
     # 000's LPF flux estimator ψ̂ = ê/(s + ωc), uncompensated as in 000 Fig. 5, with the type-2 PLL (ASSUMED,
     # papers.FLUX_PLL_HZ) that gives it a speed: drive jobs only (on a bare EMF signal its PLL has nothing
@@ -217,28 +232,24 @@ _ENTRIES = (
         defaults=dict(
             Rs=papers.SPMSM_000["Rs"], L=papers.SPMSM_000["Ld"], omega_c=papers.LPF_OMEGA_C, **_pll(papers.FLUX_PLL_HZ)
         ),
-        closed_form_source="000 Fig. 5 (omega_c = 100 rad/s), PLL pole placement omega_b = 2 pi 20 (ASSUMED)",
-        closed_form_rule="000 Fig. 5: omega_c = 100 rad/s; PLL kp = 2ζω_b, ki = ω_b², ω_b = 2π·20 (ASSUMED)",
+        aliases=("lpf",),
         machines=("spmsm000",),
         **_FLUX_SUPPORT,
     ),
-    # The pure integrator is no job component: its flux starts from zero, so its circle is offset by the flux
-    # at its start (000's "unknown integral initial value") and θ̂ is wrong by up to 90° whatever its PLL
-    # gains; in a sensorless drive it loses synchronism.  Studies may still name it.
+    # The pure integrator is no job component (its class says why: PureIntegratorFlux.why_not_tunable).
+    # Studies may still name it.
     Registered(
         PureIntegratorFlux,
         signal="drive",
         defaults=dict(Rs=papers.SPMSM_000["Rs"], L=papers.SPMSM_000["Ld"]),
+        aliases=("integrator",),
         machines=("spmsm000",),
         **_FLUX_SUPPORT,
-        tunable=False,
     ),
     Registered(
         CLESO,
         signal="drive",
         defaults=_leso_defaults(omega0=papers.LESO_OMEGA0),
-        closed_form_source="002 Table II (ω0 = 500π), PLL pole placement ω_b = 2π·15",
-        closed_form_rule="002 eq (16), Table II: l1 = 2ω0 − μ, l2 = ω0², ω0 = 500π; PLL ω_b = 2π·15",
         machines=_LESO_MACHINES,
         **_LESO_SUPPORT,
         aliases=("cleso",),
@@ -247,8 +258,7 @@ _ENTRIES = (
         GILESO,
         signal="drive",
         defaults=_leso_defaults(omega0=papers.LESO_OMEGA0, K_r=papers.GILESO_K_R, omega_c=papers.GILESO_OMEGA_C),
-        closed_form_source="002 Table II (ω0 = 500π, K_r = 2ω0², ωc = π), PLL pole placement ω_b = 2π·15",
-        closed_form_rule="002 Table II: ω0 = 500π, K_r = 2ω0², ωc = π; PLL ω_b = 2π·15",
+        aliases=("gileso",),
         machines=_LESO_MACHINES,
         **_LESO_SUPPORT,
     ),
@@ -256,10 +266,24 @@ _ENTRIES = (
         FALESO,
         signal="drive",
         defaults=_leso_defaults(k1=papers.FALESO_K1, k2=papers.FALESO_K2),
-        closed_form_source="002 Table II (k1 = 10π, k2 = 100π), PLL pole placement ω_b = 2π·15",
-        closed_form_rule="002 Table II: k1 = 10π, k2 = 100π; PLL ω_b = 2π·15",
+        aliases=("faleso",),
         machines=_LESO_MACHINES,
         **_LESO_SUPPORT,
+    ),
+    # The reduced-order flux observer of Hinkkanen et al. 2018 (jaxobs.observers.rofo): a stator-flux observer in
+    # estimated rotor coordinates with both inductances, so it runs on salient and non-salient machines.  Its
+    # gains are dimensionless or in rad/s (c_sigma scales with the bound machine's Rs/L), so one design holds on
+    # any machine; the defaults are its closed form at the default ts.  No small-signal model of it is in
+    # jaxobs.linear (its linearised poles are in the module doc).  Dual three-phase: not derived here.
+    Registered(
+        ReducedOrderFluxObserver,
+        signal="drive",
+        defaults=_rofo_defaults(),
+        machines=_LESO_MACHINES,
+        salient=True,
+        dual=False,
+        why_not_dual="its error dynamics are derived for a three-phase machine only",
+        aliases=("rofo",),
     ),
 )
 
@@ -285,6 +309,12 @@ def registered(name: str) -> Registered:
     return entry
 
 
+def _model_at(spec: tuple, values: dict):
+    """The small-signal model a class names (``(function of jaxobs.linear, its fields)``) at ``values``."""
+    fn, fields = spec
+    return getattr(linear, fn)(*(float(values[f]) for f in fields))
+
+
 def closed_form_gains(name: str, component=None) -> dict:
     """A registered class's closed-form gains as floats (name -> value), at ``component``'s nominal frequency
     ``omega_n`` where it has one (the FLLs); the gains of :meth:`Registered.gains`.
@@ -297,7 +327,7 @@ def closed_form_gains(name: str, component=None) -> dict:
         gain name -> float.
     """
     entry = registered(name)
-    takes_omega_n = "omega_n" in inspect.signature(entry.cls.closed_form).parameters
+    takes_omega_n = "omega_n" in entry.cls.closed_form_design().inputs
     kw = {"omega_n": float(component.omega_n)} if component is not None and takes_omega_n else {}
     obs = entry.cls.closed_form(**kw)
     return {g: float(getattr(obs, g)) for g in entry.gains}

@@ -17,7 +17,7 @@ from jaxobs_tuning.cli import BODE_FILES, DEMO_FILES, REPRODUCE_FILES, build_par
 from jaxobs_tuning.results import load_result, tuned_component
 
 ROOT = Path(__file__).resolve().parents[1]
-COMMANDS = ("tune", "demo", "closed-form", "bode", "reproduce", "study", "export", "envelope", "drive")
+COMMANDS = ("tune", "demo", "closed-form", "bode", "reproduce", "study", "export", "envelope", "drive", "log")
 
 
 def _python(code_or_args, env_drop=(), env_add=None):
@@ -189,8 +189,10 @@ def test_closed_form_json_reports_formula_and_source(capsys):
 def test_closed_form_bad_options_exit_2(capsys):
     assert main(["closed-form", "wif", "--k", "2"]) == 2
     assert "--k does not apply to wif" in capsys.readouterr().err
-    assert main(["closed-form", "cleso"]) == 2
-    assert "--rs" in capsys.readouterr().err
+    assert main(["closed-form", "cleso", "--lq", "0"]) == 2
+    assert "CLESO.Lq must be finite and > 0" in capsys.readouterr().err
+    assert main(["closed-form", "faleso", "--k1", "-1"]) == 2  # a gain's declared bounds (check_gains)
+    assert "FALESO.k1 must be finite and > 0" in capsys.readouterr().err
     assert main(["closed-form", "sogi-fll", "--zeta", "-1"]) == 2
     assert "zeta" in capsys.readouterr().err
 

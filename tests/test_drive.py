@@ -67,7 +67,7 @@ def test_scan_plant_converges_to_diffrax_at_the_rules_order(rule, order):
     """IPMSM with 5th/7th BEMF harmonics under held rotating voltages, 40 ms.  Max error over
     (i_d, i_q, ωm) against Dopri8 at rtol 1e-12: RK4 3.1e-7, 1.9e-8, 1.4e-9 for 1, 2, 4
     substeps (slope 3.9); Euler 0.83, 0.40, 0.20 (slope 1.0)."""
-    par = D.ipmsm_paper002(a5=0.03, a7=0.02)
+    par = D.ipmsm_paper002(inertia="motor", a5=0.03, a7=0.02)
     inv = D.Inverter()
     ua, ub, tl = _open_loop_case()
     ref = _diffrax_plant(par, inv, ua, ub, tl, 0.0)
@@ -83,7 +83,7 @@ def test_scan_plant_converges_to_diffrax_at_the_rules_order(rule, order):
 
 def test_dead_time_plant_matches_diffrax():
     """With the (smoothed) dead-time error, RK4 with 8 substeps still follows the reference."""
-    par = D.spmsm_paper000()
+    par = D.spmsm_paper000(inertia="motor")
     inv = D.Inverter(i_smooth=0.5)
     ua, ub, tl = _open_loop_case()
     ref = _diffrax_plant(par, inv, 2 * ua, 2 * ub, 0 * tl, 2e-6)
@@ -95,7 +95,7 @@ def test_dead_time_plant_matches_diffrax():
 # closed loop, sensored
 # --------------------------------------------------------------------------
 
-PAR = D.spmsm_paper000()
+PAR = D.spmsm_paper000(inertia="motor")
 FOC = D.FOC.imc(PAR, alpha_c=2 * math.pi * 300, alpha_s=2 * math.pi * 20)
 DRIVE = D.Drive(FOC)
 
@@ -164,7 +164,7 @@ def test_current_loop_time_constant_matches_imc():
 
 
 def test_mtpa_and_ipmsm_torque():
-    par = D.ipmsm_paper002()
+    par = D.ipmsm_paper002(inertia="motor")
     foc = D.FOC.imc(par, alpha_c=2 * math.pi * 300, alpha_s=2 * math.pi * 10, id_mode="mtpa")
     sc = D.Scenario(
         par,
@@ -182,7 +182,7 @@ def test_mtpa_and_ipmsm_torque():
 
 
 def test_if_startup_switches_over():
-    par = D.spmsm_paper000()
+    par = D.spmsm_paper000(inertia="motor")
     start = D.IfStartup(i_f=6.0, accel=2 * math.pi * 20 / 0.2, omega_switch=3 * 20 * D.RPM)  # 20 r/min
     drv = D.Drive(FOC, startup=start)
     sc = D.Scenario(par, speed_ref=D.Scenario.speed_rpm([0.0, 0.4], [20, 200], ramp=0.2))
@@ -299,7 +299,7 @@ def test_bad_sample_times_and_settings():
         D.grid(D.Scenario(PAR), spin=[1.0])
     with pytest.raises(ValueError, match="observer"):
         D.ClosedLoop(D.Drive(FOC, sensorless=True), None, D.Scenario(PAR))
-    assert D.spmsm_paper000(p=3.0).p == 3
+    assert D.spmsm_paper000(inertia="motor", p=3.0).p == 3
 
 
 # --------------------------------------------------------------------------
@@ -327,7 +327,7 @@ def test_encoder_drive_started_at_speed_stays_within_half_a_percent_from_t0():
 def test_sensorless_drive_starts_locked():
     """FA-LESO + PLL closing the loop from t = 0 (no hand-over) at 600 r/min and 10 N·m on the IPMSM (MTPA off):
     after the settling phase before t = 0 its position error stays under 0.1° and the speed within 0.1 %."""
-    par = D.ipmsm_paper002()
+    par = D.ipmsm_paper002(inertia="motor")
     foc = D.FOC.imc(par, alpha_c=2 * math.pi * 300, alpha_s=2 * math.pi * 5)
     w_e = par.p * 600 * D.RPM
     obs = jaxobs.FALESO(par.Rs, par.Lq, omega0_pll=w_e)  # 002 Table II gains, the default 15 Hz PLL
@@ -440,7 +440,7 @@ def test_ok_is_false_for_a_non_finite_observer_or_plant_signal():
     """``sol.ok`` (SaveAll and SaveFinal) is False when the observer's estimate is NaN — even in a sensored
     drive, where it never feeds back and the plant runs on — or when the plant's signals are (a NaN inertia,
     which the constructors would refuse, set under jit); True for the healthy run beside them."""
-    par = D.ipmsm_paper002()
+    par = D.ipmsm_paper002(inertia="motor")
     drive = D.Drive(D.FOC.imc(par, 2 * math.pi * 300, 2 * math.pi * 5), settle=0.0)  # sensored
     obs = jaxobs.FALESO(par.Rs, par.Lq)
     sc = D.Scenario(par, omega_m0=600 * D.RPM, speed_ref=D.Profile.constant(600 * D.RPM))

@@ -22,7 +22,7 @@ from jaxobs_tuning.study_file import load_study
 from jaxobs_tuning.summary import study_warnings
 from tests.cfcheck import assert_cf18
 
-PAR = D.ipmsm_paper002()
+PAR = D.ipmsm_paper002(inertia="motor")
 DRIVE = D.Drive(D.FOC.imc(PAR, alpha_c=2 * math.pi * 300, alpha_s=2 * math.pi * 5), sensorless=True)
 DESIGNS = {"C-LESO": jaxobs.CLESO(PAR.Rs, PAR.Lq), "FA-LESO": jaxobs.FALESO(PAR.Rs, PAR.Lq)}
 PRESET = Path(__file__).resolve().parents[1] / "tuning" / "presets" / "study_leso_drive.toml"

@@ -282,6 +282,10 @@ _DRIVE = {
     "CLESO": lambda **kw: jaxobs.CLESO(Rs=0.6, Lq=0.012, **kw),
     "GILESO": lambda **kw: jaxobs.GILESO(Rs=0.6, Lq=0.012, omega0_pll=_W, **kw),
     "FALESO": lambda **kw: jaxobs.FALESO(Rs=0.6, Lq=0.012, omega0_pll=_W, **kw),
+    # Hinkkanen et al. 2018's observer, salient (Ld ≠ Lq): no rule (its step is its own exact update)
+    "ReducedOrderFluxObserver": lambda **kw: jaxobs.ReducedOrderFluxObserver.closed_form(
+        Rs=0.6, Ld=0.006, Lq=0.012, psi_f=0.45, omega_init=_W, **kw
+    ),
 }
 
 
@@ -405,7 +409,18 @@ def test_drive_recording_is_what_the_loop_feeds_its_observer():
 
 @pytest.mark.parametrize(
     "name, rule",
-    [(n, None) for n in ("CLESO", "FALESO", "GILESO", "SOIFO", "SecondOrderSOIFO", "PureIntegratorFlux")]
+    [
+        (n, None)
+        for n in (
+            "CLESO",
+            "FALESO",
+            "GILESO",
+            "SOIFO",
+            "SecondOrderSOIFO",
+            "PureIntegratorFlux",
+            "ReducedOrderFluxObserver",
+        )
+    ]
     + [("SOIFO", jaxobs.Tustin()), ("FALESO", jaxobs.Tustin())],
     ids=lambda v: v if isinstance(v, str) else type(v).__name__ if v is not None else "RK4",
 )

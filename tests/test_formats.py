@@ -10,7 +10,7 @@ from jaxobs import drive as D
 
 
 def test_drive_batch_results_as_a_dataset_with_the_grid_dims():
-    par = D.spmsm_paper000()
+    par = D.spmsm_paper000(inertia="motor")
     drv = D.Drive(D.FOC.imc(par, alpha_c=2 * jnp.pi * 300, alpha_s=2 * jnp.pi * 20))
     batch = D.grid(D.Scenario(par, load=D.Profile.constant(5.0)), speed_rpm=[500.0, 1000.0], dRs=[0.0, 0.5, 0.25])
     sols = jax.vmap(lambda s: jaxobs.simulate(D.ClosedLoop(drv, None, s), 0.01))(batch.scenarios)

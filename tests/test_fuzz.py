@@ -15,6 +15,7 @@ from pathlib import Path
 import pytest
 
 from jaxobs_tuning.cli import main
+from jaxobs_tuning.job.fields import MAX_ERROR
 
 PRESETS = Path(__file__).parents[1] / "tuning" / "presets"
 JOBS = sorted(p for p in PRESETS.glob("*.toml") if not p.name.startswith("study_"))
@@ -189,7 +190,16 @@ def _check(path: Path, capsys) -> tuple[int, str, float]:
 def _one_line(err: str):
     lines = err.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("jaxobs: error: "), err[:500]
-    assert len(lines[0]) <= 230 and "Traceback" not in err, lines[0][:500]
+    # MAX_ERROR bounds the message; 30 more for the "jaxobs: error: " prefix
+    assert len(lines[0]) <= MAX_ERROR + 30 and "Traceback" not in err, lines[0][:500]
+
+
+def test_a_long_job_error_keeps_its_remedy():
+    """A message of several hundred characters is printed whole: the remedy at its end is never cut away."""
+    from jaxobs_tuning.job.fields import JobError
+
+    msg = "x " * 200 + "(declare delimiter = ';')"
+    assert str(JobError("scenarios.recording", msg)).endswith("(declare delimiter = ';')")
 
 
 def _run_fuzz(cases, path, check, capsys, what):

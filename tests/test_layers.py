@@ -57,8 +57,15 @@ LAYERS = [
     ("jaxobs.signals",),
     ("jaxobs.scenarios", "jaxobs.drive.plant", "jaxobs.drive.dual", "jaxobs.drive.control", "jaxobs.drive.scenario"),
     # observers: they estimate
-    ("jaxobs.observers._cores", "jaxobs.observers._gains", "jaxobs.observers._rules", "jaxobs.observers.base"),
-    ("jaxobs.observers.sogi", "jaxobs.observers.fll", "jaxobs.observers.flux", "jaxobs.observers.leso"),
+    ("jaxobs.observers._cores", "jaxobs.observers._gains", "jaxobs.observers._rules"),
+    ("jaxobs.observers.base",),  # its one bound check is _gains'
+    (
+        "jaxobs.observers.sogi",
+        "jaxobs.observers.fll",
+        "jaxobs.observers.flux",
+        "jaxobs.observers.leso",
+        "jaxobs.observers.rofo",
+    ),
     ("jaxobs.observers",),
     # the closed loop composes the drive's parts with a drive observer (its contract, observers.base)
     ("jaxobs.drive.loop",),
@@ -130,7 +137,7 @@ LAYERS = [
     ("jaxobs_tuning",),
     # the command line: the top layer (`jaxobs ...` and `python -m jaxobs`)
     ("jaxobs_tuning.cli_common", "jaxobs_tuning.summary", "jaxobs_tuning.distributed"),
-    ("jaxobs_tuning.cli_papers", "jaxobs_tuning.cli_drive"),
+    ("jaxobs_tuning.cli_papers", "jaxobs_tuning.cli_drive", "jaxobs_tuning.cli_log"),
     ("jaxobs_tuning.cli",),
     ("jaxobs.__main__",),
 ]

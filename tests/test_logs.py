@@ -2,6 +2,7 @@
 reader, and one test per silent mistake a log can carry, each now a one-line error or warning naming the column."""
 
 import math
+import re
 import subprocess
 import sys
 import textwrap
@@ -46,7 +47,7 @@ def test_default_layout_reads_what_drive_recording_reads():
     old = jaxobs.DriveRecording.from_csv(DRIVE_CSV, time_column="t", theta_e="theta_e", omega_e="omega_e")
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # a clean log warns of nothing
-        log = _read(DRIVE_CSV, machine=D.spmsm_paper000())
+        log = _read(DRIVE_CSV, machine=D.spmsm_paper000(inertia="motor"))
     assert log.n == 3000 and log.warnings == []
     new = log.recording()
     for a, b in zip(jax.tree.leaves(old), jax.tree.leaves(new)):
@@ -55,7 +56,7 @@ def test_default_layout_reads_what_drive_recording_reads():
 
 
 def _sosoifo_theta(rec):
-    par = D.spmsm_paper000()
+    par = D.spmsm_paper000(inertia="motor")
     k1, k2 = papers.SECOND_ORDER_SOIFO_K1, papers.SECOND_ORDER_SOIFO_K2
     obs = jaxobs.SecondOrderSOIFO(par.Rs, par.Ld, k1, k2, k1**3 / (2 * k2), 2 * math.pi * 50)
     sol = jaxobs.simulate(jaxobs.OnSignal(obs, rec), 0.2)
@@ -148,7 +149,7 @@ MISTAKES = [
 def test_each_silent_mistake_is_refused_naming_the_column(tmp_path, which, match):
     path = _write(tmp_path / "log.csv", _mistake(_cols(), which))
     with pytest.raises(ValueError, match=match) as e:
-        _read(path, machine=D.spmsm_paper000())
+        _read(path, machine=D.spmsm_paper000(inertia="motor"))
     assert "\n" not in str(e.value)
 
 
@@ -190,7 +191,7 @@ def test_reference_voltages_declared_as_applied_warn(tmp_path):
     c = _cols()
     c["u_a"], c["u_b"] = np.roll(c["u_a"], -1), np.roll(c["u_b"], -1)
     with pytest.warns(RecordingWarning, match=r"columns 'u_a, u_b' match the machine's model best 1 period"):
-        _read(_write(tmp_path / "log.csv", c), machine=D.spmsm_paper000())
+        _read(_write(tmp_path / "log.csv", c), machine=D.spmsm_paper000(inertia="motor"))
 
 
 def test_three_phases_that_do_not_sum_to_zero(tmp_path):
@@ -271,3 +272,163 @@ def test_a_long_log_reads_at_flat_memory(tmp_path):
     big, size = _rss_of_reading(tmp_path, 10_000_000)
     print(f"peak RSS {small:.0f} MiB (1e5 rows), {big:.0f} MiB (1e7 rows, {size:.0f} MiB of CSV)")
     assert big - small < 120
+
+
+def test_a_byte_order_mark_is_no_part_of_the_first_column(tmp_path):
+    """A spreadsheet's UTF-8 export begins with a byte-order mark: the log reads as the same file without one."""
+    plain = _write(tmp_path / "plain.csv", _cols())
+    bom = tmp_path / "bom.csv"
+    bom.write_bytes(b"\xef\xbb\xbf" + plain.read_bytes())
+    a, b = _read(plain).recording(), _read(bom).recording()
+    for x, y in zip(jax.tree.leaves(a), jax.tree.leaves(b)):
+        np.testing.assert_array_equal(np.asarray(x), np.asarray(y))
+
+
+def test_a_missing_folder_for_the_columns_is_one_line(tmp_path):
+    with pytest.raises(ValueError, match="is not an existing folder"):
+        _read(DRIVE_CSV, folder=tmp_path / "missing")
+
+
+def test_provenance_hashes_a_file_in_blocks_to_the_digest_of_its_bytes(tmp_path):
+    import hashlib
+
+    from jaxobs.provenance import sha256
+
+    data = np.random.default_rng(0).bytes(3 * (1 << 20) + 17)  # over three blocks, the last one partial
+    f = tmp_path / "x.bin"
+    f.write_bytes(data)
+    assert sha256(f) == sha256(data) == hashlib.sha256(data).hexdigest()
+
+
+def test_rounded_time_stamps_run_on_the_observers_grid():
+    """A recording whose interval is the observer's to the reader's tolerance (time stamps printed to 12 digits:
+    ts = 9.99999999997669e-05 for 1e-4) runs as the exact one does: the same samples, the same estimates."""
+    from jaxobs.observers import SOIFO
+
+    c = _cols()
+    ts = float(c["t"][1] - c["t"][0])
+    args = (c["u_a"], c["u_b"], c["i_a"], c["i_b"])
+    exact = jaxobs.DriveRecording(*args, ts, theta_e=c["theta_e"])
+    rounded = jaxobs.DriveRecording(*args, ts * (1 - 2.331e-12), theta_e=c["theta_e"])
+    obs = SOIFO.closed_form(Rs=papers.SPMSM_000["Rs"], L=papers.SPMSM_000["Ld"], ts=ts)
+    t1 = 200 * ts
+    a = jaxobs.simulate(jaxobs.OnSignal(obs, exact), t1).outputs
+    b = jaxobs.simulate(jaxobs.OnSignal(obs, rounded), t1).outputs
+    for x, y in zip(jax.tree.leaves(a.obs), jax.tree.leaves(b.obs)):  # the estimates: the same samples, bit for bit
+        np.testing.assert_array_equal(np.asarray(x), np.asarray(y))
+    for x, y in zip(
+        jax.tree.leaves(a.truth), jax.tree.leaves(b.truth)
+    ):  # the truth: ω = dθ/dt over each ts (2.3e-12 apart)
+        np.testing.assert_allclose(np.asarray(x), np.asarray(y), rtol=1e-11)
+    with pytest.raises(ValueError, match="must equal the observer"):  # beyond the tolerance: refused
+        jaxobs.OnSignal(obs, jaxobs.DriveRecording(*args, ts * (1 + 1e-6), theta_e=c["theta_e"]))
+
+
+@pytest.mark.parametrize(
+    "text, match",
+    [
+        ("[layout]\nx = " + "[" * 5000 + "]" * 5000 + "\n", "nested deeper"),
+        ("[layout]\ncurrent_frame = 'abc'\nz = 1" + "0" * 5000 + "\n", "digits"),
+        ("[layout]\ncurrent_frame = \xff\n", "not UTF-8"),
+    ],
+    ids=["deep nesting", "long number", "not utf-8"],
+)
+def test_a_hostile_sidecar_is_one_line(tmp_path, text, match):
+    csv = _write(tmp_path / "log.csv", _cols())
+    (tmp_path / "log.csv.toml").write_bytes(text.encode("latin-1"))
+    with pytest.raises(ValueError, match=match) as e:
+        RecordingLayout.sidecar(csv)
+    assert "\n" not in str(e.value) and "log.csv.toml" in str(e.value)
+
+
+def test_a_declared_voltage_delay_one_period_too_long_warns(tmp_path):
+    """References applied one period after they are logged, declared with a delay of 2: the voltages as read lag
+    the machine's model by a period (a bias of −ω_e·ts in every estimate): a warning naming the columns and the
+    delay to declare.  Declared right, the same file warns of nothing."""
+    c = _cols()
+    c["u_a"], c["u_b"] = np.roll(c["u_a"], -1), np.roll(c["u_b"], -1)  # row k: the reference applied from t_k+1
+    f = _write(tmp_path / "log.csv", c)
+    too_long = RecordingLayout(voltage_timing="reference", voltage_delay=2)
+    with pytest.warns(RecordingWarning, match=r"'u_a, u_b' match .* 1 period\(s\) earlier .*voltage_delay = 1;"):
+        _read(f, machine=D.spmsm_paper000(inertia="motor"), layout=too_long)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        _read(
+            f,
+            machine=D.spmsm_paper000(inertia="motor"),
+            layout=RecordingLayout(voltage_timing="reference", voltage_delay=1),
+        )
+
+
+def test_a_file_cut_inside_its_last_line_is_refused_naming_the_line(tmp_path):
+    """A copy cut short inside a used field (the last ω read as 187 instead of 187.84) is an error naming the
+    line: a file must end its last line."""
+    text = _write(tmp_path / "whole.csv", _cols()).read_text()
+    n = text.count("\n")
+    for cut in (text.rstrip("\n")[:-8], text.rstrip("\n")):  # cut inside a field; whole but without a line end
+        f = tmp_path / "cut.csv"
+        f.write_text(cut)
+        with pytest.raises(ValueError, match=rf"line {n}, the last, has no line end: the file may be cut short"):
+            _read(f)
+
+
+def _abc(c):
+    """The log's currents as phases a and b (amplitude-invariant Clarke inverted)."""
+    c["i_a"], c["i_b"] = c["i_a"], -0.5 * c["i_a"] + S3 / 2 * c["i_b"]
+    return c
+
+
+def test_a_clean_phase_log_with_steps_warns_nothing(tmp_path):
+    """The shipped log holds a speed step at 0.1 s and a load step at 0.2 s; here its currents also double at
+    0.15 s, balanced (a clean step).  Read as phase currents, the balance check keeps to the windows whose
+    amplitude holds, and the log warns of no offset or unbalance (a window across the step read a DC offset of
+    2.2 %)."""
+    c = _abc(_cols())
+    step = np.where(c["t"] >= 0.15, 2.0, 1.0)
+    c["i_a"], c["i_b"] = c["i_a"] * step, c["i_b"] * step
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RecordingWarning)
+        log = _read(_write(tmp_path / "abc.csv", c), layout=RecordingLayout(current_frame="abc"))
+    assert log.warnings == []
+
+
+@pytest.mark.parametrize(
+    "frame, offset, gain, warned",
+    [
+        ("abc", 0.0, 0.035, r"gain mismatch of about 3\.[3-7] % between their phases"),
+        ("abc", 0.03, 0.0, r"DC offset of about (2\.[89]|3|3\.[0-2]) % of the amplitude on one of their phases"),
+        (
+            "alpha_beta",
+            0.05,
+            0.0,
+            r"DC offset of about (4\.[89]|5|5\.[0-2]) % of the amplitude on one of their channels",
+        ),
+        ("alpha_beta", 0.0, 0.04, r"gain mismatch of about (3\.[89]|4|4\.[0-2]) % between their channels"),
+        ("abc", 0.01, 0.01, None),  # below both thresholds
+    ],
+)
+def test_offsets_and_gain_errors_warn_with_their_size_in_either_frame(tmp_path, frame, offset, gain, warned):
+    c = {k: v[:1000] for k, v in _cols().items()}  # the steady 0.1 s before the speed step
+    c = _abc(c) if frame == "abc" else c
+    amp = float(np.max(np.abs(c["i_a"])))
+    c["i_a"] = (1 + gain) * c["i_a"] + offset * amp
+    with warnings.catch_warnings(record=True) as rec:
+        warnings.simplefilter("always", RecordingWarning)
+        _read(_write(tmp_path / "log.csv", c), layout=RecordingLayout(current_frame=frame))
+    text = " | ".join(str(w.message) for w in rec if isinstance(w.message, RecordingWarning))
+    if warned is None:
+        assert text == ""
+    else:
+        assert re.search(warned, text), text  # the size read back within 0.2 % (the clean log's own 0.16 %)
+
+
+def test_a_mechanical_angle_under_declared_phases_names_the_angle(tmp_path):
+    """Phase currents declared as such, with the angle column mechanical but read as electrical: the columns do
+    not turn with the angle, and the message names the angle's declaration, not the frame already declared."""
+    c = _abc(_cols())
+    c["theta_e"] = np.mod(np.unwrap(c["theta_e"]) / P, 2 * math.pi)
+    del c["omega_e"]
+    layout = RecordingLayout(current_frame="abc")
+    with pytest.raises(ValueError, match=r"the angle column 'theta_e' does not turn with them: .*angle_kind") as e:
+        _read(_write(tmp_path / "log.csv", c), omega_e=None, layout=layout)
+    assert "declare current_frame" not in str(e.value)

@@ -69,10 +69,22 @@ def test_every_preset_gain_is_checked():
     "preset, table", [(D.spmsm_paper000, papers.SPMSM_000), (D.ipmsm_paper002, papers.IPMSM_002)], ids=["000", "002"]
 )
 def test_machine_presets_are_the_papers_tables(preset, table):
-    """jaxobs.drive's machine presets hold the tables of jaxobs.papers (000 Table II; 002's ASSUMED machine)."""
-    par = preset()
+    """jaxobs.drive's machine presets hold the tables of jaxobs.papers (000 Table II; 002's ASSUMED machine): the
+    motor alone with inertia="motor", and by default the shipped drive file's machine, the same but for the
+    bench's ASSUMED inertia (papers.BENCH_J_000, BENCH_J_002) -- one machine per paper, the one the CLI runs."""
+    par = preset(inertia="motor")
     for field, value in table.items():
         assert float(getattr(par, field)) == value, field
+    bench = preset()
+    name, bench_j = ("spmsm000", papers.BENCH_J_000) if table is papers.SPMSM_000 else ("ipmsm002", papers.BENCH_J_002)
+    assert bench is D.bench_machine(name) and float(bench.J) == bench_j
+    for field, value in table.items():
+        assert float(getattr(bench, field)) == (bench_j if field == "J" else value), field
+    assert float(preset(J=1.0).J) == 1.0
+    with pytest.raises(ValueError, match="inertia must be 'bench' or 'motor'"):
+        preset(inertia="load")
+    with pytest.raises(ValueError, match="give the inertia once"):
+        preset(inertia="motor", J=1.0)
 
 
 # Numbers that identify a paper constant (their value is unlikely to mean anything else), and the

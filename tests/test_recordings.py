@@ -141,7 +141,7 @@ def test_drive_recording_runs_a_flux_observer_open_loop_against_the_encoder():
     """The shipped u/i recording (000's SPMSM, sensored FOC, 1000 r/min): 000's second-order SOIFO on the
     machine's Rs, L, run open loop on it, follows the recorded encoder angle; its wrapped angle column
     is unwrapped (the speed from it is the recorded one)."""
-    par = D.spmsm_paper000()
+    par = D.spmsm_paper000(inertia="motor")
     rec = jaxobs.DriveRecording.from_csv(DRIVE_CSV, time_column="t", theta_e="theta_e", ts=1e-4)
     rec_w = jaxobs.DriveRecording.from_csv(DRIVE_CSV, time_column="t", theta_e="theta_e", omega_e="omega_e")
     assert rec.has_truth and rec.n == 3000

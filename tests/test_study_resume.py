@@ -118,7 +118,7 @@ def test_run_study_from_a_partial_store_equals_one_run(tmp_path):
 
 def test_run_drive_study_from_a_partial_store_equals_one_run(tmp_path):
     """As for FLL studies: the drive study's chunks lost to a kill are computed again, the others read back."""
-    par = D.ipmsm_paper002()
+    par = D.ipmsm_paper002(inertia="motor")
     drive = D.Drive(D.FOC.imc(par, alpha_c=2 * math.pi * 300, alpha_s=2 * math.pi * 5), sensorless=True)
     designs = {"a": jaxobs.CLESO(par.Rs, par.Lq), "b": jaxobs.CLESO(par.Rs, par.Lq, omega0=4000.0)}
     axes = {"speed_rpm": [600.0], "dRs": [-0.2, 0.2], "dLq": [0.0, 0.2]}

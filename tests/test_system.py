@@ -15,7 +15,7 @@ import jaxobs
 from jaxobs import drive as D
 from jaxobs import papers
 
-PAR = D.spmsm_paper000()
+PAR = D.spmsm_paper000(inertia="motor")
 FOC = D.FOC.imc(PAR, alpha_c=2 * math.pi * 300, alpha_s=2 * math.pi * 20)
 
 
@@ -52,7 +52,7 @@ def test_user_scan_of_the_closed_loop_equals_simulate_exactly():
 
 def test_user_scan_of_a_sensorless_closed_loop_equals_simulate_exactly():
     """An observer closing the loop (FA-LESO + PLL on the IPMSM, observer from the hand-over on)."""
-    par = D.ipmsm_paper002()
+    par = D.ipmsm_paper002(inertia="motor")
     foc = D.FOC.imc(par, alpha_c=2 * math.pi * 300, alpha_s=2 * math.pi * 10)
     w_e = par.p * 300 * D.RPM
     obs = jaxobs.FALESO(

@@ -220,7 +220,7 @@ def test_time_major_drive_recordings_compute_what_scenario_major_ones_compute():
     assert time_major.samples.shape == (rec.n, 3, 4) and time_major.n == rec.n
     np.testing.assert_array_equal(time_major(5 * rec.ts).i_a, by_scenario(5 * rec.ts).i_a)
 
-    par = D.spmsm_paper000()
+    par = D.spmsm_paper000(inertia="motor")
     k1, k2 = papers.SECOND_ORDER_SOIFO_K1, papers.SECOND_ORDER_SOIFO_K2
 
     def cost(o):

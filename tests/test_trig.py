@@ -144,7 +144,7 @@ def test_float32_derivatives_are_the_closed_forms():
 
 def test_drive_step_makes_no_library_sine_in_float64():
     """The float64 drive's step (plant, FOC, observer) calls no XLA sin/cos: every one goes through sincos."""
-    par = D.spmsm_paper000()
+    par = D.spmsm_paper000(inertia="motor")
     drive = D.bench_drive(par, handover=0.05)
     soifo = jaxobs.SecondOrderSOIFO(par.Rs, par.Ld, 1.0, 0.5, 0.3, omega0=par.p * 1000 * D.RPM)
     loop = D.ClosedLoop(drive, soifo, D.Scenario(par, omega_m0=1000 * D.RPM, dead_time=2e-6))

@@ -83,8 +83,9 @@ from jaxobs.provenance import cf_labels
 
 from .cli_common import enable_x64, progress_of
 from .cli_drive import add_drive_parser
+from .cli_log import add_log_parser
 from .cli_papers import BODE_FILES as BODE_FILES
-from .cli_papers import CF_OPTIONS, cmd_bode, cmd_closed_form, cmd_demo, cmd_reproduce
+from .cli_papers import CF_OPTIONS, cf_flags, cmd_bode, cmd_closed_form, cmd_demo, cmd_reproduce
 from .cli_papers import DEMO_FILES as DEMO_FILES
 from .cli_papers import REPRODUCE_FILES as REPRODUCE_FILES
 from .cli_papers import closed_form_rows as closed_form_rows
@@ -384,14 +385,8 @@ def build_parser() -> argparse.ArgumentParser:
         parents=[quiet],
     )
     c.add_argument("design", choices=list(CF_OPTIONS), help="which design rule")
-    c.add_argument("--k", type=float, help="SOGI gain k (sogi-fll)")
-    c.add_argument("--omega-n", dest="omega_n", type=float, help="nominal frequency, rad/s (default 100π)")
-    c.add_argument("--zeta", type=float, help="damping ratio (default 1/√2)")
-    c.add_argument("--omega-c", dest="omega_c", type=float, help="crossover, rad/s (wif, default 2π·18.8)")
-    c.add_argument("--b", type=float, help="symmetric-optimum factor b > 1 (wif, default 1+√2)")
-    c.add_argument("--omega0", type=float, help="LESO bandwidth, rad/s (cleso, default 500π)")
-    c.add_argument("--rs", type=float, help="stator resistance, ohm (cleso)")
-    c.add_argument("--lq", type=float, help="q-axis inductance, H (cleso)")
+    for flag, (dest, what) in cf_flags().items():  # each design's inputs (its class's closed_form_design)
+        c.add_argument(flag, dest=dest, type=float, help=what)
     c.add_argument("--json", action="store_true", help="print JSON")
     c.set_defaults(func=cmd_closed_form)
 
@@ -470,6 +465,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_export_parser(sub, parents=[quiet])
     add_envelope_parser(sub, parents=[quiet])
     add_drive_parser(sub, parents=[quiet])
+    add_log_parser(sub, parents=[quiet])
     return p
 
 

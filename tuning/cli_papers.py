@@ -2,13 +2,12 @@
 
 from __future__ import annotations
 
+import inspect
 import json
-import math
 import re
 from pathlib import Path
 
-from jaxobs import linear, papers
-from jaxobs.registry import registered
+from jaxobs.registry import REGISTRY
 from jaxobs.reproduce.figures import FLUX_FIGURES, LESO_FIGURES
 
 from .cli_common import CommandOut, enable_x64, progress_of
@@ -95,98 +94,91 @@ def cmd_demo(args) -> int:
     return 0 if all(r["ok"] for r in rows) else 1
 
 
-# each closed form's command-line inputs, by its alias in jaxobs.registry (the FLLs': their class's closed_form
-# arguments; the C-LESO's: 002 eq (16)'s ω0 and the machine's Rs and Lq, whose l1, l2 it prints)
-CF_OPTIONS = {
-    "sogi-fll": ("k", "omega_n", "zeta"),
-    "wpf": ("omega_n", "zeta"),
-    "wif": ("omega_c", "b", "omega_n"),
-    "cleso": ("omega0", "rs", "lq"),
-}
+# The closed forms `jaxobs closed-form` offers: every registered observer, by its aliases (jaxobs.registry); each
+# class's closed_form_design is its rule, its keyword arguments (less the constructor's **kw) its inputs, and its
+# rows carry their own formulas and sources, printed here as they are.
+CF_DESIGNS = {a: e.cls for e in REGISTRY.values() for a in e.aliases}
+
+
+def _inputs(cls) -> tuple:
+    """The inputs of a class's closed form: ``closed_form_design``'s named parameters (its ``ClosedForm.inputs``)."""
+    params = inspect.signature(cls.closed_form_design).parameters.values()
+    return tuple(p.name for p in params if p.kind is inspect.Parameter.KEYWORD_ONLY or p.default is not p.empty)
+
+
+def cf_flag(name: str) -> str:
+    """The command-line flag of a closed-form input: ``Rs`` -> ``--rs``, ``omega_n`` -> ``--omega-n``."""
+    return "--" + name.lower().replace("_", "-")
+
+
+# alias -> the closed form's inputs (one flag each; a flag names the same input of every design that has it)
+CF_OPTIONS = {a: _inputs(cls) for a, cls in CF_DESIGNS.items()}
+
+
+def cf_flags() -> dict:
+    """Every closed-form input's flag, with the designs that take it: flag -> (dest, help)."""
+    out: dict = {}
+    for alias, names in CF_OPTIONS.items():
+        for n in names:
+            dest = n.lower()
+            out.setdefault(cf_flag(n), [dest, []])[1].append(alias)
+    return {f: (d, f"closed-form input of {', '.join(a)} (default: the paper's)") for f, (d, a) in out.items()}
 
 
 def closed_form_rows(design: str, values: dict) -> dict:
-    """Gains of a closed-form design with the formula and source of each (used by the CLI); the defaults are
-    the papers' (:mod:`jaxobs.papers`)."""
+    """A closed-form design's inputs and rows (name, value, units, formula, source), as the class's
+    ``closed_form_design`` gives them: the defaults are the papers' (:mod:`jaxobs.papers`).
 
-    if design == "sogi-fll":
-        k = values.get("k", papers.SOGI_FLL_K)
-        wn = values.get("omega_n", papers.FLL_OMEGA_N)
-        zeta = values.get("zeta", papers.FLL_ZETA)
-        obs = registered(design).cls.closed_form(k=k, omega_n=wn, zeta=zeta)
-        gains = [
-            ("k", float(obs.k), "chosen (001 uses 1/√2)", "001 Sec. II-B"),
-            ("lam", float(obs.lam), "λ = k²ωn²/(8ζ²)", "001 eq (22)"),
-        ]
-        inputs = dict(k=k, omega_n=wn, zeta=zeta)
-    elif design == "wpf":
-        wn = values.get("omega_n", papers.FLL_OMEGA_N)
-        zeta = values.get("zeta", papers.FLL_ZETA)
-        obs = registered(design).cls.closed_form(omega_n=wn, zeta=zeta)
-        gains = [
-            ("k1", float(obs.k1), "k1 = √2 (prefilter ζ = 1/√2)", "001 eq (26)"),
-            ("k2", float(obs.k2), "k2 = k1 (amplitude poles coincide)", "001 Sec. III-B"),
-            ("lam", float(obs.lam), "λ = 2(ζ+1)ωn²/(2ζ+1)³", "001 eq (29)"),
-        ]
-        inputs = dict(omega_n=wn, zeta=zeta)
-    elif design == "wif":
-        wc = values.get("omega_c", papers.WIF_OMEGA_C)
-        b = values.get("b", papers.WIF_B)
-        wn = values.get("omega_n", papers.FLL_OMEGA_N)
-        obs = registered(design).cls.closed_form(omega_c=wc, b=b, omega_n=wn)
-        pm = math.degrees(float(linear.symmetric_optimum_pm(b)))
-        gains = [
-            ("k1", float(obs.k1), "k1 = 2bωc/ωn", "001 eq (34)"),
-            ("k2", float(obs.k2), "k2 = 2ωc/ωn", "001 eq (34)"),
-            ("lam", float(obs.lam), "λ = 2ωc²/b", "001 eq (34)"),
-            ("phase_margin_deg", pm, "PM = atan((b²−1)/(2b))", "001 eq (39)"),
-        ]
-        inputs = dict(omega_c=wc, b=b, omega_n=wn)
-    elif design == "cleso":
-        if "rs" not in values or "lq" not in values:
-            raise ValueError(
-                "closed-form cleso needs --rs (stator resistance, ohm >= 0) and --lq (q-axis inductance, H > 0)"
-            )
-        w0 = values.get("omega0", papers.LESO_OMEGA0)
-        g = linear.cleso_closed_form(w0, values["rs"], values["lq"])
-        gains = [
-            ("l1", float(g.l1), "l1 = 2ω0 − μ, μ = Rs/Lq", "002 eq (16)"),
-            ("l2", float(g.l2), "l2 = ω0²", "002 eq (16)"),
-        ]
-        inputs = dict(omega0=w0, rs=values["rs"], lq=values["lq"])
-    else:  # argparse restricts the choices
-        raise ValueError(f"design must be one of {', '.join(CF_OPTIONS)}, got {design!r}")
+    Args:
+        design: An alias of :data:`CF_DESIGNS` (``"wif"``, ``"soifo"``, ``"cleso"``, ...).
+        values: Inputs by their flag's name (``rs``, ``omega_n``); each must be an input of the design.
+
+    Returns:
+        ``{"design", "source", "inputs", "gains": [{"name", "value", "units", "formula", "source"}, ...]}``.
+
+    Raises:
+        ValueError: an unknown design, an input it does not take, or a value out of its range.
+    """
+    if design not in CF_DESIGNS:
+        raise ValueError(f"design must be one of {', '.join(CF_DESIGNS)}, got {design!r}")
+    by_flag = {n.lower(): n for n in CF_OPTIONS[design]}
+    for k in values:
+        if k not in by_flag:
+            allowed = ", ".join(cf_flag(o) for o in CF_OPTIONS[design])
+            raise ValueError(f"{cf_flag(k)} does not apply to {design} (allowed: {allowed})")
+    cf = CF_DESIGNS[design].closed_form_design(**{by_flag[k]: v for k, v in values.items()})
     return {
         "design": design,
-        "inputs": inputs,
-        "gains": [dict(name=n, value=v, formula=f, source=src) for n, v, f, src in gains],
+        "source": cf.source,
+        "inputs": {k: float(v) for k, v in cf.inputs.items()},
+        "gains": [
+            dict(name=r.name, value=float(r.value), units=r.units, formula=r.formula, source=r.source) for r in cf.rows
+        ],
     }
 
 
 def cmd_closed_form(args) -> int:
     enable_x64()
     values = {}
-    for name in ("k", "omega_n", "zeta", "omega_c", "b", "omega0", "rs", "lq"):
-        v = getattr(args, name)
+    for flag, (dest, _) in cf_flags().items():
+        v = getattr(args, dest, None)
         if v is None:
             continue
-        if name not in CF_OPTIONS[args.design]:
-            allowed = ", ".join("--" + o.replace("_", "-") for o in CF_OPTIONS[args.design])
-            raise ValueError(f"--{name.replace('_', '-')} does not apply to {args.design} (allowed: {allowed})")
-        values[name] = v
+        if dest not in {n.lower() for n in CF_OPTIONS[args.design]}:
+            allowed = ", ".join(cf_flag(o) for o in CF_OPTIONS[args.design])
+            raise ValueError(f"{flag} does not apply to {args.design} (allowed: {allowed})")
+        values[dest] = v
     try:
         res = closed_form_rows(args.design, values)
     except ValueError as e:  # name the flag the user typed (SOGIFLLWIF.closed_form.b -> --b), not the argument
-        raise ValueError(
-            re.sub(r"\b\w+\.closed_form\.(\w+)", lambda m: "--" + m[1].replace("_", "-"), str(e))
-        ) from None
+        raise ValueError(re.sub(r"\b\w+\.closed_form\.(\w+)", lambda m: cf_flag(m[1]), str(e))) from None
     if args.json:
         print(json.dumps(res, indent=1))
     else:
         ins = ", ".join(f"{k} = {v:.6g}" for k, v in res["inputs"].items())
-        print(f"{args.design}: {ins}")
+        print(f"{args.design} ({res['source']}): {ins}")
         for g in res["gains"]:
-            print(f"  {g['name']:<18}{g['value']:>14.6g}   {g['formula']:<36}{g['source']}")
+            print(f"  {g['name']:<18}{g['value']:>14.6g} {g['units']:<10}{g['formula']:<52}{g['source']}")
     return 0
 
 

@@ -15,7 +15,9 @@ from .bench import bench_machine as bench_machine
 from .bench import drive_speed_limit_rpm as drive_speed_limit_rpm
 from .bench import if_handover_earliest as if_handover_earliest
 from .bench import if_load_limit as if_load_limit
+from .bench import ipmsm_paper002 as ipmsm_paper002
 from .bench import shipped_drive as shipped_drive
+from .bench import spmsm_paper000 as spmsm_paper000
 from .component import AbstractComponent as AbstractComponent
 from .control import FOC as FOC
 from .control import ControllerState as ControllerState
@@ -60,11 +62,9 @@ from .machine import ab_to_dq as ab_to_dq
 from .machine import bemf_ab as bemf_ab
 from .machine import bemf_dq as bemf_dq
 from .machine import dq_to_ab as dq_to_ab
-from .machine import ipmsm_paper002 as ipmsm_paper002
 from .machine import lq_apparent as lq_apparent
 from .machine import lq_incremental as lq_incremental
 from .machine import plant_vf as plant_vf
-from .machine import spmsm_paper000 as spmsm_paper000
 from .machine import torque as torque
 from .plant import PMSM as PMSM
 from .plant import PlantInput as PlantInput

@@ -21,6 +21,7 @@ from __future__ import annotations
 import functools
 import math
 from pathlib import Path
+from typing import Literal
 
 import jax
 
@@ -40,7 +41,9 @@ __all__ = [
     "drive_speed_limit_rpm",
     "if_handover_earliest",
     "if_load_limit",
+    "ipmsm_paper002",
     "shipped_drive",
+    "spmsm_paper000",
 ]
 
 _DATA = Path(__file__).resolve().parent.parent / "data"
@@ -95,6 +98,67 @@ def bench_machine(name: str = "ipmsm002", **overrides) -> PMSMParams:
     if unknown:
         raise ValueError(f"bench_machine: unknown parameter(s) {', '.join(sorted(unknown))}; allowed: {', '.join(kw)}")
     return PMSMParams(**{**kw, **overrides})
+
+
+def _paper_machine(name, inertia, motor_J, overrides) -> PMSMParams:
+    if inertia not in ("bench", "motor"):
+        raise ValueError(f"inertia must be 'bench' or 'motor', got {inertia!r}")
+    if inertia == "motor" and "J" in overrides:
+        raise ValueError("give the inertia once: inertia='motor' or J=..., not both")
+    return bench_machine(name, **({"J": motor_J} if inertia == "motor" else {}), **overrides)
+
+
+def spmsm_paper000(*, inertia: Literal["bench", "motor"] = "bench", **overrides) -> PMSMParams:
+    """Paper 000's SPMSM: the machine of the shipped drive file ``spmsm000`` (``jaxobs/data/spmsm000.toml``), the
+    one ``jaxobs reproduce flux``, drive jobs and studies simulate.
+
+    Table II: ψf = 0.35 Wb, 2000 r/min, 3 pole pairs, L = 5 mH, Rs = 0.8 Ω, 14 N·m, J = 3.78e-4 kg·m²
+    (:data:`jaxobs.papers.SPMSM_000`); friction is not given, B = 0.  Table II's J is the motor's; the bench
+    couples a load machine, so the bench's J is :data:`jaxobs.papers.BENCH_J_000` (10×, ASSUMED).
+
+    Args:
+        inertia: ``"bench"`` (default: the drive file's J, the bench's total) or ``"motor"`` (Table II's J,
+            the motor alone).
+        **overrides: :class:`PMSMParams` keywords that replace the file's values (``J`` among them).
+
+    Returns:
+        The :class:`PMSMParams`.
+
+    Raises:
+        ValueError: an unknown ``inertia`` or parameter, or both ``inertia="motor"`` and ``J``.
+    """
+    return _paper_machine("spmsm000", inertia, papers.SPMSM_000["J"], overrides)
+
+
+def ipmsm_paper002(*, inertia: Literal["bench", "motor"] = "bench", **overrides) -> PMSMParams:
+    """The IPMSM for paper 002's operating points: the machine of the shipped drive file ``ipmsm002``
+    (``jaxobs/data/ipmsm002.toml``), the one ``jaxobs reproduce leso --machine single``, drive jobs and studies
+    simulate.  Its values are ASSUMED (our copy lacks 002's machine table; :data:`jaxobs.papers.IPMSM_002`).
+
+    002 runs 300/600/840 r/min at 25/50/70 Hz, so p = 5.  The rest is chosen as a plausible ~2 kW lab machine
+    and documented as assumed:
+
+    - Rs = 0.6 Ω, Ld = 6 mH, Lq = 12 mH (saliency 2, an IPMSM),
+    - ψf = 0.45 Wb: BEMF 141 V peak at 600 r/min, 198 V at 840 r/min,
+    - motor J = 5e-3 kg·m², B = 1e-3 N·m·s/rad, rated 30 N·m at 600 r/min (8.9 A at i_d = 0); the bench's J
+      is :data:`jaxobs.papers.BENCH_J_002` (10×: with the motor alone an 80 % load step stalls the drive).
+
+    002's machine is dual three-phase under vector space decomposition; this is its αβ subspace, the one the
+    observers see (002 eqs 4–5), as an equivalent three-phase machine (the whole dual machine:
+    :func:`jaxobs.drive.dual_ipmsm_paper002`).  002 Sec. V-B runs one set alone to expose the 5th and 7th BEMF
+    harmonics; ``a5``/``a7`` model that case.
+
+    Args:
+        inertia: ``"bench"`` (default: the drive file's J) or ``"motor"`` (the motor alone).
+        **overrides: :class:`PMSMParams` keywords that replace the file's values (``J`` among them).
+
+    Returns:
+        The :class:`PMSMParams`.
+
+    Raises:
+        ValueError: an unknown ``inertia`` or parameter, or both ``inertia="motor"`` and ``J``.
+    """
+    return _paper_machine("ipmsm002", inertia, papers.IPMSM_002["J"], overrides)
 
 
 def bench_drive(

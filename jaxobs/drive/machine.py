@@ -1,4 +1,5 @@
-"""Permanent-magnet synchronous machine: parameters, presets and the plant vector field.
+"""Permanent-magnet synchronous machine: parameters and the plant vector field (the papers' machines are the
+shipped drive files', :func:`jaxobs.drive.spmsm_paper000` and :func:`jaxobs.drive.ipmsm_paper002`).
 
 Frames and scaling (motulator's conventions): space vectors are complex,
 x_ab = x_α + j x_β (stationary) and x_dq = x_ab e^{−jθe} (rotor), amplitude
@@ -45,7 +46,6 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from .. import papers
 from .._trig import sincos
 from .._validate import check_nonnegative, check_positive, check_real
 
@@ -54,8 +54,6 @@ __all__ = [
     "QSaturation",
     "lq_apparent",
     "lq_incremental",
-    "spmsm_paper000",
-    "ipmsm_paper002",
     "plant_vf",
     "torque",
     "bemf_dq",
@@ -233,49 +231,6 @@ class PMSMParams(eqx.Module):
             self,
             (self.Rs * (1 + dRs), self.Ld * (1 + dL), self.Lq * (1 + dL), self.psi_f * (1 + dpsi)),
         )
-
-
-def spmsm_paper000(**overrides) -> PMSMParams:
-    """Paper 000 Table II SPMSM: ψf = 0.35 Wb, 2000 r/min, 3 pole pairs, L = 5 mH, Rs = 0.8 Ω,
-    14 N·m, J = 3.78e-4 kg·m².  Friction is not given; B = 0 by default.
-
-    Args:
-        **overrides: :class:`PMSMParams` keywords that replace the table's values.
-
-    Returns:
-        The :class:`PMSMParams`.
-    """
-    kw = dict(papers.SPMSM_000)
-    kw.update(overrides)
-    return PMSMParams(**kw)
-
-
-def ipmsm_paper002(**overrides) -> PMSMParams:
-    """IPMSM for paper 002's operating points (ASSUMED values: our copy lacks 002's machine table).
-
-    002 runs 300/600/840 r/min at 25/50/70 Hz, so p = 5.  The rest is chosen as a
-    plausible ~2 kW lab machine and documented as assumed:
-
-    - Rs = 0.6 Ω, Ld = 6 mH, Lq = 12 mH (saliency 2, an IPMSM),
-    - ψf = 0.45 Wb: BEMF 141 V peak at 600 r/min, 198 V at 840 r/min,
-    - J = 5e-3 kg·m², B = 1e-3 N·m·s/rad, rated 30 N·m at 600 r/min (8.9 A at i_d = 0).
-
-    002's machine is dual three-phase under vector space decomposition; we model
-    its αβ subspace, the one the observers see (002 eqs 4–5), as an equivalent
-    three-phase machine.  Left out: the xy (harmonic) subspace and its currents,
-    the zero sequences and the mutual coupling between the two winding sets.
-    002 Sec. V-B runs one set alone to expose the 5th and 7th BEMF harmonics;
-    ``a5``/``a7`` model that case.
-
-    Args:
-        **overrides: :class:`PMSMParams` keywords that replace these values.
-
-    Returns:
-        The :class:`PMSMParams`.
-    """
-    kw = dict(papers.IPMSM_002)
-    kw.update(overrides)
-    return PMSMParams(**kw)
 
 
 def _harmonic_factor(par: PMSMParams, sc):

@@ -9,7 +9,6 @@ from __future__ import annotations
 import equinox as eqx
 import jax.numpy as jnp
 
-from .. import papers
 from ..observers import (
     pll_gains,
     second_order_soifo_lambda,
@@ -145,49 +144,42 @@ def wif_model(k1, k2, lam, omega_n) -> FLLModel:
 # --------------------------------------------------------------------------
 
 
-def sogi_fll_closed_form(k=papers.SOGI_FLL_K, omega_n=papers.FLL_OMEGA_N, zeta=papers.FLL_ZETA, **kw):
-    """A :class:`~jaxobs.SOGIFLL` tuned by 001 eq (22) (Table I: k = 1/√2, λ = 12337): :meth:`SOGIFLL.closed_form`.
+def sogi_fll_closed_form(**kw) -> SOGIFLL:
+    """:meth:`SOGIFLL.closed_form <jaxobs.SOGIFLL.closed_form_design>` itself: 001 eq (22) (Table I: k = 1/√2,
+    λ = 12337); the rule, its defaults and its rows are the class's.
 
     Args:
-        k: SOGI gain.
-        omega_n: Nominal frequency ωn, rad/s.
-        zeta: Damping ζ.
-        **kw: The constructor's keywords.
+        **kw: :meth:`SOGIFLL.closed_form_design`'s arguments (``k``, ``omega_n``, ``zeta``, constructor keywords).
 
     Returns:
         The :class:`~jaxobs.SOGIFLL`.
     """
-    return SOGIFLL.closed_form(k=k, omega_n=omega_n, zeta=zeta, **kw)
+    return SOGIFLL.closed_form(**kw)
 
 
-def wpf_closed_form(omega_n=papers.FLL_OMEGA_N, zeta=papers.FLL_ZETA, **kw):
-    """A :class:`~jaxobs.SOGIFLLWPF` tuned by 001 eq (29) (Table I: k1 = k2 = √2, λ = 23948):
-    :meth:`SOGIFLLWPF.closed_form`.
+def wpf_closed_form(**kw) -> SOGIFLLWPF:
+    """:meth:`SOGIFLLWPF.closed_form <jaxobs.SOGIFLLWPF.closed_form_design>` itself: 001 eq (29) (Table I:
+    k1 = k2 = √2, λ = 23948); the rule, its defaults and its rows are the class's.
 
     Args:
-        omega_n: Nominal frequency ωn, rad/s.
-        zeta: Damping ζ.
-        **kw: The constructor's keywords.
+        **kw: :meth:`SOGIFLLWPF.closed_form_design`'s arguments (``omega_n``, ``zeta``, constructor keywords).
 
     Returns:
         The :class:`~jaxobs.SOGIFLLWPF`.
     """
-    return SOGIFLLWPF.closed_form(omega_n=omega_n, zeta=zeta, **kw)
+    return SOGIFLLWPF.closed_form(**kw)
 
 
-def wif_closed_form(omega_c=papers.WIF_OMEGA_C, b=papers.WIF_B, omega_n=papers.FLL_OMEGA_N, **kw):
-    """A :class:`~jaxobs.SOGIFLLWIF` tuned by the symmetric optimum, 001 eq (34): :meth:`SOGIFLLWIF.closed_form`.
-
-    Defaults are 001's: b = 1 + √2 (ζ = 1/√2, PM = 45°), ωc = 2π·18.8 rad/s
-    (Table I: k1 = 1.815, k2 = 0.752, λ = 11559).
+def wif_closed_form(**kw) -> SOGIFLLWIF:
+    """:meth:`SOGIFLLWIF.closed_form <jaxobs.SOGIFLLWIF.closed_form_design>` itself: the symmetric optimum,
+    001 eq (34) (b = 1 + √2, ωc = 2π·18.8 rad/s; Table I: k1 = 1.815, k2 = 0.752, λ = 11559); the rule, its
+    defaults and its rows are the class's.
 
     Args:
-        omega_c: The crossover ωc, rad/s.
-        b: The symmetric optimum's ratio b.
-        omega_n: Nominal frequency ωn, rad/s.
-        **kw: The constructor's keywords.
+        **kw: :meth:`SOGIFLLWIF.closed_form_design`'s arguments (``omega_c``, ``b``, ``omega_n``, constructor
+            keywords).
 
     Returns:
         The :class:`~jaxobs.SOGIFLLWIF`.
     """
-    return SOGIFLLWIF.closed_form(omega_c=omega_c, b=b, omega_n=omega_n, **kw)
+    return SOGIFLLWIF.closed_form(**kw)

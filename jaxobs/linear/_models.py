@@ -31,7 +31,7 @@ import jax
 import jax.numpy as jnp
 
 from .._validate import as_float, check_positive, check_real
-from ..observers import sogi2_tustin_coefficients
+from ..observers import cleso_gains, sogi2_tustin_coefficients
 from ._tf import DiscreteTransferFunction, TransferFunction, is_hurwitz
 
 __all__ = [
@@ -370,7 +370,8 @@ class CLESOGains(eqx.Module):
 
 
 def cleso_closed_form(omega0, Rs, Lq) -> CLESOGains:
-    """002 eq (16): l1 = 2ω0 − μ, l2 = ω0², μ = Rs/Lq; both poles at −ω0.
+    """002 eq (16): l1 = 2ω0 − μ, l2 = ω0², μ = Rs/Lq; both poles at −ω0 (:func:`jaxobs.observers.cleso_gains`,
+    which the C-LESO runs; its design's rows are :meth:`jaxobs.CLESO.closed_form_design`'s).
 
     Args:
         omega0: The bandwidth ω0, rad/s (> 0).
@@ -386,8 +387,8 @@ def cleso_closed_form(omega0, Rs, Lq) -> CLESOGains:
     w0 = check_positive("omega0", omega0, "cleso_closed_form")
     rs = check_real("Rs", Rs, lower=0.0, lower_open=False, owner="cleso_closed_form")
     lq = check_positive("Lq", Lq, "cleso_closed_form")
-    mu = rs / lq
-    return CLESOGains(l1=2 * w0 - mu, l2=w0**2, omega0=w0)
+    l1, l2 = cleso_gains(w0, rs / lq)  # the one writing of eq (16), jaxobs.observers._rules
+    return CLESOGains(l1=l1, l2=l2, omega0=w0)
 
 
 def faleso_speed_loop_poles(

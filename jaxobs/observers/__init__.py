@@ -1,17 +1,26 @@
-"""Observers: the SOGI-FLL family, the SOGIs, the flux observers of 000 and the LESOs of 002, on one contract.
+"""Observers: the SOGI-FLL family, the SOGIs, the flux observers of 000, the LESOs of 002 and the reduced-order
+flux observer (Hinkkanen et al. 2018, :mod:`jaxobs.observers.rofo`), on one contract.
 
 :class:`AbstractObserver` is every observer; :class:`AbstractVectorFieldObserver` the ones given by a vector
 field (FLL family, SOGIs); :class:`AbstractDriveObserver` the drive observers (flux observers, LESOs,
 :class:`ObserverBank`), bound to a machine and a speed by their one ``bind`` method.  Each observer declares its
 gains with :func:`gain` (units, role, bounds, the paper's symbol; :func:`gain_fields` lists them), and each one a
-paper tunes has a ``closed_form`` classmethod: the paper's rule (the rules' arithmetic: ``sogi_fll_lambda``, ...).
+paper tunes has a closed form: ``closed_form_design`` gives a :class:`ClosedForm` (the observer with its inputs
+and :class:`DesignRow` s: name, value, units, formula, source) and ``closed_form`` its observer (the rules'
+arithmetic: ``sogi_fll_lambda``, ...).  :func:`check_gains` enforces every gain's declared bounds, once, after
+every constructor.
 """
 
 from ._cores import sogi2_tustin_coefficients as sogi2_tustin_coefficients
+from ._gains import ClosedForm as ClosedForm
+from ._gains import DesignRow as DesignRow
 from ._gains import GainInfo as GainInfo
+from ._gains import check_gains as check_gains
 from ._gains import gain as gain
 from ._gains import gain_fields as gain_fields
+from ._gains import gain_row as gain_row
 from ._gains import gain_table as gain_table
+from ._rules import cleso_gains as cleso_gains
 from ._rules import pll_gains as pll_gains
 from ._rules import second_order_soifo_lambda as second_order_soifo_lambda
 from ._rules import sogi_fll_lambda as sogi_fll_lambda
@@ -41,6 +50,8 @@ from .leso import FALESO as FALESO
 from .leso import GILESO as GILESO
 from .leso import AbstractLESO as AbstractLESO
 from .leso import LESOOutput as LESOOutput
+from .rofo import ReducedOrderFluxObserver as ReducedOrderFluxObserver
+from .rofo import ROFOOutput as ROFOOutput
 from .sogi import SOGI as SOGI
 from .sogi import SOGI2 as SOGI2
 from .sogi import QSGOutput as QSGOutput

@@ -6,10 +6,28 @@ study's NetCDF variable, a tuning job's bounds and the C export's comments all r
 
 - ``units``: CF/UDUNITS, e.g. ``"1"``, ``"rad s-1"``, ``"rad2 s-2"``;
 - ``role``: the part of the observer the gain belongs to (``"sogi"``, ``"prefilter"``, ``"fll"``, ``"pll"``,
-  ``"leso"``, ``"filter"``);
+  ``"leso"``, ``"filter"``, ``"flux"``: the reduced-order flux observer's flux gain);
 - ``bounds``: the open interval the constructor accepts, (lower, upper);
 - ``long_name``: what it is, in words;
 - ``symbol``: the paper's symbol, with the paper ("001: λ").
+
+One check enforces every gain's declared ``bounds``: :func:`check_gains`, which
+:class:`~jaxobs.observers.AbstractObserver` runs after every constructor (``__check_init__``).  A constructor
+converts a gain (``as_float``) and leaves its range to that check; it checks by hand only what is not a gain
+(a machine's Rs, a sample time, an initial speed).
+
+A closed form is a design: :class:`ClosedForm` is the observer a paper's rule gives (the one the simulator
+runs) with its inputs and its rows (:class:`DesignRow`: name, value, units, formula, source equation).  The
+convention every observer class that a paper tunes follows:
+
+- ``closed_form_design(**inputs, **constructor_keywords) -> ClosedForm`` is the one place the rule is
+  evaluated; its keyword defaults are the paper's (``jaxobs.papers``), and ``ClosedForm.inputs`` lists the
+  inputs it used (what ``jaxobs closed-form`` offers as options);
+- ``closed_form(**kw)`` is ``closed_form_design(**kw).observer``, for the callers that want the observer;
+- each row of a gain takes its units from the gain's :class:`GainInfo` (:func:`gain_row`); a quantity that is
+  no field (a C-LESO's l1, l2 of 002 eq 16, the WIF's phase margin) is a :class:`DesignRow` of its own;
+- formulas and sources live in the rows, not in the registry or the command line, which print them as
+  they are.
 
 Names follow the papers (001's k, k1, k2, λ; 000's K1, K2; 002's ω0, k1, k2, K_r, ωc), so one name may denote
 different gains in two families (001's WIF k1 and 002's FA-LESO k1): a gain is (class, name), and its
@@ -20,11 +38,13 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import equinox as eqx
 
-__all__ = ["GainInfo", "gain", "gain_fields", "gain_table"]
+from .._validate import check_real
+
+__all__ = ["GainInfo", "gain", "gain_fields", "gain_table", "check_gains", "DesignRow", "ClosedForm", "gain_row"]
 
 _KEY = "jaxobs_gain"
 
@@ -108,3 +128,79 @@ def gain_table(designs: dict) -> dict[str, GainInfo]:
                     f"{dname!r} ({type(obs).__name__}); a study's designs must give one gain name one unit"
                 )
     return table
+
+
+def check_gains(obs) -> None:
+    """Check every gain of ``obs`` against its declared bounds (its :class:`GainInfo`): the one bound check.
+
+    Traced values (an observer built inside ``vmap`` or ``grad``) pass through, as in every constructor check
+    (:mod:`jaxobs._validate`).
+
+    Args:
+        obs: An observer instance.
+
+    Raises:
+        ValueError: A gain outside its open interval, naming the class, the gain and the range.
+    """
+    owner = type(obs).__name__
+    for name, info in gain_fields(obs).items():
+        lo, hi = info.bounds
+        check_real(name, getattr(obs, name), lower=lo, upper=None if math.isinf(hi) else hi, owner=owner)
+
+
+class DesignRow(NamedTuple):
+    """One row of a closed-form design.
+
+    Attributes:
+        name: The gain's field name, or the quantity's name (``"l1"``, ``"phase_margin_deg"``).
+        value: Its value (a float or a JAX scalar: a design may be built from traced inputs).
+        units: CF/UDUNITS units (``"1"`` when dimensionless).
+        formula: The rule, in the paper's symbols (``"λ = 2ωc²/b"``).
+        source: The paper and equation (``"001 eq (34)"``).
+    """
+
+    name: str
+    value: Any
+    units: str
+    formula: str
+    source: str
+
+
+class ClosedForm(NamedTuple):
+    """A closed-form design: the observer a paper's rule gives, with its inputs and rows (module doc).
+
+    Attributes:
+        observer: The observer the simulator runs.
+        inputs: The rule's inputs, name -> value (the paper's defaults unless given).
+        rows: The design's :class:`DesignRow` s, gains first.
+        source: The paper's equations and table, in one line (what a tuning result records).
+    """
+
+    observer: Any
+    inputs: dict
+    rows: tuple
+    source: str
+
+    @property
+    def rule(self) -> str:
+        """The source and every row's formula, in one line (the C export's source line)."""
+        return f"{self.source}: " + "; ".join(r.formula for r in self.rows)
+
+
+def gain_row(cls, name: str, value, formula: str, source: str) -> DesignRow:
+    """The :class:`DesignRow` of gain ``name`` of ``cls``, in the units its :class:`GainInfo` declares.
+
+    Args:
+        cls: The observer class.
+        name: The gain's field name.
+        value: Its value.
+        formula: The rule.
+        source: The paper and equation.
+
+    Returns:
+        The row.
+
+    Raises:
+        KeyError: ``name`` is not a gain of ``cls``.
+    """
+    return DesignRow(name, value, gain_fields(cls)[name].units, formula, source)

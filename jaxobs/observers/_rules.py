@@ -18,6 +18,7 @@ __all__ = [
     "second_order_soifo_lambda",
     "symmetric_optimum_pm",
     "pll_gains",
+    "cleso_gains",
 ]
 
 
@@ -114,3 +115,19 @@ def symmetric_optimum_pm(b):
         The phase margin, rad.
     """
     return jnp.arctan((b**2 - 1) / (2 * b))
+
+
+def cleso_gains(omega0, mu):
+    """002 eq (16): the C-LESO's gains l1 = 2ω0 − μ, l2 = ω0², both poles at −ω0 (ê/e = ω0²/(s + ω0)², eq 17).
+
+    The one place eq (16) is written: the C-LESO and the GI-LESO (whose L1 is the same, eq 29) run it,
+    :func:`jaxobs.linear.cleso_closed_form` and the closed forms' rows report it.
+
+    Args:
+        omega0: The bandwidth ω0, rad/s.
+        mu: μ = Rs/Lq, 1/s.
+
+    Returns:
+        ``(l1, l2)``, 1/s and 1/s².
+    """
+    return 2 * omega0 - mu, omega0**2

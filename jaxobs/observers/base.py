@@ -41,6 +41,7 @@ import jax
 import jax.numpy as jnp
 
 from .._discretize import AbstractRule
+from ._gains import check_gains
 
 __all__ = [
     "AbstractObserver",
@@ -59,7 +60,24 @@ class AbstractObserver(eqx.Module):
     ``ts`` is a field of each observer (an abstract variable of its family's base) or a property (an
     :class:`ObserverBank`'s is its primary's); it is not declared here, where a field would be inherited by
     a subclass that computes it.
+
+    Gains are fields declared with :func:`~jaxobs.observers.gain`; after every constructor
+    ``__check_init__`` checks each against its declared bounds (:func:`~jaxobs.observers.check_gains`), so a
+    constructor does not check a gain's range by hand.  A class a paper tunes has a closed form: the
+    classmethods ``closed_form_design(**inputs) -> ClosedForm`` (the observer, its inputs and its rows: name,
+    value, units, formula, source equation) and ``closed_form(**inputs)``, its observer
+    (:mod:`jaxobs.observers._gains` states the convention).
     """
+
+    # Declared by the class, read by the applications (jaxobs.registry): why a tuning job may not name it
+    # ("" where it may), and the paper's small-signal model, (the jaxobs.linear function, the fields it takes
+    # in order), or None where the papers give none.  A name, not the function: jaxobs.linear sits above the
+    # observers (it analyses them), so an observer cannot import it.
+    why_not_tunable: ClassVar[str] = ""
+    small_signal_model: ClassVar[tuple[str, tuple[str, ...]] | None] = None
+
+    def __check_init__(self):
+        check_gains(self)
 
     @abc.abstractmethod
     def init(self, u0=None) -> Any:

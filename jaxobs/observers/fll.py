@@ -4,7 +4,8 @@ All three take a single-phase signal v(t) = V cos θ and estimate the in-phase
 and quadrature components, amplitude V̂, phase θ̂ = atan2(qv', v') (001 eq 10)
 and frequency ω̂ (rad/s).  Gains are named as in paper 001 (k, k1, k2, λ=lam),
 so tuning jobs can name them; each is declared with its units and symbol (:func:`jaxobs.observers.gain`).
-Each class's ``closed_form`` is its paper's tuning rule (001 eqs 22, 29, 34).
+Each class's ``closed_form_design`` is its paper's tuning rule (001 eqs 22, 29, 34) with its rows;
+``closed_form`` is its observer.
 
 State layout (flat arrays, integrators in the order of 001 Table II):
 
@@ -15,7 +16,7 @@ State layout (flat arrays, integrators in the order of 001 Table II):
 
 from __future__ import annotations
 
-from typing import Literal, NamedTuple
+from typing import ClassVar, Literal, NamedTuple
 
 import equinox as eqx
 import jax
@@ -27,8 +28,8 @@ from .._math import safe_atan2, safe_norm2
 from .._validate import as_float, check_positive, check_real, check_sample_time
 from .._validate import static_float as _static_float
 from ._cores import fll_rate, sogi2_vf, sogi_vf
-from ._gains import gain
-from ._rules import sogi_fll_lambda, wif_symmetric_optimum, wpf_lambda
+from ._gains import ClosedForm, DesignRow, gain, gain_row
+from ._rules import sogi_fll_lambda, symmetric_optimum_pm, wif_symmetric_optimum, wpf_lambda
 from .base import AbstractVectorFieldObserver
 
 __all__ = ["FLLOutput", "SOGIFLL", "SOGIFLLWPF", "SOGIFLLWIF"]
@@ -89,16 +90,19 @@ class SOGIFLL(AbstractVectorFieldObserver):
     rule: AbstractRule = eqx.field(static=True)
     v_floor: float = eqx.field(static=True)
 
+    small_signal_model: ClassVar = ("sogi_fll_model", ("k", "lam", "omega_n"))  # 001 eqs (18)–(20)
+
     def __init__(self, k, lam, omega_n=papers.FLL_OMEGA_N, *, ts=1e-4, rule=None, v_floor=1e-3):
-        self.k = check_positive("k", k, "SOGIFLL")
-        self.lam = check_positive("lam", lam, "SOGIFLL")
+        self.k, self.lam = as_float(k), as_float(lam)  # bounds: check_gains (AbstractObserver)
         self.omega_n = check_positive("omega_n", omega_n, "SOGIFLL")
         self.ts = check_sample_time("ts", ts, "SOGIFLL")
         self.rule = check_rule(AB3() if rule is None else rule, "SOGIFLL")
         self.v_floor = _static_float(check_positive("v_floor", v_floor, "SOGIFLL"), v_floor)
 
     @classmethod
-    def closed_form(cls, k=papers.SOGI_FLL_K, omega_n=papers.FLL_OMEGA_N, zeta=papers.FLL_ZETA, **kw) -> SOGIFLL:
+    def closed_form_design(
+        cls, k=papers.SOGI_FLL_K, omega_n=papers.FLL_OMEGA_N, zeta=papers.FLL_ZETA, **kw
+    ) -> ClosedForm:
         """The SOGI-FLL tuned by 001 eq (22): λ = k² ωn² / (8 ζ²) (Table I: k = 1/√2, λ = 12337).
 
         Args:
@@ -108,14 +112,31 @@ class SOGIFLL(AbstractVectorFieldObserver):
             **kw: the constructor's keywords (``ts``, ``rule``, ``v_floor``).
 
         Returns:
-            The :class:`SOGIFLL`.
+            The :class:`~jaxobs.observers.ClosedForm`: the :class:`SOGIFLL` and the rows k, lam.
 
         Raises:
             ValueError: a value out of its range.
         """
         check_positive("k", k, "SOGIFLL.closed_form")
         check_positive("zeta", zeta, "SOGIFLL.closed_form")
-        return cls(k=k, lam=sogi_fll_lambda(as_float(k), as_float(omega_n), zeta), omega_n=omega_n, **kw)
+        obs = cls(k=k, lam=sogi_fll_lambda(as_float(k), as_float(omega_n), zeta), omega_n=omega_n, **kw)
+        rows = (
+            gain_row(cls, "k", obs.k, "k chosen (001: k = 1/√2)", "001 Sec. II-B"),
+            gain_row(cls, "lam", obs.lam, "λ = k²ωn²/(8ζ²)", "001 eq (22)"),
+        )
+        return ClosedForm(obs, dict(k=k, omega_n=omega_n, zeta=zeta), rows, "001 eq (22), Table I")
+
+    @classmethod
+    def closed_form(cls, **kw) -> SOGIFLL:
+        """The observer of :meth:`closed_form_design` (same arguments).
+
+        Args:
+            **kw: :meth:`closed_form_design`'s arguments.
+
+        Returns:
+            The :class:`SOGIFLL`.
+        """
+        return cls.closed_form_design(**kw).observer
 
     def f(self, x, u):
         y, q, w = x[0], x[1], x[2]
@@ -167,17 +188,17 @@ class SOGIFLLWPF(AbstractVectorFieldObserver):
     rule: AbstractRule = eqx.field(static=True)
     v_floor: float = eqx.field(static=True)
 
+    small_signal_model: ClassVar = ("wpf_model", ("k1", "k2", "lam", "omega_n"))  # 001 eqs (24)–(25)
+
     def __init__(self, k1, k2, lam, omega_n=papers.FLL_OMEGA_N, *, ts=1e-4, rule=None, v_floor=1e-3):
-        self.k1 = check_positive("k1", k1, "SOGIFLLWPF")
-        self.k2 = check_positive("k2", k2, "SOGIFLLWPF")
-        self.lam = check_positive("lam", lam, "SOGIFLLWPF")
+        self.k1, self.k2, self.lam = as_float(k1), as_float(k2), as_float(lam)  # bounds: check_gains
         self.omega_n = check_positive("omega_n", omega_n, "SOGIFLLWPF")
         self.ts = check_sample_time("ts", ts, "SOGIFLLWPF")
         self.rule = check_rule(AB3() if rule is None else rule, "SOGIFLLWPF")
         self.v_floor = _static_float(check_positive("v_floor", v_floor, "SOGIFLLWPF"), v_floor)
 
     @classmethod
-    def closed_form(cls, omega_n=papers.FLL_OMEGA_N, zeta=papers.FLL_ZETA, **kw) -> SOGIFLLWPF:
+    def closed_form_design(cls, omega_n=papers.FLL_OMEGA_N, zeta=papers.FLL_ZETA, **kw) -> ClosedForm:
         """The SOGI-FLL-WPF tuned by 001 eq (29): k1 = k2 = √2 (eq 26), λ = 2 (ζ + 1) ωn² / (2ζ + 1)³
         (Table I: λ = 23948).
 
@@ -187,14 +208,32 @@ class SOGIFLLWPF(AbstractVectorFieldObserver):
             **kw: the constructor's keywords (``ts``, ``rule``, ``v_floor``).
 
         Returns:
-            The :class:`SOGIFLLWPF`.
+            The :class:`~jaxobs.observers.ClosedForm`: the :class:`SOGIFLLWPF` and the rows k1, k2, lam.
 
         Raises:
             ValueError: a value out of its range.
         """
         check_positive("zeta", zeta, "SOGIFLLWPF.closed_form")
         lam = wpf_lambda(as_float(omega_n), zeta)
-        return cls(k1=papers.WPF_K1, k2=papers.WPF_K2, lam=lam, omega_n=omega_n, **kw)
+        obs = cls(k1=papers.WPF_K1, k2=papers.WPF_K2, lam=lam, omega_n=omega_n, **kw)
+        rows = (
+            gain_row(cls, "k1", obs.k1, "k1 = √2 (prefilter ζ = 1/√2)", "001 eq (26)"),
+            gain_row(cls, "k2", obs.k2, "k2 = k1 (amplitude poles coincide)", "001 Sec. III-B"),
+            gain_row(cls, "lam", obs.lam, "λ = 2(ζ+1)ωn²/(2ζ+1)³", "001 eq (29)"),
+        )
+        return ClosedForm(obs, dict(omega_n=omega_n, zeta=zeta), rows, "001 eq (29), Table I")
+
+    @classmethod
+    def closed_form(cls, **kw) -> SOGIFLLWPF:
+        """The observer of :meth:`closed_form_design` (same arguments).
+
+        Args:
+            **kw: :meth:`closed_form_design`'s arguments.
+
+        Returns:
+            The :class:`SOGIFLLWPF`.
+        """
+        return cls.closed_form_design(**kw).observer
 
     def f(self, x, u):
         p, qp, y, q, w = x[0], x[1], x[2], x[3], x[4]
@@ -276,10 +315,10 @@ class SOGIFLLWIF(AbstractVectorFieldObserver):
     v_floor: float = eqx.field(static=True)
     fll_error: Literal["input", "residual"] = eqx.field(static=True)
 
+    small_signal_model: ClassVar = ("wif_model", ("k1", "k2", "lam", "omega_n"))  # 001 eqs (31)–(32)
+
     def __init__(self, k1, k2, lam, omega_n=papers.FLL_OMEGA_N, *, ts=1e-4, rule=None, v_floor=1e-3, fll_error="input"):
-        self.k1 = check_positive("k1", k1, "SOGIFLLWIF")
-        self.k2 = check_positive("k2", k2, "SOGIFLLWIF")
-        self.lam = check_positive("lam", lam, "SOGIFLLWIF")
+        self.k1, self.k2, self.lam = as_float(k1), as_float(k2), as_float(lam)  # bounds: check_gains
         self.omega_n = check_positive("omega_n", omega_n, "SOGIFLLWIF")
         self.ts = check_sample_time("ts", ts, "SOGIFLLWIF")
         self.rule = check_rule(AB3() if rule is None else rule, "SOGIFLLWIF")
@@ -289,7 +328,9 @@ class SOGIFLLWIF(AbstractVectorFieldObserver):
         self.fll_error = fll_error
 
     @classmethod
-    def closed_form(cls, omega_c=papers.WIF_OMEGA_C, b=papers.WIF_B, omega_n=papers.FLL_OMEGA_N, **kw) -> SOGIFLLWIF:
+    def closed_form_design(
+        cls, omega_c=papers.WIF_OMEGA_C, b=papers.WIF_B, omega_n=papers.FLL_OMEGA_N, **kw
+    ) -> ClosedForm:
         """The SOGI-FLL-WIF tuned by the symmetric optimum, 001 eq (34): k1 = 2bωc/ωn, k2 = 2ωc/ωn,
         λ = 2ωc²/b; its phase margin is atan((b² − 1)/(2b)) (eq 39).
 
@@ -300,7 +341,8 @@ class SOGIFLLWIF(AbstractVectorFieldObserver):
             **kw: the constructor's keywords (``ts``, ``rule``, ``v_floor``, ``fll_error``).
 
         Returns:
-            The :class:`SOGIFLLWIF` (Table I: k1 = 1.815, k2 = 0.752, λ = 11559).
+            The :class:`~jaxobs.observers.ClosedForm`: the :class:`SOGIFLLWIF` (Table I: k1 = 1.815,
+            k2 = 0.752, λ = 11559) and the rows k1, k2, lam and the phase margin.
 
         Raises:
             ValueError: a value out of its range.
@@ -308,7 +350,32 @@ class SOGIFLLWIF(AbstractVectorFieldObserver):
         check_real("b", b, lower=1.0, owner="SOGIFLLWIF.closed_form")
         check_positive("omega_c", omega_c, "SOGIFLLWIF.closed_form")
         k1, k2, lam = wif_symmetric_optimum(as_float(b), as_float(omega_c), as_float(omega_n))
-        return cls(k1=k1, k2=k2, lam=lam, omega_n=omega_n, **kw)
+        obs = cls(k1=k1, k2=k2, lam=lam, omega_n=omega_n, **kw)
+        rows = (
+            gain_row(cls, "k1", obs.k1, "k1 = 2bωc/ωn", "001 eq (34)"),
+            gain_row(cls, "k2", obs.k2, "k2 = 2ωc/ωn", "001 eq (34)"),
+            gain_row(cls, "lam", obs.lam, "λ = 2ωc²/b", "001 eq (34)"),
+            DesignRow(
+                "phase_margin_deg",
+                jnp.degrees(symmetric_optimum_pm(as_float(b))),
+                "degree",
+                "PM = atan((b²−1)/(2b))",
+                "001 eq (39)",
+            ),
+        )
+        return ClosedForm(obs, dict(omega_c=omega_c, b=b, omega_n=omega_n), rows, "001 eq (34), Table I")
+
+    @classmethod
+    def closed_form(cls, **kw) -> SOGIFLLWIF:
+        """The observer of :meth:`closed_form_design` (same arguments).
+
+        Args:
+            **kw: :meth:`closed_form_design`'s arguments.
+
+        Returns:
+            The :class:`SOGIFLLWIF`.
+        """
+        return cls.closed_form_design(**kw).observer
 
     def f(self, x, u):
         za, zb, y, q, w = x[0], x[1], x[2], x[3], x[4]

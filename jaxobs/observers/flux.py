@@ -65,9 +65,9 @@ import jax.numpy as jnp
 from .. import papers
 from .._discretize import RK4, AbstractRule, check_rule
 from .._math import safe_atan2
-from .._validate import check_nonnegative, check_positive, check_sample_time
+from .._validate import as_float, check_nonnegative, check_positive, check_sample_time
 from ._cores import pll_vf, quadrature_error, safe_sq_amplitude, sogi2_tustin_coefficients, sogi2_vf, sogi_vf
-from ._gains import gain
+from ._gains import ClosedForm, gain, gain_row
 from ._rules import pll_gains, second_order_soifo_lambda, soifo_lambda
 from .base import AbstractDriveObserver, DriveObserverState, replace_leaves
 
@@ -213,8 +213,8 @@ def _omega_init(omega_init, omega0, name):
 
 
 def _check_pll(obj, kp_pll, ki_pll, omega_init, psi_floor, name):
-    obj.kp_pll = check_positive("kp_pll", kp_pll, name)
-    obj.ki_pll = check_positive("ki_pll", ki_pll, name)
+    del name  # the gains' bounds: check_gains (AbstractObserver)
+    obj.kp_pll, obj.ki_pll = as_float(kp_pll), as_float(ki_pll)
     obj.omega_init = jnp.asarray(omega_init, dtype=obj.kp_pll.dtype)
     obj.psi_floor = float(psi_floor)
 
@@ -230,6 +230,19 @@ def _ki():
 def _lam_normalized():
     # lam·ω̂² is 001's λ (module doc, "Names"): dimensionless, where the FLLs' λ is in rad²/s²
     return gain(units="1", role="fll", long_name="frequency-normalized FLL gain, λ/ω̂²", symbol="000: Γ, λ/ω̂²")
+
+
+def _pll_design(cls, pll_hz):
+    """The flux observers' PLL placed at ω_b = 2π·``pll_hz`` (ζ = 1/√2; ASSUMED: 000 gives no PLL): its gains and
+    rows."""
+    check_positive("pll_hz", pll_hz, f"{cls.__name__}.closed_form")
+    kp, ki = pll_gains(2 * math.pi * pll_hz)
+    src = "ours (ASSUMED: 000 gives no PLL)"
+    rows = (
+        gain_row(cls, "kp_pll", float(kp), "k_p = 2ζω_b, ω_b = 2π·pll_hz, ζ = 1/√2", src),
+        gain_row(cls, "ki_pll", float(ki), "k_i = ω_b²", src),
+    )
+    return float(kp), float(ki), rows
 
 
 class _PLLFluxBase(AbstractFluxObserver):
@@ -288,10 +301,60 @@ class PureIntegratorFlux(_PLLFluxBase):
     rule: AbstractRule = eqx.field(static=True)
     psi_floor: float = eqx.field(static=True)
 
+    # its flux starts from zero, so its circle is offset by the flux at its start (000's "unknown integral
+    # initial value") and θ̂ is wrong by up to 90° whatever its PLL gains: in a sensorless drive it loses
+    # synchronism
+    why_not_tunable: ClassVar[str] = (
+        "its flux keeps the integration constant of its start, so it cannot hold a sensorless drive; "
+        "use LPFFlux, SOIFO or SecondOrderSOIFO"
+    )
+
     def __init__(self, Rs, L, kp_pll, ki_pll, omega_init=None, *, ts=1e-4, rule=None, psi_floor=1e-4, omega0=None):
         omega_init = _omega_init(omega_init, omega0, "PureIntegratorFlux")
         _check_common(self, Rs, L, ts, rule, "PureIntegratorFlux")
         _check_pll(self, kp_pll, ki_pll, 0.0 if omega_init is None else omega_init, psi_floor, "PureIntegratorFlux")
+
+    @classmethod
+    def closed_form_design(
+        cls,
+        pll_hz=papers.FLUX_PLL_HZ,
+        Rs=papers.SPMSM_000["Rs"],
+        L=papers.SPMSM_000["Ld"],
+        omega_init=0.0,
+        **kw,
+    ) -> ClosedForm:
+        """000's pure integrator (eq 6: it has no gain of its own) with its type-2 PLL placed at
+        ω_b = 2π·``pll_hz`` (k_p = 2ζω_b, k_i = ω_b², ζ = 1/√2; ASSUMED: 000 gives no PLL).
+
+        Args:
+            pll_hz: the PLL's bandwidth, Hz (> 0).
+            Rs: assumed stator resistance, ohm (>= 0; ``bind`` sets it per scenario).
+            L: assumed inductance, H (> 0; ``bind`` sets it).
+            omega_init: the PLL's initial speed, rad/s (``bind`` sets it).
+            **kw: the constructor's keywords.
+
+        Returns:
+            The :class:`~jaxobs.observers.ClosedForm`: the :class:`PureIntegratorFlux` and the PLL's rows.
+
+        Raises:
+            ValueError: a value out of its range.
+        """
+        kp, ki, rows = _pll_design(cls, pll_hz)
+        obs = cls(Rs, L, kp, ki, omega_init, **kw)
+        inputs = dict(pll_hz=pll_hz, Rs=Rs, L=L, omega_init=omega_init)
+        return ClosedForm(obs, inputs, rows, "000 eq (6), PLL pole placement ω_b = 2π·20 (ASSUMED)")
+
+    @classmethod
+    def closed_form(cls, **kw) -> PureIntegratorFlux:
+        """The observer of :meth:`closed_form_design` (same arguments).
+
+        Args:
+            **kw: :meth:`closed_form_design`'s arguments.
+
+        Returns:
+            The :class:`PureIntegratorFlux`.
+        """
+        return cls.closed_form_design(**kw).observer
 
     def f(self, x, e):
         return jnp.stack([e[0], e[1], *self._pll_rates(x)])
@@ -353,12 +416,12 @@ class LPFFlux(_PLLFluxBase):
     ):
         omega_init = _omega_init(omega_init, omega0, "LPFFlux")
         _check_common(self, Rs, L, ts, rule, "LPFFlux")
-        self.omega_c = check_positive("omega_c", omega_c, "LPFFlux")
+        self.omega_c = as_float(omega_c)  # bounds: check_gains (AbstractObserver)
         _check_pll(self, kp_pll, ki_pll, 0.0 if omega_init is None else omega_init, psi_floor, "LPFFlux")
         self.compensate = bool(compensate)
 
     @classmethod
-    def closed_form(
+    def closed_form_design(
         cls,
         omega_c=papers.LPF_OMEGA_C,
         pll_hz=papers.FLUX_PLL_HZ,
@@ -366,7 +429,7 @@ class LPFFlux(_PLLFluxBase):
         L=papers.SPMSM_000["Ld"],
         omega_init=0.0,
         **kw,
-    ) -> LPFFlux:
+    ) -> ClosedForm:
         """000's LPF estimator, uncompensated as in 000 Fig. 5 (ωc = 100 rad/s), with its type-2 PLL placed at
         ω_b = 2π·``pll_hz`` (k_p = 2ζω_b, k_i = ω_b², ζ = 1/√2; ASSUMED: 000 gives no PLL).
 
@@ -379,14 +442,28 @@ class LPFFlux(_PLLFluxBase):
             **kw: the constructor's keywords.
 
         Returns:
-            The :class:`LPFFlux`.
+            The :class:`~jaxobs.observers.ClosedForm`: the :class:`LPFFlux` and the rows omega_c and the PLL's.
 
         Raises:
             ValueError: a value out of its range.
         """
-        check_positive("pll_hz", pll_hz, "LPFFlux.closed_form")
-        kp, ki = pll_gains(2 * math.pi * pll_hz)
-        return cls(Rs, L, omega_c, float(kp), float(ki), omega_init, **kw)
+        kp, ki, pll_rows = _pll_design(cls, pll_hz)
+        obs = cls(Rs, L, omega_c, kp, ki, omega_init, **kw)
+        rows = (gain_row(cls, "omega_c", obs.omega_c, "chosen: ωc = 100 rad/s", "000 Fig. 5"), *pll_rows)
+        inputs = dict(omega_c=omega_c, pll_hz=pll_hz, Rs=Rs, L=L, omega_init=omega_init)
+        return ClosedForm(obs, inputs, rows, "000 Fig. 5 (ωc = 100 rad/s), PLL pole placement ω_b = 2π·20 (ASSUMED)")
+
+    @classmethod
+    def closed_form(cls, **kw) -> LPFFlux:
+        """The observer of :meth:`closed_form_design` (same arguments).
+
+        Args:
+            **kw: :meth:`closed_form_design`'s arguments.
+
+        Returns:
+            The :class:`LPFFlux`.
+        """
+        return cls.closed_form_design(**kw).observer
 
     def f(self, x, e):
         return jnp.stack([e[0] - self.omega_c * x[0], e[1] - self.omega_c * x[1], *self._pll_rates(x)])
@@ -473,17 +550,18 @@ class SOIFO(_FLLFluxBase):
     v_floor: float = eqx.field(static=True)
     omega_min: float = eqx.field(static=True)
 
+    small_signal_model: ClassVar = ("soifo_tf", ("k", "omega_init"))  # 000 eq (15), ψ̂/e at ω' = omega_init
+
     def __init__(self, Rs, L, k, lam, omega_init=None, *, ts=1e-4, rule=None, v_floor=1e-2, omega_min=1.0, omega0=None):
         omega_init = _omega_init(omega_init, omega0, "SOIFO")
         _check_common(self, Rs, L, ts, rule, "SOIFO")
-        self.k = check_positive("k", k, "SOIFO")
-        self.lam = check_positive("lam", lam, "SOIFO")
+        self.k, self.lam = as_float(k), as_float(lam)  # bounds: check_gains (AbstractObserver)
         self.omega_init = check_positive("omega_init", omega_init, "SOIFO")
         self.v_floor = float(v_floor)
         self.omega_min = float(omega_min)
 
     @classmethod
-    def closed_form(cls, k=papers.SOIFO_K, Rs=0.0, L=1.0, omega_init=papers.FLL_OMEGA_N, **kw) -> SOIFO:
+    def closed_form_design(cls, k=papers.SOIFO_K, Rs=0.0, L=1.0, omega_init=papers.FLL_OMEGA_N, **kw) -> ClosedForm:
         """The SOIFO at 000's k = 1.414 with the FLL damped by 001 eq (22) frequency-normalized: lam = k²/4
         (ζ = 1/√2 at every speed, module doc).
 
@@ -495,12 +573,30 @@ class SOIFO(_FLLFluxBase):
             **kw: the constructor's keywords.
 
         Returns:
-            The :class:`SOIFO`.
+            The :class:`~jaxobs.observers.ClosedForm`: the :class:`SOIFO` and the rows k, lam.
 
         Raises:
             ValueError: a value out of its range.
         """
-        return cls(Rs, L, k, soifo_lambda(k), omega_init, **kw)
+        obs = cls(Rs, L, k, soifo_lambda(k), omega_init, **kw)
+        rows = (
+            gain_row(cls, "k", obs.k, "chosen: k = 1.414 (settling time 0.018 s)", "000 Sec. III-B"),
+            gain_row(cls, "lam", obs.lam, "lam = k²/4 (λ = k²ωn²/4 at ζ = 1/√2, ωn → 1)", "001 eq (22), normalized"),
+        )
+        inputs = dict(k=k, Rs=Rs, L=L, omega_init=omega_init)
+        return ClosedForm(obs, inputs, rows, "000 (k = 1.414), lam = k²/4")
+
+    @classmethod
+    def closed_form(cls, **kw) -> SOIFO:
+        """The observer of :meth:`closed_form_design` (same arguments).
+
+        Args:
+            **kw: :meth:`closed_form_design`'s arguments.
+
+        Returns:
+            The :class:`SOIFO`.
+        """
+        return cls.closed_form_design(**kw).observer
 
     _speed_index: ClassVar[int] = 4  # the FLL's ω̂ (a SOGI's centre frequency: > 0)
 
@@ -573,6 +669,8 @@ class SecondOrderSOIFO(_FLLFluxBase):
     v_floor: float = eqx.field(static=True)
     omega_min: float = eqx.field(static=True)
 
+    small_signal_model: ClassVar = ("sosoifo_tf", ("K1", "K2", "omega_init"))  # 000 eq (20) at ω' = omega_init
+
     def __init__(
         self,
         Rs,
@@ -591,9 +689,7 @@ class SecondOrderSOIFO(_FLLFluxBase):
     ):
         omega_init = _omega_init(omega_init, omega0, "SecondOrderSOIFO")
         _check_common(self, Rs, L, ts, rule, "SecondOrderSOIFO")
-        self.K1 = check_positive("K1", K1, "SecondOrderSOIFO")
-        self.K2 = check_positive("K2", K2, "SecondOrderSOIFO")
-        self.lam = check_positive("lam", lam, "SecondOrderSOIFO")
+        self.K1, self.K2, self.lam = as_float(K1), as_float(K2), as_float(lam)  # bounds: check_gains
         self.omega_init = check_positive("omega_init", omega_init, "SecondOrderSOIFO")
         if discretization not in ("rule", "paper"):
             raise ValueError(f"SecondOrderSOIFO.discretization must be 'rule' or 'paper', got {discretization!r}")
@@ -604,7 +700,7 @@ class SecondOrderSOIFO(_FLLFluxBase):
     _speed_index: ClassVar[int] = 8  # the FLL's ω̂
 
     @classmethod
-    def closed_form(
+    def closed_form_design(
         cls,
         K1=papers.SECOND_ORDER_SOIFO_K1,
         K2=papers.SECOND_ORDER_SOIFO_K2,
@@ -612,7 +708,7 @@ class SecondOrderSOIFO(_FLLFluxBase):
         L=1.0,
         omega_init=papers.FLL_OMEGA_N,
         **kw,
-    ) -> SecondOrderSOIFO:
+    ) -> ClosedForm:
         """The second-order SOIFO at 000's K1 = 1.56, K2 = 3.11 with the FLL of 001's symmetric optimum (eq 34)
         frequency-normalized, in 000's names (b = K2/K1): lam = K1³/(2 K2).
 
@@ -625,12 +721,32 @@ class SecondOrderSOIFO(_FLLFluxBase):
             **kw: the constructor's keywords (``discretization``, ...).
 
         Returns:
-            The :class:`SecondOrderSOIFO`.
+            The :class:`~jaxobs.observers.ClosedForm`: the :class:`SecondOrderSOIFO` and the rows K1, K2, lam.
 
         Raises:
             ValueError: a value out of its range.
         """
-        return cls(Rs, L, K1, K2, second_order_soifo_lambda(K1, K2), omega_init, **kw)
+        obs = cls(Rs, L, K1, K2, second_order_soifo_lambda(K1, K2), omega_init, **kw)
+        chosen = "000 Sec. III-B"
+        rows = (
+            gain_row(cls, "K1", obs.K1, "chosen: K1 = 1.56 (settling time 0.018 s)", chosen),
+            gain_row(cls, "K2", obs.K2, "chosen: K2 = 3.11 (settling time 0.018 s)", chosen),
+            gain_row(cls, "lam", obs.lam, "lam = K1³/(2K2) (λ = 2ωc²/b, b = K2/K1, ωn → 1)", "001 eq (34), normalized"),
+        )
+        inputs = dict(K1=K1, K2=K2, Rs=Rs, L=L, omega_init=omega_init)
+        return ClosedForm(obs, inputs, rows, "000 (K1 = 1.56, K2 = 3.11), lam = K1³/(2K2)")
+
+    @classmethod
+    def closed_form(cls, **kw) -> SecondOrderSOIFO:
+        """The observer of :meth:`closed_form_design` (same arguments).
+
+        Args:
+            **kw: :meth:`closed_form_design`'s arguments.
+
+        Returns:
+            The :class:`SecondOrderSOIFO`.
+        """
+        return cls.closed_form_design(**kw).observer
 
     def initial_state(self):
         z = jnp.zeros_like(self.K1)

@@ -54,10 +54,10 @@ import jax.numpy as jnp
 from .. import papers
 from .._discretize import RK4, AbstractRule, Knots, check_rule
 from .._math import safe_atan2, wrap
-from .._validate import check_nonnegative, check_positive, check_sample_time
+from .._validate import as_float, check_nonnegative, check_positive, check_sample_time
 from ._cores import pll_vf
-from ._gains import gain
-from ._rules import pll_gains
+from ._gains import ClosedForm, DesignRow, gain, gain_row
+from ._rules import cleso_gains, pll_gains
 from .base import AbstractDriveObserver, DriveObserverState, replace_leaves
 
 __all__ = ["LESOOutput", "AbstractLESO", "CLESO", "GILESO", "FALESO"]
@@ -221,8 +221,7 @@ class AbstractLESO(AbstractDriveObserver):
 def _common(obj, Rs, Lq, kp_pll, ki_pll, omega0_pll, ts, rule, e_floor, name):
     obj.Rs = check_nonnegative("Rs", Rs, name)
     obj.Lq = check_positive("Lq", Lq, name)
-    obj.kp_pll = check_positive("kp_pll", kp_pll, name)
-    obj.ki_pll = check_positive("ki_pll", ki_pll, name)
+    obj.kp_pll, obj.ki_pll = as_float(kp_pll), as_float(ki_pll)  # bounds: check_gains (AbstractObserver)
     obj.omega0_pll = jnp.asarray(omega0_pll, dtype=obj.Rs.dtype)
     obj.ts = check_sample_time("ts", ts, name)
     obj.rule = check_rule(RK4() if rule is None else rule, name)
@@ -247,9 +246,26 @@ def _omega0():
     return gain(units="rad s-1", role="leso", long_name="LESO bandwidth", symbol="002: ω0")
 
 
-def _pll_closed_form(pll_hz, owner):
-    check_positive("pll_hz", pll_hz, owner)
-    return tuple(float(g) for g in pll_gains(2 * math.pi * pll_hz))
+def _pll_design(cls, pll_hz):
+    """The LESOs' PLL placed at ω_b = 2π·``pll_hz`` (ζ = 1/√2, ours: 002's PLL section is missing from our copy):
+    its gains and rows."""
+    check_positive("pll_hz", pll_hz, f"{cls.__name__}.closed_form")
+    kp, ki = (float(g) for g in pll_gains(2 * math.pi * pll_hz))
+    src = "ours (module doc: 002's ramp pins 15 Hz)"
+    rows = (
+        gain_row(cls, "kp_pll", kp, "k_p = 2ζω_b, ω_b = 2π·pll_hz, ζ = 1/√2", src),
+        gain_row(cls, "ki_pll", ki, "k_i = ω_b²", src),
+    )
+    return kp, ki, rows
+
+
+def _eq16_rows(omega0, Rs, Lq):
+    """002 eq (16)'s l1, l2 at the assumed machine (μ = Rs/Lq): rows of the C- and GI-LESO's designs."""
+    l1, l2 = cleso_gains(as_float(omega0), as_float(Rs) / as_float(Lq))
+    return (
+        DesignRow("l1", l1, "s-1", "l1 = 2ω0 − μ, μ = Rs/Lq", "002 eq (16)"),
+        DesignRow("l2", l2, "s-2", "l2 = ω0²", "002 eq (16)"),
+    )
 
 
 class CLESO(AbstractLESO):
@@ -295,35 +311,55 @@ class CLESO(AbstractLESO):
         e_floor=1.0,
     ):
         _common(self, Rs, Lq, kp_pll, ki_pll, omega0_pll, ts, rule, e_floor, "CLESO")
-        self.omega0 = check_positive("omega0", omega0, "CLESO")
+        self.omega0 = as_float(omega0)
 
     @classmethod
-    def closed_form(
+    def closed_form_design(
         cls, omega0=papers.LESO_OMEGA0, pll_hz=papers.LESO_PLL_HZ, Rs=_RS, Lq=_LQ, omega0_pll=0.0, **kw
-    ) -> CLESO:
+    ) -> ClosedForm:
         """The C-LESO of 002 Table II (ω0 = 500π; l1 = 2ω0 − μ, l2 = ω0², eq 16) with its PLL placed at
         ω_b = 2π·``pll_hz`` (k_p = 2ζω_b, k_i = ω_b², ζ = 1/√2).
 
         Args:
             omega0: LESO bandwidth, rad/s (> 0).
             pll_hz: the PLL's bandwidth, Hz (> 0).
-            Rs: assumed stator resistance, ohm (>= 0; ``bind`` sets it per scenario).
+            Rs: assumed stator resistance, ohm (>= 0; ``bind`` sets it per scenario; the rows' μ = Rs/Lq).
             Lq: assumed q-axis inductance, H (> 0; ``bind`` sets it).
             omega0_pll: the PLL's initial speed, rad/s (``bind`` sets it).
             **kw: the constructor's keywords.
 
         Returns:
-            The :class:`CLESO`.
+            The :class:`~jaxobs.observers.ClosedForm`: the :class:`CLESO` and the rows ω0, eq (16)'s l1 and l2
+            at Rs/Lq, and the PLL's.
 
         Raises:
             ValueError: a value out of its range.
         """
-        kp, ki = _pll_closed_form(pll_hz, "CLESO.closed_form")
-        return cls(Rs, Lq, omega0, kp, ki, omega0_pll, **kw)
+        kp, ki, pll_rows = _pll_design(cls, pll_hz)
+        obs = cls(Rs, Lq, omega0, kp, ki, omega0_pll, **kw)
+        rows = (
+            gain_row(cls, "omega0", obs.omega0, "chosen: ω0 = 500π", "002 Table II"),
+            *_eq16_rows(obs.omega0, obs.Rs, obs.Lq),
+            *pll_rows,
+        )
+        inputs = dict(omega0=omega0, pll_hz=pll_hz, Rs=Rs, Lq=Lq, omega0_pll=omega0_pll)
+        return ClosedForm(obs, inputs, rows, "002 Table II (ω0 = 500π), PLL pole placement ω_b = 2π·15")
+
+    @classmethod
+    def closed_form(cls, **kw) -> CLESO:
+        """The observer of :meth:`closed_form_design` (same arguments).
+
+        Args:
+            **kw: :meth:`closed_form_design`'s arguments.
+
+        Returns:
+            The :class:`CLESO`.
+        """
+        return cls.closed_form_design(**kw).observer
 
     def leso(self, xl, u, i, w):
         mu, b0 = self.mu, 1.0 / self.Lq
-        l1, l2 = 2 * self.omega0 - mu, self.omega0**2
+        l1, l2 = cleso_gains(self.omega0, mu)  # 002 eq (16)
         x1, x2 = xl[0:2], xl[2:4]
         eps = x1 - i
         dx1 = x2 + b0 * u - mu * x1 - l1 * eps
@@ -382,12 +418,12 @@ class GILESO(AbstractLESO):
         e_floor=1.0,
     ):
         _common(self, Rs, Lq, kp_pll, ki_pll, omega0_pll, ts, rule, e_floor, "GILESO")
-        self.omega0 = check_positive("omega0", omega0, "GILESO")
-        self.K_r = check_positive("K_r", 2 * float(omega0) ** 2 if K_r is None else K_r, "GILESO")
-        self.omega_c = check_positive("omega_c", omega_c, "GILESO")
+        self.omega0 = as_float(omega0)
+        self.K_r = as_float(2 * float(omega0) ** 2 if K_r is None else K_r)
+        self.omega_c = as_float(omega_c)
 
     @classmethod
-    def closed_form(
+    def closed_form_design(
         cls,
         omega0=papers.LESO_OMEGA0,
         K_r=papers.GILESO_K_R,
@@ -397,7 +433,7 @@ class GILESO(AbstractLESO):
         Lq=_LQ,
         omega0_pll=0.0,
         **kw,
-    ) -> GILESO:
+    ) -> ClosedForm:
         """The GI-LESO of 002 Table II (ω0 = 500π, K_r = 2ω0², ωc = π; eqs 29–30) with its PLL placed at
         ω_b = 2π·``pll_hz`` (k_p = 2ζω_b, k_i = ω_b², ζ = 1/√2).
 
@@ -406,28 +442,53 @@ class GILESO(AbstractLESO):
             K_r: generalized integrator gain, s⁻² (> 0).
             omega_c: generalized integrator damping, rad/s (> 0).
             pll_hz: the PLL's bandwidth, Hz (> 0).
-            Rs: assumed stator resistance, ohm (>= 0; ``bind`` sets it per scenario).
+            Rs: assumed stator resistance, ohm (>= 0; ``bind`` sets it per scenario; the rows' μ = Rs/Lq).
             Lq: assumed q-axis inductance, H (> 0; ``bind`` sets it).
             omega0_pll: the PLL's initial speed, rad/s (``bind`` sets it).
             **kw: the constructor's keywords.
 
         Returns:
-            The :class:`GILESO`.
+            The :class:`~jaxobs.observers.ClosedForm`: the :class:`GILESO` and the rows ω0, K_r, ωc, eq (16)'s
+            l1 and l2 (its L1 and L2's constant part, eq 29) and the PLL's.
 
         Raises:
             ValueError: a value out of its range.
         """
-        kp, ki = _pll_closed_form(pll_hz, "GILESO.closed_form")
-        return cls(Rs, Lq, omega0, K_r, omega_c, kp, ki, omega0_pll, **kw)
+        kp, ki, pll_rows = _pll_design(cls, pll_hz)
+        obs = cls(Rs, Lq, omega0, K_r, omega_c, kp, ki, omega0_pll, **kw)
+        table = "002 Table II"
+        rows = (
+            gain_row(cls, "omega0", obs.omega0, "chosen: ω0 = 500π", table),
+            gain_row(cls, "K_r", obs.K_r, "chosen: K_r = 2ω0²", table),
+            gain_row(cls, "omega_c", obs.omega_c, "chosen: ωc = π", table),
+            *_eq16_rows(obs.omega0, obs.Rs, obs.Lq),
+            *pll_rows,
+        )
+        inputs = dict(omega0=omega0, K_r=K_r, omega_c=omega_c, pll_hz=pll_hz, Rs=Rs, Lq=Lq, omega0_pll=omega0_pll)
+        return ClosedForm(
+            obs, inputs, rows, "002 Table II (ω0 = 500π, K_r = 2ω0², ωc = π), PLL pole placement ω_b = 2π·15"
+        )
+
+    @classmethod
+    def closed_form(cls, **kw) -> GILESO:
+        """The observer of :meth:`closed_form_design` (same arguments).
+
+        Args:
+            **kw: :meth:`closed_form_design`'s arguments.
+
+        Returns:
+            The :class:`GILESO`.
+        """
+        return cls.closed_form_design(**kw).observer
 
     def leso(self, xl, u, i, w):
         mu, b0 = self.mu, 1.0 / self.Lq
-        l1 = 2 * self.omega0 - mu
+        l1, l2 = cleso_gains(self.omega0, mu)  # 002 eq (29): L1 and the constant part of L2 are eq (16)'s
         x1, x2a, r, rd = xl[0:2], xl[2:4], xl[4:6], xl[6:8]
         eps = x1 - i
         x2 = x2a - r
         dx1 = x2 + b0 * u - mu * x1 - l1 * eps
-        dx2a = -(self.omega0**2) * eps
+        dx2a = -l2 * eps
         drd = 2 * self.K_r * self.omega_c * eps - 2 * self.omega_c * rd - w * w * r
         return jnp.concatenate([dx1, dx2a, rd, drd]), -self.Lq * x2
 
@@ -482,14 +543,14 @@ class FALESO(AbstractLESO):
         e_floor=1.0,
     ):
         _common(self, Rs, Lq, kp_pll, ki_pll, omega0_pll, ts, rule, e_floor, "FALESO")
-        # 002 eq (24): stable iff k1 > 0 and k2 > 0 (generalized Routh test)
-        self.k1 = check_positive("k1", k1, "FALESO")
-        self.k2 = check_positive("k2", k2, "FALESO")
+        # 002 eq (24): stable iff k1 > 0 and k2 > 0 (generalized Routh test): their declared bounds, which
+        # check_gains enforces (AbstractObserver)
+        self.k1, self.k2 = as_float(k1), as_float(k2)
 
     @classmethod
-    def closed_form(
+    def closed_form_design(
         cls, k1=papers.FALESO_K1, k2=papers.FALESO_K2, pll_hz=papers.LESO_PLL_HZ, Rs=_RS, Lq=_LQ, omega0_pll=0.0, **kw
-    ) -> FALESO:
+    ) -> ClosedForm:
         """The FA-LESO of 002 Table II (k1 = 10π, k2 = 100π; stable iff k1, k2 > 0, eq 24) with its PLL placed
         at ω_b = 2π·``pll_hz`` (k_p = 2ζω_b, k_i = ω_b², ζ = 1/√2).
 
@@ -503,13 +564,32 @@ class FALESO(AbstractLESO):
             **kw: the constructor's keywords.
 
         Returns:
-            The :class:`FALESO`.
+            The :class:`~jaxobs.observers.ClosedForm`: the :class:`FALESO` and the rows k1, k2 and the PLL's.
 
         Raises:
             ValueError: a value out of its range.
         """
-        kp, ki = _pll_closed_form(pll_hz, "FALESO.closed_form")
-        return cls(Rs, Lq, k1, k2, kp, ki, omega0_pll, **kw)
+        kp, ki, pll_rows = _pll_design(cls, pll_hz)
+        obs = cls(Rs, Lq, k1, k2, kp, ki, omega0_pll, **kw)
+        rows = (
+            gain_row(cls, "k1", obs.k1, "chosen: k1 = 10π (stable iff k1 > 0, eq 24)", "002 Table II"),
+            gain_row(cls, "k2", obs.k2, "chosen: k2 = 100π (stable iff k2 > 0, eq 24)", "002 Table II"),
+            *pll_rows,
+        )
+        inputs = dict(k1=k1, k2=k2, pll_hz=pll_hz, Rs=Rs, Lq=Lq, omega0_pll=omega0_pll)
+        return ClosedForm(obs, inputs, rows, "002 Table II (k1 = 10π, k2 = 100π), PLL pole placement ω_b = 2π·15")
+
+    @classmethod
+    def closed_form(cls, **kw) -> FALESO:
+        """The observer of :meth:`closed_form_design` (same arguments).
+
+        Args:
+            **kw: :meth:`closed_form_design`'s arguments.
+
+        Returns:
+            The :class:`FALESO`.
+        """
+        return cls.closed_form_design(**kw).observer
 
     def leso(self, xl, u, i, w):
         mu, b0 = self.mu, 1.0 / self.Lq

@@ -16,7 +16,7 @@ import jax.numpy as jnp
 
 from .. import papers
 from .._discretize import AbstractRule, Tustin, check_rule
-from .._validate import check_positive, check_sample_time
+from .._validate import as_float, check_positive, check_sample_time
 from ._cores import sogi2_vf, sogi_vf
 from ._gains import gain
 from .base import AbstractVectorFieldObserver
@@ -55,7 +55,7 @@ class SOGI(AbstractVectorFieldObserver):
     rule: AbstractRule = eqx.field(static=True)
 
     def __init__(self, k, omega=papers.FLL_OMEGA_N, *, ts=1e-4, rule=None):
-        self.k = check_positive("k", k, "SOGI")
+        self.k = as_float(k)  # bounds: check_gains (AbstractObserver)
         self.omega = check_positive("omega", omega, "SOGI")
         self.ts = check_sample_time("ts", ts, "SOGI")
         self.rule = check_rule(Tustin() if rule is None else rule, "SOGI")
@@ -92,8 +92,7 @@ class SOGI2(AbstractVectorFieldObserver):
     rule: AbstractRule = eqx.field(static=True)
 
     def __init__(self, K1, K2, omega=papers.FLL_OMEGA_N, *, ts=1e-4, rule=None):
-        self.K1 = check_positive("K1", K1, "SOGI2")
-        self.K2 = check_positive("K2", K2, "SOGI2")
+        self.K1, self.K2 = as_float(K1), as_float(K2)  # bounds: check_gains (AbstractObserver)
         self.omega = check_positive("omega", omega, "SOGI2")
         self.ts = check_sample_time("ts", ts, "SOGI2")
         self.rule = check_rule(Tustin() if rule is None else rule, "SOGI2")

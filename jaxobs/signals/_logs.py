@@ -34,8 +34,9 @@ Each check is a one-line ``ValueError`` (a mistake that makes every estimate wro
 - **voltage timing** (with the machine's parameters): the voltage columns against the mean voltage over each
   period that the machine's flux-linkage equation asks for, shifted by 0, 1 or 2 periods; a best match one or
   two periods late is a warning that the references were logged as applied voltages;
-- **phase balance** (abc inputs): a DC offset above 2 % of the phase amplitude, or a gain mismatch between
-  phases above 3 %, is a warning; three phases that do not sum to zero (5 % of the amplitude) an error.
+- **balance** (abc and α-β inputs, on the windows whose amplitude holds, away from load and speed steps): a DC
+  offset above 2 % of the amplitude on one phase or channel, or a gain mismatch between them above 3 %, is a
+  warning; three phases that do not sum to zero (5 % of the amplitude) an error.
 """
 
 from __future__ import annotations
@@ -53,6 +54,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..provenance import read_file
+from ..safetoml import read_toml
 from ._logchecks import check_angle_unit, check_balance, check_power, check_sequence, check_speed, check_timing
 from ._recordings import DriveRecording, _column
 
@@ -193,14 +195,13 @@ class RecordingLayout:
         Raises:
             ValueError: an unreadable sidecar, or a bad key in it.
         """
-        import tomllib
-
         side = Path(str(csv_path) + ".toml")
         if not side.exists():
             return None
-        try:
-            doc = tomllib.loads(read_file(side, MAX_SIDECAR_BYTES).decode())
-        except (ValueError, UnicodeDecodeError) as e:
+        try:  # the size first (a sidecar is a few lines), then TOML read safely: nesting, number lengths, UTF-8
+            read_file(side, MAX_SIDECAR_BYTES)
+            doc, _ = read_toml(side, "file")
+        except ValueError as e:
             raise ValueError(f"recording sidecar {str(side)!r}: {e}") from None
         extra = set(doc) - {"layout"}
         if extra:
@@ -237,7 +238,8 @@ def _first_lines(path, k=3):
     with open(path, "rb") as f:
         for n, raw in enumerate(f, 1):
             try:
-                ln = raw.decode()
+                # a UTF-8 byte-order mark (spreadsheet exports write one) is no part of the first column's name
+                ln = raw.decode("utf-8-sig" if n == 1 else "utf-8")
             except UnicodeDecodeError:
                 raise ValueError(f"recording {str(path)!r}: line {n}: not UTF-8 text") from None
             if ln.strip() and not ln.lstrip().startswith("#"):
@@ -294,7 +296,7 @@ def _header(path, layout):
 
 def _locate_bad_line(path, layout, width, skip_header):
     """The first data line that is not ``width`` numbers (called only after a failed parse)."""
-    with open(path, encoding="utf-8", errors="replace") as f:
+    with open(path, encoding="utf-8-sig", errors="replace") as f:
         seen_header = not skip_header
         for n, ln in enumerate(f, 1):
             if not ln.strip() or ln.lstrip().startswith("#"):
@@ -308,6 +310,25 @@ def _locate_bad_line(path, layout, width, skip_header):
             if not all(_is_number(x, layout.decimal) for x in row):
                 return f"line {n} holds a field that is not a number"
     return "a line could not be read"
+
+
+def _check_last_line(path):
+    """Refuse a file that does not end with a line end: a copy cut short ends inside its last line, and a value cut
+    inside a field (``187.84`` read as ``187``) cannot be told from a whole one, so the line is named and the file
+    refused rather than read.  Every CSV writer of numpy, pandas, MATLAB and spreadsheets ends its last line."""
+    size = os.path.getsize(path)
+    if size == 0:
+        return
+    with open(path, "rb") as f:
+        f.seek(size - 1)
+        if f.read(1) in (b"\n", b"\r"):
+            return
+        f.seek(0)
+        n = sum(block.count(b"\n") for block in iter(lambda: f.read(1 << 20), b"")) + 1
+    raise ValueError(
+        f"recording {str(path)!r}: line {n}, the last, has no line end: the file may be cut short inside it (copy "
+        "it again; if the line is whole, end it with a line end)"
+    )
 
 
 def _pandas_precision():
@@ -574,9 +595,14 @@ def read_drive_log(
     wanted = sorted(set(idx.values()))
 
     tmp = None
+    if folder is not None and not os.path.isdir(folder):
+        raise ValueError(
+            f"read_drive_log: folder {str(folder)!r} is not an existing folder (give one, or None for a temporary one)"
+        )
     if folder is None:
         tmp = tempfile.TemporaryDirectory(prefix="jaxobs-log-")
         folder = tmp.name
+    _check_last_line(p)
     raw, rows = _stream_columns(p, layout, header, wanted, width, folder)
     if rows < 2 + (layout.voltage_delay if layout.voltage_timing == "reference" else 0):
         raise ValueError(f"recording {p!r}: {rows} sample(s); too few")
@@ -693,9 +719,8 @@ def read_drive_log(
         check_sequence(log, layout, cols)
         if machine is not None:
             check_power(log, machine, cols)
-            check_timing(log, machine, cols)
-    if layout.current_frame == "abc" or layout.voltage_frame == "abc":
-        check_balance(log, layout, cols)
+            check_timing(log, layout, machine, cols)
+    check_balance(log, layout, cols, {"current": len(currents), "voltage": len(voltages)})
     for w in warn:
         warnings.warn(RecordingWarning(w), stacklevel=2)
     return log

@@ -16,6 +16,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._measurements import DriveInput
+from .._time import TS_REL_TOL
 from .._validate import check_real, check_sample_time, static_float
 from ..provenance import read_file
 from ._base import AbstractSignal
@@ -473,7 +474,7 @@ def read_recording(
     names_of = {i: (header[i] if header else str(i)) for i in range(width)}
     angle_idx = {_column(c, header, width, path, "truth") for c in angle}
     avg_idx = {_column(c, header, width, path, "signal") for c in averaged}
-    exact = uniform and abs(step - ts) <= 1e-9 * ts
+    exact = uniform and abs(step - ts) <= TS_REL_TOL * ts
     n = table.shape[0] if exact else int(math.floor(t[-1] / ts * (1 + 1e-12))) + 1
     if avg_idx and not exact:  # every period [t_k, t_k + ts] must lie inside the record
         n = int(math.floor((t[-1] + step) / ts * (1 + 1e-12)))

@@ -114,7 +114,7 @@ def _export(args) -> int:
         source = f"{args.result} ({args.gains} gains)"
     else:
         obs = observer_from_design(args.design, **kw)
-        source = f"closed form {args.design}, {DESIGNS[args.design][1]}"
+        source = f"closed form {args.design}, {DESIGNS[args.design].closed_form_design().rule}"
     signal = None
     df = _drive_file(args)
     record_drive = None
@@ -137,11 +137,12 @@ def _export(args) -> int:
             drive = df.drive_for(sensorless=False, settle=0.0)
             record_drive = dict(machine=machine, rpm=rpm, drive=drive, label=f"drive file {df.name}")
         obs = obs.bind(machine, rpm * math.pi / 30 * int(machine.p))  # the one binding (its clamp included)
-        r_name, l_name, speed = type(obs).bound_fields
+        # (resistance, inductance, start speed), then any other machine value (the reduced-order observer's Lq, ψf)
+        r_name, l_name, speed, *more = type(obs).bound_fields
         notes = [n for n in notes if "sets Rs, Lq" not in n]
+        machine_values = "".join(f"{n} = {float(getattr(obs, n)):g}, " for n in (r_name, l_name, *more))
         notes.append(
-            f"bound to the recording's machine: {r_name} = {float(getattr(obs, r_name)):g}, "
-            f"{l_name} = {float(getattr(obs, l_name)):g}, "
+            f"bound to the recording's machine: {machine_values}"
             f"{speed} = {float(getattr(obs, speed)):.6g} rad/s ({rpm:g} r/min)"
         )
         if args.steps < MIN_STEPS:

@@ -19,6 +19,7 @@ from jaxobs.observers import (
     AbstractLESO,
     LPFFlux,
     PureIntegratorFlux,
+    ReducedOrderFluxObserver,
     SecondOrderSOIFO,
 )
 
@@ -138,6 +139,7 @@ def drive_test_signal(
 _RECORDING_BENCH = {
     AbstractFluxObserver: ("spmsm000", 1000.0, "000 SPMSM"),  # 000's SPMSM, p = 3: 50 Hz
     AbstractLESO: ("ipmsm002", 300.0, "002 IPMSM"),  # 002's (assumed) IPMSM, p = 5: 25 Hz (see drive_recording)
+    ReducedOrderFluxObserver: ("ipmsm002", 300.0, "002 IPMSM"),  # salient: it runs on the IPMSM (Ld and Lq)
 }
 
 

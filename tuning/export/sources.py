@@ -14,8 +14,9 @@ from jaxobs.registry import REGISTRY, canonical_key
 from ..job import COMPONENTS
 from ..results import load_result
 
-# the closed forms `export --design` names (the FLLs' aliases in jaxobs.registry): alias -> (class, its rule)
-DESIGNS = {a: (e.cls, e.closed_form_rule) for e in REGISTRY.values() if e.signal == "grid" for a in e.aliases}
+# the closed forms `export --design` names (the FLLs' aliases in jaxobs.registry): alias -> class (its rule, the
+# source line, is its ClosedForm.rule, evaluated when a design is exported)
+DESIGNS = {a: e.cls for e in REGISTRY.values() if e.signal == "grid" for a in e.aliases}
 
 
 RULES = {"euler": Euler, "tustin": Tustin, "ab3": AB3, "rk4": RK4}
@@ -85,9 +86,9 @@ def observer_from_result(path, *, gains: str = "tuned", notes: list | None = Non
         kw["ts"] = float(res["ts"])
     else:
         notes.append(f"result.json has no 'ts': the {name} default ts = {probe.ts:g} s is used")
-    if "rule" in res:
+    if res.get("rule") is not None:
         kw["rule"] = parse_rule(res["rule"], "result.json rule")
-    else:
+    elif probe.rule is not None:  # a component without a rule (its step is its own update) has none to read
         notes.append(f"result.json has no 'rule': the {name} default {type(probe.rule).__name__} is used")
     if info.signal == "drive" or res.get("loop") is not None:  # a drive job bound these per scenario
         # LESOs: Rs, Lq and the PLL's initial speed; flux observers: Rs, L and the FLL's or PLL's omega_init
@@ -104,7 +105,7 @@ def observer_from_design(name: str, **kw):
     """A closed-form design by name (``sogi-fll``, ``wpf``, ``wif``): its class's ``closed_form(**kw)``."""
     if name not in DESIGNS:
         raise ValueError(f"design must be one of {', '.join(DESIGNS)}, got {name!r}")
-    return DESIGNS[name][0].closed_form(**kw)
+    return DESIGNS[name].closed_form(**kw)
 
 
 def rebuild(obs, **kw):

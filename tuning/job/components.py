@@ -1,8 +1,8 @@
 """The tunable components: a view of :data:`jaxobs.registry.REGISTRY` (its entries a job may name).
 
 A component's constructor is its class, its free gains the class's gain fields, its closed form the class's
-``closed_form`` (:func:`jaxobs.registry.closed_form_gains`); the signals, machines and a job's initial values
-are the registry's.
+``closed_form_design`` (its gains: :func:`jaxobs.registry.closed_form_gains`; its source line:
+``ClosedForm.source``); the signals, machines and a job's initial values are the registry's.
 """
 
 from __future__ import annotations
@@ -53,6 +53,7 @@ class ComponentInfo:
 
     @property
     def closed_form_source(self) -> str:
+        """The class's closed form's source, in one line (``ClosedForm.source``)."""
         return self.entry.closed_form_source
 
     def closed_form(self, component) -> dict:

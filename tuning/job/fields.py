@@ -20,7 +20,10 @@ class JobError(ValueError):
         super().__init__(cap(line, MAX_ERROR))
 
 
-MAX_ERROR = 200  # characters in a job-file error
+# characters in a job-file error: a bound on what a hostile file can make the tool print, far above any message
+# the library writes (their quoted values are cut by show() and cap() to 40-100 characters), so that no message is
+# cut before its remedy
+MAX_ERROR = 1000
 
 
 MAX_STEPS = 10_000_000  # time steps of one simulation (horizon / ts)

@@ -17,9 +17,11 @@ from ..outdir import atomic_write_text
 from .spec import Job, ScenarioSpec
 
 
-def rule_spec(rule) -> dict:
+def rule_spec(rule) -> dict | None:
     """A discretization rule as JSON that :func:`jaxobs_tuning.export.parse_rule` reads back:
-    ``{"name": ..., options}``."""
+    ``{"name": ..., options}``; None for a component without a rule (its step is its own update)."""
+    if rule is None:
+        return None
     opts = {f.name: getattr(rule, f.name) for f in dataclasses.fields(rule)}
     return {"name": type(rule).__name__, **{k: v for k, v in opts.items() if isinstance(v, (bool, int, float, str))}}
 

@@ -9,7 +9,7 @@ from pathlib import Path
 from jaxobs.families import FAMILIES, GridSignals
 from jaxobs.metrics import canonical
 from jaxobs.provenance import sha256
-from jaxobs.registry import canonical_key
+from jaxobs.registry import REGISTRY, canonical_key
 
 from .. import strategies
 from ..objective import DRIVE_METRICS, TERM_METRICS, Term
@@ -173,12 +173,8 @@ def parse_job(raw: dict, base: Path | None = None) -> Job:
     no_unknown(job_t, ("name", "component", "seed"), "job")
     name = get_field(job_t, "name", "job.name", str, "job")
     comp = get_field(job_t, "component", "job.component", str, required=True)
-    if comp == "PureIntegratorFlux":
-        raise JobError(
-            "job.component",
-            "PureIntegratorFlux is not tunable: its flux keeps the integration constant of its start, so it "
-            "cannot hold a sensorless drive; use LPFFlux, SOIFO or SecondOrderSOIFO",
-        )
+    if comp in REGISTRY and not REGISTRY[comp].tunable:  # the class declares why (why_not_tunable)
+        raise JobError("job.component", f"{comp} is not tunable: {REGISTRY[comp].cls.why_not_tunable}")
     if comp not in COMPONENTS:
         raise JobError("job.component", f"unknown component {show(comp)}; known: {', '.join(COMPONENTS)}")
     info = COMPONENTS[comp]

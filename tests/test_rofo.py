@@ -1,0 +1,338 @@
+"""The reduced-order flux observer with speed estimation (jaxobs.observers.rofo; Hinkkanen, Saarakkala, Awan,
+Mölsä, Tuovinen, IEEE Trans. Ind. Appl. 54(6), 2018), on the 2.2-kW lab IPMSM of docs/examples/ipmsm_2p2kw_lab.toml
+(salient) and paper 000's SPMSM on the bench (non-salient; the Teknic drive file too for the reversal).
+
+What is checked: its arguments and closed form; the drive-observer contract; that its discretisation is exact on a
+steady machine; that its linearised poles are the ones the closed form places (the derivation in the module doc);
+gradients against finite differences; and, in the slow suite, the sensorless closed loop at speed, under load
+steps, at 15 r/min under half the rated torque, and through a ±750 r/min reversal."""
+
+import math
+from pathlib import Path
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from gradcheck import assert_field_grads_match_fd
+
+import jaxobs
+from jaxobs import drive as D
+from jaxobs import metrics
+from jaxobs.drive.drivefile import read_drive
+from jaxobs.observers import DriveObserverState, gain_fields
+from jaxobs.observers.rofo import ROFO_ALPHA_O_HZ, ReducedOrderFluxObserver, matched_pole, speed_gains
+from jaxobs.registry import registered
+from jaxobs_tuning.cli_papers import closed_form_rows
+
+ROOT = Path(__file__).resolve().parents[1]
+LAB_FILE = ROOT / "docs" / "examples" / "ipmsm_2p2kw_lab.toml"
+TEKNIC_FILE = ROOT / "docs" / "examples" / "teknic_m2310p.toml"
+LAB = read_drive(LAB_FILE)
+SPMSM = D.bench_machine("spmsm000")
+MACHINES = {"lab_ipmsm": (LAB.machine, LAB.ts), "spmsm000": (SPMSM, 1e-4)}
+
+
+def _closed_form(name, omega_e=0.0):
+    par, ts = MACHINES[name]
+    return ReducedOrderFluxObserver.closed_form(ts=ts).bind(par, omega_e)
+
+
+# --- arguments, closed form, registry ---------------------------------------------------------------------------
+
+
+def test_bad_arguments_name_the_field():
+    ok = dict(Rs=1.0, Ld=0.01, Lq=0.02, psi_f=0.3, c_sigma=0.5, zeta_inf=0.2, k_theta=600.0, k_omega=9e4)
+    for field, bad in (("Rs", -1.0), ("Ld", 0.0), ("Lq", -0.01), ("psi_f", 0.0), ("c_sigma", 0.0),
+                       ("zeta_inf", -0.2), ("k_theta", 0.0), ("k_omega", float("nan"))):  # fmt: skip
+        with pytest.raises(ValueError, match=rf"ReducedOrderFluxObserver\.{field} must be finite"):
+            ReducedOrderFluxObserver(**{**ok, field: bad})
+    with pytest.raises(ValueError, match=r"ReducedOrderFluxObserver\.psi_floor"):
+        ReducedOrderFluxObserver(**ok, psi_floor=0.0)
+    with pytest.raises(ValueError, match=r"ReducedOrderFluxObserver\.ts"):
+        ReducedOrderFluxObserver(**ok, ts=-1e-4)
+    with pytest.raises(ValueError, match="give the initial speed once"):
+        ReducedOrderFluxObserver(**ok, omega_init=1.0, omega0=2.0)
+    with pytest.raises(ValueError, match=r"closed_form\.alpha_o_hz"):
+        ReducedOrderFluxObserver.closed_form(alpha_o_hz=0.0)
+    assert float(ReducedOrderFluxObserver(**ok, omega0=-3.0).omega_init) == -3.0  # the flux observers' key
+
+
+@pytest.mark.parametrize("ts", [1e-4, 1.25e-4])
+def test_closed_form_places_the_speed_poles_at_the_matched_pole(ts):
+    """kθ = 2α', kω = α'², α' = (1 − e^(−α_o T_s))/T_s: the forward-Euler loop (z − 1)² + T_s kθ (z − 1) + T_s² kω
+    has its double root at e^(−α_o T_s)."""
+    obs = ReducedOrderFluxObserver.closed_form(ts=ts)
+    a = 2 * math.pi * ROFO_ALPHA_O_HZ
+    am = (1 - math.exp(-a * ts)) / ts
+    assert float(obs.k_theta) == pytest.approx(2 * am, rel=1e-12)
+    assert float(obs.k_omega) == pytest.approx(am * am, rel=1e-12)
+    assert matched_pole(a, ts) == pytest.approx(am, rel=1e-12)
+    assert speed_gains(ROFO_ALPHA_O_HZ, ts) == (2 * matched_pole(a, ts), matched_pole(a, ts) ** 2)
+    z = np.roots([1.0, ts * float(obs.k_theta) - 2.0, 1.0 - ts * float(obs.k_theta) + ts * ts * float(obs.k_omega)])
+    np.testing.assert_allclose(z, math.exp(-a * ts), rtol=0, atol=1e-6)  # a double root: √(rounding)
+    assert float(obs.c_sigma) == 0.5 and float(obs.zeta_inf) == pytest.approx(0.2, rel=1e-12)
+    assert "Hinkkanen" in ReducedOrderFluxObserver.closed_form.__doc__
+
+
+def test_flux_gain_is_motulators_sigma0_at_standstill_and_grows_with_speed():
+    """σ0 = c_σ R̂s(1/L̂d + 1/L̂q)/2 with c_σ = 1/2 is motulator's 0.25 R̂s(1/L̂d + 1/L̂q); the slope is ζ∞."""
+    par, _ = MACHINES["lab_ipmsm"]
+    obs = _closed_form("lab_ipmsm")
+    sigma0 = 0.25 * float(par.Rs) * (1 / float(par.Ld) + 1 / float(par.Lq))
+    assert float(obs.flux_gain(0.0)) == pytest.approx(sigma0, rel=1e-12)  # 42.6 rad/s
+    assert float(obs.flux_gain(-300.0)) == pytest.approx(sigma0 + 0.2 * 300.0, rel=1e-12)
+
+
+def test_closed_form_design_is_the_observer_with_its_rows_at_the_machine():
+    """closed_form_design at the lab machine: its observer is the closed form bound there (bit for bit), its rows
+    σ0 and α' are the observer's flux gain at standstill and half its kθ, each row cites Hinkkanen et al. 2018 and
+    the motulator default it takes; the CLI prints the same rows."""
+    par, ts = MACHINES["lab_ipmsm"]
+    m = dict(Rs=float(par.Rs), Ld=float(par.Ld), Lq=float(par.Lq), psi_f=float(par.psi_f))
+    d = ReducedOrderFluxObserver.closed_form_design(ts=ts, **m)
+    bound = _closed_form("lab_ipmsm")
+    assert all(bool(jnp.all(a == b)) for a, b in zip(jax.tree.leaves(d.observer), jax.tree.leaves(bound)))
+    rows = {r.name: r for r in d.rows}
+    assert list(rows) == ["c_sigma", "zeta_inf", "k_theta", "k_omega", "sigma0", "alpha_matched"]
+    assert float(rows["sigma0"].value) == pytest.approx(0.25 * m["Rs"] * (1 / m["Ld"] + 1 / m["Lq"]), rel=1e-12)
+    assert float(rows["sigma0"].value) == pytest.approx(float(bound.flux_gain(0.0)), rel=1e-12)
+    assert float(rows["alpha_matched"].value) == matched_pole(2 * math.pi * ROFO_ALPHA_O_HZ, ts)
+    assert all("Hinkkanen" in r.source and "motulator 0.18" in r.source for r in d.rows)
+    assert "Tuovinen" in d.source and d.inputs["ts"] == ts
+    with pytest.raises(ValueError, match=r"^ReducedOrderFluxObserver\.c_sigma must be finite and > 0"):
+        ReducedOrderFluxObserver.closed_form_design(c_sigma=0.0)  # the gain's declared bound (check_gains)
+    res = closed_form_rows("rofo", {"rs": m["Rs"], "ld": m["Ld"], "lq": m["Lq"], "ts": ts})
+    assert [(g["name"], g["value"]) for g in res["gains"]] == [(r.name, float(r.value)) for r in d.rows]
+
+
+@pytest.mark.parametrize("name", list(MACHINES))
+def test_registered_and_runs_on_salient_and_non_salient_machines(name):
+    e = registered("rofo")
+    assert e.cls is ReducedOrderFluxObserver and e.signal == "drive" and e.salient
+    assert set(e.gains) == {"c_sigma", "zeta_inf", "k_theta", "k_omega"} == set(gain_fields(ReducedOrderFluxObserver))
+    assert e.refusal(MACHINES[name][0]) is None
+    assert "three-phase" in e.refusal(D.dual_ipmsm_paper002())
+    assert jaxobs.ReducedOrderFluxObserver is ReducedOrderFluxObserver
+
+
+def test_the_lab_drive_file_is_motulators_machine():
+    """docs/examples/ipmsm_2p2kw_lab.toml: the 2.2-kW machine of motulator's examples, 8 kHz, 540 V, the 2π·200 rad/s
+    current loop and 2π·4 rad/s speed loop it gives, the observer's 50 Hz speed estimate; salient, MTPA, no field
+    weakening (the rated point needs 95 % of u_dc/√3: the check warns)."""
+    m, f = LAB.machine, LAB
+    want = dict(Rs=3.6, Ld=0.036, Lq=0.051, psi_f=0.545, J=0.015, T_rated=14.0, n_rated=1500.0)
+    for k, v in want.items():
+        assert float(getattr(m, k)) == pytest.approx(v, rel=1e-12), k
+    assert m.p == 3 and f.ts == pytest.approx(125e-6, rel=1e-12) and float(f.drive.inverter.udc) == 540.0
+    assert f.derived["alpha_c"].value == pytest.approx(2 * math.pi * 200, rel=1e-12)
+    assert f.derived["alpha_s"].value == pytest.approx(2 * math.pi * 4, rel=1e-12)
+    assert f.derived["omega_est"].value == pytest.approx(2 * math.pi * ROFO_ALPHA_O_HZ, rel=1e-12)
+    assert f.derived["i_max"].value == pytest.approx(1.5 * math.sqrt(2) * 4.3, rel=1e-12)
+    assert f.derived["id_policy"].value == "mtpa" and [w.split(":")[0] for w in f.warnings] == ["inverter.u_dc"]
+
+
+# --- the drive-observer contract --------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("name", list(MACHINES))
+def test_bind_sets_the_machine_and_the_speed_only(name):
+    par, ts = MACHINES[name]
+    base = ReducedOrderFluxObserver(1.0, 1.0, 1.0, 1.0, 0.7, 0.3, 500.0, 6e4, ts=ts)
+    b32 = jax.tree.map(lambda x: x.astype(jnp.float32) if eqx.is_inexact_array(x) else x, base).bind(par, -120.0)
+    assert all(x.dtype == jnp.float32 for x in jax.tree.leaves(b32))
+    bound = base.bind(par, -120.0)
+    for f, want in (("Rs", par.Rs), ("Ld", par.Ld), ("Lq", par.Lq), ("psi_f", par.psi_f), ("omega_init", -120.0)):
+        assert float(getattr(bound, f)) == float(want), f
+    assert set(type(base).bound_fields) == {"Rs", "Ld", "Lq", "psi_f", "omega_init"}
+    assert all(float(getattr(bound, g)) == float(getattr(base, g)) for g in gain_fields(base))
+    only = base.bind(None, 7.0)
+    assert float(only.omega_init) == 7.0 and float(only.Ld) == 1.0
+
+    def same(a, b):
+        return all(bool(jnp.all(x == y)) for x, y in zip(jax.tree.leaves(a), jax.tree.leaves(b)))
+
+    for w in (-50.0, 0.0, 700.0):  # one start speed: bind, init, init_at and seed_speed agree
+        assert same(base.bind(par, w).init(), base.bind(par, 3.0).init_at(w))
+        assert same(base.bind(None, w).init(), base.init_at(w)) and same(
+            base.seed_speed(base.init(), w), base.init_at(w)
+        )
+        assert float(base.bind(par, w).init().x[0]) == float(par.psi_f)  # ψ̂s starts at the bound ψ̂f
+    aligned = base.init_aligned(300.0, 7.0)  # the angle is the observer's own state
+    assert isinstance(aligned, DriveObserverState) and float(aligned.x[2]) == pytest.approx(7.0 - 2 * math.pi)
+    assert float(aligned.x[3]) == 300.0 and float(base.init_at(300.0).x[2]) == 0.0
+
+
+def _steady(par, ts, w, i_d, i_q, th0):
+    """A machine turning steadily at ω_e with constant dq currents: the state at t_0, and the period's inputs."""
+    ld, lq, pf, rs = (float(getattr(par, k)) for k in ("Ld", "Lq", "psi_f", "Rs"))
+    psi = complex(ld * i_d + pf, lq * i_q)
+    u_dq = complex(rs * i_d, rs * i_q) + 1j * w * psi
+    avg = (np.exp(1j * w * ts) - 1) / (1j * w * ts) if w != 0 else 1.0  # the period's average in stator coordinates
+    u_ab, i_ab = u_dq * np.exp(1j * th0) * avg, complex(i_d, i_q) * np.exp(1j * th0)
+    x0 = jnp.asarray([psi.real, psi.imag, th0, w])
+    return x0, jnp.asarray([u_ab.real, u_ab.imag]), jnp.asarray([i_ab.real, i_ab.imag])
+
+
+OPERATING = [(0.0, 0.0, 0.0), (300.0, -2.0, 5.0), (-471.0, -1.0, -6.0), (40.0, 0.0, 8.0)]
+
+
+@pytest.mark.parametrize("name", list(MACHINES))
+def test_the_discretisation_is_exact_on_a_steady_machine(name):
+    """Voltage constant in stator coordinates over the period, R̂s i held in rotor coordinates (steady: it is): the
+    hold-equivalent step maps the machine's state at t_k onto its state at t_k+1 to rounding, at any speed and
+    load, salient or not."""
+    par, ts = MACHINES[name]
+    for w, i_d, i_q in OPERATING:
+        obs = _closed_form(name, w)
+        x0, u, i = _steady(par, ts, w, i_d, i_q, 0.3)
+        x1 = np.asarray(obs._advance(x0, u, i))
+        want = np.asarray(x0) + np.array([0.0, 0.0, w * ts, 0.0])
+        assert np.all(np.abs(x1 - want) <= 1e-12 * (1 + np.abs(want))), (w, x1 - want)
+
+
+@pytest.mark.parametrize("name", list(MACHINES))
+def test_the_linearised_poles_are_the_designed_ones(name):
+    """The step's Jacobian on a steady machine (module doc's derivation):
+
+    - the speed loop's double pole at e^(−α_o T_s) (exact, at no load, where the decoupling is exact);
+    - the flux poles at e^(s T_s), s² + 2k1 s + ωe² = 0, within 1e-3: the correction is forward Euler, which moves
+      them by O((k1 T_s)²) (measured ≤ 3e-4 at 471 rad/s);
+    - under load the sampled auxiliary flux and the held R̂s i couple the two at O(T_s): the speed poles stay
+      within 3e-3 of e^(−α_o T_s) (measured 1.5e-3 on the lab IPMSM at −471 rad/s, −1 − 6j A)."""
+    par, ts = MACHINES[name]
+    zs = math.exp(-2 * math.pi * ROFO_ALPHA_O_HZ * ts)
+    for w, i_d, i_q in OPERATING:
+        obs = _closed_form(name, w)
+        x0, u, i = _steady(par, ts, w, i_d, i_q, 0.3)
+        z = np.linalg.eigvals(np.asarray(jax.jacfwd(lambda x: obs._advance(x, u, i))(x0)))
+        k1 = float(obs.flux_gain(w))
+        flux = np.exp(np.roots([1.0, 2 * k1, w * w]).astype(complex) * ts)
+        near = [z[np.argmin(np.abs(z - f))] for f in flux]
+        np.testing.assert_allclose(near, flux, rtol=0, atol=1e-3)
+        speed = sorted(z, key=lambda v: abs(v - zs))[:2]
+        np.testing.assert_allclose(speed, zs, rtol=0, atol=1e-6 if i_d == i_q == 0 else 3e-3)
+
+
+@pytest.mark.parametrize("name", list(MACHINES))
+def test_the_first_sample_starts_from_the_current_model(name):
+    """Decision (module doc): at the first sample the flux estimate is the current model's at θ̂, so a drive that
+    starts with a current starts the observer without a flux error; nothing else moves."""
+    par, ts = MACHINES[name]
+    obs = _closed_form(name, 100.0)
+    state = obs.init_aligned(100.0, 0.4)
+    i_dq = complex(-1.0, 4.0)
+    i_ab = i_dq * np.exp(1j * 0.4)
+    s1, out = obs.step(state, jaxobs.DriveInput(1.0, 2.0, i_ab.real, i_ab.imag))
+    assert float(out.psi_d) == pytest.approx(float(par.Ld) * -1.0 + float(par.psi_f), rel=1e-12)
+    assert float(out.psi_q) == pytest.approx(float(par.Lq) * 4.0, rel=1e-12)
+    assert float(out.theta) == pytest.approx(0.4, rel=1e-12) and float(out.omega) == 100.0
+    assert bool(s1.started) and np.allclose(np.asarray(s1.u_prev), [1.0, 2.0])
+
+
+# --- gradients ------------------------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    "name", ["lab_ipmsm", pytest.param("spmsm000", marks=pytest.mark.slow)]
+)  # the same code path on both; the second in the slow suite for the fast one's budget
+def test_gradients_through_the_observer_match_finite_differences(name):
+    """A sensored drive (the observer beside the encoder) with the observer's speed started 5 % off: the mean squared
+    angle error's gradient in each gain equals a central difference."""
+    par, ts = MACHINES[name]
+    w = 0.3 * float(par.n_rated) * D.RPM
+    sc = D.Scenario(par, speed_ref=D.Profile.constant(w), omega_m0=w, load=D.Profile.constant(0.4 * float(par.T_rated)))
+    drv = D.bench_drive(par, sensorless=False, settle=0.0, ts=ts)
+    obs = ReducedOrderFluxObserver.closed_form(ts=ts).bind(par, 0.95 * par.p * w)
+
+    def loss(o):
+        sol = jaxobs.simulate(D.ClosedLoop(drv, o, sc), 0.06)
+        return jnp.mean(metrics.wrap(sol.outputs.obs.theta - sol.outputs.theta_e)[20:] ** 2)
+
+    assert_field_grads_match_fd(loss, obs, ("c_sigma", "zeta_inf", "k_theta", "k_omega"), rel=1e-4, abs=1e-12)
+
+
+# --- the sensorless closed loop (slow) ------------------------------------------------------------------------------
+
+
+def _lab():
+    return LAB.machine, LAB.drive_for(sensorless=True)
+
+
+def _bench():
+    return SPMSM, D.bench_drive(SPMSM, sensorless=True)
+
+
+def _teknic():
+    f = read_drive(TEKNIC_FILE)
+    return f.machine, f.drive_for(sensorless=True)
+
+
+def _run(par, drive, sc, t1):
+    obs = ReducedOrderFluxObserver.closed_form(ts=drive.ts).bind(sc.est_par, par.p * sc.omega_m0)
+    out = jax.jit(lambda s: jaxobs.simulate(D.ClosedLoop(drive, obs, s), t1))(sc).outputs
+    err = np.degrees(np.abs(np.asarray(metrics.wrap(out.obs.theta - out.theta_e))))
+    return np.asarray(out.t), np.asarray(out.omega_m) / D.RPM, err
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    "bench, rpm, torque, peak_deg",
+    [
+        (_lab, 750.0, 14.0, 1.5),  # measured 1.38° (motulator's observer on this machine and case: 1.43°)
+        (_bench, 1000.0, 14.0, 6.0),  # 000's SPMSM at rated torque: measured 4.68°, the speed dips to 462 r/min
+    ],
+    ids=["lab_ipmsm", "spmsm000"],
+)
+def test_sensorless_holds_at_speed_and_under_a_load_step(bench, rpm, torque, peak_deg):
+    par, drive = bench()
+    sc = D.Scenario(par, speed_ref=D.Profile.constant(rpm * D.RPM), omega_m0=rpm * D.RPM,
+                    load=D.Scenario.load_steps([0.0, 0.2], [0.0, torque]))  # fmt: skip
+    t, n, err = _run(par, drive, sc, 0.6)
+    assert np.max(err[t < 0.2]) < 0.05  # before the step: locked
+    assert np.max(err) <= peak_deg, np.max(err)
+    assert abs(n[-1] / rpm - 1) < 0.01, n[-1]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    "bench, rpm, peak_deg",
+    [
+        (_lab, 750.0, 1.0),  # measured 0.285° (motulator's observer: 0.29°)
+        (_bench, 1000.0, 1.0),  # measured 0.378°
+        (_teknic, 2000.0, 1.5),  # a 24 V servo motor (20 kHz, p = 4): measured 1.05°
+    ],
+    ids=["lab_ipmsm", "spmsm000", "teknic"],
+)
+def test_a_reversal_through_zero_holds(bench, rpm, peak_deg):
+    """±rpm in 1 s, no load: the speed estimate passes through zero (nothing divides by it) and the angle stays
+    locked; the machine ends at −rpm."""
+    par, drive = bench()
+    sc = D.Scenario(par, speed_ref=D.Profile([0.0, 0.2, 1.2], [rpm * D.RPM, rpm * D.RPM, -rpm * D.RPM]),
+                    omega_m0=rpm * D.RPM)  # fmt: skip
+    t, n, err = _run(par, drive, sc, 1.5)
+    assert np.max(err) <= peak_deg, np.max(err)
+    assert abs(n[-1] / rpm + 1) < 0.01, n[-1]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    "bench, rpm, torque, peak_deg",
+    [
+        (_lab, 15.0, 7.0, 2.0),  # measured: peak 0.67°, dip to −64.7 r/min (motulator's observer: 0.72°, −68 r/min)
+        (_bench, 20.0, 7.0, 3.0),  # 000's SPMSM, 1 % of rated speed, half its torque: measured 2.35°, −249 r/min
+    ],
+    ids=["lab_ipmsm", "spmsm000"],
+)
+def test_a_low_speed_load_step_holds(bench, rpm, torque, peak_deg):
+    """Half the rated torque stepped on at about 1 % of the rated speed: the speed dips through zero and comes back
+    within 10 % of its reference within 0.5 s, and stays there; the angle error's peak is bounded."""
+    par, drive = bench()
+    sc = D.Scenario(par, speed_ref=D.Profile.constant(rpm * D.RPM), omega_m0=rpm * D.RPM,
+                    load=D.Scenario.load_steps([0.0, 0.2], [0.0, torque]))  # fmt: skip
+    t, n, err = _run(par, drive, sc, 1.0)
+    out_of_band = t[np.abs(n - rpm) > 0.1 * rpm]
+    recovered = out_of_band[-1] - 0.2
+    assert 0.0 < recovered <= 0.5, recovered
+    assert np.max(err) <= peak_deg, np.max(err)
