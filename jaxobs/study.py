@@ -71,7 +71,7 @@ import numpy as np
 from . import metrics as M
 from ._simulate import AbstractSave, SaveAll
 from .families import AbstractScenarios, GridSignals, RecordedSignals
-from .observers import gain_table
+from .observers import gain_fields, gain_table
 from .provenance import cf_dataset, provenance
 from .runner import run_scenarios
 from .scenarios import GRID_SIGNAL_AXES, LHS, AbstractSampler, Grid, Random, Recordings, Sobol
@@ -155,7 +155,8 @@ def study(
         lambda design, sc: scenarios.system(design, sc),
         per_scenario,
         horizon=horizon,
-        build=lambda names, points, first: scenarios.build(names, points, first=first),
+        build=scenarios.build,
+        chunked=True,
         static=static,
         chunk_size=chunk_size,
         mesh=mesh,
@@ -298,7 +299,7 @@ def run_study(
     gains = {
         f"gain_{g}": (
             ("design",),
-            np.asarray([float(getattr(obs, g)) if hasattr(obs, g) else np.nan for obs in designs.values()]),
+            np.asarray([float(getattr(obs, g)) if g in gain_fields(obs) else np.nan for obs in designs.values()]),
             {"units": gains_present[g].units, "long_name": f"observer gain {g} (NaN: the design has no such gain)"},
         )
         for g in gains_present
@@ -312,7 +313,7 @@ def run_study(
         steady_from=steady_from,
         band_hz=band_hz,
         sampling=sampler.sampling,
-        **({} if recordings else {"seed": getattr(sampler, "seed", seed)}),
+        **({} if recordings else {"seed": sampler.seed if isinstance(sampler, (Random, Sobol, LHS)) else seed}),
         **provenance(
             "jaxobs.study.run_study", digests={"recordings": " ".join(sampler.sha256)} if recordings else None
         ),

@@ -29,6 +29,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import _core as M
+from ._core import _DRIVE_OUTPUTS
 
 __all__ = [
     "ALIASES",
@@ -200,10 +201,9 @@ def scored_position_error(sol, sig, ctx):
         The position error along the run, rad (zero before a standstill start's hand-over).
     """
     err = M.position_error(sol, sig)
-    mode = getattr(sol.outputs, "mode", None)
-    if mode is None:
+    if not isinstance(sol.outputs, _DRIVE_OUTPUTS):  # an observer on a signal: no start-up
         return err
-    return jnp.where((mode == 1) | _steady(sol, ctx), err, 0.0)
+    return jnp.where((sol.outputs.mode == 1) | _steady(sol, ctx), err, 0.0)
 
 
 def _lost_sync(sol, sc, ctx):
