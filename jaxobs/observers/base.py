@@ -264,6 +264,27 @@ class AbstractDriveObserver(AbstractObserver):
     # the fields bind() sets, by role (resistance, inductance, initial speed): not gains, so a study or a job
     # does not report or tune them (jaxobs.drive_study.drive_gains), and the C export says where they came from
     bound_fields: ClassVar["BoundFields"]
+    # whether the class holds a speed estimator (jaxobs.observers.speed) that a job's [observer.speed] may choose
+    takes_speed_estimator: ClassVar[bool] = False
+
+    def speed_estimator(self):
+        """The speed and position extraction this observer holds (:mod:`jaxobs.observers.speed`), or None where
+        its speed comes otherwise (an FLL, its own adaptation law).
+
+        Returns:
+            The estimator or None.
+        """
+        return None
+
+    @property
+    def reads_torque(self) -> bool:
+        """Whether a step reads the torque reference (``DriveInput.T_ref``): a mechanical-model speed estimator.
+
+        Returns:
+            True where the drive loop must fill ``T_ref``.
+        """
+        est = self.speed_estimator()
+        return est is not None and est.uses_torque
 
     @abc.abstractmethod
     def bind(self, est_par, omega_e):
@@ -355,6 +376,15 @@ class ObserverBank(AbstractDriveObserver):
     primary: int = eqx.field(static=True, default=0)
 
     bound_fields: ClassVar[BoundFields] = BoundFields()  # none of its own: bind() binds its observers
+
+    @property
+    def reads_torque(self) -> bool:
+        """Whether any of its observers reads the torque reference.
+
+        Returns:
+            True where the drive loop must fill ``T_ref``.
+        """
+        return any(o.reads_torque for o in self.observers)
 
     def __check_init__(self):
         for i, o in enumerate(self.observers):

@@ -157,7 +157,7 @@ class AbstractFluxObserver(AbstractDriveObserver):
             return replace_leaves(self, omega_init=w)
         # L̂q, not L̂d: the active flux (module doc, "Salient machines"); Lq = Ld on a non-salient machine
         new = replace_leaves(self, Rs=est_par.Rs, L=est_par.Lq, omega_init=w)
-        speed = getattr(self, "speed", None)  # the PLL-type observers' speed estimator (jaxobs.observers.speed)
+        speed = self.speed_estimator()  # the PLL-type observers' speed estimator (jaxobs.observers.speed)
         bound = None if speed is None else speed.bind(est_par)
         return new if bound is speed else eqx.tree_at(lambda o: o.speed, new, bound)
 
@@ -203,9 +203,9 @@ class AbstractFluxObserver(AbstractDriveObserver):
     def step(self, state: DriveObserverState, u):
         e, i = self.back_emf(state, u)
         f = self.f
-        if getattr(getattr(self, "speed", None), "uses_torque", False):
+        if self.reads_torque:
             # a mechanical-model speed estimator reads the torque reference held over the period (0: none given)
-            tq = getattr(u, "T_ref", None)
+            tq = u.T_ref
             tq = jnp.zeros((), state.x.dtype) if tq is None else jnp.asarray(tq, state.x.dtype)
 
             def f(x, e):
@@ -291,6 +291,10 @@ class _PLLFluxBase(AbstractFluxObserver):
     speed: eqx.AbstractVar[AbstractSpeedEstimator]
 
     _speed_index: ClassVar[int] = 3  # the PLL's ω in the state
+    takes_speed_estimator: ClassVar[bool] = True
+
+    def speed_estimator(self) -> AbstractSpeedEstimator:
+        return self.speed
 
     def start_speed(self, omega_e):
         """ω_e itself: a PLL's speed is signed and may be zero.

@@ -146,6 +146,10 @@ class AbstractLESO(AbstractDriveObserver):
     n_leso: eqx.AbstractClassVar[int]  # LESO states (the speed estimator's follow)
 
     bound_fields: ClassVar[BoundFields] = BoundFields(resistance="Rs", inductance="Lq", speed="omega0_pll")
+    takes_speed_estimator: ClassVar[bool] = True
+
+    def speed_estimator(self) -> AbstractSpeedEstimator:
+        return self.speed
 
     def bind(self, est_par, omega_e) -> AbstractLESO:
         if est_par is None:
@@ -252,7 +256,7 @@ class AbstractLESO(AbstractDriveObserver):
 
     def step(self, state: DriveObserverState, meas):
         i = jnp.stack([meas.i_a, meas.i_b])
-        tq = getattr(meas, "T_ref", None)  # the torque reference over the period; none given: 0
+        tq = meas.T_ref  # the torque reference over the period; none given: 0
         tq = jnp.zeros((), state.x.dtype) if tq is None else jnp.asarray(tq, state.x.dtype)
         path = Knots(
             u0=(state.u_prev, state.i_prev, tq),

@@ -76,7 +76,7 @@ def export_observer(
     bar.stage("generating the C from the jaxpr of the step")
     obs32 = float32_observer(observer)
     kind = "drive" if is_drive(obs32) else "signal"
-    if getattr(getattr(obs32, "speed", None), "uses_torque", False):
+    if kind == "drive" and obs32.reads_torque:
         raise ValueError(
             "export: a mechanical-model speed estimator (jaxobs.observers.speed.MechanicalSpeed) needs the torque "
             "reference each period, which the exported step does not take; export the observer with its PLL"

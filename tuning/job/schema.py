@@ -8,7 +8,7 @@ from pathlib import Path
 
 from jaxobs.families import FAMILIES, GridSignals
 from jaxobs.metrics import canonical
-from jaxobs.observers import AbstractLESO, gain_fields
+from jaxobs.observers import AbstractDriveObserver, AbstractLESO, gain_fields
 from jaxobs.observers.speed import SPEED_KINDS
 from jaxobs.provenance import sha256
 from jaxobs.registry import REGISTRY, canonical_key
@@ -180,7 +180,7 @@ def parse_observer_speed(raw: dict, info) -> dict:
         return {}
     sp = get_field(obs_t, "speed", "observer.speed", dict)
     no_unknown(sp, ("kind", "alpha_o", "zero_fade"), "observer.speed")
-    if "speed" not in getattr(info.ctor, "__dataclass_fields__", {}):
+    if not (issubclass(info.ctor, AbstractDriveObserver) and info.ctor.takes_speed_estimator):
         raise JobError(
             "observer.speed",
             f"only the LESOs and the PLL-type flux observers (LPFFlux) take a speed estimator, not {info.entry.name}",
