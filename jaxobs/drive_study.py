@@ -1,12 +1,13 @@
 """Robustness studies of sensorless drives: drive observers × a grid (or a Sobol/LHS sample) of scenarios.
 
-A preset of :func:`jaxobs.study.study` on :class:`jaxobs.families.DriveScenarios` with the drive's metrics
-(:data:`jaxobs.study.METRICS`) and flags.
+A preset of :func:`jaxobs.study.study` on :class:`jaxobs.families.DriveScenarios` with the drive family's
+default metrics and flags (:attr:`~jaxobs.families.DriveScenarios.metrics`, ``.flags``: entries of the one
+metric table, :data:`jaxobs.metrics.METRICS`, in SI units).
 
     ds = run_drive_study({"C-LESO": cleso, "FA-LESO": faleso}, {"speed_rpm": [300, 600], "dRs": [-0.3, 0.3]},
                          machine=ipmsm_paper002(), horizon=0.3)
-    ds["pos_err_rms_deg"].sel(design="FA-LESO").max()
-    ds["pos_err_rms_deg_q"].sel(design="FA-LESO", quantile=0.99)
+    ds["rms_position_steady"].sel(design="FA-LESO").max()           # rad
+    ds["rms_position_steady_q"].sel(design="FA-LESO", quantile=0.99)
 
 Every design is the observer that closes the loop (``Drive(sensorless=True)``)
 on every scenario, each scenario started in its steady state (its speed, its
@@ -26,9 +27,11 @@ scenario's.  Axes (all optional; a value per scenario):
 - ``dead_time`` (s): inverter dead time.
 
 Metrics per scenario, over the steady window [steady_from, horizon):
-``pos_err_rms_deg`` and ``pos_err_max_deg`` (|θ̂e − θe|, electrical degrees),
-``speed_err_rms_rpm`` (ω̂e/p − ωm, r/min), ``speed_noise_rpm`` (the
-sample-to-sample noise of ω̂e/p: rms of the first difference over √2) and
+``rms_position_steady`` and ``peak_position_steady`` (|θ̂e − θe|, electrical rad),
+``rms_speed_estimate_steady`` (ω̂e/p − ωm, rad/s, p the scenario's), ``speed_noise`` (the
+sample-to-sample noise of ω̂e/p: rms of the first difference over √2, rad/s), ``bias_position`` (rad),
+``peak_speed_deviation`` (rad/s, after ``t_event``; tables and figures show them in degrees and r/min:
+:meth:`jaxobs.metrics.Metric.shown`) and
 ``lost_lock``: the scenario diverged (a non-finite value) or its position error
 exceeded 90° (electrical) in the steady window — a per-scenario flag, never fatal, with the
 definition the FLL studies and the tuning share (:mod:`jaxobs.metrics`, "lost lock": 90° for a drive,
@@ -40,7 +43,7 @@ Dataset has dims ``("design", *axes)`` (a grid) or ``("design", "sample")``
 (a sample, the axes as coordinates), quantiles over the scenarios of every
 metric (``<metric>_q`` with a ``quantile`` coordinate 0.5, 0.95, 0.99, 1.0;
 lost-lock scenarios excluded from them and counted in ``lost_lock_count``).  Every variable and
-coordinate has ``units`` (UDUNITS strings: ``degree``; ``min-1`` for r/min) and ``long_name``; each gain is
+coordinate has ``units`` (UDUNITS strings: ``rad``, ``rad s-1``) and ``long_name``; each gain is
 its own variable ``gain_<name>`` (dim ``design``, its own ``units``, NaN where a design has no such gain); the
 attributes hold the options, the true machine (``machine_Rs``, ...) and the versions, nothing that changes between two
 identical runs.
@@ -56,7 +59,7 @@ from .families import DRIVE_STUDY_AXES, DriveScenarios, bind_observer, drive_sce
 from .observers import gain_fields
 from .provenance import provenance
 from .scenarios import sampler_of
-from .study import DIVERGED, METRICS, Flag, StudyContext, gain_variables, study
+from .study import StudyContext, gain_variables, study
 
 __all__ = [
     "DRIVE_STUDY_AXES",
@@ -68,15 +71,8 @@ __all__ = [
     "drive_gains",
 ]
 
-# the drive study's metrics (jaxobs.study.METRICS: units, long names, exact forms)
-DRIVE_STUDY_METRICS = (
-    "pos_err_rms_deg",
-    "pos_err_max_deg",
-    "speed_err_rms_rpm",
-    "speed_noise_rpm",
-    "pos_bias_deg",
-    "speed_dev_max_rpm",
-)
+# the drive study's metrics: the drive family's defaults (jaxobs.metrics.METRICS: SI units, long names, exact forms)
+DRIVE_STUDY_METRICS = DriveScenarios.metrics
 QUANTILES = (0.5, 0.95, 0.99, 1.0)
 
 
@@ -86,32 +82,7 @@ def drive_gains(obs) -> dict:
     return {g: float(getattr(obs, g)) for g in gain_fields(obs)}
 
 
-def _lost_lock(sol, sc, ctx):
-    o = sol.outputs
-    return M.lost_lock(o.obs.theta, o.theta_e, sol.t >= ctx.steady_from, math.radians(M.LOCK_TOL_DRIVE_DEG))
-
-
-def _lost_speed(sol, sc, ctx):  # missed its speed reference
-    return M.lost_speed(sol.outputs.omega_m, sol.outputs.omega_m_ref, sol.t >= ctx.steady_from)
-
-
-FLAGS = (
-    Flag(
-        "lost_lock",
-        f"lost lock: diverged, or position error > {M.LOCK_TOL_DRIVE_DEG:g} deg (electrical) in the steady window "
-        "(1: lost)",
-        _lost_lock,
-        count="scenarios that lost lock (diverged ones included)",
-    ),
-    Flag(
-        "lost_speed",
-        f"lost speed: diverged, or the steady window's mean |speed - reference| > {100 * M.SPEED_TOL:g} % of the "
-        f"mean |reference| (at least {M.SPEED_FLOOR_RPM:g} r/min) (1: lost)",
-        _lost_speed,
-        count="scenarios that missed their speed reference (diverged ones included)",
-    ),
-    DIVERGED,
-)
+FLAGS = tuple(M.METRICS[k] for k in DriveScenarios.flags)  # the drive family's flags (the metric table's)
 
 
 def run_drive_study(
@@ -200,9 +171,9 @@ def run_drive_study(
         designs,
         family,  # built a chunk at a time (the axes are checked above, so no chunk can refuse its points)
         sampler,
-        [METRICS[k] for k in DRIVE_STUDY_METRICS],
+        [M.METRICS[k] for k in DRIVE_STUDY_METRICS],
         horizon=horizon,
-        ctx=StudyContext(t_event=t_event, steady_from=steady_from, p=machine.p),
+        ctx=StudyContext(t_event=t_event, steady_from=steady_from),
         flags=FLAGS,
         mask="lost_lock",
         quantiles=QUANTILES,

@@ -161,9 +161,15 @@ class AbstractFamily(eqx.Module):
             grid voltage: the position metrics apply, and a recording of these signals binds it (a class
             attribute).
         options: The keys of its TOML table it reads (:meth:`from_toml`; a class attribute).
+        metrics: Its default metrics, names in :data:`jaxobs.metrics.METRICS` (what its study reports; a class
+            attribute).
+        flags: Its default flags, boolean metrics of that table, in the order a study stores them (a class
+            attribute).
     """
 
     signal: eqx.AbstractClassVar[str]
+    metrics: eqx.AbstractClassVar[tuple]
+    flags: eqx.AbstractClassVar[tuple]
     axes: eqx.AbstractClassVar[dict]
     closed_loop: eqx.AbstractClassVar[bool]
     bytes_per_step: eqx.AbstractClassVar[int]
@@ -313,6 +319,8 @@ class GridSignals(AbstractFamily):
     study_bytes_per_step: ClassVar[int] = 256
     drive_observer: ClassVar[bool] = False
     options: ClassVar[tuple] = ("t_event", "seed")
+    metrics: ClassVar[tuple[str, ...]] = ("settling_freq", "ripple_freq", "rms_phase_steady", "itae_freq", "iae_phase")
+    flags: ClassVar[tuple[str, ...]] = ("settled", "diverged", "lost_lock")
     # a recording of it: the voltage column; the truth columns (phase rad, ω rad/s, amplitude), how many
     recording_columns: ClassVar[tuple] = (("v",), ("theta", "omega", "amplitude"))
     truth_counts: ClassVar[tuple] = (3,)
@@ -380,6 +388,8 @@ class EMFSignals(AbstractFamily):
     study_bytes_per_step: ClassVar[int] = 256
     drive_observer: ClassVar[bool] = True
     options: ClassVar[tuple] = ()  # the back EMFs have no event, no noise and a fixed nominal
+    metrics: ClassVar[tuple[str, ...]] = ("iae_position", "rms_position_steady", "bias_position")
+    flags: ClassVar[tuple[str, ...]] = ("diverged", "lost_lock")
     # a recording of a drive: u and i; the truth columns (encoder angle rad [, speed rad/s]), how many
     recording_columns: ClassVar[tuple] = (("u_a", "u_b", "i_a", "i_b"), ("theta_e", "omega_e"))
     truth_counts: ClassVar[tuple] = (1, 2)
@@ -452,6 +462,15 @@ class DriveScenarios(AbstractFamily):
     study_bytes_per_step: ClassVar[int] = 1024
     drive_observer: ClassVar[bool] = True
     options: ClassVar[tuple] = ("t_event", "seed")
+    metrics: ClassVar[tuple[str, ...]] = (
+        "rms_position_steady",
+        "peak_position_steady",
+        "rms_speed_estimate_steady",
+        "speed_noise",
+        "bias_position",
+        "peak_speed_deviation",
+    )
+    flags: ClassVar[tuple[str, ...]] = ("lost_lock", "lost_speed", "diverged")
     recording_columns: ClassVar[tuple] = EMFSignals.recording_columns
     truth_counts: ClassVar[tuple] = EMFSignals.truth_counts
 
@@ -520,6 +539,9 @@ class RecordedSignals(AbstractFamily):
     study_bytes_per_step: ClassVar[int] = 256
     drive_observer: ClassVar[bool] = False  # the instance's binds says which observer runs on it
     options: ClassVar[tuple] = ()
+    # the one study on recordings is the FLL study's (jaxobs.study.run_study on a Recordings sampler)
+    metrics: ClassVar[tuple[str, ...]] = GridSignals.metrics
+    flags: ClassVar[tuple[str, ...]] = GridSignals.flags
 
     @classmethod
     def from_toml(cls, table: Mapping, where: str = "scenarios", *, freq_n: float = 50.0, drive=None):

@@ -207,6 +207,6 @@ def test_verdicts_on_a_users_drive_agree_with_pulse_simulations():
         system = lambda obs, sc: jaxobs.drive.ClosedLoop(drive, bind_observer(obs, sc), sc)  # noqa: E731
         return pulse_held(system, {"cf": cf}, par, foc, points, height=height, horizon=horizon)["cf"]
 
-    verdict = [int(ds["holds"].sel(design="cf", speed_rpm=s, load=ld)) == 1 for s, ld in points]
+    verdict = [int(ds["holds"].sel(design="cf", speed_rpm=s, load_nm=ld)) == 1 for s, ld in points]
     assert held(0.02).tolist() == verdict and held(-0.02).tolist() == verdict, verdict
     assert verdict == [False, False, False, True, False, True]

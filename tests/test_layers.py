@@ -81,7 +81,9 @@ LAYERS = [
     ("jaxobs._steps", "jaxobs._sensitivity"),
     ("jaxobs._loop",),
     ("jaxobs._simulate", "jaxobs.sharding"),
-    # metrics: they score
+    # metrics: the functions that score a run, the one metric table (its entries' forms use them), the package
+    ("jaxobs.metrics._core",),
+    ("jaxobs.metrics._table",),
     ("jaxobs.metrics",),
     # linear analysis: the observers' models, closed forms that return observers, settling times (metrics)
     ("jaxobs.linear._tf",),

@@ -124,7 +124,7 @@ def test_run_drive_study_from_a_partial_store_equals_one_run(tmp_path):
     axes = {"speed_rpm": [600.0], "dRs": [-0.2, 0.2], "dLq": [0.0, 0.2]}
     kw = dict(machine=par, drive=drive, horizon=0.03, chunk_size=2)
     ref = run_drive_study(designs, axes, **kw)
-    assert ref.sizes["dRs"] == 2 and not bool(np.isnan(ref["pos_err_rms_deg"].values).any())
+    assert ref.sizes["dRs"] == 2 and not bool(np.isnan(ref["rms_position_steady"].values).any())
     store = ChunkStore(tmp_path / "c", "fp")
     xr.testing.assert_identical(run_drive_study(designs, axes, store=store, **kw), ref)
     assert sorted(f.name for f in (tmp_path / "c").glob("*.h5")) == ["0.0.h5", "0.1.h5", "1.0.h5", "1.1.h5"]

@@ -68,7 +68,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import shlex
 import sys
 import tempfile
@@ -111,9 +110,10 @@ def load_study(path):
 
 def _cmd_drive_study(name, designs, axes, opts, out: Path, quiet: bool, provenance=None, store=None) -> int:
     from jaxobs.drive_study import DRIVE_STUDY_METRICS, run_drive_study
+    from jaxobs.metrics import METRICS
     from jaxobs.plot import drive_study_figure
     from jaxobs.quantities import text_unit
-    from jaxobs.study import METRICS, write_study
+    from jaxobs.study import write_study
 
     ds = run_drive_study(designs, axes, progress=progress_of(quiet=quiet), store=store, **opts)
     ds.attrs.update(provenance or {})  # the study file's and the result files' sha256, the machine
@@ -126,7 +126,8 @@ def _cmd_drive_study(name, designs, axes, opts, out: Path, quiet: bool, provenan
         print(f"resumed: {store.resumed} chunks of {store.total} were on disk from the stopped run")
     qs = [float(q) for q in ds["quantile"].values]
     # columns sized from their content (long design names and metric labels never run together)
-    labels = {m: f"{m} ({text_unit(METRICS[m].units)})" for m in DRIVE_STUDY_METRICS}
+    # each in its display units (study.nc keeps SI: jaxobs.metrics.Metric.shown)
+    labels = {m: f"{m} ({text_unit(METRICS[m].display_units)})" for m in DRIVE_STUDY_METRICS}
     wd = max(len("design"), *(len(str(d)) for d in ds["design"].values)) + 2
     wm = max(len(x) for x in labels.values()) + 2
     head = f"{'design':<{wd}}{'metric':<{wm}}" + "".join(f"{'q' + format(q, 'g'):>10}" for q in qs)
@@ -137,7 +138,7 @@ def _cmd_drive_study(name, designs, axes, opts, out: Path, quiet: bool, provenan
         div = int(ds["diverged"].sel(design=d).sum())
         speed = int(ds["lost_speed_count"].sel(design=d))
         for m in DRIVE_STUDY_METRICS:
-            vals = ds[f"{m}_q"].sel(design=d).values
+            vals = METRICS[m].shown(ds[f"{m}_q"].sel(design=d).values)
             row = f"{str(d):<{wd}}{labels[m]:<{wm}}" + "".join(f"{v:>10.4g}" for v in vals)
             print(row + f"{div:>10}{lost:>11}{speed:>12}")
     print(f"results: {out / 'study.nc'}, {fig}")
@@ -213,7 +214,9 @@ def _cmd_study(args) -> int:
 
 
 def _run_study(name, designs, axes, opts, out: Path, quiet: bool, store=None) -> int:
+    from jaxobs.metrics import METRICS
     from jaxobs.plot import study_figures
+    from jaxobs.quantities import text_unit
     from jaxobs.study import STUDY_METRICS, run_study, worst_cases, write_study
 
     provenance = opts.pop("provenance", None) or {}
@@ -236,18 +239,18 @@ def _run_study(name, designs, axes, opts, out: Path, quiet: bool, store=None) ->
     if store is not None and store.resumed:
         print(f"resumed: {store.resumed} chunks of {store.total} were on disk from the stopped run")
     wd = max(len("design"), *(len(str(d)) for d in ds["design"].values)) + 2  # sized from the names
-    # each column with its unit; the phase in degrees, as in the figures (study.nc keeps rad)
-    cols = {"settling_freq": ("s", 1.0), "ripple_freq": ("Hz", 1.0), "rms_phase": ("deg", 180.0 / math.pi)}
+    # each column in its display units; the phase in degrees, as in the figures (study.nc keeps rad)
+    cols = [METRICS[m] for m in ("settling_freq", "ripple_freq", "rms_phase_steady")]
     print(
         f"{'design':<{wd}}"
-        + "".join(f"{f'{m} ({u}) mean':>25}{'worst':>10}" for m, (u, _) in cols.items())
+        + "".join(f"{f'{m.name} ({text_unit(m.display_units)}) mean':>32}{'worst':>10}" for m in cols)
         + f"{'diverged':>10}{'lost lock':>11}"
     )
     for d in ds["design"].values:
         sel = ds.sel(design=d)
         row = f"{str(d):<{wd}}"
-        for m, (_, k) in cols.items():
-            row += f"{k * float(sel[m].mean()):>25.4g}{k * float(sel[m].max()):>10.4g}"
+        for m in cols:
+            row += f"{m.shown(float(sel[m.name].mean())):>32.4g}{m.shown(float(sel[m.name].max())):>10.4g}"
         print(row + f"{int(sel['diverged'].sum()):>10}{int(sel['lost_lock_count']):>11}")
     print(f"results: {out / 'study.nc'}, {out / 'worst_cases.json'}, {len(figs)} figures")
     for w in study_warnings(ds):  # on stderr too: a summary piped away still says what was lost
@@ -473,13 +476,15 @@ def main(argv=None) -> int:
     args = None
     shown = warnings.showwarning
 
-    def one_line(message, category, *a, **k):  # a recording's warning (RecordingWarning) as the tool's own line
-        if category.__name__ == "RecordingWarning":
+    # a recording's warning (RecordingWarning), an old metric name read (MetricNameWarning) as the tool's own line
+    def one_line(message, category, *a, **k):
+        if category.__name__ in ("RecordingWarning", "MetricNameWarning"):
             print(f"jaxobs: warning: {message}", file=sys.stderr)
         else:
             shown(message, category, *a, **k)
 
     warnings.showwarning = one_line
+    warnings.filterwarnings("default", ".*is an old metric name", DeprecationWarning)  # shown once per place
     try:
         use_host_devices()  # before any JAX computation: one CPU device per usable core
         args = parser.parse_args(argv)
