@@ -53,6 +53,7 @@ LAYERS = [
         "jaxobs.drive.latency",
         "jaxobs.drive.weakening",
     ),
+    ("jaxobs.drive.pwm",),  # carrier-comparison PWM: the switching instants (the inverter's Clarke transforms)
     ("jaxobs.signals._logs",),  # drive logs: a declared layout read into DriveRecordings
     ("jaxobs.signals",),
     ("jaxobs.scenarios", "jaxobs.drive.plant", "jaxobs.drive.dual", "jaxobs.drive.control", "jaxobs.drive.scenario"),
