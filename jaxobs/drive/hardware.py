@@ -114,14 +114,16 @@ class Inverter(AbstractComponent):
     udc: jax.Array  # dc-link voltage, V (> 0)
     f_pwm: jax.Array  # switching frequency, Hz (> 0)
     i_smooth: float = eqx.field(static=True)  # tanh width for the dead-time sign, A (0: exact sign)
-    u_device: jax.Array  # device drop, V (≥ 0)
+    # device drop, V (≥ 0), static: a drop of zero leaves the averaged plant's traced program as it was without
+    # drops (a traced zero would add terms, and XLA's fusion then moves the last bits)
+    u_device: float = eqx.field(static=True)
     pwm: str = eqx.field(static=True)  # "averaged" or "carrier"
 
     def __init__(self, udc=540.0, f_pwm=10e3, i_smooth=0.0, pwm="averaged", u_device=0.0):
         self.udc = check_positive("udc", udc, "Inverter")
         self.f_pwm = check_positive("f_pwm", f_pwm, "Inverter")
         self.i_smooth = _static_float(check_nonnegative("i_smooth", i_smooth, "Inverter"), i_smooth)
-        self.u_device = check_nonnegative("u_device", u_device, "Inverter")
+        self.u_device = _static_float(check_nonnegative("u_device", u_device, "Inverter"), u_device)
         if pwm not in PWM_MODELS:
             raise ValueError(f"Inverter.pwm must be one of {PWM_MODELS}, got {pwm!r}")
         self.pwm = pwm
@@ -188,8 +190,8 @@ class Inverter(AbstractComponent):
 
     @property
     def has_device_drop(self) -> bool:
-        """False where the device drop is statically zero (the averaged plant then skips it)."""
-        return not _statically_zero(self.u_device)
+        """False where the device drop is zero (the averaged plant then skips it)."""
+        return self.u_device != 0.0
 
     def device_drop_error(self, i_a, i_b):
         """Stationary-frame voltage error of the device drops at the current i_ab: −u_device·sgn(i_x) per leg.
