@@ -279,11 +279,6 @@ _ENTRIES = (
         ReducedOrderFluxObserver,
         signal="drive",
         defaults=_rofo_defaults(),
-        closed_form_source="Hinkkanen et al., IEEE TIA 54(6) 2018, pole placement (jaxobs.observers.rofo)",
-        closed_form_rule=(
-            "k1 = c_σ Rs(1/Ld + 1/Lq)/2 + ζ∞|ω̂|, c_σ = 1/2, ζ∞ = 0.2; kθ = 2α', kω = α'², "
-            "α' = (1 − e^(−α_o Ts))/Ts, α_o = 2π·50 (motulator 0.18 defaults)"
-        ),
         machines=_LESO_MACHINES,
         salient=True,
         dual=False,

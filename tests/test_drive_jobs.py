@@ -76,7 +76,7 @@ def test_the_same_tables_inline_give_the_same_drive(tmp_path):
     text = TEKNIC.read_text().split("\n[machine]", 1)[1]
     inline = "[drive.machine]" + text.replace("\n[inverter]", "\n[drive.inverter]").replace(
         "\n[sensors]", "\n[drive.sensors]"
-    )
+    ).replace("\n[control]", "\n[drive.control]")
     path = _job(tmp_path, drive='loop = "sensorless"\n' + inline)
     job = load_job(path)
     a, b = job_drive(job.drive), job_drive(load_job(_job(tmp_path)).drive)
@@ -99,7 +99,7 @@ def test_a_bad_drive_table_is_one_line_naming_the_field(tmp_path):
     with pytest.raises(JobError, match=r"^drive\.file: give a drive file, a shipped machine or the tables inline"):
         load_job(_job(tmp_path, drive='file = "teknic.toml"\nmachine = "spmsm000"'))
     (tmp_path / "bad.toml").write_text(TEKNIC.read_text().replace("Ld = 0.0002 ", "Ld = -0.0002 "))
-    with pytest.raises(JobError, match=r"^drive\.file: 'bad\.toml': machine\.Ld must be in \(0, 10\] H"):
+    with pytest.raises(JobError, match=r"^drive\.file: 'bad\.toml': machine\.Ld must be in \[1e-08, 10\] H"):
         load_job(_job(tmp_path, drive='file = "bad.toml"'))
 
 

@@ -228,7 +228,7 @@ def test_closed_form_offers_every_registered_design_and_keeps_no_formulas():
     assert not any(sym in src for sym in ("λ", "ω", "μ", "²", "eq (")), [s for s in ("λ", "ω", "μ", "²") if s in src]
 
 
-@pytest.mark.parametrize("alias", ["soifo", "second-order-soifo", "lpf", "integrator", "gileso", "faleso"])
+@pytest.mark.parametrize("alias", ["soifo", "second-order-soifo", "lpf", "integrator", "gileso", "faleso", "rofo"])
 def test_closed_form_command_prints_the_flux_observers_and_lesos(alias, capsys):
     assert main(["closed-form", alias, "--json"]) == 0
     res = json.loads(capsys.readouterr().out)

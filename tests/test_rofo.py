@@ -24,6 +24,7 @@ from jaxobs.drive.drivefile import read_drive
 from jaxobs.observers import DriveObserverState, gain_fields
 from jaxobs.observers.rofo import ROFO_ALPHA_O_HZ, ReducedOrderFluxObserver, matched_pole, speed_gains
 from jaxobs.registry import registered
+from jaxobs_tuning.cli_papers import closed_form_rows
 
 ROOT = Path(__file__).resolve().parents[1]
 LAB_FILE = ROOT / "docs" / "examples" / "ipmsm_2p2kw_lab.toml"
@@ -82,6 +83,28 @@ def test_flux_gain_is_motulators_sigma0_at_standstill_and_grows_with_speed():
     sigma0 = 0.25 * float(par.Rs) * (1 / float(par.Ld) + 1 / float(par.Lq))
     assert float(obs.flux_gain(0.0)) == pytest.approx(sigma0, rel=1e-12)  # 42.6 rad/s
     assert float(obs.flux_gain(-300.0)) == pytest.approx(sigma0 + 0.2 * 300.0, rel=1e-12)
+
+
+def test_closed_form_design_is_the_observer_with_its_rows_at_the_machine():
+    """closed_form_design at the lab machine: its observer is the closed form bound there (bit for bit), its rows
+    σ0 and α' are the observer's flux gain at standstill and half its kθ, each row cites Hinkkanen et al. 2018 and
+    the motulator default it takes; the CLI prints the same rows."""
+    par, ts = MACHINES["lab_ipmsm"]
+    m = dict(Rs=float(par.Rs), Ld=float(par.Ld), Lq=float(par.Lq), psi_f=float(par.psi_f))
+    d = ReducedOrderFluxObserver.closed_form_design(ts=ts, **m)
+    bound = _closed_form("lab_ipmsm")
+    assert all(bool(jnp.all(a == b)) for a, b in zip(jax.tree.leaves(d.observer), jax.tree.leaves(bound)))
+    rows = {r.name: r for r in d.rows}
+    assert list(rows) == ["c_sigma", "zeta_inf", "k_theta", "k_omega", "sigma0", "alpha_matched"]
+    assert float(rows["sigma0"].value) == pytest.approx(0.25 * m["Rs"] * (1 / m["Ld"] + 1 / m["Lq"]), rel=1e-12)
+    assert float(rows["sigma0"].value) == pytest.approx(float(bound.flux_gain(0.0)), rel=1e-12)
+    assert float(rows["alpha_matched"].value) == matched_pole(2 * math.pi * ROFO_ALPHA_O_HZ, ts)
+    assert all("Hinkkanen" in r.source and "motulator 0.18" in r.source for r in d.rows)
+    assert "Tuovinen" in d.source and d.inputs["ts"] == ts
+    with pytest.raises(ValueError, match=r"^ReducedOrderFluxObserver\.c_sigma must be finite and > 0"):
+        ReducedOrderFluxObserver.closed_form_design(c_sigma=0.0)  # the gain's declared bound (check_gains)
+    res = closed_form_rows("rofo", {"rs": m["Rs"], "ld": m["Ld"], "lq": m["Lq"], "ts": ts})
+    assert [(g["name"], g["value"]) for g in res["gains"]] == [(r.name, float(r.value)) for r in d.rows]
 
 
 @pytest.mark.parametrize("name", list(MACHINES))

@@ -80,8 +80,8 @@ import jax
 import jax.numpy as jnp
 
 from .._math import wrap
-from .._validate import check_nonnegative, check_positive, check_sample_time
-from ._gains import gain
+from .._validate import as_float, check_nonnegative, check_positive, check_sample_time
+from ._gains import ClosedForm, DesignRow, gain, gain_row
 from .base import AbstractDriveObserver, DriveObserverState, replace_leaves
 
 __all__ = [
@@ -206,6 +206,10 @@ class ReducedOrderFluxObserver(AbstractDriveObserver):
     # no discretization rule: the step is its own update (module doc: the hold equivalent, exact where stated);
     # jobs and the export read ``rule`` of every component, and None says so (the export's "none")
     rule: ClassVar[None] = None
+    # a job may tune it (why_not_tunable ""); jaxobs.linear holds no small-signal model of it (its linearised
+    # poles are in the module doc and tests/test_rofo.py), as for the LPF
+    why_not_tunable: ClassVar[str] = ""
+    small_signal_model: ClassVar[None] = None
 
     # bind() sets these.  The first three keep the drive observers' order (resistance, inductance, start speed:
     # tuning/export reads them so); the machine's Lq and ψf follow.
@@ -242,10 +246,9 @@ class ReducedOrderFluxObserver(AbstractDriveObserver):
         self.Ld = check_positive("Ld", Ld, name)
         self.Lq = check_positive("Lq", Lq, name)
         self.psi_f = check_positive("psi_f", psi_f, name)
-        self.c_sigma = check_positive("c_sigma", c_sigma, name)
-        self.zeta_inf = check_positive("zeta_inf", zeta_inf, name)
-        self.k_theta = check_positive("k_theta", k_theta, name)
-        self.k_omega = check_positive("k_omega", k_omega, name)
+        # the gains' declared bounds (> 0) are checked by check_gains (AbstractObserver.__check_init__)
+        self.c_sigma, self.zeta_inf = as_float(c_sigma), as_float(zeta_inf)
+        self.k_theta, self.k_omega = as_float(k_theta), as_float(k_omega)
         self.omega_init = jnp.asarray(0.0 if omega_init is None else omega_init, dtype=self.Rs.dtype)
         self.ts = check_sample_time("ts", ts, name)
         if not (math.isfinite(float(psi_floor)) and float(psi_floor) > 0):
@@ -253,7 +256,7 @@ class ReducedOrderFluxObserver(AbstractDriveObserver):
         self.psi_floor = float(psi_floor)
 
     @classmethod
-    def closed_form(
+    def closed_form_design(
         cls,
         alpha_o_hz=ROFO_ALPHA_O_HZ,
         zeta_inf=ROFO_ZETA_INF,
@@ -265,7 +268,7 @@ class ReducedOrderFluxObserver(AbstractDriveObserver):
         omega_init=0.0,
         ts=1e-4,
         **kw,
-    ) -> ReducedOrderFluxObserver:
+    ) -> ClosedForm:
         """Pole placement (module doc, derived from the linearised error dynamics of Hinkkanen 2018's observer):
 
         - flux: k1 = σ0 + ζ∞|ω̂m| with σ0 = c_σ R̂s(1/L̂d + 1/L̂q)/2, c_σ = 1/2 (the poles of s² + 2k1 s + ωm²
@@ -275,7 +278,8 @@ class ReducedOrderFluxObserver(AbstractDriveObserver):
 
         The values are motulator 0.18.0's defaults for a sensorless drive without an inertia
         (``default_sensorless_k_o``, ``default_alpha_o``, ``matched_pole``); the paper's text is not in the
-        project's papers.
+        project's papers, so the rows cite the paper without an equation number.  The machine's defaults are
+        placeholders (``bind`` sets them): the gains do not depend on them, the row σ0 does.
 
         Args:
             alpha_o_hz: The speed estimate's double pole α_o/2π, Hz (> 0).
@@ -290,13 +294,56 @@ class ReducedOrderFluxObserver(AbstractDriveObserver):
             **kw: The constructor's keywords.
 
         Returns:
-            The :class:`ReducedOrderFluxObserver`.
+            The :class:`~jaxobs.observers.ClosedForm`: the :class:`ReducedOrderFluxObserver` and the rows
+            c_sigma, zeta_inf, k_theta, k_omega, σ0 at the assumed machine and the matched pole α'.
 
         Raises:
             ValueError: A value out of its range.
         """
         k_theta, k_omega = speed_gains(alpha_o_hz, ts)
-        return cls(Rs, Ld, Lq, psi_f, c_sigma, zeta_inf, k_theta, k_omega, omega_init, ts=ts, **kw)
+        obs = cls(Rs, Ld, Lq, psi_f, c_sigma, zeta_inf, k_theta, k_omega, omega_init, ts=ts, **kw)
+        # no equation numbers: the paper's text is not in the project's papers (module doc); each row names the
+        # motulator 0.18 default it takes
+        flux = "Hinkkanen et al. 2018 (k1 = σ0 + ζ∞|ω|); motulator 0.18 default_sensorless_k_o"
+        speed = "Hinkkanen et al. 2018 (pole placement); motulator 0.18 default_alpha_o, matched_pole"
+        sigma0 = obs.c_sigma * 0.5 * obs.Rs * (1.0 / obs.Ld + 1.0 / obs.Lq)
+        rows = (
+            gain_row(cls, "c_sigma", obs.c_sigma, "c_σ = 1/2: σ0 = Rs(1/Ld + 1/Lq)/4", flux),
+            gain_row(cls, "zeta_inf", obs.zeta_inf, "ζ∞ = 0.2 (flux poles' damping at high speed)", flux),
+            gain_row(cls, "k_theta", obs.k_theta, "kθ = 2α' (double pole at −α')", speed),
+            gain_row(cls, "k_omega", obs.k_omega, "kω = α'²", speed),
+            DesignRow("sigma0", sigma0, "s-1", "σ0 = c_σ Rs(1/Ld + 1/Lq)/2 (poles 0, −2σ0 at ω = 0)", flux),
+            DesignRow("alpha_matched", obs.k_theta / 2, "s-1", "α' = (1 − e^(−α_o Ts))/Ts, α_o = 2π·alpha_o_hz", speed),
+        )
+        inputs = dict(
+            alpha_o_hz=alpha_o_hz,
+            zeta_inf=zeta_inf,
+            c_sigma=c_sigma,
+            Rs=Rs,
+            Ld=Ld,
+            Lq=Lq,
+            psi_f=psi_f,
+            omega_init=omega_init,
+            ts=ts,
+        )
+        source = (
+            "Hinkkanen, Saarakkala, Awan, Mölsä, Tuovinen, IEEE TIA 54(6) 2018, pole placement; "
+            "motulator 0.18 defaults (c_σ = 1/2, ζ∞ = 0.2, α_o = 2π·50)"
+        )
+        return ClosedForm(obs, inputs, rows, source)
+
+    @classmethod
+    def closed_form(cls, **kw) -> ReducedOrderFluxObserver:
+        """The observer of :meth:`closed_form_design` (same arguments; Hinkkanen 2018's observer, motulator's
+        defaults).
+
+        Args:
+            **kw: :meth:`closed_form_design`'s arguments.
+
+        Returns:
+            The :class:`ReducedOrderFluxObserver`.
+        """
+        return cls.closed_form_design(**kw).observer
 
     # --- the drive-observer contract ------------------------------------------------------------------------
     def bind(self, est_par, omega_e) -> ReducedOrderFluxObserver:
