@@ -13,6 +13,7 @@ duty ratios by min-max injection.  It prints the stator current at every solver 
 
 from __future__ import annotations
 
+import importlib.metadata
 import json
 import math
 import sys
@@ -73,11 +74,9 @@ def run(case):
 
 
 def main():
-    import motulator
-
     case = json.loads(sys.argv[1])
     out = run(case)
-    out["version"] = getattr(motulator, "__version__", "?")
+    out["version"] = importlib.metadata.version("motulator")
     print(json.dumps(out))
 
 

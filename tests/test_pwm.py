@@ -263,3 +263,36 @@ def test_drive_file_pwm_keys():
     ):
         with pytest.raises(ValueError, match=match):
             D.drive_from_table({**raw, "inverter": {**raw["inverter"], **extra}}, "lab")
+
+
+def test_hexagon_limit_keeps_the_direction_and_reaches_the_vertices():
+    """``voltage_limit="hexagon"``: U_dc/√3 across the edges' middles (30°), 2U_dc/3 at the vertices (0°); a vector
+    beyond is scaled onto the hexagon along its own direction (minimum phase error), one inside is untouched, and
+    carrier PWM applies any of them on average (every |m_x| ≤ 1).  The default circle is unchanged."""
+    udc = 540.0
+    hexa, circ = D.Inverter(udc, 1 / TS, voltage_limit="hexagon"), D.Inverter(udc, 1 / TS)
+    ang = jnp.linspace(-math.pi, math.pi, 721)
+    big = 1000.0
+    ua, ub = hexa.limit(big * jnp.cos(ang), big * jnp.sin(ang))
+    mag = np.hypot(np.asarray(ua), np.asarray(ub))
+    # the hexagon's radius in each direction: U_dc/√3 / cos(φ), φ the angle from the nearest edge's normal
+    phi = np.mod(np.asarray(ang), math.pi / 3) - math.pi / 6
+    np.testing.assert_allclose(mag, udc / math.sqrt(3) / np.cos(phi), rtol=1e-12)
+    np.testing.assert_allclose(np.arctan2(np.asarray(ub), np.asarray(ua)), np.asarray(ang), atol=1e-12)  # direction
+    assert mag.max() == pytest.approx(2 * udc / 3, rel=1e-12) and mag.min() == pytest.approx(udc / math.sqrt(3))
+    assert float(hexa.u_vertex) == pytest.approx(360.0) and float(circ.u_vertex) == pytest.approx(udc / math.sqrt(3))
+    small = hexa.limit(jnp.asarray(200.0), jnp.asarray(-100.0))
+    assert (float(small[0]), float(small[1])) == (200.0, -100.0)
+    cu = circ.limit(big * jnp.cos(ang), big * jnp.sin(ang))
+    np.testing.assert_allclose(np.hypot(np.asarray(cu[0]), np.asarray(cu[1])), udc / math.sqrt(3), rtol=1e-12)
+    h, va, vb = jax.vmap(lambda a, b: carrier_intervals(udc, TS, 0.0, 0.0, a, b, jnp.ones(3)))(ua, ub)
+    np.testing.assert_allclose(np.asarray((h * va).sum(1) / TS), np.asarray(ua), atol=1e-9)
+    np.testing.assert_allclose(np.asarray((h * vb).sum(1) / TS), np.asarray(ub), atol=1e-9)
+    with pytest.raises(ValueError, match="Inverter.voltage_limit"):
+        D.Inverter(voltage_limit="square")
+    raw = _lab_table()
+    f = D.drive_from_table({**raw, "inverter": {**raw["inverter"], "voltage_limit": "hexagon"}}, "lab")
+    assert f.drive.inverter.voltage_limit == "hexagon" and f.derived["u_vertex"].value == pytest.approx(360.0)
+    assert "u_vertex" not in D.drive_from_table(raw, "lab").derived
+    with pytest.raises(ValueError, match="inverter.voltage_limit"):
+        D.drive_from_table({**raw, "inverter": {**raw["inverter"], "voltage_limit": "square"}}, "lab")

@@ -39,6 +39,7 @@ The file (SI units, or the unit in the key's name; ``[machine]``'s keys from ``p
     compute_delay = 1          # periods, 0 or 1
     pwm = "averaged"           # or "carrier": carrier-comparison PWM, f_pwm_hz = f_sample_hz (jaxobs.drive.pwm)
     device_drop_v = 0.0        # V, each conducting switch's or diode's drop
+    voltage_limit = "circle"   # or "hexagon": up to 2 u_dc/3 at its vertices, minimum phase error (Inverter.limit)
     [control]
     current_bandwidth_hz = 500 # α_c/2π
     speed_bandwidth_hz = 5     # α_s/2π
@@ -223,6 +224,7 @@ DRIVE_FILE_KEYS: dict[str, dict[str, _Key]] = {
         "compute_delay": _Key(_I, 0, 1, unit="periods"),
         "pwm": _Key("str", choices=("averaged", "carrier")),
         "device_drop_v": _Key(_F, 0.0, 100.0, unit="V"),
+        "voltage_limit": _Key("str", choices=("circle", "hexagon")),
     },
     "control": {
         "current_bandwidth_hz": _Key(_F, 0.01, 1e5, unit="Hz"),
@@ -799,7 +801,15 @@ def drive_from_table(raw: dict, name: str = "drive") -> DriveFile:
         )
     if "pwm" in inv:  # printed where the file chooses (a file without it prints what it printed before)
         rec("pwm", pwm, "", "the plant's inverter: averaged, or carrier comparison (jaxobs.drive.pwm)", True)
-    inverter = Inverter(inv["u_dc"], f_pwm, pwm=pwm, u_device=inv.get("device_drop_v", 0.0))
+    limit = inv.get("voltage_limit", "circle")
+    if "voltage_limit" in inv:  # printed where the file chooses
+        rule = "the circle u_dc/√3 in every direction"
+        if limit == "hexagon":
+            rule = (
+                "the hexagon: u_dc/√3 across its edges, 2 u_dc/3 at its vertices, minimum phase error (Inverter.limit)"
+            )
+        rec("u_vertex", 2 * inv["u_dc"] / 3 if limit == "hexagon" else inv["u_dc"] / _S3, "V", rule, True)
+    inverter = Inverter(inv["u_dc"], f_pwm, pwm=pwm, u_device=inv.get("device_drop_v", 0.0), voltage_limit=limit)
     drive = Drive(foc, inverter, sensorless=True, latency=latency)
 
     # --- sensors

@@ -38,6 +38,7 @@ __all__ = ["PWM_MODELS", "Inverter", "InverterInput", "Sensors", "SensorInput", 
 
 _S3 = math.sqrt(3.0)
 PWM_MODELS = ("averaged", "carrier")  # Inverter.pwm's choices
+VOLTAGE_LIMITS = ("circle", "hexagon")  # Inverter.voltage_limit's choices
 
 
 def ab_to_abc(a, b):
@@ -106,6 +107,9 @@ class Inverter(AbstractComponent):
         i_smooth: The tanh width for the dead-time sign, A (0: the exact sign).
         pwm: ``"averaged"`` (default) or ``"carrier"``.
         u_device: The conducting device's voltage drop, V (≥ 0; default 0).
+        voltage_limit: ``"circle"`` (default: |u| ≤ U_dc/√3, the linear range) or ``"hexagon"`` (the whole
+            space-vector hexagon, up to 2U_dc/3 at its vertices; overmodulation by minimum phase error, see
+            :meth:`limit`).
 
     Raises:
         ValueError: A value out of its range, naming the field.
@@ -118,8 +122,9 @@ class Inverter(AbstractComponent):
     # drops (a traced zero would add terms, and XLA's fusion then moves the last bits)
     u_device: float = eqx.field(static=True)
     pwm: str = eqx.field(static=True)  # "averaged" or "carrier"
+    voltage_limit: str = eqx.field(static=True)  # "circle" or "hexagon"
 
-    def __init__(self, udc=540.0, f_pwm=10e3, i_smooth=0.0, pwm="averaged", u_device=0.0):
+    def __init__(self, udc=540.0, f_pwm=10e3, i_smooth=0.0, pwm="averaged", u_device=0.0, voltage_limit="circle"):
         self.udc = check_positive("udc", udc, "Inverter")
         self.f_pwm = check_positive("f_pwm", f_pwm, "Inverter")
         self.i_smooth = _static_float(check_nonnegative("i_smooth", i_smooth, "Inverter"), i_smooth)
@@ -127,13 +132,27 @@ class Inverter(AbstractComponent):
         if pwm not in PWM_MODELS:
             raise ValueError(f"Inverter.pwm must be one of {PWM_MODELS}, got {pwm!r}")
         self.pwm = pwm
+        if voltage_limit not in VOLTAGE_LIMITS:
+            raise ValueError(f"Inverter.voltage_limit must be one of {VOLTAGE_LIMITS}, got {voltage_limit!r}")
+        self.voltage_limit = voltage_limit
 
     @property
     def u_max(self):
         return self.udc / _S3
 
+    @property
+    def u_vertex(self):
+        """The largest |u| the inverter applies: 2U_dc/3 at the hexagon's vertices (U_dc/√3 under the circle)."""
+        return 2.0 * self.udc / 3.0 if self.voltage_limit == "hexagon" else self.u_max
+
     def limit(self, u_a, u_b):
-        """Scale the voltage vector back onto the circle |u| ≤ U_dc/√3 (direction kept).
+        """Scale the voltage vector back onto the circle |u| ≤ U_dc/√3, or onto the hexagon (direction kept).
+
+        The hexagon is max_x v_x − min_x v_x ≤ U_dc over the phase voltages (what min-max injection can apply:
+        U_dc/√3 across its edges' middles, 2U_dc/3 at its vertices).  A vector beyond it is scaled back onto it
+        along its own direction: minimum phase error overmodulation.  DECISION: minimum phase error rather than
+        minimum magnitude error (the nearest point of the hexagon), because the current controller's angle and
+        the decoupling it computes stay right; the lost magnitude is what its anti-windup sees.
 
         Args:
             u_a: u_α, V.
@@ -142,6 +161,11 @@ class Inverter(AbstractComponent):
         Returns:
             The limited ``(u_α, u_β)``, V.
         """
+        if self.voltage_limit == "hexagon":
+            va, vb, vc = ab_to_abc(u_a, u_b)
+            span = jnp.maximum(jnp.maximum(va, vb), vc) - jnp.minimum(jnp.minimum(va, vb), vc)
+            scale = jnp.where(span > self.udc, self.udc / jnp.maximum(span, 1e-12), 1.0)
+            return u_a * scale, u_b * scale
         mag = safe_norm2(u_a, u_b)
         scale = jnp.where(mag > self.u_max, self.u_max / jnp.maximum(mag, 1e-12), 1.0)
         return u_a * scale, u_b * scale

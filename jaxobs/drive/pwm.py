@@ -78,6 +78,18 @@ def switching_instants(m, period, dead_time, s):
     return rise, fall
 
 
+# a sorting network for six values (12 compare-exchanges, Knuth TAOCP 5.3.4): XLA's sort op under vmap on CPU
+# calls a comparator per element and cost more than the seven RK4 steps it orders
+_NETWORK6 = ((1, 2), (4, 5), (0, 2), (3, 5), (0, 1), (3, 4), (1, 4), (0, 3), (2, 5), (1, 3), (2, 4), (2, 3))
+
+
+def _sorted6(v):
+    v = list(v)
+    for i, j in _NETWORK6:
+        v[i], v[j] = jnp.minimum(v[i], v[j]), jnp.maximum(v[i], v[j])
+    return v
+
+
 def carrier_intervals(udc, period, dead_time, u_device, u_a, u_b, s):
     """The sub-intervals of one carrier period and the stationary-frame voltage over each.
 
@@ -96,9 +108,9 @@ def carrier_intervals(udc, period, dead_time, u_device, u_a, u_b, s):
     """
     m = modulation_indices(u_a, u_b, udc)
     rise, fall = switching_instants(m, period, dead_time, s)
-    edges = jnp.sort(jnp.concatenate([rise, fall]))
-    zero = jnp.zeros((1,), edges.dtype)
-    bounds = jnp.concatenate([zero, edges, zero + period])
+    edges = _sorted6([rise[0], rise[1], rise[2], fall[0], fall[1], fall[2]])
+    zero = jnp.zeros((1,), rise.dtype)
+    bounds = jnp.concatenate([zero, jnp.stack(edges), zero + period])
     h = jnp.diff(bounds)
     mid = 0.5 * (bounds[:-1] + bounds[1:])
     on = (rise[None, :] <= mid[:, None]) & (mid[:, None] < fall[None, :])  # (7, 3): upper switch on
