@@ -296,3 +296,15 @@ def test_hexagon_limit_keeps_the_direction_and_reaches_the_vertices():
     assert "u_vertex" not in D.drive_from_table(raw, "lab").derived
     with pytest.raises(ValueError, match="inverter.voltage_limit"):
         D.drive_from_table({**raw, "inverter": {**raw["inverter"], "voltage_limit": "square"}}, "lab")
+
+
+@pytest.mark.parametrize("extra, key", [({"pwm": "carrier"}, "pwm"), ({"device_drop_v": 1.0}, "device_drop_v")])
+def test_a_dual_drive_file_refuses_carrier_pwm_and_device_drops(extra, key):
+    """The dual machine's plant (jaxobs.drive.dual) runs the averaged inverter: a [dual] file asking for more is
+    refused in one line, not run without it."""
+    from jaxobs.safetoml import read_toml
+
+    raw = read_toml(LAB.parent / "ipmsm002_dual_330v.toml", "drive file")[0]
+    D.drive_from_table(raw, "dual")  # the file as shipped is accepted
+    with pytest.raises(ValueError, match=f"inverter.{key}"):
+        D.drive_from_table({**raw, "inverter": {**raw["inverter"], **extra}}, "dual")
