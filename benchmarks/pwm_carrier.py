@@ -11,7 +11,7 @@
    motulator runs the same case (:mod:`benchmarks.peer_motulator_pwm`) where ``$MOTULATOR_PYTHON`` is given.
 2. **Cost**: the file's sensored closed loop (encoder), a batch of scenarios (speed × load) over 0.1 s, jitted and
    vmapped, averaged vs carrier (the drive's n_sub = 2 RK4 steps per sub-interval, and 1) in the same run:
-   scenario-steps per second (the best of three after compiling).
+   scenario-steps per second (the best of three after compiling); and the plant alone under a rotating command.
 
 The output is meant for benchmarks/results/ with the date and ``uptime`` (the machine's load moves the cost).
 """
@@ -178,6 +178,41 @@ def cost(batch):
     return out, sc.omega_m0.shape[0], n
 
 
+def plant_cost(batch):
+    """Scenario-steps per second of the plant alone (the lab machine under a rotating command, 1 µs dead time)."""
+    import jax
+    import jax.numpy as jnp
+
+    from jaxobs import drive as D
+    from jaxobs.drive import read_drive
+    from jaxobs.drive.plant import PlantState
+
+    d = read_drive(FILE)
+    inv, n = d.drive.inverter, int(round(0.1 / d.ts))
+    x0 = jnp.asarray([0.0, 1.0, 100.0, 0.0]) + jnp.linspace(0.0, 1.0, batch)[:, None]
+    out = {}
+    for name, pwm, n_sub in (("averaged", "averaged", 2), ("carrier", "carrier", 2), ("carrier_1", "carrier", 1)):
+        plant = D.PMSM(d.machine, D.Inverter(inv.udc, inv.f_pwm, pwm=pwm), 1e-6, ts=d.ts, n_sub=n_sub)
+
+        def run(x, plant=plant):
+            def step(s, k):
+                th = 0.04 * k
+                s, o = plant.step(s, D.PlantInput(150 * jnp.cos(th), 150 * jnp.sin(th), 0.0))
+                return s, o.i_a
+
+            return jax.lax.scan(step, PlantState(x, None), jnp.arange(n))[1]
+
+        f = jax.jit(jax.vmap(run))
+        jax.block_until_ready(f(x0))
+        best = math.inf
+        for _ in range(3):
+            t0 = time.perf_counter()
+            jax.block_until_ready(f(x0))
+            best = min(best, time.perf_counter() - t0)
+        out[name] = batch * n / best
+    return out
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--motulator-python", default=os.environ.get("MOTULATOR_PYTHON"))
@@ -211,6 +246,10 @@ def main(argv=None) -> int:
     print(f"cost: sensored closed loop, batch {b}, {n} steps, jit+vmap, scenario-steps/s: averaged (n_sub 2) "
           f"{r_a:.3g}; carrier, n_sub 2 per sub-interval {r_c:.3g} ({r_c / r_a:.3f} of averaged), n_sub 1 "
           f"{r_1:.3g} ({r_1 / r_a:.3f})")  # fmt: skip
+    p = plant_cost(b)
+    p_a, p_c, p_1 = p["averaged"], p["carrier"], p["carrier_1"]
+    print(f"cost: the plant alone, batch {b}, {n} steps: averaged (n_sub 2) {p_a:.3g}; carrier, n_sub 2 {p_c:.3g} "
+          f"({p_c / p_a:.3f}), n_sub 1 {p_1:.3g} ({p_1 / p_a:.3f})")  # fmt: skip
     print(subprocess.run(["uptime"], capture_output=True, text=True).stdout.rstrip())
     return 0
 
