@@ -70,14 +70,26 @@ import numpy as np
 from . import metrics as M
 from ._simulate import AbstractSave, SaveAll
 from .drive import DriveOutput, DualOutput
-from .families import AbstractScenarios, GridSignals, RecordedSignals
+from .families import AbstractFamily, GridSignals
+from .files import atomic_path
 from .observers import gain_fields, gain_table
 from .provenance import cf_dataset, provenance
 from .quantities import Metric
 from .runner import run_scenarios
-from .scenarios import GRID_SIGNAL_AXES, LHS, AbstractSampler, Grid, Random, Recordings, Sobol
+from .scenarios import GRID_SIGNAL_AXES, LHS, AbstractSampler, Grid, Random, Recordings, Sobol, sampler_of
 
-__all__ = ["Flag", "METRICS", "STUDY_AXES", "STUDY_METRICS", "StudyContext", "study", "run_study", "worst_cases"]
+__all__ = [
+    "Flag",
+    "METRICS",
+    "STUDY_AXES",
+    "STUDY_METRICS",
+    "StudyContext",
+    "study",
+    "run_study",
+    "worst_cases",
+    "write_study",
+    "gain_variables",
+]
 
 
 @dataclass(frozen=True)
@@ -420,7 +432,7 @@ DIVERGED = Flag("diverged", "simulation diverged or a metric is not finite (1: i
 
 def study(
     designs: dict,
-    scenarios: AbstractScenarios,
+    scenarios: AbstractFamily,
     sampler: AbstractSampler,
     metrics,
     *,
@@ -500,7 +512,7 @@ def study(
     )
     values = run.values if store is None else {d: store.load(d) for d in designs}
     dnames = list(designs)
-    dims, shape, coords = sampler.layout(lambda name: _axis_meta(scenarios, name))
+    dims, shape, coords = sampler.layout(lambda name: _axis_meta(scenarios, sampler, name))
     dims = ("design", *dims)
     what = "observer design (closing the loop sensorless)" if scenarios.closed_loop else "observer design"
     coords["design"] = ("design", dnames, {"long_name": what})
@@ -546,12 +558,36 @@ def study(
     return cf_dataset(ds, f"jaxobs {label}: every design on every scenario, its metrics and flags")
 
 
-def _axis_meta(scenarios: AbstractScenarios, name: str) -> dict:
-    if name == "recording":
-        return {"long_name": "recording file (relative to the study file)"}
-    if name == "scenario":
-        return {"units": "1", "long_name": "scenario given whole (jaxobs.scenarios.Given)"}
-    return scenarios.axes[name].attrs
+def gain_variables(designs: dict) -> dict:
+    """The designs' gains as Dataset variables ``gain_<name>`` over ``design``: one variable per gain, so each
+    carries its own CF units (a (design, gain_name) array could only say "see gain_units", which no CF reader
+    understands); NaN where a design has no such gain.  What every preset and the envelope write.
+
+    Args:
+        designs: name -> observer.
+
+    Returns:
+        ``gain_<name>`` -> (dims, values, attrs), each gain's units its field's (:func:`jaxobs.observers.gain`).
+
+    Raises:
+        ValueError: two designs give one gain name different units (:func:`jaxobs.observers.gain_table`).
+    """
+    table = gain_table(designs)
+    # the gain fields alone: what a study binds per scenario (bound_fields) is none
+    gains = {d: {g: float(getattr(obs, g)) for g in gain_fields(obs)} for d, obs in designs.items()}
+    return {
+        f"gain_{g}": (
+            ("design",),
+            np.asarray([gains[d].get(g, np.nan) for d in designs], dtype=float),
+            {"units": info.units, "long_name": f"observer gain {g} (NaN: the design has no such gain)"},
+        )
+        for g, info in table.items()
+    }
+
+
+def _axis_meta(scenarios: AbstractFamily, sampler: AbstractSampler, name: str) -> dict:
+    # a family's axis, or a dim the sampler has of its own (a Given batch's, the recordings')
+    return scenarios.axes[name].attrs if name in scenarios.axes else dict(sampler.dim_attrs)
 
 
 # --------------------------------------------------------------------------
@@ -589,52 +625,76 @@ def run_study(
     designs: dict,
     axes,
     *,
-    t_event=0.1,
+    family: GridSignals | None = None,
+    t_event=None,
     horizon=0.4,
     steady_from=None,
     band_hz=0.05,
+    sampling: str | None = None,
     sample=0,
-    seed=0,
+    seed=None,
     chunk_size=2048,
     progress=False,
     return_seconds=False,
     mesh=None,
     store=None,
 ):
-    """Simulate every FLL design on every scenario; returns an ``xarray.Dataset`` (see module doc):
-    :func:`study` on :class:`~jaxobs.families.GridSignals` (or a :class:`~jaxobs.scenarios.Recordings`
-    sampler's recorded voltages) with the FLL metrics.
+    """Simulate every FLL design on every scenario: :func:`study` on :class:`~jaxobs.families.GridSignals` (or a
+    :class:`~jaxobs.scenarios.Recordings` sampler's recorded voltages) with the FLL metrics (see module doc).
 
-    ``axes``: a dict of axis values (a :class:`~jaxobs.scenarios.Grid`, or with ``sample > 0`` a
-    :class:`~jaxobs.scenarios.Random` sample of that size seeded by ``seed``), or a sampler itself
-    (``Grid``, ``Random``, ``Sobol``, ``LHS``, or ``Recordings``: recorded signals with truth columns,
-    dims ``(design, recording)``).  With ``return_seconds=True`` returns ``(dataset, seconds)``, the wall
-    time of the runs (kept out of the Dataset, so two identical studies write identical files).  ``mesh``:
-    the devices each chunk is split over, a one-axis ``"batch"`` mesh (default ``jaxobs.batch_mesh()``,
-    every device of every process; ``jaxobs.batch_mesh(jax.devices()[:1])`` keeps to one device).
-    ``store``: a :class:`jaxobs.chunkstore.ChunkStore`: each chunk's values go to disk as it finishes (none
-    held during the run), chunks already there (an interrupted run's, ``resume=True``) are not run again, and
-    the Dataset is laid out from the store: the same Dataset as without one.
+    Args:
+        designs: name -> FLL.
+        axes: a dict of axis values, or a sampler itself (``Grid``, ``Random``, ``Sobol``, ``LHS``, or
+            ``Recordings``: recorded signals with truth columns, dims ``(design, recording)``), as
+            :func:`jaxobs.scenarios.sampler_of` takes them (with ``sampling``, ``sample`` and ``seed``).
+        family: the grid signals (:class:`~jaxobs.families.GridSignals`: their event, nominal frequency and
+            seed); None: built from ``t_event`` (default 0.1 s), ``seed`` (default 0) and the first design's
+            nominal frequency.
+        t_event: the event's time, s (with ``family``: its own).
+        horizon, steady_from, band_hz: the run's length, the steady window's start (default three quarters
+            of the way from ``t_event``) and the settling band, Hz.
+        sampling, sample, seed: how a dict of axes is sampled (:func:`jaxobs.scenarios.sampler_of`; ``seed``
+            with ``family``: its own).
+        chunk_size: scenarios per compiled call.
+        progress: ``True``: a tqdm bar; a callable ``progress(done, total)``.
+        return_seconds: also return the wall time of the runs (kept out of the Dataset, so two identical
+            studies write identical files).
+        mesh: the devices each chunk is split over, a one-axis ``"batch"`` mesh (default
+            ``jaxobs.batch_mesh()``, every device of every process, as every preset;
+            ``jaxobs.batch_mesh(jax.devices()[:1])`` keeps to one device).
+        store: a :class:`jaxobs.chunkstore.ChunkStore`: each chunk's values go to disk as it finishes, chunks
+            already there (an interrupted run's, ``resume=True``) are not run again, and the Dataset is laid
+            out from the store: the same Dataset as without one.
+
+    Returns:
+        The Dataset, or ``(dataset, seconds)`` with ``return_seconds``.
+
+    Raises:
+        ValueError: no designs, an axis or sampler refused, ``family`` given with ``t_event`` or ``seed``, or
+            ``horizon``, ``t_event`` or ``chunk_size`` out of range.
     """
     if not designs:
         raise ValueError("run_study needs at least one design")
-    if isinstance(axes, dict):
-        for name in axes:  # names and values are checked by grid_signals
-            if len(axes[name]) < 1:
-                raise ValueError(f"study axis {name!r} needs at least one value")
-        sampler = Random(axes, sample, seed) if sample else Grid(axes)
-    elif isinstance(axes, AbstractSampler):
-        sampler = axes
-    else:
-        raise ValueError(f"axes must be a dict of axis values or a sampler (jaxobs.scenarios), got {axes!r}")
+    if family is not None:
+        if not isinstance(family, GridSignals):
+            raise ValueError(f"run_study: family must be GridSignals (jaxobs.families), got {type(family).__name__}")
+        if t_event is not None or seed is not None:
+            raise ValueError("run_study: give family or t_event and seed, not both (the family holds its own)")
+        t_event, seed = family.t_event, family.seed
+    t_event = 0.1 if t_event is None else t_event
+    seed = 0 if seed is None else seed
+    sampler = sampler_of(axes, sampling=sampling, sample=sample, seed=seed)
     if not horizon > t_event >= 0:
         raise ValueError(f"horizon must exceed t_event >= 0, got t_event={t_event}, horizon={horizon}")
     if chunk_size < 1:
         raise ValueError(f"chunk_size must be >= 1, got {chunk_size}")
     steady_from = t_event + 0.75 * (horizon - t_event) if steady_from is None else steady_from
     recordings = isinstance(sampler, Recordings)
-    freq = float(next(iter(designs.values())).omega_n) / (2 * math.pi)
-    family = RecordedSignals(GridSignals) if recordings else GridSignals(t_event, freq, seed)
+    freq = float(next(iter(designs.values())).omega_n) / (2 * math.pi) if family is None else family.freq
+    if recordings:
+        family = GridSignals.recorded()
+    elif family is None:
+        family = GridSignals(t_event, freq, seed)
 
     def n_period(obs) -> int:
         # settle on the one-period average of f̂: one period of the grid's frequency (a recording's: the
@@ -648,17 +708,7 @@ def run_study(
         # grid_signals's checks is a bound on one axis, so these two pass only if every point inside does)
         ends = [tuple(float(f(sampler.axes[k])) for k in sampler.names) for f in (np.min, np.max)]
         family.build(sampler.names, ends)
-    gains_present = gain_table(designs)  # each gain's units are its field's (jaxobs.observers.gain)
-    # one variable per gain, so each carries its own CF units (a (design, gain_name) array could only say
-    # "see gain_units", which no CF reader understands)
-    gains = {
-        f"gain_{g}": (
-            ("design",),
-            np.asarray([float(getattr(obs, g)) if g in gain_fields(obs) else np.nan for obs in designs.values()]),
-            {"units": gains_present[g].units, "long_name": f"observer gain {g} (NaN: the design has no such gain)"},
-        )
-        for g in gains_present
-    }
+    gains = gain_variables(designs)
     what = "recordings on which the design lost lock" if recordings else "scenarios that lost lock"
     flags = (
         Flag(
@@ -735,3 +785,22 @@ def worst_cases(ds, metric: str, k: int = 5):
             item.update(design=str(d), metric=metric)
             out.append(item)
     return out
+
+
+def write_study(ds, path, store=None) -> None:
+    """The one study writer: ``ds`` as NetCDF4 at ``path`` (h5netcdf), written beside it and renamed over it
+    (:func:`jaxobs.files.atomic_path`), so a ``path`` that exists is a whole study.
+
+    Args:
+        ds: A study's Dataset (:func:`study`, a preset's).
+        path: The file (``study.nc``).
+        store: The :class:`jaxobs.chunkstore.ChunkStore` the study ran into, or None: retired before the rename
+            (never both on disk: a ``--resume`` would be refused, its chunks left) and removed after it
+            (the results are in ``path``: nothing is left to resume).
+    """
+    with atomic_path(path) as tmp:
+        ds.to_netcdf(tmp, engine="h5netcdf")
+        if store is not None:
+            store.retire()
+    if store is not None:
+        store.remove()

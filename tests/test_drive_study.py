@@ -203,9 +203,9 @@ def test_a_study_runs_the_jobs_machine_and_drive(tmp_path):
     st = tmp_path / "s.toml"
     st.write_text(STUDY_HEAD + f'[designs.tuned]\nresult = "{res.name}"\n[axes]\ndRs = [0.0]\n')
     spec = load_study(st)
-    assert spec.opts["machine"] == D.bench_machine("spmsm000") and float(spec.opts["machine"].J) == papers.BENCH_J_000
+    assert spec.family.machine == D.bench_machine("spmsm000") and float(spec.family.machine.J) == papers.BENCH_J_000
     want = job_drive(DriveSpec(machine="spmsm000"))
-    got = spec.opts["drive"]
+    got = spec.family.drive
     assert got.sensorless and got.ts == want.ts and got.settle == want.settle
     assert bool(eqx.tree_equal(got.foc, want.foc))
     assert float(spec.designs["tuned"].omega0) == 3000.0
@@ -213,7 +213,7 @@ def test_a_study_runs_the_jobs_machine_and_drive(tmp_path):
     assert hashlib.sha256(res.read_bytes()).hexdigest() in spec.provenance["result_files"]
     # without a result: the component's default machine, the IPMSM on its bench (J = BENCH_J_002, not the motor's)
     st.write_text(STUDY_HEAD + '[designs.cf]\nclosed_form = "CLESO"\n[axes]\ndRs = [0.0]\n')
-    assert float(load_study(st).opts["machine"].J) == papers.BENCH_J_002
+    assert float(load_study(st).family.machine.J) == papers.BENCH_J_002
     # a result tuned on one machine, the study on another: one line naming the design
     st.write_text(STUDY_HEAD + f'machine = "ipmsm002"\n[designs.tuned]\nresult = "{res.name}"\n[axes]\ndRs = [0.0]\n')
     with pytest.raises(JobError, match=r"designs.tuned.result: was tuned on spmsm000, the study runs ipmsm002"):
@@ -238,11 +238,11 @@ def test_t_event_of_a_drive_study(tmp_path):
     st = tmp_path / "s.toml"
     body = '[designs.c]\nclosed_form = "FALESO"\n[axes]\n'
     st.write_text(STUDY_HEAD + body + "load_step_nm = [0.0, 5.0]\n")
-    assert load_study(st).opts["t_event"] == pytest.approx(0.1)
+    assert load_study(st).family.t_event == pytest.approx(0.1)
     st.write_text(STUDY_HEAD + body + "dRs = [0.0]\n")
-    assert load_study(st).opts["t_event"] == 0.0
+    assert load_study(st).family.t_event == 0.0
     st.write_text(STUDY_HEAD + "t_event = 0.05\n" + body + "speed_step_rpm = [100.0]\n")
-    assert load_study(st).opts["t_event"] == 0.05
+    assert load_study(st).family.t_event == 0.05
     st.write_text(STUDY_HEAD + "t_event = 0.2\n" + body + "speed_step_rpm = [100.0]\n")
     with pytest.raises(JobError, match=r"study.t_event: must be in \[0, horizon = 0.2\) s"):
         load_study(st)

@@ -55,6 +55,7 @@ LAYERS = [
     ),
     # drive logs: a declared layout read into DriveRecordings; carrier-comparison PWM (the inverter's transforms)
     ("jaxobs.signals._logs", "jaxobs.drive.pwm"),
+    ("jaxobs.signals._read",),  # the recordings reader: one file as a family's scenarios
     ("jaxobs.signals",),
     ("jaxobs.scenarios", "jaxobs.drive.plant", "jaxobs.drive.dual", "jaxobs.drive.control", "jaxobs.drive.scenario"),
     # observers: they estimate

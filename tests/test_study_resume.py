@@ -186,13 +186,13 @@ def test_a_kill_between_the_chunks_and_study_nc_resumes(tmp_path, capsys, monkey
     way round, the chunks are lost.  Now the chunks move aside before study.nc appears (ChunkStore.retire)."""
     import contextlib
 
-    import jaxobs_tuning.cli as cli
+    import jaxobs.study as writer  # the one study writer (jaxobs.study.write_study)
 
     path = tmp_path / "tiny.toml"
     path.write_text(TINY)
     ref, out = tmp_path / "ref", tmp_path / "o"
     assert main(["study", str(path), "--out", str(ref), "--quiet"]) == 0
-    real = cli.atomic_path
+    real = writer.atomic_path
 
     @contextlib.contextmanager
     def killed_before_rename(p):
@@ -200,10 +200,10 @@ def test_a_kill_between_the_chunks_and_study_nc_resumes(tmp_path, capsys, monkey
             yield tmp
             raise KeyboardInterrupt  # as a kill -9 there: study.nc not renamed, its temp folder gone
 
-    monkeypatch.setattr(cli, "atomic_path", killed_before_rename)
+    monkeypatch.setattr(writer, "atomic_path", killed_before_rename)
     assert main(["study", str(path), "--out", str(out), "--quiet"]) == 130
     assert not (out / "study.nc").exists() and not (out / STUDY_CHUNKS).exists()
-    monkeypatch.setattr(cli, "atomic_path", real)
+    monkeypatch.setattr(writer, "atomic_path", real)
     capsys.readouterr()
     assert main(["study", str(path), "--out", str(out), "--quiet", "--resume"]) == 0
     assert "resumed: 36 chunks of 36" in capsys.readouterr().out

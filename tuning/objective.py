@@ -43,7 +43,7 @@ import numpy as np
 from jaxobs import OnSignal, SaveAll, simulate
 from jaxobs import metrics as M
 from jaxobs.analysis.stability import lyapunov
-from jaxobs.families import AbstractScenarios
+from jaxobs.families import AbstractFamily
 from jaxobs.quantities import Metric
 from jaxobs.runner import run_scenarios
 from jaxobs.scenarios import Given
@@ -237,7 +237,7 @@ class Objective(AbstractObjective):
     ctx: MetricContext = eqx.field(static=True)
     aggregation: AbstractAggregation
     penalty: float = eqx.field(static=True)
-    family: AbstractScenarios | None
+    family: AbstractFamily | None
 
     def __init__(
         self,
@@ -249,7 +249,7 @@ class Objective(AbstractObjective):
         ctx: MetricContext,
         aggregation: AbstractAggregation = Mean(),
         penalty: float = 1e3,
-        family: AbstractScenarios | None = None,
+        family: AbstractFamily | None = None,
     ):
         for term in terms:
             if term.measure is None:

@@ -76,13 +76,12 @@ from ..drive import (
     drive_speed_limit_rpm,
     speed_limit,
 )
-from ..drive_study import gain_variables
-from ..families import DRIVE_STUDY_AXES, AbstractScenarios, DriveScenarios, bind_observer
+from ..families import DRIVE_STUDY_AXES, AbstractFamily, DriveScenarios, bind_observer
 from ..provenance import cf_dataset, provenance
 from ..quantities import Metric
 from ..scenarios import Grid
 from ..sharding import batch_mesh
-from ..study import Flag, study
+from ..study import Flag, gain_variables, study
 from .stability import Stability, floquet, lyapunov
 
 __all__ = [
@@ -267,7 +266,7 @@ def speed_pulse(scenarios, t0: float, width, height: float):
     return eqx.tree_at(lambda s: (s.speed_ref.times, s.speed_ref.values), scenarios, (times, values))
 
 
-class _LongRuns(AbstractScenarios):
+class _LongRuns(AbstractFamily):
     """The long runs' scenarios: the drive's (``family``), each point's speed reference pulsed by ``perturb`` ×
     its speed from the family's ``t_event`` for :data:`PULSE_TC` / α s and back (so the late window watches the
     operating point itself, not one a step moved it to), the loop wrapped in :class:`_Watched` (its running sums;
@@ -280,7 +279,10 @@ class _LongRuns(AbstractScenarios):
     signal: ClassVar[str] = "drive"
     axes: ClassVar[dict] = DRIVE_STUDY_AXES
     closed_loop: ClassVar[bool] = True
-    bytes_per_step: ClassVar[int] = 2048
+    bytes_per_step: ClassVar[int] = DriveScenarios.bytes_per_step
+    study_bytes_per_step: ClassVar[int] = DriveScenarios.study_bytes_per_step
+    drive_observer: ClassVar[bool] = True
+    options: ClassVar[tuple] = ()  # built from the drive's family, not from a TOML table
 
     def build(self, names, points, first: int = 0):
         fam = self.family

@@ -349,7 +349,7 @@ def parse_job(raw: dict, base: Path | None = None) -> Job:
             )
         if metric in DRIVE_METRICS and not scen.family.closed_loop:
             raise JobError(f"{where}.metric", f"{show(metric)} needs the closed-loop drive, not {comp} ({scen.signal})")
-        if (scen.family is not GridSignals) == grid_only:
+        if scen.family.drive_observer == grid_only:
             raise JobError(f"{where}.metric", f"{show(metric)} does not apply to {comp} ({scen.signal} signals)")
         if metric == STABILITY_MARGIN and drive is not None and drive.start != "steady":
             raise JobError(f"{where}.metric", "stability_margin needs drive.start = 'steady' (an operating point)")
