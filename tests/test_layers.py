@@ -53,7 +53,8 @@ LAYERS = [
         "jaxobs.drive.latency",
         "jaxobs.drive.weakening",
     ),
-    ("jaxobs.signals._logs",),  # drive logs: a declared layout read into DriveRecordings
+    # drive logs: a declared layout read into DriveRecordings; carrier-comparison PWM (the inverter's transforms)
+    ("jaxobs.signals._logs", "jaxobs.drive.pwm"),
     ("jaxobs.signals._read",),  # the recordings reader: one file as a family's scenarios
     ("jaxobs.signals",),
     ("jaxobs.scenarios", "jaxobs.drive.plant", "jaxobs.drive.dual", "jaxobs.drive.control", "jaxobs.drive.scenario"),
