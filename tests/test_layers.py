@@ -53,12 +53,15 @@ LAYERS = [
         "jaxobs.drive.latency",
         "jaxobs.drive.weakening",
     ),
-    ("jaxobs.signals._logs",),  # drive logs: a declared layout read into DriveRecordings
+    # drive logs: a declared layout read into DriveRecordings; carrier-comparison PWM (the inverter's transforms)
+    ("jaxobs.signals._logs", "jaxobs.drive.pwm"),
+    ("jaxobs.signals._read",),  # the recordings reader: one file as a family's scenarios
     ("jaxobs.signals",),
     ("jaxobs.scenarios", "jaxobs.drive.plant", "jaxobs.drive.dual", "jaxobs.drive.control", "jaxobs.drive.scenario"),
     # observers: they estimate
     ("jaxobs.observers._cores", "jaxobs.observers._gains", "jaxobs.observers._rules"),
     ("jaxobs.observers.base",),  # its one bound check is _gains'
+    ("jaxobs.observers.speed",),
     (
         "jaxobs.observers.sogi",
         "jaxobs.observers.fll",
@@ -79,7 +82,9 @@ LAYERS = [
     ("jaxobs._steps", "jaxobs._sensitivity"),
     ("jaxobs._loop",),
     ("jaxobs._simulate", "jaxobs.sharding"),
-    # metrics: they score
+    # metrics: the functions that score a run, the one metric table (its entries' forms use them), the package
+    ("jaxobs.metrics._core",),
+    ("jaxobs.metrics._table",),
     ("jaxobs.metrics",),
     # linear analysis: the observers' models, closed forms that return observers, settling times (metrics)
     ("jaxobs.linear._tf",),
@@ -110,7 +115,8 @@ LAYERS = [
     ("jaxobs.reproduce.leso_dual", "jaxobs.reproduce.figures"),
     ("jaxobs.reproduce",),
     # tuning: it changes gains (and exports the tuned observer)
-    ("jaxobs_tuning.outdir", "jaxobs_tuning.checkpoint"),
+    # the results folder, checkpoints, and what a solver minimises (the objective's protocol)
+    ("jaxobs_tuning.outdir", "jaxobs_tuning.checkpoint", "jaxobs_tuning.base"),
     # the C export's code generator (jaxpr -> C) is beside the rest: it knows no observer
     ("jaxobs_tuning.export.ir",),
     ("jaxobs_tuning.export.lower",),

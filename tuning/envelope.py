@@ -15,6 +15,8 @@ import dataclasses
 import math
 from pathlib import Path
 
+from jaxobs.provenance import cf_labels
+
 from .job import COMPONENTS, JobError, job_drive, load_job, parse_job
 from .outdir import OutDir, atomic_path, safe_name
 from .results import load_result, result_designs
@@ -108,13 +110,14 @@ def cli_envelope(args) -> int:
     ax = par if spec.drive_file.dual is None else par.m  # the whole machine's ratings, ψf and p set the axes
     # a count: the default axes (log-spaced speeds from 1 % of rated to the drive's limit, loads 0..rated); or
     # the values themselves, within the drive's limit and the study's loads
+    mech = spec.drive_file.table.get("machine", {}).get("max_speed_rpm")  # the file's mechanical limit, if any
     if isinstance(args.speeds, tuple):
-        top = speed_limit_rpm(ax, drive)
+        top = speed_limit_rpm(ax, drive, mech)
         if args.speeds[-1] > top:
             raise ValueError(f"--speeds: must be <= {top:.4g} r/min (the drive's speed limit), got {args.speeds[-1]:g}")
         speeds = np.asarray(args.speeds)
     else:
-        speeds = default_speeds(ax, args.speeds, drive=drive)
+        speeds = default_speeds(ax, args.speeds, drive=drive, max_speed_rpm=mech)
     loads = np.asarray(args.loads) if isinstance(args.loads, tuple) else default_loads(ax, args.loads)
     n = len(speeds) * len(loads)
     # the job's own settle and (shortest) window where it states them ([envelope]), else the library's defaults
@@ -147,6 +150,7 @@ def cli_envelope(args) -> int:
             horizon=args.horizon,
             stability=stab,
             progress=False if args.quiet else "auto",
+            max_speed_rpm=mech,
         )
         # source (CF: how the data were made) stays the library function; the job file is its own attribute
         ds.attrs.update(job_file=str(path), job_name=job.name, component=job.component, machine=spec.machine)
@@ -155,7 +159,7 @@ def cli_envelope(args) -> int:
         with atomic_path(out / "envelope.png") as tmp:
             envelope_figure(ds, tmp)
         with atomic_path(out / "envelope.nc") as tmp:
-            ds.to_netcdf(tmp, engine="h5netcdf")
+            cf_labels(ds).to_netcdf(tmp, engine="h5netcdf")  # a numeric design index, the names its label
     a = ds.attrs  # what ran: the stretched window and warm-up, and the steady start's settle (Drive.settled_for)
     print(
         f"{what}, Floquet verdict: settle {a['stability_settle']:.3g} s, windows {a['stability_window']:.3g} s up to "
@@ -167,7 +171,7 @@ def cli_envelope(args) -> int:
     print(head + f"{'lowest r/min held at all loads':>32}")
     for d in designs:
         s = ds.sel(design=d)
-        all_loads = s["holds"].astype(bool).all("load")
+        all_loads = s["holds"].astype(bool).all("load_nm")
         low = f"{float(s['speed_rpm'][all_loads].min()):.4g}" if bool(all_loads.any()) else "none"
         print(
             f"{d:<{wd}}{int(s['holds'].sum()):>5}/{n:<3}{int(s['stable'].sum()):>5}/{n:<3}{int(s['marginal'].sum()):>5}/{n:<3}"

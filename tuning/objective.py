@@ -31,36 +31,35 @@ has no block of inputs to gain, and its unrolled step compiles longer).
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
+from typing import Any
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxobs import OnSignal, SaveAll, kept_jit, simulate
+from jaxobs import OnSignal, SaveAll, simulate
 from jaxobs import metrics as M
 from jaxobs.analysis.stability import lyapunov
-from jaxobs.families import AbstractScenarios
-from jaxobs.quantities import Metric
+from jaxobs.families import AbstractFamily
+from jaxobs.metrics import Metric, MetricContext
 from jaxobs.runner import run_scenarios
 from jaxobs.scenarios import Given
 from jaxobs.sharding import batch_mesh
-from jaxobs.study import METRICS as TABLE
-from jaxobs.study import StudyContext, scored_position_error
 
 from .aggregations import AbstractAggregation, Mean
+from .base import AbstractObjective
 from .params import Parametrization
 
 __all__ = [
-    "METRICS",
-    "METRIC_UNITS",
+    "TERM_METRICS",
     "DRIVE_METRICS",
     "LOST_LOCK",
     "LOST_SYNC_DEG",
     "Term",
     "MetricContext",
+    "AbstractObjective",
     "Objective",
 ]
 
@@ -83,69 +82,34 @@ def _aggregate_and_grad(aggregation, values, grads):
 FORWARD_MAX = 8
 
 # --------------------------------------------------------------------------
-# per-scenario metrics: the one table's (jaxobs.study.METRICS), in their smooth forms where they have one
+# per-scenario metrics: the one table's (jaxobs.metrics.METRICS), in their smooth forms where they have one
 # --------------------------------------------------------------------------
 
-# what the metrics read beside the run (event, steady window, bands, temperature)
-MetricContext = StudyContext
-
-# The stability margin as a term: not a function of one simulation but of the closed loop itself,
-# jaxobs.analysis.stability.lyapunov's largest non-neutral exponent (1/s) at the scenario (from its steady
-# start; an event at t_event falls inside the settle), differentiable with respect to the gains.  The term's
-# value is that exponent, minus the margin, so minimizing it raises the margin; give it a small weight
-# (rad against 1/s).  Short runs (compile time and cost: the step's jvp in n_dirs directions): enough to
-# rank designs by their slowest mode, not a verdict (the envelope's verification gives that).
-STABILITY_MARGIN = "stability_margin"
+# A system metric (kind "system", the table's stability_margin) as a term: not a function of one simulation but
+# of the closed loop itself, jaxobs.analysis.stability.lyapunov's largest non-neutral exponent (1/s) at the
+# scenario (from its steady start; an event at t_event falls inside the settle), differentiable with respect to
+# the gains.  The term's value is that exponent, minus the margin, so minimizing it raises the margin; give it a
+# small weight (rad against 1/s).  Short runs (compile time and cost: the step's jvp in n_dirs directions): enough
+# to rank designs by their slowest mode, not a verdict (the envelope's verification gives that).
 MARGIN_KW = {"settle": 0.1, "warmup": 0.05, "window": 0.2, "n_dirs": 2}
 
-# the metrics a job may tune on (name -> jaxobs.quantities.Metric, called as its smooth form): the FLL family's
-# on grid signals, the flux observers' on EMF signals, the drive observers' in the closed loop
-METRICS: dict[str, Metric] = {
-    k: TABLE[k]
-    for k in (
-        "itae_freq",
-        "iae_freq",
-        "iae_phase",
-        "itae_phase",
-        "settling_freq",
-        "ripple_freq",
-        "rms_freq_steady",
-        "rms_phase_steady",
-        "iae_position",
-        "rms_position_steady",
-        "ripple_position",
-        "settling_position",
-        "bias_position",
-        "settling_speed",
-        "peak_speed_dev",
-        "rms_speed_steady",
-        "speed_noise_rpm",
-        "rms_speed_error_steady",
-        "peak_speed_error",
-        STABILITY_MARGIN,
-    )
-}
-# each metric's CF (UDUNITS) units, for scores.nc (the Metric's)
-METRIC_UNITS: dict[str, str] = {k: m.units for k, m in METRICS.items()}
+# the metrics a term may name (a view of the table: its run and system metrics, not its flags; each called as its
+# smooth form): the FLL family's on grid signals, the flux observers' on EMF signals, the drive observers' in the
+# closed loop
+TERM_METRICS: dict[str, Metric] = {k: m for k, m in M.METRICS.items() if m.kind != "flag"}
 # the per-scenario flag :meth:`Objective.per_scenario` adds to the metrics: the estimate ended far from the
-# truth (jaxobs.metrics.lost_lock_of: 45° / 10 % on signals, 90° on the drive, over the steady window)
+# truth (the table's lost_lock: 45° / 10 % on signals, 90° on the drive, over the steady window)
 LOST_LOCK = "lost_lock"
+# the flags the drive adds (the table's): lost_sync (lost lock anywhere in the scored horizon) and lost_speed
+DRIVE_FLAGS = ("lost_sync", "lost_speed")
 _OK = " ok"  # the simulation's own flag among a scenario's metrics (a name no metric has)
 # metrics that need the closed-loop drive (signal = "drive" jobs)
-DRIVE_METRICS = tuple(k for k, m in METRICS.items() if m.closed_loop)
+DRIVE_METRICS = tuple(k for k, m in TERM_METRICS.items() if m.closed_loop)
 
-# Loss of synchronism of a drive observer, a per-scenario flag (never fatal): its simulation diverged, or
-# |θ̂e − θe| exceeded this anywhere in the scored horizon [0, horizon) (the settling phase before t = 0 is
-# not scored, nor a standstill start's I-f phase before its hand-over: jaxobs.study.scored_position_error).
-# jaxobs.drive_study flags the same threshold over its steady window only; a job has events (speed and
-# load steps), and a pole slip during one is a loss of synchronism even if the observer locks again
-# afterwards.
-LOST_SYNC_DEG = 90.0
-
-
-def _lost_sync(sol, sig, ctx):
-    err = jnp.abs(scored_position_error(sol, sig, ctx))  # from the hand-over on (standstill starts)
-    return jnp.max(jnp.where(jnp.isfinite(err), err, jnp.inf)) > math.radians(LOST_SYNC_DEG)
+# Loss of synchronism of a drive observer (the table's lost_sync), a per-scenario flag (never fatal): its simulation
+# diverged, or |θ̂e − θe| exceeded this anywhere in the scored horizon [0, horizon) (the settling phase before t = 0
+# is not scored, nor a standstill start's I-f phase before its hand-over: jaxobs.metrics.scored_position_error).
+LOST_SYNC_DEG = M.LOCK_TOL_DRIVE_DEG
 
 
 @dataclass(frozen=True)
@@ -153,10 +117,11 @@ class Term:
     """One weighted term of the objective: a metric times its weight.
 
     Attributes:
-        metric: A :class:`~jaxobs.quantities.Metric`, or the name of one in :data:`METRICS`; kept as its name,
-            the Metric in :attr:`measure`.
+        metric: A :class:`~jaxobs.metrics.Metric`, or the name of one in :data:`TERM_METRICS`; kept as its name,
+            the Metric in :attr:`measure`.  An old name (:data:`jaxobs.metrics.ALIASES`) is read as its new one
+            with a :class:`DeprecationWarning`, the weight converted to the new units.
         weight: The weight, per the metric's unit.
-        measure: The :class:`~jaxobs.quantities.Metric` itself.
+        measure: The :class:`~jaxobs.metrics.Metric` itself.
     """
 
     metric: str | Metric
@@ -164,7 +129,11 @@ class Term:
     measure: Metric | None = field(default=None, compare=False, repr=False)
 
     def __post_init__(self):
-        m = self.metric if isinstance(self.metric, Metric) else METRICS.get(self.metric)
+        if isinstance(self.metric, str) and self.metric in M.ALIASES:
+            name, scale = M.canonical(self.metric, "Term.metric")
+            object.__setattr__(self, "metric", name)
+            object.__setattr__(self, "weight", self.weight / scale)  # per the new unit: the same term
+        m = self.metric if isinstance(self.metric, Metric) else TERM_METRICS.get(self.metric)
         object.__setattr__(self, "measure", m)
         if isinstance(self.metric, Metric):
             object.__setattr__(self, "metric", self.metric.name)
@@ -175,16 +144,43 @@ class Term:
 # --------------------------------------------------------------------------
 
 
-class Objective:
-    """value(θ), value_and_grad(θ) and per-scenario scores for a component and a scenario batch.
+@eqx.filter_jit
+def _per_scenario_vg(objective, theta, scenarios):
+    """:meth:`Objective._per_scenario_value_and_grad` as one program: the objective's arrays (the component's
+    fixed values, a family's machine) and the scenarios are its inputs, its static fields its key."""
+    return objective._per_scenario_value_and_grad(theta, scenarios)
 
-    The value-and-gradient's and the scoring's traced programs are kept across processes where
-    :func:`jaxobs.use_compile_cache` set a folder (:func:`jaxobs.kept_jit`, keyed on :attr:`kept_fields`).
+
+@eqx.filter_jit
+def _response_program(objective, theta, sig):
+    return objective._response(theta, sig)
+
+
+@eqx.filter_custom_jvp
+def _value(theta, objective, scenarios):
+    """The aggregate at ``theta`` with the sanitized derivative (module doc, "Divergence"): optax and optimistix
+    see the gradient assembled per scenario, a diverged scenario's zero included."""
+    return objective._aggregate_with_grad(theta, scenarios)[0]
+
+
+@_value.def_jvp
+def _value_jvp(primals, tangents):
+    # a function of θ alone: the objective's and the scenarios' tangents (None) do not enter
+    (theta, objective, scenarios), (tdot, _, _) = primals, tangents
+    v, g = objective._aggregate_with_grad(theta, scenarios)
+    return v, jnp.dot(g, tdot)
+
+
+class Objective(AbstractObjective):
+    """value(θ, scenarios), value_and_grad(θ, scenarios) and per-scenario scores of a component on a batch.
+
+    A module: its own values (the component, the family's machine) are arrays of its programs' inputs, and the
+    scenario batch is an argument of every call, so the value-and-gradient compiles once per batch shape
+    (``eqx.filter_jit``; JAX's persistent cache, :func:`jaxobs.use_compile_cache`, keeps it across processes).
 
     Args:
         component: The module whose free gains ``param`` sets.
         param: The :class:`~jaxobs_tuning.params.Parametrization` of the free gains.
-        scenarios: The batch (leading axis the scenarios).
         horizon: Simulated seconds per scenario.
         terms: The weighted metrics (:class:`Term`) summed per scenario.
         ctx: The metrics' event time, steady window and bands.
@@ -195,75 +191,81 @@ class Objective:
             each scenario (bound to it: the machine an observer assumes, its initial speed; closing the
             drive's loop for :class:`~jaxobs.families.DriveScenarios`); None: the component runs on each
             scenario, a signal, as it is.
+
+    Raises:
+        ValueError: An unknown metric, or an aggregation that is not an aggregation object.
     """
 
-    # what its programs bake in (the key of a kept program, jaxobs.kept_jit): the rest is made from these
-    kept_fields = ("component", "param", "scenarios", "horizon", "terms", "ctx", "aggregation", "penalty", "family",
-                   "_save")  # fmt: skip
+    component: Any
+    param: Parametrization = eqx.field(static=True)
+    horizon: float = eqx.field(static=True)
+    terms: tuple = eqx.field(static=True)
+    ctx: MetricContext = eqx.field(static=True)
+    aggregation: AbstractAggregation
+    penalty: float = eqx.field(static=True)
+    family: AbstractFamily | None
 
     def __init__(
         self,
         component,
         param: Parametrization,
-        scenarios,
         *,
         horizon: float,
         terms: list[Term],
         ctx: MetricContext,
         aggregation: AbstractAggregation = Mean(),
         penalty: float = 1e3,
-        family: AbstractScenarios | None = None,
+        family: AbstractFamily | None = None,
     ):
         for term in terms:
             if term.measure is None:
-                raise ValueError(f"objective metric {term.metric!r} is unknown; known: {', '.join(METRICS)}")
+                raise ValueError(f"objective metric {term.metric!r} is unknown; known: {', '.join(TERM_METRICS)}")
         if not isinstance(aggregation, AbstractAggregation):
             raise ValueError(
                 f"Objective.aggregation must be jaxobs_tuning.Mean(), SmoothMax() or CVaR(), got {aggregation!r}"
             )
         self.component = component
         self.param = param
-        self.scenarios = scenarios
         self.horizon = float(horizon)
-        self.terms = list(terms)
+        self.terms = tuple(terms)
         self.ctx = ctx
         self.aggregation, self.penalty = aggregation, float(penalty)
         self.family = family
-        # the solver's runs: every step's outputs, an observer on a signal through the loop made fast, the drive
-        # plainly (module doc); the scoring and the figures run once per design, where compile time counts
-        self._save = SaveAll(fast=not self.closed_loop)
-        # the scenarios and the component are constants of the program (self is static): kept_fields name them
-        self._vg = kept_jit(self._per_scenario_value_and_grad)
-        self.response = kept_jit(self._response)
-
-        @jax.custom_jvp
-        def value(theta):
-            return self._aggregate_with_grad(theta)[0]
-
-        @value.defjvp
-        def _value_jvp(primals, tangents):
-            (theta,), (tdot,) = primals, tangents
-            v, g = self._aggregate_with_grad(theta)
-            return v, jnp.dot(g, tdot)
-
-        self.value = value
 
     @property
     def closed_loop(self) -> bool:
         """Whether the component closes the drive's loop (the drive's metrics and flags apply)."""
         return self.family is not None and self.family.closed_loop
 
+    @property
+    def _save(self) -> SaveAll:
+        """The solver's runs: every step's outputs, an observer on a signal through the loop made fast, the drive
+        plainly (module doc); the scoring and the figures run once per design, where compile time counts."""
+        return SaveAll(fast=not self.closed_loop)
+
+    def value(self, theta, scenarios):
+        """The objective at ``theta`` on ``scenarios``, with the sanitized derivative (module doc).
+
+        Args:
+            theta: The free gains' vector.
+            scenarios: The batch (leading axis the scenarios).
+
+        Returns:
+            The scalar objective.
+        """
+        return _value(theta, self, scenarios)
+
     # --- single scenario
     def _simulate(self, comp, sig, save=SaveAll()):
         return simulate(self._bound_system(comp, sig), self.horizon, save=save)
 
     def _exponent(self, comp, sig):
-        """:data:`STABILITY_MARGIN`'s value: the largest non-neutral Lyapunov exponent (1/s) of the loop that
-        ``comp`` (bound to ``sig``) closes, :data:`MARGIN_KW`."""
+        """A system metric's value (the stability margin): the largest non-neutral Lyapunov exponent (1/s) of the
+        loop that ``comp`` (bound to ``sig``) closes, :data:`MARGIN_KW`."""
         return lyapunov(self._bound_system(comp, sig), **MARGIN_KW).exponent  # a drive job: the closed loop
 
     def _term(self, term, comp, sol, sig):
-        if term.metric == STABILITY_MARGIN:
+        if term.measure.kind == "system":
             return self._exponent(comp, sig)
         return term.measure(sol, sig, self.ctx)
 
@@ -282,9 +284,9 @@ class Objective:
     def _forward_mode(self, theta) -> bool:
         """The gradient by forward mode (module doc, "Gradients"): up to :data:`FORWARD_MAX` gains and no
         stability-margin term."""
-        return theta.size <= FORWARD_MAX and not any(t.metric == STABILITY_MARGIN for t in self.terms)
+        return theta.size <= FORWARD_MAX and not self._system_terms
 
-    def _per_scenario_value_and_grad(self, theta):
+    def _per_scenario_value_and_grad(self, theta, scenarios):
         def vg(sig):
             if self._forward_mode(theta):
                 one = lambda th: self._one(th, sig)  # noqa: E731
@@ -296,7 +298,7 @@ class Objective:
                 (v, ok), g = jax.value_and_grad(self._one, has_aux=True)(theta, sig)
             return v, ok, g
 
-        v, ok, g = jax.vmap(vg)(self.scenarios)
+        v, ok, g = jax.vmap(vg)(scenarios)
         g_finite = jnp.all(jnp.isfinite(g), axis=-1)
         good = ok & jnp.isfinite(v) & g_finite
         over = ok & jnp.isfinite(v) & ~g_finite  # a finite run and value, a gradient that overflowed
@@ -304,36 +306,35 @@ class Objective:
         g = jnp.where(good[:, None], g, 0.0)
         return v, g, good, over
 
-    def _aggregate_with_grad(self, theta):
-        v, g, _, _ = self._vg(theta)
+    def _aggregate_with_grad(self, theta, scenarios):
+        v, g, _, _ = _per_scenario_vg(self, theta, scenarios)
         return _aggregate_and_grad(self.aggregation, v, g)
 
-    def value_and_grad(self, theta):
-        return self._aggregate_with_grad(theta)
-
-    def value_grad_diverged(self, theta):
-        """The objective, its gradient and how many scenarios diverged, from one batch evaluation.
+    def value_and_grad(self, theta, scenarios):
+        """The objective at ``theta`` on ``scenarios`` and its gradient (module doc, "Divergence").
 
         Args:
             theta: The free gains' vector.
+            scenarios: The batch (leading axis the scenarios).
 
         Returns:
-            ``(value, gradient, diverged count)``.
+            ``(value, gradient)``.
         """
-        return self.value_grad_diverged_overflowed(theta)[:3]
+        return self._aggregate_with_grad(theta, scenarios)
 
-    def value_grad_diverged_overflowed(self, theta):
-        """:meth:`value_grad_diverged` and how many scenarios overflowed: a finite simulation and value, a
-        gradient that is not finite (a finite but huge weight; counted with the diverged ones too).  When the
-        aggregate or its gradient is not finite though every scenario's value is, every scenario counts.
+    def value_grad_diverged_overflowed(self, theta, scenarios):
+        """:meth:`value_and_grad`, how many scenarios diverged and how many overflowed: a finite simulation and
+        value, a gradient that is not finite (a finite but huge weight; counted with the diverged ones too).
+        When the aggregate or its gradient is not finite though every scenario's value is, every scenario counts.
 
         Args:
             theta: The free gains' vector.
+            scenarios: The batch (leading axis the scenarios).
 
         Returns:
             ``(value, gradient, diverged count, overflowed count)``.
         """
-        v, g, good, over = self._vg(theta)
+        v, g, good, over = _per_scenario_vg(self, theta, scenarios)
         agg_v, grad = _aggregate_and_grad(self.aggregation, v, g)
         # the counts on the host: each eager jnp reduction here was a program of its own to compile
         good, over = np.asarray(good), np.asarray(over)
@@ -342,25 +343,36 @@ class Objective:
             n_over = int(v.shape[0])
         return agg_v, grad, int(np.sum(~good)), n_over
 
-    def overflowed(self, theta, scored_good) -> int:
+    def overflowed(self, theta, scenarios, scored_good) -> int:
         """Scenarios whose simulation and weighted metrics are finite (``scored_good``: :meth:`per_scenario`'s
         mask at ``theta``) but whose tuning value or gradient is not: the objective overflows (a finite but
         huge weight), which the solver counts with the diverged scenarios, though nothing diverged.
 
         Args:
             theta: The free gains' vector.
+            scenarios: The batch ``scored_good`` is of.
             scored_good: :meth:`per_scenario`'s good mask at ``theta``.
 
         Returns:
             The number of such scenarios.
         """
-        _, _, good, _ = self._vg(theta)
+        _, _, good, _ = _per_scenario_vg(self, theta, scenarios)
         return int(np.sum(np.asarray(scored_good) & ~np.asarray(good)))
 
+    def response(self, theta, sig):
+        """One scenario's run at ``theta`` as the report draws it; one program for every design and scenario.
+
+        Args:
+            theta: The free gains' vector.
+            sig: One scenario (no leading axis).
+
+        Returns:
+            The sample times (s), the observer's frequency estimate ``obs.omega`` (rad/s) and its position error
+            θ̂ − θ (rad, :func:`jaxobs.metrics.position_error`).
+        """
+        return _response_program(self, theta, sig)
+
     def _response(self, theta, sig):
-        """One scenario's run at ``theta`` as the report draws it: the sample times (s), the observer's
-        frequency estimate ``obs.omega`` (rad/s) and its position error θ̂ − θ (rad,
-        :func:`jaxobs.metrics.position_error`); one program for every design (``response``)."""
         sol = self._simulate(self.param.apply(self.component, theta), sig)
         return sol.t, sol.outputs.obs.omega, M.position_error(sol, sig)
 
@@ -374,22 +386,29 @@ class Objective:
         """The system one scenario runs at ``theta`` (what :meth:`_simulate` simulates)."""
         return self._bound_system(self.param.apply(self.component, theta), sig)
 
+    @property
+    def _system_terms(self) -> bool:
+        """Whether a term is a system metric (of the loop, not of one run: the stability margin)."""
+        return any(t.measure.kind == "system" for t in self.terms)
+
+    @property
+    def flags(self) -> tuple[str, ...]:
+        """The table's flags each scenario reports beside the metrics: :data:`LOST_LOCK`, and on the drive
+        :data:`DRIVE_FLAGS`."""
+        return (LOST_LOCK, *DRIVE_FLAGS) if self.closed_loop else (LOST_LOCK,)
+
     def _scenario_metrics(self, sol, sig, _aux):
-        mets = {t.metric: t.measure(sol, sig, self.ctx) for t in self.terms if t.metric != STABILITY_MARGIN}
-        # far from the truth over the steady window (jaxobs.metrics, "lost lock"): reported, not tuned on
-        mets[LOST_LOCK] = M.lost_lock_of(sol, self.ctx.steady_from, signal=sig)
-        if self.closed_loop:
-            mets["lost_sync"] = _lost_sync(sol, sig, self.ctx)
-            # the drive does not follow its speed reference over the steady window (jaxobs.metrics,
-            # "lost speed"): e.g. a standstill start that runs backwards with a locked observer
-            out = sol.outputs
-            mets["lost_speed"] = M.lost_speed(out.omega_m, out.omega_m_ref, sol.t >= self.ctx.steady_from)
+        mets = {t.metric: t.measure(sol, sig, self.ctx) for t in self.terms if t.measure.kind == "run"}
+        # the flags, reported, not tuned on: far from the truth over the steady window (lost_lock); on the drive
+        # lost synchronism anywhere in the scored horizon (lost_sync) and a missed speed reference over the steady
+        # window (lost_speed: e.g. a standstill start that runs backwards with a locked observer)
+        mets.update({k: M.METRICS[k].exact(sol, sig, self.ctx) for k in self.flags})
         return {**mets, _OK: sol.ok}
 
     def _per_scenario_metrics(self, theta, scenarios):
         given = Given(scenarios)
-        # one chunk of every scenario on one device: the jit(vmap) the objective always ran, compiled once per
-        # objective (the runner keys its compilation on these two methods)
+        # one chunk of every scenario on one device: the jit(vmap) the objective always ran (the runner's program
+        # takes these two methods, and with them the objective's arrays, as inputs)
         run = run_scenarios(
             {"design": theta},
             given,
@@ -401,8 +420,9 @@ class Objective:
             label="scores",
         )
         mets = dict(run.values["design"])
-        if any(t.metric == STABILITY_MARGIN for t in self.terms):  # of the loop, not of the run: one jit(vmap)
-            mets[STABILITY_MARGIN] = np.asarray(self._exponents(theta, scenarios))
+        for t in self.terms:  # system metrics: of the loop, not of the run; one jit(vmap)
+            if t.measure.kind == "system":
+                mets[t.metric] = np.asarray(self._exponents(theta, scenarios))
         return mets, mets.pop(_OK)
 
     @eqx.filter_jit
@@ -410,22 +430,21 @@ class Objective:
         comp = self.param.apply(self.component, theta)
         return jax.vmap(lambda sig: self._exponent(comp, sig))(scenarios)
 
-    def per_scenario(self, theta, scenarios=None):
+    def per_scenario(self, theta, scenarios):
         """Each scenario's metrics (and its :data:`LOST_LOCK` flag), its weighted total (the penalty where
         diverged) and the good mask — no gradient.
 
-        On the drive the metrics hold ``lost_sync`` too: diverged, or |θ̂e − θe| > :data:`LOST_SYNC_DEG`; and
-        ``lost_speed``: diverged, or the drive missed its speed reference (:func:`jaxobs.metrics.lost_speed`).
+        On the drive the metrics hold the table's ``lost_sync`` too: diverged, or |θ̂e − θe| > :data:`LOST_SYNC_DEG`;
+        and ``lost_speed``: diverged, or the drive missed its speed reference (:func:`jaxobs.metrics.lost_speed`).
 
         Args:
             theta: The free gains' vector.
-            scenarios: The batch (default: the tuning set).
+            scenarios: The batch (leading axis the scenarios).
 
         Returns:
             ``(metrics, total, good)``: metric name -> per-scenario values, the weighted totals (the penalty
             where diverged), and the good mask.
         """
-        scenarios = self.scenarios if scenarios is None else scenarios
         mets, ok = self._per_scenario_metrics(theta, scenarios)
         # NumPy from here (the runner's values are NumPy arrays): no gradient flows through the scores, and
         # every eager jnp operation on them was a small XLA program compiled on a first run
@@ -433,17 +452,17 @@ class Objective:
         with np.errstate(over="ignore", invalid="ignore"):  # a diverged scenario's inf/NaN: masked just below
             total = sum(term.weight * mets[term.metric] for term in self.terms)
         good = np.asarray(ok) & np.isfinite(total)
-        for key in ("lost_sync", "lost_speed"):
+        for key in DRIVE_FLAGS:
             if key in mets:
                 mets = {**mets, key: mets[key] | ~good}
         return mets, np.where(good, total, self.penalty), good
 
-    def scores(self, theta, scenarios=None) -> dict:
+    def scores(self, theta, scenarios) -> dict:
         """Objective and each metric's mean and worst over ``scenarios``.
 
         Args:
             theta: The free gains' vector.
-            scenarios: The batch (default: the tuning set).
+            scenarios: The batch (leading axis the scenarios).
 
         Returns:
             The summary dict (:meth:`summarize`).
@@ -471,10 +490,9 @@ class Objective:
         }
         if LOST_LOCK in mets:  # scenarios whose estimate ends far from the truth, the diverged ones included
             out[LOST_LOCK] = int(np.sum(mets[LOST_LOCK] | ~good))
-        if "lost_sync" in mets:  # drive observers: scenarios that lost synchronism (diverged ones included)
-            out["lost_sync"] = int(np.sum(mets["lost_sync"]))
-        if "lost_speed" in mets:  # drive: mean |ωm − ωm*| > 20 % of |ωm*| in the steady window, or diverged
-            out["lost_speed"] = int(np.sum(mets["lost_speed"]))
+        for key in DRIVE_FLAGS:  # the drive: lost synchronism, lost speed (diverged ones included)
+            if key in mets:
+                out[key] = int(np.sum(mets[key]))
         for term in self.terms:
             m = np.where(good, mets[term.metric], np.nan)
             if bool(np.any(good)):

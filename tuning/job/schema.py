@@ -7,11 +7,14 @@ import os
 from pathlib import Path
 
 from jaxobs.families import FAMILIES, GridSignals
+from jaxobs.metrics import canonical
+from jaxobs.observers import AbstractDriveObserver, AbstractLESO, gain_fields
+from jaxobs.observers.speed import SPEED_KINDS
 from jaxobs.provenance import sha256
 from jaxobs.registry import REGISTRY, canonical_key
 
 from .. import strategies
-from ..objective import DRIVE_METRICS, METRICS, STABILITY_MARGIN, Term
+from ..objective import DRIVE_METRICS, TERM_METRICS, Term
 from ..params import GainSpec
 from .components import COMPONENTS, W_N
 from .drive import check_drive_speeds, check_standstill, inline_drive, parse_drive
@@ -152,6 +155,59 @@ def parse_scenarios(
     return ScenarioSpec(signal, t_event, horizon, steady, axes, sample, sseed)
 
 
+def parse_observer_speed(raw: dict, info) -> dict:
+    """A job's ``[observer.speed]``: how a LESO or a PLL-type flux observer extracts speed and position
+    (jaxobs.observers.speed).
+
+    ``kind = "pll"`` (the default: the observer's PLL on its ``kp_pll``, ``ki_pll``) or ``"mechanical"`` (a
+    mechanical-model speed observer with its three poles at −``alpha_o`` rad/s, its Ĵ, B̂ and p those of the
+    drive's assumed machine); ``zero_fade`` (rad/s, ≥ 0) selects the phase detector's fade through zero speed
+    (a LESO's; 0, the default: the sign detector).  The values are a record and a number, so a result file keeps them.
+
+    Args:
+        raw: The parsed job file.
+        info: The component's :class:`~jaxobs_tuning.job.components.ComponentInfo`.
+
+    Returns:
+        The constructor keywords to add (``speed``, ``zero_fade``); empty without the table.
+
+    Raises:
+        JobError: An unknown key or kind, a value out of its range, or a component without a speed estimator.
+    """
+    obs_t = get_field(raw, "observer", "observer", dict, {})
+    no_unknown(obs_t, ("speed",), "observer")
+    if "speed" not in obs_t:
+        return {}
+    sp = get_field(obs_t, "speed", "observer.speed", dict)
+    no_unknown(sp, ("kind", "alpha_o", "zero_fade"), "observer.speed")
+    if not (issubclass(info.ctor, AbstractDriveObserver) and info.ctor.takes_speed_estimator):
+        raise JobError(
+            "observer.speed",
+            f"only the LESOs and the PLL-type flux observers (LPFFlux) take a speed estimator, not {info.entry.name}",
+        )
+    kind = get_field(sp, "kind", "observer.speed.kind", str, "pll")
+    if kind not in SPEED_KINDS:
+        raise JobError("observer.speed.kind", f"must be one of {', '.join(SPEED_KINDS)}, got {show(kind)}")
+    out = {}
+    if kind == "mechanical":
+        alpha = get_field(sp, "alpha_o", "observer.speed.alpha_o", float, required=True)
+        if alpha <= 0:
+            raise JobError("observer.speed.alpha_o", f"must be > 0 rad/s, got {show(alpha)}")
+        out["speed"] = {"kind": kind, "alpha_o": alpha}
+    elif "alpha_o" in sp:
+        raise JobError("observer.speed.alpha_o", 'applies to kind = "mechanical" only')
+    else:
+        out["speed"] = {"kind": kind}
+    zf = get_field(sp, "zero_fade", "observer.speed.zero_fade", float, None)
+    if zf is not None:
+        if not issubclass(info.ctor, AbstractLESO):
+            raise JobError("observer.speed.zero_fade", "applies to the LESOs only (a flux does not vanish at zero)")
+        if zf < 0:
+            raise JobError("observer.speed.zero_fade", f"must be >= 0 rad/s (0: the sign detector), got {show(zf)}")
+        out["zero_fade"] = zf
+    return out
+
+
 def parse_job(raw: dict, base: Path | None = None) -> Job:
     """Validate a job dict (the parsed TOML).
 
@@ -166,7 +222,7 @@ def parse_job(raw: dict, base: Path | None = None) -> Job:
     Raises:
         JobError: A field out of its range, naming the field.
     """
-    keys = ("job", "component", "gains", "scenarios", "holdout", "objective", "solver", "drive", "envelope")
+    keys = ("job", "component", "observer", "gains", "scenarios", "holdout", "objective", "solver", "drive", "envelope")
     no_unknown(raw, keys, "job file")
     job_t = get_field(raw, "job", "job", dict, required=True)
     no_unknown(job_t, ("name", "component", "seed"), "job")
@@ -188,6 +244,7 @@ def parse_job(raw: dict, base: Path | None = None) -> Job:
         if key not in info.defaults:
             raise JobError(f"component.{k}", f"unknown for {comp}; allowed: {', '.join(info.defaults)}")
         values[key] = get_field(comp_t, k, f"component.{k}", float)
+    values.update(parse_observer_speed(raw, info))
     try:
         ts = float(info.ctor(**values).ts)
     except (ValueError, ArithmeticError, TypeError) as e:
@@ -231,6 +288,15 @@ def parse_job(raw: dict, base: Path | None = None) -> Job:
             raise JobError(f"{where}.init", f"{init:g} cannot be parametrized inside its bounds [{lower}, {upper}]")
         gains.append(g)
         values[gname] = init
+    speed_spec = values.get("speed")
+    if isinstance(speed_spec, dict) and speed_spec.get("kind") == "mechanical":
+        roles = gain_fields(info.ctor)
+        unused = [g.name for g in gains if roles[g.name].role == "pll"]
+        if unused:
+            raise JobError(
+                f"gains.{unused[0]}",
+                'the PLL\'s gains do nothing under [observer.speed] kind = "mechanical"; free another gain',
+            )
 
     scen = parse_scenarios(
         get_field(raw, "scenarios", "scenarios", dict, required=True), "scenarios", info.signals, seed, freq_n, ts, base
@@ -274,24 +340,26 @@ def parse_job(raw: dict, base: Path | None = None) -> Job:
             raise JobError(where, f"must be a table {{ metric = ..., weight = ... }}, got {show(t)}")
         no_unknown(t, ("metric", "weight"), where)
         metric = get_field(t, "metric", f"{where}.metric", str, required=True)
-        if metric not in METRICS:
-            raise JobError(f"{where}.metric", f"unknown metric {show(metric)}; known: {', '.join(METRICS)}")
+        # an old name is read as its new one (one line of warning), its weight converted to the new units
+        metric, scale = canonical(metric, f"{where}.metric")
+        if metric not in TERM_METRICS:
+            raise JobError(f"{where}.metric", f"unknown metric {show(metric)}; known: {', '.join(TERM_METRICS)}")
         grid_only = metric.endswith(("_freq", "_phase", "freq_steady", "phase_steady"))
-        if METRICS[metric].needs_truth and scen.recording is None:
+        if TERM_METRICS[metric].needs_truth and scen.recording is None:
             raise JobError(
                 f"{where}.metric",
                 f"{show(metric)} compares the estimate with a recording's truth: it needs [scenarios.recording]",
             )
         if metric in DRIVE_METRICS and not scen.family.closed_loop:
             raise JobError(f"{where}.metric", f"{show(metric)} needs the closed-loop drive, not {comp} ({scen.signal})")
-        if (scen.family is not GridSignals) == grid_only:
+        if scen.family.drive_observer == grid_only:
             raise JobError(f"{where}.metric", f"{show(metric)} does not apply to {comp} ({scen.signal} signals)")
-        if metric == STABILITY_MARGIN and drive is not None and drive.start != "steady":
-            raise JobError(f"{where}.metric", "stability_margin needs drive.start = 'steady' (an operating point)")
+        if TERM_METRICS[metric].kind == "system" and drive is not None and drive.start != "steady":
+            raise JobError(f"{where}.metric", f"{metric} needs drive.start = 'steady' (an operating point)")
         weight = get_field(t, "weight", f"{where}.weight", float, 1.0)
         if weight <= 0:
             raise JobError(f"{where}.weight", f"must be > 0, got {weight}")
-        terms.append(Term(metric, weight))
+        terms.append(Term(metric, weight / scale))
     agg = get_field(obj_t, "aggregate", "objective.aggregate", str, "mean")
     if agg not in strategies.AGGREGATIONS:
         raise JobError("objective.aggregate", f"must be {strategies.one_of(strategies.AGGREGATIONS)}, got {show(agg)}")
@@ -344,6 +412,9 @@ def parse_job(raw: dict, base: Path | None = None) -> Job:
         )
     if drive is not None and drive.file is not None and "file" in raw["drive"]:
         raw = {**raw, "drive": inline_drive(raw["drive"], drive.file)}  # a result reads it wherever it moves
+    if any(t.get("metric") != term.metric for t, term in zip(terms_raw, terms)):  # old names: never written back
+        new = [{**t, "metric": term.metric, "weight": term.weight} for t, term in zip(terms_raw, terms)]
+        raw = {**raw, "objective": {**raw["objective"], "terms": new}}
     job = Job(
         raw=raw,
         name=name,
