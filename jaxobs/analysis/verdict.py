@@ -61,6 +61,7 @@ per design (docs/architecture.md says where).
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Callable
 from typing import Literal, NamedTuple
@@ -423,14 +424,16 @@ def reversal_holds(
     load_nm: float = 0.0,
     t_start: float = 0.2,
     settle: float = 1.0,
+    horizon: float | None = None,
     rule: VerdictRule | None = None,
 ) -> Callable[[np.ndarray], np.ndarray]:
     """The states of a design's reversals at given rates, each call one batched simulation: the ``states_at`` of
     :func:`held_rate`.
 
     Each rate's run is :func:`jaxobs.drive.reversal` on ``base`` (±``speed_rpm``, ``load_nm``), the observer
-    bound to it, the horizon the slowest rate's ramp plus ``settle`` s; lock is judged from ``t_start``, the speed
-    from the end of each run's ramp plus half of ``settle`` (its settled window, at least ``settle``/2 s long).
+    bound to it; lock is judged from ``t_start``, the speed from the end of each run's ramp plus half of
+    ``settle`` to the horizon.  One program is compiled per batch size (and horizon): give ``horizon`` (at least
+    the slowest rate's ramp end plus ``settle``) to keep one across the calls of a search.
 
     Args:
         drive: The sensorless :class:`~jaxobs.drive.Drive`.
@@ -439,14 +442,17 @@ def reversal_holds(
         speed_rpm: The reversal's speed, r/min (±).
         load_nm: The load, N·m.
         t_start: The ramp's start, s.
-        settle: The time after the slowest ramp, s (> 0; several speed-loop time constants).
+        settle: The time after a ramp's end that its run lasts at least, s (> 0; several speed-loop time
+            constants).
+        horizon: The runs' length, s (None: the slowest rate's ramp end plus ``settle``, per call).
         rule: The verdict's thresholds.
 
     Returns:
         A function: rates (r/min per second) → verdict codes.
 
     Raises:
-        ValueError: ``settle`` not a finite number > 0 (the builders check the rest).
+        ValueError: ``settle`` not a finite number > 0, or (by the function) a rate whose ramp and ``settle`` do
+            not fit ``horizon`` (the builders check the rest).
     """
     if not (math.isfinite(float(settle)) and float(settle) > 0.0):
         raise ValueError(f"reversal_holds.settle must be a finite number of seconds > 0, got {settle!r}")
@@ -455,17 +461,21 @@ def reversal_holds(
         obs = observer.bind(sc.est_par, sc.est_par.p * sc.omega_m0)
         return ClosedLoop(drive, obs, sc)
 
+    @functools.partial(jax.jit, static_argnames="t1")
+    def run(s, t_set, t1):
+        sol = jax.vmap(lambda sc: simulate(one(sc), t1, save=SaveAll()))(s)
+        return verdict_of(sol, t_start, t_set, rule).state
+
     def states_at(rates):
         rates = np.asarray(rates, dtype=float).reshape(-1)
         scs = stack_scenarios([reversal(base, speed_rpm, r, load_nm=load_nm, t_start=t_start) for r in rates])
         ramp_end = t_start + 2.0 * float(speed_rpm) / rates
-        t1 = float(ramp_end.max()) + float(settle)
-
-        @jax.jit
-        def run(s, t_set):
-            sol = jax.vmap(lambda sc: simulate(one(sc), t1, save=SaveAll()))(s)
-            return verdict_of(sol, t_start, t_set, rule).state
-
-        return np.asarray(run(scs, jnp.asarray(ramp_end + 0.5 * float(settle))))
+        t1 = float(ramp_end.max()) + float(settle) if horizon is None else float(horizon)
+        if t1 < float(ramp_end.max()) + float(settle) - 1e-9:
+            raise ValueError(
+                f"reversal_holds.horizon ({t1:g} s) is shorter than the slowest ramp's end plus settle "
+                f"({float(ramp_end.max()) + float(settle):g} s)"
+            )
+        return np.asarray(run(scs, jnp.asarray(ramp_end + 0.5 * float(settle)), t1=t1))
 
     return states_at
