@@ -1,7 +1,8 @@
 """Sensorless through zero speed on the 2.2-kW lab IPMSM: each observer family's lowest speed that holds a 50 % load
 step, its standstill hold, and its slowest held ±750 r/min reversal (docs/through-zero.md).
 
-``python -m benchmarks.through_zero [--designs NAME ...] [--json FILE] [--figures DIR]``
+``python -m benchmarks.through_zero [--designs NAME ...] [--json FILE] [--traces DIR]``
+``python -m benchmarks.through_zero --traces DIR --figures DIR --figures-of NAME ...`` (figures from kept traces)
 
 Every run is the drive file ``docs/examples/ipmsm_2p2kw_lab.toml``'s sensorless drive (8 kHz, ideal sensors,
 steady start), its observer's closed form, judged by :func:`jaxobs.analysis.verdict.verdict` (one state per
@@ -15,10 +16,12 @@ run).  Per design:
   the same step at zero speed).
 - **slowest held reversal**: :func:`jaxobs.analysis.verdict.held_rate` over ramp rates :data:`RATES` (r/min per
   second) of ±750 r/min reversals without load, to :data:`RESOLUTION`, each probe one batched run
-  (:func:`jaxobs.analysis.verdict.reversal_holds`, one horizon for every probe).
+  (:func:`jaxobs.analysis.verdict.reversal_holds`, one horizon for every probe); then the same under a constant
+  50 % load where some unloaded reversal held.
 
-Figures (with ``--figures``): each design's ±750 r/min reversal in 1 s and its 15 r/min load step, speed and
-angle error against time.  The numbers are printed as a table and written with ``--json``.
+Traces (with ``--traces``) and figures (``--figures``, from the traces kept): each design's ±750 r/min reversal
+in 1 s and its 15 r/min load step, speed and angle error against time.  The numbers are printed as a table and
+written with ``--json``.
 """
 
 from __future__ import annotations
@@ -45,20 +48,26 @@ REV_SETTLE = 1.0  # after the slowest ramp, s
 
 
 def designs(ts: float) -> dict:
-    """The closed forms run here, by name: each a drive observer (unbound)."""
+    """The closed forms run here, by name: each (a drive observer, unbound; the relative error of the R̂s it and
+    the controller assume).  The error rows show what an exact model hides: at zero speed the reduced-order
+    observer's angle is unobservable (its flux poles are 0 and −2σ0), so with R̂s = Rs nothing moves it there."""
     import jaxobs
     from jaxobs.observers import CLESO, FALESO, GILESO
 
+    rofo = jaxobs.ReducedOrderFluxObserver.closed_form(ts=ts)
     return {
-        "rofo": jaxobs.ReducedOrderFluxObserver.closed_form(ts=ts),
-        "cleso": CLESO.closed_form(ts=ts),
-        "gileso": GILESO.closed_form(ts=ts),
-        "faleso": FALESO.closed_form(ts=ts),
+        "rofo": (rofo, 0.0),
+        "rofo_rs+20": (rofo, 0.2),
+        "rofo_rs-20": (rofo, -0.2),
+        "cleso": (CLESO.closed_form(ts=ts), 0.0),
+        "gileso": (GILESO.closed_form(ts=ts), 0.0),
+        "faleso": (FALESO.closed_form(ts=ts), 0.0),
     }
 
 
-def run_design(name, obs, par, drive, figures):
+def run_design(name, design, par, drive, figures):
     """One design's numbers (and its figures' traces)."""
+    import equinox as eqx
     import jax
     import numpy as np
 
@@ -67,7 +76,9 @@ def run_design(name, obs, par, drive, figures):
     from jaxobs import metrics
     from jaxobs.analysis.verdict import held_rate, reversal_holds, verdict, verdict_names, verdict_of
 
-    base = D.Scenario(par)
+    obs, d_rs = design
+    est = eqx.tree_at(lambda q: q.Rs, par, par.Rs * (1.0 + d_rs))
+    base = D.Scenario(par, est_par=est)
     scs = [D.low_speed_load_step(base, s, LOAD_PU, t_event=T_EVENT) for s in SPEEDS_PU]
     scs.append(D.standstill_hold(base, LOAD_PU, t_event=T_EVENT))
     batch = D.stack_scenarios(scs)
@@ -108,23 +119,32 @@ def run_design(name, obs, par, drive, figures):
         },
         "seconds": time.time() - t0,
     }
-    t0 = time.time()
     horizon = REV_START + 2 * REV_RPM / RATES[0] + REV_SETTLE
-    states_at = reversal_holds(drive, obs, base, REV_RPM, t_start=REV_START, settle=REV_SETTLE, horizon=horizon)
-    r = held_rate(*RATES, states_at=states_at, resolution=RESOLUTION, probes=PROBES)
-    rev = {
-        "slowest_held_rpm_s": None if np.isnan(r.rate) else r.rate,
-        "fastest_failing_rpm_s": None if np.isnan(r.other) else r.other,
-        "resolution": None if np.isnan(r.resolution) else r.resolution,
-        "probed_rpm_s": [float(x) for x in r.rates],
-        "probed_verdicts": list(verdict_names(r.states)),
-        "probes": r.probes,
-        "monotone": r.monotone,
-        "seconds": time.time() - t0,
-    }
-    out = {"load_step": step, "reversal": rev}
+
+    def search(load_nm):
+        t0 = time.time()
+        states_at = reversal_holds(
+            drive, obs, base, REV_RPM, load_nm=load_nm, t_start=REV_START, settle=REV_SETTLE, horizon=horizon
+        )
+        r = held_rate(*RATES, states_at=states_at, resolution=RESOLUTION, probes=PROBES)
+        return {
+            "load_nm": load_nm,
+            "slowest_held_rpm_s": None if np.isnan(r.rate) else r.rate,
+            "fastest_failing_rpm_s": None if np.isnan(r.other) else r.other,
+            "resolution": None if np.isnan(r.resolution) else r.resolution,
+            "probed_rpm_s": [float(x) for x in r.rates],
+            "probed_verdicts": list(verdict_names(r.states)),
+            "probes": r.probes,
+            "monotone": r.monotone,
+            "seconds": time.time() - t0,
+        }
+
+    rev = search(0.0)
+    # under a 50 % load only where some unloaded reversal held (one that fails unloaded is not rerun loaded)
+    rev_loaded = search(LOAD_PU * float(par.T_rated)) if rev["slowest_held_rpm_s"] is not None else None
+    out = {"load_step": step, "reversal": rev, "reversal_loaded": rev_loaded}
     traces = None
-    if figures:
+    if figures:  # the traces
         t0 = time.time()
         sc = D.reversal(base, REV_RPM, 2 * REV_RPM / 1.0, t_start=REV_START)
         o = jax.jit(lambda s: jaxobs.simulate(loop(s), REV_START + 1.0 + REV_SETTLE).outputs)(sc)
@@ -146,6 +166,8 @@ def run_design(name, obs, par, drive, figures):
 
 LABELS = {
     "rofo": "reduced-order flux observer",
+    "rofo_rs+20": "reduced-order, R̂s +20 %",
+    "rofo_rs-20": "reduced-order, R̂s −20 %",
     "cleso": "C-LESO + PLL",
     "gileso": "GI-LESO + PLL",
     "faleso": "FA-LESO + PLL",
@@ -184,36 +206,73 @@ def figure(traces: dict, key: str, title: str, path: Path) -> None:
     plt.close(fig)
 
 
+def _rate_text(rev) -> str:
+    """A reversal search's result as text."""
+    if rev is None:
+        return "not run"
+    slow = rev["slowest_held_rpm_s"]
+    if slow is None:
+        return "none held"
+    odd = "" if rev["monotone"] else " *"  # the probes changed verdict more than once
+    if rev["fastest_failing_rpm_s"] is None:
+        return f"<= {slow:.0f} (bound){odd}"
+    return f"{slow:.0f} ({rev['fastest_failing_rpm_s']:.0f} fails){odd}"
+
+
 def table(results: dict) -> str:
+    """The results as a text table (rates in r/min per second)."""
     rows = [
-        f"{'design':<30} {'lowest held, 50 % step':>22} {'peak° there':>11} {'standstill':>12} "
-        f"{'slowest held reversal':>24} {'1 s reversal':>14}"
+        f"{'design':<30} {'lowest held, 50 % step':>22} {'peak° there':>11} {'standstill 50 %':>15} "
+        f"{'slowest held reversal':>22} {'... under 50 %':>20} {'1 s reversal':>14}"
     ]
     for name, r in results.items():
         st, rev = r["load_step"], r["reversal"]
         low = st["lowest_held_rpm"]
         peak = st["peak_angle_deg"][st["speeds_rpm"].index(low)] if low is not None else float("nan")
-        slow = rev["slowest_held_rpm_s"]
-        if slow is None:
-            srev = "none in range"
-        elif rev["fastest_failing_rpm_s"] is None:
-            srev = f"<= {slow:.0f} r/min/s"
-        else:
-            srev = f"{slow:.0f} r/min/s ({rev['fastest_failing_rpm_s']:.0f} fails)"
         one = rev.get("one_second", {}).get("verdict", "-")
         rows.append(
             f"{LABELS.get(name, name):<30} {('none' if low is None else f'{low:g} r/min'):>22} {peak:>10.2f}° "
-            f"{st['standstill']['verdict']:>12} {srev:>24} {one:>14}"
+            f"{st['standstill']['verdict']:>15} {_rate_text(rev):>22} {_rate_text(r.get('reversal_loaded')):>20} "
+            f"{one:>14}"
         )
+    rows.append("rates in r/min per second; * the probes changed verdict more than once (not monotone in the rate)")
     return "\n".join(rows)
+
+
+def save_traces(folder: Path, name: str, traces: dict) -> None:
+    """A design's traces, every 4th sample (2 kHz: the figures' resolution), to ``folder/name.npz``."""
+    import numpy as np
+
+    folder.mkdir(parents=True, exist_ok=True)
+    flat = {f"{key}__{i}": np.asarray(x)[::4] for key, tr in traces.items() for i, x in enumerate(tr)}
+    np.savez_compressed(folder / f"{name}.npz", **flat)
+
+
+def load_traces(folder: Path, names) -> dict:
+    """The traces :func:`save_traces` wrote, for ``names`` (those with a file)."""
+    import numpy as np
+
+    out = {}
+    for name in names:
+        path = folder / f"{name}.npz"
+        if path.exists():
+            z = np.load(path)
+            keys = sorted({k.split("__")[0] for k in z.files})
+            out[name] = {k: tuple(z[f"{k}__{i}"] for i in range(4)) for k in keys}
+    return out
 
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--designs", nargs="+", help="the designs to run (default: all)")
+    ap.add_argument("--designs", nargs="+", help="the designs to run (default: all; none with --figures-of)")
     ap.add_argument("--json", type=Path, help="write the numbers to this file (merged into it if it exists)")
-    ap.add_argument("--figures", type=Path, help="write the figures into this folder")
+    ap.add_argument("--traces", type=Path, help="keep each design's traces in this folder (NAME.npz)")
+    ap.add_argument("--figures", type=Path, help="draw the figures into this folder from the --traces folder")
+    ap.add_argument("--figures-of", nargs="+", default=[], help="the designs the figures show, in order")
+    ap.add_argument("--table", action="store_true", help="run nothing: print the table of --json")
     args = ap.parse_args(argv)
+    if args.figures is not None and (args.traces is None or not args.figures_of):
+        ap.error("--figures needs --traces and --figures-of")
     import jax
 
     jax.config.update("jax_enable_x64", True)
@@ -222,13 +281,18 @@ def main(argv=None) -> int:
     f = read_drive(LAB)
     par, drive = f.machine, f.drive_for(sensorless=True)
     all_designs = designs(drive.ts)
-    chosen = args.designs or list(all_designs)
-    unknown = [d for d in chosen if d not in all_designs]
+    if args.designs is not None:
+        chosen = args.designs
+    else:
+        chosen = [] if (args.figures_of or args.table) else list(all_designs)
+    unknown = [d for d in [*chosen, *args.figures_of] if d not in all_designs]
     if unknown:
         ap.error(f"unknown design(s) {', '.join(unknown)}; known: {', '.join(all_designs)}")
-    results, traces = {}, {}
+    results = {}
     for name in chosen:
-        results[name], traces[name] = run_design(name, all_designs[name], par, drive, args.figures is not None)
+        results[name], traces = run_design(name, all_designs[name], par, drive, args.traces is not None)
+        if args.traces is not None:
+            save_traces(args.traces, name, traces)
         print(f"{name}: {json.dumps(results[name])}", flush=True)
     if args.json is not None:
         old = json.loads(args.json.read_text()) if args.json.exists() else {}
@@ -237,6 +301,7 @@ def main(argv=None) -> int:
         results = old
     print(table(results))
     if args.figures is not None:
+        traces = load_traces(args.traces, args.figures_of)
         args.figures.mkdir(parents=True, exist_ok=True)
         figure(traces, "reversal_1s", "±750 r/min reversal in 1 s, no load", args.figures / "through-zero-reversal.png")
         figure(traces, "step_15rpm", "7 N·m (50 %) load step at 15 r/min", args.figures / "through-zero-step.png")
