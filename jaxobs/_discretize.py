@@ -35,7 +35,18 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-__all__ = ["Held", "Knots", "AbstractRule", "AbstractMultistepState", "Euler", "Tustin", "AB3", "RK4", "check_rule"]
+__all__ = [
+    "Held",
+    "Knots",
+    "AbstractRule",
+    "AbstractRuleCarry",
+    "AbstractMultistepState",
+    "Euler",
+    "Tustin",
+    "AB3",
+    "RK4",
+    "check_rule",
+]
 
 VectorField = Callable[[jax.Array, Any], jax.Array]
 
@@ -387,9 +398,25 @@ class AB3(AbstractRule):
         return x1, new_state
 
 
+class AbstractRuleCarry(eqx.Module):
+    """The state of a component that a rule steps: its flat vector ``x`` beside the rule's own state.
+
+    Every such state subclasses it (the observers' :class:`~jaxobs.observers.ObserverState` and
+    :class:`~jaxobs.observers.DriveObserverState`, the plants' ``PlantState`` and ``DualPlantState``), so that
+    :func:`ab3_steady_from_start` finds the AB3 components of a carry by their class, not by attribute names.
+
+    Attributes:
+        x: The flat state.
+        rule: The rule's state (an :class:`AB3State`, or None for one-step rules).
+    """
+
+    x: jax.Array
+    rule: Any
+
+
 def _is_ab3_component(node) -> bool:
     """A component's state: its vector ``x`` beside the :class:`AB3State` of the rule that steps it."""
-    return isinstance(getattr(node, "rule", None), AB3State) and hasattr(node, "x")
+    return isinstance(node, AbstractRuleCarry) and isinstance(node.rule, AB3State)
 
 
 def ab3_steady_from_start(c0, c1, c2, h: float):

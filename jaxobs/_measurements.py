@@ -22,9 +22,14 @@ class DriveInput(NamedTuple):
         u_b: u_β, V.
         i_a: i_α at the sample, A.
         i_b: i_β at the sample, A.
+        T_ref: The torque reference the controller held over the period that ends at the sample, N·m, or None
+            where there is none (a recording, a signal-level use): a mechanical-model speed observer
+            (:class:`jaxobs.observers.speed.MechanicalSpeed`) then takes 0.  None, not 0.0, so that a batch of
+            inputs without it still scans and vmaps (None is an empty PyTree).
     """
 
     u_a: jax.Array
     u_b: jax.Array
     i_a: jax.Array
     i_b: jax.Array
+    T_ref: jax.Array | None = None

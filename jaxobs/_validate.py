@@ -98,3 +98,22 @@ def static_float(checked, raw) -> float:
     """A checked scalar kept as a static Python float (from the raw value, so it also works in ``jit``)."""
     del checked
     return float(raw)
+
+
+def key_part(k):
+    """One entry of a pytree key path as a name's part: a field's name, a dict's key, a sequence's index (what
+    :func:`jax.tree_util.tree_flatten_with_path` gives), or the entry itself for any other kind.
+
+    Args:
+        k: The key path entry.
+
+    Returns:
+        The name, key or index.
+    """
+    if isinstance(k, jax.tree_util.GetAttrKey):
+        return k.name
+    if isinstance(k, (jax.tree_util.DictKey, jax.tree_util.FlattenedIndexKey)):
+        return k.key
+    if isinstance(k, jax.tree_util.SequenceKey):
+        return k.idx
+    return k

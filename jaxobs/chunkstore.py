@@ -24,6 +24,7 @@ run in one go.
 
 from __future__ import annotations
 
+import abc
 import json
 import os
 import shutil
@@ -33,7 +34,7 @@ import numpy as np
 
 from .files import atomic_path, atomic_write_text, remove_temps
 
-__all__ = ["ChunkStore"]
+__all__ = ["AbstractChunkSink", "ChunkStore"]
 
 META = "meta.json"
 
@@ -43,8 +44,50 @@ def _partial(name: str) -> bool:
     return name.endswith(".tmp")
 
 
-class ChunkStore:
-    """The chunk files of one study run in the folder ``path`` (the runner's sink: ``start``, ``done``, ``put``).
+class AbstractChunkSink(abc.ABC):
+    """Where the study runner (:func:`jaxobs.runner.run_scenarios`) sends each chunk's values instead of memory.
+
+    The runner calls :meth:`start` once, then per design and chunk :meth:`done` (True: skip it) or :meth:`put`.
+    :class:`ChunkStore` (a folder of chunk files) and ``jaxobs_tuning.distributed.SharedChunks`` (one process's
+    share of a study split over processes) implement it.
+    """
+
+    @abc.abstractmethod
+    def start(self, *, n: int, chunk: int, devices: int, designs: list) -> None:
+        """Open the sink for a run.
+
+        Args:
+            n: The scenarios.
+            chunk: Scenarios per chunk.
+            devices: The devices the run splits each chunk over.
+            designs: The designs' names.
+        """
+
+    @abc.abstractmethod
+    def done(self, design, i: int) -> bool:
+        """Whether chunk ``i`` of ``design`` is held already (the runner skips it).
+
+        Args:
+            design: The design's name.
+            i: The chunk's index.
+
+        Returns:
+            Whether it is held.
+        """
+
+    @abc.abstractmethod
+    def put(self, design, i: int, values: dict) -> None:
+        """Take one chunk's values.
+
+        Args:
+            design: The design's name.
+            i: The chunk's index.
+            values: ``values[name]``, that chunk's real rows (no padding).
+        """
+
+
+class ChunkStore(AbstractChunkSink):
+    """The chunk files of one study run in the folder ``path`` (the runner's sink, :class:`AbstractChunkSink`).
 
     Args:
         path: The folder.

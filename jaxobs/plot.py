@@ -60,7 +60,7 @@ def drive_events(t, out, t_from: float = 0.0):
             end += 1
         kind = "step" if end == k + 1 else "ramp"
         events.append((t[k + 1] if kind == "step" else t[k], f"speed ref. {kind} to {ref[end]:.4g} r/min"))
-    mode = np.asarray(getattr(out, "mode", np.ones_like(t)))
+    mode = np.asarray(out.mode)  # a drive's outputs (DriveOutput, DualOutput) always have it
     for k in np.flatnonzero((mode[:-1] == 0) & (mode[1:] == 1)):
         events.append((t[k + 1], "I-f hand-over to the observer"))
     return sorted((float(te), w) for te, w in events if te >= t_from)

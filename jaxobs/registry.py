@@ -147,15 +147,16 @@ def canonical_key(cls, key: str) -> str:
 
 W_N = papers.FLL_OMEGA_N
 # A LESO's extended-EMF model (002 eqs 4–5) holds on a non-salient machine too (Ld = Lq), so the LESOs
-# may run on 000's SPMSM; the flux observers may not run on the IPMSM: their back EMF u − R̂s i − L̂ di/dt
-# with one inductance is not dψ_f/dt on a salient machine.  They are refused there rather than run on the
-# active flux ψ_a = ψ_s − Lq i (sinusoidal on any PMSM): that is another observer, whose amplitude
-# ψf + (Ld − Lq) i_d moves with the load, so 000's closed forms (normalized by a constant flux) and its
-# stability boundaries (docs/stability.md) would not hold for it, and no paper here gives its gains.
+# may run on 000's SPMSM.  The flux observers run on a salient machine through the active flux
+# ψa = ψf + (Ld − Lq) i_d (jaxobs.observers.flux, "Salient machines": bound to a machine they take L̂q): their
+# filters and FLL/PLL normalizations do not depend on the flux amplitude, so 000's closed forms hold at every
+# steady point; what is new is that |ψa| moves with i_d (under MTPA it falls with the load, and an i_d step is
+# an amplitude step the filters pass with a transient), which 000's analysis and docs/stability.md, at constant
+# amplitude, do not cover.  Their drive jobs still default to 000's SPMSM and may name 002's IPMSM.
 _LESO_MACHINES = ("ipmsm002", "spmsm000")
+_FLUX_MACHINES = ("spmsm000", "ipmsm002")  # 000's SPMSM first: their drive jobs' default machine
 _FLUX_SUPPORT = dict(
-    salient=False,
-    why_not_salient="000's rotor-flux observers assume Ld = Lq (their back EMF u − Rs i − L di/dt has one L)",
+    salient=True,
     why_not_dual="000's observers are derived and checked on a three-phase machine only",
 )
 # 002's LESOs run on either: they are 002's observers of a dual three-phase IPMSM (its αβ subspace,
@@ -205,7 +206,7 @@ _ENTRIES = (
         signal="emf",
         defaults=dict(Rs=0.0, L=1.0, k=papers.SOIFO_K, lam=0.5, omega_init=W_N),
         aliases=("soifo",),
-        machines=("spmsm000",),
+        machines=_FLUX_MACHINES,
         **_FLUX_SUPPORT,
     ),
     Registered(
@@ -220,7 +221,7 @@ _ENTRIES = (
             omega_init=W_N,
         ),
         aliases=("second-order-soifo",),
-        machines=("spmsm000",),
+        machines=_FLUX_MACHINES,
         **_FLUX_SUPPORT,
     ),
     # 000's LPF flux estimator ψ̂ = ê/(s + ωc), uncompensated as in 000 Fig. 5, with the type-2 PLL (ASSUMED,
@@ -233,7 +234,7 @@ _ENTRIES = (
             Rs=papers.SPMSM_000["Rs"], L=papers.SPMSM_000["Ld"], omega_c=papers.LPF_OMEGA_C, **_pll(papers.FLUX_PLL_HZ)
         ),
         aliases=("lpf",),
-        machines=("spmsm000",),
+        machines=_FLUX_MACHINES,
         **_FLUX_SUPPORT,
     ),
     # The pure integrator is no job component (its class says why: PureIntegratorFlux.why_not_tunable).
@@ -243,7 +244,7 @@ _ENTRIES = (
         signal="drive",
         defaults=dict(Rs=papers.SPMSM_000["Rs"], L=papers.SPMSM_000["Ld"]),
         aliases=("integrator",),
-        machines=("spmsm000",),
+        machines=_FLUX_MACHINES,
         **_FLUX_SUPPORT,
     ),
     Registered(

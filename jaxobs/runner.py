@@ -11,9 +11,9 @@ system factories (a design and one scenario → a system, :class:`jaxobs.Abstrac
 an ``xarray.Dataset`` (:meth:`jaxobs.scenarios.AbstractSampler.layout`).
 
 The scenarios run ``chunk_size`` at a time (the last chunk padded with copies of the last scenario, so one
-compilation serves all chunks) in one ``jit``.  A builder that takes ``first`` (the index of its first point:
-``build(names, points, first=i)``, which seeds scenario i's noise from i) is called chunk by chunk, so the
-batched scenarios are held one chunk at a time (memory O(chunk), not O(scenarios)); one that does not is
+compilation serves all chunks) in one ``jit``.  A builder declared ``chunked`` (it takes the index of its
+first point, ``build(names, points, first=i)``, which seeds scenario i's noise from i) is called chunk by chunk,
+so the batched scenarios are held one chunk at a time (memory O(chunk), not O(scenarios)); any other is
 called once for all points: a ``vmap`` on one device; split over ``mesh`` (default
 :func:`jaxobs.batch_mesh`, every device of every process) with :func:`jaxobs.map_batch` on several, each
 chunk padded up to a multiple of the device count.  Several processes (:func:`jaxobs.init_distributed`,
@@ -25,7 +25,6 @@ fields (a closed form and a tuned one) share one compilation: their gains are ar
 
 from __future__ import annotations
 
-import inspect
 import math
 from collections.abc import Callable, Hashable
 from typing import Any, NamedTuple
@@ -38,6 +37,7 @@ import numpy as np
 from . import sharding
 from ._simulate import AbstractSave, SaveAll, simulate
 from ._traced import kept_jit
+from .chunkstore import AbstractChunkSink
 from .progress import Progress
 from .scenarios import AbstractSampler, Given
 
@@ -84,17 +84,6 @@ def _pad(x, rows: int):
     return xp.concatenate([x, xp.repeat(x[-1:], rows - x.shape[0], axis=0)])
 
 
-def _builds_chunks(sampler: AbstractSampler, build) -> bool:
-    """Whether the scenarios are built a chunk at a time: a sampler of points (not one that holds its batch)
-    and a builder with a ``first`` parameter (the index of its first point, which its noise keys need)."""
-    if build is None or isinstance(sampler, Given):
-        return False
-    try:
-        return "first" in inspect.signature(build).parameters
-    except (TypeError, ValueError):  # a callable without a signature: built once, as before
-        return False
-
-
 class StudyRun(NamedTuple):
     """What :func:`run_scenarios` returns.
 
@@ -116,14 +105,15 @@ def run_scenarios(
     metrics: Callable[[Any, Any, Hashable], dict],
     *,
     horizon: float,
-    build: Callable[[tuple, list], Any] | None = None,
+    build: Callable[..., Any] | None = None,
+    chunked: bool = False,
     static: Callable[[Any], Hashable] | None = None,
     chunk_size: int = 2048,
     mesh=None,
     progress=False,
     label: str = "study",
     save: AbstractSave = SaveAll(),
-    sink=None,
+    sink: AbstractChunkSink | None = None,
 ) -> StudyRun:
     """Simulate ``system_factory(design, scenario)`` for ``horizon`` s on every scenario, every design.
 
@@ -139,10 +129,11 @@ def run_scenarios(
         horizon: The simulated time, s (finite, > 0).
         build: ``build(names, points)``: the batched scenario PyTree (leading axis one per point) of a
             sampler's points; a sampler that holds its scenarios (:class:`~jaxobs.scenarios.Given`,
-            ``Recordings``) needs none.  A builder with a ``first`` parameter is called per chunk,
-            ``build(names, chunk_points, first=index of the chunk's first point)``, the last chunk's points
-            padded with copies of its last (so every chunk has one shape); it must check its points as a
-            whole-batch call would (a bad value then stops the run at its chunk).
+            ``Recordings``) needs none.
+        chunked: Whether ``build`` is called per chunk, ``build(names, chunk_points, first=index of the
+            chunk's first point)``, the last chunk's points padded with copies of its last (so every chunk has
+            one shape); such a builder must check its points as a whole-batch call would (a bad value then
+            stops the run at its chunk).  Ignored for a sampler that holds its scenarios.
         static: ``static(design)``, a hashable Python value of the design that the metrics need outside
             tracing (``None`` without ``static``; a new value compiles again).
         chunk_size: Scenarios per chunk (an integer ≥ 1).
@@ -152,16 +143,17 @@ def run_scenarios(
         label: The run's name in messages.
         save: What each run keeps (:class:`~jaxobs.SaveAll` by default; :class:`~jaxobs.SaveFinal` for a long
             horizon whose system accumulates its own metrics in its state).
-        sink: Where each chunk's values go instead of memory (a :class:`jaxobs.chunkstore.ChunkStore`):
-            ``sink.start(n=, chunk=, devices=, designs=)`` once, then per design and chunk
-            ``sink.done(design, i)`` (True: on disk already, skipped) or ``sink.put(design, i, values)`` with
-            the chunk's real rows.
+        sink: Where each chunk's values go instead of memory (a :class:`jaxobs.chunkstore.AbstractChunkSink`,
+            such as a :class:`jaxobs.chunkstore.ChunkStore`): ``sink.start(n=, chunk=, devices=, designs=)``
+            once, then per design and chunk ``sink.done(design, i)`` (True: on disk already, skipped) or
+            ``sink.put(design, i, values)`` with the chunk's real rows.
 
     Returns:
         The :class:`StudyRun`; its ``values`` is ``None`` with a ``sink`` (read them back from the sink).
 
     Raises:
-        ValueError: No designs, or ``chunk_size``, ``horizon`` or ``mesh`` out of range.
+        ValueError: No designs, ``chunk_size``, ``horizon`` or ``mesh`` out of range, or a ``sink`` that is not
+            an :class:`~jaxobs.chunkstore.AbstractChunkSink`.
     """
     if not designs:
         raise ValueError(f"{label}: at least one design is required")
@@ -171,7 +163,10 @@ def run_scenarios(
         raise ValueError(f"horizon must be a finite number of seconds > 0, got {horizon!r}")
     if mesh is not None and not (isinstance(mesh, jax.sharding.Mesh) and mesh.axis_names == (sharding.AXIS,)):
         raise ValueError(f"mesh must be a one-axis jax.sharding.Mesh named 'batch' (jaxobs.batch_mesh), got {mesh!r}")
-    by_chunk = _builds_chunks(sampler, build)
+    if sink is not None and not isinstance(sink, AbstractChunkSink):
+        raise ValueError(f"sink must be a jaxobs.chunkstore.AbstractChunkSink or None, got {type(sink).__name__}")
+    # a sampler of points (not one that holds its batch) and a builder declared to take its chunk's first index
+    by_chunk = bool(chunked) and build is not None and not isinstance(sampler, Given)
     # the points as one float array (8 bytes a value, not a Python tuple per scenario); a builder gets
     # tuples, of its chunk's points or of all
     points = sampler.array()

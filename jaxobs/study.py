@@ -69,8 +69,9 @@ import numpy as np
 
 from . import metrics as M
 from ._simulate import AbstractSave, SaveAll
+from .drive import DriveOutput, DualOutput
 from .families import AbstractScenarios, GridSignals, RecordedSignals
-from .observers import gain_table
+from .observers import gain_fields, gain_table
 from .provenance import cf_dataset, provenance
 from .quantities import Metric
 from .runner import run_scenarios
@@ -142,10 +143,9 @@ def scored_position_error(sol, sig, ctx):
     window it always counts: a drive that has not handed over by then is scored (and flagged lost_sync) on its
     real error, never rewarded with a zero."""
     err = M.position_error(sol, sig)
-    mode = getattr(sol.outputs, "mode", None)
-    if mode is None:
+    if not isinstance(sol.outputs, (DriveOutput, DualOutput)):  # an observer on a signal: no start-up
         return err
-    return jnp.where((mode == 1) | _steady(sol, ctx), err, 0.0)
+    return jnp.where((sol.outputs.mode == 1) | _steady(sol, ctx), err, 0.0)
 
 
 def _speed_err_rpm(sol, sc):
@@ -488,7 +488,8 @@ def study(
         lambda design, sc: scenarios.system(design, sc),
         per_scenario,
         horizon=horizon,
-        build=lambda names, points, first: scenarios.build(names, points, first=first),
+        build=scenarios.build,
+        chunked=True,
         static=static,
         chunk_size=chunk_size,
         mesh=mesh,
@@ -653,7 +654,7 @@ def run_study(
     gains = {
         f"gain_{g}": (
             ("design",),
-            np.asarray([float(getattr(obs, g)) if hasattr(obs, g) else np.nan for obs in designs.values()]),
+            np.asarray([float(getattr(obs, g)) if g in gain_fields(obs) else np.nan for obs in designs.values()]),
             {"units": gains_present[g].units, "long_name": f"observer gain {g} (NaN: the design has no such gain)"},
         )
         for g in gains_present
@@ -676,7 +677,7 @@ def run_study(
         steady_from=steady_from,
         band_hz=band_hz,
         sampling=sampler.sampling,
-        **({} if recordings else {"seed": getattr(sampler, "seed", seed)}),
+        **({} if recordings else {"seed": sampler.seed if isinstance(sampler, (Random, Sobol, LHS)) else seed}),
         **provenance(
             "jaxobs.study.run_study", digests={"recordings": " ".join(sampler.sha256)} if recordings else None
         ),

@@ -76,7 +76,7 @@ def test_the_same_tables_inline_give_the_same_drive(tmp_path):
     text = TEKNIC.read_text().split("\n[machine]", 1)[1]
     inline = "[drive.machine]" + text.replace("\n[inverter]", "\n[drive.inverter]").replace(
         "\n[sensors]", "\n[drive.sensors]"
-    )
+    ).replace("\n[control]", "\n[drive.control]")
     path = _job(tmp_path, drive='loop = "sensorless"\n' + inline)
     job = load_job(path)
     a, b = job_drive(job.drive), job_drive(load_job(_job(tmp_path)).drive)
@@ -99,19 +99,16 @@ def test_a_bad_drive_table_is_one_line_naming_the_field(tmp_path):
     with pytest.raises(JobError, match=r"^drive\.file: give a drive file, a shipped machine or the tables inline"):
         load_job(_job(tmp_path, drive='file = "teknic.toml"\nmachine = "spmsm000"'))
     (tmp_path / "bad.toml").write_text(TEKNIC.read_text().replace("Ld = 0.0002 ", "Ld = -0.0002 "))
-    with pytest.raises(JobError, match=r"^drive\.file: 'bad\.toml': machine\.Ld must be in \(0, 10\] H"):
+    with pytest.raises(JobError, match=r"^drive\.file: 'bad\.toml': machine\.Ld must be in \[1e-08, 10\] H"):
         load_job(_job(tmp_path, drive='file = "bad.toml"'))
 
 
-def test_a_flux_observer_is_refused_on_a_salient_machine_in_one_line(tmp_path):
+def test_a_flux_observer_runs_on_a_salient_machine_through_the_active_flux(tmp_path):
+    """000's observers bind L̂q on a salient machine (jaxobs.observers.flux, "Salient machines"): a job on a
+    salient drive file loads, as the LESOs' always did."""
     salient = TEKNIC.read_text().replace("Lq = 0.0002 ", "Lq = 0.0003 ")
     (tmp_path / "ipm.toml").write_text(salient)
-    with pytest.raises(JobError) as e:
-        load_job(_job(tmp_path, drive='file = "ipm.toml"', comp="SOIFO", gain="k", init=1.4))
-    msg = str(e.value)
-    assert msg.startswith("drive.file: SOIFO does not run on a salient machine") and "assume Ld = Lq" in msg
-    assert "\n" not in msg
-    # the same machine non-salient runs; the LESOs run on either
+    load_job(_job(tmp_path, drive='file = "ipm.toml"', comp="SOIFO", gain="k", init=1.4))
     load_job(_job(tmp_path, comp="SOIFO", gain="k", init=1.4))
     load_job(_job(tmp_path, drive='file = "ipm.toml"'))
 
@@ -126,7 +123,7 @@ def test_the_registry_states_which_machines_each_component_supports():
         assert e.refusal(spm) is None, name
         assert (e.refusal(ipm) is None) == e.salient, name
         assert (e.refusal(dual) is None) == e.dual, name
-    assert REGISTRY["CLESO"].dual and not REGISTRY["SOIFO"].dual and not REGISTRY["LPFFlux"].salient
+    assert REGISTRY["CLESO"].dual and not REGISTRY["SOIFO"].dual and REGISTRY["LPFFlux"].salient
 
 
 def test_tune_envelope_and_export_run_on_a_users_drive_file(tmp_path, capsys):

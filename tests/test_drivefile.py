@@ -49,7 +49,7 @@ def _check(tmp_path, text, capsys):
 def test_the_issue_file_passes_and_prints_the_derived_values(tmp_path, capsys):
     rc, out, err = _check(tmp_path, ISSUE, capsys)
     assert rc == 0, err
-    keys = "base_speed_rpm max_speed_rpm max_speed_fw_rpm i_char tau_d tau_q alpha_c alpha_s kp_d ki_q kp_w ki_w"
+    keys = "base_speed_rpm emf_speed_rpm max_speed_fw_rpm i_char tau_d tau_q alpha_c alpha_s kp_d ki_q kp_w ki_w"
     for key in (*keys.split(), "i_max", "id_policy", "field_weakening", "if_current"):
         assert f" {key} " in out, key
     assert "lowest speed at which each observer family closes the speed loop" in out
@@ -67,7 +67,7 @@ def test_the_issue_file_passes_and_prints_the_derived_values(tmp_path, capsys):
     assert d["i_char"] == pytest.approx(0.11 / 0.0028, rel=1e-12)
     # without field weakening the highest speed to ask for is where the back EMF alone reaches u_dc/√3
     assert (
-        d["speed_limit_rpm"] == d["max_speed_rpm"] == pytest.approx(320 / math.sqrt(3) / 0.11 / 4 * 60 / (2 * math.pi))
+        d["speed_limit_rpm"] == d["emf_speed_rpm"] == pytest.approx(320 / math.sqrt(3) / 0.11 / 4 * 60 / (2 * math.pi))
     )
     # the FLL flux observers close the loop from ωe = 4.3 α_s (docs/stability.md)
     fll = f.lowest_speeds["FLL flux observers (SOIFO, SecondOrderSOIFO)"][0]
@@ -131,6 +131,22 @@ BROKEN = {
         "f_sample_hz = 16000.0\ncompute_delay = 0\n[dual]\nLls = 0.001",
         "inverter.compute_delay",
     ),  # fmt: skip
+    "tiny rated torque": ("rated_torque_nm = 3.2", "rated_torque_nm = 1e-300", "machine.rated_torque_nm"),
+    "zero rated current": ("rated_current_a = 4.0", "rated_current_a = 0", "machine.rated_current_a"),
+    "tiny I-f current": (
+        "f_sample_hz = 16000.0",
+        "f_sample_hz = 16000.0\n[startup]\ncurrent_a = 1e-300",
+        "startup.current_a",
+    ),  # fmt: skip
+    "I-f current of no torque": (
+        "f_sample_hz = 16000.0",
+        "f_sample_hz = 16000.0\n[startup]\ncurrent_a = 0.001",
+        "startup.current_a",
+    ),  # fmt: skip
+    "two magnet fluxes": ("psi_f = 0.11", "psi_f = 0.11\nkt_nm_per_a_rms = 0.9", "machine.psi_f"),
+    "no magnet flux": ("psi_f = 0.11", "", "machine.psi_f"),
+    "zero max speed": ("rated_current_a = 4.0", "rated_current_a = 4.0\nmax_speed_rpm = 0.0", "machine.max_speed_rpm"),
+    "tiny inductance": ("Ld = 0.0028", "Ld = 5e-324", "machine.Ld"),
     "dual with q saturation": (
         "rated_current_a = 4.0",
         "rated_current_a = 4.0\nq_sat_current_a = 20.0",
@@ -295,3 +311,82 @@ def test_individual_control_keeps_its_differential_current_loop_stable(tmp_path)
     (tmp_path / "odd.toml").write_text(ind.replace("Lls = 0.0009", "Lls = 0.003") + 'fw_voltage = "set"\n')
     odd = read_drive(tmp_path / "odd.toml")
     assert {x.split(":")[0] for x in odd.warnings} == {"dual.Lls", "dual.fw_voltage"}, odd.warnings
+
+
+TRACTION = ROOT / "docs" / "examples" / "traction_ipmsm.toml"
+LAB = ROOT / "docs" / "examples" / "lab_ipmsm_2k2.toml"
+
+
+@pytest.mark.parametrize(
+    "key, value, psi_f",
+    [
+        # ψf = Ke √2/√3 / (p 2π 1000/60): 0.11 Wb at p = 4 is 37.63 V/krpm line-to-line rms
+        ("ke_v_per_krpm_ll_rms", 0.11 * 4 * 2 * math.pi * 1000 / 60 * math.sqrt(1.5), 0.11),
+        ("ke_v_per_krpm_ll_peak", 0.11 * 4 * 2 * math.pi * 1000 / 60 * math.sqrt(3.0), 0.11),
+        ("kt_nm_per_a_rms", 1.5 * math.sqrt(2.0) * 4 * 0.11, 0.11),  # T = 1.5 √2 p ψf I_rms
+    ],
+)
+def test_datasheet_constants_give_psi_f_with_the_rule_printed(key, value, psi_f, tmp_path, capsys):
+    f_ref = jaxobs.drive.drive_from_table(__import__("tomllib").loads(ISSUE))
+    text = ISSUE.replace("psi_f = 0.11               # Wb, peak (amplitude-invariant)", f"{key} = {value!r}")
+    path = tmp_path / "drive.toml"
+    path.write_text(text)
+    f = read_drive(path)
+    assert float(f.machine.psi_f) == pytest.approx(psi_f, rel=1e-12)
+    assert f.derived["psi_f"].given and key in f.derived["psi_f"].rule
+    assert f.derived["speed_limit_rpm"].value == pytest.approx(f_ref.derived["speed_limit_rpm"].value, rel=1e-12)
+
+
+def test_one_speed_limit_for_check_tune_and_envelope():
+    """The traction IPMSM's voltage never bounds its speed with field weakening (ψf/Ld = 178 A < 240 A): its
+    [machine] max_speed_rpm is the limit (before: inf in drive check, anything in tune, 3 × rated in envelope);
+    without it the stated rule, 3 × rated.  The envelope's limit is the file's, from the same function."""
+    from jaxobs.analysis.envelope import speed_limit_rpm
+    from jaxobs.drive.drivefile import MECH_SPEED_PU
+
+    f = read_drive(TRACTION)
+    d = f.derived
+    assert d["field_weakening"].value and math.isinf(d["max_speed_fw_rpm"].value)
+    assert f.speed_limit_rpm == 12000.0 and "max_speed_rpm" in d["speed_limit_rpm"].rule and d["speed_limit_rpm"].given
+    assert speed_limit_rpm(f.machine, f.drive, 12000.0) == f.speed_limit_rpm
+    raw = __import__("tomllib").loads(TRACTION.read_text())
+    del raw["machine"]["max_speed_rpm"]
+    g = jaxobs.drive.drive_from_table(raw)
+    assert g.speed_limit_rpm == MECH_SPEED_PU * 3000.0 == speed_limit_rpm(g.machine, g.drive)
+    assert "3 × rated_speed_rpm" in g.derived["speed_limit_rpm"].rule
+    # a finite voltage bound: the file, the envelope and the bench's function agree to the bit
+    for path in (LAB, DATA / "ipmsm002.toml"):
+        h = read_drive(path)
+        assert speed_limit_rpm(h.machine, h.drive) == h.speed_limit_rpm
+    b = read_drive(DATA / "spmsm000.toml")
+    assert jaxobs.drive.drive_speed_limit_rpm(b.machine) == b.speed_limit_rpm
+
+
+def test_if_current_respects_the_rated_current_and_fw_turns_on_at_its_margin():
+    """The traction IPMSM's I-f current is half its 240 A rated peak (T_rated/K_t would give 227 A before
+    the rated current's check, 270 A at 160.6 N·m); the lab IPMSM's rated point needs 95.05 % of u_dc/√3, above
+    the 0.95 margin, so field weakening is on by default; the benches keep theirs (off, and T_rated/K_t)."""
+    f = read_drive(TRACTION)
+    assert f.derived["if_current"].value == pytest.approx(0.5 * 240.0, rel=1e-12)
+    raw = __import__("tomllib").loads(LAB.read_text())
+    del raw["control"]["field_weakening"]
+    g = jaxobs.drive.drive_from_table(raw)
+    assert g.derived["field_weakening"].value and not g.derived["field_weakening"].given
+    assert g.derived["u_rated_point"].value > 0.95 * g.derived["u_max"].value
+    for name in ("spmsm000", "ipmsm002"):
+        b = read_drive(DATA / f"{name}.toml")
+        assert not b.derived["field_weakening"].value
+        assert b.derived["if_current"].value == float(papers.IF_CURRENT_PU * b.machine.i_rated)
+
+
+def test_tune_and_study_refuse_a_speed_above_the_files_limit():
+    """tune and study check their speed axes against the file's one limit: 50 000 r/min on the traction IPMSM
+    (accepted before, when its limit was inf) is refused in one line naming the field and the rule."""
+    from jaxobs_tuning.job import JobError, check_speed_axes
+
+    f = read_drive(TRACTION)
+    with pytest.raises(
+        JobError, match=r"speed_rpm\[0\]: must be in \[1, 12000\] r/min on traction_ipmsm \(speed_limit_rpm"
+    ):
+        check_speed_axes({"speed_rpm": [50000.0]}, "scenarios.grid", "traction_ipmsm", f)
+    check_speed_axes({"speed_rpm": [11000.0]}, "scenarios.grid", "traction_ipmsm", f)

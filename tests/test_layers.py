@@ -59,6 +59,7 @@ LAYERS = [
     # observers: they estimate
     ("jaxobs.observers._cores", "jaxobs.observers._gains", "jaxobs.observers._rules"),
     ("jaxobs.observers.base",),  # its one bound check is _gains'
+    ("jaxobs.observers.speed",),
     (
         "jaxobs.observers.sogi",
         "jaxobs.observers.fll",
@@ -110,7 +111,8 @@ LAYERS = [
     ("jaxobs.reproduce.leso_dual", "jaxobs.reproduce.figures"),
     ("jaxobs.reproduce",),
     # tuning: it changes gains (and exports the tuned observer)
-    ("jaxobs_tuning.outdir", "jaxobs_tuning.checkpoint"),
+    # the results folder, checkpoints, and what a solver minimises (the objective's protocol)
+    ("jaxobs_tuning.outdir", "jaxobs_tuning.checkpoint", "jaxobs_tuning.base"),
     # the C export's code generator (jaxpr -> C) is beside the rest: it knows no observer
     ("jaxobs_tuning.export.ir",),
     ("jaxobs_tuning.export.lower",),

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from jaxobs_tuning import solvers, strategies
+from jaxobs_tuning import AbstractObjective, solvers, strategies
 from jaxobs_tuning.cli import main
 from jaxobs_tuning.outdir import LOCK, OutDir, OutError, atomic_path, atomic_write_bytes, safe_name
 from jaxobs_tuning.params import GainSpec, Parametrization
@@ -172,19 +172,25 @@ def test_internal_error_is_one_line_with_a_log(tmp_path, capsys, monkeypatch):
 # --------------------------------------------------------------------------
 
 
-class _Quadratic:
+class _Quadratic(AbstractObjective):
     """A cheap stand-in objective with the interface the solvers use."""
+
+    param: Parametrization
+    n: int
 
     def __init__(self, n_gains=2):
         specs = [GainSpec("a", 2.0, 0.1, 50.0), GainSpec("b", 1.0, 0.01, 10.0, log=False)]
         self.param = Parametrization(specs[:n_gains])
         self.n = n_gains
 
-    def value_grad_diverged(self, theta):
+    def value_grad_diverged_overflowed(self, theta, scenarios):
         target, w = jnp.asarray([0.3, -0.7])[: self.n], jnp.asarray([1.0, 3.0])[: self.n]
         v = jnp.sum((theta - target) ** 2 * w) + 0.1 * jnp.sum(jnp.sin(3 * theta))
         g = 2 * (theta - target) * w + 0.3 * jnp.cos(3 * theta)
-        return v, g, 0
+        return v, g, 0, 0
+
+    def value(self, theta, scenarios):
+        return self.value_grad_diverged_overflowed(theta, scenarios)[0]
 
 
 CFG = strategies.solver("adam", learning_rate=0.1, steps=24, patience=100, checkpoint_every=2, progress_every=1)

@@ -9,7 +9,7 @@ import pytest
 import jaxobs
 from jaxobs.progress import Progress
 from jaxobs.study import run_study
-from jaxobs_tuning import strategies
+from jaxobs_tuning import AbstractObjective, strategies
 from jaxobs_tuning.cli import build_parser
 from jaxobs_tuning.solvers import tune
 
@@ -43,7 +43,7 @@ def test_progress_is_silent_by_default_a_bar_on_stderr_or_a_callback(capsys, mon
         Progress("yes", 1, "x")
 
 
-class _Quadratic:
+class _Quadratic(AbstractObjective):
     """A stand-in objective with no compilation: (θ − 1)², never diverged."""
 
     class param:
@@ -55,10 +55,10 @@ class _Quadratic:
         def to_theta(values):
             return jnp.asarray([values["g"]])
 
-    def value_grad_diverged(self, theta):
-        return jnp.sum((theta - 1.0) ** 2), 2 * (theta - 1.0), 0
+    def value_grad_diverged_overflowed(self, theta, scenarios):
+        return jnp.sum((theta - 1.0) ** 2), 2 * (theta - 1.0), 0, 0
 
-    def value(self, theta):
+    def value(self, theta, scenarios):
         return jnp.sum((theta - 1.0) ** 2)
 
 

@@ -145,7 +145,7 @@ def test_bind_sets_the_machine_and_the_speed_only(name):
     bound = base.bind(par, -120.0)
     for f, want in (("Rs", par.Rs), ("Ld", par.Ld), ("Lq", par.Lq), ("psi_f", par.psi_f), ("omega_init", -120.0)):
         assert float(getattr(bound, f)) == float(want), f
-    assert set(type(base).bound_fields) == {"Rs", "Ld", "Lq", "psi_f", "omega_init"}
+    assert set(type(base).bound_fields.names) == {"Rs", "Ld", "Lq", "psi_f", "omega_init"}
     assert all(float(getattr(bound, g)) == float(getattr(base, g)) for g in gain_fields(base))
     only = base.bind(None, 7.0)
     assert float(only.omega_init) == 7.0 and float(only.Ld) == 1.0

@@ -8,7 +8,17 @@ import optax
 import optimistix as optx
 import pytest
 
-from jaxobs_tuning import CVaR, Mean, Objective, OptaxSolver, OptimistixSolver, SmoothMax, strategies, tune
+from jaxobs_tuning import (
+    AbstractObjective,
+    CVaR,
+    Mean,
+    Objective,
+    OptaxSolver,
+    OptimistixSolver,
+    SmoothMax,
+    strategies,
+    tune,
+)
 from jaxobs_tuning.solvers import as_solver
 
 
@@ -42,7 +52,8 @@ def test_aggregations_on_a_hand_made_batch():
         (lambda: OptaxSolver(optax.adam(0.1), steps=0), "OptaxSolver.steps"),
         (lambda: OptaxSolver(optax.adam(0.1), patience=True), "OptaxSolver.patience"),
         (lambda: OptimistixSolver(optx.BFGS(rtol=1e-6, atol=1e-6), tol=-1.0), "OptimistixSolver.tol"),
-        (lambda: Objective(None, None, None, horizon=1.0, terms=[], ctx=None, aggregation="mean"), "aggregation"),
+        (lambda: Objective(None, None, horizon=1.0, terms=[], ctx=None, aggregation="mean"), "aggregation"),
+        (lambda: tune(object(), optax.sgd(0.1)), "objective must be a jaxobs_tuning.AbstractObjective"),
     ],
 )
 def test_bad_strategies_are_refused_naming_the_field(make, match):
@@ -64,7 +75,7 @@ def test_the_table_builds_the_objects_a_job_names():
     assert float(sched(0)) == pytest.approx(0.1) and float(sched(10)) == pytest.approx(0.0, abs=1e-12)
 
 
-class _Quadratic:
+class _Quadratic(AbstractObjective):
     """(θ − 1)², never diverged; no simulation."""
 
     class param:
@@ -80,10 +91,10 @@ class _Quadratic:
         def theta0():
             return jnp.zeros(1)
 
-    def value_grad_diverged(self, theta):
-        return jnp.sum((theta - 1.0) ** 2), 2 * (theta - 1.0), 0
+    def value_grad_diverged_overflowed(self, theta, scenarios):
+        return jnp.sum((theta - 1.0) ** 2), 2 * (theta - 1.0), 0, 0
 
-    def value(self, theta):
+    def value(self, theta, scenarios):
         return jnp.sum((theta - 1.0) ** 2)
 
 

@@ -359,6 +359,7 @@ def test_scenarios_built_a_chunk_at_a_time_are_the_whole_batchs():
         lambda sol, _s, _a: {"w": sol.outputs.obs.omega[-1]},
         horizon=0.01,
         build=build,
+        chunked=True,
         chunk_size=3,
     )
     assert calls == [(0, 3), (3, 3), (6, 3)]

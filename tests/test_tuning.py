@@ -48,18 +48,19 @@ def itae_tuning():
     comp = linear.sogi_fll_closed_form()
     param = Parametrization([GainSpec("lam", float(comp.lam), 500.0, 500000.0)])
     obj = Objective(
-        comp, param, sig, horizon=0.4, terms=[Term("itae_freq")], ctx=MetricContext(t_event=0.1, steady_from=0.3)
+        comp, param, horizon=0.4, terms=[Term("itae_freq")], ctx=MetricContext(t_event=0.1, steady_from=0.3)
     )
-    res = tune(obj, OptaxSolver(optax.adam(0.1), steps=60, patience=15, name="adam"), param.theta0(), quiet=True)
-    return obj, param, res
+    solver = OptaxSolver(optax.adam(0.1), steps=60, patience=15, name="adam")
+    res = tune(obj, solver, param.theta0(), scenarios=sig, quiet=True)
+    return obj, sig, param, res
 
 
 def test_nonlinear_itae_tuning_beats_the_closed_form(itae_tuning):
     """Measured: closed form λ = 12337, ITAE 6.06e-4 Hz·s²; tuned λ = 40133, ITAE 4.28e-4 (−29 %)."""
-    obj, param, res = itae_tuning
+    obj, sig, param, res = itae_tuning
     theta_cf = param.theta0()
-    cf_score = obj.scores(theta_cf)["itae_freq_mean"]
-    tuned_score = obj.scores(res.theta)["itae_freq_mean"]
+    cf_score = obj.scores(theta_cf, sig)["itae_freq_mean"]
+    tuned_score = obj.scores(res.theta, sig)["itae_freq_mean"]
     lam = param.values(res.theta)["lam"]
     assert tuned_score < 0.95 * cf_score, (lam, tuned_score, cf_score)
     assert lam != pytest.approx(papers.SOGI_FLL_LAM, rel=0.05)  # it moved somewhere else on purpose
@@ -99,17 +100,20 @@ def test_diverging_candidates_give_a_finite_penalty_and_gradient():
     sigs = jaxobs.stack([jaxobs.paper001_test("A", t_event=0.1, phase=p) for p in (0.0, 1.0)])
     comp = jaxobs.SOGIFLL(k=0.7, lam=12000.0, rule=jaxobs.Euler(), ts=1e-3)
     param = Parametrization([GainSpec("k", 0.7, 0.01, 100.0)])
-    obj = Objective(
-        comp, param, sigs, horizon=0.3, terms=[Term("itae_freq")], ctx=MetricContext(0.1, 0.25), penalty=123.0
-    )
+    obj = Objective(comp, param, horizon=0.3, terms=[Term("itae_freq")], ctx=MetricContext(0.1, 0.25), penalty=123.0)
     bad = param.to_theta({"k": 40.0})
-    v, g = obj.value_and_grad(bad)
+    v, g = obj.value_and_grad(bad, sigs)
     assert float(v) == 123.0 and np.all(np.isfinite(np.asarray(g))) and float(g[0]) == 0.0
-    v_ok, g_ok = obj.value_and_grad(param.theta0())
+    v_ok, g_ok = obj.value_and_grad(param.theta0(), sigs)
     assert np.isfinite(float(v_ok)) and float(v_ok) < 1.0 and np.isfinite(float(g_ok[0]))
     # the same objective works through jax.grad and an optimistix-style forward derivative
-    assert float(jax.grad(obj.value)(param.theta0())[0]) == pytest.approx(float(g_ok[0]))
-    assert float(jax.jvp(obj.value, (param.theta0(),), (jnp.ones(1),))[1]) == pytest.approx(float(g_ok[0]))
+    value = lambda th: obj.value(th, sigs)  # noqa: E731
+    assert float(jax.grad(value)(param.theta0())[0]) == pytest.approx(float(g_ok[0]))
+    assert float(jax.jvp(value, (param.theta0(),), (jnp.ones(1),))[1]) == pytest.approx(float(g_ok[0]))
+    # the scenarios are an argument: one of them alone is the same objective on a batch of one
+    one = jax.tree.map(lambda x: x[:1], sigs)
+    v_one, _ = obj.value_and_grad(param.theta0(), one)
+    assert float(v_one) != float(v_ok) and np.isfinite(float(v_one))
 
 
 def test_forward_mode_gradient_equals_reverse_mode_and_central_differences(monkeypatch):
@@ -128,7 +132,6 @@ def test_forward_mode_gradient_equals_reverse_mode_and_central_differences(monke
         return Objective(
             comp,
             param,
-            sigs,
             horizon=0.15,
             terms=[Term("itae_freq"), Term("ripple_freq", 0.01)],
             ctx=MetricContext(0.05, 0.1),
@@ -137,14 +140,14 @@ def test_forward_mode_gradient_equals_reverse_mode_and_central_differences(monke
 
     fwd = objective()
     assert fwd._forward_mode(theta)
-    v_f, g_f = fwd.value_and_grad(theta)
+    v_f, g_f = fwd.value_and_grad(theta, sigs)
     monkeypatch.setattr(O, "FORWARD_MAX", 0)
     rev = objective()
     assert not rev._forward_mode(theta)
-    v_r, g_r = rev.value_and_grad(theta)
+    v_r, g_r = rev.value_and_grad(theta, sigs)
     assert float(v_f) == pytest.approx(float(v_r), rel=1e-12)
     np.testing.assert_allclose(np.asarray(g_f), np.asarray(g_r), rtol=1e-9)
-    value = jax.jit(fwd.value)
+    value = jax.jit(lambda th: fwd.value(th, sigs))
     for i in range(3):
         e = jnp.zeros(3).at[i].set(1e-5)
         fd = (float(value(theta + e)) - float(value(theta - e))) / 2e-5
@@ -157,11 +160,11 @@ def test_per_scenario_scores_flag_a_lost_lock_that_does_not_diverge():
     sigs = jaxobs.stack([jaxobs.GridSignal(t_event=0.1, freq_step=f) for f in (-1.0, 2.0)])
     comp = jaxobs.SOGIFLL(k=0.7, lam=1e4)
     param = Parametrization([GainSpec("k", 0.7, 0.01, 100.0)])
-    obj = Objective(comp, param, sigs, horizon=0.4, terms=[Term("rms_phase_steady")], ctx=MetricContext(0.1, 0.3))
-    mets, total, good = obj.per_scenario(param.to_theta({"k": 20.0}))
+    obj = Objective(comp, param, horizon=0.4, terms=[Term("rms_phase_steady")], ctx=MetricContext(0.1, 0.3))
+    mets, total, good = obj.per_scenario(param.to_theta({"k": 20.0}), sigs)
     assert np.all(np.asarray(good)) and np.all(np.asarray(mets["lost_lock"]))
     assert obj.summarize(mets, total, good)["lost_lock"] == 2
-    mets, total, good = obj.per_scenario(param.theta0())
+    mets, total, good = obj.per_scenario(param.theta0(), sigs)
     assert not np.any(np.asarray(mets["lost_lock"])) and obj.summarize(mets, total, good)["lost_lock"] == 0
 
 

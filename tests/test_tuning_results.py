@@ -360,11 +360,7 @@ def test_flux_observer_drive_job_runs_sensorless_on_the_spmsm(tmp_path, capsys):
 @pytest.mark.parametrize(
     "edit, field, words",
     [
-        (
-            lambda s: s.replace('loop = "sensorless"', 'loop = "sensorless"\nmachine = "ipmsm002"'),
-            "drive.machine",
-            "cannot run on ipmsm002",
-        ),
+        # (a flux observer on ipmsm002 runs now, through the active flux: tests/test_zero_speed.py)
         (
             lambda s: s.replace('loop = "sensorless"', 'loop = "sensorless"\nmachine = "spmsm"'),
             "drive.machine",
@@ -381,21 +377,16 @@ def test_flux_observer_drive_job_runs_sensorless_on_the_spmsm(tmp_path, capsys):
             "drive",
             "applies to drive jobs",
         ),
-        # the LPF observer runs in the drive only; 000's LPF is not a machine for the LESOs' IPMSM either
+        # the LPF observer runs in the drive only (on 002's IPMSM too, through the active flux)
         (
             lambda s: _lpf(s).replace('signal = "drive"', 'signal = "emf"'),
             "scenarios.signal",
             "'drive' signals",
         ),
-        (
-            lambda s: _lpf(s).replace('loop = "sensorless"', 'loop = "sensorless"\nmachine = "ipmsm002"'),
-            "drive.machine",
-            "LPFFlux",
-        ),
     ],
 )
 def test_flux_drive_job_bad_machine_or_component_exits_2(tmp_path, capsys, edit, field, words):
-    """--check refuses a flux observer on the salient IPMSM, an unknown machine, the pure integrator (its
+    """--check refuses an unknown machine, the pure integrator (its
     integration constant never decays), and a signal the component cannot run on: exit 2, one line."""
     path = tmp_path / "job.toml"
     path.write_text(edit(FLUX_DRIVE))

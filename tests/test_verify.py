@@ -14,7 +14,9 @@ import numpy as np
 import pytest
 
 from jaxobs.provenance import read_file
+from jaxobs_tuning import AbstractObjective
 from jaxobs_tuning.checkpoint import DIGEST, content_digest
+from jaxobs_tuning.params import GainSpec, Parametrization
 from jaxobs_tuning.solvers import CheckpointError
 from tests.test_outputs import _run
 
@@ -415,24 +417,26 @@ def test_objective_overflow_is_its_own_outcome(tmp_path, capsys, monkeypatch):
     assert "OVERFLOW" in capsys.readouterr().out
 
 
-class _OverflowsAt:
+class _OverflowsAt(AbstractObjective):
     """A stand-in objective whose gradient overflows from iteration ``at`` on (a finite value, a finite run)."""
 
+    param: Parametrization
+    at: int
+    calls: list  # [evaluations so far] (a module is frozen: the count lives in a list)
+
     def __init__(self, at: int):
-        from jaxobs_tuning.params import GainSpec, Parametrization
-
         self.param = Parametrization([GainSpec("a", 2.0, 0.1, 50.0)])
-        self.at, self.calls = at, 0
+        self.at, self.calls = at, [0]
 
-    def value_grad_diverged_overflowed(self, theta):
+    def value_grad_diverged_overflowed(self, theta, scenarios):
         import jax.numpy as jnp
 
-        n = self.calls
-        self.calls += 1
+        n = self.calls[0]
+        self.calls[0] += 1
         return jnp.sum(theta**2), 2 * theta, int(n >= self.at), int(n >= self.at)
 
-    def value_grad_diverged(self, theta):
-        return self.value_grad_diverged_overflowed(theta)[:3]
+    def value(self, theta, scenarios):
+        return self.value_grad_diverged_overflowed(theta, scenarios)[0]
 
 
 @pytest.mark.parametrize("at", [0, 3, 6])

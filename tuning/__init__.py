@@ -3,7 +3,7 @@
 ```python
 from jaxobs_tuning import load_job, run_job
 from jaxobs_tuning import Objective, tune, CVaR
-    # in Python: tune(Objective(..., aggregation=CVaR(0.9)), optax.adam(0.1))
+    # in Python: tune(Objective(..., aggregation=CVaR(0.9)), optax.adam(0.1), scenarios=batch)
 from jaxobs_tuning import load_result, tuned_component     # a run's result.json back as a component
 ```
 """
@@ -12,6 +12,7 @@ from .aggregations import AbstractAggregation as AbstractAggregation
 from .aggregations import CVaR as CVaR
 from .aggregations import Mean as Mean
 from .aggregations import SmoothMax as SmoothMax
+from .base import AbstractObjective as AbstractObjective
 from .job import COMPONENTS as COMPONENTS
 from .job import JobError as JobError
 from .job import load_job as load_job

@@ -15,7 +15,7 @@ import math
 from jaxobs.drive import read_drive
 
 _SECTIONS = (
-    ("machine", ("kt", "i_char", "tau_d", "tau_q", "t_accel", "i_rated_point")),
+    ("machine", ("psi_f", "kt", "i_char", "tau_d", "tau_q", "t_accel", "i_rated_point")),
     (
         "speeds",
         (
@@ -23,7 +23,7 @@ _SECTIONS = (
             "u_rated_point",
             "u_rated_point_fw",
             "base_speed_rpm",
-            "max_speed_rpm",
+            "emf_speed_rpm",
             "max_speed_fw_rpm",
             "speed_limit_rpm",
         ),
@@ -31,7 +31,7 @@ _SECTIONS = (
     ("timing", ("ts", "use_delay", "advance", "speed_every")),
     ("current loop", ("alpha_c", "alpha_c_ts", "current_phase_margin", "kp_d", "ki_d", "kp_q", "ki_q")),
     ("speed loop", ("alpha_s", "omega_est", "speed_schedule", "kp_w", "ki_w")),
-    ("limits and policy", ("i_max", "id_policy", "field_weakening")),
+    ("limits and policy", ("i_max", "id_policy", "field_weakening", "fw_margin")),
     ("sensors", ("adc_lsb", "i_noise", "encoder_angle_step", "encoder_speed_step")),
     ("I-f start-up", ("if_current", "if_switch_rpm", "if_ramp_s")),
 )

@@ -15,6 +15,7 @@ import sys
 from pathlib import Path
 
 import jaxobs
+from jaxobs.chunkstore import AbstractChunkSink
 
 from .job import JobError, read_toml
 from .study_file import WHAT
@@ -141,7 +142,7 @@ class _ShareComputed(Exception):
     for it to do (process 0 lays the study out from its store and writes it)."""
 
 
-class SharedChunks:
+class SharedChunks(AbstractChunkSink):
     """The runner's sink (:func:`jaxobs.runner.run_scenarios`) in each process of a study split over processes.
 
     Every process must skip the same chunks (a chunk is computed by all of them together, in collectives), but

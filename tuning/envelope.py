@@ -108,13 +108,14 @@ def cli_envelope(args) -> int:
     ax = par if spec.drive_file.dual is None else par.m  # the whole machine's ratings, ψf and p set the axes
     # a count: the default axes (log-spaced speeds from 1 % of rated to the drive's limit, loads 0..rated); or
     # the values themselves, within the drive's limit and the study's loads
+    mech = spec.drive_file.table.get("machine", {}).get("max_speed_rpm")  # the file's mechanical limit, if any
     if isinstance(args.speeds, tuple):
-        top = speed_limit_rpm(ax, drive)
+        top = speed_limit_rpm(ax, drive, mech)
         if args.speeds[-1] > top:
             raise ValueError(f"--speeds: must be <= {top:.4g} r/min (the drive's speed limit), got {args.speeds[-1]:g}")
         speeds = np.asarray(args.speeds)
     else:
-        speeds = default_speeds(ax, args.speeds, drive=drive)
+        speeds = default_speeds(ax, args.speeds, drive=drive, max_speed_rpm=mech)
     loads = np.asarray(args.loads) if isinstance(args.loads, tuple) else default_loads(ax, args.loads)
     n = len(speeds) * len(loads)
     # the job's own settle and (shortest) window where it states them ([envelope]), else the library's defaults
@@ -147,6 +148,7 @@ def cli_envelope(args) -> int:
             horizon=args.horizon,
             stability=stab,
             progress=False if args.quiet else "auto",
+            max_speed_rpm=mech,
         )
         # source (CF: how the data were made) stays the library function; the job file is its own attribute
         ds.attrs.update(job_file=str(path), job_name=job.name, component=job.component, machine=spec.machine)

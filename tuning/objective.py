@@ -33,13 +33,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import Any
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxobs import OnSignal, SaveAll, kept_jit, simulate
+from jaxobs import OnSignal, SaveAll, simulate
 from jaxobs import metrics as M
 from jaxobs.analysis.stability import lyapunov
 from jaxobs.families import AbstractScenarios
@@ -51,6 +52,7 @@ from jaxobs.study import METRICS as TABLE
 from jaxobs.study import StudyContext, scored_position_error
 
 from .aggregations import AbstractAggregation, Mean
+from .base import AbstractObjective
 from .params import Parametrization
 
 __all__ = [
@@ -61,6 +63,7 @@ __all__ = [
     "LOST_SYNC_DEG",
     "Term",
     "MetricContext",
+    "AbstractObjective",
     "Objective",
 ]
 
@@ -175,16 +178,43 @@ class Term:
 # --------------------------------------------------------------------------
 
 
-class Objective:
-    """value(θ), value_and_grad(θ) and per-scenario scores for a component and a scenario batch.
+@eqx.filter_jit
+def _per_scenario_vg(objective, theta, scenarios):
+    """:meth:`Objective._per_scenario_value_and_grad` as one program: the objective's arrays (the component's
+    fixed values, a family's machine) and the scenarios are its inputs, its static fields its key."""
+    return objective._per_scenario_value_and_grad(theta, scenarios)
 
-    The value-and-gradient's and the scoring's traced programs are kept across processes where
-    :func:`jaxobs.use_compile_cache` set a folder (:func:`jaxobs.kept_jit`, keyed on :attr:`kept_fields`).
+
+@eqx.filter_jit
+def _response_program(objective, theta, sig):
+    return objective._response(theta, sig)
+
+
+@eqx.filter_custom_jvp
+def _value(theta, objective, scenarios):
+    """The aggregate at ``theta`` with the sanitized derivative (module doc, "Divergence"): optax and optimistix
+    see the gradient assembled per scenario, a diverged scenario's zero included."""
+    return objective._aggregate_with_grad(theta, scenarios)[0]
+
+
+@_value.def_jvp
+def _value_jvp(primals, tangents):
+    # a function of θ alone: the objective's and the scenarios' tangents (None) do not enter
+    (theta, objective, scenarios), (tdot, _, _) = primals, tangents
+    v, g = objective._aggregate_with_grad(theta, scenarios)
+    return v, jnp.dot(g, tdot)
+
+
+class Objective(AbstractObjective):
+    """value(θ, scenarios), value_and_grad(θ, scenarios) and per-scenario scores of a component on a batch.
+
+    A module: its own values (the component, the family's machine) are arrays of its programs' inputs, and the
+    scenario batch is an argument of every call, so the value-and-gradient compiles once per batch shape
+    (``eqx.filter_jit``; JAX's persistent cache, :func:`jaxobs.use_compile_cache`, keeps it across processes).
 
     Args:
         component: The module whose free gains ``param`` sets.
         param: The :class:`~jaxobs_tuning.params.Parametrization` of the free gains.
-        scenarios: The batch (leading axis the scenarios).
         horizon: Simulated seconds per scenario.
         terms: The weighted metrics (:class:`Term`) summed per scenario.
         ctx: The metrics' event time, steady window and bands.
@@ -195,17 +225,24 @@ class Objective:
             each scenario (bound to it: the machine an observer assumes, its initial speed; closing the
             drive's loop for :class:`~jaxobs.families.DriveScenarios`); None: the component runs on each
             scenario, a signal, as it is.
+
+    Raises:
+        ValueError: An unknown metric, or an aggregation that is not an aggregation object.
     """
 
-    # what its programs bake in (the key of a kept program, jaxobs.kept_jit): the rest is made from these
-    kept_fields = ("component", "param", "scenarios", "horizon", "terms", "ctx", "aggregation", "penalty", "family",
-                   "_save")  # fmt: skip
+    component: Any
+    param: Parametrization = eqx.field(static=True)
+    horizon: float = eqx.field(static=True)
+    terms: tuple = eqx.field(static=True)
+    ctx: MetricContext = eqx.field(static=True)
+    aggregation: AbstractAggregation
+    penalty: float = eqx.field(static=True)
+    family: AbstractScenarios | None
 
     def __init__(
         self,
         component,
         param: Parametrization,
-        scenarios,
         *,
         horizon: float,
         terms: list[Term],
@@ -223,35 +260,34 @@ class Objective:
             )
         self.component = component
         self.param = param
-        self.scenarios = scenarios
         self.horizon = float(horizon)
-        self.terms = list(terms)
+        self.terms = tuple(terms)
         self.ctx = ctx
         self.aggregation, self.penalty = aggregation, float(penalty)
         self.family = family
-        # the solver's runs: every step's outputs, an observer on a signal through the loop made fast, the drive
-        # plainly (module doc); the scoring and the figures run once per design, where compile time counts
-        self._save = SaveAll(fast=not self.closed_loop)
-        # the scenarios and the component are constants of the program (self is static): kept_fields name them
-        self._vg = kept_jit(self._per_scenario_value_and_grad)
-        self.response = kept_jit(self._response)
-
-        @jax.custom_jvp
-        def value(theta):
-            return self._aggregate_with_grad(theta)[0]
-
-        @value.defjvp
-        def _value_jvp(primals, tangents):
-            (theta,), (tdot,) = primals, tangents
-            v, g = self._aggregate_with_grad(theta)
-            return v, jnp.dot(g, tdot)
-
-        self.value = value
 
     @property
     def closed_loop(self) -> bool:
         """Whether the component closes the drive's loop (the drive's metrics and flags apply)."""
         return self.family is not None and self.family.closed_loop
+
+    @property
+    def _save(self) -> SaveAll:
+        """The solver's runs: every step's outputs, an observer on a signal through the loop made fast, the drive
+        plainly (module doc); the scoring and the figures run once per design, where compile time counts."""
+        return SaveAll(fast=not self.closed_loop)
+
+    def value(self, theta, scenarios):
+        """The objective at ``theta`` on ``scenarios``, with the sanitized derivative (module doc).
+
+        Args:
+            theta: The free gains' vector.
+            scenarios: The batch (leading axis the scenarios).
+
+        Returns:
+            The scalar objective.
+        """
+        return _value(theta, self, scenarios)
 
     # --- single scenario
     def _simulate(self, comp, sig, save=SaveAll()):
@@ -284,7 +320,7 @@ class Objective:
         stability-margin term."""
         return theta.size <= FORWARD_MAX and not any(t.metric == STABILITY_MARGIN for t in self.terms)
 
-    def _per_scenario_value_and_grad(self, theta):
+    def _per_scenario_value_and_grad(self, theta, scenarios):
         def vg(sig):
             if self._forward_mode(theta):
                 one = lambda th: self._one(th, sig)  # noqa: E731
@@ -296,7 +332,7 @@ class Objective:
                 (v, ok), g = jax.value_and_grad(self._one, has_aux=True)(theta, sig)
             return v, ok, g
 
-        v, ok, g = jax.vmap(vg)(self.scenarios)
+        v, ok, g = jax.vmap(vg)(scenarios)
         g_finite = jnp.all(jnp.isfinite(g), axis=-1)
         good = ok & jnp.isfinite(v) & g_finite
         over = ok & jnp.isfinite(v) & ~g_finite  # a finite run and value, a gradient that overflowed
@@ -304,36 +340,35 @@ class Objective:
         g = jnp.where(good[:, None], g, 0.0)
         return v, g, good, over
 
-    def _aggregate_with_grad(self, theta):
-        v, g, _, _ = self._vg(theta)
+    def _aggregate_with_grad(self, theta, scenarios):
+        v, g, _, _ = _per_scenario_vg(self, theta, scenarios)
         return _aggregate_and_grad(self.aggregation, v, g)
 
-    def value_and_grad(self, theta):
-        return self._aggregate_with_grad(theta)
-
-    def value_grad_diverged(self, theta):
-        """The objective, its gradient and how many scenarios diverged, from one batch evaluation.
+    def value_and_grad(self, theta, scenarios):
+        """The objective at ``theta`` on ``scenarios`` and its gradient (module doc, "Divergence").
 
         Args:
             theta: The free gains' vector.
+            scenarios: The batch (leading axis the scenarios).
 
         Returns:
-            ``(value, gradient, diverged count)``.
+            ``(value, gradient)``.
         """
-        return self.value_grad_diverged_overflowed(theta)[:3]
+        return self._aggregate_with_grad(theta, scenarios)
 
-    def value_grad_diverged_overflowed(self, theta):
-        """:meth:`value_grad_diverged` and how many scenarios overflowed: a finite simulation and value, a
-        gradient that is not finite (a finite but huge weight; counted with the diverged ones too).  When the
-        aggregate or its gradient is not finite though every scenario's value is, every scenario counts.
+    def value_grad_diverged_overflowed(self, theta, scenarios):
+        """:meth:`value_and_grad`, how many scenarios diverged and how many overflowed: a finite simulation and
+        value, a gradient that is not finite (a finite but huge weight; counted with the diverged ones too).
+        When the aggregate or its gradient is not finite though every scenario's value is, every scenario counts.
 
         Args:
             theta: The free gains' vector.
+            scenarios: The batch (leading axis the scenarios).
 
         Returns:
             ``(value, gradient, diverged count, overflowed count)``.
         """
-        v, g, good, over = self._vg(theta)
+        v, g, good, over = _per_scenario_vg(self, theta, scenarios)
         agg_v, grad = _aggregate_and_grad(self.aggregation, v, g)
         # the counts on the host: each eager jnp reduction here was a program of its own to compile
         good, over = np.asarray(good), np.asarray(over)
@@ -342,25 +377,36 @@ class Objective:
             n_over = int(v.shape[0])
         return agg_v, grad, int(np.sum(~good)), n_over
 
-    def overflowed(self, theta, scored_good) -> int:
+    def overflowed(self, theta, scenarios, scored_good) -> int:
         """Scenarios whose simulation and weighted metrics are finite (``scored_good``: :meth:`per_scenario`'s
         mask at ``theta``) but whose tuning value or gradient is not: the objective overflows (a finite but
         huge weight), which the solver counts with the diverged scenarios, though nothing diverged.
 
         Args:
             theta: The free gains' vector.
+            scenarios: The batch ``scored_good`` is of.
             scored_good: :meth:`per_scenario`'s good mask at ``theta``.
 
         Returns:
             The number of such scenarios.
         """
-        _, _, good, _ = self._vg(theta)
+        _, _, good, _ = _per_scenario_vg(self, theta, scenarios)
         return int(np.sum(np.asarray(scored_good) & ~np.asarray(good)))
 
+    def response(self, theta, sig):
+        """One scenario's run at ``theta`` as the report draws it; one program for every design and scenario.
+
+        Args:
+            theta: The free gains' vector.
+            sig: One scenario (no leading axis).
+
+        Returns:
+            The sample times (s), the observer's frequency estimate ``obs.omega`` (rad/s) and its position error
+            θ̂ − θ (rad, :func:`jaxobs.metrics.position_error`).
+        """
+        return _response_program(self, theta, sig)
+
     def _response(self, theta, sig):
-        """One scenario's run at ``theta`` as the report draws it: the sample times (s), the observer's
-        frequency estimate ``obs.omega`` (rad/s) and its position error θ̂ − θ (rad,
-        :func:`jaxobs.metrics.position_error`); one program for every design (``response``)."""
         sol = self._simulate(self.param.apply(self.component, theta), sig)
         return sol.t, sol.outputs.obs.omega, M.position_error(sol, sig)
 
@@ -388,8 +434,8 @@ class Objective:
 
     def _per_scenario_metrics(self, theta, scenarios):
         given = Given(scenarios)
-        # one chunk of every scenario on one device: the jit(vmap) the objective always ran, compiled once per
-        # objective (the runner keys its compilation on these two methods)
+        # one chunk of every scenario on one device: the jit(vmap) the objective always ran (the runner's program
+        # takes these two methods, and with them the objective's arrays, as inputs)
         run = run_scenarios(
             {"design": theta},
             given,
@@ -410,7 +456,7 @@ class Objective:
         comp = self.param.apply(self.component, theta)
         return jax.vmap(lambda sig: self._exponent(comp, sig))(scenarios)
 
-    def per_scenario(self, theta, scenarios=None):
+    def per_scenario(self, theta, scenarios):
         """Each scenario's metrics (and its :data:`LOST_LOCK` flag), its weighted total (the penalty where
         diverged) and the good mask — no gradient.
 
@@ -419,13 +465,12 @@ class Objective:
 
         Args:
             theta: The free gains' vector.
-            scenarios: The batch (default: the tuning set).
+            scenarios: The batch (leading axis the scenarios).
 
         Returns:
             ``(metrics, total, good)``: metric name -> per-scenario values, the weighted totals (the penalty
             where diverged), and the good mask.
         """
-        scenarios = self.scenarios if scenarios is None else scenarios
         mets, ok = self._per_scenario_metrics(theta, scenarios)
         # NumPy from here (the runner's values are NumPy arrays): no gradient flows through the scores, and
         # every eager jnp operation on them was a small XLA program compiled on a first run
@@ -438,12 +483,12 @@ class Objective:
                 mets = {**mets, key: mets[key] | ~good}
         return mets, np.where(good, total, self.penalty), good
 
-    def scores(self, theta, scenarios=None) -> dict:
+    def scores(self, theta, scenarios) -> dict:
         """Objective and each metric's mean and worst over ``scenarios``.
 
         Args:
             theta: The free gains' vector.
-            scenarios: The batch (default: the tuning set).
+            scenarios: The batch (leading axis the scenarios).
 
         Returns:
             The summary dict (:meth:`summarize`).

@@ -46,7 +46,7 @@ def scenario_values(spec) -> tuple[list, list]:
 def _axis_text(family, name: str, value: float) -> str:
     """One axis value as a figure's title states it: the axis's long name (before any parenthesis), the value and
     its unit (:class:`jaxobs.quantities.Axis`; a dimensionless value alone)."""
-    axis = getattr(family, "axes", {}).get(name)
+    axis = family.axes.get(name)
     if axis is None:
         return f"{name} = {value:.4g}"
     label, _, note = axis.long_name.partition(" (")
@@ -62,13 +62,13 @@ def _axis_text(family, name: str, value: float) -> str:
 def _describe(spec, index: int) -> str:
     """The scenario's axis values (their long names and units), or for a job on recordings the recording's file
     name; a long line broken in two."""
-    rec = getattr(spec, "recording", None)
+    rec = spec.recording
     if rec is not None and index < len(rec.files):
         return f"scenario #{index}: recording {Path(rec.files[index]).name}"
     names, combos = scenario_values(spec)
     if not names or index >= len(combos):
         return f"scenario #{index}"
-    family = getattr(spec, "family", None)
+    family = spec.family
     lines = [f"scenario #{index}:"]
     for n, v in zip(names, combos[index]):  # lines of at most about 100 characters, broken between the axes
         item = _axis_text(family, n, v)
@@ -191,17 +191,19 @@ def _coincide(traces: dict, gains: dict, tol: float = 1e-3) -> dict:
     return out
 
 
-def write_report(out: Path, job, obj, thetas: dict, history: list, closed_form_totals=None, best_iteration=None):
+def write_report(
+    out: Path, job, obj, scenarios, thetas: dict, history: list, closed_form_totals=None, best_iteration=None
+):
     """convergence.png and responses.png in ``out``.  ``closed_form_totals``: the closed form's per-scenario
-    totals on ``obj``'s scenarios (:meth:`Objective.per_scenario`'s second value), where the caller has them
+    totals on ``scenarios`` (:meth:`Objective.per_scenario`'s second value), where the caller has them
     (else they are computed again); the responses show the scenario where it does worst.  ``best_iteration``:
     the iteration of the tuned design, marked on convergence.png (None: the least stable value there)."""
     if history:
         convergence_figure(history, job.name, out / "convergence.png", objective_text(obj), best_iteration)
     # responses on the scenario where the closed form does worst
-    per = obj.per_scenario(thetas["closed_form"])[1] if closed_form_totals is None else closed_form_totals
+    per = obj.per_scenario(thetas["closed_form"], scenarios)[1] if closed_form_totals is None else closed_form_totals
     worst = int(np.argmax(np.asarray(per)))
-    sig = jax.tree.map(lambda x: np.asarray(x)[worst], obj.scenarios)  # on the host: no gather to compile
+    sig = jax.tree.map(lambda x: np.asarray(x)[worst], scenarios)  # on the host: no gather to compile
     fig, axes = _subplots(2, 1, figsize=(8, 5.5), sharex=True)
     drawn, times = {}, {}
     for label, th in thetas.items():

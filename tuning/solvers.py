@@ -1,8 +1,10 @@
 """Solvers: optax loops (with early stopping and checkpoints) and optimistix minimisers, as objects.
 
-``tune(objective, optimizer)`` takes an optax ``GradientTransformation`` (``optax.adam(0.1)``), an
-optimistix minimiser (``optx.BFGS(rtol, atol)``) or a solver object that holds one with its stopping
-rule (:class:`OptaxSolver`, :class:`OptimistixSolver`); each solver runs its own loop (``solver.run``).
+``tune(objective, optimizer, scenarios=batch)`` minimises an :class:`~jaxobs_tuning.base.AbstractObjective` on a
+scenario batch (an argument of every evaluation, never held by the objective).  It takes an optax
+``GradientTransformation`` (``optax.adam(0.1)``), an optimistix minimiser (``optx.BFGS(rtol, atol)``) or a
+solver object that holds one with its stopping rule (:class:`OptaxSolver`, :class:`OptimistixSolver`); each
+solver runs its own loop (``solver.run``).
 A TOML job names its optimizer and schedule, and :mod:`jaxobs_tuning.strategies` maps the names to these objects.
 
 The optax loop is a Python loop over *iterations* (each one a compiled
@@ -23,6 +25,7 @@ import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import equinox as eqx
 import jax
@@ -34,6 +37,7 @@ import optimistix as optx
 from jaxobs.progress import Progress
 from jaxobs.provenance import read_file
 
+from .base import AbstractObjective
 from .checkpoint import DIGEST, MAX_CHECKPOINT_BYTES, check_state, content_digest
 from .outdir import atomic_write_bytes
 
@@ -135,13 +139,9 @@ def _bar(solver: AbstractSolver, quiet: bool) -> Progress:
     return bar
 
 
-def _evaluate(objective, theta):
-    """(value, gradient, diverged, overflowed) at ``theta``: an objective without an overflow count (a user's
-    own, with ``value_grad_diverged`` only) never overflows."""
-    both = getattr(objective, "value_grad_diverged_overflowed", None)
-    if both is not None:
-        return both(theta)
-    return (*objective.value_grad_diverged(theta), 0)
+def _evaluate(objective: AbstractObjective, theta, scenarios):
+    """(value, gradient, diverged, overflowed) at ``theta`` on ``scenarios``."""
+    return objective.value_grad_diverged_overflowed(theta, scenarios)
 
 
 def _overflow_result(history: list, it: int, n_over: int, seconds: float) -> TuneResult:
@@ -301,9 +301,10 @@ class AbstractSolver(abc.ABC):
     @abc.abstractmethod
     def run(
         self,
-        objective,
+        objective: AbstractObjective,
         theta0,
         *,
+        scenarios: Any = None,
         checkpoint: Path | None = None,
         resume: bool = False,
         quiet: bool = False,
@@ -312,8 +313,10 @@ class AbstractSolver(abc.ABC):
         """Minimise ``objective`` from θ0.
 
         Args:
-            objective: The :class:`~jaxobs_tuning.objective.Objective` (``value_grad_diverged(θ)``, ``param``).
+            objective: The :class:`~jaxobs_tuning.base.AbstractObjective` (``value_grad_diverged_overflowed(θ,
+                scenarios)``, ``param``).
             theta0: The initial θ.
+            scenarios: The batch every evaluation takes (None: an objective without data).
             checkpoint: One npz file, rewritten atomically every ``checkpoint_every`` iterations, holding
                 ``fingerprint``.
             resume: Continue from ``checkpoint``; a checkpoint of another job, or a corrupt one, raises
@@ -366,15 +369,19 @@ class OptaxSolver(AbstractSolver):
             if isinstance(v, bool) or not isinstance(v, int) or v < 1:
                 raise ValueError(f"OptaxSolver.{fld} must be an integer >= 1, got {v!r}")
 
-    def run(self, objective, theta0, *, checkpoint=None, resume=False, quiet=False, fingerprint=None) -> TuneResult:
+    def run(
+        self, objective, theta0, *, scenarios=None, checkpoint=None, resume=False, quiet=False, fingerprint=None
+    ) -> TuneResult:
         """Minimise ``objective`` from θ0, with checkpoints.
 
         Testing hook: the module's ``_at_iteration``, when set, is called with each iteration's number before
         that iteration; what it raises ends the run there.
 
         Args:
-            objective: The :class:`~jaxobs_tuning.objective.Objective` (``value_grad_diverged(θ)``, ``param``).
+            objective: The :class:`~jaxobs_tuning.base.AbstractObjective` (``value_grad_diverged_overflowed(θ,
+                scenarios)``, ``param``).
             theta0: The initial θ.
+            scenarios: The batch every evaluation takes (None: an objective without data).
             checkpoint: One npz file, rewritten atomically every ``checkpoint_every`` iterations, holding
                 ``fingerprint``.
             resume: Continue from ``checkpoint``; a checkpoint of another job, or a corrupt one, raises
@@ -418,7 +425,7 @@ class OptaxSolver(AbstractSolver):
         for it in range(start, self.steps):
             if _at_iteration is not None:
                 _at_iteration(it)
-            value, grad, ndiv, nover = _evaluate(objective, theta)
+            value, grad, ndiv, nover = _evaluate(objective, theta, scenarios)
             value = float(value)
             history.append(_entry(objective, it, value, ndiv, theta))
             if nover:
@@ -450,7 +457,7 @@ class OptaxSolver(AbstractSolver):
         if overflow is not None:
             return _overflow_result(history, *overflow, time.time() - t_start)
         if not early:  # the last update is scored too: keep it if it is stable and better
-            value, _, ndiv, nover = _evaluate(objective, theta)
+            value, _, ndiv, nover = _evaluate(objective, theta, scenarios)
             history.append(_entry(objective, it, float(value), ndiv, theta))
             if nover:
                 return _overflow_result(history, it, nover, time.time() - t_start)
@@ -518,18 +525,22 @@ class OptimistixSolver(AbstractSolver):
             raise ValueError(f"OptimistixSolver.minimiser must be an optimistix minimiser, got {self.minimiser!r}")
         _check_budget("OptimistixSolver", self.steps, self.tol, self.progress_every)
 
-    def run(self, objective, theta0, *, checkpoint=None, resume=False, quiet=False, fingerprint=None) -> TuneResult:
+    def run(
+        self, objective, theta0, *, scenarios=None, checkpoint=None, resume=False, quiet=False, fingerprint=None
+    ) -> TuneResult:
         t_start = time.time()
         solver = self.minimiser
-        fn = lambda th, _: (objective.value(th), None)  # noqa: E731
+        # the objective and its scenarios are optimistix's args: inputs of the compiled step, not its constants
+        fn = lambda th, args: (args[0].value(th, args[1]), None)  # noqa: E731
+        data = (objective, scenarios)
         tags = frozenset()
         f_struct = jax.ShapeDtypeStruct((), theta0.dtype)
-        state = solver.init(fn, theta0, None, {}, f_struct, None, tags)
-        step = eqx.filter_jit(lambda y, st: solver.step(fn, y, None, {}, st, tags))
-        terminate = eqx.filter_jit(lambda y, st: solver.terminate(fn, y, None, {}, st, tags))
+        state = solver.init(fn, theta0, data, {}, f_struct, None, tags)
+        step = eqx.filter_jit(lambda y, st, args: solver.step(fn, y, args, {}, st, tags))
+        terminate = eqx.filter_jit(lambda y, st, args: solver.terminate(fn, y, args, {}, st, tags))
         y = theta0
         bar = _bar(self, quiet)
-        value, _, ndiv, nover = _evaluate(objective, y)
+        value, _, ndiv, nover = _evaluate(objective, y, scenarios)
         history = [_entry(objective, 0, value, ndiv, y)]
         if nover:
             bar.close()
@@ -538,14 +549,14 @@ class OptimistixSolver(AbstractSolver):
         best_value = float(value) if ndiv == 0 else math.inf
         result, n = optx.RESULTS.nonlinear_max_steps_reached, 0
         for n in range(1, self.steps + 1):
-            done, res = terminate(y, state)
+            done, res = terminate(y, state, data)
             if bool(done):
                 result, n = res, n - 1
                 break
-            y_new, state, _ = step(y, state)
+            y_new, state, _ = step(y, state, data)
             if not bool(jnp.all(y_new == y)):  # an accepted step: record the new iterate
                 y = y_new
-                value, _, ndiv, nover = _evaluate(objective, y)
+                value, _, ndiv, nover = _evaluate(objective, y, scenarios)
                 history.append(_entry(objective, n, value, ndiv, y))
                 if nover:
                     bar.close()
@@ -554,7 +565,7 @@ class OptimistixSolver(AbstractSolver):
                     best_value = min(best_value, float(value))
             _show(bar, n, self, history[-1]["value"], best_value, history[-1]["diverged"], n == 1)
         else:
-            done, res = terminate(y, state)
+            done, res = terminate(y, state, data)
             if bool(done):
                 result = res
         bar.close()
@@ -600,10 +611,11 @@ def as_solver(optimizer) -> AbstractSolver:
 
 
 def tune(
-    objective,
+    objective: AbstractObjective,
     optimizer,
     theta0=None,
     *,
+    scenarios: Any = None,
     checkpoint: Path | None = None,
     resume: bool = False,
     quiet: bool = False,
@@ -613,9 +625,11 @@ def tune(
     (:func:`decide_status`).
 
     Args:
-        objective: The :class:`~jaxobs_tuning.objective.Objective`.
+        objective: The :class:`~jaxobs_tuning.base.AbstractObjective` (a
+            :class:`~jaxobs_tuning.objective.Objective`).
         optimizer: A solver, an optax ``GradientTransformation`` or an optimistix minimiser (:func:`as_solver`).
         theta0: The initial θ (default ``objective.param.theta0()``).
+        scenarios: The batch every evaluation takes (None: an objective without data).
         checkpoint: See :meth:`OptaxSolver.run`.
         resume: See :meth:`OptaxSolver.run`.
         quiet: No progress lines.
@@ -624,6 +638,18 @@ def tune(
     Returns:
         The :class:`TuneResult`.
     """
+    if not isinstance(objective, AbstractObjective):
+        raise ValueError(
+            f"tune: objective must be a jaxobs_tuning.AbstractObjective (an Objective), got {type(objective).__name__}"
+        )
     solver = as_solver(optimizer)
     theta0 = objective.param.theta0() if theta0 is None else theta0
-    return solver.run(objective, theta0, checkpoint=checkpoint, resume=resume, quiet=quiet, fingerprint=fingerprint)
+    return solver.run(
+        objective,
+        theta0,
+        scenarios=scenarios,
+        checkpoint=checkpoint,
+        resume=resume,
+        quiet=quiet,
+        fingerprint=fingerprint,
+    )

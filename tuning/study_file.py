@@ -505,9 +505,10 @@ def _parse_drive(raw: dict, st: dict, name: str, base: Path) -> StudySpec:
         # scenario's assumed machine and speed (AbstractDriveObserver.bind); the drive's ts rules
         ctor = REGISTRY[comp].cls
         par = bench_machine("spmsm000" if issubclass(ctor, AbstractFluxObserver) else "ipmsm002")
-        # valid for the constructor, then bound: 0 for the resistance (the first), 1 for the rest
-        fixed = {f: (0.0 if k == 0 else 1.0) for k, f in enumerate(ctor.bound_fields)}
-        return _component(spec, where, comp, (*ctor.bound_fields, "ts"), fixed).bind(par, 0.0)
+        # valid for the constructor, then bound: 0 for the resistance, 1 for the rest
+        bound = ctor.bound_fields
+        fixed = {f: (0.0 if f == bound.resistance else 1.0) for f in bound.names}
+        return _component(spec, where, comp, (*bound.names, "ts"), fixed).bind(par, 0.0)
 
     designs = _designs(raw, build)
     # the machine: study.machine, else the one the results were tuned on, else the first design's default

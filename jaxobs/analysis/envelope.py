@@ -74,6 +74,7 @@ from ..drive import (
     DualPMSMParams,
     PMSMParams,
     drive_speed_limit_rpm,
+    speed_limit,
 )
 from ..drive_study import gain_variables
 from ..families import DRIVE_STUDY_AXES, AbstractScenarios, DriveScenarios, bind_observer
@@ -144,29 +145,35 @@ ENVELOPE_VARIABLES = {
 }
 
 
-def speed_limit_rpm(machine: PMSMParams, drive: Drive | DualDrive | None = None) -> float:
-    """The highest speed (r/min) ``drive`` may ask of ``machine`` at no load: where the back EMF reaches the
-    inverter's voltage limit u_max, ωe ψf = u_max, or with the FOC's field weakening on
-    (``FOC.field_weakening``) where the weakened flux does, ωe (ψf − Ld i_max) = u_max (the drive file's
-    ``speed_limit_rpm``, :mod:`jaxobs.drive.drivefile`; unbounded by the voltage where Ld i_max ≥ ψf, then
-    3 × rated speed).  ``drive=None``: the default inverter, no weakening
-    (:func:`jaxobs.drive.drive_speed_limit_rpm`)."""
+def speed_limit_rpm(
+    machine: PMSMParams, drive: Drive | DualDrive | None = None, max_speed_rpm: float | None = None
+) -> float:
+    """The highest speed (r/min) ``drive`` may ask of ``machine``: the drive file's one rule
+    (:func:`jaxobs.drive.drivefile.speed_limit`: the no-load voltage bound, ωe ψf = u_max, or with the FOC's
+    field weakening ωe (ψf − Ld i_max) = u_max; then the mechanical limit ``max_speed_rpm``, a drive file's
+    ``[machine] max_speed_rpm``, or 3 × rated speed where the voltage leaves the speed unbounded).
+    ``drive=None``: the default inverter, no weakening (:func:`jaxobs.drive.drive_speed_limit_rpm`)."""
     if drive is None:
         return drive_speed_limit_rpm(machine)
-    u_max, psi = float(drive.inverter.u_max), float(machine.psi_f)
-    flux = psi
     foc = drive.ctrl.foc if isinstance(drive, DualDrive) else drive.foc  # the dual drive: per phase, the same bound
-    if foc.field_weakening is not None:
-        flux = psi - float(machine.Ld) * float(foc.i_max)
-        if flux <= 0.0:
-            return 3.0 * float(machine.n_rated)
-    return u_max / flux / float(machine.p) * 60.0 / (2 * math.pi)
+    return speed_limit(
+        machine.p,
+        float(machine.psi_f),
+        float(machine.Ld),
+        float(foc.i_max),
+        float(drive.inverter.u_max),
+        foc.field_weakening is not None,
+        float(machine.n_rated),
+        max_speed_rpm,
+    )[0]
 
 
-def default_speeds(machine: PMSMParams, n: int = 8, drive: Drive | None = None) -> np.ndarray:
+def default_speeds(
+    machine: PMSMParams, n: int = 8, drive: Drive | None = None, max_speed_rpm: float | None = None
+) -> np.ndarray:
     """``n`` speeds, r/min, log-spaced from 1 % of the machine's rated speed to the highest allowed speed,
-    98 % of :func:`speed_limit_rpm` (the drive's no-load voltage limit, with its field weakening where on)."""
-    top = 0.98 * speed_limit_rpm(machine, drive)
+    98 % of :func:`speed_limit_rpm` (the drive's one speed limit, ``max_speed_rpm`` its mechanical one)."""
+    top = 0.98 * speed_limit_rpm(machine, drive, max_speed_rpm)
     return np.geomspace(min(0.01 * float(machine.n_rated), 0.5 * top), top, n)
 
 
@@ -380,7 +387,7 @@ def _speed_bandwidth(drive: Drive, machine: PMSMParams, speed_rpm: float) -> flo
     """The speed loop's double-pole bandwidth α = 2 k_iω / k_pω (rad/s) at ``speed_rpm``: α_s, or less where
     the FOC schedules it on the speed (FOC.speed_gains)."""
     foc = drive.ctrl.foc if isinstance(drive, DualDrive) else drive.foc
-    foc = foc.bind(machine if foc.est is None else foc.est, drive.inverter.u_max)
+    foc = foc.bind(foc.est, drive.inverter.u_max)
     kp, ki = foc.speed_gains(jnp.asarray(speed_rpm * 2.0 * math.pi / 60.0))
     return 2.0 * float(ki) / float(kp)
 
@@ -430,6 +437,7 @@ def envelope(
     seed: int = 0,
     chunk_size: int = 256,
     progress=None,
+    max_speed_rpm: float | None = None,
 ):
     """The operating envelope of every design (name -> drive observer closing ``drive``'s loop sensorless).
 
@@ -445,7 +453,9 @@ def envelope(
     ("floquet", the default, or "lyapunov") and that function's keyword arguments
     (:func:`~jaxobs.analysis.stability.floquet`: settle, window, tol, n_report;
     :func:`~jaxobs.analysis.stability.lyapunov`: settle, warmup, window, n_dirs, tol).  ``progress`` as in
-    :func:`jaxobs.runner.run_scenarios`.  The long runs' and the verdicts' traced programs are kept across
+    :func:`jaxobs.runner.run_scenarios`.  ``max_speed_rpm``: the drive file's mechanical limit
+    (``[machine] max_speed_rpm``; :func:`speed_limit_rpm`), None: the rule's default.  The long runs' and the
+    verdicts' traced programs are kept across
     processes where a folder is set (:func:`jaxobs.kept_jit`).  Returns an ``xarray.Dataset`` with dims
     ``("design", "speed_rpm", "load"[, axis])`` and the variables of :data:`ENVELOPE_VARIABLES` (booleans stored
     as int8 0/1); its ``horizon`` and ``steady_from`` attributes are those that ran.
@@ -463,10 +473,10 @@ def envelope(
     dual = _dual_machine(machine, drive, mismatch)
     machine = machine if dual is None else dual.m  # the whole machine's ratings, ψf and p set the axes
     # the drive's limit with its inverter and field weakening (the dual drive's per phase: the same bound)
-    n_max = speed_limit_rpm(machine, drive)
+    n_max = speed_limit_rpm(machine, drive, max_speed_rpm)
     # the lowest speed whose steady start (Drive.settled_for) fits the 60 s settle limit: SETTLE_PERIODS / p r/min
     n_min = max(1.0, SETTLE_PERIODS / machine.p)
-    speeds = default_speeds(machine, drive=drive) if speeds_rpm is None else speeds_rpm
+    speeds = default_speeds(machine, drive=drive, max_speed_rpm=max_speed_rpm) if speeds_rpm is None else speeds_rpm
     speeds = _axis("speeds_rpm", speeds, n_min, n_max, "r/min")
     lo_l, hi_l = DRIVE_STUDY_AXES["load_nm"].range
     loads = _axis("loads_nm", default_loads(machine) if loads_nm is None else loads_nm, lo_l, hi_l, "N·m")

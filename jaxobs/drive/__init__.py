@@ -29,6 +29,7 @@ from .drivefile import DriveFile as DriveFile
 from .drivefile import drive_from_table as drive_from_table
 from .drivefile import load_drive as load_drive
 from .drivefile import read_drive as read_drive
+from .drivefile import speed_limit as speed_limit
 from .dual import DualPMSM as DualPMSM
 from .dual import DualPMSMParams as DualPMSMParams
 from .dual import dual_ipmsm_paper002 as dual_ipmsm_paper002
@@ -65,6 +66,8 @@ from .machine import dq_to_ab as dq_to_ab
 from .machine import lq_apparent as lq_apparent
 from .machine import lq_incremental as lq_incremental
 from .machine import plant_vf as plant_vf
+from .machine import psi_f_from_ke as psi_f_from_ke
+from .machine import psi_f_from_kt as psi_f_from_kt
 from .machine import torque as torque
 from .plant import PMSM as PMSM
 from .plant import PlantInput as PlantInput

@@ -27,7 +27,7 @@ import jax
 
 from .. import papers
 from .control import FOC, IfStartup
-from .drivefile import DriveFile, read_drive
+from .drivefile import DriveFile, read_drive, speed_limit
 from .hardware import Inverter
 from .latency import Latency
 from .loop import Drive
@@ -259,8 +259,9 @@ def if_handover_earliest(machine: PMSMParams, startup: IfStartup | None = None) 
 def drive_speed_limit_rpm(machine: PMSMParams, inverter: Inverter | None = None) -> float:
     """The highest speed a drive may ask of ``machine``.
 
-    The speed at which the back EMF alone, ωe ψf, reaches the inverter's voltage limit u_max = U_dc/√3 (a
-    drive file states its own: ``DriveFile.derived["speed_limit_rpm"]``).  Above it an FOC without field
+    The speed at which the back EMF alone, ωe ψf, reaches the inverter's voltage limit u_max = U_dc/√3: the
+    drive file's one rule without field weakening (:func:`jaxobs.drive.drivefile.speed_limit`; a drive file
+    states its own: ``DriveFile.derived["speed_limit_rpm"]``).  Above it an FOC without field
     weakening (i_d* is 0 or MTPA, never negative) cannot hold even zero current:
     the machine would run away from its reference.
     It is a no-load bound (load adds Rs·i and ωe·Lq·i to the voltage), so it is necessary, not sufficient:
@@ -273,5 +274,6 @@ def drive_speed_limit_rpm(machine: PMSMParams, inverter: Inverter | None = None)
     Returns:
         The speed, r/min (either direction).
     """
-    w_e = float((Inverter() if inverter is None else inverter).u_max) / float(machine.psi_f)  # rad/s electrical
-    return w_e / machine.p * 60.0 / (2 * math.pi)
+    u_max = float((Inverter() if inverter is None else inverter).u_max)
+    return speed_limit(machine.p, float(machine.psi_f), float(machine.Ld), math.inf, u_max, False,
+                       float(machine.n_rated))[0]  # fmt: skip

@@ -38,12 +38,21 @@ loop keeps its designed bandwidth at every load (``tests/test_mtpa_speed_loop.py
 a +1 % step at 500 r/min: 1.008–1.011 α_s from no load to 1.5× rated load, where
 i_q* = i_lin measured 1.069, 1.117 and 1.141 α_s at half, full and 1.5× rated).
 
-Current limit: the circle |i*| ≤ i_max.  i_d has priority: the policy's i_d (MTPA)
-and field weakening's Δi_d are kept, and i_q* takes what the circle leaves,
-|i_q*| ≤ √(i_max² − i_d*²).  Under MTPA the speed loop's output is limited to the
+Current limit: the circle |i*| ≤ i_max at every sample (standstill, I-f and its blend
+included).  i_d has priority: i_d* is kept within ±i_max and i_q* takes what the circle
+leaves, |i_q*| ≤ √(i_max² − i_d*²).  Under MTPA the speed loop's output is limited to the
 torque of the MTPA point on the circle (:meth:`FOC.iq_limit`), so the MTPA current
-it asks for is on the circle at most; field weakening then cuts i_q* to the rest
-of the circle.  With i_d* = 0 the circle is |i_q*| ≤ i_max.
+it asks for is on the circle at most.  With field weakening the weakened reference
+keeps the speed loop's torque while it can and is cut by the circle, MTPV and the
+voltage (:mod:`jaxobs.drive.weakening`).  With i_d* = 0 the circle is |i_q*| ≤ i_max.
+
+Speed-loop anti-windup: conditional integration on the torque *realised*: the
+integrator stops while the speed loop's output is not realised (beyond the circle's
+torque, or cut by field weakening's limits: the reference's torque on the assumed
+machine, in K̂_t units) and the speed error pushes further.  Stopping only at the
+circle's torque let the integrator wind up while field weakening cut i_q*: a
+1000 → 2000 r/min step at 14 N·m on the lab IPMSM of ``docs/examples/lab_ipmsm_2k2.toml``
+overshot by 47.6 r/min; it now does not overshoot (``tests/test_weakening.py`` holds it within 5 r/min).
 
 Delay compensation: the voltage computed from the samples at τ_k acts ``advance``
 periods later on average (1.5 with sampling at the period start and one period of
@@ -110,9 +119,11 @@ from .._trig import sincos
 from .._validate import check_nonnegative, check_positive, check_real, check_sample_time
 from .component import AbstractComponent
 from .machine import RPM, PMSMParams, rotate
-from .weakening import VoltageFeedbackFW
+from .weakening import VoltageFeedbackFW, id_stop, mtpv_iq, voltage_iq_range
 
-__all__ = ["FOC", "FOCInput", "FOCOutput", "IfStartup", "ControllerState", "OperatingPoint"]
+__all__ = ["FOC", "FOCInput", "FOCOutput", "IfStartup", "ControllerState", "OperatingPoint", "DEFAULT_U_MAX"]
+
+DEFAULT_U_MAX = 540.0 / math.sqrt(3.0)  # V: the default Inverter's U_dc/√3 (jaxobs.drive.hardware), FOC.imc's default
 
 
 class OperatingPoint(NamedTuple):
@@ -358,10 +369,11 @@ class FOC(AbstractComponent):
 
     Besides its gains the controller needs the machine it assumes (``est``: its
     decoupling terms and MTPA use it), the voltage limit of its inverter
-    (``u_max``, for anti-windup) and, optionally, an I-f ``startup``.
-    :meth:`imc` sets ``est``; :class:`~jaxobs.drive.ClosedLoop` binds the
-    scenario's assumed machine, the inverter's limit and the drive's start-up
-    with :meth:`bind` before it steps.
+    (``u_max``, for anti-windup and field weakening) and, optionally, an I-f ``startup``:
+    it is built whole, with both (:meth:`imc` takes ``u_max``, default the default
+    :class:`~jaxobs.drive.Inverter`'s U_dc/√3).  :class:`~jaxobs.drive.ClosedLoop` runs
+    :meth:`bind`'s copy of it, whole too, with the scenario's assumed machine, the
+    drive's inverter limit and start-up.
 
     Args:
         kp_d: d current loop's proportional gain, V/A (> 0).
@@ -380,8 +392,8 @@ class FOC(AbstractComponent):
         outer: ``"speed"``, or ``"current"``: the reference is i_q*, A.
         setpoint_weight: b in k_pω (b ω* − ω), in [0, 1]: 0 = I-P (no overshoot), 1 = PI.
         speed_schedule: N > 0: the speed-loop bandwidth is min(α_s, |ωe*|/N) (:meth:`speed_gains`); 0: fixed.
-        est: The machine the controller assumes (:class:`PMSMParams`), or None until :meth:`bind`.
-        u_max: The voltage limit for anti-windup, V, or None until :meth:`bind`.
+        est: The machine the controller assumes (:class:`PMSMParams`; keyword, required).
+        u_max: The voltage limit for anti-windup and field weakening, V (> 0; keyword, required).
         startup: An :class:`IfStartup` (None: closed loop from t = 0).
 
     Raises:
@@ -404,8 +416,8 @@ class FOC(AbstractComponent):
     setpoint_weight: float = eqx.field(static=True)  # b in k_pω (b ω* − ω): 0 = I-P (no overshoot), 1 = PI
     speed_schedule: float = eqx.field(static=True)  # N > 0: speed-loop bandwidth min(α_s, |ωe*|/N); 0: fixed
     field_weakening: VoltageFeedbackFW | None  # None: i_d* is the policy's (zero or MTPA)
-    est: PMSMParams | None  # the machine the controller assumes
-    u_max: jax.Array | None  # voltage limit for anti-windup, V
+    est: PMSMParams  # the machine the controller assumes
+    u_max: jax.Array  # voltage limit for anti-windup and field weakening, V
     startup: IfStartup | None  # I-f start-up (None: closed loop from t = 0)
 
     def __init__(
@@ -427,17 +439,20 @@ class FOC(AbstractComponent):
         outer="speed",
         setpoint_weight=0.0,
         speed_schedule=0.0,
-        est=None,
-        u_max=None,
+        est,
+        u_max,
         startup=None,
     ):
         own = "FOC"
-        if est is not None and not isinstance(est, PMSMParams):
-            raise ValueError(f"{own}.est must be a PMSMParams or None, got {type(est).__name__}")
+        if not isinstance(est, PMSMParams):
+            raise ValueError(f"{own}.est must be a PMSMParams (the machine the controller assumes), got "
+                             f"{type(est).__name__}")  # fmt: skip
         if startup is not None and not isinstance(startup, IfStartup):
             raise ValueError(f"{own}.startup must be an IfStartup or None, got {type(startup).__name__}")
         self.est = est
-        self.u_max = None if u_max is None else check_positive("u_max", u_max, own)
+        if u_max is None:
+            raise ValueError(f"{own}.u_max must be the inverter's voltage limit, V (> 0), got None")
+        self.u_max = check_positive("u_max", u_max, own)
         self.startup = startup
         self.kp_d = check_positive("kp_d", kp_d, own)
         self.ki_d = check_nonnegative("ki_d", ki_d, own)
@@ -475,7 +490,7 @@ class FOC(AbstractComponent):
         self.speed_schedule = float(speed_schedule)
 
     @classmethod
-    def imc(cls, est_par: PMSMParams, alpha_c, alpha_s, i_max=None, **kw):
+    def imc(cls, est_par: PMSMParams, alpha_c, alpha_s, i_max=None, u_max=None, **kw):
         """IMC current gains (k_p = α_c L̂, k_i = α_c R̂s) and double-pole speed gains at −α_s.
 
         Args:
@@ -483,6 +498,7 @@ class FOC(AbstractComponent):
             alpha_c: The current loops' bandwidth α_c, rad/s.
             alpha_s: The speed loop's double pole α_s, rad/s.
             i_max: The current-vector limit, A (default 1.5× the rated current).
+            u_max: The voltage limit, V (default the default :class:`~jaxobs.drive.Inverter`'s, 540 V/√3).
             **kw: Other :class:`FOC` keywords.
 
         Returns:
@@ -502,6 +518,7 @@ class FOC(AbstractComponent):
             ki_w=alpha_s**2 * est_par.J / kt,
             i_max=i_max,
             est=kw.pop("est", est_par),
+            u_max=DEFAULT_U_MAX if u_max is None else u_max,
             **kw,
         )
 
@@ -522,15 +539,14 @@ class FOC(AbstractComponent):
         """
         if self.speed_schedule <= 0:
             return self.kp_w, self.ki_w
-        if self.est is None:
-            raise ValueError("FOC.speed_gains with speed_schedule > 0 needs the assumed machine (FOC.imc or bind)")
         alpha = 2 * self.ki_w / self.kp_w
         w_e = jnp.abs(self.est.p * omega_m_ref)
         r = jnp.where(alpha > 0, jnp.minimum(w_e / (self.speed_schedule * jnp.where(alpha > 0, alpha, 1.0)), 1.0), 1.0)
         return self.kp_w * r, self.ki_w * r * r
 
     def bind(self, est: PMSMParams, u_max, startup: IfStartup | None = None) -> FOC:
-        """This controller with its assumed machine, voltage limit and start-up set (no checks: traced-safe).
+        """A copy of this controller with another assumed machine, voltage limit and start-up (a scenario's, a
+        drive's), as whole as this one (no value checks: traced-safe; None is refused).
 
         Args:
             est: The machine the controller assumes.
@@ -539,7 +555,12 @@ class FOC(AbstractComponent):
 
         Returns:
             The :class:`FOC`.
+
+        Raises:
+            ValueError: ``est`` or ``u_max`` None.
         """
+        if est is None or u_max is None:
+            raise ValueError("FOC.bind: est and u_max must be given (a FOC is whole), got None")
         return eqx.tree_at(
             lambda f: (f.est, f.u_max, f.startup), self, (est, u_max, startup), is_leaf=lambda x: x is None
         )
@@ -578,14 +599,21 @@ class FOC(AbstractComponent):
         u_d, u_q = _rotate(op.u_d, op.u_q, -op.offset)
         int_d = u_d + w_e * est.Lq * i_q
         int_q = u_q - w_e * (est.Ld * i_d + est.psi_f)
+        lin, held = self.iq_lin(est, i_q), i_q
+        if self.field_weakening is not None:
+            # weakened: the speed loop asks for the torque of the references on the assumed machine, as its policy's
+            # current i_q,cmd; Δi_d takes i_d* from the policy's i_d(i_q,cmd) (jaxobs.drive.weakening, points 1-2)
+            weak = op.id_fw < 0
+            lin_w = _torque_dq(est, i_d, i_q) / est.kt
+            cmd = self.mtpa_iq(est, lin_w)
+            lin, held = jnp.where(weak, lin_w, lin), jnp.where(weak, cmd, held)
+            rest["id_fw"] = z + jnp.where(weak, jnp.minimum(i_d - self._id_ref(est, cmd), 0.0), op.id_fw)
         if self.outer == "current":
             int_w = z
         else:
             gain = self.speed_gains(op.omega_m_ref)[0]
-            int_w = self.iq_lin(est, i_q) - gain * (self.setpoint_weight * op.omega_m_ref - op.omega_m)
-        if self.field_weakening is not None:
-            rest["id_fw"] = z + op.id_fw
-        return ControllerState(int_d=z + int_d, int_q=z + int_q, int_w=z + int_w, iq_ref=z + i_q, **rest)
+            int_w = lin - gain * (self.setpoint_weight * op.omega_m_ref - op.omega_m)
+        return ControllerState(int_d=z + int_d, int_q=z + int_q, int_w=z + int_w, iq_ref=z + held, **rest)
 
     def operating_point(self, par: PMSMParams, omega_m, omega_m_ref, theta_e, t_load, offset=0.0) -> OperatingPoint:
         """The steady state of the true machine ``par`` under this controller at speed ω_m and load T_L.
@@ -602,14 +630,15 @@ class FOC(AbstractComponent):
         machine's steady rotor-frame voltage (the BEMF harmonics, which average
         out, are left out).
 
-        With field weakening (and the voltage limit bound) the operating point is the
-        field-weakened one where the policy's would ask for more than the margin m u_max:
-        i_d* = i_d,policy(i_q*) + Δi_d with Δi_d ≤ 0 such that |u| = m u_max
-        (:class:`VoltageFeedbackFW`'s equilibrium; |u| is the same in the controller's
-        frame and the rotor's), jointly with the torque balance (Newton on Δi_d and
-        i_q* in turn, from Δi_d = 0), i_q* limited to the current circle's rest,
-        Δi_d to [−i_max, 0].  Below base speed Δi_d = 0 and the point is the
-        policy's, unchanged.
+        With field weakening the operating point is the field-weakened one where the
+        policy's would ask for more than the margin m u_max: i_d* ≤ the policy's such that
+        |u| = m u_max (:class:`VoltageFeedbackFW`'s equilibrium; |u| is the same in the
+        controller's frame and the rotor's), jointly with the torque balance (Newton on
+        i_d* and i_q* in turn, from the policy's point), i_d* within its stop
+        (:func:`~jaxobs.drive.weakening.id_stop`) and i_q* within the circle, MTPV and the
+        voltage (:mod:`jaxobs.drive.weakening`, point 3; a load beyond them is not
+        carried, and the drive decelerates from there).  ``id_fw`` is then i_d* less the
+        policy's i_d.  Below base speed Δi_d = 0 and the point is the policy's, unchanged.
 
         Args:
             par: The true machine.
@@ -650,26 +679,40 @@ class FOC(AbstractComponent):
         u_d, u_q = voltage(i_d, i_q)
         id_fw = 0.0
         fw = self.field_weakening
-        if fw is not None and self.u_max is not None:
+        if fw is not None:
             target2 = (fw.margin * self.u_max) ** 2
+            est = self.est
 
-            def excess(dfw, iq):  # |u|² − (m u_max)² at Δi_d = dfw
-                ud, uq = voltage(*rotor_currents(iq, dfw))
+            def excess(idr, iqr):  # |u|² − (m u_max)² at the references (i_d*, i_q*)
+                ud, uq = voltage(*_rotate(idr, iqr, offset))
                 return ud * ud + uq * uq - target2
 
-            dfw, iq = jnp.zeros_like(i_q), solve_iq(None)
-            for _ in range(8):  # Newton on Δi_d (|u|² is a convex quadratic in it), then i_q* for the torque
-                f, df = jax.jvp(lambda d: excess(d, iq), (dfw,), (jnp.ones_like(dfw),))
-                dfw = jnp.clip(dfw - f / jnp.where(jnp.abs(df) > 1e-12, df, 1.0), -self.i_max, 0.0)
-                iq = solve_iq(dfw)
-                i_d_ref = self._id_ref(self.est, iq) + dfw
-                iq = fw.limit_iq(iq, i_d_ref, self.i_max)
+            iq_pol = solve_iq(None)
+            id_pol = self._id_ref(est, iq_pol)
+            lo = id_stop(est, id_pol, self.i_max)
+
+            def solve_iq_at(idr):  # i_q* that carries the load at i_d* = idr (Newton from the policy's)
+                iq = iq_pol
+                for _ in range(4):
+                    te, dte = jax.jvp(lambda q: _torque_dq(par, *_rotate(idr, q, offset)), (iq,), (jnp.ones_like(iq),))
+                    iq = iq - (te - need) / jnp.where(jnp.abs(dte) > 1e-12, dte, 1.0)
+                return iq
+
+            idr, iqr = id_pol, iq_pol
+            for _ in range(8):  # Newton on i_d* (|u|² is a convex quadratic in it), then i_q* for the torque
+                f, df = jax.jvp(lambda d: excess(d, iqr), (idr,), (jnp.ones_like(idr),))
+                idr = jnp.clip(idr - f / jnp.where(jnp.abs(df) > 1e-12, df, 1.0), lo, id_pol)
+                iqr = solve_iq_at(idr)
+            # the limits the controller puts on i_q* there (jaxobs.drive.weakening, point 3)
+            room = jnp.minimum(fw.limit_room(idr, self.i_max), mtpv_iq(est, idr))
+            q_lo, q_hi = voltage_iq_range(est, idr, est.p * omega_m, self.u_max)
+            iqr = jnp.clip(iqr, jnp.maximum(-room, q_lo), jnp.minimum(room, q_hi))
             weakened = u_d * u_d + u_q * u_q > target2
-            fd, fq = rotor_currents(iq, dfw)
+            fd, fq = _rotate(idr, iqr, offset)
             fud, fuq = voltage(fd, fq)
             i_d, i_q = jnp.where(weakened, fd, i_d), jnp.where(weakened, fq, i_q)
             u_d, u_q = jnp.where(weakened, fud, u_d), jnp.where(weakened, fuq, u_q)
-            id_fw = jnp.where(weakened, dfw, 0.0)
+            id_fw = jnp.where(weakened, jnp.minimum(idr - id_pol, 0.0), 0.0)
         z = jnp.zeros_like(w_e)
         return OperatingPoint(
             omega_m=z + omega_m,
@@ -769,11 +812,6 @@ class FOC(AbstractComponent):
         Returns:
             ``(the next ControllerState, the FOCOutput)``.
         """
-        if self.est is None or self.u_max is None:
-            raise ValueError(
-                "FOC.step needs the assumed machine and the voltage limit: build it with FOC.imc(est_par, ...) "
-                "and u_max=..., or call foc.bind(est, u_max, startup) (ClosedLoop does)"
-            )
         k, i_a, i_b, theta, omega_e, omega_m, omega_m_ref = inp
         est, u_max, startup = self.est, self.u_max, self.startup
         ts = self.ts
@@ -827,24 +865,31 @@ class FOC(AbstractComponent):
         unsat = kp_w * (self.setpoint_weight * omega_m_ref - omega_m) + int_w0
         iq_max, lin_max = self.iq_limit(est)  # the circle's i_q under the policy, and its torque in K̂_t units
         iq_sat = jnp.clip(unsat, -lin_max, lin_max)
-        # conditional integration: freeze while saturated and the error pushes further
-        windup = (unsat != iq_sat) & (jnp.sign(e_w) == jnp.sign(unsat))
-        int_w = jnp.where(run_speed & ~windup, int_w0 + ki_w * e_w * tw, int_w0)
-        iq_ref = jnp.where(run_speed, self.mtpa_iq(est, iq_sat), iq_held)
+        iq_cmd = jnp.where(run_speed, self.mtpa_iq(est, iq_sat), iq_held)  # the speed loop's current, held
         if self.outer == "current":  # the reference is i_q* itself (current-loop tests, torque control)
-            iq_ref = jnp.clip(omega_m_ref, -iq_max, iq_max)
-            int_w = cs.int_w
-        id_ref = self._id_ref(est, iq_ref)
-        fw = self.field_weakening
+            iq_cmd = jnp.clip(omega_m_ref, -iq_max, iq_max)
+        id_ref = self._id_ref(est, iq_cmd)
+        iq_ref, real, fw = iq_cmd, iq_sat, self.field_weakening
         if fw is not None:
-            id_ref = id_ref + cs.id_fw
-            iq_ref = fw.limit_iq(iq_ref, id_ref, self.i_max)
+            # the weakened reference within the stop, the circle, MTPV and the voltage (jaxobs.drive.weakening)
+            id_pol = id_ref
+            id_ref, iq_ref, capped, fw_lo = fw.references(est, id_pol, iq_cmd, cs.id_fw, w_e, u_max, self.i_max)
+            real = jnp.where(capped, _torque_dq(est, id_ref, iq_ref) / est.kt, iq_sat)
+        # conditional integration on the torque realised (in K̂_t units): freeze while the speed loop's output is
+        # not realised (the circle's torque, or field weakening's limits) and the error pushes further.  Without
+        # field weakening real = iq_sat, the circle's limit alone.
+        windup = (unsat != real) & (jnp.sign(e_w) == jnp.sign(unsat - real))
+        int_w = jnp.where(run_speed & ~windup, int_w0 + ki_w * e_w * tw, int_w0)
+        if self.outer == "current":
+            int_w = cs.int_w
+        held = iq_cmd
         int_d0, int_q0 = cs.int_d, cs.int_q
         if startup is not None:
             # I-f: I_f on the I-f frame's q axis; after the switch the d-current blends from the I-f vector's
             r = jnp.where(startup.blend > 0, jnp.clip(1.0 - t_closed / jnp.maximum(startup.blend, ts), 0.0, 1.0), 0.0)
             id_ref = jnp.where(closed, r * id_hand + (1 - r) * id_ref, 0.0)
             iq_ref = jnp.where(closed, iq_ref, startup.i_f)
+            held = jnp.where(closed, held, startup.i_f)
             int_w = jnp.where(closed, int_w, cs.int_w)
             # the current PIs' integrators into the new frame, so that the voltage vector is continuous:
             # u = ∫ + decoupling, rotated by Δ from θ_f to θ̂, minus the decoupling computed in θ̂
@@ -856,6 +901,11 @@ class FOC(AbstractComponent):
             vq = cs.int_q + omega_f * (est.Ld * idf + est.psi_f)
             int_d0 = jnp.where(switch, cd * vd - sd * vq + omega_e * est.Lq * iqh, cs.int_d)
             int_q0 = jnp.where(switch, sd * vd + cd * vq - omega_e * (est.Ld * idh + est.psi_f), cs.int_q)
+
+        # the current circle, whatever set the references (the blend after an I-f switch, an I-f current above
+        # i_max): |i*| ≤ i_max at every sample, i_d first (an identity where the circle is not reached)
+        id_ref = jnp.clip(id_ref, -self.i_max, self.i_max)
+        iq_ref = VoltageFeedbackFW.limit_iq(iq_ref, id_ref, self.i_max)
 
         # --- current loop
         s, c = sincos(th)
@@ -869,7 +919,7 @@ class FOC(AbstractComponent):
         scale = jnp.where(sat, u_max / jnp.maximum(mag, 1e-12), 1.0)
         int_d = jnp.where(sat, int_d0, int_d0 + self.ki_d * e_d * ts)
         int_q = jnp.where(sat, int_q0, int_q0 + self.ki_q * e_q * ts)
-        id_fw = cs.id_fw if fw is None else fw.update(cs.id_fw, mag, u_max, w_e, est.Ld, self.i_max, ts)
+        id_fw = cs.id_fw if fw is None else fw.update(cs.id_fw, mag, u_max, w_e, est.Ld, self.i_max, ts, fw_lo)
         u_d, u_q = u_d * scale, u_q * scale
         # the voltage is applied later (1.5 periods on average by default, jaxobs.drive.latency): rotate ahead
         th_out = th + (self.advance * w_e * ts if self.advance != 0.0 else 0.0)
@@ -880,7 +930,7 @@ class FOC(AbstractComponent):
             int_d=int_d,
             int_q=int_q,
             int_w=int_w,
-            iq_ref=iq_ref,
+            iq_ref=held,
             theta_f=theta_f,
             omega_f=omega_f,
             t_at_switch=t_at_switch,

@@ -17,7 +17,10 @@ The file (SI units, or the unit in the key's name; ``[machine]``'s keys from ``p
     Rs = 0.45                  # Ω
     Ld = 0.0028                # H
     Lq = 0.0041                # H
-    psi_f = 0.11               # Wb, peak (amplitude-invariant)
+    psi_f = 0.11               # Wb, peak (amplitude-invariant); or exactly one of the datasheet constants:
+    # ke_v_per_krpm_ll_rms = 37.6  # V per 1000 r/min, line to line, rms: ψf = Ke √2/√3 / (p 2π 1000/60)
+    # ke_v_per_krpm_ll_peak = 53.2 # V per 1000 r/min, line to line, peak: ψf = Ke/√3 / (p 2π 1000/60)
+    # kt_nm_per_a_rms = 0.93       # N·m per A rms: ψf = Kt / (1.5 √2 p)
     J = 0.0012                 # kg·m², everything on the shaft
     rated_speed_rpm = 3000
     rated_torque_nm = 3.2
@@ -27,6 +30,7 @@ The file (SI units, or the unit in the key's name; ``[machine]``'s keys from ``p
     a7 = 0.0
     q_sat_current_a = 20.0     # q-axis saturation (QSaturation): the current at which Lq has fallen to 2^(−1/n)
     q_sat_n = 2.0
+    max_speed_rpm = 9000.0     # the mechanical limit (speed_limit_rpm below)
     [inverter]
     u_dc = 320.0               # V
     f_sample_hz = 16000.0      # control and PWM period = 1/f_sample_hz
@@ -43,7 +47,7 @@ The file (SI units, or the unit in the key's name; ``[machine]``'s keys from ``p
     id_policy = "mtpa"         # "zero" or "mtpa"
     field_weakening = false    # VoltageFeedbackFW
     fw_bandwidth_hz = 20.0
-    fw_margin = 0.95
+    fw_margin = 0.95           # m: field weakening holds |u*| at m u_dc/√3, in [0.5, 1] (default 0.95)
     speed_schedule = 0.0       # N > 0: speed loop at min(α_s, |ωe*|/N) (docs/stability.md)
     setpoint_weight = 0.0      # b: 0 is I-P, 1 is PI
     advance = 1.5              # delay compensation, periods (default: the timing's use delay)
@@ -92,12 +96,25 @@ Derived defaults (each recorded in :attr:`DriveFile.derived` with its rule):
   project's :meth:`FOC.imc` default, 1.5 × rated).
 - **i_d policy**: MTPA where Lq > Ld (an IPMSM's reluctance torque), zero otherwise.
 - **Field weakening** on when the rated point (rated torque at rated speed, the policy's currents) needs a
-  voltage above the inverter's linear limit u_dc/√3; the file is refused when no i_d within the current
-  circle reaches the rated point under it.
+  voltage above ``fw_margin`` × u_dc/√3 (the voltage field weakening would hold it at), or when
+  ``max_speed_rpm`` lies above the speed where the back EMF alone reaches u_dc/√3; the file is refused when no
+  i_d within the current circle reaches the rated point under u_dc/√3.  ``fw_margin`` = 0.95 by default
+  (:data:`jaxobs.drive.weakening.FW_MARGIN`: 5 % of the voltage left to the current PIs).
+- **Speed limit** (one rule, :func:`speed_limit`; ``jaxobs drive check`` prints it, tune, study and envelope
+  use it): the no-load voltage bound, ωe ψf = u_dc/√3, or ωe (ψf − Ld i_max) = u_dc/√3 with field weakening;
+  within ``max_speed_rpm`` where given; where the voltage leaves the speed unbounded (ψf/Ld ≤ i_max) and no
+  ``max_speed_rpm`` is given, :data:`MECH_SPEED_PU` (3) × the rated speed, ASSUMED.
+- **ψf from a datasheet**: exactly one of ``psi_f``, ``ke_v_per_krpm_ll_rms``, ``ke_v_per_krpm_ll_peak``,
+  ``kt_nm_per_a_rms`` (:func:`~jaxobs.drive.psi_f_from_ke`, :func:`~jaxobs.drive.psi_f_from_kt`; the rule is
+  recorded with ``psi_f``).
+- **Tiny values**: every number has a floor (e.g. inductances ≥ 1e-8 H, torques and currents ≥ 1e-6, u_dc ≥
+  1 V); zero and subnormal values are one-line refusals, never a division by zero.
 - **Speed-loop period**: ``speed_every`` = round(f_s / 1 kHz) (000's DSP runs its speed loop at 1 kHz,
   :mod:`jaxobs.drive.control`), at least 1.
 - **I-f start-up**: :meth:`IfStartup.for_machine` (rated torque, inertia: the ramp's torque and the rotor's
-  swing), with ``[startup]``'s keys overriding.
+  swing), with ``[startup]``'s keys overriding; its current papers.IF_CURRENT_PU × the smaller of T_rated/K_t
+  and the rated peak √2 ``rated_current_a`` (an IPMSM carries its rated torque with less than T_rated/K_t), at
+  least 1 % of i_max.
 - **A dual machine** (``[dual]``): every value above is derived on one set carrying half of ``J``, ``B`` and the
   rated torque (:meth:`DualPMSMParams.per_set`, what the observers and the speed loop are designed on); the xy
   PIs get k_p = α_c L̂ls, k_i = α_c R̂s.  The dual loop runs the default timing and no q-axis saturation: a file
@@ -126,11 +143,13 @@ from .dual_loop import DualDrive, DualFOC
 from .hardware import Inverter, Sensors
 from .latency import Latency, PeriodStart, PWMCentre
 from .loop import SETTLE_PERIODS, Drive
-from .machine import RPM, PMSMParams, QSaturation
-from .weakening import VoltageFeedbackFW
+from .machine import RPM, PMSMParams, QSaturation, psi_f_from_ke, psi_f_from_kt
+from .weakening import FW_MARGIN, VoltageFeedbackFW
 
 __all__ = [
     "ALPHA_C_TS_MAX",
+    "MECH_SPEED_PU",
+    "speed_limit",
     "DRIVE_FILE_KEYS",
     "Derived",
     "DriveFile",
@@ -151,6 +170,11 @@ ESTIMATE_RATIO = 3.0  # α_s ≤ ω_est / 3 (ASSUMED: the benches' 5 Hz loop thr
 FLL_RATIO = 4.3  # a speed estimate scaling with ω_e closes the loop from ω_e ≥ 4.3 α_s (docs/stability.md)
 OVERLOAD = 1.5  # i_max = 1.5 × rated (peak), FOC.imc's default
 SPEED_LOOP_HZ = 1000.0  # the default speed-loop rate (000's DSP)
+# ASSUMED: without [machine] max_speed_rpm, a drive whose voltage never bounds its speed (field weakening with
+# ψf/Ld ≤ i_max) is limited to 3 × its rated speed (a common top-to-base ratio of traction and spindle drives)
+MECH_SPEED_PU = 3.0
+IF_CURRENT_MIN_PU = 0.01  # the I-f current at least 1 % of i_max (tiny values are refused, not divided by)
+PSI_F_KEYS = ("psi_f", "ke_v_per_krpm_ll_rms", "ke_v_per_krpm_ll_peak", "kt_nm_per_a_rms")
 
 _S2, _S3 = math.sqrt(2.0), math.sqrt(3.0)
 
@@ -171,37 +195,42 @@ DRIVE_FILE_KEYS: dict[str, dict[str, _Key]] = {
     "machine": {
         "p": _Key(_I, 1, 100, unit="pole pairs", required=True),
         "Rs": _Key(_F, 0.0, 1e3, unit="Ω", required=True),
-        "Ld": _Key(_F, 0.0, 10.0, lo_open=True, unit="H", required=True),
-        "Lq": _Key(_F, 0.0, 10.0, lo_open=True, unit="H", required=True),
-        "psi_f": _Key(_F, 0.0, 100.0, lo_open=True, unit="Wb", required=True),
-        "J": _Key(_F, 0.0, 1e5, lo_open=True, unit="kg·m²", required=True),
-        "rated_speed_rpm": _Key(_F, 0.0, 1e6, lo_open=True, unit="r/min", required=True),
-        "rated_torque_nm": _Key(_F, 0.0, 1e6, lo_open=True, unit="N·m", required=True),
-        "rated_current_a": _Key(_F, 0.0, 1e5, lo_open=True, unit="A rms", required=True),
+        "Ld": _Key(_F, 1e-8, 10.0, unit="H", required=True),
+        "Lq": _Key(_F, 1e-8, 10.0, unit="H", required=True),
+        # the magnet flux: psi_f, or one of the datasheet constants it is converted from (PSI_F_KEYS)
+        "psi_f": _Key(_F, 1e-6, 100.0, unit="Wb"),
+        "ke_v_per_krpm_ll_rms": _Key(_F, 1e-3, 1e6, unit="V/krpm"),
+        "ke_v_per_krpm_ll_peak": _Key(_F, 1e-3, 1e6, unit="V/krpm"),
+        "kt_nm_per_a_rms": _Key(_F, 1e-6, 1e4, unit="N·m/A"),
+        "J": _Key(_F, 1e-10, 1e5, unit="kg·m²", required=True),
+        "rated_speed_rpm": _Key(_F, 1.0, 1e6, unit="r/min", required=True),
+        "rated_torque_nm": _Key(_F, 1e-6, 1e6, unit="N·m", required=True),
+        "rated_current_a": _Key(_F, 1e-6, 1e5, unit="A rms", required=True),
+        "max_speed_rpm": _Key(_F, 1.0, 1e6, unit="r/min"),
         "B": _Key(_F, 0.0, 1e3, unit="N·m·s/rad"),
         "a5": _Key(_F, 0.0, 1.0, unit="1"),
         "a7": _Key(_F, 0.0, 1.0, unit="1"),
-        "q_sat_current_a": _Key(_F, 0.0, 1e6, lo_open=True, unit="A"),
+        "q_sat_current_a": _Key(_F, 1e-6, 1e6, unit="A"),
         "q_sat_n": _Key(_F, 1.0, 16.0, unit="1"),
     },
     "inverter": {
-        "u_dc": _Key(_F, 0.0, 1e5, lo_open=True, unit="V", required=True),
+        "u_dc": _Key(_F, 1.0, 1e5, unit="V", required=True),
         "f_sample_hz": _Key(_F, 100.0, 1e6, unit="Hz", required=True),
         "f_pwm_hz": _Key(_F, 100.0, 1e6, unit="Hz"),
         "sampling": _Key("str", choices=("start", "centre")),
         "compute_delay": _Key(_I, 0, 1, unit="periods"),
     },
     "control": {
-        "current_bandwidth_hz": _Key(_F, 0.0, 1e5, lo_open=True, unit="Hz"),
-        "speed_bandwidth_hz": _Key(_F, 0.0, 1e4, lo_open=True, unit="Hz"),
-        "speed_estimate_hz": _Key(_F, 0.0, 1e4, lo_open=True, unit="Hz"),
+        "current_bandwidth_hz": _Key(_F, 0.01, 1e5, unit="Hz"),
+        "speed_bandwidth_hz": _Key(_F, 0.001, 1e4, unit="Hz"),
+        "speed_estimate_hz": _Key(_F, 0.001, 1e4, unit="Hz"),
         "speed_every": _Key(_I, 1, 10_000, unit="periods"),
         "overload": _Key(_F, 1.0, 10.0, unit="1"),
-        "i_max_a": _Key(_F, 0.0, 1e6, lo_open=True, unit="A"),
+        "i_max_a": _Key(_F, 1e-6, 1e6, unit="A"),
         "id_policy": _Key("str", choices=("zero", "mtpa")),
         "field_weakening": _Key("bool"),
-        "fw_bandwidth_hz": _Key(_F, 0.0, 1e4, lo_open=True, unit="Hz"),
-        "fw_margin": _Key(_F, 0.0, 1.0, lo_open=True, unit="1"),
+        "fw_bandwidth_hz": _Key(_F, 0.01, 1e4, unit="Hz"),
+        "fw_margin": _Key(_F, 0.5, 1.0, unit="1"),
         "speed_schedule": _Key(_F, 0.0, 1000.0, unit="1"),
         "setpoint_weight": _Key(_F, 0.0, 1.0, unit="1"),
         "advance": _Key(_F, 0.0, 3.0, unit="periods"),
@@ -213,21 +242,21 @@ DRIVE_FILE_KEYS: dict[str, dict[str, _Key]] = {
         "u_offset_v": _Key("pair", -1e4, 1e4, unit="V"),
         "i_gain_error": _Key("pair", -0.5, 0.5, unit="1"),
         "adc_bits": _Key(_I, 6, 24, unit="bits"),
-        "adc_range_a": _Key(_F, 0.0, 1e6, lo_open=True, unit="A"),
+        "adc_range_a": _Key(_F, 1e-6, 1e6, unit="A"),
         "encoder_lines": _Key(_I, 1, 10_000_000, unit="lines/rev"),
     },
     "startup": {
-        "current_a": _Key(_F, 0.0, 1e6, lo_open=True, unit="A"),
-        "switch_rpm": _Key(_F, 0.0, 1e6, lo_open=True, unit="r/min"),
+        "current_a": _Key(_F, 1e-6, 1e6, unit="A"),
+        "switch_rpm": _Key(_F, 0.01, 1e6, unit="r/min"),
         "hold_s": _Key(_F, 0.0, 60.0, unit="s"),
         "blend_s": _Key(_F, 0.0, 10.0, unit="s"),
-        "dwell_s": _Key(_F, 0.0, 10.0, lo_open=True, unit="s"),
-        "angle_tol_rad": _Key(_F, 0.0, 3.14, lo_open=True, unit="rad"),
-        "speed_tol": _Key(_F, 0.0, 1.0, lo_open=True, unit="1"),
+        "dwell_s": _Key(_F, 1e-6, 10.0, unit="s"),
+        "angle_tol_rad": _Key(_F, 1e-6, 3.14, unit="rad"),
+        "speed_tol": _Key(_F, 1e-6, 1.0, unit="1"),
     },
     # a dual three-phase machine (jaxobs.drive._dualfile): the xy inductance and the current control's mode
     "dual": {
-        "Lls": _Key(_F, 0.0, 10.0, lo_open=True, unit="H", required=True),
+        "Lls": _Key(_F, 1e-8, 10.0, unit="H", required=True),
         "mode": _Key("str", choices=("vsd", "individual")),
         "fw_voltage": _Key("str", choices=("ab", "set")),
     },
@@ -439,10 +468,11 @@ def _voltage(m: dict, w_e: float, i_d: float, i_q: float) -> float:
 
 def _fw_voltage(m: dict, w_e: float, torque: float, i_max: float, id_top: float) -> float:
     """The least |u| (V) at ω_e that carries ``torque`` within the current circle i_max with i_d ≤ ``id_top``
-    (field weakening: a more negative i_d); inf where no i_d does."""
+    (field weakening: a more negative i_d, down to where the FOC stops it, max(−i_max, −ψf/Ld):
+    :func:`jaxobs.drive.weakening.id_stop`); inf where no i_d does."""
     p, Ld, Lq, psi = m["p"], m["Ld"], m["Lq"], m["psi_f"]
     best = math.inf
-    for i_d in np.linspace(id_top, -i_max, 4001):
+    for i_d in np.linspace(id_top, max(-i_max, min(-psi / Ld, id_top)), 4001):  # to the FOC's stop (weakening)
         k = 1.5 * p * (psi + (Ld - Lq) * i_d)
         if k <= 0:
             continue
@@ -467,6 +497,47 @@ def _base_speed(m: dict, i_d: float, i_q: float, u_max: float) -> float:
 
 def _rpm(w_e: float, p: int) -> float:
     return w_e / p / RPM
+
+
+def _no_load_rpm(u_max: float, flux: float, p: int) -> float:
+    """The speed (r/min) where ωe · ``flux`` = u_max (inf for flux ≤ 0), in the one order of operations every
+    speed limit uses (the envelope's default speeds are 0.98 × it: the same bits everywhere)."""
+    return math.inf if flux <= 0.0 else u_max / flux / float(p) * 60.0 / (2 * math.pi)
+
+
+def speed_limit(p, psi_f, Ld, i_max, u_max, weakening, rated_speed_rpm, max_speed_rpm=None) -> tuple[float, str]:
+    """The one speed limit of a drive (r/min, either direction) and its rule, which ``jaxobs drive check``
+    prints and ``tune``, ``study`` and ``envelope`` use.
+
+    The voltage's no-load bound: ωe ψf = u_max without field weakening (the FOC cannot hold even zero current
+    above it); ωe (ψf − Ld i_max) = u_max with it (i_d stops at max(−i_max, −ψf/Ld): unbounded where
+    Ld i_max ≥ ψf).  Then the mechanical limit: ``max_speed_rpm`` (``[machine] max_speed_rpm``) where given,
+    else :data:`MECH_SPEED_PU` × the rated speed where the voltage leaves the speed unbounded.
+
+    Args:
+        p: The pole pairs.
+        psi_f: ψf, Wb.
+        Ld: The d inductance, H.
+        i_max: The current limit, A.
+        u_max: The voltage limit, V.
+        weakening: Whether the FOC weakens the field.
+        rated_speed_rpm: The rated speed, r/min.
+        max_speed_rpm: The mechanical limit, r/min, or None.
+
+    Returns:
+        ``(limit, rule)``.
+    """
+    flux = psi_f - Ld * i_max if weakening else psi_f
+    n_v = _no_load_rpm(u_max, flux, p)
+    why = "no-load ωe (ψf − Ld i_max) = u_max" if weakening else "no-load ωe ψf = u_max"
+    if max_speed_rpm is not None:
+        return min(n_v, float(max_speed_rpm)), f"min({why}, machine.max_speed_rpm)"
+    if math.isinf(n_v):
+        return MECH_SPEED_PU * float(rated_speed_rpm), (
+            f"{MECH_SPEED_PU:g} × rated_speed_rpm (ASSUMED; machine.max_speed_rpm sets it): {why} is unbounded "
+            "(ψf/Ld ≤ i_max)"
+        )
+    return n_v, why + (" (field weakening)" if weakening else " (no field weakening)")
 
 
 def drive_from_table(raw: dict, name: str = "drive") -> DriveFile:
@@ -505,6 +576,20 @@ def drive_from_table(raw: dict, name: str = "drive") -> DriveFile:
         return value
 
     p = m["p"]
+    given_flux = [k for k in PSI_F_KEYS if k in m]
+    if len(given_flux) != 1:
+        what = "missing" if not given_flux else f"give one, got {', '.join(given_flux)}"
+        raise ValueError(f"machine.psi_f: {what} (the magnet flux: one of {', '.join(PSI_F_KEYS)})")
+    if "psi_f" not in m:  # a datasheet's back-EMF or torque constant, converted (the rule printed)
+        key = given_flux[0]
+        if key == "kt_nm_per_a_rms":
+            psi_f, rule = psi_f_from_kt(m[key], p)
+        else:
+            psi_f, rule = psi_f_from_ke(m[key], p, line_peak=key.endswith("peak"))
+        if not (1e-6 <= psi_f <= 100.0):
+            raise ValueError(f"machine.{key}: gives psi_f = {psi_f:.4g} Wb, outside [1e-06, 100] Wb, got {m[key]:g}")
+        m = {**m, "psi_f": psi_f}
+        rec("psi_f", psi_f, "Wb", f"machine.{key}: {rule}", True)
     if "q_sat_n" in m and "q_sat_current_a" not in m:
         raise ValueError("machine.q_sat_n: needs machine.q_sat_current_a (the saturation's current)")
     q_sat = QSaturation(m["q_sat_current_a"], m.get("q_sat_n", 2.0)) if "q_sat_current_a" in m else None
@@ -574,16 +659,20 @@ def drive_from_table(raw: dict, name: str = "drive") -> DriveFile:
     u_rated = rec("u_rated_point", _voltage(m, w_rated, i_d_r, i_q_r), "V", "steady |u| at rated torque and speed")
     rec("base_speed_rpm", _rpm(_base_speed(m, i_d_r, i_q_r, u_max), p), "r/min",
                  "the speed where rated torque's |u| reaches u_max")  # fmt: skip
-    rec("max_speed_rpm", _rpm(u_max / m["psi_f"], p), "r/min", "no-load speed where ωe ψf = u_max (no weakening)")
-    ld_imax = m["Ld"] * i_max
-    w_fw = math.inf if ld_imax >= m["psi_f"] else u_max / (m["psi_f"] - ld_imax)
-    rec("max_speed_fw_rpm", _rpm(w_fw, p), "r/min",
+    n_emf = rec("emf_speed_rpm", _no_load_rpm(u_max, m["psi_f"], p), "r/min",
+                "no-load speed where ωe ψf = u_max (no weakening)")  # fmt: skip
+    rec("max_speed_fw_rpm", _no_load_rpm(u_max, m["psi_f"] - m["Ld"] * i_max, p), "r/min",
         "no-load ωe (ψf − Ld i_max) = u_max (inf: i_char ≤ i_max, unbounded by the voltage)")  # fmt: skip
     fw_needed = u_rated > u_max
-    fw = ctl.get("field_weakening", fw_needed)
-    rec("field_weakening", fw, "", "on when the rated point needs |u| > u_dc/√3", "field_weakening" in ctl)
-    rec("speed_limit_rpm", _rpm(w_fw if fw else u_max / m["psi_f"], p), "r/min",
-        "the highest speed to ask for: max_speed_fw_rpm with field weakening, else max_speed_rpm")  # fmt: skip
+    margin = rec("fw_margin", ctl.get("fw_margin", FW_MARGIN), "1",
+                 "5 % of u_max left to the current PIs (jaxobs.drive.weakening)", "fw_margin" in ctl)  # fmt: skip
+    fw_default = u_rated > margin * u_max or m.get("max_speed_rpm", 0.0) > n_emf
+    fw = ctl.get("field_weakening", fw_default)
+    rec("field_weakening", fw, "", "on when the rated point needs |u| > fw_margin × u_dc/√3, or machine.max_speed_rpm "
+        "lies above emf_speed_rpm (where the back EMF alone reaches u_max)", "field_weakening" in ctl)  # fmt: skip
+    limit, limit_rule = speed_limit(p, m["psi_f"], m["Ld"], i_max, u_max, fw, m["rated_speed_rpm"],
+                                    m.get("max_speed_rpm"))  # fmt: skip
+    rec("speed_limit_rpm", limit, "r/min", limit_rule, "max_speed_rpm" in m)
     if fw_needed:
         id_top = min(i_d_r, 0.0)
         u_fw = _fw_voltage(m, w_rated, m["rated_torque_nm"], i_max, id_top) if fw else math.inf
@@ -595,10 +684,10 @@ def drive_from_table(raw: dict, name: str = "drive") -> DriveFile:
                 f"{m['rated_speed_rpm']:g} r/min {how}), got {inv['u_dc']:g}"
             )
         rec("u_rated_point_fw", u_fw, "V", "least |u| at the rated point with i_d ≤ the policy's, |i| ≤ i_max")
-    elif u_rated > 0.95 * u_max:
+    elif u_rated > margin * u_max and not fw:
         warn.append(
-            f"inverter.u_dc: the rated point needs {u_rated / u_max:.1%} of u_dc/√3 (less than 5 % left for the "
-            "current loop to regulate)"
+            f"inverter.u_dc: the rated point needs {u_rated / u_max:.1%} of u_dc/√3 (less than {1 - margin:.0%} left "
+            "for the current loop to regulate; control.field_weakening = true would hold it at fw_margin)"
         )
 
     # --- current loop
@@ -677,7 +766,7 @@ def drive_from_table(raw: dict, name: str = "drive") -> DriveFile:
     # --- controller
     fw_obj = None
     if fw:
-        fw_obj = VoltageFeedbackFW(2 * math.pi * ctl.get("fw_bandwidth_hz", 20.0), ctl.get("fw_margin", 0.95))
+        fw_obj = VoltageFeedbackFW(2 * math.pi * ctl.get("fw_bandwidth_hz", 20.0), margin)
     advance = ctl.get("advance", n_use)
     rec("advance", advance, "periods", "the timing's use delay (Latency.use_delay)", "advance" in ctl)
     foc_kw = dict(
@@ -739,8 +828,20 @@ def drive_from_table(raw: dict, name: str = "drive") -> DriveFile:
         )
     if "current_a" in st and st["current_a"] > i_max:
         raise ValueError(f"startup.current_a: must be <= the current limit {i_max:.4g} A, got {st['current_a']:g}")
-    startup = IfStartup.for_machine(machine, rpm_switch=st.get("switch_rpm"), i_f=st.get("current_a"), **kw)
-    rec("if_current", float(startup.i_f), "A", "papers.IF_CURRENT_PU × rated current at i_d = 0 (T_rated/K_t)",
+    # the I-f current: IF_CURRENT_PU of the rated current, the smaller of T_rated/K_t (the i_d = 0 current of
+    # rated torque) and the rated peak √2 rated_current_a (an IPMSM's rated torque needs less than T_rated/K_t)
+    i_rated_pk = _S2 * m["rated_current_a"]
+    i_kt = m["rated_torque_nm"] / kt
+    i_f = st.get("current_a", papers.IF_CURRENT_PU * (i_rated_pk if i_rated_pk < i_kt * (1 - 1e-9) else i_kt))
+    # None: IfStartup.for_machine's own T_rated/K_t rule, computed as it always was (the benches' presets)
+    i_f_arg = i_f if ("current_a" in st or i_rated_pk < i_kt * (1 - 1e-9)) else None
+    if i_f < IF_CURRENT_MIN_PU * i_max:
+        raise ValueError(
+            f"startup.current_a: must be >= {IF_CURRENT_MIN_PU:g} × the current limit "
+            f"({IF_CURRENT_MIN_PU * i_max:.4g} A: below it the I-f vector carries no torque to start with), got {i_f:g}"
+        )
+    startup = IfStartup.for_machine(machine, rpm_switch=st.get("switch_rpm"), i_f=i_f_arg, **kw)
+    rec("if_current", float(startup.i_f), "A", "papers.IF_CURRENT_PU × min(T_rated/K_t, √2 rated_current_a)",
         "current_a" in st)  # fmt: skip
     rec("if_switch_rpm", float(startup.omega_switch) / p / RPM, "r/min", "papers.IF_SWITCH_PU × rated speed",
         "switch_rpm" in st)  # fmt: skip

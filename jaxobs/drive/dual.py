@@ -59,7 +59,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .. import papers
-from .._discretize import RK4, AbstractRule, Held, check_rule
+from .._discretize import RK4, AbstractRule, AbstractRuleCarry, Held, check_rule
 from .._math import wrap
 from .._validate import check_nonnegative, check_positive, check_sample_time
 from .component import AbstractComponent
@@ -314,7 +314,7 @@ class DualPlantOutput(NamedTuple):
     torque: jax.Array  # N·m
 
 
-class DualPlantState(NamedTuple):
+class DualPlantState(AbstractRuleCarry):
     x: jax.Array  # [i_d, i_q, i_x, i_y, ω_m, θ_e], shape (6,)
     rule: Any
 

@@ -50,7 +50,7 @@ from .._discretize import RK4, AbstractRule, check_rule
 from .._math import wrap
 from .._system import AbstractSystem
 from .._validate import check_sample_time
-from ..observers import AbstractDriveObserver
+from ..observers import AbstractDriveObserver, AbstractObserver
 from .control import FOC, ControllerState, FOCInput, IfStartup, OperatingPoint
 from .hardware import Inverter, InverterInput, SensorInput
 from .latency import Latency
@@ -338,12 +338,25 @@ class AbstractDriveLoop(AbstractSystem):
                     obs, offset = self._settled_observer(op)
         return op, obs
 
-    def _observe(self, obs_state, meas, t):
+    def _observe(self, obs_state, meas, t, iq_ref=None):
         """The observer's step at time ``t`` (s) on ``meas`` (a DriveInput): (state, outputs); Nones for the
-        encoder."""
+        encoder.  ``iq_ref`` (A), the q-current reference held over the period just ended, gives the observer
+        the torque reference ``T_ref`` where its speed estimator reads one (:meth:`_with_torque`)."""
         if self.observer is None:
             return None, None
-        return self._observer_at(t).step(obs_state, meas)
+        return self._observer_at(t).step(obs_state, self._with_torque(meas, iq_ref))
+
+    def _with_torque(self, meas, iq_ref):
+        """``meas`` with ``T_ref``, the torque the controller's policy gives ``iq_ref`` on the machine it assumes
+        (1.5 p (ψ̂f i_q* + (L̂d − L̂q) i_d*(i_q*) i_q*), field weakening's Δi_d left out), where the observer's
+        speed estimator reads it (a mechanical model, jaxobs.observers.speed) and the controller is a
+        :class:`FOC`; ``meas`` itself otherwise."""
+        if iq_ref is None or not self.observer.reads_torque:  # an ObserverBank: any of its observers
+            return meas
+        foc = self.controller
+        if not isinstance(foc, FOC):  # the dual three-phase loop's controller: no torque reference (T* = 0)
+            return meas
+        return meas._replace(T_ref=foc._policy_torque(foc.est, iq_ref))
 
     def _feedback(self, t, obs_out, theta_e, omega_e, omega_m):
         """The angle (rad), electrical and mechanical speeds (rad/s) the controller uses at time ``t``: the
@@ -429,7 +442,7 @@ class AbstractDriveLoop(AbstractSystem):
                 th = th + lat.sample_offset * w_e * ts
             i_a, i_b = dq_to_ab(op.i_d, op.i_q, th)
             _, meas = sc.sensors.step(sc.key, SensorInput(k, u_a, u_b, i_a, i_b))
-            s, out = obs.step(s, meas)
+            s, out = obs.step(s, self._with_torque(meas, op.i_q))
             err = out.theta - th
             counted = k >= -tail
             acc = acc + jnp.where(counted, jnp.stack([jnp.cos(err), jnp.sin(err)]), 0.0)
@@ -445,7 +458,8 @@ class ClosedLoop(AbstractDriveLoop):
 
     Args:
         drive: The :class:`Drive`.
-        observer: A drive observer (``init`` and ``step``), or None: the encoder.
+        observer: An observer (a :class:`~jaxobs.observers.AbstractObserver`, usually a drive observer), or
+            None: the encoder.
         scenario: The :class:`Scenario`.
 
     Raises:
@@ -453,7 +467,7 @@ class ClosedLoop(AbstractDriveLoop):
     """
 
     drive: Drive
-    observer: Any
+    observer: AbstractObserver | None
     scenario: Scenario
 
     # loop unrolling (jaxobs._loop point 3): 1, the drive step is large, and
@@ -466,8 +480,11 @@ class ClosedLoop(AbstractDriveLoop):
             raise ValueError(f"ClosedLoop.drive must be a jaxobs.drive.Drive, got {type(drive).__name__}")
         if not isinstance(scenario, Scenario):
             raise ValueError(f"ClosedLoop.scenario must be a jaxobs.drive.Scenario, got {type(scenario).__name__}")
-        if observer is not None and not (hasattr(observer, "init") and hasattr(observer, "step")):
-            raise ValueError(f"ClosedLoop.observer must have init and step (or be None), got {type(observer).__name__}")
+        if observer is not None and not isinstance(observer, AbstractObserver):
+            raise ValueError(
+                f"ClosedLoop.observer must be an observer (a jaxobs.observers.AbstractObserver: init and step) or "
+                f"None, got {type(observer).__name__}"
+            )
         if drive.sensorless and observer is None:
             raise ValueError("ClosedLoop: a sensorless drive needs an observer (observer=None is the encoder)")
         check_sample_time("ts", drive.ts, "Drive")
@@ -604,7 +621,7 @@ class ClosedLoop(AbstractDriveLoop):
             plant_state, y = self.plant.step(state.plant, PlantInput(state.u_a, state.u_b, x.load))
             ys = y
         key, meas = sc.sensors.step(state.sensors, SensorInput(k, state.u_a, state.u_b, ys.i_a, ys.i_b))
-        obs_state, obs_out = self._observe(state.obs, meas, t)
+        obs_state, obs_out = self._observe(state.obs, meas, t, state.ctrl.iq_ref)
         w_e = sc.par.p * ys.omega_m
         th_c, w_e_c, w_m_c = self._feedback(t, obs_out, ys.theta_e, w_e, ys.omega_m)
         ctrl, c = self.controller.step(state.ctrl, FOCInput(k, meas.i_a, meas.i_b, th_c, w_e_c, w_m_c, x.omega_m_ref))

@@ -52,6 +52,8 @@ from .._validate import check_nonnegative, check_positive, check_real
 __all__ = [
     "PMSMParams",
     "QSaturation",
+    "psi_f_from_ke",
+    "psi_f_from_kt",
     "lq_apparent",
     "lq_incremental",
     "plant_vf",
@@ -231,6 +233,56 @@ class PMSMParams(eqx.Module):
             self,
             (self.Rs * (1 + dRs), self.Ld * (1 + dL), self.Lq * (1 + dL), self.psi_f * (1 + dpsi)),
         )
+
+
+def psi_f_from_ke(ke_v_per_krpm: float, p: int, *, line_peak: bool = False) -> tuple[float, str]:
+    """ψf (Wb, peak phase flux, amplitude-invariant) from a datasheet's back-EMF constant.
+
+    A datasheet gives Ke as the line-to-line voltage per 1000 r/min, rms (the usual) or peak.  The phase
+    voltage's peak is ωe ψf with ωe = p · 2π · 1000/60 rad/s at 1000 r/min, and a line-to-line voltage is √3
+    times the phase voltage, so ψf = Ke √2/√3 / ωe (rms) or Ke/√3 / ωe (peak).
+
+    Args:
+        ke_v_per_krpm: Ke, V per 1000 r/min, line to line (> 0).
+        p: The pole pairs.
+        line_peak: Ke is the line-to-line peak voltage (default: rms).
+
+    Returns:
+        ``(ψf, the rule as one line)``.
+
+    Raises:
+        ValueError: Ke or p out of range.
+    """
+    ke, p = float(ke_v_per_krpm), int(p)
+    if not (math.isfinite(ke) and ke > 0.0) or p < 1:
+        raise ValueError(f"psi_f_from_ke: Ke must be > 0 V/krpm and p >= 1, got {ke_v_per_krpm!r}, {p!r}")
+    w_e = p * 2.0 * math.pi * 1000.0 / 60.0
+    if line_peak:
+        return ke / math.sqrt(3.0) / w_e, "Ke (V/krpm, line-to-line peak) / √3 / (p 2π 1000/60)"
+    return ke * math.sqrt(2.0 / 3.0) / w_e, "Ke (V/krpm, line-to-line rms) × √2/√3 / (p 2π 1000/60)"
+
+
+def psi_f_from_kt(kt_nm_per_a_rms: float, p: int) -> tuple[float, str]:
+    """ψf (Wb, peak, amplitude-invariant) from a datasheet's torque constant Kt in N·m per A rms (phase).
+
+    The magnet torque is T = 1.5 p ψf i_peak = 1.5 √2 p ψf I_rms, so ψf = Kt / (1.5 √2 p).  (A surface
+    machine's Kt; on an IPMSM the datasheet's Kt may include reluctance torque at rated current, which this
+    reading attributes to the magnet.)
+
+    Args:
+        kt_nm_per_a_rms: Kt, N·m/A rms (> 0).
+        p: The pole pairs.
+
+    Returns:
+        ``(ψf, the rule as one line)``.
+
+    Raises:
+        ValueError: Kt or p out of range.
+    """
+    kt, p = float(kt_nm_per_a_rms), int(p)
+    if not (math.isfinite(kt) and kt > 0.0) or p < 1:
+        raise ValueError(f"psi_f_from_kt: Kt must be > 0 N·m/A and p >= 1, got {kt_nm_per_a_rms!r}, {p!r}")
+    return kt / (1.5 * math.sqrt(2.0) * p), "Kt (N·m/A rms) / (1.5 √2 p)"
 
 
 def _harmonic_factor(par: PMSMParams, sc):

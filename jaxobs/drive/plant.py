@@ -23,7 +23,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from .._discretize import RK4, AbstractRule, Held, check_rule
+from .._discretize import RK4, AbstractRule, AbstractRuleCarry, Held, check_rule
 from .._math import wrap
 from .._trig import sincos
 from .._validate import check_nonnegative, check_sample_time
@@ -89,7 +89,7 @@ class PlantOutput(NamedTuple):
     torque: jax.Array  # electromagnetic torque, N·m
 
 
-class PlantState(NamedTuple):
+class PlantState(AbstractRuleCarry):
     """The machine's state between two periods.
 
     Attributes:

@@ -27,7 +27,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._validate import as_float, check_nonnegative, check_real
+from .._validate import as_float, check_nonnegative, check_real, key_part
 from ..quantities import Axis, text_unit
 from .hardware import Sensors
 from .machine import RPM, PMSMParams
@@ -345,7 +345,7 @@ class Batch(eqx.Module):
         leaves = jax.tree_util.tree_flatten_with_path(outputs)[0]
         named = {}
         for path, leaf in leaves:
-            name = "_".join(str(getattr(k, "name", getattr(k, "key", getattr(k, "idx", k)))) for k in path)
+            name = "_".join(str(key_part(k)) for k in path)
             arr = np.asarray(leaf)
             if arr.ndim == 0 or arr.shape[0] != self.size:
                 raise ValueError(

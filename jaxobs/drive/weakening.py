@@ -5,18 +5,53 @@ ref. [32], Hu et al. 2021, which adds the xy subspace of a dual three-phase mach
 negative d-current Δi_d when the current PIs' voltage reference |u*| exceeds a margin m of the inverter's
 limit u_max, and gives it back when |u*| falls below it,
 
-    dΔi_d/dt = α_fw (m u_max − |u*|) / (L̂d max(|ω̂e|, ω_min)),   −i_max ≤ Δi_d ≤ 0,
+    dΔi_d/dt = α_fw (m u_max − |u*|) / (L̂d max(|ω̂e|, ω_min)),
 
-so i_d* = i_d,policy + Δi_d, and the q-current is limited to the rest of the current circle,
-|i_q*| ≤ √(i_max² − i_d*²).  Above base speed |u*| ≈ |ω̂e| (ψ̂f + L̂d i_d), whose slope in i_d is ω̂e L̂d:
-dividing by it makes the loop from Δi_d to |u*| a first-order loop of bandwidth α_fw at every speed
-(ω_min only bounds the gain near standstill, where the scheme never acts).  The margin m < 1 leaves the
-current PIs room to regulate.  It is off by default (``field_weakening=None``: i_d* is the policy's, 0 or MTPA).
+so i_d* = max(i_d,policy + Δi_d, i_d,lo).  Above base speed |u*| ≈ |ω̂e| (ψ̂f + L̂d i_d), whose slope in i_d is
+ω̂e L̂d: dividing by it makes the loop from Δi_d to |u*| a first-order loop of bandwidth α_fw at every speed
+(ω_min only bounds the gain near standstill).  It is off by default (``field_weakening=None``: i_d* is the
+policy's, 0 or MTPA).
+
+The reference the FOC then asks for (:meth:`VoltageFeedbackFW.references`; constant inductances, the assumed
+machine L̂d, L̂q, ψ̂f, R̂s):
+
+1. *Where i_d stops.*  i_d,lo = max(−i_max, min(−ψ̂f/L̂d, i_d,policy)): never beyond the current circle (at any
+   speed, standstill included), and never past the characteristic current −ψ̂f/L̂d, where the d flux
+   ψd = ψ̂f + L̂d i_d reaches zero (more negative i_d raises |ψd| again and the voltage with it).  The
+   integrator itself is clipped to [i_d,lo − i_d,policy, 0]: it cannot wind up against that stop.  Below
+   ω_gate = (m u_max − R̂s i_max)/√(ψ̂f² + (L̂q i_max)²) (:meth:`VoltageFeedbackFW.gate_speed`) no current in the
+   circle needs field weakening, and the stop is the policy's i_d: a current PI's momentary saturation at
+   standstill (L̂ di/dt, not the back EMF) no longer drives Δi_d through the gain's ω_min floor (it asked for
+   i_d* = −11.2 A on the 9.1 A lab IPMSM after a 0 → 2000 r/min step; ``tests/test_weakening.py``).
+2. *The same torque on the weakened d axis.*  The speed loop asks for a torque (the policy's at i_q,cmd);
+   at the weakened i_d* the q current that gives it is i_q = i_q,cmd (ψ̂f + (L̂d − L̂q) i_d,policy)/(ψ̂f +
+   (L̂d − L̂q) i_d*), so the speed loop's gain does not change when the field is weakened (the divisor is
+   > 0 for i_d* ≥ −ψ̂f/L̂d on any machine: ≥ ψ̂f L̂q/L̂d).
+3. *The limits of i_q* at that i_d*: the current circle |i_q| ≤ √(i_max² − i_d*²); the MTPV line; and the
+   voltage: the steady |u| of (i_d*, i_q) at ω̂e at most u_max (a quadratic in i_q with R̂s included).
+   MTPV with constant inductances (the maximum torque on the flux circle |ψ| = const): ψd² − ψq² −
+   ψ̂f L̂q ψd/(L̂q − L̂d) = 0 (checked by brute force in ``tests/test_weakening.py``).  For L̂q ≥ L̂d it lies at
+   ψd < 0, beyond −ψ̂f/L̂d, so the stop of point 1 keeps the reference on the MTPA side of it and only an
+   inverse-salient machine (L̂d > L̂q, MTPV at ψd > 0) has |ψq| ≤ √(ψd² + ψ̂f L̂q ψd/(L̂d − L̂q)) as a bound.
+   Stopping at −ψ̂f/L̂d on a salient machine gives up the torque between it and its MTPV line at very high
+   speed (a few % at 1.5× base speed on the traction IPMSM of ``docs/examples/traction_ipmsm.toml``): a
+   decision for a reference that is monotonic in Δi_d and needs no search.
+4. *The torque realised* by (i_d*, i_q*) goes back to the speed loop, whose integrator stops when that torque,
+   not only the current circle's, falls short of what it asks (:meth:`jaxobs.drive.FOC.step`).
+
+The voltage limit of point 3 is u_max itself, above the loop's target m u_max: the Δi_d loop keeps |u*| at
+m u_max while it can, and the cap only acts when i_d* has reached its stop (a cap at m u_max would fight the
+Δi_d loop: any model error would then walk i_d* back and the torque down).
+
+The margin m leaves the current PIs room to regulate.  Its default, :data:`FW_MARGIN` = 0.95, is the rule
+m = 1 − 0.05: 5 % of u_max left for the current loop's transient voltage, about L̂ α_c Δi for a step Δi of a
+few % of i_max at the benches' α_c (motulator 0.18's synchronous-machine current control takes 0.9 of its
+own limit); ``[control] fw_margin`` sets it.
 
 |u*| is the current PIs' reference before the controller's own limit, available at the end of a period, so
 Δi_d acts from the next period on (a one-period lag, negligible against 1/α_fw).  A steady start above base
 speed starts at this loop's equilibrium, |u*| = m u_max (:meth:`jaxobs.drive.FOC.operating_point` solves
-Δi_d with the torque balance; :meth:`jaxobs.drive.FOC.init` starts the integrator there).
+i_d* with the torque balance; :meth:`jaxobs.drive.FOC.init` starts the integrator there).
 """
 
 from __future__ import annotations
@@ -24,10 +59,13 @@ from __future__ import annotations
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from .._validate import check_positive, check_real
 
-__all__ = ["VoltageFeedbackFW"]
+__all__ = ["FW_MARGIN", "VoltageFeedbackFW", "capability_torque", "id_stop", "mtpv_iq", "voltage_iq_range"]
+
+FW_MARGIN = 0.95  # the default margin m (module doc: 5 % of u_max left to the current PIs)
 
 
 class VoltageFeedbackFW(eqx.Module):
@@ -46,13 +84,13 @@ class VoltageFeedbackFW(eqx.Module):
     margin: jax.Array  # m: the fraction of u_max the voltage reference is held below, in (0, 1]
     omega_min: jax.Array  # electrical speed floor of the gain's ω̂e, rad/s (> 0)
 
-    def __init__(self, alpha_fw=2 * jnp.pi * 20.0, margin=0.95, omega_min=10.0):
+    def __init__(self, alpha_fw=2 * jnp.pi * 20.0, margin=FW_MARGIN, omega_min=10.0):
         own = "VoltageFeedbackFW"
         self.alpha_fw = check_positive("alpha_fw", alpha_fw, own)
         self.margin = check_real("margin", margin, lower=0.0, upper=1.0, owner=own)
         self.omega_min = check_positive("omega_min", omega_min, own)
 
-    def update(self, id_fw, u_ref_mag, u_max, omega_e, Ld, i_max, ts):
+    def update(self, id_fw, u_ref_mag, u_max, omega_e, Ld, i_max, ts, lo=None):
         """Δi_d for the next period from this period's |u*| and ω̂e.
 
         Args:
@@ -63,12 +101,67 @@ class VoltageFeedbackFW(eqx.Module):
             Ld: The assumed d-axis inductance, H.
             i_max: The current-vector limit, A.
             ts: The control period, s.
+            lo: The least Δi_d, A (≤ 0): i_d,lo − i_d,policy (module doc, point 1); None: −i_max.
 
         Returns:
-            Δi_d, A, in [−i_max, 0].
+            Δi_d, A, in [lo, 0].
         """
         gain = self.alpha_fw / (Ld * jnp.maximum(jnp.abs(omega_e), self.omega_min))
-        return jnp.clip(id_fw + gain * (self.margin * u_max - u_ref_mag) * ts, -i_max, 0.0)
+        lo = -i_max if lo is None else lo
+        return jnp.clip(id_fw + gain * (self.margin * u_max - u_ref_mag) * ts, lo, 0.0)
+
+    def references(self, est, id_policy, iq_cmd, id_fw, omega_e, u_max, i_max):
+        """The current reference the speed loop's demand gets under field weakening (module doc, points 1–3).
+
+        Args:
+            est: The machine the controller assumes (:class:`~jaxobs.drive.PMSMParams`).
+            id_policy: The policy's i_d for ``iq_cmd``, A.
+            iq_cmd: The speed loop's q current under the policy, A.
+            id_fw: Δi_d, A (≤ 0).
+            omega_e: ω̂e, rad/s.
+            u_max: The voltage limit, V.
+            i_max: The current-vector limit, A.
+
+        Returns:
+            ``(i_d*, i_q*, capped, lo)``: the reference, A; whether a limit of point 3 cut i_q below the torque's
+            (the torque the speed loop asked for is then not realised); the least Δi_d for :meth:`update`, A.
+        """
+        id_lo = id_stop(est, id_policy, i_max)
+        # below the speed where every current within the circle (i_d ≤ 0) fits m u_max at steady state, field
+        # weakening is never needed: the stop is the policy's i_d there (module doc, point 1)
+        id_lo = jnp.where(jnp.abs(omega_e) < self.gate_speed(est, u_max, i_max), id_policy, id_lo)
+        id_ref = jnp.maximum(id_policy + id_fw, id_lo)
+        dl = est.Ld - est.Lq
+        k_pol = est.psi_f + dl * id_policy
+        k_ref = est.psi_f + dl * id_ref  # ≥ ψ̂f min(1, L̂q/L̂d) > 0 above the stop (module doc, point 2)
+        weak = id_ref < id_policy
+        iq_w = jnp.where(weak, iq_cmd * k_pol / jnp.where(weak, k_ref, 1.0), iq_cmd)
+        room = jnp.minimum(self.limit_room(id_ref, i_max), mtpv_iq(est, id_ref))
+        q_lo, q_hi = voltage_iq_range(est, id_ref, omega_e, u_max)
+        iq_ref = jnp.clip(iq_w, jnp.maximum(-room, q_lo), jnp.minimum(room, q_hi))
+        return id_ref, iq_ref, iq_ref != iq_w, id_lo - id_policy
+
+    def gate_speed(self, est, u_max, i_max):
+        """ω_gate = (m u_max − R̂s i_max) / √(ψ̂f² + (L̂q i_max)²), rad/s: below it no current within the circle with
+        i_d ≤ 0 needs more than m u_max at steady state (its flux is at most that root), so field weakening is
+        held at zero there (module doc, point 1); 0 where R̂s i_max ≥ m u_max.
+
+        Args:
+            est: The assumed machine.
+            u_max: The voltage limit, V.
+            i_max: The current-vector limit, A.
+
+        Returns:
+            ω_gate, rad/s (electrical).
+        """
+        psi_hi = jnp.sqrt(est.psi_f**2 + (est.Lq * i_max) ** 2)
+        return jnp.maximum(self.margin * u_max - est.Rs * i_max, 0.0) / psi_hi
+
+    @staticmethod
+    def limit_room(id_ref, i_max):
+        """√(i_max² − i_d*²): the q current the circle leaves, A (0 on and beyond the circle, with a finite
+        gradient there: the root of a masked argument)."""
+        return _safe_sqrt(i_max * i_max - id_ref * id_ref)
 
     @staticmethod
     def limit_iq(iq_ref, id_ref, i_max):
@@ -82,5 +175,110 @@ class VoltageFeedbackFW(eqx.Module):
         Returns:
             The limited i_q*, A.
         """
-        room = jnp.sqrt(jnp.maximum(i_max * i_max - id_ref * id_ref, 0.0))
+        room = _safe_sqrt(i_max * i_max - id_ref * id_ref)
         return jnp.clip(iq_ref, -room, room)
+
+
+def _safe_sqrt(x):
+    """√x for x > 0, else 0, differentiable everywhere (√ of a masked argument: no inf·0 in the gradient)."""
+    pos = x > 0
+    return jnp.where(pos, jnp.sqrt(jnp.where(pos, x, 1.0)), 0.0)
+
+
+def id_stop(est, id_policy, i_max):
+    """i_d,lo = max(−i_max, min(−ψ̂f/L̂d, i_d,policy)): where field weakening stops (module doc, point 1), A.
+
+    Args:
+        est: The assumed machine.
+        id_policy: The policy's i_d, A.
+        i_max: The current-vector limit, A.
+
+    Returns:
+        i_d,lo, A.
+    """
+    return jnp.maximum(-i_max, jnp.minimum(-est.psi_f / est.Ld, id_policy))
+
+
+def mtpv_iq(est, id_ref):
+    """The largest |i_q| (A) at ``id_ref`` on the MTPA side of the MTPV line (module doc, point 3): unbounded
+    (inf) where L̂q ≥ L̂d (the stop at −ψ̂f/L̂d keeps i_d* on that side); √(ψd² + ψ̂f L̂q ψd/(L̂d − L̂q))/L̂q on an
+    inverse-salient machine, 0 at ψd ≤ 0.
+
+    Args:
+        est: The assumed machine.
+        id_ref: i_d*, A.
+
+    Returns:
+        The bound, A.
+    """
+    psi_d = est.psi_f + est.Ld * id_ref
+    inverse = est.Ld > est.Lq
+    gap = jnp.where(inverse, est.Ld - est.Lq, 1.0)
+    q2 = psi_d * psi_d + est.psi_f * est.Lq * psi_d / gap
+    bound = _safe_sqrt(q2) / est.Lq
+    bound = jnp.where(psi_d > 0, bound, 0.0)
+    return jnp.where(inverse, bound, jnp.inf)
+
+
+def voltage_iq_range(est, id_ref, omega_e, u_lim):
+    """The q currents (A) whose steady voltage at ``id_ref`` and ω̂e stays within ``u_lim``: the interval where
+    (R̂s i_d − ω̂e L̂q i_q)² + (R̂s i_q + ω̂e (ψ̂f + L̂d i_d))² ≤ u_lim² (module doc, point 3).  Where no i_q fits
+    (even i_q = 0 needs more), the least-voltage i_q alone; unbounded at standstill without resistance.
+
+    Args:
+        est: The assumed machine.
+        id_ref: i_d*, A.
+        omega_e: ω̂e, rad/s.
+        u_lim: The voltage limit, V.
+
+    Returns:
+        ``(low, high)``, A.
+    """
+    psi_d = est.psi_f + est.Ld * id_ref
+    a = est.Rs * est.Rs + (omega_e * est.Lq) ** 2
+    b = 2.0 * est.Rs * omega_e * (psi_d - est.Lq * id_ref)
+    c = (est.Rs * id_ref) ** 2 + (omega_e * psi_d) ** 2 - u_lim * u_lim
+    ok = a > 1e-30
+    a_s = jnp.where(ok, a, 1.0)
+    disc = b * b - 4.0 * a_s * c
+    root = _safe_sqrt(disc)
+    centre = -b / (2.0 * a_s)
+    half = root / (2.0 * a_s)
+    lo = jnp.where(ok, centre - half, -jnp.inf)
+    hi = jnp.where(ok, centre + half, jnp.inf)
+    return lo, hi
+
+
+def capability_torque(est, omega_e: float, u_max: float, i_max: float, margin: float = FW_MARGIN, n: int = 4001):
+    """The steady torque (N·m) the field-weakened reference can hold at ω_e on ``est``: the largest torque of
+    (i_d, i_q) with i_d from the policy-free range [i_d,lo, 0] (i_d,lo at its stop, :func:`id_stop` with
+    i_d,policy = 0) and i_q within the circle, MTPV and the steady voltage ``margin`` × u_max (the Δi_d loop's
+    target), on a grid of ``n`` d currents (NumPy: a check's number, not traced).
+
+    Args:
+        est: The machine (:class:`~jaxobs.drive.PMSMParams`).
+        omega_e: The electrical speed, rad/s.
+        u_max: The voltage limit, V.
+        i_max: The current limit, A.
+        margin: The fraction of u_max the steady voltage may use.
+        n: Grid points.
+
+    Returns:
+        ``(torque, i_d, i_q)`` at the best point (N·m, A, A).
+    """
+    Ld, Lq, psi, Rs, p = float(est.Ld), float(est.Lq), float(est.psi_f), float(est.Rs), est.p
+    i_d = np.linspace(max(-float(i_max), -psi / Ld), 0.0, int(n))
+    psi_d = psi + Ld * i_d
+    a = Rs * Rs + (omega_e * Lq) ** 2
+    b = 2.0 * Rs * omega_e * (psi_d - Lq * i_d)
+    c = (Rs * i_d) ** 2 + (omega_e * psi_d) ** 2 - (margin * u_max) ** 2
+    disc = b * b - 4.0 * a * c
+    hi = np.where(disc > 0, (-b + np.sqrt(np.maximum(disc, 0.0))) / (2.0 * a), 0.0)
+    room = np.sqrt(np.maximum(float(i_max) ** 2 - i_d * i_d, 0.0))
+    if Ld > Lq:  # the MTPV bound of an inverse-salient machine (mtpv_iq)
+        q2 = psi_d * psi_d + psi * Lq * psi_d / (Ld - Lq)
+        room = np.minimum(room, np.where(psi_d > 0, np.sqrt(np.maximum(q2, 0.0)) / Lq, 0.0))
+    i_q = np.clip(hi, 0.0, room)
+    torque = 1.5 * p * (psi + (Ld - Lq) * i_d) * i_q
+    k = int(np.argmax(torque))
+    return float(torque[k]), float(i_d[k]), float(i_q[k])

@@ -9,6 +9,8 @@ paper tunes has a closed form: ``closed_form_design`` gives a :class:`ClosedForm
 and :class:`DesignRow` s: name, value, units, formula, source) and ``closed_form`` its observer (the rules'
 arithmetic: ``sogi_fll_lambda``, ...).  :func:`check_gains` enforces every gain's declared bounds, once, after
 every constructor.
+A LESO and a PLL-type flux observer hold their speed and position extraction as a strategy
+(:class:`AbstractSpeedEstimator`: :class:`PLLSpeed`, :class:`MechanicalSpeed`; :mod:`jaxobs.observers.speed`).
 """
 
 from ._cores import sogi2_tustin_coefficients as sogi2_tustin_coefficients
@@ -32,6 +34,7 @@ from .base import AbstractDriveObserver as AbstractDriveObserver
 from .base import AbstractObserver as AbstractObserver
 from .base import AbstractVectorFieldObserver as AbstractVectorFieldObserver
 from .base import BankOutput as BankOutput
+from .base import BoundFields as BoundFields
 from .base import DriveObserverState as DriveObserverState
 from .base import ObserverBank as ObserverBank
 from .base import ObserverState as ObserverState
@@ -55,3 +58,6 @@ from .rofo import ROFOOutput as ROFOOutput
 from .sogi import SOGI as SOGI
 from .sogi import SOGI2 as SOGI2
 from .sogi import QSGOutput as QSGOutput
+from .speed import AbstractSpeedEstimator as AbstractSpeedEstimator
+from .speed import MechanicalSpeed as MechanicalSpeed
+from .speed import PLLSpeed as PLLSpeed

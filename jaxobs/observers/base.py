@@ -21,7 +21,8 @@ continuous-time reference sampled at t_n.
 
 The hierarchy (abstract classes; the concrete observers are final):
 
-- :class:`AbstractObserver`: ``ts``, ``init``, ``step``.  Every observer subclasses it.
+- :class:`AbstractObserver`: ``ts`` (an abstract variable: a field, or a property such as a bank's), ``init``,
+  ``step``.  Every observer subclasses it.
 - :class:`AbstractVectorFieldObserver`: an observer given by a vector field ``f(x, u)`` on a
   flat state, integrated by its rule (the FLL family, the SOGIs); ``init``/``step`` come with it.
 - :class:`AbstractDriveObserver`: an observer of a drive (fed a :class:`~jaxobs.measurements.DriveInput`)
@@ -31,22 +32,24 @@ The hierarchy (abstract classes; the concrete observers are final):
   drive observer does too, and then runs in :class:`jaxobs.drive.ClosedLoop` as they do.
 """
 
-from __future__ import annotations
-
+# no ``from __future__ import annotations`` here: equinox recognizes ``eqx.AbstractVar`` only in an evaluated
+# annotation (a string one would make AbstractObserver.ts an ordinary field, first in every observer's fields)
 import abc
+import dataclasses
 from typing import Any, ClassVar, NamedTuple
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from .._discretize import AbstractRule
+from .._discretize import AbstractRule, AbstractRuleCarry
 from ._gains import check_gains
 
 __all__ = [
     "AbstractObserver",
     "AbstractVectorFieldObserver",
     "AbstractDriveObserver",
+    "BoundFields",
     "ObserverState",
     "DriveObserverState",
     "ObserverBank",
@@ -57,9 +60,9 @@ __all__ = [
 class AbstractObserver(eqx.Module):
     """Every observer: a sample time ``ts`` (s) and pure ``init`` / ``step``.
 
-    ``ts`` is a field of each observer (an abstract variable of its family's base) or a property (an
-    :class:`ObserverBank`'s is its primary's); it is not declared here, where a field would be inherited by
-    a subclass that computes it.
+    ``ts`` is an abstract variable: no field is declared here, so a concrete observer implements it with a
+    field of its own (every observer of the FLL, flux and LESO families) or with a property (an
+    :class:`ObserverBank`'s is its primary's); a class that has neither cannot be constructed.
 
     Gains are fields declared with :func:`~jaxobs.observers.gain`; after every constructor
     ``__check_init__`` checks each against its declared bounds (:func:`~jaxobs.observers.check_gains`), so a
@@ -67,7 +70,12 @@ class AbstractObserver(eqx.Module):
     classmethods ``closed_form_design(**inputs) -> ClosedForm`` (the observer, its inputs and its rows: name,
     value, units, formula, source equation) and ``closed_form(**inputs)``, its observer
     (:mod:`jaxobs.observers._gains` states the convention).
+
+    Attributes:
+        ts: Sample time, s.
     """
+
+    ts: eqx.AbstractVar[float]
 
     # Declared by the class, read by the applications (jaxobs.registry): why a tuning job may not name it
     # ("" where it may), and the paper's small-signal model, (the jaxobs.linear function, the fields it takes
@@ -103,7 +111,7 @@ class AbstractObserver(eqx.Module):
         """
 
 
-class ObserverState(eqx.Module):
+class ObserverState(AbstractRuleCarry):
     """State of a vector-field observer: the flat state and the rule's own state.
 
     Attributes:
@@ -126,8 +134,10 @@ class AbstractVectorFieldObserver(AbstractObserver):
         rule: The discretization rule.
     """
 
-    ts: eqx.AbstractVar[float]
-    rule: eqx.AbstractVar[AbstractRule]
+    # fields, declared here first (every vector-field observer's fields start with ts and rule; the order of
+    # their dataclass fields, and so of their constructors' and exports' fields, is this)
+    ts: float
+    rule: AbstractRule
 
     @abc.abstractmethod
     def f(self, x: jax.Array, u) -> jax.Array:
@@ -179,7 +189,7 @@ class AbstractVectorFieldObserver(AbstractObserver):
         return self.f(x, signal(t))
 
 
-class DriveObserverState(eqx.Module):
+class DriveObserverState(AbstractRuleCarry):
     """State of a flux observer or a LESO: the flat state, the rule's state and the samples of the last period.
 
     One class for both families: each integrates the period [t_{k−1}, t_k] from the voltage applied over it
@@ -218,6 +228,29 @@ def replace_leaves(module, **values):
     return eqx.tree_at(lambda m: tuple(getattr(m, n) for n in names), module, new)
 
 
+@dataclasses.dataclass(frozen=True)
+class BoundFields:
+    """The fields a drive observer's :meth:`~AbstractDriveObserver.bind` sets, each named by its role.
+
+    Attributes:
+        resistance: The assumed stator resistance's field (R̂s), or None where the observer assumes none.
+        inductance: The assumed inductance's field (a flux observer's L̂, a LESO's L̂q, the reduced-order
+            observer's L̂d), or None.
+        speed: The initial speed's field (rad/s), or None.
+        more: Any other machine value it sets (the reduced-order observer's L̂q and ψ̂f).
+    """
+
+    resistance: str | None = None
+    inductance: str | None = None
+    speed: str | None = None
+    more: tuple[str, ...] = ()
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        """The bound fields' names: resistance, inductance, speed (those present), then ``more``."""
+        return (*(n for n in (self.resistance, self.inductance, self.speed) if n is not None), *self.more)
+
+
 class AbstractDriveObserver(AbstractObserver):
     """An observer of a drive: fed a :class:`~jaxobs.measurements.DriveInput` each period, it assumes a
     machine (what the controller believes, ``est_par`` in motulator's vocabulary) and starts at a speed.
@@ -228,9 +261,30 @@ class AbstractDriveObserver(AbstractObserver):
     :meth:`seed_speed` (:class:`jaxobs.drive.ClosedLoop`).
     """
 
-    # the fields bind() sets (resistance, inductance, initial speed): not gains, so a study or a job does not
-    # report or tune them (jaxobs.drive_study.drive_gains), and the C export says where they came from
-    bound_fields: ClassVar[tuple[str, ...]]
+    # the fields bind() sets, by role (resistance, inductance, initial speed): not gains, so a study or a job
+    # does not report or tune them (jaxobs.drive_study.drive_gains), and the C export says where they came from
+    bound_fields: ClassVar["BoundFields"]
+    # whether the class holds a speed estimator (jaxobs.observers.speed) that a job's [observer.speed] may choose
+    takes_speed_estimator: ClassVar[bool] = False
+
+    def speed_estimator(self):
+        """The speed and position extraction this observer holds (:mod:`jaxobs.observers.speed`), or None where
+        its speed comes otherwise (an FLL, its own adaptation law).
+
+        Returns:
+            The estimator or None.
+        """
+        return None
+
+    @property
+    def reads_torque(self) -> bool:
+        """Whether a step reads the torque reference (``DriveInput.T_ref``): a mechanical-model speed estimator.
+
+        Returns:
+            True where the drive loop must fill ``T_ref``.
+        """
+        est = self.speed_estimator()
+        return est is not None and est.uses_torque
 
     @abc.abstractmethod
     def bind(self, est_par, omega_e):
@@ -321,7 +375,16 @@ class ObserverBank(AbstractDriveObserver):
     observers: tuple
     primary: int = eqx.field(static=True, default=0)
 
-    bound_fields: ClassVar[tuple[str, ...]] = ()  # a bank has none of its own: bind() binds its observers
+    bound_fields: ClassVar[BoundFields] = BoundFields()  # none of its own: bind() binds its observers
+
+    @property
+    def reads_torque(self) -> bool:
+        """Whether any of its observers reads the torque reference.
+
+        Returns:
+            True where the drive loop must fill ``T_ref``.
+        """
+        return any(o.reads_torque for o in self.observers)
 
     def __check_init__(self):
         for i, o in enumerate(self.observers):
@@ -337,7 +400,7 @@ class ObserverBank(AbstractDriveObserver):
     def ts(self) -> float:
         return self.observers[self.primary].ts
 
-    def bind(self, est_par, omega_e) -> ObserverBank:
+    def bind(self, est_par, omega_e) -> "ObserverBank":
         return eqx.tree_at(lambda b: b.observers, self, tuple(o.bind(est_par, omega_e) for o in self.observers))
 
     def init(self, u0=None):

@@ -44,6 +44,25 @@ FLL's small-signal polynomial proportional to ω̂ and the damping independent
 of speed.  001's damping rule λ = k²ωn²/4 becomes lam = k²/4 (ζ = 1/√2 at every
 speed); the WIF's symmetric optimum λ = 2ωc²/b becomes lam = 2(ωc/ω̂)²/b.
 
+Salient machines: the active flux (Boldea, Paicu, Andreescu, "Active flux concept for motion-sensorless
+unified AC drives", IEEE Trans. Power Electron. 23(5), 2008).  In the rotor frame ψs = (Ld i_d + ψf) + j Lq i_q,
+so ψs − Lq i = (ψf + (Ld − Lq) i_d) e^{jθe}: the "active flux" ψa, aligned with the rotor's d axis on any PMSM.
+Bound to a machine, an observer takes L̂ = L̂q (:meth:`AbstractFluxObserver.bind`), so the back EMF it filters,
+u − R̂s i − L̂q di/dt = dψa/dt, is the active flux's, and θ̂ = atan2(ψ̂β, ψ̂α) is θe on a salient machine as on
+000's non-salient one (where Lq = Ld, ψa = ψf and nothing changes).  What that changes for 000's closed forms:
+
+- the filters (SOGI, second-order SOGI, LPF, integrator) are linear in e: their transfer functions (000 Table
+  III, eqs 15–21) and the angle they give at a steady point are unchanged;
+- the FLL is normalized by V̂² (``_fll_norm``) and its gain by ω̂² (above), the PLLs by |ψ̂|: none depends on the
+  flux amplitude, so the closed forms (001's damping rule, the WIF's symmetric optimum, the PLL's placement)
+  hold at every steady operating point as derived;
+- but the amplitude |ψa| = |ψf + (Ld − Lq) i_d| moves with i_d: under i_d* = 0 it is ψf (000's analysis holds
+  as is), under MTPA (Lq > Ld, i_d < 0) it falls with the load, and a step of i_d steps it.  The flux outputs
+  are then ψa, not ψf; a load step is an amplitude step (Ld − Lq)Δi_d of the filtered signal, which the
+  filters pass with their own step response — a transient angle error that 000's analysis (a constant
+  amplitude) does not cover, and the stability maps of docs/stability.md, drawn at constant amplitude,
+  do not either.  A machine whose ψa nears zero (strong saliency at high −i_d) leaves only the floors.
+
 Names.  ``lam`` keeps the name of the FLL gain it normalizes (001's λ, which 000's Γ draws): it is the same
 gain of the same loop, divided by ω̂², so it keeps the name and carries its own unit ("1", against the
 FLLs' rad²/s²) in its field's metadata (:func:`jaxobs.observers.gain_fields`); a gain is (class, name).  The
@@ -66,10 +85,11 @@ from .. import papers
 from .._discretize import RK4, AbstractRule, check_rule
 from .._math import safe_atan2
 from .._validate import as_float, check_nonnegative, check_positive, check_sample_time
-from ._cores import pll_vf, quadrature_error, safe_sq_amplitude, sogi2_tustin_coefficients, sogi2_vf, sogi_vf
+from ._cores import quadrature_error, safe_sq_amplitude, sogi2_tustin_coefficients, sogi2_vf, sogi_vf
 from ._gains import ClosedForm, gain, gain_row
 from ._rules import pll_gains, second_order_soifo_lambda, soifo_lambda
-from .base import AbstractDriveObserver, DriveObserverState, replace_leaves
+from .base import AbstractDriveObserver, BoundFields, DriveObserverState, replace_leaves
+from .speed import AbstractSpeedEstimator, speed_from_spec
 
 __all__ = ["FluxOutput", "AbstractFluxObserver", "PureIntegratorFlux", "LPFFlux", "SOIFO", "SecondOrderSOIFO"]
 
@@ -99,12 +119,13 @@ class AbstractFluxObserver(AbstractDriveObserver):
 
     Subclasses give the filter (``f``, ``output``, ``initial_state``), where their speed estimate sits in
     the state (``_speed_index``) and the speed they start from (:meth:`start_speed`).  The model has one
-    inductance ``L``: bound to a machine it takes the d-axis one, Ld (000's machine is non-salient; on a
-    salient one u − R̂s i − L̂ di/dt is not dψf/dt, so the drive jobs run these on 000's SPMSM only).
+    inductance ``L``: bound to a machine it takes the q-axis one, L̂q, so that on a salient machine the flux it
+    integrates is the active flux ψa = ψf + (Ld − Lq) i_d along the rotor's d axis (module doc, "Salient
+    machines"); on 000's non-salient machine Lq = Ld and nothing changes.
 
     Attributes:
         Rs: Assumed stator resistance, ohm (:meth:`bind` sets it).
-        L: Assumed inductance, H (:meth:`bind` sets it to the machine's Ld).
+        L: Assumed inductance, H (:meth:`bind` sets it to the machine's Lq: the active flux).
         omega_init: The speed estimate's start, rad/s (:meth:`bind` sets it).
         ts: Sample time, s.
         rule: Discretization rule.
@@ -116,7 +137,7 @@ class AbstractFluxObserver(AbstractDriveObserver):
     ts: eqx.AbstractVar[float]
     rule: eqx.AbstractVar[AbstractRule]
 
-    bound_fields: ClassVar[tuple[str, ...]] = ("Rs", "L", "omega_init")
+    bound_fields: ClassVar[BoundFields] = BoundFields(resistance="Rs", inductance="L", speed="omega_init")
     _speed_index: ClassVar[int]  # the speed estimate's place in the state
 
     @abc.abstractmethod
@@ -134,7 +155,11 @@ class AbstractFluxObserver(AbstractDriveObserver):
         w = self.start_speed(omega_e)
         if est_par is None:
             return replace_leaves(self, omega_init=w)
-        return replace_leaves(self, Rs=est_par.Rs, L=est_par.Ld, omega_init=w)
+        # L̂q, not L̂d: the active flux (module doc, "Salient machines"); Lq = Ld on a non-salient machine
+        new = replace_leaves(self, Rs=est_par.Rs, L=est_par.Lq, omega_init=w)
+        speed = self.speed_estimator()  # the PLL-type observers' speed estimator (jaxobs.observers.speed)
+        bound = None if speed is None else speed.bind(est_par)
+        return new if bound is speed else eqx.tree_at(lambda o: o.speed, new, bound)
 
     def init(self, u0=None) -> DriveObserverState:
         return self._init_from(self.initial_state())
@@ -177,7 +202,16 @@ class AbstractFluxObserver(AbstractDriveObserver):
 
     def step(self, state: DriveObserverState, u):
         e, i = self.back_emf(state, u)
-        x1, rs = self.rule.step(self.f, state.x, e, self.ts, state.rule)
+        f = self.f
+        if self.reads_torque:
+            # a mechanical-model speed estimator reads the torque reference held over the period (0: none given)
+            tq = u.T_ref
+            tq = jnp.zeros((), state.x.dtype) if tq is None else jnp.asarray(tq, state.x.dtype)
+
+            def f(x, e):
+                return self.f(x, e, tq)
+
+        x1, rs = self.rule.step(f, state.x, e, self.ts, state.rule)
         x1 = jnp.where(state.started, x1, state.x)
         new = DriveObserverState(x=x1, rule=rs, i_prev=i, u_prev=jnp.stack([u.u_a, u.u_b]), started=jnp.asarray(True))
         return new, self.output(x1, e)
@@ -246,13 +280,21 @@ def _pll_design(cls, pll_hz):
 
 
 class _PLLFluxBase(AbstractFluxObserver):
-    """Flux filters with state [ψα, ψβ, θ_pll, ω_pll]: a type-2 PLL on the estimated flux gives ω̂."""
+    """Flux filters with state [ψα, ψβ, θ̂, ω̂, ...]: a speed estimator (``speed``, jaxobs.observers.speed) on the
+    estimated flux's phase error gives θ̂ and ω̂: the type-2 PLL on ``kp_pll``, ``ki_pll`` by default, or a
+    mechanical model (its load-torque state follows ω̂).  The flux does not vanish at standstill, so the
+    detector needs no fade: quadrature_error normalizes by |ψ̂| (floored at ``psi_floor``)."""
 
     kp_pll: eqx.AbstractVar[jax.Array]
     ki_pll: eqx.AbstractVar[jax.Array]
     psi_floor: eqx.AbstractVar[float]
+    speed: eqx.AbstractVar[AbstractSpeedEstimator]
 
     _speed_index: ClassVar[int] = 3  # the PLL's ω in the state
+    takes_speed_estimator: ClassVar[bool] = True
+
+    def speed_estimator(self) -> AbstractSpeedEstimator:
+        return self.speed
 
     def start_speed(self, omega_e):
         """ω_e itself: a PLL's speed is signed and may be zero.
@@ -267,11 +309,11 @@ class _PLLFluxBase(AbstractFluxObserver):
 
     def initial_state(self):
         z = jnp.zeros_like(self.kp_pll)
-        return jnp.stack([z, z, z, self.omega_init])
+        return jnp.concatenate([jnp.stack([z, z]), self.speed.initial_state(z, self.omega_init)])
 
-    def _pll_rates(self, x):
+    def _pll_rates(self, x, torque=0.0):
         err = quadrature_error(x[0], x[1], x[2], self.psi_floor)
-        return pll_vf(x[2], x[3], err, self.kp_pll, self.ki_pll)
+        return self.speed.vf(self, x[2:], err, torque)
 
 
 class PureIntegratorFlux(_PLLFluxBase):
@@ -279,7 +321,7 @@ class PureIntegratorFlux(_PLLFluxBase):
 
     Args:
         Rs: Assumed stator resistance, ohm (≥ 0; :meth:`bind` sets it per scenario).
-        L: Assumed inductance, H (> 0; :meth:`bind` sets it to the machine's Ld).
+        L: Assumed inductance, H (> 0; :meth:`bind` sets it to the machine's Lq: the active flux).
         kp_pll: The PLL's proportional gain, 1/s (> 0).
         ki_pll: The PLL's integral gain, 1/s² (> 0).
         omega_init: The PLL's initial speed, rad/s (default 0; :meth:`bind` sets it).
@@ -287,6 +329,8 @@ class PureIntegratorFlux(_PLLFluxBase):
         rule: Discretization rule (default :class:`~jaxobs.RK4`).
         psi_floor: Floor of |ψ̂| in the PLL's normalized phase detector, Wb.
         omega0: Another name of ``omega_init`` (the job files' key); give one of the two.
+        speed: The speed extraction: an estimator or a record (:func:`~jaxobs.observers.speed.speed_from_spec`);
+            default :class:`~jaxobs.observers.speed.PLLSpeed` on ``kp_pll``, ``ki_pll``.
 
     Raises:
         ValueError: A value out of its range, or both ``omega_init`` and ``omega0`` given.
@@ -297,6 +341,7 @@ class PureIntegratorFlux(_PLLFluxBase):
     kp_pll: jax.Array = _kp()
     ki_pll: jax.Array = _ki()
     omega_init: jax.Array  # initial PLL speed, rad/s
+    speed: AbstractSpeedEstimator  # speed and position extraction (its states follow the flux's)
     ts: float = eqx.field(static=True)
     rule: AbstractRule = eqx.field(static=True)
     psi_floor: float = eqx.field(static=True)
@@ -309,10 +354,13 @@ class PureIntegratorFlux(_PLLFluxBase):
         "use LPFFlux, SOIFO or SecondOrderSOIFO"
     )
 
-    def __init__(self, Rs, L, kp_pll, ki_pll, omega_init=None, *, ts=1e-4, rule=None, psi_floor=1e-4, omega0=None):
+    def __init__(
+        self, Rs, L, kp_pll, ki_pll, omega_init=None, *, ts=1e-4, rule=None, psi_floor=1e-4, omega0=None, speed=None
+    ):
         omega_init = _omega_init(omega_init, omega0, "PureIntegratorFlux")
         _check_common(self, Rs, L, ts, rule, "PureIntegratorFlux")
         _check_pll(self, kp_pll, ki_pll, 0.0 if omega_init is None else omega_init, psi_floor, "PureIntegratorFlux")
+        self.speed = speed_from_spec(speed, "PureIntegratorFlux.speed")
 
     @classmethod
     def closed_form_design(
@@ -356,8 +404,8 @@ class PureIntegratorFlux(_PLLFluxBase):
         """
         return cls.closed_form_design(**kw).observer
 
-    def f(self, x, e):
-        return jnp.stack([e[0], e[1], *self._pll_rates(x)])
+    def f(self, x, e, torque=0.0):
+        return jnp.concatenate([jnp.stack([e[0], e[1]]), self._pll_rates(x, torque)])
 
     def output(self, x, e):
         return FluxOutput(psi_a=x[0], psi_b=x[1], theta=safe_atan2(x[1], x[0]), omega=x[3], e_a=e[0], e_b=e[1])
@@ -373,7 +421,7 @@ class LPFFlux(_PLLFluxBase):
 
     Args:
         Rs: Assumed stator resistance, ohm (≥ 0; :meth:`bind` sets it per scenario).
-        L: Assumed inductance, H (> 0; :meth:`bind` sets it to the machine's Ld).
+        L: Assumed inductance, H (> 0; :meth:`bind` sets it to the machine's Lq: the active flux).
         omega_c: The low-pass cut-off ωc, rad/s (> 0).
         kp_pll: The PLL's proportional gain, 1/s (> 0).
         ki_pll: The PLL's integral gain, 1/s² (> 0).
@@ -383,6 +431,8 @@ class LPFFlux(_PLLFluxBase):
         rule: Discretization rule (default :class:`~jaxobs.RK4`).
         psi_floor: Floor of |ψ̂| in the PLL's normalized phase detector, Wb.
         omega0: Another name of ``omega_init`` (the job files' key); give one of the two.
+        speed: The speed extraction: an estimator or a record (:func:`~jaxobs.observers.speed.speed_from_spec`);
+            default :class:`~jaxobs.observers.speed.PLLSpeed` on ``kp_pll``, ``ki_pll``.
 
     Raises:
         ValueError: A value out of its range, or both ``omega_init`` and ``omega0`` given.
@@ -394,6 +444,7 @@ class LPFFlux(_PLLFluxBase):
     kp_pll: jax.Array = _kp()
     ki_pll: jax.Array = _ki()
     omega_init: jax.Array  # initial PLL speed, rad/s
+    speed: AbstractSpeedEstimator  # speed and position extraction (its states follow the flux's)
     ts: float = eqx.field(static=True)
     rule: AbstractRule = eqx.field(static=True)
     compensate: bool = eqx.field(static=True)
@@ -413,12 +464,14 @@ class LPFFlux(_PLLFluxBase):
         rule=None,
         psi_floor=1e-4,
         omega0=None,
+        speed=None,
     ):
         omega_init = _omega_init(omega_init, omega0, "LPFFlux")
         _check_common(self, Rs, L, ts, rule, "LPFFlux")
         self.omega_c = as_float(omega_c)  # bounds: check_gains (AbstractObserver)
         _check_pll(self, kp_pll, ki_pll, 0.0 if omega_init is None else omega_init, psi_floor, "LPFFlux")
         self.compensate = bool(compensate)
+        self.speed = speed_from_spec(speed, "LPFFlux.speed")
 
     @classmethod
     def closed_form_design(
@@ -465,8 +518,9 @@ class LPFFlux(_PLLFluxBase):
         """
         return cls.closed_form_design(**kw).observer
 
-    def f(self, x, e):
-        return jnp.stack([e[0] - self.omega_c * x[0], e[1] - self.omega_c * x[1], *self._pll_rates(x)])
+    def f(self, x, e, torque=0.0):
+        filt = jnp.stack([e[0] - self.omega_c * x[0], e[1] - self.omega_c * x[1]])
+        return jnp.concatenate([filt, self._pll_rates(x, torque)])
 
     def output(self, x, e):
         pa, pb, w = x[0], x[1], x[3]
@@ -526,7 +580,7 @@ class SOIFO(_FLLFluxBase):
 
     Args:
         Rs: Assumed stator resistance, ohm (≥ 0; :meth:`bind` sets it per scenario).
-        L: Assumed inductance, H (> 0; :meth:`bind` sets it to the machine's Ld).
+        L: Assumed inductance, H (> 0; :meth:`bind` sets it to the machine's Lq: the active flux).
         k: SOGI gain (> 0).
         lam: Frequency-normalized FLL gain λ/ω̂² (dimensionless, > 0).
         omega_init: The FLL's initial frequency, rad/s (> 0; :meth:`bind` sets it).
@@ -641,7 +695,7 @@ class SecondOrderSOIFO(_FLLFluxBase):
 
     Args:
         Rs: Assumed stator resistance, ohm (≥ 0; :meth:`bind` sets it per scenario).
-        L: Assumed inductance, H (> 0; :meth:`bind` sets it to the machine's Ld).
+        L: Assumed inductance, H (> 0; :meth:`bind` sets it to the machine's Lq: the active flux).
         K1: Second-order SOGI error gain (000's K1, > 0).
         K2: Second-order SOGI damping gain (000's K2, > 0).
         lam: Frequency-normalized FLL gain λ/ω̂² (dimensionless, > 0).

@@ -18,7 +18,8 @@ so that ê/e = L2(s)/(s² + (μ + L1(s)) s + L2(s))  (eq 14).
   (the −μx̂1 + με1 = −μ i of eq 27 is the known term F).  ê/e = (k2 s + k1)/(s² + (k2 − jω̂e)s + k1).
   States [x̂1α, x̂1β, zα, zβ].
 
-PLL (our design; 002's PLL section is missing from our copy).  ê = ωe ψ (−sin θe, cos θe)
+PLL (our design; 002's PLL section is missing from our copy; the default :class:`~jaxobs.observers.speed.PLLSpeed`
+of the speed-estimator strategy the observer holds in ``speed``).  ê = ωe ψ (−sin θe, cos θe)
 (002 eq 5), so the normalized quadrature detector
 
     err = sgn(ω̂e)·(−êα cos θ̂ − êβ sin θ̂)/|ê| = sin(θe − θ̂)
@@ -35,6 +36,35 @@ speed-to-angle error ratio grows with ω_b, and ours at 15 Hz gives 4.1°, 13.2 
 5.7 r/min — and it keeps 40.5° of phase margin through the FA-LESO (23.6° at 30 Hz).  Its price: a
 5 Hz speed loop closed through it is barely damped (ζ ≈ 0.07 at 10 Hz), and unstable under field
 weakening (:func:`jaxobs.linear.faleso_speed_loop_poles`; docs/papers.md, paper 002's load step).
+
+Through zero speed.  The sign detector's gain is sin(θe − θ̂)·sgn(ωe)·sgn(ω̂): at ω̂ = 0 it jumps from +1 to −1
+(the loop flips while the rotor has not yet reversed), and near zero X/|ê| is a full-gain error of an ê that
+the LESO's own estimation error dominates.  ``zero_fade = ω_f > 0`` selects instead
+
+    err = X · ω̂|ω̂| / (|ê| (ω̂² + ω_f²)),      X = −êα cos θ̂ − êβ sin θ̂ = ωe ψ sin(θe − θ̂),
+
+i.e. the sign detector times ω̂²/(ω̂² + ω_f²) (sgn(ω̂)·ω̂² = ω̂|ω̂|, continuous and differentiable).
+Small-signal gain of the detector, ∂err/∂θe at θ̂ = θe: at speed (|ω̂| ≫ ω_f, ω̂ and ωe of one sign)
+1/(1 + ω_f²/ω̂²) → 1, the loop as designed (k_p, k_i placed on a unit gain); near standstill ω̂²/ω_f² → 0: the
+loop opens smoothly instead of flipping, and the speed estimator runs on what it holds.  At ω̂ = 0 exactly
+the error is 0.  What that means for the speed estimator (:mod:`jaxobs.observers.speed`):
+
+- a PLL's ω̂̇ = k_i err is then ∝ ω̂|ω̂| near zero, so ω̂ = 0 is invariant: the PLL alone cannot carry ω̂ through
+  zero.  Under a speed ramp of rate a (rad/s², electrical) its type-2 loop needs err = −a/k_i, which the fade
+  can give only while |ω̂| > ω_f √(a/k_i) (for a/k_i ≪ 1); below that ω̂ lags, decays towards 0 without crossing
+  it (ω̂̇ ∝ −ω̂²), the rotor crosses zero alone and the detector's sgn(ωe ω̂) = −1 drives the angle away
+  (tests/test_zero_speed.py: ω̂ never below 0 while the rotor reaches −300 r/min).  The sign detector slips
+  by π at the flip instead.  A back-EMF observer holds no information at ωe = 0 (ê = 0), and a PLL has no
+  model to bridge the gap;
+- a mechanical-model speed observer (:class:`~jaxobs.observers.speed.MechanicalSpeed`) carries ω̂ and θ̂
+  through on the torque reference and the assumed inertia (and, without a torque reference, on its
+  acceleration state), and the faded detector re-engages it on the other side (tests/test_zero_speed.py
+  measures the reversal).
+
+``zero_fade`` is 0 by default: the fade moves every result at speed by ω_f²/ω̂² relative (2 % of the PLL's gain
+at ω̂ = 7 ω_f), so 002's reproductions and the presets keep the sign detector, which 002's operating points
+(300–840 r/min, one direction) never take through zero; ``zero_fade`` is static (it picks the detector's
+form), so with 0 the step is the old one bit for bit.
 
 Sampling.  Like the flux observers, at t_k the observer integrates the period
 [t_{k−1}, t_k] with the voltage applied over it (held) and the current
@@ -55,10 +85,10 @@ from .. import papers
 from .._discretize import RK4, AbstractRule, Knots, check_rule
 from .._math import safe_atan2, wrap
 from .._validate import as_float, check_nonnegative, check_positive, check_sample_time
-from ._cores import pll_vf
 from ._gains import ClosedForm, DesignRow, gain, gain_row
 from ._rules import cleso_gains, pll_gains
-from .base import AbstractDriveObserver, DriveObserverState, replace_leaves
+from .base import AbstractDriveObserver, BoundFields, DriveObserverState, replace_leaves
+from .speed import AbstractSpeedEstimator, speed_from_spec
 
 __all__ = ["LESOOutput", "AbstractLESO", "CLESO", "GILESO", "FALESO"]
 
@@ -97,7 +127,10 @@ class AbstractLESO(AbstractDriveObserver):
         ts: Sample time, s.
         rule: Discretization rule.
         e_floor: Floor of |ê| in the PLL's normalized error, V.
-        n_leso: The LESO's states (the PLL's two follow; a class attribute).
+        speed: The speed and position extraction (:class:`~jaxobs.observers.speed.PLLSpeed`, the default, or
+            :class:`~jaxobs.observers.speed.MechanicalSpeed`); its states follow the LESO's.
+        zero_fade: ω_f of the phase detector's fade through zero speed, rad/s (0: the sign detector; module doc).
+        n_leso: The LESO's states (the speed estimator's follow; a class attribute).
     """
 
     Rs: eqx.AbstractVar[jax.Array]
@@ -108,18 +141,26 @@ class AbstractLESO(AbstractDriveObserver):
     ts: eqx.AbstractVar[float]
     rule: eqx.AbstractVar[AbstractRule]
     e_floor: eqx.AbstractVar[float]
-    n_leso: eqx.AbstractClassVar[int]  # LESO states (the PLL's two follow)
+    speed: eqx.AbstractVar[AbstractSpeedEstimator]
+    zero_fade: eqx.AbstractVar[float]
+    n_leso: eqx.AbstractClassVar[int]  # LESO states (the speed estimator's follow)
 
-    bound_fields: ClassVar[tuple[str, ...]] = ("Rs", "Lq", "omega0_pll")
+    bound_fields: ClassVar[BoundFields] = BoundFields(resistance="Rs", inductance="Lq", speed="omega0_pll")
+    takes_speed_estimator: ClassVar[bool] = True
+
+    def speed_estimator(self) -> AbstractSpeedEstimator:
+        return self.speed
 
     def bind(self, est_par, omega_e) -> AbstractLESO:
         if est_par is None:
             return replace_leaves(self, omega0_pll=omega_e)
-        return replace_leaves(self, Rs=est_par.Rs, Lq=est_par.Lq, omega0_pll=omega_e)
+        new = replace_leaves(self, Rs=est_par.Rs, Lq=est_par.Lq, omega0_pll=omega_e)
+        speed = self.speed.bind(est_par)  # a mechanical model takes the assumed Ĵ, B̂, p; a PLL has none
+        return new if speed is self.speed else eqx.tree_at(lambda o: o.speed, new, speed)
 
     def initial_state(self):
         z = jnp.zeros((self.n_leso,), self.Rs.dtype)
-        return jnp.concatenate([z, jnp.stack([jnp.zeros_like(self.Rs), self.omega0_pll])])
+        return jnp.concatenate([z, self.speed.initial_state(jnp.zeros_like(self.Rs), self.omega0_pll)])
 
     def init(self, u0=None) -> DriveObserverState:
         return self._init_from(self.initial_state())
@@ -170,7 +211,7 @@ class AbstractLESO(AbstractDriveObserver):
 
     def _init_from(self, x0) -> DriveObserverState:
         z2 = jnp.zeros((2,), x0.dtype)
-        inp0 = (z2, z2)
+        inp0 = (z2, z2, jnp.zeros((), x0.dtype))
         return DriveObserverState(
             x=x0, rule=self.rule.init(self.f, x0, inp0), i_prev=z2, u_prev=z2, started=jnp.asarray(False)
         )
@@ -189,18 +230,39 @@ class AbstractLESO(AbstractDriveObserver):
             ``(dx_leso/dt, ê)``.
         """
 
-    def f(self, x, inp):
-        u, i = inp
-        xl, th, w = x[: self.n_leso], x[self.n_leso], x[self.n_leso + 1]
-        dxl, e = self.leso(xl, u, i, w)
+    def phase_error(self, e, th, w):
+        """The phase detector (module doc, "Through zero speed"): ≈ sin(θe − θ̂) at speed.
+
+        Args:
+            e: ê (αβ), V.
+            th: θ̂, rad.
+            w: ω̂, rad/s.
+
+        Returns:
+            ε: sgn(ω̂)·X/|ê| (``zero_fade`` 0), or X·ω̂|ω̂|/(|ê|(ω̂² + ω_f²)), X = −êα cos θ̂ − êβ sin θ̂.
+        """
         mag = jnp.sqrt(jnp.maximum(e[0] * e[0] + e[1] * e[1], self.e_floor**2))
-        err = jnp.where(w < 0, -1.0, 1.0) * (-e[0] * jnp.cos(th) - e[1] * jnp.sin(th)) / mag
-        dth, dw = pll_vf(th, w, err, self.kp_pll, self.ki_pll)
-        return jnp.concatenate([dxl, jnp.stack([dth, dw])])
+        if self.zero_fade == 0.0:
+            return jnp.where(w < 0, -1.0, 1.0) * (-e[0] * jnp.cos(th) - e[1] * jnp.sin(th)) / mag
+        fade = w * jnp.abs(w) / (w * w + self.zero_fade**2)
+        return fade * (-e[0] * jnp.cos(th) - e[1] * jnp.sin(th)) / mag
+
+    def f(self, x, inp):
+        u, i, torque = inp
+        xl, xs = x[: self.n_leso], x[self.n_leso :]
+        dxl, e = self.leso(xl, u, i, xs[1])
+        err = self.phase_error(e, xs[0], xs[1])
+        return jnp.concatenate([dxl, self.speed.vf(self, xs, err, torque)])
 
     def step(self, state: DriveObserverState, meas):
         i = jnp.stack([meas.i_a, meas.i_b])
-        path = Knots(u0=(state.u_prev, state.i_prev), um=(state.u_prev, 0.5 * (i + state.i_prev)), u1=(state.u_prev, i))
+        tq = meas.T_ref  # the torque reference over the period; none given: 0
+        tq = jnp.zeros((), state.x.dtype) if tq is None else jnp.asarray(tq, state.x.dtype)
+        path = Knots(
+            u0=(state.u_prev, state.i_prev, tq),
+            um=(state.u_prev, 0.5 * (i + state.i_prev), tq),
+            u1=(state.u_prev, i, tq),
+        )
         x1, rs = self.rule.step(self.f, state.x, path, self.ts, state.rule)
         x1 = jnp.where(state.started, x1, state.x)
         x1 = x1.at[self.n_leso].set(wrap(x1[self.n_leso]))
@@ -218,7 +280,7 @@ class AbstractLESO(AbstractDriveObserver):
         return self.Rs / self.Lq
 
 
-def _common(obj, Rs, Lq, kp_pll, ki_pll, omega0_pll, ts, rule, e_floor, name):
+def _common(obj, Rs, Lq, kp_pll, ki_pll, omega0_pll, ts, rule, e_floor, name, speed, zero_fade):
     obj.Rs = check_nonnegative("Rs", Rs, name)
     obj.Lq = check_positive("Lq", Lq, name)
     obj.kp_pll, obj.ki_pll = as_float(kp_pll), as_float(ki_pll)  # bounds: check_gains (AbstractObserver)
@@ -226,6 +288,14 @@ def _common(obj, Rs, Lq, kp_pll, ki_pll, omega0_pll, ts, rule, e_floor, name):
     obj.ts = check_sample_time("ts", ts, name)
     obj.rule = check_rule(RK4() if rule is None else rule, name)
     obj.e_floor = float(e_floor)
+    obj.speed = speed_from_spec(speed, f"{name}.speed")
+    # static (it picks the detector's form): a Python number, checked here as the sample time is
+    zf = float(zero_fade)
+    if not math.isfinite(zf) or zf < 0:
+        raise ValueError(
+            f"{name}.zero_fade must be a finite number of rad/s >= 0 (0: the sign detector), got {zero_fade!r}"
+        )
+    obj.zero_fade = zf
 
 
 # The PLL defaults: pole placement at ω_b = 2π·papers.LESO_PLL_HZ with ζ = papers.PLL_ZETA = 1/√2, so a LESO's
@@ -281,6 +351,9 @@ class CLESO(AbstractLESO):
         ts: Sample time, s.
         rule: Discretization rule (default :class:`~jaxobs.RK4`).
         e_floor: Floor of |ê| in the PLL's normalized error, V.
+        speed: The speed extraction: an estimator, or a record (:func:`~jaxobs.observers.speed.speed_from_spec`);
+            default :class:`~jaxobs.observers.speed.PLLSpeed` on ``kp_pll``, ``ki_pll``.
+        zero_fade: ω_f, rad/s (≥ 0; 0: the sign detector; module doc, "Through zero speed").
 
     Raises:
         ValueError: A value out of its range.
@@ -292,9 +365,11 @@ class CLESO(AbstractLESO):
     kp_pll: jax.Array = _kp()
     ki_pll: jax.Array = _ki()
     omega0_pll: jax.Array  # initial PLL speed, rad/s
+    speed: AbstractSpeedEstimator  # speed and position extraction (its states follow the LESO's)
     ts: float = eqx.field(static=True)
     rule: AbstractRule = eqx.field(static=True)
     e_floor: float = eqx.field(static=True)
+    zero_fade: float = eqx.field(static=True)  # ω_f of the detector's fade through zero, rad/s (0: sign)
     n_leso: ClassVar[int] = 4
 
     def __init__(
@@ -309,8 +384,10 @@ class CLESO(AbstractLESO):
         ts=1e-4,
         rule=None,
         e_floor=1.0,
+        speed=None,
+        zero_fade=0.0,
     ):
-        _common(self, Rs, Lq, kp_pll, ki_pll, omega0_pll, ts, rule, e_floor, "CLESO")
+        _common(self, Rs, Lq, kp_pll, ki_pll, omega0_pll, ts, rule, e_floor, "CLESO", speed, zero_fade)
         self.omega0 = as_float(omega0)
 
     @classmethod
@@ -382,6 +459,9 @@ class GILESO(AbstractLESO):
         ts: Sample time, s.
         rule: Discretization rule (default :class:`~jaxobs.RK4`).
         e_floor: Floor of |ê| in the PLL's normalized error, V.
+        speed: The speed extraction: an estimator, or a record (:func:`~jaxobs.observers.speed.speed_from_spec`);
+            default :class:`~jaxobs.observers.speed.PLLSpeed` on ``kp_pll``, ``ki_pll``.
+        zero_fade: ω_f, rad/s (≥ 0; 0: the sign detector; module doc, "Through zero speed").
 
     Raises:
         ValueError: A value out of its range.
@@ -397,9 +477,11 @@ class GILESO(AbstractLESO):
     kp_pll: jax.Array = _kp()
     ki_pll: jax.Array = _ki()
     omega0_pll: jax.Array  # initial PLL speed, rad/s
+    speed: AbstractSpeedEstimator  # speed and position extraction (its states follow the LESO's)
     ts: float = eqx.field(static=True)
     rule: AbstractRule = eqx.field(static=True)
     e_floor: float = eqx.field(static=True)
+    zero_fade: float = eqx.field(static=True)  # ω_f of the detector's fade through zero, rad/s (0: sign)
     n_leso: ClassVar[int] = 8
 
     def __init__(
@@ -416,8 +498,10 @@ class GILESO(AbstractLESO):
         ts=1e-4,
         rule=None,
         e_floor=1.0,
+        speed=None,
+        zero_fade=0.0,
     ):
-        _common(self, Rs, Lq, kp_pll, ki_pll, omega0_pll, ts, rule, e_floor, "GILESO")
+        _common(self, Rs, Lq, kp_pll, ki_pll, omega0_pll, ts, rule, e_floor, "GILESO", speed, zero_fade)
         self.omega0 = as_float(omega0)
         self.K_r = as_float(2 * float(omega0) ** 2 if K_r is None else K_r)
         self.omega_c = as_float(omega_c)
@@ -509,6 +593,9 @@ class FALESO(AbstractLESO):
         ts: Sample time, s.
         rule: Discretization rule (default :class:`~jaxobs.RK4`).
         e_floor: Floor of |ê| in the PLL's normalized error, V.
+        speed: The speed extraction: an estimator, or a record (:func:`~jaxobs.observers.speed.speed_from_spec`);
+            default :class:`~jaxobs.observers.speed.PLLSpeed` on ``kp_pll``, ``ki_pll``.
+        zero_fade: ω_f, rad/s (≥ 0; 0: the sign detector; module doc, "Through zero speed").
 
     Raises:
         ValueError: A value out of its range.
@@ -523,9 +610,11 @@ class FALESO(AbstractLESO):
     kp_pll: jax.Array = _kp()
     ki_pll: jax.Array = _ki()
     omega0_pll: jax.Array  # initial PLL speed, rad/s
+    speed: AbstractSpeedEstimator  # speed and position extraction (its states follow the LESO's)
     ts: float = eqx.field(static=True)
     rule: AbstractRule = eqx.field(static=True)
     e_floor: float = eqx.field(static=True)
+    zero_fade: float = eqx.field(static=True)  # ω_f of the detector's fade through zero, rad/s (0: sign)
     n_leso: ClassVar[int] = 4
 
     def __init__(
@@ -541,8 +630,10 @@ class FALESO(AbstractLESO):
         ts=1e-4,
         rule=None,
         e_floor=1.0,
+        speed=None,
+        zero_fade=0.0,
     ):
-        _common(self, Rs, Lq, kp_pll, ki_pll, omega0_pll, ts, rule, e_floor, "FALESO")
+        _common(self, Rs, Lq, kp_pll, ki_pll, omega0_pll, ts, rule, e_floor, "FALESO", speed, zero_fade)
         # 002 eq (24): stable iff k1 > 0 and k2 > 0 (generalized Routh test): their declared bounds, which
         # check_gains enforces (AbstractObserver)
         self.k1, self.k2 = as_float(k1), as_float(k2)

@@ -82,7 +82,7 @@ import jax.numpy as jnp
 from .._math import wrap
 from .._validate import as_float, check_nonnegative, check_positive, check_sample_time
 from ._gains import ClosedForm, DesignRow, gain, gain_row
-from .base import AbstractDriveObserver, DriveObserverState, replace_leaves
+from .base import AbstractDriveObserver, BoundFields, DriveObserverState, replace_leaves
 
 __all__ = [
     "ROFOOutput",
@@ -211,9 +211,10 @@ class ReducedOrderFluxObserver(AbstractDriveObserver):
     why_not_tunable: ClassVar[str] = ""
     small_signal_model: ClassVar[None] = None
 
-    # bind() sets these.  The first three keep the drive observers' order (resistance, inductance, start speed:
-    # tuning/export reads them so); the machine's Lq and ψf follow.
-    bound_fields: ClassVar[tuple[str, ...]] = ("Rs", "Ld", "omega_init", "Lq", "psi_f")
+    # bind() sets these, by role (tuning/export reads them so); the machine's Lq and ψf besides
+    bound_fields: ClassVar[BoundFields] = BoundFields(
+        resistance="Rs", inductance="Ld", speed="omega_init", more=("Lq", "psi_f")
+    )
 
     def __init__(
         self,

@@ -55,14 +55,22 @@ __all__ = [
 # --------------------------------------------------------------------------------------------
 
 
+def _key_part(k):
+    """A key path entry's name, key or index (jaxobs.drive.scenario names its batch's leaves alike)."""
+    if isinstance(k, jax.tree_util.GetAttrKey):
+        return k.name
+    if isinstance(k, (jax.tree_util.DictKey, jax.tree_util.FlattenedIndexKey)):
+        return k.key
+    if isinstance(k, jax.tree_util.SequenceKey):
+        return k.idx
+    return k
+
+
 def leaf_name(path) -> str:
     """A pytree key path as a C identifier: ``.rule.f1`` -> ``rule_f1``, ``[0]`` (a tuple's) -> ``leaf0``."""
     parts = []
     for k in path:
-        for attr in ("name", "key", "idx"):
-            if hasattr(k, attr):
-                parts.append(str(getattr(k, attr)))
-                break
+        parts.append(str(_key_part(k)))
     name = re.sub(r"\W", "_", "_".join(parts)) or "value"
     return f"leaf{name}" if name[0].isdigit() else name
 
@@ -76,7 +84,7 @@ _RESERVED |= {"union", "unsigned", "void", "volatile", "while", "_Bool", "_Compl
 
 def _local(name: str) -> str:
     """A C local for a state or input scalar that no temporary (t12, b4, c7), macro or keyword shadows."""
-    clash = name in _RESERVED or re.fullmatch(r"[tbc]\d+", name) or name.startswith("JX_") or hasattr(math, name)
+    clash = name in _RESERVED or re.fullmatch(r"[tbc]\d+", name) or name.startswith("JX_") or name in dir(math)
     return f"{name}_" if clash else name
 
 
@@ -300,9 +308,10 @@ def statics(observer) -> dict:
     return out
 
 
-def write_c(obs32, step: CStep, kind: str, source: str, notes) -> tuple[str, str]:
+def write_c(obs32, step: CStep, kind: str, source: str, notes, rule=None) -> tuple[str, str]:
     """observer.h and observer.c of a generated step: ``kind`` "signal" or "drive" (the step convention
-    documented in the header), ``source`` where the design comes from, ``notes`` lines for the header."""
+    documented in the header), ``source`` where the design comes from, ``notes`` lines for the header, ``rule``
+    the observer's discretization rule (None: it integrates in its own step)."""
     component = type(obs32).__name__
     c_type = "float"
     gains = [  # (macro, its C literal, the leaf's name), one per scalar of every array leaf
@@ -328,7 +337,7 @@ def write_c(obs32, step: CStep, kind: str, source: str, notes) -> tuple[str, str
     if step.has_branch:
         dearer = _ops_text(step.ops_worst)
         worst = f"\n *   a step taking the dearer branch of each if (e.g. AB3's RK4 start-up):\n *     {dearer}"
-    rule = rule_doc(getattr(obs32, "rule", None))
+    rule = rule_doc(rule)
     opts = ", ".join(f"{k}={v!r}" for k, v in rule.items() if k not in ("name", "description"))
     header = f"""/* observer.h -- {component} exported by `jaxobs export` (float32, C99), generated from the jaxpr of
  * its step (jaxobs_tuning.export.codegen): the same operations as the JAX step, in the same order.

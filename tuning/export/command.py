@@ -137,8 +137,9 @@ def _export(args) -> int:
             drive = df.drive_for(sensorless=False, settle=0.0)
             record_drive = dict(machine=machine, rpm=rpm, drive=drive, label=f"drive file {df.name}")
         obs = obs.bind(machine, rpm * math.pi / 30 * int(machine.p))  # the one binding (its clamp included)
-        # (resistance, inductance, start speed), then any other machine value (the reduced-order observer's Lq, ψf)
-        r_name, l_name, speed, *more = type(obs).bound_fields
+        # resistance, inductance, start speed, then any other machine value (the reduced-order observer's Lq, ψf)
+        bound = type(obs).bound_fields
+        r_name, l_name, speed, more = bound.resistance, bound.inductance, bound.speed, bound.more
         notes = [n for n in notes if "sets Rs, Lq" not in n]
         machine_values = "".join(f"{n} = {float(getattr(obs, n)):g}, " for n in (r_name, l_name, *more))
         notes.append(

@@ -5,7 +5,6 @@
 from __future__ import annotations
 
 import json
-import math
 from pathlib import Path
 
 import equinox as eqx
@@ -28,7 +27,9 @@ from .golden import (
     float32_observer,
     golden_outputs,
     is_drive,
+    observer_rule,
     record_start,
+    signal_frequency_hz,
     signal_speed,
     zero_input,
 )
@@ -75,13 +76,20 @@ def export_observer(
     bar.stage("generating the C from the jaxpr of the step")
     obs32 = float32_observer(observer)
     kind = "drive" if is_drive(obs32) else "signal"
+    if kind == "drive" and obs32.reads_torque:
+        raise ValueError(
+            "export: a mechanical-model speed estimator (jaxobs.observers.speed.MechanicalSpeed) needs the torque "
+            "reference each period, which the exported step does not take; export the observer with its PLL"
+        )
+    # the four measurements (u_a, u_b, i_a, i_b): DriveInput's T_ref is None here, no input of the C step
+    names = list(DriveInput._fields[:4])
     with jax.enable_x64(False):
         u0 = zero_input(obs32)
         state0 = obs32.init(u0)
-        step = generate(obs32, state0, u0, input_names=list(DriveInput._fields) if kind == "drive" else ["v"])
+        step = generate(obs32, state0, u0, input_names=names if kind == "drive" else ["v"])
     component = type(obs32).__name__
     _self_check(obs32, step, state0)
-    header, source_c = write_c(obs32, step, kind, source or f"{component} as given", notes)
+    header, source_c = write_c(obs32, step, kind, source or f"{component} as given", notes, observer_rule(obs32))
     bar.update()
     bar.stage("the test record" + (" (compiling and running the sensored drive)" if kind == "drive" else ""))
     nu = len(step.input_names)
@@ -91,8 +99,7 @@ def export_observer(
         if n_steps > MAX_STEPS:  # a bound on the work and on golden.csv's size
             raise ValueError(f"export: n_steps must be <= {MAX_STEPS}, got {n_steps}")
     if signal is None and kind == "signal":
-        # an FLL's nominal frequency when it has one, else 50 Hz
-        f0 = float(getattr(obs32, "omega_n", 2 * math.pi * 50.0)) / (2 * math.pi)
+        f0 = signal_frequency_hz(obs32)  # an FLL's nominal frequency, else 50 Hz
         u, signal_doc = fll_test_signal(obs32.ts, n_steps, f0)
     elif signal is None:
         u, signal_doc = drive_recording(observer, n_steps, start=record_start(obs32), **(record_drive or {}))
@@ -161,7 +168,7 @@ def export_observer(
         "notes": notes,
         "dtype": "float32",
         "ts": obs32.ts,
-        "rule": rule_doc(getattr(obs32, "rule", None)),
+        "rule": rule_doc(observer_rule(obs32)),
         "step": step_doc[kind],
         "gains": gains,
         "static": statics(obs32),

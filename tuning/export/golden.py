@@ -13,10 +13,15 @@ import numpy as np
 
 from jaxobs import DriveInput
 from jaxobs.observers import (
+    SOGIFLL,
+    SOGIFLLWIF,
+    SOGIFLLWPF,
     SOIFO,
     AbstractDriveObserver,
     AbstractFluxObserver,
     AbstractLESO,
+    AbstractObserver,
+    AbstractVectorFieldObserver,
     LPFFlux,
     PureIntegratorFlux,
     ReducedOrderFluxObserver,
@@ -166,8 +171,14 @@ def recording_bench(observer):
     return bench_machine(name), rpm
 
 
-class _Tap(eqx.Module):
-    """An "observer" that returns what it is fed: the measurements a ClosedLoop gives its observer."""
+class _Tap(AbstractObserver):
+    """An "observer" that returns what it is fed: the measurements a ClosedLoop gives its observer.
+
+    Attributes:
+        ts: Sample time, s (the drive's).
+    """
+
+    ts: float = eqx.field(static=True)
 
     def init(self, u0=None):
         return None
@@ -257,7 +268,7 @@ def drive_recording(
             f"drive_recording: the drive must be sensored and run at the observer's ts = {ts:g} s, got "
             f"{'sensorless' if drive.sensorless else 'sensored'} at {float(drive.ts):g} s"
         )
-    sol = jaxobs.simulate(D.ClosedLoop(drive, _Tap(), scenario), n_steps * ts)
+    sol = jaxobs.simulate(D.ClosedLoop(drive, _Tap(ts), scenario), n_steps * ts)
     m = sol.outputs.obs
     data = np.stack([np.asarray(m.u_a), np.asarray(m.u_b), np.asarray(m.i_a), np.asarray(m.i_b)], axis=1)
     data = data[:n_steps].astype(np.float64)
@@ -334,14 +345,30 @@ def record_start(observer) -> str:
     return _RECORD_START.get(type(observer), "")
 
 
+def signal_frequency_hz(observer) -> float:
+    """The frequency (Hz) of a signal observer's test record: an FLL's nominal frequency (001: the grid's,
+    ``omega_n``), else 50 Hz (a SOGI has no nominal frequency of its own)."""
+    if isinstance(observer, (SOGIFLL, SOGIFLLWPF, SOGIFLLWIF)):
+        return float(observer.omega_n) / (2 * math.pi)
+    return 50.0
+
+
+def observer_rule(observer):
+    """The observer's discretization rule, or None for an observer that integrates in its own step (a bank, a
+    user's drive observer): every vector-field observer, flux observer and LESO declares one."""
+    if isinstance(observer, (AbstractVectorFieldObserver, AbstractFluxObserver, AbstractLESO)):
+        return observer.rule
+    return None
+
+
 def signal_speed(observer) -> float:
     """The electrical speed (rad/s) of a drive observer's synthetic record: its initial speed (the last of its
     bound fields), else 50 Hz."""
-    w = float(getattr(observer, type(observer).bound_fields[2]))
+    w = float(getattr(observer, type(observer).bound_fields.speed))
     return w if w > 0 else 2 * math.pi * 50.0
 
 
 def assumed_machine(obs) -> tuple[float, float]:
     """(R̂s, L̂) the drive observer assumes: the golden signal's machine."""
-    rs, ls = type(obs).bound_fields[:2]  # (resistance, inductance, start speed)
-    return float(getattr(obs, rs)), float(getattr(obs, ls))
+    bound = type(obs).bound_fields
+    return float(getattr(obs, bound.resistance)), float(getattr(obs, bound.inductance))

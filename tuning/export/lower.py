@@ -82,7 +82,7 @@ def _where(eqn) -> str:
 
 def _sub_jaxpr(j):
     """(jaxpr, consts) of a ClosedJaxpr or an open Jaxpr parameter."""
-    if hasattr(j, "jaxpr") and hasattr(j, "consts"):
+    if isinstance(j, jax.extend.core.ClosedJaxpr):
         return j.jaxpr, list(j.consts)
     return j, []
 

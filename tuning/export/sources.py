@@ -92,7 +92,7 @@ def observer_from_result(path, *, gains: str = "tuned", notes: list | None = Non
         notes.append(f"result.json has no 'rule': the {name} default {type(probe.rule).__name__} is used")
     if info.signal == "drive" or res.get("loop") is not None:  # a drive job bound these per scenario
         # LESOs: Rs, Lq and the PLL's initial speed; flux observers: Rs, L and the FLL's or PLL's omega_init
-        keys = type(probe).bound_fields
+        keys = type(probe).bound_fields.names
         bound = ", ".join(f"{k} = {float(getattr(probe, k)):g}" for k in keys)
         notes.append(f"the job sets {', '.join(keys)} per scenario; exported with {bound}")
     diverged = res.get("scores", {}).get(gains, {}).get("diverged") if gains in res.get("scores", {}) else None

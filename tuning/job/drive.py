@@ -94,8 +94,9 @@ def check_speed_axes(axes: dict, where: str, machine: str, file: DriveFile | Non
 
     ``speed_rpm`` and ``speed_rpm + speed_step_rpm`` (every combination of the axes, so every point a sampler
     draws inside their ranges too) must lie within ± the drive file's speed limit
-    (:attr:`jaxobs.drive.DriveFile.speed_limit_rpm`: where the back EMF reaches the inverter's voltage limit,
-    past field weakening's reach where it is on).
+    (:attr:`jaxobs.drive.DriveFile.speed_limit_rpm`, the one rule :func:`jaxobs.drive.speed_limit` that
+    ``jaxobs drive check`` prints and ``envelope`` uses: the no-load voltage bound, with field weakening where
+    on, within the mechanical limit ``[machine] max_speed_rpm``).
 
     Args:
         axes: name -> values.
@@ -111,8 +112,7 @@ def check_speed_axes(axes: dict, where: str, machine: str, file: DriveFile | Non
         return
     file = shipped_drive(machine) if file is None else file
     n_max = file.speed_limit_rpm
-    fw = file.derived["field_weakening"].value
-    why = "its back EMF reaches the inverter's voltage limit there" + (" with field weakening" if fw else "")
+    why = f"speed_limit_rpm, drive check: {file.derived['speed_limit_rpm'].rule}"
     rng = f"must be in [1, {n_max:.0f}] r/min on {machine} ({why})"
     for i, x in enumerate(speeds):
         if abs(x) > n_max:

@@ -28,6 +28,15 @@ from .verify import verify_designs
 
 
 def build_objective(job: Job, spec: ScenarioSpec | None = None):
+    """The job's objective and the scenario batch it is called with.
+
+    Args:
+        job: The parsed :class:`Job`.
+        spec: The scenarios (default: the job's tuning set; its held-out set for the holdout scores).
+
+    Returns:
+        ``(objective, scenarios, (axis names, points))``: the :class:`Objective` and its batch.
+    """
     spec = job.scenarios if spec is None else spec
     comp = COMPONENTS[job.component].ctor(**job.values)
     drive = job_drive(job.drive) if spec.family.closed_loop and spec.recording is None else None
@@ -40,7 +49,6 @@ def build_objective(job: Job, spec: ScenarioSpec | None = None):
     obj = Objective(
         comp,
         param,
-        scen,
         horizon=spec.horizon,
         terms=job.terms,
         ctx=ctx,
@@ -48,7 +56,7 @@ def build_objective(job: Job, spec: ScenarioSpec | None = None):
         penalty=job.penalty,
         family=family,
     )
-    return obj, (names, combos)
+    return obj, scen, (names, combos)
 
 
 def _inside(g: GainSpec, v: float) -> float:
@@ -60,12 +68,12 @@ def _inside(g: GainSpec, v: float) -> float:
     return float(v)
 
 
-def _score_designs(obj, thetas: dict, bar: Progress, what: str) -> dict:
+def _score_designs(obj, scenarios, thetas: dict, bar: Progress, what: str) -> dict:
     """Each design's per-scenario scores, one progress step each (the first one compiles)."""
     per = {}
     for i, (k, th) in enumerate(thetas.items()):
         bar.stage(f"{what}{k}" + (" (compiling the metrics)" if i == 0 else ""))
-        per[k] = obj.per_scenario(th)
+        per[k] = obj.per_scenario(th, scenarios)
         bar.update()
     return per
 
@@ -129,7 +137,7 @@ def run_job(job: Job, out: Path, resume: bool = False, quiet: bool = False) -> d
     """
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.time()
-    obj, (names, combos) = build_objective(job)
+    obj, scen, (names, combos) = build_objective(job)
     param = obj.param
     theta0 = param.theta0()
     info = COMPONENTS[job.component]
@@ -140,6 +148,7 @@ def run_job(job: Job, out: Path, resume: bool = False, quiet: bool = False) -> d
         obj,
         job.solver,
         theta0,
+        scenarios=scen,
         checkpoint=out / CHECKPOINT,
         resume=resume,
         quiet=quiet,
@@ -154,14 +163,15 @@ def run_job(job: Job, out: Path, resume: bool = False, quiet: bool = False) -> d
         "closed_form": {g.name: float(cf[g.name]) for g in job.gains},
         "tuned": param.values(res.theta) if res.theta is not None else None,
     }
-    fixed = {k: float(v) for k, v in job.values.items() if k not in param.names}
+    # a LESO's [observer.speed] record stays a record (jaxobs.observers.speed.speed_from_spec)
+    fixed = {k: (v if isinstance(v, dict) else float(v)) for k, v in job.values.items() if k not in param.names}
     values = {k: (None if g is None else {**fixed, **g}) for k, g in gains.items()}
     n_scored = len(thetas) * (2 if job.holdout is not None else 1)
     bar = Progress(not quiet and "auto", n_scored, "score", unit="design")
-    per = _score_designs(obj, thetas, bar, "")
+    per = _score_designs(obj, scen, thetas, bar, "")
     scores = {k: (obj.summarize(*per[k]) if k in per else None) for k in gains}
     status, reason = res.status, res.reason
-    n_over = obj.overflowed(theta0, per["initial"][2]) if status == "diverged" else 0
+    n_over = obj.overflowed(theta0, scen, per["initial"][2]) if status == "diverged" else 0
     if status == "overflow" or n_over:
         # nothing diverged: the simulations and the scored metrics are finite, the objective's value or
         # gradient is not (a weight of 1e308 is no divergence of the system).  The solver checks every
@@ -197,7 +207,7 @@ def run_job(job: Job, out: Path, resume: bool = False, quiet: bool = False) -> d
         "scores": scores,
         "linear": lin,
         "scenarios": {"axes": names, "count": len(combos)},
-        **recordings_provenance(job, obj.scenarios),
+        **recordings_provenance(job, scen),
         "iterations": res.iterations,
         "best_iteration": res.best_iteration,
         "versions": versions(),
@@ -229,8 +239,8 @@ def run_job(job: Job, out: Path, resume: bool = False, quiet: bool = False) -> d
         result["null_reasons"] = nulls
     result["lost_lock_tuned_only"] = {"tuning": _lost_only(per)}
     if job.holdout is not None:
-        hobj, (hn, hc) = build_objective(job, job.holdout)
-        hper = _score_designs(hobj, thetas, bar, "held-out ")
+        hobj, hscen, (hn, hc) = build_objective(job, job.holdout)
+        hper = _score_designs(hobj, hscen, thetas, bar, "held-out ")
         result["holdout"] = {k: (hobj.summarize(*hper[k]) if k in hper else None) for k in gains}
         result["holdout"]["count"] = len(hc)
         result["lost_lock_tuned_only"]["holdout"] = _lost_only(hper)
@@ -245,7 +255,14 @@ def run_job(job: Job, out: Path, resume: bool = False, quiet: bool = False) -> d
     write_json(out / "history.json", res.history)
     # the closed form's totals scored above: the report's worst scenario without scoring it a second time
     write_report(
-        out, job, obj, thetas, res.history, closed_form_totals=per["closed_form"][1], best_iteration=res.best_iteration
+        out,
+        job,
+        obj,
+        scen,
+        thetas,
+        res.history,
+        closed_form_totals=per["closed_form"][1],
+        best_iteration=res.best_iteration,
     )
     timing = {"total_s": time.time() - t0, **res.timing, "iterations": res.iterations}
     atomic_write_text(out / "timing.json", json.dumps(timing, indent=1) + "\n")

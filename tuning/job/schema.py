@@ -7,6 +7,8 @@ import os
 from pathlib import Path
 
 from jaxobs.families import FAMILIES, GridSignals
+from jaxobs.observers import AbstractDriveObserver, AbstractLESO, gain_fields
+from jaxobs.observers.speed import SPEED_KINDS
 from jaxobs.provenance import sha256
 from jaxobs.registry import REGISTRY, canonical_key
 
@@ -152,6 +154,59 @@ def parse_scenarios(
     return ScenarioSpec(signal, t_event, horizon, steady, axes, sample, sseed)
 
 
+def parse_observer_speed(raw: dict, info) -> dict:
+    """A job's ``[observer.speed]``: how a LESO or a PLL-type flux observer extracts speed and position
+    (jaxobs.observers.speed).
+
+    ``kind = "pll"`` (the default: the observer's PLL on its ``kp_pll``, ``ki_pll``) or ``"mechanical"`` (a
+    mechanical-model speed observer with its three poles at −``alpha_o`` rad/s, its Ĵ, B̂ and p those of the
+    drive's assumed machine); ``zero_fade`` (rad/s, ≥ 0) selects the phase detector's fade through zero speed
+    (a LESO's; 0, the default: the sign detector).  The values are a record and a number, so a result file keeps them.
+
+    Args:
+        raw: The parsed job file.
+        info: The component's :class:`~jaxobs_tuning.job.components.ComponentInfo`.
+
+    Returns:
+        The constructor keywords to add (``speed``, ``zero_fade``); empty without the table.
+
+    Raises:
+        JobError: An unknown key or kind, a value out of its range, or a component without a speed estimator.
+    """
+    obs_t = get_field(raw, "observer", "observer", dict, {})
+    no_unknown(obs_t, ("speed",), "observer")
+    if "speed" not in obs_t:
+        return {}
+    sp = get_field(obs_t, "speed", "observer.speed", dict)
+    no_unknown(sp, ("kind", "alpha_o", "zero_fade"), "observer.speed")
+    if not (issubclass(info.ctor, AbstractDriveObserver) and info.ctor.takes_speed_estimator):
+        raise JobError(
+            "observer.speed",
+            f"only the LESOs and the PLL-type flux observers (LPFFlux) take a speed estimator, not {info.entry.name}",
+        )
+    kind = get_field(sp, "kind", "observer.speed.kind", str, "pll")
+    if kind not in SPEED_KINDS:
+        raise JobError("observer.speed.kind", f"must be one of {', '.join(SPEED_KINDS)}, got {show(kind)}")
+    out = {}
+    if kind == "mechanical":
+        alpha = get_field(sp, "alpha_o", "observer.speed.alpha_o", float, required=True)
+        if alpha <= 0:
+            raise JobError("observer.speed.alpha_o", f"must be > 0 rad/s, got {show(alpha)}")
+        out["speed"] = {"kind": kind, "alpha_o": alpha}
+    elif "alpha_o" in sp:
+        raise JobError("observer.speed.alpha_o", 'applies to kind = "mechanical" only')
+    else:
+        out["speed"] = {"kind": kind}
+    zf = get_field(sp, "zero_fade", "observer.speed.zero_fade", float, None)
+    if zf is not None:
+        if not issubclass(info.ctor, AbstractLESO):
+            raise JobError("observer.speed.zero_fade", "applies to the LESOs only (a flux does not vanish at zero)")
+        if zf < 0:
+            raise JobError("observer.speed.zero_fade", f"must be >= 0 rad/s (0: the sign detector), got {show(zf)}")
+        out["zero_fade"] = zf
+    return out
+
+
 def parse_job(raw: dict, base: Path | None = None) -> Job:
     """Validate a job dict (the parsed TOML).
 
@@ -166,7 +221,7 @@ def parse_job(raw: dict, base: Path | None = None) -> Job:
     Raises:
         JobError: A field out of its range, naming the field.
     """
-    keys = ("job", "component", "gains", "scenarios", "holdout", "objective", "solver", "drive", "envelope")
+    keys = ("job", "component", "observer", "gains", "scenarios", "holdout", "objective", "solver", "drive", "envelope")
     no_unknown(raw, keys, "job file")
     job_t = get_field(raw, "job", "job", dict, required=True)
     no_unknown(job_t, ("name", "component", "seed"), "job")
@@ -188,6 +243,7 @@ def parse_job(raw: dict, base: Path | None = None) -> Job:
         if key not in info.defaults:
             raise JobError(f"component.{k}", f"unknown for {comp}; allowed: {', '.join(info.defaults)}")
         values[key] = get_field(comp_t, k, f"component.{k}", float)
+    values.update(parse_observer_speed(raw, info))
     try:
         ts = float(info.ctor(**values).ts)
     except (ValueError, ArithmeticError, TypeError) as e:
@@ -231,6 +287,15 @@ def parse_job(raw: dict, base: Path | None = None) -> Job:
             raise JobError(f"{where}.init", f"{init:g} cannot be parametrized inside its bounds [{lower}, {upper}]")
         gains.append(g)
         values[gname] = init
+    speed_spec = values.get("speed")
+    if isinstance(speed_spec, dict) and speed_spec.get("kind") == "mechanical":
+        roles = gain_fields(info.ctor)
+        unused = [g.name for g in gains if roles[g.name].role == "pll"]
+        if unused:
+            raise JobError(
+                f"gains.{unused[0]}",
+                'the PLL\'s gains do nothing under [observer.speed] kind = "mechanical"; free another gain',
+            )
 
     scen = parse_scenarios(
         get_field(raw, "scenarios", "scenarios", dict, required=True), "scenarios", info.signals, seed, freq_n, ts, base
