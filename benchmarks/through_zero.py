@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 import time
 from pathlib import Path
@@ -47,14 +48,22 @@ REV_START = 0.2  # the ramp's start, s
 REV_SETTLE = 1.0  # after the slowest ramp, s
 
 
+# The LESOs' through-zero options (jaxobs.observers.leso, jaxobs.observers.speed), at the values
+# tests/test_zero_speed.py uses: the faded phase detector's ω_f and the mechanical speed observer's bandwidth.
+ZERO_FADE = 20.0  # rad/s
+ALPHA_O = 2 * math.pi * 10.0  # rad/s: the triple pole of MechanicalSpeed.closed_form
+
+
 def designs(ts: float) -> dict:
     """The closed forms run here, by name: each (a drive observer, unbound; the relative error of the R̂s it and
     the controller assume).  The error rows show what an exact model hides: at zero speed the reduced-order
     observer's angle is unobservable (its flux poles are 0 and −2σ0), so with R̂s = Rs nothing moves it there."""
     import jaxobs
-    from jaxobs.observers import CLESO, FALESO, GILESO
+    from jaxobs.observers import CLESO, FALESO, GILESO, SOIFO, LPFFlux
+    from jaxobs.observers.speed import MechanicalSpeed
 
     rofo = jaxobs.ReducedOrderFluxObserver.closed_form(ts=ts)
+    mech = MechanicalSpeed.closed_form(ALPHA_O)  # Ĵ, B̂ and p are bound from the assumed machine
     return {
         "rofo": (rofo, 0.0),
         "rofo_rs+20": (rofo, 0.2),
@@ -62,6 +71,12 @@ def designs(ts: float) -> dict:
         "cleso": (CLESO.closed_form(ts=ts), 0.0),
         "gileso": (GILESO.closed_form(ts=ts), 0.0),
         "faleso": (FALESO.closed_form(ts=ts), 0.0),
+        "faleso_fade": (FALESO.closed_form(ts=ts, zero_fade=ZERO_FADE), 0.0),
+        "cleso_mech": (CLESO.closed_form(ts=ts, speed=mech, zero_fade=ZERO_FADE), 0.0),
+        "gileso_mech": (GILESO.closed_form(ts=ts, speed=mech, zero_fade=ZERO_FADE), 0.0),
+        "faleso_mech": (FALESO.closed_form(ts=ts, speed=mech, zero_fade=ZERO_FADE), 0.0),
+        "soifo": (SOIFO.closed_form(ts=ts), 0.0),
+        "lpf_mech": (LPFFlux.closed_form(ts=ts, speed=mech), 0.0),
     }
 
 
@@ -83,7 +98,13 @@ def run_design(name, design, par, drive, figures):
     scs.append(D.standstill_hold(base, LOAD_PU, t_event=T_EVENT))
     batch = D.stack_scenarios(scs)
 
-    def loop(sc):
+    # every run starts steady after the observer's settling phase, SETTLE_PERIODS electrical periods at the
+    # lowest speed the batch starts at (Drive.settled_for, as the envelope does: the flux observers' time
+    # constants scale with 1/ωe; the phase is cheap, observer steps on synthetic measurements)
+    step_drive = drive.settled_for(par.p * min(SPEEDS_PU) * float(par.n_rated) * D.RPM)
+    rev_drive = drive.settled_for(par.p * REV_RPM * D.RPM)
+
+    def loop(sc, drive=step_drive):
         return D.ClosedLoop(drive, obs.bind(sc.est_par, sc.est_par.p * sc.omega_m0), sc)
 
     t0 = time.time()
@@ -124,7 +145,7 @@ def run_design(name, design, par, drive, figures):
     def search(load_nm):
         t0 = time.time()
         states_at = reversal_holds(
-            drive, obs, base, REV_RPM, load_nm=load_nm, t_start=REV_START, settle=REV_SETTLE, horizon=horizon
+            rev_drive, obs, base, REV_RPM, load_nm=load_nm, t_start=REV_START, settle=REV_SETTLE, horizon=horizon
         )
         r = held_rate(*RATES, states_at=states_at, resolution=RESOLUTION, probes=PROBES)
         return {
@@ -147,7 +168,7 @@ def run_design(name, design, par, drive, figures):
     if figures:  # the traces
         t0 = time.time()
         sc = D.reversal(base, REV_RPM, 2 * REV_RPM / 1.0, t_start=REV_START)
-        o = jax.jit(lambda s: jaxobs.simulate(loop(s), REV_START + 1.0 + REV_SETTLE).outputs)(sc)
+        o = jax.jit(lambda s: jaxobs.simulate(loop(s, rev_drive), REV_START + 1.0 + REV_SETTLE).outputs)(sc)
         e = np.degrees(np.asarray(metrics.wrap(o.obs.theta - o.theta_e)))
         v1 = verdict(o.t, np.radians(e), o.omega_m, o.omega_m_ref, REV_START, REV_START + 1.0 + 0.5 * REV_SETTLE)
         rev["one_second"] = {"verdict": str(verdict_names(v1.state)), "peak_angle_deg": float(v1.peak_angle_deg)}
@@ -171,6 +192,12 @@ LABELS = {
     "cleso": "C-LESO + PLL",
     "gileso": "GI-LESO + PLL",
     "faleso": "FA-LESO + PLL",
+    "faleso_fade": "FA-LESO + PLL, faded detector",
+    "cleso_mech": "C-LESO + mechanical",
+    "gileso_mech": "GI-LESO + mechanical",
+    "faleso_mech": "FA-LESO + mechanical",
+    "soifo": "SOIFO (active flux)",
+    "lpf_mech": "LPF flux + mechanical",
 }
 
 
@@ -212,7 +239,9 @@ def _rate_text(rev) -> str:
         return "not run"
     slow = rev["slowest_held_rpm_s"]
     if slow is None:
-        return "none held"
+        held = [round(r) for r, v in zip(rev["probed_rpm_s"], rev["probed_verdicts"]) if v == "holds"]
+        # held at slow rates only: the search's premise (fast ones hold) fails; the rates that held are named
+        return "none held" if not held else "only " + ",".join(map(str, sorted(held))) + " *"
     odd = "" if rev["monotone"] else " *"  # the probes changed verdict more than once
     if rev["fastest_failing_rpm_s"] is None:
         return f"<= {slow:.0f} (bound){odd}"
