@@ -1,12 +1,13 @@
 """Robustness studies of sensorless drives: drive observers × a grid (or a Sobol/LHS sample) of scenarios.
 
-A preset of :func:`jaxobs.study.study` on :class:`jaxobs.families.DriveScenarios` with the drive's metrics
-(:data:`jaxobs.study.METRICS`) and flags.
+A preset of :func:`jaxobs.study.study` on :class:`jaxobs.families.DriveScenarios` with the drive family's
+default metrics and flags (:attr:`~jaxobs.families.DriveScenarios.metrics`, ``.flags``: entries of the one
+metric table, :data:`jaxobs.metrics.METRICS`, in SI units).
 
     ds = run_drive_study({"C-LESO": cleso, "FA-LESO": faleso}, {"speed_rpm": [300, 600], "dRs": [-0.3, 0.3]},
                          machine=ipmsm_paper002(), horizon=0.3)
-    ds["pos_err_rms_deg"].sel(design="FA-LESO").max()
-    ds["pos_err_rms_deg_q"].sel(design="FA-LESO", quantile=0.99)
+    ds["rms_position_steady"].sel(design="FA-LESO").max()           # rad
+    ds["rms_position_steady_q"].sel(design="FA-LESO", quantile=0.99)
 
 Every design is the observer that closes the loop (``Drive(sensorless=True)``)
 on every scenario, each scenario started in its steady state (its speed, its
@@ -26,9 +27,11 @@ scenario's.  Axes (all optional; a value per scenario):
 - ``dead_time`` (s): inverter dead time.
 
 Metrics per scenario, over the steady window [steady_from, horizon):
-``pos_err_rms_deg`` and ``pos_err_max_deg`` (|θ̂e − θe|, electrical degrees),
-``speed_err_rms_rpm`` (ω̂e/p − ωm, r/min), ``speed_noise_rpm`` (the
-sample-to-sample noise of ω̂e/p: rms of the first difference over √2) and
+``rms_position_steady`` and ``peak_position_steady`` (|θ̂e − θe|, electrical rad),
+``rms_speed_estimate_steady`` (ω̂e/p − ωm, rad/s, p the scenario's), ``speed_noise`` (the
+sample-to-sample noise of ω̂e/p: rms of the first difference over √2, rad/s), ``bias_position`` (rad),
+``peak_speed_deviation`` (rad/s, after ``t_event``; tables and figures show them in degrees and r/min:
+:meth:`jaxobs.metrics.Metric.shown`) and
 ``lost_lock``: the scenario diverged (a non-finite value) or its position error
 exceeded 90° (electrical) in the steady window — a per-scenario flag, never fatal, with the
 definition the FLL studies and the tuning share (:mod:`jaxobs.metrics`, "lost lock": 90° for a drive,
@@ -40,7 +43,7 @@ Dataset has dims ``("design", *axes)`` (a grid) or ``("design", "sample")``
 (a sample, the axes as coordinates), quantiles over the scenarios of every
 metric (``<metric>_q`` with a ``quantile`` coordinate 0.5, 0.95, 0.99, 1.0;
 lost-lock scenarios excluded from them and counted in ``lost_lock_count``).  Every variable and
-coordinate has ``units`` (UDUNITS strings: ``degree``; ``min-1`` for r/min) and ``long_name``; each gain is
+coordinate has ``units`` (UDUNITS strings: ``rad``, ``rad s-1``) and ``long_name``; each gain is
 its own variable ``gain_<name>`` (dim ``design``, its own ``units``, NaN where a design has no such gain); the
 attributes hold the options, the true machine (``machine_Rs``, ...) and the versions, nothing that changes between two
 identical runs.
@@ -50,19 +53,13 @@ from __future__ import annotations
 
 import math
 
-import jax
-import numpy as np
-
 from . import metrics as M
 from .drive import Drive, PMSMParams
 from .families import DRIVE_STUDY_AXES, DriveScenarios, bind_observer, drive_scenarios
-from .observers import gain_fields, gain_table
+from .observers import gain_fields
 from .provenance import provenance
-from .scenarios import LHS, Grid, Sobol
-from .sharding import batch_mesh
-from .study import DIVERGED, METRICS, Flag, StudyContext, study
-
-SAMPLERS = {"sobol": Sobol, "lhs": LHS}  # sampling name -> sampler (jaxobs.scenarios)
+from .scenarios import sampler_of
+from .study import StudyContext, gain_variables, study
 
 __all__ = [
     "DRIVE_STUDY_AXES",
@@ -74,15 +71,8 @@ __all__ = [
     "drive_gains",
 ]
 
-# the drive study's metrics (jaxobs.study.METRICS: units, long names, exact forms)
-DRIVE_STUDY_METRICS = (
-    "pos_err_rms_deg",
-    "pos_err_max_deg",
-    "speed_err_rms_rpm",
-    "speed_noise_rpm",
-    "pos_bias_deg",
-    "speed_dev_max_rpm",
-)
+# the drive study's metrics: the drive family's defaults (jaxobs.metrics.METRICS: SI units, long names, exact forms)
+DRIVE_STUDY_METRICS = DriveScenarios.metrics
 QUANTILES = (0.5, 0.95, 0.99, 1.0)
 
 
@@ -92,83 +82,76 @@ def drive_gains(obs) -> dict:
     return {g: float(getattr(obs, g)) for g in gain_fields(obs)}
 
 
-def gain_variables(designs: dict) -> dict:
-    """The designs' gains as Dataset variables ``gain_<name>`` over ``design``, each with its own CF units (NaN
-    where a design has no such gain): what drive studies and envelopes write."""
-    gains = {d: drive_gains(obs) for d, obs in designs.items()}
-    table = gain_table(designs)  # each gain's units are its field's (jaxobs.observers.gain)
-    return {
-        f"gain_{g}": (
-            ("design",),
-            np.asarray([gains[d].get(g, np.nan) for d in designs], dtype=float),
-            {"units": info.units, "long_name": f"observer gain {g} (NaN: the design has no such gain)"},
-        )
-        for g, info in table.items()
-    }
-
-
-def _lost_lock(sol, sc, ctx):
-    o = sol.outputs
-    return M.lost_lock(o.obs.theta, o.theta_e, sol.t >= ctx.steady_from, math.radians(M.LOCK_TOL_DRIVE_DEG))
-
-
-def _lost_speed(sol, sc, ctx):  # missed its speed reference
-    return M.lost_speed(sol.outputs.omega_m, sol.outputs.omega_m_ref, sol.t >= ctx.steady_from)
-
-
-FLAGS = (
-    Flag(
-        "lost_lock",
-        f"lost lock: diverged, or position error > {M.LOCK_TOL_DRIVE_DEG:g} deg (electrical) in the steady window "
-        "(1: lost)",
-        _lost_lock,
-        count="scenarios that lost lock (diverged ones included)",
-    ),
-    Flag(
-        "lost_speed",
-        f"lost speed: diverged, or the steady window's mean |speed - reference| > {100 * M.SPEED_TOL:g} % of the "
-        f"mean |reference| (at least {M.SPEED_FLOOR_RPM:g} r/min) (1: lost)",
-        _lost_speed,
-        count="scenarios that missed their speed reference (diverged ones included)",
-    ),
-    DIVERGED,
-)
+FLAGS = tuple(M.METRICS[k] for k in DriveScenarios.flags)  # the drive family's flags (the metric table's)
 
 
 def run_drive_study(
     designs: dict,
-    axes: dict,
+    axes,
     *,
-    machine: PMSMParams,
-    drive: Drive,
+    family: DriveScenarios | None = None,
+    machine: PMSMParams | None = None,
+    drive: Drive | None = None,
     sensors=None,
     horizon: float = 0.3,
     steady_from: float | None = None,
-    t_event: float = 0.0,
-    sampling: str = "grid",
+    t_event: float | None = None,
+    sampling: str | None = None,
     sample: int = 0,
-    seed: int = 0,
+    seed: int | None = None,
     chunk_size: int = 256,
     progress=None,
     mesh=None,
     store=None,
 ):
-    """Run every design (a drive observer closing ``drive``'s loop) on every scenario; an ``xarray.Dataset``.
+    """Run every design (a drive observer closing the drive's loop) on every scenario; an ``xarray.Dataset``.
 
-    ``sampling="grid"``: the Cartesian product of the axes; ``"sobol"``/``"lhs"``: ``sample``
-    points drawn by scipy.stats.qmc inside the axes' [min, max].  ``progress``: ``True`` a tqdm bar
-    on stderr (each design's compilation named), a callable ``progress(done, total)`` called after
-    each chunk, ``None``/``False`` nothing (:mod:`jaxobs.progress`).  ``mesh``: the devices each chunk is
-    split over (:func:`jaxobs.runner.run_scenarios`; default one device).
-    ``sensors``: the drive's :class:`~jaxobs.drive.Sensors` (a drive file's), or None: ideal; the noise and
-    offset axes set their own.
-    ``store``: a :class:`jaxobs.chunkstore.ChunkStore`, as in :func:`jaxobs.study.run_study`: each chunk's
-    values go to disk as it finishes, the chunks already there are not run again, and the Dataset is laid
-    out from the store (the same Dataset as without one).
+    Args:
+        designs: name -> drive observer.
+        axes: a dict of axis values (:data:`DRIVE_STUDY_AXES`) or a sampler, as
+            :func:`jaxobs.scenarios.sampler_of` takes them, the same way as :func:`jaxobs.study.run_study`:
+            ``sampling="grid"`` (the default without ``sample``) the Cartesian product of the axes;
+            ``"random"``, ``"sobol"``, ``"lhs"``: ``sample`` points drawn inside the axes' [min, max].
+        family: the drive's scenarios (:class:`~jaxobs.families.DriveScenarios`: the true machine, the
+            sensorless drive, the steps' time, the noise seed, the sensors); None: built from ``machine``,
+            ``drive``, ``sensors``, ``t_event`` (default 0) and ``seed`` (default 0), the keywords this preset
+            first took (kept for the Python API and the docs).
+        machine, drive, sensors, t_event: without ``family``: the true machine, the ``Drive`` (sensorless), the
+            drive's :class:`~jaxobs.drive.Sensors` (None: ideal; the noise and offset axes set their own) and the
+            steps' time, s in [0, horizon).
+        horizon, steady_from: the run's length and the steady window's start (default half the horizon), s.
+        sampling, sample, seed: how a dict of axes is sampled (``seed`` with ``family``: its own).
+        chunk_size: scenarios per compiled call.
+        progress: ``True`` a tqdm bar on stderr (each design's compilation named), a callable
+            ``progress(done, total)`` called after each chunk, ``None``/``False`` nothing (:mod:`jaxobs.progress`).
+        mesh: the devices each chunk is split over (:func:`jaxobs.runner.run_scenarios`; default
+            ``jaxobs.batch_mesh()``, every device, as every preset).
+        store: a :class:`jaxobs.chunkstore.ChunkStore`, as in :func:`jaxobs.study.run_study`: each chunk's
+            values go to disk as it finishes, the chunks already there are not run again, and the Dataset is
+            laid out from the store (the same Dataset as without one).
+
+    Returns:
+        The Dataset (module doc).
+
+    Raises:
+        ValueError: no designs, an axis or sampler refused, a drive that is not sensorless, ``family`` given with
+            its own keywords, or ``horizon``, ``steady_from`` or ``t_event`` out of range.
     """
     if not designs:
         raise ValueError("drive study: at least one design is required")
-    DriveScenarios.check_axes(axes, "axes")
+    if family is None:
+        if machine is None or drive is None:
+            raise ValueError("drive study: give family (a DriveScenarios), or machine and drive")
+        t_event = 0.0 if t_event is None else t_event
+        family = DriveScenarios(machine, drive, t_event=t_event, seed=0 if seed is None else seed, sensors=sensors)
+    elif not isinstance(family, DriveScenarios):
+        raise ValueError(f"drive study: family must be DriveScenarios (jaxobs.families), got {type(family).__name__}")
+    elif any(v is not None for v in (machine, drive, sensors, t_event, seed)):
+        raise ValueError("drive study: give family or machine, drive, sensors, t_event and seed, not both")
+    machine, drive, t_event, seed = family.machine, family.drive, family.t_event, family.seed
+    if isinstance(axes, dict):
+        DriveScenarios.check_axes(axes, "axes")
+    sampler = sampler_of(axes, sampling=sampling, sample=sample, seed=seed)
     if not drive.sensorless:
         raise ValueError("drive study: the drive must be sensorless (Drive(..., sensorless=True))")
     if not (horizon > 0 and math.isfinite(horizon)):
@@ -178,15 +161,7 @@ def run_drive_study(
         raise ValueError(f"steady_from must be in [0, horizon), got {steady_from!r}")
     if not (math.isfinite(t_event) and 0 <= t_event < horizon):
         raise ValueError(f"t_event must be in [0, horizon = {horizon:g}) s, got {t_event!r}")
-    if sampling == "grid":
-        sampler = Grid(axes)
-    elif sampling in SAMPLERS:
-        if not (isinstance(sample, int) and sample >= 1):
-            raise ValueError(f"sample must be an integer >= 1 with sampling={sampling!r}, got {sample!r}")
-        sampler = SAMPLERS[sampling](axes, sample, seed)
-    else:
-        raise ValueError(f"sampling must be 'grid', 'sobol' or 'lhs', got {sampling!r}")
-    attrs = dict(horizon=horizon, steady_from=steady_from, t_event=t_event, sampling=sampling, seed=seed)
+    attrs = dict(horizon=horizon, steady_from=steady_from, t_event=t_event, sampling=sampler.sampling, seed=seed)
     # the true machine (the assumed one is this, moved by the mismatch axes) and the drive's controller
     attrs.update({f"machine_{f}": float(getattr(machine, f)) for f in ("Rs", "Ld", "Lq", "psi_f", "p", "J")})
     attrs.update(drive_ts=float(drive.ts), drive_settle=float(drive.settle))
@@ -194,19 +169,18 @@ def run_drive_study(
     attrs.update(provenance("jaxobs.drive_study.run_drive_study"))
     return study(
         designs,
-        # built a chunk at a time (the axes are checked above, so no chunk can refuse its points)
-        DriveScenarios(machine, drive, t_event=t_event, seed=seed, sensors=sensors),
+        family,  # built a chunk at a time (the axes are checked above, so no chunk can refuse its points)
         sampler,
-        [METRICS[k] for k in DRIVE_STUDY_METRICS],
+        [M.METRICS[k] for k in DRIVE_STUDY_METRICS],
         horizon=horizon,
-        ctx=StudyContext(t_event=t_event, steady_from=steady_from, p=machine.p),
+        ctx=StudyContext(t_event=t_event, steady_from=steady_from),
         flags=FLAGS,
         mask="lost_lock",
         quantiles=QUANTILES,
         gains=gain_variables({d: designs[d] for d in designs}),  # one variable per gain (jaxobs.study too)
         attrs=attrs,
         chunk_size=chunk_size,
-        mesh=batch_mesh(jax.devices()[:1]) if mesh is None else mesh,
+        mesh=mesh,
         progress=progress,
         store=store,
         label="drive study",

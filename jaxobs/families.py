@@ -1,8 +1,8 @@
 """Scenario families: what a study or a tuning job runs a design on, and the one place a design is bound.
 
-A family (:class:`AbstractScenarios`) declares its axes (one :class:`~jaxobs.quantities.Axis` each), builds
-a batch of scenarios from named points (:meth:`~AbstractScenarios.build`) and makes the system one design
-runs on one scenario (:meth:`~AbstractScenarios.system`): an observer on a signal, or an observer closing
+A family (:class:`AbstractFamily`) declares its axes (one :class:`~jaxobs.quantities.Axis` each), builds
+a batch of scenarios from named points (:meth:`~AbstractFamily.build`) and makes the system one design
+runs on one scenario (:meth:`~AbstractFamily.system`): an observer on a signal, or an observer closing
 the drive's loop, bound to the scenario's assumed machine.
 
     fam = GridSignals(t_event=0.1, freq=50.0)
@@ -19,14 +19,21 @@ The families:
   observer settled before t = 0), axes :data:`DRIVE_STUDY_AXES` (of :data:`jaxobs.drive.DRIVE_AXES`);
 - :class:`RecordedSignals`: recorded signals with their truth columns, given whole (one per file).
 
-A tuning job's ``scenarios.signal`` names its family: :data:`FAMILIES` maps the name to the class, once.
+Each family is built by its own class: its constructor, or :meth:`~AbstractFamily.from_toml` from its TOML
+table (a job's ``[scenarios]``, a study file's ``[study]``: the keys it owns, :attr:`~AbstractFamily.options`,
+each checked with a ``ValueError`` naming the field) and what the run gives it (the design's nominal frequency,
+the drive it closes).  A tuning job's ``scenarios.signal`` names its family: :data:`FAMILIES` maps the name to
+the class, once.  Recordings of a family's signals are :meth:`AbstractFamily.recorded`: a
+:class:`RecordedSignals` that holds what the recordings are (their columns, whether a design binds to them), the
+files read by :func:`jaxobs.signals.read_recorded`.
 """
 
 from __future__ import annotations
 
 import abc
 import math
-from typing import ClassVar
+from collections.abc import Mapping
+from typing import ClassVar, NamedTuple
 
 import equinox as eqx
 
@@ -36,12 +43,12 @@ from .drive import RPM, ClosedLoop, Drive, PMSMParams, Profile, Scenario, Sensor
 from .observers import AbstractDriveObserver
 from .quantities import Axis
 from .scenarios import EMF_SIGNAL_AXES, GRID_SIGNAL_AXES, emf_signals, grid_signals
-from .signals import DriveRecording, RecordingLayout, SampledSignal, read_drive_log
 
 __all__ = [
-    "AbstractScenarios",
+    "AbstractFamily",
     "DRIVE_STUDY_AXES",
     "DriveScenarios",
+    "DriveSetting",
     "EMFSignals",
     "FAMILIES",
     "GridSignals",
@@ -124,7 +131,23 @@ def drive_scenarios(
     return scenario_batch(base, names, combos, seed=seed, t_event=t_event, first=first)
 
 
-class AbstractScenarios(eqx.Module):
+def _t_event(table: Mapping, where: str, default: float) -> float:
+    """``<where>.t_event``: a finite number of seconds >= 0."""
+    v = table.get("t_event", default)
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not (math.isfinite(v) and v >= 0):
+        raise ValueError(f"{where}.t_event: must be a finite number of seconds >= 0, got {v!r}")
+    return float(v)
+
+
+def _seed(table: Mapping, where: str) -> int:
+    """``<where>.seed``: an integer in [0, 2^32)."""
+    v = table.get("seed", 0)
+    if isinstance(v, bool) or not isinstance(v, int) or not 0 <= v < 2**32:
+        raise ValueError(f"{where}.seed: must be an integer in [0, 2^32), got {v!r}")
+    return int(v)
+
+
+class AbstractFamily(eqx.Module):
     """A family of scenarios: its axes, its batches, and the system a design runs on one of its scenarios.
 
     Attributes:
@@ -132,12 +155,30 @@ class AbstractScenarios(eqx.Module):
         axes: name -> :class:`~jaxobs.quantities.Axis` (a class attribute).
         closed_loop: Whether the design closes the drive's loop: the drive's metrics apply (a class attribute).
         bytes_per_step: An estimate of the memory a gradient keeps per scenario and step (a class attribute).
+        study_bytes_per_step: The same for a study's run (exact metrics, no gradient: an estimate for the study
+            files' memory check, not a measurement; a class attribute).
+        drive_observer: Whether the design is a drive observer (bound to a machine and a speed), not an FLL on a
+            grid voltage: the position metrics apply, and a recording of these signals binds it (a class
+            attribute).
+        options: The keys of its TOML table it reads (:meth:`from_toml`; a class attribute).
+        metrics: Its default metrics, names in :data:`jaxobs.metrics.METRICS` (what its study reports; a class
+            attribute).
+        flags: Its default flags, boolean metrics of that table, in the order a study stores them (a class
+            attribute).
     """
 
     signal: eqx.AbstractClassVar[str]
+    metrics: eqx.AbstractClassVar[tuple]
+    flags: eqx.AbstractClassVar[tuple]
     axes: eqx.AbstractClassVar[dict]
     closed_loop: eqx.AbstractClassVar[bool]
     bytes_per_step: eqx.AbstractClassVar[int]
+    study_bytes_per_step: eqx.AbstractClassVar[int]
+    drive_observer: eqx.AbstractClassVar[bool]
+    options: eqx.AbstractClassVar[tuple]
+    # a recording of its signals: the default signal and truth columns (a family with ``truth_counts``, how many
+    # truth columns a recording may give); None: none stands for them
+    recording_columns: ClassVar[tuple | None] = None
 
     @abc.abstractmethod
     def build(self, names, points, first: int = 0):
@@ -166,21 +207,43 @@ class AbstractScenarios(eqx.Module):
         """
 
     @classmethod
-    def of(cls, *, t_event: float = 0.0, seed: int = 0, freq: float = 50.0, machine=None, drive=None, sensors=None):
-        """The family with these options, each family taking the ones it has.
+    def from_toml(cls, table: Mapping, where: str = "scenarios", *, freq_n: float = 50.0, drive=None):
+        """The family from its TOML table and what the run gives it.
+
+        The table is a job's ``[scenarios]`` or a study file's ``[study]``: the family reads its own keys
+        (:attr:`options`), each checked here; the table's other keys are its reader's.  What is not in a TOML
+        table comes from the run, the same two things for every family, each reading what it needs: the
+        design's nominal frequency and the drive the design closes.  A family that no file names (one built
+        from another, as the envelope's long runs are) keeps this refusal.
 
         Args:
-            t_event: The event's time, s.
-            seed: The seed of the noise keys.
-            freq: A grid's nominal frequency, Hz.
-            machine: The drive's true machine.
-            drive: The :class:`~jaxobs.drive.Drive`.
-            sensors: The drive's: a drive file's :class:`~jaxobs.drive.Sensors`, or None: ideal.
+            table: The TOML table (a mapping of plain values).
+            where: The table's name in errors.
+            freq_n: The design's nominal frequency, Hz (a grid's).
+            drive: What a closed loop runs (:class:`DriveSetting`), or None.
 
         Returns:
             The family.
+
+        Raises:
+            ValueError: ``<where>.<key>`` out of its range, or a needed run input missing.
         """
-        return cls()
+        raise ValueError(f"{where}: {cls.__name__} is not built from a TOML table")
+
+    @classmethod
+    def recorded(cls) -> RecordedSignals:
+        """Recordings of this family's signals: their default columns and whether a design binds to them.
+
+        Returns:
+            The :class:`RecordedSignals`.
+
+        Raises:
+            ValueError: no recording stands for this family's signals.
+        """
+        if cls.recording_columns is None:
+            raise ValueError(f"{cls.__name__}: no recording stands for its signals")
+        cols, truth = cls.recording_columns
+        return RecordedSignals(cls.signal, cols, truth, cls.truth_counts, cls.drive_observer)
 
     @classmethod
     def limits(cls, freq_n: float, ts: float) -> dict:
@@ -221,7 +284,22 @@ class AbstractScenarios(eqx.Module):
         return out
 
 
-class GridSignals(AbstractScenarios):
+class DriveSetting(NamedTuple):
+    """What a closed loop runs, beside its scenarios: the true machine, the drive and its sensors (a drive file's,
+    :meth:`jaxobs.drive.DriveFile.drive_for`; a shipped bench's sensors are ideal).
+
+    Attributes:
+        machine: The true machine (:class:`~jaxobs.drive.PMSMParams`).
+        drive: The :class:`~jaxobs.drive.Drive`.
+        sensors: The drive's :class:`~jaxobs.drive.Sensors`, or None: ideal.
+    """
+
+    machine: PMSMParams
+    drive: Drive
+    sensors: Sensors | None = None
+
+
+class GridSignals(AbstractFamily):
     """Single-phase grid voltages (:func:`jaxobs.scenarios.grid_signals`); the design runs on the signal.
 
     Attributes:
@@ -238,13 +316,43 @@ class GridSignals(AbstractScenarios):
     axes: ClassVar[dict] = GRID_SIGNAL_AXES
     closed_loop: ClassVar[bool] = False
     bytes_per_step: ClassVar[int] = 512
+    study_bytes_per_step: ClassVar[int] = 256
+    drive_observer: ClassVar[bool] = False
+    options: ClassVar[tuple] = ("t_event", "seed")
+    metrics: ClassVar[tuple[str, ...]] = ("settling_freq", "ripple_freq", "rms_phase_steady", "itae_freq", "iae_phase")
+    flags: ClassVar[tuple[str, ...]] = ("settled", "diverged", "lost_lock")
     # a recording of it: the voltage column; the truth columns (phase rad, ω rad/s, amplitude), how many
     recording_columns: ClassVar[tuple] = (("v",), ("theta", "omega", "amplitude"))
     truth_counts: ClassVar[tuple] = (3,)
 
+    def __check_init__(self):
+        if not (math.isfinite(self.t_event) and self.t_event >= 0):
+            raise ValueError(f"t_event must be a finite number of seconds >= 0, got {self.t_event!r}")
+        if not (math.isfinite(self.freq) and self.freq > 0):
+            raise ValueError(f"freq must be a finite frequency > 0 Hz, got {self.freq!r}")
+
     @classmethod
-    def of(cls, *, t_event: float = 0.0, seed: int = 0, freq: float = 50.0, machine=None, drive=None, sensors=None):
-        return cls(t_event, freq, seed)
+    def from_toml(cls, table: Mapping, where: str = "scenarios", *, freq_n: float = 50.0, drive=None):
+        """``t_event`` (s, >= 0; default 0.1) and ``seed`` (default 0) from ``table``; the grid's nominal
+        frequency is the design's ``freq_n``; ``drive`` does not apply (an FLL closes no loop).
+
+        Args:
+            table: The TOML table.
+            where: Its name in errors.
+            freq_n: The design's nominal frequency, Hz.
+            drive: Must be None.
+
+        Returns:
+            The :class:`GridSignals`.
+
+        Raises:
+            ValueError: ``<where>.t_event`` or ``<where>.seed`` out of range, ``freq_n`` not > 0, or a drive.
+        """
+        if drive is not None:
+            raise ValueError(f"{where}: grid signals run an FLL on a grid voltage: no drive applies")
+        if not (math.isfinite(freq_n) and freq_n > 0):
+            raise ValueError(f"{where}: the design's nominal frequency must be > 0 Hz, got {freq_n!r}")
+        return cls(_t_event(table, where, 0.1), float(freq_n), _seed(table, where))
 
     def build(self, names, points, first: int = 0):
         return grid_signals(names, points, self.t_event, self.freq, seed=self.seed, first=first)
@@ -269,7 +377,7 @@ class GridSignals(AbstractScenarios):
         return {"freq_step": (max(lo, -step), min(hi, step, 0.25 / ts - freq_n))}
 
 
-class EMFSignals(AbstractScenarios):
+class EMFSignals(AbstractFamily):
     """Two-axis back EMFs (:func:`jaxobs.scenarios.emf_signals`): 100 V at 50 Hz, proportional to speed; the
     design (a flux observer) runs on the signal."""
 
@@ -277,9 +385,34 @@ class EMFSignals(AbstractScenarios):
     axes: ClassVar[dict] = EMF_SIGNAL_AXES
     closed_loop: ClassVar[bool] = False
     bytes_per_step: ClassVar[int] = 512
+    study_bytes_per_step: ClassVar[int] = 256
+    drive_observer: ClassVar[bool] = True
+    options: ClassVar[tuple] = ()  # the back EMFs have no event, no noise and a fixed nominal
+    metrics: ClassVar[tuple[str, ...]] = ("iae_position", "rms_position_steady", "bias_position")
+    flags: ClassVar[tuple[str, ...]] = ("diverged", "lost_lock")
     # a recording of a drive: u and i; the truth columns (encoder angle rad [, speed rad/s]), how many
     recording_columns: ClassVar[tuple] = (("u_a", "u_b", "i_a", "i_b"), ("theta_e", "omega_e"))
     truth_counts: ClassVar[tuple] = (1, 2)
+
+    @classmethod
+    def from_toml(cls, table: Mapping, where: str = "scenarios", *, freq_n: float = 50.0, drive=None):
+        """The back EMFs read no key of ``table`` (their reader checks its own) and no run input.
+
+        Args:
+            table: The TOML table.
+            where: Its name in errors.
+            freq_n: Not read (the EMFs' 50 Hz is the axes' base).
+            drive: Must be None.
+
+        Returns:
+            The :class:`EMFSignals`.
+
+        Raises:
+            ValueError: a drive (the design runs on the signal, open loop).
+        """
+        if drive is not None:
+            raise ValueError(f"{where}: back-EMF signals run the observer open loop: no drive applies")
+        return cls()
 
     def build(self, names, points, first: int = 0):
         return emf_signals(names, points)
@@ -302,7 +435,7 @@ class EMFSignals(AbstractScenarios):
         return {"speed_hz": (lo, min(hi, 0.25 / ts))}
 
 
-class DriveScenarios(AbstractScenarios):
+class DriveScenarios(AbstractFamily):
     """The sensorless drive on ``machine``: each scenario (:func:`drive_scenarios`) starts steady.
 
     The design closes ``drive``'s loop, bound to the scenario's assumed machine and speed
@@ -326,12 +459,47 @@ class DriveScenarios(AbstractScenarios):
     axes: ClassVar[dict] = DRIVE_STUDY_AXES
     closed_loop: ClassVar[bool] = True
     bytes_per_step: ClassVar[int] = 2048
+    study_bytes_per_step: ClassVar[int] = 1024
+    drive_observer: ClassVar[bool] = True
+    options: ClassVar[tuple] = ("t_event", "seed")
+    metrics: ClassVar[tuple[str, ...]] = (
+        "rms_position_steady",
+        "peak_position_steady",
+        "rms_speed_estimate_steady",
+        "speed_noise",
+        "bias_position",
+        "peak_speed_deviation",
+    )
+    flags: ClassVar[tuple[str, ...]] = ("lost_lock", "lost_speed", "diverged")
     recording_columns: ClassVar[tuple] = EMFSignals.recording_columns
     truth_counts: ClassVar[tuple] = EMFSignals.truth_counts
 
     @classmethod
-    def of(cls, *, t_event: float = 0.0, seed: int = 0, freq: float = 50.0, machine=None, drive=None, sensors=None):
-        return cls(machine, drive, t_event=t_event, seed=seed, sensors=sensors)
+    def from_toml(cls, table: Mapping, where: str = "scenarios", *, freq_n: float = 50.0, drive=None):
+        """``t_event`` (s, >= 0; default 0: no event) and ``seed`` (default 0) from ``table``; the machine, the
+        drive and its sensors from ``drive`` (required: the design closes its loop).
+
+        Args:
+            table: The TOML table.
+            where: Its name in errors.
+            freq_n: Not read (the drive's speed is an axis).
+            drive: The :class:`DriveSetting` the scenarios run.
+
+        Returns:
+            The :class:`DriveScenarios`.
+
+        Raises:
+            ValueError: ``<where>.t_event`` or ``<where>.seed`` out of range, or no drive.
+        """
+        if not isinstance(drive, DriveSetting):
+            raise ValueError(f"{where}: drive scenarios need the drive they close (a DriveSetting), got {drive!r}")
+        return cls(
+            drive.machine,
+            drive.drive,
+            t_event=_t_event(table, where, 0.0),
+            seed=_seed(table, where),
+            sensors=drive.sensors,
+        )
 
     def build(self, names, points, first: int = 0):
         return drive_scenarios(
@@ -342,27 +510,48 @@ class DriveScenarios(AbstractScenarios):
         return ClosedLoop(self.drive, bind_observer(design, scenario), scenario)
 
 
-class RecordedSignals(AbstractScenarios):
+class RecordedSignals(AbstractFamily):
     """Recorded signals with their truth columns, given whole (a sampler that holds them:
-    :class:`jaxobs.scenarios.Recordings`).
+    :class:`jaxobs.scenarios.Recordings`); made by the family they stand for (:meth:`AbstractFamily.recorded`).
+
+    The files are read by :func:`jaxobs.signals.read_recorded`; the family holds what they are.
 
     Attributes:
-        kind: The family the recordings stand for: a grid voltage (:class:`GridSignals`: the design runs on
-            the recorded voltage) or a drive's u and i (:class:`EMFSignals`, :class:`DriveScenarios`: a drive
-            observer, bound to the recorded speed at t = 0, runs open loop on them).
+        source: The name of the family the recordings stand for (:data:`FAMILIES`; a label, never compared).
+        columns: The signal columns a recording has by default: a grid voltage's, or a drive's u and i.
+        truth: The truth columns by default: the phase, frequency and amplitude (grid), or the encoder's angle and
+            speed.
+        truth_counts: How many truth columns a recording may give.
+        binds: Whether the design is bound to the recording (a drive observer on u and i: bound to the recorded
+            speed at t = 0, run open loop), not run on it as is (an FLL on a grid voltage).
     """
 
-    kind: type = eqx.field(static=True)
+    source: str = eqx.field(static=True)
+    columns: tuple = eqx.field(static=True)
+    truth: tuple = eqx.field(static=True)
+    truth_counts: tuple = eqx.field(static=True)
+    binds: bool = eqx.field(static=True)
 
     signal: ClassVar[str] = "recording"
     axes: ClassVar[dict] = {}
     closed_loop: ClassVar[bool] = False
     bytes_per_step: ClassVar[int] = 512
+    study_bytes_per_step: ClassVar[int] = 256
+    drive_observer: ClassVar[bool] = False  # the instance's binds says which observer runs on it
+    options: ClassVar[tuple] = ()
+    # the one study on recordings is the FLL study's (jaxobs.study.run_study on a Recordings sampler)
+    metrics: ClassVar[tuple[str, ...]] = GridSignals.metrics
+    flags: ClassVar[tuple[str, ...]] = GridSignals.flags
 
-    @property
-    def binds(self) -> bool:
-        """Whether the design is bound to the recording (a drive observer on u and i), not run on it as is."""
-        return self.kind is not GridSignals
+    @classmethod
+    def from_toml(cls, table: Mapping, where: str = "scenarios", *, freq_n: float = 50.0, drive=None):
+        """Recordings are made by the family they stand for (:meth:`AbstractFamily.recorded`), their files
+        described by the recording table's reader (``jaxobs_tuning.job.recordings``).
+
+        Raises:
+            ValueError: always: name the family the recordings stand for.
+        """
+        raise ValueError(f"{where}.recording: recordings stand for a family's signals: use <Family>.recorded()")
 
     def build(self, names, points, first: int = 0):
         raise ValueError("recorded signals are given whole (jaxobs.scenarios.Recordings): they are not built")
@@ -372,60 +561,10 @@ class RecordedSignals(AbstractScenarios):
         # Rs and L (a recording gives the speed, not the machine)
         return OnSignal(design.bind(None, scenario.omega_e[..., 0]) if self.binds else design, scenario)
 
-    def read(self, path: str, columns, truth, *, layout=None, machine=None, windows=None, **kw):
-        """One recording file as scenarios.
 
-        Args:
-            path: the CSV file.
-            columns: a grid voltage's column (``columns[0]``), or the voltage then the current columns, two each
-                (u_α, u_β, i_α, i_β, or in ``layout``'s frames) or three each (``abc``).
-            truth: the phase, frequency and amplitude columns (grid), or the encoder's angle and speed.
-            layout: what a drive log's columns hold (:class:`jaxobs.signals.RecordingLayout`; default the
-                sidecar ``<path>.toml``, else the observers' own form).
-            machine: a :class:`~jaxobs.drive.PMSMParams` for the log's power and timing checks, or None.
-            windows: ``(count, n)``: ``count`` windows of ``n`` samples spread evenly over a drive log, each a
-                scenario starting at its own speed; None: the whole file.
-            **kw: the time base (``time_column``, ``sample_rate``, ``ts``) and ``max_bytes``.
-
-        Returns:
-            A :class:`~jaxobs.SampledSignal` (a grid voltage), a :class:`~jaxobs.DriveRecording` (u and i), or a
-            list of ``count`` of them (``windows``).
-
-        Raises:
-            ValueError: what :func:`jaxobs.signals.read_drive_log` or ``from_csv`` refuses, in one line; a
-                declared layout on a log sampled at another rate than ``ts``.
-        """
-        if not self.binds:
-            return SampledSignal.from_csv(path, columns=columns[0], truth=truth, **kw)
-        ts = kw.get("ts")
-        log = read_drive_log(
-            path,
-            voltages=columns[: len(columns) // 2],  # 2 + 2 columns, or 3 + 3 (abc)
-            currents=columns[len(columns) // 2 :],
-            theta_e=truth[0],
-            omega_e=truth[1] if len(truth) > 1 else None,
-            time_column=kw.get("time_column"),
-            sample_rate=kw.get("sample_rate"),
-            layout=layout,
-            machine=machine,
-            max_bytes=kw.get("max_bytes"),
-        )
-        if ts is None or abs(log.ts - ts) <= 1e-9 * ts:
-            if windows is None:
-                return log.recording()
-            count, n = windows
-            if log.n < n:
-                raise ValueError(f"recording {str(path)!r}: {log.n} samples, fewer than a window's {n}")
-            starts = [round(i * (log.n - n) / max(count - 1, 1)) for i in range(count)]
-            return [log.recording(a, n) for a in starts]
-        # another rate: resampled by the small reader (the checks above have run on the file as it is)
-        if (layout is not None and layout != RecordingLayout()) or windows is not None:
-            raise ValueError(
-                f"recording {str(path)!r}: sampled at {1 / log.ts:.6g} Hz, not at the observer's {1 / ts:.6g} Hz: a "
-                "declared layout or windows read the log at its own rate (resample it, or set ts)"
-            )
-        return DriveRecording.from_csv(path, columns=columns, **dict(zip(("theta_e", "omega_e"), truth)), **kw)
-
+# the base's first name, kept for code written against it: a family is not a batch of scenarios (docs/architecture.md,
+# "Scenario, family, sampler")
+AbstractScenarios = AbstractFamily
 
 # a job file's ``scenarios.signal`` -> its family (the one place the name is read)
-FAMILIES: dict[str, type[AbstractScenarios]] = {f.signal: f for f in (GridSignals, EMFSignals, DriveScenarios)}
+FAMILIES: dict[str, type[AbstractFamily]] = {f.signal: f for f in (GridSignals, EMFSignals, DriveScenarios)}

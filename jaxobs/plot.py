@@ -22,6 +22,7 @@ from ._plot_bode import resonance_grid as resonance_grid
 from ._plot_paper import Panel as Panel
 from ._plot_paper import Series as Series
 from ._plot_paper import paper_figure as paper_figure
+from .metrics import METRICS as _METRICS
 from .quantities import text_unit
 
 
@@ -180,7 +181,7 @@ def position_error_figure(sol, names, title, path=None, t_from: float = 0.0):
 _STUDY_PLOT = {
     "settling_freq": (1.0, "s", "settling time"),
     "ripple_freq": (1.0, "Hz p-p", "steady frequency ripple"),
-    "rms_phase": (180.0 / math.pi, "deg", "steady rms phase error"),
+    "rms_phase_steady": (180.0 / math.pi, "deg", "steady rms phase error"),
 }
 # axes' units when the Dataset has none (a study written before the units were added)
 _AXIS_UNITS = {
@@ -352,13 +353,14 @@ _DRIVE_AXIS_LABELS = {
     "dead_time": "dead time (µs)",
 }
 _DRIVE_AXIS_SCALE = {"dead_time": 1e6}
+# in their display units (jaxobs.metrics.Metric.shown: the study stores SI)
 _DRIVE_METRIC_LABELS = {
-    "pos_err_rms_deg": "rms position error (deg el.)",
-    "pos_err_max_deg": "peak position error (deg el.)",
-    "speed_err_rms_rpm": "rms speed-estimate error (r/min)",
-    "speed_noise_rpm": "speed-estimate noise (r/min)",
-    "pos_bias_deg": "steady position lag |mean| (deg el.)",
-    "speed_dev_max_rpm": "peak speed deviation after the event (r/min)",
+    "rms_position_steady": "rms position error (deg el.)",
+    "peak_position_steady": "peak position error (deg el.)",
+    "rms_speed_estimate_steady": "rms speed-estimate error (r/min)",
+    "speed_noise": "speed-estimate noise (r/min)",
+    "bias_position": "steady position lag |mean| (deg el.)",
+    "peak_speed_deviation": "peak speed deviation after the event (r/min)",
 }
 
 
@@ -401,6 +403,7 @@ def drive_study_figure(ds, path):
     and 95 % quantile (dashed) against each swept axis, over the other axes (a grid) or in bins of the
     axis (a Sobol/LHS sample).  Axes and metrics are labelled in words with their units."""
     metrics = [v[: -len("_q")] for v in ds.data_vars if v.endswith("_q")]  # the metrics with quantiles
+    ds = ds.assign({m: _METRICS[m].shown(ds[m]) for m in metrics if m in _METRICS})  # SI -> display units
     axes = [k for k in ds[metrics[0]].dims if k not in ("design", "sample")]
     if "sample" in ds.dims:
         axes = [k for k in ds.coords if ds[k].dims == ("sample",) and k != "sample"]
@@ -466,12 +469,12 @@ def drive_study_figure(ds, path):
     return fig
 
 
-# the envelope map's panels: variable -> (label, colour map, centred at 0)
+# the envelope map's panels: variable -> (label, colour map, centred at 0, scale to the shown unit: the file is SI)
 _ENVELOPE_PANELS = {
-    "margin": ("stability margin (1/s; < 0: unstable)", "RdBu", True),
-    "pos_err_max_deg": ("peak position error, late window (deg el.)", "viridis", False),
-    "pos_bias_deg": ("steady position bias (deg el.)", "PuOr", True),
-    "pos_ripple_deg": ("position-error ripple, rms (deg el.)", "viridis", False),
+    "margin": ("stability margin (1/s; < 0: unstable)", "RdBu", True, 1.0),
+    "peak_position_late": ("peak position error, late window (deg el.)", "viridis", False, 180.0 / math.pi),
+    "mean_position_late": ("steady position bias (deg el.)", "PuOr", True, 180.0 / math.pi),
+    "ripple_position_late": ("position-error ripple, rms (deg el.)", "viridis", False, 180.0 / math.pi),
 }
 
 
@@ -516,7 +519,7 @@ def _fail_marks(ds, d, extra, h):
 
     def every(name):
         v = ds[name].sel(design=d).astype(bool)
-        return np.asarray((v.all(extra) if extra else v).transpose("speed_rpm", "load").values, dtype=bool)
+        return np.asarray((v.all(extra) if extra else v).transpose("speed_rpm", "load_nm").values, dtype=bool)
 
     fails = h < 0.5
     unsync = fails & ~every("synchronous")
@@ -540,16 +543,16 @@ def envelope_figure(ds, path):
     halo = [withStroke(linewidth=2.2, foreground="w")]  # a mark stays visible on the darkest cells
 
     designs = list(ds["design"].values)
-    extra = [d for d in ds["holds"].dims if d not in ("design", "speed_rpm", "load")]
-    worst = {"margin": "min", "pos_err_max_deg": "max", "pos_ripple_deg": "max"}
+    extra = [d for d in ds["holds"].dims if d not in ("design", "speed_rpm", "load_nm")]
+    worst = {"margin": "min", "peak_position_late": "max", "ripple_position_late": "max"}
 
     def reduce(name):
         v = ds[name]
-        if name == "pos_bias_deg":  # the bias of largest magnitude, with its sign
+        if name == "mean_position_late":  # the bias of largest magnitude, with its sign
             return v.isel({extra[0]: abs(v).fillna(-1.0).argmax(extra[0])}) if extra else v
         return getattr(v, worst.get(name, "min"))(extra) if extra else v
 
-    sp, ld = ds["speed_rpm"].values, ds["load"].values
+    sp, ld = ds["speed_rpm"].values, ds["load_nm"].values
     xe, ye = _log_edges(sp), _lin_edges(ld)
     # at most 8 tick labels an axis (every k-th grid value), so that 3 inches of panel stay legible
     xtick, ytick = slice(None, None, -(-sp.size // 8)), slice(None, None, -(-ld.size // 8))
@@ -561,8 +564,8 @@ def envelope_figure(ds, path):
     axs = fig.subplots(len(rows), len(designs), squeeze=False)
     holds = reduce("holds") if not extra else ds["holds"].min(extra)
     for r, name in enumerate(rows):
-        label, cmap, centred = _ENVELOPE_PANELS[name]
-        vals = np.asarray(reduce(name).transpose("design", "speed_rpm", "load").values, dtype=float)
+        label, cmap, centred, scale = _ENVELOPE_PANELS[name]
+        vals = scale * np.asarray(reduce(name).transpose("design", "speed_rpm", "load_nm").values, dtype=float)
         fin = vals[np.isfinite(vals)]
         if centred:
             lim = float(np.percentile(np.abs(fin), 95)) if fin.size else 1.0
@@ -580,7 +583,7 @@ def envelope_figure(ds, path):
                           hatch="///", lw=0, zorder=0)
             )  # fmt: skip
             mesh = ax.pcolormesh(xe, ye, vals[c].T, cmap=cmap, vmin=vmin, vmax=vmax, shading="flat", zorder=1)
-            h = np.asarray(holds.sel(design=d).transpose("speed_rpm", "load").values, dtype=float)
+            h = np.asarray(holds.sel(design=d).transpose("speed_rpm", "load_nm").values, dtype=float)
             _outline(ax, h >= 0.5, xe, ye)
             # each failing point marked by why it fails (the first reason of: not synchronous, not resolved
             # stable, error over the bound): a crossed point whose panels all look benign was a puzzle

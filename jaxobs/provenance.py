@@ -26,6 +26,8 @@ __all__ = [
     "REFERENCES",
     "cf_dataset",
     "cf_missing",
+    "by_label",
+    "cf_labels",
     "provenance",
     "read_file",
     "sha256",
@@ -197,3 +199,52 @@ def cf_missing(ds) -> list[str]:
         if ds[name].dtype.kind in "biuf" and not attrs.get("units"):
             out.append(f"{name}: no units")
     return out
+
+
+def cf_labels(ds):
+    """``ds`` as a NetCDF holds it: each dimension whose coordinate is a list of names (``design``; ``recording``,
+    the files of a study or a job on recordings) gets a numeric index as its coordinate (0, 1, ... as int32), and
+    the names a label variable ``<dim>_label`` beside it (CF 1.8, 6.1: a string-valued auxiliary coordinate).  A
+    string coordinate variable is not ordered, which CF checkers read as one that is not monotonic (compliance-
+    checker's check raised on it).  :func:`by_label` reads a file back.
+
+    Args:
+        ds: an ``xarray.Dataset`` (a study, scores, an envelope).
+
+    Returns:
+        A new Dataset (``ds`` itself where no dimension coordinate is a list of names).
+    """
+    out = ds
+    for dim in list(ds.dims):
+        if dim not in ds.coords or ds[dim].dtype.kind not in "OUS":
+            continue
+        names = ds[dim]
+        what = names.attrs.get("long_name", dim)
+        out = out.assign_coords(
+            {
+                dim: (dim, np.arange(names.size, dtype=np.int32), {"units": "1", "long_name": f"{what}: its index"}),
+                f"{dim}_label": (dim, [str(n) for n in names.values], {"long_name": f"{what}: its name"}),
+            }
+        )
+        out[dim].encoding["_FillValue"] = None
+    return out
+
+
+def by_label(ds):
+    """:func:`cf_labels`'s inverse: ``ds`` read from a NetCDF with the names as the coordinates again
+    (``ds.sel(design="tuned")``); ``ds`` itself where it has no ``<dim>_label``.
+
+    Args:
+        ds: an ``xarray.Dataset`` read from a NetCDF of jaxobs.
+
+    Returns:
+        The Dataset labelled by the names.
+    """
+    for dim in list(ds.dims):
+        label = f"{dim}_label"
+        if label not in ds.variables:
+            continue
+        what = str(ds[label].attrs.get("long_name", dim)).removesuffix(": its name")
+        names = [str(n) for n in ds[label].values]
+        ds = ds.drop_vars(label).assign_coords({dim: (dim, names, {"long_name": what})})
+    return ds

@@ -1,23 +1,22 @@
-"""The records that name what a study varies and what it measures: :class:`Axis` and :class:`Metric`.
+"""The record that names what a study varies: :class:`Axis`, and the spelling of a unit.
 
 Each axis a scenario family varies is one :class:`Axis` (its name, its CF units, the range it may take and
 what it is in words), declared once, in the family's table (:data:`jaxobs.scenarios.GRID_SIGNAL_AXES`,
-:data:`jaxobs.scenarios.EMF_SIGNAL_AXES`, :data:`jaxobs.drive.DRIVE_AXES`).  Each metric a study or a tuning
-job reports is one :class:`Metric` (its name, CF units, long name, and its exact and smooth forms), declared
-once, in :data:`jaxobs.families.METRICS`.  Units are UDUNITS strings, as CF readers parse them (``degree``,
-``min-1`` for r/min, ``N m``); :func:`text_unit` spells one for a message or a figure's label.
+:data:`jaxobs.scenarios.EMF_SIGNAL_AXES`, :data:`jaxobs.drive.DRIVE_AXES`).  What a study measures is the
+metric table's (:data:`jaxobs.metrics.METRICS`, one :class:`jaxobs.metrics.Metric` per quantity).  Units are
+UDUNITS strings, as CF readers parse them (``degree``, ``min-1`` for r/min, ``N m``); :func:`text_unit` spells
+one for a message or a figure's label.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
 from dataclasses import dataclass
 
-__all__ = ["Axis", "Metric", "text_unit"]
+__all__ = ["Axis", "text_unit"]
 
 # a CF unit -> its spelling in a message or a label ("degree" is "deg", "min-1" is "r/min")
-_TEXT = {"degree": "deg", "min-1": "r/min", "N m": "N·m"}
+_TEXT = {"degree": "deg", "min-1": "r/min", "N m": "N·m", "percent": "%"}
 
 
 def text_unit(units: str) -> str:
@@ -90,39 +89,3 @@ class Axis:
         lo = self.range[0] if low is None else low
         hi = self.range[1] if high is None else high
         return f"[{lo:g}, {hi:g}]" + ("" if self.units == "1" else f" {text_unit(self.units)}")
-
-
-@dataclass(frozen=True)
-class Metric:
-    """One metric and its forms, each a scalar of one run.
-
-    Attributes:
-        name: The metric's name.
-        units: Its CF units.
-        long_name: What it is.
-        exact: ``exact(sol, scenario, ctx)``: what a study or a report gives.
-        smooth: ``smooth(sol, scenario, ctx)``: what a gradient is taken of (the exact one where that has a
-            useful gradient).
-        closed_loop: It needs the closed-loop drive (a speed, a reference), not an observer on a signal.
-        needs_truth: It needs an observer on a signal that reports its truth (a recording with its encoder:
-            :class:`jaxobs.SignalTruth`).
-    """
-
-    name: str
-    units: str
-    long_name: str
-    exact: Callable | None = None
-    smooth: Callable | None = None
-    closed_loop: bool = False
-    needs_truth: bool = False
-
-    def __call__(self, sol, scenario, ctx):
-        """The form a gradient is taken of: ``smooth``, or ``exact`` where the metric has no smooth form.
-
-        Raises:
-            ValueError: the metric has neither form (it is not a function of one run).
-        """
-        form = self.smooth if self.smooth is not None else self.exact
-        if form is None:
-            raise ValueError(f"metric {self.name} is not a function of one run (it has no exact or smooth form)")
-        return form(sol, scenario, ctx)

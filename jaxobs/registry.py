@@ -176,7 +176,10 @@ def _leso_defaults(**gains):
 def _rofo_defaults() -> dict:
     # the closed form (ReducedOrderFluxObserver.closed_form) at the default ts, in Python floats; the machine's
     # values are placeholders a drive job binds (002's IPMSM, the entry's default machine)
-    k_theta, k_omega = rofo.speed_gains(rofo.ROFO_ALPHA_O_HZ, 1e-4)
+    # (matched_pole in plain floats: importing the registry runs no JAX computation, which would start JAX before
+    # the command line sets its device count)
+    am = rofo.matched_pole(2 * math.pi * rofo.ROFO_ALPHA_O_HZ, 1e-4)
+    k_theta, k_omega = 2.0 * am, am * am
     machine = {k: papers.IPMSM_002[k] for k in ("Rs", "Ld", "Lq", "psi_f")}
     gains = dict(c_sigma=rofo.ROFO_C_SIGMA, zeta_inf=rofo.ROFO_ZETA_INF, k_theta=k_theta, k_omega=k_omega)
     return {**machine, **gains}

@@ -1,7 +1,7 @@
 """The one study runner: every design on every scenario a sampler picks, in chunks, over devices and processes.
 
     run = run_scenarios(designs, Grid(axes), system_factory, metrics, build=..., horizon=0.4)
-    run.values["tuned"]["rms_phase"]          # one value per scenario, in the sampler's order
+    run.values["tuned"]["rms_phase_steady"]       # one value per scenario, in the sampler's order
 
 FLL studies (:func:`jaxobs.study.run_study`), drive studies (:func:`jaxobs.drive_study.run_drive_study`)
 and studies on recordings are this runner with different samplers (:mod:`jaxobs.scenarios`: ``Grid``,

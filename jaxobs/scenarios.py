@@ -52,6 +52,8 @@ __all__ = [
     "Sobol",
     "emf_signals",
     "grid_signals",
+    "sampler_of",
+    "SAMPLINGS",
 ]
 
 # the grid signals' axes (the FLL family): one Axis each (CF units, the range a study or a job may give)
@@ -271,10 +273,12 @@ class AbstractSampler:
     Attributes:
         names: The axes.
         sampling: The Dataset's ``sampling`` attribute.
+        dim_attrs: The attributes of a dim of its own (a :class:`Given` batch's), which no family's axis names.
     """
 
     names: tuple
     sampling: str
+    dim_attrs: ClassVar[dict] = {}
 
     def points(self) -> list[tuple]:
         raise NotImplementedError
@@ -468,6 +472,8 @@ class Given(AbstractSampler):
 
     names: ClassVar[tuple] = ()
     sampling: ClassVar[str] = "given"
+    # the dim's attributes, where the family has no axis of its name (jaxobs.study.study)
+    dim_attrs: ClassVar[dict] = {"units": "1", "long_name": "scenario given whole (jaxobs.scenarios.Given)"}
 
     def __init__(self, batch, labels=None, dim: str = "scenario"):
         sizes = {int(np.shape(x)[0]) for x in jax.tree.leaves(batch) if np.ndim(x) > 0}
@@ -504,6 +510,7 @@ class Recordings(Given):
     """
 
     sampling: ClassVar[str] = "recordings"
+    dim_attrs: ClassVar[dict] = {"long_name": "recording file (relative to the study file)"}
 
     def __init__(self, signals, files, sha256=()):
         self.files = tuple(map(str, files))
@@ -511,3 +518,42 @@ class Recordings(Given):
         if not self.files:
             raise ValueError("Recordings needs at least one recording")
         super().__init__(signals, self.files, dim="recording")
+
+
+# a study's ``sampling`` name -> its sampler over a dict of axes (the presets' and the study files' one table)
+SAMPLINGS: dict[str, type] = {"grid": Grid, "random": Random, "sobol": Sobol, "lhs": LHS}
+
+
+def sampler_of(axes, *, sampling: str | None = None, sample: int = 0, seed: int = 0) -> AbstractSampler:
+    """The sampler of a study: how both presets (:func:`jaxobs.study.run_study`,
+    :func:`jaxobs.drive_study.run_drive_study`) take their scenarios.
+
+    Args:
+        axes: A sampler, taken as it is; or a dict of axis values: a :class:`Grid`, or ``sample`` points drawn
+            by ``sampling``.
+        sampling: ``"grid"``, ``"random"``, ``"sobol"`` or ``"lhs"`` (:data:`SAMPLINGS`); None: ``"random"``
+            with ``sample`` > 0, else ``"grid"``.
+        sample: The number of points drawn (0 with a grid).
+        seed: The draws' seed.
+
+    Returns:
+        The sampler.
+
+    Raises:
+        ValueError: ``axes`` neither, an unknown ``sampling``, ``sample`` given with a grid or a sampler, or a
+            value its sampler refuses (each naming the field).
+    """
+    if isinstance(axes, AbstractSampler):
+        if sampling is not None or sample:
+            raise ValueError("sampling and sample apply to a dict of axes; a sampler is taken as it is")
+        return axes
+    if not isinstance(axes, dict):
+        raise ValueError(f"axes must be a dict of axis values or a sampler (jaxobs.scenarios), got {axes!r}")
+    sampling = ("random" if sample else "grid") if sampling is None else sampling
+    if sampling not in SAMPLINGS:
+        raise ValueError(f"sampling must be 'grid', 'random', 'sobol' or 'lhs', got {sampling!r}")
+    if sampling == "grid":  # the table's one sampler without a count
+        if sample:
+            raise ValueError("sample applies to sampling 'random', 'sobol' or 'lhs' (a grid runs every combination)")
+        return Grid(axes)
+    return SAMPLINGS[sampling](axes, sample, seed)

@@ -2,9 +2,10 @@
 
 :func:`study` is the one study: every design on every scenario a sampler (:mod:`jaxobs.scenarios`) picks
 from a family (:mod:`jaxobs.families`), run by :func:`jaxobs.runner.run_scenarios`, scored by
-:class:`~jaxobs.quantities.Metric` s (their exact forms; :data:`METRICS` is the table) and
-:class:`Flag` s, and laid out with the sampler's dims, CF units and the designs' gains.  The FLL study
-(:func:`run_study`, below) and the drive study (:func:`jaxobs.drive_study.run_drive_study`) are presets of it.
+:class:`~jaxobs.metrics.Metric` s of the one metric table (:data:`jaxobs.metrics.METRICS`: their exact forms,
+the flags among them: boolean metrics), and laid out with the sampler's dims, CF units and the designs' gains.
+The FLL study (:func:`run_study`, below) and the drive study (:func:`jaxobs.drive_study.run_drive_study`) are
+presets of it.
 
 The FLL study:
 
@@ -53,7 +54,8 @@ Sampled scenarios are single-phase grid signals (the FLL family) built by
 standard deviation, p.u., with a per-scenario seed).
 Metrics (exact versions): ``settling_freq`` (s after the event for the
 one-period average of f̂ to stay within ``band_hz`` of the final frequency), ``ripple_freq`` (steady p-p, Hz),
-``rms_phase`` (steady rms phase error, rad), ``itae_freq`` and ``iae_phase``.
+``rms_phase_steady`` (steady rms phase error, rad), ``itae_freq`` and ``iae_phase`` (the family's default
+metrics, :attr:`jaxobs.families.GridSignals.metrics`).
 """
 
 from __future__ import annotations
@@ -61,372 +63,45 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, replace
-from typing import Any, NamedTuple
+from dataclasses import replace
 
 import jax.numpy as jnp
 import numpy as np
 
 from . import metrics as M
 from ._simulate import AbstractSave, SaveAll
-from .drive import DriveOutput, DualOutput
-from .families import AbstractScenarios, GridSignals, RecordedSignals
+from .families import AbstractFamily, GridSignals
+from .files import atomic_path
 from .observers import gain_fields, gain_table
-from .provenance import cf_dataset, provenance
-from .quantities import Metric
+from .provenance import cf_dataset, cf_labels, provenance
 from .runner import run_scenarios
-from .scenarios import GRID_SIGNAL_AXES, LHS, AbstractSampler, Grid, Random, Recordings, Sobol
+from .scenarios import GRID_SIGNAL_AXES, LHS, AbstractSampler, Grid, Random, Recordings, Sobol, sampler_of
 
-__all__ = ["Flag", "METRICS", "STUDY_AXES", "STUDY_METRICS", "StudyContext", "study", "run_study", "worst_cases"]
-
-
-@dataclass(frozen=True)
-class StudyContext:
-    """What the metrics read beside the run: the event ``t_event`` (s), the steady window's start
-    ``steady_from`` (s), the settling band ``band_hz`` (Hz), the smooth forms' ``temperature`` (s, or the
-    metric's units), ``settling_position``'s band ``band_deg`` (electrical degrees, around the error's own
-    final value), ``settling_speed``'s band ``band_rpm`` (r/min, around the reference), the one-period
-    average's length ``n_period`` (samples: a design's, the study's ``static``) and the machine's pole pairs
-    ``p`` (a drive study's speed estimate)."""
-
-    t_event: float = 0.0
-    steady_from: float = 0.0
-    band_hz: float = 0.05
-    temperature: float = 1e-3
-    band_deg: float = 2.0
-    band_rpm: float = 5.0
-    n_period: int = 1
-    p: float = 1.0
+__all__ = [
+    "STUDY_AXES",
+    "STUDY_METRICS",
+    "StudyContext",
+    "study",
+    "run_study",
+    "worst_cases",
+    "write_study",
+    "gain_variables",
+]
 
 
-def _steady(sol, ctx):
-    return sol.t >= ctx.steady_from
-
-
-def _fll(sol):
-    """An FLL run's errors: f̂ (Hz), the true f (Hz), f̂ − f (Hz), the wrapped phase error (rad)."""
-    out = sol.outputs
-    f_hat = out.obs.omega / (2 * math.pi)
-    f_true = out.truth.omega / (2 * math.pi)
-    return f_hat, f_true, f_hat - f_true, M.wrap(out.obs.theta - out.truth.theta)
-
-
-def _freq_err_hz(sol):
-    return (sol.outputs.obs.omega - sol.outputs.truth.omega) / (2 * math.pi)
-
-
-def _phase_err(sol):
-    return M.wrap(sol.outputs.obs.theta - sol.outputs.truth.theta)
-
-
-def _settle_avg(sol, ctx):
-    # settle on the one-period average of f̂: harmonics and dc leave a ripple that is not a transient
-    f_hat, f_true, _, _ = _fll(sol)
-    return M.moving_average(f_hat, ctx.n_period), f_true[-1]
-
-
-def _drive_err_deg(sol):
-    o = sol.outputs
-    return jnp.degrees(M.wrap(o.obs.theta - o.theta_e))
-
-
-def _drive_speed_hat_rpm(sol, ctx):
-    return sol.outputs.obs.omega / ctx.p * 30 / math.pi
-
-
-def scored_position_error(sol, sig, ctx):
-    """The position error (rad, :func:`jaxobs.metrics.position_error`) as the metrics score it.  A drive
-    started from standstill runs on the I-f angle until its hand-over (the FOC's ``mode`` 0 → 1); the
-    observer is not in the loop then and may sit ~90° off while it converges at low speed (measured: the I-f
-    phase was 0.12 of a 0.124 ``iae_position``), which is the start-up's doing, not the observer's.  So its
-    error counts from the hand-over on (a steady start is in mode 1 from t = 0: unchanged).  Inside the steady
-    window it always counts: a drive that has not handed over by then is scored (and flagged lost_sync) on its
-    real error, never rewarded with a zero."""
-    err = M.position_error(sol, sig)
-    if not isinstance(sol.outputs, (DriveOutput, DualOutput)):  # an observer on a signal: no start-up
-        return err
-    return jnp.where((sol.outputs.mode == 1) | _steady(sol, ctx), err, 0.0)
-
-
-def _speed_err_rpm(sol, sc):
-    """Speed-estimate error of a drive observer, ω̂e/p − ωm, in r/min (mechanical); ``sc`` the drive Scenario."""
-    out = sol.outputs
-    return (out.obs.omega / sc.par.p - out.omega_m) * 30 / math.pi
-
-
-def _rpm(omega_m):
-    """Mechanical speed, rad/s -> r/min."""
-    return omega_m * 30 / math.pi
-
-
-def _sample_noise(x, mask):
-    """rms of the sample-to-sample change over √2: the standard deviation of white noise on ``x``,
-    blind to its slow variations (a speed estimate's high-frequency noise)."""
-    return M.rms(jnp.diff(x) / math.sqrt(2.0), mask[1:])
-
-
-# the study metrics, exact forms: the FLL family's on grid signals and recordings, the sensorless drive's
-METRICS: dict[str, Metric] = {
-    m.name: m
-    for m in (
-        Metric(
-            "settling_freq",
-            "s",
-            "settling time of the one-period average of the frequency estimate after the event",
-            exact=lambda sol, sc, ctx: M.settling_time(sol.t, *_settle_avg(sol, ctx), ctx.band_hz, ctx.t_event),
-            # tuning: the frequency estimate itself, a smooth settling time
-            smooth=lambda sol, sc, ctx: M.smooth_settling_time(
-                sol.t,
-                sol.outputs.obs.omega / (2 * math.pi),
-                sol.outputs.truth.omega[-1] / (2 * math.pi),
-                ctx.band_hz,
-                ctx.t_event,
-                temperature=ctx.temperature,
-            ),
-        ),
-        Metric(
-            "ripple_freq",
-            "Hz",
-            "steady peak-to-peak frequency error",
-            exact=lambda sol, sc, ctx: M.peak_to_peak(_fll(sol)[2], sol.t >= ctx.steady_from),
-            smooth=lambda sol, sc, ctx: M.smooth_peak_to_peak(_freq_err_hz(sol), _steady(sol, ctx), 1e-3),
-        ),
-        Metric(
-            "rms_phase",
-            "rad",
-            "steady rms phase error",
-            exact=lambda sol, sc, ctx: M.rms(_fll(sol)[3], sol.t >= ctx.steady_from),
-        ),
-        Metric(
-            "itae_freq",
-            "Hz s2",
-            "ITAE of the frequency error after the event",
-            exact=lambda sol, sc, ctx: M.itae(sol.t, _fll(sol)[2], ctx.t_event),
-            # tuning: the same ITAE, the error formed in rad/s and then scaled to Hz (its own rounding)
-            smooth=lambda sol, sc, ctx: M.itae(sol.t, _freq_err_hz(sol), ctx.t_event),
-        ),
-        Metric(
-            "iae_phase",
-            "rad s",
-            "IAE of the phase error after the event",
-            exact=lambda sol, sc, ctx: M.iae(sol.t, _fll(sol)[3], ctx.t_event),
-        ),
-        Metric(
-            "pos_err_rms_deg",
-            "degree",
-            "rms position error in the steady window (electrical)",
-            exact=lambda sol, sc, ctx: M.rms(_drive_err_deg(sol), sol.t >= ctx.steady_from),
-            closed_loop=True,
-        ),
-        Metric(
-            "pos_err_max_deg",
-            "degree",
-            "peak position error in the steady window (electrical)",
-            exact=lambda sol, sc, ctx: jnp.max(jnp.where(sol.t >= ctx.steady_from, jnp.abs(_drive_err_deg(sol)), 0.0)),
-            closed_loop=True,
-        ),
-        Metric(
-            "speed_err_rms_rpm",
-            "min-1",
-            "rms speed-estimate error in the steady window",
-            exact=lambda sol, sc, ctx: M.rms(
-                _drive_speed_hat_rpm(sol, ctx) - sol.outputs.omega_m * 30 / math.pi, sol.t >= ctx.steady_from
-            ),
-            closed_loop=True,
-        ),
-        Metric(
-            "speed_noise_rpm",
-            "min-1",
-            "speed-estimate noise: rms sample-to-sample change / sqrt(2)",
-            exact=lambda sol, sc, ctx: M.rms(
-                jnp.diff(_drive_speed_hat_rpm(sol, ctx)) / math.sqrt(2.0), (sol.t >= ctx.steady_from)[1:]
-            ),
-            # tuning: the scenario's own pole pairs
-            smooth=lambda sol, sc, ctx: _sample_noise(
-                sol.outputs.obs.omega / sc.par.p * 30 / math.pi, _steady(sol, ctx)
-            ),
-            closed_loop=True,
-        ),
-        Metric(
-            "pos_bias_deg",
-            "degree",
-            "|mean position error| in the steady window (electrical): the observer's steady lag",
-            exact=lambda sol, sc, ctx: jnp.abs(M.steady_mean(_drive_err_deg(sol), sol.t >= ctx.steady_from)),
-            closed_loop=True,
-        ),
-        Metric(
-            "speed_dev_max_rpm",
-            "min-1",
-            "peak |true speed - reference| after t_event (a load step's dip)",
-            exact=lambda sol, sc, ctx: (
-                M.peak_deviation(sol.t, sol.outputs.omega_m, sol.outputs.omega_m_ref, ctx.t_event) * 30 / math.pi
-            ),
-            closed_loop=True,
-        ),
-        # tuning's metrics (jaxobs_tuning.objective: smooth where the exact one has no useful gradient)
-        Metric(
-            "iae_freq",
-            "Hz s",
-            "IAE of the frequency error after the event",
-            exact=lambda sol, sc, ctx: M.iae(sol.t, _freq_err_hz(sol), ctx.t_event),
-        ),
-        Metric(
-            "itae_phase",
-            "rad s2",
-            "ITAE of the phase error after the event",
-            exact=lambda sol, sc, ctx: M.itae(sol.t, _phase_err(sol), ctx.t_event),
-        ),
-        Metric(
-            "rms_freq_steady",
-            "Hz",
-            "steady rms frequency error",
-            exact=lambda sol, sc, ctx: M.rms(_freq_err_hz(sol), _steady(sol, ctx)),
-        ),
-        Metric(
-            "rms_phase_steady",
-            "rad",
-            "steady rms phase error",
-            exact=lambda sol, sc, ctx: M.rms(_phase_err(sol), _steady(sol, ctx)),
-        ),
-        # flux observers on EMF signals, and drive observers
-        Metric(
-            "iae_position",
-            "rad s",
-            "IAE of the position error after the event (from the I-f hand-over on)",
-            exact=lambda sol, sc, ctx: M.iae(sol.t, scored_position_error(sol, sc, ctx), ctx.t_event),
-        ),
-        Metric(
-            "rms_position_steady",
-            "rad",
-            "steady rms position error (electrical)",
-            exact=lambda sol, sc, ctx: M.rms(M.position_error(sol, sc), _steady(sol, ctx)),
-        ),
-        Metric(
-            "ripple_position",
-            "rad",
-            "steady peak-to-peak position error (electrical)",
-            smooth=lambda sol, sc, ctx: M.smooth_peak_to_peak(M.position_error(sol, sc), _steady(sol, ctx), 1e-4),
-        ),
-        # drive observers in the closed loop (the scenario is a drive Scenario): settling after a load or speed
-        # step at t_event, and the noise the estimates carry.  settling_position settles to a band around the
-        # error's own final value (its mean over the steady window), so a steady lag settles; the lag is
-        # bias_position
-        Metric(
-            "settling_position",
-            "s",
-            "settling time of the position error to its own steady value after the event",
-            smooth=lambda sol, sc, ctx: M.smooth_settling_to_steady(
-                sol.t,
-                scored_position_error(sol, sc, ctx),
-                math.radians(ctx.band_deg),
-                _steady(sol, ctx),
-                ctx.t_event,
-                temperature=ctx.temperature,
-            ),
-            closed_loop=True,
-        ),
-        Metric(
-            "bias_position",
-            "rad",
-            "|mean position error| in the steady window (electrical)",
-            exact=lambda sol, sc, ctx: jnp.abs(M.steady_mean(M.position_error(sol, sc), _steady(sol, ctx))),
-        ),
-        # the true speed against its reference (r/min): after a speed step its settling, after a load step its
-        # recovery time; and the peak deviation after it
-        Metric(
-            "settling_speed",
-            "s",
-            "settling time of the speed to its reference after the event",
-            smooth=lambda sol, sc, ctx: M.smooth_settling_to_reference(
-                sol.t,
-                _rpm(sol.outputs.omega_m),
-                _rpm(sol.outputs.omega_m_ref),
-                ctx.band_rpm,
-                ctx.t_event,
-                temperature=ctx.temperature,
-            ),
-            closed_loop=True,
-        ),
-        Metric(
-            "peak_speed_dev",
-            "min-1",
-            "peak |speed - reference| after the event",
-            smooth=lambda sol, sc, ctx: M.smooth_peak_deviation(
-                sol.t,
-                _rpm(sol.outputs.omega_m),
-                _rpm(sol.outputs.omega_m_ref),
-                ctx.t_event,
-                temperature=ctx.temperature,
-            ),
-            closed_loop=True,
-        ),
-        Metric(
-            "rms_speed_steady",
-            "min-1",
-            "steady rms speed-estimate error",
-            exact=lambda sol, sc, ctx: M.rms(_speed_err_rpm(sol, sc), _steady(sol, ctx)),
-            closed_loop=True,
-        ),
-        # the speed estimate of an observer run open loop on a signal that carries its truth (a drive log with its
-        # encoder, jaxobs.DriveRecording): electrical rad/s, as the recording gives it (its pole pairs are not known)
-        Metric(
-            "rms_speed_error_steady",
-            "rad s-1",
-            "steady rms electrical speed-estimate error against the recorded speed",
-            exact=lambda sol, sc, ctx: M.rms(sol.outputs.obs.omega - sol.outputs.truth.omega, _steady(sol, ctx)),
-            needs_truth=True,
-        ),
-        Metric(
-            "peak_speed_error",
-            "rad s-1",
-            "peak |electrical speed-estimate error| after the event, against the recorded speed",
-            exact=lambda sol, sc, ctx: M.peak_deviation(
-                sol.t, sol.outputs.obs.omega, sol.outputs.truth.omega, ctx.t_event
-            ),
-            # a soft maximum within 0.1·(1 + log n) rad/s of the peak (n: the samples after the event)
-            smooth=lambda sol, sc, ctx: M.smooth_peak_deviation(
-                sol.t, sol.outputs.obs.omega, sol.outputs.truth.omega, ctx.t_event, temperature=0.1
-            ),
-            needs_truth=True,
-        ),
-        # not a function of one run but of the closed loop itself: jaxobs.analysis.stability.lyapunov's largest
-        # non-neutral exponent (1/s) at the scenario, which the objective computes
-        Metric(
-            "stability_margin",
-            "s-1",
-            "largest non-neutral Lyapunov exponent of the closed loop (minus the stability margin)",
-            closed_loop=True,
-        ),
-    )
-}
-
-
-class Flag(NamedTuple):
-    """A per-scenario flag of a study: ``name``, ``long_name``; ``exact(sol, scenario, ctx)`` (a bool; None: the
-    ``diverged`` flag itself: the run or a metric not finite); ``diverged``: a diverged scenario counts as
-    flagged (``True``), or as not (``False``: the flag is kept only where the run is finite); ``count``: the
-    ``long_name`` of ``<name>_count``, the flagged scenarios per design (None: no count); ``dtype``: as stored."""
-
-    name: str
-    long_name: str
-    exact: Callable | None = None
-    diverged: bool = True
-    count: str | None = None
-    dtype: Any = np.int8
-
-
-DIVERGED = Flag("diverged", "simulation diverged or a metric is not finite (1: its metrics are NaN)")
+# what the metrics read beside the run (the metric table's: jaxobs.metrics.MetricContext)
+StudyContext = M.MetricContext
 
 
 def study(
     designs: dict,
-    scenarios: AbstractScenarios,
+    scenarios: AbstractFamily,
     sampler: AbstractSampler,
     metrics,
     *,
     horizon: float,
     ctx: StudyContext = StudyContext(),
-    flags: tuple = (DIVERGED,),
+    flags: tuple = (M.DIVERGED,),
     mask: str | None = "diverged",
     quantiles: tuple = (),
     static: Callable | None = None,
@@ -445,10 +120,12 @@ def study(
         designs: name -> design (an observer), each run on ``scenarios.system(design, scenario)``.
         scenarios: the family (:mod:`jaxobs.families`): its axes label the coordinates, it builds the batches.
         sampler: which points of the axes run, and their layout (:mod:`jaxobs.scenarios`).
-        metrics: :class:`~jaxobs.quantities.Metric` s (their ``exact`` forms), one variable each with its units.
+        metrics: the metric table's entries (:data:`jaxobs.metrics.METRICS`; their ``exact`` forms), one variable
+            each with its SI units.
         horizon: s, of every run.
         ctx: what the metrics read (:class:`StudyContext`); ``ctx.n_period`` is ``static(design)`` where given.
-        flags: the per-scenario flags (:class:`Flag`), stored as variables in this order (``diverged`` among them).
+        flags: the per-scenario flags (the table's boolean metrics, ``kind="flag"``), stored as variables in this
+            order (``diverged`` among them).
         mask: the flag whose scenarios' metrics are NaN (``diverged``, or ``lost_lock``: no steady error to speak
             of); None: every metric as computed.
         quantiles: quantiles over each design's unmasked scenarios, ``<metric>_q`` (dims design, quantile).
@@ -500,7 +177,7 @@ def study(
     )
     values = run.values if store is None else {d: store.load(d) for d in designs}
     dnames = list(designs)
-    dims, shape, coords = sampler.layout(lambda name: _axis_meta(scenarios, name))
+    dims, shape, coords = sampler.layout(lambda name: _axis_meta(scenarios, sampler, name))
     dims = ("design", *dims)
     what = "observer design (closing the loop sensorless)" if scenarios.closed_loop else "observer design"
     coords["design"] = ("design", dnames, {"long_name": what})
@@ -546,12 +223,36 @@ def study(
     return cf_dataset(ds, f"jaxobs {label}: every design on every scenario, its metrics and flags")
 
 
-def _axis_meta(scenarios: AbstractScenarios, name: str) -> dict:
-    if name == "recording":
-        return {"long_name": "recording file (relative to the study file)"}
-    if name == "scenario":
-        return {"units": "1", "long_name": "scenario given whole (jaxobs.scenarios.Given)"}
-    return scenarios.axes[name].attrs
+def gain_variables(designs: dict) -> dict:
+    """The designs' gains as Dataset variables ``gain_<name>`` over ``design``: one variable per gain, so each
+    carries its own CF units (a (design, gain_name) array could only say "see gain_units", which no CF reader
+    understands); NaN where a design has no such gain.  What every preset and the envelope write.
+
+    Args:
+        designs: name -> observer.
+
+    Returns:
+        ``gain_<name>`` -> (dims, values, attrs), each gain's units its field's (:func:`jaxobs.observers.gain`).
+
+    Raises:
+        ValueError: two designs give one gain name different units (:func:`jaxobs.observers.gain_table`).
+    """
+    table = gain_table(designs)
+    # the gain fields alone: what a study binds per scenario (bound_fields) is none
+    gains = {d: {g: float(getattr(obs, g)) for g in gain_fields(obs)} for d, obs in designs.items()}
+    return {
+        f"gain_{g}": (
+            ("design",),
+            np.asarray([gains[d].get(g, np.nan) for d in designs], dtype=float),
+            {"units": info.units, "long_name": f"observer gain {g} (NaN: the design has no such gain)"},
+        )
+        for g, info in table.items()
+    }
+
+
+def _axis_meta(scenarios: AbstractFamily, sampler: AbstractSampler, name: str) -> dict:
+    # a family's axis, or a dim the sampler has of its own (a Given batch's, the recordings')
+    return scenarios.axes[name].attrs if name in scenarios.axes else dict(sampler.dim_attrs)
 
 
 # --------------------------------------------------------------------------
@@ -559,82 +260,84 @@ def _axis_meta(scenarios: AbstractScenarios, name: str) -> dict:
 # --------------------------------------------------------------------------
 
 STUDY_AXES = GRID_SIGNAL_AXES  # the scenarios a study runs: jaxobs.families.GridSignals
-STUDY_METRICS = ("settling_freq", "ripple_freq", "rms_phase", "itae_freq", "iae_phase")
-LOST_LOCK_LONG_NAME = (
-    f"lost lock: diverged, or in the steady window a phase error > {M.LOCK_TOL_DEG:g} deg or a mean frequency "
-    f"error > {100 * M.LOCK_FREQ_TOL:g} % (1: lost)"
-)
-
-
-def _fll_settled(sol, sc, ctx):
-    return M.settled(sol.t, *_settle_avg(sol, ctx), ctx.band_hz, ctx.t_event)
-
-
-def _fll_lost_lock(sol, sc, ctx):
-    # far from the truth over the steady window: phase error > 45° or mean frequency error > 10 %
-    # (jaxobs.metrics, "lost lock")
-    out = sol.outputs
-    return M.lost_lock(
-        out.obs.theta,
-        out.truth.theta,
-        sol.t >= ctx.steady_from,
-        math.radians(M.LOCK_TOL_DEG),
-        omega_hat=out.obs.omega,
-        omega=out.truth.omega,
-        freq_tol=M.LOCK_FREQ_TOL,
-    )
+# the FLL family's default metrics and flags (jaxobs.families.GridSignals declares them)
+STUDY_METRICS = GridSignals.metrics
 
 
 def run_study(
     designs: dict,
     axes,
     *,
-    t_event=0.1,
+    family: GridSignals | None = None,
+    t_event=None,
     horizon=0.4,
     steady_from=None,
     band_hz=0.05,
+    sampling: str | None = None,
     sample=0,
-    seed=0,
+    seed=None,
     chunk_size=2048,
     progress=False,
     return_seconds=False,
     mesh=None,
     store=None,
 ):
-    """Simulate every FLL design on every scenario; returns an ``xarray.Dataset`` (see module doc):
-    :func:`study` on :class:`~jaxobs.families.GridSignals` (or a :class:`~jaxobs.scenarios.Recordings`
-    sampler's recorded voltages) with the FLL metrics.
+    """Simulate every FLL design on every scenario: :func:`study` on :class:`~jaxobs.families.GridSignals` (or a
+    :class:`~jaxobs.scenarios.Recordings` sampler's recorded voltages) with the FLL metrics (see module doc).
 
-    ``axes``: a dict of axis values (a :class:`~jaxobs.scenarios.Grid`, or with ``sample > 0`` a
-    :class:`~jaxobs.scenarios.Random` sample of that size seeded by ``seed``), or a sampler itself
-    (``Grid``, ``Random``, ``Sobol``, ``LHS``, or ``Recordings``: recorded signals with truth columns,
-    dims ``(design, recording)``).  With ``return_seconds=True`` returns ``(dataset, seconds)``, the wall
-    time of the runs (kept out of the Dataset, so two identical studies write identical files).  ``mesh``:
-    the devices each chunk is split over, a one-axis ``"batch"`` mesh (default ``jaxobs.batch_mesh()``,
-    every device of every process; ``jaxobs.batch_mesh(jax.devices()[:1])`` keeps to one device).
-    ``store``: a :class:`jaxobs.chunkstore.ChunkStore`: each chunk's values go to disk as it finishes (none
-    held during the run), chunks already there (an interrupted run's, ``resume=True``) are not run again, and
-    the Dataset is laid out from the store: the same Dataset as without one.
+    Args:
+        designs: name -> FLL.
+        axes: a dict of axis values, or a sampler itself (``Grid``, ``Random``, ``Sobol``, ``LHS``, or
+            ``Recordings``: recorded signals with truth columns, dims ``(design, recording)``), as
+            :func:`jaxobs.scenarios.sampler_of` takes them (with ``sampling``, ``sample`` and ``seed``).
+        family: the grid signals (:class:`~jaxobs.families.GridSignals`: their event, nominal frequency and
+            seed); None: built from ``t_event`` (default 0.1 s), ``seed`` (default 0) and the first design's
+            nominal frequency.
+        t_event: the event's time, s (with ``family``: its own).
+        horizon, steady_from, band_hz: the run's length, the steady window's start (default three quarters
+            of the way from ``t_event``) and the settling band, Hz.
+        sampling, sample, seed: how a dict of axes is sampled (:func:`jaxobs.scenarios.sampler_of`; ``seed``
+            with ``family``: its own).
+        chunk_size: scenarios per compiled call.
+        progress: ``True``: a tqdm bar; a callable ``progress(done, total)``.
+        return_seconds: also return the wall time of the runs (kept out of the Dataset, so two identical
+            studies write identical files).
+        mesh: the devices each chunk is split over, a one-axis ``"batch"`` mesh (default
+            ``jaxobs.batch_mesh()``, every device of every process, as every preset;
+            ``jaxobs.batch_mesh(jax.devices()[:1])`` keeps to one device).
+        store: a :class:`jaxobs.chunkstore.ChunkStore`: each chunk's values go to disk as it finishes, chunks
+            already there (an interrupted run's, ``resume=True``) are not run again, and the Dataset is laid
+            out from the store: the same Dataset as without one.
+
+    Returns:
+        The Dataset, or ``(dataset, seconds)`` with ``return_seconds``.
+
+    Raises:
+        ValueError: no designs, an axis or sampler refused, ``family`` given with ``t_event`` or ``seed``, or
+            ``horizon``, ``t_event`` or ``chunk_size`` out of range.
     """
     if not designs:
         raise ValueError("run_study needs at least one design")
-    if isinstance(axes, dict):
-        for name in axes:  # names and values are checked by grid_signals
-            if len(axes[name]) < 1:
-                raise ValueError(f"study axis {name!r} needs at least one value")
-        sampler = Random(axes, sample, seed) if sample else Grid(axes)
-    elif isinstance(axes, AbstractSampler):
-        sampler = axes
-    else:
-        raise ValueError(f"axes must be a dict of axis values or a sampler (jaxobs.scenarios), got {axes!r}")
+    if family is not None:
+        if not isinstance(family, GridSignals):
+            raise ValueError(f"run_study: family must be GridSignals (jaxobs.families), got {type(family).__name__}")
+        if t_event is not None or seed is not None:
+            raise ValueError("run_study: give family or t_event and seed, not both (the family holds its own)")
+        t_event, seed = family.t_event, family.seed
+    t_event = 0.1 if t_event is None else t_event
+    seed = 0 if seed is None else seed
+    sampler = sampler_of(axes, sampling=sampling, sample=sample, seed=seed)
     if not horizon > t_event >= 0:
         raise ValueError(f"horizon must exceed t_event >= 0, got t_event={t_event}, horizon={horizon}")
     if chunk_size < 1:
         raise ValueError(f"chunk_size must be >= 1, got {chunk_size}")
     steady_from = t_event + 0.75 * (horizon - t_event) if steady_from is None else steady_from
     recordings = isinstance(sampler, Recordings)
-    freq = float(next(iter(designs.values())).omega_n) / (2 * math.pi)
-    family = RecordedSignals(GridSignals) if recordings else GridSignals(t_event, freq, seed)
+    freq = float(next(iter(designs.values())).omega_n) / (2 * math.pi) if family is None else family.freq
+    if recordings:
+        family = GridSignals.recorded()
+    elif family is None:
+        family = GridSignals(t_event, freq, seed)
 
     def n_period(obs) -> int:
         # settle on the one-period average of f̂: one period of the grid's frequency (a recording's: the
@@ -648,29 +351,10 @@ def run_study(
         # grid_signals's checks is a bound on one axis, so these two pass only if every point inside does)
         ends = [tuple(float(f(sampler.axes[k])) for k in sampler.names) for f in (np.min, np.max)]
         family.build(sampler.names, ends)
-    gains_present = gain_table(designs)  # each gain's units are its field's (jaxobs.observers.gain)
-    # one variable per gain, so each carries its own CF units (a (design, gain_name) array could only say
-    # "see gain_units", which no CF reader understands)
-    gains = {
-        f"gain_{g}": (
-            ("design",),
-            np.asarray([float(getattr(obs, g)) if g in gain_fields(obs) else np.nan for obs in designs.values()]),
-            {"units": gains_present[g].units, "long_name": f"observer gain {g} (NaN: the design has no such gain)"},
-        )
-        for g in gains_present
-    }
+    gains = gain_variables(designs)
     what = "recordings on which the design lost lock" if recordings else "scenarios that lost lock"
-    flags = (
-        Flag(
-            "settled",
-            "settled by the horizon (False: settling_freq is censored at horizon - t_event)",
-            _fll_settled,
-            diverged=False,
-            dtype=bool,
-        ),
-        DIVERGED,
-        Flag("lost_lock", LOST_LOCK_LONG_NAME, _fll_lost_lock, count=f"{what} (diverged ones included)"),
-    )
+    flags = tuple(M.METRICS[k] for k in GridSignals.flags)
+    flags = tuple(replace(f, count=f"{what} (diverged ones included)") if f.name == "lost_lock" else f for f in flags)
     attrs = dict(
         t_event=t_event,
         horizon=horizon,
@@ -687,7 +371,7 @@ def run_study(
         designs,
         family,
         sampler,
-        [METRICS[k] for k in STUDY_METRICS],
+        [M.METRICS[k] for k in STUDY_METRICS],
         horizon=horizon,
         ctx=StudyContext(t_event=t_event, steady_from=steady_from, band_hz=band_hz),
         flags=flags,
@@ -710,6 +394,7 @@ def worst_cases(ds, metric: str, k: int = 5):
     Diverged scenarios (no finite metric) are the worst of all: they come first, with ``value`` None and
     ``diverged`` True, never dropped; then the finite values, largest first.
     """
+    metric = M.canonical(metric, "worst_cases(metric)")[0]
     out = []
     has_div = "diverged" in ds
     has_lost = "lost_lock" in ds
@@ -735,3 +420,23 @@ def worst_cases(ds, metric: str, k: int = 5):
             item.update(design=str(d), metric=metric)
             out.append(item)
     return out
+
+
+def write_study(ds, path, store=None) -> None:
+    """The one study writer: ``ds`` as NetCDF4 at ``path`` (h5netcdf), its name coordinates as numeric indexes
+    with label variables (:func:`jaxobs.provenance.cf_labels`), written beside it and renamed over it
+    (:func:`jaxobs.files.atomic_path`), so a ``path`` that exists is a whole study.
+
+    Args:
+        ds: A study's Dataset (:func:`study`, a preset's).
+        path: The file (``study.nc``).
+        store: The :class:`jaxobs.chunkstore.ChunkStore` the study ran into, or None: retired before the rename
+            (never both on disk: a ``--resume`` would be refused, its chunks left) and removed after it
+            (the results are in ``path``: nothing is left to resume).
+    """
+    with atomic_path(path) as tmp:
+        cf_labels(ds).to_netcdf(tmp, engine="h5netcdf")  # a numeric design index, the names its label
+        if store is not None:
+            store.retire()
+    if store is not None:
+        store.remove()

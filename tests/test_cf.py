@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from jaxobs.provenance import CONVENTIONS, REFERENCES, cf_dataset, cf_missing
+from jaxobs.provenance import CONVENTIONS, REFERENCES, by_label, cf_dataset, cf_labels, cf_missing
 from jaxobs_tuning.cli import main
 from tests.cfcheck import assert_cf18, cf_failures
 from tests.test_tuning import GOOD
@@ -31,8 +31,15 @@ def test_cf_dataset_sets_the_global_attributes_int32_and_no_fill_on_coordinates(
     assert ds["count"].dtype == np.int32 and ds["scenario"].dtype == np.int32  # CF 1.8: no int64, no unsigned
     assert ds["count"].attrs["long_name"] == "scenarios lost" and ds["scenario"].attrs["units"] == "1"
     assert list(ds["count"].values) == [3, 0] and cf_missing(ds) == []
-    ds.to_netcdf(tmp_path / "x.nc", engine="h5netcdf")
+    # the designs' names as a string coordinate variable: compliance-checker's monotonicity check fails on it
+    ds.to_netcdf(tmp_path / "names.nc", engine="h5netcdf")
+    assert any("monotonicity" in f for f in cf_failures(tmp_path / "names.nc"))
+    # as the commands write it: a numeric design index, the names its label; read back by name
+    cf_labels(ds).to_netcdf(tmp_path / "x.nc", engine="h5netcdf")
     assert_cf18(tmp_path / "x.nc")
+    back = by_label(xr.load_dataset(tmp_path / "x.nc", engine="h5netcdf"))
+    assert list(back["design"].values) == ["a", "b"] and int(back["count"].sel(design="b")) == 0
+    assert back["design"].attrs["long_name"] == "observer design" and "design_label" not in back.variables
     # what the checks catch: a variable without long_name or units, a coordinate with a _FillValue, int64
     bad = _dataset()
     bad["value"] = ("design", [1.0, 2.0])
@@ -58,6 +65,10 @@ def test_tune_on_sampled_scenarios_writes_cf_scores_and_holdout_scores(tmp_path)
     assert main(["tune", str(path), "--out", str(tmp_path / "o"), "--quiet"]) == 0
     for name in ("scores.nc", "holdout_scores.nc"):
         assert_cf18(tmp_path / "o" / name)
-    ds = xr.load_dataset(tmp_path / "o" / "scores.nc", engine="h5netcdf")
+    raw = xr.load_dataset(tmp_path / "o" / "scores.nc", engine="h5netcdf")
+    assert raw["design"].dtype == np.int32 and list(raw["design_label"].values) == ["initial", "closed_form", "tuned"]
+    ds = by_label(raw)
     assert ds["itae_freq"].dims == ("design", "scenario") and ds["scenario"].dtype == np.int32
-    assert "held out" in xr.load_dataset(tmp_path / "o" / "holdout_scores.nc", engine="h5netcdf").attrs["title"]
+    assert (
+        "held out" in by_label(xr.load_dataset(tmp_path / "o" / "holdout_scores.nc", engine="h5netcdf")).attrs["title"]
+    )

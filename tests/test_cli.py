@@ -80,6 +80,20 @@ def test_import_jaxobs_leaves_the_environment_alone():
     assert p.returncode == 0, p.stderr
 
 
+def test_importing_the_command_line_starts_no_jax_backend():
+    """Importing the command line (and so the library, the registry, the job and export tables) runs no JAX
+    computation: the first would start JAX with its default device count before ``main`` sets it."""
+    code = (
+        "import jax._src.xla_bridge as xb\n"
+        "def started(*a, **k):\n"
+        "    raise SystemExit('a JAX computation at import')\n"
+        "xb.backends = started\n"
+        "import jaxobs_tuning.cli\n"
+    )
+    p = _python(code)
+    assert p.returncode == 0, p.stderr[-2000:]
+
+
 def test_library_never_imports_tuning():
     """Every module of jaxobs/ but the ``python -m jaxobs`` entry point imports without tuning/."""
     code = (

@@ -172,7 +172,7 @@ def test_a_drive_study_runs_the_users_drive_file(tmp_path):
     st.write_text(STUDY.format(speed="1000.0"))
     spec = load_study(st)
     assert spec.provenance["machine"].startswith("teknic_m2310p:")
-    assert int(spec.opts["machine"].p) == 4 and float(spec.opts["drive"].ts) == pytest.approx(5e-5, rel=1e-15)
+    assert int(spec.family.machine.p) == 4 and float(spec.family.drive.ts) == pytest.approx(5e-5, rel=1e-15)
     assert float(spec.designs["cf"].ts) == pytest.approx(5e-5, rel=1e-15)  # the closed form at the drive's period
     st.write_text(STUDY.format(speed="6000.0"))
     with pytest.raises(JobError, match=r"^axes\.speed_rpm\[0\]: must be in \[1, 5172\] r/min on teknic_m2310p"):
@@ -207,6 +207,6 @@ def test_verdicts_on_a_users_drive_agree_with_pulse_simulations():
         system = lambda obs, sc: jaxobs.drive.ClosedLoop(drive, bind_observer(obs, sc), sc)  # noqa: E731
         return pulse_held(system, {"cf": cf}, par, foc, points, height=height, horizon=horizon)["cf"]
 
-    verdict = [int(ds["holds"].sel(design="cf", speed_rpm=s, load=ld)) == 1 for s, ld in points]
+    verdict = [int(ds["holds"].sel(design="cf", speed_rpm=s, load_nm=ld)) == 1 for s, ld in points]
     assert held(0.02).tolist() == verdict and held(-0.02).tolist() == verdict, verdict
     assert verdict == [False, False, False, True, False, True]

@@ -15,6 +15,7 @@ import jaxobs
 from jaxobs import drive as D
 from jaxobs import papers
 from jaxobs.drive_study import QUANTILES, run_drive_study
+from jaxobs.provenance import by_label
 from jaxobs_tuning.cli import main
 from jaxobs_tuning.job import COMPONENTS, DriveSpec, JobError, job_drive
 from jaxobs_tuning.study_file import load_study
@@ -32,19 +33,20 @@ def test_grid_study_dims_quantiles_and_the_papers_ordering():
     frequency-adaptive internal model beats the C-LESO's lag on every scenario (002's point)."""
     axes = {"speed_rpm": [300.0, 600.0], "dRs": [-0.3, 0.3], "dLq": [-0.2, 0.2]}
     ds = run_drive_study(DESIGNS, axes, machine=PAR, drive=DRIVE, horizon=0.06, chunk_size=8)
-    assert ds["pos_err_rms_deg"].dims == ("design", "speed_rpm", "dRs", "dLq")
+    assert ds["rms_position_steady"].dims == ("design", "speed_rpm", "dRs", "dLq")
     assert list(ds["quantile"].values) == list(QUANTILES)
     assert int(ds["lost_lock_count"].sum()) == 0
     assert int(ds["lost_speed_count"].sum()) == 0 and ds["lost_speed"].dims == ds["lost_lock"].dims
-    c, fa = (ds["pos_err_rms_deg"].sel(design=d) for d in ("C-LESO", "FA-LESO"))
+    c, fa = (np.degrees(ds["rms_position_steady"].sel(design=d)) for d in ("C-LESO", "FA-LESO"))
     assert bool((fa < c).all())
     # the C-LESO's steady lag is its transfer function's phase: 11.4° at 300 r/min, 22.6° at 600 (README)
     np.testing.assert_allclose(c.sel(dRs=0.3, dLq=0.2).values, [11.4, 22.6], atol=3.0)
     # ... which is its steady bias: the rms of a steady lag is the lag
-    bias = ds["pos_bias_deg"].sel(design="C-LESO", dRs=0.3, dLq=0.2).values
+    bias = np.degrees(ds["bias_position"].sel(design="C-LESO", dRs=0.3, dLq=0.2).values)
     np.testing.assert_allclose(bias, c.sel(dRs=0.3, dLq=0.2).values, rtol=0.02)
     # quantile 1.0 is the worst scenario
-    assert float(ds["pos_err_rms_deg_q"].sel(design="C-LESO", quantile=1.0)) == pytest.approx(float(c.max()))
+    q1 = float(ds["rms_position_steady_q"].sel(design="C-LESO", quantile=1.0))
+    assert math.degrees(q1) == pytest.approx(float(c.max()))
     for v in ds.data_vars:
         assert "units" in ds[v].attrs, v
 
@@ -60,11 +62,11 @@ def test_sobol_sample_and_bad_axes():
         sample=8,
         chunk_size=8,
     )
-    assert ds["pos_err_rms_deg"].dims == ("design", "sample") and ds.sizes["sample"] == 8
+    assert ds["rms_position_steady"].dims == ("design", "sample") and ds.sizes["sample"] == 8
     spd = ds["speed_rpm"].values
     assert np.all((spd >= 300.0) & (spd <= 600.0)) and np.unique(spd).size == 8
     # current noise shows in the speed estimate's sample-to-sample noise
-    noise = ds["speed_noise_rpm"].sel(design="FA-LESO").values
+    noise = ds["speed_noise"].sel(design="FA-LESO").values
     assert np.corrcoef(ds["i_noise"].values, noise)[0, 1] > 0.8
     with pytest.raises(ValueError, match="axes.spin"):
         run_drive_study(DESIGNS, {"spin": [1.0]}, machine=PAR, drive=DRIVE)
@@ -92,19 +94,22 @@ def test_cli_drive_study_writes_netcdf_with_the_axes(tmp_path, capsys):
     small = _small_preset(tmp_path)
     assert main(["study", str(small), "--out", str(out), "--quiet"]) == 0
     assert_cf18(out / "study.nc")  # CF 1.8: compliance-checker, attributes, types
-    ds = xr.load_dataset(out / "study.nc", engine="h5netcdf")
-    assert {"dRs", "dLq"} <= set(ds["pos_err_rms_deg"].dims) and "quantile" in ds.coords
+    ds = by_label(xr.load_dataset(out / "study.nc", engine="h5netcdf"))
+    assert {"dRs", "dLq"} <= set(ds["rms_position_steady"].dims) and "quantile" in ds.coords
     assert (out / "drive_study.png").stat().st_size > 10_000
     printed = capsys.readouterr().out
-    assert "lost lock" in printed and "FA-LESO-tuned  pos_err_rms_deg (deg)" in printed  # columns apart
+    # columns apart; the table in display units (deg, r/min), the file in SI
+    assert "lost lock" in printed and "FA-LESO-tuned  rms_position_steady (deg)" in printed
+    assert "speed_noise (r/min)" in printed
     assert "diverged" in printed and "lost speed" in printed  # each design's losses, lost speed included
     for name in [*ds.data_vars, *ds.coords]:
         assert "long_name" in ds[name].attrs, name
         if name != "design":
             assert "units" in ds[name].attrs and "see" not in ds[name].attrs["units"], name
     assert ds["dRs"].attrs["units"] == "1" and "resistance" in ds["dRs"].attrs["long_name"]
-    # UDUNITS spellings (CF): r/min and deg are not parseable
-    assert ds["speed_rpm"].attrs["units"] == "min-1" and ds["pos_err_rms_deg"].attrs["units"] == "degree"
+    # UDUNITS spellings (CF): r/min and deg are not parseable; the metrics SI
+    assert ds["speed_rpm"].attrs["units"] == "min-1" and ds["rms_position_steady"].attrs["units"] == "rad"
+    assert ds["speed_noise"].attrs["units"] == "rad s-1" and "pos_err_rms_deg" not in ds  # old names never written
     assert float(ds["gain_k2"].sel(design="FA-LESO-tuned")) == 613.683 and ds["gain_k2"].attrs["units"] == "s-1"
     assert float(ds["gain_omega0"].sel(design="C-LESO")) == pytest.approx(papers.LESO_OMEGA0)
     assert ds["gain_omega0"].attrs["units"] == "rad s-1"
@@ -154,7 +159,7 @@ def test_the_leso_drive_preset_runs(tmp_path):
     """The shipped preset: 1024 scenarios per design, dRs and dLq dims and a quantile coordinate."""
     out = tmp_path / "leso"
     assert main(["study", str(PRESET), "--out", str(out), "--quiet"]) == 0
-    ds = xr.open_dataset(out / "study.nc", engine="h5netcdf")
+    ds = by_label(xr.open_dataset(out / "study.nc", engine="h5netcdf"))
     assert ds.attrs["scenarios"] >= 1000 and {"dRs", "dLq"} <= set(ds.dims) and "quantile" in ds.coords
 
 
@@ -172,7 +177,7 @@ def test_a_load_step_at_t_event_is_the_only_transient():
         t_event=0.03,
         chunk_size=2,
     )
-    peak = ds["pos_err_max_deg"].sel(design="FA-LESO", speed_rpm=600.0)
+    peak = np.degrees(ds["peak_position_steady"].sel(design="FA-LESO", speed_rpm=600.0))
     assert float(peak.sel(load_step_nm=0.0)) < 0.1 < float(peak.sel(load_step_nm=5.0))
 
 
@@ -203,9 +208,9 @@ def test_a_study_runs_the_jobs_machine_and_drive(tmp_path):
     st = tmp_path / "s.toml"
     st.write_text(STUDY_HEAD + f'[designs.tuned]\nresult = "{res.name}"\n[axes]\ndRs = [0.0]\n')
     spec = load_study(st)
-    assert spec.opts["machine"] == D.bench_machine("spmsm000") and float(spec.opts["machine"].J) == papers.BENCH_J_000
+    assert spec.family.machine == D.bench_machine("spmsm000") and float(spec.family.machine.J) == papers.BENCH_J_000
     want = job_drive(DriveSpec(machine="spmsm000"))
-    got = spec.opts["drive"]
+    got = spec.family.drive
     assert got.sensorless and got.ts == want.ts and got.settle == want.settle
     assert bool(eqx.tree_equal(got.foc, want.foc))
     assert float(spec.designs["tuned"].omega0) == 3000.0
@@ -213,7 +218,7 @@ def test_a_study_runs_the_jobs_machine_and_drive(tmp_path):
     assert hashlib.sha256(res.read_bytes()).hexdigest() in spec.provenance["result_files"]
     # without a result: the component's default machine, the IPMSM on its bench (J = BENCH_J_002, not the motor's)
     st.write_text(STUDY_HEAD + '[designs.cf]\nclosed_form = "CLESO"\n[axes]\ndRs = [0.0]\n')
-    assert float(load_study(st).opts["machine"].J) == papers.BENCH_J_002
+    assert float(load_study(st).family.machine.J) == papers.BENCH_J_002
     # a result tuned on one machine, the study on another: one line naming the design
     st.write_text(STUDY_HEAD + f'machine = "ipmsm002"\n[designs.tuned]\nresult = "{res.name}"\n[axes]\ndRs = [0.0]\n')
     with pytest.raises(JobError, match=r"designs.tuned.result: was tuned on spmsm000, the study runs ipmsm002"):
@@ -238,11 +243,11 @@ def test_t_event_of_a_drive_study(tmp_path):
     st = tmp_path / "s.toml"
     body = '[designs.c]\nclosed_form = "FALESO"\n[axes]\n'
     st.write_text(STUDY_HEAD + body + "load_step_nm = [0.0, 5.0]\n")
-    assert load_study(st).opts["t_event"] == pytest.approx(0.1)
+    assert load_study(st).family.t_event == pytest.approx(0.1)
     st.write_text(STUDY_HEAD + body + "dRs = [0.0]\n")
-    assert load_study(st).opts["t_event"] == 0.0
+    assert load_study(st).family.t_event == 0.0
     st.write_text(STUDY_HEAD + "t_event = 0.05\n" + body + "speed_step_rpm = [100.0]\n")
-    assert load_study(st).opts["t_event"] == 0.05
+    assert load_study(st).family.t_event == 0.05
     st.write_text(STUDY_HEAD + "t_event = 0.2\n" + body + "speed_step_rpm = [100.0]\n")
     with pytest.raises(JobError, match=r"study.t_event: must be in \[0, horizon = 0.2\) s"):
         load_study(st)

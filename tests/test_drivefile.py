@@ -314,7 +314,7 @@ def test_individual_control_keeps_its_differential_current_loop_stable(tmp_path)
 
 
 TRACTION = ROOT / "docs" / "examples" / "traction_ipmsm.toml"
-LAB = ROOT / "docs" / "examples" / "lab_ipmsm_2k2.toml"
+LAB = ROOT / "docs" / "examples" / "ipmsm_2p2kw_lab.toml"
 
 
 @pytest.mark.parametrize(

@@ -15,6 +15,7 @@ from jaxobs._simulate import simulate
 from jaxobs.drive import dual, dual_loop
 from jaxobs.metrics import harmonic_amplitude
 from jaxobs.observers import CLESO, FALESO
+from jaxobs.provenance import by_label
 
 TH = dual.PHASE_ANGLES
 rng = np.random.default_rng(0)
@@ -543,7 +544,7 @@ def test_envelope_of_a_dual_faleso_job_agrees_with_pulse_simulations(tmp_path):
     out = tmp_path / "env"
     rc = main(["envelope", str(job_file), "--speeds", "150,840", "--loads", "0,30", "--out", str(out), "--quiet"])
     assert rc == 0 and (out / "envelope.png").is_file()
-    ds = xr.open_dataset(out / "envelope.nc").load()
+    ds = by_label(xr.open_dataset(out / "envelope.nc").load())
     assert ds.attrs["machine"] == "ipmsm002_dual_330v" and "machine_Lls" in ds.attrs
 
     job, designs = envelope_designs(job_file)
@@ -558,10 +559,10 @@ def test_envelope_of_a_dual_faleso_job_agrees_with_pulse_simulations(tmp_path):
         cf = {"closed_form": designs["closed_form"]}
         return pulse_held(system, cf, par, foc, points, height=height)["closed_form"].tolist()
 
-    verdict = [int(ds["holds"].sel(design="closed_form", speed_rpm=s, load=ld)) == 1 for s, ld in points]
+    verdict = [int(ds["holds"].sel(design="closed_form", speed_rpm=s, load_nm=ld)) == 1 for s, ld in points]
     assert verdict == [True, True, True, False], ds["margin"].values
     assert held(0.02) == verdict and held(-0.02) == verdict
     w_e = par.p * 840.0 * np.pi / 30
     root = papers.FALESO_K1 * papers.FALESO_K2 / (papers.FALESO_K2**2 + w_e**2)
-    sel = ds.sel(design="closed_form", speed_rpm=840.0, load=0.0)
+    sel = ds.sel(design="closed_form", speed_rpm=840.0, load_nm=0.0)
     assert abs(float(sel["margin"]) - root) <= float(sel["resolution"]), (float(sel["margin"]), root)

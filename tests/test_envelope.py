@@ -3,6 +3,7 @@ and figure, the pulse check beside a boundary, and (slow) the preset's verdicts 
 low-speed points."""
 
 import json
+import math
 from pathlib import Path
 
 import jax
@@ -16,6 +17,7 @@ from jaxobs import papers
 from jaxobs.analysis.envelope import ENVELOPE_VARIABLES, envelope, speed_pulse
 from jaxobs.drive import bench_drive, bench_machine
 from jaxobs.drive_study import bind_observer, drive_scenarios
+from jaxobs.provenance import by_label
 from jaxobs_tuning.cli import main
 from jaxobs_tuning.job import job_drive, load_job
 from jaxobs_tuning.job.output import claimed_envelope
@@ -41,24 +43,24 @@ def small():
 
 def test_small_envelope_dims_units_and_verdicts(small):
     ds = small
-    assert ds["holds"].dims == ("design", "speed_rpm", "load")
+    assert ds["holds"].dims == ("design", "speed_rpm", "load_nm")
     assert set(ENVELOPE_VARIABLES) <= set(ds.data_vars)
     for name in [*ds.data_vars, *ds.coords]:
         assert ds[name].attrs.get("long_name"), name
         if name != "design":
             assert ds[name].attrs.get("units"), name
-    assert ds["speed_rpm"].attrs["units"] == "min-1" and ds["load"].attrs["units"] == "N m"
-    assert ds["pos_bias_deg"].attrs["units"] == "degree" and ds["gain_lam"].attrs["units"] == "1"
+    assert ds["speed_rpm"].attrs["units"] == "min-1" and ds["load_nm"].attrs["units"] == "N m"
+    assert ds["mean_position_late"].attrs["units"] == "rad" and ds["gain_lam"].attrs["units"] == "1"  # SI
     assert float(ds["gain_lam"].sel(design="lam x2")) == 1.22
     cf = ds.sel(design="closed form")
     # the closed form: unstable and not held at 300 r/min, stable with margin and held at 1000
     assert (cf["margin"].sel(speed_rpm=300.0) < 0).all() and (cf["stable"].sel(speed_rpm=300.0) == 0).all()
     assert (cf["margin"].sel(speed_rpm=1000.0) > 10).all() and (cf["holds"].sel(speed_rpm=1000.0) == 1).all()
     assert (cf["holds"].sel(speed_rpm=300.0) == 0).all()
-    assert (cf["pos_err_max_deg"].sel(speed_rpm=1000.0) < 2).all()
-    assert (cf["pos_ripple_deg"].sel(speed_rpm=1000.0) < cf["pos_err_max_deg"].sel(speed_rpm=1000.0)).all()
+    peak = cf["peak_position_late"].sel(speed_rpm=1000.0)
+    assert (np.degrees(peak) < 2).all() and (cf["ripple_position_late"].sel(speed_rpm=1000.0) < peak).all()
     # holds is exactly stable ∧ synchronous ∧ error within the bound
-    err_ok = ds["pos_err_max_deg"].fillna(np.inf) <= ds.attrs["bound_deg"]
+    err_ok = np.degrees(ds["peak_position_late"]).fillna(np.inf) <= ds.attrs["bound_deg"]
     want = (ds["stable"] == 1) & (ds["synchronous"] == 1) & err_ok
     assert (want == (ds["holds"] == 1)).all()
     # a doubled FLL gain moves the margin (the designs are not one program's constant)
@@ -78,16 +80,16 @@ def test_long_run_metrics_match_a_saved_trajectory(small):
     sol = jaxobs.simulate(jaxobs.drive.ClosedLoop(drive, bind_observer(CF, sc), sc), 0.6)
     err = np.degrees(np.asarray(jaxobs.metrics.wrap(sol.outputs.obs.theta - sol.outputs.theta_e)))
     late = np.asarray(sol.t) >= 0.3 - 1e-9
-    cf = small.sel(design="closed form", speed_rpm=1000.0, load=5.0)
-    assert float(cf["pos_bias_deg"]) == pytest.approx(err[late].mean(), rel=1e-6, abs=1e-9)
-    assert float(cf["pos_ripple_deg"]) == pytest.approx(err[late].std(), rel=1e-5, abs=1e-9)
-    assert float(cf["pos_err_max_deg"]) == pytest.approx(np.abs(err[late]).max(), rel=1e-9)
+    cf = small.sel(design="closed form", speed_rpm=1000.0, load_nm=5.0)
+    assert math.degrees(cf["mean_position_late"]) == pytest.approx(err[late].mean(), rel=1e-6, abs=1e-9)
+    assert math.degrees(cf["ripple_position_late"]) == pytest.approx(err[late].std(), rel=1e-5, abs=1e-9)
+    assert math.degrees(cf["peak_position_late"]) == pytest.approx(np.abs(err[late]).max(), rel=1e-9)
     o = sol.outputs
     dev = np.abs(np.asarray(o.omega_m - o.omega_m_ref)) / np.abs(np.asarray(o.omega_m_ref))
-    assert float(cf["speed_dev_late_pct"]) == pytest.approx(100 * dev[late].max(), rel=1e-9)
+    assert float(cf["peak_speed_deviation_late"]) == pytest.approx(dev[late].max(), rel=1e-9)
     k = np.arange(len(dev))  # the early window opens at the sample nearest 3/α after the pulse's end
     early = (k >= round((0.05 + 4 * width) / drive.ts)) & ~late
-    assert float(cf["speed_dev_early_pct"]) == pytest.approx(100 * dev[early].max(), rel=1e-9)
+    assert float(cf["peak_speed_deviation_early"]) == pytest.approx(dev[early].max(), rel=1e-9)
 
 
 @pytest.mark.parametrize(
@@ -112,7 +114,7 @@ def test_mismatch_axis_is_a_third_dim(small):
     # dRs): its two compiled programs (long run, Floquet verdict) serve this map too, 16 s -> 1 s cold
     ds = envelope({"closed form": CF}, machine=PAR, drive=DRIVE, speeds_rpm=[300.0, 1000.0], loads_nm=[0.0],
                   mismatch=("dRs", [-0.3, 0.3]), horizon=0.6, stability=SHORT)  # fmt: skip
-    assert ds["margin"].dims == ("design", "speed_rpm", "load", "dRs") and ds["dRs"].attrs["units"] == "1"
+    assert ds["margin"].dims == ("design", "speed_rpm", "load_nm", "dRs") and ds["dRs"].attrs["units"] == "1"
     assert np.isfinite(ds["margin"]).all()
 
 
@@ -121,8 +123,8 @@ def test_cli_envelope_writes_netcdf_and_figure(tmp_path, capsys):
     args = ["envelope", str(PRESET), "--out", str(out), "--speeds", "2", "--loads", "1", "--horizon", "0.5"]
     assert main([*args, "--quiet"]) == 0
     assert_cf18(out / "envelope.nc")  # CF 1.8: compliance-checker, attributes, types
-    ds = xr.load_dataset(out / "envelope.nc", engine="h5netcdf")
-    assert {"speed_rpm", "load"} <= set(ds["margin"].dims) and "stable" in ds
+    ds = by_label(xr.load_dataset(out / "envelope.nc", engine="h5netcdf"))
+    assert {"speed_rpm", "load_nm"} <= set(ds["margin"].dims) and "stable" in ds
     assert list(ds["design"].values) == ["initial", "closed_form"]
     assert ds.attrs["component"] == "SecondOrderSOIFO" and ds.attrs["machine"] == "spmsm000"
     assert (out / "envelope.png").stat().st_size > 10_000
@@ -191,11 +193,11 @@ def test_pulse_check_agrees_with_floquet_beside_the_boundary():
     said synchronous."""
     points = [400.0, 405.0, 410.0]
     ds = envelope({"cf": CF}, machine=PAR, drive=DRIVE, speeds_rpm=points, loads_nm=[5.0], stability=dict(window=1.0))
-    cf = ds.sel(design="cf", load=5.0)
+    cf = ds.sel(design="cf", load_nm=5.0)
     assert not cf["marginal"].any() and not cf["off_orbit"].any(), (cf["margin"].values, cf["resolution"].values)
     stable = cf["stable"].values == 1
     assert stable.tolist() == [False, False, True], cf["margin"].values
-    assert (cf["synchronous"].values == 1).tolist() == stable.tolist(), cf["speed_dev_late_pct"].values
+    assert (cf["synchronous"].values == 1).tolist() == stable.tolist(), cf["peak_speed_deviation_late"].values
     assert _holds_sim({"cf": CF}, [(s, 5.0) for s in points])["cf"].tolist() == stable.tolist()
 
 
@@ -208,10 +210,10 @@ def test_preset_envelope_agrees_with_pulse_simulations_at_low_speed(tmp_path):
     its speed reference over the Lyapunov run (the start itself: tests/test_stability.py, loaded 144 r/min)."""
     out = tmp_path / "env"
     assert main(["envelope", str(PRESET), "--out", str(out), "--quiet"]) == 0
-    ds = xr.load_dataset(out / "envelope.nc", engine="h5netcdf")
-    assert {"speed_rpm", "load"} <= set(ds["stable"].dims)
+    ds = by_label(xr.load_dataset(out / "envelope.nc", engine="h5netcdf"))
+    assert {"speed_rpm", "load_nm"} <= set(ds["stable"].dims)
     low = ds.sel(speed_rpm=ds["speed_rpm"][ds["speed_rpm"] <= 600.0])
-    points = [(float(s), float(ld)) for s in low["speed_rpm"].values for ld in low["load"].values]
+    points = [(float(s), float(ld)) for s in low["speed_rpm"].values for ld in low["load_nm"].values]
     assert len(points) >= 20 and points[0][0] == pytest.approx(20.0)
     designs = {"initial": jaxobs.SecondOrderSOIFO(0.0, 1.0, K1, K2, 0.61, 100.0), "closed_form": CF}
     # the preset's own drive (its [drive] table: the speed loop scheduled on the reference, speed_schedule), as
@@ -222,7 +224,7 @@ def test_preset_envelope_agrees_with_pulse_simulations_at_low_speed(tmp_path):
     # 20 r/min and rated load a 2 % pulse (the map's) runs the machine away although the point is stable
     # (docs/envelope.md): there the map says stable and not synchronous.
     sim = _holds_sim(designs, points, drive=drive, horizon=ds.attrs["horizon"], height=0.005)
-    top = ds.sel(speed_rpm=points[0][0], load=float(ds["load"][-1]))
+    top = ds.sel(speed_rpm=points[0][0], load_nm=float(ds["load_nm"][-1]))
     assert (top["stable"] == 1).all() and (top["synchronous"] == 0).all(), top
     for d in designs:
         verdict = low["stable"].sel(design=d).values.ravel() == 1
@@ -277,7 +279,7 @@ def test_dual_envelope_maps_speed_by_load_in_both_modes(mode):
     m, drv, obs = _dual_faleso(mode)
     ds = envelope({"FA-LESO": obs}, machine=m, drive=drv, speeds_rpm=[300.0, 600.0], loads_nm=[0.0, 10.0],
                   horizon=0.6, stability=SHORT)  # fmt: skip
-    assert ds["holds"].dims == ("design", "speed_rpm", "load") and ds.attrs["drive_mode"] == mode
+    assert ds["holds"].dims == ("design", "speed_rpm", "load_nm") and ds.attrs["drive_mode"] == mode
     assert ds.attrs["machine_Lls"] == pytest.approx(float(m.Lls))
     assert (ds["holds"] == 1).all() and (ds["stable"] == 1).all() and (ds["synchronous"] == 1).all(), ds["margin"]
     for rpm in (300.0, 600.0):

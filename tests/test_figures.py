@@ -288,17 +288,17 @@ def _envelope() -> xr.Dataset:
     sync[1, 0, 0], stable[1, 0, 1], err[1, 1, 1] = 0.0, 0.0, 45.0
     err[1, 0, 0] = np.nan
     holds = sync * stable * (np.nan_to_num(err, nan=99.0) <= 30.0)
-    dims = ("design", "speed_rpm", "load")
+    dims = ("design", "speed_rpm", "load_nm")
     data = {
         "margin": (dims, np.where(stable > 0, 5.0, -1.0)),
-        "pos_err_max_deg": (dims, err),
-        "pos_bias_deg": (dims, np.where(np.isnan(err), np.nan, 0.5)),
-        "pos_ripple_deg": (dims, np.where(np.isnan(err), np.nan, 0.2)),
+        "peak_position_late": (dims, np.radians(err)),
+        "mean_position_late": (dims, np.where(np.isnan(err), np.nan, np.radians(0.5))),
+        "ripple_position_late": (dims, np.where(np.isnan(err), np.nan, np.radians(0.2))),
         "holds": (dims, holds.astype(np.int8)),
         "stable": (dims, stable.astype(np.int8)),
         "synchronous": (dims, sync.astype(np.int8)),
     }
-    coords = {"design": ["closed_form", "tuned"], "speed_rpm": speeds, "load": loads}
+    coords = {"design": ["closed_form", "tuned"], "speed_rpm": speeds, "load_nm": loads}
     return xr.Dataset(data, coords=coords, attrs={"bound_deg": 30.0})
 
 

@@ -53,7 +53,9 @@ LAYERS = [
         "jaxobs.drive.latency",
         "jaxobs.drive.weakening",
     ),
-    ("jaxobs.signals._logs",),  # drive logs: a declared layout read into DriveRecordings
+    # drive logs: a declared layout read into DriveRecordings; carrier-comparison PWM (the inverter's transforms)
+    ("jaxobs.signals._logs", "jaxobs.drive.pwm"),
+    ("jaxobs.signals._read",),  # the recordings reader: one file as a family's scenarios
     ("jaxobs.signals",),
     ("jaxobs.scenarios", "jaxobs.drive.plant", "jaxobs.drive.dual", "jaxobs.drive.control", "jaxobs.drive.scenario"),
     # observers: they estimate
@@ -80,7 +82,9 @@ LAYERS = [
     ("jaxobs._steps", "jaxobs._sensitivity"),
     ("jaxobs._loop",),
     ("jaxobs._simulate", "jaxobs.sharding"),
-    # metrics: they score
+    # metrics: the functions that score a run, the one metric table (its entries' forms use them), the package
+    ("jaxobs.metrics._core",),
+    ("jaxobs.metrics._table",),
     ("jaxobs.metrics",),
     # linear analysis: the observers' models, closed forms that return observers, settling times (metrics)
     ("jaxobs.linear._tf",),

@@ -29,7 +29,7 @@ dc = [0.0, 0.05]
 
 TUNE_FILES = ("result.json", "checkpoint.npz", "history.json", "timing.json", "scores.nc")
 TUNE_FILES += ("convergence.png", "responses.png")
-METRICS = ("settling_freq", "ripple_freq", "rms_phase")
+METRICS = ("settling_freq", "ripple_freq", "rms_phase_steady")
 STUDY_FIGURES = tuple(f"{k}_{m}.png" for k in ("heatmap", "distribution") for m in METRICS)
 STUDY_FILES = ("study.nc", "worst_cases.json", *STUDY_FIGURES)
 EXPORT_FILES = ("observer.h", "observer.c", "test_main.c", "golden.csv", "coefficients.json")

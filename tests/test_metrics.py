@@ -1,6 +1,7 @@
 """Metrics: exact values on known signals, and smooth surrogates converging to the exact ones."""
 
 import math
+import warnings
 
 import jax
 import jax.numpy as jnp
@@ -287,3 +288,102 @@ def test_peak_deviation_and_recovery_after_a_load_step():
     # the event after the record raises
     with pytest.raises(ValueError, match="t_event"):
         M.peak_deviation(T, w, ref, 2.0)
+
+
+# --------------------------------------------------------------------------
+# the one metric table (jaxobs.metrics.METRICS): SI units, kinds, old names, display units, the families' defaults
+# --------------------------------------------------------------------------
+
+SI_UNITS = {"s", "Hz", "Hz s", "Hz s2", "rad", "rad s", "rad s2", "rad s-1", "s-1", "1"}
+
+
+def test_the_metric_table_holds_one_si_entry_per_quantity_and_flags_are_boolean_metrics():
+    assert len(M.METRICS) == len({m.long_name for m in M.METRICS.values()})  # no quantity twice under two names
+    for name, m in M.METRICS.items():
+        assert m.name == name and m.units in SI_UNITS, (name, m.units)
+        assert m.kind in ("run", "flag", "system")
+        if m.kind == "flag":
+            assert m.units == "1" and m.display is None, name
+        if m.kind == "run":
+            assert m.exact is not None or m.smooth is not None, name
+    assert M.METRICS["stability_margin"].kind == "system" and M.METRICS["stability_margin"].exact is None
+    assert {k for k, m in M.METRICS.items() if m.kind == "flag"} == {
+        "diverged",
+        "settled",
+        "lost_lock",
+        "lost_speed",
+        "lost_sync",
+    }
+    assert M.DIVERGED is M.METRICS["diverged"]
+    with pytest.raises(ValueError, match="stability_margin is not a function of one run"):
+        M.METRICS["stability_margin"](None, None, M.MetricContext())
+    with pytest.raises(ValueError, match="kind must be"):
+        M.Metric("x", "1", "x", kind="bool")
+    with pytest.raises(ValueError, match="no display transform"):
+        M.Metric("x", "s", "x", display="degree")
+
+
+def test_display_units_are_a_presentation_transform():
+    pos, spd = M.METRICS["rms_position_steady"], M.METRICS["peak_speed_deviation"]
+    assert pos.units == "rad" and pos.display_units == "degree" and pos.shown(math.pi) == pytest.approx(180.0)
+    assert spd.units == "rad s-1" and spd.display_units == "min-1" and spd.shown(math.pi / 30) == pytest.approx(1.0)
+    itae = M.METRICS["itae_freq"]
+    assert itae.display_units == itae.units and itae.shown(2.5) == 2.5
+
+
+def test_old_names_are_read_with_one_line_of_warning_and_their_unit_conversion():
+    for old, alias in M.ALIASES.items():
+        assert old not in M.METRICS and alias.new in M.METRICS  # an old name is never an entry
+        with pytest.warns(M.MetricNameWarning, match=rf"^here: '{old}' is an old metric name, read as '{alias.new}'"):
+            assert M.canonical(old, "here") == (alias.new, alias.scale)
+    assert issubclass(M.MetricNameWarning, DeprecationWarning)
+    assert M.ALIASES["pos_err_rms_deg"].scale == pytest.approx(math.pi / 180)  # deg -> rad
+    assert M.ALIASES["speed_noise_rpm"].scale == pytest.approx(math.pi / 30)  # r/min -> rad/s
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert M.canonical("itae_freq") == ("itae_freq", 1.0)  # a name of the table: no warning
+
+
+def test_each_family_declares_its_default_metrics_and_flags():
+    from jaxobs.drive_study import DRIVE_STUDY_METRICS
+    from jaxobs.families import DriveScenarios, EMFSignals, GridSignals, RecordedSignals
+    from jaxobs.study import STUDY_METRICS
+
+    for fam in (GridSignals, EMFSignals, DriveScenarios, RecordedSignals):
+        assert fam.metrics and all(M.METRICS[k].kind == "run" and M.METRICS[k].exact is not None for k in fam.metrics)
+        assert "diverged" in fam.flags and all(M.METRICS[k].kind == "flag" for k in fam.flags)
+        assert fam.closed_loop or not any(M.METRICS[k].closed_loop for k in (*fam.metrics, *fam.flags))
+    assert STUDY_METRICS == GridSignals.metrics and DRIVE_STUDY_METRICS == DriveScenarios.metrics
+
+
+def test_a_term_of_an_old_name_is_the_same_term_in_si():
+    from jaxobs_tuning.objective import TERM_METRICS, Term
+
+    assert "lost_lock" not in TERM_METRICS and "stability_margin" in TERM_METRICS  # a run or system metric
+    with pytest.warns(M.MetricNameWarning, match="speed_noise_rpm"):
+        t = Term("speed_noise_rpm", 0.01)
+    assert t.metric == "speed_noise" and t.measure is M.METRICS["speed_noise"]
+    assert t.weight == pytest.approx(0.01 * 30 / math.pi, rel=1e-15)  # per rad/s: the same term
+
+
+def test_a_job_file_reads_an_old_metric_name_and_never_writes_it(tmp_path, capsys):
+    import tomllib
+
+    from jaxobs_tuning.cli import main
+    from jaxobs_tuning.job import parse_job
+    from tests.test_tuning import GOOD
+
+    old = GOOD.replace('metric = "itae_freq", weight = 1.0', 'metric = "rms_phase", weight = 2.0')
+    assert "rms_phase" in old
+    with pytest.warns(M.MetricNameWarning, match=r"^objective.terms\[0\].metric: 'rms_phase' is an old metric name"):
+        job = parse_job(tomllib.loads(old))
+    assert [(t.metric, t.weight) for t in job.terms] == [("rms_phase_steady", 2.0)]
+    assert job.raw["objective"]["terms"] == [{"metric": "rms_phase_steady", "weight": 2.0}]  # what result.json holds
+    # the command line: the warning as its own one line, the job refused or run on the new name
+    path = tmp_path / "job.toml"
+    path.write_text(old.replace("steps = 3", "steps = 1"))
+    assert main(["tune", str(path), "--out", str(tmp_path / "o"), "--quiet"]) == 0
+    err = capsys.readouterr().err
+    assert "jaxobs: warning: objective.terms[0].metric: 'rms_phase' is an old metric name" in err
+    text = (tmp_path / "o" / "result.json").read_text()
+    assert '"rms_phase_steady"' in text and '"rms_phase"' not in text and "rms_phase_mean" not in text

@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 import xarray as xr
 
+from jaxobs.provenance import by_label
 from jaxobs_tuning import AbstractObjective, solvers, strategies
 from jaxobs_tuning.cli import main
 from jaxobs_tuning.outdir import LOCK, OutDir, OutError, atomic_path, atomic_write_bytes, safe_name
@@ -134,7 +135,7 @@ def test_cli_refuses_a_locked_or_used_out_with_one_line(tmp_path, capsys, monkey
     res = json.loads((tmp_path / "out" / "_.._escape" / "result.json").read_text())
     assert [res["scores"][d]["lost_lock"] for d in ("initial", "closed_form", "tuned")] == [0, 0, 0]
     assert res["lost_lock_tuned_only"] == {"tuning": 0}
-    scores = xr.load_dataset(tmp_path / "out" / "_.._escape" / "scores.nc", engine="h5netcdf")
+    scores = by_label(xr.load_dataset(tmp_path / "out" / "_.._escape" / "scores.nc", engine="h5netcdf"))
     assert scores["lost_lock"].dtype == np.int8 and scores["lost_lock"].dims == scores["total"].dims
     assert int(scores["lost_lock"].sum()) == 0
     # a tuned design that loses lock where the closed form holds it is a warning

@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from jaxobs.provenance import by_label
 from jaxobs_tuning.cli import main
 from jaxobs_tuning.job import load_job, run_job
 
@@ -80,6 +81,7 @@ layout = { current_frame = "abc", voltage_timing = "reference" }
     import xarray as xr
 
     with xr.open_dataset(tmp_path / "o" / "scores.nc", engine="h5netcdf") as ds:
+        ds = by_label(ds)
         assert list(ds["recording"].values) == ["ctrl.csv"]
         assert ds["rms_speed_error_steady"].attrs["units"] == "rad s-1"
     # the same log undeclared: refused before anything runs, naming the columns and the declaration

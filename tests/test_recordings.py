@@ -14,6 +14,7 @@ import jaxobs
 from jaxobs import drive as D
 from jaxobs import metrics as M
 from jaxobs import papers
+from jaxobs.provenance import by_label
 from tests.cfcheck import assert_cf18
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -300,6 +301,7 @@ def test_study_file_on_a_recording(tmp_path, capsys):
     assert main(["study", str(path), "--out", str(tmp_path / "o"), "--quiet"]) == 0
     assert capsys.readouterr().err == ""
     with xr.open_dataset(tmp_path / "o" / "study.nc", engine="h5netcdf") as ds:
+        ds = by_label(ds)
         assert ds["ripple_freq"].dims == ("design", "recording")
         assert str(ds["recording"].values[0]) == "recordings/grid_50_51hz.csv"
         assert all("units" in ds[v].attrs for v in ds.data_vars)

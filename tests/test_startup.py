@@ -322,7 +322,9 @@ def test_standstill_jobs_score_the_position_error_from_the_hand_over_on():
 
     from jaxobs import Solution
     from jaxobs.drive import DriveOutput
-    from jaxobs_tuning.objective import METRICS, MetricContext, _lost_sync
+    from jaxobs.metrics import METRICS as TABLE
+    from jaxobs_tuning.objective import TERM_METRICS as METRICS
+    from jaxobs_tuning.objective import MetricContext
 
     def drive_output(**fields):  # a closed loop's outputs: the metrics take θe as the truth by its type
         return DriveOutput(**(dict.fromkeys(DriveOutput._fields) | fields))
@@ -339,10 +341,10 @@ def test_standstill_jobs_score_the_position_error_from_the_hand_over_on():
 
     handed = sol(jnp.where(t < 0.4, 0, 1))
     assert float(METRICS["iae_position"](handed, None, ctx)) == pytest.approx(0.01 * 0.6, rel=0.02)
-    assert not bool(_lost_sync(handed, None, ctx))
+    assert not bool(TABLE["lost_sync"].exact(handed, None, ctx))
     steady = sol(jnp.ones_like(t, dtype=jnp.int32))  # a steady start: every sample counts
     assert float(METRICS["iae_position"](steady, None, ctx)) == pytest.approx(1.65 * 0.4 + 0.01 * 0.6, rel=0.02)
-    assert bool(_lost_sync(steady, None, ctx))
+    assert bool(TABLE["lost_sync"].exact(steady, None, ctx))
     never = solution(
         drive_output(
             theta_e=jnp.zeros_like(t),
@@ -351,7 +353,7 @@ def test_standstill_jobs_score_the_position_error_from_the_hand_over_on():
         )
     )
     assert float(METRICS["rms_position_steady"](never, None, ctx)) == pytest.approx(1.7, rel=1e-4)
-    assert bool(_lost_sync(never, None, ctx))  # 97° in the steady window
+    assert bool(TABLE["lost_sync"].exact(never, None, ctx))  # 97° in the steady window
 
 
 @pytest.mark.slow

@@ -15,6 +15,7 @@ import xarray as xr
 import jaxobs
 from jaxobs import linear, papers
 from jaxobs import metrics as M
+from jaxobs.provenance import by_label
 from jaxobs.study import run_study, worst_cases
 from jaxobs_tuning.cli import main
 from jaxobs_tuning.summary import study_warnings
@@ -44,7 +45,7 @@ def test_dims_coords_and_values_match_single_runs(small_study):
         rms = float(M.rms(M.wrap(out.obs.theta - out.truth.theta), sol.t >= steady))
         cell = ds.sel(design=dname, freq_step=fs, dc=dc, phase_jump_deg=pj)
         assert float(cell["ripple_freq"]) == pytest.approx(ripple, rel=1e-9, abs=1e-12)
-        assert float(cell["rms_phase"]) == pytest.approx(rms, rel=1e-9, abs=1e-12)
+        assert float(cell["rms_phase_steady"]) == pytest.approx(rms, rel=1e-9, abs=1e-12)
     assert int(ds["diverged"].sum()) == 0 and int(ds["lost_lock"].sum()) == 0  # the closed forms hold lock
     # the SOGI-FLL's dc ripple is the worst case of the study
     worst = worst_cases(ds, "ripple_freq", 1)
@@ -54,7 +55,7 @@ def test_dims_coords_and_values_match_single_runs(small_study):
 def test_netcdf_round_trip(small_study, tmp_path):
     _, ds = small_study
     ds.to_netcdf(tmp_path / "s.nc", engine="h5netcdf")
-    back = xr.load_dataset(tmp_path / "s.nc", engine="h5netcdf")
+    back = by_label(xr.load_dataset(tmp_path / "s.nc", engine="h5netcdf"))
     assert back.identical(ds)
 
 
@@ -75,7 +76,7 @@ def test_dataset_has_units_gains_settled_and_provenance(small_study, tmp_path):
             continue
         assert {"units", "long_name"} <= set(ds[name].attrs), name
         assert "see" not in ds[name].attrs["units"], name  # a CF unit, not a pointer elsewhere
-    assert ds["rms_phase"].attrs["units"] == "rad" and ds["freq_step"].attrs["units"] == "Hz"
+    assert ds["rms_phase_steady"].attrs["units"] == "rad" and ds["freq_step"].attrs["units"] == "Hz"
     # each gain its own variable with its own units (CF)
     assert ds["gain_k"].dims == ("design",) and ds["gain_k"].attrs["units"] == "1"
     assert ds["gain_lam"].attrs["units"] == "rad2 s-2"
@@ -122,7 +123,7 @@ def test_study_of_more_than_10000_scenarios(tmp_path, capsys):
     )
     elapsed = time.time() - t0
     assert ds.sizes["sample"] == 10240 and int(ds["diverged"].sum()) == 0
-    assert np.all(np.isfinite(ds["rms_phase"].values))
+    assert np.all(np.isfinite(ds["rms_phase_steady"].values))
     print(f"\n10,240-scenario study: {elapsed:.1f} s on this machine")
 
 
@@ -131,9 +132,9 @@ def test_study_cli_default(tmp_path, capsys):
     out = capsys.readouterr().out
     assert "3 designs x 200 scenarios" in out
     # the table labels its units (the phase in degrees, as the figures)
-    assert "settling_freq (s) mean" in out and "ripple_freq (Hz) mean" in out and "rms_phase (deg) mean" in out
+    assert "settling_freq (s) mean" in out and "ripple_freq (Hz) mean" in out and "rms_phase_steady (deg) mean" in out
     assert_cf18(tmp_path / "study.nc")  # CF 1.8: compliance-checker, attributes, types
-    ds = xr.load_dataset(tmp_path / "study.nc", engine="h5netcdf")
+    ds = by_label(xr.load_dataset(tmp_path / "study.nc", engine="h5netcdf"))
     assert set(ds["design"].values) == {"SOGI-FLL", "SOGI-FLL-WPF", "SOGI-FLL-WIF"}
     worst = json.loads((tmp_path / "worst_cases.json").read_text())
     assert worst["ripple_freq"][0]["design"] == "SOGI-FLL"
@@ -210,8 +211,8 @@ def test_lost_lock_and_diverged_scenarios_are_flagged_and_listed_first():
     assert ds["lost_lock"].dtype == np.int8 and ds["lost_lock"].dims == ("design", "freq_step")
     assert list(ds["lost_lock_count"].values) == [0, 2, 2]
     assert list(ds["diverged"].sum("freq_step").values) == [0, 0, 2]
-    assert np.all(np.isfinite(ds["rms_phase"].sel(design="false lock")))  # finite, yet far from the truth
-    worst = worst_cases(ds, "rms_phase", 2)
+    assert np.all(np.isfinite(ds["rms_phase_steady"].sel(design="false lock")))  # finite, yet far from the truth
+    worst = worst_cases(ds, "rms_phase_steady", 2)
     assert [(w["design"], w["diverged"], w["lost_lock"]) for w in worst] == [
         ("closed form", False, False),
         ("closed form", False, False),
@@ -307,7 +308,7 @@ def test_the_runner_takes_any_sampler_factory_and_metrics():
     obs = linear.sogi_fll_closed_form()
     sampler = Sobol({"dc": [0.0, 0.1], "freq_step": [-1.0, 1.0]}, 4, seed=2)
     ds = run_study({"a": obs}, sampler, horizon=0.2, progress=False)
-    assert ds["rms_phase"].dims == ("design", "sample") and ds.attrs["sampling"] == "sobol"
+    assert ds["rms_phase_steady"].dims == ("design", "sample") and ds.attrs["sampling"] == "sobol"
     np.testing.assert_array_equal(ds["dc"].values, [p[0] for p in sampler.points()])
     steady = ds.attrs["steady_from"]
 
@@ -324,7 +325,7 @@ def test_the_runner_takes_any_sampler_factory_and_metrics():
         build=lambda names, pts: grid_signals(names, pts, ds.attrs["t_event"], freq),
         chunk_size=3,  # two chunks, the last padded
     )
-    np.testing.assert_allclose(run.values["a"]["rms"], ds["rms_phase"].sel(design="a").values, rtol=1e-12)
+    np.testing.assert_allclose(run.values["a"]["rms"], ds["rms_phase_steady"].sel(design="a").values, rtol=1e-12)
     assert bool(jnp.all(jnp.isfinite(run.values["a"]["rms"])))
 
 
@@ -340,7 +341,7 @@ def test_scenarios_built_a_chunk_at_a_time_are_the_whole_batchs():
     sampler = Random({"noise": [0.0, 0.2], "freq_step": [-1.0, 1.0]}, 7, seed=3)
     one = run_study(designs, sampler, horizon=0.15, t_event=0.05, chunk_size=7, seed=5)
     chunks = run_study(designs, sampler, horizon=0.15, t_event=0.05, chunk_size=3, seed=5)
-    for k in ("rms_phase", "ripple_freq", "settling_freq"):
+    for k in ("rms_phase_steady", "ripple_freq", "settling_freq"):
         np.testing.assert_array_equal(chunks[k].values, one[k].values)
     whole = grid_signals(sampler.names, sampler.points(), 0.05, 50.0, seed=5)
     calls = []

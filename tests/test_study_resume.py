@@ -124,7 +124,7 @@ def test_run_drive_study_from_a_partial_store_equals_one_run(tmp_path):
     axes = {"speed_rpm": [600.0], "dRs": [-0.2, 0.2], "dLq": [0.0, 0.2]}
     kw = dict(machine=par, drive=drive, horizon=0.03, chunk_size=2)
     ref = run_drive_study(designs, axes, **kw)
-    assert ref.sizes["dRs"] == 2 and not bool(np.isnan(ref["pos_err_rms_deg"].values).any())
+    assert ref.sizes["dRs"] == 2 and not bool(np.isnan(ref["rms_position_steady"].values).any())
     store = ChunkStore(tmp_path / "c", "fp")
     xr.testing.assert_identical(run_drive_study(designs, axes, store=store, **kw), ref)
     assert sorted(f.name for f in (tmp_path / "c").glob("*.h5")) == ["0.0.h5", "0.1.h5", "1.0.h5", "1.1.h5"]
@@ -186,13 +186,13 @@ def test_a_kill_between_the_chunks_and_study_nc_resumes(tmp_path, capsys, monkey
     way round, the chunks are lost.  Now the chunks move aside before study.nc appears (ChunkStore.retire)."""
     import contextlib
 
-    import jaxobs_tuning.cli as cli
+    import jaxobs.study as writer  # the one study writer (jaxobs.study.write_study)
 
     path = tmp_path / "tiny.toml"
     path.write_text(TINY)
     ref, out = tmp_path / "ref", tmp_path / "o"
     assert main(["study", str(path), "--out", str(ref), "--quiet"]) == 0
-    real = cli.atomic_path
+    real = writer.atomic_path
 
     @contextlib.contextmanager
     def killed_before_rename(p):
@@ -200,10 +200,10 @@ def test_a_kill_between_the_chunks_and_study_nc_resumes(tmp_path, capsys, monkey
             yield tmp
             raise KeyboardInterrupt  # as a kill -9 there: study.nc not renamed, its temp folder gone
 
-    monkeypatch.setattr(cli, "atomic_path", killed_before_rename)
+    monkeypatch.setattr(writer, "atomic_path", killed_before_rename)
     assert main(["study", str(path), "--out", str(out), "--quiet"]) == 130
     assert not (out / "study.nc").exists() and not (out / STUDY_CHUNKS).exists()
-    monkeypatch.setattr(cli, "atomic_path", real)
+    monkeypatch.setattr(writer, "atomic_path", real)
     capsys.readouterr()
     assert main(["study", str(path), "--out", str(out), "--quiet", "--resume"]) == 0
     assert "resumed: 36 chunks of 36" in capsys.readouterr().out

@@ -14,6 +14,7 @@ import pytest
 
 from jaxobs import drive as D
 from jaxobs import linear, papers
+from jaxobs.provenance import by_label
 from jaxobs_tuning import load_job
 from jaxobs_tuning.cli import main
 from jaxobs_tuning.targets import flux_settling_time
@@ -120,7 +121,7 @@ def test_two_runs_write_byte_identical_results_that_rebuild_the_design(tmp_path)
     assert float(obs.lam) == res["gains"]["tuned"]["lam"] and obs.ts == res["ts"] and type(obs.rule).__name__ == "AB3"
     assert not any("has no" in n for n in notes)
     assert_cf18(tmp_path / "a" / "scores.nc")  # CF 1.8: compliance-checker, attributes, types
-    ds = xr.open_dataset(tmp_path / "a" / "scores.nc", engine="h5netcdf")
+    ds = by_label(xr.open_dataset(tmp_path / "a" / "scores.nc", engine="h5netcdf"))
     assert ds["itae_freq"].dims == ("design", "freq_step") and list(ds["freq_step"].values) == [1.0, 2.0]
     # CF units on every variable and numeric coordinate (NetCDF4)
     for name in [*ds.data_vars, *ds.coords]:
@@ -350,6 +351,7 @@ def test_flux_observer_drive_job_runs_sensorless_on_the_spmsm(tmp_path, capsys):
     import xarray as xr
 
     with xr.open_dataset(tmp_path / "o" / "scores.nc") as ds:
+        ds = by_label(ds)
         assert ds["lost_sync"].dims == ("design", "speed_rpm", "load_step_nm")
         assert int(ds["lost_sync"].sum()) == 0
         assert ds["lost_speed"].dims == ds["lost_sync"].dims and int(ds["lost_speed"].sum()) == 0
@@ -426,10 +428,13 @@ def test_every_drive_component_may_be_tuned_by_a_job():
 
 
 def test_every_metric_has_cf_units():
-    """scores.nc labels each metric from METRIC_UNITS: a metric added without its units fails here."""
-    from jaxobs_tuning.objective import METRIC_UNITS, METRICS
+    """scores.nc labels each metric with its entry's units: a term metric is every run and system entry of the one
+    table, each with units."""
+    from jaxobs.metrics import METRICS
+    from jaxobs_tuning.objective import TERM_METRICS
 
-    assert set(METRIC_UNITS) == set(METRICS)
+    assert set(TERM_METRICS) == {k for k, m in METRICS.items() if m.kind in ("run", "system")}
+    assert all(TERM_METRICS[k] is METRICS[k] and METRICS[k].units for k in TERM_METRICS)
 
 
 def test_report_marks_events_only_where_the_scenario_has_one_and_draws_a_negative_objective(tmp_path):

@@ -81,7 +81,7 @@ def test_steady_start_below_base_speed_is_the_policys():
 
 EXAMPLES = __import__("pathlib").Path(__file__).resolve().parent.parent / "docs" / "examples"
 TRACTION = EXAMPLES / "traction_ipmsm.toml"
-LAB = EXAMPLES / "lab_ipmsm_2k2.toml"
+LAB = EXAMPLES / "ipmsm_2p2kw_lab.toml"
 
 
 @pytest.mark.parametrize("Ld, Lq", [(0.37e-3, 1.2e-3), (1.2e-3, 0.37e-3), (0.8e-3, 0.8e-3)])
@@ -132,7 +132,7 @@ def test_the_weakened_reference_stays_in_the_circle_and_above_the_stop_at_every_
 
 
 def test_lab_ipmsm_speed_step_in_field_weakening_does_not_overshoot():
-    """The 2.2-kW lab IPMSM (docs/examples/lab_ipmsm_2k2.toml, sensored): 1000 → 2000 r/min at 14 N·m with field
+    """The 2.2-kW lab IPMSM (docs/examples/ipmsm_2p2kw_lab.toml, sensored): 1000 → 2000 r/min at 14 N·m with field
     weakening.  With the speed integrator stopping only at the circle's torque it overshot by 47.6 r/min
     (65.7 in motulator's comparison); stopping at the torque realised it does not overshoot (measured 0.00 r/min,
     settling into ±2 % of the step in 280 ms; motulator 0.18: 0 r/min, 248 ms), and |i*| ≤ i_max throughout."""

@@ -18,7 +18,7 @@ from .job import JobError as JobError
 from .job import load_job as load_job
 from .job import parse_job as parse_job
 from .job import run_job as run_job
-from .objective import METRICS as METRICS
+from .objective import TERM_METRICS as TERM_METRICS
 from .objective import Objective as Objective
 from .objective import Term as Term
 from .params import GainSpec as GainSpec

@@ -68,7 +68,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import shlex
 import sys
 import tempfile
@@ -94,7 +93,7 @@ from .envelope import add_envelope_parser
 from .export import add_export_parser
 from .job import CHECKPOINT, UNSAFE_EXIT, load_job, load_recordings, run_job
 from .job.drive import check_three_phase
-from .outdir import OutDir, atomic_path, atomic_write_text, safe_name
+from .outdir import OutDir, atomic_write_text, safe_name
 from .study_file import load_study as _load_study
 from .study_file import study_fingerprint
 from .summary import print_summary, study_warnings
@@ -103,34 +102,32 @@ STUDY_CHUNKS = "study.chunks"  # a study's results while it runs (jaxobs.chunkst
 
 
 def load_study(path):
-    """A study file as (name, designs, axes, options): :func:`jaxobs_tuning.study_file.load_study`, checked in full."""
+    """A study file as (name, designs, axes, options): :func:`jaxobs_tuning.study_file.load_study`, checked in
+    full; the options hold its preset's keywords, ``family`` (:mod:`jaxobs.families`) among them."""
     spec = _load_study(path)
-    return spec.name, spec.designs, spec.axes, dict(spec.opts, kind=spec.kind)
+    return spec.name, spec.designs, spec.axes, dict(spec.opts, family=spec.family)
 
 
 def _cmd_drive_study(name, designs, axes, opts, out: Path, quiet: bool, provenance=None, store=None) -> int:
     from jaxobs.drive_study import DRIVE_STUDY_METRICS, run_drive_study
+    from jaxobs.metrics import METRICS
     from jaxobs.plot import drive_study_figure
     from jaxobs.quantities import text_unit
-    from jaxobs.study import METRICS
+    from jaxobs.study import write_study
 
     ds = run_drive_study(designs, axes, progress=progress_of(quiet=quiet), store=store, **opts)
     ds.attrs.update(provenance or {})  # the study file's and the result files' sha256, the machine
     fig = out / "drive_study.png"
     drive_study_figure(ds, fig)
-    with atomic_path(out / "study.nc") as tmp:  # last: a study.nc means a complete results folder
-        ds.to_netcdf(tmp, engine="h5netcdf")
-        if store is not None:
-            store.retire()  # before study.nc's rename: never both on disk (a --resume refused, chunks left)
-    if store is not None:
-        store.remove()  # the results are in study.nc: nothing is left to resume
+    write_study(ds, out / "study.nc", store)  # last: a study.nc means a complete results folder
     n = int(ds.attrs["scenarios"])
     print(f"drive study {name}: {len(designs)} designs x {n} scenarios ({ds.attrs['sampling']}), sensorless")
     if store is not None and store.resumed:
         print(f"resumed: {store.resumed} chunks of {store.total} were on disk from the stopped run")
     qs = [float(q) for q in ds["quantile"].values]
     # columns sized from their content (long design names and metric labels never run together)
-    labels = {m: f"{m} ({text_unit(METRICS[m].units)})" for m in DRIVE_STUDY_METRICS}
+    # each in its display units (study.nc keeps SI: jaxobs.metrics.Metric.shown)
+    labels = {m: f"{m} ({text_unit(METRICS[m].display_units)})" for m in DRIVE_STUDY_METRICS}
     wd = max(len("design"), *(len(str(d)) for d in ds["design"].values)) + 2
     wm = max(len(x) for x in labels.values()) + 2
     head = f"{'design':<{wd}}{'metric':<{wm}}" + "".join(f"{'q' + format(q, 'g'):>10}" for q in qs)
@@ -141,7 +138,7 @@ def _cmd_drive_study(name, designs, axes, opts, out: Path, quiet: bool, provenan
         div = int(ds["diverged"].sel(design=d).sum())
         speed = int(ds["lost_speed_count"].sel(design=d))
         for m in DRIVE_STUDY_METRICS:
-            vals = ds[f"{m}_q"].sel(design=d).values
+            vals = METRICS[m].shown(ds[f"{m}_q"].sel(design=d).values)
             row = f"{str(d):<{wd}}{labels[m]:<{wm}}" + "".join(f"{v:>10.4g}" for v in vals)
             print(row + f"{div:>10}{lost:>11}{speed:>12}")
     print(f"results: {out / 'study.nc'}, {fig}")
@@ -150,17 +147,19 @@ def _cmd_drive_study(name, designs, axes, opts, out: Path, quiet: bool, provenan
     return 0
 
 
-def _recording_study(designs: dict, *, recording, t_event, horizon, steady_from, band_hz, progress, store=None, **_):
+def _recording_study(
+    designs: dict, *, family, recording, t_event, horizon, steady_from, band_hz, progress, store=None, **_
+):
     """Every FLL design on every recording of ``[study.recording]``: :func:`jaxobs.study.run_study` with a
-    :class:`jaxobs.scenarios.Recordings` sampler (dims (design, recording), the files' sha256); (Dataset, s)."""
+    :class:`jaxobs.scenarios.Recordings` sampler of ``family``'s recordings (dims (design, recording), the files'
+    sha256); (Dataset, s)."""
     import jax
 
-    from jaxobs.families import GridSignals, RecordedSignals
     from jaxobs.scenarios import Recordings
     from jaxobs.study import run_study
 
     rec = recording
-    sampler = Recordings(load_recordings(rec, RecordedSignals(GridSignals)), rec.files, rec.sha256)
+    sampler = Recordings(load_recordings(rec, family), rec.files, rec.sha256)
     return run_study(
         designs,
         sampler,
@@ -188,7 +187,7 @@ def _cmd_study(args) -> int:
             rank = join_distributed(args)
     spec = _load_study(path)  # everything checked: tables, keys, ranges, sizes, result files
     name, designs, axes = spec.name, spec.designs, spec.axes
-    opts = dict(spec.opts, kind=spec.kind, provenance=spec.provenance)
+    opts = dict(spec.opts, family=spec.family, provenance=spec.provenance)
     out = Path(args.out) if args.out else Path("out") / safe_name(str(name), "study")
     # a study writes each chunk's results under study.chunks/ as it finishes (jaxobs.chunkstore): a
     # kill loses at most the chunks being computed, and --resume continues from the last complete one
@@ -200,7 +199,8 @@ def _cmd_study(args) -> int:
     if args.check:
         if args.out:  # what the real run would refuse (an explicit --out: the default one may not exist yet)
             OutDir(out, products, force=args.force, hints={STUDY_CHUNKS: hint}).check()
-        print(f"{path}: OK — {spec.kind} study {name!r}, {len(designs)} designs x {spec.scenarios} scenarios")
+        family = type(spec.family).__name__  # GridSignals, RecordedSignals or DriveScenarios (jaxobs.families)
+        print(f"{path}: OK — {family} study {name!r}, {len(designs)} designs x {spec.scenarios} scenarios")
         return 0
     outdir = OutDir(out, products, force=args.force, hints={STUDY_CHUNKS: hint})
     store = ChunkStore(out / STUDY_CHUNKS, study_fingerprint(spec), resume=args.resume)
@@ -214,11 +214,13 @@ def _cmd_study(args) -> int:
 
 
 def _run_study(name, designs, axes, opts, out: Path, quiet: bool, store=None) -> int:
+    from jaxobs.metrics import METRICS
     from jaxobs.plot import study_figures
-    from jaxobs.study import STUDY_METRICS, run_study, worst_cases
+    from jaxobs.quantities import text_unit
+    from jaxobs.study import STUDY_METRICS, run_study, worst_cases, write_study
 
     provenance = opts.pop("provenance", None) or {}
-    if opts.pop("kind", "fll") == "drive":
+    if opts["family"].closed_loop:  # the family's designs close the drive's loop: the drive study's preset
         return _cmd_drive_study(name, designs, axes, opts, out, quiet, provenance, store)
     if opts.get("recording") is not None:  # [study.recording]: the recordings are the scenarios
         ds, seconds = _recording_study(designs, progress=progress_of(quiet=quiet), store=store, **opts)
@@ -231,29 +233,24 @@ def _run_study(name, designs, axes, opts, out: Path, quiet: bool, store=None) ->
     worst = {m: worst_cases(ds, m, 3) for m in STUDY_METRICS}
     atomic_write_text(out / "worst_cases.json", json.dumps(worst, indent=1))
     figs = study_figures(ds, out)
-    with atomic_path(out / "study.nc") as tmp:  # last: a study.nc means a complete results folder
-        ds.to_netcdf(tmp, engine="h5netcdf")
-        if store is not None:
-            store.retire()  # before study.nc's rename: never both on disk (a --resume refused, chunks left)
-    if store is not None:
-        store.remove()  # the results are in study.nc: nothing is left to resume
+    write_study(ds, out / "study.nc", store)  # last: a study.nc means a complete results folder
     n = int(ds.attrs["scenarios"])
     print(f"study {name}: {len(designs)} designs x {n} scenarios in {seconds:.1f} s")
     if store is not None and store.resumed:
         print(f"resumed: {store.resumed} chunks of {store.total} were on disk from the stopped run")
     wd = max(len("design"), *(len(str(d)) for d in ds["design"].values)) + 2  # sized from the names
-    # each column with its unit; the phase in degrees, as in the figures (study.nc keeps rad)
-    cols = {"settling_freq": ("s", 1.0), "ripple_freq": ("Hz", 1.0), "rms_phase": ("deg", 180.0 / math.pi)}
+    # each column in its display units; the phase in degrees, as in the figures (study.nc keeps rad)
+    cols = [METRICS[m] for m in ("settling_freq", "ripple_freq", "rms_phase_steady")]
     print(
         f"{'design':<{wd}}"
-        + "".join(f"{f'{m} ({u}) mean':>25}{'worst':>10}" for m, (u, _) in cols.items())
+        + "".join(f"{f'{m.name} ({text_unit(m.display_units)}) mean':>32}{'worst':>10}" for m in cols)
         + f"{'diverged':>10}{'lost lock':>11}"
     )
     for d in ds["design"].values:
         sel = ds.sel(design=d)
         row = f"{str(d):<{wd}}"
-        for m, (_, k) in cols.items():
-            row += f"{k * float(sel[m].mean()):>25.4g}{k * float(sel[m].max()):>10.4g}"
+        for m in cols:
+            row += f"{m.shown(float(sel[m.name].mean())):>32.4g}{m.shown(float(sel[m.name].max())):>10.4g}"
         print(row + f"{int(sel['diverged'].sum()):>10}{int(sel['lost_lock_count']):>11}")
     print(f"results: {out / 'study.nc'}, {out / 'worst_cases.json'}, {len(figs)} figures")
     for w in study_warnings(ds):  # on stderr too: a summary piped away still says what was lost
@@ -479,13 +476,15 @@ def main(argv=None) -> int:
     args = None
     shown = warnings.showwarning
 
-    def one_line(message, category, *a, **k):  # a recording's warning (RecordingWarning) as the tool's own line
-        if category.__name__ == "RecordingWarning":
+    # a recording's warning (RecordingWarning), an old metric name read (MetricNameWarning) as the tool's own line
+    def one_line(message, category, *a, **k):
+        if category.__name__ in ("RecordingWarning", "MetricNameWarning"):
             print(f"jaxobs: warning: {message}", file=sys.stderr)
         else:
             shown(message, category, *a, **k)
 
     warnings.showwarning = one_line
+    warnings.filterwarnings("default", ".*is an old metric name", DeprecationWarning)  # shown once per place
     try:
         use_host_devices()  # before any JAX computation: one CPU device per usable core
         args = parser.parse_args(argv)

@@ -18,7 +18,7 @@ import jaxobs
 from jaxobs.chunkstore import AbstractChunkSink
 
 from .job import JobError, read_toml
-from .study_file import WHAT
+from .study_file import KINDS, WHAT
 
 
 def distributed_asked(args) -> bool:
@@ -38,7 +38,9 @@ def refuse_unsplittable(path: Path) -> None:
     except JobError:
         return
     st = raw.get("study") if isinstance(raw.get("study"), dict) else {}
-    kind = "drive" if st.get("kind") == "drive" else "recording" if "recording" in st else None
+    name = st.get("kind") if isinstance(st.get("kind"), str) else "fll"  # an unknown kind: load_study's error
+    family = KINDS.get(name, KINDS["fll"])[0]
+    kind = "drive" if family.closed_loop else "recording" if "recording" in st else None
     if kind is not None:
         raise ValueError(
             f"{path}: only FLL studies on a scenario grid or sample are split over processes; "

@@ -15,6 +15,8 @@ import dataclasses
 import math
 from pathlib import Path
 
+from jaxobs.provenance import cf_labels
+
 from .job import COMPONENTS, JobError, job_drive, load_job, parse_job
 from .outdir import OutDir, atomic_path, safe_name
 from .results import load_result, result_designs
@@ -157,7 +159,7 @@ def cli_envelope(args) -> int:
         with atomic_path(out / "envelope.png") as tmp:
             envelope_figure(ds, tmp)
         with atomic_path(out / "envelope.nc") as tmp:
-            ds.to_netcdf(tmp, engine="h5netcdf")
+            cf_labels(ds).to_netcdf(tmp, engine="h5netcdf")  # a numeric design index, the names its label
     a = ds.attrs  # what ran: the stretched window and warm-up, and the steady start's settle (Drive.settled_for)
     print(
         f"{what}, Floquet verdict: settle {a['stability_settle']:.3g} s, windows {a['stability_window']:.3g} s up to "
@@ -169,7 +171,7 @@ def cli_envelope(args) -> int:
     print(head + f"{'lowest r/min held at all loads':>32}")
     for d in designs:
         s = ds.sel(design=d)
-        all_loads = s["holds"].astype(bool).all("load")
+        all_loads = s["holds"].astype(bool).all("load_nm")
         low = f"{float(s['speed_rpm'][all_loads].min()):.4g}" if bool(all_loads.any()) else "none"
         print(
             f"{d:<{wd}}{int(s['holds'].sum()):>5}/{n:<3}{int(s['stable'].sum()):>5}/{n:<3}{int(s['marginal'].sum()):>5}/{n:<3}"

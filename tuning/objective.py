@@ -31,7 +31,6 @@ has no block of inputs to gain, and its unrolled step compiles longer).
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -43,21 +42,18 @@ import numpy as np
 from jaxobs import OnSignal, SaveAll, simulate
 from jaxobs import metrics as M
 from jaxobs.analysis.stability import lyapunov
-from jaxobs.families import AbstractScenarios
-from jaxobs.quantities import Metric
+from jaxobs.families import AbstractFamily
+from jaxobs.metrics import Metric, MetricContext
 from jaxobs.runner import run_scenarios
 from jaxobs.scenarios import Given
 from jaxobs.sharding import batch_mesh
-from jaxobs.study import METRICS as TABLE
-from jaxobs.study import StudyContext, scored_position_error
 
 from .aggregations import AbstractAggregation, Mean
 from .base import AbstractObjective
 from .params import Parametrization
 
 __all__ = [
-    "METRICS",
-    "METRIC_UNITS",
+    "TERM_METRICS",
     "DRIVE_METRICS",
     "LOST_LOCK",
     "LOST_SYNC_DEG",
@@ -86,69 +82,34 @@ def _aggregate_and_grad(aggregation, values, grads):
 FORWARD_MAX = 8
 
 # --------------------------------------------------------------------------
-# per-scenario metrics: the one table's (jaxobs.study.METRICS), in their smooth forms where they have one
+# per-scenario metrics: the one table's (jaxobs.metrics.METRICS), in their smooth forms where they have one
 # --------------------------------------------------------------------------
 
-# what the metrics read beside the run (event, steady window, bands, temperature)
-MetricContext = StudyContext
-
-# The stability margin as a term: not a function of one simulation but of the closed loop itself,
-# jaxobs.analysis.stability.lyapunov's largest non-neutral exponent (1/s) at the scenario (from its steady
-# start; an event at t_event falls inside the settle), differentiable with respect to the gains.  The term's
-# value is that exponent, minus the margin, so minimizing it raises the margin; give it a small weight
-# (rad against 1/s).  Short runs (compile time and cost: the step's jvp in n_dirs directions): enough to
-# rank designs by their slowest mode, not a verdict (the envelope's verification gives that).
-STABILITY_MARGIN = "stability_margin"
+# A system metric (kind "system", the table's stability_margin) as a term: not a function of one simulation but
+# of the closed loop itself, jaxobs.analysis.stability.lyapunov's largest non-neutral exponent (1/s) at the
+# scenario (from its steady start; an event at t_event falls inside the settle), differentiable with respect to
+# the gains.  The term's value is that exponent, minus the margin, so minimizing it raises the margin; give it a
+# small weight (rad against 1/s).  Short runs (compile time and cost: the step's jvp in n_dirs directions): enough
+# to rank designs by their slowest mode, not a verdict (the envelope's verification gives that).
 MARGIN_KW = {"settle": 0.1, "warmup": 0.05, "window": 0.2, "n_dirs": 2}
 
-# the metrics a job may tune on (name -> jaxobs.quantities.Metric, called as its smooth form): the FLL family's
-# on grid signals, the flux observers' on EMF signals, the drive observers' in the closed loop
-METRICS: dict[str, Metric] = {
-    k: TABLE[k]
-    for k in (
-        "itae_freq",
-        "iae_freq",
-        "iae_phase",
-        "itae_phase",
-        "settling_freq",
-        "ripple_freq",
-        "rms_freq_steady",
-        "rms_phase_steady",
-        "iae_position",
-        "rms_position_steady",
-        "ripple_position",
-        "settling_position",
-        "bias_position",
-        "settling_speed",
-        "peak_speed_dev",
-        "rms_speed_steady",
-        "speed_noise_rpm",
-        "rms_speed_error_steady",
-        "peak_speed_error",
-        STABILITY_MARGIN,
-    )
-}
-# each metric's CF (UDUNITS) units, for scores.nc (the Metric's)
-METRIC_UNITS: dict[str, str] = {k: m.units for k, m in METRICS.items()}
+# the metrics a term may name (a view of the table: its run and system metrics, not its flags; each called as its
+# smooth form): the FLL family's on grid signals, the flux observers' on EMF signals, the drive observers' in the
+# closed loop
+TERM_METRICS: dict[str, Metric] = {k: m for k, m in M.METRICS.items() if m.kind != "flag"}
 # the per-scenario flag :meth:`Objective.per_scenario` adds to the metrics: the estimate ended far from the
-# truth (jaxobs.metrics.lost_lock_of: 45° / 10 % on signals, 90° on the drive, over the steady window)
+# truth (the table's lost_lock: 45° / 10 % on signals, 90° on the drive, over the steady window)
 LOST_LOCK = "lost_lock"
+# the flags the drive adds (the table's): lost_sync (lost lock anywhere in the scored horizon) and lost_speed
+DRIVE_FLAGS = ("lost_sync", "lost_speed")
 _OK = " ok"  # the simulation's own flag among a scenario's metrics (a name no metric has)
 # metrics that need the closed-loop drive (signal = "drive" jobs)
-DRIVE_METRICS = tuple(k for k, m in METRICS.items() if m.closed_loop)
+DRIVE_METRICS = tuple(k for k, m in TERM_METRICS.items() if m.closed_loop)
 
-# Loss of synchronism of a drive observer, a per-scenario flag (never fatal): its simulation diverged, or
-# |θ̂e − θe| exceeded this anywhere in the scored horizon [0, horizon) (the settling phase before t = 0 is
-# not scored, nor a standstill start's I-f phase before its hand-over: jaxobs.study.scored_position_error).
-# jaxobs.drive_study flags the same threshold over its steady window only; a job has events (speed and
-# load steps), and a pole slip during one is a loss of synchronism even if the observer locks again
-# afterwards.
-LOST_SYNC_DEG = 90.0
-
-
-def _lost_sync(sol, sig, ctx):
-    err = jnp.abs(scored_position_error(sol, sig, ctx))  # from the hand-over on (standstill starts)
-    return jnp.max(jnp.where(jnp.isfinite(err), err, jnp.inf)) > math.radians(LOST_SYNC_DEG)
+# Loss of synchronism of a drive observer (the table's lost_sync), a per-scenario flag (never fatal): its simulation
+# diverged, or |θ̂e − θe| exceeded this anywhere in the scored horizon [0, horizon) (the settling phase before t = 0
+# is not scored, nor a standstill start's I-f phase before its hand-over: jaxobs.metrics.scored_position_error).
+LOST_SYNC_DEG = M.LOCK_TOL_DRIVE_DEG
 
 
 @dataclass(frozen=True)
@@ -156,10 +117,11 @@ class Term:
     """One weighted term of the objective: a metric times its weight.
 
     Attributes:
-        metric: A :class:`~jaxobs.quantities.Metric`, or the name of one in :data:`METRICS`; kept as its name,
-            the Metric in :attr:`measure`.
+        metric: A :class:`~jaxobs.metrics.Metric`, or the name of one in :data:`TERM_METRICS`; kept as its name,
+            the Metric in :attr:`measure`.  An old name (:data:`jaxobs.metrics.ALIASES`) is read as its new one
+            with a :class:`DeprecationWarning`, the weight converted to the new units.
         weight: The weight, per the metric's unit.
-        measure: The :class:`~jaxobs.quantities.Metric` itself.
+        measure: The :class:`~jaxobs.metrics.Metric` itself.
     """
 
     metric: str | Metric
@@ -167,7 +129,11 @@ class Term:
     measure: Metric | None = field(default=None, compare=False, repr=False)
 
     def __post_init__(self):
-        m = self.metric if isinstance(self.metric, Metric) else METRICS.get(self.metric)
+        if isinstance(self.metric, str) and self.metric in M.ALIASES:
+            name, scale = M.canonical(self.metric, "Term.metric")
+            object.__setattr__(self, "metric", name)
+            object.__setattr__(self, "weight", self.weight / scale)  # per the new unit: the same term
+        m = self.metric if isinstance(self.metric, Metric) else TERM_METRICS.get(self.metric)
         object.__setattr__(self, "measure", m)
         if isinstance(self.metric, Metric):
             object.__setattr__(self, "metric", self.metric.name)
@@ -237,7 +203,7 @@ class Objective(AbstractObjective):
     ctx: MetricContext = eqx.field(static=True)
     aggregation: AbstractAggregation
     penalty: float = eqx.field(static=True)
-    family: AbstractScenarios | None
+    family: AbstractFamily | None
 
     def __init__(
         self,
@@ -249,11 +215,11 @@ class Objective(AbstractObjective):
         ctx: MetricContext,
         aggregation: AbstractAggregation = Mean(),
         penalty: float = 1e3,
-        family: AbstractScenarios | None = None,
+        family: AbstractFamily | None = None,
     ):
         for term in terms:
             if term.measure is None:
-                raise ValueError(f"objective metric {term.metric!r} is unknown; known: {', '.join(METRICS)}")
+                raise ValueError(f"objective metric {term.metric!r} is unknown; known: {', '.join(TERM_METRICS)}")
         if not isinstance(aggregation, AbstractAggregation):
             raise ValueError(
                 f"Objective.aggregation must be jaxobs_tuning.Mean(), SmoothMax() or CVaR(), got {aggregation!r}"
@@ -294,12 +260,12 @@ class Objective(AbstractObjective):
         return simulate(self._bound_system(comp, sig), self.horizon, save=save)
 
     def _exponent(self, comp, sig):
-        """:data:`STABILITY_MARGIN`'s value: the largest non-neutral Lyapunov exponent (1/s) of the loop that
-        ``comp`` (bound to ``sig``) closes, :data:`MARGIN_KW`."""
+        """A system metric's value (the stability margin): the largest non-neutral Lyapunov exponent (1/s) of the
+        loop that ``comp`` (bound to ``sig``) closes, :data:`MARGIN_KW`."""
         return lyapunov(self._bound_system(comp, sig), **MARGIN_KW).exponent  # a drive job: the closed loop
 
     def _term(self, term, comp, sol, sig):
-        if term.metric == STABILITY_MARGIN:
+        if term.measure.kind == "system":
             return self._exponent(comp, sig)
         return term.measure(sol, sig, self.ctx)
 
@@ -318,7 +284,7 @@ class Objective(AbstractObjective):
     def _forward_mode(self, theta) -> bool:
         """The gradient by forward mode (module doc, "Gradients"): up to :data:`FORWARD_MAX` gains and no
         stability-margin term."""
-        return theta.size <= FORWARD_MAX and not any(t.metric == STABILITY_MARGIN for t in self.terms)
+        return theta.size <= FORWARD_MAX and not self._system_terms
 
     def _per_scenario_value_and_grad(self, theta, scenarios):
         def vg(sig):
@@ -420,16 +386,23 @@ class Objective(AbstractObjective):
         """The system one scenario runs at ``theta`` (what :meth:`_simulate` simulates)."""
         return self._bound_system(self.param.apply(self.component, theta), sig)
 
+    @property
+    def _system_terms(self) -> bool:
+        """Whether a term is a system metric (of the loop, not of one run: the stability margin)."""
+        return any(t.measure.kind == "system" for t in self.terms)
+
+    @property
+    def flags(self) -> tuple[str, ...]:
+        """The table's flags each scenario reports beside the metrics: :data:`LOST_LOCK`, and on the drive
+        :data:`DRIVE_FLAGS`."""
+        return (LOST_LOCK, *DRIVE_FLAGS) if self.closed_loop else (LOST_LOCK,)
+
     def _scenario_metrics(self, sol, sig, _aux):
-        mets = {t.metric: t.measure(sol, sig, self.ctx) for t in self.terms if t.metric != STABILITY_MARGIN}
-        # far from the truth over the steady window (jaxobs.metrics, "lost lock"): reported, not tuned on
-        mets[LOST_LOCK] = M.lost_lock_of(sol, self.ctx.steady_from, signal=sig)
-        if self.closed_loop:
-            mets["lost_sync"] = _lost_sync(sol, sig, self.ctx)
-            # the drive does not follow its speed reference over the steady window (jaxobs.metrics,
-            # "lost speed"): e.g. a standstill start that runs backwards with a locked observer
-            out = sol.outputs
-            mets["lost_speed"] = M.lost_speed(out.omega_m, out.omega_m_ref, sol.t >= self.ctx.steady_from)
+        mets = {t.metric: t.measure(sol, sig, self.ctx) for t in self.terms if t.measure.kind == "run"}
+        # the flags, reported, not tuned on: far from the truth over the steady window (lost_lock); on the drive
+        # lost synchronism anywhere in the scored horizon (lost_sync) and a missed speed reference over the steady
+        # window (lost_speed: e.g. a standstill start that runs backwards with a locked observer)
+        mets.update({k: M.METRICS[k].exact(sol, sig, self.ctx) for k in self.flags})
         return {**mets, _OK: sol.ok}
 
     def _per_scenario_metrics(self, theta, scenarios):
@@ -447,8 +420,9 @@ class Objective(AbstractObjective):
             label="scores",
         )
         mets = dict(run.values["design"])
-        if any(t.metric == STABILITY_MARGIN for t in self.terms):  # of the loop, not of the run: one jit(vmap)
-            mets[STABILITY_MARGIN] = np.asarray(self._exponents(theta, scenarios))
+        for t in self.terms:  # system metrics: of the loop, not of the run; one jit(vmap)
+            if t.measure.kind == "system":
+                mets[t.metric] = np.asarray(self._exponents(theta, scenarios))
         return mets, mets.pop(_OK)
 
     @eqx.filter_jit
@@ -460,8 +434,8 @@ class Objective(AbstractObjective):
         """Each scenario's metrics (and its :data:`LOST_LOCK` flag), its weighted total (the penalty where
         diverged) and the good mask — no gradient.
 
-        On the drive the metrics hold ``lost_sync`` too: diverged, or |θ̂e − θe| > :data:`LOST_SYNC_DEG`; and
-        ``lost_speed``: diverged, or the drive missed its speed reference (:func:`jaxobs.metrics.lost_speed`).
+        On the drive the metrics hold the table's ``lost_sync`` too: diverged, or |θ̂e − θe| > :data:`LOST_SYNC_DEG`;
+        and ``lost_speed``: diverged, or the drive missed its speed reference (:func:`jaxobs.metrics.lost_speed`).
 
         Args:
             theta: The free gains' vector.
@@ -478,7 +452,7 @@ class Objective(AbstractObjective):
         with np.errstate(over="ignore", invalid="ignore"):  # a diverged scenario's inf/NaN: masked just below
             total = sum(term.weight * mets[term.metric] for term in self.terms)
         good = np.asarray(ok) & np.isfinite(total)
-        for key in ("lost_sync", "lost_speed"):
+        for key in DRIVE_FLAGS:
             if key in mets:
                 mets = {**mets, key: mets[key] | ~good}
         return mets, np.where(good, total, self.penalty), good
@@ -516,10 +490,9 @@ class Objective(AbstractObjective):
         }
         if LOST_LOCK in mets:  # scenarios whose estimate ends far from the truth, the diverged ones included
             out[LOST_LOCK] = int(np.sum(mets[LOST_LOCK] | ~good))
-        if "lost_sync" in mets:  # drive observers: scenarios that lost synchronism (diverged ones included)
-            out["lost_sync"] = int(np.sum(mets["lost_sync"]))
-        if "lost_speed" in mets:  # drive: mean |ωm − ωm*| > 20 % of |ωm*| in the steady window, or diverged
-            out["lost_speed"] = int(np.sum(mets["lost_speed"]))
+        for key in DRIVE_FLAGS:  # the drive: lost synchronism, lost speed (diverged ones included)
+            if key in mets:
+                out[key] = int(np.sum(mets[key]))
         for term in self.terms:
             m = np.where(good, mets[term.metric], np.nan)
             if bool(np.any(good)):

@@ -39,7 +39,7 @@ A drive study::
     horizon = 0.3                  # s
     steady_from = 0.15             # s (default horizon / 2)
     t_event = 0.15                 # s, the steps' instant (default horizon / 2 with a step axis, else 0)
-    sampling = "grid"              # grid | sobol | lhs (with sample = n)
+    sampling = "grid"              # grid | random | sobol | lhs (with sample = n; jaxobs.scenarios.SAMPLINGS)
     [drive]
     settle = 0.2                   # s, the observer's unscored settling phase before t = 0
     # file = "my_drive.toml"       # or the user's drive file (relative to the study file), instead of
@@ -69,10 +69,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from jaxobs.drive import SHIPPED_DRIVES, bench_machine, shipped_drive
-from jaxobs.families import DriveScenarios, GridSignals
+from jaxobs.families import FAMILIES, AbstractFamily, DriveScenarios, DriveSetting, GridSignals
 from jaxobs.observers import AbstractFluxObserver
 from jaxobs.provenance import sha256, versions
 from jaxobs.registry import REGISTRY, canonical_key
+from jaxobs.scenarios import SAMPLINGS, Grid
 
 from .job import (
     COMPONENTS,
@@ -108,16 +109,18 @@ __all__ = [
 
 WHAT = "study file"
 # the designs a study may name, from jaxobs.registry: the FLLs (and their closed forms' aliases), the drive observers
-FLL_CLOSED_FORMS = {a: e.cls.closed_form for e in REGISTRY.values() if e.signal == "grid" for a in e.aliases}
-FLL_COMPONENTS = tuple(name for name, e in REGISTRY.items() if e.signal == "grid")
-DRIVE_OBSERVERS = tuple(name for name, e in REGISTRY.items() if "drive" in e.signals)
+# (a grid signal's design is no drive observer; a drive observer may run on a family that closes the loop)
+FLL_CLOSED_FORMS = {
+    a: e.cls.closed_form for e in REGISTRY.values() if not FAMILIES[e.signal].drive_observer for a in e.aliases
+}
+FLL_COMPONENTS = tuple(name for name, e in REGISTRY.items() if not FAMILIES[e.signal].drive_observer)
+DRIVE_OBSERVERS = tuple(name for name, e in REGISTRY.items() if any(FAMILIES[s].closed_loop for s in e.signals))
 # the drive jobs' shipped drive files (jaxobs.drive.SHIPPED_DRIVES: the same names, bench inertias and FOC), so a
 # study scores a tuned result on the drive that tuned it
 MACHINES = tuple(SHIPPED_DRIVES)
 MAX_CHUNK = 100_000
-# bytes one scenario keeps per time step while a chunk runs (every step's outputs and the metrics' temporaries,
-# float64): an estimate for the memory check, not a measurement
-BYTES_PER_STEP = {"fll": 256, "drive": 1024}
+# (the bytes one scenario keeps per time step while a chunk runs, for the memory check: each family's
+# study_bytes_per_step, jaxobs.families)
 
 _FLL_STUDY_KEYS = (
     "kind",
@@ -148,11 +151,14 @@ STEP_AXES = ("speed_step_rpm", "load_step_nm")
 
 @dataclass
 class StudySpec:
-    """A checked study file: ``run_study`` / ``run_drive_study`` take ``designs``, ``axes`` and ``opts``.
+    """A checked study file: its preset (``run_study``, or ``run_drive_study`` for a family that closes the loop)
+    takes ``designs``, ``axes``, ``family`` and ``opts``.
 
     Attributes:
         name: The study's name.
-        kind: ``"fll"`` or ``"drive"``.
+        family: The scenarios' family (:mod:`jaxobs.families`): :class:`~jaxobs.families.GridSignals`, its
+            recordings (:meth:`~jaxobs.families.AbstractFamily.recorded`), or
+            :class:`~jaxobs.families.DriveScenarios`, built by its own ``from_toml`` from ``[study]``.
         designs: name -> design.
         axes: name -> values.
         opts: The runner's other options.
@@ -162,7 +168,7 @@ class StudySpec:
     """
 
     name: str
-    kind: str  # "fll" | "drive"
+    family: AbstractFamily
     designs: dict
     axes: dict
     opts: dict = field(default_factory=dict)
@@ -220,15 +226,23 @@ def parse_study(raw: dict, base: Path | None = None) -> StudySpec:
     base = Path.cwd() if base is None else Path(base)
     st = get_field(raw, "study", "study", dict, {})
     kind = get_field(st, "kind", "study.kind", str, "fll")
-    if kind not in ("fll", "drive"):
+    if kind not in KINDS:
         raise JobError("study.kind", f"must be 'fll' or 'drive', got {show(kind)}")
+    family, parse, default_name = KINDS[kind]  # the one place a study file's kind is read
     no_unknown(raw, ("study", "designs", "axes", "drive"), WHAT)  # every table a study file may have
-    if kind != "drive" and "drive" in raw:
+    if not family.closed_loop and "drive" in raw:
         raise JobError("drive", "applies to drive studies (study.kind = 'drive')")
-    name = get_field(st, "name", "study.name", str, "study" if kind == "fll" else "drive-study")
-    if kind == "drive":
-        return _parse_drive(raw, st, name, base)
-    return _parse_fll(raw, st, name, base)
+    return parse(raw, st, get_field(st, "name", "study.name", str, default_name), base)
+
+
+def _family(family: type[AbstractFamily], st: dict, **run) -> AbstractFamily:
+    """``family`` built by its own ``from_toml`` from ``[study]`` (its keys checked there, a ValueError naming
+    the field) and what the run gives it."""
+    try:
+        return family.from_toml(st, "study", **run)
+    except ValueError as e:  # "study.<key>: why"
+        field, _, why = str(e).partition(": ")
+        raise JobError(field, why or str(e)) from None
 
 
 # --------------------------------------------------------------------------------------------------
@@ -248,7 +262,7 @@ def _count(axes: dict, sample: int) -> int:
     return n
 
 
-def _check_steps(horizon: float, steady_from: float, ts: float, n: int, chunk: int, kind: str, extra_s=0.0) -> None:
+def _check_steps(horizon: float, steady_from: float, ts: float, n: int, chunk: int, family, extra_s=0.0) -> None:
     """Time steps of one run, the steady window's samples, and the memory of one chunk, against the machine."""
     if horizon < ts:
         raise JobError("study.horizon", f"shorter than one sample (ts = {ts:g} s), got {horizon:g} s")
@@ -260,7 +274,7 @@ def _check_steps(horizon: float, steady_from: float, ts: float, n: int, chunk: i
             "study.steady_from",
             f"the steady window [{steady_from:g}, {horizon:g}) s holds fewer than 10 samples of {ts:g} s",
         )
-    need = steps * min(n, chunk) * BYTES_PER_STEP[kind]
+    need = steps * min(n, chunk) * family.study_bytes_per_step
     have = available_memory()
     if need > have:
         raise JobError(
@@ -412,11 +426,10 @@ def _parse_fll(raw: dict, st: dict, name: str, base: Path) -> StudySpec:
         return _fll_recordings(raw, st, name, base, designs, t_event, horizon, steady, band, results)
     axes = _axes(raw, GridSignals, GridSignals.limits(freq, ts))
     n = _count(axes, sample)
-    _check_steps(horizon, steady, ts, n, chunk, "fll")
-    opts = dict(
-        t_event=t_event, horizon=horizon, steady_from=steady, band_hz=band, sample=sample, seed=seed, chunk_size=chunk
-    )
-    return StudySpec(name, "fll", designs, axes, opts, n, _results_attr(results))
+    family = _family(GridSignals, {"t_event": t_event, "seed": seed}, freq_n=freq)
+    _check_steps(horizon, steady, ts, n, chunk, family)
+    opts = dict(horizon=horizon, steady_from=steady, band_hz=band, sample=sample, chunk_size=chunk)
+    return StudySpec(name, family, designs, axes, opts, n, _results_attr(results))
 
 
 def _fll_recordings(raw, st, name, base, designs, t_event, horizon, steady, band, results) -> StudySpec:
@@ -434,7 +447,8 @@ def _fll_recordings(raw, st, name, base, designs, t_event, horizon, steady, band
         {"recording": st["recording"]}, "study", GridSignals, t_event, horizon, steady, 0, ts[0], base
     )
     opts = dict(t_event=t_event, horizon=horizon, steady_from=steady, band_hz=band, recording=spec.recording)
-    return StudySpec(name, "fll", designs, {}, opts, len(spec.recording.files), _results_attr(results))
+    family = GridSignals.recorded()  # the recordings stand for grid voltages
+    return StudySpec(name, family, designs, {}, opts, len(spec.recording.files), _results_attr(results))
 
 
 # --------------------------------------------------------------------------------------------------
@@ -560,28 +574,26 @@ def _parse_drive(raw: dict, st: dict, name: str, base: Path) -> StudySpec:
     if not 0 <= t_event < horizon:
         raise JobError("study.t_event", f"must be in [0, horizon = {horizon:g}) s, got {t_event:g}")
     sampling = get_field(st, "sampling", "study.sampling", str, "grid")
-    if sampling not in ("grid", "sobol", "lhs"):
-        raise JobError("study.sampling", f"must be grid, sobol or lhs, got {show(sampling)}")
+    if sampling not in SAMPLINGS:  # the presets' one table (jaxobs.scenarios.sampler_of)
+        raise JobError("study.sampling", f"must be {', '.join(SAMPLINGS)}, got {show(sampling)}")
     sample = get_field(st, "sample", "study.sample", int, 0)
-    if sampling == "grid" and sample:
-        raise JobError("study.sample", "applies to sampling = 'sobol' or 'lhs' (a grid runs every combination)")
-    if sampling != "grid" and not 1 <= sample <= MAX_SCENARIOS:
+    drawn = SAMPLINGS[sampling] is not Grid
+    if not drawn and sample:
+        raise JobError(
+            "study.sample", "applies to sampling = 'random', 'sobol' or 'lhs' (a grid runs every combination)"
+        )
+    if drawn and not 1 <= sample <= MAX_SCENARIOS:
         raise JobError("study.sample", f"must be in [1, {MAX_SCENARIOS}] with sampling = {sampling!r}, got {sample}")
     seed, chunk = _seed(st), _chunk(st, 256)
     axes = _axes(raw, DriveScenarios)
     check_speed_axes(axes, "axes", machine, file)  # the jobs' check: speeds within the inverter's limit
     n = _count(axes, sample)
-    _check_steps(horizon, steady, ts, n, chunk, "drive", extra_s=settle)
-    opts = dict(
-        machine=par,
-        drive=drive,
-        sensors=None if file is None else file.sensors,  # a shipped bench's: ideal
-        horizon=horizon,
-        steady_from=steady,
-        t_event=t_event,
-        sampling=sampling,
-        sample=sample,
-        seed=seed,
-        chunk_size=chunk,
-    )
-    return StudySpec(name, "drive", designs, axes, opts, n, provenance)
+    sensors = None if file is None else file.sensors  # a shipped bench's: ideal
+    family = _family(DriveScenarios, {"t_event": t_event, "seed": seed}, drive=DriveSetting(par, drive, sensors))
+    _check_steps(horizon, steady, ts, n, chunk, family, extra_s=settle)
+    opts = dict(horizon=horizon, steady_from=steady, sampling=sampling, sample=sample, chunk_size=chunk)
+    return StudySpec(name, family, designs, axes, opts, n, provenance)
+
+
+# a study file's ``study.kind`` -> (its family, its parser, its default name): the one place the kind is read
+KINDS = {"fll": (GridSignals, _parse_fll, "study"), "drive": (DriveScenarios, _parse_drive, "drive-study")}

@@ -306,6 +306,7 @@ def reference_markdown() -> str:
     sys.path.insert(0, str(ROOT))
     import jaxobs_tuning
     from jaxobs.drive import SHIPPED_DRIVES  # the drive jobs' and studies' shipped drive files
+    from jaxobs.metrics import ALIASES  # the old metric names a job may still give
 
     # the schema's public tables wherever a refactor puts them (tuning's modules are being split): each name is
     # looked up in tuning's submodules, the first that defines it wins
@@ -425,7 +426,11 @@ def reference_markdown() -> str:
             "objective.terms[0]",
             index,
             None,
-            "Metrics: " + ", ".join(f"`{m}`" for m in jaxobs_tuning.METRICS) + ".",
+            "Metrics (SI units; the table `jaxobs.metrics.METRICS`): "
+            + ", ".join(f"`{m}` ({jaxobs_tuning.TERM_METRICS[m].units})" for m in jaxobs_tuning.TERM_METRICS)
+            + ". Old names (`"
+            + "`, `".join(ALIASES)
+            + "`) are read with a warning, their weights converted.",
         )
     )
     out.append(_table("[solver]", allowed_keys(parse, g, ("solver",), grid_job.parent), "solver", index, None))

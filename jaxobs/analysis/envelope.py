@@ -2,7 +2,7 @@
 
     ds = envelope({"closed form": cf, "tuned": tuned}, machine=par, drive=drive)
     ds["holds"].sel(design="tuned")            # stable ∧ synchronous ∧ error within the bound
-    ds["margin"].sel(design="tuned", load=0)   # 1/s, the slowest mode's decay rate
+    ds["margin"].sel(design="tuned", load_nm=0)   # 1/s, the slowest mode's decay rate
 
 At every operating point (speed × load, optionally × one mismatch axis) and for every design (an observer that
 closes the loop sensorless) it measures two things, each batched over the points in one ``jit(vmap)``:
@@ -56,6 +56,7 @@ then a multi-start projected gradient ascent with a line search, each worst veri
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 from typing import ClassVar, NamedTuple
 
 import equinox as eqx
@@ -76,13 +77,11 @@ from ..drive import (
     drive_speed_limit_rpm,
     speed_limit,
 )
-from ..drive_study import gain_variables
-from ..families import DRIVE_STUDY_AXES, AbstractScenarios, DriveScenarios, bind_observer
+from ..families import DRIVE_STUDY_AXES, AbstractFamily, DriveScenarios, bind_observer
 from ..provenance import cf_dataset, provenance
-from ..quantities import Metric
 from ..scenarios import Grid
 from ..sharding import batch_mesh
-from ..study import Flag, study
+from ..study import gain_variables, study
 from .stability import Stability, floquet, lyapunov
 
 __all__ = [
@@ -136,11 +135,11 @@ ENVELOPE_VARIABLES = {
     ),
     "lost_lock": ("1", "lost lock over the late window: diverged or position error > 90 deg electrical (1: lost)"),
     "lost_speed": ("1", "lost speed over the late window: diverged, or mean |speed - ref| > 20 % of |ref| (1: lost)"),
-    "pos_err_max_deg": ("degree", "peak |position error| in the late window (electrical)"),
-    "pos_bias_deg": ("degree", "mean position error in the late window (electrical, signed): the steady bias"),
-    "pos_ripple_deg": ("degree", "rms of the position error about its mean in the late window (electrical)"),
-    "speed_dev_early_pct": ("percent", "peak |speed - reference| / |reference| in the early window"),
-    "speed_dev_late_pct": ("percent", "peak |speed - reference| / |reference| in the late window"),
+    "peak_position_late": ("rad", "peak |position error| in the late window (electrical)"),
+    "mean_position_late": ("rad", "mean position error in the late window (electrical, signed): the steady bias"),
+    "ripple_position_late": ("rad", "rms of the position error about its mean in the late window (electrical)"),
+    "peak_speed_deviation_early": ("1", "peak |speed - reference| / |reference| in the early window"),
+    "peak_speed_deviation_late": ("1", "peak |speed - reference| / |reference| in the late window"),
     "holds": ("1", "holds: stable, synchronous and peak position error within bound_deg (1: holds)"),
 }
 
@@ -267,7 +266,7 @@ def speed_pulse(scenarios, t0: float, width, height: float):
     return eqx.tree_at(lambda s: (s.speed_ref.times, s.speed_ref.values), scenarios, (times, values))
 
 
-class _LongRuns(AbstractScenarios):
+class _LongRuns(AbstractFamily):
     """The long runs' scenarios: the drive's (``family``), each point's speed reference pulsed by ``perturb`` ×
     its speed from the family's ``t_event`` for :data:`PULSE_TC` / α s and back (so the late window watches the
     operating point itself, not one a step moved it to), the loop wrapped in :class:`_Watched` (its running sums;
@@ -280,7 +279,19 @@ class _LongRuns(AbstractScenarios):
     signal: ClassVar[str] = "drive"
     axes: ClassVar[dict] = DRIVE_STUDY_AXES
     closed_loop: ClassVar[bool] = True
-    bytes_per_step: ClassVar[int] = 2048
+    bytes_per_step: ClassVar[int] = DriveScenarios.bytes_per_step
+    study_bytes_per_step: ClassVar[int] = DriveScenarios.study_bytes_per_step
+    drive_observer: ClassVar[bool] = True
+    options: ClassVar[tuple] = ()  # built from the drive's family, not from a TOML table
+    # the long run's own metrics (LONG_RUN_METRICS, read from its running sums) and flags (_long_run_flags)
+    metrics: ClassVar[tuple[str, ...]] = (
+        "peak_position_late",
+        "mean_position_late",
+        "ripple_position_late",
+        "peak_speed_deviation_early",
+        "peak_speed_deviation_late",
+    )
+    flags: ClassVar[tuple[str, ...]] = ("lost_lock", "lost_speed", "synchronous", "diverged")
 
     def build(self, names, points, first: int = 0):
         fam = self.family
@@ -301,42 +312,47 @@ def _sums(sol):
     return w, mean, jnp.sqrt(jnp.maximum(w.sum_e2 / w.n - mean * mean, 0.0))
 
 
-def _var(name: str, form) -> Metric:
-    return Metric(name, *ENVELOPE_VARIABLES[name], exact=form, closed_loop=True)
+def _var(name: str, form) -> M.Metric:
+    return M.Metric(name, *ENVELOPE_VARIABLES[name], exact=form, closed_loop=True)
 
 
 # the long run's metrics, read from its final state (units and long names: ENVELOPE_VARIABLES)
 LONG_RUN_METRICS = (
-    _var("pos_err_max_deg", lambda sol, sc, ctx: jnp.degrees(_sums(sol)[0].max_e)),
-    _var("pos_bias_deg", lambda sol, sc, ctx: jnp.degrees(_sums(sol)[1])),
-    _var("pos_ripple_deg", lambda sol, sc, ctx: jnp.degrees(_sums(sol)[2])),
-    _var("speed_dev_early_pct", lambda sol, sc, ctx: 100 * _sums(sol)[0].dev_early),
-    _var("speed_dev_late_pct", lambda sol, sc, ctx: 100 * _sums(sol)[0].dev_late),
+    _var("peak_position_late", lambda sol, sc, ctx: _sums(sol)[0].max_e),
+    _var("mean_position_late", lambda sol, sc, ctx: _sums(sol)[1]),
+    _var("ripple_position_late", lambda sol, sc, ctx: _sums(sol)[2]),
+    _var("peak_speed_deviation_early", lambda sol, sc, ctx: _sums(sol)[0].dev_early),
+    _var("peak_speed_deviation_late", lambda sol, sc, ctx: _sums(sol)[0].dev_late),
 )
 
 
 def _lock_lost(sol, sc, ctx):
+    # the lost-lock flag's definition (jaxobs.metrics.lost_lock: |error| > 90 deg electrical somewhere in the window)
+    # read from the running maximum: the long run keeps no trajectory
     return _sums(sol)[0].max_e > math.radians(M.LOCK_TOL_DRIVE_DEG)
 
 
 def _speed_lost(sol, sc, ctx):
+    # jaxobs.metrics.lost_speed's definition from the running sums (the window's means are the sums over n)
     w = _sums(sol)[0]
     return w.sum_dw > jnp.maximum(M.SPEED_TOL * w.sum_ref, M.SPEED_FLOOR_RPM * math.pi / 30 * w.n)
 
 
 def _long_run_flags(speed_tol: float) -> tuple:
     """lost_lock, lost_speed (diverged included) and synchronous: finite, locked, at speed and settled (its late
-    peak speed deviation under ``speed_tol`` and at most :data:`SETTLE_GROWTH` × the early window's)."""
+    peak speed deviation under ``speed_tol`` and at most :data:`SETTLE_GROWTH` × the early window's).  The first two
+    are the metric table's flags (:data:`jaxobs.metrics.METRICS`) with the long run's forms, over its late window."""
 
     def synchronous(sol, sc, ctx):
         w = _sums(sol)[0]
         settled = (w.dev_late < speed_tol) & (w.dev_late <= SETTLE_GROWTH * jnp.maximum(w.dev_early, 1e-6))
         return ~_lock_lost(sol, sc, ctx) & ~_speed_lost(sol, sc, ctx) & settled
 
-    return tuple(
-        Flag(name, ENVELOPE_VARIABLES[name][1], form, diverged=name != "synchronous")
-        for name, form in (("lost_lock", _lock_lost), ("lost_speed", _speed_lost), ("synchronous", synchronous))
-    )
+    def table(name, form):
+        return replace(M.METRICS[name], exact=form, long_name=ENVELOPE_VARIABLES[name][1], count=None)
+
+    sync = M.Metric("synchronous", "1", ENVELOPE_VARIABLES["synchronous"][1], synchronous, kind="flag", diverged=False)
+    return table("lost_lock", _lock_lost), table("lost_speed", _speed_lost), sync
 
 
 class _DualScenarios(DriveScenarios):
@@ -457,7 +473,7 @@ def envelope(
     (``[machine] max_speed_rpm``; :func:`speed_limit_rpm`), None: the rule's default.  The long runs' and the
     verdicts' traced programs are kept across
     processes where a folder is set (:func:`jaxobs.kept_jit`).  Returns an ``xarray.Dataset`` with dims
-    ``("design", "speed_rpm", "load"[, axis])`` and the variables of :data:`ENVELOPE_VARIABLES` (booleans stored
+    ``("design", "speed_rpm", "load_nm"[, axis])`` and the variables of :data:`ENVELOPE_VARIABLES` (booleans stored
     as int8 0/1); its ``horizon`` and ``steady_from`` attributes are those that ran.
 
     Raises:
@@ -624,16 +640,16 @@ def envelope(
     for m in LONG_RUN_METRICS:
         res[m.name] = runs[m.name].values
     lost = res["lost_lock"].astype(bool)
-    for k in ("pos_err_max_deg", "pos_bias_deg", "pos_ripple_deg"):
+    for k in ("peak_position_late", "mean_position_late", "ripple_position_late"):
         res[k] = np.where(lost, np.nan, res[k])  # a lost point has no steady error to speak of
-    err_ok = np.nan_to_num(res["pos_err_max_deg"], nan=np.inf) <= bound_deg
+    err_ok = np.nan_to_num(np.degrees(res["peak_position_late"]), nan=np.inf) <= bound_deg
     res["holds"] = res["stable"].astype(bool) & res["synchronous"].astype(bool) & err_ok
 
-    dims = ("design", "speed_rpm", "load", *names[2:])
+    dims = ("design", "speed_rpm", "load_nm", *names[2:])
     coords = {
         "design": ("design", dnames, {"long_name": "observer design (closing the loop sensorless)"}),
         "speed_rpm": ("speed_rpm", speeds, DRIVE_STUDY_AXES["speed_rpm"].attrs),
-        "load": ("load", loads, DRIVE_STUDY_AXES["load_nm"].attrs),
+        "load_nm": ("load_nm", loads, DRIVE_STUDY_AXES["load_nm"].attrs),
     }
     if mismatch is not None:
         coords[mismatch[0]] = (mismatch[0], axes[mismatch[0]], DRIVE_STUDY_AXES[mismatch[0]].attrs)

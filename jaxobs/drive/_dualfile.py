@@ -94,6 +94,9 @@ def dual_drive_file(single, raw: dict, dual_table: dict, *, lowered: bool = Fals
             f"inverter.{key}: a dual drive ([dual]) runs the default timing (sampling 'start', compute_delay 1), "
             f"got {inv.get(key)!r}"
         )
+    if inv.get("pwm", "averaged") != "averaged" or inv.get("device_drop_v", 0.0) != 0.0:
+        key = "pwm" if inv.get("pwm", "averaged") != "averaged" else "device_drop_v"
+        raise ValueError(f"inverter.{key}: a dual drive ([dual]) runs the averaged inverter without device drops")
     if single.machine.q_sat is not None:
         raise ValueError("machine.q_sat_current_a: a dual drive ([dual]) has no q-axis saturation model; remove it")
     per_set = single.machine

@@ -51,7 +51,7 @@ integrator stops while the speed loop's output is not realised (beyond the circl
 torque, or cut by field weakening's limits: the reference's torque on the assumed
 machine, in K̂_t units) and the speed error pushes further.  Stopping only at the
 circle's torque let the integrator wind up while field weakening cut i_q*: a
-1000 → 2000 r/min step at 14 N·m on the lab IPMSM of ``docs/examples/lab_ipmsm_2k2.toml``
+1000 → 2000 r/min step at 14 N·m on the lab IPMSM of ``docs/examples/ipmsm_2p2kw_lab.toml``
 overshot by 47.6 r/min; it now does not overshoot (``tests/test_weakening.py`` holds it within 5 r/min).
 
 Delay compensation: the voltage computed from the samples at τ_k acts ``advance``

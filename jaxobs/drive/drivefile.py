@@ -37,6 +37,9 @@ The file (SI units, or the unit in the key's name; ``[machine]``'s keys from ``p
     f_pwm_hz = 16000.0         # switching frequency (dead time's error), default f_sample_hz
     sampling = "start"         # "start" or "centre" of the PWM period (jaxobs.drive.latency)
     compute_delay = 1          # periods, 0 or 1
+    pwm = "averaged"           # or "carrier": carrier-comparison PWM, f_pwm_hz = f_sample_hz (jaxobs.drive.pwm)
+    device_drop_v = 0.0        # V, each conducting switch's or diode's drop
+    voltage_limit = "circle"   # or "hexagon": up to 2 u_dc/3 at its vertices, minimum phase error (Inverter.limit)
     [control]
     current_bandwidth_hz = 500 # α_c/2π
     speed_bandwidth_hz = 5     # α_s/2π
@@ -219,6 +222,9 @@ DRIVE_FILE_KEYS: dict[str, dict[str, _Key]] = {
         "f_pwm_hz": _Key(_F, 100.0, 1e6, unit="Hz"),
         "sampling": _Key("str", choices=("start", "centre")),
         "compute_delay": _Key(_I, 0, 1, unit="periods"),
+        "pwm": _Key("str", choices=("averaged", "carrier")),
+        "device_drop_v": _Key(_F, 0.0, 100.0, unit="V"),
+        "voltage_limit": _Key("str", choices=("circle", "hexagon")),
     },
     "control": {
         "current_bandwidth_hz": _Key(_F, 0.01, 1e5, unit="Hz"),
@@ -787,7 +793,23 @@ def drive_from_table(raw: dict, name: str = "drive") -> DriveFile:
         rule = "IMC: α_c L̂, α_c R̂s" if g[-1] != "w" else "double pole at −α_s: 2α_s Ĵ/K_t, α_s² Ĵ/K_t"
         rec(g, float(getattr(foc, g)), unit, rule)
     f_pwm = inv.get("f_pwm_hz", f_s)
-    inverter = Inverter(inv["u_dc"], f_pwm)
+    pwm = inv.get("pwm", "averaged")
+    if pwm == "carrier" and (f_pwm != f_s or sampling != "start"):
+        raise ValueError(
+            'inverter.pwm: "carrier" runs one carrier period per sample (single update, sampled at the carrier\'s '
+            f'peak): it needs f_pwm_hz = f_sample_hz and sampling = "start", got {f_pwm:g} Hz and {sampling!r}'
+        )
+    if "pwm" in inv:  # printed where the file chooses (a file without it prints what it printed before)
+        rec("pwm", pwm, "", "the plant's inverter: averaged, or carrier comparison (jaxobs.drive.pwm)", True)
+    limit = inv.get("voltage_limit", "circle")
+    if "voltage_limit" in inv:  # printed where the file chooses
+        rule = "the circle u_dc/√3 in every direction"
+        if limit == "hexagon":
+            rule = (
+                "the hexagon: u_dc/√3 across its edges, 2 u_dc/3 at its vertices, minimum phase error (Inverter.limit)"
+            )
+        rec("u_vertex", 2 * inv["u_dc"] / 3 if limit == "hexagon" else inv["u_dc"] / _S3, "V", rule, True)
+    inverter = Inverter(inv["u_dc"], f_pwm, pwm=pwm, u_device=inv.get("device_drop_v", 0.0), voltage_limit=limit)
     drive = Drive(foc, inverter, sensorless=True, latency=latency)
 
     # --- sensors

@@ -1,9 +1,13 @@
 """Inverter (average-value model) and sensors.
 
 Inverter: the commanded stationary-frame voltage is limited to the circle
-|u| ≤ U_dc/√3 (the linear range of space-vector modulation), and the dead
+|u| ≤ U_dc/√3 (the linear range of space-vector modulation).  Its ``pwm`` is
+``"averaged"`` (the default): the voltage is held over the period and the dead
 time adds, per phase, Δu_x = −U_dc·T_d·f_pwm·sgn(i_x) (x = a, b, c), taken
-back to αβ with the amplitude-invariant Clarke transform.  ``i_smooth > 0``
+back to αβ with the amplitude-invariant Clarke transform; or ``"carrier"``:
+the plant integrates the switched voltage of a triangular carrier's comparison
+between its switching instants, dead time on the edges (:mod:`jaxobs.drive.pwm`).
+A device drop u_device lowers each leg's voltage by u_device·sgn(i_x) in both.  ``i_smooth > 0``
 replaces sgn by tanh(i/i_smooth) so gradients flow; ``i_smooth = 0`` is the
 exact sign.  The one-sample computation delay lives in the closed-loop scan:
 the voltage applied over [t_k, t_{k+1}] is the one computed at t_{k−1}.
@@ -30,9 +34,11 @@ from .._validate import as_float, check_nonnegative, check_positive, check_real
 from .._validate import static_float as _static_float
 from .component import AbstractComponent
 
-__all__ = ["Inverter", "InverterInput", "Sensors", "SensorInput", "clarke_abc_to_ab", "ab_to_abc"]
+__all__ = ["PWM_MODELS", "Inverter", "InverterInput", "Sensors", "SensorInput", "clarke_abc_to_ab", "ab_to_abc"]
 
 _S3 = math.sqrt(3.0)
+PWM_MODELS = ("averaged", "carrier")  # Inverter.pwm's choices
+VOLTAGE_LIMITS = ("circle", "hexagon")  # Inverter.voltage_limit's choices
 
 
 def ab_to_abc(a, b):
@@ -91,10 +97,19 @@ class Inverter(AbstractComponent):
     error depends on the instantaneous current, so the plant adds it inside its
     vector field (:class:`~jaxobs.drive.PMSM`).
 
+    With ``pwm="carrier"`` the plant integrates the switched voltage instead (:mod:`jaxobs.drive.pwm`): one
+    carrier period per control period, so ``f_pwm`` must be the sampling frequency (checked by
+    :class:`~jaxobs.drive.PMSM`).
+
     Args:
         udc: The dc-link voltage, V (> 0).
         f_pwm: The switching frequency, Hz (> 0).
         i_smooth: The tanh width for the dead-time sign, A (0: the exact sign).
+        pwm: ``"averaged"`` (default) or ``"carrier"``.
+        u_device: The conducting device's voltage drop, V (≥ 0; default 0).
+        voltage_limit: ``"circle"`` (default: |u| ≤ U_dc/√3, the linear range) or ``"hexagon"`` (the whole
+            space-vector hexagon, up to 2U_dc/3 at its vertices; overmodulation by minimum phase error, see
+            :meth:`limit`).
 
     Raises:
         ValueError: A value out of its range, naming the field.
@@ -103,18 +118,41 @@ class Inverter(AbstractComponent):
     udc: jax.Array  # dc-link voltage, V (> 0)
     f_pwm: jax.Array  # switching frequency, Hz (> 0)
     i_smooth: float = eqx.field(static=True)  # tanh width for the dead-time sign, A (0: exact sign)
+    # device drop, V (≥ 0), static: a drop of zero leaves the averaged plant's traced program as it was without
+    # drops (a traced zero would add terms, and XLA's fusion then moves the last bits)
+    u_device: float = eqx.field(static=True)
+    pwm: str = eqx.field(static=True)  # "averaged" or "carrier"
+    voltage_limit: str = eqx.field(static=True)  # "circle" or "hexagon"
 
-    def __init__(self, udc=540.0, f_pwm=10e3, i_smooth=0.0):
+    def __init__(self, udc=540.0, f_pwm=10e3, i_smooth=0.0, pwm="averaged", u_device=0.0, voltage_limit="circle"):
         self.udc = check_positive("udc", udc, "Inverter")
         self.f_pwm = check_positive("f_pwm", f_pwm, "Inverter")
         self.i_smooth = _static_float(check_nonnegative("i_smooth", i_smooth, "Inverter"), i_smooth)
+        self.u_device = _static_float(check_nonnegative("u_device", u_device, "Inverter"), u_device)
+        if pwm not in PWM_MODELS:
+            raise ValueError(f"Inverter.pwm must be one of {PWM_MODELS}, got {pwm!r}")
+        self.pwm = pwm
+        if voltage_limit not in VOLTAGE_LIMITS:
+            raise ValueError(f"Inverter.voltage_limit must be one of {VOLTAGE_LIMITS}, got {voltage_limit!r}")
+        self.voltage_limit = voltage_limit
 
     @property
     def u_max(self):
         return self.udc / _S3
 
+    @property
+    def u_vertex(self):
+        """The largest |u| the inverter applies: 2U_dc/3 at the hexagon's vertices (U_dc/√3 under the circle)."""
+        return 2.0 * self.udc / 3.0 if self.voltage_limit == "hexagon" else self.u_max
+
     def limit(self, u_a, u_b):
-        """Scale the voltage vector back onto the circle |u| ≤ U_dc/√3 (direction kept).
+        """Scale the voltage vector back onto the circle |u| ≤ U_dc/√3, or onto the hexagon (direction kept).
+
+        The hexagon is max_x v_x − min_x v_x ≤ U_dc over the phase voltages (what min-max injection can apply:
+        U_dc/√3 across its edges' middles, 2U_dc/3 at its vertices).  A vector beyond it is scaled back onto it
+        along its own direction: minimum phase error overmodulation.  DECISION: minimum phase error rather than
+        minimum magnitude error (the nearest point of the hexagon), because the current controller's angle and
+        the decoupling it computes stay right; the lost magnitude is what its anti-windup sees.
 
         Args:
             u_a: u_α, V.
@@ -123,6 +161,11 @@ class Inverter(AbstractComponent):
         Returns:
             The limited ``(u_α, u_β)``, V.
         """
+        if self.voltage_limit == "hexagon":
+            va, vb, vc = ab_to_abc(u_a, u_b)
+            span = jnp.maximum(jnp.maximum(va, vb), vc) - jnp.minimum(jnp.minimum(va, vb), vc)
+            scale = jnp.where(span > self.udc, self.udc / jnp.maximum(span, 1e-12), 1.0)
+            return u_a * scale, u_b * scale
         mag = safe_norm2(u_a, u_b)
         scale = jnp.where(mag > self.u_max, self.u_max / jnp.maximum(mag, 1e-12), 1.0)
         return u_a * scale, u_b * scale
@@ -141,7 +184,15 @@ class Inverter(AbstractComponent):
     def step(self, state, inp: InverterInput) -> tuple[None, InverterInput]:
         return state, InverterInput(*self.limit(inp.u_a, inp.u_b))
 
-    def _sgn(self, i):
+    def sign(self, i):
+        """The current's sign the dead time and the device drop act by: sgn(i), or tanh(i/i_smooth).
+
+        Args:
+            i: A phase current, A.
+
+        Returns:
+            The (smoothed) sign.
+        """
         if self.i_smooth > 0:
             return jnp.tanh(i / self.i_smooth)
         return jnp.sign(i)
@@ -159,7 +210,26 @@ class Inverter(AbstractComponent):
         """
         du = self.udc * dead_time * self.f_pwm
         ia, ib, ic = ab_to_abc(i_a, i_b)
-        return clarke_abc_to_ab(-du * self._sgn(ia), -du * self._sgn(ib), -du * self._sgn(ic))
+        return clarke_abc_to_ab(-du * self.sign(ia), -du * self.sign(ib), -du * self.sign(ic))
+
+    @property
+    def has_device_drop(self) -> bool:
+        """False where the device drop is zero (the averaged plant then skips it)."""
+        return self.u_device != 0.0
+
+    def device_drop_error(self, i_a, i_b):
+        """Stationary-frame voltage error of the device drops at the current i_ab: −u_device·sgn(i_x) per leg.
+
+        Args:
+            i_a: The α current, A.
+            i_b: The β current, A.
+
+        Returns:
+            ``(Δu_α, Δu_β)``, V.
+        """
+        ia, ib, ic = ab_to_abc(i_a, i_b)
+        d = self.u_device
+        return clarke_abc_to_ab(-d * self.sign(ia), -d * self.sign(ib), -d * self.sign(ic))
 
 
 def _statically_zero(x) -> bool:

@@ -13,6 +13,16 @@ The vector field :meth:`PMSM.field` (:func:`plant_field`) is the same function
 ``diffrax.diffeqsolve`` runs as the high-accuracy reference (tests/test_drive.py).
 State x = [i_d (A), i_q (A), ω_m (rad/s, mechanical), θ_e (rad, electrical)];
 θ_e is wrapped to (−π, π] after every period.
+
+Carrier PWM (an inverter with ``pwm="carrier"``, :mod:`jaxobs.drive.pwm`): the period is cut at the six
+switching instants of the carrier comparison (dead time on the edges) into seven sub-intervals, each under its
+switched voltage held, and each sub-interval is integrated by one step of the plant's rule (``n_sub`` steps per
+sub-interval); the speed and angle in the same state, as under the averaged inverter.  Within a sub-interval
+the voltage is constant in the stationary frame, but the machine is not linear time-invariant there (the rotor
+turns, and a salient machine's stationary-frame inductance turns with it), so the rule is RK4 on the nonlinear
+field rather than a matrix exponential; the longest sub-interval is at most half a period, and its error
+against diffrax's Dopri8 (tests/test_pwm.py) is stated there.  The output at t_k is the state at the period's
+start, the carrier's peak, the centre of the zero vector 000: where the current ripple crosses its mean.
 """
 
 from __future__ import annotations
@@ -28,8 +38,9 @@ from .._math import wrap
 from .._trig import sincos
 from .._validate import check_nonnegative, check_sample_time
 from .component import AbstractComponent
-from .hardware import Inverter
+from .hardware import Inverter, ab_to_abc
 from .machine import PMSMParams, dq_to_ab, plant_vf, rotate, torque
+from .pwm import N_INTERVALS, carrier_intervals
 
 __all__ = ["PMSM", "PlantInput", "PlantOutput", "PlantState", "plant_field"]
 
@@ -50,6 +61,9 @@ def plant_field(par: PMSMParams, inverter: Inverter, dead_time, x, inp):
     sc = sincos(x[3])  # one sine and cosine of θe for the currents' and the voltage's transforms
     i_a, i_b = rotate(x[0], x[1], *sc)
     du_a, du_b = inverter.dead_time_error(dead_time, i_a, i_b)
+    if inverter.has_device_drop:  # statically zero by default: the field stays what it was without drops
+        dd_a, dd_b = inverter.device_drop_error(i_a, i_b)
+        du_a, du_b = du_a + dd_a, du_b + dd_b
     return plant_vf(par, x, (inp[0] + du_a, inp[1] + du_b), inp[2], sc=sc)
 
 
@@ -109,11 +123,12 @@ class PMSM(AbstractComponent):
         inverter: The inverter (default :class:`Inverter`).
         dead_time: The dead time, s (≥ 0).
         ts: The control period, s.
-        n_sub: Substeps per period (an integer ≥ 1).
-        rule: The integration rule (default :class:`~jaxobs.RK4`).
+        n_sub: Substeps per period (an integer ≥ 1); under carrier PWM, per sub-interval.
+        rule: The integration rule (default :class:`~jaxobs.RK4`); under carrier PWM a one-step rule.
 
     Raises:
-        ValueError: A value out of its range, naming the field.
+        ValueError: A value out of its range, naming the field; under carrier PWM, a switching frequency other
+            than 1/ts or a multistep rule.
     """
 
     par: PMSMParams
@@ -134,6 +149,19 @@ class PMSM(AbstractComponent):
             raise ValueError(f"PMSM.n_sub must be an integer >= 1, got {n_sub!r}")
         self.n_sub = n_sub
         self.rule = check_rule(RK4() if rule is None else rule, "PMSM")
+        if self.inverter.pwm == "carrier":
+            f_pwm = self.inverter.f_pwm
+            if not isinstance(f_pwm, jax.core.Tracer) and abs(float(f_pwm) * self.ts - 1.0) > 1e-9:
+                raise ValueError(
+                    f"PMSM.ts: carrier PWM integrates one carrier period per step (single update): ts must be "
+                    f"1/inverter.f_pwm = {1.0 / float(f_pwm):.6g} s, got {self.ts:.6g} s (a half-period plant, "
+                    "PWM-centre sampling, is not supported)"
+                )
+            if type(self.rule).init is not AbstractRule.init:
+                raise ValueError(
+                    f"PMSM.rule: carrier PWM steps sub-intervals of varying length: a one-step rule, got "
+                    f"{type(self.rule).__name__}"
+                )
 
     def field(self, x, inp):
         """The vector field.
@@ -167,8 +195,42 @@ class PMSM(AbstractComponent):
         i_a, i_b = dq_to_ab(i_d, i_q, th)
         return PlantOutput(i_d, i_q, w_m, th, i_a, i_b, torque(self.par, i_d, i_q, th))
 
+    def _applied_field(self, x, inp):
+        """The machine's field under the switched voltage (no averaged dead-time error: it is on the edges)."""
+        return plant_vf(self.par, x, (inp[0], inp[1]), inp[2])
+
+    def carrier_substeps(self, state: PlantState, inp: PlantInput):
+        """One period under carrier PWM, sub-interval by sub-interval (``pwm="carrier"``).
+
+        Args:
+            state: The plant state at the period's start.
+            inp: The commanded (limited) voltage and the load torque.
+
+        Returns:
+            ``(t, xs, rule_state)``: the boundaries' times from the period's start, shape (8,), s; the state at
+            each, shape (8, 4) (θ_e unwrapped); the rule's state at the end.
+        """
+        inv = self.inverter
+        i_a, i_b = dq_to_ab(state.x[0], state.x[1], state.x[3])
+        s = jnp.stack([inv.sign(i) for i in ab_to_abc(i_a, i_b)])  # the phase currents' signs at t_k
+        h, v_a, v_b = carrier_intervals(inv.udc, self.ts, self.dead_time, inv.u_device, inp.u_a, inp.u_b, s)
+        x, rs = state.x, state.rule
+        xs = [x]
+        for j in range(N_INTERVALS):  # seven sub-intervals: a fixed, unrolled sequence
+            path = Held((v_a[j], v_b[j], inp.t_load))
+            hj = h[j] / self.n_sub
+            for _ in range(self.n_sub):
+                x, rs = self.rule.step(self._applied_field, x, path, hj, rs)
+            xs.append(x)
+        t = jnp.concatenate([jnp.zeros((1,), h.dtype), jnp.cumsum(h)])
+        return t, jnp.stack(xs), rs
+
     def step(self, state: PlantState, inp: PlantInput) -> tuple[PlantState, PlantOutput]:
         out = self.output(state.x)
+        if self.inverter.pwm == "carrier":
+            _, xs, rs = self.carrier_substeps(state, inp)
+            x = xs[-1]
+            return PlantState(x=x.at[3].set(wrap(x[3])), rule=rs), out
         path = Held((inp.u_a, inp.u_b, inp.t_load))
         h = self.ts / self.n_sub
         x, rs = state.x, state.rule

@@ -2,7 +2,8 @@
 
 The contract in ``_base`` (AbstractSignal: what a signal declares; FunctionSignal: a plain function of time);
 waveforms in ``_waveforms`` (GridSignal, EMFSignal, paper001_test, stack); recorded signals and their
-CSV reader in ``_recordings`` (SampledSignal, DriveRecording, read_recording).
+CSV reader in ``_recordings`` (SampledSignal, DriveRecording, read_recording); one recording file as a
+family's scenarios, ``_read`` (read_recorded).
 
 A :class:`GridSignal` is a PyTree whose leaves (amplitude, frequency, event
 time, step sizes, harmonic magnitudes, …) may carry a leading batch axis; it is
@@ -30,6 +31,7 @@ from ._logs import LogData as LogData
 from ._logs import RecordingLayout as RecordingLayout
 from ._logs import RecordingWarning as RecordingWarning
 from ._logs import read_drive_log as read_drive_log
+from ._read import read_recorded as read_recorded
 from ._recordings import MAX_CSV_BYTES as MAX_CSV_BYTES
 from ._recordings import DriveRecording as DriveRecording
 from ._recordings import RecordingColumnError as RecordingColumnError

@@ -129,7 +129,7 @@ def axes_field(tab: dict, family, where: str, limits: dict | None = None) -> dic
         tab: Axis name -> list of numbers.
         family: A scenario family (:mod:`jaxobs.families`).
         where: The table's name in errors.
-        limits: name -> (low, high), narrowing the ranges (:meth:`~jaxobs.families.AbstractScenarios.limits`).
+        limits: name -> (low, high), narrowing the ranges (:meth:`~jaxobs.families.AbstractFamily.limits`).
 
     Returns:
         name -> the checked values.

@@ -10,9 +10,9 @@ from pathlib import Path
 import numpy as np
 
 from jaxobs import metrics as M
-from jaxobs.provenance import cf_dataset
+from jaxobs.provenance import cf_dataset, cf_labels
 
-from ..objective import LOST_SYNC_DEG, METRIC_UNITS, METRICS
+from ..objective import TERM_METRICS
 from ..outdir import atomic_write_text
 from .spec import Job, ScenarioSpec
 
@@ -64,8 +64,9 @@ def at_bounds(job: Job, gains: dict) -> dict:
 def scores_dataset(obj, names, combos, spec: ScenarioSpec, per: dict, title: str = "jaxobs tune: per-scenario scores"):
     """Per-scenario metrics of each design as an xarray Dataset: the grid's axes as dims (a full grid),
     else one ``scenario`` dim with the axes as coordinates (sampled scenarios).  Every variable carries a
-    ``long_name`` and every numeric one CF ``units`` (the metrics': :data:`jaxobs_tuning.objective.METRICS`;
-    flags ``1``); the CF-1.8 global attributes, ``title`` among them (:func:`jaxobs.provenance.cf_dataset`)."""
+    ``long_name`` and every numeric one CF ``units`` (the metrics': :data:`jaxobs_tuning.objective.TERM_METRICS`;
+    flags ``1``); the CF-1.8 global attributes, ``title`` among them (:func:`jaxobs.provenance.cf_dataset`); a
+    numeric ``design`` index and its label ``design_label`` (:func:`jaxobs.provenance.cf_labels`)."""
     import xarray as xr
 
     designs = list(per)
@@ -82,8 +83,8 @@ def scores_dataset(obj, names, combos, spec: ScenarioSpec, per: dict, title: str
         coords.update({n: ("scenario", [c[i] for c in combos]) for i, n in enumerate(names)})
     data = {}
     keys = [t.metric for t in obj.terms]
-    extra = ("lost_sync", "lost_speed") if obj.closed_loop else ()
-    for key in (*keys, "total", "diverged", "lost_lock", *extra):
+    flag_keys = ("diverged", *obj.flags)  # the table's flags (jaxobs.metrics.METRICS): lost_lock, the drive's too
+    for key in (*keys, "total", *flag_keys):
         rows = []
         for d in designs:
             mets, total, good = per[d]
@@ -93,31 +94,15 @@ def scores_dataset(obj, names, combos, spec: ScenarioSpec, per: dict, title: str
         data[key] = (dims, np.stack(rows))
     ds = xr.Dataset(data, coords=coords)
     for key in keys:
-        ds[key].attrs.update(units=METRIC_UNITS[key], long_name=METRICS[key].long_name)
+        ds[key].attrs.update(units=TERM_METRICS[key].units, long_name=TERM_METRICS[key].long_name)
     # the weights carry the metrics' units (a term's weight is per its metric's unit): the total is a number
     ds["total"].attrs.update(units="1", long_name="weighted objective of the scenario (the penalty where diverged)")
-    flags = {
-        "diverged": "diverged: the simulation ended non-finite (1: diverged)",
-        "lost_lock": "lost lock: the estimate ended far from the truth in the steady window (45 deg or 10 % on "
-        "signals, 90 deg on the drive), or diverged (1: lost)",
-        "lost_sync": f"lost synchronism: diverged, or |position error| > {LOST_SYNC_DEG:g} deg (1: lost)",
-        "lost_speed": f"lost speed: diverged, or the steady window's mean |speed - reference| > "
-        f"{100 * M.SPEED_TOL:g} % of the mean |reference| (at least {M.SPEED_FLOOR_RPM:g} r/min) (1: lost)",
-    }
-    for key in ("diverged", "lost_lock", *extra):
+    for key in flag_keys:
         ds[key] = ds[key].astype("int8")
-        ds[key].attrs.update(units="1", long_name=flags[key])
-    ds.attrs["note"] = (
-        "total: the weighted objective per scenario (the penalty where diverged); diverged: 1/0; lost_lock: 1 where "
-        "the estimate ended far from the truth in the steady window (45 deg or 10 % on signals, 90 deg on the "
-        "drive) or diverged"
+        ds[key].attrs.update(units="1", long_name=M.METRICS[key].long_name)
+    ds.attrs["note"] = "total: the weighted objective per scenario (the penalty where diverged); " + "; ".join(
+        f"{key}: {M.METRICS[key].long_name}" for key in flag_keys
     )
-    if extra:
-        ds.attrs["note"] += f"; lost_sync: 1 where diverged or |position error| > {LOST_SYNC_DEG:g} deg (drive)"
-        ds.attrs["note"] += (
-            f"; lost_speed: 1 where diverged or the steady window's mean |speed - reference| > "
-            f"{100 * M.SPEED_TOL:g} % of the mean |reference| (at least {M.SPEED_FLOOR_RPM:g} r/min) (drive)"
-        )
     what = "observer design (closing the loop sensorless)" if obj.closed_loop else "observer design"
     ds["design"].attrs["long_name"] = f"{what}: its initial, closed-form or tuned gains"
     for name in names:
@@ -130,7 +115,8 @@ def scores_dataset(obj, names, combos, spec: ScenarioSpec, per: dict, title: str
     if not grid:
         ds["scenario"].attrs.update(units="1", long_name=f"scenario: one of {len(combos)} random points of the axes")
     ds.attrs["source"] = "jaxobs tune (jaxobs_tuning.run_job)"
-    return cf_dataset(ds, title)
+    # as the file holds it: a numeric design index, the names its label (jaxobs.provenance.by_label reads it back)
+    return cf_labels(cf_dataset(ds, title))
 
 
 def recordings_provenance(job: Job, scenarios=None) -> dict:

@@ -14,7 +14,7 @@ from jaxobs.drive import bench_machine, load_drive
 from jaxobs.families import FAMILIES, RecordedSignals
 from jaxobs.observers import AbstractFluxObserver
 from jaxobs.provenance import sha256
-from jaxobs.signals import RecordingLayout, stack
+from jaxobs.signals import RecordingLayout, read_recorded, stack
 
 from ..objective import DRIVE_METRICS
 from .components import COMPONENTS
@@ -43,7 +43,7 @@ def _col_spec(v, field: str):
     return v
 
 
-def parse_recording_scenarios(tab, where, kind, t_event, horizon, steady, seed, ts, base) -> ScenarioSpec:
+def parse_recording_scenarios(tab, where, family, t_event, horizon, steady, seed, ts, base) -> ScenarioSpec:
     """``[<where>.recording]``: the file(s), the time base, the columns.
 
     Read and checked now when the job file's folder is known (``base``): exists, at most
@@ -53,7 +53,7 @@ def parse_recording_scenarios(tab, where, kind, t_event, horizon, steady, seed, 
     Args:
         tab: The scenario table holding ``recording``.
         where: The scenario table's name in errors.
-        kind: The family the recordings stand for (:mod:`jaxobs.families`).
+        family: The family the recordings stand for (a class of :mod:`jaxobs.families`).
         t_event: The event's time, s.
         horizon: The simulated time, s.
         steady: The steady window's start, s.
@@ -86,11 +86,10 @@ def parse_recording_scenarios(tab, where, kind, t_event, horizon, steady, seed, 
     rate = get_field(rec, "sample_rate", f"{w}.sample_rate", float)
     if rate is not None and not 0 < rate <= 1e9:
         raise JobError(f"{w}.sample_rate", f"must be in (0, 1e9] Hz, got {rate:g}")
-    family = RecordedSignals(kind)
-    cols_default, truth_default = (list(c) for c in family.kind.recording_columns)
-    cols, truth = rec.get("columns", cols_default), rec.get("truth", truth_default)
-    n_truth = family.kind.truth_counts  # grid: theta, omega, amplitude; u/i: theta_e [, omega_e]
-    n_cols = (4, 6) if family.binds else (len(cols_default),)  # u/i: 2 + 2, or 3 + 3 phase columns (abc)
+    source, family = family, family.recorded()
+    cols, truth = rec.get("columns", list(family.columns)), rec.get("truth", list(family.truth))
+    n_truth = family.truth_counts  # grid: theta, omega, amplitude; u/i: theta_e [, omega_e]
+    n_cols = (4, 6) if family.binds else (len(family.columns),)  # u/i: 2 + 2, or 3 + 3 phase columns (abc)
     for key, v, n_ok in (("columns", cols, n_cols), ("truth", truth, n_truth)):
         if not isinstance(v, list) or len(v) not in n_ok:
             raise JobError(f"{w}.{key}", f"must be a list of {' or '.join(map(str, n_ok))} column(s), got {show(v)}")
@@ -142,7 +141,7 @@ def parse_recording_scenarios(tab, where, kind, t_event, horizon, steady, seed, 
             "them to the shortest",
         )
     axes = {"recording": [float(i) for i in range(len(files) * max(windows, 1))]}
-    return ScenarioSpec(kind.signal, t_event, horizon, steady, axes, 0, seed, recording=spec)
+    return ScenarioSpec(source.signal, t_event, horizon, steady, axes, 0, seed, recording=spec)
 
 
 def _log_options(rec: dict, w: str, family: RecordedSignals, cols, root: Path, load: bool):
@@ -197,10 +196,10 @@ def _load_one(spec: RecordingSpec, family: RecordedSignals, path: str, need: int
     """One file's scenario (or its ``spec.windows`` windows of ``need`` samples, a list)."""
     kw = dict(time_column=spec.time_column, sample_rate=spec.sample_rate, ts=spec.ts)
     if not family.binds:
-        return family.read(path, spec.columns, spec.truth, max_bytes=MAX_RECORDING_BYTES, **kw)
+        return read_recorded(path, spec.columns, spec.truth, drive=False, max_bytes=MAX_RECORDING_BYTES, **kw)
     windows = (spec.windows, need) if spec.windows else None
-    return family.read(
-        path, spec.columns, spec.truth, layout=spec.layout, machine=spec.machine, windows=windows,
+    return read_recorded(
+        path, spec.columns, spec.truth, drive=True, layout=spec.layout, machine=spec.machine, windows=windows,
         max_bytes=MAX_LOG_BYTES, **kw,
     )  # fmt: skip
 
@@ -213,7 +212,7 @@ def load_recordings(spec: RecordingSpec, family: RecordedSignals, horizon: float
 
     Args:
         spec: The :class:`RecordingSpec`.
-        family: The :class:`jaxobs.families.RecordedSignals` that reads them.
+        family: The :class:`jaxobs.families.RecordedSignals` they are (read by :func:`jaxobs.signals.read_recorded`).
         horizon: The simulated time, s (the windows' length).
 
     Returns:
@@ -248,7 +247,7 @@ def check_recording_job(job, comp_t: dict) -> None:
                     f"{t.metric!r} needs the closed-loop drive; a recording runs the observer open loop (use "
                     "iae_position, rms_position_steady, ripple_position, rms_speed_error_steady, peak_speed_error)",
                 )
-        if RecordedSignals(spec.family).binds and issubclass(COMPONENTS[job.component].ctor, AbstractFluxObserver):
+        if spec.family.recorded().binds and issubclass(COMPONENTS[job.component].ctor, AbstractFluxObserver):
             for k in ("Rs", "L"):
                 if k not in comp_t:
                     raise JobError(

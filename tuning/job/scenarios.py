@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import math
 
-from jaxobs.families import AbstractScenarios, RecordedSignals
+from jaxobs.families import AbstractFamily, DriveSetting
 from jaxobs.scenarios import Grid, Random
 
 from .components import W_N
@@ -28,7 +28,7 @@ def scenario_points(spec: ScenarioSpec):
     return list(sampler.names), sampler.points()
 
 
-def job_family(spec: ScenarioSpec, values: dict, drive=None, drive_spec: DriveSpec | None = None) -> AbstractScenarios:
+def job_family(spec: ScenarioSpec, values: dict, drive=None, drive_spec: DriveSpec | None = None) -> AbstractFamily:
     """The family of a job's scenario set.
 
     Args:
@@ -39,20 +39,23 @@ def job_family(spec: ScenarioSpec, values: dict, drive=None, drive_spec: DriveSp
             ``ipmsm002``).
 
     Returns:
-        Its recordings (:class:`~jaxobs.families.RecordedSignals`), or the family ``spec.signal`` names with the
-        job's event, seed, nominal frequency, machine, sensors and drive.
+        Its recordings (:meth:`~jaxobs.families.AbstractFamily.recorded`), or the family ``spec.signal`` names,
+        built by its own :meth:`~jaxobs.families.AbstractFamily.from_toml` from the job's event and seed, the
+        component's nominal frequency and, where there is one, the drive.
     """
     if spec.recording is not None:
-        return RecordedSignals(spec.family)
+        return spec.family.recorded()
     freq = float(values.get("omega_n", W_N)) / (2 * math.pi)
-    df = DriveSpec().drive_file if drive_spec is None else drive_spec.drive_file
-    sensors = None if drive_spec is None or drive_spec.file is None else df.sensors  # shipped: ideal sensors
-    return spec.family.of(
-        t_event=spec.t_event, seed=spec.seed, freq=freq, machine=df.machine, drive=drive, sensors=sensors
-    )
+    setting = None
+    if drive is not None:  # the job's drive (jaxobs_tuning.job.run: the family closes its loop)
+        df = DriveSpec().drive_file if drive_spec is None else drive_spec.drive_file
+        sensors = None if drive_spec is None or drive_spec.file is None else df.sensors  # shipped: ideal sensors
+        setting = DriveSetting(df.machine, drive, sensors)
+    table = {"t_event": spec.t_event, "seed": spec.seed}  # [scenarios], as checked (jaxobs_tuning.job.schema)
+    return spec.family.from_toml(table, "scenarios", freq_n=freq, drive=setting)
 
 
-def build_scenarios(spec: ScenarioSpec, family: AbstractScenarios):
+def build_scenarios(spec: ScenarioSpec, family: AbstractFamily):
     """The batched scenarios of every combination of the axes (or ``sample`` random ones), or the job's recordings.
 
     Args:

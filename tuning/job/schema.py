@@ -7,13 +7,14 @@ import os
 from pathlib import Path
 
 from jaxobs.families import FAMILIES, GridSignals
+from jaxobs.metrics import canonical
 from jaxobs.observers import AbstractDriveObserver, AbstractLESO, gain_fields
 from jaxobs.observers.speed import SPEED_KINDS
 from jaxobs.provenance import sha256
 from jaxobs.registry import REGISTRY, canonical_key
 
 from .. import strategies
-from ..objective import DRIVE_METRICS, METRICS, STABILITY_MARGIN, Term
+from ..objective import DRIVE_METRICS, TERM_METRICS, Term
 from ..params import GainSpec
 from .components import COMPONENTS, W_N
 from .drive import check_drive_speeds, check_standstill, inline_drive, parse_drive
@@ -339,24 +340,26 @@ def parse_job(raw: dict, base: Path | None = None) -> Job:
             raise JobError(where, f"must be a table {{ metric = ..., weight = ... }}, got {show(t)}")
         no_unknown(t, ("metric", "weight"), where)
         metric = get_field(t, "metric", f"{where}.metric", str, required=True)
-        if metric not in METRICS:
-            raise JobError(f"{where}.metric", f"unknown metric {show(metric)}; known: {', '.join(METRICS)}")
+        # an old name is read as its new one (one line of warning), its weight converted to the new units
+        metric, scale = canonical(metric, f"{where}.metric")
+        if metric not in TERM_METRICS:
+            raise JobError(f"{where}.metric", f"unknown metric {show(metric)}; known: {', '.join(TERM_METRICS)}")
         grid_only = metric.endswith(("_freq", "_phase", "freq_steady", "phase_steady"))
-        if METRICS[metric].needs_truth and scen.recording is None:
+        if TERM_METRICS[metric].needs_truth and scen.recording is None:
             raise JobError(
                 f"{where}.metric",
                 f"{show(metric)} compares the estimate with a recording's truth: it needs [scenarios.recording]",
             )
         if metric in DRIVE_METRICS and not scen.family.closed_loop:
             raise JobError(f"{where}.metric", f"{show(metric)} needs the closed-loop drive, not {comp} ({scen.signal})")
-        if (scen.family is not GridSignals) == grid_only:
+        if scen.family.drive_observer == grid_only:
             raise JobError(f"{where}.metric", f"{show(metric)} does not apply to {comp} ({scen.signal} signals)")
-        if metric == STABILITY_MARGIN and drive is not None and drive.start != "steady":
-            raise JobError(f"{where}.metric", "stability_margin needs drive.start = 'steady' (an operating point)")
+        if TERM_METRICS[metric].kind == "system" and drive is not None and drive.start != "steady":
+            raise JobError(f"{where}.metric", f"{metric} needs drive.start = 'steady' (an operating point)")
         weight = get_field(t, "weight", f"{where}.weight", float, 1.0)
         if weight <= 0:
             raise JobError(f"{where}.weight", f"must be > 0, got {weight}")
-        terms.append(Term(metric, weight))
+        terms.append(Term(metric, weight / scale))
     agg = get_field(obj_t, "aggregate", "objective.aggregate", str, "mean")
     if agg not in strategies.AGGREGATIONS:
         raise JobError("objective.aggregate", f"must be {strategies.one_of(strategies.AGGREGATIONS)}, got {show(agg)}")
@@ -409,6 +412,9 @@ def parse_job(raw: dict, base: Path | None = None) -> Job:
         )
     if drive is not None and drive.file is not None and "file" in raw["drive"]:
         raw = {**raw, "drive": inline_drive(raw["drive"], drive.file)}  # a result reads it wherever it moves
+    if any(t.get("metric") != term.metric for t, term in zip(terms_raw, terms)):  # old names: never written back
+        new = [{**t, "metric": term.metric, "weight": term.weight} for t, term in zip(terms_raw, terms)]
+        raw = {**raw, "objective": {**raw["objective"], "terms": new}}
     job = Job(
         raw=raw,
         name=name,

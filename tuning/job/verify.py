@@ -133,13 +133,13 @@ def verify_designs(designs: dict, env: EnvelopeSpec, drive_spec: DriveSpec) -> d
     for name in designs:
         rows = []
         for s, ld in combos:
-            pt = ds.sel(design=name, speed_rpm=s, load=ld)
+            pt = ds.sel(design=name, speed_rpm=s, load_nm=ld)
             row = {"speed_rpm": s, "load_nm": ld}
             for k in ("synchronous", "stable", "marginal", "holds", "lost_lock", "lost_speed"):
                 row[k] = bool(pt[k])
             row["margin_per_s"] = _num(pt["margin"])
             row["resolution_per_s"] = _num(pt["resolution"])
-            for k in ("pos_err_max_deg", "pos_bias_deg", "pos_ripple_deg", "speed_dev_late_pct"):
+            for k in ("peak_position_late", "mean_position_late", "ripple_position_late", "peak_speed_deviation_late"):
                 row[k] = _num(pt[k])
             row["passes"] = row["synchronous"] and row["stable"]
             rows.append(row)

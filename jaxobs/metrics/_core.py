@@ -26,11 +26,11 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._math import wrap as wrap
-from ._simulate import SignalOutput, Solution
-from .drive.dual_loop import DualOutput
-from .drive.loop import DriveOutput
-from .signals import AbstractSignal
+from .._math import wrap as wrap
+from .._simulate import SignalOutput, Solution
+from ..drive.dual_loop import DualOutput
+from ..drive.loop import DriveOutput
+from ..signals import AbstractSignal
 
 # The outputs whose truth is the rotor's electrical angle θe (the closed-loop drives: their field theta_e), against
 # those whose truth is a signal's (SignalOutput's field truth, or the flux angle of an EMFSignal passed beside).

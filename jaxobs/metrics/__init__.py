@@ -1,0 +1,35 @@
+"""Metrics: the functions that score a trajectory, and the one metric table.
+
+- :mod:`jaxobs.metrics._core`: metrics on simulated trajectories, exact and smooth (``settling_time``, ``rms``,
+  ``lost_lock``, ...), each a function of arrays or of a :class:`~jaxobs.Solution`;
+- :mod:`jaxobs.metrics._table`: :data:`METRICS`, one :class:`Metric` per quantity a study, a tuning job or an
+  envelope reports (SI units; flags are boolean metrics, the stability margin a system metric), display units as
+  a presentation transform, and :data:`ALIASES`, the old names read on input (:func:`canonical`).
+"""
+
+from ._core import *  # noqa: F403
+from ._core import __all__ as _core_all
+from ._table import ALIASES as ALIASES
+from ._table import DISPLAY as DISPLAY
+from ._table import DIVERGED as DIVERGED
+from ._table import METRICS as METRICS
+from ._table import Alias as Alias
+from ._table import Metric as Metric
+from ._table import MetricContext as MetricContext
+from ._table import MetricNameWarning as MetricNameWarning
+from ._table import canonical as canonical
+from ._table import scored_position_error as scored_position_error
+
+__all__ = [
+    *_core_all,
+    "ALIASES",
+    "DISPLAY",
+    "DIVERGED",
+    "METRICS",
+    "Alias",
+    "Metric",
+    "MetricContext",
+    "MetricNameWarning",
+    "canonical",
+    "scored_position_error",
+]

@@ -1,0 +1,70 @@
+"""The recordings reader: one recording file as the scenarios a family runs.
+
+A grid voltage is a :class:`~jaxobs.signals.SampledSignal` (:meth:`~jaxobs.signals.SampledSignal.from_csv`); a
+drive's u and i a :class:`~jaxobs.signals.DriveRecording`, read as a drive log (:func:`read_drive_log`: its layout,
+timing and consistency checks), or resampled by the small reader when the log's rate is not the observer's.
+"""
+
+from __future__ import annotations
+
+from .._time import TS_REL_TOL
+from ._logs import RecordingLayout, read_drive_log
+from ._recordings import DriveRecording, SampledSignal
+
+__all__ = ["read_recorded"]
+
+
+def read_recorded(path, columns, truth, *, drive: bool, layout=None, machine=None, windows=None, **kw):
+    """One recording file as scenarios.
+
+    Args:
+        path: the CSV file.
+        columns: a grid voltage's column (``columns[0]``), or the voltage then the current columns, two each
+            (u_α, u_β, i_α, i_β, or in ``layout``'s frames) or three each (``abc``).
+        truth: the phase, frequency and amplitude columns (grid), or the encoder's angle and speed.
+        drive: whether the file is a drive's u and i (a drive observer's), not a grid voltage (an FLL's).
+        layout: what a drive log's columns hold (:class:`RecordingLayout`; default the sidecar ``<path>.toml``,
+            else the observers' own form).
+        machine: a :class:`~jaxobs.drive.PMSMParams` for the log's power and timing checks, or None.
+        windows: ``(count, n)``: ``count`` windows of ``n`` samples spread evenly over a drive log, each a
+            scenario starting at its own speed; None: the whole file.
+        **kw: the time base (``time_column``, ``sample_rate``, ``ts``) and ``max_bytes``.
+
+    Returns:
+        A :class:`SampledSignal` (a grid voltage), a :class:`DriveRecording` (u and i), or a list of ``count`` of
+        them (``windows``).
+
+    Raises:
+        ValueError: what :func:`read_drive_log` or ``from_csv`` refuses, in one line; a declared layout on a log
+            sampled at another rate than ``ts``.
+    """
+    if not drive:
+        return SampledSignal.from_csv(path, columns=columns[0], truth=truth, **kw)
+    ts = kw.get("ts")
+    log = read_drive_log(
+        path,
+        voltages=columns[: len(columns) // 2],  # 2 + 2 columns, or 3 + 3 (abc)
+        currents=columns[len(columns) // 2 :],
+        theta_e=truth[0],
+        omega_e=truth[1] if len(truth) > 1 else None,
+        time_column=kw.get("time_column"),
+        sample_rate=kw.get("sample_rate"),
+        layout=layout,
+        machine=machine,
+        max_bytes=kw.get("max_bytes"),
+    )
+    if ts is None or abs(log.ts - ts) <= TS_REL_TOL * ts:  # the one sample-interval tolerance
+        if windows is None:
+            return log.recording()
+        count, n = windows
+        if log.n < n:
+            raise ValueError(f"recording {str(path)!r}: {log.n} samples, fewer than a window's {n}")
+        starts = [round(i * (log.n - n) / max(count - 1, 1)) for i in range(count)]
+        return [log.recording(a, n) for a in starts]
+    # another rate: resampled by the small reader (the checks above have run on the file as it is)
+    if (layout is not None and layout != RecordingLayout()) or windows is not None:
+        raise ValueError(
+            f"recording {str(path)!r}: sampled at {1 / log.ts:.6g} Hz, not at the observer's {1 / ts:.6g} Hz: a "
+            "declared layout or windows read the log at its own rate (resample it, or set ts)"
+        )
+    return DriveRecording.from_csv(path, columns=columns, **dict(zip(("theta_e", "omega_e"), truth)), **kw)
