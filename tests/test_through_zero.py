@@ -211,6 +211,7 @@ def test_held_rate_bounds_and_misses():
 # ---- real runs on two machines ----------------------------------------------------------------------------------
 
 
+@pytest.mark.slow  # 60-75 s each on two cores, mostly the closed loop's compile
 @pytest.mark.parametrize("name", MACHINES)
 def test_real_reversals_the_flux_observer_holds_the_sign_pll_leso_does_not(name):
     """A reversal ±½ rated speed in 0.2 s on each drive file's sensorless drive: the reduced-order flux observer
