@@ -358,7 +358,6 @@ STUDY_MUST_FAIL = [
         "study.t_event",
     ),
     ("drive: t_event < 0", DRIVE_STUDY.replace("horizon = 0.2", "horizon = 0.2\nt_event = -0.1"), "study.t_event"),
-    ("drive: SOIFO on the IPMSM", DRIVE_STUDY + '\n[designs.s]\nclosed_form = "SOIFO"\n', "designs.s"),
     ("drive: unknown table", DRIVE_STUDY + "\n[studyy]\na = 1\n", "allowed: study, designs, axes, drive"),
     ("fll: a [drive] table", S + "\n[drive]\nsettle = 0.1\n", "drive"),
     ("drive: sampling", DRIVE_STUDY.replace('kind = "drive"', 'kind = "drive"\nsampling = "halton"'), "study.sampling"),

@@ -9,6 +9,8 @@ the paper's second is the ratio qv'/v' inside its inverse tangent, where the C c
 The C also has what the paper's diagram does not: guards against a zero amplitude (1 compare, 5 selects, 1 fmaxf;
 jaxobs._math.safe_norm2/safe_atan2 and the FLL's amplitude floor)."""
 
+import dataclasses
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -28,7 +30,9 @@ def table_ii_counts(name):
     """(×, ÷, ±, atan2, sqrt, states) of the exported forward-Euler step, its integration taken out; and the
     guards' (compare, select, fmaxf)."""
     obs = DESIGNS[name]()
-    obs = type(obs)(**{k: getattr(obs, k) for k in obs.__dataclass_fields__ if k != "rule"}, rule=jaxobs.Euler())
+    obs = type(obs)(
+        **{f.name: getattr(obs, f.name) for f in dataclasses.fields(obs) if f.name != "rule"}, rule=jaxobs.Euler()
+    )
     obs = jax.tree.map(lambda x: jnp.asarray(x, jnp.float32) if eqx.is_inexact_array(x) else x, obs)
     state = obs.init()
     ops = generate(obs, state, jnp.float32(0.0)).ops_steady

@@ -98,8 +98,8 @@ def test_drive_pieces_are_step_components():
         assert isinstance(component, D.AbstractComponent)
     cs, c = foc.step(foc.init(), D.FOCInput(0, 0.0, 0.0, 0.0, 0.0, 0.0, 10.0))
     assert isinstance(c, D.FOCOutput) and float(cs.int_w) > 0.0  # I-P: the speed error enters the integrator
-    with pytest.raises(ValueError, match="FOC.step needs the assumed machine"):
-        D.FOC(1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 10.0).step(cs, D.FOCInput(0, 0.0, 0.0, 0.0, 0.0, 0.0, 10.0))
+    with pytest.raises(TypeError, match="'est' and 'u_max'"):  # a FOC is whole when built: no half-built one
+        D.FOC(1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 10.0)
 
 
 def test_save_strategies_agree():

@@ -91,7 +91,7 @@ def test_mtpv_is_the_brute_force_maximum_on_the_flux_circle(Ld, Lq):
     from jaxobs.drive.weakening import mtpv_iq
 
     psi_f, p = 0.066, 3
-    est = D.PMSMParams(0.018, Ld, Lq, psi_f, 0.1, p)
+    est = D.PMSMParams(0.02, Ld, Lq, psi_f, 0.1, p)  # Rs does not enter the flux circle
     for psi in (0.02, 0.05, 0.1):
         delta = np.linspace(0.0, np.pi, 400001)
         psi_d, psi_q = psi * np.cos(delta), psi * np.sin(delta)

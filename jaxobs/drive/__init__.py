@@ -80,5 +80,9 @@ from .scenario import ParameterDrift as ParameterDrift
 from .scenario import Profile as Profile
 from .scenario import Scenario as Scenario
 from .scenario import grid as grid
+from .scenario import low_speed_load_step as low_speed_load_step
+from .scenario import reversal as reversal
 from .scenario import scenario_batch as scenario_batch
+from .scenario import stack_scenarios as stack_scenarios
+from .scenario import standstill_hold as standstill_hold
 from .weakening import VoltageFeedbackFW as VoltageFeedbackFW

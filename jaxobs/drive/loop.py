@@ -351,7 +351,9 @@ class AbstractDriveLoop(AbstractSystem):
         (1.5 p (ψ̂f i_q* + (L̂d − L̂q) i_d*(i_q*) i_q*), field weakening's Δi_d left out), where the observer's
         speed estimator reads it (a mechanical model, jaxobs.observers.speed) and the controller is a
         :class:`FOC`; ``meas`` itself otherwise."""
-        if iq_ref is None or not self.observer.reads_torque:  # an ObserverBank: any of its observers
+        observer = self.observer  # a drive observer, or an ObserverBank (any of its observers); a bare observer
+        # (a wrapper of the export's golden vectors) reads no torque
+        if iq_ref is None or not (isinstance(observer, AbstractDriveObserver) and observer.reads_torque):
             return meas
         foc = self.controller
         if not isinstance(foc, FOC):  # the dual three-phase loop's controller: no torque reference (T* = 0)
