@@ -156,7 +156,7 @@ def test_floquet_on_the_dual_field_weakened_drive_agrees_with_its_runs():
     two programs, one per field-weakening budget).  The runs (tests/test_dual.py) hold 840 r/min with the αβ
     budget ("ab", the default) and leave it with the sets' budget ("set", growing at +3.9 /s into a limit cycle);
     the linear model puts the speed pair through the PLL at −4.85 /s at "ab"'s i_d and +3.46 /s at "set"'s.
-    Floquet on the same loop: growing with "set" (measured +13.1 ± 0.47 /s after a 1 s settle), and with "ab" the
+    Floquet on the same loop: growing with "set" (measured +19.2 /s after a 1 s settle, off its orbit), and with "ab" the
     FA-LESO's integral root, −0.034 /s, but only to ± 1.03 /s: the orbit under field weakening, a set at its
     inverter's limit most of the time, does not come back to itself over whole electrical periods (the neutral
     direction is off by a third after 0.3 s), so that verdict is marginal, not stable.  The test holds what is
@@ -179,7 +179,11 @@ def test_floquet_on_the_dual_field_weakened_drive_agrees_with_its_runs():
     ab, st = verdict["ab"], verdict["set"]
     assert bool(ab.stable) or bool(ab.marginal), (ab.exponent, ab.resolution)
     assert float(ab.exponent) < 0 and float(ab.speed_dev) < 0.01, (ab.exponent, ab.speed_dev)
-    assert float(st.exponent) - float(st.resolution) > 0 and not bool(st.stable), (st.exponent, st.resolution)
+    # "set": unstable.  Since field weakening's i_q keeps the speed loop's torque at the weakened i_d, this run
+    # leaves its orbit within the settle (off_orbit; +19.2 /s against a rate bound of 18.2 /s), where no resolution
+    # is defined; before, it stayed near it and read +13.1 ± 0.47 /s
+    assert not bool(st.stable), (st.exponent, st.resolution)
+    assert bool(st.off_orbit) or float(st.exponent) - float(st.resolution) > 0, (st.exponent, st.resolution)
 
 
 def test_dual_loop_verdict_needs_the_observer_closing_within_the_settle():

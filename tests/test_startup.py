@@ -289,12 +289,15 @@ def test_an_observer_that_never_agrees_keeps_the_drive_in_i_f():
     """The fail-safe: a SOIFO whose FLL is not seeded (it stays at 1 rad/s, its gain being lam·ω̂²) never
     agrees with the I-f frame, so the drive never hands over and the I-f keeps the rotor synchronous at the
     switch speed (measured: with seeding it switches at 0.353 s)."""
-    import equinox as eqx
 
-    class Unseeded(eqx.Module):  # the observer without seed_speed
+    class Unseeded(jaxobs.AbstractObserver):  # an observer, but no drive observer: no seed_speed
         obs: object
 
-        def init(self):
+        @property
+        def ts(self):
+            return self.obs.ts
+
+        def init(self, u0=None):
             return self.obs.init()
 
         def step(self, s, u):
