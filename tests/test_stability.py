@@ -156,8 +156,8 @@ def test_floquet_on_the_dual_field_weakened_drive_agrees_with_its_runs():
     two programs, one per field-weakening budget).  The runs (tests/test_dual.py) hold 840 r/min with the αβ
     budget ("ab", the default) and leave it with the sets' budget ("set", growing at +3.9 /s into a limit cycle);
     the linear model puts the speed pair through the PLL at −4.85 /s at "ab"'s i_d and +3.46 /s at "set"'s.
-    Floquet on the same loop: growing with "set" (measured +19.2 /s after a 1 s settle, off its orbit), and with "ab" the
-    FA-LESO's integral root, −0.034 /s, but only to ± 1.03 /s: the orbit under field weakening, a set at its
+    Floquet on the same loop: growing with "set" (measured +19.2 /s after a 1 s settle, off its orbit), and with "ab"
+    the FA-LESO's integral root, −0.034 /s, but only to ± 1.03 /s: the orbit under field weakening, a set at its
     inverter's limit most of the time, does not come back to itself over whole electrical periods (the neutral
     direction is off by a third after 0.3 s), so that verdict is marginal, not stable.  The test holds what is
     resolved: "set" unstable, "ab" not."""
