@@ -6,11 +6,11 @@ The rows are the throughput workloads of :mod:`benchmarks.workloads` as a user r
 (10 000 steps) with its grid signal generated in the loop and read back from precomputed time-major rows, and
 the sensorless drive 0.2 s (2 000 steps) — each compiled once and timed best of three after a warm-up call.
 Three ways to run a batch can be timed side by side (``--ways``): ``map_batch`` (:func:`jaxobs.map_batch` as
-it is called by default: the batch split over the devices, each share run ``jaxobs.sharding.TILE`` scenarios at a time
-on a CPU and whole on an accelerator), ``tiled`` (``map_batch`` with ``tile=jaxobs.sharding.TILE`` on any device) and
-``vmap`` (one ``jax.vmap`` over the whole batch).  Run it once on the CPU and once on a GPU (``JAX_PLATFORMS``
-chooses); docs/performance.md, "On a GPU", puts the two in one table.  Precomputed rows stop at batch 8192:
-their inputs are ``batch × 10 000`` samples of four arrays (2.6 GB in float64 at 8192).
+it is called by default: the batch split over the devices, each share run ``jaxobs.runtime.sharding.TILE`` scenarios at
+a time on a CPU and whole on an accelerator), ``tiled`` (``map_batch`` with ``tile=jaxobs.runtime.sharding.TILE`` on any
+device) and ``vmap`` (one ``jax.vmap`` over the whole batch).  Run it once on the CPU and once on a GPU
+(``JAX_PLATFORMS`` chooses); docs/performance.md, "On a GPU", puts the two in one table.  Precomputed rows stop at batch
+8192: their inputs are ``batch × 10 000`` samples of four arrays (2.6 GB in float64 at 8192).
 """
 
 from __future__ import annotations
@@ -53,7 +53,7 @@ def rows(batches, dtypes, ways=("map_batch", "vmap"), log=print, out: Path | Non
             for name, inputs in work:
                 for way in ways:
                     shard = way != "vmap"
-                    tile = jaxobs.sharding.TILE if way == "tiled" else None
+                    tile = jaxobs.runtime.sharding.TILE if way == "tiled" else None
                     row = dict(workload=name, inputs=inputs, dtype=dt, batch=batch, way=way)
                     t0 = time.perf_counter()
                     try:

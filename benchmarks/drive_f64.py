@@ -15,10 +15,10 @@ the number a tuning run optimizes.
 
 Where float64 loses (``--ops``, seconds): the cost of one element of each operation the drive's step is
 made of, XLA's (a jitted loop over a (1024,) array) beside numba's scalar libm calls, in both precisions,
-and ``jaxobs._trig.sincos`` (the drive's sine and cosine) beside XLA's pair.
+and ``jaxobs.core.trig.sincos`` (the drive's sine and cosine) beside XLA's pair.
 
 ``--xla-trig`` adds the row ``jaxobs-xla-trig``: the same drive with XLA's own ``sin``/``cos`` in place of
-``jaxobs._trig.sincos`` (the modules that call it are patched while that row is traced and compiled), the
+``jaxobs.core.trig.sincos`` (the modules that call it are patched while that row is traced and compiled), the
 A/B of jaxobs's own sine and cosine against XLA's, timed in the same rounds.  ``--dtypes f64`` leaves float32
 out (one numba compile instead of two).
 """
@@ -38,7 +38,7 @@ import jax
 import numpy as np
 
 import jaxobs
-from jaxobs._trig import sincos
+from jaxobs.core.trig import sincos
 
 from . import baselines
 from . import workloads as W
@@ -59,7 +59,7 @@ OPS = {
     "cos": lambda m, x: m.cos(x),
     "atan2": lambda m, x: m.arctan2(x, 1.3 - x) if m is not math else math.atan2(x, 1.3 - x),
     "sin+cos": lambda m, x: m.sin(x) + m.cos(x),
-    "sincos (jaxobs)": lambda m, x: sum(sincos(x)),  # float64: jaxobs._trig's polynomial; float32: XLA's pair
+    "sincos (jaxobs)": lambda m, x: sum(sincos(x)),  # float64: jaxobs.core.trig's polynomial; float32: XLA's pair
     "exp": lambda m, x: m.exp(-x),
     "sqrt": lambda m, x: m.sqrt(x + 1.0),
     "divide": lambda m, x: 1.0 / (x + 1.5),
@@ -122,7 +122,7 @@ def _xla_sincos(x):
 
 
 def _callers_of_sincos():
-    """The modules whose drive code calls ``jaxobs._trig.sincos`` (patched for ``--xla-trig``)."""
+    """The modules whose drive code calls ``jaxobs.core.trig.sincos`` (patched for ``--xla-trig``)."""
     from jaxobs.drive import control, machine, plant
 
     return (control, machine, plant)

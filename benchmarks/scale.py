@@ -4,7 +4,7 @@
     python -m benchmarks.scale --kind drive [--scenarios 10000 100000] [--horizon 0.005]
 
 Each size runs in a fresh process (so its peak RSS is its own): ``run_study`` of the SOGI-FLL-WIF on
-random scenarios (4 axes), float64, chunks of 2048, one device, with a :class:`jaxobs.chunkstore.ChunkStore`
+random scenarios (4 axes), float64, chunks of 2048, one device, with a :class:`jaxobs.runtime.chunkstore.ChunkStore`
 in a temporary folder (each chunk's metrics to disk as it finishes, as ``jaxobs study`` does), then the
 Dataset written as study.nc (NetCDF4, h5netcdf).  ``--held``: without the store (every chunk's values held
 in memory until the end), for comparison.  Reported: the wall time of the study (compilation included, from
@@ -42,7 +42,7 @@ def _drive_study(scenarios: int, horizon: float, store, mesh):
     import jaxobs
     from jaxobs import drive as D
     from jaxobs import linear, papers
-    from jaxobs.drive_study import run_drive_study
+    from jaxobs.studies.drive import run_drive_study
 
     par = D.bench_machine("spmsm000")
     k1, k2 = papers.SECOND_ORDER_SOIFO_K1, papers.SECOND_ORDER_SOIFO_K2
@@ -83,8 +83,8 @@ def _worker(scenarios: int, horizon: float, held: bool, kind: str = "fll") -> No
     jax.config.update("jax_enable_x64", True)
     import jaxobs
     from jaxobs import linear
-    from jaxobs.chunkstore import ChunkStore
-    from jaxobs.study import run_study
+    from jaxobs.runtime.chunkstore import ChunkStore
+    from jaxobs.studies.study import run_study
 
     jaxobs.use_compile_cache()
     with tempfile.TemporaryDirectory(prefix="jaxobs-scale-") as tmp:

@@ -31,7 +31,7 @@ def _worker(devices: int, scenarios: int, runs: int, coordinator: str | None, np
     if coordinator:
         jaxobs.init_distributed(coordinator, nproc, pid)
     from jaxobs import linear
-    from jaxobs.study import run_study
+    from jaxobs.studies.study import run_study
 
     designs = {"WIF": linear.wif_closed_form()}
     rows = []

@@ -3,8 +3,8 @@
 The names below are the user API (``__all__``); everything else lives in the
 subpackages (:mod:`jaxobs.drive`, :mod:`jaxobs.observers`, :mod:`jaxobs.linear`,
 :mod:`jaxobs.metrics`, :mod:`jaxobs.signals`, :mod:`jaxobs.scenarios`,
-:mod:`jaxobs.sharding`, :mod:`jaxobs.papers`) or in private implementation
-modules (``jaxobs._simulate``, ``jaxobs._loop``, ``jaxobs._discretize``, ...).
+:mod:`jaxobs.runtime.sharding`, :mod:`jaxobs.papers`) or in private implementation
+modules (``jaxobs.runtime.simulation``, ``jaxobs.runtime._loop``, ``jaxobs.core.discretize``, ...).
 
 Importing it has no side effects: no environment variable or JAX option
 changes.  To run a sharded batch on every CPU core, call
@@ -21,47 +21,21 @@ from . import linear as linear
 from . import metrics as metrics
 from . import observers as observers
 from . import papers as papers
+from . import runtime as runtime
 from . import scenarios as scenarios
-from . import sharding as sharding
 from . import signals as signals
 
-# running a process: compile cache, devices, several processes
-from ._cache import use_compile_cache as use_compile_cache
-
 # discretization rules (strategy objects every observer and the plant take)
-from ._discretize import AB3 as AB3
-from ._discretize import RK4 as RK4
-from ._discretize import AbstractRule as AbstractRule
-from ._discretize import Euler as Euler
-from ._discretize import Tustin as Tustin
-
-# checkpoint strategies of the loop (how gradients through a long horizon are computed)
-from ._loop import AbstractCheckpoint as AbstractCheckpoint
-from ._loop import AbstractReverseCheckpoint as AbstractReverseCheckpoint
-from ._loop import AutoCheckpoint as AutoCheckpoint
-from ._loop import ChunkCheckpoint as ChunkCheckpoint
-from ._loop import ForwardSensitivity as ForwardSensitivity
-from ._loop import NoCheckpoint as NoCheckpoint
-from ._loop import StepCheckpoint as StepCheckpoint
+from .core.discretize import AB3 as AB3
+from .core.discretize import RK4 as RK4
+from .core.discretize import AbstractRule as AbstractRule
+from .core.discretize import Euler as Euler
+from .core.discretize import Tustin as Tustin
 
 # what a drive observer is given each period
-from ._measurements import DriveInput as DriveInput
-
-# the one loop over a system, and what to save
-from ._simulate import AbstractSave as AbstractSave
-from ._simulate import OnSignal as OnSignal
-from ._simulate import PrecisionWarning as PrecisionWarning
-from ._simulate import SaveAll as SaveAll
-from ._simulate import SaveFinal as SaveFinal
-from ._simulate import SignalOutput as SignalOutput
-from ._simulate import SignalTruth as SignalTruth
-from ._simulate import Solution as Solution
-from ._simulate import simulate as simulate
-from ._system import AbstractSystem as AbstractSystem
-from ._time import SampleTime as SampleTime
-from ._traced import ProgramCache as ProgramCache
-from ._traced import kept_jit as kept_jit
-from ._traced import set_program_cache as set_program_cache
+from .core.measurements import DriveInput as DriveInput
+from .core.sampletime import SampleTime as SampleTime
+from .core.system import AbstractSystem as AbstractSystem
 from .metrics import lost_lock_of as lost_lock_of
 
 # observers: the FLL family (001), the flux observers (000), the LESOs (002), the reduced-order flux observer
@@ -82,12 +56,38 @@ from .observers import ObserverBank as ObserverBank
 from .observers import PureIntegratorFlux as PureIntegratorFlux
 from .observers import ReducedOrderFluxObserver as ReducedOrderFluxObserver
 from .observers import SecondOrderSOIFO as SecondOrderSOIFO
-from .sharding import batch_axes as batch_axes
-from .sharding import batch_mesh as batch_mesh
-from .sharding import init_distributed as init_distributed
-from .sharding import map_batch as map_batch
-from .sharding import shard_batch as shard_batch
-from .sharding import use_host_devices as use_host_devices
+
+# checkpoint strategies of the loop (how gradients through a long horizon are computed)
+from .runtime import AbstractCheckpoint as AbstractCheckpoint
+from .runtime import AbstractReverseCheckpoint as AbstractReverseCheckpoint
+from .runtime import AutoCheckpoint as AutoCheckpoint
+from .runtime import ChunkCheckpoint as ChunkCheckpoint
+from .runtime import ForwardSensitivity as ForwardSensitivity
+from .runtime import NoCheckpoint as NoCheckpoint
+from .runtime import StepCheckpoint as StepCheckpoint
+
+# running a process: compile cache, devices, several processes
+from .runtime.cache import use_compile_cache as use_compile_cache
+from .runtime.programs import ProgramCache as ProgramCache
+from .runtime.programs import kept_jit as kept_jit
+from .runtime.programs import set_program_cache as set_program_cache
+from .runtime.sharding import batch_axes as batch_axes
+from .runtime.sharding import batch_mesh as batch_mesh
+from .runtime.sharding import init_distributed as init_distributed
+from .runtime.sharding import map_batch as map_batch
+from .runtime.sharding import shard_batch as shard_batch
+from .runtime.sharding import use_host_devices as use_host_devices
+
+# the one loop over a system, and what to save
+from .runtime.simulation import AbstractSave as AbstractSave
+from .runtime.simulation import OnSignal as OnSignal
+from .runtime.simulation import PrecisionWarning as PrecisionWarning
+from .runtime.simulation import SaveAll as SaveAll
+from .runtime.simulation import SaveFinal as SaveFinal
+from .runtime.simulation import SignalOutput as SignalOutput
+from .runtime.simulation import SignalTruth as SignalTruth
+from .runtime.simulation import Solution as Solution
+from .runtime.simulation import simulate as simulate
 
 # test signals and recordings
 from .signals import AbstractSignal as AbstractSignal

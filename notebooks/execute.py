@@ -35,7 +35,7 @@ def execute(path: Path) -> float:
     import nbformat
     from nbclient import NotebookClient
 
-    from jaxobs.provenance import versions
+    from jaxobs.io.provenance import versions
 
     nb = nbformat.read(path, as_version=4)
     for c in nb.cells:  # from a clean state: nothing of an earlier run survives a cell that fails

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import xarray as xr
 
-from jaxobs.provenance import CONVENTIONS, cf_missing
+from jaxobs.io.provenance import CONVENTIONS, cf_missing
 
 
 def _failed(value) -> bool:
@@ -18,7 +18,7 @@ def _failed(value) -> bool:
 def cf_failures(path) -> list[str]:
     """compliance-checker's CF 1.8 high-priority failures ("errors") of the NetCDF at ``path``, each as
     ``section: message``; any exception it raised, as ``exception: ...`` (every coordinate variable is numeric:
-    the designs' names are a label, jaxobs.provenance.cf_labels, so its monotonicity check runs on each)."""
+    the designs' names are a label, jaxobs.io.provenance.cf_labels, so its monotonicity check runs on each)."""
     from compliance_checker.cf.cf_1_8 import CF1_8Check
     from compliance_checker.runner import CheckSuite
 

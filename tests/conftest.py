@@ -8,7 +8,7 @@ Every compilation is kept in JAX's persistent cache (``JAXOBS_TEST_CACHE``,
 default ``~/.cache/jaxobs/jax-tests``; empty string: off), so a second ``make test``
 on the same machine skips most of XLA's work, and the two pytest workers and the
 command lines run in subprocesses reuse each other's programs.  All of them, as the
-command line keeps them (jaxobs._cache): with only those over 1 s kept, the small
+command line keeps them (jaxobs.runtime.cache): with only those over 1 s kept, the small
 ones (metrics, eager operations, the linear analysis) were compiled again in every
 process; tests/test_fll.py cached went 14.0 -> 10.4 CPU-s, cold unchanged.  The
 cache changes no number: a cached executable is the same program.
@@ -43,6 +43,6 @@ def _no_program_cache_after():
     """The command line run in this process (``main``) sets a program cache (jaxobs.use_compile_cache): off again
     after the test, so that what one test kept is not what the next one runs."""
     yield
-    from jaxobs._traced import set_program_cache
+    from jaxobs.runtime.programs import set_program_cache
 
     set_program_cache(None)

@@ -15,7 +15,7 @@ import numpy as np
 import jaxobs
 from jaxobs.analysis.envelope import speed_pulse
 from jaxobs.drive import RPM
-from jaxobs.families import drive_scenarios
+from jaxobs.scenarios.families import drive_scenarios
 
 
 def pulse_held(system, designs: dict, machine, foc, points, *, height: float = 0.02, horizon: float = 3.0) -> dict:

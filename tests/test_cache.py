@@ -9,7 +9,7 @@ import jax
 import pytest
 
 import jaxobs
-from jaxobs._cache import CACHE_ENV
+from jaxobs.runtime.cache import CACHE_ENV
 
 ROOT = Path(__file__).parents[1]
 

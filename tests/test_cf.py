@@ -1,4 +1,4 @@
-"""Every NetCDF the commands write is CF 1.8 (jaxobs.provenance.cf_dataset; compliance-checker, tests/cfcheck.py):
+"""Every NetCDF the commands write is CF 1.8 (jaxobs.io.provenance.cf_dataset; compliance-checker, tests/cfcheck.py):
 the helper itself, and a tune's scores.nc on sampled scenarios with its holdout_scores.nc.  The grid scores.nc,
 both kinds of study.nc and envelope.nc are checked where their command tests write them (test_tuning_results,
 test_study, test_drive_study, test_envelope)."""
@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from jaxobs.provenance import CONVENTIONS, REFERENCES, by_label, cf_dataset, cf_labels, cf_missing
+from jaxobs.io.provenance import CONVENTIONS, REFERENCES, by_label, cf_dataset, cf_labels, cf_missing
 from jaxobs_tuning.cli import main
 from tests.cfcheck import assert_cf18, cf_failures
 from tests.test_tuning import GOOD

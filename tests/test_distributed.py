@@ -21,8 +21,8 @@ import xarray as xr
 
 import jaxobs
 from jaxobs import linear
-from jaxobs.provenance import by_label
-from jaxobs.study import run_study
+from jaxobs.io.provenance import by_label
+from jaxobs.studies.study import run_study
 from jaxobs_tuning.cli import main
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -51,7 +51,7 @@ _WORKER = (
     import jax
     from jaxobs_tuning.cli import main
 
-    import jaxobs.sharding as S
+    import jaxobs.runtime.sharding as S
 
     # the split itself: every chunk's results reach gather_batch spread over both processes, this process
     # holding 2 rows of each chunk of 4 (without the split, both would compute everything, and agree too)
@@ -69,7 +69,7 @@ _WORKER = (
     # the command line joined the run: two processes, one device each, the mesh over both
     assert (jax.process_count(), len(jax.devices()), len(jax.local_devices())) == (2, 2, 1), jax.devices()
     from jaxobs import linear
-    from jaxobs.study import run_study
+    from jaxobs.studies.study import run_study
 
     ds = run_study({"SOGI-FLL": linear.sogi_fll_closed_form()}, __AXES__, **__OPTS__)
     ds.to_netcdf(f"{out}/process{pid}.nc", engine="h5netcdf")
@@ -171,7 +171,7 @@ def test_study_over_two_processes_equals_one_process(tmp_path):
     for name in ("process0.nc", "process1.nc"):
         _assert_same_study(by_label(xr.load_dataset(out / name, engine="h5netcdf")), want, name)
     cli = by_label(xr.load_dataset(out / "study.nc", engine="h5netcdf"))
-    assert cli.attrs["source"] == "jaxobs.study.run_study" and "study_sha256" in cli.attrs
+    assert cli.attrs["source"] == "jaxobs.studies.study.run_study" and "study_sha256" in cli.attrs
     _assert_same_study(cli, want, "study.nc (jaxobs study, process 0)")
 
 
@@ -196,15 +196,15 @@ def test_global_batch_and_gather_batch_in_one_process():
 
     x = {"a": np.arange(6.0), "b": np.arange(12.0).reshape(6, 2)}
     mesh = jaxobs.batch_mesh(jax.devices()[:1])
-    g = jaxobs.sharding.global_batch(x, mesh)
+    g = jaxobs.runtime.sharding.global_batch(x, mesh)
     assert g["a"].sharding.spec == jax.sharding.PartitionSpec("batch")
-    back = jaxobs.sharding.gather_batch(g)
+    back = jaxobs.runtime.sharding.gather_batch(g)
     np.testing.assert_array_equal(back["b"], x["b"])
     assert isinstance(back["a"], np.ndarray)
     with pytest.raises(ValueError, match="divide"):
-        jaxobs.sharding.global_batch({"a": np.arange(5.0)}, jaxobs.batch_mesh([jax.devices()[0]] * 2))
+        jaxobs.runtime.sharding.global_batch({"a": np.arange(5.0)}, jaxobs.batch_mesh([jax.devices()[0]] * 2))
     with pytest.raises(ValueError, match="scalar"):
-        jaxobs.sharding.global_batch({"a": np.arange(6.0), "s": np.float64(1.0)}, mesh)
+        jaxobs.runtime.sharding.global_batch({"a": np.arange(6.0), "s": np.float64(1.0)}, mesh)
     with pytest.raises(ValueError, match="mesh"):
         run_study({"a": linear.sogi_fll_closed_form()}, {"dc": [0.0]}, mesh="cpu")
 
@@ -400,7 +400,7 @@ RESUME_TOML = (
 # process 0 of a run whose store kills this process (SIGKILL, no cleanup) once its 5th chunk is on disk
 _KILLED_AFTER_5 = """
 import os, signal, sys
-from jaxobs.chunkstore import ChunkStore
+from jaxobs.runtime.chunkstore import ChunkStore
 from jaxobs_tuning.cli import main
 
 real, count = ChunkStore.put, [0]

@@ -12,7 +12,7 @@ import pytest
 import jaxobs
 from jaxobs import drive as D
 from jaxobs import linear, metrics, papers
-from jaxobs.drive_study import bind_observer
+from jaxobs.studies.drive import bind_observer
 
 TS = 1e-4
 

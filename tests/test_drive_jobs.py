@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 
 from jaxobs.drive import bench_machine, dual_ipmsm_paper002, read_drive
-from jaxobs.registry import REGISTRY, registered
+from jaxobs.studies.registry import REGISTRY, registered
 from jaxobs_tuning.cli import main
 from jaxobs_tuning.job import JobError, job_drive, load_job, parse_job
 from jaxobs_tuning.study_file import load_study
@@ -193,7 +193,7 @@ def test_verdicts_on_a_users_drive_agree_with_pulse_simulations():
     import jaxobs
     from jaxobs.analysis.envelope import envelope
     from jaxobs.drive import load_drive
-    from jaxobs.families import bind_observer
+    from jaxobs.scenarios.families import bind_observer
 
     par, drive = load_drive(TEKNIC)
     cf = registered("cleso").cls.closed_form(ts=drive.ts)

@@ -10,7 +10,7 @@ import pytest
 import jaxobs
 from jaxobs import drive as D
 from jaxobs import metrics as M
-from jaxobs.drive_study import bind_observer
+from jaxobs.studies.drive import bind_observer
 from jaxobs_tuning.objective import DRIVE_METRICS, MetricContext
 from jaxobs_tuning.objective import TERM_METRICS as METRICS
 

@@ -14,8 +14,8 @@ import xarray as xr
 import jaxobs
 from jaxobs import drive as D
 from jaxobs import papers
-from jaxobs.drive_study import QUANTILES, run_drive_study
-from jaxobs.provenance import by_label
+from jaxobs.io.provenance import by_label
+from jaxobs.studies.drive import QUANTILES, run_drive_study
 from jaxobs_tuning.cli import main
 from jaxobs_tuning.job import COMPONENTS, DriveSpec, JobError, job_drive
 from jaxobs_tuning.study_file import load_study

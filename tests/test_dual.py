@@ -11,11 +11,11 @@ import pytest
 
 from jaxobs import drive as D
 from jaxobs import linear, papers
-from jaxobs._simulate import simulate
 from jaxobs.drive import dual, dual_loop
+from jaxobs.io.provenance import by_label
 from jaxobs.metrics import harmonic_amplitude
 from jaxobs.observers import CLESO, FALESO
-from jaxobs.provenance import by_label
+from jaxobs.runtime.simulation import simulate
 
 TH = dual.PHASE_ANGLES
 rng = np.random.default_rng(0)
@@ -535,7 +535,7 @@ def test_envelope_of_a_dual_faleso_job_agrees_with_pulse_simulations(tmp_path):
     import xarray as xr
     from pulses import pulse_held
 
-    from jaxobs.families import bind_observer
+    from jaxobs.scenarios.families import bind_observer
     from jaxobs_tuning.cli import main
     from jaxobs_tuning.envelope import envelope_designs
     from jaxobs_tuning.job import job_drive

@@ -16,8 +16,8 @@ import jaxobs
 from jaxobs import papers
 from jaxobs.analysis.envelope import ENVELOPE_VARIABLES, envelope, speed_pulse
 from jaxobs.drive import bench_drive, bench_machine
-from jaxobs.drive_study import bind_observer, drive_scenarios
-from jaxobs.provenance import by_label
+from jaxobs.io.provenance import by_label
+from jaxobs.studies.drive import bind_observer, drive_scenarios
 from jaxobs_tuning.cli import main
 from jaxobs_tuning.job import job_drive, load_job
 from jaxobs_tuning.job.output import claimed_envelope

@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 from jaxobs import drive as D
-from jaxobs.families import (
+from jaxobs.scenarios import LHS, Given, Grid, Random, Recordings, Sobol, sampler_of
+from jaxobs.scenarios.families import (
     FAMILIES,
     AbstractFamily,
     DriveScenarios,
@@ -18,7 +19,6 @@ from jaxobs.families import (
     GridSignals,
     RecordedSignals,
 )
-from jaxobs.scenarios import LHS, Given, Grid, Random, Recordings, Sobol, sampler_of
 from jaxobs.signals import SampledSignal, read_recorded
 
 ROOT = Path(__file__).parents[1]
@@ -109,8 +109,8 @@ def test_the_presets_share_one_default_mesh():
     """run_study and run_drive_study default to the same mesh: the runner's (every device)."""
     import inspect
 
-    from jaxobs.drive_study import run_drive_study
-    from jaxobs.study import run_study
+    from jaxobs.studies.drive import run_drive_study
+    from jaxobs.studies.study import run_study
 
     for preset in (run_study, run_drive_study):
         params = inspect.signature(preset).parameters
@@ -120,9 +120,9 @@ def test_the_presets_share_one_default_mesh():
 
 # the modules that take a family: none forks on a family's (or a study kind's) name
 USERS = (
-    "jaxobs/families.py",
-    "jaxobs/study.py",
-    "jaxobs/drive_study.py",
+    "jaxobs/scenarios/families.py",
+    "jaxobs/studies/study.py",
+    "jaxobs/studies/drive.py",
     "jaxobs/analysis/envelope.py",
     "tuning/objective.py",
     "tuning/cli.py",

@@ -263,7 +263,7 @@ def test_two_sided_bode_axis_is_labelled_every_other_decade():
     unlabelled, so no two labels meet."""
     import matplotlib.pyplot as plt
 
-    from jaxobs._plot_bode import _two_sided_ticks
+    from jaxobs.plot._bode import _two_sided_ticks
 
     fig, ax = plt.subplots(figsize=(7.5, 3))
     x = np.concatenate([-np.logspace(-3, 3.7, 50)[::-1], np.logspace(-3, 3.7, 50)])

@@ -11,7 +11,7 @@ from gradcheck import assert_field_grads_match_fd
 
 import jaxobs
 from jaxobs import linear, metrics
-from jaxobs.demo import DEMO_TESTS, fll_demo
+from jaxobs.studies.demo import DEMO_TESTS, fll_demo
 
 TE = 0.2  # event time of the test signals
 
@@ -295,7 +295,7 @@ def test_bad_test_name():
 
 def test_gradients_stay_finite_through_the_zero_initial_state():
     """Amplitude √(v'² + qv'²) and phase atan2 are evaluated at the zero initial state; their
-    gradients there must not be NaN (see jaxobs/_math.py)."""
+    gradients there must not be NaN (see jaxobs/core/numerics.py)."""
     obs = linear.sogi_fll_closed_form()
     sig = jaxobs.paper001_test("B", t_event=0.05)
 

@@ -15,7 +15,7 @@ from jaxobs import drive as D
 from jaxobs.drive.drivefile import drive_from_table
 from jaxobs.drive.plant import PlantInput
 from jaxobs.drive.saturation import AlgebraicSaturation, check_inverse, map_mtpa, map_summary
-from jaxobs.safetoml import read_toml
+from jaxobs.io.safetoml import read_toml
 
 EXAMPLE = Path(__file__).resolve().parent.parent / "docs" / "examples" / "pmsyrm_5p6kw_sat.toml"
 # motulator's 5.6-kW PM-SyRM example map (docs/examples/pmsyrm_5p6kw_sat.toml)

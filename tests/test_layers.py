@@ -22,27 +22,29 @@ FOLDER = {"jaxobs": "jaxobs", "jaxobs_tuning": "tuning"}  # the folder tuning/ i
 
 # Lowest first.  A module may import only modules of lower layers.  The order is docs/architecture.md's.
 LAYERS = [
-    # traced programs kept across processes (no project imports; jaxobs._cache sets their folder); the one
+    # packages whose __init__ imports nothing: the foundations, files in and out, the studies
+    ("jaxobs.core", "jaxobs.io", "jaxobs.studies"),
+    # traced programs kept across processes (no project imports; jaxobs.runtime.cache sets their folder); the one
     # file writer (no project imports)
-    ("jaxobs._traced", "jaxobs.files"),
+    ("jaxobs.runtime.programs", "jaxobs.io.files"),
     # foundations: no project imports
     (
-        "jaxobs._math",
-        "jaxobs._trig",
-        "jaxobs._validate",
+        "jaxobs.core.numerics",
+        "jaxobs.core.trig",
+        "jaxobs.core.validate",
         "jaxobs.papers",
-        "jaxobs._measurements",
-        "jaxobs._system",
-        "jaxobs._time",
-        "jaxobs.progress",
-        "jaxobs.provenance",
-        "jaxobs._cache",
+        "jaxobs.core.measurements",
+        "jaxobs.core.system",
+        "jaxobs.core.sampletime",
+        "jaxobs.runtime.progress",
+        "jaxobs.io.provenance",
+        "jaxobs.runtime.cache",
         "jaxobs.drive.component",
-        "jaxobs.chunkstore",
-        "jaxobs.quantities",
+        "jaxobs.runtime.chunkstore",
+        "jaxobs.core.quantities",
     ),
     # integration rules (and check_rule)
-    ("jaxobs._discretize", "jaxobs.safetoml", "jaxobs.signals._base", "jaxobs.drive.saturation"),
+    ("jaxobs.core.discretize", "jaxobs.io.safetoml", "jaxobs.signals._base", "jaxobs.drive.saturation"),
     # signals and plant: they produce the measurements
     (
         "jaxobs.signals._waveforms",
@@ -79,9 +81,10 @@ LAYERS = [
     ("jaxobs.drive.bench",),
     ("jaxobs.drive",),
     # the one loop over a system, and sharding a batch over devices
-    ("jaxobs._steps", "jaxobs._sensitivity"),
-    ("jaxobs._loop",),
-    ("jaxobs._simulate", "jaxobs.sharding"),
+    ("jaxobs.runtime._steps", "jaxobs.runtime._sensitivity"),
+    ("jaxobs.runtime._loop",),
+    ("jaxobs.runtime.simulation", "jaxobs.runtime.sharding"),
+    ("jaxobs.runtime",),  # the loop's public names (simulate, the savers, the checkpoints)
     # metrics: the functions that score a run, the one metric table (its entries' forms use them), the package
     ("jaxobs.metrics._core",),
     ("jaxobs.metrics._table",),
@@ -93,20 +96,20 @@ LAYERS = [
     ("jaxobs",),
     # the one study runner (samplers in jaxobs.scenarios), the scenario families (their axes, batches, systems)
     # and the registry of observer classes
-    ("jaxobs.runner", "jaxobs.families", "jaxobs.registry"),
+    ("jaxobs.runtime.runner", "jaxobs.scenarios.families", "jaxobs.studies.registry"),
     # the figures' helpers and the Bode figures (jaxobs.plot re-exports them)
-    ("jaxobs._figure", "jaxobs.reproduce.compare", "jaxobs.reproduce._run"),
-    ("jaxobs._plot_bode", "jaxobs._plot_paper"),
+    ("jaxobs.plot._figure", "jaxobs.reproduce.compare", "jaxobs.reproduce._run"),
+    ("jaxobs.plot._bode", "jaxobs.plot._paper"),
     # the library's own applications: studies, the demo, the papers' reproductions, figures, benchmarks
     (
-        "jaxobs.study",
-        "jaxobs.demo",
+        "jaxobs.studies.study",
+        "jaxobs.studies.demo",
         "jaxobs.reproduce.flux",
         "jaxobs.reproduce.leso",
         "jaxobs.plot",
     ),
-    # the drive study: a preset of jaxobs.study.study
-    ("jaxobs.drive_study",),
+    # the drive study: a preset of jaxobs.studies.study.study
+    ("jaxobs.studies.drive",),
     # analyses above the studies they run: the package (no imports), the closed loop's stability verdict, then
     # the envelope map (the stability verdict and the long runs of a drive study, over the speed x load plane)
     ("jaxobs.analysis",),
@@ -285,18 +288,18 @@ def test_the_checks_see_a_violation(tmp_path, monkeypatch):
     """The parser resolves relative and package imports, and flags upward and deferred ones."""
     targets = {(t, lazy) for t, _, lazy in _imports("jaxobs.signals._waveforms")}
     assert ("jaxobs.papers", False) in targets  # `from .. import papers`
-    assert ("jaxobs._measurements", False) in targets  # `from .._measurements import DriveInput`
+    assert ("jaxobs.core.measurements", False) in targets  # `from .._measurements import DriveInput`
     assert {t for t, _, _ in _imports("jaxobs.reproduce.leso")} >= {"jaxobs.drive", "jaxobs.linear", "jaxobs.papers"}
     probe = tmp_path / "_probe.py"  # a module beside signals that imports upward, once at the top, once deferred
-    probe.write_text("from . import study\n\n\ndef f():\n    from . import metrics\n")
+    probe.write_text("from .studies import study\n\n\ndef f():\n    from . import metrics\n")
     monkeypatch.setitem(MODULES, "jaxobs._probe", probe)
     monkeypatch.setitem(RANK, "jaxobs._probe", RANK["jaxobs.signals"])
     assert {(t, lazy) for t, _, lazy in _imports("jaxobs._probe")} == {
-        ("jaxobs.study", False),
+        ("jaxobs.studies.study", False),
         ("jaxobs.metrics", True),
     }
     found = _violations()
-    assert "a layer above it" in " ".join(found[("jaxobs._probe", "jaxobs.study")])
+    assert "a layer above it" in " ".join(found[("jaxobs._probe", "jaxobs.studies.study")])
     assert "inside a function" in " ".join(found[("jaxobs._probe", "jaxobs.metrics")])
 
 
@@ -350,16 +353,16 @@ def test_no_private_name_crosses_a_package():
 def test_the_private_import_check_sees_one(tmp_path, monkeypatch):
     probe = tmp_path / "_probe.py"
     probe.write_text(
-        "from jaxobs.observers._cores import x\nfrom .job.fields import _cap\nfrom jaxobs._validate import y\n"
-        "import jaxobs._math\nfrom .targets import _z\n"
+        "from jaxobs.observers._cores import x\nfrom .job.fields import _cap\nfrom jaxobs.runtime._loop import y\n"
+        "import jaxobs.runtime._steps\nfrom .targets import _z\n"
     )
     monkeypatch.setitem(MODULES, "jaxobs_tuning._probe", probe)
     found = [what for _, what in _private_imports("jaxobs_tuning._probe")]
     assert found == [
         "the private module jaxobs.observers._cores",
         "the private name _cap of jaxobs_tuning.job.fields",
-        "the private module jaxobs._validate",
-        "the private module jaxobs._math",
+        "the private module jaxobs.runtime._loop",
+        "the private module jaxobs.runtime._steps",
     ], found
 
 

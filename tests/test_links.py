@@ -1,5 +1,5 @@
 """A hard link and a symlink planted at every file name each writing command writes in --out (tune, study,
-envelope, export, and error.log): each file is written beside its name and renamed over it (jaxobs.files), so
+envelope, export, and error.log): each file is written beside its name and renamed over it (jaxobs.io.files), so
 the link is replaced and nothing outside --out changes; a symlink at a result the run would overwrite is
 refused before any work (jaxobs_tuning.outdir).  The runs are the cheapest of each command: a one-step tune,
 a 4-scenario study, a 1-point envelope, a 10 000-step export."""

@@ -292,7 +292,7 @@ def test_a_missing_folder_for_the_columns_is_one_line(tmp_path):
 def test_provenance_hashes_a_file_in_blocks_to_the_digest_of_its_bytes(tmp_path):
     import hashlib
 
-    from jaxobs.provenance import sha256
+    from jaxobs.io.provenance import sha256
 
     data = np.random.default_rng(0).bytes(3 * (1 << 20) + 17)  # over three blocks, the last one partial
     f = tmp_path / "x.bin"

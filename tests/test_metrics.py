@@ -345,9 +345,9 @@ def test_old_names_are_read_with_one_line_of_warning_and_their_unit_conversion()
 
 
 def test_each_family_declares_its_default_metrics_and_flags():
-    from jaxobs.drive_study import DRIVE_STUDY_METRICS
-    from jaxobs.families import DriveScenarios, EMFSignals, GridSignals, RecordedSignals
-    from jaxobs.study import STUDY_METRICS
+    from jaxobs.scenarios.families import DriveScenarios, EMFSignals, GridSignals, RecordedSignals
+    from jaxobs.studies.drive import DRIVE_STUDY_METRICS
+    from jaxobs.studies.study import STUDY_METRICS
 
     for fam in (GridSignals, EMFSignals, DriveScenarios, RecordedSignals):
         assert fam.metrics and all(M.METRICS[k].kind == "run" and M.METRICS[k].exact is not None for k in fam.metrics)

@@ -17,7 +17,7 @@ import pytest
 import jaxobs
 from jaxobs import drive as D
 from jaxobs.drive.control import FOCInput
-from jaxobs.drive_study import drive_scenarios
+from jaxobs.studies.drive import drive_scenarios
 
 PAR = D.PMSMParams(Rs=0.2, Ld=2e-3, Lq=8e-3, psi_f=0.1, J=5e-3, p=4, T_rated=8.0, n_rated=1000.0)
 ALPHA_S = 2 * math.pi * 5.0

@@ -21,7 +21,7 @@ def test_all_resolves_and_is_the_public_namespace():
 
 def test_no_module_is_shadowed_by_a_function():
     """A public submodule is reachable as itself: ``jaxobs.simulate`` is the function, and its module is
-    the private ``jaxobs._simulate``."""
+    the private ``jaxobs.runtime.simulation``."""
     for info in pkgutil.iter_modules(jaxobs.__path__):
         if info.name.startswith("_") or info.name == "__main__":
             continue

@@ -18,7 +18,6 @@ import pytest
 import jaxobs
 from jaxobs import drive as D
 from jaxobs import linear, papers
-from jaxobs.drive_study import bind_observer, drive_gains
 from jaxobs.observers import (
     AbstractDriveObserver,
     AbstractFluxObserver,
@@ -30,6 +29,7 @@ from jaxobs.observers import (
 )
 from jaxobs.reproduce import flux as RF
 from jaxobs.reproduce import leso as RL
+from jaxobs.studies.drive import bind_observer, drive_gains
 
 SPMSM = D.bench_machine("spmsm000")
 IPMSM = D.bench_machine("ipmsm002")
@@ -60,7 +60,7 @@ def _leaves_equal(a, b):
 
 
 def _old_bind_observer(obs, sc):
-    """jaxobs.drive_study.bind_observer before the contract (family guessed by hasattr)."""
+    """jaxobs.studies.drive.bind_observer before the contract (family guessed by hasattr)."""
     est, w_e = sc.est_par, sc.est_par.p * sc.omega_m0
     if hasattr(obs, "Lq"):
         return eqx.tree_at(lambda o: (o.Rs, o.Lq, o.omega0_pll), obs, (est.Rs, est.Lq, w_e))

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from jaxobs.provenance import by_label
+from jaxobs.io.provenance import by_label
 from jaxobs_tuning import AbstractObjective, solvers, strategies
 from jaxobs_tuning.cli import main
 from jaxobs_tuning.outdir import LOCK, OutDir, OutError, atomic_path, atomic_write_bytes, safe_name
@@ -432,7 +432,7 @@ def test_a_hard_link_at_the_lock_is_not_written_through(tmp_path):
 def _interrupted(saves: bool):
     """run_job stand-in: a progress bar left open (as a call cut short by Ctrl-C leaves it), a checkpoint
     written first or not, then Ctrl-C."""
-    from jaxobs.progress import Progress
+    from jaxobs.runtime.progress import Progress
 
     def run_job(job, out, resume=False, quiet=False):
         if saves:
@@ -461,7 +461,7 @@ def test_ctrl_c_names_resume_only_with_a_checkpoint_and_draws_nothing_after(tmp_
 
 
 def test_a_study_store_has_chunks_to_resume_only_once_one_is_written(tmp_path):
-    from jaxobs.chunkstore import ChunkStore
+    from jaxobs.runtime.chunkstore import ChunkStore
 
     s = ChunkStore(tmp_path / "c", "f" * 64)
     assert not s.has_chunks()

@@ -7,7 +7,7 @@ multiply (T_s·f) and one add (x + T_s·f) per state, and subtracts those.  What
 in every column but ÷: Table II has 2 divisions, the C one.  The FLL's normalization by V̂² is the one both have;
 the paper's second is the ratio qv'/v' inside its inverse tangent, where the C calls atan2f(qv', v') instead.
 The C also has what the paper's diagram does not: guards against a zero amplitude (1 compare, 5 selects, 1 fmaxf;
-jaxobs._math.safe_norm2/safe_atan2 and the FLL's amplitude floor)."""
+jaxobs.core.numerics.safe_norm2/safe_atan2 and the FLL's amplitude floor)."""
 
 import dataclasses
 

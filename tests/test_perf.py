@@ -1,4 +1,4 @@
-"""The fast loop (jaxobs._loop) changes no number; checkpointing and sharding give the same results.
+"""The fast loop (jaxobs.runtime._loop) changes no number; checkpointing and sharding give the same results.
 
 Also: long-horizon gradients stay within their memory budget, forward
 sensitivities equal reverse mode, the noise-free sensor path and the vectorized
@@ -20,7 +20,7 @@ import pytest
 import jaxobs
 from benchmarks import workloads as B
 from jaxobs import drive as D
-from jaxobs._loop import run_loop
+from jaxobs.runtime._loop import run_loop
 
 T1 = 0.05
 
@@ -121,7 +121,7 @@ def test_run_loop_maps_inputs_a_block_at_a_time():
 @pytest.mark.parametrize("n_dirs", [2, 5])
 def test_multi_jvp_matches_jacfwd_and_prunes_mixed_terms(n_dirs):
     """Forward sensitivities along several directions at once: nested (≤ NESTED_MAX) or vmapped, both = jacfwd."""
-    from jaxobs._sensitivity import NESTED_MAX, multi_jvp
+    from jaxobs.runtime._sensitivity import NESTED_MAX, multi_jvp
 
     def fun(p):
         def body(x, t):
@@ -161,7 +161,7 @@ def test_run_loop_rejects_bad_settings():
 def test_auto_checkpoint_picks_a_strategy_and_hands_it_the_loop():
     """AutoCheckpoint owns no loop of its own: forward sensitivities without per-step outputs (reverse mode
     past forward_max scalars by chunks above chunk_above steps, per-step checkpoints below), else those."""
-    from jaxobs._steps import Loop
+    from jaxobs.runtime._steps import Loop
 
     def loop(n, outputs):
         return Loop(lambda c, x: (c, None), lambda c: c, n, 1, True, None, True, outputs)
@@ -319,7 +319,7 @@ _SHARD_SCRIPT = textwrap.dedent(
     np.testing.assert_allclose(a, b, rtol=1e-12, atol=0)
     # a study over the 4 host devices (6 scenarios: chunks padded to 8) equals it on one device
     from jaxobs import linear
-    from jaxobs.study import run_study
+    from jaxobs.studies.study import run_study
     axes = {"freq_step": [-2.0, 1.0], "dc": [0.0, 0.05, 0.1]}
     designs = {"SOGI-FLL": linear.sogi_fll_closed_form()}
     one = run_study(designs, axes, horizon=0.2, mesh=jaxobs.batch_mesh(jax.devices()[:1]))
@@ -371,7 +371,7 @@ def test_map_batch_equals_vmap_with_a_short_last_tile_and_rejects_bad_input():
 def test_map_batch_tiles_on_cpus_and_runs_whole_shares_on_accelerators():
     from types import SimpleNamespace
 
-    from jaxobs.sharding import TILE, _default_tile
+    from jaxobs.runtime.sharding import TILE, _default_tile
 
     cpu, gpu = SimpleNamespace(platform="cpu"), SimpleNamespace(platform="gpu")
     assert _default_tile([cpu, cpu], 65536) == TILE

@@ -16,7 +16,7 @@ import pytest
 import jaxobs
 from jaxobs import metrics as M
 from jaxobs import papers
-from jaxobs._time import SampleTime, cycles
+from jaxobs.core.sampletime import SampleTime, cycles
 from jaxobs.signals import EMFSignal, GridSignal
 
 
@@ -118,7 +118,7 @@ def test_float32_steady_metrics_within_5_percent_of_float64_at_100_s():
 
 
 def test_one_precision_warning_per_process_in_float32(monkeypatch):
-    monkeypatch.setattr(importlib.import_module("jaxobs._simulate"), "_warned_float32", False)
+    monkeypatch.setattr(importlib.import_module("jaxobs.runtime.simulation"), "_warned_float32", False)
     obs = jaxobs.SOGIFLL(papers.SOGI_FLL_K, papers.SOGI_FLL_LAM)
     with warnings.catch_warnings(record=True) as seen:
         warnings.simplefilter("always")

@@ -16,7 +16,7 @@ import pytest
 from jax import export
 
 import jaxobs
-from jaxobs import _traced
+from jaxobs.runtime import programs as _traced
 
 X = jnp.linspace(-1.0, 2.0, 11)
 SCALE = 2.0  # a module constant a kept function reads

@@ -7,8 +7,8 @@ import jax.numpy as jnp
 import pytest
 
 import jaxobs
-from jaxobs.progress import Progress
-from jaxobs.study import run_study
+from jaxobs.runtime.progress import Progress
+from jaxobs.studies.study import run_study
 from jaxobs_tuning import AbstractObjective, strategies
 from jaxobs_tuning.cli import build_parser
 from jaxobs_tuning.solvers import tune

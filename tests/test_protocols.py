@@ -19,11 +19,13 @@ ROOT = Path(__file__).parents[1]
 
 # module -> why it may probe (input and output only)
 IO = {
-    "jaxobs/files.py": "the operating system's optional open() flags (O_NOFOLLOW, O_DIRECTORY, O_BINARY, ...)",
-    "jaxobs/provenance.py": "the operating system's optional open() flags",
+    "jaxobs/io/files.py": "the operating system's optional open() flags (O_NOFOLLOW, O_DIRECTORY, O_BINARY, ...)",
+    "jaxobs/io/provenance.py": "the operating system's optional open() flags",
     "tuning/outdir.py": "the operating system's optional open() flags",
-    "jaxobs/progress.py": "whether stderr is a terminal (a stream may have no isatty)",
-    "jaxobs/_traced.py": "the kept-program cache's files: open() flags, the digest of code and values it keys on",
+    "jaxobs/runtime/progress.py": "whether stderr is a terminal (a stream may have no isatty)",
+    "jaxobs/runtime/programs.py": (
+        "the kept-program cache's files: open() flags, the digest of code and values it keys on"
+    ),
     "tuning/cli.py": "the command line's argparse namespace (a subcommand defines only its own options)",
     "tuning/envelope.py": "the command line's argparse namespace",
     "tuning/export/command.py": "the command line's argparse namespace",
@@ -98,11 +100,11 @@ def test_observer_ts_is_declared_and_required():
 
 
 def test_ab3_components_are_found_by_class():
-    """The AB3 start-up (jaxobs._discretize.ab3_steady_from_start) finds a component's (x, rule) by its class,
+    """The AB3 start-up (jaxobs.core.discretize.ab3_steady_from_start) finds a component's (x, rule) by its class,
     AbstractRuleCarry: a look-alike with the same attribute names is not one (the carry is peeled instead)."""
     import equinox as eqx
 
-    from jaxobs._discretize import AB3, ab3_steady_from_start
+    from jaxobs.core.discretize import AB3, ab3_steady_from_start
     from jaxobs.observers import ObserverState
 
     x0 = jnp.asarray([1.0, 2.0])

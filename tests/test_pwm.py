@@ -239,7 +239,7 @@ def test_sensored_closed_loop_holds_with_carrier_pwm(bench):
 
 
 def _lab_table():
-    from jaxobs.safetoml import read_toml
+    from jaxobs.io.safetoml import read_toml
 
     return read_toml(LAB, "drive file")[0]
 
@@ -302,7 +302,7 @@ def test_hexagon_limit_keeps_the_direction_and_reaches_the_vertices():
 def test_a_dual_drive_file_refuses_carrier_pwm_and_device_drops(extra, key):
     """The dual machine's plant (jaxobs.drive.dual) runs the averaged inverter: a [dual] file asking for more is
     refused in one line, not run without it."""
-    from jaxobs.safetoml import read_toml
+    from jaxobs.io.safetoml import read_toml
 
     raw = read_toml(LAB.parent / "ipmsm002_dual_330v.toml", "drive file")[0]
     D.drive_from_table(raw, "dual")  # the file as shipped is accepted

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from jaxobs.provenance import by_label
+from jaxobs.io.provenance import by_label
 from jaxobs_tuning.cli import main
 from jaxobs_tuning.job import load_job, run_job
 

@@ -14,7 +14,7 @@ import jaxobs
 from jaxobs import drive as D
 from jaxobs import metrics as M
 from jaxobs import papers
-from jaxobs.provenance import by_label
+from jaxobs.io.provenance import by_label
 from tests.cfcheck import assert_cf18
 
 ROOT = Path(__file__).resolve().parents[1]

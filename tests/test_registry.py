@@ -26,9 +26,9 @@ import pytest
 
 import jaxobs
 from jaxobs import linear, papers
-from jaxobs import registry as registry_module
 from jaxobs.observers import AbstractDriveObserver, ClosedForm, gain_fields, gain_table
-from jaxobs.registry import REGISTRY, closed_form_gains, registered
+from jaxobs.studies import registry as registry_module
+from jaxobs.studies.registry import REGISTRY, closed_form_gains, registered
 from jaxobs_tuning import cli_papers
 from jaxobs_tuning.cli import main
 from jaxobs_tuning.cli_papers import CF_DESIGNS, CF_OPTIONS

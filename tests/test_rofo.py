@@ -23,7 +23,7 @@ from jaxobs import metrics
 from jaxobs.drive.drivefile import read_drive
 from jaxobs.observers import DriveObserverState, gain_fields
 from jaxobs.observers.rofo import ROFO_ALPHA_O_HZ, ReducedOrderFluxObserver, matched_pole, speed_gains
-from jaxobs.registry import registered
+from jaxobs.studies.registry import registered
 from jaxobs_tuning.cli_papers import closed_form_rows
 
 ROOT = Path(__file__).resolve().parents[1]

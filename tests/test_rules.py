@@ -10,7 +10,7 @@ import pytest
 
 import jaxobs
 from jaxobs import papers
-from jaxobs._discretize import Held, Knots, diffrax_rk4_step
+from jaxobs.core.discretize import Held, Knots, diffrax_rk4_step
 
 OMEGA_C = 2 * math.pi * 50.0  # SOGI centre
 OMEGA_IN = 2 * math.pi * 55.0  # input frequency (off-centre, so the response is not trivial)

@@ -42,9 +42,9 @@ from jaxobs.drive import (
     dual_ipmsm_paper002,
     spmsm_paper000,
 )
-from jaxobs.drive_study import bind_observer, drive_scenarios
 from jaxobs.linear import TransferFunction, faleso_tf
 from jaxobs.observers import FALESO, GILESO
+from jaxobs.studies.drive import bind_observer, drive_scenarios
 
 ALPHA_S = 2 * math.pi * papers.BENCH_SPEED_HZ
 

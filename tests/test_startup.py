@@ -29,8 +29,8 @@ import pytest
 import jaxobs
 from jaxobs import drive as D
 from jaxobs import linear, papers
-from jaxobs.drive_study import bind_observer
 from jaxobs.metrics import wrap
+from jaxobs.studies.drive import bind_observer
 
 IPMSM = D.ipmsm_paper002(J=papers.BENCH_J_002)
 SPMSM = D.spmsm_paper000(J=papers.BENCH_J_000)

@@ -15,8 +15,8 @@ import xarray as xr
 import jaxobs
 from jaxobs import linear, papers
 from jaxobs import metrics as M
-from jaxobs.provenance import by_label
-from jaxobs.study import run_study, worst_cases
+from jaxobs.io.provenance import by_label
+from jaxobs.studies.study import run_study, worst_cases
 from jaxobs_tuning.cli import main
 from jaxobs_tuning.summary import study_warnings
 from tests.cfcheck import assert_cf18
@@ -302,7 +302,7 @@ def test_the_runner_takes_any_sampler_factory_and_metrics():
     factory and metrics and gives the same numbers on the same points."""
     import jax.numpy as jnp
 
-    from jaxobs.runner import run_scenarios
+    from jaxobs.runtime.runner import run_scenarios
     from jaxobs.scenarios import Sobol, grid_signals
 
     obs = linear.sogi_fll_closed_form()
@@ -334,7 +334,7 @@ def test_scenarios_built_a_chunk_at_a_time_are_the_whole_batchs():
     memory of the scenarios is one chunk's); its noise keys are the whole batch's, so a noisy
     study gives the same values in chunks of 3 as in one chunk, designs of two classes included; a bad axis
     value is refused before anything runs."""
-    from jaxobs.runner import run_scenarios
+    from jaxobs.runtime.runner import run_scenarios
     from jaxobs.scenarios import Random, grid_signals
 
     designs = {"SOGI-FLL": linear.sogi_fll_closed_form(), "WIF": linear.wif_closed_form()}
@@ -371,7 +371,7 @@ def test_scenarios_built_a_chunk_at_a_time_are_the_whole_batchs():
 
 
 def test_provenance_versions_and_digests(tmp_path):
-    from jaxobs.provenance import provenance, sha256, versions
+    from jaxobs.io.provenance import provenance, sha256, versions
 
     v = versions()
     assert v["jax"] == jax.__version__ and v["numpy"] == np.__version__ and isinstance(v["x64"], bool)

@@ -1,4 +1,4 @@
-"""Studies that survive a kill: chunk by chunk on disk (jaxobs.chunkstore), `jaxobs study --resume` after a
+"""Studies that survive a kill: chunk by chunk on disk (jaxobs.runtime.chunkstore), `jaxobs study --resume` after a
 stop at any chunk gives a study.nc byte-identical to an uninterrupted run's, for FLL and drive studies.
 
 The stops are injected after a chosen number of chunks (the store's ``put`` raising KeyboardInterrupt, in this
@@ -20,9 +20,9 @@ import xarray as xr
 import jaxobs
 from jaxobs import drive as D
 from jaxobs import linear
-from jaxobs.chunkstore import ChunkStore
-from jaxobs.drive_study import run_drive_study
-from jaxobs.study import run_study
+from jaxobs.runtime.chunkstore import ChunkStore
+from jaxobs.studies.drive import run_drive_study
+from jaxobs.studies.study import run_study
 from jaxobs_tuning.cli import STUDY_CHUNKS, main
 
 # one scenario a chunk: many chunks, so that a kill lands mid-run and a resume has chunks to skip
@@ -186,7 +186,7 @@ def test_a_kill_between_the_chunks_and_study_nc_resumes(tmp_path, capsys, monkey
     way round, the chunks are lost.  Now the chunks move aside before study.nc appears (ChunkStore.retire)."""
     import contextlib
 
-    import jaxobs.study as writer  # the one study writer (jaxobs.study.write_study)
+    import jaxobs.studies.study as writer  # the one study writer (jaxobs.studies.study.write_study)
 
     path = tmp_path / "tiny.toml"
     path.write_text(TINY)

@@ -1,5 +1,5 @@
 """Time-major recordings (``SampledSignal(batch_inner=True)``, leaves (n, B)): the loop reads them as scan rows
-(jaxobs._loop, point 6) and computes what the scenario-major batch computes; nothing is transposed or sliced."""
+(jaxobs.runtime._loop, point 6) and computes what the scenario-major batch computes; nothing is transposed or sliced."""
 
 import re
 
@@ -11,9 +11,9 @@ import pytest
 
 import jaxobs
 from benchmarks import workloads as W
-from jaxobs._discretize import AB3State, ab3_steady_from_start
-from jaxobs._simulate import OnRows
-from jaxobs.sharding import batch_axes, batch_size
+from jaxobs.core.discretize import AB3State, ab3_steady_from_start
+from jaxobs.runtime.sharding import batch_axes, batch_size
+from jaxobs.runtime.simulation import OnRows
 
 TS = W.TS
 N = 600  # samples in each recording

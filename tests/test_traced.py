@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 import jaxobs
-from jaxobs import _traced
+from jaxobs.runtime import programs as _traced
 
 
 @pytest.fixture

@@ -1,4 +1,4 @@
-"""jaxobs._trig.sincos: the float64 and float32 sine and cosine of the drive's Park transforms and the signals.
+"""jaxobs.core.trig.sincos: the float64 and float32 sine and cosine of the drive's Park transforms and the signals.
 
 Oracle: NumPy's libm (itself within 1 ulp of the true value) on 10⁶ random angles and on the awkward ones
 (the doubles at and next to every multiple of π/2 up to 10⁵, ±0, tiny, subnormal); derivatives against
@@ -13,7 +13,7 @@ import pytest
 
 import jaxobs
 import jaxobs.drive as D
-from jaxobs._trig import sincos
+from jaxobs.core.trig import sincos
 
 _f = jax.jit(sincos)
 
@@ -116,7 +116,7 @@ def test_float32_special_values():
         s, c = _f(jnp.asarray(x))
     s, c = np.asarray(s), np.asarray(c)
     assert s[0] == 0.0 and not np.signbit(s[0]) and np.signbit(s[1]) and (c[:5] == 1.0).all()
-    # XLA's CPU code flushes float32 subnormals: their sine is ±0 (jaxobs._trig's doc)
+    # XLA's CPU code flushes float32 subnormals: their sine is ±0 (jaxobs.core.trig's doc)
     assert (s[2:4] == 0.0).all() and np.signbit(s[3]) and not np.signbit(s[2]) and s[4] == x[4]
     assert np.isnan(s[5:8]).all() and np.isnan(c[5:8]).all()
     # up to 2^21 rad the angle's own spacing sets the error; beyond, NaN rather than a sine-looking number

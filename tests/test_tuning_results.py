@@ -14,7 +14,7 @@ import pytest
 
 from jaxobs import drive as D
 from jaxobs import linear, papers
-from jaxobs.provenance import by_label
+from jaxobs.io.provenance import by_label
 from jaxobs_tuning import load_job
 from jaxobs_tuning.cli import main
 from jaxobs_tuning.targets import flux_settling_time

@@ -13,7 +13,7 @@ import threading
 import numpy as np
 import pytest
 
-from jaxobs.provenance import read_file
+from jaxobs.io.provenance import read_file
 from jaxobs_tuning import AbstractObjective
 from jaxobs_tuning.checkpoint import DIGEST, content_digest
 from jaxobs_tuning.params import GainSpec, Parametrization

@@ -14,11 +14,11 @@ from gradcheck import assert_field_grads_match_fd
 
 import jaxobs
 from jaxobs import drive as D
-from jaxobs._measurements import DriveInput
+from jaxobs.core.measurements import DriveInput
 from jaxobs.metrics import wrap
 from jaxobs.observers import CLESO, FALESO, GILESO, SOIFO, LPFFlux, SecondOrderSOIFO
 from jaxobs.observers.speed import MechanicalSpeed, PLLSpeed, mechanical_gains, speed_from_spec
-from jaxobs.registry import REGISTRY
+from jaxobs.studies.registry import REGISTRY
 
 MACHINES = ("ipmsm002", "spmsm000")
 ALPHA_O = 2 * math.pi * 10.0  # the mechanical observer's bandwidth in these tests, rad/s

@@ -78,7 +78,7 @@ from pathlib import Path
 
 import jaxobs
 from jaxobs import use_compile_cache, use_host_devices
-from jaxobs.chunkstore import ChunkStore
+from jaxobs.runtime.chunkstore import ChunkStore
 
 from .cli_common import enable_x64, progress_of
 from .cli_drive import add_drive_parser
@@ -98,22 +98,22 @@ from .study_file import load_study as _load_study
 from .study_file import study_fingerprint
 from .summary import print_summary, study_warnings
 
-STUDY_CHUNKS = "study.chunks"  # a study's results while it runs (jaxobs.chunkstore), in --out
+STUDY_CHUNKS = "study.chunks"  # a study's results while it runs (jaxobs.runtime.chunkstore), in --out
 
 
 def load_study(path):
     """A study file as (name, designs, axes, options): :func:`jaxobs_tuning.study_file.load_study`, checked in
-    full; the options hold its preset's keywords, ``family`` (:mod:`jaxobs.families`) among them."""
+    full; the options hold its preset's keywords, ``family`` (:mod:`jaxobs.scenarios.families`) among them."""
     spec = _load_study(path)
     return spec.name, spec.designs, spec.axes, dict(spec.opts, family=spec.family)
 
 
 def _cmd_drive_study(name, designs, axes, opts, out: Path, quiet: bool, provenance=None, store=None) -> int:
-    from jaxobs.drive_study import DRIVE_STUDY_METRICS, run_drive_study
+    from jaxobs.core.quantities import text_unit
     from jaxobs.metrics import METRICS
     from jaxobs.plot import drive_study_figure
-    from jaxobs.quantities import text_unit
-    from jaxobs.study import write_study
+    from jaxobs.studies.drive import DRIVE_STUDY_METRICS, run_drive_study
+    from jaxobs.studies.study import write_study
 
     ds = run_drive_study(designs, axes, progress=progress_of(quiet=quiet), store=store, **opts)
     ds.attrs.update(provenance or {})  # the study file's and the result files' sha256, the machine
@@ -150,13 +150,13 @@ def _cmd_drive_study(name, designs, axes, opts, out: Path, quiet: bool, provenan
 def _recording_study(
     designs: dict, *, family, recording, t_event, horizon, steady_from, band_hz, progress, store=None, **_
 ):
-    """Every FLL design on every recording of ``[study.recording]``: :func:`jaxobs.study.run_study` with a
+    """Every FLL design on every recording of ``[study.recording]``: :func:`jaxobs.studies.study.run_study` with a
     :class:`jaxobs.scenarios.Recordings` sampler of ``family``'s recordings (dims (design, recording), the files'
     sha256); (Dataset, s)."""
     import jax
 
     from jaxobs.scenarios import Recordings
-    from jaxobs.study import run_study
+    from jaxobs.studies.study import run_study
 
     rec = recording
     sampler = Recordings(load_recordings(rec, family), rec.files, rec.sha256)
@@ -189,7 +189,7 @@ def _cmd_study(args) -> int:
     name, designs, axes = spec.name, spec.designs, spec.axes
     opts = dict(spec.opts, family=spec.family, provenance=spec.provenance)
     out = Path(args.out) if args.out else Path("out") / safe_name(str(name), "study")
-    # a study writes each chunk's results under study.chunks/ as it finishes (jaxobs.chunkstore): a
+    # a study writes each chunk's results under study.chunks/ as it finishes (jaxobs.runtime.chunkstore): a
     # kill loses at most the chunks being computed, and --resume continues from the last complete one
     resume = f"jaxobs study {shlex.quote(str(path))} --out {shlex.quote(str(out))} --resume"
     if distributed_asked(args):  # every process is given --resume (process 0 tells the others what is done)
@@ -199,7 +199,9 @@ def _cmd_study(args) -> int:
     if args.check:
         if args.out:  # what the real run would refuse (an explicit --out: the default one may not exist yet)
             OutDir(out, products, force=args.force, hints={STUDY_CHUNKS: hint}).check()
-        family = type(spec.family).__name__  # GridSignals, RecordedSignals or DriveScenarios (jaxobs.families)
+        family = type(
+            spec.family
+        ).__name__  # GridSignals, RecordedSignals or DriveScenarios (jaxobs.scenarios.families)
         print(f"{path}: OK — {family} study {name!r}, {len(designs)} designs x {spec.scenarios} scenarios")
         return 0
     outdir = OutDir(out, products, force=args.force, hints={STUDY_CHUNKS: hint})
@@ -214,10 +216,10 @@ def _cmd_study(args) -> int:
 
 
 def _run_study(name, designs, axes, opts, out: Path, quiet: bool, store=None) -> int:
+    from jaxobs.core.quantities import text_unit
     from jaxobs.metrics import METRICS
     from jaxobs.plot import study_figures
-    from jaxobs.quantities import text_unit
-    from jaxobs.study import STUDY_METRICS, run_study, worst_cases, write_study
+    from jaxobs.studies.study import STUDY_METRICS, run_study, worst_cases, write_study
 
     provenance = opts.pop("provenance", None) or {}
     if opts["family"].closed_loop:  # the family's designs close the drive's loop: the drive study's preset
@@ -502,7 +504,7 @@ def main(argv=None) -> int:
         print(f"jaxobs: error: {e.strerror or e}{where}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
-        from jaxobs.progress import close_all
+        from jaxobs.runtime.progress import close_all
 
         # the bars closed first (tqdm draws a bar as it closes: nothing is drawn after the line below), which
         # ends their line; else on a line of its own, a bar may hold the terminal's current line

@@ -33,7 +33,7 @@ def _columns(text: str | None, default: tuple[str, ...]) -> tuple[str, ...]:
 
 
 def _layout(path: str | None):
-    from jaxobs.safetoml import read_toml
+    from jaxobs.io.safetoml import read_toml
     from jaxobs.signals import RecordingLayout
 
     if path is None:

@@ -7,8 +7,8 @@ import json
 import re
 from pathlib import Path
 
-from jaxobs.registry import REGISTRY
 from jaxobs.reproduce.figures import FLUX_FIGURES, LESO_FIGURES
+from jaxobs.studies.registry import REGISTRY
 
 from .cli_common import CommandOut, enable_x64, progress_of
 from .outdir import atomic_path
@@ -67,9 +67,9 @@ REPRODUCE_DUAL_LAYOUT_FILES = ("leso_dual_fig16_speed_ramp_330V_layout.png",)
 
 def cmd_demo(args) -> int:
     enable_x64()
-    from jaxobs.demo import DEMO_TESTS, fll_demo, format_table
     from jaxobs.plot import fll_demo_figure
     from jaxobs.reproduce.figures import fll_figure
+    from jaxobs.studies.demo import DEMO_TESTS, fll_demo, format_table
 
     if args.t_event <= 0:
         raise ValueError(f"--t-event must be > 0 s, got {args.t_event}")
@@ -94,8 +94,8 @@ def cmd_demo(args) -> int:
     return 0 if all(r["ok"] for r in rows) else 1
 
 
-# The closed forms `jaxobs closed-form` offers: every registered observer, by its aliases (jaxobs.registry); each
-# class's closed_form_design is its rule, its keyword arguments (less the constructor's **kw) its inputs, and its
+# The closed forms `jaxobs closed-form` offers: every registered observer, by its aliases (jaxobs.studies.registry);
+# # each class's closed_form_design is its rule, its keyword arguments (less the constructor's **kw) its inputs, and its
 # rows carry their own formulas and sources, printed here as they are.
 CF_DESIGNS = {a: e.cls for e in REGISTRY.values() for a in e.aliases}
 

@@ -15,7 +15,7 @@ import sys
 from pathlib import Path
 
 import jaxobs
-from jaxobs.chunkstore import AbstractChunkSink
+from jaxobs.runtime.chunkstore import AbstractChunkSink
 
 from .job import JobError, read_toml
 from .study_file import KINDS, WHAT
@@ -145,17 +145,17 @@ class _ShareComputed(Exception):
 
 
 class SharedChunks(AbstractChunkSink):
-    """The runner's sink (:func:`jaxobs.runner.run_scenarios`) in each process of a study split over processes.
+    """The runner's sink (:func:`jaxobs.runtime.runner.run_scenarios`) in each process of a study split over processes.
 
     Every process must skip the same chunks (a chunk is computed by all of them together, in collectives), but
-    only process 0 holds the study's :class:`jaxobs.chunkstore.ChunkStore` (``store``; ``None`` elsewhere): at
+    only process 0 holds the study's :class:`jaxobs.runtime.chunkstore.ChunkStore` (``store``; ``None`` elsewhere): at
     :meth:`start` it opens it (checking an earlier run's chunks) and broadcasts which chunks are on disk, or
     that it cannot use them, so that every process stops with one line instead of waiting in a collective.
     Process 0 writes each chunk and lays the study out from the store; the others hold nothing, and their
     :meth:`load`, reached once every collective is done, ends their run (:class:`_ShareComputed`).
 
     Args:
-        store: Process 0's :class:`jaxobs.chunkstore.ChunkStore`; ``None`` elsewhere.
+        store: Process 0's :class:`jaxobs.runtime.chunkstore.ChunkStore`; ``None`` elsewhere.
         pid: This process's index.
     """
 
@@ -217,7 +217,7 @@ class SharedChunks(AbstractChunkSink):
 
 def distributed_study(name, designs, axes, opts, out: Path, args, rank, write, outdir, store) -> int:
     """One process of a study split over processes: every process computes its share of every chunk
-    (jaxobs.study.run_study), process 0 alone checks and locks ``--out`` (``outdir``, an
+    (jaxobs.studies.study.run_study), process 0 alone checks and locks ``--out`` (``outdir``, an
     :class:`~jaxobs_tuning.outdir.OutDir`) and writes it (and shows progress) by
     ``write(name, designs, axes, opts, out, quiet, store=)``, the single-process study of the command line.
     A kill loses at most the chunks being computed, and ``--resume`` (every process given it) continues from
@@ -234,7 +234,7 @@ def distributed_study(name, designs, axes, opts, out: Path, args, rank, write, o
         write: ``write(name, designs, axes, opts, out, quiet, store=)``, the single-process study of the
             command line.
         outdir: The :class:`~jaxobs_tuning.outdir.OutDir` process 0 checks and locks.
-        store: Process 0's :class:`jaxobs.chunkstore.ChunkStore` (unused in the others), shared as
+        store: Process 0's :class:`jaxobs.runtime.chunkstore.ChunkStore` (unused in the others), shared as
             :class:`SharedChunks`.
 
     Returns:
@@ -243,7 +243,7 @@ def distributed_study(name, designs, axes, opts, out: Path, args, rank, write, o
     import numpy as np
     from jax.experimental import multihost_utils
 
-    from jaxobs.study import run_study
+    from jaxobs.studies.study import run_study
 
     pid, count = rank
     with contextlib.ExitStack() as stack:

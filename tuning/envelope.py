@@ -15,7 +15,7 @@ import dataclasses
 import math
 from pathlib import Path
 
-from jaxobs.provenance import cf_labels
+from jaxobs.io.provenance import cf_labels
 
 from .job import COMPONENTS, JobError, job_drive, load_job, parse_job
 from .outdir import OutDir, atomic_path, safe_name

@@ -42,11 +42,11 @@ import numpy as np
 from jaxobs import OnSignal, SaveAll, simulate
 from jaxobs import metrics as M
 from jaxobs.analysis.stability import lyapunov
-from jaxobs.families import AbstractFamily
 from jaxobs.metrics import Metric, MetricContext
-from jaxobs.runner import run_scenarios
+from jaxobs.runtime.runner import run_scenarios
+from jaxobs.runtime.sharding import batch_mesh
 from jaxobs.scenarios import Given
-from jaxobs.sharding import batch_mesh
+from jaxobs.scenarios.families import AbstractFamily
 
 from .aggregations import AbstractAggregation, Mean
 from .base import AbstractObjective
@@ -187,9 +187,9 @@ class Objective(AbstractObjective):
         aggregation: How the per-scenario values become one (:class:`~jaxobs_tuning.aggregations.Mean` by
             default).
         penalty: The value of a diverged scenario.
-        family: The scenarios' family (:mod:`jaxobs.families`), which makes the system the component runs on
+        family: The scenarios' family (:mod:`jaxobs.scenarios.families`), which makes the system the component runs on
             each scenario (bound to it: the machine an observer assumes, its initial speed; closing the
-            drive's loop for :class:`~jaxobs.families.DriveScenarios`); None: the component runs on each
+            drive's loop for :class:`~jaxobs.scenarios.families.DriveScenarios`); None: the component runs on each
             scenario, a signal, as it is.
 
     Raises:
@@ -376,7 +376,7 @@ class Objective(AbstractObjective):
         sol = self._simulate(self.param.apply(self.component, theta), sig)
         return sol.t, sol.outputs.obs.omega, M.position_error(sol, sig)
 
-    # --- reporting: a design scored on the scenarios by the one study runner (jaxobs.runner)
+    # --- reporting: a design scored on the scenarios by the one study runner (jaxobs.runtime.runner)
     def _bound_system(self, comp, sig):
         """The system one scenario runs: the family's (``comp`` bound to the scenario, on its signal or closing
         the drive's loop), or ``comp`` on the signal as it is."""

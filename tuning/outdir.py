@@ -13,7 +13,7 @@ at a time (a lock file), no silent overwrite, every file written to a temp file 
   that cannot be written (a full disk) is removed again, and the error names the file.
 - A lock file with another name (a hard link planted at ``.jaxobs.lock``) is unlinked, never written.
 - Existing results (``result.json``, ``study.nc``, a checkpoint) are not overwritten without ``--force``.
-- Every file is written by :mod:`jaxobs.files` (a temp entry beside it, renamed over it: a symlink or hard
+- Every file is written by :mod:`jaxobs.io.files` (a temp entry beside it, renamed over it: a symlink or hard
   link at its name is replaced, never written through); the temp entries a killed run left are removed once
   the folder is locked and its checks pass, whether the run resumes, is forced or starts afresh.
 """
@@ -27,7 +27,7 @@ import re
 import socket
 from pathlib import Path
 
-from jaxobs.files import atomic_path, atomic_write_bytes, atomic_write_text, remove_temps
+from jaxobs.io.files import atomic_path, atomic_write_bytes, atomic_write_text, remove_temps
 
 __all__ = ["OutError", "safe_name", "OutDir", "atomic_write_bytes", "atomic_write_text", "atomic_path"]
 
@@ -123,7 +123,7 @@ class OutDir:
         self._lock()
         try:
             self._check_products()
-            remove_temps(p)  # a killed run's temp files and folders (jaxobs.files)
+            remove_temps(p)  # a killed run's temp files and folders (jaxobs.io.files)
         except BaseException:
             self.release()
             raise

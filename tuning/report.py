@@ -9,8 +9,8 @@ from pathlib import Path
 import jax
 import numpy as np
 
-from jaxobs.families import GridSignals
-from jaxobs.quantities import text_unit
+from jaxobs.core.quantities import text_unit
+from jaxobs.scenarios.families import GridSignals
 
 from .aggregations import CVaR, Mean, SmoothMax
 from .outdir import atomic_path
@@ -45,7 +45,7 @@ def scenario_values(spec) -> tuple[list, list]:
 
 def _axis_text(family, name: str, value: float) -> str:
     """One axis value as a figure's title states it: the axis's long name (before any parenthesis), the value and
-    its unit (:class:`jaxobs.quantities.Axis`; a dimensionless value alone)."""
+    its unit (:class:`jaxobs.core.quantities.Axis`; a dimensionless value alone)."""
     axis = family.axes.get(name)
     if axis is None:
         return f"{name} = {value:.4g}"
@@ -81,7 +81,7 @@ def _describe(spec, index: int) -> str:
 
 
 # the axes whose non-zero value is an event at t_event: a grid signal's disturbances (jaxobs.signals: every one
-# switches on at t_event) and a drive's reference and load steps (jaxobs.drive_study)
+# switches on at t_event) and a drive's reference and load steps (jaxobs.studies.drive)
 _EVENT_AXES = {
     "grid": ("freq_step", "phase_jump_deg", "sag", "dc", "harmonics_scale", "sub_amplitude"),
     "drive": ("speed_step_rpm", "load_step_nm"),

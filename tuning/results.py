@@ -6,7 +6,7 @@ design back (a robustness study, a notebook) reads it here, in the layer that
 wrote it; the library only ever receives the component itself::
 
     obs = tuned_component(load_result("out/wif-robust/result.json"))
-    ds = run_study({"tuned": obs}, axes)            # jaxobs.study.run_study
+    ds = run_study({"tuned": obs}, axes)            # jaxobs.studies.study.run_study
 
 Every command that reads a result back (``study``, ``export``, ``envelope``) reads it through
 :func:`load_result`: a regular file of bounded size and nesting, then :func:`check_result`'s schema, the
@@ -20,8 +20,8 @@ import math
 import re
 from pathlib import Path
 
-from jaxobs.provenance import read_file
-from jaxobs.registry import KEY_ALIASES, canonical_key
+from jaxobs.io.provenance import read_file
+from jaxobs.studies.registry import KEY_ALIASES, canonical_key
 
 from .job import COMPONENTS, Job, parse_job
 

@@ -34,8 +34,8 @@ import numpy as np
 import optax
 import optimistix as optx
 
-from jaxobs.progress import Progress
-from jaxobs.provenance import read_file
+from jaxobs.io.provenance import read_file
+from jaxobs.runtime.progress import Progress
 
 from .base import AbstractObjective
 from .checkpoint import DIGEST, MAX_CHECKPOINT_BYTES, check_state, content_digest

@@ -31,7 +31,7 @@ import numpy as np
 from jaxobs import kept_jit, linear, papers
 from jaxobs.drive import bench_machine
 from jaxobs.observers import CLESO, FALESO, AbstractFluxObserver
-from jaxobs.registry import REGISTRY, canonical_key
+from jaxobs.studies.registry import REGISTRY, canonical_key
 
 from .targets import _settling_at_k2, k1_for_settling_time_at_k2, soifo_settling_time
 
@@ -282,7 +282,7 @@ def structure(component: str, values: dict, job=None) -> dict:
     Returns:
         The structure's fields, with ``"not_available"``: field -> why, where some could not be given.
     """
-    # the paper's small-signal model of the class (jaxobs.registry), analysed by its family: an FLL's loop, a
+    # the paper's small-signal model of the class (jaxobs.studies.registry), analysed by its family: an FLL's loop, a
     # flux observer's filter, a LESO's PLL loop (the C-LESO's and the FA-LESO's: 002 gives them)
     entry = REGISTRY.get(component)
     cls = entry.cls if entry is not None else None

@@ -27,7 +27,7 @@ A FLL study::
     k = 1.0
     lam = 20000.0
 
-    [axes]                         # jaxobs.families.GridSignals.axes, each a non-empty list of numbers in its range
+    [axes]                         # GridSignals.axes, each a non-empty list of numbers in its range
     freq_step = [-2.0, 2.0]
 
 A drive study::
@@ -51,7 +51,7 @@ A drive study::
     [designs.mine]
     component = "FALESO"
     k1 = 16.1
-    [axes]                         # jaxobs.families.DriveScenarios.axes
+    [axes]                         # jaxobs.scenarios.families.DriveScenarios.axes
     dRs = [-0.2, 0.2]
 
 ``result`` paths: a relative path is read relative to the folder of the study file (not the working
@@ -69,11 +69,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from jaxobs.drive import SHIPPED_DRIVES, bench_machine, shipped_drive
-from jaxobs.families import FAMILIES, AbstractFamily, DriveScenarios, DriveSetting, GridSignals
+from jaxobs.io.provenance import sha256, versions
 from jaxobs.observers import AbstractFluxObserver
-from jaxobs.provenance import sha256, versions
-from jaxobs.registry import REGISTRY, canonical_key
 from jaxobs.scenarios import SAMPLINGS, Grid
+from jaxobs.scenarios.families import FAMILIES, AbstractFamily, DriveScenarios, DriveSetting, GridSignals
+from jaxobs.studies.registry import REGISTRY, canonical_key
 
 from .job import (
     COMPONENTS,
@@ -108,8 +108,8 @@ __all__ = [
 ]
 
 WHAT = "study file"
-# the designs a study may name, from jaxobs.registry: the FLLs (and their closed forms' aliases), the drive observers
-# (a grid signal's design is no drive observer; a drive observer may run on a family that closes the loop)
+# the designs a study may name, from jaxobs.studies.registry: the FLLs (and their closed forms' aliases), the drive
+# # observers (a grid signal's design is no drive observer; a drive observer may run on a family that closes the loop)
 FLL_CLOSED_FORMS = {
     a: e.cls.closed_form for e in REGISTRY.values() if not FAMILIES[e.signal].drive_observer for a in e.aliases
 }
@@ -120,7 +120,7 @@ DRIVE_OBSERVERS = tuple(name for name, e in REGISTRY.items() if any(FAMILIES[s].
 MACHINES = tuple(SHIPPED_DRIVES)
 MAX_CHUNK = 100_000
 # (the bytes one scenario keeps per time step while a chunk runs, for the memory check: each family's
-# study_bytes_per_step, jaxobs.families)
+# study_bytes_per_step, jaxobs.scenarios.families)
 
 _FLL_STUDY_KEYS = (
     "kind",
@@ -156,9 +156,10 @@ class StudySpec:
 
     Attributes:
         name: The study's name.
-        family: The scenarios' family (:mod:`jaxobs.families`): :class:`~jaxobs.families.GridSignals`, its
-            recordings (:meth:`~jaxobs.families.AbstractFamily.recorded`), or
-            :class:`~jaxobs.families.DriveScenarios`, built by its own ``from_toml`` from ``[study]``.
+        family: The scenarios' family (:mod:`jaxobs.scenarios.families`):
+        :class:`~jaxobs.scenarios.families.GridSignals`, its
+            recordings (:meth:`~jaxobs.scenarios.families.AbstractFamily.recorded`), or
+            :class:`~jaxobs.scenarios.families.DriveScenarios`, built by its own ``from_toml`` from ``[study]``.
         designs: name -> design.
         axes: name -> values.
         opts: The runner's other options.

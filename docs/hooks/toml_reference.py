@@ -277,9 +277,9 @@ def _table(
 
 def _axes_table(title: str, ranges: dict, intro: str) -> str:
     lines = [f"### `{title}`", "", intro, "", "| axis | unit | range |", "|---|---|---|"]
-    from jaxobs.quantities import text_unit
+    from jaxobs.core.quantities import text_unit
 
-    for name, axis in ranges.items():  # jaxobs.quantities.Axis records
+    for name, axis in ranges.items():  # jaxobs.core.quantities.Axis records
         lo, hi = axis.range
         lines.append(f"| `{name}` | {text_unit(axis.units)} | [{lo:g}, {hi:g}] |")
     return "\n".join(lines) + "\n"
@@ -529,7 +529,7 @@ def reference_markdown() -> str:
         + "\n".join(rows)
         + "\n"
     )
-    from jaxobs.families import DriveScenarios, GridSignals
+    from jaxobs.scenarios.families import DriveScenarios, GridSignals
 
     out.append(_axes_table('[axes] (kind = "fll")', GridSignals.axes, "Each a list of values."))
     out.append(_axes_table('[axes] (kind = "drive")', DriveScenarios.axes, "Each a list of values."))

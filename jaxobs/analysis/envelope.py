@@ -11,7 +11,7 @@ closes the loop sensorless) it measures two things, each batched over the points
   largest non-neutral Floquet multiplier of ``ClosedLoop.step`` over whole electrical periods of its own
   orbit, as a decay rate; or, with ``stability={"method": "lyapunov"}``, the largest non-neutral Lyapunov
   exponent fitted over a window, :func:`jaxobs.analysis.stability.lyapunov`);
-- **a long simulation** through the study runner (:func:`jaxobs.runner.run_scenarios`), started steady and
+- **a long simulation** through the study runner (:func:`jaxobs.runtime.runner.run_scenarios`), started steady and
   perturbed by a speed-reference pulse: ``perturb`` (relative) × the point's speed from ``t_perturb`` s for one
   time constant 1/α of the point's speed loop, then back.  A pulse, not a step: a step would move the point
   the late window watches (a +2 % step at 405 r/min, 5 N·m on the bench moves 000's second-order SOIFO from
@@ -77,11 +77,11 @@ from ..drive import (
     drive_speed_limit_rpm,
     speed_limit,
 )
-from ..families import DRIVE_STUDY_AXES, AbstractFamily, DriveScenarios, bind_observer
-from ..provenance import cf_dataset, provenance
+from ..io.provenance import cf_dataset, provenance
+from ..runtime.sharding import batch_mesh
 from ..scenarios import Grid
-from ..sharding import batch_mesh
-from ..study import gain_variables, study
+from ..scenarios.families import DRIVE_STUDY_AXES, AbstractFamily, DriveScenarios, bind_observer
+from ..studies.study import gain_variables, study
 from .stability import Stability, floquet, lyapunov
 
 __all__ = [
@@ -469,7 +469,7 @@ def envelope(
     ("floquet", the default, or "lyapunov") and that function's keyword arguments
     (:func:`~jaxobs.analysis.stability.floquet`: settle, window, tol, n_report;
     :func:`~jaxobs.analysis.stability.lyapunov`: settle, warmup, window, n_dirs, tol).  ``progress`` as in
-    :func:`jaxobs.runner.run_scenarios`.  ``max_speed_rpm``: the drive file's mechanical limit
+    :func:`jaxobs.runtime.runner.run_scenarios`.  ``max_speed_rpm``: the drive file's mechanical limit
     (``[machine] max_speed_rpm``; :func:`speed_limit_rpm`), None: the rule's default.  The long runs' and the
     verdicts' traced programs are kept across
     processes where a folder is set (:func:`jaxobs.kept_jit`).  Returns an ``xarray.Dataset`` with dims

@@ -7,7 +7,7 @@ Every dynamic piece is a step component (``init``/``step``): :class:`PMSM`,
 them with an observer, :class:`ClosedLoop`, which ``jaxobs.simulate`` runs.
 """
 
-from .._measurements import DriveInput as DriveInput
+from ..core.measurements import DriveInput as DriveInput
 from .bench import IF_SUDDEN_LOAD_PU as IF_SUDDEN_LOAD_PU
 from .bench import SHIPPED_DRIVES as SHIPPED_DRIVES
 from .bench import bench_drive as bench_drive

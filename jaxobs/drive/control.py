@@ -114,9 +114,9 @@ import jax
 import jax.numpy as jnp
 
 from .. import papers
-from .._math import safe_norm2, wrap
-from .._trig import sincos
-from .._validate import check_nonnegative, check_positive, check_real, check_sample_time
+from ..core.numerics import safe_norm2, wrap
+from ..core.trig import sincos
+from ..core.validate import check_nonnegative, check_positive, check_real, check_sample_time
 from .component import AbstractComponent
 from .machine import RPM, PMSMParams, rotate
 from .weakening import VoltageFeedbackFW, id_stop, mtpv_iq, voltage_iq_range

@@ -164,7 +164,7 @@ from typing import NamedTuple
 import numpy as np
 
 from .. import papers
-from ..safetoml import TomlFieldError, read_toml
+from ..io.safetoml import TomlFieldError, read_toml
 from ._dualfile import dual_drive_file, halved, lowered_bandwidth
 from .control import FOC, IfStartup
 from .dual import DualPMSMParams
@@ -1014,7 +1014,7 @@ def _lowest_speeds(p: int, alpha_s: float, schedule: float, w_est: float) -> dic
 
 
 def read_drive(path) -> DriveFile:
-    """The drive file at ``path``, read safely (size at most 1 MB, nesting, encoding: :mod:`jaxobs.safetoml`)
+    """The drive file at ``path``, read safely (size at most 1 MB, nesting, encoding: :mod:`jaxobs.io.safetoml`)
     and checked in full.
 
     Args:

@@ -59,9 +59,9 @@ import jax.numpy as jnp
 import numpy as np
 
 from .. import papers
-from .._discretize import RK4, AbstractRule, AbstractRuleCarry, Held, check_rule
-from .._math import wrap
-from .._validate import check_nonnegative, check_positive, check_sample_time
+from ..core.discretize import RK4, AbstractRule, AbstractRuleCarry, Held, check_rule
+from ..core.numerics import wrap
+from ..core.validate import check_nonnegative, check_positive, check_sample_time
 from .component import AbstractComponent
 from .hardware import Inverter
 from .machine import PMSMParams, ab_to_dq, dq_to_ab

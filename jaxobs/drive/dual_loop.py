@@ -56,10 +56,10 @@ import jax
 import jax.numpy as jnp
 
 from .. import papers
-from .._discretize import RK4, AbstractRule, check_rule
-from .._math import safe_norm2, wrap
-from .._measurements import DriveInput
-from .._validate import check_nonnegative, check_positive
+from ..core.discretize import RK4, AbstractRule, check_rule
+from ..core.measurements import DriveInput
+from ..core.numerics import safe_norm2, wrap
+from ..core.validate import check_nonnegative, check_positive
 from .component import AbstractComponent
 from .control import FOC, ControllerState, FOCInput, IfStartup, OperatingPoint
 from .dual import DualPlantInput, DualPlantState, DualPMSM, DualPMSMParams, sets_to_vsd, vsd_to_sets

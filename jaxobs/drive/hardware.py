@@ -28,10 +28,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._math import safe_norm2
-from .._measurements import DriveInput
-from .._validate import as_float, check_nonnegative, check_positive, check_real
-from .._validate import static_float as _static_float
+from ..core.measurements import DriveInput
+from ..core.numerics import safe_norm2
+from ..core.validate import as_float, check_nonnegative, check_positive, check_real
+from ..core.validate import static_float as _static_float
 from .component import AbstractComponent
 
 __all__ = ["PWM_MODELS", "Inverter", "InverterInput", "Sensors", "SensorInput", "clarke_abc_to_ab", "ab_to_abc"]

@@ -17,7 +17,7 @@ One step is one control period T_s (10 kHz by default), as on a DSP:
 2. the sensors measure the current at t_k and the voltage applied over
    [t_k, t_{k+1}], with their offsets, gain errors and noise
    (:class:`~jaxobs.drive.Sensors`);
-3. the observer steps on those measurements (a :class:`~jaxobs._measurements.DriveInput`)
+3. the observer steps on those measurements (a :class:`~jaxobs.core.measurements.DriveInput`)
    and reports θ̂e, ω̂e at t_k;
 4. the FOC uses the encoder (``drive.sensorless=False``) or the observer's θ̂e,
    ω̂e (from ``drive.handover`` on; the encoder before, while the observer
@@ -46,10 +46,10 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from .._discretize import RK4, AbstractRule, check_rule
-from .._math import wrap
-from .._system import AbstractSystem
-from .._validate import check_sample_time
+from ..core.discretize import RK4, AbstractRule, check_rule
+from ..core.numerics import wrap
+from ..core.system import AbstractSystem
+from ..core.validate import check_sample_time
 from ..observers import AbstractDriveObserver, AbstractObserver
 from .control import FOC, ControllerState, FOCInput, IfStartup, OperatingPoint
 from .hardware import Inverter, InverterInput, SensorInput
@@ -472,7 +472,7 @@ class ClosedLoop(AbstractDriveLoop):
     observer: AbstractObserver | None
     scenario: Scenario
 
-    # loop unrolling (jaxobs._loop point 3): 1, the drive step is large, and
+    # loop unrolling (jaxobs.runtime._loop point 3): 1, the drive step is large, and
     # unrolling it made XLA's CPU fusion duplicate work (forward 3.1 → 1.3 M
     # scenario-steps/s at 2) and its reverse-mode compile blow up (> 200 s).
     unroll: ClassVar[int] = 1
@@ -507,7 +507,7 @@ class ClosedLoop(AbstractDriveLoop):
     def plant(self) -> PMSM:
         """The true machine behind the drive's inverter, with the scenario's dead time."""
         d, sc = self.drive, self.scenario
-        # the constructor's checks pass traced leaves through (jaxobs._validate)
+        # the constructor's checks pass traced leaves through (jaxobs.core.validate)
         return PMSM(sc.par, d.inverter, sc.dead_time, ts=d.ts, n_sub=d.n_sub, rule=d.rule)
 
     @property

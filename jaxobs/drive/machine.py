@@ -59,8 +59,8 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from .._trig import sincos
-from .._validate import check_nonnegative, check_positive, check_real
+from ..core.trig import sincos
+from ..core.validate import check_nonnegative, check_positive, check_real
 from .saturation import AlgebraicSaturation, FluxTable
 
 __all__ = [
@@ -317,7 +317,7 @@ def _harmonic_factor(par: PMSMParams, sc):
 
     e^{j6θ} = (e^{jθ})⁶ by two squarings and a product (e^{j2θ}, e^{j3θ}, e^{j6θ}): no second sine and
     cosine per angle.  Inside the plant's vector field XLA evaluates this once per state component it
-    stacks, in scalar code (jaxobs._trig), where a polynomial sine costs several times these six products."""
+    stacks, in scalar code (jaxobs.core.trig), where a polynomial sine costs several times these six products."""
     s, c = sc
     c2, s2 = c * c - s * s, 2.0 * s * c
     c3, s3 = c2 * c - s2 * s, s2 * c + c2 * s

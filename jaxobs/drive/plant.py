@@ -38,10 +38,10 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from .._discretize import RK4, AbstractRule, AbstractRuleCarry, Held, check_rule
-from .._math import wrap
-from .._trig import sincos
-from .._validate import check_nonnegative, check_sample_time
+from ..core.discretize import RK4, AbstractRule, AbstractRuleCarry, Held, check_rule
+from ..core.numerics import wrap
+from ..core.trig import sincos
+from ..core.validate import check_nonnegative, check_sample_time
 from .component import AbstractComponent
 from .hardware import Inverter, ab_to_abc
 from .machine import PMSMParams, dq_to_ab, mapped_torque, plant_vf, rotate, state_currents, torque

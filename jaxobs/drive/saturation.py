@@ -42,7 +42,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._validate import check_nonnegative, check_positive, check_real
+from ..core.validate import check_nonnegative, check_positive, check_real
 
 __all__ = [
     "AlgebraicSaturation",

@@ -27,8 +27,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._validate import as_float, check_nonnegative, check_real, key_part
-from ..quantities import Axis, text_unit
+from ..core.quantities import Axis, text_unit
+from ..core.validate import as_float, check_nonnegative, check_real, key_part
 from .hardware import Sensors
 from .machine import RPM, PMSMParams
 

@@ -61,7 +61,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._validate import check_positive, check_real
+from ..core.validate import check_positive, check_real
 
 __all__ = ["FW_MARGIN", "VoltageFeedbackFW", "capability_torque", "id_stop", "mtpv_iq", "voltage_iq_range"]
 

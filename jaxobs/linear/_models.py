@@ -30,7 +30,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from .._validate import as_float, check_positive, check_real
+from ..core.validate import as_float, check_positive, check_real
 from ..observers import cleso_gains, sogi2_tustin_coefficients
 from ._tf import DiscreteTransferFunction, TransferFunction, is_hurwitz
 

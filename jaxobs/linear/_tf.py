@@ -22,7 +22,7 @@ import jax.scipy.linalg as jsl
 import numpy as np
 import optimistix as optx
 
-from .._validate import as_float
+from ..core.validate import as_float
 
 __all__ = [
     "TransferFunction",

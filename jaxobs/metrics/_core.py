@@ -26,10 +26,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._math import wrap as wrap
-from .._simulate import SignalOutput, Solution
+from ..core.numerics import wrap as wrap
 from ..drive.dual_loop import DualOutput
 from ..drive.loop import DriveOutput
+from ..runtime.simulation import SignalOutput, Solution
 from ..signals import AbstractSignal
 
 # The outputs whose truth is the rotor's electrical angle θe (the closed-loop drives: their field theta_e), against

@@ -42,7 +42,7 @@ from typing import Any, NamedTuple
 
 import equinox as eqx
 
-from .._validate import check_real
+from ..core.validate import check_real
 
 __all__ = ["GainInfo", "gain", "gain_fields", "gain_table", "check_gains", "DesignRow", "ClosedForm", "gain_row"]
 
@@ -134,7 +134,7 @@ def check_gains(obs) -> None:
     """Check every gain of ``obs`` against its declared bounds (its :class:`GainInfo`): the one bound check.
 
     Traced values (an observer built inside ``vmap`` or ``grad``) pass through, as in every constructor check
-    (:mod:`jaxobs._validate`).
+    (:mod:`jaxobs.core.validate`).
 
     Args:
         obs: An observer instance.

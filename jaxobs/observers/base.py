@@ -42,7 +42,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from .._discretize import AbstractRule, AbstractRuleCarry
+from ..core.discretize import AbstractRule, AbstractRuleCarry
 from ._gains import check_gains
 
 __all__ = [
@@ -77,7 +77,7 @@ class AbstractObserver(eqx.Module):
 
     ts: eqx.AbstractVar[float]
 
-    # Declared by the class, read by the applications (jaxobs.registry): why a tuning job may not name it
+    # Declared by the class, read by the applications (jaxobs.studies.registry): why a tuning job may not name it
     # ("" where it may), and the paper's small-signal model, (the jaxobs.linear function, the fields it takes
     # in order), or None where the papers give none.  A name, not the function: jaxobs.linear sits above the
     # observers (it analyses them), so an observer cannot import it.
@@ -262,7 +262,7 @@ class AbstractDriveObserver(AbstractObserver):
     """
 
     # the fields bind() sets, by role (resistance, inductance, initial speed): not gains, so a study or a job
-    # does not report or tune them (jaxobs.drive_study.drive_gains), and the C export says where they came from
+    # does not report or tune them (jaxobs.studies.drive.drive_gains), and the C export says where they came from
     bound_fields: ClassVar["BoundFields"]
     # whether the class holds a speed estimator (jaxobs.observers.speed) that a job's [observer.speed] may choose
     takes_speed_estimator: ClassVar[bool] = False

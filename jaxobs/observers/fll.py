@@ -23,10 +23,10 @@ import jax
 import jax.numpy as jnp
 
 from .. import papers
-from .._discretize import AB3, AbstractRule, check_rule
-from .._math import safe_atan2, safe_norm2
-from .._validate import as_float, check_positive, check_real, check_sample_time
-from .._validate import static_float as _static_float
+from ..core.discretize import AB3, AbstractRule, check_rule
+from ..core.numerics import safe_atan2, safe_norm2
+from ..core.validate import as_float, check_positive, check_real, check_sample_time
+from ..core.validate import static_float as _static_float
 from ._cores import fll_rate, sogi2_vf, sogi_vf
 from ._gains import ClosedForm, DesignRow, gain, gain_row
 from ._rules import sogi_fll_lambda, symmetric_optimum_pm, wif_symmetric_optimum, wpf_lambda

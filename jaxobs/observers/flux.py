@@ -82,9 +82,9 @@ import jax
 import jax.numpy as jnp
 
 from .. import papers
-from .._discretize import RK4, AbstractRule, check_rule
-from .._math import safe_atan2
-from .._validate import as_float, check_nonnegative, check_positive, check_sample_time
+from ..core.discretize import RK4, AbstractRule, check_rule
+from ..core.numerics import safe_atan2
+from ..core.validate import as_float, check_nonnegative, check_positive, check_sample_time
 from ._cores import quadrature_error, safe_sq_amplitude, sogi2_tustin_coefficients, sogi2_vf, sogi_vf
 from ._gains import ClosedForm, gain, gain_row
 from ._rules import pll_gains, second_order_soifo_lambda, soifo_lambda

@@ -82,9 +82,9 @@ import jax
 import jax.numpy as jnp
 
 from .. import papers
-from .._discretize import RK4, AbstractRule, Knots, check_rule
-from .._math import safe_atan2, wrap
-from .._validate import as_float, check_nonnegative, check_positive, check_sample_time
+from ..core.discretize import RK4, AbstractRule, Knots, check_rule
+from ..core.numerics import safe_atan2, wrap
+from ..core.validate import as_float, check_nonnegative, check_positive, check_sample_time
 from ._gains import ClosedForm, DesignRow, gain, gain_row
 from ._rules import cleso_gains, pll_gains
 from .base import AbstractDriveObserver, BoundFields, DriveObserverState, replace_leaves

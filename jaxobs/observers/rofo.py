@@ -79,8 +79,8 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from .._math import wrap
-from .._validate import as_float, check_nonnegative, check_positive, check_sample_time
+from ..core.numerics import wrap
+from ..core.validate import as_float, check_nonnegative, check_positive, check_sample_time
 from ._gains import ClosedForm, DesignRow, gain, gain_row
 from .base import AbstractDriveObserver, BoundFields, DriveObserverState, replace_leaves
 

@@ -15,8 +15,8 @@ import jax
 import jax.numpy as jnp
 
 from .. import papers
-from .._discretize import AbstractRule, Tustin, check_rule
-from .._validate import as_float, check_positive, check_sample_time
+from ..core.discretize import AbstractRule, Tustin, check_rule
+from ..core.validate import as_float, check_positive, check_sample_time
 from ._cores import sogi2_vf, sogi_vf
 from ._gains import gain
 from .base import AbstractVectorFieldObserver

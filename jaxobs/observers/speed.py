@@ -50,7 +50,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from .._validate import check_nonnegative, check_positive
+from ..core.validate import check_nonnegative, check_positive
 from ._cores import pll_vf
 from ._gains import gain
 

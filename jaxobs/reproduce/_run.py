@@ -17,9 +17,7 @@ from typing import Any, NamedTuple
 import jax
 from jax import export
 
-from .._measurements import DriveInput
-from .._simulate import SignalOutput, SignalTruth, simulate
-from .._traced import kept_jit
+from ..core.measurements import DriveInput
 from ..drive.control import FOCOutput
 from ..drive.dual import DualPlantOutput
 from ..drive.dual_loop import DualFOCOutput, DualOutput
@@ -30,6 +28,8 @@ from ..observers.fll import FLLOutput
 from ..observers.flux import FluxOutput
 from ..observers.leso import LESOOutput
 from ..observers.sogi import QSGOutput
+from ..runtime.programs import kept_jit
+from ..runtime.simulation import SignalOutput, SignalTruth, simulate
 
 __all__ = ["Run", "run_kept"]
 

@@ -188,7 +188,7 @@ def flux_figures(traces, names, p: int, psi_f: float, out: Path):
 
 def fll_figure(traces, i: int, test: str, t_event: float, path=None, span: float | None = None):
     """Paper 001's Test ``test`` in its layout: ``traces`` {FLL name: run batched over tests} (as
-    :func:`jaxobs.demo.fll_demo` returns them), ``i`` the test's index in the batch, the event at ``t_event``
+    :func:`jaxobs.studies.demo.fll_demo` returns them), ``i`` the test's index in the batch, the event at ``t_event``
     (s); drawn from 50 ms before it to ``span`` s after (default 0.3 s for a step, 1.2 s for a steady
     disturbance)."""
     span = (0.3 if test in ("1", "2", "3", "A", "B") else 1.2) if span is None else span

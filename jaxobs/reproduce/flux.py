@@ -52,7 +52,7 @@ from ..observers import (
     PureIntegratorFlux,
     SecondOrderSOIFO,
 )
-from ..progress import Progress
+from ..runtime.progress import Progress
 from ._run import run_kept
 from .compare import annotate
 
@@ -171,7 +171,7 @@ def run_flux_experiments(quick: bool = False, progress=None):
     tolerance, within, explanation} (:mod:`jaxobs.reproduce.compare`).
 
     ``quick`` skips the 20 r/min and start-up runs (several simulated seconds each).  ``progress``: one
-    step per experiment, each named as it compiles and runs (:mod:`jaxobs.progress`: ``True`` a tqdm bar
+    step per experiment, each named as it compiles and runs (:mod:`jaxobs.runtime.progress`: ``True`` a tqdm bar
     on stderr, or a callable ``progress(done, total)``).
     """
     par = D.bench_machine("spmsm000")

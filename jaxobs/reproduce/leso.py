@@ -40,7 +40,7 @@ from .. import drive as D
 from .. import linear, papers
 from ..metrics import harmonic_amplitude, wrap
 from ..observers import CLESO, FALESO, GILESO, ObserverBank
-from ..progress import Progress
+from ..runtime.progress import Progress
 from ._run import run_kept
 from .compare import annotate
 
@@ -247,7 +247,7 @@ N_EXPERIMENTS = 3 + 2 + 1 + 3 + 1 + 3 + 4 + 2
 def run_leso_experiments(progress=None):
     """Returns (rows, traces); rows {experiment, observer, metric, unit, paper, ours, tolerance, within,
     explanation} (:mod:`jaxobs.reproduce.compare`, :data:`EXPLANATIONS`).  ``progress``: one
-    step per experiment, each named as it compiles and runs (:mod:`jaxobs.progress`)."""
+    step per experiment, each named as it compiles and runs (:mod:`jaxobs.runtime.progress`)."""
     rows, traces = [], {}
     bar = Progress(progress, N_EXPERIMENTS, "reproduce leso", unit="experiment")
 

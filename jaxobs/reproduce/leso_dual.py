@@ -47,7 +47,7 @@ import numpy as np
 
 from .. import drive as D
 from ..metrics import harmonic_amplitude
-from ..progress import Progress
+from ..runtime.progress import Progress
 from ._run import run_kept
 from .compare import annotate
 from .leso import LESO_NAMES, LOAD_STEP, LOAD_STEP_OTHERS, SENSORLESS_FW_SPEED_HZ, _closing_rows, leso_bank

@@ -24,7 +24,7 @@ Tests 1–3 (model accuracy, 001 Sec. V) and A–E (performance, 001 Sec. VI) ar
 built by :func:`paper001_test`.
 """
 
-from .._time import SampleTime as SampleTime
+from ..core.sampletime import SampleTime as SampleTime
 from ._base import AbstractSignal as AbstractSignal
 from ._base import FunctionSignal as FunctionSignal
 from ._logs import LogData as LogData

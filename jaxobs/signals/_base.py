@@ -4,7 +4,7 @@ A signal is an ``equinox.Module`` called as ``signal(t)`` inside a scan or ``vma
 defaults, what the rest of jaxobs reads from it instead of probing for it:
 
 - ``accepts_sample_time``: it takes a :class:`~jaxobs.SampleTime` (the exact sample index) in place of the
-  float t_k, so that a float32 phase stays exact at any horizon (``jaxobs._time``);
+  float t_k, so that a float32 phase stays exact at any horizon (``jaxobs.core.sampletime``);
 - ``has_truth``: ``theta``, ``omega`` and ``fundamental_amplitude`` report what the signal really is;
 - ``has_flux_angle``: ``flux_angle(t)`` and ``flux_omega(t)`` are the rotor-flux angle and its rate that a flux
   observer's estimate is compared with (an EMF's truth);

@@ -53,8 +53,8 @@ from pathlib import Path
 import jax.numpy as jnp
 import numpy as np
 
-from ..provenance import read_file
-from ..safetoml import read_toml
+from ..io.provenance import read_file
+from ..io.safetoml import read_toml
 from ._logchecks import check_angle_unit, check_balance, check_power, check_sequence, check_speed, check_timing
 from ._recordings import DriveRecording, _column
 

@@ -7,7 +7,7 @@ timing and consistency checks), or resampled by the small reader when the log's 
 
 from __future__ import annotations
 
-from .._time import TS_REL_TOL
+from ..core.sampletime import TS_REL_TOL
 from ._logs import RecordingLayout, read_drive_log
 from ._recordings import DriveRecording, SampledSignal
 

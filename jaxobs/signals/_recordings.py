@@ -15,10 +15,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._measurements import DriveInput
-from .._time import TS_REL_TOL
-from .._validate import check_real, check_sample_time, static_float
-from ..provenance import read_file
+from ..core.measurements import DriveInput
+from ..core.sampletime import TS_REL_TOL
+from ..core.validate import check_real, check_sample_time, static_float
+from ..io.provenance import read_file
 from ._base import AbstractSignal
 
 
@@ -100,13 +100,13 @@ class SampledSignal(_Recording):
 
     ``truth`` is the true (θ, ω, fundamental amplitude) at the same instants,
     when known (a synthetic waveform); with it, ``simulate`` fills in
-    :class:`~jaxobs._simulate.SignalTruth` and a cost may compare against it.
+    :class:`~jaxobs.runtime.simulation.SignalTruth` and a cost may compare against it.
     Leaves may carry a leading batch axis (``vmap`` over recordings of one
     length).
 
     This is also how a benchmark feeds *precomputed* inputs: the waveform is
     generated once, outside the timed function, and the loop only reads it,
-    a block of steps at a time (``SaveFinal``: :mod:`jaxobs._loop`, point 5).
+    a block of steps at a time (``SaveFinal``: :mod:`jaxobs.runtime._loop`, point 5).
 
     A batch of recordings may be stored **time-major** instead
     (``batch_inner=True``: ``samples`` and each truth array shaped ``(n, B)``,
@@ -115,7 +115,7 @@ class SampledSignal(_Recording):
     the batch along its inner axis, and the throughput loop (``SaveFinal``,
     ``SaveAll(fast=True)``) takes the rows as its scan inputs where they lie:
     one contiguous ``(B,)`` row per step, nothing gathered or transposed
-    (:mod:`jaxobs._loop`, point 6).  A device's share of a time-major batch runs
+    (:mod:`jaxobs.runtime._loop`, point 6).  A device's share of a time-major batch runs
     whole (``map_batch`` does not tile it).  The plain loop (``SaveAll()``)
     gives the same numbers by reading the samples back through ``sig(t)``,
     which under ``vmap`` moves the batch axis to the front: correct, slower.
@@ -307,7 +307,7 @@ def _csv_table(path, max_bytes):
     p = Path(path)
     if not p.exists() and not p.is_symlink():  # what Python says of a missing file, in one line
         raise FileNotFoundError(errno.ENOENT, f"recording {str(p)!r}: no such file")
-    try:  # a regular file only (no FIFO, no device), at most max_bytes (jaxobs.provenance.read_file)
+    try:  # a regular file only (no FIFO, no device), at most max_bytes (jaxobs.io.provenance.read_file)
         data = read_file(p, max_bytes)
     except ValueError as e:
         msg = str(e)
@@ -510,7 +510,7 @@ class DriveRecording(_Recording):
     """A recording of a drive's measurements, (u_α, u_β, i_α, i_β) per sample, for a drive observer run open
     loop (``jaxobs.OnSignal(observer, recording)``), with the encoder's electrical angle when known.
 
-    ``recording(t)`` returns the :class:`~jaxobs._measurements.DriveInput` at t_k (the drive observers'
+    ``recording(t)`` returns the :class:`~jaxobs.core.measurements.DriveInput` at t_k (the drive observers'
     contract: the voltage applied over [t_k, t_k+1], the current sampled at t_k); its ``ts`` must be the
     observer's (``OnSignal`` checks it; :meth:`from_csv` resamples).  With ``theta_e`` (the encoder's
     electrical angle, rad) the truth is reported: ``theta`` the angle (unwrapped), ``omega`` the electrical

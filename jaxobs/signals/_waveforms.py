@@ -29,10 +29,10 @@ import jax
 import jax.numpy as jnp
 
 from .. import papers
-from .._measurements import DriveInput
-from .._time import SampleTime, cycles, exact_phase, frac_mul, time_value
-from .._trig import sincos
-from .._validate import as_float, check_nonnegative, check_positive, check_real, check_sample_time
+from ..core.measurements import DriveInput
+from ..core.sampletime import SampleTime, cycles, exact_phase, frac_mul, time_value
+from ..core.trig import sincos
+from ..core.validate import as_float, check_nonnegative, check_positive, check_real, check_sample_time
 from ._base import AbstractSignal
 
 
@@ -123,7 +123,7 @@ class GridSignal(AbstractSignal):
     def _cycles(self, t):
         """θ(t)/(2π) without φ₀ and Δφ, in cycles; in float32 (a SampleTime) exact and reduced modulo 1.
 
-        The event term is split as Δf·t − Δf·tₑ so that each product is reduced exactly (jaxobs._time).
+        The event term is split as Δf·t − Δf·tₑ so that each product is reduced exactly (jaxobs.core.sampletime).
         """
         c = cycles(self.freq, t) + self._on(t) * (cycles(self.freq_step, t) - frac_mul(self.freq_step, self.t_event))
         return c - jax.lax.stop_gradient(jnp.round(c))
@@ -163,7 +163,7 @@ class GridSignal(AbstractSignal):
     def _cos_orders(th, orders):
         """{h: cos(h·θ)} for h = 1 and each of ``orders``.
 
-        In float64 from one vectorizable cosine (:func:`jaxobs._trig.sincos`) and the Chebyshev recurrence
+        In float64 from one vectorizable cosine (:func:`jaxobs.core.trig.sincos`) and the Chebyshev recurrence
         cos(hθ) = 2 cos θ cos((h−1)θ) − cos((h−2)θ): XLA's CPU backend calls a scalar library routine for
         each float64 ``cos`` (9–14 ns a value), and a Test C signal needs seven a sample, which made them most
         of a robust FLL job's simulation (72 scenarios, 0.4 s: 38 → 22 ms a forward run, docs/performance.md).
@@ -273,7 +273,7 @@ class EMFSignal(AbstractSignal):
     e_α = A0α + A1 cos(ω1 t + φ1) + Σ_h A_h cos(s_h h ω1 t),
     e_β = A0β + A1 sin(ω1 t + φ1) + Σ_h s_h A_h sin(s_h h ω1 t),
     with s_h = ±1 the sequence of harmonic h.  ``__call__(t)`` returns a
-    :class:`~jaxobs._measurements.DriveInput` with u = e and i = 0, the voltage being the
+    :class:`~jaxobs.core.measurements.DriveInput` with u = e and i = 0, the voltage being the
     *average* of e over the coming period [t, t + ts] — the same convention as
     the drive, which tells the observer at t_k the voltage it applies over
     [t_k, t_{k+1}].  The true rotor flux (∫e with no dc) is A1/ω1 (sin, −cos)
@@ -330,7 +330,7 @@ class EMFSignal(AbstractSignal):
     def _avg_cis_exact(self, c_mid, h, phi):
         # float32, t a SampleTime: the same average written at the period's middle,
         # (sin a1 − sin a0, cos a0 − cos a1) = 2 sin(w ts/2)·(cos a_m, sin a_m), a_m = w (t + ts/2) + phi,
-        # with a_m from the exact cycles c_mid of ω1 (t + ts/2) (jaxobs._time), h·c_mid reduced modulo 1
+        # with a_m from the exact cycles c_mid of ω1 (t + ts/2) (jaxobs.core.sampletime), h·c_mid reduced modulo 1
         c = h * c_mid
         a_m = 2 * jnp.pi * (c - jax.lax.stop_gradient(jnp.round(c))) + phi
         x = 0.5 * h * self.omega1 * self.ts
@@ -356,7 +356,7 @@ class EMFSignal(AbstractSignal):
 
     def flux_angle(self, t):
         """The true rotor-flux angle ω1 t + φ1 − π/2 (ψ lags e by 90°); in float32 from a
-        :class:`SampleTime`, reduced modulo 2π and exact (jaxobs._time).
+        :class:`SampleTime`, reduced modulo 2π and exact (jaxobs.core.sampletime).
 
         Args:
             t: The time, s, or a :class:`SampleTime`.

@@ -14,7 +14,7 @@ from jaxobs.drive import read_drive
 from jaxobs.observers import (
     AbstractDriveObserver,
 )
-from jaxobs.registry import REGISTRY
+from jaxobs.studies.registry import REGISTRY
 
 from ..job import parse_job
 from ..outdir import OutDir

@@ -13,7 +13,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxobs import DriveInput
-from jaxobs.progress import Progress
+from jaxobs.runtime.progress import Progress
 
 from ..outdir import atomic_path, atomic_write_text
 from .codegen import CStep, gain_macro, generate, is_angle, leaf_name, reference, rule_doc, statics, write_c
@@ -69,7 +69,7 @@ def export_observer(
             :func:`drive_recording`'s ``machine``, ``rpm``, ``drive`` and ``label`` (a drive file's).
         notes: lines recorded in the header and coefficients.json (e.g. defaults used).
         progress: its three stages (C generated, the test record, the golden vectors), each named as
-            it runs (:mod:`jaxobs.progress`: ``True`` a tqdm bar on stderr, or a callable).
+            it runs (:mod:`jaxobs.runtime.progress`: ``True`` a tqdm bar on stderr, or a callable).
     """
     notes = list(notes)
     bar = Progress(progress, 3, "export", unit="stage")

@@ -9,12 +9,12 @@ import re
 from pathlib import Path
 
 from jaxobs import AB3, RK4, Euler, Tustin
-from jaxobs.registry import REGISTRY, canonical_key
+from jaxobs.studies.registry import REGISTRY, canonical_key
 
 from ..job import COMPONENTS
 from ..results import load_result
 
-# the closed forms `export --design` names (the FLLs' aliases in jaxobs.registry): alias -> class (its rule, the
+# the closed forms `export --design` names (the FLLs' aliases in jaxobs.studies.registry): alias -> class (its rule, the
 # source line, is its ClosedForm.rule, evaluated when a design is exported)
 DESIGNS = {a: e.cls for e in REGISTRY.values() if e.signal == "grid" for a in e.aliases}
 

@@ -1,7 +1,7 @@
-"""The tunable components: a view of :data:`jaxobs.registry.REGISTRY` (its entries a job may name).
+"""The tunable components: a view of :data:`jaxobs.studies.registry.REGISTRY` (its entries a job may name).
 
 A component's constructor is its class, its free gains the class's gain fields, its closed form the class's
-``closed_form_design`` (its gains: :func:`jaxobs.registry.closed_form_gains`; its source line:
+``closed_form_design`` (its gains: :func:`jaxobs.studies.registry.closed_form_gains`; its source line:
 ``ClosedForm.source``); the signals, machines and a job's initial values are the registry's.
 """
 
@@ -10,7 +10,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from jaxobs import papers
-from jaxobs.registry import REGISTRY, Registered, closed_form_gains
+from jaxobs.studies.registry import REGISTRY, Registered, closed_form_gains
 
 W_N = papers.FLL_OMEGA_N
 
@@ -20,7 +20,7 @@ class ComponentInfo:
     """A tunable component: its registry entry, read as a job reads it.
 
     Attributes:
-        entry: The :class:`jaxobs.registry.Registered` entry.
+        entry: The :class:`jaxobs.studies.registry.Registered` entry.
     """
 
     entry: Registered

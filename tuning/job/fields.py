@@ -127,9 +127,9 @@ def axes_field(tab: dict, family, where: str, limits: dict | None = None) -> dic
 
     Args:
         tab: Axis name -> list of numbers.
-        family: A scenario family (:mod:`jaxobs.families`).
+        family: A scenario family (:mod:`jaxobs.scenarios.families`).
         where: The table's name in errors.
-        limits: name -> (low, high), narrowing the ranges (:meth:`~jaxobs.families.AbstractFamily.limits`).
+        limits: name -> (low, high), narrowing the ranges (:meth:`~jaxobs.scenarios.families.AbstractFamily.limits`).
 
     Returns:
         name -> the checked values.

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from jaxobs import metrics as M
-from jaxobs.provenance import cf_dataset, cf_labels
+from jaxobs.io.provenance import cf_dataset, cf_labels
 
 from ..objective import TERM_METRICS
 from ..outdir import atomic_write_text
@@ -65,8 +65,8 @@ def scores_dataset(obj, names, combos, spec: ScenarioSpec, per: dict, title: str
     """Per-scenario metrics of each design as an xarray Dataset: the grid's axes as dims (a full grid),
     else one ``scenario`` dim with the axes as coordinates (sampled scenarios).  Every variable carries a
     ``long_name`` and every numeric one CF ``units`` (the metrics': :data:`jaxobs_tuning.objective.TERM_METRICS`;
-    flags ``1``); the CF-1.8 global attributes, ``title`` among them (:func:`jaxobs.provenance.cf_dataset`); a
-    numeric ``design`` index and its label ``design_label`` (:func:`jaxobs.provenance.cf_labels`)."""
+    flags ``1``); the CF-1.8 global attributes, ``title`` among them (:func:`jaxobs.io.provenance.cf_dataset`); a
+    numeric ``design`` index and its label ``design_label`` (:func:`jaxobs.io.provenance.cf_labels`)."""
     import xarray as xr
 
     designs = list(per)
@@ -115,7 +115,7 @@ def scores_dataset(obj, names, combos, spec: ScenarioSpec, per: dict, title: str
     if not grid:
         ds["scenario"].attrs.update(units="1", long_name=f"scenario: one of {len(combos)} random points of the axes")
     ds.attrs["source"] = "jaxobs tune (jaxobs_tuning.run_job)"
-    # as the file holds it: a numeric design index, the names its label (jaxobs.provenance.by_label reads it back)
+    # as the file holds it: a numeric design index, the names its label (jaxobs.io.provenance.by_label reads it back)
     return cf_labels(cf_dataset(ds, title))
 
 

@@ -11,9 +11,9 @@ import jax
 
 import jaxobs
 from jaxobs.drive import bench_machine, load_drive
-from jaxobs.families import FAMILIES, RecordedSignals
+from jaxobs.io.provenance import sha256
 from jaxobs.observers import AbstractFluxObserver
-from jaxobs.provenance import sha256
+from jaxobs.scenarios.families import FAMILIES, RecordedSignals
 from jaxobs.signals import RecordingLayout, read_recorded, stack
 
 from ..objective import DRIVE_METRICS
@@ -53,7 +53,7 @@ def parse_recording_scenarios(tab, where, family, t_event, horizon, steady, seed
     Args:
         tab: The scenario table holding ``recording``.
         where: The scenario table's name in errors.
-        family: The family the recordings stand for (a class of :mod:`jaxobs.families`).
+        family: The family the recordings stand for (a class of :mod:`jaxobs.scenarios.families`).
         t_event: The event's time, s.
         horizon: The simulated time, s.
         steady: The steady window's start, s.
@@ -212,7 +212,8 @@ def load_recordings(spec: RecordingSpec, family: RecordedSignals, horizon: float
 
     Args:
         spec: The :class:`RecordingSpec`.
-        family: The :class:`jaxobs.families.RecordedSignals` they are (read by :func:`jaxobs.signals.read_recorded`).
+        family: The :class:`jaxobs.scenarios.families.RecordedSignals` they are (read by
+            :func:`jaxobs.signals.read_recorded`).
         horizon: The simulated time, s (the windows' length).
 
     Returns:

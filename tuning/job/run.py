@@ -10,8 +10,8 @@ from pathlib import Path
 
 import numpy as np
 
-from jaxobs.progress import Progress
-from jaxobs.provenance import versions
+from jaxobs.io.provenance import versions
+from jaxobs.runtime.progress import Progress
 
 from ..objective import MetricContext, Objective
 from ..outdir import atomic_path, atomic_write_text

@@ -1,12 +1,12 @@
-"""A job's scenarios: its family (:mod:`jaxobs.families`, named by ``scenarios.signal``) and the batch it builds
-from grid points or samples of its axes."""
+"""A job's scenarios: its family (:mod:`jaxobs.scenarios.families`, named by ``scenarios.signal``) and the batch it
+builds from grid points or samples of its axes."""
 
 from __future__ import annotations
 
 import math
 
-from jaxobs.families import AbstractFamily, DriveSetting
 from jaxobs.scenarios import Grid, Random
+from jaxobs.scenarios.families import AbstractFamily, DriveSetting
 
 from .components import W_N
 from .recordings import load_recordings
@@ -39,8 +39,9 @@ def job_family(spec: ScenarioSpec, values: dict, drive=None, drive_spec: DriveSp
             ``ipmsm002``).
 
     Returns:
-        Its recordings (:meth:`~jaxobs.families.AbstractFamily.recorded`), or the family ``spec.signal`` names,
-        built by its own :meth:`~jaxobs.families.AbstractFamily.from_toml` from the job's event and seed, the
+        Its recordings (:meth:`~jaxobs.scenarios.families.AbstractFamily.recorded`), or the family ``spec.signal``
+        names,
+        built by its own :meth:`~jaxobs.scenarios.families.AbstractFamily.from_toml` from the job's event and seed, the
         component's nominal frequency and, where there is one, the drive.
     """
     if spec.recording is not None:

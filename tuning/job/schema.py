@@ -6,12 +6,12 @@ import math
 import os
 from pathlib import Path
 
-from jaxobs.families import FAMILIES, GridSignals
+from jaxobs.io.provenance import sha256
 from jaxobs.metrics import canonical
 from jaxobs.observers import AbstractDriveObserver, AbstractLESO, gain_fields
 from jaxobs.observers.speed import SPEED_KINDS
-from jaxobs.provenance import sha256
-from jaxobs.registry import REGISTRY, canonical_key
+from jaxobs.scenarios.families import FAMILIES, GridSignals
+from jaxobs.studies.registry import REGISTRY, canonical_key
 
 from .. import strategies
 from ..objective import DRIVE_METRICS, TERM_METRICS, Term
@@ -34,12 +34,12 @@ from .spec import Job, ScenarioSpec
 from .toml import read_toml
 from .verify import parse_envelope
 
-# the scenario axes and their ranges: each family's (jaxobs.families); a job's signal names its family
+# the scenario axes and their ranges: each family's (jaxobs.scenarios.families); a job's signal names its family
 AXIS_RANGES = {name: family.axes for name, family in FAMILIES.items()}
 
 
 def freq_step_range(freq_n: float, ts: float) -> tuple[float, float]:
-    """The allowed ``freq_step`` on a grid (:meth:`jaxobs.families.GridSignals.limits`).
+    """The allowed ``freq_step`` on a grid (:meth:`jaxobs.scenarios.families.GridSignals.limits`).
 
     Args:
         freq_n: The grid's nominal frequency, Hz.

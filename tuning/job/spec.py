@@ -5,7 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from jaxobs.drive import shipped_drive
-from jaxobs.families import FAMILIES
+from jaxobs.scenarios.families import FAMILIES
 
 from ..aggregations import AbstractAggregation
 from ..solvers import AbstractSolver
@@ -16,7 +16,7 @@ class ScenarioSpec:
     """A job's scenario set (``[scenarios]`` or ``[holdout]``).
 
     Attributes:
-        signal: The scenario family's name (:data:`jaxobs.families.FAMILIES`).
+        signal: The scenario family's name (:data:`jaxobs.scenarios.families.FAMILIES`).
         t_event: The event's time, s.
         horizon: The simulated time, s.
         steady_from: The steady window's start, s.
@@ -37,7 +37,7 @@ class ScenarioSpec:
 
     @property
     def family(self) -> type:
-        """The scenario family ``signal`` names (:data:`jaxobs.families.FAMILIES`: the one place the name is
+        """The scenario family ``signal`` names (:data:`jaxobs.scenarios.families.FAMILIES`: the one place the name is
         read); a recording stands for this family's signals."""
         return FAMILIES[self.signal]
 

@@ -1,19 +1,19 @@
 """TOML files read safely: size, encoding and nesting checked before the parser sees them
-(:mod:`jaxobs.safetoml`), each refusal a :class:`JobError` naming the field."""
+(:mod:`jaxobs.io.safetoml`), each refusal a :class:`JobError` naming the field."""
 
 from __future__ import annotations
 
-from jaxobs import safetoml
-from jaxobs.safetoml import MAX_DEPTH as MAX_DEPTH
-from jaxobs.safetoml import MAX_DIGITS as MAX_DIGITS
-from jaxobs.safetoml import MAX_FILE_BYTES as MAX_FILE_BYTES
-from jaxobs.safetoml import TomlFieldError
+from jaxobs.io import safetoml
+from jaxobs.io.safetoml import MAX_DEPTH as MAX_DEPTH
+from jaxobs.io.safetoml import MAX_DIGITS as MAX_DIGITS
+from jaxobs.io.safetoml import MAX_FILE_BYTES as MAX_FILE_BYTES
+from jaxobs.io.safetoml import TomlFieldError
 
 from .fields import JobError
 
 
 def check_nesting(text: str, what: str = "job file") -> None:
-    """:func:`jaxobs.safetoml.check_nesting`, refusing with a :class:`JobError`."""
+    """:func:`jaxobs.io.safetoml.check_nesting`, refusing with a :class:`JobError`."""
     try:
         safetoml.check_nesting(text, what)
     except TomlFieldError as e:
@@ -21,7 +21,7 @@ def check_nesting(text: str, what: str = "job file") -> None:
 
 
 def check_numbers(text: str, what: str = "job file") -> None:
-    """:func:`jaxobs.safetoml.check_numbers`, refusing with a :class:`JobError`."""
+    """:func:`jaxobs.io.safetoml.check_numbers`, refusing with a :class:`JobError`."""
     try:
         safetoml.check_numbers(text, what)
     except TomlFieldError as e:
@@ -29,7 +29,7 @@ def check_numbers(text: str, what: str = "job file") -> None:
 
 
 def read_toml(path, what: str = "job file") -> tuple[dict, bytes]:
-    """A TOML file's table and bytes (:func:`jaxobs.safetoml.read_toml`), or a :class:`JobError` of one line:
+    """A TOML file's table and bytes (:func:`jaxobs.io.safetoml.read_toml`), or a :class:`JobError` of one line:
     unreadable, larger than :data:`MAX_FILE_BYTES`, not UTF-8, nested deeper than :data:`MAX_DEPTH`, not TOML."""
     try:
         return safetoml.read_toml(path, what)

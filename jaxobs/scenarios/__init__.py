@@ -1,13 +1,13 @@
 """Scenario samplers and builders: which points of the named axes a study runs, and the batched signals.
 
-One place, below both the studies (:mod:`jaxobs.study`, :mod:`jaxobs.drive_study`) and the tuning jobs
+One place, below both the studies (:mod:`jaxobs.studies.study`, :mod:`jaxobs.studies.drive`) and the tuning jobs
 (``tuning/``).  A *sampler* picks the points of the axes and says how the results are laid out
 (:class:`Grid`: the Cartesian product, one dim per axis; :class:`Random`, :class:`Sobol`, :class:`LHS`:
 ``n`` points inside the axes' [min, max], one ``sample`` dim with the axes as coordinates along it;
 :class:`Given`: a batch given whole, one ``scenario`` dim; :class:`Recordings`: recorded signals, one
 ``recording`` dim); a *builder* turns the points into a
 batched scenario PyTree (:func:`grid_signals` here, :func:`jaxobs.drive.scenario_batch` for the drive), and
-:func:`jaxobs.runner.run_scenarios` runs every design on it.
+:func:`jaxobs.runtime.runner.run_scenarios` runs every design on it.
 
 Grid signals (the FLL family): single-phase :class:`~jaxobs.GridSignal` s with an event
 at ``t_event`` plus optional white noise.  Axes (:data:`GRID_SIGNAL_AXES`):
@@ -34,10 +34,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._time import SampleTime, time_value
-from .papers import TEST_C_HARMONICS
-from .quantities import Axis
-from .signals import AbstractSignal, EMFSignal, GridSignal, stack
+from ..core.quantities import Axis
+from ..core.sampletime import SampleTime, time_value
+from ..papers import TEST_C_HARMONICS
+from ..signals import AbstractSignal, EMFSignal, GridSignal, stack
 
 __all__ = [
     "EMF_SIGNAL_AXES",
@@ -124,7 +124,7 @@ def grid_signals(names, combos, t_event: float, freq: float, *, seed: int = 0, f
 
     Vectorized — the leaves are set as arrays, no constructor runs per scenario — and
     checked as :class:`GridSignal` would check one scenario.  Shared by studies
-    (:func:`jaxobs.study.run_study`) and by tuning jobs on grid signals.
+    (:func:`jaxobs.studies.study.run_study`) and by tuning jobs on grid signals.
 
     Args:
         names: The axes, of :data:`GRID_SIGNAL_AXES`.
@@ -285,7 +285,7 @@ class AbstractSampler:
 
     def array(self) -> np.ndarray:
         """The points as one (n, axes) float array: 8 bytes a value where :meth:`points` holds a tuple of
-        Python floats (about 180 bytes a scenario of four axes); what :func:`jaxobs.runner.run_scenarios`
+        Python floats (about 180 bytes a scenario of four axes); what :func:`jaxobs.runtime.runner.run_scenarios`
         keeps while a study runs."""
         pts = self.points()
         return np.asarray(pts, dtype=float).reshape(len(pts), len(self.names))
@@ -472,7 +472,7 @@ class Given(AbstractSampler):
 
     names: ClassVar[tuple] = ()
     sampling: ClassVar[str] = "given"
-    # the dim's attributes, where the family has no axis of its name (jaxobs.study.study)
+    # the dim's attributes, where the family has no axis of its name (jaxobs.studies.study.study)
     dim_attrs: ClassVar[dict] = {"units": "1", "long_name": "scenario given whole (jaxobs.scenarios.Given)"}
 
     def __init__(self, batch, labels=None, dim: str = "scenario"):
@@ -525,8 +525,8 @@ SAMPLINGS: dict[str, type] = {"grid": Grid, "random": Random, "sobol": Sobol, "l
 
 
 def sampler_of(axes, *, sampling: str | None = None, sample: int = 0, seed: int = 0) -> AbstractSampler:
-    """The sampler of a study: how both presets (:func:`jaxobs.study.run_study`,
-    :func:`jaxobs.drive_study.run_drive_study`) take their scenarios.
+    """The sampler of a study: how both presets (:func:`jaxobs.studies.study.run_study`,
+    :func:`jaxobs.studies.drive.run_drive_study`) take their scenarios.
 
     Args:
         axes: A sampler, taken as it is; or a dict of axis values: a :class:`Grid`, or ``sample`` points drawn

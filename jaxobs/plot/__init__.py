@@ -14,16 +14,16 @@ from pathlib import Path
 
 import numpy as np
 
-from . import metrics, papers
+from .. import metrics, papers
+from ..core.quantities import text_unit
+from ..metrics import METRICS as _METRICS
+from ._bode import bode_figure as bode_figure
+from ._bode import paper_bode_figures as paper_bode_figures
+from ._bode import resonance_grid as resonance_grid
 from ._figure import _finish, _mark_event, _save, _subplots
-from ._plot_bode import bode_figure as bode_figure
-from ._plot_bode import paper_bode_figures as paper_bode_figures
-from ._plot_bode import resonance_grid as resonance_grid
-from ._plot_paper import Panel as Panel
-from ._plot_paper import Series as Series
-from ._plot_paper import paper_figure as paper_figure
-from .metrics import METRICS as _METRICS
-from .quantities import text_unit
+from ._paper import Panel as Panel
+from ._paper import Series as Series
+from ._paper import paper_figure as paper_figure
 
 
 def fll_event_text(test: str) -> str:
@@ -197,7 +197,7 @@ _AXIS_UNITS = {
 
 
 def _axis_words(ds, name: str, short: bool = False) -> str:
-    """An axis in words: its ``long_name`` (the Axis record's, :mod:`jaxobs.quantities`), or its name where the
+    """An axis in words: its ``long_name`` (the Axis record's, :mod:`jaxobs.core.quantities`), or its name where the
     Dataset has none; ``short``: without the closing parenthesis (a title lists several)."""
     words = str(ds[name].attrs.get("long_name") or name)
     return re.sub(r"\s*\([^()]*\)$", "", words) if short else words

@@ -6,7 +6,7 @@
 The folder holds ``meta.json`` (the study's fingerprint, the number of scenarios, the chunk size, the
 device count and the designs) and one HDF5 file per finished chunk, ``<design index>.<chunk index>.h5``
 (one dataset per metric, that chunk's real rows only).  Each chunk file is written in a temp folder beside
-it, fsync'ed and renamed (:mod:`jaxobs.files`): a chunk file that exists is complete, and a kill mid-write
+it, fsync'ed and renamed (:mod:`jaxobs.io.files`): a chunk file that exists is complete, and a kill mid-write
 leaves only a temp entry, which the next open removes.
 
 Why one file per chunk and not one growing NetCDF4/HDF5 file: HDF5 updates its metadata in place and has
@@ -32,7 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .files import atomic_path, atomic_write_text, remove_temps
+from ..io.files import atomic_path, atomic_write_text, remove_temps
 
 __all__ = ["AbstractChunkSink", "ChunkStore"]
 
@@ -45,7 +45,7 @@ def _partial(name: str) -> bool:
 
 
 class AbstractChunkSink(abc.ABC):
-    """Where the study runner (:func:`jaxobs.runner.run_scenarios`) sends each chunk's values instead of memory.
+    """Where the study runner (:func:`jaxobs.runtime.runner.run_scenarios`) sends each chunk's values instead of memory.
 
     The runner calls :meth:`start` once, then per design and chunk :meth:`done` (True: skip it) or :meth:`put`.
     :class:`ChunkStore` (a folder of chunk files) and ``jaxobs_tuning.distributed.SharedChunks`` (one process's

@@ -1,6 +1,6 @@
 """Scenario families: what a study or a tuning job runs a design on, and the one place a design is bound.
 
-A family (:class:`AbstractFamily`) declares its axes (one :class:`~jaxobs.quantities.Axis` each), builds
+A family (:class:`AbstractFamily`) declares its axes (one :class:`~jaxobs.core.quantities.Axis` each), builds
 a batch of scenarios from named points (:meth:`~AbstractFamily.build`) and makes the system one design
 runs on one scenario (:meth:`~AbstractFamily.system`): an observer on a signal, or an observer closing
 the drive's loop, bound to the scenario's assumed machine.
@@ -37,12 +37,12 @@ from typing import ClassVar, NamedTuple
 
 import equinox as eqx
 
-from ._simulate import OnSignal
-from .drive import DRIVE_AXES as _ALL_DRIVE_AXES
-from .drive import RPM, ClosedLoop, Drive, PMSMParams, Profile, Scenario, Sensors, scenario_batch
-from .observers import AbstractDriveObserver
-from .quantities import Axis
-from .scenarios import EMF_SIGNAL_AXES, GRID_SIGNAL_AXES, emf_signals, grid_signals
+from ..core.quantities import Axis
+from ..drive import DRIVE_AXES as _ALL_DRIVE_AXES
+from ..drive import RPM, ClosedLoop, Drive, PMSMParams, Profile, Scenario, Sensors, scenario_batch
+from ..observers import AbstractDriveObserver
+from ..runtime.simulation import OnSignal
+from . import EMF_SIGNAL_AXES, GRID_SIGNAL_AXES, emf_signals, grid_signals
 
 __all__ = [
     "AbstractFamily",
@@ -152,7 +152,7 @@ class AbstractFamily(eqx.Module):
 
     Attributes:
         signal: The name a job file gives it, ``scenarios.signal`` (a class attribute).
-        axes: name -> :class:`~jaxobs.quantities.Axis` (a class attribute).
+        axes: name -> :class:`~jaxobs.core.quantities.Axis` (a class attribute).
         closed_loop: Whether the design closes the drive's loop: the drive's metrics apply (a class attribute).
         bytes_per_step: An estimate of the memory a gradient keeps per scenario and step (a class attribute).
         study_bytes_per_step: The same for a study's run (exact metrics, no gradient: an estimate for the study
@@ -539,7 +539,7 @@ class RecordedSignals(AbstractFamily):
     study_bytes_per_step: ClassVar[int] = 256
     drive_observer: ClassVar[bool] = False  # the instance's binds says which observer runs on it
     options: ClassVar[tuple] = ()
-    # the one study on recordings is the FLL study's (jaxobs.study.run_study on a Recordings sampler)
+    # the one study on recordings is the FLL study's (jaxobs.studies.study.run_study on a Recordings sampler)
     metrics: ClassVar[tuple[str, ...]] = GridSignals.metrics
     flags: ClassVar[tuple[str, ...]] = GridSignals.flags
 

@@ -3,7 +3,7 @@
 The loop is a ``jax.custom_vjp`` whose forward pass carries, beside the state, its derivative with
 respect to every *perturbed* input scalar (``symbolic_zeros``: a tuning job's few gains; the signal
 and scenario are not perturbed), so the backward pass is one small product and nothing is stored per
-step (jaxobs._loop, point 4, gives the measurements).
+step (jaxobs.runtime._loop, point 4, gives the measurements).
 
 Forward and backward share nothing mutable: what the backward pass needs to know about the forward
 one (which inputs were perturbed, and whether the tangents were pushed forward or a reverse-mode VJP

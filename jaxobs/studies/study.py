@@ -1,10 +1,10 @@
 """Studies: designs × a sampler's scenarios of one family → a labelled xarray Dataset.
 
 :func:`study` is the one study: every design on every scenario a sampler (:mod:`jaxobs.scenarios`) picks
-from a family (:mod:`jaxobs.families`), run by :func:`jaxobs.runner.run_scenarios`, scored by
+from a family (:mod:`jaxobs.scenarios.families`), run by :func:`jaxobs.runtime.runner.run_scenarios`, scored by
 :class:`~jaxobs.metrics.Metric` s of the one metric table (:data:`jaxobs.metrics.METRICS`: their exact forms,
 the flags among them: boolean metrics), and laid out with the sampler's dims, CF units and the designs' gains.
-The FLL study (:func:`run_study`, below) and the drive study (:func:`jaxobs.drive_study.run_drive_study`) are
+The FLL study (:func:`run_study`, below) and the drive study (:func:`jaxobs.studies.drive.run_drive_study`) are
 presets of it.
 
 The FLL study:
@@ -37,15 +37,15 @@ share as one ``vmap`` (:func:`jaxobs.map_batch`, no communication).  One device 
 Several host devices in one process (:func:`jaxobs.use_host_devices`) use every core.  Several
 processes (:func:`jaxobs.init_distributed` in each, then the same ``run_study`` call in each): every
 process builds every scenario (the grid, or the draws from ``seed``: the same everywhere), places its own
-devices' rows of each chunk (:func:`jaxobs.sharding.global_batch`), and receives every scenario's
-metrics (an all-gather, :func:`jaxobs.sharding.gather_batch`), so every process returns the whole
+devices' rows of each chunk (:func:`jaxobs.runtime.sharding.global_batch`), and receives every scenario's
+metrics (an all-gather, :func:`jaxobs.runtime.sharding.gather_batch`), so every process returns the whole
 Dataset.  The numbers equal a one-device run's to rounding: a device's share is a smaller ``vmap``,
 which XLA may vectorize differently in the last bit (tests/test_distributed.py: 2 processes).
 
 The scenarios come from a sampler (:mod:`jaxobs.scenarios`): a dict of axes is a ``Grid`` (or, with
 ``sample``, a ``Random`` sample); ``Sobol``, ``LHS`` and ``Recordings`` (recorded signals with their truth
 columns: dims ``("design", "recording")``) are passed as ``axes`` themselves.  The loop over chunks, devices
-and processes is the one study runner, :func:`jaxobs.runner.run_scenarios`, which drive studies share.
+and processes is the one study runner, :func:`jaxobs.runtime.runner.run_scenarios`, which drive studies share.
 
 Sampled scenarios are single-phase grid signals (the FLL family) built by
 :func:`jaxobs.scenarios.grid_signals`: axes are ``freq_step`` (Hz),
@@ -55,7 +55,7 @@ standard deviation, p.u., with a per-scenario seed).
 Metrics (exact versions): ``settling_freq`` (s after the event for the
 one-period average of f̂ to stay within ``band_hz`` of the final frequency), ``ripple_freq`` (steady p-p, Hz),
 ``rms_phase_steady`` (steady rms phase error, rad), ``itae_freq`` and ``iae_phase`` (the family's default
-metrics, :attr:`jaxobs.families.GridSignals.metrics`).
+metrics, :attr:`jaxobs.scenarios.families.GridSignals.metrics`).
 """
 
 from __future__ import annotations
@@ -68,14 +68,14 @@ from dataclasses import replace
 import jax.numpy as jnp
 import numpy as np
 
-from . import metrics as M
-from ._simulate import AbstractSave, SaveAll
-from .families import AbstractFamily, GridSignals
-from .files import atomic_path
-from .observers import gain_fields, gain_table
-from .provenance import cf_dataset, cf_labels, provenance
-from .runner import run_scenarios
-from .scenarios import GRID_SIGNAL_AXES, LHS, AbstractSampler, Grid, Random, Recordings, Sobol, sampler_of
+from .. import metrics as M
+from ..io.files import atomic_path
+from ..io.provenance import cf_dataset, cf_labels, provenance
+from ..observers import gain_fields, gain_table
+from ..runtime.runner import run_scenarios
+from ..runtime.simulation import AbstractSave, SaveAll
+from ..scenarios import GRID_SIGNAL_AXES, LHS, AbstractSampler, Grid, Random, Recordings, Sobol, sampler_of
+from ..scenarios.families import AbstractFamily, GridSignals
 
 __all__ = [
     "STUDY_AXES",
@@ -118,7 +118,7 @@ def study(
 
     Args:
         designs: name -> design (an observer), each run on ``scenarios.system(design, scenario)``.
-        scenarios: the family (:mod:`jaxobs.families`): its axes label the coordinates, it builds the batches.
+        scenarios: the family (:mod:`jaxobs.scenarios.families`): its axes label the coordinates, it builds the batches.
         sampler: which points of the axes run, and their layout (:mod:`jaxobs.scenarios`).
         metrics: the metric table's entries (:data:`jaxobs.metrics.METRICS`; their ``exact`` forms), one variable
             each with its SI units.
@@ -133,13 +133,13 @@ def study(
             ``n_period``); None: ``ctx`` as given.
         gains: the designs' gain variables (``gain_<name>`` -> (dims, values, attrs)), stored as given.
         attrs: the Dataset's attributes (the options, the provenance).
-        save, chunk_size, mesh, progress, store, label: as :func:`jaxobs.runner.run_scenarios` takes them
-            (``store``: a :class:`jaxobs.chunkstore.ChunkStore`, the Dataset laid out from it).
+        save, chunk_size, mesh, progress, store, label: as :func:`jaxobs.runtime.runner.run_scenarios` takes them
+            (``store``: a :class:`jaxobs.runtime.chunkstore.ChunkStore`, the Dataset laid out from it).
 
     Returns:
         The Dataset: dims ``("design", *sampler dims)``, a variable per metric and flag, ``<flag>_count`` per
         design, the quantiles, the gains; every variable and numeric coordinate with CF ``units`` and ``long_name``,
-        the CF-1.8 global attributes (:func:`jaxobs.provenance.cf_dataset`).
+        the CF-1.8 global attributes (:func:`jaxobs.io.provenance.cf_dataset`).
     """
     import xarray as xr
 
@@ -259,8 +259,8 @@ def _axis_meta(scenarios: AbstractFamily, sampler: AbstractSampler, name: str) -
 # the FLL study: grid signals (or recordings) with an event, the FLL family's metrics
 # --------------------------------------------------------------------------
 
-STUDY_AXES = GRID_SIGNAL_AXES  # the scenarios a study runs: jaxobs.families.GridSignals
-# the FLL family's default metrics and flags (jaxobs.families.GridSignals declares them)
+STUDY_AXES = GRID_SIGNAL_AXES  # the scenarios a study runs: jaxobs.scenarios.families.GridSignals
+# the FLL family's default metrics and flags (jaxobs.scenarios.families.GridSignals declares them)
 STUDY_METRICS = GridSignals.metrics
 
 
@@ -282,7 +282,8 @@ def run_study(
     mesh=None,
     store=None,
 ):
-    """Simulate every FLL design on every scenario: :func:`study` on :class:`~jaxobs.families.GridSignals` (or a
+    """Simulate every FLL design on every scenario: :func:`study` on :class:`~jaxobs.scenarios.families.GridSignals`
+    (or a
     :class:`~jaxobs.scenarios.Recordings` sampler's recorded voltages) with the FLL metrics (see module doc).
 
     Args:
@@ -290,7 +291,7 @@ def run_study(
         axes: a dict of axis values, or a sampler itself (``Grid``, ``Random``, ``Sobol``, ``LHS``, or
             ``Recordings``: recorded signals with truth columns, dims ``(design, recording)``), as
             :func:`jaxobs.scenarios.sampler_of` takes them (with ``sampling``, ``sample`` and ``seed``).
-        family: the grid signals (:class:`~jaxobs.families.GridSignals`: their event, nominal frequency and
+        family: the grid signals (:class:`~jaxobs.scenarios.families.GridSignals`: their event, nominal frequency and
             seed); None: built from ``t_event`` (default 0.1 s), ``seed`` (default 0) and the first design's
             nominal frequency.
         t_event: the event's time, s (with ``family``: its own).
@@ -305,7 +306,7 @@ def run_study(
         mesh: the devices each chunk is split over, a one-axis ``"batch"`` mesh (default
             ``jaxobs.batch_mesh()``, every device of every process, as every preset;
             ``jaxobs.batch_mesh(jax.devices()[:1])`` keeps to one device).
-        store: a :class:`jaxobs.chunkstore.ChunkStore`: each chunk's values go to disk as it finishes, chunks
+        store: a :class:`jaxobs.runtime.chunkstore.ChunkStore`: each chunk's values go to disk as it finishes, chunks
             already there (an interrupted run's, ``resume=True``) are not run again, and the Dataset is laid
             out from the store: the same Dataset as without one.
 
@@ -320,7 +321,9 @@ def run_study(
         raise ValueError("run_study needs at least one design")
     if family is not None:
         if not isinstance(family, GridSignals):
-            raise ValueError(f"run_study: family must be GridSignals (jaxobs.families), got {type(family).__name__}")
+            raise ValueError(
+                f"run_study: family must be GridSignals (jaxobs.scenarios.families), got {type(family).__name__}"
+            )
         if t_event is not None or seed is not None:
             raise ValueError("run_study: give family or t_event and seed, not both (the family holds its own)")
         t_event, seed = family.t_event, family.seed
@@ -346,7 +349,7 @@ def run_study(
         return max(1, int(round(1.0 / (f * obs.ts))))
 
     if isinstance(sampler, (Grid, Random, Sobol, LHS)):
-        # the signals are built a chunk at a time (jaxobs.runner): a bad axis value is refused here, before
+        # the signals are built a chunk at a time (jaxobs.runtime.runner): a bad axis value is refused here, before
         # anything runs, by building the two scenarios of every axis's least and greatest values (each of
         # grid_signals's checks is a bound on one axis, so these two pass only if every point inside does)
         ends = [tuple(float(f(sampler.axes[k])) for k in sampler.names) for f in (np.min, np.max)]
@@ -363,7 +366,7 @@ def run_study(
         sampling=sampler.sampling,
         **({} if recordings else {"seed": sampler.seed if isinstance(sampler, (Random, Sobol, LHS)) else seed}),
         **provenance(
-            "jaxobs.study.run_study", digests={"recordings": " ".join(sampler.sha256)} if recordings else None
+            "jaxobs.studies.study.run_study", digests={"recordings": " ".join(sampler.sha256)} if recordings else None
         ),
     )
     t0 = time.time()
@@ -424,13 +427,13 @@ def worst_cases(ds, metric: str, k: int = 5):
 
 def write_study(ds, path, store=None) -> None:
     """The one study writer: ``ds`` as NetCDF4 at ``path`` (h5netcdf), its name coordinates as numeric indexes
-    with label variables (:func:`jaxobs.provenance.cf_labels`), written beside it and renamed over it
-    (:func:`jaxobs.files.atomic_path`), so a ``path`` that exists is a whole study.
+    with label variables (:func:`jaxobs.io.provenance.cf_labels`), written beside it and renamed over it
+    (:func:`jaxobs.io.files.atomic_path`), so a ``path`` that exists is a whole study.
 
     Args:
         ds: A study's Dataset (:func:`study`, a preset's).
         path: The file (``study.nc``).
-        store: The :class:`jaxobs.chunkstore.ChunkStore` the study ran into, or None: retired before the rename
+        store: The :class:`jaxobs.runtime.chunkstore.ChunkStore` the study ran into, or None: retired before the rename
             (never both on disk: a ``--resume`` would be refused, its chunks left) and removed after it
             (the results are in ``path``: nothing is left to resume).
     """

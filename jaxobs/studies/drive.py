@@ -1,7 +1,8 @@
 """Robustness studies of sensorless drives: drive observers × a grid (or a Sobol/LHS sample) of scenarios.
 
-A preset of :func:`jaxobs.study.study` on :class:`jaxobs.families.DriveScenarios` with the drive family's
-default metrics and flags (:attr:`~jaxobs.families.DriveScenarios.metrics`, ``.flags``: entries of the one
+A preset of :func:`jaxobs.studies.study.study` on :class:`jaxobs.scenarios.families.DriveScenarios` with the drive
+family's default metrics and flags (:attr:`~jaxobs.scenarios.families.DriveScenarios.metrics`, ``.flags``: entries of
+the one
 metric table, :data:`jaxobs.metrics.METRICS`, in SI units).
 
     ds = run_drive_study({"C-LESO": cleso, "FA-LESO": faleso}, {"speed_rpm": [300, 600], "dRs": [-0.3, 0.3]},
@@ -53,12 +54,12 @@ from __future__ import annotations
 
 import math
 
-from . import metrics as M
-from .drive import Drive, PMSMParams
-from .families import DRIVE_STUDY_AXES, DriveScenarios, bind_observer, drive_scenarios
-from .observers import gain_fields
-from .provenance import provenance
-from .scenarios import sampler_of
+from .. import metrics as M
+from ..drive import Drive, PMSMParams
+from ..io.provenance import provenance
+from ..observers import gain_fields
+from ..scenarios import sampler_of
+from ..scenarios.families import DRIVE_STUDY_AXES, DriveScenarios, bind_observer, drive_scenarios
 from .study import StudyContext, gain_variables, study
 
 __all__ = [
@@ -109,10 +110,10 @@ def run_drive_study(
     Args:
         designs: name -> drive observer.
         axes: a dict of axis values (:data:`DRIVE_STUDY_AXES`) or a sampler, as
-            :func:`jaxobs.scenarios.sampler_of` takes them, the same way as :func:`jaxobs.study.run_study`:
+            :func:`jaxobs.scenarios.sampler_of` takes them, the same way as :func:`jaxobs.studies.study.run_study`:
             ``sampling="grid"`` (the default without ``sample``) the Cartesian product of the axes;
             ``"random"``, ``"sobol"``, ``"lhs"``: ``sample`` points drawn inside the axes' [min, max].
-        family: the drive's scenarios (:class:`~jaxobs.families.DriveScenarios`: the true machine, the
+        family: the drive's scenarios (:class:`~jaxobs.scenarios.families.DriveScenarios`: the true machine, the
             sensorless drive, the steps' time, the noise seed, the sensors); None: built from ``machine``,
             ``drive``, ``sensors``, ``t_event`` (default 0) and ``seed`` (default 0), the keywords this preset
             first took (kept for the Python API and the docs).
@@ -123,11 +124,12 @@ def run_drive_study(
         sampling, sample, seed: how a dict of axes is sampled (``seed`` with ``family``: its own).
         chunk_size: scenarios per compiled call.
         progress: ``True`` a tqdm bar on stderr (each design's compilation named), a callable
-            ``progress(done, total)`` called after each chunk, ``None``/``False`` nothing (:mod:`jaxobs.progress`).
-        mesh: the devices each chunk is split over (:func:`jaxobs.runner.run_scenarios`; default
+            ``progress(done, total)`` called after each chunk, ``None``/``False`` nothing
+            (:mod:`jaxobs.runtime.progress`).
+        mesh: the devices each chunk is split over (:func:`jaxobs.runtime.runner.run_scenarios`; default
             ``jaxobs.batch_mesh()``, every device, as every preset).
-        store: a :class:`jaxobs.chunkstore.ChunkStore`, as in :func:`jaxobs.study.run_study`: each chunk's
-            values go to disk as it finishes, the chunks already there are not run again, and the Dataset is
+        store: a :class:`jaxobs.runtime.chunkstore.ChunkStore`, as in :func:`jaxobs.studies.study.run_study`: each
+            chunk's values go to disk as it finishes, the chunks already there are not run again, and the Dataset is
             laid out from the store (the same Dataset as without one).
 
     Returns:
@@ -145,7 +147,9 @@ def run_drive_study(
         t_event = 0.0 if t_event is None else t_event
         family = DriveScenarios(machine, drive, t_event=t_event, seed=0 if seed is None else seed, sensors=sensors)
     elif not isinstance(family, DriveScenarios):
-        raise ValueError(f"drive study: family must be DriveScenarios (jaxobs.families), got {type(family).__name__}")
+        raise ValueError(
+            f"drive study: family must be DriveScenarios (jaxobs.scenarios.families), got {type(family).__name__}"
+        )
     elif any(v is not None for v in (machine, drive, sensors, t_event, seed)):
         raise ValueError("drive study: give family or machine, drive, sensors, t_event and seed, not both")
     machine, drive, t_event, seed = family.machine, family.drive, family.t_event, family.seed
@@ -166,7 +170,7 @@ def run_drive_study(
     attrs.update({f"machine_{f}": float(getattr(machine, f)) for f in ("Rs", "Ld", "Lq", "psi_f", "p", "J")})
     attrs.update(drive_ts=float(drive.ts), drive_settle=float(drive.settle))
     # provenance, and nothing that differs between two identical runs (the run time is not stored)
-    attrs.update(provenance("jaxobs.drive_study.run_drive_study"))
+    attrs.update(provenance("jaxobs.studies.drive.run_drive_study"))
     return study(
         designs,
         family,  # built a chunk at a time (the axes are checked above, so no chunk can refuse its points)
@@ -177,7 +181,7 @@ def run_drive_study(
         flags=FLAGS,
         mask="lost_lock",
         quantiles=QUANTILES,
-        gains=gain_variables({d: designs[d] for d in designs}),  # one variable per gain (jaxobs.study too)
+        gains=gain_variables({d: designs[d] for d in designs}),  # one variable per gain (jaxobs.studies.study too)
         attrs=attrs,
         chunk_size=chunk_size,
         mesh=mesh,

@@ -3,7 +3,7 @@
     run = run_scenarios(designs, Grid(axes), system_factory, metrics, build=..., horizon=0.4)
     run.values["tuned"]["rms_phase_steady"]       # one value per scenario, in the sampler's order
 
-FLL studies (:func:`jaxobs.study.run_study`), drive studies (:func:`jaxobs.drive_study.run_drive_study`)
+FLL studies (:func:`jaxobs.studies.study.run_study`), drive studies (:func:`jaxobs.studies.drive.run_drive_study`)
 and studies on recordings are this runner with different samplers (:mod:`jaxobs.scenarios`: ``Grid``,
 ``Random``, ``Sobol``, ``LHS``, ``Recordings``), builders (the points → a batched scenario PyTree),
 system factories (a design and one scenario → a system, :class:`jaxobs.AbstractSystem`) and metrics
@@ -18,8 +18,8 @@ called once for all points: a ``vmap`` on one device; split over ``mesh`` (defau
 :func:`jaxobs.batch_mesh`, every device of every process) with :func:`jaxobs.map_batch` on several, each
 chunk padded up to a multiple of the device count.  Several processes (:func:`jaxobs.init_distributed`,
 then the same call in each): every process builds every scenario (from the sampler's points, the same
-everywhere), places only its own devices' rows (:func:`jaxobs.sharding.global_batch`) and receives every
-scenario's values (:func:`jaxobs.sharding.gather_batch`).  Designs of one class with the same static
+everywhere), places only its own devices' rows (:func:`jaxobs.runtime.sharding.global_batch`) and receives every
+scenario's values (:func:`jaxobs.runtime.sharding.gather_batch`).  Designs of one class with the same static
 fields (a closed form and a tuned one) share one compilation: their gains are array leaves.
 """
 
@@ -34,12 +34,12 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ..scenarios import AbstractSampler, Given
 from . import sharding
-from ._simulate import AbstractSave, SaveAll, simulate
-from ._traced import kept_jit
 from .chunkstore import AbstractChunkSink
+from .programs import kept_jit
 from .progress import Progress
-from .scenarios import AbstractSampler, Given
+from .simulation import AbstractSave, SaveAll, simulate
 
 __all__ = ["StudyRun", "run_scenarios"]
 
@@ -143,8 +143,8 @@ def run_scenarios(
         label: The run's name in messages.
         save: What each run keeps (:class:`~jaxobs.SaveAll` by default; :class:`~jaxobs.SaveFinal` for a long
             horizon whose system accumulates its own metrics in its state).
-        sink: Where each chunk's values go instead of memory (a :class:`jaxobs.chunkstore.AbstractChunkSink`,
-            such as a :class:`jaxobs.chunkstore.ChunkStore`): ``sink.start(n=, chunk=, devices=, designs=)``
+        sink: Where each chunk's values go instead of memory (a :class:`jaxobs.runtime.chunkstore.AbstractChunkSink`,
+            such as a :class:`jaxobs.runtime.chunkstore.ChunkStore`): ``sink.start(n=, chunk=, devices=, designs=)``
             once, then per design and chunk ``sink.done(design, i)`` (True: on disk already, skipped) or
             ``sink.put(design, i, values)`` with the chunk's real rows.
 
@@ -153,7 +153,7 @@ def run_scenarios(
 
     Raises:
         ValueError: No designs, ``chunk_size``, ``horizon`` or ``mesh`` out of range, or a ``sink`` that is not
-            an :class:`~jaxobs.chunkstore.AbstractChunkSink`.
+            an :class:`~jaxobs.runtime.chunkstore.AbstractChunkSink`.
     """
     if not designs:
         raise ValueError(f"{label}: at least one design is required")
@@ -164,7 +164,9 @@ def run_scenarios(
     if mesh is not None and not (isinstance(mesh, jax.sharding.Mesh) and mesh.axis_names == (sharding.AXIS,)):
         raise ValueError(f"mesh must be a one-axis jax.sharding.Mesh named 'batch' (jaxobs.batch_mesh), got {mesh!r}")
     if sink is not None and not isinstance(sink, AbstractChunkSink):
-        raise ValueError(f"sink must be a jaxobs.chunkstore.AbstractChunkSink or None, got {type(sink).__name__}")
+        raise ValueError(
+            f"sink must be a jaxobs.runtime.chunkstore.AbstractChunkSink or None, got {type(sink).__name__}"
+        )
     # a sampler of points (not one that holds its batch) and a builder declared to take its chunk's first index
     by_chunk = bool(chunked) and build is not None and not isinstance(sampler, Given)
     # the points as one float array (8 bytes a value, not a Python tuple per scenario); a builder gets

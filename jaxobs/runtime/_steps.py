@@ -1,8 +1,8 @@
 """The steps of the one time loop: split state vectors, peeled start-ups, inputs a block at a time.
 
-The machinery behind :func:`jaxobs._loop.run_loop` (its module doc gives the reasons and the
+The machinery behind :func:`jaxobs.runtime._loop.run_loop` (its module doc gives the reasons and the
 measurements, points 1, 2 and 5).  What a checkpoint strategy decides — how reverse-mode AD stores
-the steps — is the strategy's own ``scan`` method (:mod:`jaxobs._loop`); :func:`run_steps` calls it
+the steps — is the strategy's own ``scan`` method (:mod:`jaxobs.runtime._loop`); :func:`run_steps` calls it
 for the peeled start-up and for the rest, and :func:`scan_blocks` is the blocked scan the strategies
 share.
 """
@@ -15,7 +15,7 @@ from typing import Any, NamedTuple
 import jax
 import jax.numpy as jnp
 
-from ._discretize import AbstractMultistepState
+from ..core.discretize import AbstractMultistepState
 
 __all__ = [
     "Loop",
@@ -28,27 +28,27 @@ __all__ = [
     "INPUT_BLOCK",
 ]
 
-# With ``xs_map``, the inputs of this many steps are evaluated together (jaxobs._loop, point 5).
+# With ``xs_map``, the inputs of this many steps are evaluated together (jaxobs.runtime._loop, point 5).
 INPUT_BLOCK = 128
 
 _SPLIT_MAX = 64  # 1-D leaves up to this size are carried as tuples of scalars
 
 
 class Loop(NamedTuple):
-    """One call of :func:`jaxobs._loop.run_loop`: what every strategy's ``loop`` is given.
+    """One call of :func:`jaxobs.runtime._loop.run_loop`: what every strategy's ``loop`` is given.
 
     Attributes:
         body: ``body(carry, x) -> (carry, y)``.
         init: ``init(carry)`` builds the initial carry from the loop's carry argument (the carry itself, or —
             with ``run_loop(carry_fn=...)`` — a function of nothing, called inside the strategy's loop:
-            jaxobs._loop, point 4).
+            jaxobs.runtime._loop, point 4).
         n: The steps.
         unroll: The loop's unrolling.
-        split: Whether state vectors are carried split (jaxobs._loop, point 1).
+        split: Whether state vectors are carried split (jaxobs.runtime._loop, point 1).
         xs_map: Maps a block of ``xs`` to the steps' inputs, or ``None``.
-        peel: Whether multistep start-ups are peeled (jaxobs._loop, point 2).
+        peel: Whether multistep start-ups are peeled (jaxobs.runtime._loop, point 2).
         has_outputs: The body returns per-step outputs (not ``None``).
-        fill: The start-up steps' carries ``(c0, c1, c2)`` to a steady carry at step 0 (jaxobs._loop, point 6),
+        fill: The start-up steps' carries ``(c0, c1, c2)`` to a steady carry at step 0 (jaxobs.runtime._loop, point 6),
             or ``None``.
     """
 
@@ -133,7 +133,7 @@ def run_steps(loop: Loop, strategy, carry, xs):
 
     Args:
         loop: The :class:`Loop`.
-        strategy: The reverse-mode strategy (:class:`jaxobs._loop.AbstractReverseCheckpoint`).
+        strategy: The reverse-mode strategy (:class:`jaxobs.runtime._loop.AbstractReverseCheckpoint`).
         carry: The initial carry.
         xs: The per-step inputs.
 

@@ -39,7 +39,7 @@ same per-scenario program; XLA may vectorize a tile's elementwise functions
 differently, a last-bit difference).
 
 Many processes.  A study splits over several processes, on one machine or many
-(:func:`jaxobs.study.run_study`; tests/test_distributed.py runs 2 local processes
+(:func:`jaxobs.studies.study.run_study`; tests/test_distributed.py runs 2 local processes
 and finds the single-process numbers).  Every process calls
 :func:`init_distributed` first (``jax.distributed.initialize``, with the CPU
 backend's collectives set to gloo), then runs the same program: ``jax.devices()``
@@ -80,7 +80,7 @@ import jax
 import numpy as np
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
-from .signals import AbstractSignal
+from ..signals import AbstractSignal
 
 __all__ = [
     "batch_mesh",
@@ -366,7 +366,7 @@ def init_distributed(
     implementation: this sets ``jax_cpu_collectives_implementation`` to ``"gloo"`` (TCP, in jaxlib)
     unless it names one already (``"mpi"``); a GPU backend uses NCCL and ignores the option.
     Afterwards ``jax.devices()`` lists every process's devices, ``jax.local_devices()`` this
-    process's, and :func:`jaxobs.study.run_study` splits each chunk of scenarios over all of them.
+    process's, and :func:`jaxobs.studies.study.run_study` splits each chunk of scenarios over all of them.
 
     Args:
         coordinator: Process 0's ``"HOST:PORT"`` (a free port there; every process gives the same).

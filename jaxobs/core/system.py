@@ -5,7 +5,7 @@ A system is an ``equinox.Module`` with a sample time ``ts`` and two pure methods
 reads is declared here with a default, so that ``simulate`` asks rather than probes:
 
 - ``t0``: the time of sample 0 (0 s);
-- ``unroll``: the loop unrolling the system prefers (1; :mod:`jaxobs._loop`, point 3);
+- ``unroll``: the loop unrolling the system prefers (1; :mod:`jaxobs.runtime._loop`, point 3);
 - ``check_horizon(n)``: refuse a run of n steps the system cannot make (accepts every n);
 - ``loop_inputs(ks)``: how the throughput loop feeds the steps at the sample indices ``ks``
   (:class:`LoopInputs`; by default the indices themselves, each step ``step(state, k)``); a system whose
@@ -31,14 +31,14 @@ __all__ = ["AbstractSystem", "LoopInputs"]
 
 
 class LoopInputs(NamedTuple):
-    """How the throughput loop feeds a system's n steps (:func:`jaxobs._loop.run_loop`'s arguments).
+    """How the throughput loop feeds a system's n steps (:func:`jaxobs.runtime._loop.run_loop`'s arguments).
 
     Attributes:
         xs: the per-step values, leading axis n (the sample indices, or a time-major batch's rows).
         advance: ``advance(state, x) -> (state, outputs)``, the step on one step's input.
         xs_map: a block of ``xs`` (leading axis the block) to the block's inputs, evaluated a block at a
-            time (:mod:`jaxobs._loop`, point 5), or None: ``advance`` takes ``xs[k]`` itself.
-        fill: the peeled start-up's carries to a steady carry at step 0 (:mod:`jaxobs._loop`, point 6), or None.
+            time (:mod:`jaxobs.runtime._loop`, point 5), or None: ``advance`` takes ``xs[k]`` itself.
+        fill: the peeled start-up's carries to a steady carry at step 0 (:mod:`jaxobs.runtime._loop`, point 6), or None.
         unroll: the loop unrolling (simulate's ``unroll=`` overrides it).
     """
 
@@ -60,7 +60,7 @@ class AbstractSystem(eqx.Module):
     """
 
     t0: ClassVar[float] = 0.0  # time of sample 0, s (a system that starts elsewhere has a field)
-    unroll: ClassVar[int] = 1  # preferred loop unrolling (jaxobs._loop point 3)
+    unroll: ClassVar[int] = 1  # preferred loop unrolling (jaxobs.runtime._loop point 3)
 
     @property
     @abc.abstractmethod

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import os
 
-from .files import atomic_path
+from ..io.files import atomic_path
 
 
 def _subplots(*args, figsize, **kwargs):
@@ -23,7 +23,7 @@ def _finish(fig, path, dpi=110):
 
 
 def _save(fig, path, dpi) -> None:
-    """``fig`` to ``path`` (if given) through :class:`jaxobs.files.atomic_path`: a temp file renamed over it,
+    """``fig`` to ``path`` (if given) through :class:`jaxobs.io.files.atomic_path`: a temp file renamed over it,
     never written through a link; a file object given as ``path`` is written as it is."""
     if path is None:
         return

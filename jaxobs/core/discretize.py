@@ -318,7 +318,7 @@ def solve_small(a, b):
 
 class AbstractMultistepState(eqx.Module):
     """A rule state whose first ``startup_steps`` steps differ from the rest (a multistep rule's start-up): the
-    loop peels them off and runs the rest in the state's branch-free ``steady()`` form (:mod:`jaxobs._loop`,
+    loop peels them off and runs the rest in the state's branch-free ``steady()`` form (:mod:`jaxobs.runtime._loop`,
     point 2).
 
     Attributes:
@@ -347,7 +347,7 @@ class AB3State(AbstractMultistepState):
         """The same state, declared past its start-up: its step is plain AB3, with no branch.
 
         Only valid once ``startup_steps`` steps have been taken; the simulation
-        loop (:mod:`jaxobs._loop`) converts the carry after running them.
+        loop (:mod:`jaxobs.runtime._loop`) converts the carry after running them.
         """
         return AB3State(f1=self.f1, f2=self.f2, n=None)
 
@@ -424,7 +424,7 @@ def ab3_steady_from_start(c0, c1, c2, h: float):
     steps from its x₀ land on the x₁ and x₂ that the RK4 start-up took it to.
 
     Why: a loop whose inputs are scan rows cannot start its steady loop at sample 2 without slicing its
-    inputs (``xs[2:]``, a copy of the whole horizon, :mod:`jaxobs._loop` point 6).  With the start-up's
+    inputs (``xs[2:]``, a copy of the whole horizon, :mod:`jaxobs.runtime._loop` point 6).  With the start-up's
     values F₀ = f(x₀, u₀), F₁ = f(x₁, u₁) (``c2``'s history) the steady step
     x₊ = x + h/12 (23 f − 16 f₋₁ + 5 f₋₂) reproduces x₁ and x₂ exactly in real arithmetic when
 

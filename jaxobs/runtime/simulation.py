@@ -15,7 +15,7 @@ or a recording) and :class:`jaxobs.drive.ClosedLoop` (the PMSM drive, with an
 observer or the encoder).  What else the loop reads of a system is declared by
 :class:`~jaxobs.AbstractSystem` with defaults (``t0``, ``unroll``,
 ``check_horizon``, ``loop_inputs``, ``throughput``).  :class:`OnSignal` feeds its
-inputs a block of steps at a time, vectorized (:mod:`jaxobs._loop`, point 5),
+inputs a block of steps at a time, vectorized (:mod:`jaxobs.runtime._loop`, point 5),
 which is what makes long horizons fast on CPU; on a time-major recording batch
 its throughput loop runs as :class:`OnRows`, whose inputs are the batch's rows
 (point 6).
@@ -23,7 +23,7 @@ its throughput loop runs as :class:`OnRows`, whose inputs are the batch's rows
 What to keep and how reverse-mode AD stores the loop are strategy objects,
 as diffrax passes ``SaveAt`` and adjoints: :class:`SaveAll` / :class:`SaveFinal`
 (each with an optional running cost), each running the loop it needs
-(``save.run``), and the checkpoint strategies of :mod:`jaxobs._loop`
+(``save.run``), and the checkpoint strategies of :mod:`jaxobs.runtime._loop`
 (:class:`AutoCheckpoint` by default).  ``simulate`` is a
 ``filter_jit``-ed function of PyTrees: ``jax.vmap`` over a batch of systems
 (scenarios, gains) and ``jax.grad`` through it apply unchanged.  Gains stay
@@ -48,14 +48,14 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._discretize import Knots, ab3_steady_from_start
+from ..core.discretize import Knots, ab3_steady_from_start
+from ..core.measurements import DriveInput
+from ..core.sampletime import TS_REL_TOL, SampleTime
+from ..core.system import AbstractSystem, LoopInputs
+from ..core.validate import check_sample_time
+from ..observers import AbstractObserver
+from ..signals import AbstractSignal, DriveRecording, EMFSignal, FunctionSignal, SampledSignal
 from ._loop import AbstractCheckpoint, AutoCheckpoint, check_unroll, run_loop
-from ._measurements import DriveInput
-from ._system import AbstractSystem, LoopInputs
-from ._time import TS_REL_TOL, SampleTime
-from ._validate import check_sample_time
-from .observers import AbstractObserver
-from .signals import AbstractSignal, DriveRecording, EMFSignal, FunctionSignal, SampledSignal
 
 __all__ = [
     "simulate",
@@ -203,7 +203,7 @@ class AbstractSave(eqx.Module):
     over a long horizon needs no trajectory.
 
     Each strategy runs its own loop (:meth:`run`), as diffrax's adjoints do: the plain scan of the system's
-    step, or the throughput loop (:mod:`jaxobs._loop`) over the inputs the system declares
+    step, or the throughput loop (:mod:`jaxobs.runtime._loop`) over the inputs the system declares
     (:meth:`jaxobs.AbstractSystem.loop_inputs`).
 
     Attributes:
@@ -239,8 +239,8 @@ class AbstractSave(eqx.Module):
         return _solve(self.cost, system, n, feed, fast=False, keep=keep, checkpoint=checkpoint, state0=state0)
 
     def _throughput(self, system, n, *, keep, checkpoint, state0, unroll) -> Solution:
-        """The throughput loop (:mod:`jaxobs._loop`) over the inputs the system declares: the plain scan's numbers to
-        rounding (1e-12 relative)."""
+        """The throughput loop (:mod:`jaxobs.runtime._loop`) over the inputs the system declares: the plain scan's
+        numbers to rounding (1e-12 relative)."""
         system = system.throughput()
 
         def feed(ks):
@@ -254,7 +254,7 @@ class SaveAll(AbstractSave):
     """Keep every step's outputs (``sol.outputs``, leading axis the samples) and the final state.
 
     ``fast=False`` (the default) scans ``system.step`` plainly: a user's own ``lax.scan`` of it gives the
-    same numbers bit for bit.  ``fast=True`` runs the loop made fast (jaxobs._loop: inputs a block of steps
+    same numbers bit for bit.  ``fast=True`` runs the loop made fast (jaxobs.runtime._loop: inputs a block of steps
     at a time, state vectors split, multistep start-ups peeled, unrolled), as :class:`SaveFinal` always
     does: the same outputs to rounding (1e-12 relative), in about half the time where the input is costly
     (a harmonic signal) or under differentiation (the tuning objective runs this way).
@@ -279,7 +279,7 @@ class SaveAll(AbstractSave):
 
 class SaveFinal(AbstractSave):
     """Keep only the final state, ``ok`` and the running cost: a long horizon stores no trajectory.  Always the
-    throughput loop (:mod:`jaxobs._loop`).
+    throughput loop (:mod:`jaxobs.runtime._loop`).
 
     Attributes:
         cost: ``cost(out) -> scalar``, or ``None`` (no running cost; static).
@@ -290,10 +290,10 @@ class SaveFinal(AbstractSave):
 
 
 def _solve(cost, system, n: int, feed: Callable, *, fast: bool, keep: bool, checkpoint, state0) -> Solution:
-    """The loop of ``n`` steps fed by ``feed(ks)`` (:class:`~jaxobs._system.LoopInputs` at the sample indices ks),
+    """The loop of ``n`` steps fed by ``feed(ks)`` (:class:`~jaxobs.core.system.LoopInputs` at the sample indices ks),
     with the running cost; the outputs kept when ``keep``.
 
-    With ``fast`` the loop is made fast (jaxobs._loop: inputs a block of steps at a time, multistep start-ups
+    With ``fast`` the loop is made fast (jaxobs.runtime._loop: inputs a block of steps at a time, multistep start-ups
     peeled, state vectors split, unrolled).  Those rewrites change which operations XLA fuses, and XLA's CPU
     backend always contracts a·b + c into a fused multiply-add where it fuses, so the two loops agree to
     rounding (1e-12 relative, tests/test_perf.py), not to the last bit.
@@ -400,7 +400,7 @@ class OnSignal(AbstractSystem):
     t0: float = eqx.field(static=True)
     knots: bool = eqx.field(static=True)
 
-    # loop unrolling (jaxobs._loop point 3): a signal-level step is small.  3, measured against 2, 4, 6 and 8
+    # loop unrolling (jaxobs.runtime._loop point 3): a signal-level step is small.  3, measured against 2, 4, 6 and 8
     # (batch 1024, 2 host devices, 1 s at 10 kHz, M scenario-steps/s, side by side in one run each):
     # SOGI-FLL precomputed f32 u3 299 / u4 285 / u8 229, f64 181 / 168 / 99; WIF precomputed f32 297 / 244 /
     # 156, f64 128 / 125 / 52; WIF input in the loop f64 42 / 40 / 28.  Deeper unrolling lets XLA's CPU
@@ -457,7 +457,7 @@ class OnSignal(AbstractSystem):
 
     def _at(self, k, offset: float = 0.0):
         """The time of sample k (+ a static offset) as the signal takes it: a :class:`SampleTime` (the
-        exact index, so that a float32 phase stays accurate at any horizon: jaxobs._time) for signals
+        exact index, so that a float32 phase stays accurate at any horizon: jaxobs.core.sampletime) for signals
         that accept one, else the float t_k + offset."""
         if self.signal.accepts_sample_time:
             return SampleTime(jnp.asarray(k, jnp.int32), self.ts, self.t0 + offset)
@@ -593,10 +593,10 @@ class OnRows(AbstractSystem):
 
     A batch of recordings stored time-major (``SampledSignal(batch_inner=True)``,
     ``DriveRecording(batch_inner=True)``: leaves (n, B), row k every scenario's sample k) is mapped along its
-    inner axis (``jaxobs.map_batch``), and its rows are the scan's inputs (:mod:`jaxobs._loop`, point 6):
+    inner axis (``jaxobs.map_batch``), and its rows are the scan's inputs (:mod:`jaxobs.runtime._loop`, point 6):
     ``lax.scan`` keeps a batched input's batch axis where time-major rows have it, so each step reads one
     contiguous (B,) row.  AB3's start-up is filled into a steady history
-    (:func:`jaxobs._discretize.ab3_steady_from_start`) instead of peeled, since ``xs[2:]`` would copy the
+    (:func:`jaxobs.core.discretize.ab3_steady_from_start`) instead of peeled, since ``xs[2:]`` would copy the
     horizon.  The numbers are :class:`OnSignal`'s to rounding; ``step`` is its step.
 
     Args:
@@ -605,7 +605,7 @@ class OnRows(AbstractSystem):
 
     system: OnSignal
 
-    # the unroll over the rows (jaxobs._loop point 6), where a step reads one row and nothing else: 2, measured
+    # the unroll over the rows (jaxobs.runtime._loop point 6), where a step reads one row and nothing else: 2, measured
     # against 1, 2, 3 and 4 (SOGI-FLL, precomputed, 2 host devices, 1 s at 10 kHz, M scenario-steps/s, one run
     # each): batch 8192 f32 u1 884-893 / u2 1095-1104 / u3 365-390 / u4 1160-1165, f64 u2 646-648 / u4 416-510;
     # batch 1024 f32 u2 773-781 / u4 929-944, f64 u2 485-513 / u4 557-568.  4 is faster in three of the four and
@@ -640,7 +640,7 @@ class OnRows(AbstractSystem):
     def input_rows(self, n: int):
         """The rows of all steps: the recording's arrays' rows ``[off, off + n)``, off the index of sample 0.
 
-        Under ``map_batch`` the loop reads them one contiguous row per step (:mod:`jaxobs._loop`, point 6): a
+        Under ``map_batch`` the loop reads them one contiguous row per step (:mod:`jaxobs.runtime._loop`, point 6): a
         static slice keeps the batch axis inner, and with the horizon the whole recording there is no slice at
         all.
 
@@ -676,7 +676,7 @@ class OnRows(AbstractSystem):
         self.system.check_horizon(n)
 
     def loop_inputs(self, ks) -> LoopInputs:
-        """The rows as the scan's inputs, the start-up filled (:mod:`jaxobs._loop`, point 6)."""
+        """The rows as the scan's inputs, the start-up filled (:mod:`jaxobs.runtime._loop`, point 6)."""
         n = ks.shape[0]
         unroll = min(self.unroll, n)
         while n % unroll:  # a remainder would be split off the rows: a copy of the horizon

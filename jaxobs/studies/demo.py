@@ -28,10 +28,10 @@ import equinox as eqx
 import jax
 import numpy as np
 
-from . import linear, metrics
-from ._simulate import OnSignal, simulate
-from .progress import Progress
-from .signals import paper001_test, stack
+from .. import linear, metrics
+from ..runtime.progress import Progress
+from ..runtime.simulation import OnSignal, simulate
+from ..signals import paper001_test, stack
 
 __all__ = ["fll_demo", "DEMO_TESTS", "format_table", "table_i_flls"]
 
@@ -83,7 +83,7 @@ def fll_demo(
         steady_delay: The time from the event to the steady window, s.
         steady_len: The steady window's length, s.
         flls: name -> FLL (default Table I's FLLs).
-        progress: One step per FLL, each named as it compiles and runs (:mod:`jaxobs.progress`).
+        progress: One step per FLL, each named as it compiles and runs (:mod:`jaxobs.runtime.progress`).
         tests: Paper 001's tests to run (keys of :data:`jaxobs.papers.TESTS_001`; default A–E, Sec. VI).
 
     Returns:

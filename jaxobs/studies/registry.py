@@ -18,9 +18,9 @@ import math
 from collections.abc import Callable
 from typing import Any
 
-from . import linear, papers
-from .drive import DualPMSMParams
-from .observers import (
+from .. import linear, papers
+from ..drive import DualPMSMParams
+from ..observers import (
     CLESO,
     FALESO,
     GILESO,

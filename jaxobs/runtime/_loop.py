@@ -16,7 +16,7 @@ checks each against the plain scan, to 1e-12 or tighter):
    outputs become separate fused outputs that share their subexpressions.
    Measured on the SOGI-FLL (forward Euler, batch 1024, float32, 2 devices,
    unroll 8, before the default became 3): 48 → 74 M scenario-steps/s.
-2. **Peel multistep start-ups.**  :class:`~jaxobs._discretize.AB3` starts with
+2. **Peel multistep start-ups.**  :class:`~jaxobs.core.discretize.AB3` starts with
    two RK4 steps behind a ``lax.cond`` on its sample count.  A conditional in
    the loop body costs a branch per step and blocks unrolling, so the loop runs
    the start-up steps on their own and then converts every rule state in the
@@ -53,8 +53,8 @@ checks each against the plain scan, to 1e-12 or tighter):
 
    The reverse-mode strategies differ only in how they scan the steps (their
    ``scan`` method); the split carry, the peeled start-up and the blocks of
-   inputs are the same for all (:mod:`jaxobs._steps`).  The forward
-   sensitivities' custom VJP is :mod:`jaxobs._sensitivity`.
+   inputs are the same for all (:mod:`jaxobs.runtime._steps`).  The forward
+   sensitivities' custom VJP is :mod:`jaxobs.runtime._sensitivity`.
 
    The directions are counted where the system's parameters enter, not at the
    loop's state: ``simulate`` passes the initial state as ``carry_fn``, built
@@ -66,7 +66,7 @@ checks each against the plain scan, to 1e-12 or tighter):
    (k, λ, ω_n) 7.21 → 4.51.
 
    With two or three perturbed scalars (a tuning job's gains) the tangents
-   are pushed by nested JVPs with the mixed terms removed (:func:`jaxobs._sensitivity.multi_jvp`),
+   are pushed by nested JVPs with the mixed terms removed (:func:`jaxobs.runtime._sensitivity.multi_jvp`),
    each tangent an array of the primal's shape, which XLA fuses into the
    primal's kernels: value_and_grad costs about 2× the forward pass.
 5. **Inputs a block at a time** (``xs_map``).  A signal evaluated inside the
@@ -93,7 +93,7 @@ checks each against the plain scan, to 1e-12 or tighter):
    carry moves the batch axis to the front instead: a transpose of the whole
    recording.  The peeled start-up (point 2) would need ``xs[2:]``, a copy of the
    whole horizon; instead the loop takes the start-up's two steps on their own,
-   then ``fill(c0, c1, c2)`` (:func:`jaxobs._discretize.ab3_steady_from_start`)
+   then ``fill(c0, c1, c2)`` (:func:`jaxobs.core.discretize.ab3_steady_from_start`)
    gives the carry at sample 0 a steady AB3 history under which the steady step
    repeats the start-up (to the rounding of x), and the steady loop runs every
    row.  Measured on the precomputed SOGI-FLL, 1 s at 10 kHz, 2 host devices,
@@ -149,7 +149,7 @@ class AbstractCheckpoint(eqx.Module):
         """Run a loop from ``loop.init(carry)`` over ``xs``.
 
         Args:
-            loop: The :class:`jaxobs._steps.Loop`.
+            loop: The :class:`jaxobs.runtime._steps.Loop`.
             carry: The initial carry.
             xs: The per-step inputs.
 
@@ -164,7 +164,7 @@ class AbstractReverseCheckpoint(AbstractCheckpoint):
     @property
     @abc.abstractmethod
     def startup(self) -> AbstractReverseCheckpoint:
-        """The strategy for the few peeled start-up steps (jaxobs._loop, point 2): never chunked."""
+        """The strategy for the few peeled start-up steps (jaxobs.runtime._loop, point 2): never chunked."""
 
     @abc.abstractmethod
     def scan(self, step, carry, xs, n: int, unroll: int, xs_map=None):
@@ -176,7 +176,7 @@ class AbstractReverseCheckpoint(AbstractCheckpoint):
             xs: The per-step inputs.
             n: The steps (≥ 1).
             unroll: The loop's unrolling.
-            xs_map: With it each step sees ``xs_map`` of a block of ``xs`` (jaxobs._loop, point 5).
+            xs_map: With it each step sees ``xs_map`` of a block of ``xs`` (jaxobs.runtime._loop, point 5).
 
         Returns:
             ``(final carry, stacked outputs)``, as ``lax.scan``.
@@ -292,7 +292,7 @@ class AutoCheckpoint(AbstractCheckpoint):
         """The strategy a loop runs under.
 
         Args:
-            loop: The :class:`jaxobs._steps.Loop`.
+            loop: The :class:`jaxobs.runtime._steps.Loop`.
 
         Returns:
             The :class:`AbstractCheckpoint`.
@@ -362,7 +362,7 @@ def run_loop(
         fill: With ``xs`` the per-step inputs themselves (no ``xs_map``), the loop does not slice them for its
             peeled start-up: ``fill(c0, c1, c2)`` turns the carries before and after the start-up's two steps
             into a steady carry at step 0 whose steps repeat them (module doc, point 6;
-            :func:`jaxobs._discretize.ab3_steady_from_start`), and the steady loop runs every row.
+            :func:`jaxobs.core.discretize.ab3_steady_from_start`), and the steady loop runs every row.
 
     Returns:
         ``(final carry, stacked per-step outputs or None)``.

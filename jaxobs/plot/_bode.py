@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from . import linear, papers
+from .. import linear, papers
 from ._figure import _finish, _mark_event, _subplots
 
 # one look per trace, so a trace never hides under another: widths fall as the dashes rise, and markers

@@ -26,7 +26,7 @@ from pathlib import Path
 
 import jax
 
-from ._traced import ProgramCache, set_program_cache
+from .programs import ProgramCache, set_program_cache
 
 __all__ = ["use_compile_cache", "CACHE_ENV"]
 
