@@ -8,7 +8,7 @@ STAMP  := $(VENV)/.installed-stamp
 # that a folder named like the package could shadow it; none is (tests/test_cli.py checks the package list)
 PIP    := PYTHONWARNINGS="ignore:Editable installation" $(VENV)/bin/python -m pip
 
-.PHONY: run test test-slow test-repro lint bench docs docs-serve clean
+.PHONY: run test test-slow test-repro lint typecheck bench docs docs-serve clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -39,6 +39,10 @@ test-repro: $(STAMP)
 lint: $(STAMP)
 	$(VENV)/bin/ruff check .
 	$(VENV)/bin/ruff format --check .
+
+# pyright, basic mode, over jaxobs/ and tuning/ ([tool.pyright] in pyproject.toml), as CI runs it
+typecheck: $(STAMP)
+	$(VENV)/bin/pyright
 
 # The full benchmark run (over 30 min on 2 cores, benchmarks/README.md): the throughput rows with the batch-inner numba
 # kernels (~29 min), then time to result (make run cold and warm) and scale (FLL 10^6, drive 10^5 scenarios), ~2 min
