@@ -378,3 +378,22 @@ def test_the_drive_imports_nothing_above_it():
         if target in RANK and RANK[target] > top
     ]
     assert not bad, "\n".join(bad)
+
+
+def test_the_architecture_page_draws_these_layers():
+    """docs/architecture.md's layer block is LAYERS: the same modules, in the same order, grouped into the same
+    numbered layers (a number starts a layer; a line without one is beside the line above)."""
+    import re
+
+    doc = (ROOT / "docs" / "architecture.md").read_text()
+    start = doc.index("```\n #  module")
+    block = doc[start + 4 : doc.index("```", start + 3)].splitlines()[1:]
+    drawn = []
+    for line in block:
+        m = re.match(r"^( ?\d+[a-z]?  |    )((?:jaxobs_tuning|jaxobs)(?:\.\w+)*)(\s|$)", line)
+        if not m:
+            continue
+        if m.group(1).strip():
+            drawn.append([])
+        drawn[-1].append(m.group(2))
+    assert drawn == [list(layer) for layer in LAYERS]
