@@ -50,12 +50,14 @@ LAYERS = [
         "jaxobs.signals._waveforms",
         "jaxobs.signals._recordings",
         "jaxobs.signals._logchecks",
+        "jaxobs.signals._layout",
         "jaxobs.drive.machine",
         "jaxobs.drive.hardware",
         "jaxobs.drive.latency",
         "jaxobs.drive.weakening",
     ),
     # drive logs: a declared layout read into DriveRecordings; carrier-comparison PWM (the inverter's transforms)
+    ("jaxobs.signals._logfile",),  # a drive log's delimited text streamed into disk-backed columns
     ("jaxobs.signals._logs", "jaxobs.drive.pwm"),
     ("jaxobs.signals._read",),  # the recordings reader: one file as a family's scenarios
     ("jaxobs.signals",),

@@ -365,7 +365,7 @@ class RecordingColumnError(ValueError):
         self.role, self.spec = role, spec
 
 
-def _column(spec, header, width, path, role):
+def column_index(spec, header, width, path, role):
     """The index of a column given by name or 0-based index."""
     p = str(path)
     if isinstance(spec, (int, np.integer)) and not isinstance(spec, bool):
@@ -425,15 +425,15 @@ def read_recording(
     width = table.shape[1]
     if (time_column is None) == (sample_rate is None):
         raise ValueError(f"recording {str(path)!r}: give exactly one of time_column and sample_rate")
-    tcol = None if time_column is None else _column(time_column, header, width, path, "time")
-    idx_extra = [_column(c, header, width, path, "truth") for c in extra]
+    tcol = None if time_column is None else column_index(time_column, header, width, path, "time")
+    idx_extra = [column_index(c, header, width, path, "truth") for c in extra]
     if columns is None:
         rest = [i for i in range(width) if i != tcol and i not in idx_extra]
         if len(rest) != 1:
             names = [header[i] if header else str(i) for i in rest]
             raise ValueError(f"recording {str(path)!r}: name the channel among {', '.join(names)} (columns=...)")
         columns = rest
-    idx = [_column(c, header, width, path, "signal") for c in columns]
+    idx = [column_index(c, header, width, path, "signal") for c in columns]
     if table.shape[0] < 2:
         raise ValueError(f"recording {str(path)!r}: {table.shape[0]} sample(s); at least 2 are needed")
     for i in sorted({*idx, *idx_extra, *([] if tcol is None else [tcol])}):
@@ -472,8 +472,8 @@ def read_recording(
             f"than the observer's ts = {ts:g} s ({1 / ts:g} Hz): interpolation would invent the samples between"
         )
     names_of = {i: (header[i] if header else str(i)) for i in range(width)}
-    angle_idx = {_column(c, header, width, path, "truth") for c in angle}
-    avg_idx = {_column(c, header, width, path, "signal") for c in averaged}
+    angle_idx = {column_index(c, header, width, path, "truth") for c in angle}
+    avg_idx = {column_index(c, header, width, path, "signal") for c in averaged}
     exact = uniform and abs(step - ts) <= TS_REL_TOL * ts
     n = table.shape[0] if exact else int(math.floor(t[-1] / ts * (1 + 1e-12))) + 1
     if avg_idx and not exact:  # every period [t_k, t_k + ts] must lie inside the record
