@@ -89,6 +89,7 @@ LAYERS = [
     ("jaxobs.runtime",),  # the loop's public names (simulate, the savers, the checkpoints)
     # metrics: the functions that score a run, the one metric table (its entries' forms use them), the package
     ("jaxobs.metrics._core",),
+    ("jaxobs.metrics._lock",),  # lost lock, lost speed and the position error of a run
     ("jaxobs.metrics._table",),
     ("jaxobs.metrics",),
     # linear analysis: the observers' models, closed forms that return observers, settling times (metrics)
