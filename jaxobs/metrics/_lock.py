@@ -90,7 +90,7 @@ def lost_lock(theta_hat, theta, window_mask, tol_rad=math.pi / 4, *, omega_hat=N
 # an observer that tracks a rotor turning the wrong way (a standstill start under a load the I-f start-up
 # cannot carry runs backwards with a locked observer: |ωm − ωm*| > 100 % of ωm*), a speed stuck far from
 # its reference, and a large speed limit cycle.  20 %: far above a locked drive's speed ripple and
-# load-step dips after the steady window begins (≤ 1 % measured on the presets), far below a reversal.
+# load-step dips after the steady window begins (docs/performance.md), far below a reversal.
 SPEED_TOL = 0.20
 SPEED_FLOOR_RPM = 20.0
 

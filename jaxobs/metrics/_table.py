@@ -187,8 +187,8 @@ def _speed_hat(sol, sc):
 def scored_position_error(sol, sig, ctx):
     """The position error (rad, :func:`jaxobs.metrics.position_error`) as the metrics score it.  A drive
     started from standstill runs on the I-f angle until its hand-over (the FOC's ``mode`` 0 → 1); the
-    observer is not in the loop then and may sit ~90° off while it converges at low speed (measured: the I-f
-    phase was 0.12 of a 0.124 ``iae_position``), which is the start-up's doing, not the observer's.  So its
+    observer is not in the loop then and may sit ~90° off while it converges at low speed (most of the
+    ``iae_position`` of such a start, docs/performance.md), which is the start-up's doing, not the observer's.  So its
     error counts from the hand-over on (a steady start is in mode 1 from t = 0: unchanged).  Inside the steady
     window it always counts: a drive that has not handed over by then is scored (and flagged lost_sync) on its
     real error, never rewarded with a zero.

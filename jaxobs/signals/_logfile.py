@@ -8,8 +8,10 @@ from __future__ import annotations
 import os
 import re
 import stat
+from typing import overload
 
 import numpy as np
+from numpy.typing import DTypeLike
 
 from ._layout import DELIMITERS
 
@@ -196,25 +198,32 @@ def stream_columns(path, layout, header, wanted: list[int], width: int, folder):
 class DiskColumn:
     """A float64 column on disk, read a block at a time (``col[a:b]``, np.fromfile) or whole (``np.asarray(col)``).
 
-    Not a memory map: a mapped window faults in the pages around it (the kernel's read-ahead), which over a
-    10^7-row log's 96 check windows kept 264 MiB resident; a read keeps only what it returns.
+    Not a memory map: a mapped window faults in the pages around it (the kernel's read-ahead), which keeps far more
+    resident than the window over a long log's check windows (docs/performance.md); a read keeps only what it
+    returns.
     """
 
-    def __init__(self, fn, n):
+    def __init__(self, fn: str, n: int) -> None:
         self.fn, self.n = fn, n
 
     @property
-    def shape(self):
+    def shape(self) -> tuple[int]:
         return (self.n,)
 
-    def __len__(self):
+    def __len__(self) -> int:
         return self.n
 
-    def __array__(self, dtype=None, copy=None):
+    def __array__(self, dtype: DTypeLike | None = None, copy: bool | None = None) -> np.ndarray:
         a = self[0 : self.n]
         return a if dtype is None else a.astype(dtype)
 
-    def __getitem__(self, sl: slice | int):
+    @overload
+    def __getitem__(self, sl: slice) -> np.ndarray: ...
+
+    @overload
+    def __getitem__(self, sl: int) -> float: ...
+
+    def __getitem__(self, sl: slice | int) -> np.ndarray | float:
         if not isinstance(sl, slice):
             return float(self[slice(int(sl), int(sl) + 1)][0])
         a, b = max(sl.start or 0, 0), min(self.n if sl.stop is None else sl.stop, self.n)
