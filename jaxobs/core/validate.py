@@ -38,7 +38,7 @@ def as_float(x: ArrayLike) -> jax.Array:
 
 def check_real(
     name: str,
-    x: ArrayLike,
+    x: Any,
     *,
     lower: float | None = None,
     upper: float | None = None,
@@ -49,7 +49,7 @@ def check_real(
 
     Args:
         name: The field's name in the error.
-        x: The value (any shape).
+        x: The value (any shape; anything else, None included, is refused as not a real number).
         lower: The lower bound, or None.
         upper: The upper bound, or None.
         lower_open: Whether the lower bound is strict (``x > lower``); otherwise ``x >= lower``.
@@ -79,7 +79,7 @@ def check_real(
     return as_float(x)
 
 
-def check_positive(name: str, x: ArrayLike, owner: str = "") -> jax.Array:
+def check_positive(name: str, x: Any, owner: str = "") -> jax.Array:
     """Check that every element of ``x`` is finite and > 0 (:func:`check_real`).
 
     Args:
@@ -96,7 +96,7 @@ def check_positive(name: str, x: ArrayLike, owner: str = "") -> jax.Array:
     return check_real(name, x, lower=0.0, lower_open=True, owner=owner)
 
 
-def check_nonnegative(name: str, x: ArrayLike, owner: str = "") -> jax.Array:
+def check_nonnegative(name: str, x: Any, owner: str = "") -> jax.Array:
     """Check that every element of ``x`` is finite and >= 0 (:func:`check_real`).
 
     Args:

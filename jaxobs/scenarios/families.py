@@ -588,7 +588,7 @@ class DriveScenarios(AbstractFamily):
             self.machine, names, points, seed=self.seed, t_event=self.t_event, first=first, sensors=self.sensors
         )
 
-    def system(self, design: AbstractObserver, scenario: PyTree) -> AbstractSystem:
+    def system(self, design: AbstractObserver, scenario: PyTree) -> ClosedLoop:
         """The system ``design`` runs on one ``scenario`` (:meth:`AbstractFamily.system`).
 
         Args:
