@@ -137,6 +137,23 @@ def check_sample_time(name: str, ts: Any, owner: str = "") -> float:
     return val
 
 
+def check_seconds(label: str, value: Any, *, strict: bool = False) -> None:
+    """Check a time (an event's, a start's): a finite number of seconds >= 0.
+
+    Args:
+        label: What the error names before "must be": a field (``t_event``), or a table's key (``scenarios.t_event:``).
+        value: The time, s.
+        strict: Also refuse a bool, and a value that is neither an int nor a float (a value read from a file).
+
+    Raises:
+        ValueError: ``<label> must be a finite number of seconds >= 0, got <value>``.
+    """
+    if strict and (isinstance(value, bool) or not isinstance(value, (int, float))):
+        raise ValueError(f"{label} must be a finite number of seconds >= 0, got {value!r}")
+    if not (math.isfinite(value) and value >= 0):
+        raise ValueError(f"{label} must be a finite number of seconds >= 0, got {value!r}")
+
+
 def _range_text(lower, upper, lower_open):
     parts = []
     if lower is not None:

@@ -40,6 +40,7 @@ from jaxtyping import PyTree
 
 from ..core.quantities import Axis
 from ..core.system import AbstractSystem
+from ..core.validate import check_seconds
 from ..drive import DRIVE_AXES as _ALL_DRIVE_AXES
 from ..drive import RPM, ClosedLoop, Drive, PMSMParams, Profile, Scenario, Sensors, scenario_batch
 from ..observers import AbstractDriveObserver, AbstractObserver
@@ -126,8 +127,7 @@ def drive_scenarios(
     Raises:
         ValueError: ``t_event`` is negative or not finite, or an axis or value is refused by ``scenario_batch``.
     """
-    if not (math.isfinite(t_event) and t_event >= 0):
-        raise ValueError(f"t_event must be a finite number of seconds >= 0, got {t_event!r}")
+    check_seconds("t_event", t_event)
     two = Profile([0.0, t_event], [600.0 * RPM] * 2, kind="step")  # before / after the event
     zero = Profile([0.0, t_event], [0.0, 0.0], kind="step")
     base = Scenario(machine, speed_ref=two, load=zero, omega_m0=600.0 * RPM, sensors=sensors)
@@ -137,8 +137,7 @@ def drive_scenarios(
 def _t_event(table: Mapping, where: str, default: float) -> float:
     """``<where>.t_event``: a finite number of seconds >= 0."""
     v = table.get("t_event", default)
-    if isinstance(v, bool) or not isinstance(v, (int, float)) or not (math.isfinite(v) and v >= 0):
-        raise ValueError(f"{where}.t_event: must be a finite number of seconds >= 0, got {v!r}")
+    check_seconds(f"{where}.t_event:", v, strict=True)
     return float(v)
 
 
@@ -339,8 +338,7 @@ class GridSignals(AbstractFamily):
     truth_counts: ClassVar[tuple] = (3,)
 
     def __check_init__(self):
-        if not (math.isfinite(self.t_event) and self.t_event >= 0):
-            raise ValueError(f"t_event must be a finite number of seconds >= 0, got {self.t_event!r}")
+        check_seconds("t_event", self.t_event)
         if not (math.isfinite(self.freq) and self.freq > 0):
             raise ValueError(f"freq must be a finite frequency > 0 Hz, got {self.freq!r}")
 
