@@ -181,8 +181,8 @@ IPMSM_002_A7 = 0.0879
 # BEMF too.  How much depends on Lls and rises with speed (the xy impedance ω Lls grows against the current PIs'
 # gain), so the C-LESO's 600/300 r/min ratio fixes Lls and its 300 r/min numbers then fix a5, a7:
 # ASSUMED-FITTED: Lls, H.  002 gives no xy inductance; the C-LESO's ratios 4.1/5.4 = 0.759 (5th) and 4.5/5.9 =
-# 0.763 (7th) are met at Lls ≈ 5.0 and 4.5 mH (measured on a 1 mH grid, 2-8 mH: 0.83/0.88 at 2 mH, 0.72/0.66 at
-# 7 mH); 4.5 mH is the least-squares point.  With the assumed Ld = 6 mH that is 0.75 Ld: a large leakage, as the
+# 0.763 (7th) are met at Lls ≈ 5.0 and 4.5 mH (a search over 2-8 mH, docs/performance.md); 4.5 mH is the
+# least-squares point.  With the assumed Ld = 6 mH that is 0.75 Ld: a large leakage, as the
 # xy inductance of a concentrated-winding dual three-phase machine can be.  The fit leans on the assumed current
 # loops (papers.BENCH_CURRENT_HZ): with them at half that bandwidth it moves to ≈ 5.7 mH.
 DUAL_LLS_002 = 4.5e-3

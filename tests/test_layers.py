@@ -50,12 +50,14 @@ LAYERS = [
         "jaxobs.signals._waveforms",
         "jaxobs.signals._recordings",
         "jaxobs.signals._logchecks",
+        "jaxobs.signals._layout",
         "jaxobs.drive.machine",
         "jaxobs.drive.hardware",
         "jaxobs.drive.latency",
         "jaxobs.drive.weakening",
     ),
     # drive logs: a declared layout read into DriveRecordings; carrier-comparison PWM (the inverter's transforms)
+    ("jaxobs.signals._logfile",),  # a drive log's delimited text streamed into disk-backed columns
     ("jaxobs.signals._logs", "jaxobs.drive.pwm"),
     ("jaxobs.signals._read",),  # the recordings reader: one file as a family's scenarios
     ("jaxobs.signals",),
@@ -87,6 +89,7 @@ LAYERS = [
     ("jaxobs.runtime",),  # the loop's public names (simulate, the savers, the checkpoints)
     # metrics: the functions that score a run, the one metric table (its entries' forms use them), the package
     ("jaxobs.metrics._core",),
+    ("jaxobs.metrics._lock",),  # lost lock, lost speed and the position error of a run
     ("jaxobs.metrics._table",),
     ("jaxobs.metrics",),
     # linear analysis: the observers' models, closed forms that return observers, settling times (metrics)

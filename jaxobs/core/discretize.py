@@ -34,6 +34,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jaxtyping import PyTree
 
 __all__ = [
     "Held",
@@ -49,6 +50,9 @@ __all__ = [
 ]
 
 VectorField = Callable[[jax.Array, Any], jax.Array]
+Step = float | jax.Array  # a period h, s, or a fraction s of one
+Input = Any  # a component's input over a period: an AbstractInputPath, or a bare sample (any PyTree), held
+RuleState = Any  # a rule's own state: an AbstractMultistepState, or None for one-step rules
 
 
 # --------------------------------------------------------------------------
@@ -60,7 +64,15 @@ class AbstractInputPath(eqx.Module):
     """The input over one sample period, evaluated at a fraction ``s`` in [0, 1]."""
 
     @abc.abstractmethod
-    def at(self, s): ...
+    def at(self, s: Step) -> Any:
+        """The input at the fraction ``s`` of the period.
+
+        Args:
+            s: The fraction, in [0, 1].
+
+        Returns:
+            The input there (a PyTree like the samples).
+        """
 
 
 class Held(AbstractInputPath):
@@ -72,7 +84,15 @@ class Held(AbstractInputPath):
 
     u: Any
 
-    def at(self, s):
+    def at(self, s: Step) -> Any:
+        """The held sample, whatever ``s``.
+
+        Args:
+            s: The fraction of the period (unused).
+
+        Returns:
+            The sample.
+        """
         del s
         return self.u
 
@@ -94,7 +114,15 @@ class Knots(AbstractInputPath):
     um: Any
     u1: Any
 
-    def at(self, s):
+    def at(self, s: Step) -> Any:
+        """The quadratic through the three knots at the fraction ``s`` (a knot itself at s = 0, 1/2, 1).
+
+        Args:
+            s: The fraction of the period, in [0, 1].
+
+        Returns:
+            The input there.
+        """
         if isinstance(s, (int, float)):
             if s == 0:
                 return self.u0
@@ -108,7 +136,7 @@ class Knots(AbstractInputPath):
         return jax.tree.map(lambda a, b, c: w0 * a + wm * b + w1 * c, self.u0, self.um, self.u1)
 
 
-def as_path(u) -> AbstractInputPath:
+def as_path(u: Input) -> AbstractInputPath:
     """A bare input sample means zero-order hold.
 
     Args:
@@ -138,12 +166,36 @@ class AbstractRule(eqx.Module):
 
     order: ClassVar[int]
 
-    def init(self, f: VectorField, x0, u) -> Any:
+    def init(self, f: VectorField, x0: jax.Array, u: Input) -> RuleState:
+        """The rule's own state before the first period (None: a one-step rule has none).
+
+        Args:
+            f: The vector field ``f(x, u)``.
+            x0: The initial state.
+            u: The first input.
+
+        Returns:
+            The rule's state.
+        """
         del f, x0, u
         return None
 
     @abc.abstractmethod
-    def step(self, f: VectorField, x, u, h, rule_state) -> tuple[jax.Array, Any]: ...
+    def step(
+        self, f: VectorField, x: jax.Array, u: Input, h: Step, rule_state: RuleState
+    ) -> tuple[jax.Array, RuleState]:
+        """One period of the rule.
+
+        Args:
+            f: The vector field ``f(x, u)``.
+            x: The state.
+            u: The input over the period (an :class:`AbstractInputPath`, or a bare sample: held).
+            h: The period, s.
+            rule_state: The rule's own state.
+
+        Returns:
+            (the state after the period, the rule's new state).
+        """
 
 
 def _diffrax_term(f: VectorField, path: AbstractInputPath, h):
@@ -156,7 +208,21 @@ class Euler(AbstractRule):
 
     order: ClassVar[int] = 1
 
-    def step(self, f, x, u, h, rule_state):
+    def step(
+        self, f: VectorField, x: jax.Array, u: Input, h: Step, rule_state: RuleState
+    ) -> tuple[jax.Array, RuleState]:
+        """One period of this rule (:meth:`AbstractRule.step`).
+
+        Args:
+            f: The vector field ``f(x, u)``.
+            x: The state.
+            u: The input over the period (an :class:`AbstractInputPath`, or a bare sample: held).
+            h: The period, s.
+            rule_state: The rule's own state.
+
+        Returns:
+            (the state after the period, the rule's new state).
+        """
         path = as_path(u)
         x1, _, _, _, _ = diffrax.Euler().step(_diffrax_term(f, path, h), 0.0, h, x, None, None, False)
         return x1, rule_state
@@ -186,18 +252,31 @@ class RK4(AbstractRule):
     """Classic fourth-order Runge--Kutta (stages at 0, ½, ½, 1 of the period).
 
     The same tableau run through ``diffrax.AbstractERK`` (``_DiffraxClassicRK4``)
-    gives identical steps — tested — but its generic stage loop ran 8× slower
-    inside a vmapped scan (4.8 vs 37.8 M scenario-steps/s for the SOGI-FLL,
-    batch 1024, float32, 2-core CPU), so the hot loop uses the plain formula.
+    gives identical steps — tested — but its generic stage loop is several times slower inside a vmapped scan
+    (docs/performance.md), so the hot loop uses the plain formula.
     """
 
     order: ClassVar[int] = 4
 
-    def step(self, f, x, u, h, rule_state):
+    def step(
+        self, f: VectorField, x: jax.Array, u: Input, h: Step, rule_state: RuleState
+    ) -> tuple[jax.Array, RuleState]:
+        """One period of this rule (:meth:`AbstractRule.step`).
+
+        Args:
+            f: The vector field ``f(x, u)``.
+            x: The state.
+            u: The input over the period (an :class:`AbstractInputPath`, or a bare sample: held).
+            h: The period, s.
+            rule_state: The rule's own state.
+
+        Returns:
+            (the state after the period, the rule's new state).
+        """
         return rk4_step(f, x, as_path(u), h), rule_state
 
 
-def diffrax_rk4_step(f: VectorField, x, u, h):
+def diffrax_rk4_step(f: VectorField, x: jax.Array, u: Input, h: Step) -> jax.Array:
     """One classic RK4 step through diffrax's ERK machinery (the reference for :class:`RK4`).
 
     Args:
@@ -216,7 +295,7 @@ def diffrax_rk4_step(f: VectorField, x, u, h):
     return x1
 
 
-def rk4_step(f: VectorField, x, path: AbstractInputPath, h):
+def rk4_step(f: VectorField, x: jax.Array, path: AbstractInputPath, h: Step) -> jax.Array:
     """Plain classic RK4 step (used to start AB3, which has no history yet).
 
     Args:
@@ -262,7 +341,21 @@ class Tustin(AbstractRule):
         if not (isinstance(self.newton_iters, int) and self.newton_iters >= 1):
             raise ValueError(f"Tustin.newton_iters must be an integer >= 1, got {self.newton_iters!r}")
 
-    def step(self, f, x, u, h, rule_state):
+    def step(
+        self, f: VectorField, x: jax.Array, u: Input, h: Step, rule_state: RuleState
+    ) -> tuple[jax.Array, RuleState]:
+        """One period of this rule (:meth:`AbstractRule.step`).
+
+        Args:
+            f: The vector field ``f(x, u)``.
+            x: The state.
+            u: The input over the period (an :class:`AbstractInputPath`, or a bare sample: held).
+            h: The period, s.
+            rule_state: The rule's own state.
+
+        Returns:
+            (the state after the period, the rule's new state).
+        """
         path = as_path(u)
         f0 = f(x, path.at(0.0))
         u1 = path.at(1.0)
@@ -280,13 +373,13 @@ class Tustin(AbstractRule):
         return y, rule_state
 
 
-def solve_small(a, b):
+def solve_small(a: jax.Array, b: jax.Array) -> jax.Array:
     """Solve a x = b for a small dense ``a`` by unrolled Gauss elimination.
 
     The Newton matrices here are I − (h/2)·J with h‖J‖ ≪ 1, i.e. strongly
     diagonally dominant, so elimination without pivoting is stable.  Unrolled
-    elementwise code vectorizes across a vmapped batch; a batched LAPACK call
-    per scenario made the Tustin rule 40× slower on CPU.  Falls back to
+    elementwise code vectorizes across a vmapped batch, where a batched LAPACK call per scenario is far slower on
+    CPU (docs/performance.md).  Falls back to
     ``jnp.linalg.solve`` above 12 states.
 
     Args:
@@ -307,7 +400,7 @@ def solve_small(a, b):
             m = rows[j][i] / piv
             rows[j] = rows[j] - m * rows[i]
             rhs[j] = rhs[j] - m * rhs[i]
-    x = [None] * n
+    x: list[Any] = [None] * n  # each set below, last first
     for i in reversed(range(n)):
         acc = rhs[i]
         for j in range(i + 1, n):
@@ -337,6 +430,14 @@ class AbstractMultistepState(eqx.Module):
 
 
 class AB3State(AbstractMultistepState):
+    """The AB3 rule's history: f at the two previous samples, and the samples taken while it starts up.
+
+    Attributes:
+        f1: f at the previous sample (x's shape).
+        f2: f two samples back (x's shape).
+        n: The samples taken so far (int32 scalar); None once past the start-up ("steady").
+    """
+
     f1: jax.Array  # f at the previous sample,     shape = x.shape
     f2: jax.Array  # f two samples back,           shape = x.shape
     n: jax.Array | None  # samples taken so far (int32 scalar); None once past the start-up ("steady")
@@ -377,11 +478,33 @@ class AB3(AbstractRule):
 
     order: ClassVar[int] = 3
 
-    def init(self, f, x0, u):
+    def init(self, f: VectorField, x0: jax.Array, u: Input) -> AB3State:
+        """The empty history: zeros, no sample taken.
+
+        Args:
+            f: The vector field (unused).
+            x0: The initial state.
+            u: The first input (unused).
+
+        Returns:
+            The :class:`AB3State`.
+        """
         z = jnp.zeros_like(x0)
         return AB3State(f1=z, f2=z, n=jnp.asarray(0, dtype=jnp.int32))
 
-    def step(self, f, x, u, h, rule_state):
+    def step(self, f: VectorField, x: jax.Array, u: Input, h: Step, rule_state: AB3State) -> tuple[jax.Array, AB3State]:
+        """One period of this rule (:meth:`AbstractRule.step`).
+
+        Args:
+            f: The vector field ``f(x, u)``.
+            x: The state.
+            u: The input over the period (an :class:`AbstractInputPath`, or a bare sample: held).
+            h: The period, s.
+            rule_state: The rule's own state.
+
+        Returns:
+            (the state after the period, the rule's new state).
+        """
         path = as_path(u)
         f0 = f(x, path.at(0.0))
 
@@ -419,7 +542,7 @@ def _is_ab3_component(node) -> bool:
     return isinstance(node, AbstractRuleCarry) and isinstance(node.rule, AB3State)
 
 
-def ab3_steady_from_start(c0, c1, c2, h: float):
+def ab3_steady_from_start(c0: PyTree, c1: PyTree, c2: PyTree, h: float) -> PyTree | None:
     """The carry at sample 0 with every AB3 component's history replaced by one under which two *steady* AB3
     steps from its x₀ land on the x₁ and x₂ that the RK4 start-up took it to.
 
@@ -461,7 +584,7 @@ def ab3_steady_from_start(c0, c1, c2, h: float):
     return jax.tree.map(fill, c0, c1, c2, is_leaf=_is_ab3_component)
 
 
-def check_rule(rule, owner: str) -> AbstractRule:
+def check_rule(rule: object, owner: str) -> AbstractRule:
     """A component's ``rule`` must be a discretization rule object.
 
     Args:

@@ -10,25 +10,46 @@ value and the derivative are finite; away from the origin they are exact.
 
 from __future__ import annotations
 
+import jax
 import jax.numpy as jnp
+import numpy as np
+from jax.typing import ArrayLike
 
 _TINY = 1e-30
 
+Real = jax.Array | np.ndarray | float  # a real value or array (compared with a bound)
 
-def safe_norm2(x, y):
-    """√(x² + y²), exact unless x² + y² < 1e-30, with a zero gradient at the origin."""
+
+def safe_norm2(x: Real, y: Real) -> jax.Array:
+    """√(x² + y²), exact unless x² + y² < 1e-30, with a zero gradient at the origin.
+
+    Args:
+        x: The first component.
+        y: The second component.
+
+    Returns:
+        The norm, 0 at the origin.
+    """
     sq = x * x + y * y
     ok = sq > _TINY
     return jnp.where(ok, jnp.sqrt(jnp.where(ok, sq, 1.0)), 0.0)
 
 
-def safe_atan2(y, x):
-    """atan2(y, x), 0 at the origin with a zero gradient there."""
+def safe_atan2(y: Real, x: Real) -> jax.Array:
+    """atan2(y, x), 0 at the origin with a zero gradient there.
+
+    Args:
+        y: The ordinate.
+        x: The abscissa.
+
+    Returns:
+        The angle, rad, in (−π, π].
+    """
     ok = (x * x + y * y) > _TINY
     return jnp.where(ok, jnp.arctan2(jnp.where(ok, y, 0.0), jnp.where(ok, x, 1.0)), 0.0)
 
 
-def wrap(a):
+def wrap(a: ArrayLike) -> jax.Array:
     """Angle wrapped to (−π, π] (electrical angles and angle errors).
 
     Args:

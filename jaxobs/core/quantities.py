@@ -11,6 +11,7 @@ one for a message or a figure's label.
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable
 from dataclasses import dataclass
 
 __all__ = ["Axis", "text_unit"]
@@ -52,7 +53,9 @@ class Axis:
         """The CF attributes of its coordinate: ``units`` and ``long_name``."""
         return {"units": self.units, "long_name": self.long_name}
 
-    def check(self, values, where: str = "axes", *, low: float | None = None, high: float | None = None):
+    def check(
+        self, values: Iterable[float], where: str = "axes", *, low: float | None = None, high: float | None = None
+    ) -> list[float]:
         """``values`` as a float list, each finite and inside the range.
 
         Args:

@@ -43,6 +43,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax.typing import ArrayLike
 
 __all__ = ["SampleTime", "time_value", "exact_phase", "cycles", "frac_mul"]
 
@@ -54,6 +55,8 @@ _MASK = np.uint32(0xFFFFF000)  # sign, exponent and the top 11 stored mantissa b
 # time stamps printed to 12 digits give ts = 9.99999999997669e-05 for 1e-4).  Over the longest simulation a job
 # allows (10^7 samples) such a difference moves the last sample by 1e-2 of a period at most.
 TS_REL_TOL = 1e-9
+
+Time = jax.Array | np.ndarray | float  # a float time, s (any shape)
 
 
 class SampleTime(eqx.Module):
@@ -73,12 +76,19 @@ class SampleTime(eqx.Module):
     ts: float = eqx.field(static=True)  # s
     t0: float = eqx.field(static=True)  # s
 
-    def value(self):
-        """t0 + k·ts in the default float dtype (rounded: for comparisons and tangents, not for phases)."""
+    def value(self) -> jax.Array:
+        """t0 + k·ts in the default float dtype (rounded: for comparisons and tangents, not for phases).
+
+        Returns:
+            The time, s.
+        """
         return self.t0 + self.ts * jnp.asarray(self.k).astype(jnp.result_type(float))
 
 
-def time_value(t):
+TimeLike = Time | SampleTime  # a float time, or a SampleTime (sample k of a static period)
+
+
+def time_value(t: TimeLike) -> Time:
     """The float time of ``t``.
 
     Args:
@@ -90,7 +100,7 @@ def time_value(t):
     return t.value() if isinstance(t, SampleTime) else t
 
 
-def exact_phase(t, *leaves) -> bool:
+def exact_phase(t: TimeLike, *leaves: ArrayLike) -> bool:
     """Whether to form phases by :func:`cycles`: ``t`` is a SampleTime and the arithmetic is float32.
 
     Args:
@@ -130,8 +140,8 @@ def _frac(x):
 class _Sum:
     """A running sum of fractional parts, kept in [−½, ½] (modulo 1) after every addition."""
 
-    def __init__(self):
-        self.s = None
+    def __init__(self) -> None:
+        self.s: jax.Array | None = None
 
     def add(self, x):
         self.s = _frac(x) if self.s is None else _frac(self.s + _frac(x))
@@ -152,7 +162,7 @@ def _cycles_exact(rate, a_pieces, b_pieces, k):
     return acc.s if acc.s is not None else jnp.zeros_like(rate)
 
 
-def cycles(rate, t, scale: float = 1.0):
+def cycles(rate: Time, t: TimeLike, scale: float = 1.0) -> Time:
     """rate·scale·t in cycles: reduced to [−½, ½] and exact (module doc) when ``t`` is a float32
     :class:`SampleTime`; else the plain product (float64, or a float time).
 
@@ -166,7 +176,7 @@ def cycles(rate, t, scale: float = 1.0):
     """
     tv = time_value(t)
     naive = rate * (scale * tv)
-    if not exact_phase(t, rate):
+    if not isinstance(t, SampleTime) or not exact_phase(t, rate):
         return naive
     rate = jnp.asarray(rate, jnp.float32)
     a = _static_pieces(scale * t.ts)
@@ -176,7 +186,7 @@ def cycles(rate, t, scale: float = 1.0):
     return exact + (naive - jax.lax.stop_gradient(naive))
 
 
-def frac_mul(x, y):
+def frac_mul(x: jax.Array, y: jax.Array) -> jax.Array:
     """x·y modulo 1 in [−½, ½], exact before the last rounding, for float32 x, y (straight-through tangent).
 
     Args:
@@ -192,6 +202,7 @@ def frac_mul(x, y):
     for a in _split(xs):
         for b in _split(ys):
             acc.add(a * b)  # ≤ 24 bits: exact
+    assert acc.s is not None  # four products added
     return acc.s + (naive - jax.lax.stop_gradient(naive))
 
 

@@ -72,7 +72,7 @@ class AbstractSystem(eqx.Module):
         """The state at sample 0."""
 
     @abc.abstractmethod
-    def step(self, state, k) -> tuple[Any, Any]:
+    def step(self, state: Any, k: jax.Array) -> tuple[Any, Any]:
         """One sample period.
 
         Args:

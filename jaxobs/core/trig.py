@@ -37,9 +37,9 @@ random angles in ±10³ rad (and in ±10⁴ and ±4, measured), and 0 ulp on the
 of π/2 up to 10³ and its 16 neighbours either side, where XLA's ``sin`` and ``cos`` are off by 1 ulp.
 Beyond 2¹³·π/2 the error grows as ulp(x); above 2²¹ rad (a spacing of 1/4 rad) the result is NaN.  A
 float32 subnormal's sine is ±0, not the subnormal: XLA's CPU code flushes float32 subnormals in its
-arithmetic, and taking x itself after the division by one below made the float32 and float64 drives 3×
-slower (the select was copied into every consumer fusion with all it reads).  On 10⁶ values (jit, this
-machine, one run, load 0.8) its cosine takes 0.50 ns a value (sine and cosine 0.60), XLA's ``cos`` 4.6.
+arithmetic, and taking x itself after the division by one below made the float32 and float64 drives
+slower (the select was copied into every consumer fusion with all it reads; docs/performance.md).  Its cosine
+is several times faster than XLA's ``cos`` (docs/performance.md).
 Other dtypes (float16, bfloat16) keep XLA's ``sin`` and ``cos``.
 
 Derivatives: a ``custom_jvp`` that uses ``sincos`` itself (d sin = cos dx, d cos = −sin dx), so every
@@ -50,6 +50,7 @@ from __future__ import annotations
 
 import jax
 import jax.numpy as jnp
+from jax.typing import ArrayLike
 
 __all__ = ["sincos"]
 
@@ -94,7 +95,7 @@ _D3 = 2.443315711809948e-5
 _LIMIT32 = 2.0**21  # rad: beyond it NaN (module doc)
 
 
-def sincos(x):
+def sincos(x: ArrayLike) -> tuple[jax.Array, jax.Array]:
     """(sin x, cos x): in float64 and float32 the vectorizable version of the module doc (float64: at most 1 ulp
     from libm's for |x| ≤ 10⁵; float32: see the module doc), in any other dtype XLA's ``sin`` and ``cos``.
 
@@ -195,7 +196,8 @@ def _sincos_jit(x):
     # does not copy an expensive value into each of its consumers, so sin and cos are computed once per
     # angle in a vectorized loop of their own.  Without it XLA copied the whole polynomial into every
     # fusion that reads it, among them the plant's state-derivative stacks, which its CPU backend emits as
-    # scalar loops, one per stacked component: the float64 drive ran 3.5× slower than with XLA's own sine.
+    # scalar loops, one per stacked component: the float64 drive ran slower than with XLA's own sine
+    # (docs/performance.md).
     one = 1.0 + 0.0 * x
     return jnp.where(ok, s, jnp.nan) / one, jnp.where(ok, c, jnp.nan) / one
 

@@ -22,7 +22,10 @@ import secrets
 import shutil
 import stat
 import tempfile
+from collections.abc import Callable
 from pathlib import Path
+from types import TracebackType
+from typing import Literal
 
 __all__ = ["atomic_write_bytes", "atomic_write_text", "atomic_path", "remove_temps", "is_temp"]
 
@@ -56,7 +59,9 @@ def _fsync_folder(folder: Path) -> None:
         os.close(fd)
 
 
-def atomic_write_bytes(path, data: bytes, replace=os.replace) -> None:
+def atomic_write_bytes(
+    path: str | os.PathLike[str], data: bytes, replace: Callable[[str, Path], None] = os.replace
+) -> None:
     """``data`` to a temp file beside ``path``, fsync'ed, then renamed over it (a symlink or hard link there is
     replaced, never written through).
 
@@ -97,7 +102,7 @@ def atomic_write_bytes(path, data: bytes, replace=os.replace) -> None:
     _fsync_folder(path.parent)
 
 
-def atomic_write_text(path, text: str) -> None:
+def atomic_write_text(path: str | os.PathLike[str], text: str) -> None:
     """Write text (UTF-8) to a file through :func:`atomic_write_bytes`.
 
     Args:
@@ -116,15 +121,18 @@ class atomic_path:
     ``tmp`` (an ``OSError`` then), leaves ``p`` as it was.
     """
 
-    def __init__(self, path):
+    def __init__(self, path: str | os.PathLike[str]) -> None:
         self.path = Path(path)
-        self._dir = None
+        self._dir: Path | None = None
 
     def __enter__(self) -> Path:
         self._dir = Path(tempfile.mkdtemp(prefix=f".{self.path.name}.", suffix=".tmp", dir=self.path.parent))
         return self._dir / self.path.name
 
-    def __exit__(self, et, ev, tb):
+    def __exit__(
+        self, et: type[BaseException] | None, ev: BaseException | None, tb: TracebackType | None
+    ) -> Literal[False]:
+        assert self._dir is not None, "atomic_path: __exit__ before __enter__"
         try:
             if et is None:
                 tmp = self._dir / self.path.name
@@ -142,7 +150,7 @@ class atomic_path:
         return False
 
 
-def remove_temps(folder, match=is_temp) -> list[str]:
+def remove_temps(folder: str | os.PathLike[str], match: Callable[[str], bool] = is_temp) -> list[str]:
     """Remove the temp entries a killed writer left in ``folder`` (files, and folders with what they hold; a
     symlink is removed itself, never followed).  The caller must be the folder's only writer (the command
     line holds its lock).

@@ -16,9 +16,13 @@ import stat
 from importlib.metadata import PackageNotFoundError
 from importlib.metadata import version as _pkg_version
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import jax
 import numpy as np
+
+if TYPE_CHECKING:
+    import xarray as xr
 
 __all__ = [
     "CONVENTIONS",
@@ -66,22 +70,33 @@ def _version(name: str) -> str:
         return "unknown"
 
 
-def versions() -> dict:
+def versions() -> dict[str, str | bool]:
     """``{package: version}`` for :data:`PACKAGES`, the Python version and whether JAX runs in float64 (``x64``)."""
-    out = {name: _version(name) for name in PACKAGES}
+    out: dict[str, str | bool] = {name: _version(name) for name in PACKAGES}
     out["python"] = platform.python_version()
-    out["x64"] = bool(jax.config.jax_enable_x64)
+    out["x64"] = bool(jax.config.read("jax_enable_x64"))
     return out
 
 
-def read_file(path, max_bytes: int) -> bytes:
+def read_file(path: str | os.PathLike[str], max_bytes: int) -> bytes:
     """The bytes of the regular file at ``path``, at most ``max_bytes`` of them; else a one-line ``ValueError``
     (``cannot read 'P' (reason)``, ``'P': not a file``, ``'P': more than the limit of N bytes``) that a
     caller prefixes with the field or argument that named the file.
 
     A FIFO, a device or a directory is refused before it is opened (``os.stat``), and the file is opened
     with ``O_NONBLOCK`` and checked again on its descriptor (``os.fstat``): a FIFO swapped in between the
-    two calls cannot block the process, and ``/dev/zero`` cannot fill its memory."""
+    two calls cannot block the process, and ``/dev/zero`` cannot fill its memory.
+
+    Args:
+        path: The file.
+        max_bytes: The most bytes it may hold.
+
+    Returns:
+        Its bytes.
+
+    Raises:
+        ValueError: Not a regular file, larger than ``max_bytes``, or unreadable (one line).
+    """
     p = os.fspath(path)
     shown = repr(p if len(p) <= 120 else p[:117] + "...")
     try:
@@ -123,19 +138,27 @@ def sha256(data: bytes | str | Path) -> str:
     return h.hexdigest()
 
 
-def provenance(source: str, *, digests: dict | None = None) -> dict:
+def provenance(source: str, *, digests: dict[str, str] | None = None) -> dict[str, str | int]:
     """NetCDF attributes (strings and integers) of a result: ``source`` (the function or command that made it),
     ``<package>_version`` for every package of :func:`versions`, ``python_version``, ``jax_enable_x64`` (1/0),
-    and ``<name>_sha256`` for each ``name: hex digest`` of ``digests`` (the files the result was made from)."""
+    and ``<name>_sha256`` for each ``name: hex digest`` of ``digests`` (the files the result was made from).
+
+    Args:
+        source: The function or command that made the result.
+        digests: ``{name: hex sha256}`` of the files the result was made from.
+
+    Returns:
+        The attributes.
+    """
     v = versions()
-    attrs = {"source": source, **{f"{k}_version": v[k] for k in (*PACKAGES, "python")}}
+    attrs: dict[str, str | int] = {"source": source, **{f"{k}_version": str(v[k]) for k in (*PACKAGES, "python")}}
     attrs["jax_enable_x64"] = int(v["x64"])
     for name, digest in (digests or {}).items():
         attrs[f"{name}_sha256"] = digest
     return attrs
 
 
-def cf_dataset(ds, title: str):
+def cf_dataset(ds: xr.Dataset, title: str) -> xr.Dataset:
     """``ds`` made a CF-1.8 Dataset, in place, and returned: what every NetCDF the commands write passes through.
 
     - Global attributes: ``Conventions`` (:data:`CONVENTIONS`), ``title``, ``institution``, ``references`` (the
@@ -188,9 +211,16 @@ def cf_dataset(ds, title: str):
     return ds
 
 
-def cf_missing(ds) -> list[str]:
+def cf_missing(ds: xr.Dataset) -> list[str]:
     """The variables and coordinates of ``ds`` that lack what CF asks of them here: a ``long_name``, and ``units``
-    on every numeric one (a string label, such as a design's name, has no unit); ``[]`` when none does."""
+    on every numeric one (a string label, such as a design's name, has no unit); ``[]`` when none does.
+
+    Args:
+        ds: An ``xarray.Dataset``.
+
+    Returns:
+        One line per lack, ``<name>: no long_name`` or ``<name>: no units``.
+    """
     out = []
     for name in ds.variables:
         attrs = ds[name].attrs
@@ -201,7 +231,7 @@ def cf_missing(ds) -> list[str]:
     return out
 
 
-def cf_labels(ds):
+def cf_labels(ds: xr.Dataset) -> xr.Dataset:
     """``ds`` as a NetCDF holds it: each dimension whose coordinate is a list of names (``design``; ``recording``,
     the files of a study or a job on recordings) gets a numeric index as its coordinate (0, 1, ... as int32), and
     the names a label variable ``<dim>_label`` beside it (CF 1.8, 6.1: a string-valued auxiliary coordinate).  A
@@ -230,7 +260,7 @@ def cf_labels(ds):
     return out
 
 
-def by_label(ds):
+def by_label(ds: xr.Dataset) -> xr.Dataset:
     """:func:`cf_labels`'s inverse: ``ds`` read from a NetCDF with the names as the coordinates again
     (``ds.sel(design="tuned")``); ``ds`` itself where it has no ``<dim>_label``.
 

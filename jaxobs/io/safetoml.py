@@ -7,9 +7,11 @@ line that names the field (the file's role, ``what``, when no key is at fault).
 
 from __future__ import annotations
 
+import os
 import re
 import tomllib
 from pathlib import Path
+from typing import Any
 
 from .provenance import read_file
 
@@ -64,9 +66,13 @@ _HEADER = re.compile(r"\s*\[\[?\s*([^\]]+?)\s*\]\]?\s*$")
 
 
 def check_numbers(text: str, what: str = "job file") -> None:
-    """Refuse a number literal of more than :data:`MAX_DIGITS` digits before the parser converts it (a
-    5000-digit integer was "Exceeds the limit (4300 digits)", naming no field), naming its field: the
-    key on its line, under the table header above it.
+    """Refuse a number literal of more than :data:`MAX_DIGITS` digits before the parser converts it (the
+    parser's own refusal of a too-long integer names no field), naming its field: the key on its line, under
+    the table header above it.
+
+    Args:
+        text: The TOML text.
+        what: The file's role, named where a number lies outside every table and key.
 
     Raises:
         TomlFieldError: naming the key.
@@ -98,7 +104,7 @@ def _depth(obj) -> int:
     return best
 
 
-def read_toml(path, what: str = "job file") -> tuple[dict, bytes]:
+def read_toml(path: str | os.PathLike[str], what: str = "job file") -> tuple[dict[str, Any], bytes]:
     """A TOML file's table and bytes.
 
     Args:

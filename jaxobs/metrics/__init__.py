@@ -1,7 +1,9 @@
 """Metrics: the functions that score a trajectory, and the one metric table.
 
 - :mod:`jaxobs.metrics._core`: metrics on simulated trajectories, exact and smooth (``settling_time``, ``rms``,
-  ``lost_lock``, ...), each a function of arrays or of a :class:`~jaxobs.Solution`;
+  ``smooth_settling_time``, ...), each a function of arrays;
+- :mod:`jaxobs.metrics._lock`: lost lock and lost speed, the flags of a run, and the position error of a
+  :class:`~jaxobs.Solution` (``lost_lock``, ``lost_lock_of``, ``lost_speed``, ``position_error``);
 - :mod:`jaxobs.metrics._table`: :data:`METRICS`, one :class:`Metric` per quantity a study, a tuning job or an
   envelope reports (SI units; flags are boolean metrics, the stability margin a system metric), display units as
   a presentation transform, and :data:`ALIASES`, the old names read on input (:func:`canonical`).
@@ -9,6 +11,8 @@
 
 from ._core import *  # noqa: F403
 from ._core import __all__ as _core_all
+from ._lock import *  # noqa: F403
+from ._lock import __all__ as _lock_all
 from ._table import ALIASES as ALIASES
 from ._table import DISPLAY as DISPLAY
 from ._table import DIVERGED as DIVERGED
@@ -22,6 +26,7 @@ from ._table import scored_position_error as scored_position_error
 
 __all__ = [
     *_core_all,
+    *_lock_all,
     "ALIASES",
     "DISPLAY",
     "DIVERGED",

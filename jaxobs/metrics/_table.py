@@ -29,6 +29,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import _core as M
+from . import _lock as L
 from ._core import _DRIVE_OUTPUTS
 
 __all__ = [
@@ -186,8 +187,8 @@ def _speed_hat(sol, sc):
 def scored_position_error(sol, sig, ctx):
     """The position error (rad, :func:`jaxobs.metrics.position_error`) as the metrics score it.  A drive
     started from standstill runs on the I-f angle until its hand-over (the FOC's ``mode`` 0 → 1); the
-    observer is not in the loop then and may sit ~90° off while it converges at low speed (measured: the I-f
-    phase was 0.12 of a 0.124 ``iae_position``), which is the start-up's doing, not the observer's.  So its
+    observer is not in the loop then and may sit ~90° off while it converges at low speed (most of the
+    ``iae_position`` of such a start, docs/performance.md), which is the start-up's doing, not the observer's.  So its
     error counts from the hand-over on (a steady start is in mode 1 from t = 0: unchanged).  Inside the steady
     window it always counts: a drive that has not handed over by then is scored (and flagged lost_sync) on its
     real error, never rewarded with a zero.
@@ -200,7 +201,7 @@ def scored_position_error(sol, sig, ctx):
     Returns:
         The position error along the run, rad (zero before a standstill start's hand-over).
     """
-    err = M.position_error(sol, sig)
+    err = L.position_error(sol, sig)
     if not isinstance(sol.outputs, _DRIVE_OUTPUTS):  # an observer on a signal: no start-up
         return err
     return jnp.where((sol.outputs.mode == 1) | _steady(sol, ctx), err, 0.0)
@@ -212,7 +213,7 @@ def _lost_sync(sol, sc, ctx):
     # the observer locks again afterwards.  The scored error is already wrapped (wrap of it against 0 is itself)
     err = scored_position_error(sol, sc, ctx)
     every = jnp.ones(err.shape, dtype=bool)
-    return M.lost_lock(err, jnp.zeros_like(err), every, math.radians(M.LOCK_TOL_DRIVE_DEG))
+    return L.lost_lock(err, jnp.zeros_like(err), every, math.radians(L.LOCK_TOL_DRIVE_DEG))
 
 
 def _entries(*ms: Metric) -> dict[str, Metric]:
@@ -225,8 +226,8 @@ def _entries(*ms: Metric) -> dict[str, Metric]:
 
 
 _LOCK = (
-    f"lost lock: diverged, or in the steady window a phase error > {M.LOCK_TOL_DEG:g} deg or a mean frequency error "
-    f"> {100 * M.LOCK_FREQ_TOL:g} % (an estimate on a signal), a position error > {M.LOCK_TOL_DRIVE_DEG:g} deg "
+    f"lost lock: diverged, or in the steady window a phase error > {L.LOCK_TOL_DEG:g} deg or a mean frequency error "
+    f"> {100 * L.LOCK_FREQ_TOL:g} % (an estimate on a signal), a position error > {L.LOCK_TOL_DRIVE_DEG:g} deg "
     "electrical (a drive observer) (1: lost)"
 )
 
@@ -304,28 +305,28 @@ METRICS: dict[str, Metric] = _entries(
         "rms_position_steady",
         "rad",
         "steady rms position error (electrical)",
-        exact=lambda sol, sc, ctx: M.rms(M.position_error(sol, sc), _steady(sol, ctx)),
+        exact=lambda sol, sc, ctx: M.rms(L.position_error(sol, sc), _steady(sol, ctx)),
         display="degree",
     ),
     Metric(
         "peak_position_steady",
         "rad",
         "steady peak |position error| (electrical)",
-        exact=lambda sol, sc, ctx: jnp.max(jnp.where(_steady(sol, ctx), jnp.abs(M.position_error(sol, sc)), 0.0)),
+        exact=lambda sol, sc, ctx: jnp.max(jnp.where(_steady(sol, ctx), jnp.abs(L.position_error(sol, sc)), 0.0)),
         display="degree",
     ),
     Metric(
         "ripple_position",
         "rad",
         "steady peak-to-peak position error (electrical)",
-        smooth=lambda sol, sc, ctx: M.smooth_peak_to_peak(M.position_error(sol, sc), _steady(sol, ctx), 1e-4),
+        smooth=lambda sol, sc, ctx: M.smooth_peak_to_peak(L.position_error(sol, sc), _steady(sol, ctx), 1e-4),
         display="degree",
     ),
     Metric(
         "bias_position",
         "rad",
         "|mean position error| in the steady window (electrical): the observer's steady lag",
-        exact=lambda sol, sc, ctx: jnp.abs(M.steady_mean(M.position_error(sol, sc), _steady(sol, ctx))),
+        exact=lambda sol, sc, ctx: jnp.abs(M.steady_mean(L.position_error(sol, sc), _steady(sol, ctx))),
         display="degree",
     ),
     # drive observers in the closed loop (the scenario is a drive Scenario): settling after a load or speed step at
@@ -442,16 +443,16 @@ METRICS: dict[str, Metric] = _entries(
         _LOCK,
         # the one definition (jaxobs.metrics.lost_lock_of: 45° / 10 % on signals, 90° on the drive), over the
         # steady window
-        exact=lambda sol, sc, ctx: M.lost_lock_of(sol, ctx.steady_from, signal=sc),
+        exact=lambda sol, sc, ctx: L.lost_lock_of(sol, ctx.steady_from, signal=sc),
         kind="flag",
         count="scenarios that lost lock (diverged ones included)",
     ),
     Metric(
         "lost_speed",
         "1",
-        f"lost speed: diverged, or the steady window's mean |speed - reference| > {100 * M.SPEED_TOL:g} % of the "
-        f"mean |reference| (at least {M.SPEED_FLOOR_RPM:g} r/min) (1: lost)",
-        exact=lambda sol, sc, ctx: M.lost_speed(sol.outputs.omega_m, sol.outputs.omega_m_ref, _steady(sol, ctx)),
+        f"lost speed: diverged, or the steady window's mean |speed - reference| > {100 * L.SPEED_TOL:g} % of the "
+        f"mean |reference| (at least {L.SPEED_FLOOR_RPM:g} r/min) (1: lost)",
+        exact=lambda sol, sc, ctx: L.lost_speed(sol.outputs.omega_m, sol.outputs.omega_m_ref, _steady(sol, ctx)),
         kind="flag",
         closed_loop=True,
         count="scenarios that missed their speed reference (diverged ones included)",
@@ -459,7 +460,7 @@ METRICS: dict[str, Metric] = _entries(
     Metric(
         "lost_sync",
         "1",
-        f"lost synchronism: diverged, or |position error| > {M.LOCK_TOL_DRIVE_DEG:g} deg anywhere in the scored "
+        f"lost synchronism: diverged, or |position error| > {L.LOCK_TOL_DRIVE_DEG:g} deg anywhere in the scored "
         "horizon (1: lost)",
         exact=_lost_sync,
         kind="flag",

@@ -26,16 +26,18 @@ from __future__ import annotations
 import functools
 import itertools
 import math
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
-from typing import ClassVar
+from typing import Any, ClassVar
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jaxtyping import PyTree
 
 from ..core.quantities import Axis
-from ..core.sampletime import SampleTime, time_value
+from ..core.sampletime import SampleTime, Time, TimeLike, time_value
 from ..papers import TEST_C_HARMONICS
 from ..signals import AbstractSignal, EMFSignal, GridSignal, stack
 
@@ -89,8 +91,8 @@ class NoisyGridSignal(AbstractSignal):
     """
 
     clean: GridSignal
-    noise: jax.Array
-    key: jax.Array
+    noise: jax.Array | np.ndarray  # NumPy in the template grid_signals broadcasts, JAX once batched
+    key: jax.Array | np.ndarray
 
     accepts_sample_time: ClassVar[bool] = True  # passed on to the clean signal (exact float32 phase)
     has_truth: ClassVar[bool] = True  # the clean signal's
@@ -106,20 +108,52 @@ class NoisyGridSignal(AbstractSignal):
             n = jax.random.normal(self.key, jnp.shape(tv), dtype=dtype)
         return self.clean(t) + self.noise * n
 
-    def theta(self, t):
+    def theta(self, t: TimeLike) -> Time:
+        """The phase, rad, of the clean signal at ``t``.
+
+        Args:
+            t: The time, s, or a :class:`~jaxobs.SampleTime`.
+
+        Returns:
+            The phase, rad.
+        """
         return self.clean.theta(t)
 
-    def omega(self, t):
+    def omega(self, t: TimeLike) -> Time:
+        """The angular frequency, rad/s, of the clean signal at ``t``.
+
+        Args:
+            t: The time, s, or a :class:`~jaxobs.SampleTime`.
+
+        Returns:
+            The angular frequency, rad/s.
+        """
         return self.clean.omega(t)
 
-    def fundamental_amplitude(self, t):
+    def fundamental_amplitude(self, t: TimeLike) -> Time:
+        """The fundamental's amplitude of the clean signal at ``t``.
+
+        Args:
+            t: The time, s, or a :class:`~jaxobs.SampleTime`.
+
+        Returns:
+            The fundamental's amplitude.
+        """
         return self.clean.fundamental_amplitude(t)
 
 
 _AXIS_LOWER = {"sag": 0.0, "harmonics_scale": 0.0, "sub_amplitude": 0.0, "noise": 0.0}
 
 
-def grid_signals(names, combos, t_event: float, freq: float, *, seed: int = 0, first: int = 0):
+def grid_signals(
+    names: Sequence[str],
+    combos: Sequence[Sequence[float]],
+    t_event: float,
+    freq: float,
+    *,
+    seed: int = 0,
+    first: int = 0,
+) -> NoisyGridSignal:
     """Batched :class:`NoisyGridSignal` for ``combos``.
 
     Vectorized — the leaves are set as arrays, no constructor runs per scenario — and
@@ -209,7 +243,7 @@ EMF_SIGNAL_AXES: dict[str, Axis] = {
 }
 
 
-def emf_signals(names, combos):
+def emf_signals(names: Sequence[str], combos: Sequence[Sequence[float]]) -> EMFSignal:
     """Batched :class:`~jaxobs.EMFSignal` for ``combos``.
 
     A back EMF proportional to speed, 100 V at 50 Hz (``speed_hz``, default 50 Hz), with dc offsets
@@ -263,6 +297,11 @@ def _axes_dict(axes) -> dict:
     return out
 
 
+AxisMeta = Callable[[str], dict[str, str]]  # an axis's attributes (units, long_name) by its name
+Builder = Callable[[tuple, list], PyTree]  # build(names, points): a family's batched scenarios of its points
+Layout = tuple[tuple, tuple, dict]  # (dims after design, the shape of the per-scenario values, the coordinates)
+
+
 class AbstractSampler:
     """The points of a study.
 
@@ -281,6 +320,7 @@ class AbstractSampler:
     dim_attrs: ClassVar[dict] = {}
 
     def points(self) -> list[tuple]:
+        """The points, one tuple of values per scenario in ``names`` order."""
         raise NotImplementedError
 
     def array(self) -> np.ndarray:
@@ -290,10 +330,19 @@ class AbstractSampler:
         pts = self.points()
         return np.asarray(pts, dtype=float).reshape(len(pts), len(self.names))
 
-    def layout(self, axis_meta) -> tuple[tuple, tuple, dict]:
+    def layout(self, axis_meta: AxisMeta) -> Layout:
+        """How the results are laid out: the dims after ``design``, the shape the per-scenario values take, and the
+        coordinates ``{name: (dim, values, attributes)}``.
+
+        Args:
+            axis_meta: An axis's attributes (``units``, ``long_name``) by its name.
+
+        Returns:
+            (dims, shape, coordinates).
+        """
         raise NotImplementedError
 
-    def scenarios(self, build, points: list):
+    def scenarios(self, build: Builder | None, points: list) -> PyTree:
         """The batched scenario PyTree of ``points`` (this sampler's): ``build(names, points)``.
 
         Args:
@@ -330,17 +379,28 @@ class Grid(AbstractSampler):
 
     @property
     def names(self) -> tuple:
+        """The axes, in ``axes`` order."""
         return tuple(self.axes)
 
     def points(self) -> list[tuple]:
+        """Every combination of the axes' values, the last axis fastest."""
         return list(itertools.product(*(list(map(float, self.axes[n])) for n in self.names)))
 
     def array(self) -> np.ndarray:
+        """The points as one (n, axes) float array, in :meth:`points`' order."""
         # itertools.product's order (the last axis fastest), without a tuple per point
         cols = np.meshgrid(*(np.asarray(self.axes[n], dtype=float) for n in self.names), indexing="ij")
         return np.stack([c.reshape(-1) for c in cols], axis=1)
 
-    def layout(self, axis_meta):
+    def layout(self, axis_meta: AxisMeta) -> Layout:
+        """The axes as dims, each with its values as the coordinate (:meth:`AbstractSampler.layout`).
+
+        Args:
+            axis_meta: An axis's attributes (``units``, ``long_name``) by its name.
+
+        Returns:
+            (dims, shape, coordinates).
+        """
         shape = tuple(len(self.axes[n]) for n in self.names)
         coords = {n: (n, np.asarray(self.axes[n], dtype=float), axis_meta(n)) for n in self.names}
         return self.names, shape, coords
@@ -376,9 +436,18 @@ class _Drawn(AbstractSampler):
         raise NotImplementedError
 
     def points(self) -> list[tuple]:
+        """The points drawn, as tuples (:meth:`array`'s rows)."""
         return list(map(tuple, self.array().tolist()))
 
-    def layout(self, axis_meta):
+    def layout(self, axis_meta: AxisMeta) -> Layout:
+        """One ``sample`` dim, the axes as coordinates along it (:meth:`AbstractSampler.layout`).
+
+        Args:
+            axis_meta: An axis's attributes (``units``, ``long_name``) by its name.
+
+        Returns:
+            (dims, shape, coordinates).
+        """
         # the coordinates straight from the array: a list of n tuples of Python floats took ~180 bytes a
         # scenario, at the end of a study where its values are held too (the peak of a 10⁶-scenario study)
         pts = self.array()
@@ -403,6 +472,7 @@ class Random(_Drawn):
     sampling: ClassVar[str] = "random"
 
     def array(self) -> np.ndarray:
+        """The points drawn uniformly, (n, axes)."""
         # one vectorized draw: the same numbers as n × axes scalar draws in that order (row-major), without a
         # Python loop over the points
         lo, hi = self._bounds()
@@ -432,9 +502,12 @@ class Sobol(_Drawn):
     sample_long_name: ClassVar[str] = "scenario drawn by sobol"
 
     def array(self) -> np.ndarray:
+        """The points of the scrambled Sobol sequence, (n, axes)."""
         from scipy.stats import qmc
 
-        return _qmc_points(self, qmc.Sobol(len(self.names), scramble=True, seed=self.seed).random(self.n))
+        # scipy's rng renaming decorator keeps seed=, which its stubs do not show
+        sobol = qmc.Sobol(len(self.names), scramble=True, seed=self.seed)  # pyright: ignore[reportCallIssue]
+        return _qmc_points(self, sobol.random(self.n))
 
 
 class LHS(_Drawn):
@@ -453,9 +526,12 @@ class LHS(_Drawn):
     sample_long_name: ClassVar[str] = "scenario drawn by lhs"
 
     def array(self) -> np.ndarray:
+        """The points of the Latin hypercube, (n, axes)."""
         from scipy.stats import qmc
 
-        return _qmc_points(self, qmc.LatinHypercube(len(self.names), seed=self.seed).random(self.n))
+        # scipy's rng renaming decorator keeps seed=, which its stubs do not show
+        lhs = qmc.LatinHypercube(len(self.names), seed=self.seed)  # pyright: ignore[reportCallIssue]
+        return _qmc_points(self, lhs.random(self.n))
 
 
 class Given(AbstractSampler):
@@ -475,7 +551,7 @@ class Given(AbstractSampler):
     # the dim's attributes, where the family has no axis of its name (jaxobs.studies.study.study)
     dim_attrs: ClassVar[dict] = {"units": "1", "long_name": "scenario given whole (jaxobs.scenarios.Given)"}
 
-    def __init__(self, batch, labels=None, dim: str = "scenario"):
+    def __init__(self, batch: PyTree, labels: Sequence[Any] | None = None, dim: str = "scenario") -> None:
         sizes = {int(np.shape(x)[0]) for x in jax.tree.leaves(batch) if np.ndim(x) > 0}
         if len(sizes) != 1:
             raise ValueError(f"{type(self).__name__}: the scenarios need one leading axis, got sizes {sorted(sizes)}")
@@ -487,12 +563,30 @@ class Given(AbstractSampler):
         self.dim = dim
 
     def points(self) -> list[tuple]:
+        """One empty tuple per scenario (no axes)."""
         return [() for _ in range(self.n)]
 
-    def scenarios(self, build, points: list):
+    def scenarios(self, build: Builder | None, points: list) -> PyTree:
+        """The scenarios given (:meth:`AbstractSampler.scenarios`; no builder is needed).
+
+        Args:
+            build: Unused.
+            points: Unused: every scenario is run.
+
+        Returns:
+            The batch given.
+        """
         return self.batch
 
-    def layout(self, axis_meta):
+    def layout(self, axis_meta: AxisMeta) -> Layout:
+        """The one dim, the labels as its coordinate (:meth:`AbstractSampler.layout`).
+
+        Args:
+            axis_meta: The dim's attributes (``units``, ``long_name``) by its name.
+
+        Returns:
+            (dims, shape, coordinates).
+        """
         return (self.dim,), (self.n,), {self.dim: (self.dim, self.labels, axis_meta(self.dim))}
 
 
@@ -512,7 +606,7 @@ class Recordings(Given):
     sampling: ClassVar[str] = "recordings"
     dim_attrs: ClassVar[dict] = {"long_name": "recording file (relative to the study file)"}
 
-    def __init__(self, signals, files, sha256=()):
+    def __init__(self, signals: PyTree, files: Sequence[str], sha256: Sequence[str] = ()) -> None:
         self.files = tuple(map(str, files))
         self.sha256 = tuple(sha256)
         if not self.files:
@@ -524,7 +618,9 @@ class Recordings(Given):
 SAMPLINGS: dict[str, type] = {"grid": Grid, "random": Random, "sobol": Sobol, "lhs": LHS}
 
 
-def sampler_of(axes, *, sampling: str | None = None, sample: int = 0, seed: int = 0) -> AbstractSampler:
+def sampler_of(
+    axes: AbstractSampler | Mapping[str, Any], *, sampling: str | None = None, sample: int = 0, seed: int = 0
+) -> AbstractSampler:
     """The sampler of a study: how both presets (:func:`jaxobs.studies.study.run_study`,
     :func:`jaxobs.studies.drive.run_drive_study`) take their scenarios.
 

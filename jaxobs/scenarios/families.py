@@ -32,15 +32,18 @@ from __future__ import annotations
 
 import abc
 import math
-from collections.abc import Mapping
-from typing import ClassVar, NamedTuple
+from collections.abc import Mapping, Sequence
+from typing import Any, ClassVar, NamedTuple, Self, cast
 
 import equinox as eqx
+from jaxtyping import PyTree
 
 from ..core.quantities import Axis
+from ..core.system import AbstractSystem
+from ..core.validate import check_seconds
 from ..drive import DRIVE_AXES as _ALL_DRIVE_AXES
 from ..drive import RPM, ClosedLoop, Drive, PMSMParams, Profile, Scenario, Sensors, scenario_batch
-from ..observers import AbstractDriveObserver
+from ..observers import AbstractDriveObserver, AbstractObserver
 from ..runtime.simulation import OnSignal
 from . import EMF_SIGNAL_AXES, GRID_SIGNAL_AXES, emf_signals, grid_signals
 
@@ -72,7 +75,7 @@ DRIVE_STUDY_AXES: dict[str, Axis] = {
 }
 
 
-def bind_observer(obs, sc: Scenario):
+def bind_observer(obs: AbstractObserver, sc: Scenario) -> AbstractDriveObserver:
     """The observer bound to the scenario's assumed machine and initial speed: ``obs.bind(est_par, p̂·ω_m0)``
     (:meth:`jaxobs.observers.AbstractDriveObserver.bind`, the one binding).
 
@@ -88,13 +91,14 @@ def bind_observer(obs, sc: Scenario):
     """
     if not isinstance(obs, AbstractDriveObserver):
         raise ValueError(f"drive study: {type(obs).__name__} is not a drive observer (a LESO or a flux observer)")
-    return obs.bind(sc.est_par, sc.est_par.p * sc.omega_m0)
+    # bind returns the observer bound (AbstractDriveObserver.bind declares no return type)
+    return cast(AbstractDriveObserver, obs.bind(sc.est_par, sc.est_par.p * sc.omega_m0))
 
 
 def drive_scenarios(
     machine: PMSMParams,
-    names,
-    combos,
+    names: Sequence[str],
+    combos: Sequence[Sequence[float]],
     *,
     seed: int = 0,
     t_event: float = 0.0,
@@ -123,8 +127,7 @@ def drive_scenarios(
     Raises:
         ValueError: ``t_event`` is negative or not finite, or an axis or value is refused by ``scenario_batch``.
     """
-    if not (math.isfinite(t_event) and t_event >= 0):
-        raise ValueError(f"t_event must be a finite number of seconds >= 0, got {t_event!r}")
+    check_seconds("t_event", t_event)
     two = Profile([0.0, t_event], [600.0 * RPM] * 2, kind="step")  # before / after the event
     zero = Profile([0.0, t_event], [0.0, 0.0], kind="step")
     base = Scenario(machine, speed_ref=two, load=zero, omega_m0=600.0 * RPM, sensors=sensors)
@@ -134,8 +137,7 @@ def drive_scenarios(
 def _t_event(table: Mapping, where: str, default: float) -> float:
     """``<where>.t_event``: a finite number of seconds >= 0."""
     v = table.get("t_event", default)
-    if isinstance(v, bool) or not isinstance(v, (int, float)) or not (math.isfinite(v) and v >= 0):
-        raise ValueError(f"{where}.t_event: must be a finite number of seconds >= 0, got {v!r}")
+    check_seconds(f"{where}.t_event:", v, strict=True)
     return float(v)
 
 
@@ -181,7 +183,7 @@ class AbstractFamily(eqx.Module):
     recording_columns: ClassVar[tuple | None] = None
 
     @abc.abstractmethod
-    def build(self, names, points, first: int = 0):
+    def build(self, names: Sequence[str], points: Sequence[Sequence[float]], first: int = 0) -> PyTree:
         """The batched scenarios of ``points``.
 
         Args:
@@ -195,7 +197,7 @@ class AbstractFamily(eqx.Module):
         """
 
     @abc.abstractmethod
-    def system(self, design, scenario):
+    def system(self, design: AbstractObserver, scenario: PyTree) -> AbstractSystem:
         """The system ``design`` runs on one ``scenario``.
 
         Args:
@@ -207,7 +209,14 @@ class AbstractFamily(eqx.Module):
         """
 
     @classmethod
-    def from_toml(cls, table: Mapping, where: str = "scenarios", *, freq_n: float = 50.0, drive=None):
+    def from_toml(
+        cls,
+        table: Mapping[str, Any],
+        where: str = "scenarios",
+        *,
+        freq_n: float = 50.0,
+        drive: DriveSetting | None = None,
+    ) -> Self:
         """The family from its TOML table and what the run gives it.
 
         The table is a job's ``[scenarios]`` or a study file's ``[study]``: the family reads its own keys
@@ -243,7 +252,10 @@ class AbstractFamily(eqx.Module):
         if cls.recording_columns is None:
             raise ValueError(f"{cls.__name__}: no recording stands for its signals")
         cols, truth = cls.recording_columns
-        return RecordedSignals(cls.signal, cols, truth, cls.truth_counts, cls.drive_observer)
+        # truth_counts: a class attribute of each family with recording_columns (declared there, not on this base:
+        # an annotation here would be an equinox field of every family)
+        counts: tuple = getattr(cls, "truth_counts")  # noqa: B009 (not declared on this base: see above)
+        return RecordedSignals(cls.signal, cols, truth, counts, cls.drive_observer)
 
     @classmethod
     def limits(cls, freq_n: float, ts: float) -> dict:
@@ -326,13 +338,19 @@ class GridSignals(AbstractFamily):
     truth_counts: ClassVar[tuple] = (3,)
 
     def __check_init__(self):
-        if not (math.isfinite(self.t_event) and self.t_event >= 0):
-            raise ValueError(f"t_event must be a finite number of seconds >= 0, got {self.t_event!r}")
+        check_seconds("t_event", self.t_event)
         if not (math.isfinite(self.freq) and self.freq > 0):
             raise ValueError(f"freq must be a finite frequency > 0 Hz, got {self.freq!r}")
 
     @classmethod
-    def from_toml(cls, table: Mapping, where: str = "scenarios", *, freq_n: float = 50.0, drive=None):
+    def from_toml(
+        cls,
+        table: Mapping[str, Any],
+        where: str = "scenarios",
+        *,
+        freq_n: float = 50.0,
+        drive: DriveSetting | None = None,
+    ) -> Self:
         """``t_event`` (s, >= 0; default 0.1) and ``seed`` (default 0) from ``table``; the grid's nominal
         frequency is the design's ``freq_n``; ``drive`` does not apply (an FLL closes no loop).
 
@@ -354,10 +372,29 @@ class GridSignals(AbstractFamily):
             raise ValueError(f"{where}: the design's nominal frequency must be > 0 Hz, got {freq_n!r}")
         return cls(_t_event(table, where, 0.1), float(freq_n), _seed(table, where))
 
-    def build(self, names, points, first: int = 0):
+    def build(self, names: Sequence[str], points: Sequence[Sequence[float]], first: int = 0) -> PyTree:
+        """The batched scenarios of ``points`` (:meth:`AbstractFamily.build`).
+
+        Args:
+            names: The axes.
+            points: Tuples of values for the axes ``names``.
+            first: The index of ``points[0]`` among all the scenarios.
+
+        Returns:
+            The batched :class:`~jaxobs.scenarios.NoisyGridSignal` (leading axis one per point).
+        """
         return grid_signals(names, points, self.t_event, self.freq, seed=self.seed, first=first)
 
-    def system(self, design, scenario):
+    def system(self, design: AbstractObserver, scenario: PyTree) -> AbstractSystem:
+        """The system ``design`` runs on one ``scenario`` (:meth:`AbstractFamily.system`).
+
+        Args:
+            design: The observer.
+            scenario: One scenario of this family.
+
+        Returns:
+            The :class:`~jaxobs.OnSignal` of the observer on the grid voltage.
+        """
         return OnSignal(design, scenario)
 
     @classmethod
@@ -395,7 +432,14 @@ class EMFSignals(AbstractFamily):
     truth_counts: ClassVar[tuple] = (1, 2)
 
     @classmethod
-    def from_toml(cls, table: Mapping, where: str = "scenarios", *, freq_n: float = 50.0, drive=None):
+    def from_toml(
+        cls,
+        table: Mapping[str, Any],
+        where: str = "scenarios",
+        *,
+        freq_n: float = 50.0,
+        drive: DriveSetting | None = None,
+    ) -> Self:
         """The back EMFs read no key of ``table`` (their reader checks its own) and no run input.
 
         Args:
@@ -414,10 +458,29 @@ class EMFSignals(AbstractFamily):
             raise ValueError(f"{where}: back-EMF signals run the observer open loop: no drive applies")
         return cls()
 
-    def build(self, names, points, first: int = 0):
+    def build(self, names: Sequence[str], points: Sequence[Sequence[float]], first: int = 0) -> PyTree:
+        """The batched scenarios of ``points`` (:meth:`AbstractFamily.build`).
+
+        Args:
+            names: The axes.
+            points: Tuples of values for the axes ``names``.
+            first: The index of ``points[0]`` among all the scenarios.
+
+        Returns:
+            The batched :class:`~jaxobs.EMFSignal` (leading axis one per point).
+        """
         return emf_signals(names, points)
 
-    def system(self, design, scenario):
+    def system(self, design: AbstractObserver, scenario: PyTree) -> AbstractSystem:
+        """The system ``design`` runs on one ``scenario`` (:meth:`AbstractFamily.system`).
+
+        Args:
+            design: The observer.
+            scenario: One scenario of this family.
+
+        Returns:
+            The :class:`~jaxobs.OnSignal` of the observer on the back EMF.
+        """
         return OnSignal(design, scenario)
 
     @classmethod
@@ -475,7 +538,14 @@ class DriveScenarios(AbstractFamily):
     truth_counts: ClassVar[tuple] = EMFSignals.truth_counts
 
     @classmethod
-    def from_toml(cls, table: Mapping, where: str = "scenarios", *, freq_n: float = 50.0, drive=None):
+    def from_toml(
+        cls,
+        table: Mapping[str, Any],
+        where: str = "scenarios",
+        *,
+        freq_n: float = 50.0,
+        drive: DriveSetting | None = None,
+    ) -> Self:
         """``t_event`` (s, >= 0; default 0: no event) and ``seed`` (default 0) from ``table``; the machine, the
         drive and its sensors from ``drive`` (required: the design closes its loop).
 
@@ -501,12 +571,31 @@ class DriveScenarios(AbstractFamily):
             sensors=drive.sensors,
         )
 
-    def build(self, names, points, first: int = 0):
+    def build(self, names: Sequence[str], points: Sequence[Sequence[float]], first: int = 0) -> PyTree:
+        """The batched scenarios of ``points`` (:meth:`AbstractFamily.build`).
+
+        Args:
+            names: The axes.
+            points: Tuples of values for the axes ``names``.
+            first: The index of ``points[0]`` among all the scenarios.
+
+        Returns:
+            The batched :class:`~jaxobs.drive.Scenario` (leading axis one per point).
+        """
         return drive_scenarios(
             self.machine, names, points, seed=self.seed, t_event=self.t_event, first=first, sensors=self.sensors
         )
 
-    def system(self, design, scenario):
+    def system(self, design: AbstractObserver, scenario: PyTree) -> ClosedLoop:
+        """The system ``design`` runs on one ``scenario`` (:meth:`AbstractFamily.system`).
+
+        Args:
+            design: The observer.
+            scenario: One scenario of this family.
+
+        Returns:
+            The :class:`~jaxobs.drive.ClosedLoop` with the observer bound to the scenario's assumed machine.
+        """
         return ClosedLoop(self.drive, bind_observer(design, scenario), scenario)
 
 
@@ -544,22 +633,63 @@ class RecordedSignals(AbstractFamily):
     flags: ClassVar[tuple[str, ...]] = GridSignals.flags
 
     @classmethod
-    def from_toml(cls, table: Mapping, where: str = "scenarios", *, freq_n: float = 50.0, drive=None):
+    def from_toml(
+        cls,
+        table: Mapping[str, Any],
+        where: str = "scenarios",
+        *,
+        freq_n: float = 50.0,
+        drive: DriveSetting | None = None,
+    ) -> Self:
         """Recordings are made by the family they stand for (:meth:`AbstractFamily.recorded`), their files
         described by the recording table's reader (``jaxobs_tuning.job.recordings``).
+
+        Args:
+            table: The TOML table.
+            where: Its name in errors.
+            freq_n: Unused.
+            drive: Unused.
+
+        Returns:
+            Nothing: it raises.
 
         Raises:
             ValueError: always: name the family the recordings stand for.
         """
         raise ValueError(f"{where}.recording: recordings stand for a family's signals: use <Family>.recorded()")
 
-    def build(self, names, points, first: int = 0):
+    def build(self, names: Sequence[str], points: Sequence[Sequence[float]], first: int = 0) -> PyTree:
+        """Refused: recorded signals are given whole (:class:`jaxobs.scenarios.Recordings`).
+
+        Args:
+            names: The axes.
+            points: Tuples of values for the axes ``names``.
+            first: The index of ``points[0]`` among all the scenarios.
+
+        Returns:
+            Nothing: it raises.
+
+        Raises:
+            ValueError: always.
+        """
         raise ValueError("recorded signals are given whole (jaxobs.scenarios.Recordings): they are not built")
 
-    def system(self, design, scenario):
+    def system(self, design: AbstractObserver, scenario: PyTree) -> AbstractSystem:
+        """The system ``design`` runs on one ``scenario`` (:meth:`AbstractFamily.system`).
+
+        Args:
+            design: The observer.
+            scenario: One scenario of this family.
+
+        Returns:
+            The :class:`~jaxobs.OnSignal` of the observer on the recording (bound to its speed at t = 0 where it binds).
+        """
         # a drive observer starts from the recorded speed at t = 0 (the encoder's); est_par None keeps its own
         # Rs and L (a recording gives the speed, not the machine)
-        return OnSignal(design.bind(None, scenario.omega_e[..., 0]) if self.binds else design, scenario)
+        if not self.binds:
+            return OnSignal(design, scenario)
+        bound = cast(AbstractDriveObserver, design).bind(None, scenario.omega_e[..., 0])  # binds: a drive observer
+        return OnSignal(cast(AbstractObserver, bound), scenario)
 
 
 # the base's first name, kept for code written against it: a family is not a batch of scenarios (docs/architecture.md,

@@ -2,8 +2,10 @@
 
 The contract in ``_base`` (AbstractSignal: what a signal declares; FunctionSignal: a plain function of time);
 waveforms in ``_waveforms`` (GridSignal, EMFSignal, paper001_test, stack); recorded signals and their
-CSV reader in ``_recordings`` (SampledSignal, DriveRecording, read_recording); one recording file as a
-family's scenarios, ``_read`` (read_recorded).
+CSV reader in ``_recordings`` (SampledSignal, DriveRecording, read_recording); drive logs as recorded: their
+declared layout in ``_layout`` (RecordingLayout), their delimited text streamed into disk-backed columns in
+``_logfile``, their checks in ``_logchecks``, the reader in ``_logs`` (read_drive_log, LogData); one recording
+file as a family's scenarios, ``_read`` (read_recorded).
 
 A :class:`GridSignal` is a PyTree whose leaves (amplitude, frequency, event
 time, step sizes, harmonic magnitudes, …) may carry a leading batch axis; it is
@@ -27,9 +29,9 @@ built by :func:`paper001_test`.
 from ..core.sampletime import SampleTime as SampleTime
 from ._base import AbstractSignal as AbstractSignal
 from ._base import FunctionSignal as FunctionSignal
+from ._layout import RecordingLayout as RecordingLayout
+from ._layout import RecordingWarning as RecordingWarning
 from ._logs import LogData as LogData
-from ._logs import RecordingLayout as RecordingLayout
-from ._logs import RecordingWarning as RecordingWarning
 from ._logs import read_drive_log as read_drive_log
 from ._read import read_recorded as read_recorded
 from ._recordings import MAX_CSV_BYTES as MAX_CSV_BYTES

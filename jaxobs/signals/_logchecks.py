@@ -9,8 +9,40 @@ check's memory does not grow with the log.  An error is a one-line ``ValueError`
 from __future__ import annotations
 
 import math
+from typing import Protocol
 
+import jax
 import numpy as np
+
+
+class MachineConstants(Protocol):
+    """The machine constants the power and timing checks read (a :class:`jaxobs.drive.PMSMParams` has them)."""
+
+    @property
+    def p(self) -> int:
+        """The pole pairs."""
+        ...
+
+    @property
+    def Rs(self) -> jax.Array:
+        """The stator resistance, Ω."""
+        ...
+
+    @property
+    def Ld(self) -> jax.Array:
+        """The d-axis inductance, H."""
+        ...
+
+    @property
+    def Lq(self) -> jax.Array:
+        """The q-axis inductance, H."""
+        ...
+
+    @property
+    def psi_f(self) -> jax.Array:
+        """The magnet's flux linkage, Wb."""
+        ...
+
 
 # --------------------------------------------------------------------------------------------------------------
 

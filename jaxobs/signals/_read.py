@@ -8,7 +8,8 @@ timing and consistency checks), or resampled by the small reader when the log's 
 from __future__ import annotations
 
 from ..core.sampletime import TS_REL_TOL
-from ._logs import RecordingLayout, read_drive_log
+from ._layout import RecordingLayout
+from ._logs import read_drive_log
 from ._recordings import DriveRecording, SampledSignal
 
 __all__ = ["read_recorded"]

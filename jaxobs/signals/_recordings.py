@@ -6,9 +6,10 @@ from __future__ import annotations
 import csv
 import errno
 import math
+import os
 import re
 from pathlib import Path
-from typing import ClassVar
+from typing import ClassVar, cast
 
 import equinox as eqx
 import jax
@@ -247,7 +248,7 @@ class SampledSignal(_Recording):
             raise ValueError(f"from_csv: truth must be 3 columns (theta, omega, amplitude), got {truth!r}")
         rec = read_recording(
             path,
-            None if columns is None else ([columns] if single else list(columns)),
+            None if columns is None else [columns] if isinstance(columns, (str, int)) else list(columns),
             time_column=time_column,
             sample_rate=sample_rate,
             ts=ts,
@@ -365,7 +366,7 @@ class RecordingColumnError(ValueError):
         self.role, self.spec = role, spec
 
 
-def _column(spec, header, width, path, role):
+def column_index(spec: object, header: list[str] | None, width: int, path: str | os.PathLike[str], role: str) -> int:
     """The index of a column given by name or 0-based index."""
     p = str(path)
     if isinstance(spec, (int, np.integer)) and not isinstance(spec, bool):
@@ -425,18 +426,19 @@ def read_recording(
     width = table.shape[1]
     if (time_column is None) == (sample_rate is None):
         raise ValueError(f"recording {str(path)!r}: give exactly one of time_column and sample_rate")
-    tcol = None if time_column is None else _column(time_column, header, width, path, "time")
-    idx_extra = [_column(c, header, width, path, "truth") for c in extra]
+    tcol = None if time_column is None else column_index(time_column, header, width, path, "time")
+    idx_extra = [column_index(c, header, width, path, "truth") for c in extra]
     if columns is None:
         rest = [i for i in range(width) if i != tcol and i not in idx_extra]
         if len(rest) != 1:
             names = [header[i] if header else str(i) for i in rest]
             raise ValueError(f"recording {str(path)!r}: name the channel among {', '.join(names)} (columns=...)")
         columns = rest
-    idx = [_column(c, header, width, path, "signal") for c in columns]
+    idx = [column_index(c, header, width, path, "signal") for c in columns]
     if table.shape[0] < 2:
         raise ValueError(f"recording {str(path)!r}: {table.shape[0]} sample(s); at least 2 are needed")
-    for i in sorted({*idx, *idx_extra, *([] if tcol is None else [tcol])}):
+    read: set[int] = {*idx, *idx_extra, *([] if tcol is None else [tcol])}
+    for i in sorted(read):
         bad = np.flatnonzero(~np.isfinite(table[:, i]))
         if bad.size:
             name = header[i] if header else str(i)
@@ -452,6 +454,7 @@ def read_recording(
         step, longest = float(np.median(dt)), float(np.max(dt))
         uniform = float(np.max(np.abs(dt - step))) <= 1e-6 * step
     else:
+        assert sample_rate is not None  # exactly one of time_column and sample_rate, checked above
         rate = float(sample_rate)
         if not (math.isfinite(rate) and rate > 0):
             raise ValueError(f"recording {str(path)!r}: sample_rate must be a number of Hz > 0, got {sample_rate!r}")
@@ -472,8 +475,8 @@ def read_recording(
             f"than the observer's ts = {ts:g} s ({1 / ts:g} Hz): interpolation would invent the samples between"
         )
     names_of = {i: (header[i] if header else str(i)) for i in range(width)}
-    angle_idx = {_column(c, header, width, path, "truth") for c in angle}
-    avg_idx = {_column(c, header, width, path, "signal") for c in averaged}
+    angle_idx = {column_index(c, header, width, path, "truth") for c in angle}
+    avg_idx = {column_index(c, header, width, path, "signal") for c in averaged}
     exact = uniform and abs(step - ts) <= TS_REL_TOL * ts
     n = table.shape[0] if exact else int(math.floor(t[-1] / ts * (1 + 1e-12))) + 1
     if avg_idx and not exact:  # every period [t_k, t_k + ts] must lie inside the record
@@ -571,7 +574,8 @@ class DriveRecording(_Recording):
             if theta_e.shape != shape:
                 raise ValueError(f"{own}.theta_e must have the shape of u_a {shape}, got {theta_e.shape}")
             if omega_e is None:  # the angle's derivative: centred differences (one-sided at the ends)
-                omega_e = jnp.gradient(theta_e, self.ts, axis=0 if batch_inner else -1)
+                # one axis: one array (the stubs also allow the list of several)
+                omega_e = cast(jax.Array, jnp.gradient(theta_e, self.ts, axis=0 if batch_inner else -1))
             omega_e = check_real("omega_e", omega_e, owner=own)
             if omega_e.shape != shape:
                 raise ValueError(f"{own}.omega_e must have the shape of u_a {shape}, got {omega_e.shape}")
@@ -656,9 +660,9 @@ class DriveRecording(_Recording):
             max_bytes=max_bytes,
         )
         ex = rec["extra"]
+        args = [*rec["columns"], rec["ts"]]
         return cls(
-            *rec["columns"],
-            rec["ts"],
+            *args,
             theta_e=ex[0] if ex else None,
             omega_e=ex[1] if len(ex) > 1 else None,
         )

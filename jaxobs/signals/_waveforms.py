@@ -22,11 +22,12 @@ built by :func:`paper001_test`.
 from __future__ import annotations
 
 import math
-from typing import ClassVar
+from typing import Any, ClassVar
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+from jax.core import Tracer
 
 from .. import papers
 from ..core.measurements import DriveInput
@@ -107,7 +108,7 @@ class GridSignal(AbstractSignal):
         self.sub_amplitude = check_nonnegative("sub_amplitude", sub_amplitude, own)
         self.sub_freq = check_nonnegative("sub_freq", sub_freq, own)
         # a traced freq or freq_step (vmap over either) is checked by nobody here: the divergence flags see it
-        if self.freq.ndim == 0 and not any(isinstance(x, jax.core.Tracer) for x in (self.freq, self.freq_step)):
+        if self.freq.ndim == 0 and not any(isinstance(x, Tracer) for x in (self.freq, self.freq_step)):
             f_after = float(self.freq) + float(jnp.max(jnp.atleast_1d(self.freq_step)))
             if f_after <= 0:
                 raise ValueError(f"{own}.freq_step must keep the frequency > 0 Hz, got freq + freq_step = {f_after:g}")
@@ -165,8 +166,8 @@ class GridSignal(AbstractSignal):
 
         In float64 from one vectorizable cosine (:func:`jaxobs.core.trig.sincos`) and the Chebyshev recurrence
         cos(hθ) = 2 cos θ cos((h−1)θ) − cos((h−2)θ): XLA's CPU backend calls a scalar library routine for
-        each float64 ``cos`` (9–14 ns a value), and a Test C signal needs seven a sample, which made them most
-        of a robust FLL job's simulation (72 scenarios, 0.4 s: 38 → 22 ms a forward run, docs/performance.md).
+        each float64 ``cos``, and a Test C signal needs seven a sample, which made them most of a robust FLL
+        job's simulation (docs/performance.md).
         The recurrence's error grows with h: 1.1e-14 absolute at h = 13 over 10⁶ angles up to 10³ rad, where
         ``cos(h*th)`` was off by up to 3.6e-12, the product h·θ rounded (tests/test_signals.py).  float32
         takes ``sincos``'s cosine of each multiple (its float32 polynomial: 0.5 ns a value against 4.6 ns for
@@ -227,7 +228,7 @@ def paper001_test(name: str, *, freq=50.0, amplitude=1.0, t_event=0.2, phase=0.0
     harmonics = {h: 0.0 for h in papers.TEST_C_HARMONICS}
     if "harmonics_scale" in test:
         harmonics = {h: test["harmonics_scale"] * m * amplitude for h, m in papers.TEST_C_HARMONICS.items()}
-    kw = dict(amplitude=amplitude, freq=freq, phase=phase, t_event=t_event, harmonics=harmonics)
+    kw: dict[str, Any] = dict(amplitude=amplitude, freq=freq, phase=phase, t_event=t_event, harmonics=harmonics)
     for field in ("freq_step", "sag", "sub_freq"):
         if field in test:
             kw[field] = test[field]
