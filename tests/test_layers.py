@@ -64,8 +64,8 @@ LAYERS = [
     ("jaxobs.scenarios", "jaxobs.drive.plant", "jaxobs.drive.dual", "jaxobs.drive.control", "jaxobs.drive.scenario"),
     # observers: they estimate
     ("jaxobs.observers._cores", "jaxobs.observers._gains", "jaxobs.observers._rules"),
-    ("jaxobs.observers.base",),  # its one bound check is _gains'
     ("jaxobs.observers.speed",),
+    ("jaxobs.observers.base",),  # its one bound check is _gains'; a drive observer holds a speed estimator
     (
         "jaxobs.observers.sogi",
         "jaxobs.observers.fll",
@@ -73,6 +73,7 @@ LAYERS = [
         "jaxobs.observers.leso",
         "jaxobs.observers.rofo",
     ),
+    ("jaxobs.observers.soifo", "jaxobs.observers.faleso"),  # on flux's and leso's contracts
     ("jaxobs.observers",),
     # the closed loop composes the drive's parts with a drive observer (its contract, observers.base)
     ("jaxobs.drive.loop",),
@@ -94,6 +95,7 @@ LAYERS = [
     ("jaxobs.metrics",),
     # linear analysis: the observers' models, closed forms that return observers, settling times (metrics)
     ("jaxobs.linear._tf",),
+    ("jaxobs.linear._margins", "jaxobs.linear._discrete"),  # frequency responses and margins; H(z) and Tustin
     ("jaxobs.linear._models", "jaxobs.linear._fll"),
     ("jaxobs.linear",),
     ("jaxobs",),

@@ -5,6 +5,8 @@ papers' small-signal models and closed-form tuning rules.
 All functions are JAX functions of the coefficients: differentiable w.r.t. gains.
 """
 
+from ._discrete import DiscreteTransferFunction as DiscreteTransferFunction
+from ._discrete import tustin as tustin
 from ._fll import (
     FLLModel as FLLModel,
 )
@@ -47,6 +49,9 @@ from ._fll import (
 from ._fll import (
     wpf_model as wpf_model,
 )
+from ._margins import Margins as Margins
+from ._margins import bode as bode
+from ._margins import margins as margins
 from ._models import (
     CLESOGains as CLESOGains,
 )
@@ -116,27 +121,6 @@ from ._models import (
 from ._models import (
     sosoifo_tf as sosoifo_tf,
 )
-from ._tf import (
-    DiscreteTransferFunction as DiscreteTransferFunction,
-)
-from ._tf import (
-    Margins as Margins,
-)
-from ._tf import (
-    TransferFunction as TransferFunction,
-)
-from ._tf import (
-    bode as bode,
-)
-from ._tf import (
-    is_hurwitz as is_hurwitz,
-)
-from ._tf import (
-    margins as margins,
-)
-from ._tf import (
-    routh_complex as routh_complex,
-)
-from ._tf import (
-    tustin as tustin,
-)
+from ._tf import TransferFunction as TransferFunction
+from ._tf import is_hurwitz as is_hurwitz
+from ._tf import routh_complex as routh_complex

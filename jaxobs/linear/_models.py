@@ -32,7 +32,8 @@ import jax.numpy as jnp
 
 from ..core.validate import as_float, check_positive, check_real
 from ..observers import cleso_gains, sogi2_tustin_coefficients
-from ._tf import DiscreteTransferFunction, TransferFunction, is_hurwitz
+from ._discrete import DiscreteTransferFunction
+from ._tf import TransferFunction, is_hurwitz
 
 __all__ = [
     "integrator_flux_tf",
@@ -388,7 +389,7 @@ def cleso_closed_form(omega0, Rs, Lq) -> CLESOGains:
     rs = check_real("Rs", Rs, lower=0.0, lower_open=False, owner="cleso_closed_form")
     lq = check_positive("Lq", Lq, "cleso_closed_form")
     l1, l2 = cleso_gains(w0, rs / lq)  # the one writing of eq (16), jaxobs.observers._rules
-    return CLESOGains(l1=l1, l2=l2, omega0=w0)
+    return CLESOGains(l1=jnp.asarray(l1), l2=jnp.asarray(l2), omega0=w0)
 
 
 def faleso_speed_loop_poles(

@@ -1,4 +1,5 @@
-"""Gains as fields with metadata: :func:`gain` declares one, :func:`gain_fields` lists a class's.
+"""Gains as fields with metadata: :func:`gain_metadata` marks one (``eqx.field(metadata=gain_metadata(...))``, or
+:func:`gain` in one call), :func:`gain_fields` lists a class's.
 
 A gain is an array field of an observer that a tuner may change.  Its metadata travels with the field, so a
 study's NetCDF variable, a tuning job's bounds and the C export's comments all read one record
@@ -44,7 +45,17 @@ import equinox as eqx
 
 from ..core.validate import check_real
 
-__all__ = ["GainInfo", "gain", "gain_fields", "gain_table", "check_gains", "DesignRow", "ClosedForm", "gain_row"]
+__all__ = [
+    "GainInfo",
+    "gain",
+    "gain_metadata",
+    "gain_fields",
+    "gain_table",
+    "check_gains",
+    "DesignRow",
+    "ClosedForm",
+    "gain_row",
+]
 
 _KEY = "jaxobs_gain"
 
@@ -69,8 +80,57 @@ class GainInfo(NamedTuple):
     symbol: str
 
 
-def gain(*, units: str, role: str, long_name: str, symbol: str, bounds=(0.0, math.inf), **kwargs):
+def gain_metadata(
+    *, units: str, role: str, long_name: str, symbol: str, bounds: tuple[float, float] = (0.0, math.inf)
+) -> dict[str, Any]:
+    """The metadata that makes an observer field a gain: ``k: jax.Array = eqx.field(metadata=gain_metadata(...))``.
+
+    The observers of jaxobs declare their gains in that form, which a type checker reads as a field without a
+    default (``eqx.field`` is a dataclass field specifier; a call to :func:`gain` looks like a default value).
+
+    Args:
+        units: CF/UDUNITS units (``"1"`` when dimensionless).
+        role: the part of the observer the gain belongs to.
+        long_name: what the gain is, in words.
+        symbol: the paper's symbol and the paper, e.g. ``"001: λ"``.
+        bounds: the open interval (lower, upper) of valid values.
+
+    Returns:
+        The field's metadata: its :class:`GainInfo` record under the key :func:`gain_fields` reads.
+    """
+    return {_KEY: dict(units=units, role=role, bounds=tuple(bounds), long_name=long_name, symbol=symbol)}
+
+
+def kp_pll_metadata() -> dict[str, Any]:
+    """The metadata of a PLL's proportional gain ``kp_pll`` (the flux observers' and the LESOs' PLL).
+
+    Returns:
+        The field's metadata (:func:`gain_metadata`).
+    """
+    return gain_metadata(units="s-1", role="pll", long_name="PLL proportional gain", symbol="k_p (ours: 2ζω_b)")
+
+
+def ki_pll_metadata() -> dict[str, Any]:
+    """The metadata of a PLL's integral gain ``ki_pll`` (the flux observers' and the LESOs' PLL).
+
+    Returns:
+        The field's metadata (:func:`gain_metadata`).
+    """
+    return gain_metadata(units="s-2", role="pll", long_name="PLL integral gain", symbol="k_i (ours: ω_b²)")
+
+
+def gain(
+    *,
+    units: str,
+    role: str,
+    long_name: str,
+    symbol: str,
+    bounds: tuple[float, float] = (0.0, math.inf),
+    **kwargs: Any,
+) -> Any:
     """An observer field that is a gain: ``eqx.field`` with its :class:`GainInfo` in the field's metadata.
+
+    The same field as ``eqx.field(metadata=gain_metadata(...), **kwargs)``, in one call.
 
     Args:
         units: CF/UDUNITS units (``"1"`` when dimensionless).
@@ -83,7 +143,7 @@ def gain(*, units: str, role: str, long_name: str, symbol: str, bounds=(0.0, mat
     Returns:
         A dataclass field for the observer's class body.
     """
-    meta = {_KEY: dict(units=units, role=role, bounds=tuple(bounds), long_name=long_name, symbol=symbol)}
+    meta = gain_metadata(units=units, role=role, long_name=long_name, symbol=symbol, bounds=bounds)
     return eqx.field(metadata={**kwargs.pop("metadata", {}), **meta}, **kwargs)
 
 

@@ -6,9 +6,13 @@ its closed form without importing the linear analysis above it.
 
 from __future__ import annotations
 
+import jax
 import jax.numpy as jnp
 
 from .. import papers
+
+# a rule's inputs and values: Python numbers, or JAX scalars (a design built from traced gains)
+Scalar = float | jax.Array
 
 __all__ = [
     "sogi_fll_lambda",
@@ -22,7 +26,7 @@ __all__ = [
 ]
 
 
-def sogi_fll_lambda(k, omega_n, zeta=papers.FLL_ZETA):
+def sogi_fll_lambda(k: Scalar, omega_n: Scalar, zeta: Scalar = papers.FLL_ZETA) -> Scalar:
     """001 eq (22): λ = k² ωn² / (8 ζ²)  (= k² ωn² / 4 at ζ = 1/√2).
 
     Args:
@@ -36,7 +40,7 @@ def sogi_fll_lambda(k, omega_n, zeta=papers.FLL_ZETA):
     return k**2 * omega_n**2 / (8 * zeta**2)
 
 
-def wpf_lambda(omega_n, zeta=papers.FLL_ZETA):
+def wpf_lambda(omega_n: Scalar, zeta: Scalar = papers.FLL_ZETA) -> Scalar:
     """001 eq (29), with k1 = k2 = √2: λ = 2 (ζ + 1) ωn² / (2ζ + 1)³.
 
     Args:
@@ -49,7 +53,7 @@ def wpf_lambda(omega_n, zeta=papers.FLL_ZETA):
     return 2 * (zeta + 1) * omega_n**2 / (2 * zeta + 1) ** 3
 
 
-def wif_symmetric_optimum(b, omega_c, omega_n):
+def wif_symmetric_optimum(b: Scalar, omega_c: Scalar, omega_n: Scalar) -> tuple[Scalar, Scalar, Scalar]:
     """001 eq (34): k1 = 2 b ωc / ωn, k2 = 2 ωc / ωn, λ = 2 ωc² / b.
 
     Args:
@@ -63,9 +67,9 @@ def wif_symmetric_optimum(b, omega_c, omega_n):
     return 2 * b * omega_c / omega_n, 2 * omega_c / omega_n, 2 * omega_c**2 / b
 
 
-def soifo_lambda(k):
+def soifo_lambda(k: Scalar) -> Scalar:
     """The SOIFO's FLL gain ``lam`` (dimensionless: 000's FLL is frequency-normalized, λ(ω̂) = lam·ω̂²,
-    :mod:`jaxobs.observers.flux`): 001 eq (22) at ζ = 1/√2 with ωn → 1, lam = k²/4, the same damping at
+    :mod:`jaxobs.observers.soifo`): 001 eq (22) at ζ = 1/√2 with ωn → 1, lam = k²/4, the same damping at
     every speed.
 
     Args:
@@ -77,7 +81,7 @@ def soifo_lambda(k):
     return k**2 / 4
 
 
-def second_order_soifo_lambda(K1, K2):
+def second_order_soifo_lambda(K1: Scalar, K2: Scalar) -> Scalar:
     """The second-order SOIFO's FLL gain ``lam`` (dimensionless, as :func:`soifo_lambda`): 001's symmetric
     optimum (eq 34) frequency-normalized, in 000's names (the WIF's k1 = K2, k2 = K1) with b = K2/K1:
     lam = K1³/(2 K2).
@@ -92,7 +96,7 @@ def second_order_soifo_lambda(K1, K2):
     return K1**3 / (2 * K2)
 
 
-def pll_gains(bandwidth, zeta=papers.PLL_ZETA):
+def pll_gains(bandwidth: Scalar, zeta: Scalar = papers.PLL_ZETA) -> tuple[Scalar, Scalar]:
     """Type-2 PLL on a normalized error: k_p = 2ζω_b, k_i = ω_b² (θ̂/θ = (k_p s + k_i)/(s² + k_p s + k_i)).
 
     Args:
@@ -105,7 +109,7 @@ def pll_gains(bandwidth, zeta=papers.PLL_ZETA):
     return 2 * zeta * bandwidth, bandwidth**2
 
 
-def symmetric_optimum_pm(b):
+def symmetric_optimum_pm(b: Scalar) -> jax.Array:
     """001 eq (39): phase margin of the symmetric optimum.
 
     Args:
@@ -117,7 +121,7 @@ def symmetric_optimum_pm(b):
     return jnp.arctan((b**2 - 1) / (2 * b))
 
 
-def cleso_gains(omega0, mu):
+def cleso_gains(omega0: Scalar, mu: Scalar) -> tuple[Scalar, Scalar]:
     """002 eq (16): the C-LESO's gains l1 = 2ω0 − μ, l2 = ω0², both poles at −ω0 (ê/e = ω0²/(s + ω0)², eq 17).
 
     The one place eq (16) is written: the C-LESO and the GI-LESO (whose L1 is the same, eq 29) run it,

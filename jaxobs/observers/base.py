@@ -36,14 +36,18 @@ The hierarchy (abstract classes; the concrete observers are final):
 # annotation (a string one would make AbstractObserver.ts an ordinary field, first in every observer's fields)
 import abc
 import dataclasses
-from typing import Any, ClassVar, NamedTuple
+from collections.abc import Callable
+from typing import Any, ClassVar, NamedTuple, Protocol, TypeVar
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+from jax.typing import ArrayLike
 
 from ..core.discretize import AbstractRule, AbstractRuleCarry
+from ..core.measurements import DriveInput
 from ._gains import check_gains
+from .speed import AbstractSpeedEstimator
 
 __all__ = [
     "AbstractObserver",
@@ -54,7 +58,62 @@ __all__ = [
     "DriveObserverState",
     "ObserverBank",
     "BankOutput",
+    "AssumedMachine",
 ]
+
+_M = TypeVar("_M", bound=eqx.Module)
+
+
+class AssumedMachine(Protocol):
+    """The machine a drive observer assumes, as its :meth:`~AbstractDriveObserver.bind` reads it.
+
+    :class:`jaxobs.drive.PMSMParams` is one; the observers sit below :mod:`jaxobs.drive`, so they name what they
+    read instead of importing the class.
+
+    Attributes:
+        Rs: Stator resistance, ohm.
+        Ld: d-axis inductance, H.
+        Lq: q-axis inductance, H.
+        psi_f: PM flux linkage, Wb.
+        J: Inertia, kg·m².
+        B: Viscous friction, N·m·s/rad.
+        p: Pole pairs.
+    """
+
+    @property
+    def Rs(self) -> jax.Array:
+        """Stator resistance, ohm."""
+        ...
+
+    @property
+    def Ld(self) -> jax.Array:
+        """d-axis inductance, H."""
+        ...
+
+    @property
+    def Lq(self) -> jax.Array:
+        """q-axis inductance, H."""
+        ...
+
+    @property
+    def psi_f(self) -> jax.Array:
+        """PM flux linkage, Wb."""
+        ...
+
+    @property
+    def J(self) -> jax.Array:
+        """Inertia, kg·m²."""
+        ...
+
+    @property
+    def B(self) -> jax.Array:
+        """Viscous friction, N·m·s/rad."""
+        ...
+
+    @property
+    def p(self) -> int:
+        """Pole pairs."""
+        ...
 
 
 class AbstractObserver(eqx.Module):
@@ -84,11 +143,11 @@ class AbstractObserver(eqx.Module):
     why_not_tunable: ClassVar[str] = ""
     small_signal_model: ClassVar[tuple[str, tuple[str, ...]] | None] = None
 
-    def __check_init__(self):
+    def __check_init__(self) -> None:
         check_gains(self)
 
     @abc.abstractmethod
-    def init(self, u0=None) -> Any:
+    def init(self, u0: Any = None) -> Any:
         """The state at sample 0.
 
         Args:
@@ -99,7 +158,7 @@ class AbstractObserver(eqx.Module):
         """
 
     @abc.abstractmethod
-    def step(self, state, u) -> tuple[Any, Any]:
+    def step(self, state: Any, u: Any) -> tuple[Any, Any]:
         """One sample.
 
         Args:
@@ -140,7 +199,7 @@ class AbstractVectorFieldObserver(AbstractObserver):
     rule: AbstractRule
 
     @abc.abstractmethod
-    def f(self, x: jax.Array, u) -> jax.Array:
+    def f(self, x: jax.Array, u: Any) -> jax.Array:
         """Continuous-time vector field.
 
         Args:
@@ -166,16 +225,33 @@ class AbstractVectorFieldObserver(AbstractObserver):
     def initial_state(self) -> jax.Array:
         """The flat state at t = 0."""
 
-    def init(self, u0=None) -> ObserverState:
+    def init(self, u0: Any = None) -> ObserverState:
+        """The state at sample 0: :meth:`initial_state` and the rule's own.
+
+        Args:
+            u0: The first input, for rules that need it; None otherwise.
+
+        Returns:
+            The :class:`ObserverState`.
+        """
         x0 = self.initial_state()
         return ObserverState(x=x0, rule=self.rule.init(self.f, x0, u0))
 
-    def step(self, state: ObserverState, u) -> tuple[ObserverState, Any]:
+    def step(self, state: ObserverState, u: Any) -> tuple[ObserverState, Any]:
+        """One sample: the outputs of the state at t_n, and the state integrated over [t_n, t_{n+1}].
+
+        Args:
+            state: The state at n.
+            u: The input sample at t_n.
+
+        Returns:
+            ``(the state at n + 1, the named outputs at t_n)``.
+        """
         out = self.output(state.x)
         x1, rule_state = self.rule.step(self.f, state.x, u, self.ts, state.rule)
         return ObserverState(x=x1, rule=rule_state), out
 
-    def vector_field(self, t, x, signal):
+    def vector_field(self, t: ArrayLike, x: jax.Array, signal: Callable[[ArrayLike], Any]) -> jax.Array:
         """``f(t, x, args)`` for ``diffrax.ODETerm``.
 
         Args:
@@ -210,7 +286,7 @@ class DriveObserverState(AbstractRuleCarry):
     started: jax.Array  # False until one sample has been seen
 
 
-def replace_leaves(module, **values):
+def replace_leaves(module: _M, **values: ArrayLike) -> _M:
     """``module`` with the named array fields set to ``values``, each cast to its field's dtype.
 
     The cast keeps a float32 observer float32 when it is bound to a float64 machine (the C export rounds
@@ -267,7 +343,7 @@ class AbstractDriveObserver(AbstractObserver):
     # whether the class holds a speed estimator (jaxobs.observers.speed) that a job's [observer.speed] may choose
     takes_speed_estimator: ClassVar[bool] = False
 
-    def speed_estimator(self):
+    def speed_estimator(self) -> AbstractSpeedEstimator | None:
         """The speed and position extraction this observer holds (:mod:`jaxobs.observers.speed`), or None where
         its speed comes otherwise (an FLL, its own adaptation law).
 
@@ -287,7 +363,7 @@ class AbstractDriveObserver(AbstractObserver):
         return est is not None and est.uses_torque
 
     @abc.abstractmethod
-    def bind(self, est_par, omega_e):
+    def bind(self, est_par: AssumedMachine | None, omega_e: ArrayLike) -> "AbstractDriveObserver":
         """This observer assuming a machine and starting at a speed.
 
         Its initial speed field becomes what :meth:`init_at` would start from.  The gains are untouched; every
@@ -304,7 +380,7 @@ class AbstractDriveObserver(AbstractObserver):
         """
 
     @abc.abstractmethod
-    def init_at(self, omega_e):
+    def init_at(self, omega_e: ArrayLike) -> Any:
         """The initial state of a steady start's settling phase.
 
         Args:
@@ -314,7 +390,7 @@ class AbstractDriveObserver(AbstractObserver):
             The :class:`DriveObserverState`.
         """
 
-    def init_aligned(self, omega_e, theta_e):
+    def init_aligned(self, omega_e: ArrayLike, theta_e: ArrayLike) -> Any:
         """The initial state of a steady start's settling phase, aligned to the rotor.
 
         :meth:`init_at` with, where the observer has an angle state of its own (a LESO's PLL θ̂), that angle
@@ -331,7 +407,7 @@ class AbstractDriveObserver(AbstractObserver):
         return self.init_at(omega_e)
 
     @abc.abstractmethod
-    def seed_speed(self, state, omega_e):
+    def seed_speed(self, state: Any, omega_e: ArrayLike) -> Any:
         """``state`` with its speed estimate set: an I-f start-up holds it at the I-f frequency until the
         hand-over (a DSP knows that frequency: it is the FLL's or PLL's feed-forward).
 
@@ -355,7 +431,7 @@ class BankOutput(NamedTuple):
 
     theta: Any  # the primary observer's θ̂e (what a sensorless controller uses)
     omega: Any  # the primary observer's ω̂e
-    each: tuple  # every observer's own outputs, in order
+    each: tuple[Any, ...]  # every observer's own outputs, in order
 
 
 class ObserverBank(AbstractDriveObserver):
@@ -372,7 +448,7 @@ class ObserverBank(AbstractDriveObserver):
         ValueError: An entry is not a drive observer, or ``primary`` is out of range.
     """
 
-    observers: tuple
+    observers: tuple[AbstractDriveObserver, ...]
     primary: int = eqx.field(static=True, default=0)
 
     bound_fields: ClassVar[BoundFields] = BoundFields()  # none of its own: bind() binds its observers
@@ -386,7 +462,7 @@ class ObserverBank(AbstractDriveObserver):
         """
         return any(o.reads_torque for o in self.observers)
 
-    def __check_init__(self):
+    def __check_init__(self) -> None:
         for i, o in enumerate(self.observers):
             if not isinstance(o, AbstractDriveObserver):
                 raise ValueError(
@@ -398,24 +474,77 @@ class ObserverBank(AbstractDriveObserver):
 
     @property
     def ts(self) -> float:
+        """The primary observer's sample time, s."""
         return self.observers[self.primary].ts
 
-    def bind(self, est_par, omega_e) -> "ObserverBank":
+    def bind(self, est_par: AssumedMachine | None, omega_e: ArrayLike) -> "ObserverBank":
+        """The bank with every observer bound (:meth:`AbstractDriveObserver.bind`).
+
+        Args:
+            est_par: The machine assumed, or None (the speed only).
+            omega_e: The electrical speed, rad/s, signed.
+
+        Returns:
+            The bound bank.
+        """
         return eqx.tree_at(lambda b: b.observers, self, tuple(o.bind(est_par, omega_e) for o in self.observers))
 
-    def init(self, u0=None):
+    def init(self, u0: Any = None) -> tuple[Any, ...]:
+        """Every observer's state at sample 0.
+
+        Args:
+            u0: Unused (each drive observer starts from its own state).
+
+        Returns:
+            The states, in order.
+        """
         return tuple(o.init() for o in self.observers)
 
-    def init_at(self, omega_e):
+    def init_at(self, omega_e: ArrayLike) -> tuple[Any, ...]:
+        """Every observer's :meth:`~AbstractDriveObserver.init_at`.
+
+        Args:
+            omega_e: The speed estimates' start, rad/s.
+
+        Returns:
+            The states, in order.
+        """
         return tuple(o.init_at(omega_e) for o in self.observers)
 
-    def init_aligned(self, omega_e, theta_e):
+    def init_aligned(self, omega_e: ArrayLike, theta_e: ArrayLike) -> tuple[Any, ...]:
+        """Every observer's :meth:`~AbstractDriveObserver.init_aligned`.
+
+        Args:
+            omega_e: The speed estimates' start, rad/s.
+            theta_e: The rotor's electrical angle, rad.
+
+        Returns:
+            The states, in order.
+        """
         return tuple(o.init_aligned(omega_e, theta_e) for o in self.observers)
 
-    def seed_speed(self, state, omega_e):
+    def seed_speed(self, state: tuple[Any, ...], omega_e: ArrayLike) -> tuple[Any, ...]:
+        """Every observer's state with its speed estimate set (:meth:`~AbstractDriveObserver.seed_speed`).
+
+        Args:
+            state: The states, in order.
+            omega_e: The speed, rad/s.
+
+        Returns:
+            The states with their speed estimates at ``omega_e``.
+        """
         return tuple(o.seed_speed(s, omega_e) for o, s in zip(self.observers, state))
 
-    def step(self, state, u):
+    def step(self, state: tuple[Any, ...], u: DriveInput) -> tuple[tuple[Any, ...], BankOutput]:
+        """One sample of every observer, on the same measurements.
+
+        Args:
+            state: The states at n, in order.
+            u: The measurements at t_n.
+
+        Returns:
+            ``(the states at n + 1, the bank's outputs at t_n)``.
+        """
         pairs = [o.step(s, u) for o, s in zip(self.observers, state)]
         outs = tuple(p[1] for p in pairs)
         return tuple(p[0] for p in pairs), BankOutput(

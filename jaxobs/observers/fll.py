@@ -16,11 +16,12 @@ State layout (flat arrays, integrators in the order of 001 Table II):
 
 from __future__ import annotations
 
-from typing import ClassVar, Literal, NamedTuple
+from typing import Any, ClassVar, Literal, NamedTuple
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+from jax.typing import ArrayLike
 
 from .. import papers
 from ..core.discretize import AB3, AbstractRule, check_rule
@@ -28,7 +29,7 @@ from ..core.numerics import safe_atan2, safe_norm2
 from ..core.validate import as_float, check_positive, check_real, check_sample_time
 from ..core.validate import static_float as _static_float
 from ._cores import fll_rate, sogi2_vf, sogi_vf
-from ._gains import ClosedForm, DesignRow, gain, gain_row
+from ._gains import ClosedForm, DesignRow, gain_metadata, gain_row
 from ._rules import sogi_fll_lambda, symmetric_optimum_pm, wif_symmetric_optimum, wpf_lambda
 from .base import AbstractVectorFieldObserver
 
@@ -53,11 +54,15 @@ class FLLOutput(NamedTuple):
     omega: jax.Array  # ω̂, rad/s
 
 
-def _lam():
-    return gain(units="rad2 s-2", role="fll", long_name="FLL gain", symbol="001: λ")
+def _lam() -> dict[str, Any]:
+    return gain_metadata(units="rad2 s-2", role="fll", long_name="FLL gain", symbol="001: λ")
 
 
-def _fll_output(y, q, w):
+def _sogi_gain(role: str, long_name: str, symbol: str) -> dict[str, Any]:
+    return gain_metadata(units="1", role=role, long_name=long_name, symbol=symbol)
+
+
+def _fll_output(y: jax.Array, q: jax.Array, w: jax.Array) -> FLLOutput:
     return FLLOutput(v_alpha=y, v_beta=q, amplitude=safe_norm2(y, q), theta=safe_atan2(q, y), omega=w)
 
 
@@ -83,8 +88,8 @@ class SOGIFLL(AbstractVectorFieldObserver):
         ValueError: A value out of its range.
     """
 
-    k: jax.Array = gain(units="1", role="sogi", long_name="SOGI gain", symbol="001: k")
-    lam: jax.Array = _lam()
+    k: jax.Array = eqx.field(metadata=_sogi_gain("sogi", "SOGI gain", "001: k"))
+    lam: jax.Array = eqx.field(metadata=_lam())
     omega_n: jax.Array
     ts: float = eqx.field(static=True)
     rule: AbstractRule = eqx.field(static=True)
@@ -92,7 +97,16 @@ class SOGIFLL(AbstractVectorFieldObserver):
 
     small_signal_model: ClassVar = ("sogi_fll_model", ("k", "lam", "omega_n"))  # 001 eqs (18)–(20)
 
-    def __init__(self, k, lam, omega_n=papers.FLL_OMEGA_N, *, ts=1e-4, rule=None, v_floor=1e-3):
+    def __init__(
+        self,
+        k: ArrayLike,
+        lam: ArrayLike,
+        omega_n: ArrayLike = papers.FLL_OMEGA_N,
+        *,
+        ts: float = 1e-4,
+        rule: AbstractRule | None = None,
+        v_floor: float = 1e-3,
+    ) -> None:
         self.k, self.lam = as_float(k), as_float(lam)  # bounds: check_gains (AbstractObserver)
         self.omega_n = check_positive("omega_n", omega_n, "SOGIFLL")
         self.ts = check_sample_time("ts", ts, "SOGIFLL")
@@ -101,7 +115,11 @@ class SOGIFLL(AbstractVectorFieldObserver):
 
     @classmethod
     def closed_form_design(
-        cls, k=papers.SOGI_FLL_K, omega_n=papers.FLL_OMEGA_N, zeta=papers.FLL_ZETA, **kw
+        cls,
+        k: ArrayLike = papers.SOGI_FLL_K,
+        omega_n: ArrayLike = papers.FLL_OMEGA_N,
+        zeta: float = papers.FLL_ZETA,
+        **kw: Any,
     ) -> ClosedForm:
         """The SOGI-FLL tuned by 001 eq (22): λ = k² ωn² / (8 ζ²) (Table I: k = 1/√2, λ = 12337).
 
@@ -127,7 +145,7 @@ class SOGIFLL(AbstractVectorFieldObserver):
         return ClosedForm(obs, dict(k=k, omega_n=omega_n, zeta=zeta), rows, "001 eq (22), Table I")
 
     @classmethod
-    def closed_form(cls, **kw) -> SOGIFLL:
+    def closed_form(cls, **kw: Any) -> SOGIFLL:
         """The observer of :meth:`closed_form_design` (same arguments).
 
         Args:
@@ -138,16 +156,38 @@ class SOGIFLL(AbstractVectorFieldObserver):
         """
         return cls.closed_form_design(**kw).observer
 
-    def f(self, x, u):
+    def f(self, x: jax.Array, u: ArrayLike) -> jax.Array:
+        """The vector field (class doc).
+
+        Args:
+            x: [v', qv', ω̂].
+            u: The input sample v.
+
+        Returns:
+            dx/dt.
+        """
         y, q, w = x[0], x[1], x[2]
         dy, dq = sogi_vf(y, q, u, w, self.k)
         dw = fll_rate(u - y, q, y, self.lam, self.v_floor)
         return jnp.stack([dy, dq, dw])
 
-    def output(self, x):
+    def output(self, x: jax.Array) -> FLLOutput:
+        """The outputs of a state: v', qv', V̂, θ̂ and ω̂ (the SOGI's).
+
+        Args:
+            x: The flat state.
+
+        Returns:
+            The :class:`FLLOutput`.
+        """
         return _fll_output(x[0], x[1], x[2])
 
-    def initial_state(self):
+    def initial_state(self) -> jax.Array:
+        """Every integrator at 0, ω̂ at ``omega_n``.
+
+        Returns:
+            The flat state.
+        """
         z = jnp.zeros_like(self.omega_n)
         return jnp.stack([z, z, self.omega_n])
 
@@ -180,9 +220,9 @@ class SOGIFLLWPF(AbstractVectorFieldObserver):
         ValueError: A value out of its range.
     """
 
-    k1: jax.Array = gain(units="1", role="prefilter", long_name="prefilter SOGI gain", symbol="001: k1")
-    k2: jax.Array = gain(units="1", role="sogi", long_name="SOGI gain of the SOGI-FLL", symbol="001: k2")
-    lam: jax.Array = _lam()
+    k1: jax.Array = eqx.field(metadata=_sogi_gain("prefilter", "prefilter SOGI gain", "001: k1"))
+    k2: jax.Array = eqx.field(metadata=_sogi_gain("sogi", "SOGI gain of the SOGI-FLL", "001: k2"))
+    lam: jax.Array = eqx.field(metadata=_lam())
     omega_n: jax.Array
     ts: float = eqx.field(static=True)
     rule: AbstractRule = eqx.field(static=True)
@@ -190,7 +230,17 @@ class SOGIFLLWPF(AbstractVectorFieldObserver):
 
     small_signal_model: ClassVar = ("wpf_model", ("k1", "k2", "lam", "omega_n"))  # 001 eqs (24)–(25)
 
-    def __init__(self, k1, k2, lam, omega_n=papers.FLL_OMEGA_N, *, ts=1e-4, rule=None, v_floor=1e-3):
+    def __init__(
+        self,
+        k1: ArrayLike,
+        k2: ArrayLike,
+        lam: ArrayLike,
+        omega_n: ArrayLike = papers.FLL_OMEGA_N,
+        *,
+        ts: float = 1e-4,
+        rule: AbstractRule | None = None,
+        v_floor: float = 1e-3,
+    ) -> None:
         self.k1, self.k2, self.lam = as_float(k1), as_float(k2), as_float(lam)  # bounds: check_gains
         self.omega_n = check_positive("omega_n", omega_n, "SOGIFLLWPF")
         self.ts = check_sample_time("ts", ts, "SOGIFLLWPF")
@@ -198,7 +248,9 @@ class SOGIFLLWPF(AbstractVectorFieldObserver):
         self.v_floor = _static_float(check_positive("v_floor", v_floor, "SOGIFLLWPF"), v_floor)
 
     @classmethod
-    def closed_form_design(cls, omega_n=papers.FLL_OMEGA_N, zeta=papers.FLL_ZETA, **kw) -> ClosedForm:
+    def closed_form_design(
+        cls, omega_n: ArrayLike = papers.FLL_OMEGA_N, zeta: float = papers.FLL_ZETA, **kw: Any
+    ) -> ClosedForm:
         """The SOGI-FLL-WPF tuned by 001 eq (29): k1 = k2 = √2 (eq 26), λ = 2 (ζ + 1) ωn² / (2ζ + 1)³
         (Table I: λ = 23948).
 
@@ -224,7 +276,7 @@ class SOGIFLLWPF(AbstractVectorFieldObserver):
         return ClosedForm(obs, dict(omega_n=omega_n, zeta=zeta), rows, "001 eq (29), Table I")
 
     @classmethod
-    def closed_form(cls, **kw) -> SOGIFLLWPF:
+    def closed_form(cls, **kw: Any) -> SOGIFLLWPF:
         """The observer of :meth:`closed_form_design` (same arguments).
 
         Args:
@@ -235,17 +287,39 @@ class SOGIFLLWPF(AbstractVectorFieldObserver):
         """
         return cls.closed_form_design(**kw).observer
 
-    def f(self, x, u):
+    def f(self, x: jax.Array, u: ArrayLike) -> jax.Array:
+        """The vector field (class doc).
+
+        Args:
+            x: [p, qp, v', qv', ω̂].
+            u: The input sample v.
+
+        Returns:
+            dx/dt.
+        """
         p, qp, y, q, w = x[0], x[1], x[2], x[3], x[4]
         dp, dqp = sogi_vf(p, qp, u, w, self.k1)
         dy, dq = sogi_vf(y, q, p, w, self.k2)
         dw = fll_rate(p - y, q, y, self.lam, self.v_floor)
         return jnp.stack([dp, dqp, dy, dq, dw])
 
-    def output(self, x):
+    def output(self, x: jax.Array) -> FLLOutput:
+        """The outputs of a state: v', qv', V̂, θ̂ and ω̂ (the SOGI-FLL's, after the prefilter).
+
+        Args:
+            x: The flat state.
+
+        Returns:
+            The :class:`FLLOutput`.
+        """
         return _fll_output(x[2], x[3], x[4])
 
-    def initial_state(self):
+    def initial_state(self) -> jax.Array:
+        """Every integrator at 0, ω̂ at ``omega_n``.
+
+        Returns:
+            The flat state.
+        """
         z = jnp.zeros_like(self.omega_n)
         return jnp.stack([z, z, z, z, self.omega_n])
 
@@ -306,9 +380,9 @@ class SOGIFLLWIF(AbstractVectorFieldObserver):
     """
 
     # 001 eq (30): k1 sets the envelope's damping term, k2 the loop gain (000's K2 and K1)
-    k1: jax.Array = gain(units="1", role="sogi", long_name="in-loop filter damping gain", symbol="001: k1")
-    k2: jax.Array = gain(units="1", role="sogi", long_name="in-loop filter gain", symbol="001: k2")
-    lam: jax.Array = _lam()
+    k1: jax.Array = eqx.field(metadata=_sogi_gain("sogi", "in-loop filter damping gain", "001: k1"))
+    k2: jax.Array = eqx.field(metadata=_sogi_gain("sogi", "in-loop filter gain", "001: k2"))
+    lam: jax.Array = eqx.field(metadata=_lam())
     omega_n: jax.Array
     ts: float = eqx.field(static=True)
     rule: AbstractRule = eqx.field(static=True)
@@ -317,7 +391,18 @@ class SOGIFLLWIF(AbstractVectorFieldObserver):
 
     small_signal_model: ClassVar = ("wif_model", ("k1", "k2", "lam", "omega_n"))  # 001 eqs (31)–(32)
 
-    def __init__(self, k1, k2, lam, omega_n=papers.FLL_OMEGA_N, *, ts=1e-4, rule=None, v_floor=1e-3, fll_error="input"):
+    def __init__(
+        self,
+        k1: ArrayLike,
+        k2: ArrayLike,
+        lam: ArrayLike,
+        omega_n: ArrayLike = papers.FLL_OMEGA_N,
+        *,
+        ts: float = 1e-4,
+        rule: AbstractRule | None = None,
+        v_floor: float = 1e-3,
+        fll_error: Literal["input", "residual"] = "input",
+    ) -> None:
         self.k1, self.k2, self.lam = as_float(k1), as_float(k2), as_float(lam)  # bounds: check_gains
         self.omega_n = check_positive("omega_n", omega_n, "SOGIFLLWIF")
         self.ts = check_sample_time("ts", ts, "SOGIFLLWIF")
@@ -329,7 +414,11 @@ class SOGIFLLWIF(AbstractVectorFieldObserver):
 
     @classmethod
     def closed_form_design(
-        cls, omega_c=papers.WIF_OMEGA_C, b=papers.WIF_B, omega_n=papers.FLL_OMEGA_N, **kw
+        cls,
+        omega_c: ArrayLike = papers.WIF_OMEGA_C,
+        b: ArrayLike = papers.WIF_B,
+        omega_n: ArrayLike = papers.FLL_OMEGA_N,
+        **kw: Any,
     ) -> ClosedForm:
         """The SOGI-FLL-WIF tuned by the symmetric optimum, 001 eq (34): k1 = 2bωc/ωn, k2 = 2ωc/ωn,
         λ = 2ωc²/b; its phase margin is atan((b² − 1)/(2b)) (eq 39).
@@ -366,7 +455,7 @@ class SOGIFLLWIF(AbstractVectorFieldObserver):
         return ClosedForm(obs, dict(omega_c=omega_c, b=b, omega_n=omega_n), rows, "001 eq (34), Table I")
 
     @classmethod
-    def closed_form(cls, **kw) -> SOGIFLLWIF:
+    def closed_form(cls, **kw: Any) -> SOGIFLLWIF:
         """The observer of :meth:`closed_form_design` (same arguments).
 
         Args:
@@ -377,7 +466,16 @@ class SOGIFLLWIF(AbstractVectorFieldObserver):
         """
         return cls.closed_form_design(**kw).observer
 
-    def f(self, x, u):
+    def f(self, x: jax.Array, u: ArrayLike) -> jax.Array:
+        """The vector field (class doc).
+
+        Args:
+            x: [z_a, z_b, v', qv', ω̂].
+            u: The input sample v.
+
+        Returns:
+            dx/dt.
+        """
         za, zb, y, q, w = x[0], x[1], x[2], x[3], x[4]
         dza, dzb, dy, dq = sogi2_vf(za, zb, y, q, u, w, k_err=self.k2, k_damp=self.k1)
         if self.fll_error == "input":
@@ -386,9 +484,22 @@ class SOGIFLLWIF(AbstractVectorFieldObserver):
             dw = fll_rate(u - y, q, y, self.lam, self.v_floor)
         return jnp.stack([dza, dzb, dy, dq, dw])
 
-    def output(self, x):
+    def output(self, x: jax.Array) -> FLLOutput:
+        """The outputs of a state: v', qv', V̂, θ̂ and ω̂ (the second GI's).
+
+        Args:
+            x: The flat state.
+
+        Returns:
+            The :class:`FLLOutput`.
+        """
         return _fll_output(x[2], x[3], x[4])
 
-    def initial_state(self):
+    def initial_state(self) -> jax.Array:
+        """Every integrator at 0, ω̂ at ``omega_n``.
+
+        Returns:
+            The flat state.
+        """
         z = jnp.zeros_like(self.omega_n)
         return jnp.stack([z, z, z, z, self.omega_n])

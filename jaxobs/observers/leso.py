@@ -1,5 +1,7 @@
 """Back-EMF extended state observers of paper 002 (Li et al.): C-LESO, GI-LESO, FA-LESO, each
-followed by a normalized quadrature PLL whose ω̂e the GI- and FA-LESO use.
+followed by a normalized quadrature PLL whose ω̂e the GI- and FA-LESO use.  Their contract
+(:class:`AbstractLESO`: the PLL, the sampling), the C-LESO and the GI-LESO are here; the complex-coefficient
+FA-LESO is :mod:`jaxobs.observers.faleso`'s.
 
 Model (002 eqs 4–8): p i_ab = b0 u_ab − μ i_ab + x2, b0 = 1/L̂q, μ = R̂s/L̂q, x2 = −e_ab/L̂q.
 Observer (eq 9), per axis, with ε1 = x̂1 − i:
@@ -32,8 +34,8 @@ stability with the complex Routh test and its phase margin.  ω̂ is fed back to
 the GI-LESO's resonance and to the FA-LESO's rotation term: a frequency-adaptation
 loop, stable here because the PLL is slower (ω_b = 2π·15 rad/s by default) than
 the LESO (k2 = 100π).  Why 15 Hz: 002's speed ramp (4.5°, 13 r/min) pins it — a type-2 PLL's
-speed-to-angle error ratio grows with ω_b, and ours at 15 Hz gives 4.1°, 13.2 r/min, at 30 Hz 1.2°,
-5.7 r/min — and it keeps 40.5° of phase margin through the FA-LESO (23.6° at 30 Hz).  Its price: a
+speed-to-angle error ratio grows with ω_b — and it keeps a wider phase margin through the FA-LESO than 30 Hz
+(the ramp's errors and the margins at 15 and 30 Hz: docs/performance.md).  Its price: a
 5 Hz speed loop closed through it is barely damped (ζ ≈ 0.07 at 10 Hz), and unstable under field
 weakening (:func:`jaxobs.linear.faleso_speed_loop_poles`; docs/papers.md, paper 002's load step).
 
@@ -75,22 +77,24 @@ from __future__ import annotations
 
 import abc
 import math
-from typing import ClassVar, NamedTuple
+from typing import Any, ClassVar, NamedTuple, Self
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+from jax.typing import ArrayLike
 
 from .. import papers
 from ..core.discretize import RK4, AbstractRule, Knots, check_rule
+from ..core.measurements import DriveInput
 from ..core.numerics import safe_atan2, wrap
 from ..core.validate import as_float, check_nonnegative, check_positive, check_sample_time
-from ._gains import ClosedForm, DesignRow, gain, gain_row
+from ._gains import ClosedForm, DesignRow, gain_metadata, gain_row, ki_pll_metadata, kp_pll_metadata
 from ._rules import cleso_gains, pll_gains
-from .base import AbstractDriveObserver, BoundFields, DriveObserverState, replace_leaves
+from .base import AbstractDriveObserver, AssumedMachine, BoundFields, DriveObserverState, replace_leaves
 from .speed import AbstractSpeedEstimator, speed_from_spec
 
-__all__ = ["LESOOutput", "AbstractLESO", "CLESO", "GILESO", "FALESO"]
+__all__ = ["LESOOutput", "AbstractLESO", "CLESO", "GILESO"]
 
 
 class LESOOutput(NamedTuple):
@@ -149,23 +153,51 @@ class AbstractLESO(AbstractDriveObserver):
     takes_speed_estimator: ClassVar[bool] = True
 
     def speed_estimator(self) -> AbstractSpeedEstimator:
+        """The speed extraction this observer holds (``speed``).
+
+        Returns:
+            The :class:`~jaxobs.observers.speed.AbstractSpeedEstimator`.
+        """
         return self.speed
 
-    def bind(self, est_par, omega_e) -> AbstractLESO:
+    def bind(self, est_par: AssumedMachine | None, omega_e: ArrayLike) -> Self:
+        """This LESO assuming ``est_par``'s Rs and Lq (and its speed estimator the machine's mechanics), its PLL
+        starting at the signed ω_e (:meth:`AbstractDriveObserver.bind`).
+
+        Args:
+            est_par: The machine assumed, or None (the speed only).
+            omega_e: The electrical speed, rad/s, signed.
+
+        Returns:
+            The bound observer.
+        """
         if est_par is None:
             return replace_leaves(self, omega0_pll=omega_e)
         new = replace_leaves(self, Rs=est_par.Rs, Lq=est_par.Lq, omega0_pll=omega_e)
         speed = self.speed.bind(est_par)  # a mechanical model takes the assumed Ĵ, B̂, p; a PLL has none
         return new if speed is self.speed else eqx.tree_at(lambda o: o.speed, new, speed)
 
-    def initial_state(self):
+    def initial_state(self) -> jax.Array:
+        """The LESO's states at 0, then the speed estimator's (θ̂ = 0, ω̂ = ``omega0_pll``).
+
+        Returns:
+            The flat state.
+        """
         z = jnp.zeros((self.n_leso,), self.Rs.dtype)
         return jnp.concatenate([z, self.speed.initial_state(jnp.zeros_like(self.Rs), self.omega0_pll)])
 
-    def init(self, u0=None) -> DriveObserverState:
+    def init(self, u0: Any = None) -> DriveObserverState:
+        """The state at sample 0: :meth:`initial_state`, nothing seen yet.
+
+        Args:
+            u0: Unused (the first period starts at the first sample).
+
+        Returns:
+            The :class:`DriveObserverState`.
+        """
         return self._init_from(self.initial_state())
 
-    def init_at(self, omega_e) -> DriveObserverState:
+    def init_at(self, omega_e: ArrayLike) -> DriveObserverState:
         """The initial state with the PLL's speed at ω_e: the start of a drive's settling phase.
 
         Args:
@@ -176,15 +208,13 @@ class AbstractLESO(AbstractDriveObserver):
         """
         return self._init_from(self.initial_state().at[self.n_leso + 1].set(omega_e))
 
-    def init_aligned(self, omega_e, theta_e) -> DriveObserverState:
+    def init_aligned(self, omega_e: ArrayLike, theta_e: ArrayLike) -> DriveObserverState:
         """:meth:`init_at` with the PLL's angle at the rotor's θ_e (rad) too: a steady start's settling phase.
 
-        From θ̂ = 0 the PLL's first error was wherever the rotor happened to be when the phase began
+        From θ̂ = 0 the PLL's first error would be wherever the rotor happened to be when the phase began
         (θ_e0 − ω_e·settle, any angle), and near 180° (the sine detector's unstable point) it pulls in slowly
-        and erratically.  So the observer a steady start handed over depended on the settle's length: the
-        tuned GI-LESO of tuning/presets/gileso.toml at 150 r/min, 15 N·m settled 0.2 s ended its second pass
-        with ω̂e near 0 (78.5 rad/s true; its start then dipped 43 % in speed), and settled 0.338 s (10
-        periods of 355 r/min) 0.5 rad/s off, its start dipping 65 % and reversing.
+        and erratically, so the observer a steady start hands over would depend on the settle's length
+        (docs/performance.md).
 
         Args:
             omega_e: ω_e, rad/s.
@@ -196,7 +226,7 @@ class AbstractLESO(AbstractDriveObserver):
         x0 = self.initial_state().at[self.n_leso].set(wrap(theta_e))
         return self._init_from(x0.at[self.n_leso + 1].set(omega_e))
 
-    def seed_speed(self, state: DriveObserverState, omega_e) -> DriveObserverState:
+    def seed_speed(self, state: DriveObserverState, omega_e: ArrayLike) -> DriveObserverState:
         """``state`` with the PLL's speed set to ω_e: an I-f start-up holds it at the I-f frequency until the
         hand-over (jaxobs.drive.ClosedLoop).
 
@@ -209,7 +239,7 @@ class AbstractLESO(AbstractDriveObserver):
         """
         return eqx.tree_at(lambda s: s.x, state, state.x.at[self.n_leso + 1].set(omega_e))
 
-    def _init_from(self, x0) -> DriveObserverState:
+    def _init_from(self, x0: jax.Array) -> DriveObserverState:
         z2 = jnp.zeros((2,), x0.dtype)
         inp0 = (z2, z2, jnp.zeros((), x0.dtype))
         return DriveObserverState(
@@ -217,7 +247,7 @@ class AbstractLESO(AbstractDriveObserver):
         )
 
     @abc.abstractmethod
-    def leso(self, xl, u, i, w):
+    def leso(self, xl: jax.Array, u: jax.Array, i: jax.Array, w: jax.Array) -> tuple[jax.Array, jax.Array]:
         """The LESO part.
 
         Args:
@@ -230,7 +260,7 @@ class AbstractLESO(AbstractDriveObserver):
             ``(dx_leso/dt, ê)``.
         """
 
-    def phase_error(self, e, th, w):
+    def phase_error(self, e: jax.Array, th: jax.Array, w: jax.Array) -> jax.Array:
         """The phase detector (module doc, "Through zero speed"): ≈ sin(θe − θ̂) at speed.
 
         Args:
@@ -247,14 +277,32 @@ class AbstractLESO(AbstractDriveObserver):
         fade = w * jnp.abs(w) / (w * w + self.zero_fade**2)
         return fade * (-e[0] * jnp.cos(th) - e[1] * jnp.sin(th)) / mag
 
-    def f(self, x, inp):
+    def f(self, x: jax.Array, inp: tuple[jax.Array, jax.Array, jax.Array]) -> jax.Array:
+        """The LESO's and the speed estimator's vector field.
+
+        Args:
+            x: The flat state: the LESO's ``n_leso`` states, then the speed estimator's.
+            inp: ``(u, i, torque)``: the voltage (αβ), V, the current (αβ), A, and the torque reference, N·m.
+
+        Returns:
+            dx/dt.
+        """
         u, i, torque = inp
         xl, xs = x[: self.n_leso], x[self.n_leso :]
         dxl, e = self.leso(xl, u, i, xs[1])
         err = self.phase_error(e, xs[0], xs[1])
         return jnp.concatenate([dxl, self.speed.vf(self, xs, err, torque)])
 
-    def step(self, state: DriveObserverState, meas):
+    def step(self, state: DriveObserverState, meas: DriveInput) -> tuple[DriveObserverState, LESOOutput]:
+        """One sample: the period that ends now integrated (module doc, "Sampling"), and the outputs at t_k.
+
+        Args:
+            state: The state at the previous sample.
+            meas: The measurements at this sample.
+
+        Returns:
+            ``(the state at this sample, the outputs at t_k)``.
+        """
         i = jnp.stack([meas.i_a, meas.i_b])
         tq = meas.T_ref  # the torque reference over the period; none given: 0
         tq = jnp.zeros((), state.x.dtype) if tq is None else jnp.asarray(tq, state.x.dtype)
@@ -276,11 +324,25 @@ class AbstractLESO(AbstractDriveObserver):
         return new, out
 
     @property
-    def mu(self):
+    def mu(self) -> jax.Array:
+        """μ = R̂s/L̂q, 1/s (002 eq 8)."""
         return self.Rs / self.Lq
 
 
-def _common(obj, Rs, Lq, kp_pll, ki_pll, omega0_pll, ts, rule, e_floor, name, speed, zero_fade):
+def _common(
+    obj: AbstractLESO,
+    Rs: ArrayLike,
+    Lq: ArrayLike,
+    kp_pll: ArrayLike,
+    ki_pll: ArrayLike,
+    omega0_pll: ArrayLike,
+    ts: float,
+    rule: AbstractRule | None,
+    e_floor: float,
+    name: str,
+    speed: AbstractSpeedEstimator | dict[str, Any] | None,
+    zero_fade: float,
+) -> None:
     obj.Rs = check_nonnegative("Rs", Rs, name)
     obj.Lq = check_positive("Lq", Lq, name)
     obj.kp_pll, obj.ki_pll = as_float(kp_pll), as_float(ki_pll)  # bounds: check_gains (AbstractObserver)
@@ -304,19 +366,11 @@ _DEFAULT_PLL = pll_gains(2 * math.pi * papers.LESO_PLL_HZ)
 _RS, _LQ = papers.IPMSM_002["Rs"], papers.IPMSM_002["Lq"]
 
 
-def _kp():
-    return gain(units="s-1", role="pll", long_name="PLL proportional gain", symbol="k_p (ours: 2ζω_b)")
+def _omega0() -> dict[str, Any]:
+    return gain_metadata(units="rad s-1", role="leso", long_name="LESO bandwidth", symbol="002: ω0")
 
 
-def _ki():
-    return gain(units="s-2", role="pll", long_name="PLL integral gain", symbol="k_i (ours: ω_b²)")
-
-
-def _omega0():
-    return gain(units="rad s-1", role="leso", long_name="LESO bandwidth", symbol="002: ω0")
-
-
-def _pll_design(cls, pll_hz):
+def _pll_design(cls: type, pll_hz: float) -> tuple[float, float, tuple[DesignRow, ...]]:
     """The LESOs' PLL placed at ω_b = 2π·``pll_hz`` (ζ = 1/√2, ours: 002's PLL section is missing from our copy):
     its gains and rows."""
     check_positive("pll_hz", pll_hz, f"{cls.__name__}.closed_form")
@@ -329,7 +383,7 @@ def _pll_design(cls, pll_hz):
     return kp, ki, rows
 
 
-def _eq16_rows(omega0, Rs, Lq):
+def _eq16_rows(omega0: ArrayLike, Rs: ArrayLike, Lq: ArrayLike) -> tuple[DesignRow, DesignRow]:
     """002 eq (16)'s l1, l2 at the assumed machine (μ = Rs/Lq): rows of the C- and GI-LESO's designs."""
     l1, l2 = cleso_gains(as_float(omega0), as_float(Rs) / as_float(Lq))
     return (
@@ -361,9 +415,9 @@ class CLESO(AbstractLESO):
 
     Rs: jax.Array
     Lq: jax.Array
-    omega0: jax.Array = _omega0()
-    kp_pll: jax.Array = _kp()
-    ki_pll: jax.Array = _ki()
+    omega0: jax.Array = eqx.field(metadata=_omega0())
+    kp_pll: jax.Array = eqx.field(metadata=kp_pll_metadata())
+    ki_pll: jax.Array = eqx.field(metadata=ki_pll_metadata())
     omega0_pll: jax.Array  # initial PLL speed, rad/s
     speed: AbstractSpeedEstimator  # speed and position extraction (its states follow the LESO's)
     ts: float = eqx.field(static=True)
@@ -374,25 +428,31 @@ class CLESO(AbstractLESO):
 
     def __init__(
         self,
-        Rs,
-        Lq,
-        omega0=papers.LESO_OMEGA0,
-        kp_pll=_DEFAULT_PLL[0],
-        ki_pll=_DEFAULT_PLL[1],
-        omega0_pll=0.0,
+        Rs: ArrayLike,
+        Lq: ArrayLike,
+        omega0: ArrayLike = papers.LESO_OMEGA0,
+        kp_pll: ArrayLike = _DEFAULT_PLL[0],
+        ki_pll: ArrayLike = _DEFAULT_PLL[1],
+        omega0_pll: ArrayLike = 0.0,
         *,
-        ts=1e-4,
-        rule=None,
-        e_floor=1.0,
-        speed=None,
-        zero_fade=0.0,
-    ):
+        ts: float = 1e-4,
+        rule: AbstractRule | None = None,
+        e_floor: float = 1.0,
+        speed: AbstractSpeedEstimator | dict[str, Any] | None = None,
+        zero_fade: float = 0.0,
+    ) -> None:
         _common(self, Rs, Lq, kp_pll, ki_pll, omega0_pll, ts, rule, e_floor, "CLESO", speed, zero_fade)
         self.omega0 = as_float(omega0)
 
     @classmethod
     def closed_form_design(
-        cls, omega0=papers.LESO_OMEGA0, pll_hz=papers.LESO_PLL_HZ, Rs=_RS, Lq=_LQ, omega0_pll=0.0, **kw
+        cls,
+        omega0: ArrayLike = papers.LESO_OMEGA0,
+        pll_hz: float = papers.LESO_PLL_HZ,
+        Rs: ArrayLike = _RS,
+        Lq: ArrayLike = _LQ,
+        omega0_pll: ArrayLike = 0.0,
+        **kw: Any,
     ) -> ClosedForm:
         """The C-LESO of 002 Table II (ω0 = 500π; l1 = 2ω0 − μ, l2 = ω0², eq 16) with its PLL placed at
         ω_b = 2π·``pll_hz`` (k_p = 2ζω_b, k_i = ω_b², ζ = 1/√2).
@@ -423,7 +483,7 @@ class CLESO(AbstractLESO):
         return ClosedForm(obs, inputs, rows, "002 Table II (ω0 = 500π), PLL pole placement ω_b = 2π·15")
 
     @classmethod
-    def closed_form(cls, **kw) -> CLESO:
+    def closed_form(cls, **kw: Any) -> CLESO:
         """The observer of :meth:`closed_form_design` (same arguments).
 
         Args:
@@ -434,7 +494,18 @@ class CLESO(AbstractLESO):
         """
         return cls.closed_form_design(**kw).observer
 
-    def leso(self, xl, u, i, w):
+    def leso(self, xl: jax.Array, u: jax.Array, i: jax.Array, w: jax.Array) -> tuple[jax.Array, jax.Array]:
+        """The C-LESO (002 eqs 9, 15–16), per axis.
+
+        Args:
+            xl: [x̂1α, x̂1β, x̂2α, x̂2β].
+            u: The voltage (αβ), V.
+            i: The current (αβ), A.
+            w: The PLL's speed ω̂, rad/s (unused: the C-LESO has no internal model of ω̂).
+
+        Returns:
+            ``(dx_leso/dt, ê)``.
+        """
         mu, b0 = self.mu, 1.0 / self.Lq
         l1, l2 = cleso_gains(self.omega0, mu)  # 002 eq (16)
         x1, x2 = xl[0:2], xl[2:4]
@@ -469,13 +540,17 @@ class GILESO(AbstractLESO):
 
     Rs: jax.Array
     Lq: jax.Array
-    omega0: jax.Array = _omega0()
-    K_r: jax.Array = gain(units="s-2", role="leso", long_name="generalized integrator gain", symbol="002: K_r")
-    omega_c: jax.Array = gain(
-        units="rad s-1", role="leso", long_name="generalized integrator damping", symbol="002: ωc"
+    omega0: jax.Array = eqx.field(metadata=_omega0())
+    K_r: jax.Array = eqx.field(
+        metadata=gain_metadata(units="s-2", role="leso", long_name="generalized integrator gain", symbol="002: K_r")
     )
-    kp_pll: jax.Array = _kp()
-    ki_pll: jax.Array = _ki()
+    omega_c: jax.Array = eqx.field(
+        metadata=gain_metadata(
+            units="rad s-1", role="leso", long_name="generalized integrator damping", symbol="002: ωc"
+        )
+    )
+    kp_pll: jax.Array = eqx.field(metadata=kp_pll_metadata())
+    ki_pll: jax.Array = eqx.field(metadata=ki_pll_metadata())
     omega0_pll: jax.Array  # initial PLL speed, rad/s
     speed: AbstractSpeedEstimator  # speed and position extraction (its states follow the LESO's)
     ts: float = eqx.field(static=True)
@@ -486,21 +561,21 @@ class GILESO(AbstractLESO):
 
     def __init__(
         self,
-        Rs,
-        Lq,
-        omega0=papers.LESO_OMEGA0,
-        K_r=None,
-        omega_c=papers.GILESO_OMEGA_C,
-        kp_pll=_DEFAULT_PLL[0],
-        ki_pll=_DEFAULT_PLL[1],
-        omega0_pll=0.0,
+        Rs: ArrayLike,
+        Lq: ArrayLike,
+        omega0: float | jax.Array = papers.LESO_OMEGA0,
+        K_r: ArrayLike | None = None,
+        omega_c: ArrayLike = papers.GILESO_OMEGA_C,
+        kp_pll: ArrayLike = _DEFAULT_PLL[0],
+        ki_pll: ArrayLike = _DEFAULT_PLL[1],
+        omega0_pll: ArrayLike = 0.0,
         *,
-        ts=1e-4,
-        rule=None,
-        e_floor=1.0,
-        speed=None,
-        zero_fade=0.0,
-    ):
+        ts: float = 1e-4,
+        rule: AbstractRule | None = None,
+        e_floor: float = 1.0,
+        speed: AbstractSpeedEstimator | dict[str, Any] | None = None,
+        zero_fade: float = 0.0,
+    ) -> None:
         _common(self, Rs, Lq, kp_pll, ki_pll, omega0_pll, ts, rule, e_floor, "GILESO", speed, zero_fade)
         self.omega0 = as_float(omega0)
         self.K_r = as_float(2 * float(omega0) ** 2 if K_r is None else K_r)
@@ -509,14 +584,14 @@ class GILESO(AbstractLESO):
     @classmethod
     def closed_form_design(
         cls,
-        omega0=papers.LESO_OMEGA0,
-        K_r=papers.GILESO_K_R,
-        omega_c=papers.GILESO_OMEGA_C,
-        pll_hz=papers.LESO_PLL_HZ,
-        Rs=_RS,
-        Lq=_LQ,
-        omega0_pll=0.0,
-        **kw,
+        omega0: float | jax.Array = papers.LESO_OMEGA0,
+        K_r: ArrayLike = papers.GILESO_K_R,
+        omega_c: ArrayLike = papers.GILESO_OMEGA_C,
+        pll_hz: float = papers.LESO_PLL_HZ,
+        Rs: ArrayLike = _RS,
+        Lq: ArrayLike = _LQ,
+        omega0_pll: ArrayLike = 0.0,
+        **kw: Any,
     ) -> ClosedForm:
         """The GI-LESO of 002 Table II (ω0 = 500π, K_r = 2ω0², ωc = π; eqs 29–30) with its PLL placed at
         ω_b = 2π·``pll_hz`` (k_p = 2ζω_b, k_i = ω_b², ζ = 1/√2).
@@ -554,7 +629,7 @@ class GILESO(AbstractLESO):
         )
 
     @classmethod
-    def closed_form(cls, **kw) -> GILESO:
+    def closed_form(cls, **kw: Any) -> GILESO:
         """The observer of :meth:`closed_form_design` (same arguments).
 
         Args:
@@ -565,7 +640,18 @@ class GILESO(AbstractLESO):
         """
         return cls.closed_form_design(**kw).observer
 
-    def leso(self, xl, u, i, w):
+    def leso(self, xl: jax.Array, u: jax.Array, i: jax.Array, w: jax.Array) -> tuple[jax.Array, jax.Array]:
+        """The GI-LESO (002 eqs 29–30; module doc), per axis.
+
+        Args:
+            xl: [x̂1α, x̂1β, x̂2aα, x̂2aβ, rα, rβ, ṙα, ṙβ].
+            u: The voltage (αβ), V.
+            i: The current (αβ), A.
+            w: The PLL's speed ω̂, rad/s (the generalized integrator's resonance).
+
+        Returns:
+            ``(dx_leso/dt, ê)``.
+        """
         mu, b0 = self.mu, 1.0 / self.Lq
         l1, l2 = cleso_gains(self.omega0, mu)  # 002 eq (29): L1 and the constant part of L2 are eq (16)'s
         x1, x2a, r, rd = xl[0:2], xl[2:4], xl[4:6], xl[6:8]
@@ -575,118 +661,3 @@ class GILESO(AbstractLESO):
         dx2a = -l2 * eps
         drd = 2 * self.K_r * self.omega_c * eps - 2 * self.omega_c * rd - w * w * r
         return jnp.concatenate([dx1, dx2a, rd, drd]), -self.Lq * x2
-
-
-class FALESO(AbstractLESO):
-    """Frequency-adaptive complex-coefficient LESO (002 eqs 25–28).
-
-    ê/e = (k2 s + k1)/(s² + (k2 − jω̂e)s + k1); stable iff k1 > 0 and k2 > 0 (002 eq 24).
-
-    Args:
-        Rs: Assumed stator resistance, ohm (≥ 0; :meth:`bind` sets it per scenario).
-        Lq: Assumed q-axis inductance, H (> 0; :meth:`bind` sets it).
-        k1: FA-LESO integral gain, 1/s² (> 0).
-        k2: FA-LESO proportional gain, 1/s (> 0).
-        kp_pll: The PLL's proportional gain, 1/s (> 0; default: placed at 2π·``papers.LESO_PLL_HZ``, ζ = 1/√2).
-        ki_pll: The PLL's integral gain, 1/s² (> 0; default as ``kp_pll``).
-        omega0_pll: The PLL's initial speed, rad/s (:meth:`bind` sets it).
-        ts: Sample time, s.
-        rule: Discretization rule (default :class:`~jaxobs.RK4`).
-        e_floor: Floor of |ê| in the PLL's normalized error, V.
-        speed: The speed extraction: an estimator, or a record (:func:`~jaxobs.observers.speed.speed_from_spec`);
-            default :class:`~jaxobs.observers.speed.PLLSpeed` on ``kp_pll``, ``ki_pll``.
-        zero_fade: ω_f, rad/s (≥ 0; 0: the sign detector; module doc, "Through zero speed").
-
-    Raises:
-        ValueError: A value out of its range.
-    """
-
-    # 002's names: ê/e = (k2 s + k1)/(s² + (k2 − jω̂e)s + k1), so k1 is in s⁻² and k2 in s⁻¹ (001's WIF k1,
-    # k2, dimensionless, are other gains: a gain is (class, name), jaxobs.observers.gain_fields)
-    Rs: jax.Array
-    Lq: jax.Array
-    k1: jax.Array = gain(units="s-2", role="leso", long_name="FA-LESO integral gain", symbol="002: k1")
-    k2: jax.Array = gain(units="s-1", role="leso", long_name="FA-LESO proportional gain", symbol="002: k2")
-    kp_pll: jax.Array = _kp()
-    ki_pll: jax.Array = _ki()
-    omega0_pll: jax.Array  # initial PLL speed, rad/s
-    speed: AbstractSpeedEstimator  # speed and position extraction (its states follow the LESO's)
-    ts: float = eqx.field(static=True)
-    rule: AbstractRule = eqx.field(static=True)
-    e_floor: float = eqx.field(static=True)
-    zero_fade: float = eqx.field(static=True)  # ω_f of the detector's fade through zero, rad/s (0: sign)
-    n_leso: ClassVar[int] = 4
-
-    def __init__(
-        self,
-        Rs,
-        Lq,
-        k1=papers.FALESO_K1,
-        k2=papers.FALESO_K2,
-        kp_pll=_DEFAULT_PLL[0],
-        ki_pll=_DEFAULT_PLL[1],
-        omega0_pll=0.0,
-        *,
-        ts=1e-4,
-        rule=None,
-        e_floor=1.0,
-        speed=None,
-        zero_fade=0.0,
-    ):
-        _common(self, Rs, Lq, kp_pll, ki_pll, omega0_pll, ts, rule, e_floor, "FALESO", speed, zero_fade)
-        # 002 eq (24): stable iff k1 > 0 and k2 > 0 (generalized Routh test): their declared bounds, which
-        # check_gains enforces (AbstractObserver)
-        self.k1, self.k2 = as_float(k1), as_float(k2)
-
-    @classmethod
-    def closed_form_design(
-        cls, k1=papers.FALESO_K1, k2=papers.FALESO_K2, pll_hz=papers.LESO_PLL_HZ, Rs=_RS, Lq=_LQ, omega0_pll=0.0, **kw
-    ) -> ClosedForm:
-        """The FA-LESO of 002 Table II (k1 = 10π, k2 = 100π; stable iff k1, k2 > 0, eq 24) with its PLL placed
-        at ω_b = 2π·``pll_hz`` (k_p = 2ζω_b, k_i = ω_b², ζ = 1/√2).
-
-        Args:
-            k1: integral gain, s⁻² (> 0).
-            k2: proportional gain, s⁻¹ (> 0).
-            pll_hz: the PLL's bandwidth, Hz (> 0).
-            Rs: assumed stator resistance, ohm (>= 0; ``bind`` sets it per scenario).
-            Lq: assumed q-axis inductance, H (> 0; ``bind`` sets it).
-            omega0_pll: the PLL's initial speed, rad/s (``bind`` sets it).
-            **kw: the constructor's keywords.
-
-        Returns:
-            The :class:`~jaxobs.observers.ClosedForm`: the :class:`FALESO` and the rows k1, k2 and the PLL's.
-
-        Raises:
-            ValueError: a value out of its range.
-        """
-        kp, ki, pll_rows = _pll_design(cls, pll_hz)
-        obs = cls(Rs, Lq, k1, k2, kp, ki, omega0_pll, **kw)
-        rows = (
-            gain_row(cls, "k1", obs.k1, "chosen: k1 = 10π (stable iff k1 > 0, eq 24)", "002 Table II"),
-            gain_row(cls, "k2", obs.k2, "chosen: k2 = 100π (stable iff k2 > 0, eq 24)", "002 Table II"),
-            *pll_rows,
-        )
-        inputs = dict(k1=k1, k2=k2, pll_hz=pll_hz, Rs=Rs, Lq=Lq, omega0_pll=omega0_pll)
-        return ClosedForm(obs, inputs, rows, "002 Table II (k1 = 10π, k2 = 100π), PLL pole placement ω_b = 2π·15")
-
-    @classmethod
-    def closed_form(cls, **kw) -> FALESO:
-        """The observer of :meth:`closed_form_design` (same arguments).
-
-        Args:
-            **kw: :meth:`closed_form_design`'s arguments.
-
-        Returns:
-            The :class:`FALESO`.
-        """
-        return cls.closed_form_design(**kw).observer
-
-    def leso(self, xl, u, i, w):
-        mu, b0 = self.mu, 1.0 / self.Lq
-        x1, z = xl[0:2], xl[2:4]
-        eps = x1 - i
-        x2 = -self.k2 * eps - self.k1 * z
-        rot = jnp.stack([-w * eps[1], w * eps[0]])  # j ω̂ ε1
-        dx1 = x2 + b0 * u - mu * x1 + mu * eps + rot
-        return jnp.concatenate([dx1, eps]), -self.Lq * x2

@@ -73,16 +73,19 @@ model-based observer.
 from __future__ import annotations
 
 import math
-from typing import ClassVar, NamedTuple
+from typing import Any, ClassVar, NamedTuple, Self
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+from jax.typing import ArrayLike
 
+from ..core.discretize import AbstractRule
+from ..core.measurements import DriveInput
 from ..core.numerics import wrap
 from ..core.validate import as_float, check_nonnegative, check_positive, check_sample_time
-from ._gains import ClosedForm, DesignRow, gain, gain_row
-from .base import AbstractDriveObserver, BoundFields, DriveObserverState, replace_leaves
+from ._gains import ClosedForm, DesignRow, gain_metadata, gain_row
+from .base import AbstractDriveObserver, AssumedMachine, BoundFields, DriveObserverState, replace_leaves
 
 __all__ = [
     "ROFOOutput",
@@ -116,14 +119,14 @@ class ROFOOutput(NamedTuple):
     psi_q: jax.Array  # and q, Wb
 
 
-def _sinc(x):
+def _sinc(x: jax.Array) -> jax.Array:
     """sin(x)/x with its limit 1 − x²/6 near 0 (finite value and gradient at 0)."""
     small = jnp.abs(x) < 1e-4
     xs = jnp.where(small, 1.0, x)
     return jnp.where(small, 1.0 - x * x / 6.0, jnp.sin(xs) / xs)
 
 
-def matched_pole(alpha, ts):
+def matched_pole(alpha: float, ts: float) -> float:
     """The pole α' = (1 − e^{−α T_s})/T_s: forward-Euler gains designed for −α' put the pole at z = e^{−α T_s}.
 
     Args:
@@ -136,7 +139,7 @@ def matched_pole(alpha, ts):
     return -math.expm1(-alpha * ts) / ts
 
 
-def speed_gains(alpha_o_hz, ts) -> tuple[float, float]:
+def speed_gains(alpha_o_hz: float, ts: float) -> tuple[float, float]:
     """The closed form's speed gains (kθ, kω) = (2α', α'²), α' the matched pole of α_o = 2π·``alpha_o_hz``.
 
     Args:
@@ -181,24 +184,32 @@ class ReducedOrderFluxObserver(AbstractDriveObserver):
     Ld: jax.Array
     Lq: jax.Array
     psi_f: jax.Array
-    c_sigma: jax.Array = gain(
-        units="1",
-        role="flux",
-        long_name="zero-speed flux gain over the mean machine pole Rs(1/Ld + 1/Lq)/2",
-        symbol="Hinkkanen 2018: σ0 (ours: c_σ = σ0/(R̂s(1/L̂d + 1/L̂q)/2))",
+    c_sigma: jax.Array = eqx.field(
+        metadata=gain_metadata(
+            units="1",
+            role="flux",
+            long_name="zero-speed flux gain over the mean machine pole Rs(1/Ld + 1/Lq)/2",
+            symbol="Hinkkanen 2018: σ0 (ours: c_σ = σ0/(R̂s(1/L̂d + 1/L̂q)/2))",
+        )
     )
-    zeta_inf: jax.Array = gain(
-        units="1",
-        role="flux",
-        long_name="flux gain slope in |speed| (the flux poles' damping at high speed)",
-        symbol="Hinkkanen 2018: k1 = σ0 + ζ∞|ω̂m|",
+    zeta_inf: jax.Array = eqx.field(
+        metadata=gain_metadata(
+            units="1",
+            role="flux",
+            long_name="flux gain slope in |speed| (the flux poles' damping at high speed)",
+            symbol="Hinkkanen 2018: k1 = σ0 + ζ∞|ω̂m|",
+        )
     )
     # the speed estimate is a type-2 tracking loop on ε (θ̂̇ = ω̂ + kθ ε, ω̂̇ = kω ε): a PLL's role
-    k_theta: jax.Array = gain(
-        units="s-1", role="pll", long_name="angle estimation gain", symbol="kθ (closed form: 2α')"
+    k_theta: jax.Array = eqx.field(
+        metadata=gain_metadata(
+            units="s-1", role="pll", long_name="angle estimation gain", symbol="kθ (closed form: 2α')"
+        )
     )
-    k_omega: jax.Array = gain(
-        units="s-2", role="pll", long_name="speed estimation gain", symbol="kω (closed form: α'²)"
+    k_omega: jax.Array = eqx.field(
+        metadata=gain_metadata(
+            units="s-2", role="pll", long_name="speed estimation gain", symbol="kω (closed form: α'²)"
+        )
     )
     omega_init: jax.Array  # the speed estimate's start, rad/s (signed)
     ts: float = eqx.field(static=True)
@@ -218,21 +229,21 @@ class ReducedOrderFluxObserver(AbstractDriveObserver):
 
     def __init__(
         self,
-        Rs,
-        Ld,
-        Lq,
-        psi_f,
-        c_sigma,
-        zeta_inf,
-        k_theta,
-        k_omega,
-        omega_init=None,
+        Rs: ArrayLike,
+        Ld: ArrayLike,
+        Lq: ArrayLike,
+        psi_f: ArrayLike,
+        c_sigma: ArrayLike,
+        zeta_inf: ArrayLike,
+        k_theta: ArrayLike,
+        k_omega: ArrayLike,
+        omega_init: ArrayLike | None = None,
         *,
-        ts=1e-4,
-        psi_floor=1e-4,
-        omega0=None,
-        rule=None,
-    ):
+        ts: float = 1e-4,
+        psi_floor: float = 1e-4,
+        omega0: ArrayLike | None = None,
+        rule: AbstractRule | None = None,
+    ) -> None:
         name = "ReducedOrderFluxObserver"
         if rule is not None:
             raise ValueError(
@@ -259,16 +270,16 @@ class ReducedOrderFluxObserver(AbstractDriveObserver):
     @classmethod
     def closed_form_design(
         cls,
-        alpha_o_hz=ROFO_ALPHA_O_HZ,
-        zeta_inf=ROFO_ZETA_INF,
-        c_sigma=ROFO_C_SIGMA,
-        Rs=0.0,
-        Ld=1.0,
-        Lq=1.0,
-        psi_f=1.0,
-        omega_init=0.0,
-        ts=1e-4,
-        **kw,
+        alpha_o_hz: float = ROFO_ALPHA_O_HZ,
+        zeta_inf: ArrayLike = ROFO_ZETA_INF,
+        c_sigma: ArrayLike = ROFO_C_SIGMA,
+        Rs: ArrayLike = 0.0,
+        Ld: ArrayLike = 1.0,
+        Lq: ArrayLike = 1.0,
+        psi_f: ArrayLike = 1.0,
+        omega_init: ArrayLike = 0.0,
+        ts: float = 1e-4,
+        **kw: Any,
     ) -> ClosedForm:
         """Pole placement (module doc, derived from the linearised error dynamics of Hinkkanen 2018's observer):
 
@@ -334,7 +345,7 @@ class ReducedOrderFluxObserver(AbstractDriveObserver):
         return ClosedForm(obs, inputs, rows, source)
 
     @classmethod
-    def closed_form(cls, **kw) -> ReducedOrderFluxObserver:
+    def closed_form(cls, **kw: Any) -> ReducedOrderFluxObserver:
         """The observer of :meth:`closed_form_design` (same arguments; Hinkkanen 2018's observer, motulator's
         defaults).
 
@@ -347,14 +358,24 @@ class ReducedOrderFluxObserver(AbstractDriveObserver):
         return cls.closed_form_design(**kw).observer
 
     # --- the drive-observer contract ------------------------------------------------------------------------
-    def bind(self, est_par, omega_e) -> ReducedOrderFluxObserver:
+    def bind(self, est_par: AssumedMachine | None, omega_e: ArrayLike) -> Self:
+        """This observer assuming ``est_par``'s Rs, Ld, Lq and ψf, its speed estimate starting at the signed ω_e
+        (:meth:`AbstractDriveObserver.bind`).
+
+        Args:
+            est_par: The machine assumed, or None (the speed only).
+            omega_e: The electrical speed, rad/s, signed.
+
+        Returns:
+            The bound observer.
+        """
         if est_par is None:
             return replace_leaves(self, omega_init=omega_e)
         return replace_leaves(
             self, Rs=est_par.Rs, Ld=est_par.Ld, Lq=est_par.Lq, psi_f=est_par.psi_f, omega_init=omega_e
         )
 
-    def initial_state(self, omega_e=None, theta_e=None):
+    def initial_state(self, omega_e: ArrayLike | None = None, theta_e: ArrayLike | None = None) -> jax.Array:
         """[ψ̂d, ψ̂q, θ̂, ω̂m] = [ψ̂f, 0, θ_e or 0, ω_e or omega_init].
 
         Args:
@@ -369,14 +390,22 @@ class ReducedOrderFluxObserver(AbstractDriveObserver):
         th = jnp.zeros((), dt) if theta_e is None else wrap(jnp.asarray(theta_e, dt))
         return jnp.stack([jnp.asarray(self.psi_f, dt), jnp.zeros((), dt), th, w])
 
-    def _init_from(self, x0) -> DriveObserverState:
+    def _init_from(self, x0: jax.Array) -> DriveObserverState:
         z2 = jnp.zeros((2,), x0.dtype)
         return DriveObserverState(x=x0, rule=None, i_prev=z2, u_prev=z2, started=jnp.asarray(False))
 
-    def init(self, u0=None) -> DriveObserverState:
+    def init(self, u0: Any = None) -> DriveObserverState:
+        """The state at sample 0: :meth:`initial_state`, nothing seen yet.
+
+        Args:
+            u0: Unused (the first sample sets the flux from the current model).
+
+        Returns:
+            The :class:`DriveObserverState`.
+        """
         return self._init_from(self.initial_state())
 
-    def init_at(self, omega_e) -> DriveObserverState:
+    def init_at(self, omega_e: ArrayLike) -> DriveObserverState:
         """The initial state with the speed estimate at ω_e (θ̂ = 0, ψ̂s = ψ̂f).
 
         Args:
@@ -387,7 +416,7 @@ class ReducedOrderFluxObserver(AbstractDriveObserver):
         """
         return self._init_from(self.initial_state(omega_e))
 
-    def init_aligned(self, omega_e, theta_e) -> DriveObserverState:
+    def init_aligned(self, omega_e: ArrayLike, theta_e: ArrayLike) -> DriveObserverState:
         """:meth:`init_at` with θ̂ at the rotor's θ_e: the angle is this observer's own state.
 
         Args:
@@ -399,7 +428,7 @@ class ReducedOrderFluxObserver(AbstractDriveObserver):
         """
         return self._init_from(self.initial_state(omega_e, theta_e))
 
-    def seed_speed(self, state: DriveObserverState, omega_e) -> DriveObserverState:
+    def seed_speed(self, state: DriveObserverState, omega_e: ArrayLike) -> DriveObserverState:
         """``state`` with ω̂m set to ω_e (an I-f start-up holds it at the I-f frequency).
 
         Args:
@@ -412,7 +441,7 @@ class ReducedOrderFluxObserver(AbstractDriveObserver):
         return eqx.tree_at(lambda s: s.x, state, state.x.at[3].set(omega_e))
 
     # --- the observer -----------------------------------------------------------------------------------------
-    def flux_gain(self, omega):
+    def flux_gain(self, omega: ArrayLike) -> jax.Array:
         """k1 = σ0 + ζ∞|ω̂m|, σ0 = c_σ R̂s(1/L̂d + 1/L̂q)/2, 1/s.
 
         Args:
@@ -424,7 +453,9 @@ class ReducedOrderFluxObserver(AbstractDriveObserver):
         sigma0 = self.c_sigma * 0.5 * self.Rs * (1.0 / self.Ld + 1.0 / self.Lq)
         return sigma0 + self.zeta_inf * jnp.abs(omega)
 
-    def current_model(self, i_d, i_q):
+    def current_model(
+        self, i_d: jax.Array, i_q: jax.Array
+    ) -> tuple[tuple[jax.Array, jax.Array], tuple[jax.Array, jax.Array]]:
         """The current model's flux L̂d id + ψ̂f + j L̂q iq and the auxiliary flux ψ̂f + (L̂d − L̂q) is* (d, q each).
 
         Args:
@@ -437,7 +468,9 @@ class ReducedOrderFluxObserver(AbstractDriveObserver):
         dl = self.Ld - self.Lq
         return (self.Ld * i_d + self.psi_f, self.Lq * i_q), (self.psi_f + dl * i_d, -dl * i_q)
 
-    def error_signals(self, psi, i_d, i_q):
+    def error_signals(
+        self, psi: tuple[jax.Array, jax.Array], i_d: jax.Array, i_q: jax.Array
+    ) -> tuple[jax.Array, jax.Array, jax.Array, jax.Array, jax.Array, jax.Array]:
         """The flux error e, the auxiliary flux ψ̂a and the position error ε = −Im{e/ψ̂a} (module doc).
 
         Args:
@@ -456,7 +489,7 @@ class ReducedOrderFluxObserver(AbstractDriveObserver):
         im = (eq * pad - ed * paq) / na
         return ed, eq, pad, paq, re, -im
 
-    def _advance(self, x, u_ab, i_ab):
+    def _advance(self, x: jax.Array, u_ab: jax.Array, i_ab: jax.Array) -> jax.Array:
         """The state at t_k from the state at t_{k−1}, the current i_{k−1} and the voltage over the period."""
         psi_d, psi_q, th, w = x[0], x[1], x[2], x[3]
         c, s = jnp.cos(th), jnp.sin(th)
@@ -478,13 +511,23 @@ class ReducedOrderFluxObserver(AbstractDriveObserver):
         new_q = -sp * pd + cp * pq - (-sh * rd + ch * rq)
         return jnp.stack([new_d, new_q, wrap(th + self.ts * wc), w + self.ts * self.k_omega * eps])
 
-    def _current_model_state(self, x, i_ab):
+    def _current_model_state(self, x: jax.Array, i_ab: jax.Array) -> jax.Array:
         """``x`` with ψ̂s set to the current model's flux at θ̂ (the first sample's start, module doc)."""
         c, s = jnp.cos(x[2]), jnp.sin(x[2])
         (pid, piq), _ = self.current_model(c * i_ab[0] + s * i_ab[1], -s * i_ab[0] + c * i_ab[1])
         return jnp.stack([pid, piq, x[2], x[3]])
 
-    def step(self, state: DriveObserverState, meas):
+    def step(self, state: DriveObserverState, meas: DriveInput) -> tuple[DriveObserverState, ROFOOutput]:
+        """One sample: the period that ends now by the hold equivalent (module doc), or, at the first sample, the
+        current model's flux.
+
+        Args:
+            state: The state at the previous sample.
+            meas: The measurements at this sample.
+
+        Returns:
+            ``(the state at this sample, the outputs at t_k)``.
+        """
         i = jnp.stack([meas.i_a, meas.i_b])
         x1 = jnp.where(
             state.started, self._advance(state.x, state.u_prev, state.i_prev), self._current_model_state(state.x, i)

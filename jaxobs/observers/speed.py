@@ -44,15 +44,16 @@ that case.
 from __future__ import annotations
 
 import abc
-from typing import ClassVar
+from typing import Any, ClassVar, Protocol
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+from jax.typing import ArrayLike
 
 from ..core.validate import check_nonnegative, check_positive
 from ._cores import pll_vf
-from ._gains import gain
+from ._gains import gain_metadata
 
 __all__ = [
     "AbstractSpeedEstimator",
@@ -61,10 +62,57 @@ __all__ = [
     "mechanical_gains",
     "speed_from_spec",
     "SPEED_KINDS",
+    "SpeedHost",
+    "MachineInertia",
 ]
 
 # what a job's [observer.speed] ``kind`` names (tuning/job/schema.py)
 SPEED_KINDS = ("pll", "mechanical")
+
+
+class SpeedHost(Protocol):
+    """The observer that holds a speed estimator, as the estimator reads it: its PLL gains (a PLL's are its host's).
+
+    Attributes:
+        kp_pll: The PLL's proportional gain, 1/s.
+        ki_pll: The PLL's integral gain, 1/s².
+    """
+
+    @property
+    def kp_pll(self) -> jax.Array:
+        """The PLL's proportional gain, 1/s."""
+        ...
+
+    @property
+    def ki_pll(self) -> jax.Array:
+        """The PLL's integral gain, 1/s²."""
+        ...
+
+
+class MachineInertia(Protocol):
+    """The assumed machine's mechanics, as a mechanical-model speed observer binds them (a
+    :class:`jaxobs.drive.PMSMParams` has them).
+
+    Attributes:
+        J: Inertia, kg·m².
+        B: Viscous friction, N·m·s/rad.
+        p: Pole pairs.
+    """
+
+    @property
+    def J(self) -> jax.Array:
+        """Inertia, kg·m²."""
+        ...
+
+    @property
+    def B(self) -> jax.Array:
+        """Viscous friction, N·m·s/rad."""
+        ...
+
+    @property
+    def p(self) -> int:
+        """Pole pairs."""
+        ...
 
 
 class AbstractSpeedEstimator(eqx.Module):
@@ -78,7 +126,7 @@ class AbstractSpeedEstimator(eqx.Module):
     # whether vf reads the torque reference: a drive loop computes T* for the observer only then
     uses_torque: eqx.AbstractClassVar[bool]
 
-    def initial_state(self, theta0, omega0) -> jax.Array:
+    def initial_state(self, theta0: ArrayLike, omega0: ArrayLike) -> jax.Array:
         """The states at the start: [θ̂0, ω̂0, 0, ...].
 
         Args:
@@ -92,7 +140,7 @@ class AbstractSpeedEstimator(eqx.Module):
         return jnp.concatenate([head, jnp.zeros((self.n_states - 2,), head.dtype)])
 
     @abc.abstractmethod
-    def vf(self, host, xs, err, torque) -> jax.Array:
+    def vf(self, host: SpeedHost, xs: jax.Array, err: jax.Array, torque: ArrayLike) -> jax.Array:
         """The states' rates.
 
         Args:
@@ -105,7 +153,7 @@ class AbstractSpeedEstimator(eqx.Module):
             d(xs)/dt.
         """
 
-    def bind(self, est_par):
+    def bind(self, est_par: MachineInertia) -> AbstractSpeedEstimator:
         """This strategy assuming ``est_par`` (a :class:`jaxobs.drive.PMSMParams`); a PLL has nothing to bind.
 
         Args:
@@ -123,12 +171,23 @@ class PLLSpeed(AbstractSpeedEstimator):
     n_states: ClassVar[int] = 2
     uses_torque: ClassVar[bool] = False
 
-    def vf(self, host, xs, err, torque):
+    def vf(self, host: SpeedHost, xs: jax.Array, err: jax.Array, torque: ArrayLike) -> jax.Array:
+        """The PLL's rates on the host's ``kp_pll``, ``ki_pll``.
+
+        Args:
+            host: The observer holding the PLL.
+            xs: [θ̂, ω̂].
+            err: The phase error ε.
+            torque: Unused (a PLL has no mechanical model).
+
+        Returns:
+            [θ̂̇, ω̂̇].
+        """
         dth, dw = pll_vf(xs[0], xs[1], err, host.kp_pll, host.ki_pll)
         return jnp.stack([dth, dw])
 
 
-def mechanical_gains(alpha_o):
+def mechanical_gains(alpha_o: float) -> tuple[float, float, float]:
     """The mechanical speed observer's gains placing its three error poles at −α_o (module doc).
 
     s³ + k1 s² + k2 s + k3 = (s + α_o)³  ⇒  k1 = 3α_o, k2 = 3α_o², k3 = α_o³.
@@ -157,16 +216,24 @@ class MechanicalSpeed(AbstractSpeedEstimator):
         ValueError: A value out of its range.
     """
 
-    k1: jax.Array = gain(units="s-1", role="speed", long_name="mechanical observer angle gain", symbol="ours: k1")
-    k2: jax.Array = gain(units="s-2", role="speed", long_name="mechanical observer speed gain", symbol="ours: k2")
-    k3: jax.Array = gain(units="s-3", role="speed", long_name="mechanical observer load gain", symbol="ours: k3")
+    k1: jax.Array = eqx.field(
+        metadata=gain_metadata(units="s-1", role="speed", long_name="mechanical observer angle gain", symbol="ours: k1")
+    )
+    k2: jax.Array = eqx.field(
+        metadata=gain_metadata(units="s-2", role="speed", long_name="mechanical observer speed gain", symbol="ours: k2")
+    )
+    k3: jax.Array = eqx.field(
+        metadata=gain_metadata(units="s-3", role="speed", long_name="mechanical observer load gain", symbol="ours: k3")
+    )
     J: jax.Array  # assumed inertia, kg·m²
     B: jax.Array  # assumed viscous friction, N·m·s/rad
     p: int = eqx.field(static=True)  # pole pairs
     n_states: ClassVar[int] = 3
     uses_torque: ClassVar[bool] = True
 
-    def __init__(self, k1, k2, k3, J=1e-3, B=0.0, p=1):
+    def __init__(
+        self, k1: ArrayLike, k2: ArrayLike, k3: ArrayLike, J: ArrayLike = 1e-3, B: ArrayLike = 0.0, p: int = 1
+    ) -> None:
         self.k1 = check_positive("k1", k1, "MechanicalSpeed")
         self.k2 = check_positive("k2", k2, "MechanicalSpeed")
         self.k3 = check_positive("k3", k3, "MechanicalSpeed")
@@ -177,7 +244,7 @@ class MechanicalSpeed(AbstractSpeedEstimator):
         self.p = int(p)
 
     @classmethod
-    def closed_form(cls, alpha_o, J=1e-3, B=0.0, p=1) -> MechanicalSpeed:
+    def closed_form(cls, alpha_o: float, J: ArrayLike = 1e-3, B: ArrayLike = 0.0, p: int = 1) -> MechanicalSpeed:
         """The observer with its three error poles at −α_o: k1 = 3α_o, k2 = 3α_o², k3 = α_o³ (module doc).
 
         Args:
@@ -195,7 +262,7 @@ class MechanicalSpeed(AbstractSpeedEstimator):
         a = float(check_positive("alpha_o", alpha_o, "MechanicalSpeed.closed_form"))
         return cls(*mechanical_gains(a), J=J, B=B, p=p)
 
-    def bind(self, est_par) -> MechanicalSpeed:
+    def bind(self, est_par: MachineInertia) -> MechanicalSpeed:
         """This observer with the assumed machine's Ĵ, B̂ and p.
 
         Args:
@@ -210,7 +277,18 @@ class MechanicalSpeed(AbstractSpeedEstimator):
             return eqx.tree_at(lambda m: (m.J, m.B), self, (J, B))
         return MechanicalSpeed(self.k1, self.k2, self.k3, J=J, B=B, p=int(est_par.p))
 
-    def vf(self, host, xs, err, torque):
+    def vf(self, host: SpeedHost, xs: jax.Array, err: jax.Array, torque: ArrayLike) -> jax.Array:
+        """The mechanical model's rates (module doc).
+
+        Args:
+            host: Unused (the gains are this observer's own).
+            xs: [θ̂, ω̂, T̂L].
+            err: The phase error ε.
+            torque: The torque reference T*, N·m.
+
+        Returns:
+            [θ̂̇, ω̂̇, T̂̇L].
+        """
         w, tl = xs[1], xs[2]
         dth = w + self.k1 * err
         dw = (self.p / self.J) * (torque - tl) - (self.B / self.J) * w + self.k2 * err
@@ -218,7 +296,9 @@ class MechanicalSpeed(AbstractSpeedEstimator):
         return jnp.stack([dth, dw, dtl])
 
 
-def speed_from_spec(spec, owner: str = "speed"):
+def speed_from_spec(
+    spec: AbstractSpeedEstimator | dict[str, Any] | None, owner: str = "speed"
+) -> AbstractSpeedEstimator:
     """A speed estimator from what a constructor was given: None (a PLL), an estimator, or a job's record
     ``{"kind": "pll"}`` / ``{"kind": "mechanical", "alpha_o": α_o}`` (rad/s; Ĵ, B̂ and p come from ``bind``).
 
