@@ -82,7 +82,7 @@ LAYERS = [
     ("jaxobs.drive",),
     # the one loop over a system, and sharding a batch over devices
     ("jaxobs.runtime._steps", "jaxobs.runtime._sensitivity"),
-    ("jaxobs.runtime._loop",),
+    ("jaxobs.runtime._loop", "jaxobs.runtime.onsignal"),  # the loop; an observer on a signal as a system
     ("jaxobs.runtime.simulation", "jaxobs.runtime.sharding"),
     ("jaxobs.runtime",),  # the loop's public names (simulate, the savers, the checkpoints)
     # metrics: the functions that score a run, the one metric table (its entries' forms use them), the package

@@ -29,8 +29,9 @@ import jax
 import numpy as np
 
 from .. import linear, metrics
+from ..runtime.onsignal import OnSignal
 from ..runtime.progress import Progress
-from ..runtime.simulation import OnSignal, simulate
+from ..runtime.simulation import simulate
 from ..signals import paper001_test, stack
 
 __all__ = ["fll_demo", "DEMO_TESTS", "format_table", "table_i_flls"]
