@@ -145,7 +145,7 @@ class AbstractCheckpoint(eqx.Module):
     """How reverse-mode AD stores the time loop; every strategy gives the same numbers."""
 
     @abc.abstractmethod
-    def loop(self, loop: Loop, carry, xs):
+    def loop(self, loop: Loop, carry: Any, xs: Any) -> tuple[Any, Any]:
         """Run a loop from ``loop.init(carry)`` over ``xs``.
 
         Args:
@@ -182,7 +182,7 @@ class AbstractReverseCheckpoint(AbstractCheckpoint):
             ``(final carry, stacked outputs)``, as ``lax.scan``.
         """
 
-    def loop(self, loop, carry, xs):
+    def loop(self, loop: Loop, carry: Any, xs: Any) -> tuple[Any, Any]:
         return run_steps(loop, self, loop.init(carry), xs)
 
 
@@ -253,7 +253,7 @@ class ForwardSensitivity(AbstractCheckpoint):
                 f"ChunkCheckpoint), got {self.fallback!r}"
             )
 
-    def loop(self, loop, carry, xs):
+    def loop(self, loop: Loop, carry: Any, xs: Any) -> tuple[Any, Any]:
         if loop.has_outputs:
             raise ValueError(
                 "ForwardSensitivity serves loops without per-step outputs: use save=SaveFinal(cost) "
@@ -302,7 +302,7 @@ class AutoCheckpoint(AbstractCheckpoint):
             return reverse
         return ForwardSensitivity(max_scalars=self.forward_max, fallback=reverse)
 
-    def loop(self, loop, carry, xs):
+    def loop(self, loop: Loop, carry: Any, xs: Any) -> tuple[Any, Any]:
         return self.pick(loop).loop(loop, carry, xs)
 
 
@@ -328,8 +328,8 @@ def check_unroll(unroll) -> int:
 
 def run_loop(
     body: Callable[[Any, Any], tuple[Any, Any]],
-    carry,
-    xs,
+    carry: Any,
+    xs: Any,
     n: int,
     *,
     unroll: int = 1,
@@ -339,7 +339,7 @@ def run_loop(
     peel: bool = True,
     carry_fn: Callable[[], Any] | None = None,
     fill: Callable[[Any, Any, Any], Any] | None = None,
-):
+) -> tuple[Any, Any]:
     """``lax.scan(body, carry, xs, length=n)``, made fast and cheap to differentiate (module doc).
 
     Args:
@@ -383,12 +383,13 @@ def run_loop(
     else:
         first = jax.tree.map(lambda a: a[:1], xs)
         x_one = jax.tree.map(lambda a: a[0], first if xs_map is None else xs_map(first))
-    carry_shape = jax.eval_shape(carry_fn) if carry is None else carry
+    carry_shape = carry if carry_fn is None else jax.eval_shape(carry_fn)  # one of the two is given
     has_outputs = bool(jax.tree.leaves(jax.eval_shape(body, carry_shape, x_one)[1]))
-    if carry is None:
+    if carry_fn is not None:
         # the initial carry is built inside the strategy's loop: what it closes over (the system's
         # parameters) becomes the perturbed inputs of the forward sensitivities
-        init, carry = (lambda _: carry_fn()), ()
+        build = carry_fn
+        init, carry = (lambda _: build()), ()
     else:
         init = lambda c: c  # noqa: E731
     loop = Loop(body, init, n, unroll, split, xs_map, peel, has_outputs, fill)
