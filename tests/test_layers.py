@@ -100,7 +100,7 @@ LAYERS = [
     ("jaxobs.runtime.runner", "jaxobs.scenarios.families", "jaxobs.studies.registry"),
     # the figures' helpers and the Bode figures (jaxobs.plot re-exports them)
     ("jaxobs.plot._figure", "jaxobs.reproduce.compare", "jaxobs.reproduce._run"),
-    ("jaxobs.plot._bode", "jaxobs.plot._paper"),
+    ("jaxobs.plot._bode", "jaxobs.plot._paper", "jaxobs.plot._envelope"),
     # the library's own applications: studies, the demo, the papers' reproductions, figures, benchmarks
     (
         "jaxobs.studies.study",
