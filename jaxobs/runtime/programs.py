@@ -2,8 +2,8 @@
 
 JAX's persistent compilation cache (:func:`jaxobs.use_compile_cache`) keeps XLA's work, but it keys
 on the lowered program, so every new process still traces each jitted function to a jaxpr and lowers
-it to StableHLO before it can look the executable up: for the default tuning job, 2-4 s of a 10 s warm
-run (the objective's value-and-gradient, the scoring, the margins).  :func:`kept_jit` keeps that
+it to StableHLO before it can look the executable up: seconds of a warm tuning run (the objective's
+value-and-gradient, the scoring, the margins; docs/performance.md).  :func:`kept_jit` keeps that
 work too.  The first call exports the program (``jax.export``: the traced and lowered StableHLO,
 serialized) to the folder of the :class:`ProgramCache` in use; a later process reads it back and runs
 it (``Exported.call``), which compiles, or reads from the compilation cache, the same program.

@@ -38,7 +38,7 @@ from ..scenarios import AbstractSampler, Given
 from . import sharding
 from .chunkstore import AbstractChunkSink
 from .programs import kept_jit
-from .progress import Progress
+from .progress import Progress, ProgressArg
 from .simulation import AbstractSave, SaveAll, simulate
 
 __all__ = ["StudyRun", "run_scenarios"]
@@ -110,7 +110,7 @@ def run_scenarios(
     static: Callable[[Any], Hashable] | None = None,
     chunk_size: int = 2048,
     mesh: jax.sharding.Mesh | None = None,
-    progress: bool | Callable[[int, int], Any] = False,
+    progress: ProgressArg = False,
     label: str = "study",
     save: AbstractSave = SaveAll(),
     sink: AbstractChunkSink | None = None,

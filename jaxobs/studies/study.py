@@ -75,6 +75,7 @@ from ..io.files import atomic_path
 from ..io.provenance import cf_dataset, cf_labels, provenance
 from ..observers import gain_fields, gain_table
 from ..runtime.chunkstore import ChunkStore
+from ..runtime.progress import ProgressArg
 from ..runtime.runner import run_scenarios
 from ..runtime.simulation import AbstractSave, SaveAll
 from ..scenarios import GRID_SIGNAL_AXES, LHS, AbstractSampler, Grid, Random, Recordings, Sobol, sampler_of
@@ -117,7 +118,7 @@ def study(
     save: AbstractSave = SaveAll(),
     chunk_size: int = 2048,
     mesh: Mesh | None = None,
-    progress: bool | Callable[[int, int], Any] = False,
+    progress: ProgressArg = False,
     store: ChunkStore | None = None,
     label: str = "study",
 ) -> xr.Dataset:
@@ -326,7 +327,7 @@ def run_study(
     sample: int = 0,
     seed: int | None = None,
     chunk_size: int = 2048,
-    progress: bool | Callable[[int, int], Any] = False,
+    progress: ProgressArg = False,
     return_seconds: bool = False,
     mesh: Mesh | None = None,
     store: ChunkStore | None = None,
