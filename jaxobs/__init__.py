@@ -1,10 +1,18 @@
 """jaxobs — a differentiable JAX simulator for tuning sensorless motor-drive observers and FLLs.
 
 The names below are the user API (``__all__``); everything else lives in the
-subpackages (:mod:`jaxobs.drive`, :mod:`jaxobs.observers`, :mod:`jaxobs.linear`,
-:mod:`jaxobs.metrics`, :mod:`jaxobs.signals`, :mod:`jaxobs.scenarios`,
-:mod:`jaxobs.runtime.sharding`, :mod:`jaxobs.papers`) or in private implementation
-modules (``jaxobs.runtime.simulation``, ``jaxobs.runtime._loop``, ``jaxobs.core.discretize``, ...).
+subpackages, each a layer of the library (docs/architecture.md):
+
+- :mod:`jaxobs.core`: the foundations (discretization rules, measurements, the system contract, quantities);
+- :mod:`jaxobs.signals`, :mod:`jaxobs.drive`: the test signals and recordings, the plant and the closed loop;
+- :mod:`jaxobs.observers`: the observers and their contract;
+- :mod:`jaxobs.runtime`: the one time loop (``simulation``, ``onsignal``), its checkpoints, batches over
+  devices (``sharding``), the study runner (``runner``, ``chunkstore``) and the program caches
+  (``programs``, ``cache``);
+- :mod:`jaxobs.metrics`, :mod:`jaxobs.linear`, :mod:`jaxobs.analysis`: scoring, linear analysis, stability;
+- :mod:`jaxobs.scenarios`, :mod:`jaxobs.studies`: scenario families and samplers, studies over them;
+- :mod:`jaxobs.io`, :mod:`jaxobs.plot`, :mod:`jaxobs.reproduce`, :mod:`jaxobs.papers`: files, figures, the
+  papers' reproductions.
 
 Importing it has no side effects: no environment variable or JAX option
 changes.  To run a sharded batch on every CPU core, call
@@ -105,8 +113,8 @@ __all__ = [
     "metrics",
     "observers",
     "papers",
+    "runtime",
     "scenarios",
-    "sharding",
     "signals",
     # the loop
     "simulate",

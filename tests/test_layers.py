@@ -24,8 +24,9 @@ FOLDER = {"jaxobs": "jaxobs", "jaxobs_tuning": "tuning"}  # the folder tuning/ i
 LAYERS = [
     # packages whose __init__ imports nothing: the foundations, files in and out, the studies
     ("jaxobs.core", "jaxobs.io", "jaxobs.studies"),
-    # traced programs kept across processes (no project imports; jaxobs.runtime.cache sets their folder); the one
-    # file writer (no project imports)
+    ("jaxobs.runtime._digest",),  # the key of a kept program: a stable digest of values (no project imports)
+    # traced programs kept across processes (jaxobs.runtime.cache sets their folder); the one file writer (no
+    # project imports)
     ("jaxobs.runtime.programs", "jaxobs.io.files"),
     # foundations: no project imports
     (
@@ -85,7 +86,7 @@ LAYERS = [
     ("jaxobs.drive",),
     # the one loop over a system, and sharding a batch over devices
     ("jaxobs.runtime._steps", "jaxobs.runtime._sensitivity"),
-    ("jaxobs.runtime._loop",),
+    ("jaxobs.runtime._loop", "jaxobs.runtime.onsignal"),  # the loop; an observer on a signal as a system
     ("jaxobs.runtime.simulation", "jaxobs.runtime.sharding"),
     ("jaxobs.runtime",),  # the loop's public names (simulate, the savers, the checkpoints)
     # metrics: the functions that score a run, the one metric table (its entries' forms use them), the package
@@ -104,7 +105,7 @@ LAYERS = [
     ("jaxobs.runtime.runner", "jaxobs.scenarios.families", "jaxobs.studies.registry"),
     # the figures' helpers and the Bode figures (jaxobs.plot re-exports them)
     ("jaxobs.plot._figure", "jaxobs.reproduce.compare", "jaxobs.reproduce._run"),
-    ("jaxobs.plot._bode", "jaxobs.plot._paper"),
+    ("jaxobs.plot._bode", "jaxobs.plot._paper", "jaxobs.plot._envelope"),
     # the library's own applications: studies, the demo, the papers' reproductions, figures, benchmarks
     (
         "jaxobs.studies.study",

@@ -331,5 +331,5 @@ def test_the_key_covers_closures_static_fields_and_module_constants(monkeypatch)
         def run(self, x):
             return x
 
-    with pytest.raises(_traced._NoKey):
+    with pytest.raises(_traced.NoKey):
         key(Opaque().run, X)

@@ -12,8 +12,8 @@ import pytest
 import jaxobs
 from benchmarks import workloads as W
 from jaxobs.core.discretize import AB3State, ab3_steady_from_start
+from jaxobs.runtime.onsignal import OnRows
 from jaxobs.runtime.sharding import batch_axes, batch_size
-from jaxobs.runtime.simulation import OnRows
 
 TS = W.TS
 N = 600  # samples in each recording

@@ -9,10 +9,13 @@ returned with ``path=None`` displays in Jupyter as the value of a cell.
 from __future__ import annotations
 
 import math
-import re
+import os
+from collections.abc import Mapping, Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
+from jax.typing import ArrayLike
 
 from .. import metrics, papers
 from ..core.quantities import text_unit
@@ -20,14 +23,29 @@ from ..metrics import METRICS as _METRICS
 from ._bode import bode_figure as bode_figure
 from ._bode import paper_bode_figures as paper_bode_figures
 from ._bode import resonance_grid as resonance_grid
-from ._figure import _finish, _mark_event, _save, _subplots
+from ._envelope import envelope_figure as envelope_figure
+from ._figure import FigurePath, _axis_words, _finish, _mark_event, _save, _subplots
 from ._paper import Panel as Panel
 from ._paper import Series as Series
 from ._paper import paper_figure as paper_figure
 
+if TYPE_CHECKING:
+    import xarray as xr
+    from matplotlib.figure import Figure
+
+    from ..drive import DriveOutput, DualOutput
+    from ..runtime.simulation import Solution
+
 
 def fll_event_text(test: str) -> str:
-    """What happens at the event of paper 001's Test ``test``, in words (papers.TESTS_001)."""
+    """What happens at the event of paper 001's Test ``test``, in words (papers.TESTS_001).
+
+    Args:
+        test: The test's letter (``"A"`` … ``"E"``).
+
+    Returns:
+        The event in words (``"event"`` for a test without one).
+    """
     spec = papers.TESTS_001.get(test, {})
     words = {
         "freq_step": lambda v: f"frequency step {v:+g} Hz",
@@ -40,10 +58,18 @@ def fll_event_text(test: str) -> str:
     return " + ".join(words[k](v) for k, v in spec.items() if k in words) or "event"
 
 
-def drive_events(t, out, t_from: float = 0.0):
-    """The events of a drive run, from its outputs: [(time s, what)] for each load-torque change (applied,
-    removed, stepped), each start of a speed-reference ramp or step (and its target), and the I-f start-up's
-    hand-over to the observer; from ``t_from`` on."""
+def drive_events(t: ArrayLike, out: DriveOutput | DualOutput, t_from: float = 0.0) -> list[tuple[float, str]]:
+    """The events of a drive run, from its outputs: each load-torque change (applied, removed, stepped), each
+    start of a speed-reference ramp or step (and its target), and the I-f start-up's hand-over to the observer.
+
+    Args:
+        t: The sample times, s.
+        out: The run's stacked outputs (``load``, ``omega_m_ref``, ``mode``).
+        t_from: Events before this time, s, are left out.
+
+    Returns:
+        ``[(time s, what)]``, in time order.
+    """
     t = np.asarray(t)
     events = []
     load = np.asarray(out.load)
@@ -67,11 +93,24 @@ def drive_events(t, out, t_from: float = 0.0):
     return sorted((float(te), w) for te, w in events if te >= t_from)
 
 
-def fll_demo_figure(traces, tests, t_event, path=None):
-    """Frequency estimate and phase error of each FLL for each test (rows = tests)."""
+def fll_demo_figure(
+    traces: Mapping[str, Solution], tests: Sequence[str], t_event: float, path: FigurePath = None
+) -> Figure:
+    """Frequency estimate and phase error of each FLL for each test (rows = tests).
+
+    Args:
+        traces: FLL name -> its :class:`~jaxobs.Solution` over the tests (one row per test,
+            :func:`jaxobs.studies.demo.fll_demo`).
+        tests: The tests' letters, in the rows' order.
+        t_event: The events' time, s.
+        path: Where the figure is written (a file name or a binary file object); None: not written.
+
+    Returns:
+        The figure.
+    """
     fig, axes = _subplots(len(tests), 2, figsize=(11, 2.2 * len(tests)), sharex=False, squeeze=False)
     for name, sol in traces.items():
-        t = np.asarray(sol.t[0])
+        t = np.asarray(sol.t)[0]
         f_hat = np.asarray(sol.outputs.obs.omega) / (2 * math.pi)
         err = np.degrees(np.asarray(metrics.wrap(sol.outputs.obs.theta - sol.outputs.truth.theta)))
         for i, test in enumerate(tests):
@@ -93,8 +132,21 @@ def fll_demo_figure(traces, tests, t_event, path=None):
     return _finish(fig, path)
 
 
-def flux_circles_figure(sol, names, title, path=None, last: float = 0.1):
-    """Estimated rotor-flux circles (ψ̂β vs ψ̂α) of each observer over the last ``last`` seconds."""
+def flux_circles_figure(
+    sol: Solution, names: Sequence[str], title: str, path: FigurePath = None, last: float = 0.1
+) -> Figure:
+    """Estimated rotor-flux circles (ψ̂β vs ψ̂α) of each observer over the last ``last`` seconds.
+
+    Args:
+        sol: A drive run with an observer bank (``outputs.obs.each``: one output per observer).
+        names: The observers' names, in the bank's order.
+        title: The figure's title.
+        path: Where the figure is written (a file name or a binary file object); None: not written.
+        last: The time drawn, s, up to the end of the run.
+
+    Returns:
+        The figure.
+    """
     t = np.asarray(sol.t)
     m = t >= t[-1] - last
     fig, axes = _subplots(1, len(names), figsize=(3.2 * len(names), 3.4), squeeze=False)
@@ -119,7 +171,7 @@ def _clipped_range(peaks: dict, spans: dict | None = None, ratio: float = 3.0, l
     it in 000's speed ramp, which stays in range: it has not lost track); where none sweeps, from the largest
     peak |error| (deg) down, each peak above ``lost`` degrees and more than ``ratio`` times the next one.
     Returns (clipped names, the largest peak kept)."""
-    order = sorted(peaks, key=peaks.get, reverse=True)
+    order = sorted(peaks, key=lambda n: peaks[n], reverse=True)
     clipped = [n for n in order[:-1] if spans is not None and spans[n] >= swept]
     if not clipped:
         for hi, lo in zip(order, order[1:]):
@@ -129,11 +181,23 @@ def _clipped_range(peaks: dict, spans: dict | None = None, ratio: float = 3.0, l
     return clipped, max(peaks[n] for n in order if n not in clipped)
 
 
-def position_error_figure(sol, names, title, path=None, t_from: float = 0.0):
+def position_error_figure(
+    sol: Solution, names: Sequence[str], title: str, path: FigurePath = None, t_from: float = 0.0
+) -> Figure:
     """Wrapped position error θ̂e − θe (deg) of each observer, with the speed on a second axis.
 
     The y-range shows the observers compared: an observer that has lost track (a pure integrator's
     drift sweeps ±180°), its error dwarfing the others', is drawn clipped, its peak given in the legend.
+
+    Args:
+        sol: A drive run with an observer bank (``outputs.obs.each``: one output per observer).
+        names: The observers' names, in the bank's order.
+        title: The figure's title.
+        path: Where the figure is written (a file name or a binary file object); None: not written.
+        t_from: The first time drawn, s; the run's events from then on are marked.
+
+    Returns:
+        The figure.
     """
     t = np.asarray(sol.t)
     m = t >= t_from
@@ -194,13 +258,6 @@ _AXIS_UNITS = {
     "phase_deg": "deg",
     "noise": "p.u.",
 }
-
-
-def _axis_words(ds, name: str, short: bool = False) -> str:
-    """An axis in words: its ``long_name`` (the Axis record's, :mod:`jaxobs.core.quantities`), or its name where the
-    Dataset has none; ``short``: without the closing parenthesis (a title lists several)."""
-    words = str(ds[name].attrs.get("long_name") or name)
-    return re.sub(r"\s*\([^()]*\)$", "", words) if short else words
 
 
 def _axis_label(ds, name: str) -> str:
@@ -280,23 +337,26 @@ def _study_heatmap(ds, da, unit, short, axes, designs):
     left = min(0.2, 1.0 / fig.get_figwidth())  # 1 in for the axis's label and its ticks
     fig.subplots_adjust(left=left, right=0.88, top=0.84, bottom=0.12, wspace=0.22, hspace=0.4)
     cax = fig.add_axes((0.9, 0.12, 0.012, 0.74))  # beside the panels, never over one
+    assert im is not None  # a study has at least one design
     cb = fig.colorbar(im, cax=cax, label=f"{short} ({unit})" + (", log scale" if is_log else ""))
     if is_log:  # plain numbers (0.2, 0.5, 1), not 2×10⁻¹, on 1-2-5 ticks and both ends (_log_ticks)
         from matplotlib.ticker import FixedLocator, FormatStrFormatter, NullFormatter
 
-        cb.ax.yaxis.set_major_locator(FixedLocator(_log_ticks(norm.vmin, norm.vmax)))
+        lo, hi = norm.vmin, norm.vmax
+        assert lo is not None and hi is not None  # a LogNorm made from the values' range
+        cb.ax.yaxis.set_major_locator(FixedLocator(_log_ticks(lo, hi)))
         cb.ax.yaxis.set_major_formatter(FormatStrFormatter("%g"))
         cb.ax.yaxis.set_minor_formatter(NullFormatter())
     cb.ax.tick_params(which="both", labelsize=9)
-    cb.ax.yaxis.label.set_size(10)
+    cb.ax.yaxis.label.set_fontsize(10)
     over = ", ".join(_axis_words(ds, a, short=True) for a in others)
     how = f"mean and worst case over the {over}" if others else "every scenario"
     fig.suptitle(f"{short} ({unit}): {how}\none colour scale for every panel", fontsize=11)
     return fig
 
 
-def study_figures(ds, out_dir):
-    """Heat-maps and distributions per metric; returns the paths.
+def study_figures(ds: xr.Dataset, out_dir: str | os.PathLike[str]) -> list[Path]:
+    """Heat-maps and distributions per metric, written as PNG files.
 
     Heat-maps (a grid of at least two axes): the first two axes, one column per design; the top row is the
     mean over the other axes and, when there are others, the bottom row their worst case (the max), so a
@@ -304,6 +364,13 @@ def study_figures(ds, out_dir):
     values span more than a decade), one labelled colour bar, each cell's value written in it; labels
     ≥ 9 pt.  The rms phase error is shown in degrees.  Histograms: one set of bins per metric; settling
     times that are censored at the horizon (``settled`` False) are counted in the legend.
+
+    Args:
+        ds: An FLL study's Dataset (:func:`jaxobs.studies.study.run_study`).
+        out_dir: The folder the files are written to (``heatmap_<metric>.png``, ``distribution_<metric>.png``).
+
+    Returns:
+        The paths written.
     """
     out = Path(out_dir)
     paths = []
@@ -397,16 +464,25 @@ def _vs_axis(ds, metric: str, design, axis: str, bins: int = 8):
     return x, med, q95
 
 
-def drive_study_figure(ds, path):
+def drive_study_figure(ds: xr.Dataset, path: FigurePath) -> Figure:
     """The drive study on one page, one row per metric (one y-scale per row, shared by every design):
     the empirical CDF over the scenarios (lost-lock counts in the legend), then the metric's median (solid)
     and 95 % quantile (dashed) against each swept axis, over the other axes (a grid) or in bins of the
-    axis (a Sobol/LHS sample).  Axes and metrics are labelled in words with their units."""
-    metrics = [v[: -len("_q")] for v in ds.data_vars if v.endswith("_q")]  # the metrics with quantiles
+    axis (a Sobol/LHS sample).  Axes and metrics are labelled in words with their units.
+
+    Args:
+        ds: A drive study's Dataset (:func:`jaxobs.studies.drive.run_drive_study`, with quantiles).
+        path: Where the figure is written (a file name or a binary file object); None: not written.
+
+    Returns:
+        The figure.
+    """
+    names = [str(v) for v in ds.data_vars]
+    metrics = [v[: -len("_q")] for v in names if v.endswith("_q")]  # the metrics with quantiles
     ds = ds.assign({m: _METRICS[m].shown(ds[m]) for m in metrics if m in _METRICS})  # SI -> display units
-    axes = [k for k in ds[metrics[0]].dims if k not in ("design", "sample")]
+    axes = [str(k) for k in ds[metrics[0]].dims if k not in ("design", "sample")]
     if "sample" in ds.dims:
-        axes = [k for k in ds.coords if ds[k].dims == ("sample",) and k != "sample"]
+        axes = [str(k) for k in ds.coords if ds[k].dims == ("sample",) and k != "sample"]
     designs = list(ds["design"].values)
     colors = {d: f"C{i}" for i, d in enumerate(designs)}
     ncol = 1 + len(axes)
@@ -466,165 +542,4 @@ def drive_study_figure(ds, path):
     )
     fig.tight_layout(rect=(0, 0.035, 1, 1))
     _save(fig, path, 90)
-    return fig
-
-
-# the envelope map's panels: variable -> (label, colour map, centred at 0, scale to the shown unit: the file is SI)
-_ENVELOPE_PANELS = {
-    "margin": ("stability margin (1/s; < 0: unstable)", "RdBu", True, 1.0),
-    "peak_position_late": ("peak position error, late window (deg el.)", "viridis", False, 180.0 / math.pi),
-    "mean_position_late": ("steady position bias (deg el.)", "PuOr", True, 180.0 / math.pi),
-    "ripple_position_late": ("position-error ripple, rms (deg el.)", "viridis", False, 180.0 / math.pi),
-}
-
-
-def _log_edges(x):
-    """Cell edges of centres ``x`` on a log axis (geometric midpoints; one centre: ±20 %)."""
-    x = np.asarray(x, dtype=float)
-    if x.size == 1:
-        return np.array([x[0] / 1.2, x[0] * 1.2])
-    mid = np.sqrt(x[1:] * x[:-1])
-    return np.concatenate([[x[0] ** 2 / mid[0]], mid, [x[-1] ** 2 / mid[-1]]])
-
-
-def _lin_edges(y):
-    y = np.asarray(y, dtype=float)
-    if y.size == 1:
-        return np.array([y[0] - 0.5, y[0] + 0.5])
-    mid = 0.5 * (y[1:] + y[:-1])
-    return np.concatenate([[2 * y[0] - mid[0]], mid, [2 * y[-1] - mid[-1]]])
-
-
-def _outline(ax, mask, xe, ye):
-    """The boundary of the cells where ``mask`` (speed × load) is true, drawn along the cells' edges."""
-    nx, ny = mask.shape
-    for i in range(nx):
-        for j in range(ny):
-            if not mask[i, j]:
-                continue
-            if i == 0 or not mask[i - 1, j]:
-                ax.plot([xe[i], xe[i]], [ye[j], ye[j + 1]], "k-", lw=1.8)
-            if i == nx - 1 or not mask[i + 1, j]:
-                ax.plot([xe[i + 1], xe[i + 1]], [ye[j], ye[j + 1]], "k-", lw=1.8)
-            if j == 0 or not mask[i, j - 1]:
-                ax.plot([xe[i], xe[i + 1]], [ye[j], ye[j]], "k-", lw=1.8)
-            if j == ny - 1 or not mask[i, j + 1]:
-                ax.plot([xe[i], xe[i + 1]], [ye[j + 1], ye[j + 1]], "k-", lw=1.8)
-
-
-def _fail_marks(ds, d, extra, h):
-    """Where design ``d`` fails (``h`` < 0.5, speed × load), split by the first reason, each with its marker:
-    ((mask, "x") not synchronous, (mask, "o") synchronous but not resolved stable, (mask, "+") the rest: peak
-    error over the bound).  With a mismatch dim a point fails a test if it fails it at any value."""
-
-    def every(name):
-        v = ds[name].sel(design=d).astype(bool)
-        return np.asarray((v.all(extra) if extra else v).transpose("speed_rpm", "load_nm").values, dtype=bool)
-
-    fails = h < 0.5
-    unsync = fails & ~every("synchronous")
-    unstable = fails & ~unsync & ~every("stable")
-    return ((unsync, "x"), (unstable, "o"), (fails & ~unsync & ~unstable, "+"))
-
-
-def envelope_figure(ds, path):
-    """The envelope map (:func:`jaxobs.analysis.envelope.envelope`): one row per metric, one column per design,
-    speed on a log axis against load; every row on ONE colour scale (shared by the designs), the region where
-    each design holds outlined in black, and each point where it does not marked by why (x: not synchronous,
-    o: not resolved stable, +: peak error over the bound).  With a mismatch dim each cell shows the worst over
-    it (lowest margin, largest error, holds only where it holds at every value).  A point that lost lock has no
-    steady error: its cells in the error panels are hatched grey, apart from every colour scale.  The marks,
-    the outline and the hatching have a legend of their own under the panels, independent of the colour
-    bars."""
-    from matplotlib.lines import Line2D
-    from matplotlib.patches import Patch, Rectangle
-    from matplotlib.patheffects import withStroke
-
-    halo = [withStroke(linewidth=2.2, foreground="w")]  # a mark stays visible on the darkest cells
-
-    designs = list(ds["design"].values)
-    extra = [d for d in ds["holds"].dims if d not in ("design", "speed_rpm", "load_nm")]
-    worst = {"margin": "min", "peak_position_late": "max", "ripple_position_late": "max"}
-
-    def reduce(name):
-        v = ds[name]
-        if name == "mean_position_late":  # the bias of largest magnitude, with its sign
-            return v.isel({extra[0]: abs(v).fillna(-1.0).argmax(extra[0])}) if extra else v
-        return getattr(v, worst.get(name, "min"))(extra) if extra else v
-
-    sp, ld = ds["speed_rpm"].values, ds["load_nm"].values
-    xe, ye = _log_edges(sp), _lin_edges(ld)
-    # at most 8 tick labels an axis (every k-th grid value), so that 3 inches of panel stay legible
-    xtick, ytick = slice(None, None, -(-sp.size // 8)), slice(None, None, -(-ld.size // 8))
-    rows = list(_ENVELOPE_PANELS)
-    from matplotlib.figure import Figure
-
-    # constrained layout: the shared colour bars span a row (tight_layout cannot place them)
-    fig = Figure(figsize=(3.0 * len(designs) + 1.6, 2.3 * len(rows) + 0.9), layout="constrained")
-    axs = fig.subplots(len(rows), len(designs), squeeze=False)
-    holds = reduce("holds") if not extra else ds["holds"].min(extra)
-    for r, name in enumerate(rows):
-        label, cmap, centred, scale = _ENVELOPE_PANELS[name]
-        vals = scale * np.asarray(reduce(name).transpose("design", "speed_rpm", "load_nm").values, dtype=float)
-        fin = vals[np.isfinite(vals)]
-        if centred:
-            lim = float(np.percentile(np.abs(fin), 95)) if fin.size else 1.0
-            vmin, vmax = -max(lim, 1e-6), max(lim, 1e-6)
-        else:
-            vmin = 0.0
-            vmax = max(float(np.percentile(fin, 95)) if fin.size else 1.0, 1e-6)
-        mesh = None
-        for c, d in enumerate(designs):
-            ax = axs[r, c]
-            # under the cells: a cell without a value (lost lock: no steady error) shows hatched grey, never a
-            # colour of the scale (white is 0 on the centred ones)
-            ax.add_patch(
-                Rectangle((xe[0], ye[0]), xe[-1] - xe[0], ye[-1] - ye[0], facecolor="0.88", edgecolor="0.55",
-                          hatch="///", lw=0, zorder=0)
-            )  # fmt: skip
-            mesh = ax.pcolormesh(xe, ye, vals[c].T, cmap=cmap, vmin=vmin, vmax=vmax, shading="flat", zorder=1)
-            h = np.asarray(holds.sel(design=d).transpose("speed_rpm", "load_nm").values, dtype=float)
-            _outline(ax, h >= 0.5, xe, ye)
-            # each failing point marked by why it fails (the first reason of: not synchronous, not resolved
-            # stable, error over the bound): a crossed point whose panels all look benign was a puzzle
-            for mask, marker in _fail_marks(ds, d, extra, h):
-                bad = np.argwhere(mask)
-                ax.plot(sp[bad[:, 0]], ld[bad[:, 1]], marker, color="k", ms=4, mew=0.8, mfc="none", path_effects=halo)
-            ax.set_xscale("log")
-            ax.set_xlim(xe[0], xe[-1])
-            ax.set_ylim(ye[0], ye[-1])
-            # ticks at the grid's own speeds and loads: each cell is centred on a point run, and its outer
-            # edges (a negative load, a speed above rated) are only the cells' extent, not points run
-            ax.set_xticks(sp[xtick], [f"{v:.0f}" if v >= 100 else f"{v:.3g}" for v in sp[xtick]], minor=False)
-            ax.set_xticks([], minor=True)
-            ax.set_yticks(ld[ytick], [f"{v:.3g}" for v in ld[ytick]])
-            ax.tick_params(labelsize=7)
-            if r == 0:
-                n_h, n = int(h.sum()), h.size
-                ax.set_title(f"{str(d).replace('_', ' ')}\nholds at {n_h}/{n} points", fontsize=9)
-            if r == len(rows) - 1:
-                ax.set_xlabel("speed (r/min, log)", fontsize=8)
-            if c == 0:
-                ax.set_ylabel("load (N·m)", fontsize=8)
-        # the scale is the 95th percentile (a lost point would swamp the rest): arrows mark values beyond it
-        lo_x, hi_x = bool(fin.size and fin.min() < vmin), bool(fin.size and fin.max() > vmax)
-        extend = {(True, True): "both", (True, False): "min", (False, True): "max"}.get((lo_x, hi_x), "neither")
-        cb = fig.colorbar(mesh, ax=list(axs[r]), shrink=0.95, pad=0.01, extend=extend)
-        cb.set_label(label, fontsize=7)
-        cb.ax.tick_params(labelsize=7)
-    bound = ds.attrs.get("bound_deg", float("nan"))
-    mark = dict(color="k", ls="none", ms=5, mew=0.8, mfc="none")
-    handles = [
-        Line2D([], [], color="k", lw=1.8, label=f"outline: holds (stable, synchronous, peak error <= {bound:g} deg)"),
-        Line2D([], [], marker="x", label="fails: not synchronous (lost lock, off speed or not settled)", **mark),
-        Line2D([], [], marker="o", label="fails: not resolved stable", **mark),
-        Line2D([], [], marker="+", label="fails: peak error over the bound", **mark),
-        Patch(facecolor="0.88", edgecolor="0.55", hatch="///", lw=0, label="no value: lost lock (no steady error)"),
-    ]
-    fig.legend(handles=handles, loc="outside lower center", ncol=2, fontsize=7, frameon=False)
-    title = "operating envelope, sensorless"
-    if extra:
-        title += f"; worst over {', '.join(_axis_words(ds, a, short=True) for a in extra)}"
-    fig.suptitle(title, fontsize=9)
-    _save(fig, path, 110)
     return fig

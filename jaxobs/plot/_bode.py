@@ -61,7 +61,7 @@ def bode_figure(
     x = omega / (2 * math.pi) if hz else omega
     fig, (ax_m, ax_p) = _subplots(2, 1, figsize=(7.5, 6), sharex=True)
     for i, (name, tf) in enumerate(tfs.items()):
-        mag, ph = linear.bode(tf, omega)
+        mag, ph = linear.bode(tf, omega)[:2]
         style = _TRACE_STYLES[i % len(_TRACE_STYLES)]
         ax_m.plot(x, np.asarray(mag), label=name, color=f"C{i}", **style)
         ax_p.plot(x, np.asarray(ph), label=name, color=f"C{i}", **style)

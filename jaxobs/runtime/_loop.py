@@ -13,9 +13,8 @@ checks each against the plain scan, to 1e-12 or tighter):
    once *per component*, and the stacked layout strides the batch.  The loop
    carries each small 1-D leaf as a tuple of scalars instead and restacks it
    inside the step, where XLA folds the stack/slice pair away; the step's
-   outputs become separate fused outputs that share their subexpressions.
-   Measured on the SOGI-FLL (forward Euler, batch 1024, float32, 2 devices,
-   unroll 8, before the default became 3): 48 → 74 M scenario-steps/s.
+   outputs become separate fused outputs that share their subexpressions
+   (docs/performance.md).
 2. **Peel multistep start-ups.**  :class:`~jaxobs.core.discretize.AB3` starts with
    two RK4 steps behind a ``lax.cond`` on its sample count.  A conditional in
    the loop body costs a branch per step and blocks unrolling, so the loop runs
@@ -61,9 +60,7 @@ checks each against the plain scan, to 1e-12 or tighter):
    inside the sensitivity region, so a gain that also sets the initial state
    (an FLL's ω_n sets ω̂(0)) is one direction, not one per state component and
    AB3 history entry it reaches (six for the SOGI-FLL, which went past
-   ``NESTED_MAX`` to the slower ``vmap`` form).  SOGI-FLL, float64, batch 1024,
-   0.5 s, one run: value_and_grad / forward for ω_n alone 4.49 → 1.94, for
-   (k, λ, ω_n) 7.21 → 4.51.
+   ``NESTED_MAX`` to the slower ``vmap`` form; docs/performance.md).
 
    With two or three perturbed scalars (a tuning job's gains) the tangents
    are pushed by nested JVPs with the mixed terms removed (:func:`jaxobs.runtime._sensitivity.multi_jvp`),
@@ -76,9 +73,8 @@ checks each against the plain scan, to 1e-12 or tighter):
    steps at once (a chunk's, under :class:`ChunkCheckpoint`), vectorized, and runs those
    steps over the stored block: a loop boundary is a fusion boundary, so each
    input sample is computed once, and memory stays O(block × batch) rather
-   than n samples of precomputed inputs.  Measured on the SOGI-FLL
-   (batch 1024, 2 devices): 53 → 105 M scenario-steps/s in float32, 32 → 61
-   in float64, the same as precomputed inputs.  A system may read a block at
+   than n samples of precomputed inputs, as fast as precomputed inputs
+   (docs/performance.md).  A system may read a block at
    once instead (``OnSignal.input_block``: a recording on the loop's own sample
    grid is one contiguous slice per block, where a per-step read gathered a
    column of the batch per step).
@@ -96,17 +92,14 @@ checks each against the plain scan, to 1e-12 or tighter):
    then ``fill(c0, c1, c2)`` (:func:`jaxobs.core.discretize.ab3_steady_from_start`)
    gives the carry at sample 0 a steady AB3 history under which the steady step
    repeats the start-up (to the rounding of x), and the steady loop runs every
-   row.  Measured on the precomputed SOGI-FLL, 1 s at 10 kHz, 2 host devices,
-   M scenario-steps/s against the hand-written JAX scan (``jax-hand``), same
-   run: batch 8192 float32 1073 vs 973, float64 657 vs 616 (the scenario-major
-   block read: 575–618 and 330–344); batch 1024 float32 746 vs 484, float64
-   505 vs 422.  The unroll over rows is ``OnRows.unroll`` (2).
+   row, faster than the hand-written JAX scan of the rows and than the
+   scenario-major block read (docs/performance.md).  The unroll over rows is
+   ``OnRows.unroll`` (2).
 
 A seventh rewrite was tried and deleted: evaluating the step's jaxpr with every small
 state vector held as its elements (a ``SCALARIZE`` switch, off by default), so that
 the optimized HLO had no stack and no recomputation of the stacked AB3 combination.
-It gave the same numbers but ran *slower* (SOGI-FLL, batch 1024, 2 devices,
-float32: input in the loop 82.8 → 19.8 M scenario-steps/s, precomputed 425 → 66),
+It gave the same numbers but ran *slower* (docs/performance.md),
 and a drive step (~1600 equations) could not use it for its compile time.
 """
 
@@ -145,7 +138,7 @@ class AbstractCheckpoint(eqx.Module):
     """How reverse-mode AD stores the time loop; every strategy gives the same numbers."""
 
     @abc.abstractmethod
-    def loop(self, loop: Loop, carry, xs):
+    def loop(self, loop: Loop, carry: Any, xs: Any) -> tuple[Any, Any]:
         """Run a loop from ``loop.init(carry)`` over ``xs``.
 
         Args:
@@ -182,7 +175,7 @@ class AbstractReverseCheckpoint(AbstractCheckpoint):
             ``(final carry, stacked outputs)``, as ``lax.scan``.
         """
 
-    def loop(self, loop, carry, xs):
+    def loop(self, loop: Loop, carry: Any, xs: Any) -> tuple[Any, Any]:
         return run_steps(loop, self, loop.init(carry), xs)
 
 
@@ -253,7 +246,7 @@ class ForwardSensitivity(AbstractCheckpoint):
                 f"ChunkCheckpoint), got {self.fallback!r}"
             )
 
-    def loop(self, loop, carry, xs):
+    def loop(self, loop: Loop, carry: Any, xs: Any) -> tuple[Any, Any]:
         if loop.has_outputs:
             raise ValueError(
                 "ForwardSensitivity serves loops without per-step outputs: use save=SaveFinal(cost) "
@@ -302,7 +295,7 @@ class AutoCheckpoint(AbstractCheckpoint):
             return reverse
         return ForwardSensitivity(max_scalars=self.forward_max, fallback=reverse)
 
-    def loop(self, loop, carry, xs):
+    def loop(self, loop: Loop, carry: Any, xs: Any) -> tuple[Any, Any]:
         return self.pick(loop).loop(loop, carry, xs)
 
 
@@ -328,8 +321,8 @@ def check_unroll(unroll) -> int:
 
 def run_loop(
     body: Callable[[Any, Any], tuple[Any, Any]],
-    carry,
-    xs,
+    carry: Any,
+    xs: Any,
     n: int,
     *,
     unroll: int = 1,
@@ -339,7 +332,7 @@ def run_loop(
     peel: bool = True,
     carry_fn: Callable[[], Any] | None = None,
     fill: Callable[[Any, Any, Any], Any] | None = None,
-):
+) -> tuple[Any, Any]:
     """``lax.scan(body, carry, xs, length=n)``, made fast and cheap to differentiate (module doc).
 
     Args:
@@ -383,12 +376,13 @@ def run_loop(
     else:
         first = jax.tree.map(lambda a: a[:1], xs)
         x_one = jax.tree.map(lambda a: a[0], first if xs_map is None else xs_map(first))
-    carry_shape = jax.eval_shape(carry_fn) if carry is None else carry
+    carry_shape = carry if carry_fn is None else jax.eval_shape(carry_fn)  # one of the two is given
     has_outputs = bool(jax.tree.leaves(jax.eval_shape(body, carry_shape, x_one)[1]))
-    if carry is None:
+    if carry_fn is not None:
         # the initial carry is built inside the strategy's loop: what it closes over (the system's
         # parameters) becomes the perturbed inputs of the forward sensitivities
-        init, carry = (lambda _: carry_fn()), ()
+        build = carry_fn
+        init, carry = (lambda _: build()), ()
     else:
         init = lambda c: c  # noqa: E731
     loop = Loop(body, init, n, unroll, split, xs_map, peel, has_outputs, fill)

@@ -162,8 +162,7 @@ def multi_jvp(fun, primals, basis):
     XLA fuses the tangent arithmetic into the primal's kernels.  ``vmap`` over
     the directions gives the same numbers but (batch, directions)-shaped
     tangents beside (batch,)-shaped primals, which XLA's CPU fusion keeps in
-    separate kernels: measured on the SOGI-FLL (gains k, λ; float64, batch
-    1024, 2 devices), value_and_grad / forward 3.0 by vmap, 2.05 nested.
+    separate kernels, slower than the nested form (docs/performance.md).
 
     Args:
         fun: The function.

@@ -141,13 +141,14 @@ def run_steps(loop: Loop, strategy, carry, xs):
         ``(final carry, stacked per-step outputs or None)``.
     """
     body, n, xs_map = loop.body, loop.n, loop.xs_map
+    inner: Callable[[Any, Any], tuple[Any, Any]]
     if loop.split:
 
-        def inner(c, x):
+        def split_body(c: Any, x: Any) -> tuple[Any, Any]:
             c, y = body(_join(c), x)
             return _split(c), y
 
-        wrap, unwrap = _split, _join
+        inner, wrap, unwrap = split_body, _split, _join
     else:
         inner, wrap, unwrap = body, (lambda c: c), (lambda c: c)
 

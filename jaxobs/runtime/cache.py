@@ -11,12 +11,11 @@ The folder is, in order: the ``path`` argument, ``$JAXOBS_CACHE_DIR``,
 ``$XDG_CACHE_HOME/jaxobs/jax``, ``~/.cache/jaxobs/jax``.
 
 Every compilation is written (``min_compile_s=0``, JAX's
-``jax_persistent_cache_min_compile_time_secs``).  The threshold was 0.5 s: it left out
-229 of the default tuning job's 240 compilations (the metrics, the scoring, the
-linear structure, JAX's one-operation programs), each under 0.5 s but together
-more compile time than the few big ones, so a second run compiled them all again.
-Reading an entry back took about 10 ms (240 entries in 2.6 s at load 14 on 2 cores); the
-default job's whole cache is 0.9 MiB (``python -m benchmarks.first_second``, docs/performance.md).
+``jax_persistent_cache_min_compile_time_secs``): a threshold leaves out most of a tuning
+job's compilations (the metrics, the scoring, the linear structure, JAX's one-operation
+programs), each short but together more compile time than the few big ones; reading an
+entry back is cheap and the cache is small (``python -m benchmarks.first_second``,
+docs/performance.md).
 """
 
 from __future__ import annotations

@@ -28,9 +28,11 @@ import abc
 import json
 import os
 import shutil
+from collections.abc import Mapping
 from pathlib import Path
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from ..io.files import atomic_path, atomic_write_text, remove_temps
 
@@ -64,7 +66,7 @@ class AbstractChunkSink(abc.ABC):
         """
 
     @abc.abstractmethod
-    def done(self, design, i: int) -> bool:
+    def done(self, design: str, i: int) -> bool:
         """Whether chunk ``i`` of ``design`` is held already (the runner skips it).
 
         Args:
@@ -76,7 +78,7 @@ class AbstractChunkSink(abc.ABC):
         """
 
     @abc.abstractmethod
-    def put(self, design, i: int, values: dict) -> None:
+    def put(self, design: str, i: int, values: Mapping[str, ArrayLike]) -> None:
         """Take one chunk's values.
 
         Args:
@@ -180,10 +182,10 @@ class ChunkStore(AbstractChunkSink):
                 continue
         return False
 
-    def _file(self, design, i: int) -> Path:
+    def _file(self, design: str, i: int) -> Path:
         return self.path / f"{self.designs.index(str(design))}.{int(i)}.h5"
 
-    def done(self, design, i: int) -> bool:
+    def done(self, design: str, i: int) -> bool:
         """Whether a chunk is on disk (complete: chunk files appear only by a rename).
 
         Args:
@@ -195,7 +197,7 @@ class ChunkStore(AbstractChunkSink):
         """
         return self._file(design, i).exists()
 
-    def put(self, design, i: int, values: dict) -> None:
+    def put(self, design: str, i: int, values: Mapping[str, ArrayLike]) -> None:
         """Write one chunk.
 
         Args:
@@ -209,7 +211,7 @@ class ChunkStore(AbstractChunkSink):
             for k in sorted(values):
                 f.create_dataset(k, data=np.asarray(values[k]))
 
-    def load(self, design) -> dict:
+    def load(self, design: str) -> dict[str, np.ndarray]:
         """Every scenario's values of a design, in order: the chunks concatenated.
 
         Args:
@@ -230,10 +232,15 @@ class ChunkStore(AbstractChunkSink):
             rows = min(self.chunk, self.n - i * self.chunk)
             try:
                 with h5py.File(f, "r") as h:
-                    part = {k: h[k][()] for k in h}
+                    nodes = {k: h[k] for k in h}
+                    part = {k: v[()] for k, v in nodes.items() if isinstance(v, h5py.Dataset)}
             except OSError as e:
                 raise ValueError(f"study chunk {str(f)!r} is missing or unreadable ({str(e)[:80]})") from None
-            if parts and set(part) != set(parts[0]) or any(np.shape(v) != (rows,) for v in part.values()):
+            if (
+                len(part) != len(nodes)
+                or (parts and set(part) != set(parts[0]))
+                or any(np.shape(v) != (rows,) for v in part.values())
+            ):
                 raise ValueError(f"study chunk {str(f)!r} does not match the study (keys or rows)")
             parts.append(part)
         return {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}

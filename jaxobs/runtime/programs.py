@@ -2,8 +2,8 @@
 
 JAX's persistent compilation cache (:func:`jaxobs.use_compile_cache`) keeps XLA's work, but it keys
 on the lowered program, so every new process still traces each jitted function to a jaxpr and lowers
-it to StableHLO before it can look the executable up: for the default tuning job, 2-4 s of a 10 s warm
-run (the objective's value-and-gradient, the scoring, the margins).  :func:`kept_jit` keeps that
+it to StableHLO before it can look the executable up: seconds of a warm tuning run (the objective's
+value-and-gradient, the scoring, the margins; docs/performance.md).  :func:`kept_jit` keeps that
 work too.  The first call exports the program (``jax.export``: the traced and lowered StableHLO,
 serialized) to the folder of the :class:`ProgramCache` in use; a later process reads it back and runs
 it (``Exported.call``), which compiles, or reads from the compilation cache, the same program.
@@ -42,9 +42,6 @@ for bit as the plain jit (tests/test_traced.py; result.json of the default job c
 
 from __future__ import annotations
 
-import dataclasses
-import enum
-import functools
 import hashlib
 import json
 import os
@@ -53,45 +50,26 @@ import struct
 import sys
 import tempfile
 import time
-import types
-from importlib.metadata import PackageNotFoundError
-from importlib.metadata import version as _pkg_version
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import equinox as eqx
 import jax
-import numpy as np
 from jax import export  # serialization needs flatbuffers (a dependency)
+from jax.core import Tracer
+
+from ._digest import Digest, NoKey, environment, package_digest
 
 __all__ = ["ProgramCache", "kept_jit", "program_cache", "set_program_cache", "set_traced_dir", "traced_dir"]
 
-# the libraries whose code runs while a jaxobs program is traced: their versions are in the key, their
-# functions and classes are named by module and name
-_LIBS = ("jax", "jaxlib", "equinox", "diffrax", "optax", "optimistix", "lineax", "numpy")
-_NAMED = frozenset((*_LIBS, "scipy", "jaxtyping", *sys.stdlib_module_names))
-# the JAX options that change what a trace produces
-_OPTIONS = (
-    "jax_enable_x64",
-    "jax_default_matmul_precision",
-    "jax_numpy_dtype_promotion",
-    "jax_numpy_rank_promotion",
-    "jax_default_prng_impl",
-    "jax_threefry_partitionable",
-    "jax_enable_checks",
-    "jax_debug_nans",
-    "jax_debug_infs",
-    "jax_disable_jit",
-)
 # Every edit of the source is a new key, so the folder keeps at most this many programs (the least recently
-# used go first): the default job keeps 7, a study 2-3, each 10-100 kB (more where a closure's arrays are
-# constants of the program).
+# used go first); a job or a study keeps a few (docs/performance.md).
 MAX_KEPT = 1000
 MAX_BYTES = 256 * 2**20  # the largest entry read back
 _STALE_TMP_S = 3600.0  # a temp file this old is a killed writer's: trimming removes it
 _MAGIC = b"jaxobs kept program 2\n"
 _SUFFIX = ".jaxexport"
-
-_digests: dict[str, str] = {}
 
 
 class ProgramCache:
@@ -146,6 +124,8 @@ class ProgramCache:
         return self._checked
 
     def _check_folder(self) -> bool:
+        if self.folder is None:
+            return False
         try:
             self.folder.mkdir(mode=0o700, parents=True, exist_ok=True)
             st = os.stat(self.folder)
@@ -162,6 +142,19 @@ class ProgramCache:
 
     # --- one entry
     def path(self, name: str) -> Path:
+        """The file of a kept program.
+
+        Args:
+            name: The program's file name, less its suffix.
+
+        Returns:
+            The path in the folder.
+
+        Raises:
+            ValueError: The cache has no folder (it is off).
+        """
+        if self.folder is None:
+            raise ValueError("ProgramCache: no folder (the cache is off)")
         return self.folder / f"{name}{_SUFFIX}"
 
     def read(self, name: str, key: dict) -> tuple[export.Exported | None, str | None]:
@@ -219,7 +212,7 @@ class ProgramCache:
             key: The program's key.
             exp: The exported program.
         """
-        if not self._usable():
+        if self.folder is None or not self._usable():
             return
         blob = exp.serialize()
         header = {
@@ -276,7 +269,7 @@ def _unpack(data: bytes) -> tuple[dict | None, bytes]:
     return (header if isinstance(header, dict) else None), data[n + 8 + size :]
 
 
-def _out_signature(exp) -> str:
+def _out_signature(exp: export.Exported) -> str:
     avals = ";".join(f"{a.shape}{a.dtype}" for a in exp.out_avals)
     return hashlib.sha256(f"{exp.out_tree}|{avals}|{exp.nr_devices}".encode()).hexdigest()
 
@@ -338,239 +331,7 @@ def traced_dir() -> Path | None:
     return program_cache().folder
 
 
-# --- the key
-def _package_digest(top: str) -> str:
-    """sha256 over every ``.py`` file (relative path and bytes) of the top-level package or module ``top``; an empty
-    string where no file holds it (an interactive session, ``python -c``)."""
-    if top not in _digests:
-        file = getattr(sys.modules.get(top), "__file__", None)
-        h = hashlib.sha256(top.encode())
-        try:
-            path = Path(file).resolve(strict=True)
-            files = sorted(path.parent.rglob("*.py")) if path.name == "__init__.py" else [path]
-            for f in files:
-                h.update(str(f.relative_to(path.parent)).encode() + b"\0" + f.read_bytes() + b"\0")
-            _digests[top] = h.hexdigest()
-        except (TypeError, OSError):
-            _digests[top] = ""
-    return _digests[top]
-
-
-def _lib_version(name: str) -> str:
-    try:
-        return _pkg_version(name)
-    except PackageNotFoundError:
-        return "unknown"
-
-
-def _environment() -> str:
-    if "libs" not in _digests:  # read once: importlib.metadata costs ~1 ms a package
-        _digests["libs"] = ",".join(f"{n}={_lib_version(n)}" for n in _LIBS)
-    opts = ",".join(f"{o}={getattr(jax.config, o, None)!r}" for o in _OPTIONS)
-    dev = jax.devices()[0]
-    # the device count too: a program split over two host devices is another program than one device's
-    kind = f"{dev.platform};{getattr(dev, 'device_kind', '')};{jax.device_count()};{jax.process_count()}"
-    return f"{_digests['libs']};{opts};{kind};{sys.version_info[:2]}"
-
-
-class _NoKey(Exception):
-    """A value the key cannot be computed from: the program is not kept."""
-
-
-class _Digest:
-    """A stable sha256 of Python values: the same in every process for equal values (no ``id``, no ``repr`` of an
-    object).  Arrays by value (``avals=False``), or with ``avals=True`` by shape, dtype and weak type where they are
-    a program's inputs (leaves of the pytree given: containers, NamedTuples, an equinox Module's fields that are not
-    static) and by value where they are its constants (held by a function, an object or a static field)."""
-
-    def __init__(self, avals: bool):
-        self.h = hashlib.sha256()
-        self.avals = avals
-        self.packages: set[str] = set()
-        self.seen: dict[tuple[int, bool], int] = {}
-
-    def hexdigest(self) -> str:
-        return self.h.hexdigest()
-
-    def constant(self, *objs) -> None:
-        """``objs`` as constants of the program: their arrays by value."""
-        avals, self.avals = self.avals, False
-        try:
-            for obj in objs:
-                self.add(obj)
-        finally:
-            self.avals = avals
-
-    def put(self, tag: str, text: str = "") -> None:
-        self.h.update(f"{tag}:{len(text)}:{text};".encode())
-
-    def named(self, obj) -> bool:
-        """A function or class by where it is defined: its package's source is in the key.  Whether it is a library's
-        (named by its module and name alone: the library's version is in the key)."""
-        module = getattr(obj, "__module__", None)
-        name = getattr(obj, "__qualname__", None) or getattr(obj, "__name__", None)
-        if not isinstance(module, str) or not isinstance(name, str):
-            raise _NoKey(f"{obj!r} has no module and name")
-        top = module.split(".")[0]
-        if top not in _NAMED:
-            if not _package_digest(top):  # defined where no file holds it (an interactive session)
-                raise _NoKey(f"{module}.{name} has no source file")
-            self.packages.add(top)
-        self.put("named", f"{module}:{name}")
-        return top in _NAMED
-
-    def code(self, co: types.CodeType, names: dict) -> None:
-        """Hash a function's code, and the module constants it reads: a constant changed at run time (a test's
-        monkeypatch) is then another key, as an edited file is.
-
-        Args:
-            co: The function's code object.
-            names: Its globals.
-        """
-        self.put("code", co.co_name)
-        self.h.update(co.co_code)
-        self.put("names", ",".join(co.co_names))
-        for name in co.co_names:
-            value = names.get(name, _ABSENT)
-            if value is not _ABSENT and _plain(value):
-                self.put("global", name)
-                self.constant(value)
-        for c in co.co_consts:
-            self.code(c, names) if isinstance(c, types.CodeType) else self.add(c)
-
-    def methods(self, cls: type) -> None:
-        """The code of every method of ``cls`` and its bases defined outside the libraries."""
-        for klass in cls.__mro__:
-            if (getattr(klass, "__module__", "") or "").split(".")[0] in _NAMED:
-                continue
-            for name, v in sorted(vars(klass).items()):
-                f = getattr(v, "__func__", v)  # staticmethod, classmethod
-                if isinstance(f, types.FunctionType):
-                    self.put("method", name)
-                    self.code(f.__code__, f.__globals__)
-
-    def add(self, obj) -> None:  # noqa: C901  (one case per kind of value)
-        t = type(obj)
-        if obj is None or obj is Ellipsis or t in (bool, int, float, complex, str):
-            self.put(t.__name__, repr(obj))
-            return
-        if t is bytes:
-            self.put("bytes", obj.hex())
-            return
-        if isinstance(obj, jax.core.Tracer):
-            raise _NoKey("a traced value")
-        if isinstance(obj, np.dtype):
-            self.put("dtype", obj.str)
-            return
-        if eqx.is_array(obj) or isinstance(obj, np.generic):
-            weak = bool(getattr(obj, "weak_type", False))
-            a = np.asarray(obj)
-            if a.dtype == object:
-                raise _NoKey("an object array")
-            self.put("array", f"{a.dtype.str}{a.shape}{weak}")
-            if not self.avals:
-                self.h.update(np.ascontiguousarray(a).tobytes())
-            return
-        if isinstance(obj, type):
-            self.named(obj)
-            return
-        if isinstance(obj, enum.Enum):
-            self.named(t)
-            self.put("enum", obj.name)
-            return
-        mark = (id(obj), self.avals)  # as an input, or as a constant (its arrays by value)
-        if mark in self.seen:  # a cycle, or the same object again
-            self.put("again", str(self.seen[mark]))
-            return
-        self.seen[mark] = len(self.seen)
-        if isinstance(obj, types.FunctionType):
-            if self.named(obj) and "<locals>" not in obj.__qualname__ and not obj.__closure__:
-                return  # a library's function: its version names it
-            self.code(obj.__code__, obj.__globals__)
-            self.constant(obj.__defaults__, obj.__kwdefaults__)
-            for cell in obj.__closure__ or ():
-                try:
-                    self.constant(cell.cell_contents)
-                except ValueError:  # an empty cell
-                    self.put("empty")
-            return
-        if isinstance(obj, types.MethodType):
-            self.put("method")
-            self.constant(obj.__func__, obj.__self__)
-            return
-        if isinstance(obj, functools.partial):
-            self.put("partial")
-            self.constant(obj.func, obj.args, obj.keywords)
-            return
-        if isinstance(obj, (types.BuiltinFunctionType, np.ufunc)):
-            self.named(obj)
-            return
-        if isinstance(obj, (tuple, list)):
-            self.named(t)
-            self.put("items", str(len(obj)))
-            for x in obj:
-                self.add(x)
-            return
-        if isinstance(obj, dict):
-            self.named(t)
-            self.put("items", str(len(obj)))
-            for k, v in obj.items():  # in order: a pytree's order
-                self.add(k)
-                self.add(v)
-            return
-        if isinstance(obj, (set, frozenset)):
-            subs = []
-            for x in obj:
-                d = _Digest(avals=False)
-                d.add(x)
-                self.packages |= d.packages
-                subs.append(d.hexdigest())
-            self.put("set", ",".join(sorted(subs)))
-            return
-        if dataclasses.is_dataclass(obj):  # equinox Modules (their bound methods too) and dataclasses
-            self.named(t)
-            pytree = isinstance(obj, eqx.Module)  # a plain dataclass is a static leaf: its arrays are constants
-            for f in dataclasses.fields(obj):
-                self.put("field", f.name)
-                value = getattr(obj, f.name, None)
-                if pytree and not f.metadata.get("static", False):
-                    self.add(value)
-                else:
-                    self.constant(value)
-            return
-        if isinstance(obj, jax.sharding.Mesh):
-            self.put("mesh", repr(tuple(obj.axis_names)) + repr(obj.devices.shape))
-            self.put("devices", ",".join(f"{d.platform}{d.id}" for d in obj.devices.flat))
-            return
-        fields = getattr(t, "kept_fields", None)
-        if isinstance(fields, tuple):  # an object that names the attributes its programs depend on
-            self.named(t)
-            self.methods(t)
-            for name in fields:
-                self.put("field", name)
-                self.constant(getattr(obj, name))
-            return
-        wrapped = getattr(obj, "__wrapped__", None)  # jax's jitted functions, custom_jvp, ...
-        if wrapped is not None:
-            self.named(t)
-            self.constant(wrapped)
-            return
-        raise _NoKey(f"a value of type {t.__module__}.{t.__qualname__}")
-
-
-_ABSENT = object()
 _LOCAL = 16  # the static values a kept function remembers, the most recent
-
-
-def _plain(value, depth: int = 0) -> bool:
-    """Whether ``value`` is a module constant made of numbers and strings (what a key can hold)."""
-    if value is None or type(value) in (bool, int, float, complex, str, bytes):
-        return True
-    if depth < 3 and type(value) in (tuple, list, frozenset):
-        return len(value) <= 64 and all(_plain(v, depth + 1) for v in value)
-    if depth < 3 and type(value) is dict:
-        return len(value) <= 64 and all(_plain(k, depth + 1) and _plain(v, depth + 1) for k, v in value.items())
-    return False
 
 
 def _is_array(x) -> bool:
@@ -607,23 +368,23 @@ class _Kept:
 
     def _function_key(self) -> tuple[str, frozenset]:
         if self._fn_key is None:  # once: the function, its closure and bound object do not change
-            d = _Digest(avals=False)
+            d = Digest(avals=False)
             d.add(self.fn)
             self._fn_key = (d.hexdigest(), frozenset(d.packages))
         return self._fn_key
 
     def full_key(self, args) -> dict:
-        """Everything the program depends on (module doc); raises ``_NoKey`` where that cannot be computed."""
+        """Everything the program depends on (module doc); raises ``NoKey`` where that cannot be computed."""
         fn_digest, fn_packages = self._function_key()
-        d = _Digest(avals=True)
+        d = Digest(avals=True)
         d.add(args)
         packages = sorted({"jaxobs", *fn_packages, *d.packages})
         return {
             "caller": self.key,
             "function": fn_digest,
             "arguments": d.hexdigest(),
-            "sources": {p: _package_digest(p) for p in packages},
-            "environment": _environment(),
+            "sources": {p: package_digest(p) for p in packages},
+            "environment": environment(),
         }
 
     def __call__(self, *args):
@@ -631,7 +392,7 @@ class _Kept:
         if not cache.enabled or jax.process_count() > 1:
             return self.jitted(*args)
         leaves, tree = jax.tree.flatten(args)
-        if any(isinstance(x, jax.core.Tracer) for x in leaves):  # inside another trace: part of its program
+        if any(isinstance(x, Tracer) for x in leaves):  # inside another trace: part of its program
             return self.jitted(*args)
         arrays = [x for x in leaves if _is_array(x)]
         local = (tree, tuple((x.shape, x.dtype, getattr(x, "weak_type", False)) if _is_array(x) else x for x in leaves))
@@ -659,7 +420,7 @@ class _Kept:
     def _program(self, cache: ProgramCache, args, leaves, tree, fresh: bool = False) -> _Program | None:
         try:
             key = self.full_key(args)
-        except _NoKey:
+        except NoKey:
             return None
         name = _entry_name(key)
         if not fresh and name in cache.programs:
@@ -711,7 +472,7 @@ def _check_inputs(exp, arrays) -> str | None:
     return None
 
 
-def kept_jit(fn, key: str | None = None):
+def kept_jit(fn: Callable[..., Any], key: str | None = None) -> Callable[..., Any]:
     """``eqx.filter_jit(fn)`` whose traced and lowered program is kept across processes (module doc).
 
     Args:

@@ -26,13 +26,19 @@ import logging
 import sys
 import warnings
 import weakref
+from collections.abc import Callable
+from typing import Any, TypeAlias
 
-__all__ = ["Progress", "check_progress", "close_all"]
+__all__ = ["Progress", "ProgressArg", "check_progress", "close_all"]
+
+# what a ``progress=`` argument may be: None or False (nothing), True (a bar), "auto" (a bar on a terminal), or a
+# callable progress(done, total)
+ProgressArg: TypeAlias = "bool | str | Callable[[int, int | None], Any] | None"
 
 _OPEN: weakref.WeakSet = weakref.WeakSet()  # the Progress objects whose bar is drawn now (close_all)
 
 
-def check_progress(progress, owner: str = "progress"):
+def check_progress(progress: ProgressArg, owner: str = "progress") -> ProgressArg:
     """Check a ``progress=`` argument.
 
     Args:
@@ -60,7 +66,7 @@ class Progress:
         unit: The unit's name.
     """
 
-    def __init__(self, progress, total: int | None, desc: str, unit: str = "it"):
+    def __init__(self, progress: ProgressArg, total: int | None, desc: str, unit: str = "it"):
         progress = check_progress(progress)
         self.total, self.done, self.desc = total, 0, desc
         self._callback = progress if callable(progress) and not isinstance(progress, bool) else None
@@ -76,11 +82,15 @@ class Progress:
             _OPEN.add(self)
 
     def stage(self, text: str) -> None:
-        """Name what runs now (shown at once in the bar's description)."""
+        """Name what runs now (shown at once in the bar's description).
+
+        Args:
+            text: What runs now ("": the bar's own name alone).
+        """
         if self._bar is not None:
             self._bar.set_description_str(f"{self.desc}: {text}" if text else self.desc, refresh=True)
 
-    def update(self, n: int = 1, **postfix) -> None:
+    def update(self, n: int = 1, **postfix: Any) -> None:
         """Report more units done.
 
         Args:
@@ -96,6 +106,7 @@ class Progress:
             self._callback(self.done, self.total)
 
     def close(self) -> None:
+        """Close the bar (warnings and logging go where they went before); a second call does nothing."""
         if self._bar is not None:
             self._routed.close()  # warnings and logging as they were
             self._bar.close()
@@ -127,7 +138,7 @@ class _BarLogHandler(logging.Handler):
     """A log record written by ``tqdm.write`` (above the bars) where the console handler ``like`` wrote it
     (stderr for logging's last resort), with its level and format."""
 
-    def __init__(self, tqdm_cls, like: logging.StreamHandler | None):
+    def __init__(self, tqdm_cls: Any, like: logging.Handler | None):
         super().__init__(logging.WARNING if like is None else like.level)
         self.tqdm_cls = tqdm_cls
         self.like = like
@@ -137,7 +148,7 @@ class _BarLogHandler(logging.Handler):
     def emit(self, record):
         try:
             # read at each record: logging's last resort writes to whatever sys.stderr is now
-            stream = sys.stderr if self.like is None else self.like.stream
+            stream = self.like.stream if isinstance(self.like, logging.StreamHandler) else sys.stderr
             self.tqdm_cls.write(self.format(record), file=stream)
         except Exception:
             self.handleError(record)

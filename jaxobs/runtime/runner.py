@@ -38,7 +38,7 @@ from ..scenarios import AbstractSampler, Given
 from . import sharding
 from .chunkstore import AbstractChunkSink
 from .programs import kept_jit
-from .progress import Progress
+from .progress import Progress, ProgressArg
 from .simulation import AbstractSave, SaveAll, simulate
 
 __all__ = ["StudyRun", "run_scenarios"]
@@ -95,7 +95,7 @@ class StudyRun(NamedTuple):
     """
 
     points: np.ndarray
-    values: dict
+    values: dict[str, dict[str, np.ndarray]] | None
 
 
 def run_scenarios(
@@ -109,8 +109,8 @@ def run_scenarios(
     chunked: bool = False,
     static: Callable[[Any], Hashable] | None = None,
     chunk_size: int = 2048,
-    mesh=None,
-    progress=False,
+    mesh: jax.sharding.Mesh | None = None,
+    progress: ProgressArg = False,
     label: str = "study",
     save: AbstractSave = SaveAll(),
     sink: AbstractChunkSink | None = None,
@@ -168,7 +168,8 @@ def run_scenarios(
             f"sink must be a jaxobs.runtime.chunkstore.AbstractChunkSink or None, got {type(sink).__name__}"
         )
     # a sampler of points (not one that holds its batch) and a builder declared to take its chunk's first index
-    by_chunk = bool(chunked) and build is not None and not isinstance(sampler, Given)
+    chunk_build = build if bool(chunked) and not isinstance(sampler, Given) else None
+    by_chunk = chunk_build is not None
     # the points as one float array (8 bytes a value, not a Python tuple per scenario); a builder gets
     # tuples, of its chunk's points or of all
     points = sampler.array()
@@ -188,9 +189,9 @@ def run_scenarios(
 
     def chunk_of(start: int):
         """The chunk at ``start``, ``chunk`` rows (the last padded with copies of its last scenario)."""
-        if by_chunk:  # built now and dropped after its chunk: only one chunk's scenarios are ever held
+        if chunk_build is not None:  # built now and dropped after its chunk: only one chunk's scenarios are ever held
             pts = list(map(tuple, points[start : start + chunk].tolist()))
-            batch = build(sampler.names, pts + [pts[-1]] * (chunk - len(pts)), first=start)
+            batch = chunk_build(sampler.names, pts + [pts[-1]] * (chunk - len(pts)), first=start)
         else:
             batch = jax.tree.map(lambda x: _pad(x[start : start + chunk], chunk), scs)
         if n_dev > 1:
@@ -199,8 +200,7 @@ def run_scenarios(
 
     if sink is not None:
         sink.start(n=n, chunk=chunk, devices=n_dev, designs=list(designs))
-    values = None if sink is not None else {}
-    parts = {dname: [] for dname in designs}
+    parts: dict[str, list[dict[str, np.ndarray]]] = {dname: [] for dname in designs}
     compiled = set()
     gains = {}
     for dname, design in designs.items():
@@ -229,7 +229,7 @@ def run_scenarios(
                 else:  # streamed: nothing of it is held once it is on disk
                     sink.put(dname, start // chunk, {k: np.asarray(v)[:rows] for k, v in got.items()})
                 bar.update(rows)
-    if sink is None:
-        for dname, ps in parts.items():
-            values[dname] = {k: np.concatenate([p[k] for p in ps])[:n] for k in ps[0]}
+    if sink is not None:
+        return StudyRun(points, None)
+    values = {dname: {k: np.concatenate([p[k] for p in ps])[:n] for k in ps[0]} for dname, ps in parts.items()}
     return StudyRun(points, values)

@@ -19,22 +19,17 @@ does this first thing)::
 
 It sets JAX's public ``jax_num_cpu_devices`` option.  Called after JAX has
 started its backends it cannot change the count: it warns once and returns the
-current count.  This measured 1.9× on batch-1024 forward simulations
-(benchmarks/README.md).
+current count (the gain: benchmarks/README.md).
 
 Tiles.  ``jit(vmap(simulate))`` steps the whole batch in lock-step: every
 time step sweeps every scenario's state (and its block of inputs), so once a
 device's share outgrows the CPU caches each step streams it from memory.
 :func:`map_batch` runs each device's share ``TILE`` scenarios at a time (a
 share of at most ``TILE`` runs as it is, without a one-tile ``lax.map`` around
-it: SOGI-FLL, batch 1024, precomputed input, one process each, float32
-179.8 → 425.2 M scenario-steps/s, float64 unchanged, 99.6 → 98.9)
+it, which slowed it: docs/performance.md)
 (``shard_map`` over the mesh, ``lax.map(..., batch_size=TILE)`` inside), so a
-tile's state stays in cache for the whole horizon.  SOGI-FLL-WIF, batch 8192,
-float64, M scenario-steps/s, ``vmap`` → ``map_batch`` in one run: precomputed
-inputs 43.8 → 62.3, the signal generated inside 41.0 → 55.9 (a first
-measurement of the latter, in another run, gave 53 → 55; a tile of 512 per
-device is what a batch of 1024 gives each of two devices).  Results equal the plain ``vmap`` to rounding (the
+tile's state stays in cache for the whole horizon (docs/performance.md; a tile
+of 512 per device is what a batch of 1024 gives each of two devices).  Results equal the plain ``vmap`` to rounding (the
 same per-scenario program; XLA may vectorize a tile's elementwise functions
 differently, a last-bit difference).
 
@@ -75,6 +70,8 @@ import os
 import re
 import time
 import warnings
+from collections.abc import Callable, Iterable, Sequence
+from typing import Any
 
 import jax
 import numpy as np
@@ -172,7 +169,9 @@ def use_host_devices(n: int | None = None) -> int:
     return n
 
 
-def batch_mesh(devices=None) -> Mesh:
+# jax.Device aliases a jaxlib extension class that jax's stubs declare as a variable: the two annotations below
+# name it all the same
+def batch_mesh(devices: Sequence[jax.Device] | None = None) -> Mesh:  # pyright: ignore[reportInvalidTypeForm]
     """A one-axis mesh named ``"batch"`` over ``devices``.
 
     Args:
@@ -190,12 +189,12 @@ def batch_mesh(devices=None) -> Mesh:
     return Mesh(np.asarray(devs), (AXIS,))
 
 
-def _declares_axis(x) -> bool:
+def _declares_axis(x: Any) -> bool:
     """A node that says which axis of its leaves is the scenario axis: a signal (its declared ``batch_axis``)."""
     return isinstance(x, AbstractSignal)
 
 
-def batch_axes(tree):
+def batch_axes(tree: Any) -> Any:
     """Which axis of each leaf is the scenario axis.
 
     Args:
@@ -209,7 +208,7 @@ def batch_axes(tree):
     return jax.tree.map(lambda x: x.batch_axis if _declares_axis(x) else 0, tree, is_leaf=_declares_axis)
 
 
-def _leaf_axes(tree) -> list[tuple[object, int]]:
+def _leaf_axes(tree: Any) -> list[tuple[Any, int]]:
     """(leaf, its scenario axis) for every leaf of ``tree``."""
     out = []
     for node, ax in zip(jax.tree.leaves(tree, is_leaf=_declares_axis), jax.tree.leaves(batch_axes(tree)), strict=True):
@@ -217,7 +216,7 @@ def _leaf_axes(tree) -> list[tuple[object, int]]:
     return out
 
 
-def batch_size(tree) -> int:
+def batch_size(tree: Any) -> int:
     """The number of scenarios in a batch.
 
     Args:
@@ -243,7 +242,7 @@ def _spec(ax: int) -> PartitionSpec:
     return PartitionSpec(*([None] * ax), AXIS)
 
 
-def shard_batch(tree, mesh: Mesh | None = None):
+def shard_batch(tree: Any, mesh: Mesh | None = None) -> Any:
     """Place every array leaf of ``tree`` with its leading (scenario) axis split over ``mesh``.
 
     A batch that does not divide evenly over the devices (or a mesh of one device)
@@ -280,13 +279,13 @@ def shard_batch(tree, mesh: Mesh | None = None):
 TILE = 512
 
 
-def _default_tile(devices, batch: int) -> int:
+def _default_tile(devices: Iterable[jax.Device], batch: int) -> int:  # pyright: ignore[reportInvalidTypeForm]
     """``map_batch``'s tile where the caller gives none: :data:`TILE` on CPU devices (cache-sized shares), the
     whole batch on accelerators (a GPU's kernels want every scenario of the share in each step)."""
     return TILE if all(d.platform == "cpu" for d in devices) else max(1, int(batch))
 
 
-def map_batch(fn, tree, *, mesh: Mesh | None = None, tile: int | None = None):
+def map_batch(fn: Callable[[Any], Any], tree: Any, *, mesh: Mesh | None = None, tile: int | None = None) -> Any:
     """``vmap(fn)(tree)`` computed per device of ``mesh``, ``tile`` scenarios at a time.
 
     Call ``map_batch`` inside ``jit``.  The batch is split over the mesh with
@@ -311,9 +310,8 @@ def map_batch(fn, tree, *, mesh: Mesh | None = None, tile: int | None = None):
         mesh: The mesh to split over (default: :func:`batch_mesh` over all devices).
         tile: Scenarios per tile per device, an integer ≥ 1, or None (the default): :data:`TILE` on CPU
             devices, the whole share on a GPU or TPU.  Tiles keep a CPU core's working set in its caches; an
-            accelerator wants every scenario of its share in each step's kernels (an H100 ran batch 8192,
-            float32, 16–19× faster whole than in tiles of 512: the SOGI-FLL 390 against 20 M
-            scenario-steps/s, the drive 141 against 8.6; docs/performance.md, "On a GPU").  A time-major
+            accelerator wants every scenario of its share in each step's kernels (docs/performance.md,
+            "On a GPU").  A time-major
             batch (:func:`batch_axes` not 0) runs each share whole whatever ``tile`` says.
 
     Returns:
@@ -336,8 +334,8 @@ def map_batch(fn, tree, *, mesh: Mesh | None = None, tile: int | None = None):
         if not leading:
             return jax.vmap(fn, in_axes=(axes,))(t)
         if batch_size(t) <= tile:
-            # one tile: the share's loop runs as it is (module doc: a one-iteration lax.map around it
-            # ran the float32 SOGI-FLL at 0.4x the speed)
+            # one tile: the share's loop runs as it is (module doc: a one-iteration lax.map around it is
+            # slower)
             return jax.vmap(fn)(t)
         return jax.lax.map(fn, t, batch_size=tile)
 
@@ -354,7 +352,7 @@ def init_distributed(
     process_id: int | None = None,
     *,
     timeout: int = 300,
-):
+) -> tuple[int, int]:
     """Join a run of several processes (``jax.distributed.initialize``); call it in every process, first.
 
     Call it before the first JAX computation (``jax.devices()`` counts), once per process;
@@ -406,7 +404,8 @@ def init_distributed(
     deadline = time.monotonic() + timeout  # one budget: the wait for process 0, then JAX's own
     if coordinator is not None and process_id not in (None, 0):
         _wait_for_coordinator(coordinator, timeout, deadline)
-    set_gloo = jax.config.jax_cpu_collectives_implementation is None
+    # an option jax.config sets at run time: its stubs lack it
+    set_gloo = jax.config.jax_cpu_collectives_implementation is None  # pyright: ignore[reportAttributeAccessIssue]
     if set_gloo:
         jax.config.update("jax_cpu_collectives_implementation", "gloo")
     try:
@@ -486,7 +485,7 @@ class _NotCoordinator(ConnectionError):
     """Something listens at the coordinator's address but is not JAX's coordinator (never retried)."""
 
 
-def global_batch(tree, mesh: Mesh | None = None):
+def global_batch(tree: Any, mesh: Mesh | None = None) -> Any:
     """A batch that every process holds in full (the same values) as global arrays split over ``mesh``.
 
     Each process fills only its own devices' rows (``jax.make_array_from_callback``), so nothing crosses
@@ -522,7 +521,7 @@ def global_batch(tree, mesh: Mesh | None = None):
     return jax.tree.map(put, tree, batch_axes(tree), is_leaf=_declares_axis)
 
 
-def gather_batch(tree):
+def gather_batch(tree: Any) -> Any:
     """Every leaf of ``tree`` as a whole NumPy array, on every process.
 
     A collective across processes (``multihost_utils.process_allgather``) where a leaf spans several, else a

@@ -23,14 +23,18 @@ sub-harmonic).
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping, Sequence
+from typing import Any
 
 import equinox as eqx
 import jax
 import numpy as np
 
 from .. import linear, metrics
-from ..runtime.progress import Progress
-from ..runtime.simulation import OnSignal, simulate
+from ..observers import AbstractObserver
+from ..runtime.onsignal import OnSignal
+from ..runtime.progress import Progress, ProgressArg
+from ..runtime.simulation import Solution, simulate
 from ..signals import paper001_test, stack
 
 __all__ = ["fll_demo", "DEMO_TESTS", "format_table", "table_i_flls"]
@@ -40,8 +44,15 @@ PAPER_TEST_B = "the SOGI-FLL's are rather smaller than the WPF's and WIF's"
 PAPER_SETTLE_CYCLES_A = 2.5  # 001 Sec. VI: "around 2.5 cycles of the nominal frequency"
 
 
-def table_i_flls(**kw):
-    """The three FLLs with paper 001 Table I gains, from the closed forms."""
+def table_i_flls(**kw: Any) -> dict[str, AbstractObserver]:
+    """The three FLLs with paper 001 Table I gains, from the closed forms.
+
+    Args:
+        **kw: The closed forms' inputs (``omega_n``, ``ts``, ...; :func:`jaxobs.linear.sogi_fll_closed_form`).
+
+    Returns:
+        name -> FLL (``"SOGI-FLL"``, ``"SOGI-FLL-WPF"``, ``"SOGI-FLL-WIF"``).
+    """
     return {
         "SOGI-FLL": linear.sogi_fll_closed_form(**kw),
         "SOGI-FLL-WPF": linear.wpf_closed_form(**kw),
@@ -74,8 +85,13 @@ def _run_batch(observer, signals, t1):
 
 
 def fll_demo(
-    t_event: float = 0.2, steady_delay: float = 1.0, steady_len: float = 1.0, flls=None, progress=None, tests=DEMO_TESTS
-):
+    t_event: float = 0.2,
+    steady_delay: float = 1.0,
+    steady_len: float = 1.0,
+    flls: Mapping[str, AbstractObserver] | None = None,
+    progress: ProgressArg = None,
+    tests: Sequence[str] = DEMO_TESTS,
+) -> tuple[list[dict[str, Any]], dict[str, Solution]]:
     """Run the demo: the FLLs on paper 001's tests.
 
     Args:
@@ -102,7 +118,7 @@ def fll_demo(
         sol = _run_batch(obs, signals, t1)
         traces[fll_name] = sol
         bar.update()
-        t = np.asarray(sol.t[0])
+        t = np.asarray(sol.t)[0]
         out = sol.outputs
         f_hat = np.asarray(out.obs.omega) / (2 * math.pi)
         err = np.asarray(metrics.wrap(out.obs.theta - out.truth.theta))
@@ -135,7 +151,15 @@ def fll_demo(
     return rows, traces
 
 
-def format_table(rows) -> str:
+def format_table(rows: Sequence[Mapping[str, Any]]) -> str:
+    """The demo's rows as a fixed-width text table, with paper 001's figures beside ours.
+
+    Args:
+        rows: :func:`fll_demo`'s rows.
+
+    Returns:
+        The table, lines joined by newlines.
+    """
     head = (
         f"{'test':<5}{'FLL':<14}{'settle 5% cyc':>14}{'2% cyc':>8}{'paper':>7}"
         f"{'f p-p Hz':>11}{'θerr p-p °':>12}{'V̂ p-p pu':>11}{'f̂ peak Hz':>11}{'θ ovs °':>9}{'V̂ ovs pu':>10}"

@@ -53,14 +53,22 @@ identical runs.
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
+from typing import TYPE_CHECKING, Any
 
 from .. import metrics as M
-from ..drive import Drive, PMSMParams
+from ..drive import Drive, PMSMParams, Sensors
 from ..io.provenance import provenance
-from ..observers import gain_fields
-from ..scenarios import sampler_of
+from ..observers import AbstractObserver, gain_fields
+from ..runtime.chunkstore import ChunkStore
+from ..runtime.progress import ProgressArg
+from ..scenarios import AbstractSampler, sampler_of
 from ..scenarios.families import DRIVE_STUDY_AXES, DriveScenarios, bind_observer, drive_scenarios
 from .study import StudyContext, gain_variables, study
+
+if TYPE_CHECKING:
+    import xarray as xr
+    from jax.sharding import Mesh
 
 __all__ = [
     "DRIVE_STUDY_AXES",
@@ -77,9 +85,16 @@ DRIVE_STUDY_METRICS = DriveScenarios.metrics
 QUANTILES = (0.5, 0.95, 0.99, 1.0)
 
 
-def drive_gains(obs) -> dict:
-    """A drive observer's gains (name -> float): its gain fields (:func:`jaxobs.observers.gain_fields`; what a
-    study binds per scenario, ``bound_fields``, is none)."""
+def drive_gains(obs: AbstractObserver) -> dict[str, float]:
+    """A drive observer's gains: its gain fields (:func:`jaxobs.observers.gain_fields`; what a study binds per
+    scenario, ``bound_fields``, is none).
+
+    Args:
+        obs: The drive observer.
+
+    Returns:
+        gain name -> float.
+    """
     return {g: float(getattr(obs, g)) for g in gain_fields(obs)}
 
 
@@ -87,13 +102,13 @@ FLAGS = tuple(M.METRICS[k] for k in DriveScenarios.flags)  # the drive family's 
 
 
 def run_drive_study(
-    designs: dict,
-    axes,
+    designs: dict[str, Any],
+    axes: Mapping[str, Any] | AbstractSampler,
     *,
     family: DriveScenarios | None = None,
     machine: PMSMParams | None = None,
     drive: Drive | None = None,
-    sensors=None,
+    sensors: Sensors | None = None,
     horizon: float = 0.3,
     steady_from: float | None = None,
     t_event: float | None = None,
@@ -101,10 +116,10 @@ def run_drive_study(
     sample: int = 0,
     seed: int | None = None,
     chunk_size: int = 256,
-    progress=None,
-    mesh=None,
-    store=None,
-):
+    progress: ProgressArg = None,
+    mesh: Mesh | None = None,
+    store: ChunkStore | None = None,
+) -> xr.Dataset:
     """Run every design (a drive observer closing the drive's loop) on every scenario; an ``xarray.Dataset``.
 
     Args:

@@ -19,7 +19,7 @@ from collections.abc import Callable
 from typing import Any
 
 from .. import linear, papers
-from ..drive import DualPMSMParams
+from ..drive import DualPMSMParams, PMSMParams
 from ..observers import (
     CLESO,
     FALESO,
@@ -69,6 +69,7 @@ class Registered:
 
     @property
     def name(self) -> str:
+        """The class's name."""
         return self.cls.__name__
 
     @property
@@ -100,7 +101,7 @@ class Registered:
         """The gains a job may tune: the class's gain fields (:func:`jaxobs.observers.gain_fields`)."""
         return tuple(gain_fields(self.cls))
 
-    def refusal(self, machine) -> str | None:
+    def refusal(self, machine: PMSMParams | DualPMSMParams) -> str | None:
         """Why this component cannot run on ``machine``.
 
         Args:
@@ -155,13 +156,13 @@ W_N = papers.FLL_OMEGA_N
 # amplitude, do not cover.  Their drive jobs still default to 000's SPMSM and may name 002's IPMSM.
 _LESO_MACHINES = ("ipmsm002", "spmsm000")
 _FLUX_MACHINES = ("spmsm000", "ipmsm002")  # 000's SPMSM first: their drive jobs' default machine
-_FLUX_SUPPORT = dict(
+_FLUX_SUPPORT: dict[str, Any] = dict(
     salient=True,
     why_not_dual="000's observers are derived and checked on a three-phase machine only",
 )
 # 002's LESOs run on either: they are 002's observers of a dual three-phase IPMSM (its αβ subspace,
 # jaxobs.reproduce.leso_dual) and their extended EMF holds with Ld ≠ Lq (002 eqs 4–5)
-_LESO_SUPPORT = dict(salient=True, dual=True)
+_LESO_SUPPORT: dict[str, Any] = dict(salient=True, dual=True)
 
 
 def _pll(hz) -> dict:
@@ -319,7 +320,7 @@ def _model_at(spec: tuple, values: dict):
     return getattr(linear, fn)(*(float(values[f]) for f in fields))
 
 
-def closed_form_gains(name: str, component=None) -> dict:
+def closed_form_gains(name: str, component: Any = None) -> dict[str, float]:
     """A registered class's closed-form gains as floats (name -> value), at ``component``'s nominal frequency
     ``omega_n`` where it has one (the FLLs); the gains of :meth:`Registered.gains`.
 

@@ -61,9 +61,11 @@ metrics, :attr:`jaxobs.scenarios.families.GridSignals.metrics`).
 from __future__ import annotations
 
 import math
+import os
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Hashable, Iterable, Mapping
 from dataclasses import replace
+from typing import TYPE_CHECKING, Any
 
 import jax.numpy as jnp
 import numpy as np
@@ -72,10 +74,16 @@ from .. import metrics as M
 from ..io.files import atomic_path
 from ..io.provenance import cf_dataset, cf_labels, provenance
 from ..observers import gain_fields, gain_table
+from ..runtime.chunkstore import ChunkStore
+from ..runtime.progress import ProgressArg
 from ..runtime.runner import run_scenarios
 from ..runtime.simulation import AbstractSave, SaveAll
 from ..scenarios import GRID_SIGNAL_AXES, LHS, AbstractSampler, Grid, Random, Recordings, Sobol, sampler_of
 from ..scenarios.families import AbstractFamily, GridSignals
+
+if TYPE_CHECKING:
+    import xarray as xr
+    from jax.sharding import Mesh
 
 __all__ = [
     "STUDY_AXES",
@@ -94,26 +102,26 @@ StudyContext = M.MetricContext
 
 
 def study(
-    designs: dict,
+    designs: dict[str, Any],
     scenarios: AbstractFamily,
     sampler: AbstractSampler,
-    metrics,
+    metrics: Iterable[M.Metric],
     *,
     horizon: float,
     ctx: StudyContext = StudyContext(),
-    flags: tuple = (M.DIVERGED,),
+    flags: tuple[M.Metric, ...] = (M.DIVERGED,),
     mask: str | None = "diverged",
-    quantiles: tuple = (),
-    static: Callable | None = None,
-    gains: dict | None = None,
-    attrs: dict | None = None,
+    quantiles: tuple[float, ...] = (),
+    static: Callable[[Any], Hashable] | None = None,
+    gains: dict[str, Any] | None = None,
+    attrs: dict[str, Any] | None = None,
     save: AbstractSave = SaveAll(),
     chunk_size: int = 2048,
-    mesh=None,
-    progress=False,
-    store=None,
+    mesh: Mesh | None = None,
+    progress: ProgressArg = False,
+    store: ChunkStore | None = None,
     label: str = "study",
-):
+) -> xr.Dataset:
     """Every design on every scenario of ``sampler``, drawn from the family ``scenarios``; an ``xarray.Dataset``.
 
     Args:
@@ -144,26 +152,11 @@ def study(
     import xarray as xr
 
     metrics = tuple(metrics)
-    names = [m.name for m in metrics]
-
-    def per_scenario(sol, sc, aux):
-        c = ctx if aux is None else replace(ctx, n_period=aux)
-        vals = {m.name: m.exact(sol, sc, c) for m in metrics}
-        finite = sol.ok & jnp.all(jnp.stack([jnp.isfinite(vals[k]) for k in names]))
-        for f in flags:
-            if f.exact is None:
-                vals[f.name] = ~finite
-            elif f.diverged:
-                vals[f.name] = ~finite | f.exact(sol, sc, c)
-            else:
-                vals[f.name] = finite & f.exact(sol, sc, c)
-        return vals
-
     run = run_scenarios(
         designs,
         sampler,
         lambda design, sc: scenarios.system(design, sc),
-        per_scenario,
+        _scorer(metrics, flags, ctx),
         horizon=horizon,
         build=scenarios.build,
         chunked=True,
@@ -175,7 +168,8 @@ def study(
         save=save,
         sink=store,
     )
-    values = run.values if store is None else {d: store.load(d) for d in designs}
+    values = {d: store.load(d) for d in designs} if store is not None else run.values
+    assert values is not None  # run_scenarios keeps the values where no store took them
     dnames = list(designs)
     dims, shape, coords = sampler.layout(lambda name: _axis_meta(scenarios, sampler, name))
     dims = ("design", *dims)
@@ -187,6 +181,53 @@ def study(
             np.asarray(quantiles),
             {"units": "1", "long_name": "quantile over the scenarios that kept lock (1: the worst)"},
         )
+    data = _metric_variables(metrics, values, dnames, dims, shape, mask, quantiles)
+    data.update(_flag_variables(flags, values, dnames, dims, shape))
+    data.update(gains or {})
+    ds = xr.Dataset(data, coords=coords)
+    ds.attrs.update(scenarios=len(run.points), **(attrs or {}))
+    return cf_dataset(ds, f"jaxobs {label}: every design on every scenario, its metrics and flags")
+
+
+def _scorer(
+    metrics: tuple[M.Metric, ...], flags: tuple[M.Metric, ...], ctx: StudyContext
+) -> Callable[[Any, Any, Hashable], dict[str, Any]]:
+    """The per-scenario values of one run: every metric's exact form, then every flag (a flag without an exact
+    form is "not finite": the run not ok or a metric not finite)."""
+    names = [m.name for m in metrics]
+    forms: list[tuple[str, Callable[..., Any]]] = []
+    for m in metrics:
+        if m.exact is None:
+            raise ValueError(f"study: the metric {m.name!r} has no exact form")
+        forms.append((m.name, m.exact))
+
+    def per_scenario(sol: Any, sc: Any, aux: Hashable) -> dict[str, Any]:
+        c = ctx if aux is None else replace(ctx, n_period=aux)
+        vals = {name: exact(sol, sc, c) for name, exact in forms}
+        finite = sol.ok & jnp.all(jnp.stack([jnp.isfinite(vals[k]) for k in names]))
+        for f in flags:
+            if f.exact is None:
+                vals[f.name] = ~finite
+            elif f.diverged:
+                vals[f.name] = ~finite | f.exact(sol, sc, c)
+            else:
+                vals[f.name] = finite & f.exact(sol, sc, c)
+        return vals
+
+    return per_scenario
+
+
+def _metric_variables(
+    metrics: tuple[M.Metric, ...],
+    values: dict[str, dict[str, np.ndarray]],
+    dnames: list[str],
+    dims: tuple[str, ...],
+    shape: tuple[int, ...],
+    mask: str | None,
+    quantiles: tuple[float, ...],
+) -> dict[str, tuple]:
+    """A variable per metric (NaN where ``mask`` flags the scenario), and its quantiles over each design's
+    scenarios where asked."""
     data = {}
     for m in metrics:
         vals = np.stack(
@@ -204,6 +245,18 @@ def study(
                 q,
                 {"units": m.units, "long_name": f"{m.long_name}, quantiles"},
             )
+    return data
+
+
+def _flag_variables(
+    flags: tuple[M.Metric, ...],
+    values: dict[str, dict[str, np.ndarray]],
+    dnames: list[str],
+    dims: tuple[str, ...],
+    shape: tuple[int, ...],
+) -> dict[str, tuple]:
+    """A variable per flag, and its count per design where the flag declares one."""
+    data = {}
     for f in flags:
         flag = np.stack([np.asarray(values[d][f.name]) for d in dnames])
         data[f.name] = (
@@ -217,10 +270,7 @@ def study(
                 flag.reshape(len(dnames), -1).sum(axis=1).astype(np.int32),  # CF 1.8 has no int64
                 {"units": "1", "long_name": f.count},
             )
-    data.update(gains or {})
-    ds = xr.Dataset(data, coords=coords)
-    ds.attrs.update(scenarios=len(run.points), **(attrs or {}))
-    return cf_dataset(ds, f"jaxobs {label}: every design on every scenario, its metrics and flags")
+    return data
 
 
 def gain_variables(designs: dict) -> dict:
@@ -265,23 +315,23 @@ STUDY_METRICS = GridSignals.metrics
 
 
 def run_study(
-    designs: dict,
-    axes,
+    designs: dict[str, Any],
+    axes: Mapping[str, Any] | AbstractSampler,
     *,
     family: GridSignals | None = None,
-    t_event=None,
-    horizon=0.4,
-    steady_from=None,
-    band_hz=0.05,
+    t_event: float | None = None,
+    horizon: float = 0.4,
+    steady_from: float | None = None,
+    band_hz: float = 0.05,
     sampling: str | None = None,
-    sample=0,
-    seed=None,
-    chunk_size=2048,
-    progress=False,
-    return_seconds=False,
-    mesh=None,
-    store=None,
-):
+    sample: int = 0,
+    seed: int | None = None,
+    chunk_size: int = 2048,
+    progress: ProgressArg = False,
+    return_seconds: bool = False,
+    mesh: Mesh | None = None,
+    store: ChunkStore | None = None,
+) -> xr.Dataset | tuple[xr.Dataset, float]:
     """Simulate every FLL design on every scenario: :func:`study` on :class:`~jaxobs.scenarios.families.GridSignals`
     (or a
     :class:`~jaxobs.scenarios.Recordings` sampler's recorded voltages) with the FLL metrics (see module doc).
@@ -337,12 +387,15 @@ def run_study(
     steady_from = t_event + 0.75 * (horizon - t_event) if steady_from is None else steady_from
     recordings = isinstance(sampler, Recordings)
     freq = float(next(iter(designs.values())).omega_n) / (2 * math.pi) if family is None else family.freq
+    fam: AbstractFamily
     if recordings:
-        family = GridSignals.recorded()
+        fam = GridSignals.recorded()
     elif family is None:
-        family = GridSignals(t_event, freq, seed)
+        fam = GridSignals(t_event, freq, seed)
+    else:
+        fam = family
 
-    def n_period(obs) -> int:
+    def n_period(obs: Any) -> int:
         # settle on the one-period average of f̂: one period of the grid's frequency (a recording's: the
         # design's nominal one), in samples
         f = float(obs.omega_n) / (2 * math.pi) if recordings else freq
@@ -353,7 +406,7 @@ def run_study(
         # anything runs, by building the two scenarios of every axis's least and greatest values (each of
         # grid_signals's checks is a bound on one axis, so these two pass only if every point inside does)
         ends = [tuple(float(f(sampler.axes[k])) for k in sampler.names) for f in (np.min, np.max)]
-        family.build(sampler.names, ends)
+        fam.build(sampler.names, ends)
     gains = gain_variables(designs)
     what = "recordings on which the design lost lock" if recordings else "scenarios that lost lock"
     flags = tuple(M.METRICS[k] for k in GridSignals.flags)
@@ -372,7 +425,7 @@ def run_study(
     t0 = time.time()
     ds = study(
         designs,
-        family,
+        fam,
         sampler,
         [M.METRICS[k] for k in STUDY_METRICS],
         horizon=horizon,
@@ -390,12 +443,21 @@ def run_study(
     return (ds, seconds) if return_seconds else ds
 
 
-def worst_cases(ds, metric: str, k: int = 5):
+def worst_cases(ds: xr.Dataset, metric: str, k: int = 5) -> list[dict[str, Any]]:
     """The ``k`` worst scenarios per design for ``metric``: dicts with the design, the value, the coordinates
     and the flags ``diverged`` and ``lost_lock``.
 
     Diverged scenarios (no finite metric) are the worst of all: they come first, with ``value`` None and
     ``diverged`` True, never dropped; then the finite values, largest first.
+
+    Args:
+        ds: A study's Dataset.
+        metric: The metric's name (an old name is read as its canonical one).
+        k: Scenarios per design.
+
+    Returns:
+        One dict per scenario, the designs in order: ``design``, ``metric``, ``value`` (None where not finite),
+        the coordinates, ``diverged`` and (where the study has it) ``lost_lock``.
     """
     metric = M.canonical(metric, "worst_cases(metric)")[0]
     out = []
@@ -425,7 +487,7 @@ def worst_cases(ds, metric: str, k: int = 5):
     return out
 
 
-def write_study(ds, path, store=None) -> None:
+def write_study(ds: xr.Dataset, path: str | os.PathLike[str], store: ChunkStore | None = None) -> None:
     """The one study writer: ``ds`` as NetCDF4 at ``path`` (h5netcdf), its name coordinates as numeric indexes
     with label variables (:func:`jaxobs.io.provenance.cf_labels`), written beside it and renamed over it
     (:func:`jaxobs.io.files.atomic_path`), so a ``path`` that exists is a whole study.
