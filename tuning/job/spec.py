@@ -3,12 +3,19 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
 
-from jaxobs.drive import shipped_drive
-from jaxobs.scenarios.families import FAMILIES
+from jaxobs.drive import DriveFile, PMSMParams, shipped_drive
+from jaxobs.scenarios.families import FAMILIES, AbstractFamily
+from jaxobs.signals import RecordingLayout
 
 from ..aggregations import AbstractAggregation
+from ..objective import Term
+from ..params import GainSpec
 from ..solvers import AbstractSolver
+
+if TYPE_CHECKING:  # verify reads this module's specs
+    from .verify import EnvelopeSpec
 
 
 @dataclass
@@ -30,13 +37,13 @@ class ScenarioSpec:
     t_event: float
     horizon: float
     steady_from: float
-    axes: dict  # name -> list of values
+    axes: dict[str, list[float]]  # name -> list of values
     sample: int  # 0: full grid; n > 0: n random combinations (seeded)
     seed: int
     recording: RecordingSpec | None = None  # [scenarios.recording]: recorded signals instead of a grid
 
     @property
-    def family(self) -> type:
+    def family(self) -> type[AbstractFamily]:
         """The scenario family ``signal`` names (:data:`jaxobs.scenarios.families.FAMILIES`: the one place the name is
         read); a recording stands for this family's signals."""
         return FAMILIES[self.signal]
@@ -68,17 +75,17 @@ class Job:
     name: str
     component: str
     seed: int
-    values: dict  # constructor values
-    gains: list  # GainSpec
+    values: dict[str, Any]  # constructor keywords: numbers, flags, None, [observer.speed]'s record
+    gains: list[GainSpec]
     scenarios: ScenarioSpec
     holdout: ScenarioSpec | None
-    terms: list
+    terms: list[Term]
     aggregation: AbstractAggregation  # objective.aggregate (with alpha, temperature), jaxobs_tuning.strategies
     penalty: float
     solver: AbstractSolver  # [solver], jaxobs_tuning.strategies
     sha256: str | None = None  # of the job file's bytes (load_job); None for a job built from a dict
     drive: DriveSpec | None = None  # signal = "drive" jobs: how the observer sits in the loop
-    envelope: object = None  # [envelope] (jaxobs_tuning.job.verify.EnvelopeSpec): verified after tuning; None: not
+    envelope: EnvelopeSpec | None = None  # [envelope]: verified after tuning; None: not
 
 
 @dataclass(frozen=True)
@@ -110,10 +117,10 @@ class DriveSpec:
     start: str = "steady"
     machine: str = "ipmsm002"  # a key of SHIPPED_DRIVES or a drive file's name; a job's default: its component's
     speed_schedule: float = 0.0  # FOC.speed_schedule (0: off)
-    file: object = field(default=None, compare=False)  # a jaxobs.drive.DriveFile, or None: the shipped `machine`
+    file: DriveFile | None = field(default=None, compare=False)  # None: the shipped `machine`
 
     @property
-    def drive_file(self):
+    def drive_file(self) -> DriveFile:
         """The checked drive file this drive runs (:class:`jaxobs.drive.DriveFile`)."""
         return shipped_drive(self.machine) if self.file is None else self.file
 
@@ -138,18 +145,18 @@ class RecordingSpec:
         machine_name: The machine as the job names it (a bench machine or a drive file).
     """
 
-    files: tuple  # as written in the job file
-    paths: tuple  # resolved against the job file's folder (or the working folder)
-    time_column: object  # a column name or index, or None
+    files: tuple[str, ...]  # as written in the job file
+    paths: tuple[str, ...]  # resolved against the job file's folder (or the working folder)
+    time_column: str | int | None  # a column name or index, or None
     sample_rate: float | None  # Hz, when there is no time column
-    columns: tuple
-    truth: tuple
+    columns: tuple[str | int, ...]
+    truth: tuple[str | int, ...]
     ts: float
-    sha256: tuple = ()  # of each file's bytes, when checked at parse time
-    layout: object = None  # a jaxobs.signals.RecordingLayout (what a drive log's columns hold), or None
+    sha256: tuple[str, ...] = ()  # of each file's bytes, when checked at parse time
+    layout: RecordingLayout | None = None  # what a drive log's columns hold, or None
     trim: bool = False  # recordings of different lengths cut to the shortest (else refused)
     windows: int = 0  # > 0: this many windows of the horizon spread over each drive log, each a scenario
-    machine: object = None  # a PMSMParams for a drive log's power and timing checks, or None
+    machine: PMSMParams | None = None  # for a drive log's power and timing checks, or None
     machine_name: str | None = None  # as the job names it (a bench machine or a drive file)
 
     def labels(self) -> list[str]:
