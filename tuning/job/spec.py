@@ -2,8 +2,9 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from jaxobs.drive import DriveFile, PMSMParams, shipped_drive
 from jaxobs.scenarios.families import FAMILIES, AbstractFamily
@@ -14,8 +15,8 @@ from ..objective import Term
 from ..params import GainSpec
 from ..solvers import AbstractSolver
 
-if TYPE_CHECKING:  # verify reads this module's specs
-    from .verify import EnvelopeSpec
+# s, of [envelope]'s runs: a slowly growing low-speed oscillation shows within it (docs/stability.md)
+DEFAULT_HORIZON = 2.0
 
 
 @dataclass
@@ -68,7 +69,8 @@ class Job:
         solver: ``[solver]`` (:mod:`jaxobs_tuning.strategies`).
         sha256: Of the job file's bytes (:func:`jaxobs_tuning.load_job`); None for a job built from a dict.
         drive: ``signal = "drive"`` jobs: how the observer sits in the loop.
-        envelope: ``[envelope]`` (``jaxobs_tuning.job.verify.EnvelopeSpec``): verified after tuning; None: not.
+        envelope: ``[envelope]`` (:class:`EnvelopeSpec`, :mod:`jaxobs_tuning.job.verify`): verified after tuning;
+            None: not.
     """
 
     raw: dict
@@ -164,3 +166,24 @@ class RecordingSpec:
         if not self.windows:
             return list(self.files)
         return [f"{f}@{k}" for f in self.files for k in range(self.windows)]
+
+
+@dataclass(frozen=True)
+class EnvelopeSpec:
+    """The envelope a drive job claims: speeds (r/min) and loads (N·m) as [lo, hi]; ``horizon`` (s) of the
+    verification runs; ``settle``, ``window``: s, of the stability verdict (:func:`jaxobs.analysis.stability.floquet`;
+    the window is lengthened to one electrical period of the lowest speed where it is shorter)."""
+
+    speed_rpm: tuple[float, float]
+    load_nm: tuple[float, float]
+    horizon: float = DEFAULT_HORIZON
+    settle: float = 0.2
+    window: float = 0.4
+
+    def points(self) -> tuple[list[float], list[float]]:
+        """The coarse verification grid: (speeds, loads), 3 × 2 (fewer where lo == hi)."""
+        lo, hi = self.speed_rpm
+        mid = math.sqrt(lo * hi) if lo > 0 else 0.5 * (lo + hi)
+        speeds = sorted({float(lo), float(mid), float(hi)})
+        loads = sorted({float(v) for v in self.load_nm})
+        return speeds, loads

@@ -30,34 +30,13 @@ from jaxobs.analysis.envelope import envelope
 
 from .drive import job_drive
 from .fields import JobError, get_field, no_unknown
-from .spec import DriveSpec, ScenarioSpec
+from .spec import DEFAULT_HORIZON as DEFAULT_HORIZON
+from .spec import DriveSpec, EnvelopeSpec, ScenarioSpec
 
 __all__ = ["EnvelopeSpec", "parse_envelope", "verify_designs", "unsafe_points", "UNSAFE_EXIT"]
 
 UNSAFE_EXIT = 4  # jaxobs tune's exit status for status "unsafe" (3 is "diverged": nothing tuned at all)
 MIN_HORIZON = 0.5  # s: jaxobs.analysis.envelope.envelope's least; the presets run the default 2 s
-DEFAULT_HORIZON = 2.0  # s: a slowly growing low-speed oscillation shows within it (docs/stability.md)
-
-
-@dataclasses.dataclass(frozen=True)
-class EnvelopeSpec:
-    """The envelope a drive job claims: speeds (r/min) and loads (N·m) as [lo, hi]; ``horizon`` (s) of the
-    verification runs; ``settle``, ``window``: s, of the stability verdict (:func:`jaxobs.analysis.stability.floquet`;
-    the window is lengthened to one electrical period of the lowest speed where it is shorter)."""
-
-    speed_rpm: tuple[float, float]
-    load_nm: tuple[float, float]
-    horizon: float = DEFAULT_HORIZON
-    settle: float = 0.2
-    window: float = 0.4
-
-    def points(self) -> tuple[list[float], list[float]]:
-        """The coarse verification grid: (speeds, loads), 3 × 2 (fewer where lo == hi)."""
-        lo, hi = self.speed_rpm
-        mid = math.sqrt(lo * hi) if lo > 0 else 0.5 * (lo + hi)
-        speeds = sorted({float(lo), float(mid), float(hi)})
-        loads = sorted({float(v) for v in self.load_nm})
-        return speeds, loads
 
 
 def _span(axes: dict, key: str, default: float) -> tuple[float, float]:
