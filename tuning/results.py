@@ -17,10 +17,12 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import re
 from pathlib import Path
 
 from jaxobs.io.provenance import read_file
+from jaxobs.observers import AbstractObserver
 from jaxobs.studies.registry import KEY_ALIASES, canonical_key
 
 from .job import COMPONENTS, Job, parse_job
@@ -45,7 +47,15 @@ CLOSED_FORM_RTOL = 1e-6  # a closed form outside the bounds must be the job's ow
 
 def check_nesting(text: str, where: str) -> None:
     """Refuse JSON nested deeper than :data:`MAX_RESULT_DEPTH` before it is parsed (the parser recurses on
-    nesting: 100 000 × ``[`` was a RecursionError).  A scan of the brackets outside strings, no recursion."""
+    nesting: 100 000 × ``[`` raise a RecursionError).  A scan of the brackets outside strings, no recursion.
+
+    Args:
+        text: The JSON text.
+        where: The file's name in errors.
+
+    Raises:
+        ValueError: Nested deeper than :data:`MAX_RESULT_DEPTH`, naming ``where``.
+    """
     depth = 0
     for m in re.finditer(r"[\[\]{}]", _JSON_STRING.sub('""', text)):
         depth += 1 if m.group() in "[{" else -1
@@ -116,7 +126,7 @@ def _check_bounds(job: Job, table: dict, where: str, what: str, closed: bool) ->
         )
 
 
-def check_result(res, where: str = "result") -> dict:
+def check_result(res: object, where: str = "result") -> dict:
     """The one schema of a ``result.json`` read back (by ``study``, ``export``, ``envelope``); ``ValueError`` of one
     line naming the field.  ``component``: a known component; ``job``: a table (its ``job.component``, when
     given, the same component; its ``[component]`` values of that component, finite numbers); ``gains``:
@@ -127,7 +137,18 @@ def check_result(res, where: str = "result") -> dict:
     a table when given.  The job must parse (:func:`jaxobs_tuning.parse_job`, its recordings not read)
     and the free gains of ``gains`` and ``values`` lie inside its bounds (``initial`` and ``tuned``; the
     closed form, reported exactly, inside them or equal to the job's own closed form).  The other keys are
-    reports, not read back."""
+    reports, not read back.
+
+    Args:
+        res: The parsed JSON.
+        where: The file's name in errors.
+
+    Returns:
+        ``res``, checked.
+
+    Raises:
+        ValueError: One line naming the field that fails the schema.
+    """
     if not isinstance(res, dict):
         raise ValueError(f"{where}: not a tuning result (a JSON object with job, component and gains)")
     for key in ("job", "component", "gains"):
@@ -196,7 +217,7 @@ def check_result(res, where: str = "result") -> dict:
     return res
 
 
-def load_result(path) -> dict:
+def load_result(path: str | os.PathLike) -> dict:
     """The parsed ``result.json`` of a tuning run, checked against :func:`check_result`'s schema.
 
     Read as a regular file of at most :data:`MAX_RESULT_BYTES`, its nesting checked before the JSON parser
@@ -231,6 +252,13 @@ def load_result(path) -> dict:
 def result_designs(result: dict, where: str = "result") -> dict:
     """Every design of a checked result (:func:`load_result`) by its constructor values: {name: component}.
 
+    Args:
+        result: A checked result.
+        where: The file's name in errors.
+
+    Returns:
+        name -> the component built from its ``values`` (the designs whose values are null left out).
+
     Raises:
         ValueError: no ``values`` table (not a ``jaxobs tune`` result.json), or values a constructor refuses.
     """
@@ -249,7 +277,7 @@ def result_designs(result: dict, where: str = "result") -> dict:
     return designs
 
 
-def tuned_component(result: dict):
+def tuned_component(result: dict) -> AbstractObserver:
     """The tuned component of a result: the job's component values with the tuned gains set.
 
     The job's values are rebuilt by :func:`jaxobs_tuning.parse_job` (its defaults,

@@ -24,12 +24,14 @@ What a model cannot say is ``None``, and ``not_available`` says why, field by fi
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
+from typing import Protocol
 
 import jax.numpy as jnp
 import numpy as np
 
 from jaxobs import kept_jit, linear, papers
-from jaxobs.drive import bench_machine
+from jaxobs.drive import DriveFile, bench_machine
 from jaxobs.observers import CLESO, FALESO, AbstractFluxObserver
 from jaxobs.studies.registry import REGISTRY, canonical_key
 
@@ -40,21 +42,46 @@ __all__ = ["structure", "STRUCTURE_FIELDS"]
 STRUCTURE_FIELDS = ("phase_margin_deg", "crossover_hz", "gain_margin_db", "dominant_damping", "dominant_hz", "stable")
 
 
+class _ScenarioAxes(Protocol):
+    @property
+    def axes(self) -> dict[str, list[float]]: ...
+
+
+class _DriveOfJob(Protocol):
+    @property
+    def drive_file(self) -> DriveFile: ...
+
+
+class JobView(Protocol):
+    """What :func:`structure` reads of a job (a :class:`jaxobs_tuning.job.Job`, a layer above): its scenarios'
+    axes and its drive."""
+
+    @property
+    def scenarios(self) -> _ScenarioAxes:
+        """The tuning set (its ``axes``: the first ``speed_rpm`` is the operating point)."""
+        ...
+
+    @property
+    def drive(self) -> _DriveOfJob | None:
+        """The job's ``[drive]`` (its ``drive_file``'s machine), or None."""
+        ...
+
+
 # One compiled program per loop shape (the designs of a job share it; the persistent compilation cache keeps
 # it across runs): run eagerly, margins dispatched every operation on its own and traced its two vmapped Newton
-# root finds anew per design, 5 s of the default job's 20 s warm run on 2 cores; the same numbers bit for bit.
+# root finds anew per design (its cost: docs/performance.md); the same numbers bit for bit.
 def _margin_values(loop):
     """The margins this table reads, as a tuple of arrays: a program :func:`jaxobs.kept_jit` can keep."""
     m = linear.margins(loop)
     return m.phase_margin, m.omega_gc, m.gain_margin
 
 
-# a second process reads the traced program back instead of tracing the two vmapped root finds again (1-2 s of a
-# warm default job)
+# a second process reads the traced program back instead of tracing the two vmapped root finds again
+# (docs/performance.md)
 _margins_of = kept_jit(_margin_values)
 
 
-def _margins(loop) -> dict:
+def _margins(loop) -> tuple[dict, dict]:
     pm, wgc, gm = (float(x) for x in _margins_of(loop))
     out, why = {}, {}
     out["phase_margin_deg"] = pm if math.isfinite(pm) else None
@@ -72,10 +99,9 @@ def _margins(loop) -> dict:
 # contributes less than CANCELLED_REL of the largest mode's amplitude to the step response (|r_i/p_i|, r_i its
 # residue).  The zero test keeps a numerically split repeated pole, whose residues are huge, from hiding the
 # others.  The FA-LESO's PLL loop (002) has such a doublet near ±jωe: the FA-LESO's own slow pole
-# -k1/(k2 - jωe) sits next to its zero -k1/k2, and in the loop's envelope model it becomes a pair at
-# ≈ -0.1 ± j157 rad/s (damping 0.0007 at 300 r/min for 002's closed form) with a zero pair 0.03 rad/s away:
-# its mode's amplitude is 2e-4 of the largest, so it is no "dominant" dynamics of the loop, while reporting
-# it read as a nearly unstable design.  1e-3 keeps every mode a plot of the response could show.
+# -k1/(k2 - jωe) sits next to its zero -k1/k2, a nearly undamped pair with a zero pair beside it whose mode is
+# far below 1e-3 of the largest (docs/performance.md), so it is no "dominant" dynamics of the loop, while
+# reporting it read as a nearly unstable design.  1e-3 keeps every mode a plot of the response could show.
 CANCELLED_REL = 1e-3
 NEAR_ZERO_REL = 1e-2
 
@@ -98,12 +124,12 @@ def _poles(tf) -> dict:
     near = np.array([bool(z.size) and np.min(np.abs(z - x)) < NEAR_ZERO_REL * abs(x) for x in p], dtype=bool)
     cancelled = near & np.isfinite(amp) & (amp < CANCELLED_REL * big)
     seen = p[~cancelled] if np.any(~cancelled) else p  # the modes the response shows
-    dom = seen[np.argmax(seen.real)]
+    dom = seen[np.argmax(np.real(seen))]
     mag = abs(dom)
     cplx = [z for z in seen if abs(z.imag) > 1e-9 * abs(z)]
     return {
         "least_pair_damping": float(min(-z.real / abs(z) for z in cplx)) if cplx else 1.0,
-        "stable": bool(np.all(p.real < 0)),
+        "stable": bool(np.all(np.real(p) < 0)),
         "dominant_damping": float(-dom.real / mag) if mag > 0 else None,
         "dominant_hz": float(mag / (2 * math.pi)),
         "poles": [[float(z.real), float(z.imag)] for z in sorted(p, key=lambda z: (z.real, z.imag))],
@@ -119,9 +145,9 @@ def _na(out: dict, why: dict, reason: str, *fields):
         why[f] = reason
 
 
-def _fll(name: str, v: dict) -> tuple[dict, dict]:
+def _fll(name: str, v: dict, small_signal: Callable) -> tuple[dict, dict]:
     wn = float(v["omega_n"])
-    model = REGISTRY[name].model(v)  # 001's small-signal model of this FLL
+    model = small_signal(v)  # 001's small-signal model of this FLL
     if name == "SOGIFLL":
         k = float(v["k"])
         rule = {
@@ -155,7 +181,7 @@ def _fll(name: str, v: dict) -> tuple[dict, dict]:
     return out, why
 
 
-def _flux(name: str, v: dict) -> tuple[dict, dict]:
+def _flux(name: str, v: dict, small_signal: Callable) -> tuple[dict, dict]:
     w = float(v["omega_init"])
     out, why = {}, {}
     _na(
@@ -168,11 +194,11 @@ def _flux(name: str, v: dict) -> tuple[dict, dict]:
     )
     if name == "SOIFO":
         k, lam = float(v["k"]), float(v["lam"])
-        out.update(_poles(REGISTRY[name].model(v)))
+        out.update(_poles(small_signal(v)))
         rule = {"rule": "lam = k^2/4 (001 eq 22 normalized), at this k", "lam_rule": linear.soifo_lambda(k)}
     else:
         K1, K2, lam = float(v["K1"]), float(v["K2"]), float(v["lam"])
-        out.update(_poles(REGISTRY[name].model(v)))
+        out.update(_poles(small_signal(v)))
         rule = {"rule": "lam = K1^3/(2 K2), at this K1, K2", "lam_rule": linear.second_order_soifo_lambda(K1, K2)}
         rule.update(_k1_rule(K1, K2, w, why))
     rule["lam_over_rule"] = lam / rule["lam_rule"]
@@ -185,8 +211,7 @@ def _k1_rule(K1: float, K2: float, omega_init: float, why: dict) -> dict:
     """000's settling-time rule re-evaluated at this K2 (jaxobs_tuning.targets.k1_for_settling_time_at_k2).
 
     Both envelope models depend on ω't only, so the K1 found at ω' = 100π holds at any ω' (the design's
-    ``omega_init``), and the settling times scale as 100π/ω'.  About 3 s for the first design of a process (one
-    compile), 0.1 s for the next.
+    ``omega_init``), and the settling times scale as 100π/ω'.  One compile per process (docs/performance.md).
     """
     w = papers.FLUX_FIG5_OMEGA
     target = soifo_settling_time(papers.SOIFO_K, w)
@@ -216,7 +241,7 @@ def _settling_at(K1, K2, omega):
     ]  # same compile
 
 
-def _drive_speed(job) -> float:
+def _drive_speed(job: JobView | None) -> float:
     """The electrical speed (rad/s) the drive jobs linearize at: the first scenario's speed (600 r/min default)
     times the pole pairs of the job's machine (its drive file; 002's IPMSM without a job)."""
     rpm = (job.scenarios.axes.get("speed_rpm") if job is not None else None) or [600.0]
@@ -225,7 +250,7 @@ def _drive_speed(job) -> float:
     return rpm * math.pi / 30 * machine.p
 
 
-def _leso(name: str, v: dict, job) -> tuple[dict, dict]:
+def _leso(name: str, v: dict, job: JobView | None) -> tuple[dict, dict]:
     from jaxobs.linear import TransferFunction
 
     we = _drive_speed(job)
@@ -249,13 +274,12 @@ def _leso(name: str, v: dict, job) -> tuple[dict, dict]:
         why["routh_stable"] = "no Routh test for the C-LESO in the papers (its poles are real, at -omega0)"
         out["routh_stable"] = None
     out["omega_e"] = we
-    # Scope (measured): this is the observer's loop alone.  In a sensorless job the PLL's
+    # Scope: this is the observer's loop alone.  In a sensorless job the PLL's
     # θ̂ and ω̂ close the FOC's current and speed loops, and an Lq mismatch makes the LESO's angle error
     # depend on i_q, which the speed loop sets from ω̂: a second loop (speed loop -> i_q -> θ̂ error -> ω̂
-    # -> speed loop) that this model leaves open.  The tuned FA-LESO of faleso.toml (0.3 s horizon) had
-    # "stable": true here with a 21° phase margin, yet grew an ~11 Hz oscillation to ±40° by 0.9 s in the
-    # sensorless drive with dLq = +0.2 (near the speed loop's and the PLL's crossover).  So "stable" and
-    # the margins are necessary, not sufficient: the drive presets score the closed loop on a long horizon.
+    # -> speed loop) that this model leaves open.  So "stable" and the margins are necessary, not sufficient
+    # (a design stable here oscillated in the sensorless drive: docs/performance.md): the drive presets score
+    # the closed loop on a long horizon.
     out["scope"] = (
         "the observer's PLL loop alone, nominal machine (no Rs/L mismatch), speed loop and FOC open; it does "
         "not model the sensorless drive's speed loop closing through the estimate, so 'stable' here does not "
@@ -270,7 +294,7 @@ def _leso(name: str, v: dict, job) -> tuple[dict, dict]:
     return out, why
 
 
-def structure(component: str, values: dict, job=None) -> dict:
+def structure(component: str, values: dict, job: JobView | None = None) -> dict:
     """The linear structure of a design (see the module docstring).
 
     Args:
@@ -291,10 +315,10 @@ def structure(component: str, values: dict, job=None) -> dict:
     try:
         if cls in (CLESO, FALESO):
             out, why = _leso(component, values, job)
-        elif entry is not None and entry.model is not None and issubclass(cls, AbstractFluxObserver):
-            out, why = _flux(component, values)
+        elif entry is not None and entry.model is not None and issubclass(entry.cls, AbstractFluxObserver):
+            out, why = _flux(component, values, entry.model)
         elif entry is not None and entry.model is not None:
-            out, why = _fll(component, values)
+            out, why = _fll(component, values, entry.model)
         else:
             out, why = {}, {}
             _na(out, why, f"no small-signal model of {component} in jaxobs.linear", *STRUCTURE_FIELDS)

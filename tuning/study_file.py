@@ -65,12 +65,13 @@ from __future__ import annotations
 import inspect
 import json
 import math
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from jaxobs.drive import SHIPPED_DRIVES, bench_machine, shipped_drive
+from jaxobs.drive import SHIPPED_DRIVES, DriveFile, bench_machine, shipped_drive
 from jaxobs.io.provenance import sha256, versions
-from jaxobs.observers import AbstractFluxObserver
+from jaxobs.observers import AbstractFluxObserver, AbstractObserver
 from jaxobs.scenarios import SAMPLINGS, Grid
 from jaxobs.scenarios.families import FAMILIES, AbstractFamily, DriveScenarios, DriveSetting, GridSignals
 from jaxobs.studies.registry import REGISTRY, canonical_key
@@ -170,8 +171,8 @@ class StudySpec:
 
     name: str
     family: AbstractFamily
-    designs: dict
-    axes: dict
+    designs: dict[str, AbstractObserver]
+    axes: dict[str, list[float]]
     opts: dict = field(default_factory=dict)
     scenarios: int = 0
     # NetCDF attributes: the sha256 of the study file and of every result file it reads (names relative
@@ -179,7 +180,7 @@ class StudySpec:
     provenance: dict = field(default_factory=dict)
 
 
-def load_study(path) -> StudySpec:
+def load_study(path: str | os.PathLike) -> StudySpec:
     """Read, check and build a study file.
 
     Args:
@@ -201,7 +202,14 @@ def load_study(path) -> StudySpec:
 def study_fingerprint(spec: StudySpec) -> str:
     """What a study's chunks (``--resume``) are checked against, as a job's checkpoint is: the sha256 of the
     study file, of every result file and recording it reads, and of the versions that compute it (another
-    JAX may give other last bits, and a resumed study must equal one run in one go)."""
+    JAX may give other last bits, and a resumed study must equal one run in one go).
+
+    Args:
+        spec: The checked study.
+
+    Returns:
+        The hex digest.
+    """
     rec = spec.opts.get("recording")
     what = {
         "provenance": {k: v for k, v in spec.provenance.items() if k != "study_file"},
@@ -367,7 +375,7 @@ def _designs(raw: dict, build) -> dict:
     designs = {}
     for name in designs_t:
         where = f"designs.{cap(str(name), 40)}"
-        spec = get_field(designs_t, name, where, dict)
+        spec = get_field(designs_t, name, where, dict, required=True)
         given = [k for k in ("closed_form", "result", "component") if k in spec]
         if len(given) != 1:
             raise JobError(where, f"give exactly one of closed_form, result, component (got {len(given)})")
@@ -447,9 +455,11 @@ def _fll_recordings(raw, st, name, base, designs, t_event, horizon, steady, band
     spec = parse_recording_scenarios(
         {"recording": st["recording"]}, "study", GridSignals, t_event, horizon, steady, 0, ts[0], base
     )
-    opts = dict(t_event=t_event, horizon=horizon, steady_from=steady, band_hz=band, recording=spec.recording)
+    rec = spec.recording
+    assert rec is not None  # parse_recording_scenarios reads [study.recording]
+    opts = dict(t_event=t_event, horizon=horizon, steady_from=steady, band_hz=band, recording=rec)
     family = GridSignals.recorded()  # the recordings stand for grid voltages
-    return StudySpec(name, family, designs, {}, opts, len(spec.recording.files), _results_attr(results))
+    return StudySpec(name, family, designs, {}, opts, len(rec.files), _results_attr(results))
 
 
 # --------------------------------------------------------------------------------------------------
@@ -466,69 +476,17 @@ def _result_machine(res: dict) -> str | None:
     return job.drive.machine if job.drive is not None else None
 
 
-def _parse_drive(raw: dict, st: dict, name: str, base: Path) -> StudySpec:
-    no_unknown(st, _DRIVE_STUDY_KEYS, "study")
-    dr = get_field(raw, "drive", "drive", dict, {})
-    # the FOC is the drive jobs' (jaxobs_tuning.job.job_drive: the bench's IMC current and I-P speed loops), so a tuned
-    # result is scored on the drive that tuned it; only the observer's unscored settling phase is the study's
-    no_unknown(dr, ("settle", "file", "name", "description", *DRIVE_TABLES), "drive")
-    settle = get_field(dr, "settle", "drive.settle", float, 0.2)
-    if not 0 <= settle <= 10:
-        raise JobError("drive.settle", f"must be in [0, 10] s, got {settle:g}")
-    # the user's drive file ([drive] file, or its tables inline), else a shipped one (study.machine)
-    file = None
-    if isinstance(dr.get("machine"), str):
-        raise JobError("drive.machine", "a shipped machine is named by study.machine; [drive.machine] is a table")
-    if "file" in dr or any(isinstance(dr.get(k), dict) for k in DRIVE_TABLES):
-        if "machine" in st:
-            raise JobError("study.machine", "give study.machine or the [drive] file (or its tables), not both")
-        file_name, file = drive_source(dr, "", base)
-    ts_file = None if file is None else file.ts  # the designs run at the drive file's period
-    tuned_on = {}  # "designs.NAME" -> the machine its result was tuned on
-    results = {}  # design -> its result file and sha256
+def _drive_machine(
+    st: dict, designs: dict, tuned_on: dict[str, str], file_name: str, file: DriveFile | None
+) -> tuple[str, DriveFile]:
+    """A drive study's machine (``study.machine``, else the one the results were tuned on, else the first
+    design's default), every design checked against it.
 
-    def build(spec, where, how):
-        if how == "result":
-            info = {}
-            obs = _result(spec, where, base, DRIVE_OBSERVERS, info)
-            results[where.split(".", 1)[1]] = f"{info['path']} sha256 {info['sha256']}"
-            try:
-                m = _result_machine(info["result"])
-            except (ValueError, TypeError, KeyError, AttributeError) as e:
-                raise JobError(f"{where}.result", str(e)) from None
-            if m is not None:
-                tuned_on[where] = m
-            return obs
-        if how == "closed_form":  # the component's closed-form gains, as a job's closed_form scores them
-            no_unknown(spec, ("closed_form",), where)
-            comp = get_field(spec, "closed_form", f"{where}.closed_form", str)
-            if comp not in DRIVE_OBSERVERS or comp not in COMPONENTS:
-                allowed = ", ".join(c for c in DRIVE_OBSERVERS if c in COMPONENTS)
-                raise JobError(f"{where}.closed_form", f"must be one of {allowed}, got {show(comp)}")
-            info = COMPONENTS[comp]
-            values = {**info.defaults, **info.closed_form(info.ctor(**info.defaults))}
-            if ts_file is not None:
-                values["ts"] = ts_file
-            try:
-                return info.ctor(**values)
-            except (ValueError, TypeError, ArithmeticError) as e:
-                raise JobError(where, str(e)) from None
-        comp = get_field(spec, "component", f"{where}.component", str)
-        if comp not in DRIVE_OBSERVERS:
-            raise JobError(f"{where}.component", f"must be one of {', '.join(DRIVE_OBSERVERS)}, got {show(comp)}")
-        # the bound fields (Rs, the inductance, the start speed) are placeholders: the study binds each
-        # scenario's assumed machine and speed (AbstractDriveObserver.bind); the drive's ts rules
-        ctor = REGISTRY[comp].cls
-        par = bench_machine("spmsm000" if issubclass(ctor, AbstractFluxObserver) else "ipmsm002")
-        # valid for the constructor, then bound: 0 for the resistance, 1 for the rest
-        bound = ctor.bound_fields
-        fixed = {f: (0.0 if f == bound.resistance else 1.0) for f in bound.names}
-        return _component(spec, where, comp, (*bound.names, "ts"), fixed).bind(par, 0.0)
-
-    designs = _designs(raw, build)
-    # the machine: study.machine, else the one the results were tuned on, else the first design's default
+    Returns:
+        ``(machine, its drive file)``.
+    """
     first = type(next(iter(designs.values()))).__name__
-    default = next(iter(tuned_on.values()), None) or COMPONENTS.get(first, COMPONENTS["CLESO"]).machines[0]
+    default: str = next(iter(tuned_on.values()), None) or COMPONENTS.get(first, COMPONENTS["CLESO"]).machines[0]
     machine = file_name if file is not None else get_field(st, "machine", "study.machine", str, default)
     if file is None and machine not in MACHINES:
         raise JobError("study.machine", f"must be one of {', '.join(MACHINES)}, got {show(machine)}")
@@ -548,20 +506,95 @@ def _parse_drive(raw: dict, st: dict, name: str, base: Path) -> StudySpec:
                 f"designs.{cap(str(dname), 40)}",
                 f"runs at ts = {float(obs.ts):g} s, the drive file at {df.ts:g} s (1/f_sample_hz): they must agree",
             )
-    par = df.machine
-    try:
-        drive = job_drive(DriveSpec(loop="sensorless", settle=settle, machine=machine, file=file))
-    except JobError:  # names its own field
-        raise
-    except (ValueError, ArithmeticError) as e:
-        raise JobError("drive", str(e)) from None
-    provenance = {"machine": f"{machine}: {df.description}", **_results_attr(results)}
-    if file is not None:  # the drive file's tables as read: the study's record, and what --resume checks
-        provenance["drive_file"] = json.dumps(file.table, sort_keys=True, ensure_ascii=False)
+    return machine, df
+
+
+def _drive_file_of_study(raw: dict, st: dict, base: Path) -> tuple[float, str, DriveFile | None]:
+    """A drive study's ``[drive]``: the observer's settling phase and the user's drive file (``file``, or its
+    tables inline), if any.
+
+    Returns:
+        ``(settle, the file's name, the file)``; ``("", None)`` for the name and file of a shipped drive.
+    """
+    dr = get_field(raw, "drive", "drive", dict, {})
+    # the FOC is the drive jobs' (jaxobs_tuning.job.job_drive: the bench's IMC current and I-P speed loops), so a tuned
+    # result is scored on the drive that tuned it; only the observer's unscored settling phase is the study's
+    no_unknown(dr, ("settle", "file", "name", "description", *DRIVE_TABLES), "drive")
+    settle = get_field(dr, "settle", "drive.settle", float, 0.2)
+    if not 0 <= settle <= 10:
+        raise JobError("drive.settle", f"must be in [0, 10] s, got {settle:g}")
+    # the user's drive file ([drive] file, or its tables inline), else a shipped one (study.machine)
+    file_name, file = "", None
+    if isinstance(dr.get("machine"), str):
+        raise JobError("drive.machine", "a shipped machine is named by study.machine; [drive.machine] is a table")
+    if "file" in dr or any(isinstance(dr.get(k), dict) for k in DRIVE_TABLES):
+        if "machine" in st:
+            raise JobError("study.machine", "give study.machine or the [drive] file (or its tables), not both")
+        file_name, file = drive_source(dr, "", base)
+    return settle, file_name, file
+
+
+def _drive_designs(raw: dict, base: Path, ts_file: float | None) -> tuple[dict, dict[str, str], dict[str, str]]:
+    """A drive study's ``[designs]``: each a tuning result, a drive component's closed form or its gains.
+
+    Args:
+        raw: The parsed study file.
+        base: The study file's folder.
+        ts_file: The drive file's period, which the closed forms run at (None: the shipped drive's).
+
+    Returns:
+        ``(designs, tuned_on, results)``: name -> observer; ``"designs.NAME"`` -> the machine its result was
+        tuned on; name -> its result file and sha256.
+    """
+    tuned_on: dict[str, str] = {}  # "designs.NAME" -> the machine its result was tuned on
+    results: dict[str, str] = {}  # design -> its result file and sha256
+
+    def build(spec: dict, where: str, how: str):
+        if how == "result":
+            info = {}
+            obs = _result(spec, where, base, DRIVE_OBSERVERS, info)
+            results[where.split(".", 1)[1]] = f"{info['path']} sha256 {info['sha256']}"
+            try:
+                m = _result_machine(info["result"])
+            except (ValueError, TypeError, KeyError, AttributeError) as e:
+                raise JobError(f"{where}.result", str(e)) from None
+            if m is not None:
+                tuned_on[where] = m
+            return obs
+        if how == "closed_form":  # the component's closed-form gains, as a job's closed_form scores them
+            no_unknown(spec, ("closed_form",), where)
+            comp = get_field(spec, "closed_form", f"{where}.closed_form", str, required=True)
+            if comp not in DRIVE_OBSERVERS or comp not in COMPONENTS:
+                allowed = ", ".join(c for c in DRIVE_OBSERVERS if c in COMPONENTS)
+                raise JobError(f"{where}.closed_form", f"must be one of {allowed}, got {show(comp)}")
+            info = COMPONENTS[comp]
+            values = {**info.defaults, **info.closed_form(info.ctor(**info.defaults))}
+            if ts_file is not None:
+                values["ts"] = ts_file
+            try:
+                return info.ctor(**values)
+            except (ValueError, TypeError, ArithmeticError) as e:
+                raise JobError(where, str(e)) from None
+        comp = get_field(spec, "component", f"{where}.component", str, required=True)
+        if comp not in DRIVE_OBSERVERS:
+            raise JobError(f"{where}.component", f"must be one of {', '.join(DRIVE_OBSERVERS)}, got {show(comp)}")
+        # the bound fields (Rs, the inductance, the start speed) are placeholders: the study binds each
+        # scenario's assumed machine and speed (AbstractDriveObserver.bind); the drive's ts rules
+        ctor = REGISTRY[comp].cls
+        par = bench_machine("spmsm000" if issubclass(ctor, AbstractFluxObserver) else "ipmsm002")
+        # valid for the constructor, then bound: 0 for the resistance, 1 for the rest
+        bound = ctor.bound_fields
+        fixed = {f: (0.0 if f == bound.resistance else 1.0) for f in bound.names}
+        return _component(spec, where, comp, (*bound.names, "ts"), fixed).bind(par, 0.0)
+
+    return _designs(raw, build), tuned_on, results
+
+
+def _drive_window(raw: dict, st: dict, ts: float) -> tuple[float, float, float]:
+    """A drive study's ``horizon``, ``steady_from`` and ``t_event`` (s), checked at the drive's period ``ts``."""
     horizon = get_field(st, "horizon", "study.horizon", float, 0.3)
     if not horizon > 0:
         raise JobError("study.horizon", f"must be > 0 s, got {horizon:g}")
-    ts = float(drive.ts)
     if horizon / ts > MAX_STEPS:
         raise JobError("study.horizon", f"{horizon:g} s is more than {MAX_STEPS:g} time steps of {ts:g} s")
     steady = get_field(st, "steady_from", "study.steady_from", float, 0.5 * horizon)
@@ -574,6 +607,11 @@ def _parse_drive(raw: dict, st: dict, name: str, base: Path) -> StudySpec:
     t_event = get_field(st, "t_event", "study.t_event", float, 0.5 * horizon if has_step else 0.0)
     if not 0 <= t_event < horizon:
         raise JobError("study.t_event", f"must be in [0, horizon = {horizon:g}) s, got {t_event:g}")
+    return horizon, steady, t_event
+
+
+def _drive_sampling(st: dict) -> tuple[str, int]:
+    """A drive study's ``sampling`` and ``sample`` (a grid: 0; a drawn sampling: its count)."""
     sampling = get_field(st, "sampling", "study.sampling", str, "grid")
     if sampling not in SAMPLINGS:  # the presets' one table (jaxobs.scenarios.sampler_of)
         raise JobError("study.sampling", f"must be {', '.join(SAMPLINGS)}, got {show(sampling)}")
@@ -585,6 +623,29 @@ def _parse_drive(raw: dict, st: dict, name: str, base: Path) -> StudySpec:
         )
     if drawn and not 1 <= sample <= MAX_SCENARIOS:
         raise JobError("study.sample", f"must be in [1, {MAX_SCENARIOS}] with sampling = {sampling!r}, got {sample}")
+    return sampling, sample
+
+
+def _parse_drive(raw: dict, st: dict, name: str, base: Path) -> StudySpec:
+    """A drive study: its ``[drive]``, designs, machine, window, sampling and axes, in that order."""
+    no_unknown(st, _DRIVE_STUDY_KEYS, "study")
+    settle, file_name, file = _drive_file_of_study(raw, st, base)
+    ts_file = None if file is None else file.ts  # the designs run at the drive file's period
+    designs, tuned_on, results = _drive_designs(raw, base, ts_file)
+    machine, df = _drive_machine(st, designs, tuned_on, file_name, file)
+    par = df.machine
+    try:
+        drive = job_drive(DriveSpec(loop="sensorless", settle=settle, machine=machine, file=file))
+    except JobError:  # names its own field
+        raise
+    except (ValueError, ArithmeticError) as e:
+        raise JobError("drive", str(e)) from None
+    provenance = {"machine": f"{machine}: {df.description}", **_results_attr(results)}
+    if file is not None:  # the drive file's tables as read: the study's record, and what --resume checks
+        provenance["drive_file"] = json.dumps(file.table, sort_keys=True, ensure_ascii=False)
+    ts = float(drive.ts)
+    horizon, steady, t_event = _drive_window(raw, st, ts)
+    sampling, sample = _drive_sampling(st)
     seed, chunk = _seed(st), _chunk(st, 256)
     axes = _axes(raw, DriveScenarios)
     check_speed_axes(axes, "axes", machine, file)  # the jobs' check: speeds within the inverter's limit

@@ -40,11 +40,13 @@ from __future__ import annotations
 
 import functools
 import math
+from collections.abc import Sequence
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
+from jax.typing import ArrayLike
 
 from jaxobs import linear
 
@@ -57,7 +59,9 @@ __all__ = [
 ]
 
 
-def lambda_for_damping(k, omega_n, zeta=1 / math.sqrt(2), lam0=None):
+def lambda_for_damping(
+    k: ArrayLike, omega_n: ArrayLike, zeta: float = 1 / math.sqrt(2), lam0: ArrayLike | None = None
+) -> jax.Array:
     """λ such that the SOGI-FLL's linear model s² + (kωn/2)s + λ/2 has damping ``zeta``.
 
     Args:
@@ -107,7 +111,14 @@ def _last_crossing(t, curve, band):
     return jnp.asarray(t)[last] + frac * (t[1] - t[0])
 
 
-def flux_settling_time(gains, omega, band=0.02, definition="envelope", t_end=0.12, n=24001):
+def flux_settling_time(
+    gains: Sequence[ArrayLike],
+    omega: float,
+    band: float = 0.02,
+    definition: str = "envelope",
+    t_end: float = 0.12,
+    n: int = 24001,
+) -> jax.Array:
     """Settling time of a SOIFO or a second-order SOIFO (module doc).
 
     Args:
@@ -134,7 +145,15 @@ def flux_settling_time(gains, omega, band=0.02, definition="envelope", t_end=0.1
     raise ValueError(f"definition must be 'envelope' or 'transient', got {definition!r}")
 
 
-def match_settling_time(target, omega, coupling=2.0, band=0.02, lower=1.0, upper=2.5, definition="envelope"):
+def match_settling_time(
+    target: float,
+    omega: float,
+    coupling: float = 2.0,
+    band: float = 0.02,
+    lower: float = 1.0,
+    upper: float = 2.5,
+    definition: str = "envelope",
+) -> jax.Array:
     """K1 (with K2 = coupling·K1) giving the second-order SOIFO the settling time ``target``.
 
     An optimistix bisection; for the envelope definition the settling time falls
@@ -163,7 +182,7 @@ def match_settling_time(target, omega, coupling=2.0, band=0.02, lower=1.0, upper
     return sol.value
 
 
-def soifo_settling_time(k, omega, band=0.02):
+def soifo_settling_time(k: float, omega: float, band: float = 0.02) -> float:
     """The SOIFO's envelope settling time in closed form: its model (kω'/2)/(s + kω'/2) is first order, so
     |step − 1| = exp(−kω't/2) and t_s = 2 ln(1/band)/(kω') (17.6 ms at 000's k = 1.414, ω' = 100π).
 
@@ -184,13 +203,22 @@ def _settling_at_k2(k1s, K2, omega, band):
     return jax.vmap(lambda k1: flux_settling_time((k1, K2), omega, band))(k1s)
 
 
-def k1_for_settling_time_at_k2(target, K2, omega, band=0.02, lower=0.05, upper=20.0, n=64, levels=4):
+def k1_for_settling_time_at_k2(
+    target: float,
+    K2: float,
+    omega: float,
+    band: float = 0.02,
+    lower: float = 0.05,
+    upper: float = 20.0,
+    n: int = 64,
+    levels: int = 4,
+) -> float | None:
     """The smallest K1 in [lower, upper] whose envelope settling time at this ``K2`` is ≤ ``target``, or None.
 
     See the module doc for why the smallest: at fixed K2 the settling time is not monotonic in K1,
     so a bracketing root finder would return whichever crossing it met.  A grid of ``n`` K1 (log
     spaced), then ``levels − 1`` finer grids in the bracket of the first crossing: every level is
-    one call of the same compiled, vmapped settling time (about 3 s to compile, 30 ms a call),
+    one call of the same compiled, vmapped settling time (compiled once, docs/performance.md),
     and the bracket shrinks by n − 1 each time (4 levels: relative width < 1e-6).
 
     Args:

@@ -26,28 +26,32 @@ class ComponentInfo:
     entry: Registered
 
     @property
-    def ctor(self):
+    def ctor(self) -> type:
+        """The component's class (its constructor)."""
         return self.entry.cls
 
     @property
-    def gains(self) -> tuple:
+    def gains(self) -> tuple[str, ...]:
+        """The names of its tunable gains."""
         return self.entry.gains
 
     @property
     def defaults(self) -> dict:
+        """A job's constructor values before its ``[component]`` and ``[gains]`` tables."""
         return self.entry.defaults
 
     @property
     def signal(self) -> str:
+        """The scenario signal a job runs it on by default (``"grid"``, ``"emf"`` or ``"drive"``)."""
         return self.entry.signal
 
     @property
-    def signals(self) -> tuple:
+    def signals(self) -> tuple[str, ...]:
         """The scenario signals this component runs on, its default first."""
         return self.entry.signals
 
     @property
-    def machines(self) -> tuple:
+    def machines(self) -> tuple[str, ...]:
         """The machines a sensorless drive job may run it on, the default first (empty: no drive jobs)."""
         return self.entry.machines
 
@@ -56,7 +60,7 @@ class ComponentInfo:
         """The class's closed form's source, in one line (``ClosedForm.source``)."""
         return self.entry.closed_form_source
 
-    def closed_form(self, component) -> dict:
+    def closed_form(self, component: object) -> dict:
         """The closed-form gains at a component's nominal frequency (the FLLs'), or the paper's.
 
         Args:

@@ -9,7 +9,7 @@ import math
 from pathlib import Path
 
 from jaxobs import drive as D
-from jaxobs.drive import SHIPPED_DRIVES, DriveFile, drive_from_table, read_drive, shipped_drive
+from jaxobs.drive import SHIPPED_DRIVES, Drive, DriveFile, drive_from_table, read_drive, shipped_drive
 
 from .components import COMPONENTS
 from .fields import JobError, get_field, no_unknown, show
@@ -18,7 +18,17 @@ from .spec import DriveSpec, ScenarioSpec
 
 def check_standstill(drive: DriveSpec, spec: ScenarioSpec, where: str) -> None:
     """What an I-f start-up can do, checked before any run (``--check`` too): the load it must carry, the
-    speed reference it hands over to, and a steady window after its hand-over."""
+    speed reference it hands over to, and a steady window after its hand-over.
+
+    Args:
+        drive: The job's ``[drive]`` (``start = "standstill"``).
+        spec: A scenario set of the job.
+        where: The set's table in errors.
+
+    Raises:
+        JobError: A steady window that starts before the hand-over, a speed below the hand-over speed or a
+            load the start-up cannot carry, naming the field.
+    """
     df = drive.drive_file
     par, s = df.machine, df.startup
     axes = spec.axes
@@ -52,11 +62,24 @@ def check_standstill(drive: DriveSpec, spec: ScenarioSpec, where: str) -> None:
         )
 
 
-def parse_start(dt: dict, drive: DriveSpec, scen) -> DriveSpec:
+def parse_start(dt: dict, drive: DriveSpec, scen: ScenarioSpec) -> DriveSpec:
     """``[drive] start``: "steady" or "standstill" (the I-f start-up must fit in the horizon; it hands over
     itself, so ``handover`` stays 0; :func:`check_standstill`).  ``loop = "sensored"`` with a standstill
     start is allowed: the same I-f start-up hands over to the encoder's angle (by the same agreement test),
-    and the observer estimates beside it from t = 0, scored from the hand-over on."""
+    and the observer estimates beside it from t = 0, scored from the hand-over on.
+
+    Args:
+        dt: The ``[drive]`` table.
+        drive: The drive parsed so far.
+        scen: The job's scenarios.
+
+    Returns:
+        ``drive`` with its start.
+
+    Raises:
+        JobError: An unknown start, a hand-over or a horizon that a standstill start cannot have, naming the
+            field.
+    """
     start = get_field(dt, "start", "drive.start", str, "steady")
     if start not in ("steady", "standstill"):
         raise JobError("drive.start", f"must be 'steady' or 'standstill', got {show(start)}")
@@ -64,7 +87,8 @@ def parse_start(dt: dict, drive: DriveSpec, scen) -> DriveSpec:
     if start == "standstill":
         if drive.handover > 0:
             raise JobError("drive.handover", "must be 0 with start = 'standstill' (the I-f start-up hands over)")
-        s = job_drive(drive).startup
+        job_drive(drive)  # the drive it runs: a dual three-phase drive file is refused here
+        s = drive.drive_file.startup  # the start-up a standstill drive runs (DriveFile.drive_for)
         t_if = float(s.omega_switch / s.accel + s.hold + s.dwell)
         if scen.horizon <= t_if:
             raise JobError(
@@ -130,6 +154,9 @@ def check_speed_axes(axes: dict, where: str, machine: str, file: DriveFile | Non
 def check_three_phase(spec: DriveSpec) -> None:
     """Refuse a dual three-phase drive file where a command runs three-phase drives only.
 
+    Args:
+        spec: The job's ``[drive]``.
+
     Raises:
         JobError: ``spec``'s drive file has a ``[dual]`` table.
     """
@@ -141,7 +168,7 @@ def check_three_phase(spec: DriveSpec) -> None:
         )
 
 
-def job_drive(spec: DriveSpec | None = None, *, dual: bool = False):
+def job_drive(spec: DriveSpec | None = None, *, dual: bool = False) -> Drive:
     """The drive a ``signal = "drive"`` job runs: its drive file's (:meth:`jaxobs.drive.DriveFile.drive_for`).
 
     Args:
@@ -199,6 +226,7 @@ def drive_source(dt: dict, default: str, base: Path | None, where: str = "drive"
         raise JobError(f"{where}.machine", "a shipped machine's name or the drive file's tables inline, not both")
     if "file" in dt:
         name = get_field(dt, "file", f"{where}.file", str)
+        assert name is not None  # the key is there
         path = Path(name) if Path(name).is_absolute() or base is None else Path(base) / name
         try:
             f = read_drive(path)
@@ -281,7 +309,7 @@ def parse_drive(dt: dict, comp: str, scen: ScenarioSpec, base: Path | None = Non
         if why is not None:
             raise JobError("drive.file" if "file" in dt else "drive.machine", why)
     # the FOC's speed-loop schedule (FOC.speed_gains): 0 off; N keeps the speed loop N times slower than ωe,
-    # the flux observers' low-speed fix (docs/stability.md: N = 6 holds 400 and 200 r/min on 000's SPMSM);
+    # the flux observers' low-speed fix (docs/stability.md);
     # without the key, the drive file's ([control] speed_schedule)
     file_schedule = float((shipped_drive(machine) if file is None else file).foc_kw["speed_schedule"])
     schedule = get_field(dt, "speed_schedule", "drive.speed_schedule", float, file_schedule)

@@ -3,6 +3,12 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Collection, Mapping
+from typing import Any, Literal, TypeVar, overload
+
+from jaxobs.scenarios.families import AbstractFamily
+
+T = TypeVar("T")
 
 
 class JobError(ValueError):
@@ -39,11 +45,27 @@ MAX_SOLVER_STEPS = 1_000_000
 
 
 def cap(text: str, n: int) -> str:
+    """Text cut to ``n`` characters, its last one an ellipsis where it was longer.
+
+    Args:
+        text: The text.
+        n: The most characters kept.
+
+    Returns:
+        ``text``, or its first ``n - 1`` characters and "…".
+    """
     return text if len(text) <= n else text[: n - 1] + "…"
 
 
-def show(v) -> str:
-    """A value for an error message: its repr, long ones elided."""
+def show(v: object) -> str:
+    """A value for an error message: its repr, long ones elided.
+
+    Args:
+        v: The value.
+
+    Returns:
+        Its repr (a list or table of more than 8 items by its type and length), at most 60 characters.
+    """
     if isinstance(v, int) and not isinstance(v, bool) and abs(v) > 10**20:
         return f"an integer of {len(str(abs(v)))} digits"
     try:
@@ -53,7 +75,42 @@ def show(v) -> str:
     return cap(r, 60)
 
 
-def get_field(table: dict, key: str, field: str, kind, default=None, required=False):
+@overload
+def get_field(table: Mapping, key: str, field: str, kind: type[T], default: T, required: bool = False) -> T: ...
+
+
+@overload
+def get_field(
+    table: Mapping, key: str, field: str, kind: type[T], default: None = None, *, required: Literal[True]
+) -> T: ...
+
+
+@overload
+def get_field(
+    table: Mapping, key: str, field: str, kind: type[T], default: None = None, required: bool = False
+) -> T | None: ...
+
+
+def get_field(
+    table: Mapping, key: str, field: str, kind: type[Any], default: Any = None, required: bool = False
+) -> Any:
+    """A key of a TOML table, checked as ``kind``.
+
+    Args:
+        table: The table.
+        key: The key.
+        field: The key's path in errors (``drive.start``).
+        kind: ``float`` (a finite number, as a float), ``int`` (within ±(2^63 - 1)), ``bool``, ``str``, ``list``
+            (a non-empty list of finite numbers, as floats) or ``dict`` (a table).
+        default: The value without the key.
+        required: Refuse a missing key.
+
+    Returns:
+        The checked value, or ``default``.
+
+    Raises:
+        JobError: A missing required key, or a value of another kind, naming ``field``.
+    """
     if key not in table:
         if required:
             raise JobError(field, "missing (required)")
@@ -94,7 +151,7 @@ def get_field(table: dict, key: str, field: str, kind, default=None, required=Fa
     raise AssertionError(kind)
 
 
-def finite(v, field: str) -> float:
+def finite(v: float, field: str) -> float:
     """A value as a finite float.
 
     Args:
@@ -116,13 +173,25 @@ def finite(v, field: str) -> float:
     return f
 
 
-def no_unknown(table: dict, allowed, where: str):
+def no_unknown(table: Mapping, allowed: Collection[str], where: str) -> None:
+    """Refuse a key of ``table`` not in ``allowed``.
+
+    Args:
+        table: The table.
+        allowed: Its allowed keys, in the order the error lists them.
+        where: The table's name in errors.
+
+    Raises:
+        JobError: ``<where>.<key>: unknown key; allowed: ...``.
+    """
     for key in table:
         if key not in allowed:
             raise JobError(f"{where}.{cap(str(key), 40)}", f"unknown key; allowed: {', '.join(allowed)}")
 
 
-def axes_field(tab: dict, family, where: str, limits: dict | None = None) -> dict:
+def axes_field(
+    tab: Mapping, family: type[AbstractFamily], where: str, limits: dict | None = None
+) -> dict[str, list[float]]:
     """Axes checked against a scenario family's: known names, each a list of numbers inside its range.
 
     Args:
@@ -140,11 +209,11 @@ def axes_field(tab: dict, family, where: str, limits: dict | None = None) -> dic
     allowed = family.axes
     if not tab:
         raise JobError(where, f"at least one axis is required; allowed: {', '.join(allowed)}")
-    axes = {}
+    axes: dict[str, list[float]] = {}
     for k in tab:
         if k not in allowed:
             raise JobError(f"{where}.{cap(str(k), 40)}", f"unknown axis; allowed: {', '.join(allowed)}")
-        v = axes[k] = get_field(tab, k, f"{where}.{k}", list)
+        v = axes[k] = get_field(tab, k, f"{where}.{k}", list, required=True)
         lo, hi = (limits or {}).get(k, allowed[k].range)
         for i, x in enumerate(v):
             if not lo <= x <= hi:

@@ -5,29 +5,53 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+from collections.abc import Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
+import equinox as eqx
 import numpy as np
 
 from jaxobs import metrics as M
+from jaxobs.core.discretize import AbstractRule
 from jaxobs.io.provenance import cf_dataset, cf_labels
+from jaxobs.scenarios.families import RecordedSignals
 
-from ..objective import TERM_METRICS
+from ..objective import TERM_METRICS, Objective
 from ..outdir import atomic_write_text
 from .spec import Job, ScenarioSpec
 
+if TYPE_CHECKING:  # imported where a Dataset is made
+    import xarray as xr
 
-def rule_spec(rule) -> dict | None:
-    """A discretization rule as JSON that :func:`jaxobs_tuning.export.parse_rule` reads back:
-    ``{"name": ..., options}``; None for a component without a rule (its step is its own update)."""
+
+def rule_spec(rule: AbstractRule | None) -> dict | None:
+    """A discretization rule as JSON that :func:`jaxobs_tuning.export.parse_rule` reads back.
+
+    Args:
+        rule: A component's discretization rule, or None.
+
+    Returns:
+        ``{"name": ..., options}`` (its plain options); None for a component without a rule (its step is its own
+        update).
+    """
     if rule is None:
         return None
     opts = {f.name: getattr(rule, f.name) for f in dataclasses.fields(rule)}
     return {"name": type(rule).__name__, **{k: v for k, v in opts.items() if isinstance(v, (bool, int, float, str))}}
 
 
-def sanitize(obj, path: str = "", reasons: dict | None = None):
-    """``obj`` with every non-finite float replaced by ``None``; ``reasons[path]`` says what it was."""
+def sanitize(obj: object, path: str = "", reasons: dict | None = None) -> object:
+    """``obj`` with every non-finite float replaced by ``None``.
+
+    Args:
+        obj: A JSON-like value (dicts, lists, tuples, numbers, numpy scalars).
+        path: Its path in ``reasons`` (``a.b[2]``).
+        reasons: path -> what a replaced value was, filled in.
+
+    Returns:
+        The value with plain Python numbers, lists for tuples and None for every non-finite float.
+    """
     reasons = {} if reasons is None else reasons
     if isinstance(obj, dict):
         return {k: sanitize(v, f"{path}.{k}" if path else str(k), reasons) for k, v in obj.items()}
@@ -41,8 +65,13 @@ def sanitize(obj, path: str = "", reasons: dict | None = None):
     return obj
 
 
-def write_json(path: Path, obj) -> None:
-    """JSON without NaN or Infinity tokens: non-finite numbers become null, listed under ``null_reasons``."""
+def write_json(path: Path, obj: object) -> None:
+    """JSON without NaN or Infinity tokens: non-finite numbers become null, listed under ``null_reasons``.
+
+    Args:
+        path: The file, written atomically.
+        obj: A JSON-like value (:func:`sanitize`).
+    """
     reasons: dict = {}
     clean = sanitize(obj, "", reasons)
     if reasons and isinstance(clean, dict):
@@ -51,7 +80,15 @@ def write_json(path: Path, obj) -> None:
 
 
 def at_bounds(job: Job, gains: dict) -> dict:
-    """Free gains within 1 % of a bound: {name: {"bound": "lower" | "upper", "limit": ..., "value": ...}}."""
+    """Free gains within 1 % of a bound.
+
+    Args:
+        job: The parsed job (its free gains' bounds).
+        gains: name -> a design's value.
+
+    Returns:
+        ``{name: {"bound": "lower" | "upper", "limit": ..., "value": ...}}``.
+    """
     out = {}
     for g in job.gains:
         v = gains[g.name]
@@ -61,15 +98,35 @@ def at_bounds(job: Job, gains: dict) -> dict:
     return out
 
 
-def scores_dataset(obj, names, combos, spec: ScenarioSpec, per: dict, title: str = "jaxobs tune: per-scenario scores"):
+def scores_dataset(
+    obj: Objective,
+    names: Sequence[str],
+    combos: Sequence[tuple],
+    spec: ScenarioSpec,
+    per: dict,
+    title: str = "jaxobs tune: per-scenario scores",
+) -> xr.Dataset:
     """Per-scenario metrics of each design as an xarray Dataset: the grid's axes as dims (a full grid),
     else one ``scenario`` dim with the axes as coordinates (sampled scenarios).  Every variable carries a
     ``long_name`` and every numeric one CF ``units`` (the metrics': :data:`jaxobs_tuning.objective.TERM_METRICS`;
     flags ``1``); the CF-1.8 global attributes, ``title`` among them (:func:`jaxobs.io.provenance.cf_dataset`); a
-    numeric ``design`` index and its label ``design_label`` (:func:`jaxobs.io.provenance.cf_labels`)."""
+    numeric ``design`` index and its label ``design_label`` (:func:`jaxobs.io.provenance.cf_labels`).
+
+    Args:
+        obj: The objective that scored them (its terms, flags and family).
+        names: The axes' names.
+        combos: The scenarios' points.
+        spec: The scenario set.
+        per: design -> ``(metrics, totals, finite)`` of :meth:`~jaxobs_tuning.objective.Objective.per_scenario`.
+        title: The dataset's title.
+
+    Returns:
+        The Dataset.
+    """
     import xarray as xr
 
     designs = list(per)
+    recorded = isinstance(obj.family, RecordedSignals)  # its one axis: the recordings, each named by its file
     grid = spec.sample == 0
     if grid:
         dims = ("design", *names)
@@ -106,7 +163,7 @@ def scores_dataset(obj, names, combos, spec: ScenarioSpec, per: dict, title: str
     what = "observer design (closing the loop sensorless)" if obj.closed_loop else "observer design"
     ds["design"].attrs["long_name"] = f"{what}: its initial, closed-form or tuned gains"
     for name in names:
-        if name == "recording" and spec.recording is not None:  # named by its file (a string label: no unit)
+        if recorded:  # a recording is named by its file (a string label: no unit)
             ds[name].attrs["long_name"] = "recording (its file; a window of a log: file@index)"
         elif name in spec.family.axes:  # the family's axis: CF units and long name
             ds[name].attrs.update(spec.family.axes[name].attrs)
@@ -119,11 +176,20 @@ def scores_dataset(obj, names, combos, spec: ScenarioSpec, per: dict, title: str
     return cf_labels(cf_dataset(ds, title))
 
 
-def recordings_provenance(job: Job, scenarios=None) -> dict:
-    """``{"recordings": [{"file", "sha256", "scenarios": [{"name", "omega_start"}, ...]}, ...]}`` of a job on
-    recordings (else nothing): each file, and each of its scenarios with the speed it starts from (rad/s,
-    electrical: the encoder's, or a grid recording's true frequency, at its first sample), read from the batch
-    ``scenarios`` when given.  The observer's own initial speed does not apply: it is bound to these."""
+def recordings_provenance(job: Job, scenarios: eqx.Module | None = None) -> dict:
+    """The recordings of a job on recordings: each file, and each of its scenarios with the speed it starts from
+    (rad/s, electrical: the encoder's, or a grid recording's true frequency, at its first sample), read from the
+    batch ``scenarios`` when given.  The observer's own initial speed does not apply: it is bound to these.
+
+    Args:
+        job: The parsed job.
+        scenarios: Its batch (a :class:`~jaxobs.signals.DriveRecording` or a
+            :class:`~jaxobs.signals.SampledSignal` with ``truth``), or None.
+
+    Returns:
+        ``{"recordings": [{"file", "sha256", "scenarios": [{"name", "omega_start"}, ...]}, ...], "loop_note"}``;
+        empty for a job not on recordings.
+    """
     rec = job.scenarios.recording
     if rec is None:
         return {}
@@ -131,8 +197,9 @@ def recordings_provenance(job: Job, scenarios=None) -> dict:
     starts = [None] * len(labels)
     if scenarios is not None:
         w = getattr(scenarios, "omega_e", None)
-        if w is None and getattr(scenarios, "truth", None) is not None:
-            w = scenarios.truth[1]
+        truth = getattr(scenarios, "truth", None)
+        if w is None and truth is not None:
+            w = truth[1]
         if w is not None:
             starts = [float(x) for x in np.asarray(w)[..., 0].reshape(-1)]
     per = max(rec.windows, 1)
@@ -146,8 +213,16 @@ def recordings_provenance(job: Job, scenarios=None) -> dict:
 def claimed_envelope(job: Job) -> dict | None:
     """The operating envelope a drive job was tuned for, from its scenarios: the speed range
     (r/min, the grid's speeds and where its speed steps take them), the load range (N·m, with the load
-    steps), the other axes' ranges; ``None`` for a job that is not a simulated drive.  Where the designs hold
-    inside it is not computed after tuning (minutes on the presets): ``jaxobs envelope <result.json>`` maps it."""
+    steps), the other axes' ranges.  Where the designs hold inside it is not computed after tuning (minutes on
+    the presets): ``jaxobs envelope <result.json>`` maps it.
+
+    Args:
+        job: The parsed job.
+
+    Returns:
+        ``{"speed_rpm", "load_nm", "other_axes", "machine", "verified", "verify_with"}``; None for a job that is
+        not a simulated drive.
+    """
     spec = job.scenarios
     if job.drive is None or not spec.family.closed_loop or spec.recording is not None:
         return None

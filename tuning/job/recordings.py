@@ -9,17 +9,16 @@ from pathlib import Path
 import equinox as eqx
 import jax
 
-import jaxobs
-from jaxobs.drive import bench_machine, load_drive
+from jaxobs.drive import PMSMParams, bench_machine, load_drive
 from jaxobs.io.provenance import sha256
 from jaxobs.observers import AbstractFluxObserver
-from jaxobs.scenarios.families import FAMILIES, RecordedSignals
-from jaxobs.signals import RecordingLayout, read_recorded, stack
+from jaxobs.scenarios.families import FAMILIES, AbstractFamily, RecordedSignals
+from jaxobs.signals import DriveRecording, RecordingColumnError, RecordingLayout, SampledSignal, read_recorded, stack
 
 from ..objective import DRIVE_METRICS
 from .components import COMPONENTS
 from .fields import JobError, cap, get_field, no_unknown, show
-from .spec import RecordingSpec, ScenarioSpec
+from .spec import Job, RecordingSpec, ScenarioSpec
 
 # a recording file of a job or study larger than this is refused: a grid voltage read whole (SampledSignal.from_csv,
 # in memory), a drive log read in chunks into columns on disk (jaxobs.signals.read_drive_log: its memory does not
@@ -37,13 +36,23 @@ MAX_RECORDINGS = 64  # files of one [scenarios.recording]
 RECORDING_COLUMNS = {name: family.recording_columns for name, family in FAMILIES.items()}
 
 
-def _col_spec(v, field: str):
+def _col_spec(v: object, field: str) -> str | int:
     if isinstance(v, bool) or not isinstance(v, (str, int)) or (isinstance(v, int) and not 0 <= v < 10_000):
         raise JobError(field, f"must be a column name or a 0-based index, got {show(v)}")
     return v
 
 
-def parse_recording_scenarios(tab, where, family, t_event, horizon, steady, seed, ts, base) -> ScenarioSpec:
+def parse_recording_scenarios(
+    tab: dict,
+    where: str,
+    family: type[AbstractFamily],
+    t_event: float,
+    horizon: float,
+    steady: float,
+    seed: int,
+    ts: float,
+    base: Path | None,
+) -> ScenarioSpec:
     """``[<where>.recording]``: the file(s), the time base, the columns.
 
     Read and checked now when the job file's folder is known (``base``): exists, at most
@@ -71,7 +80,7 @@ def parse_recording_scenarios(tab, where, family, t_event, horizon, steady, seed
     if "grid" in tab or "sample" in tab:
         key = "grid" if "grid" in tab else "sample"
         raise JobError(f"{where}.{key}", "does not apply with a recording: the recordings are the scenarios")
-    rec = get_field(tab, "recording", w, dict)
+    rec = get_field(tab, "recording", w, dict, required=True)
     no_unknown(rec, RECORDING_KEYS, w)
     files = rec.get("file")
     if isinstance(files, str):
@@ -86,10 +95,10 @@ def parse_recording_scenarios(tab, where, family, t_event, horizon, steady, seed
     rate = get_field(rec, "sample_rate", f"{w}.sample_rate", float)
     if rate is not None and not 0 < rate <= 1e9:
         raise JobError(f"{w}.sample_rate", f"must be in (0, 1e9] Hz, got {rate:g}")
-    source, family = family, family.recorded()
-    cols, truth = rec.get("columns", list(family.columns)), rec.get("truth", list(family.truth))
-    n_truth = family.truth_counts  # grid: theta, omega, amplitude; u/i: theta_e [, omega_e]
-    n_cols = (4, 6) if family.binds else (len(family.columns),)  # u/i: 2 + 2, or 3 + 3 phase columns (abc)
+    recorded = family.recorded()
+    cols, truth = rec.get("columns", list(recorded.columns)), rec.get("truth", list(recorded.truth))
+    n_truth = recorded.truth_counts  # grid: theta, omega, amplitude; u/i: theta_e [, omega_e]
+    n_cols = (4, 6) if recorded.binds else (len(recorded.columns),)  # u/i: 2 + 2, or 3 + 3 phase columns (abc)
     for key, v, n_ok in (("columns", cols, n_cols), ("truth", truth, n_truth)):
         if not isinstance(v, list) or len(v) not in n_ok:
             raise JobError(f"{w}.{key}", f"must be a list of {' or '.join(map(str, n_ok))} column(s), got {show(v)}")
@@ -97,7 +106,7 @@ def parse_recording_scenarios(tab, where, family, t_event, horizon, steady, seed
             _col_spec(c, f"{w}.{key}[{i}]")
     root = Path.cwd() if base is None else Path(base)
     paths = tuple(str(Path(f) if Path(f).is_absolute() else root / f) for f in files)
-    layout, windows, machine, mname = _log_options(rec, w, family, cols, root, base is not None)
+    layout, windows, machine, mname = _log_options(rec, w, recorded, cols, root, base is not None)
     trim = get_field(rec, "trim", f"{w}.trim", bool, False)
     spec = RecordingSpec(
         tuple(files), paths, tcol, rate, tuple(cols), tuple(truth), ts, layout=layout, trim=trim, windows=windows,
@@ -113,12 +122,12 @@ def parse_recording_scenarios(tab, where, family, t_event, horizon, steady, seed
             except OSError as e:
                 msg = f"cannot read {cap(files[i], 80)!r} (relative to the job file): {e.strerror}"
                 raise JobError(field, msg) from None
-            cap_bytes = MAX_LOG_BYTES if family.binds else MAX_RECORDING_BYTES
+            cap_bytes = MAX_LOG_BYTES if recorded.binds else MAX_RECORDING_BYTES
             if size > cap_bytes:
                 raise JobError(field, f"{files[i]!r} is {size} bytes, more than {cap_bytes} ({cap_bytes >> 20} MiB)")
             try:
-                sig = _load_one(spec, family, path, need=int(round(horizon / ts)) + 1)
-            except jaxobs.signals.RecordingColumnError as e:  # a column not in the file: the key that named it
+                sig = _load_one(spec, recorded, path, need=int(round(horizon / ts)) + 1)
+            except RecordingColumnError as e:  # a column not in the file: the key that named it
                 raise JobError(_column_field(w, e, spec), str(e).replace(path, files[i])) from None
             except ValueError as e:
                 raise JobError(field, str(e).replace(path, files[i])) from None
@@ -141,10 +150,12 @@ def parse_recording_scenarios(tab, where, family, t_event, horizon, steady, seed
             "them to the shortest",
         )
     axes = {"recording": [float(i) for i in range(len(files) * max(windows, 1))]}
-    return ScenarioSpec(source.signal, t_event, horizon, steady, axes, 0, seed, recording=spec)
+    return ScenarioSpec(family.signal, t_event, horizon, steady, axes, 0, seed, recording=spec)
 
 
-def _log_options(rec: dict, w: str, family: RecordedSignals, cols, root: Path, load: bool):
+def _log_options(
+    rec: dict, w: str, family: RecordedSignals, cols: list, root: Path, load: bool
+) -> tuple[RecordingLayout | None, int, PMSMParams | None, str | None]:
     """A drive log's ``layout`` (table), ``windows`` (count) and ``machine`` (a bench machine's name, or a drive
     file relative to the job), checked; the grid kind takes none of them."""
     keys = [k for k in ("layout", "windows", "machine") if k in rec]
@@ -153,7 +164,9 @@ def _log_options(rec: dict, w: str, family: RecordedSignals, cols, root: Path, l
     layout = None
     if "layout" in rec:
         try:
-            layout = RecordingLayout.from_table(get_field(rec, "layout", f"{w}.layout", dict), f"{w}.layout")
+            table = get_field(rec, "layout", f"{w}.layout", dict)
+            assert table is not None  # the key is there
+            layout = RecordingLayout.from_table(table, f"{w}.layout")
         except ValueError as e:  # "<w>.layout.<key>: ..." or "<w>.layout.<key> must be ...": the key, then why
             m = re.match(rf"({re.escape(w)}\.layout\.\w+):? (.*)", str(e))
             raise JobError(*(m.groups() if m else (f"{w}.layout", str(e)))) from None
@@ -168,6 +181,7 @@ def _log_options(rec: dict, w: str, family: RecordedSignals, cols, root: Path, l
     machine = name = None
     if "machine" in rec:
         name = get_field(rec, "machine", f"{w}.machine", str)
+        assert name is not None  # the key is there
         if name.endswith(".toml"):
             if load:
                 p = Path(name) if Path(name).is_absolute() else root / name
@@ -183,7 +197,7 @@ def _log_options(rec: dict, w: str, family: RecordedSignals, cols, root: Path, l
     return layout, windows, machine, name
 
 
-def _column_field(w: str, e, spec: RecordingSpec) -> str:
+def _column_field(w: str, e: RecordingColumnError, spec: RecordingSpec) -> str:
     """The job field of a recording column that the file lacks: ``<w>.columns[i]``, ``<w>.truth[i]`` or
     ``<w>.time_column``."""
     if e.role == "time":
@@ -192,7 +206,9 @@ def _column_field(w: str, e, spec: RecordingSpec) -> str:
     return f"{w}.{key}[{listed.index(e.spec)}]" if e.spec in listed else f"{w}.{key}"
 
 
-def _load_one(spec: RecordingSpec, family: RecordedSignals, path: str, need: int | None = None):
+def _load_one(
+    spec: RecordingSpec, family: RecordedSignals, path: str, need: int | None = None
+) -> SampledSignal | DriveRecording | list[DriveRecording]:
     """One file's scenario (or its ``spec.windows`` windows of ``need`` samples, a list)."""
     kw = dict(time_column=spec.time_column, sample_rate=spec.sample_rate, ts=spec.ts)
     if not family.binds:
@@ -204,7 +220,9 @@ def _load_one(spec: RecordingSpec, family: RecordedSignals, path: str, need: int
     )  # fmt: skip
 
 
-def load_recordings(spec: RecordingSpec, family: RecordedSignals, horizon: float | None = None):
+def load_recordings(
+    spec: RecordingSpec, family: RecordedSignals, horizon: float | None = None
+) -> SampledSignal | DriveRecording:
     """The recordings of a job as one batched signal, all read at ``spec.ts``.
 
     Whole files of one length (cut to the shortest with ``spec.trim``), or each drive log's ``spec.windows``
@@ -217,7 +235,8 @@ def load_recordings(spec: RecordingSpec, family: RecordedSignals, horizon: float
         horizon: The simulated time, s (the windows' length).
 
     Returns:
-        The batched signal.
+        The batched signal (a :class:`~jaxobs.signals.SampledSignal` or a
+        :class:`~jaxobs.signals.DriveRecording`, its leaves with a leading batch axis).
     """
     need = None if horizon is None else int(round(horizon / spec.ts)) + 1
     sigs = []
@@ -228,7 +247,7 @@ def load_recordings(spec: RecordingSpec, family: RecordedSignals, horizon: float
     return stack(jax.tree.map(lambda x: x[..., :n] if eqx.is_array(x) else x, s) for s in sigs)
 
 
-def check_recording_job(job, comp_t: dict) -> None:
+def check_recording_job(job: Job, comp_t: dict) -> None:
     """What a recording cannot give: the closed loop's metrics; a flux observer on u/i needs the machine's Rs, L.
 
     Args:

@@ -8,6 +8,8 @@ import sys
 import time
 from pathlib import Path
 
+import equinox as eqx
+import jax
 import numpy as np
 
 from jaxobs.io.provenance import versions
@@ -17,17 +19,19 @@ from ..objective import MetricContext, Objective
 from ..outdir import atomic_path, atomic_write_text
 from ..params import GainSpec, Parametrization
 from ..report import write_report
-from ..solvers import tune
+from ..solvers import TuneResult, tune
 from ..structure import structure
 from .components import COMPONENTS
 from .drive import job_drive
 from .output import at_bounds, claimed_envelope, recordings_provenance, rule_spec, scores_dataset, write_json
 from .scenarios import build_scenarios, job_family
-from .spec import Job, ScenarioSpec
-from .verify import verify_designs
+from .spec import DriveSpec, Job, ScenarioSpec
+from .verify import EnvelopeSpec, verify_designs
 
 
-def build_objective(job: Job, spec: ScenarioSpec | None = None):
+def build_objective(
+    job: Job, spec: ScenarioSpec | None = None
+) -> tuple[Objective, eqx.Module, tuple[list[str], list[tuple]]]:
     """The job's objective and the scenario batch it is called with.
 
     Args:
@@ -68,7 +72,7 @@ def _inside(g: GainSpec, v: float) -> float:
     return float(v)
 
 
-def _score_designs(obj, scenarios, thetas: dict, bar: Progress, what: str) -> dict:
+def _score_designs(obj: Objective, scenarios: eqx.Module, thetas: dict, bar: Progress, what: str) -> dict:
     """Each design's per-scenario scores, one progress step each (the first one compiles)."""
     per = {}
     for i, (k, th) in enumerate(thetas.items()):
@@ -89,16 +93,15 @@ def _lost_only(per: dict) -> int | None:
     return int(np.sum(lost["tuned"] & ~lost["closed_form"]))
 
 
-def _verify(job: Job, values: dict, result: dict, quiet: bool) -> None:
+def _verify(job: Job, env: EnvelopeSpec, drive: DriveSpec, values: dict, result: dict, quiet: bool) -> None:
     """Initial, closed form and tuned over ``[envelope]`` (:func:`verify_designs`) into ``result``; a tuned
     design that fails where the closed form holds turns the status to ``"unsafe"`` (the solver's own status
     stays in ``tuning_status``)."""
     if not quiet:
-        env = job.envelope
         print(f"jaxobs: verifying the designs over {env.horizon:g} s across the envelope", file=sys.stderr)
     info = COMPONENTS[job.component]
     designs = {k: info.ctor(**v) for k, v in values.items() if v is not None}
-    ver = verify_designs(designs, job.envelope, job.drive)
+    ver = verify_designs(designs, env, drive)
     result["verification"] = ver
     result["tuning_status"] = result["status"]
     if ver["unsafe_points"]:
@@ -111,12 +114,111 @@ def _verify(job: Job, values: dict, result: dict, quiet: bool) -> None:
 
 
 def job_fingerprint(job: Job) -> str:
-    """What a checkpoint is checked against: the job file's sha256, or the sha256 of the job dict's JSON."""
+    """What a checkpoint is checked against: the job file's sha256, or the sha256 of the job dict's JSON.
+
+    Args:
+        job: The parsed :class:`Job`.
+
+    Returns:
+        The hex digest, with the recordings' digests folded in where the job runs on recordings.
+    """
     fp = job.sha256 or hashlib.sha256(json.dumps(job.raw, sort_keys=True, default=str).encode()).hexdigest()
     recs = [s.recording.sha256 for s in (job.scenarios, job.holdout) if s is not None and s.recording is not None]
     if any(recs):  # a checkpoint is this job's only on the same recordings
         fp = hashlib.sha256((fp + "".join(d for r in recs for d in r)).encode()).hexdigest()
     return fp
+
+
+def _closed_form(job: Job, obj: Objective) -> tuple[dict, jax.Array]:
+    """The closed form's free gains at the job's component, and its θ nudged inside the gains' open bounds."""
+    cf_all = COMPONENTS[job.component].closed_form(obj.component)
+    cf = {g.name: cf_all[g.name] for g in job.gains}
+    return cf, obj.param.to_theta({g.name: _inside(g, cf[g.name]) for g in job.gains})
+
+
+def _design_values(
+    job: Job, obj: Objective, theta0: jax.Array, cf: dict, tuned: jax.Array | None
+) -> tuple[dict[str, dict | None], dict[str, dict | None]]:
+    """Each design's free gains and its every constructor value (None: no tuned design): ``(gains, values)``."""
+    param = obj.param
+    gains = {
+        "initial": param.values(theta0),
+        # the closed form is reported exactly; it is scored at θ nudged inside the gains' open bounds
+        "closed_form": {g.name: float(cf[g.name]) for g in job.gains},
+        "tuned": param.values(tuned) if tuned is not None else None,
+    }
+    # a LESO's [observer.speed] record stays a record (jaxobs.observers.speed.speed_from_spec)
+    fixed = {k: (v if isinstance(v, dict) else float(v)) for k, v in job.values.items() if k not in param.names}
+    values = {k: (None if g is None else {**fixed, **g}) for k, g in gains.items()}
+    return gains, values
+
+
+def _outcome(
+    job: Job, obj: Objective, scen: eqx.Module, theta0: jax.Array, per: dict, res: TuneResult, n: int
+) -> tuple[str, str]:
+    """The job's status and reason: the solver's, or ``"overflow"`` where the objective overflows on finite
+    simulations (``n``: the scenarios)."""
+    status, reason = res.status, res.reason
+    n_over = obj.overflowed(theta0, scen, per["initial"][2]) if status == "diverged" else 0
+    if status == "overflow" or n_over:
+        # nothing diverged: the simulations and the scored metrics are finite, the objective's value or
+        # gradient is not (a weight of 1e308 is no divergence of the system).  The solver checks every
+        # iteration and stops at the first overflow; the initial design's scores check it once more.
+        weights = ", ".join(f"terms[{i}].weight = {t.weight:g}" for i, t in enumerate(job.terms))
+        where = (
+            reason
+            if status == "overflow"
+            else f"the objective overflows: its value or gradient is not finite in {n_over} of {n} "
+            "scenarios whose simulation is finite"
+        )
+        status = "overflow"
+        reason = f"{where} (objective.{weights}): lower the weights; nothing is tuned"
+    return status, reason
+
+
+def _null_reasons(job: Job, status: str, tuned: dict | None) -> dict[str, str]:
+    """Why the result's nulls are null: no nominal frequency, nothing tuned."""
+    nulls = {}
+    if "omega_n" not in job.values:
+        nulls["omega_n"] = f"{job.component} has no nominal frequency omega_n"
+    if tuned is None:
+        why = (
+            "status 'overflow': the objective overflows, so nothing is tuned"
+            if status == "overflow"
+            else "status 'diverged': every design tried diverged in some tuning scenario, so nothing is tuned"
+        )
+        for key in ("gains.tuned", "values.tuned", "scores.tuned", "linear.tuned", "lost_lock_tuned_only"):
+            nulls[key] = why
+    return nulls
+
+
+def _drive_result(job: Job, drive: DriveSpec, result: dict, nulls: dict) -> None:
+    """A drive job's machine, the note on its per-scenario values and the envelope it claims, into ``result``
+    (``nulls``: why the envelope is not verified)."""
+    result["machine"] = drive.machine
+    result["values_note"] = (
+        "Rs, Lq (LESOs) or Rs, L (flux observers) and the PLL's or FLL's initial speed (omega0_pll, omega_init) "
+        f"are set per scenario from its estimated machine ({drive.drive_file.description})"
+    )
+    # the envelope it was tuned for; where the designs hold is `jaxobs envelope RESULT.json`
+    result["envelope"] = claimed_envelope(job)
+    if result["envelope"] is not None and job.envelope is not None:  # [envelope]: checked after tuning
+        result["envelope"]["verified"] = "see 'verification' (the job's [envelope] grid, after tuning)"
+    elif result["envelope"] is not None:
+        nulls["envelope.verified"] = "not run after tuning: `jaxobs envelope <result.json>` maps it"
+
+
+def _score_holdout(job: Job, holdout: ScenarioSpec, thetas: dict, bar: Progress, result: dict, out: Path) -> None:
+    """The designs' held-out scores into ``result`` and ``holdout_scores.nc``."""
+    hobj, hscen, (hn, hc) = build_objective(job, holdout)
+    hper = _score_designs(hobj, hscen, thetas, bar, "held-out ")
+    held: dict[str, dict | int | None] = {k: (hobj.summarize(*hper[k]) if k in hper else None) for k in result["gains"]}
+    held["count"] = len(hc)
+    result["holdout"] = held
+    result["lost_lock_tuned_only"]["holdout"] = _lost_only(hper)
+    with atomic_path(out / "holdout_scores.nc") as tmp:
+        scores = scores_dataset(hobj, hn, hc, holdout, hper, title="jaxobs tune: per-scenario scores, held out")
+        scores.to_netcdf(tmp, engine="h5netcdf")
 
 
 def run_job(job: Job, out: Path, resume: bool = False, quiet: bool = False) -> dict:
@@ -138,12 +240,9 @@ def run_job(job: Job, out: Path, resume: bool = False, quiet: bool = False) -> d
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.time()
     obj, scen, (names, combos) = build_objective(job)
-    param = obj.param
-    theta0 = param.theta0()
+    theta0 = obj.param.theta0()
     info = COMPONENTS[job.component]
-    cf_all = info.closed_form(obj.component)
-    cf = {g.name: cf_all[g.name] for g in job.gains}
-    theta_cf = param.to_theta({g.name: _inside(g, cf[g.name]) for g in job.gains})
+    cf, theta_cf = _closed_form(job, obj)
     res = tune(
         obj,
         job.solver,
@@ -157,34 +256,12 @@ def run_job(job: Job, out: Path, resume: bool = False, quiet: bool = False) -> d
     thetas = {"initial": theta0, "closed_form": theta_cf}
     if res.theta is not None:  # never a design that diverged in some scenario
         thetas["tuned"] = res.theta
-    gains = {
-        "initial": param.values(theta0),
-        # the closed form is reported exactly; it is scored at θ nudged inside the gains' open bounds
-        "closed_form": {g.name: float(cf[g.name]) for g in job.gains},
-        "tuned": param.values(res.theta) if res.theta is not None else None,
-    }
-    # a LESO's [observer.speed] record stays a record (jaxobs.observers.speed.speed_from_spec)
-    fixed = {k: (v if isinstance(v, dict) else float(v)) for k, v in job.values.items() if k not in param.names}
-    values = {k: (None if g is None else {**fixed, **g}) for k, g in gains.items()}
+    gains, values = _design_values(job, obj, theta0, cf, res.theta)
     n_scored = len(thetas) * (2 if job.holdout is not None else 1)
     bar = Progress(not quiet and "auto", n_scored, "score", unit="design")
     per = _score_designs(obj, scen, thetas, bar, "")
     scores = {k: (obj.summarize(*per[k]) if k in per else None) for k in gains}
-    status, reason = res.status, res.reason
-    n_over = obj.overflowed(theta0, scen, per["initial"][2]) if status == "diverged" else 0
-    if status == "overflow" or n_over:
-        # nothing diverged: the simulations and the scored metrics are finite, the objective's value or
-        # gradient is not (a weight of 1e308 is no divergence of the system).  The solver checks every
-        # iteration and stops at the first overflow; the initial design's scores check it once more.
-        weights = ", ".join(f"terms[{i}].weight = {t.weight:g}" for i, t in enumerate(job.terms))
-        where = (
-            reason
-            if status == "overflow"
-            else f"the objective overflows: its value or gradient is not finite in {n_over} of {len(combos)} "
-            "scenarios whose simulation is finite"
-        )
-        status = "overflow"
-        reason = f"{where} (objective.{weights}): lower the weights; nothing is tuned"
+    status, reason = _outcome(job, obj, scen, theta0, per, res, len(combos))
     bar.stage("linear structure of each design (margins, poles)")
     lin = {k: (None if v is None else structure(job.component, v, job)) for k, v in values.items()}
     result = {
@@ -212,44 +289,17 @@ def run_job(job: Job, out: Path, resume: bool = False, quiet: bool = False) -> d
         "best_iteration": res.best_iteration,
         "versions": versions(),
     }
-    nulls = {}
-    if "omega_n" not in job.values:
-        nulls["omega_n"] = f"{job.component} has no nominal frequency omega_n"
-    if gains["tuned"] is None:
-        why = (
-            "status 'overflow': the objective overflows, so nothing is tuned"
-            if status == "overflow"
-            else "status 'diverged': every design tried diverged in some tuning scenario, so nothing is tuned"
-        )
-        for key in ("gains.tuned", "values.tuned", "scores.tuned", "linear.tuned", "lost_lock_tuned_only"):
-            nulls[key] = why
+    nulls = _null_reasons(job, status, gains["tuned"])
     if job.drive is not None:
-        result["machine"] = job.drive.machine
-        result["values_note"] = (
-            "Rs, Lq (LESOs) or Rs, L (flux observers) and the PLL's or FLL's initial speed (omega0_pll, omega_init) "
-            f"are set per scenario from its estimated machine ({job.drive.drive_file.description})"
-        )
-        # the envelope it was tuned for; where the designs hold is `jaxobs envelope RESULT.json`
-        result["envelope"] = claimed_envelope(job)
-        if result["envelope"] is not None and job.envelope is not None:  # [envelope]: checked after tuning
-            result["envelope"]["verified"] = "see 'verification' (the job's [envelope] grid, after tuning)"
-        elif result["envelope"] is not None:
-            nulls["envelope.verified"] = "not run after tuning: `jaxobs envelope <result.json>` maps it"
+        _drive_result(job, job.drive, result, nulls)
     if nulls:
         result["null_reasons"] = nulls
     result["lost_lock_tuned_only"] = {"tuning": _lost_only(per)}
     if job.holdout is not None:
-        hobj, hscen, (hn, hc) = build_objective(job, job.holdout)
-        hper = _score_designs(hobj, hscen, thetas, bar, "held-out ")
-        result["holdout"] = {k: (hobj.summarize(*hper[k]) if k in hper else None) for k in gains}
-        result["holdout"]["count"] = len(hc)
-        result["lost_lock_tuned_only"]["holdout"] = _lost_only(hper)
-        with atomic_path(out / "holdout_scores.nc") as tmp:
-            scores = scores_dataset(hobj, hn, hc, job.holdout, hper, title="jaxobs tune: per-scenario scores, held out")
-            scores.to_netcdf(tmp, engine="h5netcdf")
+        _score_holdout(job, job.holdout, thetas, bar, result, out)
     bar.close()
-    if job.envelope is not None:  # the long-horizon verification across the envelope the job claims
-        _verify(job, values, result, quiet)
+    if job.envelope is not None and job.drive is not None:  # the long-horizon verification across the claimed envelope
+        _verify(job, job.envelope, job.drive, values, result, quiet)
     with atomic_path(out / "scores.nc") as tmp:
         scores_dataset(obj, names, combos, job.scenarios, per).to_netcdf(tmp, engine="h5netcdf")
     write_json(out / "history.json", res.history)

@@ -4,16 +4,20 @@ builds from grid points or samples of its axes."""
 from __future__ import annotations
 
 import math
+from typing import cast
 
+import equinox as eqx
+
+from jaxobs.drive import Drive
 from jaxobs.scenarios import Grid, Random
-from jaxobs.scenarios.families import AbstractFamily, DriveSetting
+from jaxobs.scenarios.families import AbstractFamily, DriveSetting, RecordedSignals
 
 from .components import W_N
 from .recordings import load_recordings
 from .spec import DriveSpec, ScenarioSpec
 
 
-def scenario_points(spec: ScenarioSpec):
+def scenario_points(spec: ScenarioSpec) -> tuple[list[str], list[tuple]]:
     """The axes' names and the scenarios' points: the studies' samplers (a grid, or ``sample`` uniform draws).
 
     Args:
@@ -28,7 +32,9 @@ def scenario_points(spec: ScenarioSpec):
     return list(sampler.names), sampler.points()
 
 
-def job_family(spec: ScenarioSpec, values: dict, drive=None, drive_spec: DriveSpec | None = None) -> AbstractFamily:
+def job_family(
+    spec: ScenarioSpec, values: dict, drive: Drive | None = None, drive_spec: DriveSpec | None = None
+) -> AbstractFamily:
     """The family of a job's scenario set.
 
     Args:
@@ -56,7 +62,7 @@ def job_family(spec: ScenarioSpec, values: dict, drive=None, drive_spec: DriveSp
     return spec.family.from_toml(table, "scenarios", freq_n=freq, drive=setting)
 
 
-def build_scenarios(spec: ScenarioSpec, family: AbstractFamily):
+def build_scenarios(spec: ScenarioSpec, family: AbstractFamily) -> tuple[eqx.Module, list[str], list[tuple]]:
     """The batched scenarios of every combination of the axes (or ``sample`` random ones), or the job's recordings.
 
     Args:
@@ -67,6 +73,7 @@ def build_scenarios(spec: ScenarioSpec, family: AbstractFamily):
         ``(scenarios, names, points)``.
     """
     names, combos = scenario_points(spec)
-    if spec.recording is not None:
+    if spec.recording is not None and isinstance(family, RecordedSignals):
         return load_recordings(spec.recording, family, spec.horizon), names, combos
-    return family.build(names, combos), names, combos
+    # AbstractFamily.build has no return annotation (its body a docstring: inferred None); it returns the batch
+    return cast(eqx.Module, family.build(names, combos)), names, combos

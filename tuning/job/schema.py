@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 import os
+from collections.abc import Mapping
 from pathlib import Path
 
 from jaxobs.io.provenance import sha256
@@ -14,9 +15,11 @@ from jaxobs.scenarios.families import FAMILIES, GridSignals
 from jaxobs.studies.registry import REGISTRY, canonical_key
 
 from .. import strategies
+from ..aggregations import AbstractAggregation
 from ..objective import DRIVE_METRICS, TERM_METRICS, Term
 from ..params import GainSpec
-from .components import COMPONENTS, W_N
+from ..solvers import AbstractSolver
+from .components import COMPONENTS, W_N, ComponentInfo
 from .drive import check_drive_speeds, check_standstill, inline_drive, parse_drive
 from .fields import (
     MAX_SCENARIOS,
@@ -30,7 +33,7 @@ from .fields import (
     show,
 )
 from .recordings import check_recording_job, parse_recording_scenarios
-from .spec import Job, ScenarioSpec
+from .spec import DriveSpec, Job, ScenarioSpec
 from .toml import read_toml
 from .verify import parse_envelope
 
@@ -121,7 +124,7 @@ def parse_scenarios(
     Raises:
         JobError: A field out of its range, naming it.
     """
-    tab = get_field({"s": tab}, "s", where, dict)
+    tab = get_field({"s": tab}, "s", where, dict, required=True)
     no_unknown(tab, ("signal", "t_event", "horizon", "steady_from", "grid", "sample", "seed", "recording"), where)
     signal = get_field(tab, "signal", f"{where}.signal", str, signals[0])
     if signal not in FAMILIES:
@@ -155,7 +158,7 @@ def parse_scenarios(
     return ScenarioSpec(signal, t_event, horizon, steady, axes, sample, sseed)
 
 
-def parse_observer_speed(raw: dict, info) -> dict:
+def parse_observer_speed(raw: dict, info: ComponentInfo) -> dict:
     """A job's ``[observer.speed]``: how a LESO or a PLL-type flux observer extracts speed and position
     (jaxobs.observers.speed).
 
@@ -178,7 +181,7 @@ def parse_observer_speed(raw: dict, info) -> dict:
     no_unknown(obs_t, ("speed",), "observer")
     if "speed" not in obs_t:
         return {}
-    sp = get_field(obs_t, "speed", "observer.speed", dict)
+    sp = get_field(obs_t, "speed", "observer.speed", dict, required=True)
     no_unknown(sp, ("kind", "alpha_o", "zero_fade"), "observer.speed")
     if not (issubclass(info.ctor, AbstractDriveObserver) and info.ctor.takes_speed_estimator):
         raise JobError(
@@ -208,22 +211,14 @@ def parse_observer_speed(raw: dict, info) -> dict:
     return out
 
 
-def parse_job(raw: dict, base: Path | None = None) -> Job:
-    """Validate a job dict (the parsed TOML).
+# the tables of a job file
+JOB_TABLES = ("job", "component", "observer", "gains", "scenarios", "holdout", "objective", "solver", "drive")
+JOB_TABLES += ("envelope",)
+SOLVER_KEYS = ("kind", "learning_rate", "steps", "patience", "tol", "schedule", "checkpoint_every", "progress_every")
 
-    Args:
-        raw: The parsed job file.
-        base: The job file's folder, against which a recording's relative ``file`` is read (and then
-            checked now: it exists, its columns, its rate); without it the files are read when the job runs.
 
-    Returns:
-        The :class:`Job`.
-
-    Raises:
-        JobError: A field out of its range, naming the field.
-    """
-    keys = ("job", "component", "observer", "gains", "scenarios", "holdout", "objective", "solver", "drive", "envelope")
-    no_unknown(raw, keys, "job file")
+def _parse_job_table(raw: dict) -> tuple[str, str, int]:
+    """``[job]``: the job's name, its component's registered name (tunable) and its seed."""
     job_t = get_field(raw, "job", "job", dict, required=True)
     no_unknown(job_t, ("name", "component", "seed"), "job")
     name = get_field(job_t, "name", "job.name", str, "job")
@@ -232,62 +227,77 @@ def parse_job(raw: dict, base: Path | None = None) -> Job:
         raise JobError("job.component", f"{comp} is not tunable: {REGISTRY[comp].cls.why_not_tunable}")
     if comp not in COMPONENTS:
         raise JobError("job.component", f"unknown component {show(comp)}; known: {', '.join(COMPONENTS)}")
-    info = COMPONENTS[comp]
     seed = get_field(job_t, "seed", "job.seed", int, 0)
     if not 0 <= seed < 2**32 - 1:
         raise JobError("job.seed", f"must be in [0, 2^32 - 1), got {show(seed)}")
+    return name, comp, seed
 
+
+def _parse_component(comp_t: dict, comp: str, info: ComponentInfo) -> dict:
+    """``[component]``: the component's defaults with the table's values (each a number of its defaults)."""
     values = dict(info.defaults)
-    comp_t = get_field(raw, "component", "component", dict, {})
     for k in comp_t:
         key = canonical_key(info.ctor, k)  # a flux observer's omega_init may be written omega0
         if key not in info.defaults:
             raise JobError(f"component.{k}", f"unknown for {comp}; allowed: {', '.join(info.defaults)}")
         values[key] = get_field(comp_t, k, f"component.{k}", float)
-    values.update(parse_observer_speed(raw, info))
+    return values
+
+
+def _component_ts(info: ComponentInfo, values: dict) -> float:
+    """The sample time of the component built from ``values`` (its constructor's refusal, one line)."""
     try:
-        ts = float(info.ctor(**values).ts)
+        return float(info.ctor(**values).ts)
     except (ValueError, ArithmeticError, TypeError) as e:
         raise JobError("component", str(e)) from None
-    freq_n = float(values.get("omega_n", W_N)) / (2 * math.pi)
 
+
+def _parse_gain(gname: str, gains_t: dict, values: Mapping[str, float]) -> GainSpec:
+    """``[gains.<gname>]``: the free gain's initial value, bounds and scale, checked together."""
+    where = f"gains.{gname}"
+    spec = get_field(gains_t, gname, where, dict, required=True)
+    no_unknown(spec, ("init", "lower", "upper", "log"), where)
+    init = get_field(spec, "init", f"{where}.init", float, values[gname])
+    lower = get_field(spec, "lower", f"{where}.lower", float)
+    upper = get_field(spec, "upper", f"{where}.upper", float)
+    log = get_field(spec, "log", f"{where}.log", bool, True)
+    if lower is not None and lower < 0:
+        raise JobError(f"{where}.lower", f"must be >= 0 (gains are positive), got {lower}")
+    if log and lower is not None and lower <= 0:
+        raise JobError(f"{where}.lower", f"must be > 0 with log = true, got {lower}")
+    if upper is not None and upper <= 0:
+        raise JobError(f"{where}.upper", f"must be > 0, got {upper}")
+    if lower is not None and upper is not None and not lower < upper:
+        raise JobError(f"{where}.upper", f"must exceed lower ({lower}), got {upper}")
+    if init <= 0:
+        raise JobError(f"{where}.init", f"must be > 0, got {init}")
+    if (lower is not None and init <= lower) or (upper is not None and init >= upper):
+        raise JobError(f"{where}.init", f"must lie strictly inside [{lower}, {upper}], got {init}")
+    if lower is not None and upper is not None and (upper - lower) < 1e-6 * upper:
+        raise JobError(f"{where}.upper", f"bounds [{lower:g}, {upper:g}] are too narrow (relative width < 1e-6)")
+    g = GainSpec(gname, init, lower, upper, log)
+    try:  # the parametrization must map init (and the closed form, nudged inside) to a finite θ
+        th = g.to_theta(init)
+    except (ValueError, ArithmeticError):
+        th = math.nan
+    if not math.isfinite(th):
+        raise JobError(f"{where}.init", f"{init:g} cannot be parametrized inside its bounds [{lower}, {upper}]")
+    return g
+
+
+def _parse_gains(raw: dict, comp: str, info: ComponentInfo, values: dict) -> list[GainSpec]:
+    """``[gains]``: one table per free gain (``values`` takes each one's initial value); a mechanical speed
+    observer leaves the PLL's gains nothing to do."""
     gains_t = get_field(raw, "gains", "gains", dict, required=True)
     if not gains_t:
         raise JobError("gains", "at least one free gain is required")
     gains = []
-    for gname, spec in gains_t.items():
-        where = f"gains.{gname}"
+    for gname in gains_t:
         if gname not in info.gains:
-            raise JobError(cap(where, 60), f"unknown gain for {comp}; tunable: {', '.join(info.gains)}")
-        spec = get_field(gains_t, gname, where, dict)
-        no_unknown(spec, ("init", "lower", "upper", "log"), where)
-        init = get_field(spec, "init", f"{where}.init", float, values[gname])
-        lower = get_field(spec, "lower", f"{where}.lower", float)
-        upper = get_field(spec, "upper", f"{where}.upper", float)
-        log = get_field(spec, "log", f"{where}.log", bool, True)
-        if lower is not None and lower < 0:
-            raise JobError(f"{where}.lower", f"must be >= 0 (gains are positive), got {lower}")
-        if log and lower is not None and lower <= 0:
-            raise JobError(f"{where}.lower", f"must be > 0 with log = true, got {lower}")
-        if upper is not None and upper <= 0:
-            raise JobError(f"{where}.upper", f"must be > 0, got {upper}")
-        if lower is not None and upper is not None and not lower < upper:
-            raise JobError(f"{where}.upper", f"must exceed lower ({lower}), got {upper}")
-        if init <= 0:
-            raise JobError(f"{where}.init", f"must be > 0, got {init}")
-        if (lower is not None and init <= lower) or (upper is not None and init >= upper):
-            raise JobError(f"{where}.init", f"must lie strictly inside [{lower}, {upper}], got {init}")
-        if lower is not None and upper is not None and (upper - lower) < 1e-6 * upper:
-            raise JobError(f"{where}.upper", f"bounds [{lower:g}, {upper:g}] are too narrow (relative width < 1e-6)")
-        g = GainSpec(gname, init, lower, upper, log)
-        try:  # the parametrization must map init (and the closed form, nudged inside) to a finite θ
-            th = g.to_theta(init)
-        except (ValueError, ArithmeticError):
-            th = math.nan
-        if not math.isfinite(th):
-            raise JobError(f"{where}.init", f"{init:g} cannot be parametrized inside its bounds [{lower}, {upper}]")
+            raise JobError(cap(f"gains.{gname}", 60), f"unknown gain for {comp}; tunable: {', '.join(info.gains)}")
+        g = _parse_gain(gname, gains_t, values)
         gains.append(g)
-        values[gname] = init
+        values[gname] = g.init
     speed_spec = values.get("speed")
     if isinstance(speed_spec, dict) and speed_spec.get("kind") == "mechanical":
         roles = gain_fields(info.ctor)
@@ -297,7 +307,18 @@ def parse_job(raw: dict, base: Path | None = None) -> Job:
                 f"gains.{unused[0]}",
                 'the PLL\'s gains do nothing under [observer.speed] kind = "mechanical"; free another gain',
             )
+    return gains
 
+
+def _parse_scenarios_and_drive(
+    raw: dict, comp: str, info: ComponentInfo, values: dict, seed: int, freq_n: float, ts: float, base: Path | None
+) -> tuple[ScenarioSpec, DriveSpec | None, float]:
+    """``[scenarios]`` and, for a drive job, ``[drive]``: the observer runs at the drive's period, so the
+    scenarios are read again at it (``values["ts"]`` set) where it differs.
+
+    Returns:
+        ``(scenarios, drive or None, ts)``.
+    """
     scen = parse_scenarios(
         get_field(raw, "scenarios", "scenarios", dict, required=True), "scenarios", info.signals, seed, freq_n, ts, base
     )
@@ -311,14 +332,25 @@ def parse_job(raw: dict, base: Path | None = None) -> Job:
             scen = parse_scenarios(raw["scenarios"], "scenarios", info.signals, seed, freq_n, ts, base)
     elif "drive" in raw:
         raise JobError("drive", f"applies to drive jobs (scenarios.signal = 'drive'), not {scen.signal!r} signals")
-    envelope = parse_envelope(raw, scen, drive)
-    holdout = None
-    if "holdout" in raw:
-        h = dict(get_field(raw, "holdout", "holdout", dict))
-        for key in ("t_event", "horizon", "steady_from"):
-            h.setdefault(key, getattr(scen, key))
-        h.setdefault("signal", scen.signal)
-        holdout = parse_scenarios(h, "holdout", (scen.signal,), seed + 1, freq_n, ts, base)
+    return scen, drive, ts
+
+
+def _parse_holdout(
+    raw: dict, scen: ScenarioSpec, seed: int, freq_n: float, ts: float, base: Path | None
+) -> ScenarioSpec | None:
+    """``[holdout]`` (None without it): the tuning set's signal, event and windows unless it gives its own."""
+    tab = get_field(raw, "holdout", "holdout", dict)
+    if tab is None:
+        return None
+    h = dict(tab)
+    for key in ("t_event", "horizon", "steady_from"):
+        h.setdefault(key, getattr(scen, key))
+    h.setdefault("signal", scen.signal)
+    return parse_scenarios(h, "holdout", (scen.signal,), seed + 1, freq_n, ts, base)
+
+
+def _check_sets(scen: ScenarioSpec, holdout: ScenarioSpec | None, drive: DriveSpec | None, ts: float) -> None:
+    """The held-out set's start-up, then each set's size and drive speeds, at --check time."""
     if holdout is not None and holdout.recording is None and drive is not None and drive.start == "standstill":
         check_standstill(drive, holdout, "holdout")
     settle = drive.settle if drive is not None else 0.0
@@ -328,38 +360,46 @@ def parse_job(raw: dict, base: Path | None = None) -> Job:
             if drive is not None:
                 check_drive_speeds(spec, where, drive)
 
-    obj_t = get_field(raw, "objective", "objective", dict, required=True)
-    no_unknown(obj_t, ("terms", "aggregate", "alpha", "temperature", "penalty"), "objective")
+
+def _parse_term(t: object, where: str, comp: str, scen: ScenarioSpec, drive: DriveSpec | None) -> Term:
+    """One ``{ metric = ..., weight = ... }`` of ``objective.terms``: a metric that applies to the job's signals."""
+    if not isinstance(t, dict):
+        raise JobError(where, f"must be a table {{ metric = ..., weight = ... }}, got {show(t)}")
+    no_unknown(t, ("metric", "weight"), where)
+    metric = get_field(t, "metric", f"{where}.metric", str, required=True)
+    # an old name is read as its new one (one line of warning), its weight converted to the new units
+    metric, scale = canonical(metric, f"{where}.metric")
+    if metric not in TERM_METRICS:
+        raise JobError(f"{where}.metric", f"unknown metric {show(metric)}; known: {', '.join(TERM_METRICS)}")
+    grid_only = metric.endswith(("_freq", "_phase", "freq_steady", "phase_steady"))
+    if TERM_METRICS[metric].needs_truth and scen.recording is None:
+        raise JobError(
+            f"{where}.metric",
+            f"{show(metric)} compares the estimate with a recording's truth: it needs [scenarios.recording]",
+        )
+    if metric in DRIVE_METRICS and not scen.family.closed_loop:
+        raise JobError(f"{where}.metric", f"{show(metric)} needs the closed-loop drive, not {comp} ({scen.signal})")
+    if scen.family.drive_observer == grid_only:
+        raise JobError(f"{where}.metric", f"{show(metric)} does not apply to {comp} ({scen.signal} signals)")
+    if TERM_METRICS[metric].kind == "system" and drive is not None and drive.start != "steady":
+        raise JobError(f"{where}.metric", f"{metric} needs drive.start = 'steady' (an operating point)")
+    weight = get_field(t, "weight", f"{where}.weight", float, 1.0)
+    if weight <= 0:
+        raise JobError(f"{where}.weight", f"must be > 0, got {weight}")
+    return Term(metric, weight / scale)
+
+
+def _parse_terms(obj_t: dict, comp: str, scen: ScenarioSpec, drive: DriveSpec | None) -> tuple[list, list[Term]]:
+    """``objective.terms``: the terms as written and as read (old metric names as their new ones)."""
     terms_raw = obj_t.get("terms")
     if not isinstance(terms_raw, list) or not terms_raw:
         raise JobError("objective.terms", "missing (required): a list of { metric = ..., weight = ... }")
-    terms = []
-    for i, t in enumerate(terms_raw):
-        where = f"objective.terms[{i}]"
-        if not isinstance(t, dict):
-            raise JobError(where, f"must be a table {{ metric = ..., weight = ... }}, got {show(t)}")
-        no_unknown(t, ("metric", "weight"), where)
-        metric = get_field(t, "metric", f"{where}.metric", str, required=True)
-        # an old name is read as its new one (one line of warning), its weight converted to the new units
-        metric, scale = canonical(metric, f"{where}.metric")
-        if metric not in TERM_METRICS:
-            raise JobError(f"{where}.metric", f"unknown metric {show(metric)}; known: {', '.join(TERM_METRICS)}")
-        grid_only = metric.endswith(("_freq", "_phase", "freq_steady", "phase_steady"))
-        if TERM_METRICS[metric].needs_truth and scen.recording is None:
-            raise JobError(
-                f"{where}.metric",
-                f"{show(metric)} compares the estimate with a recording's truth: it needs [scenarios.recording]",
-            )
-        if metric in DRIVE_METRICS and not scen.family.closed_loop:
-            raise JobError(f"{where}.metric", f"{show(metric)} needs the closed-loop drive, not {comp} ({scen.signal})")
-        if scen.family.drive_observer == grid_only:
-            raise JobError(f"{where}.metric", f"{show(metric)} does not apply to {comp} ({scen.signal} signals)")
-        if TERM_METRICS[metric].kind == "system" and drive is not None and drive.start != "steady":
-            raise JobError(f"{where}.metric", f"{metric} needs drive.start = 'steady' (an operating point)")
-        weight = get_field(t, "weight", f"{where}.weight", float, 1.0)
-        if weight <= 0:
-            raise JobError(f"{where}.weight", f"must be > 0, got {weight}")
-        terms.append(Term(metric, weight / scale))
+    terms = [_parse_term(t, f"objective.terms[{i}]", comp, scen, drive) for i, t in enumerate(terms_raw)]
+    return terms_raw, terms
+
+
+def _parse_aggregation(obj_t: dict) -> tuple[AbstractAggregation, float]:
+    """``[objective]``'s aggregation (with its alpha and temperature) and penalty."""
     agg = get_field(obj_t, "aggregate", "objective.aggregate", str, "mean")
     if agg not in strategies.AGGREGATIONS:
         raise JobError("objective.aggregate", f"must be {strategies.one_of(strategies.AGGREGATIONS)}, got {show(agg)}")
@@ -372,13 +412,13 @@ def parse_job(raw: dict, base: Path | None = None) -> Job:
     penalty = get_field(obj_t, "penalty", "objective.penalty", float, 1e3)
     if penalty <= 0:
         raise JobError("objective.penalty", f"must be > 0, got {penalty}")
+    return strategies.aggregation(agg, alpha=alpha, temperature=temperature), penalty
 
+
+def _parse_solver(raw: dict) -> AbstractSolver:
+    """``[solver]``: its kind and options (the optax solvers' own refused for a minimiser)."""
     sol_t = get_field(raw, "solver", "solver", dict, {})
-    no_unknown(
-        sol_t,
-        ("kind", "learning_rate", "steps", "patience", "tol", "schedule", "checkpoint_every", "progress_every"),
-        "solver",
-    )
+    no_unknown(sol_t, SOLVER_KEYS, "solver")
     kind = get_field(sol_t, "kind", "solver.kind", str, "adam")
     if kind not in strategies.SOLVER_KINDS:
         raise JobError("solver.kind", f"must be {strategies.one_of(strategies.SOLVER_KINDS)}, got {show(kind)}")
@@ -388,35 +428,85 @@ def parse_job(raw: dict, base: Path | None = None) -> Job:
                 raise JobError(
                     f"solver.{key}", f"does not apply to kind = '{kind}' (it applies to {', '.join(strategies.OPTAX)})"
                 )
-    opts = dict(
-        learning_rate=get_field(sol_t, "learning_rate", "solver.learning_rate", float, 0.05),
-        steps=get_field(sol_t, "steps", "solver.steps", int, 100),
-        patience=get_field(sol_t, "patience", "solver.patience", int, 25),
-        tol=get_field(sol_t, "tol", "solver.tol", float, 1e-6),
-        schedule=get_field(sol_t, "schedule", "solver.schedule", str, "constant"),
-        checkpoint_every=get_field(sol_t, "checkpoint_every", "solver.checkpoint_every", int, 5),
-        progress_every=get_field(sol_t, "progress_every", "solver.progress_every", int, 1),
+    learning_rate = get_field(sol_t, "learning_rate", "solver.learning_rate", float, 0.05)
+    steps = get_field(sol_t, "steps", "solver.steps", int, 100)
+    patience = get_field(sol_t, "patience", "solver.patience", int, 25)
+    tol = get_field(sol_t, "tol", "solver.tol", float, 1e-6)
+    schedule = get_field(sol_t, "schedule", "solver.schedule", str, "constant")
+    checkpoint_every = get_field(sol_t, "checkpoint_every", "solver.checkpoint_every", int, 5)
+    progress_every = get_field(sol_t, "progress_every", "solver.progress_every", int, 1)
+    if not 0 < learning_rate <= 1e6:
+        raise JobError("solver.learning_rate", f"must be in (0, 1e6], got {learning_rate:g}")
+    if tol < 0:
+        raise JobError("solver.tol", f"must be >= 0, got {tol:g}")
+    if steps > MAX_SOLVER_STEPS:
+        raise JobError("solver.steps", f"must be <= {MAX_SOLVER_STEPS}, got {show(steps)}")
+    counts = (("steps", steps), ("patience", patience), ("checkpoint_every", checkpoint_every))
+    for fld, n in (*counts, ("progress_every", progress_every)):
+        if n < 1:
+            raise JobError(f"solver.{fld}", f"must be >= 1, got {n}")
+    if schedule not in strategies.SCHEDULES:
+        raise JobError("solver.schedule", f"must be {strategies.one_of(strategies.SCHEDULES)}, got {show(schedule)}")
+    return strategies.solver(
+        kind,
+        learning_rate=learning_rate,
+        steps=steps,
+        patience=patience,
+        tol=tol,
+        schedule=schedule,
+        checkpoint_every=checkpoint_every,
+        progress_every=progress_every,
     )
-    if not 0 < opts["learning_rate"] <= 1e6:
-        raise JobError("solver.learning_rate", f"must be in (0, 1e6], got {opts['learning_rate']:g}")
-    if opts["tol"] < 0:
-        raise JobError("solver.tol", f"must be >= 0, got {opts['tol']:g}")
-    if opts["steps"] > MAX_SOLVER_STEPS:
-        raise JobError("solver.steps", f"must be <= {MAX_SOLVER_STEPS}, got {show(opts['steps'])}")
-    for fld in ("steps", "patience", "checkpoint_every", "progress_every"):
-        if opts[fld] < 1:
-            raise JobError(f"solver.{fld}", f"must be >= 1, got {opts[fld]}")
-    if opts["schedule"] not in strategies.SCHEDULES:
-        raise JobError(
-            "solver.schedule", f"must be {strategies.one_of(strategies.SCHEDULES)}, got {show(opts['schedule'])}"
-        )
+
+
+def _raw_to_keep(raw: dict, drive: DriveSpec | None, terms_raw: list, terms: list[Term]) -> dict:
+    """The job's tables as a result keeps them: a drive file inline, old metric names as their new ones."""
     if drive is not None and drive.file is not None and "file" in raw["drive"]:
         raw = {**raw, "drive": inline_drive(raw["drive"], drive.file)}  # a result reads it wherever it moves
     if any(t.get("metric") != term.metric for t, term in zip(terms_raw, terms)):  # old names: never written back
         new = [{**t, "metric": term.metric, "weight": term.weight} for t, term in zip(terms_raw, terms)]
         raw = {**raw, "objective": {**raw["objective"], "terms": new}}
+    return raw
+
+
+def parse_job(raw: dict, base: Path | None = None) -> Job:
+    """Validate a job dict (the parsed TOML).
+
+    The tables are read in order, each error naming its field: ``[job]``, ``[component]`` and
+    ``[observer.speed]``, ``[gains]``, ``[scenarios]`` and ``[drive]``, ``[envelope]``, ``[holdout]``, the sets'
+    sizes, ``[objective]``, ``[solver]``.
+
+    Args:
+        raw: The parsed job file.
+        base: The job file's folder, against which a recording's relative ``file`` is read (and then
+            checked now: it exists, its columns, its rate); without it the files are read when the job runs.
+
+    Returns:
+        The :class:`Job`.
+
+    Raises:
+        JobError: A field out of its range, naming the field.
+    """
+    no_unknown(raw, JOB_TABLES, "job file")
+    name, comp, seed = _parse_job_table(raw)
+    info = COMPONENTS[comp]
+    comp_t = get_field(raw, "component", "component", dict, {})
+    values = _parse_component(comp_t, comp, info)
+    values.update(parse_observer_speed(raw, info))
+    ts = _component_ts(info, values)
+    freq_n = float(values.get("omega_n", W_N)) / (2 * math.pi)
+    gains = _parse_gains(raw, comp, info, values)
+    scen, drive, ts = _parse_scenarios_and_drive(raw, comp, info, values, seed, freq_n, ts, base)
+    envelope = parse_envelope(raw, scen, drive)
+    holdout = _parse_holdout(raw, scen, seed, freq_n, ts, base)
+    _check_sets(scen, holdout, drive, ts)
+    obj_t = get_field(raw, "objective", "objective", dict, required=True)
+    no_unknown(obj_t, ("terms", "aggregate", "alpha", "temperature", "penalty"), "objective")
+    terms_raw, terms = _parse_terms(obj_t, comp, scen, drive)
+    aggregation, penalty = _parse_aggregation(obj_t)
+    solver = _parse_solver(raw)
     job = Job(
-        raw=raw,
+        raw=_raw_to_keep(raw, drive, terms_raw, terms),
         name=name,
         component=comp,
         seed=seed,
@@ -425,9 +515,9 @@ def parse_job(raw: dict, base: Path | None = None) -> Job:
         scenarios=scen,
         holdout=holdout,
         terms=terms,
-        aggregation=strategies.aggregation(agg, alpha=alpha, temperature=temperature),
+        aggregation=aggregation,
         penalty=penalty,
-        solver=strategies.solver(kind, **opts),
+        solver=solver,
         drive=drive,
         envelope=envelope,
     )
@@ -435,7 +525,7 @@ def parse_job(raw: dict, base: Path | None = None) -> Job:
     return job
 
 
-def load_job(path) -> Job:
+def load_job(path: str | os.PathLike) -> Job:
     """Read, check and parse a job file (:func:`read_toml`, then :func:`parse_job`).
 
     Args:

@@ -2,13 +2,21 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
+from typing import Any
 
-from jaxobs.drive import shipped_drive
-from jaxobs.scenarios.families import FAMILIES
+from jaxobs.drive import DriveFile, PMSMParams, shipped_drive
+from jaxobs.scenarios.families import FAMILIES, AbstractFamily
+from jaxobs.signals import RecordingLayout
 
 from ..aggregations import AbstractAggregation
+from ..objective import Term
+from ..params import GainSpec
 from ..solvers import AbstractSolver
+
+# s, of [envelope]'s runs: a slowly growing low-speed oscillation shows within it (docs/stability.md)
+DEFAULT_HORIZON = 2.0
 
 
 @dataclass
@@ -30,13 +38,13 @@ class ScenarioSpec:
     t_event: float
     horizon: float
     steady_from: float
-    axes: dict  # name -> list of values
+    axes: dict[str, list[float]]  # name -> list of values
     sample: int  # 0: full grid; n > 0: n random combinations (seeded)
     seed: int
     recording: RecordingSpec | None = None  # [scenarios.recording]: recorded signals instead of a grid
 
     @property
-    def family(self) -> type:
+    def family(self) -> type[AbstractFamily]:
         """The scenario family ``signal`` names (:data:`jaxobs.scenarios.families.FAMILIES`: the one place the name is
         read); a recording stands for this family's signals."""
         return FAMILIES[self.signal]
@@ -61,24 +69,25 @@ class Job:
         solver: ``[solver]`` (:mod:`jaxobs_tuning.strategies`).
         sha256: Of the job file's bytes (:func:`jaxobs_tuning.load_job`); None for a job built from a dict.
         drive: ``signal = "drive"`` jobs: how the observer sits in the loop.
-        envelope: ``[envelope]`` (``jaxobs_tuning.job.verify.EnvelopeSpec``): verified after tuning; None: not.
+        envelope: ``[envelope]`` (:class:`EnvelopeSpec`, :mod:`jaxobs_tuning.job.verify`): verified after tuning;
+            None: not.
     """
 
     raw: dict
     name: str
     component: str
     seed: int
-    values: dict  # constructor values
-    gains: list  # GainSpec
+    values: dict[str, Any]  # constructor keywords: numbers, flags, None, [observer.speed]'s record
+    gains: list[GainSpec]
     scenarios: ScenarioSpec
     holdout: ScenarioSpec | None
-    terms: list
+    terms: list[Term]
     aggregation: AbstractAggregation  # objective.aggregate (with alpha, temperature), jaxobs_tuning.strategies
     penalty: float
     solver: AbstractSolver  # [solver], jaxobs_tuning.strategies
     sha256: str | None = None  # of the job file's bytes (load_job); None for a job built from a dict
     drive: DriveSpec | None = None  # signal = "drive" jobs: how the observer sits in the loop
-    envelope: object = None  # [envelope] (jaxobs_tuning.job.verify.EnvelopeSpec): verified after tuning; None: not
+    envelope: EnvelopeSpec | None = None  # [envelope]: verified after tuning; None: not
 
 
 @dataclass(frozen=True)
@@ -110,10 +119,10 @@ class DriveSpec:
     start: str = "steady"
     machine: str = "ipmsm002"  # a key of SHIPPED_DRIVES or a drive file's name; a job's default: its component's
     speed_schedule: float = 0.0  # FOC.speed_schedule (0: off)
-    file: object = field(default=None, compare=False)  # a jaxobs.drive.DriveFile, or None: the shipped `machine`
+    file: DriveFile | None = field(default=None, compare=False)  # None: the shipped `machine`
 
     @property
-    def drive_file(self):
+    def drive_file(self) -> DriveFile:
         """The checked drive file this drive runs (:class:`jaxobs.drive.DriveFile`)."""
         return shipped_drive(self.machine) if self.file is None else self.file
 
@@ -138,18 +147,18 @@ class RecordingSpec:
         machine_name: The machine as the job names it (a bench machine or a drive file).
     """
 
-    files: tuple  # as written in the job file
-    paths: tuple  # resolved against the job file's folder (or the working folder)
-    time_column: object  # a column name or index, or None
+    files: tuple[str, ...]  # as written in the job file
+    paths: tuple[str, ...]  # resolved against the job file's folder (or the working folder)
+    time_column: str | int | None  # a column name or index, or None
     sample_rate: float | None  # Hz, when there is no time column
-    columns: tuple
-    truth: tuple
+    columns: tuple[str | int, ...]
+    truth: tuple[str | int, ...]
     ts: float
-    sha256: tuple = ()  # of each file's bytes, when checked at parse time
-    layout: object = None  # a jaxobs.signals.RecordingLayout (what a drive log's columns hold), or None
+    sha256: tuple[str, ...] = ()  # of each file's bytes, when checked at parse time
+    layout: RecordingLayout | None = None  # what a drive log's columns hold, or None
     trim: bool = False  # recordings of different lengths cut to the shortest (else refused)
     windows: int = 0  # > 0: this many windows of the horizon spread over each drive log, each a scenario
-    machine: object = None  # a PMSMParams for a drive log's power and timing checks, or None
+    machine: PMSMParams | None = None  # for a drive log's power and timing checks, or None
     machine_name: str | None = None  # as the job names it (a bench machine or a drive file)
 
     def labels(self) -> list[str]:
@@ -157,3 +166,24 @@ class RecordingSpec:
         if not self.windows:
             return list(self.files)
         return [f"{f}@{k}" for f in self.files for k in range(self.windows)]
+
+
+@dataclass(frozen=True)
+class EnvelopeSpec:
+    """The envelope a drive job claims: speeds (r/min) and loads (N·m) as [lo, hi]; ``horizon`` (s) of the
+    verification runs; ``settle``, ``window``: s, of the stability verdict (:func:`jaxobs.analysis.stability.floquet`;
+    the window is lengthened to one electrical period of the lowest speed where it is shorter)."""
+
+    speed_rpm: tuple[float, float]
+    load_nm: tuple[float, float]
+    horizon: float = DEFAULT_HORIZON
+    settle: float = 0.2
+    window: float = 0.4
+
+    def points(self) -> tuple[list[float], list[float]]:
+        """The coarse verification grid: (speeds, loads), 3 × 2 (fewer where lo == hi)."""
+        lo, hi = self.speed_rpm
+        mid = math.sqrt(lo * hi) if lo > 0 else 0.5 * (lo + hi)
+        speeds = sorted({float(lo), float(mid), float(hi)})
+        loads = sorted({float(v) for v in self.load_nm})
+        return speeds, loads

@@ -30,42 +30,21 @@ from jaxobs.analysis.envelope import envelope
 
 from .drive import job_drive
 from .fields import JobError, get_field, no_unknown
-from .spec import DriveSpec, ScenarioSpec
+from .spec import DEFAULT_HORIZON as DEFAULT_HORIZON
+from .spec import DriveSpec, EnvelopeSpec, ScenarioSpec
 
 __all__ = ["EnvelopeSpec", "parse_envelope", "verify_designs", "unsafe_points", "UNSAFE_EXIT"]
 
 UNSAFE_EXIT = 4  # jaxobs tune's exit status for status "unsafe" (3 is "diverged": nothing tuned at all)
 MIN_HORIZON = 0.5  # s: jaxobs.analysis.envelope.envelope's least; the presets run the default 2 s
-DEFAULT_HORIZON = 2.0  # s: a slowly growing low-speed oscillation shows within it (docs/stability.md)
 
 
-@dataclasses.dataclass(frozen=True)
-class EnvelopeSpec:
-    """The envelope a drive job claims: speeds (r/min) and loads (N·m) as [lo, hi]; ``horizon`` (s) of the
-    verification runs; ``settle``, ``window``: s, of the stability verdict (:func:`jaxobs.analysis.stability.floquet`;
-    the window is lengthened to one electrical period of the lowest speed where it is shorter)."""
-
-    speed_rpm: tuple
-    load_nm: tuple
-    horizon: float = DEFAULT_HORIZON
-    settle: float = 0.2
-    window: float = 0.4
-
-    def points(self):
-        """The coarse verification grid: (speeds, loads), 3 × 2 (fewer where lo == hi)."""
-        lo, hi = self.speed_rpm
-        mid = math.sqrt(lo * hi) if lo > 0 else 0.5 * (lo + hi)
-        speeds = sorted({float(lo), float(mid), float(hi)})
-        loads = sorted({float(v) for v in self.load_nm})
-        return speeds, loads
-
-
-def _span(axes: dict, key: str, default: float) -> tuple:
+def _span(axes: dict, key: str, default: float) -> tuple[float, float]:
     vals = [abs(v) for v in axes.get(key, [default])]
     return (min(vals), max(vals))
 
 
-def _range(tab: dict, key: str, lo: float, hi: float, unit: str, default: tuple) -> tuple:
+def _range(tab: dict, key: str, lo: float, hi: float, unit: str, default: tuple[float, float]) -> tuple[float, float]:
     where = f"envelope.{key}"
     v = get_field(tab, key, where, list, list(default))
     if len(v) != 2 or not all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in v):
@@ -78,7 +57,19 @@ def _range(tab: dict, key: str, lo: float, hi: float, unit: str, default: tuple)
 
 def parse_envelope(raw: dict, scen: ScenarioSpec, drive: DriveSpec | None) -> EnvelopeSpec | None:
     """``[envelope]`` of a job (None without the table).  Only drive jobs on a sensorless loop have one: the
-    verification closes the loop through each design."""
+    verification closes the loop through each design.
+
+    Args:
+        raw: The parsed job file.
+        scen: The job's scenarios (the default envelope: their grid's span).
+        drive: The job's ``[drive]``, or None (not a drive job).
+
+    Returns:
+        The :class:`EnvelopeSpec`, or None without ``[envelope]``.
+
+    Raises:
+        JobError: The table on a job that cannot have one, or a field out of its range, naming it.
+    """
     if "envelope" not in raw:
         return None
     if drive is None:
@@ -88,6 +79,7 @@ def parse_envelope(raw: dict, scen: ScenarioSpec, drive: DriveSpec | None) -> En
     if drive.loop != "sensorless":
         raise JobError("envelope", "applies to sensorless drive jobs (drive.loop = 'sensorless')")
     tab = get_field(raw, "envelope", "envelope", dict)
+    assert tab is not None  # the key is there
     no_unknown(tab, ("speed_rpm", "load_nm", "horizon", "settle", "window"), "envelope")
     par = drive.drive_file.machine
     n_max = drive.drive_file.speed_limit_rpm
@@ -109,7 +101,17 @@ def parse_envelope(raw: dict, scen: ScenarioSpec, drive: DriveSpec | None) -> En
 def verify_designs(designs: dict, env: EnvelopeSpec, drive_spec: DriveSpec) -> dict:
     """Initial, closed form and tuned (``designs``: name -> drive observer) at the envelope's coarse grid over
     ``env.horizon`` seconds, with their stability verdicts (:func:`jaxobs.analysis.envelope.envelope`, the one
-    envelope map, on the job's drive started steady): the ``verification`` block of result.json."""
+    envelope map, on the job's drive started steady): the ``verification`` block of result.json.
+
+    Args:
+        designs: name -> drive observer (``initial``, ``closed_form``, ``tuned``).
+        env: The envelope the job claims.
+        drive_spec: The job's ``[drive]``.
+
+    Returns:
+        The verification: the envelope, the horizon, the points, each design's verdict at each point and the
+        points where the tuned design is unsafe (:func:`unsafe_points`).
+    """
     drive_spec = dataclasses.replace(drive_spec, start="steady", handover=0.0)  # operating points, started steady
     drive = job_drive(drive_spec)
     par = drive_spec.drive_file.machine
@@ -134,7 +136,7 @@ def verify_designs(designs: dict, env: EnvelopeSpec, drive_spec: DriveSpec) -> d
         rows = []
         for s, ld in combos:
             pt = ds.sel(design=name, speed_rpm=s, load_nm=ld)
-            row = {"speed_rpm": s, "load_nm": ld}
+            row: dict[str, float | bool | None] = {"speed_rpm": s, "load_nm": ld}
             for k in ("synchronous", "stable", "marginal", "holds", "lost_lock", "lost_speed"):
                 row[k] = bool(pt[k])
             row["margin_per_s"] = _num(pt["margin"])
@@ -149,14 +151,21 @@ def verify_designs(designs: dict, env: EnvelopeSpec, drive_spec: DriveSpec) -> d
     return out
 
 
-def _num(x):
+def _num(x: object) -> float | None:
     """A JSON number, or None where it is not finite (a lost point's metrics are NaN)."""
     v = float(np.asarray(x))
     return v if math.isfinite(v) else None
 
 
-def unsafe_points(ver: dict) -> list:
-    """The points where the tuned design fails (loses synchronism or is not stable) and the closed form passes."""
+def unsafe_points(ver: dict) -> list[dict]:
+    """The points where the tuned design fails (loses synchronism or is not stable) and the closed form passes.
+
+    Args:
+        ver: The verification (:func:`verify_designs`).
+
+    Returns:
+        ``{"speed_rpm", "load_nm"}`` of each such point; empty without a tuned design or a closed form.
+    """
     des = ver["designs"]
     if "tuned" not in des or "closed_form" not in des:
         return []
