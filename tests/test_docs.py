@@ -287,6 +287,7 @@ def test_the_docs_have_runnable_blocks():
     """The conventions find something: a rename of the fences would otherwise skip every block silently."""
     assert PY_PAGES and CLI_PAGES
     assert any(_blocks(p, "console") for p in PAGES)
+    assert sum(len(_outputs(p)) for p in PAGES) >= 15  # the output blocks (a changed marker would find none)
 
 
 @pytest.mark.parametrize("page", PY_PAGES, ids=lambda p: p.name)
