@@ -15,18 +15,15 @@ both see the sanitized derivative.
 
 Gradients.  A scenario's gradient is taken in forward mode when the job has at most :data:`FORWARD_MAX`
 gains (every preset: 1–3): one tangent per gain pushed through the simulation beside its one primal run,
-nothing stored per step.  Reverse mode through a whole trajectory stores the carry of every step and
-runs it again backwards; on this CPU it cost 2.1× forward mode on a drive job (000's SOIFO, 6 scenarios ×
-1.2 s: 605 vs 290 ms, compile 10.0 vs 6.0 s) and 1.5× on the default FLL job (72 × 0.4 s; 2026-11-25,
-docs/performance.md).  The two agree to rounding (tests/test_tuning.py).  With more gains, or with the
-stability-margin term (its Lyapunov exponents come from the loop's own tangents, a reverse-mode program),
-reverse mode.  An observer on a signal is simulated by the loop made fast (``SaveAll(fast=True)``: its
-inputs a block at a time, the same outputs as the plain scan to rounding; the default job's forward-mode
-evaluation 44 → 25 ms with the harmonic signal's cosines of jaxobs.signals), for the solver only: it
-compiles about 1 s longer, which the scoring and the report's figures (run once per design) would pay
-without gaining; they keep the plain scan (the same numbers to rounding).  The closed-loop drive keeps the
-plain scan: the fast loop made its forward-mode evaluation slower (290 → 352 ms, compile 6.0 → 8.1 s; it
-has no block of inputs to gain, and its unrolled step compiles longer).
+nothing stored per step; reverse mode through a whole trajectory stores the carry of every step and runs it
+again backwards, the slower of the two on these jobs (docs/performance.md).  The two agree to rounding
+(tests/test_tuning.py).  With more gains, or with the stability-margin term (its Lyapunov exponents come
+from the loop's own tangents, a reverse-mode program), reverse mode.  An observer on a signal is simulated
+by the loop made fast (``SaveAll(fast=True)``: its inputs a block at a time, the same outputs as the plain
+scan to rounding; faster to evaluate, docs/performance.md), for the solver only: it compiles longer, which
+the scoring and the report's figures (run once per design) would pay without gaining; they keep the plain
+scan (the same numbers to rounding).  The closed-loop drive keeps the plain scan: it has no block of inputs
+to gain, and its unrolled step compiles longer (docs/performance.md).
 """
 
 from __future__ import annotations
@@ -276,9 +273,8 @@ class Objective(AbstractObjective):
         # Diverged: the final state not finite (a non-finite value never leaves these systems' states again, as
         # SaveFinal's ok reads it); a non-finite output the metrics read makes the value non-finite, which
         # _per_scenario_value_and_grad counts too.  Not sol.ok, every output over the horizon: asking for it
-        # kept every output of the loop alive, those no metric reads included (an evaluation of the default job
-        # 47 -> 33 ms, of soifo.toml's drive job 290 -> 150 ms).  The scores' diverged counts keep sol.ok
-        # (_scenario_metrics).
+        # kept every output of the loop alive, those no metric reads included (slower, docs/performance.md).
+        # The scores' diverged counts keep sol.ok (_scenario_metrics).
         return sum(vals), sol.final_ok
 
     def _forward_mode(self, theta) -> bool:

@@ -29,10 +29,14 @@ from __future__ import annotations
 import dataclasses
 import math
 import re
+from collections.abc import Sequence
+from typing import Any
 
 import equinox as eqx
 import jax
 import numpy as np
+
+from jaxobs.core.validate import key_part
 
 from .ir import Assign, If, Let, S, c_literal, count, ctype, deps, evaluate, ops_summary, prune, render
 from .lower import Emitter, Walker
@@ -55,22 +59,11 @@ __all__ = [
 # --------------------------------------------------------------------------------------------
 
 
-def _key_part(k):
-    """A key path entry's name, key or index (jaxobs.drive.scenario names its batch's leaves alike)."""
-    if isinstance(k, jax.tree_util.GetAttrKey):
-        return k.name
-    if isinstance(k, (jax.tree_util.DictKey, jax.tree_util.FlattenedIndexKey)):
-        return k.key
-    if isinstance(k, jax.tree_util.SequenceKey):
-        return k.idx
-    return k
-
-
 def leaf_name(path) -> str:
     """A pytree key path as a C identifier: ``.rule.f1`` -> ``rule_f1``, ``[0]`` (a tuple's) -> ``leaf0``."""
     parts = []
     for k in path:
-        parts.append(str(_key_part(k)))
+        parts.append(str(key_part(k)))
     name = re.sub(r"\W", "_", "_".join(parts)) or "value"
     return f"leaf{name}" if name[0].isdigit() else name
 
@@ -308,17 +301,54 @@ def statics(observer) -> dict:
     return out
 
 
-def write_c(obs32, step: CStep, kind: str, source: str, notes, rule=None) -> tuple[str, str]:
-    """observer.h and observer.c of a generated step: ``kind`` "signal" or "drive" (the step convention
-    documented in the header), ``source`` where the design comes from, ``notes`` lines for the header, ``rule``
-    the observer's discretization rule (None: it integrates in its own step)."""
-    component = type(obs32).__name__
-    c_type = "float"
-    gains = [  # (macro, its C literal, the leaf's name), one per scalar of every array leaf
+def write_c(
+    obs32: eqx.Module, step: CStep, kind: str, source: str, notes: Sequence[str], rule: Any = None
+) -> tuple[str, str]:
+    """observer.h and observer.c of a generated step.
+
+    Args:
+        obs32: The float32 observer the step was generated from.
+        step: The generated step (:func:`generate`).
+        kind: "signal" or "drive": the step convention documented in the header.
+        source: Where the design comes from, for the header.
+        notes: Lines for the header.
+        rule: The observer's discretization rule (None: it integrates in its own step).
+
+    Returns:
+        The texts of observer.h and observer.c.
+    """
+    gains = _gain_macros(step)
+    return _header_c(obs32, step, kind, source, notes, rule, gains), _source_c(obs32, step, gains)
+
+
+# the C type of the step's inputs and outputs
+_C_TYPE = "float"
+
+
+def _gain_macros(step: CStep) -> list[tuple[str, str, str]]:
+    """(macro, its C literal, the leaf's name), one per scalar of every array leaf of the gains."""
+    return [
         (gain_macro(g, None if g.shape == () else i), c_literal(v, g.dtype), g.name)
         for g in step.gains
         for i, v in enumerate(g.value.flat)
     ]
+
+
+def _state_fields(step: CStep) -> list[str]:
+    """The fields of ``jx_state``, one line per state leaf."""
+    fields = []
+    for leaf in step.state:
+        ct = "float" if leaf.dtype.kind == "f" else "int"
+        dims = "" if leaf.shape == () else f"[{leaf.size}]"
+        what = "truth value" if leaf.dtype == np.bool_ else "counter" if leaf.dtype.kind == "i" else ""
+        fields.append(f"    {ct} {leaf.name}{dims};" + (f" /* {what} */" if what else ""))
+    return fields
+
+
+def _header_c(obs32, step: CStep, kind: str, source: str, notes, rule, gains: list[tuple[str, str, str]]) -> str:
+    """observer.h: the design, its gains, the step's convention and operation count, and the C declarations."""
+    component = type(obs32).__name__
+    c_type = _C_TYPE
     gains_doc = "\n".join(f" *   {m:<14} {v:<16} {n}" for m, v, n in gains)
     options = ", ".join(f"{k} = {v!r}" for k, v in statics(obs32).items())
     note_lines = "".join(f"\n *   note: {n}" for n in notes)
@@ -326,12 +356,7 @@ def write_c(obs32, step: CStep, kind: str, source: str, notes, rule=None) -> tup
     out_doc = "\n".join(
         f" *   y[{i}]  {n}" + (" (angle, rad)" if is_angle(n) else "") for i, n in enumerate(step.output_names)
     )
-    fields = []
-    for leaf in step.state:
-        ct = "float" if leaf.dtype.kind == "f" else "int"
-        dims = "" if leaf.shape == () else f"[{leaf.size}]"
-        what = "truth value" if leaf.dtype == np.bool_ else "counter" if leaf.dtype.kind == "i" else ""
-        fields.append(f"    {ct} {leaf.name}{dims};" + (f" /* {what} */" if what else ""))
+    fields = _state_fields(step)
     angle_mask = ", ".join("1" if is_angle(n) else "0" for n in step.output_names)
     worst = ""
     if step.has_branch:
@@ -387,6 +412,13 @@ void jx_step(jx_state *s, const {c_type} *u, {c_type} *y);
 
 #endif /* JX_OBSERVER_H */
 """
+    return header
+
+
+def _source_c(obs32, step: CStep, gains: list[tuple[str, str, str]]) -> str:
+    """observer.c: the gains as macros, ``jx_init`` with the initial state and ``jx_step`` with the body."""
+    component = type(obs32).__name__
+    c_type = _C_TYPE
     macros = "\n".join(f"#define {m} {v} /* {n} */" for m, v, n in gains)
     init = []
     for leaf in step.state:
@@ -411,4 +443,4 @@ void jx_step(jx_state *s, const {c_type} *u, {c_type} *y)
 {step.body}
 }}
 """
-    return header, source_c
+    return source_c
