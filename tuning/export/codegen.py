@@ -35,6 +35,7 @@ from typing import Any
 import equinox as eqx
 import jax
 import numpy as np
+from numpy.typing import ArrayLike
 
 from jaxobs.core.validate import key_part
 
@@ -59,8 +60,15 @@ __all__ = [
 # --------------------------------------------------------------------------------------------
 
 
-def leaf_name(path) -> str:
-    """A pytree key path as a C identifier: ``.rule.f1`` -> ``rule_f1``, ``[0]`` (a tuple's) -> ``leaf0``."""
+def leaf_name(path: Sequence[Any]) -> str:
+    """A pytree key path as a C identifier: ``.rule.f1`` -> ``rule_f1``, ``[0]`` (a tuple's) -> ``leaf0``.
+
+    Args:
+        path: The key path (:func:`jax.tree_util.tree_flatten_with_path`'s).
+
+    Returns:
+        The identifier.
+    """
     parts = []
     for k in path:
         parts.append(str(key_part(k)))
@@ -92,6 +100,7 @@ class Leaf:
 
     @property
     def size(self) -> int:
+        """Its number of scalars."""
         return int(np.prod(self.shape, dtype=int))
 
     def scalars(self) -> list[str]:
@@ -113,9 +122,16 @@ class CStep:
     has_branch: bool
     block: list  # the statements of the body (jaxobs_tuning.export.ir)
 
-    def run(self, state: list, u) -> tuple[list, np.ndarray]:
-        """The emitted step on numpy scalars: ``state`` the values of the state leaves (as ``Leaf.value``),
-        ``u`` the inputs; returns (the new state leaves, the outputs y).  The C, run in Python."""
+    def run(self, state: list, u: ArrayLike) -> tuple[list, np.ndarray]:
+        """The emitted step on numpy scalars: the C, run in Python.
+
+        Args:
+            state: The values of the state leaves (as ``Leaf.value``).
+            u: The inputs.
+
+        Returns:
+            ``(the new state leaves, the outputs y)``.
+        """
         env = {}
         for g in self.gains:
             for i, v in enumerate(np.asarray(g.value).reshape(-1)):
@@ -139,10 +155,12 @@ class CStep:
 
     @property
     def input_names(self) -> list:
+        """The names of the inputs' scalars, u[0..] in order."""
         return [n for leaf in self.inputs for n in leaf.scalars()]
 
     @property
     def output_names(self) -> list:
+        """The names of the outputs' scalars, y[0..] in order."""
         return [n for leaf in self.outputs for n in leaf.scalars()]
 
 
@@ -155,15 +173,36 @@ def _leaves(tree, values=True) -> list:
 
 
 def gain_macro(leaf: Leaf, i: int | None = None) -> str:
+    """The C macro of a gain's scalar: ``JX_<NAME>`` or ``JX_<NAME>_<i>``.
+
+    Args:
+        leaf: The gain's leaf.
+        i: The scalar's index in it (None: a scalar leaf).
+
+    Returns:
+        The macro's name.
+    """
     return "JX_" + leaf.name.upper() + ("" if i is None else f"_{i}")
 
 
-def generate(observer, state, u, *, input_names=None) -> CStep:
+def generate(observer: eqx.Module, state: Any, u: Any, *, input_names: Sequence[str] | None = None) -> CStep:
     """``observer.step(state, u)`` as the body of a C function ``jx_step(jx_state *s, const T *u, T *y)``.
 
     ``state`` and ``u`` give the structure, shapes and dtypes (their values: the initial state, recorded in
     the result); the observer's array leaves become named constants ``JX_<PATH>``.  ``input_names`` names
     the scalars of ``u`` (default: its pytree paths).  Floats must be all float32 or all float64.
+
+    Args:
+        observer: The observer (any module with a pure ``step(state, u) -> (state, out)``).
+        state: Its state.
+        u: An input of its step.
+        input_names: The names of ``u``'s scalars (default: its pytree paths).
+
+    Returns:
+        The :class:`CStep`.
+
+    Raises:
+        ValueError: A primitive or dtype the export cannot write as C.
     """
     params, static = eqx.partition(observer, eqx.is_array)
     gains = _leaves(params)
@@ -249,7 +288,14 @@ def generate(observer, state, u, *, input_names=None) -> CStep:
 
 
 def is_angle(name: str) -> bool:
-    """Outputs named ``theta...`` are angles (rad): the check compares them modulo 2π."""
+    """Whether an output is an angle (rad), compared modulo 2π by the check: those named ``theta...``.
+
+    Args:
+        name: The output's name.
+
+    Returns:
+        Whether it is an angle.
+    """
     return name.startswith("theta")
 
 
@@ -276,14 +322,28 @@ _STEP_DOC = {
 }
 
 
-def reference(observer) -> str:
-    """The first line of the observer's docstring: its paper and equations (every observer's docstring names them)."""
+def reference(observer: eqx.Module) -> str:
+    """The first line of the observer's docstring: its paper and equations (every observer's docstring names them).
+
+    Args:
+        observer: The observer.
+
+    Returns:
+        The line (its class's name where it has no docstring).
+    """
     doc = (type(observer).__doc__ or "").strip().splitlines()
     return doc[0].rstrip(".") if doc else type(observer).__name__
 
 
-def rule_doc(rule) -> dict:
-    """The rule's name, first docstring line and options; an observer without a rule integrates in its step."""
+def rule_doc(rule: Any) -> dict:
+    """The rule's name, first docstring line and options; an observer without a rule integrates in its step.
+
+    Args:
+        rule: The discretization rule (a dataclass), or None.
+
+    Returns:
+        ``{"name", "description", <option>: value...}``.
+    """
     if rule is None:
         return {"name": "none", "description": "the step's own update"}
     doc = (type(rule).__doc__ or "").strip().splitlines()
@@ -291,8 +351,15 @@ def rule_doc(rule) -> dict:
     return {"name": type(rule).__name__, "description": doc[0] if doc else "", **fields}
 
 
-def statics(observer) -> dict:
-    """The observer's static fields but ts and rule (floors, options), for the record."""
+def statics(observer: Any) -> dict:
+    """The observer's static fields but ts and rule (floors, options), for the record.
+
+    Args:
+        observer: The observer (a dataclass).
+
+    Returns:
+        Field name -> value, for the int, float, str and bool fields.
+    """
     out = {}
     for f in dataclasses.fields(observer):
         v = getattr(observer, f.name)

@@ -8,7 +8,7 @@ import json
 import os
 from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import equinox as eqx
 import jax
@@ -93,7 +93,7 @@ def export_observer(
     header, source_c = write_c(obs32, step, kind, source or f"{component} as given", notes, observer_rule(obs32))
     bar.update()
     bar.stage("the test record" + (" (compiling and running the sensored drive)" if kind == "drive" else ""))
-    u, signal_doc = _test_record(observer, obs32, kind, len(step.input_names), n_steps, signal, record_drive)
+    u, signal_doc = _test_record(observer, obs32, len(step.input_names), n_steps, signal, record_drive)
     bar.update()
     bar.stage(f"golden vectors: the float32 JAX step over {u.shape[0]} samples (compiling)")
     y = golden_outputs(obs32, state0, step, u)
@@ -152,7 +152,6 @@ def _generate_checked(obs32: AbstractObserver, kind: str) -> tuple[Any, CStep]:
 def _test_record(
     observer: AbstractObserver,
     obs32: AbstractObserver,
-    kind: str,
     nu: int,
     n_steps: int,
     signal: ArrayLike | str | None,
@@ -164,17 +163,19 @@ def _test_record(
     Raises:
         ValueError: A bad ``n_steps`` or ``signal``.
     """
-    if signal is None or (isinstance(signal, str) and signal == "synthetic" and kind == "drive"):
+    drive = isinstance(obs32, AbstractDriveObserver)
+    if signal is None or (isinstance(signal, str) and signal == "synthetic" and drive):
         if not (isinstance(n_steps, int) and n_steps >= MIN_STEPS):
             raise ValueError(f"export: n_steps must be an integer >= {MIN_STEPS}, got {n_steps!r}")
         if n_steps > MAX_STEPS:  # a bound on the work and on golden.csv's size
             raise ValueError(f"export: n_steps must be <= {MAX_STEPS}, got {n_steps}")
-    if signal is None and kind == "signal":
+    if signal is None and not drive:
         f0 = signal_frequency_hz(obs32)  # an FLL's nominal frequency, else 50 Hz
         u, signal_doc = fll_test_signal(obs32.ts, n_steps, f0)
     elif signal is None:
-        u, signal_doc = drive_recording(observer, n_steps, start=record_start(obs32), **(record_drive or {}))
-    elif isinstance(signal, str) and signal == "synthetic" and kind == "drive":
+        drive_obs = cast(AbstractDriveObserver, observer)  # obs32's class
+        u, signal_doc = drive_recording(drive_obs, n_steps, start=record_start(obs32), **(record_drive or {}))
+    elif isinstance(signal, str) and signal == "synthetic" and isinstance(obs32, AbstractDriveObserver):
         rs, ls = assumed_machine(obs32)
         u, signal_doc = drive_test_signal(
             obs32.ts, n_steps, omega=signal_speed(obs32), Rs=rs, L=ls, start=record_start(obs32)
