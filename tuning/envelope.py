@@ -154,7 +154,7 @@ def cli_envelope(args: argparse.Namespace) -> int:
     n = len(speeds) * len(loads)
     # the job's own settle and (shortest) window where it states them ([envelope]), else the library's defaults
     # (jaxobs.analysis.envelope.STABILITY_METHODS: settle 0.2 s, windows of at least 0.2 s)
-    env = cast("EnvelopeSpec | None", job.envelope)  # the job's [envelope], typed object in JobSpec
+    env = cast("EnvelopeSpec | None", job.envelope)  # the job's [envelope] (Job types it object)
     stab = {} if env is None else {"settle": env.settle, "window": env.window}
     what = (
         f"{path}: {job.component} on {spec.machine}, designs {', '.join(designs)}; {len(speeds)} speeds "
