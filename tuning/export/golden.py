@@ -38,7 +38,7 @@ if TYPE_CHECKING:
 _O = TypeVar("_O", bound=AbstractObserver)  # an observer, returned as the same class
 
 MIN_STEPS = 10_000  # the golden record is at least this long
-MAX_STEPS = 2_000_000  # and at most this long (about 100 MB of golden.csv; 10^8 wrote 6.3 GB before)
+MAX_STEPS = 2_000_000  # and at most this long (golden.csv about 100 MB)
 
 
 def fll_test_signal(ts: float, n_steps: int, f0: float = 50.0, amplitude: float = 1.0) -> tuple[np.ndarray, str]:
