@@ -127,7 +127,7 @@ LAYERS = [
     # the results folder, checkpoints, and what a solver minimises (the objective's protocol)
     ("jaxobs_tuning.outdir", "jaxobs_tuning.checkpoint", "jaxobs_tuning.base"),
     # the C export's code generator (jaxpr -> C) is beside the rest: it knows no observer
-    ("jaxobs_tuning.export.ir",),
+    ("jaxobs_tuning.export.ir", "jaxobs_tuning.export.c99"),
     ("jaxobs_tuning.export.lower",),
     ("jaxobs_tuning.export.codegen", "jaxobs_tuning.params", "jaxobs_tuning.solvers", "jaxobs_tuning.aggregations"),
     ("jaxobs_tuning.strategies",),

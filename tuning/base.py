@@ -31,7 +31,7 @@ class AbstractObjective(eqx.Module):
     param: eqx.AbstractVar[Any]  # a jaxobs_tuning.params.Parametrization
 
     @abc.abstractmethod
-    def value(self, theta, scenarios) -> jax.Array:
+    def value(self, theta: jax.Array, scenarios: Any) -> jax.Array:
         """The objective at ``theta``, differentiable in it (optimistix's minimisers trace it).
 
         Args:
@@ -43,7 +43,7 @@ class AbstractObjective(eqx.Module):
         """
 
     @abc.abstractmethod
-    def value_grad_diverged_overflowed(self, theta, scenarios) -> tuple[Any, Any, int, int]:
+    def value_grad_diverged_overflowed(self, theta: jax.Array, scenarios: Any) -> tuple[Any, Any, int, int]:
         """The objective, its gradient, and the scenarios that diverged and that overflowed (a finite simulation
         and value, a gradient that is not finite), from one batch evaluation.
 
@@ -55,7 +55,7 @@ class AbstractObjective(eqx.Module):
             ``(value, gradient, diverged count, overflowed count)``.
         """
 
-    def value_grad_diverged(self, theta, scenarios) -> tuple[Any, Any, int]:
+    def value_grad_diverged(self, theta: jax.Array, scenarios: Any) -> tuple[Any, Any, int]:
         """:meth:`value_grad_diverged_overflowed` without the overflow count.
 
         Args:

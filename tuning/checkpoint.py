@@ -13,8 +13,10 @@ from __future__ import annotations
 
 import hashlib
 import math
+from collections.abc import Mapping, Sequence
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 __all__ = ["DIGEST", "MAX_CHECKPOINT_BYTES", "check_state", "content_digest"]
 
@@ -22,9 +24,16 @@ DIGEST = "sha256"  # the npz entry that holds the content digest
 MAX_CHECKPOINT_BYTES = 256 * 2**20  # a checkpoint larger than this is refused before it is parsed
 
 
-def content_digest(arrays: dict) -> str:
+def content_digest(arrays: Mapping[str, ArrayLike]) -> str:
     """The hex sha256 of every entry but :data:`DIGEST`, in name order: name, dtype, shape and bytes (so
-    two arrays with the same bytes and another shape or dtype differ)."""
+    two arrays with the same bytes and another shape or dtype differ).
+
+    Args:
+        arrays: The checkpoint's entries by name.
+
+    Returns:
+        The digest, 64 hex digits.
+    """
     h = hashlib.sha256()
     for name in sorted(k for k in arrays if k != DIGEST):
         a = np.ascontiguousarray(arrays[name])
@@ -44,12 +53,29 @@ def _number(x) -> bool:
     return type(x) in (int, float)
 
 
-def check_state(meta: dict, theta, best_theta, leaves, theta_shape) -> None:
+def check_state(
+    meta: dict,
+    theta: ArrayLike,
+    best_theta: ArrayLike,
+    leaves: Sequence[ArrayLike],
+    theta_shape: Sequence[int],
+) -> None:
     """Refuse (``ValueError``, one short line) a checkpoint state a run could not have written: θ or best θ
     not finite or not of the job's shape, a non-finite optimizer state, ``best_value`` neither a finite
     number nor null (no stable design yet), ``since_best`` > ``iteration``, a history whose length is not
     the iteration or whose entries are not the solver's (iteration i at index i, a numeric value, diverged
-    count >= 0, finite gains), a best value that no stable history entry has."""
+    count >= 0, finite gains), a best value that no stable history entry has.
+
+    Args:
+        meta: The checkpoint's metadata (iteration, since_best, best_value, history).
+        theta: The free gains' vector.
+        best_theta: The best stable design's vector.
+        leaves: The optimizer state's array leaves.
+        theta_shape: The job's shape of θ.
+
+    Raises:
+        ValueError: The first thing a run could not have written.
+    """
     for name, a in (("theta", theta), ("best_theta", best_theta)):
         a = np.asarray(a)
         if a.shape != tuple(theta_shape) or not np.issubdtype(a.dtype, np.floating):

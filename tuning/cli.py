@@ -73,8 +73,10 @@ import sys
 import tempfile
 import traceback
 import warnings
+from collections.abc import Sequence
 from importlib import resources
 from pathlib import Path
+from typing import TYPE_CHECKING, cast
 
 import jaxobs
 from jaxobs import use_compile_cache, use_host_devices
@@ -98,12 +100,25 @@ from .study_file import load_study as _load_study
 from .study_file import study_fingerprint
 from .summary import print_summary, study_warnings
 
+if TYPE_CHECKING:
+    from xarray import Dataset
+
 STUDY_CHUNKS = "study.chunks"  # a study's results while it runs (jaxobs.runtime.chunkstore), in --out
 
 
-def load_study(path):
+def load_study(path: str | Path) -> tuple[str, dict, dict, dict]:
     """A study file as (name, designs, axes, options): :func:`jaxobs_tuning.study_file.load_study`, checked in
-    full; the options hold its preset's keywords, ``family`` (:mod:`jaxobs.scenarios.families`) among them."""
+    full; the options hold its preset's keywords, ``family`` (:mod:`jaxobs.scenarios.families`) among them.
+
+    Args:
+        path: The study file (TOML).
+
+    Returns:
+        ``(name, designs, axes, options)``.
+
+    Raises:
+        ValueError: A file that does not pass the checks.
+    """
     spec = _load_study(path)
     return spec.name, spec.designs, spec.axes, dict(spec.opts, family=spec.family)
 
@@ -149,7 +164,7 @@ def _cmd_drive_study(name, designs, axes, opts, out: Path, quiet: bool, provenan
 
 def _recording_study(
     designs: dict, *, family, recording, t_event, horizon, steady_from, band_hz, progress, store=None, **_
-):
+) -> tuple[Dataset, float]:
     """Every FLL design on every recording of ``[study.recording]``: :func:`jaxobs.studies.study.run_study` with a
     :class:`jaxobs.scenarios.Recordings` sampler of ``family``'s recordings (dims (design, recording), the files'
     sha256); (Dataset, s)."""
@@ -160,7 +175,7 @@ def _recording_study(
 
     rec = recording
     sampler = Recordings(load_recordings(rec, family), rec.files, rec.sha256)
-    return run_study(
+    res = run_study(
         designs,
         sampler,
         t_event=t_event,
@@ -172,6 +187,7 @@ def _recording_study(
         store=store,
         mesh=jaxobs.batch_mesh(jax.devices()[:1]),
     )
+    return cast("tuple[Dataset, float]", res)
 
 
 def _cmd_study(args) -> int:
@@ -228,8 +244,9 @@ def _run_study(name, designs, axes, opts, out: Path, quiet: bool, store=None) ->
         ds, seconds = _recording_study(designs, progress=progress_of(quiet=quiet), store=store, **opts)
     else:
         opts.pop("recording", None)
-        ds, seconds = run_study(
-            designs, axes, progress=progress_of(quiet=quiet), return_seconds=True, store=store, **opts
+        ds, seconds = cast(
+            "tuple[Dataset, float]",
+            run_study(designs, axes, progress=progress_of(quiet=quiet), return_seconds=True, store=store, **opts),
         )
     ds.attrs.update(provenance)  # the study file's and the result files' sha256
     worst = {m: worst_cases(ds, m, 3) for m in STUDY_METRICS}
@@ -261,6 +278,7 @@ def _run_study(name, designs, axes, opts, out: Path, quiet: bool, store=None) ->
 
 
 def default_job_path() -> Path:
+    """The embedded default job (the robust SOGI-FLL-WIF job that ``jaxobs tune`` runs without a file)."""
     return Path(str(resources.files("jaxobs_tuning") / "presets" / "wif_robust.toml"))
 
 
@@ -336,11 +354,31 @@ MAX_TIMEOUT_S = 86_400  # --timeout: a day (2147483648 overflowed JAX's timer: a
 
 
 def build_parser() -> argparse.ArgumentParser:
-    """The one parser: every subcommand of ``jaxobs``, and ``--version``."""
+    """The one parser: every subcommand of ``jaxobs``, and ``--version``.
+
+    Returns:
+        The parser.
+    """
     p = _Parser(prog="jaxobs", description="Differentiable simulation and tuning of motor-drive observers and FLLs.")
     p.add_argument("--version", action="version", version=f"jaxobs {jaxobs.__version__}")
     sub = p.add_subparsers(dest="cmd", parser_class=_Parser, metavar="COMMAND")  # none given: main lists them
-    # every command takes --quiet: no progress on stderr (stdout, the results, is the same either way)
+    quiet = _quiet_parent()
+    _add_tune_parser(sub, quiet)
+    _add_demo_parser(sub, quiet)
+    _add_closed_form_parser(sub, quiet)
+    _add_bode_parser(sub, quiet)
+    _add_reproduce_parser(sub, quiet)
+    _add_study_parser(sub, quiet)
+    add_export_parser(sub, parents=[quiet])
+    add_envelope_parser(sub, parents=[quiet])
+    add_drive_parser(sub, parents=[quiet])
+    add_log_parser(sub, parents=[quiet])
+    return p
+
+
+def _quiet_parent() -> argparse.ArgumentParser:
+    """The options every command takes: --quiet, no progress on stderr (stdout, the results, is the same either
+    way), and --no-cache."""
     quiet = _Parser(add_help=False)
     quiet.add_argument("--quiet", action="store_true", help="no progress bars or compile notices on stderr")
     quiet.add_argument(
@@ -349,6 +387,11 @@ def build_parser() -> argparse.ArgumentParser:
         help="do not keep compiled programs on disk (default: kept in $JAXOBS_CACHE_DIR or ~/.cache/jaxobs/jax, "
         "so a second run skips most of XLA's work; JAXOBS_CACHE_DIR=off turns it off too)",
     )
+    return quiet
+
+
+def _add_tune_parser(sub: argparse._SubParsersAction, quiet: argparse.ArgumentParser) -> None:
+    """``jaxobs tune``."""
     t = sub.add_parser(
         "tune",
         help="gradient-based gain tuning from a TOML job (default: embedded WIF job)",
@@ -362,6 +405,9 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--force", action="store_true", help="overwrite results (and a checkpoint) already in --out")
     t.set_defaults(func=_cmd_tune)
 
+
+def _add_demo_parser(sub: argparse._SubParsersAction, quiet: argparse.ArgumentParser) -> None:
+    """``jaxobs demo``."""
     d = sub.add_parser(
         "demo",
         help="FLL family (SOGI-FLL, -WPF, -WIF) on paper 001 Tests A-E",
@@ -374,6 +420,9 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument("--t-event", type=float, default=0.2, help="time of the test event, s (default 0.2)")
     d.set_defaults(func=cmd_demo)
 
+
+def _add_closed_form_parser(sub: argparse._SubParsersAction, quiet: argparse.ArgumentParser) -> None:
+    """``jaxobs closed-form``."""
     c = sub.add_parser(
         "closed-form",
         help="closed-form gains with formula and source equation",
@@ -386,6 +435,9 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--json", action="store_true", help="print JSON")
     c.set_defaults(func=cmd_closed_form)
 
+
+def _add_bode_parser(sub: argparse._SubParsersAction, quiet: argparse.ArgumentParser) -> None:
+    """``jaxobs bode``."""
     b = sub.add_parser(
         "bode",
         help="Bode figures of the papers' flux observers, LESOs and FLL loops",
@@ -397,6 +449,9 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--rad-per-s", action="store_true", help="frequency axis in rad/s (default: Hz)")
     b.set_defaults(func=cmd_bode)
 
+
+def _add_reproduce_parser(sub: argparse._SubParsersAction, quiet: argparse.ArgumentParser) -> None:
+    """``jaxobs reproduce``."""
     r = sub.add_parser(
         "reproduce",
         help="reproduce a paper's experiments on the simulated drive",
@@ -419,6 +474,9 @@ def build_parser() -> argparse.ArgumentParser:
     )
     r.set_defaults(func=cmd_reproduce)
 
+
+def _add_study_parser(sub: argparse._SubParsersAction, quiet: argparse.ArgumentParser) -> None:
+    """``jaxobs study``, with the options of a distributed run."""
     st = sub.add_parser(
         "study",
         help="robustness study of FLL or sensorless-drive designs over a scenario grid (xarray/NetCDF)",
@@ -458,14 +516,8 @@ def build_parser() -> argparse.ArgumentParser:
     )
     st.set_defaults(func=_cmd_study)
 
-    add_export_parser(sub, parents=[quiet])
-    add_envelope_parser(sub, parents=[quiet])
-    add_drive_parser(sub, parents=[quiet])
-    add_log_parser(sub, parents=[quiet])
-    return p
 
-
-def main(argv=None) -> int:
+def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line.
 
     Args:
@@ -526,10 +578,11 @@ def _resume_hint(resume: str, saved):
     return lambda: f"; continue with: {resume}" if saved() else ""
 
 
-def _interrupt_hint(args) -> str:
+def _interrupt_hint(args: argparse.Namespace | None) -> str:
+    """What Ctrl-C adds to "interrupted": ``args.on_interrupt``, a text or a callable that gives it."""
     hint = getattr(args, "on_interrupt", "")
     try:
-        return hint() if callable(hint) else hint
+        return str(hint()) if callable(hint) else str(hint)
     except OSError:
         return ""
 

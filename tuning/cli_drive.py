@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import argparse
 import math
+from collections.abc import Sequence
 
 from jaxobs.drive import read_drive
 
@@ -66,8 +67,18 @@ def _fmt(v) -> str:
     return "inf" if math.isinf(v) else f"{v:.5g}"
 
 
-def cmd_drive_check(args) -> int:
-    """``jaxobs drive check``: print a drive file's derived values (module doc); 0, or a ``ValueError``."""
+def cmd_drive_check(args: argparse.Namespace) -> int:
+    """``jaxobs drive check``: print a drive file's derived values (module doc); 0, or a ``ValueError``.
+
+    Args:
+        args: The parsed command line.
+
+    Returns:
+        0.
+
+    Raises:
+        ValueError: Bad input (one line, exit 2).
+    """
     f = read_drive(args.file)
     print(f"drive file {args.file}: {f.name}, valid")
     if f.dual is not None:
@@ -103,7 +114,9 @@ def cmd_drive_check(args) -> int:
     return 0
 
 
-def add_drive_parser(subparsers, parents=()) -> argparse.ArgumentParser:
+def add_drive_parser(
+    subparsers: argparse._SubParsersAction, parents: Sequence[argparse.ArgumentParser] = ()
+) -> argparse.ArgumentParser:
     """Add ``jaxobs drive check`` to the CLI's subparsers.
 
     Args:

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import math
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
@@ -97,8 +98,18 @@ def events(t0: float, ts: float, speed: np.ndarray | None, amp: np.ndarray) -> l
     return [line for _, line in sorted(found)]
 
 
-def cmd_log_check(args) -> int:
-    """``jaxobs log check``: read a log as declared and print what was understood (module doc)."""
+def cmd_log_check(args: argparse.Namespace) -> int:
+    """``jaxobs log check``: read a log as declared and print what was understood (module doc).
+
+    Args:
+        args: The parsed command line.
+
+    Returns:
+        0.
+
+    Raises:
+        ValueError: Bad input (one line, exit 2).
+    """
     import warnings
 
     from jaxobs.signals import RecordingLayout, RecordingWarning, read_drive_log
@@ -137,11 +148,11 @@ def cmd_log_check(args) -> int:
     print(f"  sampled at {rate:.6g} Hz (ts = {log.ts:.6g} s), from {log.t0:.6g} s, {log.n * log.ts:.6g} s long")
     speed = amp = None
     n = log.n
-    if log.theta_e is not None or log.omega_e is not None:
-        if log.omega_e is not None:
-            speed = np.asarray(log.omega_e[0:n])
-        else:
-            speed = np.gradient(np.asarray(log.theta_e[0:n]), log.ts)
+    if log.omega_e is not None:
+        speed = np.asarray(log.omega_e[0:n])
+    elif log.theta_e is not None:
+        speed = np.gradient(np.asarray(log.theta_e[0:n]), log.ts)
+    if speed is not None:
         w_lo, w_hi = float(np.min(speed)), float(np.max(speed))
         p = shown.pole_pairs or (machine.p if machine is not None else None)
         rpm = (
@@ -164,7 +175,9 @@ def cmd_log_check(args) -> int:
     return 0
 
 
-def add_log_parser(subparsers, parents=()) -> argparse.ArgumentParser:
+def add_log_parser(
+    subparsers: argparse._SubParsersAction, parents: Sequence[argparse.ArgumentParser] = ()
+) -> argparse.ArgumentParser:
     """Add ``jaxobs log check`` to the CLI's subparsers.
 
     Args:

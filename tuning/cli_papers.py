@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import argparse
 import inspect
 import json
 import re
@@ -65,7 +66,18 @@ REPRODUCE_DUAL_FILES = (
 REPRODUCE_DUAL_LAYOUT_FILES = ("leso_dual_fig16_speed_ramp_330V_layout.png",)
 
 
-def cmd_demo(args) -> int:
+def cmd_demo(args: argparse.Namespace) -> int:
+    """``jaxobs demo``: the FLL family on paper 001's Tests A-E, a table and its figure.
+
+    Args:
+        args: The parsed command line.
+
+    Returns:
+        0, or 1 when a test failed.
+
+    Raises:
+        ValueError: Bad input (one line, exit 2).
+    """
     enable_x64()
     from jaxobs.plot import fll_demo_figure
     from jaxobs.reproduce.figures import fll_figure
@@ -107,7 +119,14 @@ def _inputs(cls) -> tuple:
 
 
 def cf_flag(name: str) -> str:
-    """The command-line flag of a closed-form input: ``Rs`` -> ``--rs``, ``omega_n`` -> ``--omega-n``."""
+    """The command-line flag of a closed-form input: ``Rs`` -> ``--rs``, ``omega_n`` -> ``--omega-n``.
+
+    Args:
+        name: The input's name (a keyword of the class's ``closed_form_design``).
+
+    Returns:
+        The flag.
+    """
     return "--" + name.lower().replace("_", "-")
 
 
@@ -157,7 +176,18 @@ def closed_form_rows(design: str, values: dict) -> dict:
     }
 
 
-def cmd_closed_form(args) -> int:
+def cmd_closed_form(args: argparse.Namespace) -> int:
+    """``jaxobs closed-form``: a design rule's closed-form gains with their formulas and sources.
+
+    Args:
+        args: The parsed command line.
+
+    Returns:
+        0.
+
+    Raises:
+        ValueError: Bad input (one line, exit 2).
+    """
     enable_x64()
     values = {}
     for flag, (dest, _) in cf_flags().items():
@@ -182,7 +212,15 @@ def cmd_closed_form(args) -> int:
     return 0
 
 
-def cmd_bode(args) -> int:
+def cmd_bode(args: argparse.Namespace) -> int:
+    """``jaxobs bode``: the Bode figures of the papers' observers and loops.
+
+    Args:
+        args: The parsed command line.
+
+    Returns:
+        0.
+    """
     enable_x64()
     from jaxobs.plot import paper_bode_figures
 
@@ -219,8 +257,18 @@ def _error_figures(traces, names, paper: str, specs, out: Path):
     return paths
 
 
-def reproduce_files(args) -> tuple:
-    """The figures ``reproduce`` writes; settles ``args.machine`` (None: "dual" for leso, "single" for flux)."""
+def reproduce_files(args: argparse.Namespace) -> tuple[str, ...]:
+    """The figures ``reproduce`` writes; settles ``args.machine`` (None: "dual" for leso, "single" for flux).
+
+    Args:
+        args: The parsed command line (``paper``, ``machine``).
+
+    Returns:
+        The figures' file names.
+
+    Raises:
+        ValueError: An unknown paper, or the dual machine asked of paper 000.
+    """
     if args.paper not in REPRODUCE_FILES:
         raise ValueError(f"reproduce: unknown paper {args.paper!r}")
     if args.machine is None:  # 002's machine is the dual three-phase IPMSM: its rows come by default
@@ -231,7 +279,18 @@ def reproduce_files(args) -> tuple:
     return REPRODUCE_FILES[args.paper] + (dual if args.machine == "dual" else ())
 
 
-def cmd_reproduce(args) -> int:
+def cmd_reproduce(args: argparse.Namespace) -> int:
+    """``jaxobs reproduce``: a paper's experiments on the simulated drive, with its figures.
+
+    Args:
+        args: The parsed command line.
+
+    Returns:
+        0, or 1 when a simulation diverged.
+
+    Raises:
+        ValueError: Bad input (one line, exit 2).
+    """
     enable_x64()
     files = reproduce_files(args)
     args.out = args.out or f"out/reproduce-{args.paper}"

@@ -5,6 +5,7 @@ anyone computes; every process checks that all were given the same study (sha256
 
 from __future__ import annotations
 
+import argparse
 import contextlib
 import errno
 import hashlib
@@ -12,17 +13,30 @@ import json
 import os
 import socket
 import sys
+from collections.abc import Callable, Hashable
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import jaxobs
-from jaxobs.runtime.chunkstore import AbstractChunkSink
+from jaxobs.runtime.chunkstore import AbstractChunkSink, ChunkStore
 
 from .job import JobError, read_toml
+from .outdir import OutDir
 from .study_file import KINDS, WHAT
 
+if TYPE_CHECKING:
+    import numpy as np
 
-def distributed_asked(args) -> bool:
-    """Whether ``study`` was given any of the distributed run's options."""
+
+def distributed_asked(args: argparse.Namespace) -> bool:
+    """Whether ``study`` was given any of the distributed run's options.
+
+    Args:
+        args: The parsed command line.
+
+    Returns:
+        Whether any of --coordinator, --num-processes, --process-id, --timeout, --distributed was given.
+    """
     given = (args.coordinator, args.num_processes, args.process_id, args.timeout)
     return args.distributed or any(v is not None for v in given)
 
@@ -31,14 +45,23 @@ def refuse_unsplittable(path: Path) -> None:
     """Drive and recording studies run in one process: refused from the raw TOML, before JAX starts.
 
     A file that does not parse passes here; :func:`jaxobs_tuning.study_file.load_study` reports it after joining
-    (every process reads the same file, so every process stops with the same one-line error)."""
+    (every process reads the same file, so every process stops with the same one-line error).
+
+    Args:
+        path: The study file.
+
+    Raises:
+        ValueError: A drive or recording study.
+    """
 
     try:
         raw, _ = read_toml(path, WHAT)
     except JobError:
         return
-    st = raw.get("study") if isinstance(raw.get("study"), dict) else {}
-    name = st.get("kind") if isinstance(st.get("kind"), str) else "fll"  # an unknown kind: load_study's error
+    st = raw.get("study")
+    st = st if isinstance(st, dict) else {}
+    name = st.get("kind")
+    name = name if isinstance(name, str) else "fll"  # an unknown kind: load_study's error
     family = KINDS.get(name, KINDS["fll"])[0]
     kind = "drive" if family.closed_loop else "recording" if "recording" in st else None
     if kind is not None:
@@ -48,10 +71,20 @@ def refuse_unsplittable(path: Path) -> None:
         )
 
 
-def join_distributed(args):
+def join_distributed(args: argparse.Namespace) -> tuple[int, int]:
     """``study --coordinator/--num-processes/--process-id/--distributed``: join the run
     (jaxobs.init_distributed); (process id, process count).  Without ``--distributed`` all three are
-    required; with it, what is not given comes from the environment (JAX_COORDINATOR_ADDRESS, SLURM, Open MPI)."""
+    required; with it, what is not given comes from the environment (JAX_COORDINATOR_ADDRESS, SLURM, Open MPI).
+
+    Args:
+        args: The parsed command line.
+
+    Returns:
+        ``(process id, process count)``.
+
+    Raises:
+        ValueError: Options missing or inconsistent.
+    """
     given = (args.coordinator, args.num_processes, args.process_id)
     if not args.distributed:
         missing = [f for f, v in zip(("--coordinator", "--num-processes", "--process-id"), given) if v is None]
@@ -159,12 +192,23 @@ class SharedChunks(AbstractChunkSink):
         pid: This process's index.
     """
 
-    def __init__(self, store, pid: int):
+    def __init__(self, store: ChunkStore | None, pid: int):
         self.store, self.pid = store, pid
-        self.mask = None
+        self.mask: np.ndarray | None = None  # (design, chunk): the chunks done, once started
         self.designs: list = []
 
     def start(self, *, n: int, chunk: int, devices: int, designs: list) -> None:
+        """Open process 0's store and share which chunks are done with every process.
+
+        Args:
+            n: The scenarios.
+            chunk: Scenarios per chunk.
+            devices: The devices a chunk is split over.
+            designs: The designs' names.
+
+        Raises:
+            ValueError: Process 0 cannot use its store (in every process).
+        """
         import numpy as np
         from jax.experimental import multihost_utils
 
@@ -186,36 +230,80 @@ class SharedChunks(AbstractChunkSink):
             raise ValueError("process 0 cannot use its study.chunks (its error says why); nothing computed")
         self.mask = got[:-1].reshape(mask.shape)
 
-    def done(self, design, i: int) -> bool:
+    def done(self, design: Hashable, i: int) -> bool:
+        """Whether chunk ``i`` of ``design`` is on disk (the same answer in every process).
+
+        Args:
+            design: The design's name.
+            i: The chunk's index.
+
+        Returns:
+            Whether it is done.
+
+        Raises:
+            RuntimeError: Called before :meth:`start`.
+        """
+        if self.mask is None:
+            raise RuntimeError("SharedChunks.done: called before start")
         return bool(self.mask[self.designs.index(str(design)), i])
 
-    def put(self, design, i: int, values: dict) -> None:
+    def put(self, design: Hashable, i: int, values: dict) -> None:
+        """Keep a computed chunk (process 0 only; the others hold nothing).
+
+        Args:
+            design: The design's name.
+            i: The chunk's index.
+            values: Its values by metric.
+        """
         if self.store is not None:
             self.store.put(design, i, values)
 
-    def load(self, design) -> dict:
+    def load(self, design: Hashable) -> dict:
+        """A design's values from process 0's store; in the others, the end of their run (``_ShareComputed``).
+
+        Args:
+            design: The design's name.
+
+        Returns:
+            Its values by metric.
+        """
         if self.store is None:
             raise _ShareComputed
         return self.store.load(design)
 
     @property
     def resumed(self) -> int:
+        """The chunks an earlier run had left on disk (0 outside process 0)."""
         return 0 if self.store is None else self.store.resumed
 
     @property
     def total(self) -> int:
+        """The study's chunks (0 outside process 0)."""
         return 0 if self.store is None else self.store.total
 
     def retire(self) -> None:
+        """Retire process 0's store (:meth:`jaxobs.runtime.chunkstore.ChunkStore.retire`)."""
         if self.store is not None:
             self.store.retire()
 
     def remove(self) -> None:
+        """Remove process 0's store (:meth:`jaxobs.runtime.chunkstore.ChunkStore.remove`)."""
         if self.store is not None:
             self.store.remove()
 
 
-def distributed_study(name, designs, axes, opts, out: Path, args, rank, write, outdir, store) -> int:
+def distributed_study(
+    name: str,
+    designs: dict,
+    axes: dict,
+    opts: dict,
+    out: Path,
+    args: argparse.Namespace,
+    rank: tuple[int, int],
+    write: Callable[..., int],
+    outdir: OutDir,
+    store: ChunkStore | None,
+) -> int:
     """One process of a study split over processes: every process computes its share of every chunk
     (jaxobs.studies.study.run_study), process 0 alone checks and locks ``--out`` (``outdir``, an
     :class:`~jaxobs_tuning.outdir.OutDir`) and writes it (and shows progress) by

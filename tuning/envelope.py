@@ -13,20 +13,39 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import math
+from collections.abc import Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING, cast
 
 from jaxobs.io.provenance import cf_labels
 
-from .job import COMPONENTS, JobError, job_drive, load_job, parse_job
+from .job import COMPONENTS, Job, JobError, job_drive, load_job, parse_job
 from .outdir import OutDir, atomic_path, safe_name
 from .results import load_result, result_designs
+
+if TYPE_CHECKING:
+    from jaxobs.drive import DriveFile
+    from jaxobs.observers.base import AbstractDriveObserver
+
+    from .job.verify import EnvelopeSpec
 
 ENVELOPE_FILES = ("envelope.nc", "envelope.png")
 
 
-def envelope_designs(path: Path, drive: str | None = None):
-    """(job, {design name: observer}) of a job file or of a result.json (its job and its values); ``drive``: a
-    drive file that replaces the result's job's (a result keeps its job's drive file inline)."""
+def envelope_designs(path: Path, drive: str | None = None) -> tuple[Job, dict[str, AbstractDriveObserver]]:
+    """(job, {design name: observer}) of a job file or of a result.json (its job and its values).
+
+    Args:
+        path: The job file (TOML) or result.json.
+        drive: A drive file that replaces the result's job's (a result keeps its job's drive file inline);
+            None: the job's own.
+
+    Returns:
+        ``(job, designs)``.
+
+    Raises:
+        JobError: A job that is not a drive job, or ``drive`` with a job file.
+    """
     if path.suffix == ".json":  # the one reader of result files (jaxobs_tuning.results), as study and export
         result = load_result(path)
         raw = result["job"]
@@ -92,7 +111,18 @@ def _count_or_list(what: str, unit: str, low: int, high: int, floor: float):
     return parse
 
 
-def cli_envelope(args) -> int:
+def cli_envelope(args: argparse.Namespace) -> int:
+    """``jaxobs envelope``: the operating envelope of a drive job's designs (module doc).
+
+    Args:
+        args: The parsed command line.
+
+    Returns:
+        The exit status: 0.
+
+    Raises:
+        ValueError: Bad input (one line, exit 2).
+    """
     import jax
 
     jax.config.update("jax_enable_x64", True)
@@ -103,14 +133,16 @@ def cli_envelope(args) -> int:
 
     path = Path(args.source)
     job, designs = envelope_designs(path, getattr(args, "drive", None))
+    assert job.drive is not None  # envelope_designs refuses a job without a drive
     spec = dataclasses.replace(job.drive, loop="sensorless", start="steady", handover=0.0)
     # a dual three-phase drive file maps the whole dual machine (its [machine] per set is what observers assume)
-    par = spec.drive_file.machine if spec.drive_file.dual is None else spec.drive_file.dual
+    df = cast("DriveFile", spec.drive_file)  # the job's checked drive file (jaxobs_tuning.job.spec.DriveSpec)
+    par = df.machine if df.dual is None else df.dual
     drive = job_drive(spec, dual=True)
-    ax = par if spec.drive_file.dual is None else par.m  # the whole machine's ratings, ψf and p set the axes
+    ax = df.machine if df.dual is None else df.dual.m  # the whole machine's ratings, ψf and p set the axes
     # a count: the default axes (log-spaced speeds from 1 % of rated to the drive's limit, loads 0..rated); or
     # the values themselves, within the drive's limit and the study's loads
-    mech = spec.drive_file.table.get("machine", {}).get("max_speed_rpm")  # the file's mechanical limit, if any
+    mech = df.table.get("machine", {}).get("max_speed_rpm")  # the file's mechanical limit, if any
     if isinstance(args.speeds, tuple):
         top = speed_limit_rpm(ax, drive, mech)
         if args.speeds[-1] > top:
@@ -122,7 +154,7 @@ def cli_envelope(args) -> int:
     n = len(speeds) * len(loads)
     # the job's own settle and (shortest) window where it states them ([envelope]), else the library's defaults
     # (jaxobs.analysis.envelope.STABILITY_METHODS: settle 0.2 s, windows of at least 0.2 s)
-    env = job.envelope
+    env = cast("EnvelopeSpec | None", job.envelope)  # the job's [envelope] (Job types it object)
     stab = {} if env is None else {"settle": env.settle, "window": env.window}
     what = (
         f"{path}: {job.component} on {spec.machine}, designs {', '.join(designs)}; {len(speeds)} speeds "
@@ -181,9 +213,18 @@ def cli_envelope(args) -> int:
     return 0
 
 
-def add_envelope_parser(subparsers, parents=()) -> argparse.ArgumentParser:
-    """Add ``jaxobs envelope`` to the CLI's subparsers; ``parents``: the options every command shares (--quiet,
-    --no-cache)."""
+def add_envelope_parser(
+    subparsers: argparse._SubParsersAction, parents: Sequence[argparse.ArgumentParser] = ()
+) -> argparse.ArgumentParser:
+    """Add ``jaxobs envelope`` to the CLI's subparsers.
+
+    Args:
+        subparsers: The CLI's subparsers.
+        parents: The parsers of the options every command shares (--quiet, --no-cache).
+
+    Returns:
+        The ``envelope`` parser.
+    """
     e = subparsers.add_parser(
         "envelope",
         help="where a drive job's designs hold: stability and synchronism over speed x load",

@@ -15,29 +15,28 @@ both see the sanitized derivative.
 
 Gradients.  A scenario's gradient is taken in forward mode when the job has at most :data:`FORWARD_MAX`
 gains (every preset: 1–3): one tangent per gain pushed through the simulation beside its one primal run,
-nothing stored per step.  Reverse mode through a whole trajectory stores the carry of every step and
-runs it again backwards; on this CPU it cost 2.1× forward mode on a drive job (000's SOIFO, 6 scenarios ×
-1.2 s: 605 vs 290 ms, compile 10.0 vs 6.0 s) and 1.5× on the default FLL job (72 × 0.4 s; 2026-11-25,
-docs/performance.md).  The two agree to rounding (tests/test_tuning.py).  With more gains, or with the
-stability-margin term (its Lyapunov exponents come from the loop's own tangents, a reverse-mode program),
-reverse mode.  An observer on a signal is simulated by the loop made fast (``SaveAll(fast=True)``: its
-inputs a block at a time, the same outputs as the plain scan to rounding; the default job's forward-mode
-evaluation 44 → 25 ms with the harmonic signal's cosines of jaxobs.signals), for the solver only: it
-compiles about 1 s longer, which the scoring and the report's figures (run once per design) would pay
-without gaining; they keep the plain scan (the same numbers to rounding).  The closed-loop drive keeps the
-plain scan: the fast loop made its forward-mode evaluation slower (290 → 352 ms, compile 6.0 → 8.1 s; it
-has no block of inputs to gain, and its unrolled step compiles longer).
+nothing stored per step; reverse mode through a whole trajectory stores the carry of every step and runs it
+again backwards, the slower of the two on these jobs (docs/performance.md).  The two agree to rounding
+(tests/test_tuning.py).  With more gains, or with the stability-margin term (its Lyapunov exponents come
+from the loop's own tangents, a reverse-mode program), reverse mode.  An observer on a signal is simulated
+by the loop made fast (``SaveAll(fast=True)``: its inputs a block at a time, the same outputs as the plain
+scan to rounding; faster to evaluate, docs/performance.md), for the solver only: it compiles longer, which
+the scoring and the report's figures (run once per design) would pay without gaining; they keep the plain
+scan (the same numbers to rounding).  The closed-loop drive keeps the plain scan: it has no block of inputs
+to gain, and its unrolled step compiles longer (docs/performance.md).
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any, cast
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+from numpy.typing import ArrayLike
 
 from jaxobs import OnSignal, SaveAll, simulate
 from jaxobs import metrics as M
@@ -52,6 +51,9 @@ from .aggregations import AbstractAggregation, Mean
 from .base import AbstractObjective
 from .params import Parametrization
 
+if TYPE_CHECKING:
+    from jaxobs.drive.loop import ClosedLoop
+
 __all__ = [
     "TERM_METRICS",
     "DRIVE_METRICS",
@@ -62,6 +64,14 @@ __all__ = [
     "AbstractObjective",
     "Objective",
 ]
+
+
+def _exact_form(name: str) -> Callable[..., Any]:
+    """The exact form of the metric ``name`` (every flag has one): ``exact(sol, scenario, ctx)``."""
+    exact = M.METRICS[name].exact
+    if exact is None:
+        raise ValueError(f"metric {name!r} has no exact form")
+    return exact
 
 
 @eqx.filter_jit
@@ -243,7 +253,7 @@ class Objective(AbstractObjective):
         plainly (module doc); the scoring and the figures run once per design, where compile time counts."""
         return SaveAll(fast=not self.closed_loop)
 
-    def value(self, theta, scenarios):
+    def value(self, theta: jax.Array, scenarios: Any) -> jax.Array:
         """The objective at ``theta`` on ``scenarios``, with the sanitized derivative (module doc).
 
         Args:
@@ -262,7 +272,8 @@ class Objective(AbstractObjective):
     def _exponent(self, comp, sig):
         """A system metric's value (the stability margin): the largest non-neutral Lyapunov exponent (1/s) of the
         loop that ``comp`` (bound to ``sig``) closes, :data:`MARGIN_KW`."""
-        return lyapunov(self._bound_system(comp, sig), **MARGIN_KW).exponent  # a drive job: the closed loop
+        loop = cast("ClosedLoop", self._bound_system(comp, sig))  # a drive job: the closed loop
+        return lyapunov(loop, **MARGIN_KW).exponent
 
     def _term(self, term, comp, sol, sig):
         if term.measure.kind == "system":
@@ -276,9 +287,8 @@ class Objective(AbstractObjective):
         # Diverged: the final state not finite (a non-finite value never leaves these systems' states again, as
         # SaveFinal's ok reads it); a non-finite output the metrics read makes the value non-finite, which
         # _per_scenario_value_and_grad counts too.  Not sol.ok, every output over the horizon: asking for it
-        # kept every output of the loop alive, those no metric reads included (an evaluation of the default job
-        # 47 -> 33 ms, of soifo.toml's drive job 290 -> 150 ms).  The scores' diverged counts keep sol.ok
-        # (_scenario_metrics).
+        # kept every output of the loop alive, those no metric reads included (slower, docs/performance.md).
+        # The scores' diverged counts keep sol.ok (_scenario_metrics).
         return sum(vals), sol.final_ok
 
     def _forward_mode(self, theta) -> bool:
@@ -310,7 +320,7 @@ class Objective(AbstractObjective):
         v, g, _, _ = _per_scenario_vg(self, theta, scenarios)
         return _aggregate_and_grad(self.aggregation, v, g)
 
-    def value_and_grad(self, theta, scenarios):
+    def value_and_grad(self, theta: jax.Array, scenarios: Any) -> tuple[jax.Array, jax.Array]:
         """The objective at ``theta`` on ``scenarios`` and its gradient (module doc, "Divergence").
 
         Args:
@@ -322,7 +332,7 @@ class Objective(AbstractObjective):
         """
         return self._aggregate_with_grad(theta, scenarios)
 
-    def value_grad_diverged_overflowed(self, theta, scenarios):
+    def value_grad_diverged_overflowed(self, theta: jax.Array, scenarios: Any) -> tuple[jax.Array, jax.Array, int, int]:
         """:meth:`value_and_grad`, how many scenarios diverged and how many overflowed: a finite simulation and
         value, a gradient that is not finite (a finite but huge weight; counted with the diverged ones too).
         When the aggregate or its gradient is not finite though every scenario's value is, every scenario counts.
@@ -343,7 +353,7 @@ class Objective(AbstractObjective):
             n_over = int(v.shape[0])
         return agg_v, grad, int(np.sum(~good)), n_over
 
-    def overflowed(self, theta, scenarios, scored_good) -> int:
+    def overflowed(self, theta: jax.Array, scenarios: Any, scored_good: ArrayLike) -> int:
         """Scenarios whose simulation and weighted metrics are finite (``scored_good``: :meth:`per_scenario`'s
         mask at ``theta``) but whose tuning value or gradient is not: the objective overflows (a finite but
         huge weight), which the solver counts with the diverged scenarios, though nothing diverged.
@@ -359,7 +369,7 @@ class Objective(AbstractObjective):
         _, _, good, _ = _per_scenario_vg(self, theta, scenarios)
         return int(np.sum(np.asarray(scored_good) & ~np.asarray(good)))
 
-    def response(self, theta, sig):
+    def response(self, theta: jax.Array, sig: Any) -> tuple[jax.Array, jax.Array, jax.Array]:
         """One scenario's run at ``theta`` as the report draws it; one program for every design and scenario.
 
         Args:
@@ -402,7 +412,7 @@ class Objective(AbstractObjective):
         # the flags, reported, not tuned on: far from the truth over the steady window (lost_lock); on the drive
         # lost synchronism anywhere in the scored horizon (lost_sync) and a missed speed reference over the steady
         # window (lost_speed: e.g. a standstill start that runs backwards with a locked observer)
-        mets.update({k: M.METRICS[k].exact(sol, sig, self.ctx) for k in self.flags})
+        mets.update({k: _exact_form(k)(sol, sig, self.ctx) for k in self.flags})
         return {**mets, _OK: sol.ok}
 
     def _per_scenario_metrics(self, theta, scenarios):
@@ -430,7 +440,7 @@ class Objective(AbstractObjective):
         comp = self.param.apply(self.component, theta)
         return jax.vmap(lambda sig: self._exponent(comp, sig))(scenarios)
 
-    def per_scenario(self, theta, scenarios):
+    def per_scenario(self, theta: jax.Array, scenarios: Any) -> tuple[dict[str, np.ndarray], np.ndarray, np.ndarray]:
         """Each scenario's metrics (and its :data:`LOST_LOCK` flag), its weighted total (the penalty where
         diverged) and the good mask — no gradient.
 
@@ -457,7 +467,7 @@ class Objective(AbstractObjective):
                 mets = {**mets, key: mets[key] | ~good}
         return mets, np.where(good, total, self.penalty), good
 
-    def scores(self, theta, scenarios) -> dict:
+    def scores(self, theta: jax.Array, scenarios: Any) -> dict:
         """Objective and each metric's mean and worst over ``scenarios``.
 
         Args:
@@ -469,7 +479,7 @@ class Objective(AbstractObjective):
         """
         return self.summarize(*self.per_scenario(theta, scenarios))
 
-    def summarize(self, mets, total, good) -> dict:
+    def summarize(self, mets: Mapping[str, ArrayLike], total: ArrayLike, good: ArrayLike) -> dict:
         """:meth:`scores` from :meth:`per_scenario`'s output.  Where every scenario diverged the metrics'
         means and worsts are ``None`` (there is nothing to average), and ``"null_reason"`` says why.
 

@@ -171,7 +171,8 @@ class OutDir:
             return
         raise OutError(f"{str(self.path)!r}: could not take the lock {str(lock)!r}")
 
-    def release(self):
+    def release(self) -> None:
+        """Give the lock back (its file removed first); nothing if it is not held."""
         if self._fd is not None:
             (self.path / LOCK).unlink(missing_ok=True)  # while still holding it: see the module doc
             os.close(self._fd)

@@ -13,11 +13,15 @@ parametrization only writes the free ones, with ``eqx.tree_at``.
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
+from typing import TypeVar
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+
+_M = TypeVar("_M", bound=eqx.Module)  # the component a parametrization applies to
 
 __all__ = ["GainSpec", "Parametrization"]
 
@@ -47,6 +51,14 @@ class GainSpec:
         return lo, hi
 
     def to_theta(self, g: float) -> float:
+        """The unconstrained coordinate of a gain value (the inverse of :meth:`from_theta`).
+
+        Args:
+            g: The gain's value, within its bounds.
+
+        Returns:
+            Its θ coordinate.
+        """
         z = math.log(g) if self.log else g
         lo, hi = self._z_bounds()
         if lo is not None and hi is not None:
@@ -58,7 +70,15 @@ class GainSpec:
             return _softplus_inv(hi - z)
         return z
 
-    def from_theta(self, th):
+    def from_theta(self, th: jax.Array) -> jax.Array:
+        """The gain's value at a θ coordinate: within its bounds, whatever ``th``.
+
+        Args:
+            th: The θ coordinate.
+
+        Returns:
+            The gain's value.
+        """
         lo, hi = self._z_bounds()
         if lo is not None and hi is not None:
             z = lo + (hi - lo) * jax.nn.sigmoid(th)
@@ -88,16 +108,42 @@ class Parametrization:
         self.specs = list(specs)
         self.names = [s.name for s in self.specs]
 
-    def theta0(self):
+    def theta0(self) -> jax.Array:
+        """θ at the gains' initial values."""
         return jnp.asarray([s.to_theta(s.init) for s in self.specs], dtype=jnp.result_type(float))
 
-    def to_theta(self, values: dict):
+    def to_theta(self, values: Mapping[str, float]) -> jax.Array:
+        """θ at given gain values.
+
+        Args:
+            values: Every free gain's value, by name.
+
+        Returns:
+            The vector θ.
+        """
         return jnp.asarray([s.to_theta(float(values[s.name])) for s in self.specs], dtype=jnp.result_type(float))
 
-    def gains(self, theta) -> dict:
+    def gains(self, theta: jax.Array) -> dict[str, jax.Array]:
+        """The free gains at θ.
+
+        Args:
+            theta: The vector θ.
+
+        Returns:
+            Each gain's value, by name.
+        """
         return {s.name: s.from_theta(theta[i]) for i, s in enumerate(self.specs)}
 
-    def apply(self, component, theta):
+    def apply(self, component: _M, theta: jax.Array) -> _M:
+        """``component`` with its free gains set from θ (each in its field's dtype).
+
+        Args:
+            component: The module whose gains are free.
+            theta: The vector θ.
+
+        Returns:
+            The module with the gains at θ.
+        """
         g = self.gains(theta)
         return eqx.tree_at(
             lambda c: tuple(getattr(c, n) for n in self.names),
@@ -105,5 +151,13 @@ class Parametrization:
             tuple(jnp.asarray(g[n], dtype=getattr(component, n).dtype) for n in self.names),
         )
 
-    def values(self, theta) -> dict:
+    def values(self, theta: jax.Array) -> dict[str, float]:
+        """The free gains at θ as Python floats.
+
+        Args:
+            theta: The vector θ.
+
+        Returns:
+            Each gain's value, by name.
+        """
         return {k: float(v) for k, v in self.gains(theta).items()}

@@ -5,15 +5,20 @@ from __future__ import annotations
 import itertools
 import math
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import jax
 import numpy as np
+from numpy.typing import ArrayLike
 
 from jaxobs.core.quantities import text_unit
 from jaxobs.scenarios.families import GridSignals
 
 from .aggregations import CVaR, Mean, SmoothMax
 from .outdir import atomic_path
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
 
 
 def _subplots(*args, figsize, **kwargs):
@@ -29,11 +34,18 @@ def _subplots(*args, figsize, **kwargs):
 _STYLE = {"initial": dict(ls="--", lw=1.2, zorder=3), "closed_form": dict(lw=1.6), "tuned": dict(lw=1.2)}
 
 
-def scenario_values(spec) -> tuple[list, list]:
+def scenario_values(spec: Any) -> tuple[list, list]:
     """The axis names and the value tuple of every scenario of a job's ``ScenarioSpec``, in the objective's order.
 
     The same enumeration as the scenarios' builder (``jaxobs_tuning.job``): the Cartesian grid, or ``sample``
     random points drawn (seeded) between each axis' smallest and largest value.
+
+    Args:
+        spec: The job's ``ScenarioSpec`` (:mod:`jaxobs_tuning.job.spec`, a layer above): its axes, sample
+            and seed.
+
+    Returns:
+        The axis names, and one tuple of values per scenario.
     """
     names = list(spec.axes)
     if spec.sample:
@@ -100,10 +112,17 @@ def _has_event(spec, index: int) -> bool:
     return any(n in axes and float(v) != 0.0 for n, v in zip(names, combos[index]))
 
 
-def objective_text(objective) -> str:
+def objective_text(objective: Any) -> str:
     """What an :class:`~jaxobs_tuning.objective.Objective` minimises, in words and symbols: ``J = <aggregate>
     over the scenarios of w1·metric1 + ...``, a number (each weight is per its metric's unit), a diverged
-    scenario scoring the penalty."""
+    scenario scoring the penalty.
+
+    Args:
+        objective: The :class:`~jaxobs_tuning.objective.Objective` (its layer's peer, not imported here).
+
+    Returns:
+        The text, two lines.
+    """
     agg = objective.aggregation
     if isinstance(agg, CVaR):
         how = f"CVaR (α = {agg.alpha:g}: the mean of the worst {100 * (1 - agg.alpha):.3g} %)"
@@ -122,7 +141,9 @@ def objective_text(objective) -> str:
     )
 
 
-def convergence_figure(history: list, name: str, path: Path, objective: str | None = None, best: int | None = None):
+def convergence_figure(
+    history: list, name: str, path: Path, objective: str | None = None, best: int | None = None
+) -> Figure:
     """The objective against the iteration into ``path``; the figure.
 
     Args:
@@ -192,12 +213,30 @@ def _coincide(traces: dict, gains: dict, tol: float = 1e-3) -> dict:
 
 
 def write_report(
-    out: Path, job, obj, scenarios, thetas: dict, history: list, closed_form_totals=None, best_iteration=None
-):
+    out: Path,
+    job: Any,
+    obj: Any,
+    scenarios: Any,
+    thetas: dict,
+    history: list,
+    closed_form_totals: ArrayLike | None = None,
+    best_iteration: int | None = None,
+) -> None:
     """convergence.png and responses.png in ``out``.  ``closed_form_totals``: the closed form's per-scenario
     totals on ``scenarios`` (:meth:`Objective.per_scenario`'s second value), where the caller has them
     (else they are computed again); the responses show the scenario where it does worst.  ``best_iteration``:
-    the iteration of the tuned design, marked on convergence.png (None: the least stable value there)."""
+    the iteration of the tuned design, marked on convergence.png (None: the least stable value there).
+
+    Args:
+        out: The results folder.
+        job: The :class:`~jaxobs_tuning.job.Job` (a layer above, not imported here): its name and scenarios.
+        obj: Its :class:`~jaxobs_tuning.objective.Objective`.
+        scenarios: The scenario batch the designs are scored on.
+        thetas: Each design's θ, by label ("initial", "closed_form", "tuned").
+        history: The solver's history.
+        closed_form_totals: The closed form's per-scenario totals on ``scenarios``, or None.
+        best_iteration: The tuned design's iteration, or None.
+    """
     if history:
         convergence_figure(history, job.name, out / "convergence.png", objective_text(obj), best_iteration)
     # responses on the scenario where the closed form does worst

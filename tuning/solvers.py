@@ -80,7 +80,8 @@ class TuneResult:
     timing: dict = field(default_factory=dict)
 
     @property
-    def stopped(self) -> str:  # an alias of ``status``
+    def stopped(self) -> str:
+        """An alias of ``status``."""
         return self.status
 
 
@@ -93,7 +94,7 @@ def _entry(objective, it, value, diverged, theta) -> dict:
 
 def decide_status(
     history: list, finished: bool, tol: float, finished_reason: str, budget_reason: str, best: int | None = None
-):
+) -> tuple[str, str, int | None]:
     """The status of a run from its history.
 
     The best design is the least objective among the points that diverged in no scenario; none:
@@ -165,7 +166,7 @@ def _overflow_result(history: list, it: int, n_over: int, seconds: float) -> Tun
 def _show(bar: Progress, i: int, solver: AbstractSolver, value, best, diverged, first: bool) -> None:
     """One iteration done; the objective, the best stable value and the diverged scenarios every
     ``solver.progress_every`` iterations."""
-    post = {}
+    post: dict[str, str | int] = {}
     if i % solver.progress_every == 0 or i == solver.steps:
         post = dict(objective=f"{value:.6g}", best=f"{best:.6g}")
         if diverged:
@@ -202,14 +203,15 @@ def _save_checkpoint(path: Path, it, theta, opt_state, best_theta, best_value, h
         history=history,
         n_leaves=len(leaves),
     )
-    entries = dict(
+    entries: dict[str, Any] = dict(  # Any: np.savez's stub types its keywords as its options (allow_pickle)
         meta=np.asarray(json.dumps(meta, allow_nan=False)),
         theta=np.asarray(theta),
         best_theta=np.asarray(best_theta),
         **arrays,
     )
     buf = io.BytesIO()
-    np.savez(buf, **entries, **{DIGEST: np.asarray(content_digest(entries))})
+    stored: dict[str, Any] = {**entries, DIGEST: np.asarray(content_digest(entries))}  # Any: as entries
+    np.savez(buf, **stored)
     # a random, O_EXCL|O_NOFOLLOW temp name beside the checkpoint, renamed by _replace (looked up now: tests
     # patch it to kill a run between the write and the rename)
     atomic_write_bytes(path, buf.getvalue(), replace=_replace)
@@ -302,7 +304,7 @@ class AbstractSolver(abc.ABC):
     def run(
         self,
         objective: AbstractObjective,
-        theta0,
+        theta0: jax.Array,
         *,
         scenarios: Any = None,
         checkpoint: Path | None = None,
@@ -370,7 +372,15 @@ class OptaxSolver(AbstractSolver):
                 raise ValueError(f"OptaxSolver.{fld} must be an integer >= 1, got {v!r}")
 
     def run(
-        self, objective, theta0, *, scenarios=None, checkpoint=None, resume=False, quiet=False, fingerprint=None
+        self,
+        objective: AbstractObjective,
+        theta0: jax.Array,
+        *,
+        scenarios: Any = None,
+        checkpoint: Path | None = None,
+        resume: bool = False,
+        quiet: bool = False,
+        fingerprint: str | None = None,
     ) -> TuneResult:
         """Minimise ``objective`` from θ0, with checkpoints.
 
@@ -526,8 +536,30 @@ class OptimistixSolver(AbstractSolver):
         _check_budget("OptimistixSolver", self.steps, self.tol, self.progress_every)
 
     def run(
-        self, objective, theta0, *, scenarios=None, checkpoint=None, resume=False, quiet=False, fingerprint=None
+        self,
+        objective: AbstractObjective,
+        theta0: jax.Array,
+        *,
+        scenarios: Any = None,
+        checkpoint: Path | None = None,
+        resume: bool = False,
+        quiet: bool = False,
+        fingerprint: str | None = None,
     ) -> TuneResult:
+        """Minimise ``objective`` from θ0 by the minimiser's own steps (no checkpoints).
+
+        Args:
+            objective: The :class:`~jaxobs_tuning.base.AbstractObjective`.
+            theta0: The initial θ.
+            scenarios: The batch every evaluation takes (None: an objective without data).
+            checkpoint: Not used: an optimistix run keeps no checkpoint.
+            resume: Not used.
+            quiet: No progress lines.
+            fingerprint: Not used.
+
+        Returns:
+            The :class:`TuneResult`.
+        """
         t_start = time.time()
         solver = self.minimiser
         # the objective and its scenarios are optimistix's args: inputs of the compiled step, not its constants
@@ -585,7 +617,7 @@ class OptimistixSolver(AbstractSolver):
         )
 
 
-def as_solver(optimizer) -> AbstractSolver:
+def as_solver(optimizer: AbstractSolver | optax.GradientTransformation | optx.AbstractMinimiser) -> AbstractSolver:
     """A solver object for ``optimizer``.
 
     Args:
@@ -612,8 +644,8 @@ def as_solver(optimizer) -> AbstractSolver:
 
 def tune(
     objective: AbstractObjective,
-    optimizer,
-    theta0=None,
+    optimizer: AbstractSolver | optax.GradientTransformation | optx.AbstractMinimiser,
+    theta0: jax.Array | None = None,
     *,
     scenarios: Any = None,
     checkpoint: Path | None = None,
@@ -643,10 +675,10 @@ def tune(
             f"tune: objective must be a jaxobs_tuning.AbstractObjective (an Objective), got {type(objective).__name__}"
         )
     solver = as_solver(optimizer)
-    theta0 = objective.param.theta0() if theta0 is None else theta0
+    start = objective.param.theta0() if theta0 is None else theta0
     return solver.run(
         objective,
-        theta0,
+        start,
         scenarios=scenarios,
         checkpoint=checkpoint,
         resume=resume,

@@ -8,13 +8,13 @@ objects themselves (``Objective(..., aggregation=CVaR(0.9))``, ``tune(objective,
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 
 import optax
 import optimistix as optx
 
-from .aggregations import CVaR, Mean, SmoothMax
-from .solvers import OptaxSolver, OptimistixSolver
+from .aggregations import AbstractAggregation, CVaR, Mean, SmoothMax
+from .solvers import AbstractSolver, OptaxSolver, OptimistixSolver
 
 __all__ = ["AGGREGATIONS", "SCHEDULES", "OPTAX", "MINIMISERS", "SOLVER_KINDS", "aggregation", "solver", "one_of"]
 
@@ -40,13 +40,20 @@ SOLVER_KINDS = (*OPTAX, *MINIMISERS)
 OPTAX_ONLY = ("learning_rate", "schedule", "patience", "checkpoint_every")
 
 
-def one_of(names) -> str:
-    """``a, b, c or d``: the allowed names, for an error message."""
+def one_of(names: Iterable[str]) -> str:
+    """``a, b, c or d``: the allowed names, for an error message.
+
+    Args:
+        names: The names, at least one.
+
+    Returns:
+        The names joined.
+    """
     names = list(names)
     return names[0] if len(names) == 1 else ", ".join(names[:-1]) + " or " + names[-1]
 
 
-def aggregation(name: str, *, alpha: float = 0.9, temperature: float | None = None):
+def aggregation(name: str, *, alpha: float = 0.9, temperature: float | None = None) -> AbstractAggregation:
     """The aggregation named ``name`` (:data:`AGGREGATIONS`).
 
     Args:
@@ -75,7 +82,7 @@ def solver(
     tol: float = 1e-6,
     checkpoint_every: int = 5,
     progress_every: int = 1,
-):
+) -> AbstractSolver:
     """The solver named ``kind`` with a job's ``[solver]`` settings; its ``name`` is the kind.
 
     Args:

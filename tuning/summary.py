@@ -5,6 +5,10 @@ from __future__ import annotations
 
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from xarray import Dataset
 
 
 def _fmt(v, spec=">14.6g") -> str:
@@ -32,7 +36,15 @@ _LINEAR_ROWS = (
 )
 
 
-def print_summary(result: dict, out: Path, timing: dict | None = None):
+def print_summary(result: dict, out: Path, timing: dict | None = None) -> None:
+    """Print a tuning run's table on stdout: gains, linear margins, objective and worst cases of the initial,
+    closed-form and tuned designs, then the files written.
+
+    Args:
+        result: result.json's content.
+        out: The results folder.
+        timing: timing.json's content (its ``total_s`` printed), or None.
+    """
     g, s, lin = result["gains"], result["scores"], result.get("linear", {})
     designs = ("initial", "closed_form", "tuned")
     heads = "".join(f"{h:>14}" for h in ("initial", "closed form", "tuned"))
@@ -109,11 +121,18 @@ def print_summary(result: dict, out: Path, timing: dict | None = None):
     print(f"results: {out / 'result.json'} ({', '.join(n for n in beside if (out / n).exists())})")
 
 
-def study_warnings(ds) -> list[str]:
+def study_warnings(ds: Dataset) -> list[str]:
     """One line per design of a study's Dataset (FLL or drive) that diverged, lost lock or (drive studies,
     ``lost_speed_count``) missed its speed reference in any scenario: ``"<design>: diverged in D, lost lock in
     L[, lost speed in S] of N scenarios"``; none for a design that lost nothing.  ``jaxobs study`` prints them
-    on stderr after its table, so that a summary piped away still says what was lost."""
+    on stderr after its table, so that a summary piped away still says what was lost.
+
+    Args:
+        ds: The study's Dataset.
+
+    Returns:
+        The lines, in design order.
+    """
     n = int(ds.attrs["scenarios"])
     drive = "lost_speed_count" in ds
     lines = []

@@ -29,10 +29,15 @@ from __future__ import annotations
 import dataclasses
 import math
 import re
+from collections.abc import Sequence
+from typing import Any
 
 import equinox as eqx
 import jax
 import numpy as np
+from numpy.typing import ArrayLike
+
+from jaxobs.core.validate import key_part
 
 from .ir import Assign, If, Let, S, c_literal, count, ctype, deps, evaluate, ops_summary, prune, render
 from .lower import Emitter, Walker
@@ -55,22 +60,18 @@ __all__ = [
 # --------------------------------------------------------------------------------------------
 
 
-def _key_part(k):
-    """A key path entry's name, key or index (jaxobs.drive.scenario names its batch's leaves alike)."""
-    if isinstance(k, jax.tree_util.GetAttrKey):
-        return k.name
-    if isinstance(k, (jax.tree_util.DictKey, jax.tree_util.FlattenedIndexKey)):
-        return k.key
-    if isinstance(k, jax.tree_util.SequenceKey):
-        return k.idx
-    return k
+def leaf_name(path: Sequence[Any]) -> str:
+    """A pytree key path as a C identifier: ``.rule.f1`` -> ``rule_f1``, ``[0]`` (a tuple's) -> ``leaf0``.
 
+    Args:
+        path: The key path (:func:`jax.tree_util.tree_flatten_with_path`'s).
 
-def leaf_name(path) -> str:
-    """A pytree key path as a C identifier: ``.rule.f1`` -> ``rule_f1``, ``[0]`` (a tuple's) -> ``leaf0``."""
+    Returns:
+        The identifier.
+    """
     parts = []
     for k in path:
-        parts.append(str(_key_part(k)))
+        parts.append(str(key_part(k)))
     name = re.sub(r"\W", "_", "_".join(parts)) or "value"
     return f"leaf{name}" if name[0].isdigit() else name
 
@@ -99,6 +100,7 @@ class Leaf:
 
     @property
     def size(self) -> int:
+        """Its number of scalars."""
         return int(np.prod(self.shape, dtype=int))
 
     def scalars(self) -> list[str]:
@@ -120,9 +122,16 @@ class CStep:
     has_branch: bool
     block: list  # the statements of the body (jaxobs_tuning.export.ir)
 
-    def run(self, state: list, u) -> tuple[list, np.ndarray]:
-        """The emitted step on numpy scalars: ``state`` the values of the state leaves (as ``Leaf.value``),
-        ``u`` the inputs; returns (the new state leaves, the outputs y).  The C, run in Python."""
+    def run(self, state: list, u: ArrayLike) -> tuple[list, np.ndarray]:
+        """The emitted step on numpy scalars: the C, run in Python.
+
+        Args:
+            state: The values of the state leaves (as ``Leaf.value``).
+            u: The inputs.
+
+        Returns:
+            ``(the new state leaves, the outputs y)``.
+        """
         env = {}
         for g in self.gains:
             for i, v in enumerate(np.asarray(g.value).reshape(-1)):
@@ -146,10 +155,12 @@ class CStep:
 
     @property
     def input_names(self) -> list:
+        """The names of the inputs' scalars, u[0..] in order."""
         return [n for leaf in self.inputs for n in leaf.scalars()]
 
     @property
     def output_names(self) -> list:
+        """The names of the outputs' scalars, y[0..] in order."""
         return [n for leaf in self.outputs for n in leaf.scalars()]
 
 
@@ -162,15 +173,36 @@ def _leaves(tree, values=True) -> list:
 
 
 def gain_macro(leaf: Leaf, i: int | None = None) -> str:
+    """The C macro of a gain's scalar: ``JX_<NAME>`` or ``JX_<NAME>_<i>``.
+
+    Args:
+        leaf: The gain's leaf.
+        i: The scalar's index in it (None: a scalar leaf).
+
+    Returns:
+        The macro's name.
+    """
     return "JX_" + leaf.name.upper() + ("" if i is None else f"_{i}")
 
 
-def generate(observer, state, u, *, input_names=None) -> CStep:
+def generate(observer: eqx.Module, state: Any, u: Any, *, input_names: Sequence[str] | None = None) -> CStep:
     """``observer.step(state, u)`` as the body of a C function ``jx_step(jx_state *s, const T *u, T *y)``.
 
     ``state`` and ``u`` give the structure, shapes and dtypes (their values: the initial state, recorded in
     the result); the observer's array leaves become named constants ``JX_<PATH>``.  ``input_names`` names
     the scalars of ``u`` (default: its pytree paths).  Floats must be all float32 or all float64.
+
+    Args:
+        observer: The observer (any module with a pure ``step(state, u) -> (state, out)``).
+        state: Its state.
+        u: An input of its step.
+        input_names: The names of ``u``'s scalars (default: its pytree paths).
+
+    Returns:
+        The :class:`CStep`.
+
+    Raises:
+        ValueError: A primitive or dtype the export cannot write as C.
     """
     params, static = eqx.partition(observer, eqx.is_array)
     gains = _leaves(params)
@@ -256,7 +288,14 @@ def generate(observer, state, u, *, input_names=None) -> CStep:
 
 
 def is_angle(name: str) -> bool:
-    """Outputs named ``theta...`` are angles (rad): the check compares them modulo 2π."""
+    """Whether an output is an angle (rad), compared modulo 2π by the check: those named ``theta...``.
+
+    Args:
+        name: The output's name.
+
+    Returns:
+        Whether it is an angle.
+    """
     return name.startswith("theta")
 
 
@@ -283,14 +322,28 @@ _STEP_DOC = {
 }
 
 
-def reference(observer) -> str:
-    """The first line of the observer's docstring: its paper and equations (every observer's docstring names them)."""
+def reference(observer: eqx.Module) -> str:
+    """The first line of the observer's docstring: its paper and equations (every observer's docstring names them).
+
+    Args:
+        observer: The observer.
+
+    Returns:
+        The line (its class's name where it has no docstring).
+    """
     doc = (type(observer).__doc__ or "").strip().splitlines()
     return doc[0].rstrip(".") if doc else type(observer).__name__
 
 
-def rule_doc(rule) -> dict:
-    """The rule's name, first docstring line and options; an observer without a rule integrates in its step."""
+def rule_doc(rule: Any) -> dict:
+    """The rule's name, first docstring line and options; an observer without a rule integrates in its step.
+
+    Args:
+        rule: The discretization rule (a dataclass), or None.
+
+    Returns:
+        ``{"name", "description", <option>: value...}``.
+    """
     if rule is None:
         return {"name": "none", "description": "the step's own update"}
     doc = (type(rule).__doc__ or "").strip().splitlines()
@@ -298,8 +351,15 @@ def rule_doc(rule) -> dict:
     return {"name": type(rule).__name__, "description": doc[0] if doc else "", **fields}
 
 
-def statics(observer) -> dict:
-    """The observer's static fields but ts and rule (floors, options), for the record."""
+def statics(observer: Any) -> dict:
+    """The observer's static fields but ts and rule (floors, options), for the record.
+
+    Args:
+        observer: The observer (a dataclass).
+
+    Returns:
+        Field name -> value, for the int, float, str and bool fields.
+    """
     out = {}
     for f in dataclasses.fields(observer):
         v = getattr(observer, f.name)
@@ -308,17 +368,54 @@ def statics(observer) -> dict:
     return out
 
 
-def write_c(obs32, step: CStep, kind: str, source: str, notes, rule=None) -> tuple[str, str]:
-    """observer.h and observer.c of a generated step: ``kind`` "signal" or "drive" (the step convention
-    documented in the header), ``source`` where the design comes from, ``notes`` lines for the header, ``rule``
-    the observer's discretization rule (None: it integrates in its own step)."""
-    component = type(obs32).__name__
-    c_type = "float"
-    gains = [  # (macro, its C literal, the leaf's name), one per scalar of every array leaf
+def write_c(
+    obs32: eqx.Module, step: CStep, kind: str, source: str, notes: Sequence[str], rule: Any = None
+) -> tuple[str, str]:
+    """observer.h and observer.c of a generated step.
+
+    Args:
+        obs32: The float32 observer the step was generated from.
+        step: The generated step (:func:`generate`).
+        kind: "signal" or "drive": the step convention documented in the header.
+        source: Where the design comes from, for the header.
+        notes: Lines for the header.
+        rule: The observer's discretization rule (None: it integrates in its own step).
+
+    Returns:
+        The texts of observer.h and observer.c.
+    """
+    gains = _gain_macros(step)
+    return _header_c(obs32, step, kind, source, notes, rule, gains), _source_c(obs32, step, gains)
+
+
+# the C type of the step's inputs and outputs
+_C_TYPE = "float"
+
+
+def _gain_macros(step: CStep) -> list[tuple[str, str, str]]:
+    """(macro, its C literal, the leaf's name), one per scalar of every array leaf of the gains."""
+    return [
         (gain_macro(g, None if g.shape == () else i), c_literal(v, g.dtype), g.name)
         for g in step.gains
         for i, v in enumerate(g.value.flat)
     ]
+
+
+def _state_fields(step: CStep) -> list[str]:
+    """The fields of ``jx_state``, one line per state leaf."""
+    fields = []
+    for leaf in step.state:
+        ct = "float" if leaf.dtype.kind == "f" else "int"
+        dims = "" if leaf.shape == () else f"[{leaf.size}]"
+        what = "truth value" if leaf.dtype == np.bool_ else "counter" if leaf.dtype.kind == "i" else ""
+        fields.append(f"    {ct} {leaf.name}{dims};" + (f" /* {what} */" if what else ""))
+    return fields
+
+
+def _header_c(obs32, step: CStep, kind: str, source: str, notes, rule, gains: list[tuple[str, str, str]]) -> str:
+    """observer.h: the design, its gains, the step's convention and operation count, and the C declarations."""
+    component = type(obs32).__name__
+    c_type = _C_TYPE
     gains_doc = "\n".join(f" *   {m:<14} {v:<16} {n}" for m, v, n in gains)
     options = ", ".join(f"{k} = {v!r}" for k, v in statics(obs32).items())
     note_lines = "".join(f"\n *   note: {n}" for n in notes)
@@ -326,12 +423,7 @@ def write_c(obs32, step: CStep, kind: str, source: str, notes, rule=None) -> tup
     out_doc = "\n".join(
         f" *   y[{i}]  {n}" + (" (angle, rad)" if is_angle(n) else "") for i, n in enumerate(step.output_names)
     )
-    fields = []
-    for leaf in step.state:
-        ct = "float" if leaf.dtype.kind == "f" else "int"
-        dims = "" if leaf.shape == () else f"[{leaf.size}]"
-        what = "truth value" if leaf.dtype == np.bool_ else "counter" if leaf.dtype.kind == "i" else ""
-        fields.append(f"    {ct} {leaf.name}{dims};" + (f" /* {what} */" if what else ""))
+    fields = _state_fields(step)
     angle_mask = ", ".join("1" if is_angle(n) else "0" for n in step.output_names)
     worst = ""
     if step.has_branch:
@@ -387,6 +479,13 @@ void jx_step(jx_state *s, const {c_type} *u, {c_type} *y);
 
 #endif /* JX_OBSERVER_H */
 """
+    return header
+
+
+def _source_c(obs32, step: CStep, gains: list[tuple[str, str, str]]) -> str:
+    """observer.c: the gains as macros, ``jx_init`` with the initial state and ``jx_step`` with the body."""
+    component = type(obs32).__name__
+    c_type = _C_TYPE
     macros = "\n".join(f"#define {m} {v} /* {n} */" for m, v, n in gains)
     init = []
     for leaf in step.state:
@@ -411,4 +510,4 @@ void jx_step(jx_state *s, const {c_type} *u, {c_type} *y)
 {step.body}
 }}
 """
-    return header, source_c
+    return source_c

@@ -6,11 +6,14 @@ from __future__ import annotations
 import argparse
 import math
 import shutil
+from collections.abc import Sequence
 from pathlib import Path
+from typing import cast
 
 import jax
 
 from jaxobs.drive import read_drive
+from jaxobs.drive.drivefile import DriveFile
 from jaxobs.observers import (
     AbstractDriveObserver,
 )
@@ -25,9 +28,19 @@ from .harness import CFLAGS, TOLERANCE, compile_and_check
 from .sources import DESIGNS, RULES, observer_from_design, observer_from_result, rebuild
 
 
-def add_export_parser(subparsers, parents=()) -> argparse.ArgumentParser:
-    """Add ``jaxobs export`` to the CLI's subparsers; ``parents``: the options every command shares (--quiet,
-    --no-cache), so that their help reads the same in each command."""
+def add_export_parser(
+    subparsers: argparse._SubParsersAction, parents: Sequence[argparse.ArgumentParser] = ()
+) -> argparse.ArgumentParser:
+    """Add ``jaxobs export`` to the CLI's subparsers.
+
+    Args:
+        subparsers: The CLI's subparsers.
+        parents: The parsers of the options every command shares (--quiet, --no-cache), so that their help reads
+            the same in each command.
+
+    Returns:
+        The ``export`` parser.
+    """
     e = subparsers.add_parser(
         "export",
         help="an observer as C99 float32 with golden vectors and a test harness",
@@ -71,8 +84,18 @@ def add_export_parser(subparsers, parents=()) -> argparse.ArgumentParser:
 MIN_TS, MAX_TS = 1e-9, 1.0  # --ts, s: a normal float32, a sample rate from 1 Hz to 1 GHz
 
 
-def cli_export(args) -> int:
-    """``jaxobs export``: 0 on success, 1 if --check finds the C off the golden vectors; bad input raises ValueError."""
+def cli_export(args: argparse.Namespace) -> int:
+    """``jaxobs export``: 0 on success, 1 if --check finds the C off the golden vectors; bad input raises ValueError.
+
+    Args:
+        args: The parsed command line.
+
+    Returns:
+        0 on success, 1 if --check finds the C off the golden vectors.
+
+    Raises:
+        ValueError: Bad input (one line, exit 2).
+    """
     jax.config.update("jax_enable_x64", True)  # the closed forms in double, as `jaxobs closed-form` computes them
     if (args.result is None) == (args.design is None):
         raise ValueError("export: give a result.json or --design (one of them)")
@@ -88,7 +111,7 @@ def cli_export(args) -> int:
         return _export(args)
 
 
-def _drive_file(args):
+def _drive_file(args: argparse.Namespace) -> DriveFile | None:
     """The drive file of an export: ``--drive``, else the result's job's own drive file (a result keeps it
     inline), else None (a shipped bench, or no drive: the recording runs on the observer family's bench)."""
     if getattr(args, "drive", None):
@@ -96,7 +119,7 @@ def _drive_file(args):
     if args.result is None:
         return None
     job = parse_job(load_result(args.result)["job"])
-    return None if job.drive is None else job.drive.file
+    return None if job.drive is None else cast("DriveFile | None", job.drive.file)  # DriveSpec.file
 
 
 def _export(args) -> int:
@@ -136,16 +159,17 @@ def _export(args) -> int:
             machine, rpm = df.machine, 0.5 * float(df.machine.n_rated)
             drive = df.drive_for(sensorless=False, settle=0.0)
             record_drive = dict(machine=machine, rpm=rpm, drive=drive, label=f"drive file {df.name}")
-        obs = obs.bind(machine, rpm * math.pi / 30 * int(machine.p))  # the one binding (its clamp included)
+        cls = type(obs)
+        # the one binding (its clamp included); bind returns the observer's own class
+        obs = cast(AbstractDriveObserver, obs.bind(machine, rpm * math.pi / 30 * int(machine.p)))
         # resistance, inductance, start speed, then any other machine value (the reduced-order observer's Lq, ψf)
-        bound = type(obs).bound_fields
+        bound = cls.bound_fields
         r_name, l_name, speed, more = bound.resistance, bound.inductance, bound.speed, bound.more
         notes = [n for n in notes if "sets Rs, Lq" not in n]
-        machine_values = "".join(f"{n} = {float(getattr(obs, n)):g}, " for n in (r_name, l_name, *more))
-        notes.append(
-            f"bound to the recording's machine: {machine_values}"
-            f"{speed} = {float(getattr(obs, speed)):.6g} rad/s ({rpm:g} r/min)"
-        )
+        names = [n for n in (r_name, l_name, *more) if n is not None]  # the roles this observer has
+        machine_values = "".join(f"{n} = {float(getattr(obs, n)):g}, " for n in names)
+        start = "" if speed is None else f"{speed} = {float(getattr(obs, speed)):.6g} rad/s "
+        notes.append(f"bound to the recording's machine: {machine_values}{start}({rpm:g} r/min)")
         if args.steps < MIN_STEPS:
             raise ValueError(f"export: --steps must be >= {MIN_STEPS}, got {args.steps}")
     elif isinstance(obs, AbstractDriveObserver):

@@ -5,14 +5,19 @@
 from __future__ import annotations
 
 import json
+import os
+from collections.abc import Callable, Sequence
 from pathlib import Path
+from typing import Any, cast
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax.typing import ArrayLike
 
 from jaxobs import DriveInput
+from jaxobs.observers.base import AbstractDriveObserver, AbstractObserver
 from jaxobs.runtime.progress import Progress
 
 from ..outdir import atomic_path, atomic_write_text
@@ -39,14 +44,14 @@ EXPORT_FILES = ("observer.h", "observer.c", "test_main.c", "golden.csv", "coeffi
 
 
 def export_observer(
-    observer,
-    out_dir,
+    observer: AbstractObserver,
+    out_dir: str | os.PathLike[str],
     *,
     n_steps: int = 12_000,
-    signal=None,
+    signal: ArrayLike | str | None = None,
     source: str = "",
-    notes=(),
-    progress=None,
+    notes: Sequence[str] = (),
+    progress: bool | str | Callable[[int, int | None], object] | None = None,
     record_drive: dict | None = None,
 ) -> dict:
     """Write ``observer`` as C99 float32 with its golden vectors into ``out_dir``; returns coefficients.json's content.
@@ -70,52 +75,25 @@ def export_observer(
         notes: lines recorded in the header and coefficients.json (e.g. defaults used).
         progress: its three stages (C generated, the test record, the golden vectors), each named as
             it runs (:mod:`jaxobs.runtime.progress`: ``True`` a tqdm bar on stderr, or a callable).
+
+    Returns:
+        coefficients.json's content.
+
+    Raises:
+        ValueError: A step the export cannot write (a primitive without C, a torque-reading speed
+            estimator), a bad ``n_steps`` or ``signal``, or non-finite golden outputs.
     """
     notes = list(notes)
     bar = Progress(progress, 3, "export", unit="stage")
     bar.stage("generating the C from the jaxpr of the step")
     obs32 = float32_observer(observer)
     kind = "drive" if is_drive(obs32) else "signal"
-    if kind == "drive" and obs32.reads_torque:
-        raise ValueError(
-            "export: a mechanical-model speed estimator (jaxobs.observers.speed.MechanicalSpeed) needs the torque "
-            "reference each period, which the exported step does not take; export the observer with its PLL"
-        )
-    # the four measurements (u_a, u_b, i_a, i_b): DriveInput's T_ref is None here, no input of the C step
-    names = list(DriveInput._fields[:4])
-    with jax.enable_x64(False):
-        u0 = zero_input(obs32)
-        state0 = obs32.init(u0)
-        step = generate(obs32, state0, u0, input_names=names if kind == "drive" else ["v"])
+    state0, step = _generate_checked(obs32, kind)
     component = type(obs32).__name__
-    _self_check(obs32, step, state0)
     header, source_c = write_c(obs32, step, kind, source or f"{component} as given", notes, observer_rule(obs32))
     bar.update()
     bar.stage("the test record" + (" (compiling and running the sensored drive)" if kind == "drive" else ""))
-    nu = len(step.input_names)
-    if signal is None or (isinstance(signal, str) and signal == "synthetic" and kind == "drive"):
-        if not (isinstance(n_steps, int) and n_steps >= MIN_STEPS):
-            raise ValueError(f"export: n_steps must be an integer >= {MIN_STEPS}, got {n_steps!r}")
-        if n_steps > MAX_STEPS:  # a bound on the work and on golden.csv's size
-            raise ValueError(f"export: n_steps must be <= {MAX_STEPS}, got {n_steps}")
-    if signal is None and kind == "signal":
-        f0 = signal_frequency_hz(obs32)  # an FLL's nominal frequency, else 50 Hz
-        u, signal_doc = fll_test_signal(obs32.ts, n_steps, f0)
-    elif signal is None:
-        u, signal_doc = drive_recording(observer, n_steps, start=record_start(obs32), **(record_drive or {}))
-    elif isinstance(signal, str) and signal == "synthetic" and kind == "drive":
-        rs, ls = assumed_machine(obs32)
-        u, signal_doc = drive_test_signal(
-            obs32.ts, n_steps, omega=signal_speed(obs32), Rs=rs, L=ls, start=record_start(obs32)
-        )
-    elif isinstance(signal, str):
-        raise ValueError(f"export: signal must be an array (or 'synthetic' for a drive observer), got {signal!r}")
-    else:
-        u = np.asarray(signal, np.float32)
-        u = u[:, None] if u.ndim == 1 else u
-        if u.ndim != 2 or u.shape[1] != nu or u.shape[0] < 1 or not np.all(np.isfinite(u)):
-            raise ValueError(f"export: signal must be finite, shape (n,) or (n, {nu}), got shape {np.shape(signal)}")
-        signal_doc = f"user signal, {u.shape[0]} steps"
+    u, signal_doc = _test_record(observer, obs32, len(step.input_names), n_steps, signal, record_drive)
     bar.update()
     bar.stage(f"golden vectors: the float32 JAX step over {u.shape[0]} samples (compiling)")
     y = golden_outputs(obs32, state0, step, u)
@@ -138,11 +116,95 @@ def export_observer(
         np.savetxt(
             tmp, np.concatenate([u, y], axis=1), fmt="%.9g", delimiter=",", header=",".join(columns), comments=""
         )
-    step_doc = {
-        "signal": "jx_step returns the outputs of the state before the sample is integrated (signal-level observer)",
-        "drive": "jx_step integrates the period that just ended and returns the outputs after it (drive "
-        "observer); the first call only records u and i",
+    coeffs = _coefficients(observer, obs32, step, kind, source, notes)
+    coeffs["golden"] = {
+        "steps": int(u.shape[0]),
+        "signal": signal_doc,
+        "columns": columns,
+        "tolerance": TOLERANCE,
+        "error": "max |y_C - y_golden| / (1 + |y_golden|), angles modulo 2 pi",
     }
+    atomic_write_text(out / "coefficients.json", json.dumps(coeffs, indent=1, ensure_ascii=False) + "\n")
+    return coeffs
+
+
+def _generate_checked(obs32: AbstractObserver, kind: str) -> tuple[Any, CStep]:
+    """The float32 observer's initial state and its step generated as C, checked in Python (:func:`_self_check`).
+
+    Raises:
+        ValueError: A speed estimator that reads the torque reference, which the C step does not take.
+    """
+    if isinstance(obs32, AbstractDriveObserver) and obs32.reads_torque:  # kind "drive"
+        raise ValueError(
+            "export: a mechanical-model speed estimator (jaxobs.observers.speed.MechanicalSpeed) needs the torque "
+            "reference each period, which the exported step does not take; export the observer with its PLL"
+        )
+    # the four measurements (u_a, u_b, i_a, i_b): DriveInput's T_ref is None here, no input of the C step
+    names = list(DriveInput._fields[:4])
+    with jax.enable_x64(False):
+        u0 = zero_input(obs32)
+        state0 = obs32.init(u0)
+        step = generate(obs32, state0, u0, input_names=names if kind == "drive" else ["v"])
+    _self_check(obs32, step, state0)
+    return state0, step
+
+
+def _test_record(
+    observer: AbstractObserver,
+    obs32: AbstractObserver,
+    nu: int,
+    n_steps: int,
+    signal: ArrayLike | str | None,
+    record_drive: dict | None,
+) -> tuple[np.ndarray, str]:
+    """The inputs per step the golden vectors are computed on (:func:`export_observer`'s ``signal``), and their
+    description.
+
+    Raises:
+        ValueError: A bad ``n_steps`` or ``signal``.
+    """
+    drive = isinstance(obs32, AbstractDriveObserver)
+    if signal is None or (isinstance(signal, str) and signal == "synthetic" and drive):
+        if not (isinstance(n_steps, int) and n_steps >= MIN_STEPS):
+            raise ValueError(f"export: n_steps must be an integer >= {MIN_STEPS}, got {n_steps!r}")
+        if n_steps > MAX_STEPS:  # a bound on the work and on golden.csv's size
+            raise ValueError(f"export: n_steps must be <= {MAX_STEPS}, got {n_steps}")
+    if signal is None and not drive:
+        f0 = signal_frequency_hz(obs32)  # an FLL's nominal frequency, else 50 Hz
+        u, signal_doc = fll_test_signal(obs32.ts, n_steps, f0)
+    elif signal is None:
+        drive_obs = cast(AbstractDriveObserver, observer)  # obs32's class
+        u, signal_doc = drive_recording(drive_obs, n_steps, start=record_start(obs32), **(record_drive or {}))
+    elif isinstance(signal, str) and signal == "synthetic" and isinstance(obs32, AbstractDriveObserver):
+        rs, ls = assumed_machine(obs32)
+        u, signal_doc = drive_test_signal(
+            obs32.ts, n_steps, omega=signal_speed(obs32), Rs=rs, L=ls, start=record_start(obs32)
+        )
+    elif isinstance(signal, str):
+        raise ValueError(f"export: signal must be an array (or 'synthetic' for a drive observer), got {signal!r}")
+    else:
+        u = np.asarray(signal, np.float32)
+        u = u[:, None] if u.ndim == 1 else u
+        if u.ndim != 2 or u.shape[1] != nu or u.shape[0] < 1 or not np.all(np.isfinite(u)):
+            raise ValueError(f"export: signal must be finite, shape (n,) or (n, {nu}), got shape {np.shape(signal)}")
+        signal_doc = f"user signal, {u.shape[0]} steps"
+    return u, signal_doc
+
+
+# the step convention per kind of observer, as coefficients.json states it
+_STEP_DOC = {
+    "signal": "jx_step returns the outputs of the state before the sample is integrated (signal-level observer)",
+    "drive": "jx_step integrates the period that just ended and returns the outputs after it (drive "
+    "observer); the first call only records u and i",
+}
+
+
+def _coefficients(
+    observer: AbstractObserver, obs32: AbstractObserver, step: CStep, kind: str, source: str, notes: list[str]
+) -> dict:
+    """coefficients.json's content but its "golden" entry: the design, gains (float32 and as given), state,
+    inputs, outputs and operation counts."""
+    component = type(obs32).__name__
     gains = {}
     for g in step.gains:
         for i, v in enumerate(g.value.flat):
@@ -161,7 +223,7 @@ def export_observer(
     ops = {"steady": step.ops_steady}
     if step.has_branch:
         ops["worst"] = step.ops_worst
-    coeffs = {
+    return {
         "component": component,
         "reference": reference(obs32),
         "design": source or f"{component} as given",
@@ -169,7 +231,7 @@ def export_observer(
         "dtype": "float32",
         "ts": obs32.ts,
         "rule": rule_doc(observer_rule(obs32)),
-        "step": step_doc[kind],
+        "step": _STEP_DOC[kind],
         "gains": gains,
         "static": statics(obs32),
         "state": state,
@@ -177,16 +239,7 @@ def export_observer(
         "outputs": step.output_names,
         "angle_outputs": [n for n in step.output_names if is_angle(n)],
         "ops_per_step": ops,
-        "golden": {
-            "steps": int(u.shape[0]),
-            "signal": signal_doc,
-            "columns": columns,
-            "tolerance": TOLERANCE,
-            "error": "max |y_C - y_golden| / (1 + |y_golden|), angles modulo 2 pi",
-        },
     }
-    atomic_write_text(out / "coefficients.json", json.dumps(coeffs, indent=1, ensure_ascii=False) + "\n")
-    return coeffs
 
 
 @eqx.filter_jit

@@ -5,6 +5,7 @@ and the float32 JAX step's outputs on them (:func:`golden_outputs`)."""
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING, Any, TypeVar
 
 import equinox as eqx
 import jax
@@ -30,11 +31,17 @@ from jaxobs.observers import (
 
 from .codegen import CStep
 
+if TYPE_CHECKING:
+    from jaxobs.core.discretize import AbstractRule
+    from jaxobs.drive import Drive, PMSMParams
+
+_O = TypeVar("_O", bound=AbstractObserver)  # an observer, returned as the same class
+
 MIN_STEPS = 10_000  # the golden record is at least this long
-MAX_STEPS = 2_000_000  # and at most this long (about 100 MB of golden.csv; 10^8 wrote 6.3 GB before)
+MAX_STEPS = 2_000_000  # and at most this long (golden.csv about 100 MB)
 
 
-def fll_test_signal(ts: float, n_steps: int, f0: float = 50.0, amplitude: float = 1.0):
+def fll_test_signal(ts: float, n_steps: int, f0: float = 50.0, amplitude: float = 1.0) -> tuple[np.ndarray, str]:
     """Unit sine at ``f0`` with a +2 Hz step at n/3 and a +40° phase jump at 2n/3 (GridSignal's settle-then-disturb).
 
     Args:
@@ -65,7 +72,7 @@ def drive_test_signal(
     psi: float = 0.1,
     current: float | None = None,
     start: str = "",
-):
+) -> tuple[np.ndarray, str]:
     """Sampled (u_α, u_β, i_α, i_β) of a surface PMSM turning at electrical speed ``omega``, with a +10 % speed
     step at n/3 and a +30° angle jump at 2n/3.
 
@@ -155,7 +162,7 @@ def _bench_of(observer) -> tuple:
     raise ValueError(f"export: {type(observer).__name__} is not a drive observer (flux observer or LESO)")
 
 
-def recording_bench(observer):
+def recording_bench(observer: AbstractDriveObserver) -> tuple[PMSMParams, float]:
     """The machine and the speed a drive observer's recording runs at.
 
     Args:
@@ -188,18 +195,18 @@ class _Tap(AbstractObserver):
 
 
 def drive_recording(
-    observer,
+    observer: AbstractDriveObserver,
     n_steps: int = 12_000,
     *,
-    machine=None,
+    machine: PMSMParams | None = None,
     rpm: float | None = None,
     load: tuple = (0.3, 0.8),
     speed_step: float = 0.1,
     start: str = "",
     encoder: bool = False,
-    drive=None,
+    drive: Drive | None = None,
     label: str | None = None,
-):
+) -> tuple[np.ndarray, str]:
     """The (u_α, u_β, i_α, i_β) a drive observer is fed in a sensored FOC drive, ``n_steps`` samples at its ts.
 
     ``jaxobs.simulate(ClosedLoop(Drive(FOC.imc(machine, 2π·300, 2π·5)), _Tap(), scenario), t1)``: the
@@ -295,16 +302,41 @@ def drive_recording(
     return data.astype(np.float32), doc
 
 
-def float32_observer(observer):
+def float32_observer(observer: _O) -> _O:
+    """``observer`` with its floating-point array leaves (its gains) rounded to float32, as the C holds them.
+
+    Args:
+        observer: Any observer.
+
+    Returns:
+        The float32 observer.
+    """
     return jax.tree.map(lambda a: a.astype(jnp.float32) if eqx.is_inexact_array(a) else a, observer)
 
 
-def is_drive(observer) -> bool:
-    """A drive observer reads (u_a, u_b, i_a, i_b) each step; any other observer reads one sample v."""
+def is_drive(observer: AbstractObserver) -> bool:
+    """Whether ``observer`` is a drive observer: one that reads (u_a, u_b, i_a, i_b) each step; any other
+    observer reads one sample v.
+
+    Args:
+        observer: Any observer.
+
+    Returns:
+        Whether it is an :class:`~jaxobs.observers.AbstractDriveObserver`.
+    """
     return isinstance(observer, AbstractDriveObserver)
 
 
-def zero_input(observer):
+def zero_input(observer: AbstractObserver) -> DriveInput | jax.Array:
+    """A zero input of ``observer``'s step in float32: four zero measurements for a drive observer, else one
+    zero sample.
+
+    Args:
+        observer: Any observer.
+
+    Returns:
+        The input.
+    """
     z = jnp.zeros((), jnp.float32)
     return DriveInput(z, z, z, z) if is_drive(observer) else z
 
@@ -316,7 +348,21 @@ def _scan_outputs(observer, state0, u):
     return out
 
 
-def golden_outputs(obs32, state0, step: CStep, u: np.ndarray) -> np.ndarray:
+def golden_outputs(obs32: AbstractObserver, state0: Any, step: CStep, u: np.ndarray) -> np.ndarray:
+    """The float32 JAX step's outputs over the inputs ``u``: golden.csv's outputs, one row per step.
+
+    Args:
+        obs32: The float32 observer (:func:`float32_observer`).
+        state0: Its initial state.
+        step: Its generated step (the outputs' names and count).
+        u: The inputs, shape (n, JX_NU).
+
+    Returns:
+        The outputs, shape (n, JX_NY), float32.
+
+    Raises:
+        ValueError: An output that is not float32.
+    """
     # 64-bit types off: every number in the step is float32, as on the target (some rules, e.g.
     # diffrax's Euler, would otherwise promote a float32 state with a float64 step size)
     with jax.enable_x64(False):
@@ -341,34 +387,82 @@ def golden_outputs(obs32, state0, step: CStep, u: np.ndarray) -> np.ndarray:
 _RECORD_START = {PureIntegratorFlux: "flux", LPFFlux: "flux", SOIFO: "alpha", SecondOrderSOIFO: "alpha"}
 
 
-def record_start(observer) -> str:
+def record_start(observer: AbstractObserver) -> str:
+    """How the first period of a drive recording is shaped for ``observer`` (:func:`drive_test_signal`'s
+    ``start``).
+
+    Args:
+        observer: Any observer.
+
+    Returns:
+        ``"flux"`` (a pure integrator or LPF), ``"alpha"`` (the SOIFOs) or ``""``.
+    """
     return _RECORD_START.get(type(observer), "")
 
 
-def signal_frequency_hz(observer) -> float:
+def signal_frequency_hz(observer: AbstractObserver) -> float:
     """The frequency (Hz) of a signal observer's test record: an FLL's nominal frequency (001: the grid's,
-    ``omega_n``), else 50 Hz (a SOGI has no nominal frequency of its own)."""
+    ``omega_n``), else 50 Hz (a SOGI has no nominal frequency of its own).
+
+    Args:
+        observer: A signal observer.
+
+    Returns:
+        The frequency, Hz.
+    """
     if isinstance(observer, (SOGIFLL, SOGIFLLWPF, SOGIFLLWIF)):
         return float(observer.omega_n) / (2 * math.pi)
     return 50.0
 
 
-def observer_rule(observer):
+def observer_rule(observer: AbstractObserver) -> AbstractRule | None:
     """The observer's discretization rule, or None for an observer that integrates in its own step (a bank, a
-    user's drive observer): every vector-field observer, flux observer and LESO declares one."""
+    user's drive observer): every vector-field observer, flux observer and LESO declares one.
+
+    Args:
+        observer: Any observer.
+
+    Returns:
+        Its rule, or None.
+    """
     if isinstance(observer, (AbstractVectorFieldObserver, AbstractFluxObserver, AbstractLESO)):
         return observer.rule
     return None
 
 
-def signal_speed(observer) -> float:
+def signal_speed(observer: AbstractDriveObserver) -> float:
     """The electrical speed (rad/s) of a drive observer's synthetic record: its initial speed (the last of its
-    bound fields), else 50 Hz."""
-    w = float(getattr(observer, type(observer).bound_fields.speed))
+    bound fields), else 50 Hz.
+
+    Args:
+        observer: The drive observer.
+
+    Returns:
+        The electrical speed, rad/s.
+
+    Raises:
+        ValueError: An observer without an initial speed field (a bank).
+    """
+    speed = type(observer).bound_fields.speed
+    if speed is None:
+        raise ValueError(f"export: {type(observer).__name__} has no initial speed field: give the test signal")
+    w = float(getattr(observer, speed))
     return w if w > 0 else 2 * math.pi * 50.0
 
 
-def assumed_machine(obs) -> tuple[float, float]:
-    """(R̂s, L̂) the drive observer assumes: the golden signal's machine."""
+def assumed_machine(obs: AbstractDriveObserver) -> tuple[float, float]:
+    """(R̂s, L̂) the drive observer assumes: the golden signal's machine.
+
+    Args:
+        obs: The drive observer.
+
+    Returns:
+        ``(R̂s, L̂)``.
+
+    Raises:
+        ValueError: An observer that assumes no machine (a bank).
+    """
     bound = type(obs).bound_fields
+    if bound.resistance is None or bound.inductance is None:
+        raise ValueError(f"export: {type(obs).__name__} assumes no machine (R̂s, L̂): give the test signal")
     return float(getattr(obs, bound.resistance)), float(getattr(obs, bound.inductance))

@@ -3,10 +3,12 @@ which compiles it with the system C compiler and replays golden.csv through the 
 
 from __future__ import annotations
 
+import os
 import re
 import shutil
 import subprocess
 import tempfile
+from collections.abc import Sequence
 from importlib import resources
 from pathlib import Path
 
@@ -17,16 +19,28 @@ CFLAGS = ("-std=c99", "-O2", "-Wall", "-Werror", "-pedantic")
 
 
 def harness_text() -> str:
+    """The text of test_main.c, the harness written beside every export."""
     return (resources.files("jaxobs_tuning.export") / "test_main.c").read_text()
 
 
-def compile_and_check(out_dir, *, cc: str | None = None, extra_flags=()) -> float:
+def compile_and_check(
+    out_dir: str | os.PathLike[str], *, cc: str | None = None, extra_flags: Sequence[str] = ()
+) -> float:
     """Compile ``out_dir``'s observer.c + test_main.c with the system C compiler and replay golden.csv.
 
     Runs ``cc -std=c99 -O2 -Wall -Werror -pedantic observer.c test_main.c -lm`` in a temporary
     folder and returns max |y_C − y_golden| / (1 + |y_golden|) over every step and output.
-    Raises ``RuntimeError`` if there is no compiler, the code does not compile or the harness
-    cannot read the vectors.
+
+    Args:
+        out_dir: The export's folder (observer.c, test_main.c, golden.csv).
+        cc: The C compiler (default: ``cc`` on PATH).
+        extra_flags: More compiler flags.
+
+    Returns:
+        The largest relative error.
+
+    Raises:
+        RuntimeError: No compiler, the code does not compile, or the harness cannot read the vectors.
     """
     out = Path(out_dir).resolve()
     cc = cc or shutil.which("cc")

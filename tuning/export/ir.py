@@ -10,6 +10,7 @@ from collections import Counter
 from typing import Any
 
 import numpy as np
+from numpy.typing import DTypeLike
 
 __all__ = [
     "S",
@@ -36,15 +37,34 @@ _CTYPE = {np.dtype(np.float32): "float", np.dtype(np.float64): "double", np.dtyp
 _CTYPE[np.dtype(np.bool_)] = "int"  # truth values: 0 or 1
 
 
-def ctype(dtype) -> str:
+def ctype(dtype: DTypeLike) -> str:
+    """The C type of a dtype: float, double, or int (int32 and truth values).
+
+    Args:
+        dtype: The dtype.
+
+    Returns:
+        The C type's name.
+
+    Raises:
+        ValueError: A dtype C cannot hold here.
+    """
     dt = np.dtype(dtype)
     if dt not in _CTYPE:
         raise ValueError(f"export: dtype {dt} cannot be written as C (float32, float64, int32 and bool can)")
     return _CTYPE[dt]
 
 
-def c_literal(value, dtype) -> str:
-    """``value`` as a C literal of ``dtype`` with every digit (shortest repr that reads back the same number)."""
+def c_literal(value: Any, dtype: DTypeLike) -> str:
+    """``value`` as a C literal of ``dtype`` with every digit (shortest repr that reads back the same number).
+
+    Args:
+        value: The number (or truth value).
+        dtype: Its dtype.
+
+    Returns:
+        The literal (``1.5f``, ``(-2.0)``, ``NAN``, ...).
+    """
     dt = np.dtype(dtype)
     if dt == np.bool_:
         return "1" if bool(value) else "0"
@@ -54,7 +74,7 @@ def c_literal(value, dtype) -> str:
     if np.isnan(v):
         return "NAN"
     if np.isinf(v):
-        return "INFINITY" if v > 0 else "(-INFINITY)"
+        return "INFINITY" if float(v) > 0 else "(-INFINITY)"
     text = str(v)  # numpy's shortest repr that reads back the same float32 (float64) number
     if "." not in text and "e" not in text:
         text += ".0"
@@ -75,11 +95,21 @@ class S:
     truth: S | None = None  # an int that is a converted truth value: ``if (truth)`` reads better
 
     @property
-    def is_lit(self):
+    def is_lit(self) -> bool:
+        """Whether it is a literal."""
         return self.lit is not None
 
 
-def lit(value, dtype) -> S:
+def lit(value: Any, dtype: DTypeLike) -> S:
+    """A literal scalar (constant).
+
+    Args:
+        value: The number.
+        dtype: Its dtype.
+
+    Returns:
+        The :class:`S`.
+    """
     dt = np.dtype(dtype)
     v = dt.type(value)
     return S(c_literal(v, dt), dt, lit=v, const=True)
@@ -106,20 +136,26 @@ class Let:
 
 @dataclasses.dataclass
 class Assign:
+    """``target = expr;``: a state field or an output written from a local (``value``, the local's scalar)."""
+
     target: str
     expr: str
     deps: tuple
-    value: S | None = None
+    value: S
 
 
 @dataclasses.dataclass
 class Decl:
+    """``T name;``: a local assigned in both branches of an ``if``."""
+
     name: str
     ctype: str
 
 
 @dataclasses.dataclass
 class If:
+    """``if (cond) { then } else { other }``: a ``cond`` primitive (AB3's RK4 start-up)."""
+
     cond: str
     deps: tuple
     then: list
@@ -136,13 +172,29 @@ class Comment:
 
 
 def deps(*xs: S) -> tuple:
+    """The names a statement reads: those of its operands that are not literals.
+
+    Args:
+        *xs: The operands.
+
+    Returns:
+        Their names.
+    """
     return tuple(x.c for x in xs if not x.is_lit)
 
 
 def evaluate(block: list, env: dict) -> dict:
     """Run ``block`` on numpy scalars: ``env`` maps the sources of the loads (``s->x[0]``, ``u[1]``) to values;
     returns it with every name and target assigned.  float32 numpy arithmetic rounds as C's float does (C99
-    without FP contraction), so this is the emitted C, run in Python: the export's check without a C compiler."""
+    without FP contraction), so this is the emitted C, run in Python: the export's check without a C compiler.
+
+    Args:
+        block: The statements.
+        env: The loads' sources and their values; updated in place.
+
+    Returns:
+        ``env``, every name and target assigned.
+    """
 
     def val(x: S):
         return x.lit if x.is_lit else env[x.c]
@@ -163,7 +215,15 @@ def evaluate(block: list, env: dict) -> dict:
 
 
 def prune(block: list, live: set) -> list:
-    """Drop statements whose results nobody reads (backwards); ``live`` is updated with what is read."""
+    """Drop statements whose results nobody reads (backwards); ``live`` is updated with what is read.
+
+    Args:
+        block: The statements.
+        live: The names read after the block (stores to the state and outputs are always kept).
+
+    Returns:
+        The statements kept, in order.
+    """
     kept = []
     for st in reversed(block):
         if isinstance(st, Let):
@@ -190,7 +250,14 @@ def prune(block: list, live: set) -> list:
 
 
 def count(block: list) -> tuple[Counter, Counter]:
-    """(cheapest, dearest) operation counts of a block: an ``if`` counts its cheaper and its dearer branch."""
+    """(cheapest, dearest) operation counts of a block: an ``if`` counts its cheaper and its dearer branch.
+
+    Args:
+        block: The statements.
+
+    Returns:
+        ``(cheapest, dearest)``: operation kind -> count.
+    """
     lo, hi = Counter(), Counter()
     for st in block:
         if isinstance(st, Let) and st.op and not st.const:
@@ -205,7 +272,14 @@ def count(block: list) -> tuple[Counter, Counter]:
 
 
 def ops_summary(c: Counter) -> dict:
-    """An operation count as JSON: +/- (negations included), *, /, calls by name, compares, selects, logic, total."""
+    """An operation count as JSON: +/- (negations included), *, /, calls by name, compares, selects, logic, total.
+
+    Args:
+        c: Operation kind -> count (:func:`count`).
+
+    Returns:
+        The summary.
+    """
     calls = {k[5:]: v for k, v in sorted(c.items()) if k.startswith("call:")}
     out = {
         "add": c["add"],
@@ -222,6 +296,15 @@ def ops_summary(c: Counter) -> dict:
 
 
 def render(block: list, indent: str = "    ") -> list:
+    """The C text of a block, one line per statement (a comment kept only before a statement).
+
+    Args:
+        block: The statements.
+        indent: The indentation of its lines.
+
+    Returns:
+        The lines.
+    """
     lines = []
     for k, st in enumerate(block):
         if isinstance(st, Comment):

@@ -5,12 +5,23 @@ which writes the statements of :mod:`jaxobs_tuning.export.ir`.  What each primit
 
 from __future__ import annotations
 
-import math
+from collections.abc import Callable, Sequence
+from typing import Any, cast
 
 import jax
+import jax.extend
 import jax.numpy as jnp
 import numpy as np
+from jax.core import ShapedArray
+from numpy.typing import DTypeLike
 
+from .c99 import BINARY_CALLS as _BINARY_CALLS
+from .c99 import BINARY_OPS as _BINARY_OPS
+from .c99 import COMPARE as _COMPARE
+from .c99 import LOGIC as _LOGIC
+from .c99 import NUMPY as _NUMPY
+from .c99 import UNARY_CALLS as _UNARY_CALLS
+from .c99 import round_away as _round_away
 from .ir import Assign, Comment, Decl, If, Let, S, c_literal, ctype, deps, lit
 
 __all__ = ["SUPPORTED", "Emitter", "Walker"]
@@ -19,36 +30,6 @@ __all__ = ["SUPPORTED", "Emitter", "Walker"]
 # the primitives
 # --------------------------------------------------------------------------------------------
 
-_UNARY_CALLS = {  # primitive -> C99 <math.h> function (float32 name; the double one drops the "f")
-    "sqrt": "sqrtf",
-    "exp": "expf",
-    "exp2": "exp2f",
-    "log": "logf",
-    "log1p": "log1pf",
-    "expm1": "expm1f",
-    "sin": "sinf",
-    "cos": "cosf",
-    "tan": "tanf",
-    "asin": "asinf",
-    "acos": "acosf",
-    "atan": "atanf",
-    "sinh": "sinhf",
-    "cosh": "coshf",
-    "tanh": "tanhf",
-    "asinh": "asinhf",
-    "acosh": "acoshf",
-    "atanh": "atanhf",
-    "abs": "fabsf",
-    "floor": "floorf",
-    "ceil": "ceilf",
-    "cbrt": "cbrtf",
-    "erf": "erff",
-}
-_BINARY_CALLS = {"atan2": "atan2f", "pow": "powf", "rem": "fmodf", "max": "fmaxf", "min": "fminf"}
-_BINARY_OPS = {"add": ("+", "add"), "add_any": ("+", "add"), "sub": ("-", "add"), "mul": ("*", "mul")}
-_BINARY_OPS["div"] = ("/", "div")
-_COMPARE = {"eq": "==", "ne": "!=", "lt": "<", "le": "<=", "gt": ">", "ge": ">="}
-_LOGIC = {"and": "&&", "or": "||"}
 _IDENTITY = {"copy", "copy_p", "stop_gradient", "optimization_barrier", "pvary", "device_put"}
 _CALLS = {"jit": "jaxpr", "pjit": "jaxpr", "closed_call": "call_jaxpr", "core_call": "call_jaxpr"}
 _CALLS |= {"custom_jvp_call": "call_jaxpr", "custom_vjp_call": "call_jaxpr", "custom_vjp_call_jaxpr": "fun_jaxpr"}
@@ -80,61 +61,17 @@ def _where(eqn) -> str:
     return "unknown"
 
 
+def _aval(var: jax.extend.core.Var) -> ShapedArray:
+    """A jaxpr variable's shape and dtype: its aval, a ShapedArray in the jaxprs of a step (jax types it
+    AbstractValue)."""
+    return cast(ShapedArray, var.aval)
+
+
 def _sub_jaxpr(j):
     """(jaxpr, consts) of a ClosedJaxpr or an open Jaxpr parameter."""
     if isinstance(j, jax.extend.core.ClosedJaxpr):
         return j.jaxpr, list(j.consts)
     return j, []
-
-
-_NUMPY = {  # the C operators and <math.h> functions on numpy scalars (float32 in, float32 out)
-    "+": np.add,
-    "-": np.subtract,
-    "*": np.multiply,
-    "/": np.divide,
-    "==": np.equal,
-    "!=": np.not_equal,
-    "<": np.less,
-    "<=": np.less_equal,
-    ">": np.greater,
-    ">=": np.greater_equal,
-    "&&": np.logical_and,
-    "||": np.logical_or,
-    "sqrtf": np.sqrt,
-    "expf": np.exp,
-    "exp2f": np.exp2,
-    "logf": np.log,
-    "log1pf": np.log1p,
-    "expm1f": np.expm1,
-    "sinf": np.sin,
-    "cosf": np.cos,
-    "tanf": np.tan,
-    "asinf": np.arcsin,
-    "acosf": np.arccos,
-    "atanf": np.arctan,
-    "sinhf": np.sinh,
-    "coshf": np.cosh,
-    "tanhf": np.tanh,
-    "asinhf": np.arcsinh,
-    "acoshf": np.arccosh,
-    "atanhf": np.arctanh,
-    "fabsf": np.abs,
-    "floorf": np.floor,
-    "ceilf": np.ceil,
-    "cbrtf": np.cbrt,
-    "erff": lambda x: type(x)(math.erf(x)),
-    "atan2f": np.arctan2,
-    "powf": np.power,
-    "fmodf": np.fmod,
-    "fmaxf": np.fmax,
-    "fminf": np.fmin,
-}
-
-
-def _round_away(x):
-    """roundf: halves away from zero."""
-    t = np.trunc(x)
-    return t + np.sign(x) if abs(x - t) >= 0.5 else t
 
 
 def _pick(which, *cases):
@@ -151,7 +88,14 @@ def _index_test(name, k):
 
 
 class Emitter:
-    def __init__(self, dtype):
+    """Writes the C statements (:mod:`jaxobs_tuning.export.ir`) of scalar operations, one SSA local each, common
+    subexpressions computed once; a primitive or dtype that C cannot hold raises a ``ValueError``.
+
+    Args:
+        dtype: The float dtype of the step (float32 or float64): the ``<math.h>`` functions' names follow it.
+    """
+
+    def __init__(self, dtype: DTypeLike):
         self.fdt = np.dtype(dtype)
         self.double = self.fdt == np.float64
         self.n = 0
@@ -161,13 +105,45 @@ class Emitter:
 
     # --- naming and statements ------------------------------------------------------------
 
-    def fresh(self, prefix="t") -> str:
+    def fresh(self, prefix: str = "t") -> str:
+        """A new local's name.
+
+        Args:
+            prefix: ``t`` (a float or int), ``b`` (a truth value) or ``c`` (an ``if``'s output).
+
+        Returns:
+            The name.
+        """
         self.n += 1
         return f"{prefix}{self.n}"
 
-    def let(self, expr: str, dtype, deps: tuple, op: str, const: bool, truth=None, *, fn, args) -> S:
-        """``const T t<n> = expr;`` (or the earlier local with the same expression); ``fn(*args)`` computes it
-        on numpy scalars (:func:`jaxobs_tuning.export.ir.evaluate`)."""
+    def let(
+        self,
+        expr: str,
+        dtype: DTypeLike,
+        deps: tuple,
+        op: str,
+        const: bool,
+        truth: S | None = None,
+        *,
+        fn: Callable[..., Any] | None,
+        args: Sequence[S],
+    ) -> S:
+        """``const T t<n> = expr;`` (or the earlier local with the same expression).
+
+        Args:
+            expr: The C expression.
+            dtype: Its dtype.
+            deps: The names it reads.
+            op: What it costs (:class:`~jaxobs_tuning.export.ir.Let`'s ``op``).
+            const: Whether it depends on constants and gains only.
+            truth: The truth value it converts, if any.
+            fn: ``fn(*args)`` computes it on numpy scalars (:func:`jaxobs_tuning.export.ir.evaluate`).
+            args: Its operands.
+
+        Returns:
+            The local.
+        """
         key = (ctype(dtype), expr)
         if key in self.memo:
             return self.memo[key]
@@ -176,12 +152,31 @@ class Emitter:
         self.memo[key] = out = S(name, np.dtype(dtype), const=const, truth=truth)
         return out
 
-    def fn(self, name: str, dtype) -> str:
+    def fn(self, name: str, dtype: DTypeLike) -> str:
+        """A ``<math.h>`` function's name for ``dtype``: the float32 one, or the double one without its "f".
+
+        Args:
+            name: The float32 name (``sinf``).
+            dtype: The operand's dtype.
+
+        Returns:
+            The name.
+        """
         return name if np.dtype(dtype) != np.float64 else name[:-1]
 
     # --- elementwise ------------------------------------------------------------------------
 
-    def unary(self, prim: str, x: S, params) -> S:
+    def unary(self, prim: str, x: S, params: dict) -> S:
+        """A one-operand primitive on a scalar.
+
+        Args:
+            prim: The primitive's name.
+            x: The operand.
+            params: The equation's parameters.
+
+        Returns:
+            The result.
+        """
         dt = x.dtype
         if prim == "neg":
             return self.let(f"-{x.c}", dt, deps(x), "add", x.const, fn=np.negative, args=(x,))
@@ -218,6 +213,15 @@ class Emitter:
         return self.let(f"{self.fn(call, dt)}({x.c})", dt, deps(x), f"call:{call}", x.const, fn=fn, args=(x,))
 
     def integer_pow(self, x: S, y: int) -> S:
+        """``x ** y`` for an integer ``y`` by products.
+
+        Args:
+            x: The base.
+            y: The exponent.
+
+        Returns:
+            The result.
+        """
         # the same products in the same order as jax's lowering of integer_pow (binary exponentiation)
         if y == 0:
             return lit(1, x.dtype)
@@ -229,9 +233,20 @@ class Emitter:
             y >>= 1
             if y > 0:
                 x = self.binary("mul", x, x)
+        assert acc is not None  # y > 0 sets it on the first pass
         return self.binary("div", lit(1, acc.dtype), acc) if recip else acc
 
     def binary(self, prim: str, a: S, b: S) -> S:
+        """A two-operand primitive on scalars (exact identities folded).
+
+        Args:
+            prim: The primitive's name.
+            a: The first operand.
+            b: The second operand.
+
+        Returns:
+            The result.
+        """
         dt = a.dtype
         const = a.const and b.const
         # exact identities only: x + 0, x - 0, x * 1, x / 1 (and x * 0 = 0 for finite x: forward-mode
@@ -274,6 +289,15 @@ class Emitter:
         return self.let(expr, dt, deps(a, b), f"call:{call}", const, fn=_NUMPY[call], args=(a, b))
 
     def select(self, which: S, cases: list) -> S:
+        """``select_n``: the case that ``which`` indexes (a truth value or an int).
+
+        Args:
+            which: The index.
+            cases: The cases.
+
+        Returns:
+            The result.
+        """
         if which.is_lit:
             return cases[int(np.clip(int(which.lit), 0, len(cases) - 1))]
         if all(c == cases[0] for c in cases[1:]):
@@ -289,7 +313,16 @@ class Emitter:
                 expr = f"{which.c} == {k} ? {cases[k].c} : ({expr})"
         return self.let(expr, dt, deps(which, *cases), "select", const, fn=_pick, args=(which, *cases))
 
-    def convert(self, x: S, new) -> S:
+    def convert(self, x: S, new: DTypeLike) -> S:
+        """``x`` in another dtype (a C cast, or a truth value's test).
+
+        Args:
+            x: The scalar.
+            new: The dtype.
+
+        Returns:
+            The converted scalar.
+        """
         new = np.dtype(new)
         if new == x.dtype:
             return x
@@ -328,10 +361,29 @@ def _values(arr) -> np.ndarray:
 
 
 class Walker:
+    """Reads a jaxpr equation by equation into its :class:`Emitter`; arrays are numpy object arrays of ``S``.
+
+    Args:
+        emitter: What the statements are written to.
+    """
+
     def __init__(self, emitter: Emitter):
         self.em = emitter
 
-    def run(self, jaxpr, consts, args) -> list:
+    def run(self, jaxpr: jax.extend.core.Jaxpr, consts: Sequence[Any], args: Sequence[np.ndarray]) -> list:
+        """The statements of a jaxpr, inlined.
+
+        Args:
+            jaxpr: The (open) jaxpr.
+            consts: Its constants' values.
+            args: Its inputs, arrays of scalars.
+
+        Returns:
+            Its outputs, arrays of scalars.
+
+        Raises:
+            ValueError: An equation that cannot be written, naming its line of Python.
+        """
         env = {}
 
         def read(v):
@@ -360,7 +412,16 @@ class Walker:
                 env[var] = o
         return [read(v) for v in jaxpr.outvars]
 
-    def eqn(self, eqn, ins) -> list:
+    def eqn(self, eqn: jax.extend.core.JaxprEqn, ins: list) -> list:
+        """One equation: inlined calls, conditionals, data movement, constants evaluated, elementwise operations.
+
+        Args:
+            eqn: The equation.
+            ins: Its inputs, arrays of scalars.
+
+        Returns:
+            Its outputs, arrays of scalars.
+        """
         prim, params = eqn.primitive.name, eqn.params
         if prim in _CALLS:
             key = _CALLS[prim] if _CALLS[prim] in params else "call_jaxpr"
@@ -387,8 +448,8 @@ class Walker:
         if prim in _REDUCE:
             return [self.reduce(_REDUCE[prim], ins[0], params["axes"])]
         if prim == "dot_general":
-            return [self.dot(ins[0], ins[1], params["dimension_numbers"], eqn.outvars[0].aval.dtype)]
-        shape = eqn.outvars[0].aval.shape
+            return [self.dot(ins[0], ins[1], params["dimension_numbers"], _aval(eqn.outvars[0]).dtype)]
+        shape = _aval(eqn.outvars[0]).shape
         ins = [np.broadcast_to(a, shape) if a.shape != shape else a for a in ins]
         out = np.empty(shape, dtype=object)
         for idx in np.ndindex(shape):
@@ -396,7 +457,17 @@ class Walker:
             out[idx] = self.scalar(prim, xs, params)
         return [out]
 
-    def scalar(self, prim, xs, params) -> S:
+    def scalar(self, prim: str, xs: list, params: dict) -> S:
+        """An elementwise primitive on one element of its operands.
+
+        Args:
+            prim: The primitive's name.
+            xs: The operands' scalars.
+            params: The equation's parameters.
+
+        Returns:
+            The result.
+        """
         em = self.em
         if prim == "select_n":
             return em.select(xs[0], xs[1:])
@@ -409,8 +480,19 @@ class Walker:
             return em.unary(prim, xs[0], params)
         return em.binary(prim, xs[0], xs[1])
 
-    def move(self, eqn, ins) -> list:
-        """Data movement: run the primitive on element ids to learn where each output element comes from."""
+    def move(self, eqn: jax.extend.core.JaxprEqn, ins: list) -> list:
+        """Data movement: run the primitive on element ids to learn where each output element comes from.
+
+        Args:
+            eqn: The equation.
+            ins: Its inputs, arrays of scalars.
+
+        Returns:
+            Its outputs, arrays of the same scalars.
+
+        Raises:
+            ValueError: An index computed in the step, or a read out of bounds.
+        """
         prim = eqn.primitive.name
         first, last = _MOVE_INDEX_OPERANDS.get(prim, (len(ins), None))
         index_ops = list(range(first, len(ins) if last is None else last))
@@ -440,7 +522,17 @@ class Walker:
             result.append(arr)
         return result
 
-    def reduce(self, kind, x, axes) -> np.ndarray:
+    def reduce(self, kind: str, x: np.ndarray, axes: Sequence[int]) -> np.ndarray:
+        """A reduction (sum, max, min, ...) over ``axes``, left to right.
+
+        Args:
+            kind: The binary operation it folds.
+            x: The array of scalars.
+            axes: The axes reduced.
+
+        Returns:
+            The reduced array.
+        """
         axes = tuple(axes)
         keep = [d for d in range(x.ndim) if d not in axes]
         moved = np.transpose(x, keep + list(axes))
@@ -454,7 +546,18 @@ class Walker:
             out[idx] = acc
         return out
 
-    def dot(self, a, b, dims, dtype) -> np.ndarray:
+    def dot(self, a: np.ndarray, b: np.ndarray, dims: tuple, dtype: DTypeLike) -> np.ndarray:
+        """``dot_general``: sums of products, in order.
+
+        Args:
+            a: The first operand, an array of scalars.
+            b: The second operand.
+            dims: ``((contracting a, contracting b), (batch a, batch b))``.
+            dtype: The result's dtype.
+
+        Returns:
+            The product, an array of scalars.
+        """
         (ca, cb), (ba, bb) = dims
         fa = [d for d in range(a.ndim) if d not in ca and d not in ba]
         fb = [d for d in range(b.ndim) if d not in cb and d not in bb]
@@ -478,7 +581,16 @@ class Walker:
                     out[bi + (i, j)] = acc if acc is not None else lit(0, dtype)
         return out.reshape(out_shape)
 
-    def cond(self, eqn, ins) -> list:
+    def cond(self, eqn: jax.extend.core.JaxprEqn, ins: list) -> list:
+        """``cond`` as ``if``/``else`` (more branches nest); a constant index takes its branch alone.
+
+        Args:
+            eqn: The equation.
+            ins: Its inputs: the index, then the operands.
+
+        Returns:
+            Its outputs, arrays of scalars.
+        """
         branches = eqn.params["branches"]
         index, ops = ins[0].flat[0], ins[1:]
         if index.is_lit:
@@ -489,11 +601,12 @@ class Walker:
         outer = em.block
         results = []
         for var in eqn.outvars:
-            arr = np.empty(var.aval.shape, dtype=object)
-            for idx in np.ndindex(var.aval.shape):
+            aval = _aval(var)
+            arr = np.empty(aval.shape, dtype=object)
+            for idx in np.ndindex(aval.shape):
                 name = em.fresh("c")
-                outer.append(Decl(name, ctype(var.aval.dtype)))
-                arr[idx] = S(name, np.dtype(var.aval.dtype))
+                outer.append(Decl(name, ctype(aval.dtype)))
+                arr[idx] = S(name, np.dtype(aval.dtype))
             results.append(arr)
         blocks = []
         memo = em.memo

@@ -5,14 +5,20 @@ the rule it runs (:func:`parse_rule`)."""
 from __future__ import annotations
 
 import dataclasses
+import os
 import re
 from pathlib import Path
+from typing import Any, TypeVar
 
 from jaxobs import AB3, RK4, Euler, Tustin
+from jaxobs.core.discretize import AbstractRule
+from jaxobs.observers import AbstractObserver
 from jaxobs.studies.registry import REGISTRY, canonical_key
 
 from ..job import COMPONENTS
 from ..results import load_result
+
+_O = TypeVar("_O", bound=AbstractObserver)  # an observer, rebuilt as its own class
 
 # the closed forms `export --design` names (the FLLs' aliases in jaxobs.studies.registry): alias -> class (its rule, the
 # source line, is its ClosedForm.rule, evaluated when a design is exported)
@@ -22,8 +28,19 @@ DESIGNS = {a: e.cls for e in REGISTRY.values() if e.signal == "grid" for a in e.
 RULES = {"euler": Euler, "tustin": Tustin, "ab3": AB3, "rk4": RK4}
 
 
-def parse_rule(spec, where: str = "rule"):
-    """A rule from its name (``"AB3"``), its repr (``"Tustin(newton_iters=3)"``) or ``{"name": ..., ...}``."""
+def parse_rule(spec: object, where: str = "rule") -> AbstractRule:
+    """A rule from its name (``"AB3"``), its repr (``"Tustin(newton_iters=3)"``) or ``{"name": ..., ...}``.
+
+    Args:
+        spec: The name, the repr or the table.
+        where: What the errors name.
+
+    Returns:
+        The rule.
+
+    Raises:
+        ValueError: An unknown rule or option.
+    """
     kw = {}
     if isinstance(spec, dict):
         kw = {k: v for k, v in spec.items() if k not in ("name", "kind")}
@@ -33,7 +50,7 @@ def parse_rule(spec, where: str = "rule"):
         raise ValueError(f"{where}: must be a rule name ({known}), got {spec!r}")
     m = re.fullmatch(r"\s*(\w+)\s*(?:\((.*)\))?\s*", spec)
     cls = RULES.get(m.group(1).lower()) if m else None
-    if cls is None:
+    if cls is None or m is None:  # no match: no class
         raise ValueError(f"{where}: unknown rule {spec!r}; known: {', '.join(c.__name__ for c in RULES.values())}")
     for item in filter(None, (s.strip() for s in (m.group(2) or "").split(","))):
         k, _, v = item.partition("=")
@@ -47,7 +64,9 @@ def parse_rule(spec, where: str = "rule"):
         raise ValueError(f"{where}: {e}") from None
 
 
-def observer_from_result(path, *, gains: str = "tuned", notes: list | None = None):
+def observer_from_result(
+    path: str | os.PathLike[str], *, gains: str = "tuned", notes: list | None = None
+) -> AbstractObserver:
     """The observer of a ``jaxobs tune`` result.json with its ``gains`` ("tuned", "closed_form" or "initial").
 
     Constructor values are rebuilt as the job built them: the component's
@@ -55,6 +74,17 @@ def observer_from_result(path, *, gains: str = "tuned", notes: list | None = Non
     sample time, rule and nominal frequency are read from the result's ``ts``,
     ``rule`` and ``omega_n`` when it has them; otherwise the component's defaults
     are used and a line saying so is appended to ``notes``.
+
+    Args:
+        path: The result.json.
+        gains: Which design: "tuned", "closed_form" or "initial".
+        notes: A list the lines about defaults used are appended to (None: none kept).
+
+    Returns:
+        The observer.
+
+    Raises:
+        ValueError: A result without that design, or of a component that is not jaxobs's.
     """
     notes = [] if notes is None else notes
     path = Path(path)
@@ -101,16 +131,36 @@ def observer_from_result(path, *, gains: str = "tuned", notes: list | None = Non
     return info.ctor(**values, **kw)
 
 
-def observer_from_design(name: str, **kw):
-    """A closed-form design by name (``sogi-fll``, ``wpf``, ``wif``): its class's ``closed_form(**kw)``."""
+def observer_from_design(name: str, **kw: Any) -> AbstractObserver:
+    """A closed-form design by name (``sogi-fll``, ``wpf``, ``wif``): its class's ``closed_form(**kw)``.
+
+    Args:
+        name: The design's alias (:data:`DESIGNS`).
+        **kw: The closed form's keywords (``ts``, ``rule``).
+
+    Returns:
+        The observer.
+
+    Raises:
+        ValueError: An unknown name.
+    """
     if name not in DESIGNS:
         raise ValueError(f"design must be one of {', '.join(DESIGNS)}, got {name!r}")
     return DESIGNS[name].closed_form(**kw)
 
 
-def rebuild(obs, **kw):
-    """The same observer with another ts or rule (static fields: rebuilt through the constructor)."""
+def rebuild(obs: _O, **kw: Any) -> _O:
+    """The same observer with another ts or rule (static fields: rebuilt through the constructor).
 
-    values = {f.name: getattr(obs, f.name) for f in dataclasses.fields(obs) if f.name not in ("ts", "rule")}
-    values.update(ts=kw.get("ts", obs.ts), rule=kw.get("rule", obs.rule))
+    Args:
+        obs: The observer (with ``ts`` and ``rule`` fields).
+        **kw: ``ts`` and/or ``rule``.
+
+    Returns:
+        The rebuilt observer.
+    """
+
+    fields = {f.name: getattr(obs, f.name) for f in dataclasses.fields(obs)}
+    values = {k: v for k, v in fields.items() if k not in ("ts", "rule")}
+    values.update(ts=kw.get("ts", obs.ts), rule=kw.get("rule", fields["rule"]))
     return type(obs)(**values)
