@@ -77,6 +77,8 @@ LAYERS = [
     # the dual loop shares the loop's base, AbstractDriveLoop; a drive file builds a machine and a Drive
     ("jaxobs.drive.dual_loop",),
     ("jaxobs.drive._dualfile",),  # a drive file's [dual]: the dual machine and drive on one set's derivation
+    ("jaxobs.drive._filekeys", "jaxobs.drive._steady"),  # a drive file's keys and its steady-state rules
+    ("jaxobs.drive._filemap", "jaxobs.drive._filebuild"),  # its saturation map; its derivation, table by table
     ("jaxobs.drive.drivefile",),
     ("jaxobs.drive.bench",),
     ("jaxobs.drive",),
