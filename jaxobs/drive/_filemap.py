@@ -60,7 +60,9 @@ def machine_map(
         mt[k] = key_value(mt, "machine", k, keys[k])
     i_rated = _S2 * mt["rated_current_a"]
     summ = map_summary(sat, mt["p"], i_rated)
-    bad_inverse = sat.state_is_flux and check_inverse(sat, 3.0 * i_rated) > _INV_TOL
+    bad_inverse = False
+    if isinstance(sat, AlgebraicSaturation) and sat.state_is_flux:  # the plant inverts the map
+        bad_inverse = check_inverse(sat, 3.0 * i_rated) > _INV_TOL
     if not all(math.isfinite(v) for v in summ.values()) or bad_inverse:
         raise ValueError(
             "machine.saturation: the map's flux cannot be found from the current up to 3 × the rated current "

@@ -231,15 +231,15 @@ class DriveFile:
 
     name: str
     machine: PMSMParams
-    drive: Drive
+    drive: Drive | DualDrive
     sensors: Sensors
     startup: IfStartup
-    derived: dict
-    lowest_speeds: dict
-    warnings: tuple
+    derived: dict[str, Derived]
+    lowest_speeds: dict[str, tuple[float | None, str]]
+    warnings: tuple[str, ...]
     description: str = ""
-    foc_kw: dict = dataclasses.field(default_factory=dict, repr=False)
-    table: dict = dataclasses.field(default_factory=dict, repr=False)
+    foc_kw: dict[str, Any] = dataclasses.field(default_factory=dict, repr=False)
+    table: dict[str, Any] = dataclasses.field(default_factory=dict, repr=False)
     dual: DualPMSMParams | None = None
 
     @property
@@ -260,7 +260,7 @@ class DriveFile:
         settle: float = 0.2,
         standstill: bool = False,
         speed_schedule: float | None = None,
-    ) -> Drive:
+    ) -> Drive | DualDrive:
         """This file's drive as a run needs it: the same machine, inverter, timing and controller.
 
         Args:
@@ -275,18 +275,18 @@ class DriveFile:
             ``speed_schedule`` applies to both).
         """
         d = self.drive
-        new_schedule = speed_schedule is not None
-        common = dict(startup=self.startup if standstill else None, n_sub=d.n_sub, rule=d.rule,
-                      sensorless=sensorless, handover=handover, settle=settle)  # fmt: skip
-        if self.dual is not None:
+        common: dict[str, Any] = dict(startup=self.startup if standstill else None, n_sub=d.n_sub, rule=d.rule,
+                                      sensorless=sensorless, handover=handover, settle=settle)  # fmt: skip
+        if isinstance(d, DualDrive) and self.dual is not None:  # a [dual] file
             ctrl = d.ctrl
-            if new_schedule and float(speed_schedule) != float(ctrl.foc.speed_schedule):
+            if speed_schedule is not None and float(speed_schedule) != float(ctrl.foc.speed_schedule):
                 kw = {k: v for k, v in self.foc_kw.items() if k not in ("alpha_c", "alpha_s", "speed_schedule")}
                 ctrl = DualFOC.imc(self.dual, self.foc_kw["alpha_c"], self.foc_kw["alpha_s"], mode=ctrl.mode,
                                    fw_voltage=ctrl.fw_voltage, speed_schedule=float(speed_schedule), **kw)  # fmt: skip
             return DualDrive(ctrl, d.inverter, **common)
+        assert isinstance(d, Drive)  # a single machine's file
         foc = d.foc
-        if new_schedule and float(speed_schedule) != float(foc.speed_schedule):
+        if speed_schedule is not None and float(speed_schedule) != float(foc.speed_schedule):
             foc = FOC.imc(self.machine, **{**self.foc_kw, "speed_schedule": float(speed_schedule)})
         return Drive(foc, d.inverter, latency=d.latency, **common)
 
@@ -362,7 +362,7 @@ def _dual_drive_file(raw: dict[str, Any], t: dict[str, dict[str, Any]], name: st
     return dataclasses.replace(single, dual=dual, drive=drive, derived=derived, table=table, warnings=warnings)
 
 
-def read_drive(path) -> DriveFile:
+def read_drive(path: str | Path) -> DriveFile:
     """The drive file at ``path``, read safely (size at most 1 MB, nesting, encoding: :mod:`jaxobs.io.safetoml`)
     and checked in full.
 
@@ -382,7 +382,7 @@ def read_drive(path) -> DriveFile:
     return drive_from_table(raw, Path(path).stem, Path(path).parent)
 
 
-def load_drive(path) -> tuple[PMSMParams, Drive]:
+def load_drive(path: str | Path) -> tuple[PMSMParams, Drive | DualDrive]:
     """The machine and the sensorless, steady-start :class:`Drive` a drive file declares (:func:`read_drive`:
     the same checks; its sensors, start-up and derived values are on the :class:`DriveFile`).
 

@@ -41,6 +41,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax.typing import ArrayLike
 
 from ..core.validate import check_nonnegative, check_positive, check_real
 
@@ -203,7 +204,8 @@ class AlgebraicSaturation(eqx.Module):
         pq = jnp.clip(iq_s / par.a_q0, -2.0, 2.0)
 
         def body(_, c):
-            return step(par, *c, id_s, iq_s)
+            c_d, c_q = c
+            return step(par, c_d, c_q, id_s, iq_s)
 
         pd, pq = jax.lax.fori_loop(0, NEWTON_ITERS, body, (pd, pq))
         pd, pq = jax.lax.stop_gradient(pd), jax.lax.stop_gradient(pq)
@@ -398,7 +400,7 @@ def _torque_jit(sat, p, i_d, i_q):
     return 1.5 * p * (psi_d * i_q - psi_q * i_d)
 
 
-def map_torque(sat: AlgebraicSaturation, p: int, i_d, i_q):
+def map_torque(sat: AlgebraicSaturation | FluxTable, p: int, i_d: ArrayLike, i_q: ArrayLike) -> jax.Array:
     """The torque of the map at the current i: (3/2) p (ψd i_q − ψq i_d), N·m (compiled once per shape).
 
     Args:
@@ -414,7 +416,7 @@ def map_torque(sat: AlgebraicSaturation, p: int, i_d, i_q):
     return _torque_jit(sat, float(p), i_d, i_q)
 
 
-def map_mtpa(sat: AlgebraicSaturation, p: int, i_abs: float):
+def map_mtpa(sat: AlgebraicSaturation | FluxTable, p: int, i_abs: float) -> tuple[float, float, float]:
     """Maximum torque per ampere on the map: the current angle that maximizes the torque at |i| = ``i_abs``.
 
     721 angles over [90°, 180°] (motoring, i_d ≤ 0), then 721 over the best two cells, then the vertex of the
@@ -454,7 +456,7 @@ def _summary_jit(sat, i_d, i_q):
     return sat.no_load_flux(), sat.inductance(0.0, 0.0), sat.inductance(i_d, i_q), psi_d, psi_q
 
 
-def map_summary(sat: AlgebraicSaturation, p: int, i_rated: float) -> dict:
+def map_summary(sat: AlgebraicSaturation | FluxTable, p: int, i_rated: float) -> dict[str, float]:
     """What a drive check prints of a map: no-load flux, the inductances at no load and at the rated current's
     MTPA point, and that point.
 
