@@ -60,48 +60,7 @@ computation: :mod:`jaxobs.drive.latency`), so the controller rotates its output
 ahead by ``advance`` × ω̂e T_s; ``advance = 0`` is no compensation
 (``delay_compensation=False``, the old flag, is ``advance=0``).
 
-I-f start-up from standstill (:class:`IfStartup`; the design and its reasons):
-
-1. *Parked start.*  The current vector of amplitude I_f is held along θ_f + 90°,
-   and θ_f starts at θ_e0 − 90°: the rotor starts on its no-load equilibrium (its
-   d axis on the current vector).  A real drive gets there by a d-axis alignment
-   (pre-positioning) phase, which friction and eddy currents settle; the model
-   has almost no damping (B ≈ 0), so we start where that phase ends.  Started
-   90° off instead (θ_f = 0 with the rotor at 0, the old start) the rotor swung
-   ±90° for the whole start-up (−41 … 126 r/min around a 0 … 60 r/min ramp on the
-   IPMSM bench) and no observer could be handed a rotor moving like that.
-2. *Smooth ramp.*  The rotor follows θ_f through the torque-angle "spring"
-   T = K_t I_f cos(θ_f − θ), which is undamped (natural frequency
-   √(p K_t I_f/J), 5–12 Hz on the benches).  A linear frequency ramp steps the
-   acceleration at its start and end and excites that swing; the default
-   raised-cosine ramp ω_f = ω_sw (τ − sin 2πτ/2π), τ = t/T_r, T_r = ω_sw/accel,
-   has a continuous acceleration (peak 2× the mean ``accel``) and leaves it
-   nearly at rest.
-3. *Hold and agreement.*  At ω_switch the drive waits at least ``hold`` seconds
-   (the observer converges: the flux observers' SOGIs have a bandwidth ∝ ω̂) and
-   then until the position and speed it is given *agree* with the I-f frame for
-   ``dwell`` seconds: |ω̂ − ω_f| ≤ speed_tol·ω_f, and the offset Δ = θ_f − θ̂ (the
-   load angle when θ̂ = θ) steady, |Δ − Δ̄| ≤ tol with Δ̄ its low-pass over
-   ``dwell``.  An observer that never agrees keeps the drive in I-f (synchronous,
-   open loop): a fail-safe, visible as ``mode`` staying 0.  (With the speed
-   seeding of ClosedLoop the speed test holds by construction and the angle test
-   decides: an unconverged flux estimate wanders against θ_f.)  Forward rotation
-   only: ω_switch > 0.
-4. *Bumpless hand-over.*  At the switch the controller moves to the given frame
-   θ̂ with nothing stepping: the current references continue the I-f vector seen
-   from θ̂ (i_q = I_f cos Δ, i_d = −I_f sin Δ); the speed integrator is pre-loaded
-   so that the I-P output k_pω(b ω* − ω̂) + ∫ equals I_f cos Δ (without the
-   k_pω ω̂ term, as before, the switch stepped i_q by −k_pω ω̂: −5.8 A on the
-   IPMSM bench at 60 r/min); the current PIs' integrators are rotated into θ̂
-   with their decoupling terms, so the voltage vector is continuous; the held
-   i_q* until the next speed-loop sample is I_f cos Δ, not I_f.
-5. *Blend.*  Over ``blend`` seconds after the switch the d-current reference
-   goes linearly from −I_f sin Δ (up to I_f at no load: the I-f vector
-   magnetizes) to the controller's i_d policy; the speed loop then carries the
-   torque on the estimated q axis alone.
-
-:class:`~jaxobs.drive.ClosedLoop` also holds the observer's speed estimate at
-the I-f frequency while the I-f runs (``seed_speed``), see there.
+I-f start-up from standstill (:class:`IfStartup`, the design and its reasons): :mod:`jaxobs.drive.startup`.
 """
 
 from __future__ import annotations
@@ -113,169 +72,20 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from .. import papers
 from ..core.numerics import safe_norm2, wrap
 from ..core.trig import sincos
-from ..core.validate import check_nonnegative, check_positive, check_real, check_sample_time
+from ..core.validate import check_nonnegative, check_positive, check_sample_time
+from ._operating import OperatingPoint as OperatingPoint
+from ._operating import steady_point
+from ._policy import policy_id, policy_iq_limit, policy_iq_lin, policy_mtpa_iq, policy_torque, rotate_by, torque_dq
 from .component import AbstractComponent
-from .machine import RPM, PMSMParams, rotate
-from .weakening import VoltageFeedbackFW, id_stop, mtpv_iq, voltage_iq_range
+from .machine import PMSMParams
+from .startup import IfStartup as IfStartup
+from .weakening import VoltageFeedbackFW
 
 __all__ = ["FOC", "FOCInput", "FOCOutput", "IfStartup", "ControllerState", "OperatingPoint", "DEFAULT_U_MAX"]
 
 DEFAULT_U_MAX = 540.0 / math.sqrt(3.0)  # V: the default Inverter's U_dc/√3 (jaxobs.drive.hardware), FOC.imc's default
-
-
-class OperatingPoint(NamedTuple):
-    """A steady operating point of the drive (the true machine), to start a scenario in.
-
-    At steady state the currents sit at their references and the speed at its
-    reference; the PI integrators hold what the loop needs to stay there.  The
-    controller's frame may sit ``offset`` ahead of the rotor's (a biased
-    observer closing the loop): its references are then met in its own frame,
-    and the rotor-frame currents below are those references rotated by ``offset``.
-
-    Attributes:
-        omega_m: The mechanical speed, rad/s.
-        omega_m_ref: The speed reference at t = 0, rad/s.
-        theta_e: The electrical angle at t = 0, rad.
-        t_load: The load torque at t = 0, N·m.
-        i_d: The rotor-frame d current, A.
-        i_q: The rotor-frame q current, A.
-        u_d: The rotor-frame d voltage the true machine needs there, V.
-        u_q: The rotor-frame q voltage, V.
-        offset: The controller's angle minus the rotor's, rad (0: encoder or unbiased).
-        id_fw: Field weakening's Δi_d there (≤ 0, A): the controller's i_d* is the policy's plus it (0
-            without field weakening, or below base speed).
-    """
-
-    omega_m: jax.Array  # mechanical speed, rad/s
-    omega_m_ref: jax.Array  # speed reference at t = 0, rad/s
-    theta_e: jax.Array  # electrical angle at t = 0, rad
-    t_load: jax.Array  # load torque at t = 0, N·m
-    i_d: jax.Array  # rotor-frame currents, A
-    i_q: jax.Array
-    u_d: jax.Array  # rotor-frame voltage the true machine needs there, V
-    u_q: jax.Array
-    offset: jax.Array | float = 0.0  # the controller's angle minus the rotor's, rad (0: encoder or unbiased)
-    # field weakening's Δi_d there (≤ 0, A): the controller's i_d* is the policy's plus it (0 without field
-    # weakening, or below base speed)
-    id_fw: jax.Array | float = 0.0
-
-    @classmethod
-    def at_rest(cls, theta_e) -> OperatingPoint:
-        """The machine at standstill: no speed, current, load or voltage (where an I-f start-up starts, the
-        rotor parked by its alignment).
-
-        Args:
-            theta_e: The electrical angle, rad.
-
-        Returns:
-            The :class:`OperatingPoint`.
-        """
-        theta_e = jnp.asarray(theta_e, dtype=jnp.result_type(theta_e, float))
-        z = jnp.zeros_like(theta_e)
-        return cls(omega_m=z, omega_m_ref=z, theta_e=theta_e, t_load=z, i_d=z, i_q=z, u_d=z, u_q=z)
-
-
-class IfStartup(eqx.Module):
-    """I-f start-up from standstill, then a hand-over to the given position (module doc, steps 1–5).
-
-    :meth:`for_machine` gives the defaults we use for a machine (``jaxobs.papers``, IF_*).
-
-    Args:
-        i_f: The current amplitude during start-up, A (> 0).
-        accel: The mean ramp rate of the electrical frequency, rad/s² (> 0).
-        omega_switch: The electrical speed at which control switches to the given position, rad/s (> 0).
-        hold: The least time spent at ``omega_switch`` before switching (lets an observer converge), s.
-        blend: After the switch, the time over which the d-current goes from the I-f vector's to the i_d
-            policy, s.
-        tol: Agreement: |Δ − Δ̄| of the offset Δ = θ_f − θ̂ (the load angle), rad (in (0, 3.15]).
-        speed_tol: Agreement: |ω̂ − ω_f| / ω_f (> 0).
-        dwell: The time agreement must hold (and Δ̄ is Δ low-passed over it), s (> 0).
-        smooth: A raised-cosine ramp (continuous acceleration); False: linear.
-
-    Raises:
-        ValueError: A value out of its range, naming the field.
-    """
-
-    i_f: jax.Array  # current amplitude during start-up, A (> 0)
-    accel: jax.Array  # mean ramp rate of the electrical frequency, rad/s² (> 0)
-    omega_switch: jax.Array  # electrical speed at which control switches to the given position, rad/s
-    hold: jax.Array  # least time spent at omega_switch before switching (lets an observer converge), s
-    blend: jax.Array  # after the switch: the d-current goes from the I-f vector's to the i_d policy, s
-    tol: jax.Array  # agreement: |Δ − Δ̄| of the offset Δ = θ_f − θ̂ (the load angle), rad
-    speed_tol: jax.Array  # agreement: |ω̂ − ω_f| / ω_f
-    dwell: jax.Array  # agreement must hold this long (and Δ̄ is Δ low-passed over it), s (> 0)
-    smooth: bool = eqx.field(static=True)  # raised-cosine ramp (continuous acceleration); False: linear
-
-    def __init__(
-        self, i_f, accel, omega_switch, hold=0.0, *, blend=0.05, tol=0.2, speed_tol=0.1, dwell=0.02, smooth=True
-    ):
-        own = "IfStartup"
-        self.i_f = check_positive("i_f", i_f, own)
-        self.accel = check_positive("accel", accel, own)
-        self.omega_switch = check_positive("omega_switch", omega_switch, own)
-        self.hold = check_nonnegative("hold", hold, own)
-        self.blend = check_nonnegative("blend", blend, own)
-        self.tol = check_real("tol", tol, lower=0.0, upper=3.15, owner=own)
-        self.speed_tol = check_positive("speed_tol", speed_tol, own)
-        self.dwell = check_positive("dwell", dwell, own)
-        self.smooth = bool(smooth)
-
-    @classmethod
-    def for_machine(cls, par: PMSMParams, *, rpm_switch=None, i_f=None, **kw) -> IfStartup:
-        """The start-up we design for ``par`` (the machine the controller assumes), ASSUMED rules of thumb.
-
-        - I_f = papers.IF_CURRENT_PU × the rated current: enough torque to accelerate and to carry a
-          light load, small enough not to heat or saturate (I-f runs at a load angle near 90° at no load);
-        - switch at papers.IF_SWITCH_PU × rated speed (``rpm_switch`` to override), where every observer
-          here has converged within the hold and a sensorless speed loop at α_s = 2π·5 rad/s is stable
-          through it (the flux observers cannot start at 0 Hz: 000 Sec. IV; see below);
-        - mean acceleration such that the ramp's *peak* torque (2× the mean for the raised cosine) is
-          papers.IF_ACCEL_TORQUE_PU of K_t I_f, the rest being margin for load and swing; and slower still
-          if that ramp would last less than papers.IF_RAMP_SWING_PERIODS periods of the undamped swing
-          2π/√(p K_t I_f/J): a raised cosine as short as one period still rings (measured: ±25 % of the
-          switch speed on the SPMSM bench, ramp 0.11 s, swing period 84 ms);
-        - hold papers.IF_HOLD s at the switch speed.
-
-        A sensorless speed loop closed through a frequency-normalized FLL (SOIFO types: natural frequency
-        ≈ ω̂e/2) needs the switch speed high enough that the FLL is faster than the speed loop: we measured
-        a limit cycle (230–610 r/min) with α_s = 2π·5 rad/s after a switch at 200 r/min (10 %) on the SPMSM
-        bench, and ±1 % at 400 r/min (ω_e,sw ≥ 4 α_s).  Through a LESO's 15 Hz PLL the loop rang ±11 % at
-        60 r/min (10 %) on the IPMSM bench and ±3 % at 120 r/min.  Hence 20 % by default.
-
-        Args:
-            par: The machine the controller assumes.
-            rpm_switch: The switch speed, r/min (default papers.IF_SWITCH_PU × rated speed).
-            i_f: The start-up current, A (default papers.IF_CURRENT_PU × the rated current).
-            **kw: Other :class:`IfStartup` keywords.
-
-        Returns:
-            The :class:`IfStartup`.
-        """
-        i_rated, kt, J, p = float(par.i_rated), float(par.kt), float(par.J), par.p
-        i_f = papers.IF_CURRENT_PU * i_rated if i_f is None else float(i_f)
-        rpm = papers.IF_SWITCH_PU * float(par.n_rated) if rpm_switch is None else float(rpm_switch)
-        accel_m = papers.IF_ACCEL_TORQUE_PU * kt * i_f / (2 * J)  # mean mechanical, rad/s²
-        swing_period = 2 * math.pi / math.sqrt(p * kt * i_f / J)
-        accel_m = min(accel_m, rpm * RPM / (papers.IF_RAMP_SWING_PERIODS * swing_period))
-        kw.setdefault("hold", papers.IF_HOLD)
-        return cls(i_f, p * accel_m, p * rpm * RPM, **kw)
-
-    def ramp(self, t):
-        """The I-f electrical frequency.
-
-        Args:
-            t: The time from the start, s.
-
-        Returns:
-            The frequency, rad/s.
-        """
-        tau = jnp.clip(t * self.accel / self.omega_switch, 0.0, 1.0)
-        if self.smooth:
-            tau = tau - jnp.sin(2 * jnp.pi * tau) / (2 * jnp.pi)
-        return self.omega_switch * tau
 
 
 class ControllerState(eqx.Module):
@@ -352,16 +162,6 @@ class FOCOutput(NamedTuple):
     id_ref: jax.Array  # current references, A
     iq_ref: jax.Array
     theta: jax.Array  # the angle the current loop used (given position, or the I-f angle in start-up), rad
-
-
-def _rotate(x_d, x_q, angle):
-    """(x_d, x_q) seen from a frame ``angle`` behind: R(angle)·(x_d, x_q)."""
-    return rotate(x_d, x_q, *sincos(angle))
-
-
-def _torque_dq(par: PMSMParams, i_d, i_q):
-    """Mean electromagnetic torque (no BEMF harmonics), N·m."""
-    return 1.5 * par.p * (par.psi_f * i_q + (par.Ld - par.Lq) * i_d * i_q)
 
 
 class FOC(AbstractComponent):
@@ -595,8 +395,8 @@ class FOC(AbstractComponent):
         w_e = est.p * op.omega_m
         # the controller's frame is op.offset ahead of the rotor's: its currents and the voltage it must
         # produce are the rotor frame's rotated back by the offset (zero offset: the rotor frame itself)
-        i_d, i_q = _rotate(op.i_d, op.i_q, -op.offset)
-        u_d, u_q = _rotate(op.u_d, op.u_q, -op.offset)
+        i_d, i_q = rotate_by(op.i_d, op.i_q, -op.offset)
+        u_d, u_q = rotate_by(op.u_d, op.u_q, -op.offset)
         int_d = u_d + w_e * est.Lq * i_q
         int_q = u_q - w_e * (est.Ld * i_d + est.psi_f)
         lin, held = self.iq_lin(est, i_q), i_q
@@ -604,7 +404,7 @@ class FOC(AbstractComponent):
             # weakened: the speed loop asks for the torque of the references on the assumed machine, as its policy's
             # current i_q,cmd; Δi_d takes i_d* from the policy's i_d(i_q,cmd) (jaxobs.drive.weakening, points 1-2)
             weak = op.id_fw < 0
-            lin_w = _torque_dq(est, i_d, i_q) / est.kt
+            lin_w = torque_dq(est, i_d, i_q) / est.kt
             cmd = self.mtpa_iq(est, lin_w)
             lin, held = jnp.where(weak, lin_w, lin), jnp.where(weak, cmd, held)
             rest["id_fw"] = z + jnp.where(weak, jnp.minimum(i_d - self._id_ref(est, cmd), 0.0), op.id_fw)
@@ -651,94 +451,27 @@ class FOC(AbstractComponent):
         Returns:
             The :class:`OperatingPoint`.
         """
-        w_e = par.p * omega_m
-
-        def rotor_currents(iq, dfw=None):  # dfw: field weakening's Δi_d (None: the policy's i_d alone)
-            i_d = self._id_ref(self.est, iq)
-            return _rotate(i_d if dfw is None else i_d + dfw, iq, offset)
-
-        def voltage(i_d, i_q):
-            return par.Rs * i_d - w_e * par.Lq * i_q, par.Rs * i_q + w_e * (par.Ld * i_d + par.psi_f)
-
-        need = t_load + par.B * omega_m
-
-        def solve_iq(dfw):
-            if self.outer == "current":
-                iq_max = self.iq_limit(self.est)[0]
-                return jnp.clip(omega_m_ref, -iq_max, iq_max)
-            # |offset| < 90° where a steady state exists; the floor keeps a wilder offset finite
-            i_q = need / (1.5 * par.p * par.psi_f * jnp.maximum(jnp.cos(offset), 0.1))
-            for _ in range(4):  # Newton on T_e(i_q*) − need
-                te, dte = jax.jvp(lambda iq: _torque_dq(par, *rotor_currents(iq, dfw)), (i_q,), (jnp.ones_like(i_q),))
-                i_q = i_q - (te - need) / dte
-            iq_max = self.iq_limit(self.est)[0]
-            return jnp.clip(i_q, -iq_max, iq_max)
-
-        i_q = solve_iq(None)
-        i_d, i_q = rotor_currents(i_q)
-        u_d, u_q = voltage(i_d, i_q)
-        id_fw = 0.0
-        fw = self.field_weakening
-        if fw is not None:
-            target2 = (fw.margin * self.u_max) ** 2
-            est = self.est
-
-            def excess(idr, iqr):  # |u|² − (m u_max)² at the references (i_d*, i_q*)
-                ud, uq = voltage(*_rotate(idr, iqr, offset))
-                return ud * ud + uq * uq - target2
-
-            iq_pol = solve_iq(None)
-            id_pol = self._id_ref(est, iq_pol)
-            lo = id_stop(est, id_pol, self.i_max)
-
-            def solve_iq_at(idr):  # i_q* that carries the load at i_d* = idr (Newton from the policy's)
-                iq = iq_pol
-                for _ in range(4):
-                    te, dte = jax.jvp(lambda q: _torque_dq(par, *_rotate(idr, q, offset)), (iq,), (jnp.ones_like(iq),))
-                    iq = iq - (te - need) / jnp.where(jnp.abs(dte) > 1e-12, dte, 1.0)
-                return iq
-
-            idr, iqr = id_pol, iq_pol
-            for _ in range(8):  # Newton on i_d* (|u|² is a convex quadratic in it), then i_q* for the torque
-                f, df = jax.jvp(lambda d: excess(d, iqr), (idr,), (jnp.ones_like(idr),))
-                idr = jnp.clip(idr - f / jnp.where(jnp.abs(df) > 1e-12, df, 1.0), lo, id_pol)
-                iqr = solve_iq_at(idr)
-            # the limits the controller puts on i_q* there (jaxobs.drive.weakening, point 3)
-            room = jnp.minimum(fw.limit_room(idr, self.i_max), mtpv_iq(est, idr))
-            q_lo, q_hi = voltage_iq_range(est, idr, est.p * omega_m, self.u_max)
-            iqr = jnp.clip(iqr, jnp.maximum(-room, q_lo), jnp.minimum(room, q_hi))
-            weakened = u_d * u_d + u_q * u_q > target2
-            fd, fq = _rotate(idr, iqr, offset)
-            fud, fuq = voltage(fd, fq)
-            i_d, i_q = jnp.where(weakened, fd, i_d), jnp.where(weakened, fq, i_q)
-            u_d, u_q = jnp.where(weakened, fud, u_d), jnp.where(weakened, fuq, u_q)
-            id_fw = jnp.where(weakened, jnp.minimum(idr - id_pol, 0.0), 0.0)
-        z = jnp.zeros_like(w_e)
-        return OperatingPoint(
-            omega_m=z + omega_m,
-            omega_m_ref=z + omega_m_ref,
-            theta_e=z + theta_e,
-            t_load=z + t_load,
-            i_d=z + i_d,
-            i_q=z + i_q,
-            u_d=u_d,
-            u_q=u_q,
-            offset=z + offset,
-            id_fw=z + id_fw,
+        return steady_point(
+            est=self.est,
+            id_mode=self.id_mode,
+            outer=self.outer,
+            i_max=self.i_max,
+            u_max=self.u_max,
+            field_weakening=self.field_weakening,
+            par=par,
+            omega_m=omega_m,
+            omega_m_ref=omega_m_ref,
+            theta_e=theta_e,
+            t_load=t_load,
+            offset=offset,
         )
 
     def _id_ref(self, est: PMSMParams, iq):
-        if self.id_mode == "zero":
-            return jnp.zeros_like(iq)
-        dl = est.Lq - est.Ld
-        safe = jnp.where(jnp.abs(dl) > 1e-12, dl, 1.0)
-        a = est.psi_f / (2 * safe)
-        mtpa = a - jnp.sign(safe) * jnp.sqrt(a * a + iq * iq)
-        return jnp.where(jnp.abs(dl) > 1e-12, mtpa, 0.0)
+        return policy_id(self.id_mode, est, iq)
 
     def _policy_torque(self, est: PMSMParams, iq):
         """The mean torque (N·m) of i_q and the policy's i_d(i_q) on ``est``."""
-        return _torque_dq(est, self._id_ref(est, iq), iq)
+        return policy_torque(self.id_mode, est, iq)
 
     def mtpa_iq(self, est: PMSMParams, iq_lin):
         """The i_q* (A) whose torque under the policy's i_d(i_q*) on ``est`` is K̂_t·``iq_lin`` (module doc): the
@@ -756,14 +489,7 @@ class FOC(AbstractComponent):
         Returns:
             i_q*, A.
         """
-        if self.id_mode == "zero":
-            return iq_lin
-        target = est.kt * iq_lin
-        iq = iq_lin
-        for _ in range(6):
-            te, dte = jax.jvp(lambda x: self._policy_torque(est, x), (iq,), (jnp.ones_like(iq),))
-            iq = iq - (te - target) / jnp.where(dte > 0, dte, 1.0)
-        return iq
+        return policy_mtpa_iq(self.id_mode, est, iq_lin)
 
     def iq_lin(self, est: PMSMParams, iq):
         """The speed loop's output that asks for the current i_q under the policy: the inverse of :meth:`mtpa_iq`.
@@ -775,9 +501,7 @@ class FOC(AbstractComponent):
         Returns:
             The speed loop's output, A (K̂_t units).
         """
-        if self.id_mode == "zero":
-            return iq
-        return self._policy_torque(est, iq) / est.kt
+        return policy_iq_lin(self.id_mode, est, iq)
 
     def iq_limit(self, est: PMSMParams):
         """The current limits of the speed loop under the policy.
@@ -791,14 +515,7 @@ class FOC(AbstractComponent):
         Returns:
             ``(|i_q*| on the policy's curve at |i| = i_max, the speed loop's output limit in K̂_t units)``, A.
         """
-        if self.id_mode == "zero":
-            return self.i_max, self.i_max
-        dl = est.Lq - est.Ld
-        salient = jnp.abs(dl) > 1e-12
-        safe = jnp.where(salient, dl, 1.0)
-        i_d = (est.psi_f - jnp.sqrt(est.psi_f**2 + 8 * safe * safe * self.i_max**2)) / (4 * safe)
-        iq = jnp.where(salient, jnp.sqrt(jnp.maximum(self.i_max**2 - i_d * i_d, 0.0)), self.i_max)
-        return iq, self.iq_lin(est, iq)
+        return policy_iq_limit(self.id_mode, est, self.i_max)
 
     def step(self, cs: ControllerState, inp: FOCInput) -> tuple[ControllerState, FOCOutput]:
         """One current-loop period: the voltage to apply over the next period.
@@ -874,7 +591,7 @@ class FOC(AbstractComponent):
             # the weakened reference within the stop, the circle, MTPV and the voltage (jaxobs.drive.weakening)
             id_pol = id_ref
             id_ref, iq_ref, capped, fw_lo = fw.references(est, id_pol, iq_cmd, cs.id_fw, w_e, u_max, self.i_max)
-            real = jnp.where(capped, _torque_dq(est, id_ref, iq_ref) / est.kt, iq_sat)
+            real = jnp.where(capped, torque_dq(est, id_ref, iq_ref) / est.kt, iq_sat)
         # conditional integration on the torque realised (in K̂_t units): freeze while the speed loop's output is
         # not realised (the circle's torque, or field weakening's limits) and the error pushes further.  Without
         # field weakening real = iq_sat, the circle's limit alone.
