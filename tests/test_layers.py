@@ -59,8 +59,8 @@ LAYERS = [
     ("jaxobs.signals._logs", "jaxobs.drive.pwm"),
     ("jaxobs.signals._read",),  # the recordings reader: one file as a family's scenarios
     ("jaxobs.signals",),
-    # the FOC's parts: the I-f start-up, the i_d policy's maps, the steady operating point
-    ("jaxobs.drive.startup", "jaxobs.drive._policy"),
+    # the FOC's parts: the I-f start-up, the i_d policy's maps, its interface types; the steady operating point
+    ("jaxobs.drive.startup", "jaxobs.drive._policy", "jaxobs.drive._foctypes"),
     ("jaxobs.drive._operating",),
     ("jaxobs.scenarios", "jaxobs.drive.plant", "jaxobs.drive.dual", "jaxobs.drive.control", "jaxobs.drive.scenario"),
     # observers: they estimate

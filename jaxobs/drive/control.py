@@ -66,7 +66,7 @@ I-f start-up from standstill (:class:`IfStartup`, the design and its reasons): :
 from __future__ import annotations
 
 import math
-from typing import Literal, NamedTuple
+from typing import Literal
 
 import equinox as eqx
 import jax
@@ -75,6 +75,10 @@ import jax.numpy as jnp
 from ..core.numerics import safe_norm2, wrap
 from ..core.trig import sincos
 from ..core.validate import check_nonnegative, check_positive, check_sample_time
+from ._foctypes import ControllerState as ControllerState
+from ._foctypes import FOCInput as FOCInput
+from ._foctypes import FOCOutput as FOCOutput
+from ._foctypes import IfPhase
 from ._operating import OperatingPoint as OperatingPoint
 from ._operating import steady_point
 from ._policy import policy_id, policy_iq_limit, policy_iq_lin, policy_mtpa_iq, policy_torque, rotate_by, torque_dq
@@ -86,82 +90,6 @@ from .weakening import VoltageFeedbackFW
 __all__ = ["FOC", "FOCInput", "FOCOutput", "IfStartup", "ControllerState", "OperatingPoint", "DEFAULT_U_MAX"]
 
 DEFAULT_U_MAX = 540.0 / math.sqrt(3.0)  # V: the default Inverter's U_dc/√3 (jaxobs.drive.hardware), FOC.imc's default
-
-
-class ControllerState(eqx.Module):
-    """The FOC's state between two periods.
-
-    Attributes:
-        int_d: The d current-PI integrator, V.
-        int_q: The q current-PI integrator, V.
-        int_w: The speed-PI integrator, A.
-        iq_ref: The speed loop's output held between its samples, A.
-        theta_f: The I-f angle, rad.
-        omega_f: The I-f electrical frequency, rad/s.
-        t_at_switch: The time spent at the switch-over frequency, s.
-        mode: 0: I-f start-up, 1: closed loop on the given position.
-        d_lp: I-f: the offset θ_f − θ̂ low-passed over the dwell, rad.
-        t_agree: I-f: how long the given position has agreed with the I-f frame, s.
-        t_closed: The time since the switch, s.
-        id_hand: The d-current at the switch (in the given frame), A.
-        id_fw: Field weakening's Δi_d (≤ 0; 0 without field weakening), A.
-        kp_w: The speed loop's k_pω at its last sample (a scheduled gain's bumpless change), A/(rad/s).
-    """
-
-    int_d: jax.Array  # current-PI integrators, V
-    int_q: jax.Array
-    int_w: jax.Array  # speed-PI integrator, A
-    iq_ref: jax.Array  # speed-loop output held between its samples, A
-    theta_f: jax.Array  # I-f angle, rad
-    omega_f: jax.Array  # I-f electrical frequency, rad/s
-    t_at_switch: jax.Array  # time spent at the switch-over frequency, s
-    mode: jax.Array  # 0: I-f start-up, 1: closed loop on the given position
-    d_lp: jax.Array  # I-f: the offset θ_f − θ̂ low-passed over the dwell, rad
-    t_agree: jax.Array  # I-f: how long the given position has agreed with the I-f frame, s
-    t_closed: jax.Array  # time since the switch, s
-    id_hand: jax.Array  # the d-current at the switch (in the given frame), A
-    id_fw: jax.Array  # field weakening's Δi_d (≤ 0; 0 without field weakening), A
-    kp_w: jax.Array  # the speed loop's k_pω at its last sample (a scheduled gain's bumpless change), A/(rad/s)
-
-
-class FOCInput(NamedTuple):
-    """What the controller is given at sample ``k``.
-
-    Attributes:
-        k: The sample index (the speed loop runs when k % speed_every == 0).
-        i_a: The measured stationary-frame α current, A.
-        i_b: The measured β current, A.
-        theta: The electrical angle the controller uses (encoder or observer), rad.
-        omega_e: The electrical speed it uses (decoupling, delay compensation), rad/s.
-        omega_m: The mechanical speed the speed loop uses, rad/s.
-        omega_m_ref: The speed reference, rad/s (i_q* in A when ``outer="current"``).
-    """
-
-    k: jax.Array  # sample index (the speed loop runs when k % speed_every == 0)
-    i_a: jax.Array  # measured stationary-frame currents, A
-    i_b: jax.Array
-    theta: jax.Array  # electrical angle the controller uses (encoder or observer), rad
-    omega_e: jax.Array  # electrical speed it uses (decoupling, delay compensation), rad/s
-    omega_m: jax.Array  # mechanical speed the speed loop uses, rad/s
-    omega_m_ref: jax.Array  # speed reference, rad/s (i_q* in A when outer="current")
-
-
-class FOCOutput(NamedTuple):
-    """What the controller gives each period.
-
-    Attributes:
-        u_a: The α voltage to apply over the next period (before the inverter's limit), V.
-        u_b: The β voltage, V.
-        id_ref: The d current reference, A.
-        iq_ref: The q current reference, A.
-        theta: The angle the current loop used (given position, or the I-f angle in start-up), rad.
-    """
-
-    u_a: jax.Array  # voltage to apply over the next period (before the inverter's limit), V
-    u_b: jax.Array
-    id_ref: jax.Array  # current references, A
-    iq_ref: jax.Array
-    theta: jax.Array  # the angle the current loop used (given position, or the I-f angle in start-up), rad
 
 
 class FOC(AbstractComponent):
@@ -520,6 +448,10 @@ class FOC(AbstractComponent):
     def step(self, cs: ControllerState, inp: FOCInput) -> tuple[ControllerState, FOCOutput]:
         """One current-loop period: the voltage to apply over the next period.
 
+        The I-f start-up's phase (:meth:`_if_phase`), the speed loop (:meth:`_speed_loop`), the I-f references and
+        hand-over (:meth:`_if_references`), the current circle, then the current loop (:meth:`_current_loop`): helper
+        methods that the trace inlines, so the compiled period is the one function it always was.
+
         Args:
             cs: The :class:`ControllerState`.
             inp: The :class:`FOCInput`: ``inp.theta``/``omega_e``/``omega_m`` are the position and speeds the
@@ -529,47 +461,96 @@ class FOC(AbstractComponent):
         Returns:
             ``(the next ControllerState, the FOCOutput)``.
         """
-        k, i_a, i_b, theta, omega_e, omega_m, omega_m_ref = inp
-        est, u_max, startup = self.est, self.u_max, self.startup
-        ts = self.ts
-        # --- I-f start-up (module doc): the angle advances every period, used in mode 0
-        kp_w, ki_w = self.speed_gains(omega_m_ref)
-        if startup is not None:
-            omega_f = startup.ramp(k * ts)
-            theta_f = wrap(cs.theta_f + 0.5 * (cs.omega_f + omega_f) * ts)  # trapezoidal: exact for the ramp
-            at_top = omega_f >= startup.omega_switch
-            t_at_switch = jnp.where(at_top, cs.t_at_switch + ts, 0.0)
-            # agreement of the given position with the I-f frame: Δ = θ_f − θ̂ steady and ω̂ ≈ ω_f
-            delta = wrap(theta_f - theta)
-            d_lp = jnp.where(
-                cs.t_at_switch > 0, wrap(cs.d_lp + jnp.minimum(ts / startup.dwell, 1.0) * wrap(delta - cs.d_lp)), delta
+        kp_w, ki_w = self.speed_gains(inp.omega_m_ref)
+        ph = self._if_phase(cs, inp, kp_w)
+        closed = ph.mode == 1
+        th = jnp.where(closed, inp.theta, ph.theta_f)
+        w_e = jnp.where(closed, inp.omega_e, ph.omega_f)
+        run_speed = (inp.k % self.speed_every) == 0
+        id_ref, iq_ref, int_w, held, fw_lo = self._speed_loop(cs, inp, ph, (kp_w, ki_w), closed, run_speed, w_e)
+        int_d0, int_q0 = cs.int_d, cs.int_q
+        if self.startup is not None:
+            id_ref, iq_ref, held, int_w, int_d0, int_q0 = self._if_references(
+                cs, inp, ph, closed, (id_ref, iq_ref, held, int_w)
             )
-            agree = (
-                at_top
-                & (jnp.abs(wrap(delta - d_lp)) <= startup.tol)
-                & (jnp.abs(omega_e - omega_f) <= startup.speed_tol * omega_f)
-            )
-            t_agree = jnp.where(agree, cs.t_agree + ts, 0.0)
-            switch = (cs.mode == 0) & (t_at_switch >= startup.hold) & (t_agree >= startup.dwell)
-            mode = jnp.where(switch, 1, cs.mode)
-            t_closed = jnp.where(cs.mode == 1, cs.t_closed + ts, 0.0)  # 0 at the switch
-            # bumpless: the I-f vector (I_f along θ_f + 90°) seen from the given frame
-            sd, cd = sincos(delta)  # also rotates the integrators below
-            iq_hand = startup.i_f * cd
-            id_hand = jnp.where(switch, -startup.i_f * sd, cs.id_hand)
-            # the speed PI's output k_pω(b ω* − ω̂) + ∫ starts at iq_hand
-            lin_hand = self.iq_lin(est, iq_hand)
-            int_w0 = jnp.where(switch, lin_hand - kp_w * (self.setpoint_weight * omega_m_ref - omega_m), cs.int_w)
-            iq_held = jnp.where(switch, iq_hand, cs.iq_ref)
-        else:
-            omega_f, theta_f, mode, int_w0, iq_held = cs.omega_f, cs.theta_f, cs.mode, cs.int_w, cs.iq_ref
-            t_at_switch, d_lp, t_agree, t_closed, id_hand = cs.t_at_switch, cs.d_lp, cs.t_agree, cs.t_closed, cs.id_hand
-        closed = mode == 1
-        th = jnp.where(closed, theta, theta_f)
-        w_e = jnp.where(closed, omega_e, omega_f)
+        # the current circle, whatever set the references (the blend after an I-f switch, an I-f current above
+        # i_max): |i*| ≤ i_max at every sample, i_d first (an identity where the circle is not reached)
+        id_ref = jnp.clip(id_ref, -self.i_max, self.i_max)
+        iq_ref = VoltageFeedbackFW.limit_iq(iq_ref, id_ref, self.i_max)
+        u_a, u_b, int_d, int_q, id_fw = self._current_loop(cs, inp, th, w_e, (id_ref, iq_ref), (int_d0, int_q0), fw_lo)
+        new = ControllerState(
+            int_d=int_d,
+            int_q=int_q,
+            int_w=int_w,
+            iq_ref=held,
+            theta_f=ph.theta_f,
+            omega_f=ph.omega_f,
+            t_at_switch=ph.t_at_switch,
+            mode=ph.mode,
+            d_lp=ph.d_lp,
+            t_agree=ph.t_agree,
+            t_closed=ph.t_closed,
+            id_hand=ph.id_hand,
+            id_fw=id_fw,
+            kp_w=jnp.where(run_speed, kp_w, cs.kp_w),
+        )
+        return new, FOCOutput(
+            u_a=u_a, u_b=u_b, id_ref=id_ref, iq_ref=iq_ref, theta=jnp.where(ph.mode == 1, inp.theta, ph.theta_f)
+        )
 
-        # --- speed loop at its own rate (the result is held in between)
-        run_speed = (k % self.speed_every) == 0
+    def _if_phase(self, cs: ControllerState, inp: FOCInput, kp_w: jax.Array) -> IfPhase:
+        """The I-f start-up's part of a period (module doc): the angle advances every period (used in mode 0), the
+        agreement, the switch and the bumpless hand-over's values; without a start-up the state's, unchanged."""
+        startup, ts = self.startup, self.ts
+        if startup is None:
+            return IfPhase(cs.omega_f, cs.theta_f, cs.mode, cs.int_w, cs.iq_ref, cs.t_at_switch, cs.d_lp, cs.t_agree,
+                            cs.t_closed, cs.id_hand)  # fmt: skip
+        k, theta, omega_e, omega_m, omega_m_ref = inp.k, inp.theta, inp.omega_e, inp.omega_m, inp.omega_m_ref
+        omega_f = startup.ramp(k * ts)
+        theta_f = wrap(cs.theta_f + 0.5 * (cs.omega_f + omega_f) * ts)  # trapezoidal: exact for the ramp
+        at_top = omega_f >= startup.omega_switch
+        t_at_switch = jnp.where(at_top, cs.t_at_switch + ts, 0.0)
+        # agreement of the given position with the I-f frame: Δ = θ_f − θ̂ steady and ω̂ ≈ ω_f
+        delta = wrap(theta_f - theta)
+        d_lp = jnp.where(
+            cs.t_at_switch > 0, wrap(cs.d_lp + jnp.minimum(ts / startup.dwell, 1.0) * wrap(delta - cs.d_lp)), delta
+        )
+        agree = (
+            at_top
+            & (jnp.abs(wrap(delta - d_lp)) <= startup.tol)
+            & (jnp.abs(omega_e - omega_f) <= startup.speed_tol * omega_f)
+        )
+        t_agree = jnp.where(agree, cs.t_agree + ts, 0.0)
+        switch = (cs.mode == 0) & (t_at_switch >= startup.hold) & (t_agree >= startup.dwell)
+        mode = jnp.where(switch, 1, cs.mode)
+        t_closed = jnp.where(cs.mode == 1, cs.t_closed + ts, 0.0)  # 0 at the switch
+        # bumpless: the I-f vector (I_f along θ_f + 90°) seen from the given frame
+        sd, cd = sincos(delta)  # also rotates the integrators (_if_references)
+        iq_hand = startup.i_f * cd
+        id_hand = jnp.where(switch, -startup.i_f * sd, cs.id_hand)
+        # the speed PI's output k_pω(b ω* − ω̂) + ∫ starts at iq_hand
+        lin_hand = self.iq_lin(self.est, iq_hand)
+        int_w0 = jnp.where(switch, lin_hand - kp_w * (self.setpoint_weight * omega_m_ref - omega_m), cs.int_w)
+        iq_held = jnp.where(switch, iq_hand, cs.iq_ref)
+        return IfPhase(omega_f, theta_f, mode, int_w0, iq_held, t_at_switch, d_lp, t_agree, t_closed, id_hand,
+                        switch, sd, cd)  # fmt: skip
+
+    def _speed_loop(
+        self,
+        cs: ControllerState,
+        inp: FOCInput,
+        ph: IfPhase,
+        gains: tuple[jax.Array, jax.Array],
+        closed: jax.Array,
+        run_speed: jax.Array,
+        w_e: jax.Array,
+    ) -> tuple[jax.Array, jax.Array, jax.Array, jax.Array, jax.Array | None]:
+        """The speed loop at its own rate (its result held in between) and the current references it gives:
+        ``(i_d*, i_q*, the speed integrator, the held i_q*, field weakening's i_d floor or None)``."""
+        est, ts, fw = self.est, self.ts, self.field_weakening
+        omega_m, omega_m_ref = inp.omega_m, inp.omega_m_ref
+        kp_w, ki_w = gains
+        int_w0 = ph.int_w0
         tw = ts * self.speed_every
         e_w = omega_m_ref - omega_m
         if self.speed_schedule > 0:
@@ -577,20 +558,20 @@ class FOC(AbstractComponent):
             # step cut the I-P's −k_pω ω̂ + ∫ by 2 % of k_pω ω̂, and at 20 r/min under load that kick lost the drive
             # (docs/stability.md).  Not at the I-f switch, where the integrator is set afresh.
             bump = (cs.kp_w - kp_w) * (self.setpoint_weight * omega_m_ref - omega_m)
-            keep = run_speed & closed if startup is None else run_speed & closed & ~switch
+            keep = run_speed & closed if ph.switch is None else run_speed & closed & ~ph.switch
             int_w0 = int_w0 + jnp.where(keep, bump, 0.0)
         unsat = kp_w * (self.setpoint_weight * omega_m_ref - omega_m) + int_w0
         iq_max, lin_max = self.iq_limit(est)  # the circle's i_q under the policy, and its torque in K̂_t units
         iq_sat = jnp.clip(unsat, -lin_max, lin_max)
-        iq_cmd = jnp.where(run_speed, self.mtpa_iq(est, iq_sat), iq_held)  # the speed loop's current, held
+        iq_cmd = jnp.where(run_speed, self.mtpa_iq(est, iq_sat), ph.iq_held)  # the speed loop's current, held
         if self.outer == "current":  # the reference is i_q* itself (current-loop tests, torque control)
             iq_cmd = jnp.clip(omega_m_ref, -iq_max, iq_max)
         id_ref = self._id_ref(est, iq_cmd)
-        iq_ref, real, fw = iq_cmd, iq_sat, self.field_weakening
+        iq_ref, real, fw_lo = iq_cmd, iq_sat, None
         if fw is not None:
             # the weakened reference within the stop, the circle, MTPV and the voltage (jaxobs.drive.weakening)
             id_pol = id_ref
-            id_ref, iq_ref, capped, fw_lo = fw.references(est, id_pol, iq_cmd, cs.id_fw, w_e, u_max, self.i_max)
+            id_ref, iq_ref, capped, fw_lo = fw.references(est, id_pol, iq_cmd, cs.id_fw, w_e, self.u_max, self.i_max)
             real = jnp.where(capped, torque_dq(est, id_ref, iq_ref) / est.kt, iq_sat)
         # conditional integration on the torque realised (in K̂_t units): freeze while the speed loop's output is
         # not realised (the circle's torque, or field weakening's limits) and the error pushes further.  Without
@@ -599,35 +580,59 @@ class FOC(AbstractComponent):
         int_w = jnp.where(run_speed & ~windup, int_w0 + ki_w * e_w * tw, int_w0)
         if self.outer == "current":
             int_w = cs.int_w
-        held = iq_cmd
-        int_d0, int_q0 = cs.int_d, cs.int_q
-        if startup is not None:
-            # I-f: I_f on the I-f frame's q axis; after the switch the d-current blends from the I-f vector's
-            r = jnp.where(startup.blend > 0, jnp.clip(1.0 - t_closed / jnp.maximum(startup.blend, ts), 0.0, 1.0), 0.0)
-            id_ref = jnp.where(closed, r * id_hand + (1 - r) * id_ref, 0.0)
-            iq_ref = jnp.where(closed, iq_ref, startup.i_f)
-            held = jnp.where(closed, held, startup.i_f)
-            int_w = jnp.where(closed, int_w, cs.int_w)
-            # the current PIs' integrators into the new frame, so that the voltage vector is continuous:
-            # u = ∫ + decoupling, rotated by Δ from θ_f to θ̂, minus the decoupling computed in θ̂
-            sf, cf = sincos(theta_f)
-            idf, iqf = cf * i_a + sf * i_b, -sf * i_a + cf * i_b
-            sh, ch = sincos(theta)
-            idh, iqh = ch * i_a + sh * i_b, -sh * i_a + ch * i_b
-            vd = cs.int_d - omega_f * est.Lq * iqf
-            vq = cs.int_q + omega_f * (est.Ld * idf + est.psi_f)
-            int_d0 = jnp.where(switch, cd * vd - sd * vq + omega_e * est.Lq * iqh, cs.int_d)
-            int_q0 = jnp.where(switch, sd * vd + cd * vq - omega_e * (est.Ld * idh + est.psi_f), cs.int_q)
+        return id_ref, iq_ref, int_w, iq_cmd, fw_lo
 
-        # the current circle, whatever set the references (the blend after an I-f switch, an I-f current above
-        # i_max): |i*| ≤ i_max at every sample, i_d first (an identity where the circle is not reached)
-        id_ref = jnp.clip(id_ref, -self.i_max, self.i_max)
-        iq_ref = VoltageFeedbackFW.limit_iq(iq_ref, id_ref, self.i_max)
+    def _if_references(
+        self,
+        cs: ControllerState,
+        inp: FOCInput,
+        ph: IfPhase,
+        closed: jax.Array,
+        refs: tuple[jax.Array, jax.Array, jax.Array, jax.Array],
+    ) -> tuple[jax.Array, jax.Array, jax.Array, jax.Array, jax.Array, jax.Array]:
+        """I-f: I_f on the I-f frame's q axis; after the switch the d-current blends from the I-f vector's, and at
+        the switch the current PIs' integrators move into the given frame.  ``refs`` is ``(i_d*, i_q*, the held
+        i_q*, the speed integrator)``; returns them with the current integrators ``(int_d, int_q)``."""
+        startup, est, ts = self.startup, self.est, self.ts
+        assert startup is not None and ph.switch is not None and ph.sd is not None and ph.cd is not None
+        id_ref, iq_ref, held, int_w = refs
+        i_a, i_b, theta, omega_e = inp.i_a, inp.i_b, inp.theta, inp.omega_e
+        switch, sd, cd, theta_f, omega_f = ph.switch, ph.sd, ph.cd, ph.theta_f, ph.omega_f
+        r = jnp.where(startup.blend > 0, jnp.clip(1.0 - ph.t_closed / jnp.maximum(startup.blend, ts), 0.0, 1.0), 0.0)
+        id_ref = jnp.where(closed, r * ph.id_hand + (1 - r) * id_ref, 0.0)
+        iq_ref = jnp.where(closed, iq_ref, startup.i_f)
+        held = jnp.where(closed, held, startup.i_f)
+        int_w = jnp.where(closed, int_w, cs.int_w)
+        # the current PIs' integrators into the new frame, so that the voltage vector is continuous:
+        # u = ∫ + decoupling, rotated by Δ from θ_f to θ̂, minus the decoupling computed in θ̂
+        sf, cf = sincos(theta_f)
+        idf, iqf = cf * i_a + sf * i_b, -sf * i_a + cf * i_b
+        sh, ch = sincos(theta)
+        idh, iqh = ch * i_a + sh * i_b, -sh * i_a + ch * i_b
+        vd = cs.int_d - omega_f * est.Lq * iqf
+        vq = cs.int_q + omega_f * (est.Ld * idf + est.psi_f)
+        int_d0 = jnp.where(switch, cd * vd - sd * vq + omega_e * est.Lq * iqh, cs.int_d)
+        int_q0 = jnp.where(switch, sd * vd + cd * vq - omega_e * (est.Ld * idh + est.psi_f), cs.int_q)
+        return id_ref, iq_ref, held, int_w, int_d0, int_q0
 
-        # --- current loop
+    def _current_loop(
+        self,
+        cs: ControllerState,
+        inp: FOCInput,
+        th: jax.Array,
+        w_e: jax.Array,
+        refs: tuple[jax.Array, jax.Array],
+        ints: tuple[jax.Array, jax.Array],
+        fw_lo: jax.Array | None,
+    ) -> tuple[jax.Array, jax.Array, jax.Array, jax.Array, jax.Array]:
+        """The current PIs with decoupling in the frame ``th``, the voltage limit and the delay compensation:
+        ``(u_α, u_β, int_d, int_q, field weakening's Δi_d)``."""
+        est, u_max, ts, fw = self.est, self.u_max, self.ts, self.field_weakening
+        id_ref, iq_ref = refs
+        int_d0, int_q0 = ints
         s, c = sincos(th)
-        i_d = c * i_a + s * i_b
-        i_q = -s * i_a + c * i_b
+        i_d = c * inp.i_a + s * inp.i_b
+        i_q = -s * inp.i_a + c * inp.i_b
         e_d, e_q = id_ref - i_d, iq_ref - i_q
         u_d = self.kp_d * e_d + int_d0 - w_e * est.Lq * i_q
         u_q = self.kp_q * e_q + int_q0 + w_e * (est.Ld * i_d + est.psi_f)
@@ -643,22 +648,4 @@ class FOC(AbstractComponent):
         so, co = sincos(th_out)
         u_a = co * u_d - so * u_q
         u_b = so * u_d + co * u_q
-        new = ControllerState(
-            int_d=int_d,
-            int_q=int_q,
-            int_w=int_w,
-            iq_ref=held,
-            theta_f=theta_f,
-            omega_f=omega_f,
-            t_at_switch=t_at_switch,
-            mode=mode,
-            d_lp=d_lp,
-            t_agree=t_agree,
-            t_closed=t_closed,
-            id_hand=id_hand,
-            id_fw=id_fw,
-            kp_w=jnp.where(run_speed, kp_w, cs.kp_w),
-        )
-        return new, FOCOutput(
-            u_a=u_a, u_b=u_b, id_ref=id_ref, iq_ref=iq_ref, theta=jnp.where(mode == 1, theta, theta_f)
-        )
+        return u_a, u_b, int_d, int_q, id_fw
