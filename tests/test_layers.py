@@ -53,10 +53,10 @@ LAYERS = [
         "jaxobs.drive.machine",
         "jaxobs.drive.hardware",
         "jaxobs.drive.latency",
-        "jaxobs.drive.weakening",
     ),
-    # drive logs: a declared layout read into DriveRecordings; carrier-comparison PWM (the inverter's transforms)
-    ("jaxobs.signals._logs", "jaxobs.drive.pwm"),
+    # drive logs: a declared layout read into DriveRecordings; carrier-comparison PWM (the inverter's transforms);
+    # field weakening (on the machine's parameters)
+    ("jaxobs.signals._logs", "jaxobs.drive.pwm", "jaxobs.drive.weakening"),
     ("jaxobs.signals._read",),  # the recordings reader: one file as a family's scenarios
     ("jaxobs.signals",),
     # the FOC's parts: the I-f start-up, the i_d policy's maps, its interface types; the steady operating point

@@ -7,7 +7,6 @@ from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
-from jax.typing import ArrayLike
 
 from ._policy import policy_id, policy_iq_limit, rotate_by, torque_dq
 from .machine import PMSMParams
@@ -77,11 +76,11 @@ def steady_point(
     u_max: jax.Array,
     field_weakening: VoltageFeedbackFW | None,
     par: PMSMParams,
-    omega_m: ArrayLike,
-    omega_m_ref: ArrayLike,
-    theta_e: ArrayLike,
-    t_load: ArrayLike,
-    offset: ArrayLike = 0.0,
+    omega_m: jax.Array | float,
+    omega_m_ref: jax.Array | float,
+    theta_e: jax.Array | float,
+    t_load: jax.Array | float,
+    offset: jax.Array | float = 0.0,
 ) -> OperatingPoint:
     """The steady state of the true machine ``par`` under this controller at speed ω_m and load T_L.
 

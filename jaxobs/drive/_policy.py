@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import jax
 import jax.numpy as jnp
-from jax.typing import ArrayLike
 
 from ..core.trig import sincos
 from .machine import PMSMParams, rotate
@@ -14,7 +13,7 @@ from .machine import PMSMParams, rotate
 __all__ = ["policy_id", "policy_iq_limit", "policy_iq_lin", "policy_mtpa_iq", "policy_torque", "rotate_by", "torque_dq"]
 
 
-def rotate_by(x_d: ArrayLike, x_q: ArrayLike, angle: ArrayLike) -> tuple[jax.Array, jax.Array]:
+def rotate_by(x_d: jax.Array | float, x_q: jax.Array | float, angle: jax.Array | float) -> tuple[jax.Array, jax.Array]:
     """(x_d, x_q) seen from a frame ``angle`` behind: R(angle)·(x_d, x_q).
 
     Args:
@@ -28,7 +27,7 @@ def rotate_by(x_d: ArrayLike, x_q: ArrayLike, angle: ArrayLike) -> tuple[jax.Arr
     return rotate(x_d, x_q, *sincos(angle))
 
 
-def torque_dq(par: PMSMParams, i_d: ArrayLike, i_q: ArrayLike) -> jax.Array:
+def torque_dq(par: PMSMParams, i_d: jax.Array | float, i_q: jax.Array | float) -> jax.Array:
     """Mean electromagnetic torque (no BEMF harmonics), N·m.
 
     Args:
@@ -42,7 +41,7 @@ def torque_dq(par: PMSMParams, i_d: ArrayLike, i_q: ArrayLike) -> jax.Array:
     return 1.5 * par.p * (par.psi_f * i_q + (par.Ld - par.Lq) * i_d * i_q)
 
 
-def policy_id(id_mode: str, est: PMSMParams, iq: ArrayLike) -> jax.Array:
+def policy_id(id_mode: str, est: PMSMParams, iq: jax.Array | float) -> jax.Array:
     """The policy's i_d* for i_q (A): zero, or MTPA ψf/(2(Lq − Ld)) − √(ψf²/(4(Lq − Ld)²) + i_q²) (0 for Ld = Lq).
 
     Args:
@@ -62,7 +61,7 @@ def policy_id(id_mode: str, est: PMSMParams, iq: ArrayLike) -> jax.Array:
     return jnp.where(jnp.abs(dl) > 1e-12, mtpa, 0.0)
 
 
-def policy_torque(id_mode: str, est: PMSMParams, iq: ArrayLike) -> jax.Array:
+def policy_torque(id_mode: str, est: PMSMParams, iq: jax.Array | float) -> jax.Array:
     """The mean torque (N·m) of i_q and the policy's i_d(i_q) on ``est``.
 
     Args:

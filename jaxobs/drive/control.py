@@ -66,7 +66,7 @@ I-f start-up from standstill (:class:`IfStartup`, the design and its reasons): :
 from __future__ import annotations
 
 import math
-from typing import Literal
+from typing import Any, Literal
 
 import equinox as eqx
 import jax
@@ -218,7 +218,15 @@ class FOC(AbstractComponent):
         self.speed_schedule = float(speed_schedule)
 
     @classmethod
-    def imc(cls, est_par: PMSMParams, alpha_c, alpha_s, i_max=None, u_max=None, **kw):
+    def imc(
+        cls,
+        est_par: PMSMParams,
+        alpha_c: jax.Array | float,
+        alpha_s: jax.Array | float,
+        i_max: jax.Array | float | None = None,
+        u_max: jax.Array | float | None = None,
+        **kw: Any,
+    ) -> FOC:
         """IMC current gains (k_p = α_c L̂, k_i = α_c R̂s) and double-pole speed gains at −α_s.
 
         Args:
@@ -250,7 +258,7 @@ class FOC(AbstractComponent):
             **kw,
         )
 
-    def speed_gains(self, omega_m_ref):
+    def speed_gains(self, omega_m_ref: jax.Array | float) -> tuple[jax.Array, jax.Array]:
         """(k_pω, k_iω) of the speed loop at the mechanical speed reference ω_m* (rad/s).
 
         ``speed_schedule = N > 0`` keeps the speed loop inside the bandwidth of a speed estimate that scales
@@ -272,7 +280,7 @@ class FOC(AbstractComponent):
         r = jnp.where(alpha > 0, jnp.minimum(w_e / (self.speed_schedule * jnp.where(alpha > 0, alpha, 1.0)), 1.0), 1.0)
         return self.kp_w * r, self.ki_w * r * r
 
-    def bind(self, est: PMSMParams, u_max, startup: IfStartup | None = None) -> FOC:
+    def bind(self, est: PMSMParams, u_max: jax.Array | float, startup: IfStartup | None = None) -> FOC:
         """A copy of this controller with another assumed machine, voltage limit and start-up (a scenario's, a
         drive's), as whole as this one (no value checks: traced-safe; None is refused).
 
@@ -293,7 +301,7 @@ class FOC(AbstractComponent):
             lambda f: (f.est, f.u_max, f.startup), self, (est, u_max, startup), is_leaf=lambda x: x is None
         )
 
-    def init(self, op: OperatingPoint | None = None, *, theta_f0=0.0) -> ControllerState:
+    def init(self, op: OperatingPoint | None = None, *, theta_f0: jax.Array | float = 0.0) -> ControllerState:
         """Zero integrators (``op=None``), or the integrators that hold the drive at ``op`` (a steady start).
 
         At a steady operating point the errors are zero, so the current PIs'
@@ -343,7 +351,15 @@ class FOC(AbstractComponent):
             int_w = lin - gain * (self.setpoint_weight * op.omega_m_ref - op.omega_m)
         return ControllerState(int_d=z + int_d, int_q=z + int_q, int_w=z + int_w, iq_ref=z + held, **rest)
 
-    def operating_point(self, par: PMSMParams, omega_m, omega_m_ref, theta_e, t_load, offset=0.0) -> OperatingPoint:
+    def operating_point(
+        self,
+        par: PMSMParams,
+        omega_m: jax.Array | float,
+        omega_m_ref: jax.Array | float,
+        theta_e: jax.Array | float,
+        t_load: jax.Array | float,
+        offset: jax.Array | float = 0.0,
+    ) -> OperatingPoint:
         """The steady state of the true machine ``par`` under this controller at speed ω_m and load T_L.
 
         The speed loop settles where the torque balances the load and friction,
@@ -394,14 +410,14 @@ class FOC(AbstractComponent):
             offset=offset,
         )
 
-    def _id_ref(self, est: PMSMParams, iq):
+    def _id_ref(self, est: PMSMParams, iq: jax.Array | float) -> jax.Array:
         return policy_id(self.id_mode, est, iq)
 
-    def _policy_torque(self, est: PMSMParams, iq):
+    def _policy_torque(self, est: PMSMParams, iq: jax.Array | float) -> jax.Array:
         """The mean torque (N·m) of i_q and the policy's i_d(i_q) on ``est``."""
         return policy_torque(self.id_mode, est, iq)
 
-    def mtpa_iq(self, est: PMSMParams, iq_lin):
+    def mtpa_iq(self, est: PMSMParams, iq_lin: jax.Array) -> jax.Array:
         """The i_q* (A) whose torque under the policy's i_d(i_q*) on ``est`` is K̂_t·``iq_lin`` (module doc): the
         speed loop's output turned into current.  ``iq_lin`` itself with i_d* = 0 or a non-salient ``est``.
 
@@ -419,7 +435,7 @@ class FOC(AbstractComponent):
         """
         return policy_mtpa_iq(self.id_mode, est, iq_lin)
 
-    def iq_lin(self, est: PMSMParams, iq):
+    def iq_lin(self, est: PMSMParams, iq: jax.Array) -> jax.Array:
         """The speed loop's output that asks for the current i_q under the policy: the inverse of :meth:`mtpa_iq`.
 
         Args:
@@ -431,7 +447,7 @@ class FOC(AbstractComponent):
         """
         return policy_iq_lin(self.id_mode, est, iq)
 
-    def iq_limit(self, est: PMSMParams):
+    def iq_limit(self, est: PMSMParams) -> tuple[jax.Array, jax.Array]:
         """The current limits of the speed loop under the policy.
 
         MTPA on the circle |i| = I: i_d = (ψf − √(ψf² + 8 ΔL² I²))/(4 ΔL), ΔL = Lq − Ld (the torque

@@ -62,6 +62,7 @@ from .. import papers
 from ..core.discretize import RK4, AbstractRule, AbstractRuleCarry, Held, check_rule
 from ..core.numerics import wrap
 from ..core.validate import check_nonnegative, check_positive, check_sample_time
+from ._operating import OperatingPoint
 from .component import AbstractComponent
 from .hardware import Inverter
 from .machine import PMSMParams, ab_to_dq, dq_to_ab
@@ -97,7 +98,7 @@ def vsd_matrix() -> np.ndarray:
 VSD_AMPLITUDE = vsd_matrix() / math.sqrt(3.0)
 
 
-def phases_to_vsd(x6):
+def phases_to_vsd(x6: jax.Array | float) -> jax.Array:
     """Six phase quantities → VSD coordinates, amplitude invariant.
 
     Args:
@@ -109,12 +110,14 @@ def phases_to_vsd(x6):
     return jnp.asarray(x6) @ jnp.asarray(VSD_AMPLITUDE.T)
 
 
-def vsd_to_phases(v6):
+def vsd_to_phases(v6: jax.Array | float) -> jax.Array:
     """Inverse of :func:`phases_to_vsd`."""
     return jnp.asarray(v6) @ jnp.asarray(3.0 * VSD_AMPLITUDE)
 
 
-def sets_to_vsd(a1, b1, a2, b2):
+def sets_to_vsd(
+    a1: jax.Array, b1: jax.Array, a2: jax.Array, b2: jax.Array
+) -> tuple[jax.Array, jax.Array, jax.Array, jax.Array]:
     """The two sets' Clarke vectors → VSD: z_αβ = (s1 + s2)/2, z_xy = conj(s1 − s2)/2 (module doc).
 
     Args:
@@ -129,7 +132,9 @@ def sets_to_vsd(a1, b1, a2, b2):
     return (a1 + a2) / 2, (b1 + b2) / 2, (a1 - a2) / 2, (b2 - b1) / 2
 
 
-def vsd_to_sets(a, b, x, y):
+def vsd_to_sets(
+    a: jax.Array, b: jax.Array, x: jax.Array, y: jax.Array
+) -> tuple[jax.Array, jax.Array, jax.Array, jax.Array]:
     """VSD → the two sets' Clarke vectors: s1,2 = z_αβ ± conj(z_xy).
 
     Args:
@@ -171,7 +176,7 @@ class DualPMSMParams(eqx.Module):
         return self.m.p
 
     @property
-    def kt(self):
+    def kt(self) -> jax.Array:
         """Torque constant at i_d = 0 and zero xy current, N·m per A of |i_αβ| (peak): 3 p ψf."""
         return 3.0 * self.m.p * self.m.psi_f
 
@@ -189,7 +194,7 @@ class DualPMSMParams(eqx.Module):
         return eqx.tree_at(lambda r: (r.Ld, r.Lq), q, ((q.Ld + self.Lls) / 2, (q.Lq + self.Lls) / 2))
 
 
-def dual_ipmsm_paper002(J=None, **overrides) -> DualPMSMParams:
+def dual_ipmsm_paper002(J: float | None = None, **overrides: Any) -> DualPMSMParams:
     """002's dual three-phase IPMSM (ASSUMED: our copy lacks its machine table; papers.IPMSM_002 per set).
 
     Two of the single IPMSM's sets on one shaft: per phase the single machine's Rs, Ld, Lq, ψf, so each set
@@ -213,7 +218,7 @@ def dual_ipmsm_paper002(J=None, **overrides) -> DualPMSMParams:
     return DualPMSMParams(PMSMParams(**kw), lls)
 
 
-def pm_flux_vsd(par: DualPMSMParams, theta_e):
+def pm_flux_vsd(par: DualPMSMParams, theta_e: jax.Array | float) -> tuple[jax.Array, jax.Array, jax.Array, jax.Array]:
     """The PM flux's rate per electrical rad/s, e/ωe, in VSD coordinates (α, β, x, y), V·s."""
     m = par.m
     phi = theta_e - jnp.asarray(PHASE_ANGLES, dtype=jnp.result_type(theta_e, float))
@@ -222,7 +227,7 @@ def pm_flux_vsd(par: DualPMSMParams, theta_e):
     return v[0], v[1], v[2], v[3]
 
 
-def dual_torque(par: DualPMSMParams, x):
+def dual_torque(par: DualPMSMParams, x: jax.Array) -> jax.Array:
     """Electromagnetic torque (module doc).
 
     Args:
@@ -240,7 +245,12 @@ def dual_torque(par: DualPMSMParams, x):
     return 3.0 * m.p * (pm + (m.Ld - m.Lq) * i_d * i_q)
 
 
-def dual_vf(par: DualPMSMParams, x, u_vsd, t_load):
+def dual_vf(
+    par: DualPMSMParams,
+    x: jax.Array,
+    u_vsd: tuple[jax.Array, jax.Array, jax.Array, jax.Array],
+    t_load: jax.Array | float,
+) -> jax.Array:
     """The dual machine's vector field.
 
     Args:
@@ -353,7 +363,7 @@ class DualPMSM(AbstractComponent):
         self.n_sub = n_sub
         self.rule = check_rule(RK4() if rule is None else rule, "DualPMSM")
 
-    def set_currents(self, x):
+    def set_currents(self, x: jax.Array) -> tuple[jax.Array, jax.Array, jax.Array, jax.Array]:
         """Each set's Clarke currents at state ``x``.
 
         Args:
@@ -365,7 +375,7 @@ class DualPMSM(AbstractComponent):
         i_a, i_b = dq_to_ab(x[0], x[1], x[5])
         return vsd_to_sets(i_a, i_b, x[2], x[3])
 
-    def field(self, x, inp):
+    def field(self, x: jax.Array, inp: jax.Array) -> jax.Array:
         """The vector field under the inverters.
 
         Args:
@@ -385,7 +395,7 @@ class DualPMSM(AbstractComponent):
         u = sets_to_vsd(inp[0] + d_a1, inp[1] + d_b1, inp[2] + d_a2, inp[3] + d_b2)
         return dual_vf(self.par, x, u, inp[4])
 
-    def init(self, op=None) -> DualPlantState:
+    def init(self, op: OperatingPoint | None = None) -> DualPlantState:
         """The machine's initial state.
 
         Args:
@@ -400,7 +410,7 @@ class DualPMSM(AbstractComponent):
         x0 = jnp.stack([jnp.asarray(v, dtype) for v in vals])
         return DualPlantState(x=x0, rule=self.rule.init(self.field, x0, None))
 
-    def output(self, x) -> DualPlantOutput:
+    def output(self, x: jax.Array) -> DualPlantOutput:
         i_a1, i_b1, i_a2, i_b2 = self.set_currents(x)
         return DualPlantOutput(x[0], x[1], x[2], x[3], x[4], x[5], i_a1, i_b1, i_a2, i_b2, dual_torque(self.par, x))
 

@@ -128,19 +128,22 @@ class DualFOC(AbstractComponent):
     # voltage does not depend on i_d: ∂|u|/∂i_d ≈ ω̂e L̂d either way, a first-order loop at α_fw, 20 Hz) and
     # neither sees the observer's angle error (|u| is a magnitude); they differ in the i_d they settle on.
     # "set" fits the xy PIs' voltage under the margin too, which takes a deeper i_d, and a lagging estimate
-    # turns i_d into accelerating torque (K_δ = 1.5 p ψf i_d): on 330 V at 840 r/min, FA-LESO closing, speed
-    # loop 2.5 Hz, "set" settles at i_d = −11.8 A, where the speed loop's pair through the PLL has
-    # Re s = +3.5 /s (jaxobs.linear.faleso_speed_loop_poles at −11.1 A; −4.9 /s at "ab"'s −7.3 A; the
-    # crossing is at −9.5 A), and the drive falls into a 601–973 r/min limit cycle; "ab" holds
-    # 840.0 r/min within 0.01°.  The depth is the cause, not the signal: "ab" with margin 0.90 (i_d −10.1 A)
-    # grows at +4.8 /s and with 0.88 (−11.5 A) cycles over 594–945 r/min; "set" with margin 1.0 (−8.1 A)
-    # holds (tests/test_dual.py).  So "ab" is the default; it leaves a set at its inverter's limit part of
-    # the time (71 % at 840 r/min on 330 V: that set's current loop then has no voltage in reserve).  002
+    # turns i_d into accelerating torque (K_δ = 1.5 p ψf i_d): the deeper i_d destabilizes the sensorless speed
+    # loop (tests/test_dual.py; docs/performance.md).  So "ab" is the default; it leaves a set at its inverter's
+    # limit part of the time (that set's current loop then has no voltage in reserve).  002
     # does not say which voltage its field weakening (its ref. [32]) budgets.  "individual" is per set either
     # way (each set's FOC limits its own).
     fw_voltage: Literal["ab", "set"] = eqx.field(static=True)
 
-    def __init__(self, foc, kp_xy=1.0, ki_xy=0.0, *, mode="vsd", fw_voltage="ab"):
+    def __init__(
+        self,
+        foc: FOC,
+        kp_xy: jax.Array | float = 1.0,
+        ki_xy: jax.Array | float = 0.0,
+        *,
+        mode: Literal["vsd", "individual"] = "vsd",
+        fw_voltage: Literal["ab", "set"] = "ab",
+    ) -> None:
         if not isinstance(foc, FOC):
             raise ValueError(f"DualFOC.foc must be a FOC, got {type(foc).__name__}")
         if mode not in ("vsd", "individual"):
@@ -154,7 +157,16 @@ class DualFOC(AbstractComponent):
         self.fw_voltage = fw_voltage
 
     @classmethod
-    def imc(cls, est: DualPMSMParams, alpha_c, alpha_s, *, mode="vsd", fw_voltage="ab", **kw) -> DualFOC:
+    def imc(
+        cls,
+        est: DualPMSMParams,
+        alpha_c: jax.Array | float,
+        alpha_s: jax.Array | float,
+        *,
+        mode: Literal["vsd", "individual"] = "vsd",
+        fw_voltage: Literal["ab", "set"] = "ab",
+        **kw: Any,
+    ) -> DualFOC:
         """IMC current loops at ``alpha_c`` rad/s and the double-pole speed loop at ``alpha_s`` on ``est``.
 
         "vsd": :meth:`FOC.imc` on ``est.per_set()``, xy PIs k_p = α_c L̂ls, k_i = α_c R̂s.  "individual":
@@ -169,7 +181,7 @@ class DualFOC(AbstractComponent):
         foc = FOC.imc(machine, alpha_c, alpha_s, **kw)
         return cls(foc, alpha_c * est.Lls, alpha_c * est.m.Rs, mode=mode, fw_voltage=fw_voltage)
 
-    def init(self, op: OperatingPoint | None = None, *, theta_f0=0.0) -> DualFOCState:
+    def init(self, op: OperatingPoint | None = None, *, theta_f0: jax.Array | float = 0.0) -> DualFOCState:
         """The integrators that hold the drive at ``op`` (per set; zero xy), zeros for None; with the FOC's
         I-f start-up its angle at ``theta_f0`` (rad; set 2's FOC, in its own frame, 30° behind)."""
         cs = self.foc.init(op, theta_f0=theta_f0)
@@ -296,7 +308,7 @@ class DualOutput(NamedTuple):
     mode: jax.Array  # 0: I-f start-up, 1: closed loop
 
     @property
-    def speed_rpm(self):
+    def speed_rpm(self) -> jax.Array:
         return self.omega_m * 60 / (2 * jnp.pi)
 
 
@@ -337,7 +349,7 @@ class DualClosedLoop(AbstractDriveLoop):
         return self.drive.ts
 
     @property
-    def pole_pairs(self):
+    def pole_pairs(self) -> int:
         return self.machine.p
 
     @property
@@ -353,7 +365,7 @@ class DualClosedLoop(AbstractDriveLoop):
         foc = c.foc.bind(c.foc.est, self.drive.inverter.u_max, self.drive.startup)
         return eqx.tree_at(lambda q: q.foc, c, foc)
 
-    def operating_point(self, offset=0.0) -> OperatingPoint:
+    def operating_point(self, offset: jax.Array | float = 0.0) -> OperatingPoint:
         """The steady state at the scenario's initial speed and load: each set carries half the load
         (the FOC's operating point on the per-set machine, its frame ``offset`` rad ahead of the rotor's),
         zero xy current.  Above base speed with field weakening it is the field-weakened one (the αβ voltage at
@@ -390,7 +402,7 @@ class DualClosedLoop(AbstractDriveLoop):
         key = sc.sensors.init(op, key=sc.key)
         return DualLoopState(plant=plant, ctrl=foc.init(op), obs=obs, sensors=key, u=(u_a, u_b, u_a, u_b))
 
-    def step(self, state: DualLoopState, k) -> tuple[DualLoopState, DualOutput]:
+    def step(self, state: DualLoopState, k: jax.Array) -> tuple[DualLoopState, DualOutput]:
         drive, sc, inv = self.drive, self.scenario, self.drive.inverter
         t = k * self.ts
         w_ref, load = sc.speed_ref(t), sc.load(t)
@@ -444,17 +456,17 @@ class DualClosedLoop(AbstractDriveLoop):
 def dual_bench_drive(
     machine: DualPMSMParams,
     *,
-    mode="vsd",
-    fw_voltage="ab",
-    sensorless=True,
-    handover=0.2,
+    mode: Literal["vsd", "individual"] = "vsd",
+    fw_voltage: Literal["ab", "set"] = "ab",
+    sensorless: bool = True,
+    handover: float = 0.2,
     startup: IfStartup | None = None,
-    settle=0.2,
-    alpha_s=None,
-    alpha_c=None,
-    n_sub=2,
+    settle: float = 0.2,
+    alpha_s: float | None = None,
+    alpha_c: float | None = None,
+    n_sub: int = 2,
     inverter: Inverter | None = None,
-    **foc_kw,
+    **foc_kw: Any,
 ) -> DualDrive:
     """The single IPMSM bench's drive (:func:`jaxobs.drive.bench_drive`) on the dual machine ``machine`` (what
     the controller assumes): the speed loop at ``alpha_s`` (default 2π·papers.BENCH_SPEED_HZ rad/s), IMC

@@ -42,6 +42,7 @@ from ..core.discretize import RK4, AbstractRule, AbstractRuleCarry, Held, check_
 from ..core.numerics import wrap
 from ..core.trig import sincos
 from ..core.validate import check_nonnegative, check_sample_time
+from ._operating import OperatingPoint
 from .component import AbstractComponent
 from .hardware import Inverter, ab_to_abc
 from .machine import PMSMParams, dq_to_ab, mapped_torque, plant_vf, rotate, state_currents, torque
@@ -50,7 +51,9 @@ from .pwm import N_INTERVALS, carrier_intervals
 __all__ = ["PMSM", "PlantInput", "PlantOutput", "PlantState", "plant_field"]
 
 
-def plant_field(par: PMSMParams, inverter: Inverter, dead_time, x, inp):
+def plant_field(
+    par: PMSMParams, inverter: Inverter, dead_time: jax.Array | float, x: jax.Array, inp: jax.Array
+) -> jax.Array:
     """Plant vector field with the inverter's dead-time error.
 
     Args:
@@ -143,7 +146,16 @@ class PMSM(AbstractComponent):
     n_sub: int = eqx.field(static=True)  # substeps per period
     rule: AbstractRule = eqx.field(static=True)
 
-    def __init__(self, par, inverter=None, dead_time=0.0, *, ts=1e-4, n_sub=2, rule=None):
+    def __init__(
+        self,
+        par: PMSMParams,
+        inverter: Inverter | None = None,
+        dead_time: jax.Array | float = 0.0,
+        *,
+        ts: float = 1e-4,
+        n_sub: int = 2,
+        rule: AbstractRule | None = None,
+    ) -> None:
         if not isinstance(par, PMSMParams):
             raise ValueError(f"PMSM.par must be a PMSMParams, got {type(par).__name__}")
         self.par = par
@@ -168,7 +180,7 @@ class PMSM(AbstractComponent):
                     f"{type(self.rule).__name__}"
                 )
 
-    def field(self, x, inp):
+    def field(self, x: jax.Array, inp: jax.Array) -> jax.Array:
         """The vector field.
 
         Args:
@@ -180,7 +192,7 @@ class PMSM(AbstractComponent):
         """
         return plant_field(self.par, self.inverter, self.dead_time, x, inp)
 
-    def init(self, op=None) -> PlantState:
+    def init(self, op: OperatingPoint | None = None) -> PlantState:
         """The machine's initial state.
 
         Args:
@@ -197,7 +209,7 @@ class PMSM(AbstractComponent):
         x0 = jnp.stack([jnp.asarray(v, dtype) for v in vals])
         return PlantState(x=x0, rule=self.rule.init(self.field, x0, None))
 
-    def output(self, x) -> PlantOutput:
+    def output(self, x: jax.Array) -> PlantOutput:
         if self.par.sat is not None:  # a map: the torque from its fluxes (the state: fluxes or currents)
             i_d, i_q = state_currents(self.par, x)
             i_a, i_b = dq_to_ab(i_d, i_q, x[3])
@@ -210,7 +222,7 @@ class PMSM(AbstractComponent):
         """The machine's field under the switched voltage (no averaged dead-time error: it is on the edges)."""
         return plant_vf(self.par, x, (inp[0], inp[1]), inp[2])
 
-    def carrier_substeps(self, state: PlantState, inp: PlantInput):
+    def carrier_substeps(self, state: PlantState, inp: PlantInput) -> tuple[jax.Array, jax.Array, Any]:
         """One period under carrier PWM, sub-interval by sub-interval (``pwm="carrier"``).
 
         Args:

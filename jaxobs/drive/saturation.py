@@ -36,12 +36,13 @@ bridge's zero), so the vector field is continuously differentiable for every exp
 from __future__ import annotations
 
 import math
+from pathlib import Path
+from typing import Any
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jax.typing import ArrayLike
 
 from ..core.validate import check_nonnegative, check_positive, check_real
 
@@ -131,7 +132,7 @@ class AlgebraicSaturation(eqx.Module):
             e = float(check_real(name, e, lower=lo, lower_open=False, upper=12.0, owner=own))
             setattr(self, name, e)
 
-    def current(self, psi_d, psi_q):
+    def current(self, psi_d: jax.Array | float, psi_q: jax.Array | float) -> tuple[jax.Array, jax.Array]:
         """The current map i(ψ) (module doc).
 
         Args:
@@ -152,7 +153,7 @@ class AlgebraicSaturation(eqx.Module):
         g_b = self.a_b * sw / (1.0 + self.a_bp * sw)
         return i_d + g_b * psi_b, i_q + self.k_q * g_b * psi_q
 
-    def inverse_inductance(self, psi_d, psi_q):
+    def inverse_inductance(self, psi_d: jax.Array | float, psi_q: jax.Array | float) -> jax.Array:
         """The incremental inverse inductance matrix ∂i/∂ψ at ψ.
 
         Args:
@@ -169,7 +170,7 @@ class AlgebraicSaturation(eqx.Module):
         jac = jnp.vectorize(jax.jacfwd(f), signature="(2)->(2,2)")
         return jac(jnp.stack(jnp.broadcast_arrays(psi_d, psi_q), axis=-1))
 
-    def flux(self, i_d, i_q):
+    def flux(self, i_d: jax.Array | float, i_q: jax.Array | float) -> tuple[jax.Array, jax.Array]:
         """The flux map ψ(i): the current map inverted by Newton's method.
 
         The start is the unsaturated guess (ψf + i_d/a_d0, i_q/a_q0) clipped to ±2 Vs, then :data:`NEWTON_ITERS`
@@ -211,7 +212,7 @@ class AlgebraicSaturation(eqx.Module):
         pd, pq = jax.lax.stop_gradient(pd), jax.lax.stop_gradient(pq)
         return step(self, pd, pq)  # the derivative-carrying step (docstring)
 
-    def no_load_flux(self):
+    def no_load_flux(self) -> jax.Array:
         """ψd at zero current: the root of i_d(ψd, 0) = 0 (bisection over [0, ψn]; 0 for a SyRM).
 
         With a_b > 0, i_d(ψd, 0) is monotonic in ψd, negative at 0 (the bridge's current −G_b ψn) and ≥ 0
@@ -231,7 +232,7 @@ class AlgebraicSaturation(eqx.Module):
         lo, hi = jax.lax.fori_loop(0, 80, body, (lo, hi))
         return 0.5 * (lo + hi)
 
-    def inductance(self, i_d, i_q):
+    def inductance(self, i_d: jax.Array | float, i_q: jax.Array | float) -> jax.Array:
         """The incremental inductance matrix ∂ψ/∂i at the current i (the inverse of :meth:`inverse_inductance`).
 
         Args:
@@ -340,7 +341,7 @@ def _short(v) -> str:
     return r if len(r) <= 60 else r[:57] + "..."
 
 
-def saturation_from_table(tbl, base=None):
+def saturation_from_table(tbl: dict[str, Any], base: str | Path | None = None) -> AlgebraicSaturation | FluxTable:
     """A drive file's ``[machine.saturation]`` table as the saturation model.
 
     ``model = "algebraic"`` (default): :data:`SAT_KEYS` (SI: the coefficients in A and Vs; ``a_d0``, ``a_dd``,
@@ -400,7 +401,9 @@ def _torque_jit(sat, p, i_d, i_q):
     return 1.5 * p * (psi_d * i_q - psi_q * i_d)
 
 
-def map_torque(sat: AlgebraicSaturation | FluxTable, p: int, i_d: ArrayLike, i_q: ArrayLike) -> jax.Array:
+def map_torque(
+    sat: AlgebraicSaturation | FluxTable, p: int, i_d: jax.Array | float, i_q: jax.Array | float
+) -> jax.Array:
     """The torque of the map at the current i: (3/2) p (ψd i_q − ψq i_d), N·m (compiled once per shape).
 
     Args:
@@ -612,7 +615,7 @@ class FluxTable(eqx.Module):
         # outside the grid: on linearly with the edge's gradient (C¹ across the edge)
         return val + comb(dbx, by) * (i_d - xc) + comb(bx, dby) * (i_q - yc)
 
-    def flux(self, i_d, i_q):
+    def flux(self, i_d: jax.Array | float, i_q: jax.Array | float) -> tuple[jax.Array, jax.Array]:
         """The flux map ψ(i), interpolated.
 
         Args:
@@ -625,7 +628,7 @@ class FluxTable(eqx.Module):
         i_d, i_q = jnp.broadcast_arrays(jnp.asarray(i_d, float), jnp.asarray(i_q, float))
         return self._eval(self.coef_d, i_d, i_q), self._eval(self.coef_q, i_d, i_q)
 
-    def inductance(self, i_d, i_q):
+    def inductance(self, i_d: jax.Array | float, i_q: jax.Array | float) -> jax.Array:
         """The incremental inductance matrix ∂ψ/∂i of the interpolant.
 
         Args:
@@ -642,6 +645,6 @@ class FluxTable(eqx.Module):
         jac = jnp.vectorize(jax.jacfwd(f), signature="(2)->(2,2)")
         return jac(jnp.stack(jnp.broadcast_arrays(jnp.asarray(i_d, float), jnp.asarray(i_q, float)), axis=-1))
 
-    def no_load_flux(self):
+    def no_load_flux(self) -> jax.Array:
         """ψd at zero current, Vs."""
         return self.flux(0.0, 0.0)[0]

@@ -20,7 +20,7 @@ from __future__ import annotations
 import itertools
 import math
 from collections.abc import Sequence
-from typing import Literal
+from typing import Any, Literal
 
 import equinox as eqx
 import jax
@@ -83,14 +83,12 @@ class Profile(eqx.Module):
         self.kind = kind
 
     @classmethod
-    def constant(cls, value):
+    def constant(cls, value: jax.Array | float) -> Profile:
         return cls([0.0], [value], kind="step")
 
     def __call__(self, t):
-        # Profiles have a handful of breakpoints and are evaluated inside the
-        # time loop: "compare_all" is a vectorized compare-and-sum, while the
-        # default searchsorted (also inside jnp.interp) is a nested while loop,
-        # which made the whole drive step 3-20x slower (benchmarks/).
+        # "compare_all": a vectorized compare-and-sum over a handful of breakpoints, not searchsorted's
+        # nested while loop inside the time loop (docs/performance.md)
         n = self.times.shape[-1]
         idx = jnp.searchsorted(self.times, t, side="right", method="compare_all") - 1
         i0 = jnp.clip(idx, 0, n - 1)
@@ -141,7 +139,7 @@ class ParameterDrift(eqx.Module):
         self.Rs, self.Ld, self.Lq, self.psi_f = Rs, Ld, Lq, psi_f
 
     @classmethod
-    def ramps(cls, name: str, times, factors) -> ParameterDrift:
+    def ramps(cls, name: str, times: jax.Array | float, factors: jax.Array | float) -> ParameterDrift:
         """One parameter ramped linearly through relative factors.
 
         Args:
@@ -156,7 +154,7 @@ class ParameterDrift(eqx.Module):
             raise ValueError(f"ParameterDrift.ramps: name must be one of Rs, Ld, Lq, psi_f, got {name!r}")
         return cls(**{name: Profile(times, factors, kind="linear")})
 
-    def at(self, est: PMSMParams, t) -> PMSMParams:
+    def at(self, est: PMSMParams, t: jax.Array | float) -> PMSMParams:
         """``est`` with the drifting parameters at time ``t``.
 
         Args:
@@ -237,7 +235,7 @@ class Scenario(eqx.Module):
         self.est_drift = est_drift
 
     @staticmethod
-    def speed_rpm(times, rpms, ramp=0.0):
+    def speed_rpm(times: Sequence[float], rpms: Sequence[float], ramp: float = 0.0) -> Profile:
         """Speed reference (r/min in, rad/s stored) changing to ``rpms[i]`` at ``times[i]``.
 
         002's 300-600-840-600-300 r/min test is a ramp profile.
@@ -263,7 +261,7 @@ class Scenario(eqx.Module):
         return Profile(tt, vv, kind="linear")
 
     @staticmethod
-    def load_steps(times, torques):
+    def load_steps(times: jax.Array | float, torques: jax.Array | float) -> Profile:
         """Load torque stepping to ``torques[i]`` at ``times[i]``.
 
         Args:
@@ -314,14 +312,14 @@ class Batch(eqx.Module):
     coords: tuple[tuple[float, ...], ...] = eqx.field(static=True)
 
     @property
-    def shape(self):
+    def shape(self) -> tuple[int, ...]:
         return tuple(len(c) for c in self.coords)
 
     @property
-    def size(self):
+    def size(self) -> int:
         return int(np.prod(self.shape))
 
-    def to_xarray(self, outputs):
+    def to_xarray(self, outputs: Any) -> Any:
         """The results of a ``vmap`` over :attr:`scenarios` as an ``xarray.Dataset`` with the grid's dims.
 
         Each leaf becomes a variable named by its path (``omega_m``, ``obs_theta``; None leaves are skipped)
@@ -418,7 +416,13 @@ def _held(prof: Profile, v) -> Profile:
 
 
 def scenario_batch(
-    base: Scenario, names, points, *, seed: int | None = None, t_event: float = 0.0, first: int = 0
+    base: Scenario,
+    names: Sequence[str],
+    points: Sequence[Sequence[float]],
+    *,
+    seed: int | None = None,
+    t_event: float = 0.0,
+    first: int = 0,
 ) -> Scenario:
     """``base`` with a leading axis, one scenario per point, built vectorized (no constructor per scenario).
 
@@ -580,7 +584,9 @@ def _base_scenario(owner: str, base) -> Scenario:
     return base
 
 
-def reversal(base: Scenario, speed_rpm: float, rate_rpm_s: float, *, load_nm: float = 0.0, t_start: float = 0.2):
+def reversal(
+    base: Scenario, speed_rpm: float, rate_rpm_s: float, *, load_nm: float = 0.0, t_start: float = 0.2
+) -> Scenario:
     """A speed reversal: steady at +``speed_rpm`` until ``t_start``, the reference ramped to −``speed_rpm`` at
     ``rate_rpm_s``, then held; the load held at ``load_nm`` throughout (an active load: it brakes one direction
     and drives the other, as a hoist's does).
@@ -615,7 +621,7 @@ def reversal(base: Scenario, speed_rpm: float, rate_rpm_s: float, *, load_nm: fl
     )
 
 
-def low_speed_load_step(base: Scenario, speed_pu: float, load_pu: float, *, t_event: float = 0.2):
+def low_speed_load_step(base: Scenario, speed_pu: float, load_pu: float, *, t_event: float = 0.2) -> Scenario:
     """A load step at low speed: steady at ``speed_pu`` × rated speed without load, then ``load_pu`` × rated
     torque stepped on at ``t_event`` (the machine's ``n_rated`` and ``T_rated``, :class:`PMSMParams`).
 
@@ -640,7 +646,7 @@ def low_speed_load_step(base: Scenario, speed_pu: float, load_pu: float, *, t_ev
     return eqx.tree_at(lambda s: (s.speed_ref, s.load, s.omega_m0), base, (Profile.constant(w), step, as_float(w)))
 
 
-def standstill_hold(base: Scenario, load_pu: float, *, t_event: float = 0.2):
+def standstill_hold(base: Scenario, load_pu: float, *, t_event: float = 0.2) -> Scenario:
     """Zero speed held under load: the reference 0, the machine at rest, ``load_pu`` × rated torque stepped on
     at ``t_event`` (0: loaded from the start, the steady start balancing it).
 

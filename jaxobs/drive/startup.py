@@ -53,7 +53,6 @@ from typing import Any
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-from jax.typing import ArrayLike
 
 from .. import papers
 from ..core.validate import check_nonnegative, check_positive, check_real
@@ -95,15 +94,15 @@ class IfStartup(eqx.Module):
 
     def __init__(
         self,
-        i_f: ArrayLike,
-        accel: ArrayLike,
-        omega_switch: ArrayLike,
-        hold: ArrayLike = 0.0,
+        i_f: jax.Array | float,
+        accel: jax.Array | float,
+        omega_switch: jax.Array | float,
+        hold: jax.Array | float = 0.0,
         *,
-        blend: ArrayLike = 0.05,
-        tol: ArrayLike = 0.2,
-        speed_tol: ArrayLike = 0.1,
-        dwell: ArrayLike = 0.02,
+        blend: jax.Array | float = 0.05,
+        tol: jax.Array | float = 0.2,
+        speed_tol: jax.Array | float = 0.1,
+        dwell: jax.Array | float = 0.02,
         smooth: bool = True,
     ) -> None:
         own = "IfStartup"
@@ -159,7 +158,7 @@ class IfStartup(eqx.Module):
         kw.setdefault("hold", papers.IF_HOLD)
         return cls(i_f, p * accel_m, p * rpm * RPM, **kw)
 
-    def ramp(self, t: ArrayLike) -> jax.Array:
+    def ramp(self, t: jax.Array | float) -> jax.Array:
         """The I-f electrical frequency.
 
         Args:
