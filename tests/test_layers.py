@@ -63,6 +63,7 @@ LAYERS = [
     ("jaxobs.drive.startup", "jaxobs.drive._policy", "jaxobs.drive._foctypes"),
     ("jaxobs.drive._operating",),
     ("jaxobs.scenarios", "jaxobs.drive.plant", "jaxobs.drive.dual", "jaxobs.drive.control", "jaxobs.drive.scenario"),
+    ("jaxobs.drive._zerospeed",),  # scenarios through and at zero speed, made from a base Scenario
     # observers: they estimate
     ("jaxobs.observers._cores", "jaxobs.observers._gains", "jaxobs.observers._rules"),
     ("jaxobs.observers.base",),  # its one bound check is _gains'

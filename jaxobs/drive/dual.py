@@ -111,7 +111,14 @@ def phases_to_vsd(x6: jax.Array | float) -> jax.Array:
 
 
 def vsd_to_phases(v6: jax.Array | float) -> jax.Array:
-    """Inverse of :func:`phases_to_vsd`."""
+    """Inverse of :func:`phases_to_vsd`.
+
+    Args:
+        v6: The VSD values (α, β, x, y, 0+, 0−), last axis of 6.
+
+    Returns:
+        The six phase values, last axis of 6.
+    """
     return jnp.asarray(v6) @ jnp.asarray(3.0 * VSD_AMPLITUDE)
 
 
@@ -173,6 +180,7 @@ class DualPMSMParams(eqx.Module):
 
     @property
     def p(self) -> int:
+        """The pole pairs."""
         return self.m.p
 
     @property
@@ -219,7 +227,15 @@ def dual_ipmsm_paper002(J: float | None = None, **overrides: Any) -> DualPMSMPar
 
 
 def pm_flux_vsd(par: DualPMSMParams, theta_e: jax.Array | float) -> tuple[jax.Array, jax.Array, jax.Array, jax.Array]:
-    """The PM flux's rate per electrical rad/s, e/ωe, in VSD coordinates (α, β, x, y), V·s."""
+    """The PM flux's rate per electrical rad/s, e/ωe, in VSD coordinates (α, β, x, y), V·s.
+
+    Args:
+        par: The dual machine.
+        theta_e: The electrical angle, rad.
+
+    Returns:
+        ``(α, β, x, y)``, V·s.
+    """
     m = par.m
     phi = theta_e - jnp.asarray(PHASE_ANGLES, dtype=jnp.result_type(theta_e, float))
     g = -jnp.sin(phi) + m.a5 * jnp.sin(5 * phi) - m.a7 * jnp.sin(7 * phi)
@@ -325,6 +341,8 @@ class DualPlantOutput(NamedTuple):
 
 
 class DualPlantState(AbstractRuleCarry):
+    """The dual plant's state: ``x`` = [i_d, i_q, i_x, i_y, ω_m, θ_e] and the rule's carry."""
+
     x: jax.Array  # [i_d, i_q, i_x, i_y, ω_m, θ_e], shape (6,)
     rule: Any
 
@@ -411,10 +429,27 @@ class DualPMSM(AbstractComponent):
         return DualPlantState(x=x0, rule=self.rule.init(self.field, x0, None))
 
     def output(self, x: jax.Array) -> DualPlantOutput:
+        """What the dual plant shows at the state ``x``.
+
+        Args:
+            x: The state [i_d, i_q, i_x, i_y, ω_m, θ_e].
+
+        Returns:
+            The :class:`DualPlantOutput`.
+        """
         i_a1, i_b1, i_a2, i_b2 = self.set_currents(x)
         return DualPlantOutput(x[0], x[1], x[2], x[3], x[4], x[5], i_a1, i_b1, i_a2, i_b2, dual_torque(self.par, x))
 
     def step(self, state: DualPlantState, inp: DualPlantInput) -> tuple[DualPlantState, DualPlantOutput]:
+        """One control period of the dual plant under held voltages.
+
+        Args:
+            state: The :class:`DualPlantState`.
+            inp: The :class:`DualPlantInput`.
+
+        Returns:
+            ``(the next state, the output at the period's start)``.
+        """
         out = self.output(state.x)
         path = Held(tuple(inp))
         h = self.ts / self.n_sub

@@ -88,6 +88,8 @@ def _rot(a, b, c, s):
 
 
 class DualFOCInput(NamedTuple):
+    """What the dual FOC is given at sample ``k`` (each set's currents, the angle and speeds it uses)."""
+
     k: jax.Array
     i_a1: jax.Array  # measured Clarke currents of each set (set 1's stationary frame), A
     i_b1: jax.Array
@@ -100,6 +102,8 @@ class DualFOCInput(NamedTuple):
 
 
 class DualFOCOutput(NamedTuple):
+    """What the dual FOC gives each period: each set's voltage, the references and the angle used."""
+
     u_a1: jax.Array  # each set's voltage for the next period (set 1's frame, before the inverters' limit), V
     u_b1: jax.Array
     u_a2: jax.Array
@@ -110,6 +114,8 @@ class DualFOCOutput(NamedTuple):
 
 
 class DualFOCState(NamedTuple):
+    """The dual FOC's state: the αβ (or each set's) FOC state and the xy PI integrators."""
+
     main: ControllerState  # the αβ FOC ("vsd") or set 1's ("individual")
     second: ControllerState  # set 2's ("individual"; carried unused under "vsd")
     int_x: jax.Array  # xy PI integrators, V
@@ -172,6 +178,17 @@ class DualFOC(AbstractComponent):
         "vsd": :meth:`FOC.imc` on ``est.per_set()``, xy PIs k_p = α_c L̂ls, k_i = α_c R̂s.  "individual":
         :meth:`FOC.imc` on ``est.set_self()``; its differential mode runs (L̂q + L̂ls)/(2 L̂ls) times faster
         than ``alpha_c`` (module doc): lower ``alpha_c`` on a machine of small L̂ls.
+
+        Args:
+            est: The dual machine the controller assumes.
+            alpha_c: The current loops' bandwidth, rad/s.
+            alpha_s: The speed loop's double pole, rad/s.
+            mode: ``"vsd"`` or ``"individual"``.
+            fw_voltage: The voltage the field weakening budgets, ``"ab"`` or ``"set"``.
+            **kw: Other :class:`FOC` keywords.
+
+        Returns:
+            The :class:`DualFOC`.
         """
         if not isinstance(est, DualPMSMParams):
             raise ValueError(f"DualFOC.imc: est must be a DualPMSMParams, got {type(est).__name__}")
@@ -183,7 +200,15 @@ class DualFOC(AbstractComponent):
 
     def init(self, op: OperatingPoint | None = None, *, theta_f0: jax.Array | float = 0.0) -> DualFOCState:
         """The integrators that hold the drive at ``op`` (per set; zero xy), zeros for None; with the FOC's
-        I-f start-up its angle at ``theta_f0`` (rad; set 2's FOC, in its own frame, 30° behind)."""
+        I-f start-up its angle at ``theta_f0`` (rad; set 2's FOC, in its own frame, 30° behind).
+
+        Args:
+            op: The :class:`OperatingPoint` (per set), or None.
+            theta_f0: The I-f angle to start from, rad.
+
+        Returns:
+            The :class:`DualFOCState`.
+        """
         cs = self.foc.init(op, theta_f0=theta_f0)
         second = cs if self.foc.startup is None else self.foc.init(op, theta_f0=theta_f0 - math.pi / 6)
         z = jnp.zeros_like(cs.int_d)
@@ -195,6 +220,15 @@ class DualFOC(AbstractComponent):
         return int_new, self.kp_xy * e + int_
 
     def step(self, cs: DualFOCState, inp: DualFOCInput) -> tuple[DualFOCState, DualFOCOutput]:
+        """One current-loop period of the dual FOC: each set's voltage for the next period.
+
+        Args:
+            cs: The :class:`DualFOCState`.
+            inp: The :class:`DualFOCInput`.
+
+        Returns:
+            ``(the next DualFOCState, the DualFOCOutput)``.
+        """
         foc, ts = self.foc, self.foc.ts
         k, th, w_e, w_m, ref = inp.k, inp.theta, inp.omega_e, inp.omega_m, inp.omega_m_ref
         if self.mode == "vsd":
@@ -261,6 +295,7 @@ class DualDrive(eqx.Module):
 
     @property
     def ts(self) -> float:
+        """The control period, s."""
         return self.ctrl.foc.ts
 
     @property
@@ -271,11 +306,19 @@ class DualDrive(eqx.Module):
 
     def settled_for(self, omega_e_min: float) -> DualDrive:
         """This drive with its settling phase at least :data:`~jaxobs.drive.loop.SETTLE_PERIODS` electrical
-        periods at ``omega_e_min`` rad/s (:meth:`jaxobs.drive.Drive.settled_for`)."""
+        periods at ``omega_e_min`` rad/s (:meth:`jaxobs.drive.Drive.settled_for`).
+
+        Args:
+            omega_e_min: The lowest electrical speed it will start at, rad/s (> 0).
+
+        Returns:
+            The :class:`DualDrive`.
+        """
         return settled_for(self, omega_e_min)
 
     @property
     def mode(self) -> str:
+        """The current control's mode, ``"vsd"`` or ``"individual"``."""
         return self.ctrl.mode
 
 
@@ -309,10 +352,13 @@ class DualOutput(NamedTuple):
 
     @property
     def speed_rpm(self) -> jax.Array:
+        """The mechanical speed, r/min."""
         return self.omega_m * 60 / (2 * jnp.pi)
 
 
 class DualLoopState(NamedTuple):
+    """The dual closed loop's state between two periods: plant, controller, observer, sensors' key, voltage."""
+
     plant: DualPlantState
     ctrl: DualFOCState
     obs: Any
@@ -346,14 +392,17 @@ class DualClosedLoop(AbstractDriveLoop):
 
     @property
     def ts(self) -> float:
+        """The control period, s."""
         return self.drive.ts
 
     @property
     def pole_pairs(self) -> int:
+        """The machine's pole pairs."""
         return self.machine.p
 
     @property
     def plant(self) -> DualPMSM:
+        """The true dual machine behind the drive's inverter, with the scenario's dead time."""
         d = self.drive
         return DualPMSM(self.machine, d.inverter, self.scenario.dead_time, ts=d.ts, n_sub=d.n_sub, rule=d.rule)
 
@@ -372,7 +421,14 @@ class DualClosedLoop(AbstractDriveLoop):
         the margin, :meth:`FOC.operating_point`): exact for ``fw_voltage="ab"`` until the xy currents build up
         from zero (the 5th/7th BEMF drive them; where a set then reaches its inverter's limit the αβ voltage it
         delivers falls short, and i_d settles deeper: −7.29 A against the start's −6.43 A at 840 r/min, no load,
-        330 V); ``fw_voltage="set"`` settles deeper still (the xy voltage under the margin too)."""
+        330 V); ``fw_voltage="set"`` settles deeper still (the xy voltage under the margin too).
+
+        Args:
+            offset: The controller's angle minus the rotor's, rad.
+
+        Returns:
+            The :class:`OperatingPoint` (per set).
+        """
         sc = self.scenario
         return self.controller.foc.operating_point(
             self.machine.per_set(), sc.omega_m0, sc.speed_ref(0.0), sc.theta_e0, sc.load(0.0) / 2, offset
@@ -403,6 +459,15 @@ class DualClosedLoop(AbstractDriveLoop):
         return DualLoopState(plant=plant, ctrl=foc.init(op), obs=obs, sensors=key, u=(u_a, u_b, u_a, u_b))
 
     def step(self, state: DualLoopState, k: jax.Array) -> tuple[DualLoopState, DualOutput]:
+        """One control period of the dual closed loop.
+
+        Args:
+            state: The :class:`DualLoopState`.
+            k: The sample index.
+
+        Returns:
+            ``(the next state, the DualOutput)``.
+        """
         drive, sc, inv = self.drive, self.scenario, self.drive.inverter
         t = k * self.ts
         w_ref, load = sc.speed_ref(t), sc.load(t)
@@ -474,7 +539,25 @@ def dual_bench_drive(
     (default 540 V) for both sets, ``settle`` the observer's settling phase before t = 0 (s, :class:`DualDrive`),
     ``startup`` an I-f start-up from standstill (:class:`~jaxobs.drive.IfStartup`, per set) or None, ``fw_voltage``
     the voltage the field weakening budgets (:class:`DualFOC`), ``foc_kw`` :class:`FOC`'s options
-    (``field_weakening``, ...)."""
+    (``field_weakening``, ...).
+
+    Args:
+        machine: The dual machine the controller assumes.
+        mode: ``"vsd"`` or ``"individual"``.
+        fw_voltage: ``"ab"`` or ``"set"``.
+        sensorless: Whether the observer closes the loop.
+        handover: The time from which the observer closes the loop, s.
+        startup: An I-f start-up, or None.
+        settle: The observer's settling phase before t = 0, s.
+        alpha_s: The speed loop's bandwidth, rad/s (None: the default).
+        alpha_c: The current loops' bandwidth, rad/s (None: the default).
+        n_sub: Plant substeps per period.
+        inverter: Both sets' inverter (None: 540 V).
+        **foc_kw: :class:`FOC`'s options.
+
+    Returns:
+        The :class:`DualDrive`.
+    """
     alpha_c = 2 * math.pi * papers.BENCH_CURRENT_HZ if alpha_c is None else alpha_c
     alpha_s = 2 * math.pi * papers.BENCH_SPEED_HZ if alpha_s is None else alpha_s
     ctrl = DualFOC.imc(machine, alpha_c, alpha_s, mode=mode, fw_voltage=fw_voltage, **foc_kw)

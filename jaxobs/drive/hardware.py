@@ -44,6 +44,15 @@ VOLTAGE_LIMITS = ("circle", "hexagon")  # Inverter.voltage_limit's choices
 def ab_to_abc(
     a: jax.Array | float, b: jax.Array | float
 ) -> tuple[jax.Array | float, jax.Array | float, jax.Array | float]:
+    """The phase values of a stationary-frame (α, β) vector (amplitude-invariant inverse Clarke).
+
+    Args:
+        a: α.
+        b: β.
+
+    Returns:
+        ``(a, b, c)``.
+    """
     return a, -0.5 * a + 0.5 * _S3 * b, -0.5 * a - 0.5 * _S3 * b
 
 
@@ -140,6 +149,7 @@ class Inverter(AbstractComponent):
 
     @property
     def u_max(self) -> jax.Array:
+        """The linear range of space-vector modulation, u_dc/√3, V."""
         return self.udc / _S3
 
     @property
@@ -184,6 +194,15 @@ class Inverter(AbstractComponent):
         return None
 
     def step(self, state: None, inp: InverterInput) -> tuple[None, InverterInput]:
+        """The commanded voltage within the inverter's limit.
+
+        Args:
+            state: None (the inverter has no state).
+            inp: The :class:`InverterInput`.
+
+        Returns:
+            ``(None, the limited InverterInput)``.
+        """
         return state, InverterInput(*self.limit(inp.u_a, inp.u_b))
 
     def sign(self, i: jax.Array | float) -> jax.Array:
@@ -306,6 +325,15 @@ class Sensors(AbstractComponent):
         return jax.random.PRNGKey(0) if key is None else key
 
     def step(self, key: jax.Array, inp: SensorInput) -> tuple[jax.Array, DriveInput]:
+        """The measured quantities at one sample.
+
+        Args:
+            key: The sensors' noise key.
+            inp: The :class:`SensorInput`.
+
+        Returns:
+            ``(the key, the DriveInput as measured)``.
+        """
         return key, DriveInput(*self.measure(key, inp.k, inp.u_a, inp.u_b, inp.i_a, inp.i_b))
 
     def measure(

@@ -210,6 +210,14 @@ class PMSM(AbstractComponent):
         return PlantState(x=x0, rule=self.rule.init(self.field, x0, None))
 
     def output(self, x: jax.Array) -> PlantOutput:
+        """What the plant shows at the state ``x`` (currents, speed, angle, torque).
+
+        Args:
+            x: The state.
+
+        Returns:
+            The :class:`PlantOutput`.
+        """
         if self.par.sat is not None:  # a map: the torque from its fluxes (the state: fluxes or currents)
             i_d, i_q = state_currents(self.par, x)
             i_a, i_b = dq_to_ab(i_d, i_q, x[3])
@@ -249,6 +257,15 @@ class PMSM(AbstractComponent):
         return t, jnp.stack(xs), rs
 
     def step(self, state: PlantState, inp: PlantInput) -> tuple[PlantState, PlantOutput]:
+        """One control period of the plant under the held (or carrier-modulated) voltage.
+
+        Args:
+            state: The :class:`PlantState`.
+            inp: The :class:`PlantInput`.
+
+        Returns:
+            ``(the next state, the output at the period's start)``.
+        """
         out = self.output(state.x)
         if self.inverter.pwm == "carrier":
             _, xs, rs = self.carrier_substeps(state, inp)

@@ -180,7 +180,15 @@ class VoltageFeedbackFW(eqx.Module):
     @staticmethod
     def limit_room(id_ref: jax.Array | float, i_max: jax.Array | float) -> jax.Array:
         """√(i_max² − i_d*²): the q current the circle leaves, A (0 on and beyond the circle, with a finite
-        gradient there: the root of a masked argument)."""
+        gradient there: the root of a masked argument).
+
+        Args:
+            id_ref: The d current reference, A.
+            i_max: The current limit, A.
+
+        Returns:
+            The room for i_q, A.
+        """
         return _safe_sqrt(i_max * i_max - id_ref * id_ref)
 
     @staticmethod
