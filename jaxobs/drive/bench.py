@@ -68,7 +68,7 @@ def shipped_drive(name: str) -> DriveFile:
     # keyed by the precision too: the file's arrays take the dtype of the moment they are read, and a process
     # that switches jax_enable_x64 (a benchmark timing float32 then float64) must not get float32 parameters
     # into a float64 drive (its loop's carry would change dtype in the first step)
-    return _read_shipped(name, bool(jax.config.jax_enable_x64))
+    return _read_shipped(name, bool(jax.config.jax_enable_x64))  # pyright: ignore[reportAttributeAccessIssue]  # stub lacks flags
 
 
 @functools.cache

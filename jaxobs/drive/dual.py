@@ -369,7 +369,16 @@ class DualPMSM(AbstractComponent):
     n_sub: int = eqx.field(static=True)
     rule: AbstractRule = eqx.field(static=True)
 
-    def __init__(self, par, inverter=None, dead_time=0.0, *, ts=1e-4, n_sub=2, rule=None):
+    def __init__(
+        self,
+        par: DualPMSMParams,
+        inverter: Inverter | None = None,
+        dead_time: jax.Array | float = 0.0,
+        *,
+        ts: float = 1e-4,
+        n_sub: int = 2,
+        rule: AbstractRule | None = None,
+    ) -> None:
         if not isinstance(par, DualPMSMParams):
             raise ValueError(f"DualPMSM.par must be a DualPMSMParams, got {type(par).__name__}")
         self.par = par

@@ -363,7 +363,7 @@ class DualLoopState(NamedTuple):
     ctrl: DualFOCState
     obs: Any
     sensors: jax.Array
-    u: tuple  # (u_a1, u_b1, u_a2, u_b2) to apply over the coming period, V
+    u: tuple[jax.Array, jax.Array, jax.Array, jax.Array]  # (u_a1, u_b1, u_a2, u_b2) to apply over the coming period, V
 
 
 class DualClosedLoop(AbstractDriveLoop):
@@ -451,7 +451,7 @@ class DualClosedLoop(AbstractDriveLoop):
             # from standstill, as ClosedLoop.init: all zeros, the I-f angle at θ_e0 − 90° (the parked rotor)
             _, plant, obs, ctrl, sensors = self._rest_start()
             z = jnp.zeros((), plant.x.dtype)
-            return DualLoopState(plant=plant, ctrl=ctrl, obs=obs, sensors=sensors, u=(z,) * 4)
+            return DualLoopState(plant=plant, ctrl=ctrl, obs=obs, sensors=sensors, u=(z, z, z, z))
         op, obs = self._steady_start(self.operating_point())
         plant = self.plant.init(op)
         u_a, u_b = self.drive.inverter.limit(*self._steady_voltage(op, op.theta_e))

@@ -36,6 +36,8 @@ from .component import AbstractComponent
 
 __all__ = ["PWM_MODELS", "Inverter", "InverterInput", "Sensors", "SensorInput", "clarke_abc_to_ab", "ab_to_abc"]
 
+_Tracer = jax.core.Tracer  # pyright: ignore[reportAttributeAccessIssue]  # jax.core: not in jax's stubs
+
 _S3 = math.sqrt(3.0)
 PWM_MODELS = ("averaged", "carrier")  # Inverter.pwm's choices
 VOLTAGE_LIMITS = ("circle", "hexagon")  # Inverter.voltage_limit's choices
@@ -256,7 +258,7 @@ class Inverter(AbstractComponent):
 
 
 def _statically_zero(x) -> bool:
-    if isinstance(x, jax.core.Tracer):  # traced: could be anything
+    if isinstance(x, _Tracer):  # traced: could be anything
         return False
     return bool(np.all(np.asarray(x) == 0))
 

@@ -135,6 +135,7 @@ class Drive(eqx.Module):
 
     @property
     def ts(self) -> float:
+        """The control period, s."""
         return self.foc.ts
 
     def settled_for(self, omega_e_min: float) -> Drive:
@@ -297,6 +298,19 @@ class AbstractDriveLoop(AbstractSystem):
     # passes of the observer's settling phase before t = 0 in a sensorless steady start: the first measures
     # the observer's steady angle error, the next settle it on the operating point under that error (init)
     settle_passes: ClassVar[int] = 2
+    drive: eqx.AbstractVar[Any]  # a Drive or a DualDrive (settle, sensorless, handover, latency, startup)
+    observer: eqx.AbstractVar[AbstractObserver | None]
+    scenario: eqx.AbstractVar[Scenario]
+
+    @property
+    @abc.abstractmethod
+    def plant(self) -> Any:
+        """The true machine behind the drive's inverter (a :class:`PMSM` or a dual one)."""
+
+    @property
+    @abc.abstractmethod
+    def controller(self) -> Any:
+        """The controller bound to the scenario's assumed machine (a :class:`FOC` or a dual one)."""
 
     @property
     @abc.abstractmethod
@@ -315,7 +329,7 @@ class AbstractDriveLoop(AbstractSystem):
         """
 
     @abc.abstractmethod
-    def _steady_voltage(self, op: OperatingPoint, theta):
+    def _steady_voltage(self, op: OperatingPoint, theta: jax.Array) -> tuple[jax.Array, jax.Array]:
         """(u_α, u_β) applied at steady state over the period that starts where the rotor is at ``theta``, V."""
 
     def _steady_start(self, op: OperatingPoint):
@@ -399,15 +413,17 @@ class AbstractDriveLoop(AbstractSystem):
         seeded = self.observer.seed_speed(obs_state, ctrl.omega_f)
         return jax.tree.map(lambda a, b: jnp.where(ctrl.mode == 0, a, b), seeded, obs_state)
 
-    def _observer_at(self, t):
+    def _observer_at(self, t: jax.Array | float) -> AbstractObserver:
         """The observer assuming the scenario's machine at time ``t`` (s): itself, or rebound by its one binding
         to ``est_par`` under the scenario's drift (:class:`~jaxobs.drive.ParameterDrift`; 002 Fig. 18).  The
         speed given to bind() only sets the initial-speed field, which no step reads."""
+        obs = self.observer
+        assert obs is not None  # called only where an observer runs
         drift = self.scenario.est_drift
-        if drift is None or not isinstance(self.observer, AbstractDriveObserver):
-            return self.observer
+        if drift is None or not isinstance(obs, AbstractDriveObserver):
+            return obs
         sc = self.scenario
-        return self.observer.bind(drift.at(sc.est_par, t), self.pole_pairs * sc.omega_m0)
+        return obs.bind(drift.at(sc.est_par, t), self.pole_pairs * sc.omega_m0)
 
     def _settled_observer(self, op: OperatingPoint):
         """The observer after ``drive.settle`` seconds on the steady operating point (a phase before t = 0,
@@ -499,10 +515,12 @@ class ClosedLoop(AbstractDriveLoop):
 
     @property
     def ts(self) -> float:
+        """The control period, s."""
         return self.drive.ts
 
     @property
     def pole_pairs(self) -> int:
+        """The true machine's pole pairs."""
         return self.scenario.par.p
 
     # --- the parts, bound to this scenario
@@ -606,6 +624,15 @@ class ClosedLoop(AbstractDriveLoop):
         return dq_to_ab(op.u_d, op.u_q, theta + lead)
 
     def step(self, state: LoopState, k: jax.Array) -> tuple[LoopState, DriveOutput]:
+        """One control period of the closed loop: sample, observe, control, then the plant over the period.
+
+        Args:
+            state: The :class:`LoopState`.
+            k: The sample index.
+
+        Returns:
+            ``(the next LoopState, the DriveOutput)``.
+        """
         drive, sc = self.drive, self.scenario
         t = k * self.ts
         # The profiles are evaluated here, inside the step, not a block of steps at a

@@ -391,9 +391,10 @@ def state_currents(par: PMSMParams, x: jax.Array) -> tuple[jax.Array, jax.Array]
     Returns:
         ``(i_d, i_q)``, A.
     """
-    if par.sat is None or not par.sat.state_is_flux:
-        return x[0], x[1]
-    return par.sat.current(x[0], x[1])
+    sat = par.sat
+    if isinstance(sat, AlgebraicSaturation) and sat.state_is_flux:
+        return sat.current(x[0], x[1])
+    return x[0], x[1]
 
 
 def mapped_torque(par: PMSMParams, x: jax.Array) -> jax.Array:
@@ -407,10 +408,12 @@ def mapped_torque(par: PMSMParams, x: jax.Array) -> jax.Array:
         The torque, N·m.
     """
     h = _harmonic_factor(par, sincos(x[3]))
-    if not par.sat.state_is_flux:  # a table: the state is the current
-        return _torque_mapped(par, *par.sat.flux(x[0], x[1]), x[0], x[1], h)
-    i_d, i_q = par.sat.current(x[0], x[1])
-    return _torque_mapped(par, x[0], x[1], i_d, i_q, h)
+    sat = par.sat
+    if isinstance(sat, AlgebraicSaturation) and sat.state_is_flux:  # the state is the flux linkage
+        i_d, i_q = sat.current(x[0], x[1])
+        return _torque_mapped(par, x[0], x[1], i_d, i_q, h)
+    assert sat is not None  # a mapped machine; a table: the state is the current
+    return _torque_mapped(par, *sat.flux(x[0], x[1]), x[0], x[1], h)
 
 
 def torque(par: PMSMParams, i_d: jax.Array | float, i_q: jax.Array | float, theta_e: jax.Array | float) -> jax.Array:
@@ -467,7 +470,7 @@ def plant_vf(
         te = _torque_mapped(par, psi_d, psi_q, i_d, i_q, h)
         dw = (te - t_load - par.B * w_m) / par.J
         return jnp.stack([di_d, di_q, dw, w_e])
-    if par.sat is not None:  # the state is the flux linkage (module doc)
+    if isinstance(par.sat, AlgebraicSaturation):  # the state is the flux linkage (module doc)
         psi_d, psi_q = x[0], x[1]
         i_d, i_q = par.sat.current(psi_d, psi_q)
         re, im = h

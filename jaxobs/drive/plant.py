@@ -50,6 +50,8 @@ from .pwm import N_INTERVALS, carrier_intervals
 
 __all__ = ["PMSM", "PlantInput", "PlantOutput", "PlantState", "plant_field"]
 
+_Tracer = jax.core.Tracer  # pyright: ignore[reportAttributeAccessIssue]  # jax.core: not in jax's stubs
+
 
 def plant_field(
     par: PMSMParams, inverter: Inverter, dead_time: jax.Array | float, x: jax.Array, inp: jax.Array
@@ -168,7 +170,7 @@ class PMSM(AbstractComponent):
         self.rule = check_rule(RK4() if rule is None else rule, "PMSM")
         if self.inverter.pwm == "carrier":
             f_pwm = self.inverter.f_pwm
-            if not isinstance(f_pwm, jax.core.Tracer) and abs(float(f_pwm) * self.ts - 1.0) > 1e-9:
+            if not isinstance(f_pwm, _Tracer) and abs(float(f_pwm) * self.ts - 1.0) > 1e-9:
                 raise ValueError(
                     f"PMSM.ts: carrier PWM integrates one carrier period per step (single update): ts must be "
                     f"1/inverter.f_pwm = {1.0 / float(f_pwm):.6g} s, got {self.ts:.6g} s (a half-period plant, "
