@@ -55,14 +55,18 @@ LAYERS = [
         "jaxobs.drive.machine",
         "jaxobs.drive.hardware",
         "jaxobs.drive.latency",
-        "jaxobs.drive.weakening",
     ),
-    # drive logs: a declared layout read into DriveRecordings; carrier-comparison PWM (the inverter's transforms)
+    # drive logs: a declared layout read into DriveRecordings; carrier-comparison PWM (the inverter's transforms);
+    # field weakening (on the machine's parameters)
     ("jaxobs.signals._logfile",),  # a drive log's delimited text streamed into disk-backed columns
-    ("jaxobs.signals._logs", "jaxobs.drive.pwm"),
+    ("jaxobs.signals._logs", "jaxobs.drive.pwm", "jaxobs.drive.weakening"),
     ("jaxobs.signals._read",),  # the recordings reader: one file as a family's scenarios
     ("jaxobs.signals",),
+    # the FOC's parts: the I-f start-up, the i_d policy's maps, its interface types; the steady operating point
+    ("jaxobs.drive.startup", "jaxobs.drive._policy", "jaxobs.drive._foctypes"),
+    ("jaxobs.drive._operating",),
     ("jaxobs.scenarios", "jaxobs.drive.plant", "jaxobs.drive.dual", "jaxobs.drive.control", "jaxobs.drive.scenario"),
+    ("jaxobs.drive._zerospeed",),  # scenarios through and at zero speed, made from a base Scenario
     # observers: they estimate
     ("jaxobs.observers._cores", "jaxobs.observers._gains", "jaxobs.observers._rules"),
     ("jaxobs.observers.speed",),
@@ -81,6 +85,8 @@ LAYERS = [
     # the dual loop shares the loop's base, AbstractDriveLoop; a drive file builds a machine and a Drive
     ("jaxobs.drive.dual_loop",),
     ("jaxobs.drive._dualfile",),  # a drive file's [dual]: the dual machine and drive on one set's derivation
+    ("jaxobs.drive._filekeys", "jaxobs.drive._steady"),  # a drive file's keys and its steady-state rules
+    ("jaxobs.drive._filemap", "jaxobs.drive._filebuild"),  # its saturation map; its derivation, table by table
     ("jaxobs.drive.drivefile",),
     ("jaxobs.drive.bench",),
     ("jaxobs.drive",),

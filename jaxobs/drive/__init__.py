@@ -8,6 +8,9 @@ them with an observer, :class:`ClosedLoop`, which ``jaxobs.simulate`` runs.
 """
 
 from ..core.measurements import DriveInput as DriveInput
+from ._zerospeed import low_speed_load_step as low_speed_load_step
+from ._zerospeed import reversal as reversal
+from ._zerospeed import standstill_hold as standstill_hold
 from .bench import IF_SUDDEN_LOAD_PU as IF_SUDDEN_LOAD_PU
 from .bench import SHIPPED_DRIVES as SHIPPED_DRIVES
 from .bench import bench_drive as bench_drive
@@ -80,9 +83,6 @@ from .scenario import ParameterDrift as ParameterDrift
 from .scenario import Profile as Profile
 from .scenario import Scenario as Scenario
 from .scenario import grid as grid
-from .scenario import low_speed_load_step as low_speed_load_step
-from .scenario import reversal as reversal
 from .scenario import scenario_batch as scenario_batch
 from .scenario import stack_scenarios as stack_scenarios
-from .scenario import standstill_hold as standstill_hold
 from .weakening import VoltageFeedbackFW as VoltageFeedbackFW

@@ -33,10 +33,12 @@ from __future__ import annotations
 import math
 
 import equinox as eqx
+import jax
 
 from .dual import DualPMSMParams
 from .dual_loop import DualDrive, DualFOC
 from .latency import Latency
+from .machine import PMSMParams
 
 
 def halved(raw: dict) -> dict:
@@ -49,7 +51,7 @@ def halved(raw: dict) -> dict:
     return {**{k: v for k, v in raw.items() if k != "dual"}, "machine": m}
 
 
-def individual_ratio(machine, lls: float) -> float:
+def individual_ratio(machine: PMSMParams, lls: jax.Array | float) -> float:
     """r = (L̂ + L̂ls)/(2 L̂ls), L̂ the larger of ``machine``'s Ld and Lq: how much faster than α_c the differential
     current loop of "individual" control runs (module doc)."""
     big = max(float(machine.Ld), float(machine.Lq))
@@ -149,8 +151,8 @@ def dual_drive_file(single, raw: dict, dual_table: dict, *, lowered: bool = Fals
     if mode == "individual":  # each set's current loops on its self inductances (L + Lls)/2 (DualFOC.imc)
         for g in ("kp_d", "ki_d", "kp_q", "ki_q"):
             old = single.derived[g]
-            derived[g] = (float(getattr(ctrl.foc, g)), old.unit, "IMC on one set's self inductances (L̂ + L̂ls)/2")
+            derived[g] = (float(getattr(ctrl.foc, g)), old.unit, "IMC on one set's self inductances (L̂ + L̂ls)/2", False)
     else:
-        derived["kp_xy"] = (float(ctrl.kp_xy), "V/A", "IMC: α_c L̂ls (the xy PIs)")
-        derived["ki_xy"] = (float(ctrl.ki_xy), "V/(A·s)", "IMC: α_c R̂s (the xy PIs)")
+        derived["kp_xy"] = (float(ctrl.kp_xy), "V/A", "IMC: α_c L̂ls (the xy PIs)", False)
+        derived["ki_xy"] = (float(ctrl.ki_xy), "V/(A·s)", "IMC: α_c R̂s (the xy PIs)", False)
     return dual, drive, derived, tuple(warn)

@@ -21,7 +21,7 @@ from __future__ import annotations
 import functools
 import math
 from pathlib import Path
-from typing import Literal
+from typing import Any, Literal
 
 import jax
 
@@ -68,7 +68,7 @@ def shipped_drive(name: str) -> DriveFile:
     # keyed by the precision too: the file's arrays take the dtype of the moment they are read, and a process
     # that switches jax_enable_x64 (a benchmark timing float32 then float64) must not get float32 parameters
     # into a float64 drive (its loop's carry would change dtype in the first step)
-    return _read_shipped(name, bool(jax.config.jax_enable_x64))
+    return _read_shipped(name, bool(jax.config.jax_enable_x64))  # pyright: ignore[reportAttributeAccessIssue]  # stub lacks flags
 
 
 @functools.cache
@@ -76,7 +76,7 @@ def _read_shipped(name: str, x64: bool) -> DriveFile:
     return read_drive(SHIPPED_DRIVES[name])
 
 
-def bench_machine(name: str = "ipmsm002", **overrides) -> PMSMParams:
+def bench_machine(name: str = "ipmsm002", **overrides: Any) -> PMSMParams:
     """The machine of a shipped drive file, on its bench's inertia (kg·m²).
 
     Args:
@@ -108,7 +108,7 @@ def _paper_machine(name, inertia, motor_J, overrides) -> PMSMParams:
     return bench_machine(name, **({"J": motor_J} if inertia == "motor" else {}), **overrides)
 
 
-def spmsm_paper000(*, inertia: Literal["bench", "motor"] = "bench", **overrides) -> PMSMParams:
+def spmsm_paper000(*, inertia: Literal["bench", "motor"] = "bench", **overrides: Any) -> PMSMParams:
     """Paper 000's SPMSM: the machine of the shipped drive file ``spmsm000`` (``jaxobs/data/spmsm000.toml``), the
     one ``jaxobs reproduce flux``, drive jobs and studies simulate.
 
@@ -130,7 +130,7 @@ def spmsm_paper000(*, inertia: Literal["bench", "motor"] = "bench", **overrides)
     return _paper_machine("spmsm000", inertia, papers.SPMSM_000["J"], overrides)
 
 
-def ipmsm_paper002(*, inertia: Literal["bench", "motor"] = "bench", **overrides) -> PMSMParams:
+def ipmsm_paper002(*, inertia: Literal["bench", "motor"] = "bench", **overrides: Any) -> PMSMParams:
     """The IPMSM for paper 002's operating points: the machine of the shipped drive file ``ipmsm002``
     (``jaxobs/data/ipmsm002.toml``), the one ``jaxobs reproduce leso --machine single``, drive jobs and studies
     simulate.  Its values are ASSUMED (our copy lacks 002's machine table; :data:`jaxobs.papers.IPMSM_002`).
@@ -172,7 +172,7 @@ def bench_drive(
     ts: float | None = None,
     latency: Latency | None = None,
     inverter: Inverter | None = None,
-    **foc_kw,
+    **foc_kw: Any,
 ) -> Drive:
     """The bench's drive: IMC current loop at 2π·BENCH_CURRENT_HZ rad/s, I-P speed loop at ``alpha_s``.
 

@@ -28,7 +28,7 @@ class AbstractComponent(eqx.Module):
     """A drive component: ``init(op=None, *, extras)`` and ``step(state, inp) -> (state, out)``."""
 
     @abc.abstractmethod
-    def init(self, op=None) -> Any:
+    def init(self, op: Any = None) -> Any:
         """The state at an operating point.
 
         Args:
@@ -39,7 +39,7 @@ class AbstractComponent(eqx.Module):
         """
 
     @abc.abstractmethod
-    def step(self, state, inp) -> tuple[Any, Any]:
+    def step(self, state: Any, inp: Any) -> tuple[Any, Any]:
         """One control period.
 
         Args:

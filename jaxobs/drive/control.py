@@ -60,308 +60,36 @@ computation: :mod:`jaxobs.drive.latency`), so the controller rotates its output
 ahead by ``advance`` × ω̂e T_s; ``advance = 0`` is no compensation
 (``delay_compensation=False``, the old flag, is ``advance=0``).
 
-I-f start-up from standstill (:class:`IfStartup`; the design and its reasons):
-
-1. *Parked start.*  The current vector of amplitude I_f is held along θ_f + 90°,
-   and θ_f starts at θ_e0 − 90°: the rotor starts on its no-load equilibrium (its
-   d axis on the current vector).  A real drive gets there by a d-axis alignment
-   (pre-positioning) phase, which friction and eddy currents settle; the model
-   has almost no damping (B ≈ 0), so we start where that phase ends.  Started
-   90° off instead (θ_f = 0 with the rotor at 0, the old start) the rotor swung
-   ±90° for the whole start-up (−41 … 126 r/min around a 0 … 60 r/min ramp on the
-   IPMSM bench) and no observer could be handed a rotor moving like that.
-2. *Smooth ramp.*  The rotor follows θ_f through the torque-angle "spring"
-   T = K_t I_f cos(θ_f − θ), which is undamped (natural frequency
-   √(p K_t I_f/J), 5–12 Hz on the benches).  A linear frequency ramp steps the
-   acceleration at its start and end and excites that swing; the default
-   raised-cosine ramp ω_f = ω_sw (τ − sin 2πτ/2π), τ = t/T_r, T_r = ω_sw/accel,
-   has a continuous acceleration (peak 2× the mean ``accel``) and leaves it
-   nearly at rest.
-3. *Hold and agreement.*  At ω_switch the drive waits at least ``hold`` seconds
-   (the observer converges: the flux observers' SOGIs have a bandwidth ∝ ω̂) and
-   then until the position and speed it is given *agree* with the I-f frame for
-   ``dwell`` seconds: |ω̂ − ω_f| ≤ speed_tol·ω_f, and the offset Δ = θ_f − θ̂ (the
-   load angle when θ̂ = θ) steady, |Δ − Δ̄| ≤ tol with Δ̄ its low-pass over
-   ``dwell``.  An observer that never agrees keeps the drive in I-f (synchronous,
-   open loop): a fail-safe, visible as ``mode`` staying 0.  (With the speed
-   seeding of ClosedLoop the speed test holds by construction and the angle test
-   decides: an unconverged flux estimate wanders against θ_f.)  Forward rotation
-   only: ω_switch > 0.
-4. *Bumpless hand-over.*  At the switch the controller moves to the given frame
-   θ̂ with nothing stepping: the current references continue the I-f vector seen
-   from θ̂ (i_q = I_f cos Δ, i_d = −I_f sin Δ); the speed integrator is pre-loaded
-   so that the I-P output k_pω(b ω* − ω̂) + ∫ equals I_f cos Δ (without the
-   k_pω ω̂ term, as before, the switch stepped i_q by −k_pω ω̂: −5.8 A on the
-   IPMSM bench at 60 r/min); the current PIs' integrators are rotated into θ̂
-   with their decoupling terms, so the voltage vector is continuous; the held
-   i_q* until the next speed-loop sample is I_f cos Δ, not I_f.
-5. *Blend.*  Over ``blend`` seconds after the switch the d-current reference
-   goes linearly from −I_f sin Δ (up to I_f at no load: the I-f vector
-   magnetizes) to the controller's i_d policy; the speed loop then carries the
-   torque on the estimated q axis alone.
-
-:class:`~jaxobs.drive.ClosedLoop` also holds the observer's speed estimate at
-the I-f frequency while the I-f runs (``seed_speed``), see there.
+I-f start-up from standstill (:class:`IfStartup`, the design and its reasons): :mod:`jaxobs.drive.startup`.
 """
 
 from __future__ import annotations
 
 import math
-from typing import Literal, NamedTuple
+from typing import Any, Literal
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from .. import papers
 from ..core.numerics import safe_norm2, wrap
 from ..core.trig import sincos
-from ..core.validate import check_nonnegative, check_positive, check_real, check_sample_time
+from ..core.validate import check_nonnegative, check_positive, check_sample_time
+from ._foctypes import ControllerState as ControllerState
+from ._foctypes import FOCInput as FOCInput
+from ._foctypes import FOCOutput as FOCOutput
+from ._foctypes import IfPhase
+from ._operating import OperatingPoint as OperatingPoint
+from ._operating import steady_point
+from ._policy import policy_id, policy_iq_limit, policy_iq_lin, policy_mtpa_iq, policy_torque, rotate_by, torque_dq
 from .component import AbstractComponent
-from .machine import RPM, PMSMParams, rotate
-from .weakening import VoltageFeedbackFW, id_stop, mtpv_iq, voltage_iq_range
+from .machine import PMSMParams
+from .startup import IfStartup as IfStartup
+from .weakening import VoltageFeedbackFW
 
 __all__ = ["FOC", "FOCInput", "FOCOutput", "IfStartup", "ControllerState", "OperatingPoint", "DEFAULT_U_MAX"]
 
 DEFAULT_U_MAX = 540.0 / math.sqrt(3.0)  # V: the default Inverter's U_dc/√3 (jaxobs.drive.hardware), FOC.imc's default
-
-
-class OperatingPoint(NamedTuple):
-    """A steady operating point of the drive (the true machine), to start a scenario in.
-
-    At steady state the currents sit at their references and the speed at its
-    reference; the PI integrators hold what the loop needs to stay there.  The
-    controller's frame may sit ``offset`` ahead of the rotor's (a biased
-    observer closing the loop): its references are then met in its own frame,
-    and the rotor-frame currents below are those references rotated by ``offset``.
-
-    Attributes:
-        omega_m: The mechanical speed, rad/s.
-        omega_m_ref: The speed reference at t = 0, rad/s.
-        theta_e: The electrical angle at t = 0, rad.
-        t_load: The load torque at t = 0, N·m.
-        i_d: The rotor-frame d current, A.
-        i_q: The rotor-frame q current, A.
-        u_d: The rotor-frame d voltage the true machine needs there, V.
-        u_q: The rotor-frame q voltage, V.
-        offset: The controller's angle minus the rotor's, rad (0: encoder or unbiased).
-        id_fw: Field weakening's Δi_d there (≤ 0, A): the controller's i_d* is the policy's plus it (0
-            without field weakening, or below base speed).
-    """
-
-    omega_m: jax.Array  # mechanical speed, rad/s
-    omega_m_ref: jax.Array  # speed reference at t = 0, rad/s
-    theta_e: jax.Array  # electrical angle at t = 0, rad
-    t_load: jax.Array  # load torque at t = 0, N·m
-    i_d: jax.Array  # rotor-frame currents, A
-    i_q: jax.Array
-    u_d: jax.Array  # rotor-frame voltage the true machine needs there, V
-    u_q: jax.Array
-    offset: jax.Array | float = 0.0  # the controller's angle minus the rotor's, rad (0: encoder or unbiased)
-    # field weakening's Δi_d there (≤ 0, A): the controller's i_d* is the policy's plus it (0 without field
-    # weakening, or below base speed)
-    id_fw: jax.Array | float = 0.0
-
-    @classmethod
-    def at_rest(cls, theta_e) -> OperatingPoint:
-        """The machine at standstill: no speed, current, load or voltage (where an I-f start-up starts, the
-        rotor parked by its alignment).
-
-        Args:
-            theta_e: The electrical angle, rad.
-
-        Returns:
-            The :class:`OperatingPoint`.
-        """
-        theta_e = jnp.asarray(theta_e, dtype=jnp.result_type(theta_e, float))
-        z = jnp.zeros_like(theta_e)
-        return cls(omega_m=z, omega_m_ref=z, theta_e=theta_e, t_load=z, i_d=z, i_q=z, u_d=z, u_q=z)
-
-
-class IfStartup(eqx.Module):
-    """I-f start-up from standstill, then a hand-over to the given position (module doc, steps 1–5).
-
-    :meth:`for_machine` gives the defaults we use for a machine (``jaxobs.papers``, IF_*).
-
-    Args:
-        i_f: The current amplitude during start-up, A (> 0).
-        accel: The mean ramp rate of the electrical frequency, rad/s² (> 0).
-        omega_switch: The electrical speed at which control switches to the given position, rad/s (> 0).
-        hold: The least time spent at ``omega_switch`` before switching (lets an observer converge), s.
-        blend: After the switch, the time over which the d-current goes from the I-f vector's to the i_d
-            policy, s.
-        tol: Agreement: |Δ − Δ̄| of the offset Δ = θ_f − θ̂ (the load angle), rad (in (0, 3.15]).
-        speed_tol: Agreement: |ω̂ − ω_f| / ω_f (> 0).
-        dwell: The time agreement must hold (and Δ̄ is Δ low-passed over it), s (> 0).
-        smooth: A raised-cosine ramp (continuous acceleration); False: linear.
-
-    Raises:
-        ValueError: A value out of its range, naming the field.
-    """
-
-    i_f: jax.Array  # current amplitude during start-up, A (> 0)
-    accel: jax.Array  # mean ramp rate of the electrical frequency, rad/s² (> 0)
-    omega_switch: jax.Array  # electrical speed at which control switches to the given position, rad/s
-    hold: jax.Array  # least time spent at omega_switch before switching (lets an observer converge), s
-    blend: jax.Array  # after the switch: the d-current goes from the I-f vector's to the i_d policy, s
-    tol: jax.Array  # agreement: |Δ − Δ̄| of the offset Δ = θ_f − θ̂ (the load angle), rad
-    speed_tol: jax.Array  # agreement: |ω̂ − ω_f| / ω_f
-    dwell: jax.Array  # agreement must hold this long (and Δ̄ is Δ low-passed over it), s (> 0)
-    smooth: bool = eqx.field(static=True)  # raised-cosine ramp (continuous acceleration); False: linear
-
-    def __init__(
-        self, i_f, accel, omega_switch, hold=0.0, *, blend=0.05, tol=0.2, speed_tol=0.1, dwell=0.02, smooth=True
-    ):
-        own = "IfStartup"
-        self.i_f = check_positive("i_f", i_f, own)
-        self.accel = check_positive("accel", accel, own)
-        self.omega_switch = check_positive("omega_switch", omega_switch, own)
-        self.hold = check_nonnegative("hold", hold, own)
-        self.blend = check_nonnegative("blend", blend, own)
-        self.tol = check_real("tol", tol, lower=0.0, upper=3.15, owner=own)
-        self.speed_tol = check_positive("speed_tol", speed_tol, own)
-        self.dwell = check_positive("dwell", dwell, own)
-        self.smooth = bool(smooth)
-
-    @classmethod
-    def for_machine(cls, par: PMSMParams, *, rpm_switch=None, i_f=None, **kw) -> IfStartup:
-        """The start-up we design for ``par`` (the machine the controller assumes), ASSUMED rules of thumb.
-
-        - I_f = papers.IF_CURRENT_PU × the rated current: enough torque to accelerate and to carry a
-          light load, small enough not to heat or saturate (I-f runs at a load angle near 90° at no load);
-        - switch at papers.IF_SWITCH_PU × rated speed (``rpm_switch`` to override), where every observer
-          here has converged within the hold and a sensorless speed loop at α_s = 2π·5 rad/s is stable
-          through it (the flux observers cannot start at 0 Hz: 000 Sec. IV; see below);
-        - mean acceleration such that the ramp's *peak* torque (2× the mean for the raised cosine) is
-          papers.IF_ACCEL_TORQUE_PU of K_t I_f, the rest being margin for load and swing; and slower still
-          if that ramp would last less than papers.IF_RAMP_SWING_PERIODS periods of the undamped swing
-          2π/√(p K_t I_f/J): a raised cosine as short as one period still rings (measured: ±25 % of the
-          switch speed on the SPMSM bench, ramp 0.11 s, swing period 84 ms);
-        - hold papers.IF_HOLD s at the switch speed.
-
-        A sensorless speed loop closed through a frequency-normalized FLL (SOIFO types: natural frequency
-        ≈ ω̂e/2) needs the switch speed high enough that the FLL is faster than the speed loop: we measured
-        a limit cycle (230–610 r/min) with α_s = 2π·5 rad/s after a switch at 200 r/min (10 %) on the SPMSM
-        bench, and ±1 % at 400 r/min (ω_e,sw ≥ 4 α_s).  Through a LESO's 15 Hz PLL the loop rang ±11 % at
-        60 r/min (10 %) on the IPMSM bench and ±3 % at 120 r/min.  Hence 20 % by default.
-
-        Args:
-            par: The machine the controller assumes.
-            rpm_switch: The switch speed, r/min (default papers.IF_SWITCH_PU × rated speed).
-            i_f: The start-up current, A (default papers.IF_CURRENT_PU × the rated current).
-            **kw: Other :class:`IfStartup` keywords.
-
-        Returns:
-            The :class:`IfStartup`.
-        """
-        i_rated, kt, J, p = float(par.i_rated), float(par.kt), float(par.J), par.p
-        i_f = papers.IF_CURRENT_PU * i_rated if i_f is None else float(i_f)
-        rpm = papers.IF_SWITCH_PU * float(par.n_rated) if rpm_switch is None else float(rpm_switch)
-        accel_m = papers.IF_ACCEL_TORQUE_PU * kt * i_f / (2 * J)  # mean mechanical, rad/s²
-        swing_period = 2 * math.pi / math.sqrt(p * kt * i_f / J)
-        accel_m = min(accel_m, rpm * RPM / (papers.IF_RAMP_SWING_PERIODS * swing_period))
-        kw.setdefault("hold", papers.IF_HOLD)
-        return cls(i_f, p * accel_m, p * rpm * RPM, **kw)
-
-    def ramp(self, t):
-        """The I-f electrical frequency.
-
-        Args:
-            t: The time from the start, s.
-
-        Returns:
-            The frequency, rad/s.
-        """
-        tau = jnp.clip(t * self.accel / self.omega_switch, 0.0, 1.0)
-        if self.smooth:
-            tau = tau - jnp.sin(2 * jnp.pi * tau) / (2 * jnp.pi)
-        return self.omega_switch * tau
-
-
-class ControllerState(eqx.Module):
-    """The FOC's state between two periods.
-
-    Attributes:
-        int_d: The d current-PI integrator, V.
-        int_q: The q current-PI integrator, V.
-        int_w: The speed-PI integrator, A.
-        iq_ref: The speed loop's output held between its samples, A.
-        theta_f: The I-f angle, rad.
-        omega_f: The I-f electrical frequency, rad/s.
-        t_at_switch: The time spent at the switch-over frequency, s.
-        mode: 0: I-f start-up, 1: closed loop on the given position.
-        d_lp: I-f: the offset θ_f − θ̂ low-passed over the dwell, rad.
-        t_agree: I-f: how long the given position has agreed with the I-f frame, s.
-        t_closed: The time since the switch, s.
-        id_hand: The d-current at the switch (in the given frame), A.
-        id_fw: Field weakening's Δi_d (≤ 0; 0 without field weakening), A.
-        kp_w: The speed loop's k_pω at its last sample (a scheduled gain's bumpless change), A/(rad/s).
-    """
-
-    int_d: jax.Array  # current-PI integrators, V
-    int_q: jax.Array
-    int_w: jax.Array  # speed-PI integrator, A
-    iq_ref: jax.Array  # speed-loop output held between its samples, A
-    theta_f: jax.Array  # I-f angle, rad
-    omega_f: jax.Array  # I-f electrical frequency, rad/s
-    t_at_switch: jax.Array  # time spent at the switch-over frequency, s
-    mode: jax.Array  # 0: I-f start-up, 1: closed loop on the given position
-    d_lp: jax.Array  # I-f: the offset θ_f − θ̂ low-passed over the dwell, rad
-    t_agree: jax.Array  # I-f: how long the given position has agreed with the I-f frame, s
-    t_closed: jax.Array  # time since the switch, s
-    id_hand: jax.Array  # the d-current at the switch (in the given frame), A
-    id_fw: jax.Array  # field weakening's Δi_d (≤ 0; 0 without field weakening), A
-    kp_w: jax.Array  # the speed loop's k_pω at its last sample (a scheduled gain's bumpless change), A/(rad/s)
-
-
-class FOCInput(NamedTuple):
-    """What the controller is given at sample ``k``.
-
-    Attributes:
-        k: The sample index (the speed loop runs when k % speed_every == 0).
-        i_a: The measured stationary-frame α current, A.
-        i_b: The measured β current, A.
-        theta: The electrical angle the controller uses (encoder or observer), rad.
-        omega_e: The electrical speed it uses (decoupling, delay compensation), rad/s.
-        omega_m: The mechanical speed the speed loop uses, rad/s.
-        omega_m_ref: The speed reference, rad/s (i_q* in A when ``outer="current"``).
-    """
-
-    k: jax.Array  # sample index (the speed loop runs when k % speed_every == 0)
-    i_a: jax.Array  # measured stationary-frame currents, A
-    i_b: jax.Array
-    theta: jax.Array  # electrical angle the controller uses (encoder or observer), rad
-    omega_e: jax.Array  # electrical speed it uses (decoupling, delay compensation), rad/s
-    omega_m: jax.Array  # mechanical speed the speed loop uses, rad/s
-    omega_m_ref: jax.Array  # speed reference, rad/s (i_q* in A when outer="current")
-
-
-class FOCOutput(NamedTuple):
-    """What the controller gives each period.
-
-    Attributes:
-        u_a: The α voltage to apply over the next period (before the inverter's limit), V.
-        u_b: The β voltage, V.
-        id_ref: The d current reference, A.
-        iq_ref: The q current reference, A.
-        theta: The angle the current loop used (given position, or the I-f angle in start-up), rad.
-    """
-
-    u_a: jax.Array  # voltage to apply over the next period (before the inverter's limit), V
-    u_b: jax.Array
-    id_ref: jax.Array  # current references, A
-    iq_ref: jax.Array
-    theta: jax.Array  # the angle the current loop used (given position, or the I-f angle in start-up), rad
-
-
-def _rotate(x_d, x_q, angle):
-    """(x_d, x_q) seen from a frame ``angle`` behind: R(angle)·(x_d, x_q)."""
-    return rotate(x_d, x_q, *sincos(angle))
-
-
-def _torque_dq(par: PMSMParams, i_d, i_q):
-    """Mean electromagnetic torque (no BEMF harmonics), N·m."""
-    return 1.5 * par.p * (par.psi_f * i_q + (par.Ld - par.Lq) * i_d * i_q)
 
 
 class FOC(AbstractComponent):
@@ -490,7 +218,15 @@ class FOC(AbstractComponent):
         self.speed_schedule = float(speed_schedule)
 
     @classmethod
-    def imc(cls, est_par: PMSMParams, alpha_c, alpha_s, i_max=None, u_max=None, **kw):
+    def imc(
+        cls,
+        est_par: PMSMParams,
+        alpha_c: jax.Array | float,
+        alpha_s: jax.Array | float,
+        i_max: jax.Array | float | None = None,
+        u_max: jax.Array | float | None = None,
+        **kw: Any,
+    ) -> FOC:
         """IMC current gains (k_p = α_c L̂, k_i = α_c R̂s) and double-pole speed gains at −α_s.
 
         Args:
@@ -522,7 +258,7 @@ class FOC(AbstractComponent):
             **kw,
         )
 
-    def speed_gains(self, omega_m_ref):
+    def speed_gains(self, omega_m_ref: jax.Array | float) -> tuple[jax.Array, jax.Array]:
         """(k_pω, k_iω) of the speed loop at the mechanical speed reference ω_m* (rad/s).
 
         ``speed_schedule = N > 0`` keeps the speed loop inside the bandwidth of a speed estimate that scales
@@ -544,7 +280,7 @@ class FOC(AbstractComponent):
         r = jnp.where(alpha > 0, jnp.minimum(w_e / (self.speed_schedule * jnp.where(alpha > 0, alpha, 1.0)), 1.0), 1.0)
         return self.kp_w * r, self.ki_w * r * r
 
-    def bind(self, est: PMSMParams, u_max, startup: IfStartup | None = None) -> FOC:
+    def bind(self, est: PMSMParams, u_max: jax.Array | float, startup: IfStartup | None = None) -> FOC:
         """A copy of this controller with another assumed machine, voltage limit and start-up (a scenario's, a
         drive's), as whole as this one (no value checks: traced-safe; None is refused).
 
@@ -565,7 +301,7 @@ class FOC(AbstractComponent):
             lambda f: (f.est, f.u_max, f.startup), self, (est, u_max, startup), is_leaf=lambda x: x is None
         )
 
-    def init(self, op: OperatingPoint | None = None, *, theta_f0=0.0) -> ControllerState:
+    def init(self, op: OperatingPoint | None = None, *, theta_f0: jax.Array | float = 0.0) -> ControllerState:
         """Zero integrators (``op=None``), or the integrators that hold the drive at ``op`` (a steady start).
 
         At a steady operating point the errors are zero, so the current PIs'
@@ -595,8 +331,8 @@ class FOC(AbstractComponent):
         w_e = est.p * op.omega_m
         # the controller's frame is op.offset ahead of the rotor's: its currents and the voltage it must
         # produce are the rotor frame's rotated back by the offset (zero offset: the rotor frame itself)
-        i_d, i_q = _rotate(op.i_d, op.i_q, -op.offset)
-        u_d, u_q = _rotate(op.u_d, op.u_q, -op.offset)
+        i_d, i_q = rotate_by(op.i_d, op.i_q, -op.offset)
+        u_d, u_q = rotate_by(op.u_d, op.u_q, -op.offset)
         int_d = u_d + w_e * est.Lq * i_q
         int_q = u_q - w_e * (est.Ld * i_d + est.psi_f)
         lin, held = self.iq_lin(est, i_q), i_q
@@ -604,7 +340,7 @@ class FOC(AbstractComponent):
             # weakened: the speed loop asks for the torque of the references on the assumed machine, as its policy's
             # current i_q,cmd; Δi_d takes i_d* from the policy's i_d(i_q,cmd) (jaxobs.drive.weakening, points 1-2)
             weak = op.id_fw < 0
-            lin_w = _torque_dq(est, i_d, i_q) / est.kt
+            lin_w = torque_dq(est, i_d, i_q) / est.kt
             cmd = self.mtpa_iq(est, lin_w)
             lin, held = jnp.where(weak, lin_w, lin), jnp.where(weak, cmd, held)
             rest["id_fw"] = z + jnp.where(weak, jnp.minimum(i_d - self._id_ref(est, cmd), 0.0), op.id_fw)
@@ -615,7 +351,15 @@ class FOC(AbstractComponent):
             int_w = lin - gain * (self.setpoint_weight * op.omega_m_ref - op.omega_m)
         return ControllerState(int_d=z + int_d, int_q=z + int_q, int_w=z + int_w, iq_ref=z + held, **rest)
 
-    def operating_point(self, par: PMSMParams, omega_m, omega_m_ref, theta_e, t_load, offset=0.0) -> OperatingPoint:
+    def operating_point(
+        self,
+        par: PMSMParams,
+        omega_m: jax.Array | float,
+        omega_m_ref: jax.Array | float,
+        theta_e: jax.Array | float,
+        t_load: jax.Array | float,
+        offset: jax.Array | float = 0.0,
+    ) -> OperatingPoint:
         """The steady state of the true machine ``par`` under this controller at speed ω_m and load T_L.
 
         The speed loop settles where the torque balances the load and friction,
@@ -651,96 +395,29 @@ class FOC(AbstractComponent):
         Returns:
             The :class:`OperatingPoint`.
         """
-        w_e = par.p * omega_m
-
-        def rotor_currents(iq, dfw=None):  # dfw: field weakening's Δi_d (None: the policy's i_d alone)
-            i_d = self._id_ref(self.est, iq)
-            return _rotate(i_d if dfw is None else i_d + dfw, iq, offset)
-
-        def voltage(i_d, i_q):
-            return par.Rs * i_d - w_e * par.Lq * i_q, par.Rs * i_q + w_e * (par.Ld * i_d + par.psi_f)
-
-        need = t_load + par.B * omega_m
-
-        def solve_iq(dfw):
-            if self.outer == "current":
-                iq_max = self.iq_limit(self.est)[0]
-                return jnp.clip(omega_m_ref, -iq_max, iq_max)
-            # |offset| < 90° where a steady state exists; the floor keeps a wilder offset finite
-            i_q = need / (1.5 * par.p * par.psi_f * jnp.maximum(jnp.cos(offset), 0.1))
-            for _ in range(4):  # Newton on T_e(i_q*) − need
-                te, dte = jax.jvp(lambda iq: _torque_dq(par, *rotor_currents(iq, dfw)), (i_q,), (jnp.ones_like(i_q),))
-                i_q = i_q - (te - need) / dte
-            iq_max = self.iq_limit(self.est)[0]
-            return jnp.clip(i_q, -iq_max, iq_max)
-
-        i_q = solve_iq(None)
-        i_d, i_q = rotor_currents(i_q)
-        u_d, u_q = voltage(i_d, i_q)
-        id_fw = 0.0
-        fw = self.field_weakening
-        if fw is not None:
-            target2 = (fw.margin * self.u_max) ** 2
-            est = self.est
-
-            def excess(idr, iqr):  # |u|² − (m u_max)² at the references (i_d*, i_q*)
-                ud, uq = voltage(*_rotate(idr, iqr, offset))
-                return ud * ud + uq * uq - target2
-
-            iq_pol = solve_iq(None)
-            id_pol = self._id_ref(est, iq_pol)
-            lo = id_stop(est, id_pol, self.i_max)
-
-            def solve_iq_at(idr):  # i_q* that carries the load at i_d* = idr (Newton from the policy's)
-                iq = iq_pol
-                for _ in range(4):
-                    te, dte = jax.jvp(lambda q: _torque_dq(par, *_rotate(idr, q, offset)), (iq,), (jnp.ones_like(iq),))
-                    iq = iq - (te - need) / jnp.where(jnp.abs(dte) > 1e-12, dte, 1.0)
-                return iq
-
-            idr, iqr = id_pol, iq_pol
-            for _ in range(8):  # Newton on i_d* (|u|² is a convex quadratic in it), then i_q* for the torque
-                f, df = jax.jvp(lambda d: excess(d, iqr), (idr,), (jnp.ones_like(idr),))
-                idr = jnp.clip(idr - f / jnp.where(jnp.abs(df) > 1e-12, df, 1.0), lo, id_pol)
-                iqr = solve_iq_at(idr)
-            # the limits the controller puts on i_q* there (jaxobs.drive.weakening, point 3)
-            room = jnp.minimum(fw.limit_room(idr, self.i_max), mtpv_iq(est, idr))
-            q_lo, q_hi = voltage_iq_range(est, idr, est.p * omega_m, self.u_max)
-            iqr = jnp.clip(iqr, jnp.maximum(-room, q_lo), jnp.minimum(room, q_hi))
-            weakened = u_d * u_d + u_q * u_q > target2
-            fd, fq = _rotate(idr, iqr, offset)
-            fud, fuq = voltage(fd, fq)
-            i_d, i_q = jnp.where(weakened, fd, i_d), jnp.where(weakened, fq, i_q)
-            u_d, u_q = jnp.where(weakened, fud, u_d), jnp.where(weakened, fuq, u_q)
-            id_fw = jnp.where(weakened, jnp.minimum(idr - id_pol, 0.0), 0.0)
-        z = jnp.zeros_like(w_e)
-        return OperatingPoint(
-            omega_m=z + omega_m,
-            omega_m_ref=z + omega_m_ref,
-            theta_e=z + theta_e,
-            t_load=z + t_load,
-            i_d=z + i_d,
-            i_q=z + i_q,
-            u_d=u_d,
-            u_q=u_q,
-            offset=z + offset,
-            id_fw=z + id_fw,
+        return steady_point(
+            est=self.est,
+            id_mode=self.id_mode,
+            outer=self.outer,
+            i_max=self.i_max,
+            u_max=self.u_max,
+            field_weakening=self.field_weakening,
+            par=par,
+            omega_m=omega_m,
+            omega_m_ref=omega_m_ref,
+            theta_e=theta_e,
+            t_load=t_load,
+            offset=offset,
         )
 
-    def _id_ref(self, est: PMSMParams, iq):
-        if self.id_mode == "zero":
-            return jnp.zeros_like(iq)
-        dl = est.Lq - est.Ld
-        safe = jnp.where(jnp.abs(dl) > 1e-12, dl, 1.0)
-        a = est.psi_f / (2 * safe)
-        mtpa = a - jnp.sign(safe) * jnp.sqrt(a * a + iq * iq)
-        return jnp.where(jnp.abs(dl) > 1e-12, mtpa, 0.0)
+    def _id_ref(self, est: PMSMParams, iq: jax.Array | float) -> jax.Array:
+        return policy_id(self.id_mode, est, iq)
 
-    def _policy_torque(self, est: PMSMParams, iq):
+    def _policy_torque(self, est: PMSMParams, iq: jax.Array | float) -> jax.Array:
         """The mean torque (N·m) of i_q and the policy's i_d(i_q) on ``est``."""
-        return _torque_dq(est, self._id_ref(est, iq), iq)
+        return policy_torque(self.id_mode, est, iq)
 
-    def mtpa_iq(self, est: PMSMParams, iq_lin):
+    def mtpa_iq(self, est: PMSMParams, iq_lin: jax.Array) -> jax.Array:
         """The i_q* (A) whose torque under the policy's i_d(i_q*) on ``est`` is K̂_t·``iq_lin`` (module doc): the
         speed loop's output turned into current.  ``iq_lin`` itself with i_d* = 0 or a non-salient ``est``.
 
@@ -756,16 +433,9 @@ class FOC(AbstractComponent):
         Returns:
             i_q*, A.
         """
-        if self.id_mode == "zero":
-            return iq_lin
-        target = est.kt * iq_lin
-        iq = iq_lin
-        for _ in range(6):
-            te, dte = jax.jvp(lambda x: self._policy_torque(est, x), (iq,), (jnp.ones_like(iq),))
-            iq = iq - (te - target) / jnp.where(dte > 0, dte, 1.0)
-        return iq
+        return policy_mtpa_iq(self.id_mode, est, iq_lin)
 
-    def iq_lin(self, est: PMSMParams, iq):
+    def iq_lin(self, est: PMSMParams, iq: jax.Array) -> jax.Array:
         """The speed loop's output that asks for the current i_q under the policy: the inverse of :meth:`mtpa_iq`.
 
         Args:
@@ -775,11 +445,9 @@ class FOC(AbstractComponent):
         Returns:
             The speed loop's output, A (K̂_t units).
         """
-        if self.id_mode == "zero":
-            return iq
-        return self._policy_torque(est, iq) / est.kt
+        return policy_iq_lin(self.id_mode, est, iq)
 
-    def iq_limit(self, est: PMSMParams):
+    def iq_limit(self, est: PMSMParams) -> tuple[jax.Array, jax.Array]:
         """The current limits of the speed loop under the policy.
 
         MTPA on the circle |i| = I: i_d = (ψf − √(ψf² + 8 ΔL² I²))/(4 ΔL), ΔL = Lq − Ld (the torque
@@ -791,17 +459,14 @@ class FOC(AbstractComponent):
         Returns:
             ``(|i_q*| on the policy's curve at |i| = i_max, the speed loop's output limit in K̂_t units)``, A.
         """
-        if self.id_mode == "zero":
-            return self.i_max, self.i_max
-        dl = est.Lq - est.Ld
-        salient = jnp.abs(dl) > 1e-12
-        safe = jnp.where(salient, dl, 1.0)
-        i_d = (est.psi_f - jnp.sqrt(est.psi_f**2 + 8 * safe * safe * self.i_max**2)) / (4 * safe)
-        iq = jnp.where(salient, jnp.sqrt(jnp.maximum(self.i_max**2 - i_d * i_d, 0.0)), self.i_max)
-        return iq, self.iq_lin(est, iq)
+        return policy_iq_limit(self.id_mode, est, self.i_max)
 
     def step(self, cs: ControllerState, inp: FOCInput) -> tuple[ControllerState, FOCOutput]:
         """One current-loop period: the voltage to apply over the next period.
+
+        The I-f start-up's phase (:meth:`_if_phase`), the speed loop (:meth:`_speed_loop`), the I-f references and
+        hand-over (:meth:`_if_references`), the current circle, then the current loop (:meth:`_current_loop`): helper
+        methods that the trace inlines, so the compiled period is the one function it always was.
 
         Args:
             cs: The :class:`ControllerState`.
@@ -812,47 +477,96 @@ class FOC(AbstractComponent):
         Returns:
             ``(the next ControllerState, the FOCOutput)``.
         """
-        k, i_a, i_b, theta, omega_e, omega_m, omega_m_ref = inp
-        est, u_max, startup = self.est, self.u_max, self.startup
-        ts = self.ts
-        # --- I-f start-up (module doc): the angle advances every period, used in mode 0
-        kp_w, ki_w = self.speed_gains(omega_m_ref)
-        if startup is not None:
-            omega_f = startup.ramp(k * ts)
-            theta_f = wrap(cs.theta_f + 0.5 * (cs.omega_f + omega_f) * ts)  # trapezoidal: exact for the ramp
-            at_top = omega_f >= startup.omega_switch
-            t_at_switch = jnp.where(at_top, cs.t_at_switch + ts, 0.0)
-            # agreement of the given position with the I-f frame: Δ = θ_f − θ̂ steady and ω̂ ≈ ω_f
-            delta = wrap(theta_f - theta)
-            d_lp = jnp.where(
-                cs.t_at_switch > 0, wrap(cs.d_lp + jnp.minimum(ts / startup.dwell, 1.0) * wrap(delta - cs.d_lp)), delta
+        kp_w, ki_w = self.speed_gains(inp.omega_m_ref)
+        ph = self._if_phase(cs, inp, kp_w)
+        closed = ph.mode == 1
+        th = jnp.where(closed, inp.theta, ph.theta_f)
+        w_e = jnp.where(closed, inp.omega_e, ph.omega_f)
+        run_speed = (inp.k % self.speed_every) == 0
+        id_ref, iq_ref, int_w, held, fw_lo = self._speed_loop(cs, inp, ph, (kp_w, ki_w), closed, run_speed, w_e)
+        int_d0, int_q0 = cs.int_d, cs.int_q
+        if self.startup is not None:
+            id_ref, iq_ref, held, int_w, int_d0, int_q0 = self._if_references(
+                cs, inp, ph, closed, (id_ref, iq_ref, held, int_w)
             )
-            agree = (
-                at_top
-                & (jnp.abs(wrap(delta - d_lp)) <= startup.tol)
-                & (jnp.abs(omega_e - omega_f) <= startup.speed_tol * omega_f)
-            )
-            t_agree = jnp.where(agree, cs.t_agree + ts, 0.0)
-            switch = (cs.mode == 0) & (t_at_switch >= startup.hold) & (t_agree >= startup.dwell)
-            mode = jnp.where(switch, 1, cs.mode)
-            t_closed = jnp.where(cs.mode == 1, cs.t_closed + ts, 0.0)  # 0 at the switch
-            # bumpless: the I-f vector (I_f along θ_f + 90°) seen from the given frame
-            sd, cd = sincos(delta)  # also rotates the integrators below
-            iq_hand = startup.i_f * cd
-            id_hand = jnp.where(switch, -startup.i_f * sd, cs.id_hand)
-            # the speed PI's output k_pω(b ω* − ω̂) + ∫ starts at iq_hand
-            lin_hand = self.iq_lin(est, iq_hand)
-            int_w0 = jnp.where(switch, lin_hand - kp_w * (self.setpoint_weight * omega_m_ref - omega_m), cs.int_w)
-            iq_held = jnp.where(switch, iq_hand, cs.iq_ref)
-        else:
-            omega_f, theta_f, mode, int_w0, iq_held = cs.omega_f, cs.theta_f, cs.mode, cs.int_w, cs.iq_ref
-            t_at_switch, d_lp, t_agree, t_closed, id_hand = cs.t_at_switch, cs.d_lp, cs.t_agree, cs.t_closed, cs.id_hand
-        closed = mode == 1
-        th = jnp.where(closed, theta, theta_f)
-        w_e = jnp.where(closed, omega_e, omega_f)
+        # the current circle, whatever set the references (the blend after an I-f switch, an I-f current above
+        # i_max): |i*| ≤ i_max at every sample, i_d first (an identity where the circle is not reached)
+        id_ref = jnp.clip(id_ref, -self.i_max, self.i_max)
+        iq_ref = VoltageFeedbackFW.limit_iq(iq_ref, id_ref, self.i_max)
+        u_a, u_b, int_d, int_q, id_fw = self._current_loop(cs, inp, th, w_e, (id_ref, iq_ref), (int_d0, int_q0), fw_lo)
+        new = ControllerState(
+            int_d=int_d,
+            int_q=int_q,
+            int_w=int_w,
+            iq_ref=held,
+            theta_f=ph.theta_f,
+            omega_f=ph.omega_f,
+            t_at_switch=ph.t_at_switch,
+            mode=ph.mode,
+            d_lp=ph.d_lp,
+            t_agree=ph.t_agree,
+            t_closed=ph.t_closed,
+            id_hand=ph.id_hand,
+            id_fw=id_fw,
+            kp_w=jnp.where(run_speed, kp_w, cs.kp_w),
+        )
+        return new, FOCOutput(
+            u_a=u_a, u_b=u_b, id_ref=id_ref, iq_ref=iq_ref, theta=jnp.where(ph.mode == 1, inp.theta, ph.theta_f)
+        )
 
-        # --- speed loop at its own rate (the result is held in between)
-        run_speed = (k % self.speed_every) == 0
+    def _if_phase(self, cs: ControllerState, inp: FOCInput, kp_w: jax.Array) -> IfPhase:
+        """The I-f start-up's part of a period (module doc): the angle advances every period (used in mode 0), the
+        agreement, the switch and the bumpless hand-over's values; without a start-up the state's, unchanged."""
+        startup, ts = self.startup, self.ts
+        if startup is None:
+            return IfPhase(cs.omega_f, cs.theta_f, cs.mode, cs.int_w, cs.iq_ref, cs.t_at_switch, cs.d_lp, cs.t_agree,
+                            cs.t_closed, cs.id_hand)  # fmt: skip
+        k, theta, omega_e, omega_m, omega_m_ref = inp.k, inp.theta, inp.omega_e, inp.omega_m, inp.omega_m_ref
+        omega_f = startup.ramp(k * ts)
+        theta_f = wrap(cs.theta_f + 0.5 * (cs.omega_f + omega_f) * ts)  # trapezoidal: exact for the ramp
+        at_top = omega_f >= startup.omega_switch
+        t_at_switch = jnp.where(at_top, cs.t_at_switch + ts, 0.0)
+        # agreement of the given position with the I-f frame: Δ = θ_f − θ̂ steady and ω̂ ≈ ω_f
+        delta = wrap(theta_f - theta)
+        d_lp = jnp.where(
+            cs.t_at_switch > 0, wrap(cs.d_lp + jnp.minimum(ts / startup.dwell, 1.0) * wrap(delta - cs.d_lp)), delta
+        )
+        agree = (
+            at_top
+            & (jnp.abs(wrap(delta - d_lp)) <= startup.tol)
+            & (jnp.abs(omega_e - omega_f) <= startup.speed_tol * omega_f)
+        )
+        t_agree = jnp.where(agree, cs.t_agree + ts, 0.0)
+        switch = (cs.mode == 0) & (t_at_switch >= startup.hold) & (t_agree >= startup.dwell)
+        mode = jnp.where(switch, 1, cs.mode)
+        t_closed = jnp.where(cs.mode == 1, cs.t_closed + ts, 0.0)  # 0 at the switch
+        # bumpless: the I-f vector (I_f along θ_f + 90°) seen from the given frame
+        sd, cd = sincos(delta)  # also rotates the integrators (_if_references)
+        iq_hand = startup.i_f * cd
+        id_hand = jnp.where(switch, -startup.i_f * sd, cs.id_hand)
+        # the speed PI's output k_pω(b ω* − ω̂) + ∫ starts at iq_hand
+        lin_hand = self.iq_lin(self.est, iq_hand)
+        int_w0 = jnp.where(switch, lin_hand - kp_w * (self.setpoint_weight * omega_m_ref - omega_m), cs.int_w)
+        iq_held = jnp.where(switch, iq_hand, cs.iq_ref)
+        return IfPhase(omega_f, theta_f, mode, int_w0, iq_held, t_at_switch, d_lp, t_agree, t_closed, id_hand,
+                        switch, sd, cd)  # fmt: skip
+
+    def _speed_loop(
+        self,
+        cs: ControllerState,
+        inp: FOCInput,
+        ph: IfPhase,
+        gains: tuple[jax.Array, jax.Array],
+        closed: jax.Array,
+        run_speed: jax.Array,
+        w_e: jax.Array,
+    ) -> tuple[jax.Array, jax.Array, jax.Array, jax.Array, jax.Array | None]:
+        """The speed loop at its own rate (its result held in between) and the current references it gives:
+        ``(i_d*, i_q*, the speed integrator, the held i_q*, field weakening's i_d floor or None)``."""
+        est, ts, fw = self.est, self.ts, self.field_weakening
+        omega_m, omega_m_ref = inp.omega_m, inp.omega_m_ref
+        kp_w, ki_w = gains
+        int_w0 = ph.int_w0
         tw = ts * self.speed_every
         e_w = omega_m_ref - omega_m
         if self.speed_schedule > 0:
@@ -860,21 +574,21 @@ class FOC(AbstractComponent):
             # step cut the I-P's −k_pω ω̂ + ∫ by 2 % of k_pω ω̂, and at 20 r/min under load that kick lost the drive
             # (docs/stability.md).  Not at the I-f switch, where the integrator is set afresh.
             bump = (cs.kp_w - kp_w) * (self.setpoint_weight * omega_m_ref - omega_m)
-            keep = run_speed & closed if startup is None else run_speed & closed & ~switch
+            keep = run_speed & closed if ph.switch is None else run_speed & closed & ~ph.switch
             int_w0 = int_w0 + jnp.where(keep, bump, 0.0)
         unsat = kp_w * (self.setpoint_weight * omega_m_ref - omega_m) + int_w0
         iq_max, lin_max = self.iq_limit(est)  # the circle's i_q under the policy, and its torque in K̂_t units
         iq_sat = jnp.clip(unsat, -lin_max, lin_max)
-        iq_cmd = jnp.where(run_speed, self.mtpa_iq(est, iq_sat), iq_held)  # the speed loop's current, held
+        iq_cmd = jnp.where(run_speed, self.mtpa_iq(est, iq_sat), ph.iq_held)  # the speed loop's current, held
         if self.outer == "current":  # the reference is i_q* itself (current-loop tests, torque control)
             iq_cmd = jnp.clip(omega_m_ref, -iq_max, iq_max)
         id_ref = self._id_ref(est, iq_cmd)
-        iq_ref, real, fw = iq_cmd, iq_sat, self.field_weakening
+        iq_ref, real, fw_lo = iq_cmd, iq_sat, None
         if fw is not None:
             # the weakened reference within the stop, the circle, MTPV and the voltage (jaxobs.drive.weakening)
             id_pol = id_ref
-            id_ref, iq_ref, capped, fw_lo = fw.references(est, id_pol, iq_cmd, cs.id_fw, w_e, u_max, self.i_max)
-            real = jnp.where(capped, _torque_dq(est, id_ref, iq_ref) / est.kt, iq_sat)
+            id_ref, iq_ref, capped, fw_lo = fw.references(est, id_pol, iq_cmd, cs.id_fw, w_e, self.u_max, self.i_max)
+            real = jnp.where(capped, torque_dq(est, id_ref, iq_ref) / est.kt, iq_sat)
         # conditional integration on the torque realised (in K̂_t units): freeze while the speed loop's output is
         # not realised (the circle's torque, or field weakening's limits) and the error pushes further.  Without
         # field weakening real = iq_sat, the circle's limit alone.
@@ -882,35 +596,59 @@ class FOC(AbstractComponent):
         int_w = jnp.where(run_speed & ~windup, int_w0 + ki_w * e_w * tw, int_w0)
         if self.outer == "current":
             int_w = cs.int_w
-        held = iq_cmd
-        int_d0, int_q0 = cs.int_d, cs.int_q
-        if startup is not None:
-            # I-f: I_f on the I-f frame's q axis; after the switch the d-current blends from the I-f vector's
-            r = jnp.where(startup.blend > 0, jnp.clip(1.0 - t_closed / jnp.maximum(startup.blend, ts), 0.0, 1.0), 0.0)
-            id_ref = jnp.where(closed, r * id_hand + (1 - r) * id_ref, 0.0)
-            iq_ref = jnp.where(closed, iq_ref, startup.i_f)
-            held = jnp.where(closed, held, startup.i_f)
-            int_w = jnp.where(closed, int_w, cs.int_w)
-            # the current PIs' integrators into the new frame, so that the voltage vector is continuous:
-            # u = ∫ + decoupling, rotated by Δ from θ_f to θ̂, minus the decoupling computed in θ̂
-            sf, cf = sincos(theta_f)
-            idf, iqf = cf * i_a + sf * i_b, -sf * i_a + cf * i_b
-            sh, ch = sincos(theta)
-            idh, iqh = ch * i_a + sh * i_b, -sh * i_a + ch * i_b
-            vd = cs.int_d - omega_f * est.Lq * iqf
-            vq = cs.int_q + omega_f * (est.Ld * idf + est.psi_f)
-            int_d0 = jnp.where(switch, cd * vd - sd * vq + omega_e * est.Lq * iqh, cs.int_d)
-            int_q0 = jnp.where(switch, sd * vd + cd * vq - omega_e * (est.Ld * idh + est.psi_f), cs.int_q)
+        return id_ref, iq_ref, int_w, iq_cmd, fw_lo
 
-        # the current circle, whatever set the references (the blend after an I-f switch, an I-f current above
-        # i_max): |i*| ≤ i_max at every sample, i_d first (an identity where the circle is not reached)
-        id_ref = jnp.clip(id_ref, -self.i_max, self.i_max)
-        iq_ref = VoltageFeedbackFW.limit_iq(iq_ref, id_ref, self.i_max)
+    def _if_references(
+        self,
+        cs: ControllerState,
+        inp: FOCInput,
+        ph: IfPhase,
+        closed: jax.Array,
+        refs: tuple[jax.Array, jax.Array, jax.Array, jax.Array],
+    ) -> tuple[jax.Array, jax.Array, jax.Array, jax.Array, jax.Array, jax.Array]:
+        """I-f: I_f on the I-f frame's q axis; after the switch the d-current blends from the I-f vector's, and at
+        the switch the current PIs' integrators move into the given frame.  ``refs`` is ``(i_d*, i_q*, the held
+        i_q*, the speed integrator)``; returns them with the current integrators ``(int_d, int_q)``."""
+        startup, est, ts = self.startup, self.est, self.ts
+        assert startup is not None and ph.switch is not None and ph.sd is not None and ph.cd is not None
+        id_ref, iq_ref, held, int_w = refs
+        i_a, i_b, theta, omega_e = inp.i_a, inp.i_b, inp.theta, inp.omega_e
+        switch, sd, cd, theta_f, omega_f = ph.switch, ph.sd, ph.cd, ph.theta_f, ph.omega_f
+        r = jnp.where(startup.blend > 0, jnp.clip(1.0 - ph.t_closed / jnp.maximum(startup.blend, ts), 0.0, 1.0), 0.0)
+        id_ref = jnp.where(closed, r * ph.id_hand + (1 - r) * id_ref, 0.0)
+        iq_ref = jnp.where(closed, iq_ref, startup.i_f)
+        held = jnp.where(closed, held, startup.i_f)
+        int_w = jnp.where(closed, int_w, cs.int_w)
+        # the current PIs' integrators into the new frame, so that the voltage vector is continuous:
+        # u = ∫ + decoupling, rotated by Δ from θ_f to θ̂, minus the decoupling computed in θ̂
+        sf, cf = sincos(theta_f)
+        idf, iqf = cf * i_a + sf * i_b, -sf * i_a + cf * i_b
+        sh, ch = sincos(theta)
+        idh, iqh = ch * i_a + sh * i_b, -sh * i_a + ch * i_b
+        vd = cs.int_d - omega_f * est.Lq * iqf
+        vq = cs.int_q + omega_f * (est.Ld * idf + est.psi_f)
+        int_d0 = jnp.where(switch, cd * vd - sd * vq + omega_e * est.Lq * iqh, cs.int_d)
+        int_q0 = jnp.where(switch, sd * vd + cd * vq - omega_e * (est.Ld * idh + est.psi_f), cs.int_q)
+        return id_ref, iq_ref, held, int_w, int_d0, int_q0
 
-        # --- current loop
+    def _current_loop(
+        self,
+        cs: ControllerState,
+        inp: FOCInput,
+        th: jax.Array,
+        w_e: jax.Array,
+        refs: tuple[jax.Array, jax.Array],
+        ints: tuple[jax.Array, jax.Array],
+        fw_lo: jax.Array | None,
+    ) -> tuple[jax.Array, jax.Array, jax.Array, jax.Array, jax.Array]:
+        """The current PIs with decoupling in the frame ``th``, the voltage limit and the delay compensation:
+        ``(u_α, u_β, int_d, int_q, field weakening's Δi_d)``."""
+        est, u_max, ts, fw = self.est, self.u_max, self.ts, self.field_weakening
+        id_ref, iq_ref = refs
+        int_d0, int_q0 = ints
         s, c = sincos(th)
-        i_d = c * i_a + s * i_b
-        i_q = -s * i_a + c * i_b
+        i_d = c * inp.i_a + s * inp.i_b
+        i_q = -s * inp.i_a + c * inp.i_b
         e_d, e_q = id_ref - i_d, iq_ref - i_q
         u_d = self.kp_d * e_d + int_d0 - w_e * est.Lq * i_q
         u_q = self.kp_q * e_q + int_q0 + w_e * (est.Ld * i_d + est.psi_f)
@@ -926,22 +664,4 @@ class FOC(AbstractComponent):
         so, co = sincos(th_out)
         u_a = co * u_d - so * u_q
         u_b = so * u_d + co * u_q
-        new = ControllerState(
-            int_d=int_d,
-            int_q=int_q,
-            int_w=int_w,
-            iq_ref=held,
-            theta_f=theta_f,
-            omega_f=omega_f,
-            t_at_switch=t_at_switch,
-            mode=mode,
-            d_lp=d_lp,
-            t_agree=t_agree,
-            t_closed=t_closed,
-            id_hand=id_hand,
-            id_fw=id_fw,
-            kp_w=jnp.where(run_speed, kp_w, cs.kp_w),
-        )
-        return new, FOCOutput(
-            u_a=u_a, u_b=u_b, id_ref=id_ref, iq_ref=iq_ref, theta=jnp.where(mode == 1, theta, theta_f)
-        )
+        return u_a, u_b, int_d, int_q, id_fw

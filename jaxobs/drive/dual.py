@@ -62,6 +62,7 @@ from .. import papers
 from ..core.discretize import RK4, AbstractRule, AbstractRuleCarry, Held, check_rule
 from ..core.numerics import wrap
 from ..core.validate import check_nonnegative, check_positive, check_sample_time
+from ._operating import OperatingPoint
 from .component import AbstractComponent
 from .hardware import Inverter
 from .machine import PMSMParams, ab_to_dq, dq_to_ab
@@ -97,7 +98,7 @@ def vsd_matrix() -> np.ndarray:
 VSD_AMPLITUDE = vsd_matrix() / math.sqrt(3.0)
 
 
-def phases_to_vsd(x6):
+def phases_to_vsd(x6: jax.Array | float) -> jax.Array:
     """Six phase quantities → VSD coordinates, amplitude invariant.
 
     Args:
@@ -109,12 +110,21 @@ def phases_to_vsd(x6):
     return jnp.asarray(x6) @ jnp.asarray(VSD_AMPLITUDE.T)
 
 
-def vsd_to_phases(v6):
-    """Inverse of :func:`phases_to_vsd`."""
+def vsd_to_phases(v6: jax.Array | float) -> jax.Array:
+    """Inverse of :func:`phases_to_vsd`.
+
+    Args:
+        v6: The VSD values (α, β, x, y, 0+, 0−), last axis of 6.
+
+    Returns:
+        The six phase values, last axis of 6.
+    """
     return jnp.asarray(v6) @ jnp.asarray(3.0 * VSD_AMPLITUDE)
 
 
-def sets_to_vsd(a1, b1, a2, b2):
+def sets_to_vsd(
+    a1: jax.Array, b1: jax.Array, a2: jax.Array, b2: jax.Array
+) -> tuple[jax.Array, jax.Array, jax.Array, jax.Array]:
     """The two sets' Clarke vectors → VSD: z_αβ = (s1 + s2)/2, z_xy = conj(s1 − s2)/2 (module doc).
 
     Args:
@@ -129,7 +139,9 @@ def sets_to_vsd(a1, b1, a2, b2):
     return (a1 + a2) / 2, (b1 + b2) / 2, (a1 - a2) / 2, (b2 - b1) / 2
 
 
-def vsd_to_sets(a, b, x, y):
+def vsd_to_sets(
+    a: jax.Array, b: jax.Array, x: jax.Array, y: jax.Array
+) -> tuple[jax.Array, jax.Array, jax.Array, jax.Array]:
     """VSD → the two sets' Clarke vectors: s1,2 = z_αβ ± conj(z_xy).
 
     Args:
@@ -168,10 +180,11 @@ class DualPMSMParams(eqx.Module):
 
     @property
     def p(self) -> int:
+        """The pole pairs."""
         return self.m.p
 
     @property
-    def kt(self):
+    def kt(self) -> jax.Array:
         """Torque constant at i_d = 0 and zero xy current, N·m per A of |i_αβ| (peak): 3 p ψf."""
         return 3.0 * self.m.p * self.m.psi_f
 
@@ -189,7 +202,7 @@ class DualPMSMParams(eqx.Module):
         return eqx.tree_at(lambda r: (r.Ld, r.Lq), q, ((q.Ld + self.Lls) / 2, (q.Lq + self.Lls) / 2))
 
 
-def dual_ipmsm_paper002(J=None, **overrides) -> DualPMSMParams:
+def dual_ipmsm_paper002(J: float | None = None, **overrides: Any) -> DualPMSMParams:
     """002's dual three-phase IPMSM (ASSUMED: our copy lacks its machine table; papers.IPMSM_002 per set).
 
     Two of the single IPMSM's sets on one shaft: per phase the single machine's Rs, Ld, Lq, ψf, so each set
@@ -213,8 +226,16 @@ def dual_ipmsm_paper002(J=None, **overrides) -> DualPMSMParams:
     return DualPMSMParams(PMSMParams(**kw), lls)
 
 
-def pm_flux_vsd(par: DualPMSMParams, theta_e):
-    """The PM flux's rate per electrical rad/s, e/ωe, in VSD coordinates (α, β, x, y), V·s."""
+def pm_flux_vsd(par: DualPMSMParams, theta_e: jax.Array | float) -> tuple[jax.Array, jax.Array, jax.Array, jax.Array]:
+    """The PM flux's rate per electrical rad/s, e/ωe, in VSD coordinates (α, β, x, y), V·s.
+
+    Args:
+        par: The dual machine.
+        theta_e: The electrical angle, rad.
+
+    Returns:
+        ``(α, β, x, y)``, V·s.
+    """
     m = par.m
     phi = theta_e - jnp.asarray(PHASE_ANGLES, dtype=jnp.result_type(theta_e, float))
     g = -jnp.sin(phi) + m.a5 * jnp.sin(5 * phi) - m.a7 * jnp.sin(7 * phi)
@@ -222,7 +243,7 @@ def pm_flux_vsd(par: DualPMSMParams, theta_e):
     return v[0], v[1], v[2], v[3]
 
 
-def dual_torque(par: DualPMSMParams, x):
+def dual_torque(par: DualPMSMParams, x: jax.Array) -> jax.Array:
     """Electromagnetic torque (module doc).
 
     Args:
@@ -240,7 +261,12 @@ def dual_torque(par: DualPMSMParams, x):
     return 3.0 * m.p * (pm + (m.Ld - m.Lq) * i_d * i_q)
 
 
-def dual_vf(par: DualPMSMParams, x, u_vsd, t_load):
+def dual_vf(
+    par: DualPMSMParams,
+    x: jax.Array,
+    u_vsd: tuple[jax.Array, jax.Array, jax.Array, jax.Array],
+    t_load: jax.Array | float,
+) -> jax.Array:
     """The dual machine's vector field.
 
     Args:
@@ -315,6 +341,8 @@ class DualPlantOutput(NamedTuple):
 
 
 class DualPlantState(AbstractRuleCarry):
+    """The dual plant's state: ``x`` = [i_d, i_q, i_x, i_y, ω_m, θ_e] and the rule's carry."""
+
     x: jax.Array  # [i_d, i_q, i_x, i_y, ω_m, θ_e], shape (6,)
     rule: Any
 
@@ -341,7 +369,16 @@ class DualPMSM(AbstractComponent):
     n_sub: int = eqx.field(static=True)
     rule: AbstractRule = eqx.field(static=True)
 
-    def __init__(self, par, inverter=None, dead_time=0.0, *, ts=1e-4, n_sub=2, rule=None):
+    def __init__(
+        self,
+        par: DualPMSMParams,
+        inverter: Inverter | None = None,
+        dead_time: jax.Array | float = 0.0,
+        *,
+        ts: float = 1e-4,
+        n_sub: int = 2,
+        rule: AbstractRule | None = None,
+    ) -> None:
         if not isinstance(par, DualPMSMParams):
             raise ValueError(f"DualPMSM.par must be a DualPMSMParams, got {type(par).__name__}")
         self.par = par
@@ -353,7 +390,7 @@ class DualPMSM(AbstractComponent):
         self.n_sub = n_sub
         self.rule = check_rule(RK4() if rule is None else rule, "DualPMSM")
 
-    def set_currents(self, x):
+    def set_currents(self, x: jax.Array) -> tuple[jax.Array, jax.Array, jax.Array, jax.Array]:
         """Each set's Clarke currents at state ``x``.
 
         Args:
@@ -365,7 +402,7 @@ class DualPMSM(AbstractComponent):
         i_a, i_b = dq_to_ab(x[0], x[1], x[5])
         return vsd_to_sets(i_a, i_b, x[2], x[3])
 
-    def field(self, x, inp):
+    def field(self, x: jax.Array, inp: jax.Array) -> jax.Array:
         """The vector field under the inverters.
 
         Args:
@@ -385,7 +422,7 @@ class DualPMSM(AbstractComponent):
         u = sets_to_vsd(inp[0] + d_a1, inp[1] + d_b1, inp[2] + d_a2, inp[3] + d_b2)
         return dual_vf(self.par, x, u, inp[4])
 
-    def init(self, op=None) -> DualPlantState:
+    def init(self, op: OperatingPoint | None = None) -> DualPlantState:
         """The machine's initial state.
 
         Args:
@@ -400,11 +437,28 @@ class DualPMSM(AbstractComponent):
         x0 = jnp.stack([jnp.asarray(v, dtype) for v in vals])
         return DualPlantState(x=x0, rule=self.rule.init(self.field, x0, None))
 
-    def output(self, x) -> DualPlantOutput:
+    def output(self, x: jax.Array) -> DualPlantOutput:
+        """What the dual plant shows at the state ``x``.
+
+        Args:
+            x: The state [i_d, i_q, i_x, i_y, ω_m, θ_e].
+
+        Returns:
+            The :class:`DualPlantOutput`.
+        """
         i_a1, i_b1, i_a2, i_b2 = self.set_currents(x)
         return DualPlantOutput(x[0], x[1], x[2], x[3], x[4], x[5], i_a1, i_b1, i_a2, i_b2, dual_torque(self.par, x))
 
     def step(self, state: DualPlantState, inp: DualPlantInput) -> tuple[DualPlantState, DualPlantOutput]:
+        """One control period of the dual plant under held voltages.
+
+        Args:
+            state: The :class:`DualPlantState`.
+            inp: The :class:`DualPlantInput`.
+
+        Returns:
+            ``(the next state, the output at the period's start)``.
+        """
         out = self.output(state.x)
         path = Held(tuple(inp))
         h = self.ts / self.n_sub

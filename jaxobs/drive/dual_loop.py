@@ -88,6 +88,8 @@ def _rot(a, b, c, s):
 
 
 class DualFOCInput(NamedTuple):
+    """What the dual FOC is given at sample ``k`` (each set's currents, the angle and speeds it uses)."""
+
     k: jax.Array
     i_a1: jax.Array  # measured Clarke currents of each set (set 1's stationary frame), A
     i_b1: jax.Array
@@ -100,6 +102,8 @@ class DualFOCInput(NamedTuple):
 
 
 class DualFOCOutput(NamedTuple):
+    """What the dual FOC gives each period: each set's voltage, the references and the angle used."""
+
     u_a1: jax.Array  # each set's voltage for the next period (set 1's frame, before the inverters' limit), V
     u_b1: jax.Array
     u_a2: jax.Array
@@ -110,6 +114,8 @@ class DualFOCOutput(NamedTuple):
 
 
 class DualFOCState(NamedTuple):
+    """The dual FOC's state: the αβ (or each set's) FOC state and the xy PI integrators."""
+
     main: ControllerState  # the αβ FOC ("vsd") or set 1's ("individual")
     second: ControllerState  # set 2's ("individual"; carried unused under "vsd")
     int_x: jax.Array  # xy PI integrators, V
@@ -128,19 +134,22 @@ class DualFOC(AbstractComponent):
     # voltage does not depend on i_d: ∂|u|/∂i_d ≈ ω̂e L̂d either way, a first-order loop at α_fw, 20 Hz) and
     # neither sees the observer's angle error (|u| is a magnitude); they differ in the i_d they settle on.
     # "set" fits the xy PIs' voltage under the margin too, which takes a deeper i_d, and a lagging estimate
-    # turns i_d into accelerating torque (K_δ = 1.5 p ψf i_d): on 330 V at 840 r/min, FA-LESO closing, speed
-    # loop 2.5 Hz, "set" settles at i_d = −11.8 A, where the speed loop's pair through the PLL has
-    # Re s = +3.5 /s (jaxobs.linear.faleso_speed_loop_poles at −11.1 A; −4.9 /s at "ab"'s −7.3 A; the
-    # crossing is at −9.5 A), and the drive falls into a 601–973 r/min limit cycle; "ab" holds
-    # 840.0 r/min within 0.01°.  The depth is the cause, not the signal: "ab" with margin 0.90 (i_d −10.1 A)
-    # grows at +4.8 /s and with 0.88 (−11.5 A) cycles over 594–945 r/min; "set" with margin 1.0 (−8.1 A)
-    # holds (tests/test_dual.py).  So "ab" is the default; it leaves a set at its inverter's limit part of
-    # the time (71 % at 840 r/min on 330 V: that set's current loop then has no voltage in reserve).  002
+    # turns i_d into accelerating torque (K_δ = 1.5 p ψf i_d): the deeper i_d destabilizes the sensorless speed
+    # loop (tests/test_dual.py; docs/performance.md).  So "ab" is the default; it leaves a set at its inverter's
+    # limit part of the time (that set's current loop then has no voltage in reserve).  002
     # does not say which voltage its field weakening (its ref. [32]) budgets.  "individual" is per set either
     # way (each set's FOC limits its own).
     fw_voltage: Literal["ab", "set"] = eqx.field(static=True)
 
-    def __init__(self, foc, kp_xy=1.0, ki_xy=0.0, *, mode="vsd", fw_voltage="ab"):
+    def __init__(
+        self,
+        foc: FOC,
+        kp_xy: jax.Array | float = 1.0,
+        ki_xy: jax.Array | float = 0.0,
+        *,
+        mode: Literal["vsd", "individual"] = "vsd",
+        fw_voltage: Literal["ab", "set"] = "ab",
+    ) -> None:
         if not isinstance(foc, FOC):
             raise ValueError(f"DualFOC.foc must be a FOC, got {type(foc).__name__}")
         if mode not in ("vsd", "individual"):
@@ -154,12 +163,32 @@ class DualFOC(AbstractComponent):
         self.fw_voltage = fw_voltage
 
     @classmethod
-    def imc(cls, est: DualPMSMParams, alpha_c, alpha_s, *, mode="vsd", fw_voltage="ab", **kw) -> DualFOC:
+    def imc(
+        cls,
+        est: DualPMSMParams,
+        alpha_c: jax.Array | float,
+        alpha_s: jax.Array | float,
+        *,
+        mode: Literal["vsd", "individual"] = "vsd",
+        fw_voltage: Literal["ab", "set"] = "ab",
+        **kw: Any,
+    ) -> DualFOC:
         """IMC current loops at ``alpha_c`` rad/s and the double-pole speed loop at ``alpha_s`` on ``est``.
 
         "vsd": :meth:`FOC.imc` on ``est.per_set()``, xy PIs k_p = α_c L̂ls, k_i = α_c R̂s.  "individual":
         :meth:`FOC.imc` on ``est.set_self()``; its differential mode runs (L̂q + L̂ls)/(2 L̂ls) times faster
         than ``alpha_c`` (module doc): lower ``alpha_c`` on a machine of small L̂ls.
+
+        Args:
+            est: The dual machine the controller assumes.
+            alpha_c: The current loops' bandwidth, rad/s.
+            alpha_s: The speed loop's double pole, rad/s.
+            mode: ``"vsd"`` or ``"individual"``.
+            fw_voltage: The voltage the field weakening budgets, ``"ab"`` or ``"set"``.
+            **kw: Other :class:`FOC` keywords.
+
+        Returns:
+            The :class:`DualFOC`.
         """
         if not isinstance(est, DualPMSMParams):
             raise ValueError(f"DualFOC.imc: est must be a DualPMSMParams, got {type(est).__name__}")
@@ -169,9 +198,17 @@ class DualFOC(AbstractComponent):
         foc = FOC.imc(machine, alpha_c, alpha_s, **kw)
         return cls(foc, alpha_c * est.Lls, alpha_c * est.m.Rs, mode=mode, fw_voltage=fw_voltage)
 
-    def init(self, op: OperatingPoint | None = None, *, theta_f0=0.0) -> DualFOCState:
+    def init(self, op: OperatingPoint | None = None, *, theta_f0: jax.Array | float = 0.0) -> DualFOCState:
         """The integrators that hold the drive at ``op`` (per set; zero xy), zeros for None; with the FOC's
-        I-f start-up its angle at ``theta_f0`` (rad; set 2's FOC, in its own frame, 30° behind)."""
+        I-f start-up its angle at ``theta_f0`` (rad; set 2's FOC, in its own frame, 30° behind).
+
+        Args:
+            op: The :class:`OperatingPoint` (per set), or None.
+            theta_f0: The I-f angle to start from, rad.
+
+        Returns:
+            The :class:`DualFOCState`.
+        """
         cs = self.foc.init(op, theta_f0=theta_f0)
         second = cs if self.foc.startup is None else self.foc.init(op, theta_f0=theta_f0 - math.pi / 6)
         z = jnp.zeros_like(cs.int_d)
@@ -183,6 +220,15 @@ class DualFOC(AbstractComponent):
         return int_new, self.kp_xy * e + int_
 
     def step(self, cs: DualFOCState, inp: DualFOCInput) -> tuple[DualFOCState, DualFOCOutput]:
+        """One current-loop period of the dual FOC: each set's voltage for the next period.
+
+        Args:
+            cs: The :class:`DualFOCState`.
+            inp: The :class:`DualFOCInput`.
+
+        Returns:
+            ``(the next DualFOCState, the DualFOCOutput)``.
+        """
         foc, ts = self.foc, self.foc.ts
         k, th, w_e, w_m, ref = inp.k, inp.theta, inp.omega_e, inp.omega_m, inp.omega_m_ref
         if self.mode == "vsd":
@@ -249,6 +295,7 @@ class DualDrive(eqx.Module):
 
     @property
     def ts(self) -> float:
+        """The control period, s."""
         return self.ctrl.foc.ts
 
     @property
@@ -259,11 +306,19 @@ class DualDrive(eqx.Module):
 
     def settled_for(self, omega_e_min: float) -> DualDrive:
         """This drive with its settling phase at least :data:`~jaxobs.drive.loop.SETTLE_PERIODS` electrical
-        periods at ``omega_e_min`` rad/s (:meth:`jaxobs.drive.Drive.settled_for`)."""
+        periods at ``omega_e_min`` rad/s (:meth:`jaxobs.drive.Drive.settled_for`).
+
+        Args:
+            omega_e_min: The lowest electrical speed it will start at, rad/s (> 0).
+
+        Returns:
+            The :class:`DualDrive`.
+        """
         return settled_for(self, omega_e_min)
 
     @property
     def mode(self) -> str:
+        """The current control's mode, ``"vsd"`` or ``"individual"``."""
         return self.ctrl.mode
 
 
@@ -296,16 +351,19 @@ class DualOutput(NamedTuple):
     mode: jax.Array  # 0: I-f start-up, 1: closed loop
 
     @property
-    def speed_rpm(self):
+    def speed_rpm(self) -> jax.Array:
+        """The mechanical speed, r/min."""
         return self.omega_m * 60 / (2 * jnp.pi)
 
 
 class DualLoopState(NamedTuple):
+    """The dual closed loop's state between two periods: plant, controller, observer, sensors' key, voltage."""
+
     plant: DualPlantState
     ctrl: DualFOCState
     obs: Any
     sensors: jax.Array
-    u: tuple  # (u_a1, u_b1, u_a2, u_b2) to apply over the coming period, V
+    u: tuple[jax.Array, jax.Array, jax.Array, jax.Array]  # (u_a1, u_b1, u_a2, u_b2) to apply over the coming period, V
 
 
 class DualClosedLoop(AbstractDriveLoop):
@@ -334,14 +392,17 @@ class DualClosedLoop(AbstractDriveLoop):
 
     @property
     def ts(self) -> float:
+        """The control period, s."""
         return self.drive.ts
 
     @property
-    def pole_pairs(self):
+    def pole_pairs(self) -> int:
+        """The machine's pole pairs."""
         return self.machine.p
 
     @property
     def plant(self) -> DualPMSM:
+        """The true dual machine behind the drive's inverter, with the scenario's dead time."""
         d = self.drive
         return DualPMSM(self.machine, d.inverter, self.scenario.dead_time, ts=d.ts, n_sub=d.n_sub, rule=d.rule)
 
@@ -353,14 +414,21 @@ class DualClosedLoop(AbstractDriveLoop):
         foc = c.foc.bind(c.foc.est, self.drive.inverter.u_max, self.drive.startup)
         return eqx.tree_at(lambda q: q.foc, c, foc)
 
-    def operating_point(self, offset=0.0) -> OperatingPoint:
+    def operating_point(self, offset: jax.Array | float = 0.0) -> OperatingPoint:
         """The steady state at the scenario's initial speed and load: each set carries half the load
         (the FOC's operating point on the per-set machine, its frame ``offset`` rad ahead of the rotor's),
         zero xy current.  Above base speed with field weakening it is the field-weakened one (the αβ voltage at
         the margin, :meth:`FOC.operating_point`): exact for ``fw_voltage="ab"`` until the xy currents build up
         from zero (the 5th/7th BEMF drive them; where a set then reaches its inverter's limit the αβ voltage it
         delivers falls short, and i_d settles deeper: −7.29 A against the start's −6.43 A at 840 r/min, no load,
-        330 V); ``fw_voltage="set"`` settles deeper still (the xy voltage under the margin too)."""
+        330 V); ``fw_voltage="set"`` settles deeper still (the xy voltage under the margin too).
+
+        Args:
+            offset: The controller's angle minus the rotor's, rad.
+
+        Returns:
+            The :class:`OperatingPoint` (per set).
+        """
         sc = self.scenario
         return self.controller.foc.operating_point(
             self.machine.per_set(), sc.omega_m0, sc.speed_ref(0.0), sc.theta_e0, sc.load(0.0) / 2, offset
@@ -383,14 +451,23 @@ class DualClosedLoop(AbstractDriveLoop):
             # from standstill, as ClosedLoop.init: all zeros, the I-f angle at θ_e0 − 90° (the parked rotor)
             _, plant, obs, ctrl, sensors = self._rest_start()
             z = jnp.zeros((), plant.x.dtype)
-            return DualLoopState(plant=plant, ctrl=ctrl, obs=obs, sensors=sensors, u=(z,) * 4)
+            return DualLoopState(plant=plant, ctrl=ctrl, obs=obs, sensors=sensors, u=(z, z, z, z))
         op, obs = self._steady_start(self.operating_point())
         plant = self.plant.init(op)
         u_a, u_b = self.drive.inverter.limit(*self._steady_voltage(op, op.theta_e))
         key = sc.sensors.init(op, key=sc.key)
         return DualLoopState(plant=plant, ctrl=foc.init(op), obs=obs, sensors=key, u=(u_a, u_b, u_a, u_b))
 
-    def step(self, state: DualLoopState, k) -> tuple[DualLoopState, DualOutput]:
+    def step(self, state: DualLoopState, k: jax.Array) -> tuple[DualLoopState, DualOutput]:
+        """One control period of the dual closed loop.
+
+        Args:
+            state: The :class:`DualLoopState`.
+            k: The sample index.
+
+        Returns:
+            ``(the next state, the DualOutput)``.
+        """
         drive, sc, inv = self.drive, self.scenario, self.drive.inverter
         t = k * self.ts
         w_ref, load = sc.speed_ref(t), sc.load(t)
@@ -444,17 +521,17 @@ class DualClosedLoop(AbstractDriveLoop):
 def dual_bench_drive(
     machine: DualPMSMParams,
     *,
-    mode="vsd",
-    fw_voltage="ab",
-    sensorless=True,
-    handover=0.2,
+    mode: Literal["vsd", "individual"] = "vsd",
+    fw_voltage: Literal["ab", "set"] = "ab",
+    sensorless: bool = True,
+    handover: float = 0.2,
     startup: IfStartup | None = None,
-    settle=0.2,
-    alpha_s=None,
-    alpha_c=None,
-    n_sub=2,
+    settle: float = 0.2,
+    alpha_s: float | None = None,
+    alpha_c: float | None = None,
+    n_sub: int = 2,
     inverter: Inverter | None = None,
-    **foc_kw,
+    **foc_kw: Any,
 ) -> DualDrive:
     """The single IPMSM bench's drive (:func:`jaxobs.drive.bench_drive`) on the dual machine ``machine`` (what
     the controller assumes): the speed loop at ``alpha_s`` (default 2π·papers.BENCH_SPEED_HZ rad/s), IMC
@@ -462,7 +539,25 @@ def dual_bench_drive(
     (default 540 V) for both sets, ``settle`` the observer's settling phase before t = 0 (s, :class:`DualDrive`),
     ``startup`` an I-f start-up from standstill (:class:`~jaxobs.drive.IfStartup`, per set) or None, ``fw_voltage``
     the voltage the field weakening budgets (:class:`DualFOC`), ``foc_kw`` :class:`FOC`'s options
-    (``field_weakening``, ...)."""
+    (``field_weakening``, ...).
+
+    Args:
+        machine: The dual machine the controller assumes.
+        mode: ``"vsd"`` or ``"individual"``.
+        fw_voltage: ``"ab"`` or ``"set"``.
+        sensorless: Whether the observer closes the loop.
+        handover: The time from which the observer closes the loop, s.
+        startup: An I-f start-up, or None.
+        settle: The observer's settling phase before t = 0, s.
+        alpha_s: The speed loop's bandwidth, rad/s (None: the default).
+        alpha_c: The current loops' bandwidth, rad/s (None: the default).
+        n_sub: Plant substeps per period.
+        inverter: Both sets' inverter (None: 540 V).
+        **foc_kw: :class:`FOC`'s options.
+
+    Returns:
+        The :class:`DualDrive`.
+    """
     alpha_c = 2 * math.pi * papers.BENCH_CURRENT_HZ if alpha_c is None else alpha_c
     alpha_s = 2 * math.pi * papers.BENCH_SPEED_HZ if alpha_s is None else alpha_s
     ctrl = DualFOC.imc(machine, alpha_c, alpha_s, mode=mode, fw_voltage=fw_voltage, **foc_kw)

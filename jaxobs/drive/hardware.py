@@ -36,16 +36,29 @@ from .component import AbstractComponent
 
 __all__ = ["PWM_MODELS", "Inverter", "InverterInput", "Sensors", "SensorInput", "clarke_abc_to_ab", "ab_to_abc"]
 
+_Tracer = jax.core.Tracer  # pyright: ignore[reportAttributeAccessIssue]  # jax.core: not in jax's stubs
+
 _S3 = math.sqrt(3.0)
 PWM_MODELS = ("averaged", "carrier")  # Inverter.pwm's choices
 VOLTAGE_LIMITS = ("circle", "hexagon")  # Inverter.voltage_limit's choices
 
 
-def ab_to_abc(a, b):
+def ab_to_abc(
+    a: jax.Array | float, b: jax.Array | float
+) -> tuple[jax.Array | float, jax.Array | float, jax.Array | float]:
+    """The phase values of a stationary-frame (α, β) vector (amplitude-invariant inverse Clarke).
+
+    Args:
+        a: α.
+        b: β.
+
+    Returns:
+        ``(a, b, c)``.
+    """
     return a, -0.5 * a + 0.5 * _S3 * b, -0.5 * a - 0.5 * _S3 * b
 
 
-def clarke_abc_to_ab(xa, xb, xc):
+def clarke_abc_to_ab(xa: jax.Array, xb: jax.Array, xc: jax.Array) -> tuple[jax.Array, jax.Array]:
     """Amplitude-invariant Clarke transform.
 
     Args:
@@ -137,15 +150,16 @@ class Inverter(AbstractComponent):
         self.voltage_limit = voltage_limit
 
     @property
-    def u_max(self):
+    def u_max(self) -> jax.Array:
+        """The linear range of space-vector modulation, u_dc/√3, V."""
         return self.udc / _S3
 
     @property
-    def u_vertex(self):
+    def u_vertex(self) -> jax.Array:
         """The largest |u| the inverter applies: 2U_dc/3 at the hexagon's vertices (U_dc/√3 under the circle)."""
         return 2.0 * self.udc / 3.0 if self.voltage_limit == "hexagon" else self.u_max
 
-    def limit(self, u_a, u_b):
+    def limit(self, u_a: jax.Array, u_b: jax.Array) -> tuple[jax.Array, jax.Array]:
         """Scale the voltage vector back onto the circle |u| ≤ U_dc/√3, or onto the hexagon (direction kept).
 
         The hexagon is max_x v_x − min_x v_x ≤ U_dc over the phase voltages (what min-max injection can apply:
@@ -170,7 +184,7 @@ class Inverter(AbstractComponent):
         scale = jnp.where(mag > self.u_max, self.u_max / jnp.maximum(mag, 1e-12), 1.0)
         return u_a * scale, u_b * scale
 
-    def init(self, op=None) -> None:
+    def init(self, op: object = None) -> None:
         """No state (the operating point does not matter to an average-value model).
 
         Args:
@@ -181,10 +195,19 @@ class Inverter(AbstractComponent):
         """
         return None
 
-    def step(self, state, inp: InverterInput) -> tuple[None, InverterInput]:
+    def step(self, state: None, inp: InverterInput) -> tuple[None, InverterInput]:
+        """The commanded voltage within the inverter's limit.
+
+        Args:
+            state: None (the inverter has no state).
+            inp: The :class:`InverterInput`.
+
+        Returns:
+            ``(None, the limited InverterInput)``.
+        """
         return state, InverterInput(*self.limit(inp.u_a, inp.u_b))
 
-    def sign(self, i):
+    def sign(self, i: jax.Array | float) -> jax.Array:
         """The current's sign the dead time and the device drop act by: sgn(i), or tanh(i/i_smooth).
 
         Args:
@@ -197,7 +220,9 @@ class Inverter(AbstractComponent):
             return jnp.tanh(i / self.i_smooth)
         return jnp.sign(i)
 
-    def dead_time_error(self, dead_time, i_a, i_b):
+    def dead_time_error(
+        self, dead_time: jax.Array | float, i_a: jax.Array | float, i_b: jax.Array | float
+    ) -> tuple[jax.Array, jax.Array]:
         """Stationary-frame voltage error of the dead time at the current i_ab.
 
         Args:
@@ -217,7 +242,7 @@ class Inverter(AbstractComponent):
         """False where the device drop is zero (the averaged plant then skips it)."""
         return self.u_device != 0.0
 
-    def device_drop_error(self, i_a, i_b):
+    def device_drop_error(self, i_a: jax.Array | float, i_b: jax.Array | float) -> tuple[jax.Array, jax.Array]:
         """Stationary-frame voltage error of the device drops at the current i_ab: −u_device·sgn(i_x) per leg.
 
         Args:
@@ -233,7 +258,7 @@ class Inverter(AbstractComponent):
 
 
 def _statically_zero(x) -> bool:
-    if isinstance(x, jax.core.Tracer):  # traced: could be anything
+    if isinstance(x, _Tracer):  # traced: could be anything
         return False
     return bool(np.all(np.asarray(x) == 0))
 
@@ -263,10 +288,9 @@ class Sensors(AbstractComponent):
     i_gain: jax.Array  # (1 + ε_α, 1 + ε_β) on the current
     i_noise: jax.Array  # current noise standard deviation, A
     u_noise: jax.Array  # voltage noise standard deviation, V
-    # Whether ``measure`` draws noise at all (static, from the constructor's
-    # arguments): without noise the loop skips the PRNG (a threefry hash and an
-    # inverse erf per sample, ~20 % of a drive step).  Traced noise levels count
-    # as noisy.  Change noise levels through the constructor, not ``tree_at``.
+    # Whether ``measure`` draws noise at all (static, from the constructor's arguments): without noise the loop
+    # skips the PRNG (docs/performance.md).  Traced noise levels count as noisy.  Change noise levels through the
+    # constructor, not ``tree_at``.
     noisy: bool = eqx.field(static=True)
 
     def __init__(self, i_offset=(0.0, 0.0), u_offset=(0.0, 0.0), i_gain_error=(0.0, 0.0), i_noise=0.0, u_noise=0.0):
@@ -283,7 +307,7 @@ class Sensors(AbstractComponent):
             if getattr(self, name).shape[-1:] != (2,):
                 raise ValueError(f"{own}.{name} must have two entries (α, β), got shape {getattr(self, name).shape}")
 
-    def init(self, op=None, *, key=None):
+    def init(self, op: object = None, *, key: jax.Array | None = None) -> jax.Array:
         """The sensors' state, whatever the operating point: the noise key.
 
         Args:
@@ -302,10 +326,27 @@ class Sensors(AbstractComponent):
             )
         return jax.random.PRNGKey(0) if key is None else key
 
-    def step(self, key, inp: SensorInput) -> tuple[jax.Array, DriveInput]:
+    def step(self, key: jax.Array, inp: SensorInput) -> tuple[jax.Array, DriveInput]:
+        """The measured quantities at one sample.
+
+        Args:
+            key: The sensors' noise key.
+            inp: The :class:`SensorInput`.
+
+        Returns:
+            ``(the key, the DriveInput as measured)``.
+        """
         return key, DriveInput(*self.measure(key, inp.k, inp.u_a, inp.u_b, inp.i_a, inp.i_b))
 
-    def measure(self, key, k, u_a, u_b, i_a, i_b):
+    def measure(
+        self,
+        key: jax.Array,
+        k: jax.Array | int,
+        u_a: jax.Array | float,
+        u_b: jax.Array | float,
+        i_a: jax.Array | float,
+        i_b: jax.Array | float,
+    ) -> tuple[jax.Array, jax.Array, jax.Array, jax.Array]:
         """Measured (u_α, u_β, i_α, i_β) at sample ``k``.
 
         Args:

@@ -71,6 +71,14 @@ class AtUse(eqx.Module):
     the observer's error plus the latency, ≈ n ω_e T_s (n = :attr:`Latency.use_delay`)."""
 
     def lead(self, latency: Latency) -> float:
+        """The lead of the comparison instant over the sample: the use delay.
+
+        Args:
+            latency: The drive's timing.
+
+        Returns:
+            The lead, periods.
+        """
         return latency.use_delay
 
 

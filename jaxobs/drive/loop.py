@@ -40,7 +40,7 @@ from __future__ import annotations
 import abc
 import dataclasses
 import math
-from typing import Any, ClassVar, NamedTuple
+from typing import Any, ClassVar, NamedTuple, Protocol, TypeVar
 
 import equinox as eqx
 import jax
@@ -63,10 +63,7 @@ __all__ = ["Drive", "AbstractDriveLoop", "ClosedLoop", "LoopState", "DriveOutput
 # Electrical periods of steady measurements a sensorless steady start gives an observer whose settling scales
 # with the speed (Drive.settled_for).  The flux observers' filters and FLL have every time constant ∝ 1/ω_e
 # (jaxobs.observers.flux): the slowest pole of 000's second-order SOGI is −0.243 ω_e, so 10 periods (62.8 rad)
-# leave e^(−0.243·62.8) ≈ 2e-7 of its start-up transient.  Measured with 000's closed-form second-order SOIFO
-# (speed_schedule = 6, no load, docs/stability.md): the angle error at t = 0 at 20 r/min is 41° after 0.2 s
-# (0.2 periods), 4.1° after 3 s, 0.23° after 6 s and 0.002° after 10 s (10 periods); at 144 r/min 14° after
-# 0.2 s and 0.003° after 1.5 s (10.8 periods).
+# leave e^(−0.243·62.8) ≈ 2e-7 of its start-up transient (measured settling: docs/performance.md).
 SETTLE_PERIODS = 10.0
 
 
@@ -138,6 +135,7 @@ class Drive(eqx.Module):
 
     @property
     def ts(self) -> float:
+        """The control period, s."""
         return self.foc.ts
 
     def settled_for(self, omega_e_min: float) -> Drive:
@@ -160,7 +158,17 @@ class Drive(eqx.Module):
         return settled_for(self, omega_e_min)
 
 
-def settled_for(drive, omega_e_min: float):
+class _Settles(Protocol):
+    """A drive with a settling phase (:class:`Drive`, :class:`~jaxobs.drive.dual_loop.DualDrive`)."""
+
+    settle: float
+    __dataclass_fields__: ClassVar[dict[str, Any]]  # a dataclass (an equinox module): dataclasses.replace takes it
+
+
+_D = TypeVar("_D", bound=_Settles)
+
+
+def settled_for(drive: _D, omega_e_min: float) -> _D:
     """A drive with its settling phase at least :data:`SETTLE_PERIODS` electrical periods long.
 
     As :meth:`Drive.settled_for`, for any drive.
@@ -273,7 +281,7 @@ class DriveOutput(NamedTuple):
     obs: Any  # the observer's outputs (None with the encoder)
 
     @property
-    def speed_rpm(self):
+    def speed_rpm(self) -> jax.Array:
         """True mechanical speed, r/min."""
         return self.omega_m * 60 / (2 * jnp.pi)
 
@@ -290,14 +298,27 @@ class AbstractDriveLoop(AbstractSystem):
     # passes of the observer's settling phase before t = 0 in a sensorless steady start: the first measures
     # the observer's steady angle error, the next settle it on the operating point under that error (init)
     settle_passes: ClassVar[int] = 2
+    drive: eqx.AbstractVar[Any]  # a Drive or a DualDrive (settle, sensorless, handover, latency, startup)
+    observer: eqx.AbstractVar[AbstractObserver | None]
+    scenario: eqx.AbstractVar[Scenario]
 
     @property
     @abc.abstractmethod
-    def pole_pairs(self):
+    def plant(self) -> Any:
+        """The true machine behind the drive's inverter (a :class:`PMSM` or a dual one)."""
+
+    @property
+    @abc.abstractmethod
+    def controller(self) -> Any:
+        """The controller bound to the scenario's assumed machine (a :class:`FOC` or a dual one)."""
+
+    @property
+    @abc.abstractmethod
+    def pole_pairs(self) -> int:
         """The true machine's pole pairs."""
 
     @abc.abstractmethod
-    def operating_point(self, offset=0.0) -> OperatingPoint:
+    def operating_point(self, offset: jax.Array | float = 0.0) -> OperatingPoint:
         """The steady state the scenario starts in.
 
         Args:
@@ -308,7 +329,7 @@ class AbstractDriveLoop(AbstractSystem):
         """
 
     @abc.abstractmethod
-    def _steady_voltage(self, op: OperatingPoint, theta):
+    def _steady_voltage(self, op: OperatingPoint, theta: jax.Array) -> tuple[jax.Array, jax.Array]:
         """(u_α, u_β) applied at steady state over the period that starts where the rotor is at ``theta``, V."""
 
     def _steady_start(self, op: OperatingPoint):
@@ -322,15 +343,11 @@ class AbstractDriveLoop(AbstractSystem):
                 # A biased observer (the LPF's steady lead, a LESO's lag) closes the loop from t = 0, so the drive
                 # settles with the FOC's frame at the observer's steady angle error, not at the rotor's: the
                 # currents that carry the load are its references rotated by that error (FOC.operating_point).
-                # Started on the encoder's operating point instead, the drive dips 2–6.6 % in speed at ~16 ms.
-                # So the error measured on the first settling gives the operating point, and the
-                # observer settles again on it (each pass from its own start, init_at: a settled observer fed
-                # a step of the currents' phase sees an L·di/dt spike).  The error of a LESO or an LPF with the
-                # machine it assumes is the phase of its filter at ω_e, whatever the currents: two passes are
-                # its fixed point.  With an L̂q error the error depends on i_q, and each pass brings the start
-                # closer; measured on the IPMSM bench, L̂q ±20 %, 5 and 15 N·m, 300 and 1000 r/min, max |ω/ω* − 1|
-                # over 0.15 s: C-LESO 2.9 % (one pass, the old start), 0.016 % (two), 0.001 % (three); FA-LESO
-                # 0.069 %, 0.005 %, 0.005 %.  Two passes: 0.2 s more of observer steps per scenario.
+                # The error on the first settling gives the operating point, and the observer settles again on
+                # it (each pass from its own start, init_at: a settled observer fed a step of the currents' phase
+                # sees an L·di/dt spike).  The error of a LESO or an LPF with the machine it assumes is the phase
+                # of its filter at ω_e, whatever the currents: two passes are its fixed point.  With an L̂q error
+                # each pass brings the start closer (settle_passes: docs/performance.md).
                 for _ in range(self.settle_passes - 1):
                     # beyond 90° no current in the observer's frame carries the load (it brakes): no steady
                     # state to start in, so such an observer (not locked in its settling) starts as before
@@ -396,15 +413,17 @@ class AbstractDriveLoop(AbstractSystem):
         seeded = self.observer.seed_speed(obs_state, ctrl.omega_f)
         return jax.tree.map(lambda a, b: jnp.where(ctrl.mode == 0, a, b), seeded, obs_state)
 
-    def _observer_at(self, t):
+    def _observer_at(self, t: jax.Array | float) -> AbstractObserver:
         """The observer assuming the scenario's machine at time ``t`` (s): itself, or rebound by its one binding
         to ``est_par`` under the scenario's drift (:class:`~jaxobs.drive.ParameterDrift`; 002 Fig. 18).  The
         speed given to bind() only sets the initial-speed field, which no step reads."""
+        obs = self.observer
+        assert obs is not None  # called only where an observer runs
         drift = self.scenario.est_drift
-        if drift is None or not isinstance(self.observer, AbstractDriveObserver):
-            return self.observer
+        if drift is None or not isinstance(obs, AbstractDriveObserver):
+            return obs
         sc = self.scenario
-        return self.observer.bind(drift.at(sc.est_par, t), self.pole_pairs * sc.omega_m0)
+        return obs.bind(drift.at(sc.est_par, t), self.pole_pairs * sc.omega_m0)
 
     def _settled_observer(self, op: OperatingPoint):
         """The observer after ``drive.settle`` seconds on the steady operating point (a phase before t = 0,
@@ -496,10 +515,12 @@ class ClosedLoop(AbstractDriveLoop):
 
     @property
     def ts(self) -> float:
+        """The control period, s."""
         return self.drive.ts
 
     @property
-    def pole_pairs(self):
+    def pole_pairs(self) -> int:
+        """The true machine's pole pairs."""
         return self.scenario.par.p
 
     # --- the parts, bound to this scenario
@@ -527,7 +548,7 @@ class ClosedLoop(AbstractDriveLoop):
         """The FOC with the scenario's assumed machine, the inverter's voltage limit and the drive's start-up."""
         return self.drive.foc.bind(self.scenario.est_par, self.drive.inverter.u_max, self.drive.startup)
 
-    def operating_point(self, offset=0.0) -> OperatingPoint:
+    def operating_point(self, offset: jax.Array | float = 0.0) -> OperatingPoint:
         """The steady state the scenario starts in: its initial speed, the load at t = 0, currents that carry it.
 
         Args:
@@ -602,7 +623,16 @@ class ClosedLoop(AbstractDriveLoop):
         lead = 0.5 * w_e * self.ts
         return dq_to_ab(op.u_d, op.u_q, theta + lead)
 
-    def step(self, state: LoopState, k) -> tuple[LoopState, DriveOutput]:
+    def step(self, state: LoopState, k: jax.Array) -> tuple[LoopState, DriveOutput]:
+        """One control period of the closed loop: sample, observe, control, then the plant over the period.
+
+        Args:
+            state: The :class:`LoopState`.
+            k: The sample index.
+
+        Returns:
+            ``(the next LoopState, the DriveOutput)``.
+        """
         drive, sc = self.drive, self.scenario
         t = k * self.ts
         # The profiles are evaluated here, inside the step, not a block of steps at a

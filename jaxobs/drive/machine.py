@@ -103,7 +103,7 @@ class QSaturation(eqx.Module):
         self.n = check_real("n", n, lower=1.0, lower_open=False, upper=16.0, owner=own)
 
     @classmethod
-    def at(cls, ratio, i_q, n=2.0) -> QSaturation:
+    def at(cls, ratio: float, i_q: float, n: float = 2.0) -> QSaturation:
         """The saturation whose apparent Lq is ``ratio`` of the small-current one at ``i_q``.
 
         Args:
@@ -121,7 +121,7 @@ class QSaturation(eqx.Module):
             raise ValueError(f"QSaturation.at: i_q must be > 0 A, got {i_q}")
         return cls(i_q / (ratio**-n - 1.0) ** (1.0 / n), n)
 
-    def factor(self, i_q):
+    def factor(self, i_q: jax.Array | float) -> jax.Array:
         """The saturation's factor.
 
         Args:
@@ -133,7 +133,7 @@ class QSaturation(eqx.Module):
         return 1.0 + (jnp.abs(i_q) / self.i_sat) ** self.n
 
 
-def lq_apparent(par: PMSMParams, i_q):
+def lq_apparent(par: PMSMParams, i_q: jax.Array | float) -> jax.Array:
     """The apparent q-axis inductance ψq / i_q.
 
     Args:
@@ -148,7 +148,7 @@ def lq_apparent(par: PMSMParams, i_q):
     return par.Lq * par.q_sat.factor(i_q) ** (-1.0 / par.q_sat.n)
 
 
-def lq_incremental(par: PMSMParams, i_q):
+def lq_incremental(par: PMSMParams, i_q: jax.Array | float) -> jax.Array:
     """The incremental q-axis inductance dψq / di_q.
 
     Args:
@@ -235,16 +235,18 @@ class PMSMParams(eqx.Module):
         self.p = int(p)
 
     @property
-    def kt(self):
+    def kt(self) -> jax.Array:
         """Torque constant at i_d = 0, N·m/A (peak current): (3/2) p ψf."""
         return 1.5 * self.p * self.psi_f
 
     @property
-    def i_rated(self):
+    def i_rated(self) -> jax.Array:
         """q-axis current for rated torque at i_d = 0, A (peak)."""
         return self.T_rated / self.kt
 
-    def with_mismatch(self, dRs=0.0, dL=0.0, dpsi=0.0):
+    def with_mismatch(
+        self, dRs: jax.Array | float = 0.0, dL: jax.Array | float = 0.0, dpsi: jax.Array | float = 0.0
+    ) -> PMSMParams:
         """A copy with relative errors — what an estimate assumes.
 
         Args:
@@ -343,7 +345,7 @@ def _torque(par: PMSMParams, i_d, i_q, h):
     return 1.5 * par.p * (pm + (par.Ld - lq_apparent(par, i_q)) * i_d * i_q)
 
 
-def bemf_dq(par: PMSMParams, omega_e, theta_e):
+def bemf_dq(par: PMSMParams, omega_e: jax.Array | float, theta_e: jax.Array | float) -> tuple[jax.Array, jax.Array]:
     """The back EMF in the rotor frame, e_dq = j ωe ψf (1 + a5 e^{−j6θ} + a7 e^{j6θ}).
 
     Args:
@@ -357,7 +359,7 @@ def bemf_dq(par: PMSMParams, omega_e, theta_e):
     return _bemf_dq(par, omega_e, _harmonic_factor(par, sincos(theta_e)))
 
 
-def bemf_ab(par: PMSMParams, omega_e, theta_e):
+def bemf_ab(par: PMSMParams, omega_e: jax.Array | float, theta_e: jax.Array | float) -> tuple[jax.Array, jax.Array]:
     """The back EMF in the stationary frame, e_ab = e_dq e^{jθe}.
 
     Args:
@@ -379,7 +381,7 @@ def _torque_mapped(par: PMSMParams, psi_d, psi_q, i_d, i_q, h):
     return 1.5 * par.p * (psi_d * i_q - psi_q * i_d + harm)
 
 
-def state_currents(par: PMSMParams, x):
+def state_currents(par: PMSMParams, x: jax.Array) -> tuple[jax.Array, jax.Array]:
     """The currents of a plant state (:func:`plant_vf`'s x).
 
     Args:
@@ -389,12 +391,13 @@ def state_currents(par: PMSMParams, x):
     Returns:
         ``(i_d, i_q)``, A.
     """
-    if par.sat is None or not par.sat.state_is_flux:
-        return x[0], x[1]
-    return par.sat.current(x[0], x[1])
+    sat = par.sat
+    if isinstance(sat, AlgebraicSaturation) and sat.state_is_flux:
+        return sat.current(x[0], x[1])
+    return x[0], x[1]
 
 
-def mapped_torque(par: PMSMParams, x):
+def mapped_torque(par: PMSMParams, x: jax.Array) -> jax.Array:
     """The torque of a mapped machine's plant state x = [ψd, ψq, ωm, θe].
 
     Args:
@@ -405,13 +408,15 @@ def mapped_torque(par: PMSMParams, x):
         The torque, N·m.
     """
     h = _harmonic_factor(par, sincos(x[3]))
-    if not par.sat.state_is_flux:  # a table: the state is the current
-        return _torque_mapped(par, *par.sat.flux(x[0], x[1]), x[0], x[1], h)
-    i_d, i_q = par.sat.current(x[0], x[1])
-    return _torque_mapped(par, x[0], x[1], i_d, i_q, h)
+    sat = par.sat
+    if isinstance(sat, AlgebraicSaturation) and sat.state_is_flux:  # the state is the flux linkage
+        i_d, i_q = sat.current(x[0], x[1])
+        return _torque_mapped(par, x[0], x[1], i_d, i_q, h)
+    assert sat is not None  # a mapped machine; a table: the state is the current
+    return _torque_mapped(par, *sat.flux(x[0], x[1]), x[0], x[1], h)
 
 
-def torque(par: PMSMParams, i_d, i_q, theta_e):
+def torque(par: PMSMParams, i_d: jax.Array | float, i_q: jax.Array | float, theta_e: jax.Array | float) -> jax.Array:
     """Electromagnetic torque (see module doc).
 
     Args:
@@ -426,7 +431,13 @@ def torque(par: PMSMParams, i_d, i_q, theta_e):
     return _torque(par, i_d, i_q, _harmonic_factor(par, sincos(theta_e)))
 
 
-def plant_vf(par: PMSMParams, x, u_ab, t_load, sc=None):
+def plant_vf(
+    par: PMSMParams,
+    x: jax.Array,
+    u_ab: tuple[jax.Array, jax.Array],
+    t_load: jax.Array | float,
+    sc: tuple[jax.Array, jax.Array] | None = None,
+) -> jax.Array:
     """The machine's vector field.
 
     Args:
@@ -459,7 +470,7 @@ def plant_vf(par: PMSMParams, x, u_ab, t_load, sc=None):
         te = _torque_mapped(par, psi_d, psi_q, i_d, i_q, h)
         dw = (te - t_load - par.B * w_m) / par.J
         return jnp.stack([di_d, di_q, dw, w_e])
-    if par.sat is not None:  # the state is the flux linkage (module doc)
+    if isinstance(par.sat, AlgebraicSaturation):  # the state is the flux linkage (module doc)
         psi_d, psi_q = x[0], x[1]
         i_d, i_q = par.sat.current(psi_d, psi_q)
         re, im = h
@@ -478,7 +489,7 @@ def plant_vf(par: PMSMParams, x, u_ab, t_load, sc=None):
     return jnp.stack([di_d, di_q, dw, w_e])
 
 
-def rotate(x, y, s, c):
+def rotate(x: jax.Array | float, y: jax.Array | float, s: jax.Array, c: jax.Array) -> tuple[jax.Array, jax.Array]:
     """A vector rotated by the angle whose sine and cosine are given.
 
     Args:
@@ -493,7 +504,7 @@ def rotate(x, y, s, c):
     return c * x - s * y, s * x + c * y
 
 
-def dq_to_ab(d, q, theta):
+def dq_to_ab(d: jax.Array | float, q: jax.Array | float, theta: jax.Array | float) -> tuple[jax.Array, jax.Array]:
     """Inverse Park: the (α, β) of a rotor-frame (d, q).
 
     Args:
@@ -508,7 +519,7 @@ def dq_to_ab(d, q, theta):
     return rotate(d, q, s, c)
 
 
-def ab_to_dq(a, b, theta):
+def ab_to_dq(a: jax.Array | float, b: jax.Array | float, theta: jax.Array | float) -> tuple[jax.Array, jax.Array]:
     """Park: the (d, q) of a stationary (α, β).
 
     Args:

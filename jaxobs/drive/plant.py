@@ -42,6 +42,7 @@ from ..core.discretize import RK4, AbstractRule, AbstractRuleCarry, Held, check_
 from ..core.numerics import wrap
 from ..core.trig import sincos
 from ..core.validate import check_nonnegative, check_sample_time
+from ._operating import OperatingPoint
 from .component import AbstractComponent
 from .hardware import Inverter, ab_to_abc
 from .machine import PMSMParams, dq_to_ab, mapped_torque, plant_vf, rotate, state_currents, torque
@@ -49,8 +50,12 @@ from .pwm import N_INTERVALS, carrier_intervals
 
 __all__ = ["PMSM", "PlantInput", "PlantOutput", "PlantState", "plant_field"]
 
+_Tracer = jax.core.Tracer  # pyright: ignore[reportAttributeAccessIssue]  # jax.core: not in jax's stubs
 
-def plant_field(par: PMSMParams, inverter: Inverter, dead_time, x, inp):
+
+def plant_field(
+    par: PMSMParams, inverter: Inverter, dead_time: jax.Array | float, x: jax.Array, inp: jax.Array
+) -> jax.Array:
     """Plant vector field with the inverter's dead-time error.
 
     Args:
@@ -143,7 +148,16 @@ class PMSM(AbstractComponent):
     n_sub: int = eqx.field(static=True)  # substeps per period
     rule: AbstractRule = eqx.field(static=True)
 
-    def __init__(self, par, inverter=None, dead_time=0.0, *, ts=1e-4, n_sub=2, rule=None):
+    def __init__(
+        self,
+        par: PMSMParams,
+        inverter: Inverter | None = None,
+        dead_time: jax.Array | float = 0.0,
+        *,
+        ts: float = 1e-4,
+        n_sub: int = 2,
+        rule: AbstractRule | None = None,
+    ) -> None:
         if not isinstance(par, PMSMParams):
             raise ValueError(f"PMSM.par must be a PMSMParams, got {type(par).__name__}")
         self.par = par
@@ -156,7 +170,7 @@ class PMSM(AbstractComponent):
         self.rule = check_rule(RK4() if rule is None else rule, "PMSM")
         if self.inverter.pwm == "carrier":
             f_pwm = self.inverter.f_pwm
-            if not isinstance(f_pwm, jax.core.Tracer) and abs(float(f_pwm) * self.ts - 1.0) > 1e-9:
+            if not isinstance(f_pwm, _Tracer) and abs(float(f_pwm) * self.ts - 1.0) > 1e-9:
                 raise ValueError(
                     f"PMSM.ts: carrier PWM integrates one carrier period per step (single update): ts must be "
                     f"1/inverter.f_pwm = {1.0 / float(f_pwm):.6g} s, got {self.ts:.6g} s (a half-period plant, "
@@ -168,7 +182,7 @@ class PMSM(AbstractComponent):
                     f"{type(self.rule).__name__}"
                 )
 
-    def field(self, x, inp):
+    def field(self, x: jax.Array, inp: jax.Array) -> jax.Array:
         """The vector field.
 
         Args:
@@ -180,7 +194,7 @@ class PMSM(AbstractComponent):
         """
         return plant_field(self.par, self.inverter, self.dead_time, x, inp)
 
-    def init(self, op=None) -> PlantState:
+    def init(self, op: OperatingPoint | None = None) -> PlantState:
         """The machine's initial state.
 
         Args:
@@ -197,7 +211,15 @@ class PMSM(AbstractComponent):
         x0 = jnp.stack([jnp.asarray(v, dtype) for v in vals])
         return PlantState(x=x0, rule=self.rule.init(self.field, x0, None))
 
-    def output(self, x) -> PlantOutput:
+    def output(self, x: jax.Array) -> PlantOutput:
+        """What the plant shows at the state ``x`` (currents, speed, angle, torque).
+
+        Args:
+            x: The state.
+
+        Returns:
+            The :class:`PlantOutput`.
+        """
         if self.par.sat is not None:  # a map: the torque from its fluxes (the state: fluxes or currents)
             i_d, i_q = state_currents(self.par, x)
             i_a, i_b = dq_to_ab(i_d, i_q, x[3])
@@ -210,7 +232,7 @@ class PMSM(AbstractComponent):
         """The machine's field under the switched voltage (no averaged dead-time error: it is on the edges)."""
         return plant_vf(self.par, x, (inp[0], inp[1]), inp[2])
 
-    def carrier_substeps(self, state: PlantState, inp: PlantInput):
+    def carrier_substeps(self, state: PlantState, inp: PlantInput) -> tuple[jax.Array, jax.Array, Any]:
         """One period under carrier PWM, sub-interval by sub-interval (``pwm="carrier"``).
 
         Args:
@@ -237,6 +259,15 @@ class PMSM(AbstractComponent):
         return t, jnp.stack(xs), rs
 
     def step(self, state: PlantState, inp: PlantInput) -> tuple[PlantState, PlantOutput]:
+        """One control period of the plant under the held (or carrier-modulated) voltage.
+
+        Args:
+            state: The :class:`PlantState`.
+            inp: The :class:`PlantInput`.
+
+        Returns:
+            ``(the next state, the output at the period's start)``.
+        """
         out = self.output(state.x)
         if self.inverter.pwm == "carrier":
             _, xs, rs = self.carrier_substeps(state, inp)

@@ -31,6 +31,7 @@ period is a fixed sequence of steps (``lax.scan``- and ``vmap``-friendly).
 
 from __future__ import annotations
 
+import jax
 import jax.numpy as jnp
 
 from .hardware import ab_to_abc, clarke_abc_to_ab
@@ -40,7 +41,7 @@ __all__ = ["N_INTERVALS", "carrier_intervals", "modulation_indices", "switching_
 N_INTERVALS = 7  # sub-intervals per carrier period: three legs, two edges each, sorted
 
 
-def modulation_indices(u_a, u_b, udc):
+def modulation_indices(u_a: jax.Array | float, u_b: jax.Array | float, udc: jax.Array | float) -> jax.Array:
     """The phases' modulation indices under min-max zero-sequence injection.
 
     Args:
@@ -56,7 +57,9 @@ def modulation_indices(u_a, u_b, udc):
     return jnp.clip((v - v0) / (0.5 * jnp.asarray(udc)[..., None]), -1.0, 1.0)
 
 
-def switching_instants(m, period, dead_time, s):
+def switching_instants(
+    m: jax.Array, period: jax.Array | float, dead_time: jax.Array | float, s: jax.Array
+) -> tuple[jax.Array, jax.Array]:
     """Each phase's rising and falling edge within one carrier period, dead time included.
 
     Args:
@@ -90,7 +93,15 @@ def _sorted6(v):
     return v
 
 
-def carrier_intervals(udc, period, dead_time, u_device, u_a, u_b, s):
+def carrier_intervals(
+    udc: jax.Array | float,
+    period: jax.Array | float,
+    dead_time: jax.Array | float,
+    u_device: jax.Array | float,
+    u_a: jax.Array | float,
+    u_b: jax.Array | float,
+    s: jax.Array,
+) -> tuple[jax.Array, jax.Array, jax.Array]:
     """The sub-intervals of one carrier period and the stationary-frame voltage over each.
 
     Args:

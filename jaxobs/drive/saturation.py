@@ -36,6 +36,8 @@ bridge's zero), so the vector field is continuously differentiable for every exp
 from __future__ import annotations
 
 import math
+from pathlib import Path
+from typing import Any
 
 import equinox as eqx
 import jax
@@ -130,7 +132,7 @@ class AlgebraicSaturation(eqx.Module):
             e = float(check_real(name, e, lower=lo, lower_open=False, upper=12.0, owner=own))
             setattr(self, name, e)
 
-    def current(self, psi_d, psi_q):
+    def current(self, psi_d: jax.Array | float, psi_q: jax.Array | float) -> tuple[jax.Array, jax.Array]:
         """The current map i(ψ) (module doc).
 
         Args:
@@ -151,7 +153,7 @@ class AlgebraicSaturation(eqx.Module):
         g_b = self.a_b * sw / (1.0 + self.a_bp * sw)
         return i_d + g_b * psi_b, i_q + self.k_q * g_b * psi_q
 
-    def inverse_inductance(self, psi_d, psi_q):
+    def inverse_inductance(self, psi_d: jax.Array | float, psi_q: jax.Array | float) -> jax.Array:
         """The incremental inverse inductance matrix ∂i/∂ψ at ψ.
 
         Args:
@@ -168,7 +170,7 @@ class AlgebraicSaturation(eqx.Module):
         jac = jnp.vectorize(jax.jacfwd(f), signature="(2)->(2,2)")
         return jac(jnp.stack(jnp.broadcast_arrays(psi_d, psi_q), axis=-1))
 
-    def flux(self, i_d, i_q):
+    def flux(self, i_d: jax.Array | float, i_q: jax.Array | float) -> tuple[jax.Array, jax.Array]:
         """The flux map ψ(i): the current map inverted by Newton's method.
 
         The start is the unsaturated guess (ψf + i_d/a_d0, i_q/a_q0) clipped to ±2 Vs, then :data:`NEWTON_ITERS`
@@ -203,13 +205,14 @@ class AlgebraicSaturation(eqx.Module):
         pq = jnp.clip(iq_s / par.a_q0, -2.0, 2.0)
 
         def body(_, c):
-            return step(par, *c, id_s, iq_s)
+            c_d, c_q = c
+            return step(par, c_d, c_q, id_s, iq_s)
 
         pd, pq = jax.lax.fori_loop(0, NEWTON_ITERS, body, (pd, pq))
         pd, pq = jax.lax.stop_gradient(pd), jax.lax.stop_gradient(pq)
         return step(self, pd, pq)  # the derivative-carrying step (docstring)
 
-    def no_load_flux(self):
+    def no_load_flux(self) -> jax.Array:
         """ψd at zero current: the root of i_d(ψd, 0) = 0 (bisection over [0, ψn]; 0 for a SyRM).
 
         With a_b > 0, i_d(ψd, 0) is monotonic in ψd, negative at 0 (the bridge's current −G_b ψn) and ≥ 0
@@ -229,7 +232,7 @@ class AlgebraicSaturation(eqx.Module):
         lo, hi = jax.lax.fori_loop(0, 80, body, (lo, hi))
         return 0.5 * (lo + hi)
 
-    def inductance(self, i_d, i_q):
+    def inductance(self, i_d: jax.Array | float, i_q: jax.Array | float) -> jax.Array:
         """The incremental inductance matrix ∂ψ/∂i at the current i (the inverse of :meth:`inverse_inductance`).
 
         Args:
@@ -338,7 +341,7 @@ def _short(v) -> str:
     return r if len(r) <= 60 else r[:57] + "..."
 
 
-def saturation_from_table(tbl, base=None):
+def saturation_from_table(tbl: dict[str, Any], base: str | Path | None = None) -> AlgebraicSaturation | FluxTable:
     """A drive file's ``[machine.saturation]`` table as the saturation model.
 
     ``model = "algebraic"`` (default): :data:`SAT_KEYS` (SI: the coefficients in A and Vs; ``a_d0``, ``a_dd``,
@@ -398,7 +401,9 @@ def _torque_jit(sat, p, i_d, i_q):
     return 1.5 * p * (psi_d * i_q - psi_q * i_d)
 
 
-def map_torque(sat: AlgebraicSaturation, p: int, i_d, i_q):
+def map_torque(
+    sat: AlgebraicSaturation | FluxTable, p: int, i_d: jax.Array | float, i_q: jax.Array | float
+) -> jax.Array:
     """The torque of the map at the current i: (3/2) p (ψd i_q − ψq i_d), N·m (compiled once per shape).
 
     Args:
@@ -414,7 +419,7 @@ def map_torque(sat: AlgebraicSaturation, p: int, i_d, i_q):
     return _torque_jit(sat, float(p), i_d, i_q)
 
 
-def map_mtpa(sat: AlgebraicSaturation, p: int, i_abs: float):
+def map_mtpa(sat: AlgebraicSaturation | FluxTable, p: int, i_abs: float) -> tuple[float, float, float]:
     """Maximum torque per ampere on the map: the current angle that maximizes the torque at |i| = ``i_abs``.
 
     721 angles over [90°, 180°] (motoring, i_d ≤ 0), then 721 over the best two cells, then the vertex of the
@@ -454,7 +459,7 @@ def _summary_jit(sat, i_d, i_q):
     return sat.no_load_flux(), sat.inductance(0.0, 0.0), sat.inductance(i_d, i_q), psi_d, psi_q
 
 
-def map_summary(sat: AlgebraicSaturation, p: int, i_rated: float) -> dict:
+def map_summary(sat: AlgebraicSaturation | FluxTable, p: int, i_rated: float) -> dict[str, float]:
     """What a drive check prints of a map: no-load flux, the inductances at no load and at the rated current's
     MTPA point, and that point.
 
@@ -610,7 +615,7 @@ class FluxTable(eqx.Module):
         # outside the grid: on linearly with the edge's gradient (C¹ across the edge)
         return val + comb(dbx, by) * (i_d - xc) + comb(bx, dby) * (i_q - yc)
 
-    def flux(self, i_d, i_q):
+    def flux(self, i_d: jax.Array | float, i_q: jax.Array | float) -> tuple[jax.Array, jax.Array]:
         """The flux map ψ(i), interpolated.
 
         Args:
@@ -623,7 +628,7 @@ class FluxTable(eqx.Module):
         i_d, i_q = jnp.broadcast_arrays(jnp.asarray(i_d, float), jnp.asarray(i_q, float))
         return self._eval(self.coef_d, i_d, i_q), self._eval(self.coef_q, i_d, i_q)
 
-    def inductance(self, i_d, i_q):
+    def inductance(self, i_d: jax.Array | float, i_q: jax.Array | float) -> jax.Array:
         """The incremental inductance matrix ∂ψ/∂i of the interpolant.
 
         Args:
@@ -640,6 +645,6 @@ class FluxTable(eqx.Module):
         jac = jnp.vectorize(jax.jacfwd(f), signature="(2)->(2,2)")
         return jac(jnp.stack(jnp.broadcast_arrays(jnp.asarray(i_d, float), jnp.asarray(i_q, float)), axis=-1))
 
-    def no_load_flux(self):
+    def no_load_flux(self) -> jax.Array:
         """ψd at zero current, Vs."""
         return self.flux(0.0, 0.0)[0]

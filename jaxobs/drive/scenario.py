@@ -20,7 +20,7 @@ from __future__ import annotations
 import itertools
 import math
 from collections.abc import Sequence
-from typing import Literal
+from typing import Any, Literal
 
 import equinox as eqx
 import jax
@@ -40,9 +40,6 @@ __all__ = [
     "grid",
     "scenario_batch",
     "DRIVE_AXES",
-    "reversal",
-    "low_speed_load_step",
-    "standstill_hold",
     "stack_scenarios",
 ]
 
@@ -83,14 +80,20 @@ class Profile(eqx.Module):
         self.kind = kind
 
     @classmethod
-    def constant(cls, value):
+    def constant(cls, value: jax.Array | float) -> Profile:
+        """A profile that holds one value.
+
+        Args:
+            value: The value.
+
+        Returns:
+            The :class:`Profile`.
+        """
         return cls([0.0], [value], kind="step")
 
     def __call__(self, t):
-        # Profiles have a handful of breakpoints and are evaluated inside the
-        # time loop: "compare_all" is a vectorized compare-and-sum, while the
-        # default searchsorted (also inside jnp.interp) is a nested while loop,
-        # which made the whole drive step 3-20x slower (benchmarks/).
+        # "compare_all": a vectorized compare-and-sum over a handful of breakpoints, not searchsorted's
+        # nested while loop inside the time loop (docs/performance.md)
         n = self.times.shape[-1]
         idx = jnp.searchsorted(self.times, t, side="right", method="compare_all") - 1
         i0 = jnp.clip(idx, 0, n - 1)
@@ -141,7 +144,7 @@ class ParameterDrift(eqx.Module):
         self.Rs, self.Ld, self.Lq, self.psi_f = Rs, Ld, Lq, psi_f
 
     @classmethod
-    def ramps(cls, name: str, times, factors) -> ParameterDrift:
+    def ramps(cls, name: str, times: jax.Array | float, factors: jax.Array | float) -> ParameterDrift:
         """One parameter ramped linearly through relative factors.
 
         Args:
@@ -156,7 +159,7 @@ class ParameterDrift(eqx.Module):
             raise ValueError(f"ParameterDrift.ramps: name must be one of Rs, Ld, Lq, psi_f, got {name!r}")
         return cls(**{name: Profile(times, factors, kind="linear")})
 
-    def at(self, est: PMSMParams, t) -> PMSMParams:
+    def at(self, est: PMSMParams, t: jax.Array | float) -> PMSMParams:
         """``est`` with the drifting parameters at time ``t``.
 
         Args:
@@ -237,7 +240,7 @@ class Scenario(eqx.Module):
         self.est_drift = est_drift
 
     @staticmethod
-    def speed_rpm(times, rpms, ramp=0.0):
+    def speed_rpm(times: Sequence[float], rpms: Sequence[float], ramp: float = 0.0) -> Profile:
         """Speed reference (r/min in, rad/s stored) changing to ``rpms[i]`` at ``times[i]``.
 
         002's 300-600-840-600-300 r/min test is a ramp profile.
@@ -263,7 +266,7 @@ class Scenario(eqx.Module):
         return Profile(tt, vv, kind="linear")
 
     @staticmethod
-    def load_steps(times, torques):
+    def load_steps(times: jax.Array | float, torques: jax.Array | float) -> Profile:
         """Load torque stepping to ``torques[i]`` at ``times[i]``.
 
         Args:
@@ -314,14 +317,16 @@ class Batch(eqx.Module):
     coords: tuple[tuple[float, ...], ...] = eqx.field(static=True)
 
     @property
-    def shape(self):
+    def shape(self) -> tuple[int, ...]:
+        """The grid's shape, one length per axis."""
         return tuple(len(c) for c in self.coords)
 
     @property
-    def size(self):
+    def size(self) -> int:
+        """The number of scenarios."""
         return int(np.prod(self.shape))
 
-    def to_xarray(self, outputs):
+    def to_xarray(self, outputs: Any) -> Any:
         """The results of a ``vmap`` over :attr:`scenarios` as an ``xarray.Dataset`` with the grid's dims.
 
         Each leaf becomes a variable named by its path (``omega_m``, ``obs_theta``; None leaves are skipped)
@@ -418,7 +423,13 @@ def _held(prof: Profile, v) -> Profile:
 
 
 def scenario_batch(
-    base: Scenario, names, points, *, seed: int | None = None, t_event: float = 0.0, first: int = 0
+    base: Scenario,
+    names: Sequence[str],
+    points: Sequence[Sequence[float]],
+    *,
+    seed: int | None = None,
+    t_event: float = 0.0,
+    first: int = 0,
 ) -> Scenario:
     """``base`` with a leading axis, one scenario per point, built vectorized (no constructor per scenario).
 
@@ -551,115 +562,6 @@ def grid(base: Scenario, *, t_event: float = 0.0, **axes: Sequence[float]) -> Ba
     coords = tuple(tuple(float(v) for v in axes[n]) for n in names)
     stacked = scenario_batch(base, names, list(itertools.product(*coords)), t_event=t_event)
     return Batch(scenarios=stacked, dims=names, coords=coords)
-
-
-# ---- scenarios through and at zero speed ------------------------------------------------------------------------
-
-
-def _finite_in(owner: str, name: str, x, lo: float, hi: float, *, lo_open: bool = False, nonzero: bool = False):
-    """``x`` as a Python float, checked finite and in [lo, hi] ((lo, hi] with ``lo_open``; ≠ 0 with ``nonzero``)."""
-    try:
-        v = float(x)
-    except (TypeError, ValueError):
-        raise ValueError(f"{owner}.{name} must be a number, got {x!r}") from None
-    ok = math.isfinite(v) and (v > lo if lo_open else v >= lo) and v <= hi and not (nonzero and v == 0.0)
-    if not ok:
-        left = "(" if lo_open else "["
-        extra = ", not 0" if nonzero else ""
-        raise ValueError(f"{owner}.{name} must be a finite number in {left}{lo:g}, {hi:g}]{extra}, got {x!r}")
-    return v
-
-
-def _base_scenario(owner: str, base) -> Scenario:
-    if not isinstance(base, Scenario):
-        raise ValueError(f"{owner}.base must be a Scenario, got {type(base).__name__}")
-    if jnp.ndim(base.omega_m0) != 0:
-        raise ValueError(
-            f"{owner}.base must be one scenario, not a batch (omega_m0 has shape {jnp.shape(base.omega_m0)})"
-        )
-    return base
-
-
-def reversal(base: Scenario, speed_rpm: float, rate_rpm_s: float, *, load_nm: float = 0.0, t_start: float = 0.2):
-    """A speed reversal: steady at +``speed_rpm`` until ``t_start``, the reference ramped to −``speed_rpm`` at
-    ``rate_rpm_s``, then held; the load held at ``load_nm`` throughout (an active load: it brakes one direction
-    and drives the other, as a hoist's does).
-
-    The ramp lasts 2·``speed_rpm``/``rate_rpm_s`` s and ends at ``speed_ref.times[-1]``; a ±750 r/min reversal
-    in 1 s is ``reversal(base, 750, 1500)``.  The machine starts steady at +``speed_rpm`` under the load.
-
-    Args:
-        base: The :class:`Scenario` whose machine, assumed machine, sensors and noise key are kept.
-        speed_rpm: The speed before the reversal, r/min (in (0, 1e5]; after it, −``speed_rpm``).
-        rate_rpm_s: The reference's ramp rate, r/min per second (in (0, 1e7]).
-        load_nm: The load torque, N·m (in [−1e4, 1e4]).
-        t_start: The start of the ramp, s (in [0, 1e4]).
-
-    Returns:
-        The :class:`Scenario`.
-
-    Raises:
-        ValueError: A value out of its range, naming the field.
-    """
-    base = _base_scenario("reversal", base)
-    n = _finite_in("reversal", "speed_rpm", speed_rpm, 0.0, 1e5, lo_open=True)
-    rate = _finite_in("reversal", "rate_rpm_s", rate_rpm_s, 0.0, 1e7, lo_open=True)
-    load = _finite_in("reversal", "load_nm", load_nm, -1e4, 1e4)
-    t0 = _finite_in("reversal", "t_start", t_start, 0.0, 1e4)
-    t1 = t0 + 2.0 * n / rate
-    ref = Profile([0.0, t0, t1], [n * RPM, n * RPM, -n * RPM], kind="linear")
-    return eqx.tree_at(
-        lambda s: (s.speed_ref, s.load, s.omega_m0),
-        base,
-        (ref, Profile.constant(load), as_float(n * RPM)),
-    )
-
-
-def low_speed_load_step(base: Scenario, speed_pu: float, load_pu: float, *, t_event: float = 0.2):
-    """A load step at low speed: steady at ``speed_pu`` × rated speed without load, then ``load_pu`` × rated
-    torque stepped on at ``t_event`` (the machine's ``n_rated`` and ``T_rated``, :class:`PMSMParams`).
-
-    Args:
-        base: The :class:`Scenario` whose machine, assumed machine, sensors and noise key are kept.
-        speed_pu: The speed, a fraction of rated speed (in [−1, 1], not 0: :func:`standstill_hold` holds zero).
-        load_pu: The load step, a fraction of rated torque (in [−3, 3]).
-        t_event: The time of the step, s (in [0, 1e4]).
-
-    Returns:
-        The :class:`Scenario`.
-
-    Raises:
-        ValueError: A value out of its range, naming the field.
-    """
-    base = _base_scenario("low_speed_load_step", base)
-    v = _finite_in("low_speed_load_step", "speed_pu", speed_pu, -1.0, 1.0, nonzero=True)
-    lp = _finite_in("low_speed_load_step", "load_pu", load_pu, -3.0, 3.0)
-    te = _finite_in("low_speed_load_step", "t_event", t_event, 0.0, 1e4)
-    w = v * float(base.par.n_rated) * RPM
-    step = Profile([0.0, te], [0.0, lp * float(base.par.T_rated)], kind="step")
-    return eqx.tree_at(lambda s: (s.speed_ref, s.load, s.omega_m0), base, (Profile.constant(w), step, as_float(w)))
-
-
-def standstill_hold(base: Scenario, load_pu: float, *, t_event: float = 0.2):
-    """Zero speed held under load: the reference 0, the machine at rest, ``load_pu`` × rated torque stepped on
-    at ``t_event`` (0: loaded from the start, the steady start balancing it).
-
-    Args:
-        base: The :class:`Scenario` whose machine, assumed machine, sensors and noise key are kept.
-        load_pu: The load, a fraction of rated torque (in [−3, 3]).
-        t_event: The time of the step, s (in [0, 1e4]).
-
-    Returns:
-        The :class:`Scenario`.
-
-    Raises:
-        ValueError: A value out of its range, naming the field.
-    """
-    base = _base_scenario("standstill_hold", base)
-    lp = _finite_in("standstill_hold", "load_pu", load_pu, -3.0, 3.0)
-    te = _finite_in("standstill_hold", "t_event", t_event, 0.0, 1e4)
-    step = Profile([0.0, te], [0.0, lp * float(base.par.T_rated)], kind="step")
-    return eqx.tree_at(lambda s: (s.speed_ref, s.load, s.omega_m0), base, (Profile.constant(0.0), step, as_float(0.0)))
 
 
 def stack_scenarios(scenarios: Sequence[Scenario]) -> Scenario:

@@ -62,6 +62,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..core.validate import check_positive, check_real
+from .machine import PMSMParams
 
 __all__ = ["FW_MARGIN", "VoltageFeedbackFW", "capability_torque", "id_stop", "mtpv_iq", "voltage_iq_range"]
 
@@ -90,7 +91,17 @@ class VoltageFeedbackFW(eqx.Module):
         self.margin = check_real("margin", margin, lower=0.0, upper=1.0, owner=own)
         self.omega_min = check_positive("omega_min", omega_min, own)
 
-    def update(self, id_fw, u_ref_mag, u_max, omega_e, Ld, i_max, ts, lo=None):
+    def update(
+        self,
+        id_fw: jax.Array | float,
+        u_ref_mag: jax.Array | float,
+        u_max: jax.Array | float,
+        omega_e: jax.Array | float,
+        Ld: jax.Array | float,
+        i_max: jax.Array | float,
+        ts: float,
+        lo: jax.Array | float | None = None,
+    ) -> jax.Array:
         """Δi_d for the next period from this period's |u*| and ω̂e.
 
         Args:
@@ -110,7 +121,16 @@ class VoltageFeedbackFW(eqx.Module):
         lo = -i_max if lo is None else lo
         return jnp.clip(id_fw + gain * (self.margin * u_max - u_ref_mag) * ts, lo, 0.0)
 
-    def references(self, est, id_policy, iq_cmd, id_fw, omega_e, u_max, i_max):
+    def references(
+        self,
+        est: PMSMParams,
+        id_policy: jax.Array,
+        iq_cmd: jax.Array,
+        id_fw: jax.Array,
+        omega_e: jax.Array,
+        u_max: jax.Array | float,
+        i_max: jax.Array | float,
+    ) -> tuple[jax.Array, jax.Array, jax.Array, jax.Array]:
         """The current reference the speed loop's demand gets under field weakening (module doc, points 1–3).
 
         Args:
@@ -141,7 +161,7 @@ class VoltageFeedbackFW(eqx.Module):
         iq_ref = jnp.clip(iq_w, jnp.maximum(-room, q_lo), jnp.minimum(room, q_hi))
         return id_ref, iq_ref, iq_ref != iq_w, id_lo - id_policy
 
-    def gate_speed(self, est, u_max, i_max):
+    def gate_speed(self, est: PMSMParams, u_max: jax.Array | float, i_max: jax.Array | float) -> jax.Array:
         """ω_gate = (m u_max − R̂s i_max) / √(ψ̂f² + (L̂q i_max)²), rad/s: below it no current within the circle with
         i_d ≤ 0 needs more than m u_max at steady state (its flux is at most that root), so field weakening is
         held at zero there (module doc, point 1); 0 where R̂s i_max ≥ m u_max.
@@ -158,13 +178,21 @@ class VoltageFeedbackFW(eqx.Module):
         return jnp.maximum(self.margin * u_max - est.Rs * i_max, 0.0) / psi_hi
 
     @staticmethod
-    def limit_room(id_ref, i_max):
+    def limit_room(id_ref: jax.Array | float, i_max: jax.Array | float) -> jax.Array:
         """√(i_max² − i_d*²): the q current the circle leaves, A (0 on and beyond the circle, with a finite
-        gradient there: the root of a masked argument)."""
+        gradient there: the root of a masked argument).
+
+        Args:
+            id_ref: The d current reference, A.
+            i_max: The current limit, A.
+
+        Returns:
+            The room for i_q, A.
+        """
         return _safe_sqrt(i_max * i_max - id_ref * id_ref)
 
     @staticmethod
-    def limit_iq(iq_ref, id_ref, i_max):
+    def limit_iq(iq_ref: jax.Array | float, id_ref: jax.Array | float, i_max: jax.Array | float) -> jax.Array:
         """i_q* within the current circle left by i_d*.
 
         Args:
@@ -185,7 +213,7 @@ def _safe_sqrt(x):
     return jnp.where(pos, jnp.sqrt(jnp.where(pos, x, 1.0)), 0.0)
 
 
-def id_stop(est, id_policy, i_max):
+def id_stop(est: PMSMParams, id_policy: jax.Array | float, i_max: jax.Array | float) -> jax.Array:
     """i_d,lo = max(−i_max, min(−ψ̂f/L̂d, i_d,policy)): where field weakening stops (module doc, point 1), A.
 
     Args:
@@ -199,7 +227,7 @@ def id_stop(est, id_policy, i_max):
     return jnp.maximum(-i_max, jnp.minimum(-est.psi_f / est.Ld, id_policy))
 
 
-def mtpv_iq(est, id_ref):
+def mtpv_iq(est: PMSMParams, id_ref: jax.Array | float) -> jax.Array:
     """The largest |i_q| (A) at ``id_ref`` on the MTPA side of the MTPV line (module doc, point 3): unbounded
     (inf) where L̂q ≥ L̂d (the stop at −ψ̂f/L̂d keeps i_d* on that side); √(ψd² + ψ̂f L̂q ψd/(L̂d − L̂q))/L̂q on an
     inverse-salient machine, 0 at ψd ≤ 0.
@@ -220,7 +248,9 @@ def mtpv_iq(est, id_ref):
     return jnp.where(inverse, bound, jnp.inf)
 
 
-def voltage_iq_range(est, id_ref, omega_e, u_lim):
+def voltage_iq_range(
+    est: PMSMParams, id_ref: jax.Array | float, omega_e: jax.Array | float, u_lim: jax.Array | float
+) -> tuple[jax.Array, jax.Array]:
     """The q currents (A) whose steady voltage at ``id_ref`` and ω̂e stays within ``u_lim``: the interval where
     (R̂s i_d − ω̂e L̂q i_q)² + (R̂s i_q + ω̂e (ψ̂f + L̂d i_d))² ≤ u_lim² (module doc, point 3).  Where no i_q fits
     (even i_q = 0 needs more), the least-voltage i_q alone; unbounded at standstill without resistance.
@@ -249,7 +279,9 @@ def voltage_iq_range(est, id_ref, omega_e, u_lim):
     return lo, hi
 
 
-def capability_torque(est, omega_e: float, u_max: float, i_max: float, margin: float = FW_MARGIN, n: int = 4001):
+def capability_torque(
+    est: PMSMParams, omega_e: float, u_max: float, i_max: float, margin: float = FW_MARGIN, n: int = 4001
+) -> tuple[float, float, float]:
     """The steady torque (N·m) the field-weakened reference can hold at ω_e on ``est``: the largest torque of
     (i_d, i_q) with i_d from the policy-free range [i_d,lo, 0] (i_d,lo at its stop, :func:`id_stop` with
     i_d,policy = 0) and i_q within the circle, MTPV and the steady voltage ``margin`` × u_max (the Δi_d loop's
