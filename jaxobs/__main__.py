@@ -8,6 +8,7 @@ way: docs/architecture.md).  Only running the package as a program reaches the t
 
 import sys
 
-from jaxobs_tuning.cli import main
+# tuning/ is installed as jaxobs_tuning by setuptools' editable finder, which pyright cannot follow
+from jaxobs_tuning.cli import main  # pyright: ignore[reportMissingImports]
 
 sys.exit(main())

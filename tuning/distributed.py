@@ -13,7 +13,7 @@ import json
 import os
 import socket
 import sys
-from collections.abc import Callable, Hashable
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -26,6 +26,7 @@ from .study_file import KINDS, WHAT
 
 if TYPE_CHECKING:
     import numpy as np
+    from jax.typing import ArrayLike
 
 
 def distributed_asked(args: argparse.Namespace) -> bool:
@@ -230,7 +231,7 @@ class SharedChunks(AbstractChunkSink):
             raise ValueError("process 0 cannot use its study.chunks (its error says why); nothing computed")
         self.mask = got[:-1].reshape(mask.shape)
 
-    def done(self, design: Hashable, i: int) -> bool:
+    def done(self, design: str, i: int) -> bool:
         """Whether chunk ``i`` of ``design`` is on disk (the same answer in every process).
 
         Args:
@@ -247,7 +248,7 @@ class SharedChunks(AbstractChunkSink):
             raise RuntimeError("SharedChunks.done: called before start")
         return bool(self.mask[self.designs.index(str(design)), i])
 
-    def put(self, design: Hashable, i: int, values: dict) -> None:
+    def put(self, design: str, i: int, values: Mapping[str, ArrayLike]) -> None:
         """Keep a computed chunk (process 0 only; the others hold nothing).
 
         Args:
@@ -258,7 +259,7 @@ class SharedChunks(AbstractChunkSink):
         if self.store is not None:
             self.store.put(design, i, values)
 
-    def load(self, design: Hashable) -> dict:
+    def load(self, design: str) -> dict[str, np.ndarray]:
         """A design's values from process 0's store; in the others, the end of their run (``_ShareComputed``).
 
         Args:

@@ -429,6 +429,7 @@ class Objective(AbstractObjective):
             mesh=batch_mesh(jax.devices()[:1]),
             label="scores",
         )
+        assert run.values is not None  # no sink was given: run_scenarios keeps the values
         mets = dict(run.values["design"])
         for t in self.terms:  # system metrics: of the loop, not of the run; one jit(vmap)
             if t.measure.kind == "system":

@@ -87,6 +87,17 @@ class AbstractChunkSink(abc.ABC):
             values: ``values[name]``, that chunk's real rows (no padding).
         """
 
+    @abc.abstractmethod
+    def load(self, design: str) -> dict[str, np.ndarray]:
+        """Every scenario's values of a design, in order, after the run (a study lays its Dataset out from them).
+
+        Args:
+            design: The design's name.
+
+        Returns:
+            ``values[name]``, one row per scenario.
+        """
+
 
 class ChunkStore(AbstractChunkSink):
     """The chunk files of one study run in the folder ``path`` (the runner's sink, :class:`AbstractChunkSink`).

@@ -74,7 +74,7 @@ from .. import metrics as M
 from ..io.files import atomic_path
 from ..io.provenance import cf_dataset, cf_labels, provenance
 from ..observers import gain_fields, gain_table
-from ..runtime.chunkstore import ChunkStore
+from ..runtime.chunkstore import AbstractChunkSink, ChunkStore
 from ..runtime.progress import ProgressArg
 from ..runtime.runner import run_scenarios
 from ..runtime.simulation import AbstractSave, SaveAll
@@ -119,7 +119,7 @@ def study(
     chunk_size: int = 2048,
     mesh: Mesh | None = None,
     progress: ProgressArg = False,
-    store: ChunkStore | None = None,
+    store: AbstractChunkSink | None = None,
     label: str = "study",
 ) -> xr.Dataset:
     """Every design on every scenario of ``sampler``, drawn from the family ``scenarios``; an ``xarray.Dataset``.
@@ -330,7 +330,7 @@ def run_study(
     progress: ProgressArg = False,
     return_seconds: bool = False,
     mesh: Mesh | None = None,
-    store: ChunkStore | None = None,
+    store: AbstractChunkSink | None = None,
 ) -> xr.Dataset | tuple[xr.Dataset, float]:
     """Simulate every FLL design on every scenario: :func:`study` on :class:`~jaxobs.scenarios.families.GridSignals`
     (or a
