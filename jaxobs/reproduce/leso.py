@@ -166,7 +166,7 @@ def _speed_mode_rows(name, par, rpm, i_d, speed_hz=papers.BENCH_SPEED_HZ):
         )
     )  # fmt: skip
     r = r[np.abs(r.imag) < we / 2]  # without the FA-LESO's slow mode at ±jωe
-    m = complex(r[np.argmax(np.real(r))])
+    m = r[np.argmax(np.real(r))]  # in r's precision (np.real, np.imag: the stubs type no .real of it)
     return [
         dict(
             experiment=name,
@@ -174,7 +174,7 @@ def _speed_mode_rows(name, par, rpm, i_d, speed_hz=papers.BENCH_SPEED_HZ):
             metric="speed_mode_zeta",
             unit="1",
             paper=None,
-            ours=float(-m.real / abs(m)),
+            ours=float(-np.real(m) / abs(m)),
         ),
         dict(
             experiment=name,
@@ -182,7 +182,7 @@ def _speed_mode_rows(name, par, rpm, i_d, speed_hz=papers.BENCH_SPEED_HZ):
             metric="speed_mode_hz",
             unit="Hz",
             paper=None,
-            ours=float(abs(m.imag) / (2 * math.pi)),
+            ours=float(abs(np.imag(m)) / (2 * math.pi)),
         ),
     ]
 
