@@ -305,11 +305,11 @@ def test_worst_case_bad_box_names_the_field(box, field):
 
 
 def test_worst_case_search_finds_an_interior_resonance_a_grid_misses():
-    """The search itself (worst_case's line-search ascent, :func:`jaxobs.analysis.envelope._ascend`) on a built
+    """The search itself (worst_case's line-search ascent, :func:`jaxobs.analysis.worst._ascend`) on a built
     landscape whose worst is interior: a resonance peak 1/(1 + ((u₀ − 0.37)/0.08)²) along one axis, falling
     0.5 along the other.  A 3 × 3 grid's worst is 0.275 at (0.5, 0); started there and from one random point the
     search reaches the peak, 1.0 at (0.37, 0): 3.6 times the grid's worst, in 6 rounds."""
-    from jaxobs.analysis.envelope import _ascend
+    from jaxobs.analysis.worst import _ascend
 
     def evaluate(u):
         r = (u[:, 0] - 0.37) / 0.08

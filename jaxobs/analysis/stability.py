@@ -63,14 +63,15 @@ scan; the QR and the log are smooth where the exponents are distinct).
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 from jax.flatten_util import ravel_pytree
+from jax.typing import ArrayLike
 
-from ..drive import ClosedLoop, DualClosedLoop
+from ..drive import ClosedLoop, DualClosedLoop, Scenario
 from ..linear import TransferFunction, sogi_fll_model, wif_model
 
 __all__ = ["Stability", "lyapunov", "stability_sweep", "LinearVerdict", "linear_speed_loop", "fll_frequency_soifo"]
@@ -92,10 +93,8 @@ class Stability(NamedTuple):
 
 
 # The speed deviation (relative, after the settle) past which the linearized run no longer follows the operating
-# point's orbit; below it the orbit "held its speed" (stable and marginal need it).  On the orbit the deviation
-# is the orbit's own ripple and slow growth over the window: 0.013-0.022 beside the SOSOIFO's boundary at
-# 400-420 r/min under the 5 Hz loop, 0.04 over 0.1 s at 300 r/min, R̂s 30 % low, from the settled start (+7 /s);
-# off it, 0.23-0.72 there after a 0.2 s settle (module doc).
+# point's orbit; below it the orbit "held its speed" (stable and marginal need it).  0.1: above an orbit's own
+# ripple and slow growth, below a departed run's deviation (module doc, docs/performance.md).
 OFF_ORBIT_DEV = 0.1
 
 
@@ -166,7 +165,7 @@ def _set_split(system, x0):
     return ravel_pytree(split)[0][:, None]
 
 
-def _start(system: ClosedLoop):
+def _start(system: ClosedLoop | DualClosedLoop):
     """The loop's steady start (its float vector and the rest), the neutral direction ∂x0/∂θe0 (one ``jvp``
     through ``init``), the other neutral directions at the start (:func:`_set_split`, or None), and the step
     on the float vector: (vec, rest, k) -> (vec, (rest, output))."""
@@ -190,7 +189,7 @@ def _start(system: ClosedLoop):
 
 
 def lyapunov(
-    system: ClosedLoop,
+    system: ClosedLoop | DualClosedLoop,
     *,
     settle: float = 0.2,
     warmup: float = 0.1,
@@ -201,13 +200,25 @@ def lyapunov(
 ) -> Stability:
     """The largest non-neutral Lyapunov exponent of ``system``'s closed loop at its operating point.
 
-    ``settle``, ``warmup``, ``window``: s (module doc); each is rounded to whole speed-loop periods.
-    ``n_dirs`` (≥ 1): tangent directions tracked besides the neutral one (2 or more resolves a complex pair
-    smoothly).  ``tol``: 1/s, the margin a stable verdict needs.  ``seed``: the initial directions.
     The scenario's profiles should be constant over the run (an operating point); the loop starts in its
-    steady state (no I-f start-up: ``drive.startup`` must be None).  ``system`` is a
-    :class:`~jaxobs.drive.ClosedLoop` or a :class:`~jaxobs.drive.DualClosedLoop` (its state and periods:
-    :func:`_check_dual`).
+    steady state (no I-f start-up: ``drive.startup`` must be None).
+
+    Args:
+        system: a :class:`~jaxobs.drive.ClosedLoop` or a :class:`~jaxobs.drive.DualClosedLoop` (its state and
+            periods: :func:`_check_dual`).
+        settle: s (module doc), rounded to whole speed-loop periods.
+        warmup: s, likewise.
+        window: s, likewise.
+        n_dirs: tangent directions tracked besides the neutral one (≥ 1; 2 or more resolves a complex pair
+            smoothly).
+        tol: 1/s, the margin a stable verdict needs.
+        seed: the initial directions.
+
+    Returns:
+        The :class:`Stability` verdict.
+
+    Raises:
+        ValueError: a system that is not a steady closed loop, or a span or count out of its range.
     """
     _check("lyapunov", system, (("settle", settle, 0.0), ("warmup", warmup, 0.0), ("window", window, 1e-3)))
     if isinstance(n_dirs, bool) or not isinstance(n_dirs, int) or not 1 <= n_dirs <= 16:
@@ -278,8 +289,88 @@ def lyapunov(
     )
 
 
+def _periodic_window(
+    system: ClosedLoop | DualClosedLoop, window: float, n_max: int, h: float
+) -> tuple[ClosedLoop | DualClosedLoop, jax.Array, jax.Array]:
+    """:func:`floquet`'s window: ``system`` with its speed moved so that m electrical periods are N whole
+    speed-loop periods of ``h`` s, N (at most ``n_max``), and whether N periods cover the m electrical ones."""
+    # the window: m electrical periods, the fewest lasting ``window``; N whole speed-loop periods; the speed
+    # moved so that they coincide, ω' = ω · m T_e / (N h)
+    sc = system.scenario
+    w_ref = jnp.abs(sc.speed_ref(0.0))
+    t_e = 2.0 * jnp.pi / jnp.maximum(system.pole_pairs * w_ref, 1e-9)
+    m = jnp.maximum(jnp.ceil(window / t_e - 1e-9), 1.0)
+    n_win = jnp.maximum(jnp.round(m * t_e / h), 1.0)
+    covered = n_win <= n_max
+    n_win = jnp.minimum(n_win, float(n_max))
+    scale = jnp.where(covered, m * t_e / (n_win * h), 1.0)
+    system = eqx.tree_at(
+        lambda s: (s.scenario.speed_ref.values, s.scenario.omega_m0),
+        system,
+        (sc.speed_ref.values * scale, sc.omega_m0 * scale),
+    )
+
+    return system, n_win, covered
+
+
+def _monodromy(
+    system: ClosedLoop | DualClosedLoop, blk: int, n_settle: int, n_win: jax.Array
+) -> tuple[jax.Array, jax.Array, jax.Array, jax.Array, jax.Array, jax.Array | None]:
+    """:func:`floquet`'s transition matrix over ``n_win`` speed-loop periods of ``blk`` samples after
+    ``n_settle``: the matrix normalized (its log scale apart), the log scale, the mask of the components the
+    step does more than copy, the peak speed deviation over the window, the neutral directions after the
+    settle (the first: ∂x/∂θe0) and the split ones (None: the single loop)."""
+    vec0, rest0, neutral0, split, step_vec = _start(system)
+    n = vec0.shape[0]
+    ref = jnp.abs(system.scenario.speed_ref(0.0))
+
+    def tangent_block(vec, rest, t, j):
+        """One speed-loop period: the state and the tangent columns ``t`` (n × d) through ``blk`` samples;
+        also the peak speed deviation and the tangents after the first sample."""
+
+        def one(c, i):
+            v, r, tt = c
+            v1, t1, (r1, out) = jax.vmap(
+                lambda d: jax.jvp(lambda vv: step_vec(vv, r, j * blk + i), (v,), (d,), has_aux=True),
+                in_axes=1,
+                out_axes=(None, 1, None),
+            )(tt)
+            dev = jnp.abs(out.omega_m - out.omega_m_ref) / jnp.maximum(ref, 1e-6)
+            return (v1, r1, t1), (dev, t1)
+
+        (vec, rest, t), (dev, tts) = jax.lax.scan(one, (vec, rest, t), jnp.arange(blk))
+        return vec, rest, t, jnp.max(dev), tts[0]
+
+    # the settle: the neutral direction alone, from t = 0 (so it is ∂x/∂θe0 exactly); its own speed excursion
+    # is not the orbit's (the rule of lyapunov)
+    def settle_block(carry, j):
+        vec, rest, t, _, _ = tangent_block(carry[0], carry[1], carry[2], j)
+        return (vec, rest, t), None
+
+    t0 = neutral0[:, None] if split is None else jnp.concatenate([neutral0[:, None], split], axis=1)
+    (vec, rest, vs), _ = jax.lax.scan(settle_block, (vec0, rest0, t0), jnp.arange(n_settle))
+
+    # the window: every direction, from the identity at t0, for the point's own N blocks; a scalar
+    # normalization each block keeps the product finite (its log accumulated), and the first step's Jacobian
+    # finds the components the step only copies (a unit row)
+    eye = jnp.eye(n, dtype=vec0.dtype)
+
+    def body(c):
+        j, vec, rest, w, log_s, mask, dev = c
+        vec, rest, w, d, first = tangent_block(vec, rest, w, n_settle + j)
+        mask = jnp.where(j == 0, jnp.any(first != eye, axis=1), mask)
+        nrm = jnp.sqrt(jnp.sum(w * w))
+        nrm = jnp.where((nrm > 0) & jnp.isfinite(nrm), nrm, 1.0)
+        return j + 1, vec, rest, w / nrm, log_s + jnp.log(nrm), mask, jnp.maximum(dev, d)
+
+    z = jnp.zeros((), vec0.dtype)
+    init = (jnp.zeros((), jnp.int32), vec, rest, eye, z, jnp.ones((n,), bool), z)
+    _, _, _, w, log_s, mask, dev = jax.lax.while_loop(lambda c: c[0] < n_win, body, init)
+    return w, log_s, mask, dev, vs, split
+
+
 def floquet(
-    system: ClosedLoop,
+    system: ClosedLoop | DualClosedLoop,
     *,
     settle: float = 0.2,
     window: float = 0.2,
@@ -323,8 +414,20 @@ def floquet(
     thousands of Jacobians).  Differentiable in the gains by forward mode (``jax.jacfwd``; reverse mode does
     not pass a ``while_loop``) where the top non-neutral multiplier is simple; ``eigvals`` runs on the CPU.
 
-    ``system`` is a :class:`~jaxobs.drive.ClosedLoop` or a :class:`~jaxobs.drive.DualClosedLoop`: the dual loop's
-    whole state, its speed loop's period, the dual machine's electrical period (:func:`_check_dual`).
+    Args:
+        system: a :class:`~jaxobs.drive.ClosedLoop` or a :class:`~jaxobs.drive.DualClosedLoop`: the dual loop's
+            whole state, its speed loop's period, the dual machine's electrical period (:func:`_check_dual`).
+        settle: s, before the window (the neutral direction carried through it).
+        window: s, the least window: the fewest whole electrical periods that last it.
+        max_window: s, the longest window (a longer electrical period: not resolved).
+        n_report: how many exponents ``exponents`` reports (1 to 16).
+        tol: 1/s, the margin a stable verdict needs.
+
+    Returns:
+        The :class:`Stability` verdict.
+
+    Raises:
+        ValueError: a system that is not a steady closed loop, or a span or count out of its range.
     """
     _check("floquet", system, (("settle", settle, 0.0), ("window", window, 1e-3), ("max_window", max_window, 1e-3)))
     if float(max_window) < float(window):
@@ -335,70 +438,10 @@ def floquet(
     h = ts * blk
     n_settle = max(int(round(settle / h)), 0)
     n_max = max(int(round(max_window / h)), 2)
-
-    # the window: m electrical periods, the fewest lasting ``window``; N whole speed-loop periods; the speed
-    # moved so that they coincide, ω' = ω · m T_e / (N h)
-    sc = system.scenario
-    w_ref = jnp.abs(sc.speed_ref(0.0))
-    t_e = 2.0 * jnp.pi / jnp.maximum(system.pole_pairs * w_ref, 1e-9)
-    m = jnp.maximum(jnp.ceil(window / t_e - 1e-9), 1.0)
-    n_win = jnp.maximum(jnp.round(m * t_e / h), 1.0)
-    covered = n_win <= n_max
-    n_win = jnp.minimum(n_win, float(n_max))
-    scale = jnp.where(covered, m * t_e / (n_win * h), 1.0)
-    system = eqx.tree_at(
-        lambda s: (s.scenario.speed_ref.values, s.scenario.omega_m0),
-        system,
-        (sc.speed_ref.values * scale, sc.omega_m0 * scale),
-    )
-
-    vec0, rest0, neutral0, split, step_vec = _start(system)
-    n = vec0.shape[0]
-    ref = jnp.abs(system.scenario.speed_ref(0.0))
-
-    def tangent_block(vec, rest, t, j):
-        """One speed-loop period: the state and the tangent columns ``t`` (n × d) through ``blk`` samples;
-        also the peak speed deviation and the tangents after the first sample."""
-
-        def one(c, i):
-            v, r, tt = c
-            v1, t1, (r1, out) = jax.vmap(
-                lambda d: jax.jvp(lambda vv: step_vec(vv, r, j * blk + i), (v,), (d,), has_aux=True),
-                in_axes=1,
-                out_axes=(None, 1, None),
-            )(tt)
-            dev = jnp.abs(out.omega_m - out.omega_m_ref) / jnp.maximum(ref, 1e-6)
-            return (v1, r1, t1), (dev, t1)
-
-        (vec, rest, t), (dev, tts) = jax.lax.scan(one, (vec, rest, t), jnp.arange(blk))
-        return vec, rest, t, jnp.max(dev), tts[0]
-
-    # the settle: the neutral direction alone, from t = 0 (so it is ∂x/∂θe0 exactly); its own speed excursion
-    # is not the orbit's (the rule of lyapunov)
-    def settle_block(carry, j):
-        vec, rest, t, _, _ = tangent_block(*carry, j)
-        return (vec, rest, t), None
-
-    t0 = neutral0[:, None] if split is None else jnp.concatenate([neutral0[:, None], split], axis=1)
-    (vec, rest, vs), _ = jax.lax.scan(settle_block, (vec0, rest0, t0), jnp.arange(n_settle))
+    system, n_win, covered = _periodic_window(system, window, n_max, h)
+    w, log_s, mask, dev, vs, split = _monodromy(system, blk, n_settle, n_win)
     v = vs[:, 0]
-
-    # the window: every direction, from the identity at t0, for the point's own N blocks; a scalar
-    # normalization each block keeps the product finite (its log accumulated), and the first step's Jacobian
-    # finds the components the step only copies (a unit row)
-    eye = jnp.eye(n, dtype=vec0.dtype)
-
-    def body(c):
-        j, vec, rest, w, log_s, mask, dev = c
-        vec, rest, w, d, first = tangent_block(vec, rest, w, n_settle + j)
-        mask = jnp.where(j == 0, jnp.any(first != eye, axis=1), mask)
-        nrm = jnp.sqrt(jnp.sum(w * w))
-        nrm = jnp.where((nrm > 0) & jnp.isfinite(nrm), nrm, 1.0)
-        return j + 1, vec, rest, w / nrm, log_s + jnp.log(nrm), mask, jnp.maximum(dev, d)
-
-    z = jnp.zeros((), vec0.dtype)
-    init = (jnp.zeros((), jnp.int32), vec, rest, eye, z, jnp.ones((n,), bool), z)
-    _, _, _, w, log_s, mask, dev = jax.lax.while_loop(lambda c: c[0] < n_win, body, init)
+    eye = jnp.eye(w.shape[0], dtype=w.dtype)
     period = n_win * h
     keep = mask.astype(w.dtype)
     w = w * keep[:, None] * keep[None, :]
@@ -423,8 +466,7 @@ def floquet(
     # the resolution: an error δ in M (the orbit off periodic by that much) moves a multiplier by up to about δ,
     # so the top non-neutral one is at most |μ| + δ: its rate at most log(|μ| + δ)/T, log(1 + δ/|μ|)/T above
     # the estimate.  ≈ δ/T for a slow mode (|μ| near 1); for a fast one the same δ is a larger share of its
-    # tiny μ (000's SOIFO at 1000 r/min, settled 0.2 s: μ = 5e-5 over 0.5 s, δ = 3e-3, so −19.9 ± 8.5 /s: still
-    # stable, as a 3 s run is).  An uncertainty of the estimate, not a property a tuner should move.
+    # tiny μ (docs/performance.md).  An uncertainty of the estimate, not a property a tuner should move.
     rel = off * jnp.exp(-jnp.clip(lam, -700.0 / period, 700.0 / period) * period)
     res = jnp.where(finite & covered, jax.lax.stop_gradient(jnp.log1p(rel) / period), jnp.inf)
     speed_dev = jnp.where(finite, dev, jnp.inf)
@@ -453,12 +495,19 @@ def _weighted_slope(acc, t, w):
 def slope_fit(acc: jax.Array, dt: float) -> tuple[jax.Array, jax.Array]:
     """Least-squares slopes of ``acc`` (samples × columns, sampled every ``dt`` s) and their resolutions.
 
-    Returns (slope, resolution), each per column, in units of ``acc`` per second.  The resolution is how far
+    The resolution is how far
     apart this window's own estimates of the exponent are (module doc): the larger of the spread (max − min)
     of the slopes fitted to its three thirds and the difference of those fitted to its two halves.  (Both
     are blind to a wobble whose period divides a sixth of the window, the same in every part; the full
     window's slope is then off by at most 12A/(ωT²) for a wobble A sin ωt over T s, and ω ≥ 12π/T there,
     so by at most A/(πT): 0.006 /s for A = 0.02 over 1 s.)
+
+    Args:
+        acc: the accumulated log growth, samples × columns.
+        dt: s between samples.
+
+    Returns:
+        (slope, resolution), each per column, in units of ``acc`` per second.
     """
     n = acc.shape[0]
     t = jnp.arange(n, dtype=acc.dtype) * dt
@@ -473,11 +522,29 @@ def slope_fit(acc: jax.Array, dt: float) -> tuple[jax.Array, jax.Array]:
     return slope, spread
 
 
-def stability_sweep(make_system: Callable, scenarios, *, method: str = "lyapunov", **kw) -> Stability:
-    """:func:`lyapunov` (or, ``method="floquet"``, :func:`floquet`) at every scenario of a batch, one
-    ``jit(vmap)``: ``make_system(scenario)`` gives the ClosedLoop (bind the observer to the scenario there);
-    ``kw`` go to that function.  For ``floquet`` a batch runs as long as its slowest point's period: batch
-    points of similar speed together."""
+def stability_sweep(
+    make_system: Callable[[Scenario], ClosedLoop | DualClosedLoop],
+    scenarios: Scenario,
+    *,
+    method: str = "lyapunov",
+    **kw: Any,
+) -> Stability:
+    """:func:`lyapunov` (or, ``method="floquet"``, :func:`floquet`) at every scenario of a batch, one ``jit(vmap)``.
+
+    For ``floquet`` a batch runs as long as its slowest point's period: batch points of similar speed together.
+
+    Args:
+        make_system: scenario -> the closed loop (bind the observer to the scenario there).
+        scenarios: the batch (a leading axis on every leaf).
+        method: "lyapunov" or "floquet".
+        **kw: that function's keyword arguments.
+
+    Returns:
+        The :class:`Stability` verdicts, batched.
+
+    Raises:
+        ValueError: an unknown method.
+    """
     if method not in ("lyapunov", "floquet"):
         raise ValueError(f"stability_sweep: method must be 'lyapunov' or 'floquet', got {method!r}")
     fn = lyapunov if method == "lyapunov" else floquet
@@ -490,25 +557,46 @@ def stability_sweep(make_system: Callable, scenarios, *, method: str = "lyapunov
 
 
 class LinearVerdict(NamedTuple):
+    """The papers' small-signal verdict beside the speed loop's (:func:`linear_speed_loop`)."""
+
     observer_poles: jax.Array  # poles of the FLL's ω̂/ω alone (the papers' model), rad/s
     loop_poles: jax.Array  # poles of the speed loop closed through ω̂ (ideal current loop), rad/s
     observer_stable: jax.Array  # the papers' verdict: every observer pole in the left half-plane
     loop_stable: jax.Array  # the composed loop's verdict
 
 
-def fll_frequency_soifo(k, lam, omega_e) -> TransferFunction:
-    """ω̂/ω of the SOIFO's FLL at ω_e (rad/s): 001 eqs (18)–(20) with the frequency-normalized gain
-    λ = lam·ω_e² (jaxobs.observers.flux), λ/2 / (s² + (kω_e/2)s + λ/2)."""
+def fll_frequency_soifo(k: ArrayLike, lam: ArrayLike, omega_e: ArrayLike) -> TransferFunction:
+    """ω̂/ω of the SOIFO's FLL at ω_e: 001 eqs (18)–(20), λ/2 / (s² + (kω_e/2)s + λ/2).
+
+    Args:
+        k: the SOGI's damping gain.
+        lam: the frequency-normalized FLL gain: λ = lam·ω_e² (jaxobs.observers.flux).
+        omega_e: the electrical speed, rad/s.
+
+    Returns:
+        The transfer function ω̂/ω.
+    """
     return sogi_fll_model(k, lam * omega_e**2, omega_e).frequency
 
 
-def fll_frequency_sosoifo(K1, K2, lam, omega_e) -> TransferFunction:
-    """ω̂/ω of the second-order SOIFO's FLL at ω_e (rad/s): the SOGI-FLL-WIF model, 001 eqs (30)–(32), with
-    k1 = K2, k2 = K1 and λ = lam·ω_e² (jaxobs.observers.flux, SecondOrderSOIFO)."""
+def fll_frequency_sosoifo(K1: ArrayLike, K2: ArrayLike, lam: ArrayLike, omega_e: ArrayLike) -> TransferFunction:
+    """ω̂/ω of the second-order SOIFO's FLL at ω_e: the SOGI-FLL-WIF model, 001 eqs (30)–(32).
+
+    Args:
+        K1: the observer's first gain (the model's k2).
+        K2: its second gain (the model's k1).
+        lam: the frequency-normalized FLL gain: λ = lam·ω_e² (jaxobs.observers.flux, SecondOrderSOIFO).
+        omega_e: the electrical speed, rad/s.
+
+    Returns:
+        The transfer function ω̂/ω.
+    """
     return wif_model(K2, K1, lam * omega_e**2, omega_e).frequency
 
 
-def linear_speed_loop(fll: TransferFunction, *, J, kt, kp_w, ki_w) -> LinearVerdict:
+def linear_speed_loop(
+    fll: TransferFunction, *, J: ArrayLike, kt: ArrayLike, kp_w: ArrayLike, ki_w: ArrayLike
+) -> LinearVerdict:
     """The speed loop closed through the observer's speed estimate ω̂ = G(s) ω, linear and continuous.
 
     Mechanics J s ω_m = K_t i_q (J kg·m², K_t N·m/A), current loop ideal (i_q = i_q*), the FOC's I-P
@@ -516,13 +604,23 @@ def linear_speed_loop(fll: TransferFunction, *, J, kt, kp_w, ki_w) -> LinearVerd
     J s² D(s) + K_t (k_pω s + k_iω) N(s) with G = N/D.  With G = 1 (the encoder) its roots are the
     design's double pole at −α_s.  The papers stop at D(s): every positive gain passes; the product
     does not when G's bandwidth (∝ ω_e with the normalized FLL) comes near α_s.
+
+    Args:
+        fll: G(s) = ω̂/ω, the observer's speed estimate (:func:`fll_frequency_soifo`, ...).
+        J: the inertia, kg·m².
+        kt: the torque constant K_t, N·m/A.
+        kp_w: the speed controller's proportional gain k_pω.
+        ki_w: its integral gain k_iω.
+
+    Returns:
+        The :class:`LinearVerdict`: the observer's poles and the composed loop's, and their verdicts.
     """
     num, den = fll.num, fll.den
     a = J * jnp.convolve(jnp.stack([jnp.ones_like(den[0]), 0.0 * den[0], 0.0 * den[0]]), den)
     b = kt * jnp.convolve(jnp.stack([kp_w + 0.0 * den[0], ki_w + 0.0 * den[0]]), num)
     b = jnp.concatenate([jnp.zeros((a.shape[0] - b.shape[0],), b.dtype), b])
     loop = TransferFunction(jnp.ones((1,), a.dtype), a + b)
-    obs_p, loop_p = fll.poles(), loop.poles()
+    obs_p, loop_p = jnp.asarray(fll.poles()), jnp.asarray(loop.poles())  # _roots' jax arrays, typed
     return LinearVerdict(
         observer_poles=obs_p,
         loop_poles=loop_p,

@@ -70,10 +70,13 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax.core import Tracer
+from jax.typing import ArrayLike
 
-from .. import SaveAll, simulate
+from .. import SaveAll, Solution, simulate
 from .. import metrics as M
 from ..drive import RPM, ClosedLoop, Drive, Scenario, reversal, stack_scenarios
+from ..observers import AbstractDriveObserver
 
 __all__ = [
     "VERDICTS",
@@ -176,12 +179,12 @@ class Verdict(NamedTuple):
     swing_second: jax.Array
 
     @property
-    def holds(self):
+    def holds(self) -> jax.Array:
         """The run holds (state ``holds``)."""
         return self.state == HOLDS
 
     @property
-    def stable(self):
+    def stable(self) -> jax.Array:
         """Holds or a bounded limit cycle: never where the run loses speed or lock, or diverges."""
         return (self.state == HOLDS) | (self.state == LIMIT_CYCLE)
 
@@ -196,7 +199,15 @@ def _swing(x, mask):
     return jnp.where(jnp.any(mask, axis=-1), 0.5 * (hi - lo), 0.0)
 
 
-def verdict(t, angle_error, omega_m, omega_m_ref, t_event, t_settled, rule: VerdictRule | None = None) -> Verdict:
+def verdict(
+    t: ArrayLike,
+    angle_error: ArrayLike,
+    omega_m: ArrayLike,
+    omega_m_ref: ArrayLike,
+    t_event: ArrayLike,
+    t_settled: ArrayLike,
+    rule: VerdictRule | None = None,
+) -> Verdict:
     """The one state of each run (module doc: the states, their order and thresholds).
 
     Works under ``jit`` and ``vmap``; the time axis is the last, leading axes are runs.
@@ -226,11 +237,11 @@ def verdict(t, angle_error, omega_m, omega_m_ref, t_event, t_settled, rule: Verd
     mid = 0.5 * (ts_ + t_end)
     ev, settled = t >= te, t >= ts_
     first, second = settled & (t < mid), t >= mid
-    if not isinstance(te, jax.core.Tracer) and not isinstance(ts_, jax.core.Tracer):
+    if not isinstance(te, Tracer) and not isinstance(ts_, Tracer):
         if np.any(np.asarray(ts_) < np.asarray(te)):
             raise ValueError("verdict: t_settled must be >= t_event")
         for name, m in (("event window", ev), ("settled window's first half", first), ("second half", second)):
-            if not isinstance(m, jax.core.Tracer) and not bool(np.all(np.any(np.asarray(m), axis=-1))):
+            if not isinstance(m, Tracer) and not bool(np.all(np.any(np.asarray(m), axis=-1))):
                 raise ValueError(f"verdict: the {name} holds no sample (t_settled too late, or the run too short)")
     dw = w - wr
     finite = jnp.all(jnp.isfinite(e) & jnp.isfinite(w), axis=-1)
@@ -252,7 +263,7 @@ def verdict(t, angle_error, omega_m, omega_m_ref, t_event, t_settled, rule: Verd
     return Verdict(state, finite, peak, err, ref, s1, s2)
 
 
-def verdict_of(sol, t_event, t_settled, rule: VerdictRule | None = None) -> Verdict:
+def verdict_of(sol: Solution, t_event: ArrayLike, t_settled: ArrayLike, rule: VerdictRule | None = None) -> Verdict:
     """The verdict of a closed-loop drive's run (:class:`jaxobs.drive.ClosedLoop` with an observer, saved with
     :class:`jaxobs.SaveAll`; batched solutions too).
 
@@ -273,7 +284,7 @@ def verdict_of(sol, t_event, t_settled, rule: VerdictRule | None = None) -> Verd
     return verdict(out.t, e, out.omega_m, out.omega_m_ref, t_event, t_settled, rule)
 
 
-def verdict_names(states) -> np.ndarray:
+def verdict_names(states: ArrayLike) -> np.ndarray:
     """The states' names (:data:`VERDICTS`) for an array of codes.
 
     Args:
@@ -365,6 +376,7 @@ def held_rate(
         if states_at is not None:
             s = np.asarray(states_at(rates), dtype=int).reshape(rates.shape)
             return s == HOLDS, s
+        assert holds_at is not None  # one of the two is given (checked above)
         h = np.asarray(holds_at(rates), dtype=bool).reshape(rates.shape)
         return h, np.where(h, HOLDS, LOSES_LOCK)
 
@@ -417,7 +429,7 @@ def held_rate(
 
 def reversal_holds(
     drive: Drive,
-    observer,
+    observer: AbstractDriveObserver,
     base: Scenario,
     speed_rpm: float,
     *,

@@ -18,6 +18,8 @@ Rows without a paper number (``paper`` None: figures only, or our own diagnostic
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
+from typing import Any
 
 __all__ = ["RELATIVE", "METRIC_RELATIVE", "ABSOLUTE", "annotate"]
 
@@ -32,9 +34,16 @@ METRIC_RELATIVE = {"max_speed_err": 0.30}
 ABSOLUTE = {"rad": 0.05, "Wb": 0.005, "deg": 0.5}
 
 
-def annotate(rows, explanations: dict):
-    """Add ``tolerance``, ``within`` and ``explanation`` to each row (module doc), in place; returns ``rows``.
-    ``explanations``: (experiment, observer, metric) → why ours differs, used where a row is not within."""
+def annotate(rows: list[dict[str, Any]], explanations: Mapping[tuple[str, str, str], str]) -> list[dict[str, Any]]:
+    """Add ``tolerance``, ``within`` and ``explanation`` to each row (module doc), in place.
+
+    Args:
+        rows: the rows {experiment, observer, metric, unit, paper, ours[, bound]}.
+        explanations: (experiment, observer, metric) → why ours differs, used where a row is not within.
+
+    Returns:
+        ``rows``.
+    """
     for r in rows:
         paper, ours = r["paper"], r["ours"]
         if paper is None:

@@ -17,12 +17,18 @@ the phase error (deg), around the test's event.
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping, Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from ..metrics import wrap
 from ..plot import Panel, Series, drive_events, fll_event_text, paper_figure
+from ._run import Run
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
 
 __all__ = ["FLUX_FIGURES", "LESO_FIGURES", "drive_figure", "flux_figure", "flux_figures", "fll_figure"]
 
@@ -145,12 +151,36 @@ def _panels(sol, i, kind, mask, p, psi_f):
     return [flux, angle, err]
 
 
-def drive_figure(sol, names, methods, kind, window, title, p: int, psi_f: float | None = None, path=None):
-    """A drive run in its paper's layout: a column for each of ``methods`` (names in ``names``, the order of
-    the run's observer bank), the panels of ``kind`` (module doc; ``flux`` needs the rotor flux ``psi_f``, Wb),
-    over ``window`` = (start, stop) s (a negative start counts back from the end, stop None: the end); ``p``
-    pole pairs.  The events of the window are named.  Any bank's run: paper 000's flux observers, paper 002's
-    LESOs (whose outputs have ``theta`` and ``omega`` too: ``position`` and ``dynamic``)."""
+def drive_figure(
+    sol: Run,
+    names: Sequence[str],
+    methods: Sequence[str],
+    kind: str,
+    window: tuple[float, float | None],
+    title: str,
+    p: int,
+    psi_f: float | None = None,
+    path: str | Path | None = None,
+) -> Figure:
+    """A drive run in its paper's layout: a column for each of ``methods``, the panels of ``kind``.
+
+    The events of the window are named.  Any bank's run: paper 000's flux observers, paper 002's LESOs (whose
+    outputs have ``theta`` and ``omega`` too: ``position`` and ``dynamic``).
+
+    Args:
+        sol: the run (its observers an :class:`~jaxobs.ObserverBank`).
+        names: the bank's observers' names, in its order.
+        methods: the observers drawn, a column each.
+        kind: the panels (module doc; ``flux`` needs ``psi_f``).
+        window: (start, stop) s; a negative start counts back from the end, stop None: the end.
+        title: the figure's title.
+        p: pole pairs.
+        psi_f: the rotor flux, Wb (``flux`` only).
+        path: where to save it (None: not saved).
+
+    Returns:
+        The figure.
+    """
     start, stop = window
     t = np.asarray(sol.t)
     t0 = t[-1] + start if start < 0 else start
@@ -162,9 +192,22 @@ def drive_figure(sol, names, methods, kind, window, title, p: int, psi_f: float 
     return paper_figure(t[mask], columns, title, path, events=events, shared=shared)
 
 
-def flux_figure(sol, spec, names, p: int, psi_f: float, path=None):
-    """Draw one row of :data:`FLUX_FIGURES` from the run ``sol`` whose bank holds the observers ``names``
-    (:data:`jaxobs.reproduce.flux.OBSERVER_NAMES`); ``p`` pole pairs, ``psi_f`` the rotor flux (Wb)."""
+def flux_figure(
+    sol: Run, spec: tuple, names: Sequence[str], p: int, psi_f: float, path: str | Path | None = None
+) -> Figure:
+    """Draw one row of :data:`FLUX_FIGURES`.
+
+    Args:
+        sol: the run.
+        spec: the row of :data:`FLUX_FIGURES`.
+        names: the observers of its bank (:data:`jaxobs.reproduce.flux.OBSERVER_NAMES`).
+        p: pole pairs.
+        psi_f: the rotor flux, Wb.
+        path: where to save it (None: not saved).
+
+    Returns:
+        The figure.
+    """
     key, _, fig, methods, kind, window = spec
     return drive_figure(sol, names, methods, kind, window, f"Paper 000 {fig} (ours): {key}", p, psi_f, path)
 
@@ -174,9 +217,19 @@ def _sliced(out, mask):
     return {k: np.asarray(getattr(out, k))[mask] for k in ("load", "omega_m_ref", "mode")}
 
 
-def flux_figures(traces, names, p: int, psi_f: float, out: Path):
-    """Every row of :data:`FLUX_FIGURES` whose experiment ran (``traces``: key → run), drawn to ``out``;
-    returns the paths written."""
+def flux_figures(traces: Mapping[str, Run], names: Sequence[str], p: int, psi_f: float, out: Path) -> list[Path]:
+    """Every row of :data:`FLUX_FIGURES` whose experiment ran, drawn to ``out``.
+
+    Args:
+        traces: experiment → run.
+        names: the observers of the runs' bank.
+        p: pole pairs.
+        psi_f: the rotor flux, Wb.
+        out: the folder.
+
+    Returns:
+        The paths written.
+    """
     paths = []
     for spec in FLUX_FIGURES:
         if spec[0] in traces:
@@ -186,11 +239,27 @@ def flux_figures(traces, names, p: int, psi_f: float, out: Path):
     return paths
 
 
-def fll_figure(traces, i: int, test: str, t_event: float, path=None, span: float | None = None):
-    """Paper 001's Test ``test`` in its layout: ``traces`` {FLL name: run batched over tests} (as
-    :func:`jaxobs.studies.demo.fll_demo` returns them), ``i`` the test's index in the batch, the event at ``t_event``
-    (s); drawn from 50 ms before it to ``span`` s after (default 0.3 s for a step, 1.2 s for a steady
-    disturbance)."""
+def fll_figure(
+    traces: Mapping[str, Any],
+    i: int,
+    test: str,
+    t_event: float,
+    path: str | Path | None = None,
+    span: float | None = None,
+) -> Figure:
+    """Paper 001's Test ``test`` in its layout, drawn from 50 ms before its event to ``span`` s after.
+
+    Args:
+        traces: {FLL name: run batched over tests} (as :func:`jaxobs.studies.demo.fll_demo` returns them).
+        i: the test's index in the batch.
+        test: the test's name.
+        t_event: the event's time, s.
+        path: where to save it (None: not saved).
+        span: s after the event (default 0.3 s for a step, 1.2 s for a steady disturbance).
+
+    Returns:
+        The figure.
+    """
     span = (0.3 if test in ("1", "2", "3", "A", "B") else 1.2) if span is None else span
     columns, t_shown = [], None
     for name, sol in traces.items():

@@ -38,6 +38,8 @@ Set-up, and the choices our copy of the paper leaves open:
 from __future__ import annotations
 
 import math
+from collections.abc import Callable, Mapping, Sequence
+from typing import Any, NamedTuple
 
 import equinox as eqx
 import numpy as np
@@ -53,10 +55,19 @@ from ..observers import (
     SecondOrderSOIFO,
 )
 from ..runtime.progress import Progress
-from ._run import run_kept
+from ._run import Run, run_kept
 from .compare import annotate
 
-__all__ = ["OBSERVER_NAMES", "flux_bank", "run_flux_experiments"]
+__all__ = [
+    "FLUX_EXPERIMENTS",
+    "OBSERVER_NAMES",
+    "FluxExperiment",
+    "Measure",
+    "flux_bank",
+    "format_rows",
+    "run_flux_experiment",
+    "run_flux_experiments",
+]
 
 OBSERVER_NAMES = ("integrator", "LPF", "SOIFO", "second-order SOIFO")
 # 000's gains (Fig. 5 and Sec. IV), under the paper's names; jaxobs.papers is their home.
@@ -76,23 +87,37 @@ LPF_FIT = 360.0  # rad/s: the LPF corner that fits 000's two steady LPF errors w
 
 def flux_bank(
     est: D.PMSMParams,
-    omega_e,
+    omega_e: float,
     *,
-    lam_soifo=linear.soifo_lambda(K_SOIFO),
-    lam_sosoifo=linear.second_order_soifo_lambda(K1, K2),
-    K1_=K1,
-    K2_=K2,
-    k=K_SOIFO,
-    primary=3,
-    lpf_omega_c=papers.LPF_OMEGA_C,
-):
-    """The four observers of 000 with the Fig. 5 settings, bound to the machine ``est`` they assume and started
-    at ω_e (rad/s) by their one binding (``ObserverBank.bind``).  ``primary``: the index in
-    :data:`OBSERVER_NAMES` of the one that closes the loop (default the second-order SOIFO); ``lpf_omega_c``:
-    the LPF's corner, rad/s (default Fig. 5's)."""
+    lam_soifo: float = linear.soifo_lambda(K_SOIFO),
+    lam_sosoifo: float = linear.second_order_soifo_lambda(K1, K2),
+    K1_: float = K1,
+    K2_: float = K2,
+    k: float = K_SOIFO,
+    primary: int = 3,
+    lpf_omega_c: float = papers.LPF_OMEGA_C,
+) -> ObserverBank:
+    """The four observers of 000 with the Fig. 5 settings, bound by their one binding (``ObserverBank.bind``).
+
+    Args:
+        est: the machine they assume.
+        omega_e: their start, rad/s.
+        lam_soifo: the SOIFO's FLL gain.
+        lam_sosoifo: the second-order SOIFO's FLL gain.
+        K1_: the second-order SOIFO's K1.
+        K2_: its K2.
+        k: the SOIFO's gain.
+        primary: the index in :data:`OBSERVER_NAMES` of the one that closes the loop (default the second-order
+            SOIFO).
+        lpf_omega_c: the LPF's corner, rad/s (default Fig. 5's).
+
+    Returns:
+        The bound :class:`~jaxobs.ObserverBank`.
+    """
     kp, ki = linear.pll_gains(2 * math.pi * papers.FLUX_PLL_HZ)
     # Rs = 0, L = 1 and omega_init = 1 rad/s are placeholders: bind() sets the assumed machine and the start speed
-    bank = ObserverBank(
+    # eqx.AbstractVar ts (a property here) reads as a field to pyright's dataclass transform
+    bank = ObserverBank(  # pyright: ignore[reportCallIssue]
         (
             PureIntegratorFlux(0.0, 1.0, kp, ki),
             LPFFlux(0.0, 1.0, lpf_omega_c, kp, ki),
@@ -166,214 +191,254 @@ def _periods(rpm, n, p=3):
     return n * 2 * math.pi / (p * rpm * D.RPM)
 
 
-def run_flux_experiments(quick: bool = False, progress=None):
-    """Run 000's experiments.  Returns (rows, traces) — rows {experiment, observer, metric, unit, paper, ours,
-    tolerance, within, explanation} (:mod:`jaxobs.reproduce.compare`).
+class Measure(NamedTuple):
+    """What one experiment's rows measure: every observer's ``metrics`` over a window of its run."""
 
-    ``quick`` skips the 20 r/min and start-up runs (several simulated seconds each).  ``progress``: one
-    step per experiment, each named as it compiles and runs (:mod:`jaxobs.runtime.progress`: ``True`` a tqdm bar
-    on stderr, or a callable ``progress(done, total)``).
+    window: tuple[float, float]  # s: [start, stop)
+    metrics: tuple[tuple[str, str], ...]  # (metric, unit) of :func:`_obs_metrics`
+    label: str = ""  # appended to the experiment's name in the rows
+    delay: bool = False  # also the SOIFOs' steady error in samples (:func:`_delay_rows`)
+    observers: tuple[str, ...] = OBSERVER_NAMES  # the observers whose rows are kept
+
+
+class FluxExperiment(NamedTuple):
+    """One of 000's experiments: its scenario on the bench, what is measured and the paper's values.
+
+    :func:`run_flux_experiment` runs any one; :data:`FLUX_EXPERIMENTS` is the table of them.
+    """
+
+    name: str  # the rows' experiment
+    figure: str  # where 000 shows it
+    rpm0: int  # r/min, the start (and the observers' start speed unless ``omega0``)
+    t1: float  # s, the horizon
+    handover: float  # s, the encoder's hand-over to the observer
+    speed_ref: Callable[[], D.Profile]  # the speed reference, rad/s
+    measures: tuple[Measure, ...]  # the rows' windows and metrics
+    paper: Mapping[tuple[str, str], float]  # (observer, metric) -> the paper's value
+    load: Callable[[], D.Profile] | None = None  # N·m (None: no load)
+    sensors: Callable[[], D.Sensors] | None = None  # the measurement errors (None: ideal)
+    rs_scale: float | None = None  # the observers assume this × Rs (None: the true machine)
+    startup: Callable[[D.PMSMParams], D.IfStartup] | None = None  # an I-f start (None: started steady)
+    omega0: Callable[[D.PMSMParams], float] | None = None  # rad/s, the observers' start (None: at rpm0)
+    alpha_s: float = 2 * math.pi * papers.BENCH_SPEED_HZ  # rad/s, the speed loop's bandwidth
+    dead_time: float = 0.0  # s, the inverter's
+    lpf_omega_c: float = papers.LPF_OMEGA_C  # rad/s, the LPF's corner
+    speed_schedule: float = 0.0  # the FOC's speed schedule N (0: the fixed loop)
+    speed_rows: str | None = None  # "range": the drive's min and max speed over the first window; "final"
+    speed_paper: float | None = None  # r/min, the paper's speed for ``speed_rows``
+    quick: bool = True  # runs under ``quick``
+
+
+def _steady_window(rpm: int, t1: float, n: int) -> tuple[float, float]:
+    """The last ``n`` electrical periods at ``rpm`` before ``t1``."""
+    return (t1 - _periods(rpm, n), t1)
+
+
+def _if_startup(par: D.PMSMParams) -> D.IfStartup:
+    """Fig. 20's I-f start to 20 r/min."""
+    we_sw = par.p * 20 * D.RPM
+    return D.IfStartup(i_f=4.0, accel=we_sw / 0.5, omega_switch=we_sw, hold=4.0)
+
+
+_ERR = (("max_abs", "rad"),)
+_ERR_MEAN = (("max_abs", "rad"), ("mean", "rad"))
+_DC = (("flux_offset", "Wb"), ("ripple", "rad"))
+_STEADY_PAPER = {
+    2000: {("LPF", "max_abs"): 0.4, ("SOIFO", "max_abs"): 0.15, ("second-order SOIFO", "max_abs"): 0.13},
+    400: {
+        ("integrator", "max_abs"): 6.0,
+        ("LPF", "max_abs"): 1.2,
+        ("SOIFO", "max_abs"): 0.035,
+        ("second-order SOIFO", "max_abs"): 0.03,
+    },
+}
+_DC_PAPER = {
+    "du_alpha = 5 V at 1000 r/min": {
+        ("LPF", "flux_offset"): 0.05,
+        ("SOIFO", "flux_offset"): 0.03,
+        ("second-order SOIFO", "flux_offset"): 0.0,
+        ("LPF", "ripple"): 0.65,
+        ("SOIFO", "ripple"): 0.25,
+        ("second-order SOIFO", "ripple"): 0.0,
+    },
+    "di_beta = 1.5 A at 1000 r/min": {
+        ("LPF", "flux_offset"): 0.03,
+        ("SOIFO", "flux_offset"): 0.017,
+        ("second-order SOIFO", "flux_offset"): 0.005,
+        ("LPF", "ripple"): 0.6,
+        ("SOIFO", "ripple"): 0.22,
+        ("second-order SOIFO", "ripple"): 0.0,
+    },
+}
+_DC_SENSORS = {
+    "du_alpha = 5 V at 1000 r/min": lambda: D.Sensors(u_offset=(5.0, 0.0)),
+    "di_beta = 1.5 A at 1000 r/min": lambda: D.Sensors(i_offset=(0.0, 1.5)),
+}
+_DEAD_TIMES = (("", 0.0), (DEAD_TIME_SUFFIX, DEAD_TIME))
+
+
+def _constant(rpm: int) -> Callable[[], D.Profile]:
+    return lambda: D.Profile.constant(rpm * D.RPM)
+
+
+FLUX_EXPERIMENTS: tuple[FluxExperiment, ...] = (
+    # --- A. steady state, no load (Figs. 10-17)
+    *(
+        FluxExperiment(
+            f"steady {rpm} r/min", "Figs. 10-17", rpm, t1, hand, _constant(rpm),
+            (Measure(_steady_window(rpm, t1, 5), _ERR_MEAN, delay=True),), _STEADY_PAPER[rpm],
+        )
+        for rpm, t1, hand in ((2000, 0.6, 0.2), (400, 1.6, 0.8))
+    ),
+    # The LPF's corner that fits both of the paper's LPF errors with the delay (docs/papers.md): its
+    # lead atan(ωc/ω1) less the delay's lag gives 0.4 rad at 2000 r/min and 1.2 at 400 for ωc ≈ 360
+    *(
+        FluxExperiment(
+            f"steady {rpm} r/min, LPF ωc = {LPF_FIT:g} rad/s", "Figs. 10-17 (docs/papers.md)", rpm, t1, hand,
+            _constant(rpm), (Measure(_steady_window(rpm, t1, 5), _ERR, observers=("LPF",)),),
+            {("LPF", "max_abs"): paper}, lpf_omega_c=LPF_FIT, quick=False,
+        )
+        for rpm, t1, hand, paper in ((2000, 0.6, 0.2, 0.4), (400, 1.6, 0.8, 1.2))
+    ),
+    # At 20 r/min (ωe = 6.3 rad/s) the FLLs' bandwidth (∝ ωe) is below the bench's 5 Hz speed loop:
+    # sensorless with the speed loop scheduled inside it, FOC(speed_schedule=6), the observers settled
+    # over 10 periods first (_simulate: Drive.settled_for; docs/stability.md "20 r/min").
+    FluxExperiment(
+        "steady 20 r/min", "docs/stability.md", 20, 3.0, 0.0, _constant(20),
+        (Measure((3.0 - 1.0, 3.0), _ERR_MEAN, delay=True),), {}, speed_schedule=6.0, speed_rows="range",
+        speed_paper=20.0, quick=False,
+    ),
+    # --- B. speed variation 400 <-> 2000 r/min (Fig. 18)
+    FluxExperiment(
+        "speed 400-2000-400 r/min", "Fig. 18", 400, 3.0, 0.8,
+        lambda: D.Scenario.speed_rpm([0.0, 1.0, 2.0], [400, 2000, 400], ramp=0.5), (Measure((1.0, 3.0), _ERR),),
+        {("LPF", "max_abs"): 1.2, ("SOIFO", "max_abs"): 0.15, ("second-order SOIFO", "max_abs"): 0.13},
+    ),
+    # --- C. load step 0 -> 10 N·m at 2000 r/min (Fig. 19), on the ideal inverter and with a dead time
+    *(
+        FluxExperiment(
+            "load step 10 N·m at 2000 r/min" + suffix, "Fig. 19", 2000, 0.8, 0.2, _constant(2000),
+            (Measure((0.4, 0.8), _ERR),),
+            {("LPF", "max_abs"): 1.3, ("SOIFO", "max_abs"): 0.25, ("second-order SOIFO", "max_abs"): 0.20},
+            load=lambda: D.Scenario.load_steps([0.0, 0.4], [0.0, 10.0]), dead_time=dt,
+        )
+        for suffix, dt in _DEAD_TIMES
+    ),
+    # --- D. dc disturbances at 1000 r/min (Figs. 21-22)
+    *(
+        FluxExperiment(
+            label + suffix, "Figs. 21-22", 1000, 1.0, 0.4, _constant(1000),
+            (Measure(_steady_window(1000, 1.0, 10), _DC),), _DC_PAPER[label], sensors=_DC_SENSORS[label],
+            dead_time=dt,
+        )
+        for label in _DC_PAPER
+        for suffix, dt in _DEAD_TIMES
+    ),
+    # --- E. Rs mismatch: the observers assume 0.4 Rs0, 10 N·m at 1000 r/min (Fig. 23)
+    FluxExperiment(
+        "Rs_est = 0.4 Rs0, 10 N·m, 1000 r/min", "Fig. 23", 1000, 1.0, 0.4, _constant(1000),
+        (Measure(_steady_window(1000, 1.0, 10), (*_ERR_MEAN, ("ripple", "rad"))),),
+        # "the estimated rotor position does not fluctuate" (Sec. IV-C): no ripple, of the proposed observers
+        {("SOIFO", "ripple"): 0.0, ("second-order SOIFO", "ripple"): 0.0},
+        load=lambda: D.Scenario.load_steps([0.0, 0.2], [0.0, 10.0]), rs_scale=0.4,
+    ),
+    # --- F. I-f start to 20 r/min, sensorless to 200 r/min, load step (Fig. 20).  The speed loop closes through
+    # the FLL's ω̂, whose bandwidth at 20 r/min is ~5 rad/s: α_s = 2π·1 rad/s, and a load step the paper does
+    # not size, 0.5 N·m.
+    FluxExperiment(
+        "I-f start, 20 -> 200 r/min, 0.5 N·m step", "Fig. 20", 0, 10.0, 0.0,
+        lambda: D.Scenario.speed_rpm([0.0, 5.0], [20, 200], ramp=1.0),
+        (Measure((4.0, 10.0), _ERR), Measure((7.0, 10.0), _ERR, label=" (last 3 s)")), {},
+        load=lambda: D.Scenario.load_steps([0.0, 8.0, 9.0], [0.0, 0.5, 0.0]), startup=_if_startup,
+        omega0=lambda par: par.p * 20 * D.RPM, alpha_s=2 * math.pi * 1.0, speed_rows="final", speed_paper=200.0,
+        quick=False,
+    ),
+)  # fmt: skip
+
+
+def _simulate(exp: FluxExperiment, par: D.PMSMParams) -> Run:
+    """``exp``'s run: the bench sensorless on the second-order SOIFO, all four observers on its measurements."""
+    est = par if exp.rs_scale is None else eqx.tree_at(lambda m: m.Rs, par, exp.rs_scale * par.Rs)
+    startup = None if exp.startup is None else exp.startup(par)
+    w0 = par.p * exp.rpm0 * D.RPM if exp.omega0 is None else exp.omega0(par)
+    sc = D.Scenario(
+        par,
+        est_par=est,
+        speed_ref=exp.speed_ref(),
+        load=None if exp.load is None else exp.load(),
+        sensors=None if exp.sensors is None else exp.sensors(),
+        omega_m0=exp.rpm0 * D.RPM if startup is None else 0.0,
+        dead_time=exp.dead_time,
+    )
+    # 000's sampling delay (module doc), in every experiment
+    drive = D.bench_drive(
+        par, handover=exp.handover, startup=startup, alpha_s=exp.alpha_s, latency=DSP_000, advance=DSP_000_ADVANCE,
+        speed_schedule=exp.speed_schedule,
+    )  # fmt: skip
+    if startup is None:  # the observers settled over 10 electrical periods first (10 s at 20 r/min)
+        drive = drive.settled_for(par.p * exp.rpm0 * D.RPM)
+    return run_kept(D.ClosedLoop(drive, flux_bank(est, w0, lpf_omega_c=exp.lpf_omega_c), sc), exp.t1)
+
+
+def run_flux_experiment(exp: FluxExperiment, par: D.PMSMParams) -> tuple[list[dict[str, Any]], Run]:
+    """Run one of 000's experiments and measure it.
+
+    Args:
+        exp: the experiment (a record of :data:`FLUX_EXPERIMENTS`).
+        par: the bench's machine (:func:`jaxobs.drive.bench_machine` "spmsm000").
+
+    Returns:
+        (rows, run): its rows {experiment, observer, metric, unit, paper, ours}, not yet annotated, and its run.
+    """
+    sol = _simulate(exp, par)
+    t = np.asarray(sol.t)
+    rows = []
+    for ms in exp.measures:
+        mask = _window(t, *ms.window)
+        name = exp.name + ms.label
+        rows += [r for r in _rows(name, sol, mask, ms.metrics, exp.paper) if r["observer"] in ms.observers]
+        if ms.delay:
+            rows += _delay_rows(name, sol, mask, exp.rpm0, exp.paper)
+    if exp.speed_rows == "range":
+        rpm_t = np.asarray(sol.outputs.speed_rpm)[_window(t, *exp.measures[0].window)]
+        for metric, v in (("min_speed", rpm_t.min()), ("max_speed", rpm_t.max())):
+            rows.append(
+                dict(experiment=exp.name, observer="drive", metric=metric, unit="r/min", paper=exp.speed_paper,
+                     ours=float(v))
+            )  # fmt: skip
+    elif exp.speed_rows == "final":
+        rpm = np.asarray(sol.outputs.speed_rpm)
+        rows.append(
+            dict(experiment=exp.name, observer="second-order SOIFO", metric="final_speed", unit="r/min",
+                 paper=exp.speed_paper, ours=float(rpm[-1]))
+        )  # fmt: skip
+    return rows, sol
+
+
+def run_flux_experiments(
+    quick: bool = False, progress: bool | Callable[[int, int | None], None] | None = None
+) -> tuple[list[dict[str, Any]], dict[str, Run]]:
+    """Run 000's experiments (:data:`FLUX_EXPERIMENTS`, in order).
+
+    Args:
+        quick: skip the 20 r/min and start-up runs (several simulated seconds each) and the LPF corner's fit.
+        progress: one step per experiment, each named as it compiles and runs (:mod:`jaxobs.runtime.progress`:
+            ``True`` a tqdm bar on stderr, or a callable ``progress(done, total)``).
+
+    Returns:
+        (rows, traces): rows {experiment, observer, metric, unit, paper, ours, tolerance, within, explanation}
+        (:mod:`jaxobs.reproduce.compare`), and each experiment's run by name.
     """
     par = D.bench_machine("spmsm000")
     rows, traces = [], {}
     bar = Progress(progress, None, "reproduce flux", unit="experiment")
-    err_metric = [("max_abs", "rad")]
-
-    def run(
-        name,
-        rpm0,
-        t1,
-        handover,
-        speed_ref,
-        load=None,
-        sensors=None,
-        est=None,
-        startup=None,
-        omega0=None,
-        alpha_s=2 * math.pi * papers.BENCH_SPEED_HZ,
-        dead_time=0.0,
-        lpf_omega_c=papers.LPF_OMEGA_C,
-        **foc_kw,
-    ):
-        est = par if est is None else est
-        w0 = par.p * rpm0 * D.RPM if omega0 is None else omega0
-        sc = D.Scenario(
-            par,
-            est_par=est,
-            speed_ref=speed_ref,
-            load=load,
-            sensors=sensors,
-            omega_m0=rpm0 * D.RPM if startup is None else 0.0,
-            dead_time=dead_time,
-        )
-        bar.stage(f"{name} ({t1:g} s)")
-        # 000's sampling delay (module doc), in every experiment
-        foc_kw = dict(latency=DSP_000, advance=DSP_000_ADVANCE, **foc_kw)
-        drive = D.bench_drive(par, handover=handover, startup=startup, alpha_s=alpha_s, **foc_kw)
-        if startup is None:  # the observers settled over 10 electrical periods first (10 s at 20 r/min)
-            drive = drive.settled_for(par.p * rpm0 * D.RPM)
-        sol = run_kept(D.ClosedLoop(drive, flux_bank(est, w0, lpf_omega_c=lpf_omega_c), sc), t1)
-        traces[name] = sol
-        t = np.asarray(sol.t)
+    for exp in FLUX_EXPERIMENTS:
+        if quick and not exp.quick:
+            continue
+        bar.stage(f"{exp.name} ({exp.t1:g} s)")
+        exp_rows, traces[exp.name] = run_flux_experiment(exp, par)
         bar.update()
-        return sol, t
-
-    # --- A. steady state, no load (Figs. 10-17)
-    for rpm, t1, hand, paper in (
-        (
-            2000,
-            0.6,
-            0.2,
-            {("LPF", "max_abs"): 0.4, ("SOIFO", "max_abs"): 0.15, ("second-order SOIFO", "max_abs"): 0.13},
-        ),
-        (
-            400,
-            1.6,
-            0.8,
-            {
-                ("integrator", "max_abs"): 6.0,
-                ("LPF", "max_abs"): 1.2,
-                ("SOIFO", "max_abs"): 0.035,
-                ("second-order SOIFO", "max_abs"): 0.03,
-            },
-        ),
-    ):
-        sol, t = run(f"steady {rpm} r/min", rpm, t1, hand, D.Profile.constant(rpm * D.RPM))
-        mask = _window(t, t1 - _periods(rpm, 5), t1)
-        rows += _rows(f"steady {rpm} r/min", sol, mask, err_metric + [("mean", "rad")], paper)
-        rows += _delay_rows(f"steady {rpm} r/min", sol, mask, rpm, paper)
-    if not quick:
-        # The LPF's corner that fits both of the paper's LPF errors with the delay (docs/papers.md): its
-        # lead atan(ωc/ω1) less the delay's lag gives 0.4 rad at 2000 r/min and 1.2 at 400 for ωc ≈ 360
-        for rpm, t1, hand, paper in ((2000, 0.6, 0.2, 0.4), (400, 1.6, 0.8, 1.2)):
-            name = f"steady {rpm} r/min, LPF ωc = {LPF_FIT:g} rad/s"
-            sol, t = run(name, rpm, t1, hand, D.Profile.constant(rpm * D.RPM), lpf_omega_c=LPF_FIT)
-            rows += [
-                r
-                for r in _rows(
-                    name, sol, _window(t, t1 - _periods(rpm, 5), t1), err_metric, {("LPF", "max_abs"): paper}
-                )
-                if r["observer"] == "LPF"
-            ]
-        # At 20 r/min (ωe = 6.3 rad/s) the FLLs' bandwidth (∝ ωe) is below the bench's 5 Hz speed loop:
-        # sensorless with the speed loop scheduled inside it, FOC(speed_schedule=6), the observers settled
-        # over 10 periods first (run(): Drive.settled_for; docs/stability.md "20 r/min").  It holds 20 r/min
-        # and its error is the delay's, 2.3-2.5 samples.
-        rpm, t1 = 20, 3.0
-        name = "steady 20 r/min"
-        sol, t = run(name, rpm, t1, 0.0, D.Profile.constant(rpm * D.RPM), speed_schedule=6.0)
-        mask = _window(t, t1 - 1.0, t1)
-        rows += _rows(name, sol, mask, err_metric + [("mean", "rad")], {})
-        rows += _delay_rows(name, sol, mask, rpm, {})
-        rpm_t = np.asarray(sol.outputs.speed_rpm)[mask]
-        for metric, v in (("min_speed", rpm_t.min()), ("max_speed", rpm_t.max())):
-            rows.append(dict(experiment=name, observer="drive", metric=metric, unit="r/min", paper=20.0, ours=float(v)))
-
-    # --- B. speed variation 400 <-> 2000 r/min (Fig. 18)
-    prof = D.Scenario.speed_rpm([0.0, 1.0, 2.0], [400, 2000, 400], ramp=0.5)
-    sol, t = run("speed 400-2000-400 r/min", 400, 3.0, 0.8, prof)
-    rows += _rows(
-        "speed 400-2000-400 r/min",
-        sol,
-        _window(t, 1.0, 3.0),
-        err_metric,
-        {("LPF", "max_abs"): 1.2, ("SOIFO", "max_abs"): 0.15, ("second-order SOIFO", "max_abs"): 0.13},
-    )
-
-    # --- C. load step 0 -> 10 N·m at 2000 r/min (Fig. 19), on the ideal inverter and with a dead time
-    for suffix, dt in (("", 0.0), (DEAD_TIME_SUFFIX, DEAD_TIME)):
-        name = "load step 10 N·m at 2000 r/min" + suffix
-        sol, t = run(
-            name,
-            2000,
-            0.8,
-            0.2,
-            D.Profile.constant(2000 * D.RPM),
-            load=D.Scenario.load_steps([0.0, 0.4], [0.0, 10.0]),
-            dead_time=dt,
-        )
-        rows += _rows(
-            name,
-            sol,
-            _window(t, 0.4, 0.8),
-            err_metric,
-            {("LPF", "max_abs"): 1.3, ("SOIFO", "max_abs"): 0.25, ("second-order SOIFO", "max_abs"): 0.20},
-        )
-
-    # --- D. dc disturbances at 1000 r/min (Figs. 21-22)
-    for label, sens, paper in (
-        (
-            "du_alpha = 5 V at 1000 r/min",
-            D.Sensors(u_offset=(5.0, 0.0)),
-            {
-                ("LPF", "flux_offset"): 0.05,
-                ("SOIFO", "flux_offset"): 0.03,
-                ("second-order SOIFO", "flux_offset"): 0.0,
-                ("LPF", "ripple"): 0.65,
-                ("SOIFO", "ripple"): 0.25,
-                ("second-order SOIFO", "ripple"): 0.0,
-            },
-        ),
-        (
-            "di_beta = 1.5 A at 1000 r/min",
-            D.Sensors(i_offset=(0.0, 1.5)),
-            {
-                ("LPF", "flux_offset"): 0.03,
-                ("SOIFO", "flux_offset"): 0.017,
-                ("second-order SOIFO", "flux_offset"): 0.005,
-                ("LPF", "ripple"): 0.6,
-                ("SOIFO", "ripple"): 0.22,
-                ("second-order SOIFO", "ripple"): 0.0,
-            },
-        ),
-    ):
-        for suffix, dt in (("", 0.0), (DEAD_TIME_SUFFIX, DEAD_TIME)):
-            sol, t = run(label + suffix, 1000, 1.0, 0.4, D.Profile.constant(1000 * D.RPM), sensors=sens, dead_time=dt)
-            mask = _window(t, 1.0 - _periods(1000, 10), 1.0)
-            rows += _rows(label + suffix, sol, mask, [("flux_offset", "Wb"), ("ripple", "rad")], paper)
-
-    # --- E. Rs mismatch: the observers assume 0.4 Rs0, 10 N·m at 1000 r/min (Fig. 23)
-    sol, t = run(
-        "Rs_est = 0.4 Rs0, 10 N·m, 1000 r/min",
-        1000,
-        1.0,
-        0.4,
-        D.Profile.constant(1000 * D.RPM),
-        load=D.Scenario.load_steps([0.0, 0.2], [0.0, 10.0]),
-        est=eqx.tree_at(lambda m: m.Rs, par, 0.4 * par.Rs),
-    )
-    rows += _rows(
-        "Rs_est = 0.4 Rs0, 10 N·m, 1000 r/min",
-        sol,
-        _window(t, 1.0 - _periods(1000, 10), 1.0),
-        err_metric + [("mean", "rad"), ("ripple", "rad")],
-        # "the estimated rotor position does not fluctuate" (Sec. IV-C): no ripple, of the proposed observers
-        {("SOIFO", "ripple"): 0.0, ("second-order SOIFO", "ripple"): 0.0},
-    )
-
-    # --- F. I-f start to 20 r/min, sensorless to 200 r/min, load step (Fig. 20)
-    if not quick:
-        we_sw = par.p * 20 * D.RPM
-        start = D.IfStartup(i_f=4.0, accel=we_sw / 0.5, omega_switch=we_sw, hold=4.0)
-        # The speed loop closes through the FLL's ω̂, whose bandwidth at 20 r/min is ~5 rad/s:
-        # α_s = 2π·1 rad/s, and a load step the paper does not size, 0.5 N·m.
-        prof = D.Scenario.speed_rpm([0.0, 5.0], [20, 200], ramp=1.0)
-        load = D.Scenario.load_steps([0.0, 8.0, 9.0], [0.0, 0.5, 0.0])
-        name = "I-f start, 20 -> 200 r/min, 0.5 N·m step"
-        sol, t = run(name, 0, 10.0, 0.0, prof, load=load, startup=start, omega0=we_sw, alpha_s=2 * math.pi * 1.0)
-        rows += _rows(name, sol, _window(t, 4.0, 10.0), err_metric, {})
-        rows += _rows(name + " (last 3 s)", sol, _window(t, 7.0, 10.0), err_metric, {})
-        rpm = np.asarray(sol.outputs.speed_rpm)
-        rows.append(
-            dict(
-                experiment=name,
-                observer="second-order SOIFO",
-                metric="final_speed",
-                unit="r/min",
-                paper=200.0,
-                ours=float(rpm[-1]),
-            )
-        )
+        rows += exp_rows
     for name, sol in traces.items():
         rows.append(
             dict(experiment=name, observer="drive", metric="finite", unit="bool", paper=None, ours=bool(sol.ok))
@@ -382,8 +447,15 @@ def run_flux_experiments(quick: bool = False, progress=None):
     return annotate(rows, EXPLANATIONS), traces
 
 
-def format_rows(rows) -> str:
-    """The rows as a fixed-width table; each text column as wide as its longest entry plus a space."""
+def format_rows(rows: Sequence[Mapping[str, Any]]) -> str:
+    """The rows as a fixed-width table; each text column as wide as its longest entry plus a space.
+
+    Args:
+        rows: the rows {experiment, observer, metric, unit, paper, ours}.
+
+    Returns:
+        The table.
+    """
     cols = ("experiment", "observer", "metric", "unit")
     width = {c: max([len(c)] + [len(str(r[c])) for r in rows]) + 1 for c in cols}
     head = "".join(f"{c:<{width[c]}}" for c in cols) + f"{'paper':>9}{'ours':>11}"

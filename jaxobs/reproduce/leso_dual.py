@@ -42,13 +42,15 @@ dual machine's rated torque.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 
 from .. import drive as D
 from ..metrics import harmonic_amplitude
 from ..runtime.progress import Progress
-from ._run import run_kept
+from ._run import Run, run_kept
 from .compare import annotate
 from .leso import LESO_NAMES, LOAD_STEP, LOAD_STEP_OTHERS, SENSORLESS_FW_SPEED_HZ, _closing_rows, leso_bank
 
@@ -123,10 +125,20 @@ def _ramp_rows(name, sol, i, machine, inv, paper_deg, paper_rpm):
     ]
 
 
-def run_leso_dual(progress=None, t1: float = 1.0, dynamics: bool = True):
-    """Returns (rows, traces) for :data:`DUAL_EXPERIMENTS` (``t1`` s each) and, with ``dynamics``, the
-    transients of :data:`DUAL_DYNAMICS` (module doc), rows as :func:`run_leso_experiments`'s (explained by
-    :data:`DUAL_EXPLANATIONS`)."""
+def run_leso_dual(
+    progress: bool | Callable[[int, int | None], None] | None = None, t1: float = 1.0, dynamics: bool = True
+) -> tuple[list[dict[str, Any]], dict[str, Run]]:
+    """The dual drive's experiments (:data:`DUAL_EXPERIMENTS`) and transients (:data:`DUAL_DYNAMICS`, module doc).
+
+    Args:
+        progress: one step per experiment (:mod:`jaxobs.runtime.progress`).
+        t1: s, each of :data:`DUAL_EXPERIMENTS`' horizon.
+        dynamics: also the transients of :data:`DUAL_DYNAMICS`.
+
+    Returns:
+        (rows, traces): rows as :func:`run_leso_experiments`'s (explained by :data:`DUAL_EXPLANATIONS`), and each
+        experiment's run by name.
+    """
     rows, traces = [], {}
     n = len(DUAL_EXPERIMENTS) + (len(DUAL_DYNAMICS) if dynamics else 0)
     bar = Progress(progress, n, "reproduce leso (dual)", unit="experiment")
