@@ -95,7 +95,9 @@ def cmd_drive_check(args: argparse.Namespace) -> int:
         for k, r in rows:
             seen.add(k)
             hz = (
-                f" ({r.value / (2 * math.pi):.4g} Hz)" if r.unit == "rad/s" and k.startswith(("alpha", "omega")) else ""
+                f" ({r.value / (2 * math.pi):.4g} Hz)"
+                if r.unit == "rad/s" and k.startswith(("alpha", "omega")) and isinstance(r.value, (int, float))
+                else ""
             )
             mark = "*" if r.given else " "
             print(f"  {mark}{k:<20} {_fmt(r.value):>12} {r.unit:<10}{hz}  {r.rule}")

@@ -124,8 +124,8 @@ def _check_designs_and_drive(designs: Mapping[str, Any], drive: Drive | DualDriv
 def _plane(
     machine: PMSMParams,
     drive: Drive | DualDrive,
-    speeds_rpm: ArrayLike | None,
-    loads_nm: ArrayLike | None,
+    speeds_rpm: ArrayLike | Sequence[float] | None,
+    loads_nm: ArrayLike | Sequence[float] | None,
     mismatch: tuple | None,
     max_speed_rpm: float | None,
 ) -> dict[str, np.ndarray]:
@@ -304,8 +304,8 @@ def envelope(
     *,
     machine: PMSMParams | DualPMSMParams,
     drive: Drive | DualDrive,
-    speeds_rpm: ArrayLike | None = None,
-    loads_nm: ArrayLike | None = None,
+    speeds_rpm: ArrayLike | Sequence[float] | None = None,
+    loads_nm: ArrayLike | Sequence[float] | None = None,
     mismatch: tuple[str, ArrayLike] | None = None,
     horizon: float = 2.0,
     steady_from: float | None = None,

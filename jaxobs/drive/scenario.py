@@ -26,6 +26,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax.typing import ArrayLike
 
 from ..core.quantities import Axis, text_unit
 from ..core.validate import as_float, check_nonnegative, check_real, key_part
@@ -144,7 +145,9 @@ class ParameterDrift(eqx.Module):
         self.Rs, self.Ld, self.Lq, self.psi_f = Rs, Ld, Lq, psi_f
 
     @classmethod
-    def ramps(cls, name: str, times: jax.Array | float, factors: jax.Array | float) -> ParameterDrift:
+    def ramps(
+        cls, name: str, times: ArrayLike | Sequence[float], factors: ArrayLike | Sequence[float]
+    ) -> ParameterDrift:
         """One parameter ramped linearly through relative factors.
 
         Args:
@@ -266,7 +269,7 @@ class Scenario(eqx.Module):
         return Profile(tt, vv, kind="linear")
 
     @staticmethod
-    def load_steps(times: jax.Array | float, torques: jax.Array | float) -> Profile:
+    def load_steps(times: ArrayLike | Sequence[float], torques: ArrayLike | Sequence[float]) -> Profile:
         """Load torque stepping to ``torques[i]`` at ``times[i]``.
 
         Args:

@@ -12,7 +12,7 @@ import math
 import os
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 from jax.typing import ArrayLike
@@ -35,6 +35,20 @@ if TYPE_CHECKING:
 
     from ..drive import DriveOutput, DualOutput
     from ..runtime.simulation import Solution
+
+
+class Trace(Protocol):
+    """A run as the figures read it: :class:`jaxobs.Solution`, or a reproduction's kept run of the same fields."""
+
+    @property
+    def t(self) -> Any:
+        """The sample times, s."""
+        ...
+
+    @property
+    def outputs(self) -> Any:
+        """The outputs, a PyTree with time leading."""
+        ...
 
 
 def fll_event_text(test: str) -> str:
@@ -133,7 +147,7 @@ def fll_demo_figure(
 
 
 def flux_circles_figure(
-    sol: Solution, names: Sequence[str], title: str, path: FigurePath = None, last: float = 0.1
+    sol: Trace, names: Sequence[str], title: str, path: FigurePath = None, last: float = 0.1
 ) -> Figure:
     """Estimated rotor-flux circles (ψ̂β vs ψ̂α) of each observer over the last ``last`` seconds.
 

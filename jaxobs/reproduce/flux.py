@@ -43,6 +43,7 @@ from typing import Any, NamedTuple
 
 import equinox as eqx
 import numpy as np
+from jax.typing import ArrayLike
 
 from .. import drive as D
 from .. import linear, papers
@@ -54,7 +55,7 @@ from ..observers import (
     PureIntegratorFlux,
     SecondOrderSOIFO,
 )
-from ..runtime.progress import Progress
+from ..runtime.progress import Progress, ProgressArg
 from ._run import Run, run_kept
 from .compare import annotate
 
@@ -89,8 +90,8 @@ def flux_bank(
     est: D.PMSMParams,
     omega_e: float,
     *,
-    lam_soifo: float = linear.soifo_lambda(K_SOIFO),
-    lam_sosoifo: float = linear.second_order_soifo_lambda(K1, K2),
+    lam_soifo: ArrayLike = linear.soifo_lambda(K_SOIFO),
+    lam_sosoifo: ArrayLike = linear.second_order_soifo_lambda(K1, K2),
     K1_: float = K1,
     K2_: float = K2,
     k: float = K_SOIFO,
@@ -416,7 +417,7 @@ def run_flux_experiment(exp: FluxExperiment, par: D.PMSMParams) -> tuple[list[di
 
 
 def run_flux_experiments(
-    quick: bool = False, progress: bool | Callable[[int, int | None], None] | None = None
+    quick: bool = False, progress: ProgressArg = None
 ) -> tuple[list[dict[str, Any]], dict[str, Run]]:
     """Run 000's experiments (:data:`FLUX_EXPERIMENTS`, in order).
 

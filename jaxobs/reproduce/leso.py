@@ -42,7 +42,7 @@ from .. import drive as D
 from .. import linear, papers
 from ..metrics import harmonic_amplitude, wrap
 from ..observers import CLESO, FALESO, GILESO, ObserverBank
-from ..runtime.progress import Progress
+from ..runtime.progress import Progress, ProgressArg
 from ._run import Run, run_kept
 from .compare import annotate
 
@@ -536,7 +536,7 @@ def run_leso_experiment(exp: LesoExperiment) -> tuple[Rows, Run]:
 
 
 def run_leso_experiments(
-    progress: bool | Callable[[int, int | None], None] | None = None,
+    progress: ProgressArg = None,
 ) -> tuple[Rows, dict[str, Run]]:
     """Run 002's experiments (:data:`LESO_EXPERIMENTS`, in order).
 

@@ -42,14 +42,13 @@ dual machine's rated torque.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 
 from .. import drive as D
 from ..metrics import harmonic_amplitude
-from ..runtime.progress import Progress
+from ..runtime.progress import Progress, ProgressArg
 from ._run import Run, run_kept
 from .compare import annotate
 from .leso import LESO_NAMES, LOAD_STEP, LOAD_STEP_OTHERS, SENSORLESS_FW_SPEED_HZ, _closing_rows, leso_bank
@@ -87,7 +86,8 @@ DUAL_DYNAMICS = (
     *(_closing(DUAL_LOAD_STEP, i) for i in (2, 0, 1)),
     DUAL_RAMP_FW,
 )
-_RAMP = dict(t=[0.0, 0.6, 1.4, 2.2, 3.0], rpm=[300, 600, 840, 600, 300], t1=3.6)
+# the ramp's breakpoints, s, and speeds, r/min; its horizon, s
+_RAMP_T, _RAMP_RPM, _RAMP_T1 = [0.0, 0.6, 1.4, 2.2, 3.0], [300.0, 600.0, 840.0, 600.0, 300.0], 3.6
 
 
 def _simulate(name, machine, mode, rpm0, speed_ref, load, t1, primary=2, sensorless=True, **drive_kw):
@@ -126,7 +126,7 @@ def _ramp_rows(name, sol, i, machine, inv, paper_deg, paper_rpm):
 
 
 def run_leso_dual(
-    progress: bool | Callable[[int, int | None], None] | None = None, t1: float = 1.0, dynamics: bool = True
+    progress: ProgressArg = None, t1: float = 1.0, dynamics: bool = True
 ) -> tuple[list[dict[str, Any]], dict[str, Run]]:
     """The dual drive's experiments (:data:`DUAL_EXPERIMENTS`) and transients (:data:`DUAL_DYNAMICS`, module doc).
 
@@ -167,15 +167,15 @@ def run_leso_dual(
         rows.append(dict(experiment=name, observer="drive", metric="xy_rms", unit="A", paper=None, ours=ixy))
         bar.update()
     if dynamics:
-        ramp = D.Scenario.speed_rpm(_RAMP["t"], _RAMP["rpm"], ramp=0.4)
+        ramp = D.Scenario.speed_rpm(_RAMP_T, _RAMP_RPM, ramp=0.4)
         step = D.Scenario.load_steps([0.0, 0.6, 0.9], [0.0, 0.8 * rated, 0.0])
         w600 = D.Profile.constant(600 * D.RPM)
         fw = D.VoltageFeedbackFW()
         inv, inv330 = D.Inverter(), D.Inverter(udc=330.0)
         for i in (2, 0, 1):
             name = _closing(DUAL_RAMP, i)
-            bar.stage(f"{name} ({_RAMP['t1']:g} s)")
-            sol = _simulate(name, machine, "vsd", 300, ramp, None, _RAMP["t1"], i, inverter=inv, field_weakening=fw)
+            bar.stage(f"{name} ({_RAMP_T1:g} s)")
+            sol = _simulate(name, machine, "vsd", 300, ramp, None, _RAMP_T1, i, inverter=inv, field_weakening=fw)
             traces[name] = sol
             rows += _ramp_rows(name, sol, i, machine, inv, 4.5 if i == 2 else None, 13.0)
             bar.update()
@@ -189,9 +189,9 @@ def run_leso_dual(
         # field weakening where it acts: 840 r/min above base speed on 330 V, the FA-LESO closing the loop on
         # the 2.5 Hz speed loop (module doc)
         name = DUAL_RAMP_FW
-        bar.stage(f"{name} ({_RAMP['t1']:g} s)")
+        bar.stage(f"{name} ({_RAMP_T1:g} s)")
         sol = _simulate(
-            name, machine, "vsd", 300, ramp, None, _RAMP["t1"], inverter=inv330, field_weakening=fw,
+            name, machine, "vsd", 300, ramp, None, _RAMP_T1, inverter=inv330, field_weakening=fw,
             alpha_s=2 * math.pi * SENSORLESS_FW_SPEED_HZ,
         )  # fmt: skip
         traces[name] = sol

@@ -7,6 +7,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from pathlib import Path
+from typing import Literal, overload
 
 from jaxobs import drive as D
 from jaxobs.drive import SHIPPED_DRIVES, Drive, DriveFile, drive_from_table, read_drive, shipped_drive
@@ -168,7 +169,15 @@ def check_three_phase(spec: DriveSpec) -> None:
         )
 
 
-def job_drive(spec: DriveSpec | None = None, *, dual: bool = False) -> Drive:
+@overload
+def job_drive(spec: DriveSpec | None = None, *, dual: Literal[False] = False) -> Drive: ...
+
+
+@overload
+def job_drive(spec: DriveSpec | None = None, *, dual: bool) -> Drive | D.DualDrive: ...
+
+
+def job_drive(spec: DriveSpec | None = None, *, dual: bool = False) -> Drive | D.DualDrive:
     """The drive a ``signal = "drive"`` job runs: its drive file's (:meth:`jaxobs.drive.DriveFile.drive_for`).
 
     Args:
