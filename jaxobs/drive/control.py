@@ -58,7 +58,7 @@ Delay compensation: the voltage computed from the samples at τ_k acts ``advance
 periods later on average (1.5 with sampling at the period start and one period of
 computation: :mod:`jaxobs.drive.latency`), so the controller rotates its output
 ahead by ``advance`` × ω̂e T_s; ``advance = 0`` is no compensation
-(``delay_compensation=False``, the old flag, is ``advance=0``).
+(``delay_compensation=False`` is ``advance=0``).
 
 I-f start-up from standstill (:class:`IfStartup`, the design and its reasons): :mod:`jaxobs.drive.startup`.
 """

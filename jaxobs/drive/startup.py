@@ -8,7 +8,7 @@ The design and its reasons:
    d axis on the current vector).  A real drive gets there by a d-axis alignment
    (pre-positioning) phase, which friction and eddy currents settle; the model
    has almost no damping (B ≈ 0), so we start where that phase ends.  Started
-   90° off instead (θ_f = 0 with the rotor at 0, the old start) the rotor swung
+   90° off instead (θ_f = 0 with the rotor at 0) the rotor swung
    ±90° for the whole start-up (−41 … 126 r/min around a 0 … 60 r/min ramp on the
    IPMSM bench) and no observer could be handed a rotor moving like that.
 2. *Smooth ramp.*  The rotor follows θ_f through the torque-angle "spring"
@@ -32,7 +32,7 @@ The design and its reasons:
    θ̂ with nothing stepping: the current references continue the I-f vector seen
    from θ̂ (i_q = I_f cos Δ, i_d = −I_f sin Δ); the speed integrator is pre-loaded
    so that the I-P output k_pω(b ω* − ω̂) + ∫ equals I_f cos Δ (without the
-   k_pω ω̂ term, as before, the switch stepped i_q by −k_pω ω̂: −5.8 A on the
+   k_pω ω̂ term the switch would step i_q by −k_pω ω̂: −5.8 A on the
    IPMSM bench at 60 r/min); the current PIs' integrators are rotated into θ̂
    with their decoupling terms, so the voltage vector is continuous; the held
    i_q* until the next speed-loop sample is I_f cos Δ, not I_f.
