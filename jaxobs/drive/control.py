@@ -362,27 +362,9 @@ class FOC(AbstractComponent):
     ) -> OperatingPoint:
         """The steady state of the true machine ``par`` under this controller at speed ω_m and load T_L.
 
-        The speed loop settles where the torque balances the load and friction,
-        T_e(i_d, i_q) = T_L + B ω_m, with the controller's references i_q* and
-        i_d*(i_q*) (zero, or MTPA on the assumed machine) met in its own frame,
-        ``offset`` (rad) ahead of the rotor's: the rotor-frame currents are the
-        references rotated by the offset, (i_d, i_q) = R(offset)(i_d*, i_q*)
-        (a lagging observer, offset < 0, puts part of i_q* on the rotor's d axis,
-        and i_q* grows to carry the load).  Solved by Newton's method from
-        i_q* = (T_L + B ω_m)/(K_t cos offset) (exact in one step for i_d* = 0).
-        With ``outer="current"`` the reference *is* i_q*.  The voltage is the true
-        machine's steady rotor-frame voltage (the BEMF harmonics, which average
-        out, are left out).
-
-        With field weakening the operating point is the field-weakened one where the
-        policy's would ask for more than the margin m u_max: i_d* ≤ the policy's such that
-        |u| = m u_max (:class:`VoltageFeedbackFW`'s equilibrium; |u| is the same in the
-        controller's frame and the rotor's), jointly with the torque balance (Newton on
-        i_d* and i_q* in turn, from the policy's point), i_d* within its stop
-        (:func:`~jaxobs.drive.weakening.id_stop`) and i_q* within the circle, MTPV and the
-        voltage (:mod:`jaxobs.drive.weakening`, point 3; a load beyond them is not
-        carried, and the drive decelerates from there).  ``id_fw`` is then i_d* less the
-        policy's i_d.  Below base speed Δi_d = 0 and the point is the policy's, unchanged.
+        The torque balanced against the load and friction with the controller's references met in its own frame,
+        ``offset`` ahead of the rotor's, field-weakened where the voltage asks for it: the rules are
+        ``jaxobs.drive._operating.steady_point``'s, which this calls with the controller's settings.
 
         Args:
             par: The true machine.
