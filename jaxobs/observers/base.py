@@ -25,7 +25,7 @@ The hierarchy (abstract classes; the concrete observers are final):
   ``step``.  Every observer subclasses it.
 - :class:`AbstractVectorFieldObserver`: an observer given by a vector field ``f(x, u)`` on a
   flat state, integrated by its rule (the FLL family, the SOGIs); ``init``/``step`` come with it.
-- :class:`AbstractDriveObserver`: an observer of a drive (fed a :class:`~jaxobs.measurements.DriveInput`)
+- :class:`AbstractDriveObserver`: an observer of a drive (fed a :class:`~jaxobs.core.measurements.DriveInput`)
   that assumes a machine and starts at a speed: ``bind``, ``init_at``, ``seed_speed``.  The flux
   observers (:class:`~jaxobs.observers.flux.AbstractFluxObserver`), the LESOs
   (:class:`~jaxobs.observers.leso.AbstractLESO`) and :class:`ObserverBank` implement it; a user's own
@@ -328,7 +328,7 @@ class BoundFields:
 
 
 class AbstractDriveObserver(AbstractObserver):
-    """An observer of a drive: fed a :class:`~jaxobs.measurements.DriveInput` each period, it assumes a
+    """An observer of a drive: fed a :class:`~jaxobs.core.measurements.DriveInput` each period, it assumes a
     machine (what the controller believes, ``est_par`` in motulator's vocabulary) and starts at a speed.
 
     The one way to bind a drive observer to a machine and an operating point is :meth:`bind`; studies,

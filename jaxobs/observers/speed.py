@@ -12,7 +12,7 @@ states of its own, appended to the observer's state after the observer's filter 
   the C export know), so a PLL strategy holds no leaves of its own.
 
 - :class:`MechanicalSpeed`: a mechanical-model speed observer, states [θ̂, ω̂, T̂L], driven by the torque
-  reference T* the controller commands (:attr:`jaxobs.measurements.DriveInput.T_ref`) and the assumed inertia
+  reference T* the controller commands (:attr:`jaxobs.core.measurements.DriveInput.T_ref`) and the assumed inertia
   Ĵ, friction B̂ and pole pairs p (ω in electrical rad/s):
 
       θ̂̇ = ω̂ + k1 ε

@@ -136,7 +136,7 @@ def run_leso_dual(
         dynamics: also the transients of :data:`DUAL_DYNAMICS`.
 
     Returns:
-        (rows, traces): rows as :func:`run_leso_experiments`'s (explained by :data:`DUAL_EXPLANATIONS`), and each
+        (rows, traces): rows as :func:`~jaxobs.reproduce.leso.run_leso_experiments`'s (explained by :data:`DUAL_EXPLANATIONS`), and each
         experiment's run by name.
     """
     rows, traces = [], {}
