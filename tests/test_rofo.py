@@ -105,6 +105,11 @@ def test_closed_form_design_is_the_observer_with_its_rows_at_the_machine():
         ReducedOrderFluxObserver.closed_form_design(c_sigma=0.0)  # the gain's declared bound (check_gains)
     res = closed_form_rows("rofo", {"rs": m["Rs"], "ld": m["Ld"], "lq": m["Lq"], "ts": ts})
     assert [(g["name"], g["value"]) for g in res["gains"]] == [(r.name, float(r.value)) for r in d.rows]
+    # a gain given on the command line is not the paper's choice: its row says so, the others keep their rules
+    given = {g["name"]: g for g in closed_form_rows("rofo", {"c_sigma": 1.0})["gains"]}
+    assert given["c_sigma"]["value"] == 1.0 and given["c_sigma"]["formula"] == "given (--c-sigma)"
+    assert given["zeta_inf"]["formula"].startswith("chosen: ζ∞ = 0.2")
+    assert given["sigma0"]["formula"].startswith("σ0 = c_σ Rs(1/Ld + 1/Lq)/2")
 
 
 @pytest.mark.parametrize("name", list(MACHINES))

@@ -166,12 +166,20 @@ def closed_form_rows(design: str, values: dict) -> dict:
             allowed = ", ".join(cf_flag(o) for o in CF_OPTIONS[design])
             raise ValueError(f"{cf_flag(k)} does not apply to {design} (allowed: {allowed})")
     cf = CF_DESIGNS[design].closed_form_design(**{by_flag[k]: v for k, v in values.items()})
+    given = {by_flag[k] for k in values}  # a gain given as an input is not the paper's choice: its formula is "given"
     return {
         "design": design,
         "source": cf.source,
         "inputs": {k: float(v) for k, v in cf.inputs.items()},
         "gains": [
-            dict(name=r.name, value=float(r.value), units=r.units, formula=r.formula, source=r.source) for r in cf.rows
+            dict(
+                name=r.name,
+                value=float(r.value),
+                units=r.units,
+                formula=f"given ({cf_flag(r.name)})" if r.name in given else r.formula,
+                source=r.source,
+            )
+            for r in cf.rows
         ],
     }
 

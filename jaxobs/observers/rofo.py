@@ -320,8 +320,8 @@ class ReducedOrderFluxObserver(AbstractDriveObserver):
         speed = "Hinkkanen et al. 2018 (pole placement); motulator 0.18 default_alpha_o, matched_pole"
         sigma0 = obs.c_sigma * 0.5 * obs.Rs * (1.0 / obs.Ld + 1.0 / obs.Lq)
         rows = (
-            gain_row(cls, "c_sigma", obs.c_sigma, "c_σ = 1/2: σ0 = Rs(1/Ld + 1/Lq)/4", flux),
-            gain_row(cls, "zeta_inf", obs.zeta_inf, "ζ∞ = 0.2 (flux poles' damping at high speed)", flux),
+            gain_row(cls, "c_sigma", obs.c_sigma, "chosen: c_σ = 1/2 (σ0 = Rs(1/Ld + 1/Lq)/4)", flux),
+            gain_row(cls, "zeta_inf", obs.zeta_inf, "chosen: ζ∞ = 0.2 (high-speed flux-pole damping)", flux),
             gain_row(cls, "k_theta", obs.k_theta, "kθ = 2α' (double pole at −α')", speed),
             gain_row(cls, "k_omega", obs.k_omega, "kω = α'²", speed),
             DesignRow("sigma0", sigma0, "s-1", "σ0 = c_σ Rs(1/Ld + 1/Lq)/2 (poles 0, −2σ0 at ω = 0)", flux),
