@@ -6,6 +6,7 @@ import json
 import math
 import re
 import time
+import tomllib
 from pathlib import Path
 
 import jax
@@ -230,6 +231,12 @@ def test_missing_job_file_and_good_check(tmp_path, capsys):
     assert main(["tune", str(path), "--check"]) == 0
     assert "OK" in capsys.readouterr().out
     assert main(["tune", "--check"]) == 0  # the embedded default job
+
+
+def test_a_job_names_its_component_by_class_or_by_the_closed_forms_alias():
+    """``component = "sogi-fll"`` (the name ``jaxobs closed-form`` takes) is the class SOGIFLL."""
+    raw = tomllib.loads(GOOD.replace('component = "SOGIFLL"', 'component = "sogi-fll"'))
+    assert parse_job(raw).component == "SOGIFLL" == parse_job(tomllib.loads(GOOD)).component
 
 
 def test_an_emf_job_refuses_an_axis_its_signals_ignore():

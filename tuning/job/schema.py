@@ -217,16 +217,22 @@ JOB_TABLES += ("envelope",)
 SOLVER_KEYS = ("kind", "learning_rate", "steps", "patience", "tol", "schedule", "checkpoint_every", "progress_every")
 
 
+# a registered class's short names (its closed form's aliases) -> the class's name
+_ALIAS_CLASS = {alias: name for name, entry in REGISTRY.items() for alias in entry.aliases}
+
+
 def _parse_job_table(raw: dict) -> tuple[str, str, int]:
     """``[job]``: the job's name, its component's registered name (tunable) and its seed."""
     job_t = get_field(raw, "job", "job", dict, required=True)
     no_unknown(job_t, ("name", "component", "seed"), "job")
     name = get_field(job_t, "name", "job.name", str, "job")
     comp = get_field(job_t, "component", "job.component", str, required=True)
+    comp = _ALIAS_CLASS.get(comp, comp)  # a closed form's short name ("soifo", as `jaxobs closed-form` takes it)
     if comp in REGISTRY and not REGISTRY[comp].tunable:  # the class declares why (why_not_tunable)
         raise JobError("job.component", f"{comp} is not tunable: {REGISTRY[comp].cls.why_not_tunable}")
     if comp not in COMPONENTS:
-        raise JobError("job.component", f"unknown component {show(comp)}; known: {', '.join(COMPONENTS)}")
+        known = ", ".join([*COMPONENTS, *(a for a, c in _ALIAS_CLASS.items() if c in COMPONENTS)])
+        raise JobError("job.component", f"unknown component {show(comp)}; known: {known}")
     seed = get_field(job_t, "seed", "job.seed", int, 0)
     if not 0 <= seed < 2**32 - 1:
         raise JobError("job.seed", f"must be in [0, 2^32 - 1), got {show(seed)}")
