@@ -10,8 +10,8 @@ from typing import Any
 
 import equinox as eqx
 import jax.numpy as jnp
+from jax.typing import ArrayLike
 
-from ..core.numerics import Real
 from ..observers import (
     pll_gains,
     second_order_soifo_lambda,
@@ -63,7 +63,7 @@ class FLLModel(eqx.Module):
     open_loop: TransferFunction  # θ̂/(θ − θ̂), the loop of 001 Fig. 14
 
 
-def sogi_fll_model(k: Real, lam: Real, omega_n: Real) -> FLLModel:
+def sogi_fll_model(k: ArrayLike, lam: ArrayLike, omega_n: ArrayLike) -> FLLModel:
     """The SOGI-FLL's small-signal model, 001 eqs (18)–(20).
 
     Args:
@@ -86,7 +86,7 @@ def sogi_fll_model(k: Real, lam: Real, omega_n: Real) -> FLLModel:
     )
 
 
-def wpf_model(k1: Real, k2: Real, lam: Real, omega_n: Real) -> FLLModel:
+def wpf_model(k1: ArrayLike, k2: ArrayLike, lam: ArrayLike, omega_n: ArrayLike) -> FLLModel:
     """001 eqs (23)–(25).
 
     001 notes that Fig. 4 "does not have a standard form"; rearranged, the loop
@@ -115,7 +115,7 @@ def wpf_model(k1: Real, k2: Real, lam: Real, omega_n: Real) -> FLLModel:
     )
 
 
-def wif_model(k1: Real, k2: Real, lam: Real, omega_n: Real) -> FLLModel:
+def wif_model(k1: ArrayLike, k2: ArrayLike, lam: ArrayLike, omega_n: ArrayLike) -> FLLModel:
     """The SOGI-FLL-WIF's small-signal model, 001 eqs (30)–(32).
 
     Args:

@@ -325,7 +325,9 @@ def itae(t: jax.Array, e: Real, t_event: Real = 0.0) -> jax.Array:
     return _nan_where(~jnp.any(after, axis=-1), val)
 
 
-def harmonic_amplitude(t: Real, x: jax.Array, omega: Real, mask: jax.Array | None = None) -> jax.Array:
+def harmonic_amplitude(
+    t: Real, x: jax.Array | np.ndarray, omega: Real, mask: jax.Array | np.ndarray | None = None
+) -> jax.Array:
     """Amplitude of the component of ``x`` at angular frequency ``omega`` (DFT over the masked samples).
 
     Exact for a sinusoid when the window holds whole periods of every component
