@@ -6,8 +6,11 @@ simulator runs, so a closed-form design and a tuned one are compared directly.
 
 from __future__ import annotations
 
+from typing import Any
+
 import equinox as eqx
 import jax.numpy as jnp
+from jax.typing import ArrayLike
 
 from ..observers import (
     pll_gains,
@@ -60,7 +63,7 @@ class FLLModel(eqx.Module):
     open_loop: TransferFunction  # θ̂/(θ − θ̂), the loop of 001 Fig. 14
 
 
-def sogi_fll_model(k, lam, omega_n) -> FLLModel:
+def sogi_fll_model(k: ArrayLike, lam: ArrayLike, omega_n: ArrayLike) -> FLLModel:
     """The SOGI-FLL's small-signal model, 001 eqs (18)–(20).
 
     Args:
@@ -83,7 +86,7 @@ def sogi_fll_model(k, lam, omega_n) -> FLLModel:
     )
 
 
-def wpf_model(k1, k2, lam, omega_n) -> FLLModel:
+def wpf_model(k1: ArrayLike, k2: ArrayLike, lam: ArrayLike, omega_n: ArrayLike) -> FLLModel:
     """001 eqs (23)–(25).
 
     001 notes that Fig. 4 "does not have a standard form"; rearranged, the loop
@@ -112,7 +115,7 @@ def wpf_model(k1, k2, lam, omega_n) -> FLLModel:
     )
 
 
-def wif_model(k1, k2, lam, omega_n) -> FLLModel:
+def wif_model(k1: ArrayLike, k2: ArrayLike, lam: ArrayLike, omega_n: ArrayLike) -> FLLModel:
     """The SOGI-FLL-WIF's small-signal model, 001 eqs (30)–(32).
 
     Args:
@@ -144,7 +147,7 @@ def wif_model(k1, k2, lam, omega_n) -> FLLModel:
 # --------------------------------------------------------------------------
 
 
-def sogi_fll_closed_form(**kw) -> SOGIFLL:
+def sogi_fll_closed_form(**kw: Any) -> SOGIFLL:
     """:meth:`SOGIFLL.closed_form <jaxobs.SOGIFLL.closed_form_design>` itself: 001 eq (22) (Table I: k = 1/√2,
     λ = 12337); the rule, its defaults and its rows are the class's.
 
@@ -157,7 +160,7 @@ def sogi_fll_closed_form(**kw) -> SOGIFLL:
     return SOGIFLL.closed_form(**kw)
 
 
-def wpf_closed_form(**kw) -> SOGIFLLWPF:
+def wpf_closed_form(**kw: Any) -> SOGIFLLWPF:
     """:meth:`SOGIFLLWPF.closed_form <jaxobs.SOGIFLLWPF.closed_form_design>` itself: 001 eq (29) (Table I:
     k1 = k2 = √2, λ = 23948); the rule, its defaults and its rows are the class's.
 
@@ -170,7 +173,7 @@ def wpf_closed_form(**kw) -> SOGIFLLWPF:
     return SOGIFLLWPF.closed_form(**kw)
 
 
-def wif_closed_form(**kw) -> SOGIFLLWIF:
+def wif_closed_form(**kw: Any) -> SOGIFLLWIF:
     """:meth:`SOGIFLLWIF.closed_form <jaxobs.SOGIFLLWIF.closed_form_design>` itself: the symmetric optimum,
     001 eq (34) (b = 1 + √2, ωc = 2π·18.8 rad/s; Table I: k1 = 1.815, k2 = 0.752, λ = 11559); the rule, its
     defaults and its rows are the class's.

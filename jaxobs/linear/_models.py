@@ -29,7 +29,9 @@ from __future__ import annotations
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+from jax.typing import ArrayLike
 
+from ..core.numerics import Real
 from ..core.validate import as_float, check_positive, check_real
 from ..observers import cleso_gains, sogi2_tustin_coefficients
 from ._discrete import DiscreteTransferFunction
@@ -75,7 +77,7 @@ def integrator_flux_tf() -> TransferFunction:
     return TransferFunction([1.0], [1.0, 0.0])
 
 
-def lpf_flux_tf(omega_c) -> TransferFunction:
+def lpf_flux_tf(omega_c: ArrayLike) -> TransferFunction:
     """Low-pass filter 1/(s + ωc) (000, Sec. II).
 
     Args:
@@ -87,7 +89,7 @@ def lpf_flux_tf(omega_c) -> TransferFunction:
     return TransferFunction([1.0], jnp.stack([jnp.ones_like(as_float(omega_c)), as_float(omega_c)]))
 
 
-def soifo_tf(k, omega) -> TransferFunction:
+def soifo_tf(k: ArrayLike, omega: ArrayLike) -> TransferFunction:
     """SOIFO (000 eq 15): (1/ω') Q(s) = k ω' / (s² + k ω' s + ω'²).
 
     Args:
@@ -105,7 +107,7 @@ def _sogi2_den(K1, K2, w):
     return jnp.stack([jnp.ones_like(w), K2 * w, (2 + K1 * K2) * w**2, K2 * w**3, w**4])
 
 
-def sosoifo_tf(K1, K2, omega) -> TransferFunction:
+def sosoifo_tf(K1: ArrayLike, K2: ArrayLike, omega: ArrayLike) -> TransferFunction:
     """Second-order SOIFO (000 eq 20): K1K2ω'² s / (s⁴ + K2ω's³ + (2+K1K2)ω'²s² + K2ω'³s + ω'⁴).
 
     Args:
@@ -120,7 +122,7 @@ def sosoifo_tf(K1, K2, omega) -> TransferFunction:
     return TransferFunction(jnp.stack([K1 * K2 * w**2, jnp.zeros_like(w)]), _sogi2_den(K1, K2, w))
 
 
-def sogi2_tf(K1, K2, omega):
+def sogi2_tf(K1: ArrayLike, K2: ArrayLike, omega: ArrayLike) -> tuple[TransferFunction, TransferFunction]:
     """Second-order SOGI outputs (000 eqs 17–18).
 
     Args:
@@ -138,7 +140,7 @@ def sogi2_tf(K1, K2, omega):
     return d1, q1
 
 
-def flux_dc_gain(tf: TransferFunction):
+def flux_dc_gain(tf: TransferFunction) -> jax.Array:
     """Final value of ψ̂ for a unit dc back EMF: lim_{s→0} s·H(s)·(1/s) = H(0) (000 eqs 29, 36).
 
     Infinite for the pure integrator (the ramp A₀t of eq 10).
@@ -152,7 +154,7 @@ def flux_dc_gain(tf: TransferFunction):
     return tf.dcgain()
 
 
-def soifo_harmonic_factor(h, k):
+def soifo_harmonic_factor(h: ArrayLike, k: Real) -> jax.Array:
     """000 eq (16): amplitude of the h-th harmonic relative to a pure integrator, 1/√((1−h²)²/(k²h²) + 1).
 
     Args:
@@ -166,7 +168,7 @@ def soifo_harmonic_factor(h, k):
     return 1.0 / jnp.sqrt((1 - h**2) ** 2 / (k**2 * h**2) + 1)
 
 
-def sosoifo_harmonic_factor(h, K1, K2):
+def sosoifo_harmonic_factor(h: ArrayLike, K1: Real, K2: Real) -> jax.Array:
     """000 eq (21): 1/√([1 − h²(2+K1K2) + h⁴]²/(h²K1K2)² + (hK2 − h³K2)²/(h²K1K2)²).
 
     The amplitude of the h-th harmonic relative to a pure integrator.
@@ -185,7 +187,7 @@ def sosoifo_harmonic_factor(h, K1, K2):
     return 1.0 / jnp.sqrt(a**2 + b**2)
 
 
-def soifo_harmonic_phase(h, k):
+def soifo_harmonic_phase(h: ArrayLike, k: Real) -> jax.Array:
     """000 eq (16)'s γ_h1, rad: the h-th harmonic of ψ̂ is (factor)·(A_h/ω_h)·sin(ω_h t + φ_h − π/2 + γ_h1).
 
     γ_h1 = arg H(jhω') + π/2 with H = kω'/(s² + kω's + ω'²), i.e. atan((1 − h²)/(kh)), as printed (the
@@ -203,7 +205,7 @@ def soifo_harmonic_phase(h, k):
     return jnp.arctan2(1 - h**2, k * h)
 
 
-def sosoifo_harmonic_phase(h, K1, K2):
+def sosoifo_harmonic_phase(h: ArrayLike, K1: Real, K2: Real) -> jax.Array:
     """000 eq (21)'s γ_h2, corrected, rad: the h-th harmonic is (factor)·(A_h/ω_h)·sin(ω_h t + φ_h − π/2 + γ_h2).
 
     H(jhω') = jhK1K2 / (ω' P) with P = [1 − h²(2+K1K2) + h⁴] + j K2 h(1 − h²)  (000 eq 39), so
@@ -226,7 +228,7 @@ def sosoifo_harmonic_phase(h, K1, K2):
     return jnp.pi - jnp.arctan2(im, re)
 
 
-def lpf_compensation(omega_1, omega_c):
+def lpf_compensation(omega_1: ArrayLike, omega_c: ArrayLike) -> tuple[jax.Array, jax.Array]:
     """Gain and rotation that turn the LPF's output at ω1 into the integrator's (000 eq 11).
 
     The LPF passes the fundamental as A₁/√(ω₁² + ωc²) at −0.5π + θ₁ with
@@ -247,7 +249,9 @@ def lpf_compensation(omega_1, omega_c):
     return jnp.abs(ratio), jnp.angle(ratio)
 
 
-def sogi2_tustin_paper(K1, K2, omega, ts):
+def sogi2_tustin_paper(
+    K1: ArrayLike, K2: ArrayLike, omega: ArrayLike, ts: float
+) -> tuple[DiscreteTransferFunction, DiscreteTransferFunction]:
     """000 eqs (22)–(25): the Tustin coefficients of the second-order SOGI, as printed.
 
     u = 2K1K2ω'²Ts², v = 8K2ω'Ts, w = 4(2+K1K2)ω'²Ts², x = 2K2ω'³Ts³, y = ω'⁴Ts⁴;
@@ -274,7 +278,7 @@ def sogi2_tustin_paper(K1, K2, omega, ts):
 # --------------------------------------------------------------------------
 
 
-def leso_tf(l1, l2, mu) -> TransferFunction:
+def leso_tf(l1: ArrayLike, l2: ArrayLike, mu: ArrayLike) -> TransferFunction:
     """LESO with constant gains (002 eq 15): l2 / (s² + (μ + l1) s + l2).
 
     Args:
@@ -289,7 +293,7 @@ def leso_tf(l1, l2, mu) -> TransferFunction:
     return TransferFunction(jnp.stack([l2]), jnp.stack([jnp.ones_like(l2), mu + l1, l2]))
 
 
-def cleso_tf(omega0) -> TransferFunction:
+def cleso_tf(omega0: ArrayLike) -> TransferFunction:
     """C-LESO with the gains of (16) (002 eq 17): ω0² / (s + ω0)².
 
     Args:
@@ -302,7 +306,7 @@ def cleso_tf(omega0) -> TransferFunction:
     return TransferFunction(jnp.stack([w * w]), jnp.stack([jnp.ones_like(w), 2 * w, w * w]))
 
 
-def gileso_tf(omega0, K_r, omega_c, omega_e) -> TransferFunction:
+def gileso_tf(omega0: ArrayLike, K_r: ArrayLike, omega_c: ArrayLike, omega_e: ArrayLike) -> TransferFunction:
     """GI-LESO (002 eqs 29–30): (G + ω0²)/(s² + 2ω0 s + G + ω0²), G = 2K_r ωc s/(s² + 2ωc s + ω̂e²).
 
     Args:
@@ -323,7 +327,7 @@ def gileso_tf(omega0, K_r, omega_c, omega_e) -> TransferFunction:
     return TransferFunction(num, den)
 
 
-def faleso_tf(k1, k2, omega_e) -> TransferFunction:
+def faleso_tf(k1: ArrayLike, k2: ArrayLike, omega_e: ArrayLike) -> TransferFunction:
     """FA-LESO, a complex-coefficient filter (002 eqs 21, 26): (k2 s + k1)/(s² + (k2 − jω̂e) s + k1).
 
     Acts on the complex vector e_α + j e_β: positive-sequence components are at
@@ -342,7 +346,7 @@ def faleso_tf(k1, k2, omega_e) -> TransferFunction:
     return TransferFunction(jnp.stack([k2, k1]).astype(complex), jnp.stack([one + 0j, k2 - 1j * we, k1 + 0j]))
 
 
-def faleso_is_stable(k1, k2, omega_e):
+def faleso_is_stable(k1: ArrayLike, k2: ArrayLike, omega_e: ArrayLike) -> jax.Array:
     """Generalized Routh test on 002 eq (22) (stable iff k1 > 0 and k2 > 0, eq 24).
 
     Args:
@@ -370,7 +374,7 @@ class CLESOGains(eqx.Module):
     omega0: jax.Array
 
 
-def cleso_closed_form(omega0, Rs, Lq) -> CLESOGains:
+def cleso_closed_form(omega0: ArrayLike, Rs: ArrayLike, Lq: ArrayLike) -> CLESOGains:
     """002 eq (16): l1 = 2ω0 − μ, l2 = ω0², μ = Rs/Lq; both poles at −ω0 (:func:`jaxobs.observers.cleso_gains`,
     which the C-LESO runs; its design's rows are :meth:`jaxobs.CLESO.closed_form_design`'s).
 
@@ -393,8 +397,23 @@ def cleso_closed_form(omega0, Rs, Lq) -> CLESOGains:
 
 
 def faleso_speed_loop_poles(
-    k1, k2, omega_e, kp, ki, kp_w, ki_w, *, p, psi_f, Ld, Lq, J, i_d=0.0, i_q=0.0, adaptation: bool = False
-):
+    k1: Real,
+    k2: Real,
+    omega_e: ArrayLike,
+    kp: Real,
+    ki: Real,
+    kp_w: Real,
+    ki_w: Real,
+    *,
+    p: Real,
+    psi_f: Real,
+    Ld: Real,
+    Lq: Real,
+    J: Real,
+    i_d: Real = 0.0,
+    i_q: Real = 0.0,
+    adaptation: bool = False,
+) -> jax.Array:
     """Poles (rad/s) of a sensorless drive's speed loop closed through the FA-LESO and its PLL, linearized at
     the operating point ω_e (rad/s), (i_d, i_q) (A) with the estimate unbiased (the FA-LESO's, δ0 = 0).
 
@@ -471,7 +490,7 @@ def faleso_speed_loop_poles(
     return jnp.roots(poly, strip_zeros=False)
 
 
-def position_error_rs(delta_rs, i_d, i_q, e_ex):
+def position_error_rs(delta_rs: Real, i_d: Real, i_q: Real, e_ex: Real) -> jax.Array:
     """002 eq (42): Δθ = atan(−ΔRs î_d / (E_ex − ΔRs î_q)), rad.
 
     Args:
@@ -486,7 +505,7 @@ def position_error_rs(delta_rs, i_d, i_q, e_ex):
     return jnp.arctan2(-delta_rs * i_d, e_ex - delta_rs * i_q)
 
 
-def position_error_lq(delta_lq, i_d, i_q, e_ex, omega_e):
+def position_error_lq(delta_lq: Real, i_d: Real, i_q: Real, e_ex: Real, omega_e: Real) -> jax.Array:
     """002 eq (43): Δθ = atan(ΔLq î_q / (E_ex/ω̂e − ΔLq î_d)), rad.
 
     Args:
@@ -514,7 +533,7 @@ def _poly_shift(c, a):
     return out
 
 
-def faleso_pll_loop(k1, k2, omega_e, kp, ki) -> TransferFunction:
+def faleso_pll_loop(k1: ArrayLike, k2: ArrayLike, omega_e: ArrayLike, kp: ArrayLike, ki: ArrayLike) -> TransferFunction:
     """The PLL's open loop through the FA-LESO, linearized at ω̂e = ωe (real coefficients).
 
     A small phase modulation δ of the BEMF reaches the FA-LESO's output through its

@@ -24,7 +24,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 from jax.core import Tracer
+from jax.typing import ArrayLike
 
+from ..core.numerics import Real
 from ..core.numerics import wrap as wrap
 from ..drive.dual_loop import DualOutput
 from ..drive.loop import DriveOutput
@@ -95,7 +97,7 @@ def _nan_where(bad, x):
     return jnp.where(bad, jnp.nan, x)
 
 
-def moving_average(x, n: int):
+def moving_average(x: jax.Array, n: int) -> jax.Array:
     """Causal moving average over the last ``n`` samples (fewer at the start).
 
     Args:
@@ -117,7 +119,7 @@ def moving_average(x, n: int):
     return (c - shifted) / count
 
 
-def window_mask(t, start, stop=None):
+def window_mask(t: jax.Array, start: Real, stop: Real | None = None) -> jax.Array:
     """Boolean mask of samples with start <= t < stop.
 
     Args:
@@ -134,7 +136,7 @@ def window_mask(t, start, stop=None):
     return m
 
 
-def settling_time(t, x, final, band, t_event=0.0):
+def settling_time(t: jax.Array, x: jax.Array, final: Real, band: Real, t_event: Real = 0.0) -> jax.Array:
     """Time after ``t_event`` from which |x − final| stays within ``band`` (exact).
 
     Args:
@@ -162,7 +164,14 @@ def settling_time(t, x, final, band, t_event=0.0):
     return _nan_where(bad | ~jnp.any(after, axis=-1), settled_at - t_event)
 
 
-def settled(t, x, final, band, t_event=0.0, min_hold=0.0):
+def settled(
+    t: jax.Array,
+    x: jax.Array,
+    final: Real,
+    band: Real,
+    t_event: Real = 0.0,
+    min_hold: Real = 0.0,
+) -> jax.Array:
     """Whether x has settled by the end of the record: after ``t_event`` it enters
     |x − final| <= ``band`` and stays there, ending inside the band for at least ``min_hold`` s.
 
@@ -196,7 +205,7 @@ def settled(t, x, final, band, t_event=0.0, min_hold=0.0):
     return inside_at_end & (hold >= min_hold) & ~bad & jnp.any(after, axis=-1)
 
 
-def peak_to_peak(x, mask):
+def peak_to_peak(x: Real, mask: ArrayLike) -> jax.Array:
     """max − min of ``x`` over the samples where ``mask`` is true.
 
     Args:
@@ -215,7 +224,7 @@ def peak_to_peak(x, mask):
     return _nan_where(count == 0, hi - lo)
 
 
-def steady_mean(x, mask):
+def steady_mean(x: Real, mask: ArrayLike) -> jax.Array:
     """Mean of ``x`` over the samples where ``mask`` is true.
 
     Args:
@@ -232,7 +241,19 @@ def steady_mean(x, mask):
     return jnp.sum(jnp.where(mask, x, 0.0), axis=-1) / jnp.where(count == 0, jnp.nan, count)
 
 
-def rms(x, mask):
+def rms(x: jax.Array, mask: ArrayLike) -> jax.Array:
+    """Root mean square of ``x`` over the samples where ``mask`` is true.
+
+    Args:
+        x: The signal (samples along the last axis).
+        mask: The window (bool, shaped like ``x``).
+
+    Returns:
+        The rms value, in the units of ``x`` (NaN for a traced empty window).
+
+    Raises:
+        ValueError: A concrete empty window.
+    """
     return jnp.sqrt(steady_mean(x * x, mask))
 
 
@@ -241,7 +262,7 @@ def rms(x, mask):
 # --------------------------------------------------------------------------
 
 
-def overshoot(x, final, initial, mask=None):
+def overshoot(x: Real, final: Real, initial: Real, mask: ArrayLike | None = None) -> jax.Array:
     """Peak excursion beyond ``final`` in the direction of the step, as a fraction of |final − initial|.
 
     Args:
@@ -265,7 +286,7 @@ def overshoot(x, final, initial, mask=None):
     return jnp.maximum(jnp.max(beyond, axis=-1), 0.0) / jnp.abs(step)
 
 
-def iae(t, e, t_event=0.0):
+def iae(t: jax.Array, e: Real, t_event: Real = 0.0) -> jax.Array:
     """∫|e| dt after ``t_event`` (rectangle rule on the sample grid).
 
     Args:
@@ -284,7 +305,7 @@ def iae(t, e, t_event=0.0):
     return _nan_where(~jnp.any(after, axis=-1), jnp.sum(jnp.where(after, jnp.abs(e), 0.0), axis=-1) * dt)
 
 
-def itae(t, e, t_event=0.0):
+def itae(t: jax.Array, e: Real, t_event: Real = 0.0) -> jax.Array:
     """∫(t − t_event)|e| dt after ``t_event`` (rectangle rule on the sample grid).
 
     Args:
@@ -304,7 +325,9 @@ def itae(t, e, t_event=0.0):
     return _nan_where(~jnp.any(after, axis=-1), val)
 
 
-def harmonic_amplitude(t, x, omega, mask=None):
+def harmonic_amplitude(
+    t: Real, x: jax.Array | np.ndarray, omega: Real, mask: jax.Array | np.ndarray | None = None
+) -> jax.Array:
     """Amplitude of the component of ``x`` at angular frequency ``omega`` (DFT over the masked samples).
 
     Exact for a sinusoid when the window holds whole periods of every component
@@ -332,7 +355,7 @@ def harmonic_amplitude(t, x, omega, mask=None):
     return jnp.where(omega == 0, c, 2 * jnp.sqrt(c * c + s * s))
 
 
-def flux_offset(psi_a, psi_b, mask):
+def flux_offset(psi_a: Real, psi_b: Real, mask: ArrayLike) -> jax.Array:
     """dc offset of an estimated flux circle, |mean ψ̂_ab| over the masked samples (whole periods).
 
     Args:
@@ -346,7 +369,7 @@ def flux_offset(psi_a, psi_b, mask):
     return jnp.sqrt(steady_mean(psi_a, mask) ** 2 + steady_mean(psi_b, mask) ** 2)
 
 
-def flux_imbalance(psi_a, psi_b, mask):
+def flux_imbalance(psi_a: Real, psi_b: Real, mask: ArrayLike) -> jax.Array:
     """Difference of the α and β flux amplitudes (half peak-to-peak each) over the masked samples.
 
     Args:
@@ -365,7 +388,7 @@ def flux_imbalance(psi_a, psi_b, mask):
 # --------------------------------------------------------------------------
 
 
-def smooth_max(x, temperature, mask=None, axis=-1):
+def smooth_max(x: Real, temperature: Real, mask: ArrayLike | None = None, axis: int = -1) -> jax.Array:
     """temperature·log Σ exp(x/temperature) − temperature·log n: between max − T log n and max.
 
     Args:
@@ -388,7 +411,7 @@ def smooth_max(x, temperature, mask=None, axis=-1):
     return _nan_where(n == 0, val)
 
 
-def smooth_abs(x, eps):
+def smooth_abs(x: Real, eps: Real) -> jax.Array:
     """√(x² + ε²) − ε: |x| as ε → 0, smooth at 0.
 
     Args:
@@ -401,7 +424,15 @@ def smooth_abs(x, eps):
     return jnp.sqrt(x * x + eps * eps) - eps
 
 
-def smooth_settling_time(t, x, final, band, t_event=0.0, temperature=None, sharpness=None):
+def smooth_settling_time(
+    t: jax.Array,
+    x: Real,
+    final: Real,
+    band: Real,
+    t_event: Real = 0.0,
+    temperature: Real | None = None,
+    sharpness: Real | None = None,
+) -> jax.Array:
     """Smooth settling time: a soft maximum over samples of (t − t_event)·σ((|x − final| − band)/sharpness).
 
     As ``temperature`` and ``sharpness`` go to 0 it tends to the
@@ -433,7 +464,20 @@ def smooth_settling_time(t, x, final, band, t_event=0.0, temperature=None, sharp
     return _nan_where(bad, jnp.maximum(smooth_max(score, temperature, mask=after), 0.0))
 
 
-def smooth_peak_to_peak(x, mask, temperature):
+def smooth_peak_to_peak(x: jax.Array, mask: ArrayLike, temperature: Real) -> jax.Array:
+    """Smooth max − min of ``x`` over the samples where ``mask`` is true: :func:`smooth_max` of ``x`` and of ``−x``.
+
+    Args:
+        x: The signal (samples along the last axis).
+        mask: The window (bool, shaped like ``x``).
+        temperature: The soft maxima's temperature, in the units of ``x`` (> 0).
+
+    Returns:
+        The smooth peak-to-peak value, in the units of ``x`` (NaN for a traced empty window).
+
+    Raises:
+        ValueError: A concrete empty window.
+    """
     return smooth_max(x, temperature, mask) + smooth_max(-x, temperature, mask)
 
 
@@ -451,7 +495,9 @@ def _own_final(x, steady_mask, name):
     return jnp.where(bad, 0.0, final), bad
 
 
-def settling_to_steady(t, x, band, steady_mask, t_event=0.0):
+def settling_to_steady(
+    t: jax.Array, x: jax.Array, band: Real, steady_mask: ArrayLike, t_event: Real = 0.0
+) -> jax.Array:
     """Time after ``t_event`` from which x stays within ``band`` of its *own* final value (exact).
 
     The final value is the mean of x over ``steady_mask`` (the steady window), so a signal that settles
@@ -476,7 +522,15 @@ def settling_to_steady(t, x, band, steady_mask, t_event=0.0):
     return _nan_where(bad, settling_time(t, x, final, band, t_event))
 
 
-def smooth_settling_to_steady(t, x, band, steady_mask, t_event=0.0, temperature=None, sharpness=None):
+def smooth_settling_to_steady(
+    t: jax.Array,
+    x: jax.Array,
+    band: Real,
+    steady_mask: ArrayLike,
+    t_event: Real = 0.0,
+    temperature: Real | None = None,
+    sharpness: Real | None = None,
+) -> jax.Array:
     """:func:`settling_to_steady` through :func:`smooth_settling_time` (the final value is a smooth mean too).
 
     Args:
@@ -495,7 +549,7 @@ def smooth_settling_to_steady(t, x, band, steady_mask, t_event=0.0, temperature=
     return _nan_where(bad, smooth_settling_time(t, x, final, band, t_event, temperature, sharpness))
 
 
-def settling_to_reference(t, x, ref, band, t_event=0.0):
+def settling_to_reference(t: jax.Array, x: jax.Array, ref: Real, band: Real, t_event: Real = 0.0) -> jax.Array:
     """Time after ``t_event`` from which |x − ref| stays within ``band`` (exact).
 
     A quantity against its reference, e.g. the drive's true speed ωm against ωm* after a speed step.  After
@@ -514,7 +568,15 @@ def settling_to_reference(t, x, ref, band, t_event=0.0):
     return settling_time(t, x - ref, 0.0, band, t_event)
 
 
-def smooth_settling_to_reference(t, x, ref, band, t_event=0.0, temperature=None, sharpness=None):
+def smooth_settling_to_reference(
+    t: jax.Array,
+    x: jax.Array,
+    ref: Real,
+    band: Real,
+    t_event: Real = 0.0,
+    temperature: Real | None = None,
+    sharpness: Real | None = None,
+) -> jax.Array:
     """:func:`settling_to_reference` through :func:`smooth_settling_time`.
 
     Args:
@@ -532,7 +594,7 @@ def smooth_settling_to_reference(t, x, ref, band, t_event=0.0, temperature=None,
     return smooth_settling_time(t, x - ref, 0.0, band, t_event, temperature, sharpness)
 
 
-def peak_deviation(t, x, ref, t_event=0.0):
+def peak_deviation(t: jax.Array, x: Real, ref: Real, t_event: Real = 0.0) -> jax.Array:
     """max |x − ref| after ``t_event`` (exact): the speed dip (or rise) after a load step.
 
     Args:
@@ -552,7 +614,7 @@ def peak_deviation(t, x, ref, t_event=0.0):
     return _nan_where(~jnp.any(after, axis=-1), dev)
 
 
-def smooth_peak_deviation(t, x, ref, t_event=0.0, temperature=1e-3):
+def smooth_peak_deviation(t: jax.Array, x: Real, ref: Real, t_event: Real = 0.0, temperature: Real = 1e-3) -> jax.Array:
     """:func:`peak_deviation` as a soft maximum of a smooth |x − ref| (ε = ``temperature``).
 
     Within ``temperature``·(1 + log n) below the exact peak, n the samples after the event.

@@ -7,10 +7,13 @@ against its truth (the rotor's electrical angle for the closed-loop drives, the 
 from __future__ import annotations
 
 import math
+from typing import cast
 
+import jax
 import jax.numpy as jnp
 
-from ..core.numerics import wrap
+from ..core.numerics import Real, wrap
+from ..drive.scenario import Scenario
 from ..runtime.simulation import SignalOutput, Solution
 from ..signals import AbstractSignal
 from ._core import _DRIVE_OUTPUTS, _window
@@ -46,7 +49,16 @@ LOCK_TOL_DRIVE_DEG = 90.0
 LOCK_FREQ_TOL = 0.10
 
 
-def lost_lock(theta_hat, theta, window_mask, tol_rad=math.pi / 4, *, omega_hat=None, omega=None, freq_tol=None):
+def lost_lock(
+    theta_hat: Real,
+    theta: Real,
+    window_mask: jax.Array,
+    tol_rad: float = math.pi / 4,
+    *,
+    omega_hat: Real | None = None,
+    omega: Real | None = None,
+    freq_tol: float | None = None,
+) -> jax.Array:
     """Whether an estimate has lost lock: |wrap(θ̂ − θ)| > ``tol_rad`` somewhere in the final window
     (and, with ``omega_hat``, ``omega`` and ``freq_tol``, the window's mean |ω̂ − ω| > ``freq_tol`` × mean |ω|).
 
@@ -95,7 +107,13 @@ SPEED_TOL = 0.20
 SPEED_FLOOR_RPM = 20.0
 
 
-def lost_speed(omega_m, omega_m_ref, window_mask, rel_tol=SPEED_TOL, floor_rpm=SPEED_FLOOR_RPM):
+def lost_speed(
+    omega_m: Real,
+    omega_m_ref: Real,
+    window_mask: jax.Array,
+    rel_tol: float = SPEED_TOL,
+    floor_rpm: float = SPEED_FLOOR_RPM,
+) -> jax.Array:
     """Whether a drive lost its speed: the window's mean |ωm − ωm*| > max(``rel_tol`` × mean |ωm*|,
     ``floor_rpm``), or it is not finite.
 
@@ -120,7 +138,14 @@ def lost_speed(omega_m, omega_m_ref, window_mask, rel_tol=SPEED_TOL, floor_rpm=S
     return ~(err <= tol) | (count == 0)  # NaN: lost
 
 
-def lost_lock_of(sol, steady_from=None, *, signal=None, tol_deg=None, freq_tol=LOCK_FREQ_TOL):
+def lost_lock_of(
+    sol: Solution,
+    steady_from: Real | None = None,
+    *,
+    signal: AbstractSignal | Scenario | None = None,
+    tol_deg: float | None = None,
+    freq_tol: float | None = LOCK_FREQ_TOL,
+) -> jax.Array:
     """The lost-lock flag of a simulation (:func:`jaxobs.simulate` with ``SaveAll``): True where the
     observer's estimate is far from the truth over the final window ``t >= steady_from`` (default: the
     last quarter of the record); the definition and tolerances are :func:`lost_lock`'s (module
@@ -137,7 +162,8 @@ def lost_lock_of(sol, steady_from=None, *, signal=None, tol_deg=None, freq_tol=L
     Args:
         sol: The :class:`~jaxobs.Solution` (saved with ``SaveAll``).
         steady_from: The start of the final window, s (default: the last quarter of the record).
-        signal: The :class:`~jaxobs.signals.EMFSignal` an observer ran on (its flux angle is the truth).
+        signal: The scenario the run was simulated on; read only where the outputs carry no truth, and then
+            it must be an :class:`~jaxobs.signals.EMFSignal` (its flux angle is the truth).
         tol_deg: The angle tolerance, degrees (default :data:`LOCK_TOL_DEG`, or
             :data:`LOCK_TOL_DRIVE_DEG` for a drive).
         freq_tol: The frequency tolerance, a fraction of the true frequency; ``None`` drops the frequency test.
@@ -149,7 +175,7 @@ def lost_lock_of(sol, steady_from=None, *, signal=None, tol_deg=None, freq_tol=L
         ValueError: No trajectory or no observer estimate in ``sol``, or no truth to compare with.
     """
     out = _estimated(sol, "lost_lock_of")
-    t = sol.t
+    t = cast(jax.Array, sol.t)  # saved with the outputs, which _estimated found
     if steady_from is None:
         steady_from = t[..., 0] + 0.75 * (t[..., -1] - t[..., 0])
         mask = t >= jnp.expand_dims(steady_from, -1)
@@ -191,7 +217,7 @@ def _truth(sol, signal, caller):
     return signal.flux_angle(sol.t), signal.flux_omega(sol.t)
 
 
-def position_error(sol, signal=None):
+def position_error(sol: Solution, signal: AbstractSignal | Scenario | None = None) -> jax.Array:
     """The observer's position error θ̂ − θ (rad, wrapped to (−π, π]) along a simulation's trajectory.
 
     The truth is the rotor's electrical angle θe for the closed-loop drives (``ClosedLoop``,
@@ -201,7 +227,8 @@ def position_error(sol, signal=None):
 
     Args:
         sol: The :class:`~jaxobs.Solution` (saved with ``SaveAll``).
-        signal: The :class:`~jaxobs.signals.EMFSignal` an observer ran on, where the outputs carry no truth.
+        signal: The scenario the run was simulated on; read only where the outputs carry no truth, and then
+            it must be an :class:`~jaxobs.signals.EMFSignal` (its flux angle is the truth).
 
     Returns:
         θ̂ − θ along the trajectory, rad.

@@ -23,14 +23,21 @@ import math
 import warnings
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any, Literal, NamedTuple
+from typing import TYPE_CHECKING, Any, Literal, NamedTuple, TypeVar
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ..drive.scenario import Scenario
+from ..runtime.simulation import Solution
+from ..signals import AbstractSignal
 from . import _core as M
 from . import _lock as L
 from ._core import _DRIVE_OUTPUTS
+
+if TYPE_CHECKING:
+    import xarray as xr
 
 __all__ = [
     "ALIASES",
@@ -46,6 +53,9 @@ __all__ = [
 ]
 
 _RPM = 30.0 / math.pi  # rad/s -> r/min (mechanical)
+
+# what a display transform scales (Metric.shown): a number, an array, an xarray variable
+_Values = TypeVar("_Values", float, np.ndarray, jax.Array, "xr.DataArray")
 
 # a display transform: (SI units, display units) -> factor (display = factor × SI)
 DISPLAY: dict[tuple[str, str], float] = {
@@ -135,11 +145,11 @@ class Metric:
         """The units it is shown in: :attr:`display`, or its own."""
         return self.units if self.display is None else self.display
 
-    def shown(self, values):
+    def shown(self, values: _Values) -> _Values:
         """``values`` (in :attr:`units`) in :attr:`display_units`: the presentation transform.
 
         Args:
-            values: A number or an array in the metric's SI units.
+            values: A number, an array or an ``xarray.DataArray`` in the metric's SI units.
 
         Returns:
             The values times the display factor (unchanged where the metric has no display units).
@@ -184,7 +194,7 @@ def _speed_hat(sol, sc):
     return sol.outputs.obs.omega / sc.par.p
 
 
-def scored_position_error(sol, sig, ctx):
+def scored_position_error(sol: Solution, sig: AbstractSignal | Scenario, ctx: MetricContext) -> jax.Array:
     """The position error (rad, :func:`jaxobs.metrics.position_error`) as the metrics score it.  A drive
     started from standstill runs on the I-f angle until its hand-over (the FOC's ``mode`` 0 → 1); the
     observer is not in the loop then and may sit ~90° off while it converges at low speed (most of the
