@@ -31,6 +31,8 @@ keeps the single file's 60°); a given bandwidth whose differential margin is un
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
+from typing import Any, Protocol
 
 import equinox as eqx
 import jax
@@ -38,12 +40,51 @@ import jax
 from .dual import DualPMSMParams
 from .dual_loop import DualDrive, DualFOC
 from .latency import Latency
+from .loop import Drive
 from .machine import PMSMParams
 
 
+class SetFile(Protocol):
+    """One set's drive file, as :func:`dual_drive_file` reads it: a :class:`~jaxobs.drive.DriveFile` (defined
+    above this module, which it imports)."""
+
+    @property
+    def machine(self) -> PMSMParams:
+        """The set's machine (half the rotor)."""
+        ...
+
+    @property
+    def drive(self) -> Drive | DualDrive:
+        """The sensorless drive derived on it."""
+        ...
+
+    @property
+    def foc_kw(self) -> Mapping[str, Any]:
+        """:meth:`FOC.imc`'s keywords as derived."""
+        ...
+
+    @property
+    def derived(self) -> Mapping[str, Any]:
+        """Name -> derived value (``.value``, ``.unit``)."""
+        ...
+
+    @property
+    def ts(self) -> float:
+        """The control and PWM period, s."""
+        ...
+
+
 def halved(raw: dict) -> dict:
-    """The file's tables with ``[dual]`` removed and ``[machine]`` as one set carrying half the rotor (half of
-    ``J``, ``B`` and the rated torque), which the single-machine derivation then checks and derives on."""
+    """The file's tables with ``[dual]`` removed and ``[machine]`` as one set carrying half the rotor.
+
+    Half of ``J``, ``B`` and the rated torque; the single-machine derivation then checks and derives on it.
+
+    Args:
+        raw: The file's tables, name -> table (``[machine]`` among them).
+
+    Returns:
+        The tables without ``[dual]``, ``[machine]`` halved (a new dict; ``raw`` is not changed).
+    """
     m = dict(raw["machine"])
     for k in ("J", "B", "rated_torque_nm"):
         if k in m and isinstance(m[k], (int, float)) and not isinstance(m[k], bool):
@@ -52,15 +93,35 @@ def halved(raw: dict) -> dict:
 
 
 def individual_ratio(machine: PMSMParams, lls: jax.Array | float) -> float:
-    """r = (L̂ + L̂ls)/(2 L̂ls), L̂ the larger of ``machine``'s Ld and Lq: how much faster than α_c the differential
-    current loop of "individual" control runs (module doc)."""
+    """r = (L̂ + L̂ls)/(2 L̂ls), L̂ the larger of ``machine``'s Ld and Lq.
+
+    How much faster than α_c the differential current loop of "individual" control runs (module doc).
+
+    Args:
+        machine: One set's machine (its assumed Ld and Lq).
+        lls: L̂ls, the xy (leakage) inductance, H.
+
+    Returns:
+        r.
+    """
     big = max(float(machine.Ld), float(machine.Lq))
     return (big + float(lls)) / (2.0 * float(lls))
 
 
-def lowered_bandwidth(half: dict, single, dual_table: dict, pm_design: float) -> dict | None:
-    """``half`` with ``control.current_bandwidth_hz`` set to the derived α_c / r where "individual" control's
-    differential loop would otherwise keep less than ``pm_design`` degrees (module doc), else None."""
+def lowered_bandwidth(half: dict, single: SetFile, dual_table: dict, pm_design: float) -> dict | None:
+    """``half`` with a lower current bandwidth where "individual" control needs one (module doc).
+
+    Args:
+        half: The tables of :func:`halved`.
+        single: The drive file derived on ``half``.
+        dual_table: ``[dual]``.
+        pm_design: The phase margin the differential loop should keep, deg.
+
+    Returns:
+        ``half`` with ``control.current_bandwidth_hz`` set to the derived α_c / r where "individual" control's
+        differential loop would otherwise keep less than ``pm_design`` degrees, else None (also where the file
+        sets ``control.current_bandwidth_hz`` itself).
+    """
     if dual_table.get("mode", "vsd") != "individual" or "current_bandwidth_hz" in half.get("control", {}):
         return None
     r = individual_ratio(single.machine, dual_table["Lls"])
@@ -71,7 +132,14 @@ def lowered_bandwidth(half: dict, single, dual_table: dict, pm_design: float) ->
     return {**half, "control": {**half.get("control", {}), "current_bandwidth_hz": alpha_c / r / (2 * math.pi)}}
 
 
-def dual_drive_file(single, raw: dict, dual_table: dict, *, lowered: bool = False, pm=(30.0, 45.0)):
+def dual_drive_file(
+    single: SetFile,
+    raw: dict,
+    dual_table: dict,
+    *,
+    lowered: bool = False,
+    pm: tuple[float, float] = (30.0, 45.0),
+) -> tuple[DualPMSMParams, DualDrive, dict[str, tuple[float | str, str, str, bool]], tuple[str, ...]]:
     """The dual machine and drive on the per-set derivation ``single`` (the drive file of :func:`halved`).
 
     Args:
@@ -109,7 +177,9 @@ def dual_drive_file(single, raw: dict, dual_table: dict, *, lowered: bool = Fals
     alpha_c = float(single.foc_kw["alpha_c"])
     n, ts = float(single.derived["use_delay"].value), single.ts
     warn = []
-    derived = {"Lls": (float(dual.Lls), "H", "[dual] Lls: the xy-subspace inductance", True)}
+    derived: dict[str, tuple[float | str, str, str, bool]] = {
+        "Lls": (float(dual.Lls), "H", "[dual] Lls: the xy-subspace inductance", True)
+    }
     mode_rule = "[dual] mode: 'vsd' (αβ + xy PIs) or 'individual' (a FOC per set)"
     derived["dual_mode"] = (mode, "", mode_rule, "mode" in dual_table)
     if float(dual.Lls) >= min(float(per_set.Ld), float(per_set.Lq)):

@@ -7,6 +7,7 @@ from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
+from jax.typing import ArrayLike
 
 from ._policy import policy_id, policy_iq_limit, rotate_by, torque_dq
 from .machine import PMSMParams
@@ -52,7 +53,7 @@ class OperatingPoint(NamedTuple):
     id_fw: jax.Array | float = 0.0
 
     @classmethod
-    def at_rest(cls, theta_e) -> OperatingPoint:
+    def at_rest(cls, theta_e: ArrayLike) -> OperatingPoint:
         """The machine at standstill: no speed, current, load or voltage (where an I-f start-up starts, the
         rotor parked by its alignment).
 

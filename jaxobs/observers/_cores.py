@@ -43,10 +43,14 @@ damping term carries k1, so Golestan's k1 is Xu's K2 and k2 is K1.
 
 from __future__ import annotations
 
+import jax
 import jax.numpy as jnp
+from jax.typing import ArrayLike
 
 
-def gi_vf(y, q, x, w):
+def gi_vf(
+    y: jax.Array | float, q: jax.Array | float, x: ArrayLike, w: jax.Array | float
+) -> tuple[ArrayLike, jax.Array | float]:
     """Generalized integrator.
 
     Args:
@@ -61,7 +65,9 @@ def gi_vf(y, q, x, w):
     return w * (x - q), w * y
 
 
-def sogi_vf(y, q, v, w, k):
+def sogi_vf(
+    y: jax.Array | float, q: jax.Array | float, v: ArrayLike, w: jax.Array | float, k: jax.Array | float
+) -> tuple[ArrayLike, jax.Array | float]:
     """SOGI (001 eqs 6–7).
 
     Args:
@@ -77,7 +83,16 @@ def sogi_vf(y, q, v, w, k):
     return gi_vf(y, q, k * (v - y), w)
 
 
-def sogi2_vf(za, zb, y, q, v, w, k_err, k_damp):
+def sogi2_vf(
+    za: jax.Array | float,
+    zb: jax.Array | float,
+    y: jax.Array | float,
+    q: jax.Array | float,
+    v: ArrayLike,
+    w: jax.Array | float,
+    k_err: jax.Array | float,
+    k_damp: jax.Array | float,
+) -> tuple[ArrayLike, jax.Array | float, ArrayLike, jax.Array | float]:
     """Second-order SOGI (000 eqs 17–18): returns (ża, żb, ẏ, q̇).
 
     ``(y, q)`` are the filtered in-phase and quadrature outputs (v', qv');
@@ -106,7 +121,9 @@ def sogi2_vf(za, zb, y, q, v, w, k_err, k_damp):
     return dza, dzb, dy, dq
 
 
-def sogi2_tustin_coefficients(K1, K2, w, ts):
+def sogi2_tustin_coefficients(
+    K1: jax.Array | float, K2: jax.Array | float, w: jax.Array | float, ts: jax.Array | float
+) -> tuple[jax.Array, jax.Array, jax.Array]:
     """Second-order SOGI by Tustin, 000 eqs (22)–(25): (a1…a4, D1 numerator, Q1 numerator), each in
     ascending powers of z⁻¹.
 
@@ -136,7 +153,7 @@ def sogi2_tustin_coefficients(K1, K2, w, ts):
     return a, d_num, q_num
 
 
-def safe_sq_amplitude(y, q, v_floor):
+def safe_sq_amplitude(y: jax.Array | float, q: jax.Array | float, v_floor: jax.Array | float) -> jax.Array:
     """V̂² = y² + q², floored at ``v_floor²`` so the FLL normalization never divides by 0.
 
     The floor is exact above it (no bias once V̂ > v_floor).
@@ -152,7 +169,13 @@ def safe_sq_amplitude(y, q, v_floor):
     return jnp.maximum(y * y + q * q, v_floor * v_floor)
 
 
-def fll_rate(err, q, y, lam, v_floor):
+def fll_rate(
+    err: ArrayLike,
+    q: jax.Array | float,
+    y: jax.Array | float,
+    lam: jax.Array | float,
+    v_floor: jax.Array | float,
+) -> jax.Array:
     """Normalized FLL, 001 eq (8): ω̂̇ = −λ · err · q / V̂².
 
     Args:
@@ -165,10 +188,17 @@ def fll_rate(err, q, y, lam, v_floor):
     Returns:
         ω̂̇, rad/s².
     """
-    return -lam * err * q / safe_sq_amplitude(y, q, v_floor)
+    # numpy's stubs type ndarray / jax.Array as an ndarray; jax's __array_priority__ gives a jax.Array
+    return -lam * err * q / safe_sq_amplitude(y, q, v_floor)  # pyright: ignore[reportReturnType] (numpy stubs)
 
 
-def pll_vf(theta_p, omega_p, err, kp, ki):
+def pll_vf(
+    theta_p: jax.Array | float,
+    omega_p: jax.Array | float,
+    err: jax.Array | float,
+    kp: jax.Array | float,
+    ki: jax.Array | float,
+) -> tuple[jax.Array | float, jax.Array | float]:
     """Type-2 PLL on a normalized phase error ``err`` ≈ sin(θ − θ_p):
 
         θ̇_p = ω_p + k_p err,    ω̇_p = k_i err.
@@ -190,7 +220,9 @@ def pll_vf(theta_p, omega_p, err, kp, ki):
     return omega_p + kp * err, ki * err
 
 
-def quadrature_error(x_a, x_b, theta_p, floor):
+def quadrature_error(
+    x_a: jax.Array | float, x_b: jax.Array | float, theta_p: jax.Array | float, floor: jax.Array | float
+) -> jax.Array:
     """Normalized quadrature phase detector for a vector (x_a, x_b) = |x|(cos θ, sin θ).
 
     Args:

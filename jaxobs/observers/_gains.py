@@ -42,6 +42,7 @@ import math
 from typing import Any, NamedTuple
 
 import equinox as eqx
+from jax.typing import ArrayLike
 
 from ..core.validate import check_real
 
@@ -147,7 +148,7 @@ def gain(
     return eqx.field(metadata={**kwargs.pop("metadata", {}), **meta}, **kwargs)
 
 
-def gain_fields(cls) -> dict[str, GainInfo]:
+def gain_fields(cls: type | eqx.Module) -> dict[str, GainInfo]:
     """The gains of an observer class (or instance), in field order, each with its :class:`GainInfo`.
 
     Args:
@@ -190,7 +191,7 @@ def gain_table(designs: dict) -> dict[str, GainInfo]:
     return table
 
 
-def check_gains(obs) -> None:
+def check_gains(obs: eqx.Module) -> None:
     """Check every gain of ``obs`` against its declared bounds (its :class:`GainInfo`): the one bound check.
 
     Traced values (an observer built inside ``vmap`` or ``grad``) pass through, as in every constructor check
@@ -247,7 +248,7 @@ class ClosedForm(NamedTuple):
         return f"{self.source}: " + "; ".join(r.formula for r in self.rows)
 
 
-def gain_row(cls, name: str, value, formula: str, source: str) -> DesignRow:
+def gain_row(cls: type, name: str, value: ArrayLike, formula: str, source: str) -> DesignRow:
     """The :class:`DesignRow` of gain ``name`` of ``cls``, in the units its :class:`GainInfo` declares.
 
     Args:

@@ -4,12 +4,19 @@ style per trace, frequency in Hz (or rad/s), and the papers' three Bode figures.
 from __future__ import annotations
 
 import math
+import os
+from collections.abc import Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from .. import linear, papers
-from ._figure import _finish, _mark_event, _subplots
+from ._figure import FigurePath, _finish, _mark_event, _subplots
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
 
 # one look per trace, so a trace never hides under another: widths fall as the dashes rise, and markers
 # (spaced along the curve, matplotlib's float markevery) tell overlapping curves apart
@@ -21,7 +28,12 @@ _TRACE_STYLES = (
 )
 
 
-def resonance_grid(tfs, omega, n: int = 241, damping_ratio: float = 0.3):
+def resonance_grid(
+    tfs: dict[str, linear.TransferFunction] | Sequence[linear.TransferFunction],
+    omega: ArrayLike,
+    n: int = 241,
+    damping_ratio: float = 0.3,
+) -> np.ndarray:
     """``omega`` (rad/s) refined around every lightly damped pole of ``tfs`` (a dict or a list of
     :class:`~jaxobs.linear.TransferFunction`), sorted and unique.
 
@@ -30,7 +42,17 @@ def resonance_grid(tfs, omega, n: int = 241, damping_ratio: float = 0.3):
     not symmetric).  The GI-LESO's at ±50 Hz (σ ≈ −8.8 rad/s) swings ±1.1 dB within a few rad/s: a log grid
     spaced ~1 % in ω draws it within 0.04 dB but only just; around each such pole ``n`` points
     ω_p + |σ|·sinh(u), u uniform in [−8, 8] (steps of |σ|/15 at the peak, out to ~1500 |σ|), draw its
-    shape to 0.005 dB (tests/test_figures.py), kept inside the range of ``omega`` and on its side of zero."""
+    shape to 0.005 dB (tests/test_figures.py), kept inside the range of ``omega`` and on its side of zero.
+
+    Args:
+        tfs: The transfer functions, name -> transfer function or a sequence of them.
+        omega: The grid to refine, rad/s.
+        n: The points added around each lightly damped pole.
+        damping_ratio: A pole σ + jω_p is lightly damped where |σ| < ``damping_ratio``·|ω_p|.
+
+    Returns:
+        The refined grid, rad/s (sorted, unique).
+    """
     omega = np.asarray(omega, dtype=float)
     lo, hi = float(omega.min()), float(omega.max())
     u = np.sinh(np.linspace(-8.0, 8.0, n))
@@ -47,8 +69,15 @@ def resonance_grid(tfs, omega, n: int = 241, damping_ratio: float = 0.3):
 
 
 def bode_figure(
-    tfs: dict, omega, title: str, path=None, hz: bool = True, mark=None, refine: bool = True, mark_text: str = ""
-):
+    tfs: dict[str, linear.TransferFunction],
+    omega: ArrayLike,
+    title: str,
+    path: FigurePath = None,
+    hz: bool = True,
+    mark: float | None = None,
+    refine: bool = True,
+    mark_text: str = "",
+) -> Figure:
     """Bode magnitude (dB) and phase (deg) of several transfer functions on one grid.
 
     The frequency axis is in Hz (``hz=False``: rad/s); ``omega`` is in rad/s either way, refined around
@@ -56,6 +85,19 @@ def bode_figure(
     own line style and markers, so one lying on another stays visible.  Complex-coefficient filters are
     plotted over negative and positive frequency when ``omega`` contains both signs (their response is
     not conjugate-symmetric).  ``mark`` (rad/s) draws a dotted line there, named ``mark_text`` on the magnitude.
+
+    Args:
+        tfs: The transfer functions, trace name -> transfer function.
+        omega: The frequency grid, rad/s.
+        title: The figure's title.
+        path: Where to save the figure (None: not saved).
+        hz: Frequency axis in Hz (else rad/s).
+        mark: A frequency to mark with a dotted line, rad/s, or None.
+        refine: Whether to refine ``omega`` around lightly damped poles.
+        mark_text: The name of the marked frequency.
+
+    Returns:
+        The figure.
     """
     omega = resonance_grid(tfs, omega) if refine else np.asarray(omega)
     x = omega / (2 * math.pi) if hz else omega
@@ -101,9 +143,16 @@ def _two_sided_ticks(ax, linthresh: float, x_max: float) -> None:
     ax.xaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}".replace("-", "−")))
 
 
-def paper_bode_figures(out_dir, hz: bool = True):
-    """The three Bode figures of the papers: 000 Fig. 5, 002 Fig. 4, 001 Fig. 14, over frequency in Hz
-    (``hz=False``: rad/s). Returns the paths."""
+def paper_bode_figures(out_dir: str | os.PathLike[str], hz: bool = True) -> list[Path]:
+    """The three Bode figures of the papers: 000 Fig. 5, 002 Fig. 4, 001 Fig. 14.
+
+    Args:
+        out_dir: The folder the PNG files are written to (created if missing).
+        hz: Frequency axis in Hz (else rad/s).
+
+    Returns:
+        The paths of the three files.
+    """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     paths = []

@@ -7,11 +7,16 @@ say what goes in the panels: this module only draws.
 from __future__ import annotations
 
 import textwrap
-from typing import NamedTuple
+from collections.abc import Sequence
+from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
+from numpy.typing import ArrayLike
 
-from ._figure import _finish, _mark_event, _subplots
+from ._figure import FigurePath, _finish, _mark_event, _subplots
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
 
 __all__ = ["Series", "Panel", "paper_figure"]
 
@@ -39,14 +44,37 @@ def _letter(i: int) -> str:
     return f"({chr(ord('a') + i)})"
 
 
-def paper_figure(t, columns, title, path=None, events=(), t_unit: str = "s", shared=()):
-    """Draw ``columns`` = [(method name, [Panel, ...]), ...] side by side over the time axis ``t``
-    (in ``t_unit``), each column headed "(a) name", "(b) name", ...; every column has the same panels, in
-    order, and shares its x axis.  ``events``: [(time, what)], a dotted line in every panel, named in the
-    top one.  ``shared``: the indices of the panel rows whose columns share one y scale (the methods'
-    estimates compared at a glance); the others scale to their own traces, as the papers' errors do (an
-    error of 0.03 rad on the scale of a lost integrator's ±π would read as zero).  Returns the figure; saved
-    to ``path`` if given."""
+def paper_figure(
+    t: ArrayLike,
+    columns: Sequence[tuple[str, Sequence[Panel]]],
+    title: str,
+    path: FigurePath = None,
+    events: Sequence[tuple[float, str]] = (),
+    t_unit: str = "s",
+    shared: Sequence[int] = (),
+) -> Figure:
+    """Draw ``columns`` side by side over the time axis ``t``, in the papers' layout.
+
+    Each column is headed "(a) name", "(b) name", ...; every column has the same panels, in order, and shares
+    its x axis.  The rows not in ``shared`` scale to their own traces, as the papers' errors do (an error of
+    0.03 rad on the scale of a lost integrator's ±π would read as zero).
+
+    Args:
+        t: The time axis, in ``t_unit``.
+        columns: ``[(method name, [Panel, ...]), ...]``.
+        title: The figure's title (wrapped to its width).
+        path: Where to save the figure (None: not saved).
+        events: ``[(time, what)]``: a dotted line in every panel, named in the top one.
+        t_unit: The unit of ``t``.
+        shared: The indices of the panel rows whose columns share one y scale (the methods' estimates
+            compared at a glance).
+
+    Returns:
+        The figure.
+
+    Raises:
+        ValueError: The columns do not all have the same number of panels.
+    """
     t = np.asarray(t)
     ncol = len(columns)
     nrow = max(len(panels) for _, panels in columns)

@@ -18,6 +18,7 @@ import jax
 from jax import export
 
 from ..core.measurements import DriveInput
+from ..core.system import AbstractSystem
 from ..drive.control import FOCOutput
 from ..drive.dual import DualPlantOutput
 from ..drive.dual_loop import DualFOCOutput, DualOutput
@@ -71,6 +72,14 @@ def _simulated(system, t1: float):
 _simulated_kept = kept_jit(_simulated)
 
 
-def run_kept(system, t1: float) -> Run:
-    """``simulate(system, t1)`` as a :class:`Run`, its program kept across processes (module doc)."""
+def run_kept(system: AbstractSystem, t1: float) -> Run:
+    """``simulate(system, t1)`` as a :class:`Run`, its program kept across processes (module doc).
+
+    Args:
+        system: The system to simulate.
+        t1: The horizon, s.
+
+    Returns:
+        The run's times, outputs and ok flag.
+    """
     return Run(*_simulated_kept(system, float(t1)))

@@ -285,4 +285,6 @@ def fll_figure(
         columns.append((name, [f, v, Panel("θ̂ − θ (deg)", (Series("error", err[mask]),), zero=True)]))
         t_shown = t[mask]
     title = f"Paper 001 Test {test} (ours): {fll_event_text(test)} at t = {t_event:g} s"
-    return paper_figure(t_shown, columns, title, path, events=[(t_event, fll_event_text(test))], shared=(0, 1, 2))
+    return paper_figure(
+        np.asarray(t_shown), columns, title, path, events=[(t_event, fll_event_text(test))], shared=(0, 1, 2)
+    )

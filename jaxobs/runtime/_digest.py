@@ -49,8 +49,17 @@ _ABSENT = object()
 
 
 def package_digest(top: str) -> str:
-    """sha256 over every ``.py`` file (relative path and bytes) of the top-level package or module ``top``; an empty
-    string where no file holds it (an interactive session, ``python -c``)."""
+    """sha256 over every ``.py`` file (relative path and bytes) of the top-level package or module ``top``.
+
+    Computed once per process and cached.
+
+    Args:
+        top: The name of a top-level package or module (already imported).
+
+    Returns:
+        The hex digest, or an empty string where no file holds it (an interactive session, ``python -c``) or a
+        file cannot be read.
+    """
     if top not in _digests:
         file = getattr(sys.modules.get(top), "__file__", None)
         if not isinstance(file, str):
@@ -107,7 +116,14 @@ class Digest:
         return self.h.hexdigest()
 
     def constant(self, *objs: Any) -> None:
-        """``objs`` as constants of the program: their arrays by value."""
+        """Hash ``objs`` as constants of the program: their arrays by value.
+
+        Args:
+            *objs: The values.
+
+        Raises:
+            NoKey: A value the key cannot be computed from.
+        """
         avals, self.avals = self.avals, False
         try:
             for obj in objs:
@@ -116,12 +132,26 @@ class Digest:
             self.avals = avals
 
     def put(self, tag: str, text: str = "") -> None:
-        """Hash a tagged text (its length first: no two sequences of puts hash alike)."""
+        """Hash a tagged text (its length first: no two sequences of puts hash alike).
+
+        Args:
+            tag: The tag.
+            text: The text.
+        """
         self.h.update(f"{tag}:{len(text)}:{text};".encode())
 
     def named(self, obj: Any) -> bool:
-        """A function or class by where it is defined: its package's source is in the key.  Whether it is a library's
-        (named by its module and name alone: the library's version is in the key)."""
+        """Hash a function or class by where it is defined: its package's source is in the key.
+
+        Args:
+            obj: The function or class.
+
+        Returns:
+            Whether it is a library's (named by its module and name alone: the library's version is in the key).
+
+        Raises:
+            NoKey: It has no module and name, or its package has no source file.
+        """
         module = getattr(obj, "__module__", None)
         name = getattr(obj, "__qualname__", None) or getattr(obj, "__name__", None)
         if not isinstance(module, str) or not isinstance(name, str):
@@ -154,7 +184,11 @@ class Digest:
             self.code(c, names) if isinstance(c, types.CodeType) else self.add(c)
 
     def methods(self, cls: type) -> None:
-        """The code of every method of ``cls`` and its bases defined outside the libraries."""
+        """Hash the code of every method of ``cls`` and its bases defined outside the libraries.
+
+        Args:
+            cls: The class.
+        """
         for klass in cls.__mro__:
             if (getattr(klass, "__module__", "") or "").split(".")[0] in _NAMED:
                 continue
@@ -309,7 +343,16 @@ class Digest:
 
 
 def plain(value: Any, depth: int = 0) -> bool:
-    """Whether ``value`` is a module constant made of numbers and strings (what a key can hold)."""
+    """Whether ``value`` is a module constant made of numbers and strings (what a key can hold).
+
+    Args:
+        value: The value.
+        depth: How deep in containers ``value`` is (a container at depth 3 or more is not plain).
+
+    Returns:
+        Whether it is plain: ``None``, a number, a string or bytes, or a small tuple, list, frozenset or dict of
+        plain values.
+    """
     if value is None or type(value) in (bool, int, float, complex, str, bytes):
         return True
     if depth < 3 and type(value) in (tuple, list, frozenset):

@@ -160,7 +160,15 @@ class AbstractReverseCheckpoint(AbstractCheckpoint):
         """The strategy for the few peeled start-up steps (jaxobs.runtime._loop, point 2): never chunked."""
 
     @abc.abstractmethod
-    def scan(self, step, carry, xs, n: int, unroll: int, xs_map=None):
+    def scan(
+        self,
+        step: Callable[[Any, Any], tuple[Any, Any]],
+        carry: Any,
+        xs: Any,
+        n: int,
+        unroll: int,
+        xs_map: Callable[[Any], Any] | None = None,
+    ) -> tuple[Any, Any]:
         """Scan ``step`` over ``xs``.
 
         Args:
@@ -176,6 +184,16 @@ class AbstractReverseCheckpoint(AbstractCheckpoint):
         """
 
     def loop(self, loop: Loop, carry: Any, xs: Any) -> tuple[Any, Any]:
+        """Run a loop from ``loop.init(carry)`` over ``xs``.
+
+        Args:
+            loop: The :class:`jaxobs.runtime._steps.Loop`.
+            carry: The initial carry.
+            xs: The per-step inputs.
+
+        Returns:
+            ``(final carry, stacked per-step outputs or None)``.
+        """
         return run_steps(loop, self, loop.init(carry), xs)
 
 
@@ -183,10 +201,32 @@ class NoCheckpoint(AbstractReverseCheckpoint):
     """Plain ``lax.scan``: the VJP stores every step's residuals (fast for short loops, memory-hungry)."""
 
     @property
-    def startup(self):
+    def startup(self) -> AbstractReverseCheckpoint:
+        """The strategy for the peeled start-up steps: this one."""
         return self
 
-    def scan(self, step, carry, xs, n, unroll, xs_map=None):
+    def scan(
+        self,
+        step: Callable[[Any, Any], tuple[Any, Any]],
+        carry: Any,
+        xs: Any,
+        n: int,
+        unroll: int,
+        xs_map: Callable[[Any], Any] | None = None,
+    ) -> tuple[Any, Any]:
+        """Scan ``step`` over ``xs`` (the abstract method's contract).
+
+        Args:
+            step: ``step(carry, x) -> (carry, out)``.
+            carry: The initial carry.
+            xs: The per-step inputs.
+            n: The steps (≥ 1).
+            unroll: The loop's unrolling.
+            xs_map: With it each step sees ``xs_map`` of a block of ``xs`` (jaxobs.runtime._loop, point 5).
+
+        Returns:
+            ``(final carry, stacked outputs)``, as ``lax.scan``.
+        """
         if xs_map is None:
             return jax.lax.scan(step, carry, xs, length=n, unroll=min(unroll, n))
         return scan_blocks(step, carry, xs, n, block_size(n, INPUT_BLOCK, unroll), unroll, xs_map)
@@ -196,10 +236,32 @@ class StepCheckpoint(AbstractReverseCheckpoint):
     """``jax.checkpoint`` on each step: the VJP stores one carry per step and recomputes the step once."""
 
     @property
-    def startup(self):
+    def startup(self) -> AbstractReverseCheckpoint:
+        """The strategy for the peeled start-up steps: this one."""
         return self
 
-    def scan(self, step, carry, xs, n, unroll, xs_map=None):
+    def scan(
+        self,
+        step: Callable[[Any, Any], tuple[Any, Any]],
+        carry: Any,
+        xs: Any,
+        n: int,
+        unroll: int,
+        xs_map: Callable[[Any], Any] | None = None,
+    ) -> tuple[Any, Any]:
+        """Scan ``step`` over ``xs`` (the abstract method's contract).
+
+        Args:
+            step: ``step(carry, x) -> (carry, out)``.
+            carry: The initial carry.
+            xs: The per-step inputs.
+            n: The steps (≥ 1).
+            unroll: The loop's unrolling.
+            xs_map: With it each step sees ``xs_map`` of a block of ``xs`` (jaxobs.runtime._loop, point 5).
+
+        Returns:
+            ``(final carry, stacked outputs)``, as ``lax.scan``.
+        """
         # NoCheckpoint's loop over the checkpointed step
         return NoCheckpoint().scan(jax.checkpoint(step, prevent_cse=False), carry, xs, n, unroll, xs_map)
 
@@ -208,10 +270,32 @@ class ChunkCheckpoint(AbstractReverseCheckpoint):
     """About √n-step chunks: one carry stored per chunk, each chunk recomputed once (O(√n) memory)."""
 
     @property
-    def startup(self):
+    def startup(self) -> AbstractReverseCheckpoint:
+        """The strategy for the peeled start-up steps: :class:`StepCheckpoint` (never chunked)."""
         return StepCheckpoint()
 
-    def scan(self, step, carry, xs, n, unroll, xs_map=None):
+    def scan(
+        self,
+        step: Callable[[Any, Any], tuple[Any, Any]],
+        carry: Any,
+        xs: Any,
+        n: int,
+        unroll: int,
+        xs_map: Callable[[Any], Any] | None = None,
+    ) -> tuple[Any, Any]:
+        """Scan ``step`` over ``xs`` (the abstract method's contract).
+
+        Args:
+            step: ``step(carry, x) -> (carry, out)``.
+            carry: The initial carry.
+            xs: The per-step inputs.
+            n: The steps (≥ 1).
+            unroll: The loop's unrolling.
+            xs_map: With it each step sees ``xs_map`` of a block of ``xs`` (jaxobs.runtime._loop, point 5).
+
+        Returns:
+            ``(final carry, stacked outputs)``, as ``lax.scan``.
+        """
         step = jax.checkpoint(step, prevent_cse=False)
         size = block_size(n, max(1, math.isqrt(n - 1) + 1), unroll)  # about √n steps per chunk
         return scan_blocks(step, carry, xs, n, size, unroll, xs_map, checkpoint_blocks=True)
@@ -247,6 +331,19 @@ class ForwardSensitivity(AbstractCheckpoint):
             )
 
     def loop(self, loop: Loop, carry: Any, xs: Any) -> tuple[Any, Any]:
+        """Run a loop from ``loop.init(carry)`` over ``xs``.
+
+        Args:
+            loop: The :class:`jaxobs.runtime._steps.Loop`.
+            carry: The initial carry.
+            xs: The per-step inputs.
+
+        Returns:
+            ``(final carry, stacked per-step outputs or None)``.
+
+        Raises:
+            ValueError: The loop has per-step outputs (use ``save=SaveFinal(cost)``).
+        """
         if loop.has_outputs:
             raise ValueError(
                 "ForwardSensitivity serves loops without per-step outputs: use save=SaveFinal(cost) "
@@ -296,10 +393,31 @@ class AutoCheckpoint(AbstractCheckpoint):
         return ForwardSensitivity(max_scalars=self.forward_max, fallback=reverse)
 
     def loop(self, loop: Loop, carry: Any, xs: Any) -> tuple[Any, Any]:
+        """Run a loop from ``loop.init(carry)`` over ``xs``.
+
+        Args:
+            loop: The :class:`jaxobs.runtime._steps.Loop`.
+            carry: The initial carry.
+            xs: The per-step inputs.
+
+        Returns:
+            ``(final carry, stacked per-step outputs or None)``.
+        """
         return self.pick(loop).loop(loop, carry, xs)
 
 
-def check_checkpoint(checkpoint) -> AbstractCheckpoint:
+def check_checkpoint(checkpoint: object) -> AbstractCheckpoint:
+    """Check that ``checkpoint`` is a checkpoint strategy.
+
+    Args:
+        checkpoint: The value given as ``checkpoint``.
+
+    Returns:
+        ``checkpoint`` itself.
+
+    Raises:
+        ValueError: It is not an :class:`AbstractCheckpoint`.
+    """
     if not isinstance(checkpoint, AbstractCheckpoint):
         raise ValueError(
             "checkpoint must be a checkpoint strategy (jaxobs.AutoCheckpoint(), NoCheckpoint(), StepCheckpoint(), "
@@ -308,7 +426,18 @@ def check_checkpoint(checkpoint) -> AbstractCheckpoint:
     return checkpoint
 
 
-def check_unroll(unroll) -> int:
+def check_unroll(unroll: object) -> int:
+    """Check that ``unroll`` is an integer ≥ 1.
+
+    Args:
+        unroll: The value given as ``unroll``.
+
+    Returns:
+        It as a Python ``int``.
+
+    Raises:
+        ValueError: It is not an integer ≥ 1 (``bool`` included).
+    """
     if isinstance(unroll, bool) or not isinstance(unroll, (int, np.integer)) or unroll < 1:
         raise ValueError(f"unroll must be an integer >= 1, got {unroll!r}")
     return int(unroll)

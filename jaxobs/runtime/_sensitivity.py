@@ -15,6 +15,7 @@ argument of the custom VJP.
 from __future__ import annotations
 
 import functools
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import equinox as eqx
@@ -68,7 +69,9 @@ class _Reverse(eqx.Module):
     treedef: Any = eqx.field(static=True)
 
 
-def sensitivity_loop(conv, max_scalars: int, consts, carry, xs):
+def sensitivity_loop(
+    conv: Callable[..., tuple[Any, Any]], max_scalars: int, consts: Sequence[Any], carry: Any, xs: Any
+) -> tuple[Any, Any]:
     """A closure-converted loop whose reverse-mode derivative is computed by forward sensitivities.
 
     Args:
@@ -152,7 +155,7 @@ def _loop_bwd(conv, max_scalars, res, cot):
 _loop.defvjp(_loop_fwd, _loop_bwd, symbolic_zeros=True)
 
 
-def multi_jvp(fun, primals, basis):
+def multi_jvp(fun: Callable[..., Any], primals: tuple[Any, ...], basis: Sequence[jax.Array]) -> tuple[Any, Any]:
     """``fun(*primals)`` and its JVPs along each direction of ``basis``, in one pass.
 
     Up to ``NESTED_MAX`` directions, by nested ``jax.jvp`` — the tangent along

@@ -10,7 +10,7 @@ share.
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import Any, NamedTuple
+from typing import Any, NamedTuple, Protocol
 
 import jax
 import jax.numpy as jnp
@@ -63,6 +63,26 @@ class Loop(NamedTuple):
     fill: Callable[[Any, Any, Any], Any] | None = None
 
 
+class _ReverseStrategy(Protocol):
+    """What :func:`run_steps` asks of a reverse-mode strategy (a ``_loop.AbstractReverseCheckpoint``).
+
+    The protocol keeps this module below :mod:`jaxobs.runtime._loop`, which defines the strategies.
+    """
+
+    @property
+    def startup(self) -> _ReverseStrategy: ...
+
+    def scan(
+        self,
+        step: Callable[[Any, Any], tuple[Any, Any]],
+        carry: Any,
+        xs: Any,
+        n: int,
+        unroll: int,
+        xs_map: Callable[[Any], Any] | None = None,
+    ) -> tuple[Any, Any]: ...
+
+
 # ---------------------------------------------------------------------------
 # split state vectors (point 1)
 # ---------------------------------------------------------------------------
@@ -104,7 +124,7 @@ def _has_steady(x):
     return isinstance(x, AbstractMultistepState)
 
 
-def startup_steps(carry) -> int:
+def startup_steps(carry: Any) -> int:
     """How many leading steps must run before every rule state in a carry can go steady.
 
     Args:
@@ -117,16 +137,31 @@ def startup_steps(carry) -> int:
     return max((s.startup_steps for s in states), default=0)
 
 
-def to_steady(carry):
+def to_steady(carry: Any) -> Any:
+    """Every multistep rule state in a carry in its steady form (its step without the start-up branch).
+
+    Args:
+        carry: The loop's carry, its start-up steps taken.
+
+    Returns:
+        The carry with each :class:`jaxobs.core.discretize.AbstractMultistepState` replaced by ``steady()``.
+    """
     return jax.tree.map(lambda s: s.steady() if _has_steady(s) else s, carry, is_leaf=_has_steady)
 
 
-def to_started(carry):
-    """Undo :func:`to_steady`: the carry a plain scan of the step would end with."""
+def to_started(carry: Any) -> Any:
+    """Undo :func:`to_steady`: the carry a plain scan of the step would end with.
+
+    Args:
+        carry: The loop's carry, its multistep states steady.
+
+    Returns:
+        The carry with each steady multistep state replaced by ``started()``.
+    """
     return jax.tree.map(lambda s: s.started() if _has_steady(s) else s, carry, is_leaf=_has_steady)
 
 
-def run_steps(loop: Loop, strategy, carry, xs):
+def run_steps(loop: Loop, strategy: _ReverseStrategy, carry: Any, xs: Any) -> tuple[Any, Any]:
     """The ``loop.n`` steps from ``carry`` (already built: ``loop.init`` applied), stored for reverse-mode
     AD as ``strategy`` says: its ``scan(step, carry, xs, n, unroll, xs_map)`` runs the steps, and the
     start-up steps peeled off run under ``strategy.startup`` (a few steps: never chunked), not unrolled.
@@ -190,7 +225,16 @@ def run_steps(loop: Loop, strategy, carry, xs):
 # ---------------------------------------------------------------------------
 
 
-def scan_blocks(step, carry, xs, n: int, size: int, unroll: int, xs_map=None, checkpoint_blocks: bool = False):
+def scan_blocks(
+    step: Callable[[Any, Any], tuple[Any, Any]],
+    carry: Any,
+    xs: Any,
+    n: int,
+    size: int,
+    unroll: int,
+    xs_map: Callable[[Any], Any] | None = None,
+    checkpoint_blocks: bool = False,
+) -> tuple[Any, Any]:
     """``n`` (>= 1) steps of ``step`` as an outer scan over blocks of ``size`` steps (a divisor of n when
     :func:`block_size` found one; the remainder then runs after, not unrolled).
 
