@@ -35,10 +35,10 @@ closes the loop sensorless) it measures two things, each batched over the points
 A point is **synchronous** when the run stayed finite, kept lock (late peak position error ≤ 90° electrical,
 the drive studies' lost-lock tolerance), kept its speed (:func:`jaxobs.metrics.lost_speed`'s rule on the late
 window) and settled: its late peak speed deviation is under ``speed_tol`` and at most 2 % above the early
-window's (:data:`~jaxobs.analysis.envelope_runs.SETTLE_GROWTH`: a settled point's windows both see the same steady ripple, equal to within
-their sampling; a mode growing at λ shows as about e^(λ (steady_from − early start)), 1.15 at 405 r/min
-above).  It **holds** when it is stable (the stability verdict), synchronous and its late peak position
-error is within ``bound_deg``.
+window's (:data:`~jaxobs.analysis.envelope_runs.SETTLE_GROWTH`: a settled point's windows both see the same
+steady ripple, equal to within their sampling; a mode growing at λ shows as about e^(λ (steady_from − early
+start)), 1.15 at 405 r/min above).  It **holds** when it is stable (the stability verdict), synchronous and its
+late peak position error is within ``bound_deg``.
 Where the verdict's linearized run left its operating point (``off_orbit``) the point is unstable and its rate
 is a bound (``rate_bound``, :func:`jaxobs.analysis.stability.floquet`), not a margin ± a resolution.
 

@@ -136,8 +136,8 @@ def run_leso_dual(
         dynamics: also the transients of :data:`DUAL_DYNAMICS`.
 
     Returns:
-        (rows, traces): rows as :func:`~jaxobs.reproduce.leso.run_leso_experiments`'s (explained by :data:`DUAL_EXPLANATIONS`), and each
-        experiment's run by name.
+        (rows, traces): rows as :func:`~jaxobs.reproduce.leso.run_leso_experiments`'s (explained by
+        :data:`DUAL_EXPLANATIONS`), and each experiment's run by name.
     """
     rows, traces = [], {}
     n = len(DUAL_EXPERIMENTS) + (len(DUAL_DYNAMICS) if dynamics else 0)
