@@ -8,8 +8,9 @@ import errno
 import math
 import os
 import re
+from collections.abc import Sequence
 from pathlib import Path
-from typing import ClassVar, cast
+from typing import Any, ClassVar, cast
 
 import equinox as eqx
 import jax
@@ -17,7 +18,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..core.measurements import DriveInput
-from ..core.sampletime import TS_REL_TOL
+from ..core.sampletime import TS_REL_TOL, Time
 from ..core.validate import check_real, check_sample_time, static_float
 from ..io.provenance import read_file
 from ._base import AbstractSignal
@@ -176,6 +177,7 @@ class SampledSignal(_Recording):
 
     @property
     def has_truth(self) -> bool:
+        """Whether the signal was built with its truth (``truth=(theta, omega, amplitude)``)."""
         return self.truth is not None
 
     def __call__(self, t):
@@ -186,25 +188,58 @@ class SampledSignal(_Recording):
             raise ValueError("SampledSignal was built without truth=(theta, omega, amplitude)")
         return self._read(self.truth[which], t)
 
-    def theta(self, t):
+    def theta(self, t: Time) -> jax.Array:
+        """The true phase, read back from ``truth`` as the samples are (class doc).
+
+        Args:
+            t: The time, s.
+
+        Returns:
+            θ(t), rad.
+
+        Raises:
+            ValueError: The signal was built without ``truth``.
+        """
         return self._truth(0, t)
 
-    def omega(self, t):
+    def omega(self, t: Time) -> jax.Array:
+        """The true angular frequency, read back from ``truth`` as the samples are (class doc).
+
+        Args:
+            t: The time, s.
+
+        Returns:
+            ω(t), rad/s.
+
+        Raises:
+            ValueError: The signal was built without ``truth``.
+        """
         return self._truth(1, t)
 
-    def fundamental_amplitude(self, t):
+    def fundamental_amplitude(self, t: Time) -> jax.Array:
+        """The true fundamental amplitude, read back from ``truth`` as the samples are (class doc).
+
+        Args:
+            t: The time, s.
+
+        Returns:
+            The amplitude, in the samples' units.
+
+        Raises:
+            ValueError: The signal was built without ``truth``.
+        """
         return self._truth(2, t)
 
     @classmethod
     def from_csv(
         cls,
-        path,
+        path: str | os.PathLike[str],
         *,
-        columns=None,
-        time_column=None,
-        sample_rate=None,
-        ts=None,
-        truth=None,
+        columns: str | int | Sequence[str | int] | None = None,
+        time_column: str | int | None = None,
+        sample_rate: float | None = None,
+        ts: float | None = None,
+        truth: Sequence[str | int] | None = None,
         max_bytes: int | None = None,
     ) -> SampledSignal:
         """A recorded signal from a CSV file, resampled to the observer's sample time ``ts``.
@@ -367,7 +402,22 @@ class RecordingColumnError(ValueError):
 
 
 def column_index(spec: object, header: list[str] | None, width: int, path: str | os.PathLike[str], role: str) -> int:
-    """The index of a column given by name or 0-based index."""
+    """The index of a column given by name or 0-based index.
+
+    Args:
+        spec: The column: its header name, or its 0-based index.
+        header: The file's column names, or None (no header row).
+        width: The file's number of columns.
+        path: The file (for the message).
+        role: ``"time"``, ``"signal"`` or ``"truth"`` (for the message and the error's ``role``).
+
+    Returns:
+        The column's 0-based index.
+
+    Raises:
+        RecordingColumnError: An index outside the file's columns, a name with no header row or not in it, or a
+            spec that is neither a name nor an index.
+    """
     p = str(path)
     if isinstance(spec, (int, np.integer)) and not isinstance(spec, bool):
         if not 0 <= spec < width:
@@ -386,17 +436,17 @@ def column_index(spec: object, header: list[str] | None, width: int, path: str |
 
 
 def read_recording(
-    path,
-    columns=None,
+    path: str | os.PathLike[str],
+    columns: Sequence[str | int] | None = None,
     *,
-    time_column=None,
-    sample_rate=None,
-    ts=None,
-    extra=(),
-    angle=(),
-    averaged=(),
-    max_bytes=None,
-) -> dict:
+    time_column: str | int | None = None,
+    sample_rate: float | None = None,
+    ts: float | None = None,
+    extra: Sequence[str | int] = (),
+    angle: Sequence[str | int] = (),
+    averaged: Sequence[str | int] = (),
+    max_bytes: int | None = None,
+) -> dict[str, Any]:
     """Read channels of a CSV recording and resample them to ``ts`` (the engine of :meth:`SampledSignal.from_csv`
     and :meth:`DriveRecording.from_csv`; their docstrings give the file format and the checks).
 
@@ -583,23 +633,54 @@ class DriveRecording(_Recording):
 
     @property
     def has_truth(self) -> bool:
+        """Whether the recording holds the encoder's angle (``theta_e``)."""
         return self.theta_e is not None
 
     def __call__(self, t):
         x = self._read(self.samples, t)
         return DriveInput(u_a=x[..., 0], u_b=x[..., 1], i_a=x[..., 2], i_b=x[..., 3])
 
-    def theta(self, t):
+    def theta(self, t: Time) -> jax.Array:
+        """The encoder's electrical angle (unwrapped), read back as the samples are.
+
+        Args:
+            t: The time, s.
+
+        Returns:
+            θ_e(t), rad.
+
+        Raises:
+            ValueError: The recording was built without ``theta_e``.
+        """
         if self.theta_e is None:
             raise ValueError("DriveRecording was built without theta_e (the encoder angle)")
         return self._read(self.theta_e, t)
 
-    def omega(self, t):
+    def omega(self, t: Time) -> jax.Array:
+        """The electrical speed (given, or the angle's centred difference), read back as the samples are.
+
+        Args:
+            t: The time, s.
+
+        Returns:
+            ω_e(t), rad/s.
+
+        Raises:
+            ValueError: The recording was built without ``theta_e``.
+        """
         if self.omega_e is None:
             raise ValueError("DriveRecording was built without theta_e (the encoder angle)")
         return self._read(self.omega_e, t)
 
-    def fundamental_amplitude(self, t):
+    def fundamental_amplitude(self, t: Time) -> jax.Array:
+        """The voltage vector's length |u_αβ| at ``t``.
+
+        Args:
+            t: The time, s.
+
+        Returns:
+            |u_αβ|(t), V.
+        """
         m = self(t)
         return jnp.sqrt(m.u_a * m.u_a + m.u_b * m.u_b)
 
@@ -608,14 +689,14 @@ class DriveRecording(_Recording):
     @classmethod
     def from_csv(
         cls,
-        path,
+        path: str | os.PathLike[str],
         *,
-        columns=COLUMNS,
-        time_column=None,
-        sample_rate=None,
-        ts=None,
-        theta_e=None,
-        omega_e=None,
+        columns: Sequence[str | int] = COLUMNS,
+        time_column: str | int | None = None,
+        sample_rate: float | None = None,
+        ts: float | None = None,
+        theta_e: str | int | None = None,
+        omega_e: str | int | None = None,
         max_bytes: int | None = None,
     ) -> DriveRecording:
         """A drive recording from a CSV file (the format and the checks of :meth:`SampledSignal.from_csv`).
