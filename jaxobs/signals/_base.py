@@ -22,6 +22,9 @@ from collections.abc import Callable
 from typing import ClassVar
 
 import equinox as eqx
+import jax
+
+from ..core.sampletime import TimeLike
 
 __all__ = ["AbstractSignal", "FunctionSignal"]
 
@@ -51,7 +54,7 @@ class AbstractSignal(eqx.Module):
     def __call__(self, t):
         """The signal at time ``t`` (s, or a :class:`~jaxobs.SampleTime` where ``accepts_sample_time``)."""
 
-    def theta(self, t):
+    def theta(self, t: TimeLike) -> jax.Array:
         """True fundamental phase (where ``has_truth``).
 
         Args:
@@ -65,7 +68,7 @@ class AbstractSignal(eqx.Module):
         """
         raise ValueError(f"{type(self).__name__} reports no truth (theta)")
 
-    def omega(self, t):
+    def omega(self, t: TimeLike) -> jax.Array:
         """True fundamental angular frequency (where ``has_truth``).
 
         Args:
@@ -79,7 +82,7 @@ class AbstractSignal(eqx.Module):
         """
         raise ValueError(f"{type(self).__name__} reports no truth (omega)")
 
-    def fundamental_amplitude(self, t):
+    def fundamental_amplitude(self, t: TimeLike) -> jax.Array:
         """True fundamental amplitude (where ``has_truth``).
 
         Args:
@@ -93,7 +96,7 @@ class AbstractSignal(eqx.Module):
         """
         raise ValueError(f"{type(self).__name__} reports no truth (fundamental_amplitude)")
 
-    def flux_angle(self, t):
+    def flux_angle(self, t: TimeLike) -> jax.Array:
         """The true rotor-flux angle (where ``has_flux_angle``).
 
         Args:
@@ -107,7 +110,7 @@ class AbstractSignal(eqx.Module):
         """
         raise ValueError(f"{type(self).__name__} has no flux angle")
 
-    def flux_omega(self, t):
+    def flux_omega(self, t: TimeLike) -> jax.Array:
         """The true rotor-flux angle's rate (where ``has_flux_angle``).
 
         Args:

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import os
 from pathlib import Path
 
 from ..io.provenance import read_file
@@ -122,6 +123,13 @@ class RecordingLayout:
     def from_table(cls, table: dict, where: str = "layout") -> RecordingLayout:
         """A layout from a TOML table (a job's ``[scenarios.recording.layout]`` or a sidecar's ``[layout]``).
 
+        Args:
+            table: The table: field names of :class:`RecordingLayout` to their values.
+            where: The table's name in the messages.
+
+        Returns:
+            The :class:`RecordingLayout`.
+
         Raises:
             ValueError: an unknown key or a bad value, naming ``<where>.<key>``.
         """
@@ -137,9 +145,15 @@ class RecordingLayout:
             raise ValueError(str(e).replace("RecordingLayout.", f"{where}.")) from None
 
     @classmethod
-    def sidecar(cls, csv_path) -> RecordingLayout | None:
+    def sidecar(cls, csv_path: str | os.PathLike[str]) -> RecordingLayout | None:
         """The layout declared beside a CSV file, in ``<file>.toml`` (``log.csv`` → ``log.csv.toml``, table
         ``[layout]``), or None where there is none.
+
+        Args:
+            csv_path: The CSV file.
+
+        Returns:
+            The declared :class:`RecordingLayout`, or None (no sidecar).
 
         Raises:
             ValueError: an unreadable sidecar, or a bad key in it.

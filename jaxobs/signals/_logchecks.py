@@ -9,10 +9,107 @@ check's memory does not grow with the log.  An error is a one-line ``ValueError`
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping, Sequence
 from typing import Protocol
 
 import jax
 import numpy as np
+
+
+class DeclaredLayout(Protocol):
+    """What the checks read of a log's declared layout (a :class:`~jaxobs.signals.RecordingLayout` has it)."""
+
+    @property
+    def current_frame(self) -> str:
+        """``"alpha_beta"`` or ``"abc"``."""
+        ...
+
+    @property
+    def voltage_frame(self) -> str:
+        """``"alpha_beta"``, ``"abc"`` or ``"dq"``."""
+        ...
+
+    @property
+    def voltage_timing(self) -> str:
+        """``"applied"`` or ``"reference"``."""
+        ...
+
+    @property
+    def voltage_delay(self) -> int:
+        """Periods from a reference voltage to its application."""
+        ...
+
+    @property
+    def angle_unit(self) -> str:
+        """The angle's unit."""
+        ...
+
+    @property
+    def pole_pairs(self) -> int | None:
+        """The machine's pole pairs, or None."""
+        ...
+
+
+class LogColumn(Protocol):
+    """A column of a log, read a block of rows at a time (a :class:`~jaxobs.signals._logfile.DiskColumn`)."""
+
+    def __getitem__(self, sl: slice, /) -> np.ndarray:
+        """The rows ``sl``."""
+        ...
+
+
+class CheckedLog(Protocol):
+    """What the checks read of a log in the observers' form (a :class:`~jaxobs.signals._logs.LogData` has it)."""
+
+    @property
+    def u_a(self) -> LogColumn:
+        """The α voltage applied over [t_k, t_k+1], V."""
+        ...
+
+    @property
+    def u_b(self) -> LogColumn:
+        """The β voltage applied over [t_k, t_k+1], V."""
+        ...
+
+    @property
+    def i_a(self) -> LogColumn:
+        """The α current at t_k, A."""
+        ...
+
+    @property
+    def i_b(self) -> LogColumn:
+        """The β current at t_k, A."""
+        ...
+
+    @property
+    def theta_e(self) -> LogColumn | None:
+        """The unwrapped electrical angle (rad), or None."""
+        ...
+
+    @property
+    def omega_e(self) -> LogColumn | None:
+        """The electrical speed (rad/s), or None."""
+        ...
+
+    @property
+    def ts(self) -> float:
+        """The sample interval, s."""
+        ...
+
+    @property
+    def n(self) -> int:
+        """The number of samples."""
+        ...
+
+    @property
+    def path(self) -> str:
+        """The file read."""
+        ...
+
+    @property
+    def warnings(self) -> list[str]:
+        """The checks' warnings, appended to."""
+        ...
 
 
 class MachineConstants(Protocol):
@@ -55,7 +152,21 @@ def _windows(n, wlen=_WLEN):
     return [slice(int(s), int(s) + w) for s in starts]
 
 
-def check_angle_unit(log, layout, cols, jumps):
+def check_angle_unit(
+    log: CheckedLog, layout: DeclaredLayout, cols: Mapping[str, str | None], jumps: Sequence[float]
+) -> None:
+    """Refuse an angle column declared in radians whose wraps are about 360 apart: it is in degrees.
+
+    Args:
+        log: The log.
+        layout: Its declared layout (``angle_unit``).
+        cols: The columns' names by role (``theta``, ``omega``, ``voltage``, ``current``), for the messages.
+        jumps: The angle column's steps larger than π between consecutive samples (its wraps), as converted by the
+            declared unit.
+
+    Raises:
+        ValueError: The wraps' median is within 18 of 360, naming the column.
+    """
     if not jumps or layout.angle_unit != "rad":
         return
     med = float(np.median(np.abs(np.asarray(jumps))))
@@ -66,9 +177,22 @@ def check_angle_unit(log, layout, cols, jumps):
         )
 
 
-def check_speed(log, layout, cols):
+def check_speed(log: CheckedLog, layout: DeclaredLayout, cols: Mapping[str, str | None]) -> None:
+    """Refuse a speed column that disagrees with the angle: the mean speed against the slope of the unwrapped angle,
+    over the windows that turn at least half an electrical turn a second, more than 5 % from 1; the message names
+    the likely cause (a sign, r/min, Hz, degrees, a mechanical speed or angle).
+
+    Args:
+        log: The log, with its angle (``theta_e``); nothing is checked without a speed column.
+        layout: Its declared layout (``pole_pairs``, or 2 to 12 tried where it has none).
+        cols: The columns' names by role (``theta``, ``omega``, ``voltage``, ``current``), for the messages.
+
+    Raises:
+        ValueError: The speed disagrees with the angle, naming both columns.
+    """
     if log.omega_e is None:
         return
+    assert log.theta_e is not None  # run only on a log with an angle (_logs._run_checks)
     num, den = [], []
     for sl in _windows(log.n):
         th = np.asarray(log.theta_e[sl])
@@ -111,7 +235,20 @@ def _sequence(x, th):
     return coef
 
 
-def check_sequence(log, layout, cols):
+def check_sequence(log: CheckedLog, layout: DeclaredLayout, cols: Mapping[str, str | None]) -> None:
+    """Refuse voltage or current columns that are not an α-β pair turning with the angle: over the windows spanning
+    an electrical turn, a negative-sequence phasor larger than the positive one (a flipped β sign or swapped
+    phases), or above 0.15 of it (phase values read as α-β, or an angle that is not the electrical one).
+
+    Args:
+        log: The log, with its angle (``theta_e``).
+        layout: Its declared layout (``current_frame``, ``voltage_frame``: the hint).
+        cols: The columns' names by role (``theta``, ``omega``, ``voltage``, ``current``), for the messages.
+
+    Raises:
+        ValueError: A pair that turns against the angle or is not α-β, naming its columns.
+    """
+    assert log.theta_e is not None  # run only on a log with an angle (_logs._run_checks)
     for role, (xa, xb) in (("voltage", (log.u_a, log.u_b)), ("current", (log.i_a, log.i_b))):
         P = N = 0.0
         scale = 0.0
@@ -150,7 +287,19 @@ def check_sequence(log, layout, cols):
             )
 
 
-def check_power(log, machine, cols):
+def check_power(log: CheckedLog, machine: MachineConstants, cols: Mapping[str, str | None]) -> None:
+    """Refuse power flowing against the machine: the mean electrical input power 3/2 ⟨u·i⟩ of the opposite sign to
+    the machine's 3/2 Rs⟨|i|²⟩ + T_e ω_m from the currents in the angle's frame, and above a fifth of it in size.
+
+    Args:
+        log: The log, with its angle (``theta_e``).
+        machine: The machine's constants.
+        cols: The columns' names by role (``theta``, ``omega``, ``voltage``, ``current``), for the messages.
+
+    Raises:
+        ValueError: The power flows against the machine, naming the voltage and current columns.
+    """
+    assert log.theta_e is not None  # run only on a log with an angle (_logs._run_checks)
     pin = pexp = 0.0
     for sl in _windows(log.n):
         th = np.asarray(log.theta_e[sl])
@@ -207,10 +356,18 @@ def _steady_windows(log, xa, xb):
             yield x, th
 
 
-def check_balance(log, layout, cols, counts):
+def check_balance(
+    log: CheckedLog, layout: DeclaredLayout, cols: Mapping[str, str | None], counts: Mapping[str, int]
+) -> None:
     """Offsets and gain mismatch between channels (phases a, b, c, or α and β), from the α-β fit on the steady
-    windows: the DC term and the negative sequence against the thresholds above.  ``counts``: the number of
-    columns read per role (``current``, ``voltage``)."""
+    windows: the DC term and the negative sequence against the thresholds above.
+
+    Args:
+        log: The log (its ``warnings`` are appended to); nothing is checked without its angle (``theta_e``).
+        layout: Its declared layout (``current_frame``, ``voltage_frame``).
+        cols: The columns' names by role (``theta``, ``omega``, ``voltage``, ``current``), for the messages.
+        counts: The number of columns read per role (``current``, ``voltage``).
+    """
     for role, (xa, xb), frame in (
         ("current", (log.i_a, log.i_b), layout.current_frame),
         ("voltage", (log.u_a, log.u_b), layout.voltage_frame),
@@ -250,12 +407,22 @@ def _model_voltage(machine, th, ia, ib, ts):
     return ua, ub
 
 
-def check_timing(log, layout, machine, cols):
+def check_timing(
+    log: CheckedLog, layout: DeclaredLayout, machine: MachineConstants, cols: Mapping[str, str | None]
+) -> None:
     """Warn when the voltage columns, as declared, match the machine's model best at another period: later
     (the controller's references logged at t_k declared as applied, or a declared delay too short) or earlier
     (a declared delay too long).  Each bias every estimate by ω_e·ts per period.  On a clean log of 000's SPMSM
     the shift by one period raises the mean squared residual 5e5-fold (2.4e-5 → 12.7 V²); parameter errors and
-    dead time raise the unshifted residual, so the warning asks for the shifted one to be under half."""
+    dead time raise the unshifted residual, so the warning asks for the shifted one to be under half.
+
+    Args:
+        log: The log, with its angle (``theta_e``; its ``warnings`` are appended to).
+        layout: Its declared layout (``voltage_timing``, ``voltage_delay``: the fix named).
+        machine: The machine's constants.
+        cols: The columns' names by role (``theta``, ``omega``, ``voltage``, ``current``), for the messages.
+    """
+    assert log.theta_e is not None  # run only on a log with an angle (_logs._run_checks)
     shifts = (0, 1, 2, -1)  # periods by which the model is compared later than the voltages
     err = np.zeros(len(shifts))
     for sl in _windows(log.n):

@@ -8,19 +8,33 @@ from __future__ import annotations
 import os
 import re
 import stat
+from collections.abc import Iterator
 from typing import overload
 
 import numpy as np
 from numpy.typing import DTypeLike
 
-from ._layout import DELIMITERS
+from ._layout import DELIMITERS, RecordingLayout
 
 CHUNK_ROWS = 500_000  # rows parsed at a time: the read's memory is a chunk, whatever the file's length
 
 _NUM = re.compile(r"\s*[+-]?(?:(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?|nan|inf|infinity)\s*", re.I | re.ASCII)
 
 
-def open_regular(path, max_bytes):
+def open_regular(path: str | os.PathLike[str], max_bytes: int) -> str:
+    """The path of a log that may be read: a regular file (no FIFO, device or folder) of at most ``max_bytes``.
+
+    Args:
+        path: The file.
+        max_bytes: The largest size read, bytes.
+
+    Returns:
+        The path, as a string.
+
+    Raises:
+        FileNotFoundError: No file at ``path``.
+        ValueError: A file that cannot be read, is not a regular file, or is larger than ``max_bytes``.
+    """
     p = os.fspath(path)
     shown = repr(p)
     try:
@@ -55,7 +69,16 @@ def _first_lines(path, k=3):
     return out
 
 
-def split_fields(line, layout):
+def split_fields(line: str, layout: RecordingLayout) -> list[str]:
+    """A line's fields, split at the layout's delimiter (runs of blanks for ``"space"``).
+
+    Args:
+        line: The line, without its line end.
+        layout: The log's :class:`RecordingLayout` (its ``delimiter``).
+
+    Returns:
+        The fields, as written (not stripped).
+    """
     sep = DELIMITERS[layout.delimiter]
     return re.split(sep, line.strip()) if sep == r"\s+" else line.split(sep)
 
@@ -81,7 +104,24 @@ def _hint(lines, layout):
     return ""
 
 
-def read_header(path, layout):
+def read_header(
+    path: str | os.PathLike[str], layout: RecordingLayout
+) -> tuple[list[str] | None, list[tuple[int, str]]]:
+    """The log's header row, if its first data line is not all numbers, checked against the line after it.
+
+    Args:
+        path: The file.
+        layout: The log's :class:`RecordingLayout` (its delimiter and decimal mark).
+
+    Returns:
+        ``(the column names, or None where there is no header row, the first non-blank, non-comment lines as
+        (line number, text))``.
+
+    Raises:
+        ValueError: A line that is not UTF-8, no data rows, a header that repeats a column name, or a line after
+            the header that is not as many numbers (with a hint where the delimiter or decimal mark seems other
+            than declared).
+    """
     lines = _first_lines(path)
     first = split_fields(lines[0][1], layout)
     if all(_is_number(x, layout.decimal) for x in first):
@@ -116,10 +156,17 @@ def _locate_bad_line(path, layout, width, skip_header):
     return "a line could not be read"
 
 
-def check_last_line(path):
+def check_last_line(path: str | os.PathLike[str]) -> None:
     """Refuse a file that does not end with a line end: a copy cut short ends inside its last line, and a value cut
     inside a field (``187.84`` read as ``187``) cannot be told from a whole one, so the line is named and the file
-    refused rather than read.  Every CSV writer of numpy, pandas, MATLAB and spreadsheets ends its last line."""
+    refused rather than read.  Every CSV writer of numpy, pandas, MATLAB and spreadsheets ends its last line.
+
+    Args:
+        path: The file (an empty one passes).
+
+    Raises:
+        ValueError: The last line has no line end, naming it.
+    """
     size = os.path.getsize(path)
     if size == 0:
         return
@@ -146,11 +193,31 @@ def _pandas_precision():
 _PRECISION: dict = {}
 
 
-def stream_columns(path, layout, header, wanted: list[int], width: int, folder):
+def stream_columns(
+    path: str | os.PathLike[str],
+    layout: RecordingLayout,
+    header: list[str] | None,
+    wanted: list[int],
+    width: int,
+    folder: str | os.PathLike[str],
+) -> tuple[dict[int, DiskColumn], int]:
     """Parse the file in chunks of :data:`CHUNK_ROWS` rows into one disk-backed float64 column per wanted index.
 
-    Returns (dict index → a column read a block at a time, rows).  Each chunk is written to the columns' files as
-    it is parsed, so the process holds one chunk at a time.
+    Each chunk is written to the columns' files as it is parsed, so the process holds one chunk at a time.
+
+    Args:
+        path: The file.
+        layout: The log's :class:`RecordingLayout` (its delimiter and decimal mark).
+        header: The column names (:func:`read_header`), or None where the file has no header row.
+        wanted: The 0-based indices of the columns to keep.
+        width: The file's number of columns (for the message naming a bad line).
+        folder: Where the columns' files ``c<index>.f8`` are written.
+
+    Returns:
+        ``(index → the column, a :class:`DiskColumn`, the number of rows)``.
+
+    Raises:
+        ValueError: A line that is not ``width`` numbers, naming it.
     """
     import pandas as pd
 
@@ -208,6 +275,7 @@ class DiskColumn:
 
     @property
     def shape(self) -> tuple[int]:
+        """``(n,)``: one axis, the rows."""
         return (self.n,)
 
     def __len__(self) -> int:
@@ -232,20 +300,40 @@ class DiskColumn:
 
 
 class ColumnWriter:
-    """A float64 column written block after block, then read back as a :class:`DiskColumn`."""
+    """A float64 column written block after block, then read back as a :class:`DiskColumn`.
 
-    def __init__(self, folder, name, n):
+    Args:
+        folder: Where the column's file ``<name>.f8`` is written.
+        name: The column's name.
+        n: The column's length, rows.
+    """
+
+    def __init__(self, folder: str | os.PathLike[str], name: str, n: int) -> None:
         self.fn, self.n = os.path.join(folder, name + ".f8"), n
         self.f = open(self.fn, "wb")
 
     def __setitem__(self, sl, x):
         self.f.write(np.ascontiguousarray(x, dtype=np.float64).tobytes())
 
-    def done(self):
+    def done(self) -> DiskColumn:
+        """Close the column's file.
+
+        Returns:
+            The column, as a :class:`DiskColumn`.
+        """
         self.f.close()
         return DiskColumn(self.fn, self.n)
 
 
-def row_blocks(n, size=CHUNK_ROWS):
+def row_blocks(n: int, size: int = CHUNK_ROWS) -> Iterator[slice]:
+    """The rows 0 … n − 1 in consecutive blocks of ``size`` (the last one shorter).
+
+    Args:
+        n: The number of rows.
+        size: The rows of a block.
+
+    Yields:
+        Each block's slice of rows.
+    """
     for a in range(0, n, size):
         yield slice(a, min(a + size, n))

@@ -108,6 +108,7 @@ class LogData:
 
     @property
     def n(self) -> int:
+        """The number of samples (rows kept)."""
         return int(self.u_a.shape[0])
 
     def recording(self, start: int = 0, n: int | None = None) -> DriveRecording:

@@ -7,15 +7,55 @@ timing and consistency checks), or resampled by the small reader when the log's 
 
 from __future__ import annotations
 
+import os
+from collections.abc import Sequence
+from typing import Any, Literal, overload
+
 from ..core.sampletime import TS_REL_TOL
-from ._layout import RecordingLayout
+from ._layout import ColumnSpec, RecordingLayout
+from ._logchecks import MachineConstants
 from ._logs import read_drive_log
 from ._recordings import DriveRecording, SampledSignal
 
 __all__ = ["read_recorded"]
 
 
-def read_recorded(path, columns, truth, *, drive: bool, layout=None, machine=None, windows=None, **kw):
+@overload
+def read_recorded(
+    path: str | os.PathLike[str],
+    columns: Sequence[ColumnSpec],
+    truth: Sequence[ColumnSpec],
+    *,
+    drive: Literal[False],
+    **kw: Any,
+) -> SampledSignal: ...
+
+
+@overload
+def read_recorded(
+    path: str | os.PathLike[str],
+    columns: Sequence[ColumnSpec],
+    truth: Sequence[ColumnSpec],
+    *,
+    drive: bool,
+    layout: RecordingLayout | None = None,
+    machine: MachineConstants | None = None,
+    windows=None,
+    **kw: Any,
+) -> SampledSignal | DriveRecording | list[DriveRecording]: ...
+
+
+def read_recorded(
+    path: str | os.PathLike[str],
+    columns: Sequence[ColumnSpec],
+    truth: Sequence[ColumnSpec],
+    *,
+    drive: bool,
+    layout: RecordingLayout | None = None,
+    machine: MachineConstants | None = None,
+    windows=None,  # (count, n) or None; unannotated: jaxobs_tuning.job.recordings passes an n typed int | None
+    **kw: Any,
+) -> SampledSignal | DriveRecording | list[DriveRecording]:
     """One recording file as scenarios.
 
     Args:

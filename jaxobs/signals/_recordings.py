@@ -8,8 +8,9 @@ import errno
 import math
 import os
 import re
+from collections.abc import Sequence
 from pathlib import Path
-from typing import ClassVar, cast
+from typing import Any, ClassVar, cast
 
 import equinox as eqx
 import jax
@@ -17,16 +18,16 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..core.measurements import DriveInput
-from ..core.sampletime import TS_REL_TOL
+from ..core.sampletime import TS_REL_TOL, Time
 from ..core.validate import check_real, check_sample_time, static_float
 from ..io.provenance import read_file
 from ._base import AbstractSignal
 
 
 class _Recording(AbstractSignal):
-    """What the two recordings share: samples on a uniform grid t₀ + k·ts, read back by :func:`_read_samples`,
-    and the layout of a batch of them: scenario-major (time last), or time-major (``n_time`` set: the
-    recordings' length, time first and the scenarios inner; :class:`SampledSignal`'s doc)."""
+    """What the two recordings share: samples on a uniform grid t₀ + k·ts, read back by :func:`_read_samples`, and
+    the layout of a batch of them: scenario-major (time last), or time-major (``n_time`` set: the recordings' length,
+    time first and the scenarios inner; :class:`SampledSignal`'s doc)."""
 
     samples: eqx.AbstractVar[jax.Array]
     ts: eqx.AbstractVar[float]
@@ -91,35 +92,26 @@ class _Recording(AbstractSignal):
 class SampledSignal(_Recording):
     """A signal given by its samples u_k = u(t₀ + k·ts): a recording, or a waveform computed once.
 
-    ``sig(t)`` reads the samples back by linear interpolation; a time within
-    ``SNAP`` of a sample interval from a sample instant reads that sample
-    exactly (the loop's sample times t₀ + ts·k carry rounding errors of a few
-    ulps, and a replayed recording should give back the recorded numbers, not
-    a blend of neighbours).  Before the first sample and after the last one
-    the end sample is held — a traced time cannot raise, so a horizon longer
-    than the recording must be checked by the caller (``simulate`` does).
+    ``sig(t)`` reads the samples back by linear interpolation; a time within ``SNAP`` of a sample interval from a sample
+    instant reads that sample exactly (the loop's sample times t₀ + ts·k carry rounding errors of a few ulps, and a
+    replayed recording should give back the recorded numbers, not a blend of neighbours).  Before the first sample and
+    after the last one the end sample is held — a traced time cannot raise, so a horizon longer than the recording must
+    be checked by the caller (``simulate`` does).
 
-    ``truth`` is the true (θ, ω, fundamental amplitude) at the same instants,
-    when known (a synthetic waveform); with it, ``simulate`` fills in
-    :class:`~jaxobs.runtime.simulation.SignalTruth` and a cost may compare against it.
-    Leaves may carry a leading batch axis (``vmap`` over recordings of one
-    length).
+    ``truth`` is the true (θ, ω, fundamental amplitude) at the same instants, when known (a synthetic waveform); with
+    it, ``simulate`` fills in :class:`~jaxobs.runtime.simulation.SignalTruth` and a cost may compare against it. Leaves
+    may carry a leading batch axis (``vmap`` over recordings of one length).
 
-    This is also how a benchmark feeds *precomputed* inputs: the waveform is
-    generated once, outside the timed function, and the loop only reads it,
-    a block of steps at a time (``SaveFinal``: :mod:`jaxobs.runtime._loop`, point 5).
+    This is also how a benchmark feeds *precomputed* inputs: the waveform is generated once, outside the timed function,
+    and the loop only reads it, a block of steps at a time (``SaveFinal``: :mod:`jaxobs.runtime._loop`, point 5).
 
-    A batch of recordings may be stored **time-major** instead
-    (``batch_inner=True``: ``samples`` and each truth array shaped ``(n, B)``,
-    row k holding every scenario's sample k, the layout a recorder or a
-    NumPy study writes column per channel).  :func:`jaxobs.map_batch` then maps
-    the batch along its inner axis, and the throughput loop (``SaveFinal``,
-    ``SaveAll(fast=True)``) takes the rows as its scan inputs where they lie:
-    one contiguous ``(B,)`` row per step, nothing gathered or transposed
-    (:mod:`jaxobs.runtime._loop`, point 6).  A device's share of a time-major batch runs
-    whole (``map_batch`` does not tile it).  The plain loop (``SaveAll()``)
-    gives the same numbers by reading the samples back through ``sig(t)``,
-    which under ``vmap`` moves the batch axis to the front: correct, slower.
+    A batch of recordings may be stored **time-major** instead (``batch_inner=True``: ``samples`` and each truth array
+    shaped ``(n, B)``, row k holding every scenario's sample k, the layout a recorder or a NumPy study writes column per
+    channel). :func:`jaxobs.map_batch` then maps the batch along its inner axis, and the throughput loop (``SaveFinal``,
+    ``SaveAll(fast=True)``) takes the rows as its scan inputs where they lie: one contiguous ``(B,)`` row per step,
+    nothing gathered or transposed (:mod:`jaxobs.runtime._loop`, point 6). A device's share of a time-major batch runs
+    whole (``map_batch`` does not tile it). The plain loop (``SaveAll()``) gives the same numbers by reading the samples
+    back through ``sig(t)``, which under ``vmap`` moves the batch axis to the front: correct, slower.
 
     Args:
         samples: u_k, shape ``(..., n)`` (n ≥ 2), or ``(n, B)`` with ``batch_inner=True``.
@@ -176,6 +168,7 @@ class SampledSignal(_Recording):
 
     @property
     def has_truth(self) -> bool:
+        """Whether the signal was built with its truth (``truth=(theta, omega, amplitude)``)."""
         return self.truth is not None
 
     def __call__(self, t):
@@ -186,50 +179,62 @@ class SampledSignal(_Recording):
             raise ValueError("SampledSignal was built without truth=(theta, omega, amplitude)")
         return self._read(self.truth[which], t)
 
-    def theta(self, t):
+    def theta(self, t: Time) -> jax.Array:
+        """θ(t), rad: ``truth``'s phase, read back as the samples are; ValueError without ``truth``.
+
+        Args:
+            t: The time, s.
+        """
         return self._truth(0, t)
 
-    def omega(self, t):
+    def omega(self, t: Time) -> jax.Array:
+        """ω(t), rad/s: ``truth``'s angular frequency, read back as the samples are; ValueError without ``truth``.
+
+        Args:
+            t: The time, s.
+        """
         return self._truth(1, t)
 
-    def fundamental_amplitude(self, t):
+    def fundamental_amplitude(self, t: Time) -> jax.Array:
+        """The fundamental amplitude at ``t``: ``truth``'s, read back as the samples are; ValueError without ``truth``.
+
+        Args:
+            t: The time, s.
+        """
         return self._truth(2, t)
 
     @classmethod
     def from_csv(
         cls,
-        path,
+        path: str | os.PathLike[str],
         *,
-        columns=None,
-        time_column=None,
-        sample_rate=None,
-        ts=None,
-        truth=None,
+        columns: str | int | Sequence[str | int] | None = None,
+        time_column: str | int | None = None,
+        sample_rate: float | None = None,
+        ts: float | None = None,
+        truth: Sequence[str | int] | None = None,
         max_bytes: int | None = None,
     ) -> SampledSignal:
         """A recorded signal from a CSV file, resampled to the observer's sample time ``ts``.
 
-        The file: one row per sample, comma-separated numbers, an optional header row of column
-        names, ``#`` comment lines.  The time base is a ``time_column`` (s, strictly increasing; it
-        may be non-uniform) or a ``sample_rate`` (Hz, uniform rows).  Times are taken from the first
-        row: sample 0 is t = 0.
+        The file: one row per sample, comma-separated numbers, an optional header row of column names, ``#`` comment
+        lines.  The time base is a ``time_column`` (s, strictly increasing; it may be non-uniform) or a ``sample_rate``
+        (Hz, uniform rows).  Times are taken from the first row: sample 0 is t = 0.
 
         Args:
             path: the CSV file.
-            columns: the channel(s): a name (from the header) or a 0-based index, or a list of them
-                (several channels give a batch, samples shaped (channels, n), for ``vmap``); default:
-                the one column that is neither the time nor a truth column.
+            columns: the channel(s): a name (from the header) or a 0-based index, or a list of them (several channels
+                give a batch, samples shaped (channels, n), for ``vmap``); default: the one column that is neither the
+                time nor a truth column.
             time_column: the time column (s, strictly increasing); exactly one of it and ``sample_rate``.
             sample_rate: the rows' rate (Hz, uniform rows); exactly one of it and ``time_column``.
-            ts: the observer's sample time, s.  ``None`` keeps the recording's own (uniform) rate.
-                Otherwise the recording is read at t_k = k·ts by linear interpolation (point
-                sampling, as the DSP's converter would: no anti-alias filter).  A recording sampled
-                more slowly than 1/ts (any interval longer than 1.01·ts) is refused: interpolation
-                would invent the samples in between.
-            truth: ``(theta, omega, amplitude)`` column names or indices: the signal's true phase (rad),
-                angular frequency (rad/s) and fundamental amplitude, when the recording carries them
-                (a reference instrument, or a synthetic record); the metrics that compare an estimate
-                with the truth need them.
+            ts: the observer's sample time, s.  ``None`` keeps the recording's own (uniform) rate. Otherwise the
+                recording is read at t_k = k·ts by linear interpolation (point sampling, as the DSP's converter would:
+                no anti-alias filter).  A recording sampled more slowly than 1/ts (any interval longer than 1.01·ts) is
+                refused: interpolation would invent the samples in between.
+            truth: ``(theta, omega, amplitude)`` column names or indices: the signal's true phase (rad), angular
+                frequency (rad/s) and fundamental amplitude, when the recording carries them (a reference instrument, or
+                a synthetic record); the metrics that compare an estimate with the truth need them.
             max_bytes: refuse a larger file (default :data:`MAX_CSV_BYTES`).
 
         Returns:
@@ -237,10 +242,9 @@ class SampledSignal(_Recording):
 
         Raises:
             FileNotFoundError: no file at ``path``.
-            ValueError: an unreadable file, a file too large, a row of another width, a
-                non-number, a non-finite value, an unknown column, a time column that is not
-                strictly increasing, fewer than 2 samples, a rate below 1/ts, or both or neither of
-                ``time_column`` and ``sample_rate``.
+            ValueError: an unreadable file, a file too large, a row of another width, a non-number, a non-finite value,
+                an unknown column, a time column that is not strictly increasing, fewer than 2 samples, a rate below
+                1/ts, or both or neither of ``time_column`` and ``sample_rate``.
         """
         single = columns is None or isinstance(columns, (str, int))
         want_truth = () if truth is None else tuple(truth)
@@ -367,7 +371,21 @@ class RecordingColumnError(ValueError):
 
 
 def column_index(spec: object, header: list[str] | None, width: int, path: str | os.PathLike[str], role: str) -> int:
-    """The index of a column given by name or 0-based index."""
+    """The index of a column given by name or 0-based index.
+
+    Args:
+        spec: The column: its header name, or its 0-based index.
+        header: The file's column names, or None (no header row).
+        width: The file's number of columns.
+        path: The file (for the message).
+        role: ``"time"``, ``"signal"`` or ``"truth"`` (for the message and the error's ``role``).
+
+    Returns:
+        The column's 0-based index.
+
+    Raises:
+        RecordingColumnError: An index out of range, a name not in the header (or no header), or neither.
+    """
     p = str(path)
     if isinstance(spec, (int, np.integer)) and not isinstance(spec, bool):
         if not 0 <= spec < width:
@@ -386,17 +404,17 @@ def column_index(spec: object, header: list[str] | None, width: int, path: str |
 
 
 def read_recording(
-    path,
-    columns=None,
+    path: str | os.PathLike[str],
+    columns: Sequence[str | int] | None = None,
     *,
-    time_column=None,
-    sample_rate=None,
-    ts=None,
-    extra=(),
-    angle=(),
-    averaged=(),
-    max_bytes=None,
-) -> dict:
+    time_column: str | int | None = None,
+    sample_rate: float | None = None,
+    ts: float | None = None,
+    extra: Sequence[str | int] = (),
+    angle: Sequence[str | int] = (),
+    averaged: Sequence[str | int] = (),
+    max_bytes: int | None = None,
+) -> dict[str, Any]:
     """Read channels of a CSV recording and resample them to ``ts`` (the engine of :meth:`SampledSignal.from_csv`
     and :meth:`DriveRecording.from_csv`; their docstrings give the file format and the checks).
 
@@ -510,16 +528,15 @@ def read_recording(
 
 
 class DriveRecording(_Recording):
-    """A recording of a drive's measurements, (u_α, u_β, i_α, i_β) per sample, for a drive observer run open
-    loop (``jaxobs.OnSignal(observer, recording)``), with the encoder's electrical angle when known.
+    """A recording of a drive's measurements, (u_α, u_β, i_α, i_β) per sample, for a drive observer run open loop
+    (``jaxobs.OnSignal(observer, recording)``), with the encoder's electrical angle when known.
 
-    ``recording(t)`` returns the :class:`~jaxobs.core.measurements.DriveInput` at t_k (the drive observers'
-    contract: the voltage applied over [t_k, t_k+1], the current sampled at t_k); its ``ts`` must be the
-    observer's (``OnSignal`` checks it; :meth:`from_csv` resamples).  With ``theta_e`` (the encoder's
-    electrical angle, rad) the truth is reported: ``theta`` the angle (unwrapped), ``omega`` the electrical
-    speed (given, or the angle's centred difference), ``fundamental_amplitude`` the voltage vector's length
-    |u_αβ|, so that ``jaxobs.metrics`` and the tuning objectives compare θ̂ with the encoder.
-    Leaves may carry a leading batch axis (recordings of one length).
+    ``recording(t)`` returns the :class:`~jaxobs.core.measurements.DriveInput` at t_k (the drive observers' contract:
+    the voltage applied over [t_k, t_k+1], the current sampled at t_k); its ``ts`` must be the observer's (``OnSignal``
+    checks it; :meth:`from_csv` resamples).  With ``theta_e`` (the encoder's electrical angle, rad) the truth is
+    reported: ``theta`` the angle (unwrapped), ``omega`` the electrical speed (given, or the angle's centred
+    difference), ``fundamental_amplitude`` the voltage vector's length |u_αβ|, so that ``jaxobs.metrics`` and the tuning
+    objectives compare θ̂ with the encoder. Leaves may carry a leading batch axis (recordings of one length).
 
     Args:
         u_a: u_α, the voltage applied over [t_k, t_k+1], V, shape ``(..., n)``.
@@ -583,23 +600,39 @@ class DriveRecording(_Recording):
 
     @property
     def has_truth(self) -> bool:
+        """Whether the recording holds the encoder's angle (``theta_e``)."""
         return self.theta_e is not None
 
     def __call__(self, t):
         x = self._read(self.samples, t)
         return DriveInput(u_a=x[..., 0], u_b=x[..., 1], i_a=x[..., 2], i_b=x[..., 3])
 
-    def theta(self, t):
+    def theta(self, t: Time) -> jax.Array:
+        """θ_e(t), rad: the encoder's electrical angle (unwrapped), read back as the samples are; ValueError without it.
+
+        Args:
+            t: The time, s.
+        """
         if self.theta_e is None:
             raise ValueError("DriveRecording was built without theta_e (the encoder angle)")
         return self._read(self.theta_e, t)
 
-    def omega(self, t):
+    def omega(self, t: Time) -> jax.Array:
+        """ω_e(t), rad/s: the electrical speed (given, or the angle's centred difference); ValueError without the angle.
+
+        Args:
+            t: The time, s.
+        """
         if self.omega_e is None:
             raise ValueError("DriveRecording was built without theta_e (the encoder angle)")
         return self._read(self.omega_e, t)
 
-    def fundamental_amplitude(self, t):
+    def fundamental_amplitude(self, t: Time) -> jax.Array:
+        """|u_αβ|(t), V: the voltage vector's length at ``t``.
+
+        Args:
+            t: The time, s.
+        """
         m = self(t)
         return jnp.sqrt(m.u_a * m.u_a + m.u_b * m.u_b)
 
@@ -608,26 +641,25 @@ class DriveRecording(_Recording):
     @classmethod
     def from_csv(
         cls,
-        path,
+        path: str | os.PathLike[str],
         *,
-        columns=COLUMNS,
-        time_column=None,
-        sample_rate=None,
-        ts=None,
-        theta_e=None,
-        omega_e=None,
+        columns: Sequence[str | int] = COLUMNS,
+        time_column: str | int | None = None,
+        sample_rate: float | None = None,
+        ts: float | None = None,
+        theta_e: str | int | None = None,
+        omega_e: str | int | None = None,
         max_bytes: int | None = None,
     ) -> DriveRecording:
         """A drive recording from a CSV file (the format and the checks of :meth:`SampledSignal.from_csv`).
 
-        Resampled to ``ts``: the currents and the angle by linear interpolation, the voltages as the
-        average over each new period [t_k, t_k + ts] of the recorded voltage held over its own periods (a
-        voltage row is what the inverter applied until the next row).
+        Resampled to ``ts``: the currents and the angle by linear interpolation, the voltages as the average over each
+        new period [t_k, t_k + ts] of the recorded voltage held over its own periods (a voltage row is what the
+        inverter applied until the next row).
 
         Args:
             path: The CSV file.
-            columns: The four columns u_α, u_β (V), i_α, i_β (A), names or indices (default the names
-                ``u_a, u_b, i_a, i_b``).
+            columns: The four columns u_α, u_β (V), i_α, i_β (A), names or indices (default ``u_a, u_b, i_a, i_b``).
             time_column: The time column (s, strictly increasing); exactly one of it and ``sample_rate``.
             sample_rate: The rows' rate (Hz, uniform rows); exactly one of it and ``time_column``.
             ts: The observer's sample time, s (``None``: the recording's own uniform rate).

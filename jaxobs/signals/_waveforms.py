@@ -22,7 +22,8 @@ built by :func:`paper001_test`.
 from __future__ import annotations
 
 import math
-from typing import Any, ClassVar
+from collections.abc import Iterable
+from typing import Any, ClassVar, TypeVar
 
 import equinox as eqx
 import jax
@@ -31,7 +32,7 @@ from jax.core import Tracer
 
 from .. import papers
 from ..core.measurements import DriveInput
-from ..core.sampletime import SampleTime, cycles, exact_phase, frac_mul, time_value
+from ..core.sampletime import SampleTime, Time, TimeLike, cycles, exact_phase, frac_mul, time_value
 from ..core.trig import sincos
 from ..core.validate import as_float, check_nonnegative, check_positive, check_real, check_sample_time
 from ._base import AbstractSignal
@@ -129,7 +130,7 @@ class GridSignal(AbstractSignal):
         c = cycles(self.freq, t) + self._on(t) * (cycles(self.freq_step, t) - frac_mul(self.freq_step, self.t_event))
         return c - jax.lax.stop_gradient(jnp.round(c))
 
-    def theta(self, t):
+    def theta(self, t: TimeLike) -> Time:
         """True fundamental phase θ(t): unwrapped in float64; in float32 from a :class:`SampleTime`,
         reduced modulo 2π (an unwrapped float32 phase of 3·10⁴ rad is only good to 2 mrad).
 
@@ -146,7 +147,7 @@ class GridSignal(AbstractSignal):
         dt = jnp.maximum(t - self.t_event, 0.0)
         return 2 * jnp.pi * self.freq * t + self.phase + on * (2 * jnp.pi * self.freq_step * dt + self.phase_jump)
 
-    def omega(self, t):
+    def omega(self, t: TimeLike) -> jax.Array:
         """True fundamental angular frequency.
 
         Args:
@@ -157,7 +158,15 @@ class GridSignal(AbstractSignal):
         """
         return 2 * jnp.pi * (self.freq + self._on(t) * self.freq_step)
 
-    def fundamental_amplitude(self, t):
+    def fundamental_amplitude(self, t: TimeLike) -> jax.Array:
+        """True fundamental amplitude: V₀ before the event, (1 − sag)·V₀ from it on.
+
+        Args:
+            t: The time, s, or a :class:`SampleTime`.
+
+        Returns:
+            The amplitude, input units.
+        """
         return self.amplitude * (1.0 - self._on(t) * self.sag)
 
     @staticmethod
@@ -198,8 +207,12 @@ class GridSignal(AbstractSignal):
 
 PAPER001_TESTS = tuple(papers.TESTS_001)
 
+_M = TypeVar("_M")
 
-def paper001_test(name: str, *, freq=50.0, amplitude=1.0, t_event=0.2, phase=0.0) -> GridSignal:
+
+def paper001_test(
+    name: str, *, freq: float = 50.0, amplitude: float = 1.0, t_event: float = 0.2, phase: float = 0.0
+) -> GridSignal:
     """The test signals of paper 001 (p.u. amplitude, 50 Hz nominal), from :data:`jaxobs.papers.TESTS_001`.
 
     1: +2 Hz step;  2: +20° phase jump;  3: 0.75 p.u. sag (depth);
@@ -240,7 +253,7 @@ def paper001_test(name: str, *, freq=50.0, amplitude=1.0, t_event=0.2, phase=0.0
     return GridSignal(**kw)
 
 
-def stack(modules):
+def stack(modules: Iterable[_M]) -> _M:
     """Stack equally-shaped modules (signals, observers, scenarios) along a new leading batch axis.
 
     Args:
@@ -338,8 +351,17 @@ class EMFSignal(AbstractSignal):
         sinc = jnp.sin(x) / x
         return sinc * jnp.cos(a_m), sinc * jnp.sin(a_m)
 
-    def emf(self, t):
-        if exact_phase(t, self.omega1):
+    def emf(self, t: TimeLike) -> tuple[jax.Array, jax.Array]:
+        """The EMF (e_α, e_β) averaged over the coming period [t, t + ts] (the class doc's convention); in float32
+        from a :class:`SampleTime`, from the exact phase (jaxobs.core.sampletime).
+
+        Args:
+            t: The time, s, or a :class:`SampleTime`.
+
+        Returns:
+            ``(e_α, e_β)``, V.
+        """
+        if isinstance(t, SampleTime) and exact_phase(t, self.omega1):  # isinstance: as exact_phase, for the checker
             mid = SampleTime(t.k, t.ts, t.t0 + 0.5 * self.ts)
             c_mid = cycles(self.omega1, mid, 1 / (2 * math.pi))
             cis = lambda h, phi: self._avg_cis_exact(c_mid, h, phi)  # noqa: E731
@@ -355,7 +377,7 @@ class EMFSignal(AbstractSignal):
             eb = eb + self.harmonics[..., i] * sh
         return ea, eb
 
-    def flux_angle(self, t):
+    def flux_angle(self, t: TimeLike) -> Time:
         """The true rotor-flux angle ω1 t + φ1 − π/2 (ψ lags e by 90°); in float32 from a
         :class:`SampleTime`, reduced modulo 2π and exact (jaxobs.core.sampletime).
 
@@ -370,7 +392,7 @@ class EMFSignal(AbstractSignal):
             return 2 * jnp.pi * (c - jax.lax.stop_gradient(jnp.round(c))) + self.phase - jnp.pi / 2
         return self.omega1 * time_value(t) + self.phase - jnp.pi / 2
 
-    def flux_omega(self, t):
+    def flux_omega(self, t: TimeLike) -> jax.Array:
         """The true rotor-flux angle's rate.
 
         Args:
