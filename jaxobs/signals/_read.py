@@ -40,7 +40,7 @@ def read_recorded(
     drive: bool,
     layout: RecordingLayout | None = None,
     machine: MachineConstants | None = None,
-    windows=None,
+    windows: tuple[int, int] | None = None,
     **kw: Any,
 ) -> SampledSignal | DriveRecording | list[DriveRecording]: ...
 
@@ -53,7 +53,7 @@ def read_recorded(
     drive: bool,
     layout: RecordingLayout | None = None,
     machine: MachineConstants | None = None,
-    windows=None,  # (count, n) or None; unannotated: jaxobs_tuning.job.recordings passes an n typed int | None
+    windows: tuple[int, int] | None = None,
     **kw: Any,
 ) -> SampledSignal | DriveRecording | list[DriveRecording]:
     """One recording file as scenarios.

@@ -213,7 +213,11 @@ def _load_one(
     kw = dict(time_column=spec.time_column, sample_rate=spec.sample_rate, ts=spec.ts)
     if not family.binds:
         return read_recorded(path, spec.columns, spec.truth, drive=False, max_bytes=MAX_RECORDING_BYTES, **kw)
-    windows = (spec.windows, need) if spec.windows else None
+    windows = None
+    if spec.windows:
+        if need is None:  # a window is the horizon's length: without one there is nothing to cut
+            raise JobError("scenarios.recording.windows", "windows are cut to the horizon; give scenarios.horizon")
+        windows = (spec.windows, need)
     return read_recorded(
         path, spec.columns, spec.truth, drive=True, layout=spec.layout, machine=spec.machine, windows=windows,
         max_bytes=MAX_LOG_BYTES, **kw,
