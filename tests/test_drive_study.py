@@ -236,6 +236,9 @@ def test_closed_form_designs_have_the_jobs_closed_form_gains(tmp_path):
         cf = info.closed_form(info.ctor(**info.defaults))
         assert cf and all(float(getattr(designs[name], g)) == pytest.approx(v) for g, v in cf.items())
     assert float(designs["fa"].k1) == papers.FALESO_K1 and float(designs["c"].omega0) == papers.LESO_OMEGA0
+    # the closed form's short name (as `jaxobs closed-form` takes it) names the same design
+    st.write_text(STUDY_HEAD + '[designs.fa]\nclosed_form = "faleso"\n[axes]\ndRs = [0.0]\n')
+    assert bool(eqx.tree_equal(load_study(st).designs["fa"], designs["fa"]))
 
 
 def test_t_event_of_a_drive_study(tmp_path):

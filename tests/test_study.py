@@ -150,6 +150,12 @@ def test_study_file_errors(tmp_path, capsys):
     assert main(["study", str(p)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "designs.a.closed_form" in err[0]
+    # a closed form is named by its short name or by its class's name, alike
+    from jaxobs_tuning.study_file import load_study
+
+    for name in ("wif", "SOGIFLLWIF"):
+        p.write_text(f'[designs.a]\nclosed_form = "{name}"\n[axes]\nfreq_step = [1.0]\n')
+        assert type(load_study(p).designs["a"]).__name__ == "SOGIFLLWIF"
 
 
 def test_grid_signals_check_values_like_gridsignal_and_match_it():

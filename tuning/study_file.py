@@ -113,7 +113,9 @@ WHAT = "study file"
 # # observers (a grid signal's design is no drive observer; a drive observer may run on a family that closes the loop)
 FLL_CLOSED_FORMS = {
     a: e.cls.closed_form for e in REGISTRY.values() if not FAMILIES[e.signal].drive_observer for a in e.aliases
-}
+} | {n: e.cls.closed_form for n, e in REGISTRY.items() if not FAMILIES[e.signal].drive_observer}
+# a closed form's short name (as `jaxobs closed-form` takes it) -> its class's name (as jobs name components)
+_ALIAS_CLASS = {alias: name for name, e in REGISTRY.items() for alias in e.aliases}
 FLL_COMPONENTS = tuple(name for name, e in REGISTRY.items() if not FAMILIES[e.signal].drive_observer)
 DRIVE_OBSERVERS = tuple(name for name, e in REGISTRY.items() if any(FAMILIES[s].closed_loop for s in e.signals))
 # the drive jobs' shipped drive files (jaxobs.drive.SHIPPED_DRIVES: the same names, bench inertias and FOC), so a
@@ -564,8 +566,10 @@ def _drive_designs(raw: dict, base: Path, ts_file: float | None) -> tuple[dict, 
         if how == "closed_form":  # the component's closed-form gains, as a job's closed_form scores them
             no_unknown(spec, ("closed_form",), where)
             comp = get_field(spec, "closed_form", f"{where}.closed_form", str, required=True)
+            comp = _ALIAS_CLASS.get(comp, comp)
             if comp not in DRIVE_OBSERVERS or comp not in COMPONENTS:
-                allowed = ", ".join(c for c in DRIVE_OBSERVERS if c in COMPONENTS)
+                names = [c for c in DRIVE_OBSERVERS if c in COMPONENTS]
+                allowed = ", ".join([*names, *(a for a, c in _ALIAS_CLASS.items() if c in names)])
                 raise JobError(f"{where}.closed_form", f"must be one of {allowed}, got {show(comp)}")
             info = COMPONENTS[comp]
             values = {**info.defaults, **info.closed_form(info.ctor(**info.defaults))}
