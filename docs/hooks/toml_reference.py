@@ -380,7 +380,7 @@ def reference_markdown() -> str:
         out.append(_axes_table(f"[scenarios.grid] ({sig})", job_mod.AXIS_RANGES[sig], intro))
     rec_keys = allowed_keys(parse, r, ("scenarios", "recording"), rec_job.parent)
     cols = "; ".join(
-        f"`{s}`: columns {', '.join(c)}, truth {', '.join(t)}" for s, (c, t) in job_mod.RECORDING_COLUMNS.items()
+        f"`{s}`: columns {', '.join(c)}, truth {', '.join(t)}" for s, (c, t, _) in job_mod.RECORDING_COLUMNS.items()
     )
     out.append(
         _table(

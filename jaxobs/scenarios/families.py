@@ -178,8 +178,8 @@ class AbstractFamily(eqx.Module):
     study_bytes_per_step: eqx.AbstractClassVar[int]
     drive_observer: eqx.AbstractClassVar[bool]
     options: eqx.AbstractClassVar[tuple]
-    # a recording of its signals: the default signal and truth columns (a family with ``truth_counts``, how many
-    # truth columns a recording may give); None: none stands for them
+    # a recording of its signals: the default signal and truth columns, and how many truth columns a recording may
+    # give; None: none stands for them
     recording_columns: ClassVar[tuple | None] = None
 
     @abc.abstractmethod
@@ -251,10 +251,7 @@ class AbstractFamily(eqx.Module):
         """
         if cls.recording_columns is None:
             raise ValueError(f"{cls.__name__}: no recording stands for its signals")
-        cols, truth = cls.recording_columns
-        # truth_counts: a class attribute of each family with recording_columns (declared there, not on this base:
-        # an annotation here would be an equinox field of every family)
-        counts: tuple = getattr(cls, "truth_counts")  # noqa: B009 (not declared on this base: see above)
+        cols, truth, counts = cls.recording_columns
         return RecordedSignals(cls.signal, cols, truth, counts, cls.drive_observer)
 
     @classmethod
@@ -334,8 +331,7 @@ class GridSignals(AbstractFamily):
     metrics: ClassVar[tuple[str, ...]] = ("settling_freq", "ripple_freq", "rms_phase_steady", "itae_freq", "iae_phase")
     flags: ClassVar[tuple[str, ...]] = ("settled", "diverged", "lost_lock")
     # a recording of it: the voltage column; the truth columns (phase rad, ω rad/s, amplitude), how many
-    recording_columns: ClassVar[tuple] = (("v",), ("theta", "omega", "amplitude"))
-    truth_counts: ClassVar[tuple] = (3,)
+    recording_columns: ClassVar[tuple] = (("v",), ("theta", "omega", "amplitude"), (3,))
 
     def __check_init__(self):
         check_seconds("t_event", self.t_event)
@@ -428,8 +424,7 @@ class EMFSignals(AbstractFamily):
     metrics: ClassVar[tuple[str, ...]] = ("iae_position", "rms_position_steady", "bias_position")
     flags: ClassVar[tuple[str, ...]] = ("diverged", "lost_lock")
     # a recording of a drive: u and i; the truth columns (encoder angle rad [, speed rad/s]), how many
-    recording_columns: ClassVar[tuple] = (("u_a", "u_b", "i_a", "i_b"), ("theta_e", "omega_e"))
-    truth_counts: ClassVar[tuple] = (1, 2)
+    recording_columns: ClassVar[tuple] = (("u_a", "u_b", "i_a", "i_b"), ("theta_e", "omega_e"), (1, 2))
 
     @classmethod
     def from_toml(
@@ -535,7 +530,6 @@ class DriveScenarios(AbstractFamily):
     )
     flags: ClassVar[tuple[str, ...]] = ("lost_lock", "lost_speed", "diverged")
     recording_columns: ClassVar[tuple] = EMFSignals.recording_columns
-    truth_counts: ClassVar[tuple] = EMFSignals.truth_counts
 
     @classmethod
     def from_toml(
