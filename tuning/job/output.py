@@ -16,6 +16,7 @@ from jaxobs import metrics as M
 from jaxobs.core.discretize import AbstractRule
 from jaxobs.io.provenance import cf_dataset, cf_labels
 from jaxobs.scenarios.families import RecordedSignals
+from jaxobs.signals import DriveRecording, SampledSignal
 
 from ..objective import TERM_METRICS, Objective
 from ..outdir import atomic_write_text
@@ -196,10 +197,11 @@ def recordings_provenance(job: Job, scenarios: eqx.Module | None = None) -> dict
     labels = rec.labels()
     starts = [None] * len(labels)
     if scenarios is not None:
-        w = getattr(scenarios, "omega_e", None)
-        truth = getattr(scenarios, "truth", None)
-        if w is None and truth is not None:
-            w = truth[1]
+        w = None  # the recorded speed at each window's start: a drive log's, or a grid voltage's true ω
+        if isinstance(scenarios, DriveRecording):
+            w = scenarios.omega_e
+        elif isinstance(scenarios, SampledSignal) and scenarios.truth is not None:
+            w = scenarios.truth[1]
         if w is not None:
             starts = [float(x) for x in np.asarray(w)[..., 0].reshape(-1)]
     per = max(rec.windows, 1)
