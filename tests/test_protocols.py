@@ -30,7 +30,6 @@ IO = {
     "tuning/export/command.py": "the command line's argparse namespace",
     "tuning/cli_papers.py": "`jaxobs closed-form`'s options, one per parameter of a design, and its namespace",
     "tuning/study_file.py": "a study file's keys checked against a constructor's parameters; a recording's digests",
-    "tuning/job/output.py": "a results folder's recordings: the speed each starts from, read from their batch",
 }
 
 
