@@ -1,20 +1,22 @@
-"""A tune job walked through the code: which modules a reader visits, in order, and how often each is come back to.
+"""A tune job walked through the code: which modules a reader enters, in order, and how often each is come back to.
 
-The walk is the job's call tree read once, depth first, the way a reader follows a call: every Python call from one
-function of the project (``jaxobs``, ``jaxobs_tuning``) to another is recorded the first time that call site (caller,
-callee) is taken, and left out when taken again (a solver's second step reads the same code as its first).  Calls
-into the same module are part of the stay there; a call into another module starts a new stay.  A module's
-*returns* are its stays after the first: a reader who comes back to a module for the third time has met a module
-that does two jobs, or a flow that bounces.
+The walk is the job's call tree read once, depth first, the way a reader follows a call.  Reading a function, the
+reader opens each other project module (``jaxobs``, ``jaxobs_tuning``) it calls once, however many of that
+module's functions it calls: an *entry* into a module is a call into it from a function of another module, counted
+once per calling function (a comprehension or generator counts as the function it is written in).  Coming back
+from a call is no new entry (the reader is back in the function being read), nor is a call inside one module.  A
+module's *returns* are its entries after the first: a module entered from three places of the flow does more than
+one job, or the flow bounces through it.  A *climb* is an entry into a module already on the call stack (a callee
+calling back up into its caller's module).
 
 Run from the repository root::
 
-    python -m benchmarks.walk [JOB.toml] [--steps N] [--depth D] [--out DIR]
+    python -m benchmarks.walk [JOB.toml] [--steps N] [--depth D]
 
 It runs the job (default: ``tuning/presets/sogi_fll.toml`` with 2 solver steps, to keep it short) with
-``jaxobs_tuning.job.run_job`` under ``sys.setprofile``, prints the modules in visiting order with their stays, and
-the module with the most returns.  ``--depth`` keeps only calls at most D project frames below ``run_job`` (default
-3: the orchestration a reader follows; deeper calls are the observers, metrics and the loop's internals).
+``jaxobs_tuning.job.run_job`` under ``sys.setprofile``, prints the entries in visiting order, the entries per
+module and the climbs.  ``--depth`` keeps only calls at most D project frames below ``run_job`` (default 3: the
+orchestration a reader follows; deeper calls are the observers, metrics and the loop's internals).
 """
 
 from __future__ import annotations
@@ -41,8 +43,8 @@ def _module(code) -> str | None:
     return None
 
 
-def walk(job_path: Path, steps: int, depth: int) -> list[str]:
-    """The modules visited, one entry per stay, in order.
+def walk(job_path: Path, steps: int, depth: int) -> tuple[list[tuple[str, str]], list[tuple[str, str]]]:
+    """The modules entered, in order, and the climbs.
 
     Args:
         job_path: The tune job.
@@ -50,14 +52,15 @@ def walk(job_path: Path, steps: int, depth: int) -> list[str]:
         depth: The deepest project frame kept, counted from ``run_job``.
 
     Returns:
-        One module name per stay.
+        ``(entries, climbs)``: one ``(module, "caller -> callee")`` per entry; the climbs among them.
     """
     from jaxobs_tuning.job import load_job, run_job
 
     job = load_job(job_path)
     job = dataclasses.replace(job, solver=dataclasses.replace(job.solver, steps=steps))
     seen: set[tuple] = set()
-    order: list[str] = []
+    entries: list[tuple[str, str]] = []
+    climbs: list[tuple[str, str]] = []
     stack: list[tuple] = []  # (code, module) of the project frames below run_job
 
     def profile(frame, event, arg):
@@ -67,16 +70,20 @@ def walk(job_path: Path, steps: int, depth: int) -> list[str]:
                 return
             if not stack and frame.f_code.co_name != "run_job":
                 return
-            caller = stack[-1][0] if stack else None
+            # the function being read: a comprehension's or generator's enclosing one
+            caller = next((f for f in reversed(stack) if not f[0].co_name.startswith("<")), (None, None))
+            on_stack = {m for _, m in stack}
             stack.append((frame.f_code, mod))
-            if len(stack) - 1 > depth:
+            if len(stack) - 1 > depth or caller[1] == mod:
                 return
-            edge = (caller, frame.f_code)
+            edge = (caller[0], mod)
             if edge in seen:
                 return
             seen.add(edge)
-            if not order or order[-1] != mod:
-                order.append(mod)
+            name = f"{caller[1]}.{caller[0].co_name} -> {frame.f_code.co_name}" if caller[0] else "run_job"
+            entries.append((mod, name))
+            if mod in on_stack:
+                climbs.append((mod, name))
         elif event == "return" and stack and stack[-1][0] is frame.f_code:
             stack.pop()
 
@@ -86,7 +93,7 @@ def walk(job_path: Path, steps: int, depth: int) -> list[str]:
             run_job(job, Path(out), quiet=True)
         finally:
             sys.setprofile(None)
-    return order
+    return entries, climbs
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -103,14 +110,17 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--steps", type=int, default=2)
     ap.add_argument("--depth", type=int, default=3)
     args = ap.parse_args(argv)
-    order = walk(Path(args.job), args.steps, args.depth)
-    stays = Counter(order)
-    print(f"{len(order)} stays in {len(stays)} modules, {sum(n - 1 for n in stays.values())} returns in all")
-    for i, mod in enumerate(order):
-        print(f"{i + 1:3d}  {mod}")
-    print("stays per module (returns = stays - 1):")
-    for mod, n in stays.most_common():
+    entries, climbs = walk(Path(args.job), args.steps, args.depth)
+    per = Counter(m for m, _ in entries)
+    returns = sum(n - 1 for n in per.values())
+    print(f"{len(entries)} entries into {len(per)} modules, {returns} returns, {len(climbs)} climbs")
+    for i, (mod, how) in enumerate(entries):
+        print(f"{i + 1:3d}  {mod:34s} {how}")
+    print("entries per module (returns = entries - 1):")
+    for mod, n in per.most_common():
         print(f"  {n:2d}  {mod}")
+    for mod, how in climbs:
+        print(f"climb: {mod} ({how})")
     return 0
 
 

@@ -453,7 +453,8 @@ def test_report_marks_events_only_where_the_scenario_has_one_and_draws_a_negativ
     grid = load_job(Path(__file__).resolve().parents[1] / "tuning" / "presets" / "sogi_fll.toml").scenarios
     assert grid.signal == "grid" and any(_has_event(grid, i) for i in range(3))
     for values, scale in (([0.3, -0.01, -0.012], "linear"), ([0.3, 0.1, 0.02], "log")):
-        fig = convergence_figure([{"iteration": i, "value": v} for i, v in enumerate(values)], "x", tmp_path / "c.png")
+        fig = convergence_figure([{"iteration": i, "value": v} for i, v in enumerate(values)], "x")
+        fig.savefig(tmp_path / "c.png")
         (ax,) = fig.axes
         assert ax.get_yscale() == scale and (tmp_path / "c.png").stat().st_size > 0
         lo, hi = ax.get_ylim()
@@ -471,7 +472,7 @@ def test_convergence_marks_the_best_iteration_and_responses_note_designs_drawn_o
     runs = [(3.0, 0), (0.5, 2), (1.0, 0), (2.0, 0)]  # (objective, diverged scenarios)
     hist = [{"iteration": i, "value": v, "diverged": d} for i, (v, d) in enumerate(runs)]
     for best, want in ((None, 2), (3, 3)):  # iteration 1 diverged in two scenarios: never the best
-        fig = convergence_figure(hist, "x", tmp_path / "c.png", "J = mean of 1·itae_freq", best)
+        fig = convergence_figure(hist, "x", "J = mean of 1·itae_freq", best)
         (ax,) = fig.axes
         star = [ln for ln in ax.lines if ln.get_marker() == "*"]
         assert len(star) == 1 and list(star[0].get_xdata()) == [want]

@@ -7,15 +7,12 @@ import math
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-import jax
 import numpy as np
-from numpy.typing import ArrayLike
 
 from jaxobs.core.quantities import text_unit
 from jaxobs.scenarios.families import GridSignals
 
 from .aggregations import CVaR, Mean, SmoothMax
-from .outdir import atomic_path
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
@@ -71,7 +68,7 @@ def _axis_text(family, name: str, value: float) -> str:
     return f"{label} = {value:.4g}{unit}"
 
 
-def _describe(spec, index: int) -> str:
+def _describe(spec, family, index: int) -> str:
     """The scenario's axis values (their long names and units), or for a job on recordings the recording's file
     name; a long line broken in two."""
     rec = spec.recording
@@ -80,7 +77,6 @@ def _describe(spec, index: int) -> str:
     names, combos = scenario_values(spec)
     if not names or index >= len(combos):
         return f"scenario #{index}"
-    family = spec.family
     lines = [f"scenario #{index}:"]
     for n, v in zip(names, combos[index]):  # lines of at most about 100 characters, broken between the axes
         item = _axis_text(family, n, v)
@@ -141,15 +137,12 @@ def objective_text(objective: Any) -> str:
     )
 
 
-def convergence_figure(
-    history: list, name: str, path: Path, objective: str | None = None, best: int | None = None
-) -> Figure:
-    """The objective against the iteration into ``path``; the figure.
+def convergence_figure(history: list, name: str, objective: str | None = None, best: int | None = None) -> Figure:
+    """The objective against the iteration.
 
     Args:
         history: dicts with "iteration", "value" and "diverged" (the solvers' history).
         name: the job's name (the title).
-        path: the PNG written.
         objective: the objective's definition (:func:`objective_text`), printed under the axis; None: none.
         best: the iteration whose design is the tuned one (the result's ``best_iteration``); None: the least
             value among the iterations that diverged in no scenario (none marked where every one diverged).
@@ -180,8 +173,6 @@ def convergence_figure(
     if objective:
         fig.text(0.5, 0.015, objective, ha="center", va="bottom", fontsize=8, color="0.2")
     fig.tight_layout(rect=(0, 0.09 if objective else 0, 1, 1))
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=110)
     return fig
 
 
@@ -212,43 +203,40 @@ def _coincide(traces: dict, gains: dict, tol: float = 1e-3) -> dict:
     return out
 
 
-def write_report(
-    out: Path,
+def report_figures(
     job: Any,
-    obj: Any,
-    scenarios: Any,
-    thetas: dict,
+    family: type,
+    objective: str,
     history: list,
-    closed_form_totals: ArrayLike | None = None,
+    responses: dict,
+    gains: dict,
     best_iteration: int | None = None,
-) -> None:
-    """convergence.png and responses.png in ``out``.  ``closed_form_totals``: the closed form's per-scenario
-    totals on ``scenarios`` (:meth:`Objective.per_scenario`'s second value), where the caller has them
-    (else they are computed again); the responses show the scenario where it does worst.  ``best_iteration``:
-    the iteration of the tuned design, marked on convergence.png (None: the least stable value there).
+) -> dict[str, Figure]:
+    """The figures of a tuning run's results folder: ``convergence.png`` (where the solver has a history) and
+    ``responses.png``, the designs' responses on the scenario where the closed form does worst.
 
     Args:
-        out: The results folder.
         job: The :class:`~jaxobs_tuning.job.Job` (a layer above, not imported here): its name and scenarios.
-        obj: Its :class:`~jaxobs_tuning.objective.Objective`.
-        scenarios: The scenario batch the designs are scored on.
-        thetas: Each design's θ, by label ("initial", "closed_form", "tuned").
+        family: The scenario family its ``scenarios.signal`` names (:mod:`jaxobs.scenarios.families`).
+        objective: The objective's definition (:func:`objective_text`).
         history: The solver's history.
-        closed_form_totals: The closed form's per-scenario totals on ``scenarios``, or None.
-        best_iteration: The tuned design's iteration, or None.
+        responses: ``{"worst": index, label: (t, omega, err)}``: each design's response on that scenario, by
+            label ("initial", "closed_form", "tuned"); omega in rad/s, err in rad.
+        gains: Each drawn design's free gains, by label.
+        best_iteration: The tuned design's iteration, marked on convergence.png (None: the least stable value).
+
+    Returns:
+        The figures, by file name.
     """
+    figures = {}
     if history:
-        convergence_figure(history, job.name, out / "convergence.png", objective_text(obj), best_iteration)
-    # responses on the scenario where the closed form does worst
-    per = obj.per_scenario(thetas["closed_form"], scenarios)[1] if closed_form_totals is None else closed_form_totals
-    worst = int(np.argmax(np.asarray(per)))
-    sig = jax.tree.map(lambda x: np.asarray(x)[worst], scenarios)  # on the host: no gather to compile
+        figures["convergence.png"] = convergence_figure(history, job.name, objective, best_iteration)
+    worst = int(responses["worst"])
     fig, axes = _subplots(2, 1, figsize=(8, 5.5), sharex=True)
     drawn, times = {}, {}
-    for label, th in thetas.items():
-        times[label], omega, err = (np.asarray(x) for x in obj.response(th, sig))
+    for label in gains:
+        times[label], omega, err = responses[label]
         drawn[label] = (omega / (2 * math.pi), np.degrees(err))
-    gains = {label: {k: float(v) for k, v in obj.param.values(th).items()} for label, th in thetas.items()}
     notes = _coincide(drawn, gains)  # a dashed line exactly on another: the legend says why
     for label, (freq, err) in drawn.items():
         style = _STYLE.get(label, dict(lw=1))
@@ -257,7 +245,7 @@ def write_report(
         axes[1].plot(times[label], err, label=name + notes.get(label, ""), **style)
     # an FLL's ("grid") error is the grid voltage's phase; a flux observer's or a drive's (on an "emf" recording or
     # closing the loop) is the rotor's electrical position: the labels say which
-    if job.scenarios.family is not GridSignals:
+    if family is not GridSignals:
         axes[0].set_ylabel("speed estimate ω̂e/2π (Hz)")
         axes[1].set_ylabel("position error (deg el.)")
     else:
@@ -281,10 +269,11 @@ def write_report(
             fontsize=8,
             color="0.3",
         )
+    where = _describe(job.scenarios, family, worst)
     fig.suptitle(
-        f"{job.name}: closed form vs tuned on the closed form's worst scenario\n{_describe(job.scenarios, worst)}",
+        f"{job.name}: closed form vs tuned on the closed form's worst scenario\n{where}",
         fontsize=10,
     )
     fig.tight_layout()
-    with atomic_path(out / "responses.png") as tmp:
-        fig.savefig(tmp, dpi=110)
+    figures["responses.png"] = fig
+    return figures

@@ -18,7 +18,7 @@ from jaxobs.runtime.progress import Progress
 from ..objective import MetricContext, Objective
 from ..outdir import atomic_path, atomic_write_text
 from ..params import GainSpec, Parametrization
-from ..report import write_report
+from ..report import objective_text, report_figures
 from ..solvers import TuneResult, tune
 from ..structure import structure
 from .components import COMPONENTS
@@ -72,14 +72,29 @@ def _inside(g: GainSpec, v: float) -> float:
     return float(v)
 
 
-def _score_designs(obj: Objective, scenarios: eqx.Module, thetas: dict, bar: Progress, what: str) -> dict:
-    """Each design's per-scenario scores, one progress step each (the first one compiles)."""
-    per = {}
+def _score_designs(
+    obj: Objective, scenarios: eqx.Module, thetas: dict, bar: Progress, what: str, responses: bool = False
+) -> tuple[dict, dict, dict | None]:
+    """Each design's per-scenario scores and their summary, one progress step each (the first one compiles);
+    with ``responses``, each design's response on the scenario where the closed form does worst.
+
+    Returns:
+        ``(per, summaries, responses)``: :meth:`Objective.per_scenario` and :meth:`Objective.summarize` by label;
+        ``{"worst": index, label: (t, omega, err)}`` or None.
+    """
+    per, summary = {}, {}
     for i, (k, th) in enumerate(thetas.items()):
         bar.stage(f"{what}{k}" + (" (compiling the metrics)" if i == 0 else ""))
         per[k] = obj.per_scenario(th, scenarios)
+        summary[k] = obj.summarize(*per[k])
         bar.update()
-    return per
+    if not responses:
+        return per, summary, None
+    # the report's responses: on the scenario where the closed form does worst, on the host (no gather to compile)
+    worst = int(np.argmax(np.asarray(per["closed_form"][1])))
+    sig = jax.tree.map(lambda x: np.asarray(x)[worst], scenarios)
+    drawn = {k: tuple(np.asarray(x) for x in obj.response(th, sig)) for k, th in thetas.items()}
+    return per, summary, {"worst": worst, **drawn}
 
 
 CHECKPOINT = "checkpoint.npz"
@@ -129,18 +144,20 @@ def job_fingerprint(job: Job) -> str:
     return fp
 
 
-def _closed_form(job: Job, obj: Objective) -> tuple[dict, jax.Array]:
-    """The closed form's free gains at the job's component, and its θ nudged inside the gains' open bounds."""
+def _designs(job: Job, obj: Objective, theta0: jax.Array, tuned: jax.Array | None) -> tuple[dict, dict, dict, dict]:
+    """The designs a job scores: ``(thetas, gains, values, drawn)``.
+
+    ``thetas``: each scored design's θ (the closed form nudged inside the gains' open bounds, which the
+    parametrization cannot reach; no tuned design where it is None); ``gains``: the free gains reported (the
+    closed form exactly; None: no tuned design); ``values``: every constructor value; ``drawn``: the free gains
+    at each scored θ (the report's legend).
+    """
+    param = obj.param
     cf_all = COMPONENTS[job.component].closed_form(obj.component)
     cf = {g.name: cf_all[g.name] for g in job.gains}
-    return cf, obj.param.to_theta({g.name: _inside(g, cf[g.name]) for g in job.gains})
-
-
-def _design_values(
-    job: Job, obj: Objective, theta0: jax.Array, cf: dict, tuned: jax.Array | None
-) -> tuple[dict[str, dict | None], dict[str, dict | None]]:
-    """Each design's free gains and its every constructor value (None: no tuned design): ``(gains, values)``."""
-    param = obj.param
+    thetas = {"initial": theta0, "closed_form": param.to_theta({g.name: _inside(g, cf[g.name]) for g in job.gains})}
+    if tuned is not None:  # never a design that diverged in some scenario
+        thetas["tuned"] = tuned
     gains = {
         "initial": param.values(theta0),
         # the closed form is reported exactly; it is scored at θ nudged inside the gains' open bounds
@@ -150,7 +167,8 @@ def _design_values(
     # a LESO's [observer.speed] record stays a record (jaxobs.observers.speed.speed_from_spec)
     fixed = {k: (v if isinstance(v, dict) else float(v)) for k, v in job.values.items() if k not in param.names}
     values = {k: (None if g is None else {**fixed, **g}) for k, g in gains.items()}
-    return gains, values
+    drawn = {k: {n: float(v) for n, v in param.values(th).items()} for k, th in thetas.items()}
+    return thetas, gains, values, drawn
 
 
 def _outcome(
@@ -211,8 +229,8 @@ def _drive_result(job: Job, drive: DriveSpec, result: dict, nulls: dict) -> None
 def _score_holdout(job: Job, holdout: ScenarioSpec, thetas: dict, bar: Progress, result: dict, out: Path) -> None:
     """The designs' held-out scores into ``result`` and ``holdout_scores.nc``."""
     hobj, hscen, (hn, hc) = build_objective(job, holdout)
-    hper = _score_designs(hobj, hscen, thetas, bar, "held-out ")
-    held: dict[str, dict | int | None] = {k: (hobj.summarize(*hper[k]) if k in hper else None) for k in result["gains"]}
+    hper, hsum, _ = _score_designs(hobj, hscen, thetas, bar, "held-out ")
+    held: dict[str, dict | int | None] = {k: hsum.get(k) for k in result["gains"]}
     held["count"] = len(hc)
     result["holdout"] = held
     result["lost_lock_tuned_only"]["holdout"] = _lost_only(hper)
@@ -242,7 +260,6 @@ def run_job(job: Job, out: Path, resume: bool = False, quiet: bool = False) -> d
     obj, scen, (names, combos) = build_objective(job)
     theta0 = obj.param.theta0()
     info = COMPONENTS[job.component]
-    cf, theta_cf = _closed_form(job, obj)
     res = tune(
         obj,
         job.solver,
@@ -253,14 +270,11 @@ def run_job(job: Job, out: Path, resume: bool = False, quiet: bool = False) -> d
         quiet=quiet,
         fingerprint=job_fingerprint(job),
     )
-    thetas = {"initial": theta0, "closed_form": theta_cf}
-    if res.theta is not None:  # never a design that diverged in some scenario
-        thetas["tuned"] = res.theta
-    gains, values = _design_values(job, obj, theta0, cf, res.theta)
+    thetas, gains, values, drawn = _designs(job, obj, theta0, res.theta)
     n_scored = len(thetas) * (2 if job.holdout is not None else 1)
     bar = Progress(not quiet and "auto", n_scored, "score", unit="design")
-    per = _score_designs(obj, scen, thetas, bar, "")
-    scores = {k: (obj.summarize(*per[k]) if k in per else None) for k in gains}
+    per, summary, responses = _score_designs(obj, scen, thetas, bar, "", responses=True)
+    scores = {k: summary.get(k) for k in gains}
     status, reason = _outcome(job, obj, scen, theta0, per, res, len(combos))
     bar.stage("linear structure of each design (margins, poles)")
     lin = {k: (None if v is None else structure(job.component, v, job)) for k, v in values.items()}
@@ -303,17 +317,12 @@ def run_job(job: Job, out: Path, resume: bool = False, quiet: bool = False) -> d
     with atomic_path(out / "scores.nc") as tmp:
         scores_dataset(obj, names, combos, job.scenarios, per).to_netcdf(tmp, engine="h5netcdf")
     write_json(out / "history.json", res.history)
-    # the closed form's totals scored above: the report's worst scenario without scoring it a second time
-    write_report(
-        out,
-        job,
-        obj,
-        scen,
-        thetas,
-        res.history,
-        closed_form_totals=per["closed_form"][1],
-        best_iteration=res.best_iteration,
+    figures = report_figures(
+        job, job.scenarios.family, objective_text(obj), res.history, responses, drawn, best_iteration=res.best_iteration
     )
+    for name, fig in figures.items():
+        with atomic_path(out / name) as tmp:
+            fig.savefig(tmp, dpi=110)
     timing = {"total_s": time.time() - t0, **res.timing, "iterations": res.iterations}
     atomic_write_text(out / "timing.json", json.dumps(timing, indent=1) + "\n")
     write_json(out / "result.json", result)  # last: a result.json means a complete results folder
