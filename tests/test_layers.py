@@ -46,19 +46,20 @@ LAYERS = [
     ),
     # integration rules (and check_rule)
     ("jaxobs.core.discretize", "jaxobs.io.safetoml", "jaxobs.signals._base", "jaxobs.drive.saturation"),
+    # a recording's declared layout, and the one reader of delimited text (recordings and drive logs alike)
+    ("jaxobs.signals._layout",),
+    ("jaxobs.signals._logfile",),  # delimited text streamed into disk-backed columns, or read whole
     # signals and plant: they produce the measurements
     (
         "jaxobs.signals._waveforms",
         "jaxobs.signals._recordings",
         "jaxobs.signals._logchecks",
-        "jaxobs.signals._layout",
         "jaxobs.drive.machine",
         "jaxobs.drive.hardware",
         "jaxobs.drive.latency",
     ),
     # drive logs: a declared layout read into DriveRecordings; carrier-comparison PWM (the inverter's transforms);
     # field weakening (on the machine's parameters)
-    ("jaxobs.signals._logfile",),  # a drive log's delimited text streamed into disk-backed columns
     ("jaxobs.signals._logs", "jaxobs.drive.pwm", "jaxobs.drive.weakening"),
     ("jaxobs.signals._read",),  # the recordings reader: one file as a family's scenarios
     ("jaxobs.signals",),

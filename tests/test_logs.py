@@ -432,3 +432,22 @@ def test_a_mechanical_angle_under_declared_phases_names_the_angle(tmp_path):
     with pytest.raises(ValueError, match=r"the angle column 'theta_e' does not turn with them: .*angle_kind") as e:
         _read(_write(tmp_path / "log.csv", c), omega_e=None, layout=layout)
     assert "declare current_frame" not in str(e.value)
+
+
+@pytest.mark.parametrize("delimiter", [",", ";"])
+def test_a_row_with_extra_or_missing_fields_is_named_not_dropped(tmp_path, delimiter):
+    """The columns' parser reads only the columns asked for, and used to drop a row's extra fields unseen (and fill
+    a missing one with NaN): the log and the recording reader, one reader, name the line."""
+    from jaxobs.signals._layout import RecordingLayout
+
+    path = _write(tmp_path / "log.csv", _cols(), delimiter=delimiter)
+    lines = path.read_text().splitlines(keepends=True)
+    layout = RecordingLayout(delimiter=delimiter)
+    for k, (edit, fields) in enumerate(
+        ((lambda s: s.rstrip("\n") + delimiter + "7\n", 8), (lambda s: s.split(delimiter, 1)[1], 6))
+    ):
+        bad = lines[:5] + [edit(lines[5])] + lines[6:]
+        p = tmp_path / f"bad{k}.csv"
+        p.write_text("".join(bad))
+        with pytest.raises(ValueError, match=rf"line 6 has {fields} fields, the file 7$"):
+            _read(p, layout=layout)

@@ -262,12 +262,13 @@ def test_responses_plot_names_a_recording_scenario_by_its_file(tmp_path):
     from jaxobs_tuning.report import _describe
 
     job = load_job(_job_copy(tmp_path))
-    assert _describe(job.scenarios, 0) == "scenario #0: recording grid_50_51hz.csv"
+    assert _describe(job.scenarios, job.scenarios.family, 0) == "scenario #0: recording grid_50_51hz.csv"
     grid = load_job(ROOT / "tuning" / "presets" / "sogi_fll.toml")
-    assert "recording" not in _describe(grid.scenarios, 0) and " = " in _describe(grid.scenarios, 0)
+    shown = _describe(grid.scenarios, grid.scenarios.family, 0)
+    assert "recording" not in shown and " = " in shown
     # the axes by their long names and units, as the NetCDF coordinates name them, not the TOML keys
     wif = load_job(ROOT / "tuning" / "presets" / "wif_robust.toml")
-    text = _describe(wif.scenarios, 17)
+    text = _describe(wif.scenarios, wif.scenarios.family, 17)
     assert "frequency step at the event = -2 Hz" in text and "phase jump at the event = 40 deg" in text, text
     assert "dc offset = 0.1 p.u." in text and "harmonic distortion = 1 × 001 Test C's spectrum" in text, text
     assert "freq_step" not in text and all(len(line) <= 110 for line in text.splitlines()), text

@@ -275,12 +275,16 @@ def test_result_json_errors_are_one_line_exit_2_in_export_and_study(tmp_path, ca
 # --------------------------------------------------------------------------
 
 BAD_CSV = [
-    ("field over 131072", "t,x\n0," + "1" * 140_000 + "\n", "line 2: not CSV"),
-    ("unterminated quote", 't,x\n0,"1\n1,2\n', "not CSV"),
+    # one reader for recordings and drive logs (jaxobs.signals._logfile): no field-length limit of its own (the file's
+    # size is capped); a numeral past float64's range is read as inf and refused by the finiteness check
+    ("a numeral of 140000 digits", "t,x\n0," + "1" * 140_000 + "\n1,2\n", "column 'x' is not finite at data row 1"),
+    ("unterminated quote", 't,x\n0,"1\n1,2\n', "line 2 holds a field that is not a number$"),
     ("1_0", "t,x\n0,1_0\n1,2\n", "line 2 holds a field that is not a number"),
     ("0x10", "t,x\n0,0x10\n1,2\n", "not a number"),
     ("an Arabic-Indic digit", "t,x\n0,\u0661\n1,2\n", "line 2 holds a field that is not a number"),
-    ("a long number", "t,x\n0," + "1" * 2000 + "\n1,2\n", "line 2: not CSV"),
+    ("a long number", "t,x\n0," + "1" * 2000 + "\n1,2\n", "column 'x' is not finite at data row 1"),
+    ("extra fields", "t,x\n0,1\n1,2,3\n", "line 3 has 3 fields, the file 2"),
+    ("a field missing", "t,x\n0,1\n1\n2,3\n", "line 3 has 1 fields, the file 2"),
 ]
 
 

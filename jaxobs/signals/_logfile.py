@@ -83,6 +83,11 @@ def split_fields(line: str, layout: RecordingLayout) -> list[str]:
     return re.split(sep, line.strip()) if sep == r"\s+" else line.split(sep)
 
 
+def _unquote(name: str) -> str:
+    """A field without the double quotes around it (``"t"`` → ``t``; ``""`` inside → ``"``)."""
+    return name[1:-1].replace('""', '"') if len(name) >= 2 and name[0] == name[-1] == '"' else name
+
+
 def _is_number(field, decimal):
     f = field.strip()
     if decimal == ",":
@@ -126,14 +131,17 @@ def read_header(
     first = split_fields(lines[0][1], layout)
     if all(_is_number(x, layout.decimal) for x in first):
         return None, lines
-    header = [x.strip() for x in first]
+    # a quoted name ("t","u_a": some exporters quote every header field) is read without its quotes, as the
+    # columns' parser reads it
+    header = [_unquote(x.strip()) for x in first]
     if len(set(header)) != len(header):
         raise ValueError(f"recording {str(path)!r}: the header repeats a column name: {header}")
     if len(lines) > 1:
         row = split_fields(lines[1][1], layout)
         if len(row) != len(header) or not all(_is_number(x, layout.decimal) for x in row):
             n = lines[1][0]
-            why = _hint(lines[:2], layout) or f" (the header has {len(header)} columns, the line {len(row)} fields)"
+            count = f" (the header has {len(header)} columns, the line {len(row)} fields)"
+            why = _hint(lines[:2], layout) or (count if len(row) != len(header) else "")
             raise ValueError(f"recording {str(path)!r}: line {n} holds a field that is not a number{why}")
     return header, lines
 
@@ -153,7 +161,52 @@ def _locate_bad_line(path, layout, width, skip_header):
                 return f"line {n} has {len(row)} fields, the file {width}"
             if not all(_is_number(x, layout.decimal) for x in row):
                 return f"line {n} holds a field that is not a number"
-    return "a line could not be read"
+    return _NO_BAD_LINE
+
+
+_NO_BAD_LINE = "a line could not be read"
+
+
+def check_field_counts(path: str | os.PathLike[str], layout: RecordingLayout, width: int, block: int = 1 << 24) -> None:
+    """Refuse a line of another number of fields than the file's: the columns' parser reads only the columns it is
+    asked for and drops a line's extra fields unseen.  The delimiters are counted a block of the file at a time
+    (vectorised, one pass), blank and comment lines left out; a delimiter of runs of blanks (``"space"``) is
+    counted by the parser, which refuses a line with extra fields there.
+
+    Args:
+        path: The file.
+        layout: The log's :class:`RecordingLayout` (its delimiter).
+        width: The file's number of columns.
+        block: The bytes read at a time.
+
+    Raises:
+        ValueError: The first line with another number of fields, naming it.
+    """
+    sep = DELIMITERS[layout.delimiter]
+    if len(sep) != 1:
+        return
+    delim, line0, carry = ord(sep), 1, b""
+    with open(path, "rb") as f:
+        while True:
+            data = f.read(block)
+            buf = carry + data
+            cut = len(buf) if not data else buf.rfind(b"\n") + 1  # whole lines; at the end, the rest
+            buf, carry = buf[:cut], buf[cut:]
+            if buf and not buf.endswith(b"\n"):
+                buf += b"\n"
+            a = np.frombuffer(buf, np.uint8)
+            ends = np.flatnonzero(a == 10)
+            starts = np.concatenate([[0], ends[:-1] + 1])
+            seps = np.concatenate([[0], np.cumsum(a == delim)])
+            counts = seps[ends] - seps[starts]
+            for j in np.flatnonzero(counts != width - 1):
+                text = buf[starts[j] : ends[j]].decode("utf-8", "replace")
+                if text.strip() and not text.lstrip().startswith("#"):
+                    n = line0 + int(j)
+                    raise ValueError(f"recording {str(path)!r}: line {n} has {counts[j] + 1} fields, the file {width}")
+            line0 += len(ends)
+            if not data:
+                return
 
 
 def check_last_line(path: str | os.PathLike[str]) -> None:
@@ -222,6 +275,7 @@ def stream_columns(
     import pandas as pd
 
     _PRECISION.update(_pandas_precision())
+    check_field_counts(path, layout, width)
     files = {i: open(os.path.join(folder, f"c{i}.f8"), "wb") for i in wanted}
     rows = 0
     sep = DELIMITERS[layout.delimiter]
@@ -242,13 +296,19 @@ def stream_columns(
         )
         for chunk in reader:
             arr = chunk.to_numpy(dtype=np.float64)
+            if np.isnan(arr).any():  # a "nan" written, or a row short of fields (which the parser fills with NaN)
+                short = _locate_bad_line(path, layout, width, header is not None)
+                if short != _NO_BAD_LINE:
+                    raise ValueError(f"recording {str(path)!r}: {short}")
             cols = list(chunk.columns)
             for i in wanted:
                 pos = cols.index(header[i]) if header is not None else cols.index(i)
                 files[i].write(np.ascontiguousarray(arr[:, pos]).tobytes())
             rows += arr.shape[0]
             del arr, chunk
-    except (ValueError, pd.errors.ParserError):
+    except (ValueError, pd.errors.ParserError) as e:
+        if str(e).startswith(f"recording {str(path)!r}: "):  # a short row, named above
+            raise
         raise ValueError(
             f"recording {str(path)!r}: {_locate_bad_line(path, layout, width, header is not None)}"
         ) from None
@@ -337,3 +397,40 @@ def row_blocks(n: int, size: int = CHUNK_ROWS) -> Iterator[slice]:
     """
     for a in range(0, n, size):
         yield slice(a, min(a + size, n))
+
+
+def read_table(
+    path: str | os.PathLike[str], max_bytes: int, layout: RecordingLayout | None = None
+) -> tuple[list[str] | None, np.ndarray]:
+    """A whole delimited-text file as one float64 array, read by the drive logs' reader (the same checks, header
+    detection and number parsing: :func:`open_regular`, :func:`check_last_line`, :func:`read_header`,
+    :func:`stream_columns`), for a recording small enough to hold in memory.
+
+    Args:
+        path: The file.
+        max_bytes: The largest size read, bytes.
+        layout: Its delimiter and decimal mark (default: ``","`` and ``"."``).
+
+    Returns:
+        ``(the column names, or None where there is no header row, the values (rows, columns))``.
+
+    Raises:
+        FileNotFoundError: No file at ``path``.
+        ValueError: A file that cannot be read, is too large, is cut short, or holds a line that is not as many
+            numbers as the file has columns, naming it.
+    """
+    import tempfile
+
+    layout = RecordingLayout() if layout is None else layout
+    p = open_regular(path, max_bytes)
+    check_last_line(p)
+    header, lines = read_header(p, layout)
+    width = len(header) if header is not None else len(split_fields(lines[0][1], layout))
+    if header is not None and len(lines) == 1:  # a header and nothing under it
+        return header, np.empty((0, width))
+    with tempfile.TemporaryDirectory(prefix="jaxobs-csv-") as folder:
+        cols, rows = stream_columns(p, layout, header, list(range(width)), width, folder)
+        table = np.empty((rows, width))
+        for i in range(width):
+            table[:, i] = np.asarray(cols[i])
+    return header, table

@@ -3,13 +3,9 @@ encoder angle (:class:`DriveRecording`), both read from CSV files checked in ful
 
 from __future__ import annotations
 
-import csv
-import errno
 import math
 import os
-import re
 from collections.abc import Sequence
-from pathlib import Path
 from typing import Any, ClassVar, cast
 
 import equinox as eqx
@@ -20,8 +16,8 @@ import numpy as np
 from ..core.measurements import DriveInput
 from ..core.sampletime import TS_REL_TOL, Time
 from ..core.validate import check_real, check_sample_time, static_float
-from ..io.provenance import read_file
 from ._base import AbstractSignal
+from ._logfile import read_table
 
 
 class _Recording(AbstractSignal):
@@ -292,68 +288,6 @@ MAX_CSV_BYTES = 64 * 2**20  # a recording file larger than this is refused (from
 _RATE_SLACK = 1.01  # a recording's interval may exceed ts by 1 % (clock jitter) before it is "too slow"
 
 
-# a number as Python's float() reads it, less its leniencies: no "1_0" (read as 10), no non-ASCII digits
-# ("١" is 1 to float()), no surrounding junk; nan / inf pass here and are refused by the finiteness check
-# with their column and row
-_NUMBER = re.compile(
-    r"\s*[+-]?(?:(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?|nan|inf|infinity)\s*", re.I | re.ASCII
-)
-MAX_CSV_FIELD = 1000  # characters in one CSV field (csv.field_size_limit while a recording is read)
-
-
-def _number(x: str) -> float:
-    if len(x) > MAX_CSV_FIELD or not _NUMBER.fullmatch(x):
-        raise ValueError(x[:40])
-    return float(x)
-
-
-def _csv_table(path, max_bytes):
-    """(header or None, float array (rows, columns)) of a CSV file; ValueError naming the problem."""
-    p = Path(path)
-    if not p.exists() and not p.is_symlink():  # what Python says of a missing file, in one line
-        raise FileNotFoundError(errno.ENOENT, f"recording {str(p)!r}: no such file")
-    try:  # a regular file only (no FIFO, no device), at most max_bytes (jaxobs.io.provenance.read_file)
-        data = read_file(p, max_bytes)
-    except ValueError as e:
-        msg = str(e)
-        msg = msg.replace("cannot read", "cannot read it:") if msg.startswith("cannot read") else msg
-        raise ValueError(f"recording {str(p)!r}: {msg}") from None
-    try:
-        text = data.decode()
-    except UnicodeDecodeError:
-        raise ValueError(f"recording {str(p)!r}: not UTF-8 text") from None
-    lines = [(n, ln) for n, ln in enumerate(text.splitlines(), 1) if ln.strip() and not ln.lstrip().startswith("#")]
-    if not lines:
-        raise ValueError(f"recording {str(p)!r}: no data rows")
-    limit = csv.field_size_limit(MAX_CSV_FIELD)  # a field over the limit is a csv.Error, reported below
-    try:
-        reader = csv.reader((ln for _, ln in lines), strict=True)
-        rows = list(reader)
-    except csv.Error as e:  # a field too large, an unterminated quote: the line it was read from
-        lineno = lines[min(max(reader.line_num, 1), len(lines)) - 1][0]
-        raise ValueError(f"recording {str(p)!r}: line {lineno}: not CSV ({str(e)[:80]})") from None
-    finally:
-        csv.field_size_limit(limit)
-    header = None
-    try:
-        [_number(x) for x in rows[0]]
-    except ValueError:
-        header = [x.strip() for x in rows[0]]
-        rows, lines = rows[1:], lines[1:]
-        if len(set(header)) != len(header):
-            raise ValueError(f"recording {str(p)!r}: the header repeats a column name: {header}") from None
-    width = len(header) if header is not None else len(rows[0]) if rows else 0
-    out = np.empty((len(rows), width))
-    for r, ((lineno, _), row) in enumerate(zip(lines, rows)):
-        if len(row) != width:
-            raise ValueError(f"recording {str(p)!r}: line {lineno} has {len(row)} fields, the file {width}")
-        try:
-            out[r] = [_number(x) for x in row]
-        except ValueError:
-            raise ValueError(f"recording {str(p)!r}: line {lineno} holds a field that is not a number") from None
-    return header, out
-
-
 class RecordingColumnError(ValueError):
     """A column of a recording that is not there.
 
@@ -440,7 +374,7 @@ def read_recording(
         ValueError: An unreadable or invalid file (as :meth:`SampledSignal.from_csv` lists).
     """
     max_bytes = MAX_CSV_BYTES if max_bytes is None else int(max_bytes)
-    header, table = _csv_table(path, max_bytes)
+    header, table = read_table(path, max_bytes)
     width = table.shape[1]
     if (time_column is None) == (sample_rate is None):
         raise ValueError(f"recording {str(path)!r}: give exactly one of time_column and sample_rate")
