@@ -32,6 +32,10 @@ class ScenarioSpec:
         sample: 0: the full grid; n > 0: n random combinations (seeded).
         seed: The seed of the sampling and the noise.
         recording: ``[scenarios.recording]``: recorded signals instead of a grid, or None.
+        family: The scenario family ``signal`` names (:data:`jaxobs.scenarios.families.FAMILIES`), set from it.
+
+    Raises:
+        ValueError: ``signal`` names no family.
     """
 
     signal: str
@@ -43,11 +47,14 @@ class ScenarioSpec:
     seed: int
     recording: RecordingSpec | None = None  # [scenarios.recording]: recorded signals instead of a grid
 
-    @property
-    def family(self) -> type[AbstractFamily]:
-        """The scenario family ``signal`` names (:data:`jaxobs.scenarios.families.FAMILIES`: the one place the name is
-        read); a recording stands for this family's signals."""
-        return FAMILIES[self.signal]
+    # the family `signal` names, looked up once (jaxobs.scenarios.families.FAMILIES: the one place the name is
+    # read); a recording stands for this family's signals
+    family: type[AbstractFamily] = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        if self.signal not in FAMILIES:
+            raise ValueError(f"ScenarioSpec.signal must be one of {', '.join(FAMILIES)}, got {self.signal!r}")
+        self.family = FAMILIES[self.signal]
 
 
 @dataclass
