@@ -200,6 +200,20 @@ def test_closed_form_json_reports_formula_and_source(capsys):
     assert "l2" in out and "1e+06" in out
 
 
+def test_a_design_is_named_by_its_alias_or_class_name_in_any_case(capsys):
+    """`closed-form` and `export --design` read a class name (as job files and result.json name a component) or an
+    alias, in any case: the same rows; an unknown name is argparse's one line naming the choices."""
+    outs = []
+    for name in ("soifo", "SOIFO", "SecondOrderSOIFO", "second-order-soifo", "SOGIFLL"):
+        assert main(["closed-form", name, "--json"]) == 0
+        outs.append(json.loads(capsys.readouterr().out))
+    assert outs[0] == outs[1] and outs[2] == outs[3] and outs[0] != outs[2]
+    assert outs[4]["design"] == "sogi-fll"
+    with pytest.raises(SystemExit) as e:  # argparse's own error
+        main(["closed-form", "SOIF"])
+    assert e.value.code == 2 and "invalid choice: 'SOIF' (choose from 'sogi-fll'" in capsys.readouterr().err
+
+
 def test_closed_form_bad_options_exit_2(capsys):
     assert main(["closed-form", "wif", "--k", "2"]) == 2
     assert "--k does not apply to wif" in capsys.readouterr().err

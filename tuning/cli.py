@@ -81,6 +81,7 @@ from typing import TYPE_CHECKING, cast
 import jaxobs
 from jaxobs import use_compile_cache, use_host_devices
 from jaxobs.runtime.chunkstore import ChunkStore
+from jaxobs.studies.registry import spelled
 
 from .cli_common import enable_x64, progress_of
 from .cli_drive import add_drive_parser
@@ -429,7 +430,8 @@ def _add_closed_form_parser(sub: argparse._SubParsersAction, quiet: argparse.Arg
         description="Closed-form gains with formula and source equation.",
         parents=[quiet],
     )
-    c.add_argument("design", choices=list(CF_OPTIONS), help="which design rule")
+    # a class name or an alias, in any case (jaxobs.studies.registry.spelled)
+    c.add_argument("design", choices=list(CF_OPTIONS), type=spelled, help="which design rule")
     for flag, (dest, what) in cf_flags().items():  # each design's inputs (its class's closed_form_design)
         c.add_argument(flag, dest=dest, type=float, help=what)
     c.add_argument("--json", action="store_true", help="print JSON")

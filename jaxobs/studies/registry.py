@@ -314,6 +314,23 @@ def registered(name: str) -> Registered:
     return entry
 
 
+def spelled(name: str) -> str:
+    """A design named on the command line as the registry spells it: a class name (``SOGIFLLWIF``) or an alias
+    (``wif``), in any case, read as the entry's first alias; any other name as given (for the caller's error).
+
+    Args:
+        name: The name typed.
+
+    Returns:
+        The alias, or ``name``.
+    """
+    low = name.lower()
+    for e in _ENTRIES:
+        if low == e.name.lower() or low in (a.lower() for a in e.aliases):
+            return low if low in e.aliases else e.aliases[0]
+    return name
+
+
 def _model_at(spec: tuple, values: dict):
     """The small-signal model a class names (``(function of jaxobs.linear, its fields)``) at ``values``."""
     fn, fields = spec

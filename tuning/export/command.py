@@ -17,7 +17,7 @@ from jaxobs.drive.drivefile import DriveFile
 from jaxobs.observers import (
     AbstractDriveObserver,
 )
-from jaxobs.studies.registry import REGISTRY
+from jaxobs.studies.registry import REGISTRY, spelled
 
 from ..job import parse_job
 from ..outdir import OutDir
@@ -48,7 +48,9 @@ def add_export_parser(
         parents=list(parents),
     )
     e.add_argument("result", nargs="?", help="a `jaxobs tune` result.json (its tuned gains)")
-    e.add_argument("--design", choices=list(DESIGNS), help="a closed-form design instead of a result")
+    e.add_argument(
+        "--design", choices=list(DESIGNS), type=spelled, help="a closed-form design instead of a result"
+    )  # a class name or an alias, in any case
     e.add_argument("--out", default="out/export", help="folder for the files (default: out/export)")
     e.add_argument(
         "--gains",
