@@ -9,10 +9,9 @@
   a presentation transform, and :data:`ALIASES`, the old names read on input (:func:`canonical`).
 """
 
+from . import _core, _lock
 from ._core import *  # noqa: F403
-from ._core import __all__ as _core_all
 from ._lock import *  # noqa: F403
-from ._lock import __all__ as _lock_all
 from ._table import ALIASES as ALIASES
 from ._table import DISPLAY as DISPLAY
 from ._table import DIVERGED as DIVERGED
@@ -25,8 +24,6 @@ from ._table import canonical as canonical
 from ._table import scored_position_error as scored_position_error
 
 __all__ = [
-    *_core_all,
-    *_lock_all,
     "ALIASES",
     "DISPLAY",
     "DIVERGED",
@@ -38,3 +35,5 @@ __all__ = [
     "canonical",
     "scored_position_error",
 ]
+__all__ += _core.__all__  # the forms a type checker follows
+__all__ += _lock.__all__
