@@ -130,8 +130,8 @@ def test_a_tuned_design_failing_inside_its_envelope_is_unsafe_exit_4(tmp_path, c
     real = run.verify_designs
     seen = {}
 
-    def lose_sync(designs, env, drive):
-        ver = real(designs, env, drive)
+    def lose_sync(designs, env, drive, machine=None):
+        ver = real(designs, env, drive, machine)
         seen["real"] = json.loads(json.dumps(ver))
         # hand-made: the closed form passes (a 0.02 s Lyapunov window is too short for a verdict), the tuned
         # design loses synchronism

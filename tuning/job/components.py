@@ -7,7 +7,7 @@ A component's constructor is its class, its free gains the class's gain fields, 
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from jaxobs import papers
 from jaxobs.studies.registry import REGISTRY, Registered, closed_form_gains
@@ -17,43 +17,31 @@ W_N = papers.FLL_OMEGA_N
 
 @dataclass(frozen=True)
 class ComponentInfo:
-    """A tunable component: its registry entry, read as a job reads it.
+    """A tunable component: its registry entry, read as a job reads it (the entry's facts read once, when built).
 
     Attributes:
         entry: The :class:`jaxobs.studies.registry.Registered` entry.
+        ctor: The component's class (its constructor).
+        gains: The names of its tunable gains.
+        defaults: A job's constructor values before its ``[component]`` and ``[gains]`` tables.
+        signal: The scenario signal a job runs it on by default (``"grid"``, ``"emf"`` or ``"drive"``).
+        signals: The scenario signals this component runs on, its default first.
+        machines: The machines a sensorless drive job may run it on, the default first (empty: no drive jobs).
     """
 
     entry: Registered
+    ctor: type = field(init=False)
+    gains: tuple[str, ...] = field(init=False)
+    defaults: dict = field(init=False)
+    signal: str = field(init=False)
+    signals: tuple[str, ...] = field(init=False)
+    machines: tuple[str, ...] = field(init=False)
 
-    @property
-    def ctor(self) -> type:
-        """The component's class (its constructor)."""
-        return self.entry.cls
-
-    @property
-    def gains(self) -> tuple[str, ...]:
-        """The names of its tunable gains."""
-        return self.entry.gains
-
-    @property
-    def defaults(self) -> dict:
-        """A job's constructor values before its ``[component]`` and ``[gains]`` tables."""
-        return self.entry.defaults
-
-    @property
-    def signal(self) -> str:
-        """The scenario signal a job runs it on by default (``"grid"``, ``"emf"`` or ``"drive"``)."""
-        return self.entry.signal
-
-    @property
-    def signals(self) -> tuple[str, ...]:
-        """The scenario signals this component runs on, its default first."""
-        return self.entry.signals
-
-    @property
-    def machines(self) -> tuple[str, ...]:
-        """The machines a sensorless drive job may run it on, the default first (empty: no drive jobs)."""
-        return self.entry.machines
+    def __post_init__(self) -> None:
+        e = self.entry
+        facts = dict(ctor=e.cls, gains=e.gains, defaults=e.defaults, signal=e.signal, signals=e.signals)
+        for name, value in {**facts, "machines": e.machines}.items():
+            object.__setattr__(self, name, value)  # a frozen dataclass's fields, set once
 
     @property
     def closed_form_source(self) -> str:

@@ -166,8 +166,8 @@ def scores_dataset(
     for name in names:
         if recorded:  # a recording is named by its file (a string label: no unit)
             ds[name].attrs["long_name"] = "recording (its file; a window of a log: file@index)"
-        elif name in obj.family.axes:  # the family's axis: CF units and long name
-            ds[name].attrs.update(obj.family.axes[name].attrs)
+        elif name in spec.family.axes:  # the family's axis: CF units and long name
+            ds[name].attrs.update(spec.family.axes[name].attrs)
         else:
             ds[name].attrs.update(units="1", long_name=name)
     if not grid:

@@ -12,6 +12,7 @@ import equinox as eqx
 import jax
 import numpy as np
 
+from jaxobs.drive.drivefile import DriveFile
 from jaxobs.io.provenance import versions
 from jaxobs.runtime.progress import Progress
 
@@ -108,7 +109,9 @@ def _lost_only(per: dict) -> int | None:
     return int(np.sum(lost["tuned"] & ~lost["closed_form"]))
 
 
-def _verify(job: Job, env: EnvelopeSpec, drive: DriveSpec, values: dict, result: dict, quiet: bool) -> None:
+def _verify(
+    job: Job, env: EnvelopeSpec, drive: DriveSpec, df: DriveFile, values: dict, result: dict, quiet: bool
+) -> None:
     """Initial, closed form and tuned over ``[envelope]`` (:func:`verify_designs`) into ``result``; a tuned
     design that fails where the closed form holds turns the status to ``"unsafe"`` (the solver's own status
     stays in ``tuning_status``)."""
@@ -116,7 +119,7 @@ def _verify(job: Job, env: EnvelopeSpec, drive: DriveSpec, values: dict, result:
         print(f"jaxobs: verifying the designs over {env.horizon:g} s across the envelope", file=sys.stderr)
     info = COMPONENTS[job.component]
     designs = {k: info.ctor(**v) for k, v in values.items() if v is not None}
-    ver = verify_designs(designs, env, drive)
+    ver = verify_designs(designs, env, drive, df.machine)
     result["verification"] = ver
     result["tuning_status"] = result["status"]
     if ver["unsafe_points"]:
@@ -144,16 +147,19 @@ def job_fingerprint(job: Job) -> str:
     return fp
 
 
-def _designs(job: Job, obj: Objective, theta0: jax.Array, tuned: jax.Array | None) -> tuple[dict, dict, dict, dict]:
-    """The designs a job scores: ``(thetas, gains, values, drawn)``.
+def _designs(
+    job: Job, obj: Objective, theta0: jax.Array, tuned: jax.Array | None
+) -> tuple[dict, dict, dict, dict, str]:
+    """The designs a job scores: ``(thetas, gains, values, drawn, closed-form source)``.
 
     ``thetas``: each scored design's θ (the closed form nudged inside the gains' open bounds, which the
     parametrization cannot reach; no tuned design where it is None); ``gains``: the free gains reported (the
     closed form exactly; None: no tuned design); ``values``: every constructor value; ``drawn``: the free gains
-    at each scored θ (the report's legend).
+    at each scored θ (the report's legend); the closed form's source, in one line.
     """
     param = obj.param
-    cf_all = COMPONENTS[job.component].closed_form(obj.component)
+    info = COMPONENTS[job.component]
+    cf_all = info.closed_form(obj.component)
     cf = {g.name: cf_all[g.name] for g in job.gains}
     thetas = {"initial": theta0, "closed_form": param.to_theta({g.name: _inside(g, cf[g.name]) for g in job.gains})}
     if tuned is not None:  # never a design that diverged in some scenario
@@ -168,7 +174,7 @@ def _designs(job: Job, obj: Objective, theta0: jax.Array, tuned: jax.Array | Non
     fixed = {k: (v if isinstance(v, dict) else float(v)) for k, v in job.values.items() if k not in param.names}
     values = {k: (None if g is None else {**fixed, **g}) for k, g in gains.items()}
     drawn = {k: {n: float(v) for n, v in param.values(th).items()} for k, th in thetas.items()}
-    return thetas, gains, values, drawn
+    return thetas, gains, values, drawn, info.closed_form_source
 
 
 def _outcome(
@@ -210,13 +216,13 @@ def _null_reasons(job: Job, status: str, tuned: dict | None) -> dict[str, str]:
     return nulls
 
 
-def _drive_result(job: Job, drive: DriveSpec, result: dict, nulls: dict) -> None:
+def _drive_result(job: Job, df: DriveFile, result: dict, nulls: dict) -> None:
     """A drive job's machine, the note on its per-scenario values and the envelope it claims, into ``result``
     (``nulls``: why the envelope is not verified)."""
-    result["machine"] = drive.machine
+    result["machine"] = job.drive.machine if job.drive is not None else None
     result["values_note"] = (
         "Rs, Lq (LESOs) or Rs, L (flux observers) and the PLL's or FLL's initial speed (omega0_pll, omega_init) "
-        f"are set per scenario from its estimated machine ({drive.drive_file.description})"
+        f"are set per scenario from its estimated machine ({df.description})"
     )
     # the envelope it was tuned for; where the designs hold is `jaxobs envelope RESULT.json`
     result["envelope"] = claimed_envelope(job)
@@ -259,7 +265,6 @@ def run_job(job: Job, out: Path, resume: bool = False, quiet: bool = False) -> d
     t0 = time.time()
     obj, scen, (names, combos) = build_objective(job)
     theta0 = obj.param.theta0()
-    info = COMPONENTS[job.component]
     res = tune(
         obj,
         job.solver,
@@ -270,10 +275,11 @@ def run_job(job: Job, out: Path, resume: bool = False, quiet: bool = False) -> d
         quiet=quiet,
         fingerprint=job_fingerprint(job),
     )
-    thetas, gains, values, drawn = _designs(job, obj, theta0, res.theta)
+    thetas, gains, values, drawn, cf_source = _designs(job, obj, theta0, res.theta)
     n_scored = len(thetas) * (2 if job.holdout is not None else 1)
     bar = Progress(not quiet and "auto", n_scored, "score", unit="design")
     per, summary, responses = _score_designs(obj, scen, thetas, bar, "", responses=True)
+    assert responses is not None  # asked for
     scores = {k: summary.get(k) for k in gains}
     status, reason = _outcome(job, obj, scen, theta0, per, res, len(combos))
     bar.stage("linear structure of each design (margins, poles)")
@@ -291,7 +297,7 @@ def run_job(job: Job, out: Path, resume: bool = False, quiet: bool = False) -> d
         "ts": float(obj.component.ts),
         "rule": rule_spec(obj.component.rule),
         "omega_n": float(job.values["omega_n"]) if "omega_n" in job.values else None,
-        "closed_form_source": info.closed_form_source,
+        "closed_form_source": cf_source,
         "gains": gains,
         "values": values,
         "at_bound": at_bounds(job, gains["tuned"]) if gains["tuned"] is not None else {},
@@ -304,16 +310,19 @@ def run_job(job: Job, out: Path, resume: bool = False, quiet: bool = False) -> d
         "versions": versions(),
     }
     nulls = _null_reasons(job, status, gains["tuned"])
-    if job.drive is not None:
-        _drive_result(job, job.drive, result, nulls)
+    df = job.drive.drive_file if job.drive is not None else None  # the drive file the job runs, read once here
+    if job.drive is not None and df is not None:
+        _drive_result(job, df, result, nulls)
     if nulls:
         result["null_reasons"] = nulls
     result["lost_lock_tuned_only"] = {"tuning": _lost_only(per)}
     if job.holdout is not None:
         _score_holdout(job, job.holdout, thetas, bar, result, out)
     bar.close()
-    if job.envelope is not None and job.drive is not None:  # the long-horizon verification across the claimed envelope
-        _verify(job, job.envelope, job.drive, values, result, quiet)
+    if (
+        job.envelope is not None and job.drive is not None and df is not None
+    ):  # the long-horizon verification across the claimed envelope
+        _verify(job, job.envelope, job.drive, df, values, result, quiet)
     with atomic_path(out / "scores.nc") as tmp:
         scores_dataset(obj, names, combos, job.scenarios, per).to_netcdf(tmp, engine="h5netcdf")
     write_json(out / "history.json", res.history)

@@ -27,6 +27,7 @@ import math
 import numpy as np
 
 from jaxobs.analysis.envelope import envelope
+from jaxobs.drive import PMSMParams
 
 from .drive import job_drive
 from .fields import JobError, get_field, no_unknown
@@ -98,7 +99,7 @@ def parse_envelope(raw: dict, scen: ScenarioSpec, drive: DriveSpec | None) -> En
     return EnvelopeSpec(speeds, loads, horizon, settle, window)
 
 
-def verify_designs(designs: dict, env: EnvelopeSpec, drive_spec: DriveSpec) -> dict:
+def verify_designs(designs: dict, env: EnvelopeSpec, drive_spec: DriveSpec, machine: PMSMParams | None = None) -> dict:
     """Initial, closed form and tuned (``designs``: name -> drive observer) at the envelope's coarse grid over
     ``env.horizon`` seconds, with their stability verdicts (:func:`jaxobs.analysis.envelope.envelope`, the one
     envelope map, on the job's drive started steady): the ``verification`` block of result.json.
@@ -107,6 +108,7 @@ def verify_designs(designs: dict, env: EnvelopeSpec, drive_spec: DriveSpec) -> d
         designs: name -> drive observer (``initial``, ``closed_form``, ``tuned``).
         env: The envelope the job claims.
         drive_spec: The job's ``[drive]``.
+        machine: The true machine (default: its drive file's, where the caller has not read it already).
 
     Returns:
         The verification: the envelope, the horizon, the points, each design's verdict at each point and the
@@ -114,7 +116,7 @@ def verify_designs(designs: dict, env: EnvelopeSpec, drive_spec: DriveSpec) -> d
     """
     drive_spec = dataclasses.replace(drive_spec, start="steady", handover=0.0)  # operating points, started steady
     drive = job_drive(drive_spec)
-    par = drive_spec.drive_file.machine
+    par = drive_spec.drive_file.machine if machine is None else machine
     speeds, loads = env.points()
     stab = {"settle": env.settle, "window": env.window}
     ds = envelope(designs, machine=par, drive=drive, speeds_rpm=speeds, loads_nm=loads, horizon=env.horizon,
