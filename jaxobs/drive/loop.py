@@ -520,7 +520,6 @@ class ClosedLoop(AbstractDriveLoop):
 
     @property
     def pole_pairs(self) -> int:
-        """The true machine's pole pairs."""
         return self.scenario.par.p
 
     # --- the parts, bound to this scenario

@@ -184,16 +184,6 @@ class AbstractReverseCheckpoint(AbstractCheckpoint):
         """
 
     def loop(self, loop: Loop, carry: Any, xs: Any) -> tuple[Any, Any]:
-        """Run a loop from ``loop.init(carry)`` over ``xs``.
-
-        Args:
-            loop: The :class:`jaxobs.runtime._steps.Loop`.
-            carry: The initial carry.
-            xs: The per-step inputs.
-
-        Returns:
-            ``(final carry, stacked per-step outputs or None)``.
-        """
         return run_steps(loop, self, loop.init(carry), xs)
 
 
@@ -393,16 +383,6 @@ class AutoCheckpoint(AbstractCheckpoint):
         return ForwardSensitivity(max_scalars=self.forward_max, fallback=reverse)
 
     def loop(self, loop: Loop, carry: Any, xs: Any) -> tuple[Any, Any]:
-        """Run a loop from ``loop.init(carry)`` over ``xs``.
-
-        Args:
-            loop: The :class:`jaxobs.runtime._steps.Loop`.
-            carry: The initial carry.
-            xs: The per-step inputs.
-
-        Returns:
-            ``(final carry, stacked per-step outputs or None)``.
-        """
         return self.pick(loop).loop(loop, carry, xs)
 
 
