@@ -451,3 +451,36 @@ def test_a_row_with_extra_or_missing_fields_is_named_not_dropped(tmp_path, delim
         p.write_text("".join(bad))
         with pytest.raises(ValueError, match=rf"line 6 has {fields} fields, the file 7$"):
             _read(p, layout=layout)
+
+
+@pytest.mark.parametrize(
+    "which,layout",
+    [
+        ("angle in degrees", RecordingLayout(angle_unit="deg")),
+        ("phase currents in the α-β columns", RecordingLayout(current_frame="abc")),
+    ],
+)
+def test_a_log_at_another_rate_is_read_with_its_sidecar_and_resampled(tmp_path, which, layout):
+    """A log recorded faster than the observer runs (10 kHz, read at 5 kHz) is read with its declared layout (here
+    a sidecar), converted, then resampled (LogData.resampled): the clean file's samples, as DriveRecording.from_csv
+    resamples them; it was re-read without its layout, degrees taken as radians and abc as α-β."""
+    from jaxobs.signals import read_recorded
+
+    path = _write(tmp_path / "log.csv", _mistake(_cols(), which))
+    key = "angle_unit" if "deg" in which else "current_frame"
+    side = {"angle_unit": "deg", "current_frame": "abc"}[key]
+    Path(str(path) + ".toml").write_text(f'[layout]\n{key} = "{side}"\n')
+    cols, truth = ["u_a", "u_b", "i_a", "i_b"], ["theta_e", "omega_e"]
+    got = read_recorded(path, cols, truth, drive=True, time_column="t", ts=2e-4)
+    assert layout == RecordingLayout(**{key: side})
+    kw = dict(time_column="t", theta_e="theta_e", omega_e="omega_e", ts=2e-4)
+    want = jaxobs.DriveRecording.from_csv(DRIVE_CSV, columns=cols, **kw)
+    assert got.ts == want.ts == 2e-4 and got.samples.shape == want.samples.shape == (4, 1500)
+    for k, name in enumerate(cols):  # u_α, u_β averaged over each 0.2 ms; i_α, i_β interpolated
+        a, b = np.asarray(got.samples[k]), np.asarray(want.samples[k])
+        np.testing.assert_allclose(a, b, rtol=1e-9, atol=1e-9 * float(np.max(np.abs(b))), err_msg=name)
+    np.testing.assert_allclose(got.omega_e, want.omega_e, rtol=1e-9)
+    d = np.asarray(got.theta_e) - np.asarray(want.theta_e)  # the degrees' wrap: whole turns apart at most
+    np.testing.assert_allclose(np.remainder(d + math.pi, 2 * math.pi) - math.pi, 0, atol=1e-9)
+    with pytest.raises(ValueError, match="windows are cut at the log's own rate"):
+        read_recorded(path, cols, truth, drive=True, time_column="t", ts=2e-4, windows=(2, 100))

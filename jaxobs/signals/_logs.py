@@ -51,6 +51,7 @@ from collections.abc import Sequence
 import jax.numpy as jnp
 import numpy as np
 
+from ..core.validate import check_sample_time
 from ._layout import UNITS, ColumnSpec, RecordingLayout, RecordingWarning
 from ._logchecks import (
     MachineConstants,
@@ -71,7 +72,7 @@ from ._logfile import (
     split_fields,
     stream_columns,
 )
-from ._recordings import DriveRecording, column_index
+from ._recordings import _RATE_SLACK, DriveRecording, column_index, resample_rows
 
 MAX_LOG_BYTES = 8 * 2**30  # a log file larger than this is refused (10^7 rows of 10 columns is about 1 GiB)
 
@@ -136,6 +137,41 @@ class LogData:
             get(self.u_a), get(self.u_b), get(self.i_a), get(self.i_b), self.ts,
             theta_e=get(self.theta_e), omega_e=get(self.omega_e),
         )  # fmt: skip
+
+    def resampled(self, ts: float) -> DriveRecording:
+        """The whole log, in the observers' form (its layout's conversions made), resampled to ``ts``: a log
+        recorded faster than the observer runs.  The voltages become averages over each new period (each row's
+        voltage is applied over its interval), the currents, angle and speed are interpolated
+        (:func:`jaxobs.signals._recordings.resample_rows`, as ``DriveRecording.from_csv`` resamples).
+
+        Args:
+            ts: The observer's sample time, s.
+
+        Returns:
+            The :class:`jaxobs.DriveRecording` at ``ts``.
+
+        Raises:
+            ValueError: A log slower than ``ts`` (interpolation would invent the samples between), or fewer than 2
+                samples of ``ts``.
+        """
+        ts = check_sample_time("ts", ts, "LogData.resampled")
+        if self.ts > _RATE_SLACK * ts:
+            raise ValueError(
+                f"recording {self.path!r}: sampled at intervals of {self.ts:.6g} s ({1 / self.ts:.6g} Hz), slower "
+                f"than the observer's ts = {ts:g} s ({1 / ts:g} Hz): interpolation would invent the samples between"
+            )
+        named = {"u_a": self.u_a, "u_b": self.u_b, "i_a": self.i_a, "i_b": self.i_b}
+        named.update({k: c for k, c in (("theta_e", self.theta_e), ("omega_e", self.omega_e)) if c is not None})
+        keys = list(named)
+        t = self.ts * np.arange(self.n)
+        cols = resample_rows(
+            t, {i: np.asarray(named[k]) for i, k in enumerate(keys)}, ts, self.ts,
+            averaged={0, 1}, where=f"recording {self.path!r}",
+        )  # fmt: skip
+        out = {k: jnp.asarray(cols[i]) for i, k in enumerate(keys)}
+        return DriveRecording(
+            out["u_a"], out["u_b"], out["i_a"], out["i_b"], ts, theta_e=out.get("theta_e"), omega_e=out.get("omega_e")
+        )
 
 
 def read_drive_log(

@@ -2,7 +2,7 @@
 
 A grid voltage is a :class:`~jaxobs.signals.SampledSignal` (:meth:`~jaxobs.signals.SampledSignal.from_csv`); a
 drive's u and i a :class:`~jaxobs.signals.DriveRecording`, read as a drive log (:func:`read_drive_log`: its layout,
-timing and consistency checks), or resampled by the small reader when the log's rate is not the observer's.
+timing and consistency checks), resampled after its layout's conversions where its rate is not the observer's.
 """
 
 from __future__ import annotations
@@ -76,8 +76,9 @@ def read_recorded(
         them (``windows``).
 
     Raises:
-        ValueError: what :func:`read_drive_log` or ``from_csv`` refuses, in one line; a declared layout on a log
-            sampled at another rate than ``ts``.
+        ValueError: what :func:`read_drive_log` or ``from_csv`` refuses, in one line; windows on a log sampled at
+            another rate than ``ts`` (a log at another rate is read with its layout and resampled:
+            :meth:`LogData.resampled`).
     """
     if not drive:
         return SampledSignal.from_csv(path, columns=columns[0], truth=truth, **kw)
@@ -102,10 +103,10 @@ def read_recorded(
             raise ValueError(f"recording {str(path)!r}: {log.n} samples, fewer than a window's {n}")
         starts = [round(i * (log.n - n) / max(count - 1, 1)) for i in range(count)]
         return [log.recording(a, n) for a in starts]
-    # another rate: resampled by the small reader (the checks above have run on the file as it is)
-    if (layout is not None and layout != RecordingLayout()) or windows is not None:
+    # another rate: the log as read, its layout's conversions made, resampled (its checks have run on it as it is)
+    if windows is not None:
         raise ValueError(
-            f"recording {str(path)!r}: sampled at {1 / log.ts:.6g} Hz, not at the observer's {1 / ts:.6g} Hz: a "
-            "declared layout or windows read the log at its own rate (resample it, or set ts)"
+            f"recording {str(path)!r}: sampled at {1 / log.ts:.6g} Hz, not at the observer's {1 / ts:.6g} Hz: "
+            "windows are cut at the log's own rate (resample it, or set ts)"
         )
-    return DriveRecording.from_csv(path, columns=columns, **dict(zip(("theta_e", "omega_e"), truth)), **kw)
+    return log.resampled(ts)

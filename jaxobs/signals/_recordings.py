@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import math
 import os
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from typing import Any, ClassVar, cast
 
 import equinox as eqx
@@ -337,6 +337,59 @@ def column_index(spec: object, header: list[str] | None, width: int, path: str |
     raise RecordingColumnError(f"recording {p!r}: a {role} column must be a name or an index, got {spec!r}", role, spec)
 
 
+def resample_rows(
+    t: np.ndarray,
+    columns: Mapping[int, np.ndarray],
+    ts: float,
+    step: float,
+    *,
+    exact: bool = False,
+    angle: set[int] | frozenset[int] = frozenset(),
+    averaged: set[int] | frozenset[int] = frozenset(),
+    where: str = "recording",
+) -> dict[int, np.ndarray]:
+    """Recorded rows at times ``t`` resampled to ``ts``: linear interpolation at t_k = k·ts, the ``averaged`` columns
+    (a drive's applied voltage) as the average over [t_k, t_k + ts] of the recording held constant over each
+    recorded interval, the ``angle`` columns unwrapped first.
+
+    Args:
+        t: The rows' times from the first, s (strictly increasing).
+        columns: The columns by index, each as long as ``t``.
+        ts: The sample time resampled to, s.
+        step: The recorded interval (the median, for a non-uniform record), s: the last row's hold.
+        exact: The rows are already at ``ts`` (uniform, within the one tolerance): copied, not resampled.
+        angle: The indices of angle columns (rad, unwrapped before interpolation).
+        averaged: The indices of the columns held over each recorded interval.
+        where: The record's name, for the message.
+
+    Returns:
+        index -> the resampled column, for every index of ``columns``.
+
+    Raises:
+        ValueError: Fewer than 2 samples of ``ts`` after resampling.
+    """
+    n = len(t) if exact else int(math.floor(t[-1] / ts * (1 + 1e-12))) + 1
+    if averaged and not exact:  # every period [t_k, t_k + ts] must lie inside the record
+        n = int(math.floor((t[-1] + step) / ts * (1 + 1e-12)))
+    if n < 2:
+        raise ValueError(f"{where}: {t[-1]:.6g} s long, fewer than 2 samples of ts = {ts:g} s after resampling")
+    tk = ts * np.arange(n)
+
+    def resample(i: int) -> np.ndarray:
+        x = np.asarray(columns[i])
+        if i in angle:
+            x = np.unwrap(x)
+        if exact:
+            return x.copy()
+        if i in averaged:  # the average over [t_k, t_k + ts] of x held constant over each recorded interval
+            edges = np.append(t, t[-1] + step)
+            cum = np.concatenate([[0.0], np.cumsum(x * np.diff(edges))])
+            return (np.interp(tk + ts, edges, cum) - np.interp(tk, edges, cum)) / ts
+        return np.interp(tk, t, x)
+
+    return {i: resample(i) for i in columns}
+
+
 def read_recording(
     path: str | os.PathLike[str],
     columns: Sequence[str | int] | None = None,
@@ -430,30 +483,15 @@ def read_recording(
     angle_idx = {column_index(c, header, width, path, "truth") for c in angle}
     avg_idx = {column_index(c, header, width, path, "signal") for c in averaged}
     exact = uniform and abs(step - ts) <= TS_REL_TOL * ts
-    n = table.shape[0] if exact else int(math.floor(t[-1] / ts * (1 + 1e-12))) + 1
-    if avg_idx and not exact:  # every period [t_k, t_k + ts] must lie inside the record
-        n = int(math.floor((t[-1] + step) / ts * (1 + 1e-12)))
-    if n < 2:
-        raise ValueError(
-            f"recording {str(path)!r}: {t[-1]:.6g} s long, fewer than 2 samples of ts = {ts:g} s after resampling"
-        )
-    tk = ts * np.arange(n)
-
-    def resample(i):
-        x = table[:, i]
-        if i in angle_idx:
-            x = np.unwrap(x)
-        if exact:
-            return x.copy()
-        if i in avg_idx:  # the average over [t_k, t_k + ts] of x held constant over each recorded interval
-            edges = np.append(t, t[-1] + step)
-            cum = np.concatenate([[0.0], np.cumsum(x * np.diff(edges))])
-            return (np.interp(tk + ts, edges, cum) - np.interp(tk, edges, cum)) / ts
-        return np.interp(tk, t, x)
+    cols = resample_rows(
+        t, {i: table[:, i] for i in sorted(read)}, ts, step, exact=exact,
+        angle={*angle_idx} & read, averaged={*avg_idx} & read,
+        where=f"recording {str(path)!r}",
+    )  # fmt: skip
 
     return {
-        "columns": [resample(i) for i in idx],
-        "extra": [resample(i) for i in idx_extra],
+        "columns": [cols[i] for i in idx],
+        "extra": [cols[i] for i in idx_extra],
         "ts": ts,
         "rate_hz": 1.0 / step,
         "duration": float(t[-1]),
