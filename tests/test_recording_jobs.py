@@ -13,6 +13,7 @@ import pytest
 from jaxobs.io.provenance import by_label
 from jaxobs_tuning.cli import main
 from jaxobs_tuning.job import load_job, run_job
+from jaxobs_tuning.job.recordings import load_recordings
 
 ROOT = Path(__file__).resolve().parents[1]
 PRESET = ROOT / "tuning" / "presets" / "recording_sosoifo.toml"
@@ -152,3 +153,49 @@ def test_windows_of_a_log_are_scenarios_from_their_own_speed(tmp_path):
     starts = [round(i * (3000 - 1001) / 2) for i in range(3)]
     assert [s["omega_start"] for s in scen] == pytest.approx([w0[a] for a in starts], abs=1e-9)
     assert json.loads((tmp_path / "o" / "result.json").read_text())["scenarios"]["count"] == 3
+
+
+def test_a_job_declares_three_phase_currents_beside_two_voltages(tmp_path, capsys):
+    """`voltages` and `currents` (2 or 3 each) declare what labs log: three phase currents beside α-β voltages read
+    as the clean α-β log; two phase voltages give the third as −a − b only with voltage_zero_sequence = 'none', and
+    each miscount is one line naming its key."""
+    c = _cols()
+    a, b = c["i_a"], -0.5 * c["i_a"] + math.sqrt(3) / 2 * c["i_b"]
+    lab = {"t": c["t"], "u_a": c["u_a"], "u_b": c["u_b"], "ia": a, "ib": b, "ic": -a - b}
+    lab.update(theta_e=c["theta_e"], omega_e=c["omega_e"])
+    _write(tmp_path / "lab.csv", lab)
+    shutil.copy(DRIVE_CSV, tmp_path / "clean.csv")
+    head = 'time_column = "t"\ntruth = ["theta_e", "omega_e"]\n'
+    three = head + 'file = "lab.csv"\nvoltages = ["u_a", "u_b"]\ncurrents = ["ia", "ib", "ic"]\n'
+    job3 = load_job(_job(tmp_path, three + 'layout = { current_frame = "abc" }'))
+    assert job3.scenarios.recording.voltages == 2 and len(job3.scenarios.recording.columns) == 5
+    (tmp_path / "c").mkdir()
+    job_clean = load_job(_job(tmp_path / "c", head + 'file = "../clean.csv"'))
+    got = load_recordings(job3.scenarios.recording, job3.scenarios.family.recorded())
+    want = load_recordings(job_clean.scenarios.recording, job_clean.scenarios.family.recorded())
+    np.testing.assert_allclose(np.asarray(got.samples), np.asarray(want.samples), rtol=1e-12, atol=1e-12)
+    # three phase voltages beside α-β currents: 3 + 2 (half of 5 would split them 2 + 3)
+    ua, ub = c["u_a"], -0.5 * c["u_a"] + math.sqrt(3) / 2 * c["u_b"]
+    _write(tmp_path / "lab2.csv", {"t": c["t"], "ua": ua, "ub": ub, "uc": -ua - ub, "i_a": c["i_a"], "i_b": c["i_b"],
+                                   "theta_e": c["theta_e"], "omega_e": c["omega_e"]})  # fmt: skip
+    rec2 = head + 'file = "lab2.csv"\nvoltages = ["ua", "ub", "uc"]\ncurrents = ["i_a", "i_b"]\n'
+    job2 = load_job(_job(tmp_path, rec2 + 'layout = { voltage_frame = "abc" }'))
+    got2 = load_recordings(job2.scenarios.recording, job2.scenarios.family.recorded())
+    np.testing.assert_allclose(np.asarray(got2.samples), np.asarray(want.samples), rtol=1e-12, atol=1e-12)
+    for rec, field, words in (
+        (three, "scenarios.recording.currents", "3 columns are three phases: declare layout.current_frame = 'abc'"),
+        (head + 'file = "lab.csv"\nvoltages = ["u_a", "u_b"]', "scenarios.recording.currents", "is required with"),
+        (three + 'columns = ["u_a"]', "scenarios.recording.columns", "not both"),
+        (three.replace('"ic"]', '"ic", "t"]'), "scenarios.recording.currents", "a list of 2 or 3 column(s)"),
+    ):
+        assert main(["tune", str(_job(tmp_path, rec)), "--check"]) == 2, rec
+        err = capsys.readouterr().err
+        assert field in err and words in err and err.count("\n") == 1, err
+    # two phase voltages (of a file with u in abc): refused unless their zero sequence is declared absent
+    volts = head + 'file = "lab.csv"\nvoltages = ["ia", "ib"]\ncurrents = ["ia", "ib", "ic"]\n'
+    lay = 'layout = { current_frame = "abc", voltage_frame = "abc"'
+    assert main(["tune", str(_job(tmp_path, volts + lay + " }")), "--check"]) == 2
+    err = capsys.readouterr().err
+    assert "give the third column, or declare voltage_zero_sequence = 'none'" in err and err.count("\n") == 1
+    path = _job(tmp_path, volts + lay + ', voltage_zero_sequence = "none" }')
+    assert load_job(path).scenarios.recording.layout.voltage_zero_sequence == "none"

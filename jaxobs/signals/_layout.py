@@ -28,6 +28,7 @@ TIMINGS = ("applied", "reference")
 SCALINGS = ("amplitude", "power")
 DELIMITERS = {",": ",", ";": ";", "tab": "\t", "\t": "\t", "space": r"\s+", " ": r"\s+"}
 DECIMALS = (".", ",")
+ZERO_SEQUENCES = ("unknown", "none")  # what two phase voltages may leave out
 
 MAX_SIDECAR_BYTES = 64 * 2**10
 
@@ -69,6 +70,9 @@ class RecordingLayout:
         speed_kind: ``"electrical"`` or ``"mechanical"`` (needs ``pole_pairs``), for the speed.
         time_unit: the time column's unit, a key of :data:`UNITS`.
         pole_pairs: the machine's pole pairs, for mechanical angles or speeds.
+        voltage_zero_sequence: ``"none"``: the phase voltages carry no zero sequence, so two ``"abc"`` voltage
+            columns give the third as −a − b; ``"unknown"`` (the default): two ``"abc"`` voltage columns are refused
+            (a min-max or space-vector reference carries a zero sequence, and −a − b would be wrong).
         delimiter: ``","``, ``";"``, ``"tab"`` or ``"space"``.
         decimal: ``"."`` or ``","`` (a decimal comma needs another delimiter).
 
@@ -90,6 +94,7 @@ class RecordingLayout:
     speed_kind: str = "electrical"
     time_unit: str = "s"
     pole_pairs: int | None = None
+    voltage_zero_sequence: str = "unknown"
     delimiter: str = ","
     decimal: str = "."
 
@@ -102,6 +107,7 @@ class RecordingLayout:
             _choice(f"{q}_unit", getattr(self, f"{q}_unit"), tuple(UNITS[q]))
         _choice("angle_kind", self.angle_kind, KINDS)
         _choice("speed_kind", self.speed_kind, KINDS)
+        _choice("voltage_zero_sequence", self.voltage_zero_sequence, ZERO_SEQUENCES)
         _choice("delimiter", self.delimiter, tuple(DELIMITERS))
         _choice("decimal", self.decimal, DECIMALS)
         d = self.voltage_delay

@@ -276,6 +276,12 @@ def _check_columns_asked(
             raise ValueError(
                 f"recording {p!r}: {role} columns in {frame!r} are {' or '.join(map(str, allowed))}, got {len(cols)}"
             )
+    if layout.voltage_frame == "abc" and len(voltages) == 2 and layout.voltage_zero_sequence != "none":
+        raise ValueError(
+            f"recording {p!r}: two phase voltages give the third as −a − b only where they carry no zero sequence "
+            "(a min-max or space-vector reference carries one): give the third column, or declare "
+            "voltage_zero_sequence = 'none'"
+        )
     if (time_column is None) == (sample_rate is None):
         raise ValueError(f"recording {p!r}: give exactly one of time_column and sample_rate")
     if layout.voltage_frame == "dq" and theta_e is None and layout.voltage_angle is None:

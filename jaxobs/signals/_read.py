@@ -41,6 +41,7 @@ def read_recorded(
     layout: RecordingLayout | None = None,
     machine: MachineConstants | None = None,
     windows: tuple[int, int] | None = None,
+    voltages: int | None = None,
     **kw: Any,
 ) -> SampledSignal | DriveRecording | list[DriveRecording]: ...
 
@@ -54,6 +55,7 @@ def read_recorded(
     layout: RecordingLayout | None = None,
     machine: MachineConstants | None = None,
     windows: tuple[int, int] | None = None,
+    voltages: int | None = None,
     **kw: Any,
 ) -> SampledSignal | DriveRecording | list[DriveRecording]:
     """One recording file as scenarios.
@@ -69,6 +71,8 @@ def read_recorded(
         machine: a :class:`~jaxobs.drive.PMSMParams` for the log's power and timing checks, or None.
         windows: ``(count, n)``: ``count`` windows of ``n`` samples spread evenly over a drive log, each a
             scenario starting at its own speed; None: the whole file.
+        voltages: How many of a drive log's ``columns`` are its voltages, the currents following (2 or 3 each, as
+            the layout's frames take them); None: half of them.
         **kw: the time base (``time_column``, ``sample_rate``, ``ts``) and ``max_bytes``.
 
     Returns:
@@ -83,10 +87,11 @@ def read_recorded(
     if not drive:
         return SampledSignal.from_csv(path, columns=columns[0], truth=truth, **kw)
     ts = kw.get("ts")
+    nv = len(columns) // 2 if voltages is None else int(voltages)  # 2 + 2 columns, 3 + 3 (abc), 2 + 3, 3 + 2
     log = read_drive_log(
         path,
-        voltages=columns[: len(columns) // 2],  # 2 + 2 columns, or 3 + 3 (abc)
-        currents=columns[len(columns) // 2 :],
+        voltages=columns[:nv],
+        currents=columns[nv:],
         theta_e=truth[0],
         omega_e=truth[1] if len(truth) > 1 else None,
         time_column=kw.get("time_column"),

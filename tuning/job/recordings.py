@@ -26,7 +26,10 @@ from .spec import Job, RecordingSpec, ScenarioSpec
 MAX_RECORDING_BYTES = 64 * 2**20
 MAX_LOG_BYTES = 4 * 2**30
 MAX_WINDOWS = 256  # windows of one drive log (scenarios.recording.windows)
-RECORDING_KEYS = ("file", "time_column", "sample_rate", "columns", "truth", "layout", "trim", "windows", "machine")
+RECORDING_KEYS = (
+    "file", "time_column", "sample_rate", "columns", "voltages", "currents", "truth", "layout", "trim", "windows",
+    "machine",
+)  # fmt: skip
 
 
 MAX_RECORDINGS = 64  # files of one [scenarios.recording]
@@ -96,21 +99,21 @@ def parse_recording_scenarios(
     if rate is not None and not 0 < rate <= 1e9:
         raise JobError(f"{w}.sample_rate", f"must be in (0, 1e9] Hz, got {rate:g}")
     recorded = family.recorded()
-    cols, truth = rec.get("columns", list(recorded.columns)), rec.get("truth", list(recorded.truth))
+    cols, n_volt, lists = _signal_columns(rec, w, recorded)
+    truth = rec.get("truth", list(recorded.truth))
     n_truth = recorded.truth_counts  # grid: theta, omega, amplitude; u/i: theta_e [, omega_e]
-    n_cols = (4, 6) if recorded.binds else (len(recorded.columns),)  # u/i: 2 + 2, or 3 + 3 phase columns (abc)
-    for key, v, n_ok in (("columns", cols, n_cols), ("truth", truth, n_truth)):
+    for key, v, n_ok in (*lists, ("truth", truth, n_truth)):
         if not isinstance(v, list) or len(v) not in n_ok:
             raise JobError(f"{w}.{key}", f"must be a list of {' or '.join(map(str, n_ok))} column(s), got {show(v)}")
         for i, c in enumerate(v):
             _col_spec(c, f"{w}.{key}[{i}]")
     root = Path.cwd() if base is None else Path(base)
     paths = tuple(str(Path(f) if Path(f).is_absolute() else root / f) for f in files)
-    layout, windows, machine, mname = _log_options(rec, w, recorded, cols, root, base is not None)
+    layout, windows, machine, mname = _log_options(rec, w, recorded, cols, n_volt, root, base is not None)
     trim = get_field(rec, "trim", f"{w}.trim", bool, False)
     spec = RecordingSpec(
         tuple(files), paths, tcol, rate, tuple(cols), tuple(truth), ts, layout=layout, trim=trim, windows=windows,
-        machine=machine, machine_name=mname,
+        machine=machine, machine_name=mname, voltages=n_volt,
     )  # fmt: skip
     lengths = []
     if base is not None:
@@ -153,8 +156,36 @@ def parse_recording_scenarios(
     return ScenarioSpec(family.signal, t_event, horizon, steady, axes, 0, seed, recording=spec)
 
 
+def _signal_columns(rec: dict, w: str, recorded: RecordedSignals) -> tuple[list, int | None, list[tuple]]:
+    """A recording's signal columns: ``columns`` (a grid voltage's one; a drive log's 4 or 6, voltages then
+    currents in halves), or a drive log's ``voltages`` and ``currents`` (2 or 3 each: two or three phases, as its
+    layout declares).
+
+    Returns:
+        ``(the columns, voltages first, how many are voltages (None: half), the (key, list, allowed counts) to
+        check)``.
+    """
+    split = [k for k in ("voltages", "currents") if k in rec]
+    if not split:
+        cols = rec.get("columns", list(recorded.columns))
+        n_cols = (4, 6) if recorded.binds else (len(recorded.columns),)  # u/i: 2 + 2, or 3 + 3 phase columns (abc)
+        return cols, None, [("columns", cols, n_cols)]
+    if not recorded.binds:
+        raise JobError(f"{w}.{split[0]}", "applies to drive logs (u and i), not to a grid voltage: give columns")
+    if "columns" in rec:
+        raise JobError(f"{w}.columns", "give columns, or voltages and currents, not both")
+    if len(split) == 1:
+        other = "currents" if split[0] == "voltages" else "voltages"
+        raise JobError(f"{w}.{other}", f"is required with {split[0]} (the log's voltage and current columns)")
+    volts, amps = rec["voltages"], rec["currents"]
+    lists = [("voltages", volts, (2, 3)), ("currents", amps, (2, 3))]
+    if not (isinstance(volts, list) and isinstance(amps, list)):
+        return [], None, lists  # refused by the caller's check, naming the key
+    return [*volts, *amps], len(volts), lists
+
+
 def _log_options(
-    rec: dict, w: str, family: RecordedSignals, cols: list, root: Path, load: bool
+    rec: dict, w: str, family: RecordedSignals, cols: list, n_volt: int | None, root: Path, load: bool
 ) -> tuple[RecordingLayout | None, int, PMSMParams | None, str | None]:
     """A drive log's ``layout`` (table), ``windows`` (count) and ``machine`` (a bench machine's name, or a drive
     file relative to the job), checked; the grid kind takes none of them."""
@@ -170,11 +201,15 @@ def _log_options(
         except ValueError as e:  # "<w>.layout.<key>: ..." or "<w>.layout.<key> must be ...": the key, then why
             m = re.match(rf"({re.escape(w)}\.layout\.\w+):? (.*)", str(e))
             raise JobError(*(m.groups() if m else (f"{w}.layout", str(e)))) from None
-        three = layout.voltage_frame == "abc" and layout.current_frame == "abc"
+    if n_volt is None:  # columns: in halves
+        three = layout is not None and layout.voltage_frame == "abc" and layout.current_frame == "abc"
         if len(cols) == 6 and not three:
-            raise JobError(f"{w}.columns", "6 columns are three voltage and three current phases: layout abc for both")
-    elif len(cols) == 6:
-        raise JobError(f"{w}.columns", "6 columns are three voltage and three current phases: declare them in layout")
+            how = "layout abc for both" if layout is not None else "declare them in layout"
+            raise JobError(f"{w}.columns", f"6 columns are three voltage and three current phases: {how}")
+    else:  # voltages and currents: three of either are phases, declared so
+        for key, n, frame in (("voltages", n_volt, "voltage_frame"), ("currents", len(cols) - n_volt, "current_frame")):
+            if n == 3 and (layout is None or getattr(layout, frame) != "abc"):
+                raise JobError(f"{w}.{key}", f"3 columns are three phases: declare layout.{frame} = 'abc'")
     windows = get_field(rec, "windows", f"{w}.windows", int, 0)
     if "windows" in rec and not 1 <= windows <= MAX_WINDOWS:
         raise JobError(f"{w}.windows", f"must be a count in 1..{MAX_WINDOWS}, got {windows}")
@@ -203,7 +238,12 @@ def _column_field(w: str, e: RecordingColumnError, spec: RecordingSpec) -> str:
     if e.role == "time":
         return f"{w}.time_column"
     key, listed = ("columns", spec.columns) if e.role == "signal" else ("truth", spec.truth)
-    return f"{w}.{key}[{listed.index(e.spec)}]" if e.spec in listed else f"{w}.{key}"
+    if e.spec not in listed:
+        return f"{w}.{key}"
+    i = listed.index(e.spec)
+    if e.role == "signal" and spec.voltages is not None:  # given as voltages and currents
+        return f"{w}.voltages[{i}]" if i < spec.voltages else f"{w}.currents[{i - spec.voltages}]"
+    return f"{w}.{key}[{i}]"
 
 
 def _load_one(
@@ -220,7 +260,7 @@ def _load_one(
         windows = (spec.windows, need)
     return read_recorded(
         path, spec.columns, spec.truth, drive=True, layout=spec.layout, machine=spec.machine, windows=windows,
-        max_bytes=MAX_LOG_BYTES, **kw,
+        voltages=spec.voltages, max_bytes=MAX_LOG_BYTES, **kw,
     )  # fmt: skip
 
 

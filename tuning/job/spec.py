@@ -152,6 +152,8 @@ class RecordingSpec:
         windows: > 0: this many windows of the horizon spread over each drive log, each a scenario.
         machine: A :class:`~jaxobs.drive.PMSMParams` for a drive log's power and timing checks, or None.
         machine_name: The machine as the job names it (a bench machine or a drive file).
+        voltages: How many of ``columns`` are a drive log's voltages, its currents following (given as
+            ``voltages`` and ``currents``); None: half of them (given as ``columns``).
     """
 
     files: tuple[str, ...]  # as written in the job file
@@ -167,6 +169,7 @@ class RecordingSpec:
     windows: int = 0  # > 0: this many windows of the horizon spread over each drive log, each a scenario
     machine: PMSMParams | None = None  # for a drive log's power and timing checks, or None
     machine_name: str | None = None  # as the job names it (a bench machine or a drive file)
+    voltages: int | None = None  # how many of columns are voltages (the voltages/currents keys); None: half
 
     def labels(self) -> list[str]:
         """The scenarios' names: each file's name, or ``file@k`` for the k-th window of a drive log."""
