@@ -200,6 +200,24 @@ def test_closed_form_json_reports_formula_and_source(capsys):
     assert "l2" in out and "1e+06" in out
 
 
+def test_help_and_version_answer_without_importing_jax(capsys):
+    """The console script (jaxobs_tuning.cli_entry) answers `jaxobs`, `--help` and `--version` without JAX: its
+    list of commands is the full parser's, word for word, and a fresh interpreter has not imported jax after it."""
+    from jaxobs_tuning.cli import build_parser
+    from jaxobs_tuning.cli_entry import main as entry
+    from jaxobs_tuning.cli_entry import top_parser
+
+    assert top_parser().format_help() == build_parser().format_help()
+    assert entry(["--help"]) == 0 and capsys.readouterr().out == build_parser().format_help()
+    assert entry([]) == 2 and capsys.readouterr().err == build_parser().format_help()
+    code = (
+        "import sys; from jaxobs_tuning.cli_entry import main; rc = main(['--version']); "
+        "assert rc == 0 and 'jax' not in sys.modules and 'numpy' not in sys.modules, sorted(sys.modules)"
+    )
+    run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert run.returncode == 0 and run.stdout.startswith("jaxobs "), run.stderr[-2000:]
+
+
 def test_a_design_is_named_by_its_alias_or_class_name_in_any_case(capsys):
     """`closed-form` and `export --design` read a class name (as job files and result.json name a component) or an
     alias, in any case: the same rows; an unknown name is argparse's one line naming the choices."""
@@ -365,3 +383,11 @@ def test_check_also_checks_out(tmp_path, capsys):
     assert main(["tune", "--check", "--out", str(fresh)]) == 0
     assert main(["study", "--check", "--out", str(fresh)]) == 0
     assert not (tmp_path / "new").exists()  # --check writes nothing
+
+
+def test_the_package_lists_every_lazy_name():
+    """jaxobs_tuning's names load on first use: __all__ is the lazy table's names, and each resolves."""
+    import jaxobs_tuning
+
+    assert jaxobs_tuning.__all__ == list(jaxobs_tuning._LAZY)
+    assert all(getattr(jaxobs_tuning, n) is not None for n in jaxobs_tuning.__all__)
