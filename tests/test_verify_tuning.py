@@ -11,7 +11,7 @@ import pytest
 
 from jaxobs_tuning.cli import main
 from jaxobs_tuning.job import UNSAFE_EXIT, job_drive, load_job, parse_job
-from jaxobs_tuning.job.verify import EnvelopeSpec, unsafe_points
+from jaxobs_tuning.job.verify import EnvelopeSpec, unsafe_points, verification_points
 
 PRESETS = Path(__file__).parents[1] / "tuning" / "presets"
 DRIVE_PRESETS = ("cleso", "gileso", "faleso", "soifo", "sosoifo", "soifo_noise")
@@ -97,7 +97,7 @@ def test_envelope_defaults_to_the_tuning_grid_and_its_coarse_grid():
     raw["scenarios"]["grid"] = {"speed_rpm": [400.0, 1600.0], "load_nm": [0.0, 3.0]}
     env = parse_job(raw).envelope
     assert env.speed_rpm == (400.0, 1600.0) and env.load_nm == (0.0, 3.0) and env.horizon == 2.0
-    assert env.points() == ([400.0, 800.0, 1600.0], [0.0, 3.0])
+    assert verification_points(env) == ([400.0, 800.0, 1600.0], [0.0, 3.0])
     del raw["envelope"]
     assert parse_job(raw).envelope is None
 

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -189,11 +188,3 @@ class EnvelopeSpec:
     horizon: float = DEFAULT_HORIZON
     settle: float = 0.2
     window: float = 0.4
-
-    def points(self) -> tuple[list[float], list[float]]:
-        """The coarse verification grid: (speeds, loads), 3 × 2 (fewer where lo == hi)."""
-        lo, hi = self.speed_rpm
-        mid = math.sqrt(lo * hi) if lo > 0 else 0.5 * (lo + hi)
-        speeds = sorted({float(lo), float(mid), float(hi)})
-        loads = sorted({float(v) for v in self.load_nm})
-        return speeds, loads

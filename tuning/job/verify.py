@@ -34,7 +34,7 @@ from .fields import JobError, get_field, no_unknown
 from .spec import DEFAULT_HORIZON as DEFAULT_HORIZON
 from .spec import DriveSpec, EnvelopeSpec, ScenarioSpec
 
-__all__ = ["EnvelopeSpec", "parse_envelope", "verify_designs", "unsafe_points", "UNSAFE_EXIT"]
+__all__ = ["EnvelopeSpec", "parse_envelope", "verification_points", "verify_designs", "unsafe_points", "UNSAFE_EXIT"]
 
 UNSAFE_EXIT = 4  # jaxobs tune's exit status for status "unsafe" (3 is "diverged": nothing tuned at all)
 MIN_HORIZON = 0.5  # s: jaxobs.analysis.envelope.envelope's least; the presets run the default 2 s
@@ -99,6 +99,23 @@ def parse_envelope(raw: dict, scen: ScenarioSpec, drive: DriveSpec | None) -> En
     return EnvelopeSpec(speeds, loads, horizon, settle, window)
 
 
+def verification_points(env: EnvelopeSpec) -> tuple[list[float], list[float]]:
+    """The coarse grid the verification runs on: 3 speeds (the ends and their geometric mean; the arithmetic mean
+    from zero) × the 2 loads at the ends (fewer where an end repeats).
+
+    Args:
+        env: The envelope the job claims.
+
+    Returns:
+        ``(speeds, loads)``, r/min and N·m, each sorted.
+    """
+    lo, hi = env.speed_rpm
+    mid = math.sqrt(lo * hi) if lo > 0 else 0.5 * (lo + hi)
+    speeds = sorted({float(lo), float(mid), float(hi)})
+    loads = sorted({float(v) for v in env.load_nm})
+    return speeds, loads
+
+
 def verify_designs(designs: dict, env: EnvelopeSpec, drive_spec: DriveSpec, machine: PMSMParams | None = None) -> dict:
     """Initial, closed form and tuned (``designs``: name -> drive observer) at the envelope's coarse grid over
     ``env.horizon`` seconds, with their stability verdicts (:func:`jaxobs.analysis.envelope.envelope`, the one
@@ -117,7 +134,7 @@ def verify_designs(designs: dict, env: EnvelopeSpec, drive_spec: DriveSpec, mach
     drive_spec = dataclasses.replace(drive_spec, start="steady", handover=0.0)  # operating points, started steady
     drive = job_drive(drive_spec)
     par = drive_spec.drive_file.machine if machine is None else machine
-    speeds, loads = env.points()
+    speeds, loads = verification_points(env)
     stab = {"settle": env.settle, "window": env.window}
     ds = envelope(designs, machine=par, drive=drive, speeds_rpm=speeds, loads_nm=loads, horizon=env.horizon,
                   stability=stab)  # fmt: skip
