@@ -17,6 +17,7 @@ from jaxobs import drive as D
 from jaxobs.core.measurements import DriveInput
 from jaxobs.metrics import wrap
 from jaxobs.observers import CLESO, FALESO, GILESO, SOIFO, LPFFlux, SecondOrderSOIFO
+from jaxobs.observers.rofo import ReducedOrderFluxObserver
 from jaxobs.observers.speed import MechanicalSpeed, PLLSpeed, mechanical_gains, speed_from_spec
 from jaxobs.studies.registry import REGISTRY
 
@@ -339,6 +340,16 @@ def test_a_job_selects_the_speed_estimator(drive):
         job('kind = "pll"\nzero_fade = 3.0', comp="LPFFlux", gain="omega_c", init=100.0)
     lpf = job('kind = "mechanical"\nalpha_o = 60.0', comp="LPFFlux", gain="omega_c", init=100.0)
     assert isinstance(LPFFlux(**lpf.values).speed, MechanicalSpeed)
+    # the reduced-order flux observer: the mechanical model in its type-2 loop's place, whose gains then do nothing
+    rofo = job('kind = "mechanical"\nalpha_o = 60.0', comp="rofo", gain="c_sigma", init=0.5)
+    obs = ReducedOrderFluxObserver(**rofo.values)
+    assert isinstance(obs.speed, MechanicalSpeed) and float(obs.speed.k3) == 60.0**3
+    assert obs.bind(job_drive(rofo.drive).foc.est, 10.0).reads_torque
+    assert isinstance(
+        ReducedOrderFluxObserver(**job('kind = "pll"', comp="rofo", gain="c_sigma", init=0.5).values).speed, PLLSpeed
+    )
+    with pytest.raises(JobError, match=r"^gains\.k_theta: the PLL's gains do nothing"):
+        job('kind = "mechanical"\nalpha_o = 60.0', comp="rofo", gain="k_theta", init=500.0)
 
 
 def test_the_c_export_refuses_a_mechanical_speed_estimator_and_a_bank_forwards_the_torque(tmp_path):

@@ -153,6 +153,26 @@ class AbstractSpeedEstimator(eqx.Module):
             d(xs)/dt.
         """
 
+    def euler(
+        self, host: SpeedHost, xs: jax.Array, err: jax.Array, torque: ArrayLike, ts: float
+    ) -> tuple[jax.Array, jax.Array]:
+        """One forward-Euler step of :meth:`vf` over ``ts`` (an observer whose own update is exact elsewhere, the
+        reduced-order flux observer, advances its speed estimator so).
+
+        Args:
+            host: The observer holding this strategy.
+            xs: The strategy's states [θ̂, ω̂, ...] at the period's start.
+            err: The phase error ε over the period.
+            torque: The torque reference T* over the period, N·m.
+            ts: The period, s.
+
+        Returns:
+            ``(θ̂̇, the states after ts)``: the angle's rate over the period (the host's coordinates turn at it) and
+            the states, θ̂ not wrapped.
+        """
+        d = self.vf(host, xs, err, torque)
+        return d[0], xs + ts * d
+
     def bind(self, est_par: MachineInertia) -> AbstractSpeedEstimator:
         """This strategy assuming ``est_par`` (a :class:`jaxobs.drive.PMSMParams`); a PLL has nothing to bind.
 
@@ -185,6 +205,25 @@ class PLLSpeed(AbstractSpeedEstimator):
         """
         dth, dw = pll_vf(xs[0], xs[1], err, host.kp_pll, host.ki_pll)
         return jnp.stack([dth, dw])
+
+    def euler(
+        self, host: SpeedHost, xs: jax.Array, err: jax.Array, torque: ArrayLike, ts: float
+    ) -> tuple[jax.Array, jax.Array]:
+        """:meth:`AbstractSpeedEstimator.euler`, its products in the order the reduced-order flux observer's own
+        type-2 loop always took them (θ̂ + T_s(ω̂ + k_p ε), ω̂ + (T_s k_i) ε), so that its results stay bit for bit.
+
+        Args:
+            host: The observer holding the PLL.
+            xs: [θ̂, ω̂].
+            err: The phase error ε.
+            torque: Unused.
+            ts: The period, s.
+
+        Returns:
+            ``(θ̂̇, [θ̂, ω̂] after ts)``.
+        """
+        dth = xs[1] + host.kp_pll * err
+        return dth, jnp.stack([xs[0] + ts * dth, xs[1] + ts * host.ki_pll * err])
 
 
 def mechanical_gains(alpha_o: float) -> tuple[float, float, float]:

@@ -159,8 +159,8 @@ def parse_scenarios(
 
 
 def parse_observer_speed(raw: dict, info: ComponentInfo) -> dict:
-    """A job's ``[observer.speed]``: how a LESO or a PLL-type flux observer extracts speed and position
-    (jaxobs.observers.speed).
+    """A job's ``[observer.speed]``: how a LESO, a PLL-type flux observer or the reduced-order flux observer
+    extracts speed and position (jaxobs.observers.speed).
 
     ``kind = "pll"`` (the default: the observer's PLL on its ``kp_pll``, ``ki_pll``) or ``"mechanical"`` (a
     mechanical-model speed observer with its three poles at −``alpha_o`` rad/s, its Ĵ, B̂ and p those of the
@@ -186,7 +186,8 @@ def parse_observer_speed(raw: dict, info: ComponentInfo) -> dict:
     if not (issubclass(info.ctor, AbstractDriveObserver) and info.ctor.takes_speed_estimator):
         raise JobError(
             "observer.speed",
-            f"only the LESOs and the PLL-type flux observers (LPFFlux) take a speed estimator, not {info.entry.name}",
+            "only the LESOs, the PLL-type flux observers (LPFFlux) and the reduced-order flux observer take a "
+            f"speed estimator, not {info.entry.name}",
         )
     kind = get_field(sp, "kind", "observer.speed.kind", str, "pll")
     if kind not in SPEED_KINDS:
