@@ -131,7 +131,7 @@ def job_fingerprint(job: Job) -> str:
 
 def _closed_form(job: Job, obj: Objective) -> tuple[dict, jax.Array]:
     """The closed form's free gains at the job's component, and its θ nudged inside the gains' open bounds."""
-    cf_all = COMPONENTS[job.component].closed_form(obj.component)
+    cf_all = COMPONENTS[job.component].closed_form(obj.component, job.values)
     cf = {g.name: cf_all[g.name] for g in job.gains}
     return cf, obj.param.to_theta({g.name: _inside(g, cf[g.name]) for g in job.gains})
 
@@ -149,7 +149,8 @@ def _design_values(
     }
     # a LESO's [observer.speed] record stays a record (jaxobs.observers.speed.speed_from_spec)
     fixed = {k: (v if isinstance(v, dict) else float(v)) for k, v in job.values.items() if k not in param.names}
-    values = {k: (None if g is None else {**fixed, **g}) for k, g in gains.items()}
+    info = COMPONENTS[job.component]  # a dotted gain (speed.k1) goes inside its record
+    values = {k: (None if g is None else info.values_with(fixed, g)) for k, g in gains.items()}
     return gains, values
 
 
