@@ -85,11 +85,13 @@ B̂ = 0), the errors e_θ = θ̃, e_ω = ω̃m and e_T = TL − T̂L obey
     de_θ/dt = e_ω − m1 ε,   de_ω/dt = −(p/Ĵ) e_T − m2 ε,   de_T/dt = (Ĵ/p) m3 ε,   ε = e_θ − y,
 
 a triangular system again: the poles are the flux's (s² + 2k1 s + ωm²) and those of s³ + m1 s² + m2 s + m3, which
-:meth:`MechanicalSpeed.closed_form <jaxobs.observers.speed.MechanicalSpeed.closed_form>` puts at a triple −α_o.  What
+:meth:`jaxobs.observers.speed.MechanicalSpeed.closed_form` puts at a triple −α_o.  What
 the model adds is the torque: a speed change the controller commands reaches ω̂m through T* without waiting for ε,
 and a load step is the one thing ε must still find (through T̂L).  The step advances the model by forward Euler over
 the period (ε at t_{k−1}, T* held over it; :meth:`~jaxobs.observers.speed.AbstractSpeedEstimator.euler`), the flux by
-the hold equivalent below at ω̂c.  The state is then [ψ̂d, ψ̂q, θ̂, ω̂m, T̂L].
+the hold equivalent above at ω̂c.  T* is the reference, not the machine's torque: the current loop's lag and an
+inertia error are disturbances of the e_ω row, which T̂L absorbs as it absorbs the load.  The state is then
+[ψ̂d, ψ̂q, θ̂, ω̂m, T̂L].
 
 Position and speed.  θ̂ is the observer's own state (the coordinates it works in), so ``init_aligned`` starts it
 at the rotor's angle; ω̂m is electrical, signed and passes through zero (nothing in the step divides by it).  At
