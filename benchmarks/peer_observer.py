@@ -1,6 +1,6 @@
 """The reduced-order flux observer beside motulator's: the same machine, cases and closed-form gains, peak errors.
 
-``python -m benchmarks.peer_observer [--motulator-python PATH] [--json FILE] [--result RESULT.json]``
+``python -m benchmarks.peer_observer [--motulator-python PATH] [--json FILE] [--result RESULT.json [--drs X]]``
 
 jaxobs runs :class:`jaxobs.ReducedOrderFluxObserver` (closed form) closing the sensorless loop of the 2.2-kW lab
 IPMSM drive file (``docs/examples/ipmsm_2p2kw_lab.toml``: 8 kHz, 2π·200 rad/s current loop, 2π·4 rad/s speed
@@ -18,7 +18,9 @@ errors are the observers'.
 beside the observer's own closed form and motulator, and says per case whether the tuned design beats both closed
 forms and meets the case's target (:data:`TARGETS`: the peak angle error, and for the 15 r/min step the speed back
 within 10 % of its reference within 0.5 s of the event).  Without a Python that has motulator the motulator column
-is the one stored in ``benchmarks/results/2026-12-02-peer-observer.txt`` (said so in the output).
+is the one stored in ``benchmarks/results/2026-12-02-peer-observer.txt`` (said so in the output).  ``--drs X`` runs
+the three designs with the assumed R̂s off by the fraction X (controller and observer alike, as the through-zero
+benchmark's rows), motulator left out: a design tuned with the machine known exactly, checked off it.
 """
 
 from __future__ import annotations
@@ -46,12 +48,13 @@ CASES = {
 }
 
 
-def jaxobs_cases(observer: Any = None) -> dict:
+def jaxobs_cases(observer: Any = None, drs: float = 0.0) -> dict:
     """The cases run by jaxobs (float64), each ``{"peak_deg", "min_rpm", "final_rpm", "recovered_s"}``.
 
     Args:
         observer: The drive observer to run (bound per case to the machine and its speed); None: the
             reduced-order flux observer's closed form.
+        drs: The relative error of the assumed stator resistance R̂s, controller and observer alike (0: exact).
 
     Returns:
         case -> its numbers (``recovered_s``: the last time the speed is outside ±10 % of its reference, from the
@@ -61,6 +64,8 @@ def jaxobs_cases(observer: Any = None) -> dict:
     import numpy as np
 
     jax.config.update("jax_enable_x64", True)
+    import equinox as eqx
+
     import jaxobs
     from jaxobs import drive as D
     from jaxobs import metrics
@@ -68,14 +73,15 @@ def jaxobs_cases(observer: Any = None) -> dict:
 
     f = read_drive(LAB)
     par, drive = f.machine, f.drive_for(sensorless=True)
+    est = eqx.tree_at(lambda m: m.Rs, par, par.Rs * (1.0 + drs)) if drs else par
     base = jaxobs.ReducedOrderFluxObserver.closed_form(ts=drive.ts) if observer is None else observer
     out = {}
     for name, (rpm, knots, load, t_end) in CASES.items():
         times = [0.0, *(T_EVENT + dt for dt, _ in knots)] if knots else [0.0]
         values = [rpm * D.RPM, *(r * D.RPM for _, r in knots)] if knots else [rpm * D.RPM]
         sc = D.Scenario(par, speed_ref=D.Profile(times, values), omega_m0=rpm * D.RPM,
-                        load=D.Scenario.load_steps([0.0, T_EVENT], [0.0, load]))  # fmt: skip
-        obs = base.bind(par, par.p * rpm * D.RPM)
+                        load=D.Scenario.load_steps([0.0, T_EVENT], [0.0, load]), est_par=est)  # fmt: skip
+        obs = base.bind(est, par.p * rpm * D.RPM)
         o = jax.jit(lambda s, obs=obs: jaxobs.simulate(D.ClosedLoop(drive, obs, s), t_end))(sc).outputs
         err = np.degrees(np.abs(np.asarray(metrics.wrap(o.obs.theta - o.theta_e))))
         n = np.asarray(o.omega_m) / D.RPM
@@ -168,12 +174,12 @@ def _verdict(name: str, r: dict, others: dict[str, dict]) -> str:
     return f"{name}: tuned {beats}; target ({target}) {'met' if ok else 'NOT met'}"
 
 
-def tuned_table(designs: dict[str, dict], peer: dict, peer_note: str) -> str:
+def tuned_table(designs: dict[str, dict], peer: dict | None, peer_note: str) -> str:
     """The cases' rows, one per design (``designs``: label -> :func:`jaxobs_cases`'s numbers) and motulator's.
 
     Args:
         designs: label -> case -> numbers, in the order printed.
-        peer: motulator's numbers (:func:`stored_motulator`'s form).
+        peer: motulator's numbers (:func:`stored_motulator`'s form), or None (not comparable: an R̂s error).
         peer_note: How motulator's numbers were had (run now, or stored).
 
     Returns:
@@ -186,25 +192,37 @@ def tuned_table(designs: dict[str, dict], peer: dict, peer_note: str) -> str:
             rec = f"{r['recovered_s']:.3f} s"
             rows.append(f"{name:<18} {label:<34} {r['peak_deg']:>7.3f}° {r['min_rpm']:>10.1f} {r['final_rpm']:>9.1f} "
                         f"{rec:>11}")  # fmt: skip
+        if peer is None:
+            continue
         p = peer["cases"][name]
         rows.append(f"{name:<18} {'motulator (' + peer_note + ')':<34} {p['peak_deg']:>7.3f}° {p['min_rpm']:>10.1f} "
                     f"{p['final_rpm']:>9.1f} {'-':>11}")  # fmt: skip
     tuned = designs["tuned (rofo + mechanical)"]
     others = {k: v for k, v in designs.items() if k != "tuned (rofo + mechanical)"}
     rows += [
-        _verdict(n, tuned[n], {k: v[n] for k, v in others.items()} | {"motulator": peer["cases"][n]}) for n in CASES
+        _verdict(
+            n,
+            tuned[n],
+            {k: v[n] for k, v in others.items()} | ({} if peer is None else {"motulator": peer["cases"][n]}),
+        )
+        for n in CASES
     ]
     return "\n".join(rows)
 
 
-def _run_result(path: Path, python: str | None) -> dict:
-    """``--result``: the three designs and motulator, printed; the numbers returned."""
+def _run_result(path: Path, python: str | None, drs: float = 0.0) -> dict:
+    """``--result``: the three designs and motulator, printed; the numbers returned.  With an R̂s error (``drs``)
+    motulator's runs, with its machine known exactly, are not comparable: left out, and said so."""
     built = result_designs_of(path)
     designs = {
-        "rofo closed form (type-2 loop)": jaxobs_cases(),
-        "job closed form (rofo + mechanical)": jaxobs_cases(built["closed_form"]),
-        "tuned (rofo + mechanical)": jaxobs_cases(built["tuned"]),
+        "rofo closed form (type-2 loop)": jaxobs_cases(None, drs),
+        "job closed form (rofo + mechanical)": jaxobs_cases(built["closed_form"], drs),
+        "tuned (rofo + mechanical)": jaxobs_cases(built["tuned"], drs),
     }
+    if drs:
+        print(f"R̂s {drs:+.0%} (controller and observer); motulator left out (its runs assume R̂s exact)")
+        print(tuned_table(designs, None, ""))
+        return {"jaxobs": designs, "drs": drs, "result": str(path)}
     peer = motulator_cases(python)
     note = "run now"
     if peer is None:
@@ -227,9 +245,14 @@ def main(argv: list[str] | None = None) -> int:
     )
     ap.add_argument("--json", type=Path, help="also write the numbers to this file")
     ap.add_argument("--result", type=Path, help="a `jaxobs tune` result.json of rofo: its tuned design beside")
+    ap.add_argument("--drs", type=float, default=0.0, help="with --result: the relative error of the assumed R̂s")
     args = ap.parse_args(argv)
+    if args.drs and args.result is None:
+        ap.error("--drs applies with --result only")
+    if not -0.95 <= args.drs <= 10.0:
+        ap.error(f"--drs must be in [-0.95, 10] (a relative error), got {args.drs}")
     if args.result is not None:
-        numbers = _run_result(args.result, args.motulator_python)
+        numbers = _run_result(args.result, args.motulator_python, args.drs)
         if args.json is not None:
             args.json.write_text(json.dumps(numbers, indent=1) + "\n")
         return 0
