@@ -17,6 +17,7 @@ from jaxobs import drive as D
 from jaxobs.core.measurements import DriveInput
 from jaxobs.metrics import wrap
 from jaxobs.observers import CLESO, FALESO, GILESO, SOIFO, LPFFlux, SecondOrderSOIFO
+from jaxobs.observers.rofo import ReducedOrderFluxObserver
 from jaxobs.observers.speed import MechanicalSpeed, PLLSpeed, mechanical_gains, speed_from_spec
 from jaxobs.studies.registry import REGISTRY
 
@@ -339,6 +340,16 @@ def test_a_job_selects_the_speed_estimator(drive):
         job('kind = "pll"\nzero_fade = 3.0', comp="LPFFlux", gain="omega_c", init=100.0)
     lpf = job('kind = "mechanical"\nalpha_o = 60.0', comp="LPFFlux", gain="omega_c", init=100.0)
     assert isinstance(LPFFlux(**lpf.values).speed, MechanicalSpeed)
+    # the reduced-order flux observer: the mechanical model in its type-2 loop's place, whose gains then do nothing
+    rofo = job('kind = "mechanical"\nalpha_o = 60.0', comp="rofo", gain="c_sigma", init=0.5)
+    obs = ReducedOrderFluxObserver(**rofo.values)
+    assert isinstance(obs.speed, MechanicalSpeed) and float(obs.speed.k3) == 60.0**3
+    assert obs.bind(job_drive(rofo.drive).foc.est, 10.0).reads_torque
+    assert isinstance(
+        ReducedOrderFluxObserver(**job('kind = "pll"', comp="rofo", gain="c_sigma", init=0.5).values).speed, PLLSpeed
+    )
+    with pytest.raises(JobError, match=r"^gains\.k_theta: the PLL's gains do nothing"):
+        job('kind = "mechanical"\nalpha_o = 60.0', comp="rofo", gain="k_theta", init=500.0)
 
 
 def test_the_c_export_refuses_a_mechanical_speed_estimator_and_a_bank_forwards_the_torque(tmp_path):
@@ -357,3 +368,85 @@ def test_the_c_export_refuses_a_mechanical_speed_estimator_and_a_bank_forwards_t
         assert loop._with_torque(meas, jnp.asarray(2.0)).T_ref is not None
         alone = D.ClosedLoop(D.bench_drive(par), FALESO.closed_form().bind(par, 100.0), D.Scenario(par))
         assert alone._with_torque(meas, jnp.asarray(2.0)) is meas  # a PLL: the measurements as they were
+
+
+_MECH_JOB = """
+[job]
+name = "rofo_mech"
+component = "rofo"
+[observer.speed]
+kind = "{kind}"
+{alpha}
+[gains.speed.{gain}]
+{bounds}
+[gains.c_sigma]
+lower = 0.05
+upper = 5.0
+[drive]
+file = "{lab}"
+[scenarios]
+signal = "drive"
+t_event = 0.01
+horizon = 0.04
+steady_from = 0.03
+[scenarios.grid]
+speed_rpm = [750.0]
+load_step_nm = [7.0]
+[objective]
+terms = [{{ metric = "iae_position", weight = 1.0 }}]
+[solver]
+kind = "adam"
+steps = 2
+"""
+
+
+def _mech_job(kind="mechanical", gain="k2", bounds="lower = 1e4\nupper = 1e7", alpha="alpha_o = 314.159"):
+    lab = Path(__file__).resolve().parent.parent / "docs" / "examples" / "ipmsm_2p2kw_lab.toml"
+    return _MECH_JOB.format(kind=kind, gain=gain, bounds=bounds, alpha=alpha, lab=lab)
+
+
+def test_a_job_frees_the_mechanical_speed_observers_gains():
+    """``[gains.speed.k2]`` under ``[observer.speed] kind = "mechanical"`` (the reduced-order flux observer on the lab
+    IPMSM): the gain is free like any other (its closed form 3α_o² its default start, its bounds checked, one line
+    naming the field)."""
+    import tomllib
+
+    from jaxobs_tuning.job import JobError, parse_job
+
+    job = parse_job(tomllib.loads(_mech_job()))
+    assert [g.name for g in job.gains] == ["speed.k2", "c_sigma"]
+    assert job.gains[0].init == pytest.approx(3 * 314.159**2, rel=1e-12)  # the closed form's, as no init is given
+    assert job.values["speed"]["k2"] == job.gains[0].init and job.values["speed"]["alpha_o"] == 314.159
+    for kw, field in (
+        ({"bounds": "lower = 1e6\nupper = 1e5"}, "gains.speed.k2.upper"),
+        ({"bounds": "lower = -1.0"}, "gains.speed.k2.lower"),
+        ({"bounds": "init = 1e8\nupper = 1e7"}, "gains.speed.k2.init"),
+        ({"gain": "k4"}, "gains.speed.k4"),
+        ({"bounds": "lower = 1e4\nstep = 2"}, "gains.speed.k2.step"),
+        ({"kind": "pll", "alpha": ""}, "gains.speed"),
+    ):
+        with pytest.raises(JobError, match=rf"^{field}: ") as e:
+            parse_job(tomllib.loads(_mech_job(**kw)))
+        assert "\n" not in str(e.value)
+
+
+@pytest.mark.slow  # one tuning run of a drive job: about 2 minutes on two shared cores, most of it compiling
+def test_a_job_tuning_the_mechanical_speed_observers_gain_runs_and_names_it(tmp_path):
+    """Two Adam steps of the job above move ``speed.k2``; the result names it beside its closed form and rebuilds
+    the tuned design with it."""
+    from jaxobs_tuning.cli import main
+    from jaxobs_tuning.results import load_result, tuned_component
+
+    path = tmp_path / "job.toml"
+    path.write_text(_mech_job())
+    out = tmp_path / "out"
+    assert main(["tune", str(path), "--out", str(out), "--quiet"]) == 0
+    res = load_result(out / "result.json")
+    gains = res["gains"]
+    assert gains["closed_form"]["speed.k2"] == pytest.approx(3 * 314.159**2, rel=1e-12)
+    assert gains["tuned"]["speed.k2"] != pytest.approx(gains["initial"]["speed.k2"], rel=1e-6)  # the steps moved it
+    assert res["values"]["tuned"]["speed"]["k2"] == gains["tuned"]["speed.k2"]
+    obs = tuned_component(res)
+    assert isinstance(obs, ReducedOrderFluxObserver) and isinstance(obs.speed, MechanicalSpeed)
+    assert float(obs.speed.k2) == pytest.approx(gains["tuned"]["speed.k2"], rel=1e-6)  # the component's dtype
+    assert float(obs.speed.k1) == pytest.approx(3 * 314.159, rel=1e-6)  # the other two keep their closed form

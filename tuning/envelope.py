@@ -61,8 +61,8 @@ def envelope_designs(path: Path, drive: str | None = None) -> tuple[Job, dict[st
         job = load_job(path)
         info = COMPONENTS[job.component]
         initial = info.ctor(**job.values)
-        cf = info.closed_form(initial)
-        closed = info.ctor(**{**job.values, **{g.name: float(cf[g.name]) for g in job.gains}})
+        cf = info.closed_form(initial, job.values)
+        closed = info.ctor(**info.values_with(job.values, {g.name: float(cf[g.name]) for g in job.gains}))
         designs = {"initial": initial, "closed_form": closed}
     if job.drive is None or not job.scenarios.family.closed_loop:
         raise JobError(

@@ -7,7 +7,9 @@ A gain g is optimized through an unconstrained θ:
   or z = hi − softplus(θ); no bound: z = θ.
 
 Frozen gains are the component's own values and are never touched: the
-parametrization only writes the free ones, with ``eqx.tree_at``.
+parametrization only writes the free ones, with ``eqx.tree_at``.  A name with a
+dot is a path into a part the component holds: ``speed.k1`` is the ``k1`` of its
+speed estimator (a mechanical model's gain, jaxobs.observers.speed).
 """
 
 from __future__ import annotations
@@ -15,7 +17,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import TypeVar
+from typing import TypeVar, cast
 
 import equinox as eqx
 import jax
@@ -91,6 +93,14 @@ class GainSpec:
         return jnp.exp(z) if self.log else z
 
 
+def _leaf(component: eqx.Module, name: str) -> jax.Array:
+    """The field a gain's name points at: ``name`` itself, or a dotted path into a part (module doc)."""
+    node = component
+    for part in name.split("."):
+        node = getattr(node, part)
+    return cast(jax.Array, node)  # a gain's leaf: the parser names only array fields
+
+
 def _softplus_inv(y: float) -> float:
     return y + math.log(-math.expm1(-y))
 
@@ -146,9 +156,9 @@ class Parametrization:
         """
         g = self.gains(theta)
         return eqx.tree_at(
-            lambda c: tuple(getattr(c, n) for n in self.names),
+            lambda c: tuple(_leaf(c, n) for n in self.names),
             component,
-            tuple(jnp.asarray(g[n], dtype=getattr(component, n).dtype) for n in self.names),
+            tuple(jnp.asarray(g[n], dtype=_leaf(component, n).dtype) for n in self.names),
         )
 
     def values(self, theta: jax.Array) -> dict[str, float]:

@@ -23,7 +23,8 @@ from pathlib import Path
 
 from jaxobs.io.provenance import read_file
 from jaxobs.observers import AbstractObserver
-from jaxobs.studies.registry import KEY_ALIASES, canonical_key
+from jaxobs.observers.speed import MECHANICAL_GAINS, speed_from_spec
+from jaxobs.studies.registry import KEY_ALIASES, canonical_key, registered
 
 from .job import COMPONENTS, Job, parse_job
 
@@ -96,7 +97,7 @@ def _inside(v: float, lower, upper) -> bool:
 def _job_closed_form(job: Job) -> dict:
     """The closed form the run reported for ``job`` (run_job: the component of the job's values)."""
     info = COMPONENTS[job.component]
-    cf = info.closed_form(info.ctor(**job.values))
+    cf = info.closed_form(info.ctor(**job.values), job.values)
     return {g.name: float(cf[g.name]) for g in job.gains}
 
 
@@ -163,7 +164,11 @@ def check_result(res: object, where: str = "result") -> dict:
     allowed = tuple(COMPONENTS[comp].defaults) + tuple(k for k in KEY_ALIASES if canonical_key(ctor, k) != k)
     job = _table(res["job"], where, "job")
     named = _table(job.get("job", {}), where, "job.job").get("component", comp)
-    if named != comp:
+    try:  # a job names its component by its class or a short name ("rofo"); the result by its class
+        same = isinstance(named, str) and registered(named).name == comp
+    except ValueError:
+        same = False
+    if not same:
         raise ValueError(f"{where}: component {comp!r} differs from the job's job.component {str(named)[:40]!r}")
     _numbers(_table(job.get("component", {}), where, "job.component"), allowed, where, "job.component")
     gains = _table(res["gains"], where, "gains")
@@ -177,7 +182,8 @@ def check_result(res: object, where: str = "result") -> dict:
             continue
         if not _table(table, where, f"gains.{name}"):
             raise ValueError(f"{where}: gains.{name} is empty (a table of the tuned gains' values)")
-        _numbers(table, allowed, where, f"gains.{name}")
+        # a mechanical speed observer's free gains are named by their path (speed.k1; jaxobs_tuning.job.components)
+        _numbers(table, (*allowed, *(f"speed.{k}" for k in MECHANICAL_GAINS)), where, f"gains.{name}")
     if "tuned" not in gains or (gains["tuned"] is None and status not in ("diverged", "overflow")):
         raise ValueError(f"{where}: gains.tuned must be a table of gain values")
     if "ts" in res and not (_is_number(res["ts"]) and res["ts"] > 0):
@@ -203,8 +209,14 @@ def check_result(res: object, where: str = "result") -> dict:
                 continue
             if not _table(table, where, f"values.{name}"):
                 raise ValueError(f"{where}: values.{name} is empty (a table of the design's values)")
+            if "speed" in table:  # a speed estimator's record ([observer.speed], its tuned gains)
+                try:
+                    speed_from_spec(table["speed"], f"values.{name}.speed")
+                except ValueError as e:
+                    raise ValueError(f"{where}: {' '.join(str(e).split())[:160]}") from None
             # and the sample period where the job's drive file sets it (its 1/f_sample_hz)
-            _numbers(table, (*allowed, "ts"), where, f"values.{name}")
+            plain = {k: v for k, v in table.items() if k != "speed"}
+            _numbers(plain, (*allowed, "ts"), where, f"values.{name}")
         if not any(t is not None for t in values.values()):
             raise ValueError(f"{where}: values holds no design (initial, closed_form and tuned all null or absent)")
     # a JobError (a ValueError of one line) names the job's field; its recordings are not read (no base folder:
@@ -298,9 +310,10 @@ def tuned_component(result: dict) -> AbstractObserver:
     job = parse_job(result["job"])
     if job.component != result["component"]:
         raise ValueError(f"result: component {result['component']!r} differs from the job's {job.component!r}")
-    values = dict(job.values)
-    for name, v in result["gains"]["tuned"].items():
-        if name not in values:
+    free = {g.name for g in job.gains}
+    for name in result["gains"]["tuned"]:
+        if name not in job.values and name not in free:
             raise ValueError(f"result: gains.tuned.{name} is not a value of {job.component}")
-        values[name] = float(v)
-    return COMPONENTS[job.component].ctor(**values)
+    info = COMPONENTS[job.component]
+    tuned = {k: float(v) for k, v in result["gains"]["tuned"].items()}
+    return info.ctor(**info.values_with(job.values, tuned))

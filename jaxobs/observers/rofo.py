@@ -64,6 +64,35 @@ forward-Euler speed loop's double pole at z = e^{−α_o T_s} exactly (motulator
 at the first sample (no period integrated yet) the flux estimate is set to the current model's, L̂ i + ψ̂f at θ̂,
 so that the observer starts without a flux error where the drive starts with a current.
 
+The speed estimator as a strategy.  The type-2 loop above is the default of the observer's ``speed`` (a
+:class:`~jaxobs.observers.speed.PLLSpeed` on kθ and kω, which this class shows the strategy as its ``kp_pll`` and
+``ki_pll``; its update keeps the products in the order above, so its results are those of the loop written inline
+bit for bit).  A :class:`~jaxobs.observers.speed.MechanicalSpeed` takes its place (``speed=``, or a job's
+``[observer.speed] kind = "mechanical"``), as it does behind the LESOs and the LPF flux observer: the same ε drives
+the mechanical model directly, with its own gains m1, m2, m3 (the fields ``k1``, ``k2``, ``k3`` of
+:class:`~jaxobs.observers.speed.MechanicalSpeed`; not the flux gain k1 above), the torque reference T* the controller
+held over the period (``DriveInput.T_ref``, 0 where none is given) and the assumed Ĵ, B̂ and p (``bind``):
+
+    dθ̂/dt = ω̂c = ω̂m + m1 ε
+    dω̂m/dt = (p/Ĵ)(T* − T̂L) − (B̂/Ĵ) ω̂m + m2 ε
+    dT̂L/dt = −(Ĵ/p) m3 ε
+
+Decision: ε feeds the model as it is, an angle in rad (ε = θ̃ − Im{ψ̃/ψa} above, not a sine to be normalised: it is
+already the linear error signal the model's placement assumes, ε ≈ θe − θ̂), and the flux coordinates turn at ω̂c,
+the model's angle rate, as they turn at the type-2 loop's.  Linearised as above (exact parameters, a constant load,
+B̂ = 0), the errors e_θ = θ̃, e_ω = ω̃m and e_T = TL − T̂L obey
+
+    de_θ/dt = e_ω − m1 ε,   de_ω/dt = −(p/Ĵ) e_T − m2 ε,   de_T/dt = (Ĵ/p) m3 ε,   ε = e_θ − y,
+
+a triangular system again: the poles are the flux's (s² + 2k1 s + ωm²) and those of s³ + m1 s² + m2 s + m3, which
+:meth:`jaxobs.observers.speed.MechanicalSpeed.closed_form` puts at a triple −α_o.  What
+the model adds is the torque: a speed change the controller commands reaches ω̂m through T* without waiting for ε,
+and a load step is the one thing ε must still find (through T̂L).  The step advances the model by forward Euler over
+the period (ε at t_{k−1}, T* held over it; :meth:`~jaxobs.observers.speed.AbstractSpeedEstimator.euler`), the flux by
+the hold equivalent above at ω̂c.  T* is the reference, not the machine's torque: the current loop's lag and an
+inertia error are disturbances of the e_ω row, which T̂L absorbs as it absorbs the load.  The state is then
+[ψ̂d, ψ̂q, θ̂, ω̂m, T̂L].
+
 Position and speed.  θ̂ is the observer's own state (the coordinates it works in), so ``init_aligned`` starts it
 at the rotor's angle; ω̂m is electrical, signed and passes through zero (nothing in the step divides by it).  At
 standstill the flux poles are 0 and −2σ0: the angle is not observable from the back EMF there, as for every
@@ -86,6 +115,7 @@ from ..core.numerics import wrap
 from ..core.validate import as_float, check_nonnegative, check_positive, check_sample_time
 from ._gains import ClosedForm, DesignRow, gain_metadata, gain_row
 from .base import AbstractDriveObserver, AssumedMachine, BoundFields, DriveObserverState, replace_leaves
+from .speed import AbstractSpeedEstimator, speed_from_spec
 
 __all__ = [
     "ROFOOutput",
@@ -159,7 +189,8 @@ def speed_gains(alpha_o_hz: float, ts: float) -> tuple[float, float]:
 
 class ReducedOrderFluxObserver(AbstractDriveObserver):
     """Reduced-order (stator) flux observer with speed estimation, in estimated rotor coordinates (Hinkkanen 2018;
-    module doc).  State [ψ̂d, ψ̂q, θ̂, ω̂m]; runs on salient (Ld ≠ Lq) and non-salient machines.
+    module doc).  State [ψ̂d, ψ̂q, θ̂, ω̂m, ...] (the speed estimator's states after the flux's); runs on salient
+    (Ld ≠ Lq) and non-salient machines.
 
     Args:
         Rs: Assumed stator resistance, ohm (≥ 0; :meth:`bind` sets it).
@@ -175,6 +206,9 @@ class ReducedOrderFluxObserver(AbstractDriveObserver):
         psi_floor: Floor of |ψ̂a| in the error signal's division, Wb (> 0).
         omega0: Another name of ``omega_init`` (the flux observers' job-file key); give one of the two.
         rule: None only: the step is its own update (a job or an export that rebuilds a component passes it).
+        speed: The speed extraction: an estimator, or a record (:func:`~jaxobs.observers.speed.speed_from_spec`);
+            default :class:`~jaxobs.observers.speed.PLLSpeed` on ``k_theta``, ``k_omega`` (the type-2 loop of the
+            module doc), or a :class:`~jaxobs.observers.speed.MechanicalSpeed` in its place.
 
     Raises:
         ValueError: A value out of its range, both ``omega_init`` and ``omega0`` given, or a rule.
@@ -212,6 +246,7 @@ class ReducedOrderFluxObserver(AbstractDriveObserver):
         )
     )
     omega_init: jax.Array  # the speed estimate's start, rad/s (signed)
+    speed: AbstractSpeedEstimator  # θ̂, ω̂m from ε: the type-2 loop on kθ, kω (PLLSpeed) or a mechanical model
     ts: float = eqx.field(static=True)
     psi_floor: float = eqx.field(static=True)
     # no discretization rule: the step is its own update (module doc: the hold equivalent, exact where stated);
@@ -221,6 +256,7 @@ class ReducedOrderFluxObserver(AbstractDriveObserver):
     # poles are in the module doc and tests/test_rofo.py), as for the LPF
     why_not_tunable: ClassVar[str] = ""
     small_signal_model: ClassVar[None] = None
+    takes_speed_estimator: ClassVar[bool] = True
 
     # bind() sets these, by role (tuning/export reads them so); the machine's Lq and ψf besides
     bound_fields: ClassVar[BoundFields] = BoundFields(
@@ -243,6 +279,7 @@ class ReducedOrderFluxObserver(AbstractDriveObserver):
         psi_floor: float = 1e-4,
         omega0: ArrayLike | None = None,
         rule: AbstractRule | None = None,
+        speed: AbstractSpeedEstimator | dict[str, Any] | None = None,
     ) -> None:
         name = "ReducedOrderFluxObserver"
         if rule is not None:
@@ -266,6 +303,7 @@ class ReducedOrderFluxObserver(AbstractDriveObserver):
         if not (math.isfinite(float(psi_floor)) and float(psi_floor) > 0):
             raise ValueError(f"{name}.psi_floor must be finite and > 0 Wb, got {psi_floor!r}")
         self.psi_floor = float(psi_floor)
+        self.speed = speed_from_spec(speed, f"{name}.speed")
 
     @classmethod
     def closed_form_design(
@@ -357,10 +395,29 @@ class ReducedOrderFluxObserver(AbstractDriveObserver):
         """
         return cls.closed_form_design(**kw).observer
 
+    # --- the speed estimator's host (jaxobs.observers.speed.SpeedHost): the type-2 loop's gains ---------------
+    @property
+    def kp_pll(self) -> jax.Array:
+        """kθ, the type-2 loop's angle gain as the :class:`~jaxobs.observers.speed.PLLSpeed` strategy reads it, 1/s."""
+        return self.k_theta
+
+    @property
+    def ki_pll(self) -> jax.Array:
+        """kω, the type-2 loop's speed gain as the :class:`~jaxobs.observers.speed.PLLSpeed` strategy reads it, 1/s²."""
+        return self.k_omega
+
+    def speed_estimator(self) -> AbstractSpeedEstimator:
+        """The speed extraction this observer holds (``speed``).
+
+        Returns:
+            The :class:`~jaxobs.observers.speed.AbstractSpeedEstimator`.
+        """
+        return self.speed
+
     # --- the drive-observer contract ------------------------------------------------------------------------
     def bind(self, est_par: AssumedMachine | None, omega_e: ArrayLike) -> Self:
-        """This observer assuming ``est_par``'s Rs, Ld, Lq and ψf, its speed estimate starting at the signed ω_e
-        (:meth:`AbstractDriveObserver.bind`).
+        """This observer assuming ``est_par``'s Rs, Ld, Lq and ψf (and its speed estimator the machine's mechanics),
+        its speed estimate starting at the signed ω_e (:meth:`AbstractDriveObserver.bind`).
 
         Args:
             est_par: The machine assumed, or None (the speed only).
@@ -371,12 +428,13 @@ class ReducedOrderFluxObserver(AbstractDriveObserver):
         """
         if est_par is None:
             return replace_leaves(self, omega_init=omega_e)
-        return replace_leaves(
-            self, Rs=est_par.Rs, Ld=est_par.Ld, Lq=est_par.Lq, psi_f=est_par.psi_f, omega_init=omega_e
-        )
+        new = replace_leaves(self, Rs=est_par.Rs, Ld=est_par.Ld, Lq=est_par.Lq, psi_f=est_par.psi_f, omega_init=omega_e)
+        speed = self.speed.bind(est_par)  # a mechanical model takes the assumed Ĵ, B̂, p; a PLL has none
+        return new if speed is self.speed else eqx.tree_at(lambda o: o.speed, new, speed)
 
     def initial_state(self, omega_e: ArrayLike | None = None, theta_e: ArrayLike | None = None) -> jax.Array:
-        """[ψ̂d, ψ̂q, θ̂, ω̂m] = [ψ̂f, 0, θ_e or 0, ω_e or omega_init].
+        """[ψ̂d, ψ̂q, θ̂, ω̂m, ...] = [ψ̂f, 0, θ_e or 0, ω_e or omega_init, 0, ...] (the speed estimator's own states
+        at 0).
 
         Args:
             omega_e: The speed estimate's start, rad/s (None: ``omega_init``).
@@ -388,7 +446,8 @@ class ReducedOrderFluxObserver(AbstractDriveObserver):
         dt = self.Rs.dtype
         w = self.omega_init if omega_e is None else jnp.asarray(omega_e, dt)
         th = jnp.zeros((), dt) if theta_e is None else wrap(jnp.asarray(theta_e, dt))
-        return jnp.stack([jnp.asarray(self.psi_f, dt), jnp.zeros((), dt), th, w])
+        flux = jnp.stack([jnp.asarray(self.psi_f, dt), jnp.zeros((), dt)])
+        return jnp.concatenate([flux, self.speed.initial_state(th, w).astype(dt)])
 
     def _init_from(self, x0: jax.Array) -> DriveObserverState:
         z2 = jnp.zeros((2,), x0.dtype)
@@ -489,16 +548,18 @@ class ReducedOrderFluxObserver(AbstractDriveObserver):
         im = (eq * pad - ed * paq) / na
         return ed, eq, pad, paq, re, -im
 
-    def _advance(self, x: jax.Array, u_ab: jax.Array, i_ab: jax.Array) -> jax.Array:
-        """The state at t_k from the state at t_{k−1}, the current i_{k−1} and the voltage over the period."""
-        psi_d, psi_q, th, w = x[0], x[1], x[2], x[3]
+    def _advance(self, x: jax.Array, u_ab: jax.Array, i_ab: jax.Array, torque: ArrayLike = 0.0) -> jax.Array:
+        """The state at t_k from the state at t_{k−1}, the current i_{k−1}, the voltage and the torque reference
+        over the period."""
+        psi_d, psi_q, th = x[0], x[1], x[2]
         c, s = jnp.cos(th), jnp.sin(th)
         i_d, i_q = c * i_ab[0] + s * i_ab[1], -s * i_ab[0] + c * i_ab[1]
         u_d, u_q = c * u_ab[0] + s * u_ab[1], -s * u_ab[0] + c * u_ab[1]
         _, _, pad, paq, re, eps = self.error_signals((psi_d, psi_q), i_d, i_q)
         # k1 e + k2 e* with k2 = k1 ψa/ψa*: 2 k1 ψa Re{e/ψa} (module doc)
-        g = 2.0 * self.flux_gain(w) * re
-        wc = w + self.k_theta * eps
+        g = 2.0 * self.flux_gain(x[3]) * re
+        # the speed estimator over the period: ω̂c = dθ̂/dt (the default: ω̂m + kθ ε, ω̂m += (T_s kω) ε; module doc)
+        wc, xs = self.speed.euler(self, x[2:], eps, torque, self.ts)
         pd = psi_d + self.ts * (g * pad + u_d)
         pq = psi_q + self.ts * (g * paq + u_q)
         # Φ = e^{−jx}², Γ = T_s sinc(x) e^{−jx}, x = ω̂c T_s/2 (hold equivalent, module doc)
@@ -509,13 +570,13 @@ class ReducedOrderFluxObserver(AbstractDriveObserver):
         rd, rq = gam * self.Rs * i_d, gam * self.Rs * i_q
         new_d = cp * pd + sp * pq - (ch * rd + sh * rq)
         new_q = -sp * pd + cp * pq - (-sh * rd + ch * rq)
-        return jnp.stack([new_d, new_q, wrap(th + self.ts * wc), w + self.ts * self.k_omega * eps])
+        return jnp.concatenate([jnp.stack([new_d, new_q]), xs.at[0].set(wrap(xs[0]))])
 
     def _current_model_state(self, x: jax.Array, i_ab: jax.Array) -> jax.Array:
         """``x`` with ψ̂s set to the current model's flux at θ̂ (the first sample's start, module doc)."""
         c, s = jnp.cos(x[2]), jnp.sin(x[2])
         (pid, piq), _ = self.current_model(c * i_ab[0] + s * i_ab[1], -s * i_ab[0] + c * i_ab[1])
-        return jnp.stack([pid, piq, x[2], x[3]])
+        return jnp.concatenate([jnp.stack([pid, piq]), x[2:]])
 
     def step(self, state: DriveObserverState, meas: DriveInput) -> tuple[DriveObserverState, ROFOOutput]:
         """One sample: the period that ends now by the hold equivalent (module doc), or, at the first sample, the
@@ -529,8 +590,12 @@ class ReducedOrderFluxObserver(AbstractDriveObserver):
             ``(the state at this sample, the outputs at t_k)``.
         """
         i = jnp.stack([meas.i_a, meas.i_b])
+        tq = meas.T_ref  # the torque reference over the period (a mechanical speed model reads it); none given: 0
+        tq = jnp.zeros((), state.x.dtype) if tq is None else jnp.asarray(tq, state.x.dtype)
         x1 = jnp.where(
-            state.started, self._advance(state.x, state.u_prev, state.i_prev), self._current_model_state(state.x, i)
+            state.started,
+            self._advance(state.x, state.u_prev, state.i_prev, tq),
+            self._current_model_state(state.x, i),
         )
         new = DriveObserverState(
             x=x1, rule=None, i_prev=i, u_prev=jnp.stack([meas.u_a, meas.u_b]), started=jnp.asarray(True)

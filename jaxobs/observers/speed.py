@@ -62,12 +62,15 @@ __all__ = [
     "mechanical_gains",
     "speed_from_spec",
     "SPEED_KINDS",
+    "MECHANICAL_GAINS",
     "SpeedHost",
     "MachineInertia",
 ]
 
 # what a job's [observer.speed] ``kind`` names (tuning/job/schema.py)
 SPEED_KINDS = ("pll", "mechanical")
+# a mechanical model's gains a record may set beside its α_o, and a job may tune (``[gains.speed.k1]``)
+MECHANICAL_GAINS = ("k1", "k2", "k3")
 
 
 class SpeedHost(Protocol):
@@ -153,6 +156,26 @@ class AbstractSpeedEstimator(eqx.Module):
             d(xs)/dt.
         """
 
+    def euler(
+        self, host: SpeedHost, xs: jax.Array, err: jax.Array, torque: ArrayLike, ts: float
+    ) -> tuple[jax.Array, jax.Array]:
+        """One forward-Euler step of :meth:`vf` over ``ts`` (an observer whose own update is exact elsewhere, the
+        reduced-order flux observer, advances its speed estimator so).
+
+        Args:
+            host: The observer holding this strategy.
+            xs: The strategy's states [θ̂, ω̂, ...] at the period's start.
+            err: The phase error ε over the period.
+            torque: The torque reference T* over the period, N·m.
+            ts: The period, s.
+
+        Returns:
+            ``(θ̂̇, the states after ts)``: the angle's rate over the period (the host's coordinates turn at it) and
+            the states, θ̂ not wrapped.
+        """
+        d = self.vf(host, xs, err, torque)
+        return d[0], xs + ts * d
+
     def bind(self, est_par: MachineInertia) -> AbstractSpeedEstimator:
         """This strategy assuming ``est_par`` (a :class:`jaxobs.drive.PMSMParams`); a PLL has nothing to bind.
 
@@ -185,6 +208,25 @@ class PLLSpeed(AbstractSpeedEstimator):
         """
         dth, dw = pll_vf(xs[0], xs[1], err, host.kp_pll, host.ki_pll)
         return jnp.stack([dth, dw])
+
+    def euler(
+        self, host: SpeedHost, xs: jax.Array, err: jax.Array, torque: ArrayLike, ts: float
+    ) -> tuple[jax.Array, jax.Array]:
+        """:meth:`AbstractSpeedEstimator.euler`, its products in the order the reduced-order flux observer's own
+        type-2 loop always took them (θ̂ + T_s(ω̂ + k_p ε), ω̂ + (T_s k_i) ε), so that its results stay bit for bit.
+
+        Args:
+            host: The observer holding the PLL.
+            xs: [θ̂, ω̂].
+            err: The phase error ε.
+            torque: Unused.
+            ts: The period, s.
+
+        Returns:
+            ``(θ̂̇, [θ̂, ω̂] after ts)``.
+        """
+        dth = xs[1] + host.kp_pll * err
+        return dth, jnp.stack([xs[0] + ts * dth, xs[1] + ts * host.ki_pll * err])
 
 
 def mechanical_gains(alpha_o: float) -> tuple[float, float, float]:
@@ -300,7 +342,9 @@ def speed_from_spec(
     spec: AbstractSpeedEstimator | dict[str, Any] | None, owner: str = "speed"
 ) -> AbstractSpeedEstimator:
     """A speed estimator from what a constructor was given: None (a PLL), an estimator, or a job's record
-    ``{"kind": "pll"}`` / ``{"kind": "mechanical", "alpha_o": α_o}`` (rad/s; Ĵ, B̂ and p come from ``bind``).
+    ``{"kind": "pll"}`` / ``{"kind": "mechanical", "alpha_o": α_o}`` (rad/s; Ĵ, B̂ and p come from ``bind``),
+    where a mechanical record may also set any of ``k1``, ``k2``, ``k3`` (a job's tuned gains), each in place of
+    its closed form at α_o.
 
     A record keeps a job's values plain numbers and strings (result files, the C export's sources), while the
     observer it builds holds the strategy object.
@@ -313,7 +357,7 @@ def speed_from_spec(
         The :class:`AbstractSpeedEstimator`.
 
     Raises:
-        ValueError: An unknown kind or key, or α_o out of its range.
+        ValueError: An unknown kind or key, or α_o or a gain out of its range.
     """
     if spec is None:
         return PLLSpeed()
@@ -325,7 +369,7 @@ def speed_from_spec(
             f"{type(spec).__name__}"
         )
     kind = spec.get("kind", "pll")
-    allowed = {"pll": ("kind",), "mechanical": ("kind", "alpha_o")}
+    allowed = {"pll": ("kind",), "mechanical": ("kind", "alpha_o", *MECHANICAL_GAINS)}
     if kind not in allowed:
         raise ValueError(f"{owner}.kind must be one of {', '.join(SPEED_KINDS)}, got {kind!r}")
     extra = sorted(set(spec) - set(allowed[kind]))
@@ -335,4 +379,8 @@ def speed_from_spec(
         return PLLSpeed()
     if "alpha_o" not in spec:
         raise ValueError(f"{owner}.alpha_o: a mechanical speed observer needs its bandwidth α_o (rad/s, > 0)")
-    return MechanicalSpeed.closed_form(spec["alpha_o"])
+    closed = MechanicalSpeed.closed_form(spec["alpha_o"])
+    given = {k: spec[k] for k in MECHANICAL_GAINS if k in spec}
+    if not given:
+        return closed
+    return MechanicalSpeed(**{"k1": closed.k1, "k2": closed.k2, "k3": closed.k3, **given})

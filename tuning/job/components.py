@@ -3,13 +3,21 @@
 A component's constructor is its class, its free gains the class's gain fields, its closed form the class's
 ``closed_form_design`` (its gains: :func:`jaxobs.studies.registry.closed_form_gains`; its source line:
 ``ClosedForm.source``); the signals, machines and a job's initial values are the registry's.
+
+A job whose ``[observer.speed]`` is a mechanical model may also tune that model's gains, ``speed.k1``, ``speed.k2``,
+``speed.k3`` (the ``k1``, ``k2``, ``k3`` of :class:`jaxobs.observers.speed.MechanicalSpeed`; ``[gains.speed.k1]``
+in a job file): their closed form is the triple pole at the record's ``alpha_o``
+(:func:`jaxobs.observers.speed.mechanical_gains`), and a constructor takes them inside the ``speed`` record
+(:meth:`ComponentInfo.values_with`).
 """
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 
 from jaxobs import papers
+from jaxobs.observers.speed import MECHANICAL_GAINS, mechanical_gains
 from jaxobs.studies.registry import REGISTRY, Registered, closed_form_gains
 
 W_N = papers.FLL_OMEGA_N
@@ -48,16 +56,45 @@ class ComponentInfo:
         """The class's closed form's source, in one line (``ClosedForm.source``)."""
         return self.entry.closed_form_source
 
-    def closed_form(self, component: object) -> dict:
-        """The closed-form gains at a component's nominal frequency (the FLLs'), or the paper's.
+    def closed_form(self, component: object, values: Mapping[str, object] | None = None) -> dict:
+        """The closed-form gains at a component's nominal frequency (the FLLs'), or the paper's; with a job's
+        values whose ``speed`` record is a mechanical model, its gains ``speed.k1``, ``speed.k2``, ``speed.k3`` too
+        (the triple pole at the record's ``alpha_o``, module doc).
 
         Args:
             component: An instance whose ``omega_n`` the closed form takes, or None.
+            values: The job's constructor values (their ``speed`` record), or None.
 
         Returns:
             name -> float.
         """
-        return closed_form_gains(self.entry.name, component)
+        cf = closed_form_gains(self.entry.name, component)
+        rec = None if values is None else values.get("speed")
+        if isinstance(rec, dict) and rec.get("kind") == "mechanical":
+            cf.update({f"speed.{k}": v for k, v in zip(MECHANICAL_GAINS, mechanical_gains(float(rec["alpha_o"])))})
+        return cf
+
+    def values_with(self, values: Mapping[str, object], gains: Mapping[str, float]) -> dict:
+        """The constructor values ``values`` with the gains ``gains`` set: a plain name as a value, a dotted one
+        (``speed.k1``) inside the record it names (module doc).
+
+        Args:
+            values: The constructor values (a job's ``values``).
+            gains: name -> value.
+
+        Returns:
+            The constructor values, ``values`` itself untouched.
+        """
+        out = dict(values)
+        for name, v in gains.items():
+            head, _, leaf = name.partition(".")
+            if leaf:
+                rec = out[head]
+                assert isinstance(rec, Mapping), f"{head}: a dotted gain names a record"  # the job's parser checks it
+                out[head] = {**rec, leaf: float(v)}
+            else:
+                out[name] = v
+        return out
 
 
 COMPONENTS = {name: ComponentInfo(e) for name, e in REGISTRY.items() if e.tunable}

@@ -159,7 +159,7 @@ def _designs(
     """
     param = obj.param
     info = COMPONENTS[job.component]
-    cf_all = info.closed_form(obj.component)
+    cf_all = info.closed_form(obj.component, job.values)
     cf = {g.name: cf_all[g.name] for g in job.gains}
     thetas = {"initial": theta0, "closed_form": param.to_theta({g.name: _inside(g, cf[g.name]) for g in job.gains})}
     if tuned is not None:  # never a design that diverged in some scenario
@@ -172,7 +172,8 @@ def _designs(
     }
     # a LESO's [observer.speed] record stays a record (jaxobs.observers.speed.speed_from_spec)
     fixed = {k: (v if isinstance(v, dict) else float(v)) for k, v in job.values.items() if k not in param.names}
-    values = {k: (None if g is None else {**fixed, **g}) for k, g in gains.items()}
+    # a dotted gain (speed.k1) goes inside its record
+    values = {k: (None if g is None else info.values_with(fixed, g)) for k, g in gains.items()}
     drawn = {k: {n: float(v) for n, v in param.values(th).items()} for k, th in thetas.items()}
     return thetas, gains, values, drawn, info.closed_form_source
 

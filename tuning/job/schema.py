@@ -10,7 +10,7 @@ from pathlib import Path
 from jaxobs.io.provenance import sha256
 from jaxobs.metrics import canonical
 from jaxobs.observers import AbstractDriveObserver, AbstractLESO, gain_fields
-from jaxobs.observers.speed import SPEED_KINDS
+from jaxobs.observers.speed import MECHANICAL_GAINS, SPEED_KINDS, mechanical_gains
 from jaxobs.scenarios.families import FAMILIES, GridSignals
 from jaxobs.studies.registry import REGISTRY, canonical_key
 
@@ -159,8 +159,8 @@ def parse_scenarios(
 
 
 def parse_observer_speed(raw: dict, info: ComponentInfo) -> dict:
-    """A job's ``[observer.speed]``: how a LESO or a PLL-type flux observer extracts speed and position
-    (jaxobs.observers.speed).
+    """A job's ``[observer.speed]``: how a LESO, a PLL-type flux observer or the reduced-order flux observer
+    extracts speed and position (jaxobs.observers.speed).
 
     ``kind = "pll"`` (the default: the observer's PLL on its ``kp_pll``, ``ki_pll``) or ``"mechanical"`` (a
     mechanical-model speed observer with its three poles at −``alpha_o`` rad/s, its Ĵ, B̂ and p those of the
@@ -186,7 +186,8 @@ def parse_observer_speed(raw: dict, info: ComponentInfo) -> dict:
     if not (issubclass(info.ctor, AbstractDriveObserver) and info.ctor.takes_speed_estimator):
         raise JobError(
             "observer.speed",
-            f"only the LESOs and the PLL-type flux observers (LPFFlux) take a speed estimator, not {info.entry.name}",
+            "only the LESOs, the PLL-type flux observers (LPFFlux) and the reduced-order flux observer take a "
+            f"speed estimator, not {info.entry.name}",
         )
     kind = get_field(sp, "kind", "observer.speed.kind", str, "pll")
     if kind not in SPEED_KINDS:
@@ -258,9 +259,10 @@ def _component_ts(info: ComponentInfo, values: dict) -> float:
         raise JobError("component", str(e)) from None
 
 
-def _parse_gain(gname: str, gains_t: dict, values: Mapping[str, float]) -> GainSpec:
-    """``[gains.<gname>]``: the free gain's initial value, bounds and scale, checked together."""
-    where = f"gains.{gname}"
+def _parse_gain(gname: str, gains_t: dict, values: Mapping[str, float], prefix: str = "") -> GainSpec:
+    """``[gains.<prefix><gname>]``: the free gain's initial value, bounds and scale, checked together (``prefix``
+    ``"speed."``: a gain of the speed estimator, the GainSpec named ``speed.<gname>``)."""
+    where = f"gains.{prefix}{gname}"
     spec = get_field(gains_t, gname, where, dict, required=True)
     no_unknown(spec, ("init", "lower", "upper", "log"), where)
     init = get_field(spec, "init", f"{where}.init", float, values[gname])
@@ -281,7 +283,7 @@ def _parse_gain(gname: str, gains_t: dict, values: Mapping[str, float]) -> GainS
         raise JobError(f"{where}.init", f"must lie strictly inside [{lower}, {upper}], got {init}")
     if lower is not None and upper is not None and (upper - lower) < 1e-6 * upper:
         raise JobError(f"{where}.upper", f"bounds [{lower:g}, {upper:g}] are too narrow (relative width < 1e-6)")
-    g = GainSpec(gname, init, lower, upper, log)
+    g = GainSpec(prefix + gname, init, lower, upper, log)
     try:  # the parametrization must map init (and the closed form, nudged inside) to a finite θ
         th = g.to_theta(init)
     except (ValueError, ArithmeticError):
@@ -299,6 +301,9 @@ def _parse_gains(raw: dict, comp: str, info: ComponentInfo, values: dict) -> lis
         raise JobError("gains", "at least one free gain is required")
     gains = []
     for gname in gains_t:
+        if gname == "speed" and "speed" not in info.gains:
+            gains += _parse_speed_gains(gains_t, values)
+            continue
         if gname not in info.gains:
             raise JobError(cap(f"gains.{gname}", 60), f"unknown gain for {comp}; tunable: {', '.join(info.gains)}")
         g = _parse_gain(gname, gains_t, values)
@@ -307,13 +312,39 @@ def _parse_gains(raw: dict, comp: str, info: ComponentInfo, values: dict) -> lis
     speed_spec = values.get("speed")
     if isinstance(speed_spec, dict) and speed_spec.get("kind") == "mechanical":
         roles = gain_fields(info.ctor)
-        unused = [g.name for g in gains if roles[g.name].role == "pll"]
+        unused = [g.name for g in gains if g.name in roles and roles[g.name].role == "pll"]
         if unused:
             raise JobError(
                 f"gains.{unused[0]}",
                 'the PLL\'s gains do nothing under [observer.speed] kind = "mechanical"; free another gain',
             )
     return gains
+
+
+def _parse_speed_gains(gains_t: dict, values: dict) -> list[GainSpec]:
+    """``[gains.speed.<k>]``: the mechanical speed observer's gains k1, k2, k3 (jaxobs.observers.speed), free as
+    any gain; their closed form (each one's default initial value) is the triple pole at ``[observer.speed]``'s
+    ``alpha_o``, and ``values["speed"]``'s record takes their initial values."""
+    rec = values.get("speed")
+    if not (isinstance(rec, dict) and rec.get("kind") == "mechanical"):
+        raise JobError(
+            "gains.speed", 'the speed estimator\'s gains are free only with [observer.speed] kind = "mechanical"'
+        )
+    sub = get_field(gains_t, "speed", "gains.speed", dict, required=True)
+    if not sub:
+        raise JobError("gains.speed", f"name a gain of the mechanical model: {', '.join(MECHANICAL_GAINS)}")
+    closed: dict[str, float] = dict(zip(MECHANICAL_GAINS, mechanical_gains(float(rec["alpha_o"]))))
+    out, rec = [], dict(rec)
+    for k in sub:
+        if k not in closed:
+            raise JobError(
+                cap(f"gains.speed.{k}", 60), f"unknown gain of the mechanical model; tunable: {', '.join(closed)}"
+            )
+        g = _parse_gain(k, sub, closed, prefix="speed.")
+        rec[k] = g.init
+        out.append(g)
+    values["speed"] = rec
+    return out
 
 
 def _parse_scenarios_and_drive(
