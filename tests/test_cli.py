@@ -42,9 +42,10 @@ def test_python_m_jaxobs_lists_every_command_and_version():
 
 
 def test_console_script_is_the_one_parser():
-    """pyproject's ``jaxobs`` script is ``jaxobs_tuning.cli:main``, whose parser has every command."""
+    """pyproject's ``jaxobs`` script is ``jaxobs_tuning.cli_entry:main`` (help and version at once), which hands every
+    command to ``jaxobs_tuning.cli``'s parser, the one with every command."""
     meta = tomllib.loads((ROOT / "pyproject.toml").read_text())
-    assert meta["project"]["scripts"] == {"jaxobs": "jaxobs_tuning.cli:main"}
+    assert meta["project"]["scripts"] == {"jaxobs": "jaxobs_tuning.cli_entry:main"}
     assert jaxobs.__version__ == meta["project"]["version"]
     helptext = build_parser().format_help()
     assert all(c in helptext for c in COMMANDS) and "--version" in helptext
