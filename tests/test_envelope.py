@@ -181,6 +181,27 @@ def test_negative_speeds_mirror_the_positive_ones():
                                -pos["mean_position_late"].sel(speed_rpm=1000.0).values, rtol=1e-6)  # fmt: skip
 
 
+def test_summary_prints_the_reversal_verdict(capsys):
+    """--reversal's lines: a bracket, a bound, none held, and a search whose probes were not monotone."""
+    from jaxobs_tuning.envelope import _print_reversal
+
+    nan = np.nan
+    ds = xr.Dataset(
+        {
+            "reversal_rate": (("design", "reversal_load_nm"), [[474.3, 150.0], [nan, 11248.4]]),
+            "reversal_fails_at": (("design", "reversal_load_nm"), [[441.0, nan], [nan, 10467.4]]),
+            "reversal_monotone": (("design", "reversal_load_nm"), [[1, 1], [1, 0]]),
+        },
+        coords={"design": ["a", "b"], "reversal_load_nm": [0.0, 7.0]},
+        attrs={"reversal_speed_rpm": 750.0, "reversal_rates": np.array([150.0, 15000.0]), "reversal_resolution": 0.1},
+    )
+    _print_reversal(ds, ["a", "b"])
+    out = capsys.readouterr().out.splitlines()
+    assert out[0] == "slowest held reversal, +750 to -750 r/min, rates 150..15000 r/min per second to 10 %"
+    assert out[2].split() == ["a", "474", "(441", "fails)", "<=", "150", "(bound)"], out[2]
+    assert out[3].split() == ["b", "none", "held", "11248", "(10467", "fails)", "*"], out[3]
+
+
 @pytest.mark.slow  # two compiles of a new observer class: about 40 s on 2 shared cores
 def test_negative_speeds_mirror_on_a_users_salient_free_drive_with_a_pll_leso():
     """The same mirror on the Teknic drive file (surface magnets) with the C-LESO's closed form, whose PLL is bound

@@ -241,11 +241,11 @@ def _print_reversal(ds, designs: list[str]) -> None:
     lo, hi = (float(x) for x in np.atleast_1d(a["reversal_rates"]))
     print(
         f"slowest held reversal, +{float(a['reversal_speed_rpm']):.4g} to -{float(a['reversal_speed_rpm']):.4g} "
-        f"r/min, rates {lo:.4g}..{hi:.4g} r/min per second to {100 * float(a['reversal_resolution']):.3g} %"
+        f"r/min, rates {_rate(lo)}..{_rate(hi)} r/min per second to {100 * float(a['reversal_resolution']):.3g} %"
     )
     loads = [float(x) for x in ds["reversal_load_nm"].values]
     wd = max(len("design"), *(len(d) for d in designs)) + 2
-    print(f"{'design':<{wd}}" + "".join(f"{f'{x:.4g} N·m':>24}" for x in loads))
+    print(f"{'design':<{wd}}" + "".join(f"{f'{x:.4g} N·m':>28}" for x in loads))
     for d in designs:
         cells = []
         for x in loads:
@@ -254,12 +254,17 @@ def _print_reversal(ds, designs: list[str]) -> None:
             if not np.isfinite(rate):
                 cell = "none held"
             elif not np.isfinite(other):
-                cell = f"<= {rate:.4g} (bound)"
+                cell = f"<= {_rate(rate)} (bound)"
             else:
-                cell = f"{rate:.4g} ({other:.4g} fails)"
+                cell = f"{_rate(rate)} ({_rate(other)} fails)"
             cells.append(cell + ("" if int(r["reversal_monotone"]) else " *"))
-        print(f"{d:<{wd}}" + "".join(f"{c:>24}" for c in cells))
+        print(f"{d:<{wd}}" + "".join(f"{c:>28}" for c in cells))
     print("rates in r/min per second; * the probes changed verdict more than once (not monotone in the rate)")
+
+
+def _rate(x: float) -> str:
+    """A ramp rate, r/min per second: whole above 100, else 3 digits."""
+    return f"{x:.0f}" if x >= 100 else f"{x:.3g}"
 
 
 def _sensors_text(sensors, forced: bool) -> str:
