@@ -385,10 +385,11 @@ def test_preset_envelope_agrees_with_pulse_simulations_at_low_speed(tmp_path):
     # (docs/envelope.md): there the map says stable and not synchronous.
     sim = _holds_sim(designs, points, drive=drive, horizon=ds.attrs["horizon"], height=0.005)
     top = ds.sel(speed_rpm=points[0][0], load_nm=float(ds["load_nm"][-1]))
-    # there the point is stable in the small (linear_stable) and its run loses speed: stable is 0 (it was 1
-    # before the envelope judged its long runs by the verdict's rule)
+    # there the point is stable in the small (linear_stable; margin 0.475 and 0.471 /s) and its run loses lock
+    # (the pulse's return edge runs the machine off, mean |ω − ω*| 99.7 rad/s against a 2.09 rad/s reference):
+    # stable is 0 (it was 1 before the envelope judged its long runs by the verdict's rule)
     assert (top["linear_stable"] == 1).all() and (top["synchronous"] == 0).all(), top
-    assert (top["stable"] == 0).all() and (top["state"] == LOSES_SPEED).all(), top
+    assert (top["stable"] == 0).all() and (top["state"] == LOSES_LOCK).all(), top
     for d in designs:
         verdict = low["linear_stable"].sel(design=d).values.ravel() == 1
         # Every point's orbit is steady (before the settle scaled with the speed, the loaded points at 144 r/min
