@@ -190,7 +190,7 @@ def reversal_table(rev: dict) -> str:
             lines.append(
                 f"{d:<14}{row['load_nm']:>9.3g}  {cell(row['rate'], row['fails_at'], row['monotone']):<24}{ref:<24}"
             )
-    return "\n".join(lines)
+    return "\n".join(line.rstrip() for line in lines)
 
 
 def table(results: dict) -> str:
