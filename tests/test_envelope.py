@@ -18,6 +18,7 @@ from jaxobs.analysis.envelope import ENVELOPE_VARIABLES, _states, envelope, spee
 from jaxobs.analysis.verdict import HOLDS, LIMIT_CYCLE, LOSES_LOCK, LOSES_SPEED, UNSTABLE, VERDICTS, verdict_of
 from jaxobs.drive import bench_drive, bench_machine
 from jaxobs.io.provenance import by_label
+from jaxobs.plot import envelope_figure
 from jaxobs.studies.drive import bind_observer, drive_scenarios
 from jaxobs_tuning.cli import main
 from jaxobs_tuning.job import job_drive, load_job
@@ -158,7 +159,7 @@ def test_summary_takes_its_margin_from_resolved_points_only(capsys):
     assert [r.split()[5] for r in rows] == ["-0.46", "5", "none"], rows
 
 
-def test_negative_speeds_mirror_the_positive_ones():
+def test_negative_speeds_mirror_the_positive_ones(tmp_path):
     """A drive runs both ways: on 000's SPMSM (no saliency, no cogging: the machine mirrors onto itself, β → −β)
     the map at −n and load −T is the map at +n and +T, at 300 r/min (where the closed form is unstable) and at
     1000 r/min (where it holds); the steady position bias flips its sign.  The observer is bound at p̂ ω_m0 < 0
@@ -179,6 +180,9 @@ def test_negative_speeds_mirror_the_positive_ones():
         np.testing.assert_allclose(neg[v].values, pos[v].values, rtol=1e-6, err_msg=v)
     np.testing.assert_allclose(neg["mean_position_late"].sel(speed_rpm=-1000.0).values,
                                -pos["mean_position_late"].sel(speed_rpm=1000.0).values, rtol=1e-6)  # fmt: skip
+    # the figure draws both directions on one cell per speed (no log axis through zero)
+    envelope_figure(ds, tmp_path / "both.png")
+    assert (tmp_path / "both.png").stat().st_size > 10_000
 
 
 def test_summary_prints_the_reversal_verdict(capsys):
