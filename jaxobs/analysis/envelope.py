@@ -37,10 +37,21 @@ the drive studies' lost-lock tolerance), kept its speed (:func:`jaxobs.metrics.l
 window) and settled: its late peak speed deviation is under ``speed_tol`` and at most 2 % above the early
 window's (:data:`~jaxobs.analysis.envelope_runs.SETTLE_GROWTH`: a settled point's windows both see the same
 steady ripple, equal to within their sampling; a mode growing at λ shows as about e^(λ (steady_from − early
-start)), 1.15 at 405 r/min above).  It **holds** when it is stable (the stability verdict), synchronous and its
-late peak position error is within ``bound_deg``.
+start)), 1.15 at 405 r/min above).
 Where the verdict's linearized run left its operating point (``off_orbit``) the point is unstable and its rate
 is a bound (``rate_bound``, :func:`jaxobs.analysis.stability.floquet`), not a margin ± a resolution.
+
+Each point has **one verdict**, ``state`` (:data:`jaxobs.analysis.verdict.VERDICTS`): the long run judged by the
+rule of :func:`jaxobs.analysis.verdict.verdict` (``run_state``, :func:`~jaxobs.analysis.verdict.verdict_from` on
+the quantities the running sums keep: lock from the pulse on, the speed over the late window and the swing in its
+two halves), except that a run that holds where the small-signal verdict (``linear_stable``) is resolved unstable
+is unstable.  A point is **stable** when it is stable in the small and its run neither lost speed nor lock nor
+diverged (never where the run loses speed), and it **holds** when it is stable, synchronous and its late peak
+position error is within ``bound_deg``.
+
+The speed axis may hold negative speeds (a drive runs both ways: :func:`~jaxobs.analysis.envelope_runs.build_signed`;
+every window, settle and schedule follows |speed|); the runs measure through ``sensors`` (a drive file's
+``[sensors]``; None: ideal); and ``reversal=`` adds each design's slowest held reversal (:func:`reversals`).
 
 Designs of one class share both compilations (their gains are array leaves).
 
