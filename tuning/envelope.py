@@ -3,8 +3,10 @@
 For a drive job file, its initial and closed-form designs; for a ``jaxobs tune`` result.json of a drive job,
 its initial, closed-form and tuned designs (the result's own values).  The job's machine and drive (the
 bench FOC), always sensorless and started steady whatever the job's loop and start: the envelope is where the
-observer can close the loop; the Floquet stability verdict (:func:`jaxobs.analysis.stability.floquet`) with the
-job's ``[envelope]`` settle and window where it has one.  Writes ``envelope.nc`` (NetCDF,
+observer can close the loop, measured through the drive file's ``[sensors]`` (``--ideal-sensors``: ideal; a
+shipped bench's are ideal); the Floquet stability verdict (:func:`jaxobs.analysis.stability.floquet`) with the
+job's ``[envelope]`` settle and window where it has one.  ``--speeds`` may hold negative speeds
+(``--speeds=-450,450``); ``--reversal`` adds each design's slowest held reversal.  Writes ``envelope.nc`` (NetCDF,
 :func:`jaxobs.analysis.envelope.envelope`) and ``envelope.png`` (:func:`jaxobs.plot.envelope_figure`) under ``--out``.
 """
 
