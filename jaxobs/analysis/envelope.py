@@ -37,10 +37,21 @@ the drive studies' lost-lock tolerance), kept its speed (:func:`jaxobs.metrics.l
 window) and settled: its late peak speed deviation is under ``speed_tol`` and at most 2 % above the early
 window's (:data:`~jaxobs.analysis.envelope_runs.SETTLE_GROWTH`: a settled point's windows both see the same
 steady ripple, equal to within their sampling; a mode growing at λ shows as about e^(λ (steady_from − early
-start)), 1.15 at 405 r/min above).  It **holds** when it is stable (the stability verdict), synchronous and its
-late peak position error is within ``bound_deg``.
+start)), 1.15 at 405 r/min above).
 Where the verdict's linearized run left its operating point (``off_orbit``) the point is unstable and its rate
 is a bound (``rate_bound``, :func:`jaxobs.analysis.stability.floquet`), not a margin ± a resolution.
+
+Each point has **one verdict**, ``state`` (:data:`jaxobs.analysis.verdict.VERDICTS`): the long run judged by the
+rule of :func:`jaxobs.analysis.verdict.verdict` (``run_state``, :func:`~jaxobs.analysis.verdict.verdict_from` on
+the quantities the running sums keep: lock from the pulse on, the speed over the late window and the swing in its
+two halves), except that a run that holds where the small-signal verdict (``linear_stable``) is resolved unstable
+is unstable.  A point is **stable** when it is stable in the small and its run neither lost speed nor lock nor
+diverged (never where the run loses speed), and it **holds** when it is stable, synchronous and its late peak
+position error is within ``bound_deg``.
+
+The speed axis may hold negative speeds (a drive runs both ways: :func:`~jaxobs.analysis.envelope_runs.build_signed`;
+every window, settle and schedule follows |speed|); the runs measure through ``sensors`` (a drive file's
+``[sensors]``; None: ideal); and ``reversal=`` adds each design's slowest held reversal (:func:`reversals`).
 
 Designs of one class share both compilations (their gains are array leaves).
 
@@ -65,13 +76,13 @@ import numpy as np
 from jax.typing import ArrayLike
 
 from .. import SaveFinal
-from ..drive import SETTLE_PERIODS, Drive, DualDrive, DualPMSMParams, PMSMParams
+from ..drive import RPM, SETTLE_PERIODS, Drive, DualDrive, DualPMSMParams, PMSMParams, Scenario, Sensors
 from ..observers import AbstractObserver
 from ..runtime.sharding import batch_mesh
 from ..scenarios import Grid
 from ..scenarios.families import DRIVE_STUDY_AXES
 from ..studies.study import study
-from .envelope_layout import ENVELOPE_VARIABLES, envelope_dataset
+from .envelope_layout import ENVELOPE_VARIABLES, REVERSAL_VARIABLES, envelope_dataset, reversal_variables
 from .envelope_runs import (
     EARLY_TC,
     HORIZON_MAX,
@@ -88,12 +99,14 @@ from .envelope_runs import (
     _pulse_width,
     _speed_bandwidth,
     _stability,
+    build_signed,
     default_loads,
     default_speeds,
     speed_limit_rpm,
     speed_pulse,
 )
 from .stability import Stability
+from .verdict import HOLDS, LIMIT_CYCLE, UNSTABLE, VERDICTS, held_rate, reversal_holds, verdict_from
 from .worst import WORST_AXES, worst_case
 
 if TYPE_CHECKING:
@@ -102,15 +115,154 @@ if TYPE_CHECKING:
 __all__ = [
     "ENVELOPE_VARIABLES",
     "MISMATCH_AXES",
+    "REVERSAL_OPTIONS",
+    "REVERSAL_VARIABLES",
+    "REVERSAL_T_START",
     "STABILITY_METHODS",
     "WORST_AXES",
     "envelope",
+    "reversal_options",
+    "reversals",
     "default_speeds",
     "speed_limit_rpm",
     "speed_pulse",
     "default_loads",
     "worst_case",
 ]
+
+
+# ---- the reversal verdict: each design's slowest held ±speed reversal, with and without load ----------------------
+# (verdict.held_rate over verdict.reversal_holds on the envelope's drive and sensors).  A map says where a design
+# holds at constant speed; a drive also runs both ways, and the way through zero is where a back-EMF observer has
+# nothing to see (docs/through-zero.md).  It costs simulations (each probe one batched run as long as the slowest
+# ramp), so envelope() runs it only when asked (reversal=; jaxobs envelope --reversal).
+
+# the options of the reversal verdict (envelope's ``reversal=``), each with what it is
+REVERSAL_OPTIONS = {
+    "speed_rpm": "the reversal's speed, r/min: +n to -n (default half the rated speed)",
+    "loads_nm": "the constant loads, N·m, one search each (default 0 and half the rated torque)",
+    "rates": "(slow, fast) ramp rates, r/min per second (default 2n/10 and 2n/0.1: a reversal in 10 s to 0.1 s)",
+    "resolution": "the search's relative resolution (default 0.1)",
+    "probes": "rates per batched probe inside the bracket (default 3)",
+    "settle": "s after the slowest ramp's end (default max(1 s, 12/α), α the speed loop's at speed_rpm)",
+}
+REVERSAL_T_START = 0.2  # s: the ramp's start (the observer settled before t = 0, Drive.settled_for)
+
+
+def _positive(name: str, v: Any, hi: float = math.inf) -> float:
+    try:
+        x = float(v)
+    except (TypeError, ValueError):
+        raise ValueError(f"envelope: reversal.{name} must be a number, got {v!r}") from None
+    if not (math.isfinite(x) and 0.0 < x <= hi):
+        raise ValueError(f"envelope: reversal.{name} must be in (0, {hi:.6g}], got {v!r}")
+    return x
+
+
+def reversal_options(
+    reversal: Mapping[str, Any], machine: PMSMParams, drive: Drive | DualDrive, max_speed_rpm: float | None = None
+) -> dict[str, Any]:
+    """The reversal verdict's options (:data:`REVERSAL_OPTIONS`) with their defaults filled in, checked.
+
+    Args:
+        reversal: The options given (any subset of :data:`REVERSAL_OPTIONS`).
+        machine: The machine (its rated speed and torque set the defaults).
+        drive: The envelope's drive (its speed limit bounds ``speed_rpm``; a dual drive is refused).
+        max_speed_rpm: The drive file's mechanical limit (None: the rule's default).
+
+    Returns:
+        ``{speed_rpm, loads_nm (a tuple), rates (lo, hi), resolution, probes, settle}``.
+
+    Raises:
+        ValueError: An unknown option, a value out of its range (naming ``reversal.<option>`` and the range), or
+            a dual drive.
+    """
+    if isinstance(drive, DualDrive):
+        raise ValueError("envelope: reversal runs a single three-phase drive (reversal_holds), not a DualDrive")
+    if not isinstance(reversal, Mapping):
+        raise ValueError(f"envelope: reversal must be a mapping of options or None, got {type(reversal).__name__}")
+    unknown = sorted(set(reversal) - set(REVERSAL_OPTIONS))
+    if unknown:
+        raise ValueError(f"envelope: reversal has unknown keys {unknown}; allowed: {', '.join(REVERSAL_OPTIONS)}")
+    top = speed_limit_rpm(machine, drive, max_speed_rpm)
+    n = _positive("speed_rpm", reversal.get("speed_rpm", 0.5 * float(machine.n_rated)), top)
+    lo_l, hi_l = DRIVE_STUDY_AXES["load_nm"].range
+    loads = np.atleast_1d(np.asarray(reversal.get("loads_nm", (0.0, 0.5 * float(machine.T_rated))), dtype=float))
+    if loads.ndim != 1 or loads.size < 1 or not np.all(np.isfinite(loads) & (loads >= lo_l) & (loads <= hi_l)):
+        raise ValueError(f"envelope: reversal.loads_nm must be a non-empty list of numbers in [{lo_l:g}, {hi_l:g}]")
+    rates = reversal.get("rates", (2.0 * n / 10.0, 2.0 * n / 0.1))
+    if not (isinstance(rates, (tuple, list)) and len(rates) == 2):
+        raise ValueError(f"envelope: reversal.rates must be (slow, fast) r/min per second, got {rates!r}")
+    lo, hi = _positive("rates", rates[0]), _positive("rates", rates[1])
+    if not lo < hi:
+        raise ValueError(f"envelope: reversal.rates must be (slow, fast) with slow < fast, got {rates!r}")
+    alpha = _speed_bandwidth(drive, machine, n)
+    settle = _positive("settle", reversal.get("settle", max(1.0, 12.0 / alpha)), 60.0)
+    if REVERSAL_T_START + 2.0 * n / lo + settle > 120.0:
+        raise ValueError(
+            f"envelope: reversal.rates' slow end must leave the runs within 120 s: a reversal of ±{n:g} r/min at "
+            f"{lo:g} r/min per second lasts {2.0 * n / lo:.4g} s"
+        )
+    probes = reversal.get("probes", 3)
+    if isinstance(probes, bool) or not isinstance(probes, int) or not 1 <= probes <= 64:
+        raise ValueError(f"envelope: reversal.probes must be an integer in [1, 64], got {probes!r}")
+    return {
+        "speed_rpm": n,
+        "loads_nm": tuple(float(x) for x in loads),
+        "rates": (lo, hi),
+        "resolution": _positive("resolution", reversal.get("resolution", 0.1), 10.0),
+        "probes": probes,
+        "settle": settle,
+    }
+
+
+def reversals(
+    designs: Mapping[str, AbstractObserver],
+    machine: PMSMParams,
+    drive: Drive,
+    sensors: Sensors | None,
+    opts: Mapping[str, Any],
+) -> dict[str, np.ndarray]:
+    """Each design's slowest held reversal at each load (:func:`jaxobs.analysis.verdict.held_rate`).
+
+    Every run is :func:`jaxobs.drive.reversal` from +``speed_rpm`` to −``speed_rpm`` at the probed rate from
+    :data:`REVERSAL_T_START`, on ``drive`` settled for ``speed_rpm`` (:meth:`Drive.settled_for`) and measured through
+    ``sensors``; one horizon for every probe (the slowest ramp's end plus ``settle``), so a design class compiles
+    one program per batch size.
+
+    Args:
+        designs: name -> drive observer (unbound).
+        machine: The machine (true and assumed alike).
+        drive: The envelope's sensorless drive, before its settle was lengthened for the map.
+        sensors: The sensors (None: ideal).
+        opts: :func:`reversal_options`'s output.
+
+    Returns:
+        Arrays shaped (design, load): ``rate`` (the slowest held, r/min per second; NaN where none held),
+        ``other`` (the nearest probed rate that fails; NaN where every probed rate held: ``rate`` is then the
+        range's slow end, a bound), ``resolution``, ``monotone`` (bool), ``probes`` and ``states`` (the probed
+        verdicts, "rate:state" joined by spaces, one string per search).
+    """
+    n, (lo, hi), settle = float(opts["speed_rpm"]), opts["rates"], float(opts["settle"])
+    rev_drive = drive.settled_for(float(machine.p) * n * RPM)
+    base = Scenario(machine, sensors=sensors)
+    horizon = REVERSAL_T_START + 2.0 * n / lo + settle
+    loads = opts["loads_nm"]
+    shape = (len(designs), len(loads))
+    out = {k: np.full(shape, np.nan) for k in ("rate", "other", "resolution")}
+    out["monotone"], out["probes"] = np.zeros(shape, bool), np.zeros(shape, np.int32)
+    out["states"] = np.empty(shape, dtype=object)
+    for i, obs in enumerate(designs.values()):
+        for j, load in enumerate(loads):
+            states_at = reversal_holds(
+                rev_drive, obs, base, n, load_nm=load, t_start=REVERSAL_T_START, settle=settle, horizon=horizon
+            )
+            r = held_rate(lo, hi, states_at=states_at, resolution=opts["resolution"], probes=opts["probes"])
+            out["rate"][i, j], out["other"][i, j], out["resolution"][i, j] = r.rate, r.other, r.resolution
+            out["monotone"][i, j], out["probes"][i, j] = r.monotone, r.probes
+            probed = zip(r.rates, r.states)
+            out["states"][i, j] = " ".join(f"{x:.6g}:{VERDICTS[s].replace(' ', '_')}" for x, s in probed)
+    return out
 
 
 def _check_designs_and_drive(designs: Mapping[str, Any], drive: Drive | DualDrive) -> None:
@@ -135,7 +287,7 @@ def _plane(
     # the lowest speed whose steady start (Drive.settled_for) fits the 60 s settle limit: SETTLE_PERIODS / p r/min
     n_min = max(1.0, SETTLE_PERIODS / machine.p)
     speeds = default_speeds(machine, drive=drive, max_speed_rpm=max_speed_rpm) if speeds_rpm is None else speeds_rpm
-    speeds = _axis("speeds_rpm", speeds, n_min, n_max, "r/min")
+    speeds = _axis("speeds_rpm", speeds, n_min, n_max, "r/min", signed=True)  # either direction, |speed| bounded
     lo_l, hi_l = DRIVE_STUDY_AXES["load_nm"].range
     loads = _axis("loads_nm", default_loads(machine) if loads_nm is None else loads_nm, lo_l, hi_l, "N·m")
     return {"speed_rpm": speeds, "load_nm": loads}
@@ -204,8 +356,10 @@ def _settle_and_windows(
     # ω_e (a flux observer's FLL) to close it stably, ω_e ≥ 4 α (the linear boundary is 4.2-5.4 α,
     # docs/stability.md).  Below that speed the loop cannot hold with such an observer whatever its start, and
     # settling there would cost more than the whole envelope (docs/performance.md).
-    w_es = [machine.p * float(s) * 2.0 * math.pi / 60.0 for s in speeds]
-    holdable = [w for s, w in zip(speeds, w_es) if w >= 4.0 * _speed_bandwidth(drive, machine, float(s))]
+    # (by |speed|: the axis may hold negative speeds, each direction's periods and speed loop as the other's)
+    mags = sorted({abs(float(s)) for s in speeds})
+    w_es = [machine.p * s * 2.0 * math.pi / 60.0 for s in mags]
+    holdable = [w for s, w in zip(mags, w_es) if w >= 4.0 * _speed_bandwidth(drive, machine, s)]
     drive = drive.settled_for(holdable[0] if holdable else w_es[-1])
     # The Lyapunov run spans the slowest speed loop: its window at least 12/α and its warm-up 1/α (α at the lowest
     # speed; a window whose thirds are shorter than the slowest pair's period sees its wobble, not its decay:
@@ -216,7 +370,7 @@ def _settle_and_windows(
     # speed (2 % more: the speed's move to whole speed-loop periods), and the answer is exact however slow the
     # mode.  Its cost follows each point's period: the points are batched by speed (_verdicts).
     if method == "lyapunov":
-        alpha = _speed_bandwidth(drive, machine, float(speeds[0]))
+        alpha = _speed_bandwidth(drive, machine, mags[0])
         kw["window"] = max(float(kw["window"]), 12.0 / alpha)
         kw["warmup"] = max(float(kw["warmup"]), 1.0 / alpha)
     else:
@@ -294,9 +448,38 @@ def _results(
     lost = res["lost_lock"].astype(bool)
     for k in ("peak_position_late", "mean_position_late", "ripple_position_late"):
         res[k] = np.where(lost, np.nan, res[k])  # a lost point has no steady error to speak of
+    _states(res)
     err_ok = np.nan_to_num(np.degrees(res["peak_position_late"]), nan=np.inf) <= bound_deg
     res["holds"] = res["stable"].astype(bool) & res["synchronous"].astype(bool) & err_ok
     return res
+
+
+def _states(res: dict[str, np.ndarray]) -> None:
+    """``run_state``, ``state``, ``linear_stable`` and ``stable`` (in place) from the long runs' window quantities and
+    the small-signal verdict.
+
+    The long run is judged by :func:`~jaxobs.analysis.verdict.verdict_from`, the rule of
+    :func:`~jaxobs.analysis.verdict.verdict` (lock from the pulse on, the speed over the late window and its two
+    halves).  The point's ``state`` is that verdict, except that a run that holds where the small-signal verdict
+    is resolved unstable (or left its orbit) is ``unstable``: a growth slower than the window resolves
+    (verdict.py's module doc says the Floquet margin is the tool for it).  ``stable`` is the small-signal verdict
+    and a run that neither lost speed nor lock nor diverged: never 1 where the run loses speed.
+    """
+    run = verdict_from(
+        res["run_finite"] > 0.5,
+        np.degrees(res["peak_position_event"]),
+        res["mean_speed_error_late"],
+        res["mean_speed_reference_late"],
+        res["speed_swing_first"],
+        res["speed_swing_second"],
+    )
+    run_state = np.asarray(run.state, dtype=np.int8)
+    linear = res["stable"].astype(bool)
+    lin_unstable = ~linear & ~res["marginal"].astype(bool)  # resolved unstable, or off its orbit
+    res["run_state"] = run_state
+    res["state"] = np.where((run_state == HOLDS) & lin_unstable, UNSTABLE, run_state).astype(np.int8)
+    res["linear_stable"] = linear
+    res["stable"] = linear & ((run_state == HOLDS) | (run_state == LIMIT_CYCLE))
 
 
 def envelope(
@@ -318,6 +501,8 @@ def envelope(
     chunk_size: int = 256,
     progress: Any = None,
     max_speed_rpm: float | None = None,
+    sensors: Sensors | None = None,
+    reversal: Mapping[str, Any] | None = None,
 ) -> xr.Dataset:
     """The operating envelope of every design (name -> drive observer closing ``drive``'s loop sensorless).
 
@@ -328,7 +513,8 @@ def envelope(
         designs: name -> drive observer closing ``drive``'s loop sensorless.
         machine: the machine (a :class:`~jaxobs.drive.DualPMSMParams` for a :class:`~jaxobs.drive.DualDrive`).
         drive: a sensorless drive started steady.
-        speeds_rpm: speeds, r/min (> 0; default :func:`default_speeds`).
+        speeds_rpm: speeds, r/min, increasing, either sign (|speed| within the drive's limits; default
+            :func:`default_speeds`, positive).
         loads_nm: load torques, N·m (default :func:`default_loads`).
         mismatch: ``(axis, values)`` with axis one of :data:`MISMATCH_AXES` (relative, 1), a third dim.
         horizon: s, in [0.5, 20]: the long run's least horizon, stretched to :data:`HORIZON_TC` time constants of
@@ -346,15 +532,28 @@ def envelope(
         progress: as in :func:`jaxobs.runtime.runner.run_scenarios`.
         max_speed_rpm: the drive file's mechanical limit (``[machine] max_speed_rpm``; :func:`speed_limit_rpm`),
             None: the rule's default.
+        sensors: the drive's sensors (a drive file's ``[sensors]``: :attr:`jaxobs.drive.DriveFile.sensors`, its
+            ADC's quantization as noise), which every run measures through (the long runs, the stability
+            verdict's linearized run and the reversals); None: ideal.
+        reversal: None (the default: not run), or the options of each design's slowest held reversal
+            (:data:`REVERSAL_OPTIONS`; ``{}`` takes every default): ``speed_rpm`` (the reversal's ±speed, default
+            half the rated speed), ``loads_nm`` (default 0 and half the rated torque), ``rates`` ((slow, fast)
+            ramp rates, r/min per second; default a reversal in 10 s to one in 0.1 s), ``resolution`` (relative,
+            default 0.1), ``probes`` (default 3) and ``settle`` (s after the slowest ramp; default the larger of
+            1 s and 12/α of the speed loop at ``speed_rpm``).  Each is
+            :func:`jaxobs.analysis.verdict.held_rate` over :func:`~jaxobs.analysis.verdict.reversal_holds` on
+            the same drive and sensors (a :class:`~jaxobs.drive.DualDrive` has none).
 
     Returns:
         An ``xarray.Dataset`` with dims ``("design", "speed_rpm", "load_nm"[, axis])`` and the variables of
-        :data:`ENVELOPE_VARIABLES` (booleans stored as int8 0/1); its ``horizon`` and ``steady_from`` attributes
-        are those that ran.
+        :data:`ENVELOPE_VARIABLES` (booleans stored as int8 0/1; ``state`` and ``run_state`` codes of
+        :data:`jaxobs.analysis.verdict.VERDICTS`); its ``horizon`` and ``steady_from`` attributes are those that
+        ran.  With ``reversal``, the variables of :data:`REVERSAL_VARIABLES` over ``("design",
+        "reversal_load_nm")``.
 
     Raises:
         ValueError: no design, a drive that is not sensorless or not started steady, or an argument out of its
-            range (the message names it and the range).
+            range (the message names it and the range); ``reversal`` on a dual drive.
     """
     _check_designs_and_drive(designs, drive)
     dual = _dual_machine(machine, drive, mismatch)
@@ -370,6 +569,8 @@ def envelope(
             raise ValueError(f"envelope: {name} must be in [{lo:g}, {hi:g}], got {v!r}")
     _mismatch_axis(axes, mismatch)
     method, kw = _stability_options(stability)
+    rev = None if reversal is None else reversal_options(reversal, machine, drive, max_speed_rpm)
+    unsettled = drive
     drive = _settle_and_windows(drive, machine, speeds, method, kw)
     sampler = Grid(axes)
     names, points = sampler.names, sampler.points()
@@ -377,8 +578,9 @@ def envelope(
     # the long runs, a study: each point's speed reference pulses by perturb × its speed at t_perturb; nothing
     # stored per sample (SaveFinal), the wrapped loop's running sums read from its final state
     ts = drive.ts
-    family = _family(machine if dual is None else dual, drive, t_event=t_perturb, seed=seed)
-    long = _LongRuns(family, float(perturb), int(round(steady_from / ts)))
+    family = _family(machine if dual is None else dual, drive, t_event=t_perturb, seed=seed, sensors=sensors)
+    k_late, n_steps = int(round(steady_from / ts)), int(round(float(horizon) / ts))
+    long = _LongRuns(family, float(perturb), k_late, (k_late + n_steps) // 2)
     runs = study(
         dict(designs),
         long,
@@ -394,7 +596,7 @@ def envelope(
         label="envelope",
     )
     # the stability margins: constant profiles (no step), one jit(vmap) per observer class
-    scs = _family(machine if dual is None else dual, drive, seed=seed).build(names, points)
+    scs = build_signed(_family(machine if dual is None else dual, drive, seed=seed, sensors=sensors), names, points)
     stab = _verdicts(designs, drive, scs, points, method, tuple(sorted(kw.items())), dual)
     dnames = list(designs)
     res = _results(stab, runs, dnames, (len(dnames), *(len(axes[n]) for n in names)), bound_deg)
@@ -409,5 +611,19 @@ def envelope(
         seed=seed,
         **{f"stability_{k}": float(v) for k, v in kw.items()},
         stability_method=method,
+        sensors="ideal" if sensors is None else "given",
     )
-    return envelope_dataset(res, {d: designs[d] for d in dnames}, axes, names, attrs, machine, drive, dual)
+    if sensors is not None:  # what the runs measured through (Sensors' fields; the noise levels, A and V)
+        attrs.update(
+            sensors_i_noise=float(sensors.i_noise),
+            sensors_u_noise=float(sensors.u_noise),
+            sensors_i_offset=np.asarray(sensors.i_offset, dtype=float),
+            sensors_u_offset=np.asarray(sensors.u_offset, dtype=float),
+            sensors_i_gain_error=np.asarray(sensors.i_gain, dtype=float) - 1.0,
+        )
+    ds = envelope_dataset(res, {d: designs[d] for d in dnames}, axes, names, attrs, machine, drive, dual)
+    if rev is not None:
+        assert isinstance(unsettled, Drive)  # reversal_options refuses a dual drive
+        ds = ds.assign(reversal_variables(reversals(designs, machine, unsettled, sensors, rev), dnames, rev))
+        ds.attrs.update({f"reversal_{k}": v for k, v in rev.items() if k != "loads_nm"})
+    return ds

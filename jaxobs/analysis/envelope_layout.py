@@ -16,7 +16,7 @@ from ..studies.study import gain_variables
 if TYPE_CHECKING:
     import xarray as xr
 
-__all__ = ["ENVELOPE_VARIABLES", "envelope_dataset"]
+__all__ = ["ENVELOPE_VARIABLES", "REVERSAL_VARIABLES", "envelope_dataset", "reversal_variables"]
 
 # variable -> (units, long_name) of the per-point results
 ENVELOPE_VARIABLES = {
@@ -26,7 +26,8 @@ ENVELOPE_VARIABLES = {
     ),
     "stable": (
         "1",
-        "stable: margin - resolution > 0 and the orbit held its speed during the linearized run (1: stable)",
+        "stable: resolved stable in the small signal (linear_stable) and the long run neither lost speed nor lock "
+        "nor diverged (run_state holds or bounded limit cycle) (1: stable)",
     ),
     "marginal": (
         "1",
@@ -60,7 +61,50 @@ ENVELOPE_VARIABLES = {
     "peak_speed_deviation_early": ("1", "peak |speed - reference| / |reference| in the early window"),
     "peak_speed_deviation_late": ("1", "peak |speed - reference| / |reference| in the late window"),
     "holds": ("1", "holds: stable, synchronous and peak position error within bound_deg (1: holds)"),
+    "peak_position_event": ("rad", "peak |position error| from the pulse on (electrical): the verdict's lock test"),
+    "mean_speed_error_late": ("rad s-1", "mean |speed - reference| in the late window (mechanical)"),
+    "mean_speed_reference_late": ("rad s-1", "mean |reference| in the late window (mechanical)"),
+    "speed_swing_first": ("rad s-1", "half peak-to-peak of speed - reference in the late window's first half"),
+    "speed_swing_second": ("rad s-1", "half peak-to-peak of speed - reference in the late window's second half"),
+    "run_finite": ("1", "every value of the long run stayed finite (1: finite)"),
+    "run_state": (
+        "1",
+        "the long run's verdict alone (jaxobs.analysis.verdict.verdict_from on its windows): 0 holds, 1 bounded "
+        "limit cycle, 2 loses speed, 3 loses lock, 4 unstable",
+    ),
+    "linear_stable": (
+        "1",
+        "the small-signal verdict alone: margin - resolution > 0 and the orbit held its speed (1: resolved stable)",
+    ),
+    "state": (
+        "1",
+        "the point's verdict: the long run's (run_state), but unstable where the run holds and the small-signal "
+        "verdict is resolved unstable or off its orbit: 0 holds, 1 bounded limit cycle, 2 loses speed, 3 loses "
+        "lock, 4 unstable",
+    ),
 }
+
+# variable -> (units, long_name) of the reversal verdict (envelope's ``reversal=``), dims (design, reversal_load_nm)
+REVERSAL_VARIABLES = {
+    "reversal_rate": (
+        "min-1 s-1",
+        "slowest held reversal: the ramp rate (r/min per second) of the slowest probed +n to -n reversal from which "
+        "every faster probed one holds; NaN: none held",
+    ),
+    "reversal_fails_at": (
+        "min-1 s-1",
+        "the nearest probed rate below reversal_rate that does not hold; NaN: every probed rate held "
+        "(reversal_rate is then the range's slow end, a bound)",
+    ),
+    "reversal_resolution": ("1", "the bracket's relative width, reversal_rate / reversal_fails_at - 1"),
+    "reversal_monotone": ("1", "the probes changed verdict once at most over the range (1: monotone)"),
+    "reversal_probes": ("1", "batched simulations the search ran"),
+    "reversal_probed": ("1", "every probed rate (r/min per second) and its verdict, rate:state, in probe order"),
+}
+
+# the verdict codes' CF flag attributes (jaxobs.analysis.verdict.VERDICTS, in code order)
+STATE_VARIABLES = ("run_state", "state")
+STATE_FLAGS = "holds bounded_limit_cycle loses_speed loses_lock unstable"
 
 
 def envelope_dataset(
@@ -101,8 +145,11 @@ def envelope_dataset(
     data = {}
     for k, (unit, long_name) in ENVELOPE_VARIABLES.items():
         v = res[k]
-        v = v.astype(np.int8) if v.dtype == bool else v.astype(float)
-        data[k] = (dims, v, {"units": unit, "long_name": long_name})
+        v = v.astype(np.int8) if v.dtype == bool or k in STATE_VARIABLES else v.astype(float)
+        var_attrs = {"units": unit, "long_name": long_name}
+        if k in STATE_VARIABLES:
+            var_attrs.update(flag_values=np.arange(5, dtype=np.int8), flag_meanings=STATE_FLAGS)
+        data[k] = (dims, v, var_attrs)
     data.update(gain_variables(dict(designs)))  # as the drive studies write them
     ds = xr.Dataset(data, coords=coords)
     ds.attrs.update(attrs)
@@ -114,3 +161,36 @@ def envelope_dataset(
         ds.attrs.update(machine_Lls=float(dual.Lls), drive_mode=drive.mode, drive_fw_voltage=drive.ctrl.fw_voltage)
     ds.attrs.update(provenance("jaxobs.analysis.envelope.envelope"))
     return cf_dataset(ds, "jaxobs operating envelope: where each design holds over speed x load")
+
+
+def reversal_variables(rev: Mapping[str, np.ndarray], dnames: Sequence[str], opts: Mapping[str, Any]) -> dict[str, Any]:
+    """The reversal verdict as dataset variables (:data:`REVERSAL_VARIABLES`) over ``("design",
+    "reversal_load_nm")``, for ``Dataset.assign``.
+
+    Args:
+        rev: :func:`jaxobs.analysis.envelope_reversal.reversals`'s arrays, shaped (design, load).
+        dnames: The designs, in the dataset's order.
+        opts: The reversal's options (its ``loads_nm`` the new coordinate).
+
+    Returns:
+        name -> ``xarray.DataArray``, the coordinate ``reversal_load_nm`` included.
+    """
+    import xarray as xr
+
+    dims = ("design", "reversal_load_nm")
+    load_attrs = {"units": "N m", "long_name": "constant load torque of the reversal verdict's runs"}
+    loads = np.asarray(opts["loads_nm"], dtype=float)
+    coords = {"design": list(dnames), "reversal_load_nm": ("reversal_load_nm", loads, load_attrs)}
+    src = {
+        "reversal_rate": rev["rate"].astype(float),
+        "reversal_fails_at": rev["other"].astype(float),
+        "reversal_resolution": rev["resolution"].astype(float),
+        "reversal_monotone": rev["monotone"].astype(np.int8),
+        "reversal_probes": rev["probes"].astype(np.int32),
+        "reversal_probed": rev["states"].astype(str),
+    }
+    out = {}
+    for k, (unit, long_name) in REVERSAL_VARIABLES.items():
+        attrs = {"long_name": long_name} if k == "reversal_probed" else {"units": unit, "long_name": long_name}
+        out[k] = xr.DataArray(src[k], dims=dims, coords=coords, attrs=attrs)
+    return out

@@ -8,6 +8,7 @@ The long run's timing is in time constants 1/α of the speed loop at the point (
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import replace
 from typing import Any, ClassVar, NamedTuple, TypeVar
 
@@ -44,6 +45,7 @@ __all__ = [
     "PULSE_TC",
     "SETTLE_GROWTH",
     "STABILITY_METHODS",
+    "build_signed",
     "default_loads",
     "default_speeds",
     "speed_limit_rpm",
@@ -130,6 +132,14 @@ class _Watch(NamedTuple):
     dev_late: jax.Array  # the same in the late window, 1
     sum_dw: jax.Array  # Σ |ωm − ωm*|, rad/s, late window
     sum_ref: jax.Array  # Σ |ωm*|, rad/s, late window
+    # the verdict's quantities (jaxobs.analysis.verdict.verdict_from): lock from the pulse on, the swing of
+    # ωm − ωm* in each half of the late window, and whether every value stayed finite
+    max_e_event: jax.Array  # max |position error| from the pulse on, rad
+    hi1: jax.Array  # max (ωm − ωm*), rad/s, the late window's first half
+    lo1: jax.Array  # min (ωm − ωm*), the same
+    hi2: jax.Array  # max (ωm − ωm*), its second half
+    lo2: jax.Array  # min (ωm − ωm*), the same
+    finite: jax.Array  # 1 while every position error and speed so far is finite, else 0
 
 
 class _Watched(AbstractSystem):
@@ -138,6 +148,8 @@ class _Watched(AbstractSystem):
     loop: ClosedLoop
     k_early: jax.Array  # first sample of the early window (per scenario: it follows the point's speed loop)
     k_late: int = eqx.field(static=True)  # first sample of the late window
+    k_event: int = eqx.field(static=True, default=0)  # first sample of the verdict's event window (the pulse)
+    k_mid: int = eqx.field(static=True, default=0)  # first sample of the late window's second half
     unroll: ClassVar[int] = 1
 
     @property
@@ -146,18 +158,22 @@ class _Watched(AbstractSystem):
 
     def init(self):
         z = jnp.zeros((), jnp.result_type(float))
-        return self.loop.init(), _Watch(z, z, z, z, z, z, z, z)
+        inf = jnp.full((), jnp.inf, z.dtype)
+        return self.loop.init(), _Watch(z, z, z, z, z, z, z, z, z, -inf, inf, -inf, inf, z + 1.0)
 
     def step(self, state, k):
         s, w = state
         new, out = self.loop.step(s, k)
         e = M.wrap(out.obs.theta - out.theta_e)
-        dw = jnp.abs(out.omega_m - out.omega_m_ref)
+        sdw = out.omega_m - out.omega_m_ref
+        dw = jnp.abs(sdw)
         ref = jnp.abs(out.omega_m_ref)
         dev = dw / jnp.maximum(ref, 1e-9)
         late = k >= self.k_late
         early = (k >= self.k_early) & ~late
         lf = late.astype(e.dtype)
+        first, second = late & (k < self.k_mid), k >= self.k_mid
+        ok = jnp.isfinite(e) & jnp.isfinite(out.omega_m)
         w = _Watch(
             n=w.n + lf,
             sum_e=w.sum_e + lf * e,
@@ -167,6 +183,12 @@ class _Watched(AbstractSystem):
             dev_late=jnp.where(late, jnp.maximum(w.dev_late, dev), w.dev_late),
             sum_dw=w.sum_dw + lf * dw,
             sum_ref=w.sum_ref + lf * ref,
+            max_e_event=jnp.where(k >= self.k_event, jnp.maximum(w.max_e_event, jnp.abs(e)), w.max_e_event),
+            hi1=jnp.where(first, jnp.maximum(w.hi1, sdw), w.hi1),
+            lo1=jnp.where(first, jnp.minimum(w.lo1, sdw), w.lo1),
+            hi2=jnp.where(second, jnp.maximum(w.hi2, sdw), w.hi2),
+            lo2=jnp.where(second, jnp.minimum(w.lo2, sdw), w.lo2),
+            finite=jnp.where(ok, w.finite, 0.0),
         )
         return (new, w), jnp.zeros((), e.dtype)
 
@@ -180,6 +202,39 @@ EARLY_TC = 3.0  # the early window opens 3/α after the pulse ends: its transien
 HORIZON_TC = 12.0  # the horizon spans at least 12/α of the slowest point after t_perturb: late window from 6/α
 HORIZON_MAX = 30.0  # s: the longest horizon the rule may ask for (1/α ≤ 2.5 s)
 SETTLE_GROWTH = 1.02  # a settled point's late peak deviation is at most 2 % above its early one (module doc)
+
+
+def build_signed(
+    family: AbstractFamily, names: Sequence[str], points: Sequence[Sequence[float]], first: int = 0
+) -> Any:
+    """``family``'s scenarios at ``points`` whose ``speed_rpm`` may be negative (a drive runs both ways).
+
+    The scenarios are built at |speed| (the drive axes' range is positive) and turned to the signed speed: the
+    speed reference and the start speed ω_m0 negated where the speed is negative, which is what a scenario
+    built at that speed holds (:func:`jaxobs.drive.scenario_batch` sets exactly these two from ``speed_rpm``;
+    the observer is bound at p̂ ω_m0, the sign included).  Where every speed is positive the scenarios are the
+    family's own.
+
+    Args:
+        family: A drive family (:class:`~jaxobs.scenarios.families.DriveScenarios` or the dual one).
+        names: The axes, ``speed_rpm`` first.
+        points: Tuples of values for ``names``.
+        first: The index of ``points[0]`` among all the scenarios (the noise keys).
+
+    Returns:
+        The batched :class:`~jaxobs.drive.Scenario`.
+    """
+    pts = np.asarray(points, dtype=float).reshape(len(points), len(names))
+    i = list(names).index("speed_rpm")
+    sign = np.where(pts[:, i] < 0.0, -1.0, 1.0)
+    if np.all(sign > 0.0):
+        return family.build(names, points, first=first)
+    pts[:, i] = np.abs(pts[:, i])
+    scs = family.build(names, [tuple(p) for p in pts], first=first)
+    sg = jnp.asarray(sign, scs.omega_m0.dtype)
+    return eqx.tree_at(
+        lambda sc: (sc.speed_ref.values, sc.omega_m0), scs, (scs.speed_ref.values * sg[:, None], scs.omega_m0 * sg)
+    )
 
 
 def _pulse_width(drive: Drive | DualDrive, machine: PMSMParams, speeds_rpm) -> np.ndarray:
@@ -221,6 +276,7 @@ class _LongRuns(AbstractFamily):
     family: DriveScenarios
     perturb: float = eqx.field(static=True)
     k_late: int = eqx.field(static=True)
+    k_mid: int = eqx.field(static=True, default=0)  # the late window's second half (the verdict's swing test)
 
     signal: ClassVar[str] = "drive"
     axes: ClassVar[dict] = DRIVE_STUDY_AXES
@@ -236,19 +292,26 @@ class _LongRuns(AbstractFamily):
         "ripple_position_late",
         "peak_speed_deviation_early",
         "peak_speed_deviation_late",
+        "peak_position_event",
+        "mean_speed_error_late",
+        "mean_speed_reference_late",
+        "speed_swing_first",
+        "speed_swing_second",
+        "run_finite",
     )
     flags: ClassVar[tuple[str, ...]] = ("lost_lock", "lost_speed", "synchronous", "diverged")
 
     def build(self, names, points, first: int = 0):
         fam = self.family
         width = _pulse_width(fam.drive, fam.machine, [p[0] for p in points])
-        return speed_pulse(fam.build(names, points, first=first), float(fam.t_event), width, self.perturb)
+        return speed_pulse(build_signed(fam, names, points, first), float(fam.t_event), width, self.perturb)
 
     def system(self, design, scenario):
         ref = scenario.speed_ref
         t_end, width = ref.times[2], ref.times[2] - ref.times[1]
         k_early = jnp.round((t_end + EARLY_TC / PULSE_TC * width) / self.family.drive.ts)
-        return _Watched(self.family.system(design, scenario), k_early, self.k_late)
+        k_event = int(round(float(self.family.t_event) / self.family.drive.ts))
+        return _Watched(self.family.system(design, scenario), k_early, self.k_late, k_event, self.k_mid)
 
 
 def _sums(sol):
@@ -269,6 +332,13 @@ LONG_RUN_METRICS = (
     _var("ripple_position_late", lambda sol, sc, ctx: _sums(sol)[2]),
     _var("peak_speed_deviation_early", lambda sol, sc, ctx: _sums(sol)[0].dev_early),
     _var("peak_speed_deviation_late", lambda sol, sc, ctx: _sums(sol)[0].dev_late),
+    # the verdict's quantities (jaxobs.analysis.verdict.verdict_from), read from the same sums
+    _var("peak_position_event", lambda sol, sc, ctx: _sums(sol)[0].max_e_event),
+    _var("mean_speed_error_late", lambda sol, sc, ctx: _sums(sol)[0].sum_dw / _sums(sol)[0].n),
+    _var("mean_speed_reference_late", lambda sol, sc, ctx: _sums(sol)[0].sum_ref / _sums(sol)[0].n),
+    _var("speed_swing_first", lambda sol, sc, ctx: 0.5 * (_sums(sol)[0].hi1 - _sums(sol)[0].lo1)),
+    _var("speed_swing_second", lambda sol, sc, ctx: 0.5 * (_sums(sol)[0].hi2 - _sums(sol)[0].lo2)),
+    _var("run_finite", lambda sol, sc, ctx: _sums(sol)[0].finite),
 )
 
 
@@ -402,10 +472,12 @@ def _dual_machine(machine, drive, mismatch) -> DualPMSMParams | None:
     return machine
 
 
-def _axis(name: str, vals, lo: float, hi: float, unit: str) -> np.ndarray:
+def _axis(name: str, vals, lo: float, hi: float, unit: str, signed: bool = False) -> np.ndarray:
     arr = np.asarray(vals, dtype=float)
-    if arr.ndim != 1 or arr.size < 1 or not np.all(np.isfinite(arr)) or np.any(arr < lo) or np.any(arr > hi):
-        raise ValueError(f"envelope: {name} must be a non-empty list of numbers in [{lo:g}, {hi:g}] {unit}")
+    mag = np.abs(arr) if signed else arr
+    if arr.ndim != 1 or arr.size < 1 or not np.all(np.isfinite(arr)) or np.any(mag < lo) or np.any(mag > hi):
+        within = f"[{lo:g}, {hi:g}] or [{-hi:g}, {-lo:g}]" if signed else f"[{lo:g}, {hi:g}]"
+        raise ValueError(f"envelope: {name} must be a non-empty list of numbers in {within} {unit}")
     if np.any(np.diff(arr) <= 0):
         raise ValueError(f"envelope: {name} must be strictly increasing")
     return arr

@@ -55,8 +55,8 @@ whose sign changes continuously with the rate, and a held/not-held flag has no s
 written out here.  It assumes one change of verdict over the range and says where the probes disagree with
 that (:attr:`RateSearch.monotone`).
 
-The envelope (:mod:`jaxobs.analysis.envelope`) will call :func:`verdict` on its long runs and :func:`held_rate`
-per design (docs/architecture.md says where).
+The envelope (:mod:`jaxobs.analysis.envelope`) judges each long run by :func:`verdict_from` (the same rule on the
+quantities its running sums keep) and, on request, each design's slowest held reversal by :func:`held_rate`.
 """
 
 from __future__ import annotations
@@ -89,6 +89,7 @@ __all__ = [
     "Verdict",
     "verdict",
     "verdict_of",
+    "verdict_from",
     "verdict_names",
     "RateSearch",
     "held_rate",
@@ -249,7 +250,40 @@ def verdict(
     n = jnp.maximum(jnp.sum(settled, axis=-1), 1)
     err = jnp.sum(jnp.where(settled, jnp.abs(dw), 0.0), axis=-1) / n
     ref = jnp.sum(jnp.where(settled, jnp.abs(wr), 0.0), axis=-1) / n
-    s1, s2 = _swing(dw, first), _swing(dw, second)
+    return verdict_from(finite, peak, err, ref, _swing(dw, first), _swing(dw, second), rule)
+
+
+def verdict_from(
+    finite: ArrayLike,
+    peak_angle_deg: ArrayLike,
+    speed_err: ArrayLike,
+    speed_ref: ArrayLike,
+    swing_first: ArrayLike,
+    swing_second: ArrayLike,
+    rule: VerdictRule | None = None,
+) -> Verdict:
+    """The one state of each run from the quantities :func:`verdict` reads off its windows: the same rule (module
+    doc) for a run whose trajectory was not kept, only these (the envelope's long runs keep them as running sums,
+    :mod:`jaxobs.analysis.envelope_runs`).
+
+    Works under ``jit`` and ``vmap`` and on NumPy arrays; the arguments broadcast against each other.
+
+    Args:
+        finite: Every value of the run finite.
+        peak_angle_deg: Peak |θ̂e − θe| over the event window, degrees electrical (NaN: lost).
+        speed_err: Mean |ωm − ωm*| over the settled window, rad/s.
+        speed_ref: Mean |ωm*| over the settled window, rad/s.
+        swing_first: Half peak-to-peak of ωm − ωm* over the settled window's first half, rad/s.
+        swing_second: The same over its second half, rad/s.
+        rule: The thresholds (default :class:`VerdictRule`).
+
+    Returns:
+        The :class:`Verdict` (its fields the arguments, broadcast).
+    """
+    rule = VerdictRule() if rule is None else rule
+    finite = jnp.asarray(finite, dtype=bool)
+    peak, err, ref = jnp.asarray(peak_angle_deg), jnp.asarray(speed_err), jnp.asarray(speed_ref)
+    s1, s2 = jnp.asarray(swing_first), jnp.asarray(swing_second)
     cycle_tol = jnp.maximum(rule.cycle_tol * ref, rule.cycle_floor_rpm * RPM)
     grows = (s2 > cycle_tol) & (s2 > rule.growth * s1)
     lost_lock = ~(peak <= rule.lock_deg)  # NaN: lost
@@ -260,6 +294,7 @@ def verdict(
         [UNSTABLE, LOSES_LOCK, UNSTABLE, LOSES_SPEED, LIMIT_CYCLE],
         HOLDS,
     )
+    finite, peak, err, ref, s1, s2 = jnp.broadcast_arrays(finite, peak, err, ref, s1, s2)
     return Verdict(state, finite, peak, err, ref, s1, s2)
 
 
@@ -469,15 +504,6 @@ def reversal_holds(
     if not (math.isfinite(float(settle)) and float(settle) > 0.0):
         raise ValueError(f"reversal_holds.settle must be a finite number of seconds > 0, got {settle!r}")
 
-    def one(sc):
-        obs = observer.bind(sc.est_par, sc.est_par.p * sc.omega_m0)
-        return ClosedLoop(drive, obs, sc)
-
-    @functools.partial(jax.jit, static_argnames="t1")
-    def run(s, t_set, t1):
-        sol = jax.vmap(lambda sc: simulate(one(sc), t1, save=SaveAll()))(s)
-        return verdict_of(sol, t_start, t_set, rule).state
-
     def states_at(rates):
         rates = np.asarray(rates, dtype=float).reshape(-1)
         scs = stack_scenarios([reversal(base, speed_rpm, r, load_nm=load_nm, t_start=t_start) for r in rates])
@@ -488,6 +514,19 @@ def reversal_holds(
                 f"reversal_holds.horizon ({t1:g} s) is shorter than the slowest ramp's end plus settle "
                 f"({float(ramp_end.max()) + float(settle):g} s)"
             )
-        return np.asarray(run(scs, jnp.asarray(ramp_end + 0.5 * float(settle)), t1=t1))
+        t_set = jnp.asarray(ramp_end + 0.5 * float(settle))
+        return np.asarray(_reversal_states(drive, observer, scs, jnp.asarray(float(t_start)), t_set, rule, t1))
 
     return states_at
+
+
+@functools.partial(eqx.filter_jit)
+def _reversal_states(drive, observer, scs, t_start, t_set, rule, t1):
+    """The verdicts of a batch of reversals (:func:`reversal_holds`): one program per drive and observer class,
+    batch size and horizon ``t1`` (the gains, the drive's values and the scenarios are traced)."""
+
+    def one(sc):
+        return ClosedLoop(drive, observer.bind(sc.est_par, sc.est_par.p * sc.omega_m0), sc)
+
+    sol = jax.vmap(lambda sc: simulate(one(sc), t1, save=SaveAll()))(scs)
+    return verdict_of(sol, t_start, t_set, rule).state

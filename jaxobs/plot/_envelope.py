@@ -109,7 +109,10 @@ def envelope_figure(ds: xr.Dataset, path: FigurePath) -> Figure:
         return getattr(v, worst.get(name, "min"))(extra) if extra else v
 
     sp, ld = ds["speed_rpm"].values, ds["load_nm"].values
-    xe, ye = _log_edges(sp), _lin_edges(ld)
+    # speeds on a log axis; a map through both directions (a negative speed) on one cell per speed, labelled
+    log_x = bool(np.all(sp > 0))
+    xs = sp if log_x else np.arange(sp.size, dtype=float)
+    xe, ye = (_log_edges(sp) if log_x else _lin_edges(xs)), _lin_edges(ld)
     # at most 8 tick labels an axis (every k-th grid value), so that 3 inches of panel stay legible
     xtick, ytick = slice(None, None, -(-sp.size // 8)), slice(None, None, -(-ld.size // 8))
     rows = list(_ENVELOPE_PANELS)
@@ -145,13 +148,13 @@ def envelope_figure(ds: xr.Dataset, path: FigurePath) -> Figure:
             # stable, error over the bound): a crossed point whose panels all look benign was a puzzle
             for mask, marker in _fail_marks(ds, d, extra, h):
                 bad = np.argwhere(mask)
-                ax.plot(sp[bad[:, 0]], ld[bad[:, 1]], marker, color="k", ms=4, mew=0.8, mfc="none", path_effects=halo)
-            ax.set_xscale("log")
+                ax.plot(xs[bad[:, 0]], ld[bad[:, 1]], marker, color="k", ms=4, mew=0.8, mfc="none", path_effects=halo)
+            ax.set_xscale("log" if log_x else "linear")
             ax.set_xlim(xe[0], xe[-1])
             ax.set_ylim(ye[0], ye[-1])
             # ticks at the grid's own speeds and loads: each cell is centred on a point run, and its outer
             # edges (a negative load, a speed above rated) are only the cells' extent, not points run
-            ax.set_xticks(sp[xtick], [f"{v:.0f}" if v >= 100 else f"{v:.3g}" for v in sp[xtick]], minor=False)
+            ax.set_xticks(xs[xtick], [f"{v:.0f}" if abs(v) >= 100 else f"{v:.3g}" for v in sp[xtick]], minor=False)
             ax.set_xticks([], minor=True)
             ax.set_yticks(ld[ytick], [f"{v:.3g}" for v in ld[ytick]])
             ax.tick_params(labelsize=7)
@@ -159,7 +162,7 @@ def envelope_figure(ds: xr.Dataset, path: FigurePath) -> Figure:
                 n_h, n = int(h.sum()), h.size
                 ax.set_title(f"{str(d).replace('_', ' ')}\nholds at {n_h}/{n} points", fontsize=9)
             if r == len(rows) - 1:
-                ax.set_xlabel("speed (r/min, log)", fontsize=8)
+                ax.set_xlabel("speed (r/min, log)" if log_x else "speed (r/min, one cell each)", fontsize=8)
             if c == 0:
                 ax.set_ylabel("load (N·m)", fontsize=8)
         # the scale is the 95th percentile (a lost point would swamp the rest): arrows mark values beyond it
