@@ -78,6 +78,7 @@ from jax.typing import ArrayLike
 from .. import SaveFinal
 from ..drive import RPM, SETTLE_PERIODS, Drive, DualDrive, DualPMSMParams, PMSMParams, Scenario, Sensors
 from ..observers import AbstractObserver
+from ..observers.base import AbstractDriveObserver
 from ..runtime.sharding import batch_mesh
 from ..scenarios import Grid
 from ..scenarios.families import DRIVE_STUDY_AXES
@@ -252,7 +253,9 @@ def reversals(
     out = {k: np.full(shape, np.nan) for k in ("rate", "other", "resolution")}
     out["monotone"], out["probes"] = np.zeros(shape, bool), np.zeros(shape, np.int32)
     out["states"] = np.empty(shape, dtype=object)
-    for i, obs in enumerate(designs.values()):
+    for i, (name, obs) in enumerate(designs.items()):
+        if not isinstance(obs, AbstractDriveObserver):  # the map's own check has run: a drive observer each
+            raise ValueError(f"envelope reversal: design {name!r} is not a drive observer ({type(obs).__name__})")
         for j, load in enumerate(loads):
             states_at = reversal_holds(
                 rev_drive, obs, base, n, load_nm=load, t_start=REVERSAL_T_START, settle=settle, horizon=horizon
@@ -614,6 +617,7 @@ def envelope(
         sensors="ideal" if sensors is None else "given",
     )
     if sensors is not None:  # what the runs measured through (Sensors' fields; the noise levels, A and V)
+        attrs: dict[str, object] = dict(attrs)
         attrs.update(
             sensors_i_noise=float(sensors.i_noise),
             sensors_u_noise=float(sensors.u_noise),

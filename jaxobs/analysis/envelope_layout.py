@@ -146,7 +146,7 @@ def envelope_dataset(
     for k, (unit, long_name) in ENVELOPE_VARIABLES.items():
         v = res[k]
         v = v.astype(np.int8) if v.dtype == bool or k in STATE_VARIABLES else v.astype(float)
-        var_attrs = {"units": unit, "long_name": long_name}
+        var_attrs: dict[str, object] = {"units": unit, "long_name": long_name}
         if k in STATE_VARIABLES:
             var_attrs.update(flag_values=np.arange(5, dtype=np.int8), flag_meanings=STATE_FLAGS)
         data[k] = (dims, v, var_attrs)
