@@ -1,7 +1,15 @@
 """The worst case by gradients: the operating point in a box of speed, load and resistance mismatch where a
 design is least stable (:func:`worst_case`): a grid, then a multi-start projected gradient ascent with a
 backtracking (Armijo) line search of the largest non-neutral Lyapunov exponent (:func:`_ascend`), each worst
-verified by Floquet and simulation."""
+verified by Floquet and simulation.
+
+Why the ascent is written here and not an optimistix minimiser: (1) the search is confined to a box (the axes'
+ranges) and optimistix's minimisers take no bounds, so a bounded search would run through a squashing
+reparametrisation that bends the line search's geometry near the faces, where worst cases lie; (2) each round
+tries three step lengths for every start in one batched evaluation (one program call of many long simulations),
+where ``optx.BacktrackingArmijo`` tries one step per call and would take up to three times the sequential
+simulations; (3) the exponent is a maximum over modes, not smooth everywhere, and the search keeps the best point
+it has evaluated rather than its last iterate."""
 
 from __future__ import annotations
 
