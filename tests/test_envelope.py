@@ -45,6 +45,21 @@ def small():
                     horizon=0.6, stability=SHORT)  # fmt: skip
 
 
+def test_a_family_stands_for_its_machine_drive_sensors_and_seed(small):
+    """envelope(family=DriveScenarios(...)) is the map of that family's machine, drive, sensors and seed, as a drive
+    study takes them: the same Dataset as given apart; both, or neither, is one line naming the choice."""
+    from jaxobs.scenarios.families import DriveScenarios
+
+    fam = DriveScenarios(PAR, DRIVE)
+    ds = envelope(SMALL_DESIGNS, family=fam, speeds_rpm=[300.0, 1000.0], loads_nm=[0.0, 5.0], horizon=0.6,
+                  stability=SHORT)  # fmt: skip
+    assert ds.identical(small)
+    with pytest.raises(ValueError, match="give family, or machine, drive and sensors, not both"):
+        envelope(SMALL_DESIGNS, family=fam, machine=PAR)
+    with pytest.raises(ValueError, match=r"give family \(a DriveScenarios\), or machine and drive"):
+        envelope(SMALL_DESIGNS, machine=PAR)
+
+
 def test_small_envelope_dims_units_and_verdicts(small):
     ds = small
     assert ds["holds"].dims == ("design", "speed_rpm", "load_nm")

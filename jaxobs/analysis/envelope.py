@@ -81,7 +81,7 @@ from ..observers import AbstractObserver
 from ..observers.base import AbstractDriveObserver
 from ..runtime.sharding import batch_mesh
 from ..scenarios import Grid
-from ..scenarios.families import DRIVE_STUDY_AXES
+from ..scenarios.families import DRIVE_STUDY_AXES, DriveScenarios
 from ..studies.study import study
 from .envelope_layout import ENVELOPE_VARIABLES, REVERSAL_VARIABLES, envelope_dataset, reversal_variables
 from .envelope_runs import (
@@ -485,11 +485,31 @@ def _states(res: dict[str, np.ndarray]) -> None:
     res["stable"] = linear & ((run_state == HOLDS) | (run_state == LIMIT_CYCLE))
 
 
+def _from_family(
+    family: DriveScenarios | None,
+    machine: PMSMParams | DualPMSMParams | None,
+    drive: Drive | DualDrive | None,
+    sensors: Sensors | None,
+    seed: int,
+) -> tuple[PMSMParams | DualPMSMParams, Drive | DualDrive, Sensors | None, int]:
+    """The machine, drive, sensors and seed a map runs: its family's, or those given (:func:`envelope`)."""
+    if family is None:
+        if machine is None or drive is None:
+            raise ValueError("envelope: give family (a DriveScenarios), or machine and drive")
+        return machine, drive, sensors, seed
+    if not isinstance(family, DriveScenarios):
+        raise ValueError(f"envelope: family must be DriveScenarios, got {type(family).__name__}")
+    if machine is not None or drive is not None or sensors is not None:
+        raise ValueError("envelope: give family, or machine, drive and sensors, not both (the family holds its own)")
+    return family.machine, family.drive, family.sensors, family.seed
+
+
 def envelope(
     designs: Mapping[str, AbstractObserver],
     *,
-    machine: PMSMParams | DualPMSMParams,
-    drive: Drive | DualDrive,
+    machine: PMSMParams | DualPMSMParams | None = None,
+    drive: Drive | DualDrive | None = None,
+    family: DriveScenarios | None = None,
     speeds_rpm: ArrayLike | Sequence[float] | None = None,
     loads_nm: ArrayLike | Sequence[float] | None = None,
     mismatch: tuple[str, ArrayLike] | None = None,
@@ -514,8 +534,12 @@ def envelope(
 
     Args:
         designs: name -> drive observer closing ``drive``'s loop sensorless.
-        machine: the machine (a :class:`~jaxobs.drive.DualPMSMParams` for a :class:`~jaxobs.drive.DualDrive`).
+        machine: the machine (a :class:`~jaxobs.drive.DualPMSMParams` for a :class:`~jaxobs.drive.DualDrive`);
+            with ``drive``, or ``family``.
         drive: a sensorless drive started steady.
+        family: the drive's scenarios (:class:`~jaxobs.scenarios.families.DriveScenarios`, as a drive study takes
+            them): its machine, drive, sensors and seed, in place of ``machine``, ``drive``, ``sensors`` and
+            ``seed``.
         speeds_rpm: speeds, r/min, increasing, either sign (|speed| within the drive's limits; default
             :func:`default_speeds`, positive).
         loads_nm: load torques, N·m (default :func:`default_loads`).
@@ -556,8 +580,10 @@ def envelope(
 
     Raises:
         ValueError: no design, a drive that is not sensorless or not started steady, or an argument out of its
-            range (the message names it and the range); ``reversal`` on a dual drive.
+            range (the message names it and the range); ``reversal`` on a dual drive; ``family`` with
+            ``machine``, ``drive`` or ``sensors``, or neither.
     """
+    machine, drive, sensors, seed = _from_family(family, machine, drive, sensors, seed)
     _check_designs_and_drive(designs, drive)
     dual = _dual_machine(machine, drive, mismatch)
     if dual is not None:
