@@ -542,6 +542,20 @@ def test_the_peer_cases_scale_with_the_drive_files_rating():
     assert (lab["psi_f"], lab["J"], lab["B"], lab["alpha_c"]) == (0.545, 0.015, 0.0, 2 * math.pi * 200.0)
 
 
+def test_the_peer_cases_refuse_a_drive_file_without_its_rating(tmp_path):
+    """A drive file whose [machine] lacks rated_torque_nm (or has rated_speed_rpm ≤ 0) is refused by key name."""
+    from benchmarks.peer_observer import drive_cases
+
+    text = TEKNIC_FILE.read_text()
+    for key, line in (("rated_torque_nm", "rated_torque_nm = "), ("rated_speed_rpm", "rated_speed_rpm = ")):
+        bad = "\n".join(("#" + ln if ln.startswith(line) else ln) for ln in text.splitlines())
+        if key == "rated_speed_rpm":
+            bad = bad.replace("#rated_speed_rpm = ", "rated_speed_rpm = -")
+        (tmp_path / "d.toml").write_text(bad)
+        with pytest.raises(ValueError, match=f"\\[machine\\] {key} must be a number > 0"):
+            drive_cases(tmp_path / "d.toml")
+
+
 def test_the_teknic_tuning_job_and_its_stored_result_read_back():
     """The Teknic job (the lab job at the Teknic's speeds and loads) frees the same five gains on the Teknic drive;
     its stored result rebuilds the closed form at α_o = 2π·50 and a tuned mechanical-model design."""
