@@ -72,7 +72,7 @@ from ._logfile import (
     split_fields,
     stream_columns,
 )
-from ._recordings import _RATE_SLACK, DriveRecording, column_index, resample_rows
+from ._recordings import DriveRecording, check_rate, column_index, resample_rows
 
 MAX_LOG_BYTES = 8 * 2**30  # a log file larger than this is refused (10^7 rows of 10 columns is about 1 GiB)
 
@@ -155,11 +155,7 @@ class LogData:
                 samples of ``ts``.
         """
         ts = check_sample_time("ts", ts, "LogData.resampled")
-        if self.ts > _RATE_SLACK * ts:
-            raise ValueError(
-                f"recording {self.path!r}: sampled at intervals of {self.ts:.6g} s ({1 / self.ts:.6g} Hz), slower "
-                f"than the observer's ts = {ts:g} s ({1 / ts:g} Hz): interpolation would invent the samples between"
-            )
+        check_rate(self.ts, ts, f"recording {self.path!r}")
         named = {"u_a": self.u_a, "u_b": self.u_b, "i_a": self.i_a, "i_b": self.i_b}
         named.update({k: c for k, c in (("theta_e", self.theta_e), ("omega_e", self.omega_e)) if c is not None})
         keys = list(named)

@@ -337,6 +337,24 @@ def column_index(spec: object, header: list[str] | None, width: int, path: str |
     raise RecordingColumnError(f"recording {p!r}: a {role} column must be a name or an index, got {spec!r}", role, spec)
 
 
+def check_rate(longest: float, ts: float, where: str) -> None:
+    """Refuse a record slower than the observer: an interval longer than ``ts`` (by more than clock jitter).
+
+    Args:
+        longest: The record's longest interval, s.
+        ts: The observer's sample time, s.
+        where: The record's name, for the message.
+
+    Raises:
+        ValueError: ``longest`` over ``ts`` by more than 1 %: interpolation would invent the samples between.
+    """
+    if longest > _RATE_SLACK * ts:
+        raise ValueError(
+            f"{where}: sampled at intervals up to {longest:.6g} s ({1 / longest:.6g} Hz), slower than the observer's "
+            f"ts = {ts:g} s ({1 / ts:g} Hz): interpolation would invent the samples between"
+        )
+
+
 def resample_rows(
     t: np.ndarray,
     columns: Mapping[int, np.ndarray],
@@ -474,11 +492,7 @@ def read_recording(
             )
         ts = step
     ts = check_sample_time("ts", ts, "recording")
-    if longest > _RATE_SLACK * ts:
-        raise ValueError(
-            f"recording {str(path)!r}: sampled at intervals up to {longest:.6g} s ({1 / longest:.6g} Hz), slower "
-            f"than the observer's ts = {ts:g} s ({1 / ts:g} Hz): interpolation would invent the samples between"
-        )
+    check_rate(longest, ts, f"recording {str(path)!r}")
     names_of = {i: (header[i] if header else str(i)) for i in range(width)}
     angle_idx = {column_index(c, header, width, path, "truth") for c in angle}
     avg_idx = {column_index(c, header, width, path, "signal") for c in averaged}

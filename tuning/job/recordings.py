@@ -207,9 +207,13 @@ def _log_options(
             how = "layout abc for both" if layout is not None else "declare them in layout"
             raise JobError(f"{w}.columns", f"6 columns are three voltage and three current phases: {how}")
     else:  # voltages and currents: three of either are phases, declared so
-        for key, n, frame in (("voltages", n_volt, "voltage_frame"), ("currents", len(cols) - n_volt, "current_frame")):
-            if n == 3 and (layout is None or getattr(layout, frame) != "abc"):
-                raise JobError(f"{w}.{key}", f"3 columns are three phases: declare layout.{frame} = 'abc'")
+        frames = (None, None) if layout is None else (layout.voltage_frame, layout.current_frame)
+        for key, n, field, frame in (
+            ("voltages", n_volt, "voltage_frame", frames[0]),
+            ("currents", len(cols) - n_volt, "current_frame", frames[1]),
+        ):
+            if n == 3 and frame != "abc":
+                raise JobError(f"{w}.{key}", f"3 columns are three phases: declare layout.{field} = 'abc'")
     windows = get_field(rec, "windows", f"{w}.windows", int, 0)
     if "windows" in rec and not 1 <= windows <= MAX_WINDOWS:
         raise JobError(f"{w}.windows", f"must be a count in 1..{MAX_WINDOWS}, got {windows}")
