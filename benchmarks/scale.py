@@ -9,7 +9,7 @@ in a temporary folder (each chunk's metrics to disk as it finishes, as ``jaxobs 
 Dataset written as study.nc (NetCDF4, h5netcdf).  ``--held``: without the store (every chunk's values held
 in memory until the end), for comparison.  Reported: the wall time of the study (compilation included, from
 the persistent cache when warm), scenarios/s, the peak RSS of the process (its VmHWM: see ``_peak_rss_mib``) and the
-1-minute load average at the start (the machine may be shared).  ``--kind drive``: ``run_drive_study`` of
+1-minute load average at the start (the machine may be shared).  ``--kind drive``: ``run_study`` on the drive family of
 paper 000's second-order SOIFO closing the loop of its SPMSM (the drive jobs' bench, ``spmsm000``),
 sensorless, on Sobol points over speed × load × Rs mismatch × voltage noise (``study_flux_drive.toml``'s
 axes), float64, chunks of 1024, one device, streamed the same way; its settling pass before t = 0 is
@@ -42,17 +42,17 @@ def _drive_study(scenarios: int, horizon: float, store, mesh):
     import jaxobs
     from jaxobs import drive as D
     from jaxobs import linear, papers
-    from jaxobs.studies.drive import run_drive_study
+    from jaxobs.scenarios.families import DriveScenarios
+    from jaxobs.studies.study import run_study
 
     par = D.bench_machine("spmsm000")
     k1, k2 = papers.SECOND_ORDER_SOIFO_K1, papers.SECOND_ORDER_SOIFO_K2
     lam = linear.second_order_soifo_lambda(k1, k2)
     obs = jaxobs.SecondOrderSOIFO(par.Rs, par.Ld, k1, k2, lam, omega_init=par.p * 1000 * D.RPM)  # bound per scenario
-    return run_drive_study(
+    return run_study(
         {"second-order-SOIFO": obs},
         DRIVE_AXES,
-        machine=par,
-        drive=D.bench_drive(par, settle=SETTLE),
+        family=DriveScenarios(par, D.bench_drive(par, settle=SETTLE)),
         horizon=horizon,
         sampling="sobol",
         sample=scenarios,

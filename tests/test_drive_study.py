@@ -15,7 +15,9 @@ import jaxobs
 from jaxobs import drive as D
 from jaxobs import papers
 from jaxobs.io.provenance import by_label
+from jaxobs.scenarios.families import DriveScenarios
 from jaxobs.studies.drive import QUANTILES, run_drive_study
+from jaxobs.studies.study import run_study
 from jaxobs_tuning.cli import main
 from jaxobs_tuning.job import COMPONENTS, DriveSpec, JobError, job_drive
 from jaxobs_tuning.study_file import load_study
@@ -25,6 +27,7 @@ from tests.cfcheck import assert_cf18
 PAR = D.ipmsm_paper002(inertia="motor")
 DRIVE = D.Drive(D.FOC.imc(PAR, alpha_c=2 * math.pi * 300, alpha_s=2 * math.pi * 5), sensorless=True)
 DESIGNS = {"C-LESO": jaxobs.CLESO(PAR.Rs, PAR.Lq), "FA-LESO": jaxobs.FALESO(PAR.Rs, PAR.Lq)}
+FAMILY = DriveScenarios(PAR, DRIVE)
 PRESET = Path(__file__).resolve().parents[1] / "tuning" / "presets" / "study_leso_drive.toml"
 
 
@@ -32,7 +35,7 @@ def test_grid_study_dims_quantiles_and_the_papers_ordering():
     """A 2 × 2 × 2 grid (speed, dRs, dLq): labelled dims, quantiles over the scenarios, and the FA-LESO's
     frequency-adaptive internal model beats the C-LESO's lag on every scenario (002's point)."""
     axes = {"speed_rpm": [300.0, 600.0], "dRs": [-0.3, 0.3], "dLq": [-0.2, 0.2]}
-    ds = run_drive_study(DESIGNS, axes, machine=PAR, drive=DRIVE, horizon=0.06, chunk_size=8)
+    ds = run_study(DESIGNS, axes, family=FAMILY, horizon=0.06, chunk_size=8)
     assert ds["rms_position_steady"].dims == ("design", "speed_rpm", "dRs", "dLq")
     assert list(ds["quantile"].values) == list(QUANTILES)
     assert int(ds["lost_lock_count"].sum()) == 0
@@ -52,11 +55,10 @@ def test_grid_study_dims_quantiles_and_the_papers_ordering():
 
 
 def test_sobol_sample_and_bad_axes():
-    ds = run_drive_study(
+    ds = run_study(
         {"FA-LESO": DESIGNS["FA-LESO"]},
         {"speed_rpm": [300.0, 600.0], "i_noise": [0.0, 0.1]},
-        machine=PAR,
-        drive=DRIVE,
+        family=FAMILY,
         horizon=0.04,
         sampling="sobol",
         sample=8,
@@ -69,11 +71,11 @@ def test_sobol_sample_and_bad_axes():
     noise = ds["speed_noise"].sel(design="FA-LESO").values
     assert np.corrcoef(ds["i_noise"].values, noise)[0, 1] > 0.8
     with pytest.raises(ValueError, match="axes.spin"):
-        run_drive_study(DESIGNS, {"spin": [1.0]}, machine=PAR, drive=DRIVE)
+        run_study(DESIGNS, {"spin": [1.0]}, family=FAMILY)
     with pytest.raises(ValueError, match=r"axes.dRs must be .* in \[-0.95, 10\]"):
-        run_drive_study(DESIGNS, {"dRs": [-2.0]}, machine=PAR, drive=DRIVE)
+        run_study(DESIGNS, {"dRs": [-2.0]}, family=FAMILY)
     with pytest.raises(ValueError, match="sensorless"):
-        run_drive_study(DESIGNS, {"dRs": [0.0]}, machine=PAR, drive=D.Drive(DRIVE.foc))
+        run_study(DESIGNS, {"dRs": [0.0]}, family=DriveScenarios(PAR, D.Drive(DRIVE.foc)))
 
 
 def _small_preset(tmp_path):
@@ -167,14 +169,12 @@ def test_a_load_step_at_t_event_is_the_only_transient():
     """load_step_nm steps the load at t_event: before it the drive is steady (error as without a step), after
     it the FA-LESO's PLL sees the deceleration (the error grows)."""
     axes = {"speed_rpm": [600.0], "load_step_nm": [0.0, 5.0]}
-    ds = run_drive_study(
+    ds = run_study(
         {"FA-LESO": DESIGNS["FA-LESO"]},
         axes,
-        machine=PAR,
-        drive=DRIVE,
+        family=DriveScenarios(PAR, DRIVE, t_event=0.03),
         horizon=0.08,
         steady_from=0.0,
-        t_event=0.03,
         chunk_size=2,
     )
     peak = np.degrees(ds["peak_position_steady"].sel(design="FA-LESO", speed_rpm=600.0))
@@ -255,4 +255,16 @@ def test_t_event_of_a_drive_study(tmp_path):
     with pytest.raises(JobError, match=r"study.t_event: must be in \[0, horizon = 0.2\) s"):
         load_study(st)
     with pytest.raises(ValueError, match="t_event must be in"):
-        run_drive_study(DESIGNS, {"dRs": [0.0]}, machine=PAR, drive=DRIVE, horizon=0.05, t_event=0.05)
+        run_study(DESIGNS, {"dRs": [0.0]}, family=DriveScenarios(PAR, DRIVE, t_event=0.05), horizon=0.05)
+
+
+def test_run_drive_study_is_a_deprecated_alias_of_the_one_preset():
+    """The drive study's first preset warns and returns run_study's Dataset on the DriveScenarios it builds (its
+    provenance the same function's), and refuses a family given with its own keywords."""
+    axes = {"speed_rpm": [600.0], "dRs": [-0.2, 0.2]}
+    ref = run_study(DESIGNS, axes, family=FAMILY, horizon=0.04, chunk_size=2)
+    with pytest.warns(DeprecationWarning, match="run_study"):
+        old = run_drive_study(DESIGNS, axes, machine=PAR, drive=DRIVE, horizon=0.04, chunk_size=2)
+    xr.testing.assert_identical(old, ref)
+    with pytest.warns(DeprecationWarning), pytest.raises(ValueError, match="not both"):
+        run_drive_study(DESIGNS, axes, family=FAMILY, machine=PAR)

@@ -8,6 +8,7 @@ import equinox as eqx
 import numpy as np
 import pytest
 
+import jaxobs
 from jaxobs import drive as D
 from jaxobs.scenarios import LHS, Given, Grid, Random, Recordings, Sobol, sampler_of
 from jaxobs.scenarios.families import (
@@ -105,22 +106,32 @@ def test_both_presets_take_samplers_one_way():
     assert Recordings({"a": np.zeros(2)}, ["x.csv", "y.csv"]).dim_attrs["long_name"].startswith("recording file")
 
 
-def test_the_presets_share_one_default_mesh():
-    """run_study and run_drive_study default to the same mesh: the runner's (every device)."""
+def test_one_preset_the_family_declares_the_study():
+    """run_study is the one preset: its defaults are the family's (horizon, chunk), the family's study_plan says
+    what is scored, and a family without a study is refused in one line naming it."""
     import inspect
 
-    from jaxobs.studies.drive import run_drive_study
+    from jaxobs.scenarios import Grid
     from jaxobs.studies.study import run_study
 
-    for preset in (run_study, run_drive_study):
-        params = inspect.signature(preset).parameters
-        assert params["mesh"].default is None and params["sampling"].default is None and params["sample"].default == 0
-        assert params["family"].default is None
+    params = inspect.signature(run_study).parameters
+    assert params["mesh"].default is None and params["sampling"].default is None and params["sample"].default == 0
+    assert params["family"].default is None and params["horizon"].default is None
+    assert (GridSignals.study_horizon, GridSignals.study_chunk) == (0.4, 2048)
+    assert (DriveScenarios.study_horizon, DriveScenarios.study_chunk) == (0.3, 256)
+    fll = jaxobs.SOGIFLL(k=0.3, lam=500.0)
+    plan = GridSignals(0.1, 50.0).study_plan({"a": fll}, Grid({"dc": [0.0]}), horizon=0.4)
+    assert plan.metrics == GridSignals.metrics and plan.mask == "diverged" and plan.quantiles == ()
+    assert [f.name for f in plan.flags] == list(GridSignals.flags) and plan.ctx.steady_from == pytest.approx(0.325)
+    with pytest.raises(ValueError, match="EMFSignals: no study runs on this family"):
+        run_study({"a": fll}, {"speed_hz": [50.0]}, family=EMFSignals())
 
 
 # the modules that take a family: none forks on a family's (or a study kind's) name
 USERS = (
-    "jaxobs/scenarios/families.py",
+    "jaxobs/scenarios/families/_base.py",
+    "jaxobs/scenarios/families/signals.py",
+    "jaxobs/scenarios/families/drive.py",
     "jaxobs/studies/study.py",
     "jaxobs/studies/drive.py",
     "jaxobs/analysis/envelope.py",

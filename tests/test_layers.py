@@ -109,7 +109,10 @@ LAYERS = [
     ("jaxobs",),
     # the one study runner (samplers in jaxobs.scenarios), the scenario families (their axes, batches, systems)
     # and the registry of observer classes
-    ("jaxobs.runtime.runner", "jaxobs.scenarios.families", "jaxobs.studies.registry"),
+    ("jaxobs.runtime.runner", "jaxobs.scenarios.families._base", "jaxobs.studies.registry"),
+    ("jaxobs.scenarios.families.signals",),  # grid signals and back EMFs
+    ("jaxobs.scenarios.families.drive",),  # the drive (its recordings are the back EMFs')
+    ("jaxobs.scenarios.families",),
     # the figures' helpers and the Bode figures (jaxobs.plot re-exports them)
     ("jaxobs.plot._figure", "jaxobs.reproduce.compare", "jaxobs.reproduce._run"),
     ("jaxobs.plot._bode", "jaxobs.plot._paper", "jaxobs.plot._envelope"),

@@ -21,7 +21,7 @@ import jaxobs
 from jaxobs import drive as D
 from jaxobs import linear
 from jaxobs.runtime.chunkstore import ChunkStore
-from jaxobs.studies.drive import run_drive_study
+from jaxobs.scenarios.families import DriveScenarios
 from jaxobs.studies.study import run_study
 from jaxobs_tuning.cli import STUDY_CHUNKS, main
 
@@ -116,22 +116,22 @@ def test_run_study_from_a_partial_store_equals_one_run(tmp_path):
         np.testing.assert_array_equal(again[v].values, ref[v].values)
 
 
-def test_run_drive_study_from_a_partial_store_equals_one_run(tmp_path):
+def test_a_drive_study_from_a_partial_store_equals_one_run(tmp_path):
     """As for FLL studies: the drive study's chunks lost to a kill are computed again, the others read back."""
     par = D.ipmsm_paper002(inertia="motor")
     drive = D.Drive(D.FOC.imc(par, alpha_c=2 * math.pi * 300, alpha_s=2 * math.pi * 5), sensorless=True)
     designs = {"a": jaxobs.CLESO(par.Rs, par.Lq), "b": jaxobs.CLESO(par.Rs, par.Lq, omega0=4000.0)}
     axes = {"speed_rpm": [600.0], "dRs": [-0.2, 0.2], "dLq": [0.0, 0.2]}
-    kw = dict(machine=par, drive=drive, horizon=0.03, chunk_size=2)
-    ref = run_drive_study(designs, axes, **kw)
+    kw = dict(family=DriveScenarios(par, drive), horizon=0.03, chunk_size=2)
+    ref = run_study(designs, axes, **kw)
     assert ref.sizes["dRs"] == 2 and not bool(np.isnan(ref["rms_position_steady"].values).any())
     store = ChunkStore(tmp_path / "c", "fp")
-    xr.testing.assert_identical(run_drive_study(designs, axes, store=store, **kw), ref)
+    xr.testing.assert_identical(run_study(designs, axes, store=store, **kw), ref)
     assert sorted(f.name for f in (tmp_path / "c").glob("*.h5")) == ["0.0.h5", "0.1.h5", "1.0.h5", "1.1.h5"]
     for f in ("0.1.h5", "1.0.h5"):
         (tmp_path / "c" / f).unlink()
     store = ChunkStore(tmp_path / "c", "fp", resume=True)
-    again = run_drive_study(designs, axes, store=store, **kw)
+    again = run_study(designs, axes, store=store, **kw)
     assert store.resumed == 2 and store.total == 4
     xr.testing.assert_identical(again, ref)
     for v in ref.data_vars:

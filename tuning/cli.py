@@ -128,10 +128,10 @@ def _cmd_drive_study(name, designs, axes, opts, out: Path, quiet: bool, provenan
     from jaxobs.core.quantities import text_unit
     from jaxobs.metrics import METRICS
     from jaxobs.plot import drive_study_figure
-    from jaxobs.studies.drive import DRIVE_STUDY_METRICS, run_drive_study
-    from jaxobs.studies.study import write_study
+    from jaxobs.studies.drive import DRIVE_STUDY_METRICS
+    from jaxobs.studies.study import run_study, write_study
 
-    ds = run_drive_study(designs, axes, progress=progress_of(quiet=quiet), store=store, **opts)
+    ds = cast("Dataset", run_study(designs, axes, progress=progress_of(quiet=quiet), store=store, **opts))
     ds.attrs.update(provenance or {})  # the study file's and the result files' sha256, the machine
     fig = out / "drive_study.png"
     drive_study_figure(ds, fig)

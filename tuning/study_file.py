@@ -154,7 +154,7 @@ STEP_AXES = ("speed_step_rpm", "load_step_nm")
 
 @dataclass
 class StudySpec:
-    """A checked study file: its preset (``run_study``, or ``run_drive_study`` for a family that closes the loop)
+    """A checked study file: the one study preset (``jaxobs.studies.study.run_study``)
     takes ``designs``, ``axes``, ``family`` and ``opts``.
 
     Attributes:

@@ -485,7 +485,8 @@ def drive_study_figure(ds: xr.Dataset, path: FigurePath) -> Figure:
     axis (a Sobol/LHS sample).  Axes and metrics are labelled in words with their units.
 
     Args:
-        ds: A drive study's Dataset (:func:`jaxobs.studies.drive.run_drive_study`, with quantiles).
+        ds: A drive study's Dataset (:func:`jaxobs.studies.study.run_study` on a ``DriveScenarios`` family, with
+            quantiles).
         path: Where the figure is written (a file name or a binary file object); None: not written.
 
     Returns:

@@ -3,9 +3,9 @@
     run = run_scenarios(designs, Grid(axes), system_factory, metrics, build=..., horizon=0.4)
     run.values["tuned"]["rms_phase_steady"]       # one value per scenario, in the sampler's order
 
-FLL studies (:func:`jaxobs.studies.study.run_study`), drive studies (:func:`jaxobs.studies.drive.run_drive_study`)
-and studies on recordings are this runner with different samplers (:mod:`jaxobs.scenarios`: ``Grid``,
-``Random``, ``Sobol``, ``LHS``, ``Recordings``), builders (the points → a batched scenario PyTree),
+FLL studies, drive studies (:func:`jaxobs.studies.study.run_study`, each family's) and studies on recordings
+are this runner with different samplers (:mod:`jaxobs.scenarios`: ``Grid``, ``Random``, ``Sobol``, ``LHS``,
+``Recordings``), builders (the points → a batched scenario PyTree),
 system factories (a design and one scenario → a system, :class:`jaxobs.AbstractSystem`) and metrics
 (a :class:`jaxobs.Solution` → a dict of per-scenario scalars); each study then lays its values out as
 an ``xarray.Dataset`` (:meth:`jaxobs.scenarios.AbstractSampler.layout`).

@@ -621,8 +621,8 @@ SAMPLINGS: dict[str, type] = {"grid": Grid, "random": Random, "sobol": Sobol, "l
 def sampler_of(
     axes: AbstractSampler | Mapping[str, Any], *, sampling: str | None = None, sample: int = 0, seed: int = 0
 ) -> AbstractSampler:
-    """The sampler of a study: how both presets (:func:`jaxobs.studies.study.run_study`,
-    :func:`jaxobs.studies.drive.run_drive_study`) take their scenarios.
+    """The sampler of a study: how the study preset (:func:`jaxobs.studies.study.run_study`) takes its
+    scenarios.
 
     Args:
         axes: A sampler, taken as it is; or a dict of axis values: a :class:`Grid`, or ``sample`` points drawn

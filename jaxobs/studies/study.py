@@ -4,8 +4,9 @@
 from a family (:mod:`jaxobs.scenarios.families`), run by :func:`jaxobs.runtime.runner.run_scenarios`, scored by
 :class:`~jaxobs.metrics.Metric` s of the one metric table (:data:`jaxobs.metrics.METRICS`: their exact forms,
 the flags among them: boolean metrics), and laid out with the sampler's dims, CF units and the designs' gains.
-The FLL study (:func:`run_study`, below) and the drive study (:func:`jaxobs.studies.drive.run_drive_study`) are
-presets of it.
+:func:`run_study` is its one preset: the family declares its study (its metrics, flags, mask, quantiles, metric
+context and attributes: :meth:`jaxobs.scenarios.families.AbstractFamily.study_plan`), the FLL study of grid
+signals below, the drive study of :class:`~jaxobs.scenarios.families.DriveScenarios` (:mod:`jaxobs.studies.drive`).
 
 The FLL study:
 
@@ -72,13 +73,13 @@ import numpy as np
 
 from .. import metrics as M
 from ..io.files import atomic_path
-from ..io.provenance import cf_dataset, cf_labels, provenance
+from ..io.provenance import cf_dataset, cf_labels
 from ..observers import gain_fields, gain_table
 from ..runtime.chunkstore import AbstractChunkSink, ChunkStore
 from ..runtime.progress import ProgressArg
 from ..runtime.runner import run_scenarios
 from ..runtime.simulation import AbstractSave, SaveAll
-from ..scenarios import GRID_SIGNAL_AXES, LHS, AbstractSampler, Grid, Random, Recordings, Sobol, sampler_of
+from ..scenarios import GRID_SIGNAL_AXES, AbstractSampler, sampler_of
 from ..scenarios.families import AbstractFamily, GridSignals
 
 if TYPE_CHECKING:
@@ -318,43 +319,51 @@ def run_study(
     designs: dict[str, Any],
     axes: Mapping[str, Any] | AbstractSampler,
     *,
-    family: GridSignals | None = None,
+    family: AbstractFamily | None = None,
     t_event: float | None = None,
-    horizon: float = 0.4,
+    horizon: float | None = None,
     steady_from: float | None = None,
-    band_hz: float = 0.05,
+    band_hz: float | None = None,
     sampling: str | None = None,
     sample: int = 0,
     seed: int | None = None,
-    chunk_size: int = 2048,
+    chunk_size: int | None = None,
     progress: ProgressArg = False,
     return_seconds: bool = False,
     mesh: Mesh | None = None,
     store: AbstractChunkSink | None = None,
 ) -> xr.Dataset | tuple[xr.Dataset, float]:
-    """Simulate every FLL design on every scenario: :func:`study` on :class:`~jaxobs.scenarios.families.GridSignals`
-    (or a
-    :class:`~jaxobs.scenarios.Recordings` sampler's recorded voltages) with the FLL metrics (see module doc).
+    """The one study preset: every design on every scenario of ``axes``, drawn from ``family``, scored as the
+    family's study scores it (:meth:`~jaxobs.scenarios.families.AbstractFamily.study_plan`): :func:`study` with the
+    family's metrics, flags, mask, quantiles and attributes.
+
+    The FLL study (:class:`~jaxobs.scenarios.families.GridSignals`, or a :class:`~jaxobs.scenarios.Recordings`
+    sampler's recorded voltages) is the module doc's; the drive study
+    (:class:`~jaxobs.scenarios.families.DriveScenarios`) is :mod:`jaxobs.studies.drive`'s.
 
     Args:
-        designs: name -> FLL.
+        designs: name -> design (FLLs for grid signals, drive observers for a drive).
         axes: a dict of axis values, or a sampler itself (``Grid``, ``Random``, ``Sobol``, ``LHS``, or
             ``Recordings``: recorded signals with truth columns, dims ``(design, recording)``), as
-            :func:`jaxobs.scenarios.sampler_of` takes them (with ``sampling``, ``sample`` and ``seed``).
-        family: the grid signals (:class:`~jaxobs.scenarios.families.GridSignals`: their event, nominal frequency and
-            seed); None: built from ``t_event`` (default 0.1 s), ``seed`` (default 0) and the first design's
-            nominal frequency.
-        t_event: the event's time, s (with ``family``: its own).
-        horizon, steady_from, band_hz: the run's length, the steady window's start (default three quarters
-            of the way from ``t_event``) and the settling band, Hz.
-        sampling, sample, seed: how a dict of axes is sampled (:func:`jaxobs.scenarios.sampler_of`; ``seed``
-            with ``family``: its own).
-        chunk_size: scenarios per compiled call.
-        progress: ``True``: a tqdm bar; a callable ``progress(done, total)``.
+            :func:`jaxobs.scenarios.sampler_of` takes them (with ``sampling``, ``sample`` and the family's seed).
+        family: the scenarios' family (:mod:`jaxobs.scenarios.families`: ``GridSignals`` with its event, nominal
+            frequency and seed; ``DriveScenarios`` with its machine, drive, sensors, event and seed); None: grid
+            signals built from ``t_event`` (default 0.1 s), ``seed`` (default 0) and the first design's nominal
+            frequency.
+        t_event, seed: without ``family``: the grid signals' event time, s, and noise seed.
+        horizon: the runs' length, s; None: the family's ``study_horizon`` (0.4 s grid signals, 0.3 s a drive).
+        steady_from: the steady window's start, s; None: the family's rule (grid signals: three quarters of the
+            way from ``t_event``; a drive: half the horizon).
+        band_hz: the FLL's settling band, Hz (default 0.05; grid signals only).
+        sampling, sample: how a dict of axes is sampled (:func:`jaxobs.scenarios.sampler_of`).
+        chunk_size: scenarios per compiled call; None: the family's ``study_chunk`` (2048 grid signals, 256 a
+            drive).
+        progress: ``True``: a tqdm bar on stderr (each design's compilation named); a callable
+            ``progress(done, total)``; False/None: nothing.
         return_seconds: also return the wall time of the runs (kept out of the Dataset, so two identical
             studies write identical files).
         mesh: the devices each chunk is split over, a one-axis ``"batch"`` mesh (default
-            ``jaxobs.batch_mesh()``, every device of every process, as every preset;
+            ``jaxobs.batch_mesh()``, every device of every process;
             ``jaxobs.batch_mesh(jax.devices()[:1])`` keeps to one device).
         store: a :class:`jaxobs.runtime.chunkstore.ChunkStore`: each chunk's values go to disk as it finishes, chunks
             already there (an interrupted run's, ``resume=True``) are not run again, and the Dataset is laid
@@ -364,80 +373,45 @@ def run_study(
         The Dataset, or ``(dataset, seconds)`` with ``return_seconds``.
 
     Raises:
-        ValueError: no designs, an axis or sampler refused, ``family`` given with ``t_event`` or ``seed``, or
-            ``horizon``, ``t_event`` or ``chunk_size`` out of range.
+        ValueError: no designs, an axis or sampler refused, ``family`` given with ``t_event`` or ``seed``, a
+            family without a study, or ``horizon``, ``t_event``, ``steady_from``, ``band_hz`` or ``chunk_size``
+            out of range.
     """
     if not designs:
         raise ValueError("run_study needs at least one design")
-    if family is not None:
-        if not isinstance(family, GridSignals):
-            raise ValueError(
-                f"run_study: family must be GridSignals (jaxobs.scenarios.families), got {type(family).__name__}"
-            )
-        if t_event is not None or seed is not None:
-            raise ValueError("run_study: give family or t_event and seed, not both (the family holds its own)")
-        t_event, seed = family.t_event, family.seed
-    t_event = 0.1 if t_event is None else t_event
-    seed = 0 if seed is None else seed
-    sampler = sampler_of(axes, sampling=sampling, sample=sample, seed=seed)
-    if not horizon > t_event >= 0:
-        raise ValueError(f"horizon must exceed t_event >= 0, got t_event={t_event}, horizon={horizon}")
+    if family is None:
+        first = next(iter(designs.values()))
+        freq = float(first.omega_n) / (2 * math.pi)
+        family = GridSignals(0.1 if t_event is None else t_event, freq, 0 if seed is None else seed)
+    elif not isinstance(family, AbstractFamily):
+        raise ValueError(f"run_study: family must be a scenario family (jaxobs.scenarios.families), got {family!r}")
+    elif t_event is not None or seed is not None:
+        raise ValueError("run_study: give family or t_event and seed, not both (the family holds its own)")
+    sampler = sampler_of(axes, sampling=sampling, sample=sample, seed=family.draw_seed())
+    horizon = family.study_horizon if horizon is None else horizon
+    chunk_size = family.study_chunk if chunk_size is None else chunk_size
     if chunk_size < 1:
         raise ValueError(f"chunk_size must be >= 1, got {chunk_size}")
-    steady_from = t_event + 0.75 * (horizon - t_event) if steady_from is None else steady_from
-    recordings = isinstance(sampler, Recordings)
-    freq = float(next(iter(designs.values())).omega_n) / (2 * math.pi) if family is None else family.freq
-    fam: AbstractFamily
-    if recordings:
-        fam = GridSignals.recorded()
-    elif family is None:
-        fam = GridSignals(t_event, freq, seed)
-    else:
-        fam = family
-
-    def n_period(obs: Any) -> int:
-        # settle on the one-period average of f̂: one period of the grid's frequency (a recording's: the
-        # design's nominal one), in samples
-        f = float(obs.omega_n) / (2 * math.pi) if recordings else freq
-        return max(1, int(round(1.0 / (f * obs.ts))))
-
-    if isinstance(sampler, (Grid, Random, Sobol, LHS)):
-        # the signals are built a chunk at a time (jaxobs.runtime.runner): a bad axis value is refused here, before
-        # anything runs, by building the two scenarios of every axis's least and greatest values (each of
-        # grid_signals's checks is a bound on one axis, so these two pass only if every point inside does)
-        ends = [tuple(float(f(sampler.axes[k])) for k in sampler.names) for f in (np.min, np.max)]
-        fam.build(sampler.names, ends)
-    gains = gain_variables(designs)
-    what = "recordings on which the design lost lock" if recordings else "scenarios that lost lock"
-    flags = tuple(M.METRICS[k] for k in GridSignals.flags)
-    flags = tuple(replace(f, count=f"{what} (diverged ones included)") if f.name == "lost_lock" else f for f in flags)
-    attrs = dict(
-        t_event=t_event,
-        horizon=horizon,
-        steady_from=steady_from,
-        band_hz=band_hz,
-        sampling=sampler.sampling,
-        **({} if recordings else {"seed": sampler.seed if isinstance(sampler, (Random, Sobol, LHS)) else seed}),
-        **provenance(
-            "jaxobs.studies.study.run_study", digests={"recordings": " ".join(sampler.sha256)} if recordings else None
-        ),
-    )
+    plan = family.study_plan(designs, sampler, horizon=horizon, steady_from=steady_from, band_hz=band_hz)
     t0 = time.time()
     ds = study(
         designs,
-        fam,
+        plan.family,  # built a chunk at a time (the plan checked the axes: no chunk can refuse its points)
         sampler,
-        [M.METRICS[k] for k in STUDY_METRICS],
+        [M.METRICS[k] for k in plan.metrics],
         horizon=horizon,
-        ctx=StudyContext(t_event=t_event, steady_from=steady_from, band_hz=band_hz),
-        flags=flags,
-        static=n_period,
-        gains=gains,
-        attrs=attrs,
+        ctx=plan.ctx,
+        flags=plan.flags,
+        mask=plan.mask,
+        quantiles=plan.quantiles,
+        static=plan.static,
+        gains=gain_variables(designs),
+        attrs=plan.attrs,
         chunk_size=chunk_size,
         mesh=mesh,
         progress=progress,
         store=store,
+        label=plan.label,
     )
     seconds = time.time() - t0
     return (ds, seconds) if return_seconds else ds
