@@ -14,6 +14,7 @@ import pytest
 import jaxobs
 from jaxobs import papers
 from jaxobs_tuning.cli import BODE_FILES, DEMO_FILES, REPRODUCE_FILES, build_parser, load_study, main
+from jaxobs_tuning.cli_common import native_stderr_to_log
 from jaxobs_tuning.results import load_result, tuned_component
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -392,3 +393,27 @@ def test_the_package_lists_every_lazy_name():
 
     assert jaxobs_tuning.__all__ == list(jaxobs_tuning._LAZY)
     assert all(getattr(jaxobs_tuning, n) is not None for n in jaxobs_tuning.__all__)
+
+
+def test_quiet_sends_native_stderr_to_the_log_and_keeps_python_lines(tmp_path):
+    """Under --quiet, what native code writes to descriptor 2 (XLA's slow-compile alarms) goes to the log; Python's
+    one-line messages stay on stderr, and both are restored after the block.  Without --quiet, or where sys.stderr
+    was replaced (a test's capture), nothing moves."""
+    code = (
+        "import os, sys\n"
+        "from jaxobs_tuning.cli_common import native_stderr_to_log\n"
+        "with native_stderr_to_log(True) as path:\n"
+        "    os.write(2, b'native alarm\\n'); print('python line', file=sys.stderr)\n"
+        "os.write(2, b'native after\\n'); print(path)\n"
+        "with native_stderr_to_log(False) as none:\n"
+        "    os.write(2, b'not quiet\\n')\n"
+        "print(none)\n"
+    )
+    log = tmp_path / "native.log"
+    run = _python(code, env_add={"JAXOBS_NATIVE_LOG": str(log)})
+    assert run.returncode == 0, run.stderr
+    assert run.stdout.split() == [str(log), "None"]
+    assert run.stderr.splitlines() == ["python line", "native after", "not quiet"]
+    assert log.read_text() == "native alarm\n"
+    with native_stderr_to_log(True) as path:  # pytest's capture replaced sys.stderr: left alone
+        assert path is None

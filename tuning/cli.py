@@ -83,7 +83,7 @@ from jaxobs import use_compile_cache, use_host_devices
 from jaxobs.runtime.chunkstore import ChunkStore
 from jaxobs.studies.registry import spelled
 
-from .cli_common import enable_x64, progress_of
+from .cli_common import enable_x64, native_stderr_to_log, progress_of
 from .cli_drive import add_drive_parser
 from .cli_log import add_log_parser
 from .cli_papers import BODE_FILES as BODE_FILES
@@ -381,7 +381,12 @@ def _quiet_parent() -> argparse.ArgumentParser:
     """The options every command takes: --quiet, no progress on stderr (stdout, the results, is the same either
     way), and --no-cache."""
     quiet = _Parser(add_help=False)
-    quiet.add_argument("--quiet", action="store_true", help="no progress bars or compile notices on stderr")
+    quiet.add_argument(
+        "--quiet",
+        action="store_true",
+        help="no progress bars or compile notices on stderr; XLA's own messages (its slow-compile alarms) go to "
+        "$JAXOBS_NATIVE_LOG or ~/.cache/jaxobs/xla.log",
+    )
     quiet.add_argument(
         "--no-cache",
         action="store_true",
@@ -549,7 +554,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             return 2
         if not getattr(args, "no_cache", False):
             use_compile_cache()  # before any compilation: compiled programs are reused by the next process
-        return args.func(args)
+        with native_stderr_to_log(getattr(args, "quiet", False)):  # XLA's own alarms to a log under --quiet
+            return args.func(args)
     except ValueError as e:  # bad input, job-file errors (JobError) included: one line, exit 2
         print(f"jaxobs: error: {e}", file=sys.stderr)
         return 2
