@@ -13,6 +13,9 @@
    vmapped, averaged vs carrier (the drive's n_sub = 2 RK4 steps per sub-interval, and 1) in the same run:
    scenario-steps per second (the best of three after compiling); and the plant alone under a rotating command.
 
+``--figure PNG`` only draws phase a's current of the open-loop case (2 µs dead time) under carrier PWM, at every
+switching instant, beside the averaged inverter's samples (docs/img/pwm_current_lab.png).
+
 The output is meant for benchmarks/results/ with the date and ``uptime`` (the machine's load moves the cost).
 """
 
@@ -89,8 +92,13 @@ def _case():
                 i_dq=[i_d, i_q], u_dq=[u_d, u_q], w_M=w_m, theta0=0.0, t_end=T_END, t_from=T_FROM)  # fmt: skip
 
 
-def jaxobs_ripple(case, t_d):
-    """The open-loop case on jaxobs's carrier plant: the ripple (:func:`ripple`)."""
+def jaxobs_waveform(case, t_d, pwm="carrier"):
+    """The open-loop case on jaxobs's plant: the stator current at each switching instant (carrier) or at each
+    sample (averaged) from ``t_from`` on, and the sample instants.
+
+    Returns:
+        ``(t, i, t_samples)``: times, s; the complex α-β current, A; the sample instants, s.
+    """
     import jax
     import jax.numpy as jnp
     import numpy as np
@@ -101,19 +109,27 @@ def jaxobs_ripple(case, t_d):
     c = case
     par = D.PMSMParams(c["R_s"], c["L_d"], c["L_q"], c["psi_f"], 1e6, c["n_p"])
     ts = c["T_s"]
-    plant = D.PMSM(par, D.Inverter(c["u_dc"], 1.0 / ts, pwm="carrier"), t_d, ts=ts, n_sub=1)
+    plant = D.PMSM(par, D.Inverter(c["u_dc"], 1.0 / ts, pwm=pwm), t_d, ts=ts, n_sub=1)
     n = int(round(c["t_end"] / ts))
     w_e = c["n_p"] * c["w_M"]
     th = c["theta0"] + w_e * ts * (np.arange(n) + 0.5)
     u = (c["u_dq"][0] + 1j * c["u_dq"][1]) * np.exp(1j * th)
     x0 = jnp.asarray([c["i_dq"][0], c["i_dq"][1], c["w_M"], c["theta0"]])
+    t_samples = ts * np.arange(int(math.ceil(c["t_from"] / ts - 1e-9)), n)
+    inp = D.PlantInput(jnp.asarray(u.real), jnp.asarray(u.imag), jnp.zeros(n))
+    if pwm != "carrier":
+        xs = np.asarray(jax.jit(lambda s, i: jax.lax.scan(lambda a, b: (plant.step(a, b)[0], a.x), s, i)[1])(
+            PlantState(x0, None), inp))  # fmt: skip
+        t = ts * np.arange(n)
+        keep = t >= c["t_from"] - 1e-12
+        x = xs[keep]
+        return t[keep], (x[:, 0] + 1j * x[:, 1]) * np.exp(1j * x[:, 3]), t_samples
 
     def step(state, inp):
         tt, xs, rs = plant.carrier_substeps(state, inp)
         x = xs[-1]
         return PlantState(x.at[3].set(jnp.arctan2(jnp.sin(x[3]), jnp.cos(x[3]))), rs), (tt, xs)
 
-    inp = D.PlantInput(jnp.asarray(u.real), jnp.asarray(u.imag), jnp.zeros(n))
     _, (tt, xs) = jax.jit(lambda s, i: jax.lax.scan(step, s, i))(PlantState(x0, None), inp)
     tt, xs = np.asarray(tt), np.asarray(xs)
     t = (np.arange(n)[:, None] * ts + tt[:, :-1]).ravel()  # each period's 7 starts (its end is the next start)
@@ -122,9 +138,48 @@ def jaxobs_ripple(case, t_d):
     t, x = t[keep], x[keep]
     t, first = np.unique(np.round(t, 15), return_index=True)  # zero-length sub-intervals repeat an instant
     x = x[first]
-    i = (x[:, 0] + 1j * x[:, 1]) * np.exp(1j * x[:, 3])
-    t_samples = ts * np.arange(int(math.ceil(c["t_from"] / ts - 1e-9)), n)
+    return t, (x[:, 0] + 1j * x[:, 1]) * np.exp(1j * x[:, 3]), t_samples
+
+
+def jaxobs_ripple(case, t_d):
+    """The open-loop case on jaxobs's carrier plant: the ripple (:func:`ripple`)."""
+    import numpy as np
+
+    t, i, t_samples = jaxobs_waveform(case, t_d)
+    w_e = case["n_p"] * case["w_M"]
     return ripple(t, i.real, i.imag, w_e, t[np.isin(t, np.round(t_samples, 15))])
+
+
+def figure(case, path, t_d=2e-6):
+    """Phase a's current under carrier PWM (at every switching instant, so its ripple shows) beside the averaged
+    inverter's samples: one electrical period, and four PWM periods of it enlarged; written to ``path``."""
+    import matplotlib
+    import numpy as np
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    tc, ic, _ = jaxobs_waveform(case, t_d)
+    ta, ia, _ = jaxobs_waveform(case, t_d, pwm="averaged")
+    period = 2 * math.pi / (case["n_p"] * case["w_M"])
+    t0 = case["t_from"]
+    fig, (ax, az) = plt.subplots(1, 2, figsize=(10, 3.4), dpi=110, gridspec_kw={"width_ratios": [2, 1]})
+    k = ta <= t0 + period
+    t_peak = ta[k][np.argmax(ia[k].real)]  # phase a's positive peak
+    for a in (ax, az):
+        lo, hi = (t0, t0 + period) if a is ax else (t_peak - 2 * case["T_s"], t_peak + 2 * case["T_s"])
+        kc, ka = (tc >= lo) & (tc <= hi), (ta >= lo) & (ta <= hi)
+        a.plot((tc[kc] - t0) * 1e3, ic[kc].real, lw=0.8, label=f"carrier PWM, {t_d * 1e6:g} µs dead time")
+        a.plot((ta[ka] - t0) * 1e3, ia[ka].real, "o", ms=2.5 if a is ax else 5, label="averaged inverter (samples)")
+        a.set_xlabel("t (ms)")
+        a.grid(alpha=0.3)
+    ax.set_ylabel("phase a current (A)")
+    ax.set_title(f"{FILE.name}: {RPM:g} r/min, {TORQUE:g} N·m, open loop", fontsize=9)
+    az.set_title("four PWM periods at its positive peak", fontsize=9)
+    ax.legend(fontsize=8, loc="upper left")
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
 
 
 def motulator_ripple(case, t_d, python):
@@ -217,6 +272,7 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--motulator-python", default=os.environ.get("MOTULATOR_PYTHON"))
     ap.add_argument("--batch", type=int, default=16)
+    ap.add_argument("--figure", metavar="PNG", help="only draw phase a's current, carrier beside averaged, to PNG")
     a = ap.parse_args(argv)
     import jax
 
@@ -224,6 +280,10 @@ def main(argv=None) -> int:
     print(time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()))
     print(subprocess.run(["uptime"], capture_output=True, text=True).stdout.rstrip())
     case = _case()
+    if a.figure:
+        figure(case, a.figure)
+        print(f"figure: {a.figure}")
+        return 0
     i_d, i_q = case["i_dq"]
     print(f"case: {FILE.name}, {RPM:g} r/min, {TORQUE:g} N·m (MTPA i_d {i_d:.4f} A, i_q {i_q:.4f} A), "
           f"u_dc {case['u_dc']:g} V, carrier {1 / case['T_s']:g} Hz single update")  # fmt: skip
