@@ -266,8 +266,9 @@ def _rss_of_reading(tmp_path, rows):
 @pytest.mark.slow
 def test_a_long_log_reads_at_flat_memory(tmp_path):
     """10^5 and 10^7 rows (about 17 minutes at 10 kHz): the peak RSS of the read differs by less than 120 MiB,
-    where holding the 10^7 rows' five float64 columns in memory alone would take 380 MiB (measured: 328 MiB at 10^7
-    rows against about 300 at 10^5; the difference is pandas' chunk of 500 000 rows)."""
+    where holding the 10^7 rows' five float64 columns in memory alone would take 380 MiB (measured: 337 MiB at 10^7
+    rows against 314 at 10^5; the difference is pandas' chunk of 500 000 rows.  The field count's running count of
+    every byte, int64 over 16 MiB blocks, had taken it to about 700 MiB: benchmarks/log_memory.py)."""
     small, _ = _rss_of_reading(tmp_path, 100_000)
     big, size = _rss_of_reading(tmp_path, 10_000_000)
     print(f"peak RSS {small:.0f} MiB (1e5 rows), {big:.0f} MiB (1e7 rows, {size:.0f} MiB of CSV)")
@@ -484,3 +485,21 @@ def test_a_log_at_another_rate_is_read_with_its_sidecar_and_resampled(tmp_path, 
     np.testing.assert_allclose(np.remainder(d + math.pi, 2 * math.pi) - math.pi, 0, atol=1e-9)
     with pytest.raises(ValueError, match="windows are cut at the log's own rate"):
         read_recorded(path, cols, truth, drive=True, time_column="t", ts=2e-4, windows=(2, 100))
+
+
+@pytest.mark.parametrize("block", [23, 64, 1 << 22])
+def test_field_counts_are_checked_across_blocks(tmp_path, block):
+    """The field count of every line, counted a block of bytes at a time (the delimiters' positions per line): a
+    line cut by a block's edge counts whole, a comment or blank line not at all, and the first bad line is named
+    whatever the block."""
+    from jaxobs.signals._logfile import check_field_counts
+
+    lines = ["t,a,b", "# a comment, with, commas", *(f"{k},{k * 0.5},{-k}" for k in range(40)), ""]
+    good = tmp_path / "good.csv"
+    good.write_text("\n".join(lines) + "\n")
+    check_field_counts(good, RecordingLayout(), 3, block=block)
+    bad = list(lines)
+    bad[30] = bad[30] + ",7"  # line 31 of the file
+    (tmp_path / "bad.csv").write_text("\n".join(bad) + "\n")
+    with pytest.raises(ValueError, match=r"line 31 has 4 fields, the file 3$"):
+        check_field_counts(tmp_path / "bad.csv", RecordingLayout(), 3, block=block)

@@ -77,6 +77,8 @@ layout = { current_frame = "abc", voltage_timing = "reference" }
     assert res["loop"] == "open loop on recordings"
     (scen,) = res["recordings"][0]["scenarios"]
     assert scen["name"] == "ctrl.csv" and scen["omega_start"] == pytest.approx(314.1592, abs=1e-3)
+    # scored past the start-up: 2 electrical periods at the recorded 314 rad/s (docs/recordings.md)
+    assert res["startup"]["periods"] == 2 and res["startup"]["t_event"] == pytest.approx(0.04, rel=1e-3)
     s = res["scores"]["initial"]
     assert s["diverged"] == 0 and 0 < s["rms_speed_error_steady_mean"] < 20.0  # rad/s electrical, 1000 r/min
     import xarray as xr

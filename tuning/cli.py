@@ -304,7 +304,10 @@ def _cmd_tune(args) -> int:
         n = job.scenarios.sample or n
         drive = "" if job.drive is None else f", {job.drive.loop} drive on {job.drive.machine}"
         if job.scenarios.recording is not None:  # the observer runs open loop on the files, whatever the signal
-            drive = f", open loop on {len(job.scenarios.recording.files)} recording(s)"
+            rec = job.scenarios.recording
+            drive = f", open loop on {len(rec.files)} recording(s)"
+            if rec.startup_s:  # the drive logs' scores skip the observer's start-up
+                drive += f" scored from {rec.startup_s:.4g} s ({rec.startup_periods:g} electrical periods of start-up)"
         print(
             f"{path}: OK — {job.component}, free gains {', '.join(g.name for g in job.gains)}, {n} scenarios"
             f"{drive}, solver {job.solver.name}"

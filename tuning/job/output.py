@@ -20,6 +20,7 @@ from jaxobs.signals import DriveRecording, SampledSignal
 
 from ..objective import TERM_METRICS, Objective
 from ..outdir import atomic_write_text
+from .recordings import scenarios_window
 from .spec import Job, ScenarioSpec
 
 if TYPE_CHECKING:  # imported where a Dataset is made
@@ -188,8 +189,9 @@ def recordings_provenance(job: Job, scenarios: eqx.Module | None = None) -> dict
             :class:`~jaxobs.signals.SampledSignal` with ``truth``), or None.
 
     Returns:
-        ``{"recordings": [{"file", "sha256", "scenarios": [{"name", "omega_start"}, ...]}, ...], "loop_note"}``;
-        empty for a job not on recordings.
+        ``{"recordings": [{"file", "sha256", "scenarios": [{"name", "omega_start"}, ...]}, ...], "loop_note"}``,
+        with ``"startup"`` (``periods``, ``seconds``, and the ``t_event`` and ``steady_from`` scored) where drive
+        logs' scores skip the observer's start-up; empty for a job not on recordings.
     """
     rec = job.scenarios.recording
     if rec is None:
@@ -209,7 +211,11 @@ def recordings_provenance(job: Job, scenarios: eqx.Module | None = None) -> dict
     for i, (f, h) in enumerate(zip(rec.files, rec.sha256 or [None] * len(rec.files))):
         sc = [{"name": labels[i * per + k], "omega_start": starts[i * per + k]} for k in range(per)]
         out.append({"file": f, "sha256": h, "scenarios": sc})
-    return {"recordings": out, "loop_note": "open loop on recordings: each scenario starts at its own speed"}
+    got = {"recordings": out, "loop_note": "open loop on recordings: each scenario starts at its own speed"}
+    if rec.startup_periods and scenarios is not None:  # the scores' window, past the observer's start-up
+        t_start, t_event, steady = scenarios_window(job.scenarios, scenarios)
+        got["startup"] = {"periods": rec.startup_periods, "seconds": t_start, "t_event": t_event, "steady_from": steady}
+    return got
 
 
 def claimed_envelope(job: Job) -> dict | None:

@@ -3,11 +3,14 @@
 from __future__ import annotations
 
 import dataclasses
+import math
 import re
 from pathlib import Path
+from typing import cast
 
 import equinox as eqx
 import jax
+import numpy as np
 
 from jaxobs.drive import PMSMParams, bench_machine, load_drive
 from jaxobs.io.provenance import sha256
@@ -28,8 +31,21 @@ MAX_LOG_BYTES = 4 * 2**30
 MAX_WINDOWS = 256  # windows of one drive log (scenarios.recording.windows)
 RECORDING_KEYS = (
     "file", "time_column", "sample_rate", "columns", "voltages", "currents", "truth", "layout", "trim", "windows",
-    "machine",
+    "machine", "startup_periods",
 )  # fmt: skip
+
+# The observer's start-up skipped by a drive log's scores (scenarios.recording.startup_periods), in electrical periods
+# at the recording's own speed.  A recorded run starts the observer from rest (its filters at zero, its speed bound
+# to the encoder's) in the middle of a drive that has been running, a start the drive itself never makes: the first
+# samples score that start, not the observer.  The SOIFOs sign ω̂ by the cross product of flux and EMF estimates
+# that are still near zero at the first step, so a rounding of 3e-14 V there turns a peak speed error of 28 rad/s
+# into 627 (benchmarks/log_layouts.py).  Periods, not "until the estimate settles": a window that moved with the
+# gains would let a tuner shorten its own scoring by starting slowly, and its edge would not be differentiable.
+# The default, two periods (_startup_periods): at paper 000's gains the SOGI filters' transient (time constant about
+# 2/(K1 ω), 0.2 period) and the speed estimate's sign are settled by then (noise on the first samples then moves a
+# score by < 0.1 %, tests/test_recording_startup.py); a start far off the speed decays with the FLL, slower (a 20 %
+# error: 18 % of the IAE after 2 periods, 2 % after 5, docs/recordings.md), and asks for more.
+MAX_STARTUP_PERIODS = 1000.0
 
 
 MAX_RECORDINGS = 64  # files of one [scenarios.recording]
@@ -111,11 +127,12 @@ def parse_recording_scenarios(
     paths = tuple(str(Path(f) if Path(f).is_absolute() else root / f) for f in files)
     layout, windows, machine, mname = _log_options(rec, w, recorded, cols, n_volt, root, base is not None)
     trim = get_field(rec, "trim", f"{w}.trim", bool, False)
+    startup = _startup_periods(rec, w, recorded)
     spec = RecordingSpec(
         tuple(files), paths, tcol, rate, tuple(cols), tuple(truth), ts, layout=layout, trim=trim, windows=windows,
-        machine=machine, machine_name=mname, voltages=n_volt,
+        machine=machine, machine_name=mname, voltages=n_volt, startup_periods=startup,
     )  # fmt: skip
-    lengths = []
+    lengths, starts = [], []
     if base is not None:
         digests = []
         for i, path in enumerate(paths):
@@ -135,7 +152,8 @@ def parse_recording_scenarios(
             except ValueError as e:
                 raise JobError(field, str(e).replace(path, files[i])) from None
             need = int(round(horizon / ts))
-            sig = sig[0] if isinstance(sig, list) else sig
+            got = sig if isinstance(sig, list) else [sig]  # a drive log's windows, or the file
+            sig = got[0]
             if sig.n < need:
                 raise JobError(
                     f"{where}.horizon",
@@ -144,7 +162,10 @@ def parse_recording_scenarios(
                 )
             digests.append(sha256(Path(path)))
             lengths.append(sig.n if not spec.windows else need)
-        spec = dataclasses.replace(spec, sha256=tuple(digests))
+            if startup:  # each scenario's speed (a drive log's omega_e: given, or the angle's slope)
+                starts += recorded_speeds(stack(cast(DriveRecording, x) for x in got), need)
+        t_start = scored_window(spec, t_event, horizon, steady, starts, where)[0]  # it leaves a steady window
+        spec = dataclasses.replace(spec, sha256=tuple(digests), startup_s=t_start)
     if len({n for n in lengths}) > 1 and not trim and not windows:
         shown = ", ".join(f"{f} {n}" for f, n in zip(files, lengths))
         raise JobError(
@@ -154,6 +175,93 @@ def parse_recording_scenarios(
         )
     axes = {"recording": [float(i) for i in range(len(files) * max(windows, 1))]}
     return ScenarioSpec(family.signal, t_event, horizon, steady, axes, 0, seed, recording=spec)
+
+
+def _startup_periods(rec: dict, w: str, family: RecordedSignals) -> float:
+    """``startup_periods``: electrical periods of a drive log's start skipped by its scores (2 by default: the rule
+    above :data:`MAX_STARTUP_PERIODS`; a grid recording: none, the key refused)."""
+    if not family.binds:
+        if "startup_periods" in rec:
+            raise JobError(f"{w}.startup_periods", "applies to drive logs (u and i), not to a grid voltage")
+        return 0.0
+    n = get_field(rec, "startup_periods", f"{w}.startup_periods", float, 2.0)
+    if not 0.0 <= n <= MAX_STARTUP_PERIODS:
+        raise JobError(f"{w}.startup_periods", f"must be in [0, {MAX_STARTUP_PERIODS:g}] periods, got {n:g}")
+    return n
+
+
+def scored_window(
+    rec: RecordingSpec, t_event: float, horizon: float, steady: float, speeds: list[float], where: str
+) -> tuple[float, float, float]:
+    """Where a job's scores on drive logs start: past the observer's start-up, ``rec.startup_periods`` electrical
+    periods at the slowest recording's speed (:func:`recorded_speeds`; one window for every recording, so that their
+    scores add up alike; the slowest's periods cover each).  The event and the steady window begin there at the
+    earliest.
+
+    Args:
+        rec: The recordings (their ``startup_periods``).
+        t_event: The job's event, s.
+        horizon: The simulated time, s.
+        steady: The steady window's start, s.
+        speeds: Each scenario's recorded electrical speed, rad/s (:func:`recorded_speeds`).
+        where: The scenario table's name in errors.
+
+    Returns:
+        ``(start-up s, the event, the steady window's start)``: s, from each recording's first sample.
+
+    Raises:
+        JobError: The start-up leaves fewer than 10 samples of steady window, naming ``startup_periods``.
+    """
+    if not rec.startup_periods or not speeds:
+        return 0.0, t_event, steady
+    slowest = min(speeds)
+    t_start = rec.startup_periods * 2 * math.pi / slowest if slowest > 0 else math.inf
+    if (horizon - max(steady, t_start)) / rec.ts < 10:
+        raise JobError(
+            f"{where}.recording.startup_periods",
+            f"{rec.startup_periods:g} electrical periods at the slowest recording's speed "
+            f"({slowest:.4g} rad/s) are {t_start:.4g} s, leaving fewer than 10 samples before the horizon "
+            f"({horizon:g} s): lower it, or lengthen the horizon",
+        )
+    return t_start, max(t_event, t_start), max(steady, t_start)
+
+
+def scenarios_window(spec: ScenarioSpec, scenarios: eqx.Module) -> tuple[float, float, float]:
+    """:func:`scored_window` of a scenario set on its loaded batch.
+
+    Args:
+        spec: The scenario set (its ``recording``; a set without one is scored as it says).
+        scenarios: Its batch (:func:`load_recordings`).
+
+    Returns:
+        ``(start-up s, the event, the steady window's start)``.
+
+    Raises:
+        JobError: The start-up leaves fewer than 10 samples of steady window, naming ``startup_periods``.
+    """
+    rec = spec.recording
+    if rec is None:
+        return 0.0, spec.t_event, spec.steady_from
+    speeds = recorded_speeds(scenarios, round(spec.horizon / rec.ts))
+    return scored_window(rec, spec.t_event, spec.horizon, spec.steady_from, speeds, "scenarios")
+
+
+def recorded_speeds(scenarios: eqx.Module, n: int) -> list[float]:
+    """Each drive-log scenario's speed: the median |ω_e| recorded over its first ``n`` samples (the horizon), rad/s
+    electrical; none for another batch.  The median, not the first sample: the window that skips the start-up must
+    not hinge on one sample either.
+
+    Args:
+        scenarios: The job's batch (:func:`load_recordings`), or a drive log's windows stacked.
+        n: The samples of the horizon.
+
+    Returns:
+        The speeds, one per scenario.
+    """
+    if not isinstance(scenarios, DriveRecording) or scenarios.omega_e is None:
+        return []
+    w = np.abs(np.asarray(scenarios.omega_e)[..., :n])
+    return [float(x) for x in np.median(w.reshape(-1, w.shape[-1]), axis=-1)]
 
 
 def _signal_columns(rec: dict, w: str, recorded: RecordedSignals) -> tuple[list, int | None, list[tuple]]:

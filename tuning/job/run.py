@@ -25,6 +25,7 @@ from ..structure import structure
 from .components import COMPONENTS
 from .drive import job_drive
 from .output import at_bounds, claimed_envelope, recordings_provenance, rule_spec, scores_dataset, write_json
+from .recordings import scenarios_window
 from .scenarios import build_scenarios, job_family
 from .spec import DriveSpec, Job, ScenarioSpec
 from .verify import EnvelopeSpec, verify_designs
@@ -50,6 +51,9 @@ def build_objective(
     family = job_family(spec, job.values, drive, job.drive)
     scen, names, combos = build_scenarios(spec, family)
     ctx = MetricContext(t_event=spec.t_event, steady_from=spec.steady_from)
+    if spec.recording is not None and spec.recording.startup_periods:  # scored past the observer's start-up
+        _, t_event, steady = scenarios_window(spec, scen)
+        ctx = MetricContext(t_event=t_event, steady_from=steady)
     param = Parametrization(job.gains)
     obj = Objective(
         comp,

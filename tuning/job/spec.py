@@ -153,6 +153,9 @@ class RecordingSpec:
         machine_name: The machine as the job names it (a bench machine or a drive file).
         voltages: How many of ``columns`` are a drive log's voltages, its currents following (given as
             ``voltages`` and ``currents``); None: half of them (given as ``columns``).
+        startup_periods: Electrical periods of a drive log's start that its scores skip, at the slowest
+            recording's starting speed (``jaxobs_tuning.job.recordings.scored_window``); 0 for a grid recording.
+        startup_s: Those periods in seconds, when the files were read at parse time; else None.
     """
 
     files: tuple[str, ...]  # as written in the job file
@@ -169,6 +172,8 @@ class RecordingSpec:
     machine: PMSMParams | None = None  # for a drive log's power and timing checks, or None
     machine_name: str | None = None  # as the job names it (a bench machine or a drive file)
     voltages: int | None = None  # how many of columns are voltages (the voltages/currents keys); None: half
+    startup_periods: float = 0.0  # electrical periods of a drive log's start its scores skip
+    startup_s: float | None = None  # the same in seconds, when the files were read at parse time
 
     def labels(self) -> list[str]:
         """The scenarios' names: each file's name, or ``file@k`` for the k-th window of a drive log."""
