@@ -1,19 +1,19 @@
 """``[envelope]`` of a drive job and the long-horizon verification after tuning: tuning that cannot
 hide a failure.
 
-A design tuned and scored on its grid can run away a little outside it (the noise-tuned SOIFO ran away at
-400 r/min, two thirds of its grid's lowest speed).  So a drive job states the envelope it claims
-(``[envelope] speed_rpm = [lo, hi]``, ``load_nm = [lo, hi]``; by default the span of its tuning grid) and,
-after tuning, :func:`verify_designs` maps initial, closed form and tuned over a coarse grid of that
-envelope (3 speeds, lo, geometric middle and hi, × 2 loads, lo and hi) with the one envelope map,
-:func:`jaxobs.analysis.envelope.envelope`: a long run (``[envelope] horizon``, 2 s by default, stretched to the
-slowest speed loop's time constants) after a speed-reference pulse, so unbiased beside a boundary, through the study
-runner, batched, and the simulator's own stability verdict (:func:`jaxobs.analysis.stability.floquet`) at the
-same points, on the job's drive (its speed schedule) started steady, nominal machine, measured through the drive
-file's ``[sensors]`` (its ADC's quantization as noise, its offsets and gain errors; the noise drawn from the job's
-seed) as ``jaxobs envelope`` measures by default: a design tuned on noisy scenarios is verified on the same
-sensors, not on ideal ones that would hide a noise-driven loss.  ``[envelope] ideal_sensors = true`` runs ideal
-sensors (``jaxobs envelope --ideal-sensors``); a shipped bench's are ideal (as the job's scenarios run them,
+A design tuned and scored on its grid can run away a little outside it (the noise-tuned SOIFO ran away at 400 r/min,
+two thirds of its grid's lowest speed). So a drive job states the envelope it claims (``[envelope] speed_rpm = [lo,
+hi]``, ``load_nm = [lo, hi]``; by default the span of its tuning grid) and, after tuning, :func:`verify_designs`
+maps initial, closed form and tuned over a coarse grid of that envelope (3 speeds, lo, geometric middle and hi, × 2
+loads, lo and hi) with the one envelope map, :func:`jaxobs.analysis.envelope.envelope`: a long run (``[envelope]
+horizon``, 2 s by default, stretched to the slowest speed loop's time constants) after a speed-reference pulse up
+and one after a pulse down (the worse run counts), so unbiased beside a boundary, through the study runner, batched,
+and the simulator's own stability verdict (:func:`jaxobs.analysis.stability.floquet`) at the same points, on the
+job's drive (its speed schedule) started steady, nominal machine, measured through the drive file's ``[sensors]``
+(its ADC's quantization as noise, its offsets and gain errors; the noise drawn from the job's seed) as ``jaxobs
+envelope`` measures by default: a design tuned on noisy scenarios is verified on the same sensors, not on ideal ones
+that would hide a noise-driven loss. ``[envelope] ideal_sensors = true`` runs ideal sensors (``jaxobs envelope
+--ideal-sensors``); a shipped bench's are ideal (as the job's scenarios run them,
 :func:`jaxobs_tuning.job.scenarios.job_family`).
 
 A point *passes* when the design holds synchronism there (the envelope's ``synchronous``: finite, locked,
@@ -184,7 +184,8 @@ def verify_designs(
         "speed_schedule": drive_spec.speed_schedule,
         "points": [{"speed_rpm": s, "load_nm": ld} for s, ld in combos],
         "passes_definition": "synchronous (jaxobs.analysis.envelope: finite, locked within 90 deg electrical, at its "
-        "speed reference and settled after a 2 % speed-reference pulse, over the late window) and stable "
+        "speed reference and settled after a 2 % speed-reference pulse up and one down, the worse run, over the late "
+        "window) and stable "
         "(jaxobs.analysis.stability.floquet: the largest non-neutral Floquet multiplier over whole electrical "
         "periods, as a rate log|mu|/T, below 0 by more than its resolution, 1/s; within it the point is "
         "'marginal', which does not pass)",
