@@ -436,6 +436,27 @@ def test_pulse_check_agrees_with_floquet_beside_the_boundary():
     assert _holds_sim({"cf": CF}, [(s, 5.0) for s in points])["cf"].tolist() == stable.tolist()
 
 
+@pytest.mark.slow  # a map of one point (its compiles) and a 0.6 s simulation: about 70 s on 2 shared cores
+def test_a_point_reads_its_down_run_where_that_one_is_worse():
+    """000's second-order SOIFO at 500 r/min, 5 N·m under the bench's fixed 5 Hz loop, pulsed by 20 %: the pulse
+    up (600 r/min) leaves a synchronous run, the pulse down (400 r/min) crosses the low-speed boundary near 407 r/min
+    and its run does not settle (measured: late peak speed deviation 1.56 %, not synchronous).  The point reads that
+    run (a tie would read the up one): ``pulse`` −1, its quantities those of the same run saved whole, pulsed down."""
+    kw = dict(machine=PAR, drive=DRIVE, loads_nm=[5.0], horizon=0.6, perturb=0.2, stability=SHORT)
+    cf = envelope({"cf": CF}, speeds_rpm=[500.0], **kw).sel(design="cf", speed_rpm=500.0, load_nm=5.0)
+    assert float(cf["pulse"]) == -1.0 and int(cf["synchronous"]) == 0 and int(cf["holds"]) == 0
+    sc = speed_pulse(drive_scenarios(PAR, ["speed_rpm", "load_nm"], [(500.0, 5.0)]), 0.05, 1.0 / ALPHA_BENCH, -0.2)
+    sc = jax.tree.map(lambda x: x[0], sc)
+    drive = DRIVE.settled_for(PAR.p * 500.0 * jaxobs.drive.RPM)
+    sol = jaxobs.simulate(jaxobs.drive.ClosedLoop(drive, bind_observer(CF, sc), sc), 0.6)
+    o = sol.outputs
+    late = np.asarray(sol.t) >= 0.3 - 1e-9
+    err = np.degrees(np.asarray(jaxobs.metrics.wrap(o.obs.theta - o.theta_e)))
+    dev = np.abs(np.asarray(o.omega_m - o.omega_m_ref)) / np.abs(np.asarray(o.omega_m_ref))
+    assert math.degrees(cf["mean_position_late"]) == pytest.approx(err[late].mean(), rel=1e-6, abs=1e-9)
+    assert float(cf["peak_speed_deviation_late"]) == pytest.approx(dev[late].max(), rel=1e-9)
+
+
 @pytest.mark.slow
 def test_preset_envelope_agrees_with_pulse_simulations_at_low_speed(tmp_path):
     """`jaxobs envelope tuning/presets/sosoifo.toml --out DIR` writes the NetCDF
