@@ -52,6 +52,11 @@ REV_SETTLE = 1.0  # after the slowest ramp, s
 # tests/test_zero_speed.py uses: the faded phase detector's ω_f and the mechanical speed observer's bandwidth.
 ZERO_FADE = 20.0  # rad/s
 ALPHA_O = 2 * math.pi * 10.0  # rad/s: the triple pole of MechanicalSpeed.closed_form
+# The reduced-order flux observer with the mechanical speed observer: the closed form of its tuning job
+# (docs/examples/ipmsm_2p2kw_rofo_tune.toml, [observer.speed] kind = "mechanical": the triple pole at 2π·50 rad/s,
+# the type-2 loop's closed-form pole) and, where its stored result exists, that job's tuned design.
+ROFO_ALPHA_O = 2 * math.pi * 50.0  # rad/s
+ROFO_TUNED = ROOT / "benchmarks" / "results" / "2026-12-02-rofo-tune-result.json"
 
 
 def designs(ts: float) -> dict:
@@ -64,6 +69,12 @@ def designs(ts: float) -> dict:
 
     rofo = jaxobs.ReducedOrderFluxObserver.closed_form(ts=ts)
     mech = MechanicalSpeed.closed_form(ALPHA_O)  # Ĵ, B̂ and p are bound from the assumed machine
+    rofo_mech = jaxobs.ReducedOrderFluxObserver.closed_form(ts=ts, speed=MechanicalSpeed.closed_form(ROFO_ALPHA_O))
+    tuned = {}
+    if ROFO_TUNED.exists():  # the job's tuned design, built as its run scored it (benchmarks.peer_observer)
+        from benchmarks.peer_observer import result_designs_of
+
+        tuned["rofo_mech_tuned"] = (result_designs_of(ROFO_TUNED)["tuned"], 0.0)
     return {
         "rofo": (rofo, 0.0),
         "rofo_rs+20": (rofo, 0.2),
@@ -77,6 +88,10 @@ def designs(ts: float) -> dict:
         "faleso_mech": (FALESO.closed_form(ts=ts, speed=mech, zero_fade=ZERO_FADE), 0.0),
         "soifo": (SOIFO.closed_form(ts=ts), 0.0),
         "lpf_mech": (LPFFlux.closed_form(ts=ts, speed=mech), 0.0),
+        "rofo_mech": (rofo_mech, 0.0),
+        "rofo_mech_rs+20": (rofo_mech, 0.2),
+        "rofo_mech_rs-20": (rofo_mech, -0.2),
+        **tuned,
     }
 
 
@@ -198,6 +213,10 @@ LABELS = {
     "faleso_mech": "FA-LESO + mechanical",
     "soifo": "SOIFO (active flux)",
     "lpf_mech": "LPF flux + mechanical",
+    "rofo_mech": "reduced-order + mechanical",
+    "rofo_mech_rs+20": "rofo + mechanical, R̂s +20 %",
+    "rofo_mech_rs-20": "rofo + mechanical, R̂s −20 %",
+    "rofo_mech_tuned": "reduced-order + mech., tuned",
 }
 
 

@@ -71,6 +71,7 @@ def test_small_envelope_dims_units_and_verdicts(small):
     assert ds["speed_rpm"].attrs["units"] == "min-1" and ds["load_nm"].attrs["units"] == "N m"
     assert ds["mean_position_late"].attrs["units"] == "rad" and ds["gain_lam"].attrs["units"] == "1"  # SI
     assert float(ds["gain_lam"].sel(design="lam x2")) == 1.22
+    assert set(np.unique(ds["pulse"].values)) <= {-1.0, 1.0}  # the direction each point's run was pulsed
     cf = ds.sel(design="closed form")
     # the closed form: unstable and not held at 300 r/min, stable with margin and held at 1000
     assert (cf["margin"].sel(speed_rpm=300.0) < 0).all() and (cf["stable"].sel(speed_rpm=300.0) == 0).all()
@@ -150,6 +151,61 @@ def test_state_stable_and_holds_follow_the_verdict(small):
     assert res["state"].tolist() == [HOLDS, LIMIT_CYCLE, LOSES_SPEED, LOSES_LOCK, UNSTABLE, UNSTABLE]
     assert res["stable"].tolist() == [True, True, False, False, False, False]
     assert res["linear_stable"].tolist() == [True, True, True, True, True, False]
+
+
+def test_each_point_runs_both_pulses_with_one_noise_draw():
+    """The long runs' last axis is the pulse's direction: every point is built twice, pulsed up and down by the
+    same height, with the noise key of its index among the points without that axis (so the up run is the
+    one-direction map's and both differ by the pulse alone), also in a chunk that starts inside a pair."""
+    from jaxobs.analysis.envelope_runs import PULSES, _LongRuns
+    from jaxobs.drive import Sensors
+    from jaxobs.scenarios.families import DriveScenarios
+
+    fam = DriveScenarios(PAR, DRIVE, t_event=0.05, seed=7, sensors=Sensors(i_noise=0.01))
+    long = _LongRuns(fam, 0.02, 100, 150)
+    plain = [(300.0, 0.0), (1000.0, 5.0)]
+    pts = [(s, ld, sign) for s, ld in plain for sign in PULSES]
+    names = ["speed_rpm", "load_nm", "pulse"]
+    base = fam.build(["speed_rpm", "load_nm"], plain)
+    for first in (0, 1):
+        scs = long.build(names, pts[first:], first=first)
+        want = np.asarray(base.key)[[(first + i) // 2 for i in range(len(pts) - first)]]
+        assert (np.asarray(scs.key) == want).all()
+        ref = np.asarray(scs.speed_ref.values)
+        w0 = ref[:, 0]
+        signs = np.array([p[2] for p in pts[first:]])
+        assert ref[:, 1] == pytest.approx(w0 * (1.0 + 0.02 * signs), rel=1e-12) and (ref[:, 2] == w0).all()
+
+
+def test_the_worse_pulse_is_each_points_run():
+    """Of a point's two runs the one with the higher verdict code is its run (then the one not synchronous; the
+    up pulse on a tie): its metrics are the point's, ``pulse`` says which; synchronous where both are, lost
+    where either is."""
+    from jaxobs.analysis.envelope_runs import LONG_RUN_METRICS, worse_pulse
+
+    ref = 100.0
+    # three points × (up, down): both hold; up holds and down loses lock; both hold, up not synchronous
+    q = {
+        "run_finite": [[1, 1], [1, 1], [1, 1]],
+        "peak_position_event": np.radians([[2.0, 3.0], [2.0, 120.0], [2.0, 2.0]]),
+        "mean_speed_error_late": [[0.1, 0.2], [0.1, 0.1], [0.1, 0.1]],
+        "mean_speed_reference_late": np.full((3, 2), ref),
+        "speed_swing_first": np.full((3, 2), 0.1),
+        "speed_swing_second": np.full((3, 2), 0.05),
+    }
+    data = {m.name: (("speed_rpm", "pulse"), np.zeros((3, 2))) for m in LONG_RUN_METRICS}
+    data.update({k: (("speed_rpm", "pulse"), np.asarray(v, float)) for k, v in q.items()})
+    data["peak_position_late"] = (("speed_rpm", "pulse"), np.array([[0.1, 0.2], [0.1, 2.5], [0.3, 0.4]]))
+    data["synchronous"] = (("speed_rpm", "pulse"), np.array([[1, 1], [1, 0], [0, 1]], np.int8))
+    data["lost_lock"] = (("speed_rpm", "pulse"), np.array([[0, 0], [0, 1], [0, 0]], np.int8))
+    data["lost_speed"] = (("speed_rpm", "pulse"), np.zeros((3, 2), np.int8))
+    runs = xr.Dataset(data, coords={"speed_rpm": [1.0, 2.0, 3.0], "pulse": [1.0, -1.0]})
+    out = worse_pulse(runs)
+    assert out["pulse"].dims == ("speed_rpm",) and out["pulse"].values.tolist() == [1.0, -1.0, 1.0]
+    assert out["peak_position_late"].values.tolist() == [0.1, 2.5, 0.3]
+    assert out["synchronous"].values.tolist() == [1, 0, 0] and out["lost_lock"].values.tolist() == [0, 1, 0]
+    with pytest.raises(ValueError, match="no 'pulse' dim"):
+        worse_pulse(runs.isel(pulse=0))
 
 
 def test_summary_takes_its_margin_from_resolved_points_only(capsys):
@@ -378,6 +434,27 @@ def test_pulse_check_agrees_with_floquet_beside_the_boundary():
     assert stable.tolist() == [False, False, True], cf["margin"].values
     assert (cf["synchronous"].values == 1).tolist() == stable.tolist(), cf["peak_speed_deviation_late"].values
     assert _holds_sim({"cf": CF}, [(s, 5.0) for s in points])["cf"].tolist() == stable.tolist()
+
+
+@pytest.mark.slow  # a map of one point (its compiles) and a 0.6 s simulation: about 70 s on 2 shared cores
+def test_a_point_reads_its_down_run_where_that_one_is_worse():
+    """000's second-order SOIFO at 500 r/min, 5 N·m under the bench's fixed 5 Hz loop, pulsed by 20 %: the pulse
+    up (600 r/min) leaves a synchronous run, the pulse down (400 r/min) crosses the low-speed boundary near 407 r/min
+    and its run does not settle (measured: late peak speed deviation 1.56 %, not synchronous).  The point reads that
+    run (a tie would read the up one): ``pulse`` −1, its quantities those of the same run saved whole, pulsed down."""
+    kw = dict(machine=PAR, drive=DRIVE, loads_nm=[5.0], horizon=0.6, perturb=0.2, stability=SHORT)
+    cf = envelope({"cf": CF}, speeds_rpm=[500.0], **kw).sel(design="cf", speed_rpm=500.0, load_nm=5.0)
+    assert float(cf["pulse"]) == -1.0 and int(cf["synchronous"]) == 0 and int(cf["holds"]) == 0
+    sc = speed_pulse(drive_scenarios(PAR, ["speed_rpm", "load_nm"], [(500.0, 5.0)]), 0.05, 1.0 / ALPHA_BENCH, -0.2)
+    sc = jax.tree.map(lambda x: x[0], sc)
+    drive = DRIVE.settled_for(PAR.p * 500.0 * jaxobs.drive.RPM)
+    sol = jaxobs.simulate(jaxobs.drive.ClosedLoop(drive, bind_observer(CF, sc), sc), 0.6)
+    o = sol.outputs
+    late = np.asarray(sol.t) >= 0.3 - 1e-9
+    err = np.degrees(np.asarray(jaxobs.metrics.wrap(o.obs.theta - o.theta_e)))
+    dev = np.abs(np.asarray(o.omega_m - o.omega_m_ref)) / np.abs(np.asarray(o.omega_m_ref))
+    assert math.degrees(cf["mean_position_late"]) == pytest.approx(err[late].mean(), rel=1e-6, abs=1e-9)
+    assert float(cf["peak_speed_deviation_late"]) == pytest.approx(dev[late].max(), rel=1e-9)
 
 
 @pytest.mark.slow

@@ -258,3 +258,24 @@ def test_real_runs_lose_speed_with_a_resistance_error_and_the_search_brackets_a_
     r = held_rate(150.0, 15000.0, states_at=states_at, resolution=0.1)
     assert 150.0 < r.other < r.rate < 15000.0 and r.rate / r.other - 1 <= 0.1 and r.monotone
     assert list(states_at(np.asarray([r.rate, r.other]))) == [HOLDS, r.states[list(r.rates).index(r.other)]]
+
+
+def test_the_benchmark_runs_the_rofo_tune_jobs_closed_form_and_its_stored_tuned_design():
+    """benchmarks/through_zero.py's reduced-order observer with the mechanical model is the closed form of
+    docs/examples/ipmsm_2p2kw_rofo_tune.toml (the gains its stored result scored as its closed form) and, beside it,
+    that result's tuned design; the R̂s rows run the same closed form."""
+    from benchmarks.peer_observer import result_designs_of
+    from benchmarks.through_zero import ROFO_TUNED, designs
+
+    ts = read_drive(EXAMPLES / "ipmsm_2p2kw_lab.toml").ts
+    d = designs(ts)
+    stored = result_designs_of(ROFO_TUNED)
+    for name, key in (("rofo_mech", "closed_form"), ("rofo_mech_tuned", "tuned")):
+        obs, d_rs = d[name]
+        want = stored[key]
+        assert d_rs == 0.0 and type(obs.speed).__name__ == "MechanicalSpeed"
+        for g in ("k1", "k2", "k3"):
+            assert float(getattr(obs.speed, g)) == pytest.approx(float(getattr(want.speed, g)), rel=1e-12), (name, g)
+        for g in ("c_sigma", "zeta_inf", "ts"):
+            assert float(getattr(obs, g)) == pytest.approx(float(getattr(want, g)), rel=1e-12), (name, g)
+    assert d["rofo_mech_rs+20"] == (d["rofo_mech"][0], 0.2) and d["rofo_mech_rs-20"][1] == -0.2

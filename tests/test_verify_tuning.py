@@ -78,6 +78,7 @@ def test_speed_schedule_reaches_the_foc_and_is_off_by_default():
         (lambda s: s.replace("horizon = 0.5", "horizon = 20.0"), "envelope.horizon", "[0.5, 10]"),
         (lambda s: s.replace("window = 0.02", "windw = 0.02"), "envelope", "windw"),
         (lambda s: s.replace('loop = "sensorless"', 'loop = "sensored"'), "envelope", "sensorless"),
+        (lambda s: s.replace("window = 0.02", "window = 0.02\nideal_sensors = 1"), "envelope.ideal_sensors", "true or"),
     ],
 )
 def test_bad_schedule_or_envelope_exits_2(tmp_path, capsys, edit, field, words):
@@ -130,8 +131,9 @@ def test_a_tuned_design_failing_inside_its_envelope_is_unsafe_exit_4(tmp_path, c
     real = run.verify_designs
     seen = {}
 
-    def lose_sync(designs, env, drive, machine=None):
-        ver = real(designs, env, drive, machine)
+    def lose_sync(designs, env, drive, machine=None, seed=0):
+        seen["seed"] = seed  # the job's seed draws the sensors' noise
+        ver = real(designs, env, drive, machine, seed=seed)
         seen["real"] = json.loads(json.dumps(ver))
         # hand-made: the closed form passes (a 0.02 s Lyapunov window is too short for a verdict), the tuned
         # design loses synchronism
@@ -150,6 +152,7 @@ def test_a_tuned_design_failing_inside_its_envelope_is_unsafe_exit_4(tmp_path, c
     assert res["status"] == "unsafe" and res["tuning_status"] in ("budget", "converged", "no_improvement")
     ver = seen["real"]
     assert set(ver["designs"]) == {"initial", "closed_form", "tuned"} and ver["horizon_s"] == 0.5
+    assert seen["seed"] == 0 and ver["sensors"] == "ideal (a shipped bench)"  # 000's bench: its scenarios' sensors
     assert ver["speed_schedule"] == 6.0 and ver["points"] == [{"speed_rpm": 1000.0, "load_nm": 2.0}]
     for d in ver["designs"].values():  # the 1000 r/min point holds synchronism for every design, unforced
         (p,) = d["points"]
@@ -213,3 +216,64 @@ def test_stability_margin_needs_a_steady_start():
         parse_job(raw)
     raw["drive"]["start"] = "steady"
     assert parse_job(raw).terms[1].metric == "stability_margin"
+
+
+TEKNIC_JOB = """
+[job]
+name = "teknic-verify"
+component = "CLESO"
+[gains.omega0]
+init = 1570.8
+[drive]
+file = "{file}"
+[envelope]
+speed_rpm = [1000.0, 1000.0]
+load_nm = [0.1, 0.1]
+horizon = 0.5
+settle = 0.0
+window = 0.02
+{extra}
+[scenarios]
+signal = "drive"
+t_event = 0.005
+horizon = 0.02
+steady_from = 0.01
+[scenarios.grid]
+speed_rpm = [1000.0]
+[objective]
+terms = [{{ metric = "rms_position_steady", weight = 1.0 }}]
+[solver]
+kind = "adam"
+steps = 1
+"""
+
+
+def test_the_verification_measures_through_the_drive_files_sensors_unless_turned_off(tmp_path):
+    """On the Teknic drive file (a 12-bit ADC over ±16.5 A: its quantization as current noise) the verification
+    runs its [sensors], as `jaxobs envelope` does: the late position error and the Floquet margin differ from the
+    ideal sensors' run; `[envelope] ideal_sensors = true` gives exactly the run of the same file without
+    [sensors] (one point, 0.5 s, the closed form only)."""
+    from jaxobs_tuning.job.components import COMPONENTS
+    from jaxobs_tuning.job.verify import verify_designs
+
+    teknic = Path(__file__).parents[1] / "docs" / "examples" / "teknic_m2310p.toml"
+    (tmp_path / "teknic.toml").write_text(teknic.read_text())
+    (tmp_path / "bare.toml").write_text(teknic.read_text().split("\n[sensors]")[0] + "\n")
+
+    def verify(file, extra=""):
+        path = tmp_path / f"{file}-{len(extra)}.job.toml"
+        path.write_text(TEKNIC_JOB.format(file=file, extra=extra))
+        job = load_job(path)
+        designs = {"closed_form": COMPONENTS[job.component].ctor(**job.values)}
+        ver = verify_designs(designs, job.envelope, job.drive, seed=job.seed)
+        (p,) = ver["designs"]["closed_form"]["points"]
+        return ver["sensors"], p
+
+    keys = ("margin_per_s", "peak_position_late", "ripple_position_late", "peak_speed_deviation_late")
+    words, noisy = verify("teknic.toml")
+    assert words == "the drive file's [sensors]" and noisy["passes"]
+    words, off = verify("teknic.toml", "ideal_sensors = true")
+    assert words == "ideal (envelope.ideal_sensors)" and off["passes"]
+    assert all(noisy[k] != off[k] for k in keys), (noisy, off)
+    _, bare = verify("bare.toml")
+    assert {k: bare[k] for k in keys} == {k: off[k] for k in keys}

@@ -412,7 +412,8 @@ def reference_markdown() -> str:
             index,
             None,
             "Sensorless drive jobs, optional: the envelope the design claims. After tuning, initial, closed form "
-            "and tuned run at 3 speeds × 2 loads of it over `horizon` s, with the Lyapunov verdict at the same "
+            "and tuned run at 3 speeds × 2 loads of it over `horizon` s, pulsed up and down, through the drive "
+            "file's `[sensors]` (`ideal_sensors = true`: ideal sensors), with the stability verdict at the same "
             "points (`verification` in result.json); a tuned design failing where the closed form holds is "
             'status `"unsafe"`, exit 4.',
         )

@@ -18,7 +18,17 @@ closes the loop sensorless) it measures two things, each batched over the points
   a point where its loop grows at +0.146 /s, Floquet, onto the stable side of its boundary near 407 r/min),
   and a step in either one direction biases the verdict of a point just beside a boundary.  With the pulse
   the check says not synchronous there (late peak speed deviation 1.40 % against 1.21 % early) and
-  synchronous at 410 r/min (−0.32 /s; 0.80 % against 1.07 %): tests/test_envelope.py.  The horizon spans at least
+  synchronous at 410 r/min (−0.32 /s; 0.80 % against 1.07 %): tests/test_envelope.py.  **Both ways**: each point
+  runs twice, pulsed up and pulsed down, and reads the worse run (``pulse`` says which): a point holds only if it
+  holds either way.  Near the voltage limit a pulse up asks for voltage the inverter lacks (the traction IPMSM at
+  3000 r/min, no load: up loses lock, down holds; docs/envelope.md), near zero a pulse down moves the point
+  towards where a back-EMF observer sees nothing.  Two runs batched in the one ``vmap`` (the pulse's direction is
+  the long runs' last axis, :data:`~jaxobs.analysis.envelope_runs.PULSES`), not one run pulsed up then down:
+  each is then exactly the independent one-direction run a simulation pulsed that way is, with the same noise
+  draw; a second pulse in the same run would start from the first one's remainder and, to let that decay
+  (3/α) and still leave its early window, lengthen the horizon rule from 12/α to at least 16/α at the slow
+  points, where the runs cost most; the two runs cost one more long run per point, the Floquet verdict (most
+  of a map's time) unchanged, and one compiled program still.  The horizon spans at least
   :data:`HORIZON_TC` time constants 1/α of the slowest speed loop among the points (``horizon`` is its floor)
   and the late window is its second half ``[steady_from, horizon)``.  The rule: the slowest closed-loop mode
   is the speed loop's (α its double-pole bandwidth, :meth:`jaxobs.drive.FOC.speed_gains`; scheduled on the
@@ -91,6 +101,7 @@ from .envelope_runs import (
     LONG_RUN_METRICS,
     MISMATCH_AXES,
     PULSE_TC,
+    PULSES,
     STABILITY_METHODS,
     _axis,
     _dual_machine,
@@ -105,6 +116,7 @@ from .envelope_runs import (
     default_speeds,
     speed_limit_rpm,
     speed_pulse,
+    worse_pulse,
 )
 from .stability import Stability
 from .verdict import HOLDS, LIMIT_CYCLE, UNSTABLE, VERDICTS, held_rate, reversal_holds, verdict_from
@@ -446,6 +458,7 @@ def _results(
     }
     for k in ("synchronous", "lost_lock", "lost_speed"):  # flags: int8 in the study, booleans here
         res[k] = runs[k].values.astype(bool)
+    res["pulse"] = runs["pulse"].values
     for m in LONG_RUN_METRICS:
         res[m.name] = runs[m.name].values
     lost = res["lost_lock"].astype(bool)
@@ -547,7 +560,8 @@ def envelope(
         horizon: s, in [0.5, 20]: the long run's least horizon, stretched to :data:`HORIZON_TC` time constants of
             the slowest speed loop (module doc; at most :data:`HORIZON_MAX`).
         steady_from: s, the late window's start (default horizon/2, after the slowest point's early window opens).
-        perturb: relative, in [0, 0.2]: the speed-reference pulse's height.
+        perturb: relative, in [0, 0.2]: the speed-reference pulse's height; each point runs pulsed up and down by
+            it and reads the worse run (module doc; one run where it is 0).
         t_perturb: s, the pulse's start; it lasts :data:`PULSE_TC` / α at each point.
         bound_deg: deg electrical: the late peak position error a holding point may have.
         speed_tol: relative: the late peak speed deviation a synchronous point may have.
@@ -604,16 +618,17 @@ def envelope(
     sampler = Grid(axes)
     names, points = sampler.names, sampler.points()
 
-    # the long runs, a study: each point's speed reference pulses by perturb × its speed at t_perturb; nothing
+    # the long runs, a study: each point's speed reference pulses by ±perturb × its speed at t_perturb; nothing
     # stored per sample (SaveFinal), the wrapped loop's running sums read from its final state
     ts = drive.ts
     family = _family(machine if dual is None else dual, drive, t_event=t_perturb, seed=seed, sensors=sensors)
     k_late, n_steps = int(round(steady_from / ts)), int(round(float(horizon) / ts))
     long = _LongRuns(family, float(perturb), k_late, (k_late + n_steps) // 2)
+    # each point pulsed up and down in the one batch (the pulse the grid's last axis), the worse run its verdict
     runs = study(
         dict(designs),
         long,
-        sampler,
+        Grid({**axes, "pulse": list(PULSES if perturb > 0.0 else PULSES[:1])}),
         LONG_RUN_METRICS,
         horizon=float(horizon),
         flags=_long_run_flags(float(speed_tol)),
@@ -624,6 +639,7 @@ def envelope(
         progress=progress,
         label="envelope",
     )
+    runs = worse_pulse(runs)
     # the stability margins: constant profiles (no step), one jit(vmap) per observer class
     scs = build_signed(_family(machine if dual is None else dual, drive, seed=seed, sensors=sensors), names, points)
     stab = _verdicts(designs, drive, scs, points, method, tuple(sorted(kw.items())), dual)

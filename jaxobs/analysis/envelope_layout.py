@@ -61,6 +61,11 @@ ENVELOPE_VARIABLES = {
     "peak_speed_deviation_early": ("1", "peak |speed - reference| / |reference| in the early window"),
     "peak_speed_deviation_late": ("1", "peak |speed - reference| / |reference| in the late window"),
     "holds": ("1", "holds: stable, synchronous and peak position error within bound_deg (1: holds)"),
+    "pulse": (
+        "1",
+        "the speed-reference pulse whose long run the point's run quantities are: +1 up, -1 down (each point runs "
+        "both; the worse run: the higher run_state, then not synchronous; up on a tie)",
+    ),
     "peak_position_event": ("rad", "peak |position error| from the pulse on (electrical): the verdict's lock test"),
     "mean_speed_error_late": ("rad s-1", "mean |speed - reference| in the late window (mechanical)"),
     "mean_speed_reference_late": ("rad s-1", "mean |reference| in the late window (mechanical)"),

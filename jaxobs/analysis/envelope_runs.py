@@ -20,6 +20,7 @@ from jax.typing import ArrayLike
 
 from .. import AbstractSystem, kept_jit
 from .. import metrics as M
+from ..core.quantities import Axis
 from ..drive import (
     ClosedLoop,
     Drive,
@@ -35,6 +36,7 @@ from ..observers import AbstractObserver
 from ..scenarios.families import DRIVE_STUDY_AXES, AbstractFamily, DriveScenarios, bind_observer
 from .envelope_layout import ENVELOPE_VARIABLES
 from .stability import Stability, floquet, lyapunov
+from .verdict import verdict_from
 
 __all__ = [
     "EARLY_TC",
@@ -50,6 +52,9 @@ __all__ = [
     "default_speeds",
     "speed_limit_rpm",
     "speed_pulse",
+    "worse_pulse",
+    "PULSE_AXIS",
+    "PULSES",
 ]
 
 # the axes one may add as a third dim (relative errors of the assumed machine, the true inertia)
@@ -243,14 +248,15 @@ def _pulse_width(drive: Drive | DualDrive, machine: PMSMParams, speeds_rpm) -> n
     return np.array([PULSE_TC / alpha[float(v)] for v in np.asarray(speeds_rpm, float)])
 
 
-def speed_pulse(scenarios: _S, t0: float, width: ArrayLike, height: float) -> _S:
+def speed_pulse(scenarios: _S, t0: float, width: ArrayLike, height: ArrayLike) -> _S:
     """``scenarios`` (batched, each started steady at its speed reference ω0) with the reference pulsed.
 
     Args:
         scenarios: a batch of drive scenarios (:class:`~jaxobs.drive.Scenario`, leading axis the batch).
         t0: the pulse's start, s.
         width: its width, s: a number or one per scenario.
-        height: its height, relative: the reference is ω0 (1 + ``height``) from ``t0`` for ``width``, then ω0.
+        height: its height, relative: the reference is ω0 (1 + ``height``) from ``t0`` for ``width``, then ω0; a
+            number or one per scenario (negative: a pulse down).
 
     Returns:
         The scenarios with the pulsed speed reference.
@@ -263,15 +269,25 @@ def speed_pulse(scenarios: _S, t0: float, width: ArrayLike, height: float) -> _S
     if not (math.isfinite(t0) and t0 > 0.0 and np.all(np.isfinite(width)) and np.all(width > 0.0)):
         raise ValueError(f"speed_pulse: t0 and width must be finite numbers of seconds > 0, got {t0!r}, {width!r}")
     times = jnp.stack([jnp.zeros_like(w0), jnp.full_like(w0, t0), t0 + jnp.asarray(width, w0.dtype)], axis=1)
-    values = jnp.stack([w0, w0 * (1.0 + height), w0], axis=1)
+    values = jnp.stack([w0, w0 * (1.0 + jnp.asarray(height, w0.dtype)), w0], axis=1)
     return eqx.tree_at(lambda s: (s.speed_ref.times, s.speed_ref.values), scenarios, (times, values))
+
+
+# the long runs' last axis: the pulse's direction, each point run twice (PULSES; envelope_runs.worse_pulse)
+PULSE_AXIS = Axis("pulse", "1", (-1.0, 1.0), "direction of the speed-reference pulse: +1 up, -1 down")
+PULSES = (1.0, -1.0)  # up first: where both directions' runs are alike the point reads the up pulse's run
 
 
 class _LongRuns(AbstractFamily):
     """The long runs' scenarios: the drive's (``family``), each point's speed reference pulsed by ``perturb`` ×
     its speed from the family's ``t_event`` for :data:`PULSE_TC` / α s and back (so the late window watches the
     operating point itself, not one a step moved it to), the loop wrapped in :class:`_Watched` (its running sums;
-    the early window from :data:`EARLY_TC` / α after the pulse)."""
+    the early window from :data:`EARLY_TC` / α after the pulse).
+
+    The last axis of the points is ``pulse`` (:data:`PULSE_AXIS`: +1 up, −1 down), so each operating point runs
+    both ways in the one batch; both runs of a point draw the same noise (the key of the point's index among the
+    points without the pulse axis: the up run's is the one-direction map's), so they differ by the pulse alone.
+    """
 
     family: DriveScenarios
     perturb: float = eqx.field(static=True)
@@ -279,7 +295,7 @@ class _LongRuns(AbstractFamily):
     k_mid: int = eqx.field(static=True, default=0)  # the late window's second half (the verdict's swing test)
 
     signal: ClassVar[str] = "drive"
-    axes: ClassVar[dict] = DRIVE_STUDY_AXES
+    axes: ClassVar[dict] = {**DRIVE_STUDY_AXES, "pulse": PULSE_AXIS}
     closed_loop: ClassVar[bool] = True
     bytes_per_step: ClassVar[int] = DriveScenarios.bytes_per_step
     study_bytes_per_step: ClassVar[int] = DriveScenarios.study_bytes_per_step
@@ -303,8 +319,17 @@ class _LongRuns(AbstractFamily):
 
     def build(self, names, points, first: int = 0):
         fam = self.family
-        width = _pulse_width(fam.drive, fam.machine, [p[0] for p in points])
-        return speed_pulse(build_signed(fam, names, points, first), float(fam.t_event), width, self.perturb)
+        pts = np.asarray(points, dtype=float).reshape(len(points), len(names))
+        assert list(names)[-1] == "pulse", "the long runs' last axis is the pulse's direction"
+        # scenario first + i is point (first + i) // n_pulse of the points without the pulse axis (the grid's
+        # last axis runs fastest): build each point once, with its own index's key, and repeat it per direction
+        n_pulse = len(PULSES) if self.perturb > 0.0 else 1
+        idx = (first + np.arange(len(pts))) // n_pulse
+        rows = {int(j): tuple(pts[i, :-1]) for i, j in enumerate(idx)}
+        base = build_signed(fam, list(names)[:-1], list(rows.values()), int(idx[0]))
+        scs = jax.tree.map(lambda x: x[jnp.asarray(idx - idx[0])], base)
+        width = _pulse_width(fam.drive, fam.machine, pts[:, 0])
+        return speed_pulse(scs, float(fam.t_event), width, self.perturb * pts[:, -1])
 
     def system(self, design, scenario):
         ref = scenario.speed_ref
@@ -340,6 +365,45 @@ LONG_RUN_METRICS = (
     _var("speed_swing_second", lambda sol, sc, ctx: 0.5 * (_sums(sol)[0].hi2 - _sums(sol)[0].lo2)),
     _var("run_finite", lambda sol, sc, ctx: _sums(sol)[0].finite),
 )
+
+
+def worse_pulse(runs: Any) -> Any:
+    """Each point's worse long run of its two pulse directions (the study's last dim ``pulse``, :data:`PULSES`).
+
+    A point holds only if it holds pulsed either way: near the voltage limit a pulse up can lose lock where one
+    down holds, near zero speed a pulse down (towards zero) can run the machine away where one up holds.  The
+    worse run is the one with the higher verdict code (:func:`jaxobs.analysis.verdict.verdict_from` on its running
+    sums: the codes rise with severity), then the one not synchronous; on a tie the up pulse's (the first).  Its
+    metrics are the point's; the flags are both runs': ``synchronous`` where both are, ``lost_lock`` and
+    ``lost_speed`` where either is.
+
+    Args:
+        runs: The long runs' study (an ``xarray.Dataset`` with dims ``(design, ..., pulse)``).
+
+    Returns:
+        The same variables without the ``pulse`` dim, and ``pulse`` (±1: which direction's run each point reads).
+    """
+    import xarray as xr
+
+    if "pulse" not in runs.dims:
+        raise ValueError("worse_pulse: the long runs have no 'pulse' dim")
+    state = verdict_from(
+        runs["run_finite"].values > 0.5,
+        np.degrees(runs["peak_position_event"].values),
+        runs["mean_speed_error_late"].values,
+        runs["mean_speed_reference_late"].values,
+        runs["speed_swing_first"].values,
+        runs["speed_swing_second"].values,
+    ).state
+    worse = 2 * np.asarray(state, dtype=int) + (runs["synchronous"].values == 0)
+    rank = xr.DataArray(worse, dims=runs["run_finite"].dims)
+    pick = rank.argmax("pulse")  # the first maximum: the up pulse on a tie
+    out = runs.isel(pulse=pick)
+    out["synchronous"] = runs["synchronous"].min("pulse")
+    for k in ("lost_lock", "lost_speed"):
+        out[k] = runs[k].max("pulse")
+    sign = runs["pulse"].values[pick.values]
+    return out.drop_vars("pulse").assign(pulse=(pick.dims, sign.astype(float)))
 
 
 def _lock_lost(sol, sc, ctx):

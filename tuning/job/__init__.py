@@ -48,6 +48,7 @@ A job file::
     speed_rpm = [200.0, 2000.0]      # [lo, hi]; default: the span of the tuning grid
     load_nm = [0.0, 5.0]
     horizon = 2.0                    # s, each verification run
+    ideal_sensors = false            # default: through the drive file's [sensors]; true: ideal sensors
 
     [objective]
     terms = [{ metric = "itae_freq", weight = 1.0 }]

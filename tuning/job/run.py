@@ -123,7 +123,7 @@ def _verify(
         print(f"jaxobs: verifying the designs over {env.horizon:g} s across the envelope", file=sys.stderr)
     info = COMPONENTS[job.component]
     designs = {k: info.ctor(**v) for k, v in values.items() if v is not None}
-    ver = verify_designs(designs, env, drive, df.machine)
+    ver = verify_designs(designs, env, drive, df.machine, seed=job.seed)  # the drive file's sensors' noise
     result["verification"] = ver
     result["tuning_status"] = result["status"]
     if ver["unsafe_points"]:

@@ -186,10 +186,13 @@ class RecordingSpec:
 class EnvelopeSpec:
     """The envelope a drive job claims: speeds (r/min) and loads (N·m) as [lo, hi]; ``horizon`` (s) of the
     verification runs; ``settle``, ``window``: s, of the stability verdict (:func:`jaxobs.analysis.stability.floquet`;
-    the window is lengthened to one electrical period of the lowest speed where it is shorter)."""
+    the window is lengthened to one electrical period of the lowest speed where it is shorter); ``ideal_sensors``:
+    the runs measure through ideal sensors, not the drive file's ``[sensors]`` (the default, as ``jaxobs envelope``
+    without ``--ideal-sensors``)."""
 
     speed_rpm: tuple[float, float]
     load_nm: tuple[float, float]
     horizon: float = DEFAULT_HORIZON
     settle: float = 0.2
     window: float = 0.4
+    ideal_sensors: bool = False

@@ -1,15 +1,20 @@
 """``[envelope]`` of a drive job and the long-horizon verification after tuning: tuning that cannot
 hide a failure.
 
-A design tuned and scored on its grid can run away a little outside it (the noise-tuned SOIFO ran away at
-400 r/min, two thirds of its grid's lowest speed).  So a drive job states the envelope it claims
-(``[envelope] speed_rpm = [lo, hi]``, ``load_nm = [lo, hi]``; by default the span of its tuning grid) and,
-after tuning, :func:`verify_designs` maps initial, closed form and tuned over a coarse grid of that
-envelope (3 speeds, lo, geometric middle and hi, × 2 loads, lo and hi) with the one envelope map,
-:func:`jaxobs.analysis.envelope.envelope`: a long run (``[envelope] horizon``, 2 s by default, stretched to the
-slowest speed loop's time constants) after a speed-reference pulse, so unbiased beside a boundary, through the study
-runner, batched, and the simulator's own stability verdict (:func:`jaxobs.analysis.stability.floquet`) at the
-same points, on the job's drive (its speed schedule) started steady, nominal machine.
+A design tuned and scored on its grid can run away a little outside it (the noise-tuned SOIFO ran away at 400 r/min,
+two thirds of its grid's lowest speed). So a drive job states the envelope it claims (``[envelope] speed_rpm = [lo,
+hi]``, ``load_nm = [lo, hi]``; by default the span of its tuning grid) and, after tuning, :func:`verify_designs`
+maps initial, closed form and tuned over a coarse grid of that envelope (3 speeds, lo, geometric middle and hi, × 2
+loads, lo and hi) with the one envelope map, :func:`jaxobs.analysis.envelope.envelope`: a long run (``[envelope]
+horizon``, 2 s by default, stretched to the slowest speed loop's time constants) after a speed-reference pulse up
+and one after a pulse down (the worse run counts), so unbiased beside a boundary, through the study runner, batched,
+and the simulator's own stability verdict (:func:`jaxobs.analysis.stability.floquet`) at the same points, on the
+job's drive (its speed schedule) started steady, nominal machine, measured through the drive file's ``[sensors]``
+(its ADC's quantization as noise, its offsets and gain errors; the noise drawn from the job's seed) as ``jaxobs
+envelope`` measures by default: a design tuned on noisy scenarios is verified on the same sensors, not on ideal ones
+that would hide a noise-driven loss. ``[envelope] ideal_sensors = true`` runs ideal sensors (``jaxobs envelope
+--ideal-sensors``); a shipped bench's are ideal (as the job's scenarios run them,
+:func:`jaxobs_tuning.job.scenarios.job_family`).
 
 A point *passes* when the design holds synchronism there (the envelope's ``synchronous``: finite, locked,
 at speed and settled) and is stable (``stable``: resolved, the exponent below 0 by more than its
@@ -27,14 +32,23 @@ import math
 import numpy as np
 
 from jaxobs.analysis.envelope import envelope
-from jaxobs.drive import PMSMParams
+from jaxobs.drive import PMSMParams, Sensors
+from jaxobs.scenarios.families import DriveScenarios
 
 from .drive import job_drive
 from .fields import JobError, get_field, no_unknown
 from .spec import DEFAULT_HORIZON as DEFAULT_HORIZON
 from .spec import DriveSpec, EnvelopeSpec, ScenarioSpec
 
-__all__ = ["EnvelopeSpec", "parse_envelope", "verification_points", "verify_designs", "unsafe_points", "UNSAFE_EXIT"]
+__all__ = [
+    "EnvelopeSpec",
+    "parse_envelope",
+    "verification_points",
+    "verification_sensors",
+    "verify_designs",
+    "unsafe_points",
+    "UNSAFE_EXIT",
+]
 
 UNSAFE_EXIT = 4  # jaxobs tune's exit status for status "unsafe" (3 is "diverged": nothing tuned at all)
 MIN_HORIZON = 0.5  # s: jaxobs.analysis.envelope.envelope's least; the presets run the default 2 s
@@ -81,7 +95,7 @@ def parse_envelope(raw: dict, scen: ScenarioSpec, drive: DriveSpec | None) -> En
         raise JobError("envelope", "applies to sensorless drive jobs (drive.loop = 'sensorless')")
     tab = get_field(raw, "envelope", "envelope", dict)
     assert tab is not None  # the key is there
-    no_unknown(tab, ("speed_rpm", "load_nm", "horizon", "settle", "window"), "envelope")
+    no_unknown(tab, ("speed_rpm", "load_nm", "horizon", "settle", "window", "ideal_sensors"), "envelope")
     par = drive.drive_file.machine
     n_max = drive.drive_file.speed_limit_rpm
     speeds = _range(tab, "speed_rpm", 1.0, n_max, "r/min", _span(scen.axes, "speed_rpm", 600.0))
@@ -96,7 +110,8 @@ def parse_envelope(raw: dict, scen: ScenarioSpec, drive: DriveSpec | None) -> En
     window = get_field(tab, "window", "envelope.window", float, 0.4)
     if not 0.01 <= window <= 5.0:
         raise JobError("envelope.window", f"must be in [0.01, 5] s, got {window:g}")
-    return EnvelopeSpec(speeds, loads, horizon, settle, window)
+    ideal = get_field(tab, "ideal_sensors", "envelope.ideal_sensors", bool, False)
+    return EnvelopeSpec(speeds, loads, horizon, settle, window, ideal)
 
 
 def verification_points(env: EnvelopeSpec) -> tuple[list[float], list[float]]:
@@ -116,36 +131,61 @@ def verification_points(env: EnvelopeSpec) -> tuple[list[float], list[float]]:
     return speeds, loads
 
 
-def verify_designs(designs: dict, env: EnvelopeSpec, drive_spec: DriveSpec, machine: PMSMParams | None = None) -> dict:
+def verification_sensors(env: EnvelopeSpec, drive_spec: DriveSpec) -> tuple[Sensors | None, str]:
+    """The sensors the verification measures through: the drive file's ``[sensors]``, unless the job turns them
+    off (``[envelope] ideal_sensors = true``) or runs a shipped bench (ideal, as its scenarios are).
+
+    Args:
+        env: The envelope the job claims.
+        drive_spec: The job's ``[drive]``.
+
+    Returns:
+        ``(sensors, words)``: the :class:`~jaxobs.drive.Sensors` (None: ideal) and what they are, for result.json.
+    """
+    if env.ideal_sensors:
+        return None, "ideal (envelope.ideal_sensors)"
+    if drive_spec.file is None:
+        return None, "ideal (a shipped bench)"
+    return drive_spec.drive_file.sensors, "the drive file's [sensors]"
+
+
+def verify_designs(
+    designs: dict, env: EnvelopeSpec, drive_spec: DriveSpec, machine: PMSMParams | None = None, seed: int = 0
+) -> dict:
     """Initial, closed form and tuned (``designs``: name -> drive observer) at the envelope's coarse grid over
     ``env.horizon`` seconds, with their stability verdicts (:func:`jaxobs.analysis.envelope.envelope`, the one
-    envelope map, on the job's drive started steady): the ``verification`` block of result.json.
+    envelope map, on the job's drive started steady, through :func:`verification_sensors`): the
+    ``verification`` block of result.json.
 
     Args:
         designs: name -> drive observer (``initial``, ``closed_form``, ``tuned``).
         env: The envelope the job claims.
         drive_spec: The job's ``[drive]``.
         machine: The true machine (default: its drive file's, where the caller has not read it already).
+        seed: The seed of the sensors' noise (the job's seed).
 
     Returns:
-        The verification: the envelope, the horizon, the points, each design's verdict at each point and the
-        points where the tuned design is unsafe (:func:`unsafe_points`).
+        The verification: the envelope, the horizon, the sensors, the points, each design's verdict at each point
+        and the points where the tuned design is unsafe (:func:`unsafe_points`).
     """
     drive_spec = dataclasses.replace(drive_spec, start="steady", handover=0.0)  # operating points, started steady
     drive = job_drive(drive_spec)
     par = drive_spec.drive_file.machine if machine is None else machine
+    sensors, sensors_words = verification_sensors(env, drive_spec)
+    family = DriveScenarios(par, drive, seed=seed, sensors=sensors)  # as a drive study's scenarios
     speeds, loads = verification_points(env)
     stab = {"settle": env.settle, "window": env.window}
-    ds = envelope(designs, machine=par, drive=drive, speeds_rpm=speeds, loads_nm=loads, horizon=env.horizon,
-                  stability=stab)  # fmt: skip
+    ds = envelope(designs, family=family, speeds_rpm=speeds, loads_nm=loads, horizon=env.horizon, stability=stab)
     combos = [(s, ld) for s in speeds for ld in loads]
     out = {
         "envelope": {"speed_rpm": list(env.speed_rpm), "load_nm": list(env.load_nm)},
         "horizon_s": float(ds.attrs["horizon"]),  # the job's, stretched to the slowest speed loop (envelope)
+        "sensors": sensors_words,
         "speed_schedule": drive_spec.speed_schedule,
         "points": [{"speed_rpm": s, "load_nm": ld} for s, ld in combos],
         "passes_definition": "synchronous (jaxobs.analysis.envelope: finite, locked within 90 deg electrical, at its "
-        "speed reference and settled after a 2 % speed-reference pulse, over the late window) and stable "
+        "speed reference and settled after a 2 % speed-reference pulse up and one down, the worse run, over the late "
+        "window) and stable "
         "(jaxobs.analysis.stability.floquet: the largest non-neutral Floquet multiplier over whole electrical "
         "periods, as a rate log|mu|/T, below 0 by more than its resolution, 1/s; within it the point is "
         "'marginal', which does not pass)",
