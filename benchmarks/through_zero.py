@@ -57,6 +57,14 @@ ALPHA_O = 2 * math.pi * 10.0  # rad/s: the triple pole of MechanicalSpeed.closed
 # the type-2 loop's closed-form pole) and, where its stored result exists, that job's tuned design.
 ROFO_ALPHA_O = 2 * math.pi * 50.0  # rad/s
 ROFO_TUNED = ROOT / "benchmarks" / "results" / "2026-12-02-rofo-tune-result.json"
+# The other families' tuned designs on the lab drive, each of its job in docs/examples/lab_<family>_mech_tune.toml
+# (its closed form: this benchmark's "<family>_mech" row, the mechanical model's triple pole at ALPHA_O and the
+# faded detector), run where the stored result exists.  The GI-LESO's job found nothing better than its closed form
+# (benchmarks/results/2026-12-03-lab-gileso-mech-tune.txt), so it has no tuned row.
+TUNED = {
+    f"{family}_mech_tuned": ROOT / "benchmarks" / "results" / f"2026-12-03-lab-{family}-mech-tune-result.json"
+    for family in ("faleso", "cleso", "lpf")
+}
 
 
 def designs(ts: float) -> dict:
@@ -75,6 +83,11 @@ def designs(ts: float) -> dict:
         from benchmarks.peer_observer import result_designs_of
 
         tuned["rofo_mech_tuned"] = (result_designs_of(ROFO_TUNED)["tuned"], 0.0)
+    for name, path in TUNED.items():
+        if path.exists():
+            from jaxobs_tuning.results import load_result, tuned_component
+
+            tuned[name] = (tuned_component(load_result(path)), 0.0)
     return {
         "rofo": (rofo, 0.0),
         "rofo_rs+20": (rofo, 0.2),
@@ -217,6 +230,9 @@ LABELS = {
     "rofo_mech_rs+20": "rofo + mechanical, R̂s +20 %",
     "rofo_mech_rs-20": "rofo + mechanical, R̂s −20 %",
     "rofo_mech_tuned": "reduced-order + mech., tuned",
+    "faleso_mech_tuned": "FA-LESO + mechanical, tuned",
+    "cleso_mech_tuned": "C-LESO + mechanical, tuned",
+    "lpf_mech_tuned": "LPF flux + mech., tuned",
 }
 
 

@@ -450,3 +450,27 @@ def test_a_job_tuning_the_mechanical_speed_observers_gain_runs_and_names_it(tmp_
     assert isinstance(obs, ReducedOrderFluxObserver) and isinstance(obs.speed, MechanicalSpeed)
     assert float(obs.speed.k2) == pytest.approx(gains["tuned"]["speed.k2"], rel=1e-6)  # the component's dtype
     assert float(obs.speed.k1) == pytest.approx(3 * 314.159, rel=1e-6)  # the other two keep their closed form
+
+
+def test_a_leso_result_with_a_faded_detector_loads_and_rebuilds_its_design():
+    """A LESO job's ``[observer.speed]`` with ``zero_fade`` writes it among the designs' values; the result reader
+    takes it (it once refused it as "not a value of the component") and rebuilds the tuned FA-LESO with its faded
+    detector and its tuned mechanical gains (the stored result of docs/examples/lab_faleso_mech_tune.toml)."""
+    from pathlib import Path
+
+    from jaxobs.observers import FALESO
+    from jaxobs_tuning.results import load_result, tuned_component
+
+    res = load_result(
+        Path(__file__).parents[1] / "benchmarks" / "results" / "2026-12-03-lab-faleso-mech-tune-result.json"
+    )
+    assert res["values"]["tuned"]["zero_fade"] == 20.0
+    obs = tuned_component(res)
+    assert isinstance(obs, FALESO) and isinstance(obs.speed, MechanicalSpeed) and float(obs.zero_fade) == 20.0
+    assert float(obs.speed.k2) == pytest.approx(res["gains"]["tuned"]["speed.k2"], rel=1e-6)
+    assert float(obs.k1) == pytest.approx(res["gains"]["tuned"]["k1"], rel=1e-6)
+    bad = dict(res, job=dict(res["job"], observer={"speed": {"kind": "mechanical", "alpha_o": 62.83}}))
+    with pytest.raises(ValueError, match="values.initial.zero_fade is not a value of the component"):
+        from jaxobs_tuning.results import check_result
+
+        check_result(bad)

@@ -214,9 +214,10 @@ def check_result(res: object, where: str = "result") -> dict:
                     speed_from_spec(table["speed"], f"values.{name}.speed")
                 except ValueError as e:
                     raise ValueError(f"{where}: {' '.join(str(e).split())[:160]}") from None
-            # and the sample period where the job's drive file sets it (its 1/f_sample_hz)
+            # and the sample period where the job's drive file sets it (its 1/f_sample_hz), and a LESO's faded phase
+            # detector where the job's [observer.speed] sets it (jaxobs_tuning.job.schema: zero_fade)
             plain = {k: v for k, v in table.items() if k != "speed"}
-            _numbers(plain, (*allowed, "ts"), where, f"values.{name}")
+            _numbers(plain, (*allowed, "ts", *_speed_keys(job)), where, f"values.{name}")
         if not any(t is not None for t in values.values()):
             raise ValueError(f"{where}: values holds no design (initial, closed_form and tuned all null or absent)")
     # a JobError (a ValueError of one line) names the job's field; its recordings are not read (no base folder:
@@ -227,6 +228,12 @@ def check_result(res: object, where: str = "result") -> dict:
             if table is not None:
                 _check_bounds(parsed, table, where, f"{top}.{name}", closed=name == "closed_form")
     return res
+
+
+def _speed_keys(job: dict) -> tuple[str, ...]:
+    """The constructor values a job's ``[observer.speed]`` adds beside the speed record: ``zero_fade`` where set."""
+    speed = job.get("observer", {}).get("speed") if isinstance(job.get("observer"), dict) else None
+    return ("zero_fade",) if isinstance(speed, dict) and "zero_fade" in speed else ()
 
 
 def load_result(path: str | os.PathLike) -> dict:
