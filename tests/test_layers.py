@@ -126,7 +126,12 @@ LAYERS = [
     # analyses above the studies they run: the package (no imports), the closed loop's stability verdict, then
     # the envelope map (the stability verdict and the long runs of a drive study, over the speed x load plane)
     ("jaxobs.analysis",),
-    ("jaxobs.analysis.stability", "jaxobs.analysis.verdict", "jaxobs.analysis.envelope_layout"),
+    (
+        "jaxobs.analysis.stability",
+        "jaxobs.analysis.verdict",
+        "jaxobs.analysis.envelope_layout",
+        "jaxobs.analysis.drive_points",
+    ),
     ("jaxobs.analysis.envelope_runs",),
     ("jaxobs.analysis.worst",),
     ("jaxobs.analysis.envelope",),
