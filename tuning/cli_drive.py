@@ -167,30 +167,23 @@ def _figure(f: DriveFile, path: str) -> None:
 
 def _simulate(f: DriveFile) -> list[str]:
     """Run the rated and top points sensored (:mod:`jaxobs.analysis.drive_points`); print them; the warnings."""
-    from jaxobs.analysis.drive_points import HOLD_TOL, TOP_MARGIN, horizon, run_points
+    from jaxobs.analysis.drive_points import HOLD_TOL, TOP_MARGIN, horizon, point_verdict, run_points
 
     res = run_points(f)
     print(f"operating points, sensored (the FOC on the true angle), each from its steady state for {horizon(f):.3g} s "
           f"(one jit(vmap) batch); held: mean speed of the last quarter within {HOLD_TOL:.0%}:")  # fmt: skip
     warns = []
     for r in res:
-        what = "rated torque" if r.name == "rated" else f"{TOP_MARGIN:.0%} of the capability"
-        verdict = "held" if r.held else "NOT held"
-        over = r.i_ratio > 1 + _NEAR
+        if r.name == "rated":
+            what = "rated torque"
+        else:
+            what = f"{TOP_MARGIN:.0%} of the capability" if r.load_nm > 0 else "no load: the capability has none"
+        verdict, warn = point_verdict(r)
         print(f"  {r.name:<5} {r.speed_rpm:>8.5g} r/min {r.load_nm:>8.4g} N·m ({what}): mean {r.mean_rpm:.5g} r/min "
               f"({(r.mean_rpm - r.speed_rpm) / r.speed_rpm:+.2%}), max |i|/i_max {r.i_ratio:.3f}, max |u|/u_max "
-              f"{r.u_ratio:.3f}: {verdict}{', current above i_max' if over else ''}")  # fmt: skip
-        if r.held and not over:
-            continue
-        if r.u_ratio >= 1 - _NEAR:
-            key = "inverter.u_dc (the voltage ran out)"
-        elif r.i_ratio >= 1 - _NEAR:
-            key = "control.i_max_a (the current limit bound)"
-        else:
-            key = "control.speed_bandwidth_hz (neither limit bound: the loops)"
-        lower = "machine.rated_torque_nm" if r.name == "rated" else "machine.max_speed_rpm"
-        warns.append(f"{r.name} point ({r.speed_rpm:.5g} r/min, {r.load_nm:.4g} N·m) not held within the limits: "
-                     f"raise {key}, or lower {lower}")  # fmt: skip
+              f"{r.u_ratio:.3f}: {verdict}")  # fmt: skip
+        if warn is not None:
+            warns.append(warn)
     return warns
 
 

@@ -32,12 +32,22 @@ import numpy as np
 from ..drive import RPM, ClosedLoop, Drive, DriveFile, Profile, Scenario
 from ..runtime import simulate
 
-__all__ = ["HOLD_TOL", "HORIZON_MIN_S", "TOP_MARGIN", "PointResult", "check_points", "horizon", "run_points"]
+__all__ = [
+    "HOLD_TOL",
+    "HORIZON_MIN_S",
+    "TOP_MARGIN",
+    "PointResult",
+    "check_points",
+    "horizon",
+    "point_verdict",
+    "run_points",
+]
 
 HOLD_TOL = 0.02  # held: mean speed over the last quarter within 2 % of the reference
 TOP_MARGIN = 0.95  # the top point's load: 95 % of the capability there (5 % left to the speed loop)
 HORIZON_MIN_S = 0.2  # the shortest run, s
 TOP_BASE_PU = 1.5  # the top point: 1.5 × base speed, or the speed limit where lower
+NEAR = 1e-3  # a limit is reached within 0.1 % of it
 
 
 class PointResult(NamedTuple):
@@ -136,3 +146,35 @@ def run_points(f: DriveFile, points: tuple[tuple[str, float, float], ...] | None
         PointResult(name, n, t, float(mean[k]), bool(abs(mean[k] - n) <= HOLD_TOL * n), float(i_r[k]), float(u_r[k]))
         for k, (name, n, t) in enumerate(pts)
     ]
+
+
+def point_verdict(r: PointResult) -> tuple[str, str | None]:
+    """A point's one-word-or-so verdict and, where it fails, the warning naming the key to change.
+
+    Held with |i| ≤ i_max: ``"held"`` (``", at the voltage limit"`` added where |u| reached u_dc/√3: the current
+    loop had no room left).  Not held, or above i_max: the key whose limit was reached — ``inverter.u_dc`` where
+    |u| reached u_dc/√3, ``control.i_max_a`` where |i| reached i_max, else ``control.speed_bandwidth_hz`` (neither
+    limit: the loops themselves) — and the rating or speed to lower instead.
+
+    Args:
+        r: The point's run.
+
+    Returns:
+        ``(verdict, warning or None)``.
+    """
+    at_u = r.u_ratio >= 1 - NEAR
+    over = r.i_ratio > 1 + NEAR
+    if r.held and not over:
+        return "held" + (", at the voltage limit" if at_u else ""), None
+    verdict = ("NOT held" if not r.held else "held") + (", current above i_max" if over else "")
+    if at_u:
+        key = "inverter.u_dc (the voltage ran out)"
+    elif r.i_ratio >= 1 - NEAR:
+        key = "control.i_max_a (the current limit bound)"
+    else:
+        key = "control.speed_bandwidth_hz (neither limit bound: the loops)"
+    lower = "machine.rated_torque_nm" if r.name == "rated" else "machine.max_speed_rpm"
+    what = "not held" if not r.held else "held only above i_max"
+    return verdict, (
+        f"{r.name} point ({r.speed_rpm:.5g} r/min, {r.load_nm:.4g} N·m) {what}: raise {key}, or lower {lower}"
+    )
