@@ -108,3 +108,29 @@ def test_a_claimed_rating_the_curve_cannot_carry_is_a_warning(tmp_path, capsys):
     assert rc == 0
     assert "warning: machine.rated_torque_nm: the capability at the rated speed is 0.2425 N·m" in out
     assert "control.field_weakening = true" in out
+
+
+def test_a_foc_built_from_concrete_values_has_the_jax_operations_bits():
+    """FOC.imc on concrete values computes its gains in NumPy (no XLA kernel compiled: a drive check runs nothing);
+    they are bit for bit what the same operations give one by one on JAX arrays (how it computed them before), the
+    default i_max too; and as_float places a Python number with JAX's own rounding."""
+    import jax
+
+    from jaxobs.core.validate import as_float
+
+    m = D.PMSMParams(0.018, 0.00037, 0.0012, 0.066, 0.3883, 3, T_rated=135.0)
+    a_c, a_s = as_float(3490.7), as_float(31.4159)
+    foc = D.FOC.imc(m, a_c, a_s)
+    by_jax = {
+        "kp_d": a_c * m.Ld,
+        "ki_d": a_c * m.Rs,
+        "kp_q": a_c * m.Lq,
+        "ki_q": a_c * m.Rs,
+        "kp_w": 2 * a_s * m.J / m.kt,
+        "ki_w": a_s**2 * m.J / m.kt,
+        "i_max": 1.5 * m.i_rated,
+    }
+    for k, v in by_jax.items():
+        assert np.asarray(getattr(foc, k)).tobytes() == np.asarray(v).tobytes(), k
+    placed = jax.numpy.asarray(0.1, dtype=as_float(0.0).dtype)
+    assert np.asarray(as_float(0.1)).tobytes() == np.asarray(placed).tobytes()

@@ -163,10 +163,11 @@ LAYERS = [
     ("jaxobs_tuning.export", "jaxobs_tuning.envelope"),
     ("jaxobs_tuning",),
     # the command line: the top layer (`jaxobs ...` and `python -m jaxobs`)
-    ("jaxobs_tuning.cli_common", "jaxobs_tuning.summary", "jaxobs_tuning.distributed"),
+    ("jaxobs_tuning.cli_common", "jaxobs_tuning.summary", "jaxobs_tuning.distributed", "jaxobs_tuning.cli_run"),
     ("jaxobs_tuning.cli_papers", "jaxobs_tuning.cli_drive", "jaxobs_tuning.cli_log"),
     ("jaxobs_tuning.cli",),
-    ("jaxobs_tuning.cli_entry",),  # the console script: help and version at once, the commands by cli
+    # the console script: help and version at once, `drive` by its own parser, the other commands by cli
+    ("jaxobs_tuning.cli_entry",),
     ("jaxobs.__main__",),
 ]
 # Imported by nothing outside it, so it may defer imports for start-up time.  jaxobs/__main__.py is an
