@@ -26,6 +26,8 @@ import numpy as np
 
 from jaxobs.drive import DriveFile, read_drive
 
+from .cli_common import enable_x64
+
 _SECTIONS = (
     ("machine", ("psi_f", "kt", "i_char", "tau_d", "tau_q", "t_accel", "i_rated_point")),
     (
@@ -199,6 +201,8 @@ def cmd_drive_check(args: argparse.Namespace) -> int:
     Raises:
         ValueError: Bad input (one line, exit 2).
     """
+    if args.simulate:
+        enable_x64()  # the runs in float64, as every command that simulates (before any array is made)
     f = read_drive(args.file)
     _derived(f, args.file)
     warns = [*f.warnings, *_capability(f)]
