@@ -11,9 +11,10 @@ warnings.  A bad file: one line naming the key, exit 2 (the command line's ``Val
 
 ``--simulate`` runs the derived controller sensored at the rated point and at the top speed the check claims,
 loaded at 95 % of the capability there (:mod:`jaxobs.analysis.drive_points`), and reports whether each is held.
-It is a flag, not the default: the plain check is a file's arithmetic and answers in about a second, while the
-runs compile a closed loop (tens of seconds on a laptop's CPU); a check that a user runs at every edit of the
-file must stay instant.
+It is a flag, not the default: the plain check must answer within 2 s (a check run at every edit of the file),
+and it is the file's arithmetic: it compiles no XLA program and imports none of the tuning commands (most of its
+time is importing JAX; ``tests/test_cli.py`` guards both), while the runs compile and run a closed loop, tens of
+seconds on a laptop's CPU.
 """
 
 from __future__ import annotations
@@ -274,7 +275,10 @@ def add_drive_parser(
     c = sub.add_parser(
         "check",
         help="validate a drive file and print its derived values",
-        description="Validate a drive file and print its derived values.",
+        description="Validate a drive file and print its derived values and its torque-speed capability. The "
+        "plain check is the file's arithmetic (no closed loop compiled or run: it answers within about 2 s); "
+        "--simulate also runs the rated point and the top speed in closed loop, sensored (one compiled batch: tens "
+        "of seconds).",
         parents=list(parents),
     )
     c.add_argument("file", help="a drive file (TOML)")
