@@ -94,7 +94,7 @@ def test_drive_check_prints_the_capability_and_draws_it(tmp_path, capsys):
     assert "capability (steady maximum torque; |i| <= i_max = 240 A, |u| <= fw_margin × u_dc/√3 = 164.54 V" in out
     rows = {ln.split()[0]: ln.split() for ln in out.splitlines() if ln.startswith("  ") and ln.split()[0][0].isdigit()}
     assert rows["0"][1:2] == ["160.6"] and rows["0"][-1] == "current"
-    assert rows["3996.6"][1] == "103.1" and rows["3996.6"][-1] == "voltage"
+    assert rows["3996.6"][1] == "103.1" and rows["3996.6"][-1] == "voltage+i_d_stop"  # at −ψf/Ld, under u
     assert rows["12000"][1] == "34.35"
     assert fig.stat().st_size > 10_000 and fig.read_bytes()[:4] == b"\x89PNG"
     assert out.rstrip().splitlines()[-1].startswith("operating points not simulated: --simulate runs")

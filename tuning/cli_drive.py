@@ -26,6 +26,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from jaxobs.drive import DriveFile, read_drive
+from jaxobs.drive.weakening import mtpv_iq
 
 from .cli_common import enable_x64
 
@@ -108,16 +109,26 @@ def _capability(f: DriveFile) -> list[str]:
           f"{m_fw * u_max:.5g} V; {flux}; {fw}):")  # fmt: skip
     print(f"  {'speed':>9} {'torque':>9} {'power':>8} {'i_d':>8} {'i_q':>8} {'|i|/i_max':>9} {'|u|/u_max':>9}  limit")
     print(f"  {'r/min':>9} {'N·m':>9} {'kW':>8} {'A':>8} {'A':>8}")
+    m = f.machine
+    # field weakening's own stop at −ψf/Ld (where it lies inside the circle), and the MTPV line it respects on an
+    # inverse-salient machine (jaxobs.drive.weakening): limits of the reference, named where they bind
+    weak = bool(d["field_weakening"].value)
+    stop = -float(m.psi_f) / float(m.Ld) if weak and float(m.psi_f) / float(m.Ld) < i_max else None
+    mtpv = np.asarray(mtpv_iq(m, c["i_d"])) if weak and float(m.Ld) > float(m.Lq) else np.full(len(n), np.inf)
     for k in range(len(n)):
         te, i_d, i_q, u = (float(c[key][k]) for key in ("torque", "i_d", "i_q", "u"))
         if not np.isfinite(te):
             print(f"  {n[k]:>9.5g} {'none':>9}  no current within the limits fits the voltage")
             continue
         i_r = float(np.hypot(i_d, i_q)) / i_max
-        binds = [w for w, on in (("current", i_r >= 1 - near), ("voltage", u / u_max >= m_fw * (1 - near))) if on]
+        binds = [w for w, on in (("current", i_r >= 1 - near), ("voltage", u / u_max >= m_fw * (1 - near)),
+                                 ("i_d_stop", stop is not None and i_d <= stop * (1 - near)),
+                                 ("MTPV", i_q >= mtpv[k] * (1 - near))) if on]  # fmt: skip
         power = te * n[k] * 2 * np.pi / 60 / 1e3
         print(f"  {n[k]:>9.5g} {te:>9.4g} {power:>8.3g} {i_d:>8.4g} {i_q:>8.4g} {i_r:>9.3f} {u / u_max:>9.3f}  "
               f"{'+'.join(binds) or '-'}")  # fmt: skip
+    if stop is not None or np.isfinite(mtpv).any():
+        print("  (i_d_stop: i_d at −psi_f/Ld, where field weakening stops; MTPV: on the maximum-torque-per-volt line)")
     warns = []
     none = n[~np.isfinite(c["torque"])]
     # at a speed limit the voltage sets (no-load, at u_dc/√3) no torque fits fw_margin of u_dc/√3: that is the
