@@ -134,3 +134,13 @@ def test_a_foc_built_from_concrete_values_has_the_jax_operations_bits():
         assert np.asarray(getattr(foc, k)).tobytes() == np.asarray(v).tobytes(), k
     placed = jax.numpy.asarray(0.1, dtype=as_float(0.0).dtype)
     assert np.asarray(as_float(0.1)).tobytes() == np.asarray(placed).tobytes()
+
+
+@pytest.mark.parametrize(("Ld", "Lq"), [(0.0012, 0.0007), (0.00037, 0.0012)])
+def test_the_numpy_mtpv_bound_is_the_references(Ld, Lq):
+    """mtpv_iq_np (the check's, no kernel compiled) is the reference's mtpv_iq, inf on a salient machine."""
+    from jaxobs.drive.weakening import mtpv_iq, mtpv_iq_np
+
+    m = D.PMSMParams(0.018, Ld, Lq, 0.066, 0.39, 3)
+    i_d = np.linspace(-200.0, 0.0, 41)
+    assert np.allclose(mtpv_iq_np(m, i_d), np.asarray(mtpv_iq(m, i_d)), rtol=1e-12, atol=0.0)

@@ -26,7 +26,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from jaxobs.drive import DriveFile, read_drive
-from jaxobs.drive.weakening import mtpv_iq
+from jaxobs.drive.weakening import mtpv_iq_np
 
 from .cli_common import enable_x64
 
@@ -114,7 +114,7 @@ def _capability(f: DriveFile) -> list[str]:
     # inverse-salient machine (jaxobs.drive.weakening): limits of the reference, named where they bind
     weak = bool(d["field_weakening"].value)
     stop = -float(m.psi_f) / float(m.Ld) if weak and float(m.psi_f) / float(m.Ld) < i_max else None
-    mtpv = np.asarray(mtpv_iq(m, c["i_d"])) if weak and float(m.Ld) > float(m.Lq) else np.full(len(n), np.inf)
+    mtpv = mtpv_iq_np(m, c["i_d"]) if weak else np.full(len(n), np.inf)
     for k in range(len(n)):
         te, i_d, i_q, u = (float(c[key][k]) for key in ("torque", "i_d", "i_q", "u"))
         if not np.isfinite(te):

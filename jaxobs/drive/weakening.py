@@ -71,6 +71,7 @@ __all__ = [
     "capability_torque",
     "id_stop",
     "mtpv_iq",
+    "mtpv_iq_np",
     "voltage_iq_range",
 ]
 
@@ -256,6 +257,25 @@ def mtpv_iq(est: PMSMParams, id_ref: jax.Array | float) -> jax.Array:
     return jnp.where(inverse, bound, jnp.inf)
 
 
+def mtpv_iq_np(est: PMSMParams, i_d: np.ndarray) -> np.ndarray:
+    """:func:`mtpv_iq` in NumPy on concrete values (a check's number: no XLA kernel compiled), A.
+
+    Args:
+        est: The assumed machine.
+        i_d: The d currents, A.
+
+    Returns:
+        The bound at each ``i_d`` (inf where L̂q ≥ L̂d), A.
+    """
+    Ld, Lq, psi = float(est.Ld), float(est.Lq), float(est.psi_f)
+    i_d = np.asarray(i_d, float)
+    if Ld <= Lq:
+        return np.full(i_d.shape, np.inf)
+    psi_d = psi + Ld * i_d
+    q2 = psi_d * psi_d + psi * Lq * psi_d / (Ld - Lq)
+    return np.where(psi_d > 0, np.sqrt(np.maximum(q2, 0.0)) / Lq, 0.0)
+
+
 def voltage_iq_range(
     est: PMSMParams, id_ref: jax.Array | float, omega_e: jax.Array | float, u_lim: jax.Array | float
 ) -> tuple[jax.Array, jax.Array]:
@@ -393,9 +413,7 @@ def _constant_curve(est, w, u_max, i_max, margin, n):
     hi = np.where(a > 0, (-b + root) / (2.0 * a_s), np.inf)  # standstill without resistance: no voltage bound
     lo = np.where(a > 0, (-b - root) / (2.0 * a_s), -np.inf)
     room = np.sqrt(np.maximum(i_max**2 - i_d * i_d, 0.0))
-    if Ld > Lq:  # the MTPV bound of an inverse-salient machine (mtpv_iq)
-        q2 = psi_d * psi_d + psi * Lq * psi_d / (Ld - Lq)
-        room = np.minimum(room, np.where(psi_d > 0, np.sqrt(np.maximum(q2, 0.0)) / Lq, 0.0))
+    room = np.minimum(room, mtpv_iq_np(est, i_d))
     i_q = np.clip(hi, 0.0, room)
     fits = ((a == 0) | (disc >= 0)) & (i_q >= lo)  # some i_q ≥ 0 within the limits meets the voltage
     torque = np.where(fits, 1.5 * p * (psi + (Ld - Lq) * i_d) * i_q, -np.inf)
@@ -445,7 +463,7 @@ def _map_weakening_curve(machine, w, u_max, i_max, margin, n=241, block=32):
     i_d = np.linspace(float(id_stop(machine, 0.0, i_max)), 0.0, n)
     room = np.sqrt(np.maximum(i_max * i_max - i_d * i_d, 0.0))
     if float(machine.Ld) > float(machine.Lq):  # the reference's MTPV bound is the assumed machine's
-        room = np.minimum(room, np.asarray(mtpv_iq(machine, jnp.asarray(i_d))))
+        room = np.minimum(room, mtpv_iq_np(machine, i_d))
     gd, gq = np.meshgrid(i_d, np.linspace(0.0, 1.0, n) ** 2)
     gd, gq = gd.reshape(-1), (gq * room[None, :]).reshape(-1)
     pd, pq = (np.asarray(v) for v in _map_flux(machine.sat, jnp.asarray(gd), jnp.asarray(gq)))
