@@ -48,9 +48,9 @@ def test_cache_bad_input(tmp_path, restore_cache_config):
 
 _PROBE = """
 import sys
-from jaxobs_tuning import cli
-real = cli.use_compile_cache
-cli.use_compile_cache = lambda: print("CACHE", real())
+from jaxobs_tuning import cli, cli_run
+real = cli_run.use_compile_cache
+cli_run.use_compile_cache = lambda: print("CACHE", real())
 sys.exit(cli.main(sys.argv[1:]))
 """
 

@@ -220,6 +220,54 @@ def test_help_and_version_answer_without_importing_jax(capsys):
     assert run.returncode == 0 and run.stdout.startswith("jaxobs "), run.stderr[-2000:]
 
 
+# modules a plain `jaxobs drive check` must not import: the tuning commands' jobs and solvers, the integrators'
+# and optimisers' libraries, the figures, the closed-loop analyses (each costs start-up time the check never uses)
+DRIVE_CHECK_UNUSED = (
+    "jaxobs_tuning.cli",
+    "jaxobs_tuning.job",
+    "jaxobs_tuning.solvers",
+    "jaxobs_tuning.distributed",
+    "optax",
+    "optimistix",
+    "lineax",
+    "diffrax",
+    "matplotlib",
+    "xarray",
+    "jaxobs.analysis.drive_points",
+)
+
+
+@pytest.mark.parametrize("name", ["traction_ipmsm.toml", "teknic_m2310p.toml"])
+def test_a_plain_drive_check_compiles_nothing_and_imports_no_command_it_does_not_run(name):
+    """`jaxobs drive check FILE` (no --simulate, no saturation map) answers from the file's arithmetic: JAX compiles
+    no program (JAX_LOG_COMPILES logs none; each eager operation on a JAX array would compile one kernel), and the
+    console script runs it by the drive command's own parser, without the modules of DRIVE_CHECK_UNUSED."""
+    code = (
+        "import sys; from jaxobs_tuning.cli_entry import main; "
+        f"rc = main(['drive', 'check', '--no-cache', {str(ROOT / 'docs' / 'examples' / name)!r}]); "
+        f"bad = [m for m in {DRIVE_CHECK_UNUSED!r} if m in sys.modules]; "
+        "assert rc == 0 and not bad, bad"
+    )
+    env = {**os.environ, "JAX_LOG_COMPILES": "1", "JAX_PLATFORMS": "cpu"}
+    run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, env=env)
+    assert run.returncode == 0, run.stderr[-2000:]
+    assert "Compiling" not in run.stderr, run.stderr[-2000:]
+    assert "operating points not simulated" in run.stdout
+
+
+def test_the_drive_commands_own_parser_is_the_full_parsers(capsys):
+    """`jaxobs drive check --help` through the console script's drive parser is the full parser's, word for word."""
+    from jaxobs_tuning.cli_entry import main as entry
+
+    with pytest.raises(SystemExit):
+        build_parser().parse_args(["drive", "check", "--help"])
+    full = capsys.readouterr().out
+    with pytest.raises(SystemExit) as e:
+        entry(["drive", "check", "--help"])
+    assert e.value.code == 0 and capsys.readouterr().out == full
+    assert "--simulate" in full and "--figure" in full
+
+
 def test_a_design_is_named_by_its_alias_or_class_name_in_any_case(capsys):
     """`closed-form` and `export --design` read a class name (as job files and result.json name a component) or an
     alias, in any case: the same rows; an unknown name is argparse's one line naming the choices."""

@@ -82,6 +82,7 @@ def _cheap(cmd: str) -> bool:
         or "--check" in words
         and words[1] in ("tune", "study", "envelope")
         or words[1:3] in (["drive", "check"], ["log", "check"])
+        and "--simulate" not in words  # drive check --simulate compiles and runs a closed loop: slow suite
     )
 
 

@@ -129,7 +129,12 @@ LAYERS = [
     # analyses above the studies they run: the package (no imports), the closed loop's stability verdict, then
     # the envelope map (the stability verdict and the long runs of a drive study, over the speed x load plane)
     ("jaxobs.analysis",),
-    ("jaxobs.analysis.stability", "jaxobs.analysis.verdict", "jaxobs.analysis.envelope_layout"),
+    (
+        "jaxobs.analysis.stability",
+        "jaxobs.analysis.verdict",
+        "jaxobs.analysis.envelope_layout",
+        "jaxobs.analysis.drive_points",
+    ),
     ("jaxobs.analysis.envelope_runs",),
     ("jaxobs.analysis.worst",),
     ("jaxobs.analysis.envelope",),
@@ -162,9 +167,11 @@ LAYERS = [
     ("jaxobs_tuning",),
     # the command line: the top layer (`jaxobs ...` and `python -m jaxobs`)
     ("jaxobs_tuning.cli_common", "jaxobs_tuning.summary", "jaxobs_tuning.distributed"),
+    ("jaxobs_tuning.cli_run",),  # the runner of every command: one-line errors, the compile cache, --quiet's log
     ("jaxobs_tuning.cli_papers", "jaxobs_tuning.cli_drive", "jaxobs_tuning.cli_log"),
     ("jaxobs_tuning.cli",),
-    ("jaxobs_tuning.cli_entry",),  # the console script: help and version at once, the commands by cli
+    # the console script: help and version at once, `drive` by its own parser, the other commands by cli
+    ("jaxobs_tuning.cli_entry",),
     ("jaxobs.__main__",),
 ]
 # Imported by nothing outside it, so it may defer imports for start-up time.  jaxobs/__main__.py is an

@@ -25,7 +25,7 @@ IO = {
     "jaxobs/runtime/progress.py": "whether stderr is a terminal (a stream may have no isatty)",
     "jaxobs/runtime/programs.py": "the kept-program cache's files: the operating system's optional open() flags",
     "jaxobs/runtime/_digest.py": "the digest of code and values a kept program keys on (module, name, fields)",
-    "tuning/cli.py": "the command line's argparse namespace (a subcommand defines only its own options)",
+    "tuning/cli_run.py": "the command line's argparse namespace (a subcommand defines only its own options)",
     "tuning/envelope.py": "the command line's argparse namespace",
     "tuning/export/command.py": "the command line's argparse namespace",
     "tuning/cli_papers.py": "`jaxobs closed-form`'s options, one per parameter of a design, and its namespace",

@@ -70,20 +70,16 @@ import argparse
 import json
 import shlex
 import sys
-import tempfile
-import traceback
-import warnings
 from collections.abc import Sequence
 from importlib import resources
 from pathlib import Path
 from typing import TYPE_CHECKING, cast
 
 import jaxobs
-from jaxobs import use_compile_cache, use_host_devices
 from jaxobs.runtime.chunkstore import ChunkStore
 from jaxobs.studies.registry import spelled
 
-from .cli_common import enable_x64, native_stderr_to_log, progress_of
+from .cli_common import enable_x64, progress_of
 from .cli_drive import add_drive_parser
 from .cli_log import add_log_parser
 from .cli_papers import BODE_FILES as BODE_FILES
@@ -91,6 +87,8 @@ from .cli_papers import CF_OPTIONS, cf_flags, cmd_bode, cmd_closed_form, cmd_dem
 from .cli_papers import DEMO_FILES as DEMO_FILES
 from .cli_papers import REPRODUCE_FILES as REPRODUCE_FILES
 from .cli_papers import closed_form_rows as closed_form_rows
+from .cli_run import Parser as _Parser
+from .cli_run import quiet_parent, run_parser
 from .distributed import distributed_asked, distributed_study, join_distributed, refuse_unsplittable
 from .envelope import add_envelope_parser
 from .export import add_export_parser
@@ -128,10 +126,10 @@ def _cmd_drive_study(name, designs, axes, opts, out: Path, quiet: bool, provenan
     from jaxobs.core.quantities import text_unit
     from jaxobs.metrics import METRICS
     from jaxobs.plot import drive_study_figure
-    from jaxobs.studies.drive import DRIVE_STUDY_METRICS
-    from jaxobs.studies.study import run_study, write_study
+    from jaxobs.studies.drive import DRIVE_STUDY_METRICS, run_drive_study
+    from jaxobs.studies.study import write_study
 
-    ds = cast("Dataset", run_study(designs, axes, progress=progress_of(quiet=quiet), store=store, **opts))
+    ds = run_drive_study(designs, axes, progress=progress_of(quiet=quiet), store=store, **opts)
     ds.attrs.update(provenance or {})  # the study file's and the result files' sha256, the machine
     fig = out / "drive_study.png"
     drive_study_figure(ds, fig)
@@ -304,10 +302,7 @@ def _cmd_tune(args) -> int:
         n = job.scenarios.sample or n
         drive = "" if job.drive is None else f", {job.drive.loop} drive on {job.drive.machine}"
         if job.scenarios.recording is not None:  # the observer runs open loop on the files, whatever the signal
-            rec = job.scenarios.recording
-            drive = f", open loop on {len(rec.files)} recording(s)"
-            if rec.startup_s:  # the drive logs' scores skip the observer's start-up
-                drive += f" scored from {rec.startup_s:.4g} s ({rec.startup_periods:g} electrical periods of start-up)"
+            drive = f", open loop on {len(job.scenarios.recording.files)} recording(s)"
         print(
             f"{path}: OK — {job.component}, free gains {', '.join(g.name for g in job.gains)}, {n} scenarios"
             f"{drive}, solver {job.solver.name}"
@@ -323,11 +318,6 @@ def _cmd_tune(args) -> int:
         timing = {}
     print_summary(result, out, timing)
     return {"diverged": 3, "overflow": 3, "unsafe": UNSAFE_EXIT}.get(result["status"], 0)
-
-
-class _Parser(argparse.ArgumentParser):
-    def error(self, message):  # one line, exit 2, no usage dump
-        self.exit(2, f"jaxobs: error: {message}\n")
 
 
 def _host_port(text: str) -> str:
@@ -366,7 +356,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = _Parser(prog="jaxobs", description="Differentiable simulation and tuning of motor-drive observers and FLLs.")
     p.add_argument("--version", action="version", version=f"jaxobs {jaxobs.__version__}")
     sub = p.add_subparsers(dest="cmd", parser_class=_Parser, metavar="COMMAND")  # none given: main lists them
-    quiet = _quiet_parent()
+    quiet = quiet_parent()
     _add_tune_parser(sub, quiet)
     _add_demo_parser(sub, quiet)
     _add_closed_form_parser(sub, quiet)
@@ -378,25 +368,6 @@ def build_parser() -> argparse.ArgumentParser:
     add_drive_parser(sub, parents=[quiet])
     add_log_parser(sub, parents=[quiet])
     return p
-
-
-def _quiet_parent() -> argparse.ArgumentParser:
-    """The options every command takes: --quiet, no progress on stderr (stdout, the results, is the same either
-    way), and --no-cache."""
-    quiet = _Parser(add_help=False)
-    quiet.add_argument(
-        "--quiet",
-        action="store_true",
-        help="no progress bars or compile notices on stderr; XLA's own messages (its slow-compile alarms) go to "
-        "$JAXOBS_NATIVE_LOG or ~/.cache/jaxobs/xla.log",
-    )
-    quiet.add_argument(
-        "--no-cache",
-        action="store_true",
-        help="do not keep compiled programs on disk (default: kept in $JAXOBS_CACHE_DIR or ~/.cache/jaxobs/jax, "
-        "so a second run skips most of XLA's work; JAXOBS_CACHE_DIR=off turns it off too)",
-    )
-    return quiet
 
 
 def _add_tune_parser(sub: argparse._SubParsersAction, quiet: argparse.ArgumentParser) -> None:
@@ -536,85 +507,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     Returns:
         The exit status.
     """
-    parser = build_parser()
-    args = None
-    shown = warnings.showwarning
-
-    # a recording's warning (RecordingWarning), an old metric name read (MetricNameWarning) as the tool's own line
-    def one_line(message, category, *a, **k):
-        if category.__name__ in ("RecordingWarning", "MetricNameWarning"):
-            print(f"jaxobs: warning: {message}", file=sys.stderr)
-        else:
-            shown(message, category, *a, **k)
-
-    warnings.showwarning = one_line
-    warnings.filterwarnings("default", ".*is an old metric name", DeprecationWarning)  # shown once per place
-    try:
-        use_host_devices()  # before any JAX computation: one CPU device per usable core
-        args = parser.parse_args(argv)
-        if args.cmd is None:  # `jaxobs` alone: the commands, not argparse's "arguments are required: cmd"
-            parser.print_help(sys.stderr)
-            return 2
-        if not getattr(args, "no_cache", False):
-            use_compile_cache()  # before any compilation: compiled programs are reused by the next process
-        with native_stderr_to_log(getattr(args, "quiet", False)):  # XLA's own alarms to a log under --quiet
-            return args.func(args)
-    except ValueError as e:  # bad input, job-file errors (JobError) included: one line, exit 2
-        print(f"jaxobs: error: {e}", file=sys.stderr)
-        return 2
-    except OSError as e:  # an output folder that cannot be made or written, a file that cannot be read
-        where = f": {e.filename}" if e.filename else ""
-        print(f"jaxobs: error: {e.strerror or e}{where}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
-        from jaxobs.runtime.progress import close_all
-
-        # the bars closed first (tqdm draws a bar as it closes: nothing is drawn after the line below), which
-        # ends their line; else on a line of its own, a bar may hold the terminal's current line
-        start = "" if close_all() or not sys.stderr.isatty() else "\n"
-        print(f"{start}jaxobs: interrupted{_interrupt_hint(args)}", file=sys.stderr)
-        return 130
-    except (Exception, MemoryError) as e:  # an internal error: the traceback to a log, one line here
-        log = _write_error_log(getattr(args, "log_dir", None))
-        what = "out of memory" if isinstance(e, MemoryError) else f"internal error ({type(e).__name__})"
-        print(f"jaxobs: {what}: {' '.join(str(e).split())[:120]} — traceback in {log}", file=sys.stderr)
-        return 1
-    finally:
-        warnings.showwarning = shown
+    return run_parser(build_parser(), argv)
 
 
 def _resume_hint(resume: str, saved):
     """What Ctrl-C adds to "interrupted" (``args.on_interrupt``): the command that continues the run, only
     when ``saved()`` finds something on disk to continue from (interrupted before a checkpoint: nothing)."""
     return lambda: f"; continue with: {resume}" if saved() else ""
-
-
-def _interrupt_hint(args: argparse.Namespace | None) -> str:
-    """What Ctrl-C adds to "interrupted": ``args.on_interrupt``, a text or a callable that gives it."""
-    hint = getattr(args, "on_interrupt", "")
-    try:
-        return str(hint()) if callable(hint) else str(hint)
-    except OSError:
-        return ""
-
-
-def _write_error_log(out) -> str:
-    """The current exception's traceback to ``<out>/error.log`` (else a temporary file); its path."""
-    text = traceback.format_exc()
-    if out is not None:
-        try:
-            path = Path(out) / "error.log"
-            atomic_write_text(path, text)  # renamed over the name: a link there is replaced, never written through
-            return str(path)
-        except OSError:
-            pass
-    try:
-        fd, path = tempfile.mkstemp(prefix="jaxobs-error-", suffix=".log")
-        with open(fd, "w") as f:
-            f.write(text)
-        return path
-    except OSError:
-        return "(no log: nothing writable)"
 
 
 if __name__ == "__main__":

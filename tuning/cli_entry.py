@@ -1,5 +1,7 @@
 """The ``jaxobs`` console script's entry: ``jaxobs``, ``jaxobs --help`` and ``jaxobs --version`` answered at once,
-without importing JAX; every command handed to :func:`jaxobs_tuning.cli.main`.
+without importing JAX; ``jaxobs drive ...`` run by a parser of that command alone (:mod:`jaxobs_tuning.cli_run`:
+the full parser imports every command's module, the tuning jobs' solvers among them, which a drive file's check
+never uses); every other command handed to :func:`jaxobs_tuning.cli.main`.
 
 The list of commands (:data:`COMMANDS`) is the full parser's (:func:`jaxobs_tuning.cli.build_parser`), word for
 word: ``tests/test_cli.py`` compares the two help texts.
@@ -57,7 +59,8 @@ def top_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Run the command line: the top level's help and version here, every command by :func:`jaxobs_tuning.cli.main`.
+    """Run the command line: the top level's help and version here, ``drive`` by its own parser, every other command
+    by :func:`jaxobs_tuning.cli.main`.
 
     Args:
         argv: The arguments (default ``sys.argv[1:]``).
@@ -74,6 +77,14 @@ def main(argv: Sequence[str] | None = None) -> int:
             top_parser().parse_args(args[:1])
         except SystemExit as e:  # argparse's own exit after printing the help or the version
             return int(e.code or 0)
+    if args[0] == "drive":  # a drive file's check: its own parser, none of the tuning commands' modules
+        from .cli_drive import add_drive_parser
+        from .cli_run import Parser, quiet_parent, run_parser
+
+        p = Parser(prog="jaxobs", description=DESCRIPTION)
+        sub = p.add_subparsers(dest="cmd", parser_class=Parser, metavar="COMMAND")
+        add_drive_parser(sub, parents=[quiet_parent()])
+        return run_parser(p, args)
     from .cli import main as run  # the commands: JAX and the library, imported only now
 
     return run(args)

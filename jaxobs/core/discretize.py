@@ -21,15 +21,19 @@ run through diffrax's explicit Runge--Kutta machinery (``diffrax.AbstractERK``,
 see :func:`diffrax_rk4_step`) step for step, but keeps the plain formula in
 the hot loop for speed.  diffrax has no implicit trapezoidal rule and no
 multistep methods, so :class:`Tustin` and :class:`AB3` are written here.
+
+diffrax is imported where a step first traces (:func:`_diffrax`), not with this module: importing it (and
+optimistix, lineax with it) costs about half a second, which a program that never steps a rule — ``jaxobs drive
+check`` reading a drive file — should not pay (``tests/test_cli.py`` checks what that command imports).
 """
 
 from __future__ import annotations
 
 import abc
+import functools
 from collections.abc import Callable
 from typing import Any, ClassVar
 
-import diffrax
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -198,9 +202,16 @@ class AbstractRule(eqx.Module):
         """
 
 
+def _diffrax():
+    """diffrax, imported on first use (module doc)."""
+    import diffrax
+
+    return diffrax
+
+
 def _diffrax_term(f: VectorField, path: AbstractInputPath, h):
     # diffrax integrates over t in [0, h]; the input path is parametrized by s = t / h.
-    return diffrax.ODETerm(lambda t, y, args: f(y, path.at(t / h)))
+    return _diffrax().ODETerm(lambda t, y, args: f(y, path.at(t / h)))
 
 
 class Euler(AbstractRule):
@@ -224,34 +235,38 @@ class Euler(AbstractRule):
             (the state after the period, the rule's new state).
         """
         path = as_path(u)
-        x1, _, _, _, _ = diffrax.Euler().step(_diffrax_term(f, path, h), 0.0, h, x, None, None, False)
+        x1, _, _, _, _ = _diffrax().Euler().step(_diffrax_term(f, path, h), 0.0, h, x, None, None, False)
         return x1, rule_state
 
 
-_rk4_tableau = diffrax.ButcherTableau(
-    a_lower=(np.array([0.5]), np.array([0.0, 0.5]), np.array([0.0, 0.0, 1.0])),
-    b_sol=np.array([1 / 6, 1 / 3, 1 / 3, 1 / 6]),
-    # The classic RK4 has no embedded pair; diffrax wants an error row, so give
-    # it the trivial one (our rules never adapt the step).
-    b_error=np.array([0.0, 0.0, 0.0, 0.0]),
-    c=np.array([0.5, 0.5, 1.0]),
-)
+@functools.cache
+def _diffrax_classic_rk4() -> type:
+    """The classic fourth-order Runge--Kutta tableau in diffrax's ERK machinery (a class built on first use, with
+    diffrax: module doc)."""
+    dfx = _diffrax()
+    rk4_tableau = dfx.ButcherTableau(
+        a_lower=(np.array([0.5]), np.array([0.0, 0.5]), np.array([0.0, 0.0, 1.0])),
+        b_sol=np.array([1 / 6, 1 / 3, 1 / 3, 1 / 6]),
+        # The classic RK4 has no embedded pair; diffrax wants an error row, so give
+        # it the trivial one (our rules never adapt the step).
+        b_error=np.array([0.0, 0.0, 0.0, 0.0]),
+        c=np.array([0.5, 0.5, 1.0]),
+    )
 
+    class _DiffraxClassicRK4(dfx.AbstractERK):
+        tableau: ClassVar[Any] = rk4_tableau
+        interpolation_cls: ClassVar[Callable[..., Any]] = dfx.LocalLinearInterpolation
 
-class _DiffraxClassicRK4(diffrax.AbstractERK):
-    """The classic fourth-order Runge--Kutta tableau in diffrax's ERK machinery."""
+        def order(self, terms):
+            return 4
 
-    tableau: ClassVar[diffrax.ButcherTableau] = _rk4_tableau
-    interpolation_cls: ClassVar[Callable[..., diffrax.LocalLinearInterpolation]] = diffrax.LocalLinearInterpolation
-
-    def order(self, terms):
-        return 4
+    return _DiffraxClassicRK4
 
 
 class RK4(AbstractRule):
     """Classic fourth-order Runge--Kutta (stages at 0, ½, ½, 1 of the period).
 
-    The same tableau run through ``diffrax.AbstractERK`` (``_DiffraxClassicRK4``)
+    The same tableau run through ``diffrax.AbstractERK`` (:func:`diffrax_rk4_step`)
     gives identical steps — tested — but its generic stage loop is several times slower inside a vmapped scan
     (docs/performance.md), so the hot loop uses the plain formula.
     """
@@ -288,7 +303,7 @@ def diffrax_rk4_step(f: VectorField, x: jax.Array, u: Input, h: Step) -> jax.Arr
     Returns:
         The state after the step.
     """
-    solver = _DiffraxClassicRK4()
+    solver = _diffrax_classic_rk4()()
     term = _diffrax_term(f, as_path(u), h)
     state = solver.init(term, 0.0, h, x, None)
     x1, _, _, _, _ = solver.step(term, 0.0, h, x, None, state, False)

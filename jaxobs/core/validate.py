@@ -33,7 +33,12 @@ def as_float(x: ArrayLike) -> jax.Array:
     """
     if isinstance(x, jax.Array) and jnp.issubdtype(x.dtype, jnp.floating):
         return x
-    return jnp.asarray(x, dtype=jnp.result_type(float))
+    dtype = jnp.result_type(float)
+    if isinstance(x, (int, float, np.ndarray, np.generic)):
+        # converted by NumPy (the same rounding), then placed: no XLA kernel compiled for the conversion (a drive
+        # file's check builds its parameters and runs nothing)
+        return jax.device_put(np.asarray(x, dtype=dtype))
+    return jnp.asarray(x, dtype=dtype)
 
 
 def check_real(

@@ -7,6 +7,8 @@ from __future__ import annotations
 import math
 from typing import Any, NamedTuple
 
+import numpy as np
+
 from .. import papers
 from ._filekeys import PSI_F_KEYS
 from ._steady import base_speed, fw_voltage, no_load_rpm, policy_currents, rpm_of, speed_limit, steady_voltage
@@ -584,7 +586,7 @@ def startup_table(
         "current_a" in st)  # fmt: skip
     rec("if_switch_rpm", float(startup.omega_switch) / p / RPM, "r/min", "papers.IF_SWITCH_PU × rated speed",
         "switch_rpm" in st)  # fmt: skip
-    rec("if_ramp_s", float(startup.omega_switch / startup.accel), "s",
+    rec("if_ramp_s", float(np.asarray(startup.omega_switch) / np.asarray(startup.accel)), "s",
         "peak ramp torque papers.IF_ACCEL_TORQUE_PU × K_t I_f, ≥ 3 swing periods (IfStartup.for_machine)")  # fmt: skip
     return startup
 

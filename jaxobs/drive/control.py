@@ -71,6 +71,8 @@ from typing import Any, Literal
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
+from jax.core import Tracer
 
 from ..core.numerics import safe_norm2, wrap
 from ..core.trig import sincos
@@ -242,17 +244,22 @@ class FOC(AbstractComponent):
         """
         alpha_c = check_positive("alpha_c", alpha_c, "FOC.imc")
         alpha_s = check_positive("alpha_s", alpha_s, "FOC.imc")
-        kt = est_par.kt
-        if i_max is None:
-            i_max = 1.5 * est_par.i_rated
+        vals: tuple[Any, ...] = (alpha_c, alpha_s, est_par.Ld, est_par.Lq, est_par.Rs, est_par.J, est_par.psi_f,
+                                 est_par.T_rated)  # fmt: skip
+        if not any(isinstance(v, Tracer) for v in vals):
+            # concrete values: the same IEEE operations in NumPy, in the same dtype and order, give the same bits
+            # without compiling one XLA kernel per operation (a drive file's check builds a FOC and runs nothing)
+            vals = tuple(np.asarray(v) for v in vals)
+        a_c, a_s, Ld, Lq, Rs, J, psi_f, T_rated = vals
+        kt = 1.5 * est_par.p * psi_f  # PMSMParams.kt
         return cls(
-            kp_d=alpha_c * est_par.Ld,
-            ki_d=alpha_c * est_par.Rs,
-            kp_q=alpha_c * est_par.Lq,
-            ki_q=alpha_c * est_par.Rs,
-            kp_w=2 * alpha_s * est_par.J / kt,
-            ki_w=alpha_s**2 * est_par.J / kt,
-            i_max=i_max,
+            kp_d=a_c * Ld,
+            ki_d=a_c * Rs,
+            kp_q=a_c * Lq,
+            ki_q=a_c * Rs,
+            kp_w=2 * a_s * J / kt,
+            ki_w=a_s**2 * J / kt,
+            i_max=1.5 * (T_rated / kt) if i_max is None else i_max,  # 1.5 × PMSMParams.i_rated by default
             est=kw.pop("est", est_par),
             u_max=DEFAULT_U_MAX if u_max is None else u_max,
             **kw,

@@ -157,8 +157,11 @@ Derived defaults (each recorded in :attr:`DriveFile.derived` with its rule):
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
+
+import numpy as np
 
 from ..io.safetoml import TomlFieldError, read_toml
 from ._dualfile import dual_drive_file, halved, lowered_bandwidth
@@ -193,6 +196,7 @@ from .dual_loop import DualDrive, DualFOC
 from .hardware import Sensors
 from .loop import Drive
 from .machine import RPM, PMSMParams
+from .weakening import capability_curve
 
 __all__ = [
     "ALPHA_C_TS_MAX",
@@ -251,6 +255,27 @@ class DriveFile:
     def speed_limit_rpm(self) -> float:
         """The highest speed (r/min) a drive may be asked for (``derived["speed_limit_rpm"]``)."""
         return float(self.derived["speed_limit_rpm"].value)
+
+    def capability(self, speeds_rpm: Sequence[float] | np.ndarray) -> dict[str, np.ndarray]:
+        """The steady torque–speed capability at ``speeds_rpm`` (:func:`~jaxobs.drive.weakening.capability_curve`
+        with this file's controller: its i_max, its field weakening and i_d policy, fw_margin × u_dc/√3; the
+        machine's saturation map where the file has one, else the constant inductances).  The voltage is the
+        FOC's u_max = u_dc/√3 under a hexagon too: the inscribed circle of the hexagon is the largest voltage a
+        steady sinusoidal current gets without overmodulation's harmonics, and field weakening holds |u*| at
+        fw_margin of it (the hexagon's vertices are transient headroom).  A ``[dual]`` file's: one set's.
+
+        Args:
+            speeds_rpm: The mechanical speeds, r/min (≥ 0).
+
+        Returns:
+            ``torque`` (N·m; NaN where no current fits the voltage), ``i_d``, ``i_q`` (A) and ``u`` (V), each
+            shaped as ``speeds_rpm``.
+        """
+        d, m = self.derived, self.machine
+        w_e = np.asarray(speeds_rpm, float) * m.p * RPM
+        return capability_curve(m, w_e, float(d["u_max"].value), float(d["i_max"].value),
+                                float(d["fw_margin"].value), weakening=bool(d["field_weakening"].value),
+                                id_mode=str(d["id_policy"].value))  # fmt: skip
 
     def drive_for(
         self,

@@ -27,6 +27,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax.core import Tracer
 
 from ..core.measurements import DriveInput
 from ..core.numerics import safe_norm2
@@ -263,6 +264,15 @@ def _statically_zero(x) -> bool:
     return bool(np.all(np.asarray(x) == 0))
 
 
+def _pair(x):
+    """(α, β) as an array of the default float dtype: Python numbers by NumPy (no XLA kernel compiled to stack
+    them), anything else (traced values) by JAX."""
+    dtype = as_float(0.0).dtype
+    if isinstance(x, (tuple, list)) and all(isinstance(v, (int, float, np.generic)) for v in x):
+        return np.asarray(x, dtype=dtype)
+    return jnp.asarray(x, dtype=dtype)
+
+
 class Sensors(AbstractComponent):
     """Per-axis offsets, gain errors and white noise of the current and voltage measurements.
 
@@ -295,11 +305,10 @@ class Sensors(AbstractComponent):
 
     def __init__(self, i_offset=(0.0, 0.0), u_offset=(0.0, 0.0), i_gain_error=(0.0, 0.0), i_noise=0.0, u_noise=0.0):
         own = "Sensors"
-        self.i_offset = check_real("i_offset", jnp.asarray(i_offset, dtype=as_float(0.0).dtype), owner=own)
-        self.u_offset = check_real("u_offset", jnp.asarray(u_offset, dtype=as_float(0.0).dtype), owner=own)
-        self.i_gain = 1.0 + check_real(
-            "i_gain_error", jnp.asarray(i_gain_error, dtype=as_float(0.0).dtype), lower=-1.0, owner=own
-        )
+        self.i_offset = check_real("i_offset", _pair(i_offset), owner=own)
+        self.u_offset = check_real("u_offset", _pair(u_offset), owner=own)
+        gain_error = check_real("i_gain_error", _pair(i_gain_error), lower=-1.0, owner=own)
+        self.i_gain = 1.0 + gain_error if isinstance(gain_error, Tracer) else as_float(1.0 + np.asarray(gain_error))
         self.i_noise = check_nonnegative("i_noise", i_noise, own)
         self.u_noise = check_nonnegative("u_noise", u_noise, own)
         self.noisy = not _statically_zero(i_noise) or not _statically_zero(u_noise)

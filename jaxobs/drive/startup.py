@@ -53,6 +53,7 @@ from typing import Any
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from .. import papers
 from ..core.validate import check_nonnegative, check_positive, check_real
@@ -149,7 +150,10 @@ class IfStartup(eqx.Module):
         Returns:
             The :class:`IfStartup`.
         """
-        i_rated, kt, J, p = float(par.i_rated), float(par.kt), float(par.J), par.p
+        p = par.p
+        # PMSMParams.kt and .i_rated in NumPy, the same float operations (no XLA kernel compiled for them)
+        kt_arr = 1.5 * p * np.asarray(par.psi_f)
+        i_rated, kt, J = float(np.asarray(par.T_rated) / kt_arr), float(kt_arr), float(par.J)
         i_f = papers.IF_CURRENT_PU * i_rated if i_f is None else float(i_f)
         rpm = papers.IF_SWITCH_PU * float(par.n_rated) if rpm_switch is None else float(rpm_switch)
         accel_m = papers.IF_ACCEL_TORQUE_PU * kt * i_f / (2 * J)  # mean mechanical, rad/s²

@@ -64,7 +64,16 @@ import numpy as np
 from ..core.validate import check_positive, check_real
 from .machine import PMSMParams
 
-__all__ = ["FW_MARGIN", "VoltageFeedbackFW", "capability_torque", "id_stop", "mtpv_iq", "voltage_iq_range"]
+__all__ = [
+    "FW_MARGIN",
+    "VoltageFeedbackFW",
+    "capability_curve",
+    "capability_torque",
+    "id_stop",
+    "mtpv_iq",
+    "mtpv_iq_np",
+    "voltage_iq_range",
+]
 
 FW_MARGIN = 0.95  # the default margin m (module doc: 5 % of u_max left to the current PIs)
 
@@ -248,6 +257,25 @@ def mtpv_iq(est: PMSMParams, id_ref: jax.Array | float) -> jax.Array:
     return jnp.where(inverse, bound, jnp.inf)
 
 
+def mtpv_iq_np(est: PMSMParams, i_d: np.ndarray) -> np.ndarray:
+    """:func:`mtpv_iq` in NumPy on concrete values (a check's number: no XLA kernel compiled), A.
+
+    Args:
+        est: The assumed machine.
+        i_d: The d currents, A.
+
+    Returns:
+        The bound at each ``i_d`` (inf where L̂q ≥ L̂d), A.
+    """
+    Ld, Lq, psi = float(est.Ld), float(est.Lq), float(est.psi_f)
+    i_d = np.asarray(i_d, float)
+    if Ld <= Lq:
+        return np.full(i_d.shape, np.inf)
+    psi_d = psi + Ld * i_d
+    q2 = psi_d * psi_d + psi * Lq * psi_d / (Ld - Lq)
+    return np.where(psi_d > 0, np.sqrt(np.maximum(q2, 0.0)) / Lq, 0.0)
+
+
 def voltage_iq_range(
     est: PMSMParams, id_ref: jax.Array | float, omega_e: jax.Array | float, u_lim: jax.Array | float
 ) -> tuple[jax.Array, jax.Array]:
@@ -285,7 +313,8 @@ def capability_torque(
     """The steady torque (N·m) the field-weakened reference can hold at ω_e on ``est``: the largest torque of
     (i_d, i_q) with i_d from the policy-free range [i_d,lo, 0] (i_d,lo at its stop, :func:`id_stop` with
     i_d,policy = 0) and i_q within the circle, MTPV and the steady voltage ``margin`` × u_max (the Δi_d loop's
-    target), on a grid of ``n`` d currents (NumPy: a check's number, not traced).
+    target), on a grid of ``n`` d currents (NumPy: a check's number, not traced); one speed of
+    :func:`capability_curve` on the constant inductances.
 
     Args:
         est: The machine (:class:`~jaxobs.drive.PMSMParams`).
@@ -298,19 +327,145 @@ def capability_torque(
     Returns:
         ``(torque, i_d, i_q)`` at the best point (N·m, A, A).
     """
+    te, i_d, i_q, _ = _constant_curve(est, np.asarray([omega_e], float), u_max, i_max, margin, n)
+    return float(te[0]), float(i_d[0]), float(i_q[0])
+
+
+def capability_curve(
+    machine: PMSMParams,
+    omega_e: np.ndarray,
+    u_max: float,
+    i_max: float,
+    margin: float = FW_MARGIN,
+    n: int = 4001,
+    *,
+    weakening: bool = True,
+    id_mode: str = "zero",
+) -> dict[str, np.ndarray]:
+    """The torque–speed capability of a drive whose FOC runs this module's reference on ``machine``: at each
+    electrical speed the largest steady torque of a current the reference may ask for whose steady voltage is at
+    most ``margin`` × u_max (the Δi_d loop's target, module doc; without field weakening the same margin, the
+    room the current PIs need to regulate).  All speeds at once (NumPy broadcasting over speed × currents, no
+    loop per speed).
+
+    The currents the reference may ask for: with field weakening, i_d in [i_d,lo, 0] with i_d,lo = max(−i_max,
+    −ψ̂f/L̂d) (:func:`id_stop`), |i| ≤ i_max and, on an inverse-salient machine, within :func:`mtpv_iq`;
+    without it, the policy's i_d for each i_q (zero or MTPA, ``id_mode``) within the circle.
+
+    The voltage and the torque are the plant's: with the constant inductances L̂d, L̂q, ψ̂f where ``machine`` has
+    no saturation map (with field weakening i_q on the voltage bound in closed form, :func:`voltage_iq_range`,
+    over ``n`` d currents; without it ``n`` q currents); with the map's flux ψ(i) where it has one
+    (``machine.sat``: 241 × 241 currents with field weakening, ``n`` q currents without; every point is a feasible
+    current, so the grid's best is a lower bound of the true maximum, within one grid step).  A q-axis
+    saturation (``machine.q_sat``) is not applied: the curve is the unsaturated one.  Where no current fits the
+    voltage (the flux alone needs more), the torque is NaN.
+
+    Args:
+        machine: The machine (its ``Ld``, ``Lq``, ``psi_f`` are the controller's constants; ``sat`` the plant's
+            map, or None).
+        omega_e: The electrical speeds, rad/s (any shape; ≥ 0).
+        u_max: The voltage limit, V (the FOC's: u_dc/√3).
+        i_max: The current limit, A.
+        margin: The fraction of u_max the steady voltage may use.
+        n: Grid points (constant inductances; the map without field weakening).
+        weakening: Whether the FOC weakens the field (:class:`VoltageFeedbackFW`).
+        id_mode: The FOC's i_d policy, ``"zero"`` or ``"mtpa"`` (used without field weakening).
+
+    Returns:
+        ``torque`` (N·m), ``i_d``, ``i_q`` (A) and ``u`` (the steady |u| there, V), each shaped as ``omega_e``.
+    """
+    w = np.asarray(omega_e, float)
+    flat = w.reshape(-1)
+    if weakening and machine.sat is None:
+        te, i_d, i_q, u = _constant_curve(machine, flat, u_max, i_max, margin, n)
+    elif weakening:  # the map: a grid over the currents field weakening may ask for, refined
+        te, i_d, i_q, u = _map_weakening_curve(machine, flat, u_max, i_max, margin)
+    else:  # the policy's currents
+        i_q = np.linspace(0.0, float(i_max), int(n))
+        i_d = _policy_id_np(machine, id_mode, i_q)
+        keep = i_d * i_d + i_q * i_q <= float(i_max) ** 2 * (1 + 1e-12)
+        te, i_d, i_q, u = _points_curve(machine, flat, u_max, margin, i_d[keep], i_q[keep])
+    return {k: v.reshape(w.shape) for k, v in (("torque", te), ("i_d", i_d), ("i_q", i_q), ("u", u))}
+
+
+def _policy_id_np(est: PMSMParams, id_mode: str, i_q: np.ndarray) -> np.ndarray:
+    """The policy's i_d for each i_q (NumPy; the FOC's ``policy_id``: zero, or MTPA on the constants)."""
+    dl = float(est.Lq) - float(est.Ld)
+    if id_mode != "mtpa" or abs(dl) <= 1e-12:
+        return np.zeros_like(i_q)
+    a = float(est.psi_f) / (2 * dl)
+    return a - np.sign(dl) * np.sqrt(a * a + i_q * i_q)
+
+
+def _constant_curve(est, w, u_max, i_max, margin, n):
+    """:func:`capability_curve` on constant inductances: (torque, i_d, i_q, |u|) per speed of the 1-d ``w``."""
     Ld, Lq, psi, Rs, p = float(est.Ld), float(est.Lq), float(est.psi_f), float(est.Rs), est.p
-    i_d = np.linspace(max(-float(i_max), -psi / Ld), 0.0, int(n))
+    i_max = float(i_max)
+    i_d = np.linspace(max(-i_max, -psi / Ld), 0.0, int(n))[None, :]  # (1, n) against the speeds (k, 1)
+    wk = w[:, None]
     psi_d = psi + Ld * i_d
-    a = Rs * Rs + (omega_e * Lq) ** 2
-    b = 2.0 * Rs * omega_e * (psi_d - Lq * i_d)
-    c = (Rs * i_d) ** 2 + (omega_e * psi_d) ** 2 - (margin * u_max) ** 2
+    a = Rs * Rs + (wk * Lq) ** 2
+    b = 2.0 * Rs * wk * (psi_d - Lq * i_d)
+    c = (Rs * i_d) ** 2 + (wk * psi_d) ** 2 - (margin * u_max) ** 2
     disc = b * b - 4.0 * a * c
-    hi = np.where(disc > 0, (-b + np.sqrt(np.maximum(disc, 0.0))) / (2.0 * a), 0.0)
-    room = np.sqrt(np.maximum(float(i_max) ** 2 - i_d * i_d, 0.0))
-    if Ld > Lq:  # the MTPV bound of an inverse-salient machine (mtpv_iq)
-        q2 = psi_d * psi_d + psi * Lq * psi_d / (Ld - Lq)
-        room = np.minimum(room, np.where(psi_d > 0, np.sqrt(np.maximum(q2, 0.0)) / Lq, 0.0))
+    a_s = np.where(a > 0, a, 1.0)
+    root = np.sqrt(np.maximum(disc, 0.0))
+    hi = np.where(a > 0, (-b + root) / (2.0 * a_s), np.inf)  # standstill without resistance: no voltage bound
+    lo = np.where(a > 0, (-b - root) / (2.0 * a_s), -np.inf)
+    room = np.sqrt(np.maximum(i_max**2 - i_d * i_d, 0.0))
+    room = np.minimum(room, mtpv_iq_np(est, i_d))
     i_q = np.clip(hi, 0.0, room)
-    torque = 1.5 * p * (psi + (Ld - Lq) * i_d) * i_q
-    k = int(np.argmax(torque))
-    return float(torque[k]), float(i_d[k]), float(i_q[k])
+    fits = ((a == 0) | (disc >= 0)) & (i_q >= lo)  # some i_q ≥ 0 within the limits meets the voltage
+    torque = np.where(fits, 1.5 * p * (psi + (Ld - Lq) * i_d) * i_q, -np.inf)
+    k = np.argmax(torque, axis=1)
+    rows = np.arange(len(w))
+    idb, iqb = np.broadcast_to(i_d, torque.shape)[rows, k], i_q[rows, k]
+    u = np.hypot(Rs * idb - w * Lq * iqb, Rs * iqb + w * (psi + Ld * idb))
+    best = torque[rows, k]
+    return np.where(np.isfinite(best), best, np.nan), idb, iqb, u
+
+
+@eqx.filter_jit
+def _map_flux(sat, i_d, i_q):
+    return sat.flux(i_d, i_q)
+
+
+def _points_curve(machine, w, u_max, margin, i_d, i_q, flux=None):
+    """The best of the candidate currents at each speed of the 1-d ``w``: (torque, i_d, i_q, |u|); ``i_d``, ``i_q``
+    1-d (the same candidates at every speed) or (speeds, candidates); the flux the map's where ``machine`` has
+    one (or ``flux``, its (ψd, ψq) there), else the constants'."""
+    if flux is not None:
+        pd, pq = flux
+    elif machine.sat is None:
+        pd = float(machine.psi_f) + float(machine.Ld) * i_d
+        pq = float(machine.Lq) * i_q
+    else:
+        flux = _map_flux(machine.sat, jnp.asarray(i_d.reshape(-1)), jnp.asarray(i_q.reshape(-1)))
+        pd, pq = (np.asarray(v).reshape(i_d.shape) for v in flux)
+    Rs = float(machine.Rs)
+    torque = np.broadcast_to(1.5 * machine.p * (pd * i_q - pq * i_d), (len(w), i_d.shape[-1]))
+    wk = w[:, None]
+    u = np.hypot(Rs * i_d - wk * pq, Rs * i_q + wk * pd)  # (speeds, currents)
+    fits = u <= margin * u_max
+    k = np.argmax(np.where(fits, torque, -np.inf), axis=1)
+    rows = np.arange(len(w))
+    te = np.where(fits[rows, k], torque[rows, k], np.nan)
+    pick = (lambda x: x[rows, k]) if i_d.ndim == 2 else (lambda x: x[k])
+    return te, pick(i_d), pick(i_q), u[rows, k]
+
+
+def _map_weakening_curve(machine, w, u_max, i_max, margin, n=241, block=32):
+    """:func:`capability_curve` on the map with field weakening: ``n`` d currents in [i_d,lo, 0] × ``n`` q currents
+    from 0 to the room the circle (and the assumed machine's MTPV line) leaves, spaced as s² (fine where the
+    high speeds' small q currents lie, the circle itself included); the map's flux once for all of them (it does
+    not depend on the speed), then the voltage at ``block`` speeds at a time (memory, not a loop per speed)."""
+    i_max = float(i_max)
+    i_d = np.linspace(float(id_stop(machine, 0.0, i_max)), 0.0, n)
+    room = np.sqrt(np.maximum(i_max * i_max - i_d * i_d, 0.0))
+    if float(machine.Ld) > float(machine.Lq):  # the reference's MTPV bound is the assumed machine's
+        room = np.minimum(room, mtpv_iq_np(machine, i_d))
+    gd, gq = np.meshgrid(i_d, np.linspace(0.0, 1.0, n) ** 2)
+    gd, gq = gd.reshape(-1), (gq * room[None, :]).reshape(-1)
+    pd, pq = (np.asarray(v) for v in _map_flux(machine.sat, jnp.asarray(gd), jnp.asarray(gq)))
+    parts = [_points_curve(machine, w[k : k + block], u_max, margin, gd, gq, (pd, pq)) for k in range(0, len(w), block)]
+    return tuple(np.concatenate(x) for x in zip(*parts))

@@ -13,7 +13,6 @@ from typing import Any
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-import optimistix as optx
 from jax.typing import ArrayLike
 
 from ..core.validate import as_float
@@ -105,7 +104,11 @@ def _default_grid(tf: TransferFunction, n: int) -> jax.Array:
 
 
 def _refine(fn: Callable[[jax.Array, Any], jax.Array], x0: jax.Array, args: Any) -> jax.Array:
-    """Newton on x = log ω from each candidate, with gradients by implicit differentiation."""
+    """Newton on x = log ω from each candidate, with gradients by implicit differentiation.  optimistix is imported
+    here, where a margin is first traced: with it come lineax and half a second that a program computing no
+    margin (``jaxobs drive check``) need not pay."""
+    import optimistix as optx
+
     solver = optx.Newton(rtol=1e-12, atol=1e-12)
 
     def one(x: jax.Array) -> jax.Array:
