@@ -60,6 +60,16 @@ def _uptime() -> str:
     return subprocess.run(["uptime"], capture_output=True, text=True).stdout.strip()
 
 
+def _machine() -> str:
+    """The CPU's model name (Linux's /proc/cpuinfo) and the cores this process sees."""
+    try:
+        names = [ln.split(":", 1)[1].strip() for ln in Path("/proc/cpuinfo").read_text().splitlines()
+                 if ln.startswith("model name")]  # fmt: skip
+    except OSError:
+        names = []
+    return f"{names[0] if names else 'CPU'}, {os.cpu_count()} cores"
+
+
 def batch_scenario(horizon: float) -> dict[str, float]:
     """The batch rows' scenario timing: :data:`SCENARIO`'s times scaled to ``horizon``.
 
@@ -314,7 +324,8 @@ def main(argv: list[str] | None = None) -> int:
 
     jax.config.update("jax_enable_x64", True)
     start = _uptime()
-    print(time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), f"{os.cpu_count()} CPUs", f"jax {jax.__version__}")
+    print(time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), f"jax {jax.__version__}, float64")
+    print(f"machine: {_machine()} (shared: other work on it moves every time; the load average at start and end)")
     print(f"start: {start}", flush=True)
     ours = jaxobs_timing(args.batches, args.batch_horizon, args.repeats)
     peer = None
@@ -372,7 +383,7 @@ def _report(args: argparse.Namespace, start: str, ours: dict, peer: dict | None)
     print(f"end: {end}")
     if args.json is not None:
         doc = {"date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), "uptime_start": start, "uptime_end": end,
-               "cpus": os.cpu_count(), "scenario": SCENARIO, "batch_horizon_s": args.batch_horizon,
+               "machine": _machine(), "scenario": SCENARIO, "batch_horizon_s": args.batch_horizon,
                "agreement": agree, "jaxobs": {k: v for k, v in ours.items() if k != "trajectory"},
                "motulator": None if peer is None else {k: v for k, v in peer.items() if k != "trajectory"}}  # fmt: skip
         args.json.write_text(json.dumps(doc, indent=1, default=str) + "\n")
