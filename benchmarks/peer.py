@@ -37,6 +37,7 @@ import json
 import math
 import os
 import resource
+import shutil
 import subprocess
 import sys
 import time
@@ -320,6 +321,9 @@ def main(argv: list[str] | None = None) -> int:
     if any(n < 1 for n in args.batches) or args.repeats < 1 or args.max_runs < 1:
         ap.error("--batches, --repeats and --max-runs must be >= 1")
     batch_scenario(args.batch_horizon)  # checks it
+    python = args.motulator_python
+    if python and not (Path(python).is_file() or shutil.which(python)):
+        ap.error(f"--motulator-python / $MOTULATOR_PYTHON: no such Python: {python}")  # before minutes of jaxobs
     import jax
 
     jax.config.update("jax_enable_x64", True)

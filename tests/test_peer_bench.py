@@ -47,3 +47,6 @@ def test_help_and_bad_arguments():
     with pytest.raises(SystemExit) as done:
         peer.main(["--batches", "0"])
     assert done.value.code == 2
+    with pytest.raises(SystemExit) as done:
+        peer.main(["--motulator-python", "/nonexistent/python3.12"])
+    assert done.value.code == 2
