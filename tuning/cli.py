@@ -126,10 +126,10 @@ def _cmd_drive_study(name, designs, axes, opts, out: Path, quiet: bool, provenan
     from jaxobs.core.quantities import text_unit
     from jaxobs.metrics import METRICS
     from jaxobs.plot import drive_study_figure
-    from jaxobs.studies.drive import DRIVE_STUDY_METRICS, run_drive_study
-    from jaxobs.studies.study import write_study
+    from jaxobs.studies.drive import DRIVE_STUDY_METRICS
+    from jaxobs.studies.study import run_study, write_study
 
-    ds = run_drive_study(designs, axes, progress=progress_of(quiet=quiet), store=store, **opts)
+    ds = cast("Dataset", run_study(designs, axes, progress=progress_of(quiet=quiet), store=store, **opts))
     ds.attrs.update(provenance or {})  # the study file's and the result files' sha256, the machine
     fig = out / "drive_study.png"
     drive_study_figure(ds, fig)
@@ -302,7 +302,10 @@ def _cmd_tune(args) -> int:
         n = job.scenarios.sample or n
         drive = "" if job.drive is None else f", {job.drive.loop} drive on {job.drive.machine}"
         if job.scenarios.recording is not None:  # the observer runs open loop on the files, whatever the signal
-            drive = f", open loop on {len(job.scenarios.recording.files)} recording(s)"
+            rec = job.scenarios.recording
+            drive = f", open loop on {len(rec.files)} recording(s)"
+            if rec.startup_s:  # the drive logs' scores skip the observer's start-up
+                drive += f" scored from {rec.startup_s:.4g} s ({rec.startup_periods:g} electrical periods of start-up)"
         print(
             f"{path}: OK — {job.component}, free gains {', '.join(g.name for g in job.gains)}, {n} scenarios"
             f"{drive}, solver {job.solver.name}"
