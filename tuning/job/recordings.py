@@ -185,8 +185,24 @@ def parse_recording_scenarios(
             f"the recordings are of different lengths ({shown} samples of {ts:g} s): set trim = true to cut "
             "them to the shortest",
         )
+    if recorded.binds and machine is None and base is not None:  # after the logs are read: a refusal alone
+        _warn_unchecked(w)
     axes = {"recording": [float(i) for i in range(len(files) * max(windows, 1))]}
     return ScenarioSpec(family.signal, t_event, horizon, steady, axes, 0, seed, recording=spec)
+
+
+def _warn_unchecked(w: str) -> None:
+    """Warn that a job's drive logs, given no ``machine``, were not checked for their voltage timing and power."""
+    # the voltage timing (applied or reference, the delay) and the power direction are checked against the
+    # machine's flux-linkage equation (Rs, Ld, Lq, ψ_f): the job's [component] Rs, L lack ψ_f, so without the
+    # machine a reference logged as applied (a bias of ω_e·ts in every estimate) would pass unseen.
+    warnings.warn(
+        RecordingWarning(
+            f"{w}.machine is not given: the logs' voltage timing (voltage_timing, voltage_delay) and power "
+            "direction were not checked (give machine = a shipped machine's name or a drive file)"
+        ),
+        stacklevel=2,
+    )
 
 
 def _startup_periods(rec: dict, w: str, family: RecordedSignals) -> float:
@@ -338,17 +354,6 @@ def _log_options(
     if "windows" in rec and not 1 <= windows <= MAX_WINDOWS:
         raise JobError(f"{w}.windows", f"must be a count in 1..{MAX_WINDOWS}, got {windows}")
     machine = name = None
-    if family.binds and "machine" not in rec and load:
-        # the voltage timing (applied or reference, the delay) and the power direction are checked against the
-        # machine's flux-linkage equation (Rs, Ld, Lq, ψ_f): the job's [component] Rs, L lack ψ_f, so without the
-        # machine a reference logged as applied (a bias of ω_e·ts in every estimate) would pass unseen
-        warnings.warn(
-            RecordingWarning(
-                f"{w}.machine is not given: the logs' voltage timing (voltage_timing, voltage_delay) and power "
-                "direction were not checked (give machine = a shipped machine's name or a drive file)"
-            ),
-            stacklevel=2,
-        )
     if "machine" in rec:
         name = get_field(rec, "machine", f"{w}.machine", str)
         assert name is not None  # the key is there
