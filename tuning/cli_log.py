@@ -126,7 +126,8 @@ def cmd_log_check(args: argparse.Namespace) -> int:
             currents=currents,
             theta_e=None if args.theta == "" else args.theta,
             omega_e=args.omega,
-            time_column=args.time if args.time is not None or args.sample_rate else "t",
+            # `--sample-rate 0` is a rate, refused as one ("sample_rate must be ... > 0"), not a second time base
+            time_column=args.time if args.time is not None or args.sample_rate is not None else "t",
             sample_rate=args.sample_rate,
             layout=layout,
             machine=machine,

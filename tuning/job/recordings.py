@@ -5,6 +5,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import re
+import warnings
 from pathlib import Path
 from typing import cast
 
@@ -16,7 +17,15 @@ from jaxobs.drive import PMSMParams, bench_machine, load_drive
 from jaxobs.io.provenance import sha256
 from jaxobs.observers import AbstractFluxObserver
 from jaxobs.scenarios.families import FAMILIES, AbstractFamily, RecordedSignals
-from jaxobs.signals import DriveRecording, RecordingColumnError, RecordingLayout, SampledSignal, read_recorded, stack
+from jaxobs.signals import (
+    DriveRecording,
+    RecordingColumnError,
+    RecordingLayout,
+    RecordingWarning,
+    SampledSignal,
+    read_recorded,
+    stack,
+)
 
 from ..objective import DRIVE_METRICS
 from .components import COMPONENTS
@@ -145,12 +154,15 @@ def parse_recording_scenarios(
             cap_bytes = MAX_LOG_BYTES if recorded.binds else MAX_RECORDING_BYTES
             if size > cap_bytes:
                 raise JobError(field, f"{files[i]!r} is {size} bytes, more than {cap_bytes} ({cap_bytes >> 20} MiB)")
+            # the file as the job names it, its last 120 characters at most: a JobError is cut at MAX_ERROR
+            # characters, and a deep relative path (800 characters) had cut the reader's remedy off the message
+            named = files[i] if len(files[i]) <= 120 else "…" + files[i][-119:]
             try:
                 sig = _load_one(spec, recorded, path, need=int(round(horizon / ts)) + 1)
             except RecordingColumnError as e:  # a column not in the file: the key that named it
-                raise JobError(_column_field(w, e, spec), str(e).replace(path, files[i])) from None
+                raise JobError(_column_field(w, e, spec), str(e).replace(path, named)) from None
             except ValueError as e:
-                raise JobError(field, str(e).replace(path, files[i])) from None
+                raise JobError(field, str(e).replace(path, named)) from None
             need = int(round(horizon / ts))
             got = sig if isinstance(sig, list) else [sig]  # a drive log's windows, or the file
             sig = got[0]
@@ -173,8 +185,24 @@ def parse_recording_scenarios(
             f"the recordings are of different lengths ({shown} samples of {ts:g} s): set trim = true to cut "
             "them to the shortest",
         )
+    if recorded.binds and machine is None and base is not None:  # after the logs are read: a refusal alone
+        _warn_unchecked(w)
     axes = {"recording": [float(i) for i in range(len(files) * max(windows, 1))]}
     return ScenarioSpec(family.signal, t_event, horizon, steady, axes, 0, seed, recording=spec)
+
+
+def _warn_unchecked(w: str) -> None:
+    """Warn that a job's drive logs, given no ``machine``, were not checked for their voltage timing and power."""
+    # the voltage timing (applied or reference, the delay) and the power direction are checked against the
+    # machine's flux-linkage equation (Rs, Ld, Lq, ψ_f): the job's [component] Rs, L lack ψ_f, so without the
+    # machine a reference logged as applied (a bias of ω_e·ts in every estimate) would pass unseen.
+    warnings.warn(
+        RecordingWarning(
+            f"{w}.machine is not given: the logs' voltage timing (voltage_timing, voltage_delay) and power "
+            "direction were not checked (give machine = a shipped machine's name or a drive file)"
+        ),
+        stacklevel=2,
+    )
 
 
 def _startup_periods(rec: dict, w: str, family: RecordedSignals) -> float:
