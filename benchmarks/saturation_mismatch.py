@@ -25,6 +25,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import sys
 import time
 from pathlib import Path
@@ -59,13 +60,15 @@ def closed_forms(ts: float) -> dict[str, Any]:
     }
 
 
-def tuned_design(path: Path) -> tuple[str, Any]:
-    """A tuning result's design, named ``<component>_tuned``."""
+def tuned_design(path: Path, ts: float) -> tuple[str, Any, dict]:
+    """A tuning result's design, named ``<family>_tuned`` (the family of :func:`closed_forms` of its class), and its
+    job's scenario grid (axis -> values)."""
     from jaxobs_tuning.results import load_result, tuned_component
 
     res = load_result(path)
     comp = tuned_component(res)
-    return f"{type(comp).__name__.lower()}_tuned", comp
+    family = next((k for k, v in closed_forms(ts).items() if type(v) is type(comp)), type(comp).__name__.lower())
+    return f"{family}_tuned", comp, res["job"].get("scenarios", {}).get("grid", {})
 
 
 def study(designs: dict[str, Any], dsat, speeds_rpm, load_nm: float) -> dict[str, dict]:
@@ -181,6 +184,26 @@ def rank(summary: dict) -> list[str]:
     return sorted(summary, key=key)
 
 
+def compare(tuned: str, grids: dict, dsat, speeds_rpm, job_grid: dict) -> list[dict]:
+    """Print the tuned design beside its family's closed form per scenario, each marked in or out of its job's grid
+    (``*``: out); return the rows."""
+    family = tuned.removesuffix("_tuned")
+    print(f"{tuned} against {family} (closed form), steady peak / rms deg; * = outside the job's grid:")
+    rows = []
+    for i, v in enumerate(dsat):
+        for j, r in enumerate(speeds_rpm):
+            inside = v in job_grid.get("dsat", [v]) and r in job_grid.get("speed_rpm", [r])
+            cells = []
+            for k in (family, tuned):
+                g = grids[k]
+                lost = g["lost_lock"][i][j]
+                cells.append("lost lock" if lost else f"{g['peak_deg'][i][j]:.2f} / {g['rms_deg'][i][j]:.2f}")
+                rows.append({"design": k, "dsat": v, "speed_rpm": r, "in_grid": inside, "lost_lock": lost,
+                             "peak_deg": g["peak_deg"][i][j], "rms_deg": g["rms_deg"][i][j]})  # fmt: skip
+            print(f"  {'' if inside else '*':1} dsat {v:5g} {r:6g} r/min  {cells[0]:>16}  {cells[1]:>16}")
+    return rows
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run the study (and the ascent), print the table, write ``--json``."""
     ap = argparse.ArgumentParser(prog="python -m benchmarks.saturation_mismatch", description=__doc__.split("\n")[0])
@@ -209,8 +232,8 @@ def main(argv: list[str] | None = None) -> int:
     load = a.load * rated_nm
     designs = {k: v for k, v in closed_forms(drive.ts).items() if k in a.designs}
     if a.result is not None:
-        name, comp = tuned_design(a.result)
-        designs[name] = comp
+        tuned, comp, job_grid = tuned_design(a.result, drive.ts)
+        designs[tuned] = comp
     t0 = time.time()
     grids = study(designs, a.dsat, speeds, load)
     seconds = time.time() - t0
@@ -242,6 +265,8 @@ def main(argv: list[str] | None = None) -> int:
     closed = [k for k in order if not k.endswith("_tuned")]
     print(f"most sensitive closed form: {closed[0]}")
     out: dict[str, Any] = {
+        "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
+        "load_average": list(os.getloadavg()),  # the shared machine's load, as uptime prints it
         "drive": str(DRIVE.relative_to(ROOT)),
         "load_nm": load,
         "speeds_rpm": speeds,
@@ -253,6 +278,8 @@ def main(argv: list[str] | None = None) -> int:
         "ranking": order,
         "most_sensitive": closed[0],
     }
+    if a.result is not None:
+        out["tuned"] = compare(tuned, grids, a.dsat, speeds, job_grid)
     if a.ascent:
         w = summary[closed[0]]["worst_at"]
         start = min(max(w["dsat"], ASCENT_BOX[0]), ASCENT_BOX[1])
