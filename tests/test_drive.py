@@ -484,3 +484,16 @@ def test_one_scenario_builder_starts_at_speed_and_checks_its_axes():
         D.grid(base, dRs=[-2.0])
     with pytest.raises(ValueError, match="give dL or dLd/dLq"):
         D.grid(base, dL=[0.1], dLq=[0.1])
+
+
+def test_an_observer_at_another_period_than_the_drive_is_refused():
+    """An observer built at its default ts (1e-4 s) closing a 20 kHz drive stepped the wrong interval every period
+    and ran silently wrong (the whole speed as its speed error); the closed loop refuses it in one line naming both
+    periods, and takes it built at the drive's."""
+    par = D.ipmsm_paper002(inertia="motor")
+    foc = D.FOC.imc(par, alpha_c=2 * math.pi * 300, alpha_s=2 * math.pi * 5, ts=5e-5)
+    drive = D.Drive(foc, sensorless=True)
+    sc = D.Scenario(par, speed_ref=D.Profile.constant(600 * D.RPM), omega_m0=600 * D.RPM)
+    with pytest.raises(ValueError, match=r"observer runs at ts = 0.0001 s, the drive at 5e-05 s: they must agree"):
+        D.ClosedLoop(drive, jaxobs.FALESO(par.Rs, par.Lq), sc)
+    assert D.ClosedLoop(drive, jaxobs.FALESO(par.Rs, par.Lq, ts=drive.ts), sc).observer.ts == drive.ts

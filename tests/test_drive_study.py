@@ -268,3 +268,21 @@ def test_run_drive_study_is_a_deprecated_alias_of_the_one_preset():
     xr.testing.assert_identical(old, ref)
     with pytest.warns(DeprecationWarning), pytest.raises(ValueError, match="not both"):
         run_drive_study(DESIGNS, axes, family=FAMILY, machine=PAR)
+
+
+def test_a_component_design_on_a_users_drive_file_runs_at_the_files_period(tmp_path):
+    """A study's ``component`` design with explicit gains on a drive file sampled at 20 kHz (the Teknic's) runs at
+    the file's period, as a closed form does; it was refused ("runs at ts = 0.0001 s ... must agree") with no key
+    to set it."""
+    teknic = Path(__file__).resolve().parents[1] / "docs" / "examples" / "teknic_m2310p.toml"
+    st = tmp_path / "study.toml"
+    st.write_text(
+        STUDY_HEAD
+        + f'[drive]\nfile = "{teknic.as_posix()}"\n'
+        + '[designs.FAx]\ncomponent = "FALESO"\nk1 = 40.0\nk2 = 300.0\n'
+        + '[designs.CF]\nclosed_form = "FALESO"\n'
+        + "[axes]\nspeed_rpm = [1000.0]\n"
+    )
+    spec = load_study(st)
+    assert {float(o.ts) for o in spec.designs.values()} == {5e-5}
+    assert float(spec.designs["FAx"].k1) == 40.0

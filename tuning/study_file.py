@@ -589,6 +589,8 @@ def _drive_designs(raw: dict, base: Path, ts_file: float | None) -> tuple[dict, 
         # valid for the constructor, then bound: 0 for the resistance, 1 for the rest
         bound = ctor.bound_fields
         fixed = {f: (0.0 if f == bound.resistance else 1.0) for f in bound.names}
+        if ts_file is not None:  # a user's drive file: the design runs at its period, as a closed form does
+            fixed["ts"] = ts_file
         return _component(spec, where, comp, (*bound.names, "ts"), fixed).bind(par, 0.0)
 
     return _designs(raw, build), tuned_on, results

@@ -509,6 +509,13 @@ class ClosedLoop(AbstractDriveLoop):
         if drive.sensorless and observer is None:
             raise ValueError("ClosedLoop: a sensorless drive needs an observer (observer=None is the encoder)")
         check_sample_time("ts", drive.ts, "Drive")
+        # the observer steps once per control period: one built at another ts (the observers' default is 1e-4 s)
+        # would integrate the wrong interval every step and run silently wrong
+        if observer is not None and abs(float(observer.ts) - float(drive.ts)) > 1e-9 * float(drive.ts):
+            raise ValueError(
+                f"ClosedLoop: the observer runs at ts = {float(observer.ts):g} s, the drive at {float(drive.ts):g} s: "
+                "they must agree (build the observer with ts=drive.ts)"
+            )
         self.drive = drive
         self.observer = observer
         self.scenario = scenario
