@@ -83,10 +83,10 @@ def designs(ts: float) -> dict:
         from benchmarks.peer_observer import result_designs_of
 
         tuned["rofo_mech_tuned"] = (result_designs_of(ROFO_TUNED)["tuned"], 0.0)
+    from jaxobs_tuning.results import load_result, tuned_component
+
     for name, path in TUNED.items():
         if path.exists():
-            from jaxobs_tuning.results import load_result, tuned_component
-
             tuned[name] = (tuned_component(load_result(path)), 0.0)
     return {
         "rofo": (rofo, 0.0),

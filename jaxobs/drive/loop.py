@@ -48,6 +48,7 @@ import jax.numpy as jnp
 
 from ..core.discretize import RK4, AbstractRule, check_rule
 from ..core.numerics import wrap
+from ..core.sampletime import TS_REL_TOL
 from ..core.system import AbstractSystem
 from ..core.validate import check_sample_time
 from ..observers import AbstractDriveObserver, AbstractObserver
@@ -509,9 +510,8 @@ class ClosedLoop(AbstractDriveLoop):
         if drive.sensorless and observer is None:
             raise ValueError("ClosedLoop: a sensorless drive needs an observer (observer=None is the encoder)")
         check_sample_time("ts", drive.ts, "Drive")
-        # the observer steps once per control period: one built at another ts (the observers' default is 1e-4 s)
-        # would integrate the wrong interval every step and run silently wrong
-        if observer is not None and abs(float(observer.ts) - float(drive.ts)) > 1e-9 * float(drive.ts):
+        # one observer step per control period: one built at another ts would integrate the wrong interval each step
+        if observer is not None and abs(float(observer.ts) - float(drive.ts)) > TS_REL_TOL * float(drive.ts):
             raise ValueError(
                 f"ClosedLoop: the observer runs at ts = {float(observer.ts):g} s, the drive at {float(drive.ts):g} s: "
                 "they must agree (build the observer with ts=drive.ts)"
