@@ -20,7 +20,9 @@ study's chunks are padded to a multiple of the device count, so a count taken fr
 was the first JAX computation of its pytest worker.
 """
 
+import faulthandler
 import os
+import tempfile
 from pathlib import Path
 
 import jax
@@ -46,3 +48,52 @@ def _no_program_cache_after():
     from jaxobs.runtime.programs import set_program_cache
 
     set_program_cache(None)
+
+
+# ---- a worker killed by a native fault -----------------------------------------------------------------------
+# XLA's CPU runtime is native code: a fault there (SIGSEGV, SIGABRT) kills the pytest worker, not only its test.
+# CI saw it once, in a closed-loop reversal (tests/test_zero_speed.py) that passed in every run here, with the
+# compilation cache cold and warm, alone and beside the rest of the slow suite; what CI kept of the log was the
+# tail of the fault dump, without the signal or the frames.  So each worker writes its fault dump to a file of
+# its own; a test whose worker died runs once more, on the worker that replaces it (a second crash fails it); and
+# the summary names the test and prints the head of the dump.  An assertion that fails is never run again.
+_CRASH_DIR = "JAXOBS_TEST_CRASH_DIR"
+_crash_reruns: set[str] = set()
+_crash_heads: list[tuple[str, str]] = []
+
+
+@pytest.hookimpl(trylast=True)  # after pytest's own faulthandler plugin, which sends the dump to stderr
+def pytest_configure(config):
+    worker = os.environ.get("PYTEST_XDIST_WORKER")
+    if worker is None:
+        os.environ.setdefault(_CRASH_DIR, tempfile.mkdtemp(prefix="jaxobs-test-crash-"))
+    elif os.environ.get(_CRASH_DIR):
+        # kept open for the worker's life: faulthandler writes to the file descriptor when the process dies
+        config._jaxobs_fault_file = open(Path(os.environ[_CRASH_DIR]) / f"{worker}.txt", "w")  # noqa: SIM115
+        faulthandler.enable(file=config._jaxobs_fault_file, all_threads=False)
+
+
+@pytest.hookimpl(optionalhook=True)  # pytest-xdist's hook: absent under -p no:xdist
+def pytest_handlecrashitem(crashitem, report, sched):
+    """pytest-xdist's hook, called in the controller when a worker died while running ``crashitem``."""
+    dump = Path(os.environ.get(_CRASH_DIR, ".")) / f"{report.node.gateway.id}.txt"
+    lines = dump.read_text(errors="replace").splitlines() if dump.is_file() else []
+    head = "\n".join(line for line in lines[:24] if not line.startswith("Extension modules")) or "(no fault dump)"
+    _crash_heads.append((crashitem, head))
+    report.longrepr = f"{report.longrepr}\n{head}"
+    if crashitem not in _crash_reruns:
+        _crash_reruns.add(crashitem)
+        sched.mark_test_pending(crashitem)
+        report.outcome = "rerun"
+
+
+def pytest_report_teststatus(report):
+    if report.outcome == "rerun":
+        return "rerun", "R", ("RERUN", {"yellow": True})
+    return None
+
+
+def pytest_terminal_summary(terminalreporter):
+    for nodeid, head in _crash_heads:
+        terminalreporter.write_sep("!", f"a worker died in {nodeid}; its fault dump begins")
+        terminalreporter.write_line(head)
