@@ -430,8 +430,13 @@ def test_check_also_checks_out(tmp_path, capsys):
     assert "--resume" in capsys.readouterr().err
     assert main(["study", "--check", "--out", str(done), "--resume"]) == 0
     fresh = tmp_path / "new" / "deeper"
+    capsys.readouterr()
     assert main(["tune", "--check", "--out", str(fresh)]) == 0
     assert main(["study", "--check", "--out", str(fresh)]) == 0
+    # the embedded job and study are named, not by the installed package's path
+    tune_line, study_line = capsys.readouterr().out.splitlines()[-2:]
+    assert tune_line.startswith("the default job (wif_robust.toml): OK — SOGIFLLWIF")
+    assert study_line.startswith("the default study (default_study.toml): OK — GridSignals")
     assert not (tmp_path / "new").exists()  # --check writes nothing
 
 

@@ -217,7 +217,8 @@ def _cmd_study(args) -> int:
         family = type(
             spec.family
         ).__name__  # GridSignals, RecordedSignals or DriveScenarios (jaxobs.scenarios.families)
-        print(f"{path}: OK — {family} study {name!r}, {len(designs)} designs x {spec.scenarios} scenarios")
+        label = path if args.study else f"the default study ({path.name})"  # not the installed package's path
+        print(f"{label}: OK — {family} study {name!r}, {len(designs)} designs x {spec.scenarios} scenarios")
         return 0
     outdir = OutDir(out, products, force=args.force, hints={STUDY_CHUNKS: hint})
     store = ChunkStore(out / STUDY_CHUNKS, study_fingerprint(spec), resume=args.resume)
@@ -306,8 +307,9 @@ def _cmd_tune(args) -> int:
             drive = f", open loop on {len(rec.files)} recording(s)"
             if rec.startup_s:  # the drive logs' scores skip the observer's start-up
                 drive += f" scored from {rec.startup_s:.4g} s ({rec.startup_periods:g} electrical periods of start-up)"
+        label = path if args.job else f"the default job ({path.name})"  # not the installed package's path
         print(
-            f"{path}: OK — {job.component}, free gains {', '.join(g.name for g in job.gains)}, {n} scenarios"
+            f"{label}: OK — {job.component}, free gains {', '.join(g.name for g in job.gains)}, {n} scenarios"
             f"{drive}, solver {job.solver.name}"
         )
         return 0
