@@ -202,6 +202,8 @@ steps = 3
         (lambda s: s.replace("lower = 1000.0", "lower = -5.0"), "gains.lam.lower"),
         (lambda s: s.replace("steps = 3", 'steps = "three"'), "solver.steps"),
         (lambda s: s.replace("horizon = 0.3", "horizon = 0.05"), "scenarios.horizon"),
+        # the event moved past the default horizon (0.4 s): the key the user set is named
+        (lambda s: s.replace("t_event = 0.1\nhorizon = 0.3", "t_event = 0.5"), "scenarios.t_event"),
         (lambda s: s.replace('terms = [{ metric = "itae_freq", weight = 1.0 }]', ""), "objective.terms"),
         (lambda s: s.replace('metric = "itae_freq"', 'metric = "speed"'), "objective.terms[0].metric"),
         (lambda s: s.replace("[job]", "[jobb]"), "job file.jobb"),

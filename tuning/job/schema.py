@@ -137,6 +137,12 @@ def parse_scenarios(
     horizon = get_field(tab, "horizon", f"{where}.horizon", float, 0.4)
     if t_event < 0:
         raise JobError(f"{where}.t_event", f"must be >= 0 s, got {t_event}")
+    if horizon <= t_event and "horizon" not in tab:  # the user moved the event, not the default horizon: name it
+        raise JobError(
+            f"{where}.t_event",
+            f"must be in [0, horizon) = [0, {horizon:g}) s (the default horizon; set {where}.horizon to run "
+            f"longer), got {t_event:g}",
+        )
     if horizon <= t_event:
         raise JobError(f"{where}.horizon", f"must exceed t_event ({t_event:g} s), got {horizon:g}")
     if horizon > MAX_STEPS * ts:
