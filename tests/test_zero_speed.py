@@ -321,6 +321,13 @@ def test_a_job_selects_the_speed_estimator(drive):
     machine = job_drive(j.drive).foc.est
     assert obs.bind(machine, 10.0).speed.p == machine.p
     assert isinstance(FALESO(**job('kind = "pll"').values).speed, PLLSpeed)
+    # α_o T_s >= 1 is refused at the job's period, and by the observer built at it (speed_from_spec)
+    with pytest.raises(JobError, match=r"^observer\.speed\.alpha_o: must be in \(0, 1/T_s\) = \(0, \d+\) rad/s"):
+        job('kind = "mechanical"\nalpha_o = 2e4')
+    vals = job('kind = "mechanical"\nalpha_o = 5e3').values
+    assert isinstance(FALESO(**vals).speed, MechanicalSpeed)
+    with pytest.raises(ValueError, match=r"^FALESO\.speed\.alpha_o must be in \(0, 1/T_s\)"):
+        FALESO(**{**vals, "speed": {"kind": "mechanical", "alpha_o": 2e4}})
     for speed, field in (
         ('kind = "kalman"', "observer.speed.kind"),
         ('kind = "mechanical"', "observer.speed.alpha_o"),

@@ -379,7 +379,7 @@ class _PLLFluxBase(AbstractFluxObserver):
         self.kp_pll, self.ki_pll = as_float(kp_pll), as_float(ki_pll)
         self.omega_init = jnp.asarray(0.0 if omega_init is None else omega_init, dtype=self.kp_pll.dtype)
         self.psi_floor = float(psi_floor)
-        self.speed = speed_from_spec(speed, f"{name}.speed")
+        self.speed = speed_from_spec(speed, f"{name}.speed", self.ts)
 
     def _pll_rates(self, x: jax.Array, torque: ArrayLike = 0.0) -> jax.Array:
         err = quadrature_error(x[0], x[1], x[2], self.psi_floor)

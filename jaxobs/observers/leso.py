@@ -350,7 +350,7 @@ def _common(
     obj.ts = check_sample_time("ts", ts, name)
     obj.rule = check_rule(RK4() if rule is None else rule, name)
     obj.e_floor = float(e_floor)
-    obj.speed = speed_from_spec(speed, f"{name}.speed")
+    obj.speed = speed_from_spec(speed, f"{name}.speed", obj.ts)
     # static (it picks the detector's form): a Python number, checked here as the sample time is
     zf = float(zero_fade)
     if not math.isfinite(zf) or zf < 0:

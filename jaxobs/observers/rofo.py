@@ -303,7 +303,7 @@ class ReducedOrderFluxObserver(AbstractDriveObserver):
         if not (math.isfinite(float(psi_floor)) and float(psi_floor) > 0):
             raise ValueError(f"{name}.psi_floor must be finite and > 0 Wb, got {psi_floor!r}")
         self.psi_floor = float(psi_floor)
-        self.speed = speed_from_spec(speed, f"{name}.speed")
+        self.speed = speed_from_spec(speed, f"{name}.speed", self.ts)
 
     @classmethod
     def closed_form_design(

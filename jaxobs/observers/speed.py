@@ -339,7 +339,7 @@ class MechanicalSpeed(AbstractSpeedEstimator):
 
 
 def speed_from_spec(
-    spec: AbstractSpeedEstimator | dict[str, Any] | None, owner: str = "speed"
+    spec: AbstractSpeedEstimator | dict[str, Any] | None, owner: str = "speed", ts: float | None = None
 ) -> AbstractSpeedEstimator:
     """A speed estimator from what a constructor was given: None (a PLL), an estimator, or a job's record
     ``{"kind": "pll"}`` / ``{"kind": "mechanical", "alpha_o": α_o}`` (rad/s; Ĵ, B̂ and p come from ``bind``),
@@ -352,6 +352,7 @@ def speed_from_spec(
     Args:
         spec: The estimator, its record, or None.
         owner: The class or field named in errors.
+        ts: The host observer's period, s: a record's α_o must then lie in (0, 1/T_s) (below).
 
     Returns:
         The :class:`AbstractSpeedEstimator`.
@@ -380,6 +381,15 @@ def speed_from_spec(
     if "alpha_o" not in spec:
         raise ValueError(f"{owner}.alpha_o: a mechanical speed observer needs its bandwidth α_o (rad/s, > 0)")
     closed = MechanicalSpeed.closed_form(spec["alpha_o"])
+    # α_o T_s < 1: the host steps the observer explicitly once per period, and its three poles at −α_o map to
+    # z = 1 − α_o T_s (Euler) or near it (RK4): from α_o T_s = 1 on, z ≤ 0 and the steps alternate in sign, so
+    # the triple pole asked for is no longer the one run (Euler diverges from α_o T_s = 2, RK4 from 2.79).  The
+    # designs in docs/through-zero.md lie far below: α_o = 2π·10 to 2π·50 rad/s at 100–125 µs, α_o T_s ≤ 0.04.
+    if ts is not None and not float(spec["alpha_o"]) * float(ts) < 1.0:
+        raise ValueError(
+            f"{owner}.alpha_o must be in (0, 1/T_s) = (0, {1.0 / float(ts):.6g}) rad/s at the observer's period "
+            f"T_s = {float(ts):.6g} s, got {spec['alpha_o']!r}"
+        )
     given = {k: spec[k] for k in MECHANICAL_GAINS if k in spec}
     if not given:
         return closed

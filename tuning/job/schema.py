@@ -259,8 +259,8 @@ def _parse_component(comp_t: dict, comp: str, info: ComponentInfo) -> dict:
 
 def _component_ts(info: ComponentInfo, values: dict) -> float:
     """The sample time of the component built from ``values`` (its constructor's refusal, one line)."""
-    try:
-        return float(info.ctor(**values).ts)
+    try:  # without its speed estimator: a record's α_o is checked at the job's own period (parse_job)
+        return float(info.ctor(**{k: v for k, v in values.items() if k != "speed"}).ts)
     except (ValueError, ArithmeticError, TypeError) as e:
         raise JobError("component", str(e)) from None
 
@@ -371,7 +371,7 @@ def _parse_scenarios_and_drive(
         d_ts = drive.drive_file.ts
         if abs(d_ts - ts) > 1e-12 * ts:  # the observer runs at the drive's period (its file's f_sample_hz)
             values["ts"] = d_ts
-            ts = float(info.ctor(**values).ts)
+            ts = _component_ts(info, values)
             scen = parse_scenarios(raw["scenarios"], "scenarios", info.signals, seed, freq_n, ts, base)
     elif "drive" in raw:
         raise JobError("drive", f"applies to drive jobs (scenarios.signal = 'drive'), not {scen.signal!r} signals")
@@ -540,6 +540,13 @@ def parse_job(raw: dict, base: Path | None = None) -> Job:
     freq_n = float(values.get("omega_n", W_N)) / (2 * math.pi)
     gains = _parse_gains(raw, comp, info, values)
     scen, drive, ts = _parse_scenarios_and_drive(raw, comp, info, values, seed, freq_n, ts, base)
+    alpha = values.get("speed", {}).get("alpha_o")
+    if alpha is not None and not alpha * ts < 1.0:  # jaxobs.observers.speed.speed_from_spec gives the reason
+        raise JobError(
+            "observer.speed.alpha_o",
+            f"must be in (0, 1/T_s) = (0, {1.0 / ts:.6g}) rad/s at the job's period T_s = {ts:.6g} s, "
+            f"got {show(alpha)}",
+        )
     envelope = parse_envelope(raw, scen, drive)
     holdout = _parse_holdout(raw, scen, seed, freq_n, ts, base)
     _check_sets(scen, holdout, drive, ts)
