@@ -175,3 +175,40 @@ def test_the_lines_shown_are_a_direct_simulation(ui):
 def test_dpi_out_of_range_is_refused():
     with pytest.raises(ValueError, match=r"dpi must be in \[20, 300\], got 5"):
         gain_sliders.GainSliders(dpi=5)
+
+
+def test_the_benchmark_reads_cpu_time_and_tabulates_a_result():
+    """benchmarks/sliders.py's bookkeeping (its kernels are not started here): a process's CPU time from /proc grows
+    with work done, and the table shows each side's medians, the ratio and the load."""
+    import os
+    import time
+
+    from benchmarks import sliders
+
+    c0 = sliders._cpu_s(os.getpid())
+    t0 = time.process_time()
+    while time.process_time() - t0 < 0.05:
+        pass
+    assert sliders._cpu_s(os.getpid()) - c0 >= 0.04
+
+    def side(wall, cpu, canvas):
+        return {
+            "wall_s": [wall, 2 * wall],
+            "cpu_s": [cpu, cpu],
+            "png_bytes": [1000, 1000],
+            "median_wall_s": 1.5 * wall,
+            "median_cpu_s": cpu,
+            "compiles_during_moves": 0,
+            "callback": {"median_wall_s": 0.01, "median_cpu_s": 0.01, "canvas": canvas},
+        }
+
+    r = {"date": "2026-12-03 10:00 UTC", "moves": 2, "before_rev": "abc1234", "before_setup_s": 14.0}
+    r |= {"after_setup_s": 11.0, "uptime_start": "up, load average: 4.30", "uptime_end": "up, load average: 4.37"}
+    r |= {"before": side(0.4, 0.4, "FigureCanvasBase"), "after": side(0.04, 0.05, "FigureCanvasAgg")}
+    text = sliders.table(r)
+    assert "before = abc1234" in text
+    rows = [line.split()[:5] for line in text.splitlines() if line.startswith(("before  ", "after   "))]
+    assert rows == [["before", "600", "ms", "400", "ms"], ["after", "60", "ms", "50", "ms"]]
+    assert "after / before: wall 0.100, CPU 0.125" in text
+    assert "closed figure's draw() renders nothing" in text
+    assert "load average: 4.30" in text and "load average: 4.37" in text
