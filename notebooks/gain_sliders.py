@@ -10,20 +10,21 @@ What a move costs, and why it is cheap:
 - The simulation, the margins and the Bode curves are one ``jax.jit`` program whose gains are traced arguments: it is
   traced and compiled once, in ``__init__`` (``ui.traces`` counts its traces; a move adds none), and a call runs in
   a few milliseconds.
-- Drawing is what cost: a full render of the three axes (ticks, labels, the legend) took ~100 ms of CPU here, and
-  the notebook's former display path, ``display(fig)`` under the inline backend, rendered the figure twice more
-  (``bbox_inches="tight"``) and encoded a PNG: 755 ms of CPU a move in a kernel, against 4 ms of simulation.
-  Now the layout is fixed once (``tight_layout`` in ``__init__``, no layout engine after it), the still part of the
-  figure is rendered once into a saved background, and a move restores it and draws only the artists that change
-  (the sliders' three lines, the two crossover marks, the title, and the artists drawn over them), then blits.
-  ``ui.png()`` encodes the canvas's pixels as they are (no further render); the notebook puts them in an
-  ``ipywidgets.Image``.
-- The figure is a plain ``matplotlib.figure.Figure`` on an Agg canvas, not one of pyplot's: under the inline backend
-  in interactive mode a pyplot figure redraws itself in full (``draw_idle``, which on Agg renders at once) each time
-  one of its artists goes stale.
+- Drawing is what costs: a full render of the three axes (ticks, labels, the legend) takes 100-160 ms of CPU here,
+  and showing a figure with ``display(fig)`` under the inline backend renders it again with ``bbox_inches="tight"``
+  (a layout pass, then the render) and encodes it. So the layout is fixed once (``tight_layout`` in ``__init__``, no
+  layout engine after it), the still part of the figure is rendered once into a saved background, and a move
+  restores it and draws only the artists that change (the sliders' three lines, the two crossover marks, the title,
+  and what a full render draws over them: the grid-frequency line, the spines, the legend), then blits: the pixels
+  are a full render's, exactly (tests/test_gain_sliders.py). ``ui.png()`` encodes the canvas's pixels as they are
+  (no further render); the notebook puts them in an ``ipywidgets.Image``.
+- The figure is a plain ``matplotlib.figure.Figure`` on an Agg canvas, not one of pyplot's: the inline backend
+  closes pyplot's figures after each cell, and a closed figure's canvas is a ``FigureCanvasBase`` whose ``draw()``
+  renders nothing. Nor is ``canvas.draw_idle`` used: on an Agg canvas it is a full render at once.
 
-``benchmarks/sliders.py`` measures a displayed move, before and after, in a real kernel; the numbers are in the
-notebook and CHANGELOG.md.
+A displayed move (a browser's slider message to the kernel, the callback, the PNG sent) took a median 124 ms wall and
+64 ms of CPU on the shared 2-core machine at load 5.6-6.2, with no XLA compilation
+(``benchmarks/results/2026-12-03-sliders.txt``, by ``python -m benchmarks.sliders``).
 """
 
 from __future__ import annotations
@@ -44,10 +45,11 @@ from jaxobs import linear, papers
 T_EVENT, HORIZON = 0.1, 0.4  # s: Test A's step, and the end of the run
 OMEGA = np.logspace(0, 4, 300)  # rad/s, the Bode curves' grid
 # 8 x 8 in at 100 dpi, 800 x 800 pixels, as the inline backend showed it before. 72 dpi was measured and not taken:
-# the blitted draw does not depend on it (25-32 ms at 100, 90 and 72 dpi here) and the PNG encoding saves 7 ms a move
-# (17 -> 10 ms), for a figure whose text is a third smaller
+# the blitted draw does not depend on it (25-35 ms of CPU at 100, 90 and 72 dpi here) and the PNG encoding saves 7 ms
+# a move (17 -> 10 ms), for a figure whose text is a third smaller
 FIGSIZE, DPI = (8.0, 8.0), 100
-# zlib level 1: these flat-coloured line plots come out 5-8 % larger than at the default level 6, and encode faster
+# zlib level 1: these flat-coloured line plots come out 5-8 % larger than at the default level 6; the encoding took
+# 14-22 ms against 18-24 ms here (noisy on the shared cores; never slower)
 PNG_LEVEL = 1
 
 
