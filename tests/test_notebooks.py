@@ -27,6 +27,7 @@ BUDGET_S = 240
 MAX_BYTES = 1_500_000  # a notebook with its figures: the repository stays small
 
 _spec = importlib.util.spec_from_file_location("nb_execute", Path(__file__).parents[1] / "notebooks" / "execute.py")
+assert _spec is not None and _spec.loader is not None
 nb_execute = importlib.util.module_from_spec(_spec)
 _spec.loader.exec_module(nb_execute)
 
