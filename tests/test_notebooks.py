@@ -19,14 +19,15 @@ from nbclient import NotebookClient
 
 NOTEBOOKS = sorted((Path(__file__).parents[1] / "notebooks").glob("*.ipynb"))
 # the notebooks a kernel runs top to bottom in the slow suite: all but the gain sliders, whose interactive widgets
-# a headless kernel does not drive (its callback, the part that computes, is timed and checked by
-# tests/test_gain_sliders.py; executed headless it took 245 s here against the 240 s budget, and its full-size
-# re-execution did not finish)
+# a headless kernel does not drive (its callback is checked by tests/test_gain_sliders.py, and a displayed move in a
+# kernel is measured by benchmarks/sliders.py; executed headless it took 245 s here against the 240 s budget, and its
+# full-size re-execution did not finish)
 EXECUTED = [p for p in NOTEBOOKS if p.stem != "05_gain_sliders"]
 BUDGET_S = 240
 MAX_BYTES = 1_500_000  # a notebook with its figures: the repository stays small
 
 _spec = importlib.util.spec_from_file_location("nb_execute", Path(__file__).parents[1] / "notebooks" / "execute.py")
+assert _spec is not None and _spec.loader is not None
 nb_execute = importlib.util.module_from_spec(_spec)
 _spec.loader.exec_module(nb_execute)
 
