@@ -174,6 +174,52 @@ def test_vmap_over_a_batch_equals_one_at_a_time():
     assert float(jnp.std(batch[:, 1])) > 0.0
 
 
+def test_the_period_is_cut_once_not_in_every_rk4_stage():
+    """The switching instants (the sorting network's minima) are computed once a period, however many RK4 steps
+    integrate it: a vmapped step with a voltage per scenario, n_sub 1 and 2 compile to the same count.  Before
+    carrier_intervals divided its results by one, XLA's CPU fusion copied them into every RK4 stage: 72 minima at
+    n_sub 1 and 128 at 2, and the lab drive's carrier loop ran at 0.06 of the averaged loop's rate."""
+    par = D.spmsm_paper000(inertia="motor")
+    x = jnp.zeros((16, 4)) + jnp.asarray([1.0, 2.0, 100.0, 0.3])
+    ua = jnp.linspace(-200.0, 200.0, 16)
+    counts = []
+    for n_sub in (1, 2):
+        plant = D.PMSM(par, D.Inverter(540.0, 1 / TS, pwm="carrier"), 1e-6, ts=TS, n_sub=n_sub)
+        step = jax.vmap(lambda x, a, b, plant=plant: plant.step(PlantState(x, None), D.PlantInput(a, b, 0.0))[0].x)
+        hlo = jax.jit(step).lower(x, ua, -ua).compile().as_text()
+        counts.append(hlo.count(" minimum("))
+    assert counts[0] == counts[1], counts
+    assert 12 <= counts[0] < 40, counts  # the network's 12 minima (and the clips'), not 12 per stage
+
+
+# the lab drive's carrier loop (1 µs dead time, n_sub 2) at samples 1, 60 and 199, by the code before
+# carrier_intervals divided by one; after it they agree to 2e-15 relative (XLA fuses the same arithmetic
+# differently)
+_PINNED = {
+    "omega_m": [[31.415768663314825, 31.343729777835946, 31.33841923379203],
+                [157.07941114555285, 157.00739318748757, 156.9948471196796]],
+    "i_d": [[-0.8278710216984315, -0.8689964824093631, -0.825757390761504],
+            [-0.838597269811641, -0.9978913563941699, -1.1544790650265393]],
+    "i_q": [[5.5675803753226925, 5.543399655068356, 5.592989749014287],
+            [5.5659118925864925, 5.520473925456016, 5.548270799162909]],
+    "u_a": [[-31.04329913239753, -70.48732221234705, -30.68744969716831],
+            [-159.74772326522535, 234.94254433443692, 97.05143175603999]],
+}  # fmt: skip
+
+
+def test_carrier_closed_loop_trajectory_is_pinned():
+    """The lab drive's encoder loop with carrier PWM, 300 and 1500 r/min at 14 N·m, over 25 ms: its speed,
+    currents and voltage where they were (to 1e-12 of each signal's scale)."""
+    f = D.read_drive(LAB)
+    sc = D.grid(D.Scenario(f.machine, dead_time=1e-6), speed_rpm=[300.0, 1500.0], load_nm=[14.0]).scenarios
+    drive = _carrier(f.drive_for(sensorless=False))
+    out = jax.jit(jax.vmap(lambda s: jaxobs.simulate(D.ClosedLoop(drive, None, s), 0.025).outputs))(sc)
+    for name, want in _PINNED.items():
+        got = np.asarray(getattr(out, name))[:, [1, 60, 199]]
+        want = np.asarray(want)
+        np.testing.assert_allclose(got, want, rtol=0, atol=1e-12 * np.max(np.abs(want)), err_msg=name)
+
+
 def test_carrier_plant_refuses_what_it_cannot_model():
     par = D.spmsm_paper000(inertia="motor")
     with pytest.raises(ValueError, match="PMSM.ts"):

@@ -127,4 +127,12 @@ def carrier_intervals(
     on = (rise[None, :] <= mid[:, None]) & (mid[:, None] < fall[None, :])  # (7, 3): upper switch on
     pole = udc * (on.astype(h.dtype) - 0.5) - u_device * s[None, :]
     v_a, v_b = clarke_abc_to_ab(pole[:, 0], pole[:, 1], pole[:, 2])
-    return h, v_a, v_b
+    # Divided by one (1 + 0·h, which XLA does not fold; the same device as jaxobs.core.trig's sincos): XLA's
+    # fusion counts a division as expensive and does not copy it, with everything it reads, into each consumer.
+    # Without it XLA's CPU backend copied this whole function (the modulation indices, the edges, the sorting
+    # network, the switch states) into every RK4 stage of the period, 28 kernels with n_sub = 1, 56 with 2, each
+    # emitted once per state component: where every scenario of a batch has its own voltage (a closed loop),
+    # the carrier loop ran at 0.06 of the averaged one's rate, 0.26 with it (benchmarks/README.md, "Carrier PWM:
+    # cost and ripple").  x / 1 is x exactly.
+    one = 1.0 + 0.0 * h
+    return h / one, v_a / one, v_b / one
