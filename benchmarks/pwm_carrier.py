@@ -10,8 +10,11 @@
    peak to peak and the rms at the sample instants (the carrier's peak, where the ripple crosses its mean).
    motulator runs the same case (:mod:`benchmarks.peer_motulator_pwm`) where ``$MOTULATOR_PYTHON`` is given.
 2. **Cost**: the file's sensored closed loop (encoder), a batch of scenarios (speed × load) over 0.1 s, jitted and
-   vmapped, averaged vs carrier (the drive's n_sub = 2 RK4 steps per sub-interval, and 1) in the same run:
-   scenario-steps per second (the best of three after compiling); and the plant alone under a rotating command.
+   vmapped, averaged vs carrier (the drive's n_sub = 2 RK4 steps per sub-interval, and 1), and the carrier plant
+   as it was before 2026-12-03 (``jaxobs.drive.pwm._switched``, no division by one) in the same run: scenario-steps
+   per second, wall and CPU, the medians of ``--rounds`` rounds that call each variant in turn, and each compiled
+   program's count of ``minimum`` ops (constant in n_sub when the period's edges are computed once); then the
+   plant alone under a rotating command, each scenario its own.  ``--cost-only`` prints only these.
 
 ``--figure PNG`` only draws phase a's current of the open-loop case (2 µs dead time) under carrier PWM, at every
 switching instant, beside the averaged inverter's samples (docs/img/pwm_current_lab.png).
@@ -201,8 +204,62 @@ def motulator_ripple(case, t_d, python):
     return ripple(t, out["i_a"], out["i_b"], w_e, t[k[near]]), out.get("version", "?")
 
 
-def cost(batch):
-    """Scenario-steps per second of the file's sensored loop, averaged vs carrier (the best of three)."""
+def _compiled(fn, args, undivided):
+    """``fn`` jitted and compiled ahead of time for ``args``; with ``undivided``, the carrier plant's intervals as
+    before 2026-12-03 (``jaxobs.drive.pwm._switched``: without the division by one that stops XLA's fusion copying
+    them into every RK4 stage).  The tracing caches are cleared around it, so that no variant reuses another's
+    trace; the compiled program keeps its own.  Returns the compiled function and its count of ``minimum`` ops (the
+    sorting network's and the clips': a count that grows with n_sub is the copying)."""
+    import jax
+
+    from jaxobs.drive import plant as plant_module
+    from jaxobs.drive import pwm
+
+    jax.clear_caches()
+    saved = plant_module.carrier_intervals
+    if undivided:
+        plant_module.carrier_intervals = pwm._switched
+    try:
+        compiled = jax.jit(fn).lower(*args).compile()
+    finally:
+        plant_module.carrier_intervals = saved
+        jax.clear_caches()
+    return compiled, (compiled.as_text() or "").count(" minimum(")
+
+
+def _rates(variants, rounds):
+    """Scenario-steps per second of each variant (name -> (compiled, args, scenario-steps)): after one warm-up
+    call each, ``rounds`` rounds that call every variant once in turn (so the machine's load falls on all
+    alike); the median of each one's wall times, and of its process CPU times."""
+    import statistics
+
+    import jax
+
+    for f, args, _ in variants.values():
+        jax.block_until_ready(f(*args))
+    wall = {k: [] for k in variants}
+    cpu = {k: [] for k in variants}
+    for _ in range(rounds):
+        for k, (f, args, _) in variants.items():
+            c0, t0 = time.process_time(), time.perf_counter()
+            jax.block_until_ready(f(*args))
+            wall[k].append(time.perf_counter() - t0)
+            cpu[k].append(time.process_time() - c0)
+    return {k: (n / statistics.median(wall[k]), n / statistics.median(cpu[k])) for k, (_, _, n) in variants.items()}
+
+
+LABELS = {  # (name, pwm, n_sub, undivided): the variants each cost row times
+    "averaged": ("averaged", 2, False),
+    "carrier": ("carrier", 2, False),
+    "carrier_1": ("carrier", 1, False),
+    "carrier_before": ("carrier", 2, True),
+    "carrier_1_before": ("carrier", 1, True),
+}
+
+
+def cost(batch, rounds=5):
+    """The file's sensored loop, averaged vs carrier (n_sub 2 and 1, each also as before 2026-12-03): per
+    variant ``(wall rate, CPU rate, minimum ops)``, rates in scenario-steps per second (:func:`_rates`)."""
     import equinox as eqx
     import jax
     import numpy as np
@@ -214,27 +271,29 @@ def cost(batch):
     d = read_drive(FILE)
     avg = d.drive_for(sensorless=False)
     inv = avg.inverter
-    car = eqx.tree_at(lambda x: x.inverter, avg, D.Inverter(inv.udc, inv.f_pwm, pwm="carrier"))
-    car1 = D.Drive(avg.foc, car.inverter, n_sub=1, rule=avg.rule, latency=avg.latency)  # one RK4 per sub-interval
     side = max(int(round(math.sqrt(batch))), 1)
     sc = D.grid(D.Scenario(d.machine), speed_rpm=list(np.linspace(300, 1500, side)),
                 load_nm=list(np.linspace(0, 14, max(batch // side, 1)))).scenarios  # fmt: skip
     n = int(round(0.1 / d.ts))
-    out = {}
-    for name, drv in (("averaged", avg), ("carrier", car), ("carrier_1", car1)):
-        run = jax.jit(jax.vmap(lambda s, drv=drv: jaxobs.simulate(D.ClosedLoop(drv, None, s), 0.1).outputs.omega_m))
-        jax.block_until_ready(run(sc))
-        best = math.inf
-        for _ in range(3):
-            t0 = time.perf_counter()
-            jax.block_until_ready(run(sc))
-            best = min(best, time.perf_counter() - t0)
-        out[name] = sc.omega_m0.shape[0] * n / best
-    return out, sc.omega_m0.shape[0], n
+    variants, mins = {}, {}
+    for name, (pwm, n_sub, undivided) in LABELS.items():
+        drv = avg  # the file's drive (n_sub 2)
+        if pwm == "carrier":
+            drv = eqx.tree_at(lambda x: x.inverter, avg, D.Inverter(inv.udc, inv.f_pwm, pwm="carrier"))
+        if n_sub != drv.n_sub:  # one RK4 step per sub-interval
+            drv = D.Drive(drv.foc, drv.inverter, n_sub=n_sub, rule=drv.rule, latency=drv.latency)
+        fn = jax.vmap(lambda s, drv=drv: jaxobs.simulate(D.ClosedLoop(drv, None, s), 0.1).outputs.omega_m)
+        f, mins[name] = _compiled(fn, (sc,), undivided)
+        variants[name] = (f, (sc,), sc.omega_m0.shape[0] * n)
+    rates = _rates(variants, rounds)
+    return {k: (*rates[k], mins[k]) for k in variants}, sc.omega_m0.shape[0], n
 
 
-def plant_cost(batch):
-    """Scenario-steps per second of the plant alone (the lab machine under a rotating command, 1 µs dead time)."""
+def plant_cost(batch, rounds=5):
+    """The plant alone (the lab machine, 1 µs dead time) under a rotating command, each scenario its own (its
+    phase and amplitude), as in a closed loop: the variants of :func:`cost`.  (A command shared by the batch, as
+    this benchmark had before 2026-12-03, left the copied modulation unbatched and cheap: the plant alone then
+    looked 2-3 times cheaper than in the loop.)"""
     import jax
     import jax.numpy as jnp
 
@@ -244,34 +303,55 @@ def plant_cost(batch):
 
     d = read_drive(FILE)
     inv, n = d.drive.inverter, int(round(0.1 / d.ts))
-    x0 = jnp.asarray([0.0, 1.0, 100.0, 0.0]) + jnp.linspace(0.0, 1.0, batch)[:, None]
-    out = {}
-    for name, pwm, n_sub in (("averaged", "averaged", 2), ("carrier", "carrier", 2), ("carrier_1", "carrier", 1)):
+    lane = jnp.linspace(0.0, 1.0, batch)
+    x0 = jnp.asarray([0.0, 1.0, 100.0, 0.0]) + lane[:, None]
+    variants, mins = {}, {}
+    for name, (pwm, n_sub, undivided) in LABELS.items():
         plant = D.PMSM(d.machine, D.Inverter(inv.udc, inv.f_pwm, pwm=pwm), 1e-6, ts=d.ts, n_sub=n_sub)
 
-        def run(x, plant=plant):
+        def run(x, c, plant=plant):
             def step(s, k):
-                th = 0.04 * k
-                s, o = plant.step(s, D.PlantInput(150 * jnp.cos(th), 150 * jnp.sin(th), 0.0))
+                th = 0.04 * k + c
+                s, o = plant.step(s, D.PlantInput((150 + 20 * c) * jnp.cos(th), (150 + 20 * c) * jnp.sin(th), 0.0))
                 return s, o.i_a
 
             return jax.lax.scan(step, PlantState(x, None), jnp.arange(n))[1]
 
-        f = jax.jit(jax.vmap(run))
-        jax.block_until_ready(f(x0))
-        best = math.inf
-        for _ in range(3):
-            t0 = time.perf_counter()
-            jax.block_until_ready(f(x0))
-            best = min(best, time.perf_counter() - t0)
-        out[name] = batch * n / best
-    return out
+        f, mins[name] = _compiled(jax.vmap(run), (x0, lane), undivided)
+        variants[name] = (f, (x0, lane), batch * n)
+    rates = _rates(variants, rounds)
+    return {k: (*rates[k], mins[k]) for k in variants}
+
+
+def _cost_lines(title, res):
+    """The cost table's lines: each variant's rates (wall and CPU) and its ratio to the averaged one's."""
+    a_wall, a_cpu, _ = res["averaged"]
+    lines = [
+        f"{title}",
+        f"{'variant':>18} | {'wall steps/s':>12} {'ratio':>6} | {'CPU steps/s':>11} {'ratio':>6} | min ops",
+    ]
+    for k, (w, c, m) in res.items():
+        lines.append(f"{k:>18} | {w:12.3g} {w / a_wall:6.3f} | {c:11.3g} {c / a_cpu:6.3f} | {m:7d}")
+    return lines
+
+
+def _print_costs(a) -> int:
+    res, b, n = cost(a.batch, a.rounds)
+    title = f"cost: sensored closed loop, batch {b}, {n} steps, jit+vmap, medians of {a.rounds} interleaved rounds"
+    print("\n".join(_cost_lines(title, res)))
+    print(subprocess.run(["uptime"], capture_output=True, text=True).stdout.rstrip())
+    title = f"cost: the plant alone, a command per scenario, batch {b}, {n} steps"
+    print("\n".join(_cost_lines(title, plant_cost(b, a.rounds))))
+    print(subprocess.run(["uptime"], capture_output=True, text=True).stdout.rstrip())
+    return 0
 
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--motulator-python", default=os.environ.get("MOTULATOR_PYTHON"))
     ap.add_argument("--batch", type=int, default=16)
+    ap.add_argument("--rounds", type=int, default=5, help="interleaved timing rounds (the medians are printed)")
+    ap.add_argument("--cost-only", action="store_true", help="only the cost tables (no ripple, no motulator)")
     ap.add_argument("--figure", metavar="PNG", help="only draw phase a's current, carrier beside averaged, to PNG")
     a = ap.parse_args(argv)
     import jax
@@ -285,6 +365,8 @@ def main(argv=None) -> int:
         print(f"figure: {a.figure}")
         return 0
     i_d, i_q = case["i_dq"]
+    if a.cost_only:
+        return _print_costs(a)
     print(f"case: {FILE.name}, {RPM:g} r/min, {TORQUE:g} N·m (MTPA i_d {i_d:.4f} A, i_q {i_q:.4f} A), "
           f"u_dc {case['u_dc']:g} V, carrier {1 / case['T_s']:g} Hz single update")  # fmt: skip
     print(f"{'dead time':>10} | {'jaxobs rms':>10} {'p-p a':>7} {'at samples':>10} | "
@@ -301,17 +383,7 @@ def main(argv=None) -> int:
         print(line)
     if version:
         print(f"motulator {version}")
-    rates, b, n = cost(a.batch)
-    r_a, r_c, r_1 = rates["averaged"], rates["carrier"], rates["carrier_1"]
-    print(f"cost: sensored closed loop, batch {b}, {n} steps, jit+vmap, scenario-steps/s: averaged (n_sub 2) "
-          f"{r_a:.3g}; carrier, n_sub 2 per sub-interval {r_c:.3g} ({r_c / r_a:.3f} of averaged), n_sub 1 "
-          f"{r_1:.3g} ({r_1 / r_a:.3f})")  # fmt: skip
-    p = plant_cost(b)
-    p_a, p_c, p_1 = p["averaged"], p["carrier"], p["carrier_1"]
-    print(f"cost: the plant alone, batch {b}, {n} steps: averaged (n_sub 2) {p_a:.3g}; carrier, n_sub 2 {p_c:.3g} "
-          f"({p_c / p_a:.3f}), n_sub 1 {p_1:.3g} ({p_1 / p_a:.3f})")  # fmt: skip
-    print(subprocess.run(["uptime"], capture_output=True, text=True).stdout.rstrip())
-    return 0
+    return _print_costs(a)
 
 
 if __name__ == "__main__":

@@ -117,6 +117,20 @@ def carrier_intervals(
         ``(h, v_a, v_b)``, each shape (7,): the sub-intervals' lengths (s, summing to T) and the voltage
         (u_α, u_β) the legs apply over each, V.
     """
+    h, v_a, v_b = _switched(udc, period, dead_time, u_device, u_a, u_b, s)
+    # Divided by one (1 + 0·h, which XLA does not fold; the same device as jaxobs.core.trig's sincos): XLA's
+    # fusion counts a division as expensive and does not copy it, with everything it reads, into each consumer.
+    # Without it XLA's CPU backend copied this whole function (the modulation indices, the edges, the sorting
+    # network, the switch states) into every RK4 stage of the period, 28 kernels with n_sub = 1, 56 with 2, each
+    # emitted once per state component: where every scenario of a batch has its own voltage (a closed loop),
+    # the lab drive's carrier loop ran at 0.090 of the averaged one's rate, 0.242 with it (benchmarks/README.md,
+    # "Carrier PWM: cost and ripple").  x / 1 is x exactly.
+    one = 1.0 + 0.0 * h
+    return h / one, v_a / one, v_b / one
+
+
+def _switched(udc, period, dead_time, u_device, u_a, u_b, s):
+    """:func:`carrier_intervals` without its division by one (benchmarks/pwm_carrier.py times both)."""
     m = modulation_indices(u_a, u_b, udc)
     rise, fall = switching_instants(m, period, dead_time, s)
     edges = _sorted6([rise[0], rise[1], rise[2], fall[0], fall[1], fall[2]])
@@ -127,12 +141,4 @@ def carrier_intervals(
     on = (rise[None, :] <= mid[:, None]) & (mid[:, None] < fall[None, :])  # (7, 3): upper switch on
     pole = udc * (on.astype(h.dtype) - 0.5) - u_device * s[None, :]
     v_a, v_b = clarke_abc_to_ab(pole[:, 0], pole[:, 1], pole[:, 2])
-    # Divided by one (1 + 0·h, which XLA does not fold; the same device as jaxobs.core.trig's sincos): XLA's
-    # fusion counts a division as expensive and does not copy it, with everything it reads, into each consumer.
-    # Without it XLA's CPU backend copied this whole function (the modulation indices, the edges, the sorting
-    # network, the switch states) into every RK4 stage of the period, 28 kernels with n_sub = 1, 56 with 2, each
-    # emitted once per state component: where every scenario of a batch has its own voltage (a closed loop),
-    # the carrier loop ran at 0.06 of the averaged one's rate, 0.26 with it (benchmarks/README.md, "Carrier PWM:
-    # cost and ripple").  x / 1 is x exactly.
-    one = 1.0 + 0.0 * h
-    return h / one, v_a / one, v_b / one
+    return h, v_a, v_b
