@@ -1,7 +1,7 @@
 """The envelope map's cost (target: 200 operating points × 3 designs in ≤ 60 s, compile included).
 
     .venv/bin/python -m benchmarks.envelope [--speeds 20] [--loads 10] [--horizon 2] [--method floquet|lyapunov]
-        [--runs 1] [--out MAP.nc]
+        [--matrix auto|full|free] [--runs 1] [--out MAP.nc]
 
 000's SPMSM on its bench drive, sensorless; three designs of the second-order SOIFO (the job's initial gains,
 000's closed form, and a third as a tuned one would be: another lam), so one program serves all three, as
@@ -25,6 +25,9 @@ def main(argv=None) -> int:
     p.add_argument("--loads", type=int, default=10)
     p.add_argument("--horizon", type=float, default=2.0)
     p.add_argument("--method", choices=("floquet", "lyapunov"), default="floquet", help="the stability verdict")
+    p.add_argument(
+        "--matrix", choices=("auto", "full", "free"), default="auto", help="floquet's path (stability.floquet)"
+    )
     p.add_argument("--runs", type=int, default=1, help="maps in this process: the first cold, the rest warm")
     p.add_argument("--out", default=None, help="write the last run's map here (NetCDF)")
     a = p.parse_args(argv)
@@ -43,15 +46,17 @@ def main(argv=None) -> int:
     }
     speeds, loads = default_speeds(par, a.speeds), default_loads(par, a.loads)
     n = len(speeds) * len(loads)
+    stab = {"method": a.method} if a.method == "lyapunov" else {"method": a.method, "matrix": a.matrix}
+    what = a.method if a.method == "lyapunov" else f"floquet, matrix {a.matrix}"
     for run in range(max(a.runs, 1)):
         load0 = os.getloadavg()
         t0, c0 = time.perf_counter(), time.process_time()
         ds = envelope(designs, machine=par, drive=bench_drive(par), speeds_rpm=speeds, loads_nm=loads,
-                      horizon=a.horizon, stability={"method": a.method})  # fmt: skip
+                      horizon=a.horizon, stability=stab)  # fmt: skip
         wall, cpu = time.perf_counter() - t0, time.process_time() - c0
         load1 = os.getloadavg()
         print(
-            f"envelope ({a.method}, run {run + 1}, {'cold' if run == 0 else 'warm'}): {n} points x {len(designs)} "
+            f"envelope ({what}, run {run + 1}, {'cold' if run == 0 else 'warm'}): {n} points x {len(designs)} "
             f"designs, {a.horizon:g} s runs: {wall:.1f} s wall, {cpu:.1f} s CPU "
             f"(this process, all threads){', compile included' if run == 0 else ''} ({os.cpu_count()} CPUs; "
             f"1-min load average {load0[0]:.1f} before, {load1[0]:.1f} after)"
