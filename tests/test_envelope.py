@@ -636,3 +636,25 @@ def test_worst_case_finds_an_interior_worst_the_grid_misses_verified_by_simulati
     assert max(g["floquet_resolution"], s["floquet_resolution"]) < 0.01
     for rate in (s["sim_rate_up"], s["sim_rate_down"]):
         assert 0.8 * s["floquet"] <= rate <= 1.2 * s["floquet"], (rate, s["floquet"])
+
+
+@pytest.mark.slow  # two maps' compiles (the long runs and each Floquet path): about 5 min on 2 shared cores
+def test_matrix_free_verdicts_match_the_full_matrix_on_the_preset_map():
+    """Every point of the second-order SOIFO preset's claimed envelope (tuning/presets/sosoifo.toml: 200 and 2000
+    r/min × 0 and 5 N·m, settle 0.5 s, windows of ≥ 0.2 s), its initial and closed-form designs: the matrix-free
+    Floquet verdict (``matrix="free"``) against the whole matrix's.  Every verdict the same, the margins within
+    10·rtol/T (T ≥ 0.2 s) where the orbit held."""
+    job = load_job(PRESET)
+    env = job.raw["envelope"]
+    stab = {"settle": env["settle"], "window": env["window"]}
+    designs = {"initial": jaxobs.SecondOrderSOIFO(0.0, 1.0, K1, K2, 0.61, 100.0), "closed form": CF}
+
+    def mapped(**opts):
+        return envelope(designs, machine=PAR, drive=DRIVE, speeds_rpm=env["speed_rpm"], loads_nm=env["load_nm"],
+                        horizon=0.5, stability={**stab, **opts})  # fmt: skip
+
+    full, free = mapped(matrix="full"), mapped(matrix="free", rtol=1e-6)
+    for v in ("stable", "marginal", "off_orbit", "state"):
+        assert np.array_equal(full[v].values, free[v].values), v
+    on = ~full["off_orbit"].values.astype(bool)
+    assert np.all(np.abs(full["margin"].values - free["margin"].values)[on] <= 10 * 1e-6 / 0.2)

@@ -129,6 +129,8 @@ LAYERS = [
     # analyses above the studies they run: the package (no imports), the closed loop's stability verdict, then
     # the envelope map (the stability verdict and the long runs of a drive study, over the speed x load plane)
     ("jaxobs.analysis",),
+    # the loop's linearization along its orbit (the tangent blocks, the window's multipliers, whole or matrix-free)
+    ("jaxobs.analysis.monodromy",),
     (
         "jaxobs.analysis.stability",
         "jaxobs.analysis.verdict",

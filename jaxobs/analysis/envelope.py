@@ -566,7 +566,8 @@ def envelope(
         bound_deg: deg electrical: the late peak position error a holding point may have.
         speed_tol: relative: the late peak speed deviation a synchronous point may have.
         stability: ``method`` ("floquet", the default, or "lyapunov") and that function's keyword arguments
-            (:func:`~jaxobs.analysis.stability.floquet`: settle, window, tol, n_report;
+            (:func:`~jaxobs.analysis.stability.floquet`: settle, window, max_window, tol, n_report,
+            matrix, block, iters, rtol;
             :func:`~jaxobs.analysis.stability.lyapunov`: settle, warmup, window, n_dirs, tol).
         seed: the scenarios' seed.
         chunk_size: the long runs' batch size.
@@ -654,7 +655,7 @@ def envelope(
         bound_deg=float(bound_deg),
         speed_tol=float(speed_tol),
         seed=seed,
-        **{f"stability_{k}": float(v) for k, v in kw.items()},
+        **{f"stability_{k}": v if isinstance(v, str) else float(v) for k, v in kw.items()},
         stability_method=method,
         sensors="ideal" if sensors is None else "given",
     )

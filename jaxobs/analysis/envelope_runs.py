@@ -468,7 +468,10 @@ def _family(machine: PMSMParams | DualPMSMParams, drive: Drive | DualDrive, **kw
 
 # the stability verdict's options, by method: its defaults (envelope), and what each accepts
 STABILITY_METHODS = {
-    "floquet": {"settle": 0.2, "window": 0.2, "max_window": 2.0, "tol": 0.0, "n_report": 3},
+    "floquet": {
+        **{"settle": 0.2, "window": 0.2, "max_window": 2.0, "tol": 0.0, "n_report": 3},
+        **{"matrix": "auto", "block": 6, "iters": 5, "rtol": 1e-6},
+    },
     "lyapunov": {"settle": 0.2, "warmup": 0.1, "window": 0.4, "n_dirs": 3, "tol": 0.0},
 }
 

@@ -68,11 +68,11 @@ from typing import Any, NamedTuple
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-from jax.flatten_util import ravel_pytree
 from jax.typing import ArrayLike
 
 from ..drive import ClosedLoop, DualClosedLoop, Scenario
 from ..linear import TransferFunction, sogi_fll_model, wif_model
+from .monodromy import MATRIX, _start, multipliers
 
 __all__ = ["Stability", "lyapunov", "stability_sweep", "LinearVerdict", "linear_speed_loop", "fll_frequency_soifo"]
 __all__ += ["fll_frequency_sosoifo", "slope_fit", "floquet", "OFF_ORBIT_DEV"]
@@ -104,13 +104,6 @@ def _orbit(lam, res, speed_dev):
     off = ~(speed_dev < OFF_ORBIT_DEV)
     bound = jnp.where(jnp.isfinite(lam) & jnp.isfinite(res), jnp.maximum(lam - res, 0.0), jnp.inf)
     return jnp.where(off, jnp.nan, res), off, jnp.where(off, bound, jnp.nan)
-
-
-def _split(state):
-    """(the state's float leaves as one vector, a function back to the whole state given the rest)."""
-    dyn, rest = eqx.partition(state, eqx.is_inexact_array)
-    vec, unravel = ravel_pytree(dyn)
-    return vec, rest, unravel
 
 
 def _check(fn: str, system, spans) -> None:
@@ -147,45 +140,6 @@ def _speed_every(system) -> int:
     """Control periods per speed-loop period: the sampled loop's own period (a ClosedLoop's or a DualClosedLoop's)."""
     foc = system.drive.ctrl.foc if isinstance(system, DualClosedLoop) else system.drive.foc
     return foc.speed_every
-
-
-def _set_split(system, x0):
-    """Directions besides the rotation that the loop holds neutral, as tangents at its start (n × k, or None):
-    under the dual drive's "individual" mode the split of the speed integrators between the sets.  Both sets'
-    FOCs integrate the same speed error; a difference between their integrators splits i_q* between the sets (an
-    xy current), whose torque is the same to first order, so nothing restores it: a multiplier 1 (margin 0,
-    whatever the design).  Carried through the settle from that start it becomes the neutral eigenvector (the
-    other modes decay), and the verdicts take it out as they take out the rotation."""
-    if not (isinstance(system, DualClosedLoop) and system.drive.mode == "individual"):
-        return None
-    dyn, _ = eqx.partition(x0, eqx.is_inexact_array)
-    zeros = jax.tree.map(jnp.zeros_like, dyn)
-    one = jnp.ones_like(x0.ctrl.main.int_w)
-    split = eqx.tree_at(lambda s: (s.ctrl.main.int_w, s.ctrl.second.int_w), zeros, (one, -one))
-    return ravel_pytree(split)[0][:, None]
-
-
-def _start(system: ClosedLoop | DualClosedLoop):
-    """The loop's steady start (its float vector and the rest), the neutral direction ∂x0/∂θe0 (one ``jvp``
-    through ``init``), the other neutral directions at the start (:func:`_set_split`, or None), and the step
-    on the float vector: (vec, rest, k) -> (vec, (rest, output))."""
-
-    def initial(theta0):
-        return eqx.tree_at(lambda m: m.scenario.theta_e0, system, theta0).init()
-
-    th0 = system.scenario.theta_e0
-    x0, dx0 = jax.jvp(initial, (th0,), (jnp.ones_like(th0),))
-    vec0, rest0, unravel = _split(x0)
-    is_float = jax.tree.map(eqx.is_inexact_array, x0)
-    neutral, _ = ravel_pytree(eqx.filter(dx0, is_float))
-
-    def step_vec(vec, rest, k):
-        """One period on the float part; the rest (noise key, flags) rides along, constant for the tangents."""
-        new, out = system.step(eqx.combine(unravel(vec), rest), k)
-        v, r, _ = _split(new)
-        return v, (r, out)
-
-    return vec0, rest0, neutral, _set_split(system, x0), step_vec
 
 
 def lyapunov(
@@ -313,62 +267,6 @@ def _periodic_window(
     return system, n_win, covered
 
 
-def _monodromy(
-    system: ClosedLoop | DualClosedLoop, blk: int, n_settle: int, n_win: jax.Array
-) -> tuple[jax.Array, jax.Array, jax.Array, jax.Array, jax.Array, jax.Array | None]:
-    """:func:`floquet`'s transition matrix over ``n_win`` speed-loop periods of ``blk`` samples after
-    ``n_settle``: the matrix normalized (its log scale apart), the log scale, the mask of the components the
-    step does more than copy, the peak speed deviation over the window, the neutral directions after the
-    settle (the first: ∂x/∂θe0) and the split ones (None: the single loop)."""
-    vec0, rest0, neutral0, split, step_vec = _start(system)
-    n = vec0.shape[0]
-    ref = jnp.abs(system.scenario.speed_ref(0.0))
-
-    def tangent_block(vec, rest, t, j):
-        """One speed-loop period: the state and the tangent columns ``t`` (n × d) through ``blk`` samples;
-        also the peak speed deviation and the tangents after the first sample."""
-
-        def one(c, i):
-            v, r, tt = c
-            v1, t1, (r1, out) = jax.vmap(
-                lambda d: jax.jvp(lambda vv: step_vec(vv, r, j * blk + i), (v,), (d,), has_aux=True),
-                in_axes=1,
-                out_axes=(None, 1, None),
-            )(tt)
-            dev = jnp.abs(out.omega_m - out.omega_m_ref) / jnp.maximum(ref, 1e-6)
-            return (v1, r1, t1), (dev, t1)
-
-        (vec, rest, t), (dev, tts) = jax.lax.scan(one, (vec, rest, t), jnp.arange(blk))
-        return vec, rest, t, jnp.max(dev), tts[0]
-
-    # the settle: the neutral direction alone, from t = 0 (so it is ∂x/∂θe0 exactly); its own speed excursion
-    # is not the orbit's (the rule of lyapunov)
-    def settle_block(carry, j):
-        vec, rest, t, _, _ = tangent_block(carry[0], carry[1], carry[2], j)
-        return (vec, rest, t), None
-
-    t0 = neutral0[:, None] if split is None else jnp.concatenate([neutral0[:, None], split], axis=1)
-    (vec, rest, vs), _ = jax.lax.scan(settle_block, (vec0, rest0, t0), jnp.arange(n_settle))
-
-    # the window: every direction, from the identity at t0, for the point's own N blocks; a scalar
-    # normalization each block keeps the product finite (its log accumulated), and the first step's Jacobian
-    # finds the components the step only copies (a unit row)
-    eye = jnp.eye(n, dtype=vec0.dtype)
-
-    def body(c):
-        j, vec, rest, w, log_s, mask, dev = c
-        vec, rest, w, d, first = tangent_block(vec, rest, w, n_settle + j)
-        mask = jnp.where(j == 0, jnp.any(first != eye, axis=1), mask)
-        nrm = jnp.sqrt(jnp.sum(w * w))
-        nrm = jnp.where((nrm > 0) & jnp.isfinite(nrm), nrm, 1.0)
-        return j + 1, vec, rest, w / nrm, log_s + jnp.log(nrm), mask, jnp.maximum(dev, d)
-
-    z = jnp.zeros((), vec0.dtype)
-    init = (jnp.zeros((), jnp.int32), vec, rest, eye, z, jnp.ones((n,), bool), z)
-    _, _, _, w, log_s, mask, dev = jax.lax.while_loop(lambda c: c[0] < n_win, body, init)
-    return w, log_s, mask, dev, vs, split
-
-
 def floquet(
     system: ClosedLoop | DualClosedLoop,
     *,
@@ -377,6 +275,10 @@ def floquet(
     max_window: float = 2.0,
     n_report: int = 3,
     tol: float = 0.0,
+    matrix: str = "auto",
+    block: int = 6,
+    iters: int = 5,
+    rtol: float = 1e-6,
 ) -> Stability:
     """The largest non-neutral Floquet multiplier of ``system``'s closed loop over whole electrical periods.
 
@@ -407,12 +309,31 @@ def floquet(
     ``stable``, ``marginal`` and ``speed_dev`` as in :func:`lyapunov` (the deviation over the window);
     ``exponents`` are the ``n_report`` largest non-neutral log|μ|/(m T_e'), largest first.
 
-    Cost: every state component is a tangent direction (n of them, ``jax.vmap`` of ``jax.jvp``), over the
-    point's own window (a ``while_loop``: under ``vmap`` a batch runs as long as its longest window, so batch
-    points of similar speed together, as :func:`jaxobs.analysis.envelope.envelope` does), after a settle that
-    carries one (the neutral).  M is accumulated with a scalar normalization each block (a product of
-    thousands of Jacobians).  Differentiable in the gains by forward mode (``jax.jacfwd``; reverse mode does
-    not pass a ``while_loop``) where the top non-neutral multiplier is simple; ``eigvals`` runs on the CPU.
+    Cost: by default (``matrix="full"``, and ``"auto"`` where it is cheaper) every state component is a tangent
+    direction (n of them, ``jax.vmap`` of ``jax.jvp``), over the point's own window (a ``while_loop``: under ``vmap``
+    a batch runs as long as its longest window, so batch points of similar speed together, as
+    :func:`jaxobs.analysis.envelope.envelope` does), after a settle that carries one (the neutral).  M is
+    accumulated with a scalar normalization each block (a product of thousands of Jacobians).
+
+    Matrix-free (``matrix="free"``): the verdict needs only the largest |μ|.  Subspace iteration with
+    Rayleigh–Ritz (:func:`jaxobs.analysis.monodromy._dominant`): a block of ``block`` + 1 directions (``block``
+    random ones, turned onto the dominant modes through the settle) is carried through the window, at most
+    ``iters`` times, and the Ritz values of the small projected matrix are the multipliers' estimates; the passes
+    stop where the top Ritz pair's relative residual ‖M y − θ y‖/(|θ| ‖y‖) is at most ``rtol``.  That residual
+    is added to δ/|μ| in ``resolution`` (θ is an exact eigenvalue of a matrix within that much of M), so a pass
+    count that falls short widens the resolution instead of moving the verdict silently.  ``exponents`` are the
+    block's Ritz values: the top one to ``rtol``, the next ones converge more slowly (their neighbours' ratio).
+    What cannot be matrix-free is nothing the verdict reads: ``off`` needs M v for the neutral v only (the first
+    pass carries it), the mask the first sample's Jacobian's rows (a dense random probe for one period reads them).
+    ``"auto"`` takes the matrix-free path where its worst case (``iters`` passes) costs less by
+    :func:`jaxobs.analysis.monodromy.free_is_cheaper`: each sample of d directions costs about 14 + d directions
+    (the primal step and the loop's fixed costs, measured on the CPU), so with the defaults the whole matrix is
+    the cheaper below about 100 states (000's drive with the second-order SOIFO has 32: the full path) and
+    where ``n_report`` > ``block``.  ``"full"`` forces the reference.
+
+    Differentiable in the gains by forward mode (``jax.jacfwd``; reverse mode does not pass a ``while_loop``) where
+    the top non-neutral multiplier is simple, either path (matrix-free at 600 r/min, 000's second-order SOIFO:
+    d(exponent)/d(lam) −83.73530 against central differences' −83.73530); ``eigvals`` runs on the CPU.
 
     Args:
         system: a :class:`~jaxobs.drive.ClosedLoop` or a :class:`~jaxobs.drive.DualClosedLoop`: the dual loop's
@@ -422,54 +343,54 @@ def floquet(
         max_window: s, the longest window (a longer electrical period: not resolved).
         n_report: how many exponents ``exponents`` reports (1 to 16).
         tol: 1/s, the margin a stable verdict needs.
+        matrix: "auto" (by cost), "full" (the whole monodromy matrix: the reference) or "free" (matrix-free).
+        block: the matrix-free block's directions besides the neutral slot (1 to 32, ≥ ``n_report``).
+        iters: the matrix-free path's most window passes (1 to 32).
+        rtol: the top Ritz pair's relative residual that ends the passes, in (0, 1).
 
     Returns:
         The :class:`Stability` verdict.
 
     Raises:
-        ValueError: a system that is not a steady closed loop, or a span or count out of its range.
+        ValueError: a system that is not a steady closed loop, or a span, count or option out of its range.
     """
     _check("floquet", system, (("settle", settle, 0.0), ("window", window, 1e-3), ("max_window", max_window, 1e-3)))
     if float(max_window) < float(window):
         raise ValueError(f"floquet: max_window must be >= window ({window!r} s), got {max_window!r}")
     if isinstance(n_report, bool) or not isinstance(n_report, int) or not 1 <= n_report <= 16:
         raise ValueError(f"floquet: n_report must be an integer in [1, 16], got {n_report!r}")
+    _check_free(matrix, block, iters, rtol, n_report)
     ts, blk = system.ts, _speed_every(system)
     h = ts * blk
     n_settle = max(int(round(settle / h)), 0)
     n_max = max(int(round(max_window / h)), 2)
     system, n_win, covered = _periodic_window(system, window, n_max, h)
-    w, log_s, mask, dev, vs, split = _monodromy(system, blk, n_settle, n_win)
-    v = vs[:, 0]
-    eye = jnp.eye(w.shape[0], dtype=w.dtype)
-    period = n_win * h
-    keep = mask.astype(w.dtype)
-    w = w * keep[:, None] * keep[None, :]
-    vn = v * keep
-    vn = vn / jnp.maximum(jnp.linalg.norm(vn), 1e-300)
-    if split is None:
-        proj = eye - jnp.outer(vn, vn)
-    else:  # every neutral direction out: P = I − Q Qᵀ, Q an orthonormal basis of them
-        q = jnp.linalg.qr(vs * keep[:, None])[0]
-        proj = eye - q @ q.T
-    mu = jnp.linalg.eigvals(proj @ w @ proj)
-    rates = -jnp.sort(-(jnp.log(jnp.maximum(jnp.abs(mu), 1e-300)) + log_s)) / period
-    # how periodic the orbit was: the neutral direction must come back to itself (M v = v)
-    wv = w @ vn
-    along = jnp.dot(vn, wv)
-    off = jnp.abs(jnp.log(jnp.maximum(jnp.abs(along), 1e-300)) + log_s) + jnp.linalg.norm(wv - along * vn) * jnp.exp(
-        log_s
+    mult = multipliers(
+        system,
+        blk,
+        n_settle,
+        n_win,
+        matrix=matrix,
+        block=block,
+        iters=iters,
+        rtol=rtol,
+        wanted=n_report,
+        spans=(n_settle * h, float(window)),
     )
+    period = n_win * h
+    rates = -jnp.sort(-mult.log_mu) / period
     lam = rates[0]
-    finite = jnp.isfinite(lam) & jnp.all(jnp.isfinite(w))
+    finite = jnp.isfinite(lam) & mult.finite
     lam = jnp.where(finite, lam, jnp.inf)
     # the resolution: an error δ in M (the orbit off periodic by that much) moves a multiplier by up to about δ,
     # so the top non-neutral one is at most |μ| + δ: its rate at most log(|μ| + δ)/T, log(1 + δ/|μ|)/T above
     # the estimate.  ≈ δ/T for a slow mode (|μ| near 1); for a fast one the same δ is a larger share of its
     # tiny μ (docs/performance.md).  An uncertainty of the estimate, not a property a tuner should move.
-    rel = off * jnp.exp(-jnp.clip(lam, -700.0 / period, 700.0 / period) * period)
+    # The matrix-free path's top Ritz value is an exact eigenvalue of a matrix within resid·|μ| of M: its
+    # relative residual adds to δ/|μ| (0 for the whole matrix's eigenvalues; at most rtol where the passes met it).
+    rel = mult.off * jnp.exp(-jnp.clip(lam, -700.0 / period, 700.0 / period) * period) + mult.resid
     res = jnp.where(finite & covered, jax.lax.stop_gradient(jnp.log1p(rel) / period), jnp.inf)
-    speed_dev = jnp.where(finite, dev, jnp.inf)
+    speed_dev = jnp.where(finite, mult.dev, jnp.inf)
     held = speed_dev < OFF_ORBIT_DEV
     res_on, off, bound = _orbit(lam, res, speed_dev)
     return Stability(
@@ -483,6 +404,19 @@ def floquet(
         off_orbit=off,
         rate_bound=bound,
     )
+
+
+def _check_free(matrix, block, iters, rtol, n_report) -> None:
+    """floquet's choice of path and the matrix-free one's options."""
+    if matrix not in MATRIX:
+        raise ValueError(f"floquet: matrix must be one of {', '.join(MATRIX)}, got {matrix!r}")
+    for name, v, lo in (("block", block, 1), ("iters", iters, 1)):
+        if isinstance(v, bool) or not isinstance(v, int) or not lo <= v <= 32:
+            raise ValueError(f"floquet: {name} must be an integer in [{lo}, 32], got {v!r}")
+    if not (isinstance(rtol, (int, float)) and not isinstance(rtol, bool) and 0.0 < float(rtol) < 1.0):
+        raise ValueError(f"floquet: rtol must be a number in (0, 1), got {rtol!r}")
+    if matrix == "free" and n_report > block:
+        raise ValueError(f"floquet: with matrix='free', n_report must be <= block ({block}), got {n_report!r}")
 
 
 def _weighted_slope(acc, t, w):
