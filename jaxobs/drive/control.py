@@ -122,6 +122,7 @@ class FOC(AbstractComponent):
         outer: ``"speed"``, or ``"current"``: the reference is i_q*, A.
         setpoint_weight: b in k_pω (b ω* − ω), in [0, 1]: 0 = I-P (no overshoot), 1 = PI.
         speed_schedule: N > 0: the speed-loop bandwidth is min(α_s, |ωe*|/N) (:meth:`speed_gains`); 0: fixed.
+        d_priority: The voltage limit keeps u_d* and gives u_q* what is left (module doc), else it scales the vector.
         est: The machine the controller assumes (:class:`PMSMParams`; keyword, required).
         u_max: The voltage limit for anti-windup and field weakening, V (> 0; keyword, required).
         startup: An :class:`IfStartup` (None: closed loop from t = 0).
@@ -145,6 +146,7 @@ class FOC(AbstractComponent):
     outer: Literal["speed", "current"] = eqx.field(static=True)  # "current": the reference is i_q*, A
     setpoint_weight: float = eqx.field(static=True)  # b in k_pω (b ω* − ω): 0 = I-P (no overshoot), 1 = PI
     speed_schedule: float = eqx.field(static=True)  # N > 0: speed-loop bandwidth min(α_s, |ωe*|/N); 0: fixed
+    d_priority: bool = eqx.field(static=True)  # the voltage limit keeps u_d* first (else scales the vector)
     field_weakening: VoltageFeedbackFW | None  # None: i_d* is the policy's (zero or MTPA)
     est: PMSMParams  # the machine the controller assumes
     u_max: jax.Array  # voltage limit for anti-windup and field weakening, V
@@ -169,6 +171,7 @@ class FOC(AbstractComponent):
         outer="speed",
         setpoint_weight=0.0,
         speed_schedule=0.0,
+        d_priority=False,
         est,
         u_max,
         startup=None,
@@ -218,6 +221,9 @@ class FOC(AbstractComponent):
         if not (0.0 <= float(speed_schedule) <= 1e3):
             raise ValueError(f"{own}.speed_schedule must be 0 (off) or a ratio in (0, 1000], got {speed_schedule!r}")
         self.speed_schedule = float(speed_schedule)
+        if not isinstance(d_priority, bool):
+            raise ValueError(f"{own}.d_priority must be True or False, got {d_priority!r}")
+        self.d_priority = d_priority
 
     @classmethod
     def imc(
@@ -549,9 +555,10 @@ class FOC(AbstractComponent):
         closed: jax.Array,
         run_speed: jax.Array,
         w_e: jax.Array,
-    ) -> tuple[jax.Array, jax.Array, jax.Array, jax.Array, jax.Array | None]:
+    ) -> tuple[jax.Array, jax.Array, jax.Array, jax.Array, tuple[jax.Array | None, jax.Array | None]]:
         """The speed loop at its own rate (its result held in between) and the current references it gives:
-        ``(i_d*, i_q*, the speed integrator, the held i_q*, field weakening's i_d floor or None)``."""
+        ``(i_d*, i_q*, the speed integrator, the held i_q*, (field weakening's Δi_d floor, its path slope) or
+        None each)``."""
         est, ts, fw = self.est, self.ts, self.field_weakening
         omega_m, omega_m_ref = inp.omega_m, inp.omega_m_ref
         kp_w, ki_w = gains
@@ -572,11 +579,13 @@ class FOC(AbstractComponent):
         if self.outer == "current":  # the reference is i_q* itself (current-loop tests, torque control)
             iq_cmd = jnp.clip(omega_m_ref, -iq_max, iq_max)
         id_ref = self._id_ref(est, iq_cmd)
-        iq_ref, real, fw_lo = iq_cmd, iq_sat, None
+        iq_ref, real, fw_lo, slope = iq_cmd, iq_sat, None, None
         if fw is not None:
             # the weakened reference within the stop, the circle, MTPV and the voltage (jaxobs.drive.weakening)
             id_pol = id_ref
             id_ref, iq_ref, capped, fw_lo = fw.references(est, id_pol, iq_cmd, cs.id_fw, w_e, self.u_max, self.i_max)
+            if fw.bounded:  # the gain on the reference path's slope (jaxobs.drive.weakening, "Bounded")
+                slope = fw.path_slope(est, id_pol, iq_cmd, cs.id_fw, w_e, self.u_max, self.i_max)
             real = jnp.where(capped, torque_dq(est, id_ref, iq_ref) / est.kt, iq_sat)
         # conditional integration on the torque realised (in K̂_t units): freeze while the speed loop's output is
         # not realised (the circle's torque, or field weakening's limits) and the error pushes further.  Without
@@ -585,7 +594,7 @@ class FOC(AbstractComponent):
         int_w = jnp.where(run_speed & ~windup, int_w0 + ki_w * e_w * tw, int_w0)
         if self.outer == "current":
             int_w = cs.int_w
-        return id_ref, iq_ref, int_w, iq_cmd, fw_lo
+        return id_ref, iq_ref, int_w, iq_cmd, (fw_lo, slope)
 
     def _if_references(
         self,
@@ -628,7 +637,7 @@ class FOC(AbstractComponent):
         w_e: jax.Array,
         refs: tuple[jax.Array, jax.Array],
         ints: tuple[jax.Array, jax.Array],
-        fw_lo: jax.Array | None,
+        fw_lo: tuple[jax.Array | None, jax.Array | None],
     ) -> tuple[jax.Array, jax.Array, jax.Array, jax.Array, jax.Array]:
         """The current PIs with decoupling in the frame ``th``, the voltage limit and the delay compensation:
         ``(u_α, u_β, int_d, int_q, field weakening's Δi_d)``."""
@@ -646,8 +655,16 @@ class FOC(AbstractComponent):
         scale = jnp.where(sat, u_max / jnp.maximum(mag, 1e-12), 1.0)
         int_d = jnp.where(sat, int_d0, int_d0 + self.ki_d * e_d * ts)
         int_q = jnp.where(sat, int_q0, int_q0 + self.ki_q * e_q * ts)
-        id_fw = cs.id_fw if fw is None else fw.update(cs.id_fw, mag, u_max, w_e, est.Ld, self.i_max, ts, fw_lo)
-        u_d, u_q = u_d * scale, u_q * scale
+        if fw is None:
+            id_fw = cs.id_fw
+        else:
+            id_fw = fw.update(cs.id_fw, mag, u_max, w_e, est.Ld, self.i_max, ts, *fw_lo)
+        if self.d_priority:  # u_d* kept (the flux held where field weakening needs it), u_q* takes what is left
+            u_d = jnp.clip(u_d, -u_max, u_max)
+            room = jnp.sqrt(jnp.maximum(u_max * u_max - u_d * u_d, 0.0))
+            u_q = jnp.clip(u_q, -room, room)
+        else:
+            u_d, u_q = u_d * scale, u_q * scale
         # the voltage is applied later (1.5 periods on average by default, jaxobs.drive.latency): rotate ahead
         th_out = th + (self.advance * w_e * ts if self.advance != 0.0 else 0.0)
         so, co = sincos(th_out)

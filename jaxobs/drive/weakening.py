@@ -61,6 +61,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ..core.numerics import safe_norm2
 from ..core.validate import check_positive, check_real
 from .machine import PMSMParams
 
@@ -93,12 +94,16 @@ class VoltageFeedbackFW(eqx.Module):
     alpha_fw: jax.Array  # bandwidth of the Δi_d loop, rad/s (> 0)
     margin: jax.Array  # m: the fraction of u_max the voltage reference is held below, in (0, 1]
     omega_min: jax.Array  # electrical speed floor of the gain's ω̂e, rad/s (> 0)
+    bounded: bool = eqx.field(static=True)  # the loop sees min(|u*|, u_max) and the reference path's slope
 
-    def __init__(self, alpha_fw=2 * jnp.pi * 20.0, margin=FW_MARGIN, omega_min=10.0):
+    def __init__(self, alpha_fw=2 * jnp.pi * 20.0, margin=FW_MARGIN, omega_min=10.0, bounded=False):
         own = "VoltageFeedbackFW"
         self.alpha_fw = check_positive("alpha_fw", alpha_fw, own)
         self.margin = check_real("margin", margin, lower=0.0, upper=1.0, owner=own)
         self.omega_min = check_positive("omega_min", omega_min, own)
+        if not isinstance(bounded, bool):
+            raise ValueError(f"{own}.bounded must be True or False, got {bounded!r}")
+        self.bounded = bounded
 
     def update(
         self,
@@ -110,8 +115,12 @@ class VoltageFeedbackFW(eqx.Module):
         i_max: jax.Array | float,
         ts: float,
         lo: jax.Array | float | None = None,
+        slope: jax.Array | float | None = None,
     ) -> jax.Array:
         """Δi_d for the next period from this period's |u*| and ω̂e.
+
+        With ``bounded`` (module doc, "Bounded"): |u*| is taken at most u_max, and the gain's slope is
+        max(``slope``, L̂d max(|ω̂e|, ω_min)) where ``slope`` is given (:meth:`path_slope`).
 
         Args:
             id_fw: This period's Δi_d, A.
@@ -122,11 +131,16 @@ class VoltageFeedbackFW(eqx.Module):
             i_max: The current-vector limit, A.
             ts: The control period, s.
             lo: The least Δi_d, A (≤ 0): i_d,lo − i_d,policy (module doc, point 1); None: −i_max.
+            slope: d|u|/dΔi_d along the reference, V/A (:meth:`path_slope`), or None: L̂d max(|ω̂e|, ω_min).
 
         Returns:
             Δi_d, A, in [lo, 0].
         """
-        gain = self.alpha_fw / (Ld * jnp.maximum(jnp.abs(omega_e), self.omega_min))
+        design = Ld * jnp.maximum(jnp.abs(omega_e), self.omega_min)
+        if self.bounded:
+            u_ref_mag = jnp.minimum(u_ref_mag, u_max)
+            design = design if slope is None else jnp.maximum(slope, design)
+        gain = self.alpha_fw / design
         lo = -i_max if lo is None else lo
         return jnp.clip(id_fw + gain * (self.margin * u_max - u_ref_mag) * ts, lo, 0.0)
 
@@ -169,6 +183,41 @@ class VoltageFeedbackFW(eqx.Module):
         q_lo, q_hi = voltage_iq_range(est, id_ref, omega_e, u_max)
         iq_ref = jnp.clip(iq_w, jnp.maximum(-room, q_lo), jnp.minimum(room, q_hi))
         return id_ref, iq_ref, iq_ref != iq_w, id_lo - id_policy
+
+    def path_slope(
+        self,
+        est: PMSMParams,
+        id_policy: jax.Array,
+        iq_cmd: jax.Array,
+        id_fw: jax.Array,
+        omega_e: jax.Array,
+        u_max: jax.Array | float,
+        i_max: jax.Array | float,
+    ) -> jax.Array:
+        """d|u|/dΔi_d (V/A): the slope of the steady voltage of :meth:`references`' current on ``est`` at ω̂e as
+        Δi_d moves, i_q* moving with it (the torque kept, or the circle's room), for the ``bounded`` gain (module
+        doc, "Bounded"); forward-mode derivative of the reference itself, 0 where a stop holds it.
+
+        Args:
+            est: The assumed machine.
+            id_policy: The policy's i_d, A.
+            iq_cmd: The speed loop's q current, A.
+            id_fw: Δi_d, A.
+            omega_e: ω̂e, rad/s.
+            u_max: The voltage limit, V.
+            i_max: The current-vector limit, A.
+
+        Returns:
+            The slope, V/A.
+        """
+
+        def volt(dfw):
+            i_d, i_q = self.references(est, id_policy, iq_cmd, dfw, omega_e, u_max, i_max)[:2]
+            return safe_norm2(
+                est.Rs * i_d - omega_e * est.Lq * i_q, est.Rs * i_q + omega_e * (est.psi_f + est.Ld * i_d)
+            )
+
+        return jax.jvp(volt, (id_fw,), (jnp.ones_like(id_fw),))[1]
 
     def gate_speed(self, est: PMSMParams, u_max: jax.Array | float, i_max: jax.Array | float) -> jax.Array:
         """ω_gate = (m u_max − R̂s i_max) / √(ψ̂f² + (L̂q i_max)²), rad/s: below it no current within the circle with
