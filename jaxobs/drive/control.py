@@ -123,6 +123,8 @@ class FOC(AbstractComponent):
         setpoint_weight: b in k_pω (b ω* − ω), in [0, 1]: 0 = I-P (no overshoot), 1 = PI.
         speed_schedule: N > 0: the speed-loop bandwidth is min(α_s, |ωe*|/N) (:meth:`speed_gains`); 0: fixed.
         d_priority: The voltage limit keeps u_d* and gives u_q* what is left (module doc), else it scales the vector.
+        gain_schedule: Where ``est`` has a saturation map, k_pd and k_pq scale with its incremental inductances at
+            i* (module doc); else the constant gains.
         est: The machine the controller assumes (:class:`PMSMParams`; keyword, required).
         u_max: The voltage limit for anti-windup and field weakening, V (> 0; keyword, required).
         startup: An :class:`IfStartup` (None: closed loop from t = 0).
@@ -147,6 +149,7 @@ class FOC(AbstractComponent):
     setpoint_weight: float = eqx.field(static=True)  # b in k_pω (b ω* − ω): 0 = I-P (no overshoot), 1 = PI
     speed_schedule: float = eqx.field(static=True)  # N > 0: speed-loop bandwidth min(α_s, |ωe*|/N); 0: fixed
     d_priority: bool = eqx.field(static=True)  # the voltage limit keeps u_d* first (else scales the vector)
+    gain_schedule: bool = eqx.field(static=True)  # k_p on the map's incremental inductances at i* (est.sat)
     field_weakening: VoltageFeedbackFW | None  # None: i_d* is the policy's (zero or MTPA)
     est: PMSMParams  # the machine the controller assumes
     u_max: jax.Array  # voltage limit for anti-windup and field weakening, V
@@ -172,6 +175,7 @@ class FOC(AbstractComponent):
         setpoint_weight=0.0,
         speed_schedule=0.0,
         d_priority=False,
+        gain_schedule=False,
         est,
         u_max,
         startup=None,
@@ -224,6 +228,9 @@ class FOC(AbstractComponent):
         if not isinstance(d_priority, bool):
             raise ValueError(f"{own}.d_priority must be True or False, got {d_priority!r}")
         self.d_priority = d_priority
+        if not isinstance(gain_schedule, bool):
+            raise ValueError(f"{own}.gain_schedule must be True or False, got {gain_schedule!r}")
+        self.gain_schedule = gain_schedule
 
     @classmethod
     def imc(
@@ -648,8 +655,14 @@ class FOC(AbstractComponent):
         i_d = c * inp.i_a + s * inp.i_b
         i_q = -s * inp.i_a + c * inp.i_b
         e_d, e_q = id_ref - i_d, iq_ref - i_q
-        u_d = self.kp_d * e_d + int_d0 - w_e * est.Lq * i_q
-        u_q = self.kp_q * e_q + int_q0 + w_e * (est.Ld * i_d + est.psi_f)
+        kp_d, kp_q = self.kp_d, self.kp_q
+        if self.gain_schedule and est.sat is not None:
+            # IMC on the map's incremental inductance at the reference, where the current settles: k_p = α_c L_inc
+            # (module doc); the secant L̂ overstated a saturated q axis 6× on the PM-SyRM, and the loop rang
+            ind = est.sat.inductance(id_ref, iq_ref)
+            kp_d, kp_q = kp_d * ind[..., 0, 0] / est.Ld, kp_q * ind[..., 1, 1] / est.Lq
+        u_d = kp_d * e_d + int_d0 - w_e * est.Lq * i_q
+        u_q = kp_q * e_q + int_q0 + w_e * (est.Ld * i_d + est.psi_f)
         mag = safe_norm2(u_d, u_q)
         sat = mag > u_max
         scale = jnp.where(sat, u_max / jnp.maximum(mag, 1e-12), 1.0)
