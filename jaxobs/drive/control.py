@@ -46,6 +46,17 @@ it asks for is on the circle at most.  With field weakening the weakened referen
 keeps the speed loop's torque while it can and is cut by the circle, MTPV and the
 voltage (:mod:`jaxobs.drive.weakening`).  With i_d* = 0 the circle is |i_q*| ≤ i_max.
 
+The voltage limit: the vector u* beyond u_max is scaled back onto the circle, its direction kept (the default).
+``d_priority=True`` (a drive file with field weakening) keeps u_d* (clipped to ±u_max) and gives u_q* what is
+left: in field weakening u_d ≈ −ω ψq holds the negative i_d, and the scaled vector let i_d drift up and the flux
+with it (the PM-SyRM of ``docs/examples/pmsyrm_5p6kw_sat.toml`` at 2136 r/min: i_d* −17.5 A, i_d rising to −11 A
+whenever the voltage saturated) — the d axis first is the field-weakening controller's usual
+priority.  ``gain_schedule=True`` (a drive file with a saturation map) sets k_pd, k_pq = α_c L_dd, α_c L_qq, the
+map's incremental inductances at i* (the integral gains α_c R̂s unchanged): the secant L̂q at the rated MTPA point
+is 6× the saturated incremental inductance near i_max on that PM-SyRM (0.102 against 0.017 H), and the q loop
+rang from standstill: 1.10 × i_max in a standstill start at rated load (1.006 with both,
+``tests/test_current_limit.py``).
+
 Speed-loop anti-windup: conditional integration on the torque *realised*: the
 integrator stops while the speed loop's output is not realised (beyond the circle's
 torque, or cut by field weakening's limits: the reference's torque on the assumed
