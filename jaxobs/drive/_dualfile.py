@@ -90,7 +90,7 @@ def dual_foc_kw(foc_kw: Mapping[str, Any], drop: tuple[str, ...] = ("alpha_c", "
     kw = {k: v for k, v in foc_kw.items() if k not in (*drop, "d_priority", "gain_schedule")}
     fw = kw.get("field_weakening")
     if isinstance(fw, VoltageFeedbackFW) and fw.bounded:
-        kw["field_weakening"] = VoltageFeedbackFW(fw.alpha_fw, fw.margin, fw.omega_min)
+        kw["field_weakening"] = VoltageFeedbackFW(float(fw.alpha_fw), float(fw.margin), float(fw.omega_min))
     return kw
 
 
