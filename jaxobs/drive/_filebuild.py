@@ -451,7 +451,7 @@ def controller(
         setpoint_weight=ctl.get("setpoint_weight", 0.0),
         speed_schedule=loops["speed_schedule"],
         d_priority=fw,
-        gain_schedule=machine.sat is not None,
+        flux_map=machine.sat is not None,
     )
     foc = FOC.imc(machine, **foc_kw)
     for g in ("kp_d", "ki_d", "kp_q", "ki_q", "kp_w", "ki_w"):

@@ -48,14 +48,14 @@ voltage (:mod:`jaxobs.drive.weakening`).  With i_d* = 0 the circle is |i_q*| ≤
 
 The voltage limit: the vector u* beyond u_max is scaled back onto the circle, its direction kept (the default).
 ``d_priority=True`` (a drive file with field weakening) keeps u_d* (clipped to ±u_max) and gives u_q* what is
-left: in field weakening u_d ≈ −ω ψq holds the negative i_d, and the scaled vector let i_d drift up and the flux
-with it (the PM-SyRM of ``docs/examples/pmsyrm_5p6kw_sat.toml`` at 2136 r/min: i_d* −17.5 A, i_d rising to −11 A
-whenever the voltage saturated) — the d axis first is the field-weakening controller's usual
-priority.  ``gain_schedule=True`` (a drive file with a saturation map) sets k_pd, k_pq = α_c L_dd, α_c L_qq, the
-map's incremental inductances at i* (the integral gains α_c R̂s unchanged): the secant L̂q at the rated MTPA point
-is 6× the saturated incremental inductance near i_max on that PM-SyRM (0.102 against 0.017 H), and the q loop
-rang from standstill: 1.10 × i_max in a standstill start at rated load (1.006 with both,
-``tests/test_current_limit.py``).
+left: in field weakening u_d ≈ −ω ψq holds the negative i_d; the scaled vector let it drift up (the PM-SyRM of
+``docs/examples/pmsyrm_5p6kw_sat.toml`` at 2136 r/min: i_d* −17.5 A, i_d at −11 A whenever the voltage
+saturated).  ``flux_map=True`` (a drive file with a saturation map) runs the current loop on the map
+(``est.sat``): k_pd, k_pq = α_c L_dd, α_c L_qq, its incremental inductances at i* (the integral gains α_c R̂s
+unchanged), and the decoupling −ω̂e ψq, ω̂e ψd of its flux at the measured current (as motulator's flux-map
+controllers): the secant L̂q at the rated MTPA point is 6× the saturated incremental inductance near i_max on
+that PM-SyRM (0.102 against 0.017 H), and the q loop rang from standstill: 1.10 × i_max in a standstill start at
+rated load (1.0064 with the gains alone, 1.0034 with the map's decoupling too, ``tests/test_current_limit.py``).
 
 Speed-loop anti-windup: conditional integration on the torque *realised*: the
 integrator stops while the speed loop's output is not realised (beyond the circle's
@@ -88,6 +88,7 @@ from jax.core import Tracer
 from ..core.numerics import safe_norm2, wrap
 from ..core.trig import sincos
 from ..core.validate import check_nonnegative, check_positive, check_sample_time
+from . import _policy
 from ._foctypes import ControllerState as ControllerState
 from ._foctypes import FOCInput as FOCInput
 from ._foctypes import FOCOutput as FOCOutput
@@ -134,8 +135,8 @@ class FOC(AbstractComponent):
         setpoint_weight: b in k_pω (b ω* − ω), in [0, 1]: 0 = I-P (no overshoot), 1 = PI.
         speed_schedule: N > 0: the speed-loop bandwidth is min(α_s, |ωe*|/N) (:meth:`speed_gains`); 0: fixed.
         d_priority: The voltage limit keeps u_d* and gives u_q* what is left (module doc), else it scales the vector.
-        gain_schedule: Where ``est`` has a saturation map, k_pd and k_pq scale with its incremental inductances at
-            i* (module doc); else the constant gains.
+        flux_map: Where ``est`` has a saturation map, the current loop runs on it: k_pd and k_pq scale with its
+            incremental inductances at i*, the decoupling is its flux at i (module doc); else the constants.
         est: The machine the controller assumes (:class:`PMSMParams`; keyword, required).
         u_max: The voltage limit for anti-windup and field weakening, V (> 0; keyword, required).
         startup: An :class:`IfStartup` (None: closed loop from t = 0).
@@ -160,7 +161,7 @@ class FOC(AbstractComponent):
     setpoint_weight: float = eqx.field(static=True)  # b in k_pω (b ω* − ω): 0 = I-P (no overshoot), 1 = PI
     speed_schedule: float = eqx.field(static=True)  # N > 0: speed-loop bandwidth min(α_s, |ωe*|/N); 0: fixed
     d_priority: bool = eqx.field(static=True)  # the voltage limit keeps u_d* first (else scales the vector)
-    gain_schedule: bool = eqx.field(static=True)  # k_p on the map's incremental inductances at i* (est.sat)
+    flux_map: bool = eqx.field(static=True)  # the current loop on est.sat: k_p at L_inc(i*), decoupling ψ(i)
     field_weakening: VoltageFeedbackFW | None  # None: i_d* is the policy's (zero or MTPA)
     est: PMSMParams  # the machine the controller assumes
     u_max: jax.Array  # voltage limit for anti-windup and field weakening, V
@@ -186,7 +187,7 @@ class FOC(AbstractComponent):
         setpoint_weight=0.0,
         speed_schedule=0.0,
         d_priority=False,
-        gain_schedule=False,
+        flux_map=False,
         est,
         u_max,
         startup=None,
@@ -239,9 +240,9 @@ class FOC(AbstractComponent):
         if not isinstance(d_priority, bool):
             raise ValueError(f"{own}.d_priority must be True or False, got {d_priority!r}")
         self.d_priority = d_priority
-        if not isinstance(gain_schedule, bool):
-            raise ValueError(f"{own}.gain_schedule must be True or False, got {gain_schedule!r}")
-        self.gain_schedule = gain_schedule
+        if not isinstance(flux_map, bool):
+            raise ValueError(f"{own}.flux_map must be True or False, got {flux_map!r}")
+        self.flux_map = flux_map
 
     @classmethod
     def imc(
@@ -364,8 +365,9 @@ class FOC(AbstractComponent):
         # produce are the rotor frame's rotated back by the offset (zero offset: the rotor frame itself)
         i_d, i_q = rotate_by(op.i_d, op.i_q, -op.offset)
         u_d, u_q = rotate_by(op.u_d, op.u_q, -op.offset)
-        int_d = u_d + w_e * est.Lq * i_q
-        int_q = u_q - w_e * (est.Ld * i_d + est.psi_f)
+        emf_d, emf_q = _policy.rotation_emf(est, w_e, i_d, i_q, self.flux_map)  # the current loop's decoupling
+        int_d = u_d + emf_d
+        int_q = u_q - emf_q
         lin, held = self.iq_lin(est, i_q), i_q
         if self.field_weakening is not None:
             # weakened: the speed loop asks for the torque of the references on the assumed machine, as its policy's
@@ -667,13 +669,14 @@ class FOC(AbstractComponent):
         i_q = -s * inp.i_a + c * inp.i_b
         e_d, e_q = id_ref - i_d, iq_ref - i_q
         kp_d, kp_q = self.kp_d, self.kp_q
-        if self.gain_schedule and est.sat is not None:
+        if self.flux_map and est.sat is not None:
             # IMC on the map's incremental inductance at the reference, where the current settles: k_p = α_c L_inc
             # (module doc); the secant L̂ overstated a saturated q axis 6× on the PM-SyRM, and the loop rang
             ind = est.sat.inductance(id_ref, iq_ref)
             kp_d, kp_q = kp_d * ind[..., 0, 0] / est.Ld, kp_q * ind[..., 1, 1] / est.Lq
-        u_d = kp_d * e_d + int_d0 - w_e * est.Lq * i_q
-        u_q = kp_q * e_q + int_q0 + w_e * (est.Ld * i_d + est.psi_f)
+        emf_d, emf_q = _policy.rotation_emf(est, w_e, i_d, i_q, self.flux_map)
+        u_d = kp_d * e_d + int_d0 - emf_d
+        u_q = kp_q * e_q + int_q0 + emf_q
         mag = safe_norm2(u_d, u_q)
         sat = mag > u_max
         scale = jnp.where(sat, u_max / jnp.maximum(mag, 1e-12), 1.0)

@@ -61,7 +61,7 @@ always did).  Two changes to the Δi_d loop, for a machine whose q flux dominate
   cycle; the max keeps the gain at or below the unbounded design's.
 
 With them the PM-SyRM's top point (2136 r/min, 33.5 N·m) is held at 0.995 × i_max where it collapsed to 758 r/min
-drawing 1.072 × i_max (with the FOC's ``d_priority`` and ``gain_schedule``, :class:`~jaxobs.drive.FOC`).
+drawing 1.072 × i_max (with the FOC's ``d_priority`` and ``flux_map``, :class:`~jaxobs.drive.FOC`).
 
 |u*| is the current PIs' reference before the controller's own limit, available at the end of a period, so
 Δi_d acts from the next period on (a one-period lag, negligible against 1/α_fw).  A steady start above base
