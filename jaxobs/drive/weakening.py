@@ -60,7 +60,7 @@ always did).  Two changes to the Δi_d loop, for a machine whose q flux dominate
   circle at 2136 r/min, and the loop designed at α_fw ran at about 15 α_fw, against the current loop, in a limit
   cycle; the max keeps the gain at or below the unbounded design's.
 
-With them the PM-SyRM's top point (2136 r/min, 33.5 N·m) is held at 0.995 × i_max where it collapsed to 758 r/min
+With them the PM-SyRM's top point (2136 r/min, 33.5 N·m) is held at 0.996 × i_max where it collapsed to 758 r/min
 drawing 1.072 × i_max (with the FOC's ``d_priority`` and ``flux_map``, :class:`~jaxobs.drive.FOC`).
 
 |u*| is the current PIs' reference before the controller's own limit, available at the end of a period, so
