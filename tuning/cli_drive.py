@@ -161,7 +161,7 @@ def _figure(f: DriveFile, path: str) -> None:
     fig, ax = plt.subplots(figsize=(7.0, 4.2), layout="constrained")
     ax.plot(n, c["torque"], color="C0", label="max torque")
     ax.plot([float(f.machine.n_rated)], [float(f.machine.T_rated)], "o", color="C3", label="rated point")
-    ax.axvline(float(f.derived["base_speed_rpm"].value), color="0.6", ls=":", lw=1, label="base speed")
+    ax.axvline(float(f.derived["base_speed_rpm"].value), color="0.6", ls=":", lw=1, label="base speed (rated torque)")
     ax.set_xlabel("speed (r/min)")
     ax.set_ylabel("torque (N·m)", color="C0")
     ax.set_xlim(0.0, f.speed_limit_rpm)

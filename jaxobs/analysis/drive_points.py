@@ -17,6 +17,16 @@ max(:data:`HORIZON_MIN_S`, 10/α_s), ten time constants of the speed loop.  A po
 speed over the last quarter of the run lies within :data:`HOLD_TOL` (2 %) of its reference.  Per point the run
 also reports the largest |i| (the true current, every sample) over i_max and the largest |u| (the applied
 voltage) over u_dc/√3.  Both points run in one ``jit(vmap)`` (a batch of two scenarios): one compilation.
+
+The voltage is u_dc/√3, the circle inscribed in the space-vector hexagon, whatever the file's
+``inverter.voltage_limit``: the FOC limits its own command to it (``FOC.u_max`` is ``Inverter.u_max``), so a
+``"hexagon"`` plant never receives a vector beyond the circle from this controller and its corners (up to
+2 u_dc/3) are never used; the capability (fw_margin × u_dc/√3) and the points' |u|/u_max are the same numbers
+under either plant.  DECISION: the linear range, because a steady sinusoidal current through overmodulation
+carries the hexagon's 5th and 7th harmonics, which the check's steady model does not have.
+
+:func:`peak_ratios` runs any batch of scenarios on the same drive (standstill starts, speed and load steps) and
+reports the largest |i|/i_max, |i*|/i_max and |u|/u_max over every sample (``tests/test_current_limit.py``).
 """
 
 from __future__ import annotations
@@ -39,6 +49,7 @@ __all__ = [
     "PointResult",
     "check_points",
     "horizon",
+    "peak_ratios",
     "point_verdict",
     "run_points",
 ]
@@ -114,6 +125,47 @@ def _runs(drive: Drive, scs: Scenario, t1: float, i_max: float, u_max: float):
         return mean, i_r, u_r
 
     return jax.vmap(one)(scs)
+
+
+@eqx.filter_jit
+def _peaks(drive: Drive, scs: Scenario, t1: float, i_max: float, u_max: float):
+    """The batch's (max |i|/i_max, max |i*|/i_max, max |u|/u_max, the least i_d*, the last speed)."""
+
+    def one(sc):
+        out = simulate(ClosedLoop(drive, None, sc), t1).outputs
+        i_r = jnp.max(jnp.hypot(out.i_d, out.i_q)) / i_max
+        ref_r = jnp.max(jnp.hypot(out.id_ref, out.iq_ref)) / i_max
+        u_r = jnp.max(jnp.hypot(out.u_a, out.u_b)) / u_max
+        return i_r, ref_r, u_r, jnp.min(out.id_ref), out.speed_rpm[-1]
+
+    return jax.vmap(one)(scs)
+
+
+def peak_ratios(f: DriveFile, scenarios: list[Scenario], t1: float) -> dict[str, np.ndarray]:
+    """Run ``scenarios`` on the file's drive, sensored, in one ``jit(vmap)`` (their profiles of equal knots), and
+    report each one's peaks over every sample.
+
+    Args:
+        f: The drive file (a single three-phase machine's).
+        scenarios: The scenarios (each on ``f.machine``).
+        t1: The horizon, s.
+
+    Returns:
+        ``i_ratio`` (max |i|/i_max, the true current), ``ref_ratio`` (max |i*|/i_max), ``u_ratio``
+        (max |u|/(u_dc/√3), the applied voltage), ``id_ref_min`` (the least i_d*, A) and ``last_rpm`` (the speed
+        at the last sample, r/min), one entry per scenario.
+
+    Raises:
+        ValueError: A ``[dual]`` file, or no scenario.
+    """
+    if f.dual is not None or not scenarios:
+        raise ValueError("peak_ratios: scenarios must be a non-empty list on a single three-phase drive file")
+    drive = f.drive_for(sensorless=False)
+    assert isinstance(drive, Drive)
+    batch = jax.tree.map(lambda *x: jnp.stack(x), *scenarios)
+    i_max, u_max = float(f.derived["i_max"].value), float(f.derived["u_max"].value)
+    vals = (np.asarray(v) for v in _peaks(drive, batch, float(t1), i_max, u_max))
+    return dict(zip(("i_ratio", "ref_ratio", "u_ratio", "id_ref_min", "last_rpm"), vals))
 
 
 def run_points(f: DriveFile, points: tuple[tuple[str, float, float], ...] | None = None) -> list[PointResult]:

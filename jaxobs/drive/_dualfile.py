@@ -42,6 +42,7 @@ from .dual_loop import DualDrive, DualFOC
 from .latency import Latency
 from .loop import Drive
 from .machine import PMSMParams
+from .weakening import VoltageFeedbackFW
 
 
 class SetFile(Protocol):
@@ -72,6 +73,25 @@ class SetFile(Protocol):
     def ts(self) -> float:
         """The control and PWM period, s."""
         ...
+
+
+def dual_foc_kw(foc_kw: Mapping[str, Any], drop: tuple[str, ...] = ("alpha_c", "alpha_s")) -> dict[str, Any]:
+    """The single set's :meth:`FOC.imc` keywords as :meth:`DualFOC.imc` takes them: without ``drop``, and without the
+    single drive's current-limit features (``d_priority``, ``flux_map``, the bounded field weakening), which
+    the dual loops (``jaxobs.drive.dual_loop``) do not run: a ``[dual]`` file builds 002's dual bench unchanged.
+
+    Args:
+        foc_kw: The single set's keywords.
+        drop: The keywords to leave out besides.
+
+    Returns:
+        The keywords.
+    """
+    kw = {k: v for k, v in foc_kw.items() if k not in (*drop, "d_priority", "flux_map")}
+    fw = kw.get("field_weakening")
+    if isinstance(fw, VoltageFeedbackFW) and fw.bounded:
+        kw["field_weakening"] = VoltageFeedbackFW(float(fw.alpha_fw), float(fw.margin), float(fw.omega_min))
+    return kw
 
 
 def halved(raw: dict) -> dict:
@@ -214,7 +234,7 @@ def dual_drive_file(
             rule = f"IMC at the single rule's α_c / r (r = {r:.3g}): the differential loop keeps its phase margin"
             derived["alpha_c"] = (alpha_c, "rad/s", rule, False)
     derived["xy_phase_margin"] = (pm_xy, "deg", xy_rule, False)
-    kw = {k: v for k, v in single.foc_kw.items() if k not in ("alpha_c", "alpha_s")}
+    kw = dual_foc_kw(single.foc_kw)
     ctrl = DualFOC.imc(dual, alpha_c, single.foc_kw["alpha_s"], mode=mode, fw_voltage=fw_voltage, **kw)
     d = single.drive
     drive = DualDrive(ctrl, d.inverter, sensorless=True, handover=0.0, n_sub=d.n_sub, rule=d.rule)

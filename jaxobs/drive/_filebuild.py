@@ -436,7 +436,7 @@ def controller(
     """
     fw_obj = None
     if fw:
-        fw_obj = VoltageFeedbackFW(2 * math.pi * ctl.get("fw_bandwidth_hz", 20.0), margin)
+        fw_obj = VoltageFeedbackFW(2 * math.pi * ctl.get("fw_bandwidth_hz", 20.0), margin, bounded=True)
     advance = ctl.get("advance", n_use)
     rec("advance", advance, "periods", "the timing's use delay (Latency.use_delay)", "advance" in ctl)
     foc_kw = dict(
@@ -450,6 +450,8 @@ def controller(
         field_weakening=fw_obj,
         setpoint_weight=ctl.get("setpoint_weight", 0.0),
         speed_schedule=loops["speed_schedule"],
+        d_priority=fw,
+        flux_map=machine.sat is not None,
     )
     foc = FOC.imc(machine, **foc_kw)
     for g in ("kp_d", "ki_d", "kp_q", "ki_q", "kp_w", "ki_w"):

@@ -131,3 +131,25 @@ def policy_iq_limit(id_mode: str, est: PMSMParams, i_max: jax.Array) -> tuple[ja
     i_d = (est.psi_f - jnp.sqrt(est.psi_f**2 + 8 * safe * safe * i_max**2)) / (4 * safe)
     iq = jnp.where(salient, jnp.sqrt(jnp.maximum(i_max**2 - i_d * i_d, 0.0)), i_max)
     return iq, policy_iq_lin(id_mode, est, iq)
+
+
+def rotation_emf(
+    est: PMSMParams, w_e: jax.Array | float, i_d: jax.Array | float, i_q: jax.Array | float, flux_map: bool = False
+) -> tuple[jax.Array, jax.Array]:
+    """The current loop's decoupling terms (ω̂e ψq, ω̂e ψd), V: on the constants, ω̂e L̂q i_q and ω̂e (L̂d i_d + ψ̂f);
+    with ``flux_map`` and a map on ``est`` (``est.sat``), its flux at the current (:class:`~jaxobs.drive.FOC`).
+
+    Args:
+        est: The machine the controller assumes.
+        w_e: ω̂e, rad/s.
+        i_d: The d current, A.
+        i_q: The q current, A.
+        flux_map: Whether the map's flux is used where ``est`` has one.
+
+    Returns:
+        ``(ω̂e ψq, ω̂e ψd)``, V.
+    """
+    if flux_map and est.sat is not None:
+        psi_d, psi_q = est.sat.flux(i_d, i_q)
+        return w_e * psi_q, w_e * psi_d
+    return w_e * est.Lq * i_q, w_e * (est.Ld * i_d + est.psi_f)

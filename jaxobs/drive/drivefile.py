@@ -164,7 +164,7 @@ from typing import Any
 import numpy as np
 
 from ..io.safetoml import TomlFieldError, read_toml
-from ._dualfile import dual_drive_file, halved, lowered_bandwidth
+from ._dualfile import dual_drive_file, dual_foc_kw, halved, lowered_bandwidth
 from ._filebuild import ALPHA_C_TS_MAX as ALPHA_C_TS_MAX
 from ._filebuild import PM_DESIGN_DEG as PM_DESIGN_DEG
 from ._filebuild import PM_MIN_DEG as PM_MIN_DEG
@@ -305,7 +305,7 @@ class DriveFile:
         if isinstance(d, DualDrive) and self.dual is not None:  # a [dual] file
             ctrl = d.ctrl
             if speed_schedule is not None and float(speed_schedule) != float(ctrl.foc.speed_schedule):
-                kw = {k: v for k, v in self.foc_kw.items() if k not in ("alpha_c", "alpha_s", "speed_schedule")}
+                kw = dual_foc_kw(self.foc_kw, ("alpha_c", "alpha_s", "speed_schedule"))
                 ctrl = DualFOC.imc(self.dual, self.foc_kw["alpha_c"], self.foc_kw["alpha_s"], mode=ctrl.mode,
                                    fw_voltage=ctrl.fw_voltage, speed_schedule=float(speed_schedule), **kw)  # fmt: skip
             return DualDrive(ctrl, d.inverter, **common)
