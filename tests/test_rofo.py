@@ -626,9 +626,11 @@ def test_bound_to_a_map_the_error_signal_is_the_angle_error_at_any_load():
     θ̃ behind (no flux error), ε = θ̃ to first order at any current, which is what the auxiliary flux ψs + j L_inc
     (j is) is derived for; the constants (the rated secant ones) give ε = θ̃ only at their rated point and a
     steady bias elsewhere (at no load here: the secant L̂q is twice the incremental one at rated current)."""
+    from jaxobs.drive.saturation import AlgebraicSaturation
+
     par = read_drive(PMSYRM_FILE).machine
     sat = par.sat
-    assert sat is not None and sat.state_is_flux
+    assert isinstance(sat, AlgebraicSaturation) and sat.state_is_flux
     mapped = ReducedOrderFluxObserver.closed_form(ts=1.25e-4).bind(par, 0.0)
     const = ReducedOrderFluxObserver.closed_form(ts=1.25e-4).bind(eqx.tree_at(lambda p: p.sat, par, None), 0.0)
     assert type(mapped.flux_map) is type(sat) and float(mapped.flux_map.a_qq) == float(sat.a_qq)
