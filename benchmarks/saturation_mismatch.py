@@ -8,7 +8,9 @@ One drive study (:func:`jaxobs.studies.study.run_study` on :class:`jaxobs.scenar
 float64) of the drive file ``docs/examples/pmsyrm_5p6kw_sat.toml`` (Hinkkanen et al. 2017's algebraic flux map,
 8 kHz, sensorless): every design on the grid ``dsat`` × speed at a constant load, each run started steady, scored
 over its steady window.  ``dsat`` = v makes the true machine saturate (1 + v) times as much (the map's a_dd, a_qq,
-a_dq scaled) while the controller and the observer keep the nominal (rated-secant) constants (docs/studies.md).
+a_dq scaled) while the controller and the observers keep the nominal machine: the rated-secant constants, and the
+reduced-order flux observer, whose current model is the map (jaxobs/observers/rofo.py), the nominal map
+(docs/studies.md).
 
 Printed per design: the steady peak and rms electrical position error at dsat = 0 (each speed's worst), the worst
 over the grid and where, the sensitivity (worst peak minus the worst peak at dsat = 0) and the lost-lock count; the
@@ -34,8 +36,8 @@ from typing import Any, cast
 ROOT = Path(__file__).resolve().parents[1]
 DRIVE = ROOT / "docs" / "examples" / "pmsyrm_5p6kw_sat.toml"
 DSAT = (-0.5, 0.0, 0.5, 1.0, 2.0)  # the mismatch grid (−0.5: half the map's saturation; 2: three times)
-# of rated speed (1800 r/min): 900 and 1440 r/min.  Not 30 %: at 540 r/min and rated load every family
-# loses lock with dsat = 0 already (a first run), so that speed would rank nothing about the mismatch
+# of rated speed (1800 r/min): 900 and 1440 r/min.  Not 30 %: at 540 r/min and rated load every family but the
+# reduced-order flux observer (the one that models the map) loses lock with dsat = 0 already
 SPEEDS_PU = (0.5, 0.8)
 LOAD_PU = 1.0  # of rated torque (29.7 N·m)
 HORIZON = 0.2  # s; each run starts steady (the observer settled 0.2 s before t = 0), scored from horizon/2

@@ -35,8 +35,9 @@ from jaxobs_tuning.cli_papers import CF_DESIGNS, CF_OPTIONS
 from jaxobs_tuning.job import COMPONENTS, parse_job
 
 # what is not a gain: the machine and start speed bind() sets, the FLLs' nominal frequency, and the speed
-# estimator a LESO or a PLL-type flux observer holds (a module whose gains are its own: tests/test_zero_speed.py)
-NOT_GAINS = {"Rs", "L", "Ld", "Lq", "psi_f", "omega_init", "omega0_pll", "omega_n", "speed"}
+# estimator a LESO or a PLL-type flux observer holds (a module whose gains are its own: tests/test_zero_speed.py);
+# the reduced-order flux observer's flux_map: the assumed machine's current map, which bind() sets too
+NOT_GAINS = {"Rs", "L", "Ld", "Lq", "psi_f", "omega_init", "omega0_pll", "omega_n", "speed", "flux_map"}
 UNITS = {"1", "s-1", "s-2", "rad s-1", "rad2 s-2"}
 
 

@@ -398,8 +398,9 @@ DRIVE_AXES: dict[str, Axis] = {
             "dsat",
             "1",
             (-1.0, 10.0),
-            "relative change of the true machine's saturation (its map's a_dd, a_qq, a_dq; controller and "
-            "observers: the nominal constants); a machine with a saturation map only",
+            "relative change of the true machine's saturation (its map's a_dd, a_qq, a_dq; the controller and "
+            "observers keep the nominal machine: its constants, and the reduced-order flux observer its map); a "
+            "machine with a saturation map only",
         ),
         Axis("i_noise", "A", (0.0, 1e3), "current-sensor noise (standard deviation)"),
         Axis("u_noise", "V", (0.0, 1e4), "voltage-sensor noise (standard deviation)"),

@@ -78,6 +78,7 @@ class AssumedMachine(Protocol):
         J: Inertia, kg·m².
         B: Viscous friction, N·m·s/rad.
         p: Pole pairs.
+        sat: The saturation map, or None (a drive observer that models the map reads it; the others do not).
     """
 
     @property
@@ -113,6 +114,11 @@ class AssumedMachine(Protocol):
     @property
     def p(self) -> int:
         """Pole pairs."""
+        ...
+
+    @property
+    def sat(self) -> Any:
+        """The saturation map (an algebraic current map i(ψ) or a flux table), or None: the constants alone."""
         ...
 
 

@@ -93,6 +93,30 @@ the hold equivalent above at ω̂c.  T* is the reference, not the machine's torq
 inertia error are disturbances of the e_ω row, which T̂L absorbs as it absorbs the load.  The state is then
 [ψ̂d, ψ̂q, θ̂, ω̂m, T̂L].
 
+A machine with a flux map (derived here).  Bound to a machine whose ``sat`` is an algebraic current map i(ψ)
+(:class:`jaxobs.drive.saturation.AlgebraicSaturation`), the observer's current model is that map, not the constants
+L̂d, L̂q, ψ̂f (a drive file's rated-secant ones).  The constants are right at one point only: with them, a current
+change δi moves the model's flux by L̂_sec δi while the machine's moves by L_inc δi (the incremental inductance; on
+the 5.6-kW PM-SyRM at rated current L_q,inc = 0.051 H against L_q,sec = 0.102 H), so every current transient shows
+as a flux error, half of which falls on jψ̂a, the direction ε reads as an angle error: a closed sensorless loop then
+feeds its own current ripple back into its angle (measured there: a matched map, 1440 r/min, rated load, 8.8°
+steady peak error with the map against 0.00° on a linear machine with the same constants).  With the map, e is
+the map's flux at the measured current minus ψ̂s, taken by one Newton step from ψ̂s (the map is explicit in ψ, so
+no inversion runs per sample; the step is exact to first order in e, which is the order the design above is
+linearised in):
+
+    e = L_inc(ψ̂s) (is − i(ψ̂s)),   L_inc = (∂i/∂ψ)⁻¹,
+
+and the auxiliary flux is the direction an angle error moves e in, re-derived for a map: rotating the measured
+current by θ̃ moves the model's flux by L_inc (jθ̃ is) and the machine's (in the estimated frame) by jθ̃ ψs, so
+
+    ψa = ψs + j L_inc (j is)   (ψs = ψ̂s + e, the model's flux),
+
+which is ψ̂f + (L̂d − L̂q) is* for constant inductances.  The secant ψ/i sets the steady point (the flux itself),
+the incremental ∂ψ/∂i every deviation from it (the error and its direction): the choice a map makes for itself.
+The flux gain σ0 keeps the bound L̂d, L̂q (a design constant, not a model).  A table map (FluxTable, the plant
+integrated in currents) and a machine without a map keep the constants (no leaf added: bit for bit as before).
+
 Position and speed.  θ̂ is the observer's own state (the coordinates it works in), so ``init_aligned`` starts it
 at the rotor's angle; ω̂m is electrical, signed and passes through zero (nothing in the step divides by it).  At
 standstill the flux poles are 0 and −2σ0: the angle is not observable from the back EMF there, as for every
@@ -249,6 +273,8 @@ class ReducedOrderFluxObserver(AbstractDriveObserver):
     speed: AbstractSpeedEstimator  # θ̂, ω̂m from ε: the type-2 loop on kθ, kω (PLLSpeed) or a mechanical model
     ts: float = eqx.field(static=True)
     psi_floor: float = eqx.field(static=True)
+    # the assumed machine's algebraic current map i(ψ) (bind sets it from est_par.sat; None: the constants, no leaf)
+    flux_map: Any = None
     # no discretization rule: the step is its own update (module doc: the hold equivalent, exact where stated);
     # jobs and the export read ``rule`` of every component, and None says so (the export's "none")
     rule: ClassVar[None] = None
@@ -304,6 +330,7 @@ class ReducedOrderFluxObserver(AbstractDriveObserver):
             raise ValueError(f"{name}.psi_floor must be finite and > 0 Wb, got {psi_floor!r}")
         self.psi_floor = float(psi_floor)
         self.speed = speed_from_spec(speed, f"{name}.speed", self.ts)
+        self.flux_map = None  # bind sets the assumed machine's current map (module doc)
 
     @classmethod
     def closed_form_design(
@@ -417,7 +444,8 @@ class ReducedOrderFluxObserver(AbstractDriveObserver):
     # --- the drive-observer contract ------------------------------------------------------------------------
     def bind(self, est_par: AssumedMachine | None, omega_e: ArrayLike) -> Self:
         """This observer assuming ``est_par``'s Rs, Ld, Lq and ψf (and its speed estimator the machine's mechanics),
-        its speed estimate starting at the signed ω_e (:meth:`AbstractDriveObserver.bind`).
+        its speed estimate starting at the signed ω_e (:meth:`AbstractDriveObserver.bind`); with an algebraic
+        current map (``est_par.sat``) its current model is the map (module doc).
 
         Args:
             est_par: The machine assumed, or None (the speed only).
@@ -429,6 +457,9 @@ class ReducedOrderFluxObserver(AbstractDriveObserver):
         if est_par is None:
             return replace_leaves(self, omega_init=omega_e)
         new = replace_leaves(self, Rs=est_par.Rs, Ld=est_par.Ld, Lq=est_par.Lq, psi_f=est_par.psi_f, omega_init=omega_e)
+        sat = est_par.sat
+        if sat is not None and sat.state_is_flux:  # an algebraic current map i(ψ): the current model (module doc)
+            new = eqx.tree_at(lambda o: o.flux_map, new, sat, is_leaf=lambda x: x is None)
         speed = self.speed.bind(est_par)  # a mechanical model takes the assumed Ĵ, B̂, p; a PLL has none
         return new if speed is self.speed else eqx.tree_at(lambda o: o.speed, new, speed)
 
@@ -513,19 +544,38 @@ class ReducedOrderFluxObserver(AbstractDriveObserver):
         return sigma0 + self.zeta_inf * jnp.abs(omega)
 
     def current_model(
-        self, i_d: jax.Array, i_q: jax.Array
+        self, i_d: jax.Array, i_q: jax.Array, psi: tuple[jax.Array, jax.Array] | None = None
     ) -> tuple[tuple[jax.Array, jax.Array], tuple[jax.Array, jax.Array]]:
-        """The current model's flux L̂d id + ψ̂f + j L̂q iq and the auxiliary flux ψ̂f + (L̂d − L̂q) is* (d, q each).
+        """The current model's flux L̂d id + ψ̂f + j L̂q iq and the auxiliary flux ψ̂f + (L̂d − L̂q) is* (d, q each);
+        with a current map (``flux_map``), the map's flux at the current by one Newton step from ``psi`` and
+        ψa = ψs + j L_inc (j is) (module doc).
 
         Args:
             i_d: id in the estimated rotor coordinates, A.
             i_q: iq, A.
+            psi: (ψ̂d, ψ̂q), Wb, the Newton step's start with a map (None: ``psi_f``, 0); not read without one.
 
         Returns:
             ``((ψd, ψq), (ψad, ψaq))``, Wb.
         """
+        if self.flux_map is not None:
+            if psi is None:
+                psi = (jnp.broadcast_to(self.psi_f, jnp.shape(i_d)), jnp.zeros_like(i_d))
+            return self._map_model(psi, i_d, i_q)
         dl = self.Ld - self.Lq
         return (self.Ld * i_d + self.psi_f, self.Lq * i_q), (self.psi_f + dl * i_d, -dl * i_q)
+
+    def _map_model(self, psi, i_d, i_q):
+        """The map's flux at (i_d, i_q) by one Newton step from ψ̂ = ``psi`` and the auxiliary flux (module doc)."""
+        m = self.flux_map
+        j_d, j_q = m.current(psi[0], psi[1])
+        g = m.inverse_inductance(psi[0], psi[1])  # ∂i/∂ψ; its inverse is L_inc
+        det = g[..., 0, 0] * g[..., 1, 1] - g[..., 0, 1] * g[..., 1, 0]
+        l_dd, l_dq, l_qd, l_qq = g[..., 1, 1] / det, -g[..., 0, 1] / det, -g[..., 1, 0] / det, g[..., 0, 0] / det
+        dd, dq = i_d - j_d, i_q - j_q
+        f_d, f_q = psi[0] + l_dd * dd + l_dq * dq, psi[1] + l_qd * dd + l_qq * dq
+        # ψa = ψs + j L_inc (j is): L (j i) = (−L_dd iq + L_dq id, −L_qd iq + L_qq id), then times j
+        return (f_d, f_q), (f_d - l_qq * i_d + l_qd * i_q, f_q - l_dd * i_q + l_dq * i_d)
 
     def error_signals(
         self, psi: tuple[jax.Array, jax.Array], i_d: jax.Array, i_q: jax.Array
@@ -540,7 +590,7 @@ class ReducedOrderFluxObserver(AbstractDriveObserver):
         Returns:
             ``(e_d, e_q, ψad, ψaq, Re{e/ψ̂a}, ε)``.
         """
-        (pid, piq), (pad, paq) = self.current_model(i_d, i_q)
+        (pid, piq), (pad, paq) = self.current_model(i_d, i_q, psi)
         ed, eq = pid - psi[0], piq - psi[1]
         na = jnp.maximum(pad * pad + paq * paq, self.psi_floor**2)
         # e/ψa = e ψa*/|ψa|²
@@ -575,7 +625,7 @@ class ReducedOrderFluxObserver(AbstractDriveObserver):
     def _current_model_state(self, x: jax.Array, i_ab: jax.Array) -> jax.Array:
         """``x`` with ψ̂s set to the current model's flux at θ̂ (the first sample's start, module doc)."""
         c, s = jnp.cos(x[2]), jnp.sin(x[2])
-        (pid, piq), _ = self.current_model(c * i_ab[0] + s * i_ab[1], -s * i_ab[0] + c * i_ab[1])
+        (pid, piq), _ = self.current_model(c * i_ab[0] + s * i_ab[1], -s * i_ab[0] + c * i_ab[1], (x[0], x[1]))
         return jnp.concatenate([jnp.stack([pid, piq]), x[2:]])
 
     def step(self, state: DriveObserverState, meas: DriveInput) -> tuple[DriveObserverState, ROFOOutput]:
