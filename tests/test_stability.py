@@ -226,7 +226,7 @@ def test_matrix_free_floquet_matches_the_full_matrix():
     within 3e-6 /s of the full matrix's."""
     par = bench_machine("spmsm000")
     d = bench_drive(par)
-    obs = jaxobs.SecondOrderSOIFO(0.0, 1.0, 1.56, 3.11, 0.61, 100.0)
+    obs = jaxobs.SecondOrderSOIFO(0.0, 1.0, papers.SECOND_ORDER_SOIFO_K1, papers.SECOND_ORDER_SOIFO_K2, 0.61, 100.0)
     scs = drive_scenarios(par, ("speed_rpm", "load_nm"), [(300, 0), (60, 8), (405, 5), (410, 5), (1000, 10)], seed=0)
     rtol = 1e-6
 
