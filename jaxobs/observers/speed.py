@@ -60,6 +60,7 @@ __all__ = [
     "PLLSpeed",
     "MechanicalSpeed",
     "mechanical_gains",
+    "alpha_o_out_of_range",
     "speed_from_spec",
     "SPEED_KINDS",
     "MECHANICAL_GAINS",
@@ -338,6 +339,29 @@ class MechanicalSpeed(AbstractSpeedEstimator):
         return jnp.stack([dth, dw, dtl])
 
 
+def alpha_o_out_of_range(alpha_o: float, ts: float | None) -> str | None:
+    """Why a mechanical speed observer's bandwidth α_o does not fit its host's period, or None where it does.
+
+    α_o T_s < 1: the host steps the observer explicitly once per period, and its three poles at −α_o map to
+    z = 1 − α_o T_s (Euler) or near it (RK4): from α_o T_s = 1 on, z ≤ 0 and the steps alternate in sign, so the
+    triple pole asked for is no longer the one run (Euler diverges from α_o T_s = 2, RK4 from 2.79).  The designs
+    in docs/through-zero.md lie far below: α_o = 2π·10 to 2π·50 rad/s at 100–125 µs, α_o T_s ≤ 0.04.
+
+    Args:
+        alpha_o: α_o, rad/s.
+        ts: The host observer's period, s; None: not checked.
+
+    Returns:
+        The message's tail ("must be in (0, 1/T_s) = … got …"), or None.
+    """
+    if ts is None or float(alpha_o) * float(ts) < 1.0:
+        return None
+    return (
+        f"must be in (0, 1/T_s) = (0, {1.0 / float(ts):.6g}) rad/s at the observer's period "
+        f"T_s = {float(ts):.6g} s, got {alpha_o!r}"
+    )
+
+
 def speed_from_spec(
     spec: AbstractSpeedEstimator | dict[str, Any] | None, owner: str = "speed", ts: float | None = None
 ) -> AbstractSpeedEstimator:
@@ -381,15 +405,9 @@ def speed_from_spec(
     if "alpha_o" not in spec:
         raise ValueError(f"{owner}.alpha_o: a mechanical speed observer needs its bandwidth α_o (rad/s, > 0)")
     closed = MechanicalSpeed.closed_form(spec["alpha_o"])
-    # α_o T_s < 1: the host steps the observer explicitly once per period, and its three poles at −α_o map to
-    # z = 1 − α_o T_s (Euler) or near it (RK4): from α_o T_s = 1 on, z ≤ 0 and the steps alternate in sign, so
-    # the triple pole asked for is no longer the one run (Euler diverges from α_o T_s = 2, RK4 from 2.79).  The
-    # designs in docs/through-zero.md lie far below: α_o = 2π·10 to 2π·50 rad/s at 100–125 µs, α_o T_s ≤ 0.04.
-    if ts is not None and not float(spec["alpha_o"]) * float(ts) < 1.0:
-        raise ValueError(
-            f"{owner}.alpha_o must be in (0, 1/T_s) = (0, {1.0 / float(ts):.6g}) rad/s at the observer's period "
-            f"T_s = {float(ts):.6g} s, got {spec['alpha_o']!r}"
-        )
+    bad = alpha_o_out_of_range(spec["alpha_o"], ts)
+    if bad:
+        raise ValueError(f"{owner}.alpha_o {bad}")
     given = {k: spec[k] for k in MECHANICAL_GAINS if k in spec}
     if not given:
         return closed

@@ -10,7 +10,7 @@ from pathlib import Path
 from jaxobs.io.provenance import sha256
 from jaxobs.metrics import canonical
 from jaxobs.observers import AbstractDriveObserver, AbstractLESO, gain_fields
-from jaxobs.observers.speed import MECHANICAL_GAINS, SPEED_KINDS, mechanical_gains
+from jaxobs.observers.speed import MECHANICAL_GAINS, SPEED_KINDS, alpha_o_out_of_range, mechanical_gains
 from jaxobs.scenarios.families import FAMILIES, GridSignals
 from jaxobs.studies.registry import REGISTRY, canonical_key
 
@@ -541,12 +541,9 @@ def parse_job(raw: dict, base: Path | None = None) -> Job:
     gains = _parse_gains(raw, comp, info, values)
     scen, drive, ts = _parse_scenarios_and_drive(raw, comp, info, values, seed, freq_n, ts, base)
     alpha = values.get("speed", {}).get("alpha_o")
-    if alpha is not None and not alpha * ts < 1.0:  # jaxobs.observers.speed.speed_from_spec gives the reason
-        raise JobError(
-            "observer.speed.alpha_o",
-            f"must be in (0, 1/T_s) = (0, {1.0 / ts:.6g}) rad/s at the job's period T_s = {ts:.6g} s, "
-            f"got {show(alpha)}",
-        )
+    bad = None if alpha is None else alpha_o_out_of_range(alpha, ts)
+    if bad:
+        raise JobError("observer.speed.alpha_o", bad)
     envelope = parse_envelope(raw, scen, drive)
     holdout = _parse_holdout(raw, scen, seed, freq_n, ts, base)
     _check_sets(scen, holdout, drive, ts)
