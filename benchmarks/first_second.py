@@ -356,7 +356,7 @@ def summary(rows: list[dict], cpus: int | None = None) -> str:
                 if not runs or cold is None:
                     cells.append("–")
                     continue
-                r = sorted(runs, key=lambda r: r["wall_s"])[(len(runs) - 1) // 2]  # the median run
+                r = sorted(runs, key=lambda r: r["wall_s"])[(len(runs) - 1) // 2]  # the median run (the lower of two)
                 target, met = verdict(command, r, cold)
                 mark = "†" if max(r["load"]) > cpus / 2 else ""
                 loaded |= bool(mark)
