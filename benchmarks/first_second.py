@@ -176,7 +176,8 @@ def _one(args: list[str], env: dict, out: Path, result: str | None = None, light
         argv = [sys.executable, "-m", "pytest", *args[1:]]
     else:  # this file run as a script: with --tree, jaxobs and jaxobs_tuning come from that tree's PYTHONPATH
         argv = [sys.executable, str(Path(__file__).resolve()), "--worker", str(report), "light" if light else "full"]
-        argv += [str(out) if a == "OUT" else str(Path(result).resolve()) if a == "RESULT" else a for a in args]
+        res = str(Path(result).resolve()) if result is not None else ""
+        argv += [str(out) if a == "OUT" else res if a == "RESULT" else a for a in args]
     r0 = resource.getrusage(resource.RUSAGE_CHILDREN)
     load0 = os.getloadavg()[0]
     t0 = time.perf_counter()
@@ -306,7 +307,8 @@ def table(rows: list[dict]) -> str:
     for r in rows:
         f = first.setdefault((r["command"], r["tree"], r.get("source")), r)
         phases = [r.get(k) for k in _PHASES]
-        rest = "–" if None in phases else f"{r['wall_s'] - sum(phases):.1f}"
+        known = [p for p in phases if p is not None]
+        rest = f"{r['wall_s'] - sum(known):.1f}" if len(known) == len(phases) else "–"
         lines.append(
             f"| {r['command']} | {r['tree']} | {r['run']} | {_s(r['wall_s'])} | {_s(r['cpu_s'])} | "
             f"{r['wall_s'] / f['wall_s']:.2f} | "
