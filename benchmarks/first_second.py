@@ -70,6 +70,9 @@ COMMANDS = {
     "help": ["--help"],
     # the plain check of the lab IPMSM file (the file's arithmetic, no closed loop; the same file for every tree)
     "drive-check": ["drive", "check", str(DRIVE_FILE)],
+    # the same with its closed-loop runs (the rated point and the top speed, one compiled batch; no target; a tree
+    # without --simulate, 7af787e among them, exits 2: time it on the trees that have it)
+    "drive-simulate": ["drive", "check", str(DRIVE_FILE), "--simulate", "--quiet"],
     "make-run": ["tune", "--out", "OUT", "--force", "--quiet"],
     # a drive preset: the C-LESO on the IPMSM (30 Adam steps, 2 s horizon), verified over its envelope
     "drive-preset": ["tune", str(PRESETS / "cleso.toml"), "--out", "OUT", "--force", "--quiet"],
@@ -374,8 +377,10 @@ def summary(rows: list[dict], cpus: int | None = None) -> str:
             if ratio:
                 line += f" {walls[1] / walls[0]:.2f} |" if len(walls) == 2 else " – |"
             lines.append(line)
+    commits = {t: sorted({str(r.get("commit")) for r in rows if r["tree"] == t}) for t in trees}
+    lines.append("\ntrees: " + "; ".join(f"{t} = {', '.join(c)}" for t, c in commits.items()))
     if loaded:
-        lines.append(f"\n† load above {cpus / 2:g} ({cpus} cores): the targets are a quiet machine's")
+        lines.append(f"† load above {cpus / 2:g} ({cpus} cores): the targets are a quiet machine's")
     return "\n".join(lines)
 
 
@@ -403,10 +408,10 @@ def main(argv=None) -> int:
     p.add_argument(
         "--cmd",
         nargs="+",
-        default=["make-run"],
         choices=sorted(COMMANDS),
-        help="commands to time (default make-run; each one's command line is in COMMANDS, this file; make-test "
-        "takes about 14 min a tree: run it alone and merge it with --with)",
+        help="commands to time (default make-run, or none with --with: the earlier files' table alone; each "
+        "one's command line is in COMMANDS, this file; make-test takes about 14 min a tree: run it alone, merge it "
+        "with --with)",
     )
     p.add_argument("--runs", type=int, default=2, help="runs per command (the first with an empty cache)")
     p.add_argument(
@@ -433,13 +438,15 @@ def main(argv=None) -> int:
     )
     p.add_argument("--json", action="store_true", help="print the rows as JSON")
     a = p.parse_args(argv)
+    if a.cmd is None:
+        a.cmd = [] if a.merge else ["make-run"]
     if a.runs < 1:
         p.error(f"--runs must be >= 1, got {a.runs}")
     if any("RESULT" in COMMANDS[c] for c in a.cmd) and not a.result:
         p.error("--result PATH is needed by: " + ", ".join(c for c in a.cmd if "RESULT" in COMMANDS[c]))
     earlier = [r for f in a.merge for r in load_rows(f)]
-    rows = measure(a.cmd, a.runs, a.tree, a.keep_cache, result=a.result)
-    if a.out:
+    rows = measure(a.cmd, a.runs, a.tree, a.keep_cache, result=a.result) if a.cmd else []
+    if a.out and rows:
         trees = {r["tree"]: r["commit"] for r in rows}
         meta = {"date": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()), "argv": argv, "cpus": os.cpu_count()}
         Path(a.out).write_text(json.dumps({"rows": rows, "trees": trees, **meta}, indent=1) + "\n")

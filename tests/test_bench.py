@@ -221,7 +221,7 @@ def test_first_second_summary_gives_each_target_and_its_verdict(tmp_path):
     assert lines[4].startswith(
         "| make-run | warm | ≤ 25 s and ≤ 0.40 × cold | 10.0 / 9.00: met, 0.5–0.5 | 8.00 / 7.20: **not"
     )
-    assert lines[-1].startswith("† load above 1 (2 cores)")
+    assert lines[-2] == "trees: before = None; after = None" and lines[-1].startswith("† load above 1 (2 cores)")
     old = tmp_path / "old.json"
     old.write_text(json.dumps({"rows": [row("make-test", "/tmp/b", 1, 825.0)], "trees": {"/tmp/b": "18b2a8b"}}))
     (merged,) = load_rows(str(old))
