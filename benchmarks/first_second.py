@@ -27,8 +27,9 @@ The commands (:data:`COMMANDS`) and the issue's targets (:data:`TARGETS`, wall s
 ``jaxobs --help`` ≤ 0.5 s; ``jaxobs drive check`` of the lab IPMSM file ≤ 2 s; the default job
 (``make-run``) ≤ 20 s cold and warm ≤ 25 s and ≤ 0.40 of its cold run; a C-LESO result's envelope at
 200 points × 3 designs (``envelope-200x3``, ``--result`` the result.json of ``jaxobs tune
-tuning/presets/cleso.toml --out X``) ≤ 30 s cold, ≤ 15 s warm; ``make test`` (``make-test``: the suite as
-the Makefile runs it, in the tree's folder, with an empty ``JAXOBS_TEST_CACHE``) ≤ 6 min cold.  The summary
+tuning/presets/cleso.toml --out X``; one per tree where a tree cannot read another's) ≤ 30 s cold, ≤ 15 s
+warm; ``make test`` (``make-test``: the suite as the Makefile runs it, in the tree's folder, with an empty
+``JAXOBS_TEST_CACHE``) ≤ 6 min cold.  The summary
 table (:func:`summary`) gives each command's cold and warm wall / CPU seconds per tree (``before → after``
 with two trees) and whether each meets its target; a run at a load above half the cores is marked, since
 the targets are a quiet machine's.
@@ -239,18 +240,24 @@ def measure(
     trees: list[str] | None = None,
     keep_cache: str | None = None,
     log=None,
-    result: str | None = None,
+    result: str | list[str] | None = None,
 ) -> list[dict]:
     """First and later runs of each of ``cmds`` (names of :data:`COMMANDS`), ``runs`` each; one row a run.
 
     ``trees``: source trees to compare, folders or git revisions (each its own cache, their runs interleaved),
     default the installed jaxobs; ``keep_cache``: use (and keep) this cache folder instead of a temporary one;
     ``log``: called with each row as it is measured (default: its JSON on stderr); ``result``: the result file
-    of the commands that read one (``envelope-200x3``).  A row: ``command``, ``tree`` (its label,
-    :func:`labels`), ``commit``, ``run``, ``wall_s``, ``cpu_s``, ``load`` (1-min load average at its start and
-    end), ``rc``, the phases ``trace_s``, ``lower_s``, ``compile_s`` (s; None for :data:`LIGHT` commands and the
-    suite), ``jits``, ``jax_imported``, ``in_process_s`` and ``cache_mib`` (the cache after it).
+    of the commands that read one (``envelope-200x3``), or one per tree (a tree that cannot read another's).
+    A row: ``command``, ``tree`` (its label, :func:`labels`), ``commit``, ``run``, ``wall_s``, ``cpu_s``,
+    ``load`` (1-min load average at its start and end), ``rc``, the phases ``trace_s``, ``lower_s``,
+    ``compile_s`` (s; None for :data:`LIGHT` commands and the suite), ``jits``, ``jax_imported``,
+    ``in_process_s`` and ``cache_mib`` (the cache after it).
     """
+    results = result if isinstance(result, list) else [result] * len(trees or [None])
+    if len(results) != len(trees or [None]):
+        raise ValueError(
+            f"first_second: {len(results)} result files for {len(trees or [None])} trees: give one, or one per tree"
+        )
     unknown = [c for c in cmds if c not in COMMANDS]
     if unknown:
         raise ValueError(f"first_second: unknown command(s) {unknown}; known: {sorted(COMMANDS)}")
@@ -272,7 +279,7 @@ def measure(
                 (pp / "jaxobs_tuning").symlink_to(path / "tuning")
                 # the caller's PYTHONPATH after the tree's (e.g. another version of a dependency to compare)
                 env["PYTHONPATH"] = os.pathsep.join(filter(None, (str(path), str(pp), env.get("PYTHONPATH"))))
-            envs[label] = (env, path, commit)
+            envs[label] = (env, path, commit, results[j])
         for name in cmds:
             caches = {}
             for t in envs:
@@ -280,10 +287,10 @@ def measure(
                 shutil.rmtree(cache, ignore_errors=True)
                 caches[t] = cache
             for i in range(1, runs + 1):
-                for t, (env, path, commit) in envs.items():
+                for t, (env, path, commit, res) in envs.items():
                     env = {**env, "JAXOBS_CACHE_DIR": str(caches[t]), "JAXOBS_TEST_CACHE": str(caches[t])}
                     out = Path(tmp) / f"out-{name}-{len(rows)}"
-                    one = _one(COMMANDS[name], env, out, result, light=name in LIGHT, cwd=path)
+                    one = _one(COMMANDS[name], env, out, res, light=name in LIGHT, cwd=path)
                     row = {"command": name, "tree": t, "commit": commit, "run": i, **one}
                     row["cache_mib"] = round(_dir_size(caches[t]) / 2**20, 1) if caches[t].exists() else 0.0
                     rows.append(row)
@@ -426,7 +433,12 @@ def main(argv=None) -> int:
         "interleaved: run 1 of each, then run 2 ...; two are labelled before and after); default: the installed "
         "jaxobs",
     )
-    p.add_argument("--result", help="a drive job's result.json, for envelope-200x3")
+    p.add_argument(
+        "--result",
+        nargs="+",
+        help="a drive job's result.json, for envelope-200x3; or one per --tree, in their order (a tree that cannot "
+        "read another tree's result: each tuned by its own tree)",
+    )
     p.add_argument("--out", help="also write the rows (and the trees' commits, the cores, the date) to this JSON file")
     p.add_argument(
         "--with",
@@ -445,7 +457,8 @@ def main(argv=None) -> int:
     if any("RESULT" in COMMANDS[c] for c in a.cmd) and not a.result:
         p.error("--result PATH is needed by: " + ", ".join(c for c in a.cmd if "RESULT" in COMMANDS[c]))
     earlier = [r for f in a.merge for r in load_rows(f)]
-    rows = measure(a.cmd, a.runs, a.tree, a.keep_cache, result=a.result) if a.cmd else []
+    result = a.result[0] if a.result and len(a.result) == 1 else a.result
+    rows = measure(a.cmd, a.runs, a.tree, a.keep_cache, result=result) if a.cmd else []
     if a.out and rows:
         trees = {r["tree"]: r["commit"] for r in rows}
         meta = {"date": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()), "argv": argv, "cpus": os.cpu_count()}
