@@ -190,3 +190,42 @@ def test_first_second_says_which_command_needs_a_result():
 
     with pytest.raises(ValueError, match="--result"):
         _one(COMMANDS["envelope-200x3"], {}, Path("unused"))
+
+
+def test_first_second_summary_gives_each_target_and_its_verdict(tmp_path):
+    """The summary: cold and warm per tree, before → after, the target and met / not met from the wall time (a
+    warm make-run against both its 25 s and 0.40 × its cold run), † where the load was above half the cores;
+    rows of an earlier file (an old one naming its trees by folder) join with their file's name."""
+    from benchmarks.first_second import load_rows, summary
+
+    def row(cmd, tree, run, wall, load=0.5):
+        return {"command": cmd, "tree": tree, "run": run, "wall_s": wall, "cpu_s": wall * 0.9, "load": [load, load]}
+
+    rows = [
+        row("help", "before", 1, 3.1),
+        row("help", "after", 1, 0.1),
+        row("make-run", "before", 1, 30.0),
+        row("make-run", "after", 1, 18.0, load=1.4),
+        row("make-run", "before", 2, 10.0),
+        row("make-run", "after", 2, 8.0),  # 8 / 18 = 0.44 > 0.40: not met though under 25 s
+    ]
+    lines = summary(rows, cpus=2).splitlines()
+    assert lines[0].startswith("| command | run | target | before: wall / CPU (s), load | after:")
+    assert (
+        lines[2] == "| help | cold | ≤ 0.5 s | 3.10 / 2.79: **not met**, 0.5–0.5 | 0.10 / 0.09: met, 0.5–0.5 | 0.03 |"
+    )
+    assert (
+        lines[3]
+        == "| make-run | cold | ≤ 20 s | 30.0 / 27.0: **not met**, 0.5–0.5 | 18.0 / 16.2: met, 1.4–1.4† | 0.60 |"
+    )
+    assert lines[4].startswith(
+        "| make-run | warm | ≤ 25 s and ≤ 0.40 × cold | 10.0 / 9.00: met, 0.5–0.5 | 8.00 / 7.20: **not"
+    )
+    assert lines[-2] == "trees: before = None; after = None" and lines[-1].startswith("† load above 1 (2 cores)")
+    old = tmp_path / "old.json"
+    old.write_text(json.dumps({"rows": [row("make-test", "/tmp/b", 1, 825.0)], "trees": {"/tmp/b": "18b2a8b"}}))
+    (merged,) = load_rows(str(old))
+    assert (merged["tree"], merged["commit"], merged["source"]) == ("tree 1", "18b2a8b", "old.json")
+    assert "| make-test | cold | ≤ 360 s | 825.0 / 742.5: **not met**, 0.5–0.5 [old.json] |" in summary(
+        [merged], cpus=2
+    )
