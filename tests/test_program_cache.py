@@ -270,6 +270,9 @@ def test_the_key_covers_what_reaches_the_program(monkeypatch):
     assert key(f, Gain(a, 1), X) != key(f, Gain(a, 1), X[:5])  # a shape
     twice, thrice = (lambda x: x * 2), (lambda x: x * 3)  # noqa: E731  (one line, one qualified name)
     assert key(twice, X) != key(thrice, X)
+    assert key(f, {"a": 1, "b": X, "c": 1}) != key(f, {"a": 1, "b": X, "c": 2})  # every item (none taken for another)
+    assert key(f, [(1, 2), (3, 4)], X) != key(f, [(1, 2), (3, 5)], X)
+    assert key(f, (twice, thrice), X) != key(f, (twice, twice), X)
     before = key(f, Gain(a, 1), X)
     for top in ("jaxobs", __name__.split(".")[0]):  # jaxobs edited; the test's own file edited
         with monkeypatch.context() as m:

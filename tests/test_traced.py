@@ -112,7 +112,7 @@ def test_a_stale_program_is_never_reused(traced, monkeypatch, change):
     if memo is not None:
         monkeypatch.setitem(_traced._memo, memo, _traced._memo[memo] + "-edited")
     f, calls = _counted()
-    debug = jax.config.jax_debug_infs
+    debug = jax.config.values["jax_debug_infs"]
     jax.config.update("jax_debug_infs", change == "jax option" or debug)
     try:
         out = jaxobs.kept_jit(f)(g, x)

@@ -103,8 +103,8 @@ class _Key:
                 self.h.update(np.ascontiguousarray(x).tobytes())
             return None
         if (id(x), const) in self.seen:  # the same object again, or a cycle
-            return self.put("again", self.seen[id(x), const])
-        self.seen[id(x), const] = len(self.seen)
+            return self.put("again", self.seen[id(x), const][0])
+        self.seen[id(x), const] = (len(self.seen), x)  # x held: its id is not reused by another while hashing
         if isinstance(x, (type, types.BuiltinFunctionType, np.ufunc)):
             return self.name(x)
         if isinstance(x, types.FunctionType):  # its place in the file (whose digest is in the key), its values
@@ -117,7 +117,7 @@ class _Key:
         if isinstance(x, (tuple, list, dict)):  # a pytree's nodes, in order; another subclass is a leaf to jax
             self.name(t, len(x))
             leaf = const or (t not in (tuple, list, dict) and getattr(t, "_fields", None) is None)
-            for v in x.items() if isinstance(x, dict) else x:
+            for v in (v for kv in x.items() for v in kv) if isinstance(x, dict) else x:
                 self.add(v, leaf)
             return None
         if dataclasses.is_dataclass(x):  # a Module's dynamic fields are pytree nodes, a dataclass's constants
