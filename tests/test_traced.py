@@ -108,7 +108,7 @@ def test_a_stale_program_is_never_reused(traced, monkeypatch, change):
     jaxobs.kept_jit(_counted()[0])(g, x)
     _use(traced)  # a later process
     top = __name__.split(".")[0]
-    memo = {"jaxobs source": "jaxobs", "own source": top, "library version": "libs"}.get(change)
+    memo = {"jaxobs source": "jaxobs", "own source": top, "library version": "versions:"}.get(change)
     if memo is not None:
         monkeypatch.setitem(_traced._memo, memo, _traced._memo[memo] + "-edited")
     f, calls = _counted()

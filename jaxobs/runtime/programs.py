@@ -141,10 +141,10 @@ def _key(fn: Callable, caller: str, args: tuple) -> str:
     k.put(caller)
     k.add(fn, True)
     k.add(args, False)
-    if "libs" not in _memo:  # read once: importlib.metadata is slow
-        _memo["libs"] = ",".join(f"{n}={version(n)}" for n in _LIBS)
+    if "versions:" not in _memo:  # read once (importlib.metadata is slow); ":" is in no module name
+        _memo["versions:"] = ",".join(f"{n}={version(n)}" for n in _LIBS)
     dev = jax.devices()[0]
-    k.put(_memo["libs"], *(getattr(jax.config, f"jax_{o}", None) for o in _OPTIONS), sys.version_info[:2])
+    k.put(_memo["versions:"], *(getattr(jax.config, f"jax_{o}", None) for o in _OPTIONS), sys.version_info[:2])
     k.put(dev.platform, dev.device_kind, jax.device_count(), *(f"{t}={_source(t)}" for t in sorted(k.tops)))
     return k.h.hexdigest()
 
