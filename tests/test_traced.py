@@ -10,9 +10,9 @@ import jaxobs
 from jaxobs.runtime import programs as _traced
 
 
-def _use(folder, **kw):
+def _use(folder):
     """What a new process sees: a program cache on ``folder`` with nothing in memory."""
-    jaxobs.set_program_cache(None if folder is None else jaxobs.ProgramCache(folder, **kw))
+    jaxobs.set_program_cache(None if folder is None else jaxobs.ProgramCache(folder))
 
 
 @pytest.fixture
@@ -45,7 +45,7 @@ def test_kept_equals_jit_and_a_new_process_does_not_trace(traced):
     g, x = _Gain(jnp.asarray(1.3), 3), jnp.linspace(-2.0, 2.0, 37)
     ref = eqx.filter_jit(_counted()[0])(g, x)
     f, calls = _counted()
-    got = jaxobs.kept_jit(f, "test-key")(g, x)
+    got = jaxobs.kept_jit(f)(g, x)
     assert jax.tree.structure(got) == jax.tree.structure(ref)
     for a, b in zip(jax.tree.leaves(got), jax.tree.leaves(ref)):
         assert np.array_equal(np.asarray(a), np.asarray(b))  # bit for bit
@@ -53,7 +53,7 @@ def test_kept_equals_jit_and_a_new_process_does_not_trace(traced):
     # another process: a new kept_jit of new code objects reads the program back, never tracing f
     _use(traced)
     f2, calls2 = _counted()
-    again = jaxobs.kept_jit(f2, "test-key")(g, jnp.asarray(np.asarray(x) * 0.5))
+    again = jaxobs.kept_jit(f2)(g, jnp.asarray(np.asarray(x) * 0.5))
     assert calls2 == []
     ref2 = eqx.filter_jit(_counted()[0])(g, x * 0.5)
     assert all(
@@ -61,14 +61,13 @@ def test_kept_equals_jit_and_a_new_process_does_not_trace(traced):
     )
 
 
-def test_kept_keys_on_key_shape_and_static_fields(traced):
+def test_kept_keys_on_shape_and_static_fields(traced):
     g, x = _Gain(jnp.asarray(1.3), 3), jnp.linspace(-2.0, 2.0, 37)
-    jaxobs.kept_jit(_counted()[0], "a")(g, x)
-    jaxobs.kept_jit(_counted()[0], "b")(g, x)  # another key
-    jaxobs.kept_jit(_counted()[0], "a")(g, x[:5])  # another shape
+    jaxobs.kept_jit(_counted()[0])(g, x)
+    jaxobs.kept_jit(_counted()[0])(g, x[:5])  # another shape
     f, calls = _counted()
-    out = jaxobs.kept_jit(f, "a")(_Gain(jnp.asarray(1.3), 2), x)  # a static field in the tree: another program
-    assert calls == [1] and len(list(traced.iterdir())) == 4
+    out = jaxobs.kept_jit(f)(_Gain(jnp.asarray(1.3), 2), x)  # a static field in the tree: another program
+    assert calls == [1] and len(list(traced.iterdir())) == 3
     assert np.array_equal(np.asarray(out["y"]), np.asarray(eqx.filter_jit(_counted()[0])(_Gain(1.3, 2), x)["y"]))
 
 
@@ -76,25 +75,23 @@ def test_kept_off_without_folder_and_unexportable_falls_back(tmp_path, traced):
     g, x = _Gain(jnp.asarray(0.7), 1), jnp.arange(4.0)
     _use(None)
     f, calls = _counted()
-    k = jaxobs.kept_jit(f, "off")
+    k = jaxobs.kept_jit(f)
     k(g, x), k(g, x)
     assert calls == [1] and not traced.exists()  # a plain jit: traced once in this process, nothing written
     _use(traced)
-    out = jaxobs.kept_jit(lambda g, x: _Gain(g.k * x, 2), "module-out")(g, x)  # an output of a custom class
+    out = jaxobs.kept_jit(lambda g, x: _Gain(g.k * x, 2))(g, x)  # an output of a custom class
     assert isinstance(out, _Gain) and np.array_equal(np.asarray(out.k), np.asarray(g.k * x))
     assert not traced.exists() or not list(traced.iterdir())
-    with pytest.raises(ValueError, match="key must be a non-empty string"):
-        jaxobs.kept_jit(f, "")
 
 
 def test_kept_corrupt_file_is_exported_again(traced, capsys):
     g, x = _Gain(jnp.asarray(1.1), 2), jnp.linspace(0.0, 1.0, 9)
-    jaxobs.kept_jit(_counted()[0], "c")(g, x)
+    jaxobs.kept_jit(_counted()[0])(g, x)
     (path,) = traced.iterdir()
     path.write_bytes(b"not a program")
     _use(traced)  # another process
     f, calls = _counted()
-    out = jaxobs.kept_jit(f, "c")(g, x)
+    out = jaxobs.kept_jit(f)(g, x)
     assert calls == [1] and path.stat().st_size > 100
     assert np.array_equal(np.asarray(out["y"]), np.asarray(eqx.filter_jit(_counted()[0])(g, x)["y"]))
     assert "corrupt" in capsys.readouterr().err
@@ -138,7 +135,7 @@ def test_use_compile_cache_sets_the_traced_folder(tmp_path, monkeypatch):
         jaxobs.set_program_cache(kept)
 
 
-def test_the_folder_keeps_the_most_recently_used(traced):
+def test_the_folder_keeps_the_most_recently_used(traced, monkeypatch):
     """A new entry trims the folder to max_kept: the least recently used go, and a killed writer's temp file (over
     an hour old), but not a live writer's."""
     import os
@@ -153,7 +150,8 @@ def test_the_folder_keeps_the_most_recently_used(traced):
     for p in (old, live):
         p.write_bytes(b"x")
     os.utime(old, (1000, 1000))
-    _use(traced, max_kept=3)
+    monkeypatch.setattr(_traced, "MAX_KEPT", 3)
+    _use(traced)
     jaxobs.kept_jit(_counted()[0])(_Gain(jnp.asarray(0.5), 1), jnp.arange(3.0))
     names = sorted(f.name for f in traced.iterdir())
     assert len(names) == 4 and names[:3] == [live.name, "0.jaxexport", "4.jaxexport"]

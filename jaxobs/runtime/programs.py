@@ -50,10 +50,6 @@ _OPTIONS = (
 _memo: dict[str, str] = {}  # this process's package digests and library versions
 
 
-class NoKey(Exception):
-    """A value the key cannot name: the program is not kept."""
-
-
 def _source(top: str) -> str:
     """sha256 of every ``.py`` file of the imported top-level package or module ``top``; "" where none holds it."""
     if top not in _memo:
@@ -68,7 +64,7 @@ def _source(top: str) -> str:
 
 
 class _Key:
-    """The sha256 of the values a program meets (module doc); raises :class:`NoKey` where one cannot be named."""
+    """The sha256 of the values a program meets (module doc); a ValueError where one cannot be named."""
 
     def __init__(self) -> None:
         self.h, self.tops, self.seen = hashlib.sha256(), {"jaxobs"}, {}
@@ -80,11 +76,11 @@ class _Key:
     def name(self, obj: Any, *consts: Any) -> None:
         module, qual = getattr(obj, "__module__", None), getattr(obj, "__qualname__", None)
         if not isinstance(module, str) or not isinstance(qual, str):
-            raise NoKey(f"{obj!r} has no module and name")
+            raise ValueError(f"{obj!r} has no module and name")
         top = module.split(".")[0]
         if top not in _NAMED:
             if not _source(top):
-                raise NoKey(f"{module}.{qual} has no source file")
+                raise ValueError(f"{module}.{qual} has no source file")
             self.tops.add(top)
         self.put("name", module, qual, len(consts))
         for x in consts:
@@ -96,7 +92,7 @@ class _Key:
         if x is None or t in (bool, int, float, complex, str, bytes) or isinstance(x, np.dtype):
             return self.put(t.__name__, repr(x))
         if isinstance(x, Tracer) or (eqx.is_array(x) and x.dtype == object):
-            raise NoKey("a traced value or an object array")
+            raise ValueError("a traced value or an object array")
         if eqx.is_array(x) or isinstance(x, np.generic):
             self.put("array", x.dtype.str, x.shape, bool(getattr(x, "weak_type", False)))
             if const:
@@ -110,7 +106,7 @@ class _Key:
         if isinstance(x, types.FunctionType):  # its place in the file (whose digest is in the key), its values
             co = x.__code__  # two lambdas of one line end at another column
             where = max((p for p in co.co_positions() if None not in p), default=co.co_firstlineno)
-            cells = [c.cell_contents for c in x.__closure__ or ()]  # an empty cell: ValueError, not kept
+            cells = [c.cell_contents for c in x.__closure__ or ()]  # an empty cell: a ValueError too
             return self.name(x, where, x.__defaults__, x.__kwdefaults__, *cells)
         if isinstance(x, types.MethodType):
             return self.name(x.__func__, x.__self__)
@@ -131,14 +127,13 @@ class _Key:
             return self.put("mesh", x.axis_names, x.devices.shape, [f"{d.platform}{d.id}" for d in x.devices.flat])
         fields = getattr(t, "kept_fields", None)  # an object that names the attributes its programs depend on
         if not isinstance(fields, tuple):
-            raise NoKey(f"a value of type {t.__module__}.{t.__qualname__}")
+            raise ValueError(f"a value of type {t.__module__}.{t.__qualname__}")
         return self.name(t, *((f, getattr(x, f)) for f in fields))
 
 
-def _key(fn: Callable, caller: str, args: tuple) -> str:
+def _key(fn: Callable, args: tuple) -> str:
     """The name of the program ``fn(*args)``: its whole key, hashed (module doc)."""
     k = _Key()
-    k.put(caller)
     k.add(fn, True)
     k.add(args, False)
     if "versions:" not in _memo:  # read once (importlib.metadata is slow); ":" is in no module name
@@ -150,26 +145,17 @@ def _key(fn: Callable, caller: str, args: tuple) -> str:
 
 
 class ProgramCache:
-    """Where :func:`kept_jit` keeps its programs (``programs``: this process's, by key), and how many.
+    """Where :func:`kept_jit` keeps its programs (``programs``: this process's, by key).
+
+    The folder keeps the :data:`MAX_KEPT` most recently used programs, and reads back none over :data:`MAX_BYTES`.
 
     Args:
         folder: the folder the programs are kept in (created with mode 0700); ``None``: off, every
             :func:`kept_jit` is a plain ``eqx.filter_jit``.
-        max_kept: how many programs the folder keeps (the least recently used go first), ≥ 1.
-        max_bytes: the largest entry that is read back (bytes, ≥ 1); a larger one is traced again.
-
-    Raises:
-        ValueError: ``max_kept`` or ``max_bytes`` is not a positive integer.
     """
 
-    def __init__(
-        self, folder: str | os.PathLike | None = None, *, max_kept: int = MAX_KEPT, max_bytes: int = MAX_BYTES
-    ):
-        for name, v in (("max_kept", max_kept), ("max_bytes", max_bytes)):
-            if isinstance(v, bool) or not isinstance(v, int) or v < 1:
-                raise ValueError(f"ProgramCache: {name} must be an integer >= 1, got {v!r}")
+    def __init__(self, folder: str | os.PathLike | None = None):
         self.folder = None if folder is None else Path(folder)
-        self.max_kept, self.max_bytes = max_kept, max_bytes
         self.programs: dict[str, Callable | None] = {}  # None: not kept, a plain jit
         self._warned, self._unusable = False, None  # why the folder is not used ("": it is; None: not checked)
 
@@ -198,8 +184,8 @@ class ProgramCache:
         except FileNotFoundError:
             return None
         try:
-            if not stat.S_ISREG(st.st_mode) or st.st_size > self.max_bytes:  # a link, a FIFO, a folder, too large
-                raise ValueError(f"is not a regular file of at most {self.max_bytes} bytes")
+            if not stat.S_ISREG(st.st_mode) or st.st_size > MAX_BYTES:  # a link, a FIFO, a folder, too large
+                raise ValueError(f"is not a regular file of at most {MAX_BYTES} bytes")
             data = path.read_bytes()
             os.utime(path)  # recently used: the last to go when the folder is trimmed
             n, blob = len(_MAGIC), data[len(_MAGIC) + 128 :]
@@ -219,12 +205,12 @@ class ProgramCache:
             atomic_write_bytes(path, _MAGIC + path.stem.encode() + hashlib.sha256(blob).hexdigest().encode() + blob)
         except OSError as e:  # read-only, full, a folder in the way: the program runs, traced anew next time
             self._warn(f"{path.name} cannot be written ({e.strerror or e})")
-        try:  # the least recently used entries beyond max_kept, and a killed writer's temp files (over an hour old)
+        try:  # the least recently used entries beyond MAX_KEPT, and a killed writer's temp files (over an hour old)
             with os.scandir(path.parent) as it:
                 entries = [(e.stat(follow_symlinks=False).st_mtime, e) for e in it if e.is_file(follow_symlinks=False)]
             kept = sorted((t, e.path) for t, e in entries if e.name.endswith(_SUFFIX))
             old = [e.path for t, e in entries if is_temp(e.name) and time.time() - t > 3600]
-            for p in old + [p for _, p in kept[: max(0, len(kept) - self.max_kept)]]:
+            for p in old + [p for _, p in kept[: max(0, len(kept) - MAX_KEPT)]]:
                 os.unlink(p)
         except OSError:  # another process trims too
             pass
@@ -252,22 +238,16 @@ def program_cache() -> ProgramCache:
     return _state["cache"]
 
 
-def kept_jit(fn: Callable[..., Any], key: str | None = None) -> Callable[..., Any]:
+def kept_jit(fn: Callable[..., Any]) -> Callable[..., Any]:
     """``eqx.filter_jit(fn)`` whose traced and lowered program is kept across processes (module doc).
 
     Args:
         fn: the function, called with positional arguments only.  Its outputs must be arrays in tuples, lists,
             dicts and NamedTuples registered for ``jax.export`` (:mod:`jaxobs.reproduce._run`) to be kept.
-        key: an optional name added to the computed key (a non-empty string).
 
     Returns:
         A callable with ``fn``'s signature and results.
-
-    Raises:
-        ValueError: ``key`` is not a non-empty string.
     """
-    if key is not None and (not isinstance(key, str) or not key):
-        raise ValueError(f"kept_jit: key must be a non-empty string, got {key!r}")
     jitted = eqx.filter_jit(fn)
 
     def program(cache: ProgramCache, path: Path, leaves: list, tree: Any, arrays: list) -> Callable | None:
@@ -295,8 +275,8 @@ def kept_jit(fn: Callable[..., Any], key: str | None = None) -> Callable[..., An
         if not cache.enabled or jax.process_count() > 1 or any(isinstance(x, Tracer) for x in leaves):
             return jitted(*args)  # off, or inside another trace: part of its program
         try:
-            name = _key(fn, key or "", args)
-        except (NoKey, ValueError, OSError):  # a value the key cannot name, an unreadable source file
+            name = _key(fn, args)
+        except (ValueError, OSError):  # a value the key cannot name, an unreadable source file
             return jitted(*args)
         arrays = [x for x in leaves if eqx.is_array(x)]
         if name not in cache.programs:
