@@ -276,7 +276,7 @@ def kept_jit(fn: Callable[..., Any]) -> Callable[..., Any]:
             return jitted(*args)  # off, or inside another trace: part of its program
         try:
             name = _key(fn, args)
-        except (ValueError, OSError):  # a value the key cannot name, an unreadable source file
+        except (ValueError, OSError, ImportError):  # a value the key cannot name, a source or version unread
             return jitted(*args)
         arrays = [x for x in leaves if eqx.is_array(x)]
         if name not in cache.programs:
