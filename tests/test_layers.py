@@ -24,10 +24,9 @@ FOLDER = {"jaxobs": "jaxobs", "jaxobs_tuning": "tuning"}  # the folder tuning/ i
 LAYERS = [
     # packages whose __init__ imports nothing: the foundations, files in and out, the studies
     ("jaxobs.core", "jaxobs.io", "jaxobs.studies"),
-    ("jaxobs.runtime._digest",),  # the key of a kept program: a stable digest of values (no project imports)
-    # traced programs kept across processes (jaxobs.runtime.cache sets their folder); the one file writer (no
-    # project imports)
-    ("jaxobs.runtime.programs", "jaxobs.io.files"),
+    ("jaxobs.io.files",),  # the one file writer (no project imports)
+    # traced programs kept across processes (jaxobs.runtime.cache sets their folder), written by jaxobs.io.files
+    ("jaxobs.runtime.programs",),
     # foundations: no project imports
     (
         "jaxobs.core.numerics",

@@ -10,12 +10,17 @@ import jaxobs
 from jaxobs.runtime import programs as _traced
 
 
+def _use(folder):
+    """What a new process sees: a program cache on ``folder`` with nothing in memory."""
+    jaxobs.set_program_cache(None if folder is None else jaxobs.ProgramCache(folder))
+
+
 @pytest.fixture
 def traced(tmp_path):
-    before = _traced.traced_dir()
-    _traced.set_traced_dir(tmp_path / "traced")
+    before = _traced.program_cache()
+    _use(tmp_path / "traced")
     yield tmp_path / "traced"
-    _traced.set_traced_dir(before)
+    jaxobs.set_program_cache(before)
 
 
 class _Gain(eqx.Module):
@@ -40,15 +45,15 @@ def test_kept_equals_jit_and_a_new_process_does_not_trace(traced):
     g, x = _Gain(jnp.asarray(1.3), 3), jnp.linspace(-2.0, 2.0, 37)
     ref = eqx.filter_jit(_counted()[0])(g, x)
     f, calls = _counted()
-    got = jaxobs.kept_jit(f, "test-key")(g, x)
+    got = jaxobs.kept_jit(f)(g, x)
     assert jax.tree.structure(got) == jax.tree.structure(ref)
     for a, b in zip(jax.tree.leaves(got), jax.tree.leaves(ref)):
         assert np.array_equal(np.asarray(a), np.asarray(b))  # bit for bit
     assert len(list(traced.iterdir())) == 1 and calls == [1]
     # another process: a new kept_jit of new code objects reads the program back, never tracing f
-    _traced.set_traced_dir(traced)
+    _use(traced)
     f2, calls2 = _counted()
-    again = jaxobs.kept_jit(f2, "test-key")(g, jnp.asarray(np.asarray(x) * 0.5))
+    again = jaxobs.kept_jit(f2)(g, jnp.asarray(np.asarray(x) * 0.5))
     assert calls2 == []
     ref2 = eqx.filter_jit(_counted()[0])(g, x * 0.5)
     assert all(
@@ -56,70 +61,100 @@ def test_kept_equals_jit_and_a_new_process_does_not_trace(traced):
     )
 
 
-def test_kept_keys_on_key_shape_and_static_fields(traced):
+def test_kept_keys_on_shape_and_static_fields(traced):
     g, x = _Gain(jnp.asarray(1.3), 3), jnp.linspace(-2.0, 2.0, 37)
-    jaxobs.kept_jit(_counted()[0], "a")(g, x)
-    jaxobs.kept_jit(_counted()[0], "b")(g, x)  # another key
-    jaxobs.kept_jit(_counted()[0], "a")(g, x[:5])  # another shape
+    jaxobs.kept_jit(_counted()[0])(g, x)
+    jaxobs.kept_jit(_counted()[0])(g, x[:5])  # another shape
     f, calls = _counted()
-    out = jaxobs.kept_jit(f, "a")(_Gain(jnp.asarray(1.3), 2), x)  # a static field in the tree: another program
-    assert calls == [1] and len(list(traced.iterdir())) == 4
+    out = jaxobs.kept_jit(f)(_Gain(jnp.asarray(1.3), 2), x)  # a static field in the tree: another program
+    assert calls == [1] and len(list(traced.iterdir())) == 3
     assert np.array_equal(np.asarray(out["y"]), np.asarray(eqx.filter_jit(_counted()[0])(_Gain(1.3, 2), x)["y"]))
 
 
 def test_kept_off_without_folder_and_unexportable_falls_back(tmp_path, traced):
     g, x = _Gain(jnp.asarray(0.7), 1), jnp.arange(4.0)
-    _traced.set_traced_dir(None)
+    _use(None)
     f, calls = _counted()
-    k = jaxobs.kept_jit(f, "off")
+    k = jaxobs.kept_jit(f)
     k(g, x), k(g, x)
     assert calls == [1] and not traced.exists()  # a plain jit: traced once in this process, nothing written
-    _traced.set_traced_dir(traced)
-    out = jaxobs.kept_jit(lambda g, x: _Gain(g.k * x, 2), "module-out")(g, x)  # an output of a custom class
+    _use(traced)
+    out = jaxobs.kept_jit(lambda g, x: _Gain(g.k * x, 2))(g, x)  # an output of a custom class
     assert isinstance(out, _Gain) and np.array_equal(np.asarray(out.k), np.asarray(g.k * x))
     assert not traced.exists() or not list(traced.iterdir())
-    with pytest.raises(ValueError, match="key must be a non-empty string"):
-        jaxobs.kept_jit(f, "")
 
 
 def test_kept_corrupt_file_is_exported_again(traced, capsys):
     g, x = _Gain(jnp.asarray(1.1), 2), jnp.linspace(0.0, 1.0, 9)
-    jaxobs.kept_jit(_counted()[0], "c")(g, x)
+    jaxobs.kept_jit(_counted()[0])(g, x)
     (path,) = traced.iterdir()
     path.write_bytes(b"not a program")
-    _traced.set_traced_dir(traced)  # another process
+    _use(traced)  # another process
     f, calls = _counted()
-    out = jaxobs.kept_jit(f, "c")(g, x)
+    out = jaxobs.kept_jit(f)(g, x)
     assert calls == [1] and path.stat().st_size > 100
     assert np.array_equal(np.asarray(out["y"]), np.asarray(eqx.filter_jit(_counted()[0])(g, x)["y"]))
-    assert "is not a kept program (corrupt)" in capsys.readouterr().err
+    assert "corrupt" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("change", ["jaxobs source", "own source", "library version", "jax option", "none"])
+def test_a_stale_program_is_never_reused(traced, monkeypatch, change):
+    """A later process with an edited jaxobs, an edited defining module, another library version or another JAX
+    option that changes a trace traces the program again under a new key; with nothing changed it reads it back."""
+    g, x = _Gain(jnp.asarray(1.3), 2), jnp.linspace(-2.0, 2.0, 9)
+    jaxobs.kept_jit(_counted()[0])(g, x)
+    _use(traced)  # a later process
+    top = __name__.split(".")[0]
+    memo = {"jaxobs source": "jaxobs", "own source": top, "library version": "versions:"}.get(change)
+    if memo is not None:
+        monkeypatch.setitem(_traced._memo, memo, _traced._memo[memo] + "-edited")
+    f, calls = _counted()
+    debug = jax.config.values["jax_debug_infs"]
+    jax.config.update("jax_debug_infs", change == "jax option" or debug)
+    try:
+        out = jaxobs.kept_jit(f)(g, x)
+    finally:
+        jax.config.update("jax_debug_infs", debug)
+    assert calls == ([] if change == "none" else [1])
+    assert len(list(traced.iterdir())) == (1 if change == "none" else 2)
+    assert np.array_equal(np.asarray(out["y"]), np.asarray(eqx.filter_jit(_counted()[0])(g, x)["y"]))
 
 
 def test_use_compile_cache_sets_the_traced_folder(tmp_path, monkeypatch):
     before = (jax.config.jax_compilation_cache_dir, jax.config.jax_persistent_cache_min_compile_time_secs)
-    kept = _traced.traced_dir()
+    kept = _traced.program_cache()
     try:
         assert jaxobs.use_compile_cache(tmp_path / "c") == tmp_path / "c"
-        assert _traced.traced_dir() == tmp_path / "c" / "traced"
+        assert _traced.program_cache().folder == tmp_path / "c" / "traced"
         assert (tmp_path / "c").stat().st_mode & 0o777 == 0o700  # the user's alone
         jaxobs.use_compile_cache(tmp_path / "d", keep_traces=False)
-        assert _traced.traced_dir() is None
+        assert _traced.program_cache().folder is None
     finally:
         jax.config.update("jax_compilation_cache_dir", before[0])
         jax.config.update("jax_persistent_cache_min_compile_time_secs", before[1])
-        _traced.set_traced_dir(kept)
+        jaxobs.set_program_cache(kept)
 
 
-def test_the_folder_keeps_the_most_recently_used(tmp_path):
+def test_the_folder_keeps_the_most_recently_used(traced, monkeypatch):
+    """A new entry trims the folder to max_kept: the least recently used go, and a killed writer's temp file (over
+    an hour old), but not a live writer's."""
     import os
 
+    traced.mkdir()
     for i in range(5):
-        f = tmp_path / f"{i}.jaxexport"
+        f = traced / f"{i}.jaxexport"
         f.write_bytes(b"x")
         os.utime(f, (1000 + i, 1000 + i))
-    os.utime(tmp_path / "0.jaxexport", (2000, 2000))  # read back lately
-    _traced._trim(tmp_path, keep=3)
-    assert sorted(f.name for f in tmp_path.iterdir()) == ["0.jaxexport", "3.jaxexport", "4.jaxexport"]
+    os.utime(traced / "0.jaxexport", (2000, 2000))  # read back lately
+    old, live = traced / ".a.jaxexport.0123456789ab.tmp", traced / ".b.jaxexport.456789abcdef.tmp"
+    for p in (old, live):
+        p.write_bytes(b"x")
+    os.utime(old, (1000, 1000))
+    monkeypatch.setattr(_traced, "MAX_KEPT", 3)
+    _use(traced)
+    jaxobs.kept_jit(_counted()[0])(_Gain(jnp.asarray(0.5), 1), jnp.arange(3.0))
+    names = sorted(f.name for f in traced.iterdir())
+    assert len(names) == 4 and names[:3] == [live.name, "0.jaxexport", "4.jaxexport"]
 
 
 def test_a_reproduction_run_is_kept_with_its_namedtuple_outputs(traced, monkeypatch):
@@ -134,7 +169,7 @@ def test_a_reproduction_run_is_kept_with_its_namedtuple_outputs(traced, monkeypa
     monkeypatch.setattr(_run, "_simulated_kept", jaxobs.kept_jit(_run._simulated))
     got = _run.run_kept(system, 0.01)
     assert len(list(traced.iterdir())) == 1  # exported: the outputs' NamedTuples are registered
-    _traced.set_traced_dir(traced)  # a later process: read back, not traced
+    _use(traced)  # a later process: read back, not traced
     monkeypatch.setattr(_run, "_simulated_kept", jaxobs.kept_jit(_run._simulated))
     monkeypatch.setattr(_run, "simulate", lambda *a: pytest.fail("traced again"))
     again = _run.run_kept(system, 0.01)

@@ -1,21 +1,10 @@
 """JAX's persistent compilation cache, in one call: compiled once per machine.
 
-Every new process compiles its programs again: a drive closed loop takes several
-seconds of XLA work, a tuning job tens.  JAX can keep compiled executables on disk
-and reuse them in the next process (``jax_compilation_cache_dir``); a cached
-executable is the same program, so no number changes.
-
-``use_compile_cache()`` turns it on in a per-user folder; the ``jaxobs`` command
-line calls it first thing (``--no-cache`` or ``JAXOBS_CACHE_DIR=off`` turn it off).
-The folder is, in order: the ``path`` argument, ``$JAXOBS_CACHE_DIR``,
-``$XDG_CACHE_HOME/jaxobs/jax``, ``~/.cache/jaxobs/jax``.
-
-Every compilation is written (``min_compile_s=0``, JAX's
-``jax_persistent_cache_min_compile_time_secs``): a threshold leaves out most of a tuning
-job's compilations (the metrics, the scoring, the linear structure, JAX's one-operation
-programs), each short but together more compile time than the few big ones; reading an
-entry back is cheap and the cache is small (``python -m benchmarks.first_second``,
-docs/performance.md).
+``use_compile_cache()`` keeps compiled executables on disk (``jax_compilation_cache_dir``) for the next process:
+the same programs, so no number changes.  The ``jaxobs`` command line calls it first thing (``--no-cache`` or
+``JAXOBS_CACHE_DIR=off`` turn it off).  Every compilation is written (``min_compile_s=0``): a threshold leaves out
+most of a tuning job's compilations, each short but together more than the few big ones
+(``python -m benchmarks.first_second``, docs/performance.md).
 """
 
 from __future__ import annotations
@@ -33,24 +22,17 @@ CACHE_ENV = "JAXOBS_CACHE_DIR"
 _OFF = ("", "0", "off", "none", "false", "no")
 
 
-def _default_dir() -> Path:
-    base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
-    return Path(base) / "jaxobs" / "jax"
-
-
 def use_compile_cache(
     path: str | os.PathLike | None = None, *, min_compile_s: float = 0.0, keep_traces: bool = True
 ) -> Path | None:
-    """Keep JAX's compiled programs in a folder, across processes.
-
-    Call it before the computations whose compilations should be kept; it may be called again to move
-    the cache.  The folders are created with mode 0700 (only the user may read them).
+    """Keep JAX's compiled programs in a folder (mode 0700), across processes; call it again to move it.
 
     Args:
-        path: The folder (default: ``$JAXOBS_CACHE_DIR``, else the user's cache folder).
+        path: The folder (default: ``$JAXOBS_CACHE_DIR``, else ``$XDG_CACHE_HOME/jaxobs/jax``, else
+            ``~/.cache/jaxobs/jax``).
         min_compile_s: Seconds (≥ 0); compilations shorter than this are not written (default: every one).
-        keep_traces: Whether the programs of :func:`jaxobs.kept_jit` keep their traces too, in
-            ``<folder>/traced`` (a :class:`jaxobs.ProgramCache`: a second process skips tracing and lowering).
+        keep_traces: Whether :func:`jaxobs.kept_jit` keeps its traced programs too, in ``<folder>/traced``
+            (a :class:`jaxobs.ProgramCache`: a second process skips tracing and lowering).
 
     Returns:
         The folder, or ``None`` where the cache is off (``JAXOBS_CACHE_DIR`` set to ``off``, ``0`` or an
@@ -61,13 +43,11 @@ def use_compile_cache(
     """
     if isinstance(min_compile_s, bool) or not isinstance(min_compile_s, int | float) or not min_compile_s >= 0:
         raise ValueError(f"use_compile_cache: min_compile_s must be a number >= 0 (seconds), got {min_compile_s!r}")
-    if path is None:
-        env = os.environ.get(CACHE_ENV)
-        if env is not None and env.strip().lower() in _OFF:
-            return None
-        folder = Path(env).expanduser() if env is not None else _default_dir()
-    else:
-        folder = Path(path).expanduser()
+    env = os.environ.get(CACHE_ENV) if path is None else str(path)
+    if path is None and env is not None and env.strip().lower() in _OFF:
+        return None
+    base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
+    folder = Path(env).expanduser() if env is not None else Path(base) / "jaxobs" / "jax"
     try:
         folder.mkdir(mode=0o700, parents=True, exist_ok=True)
     except OSError as e:
