@@ -1,0 +1,70 @@
+"""A drive job, a drive study and the export design a component at the drive file's period, not at its class's
+default: the reduced-order flux observer's speed gains are the matched pole α' = (1 − e^{−α_o T_s})/T_s
+(jaxobs/observers/rofo.py), so a closed form computed at 100 µs and run at the PM-SyRM's 125 µs is another design
+(kθ 618.55 against 616.14 1/s), and a job whose "tuned" design is its closed form would score a design that is not.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from jaxobs.drive import read_drive
+from jaxobs.observers.rofo import ROFO_ALPHA_O_HZ, ReducedOrderFluxObserver, speed_gains
+from jaxobs.studies.registry import closed_form_gains, registered
+
+ROOT = Path(__file__).resolve().parents[1]
+SAT_JOB = ROOT / "docs" / "examples" / "pmsyrm_sat_tune.toml"
+PMSYRM = ROOT / "docs" / "examples" / "pmsyrm_5p6kw_sat.toml"
+
+
+def test_the_drive_file_runs_at_another_period_than_the_default():
+    """The premise: the PM-SyRM file samples at 8 kHz, and the matched pole moves between 100 and 125 µs."""
+    assert read_drive(PMSYRM).ts == pytest.approx(1.25e-4, rel=1e-12)
+    assert speed_gains(ROFO_ALPHA_O_HZ, 1.25e-4)[0] == pytest.approx(616.1414, rel=1e-6)
+    assert speed_gains(ROFO_ALPHA_O_HZ, 1e-4)[0] == pytest.approx(618.5515, rel=1e-6)
+
+
+def test_the_registry_gives_the_defaults_and_the_closed_form_at_a_period():
+    """``defaults_at(ts)`` is the closed form at ts; ``closed_form_gains`` takes the component's ts."""
+    e = registered("rofo")
+    kt, kw = speed_gains(ROFO_ALPHA_O_HZ, 1.25e-4)
+    d = e.defaults_at(1.25e-4)
+    assert (d["k_theta"], d["k_omega"]) == pytest.approx((kt, kw), rel=1e-12)
+    assert e.defaults_at(None) == e.defaults and "ts" not in d
+    comp = ReducedOrderFluxObserver(**d, ts=1.25e-4)
+    cf = closed_form_gains("rofo", comp)
+    assert (cf["k_theta"], cf["k_omega"]) == pytest.approx((kt, kw), rel=1e-6)
+    # a class whose closed form does not depend on the period keeps its defaults
+    assert registered("cleso").defaults_at(1.25e-4) == registered("cleso").defaults
+
+
+def test_a_drive_jobs_designs_run_the_closed_form_at_the_drive_files_period(tmp_path):
+    """The saturation job (c_σ and ζ∞ free) runs its initial, closed-form and tuned designs with the speed gains of
+    the closed form at the drive file's 125 µs, and a job that frees kθ starts it there."""
+    from jaxobs_tuning.job import COMPONENTS, load_job
+
+    kt, kw = speed_gains(ROFO_ALPHA_O_HZ, 1.25e-4)
+    job = load_job(SAT_JOB)
+    assert job.values["ts"] == pytest.approx(1.25e-4, rel=1e-12)
+    assert (job.values["k_theta"], job.values["k_omega"]) == pytest.approx((kt, kw), rel=1e-12)
+    info = COMPONENTS[job.component]
+    comp = info.ctor(**job.values)
+    cf = info.closed_form(comp, job.values)
+    assert (cf["k_theta"], cf["k_omega"]) == pytest.approx((job.values["k_theta"], job.values["k_omega"]), rel=1e-6)
+    text = SAT_JOB.read_text().replace("[gains.zeta_inf]", "[gains.k_theta]\nlower = 10.0\n\n[gains.zeta_inf]")
+    (tmp_path / "job.toml").write_text(text)
+    (tmp_path / PMSYRM.name).write_text(PMSYRM.read_text())
+    free = {g.name: g for g in load_job(tmp_path / "job.toml").gains}
+    assert free["k_theta"].init == pytest.approx(kt, rel=1e-12)
+
+
+def test_a_drive_studys_closed_form_runs_at_the_drive_files_period():
+    """A study's ``closed_form = "rofo"`` design on a drive file is designed at the file's period."""
+    from jaxobs_tuning.study_file import _drive_designs
+
+    designs = _drive_designs({"designs": {"cf": {"closed_form": "rofo"}}}, ROOT, 1.25e-4)[0]
+    obs = designs["cf"]
+    assert float(obs.ts) == pytest.approx(1.25e-4, rel=1e-12)
+    assert (float(obs.k_theta), float(obs.k_omega)) == pytest.approx(speed_gains(ROFO_ALPHA_O_HZ, 1.25e-4), rel=1e-6)
