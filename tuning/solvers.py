@@ -602,6 +602,8 @@ class OptimistixSolver(AbstractSolver):
                 result = res
         bar.close()
         finished, sentence = _minimiser_reason(result, type(solver).__name__)
+        evals = _evaluations(solver, state, int(jnp.size(theta0)))
+        sentence += "" if evals is None else f" ({evals} objective evaluations)"
         status, reason, best = decide_status(history, finished, self.tol, sentence, sentence)
         if not finished and status == "converged":  # pragma: no cover - decide_status returns budget then
             status = "budget"
@@ -613,8 +615,16 @@ class OptimistixSolver(AbstractSolver):
             status=status,
             reason=reason if status != "budget" or "budget" in reason else f"{sentence} ({reason})",
             best_iteration=None if best is None else history[best]["iteration"],
-            timing=dict(solver_s=time.time() - t_start),
+            timing=dict(solver_s=time.time() - t_start, **({} if evals is None else {"evaluations": evals})),
         )
+
+
+def _evaluations(solver: optx.AbstractMinimiser, state: Any, dim: int) -> int | None:
+    """The objective evaluations of a Nelder–Mead run (optimistix's: d + 1 for the first simplex and for each shrink,
+    2 for every other step; the solver's own scoring of each accepted iterate not counted); None for another."""
+    if not isinstance(solver, optx.NelderMead):
+        return None
+    return (dim + 1) * (1 + int(state.stats.n_shrink)) + 2 * max(int(state.step) - 1, 0)
 
 
 def as_solver(optimizer: AbstractSolver | optax.GradientTransformation | optx.AbstractMinimiser) -> AbstractSolver:
