@@ -271,7 +271,8 @@ def test_bfgs_records_every_iteration_with_a_readable_reason(tmp_path, capsys):
 
 def test_nelder_mead_respects_the_bounds_and_reports_its_evaluations(tmp_path, capsys):
     """``kind = "nelder_mead"`` (gradient-free, docs/tuning.md): the tuned gain is the best recorded iterate, inside
-    its bounds (the simplex lives in θ, the bounds' unconstrained coordinate), and the reason and timing.json give the objective evaluations; a learning rate is refused at --check."""
+    its bounds (the simplex lives in θ, the bounds' unconstrained coordinate), and the reason and timing.json give
+    the objective evaluations; a learning rate is refused at --check."""
     text = GOOD.replace('kind = "adam"', 'kind = "nelder_mead"')
     path = tmp_path / "job.toml"
     path.write_text(text)

@@ -16,7 +16,17 @@ import optimistix as optx
 from .aggregations import AbstractAggregation, CVaR, Mean, SmoothMax
 from .solvers import AbstractSolver, OptaxSolver, OptimistixSolver
 
-__all__ = ["AGGREGATIONS", "SCHEDULES", "OPTAX", "MINIMISERS", "NM_SIMPLEX", "SOLVER_KINDS", "aggregation", "solver", "one_of"]
+__all__ = [
+    "AGGREGATIONS",
+    "SCHEDULES",
+    "OPTAX",
+    "MINIMISERS",
+    "NM_SIMPLEX",
+    "SOLVER_KINDS",
+    "aggregation",
+    "solver",
+    "one_of",
+]
 
 # objective.aggregate: name -> the aggregation, from objective.alpha (CVaR) and objective.temperature (smooth max)
 AGGREGATIONS: dict[str, Callable] = {
