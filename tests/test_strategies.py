@@ -129,12 +129,16 @@ class _Rough(_Quadratic):
 
 def test_nelder_mead_finds_the_trend_of_a_rough_objective_where_bfgs_stops_in_its_ripple():
     """The job's "nelder_mead" (a simplex of θ0 and θ0 + NM_SIMPLEX) reaches the trend's minimum at θ = 1 within
-    the ripple's scale; BFGS from the same start stays within a ripple period of θ0; the run reports its objective
-    evaluations (2 per step, d + 1 for the first simplex and a shrink)."""
+    the ripple's scale, each recorded iterate better than the one before; BFGS from the same start stays within a
+    ripple period of θ0; the run reports its objective evaluations (2 per step, d + 1 for the first simplex and a
+    shrink)."""
     nm = strategies.solver("nelder_mead", tol=1e-9, steps=40)
     res = tune(_Rough(), nm, jnp.zeros(1), quiet=True)
     assert abs(float(res.theta[0]) - 1.0) < 0.1, res.theta
     assert res.value < float(_Rough().value(jnp.zeros(1), None)) - 0.5
+    # each recorded iterate is the simplex's best vertex (tuning/minimisers.py best_iterate): never worse
+    values = [h["value"] for h in res.history]
+    assert all(b < a for a, b in zip(values, values[1:], strict=False)), values
     evals = res.timing["evaluations"]
     assert 2 * res.iterations <= evals <= 4 * res.iterations + 2 and f"({evals} objective evaluations)" in res.reason
     res_bfgs = tune(_Rough(), strategies.solver("bfgs", tol=1e-9, steps=40), jnp.zeros(1), quiet=True)

@@ -39,7 +39,7 @@ from jaxobs.runtime.progress import Progress
 
 from .base import AbstractObjective
 from .checkpoint import DIGEST, MAX_CHECKPOINT_BYTES, check_state, content_digest
-from .minimisers import evaluations, gradient_free, minimiser_reason
+from .minimisers import best_iterate, evaluations, gradient_free, minimiser_reason
 from .outdir import atomic_write_bytes
 
 __all__ = [
@@ -579,6 +579,7 @@ class OptimistixSolver(AbstractSolver):
                 result, n = res, n - 1
                 break
             y_new, state, _ = step(y, state, data)
+            y_new = best_iterate(solver, y_new, state)
             if not bool(jnp.all(y_new == y)):  # an accepted step: record the new iterate
                 y = y_new
                 value, _, ndiv, nover = _evaluate(objective, y, scenarios, free)
