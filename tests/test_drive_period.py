@@ -90,6 +90,7 @@ def test_the_stored_saturation_tuning_rebuilds_at_the_drive_period_and_cuts_the_
     for obs in (tuned, cf):
         assert isinstance(obs, ReducedOrderFluxObserver) and float(obs.ts) == pytest.approx(1.25e-4, rel=1e-12)
         assert (float(obs.k_theta), float(obs.k_omega)) == pytest.approx((kt, kw), rel=1e-9)
+    assert isinstance(tuned, ReducedOrderFluxObserver)
     assert float(tuned.c_sigma) == pytest.approx(res["gains"]["tuned"]["c_sigma"], rel=1e-9)
     assert res["job"]["solver"]["kind"] == "nelder_mead" and res["job"]["scenarios"]["grid"]["dsat"] == [0.0, 1.0]
     bench = json.loads(MISMATCH_V3.read_text())
@@ -101,3 +102,33 @@ def test_the_stored_saturation_tuning_rebuilds_at_the_drive_period_and_cuts_the_
     out = [(d, v) for (name, d, v), r in by.items() if name == "rofo" and not r["in_grid"]]
     assert len(out) == 6
     assert all(by[("rofo_tuned", d, v)]["peak_deg"] < by[("rofo", d, v)]["peak_deg"] for d, v in out)
+
+
+@pytest.mark.slow
+def test_the_tuned_design_keeps_a_rated_load_step_where_its_low_damping_could_show():
+    """ζ∞ 0.026 damps the flux poles little at speed, which the job's steady runs do not score: a rated load step
+    (0 → 29.7 N·m at 0.1 s, 1440 r/min, scored from the step to 0.4 s) on the matched map reads as the closed form's
+    (measured 0.56° peak both: with an exact model the flux error, which the gains act on, stays near 0), and at
+    dsat 1 the tuned design's peak is below the closed form's (measured 3.16° against 5.98°)."""
+    import jax
+    import numpy as np
+
+    from jaxobs.scenarios.families.drive import DriveScenarios
+    from jaxobs.studies.study import run_study
+    from jaxobs_tuning.results import load_result
+
+    jax.config.update("jax_enable_x64", True)
+    g = load_result(SAT_V3)["gains"]["tuned"]
+    f = read_drive(PMSYRM)
+    drive = f.drive_for(sensorless=True)
+    designs = {
+        "cf": ReducedOrderFluxObserver.closed_form(ts=drive.ts),
+        "tuned": ReducedOrderFluxObserver.closed_form(ts=drive.ts, c_sigma=g["c_sigma"], zeta_inf=g["zeta_inf"]),
+    }
+    axes = {"speed_rpm": [1440.0], "load_nm": [0.0], "load_step_nm": [29.7], "dsat": [0.0, 1.0]}
+    family = DriveScenarios(f.machine, drive, t_event=0.1)  # type: ignore[arg-type]  # a single machine's drive
+    ds = run_study(designs, axes, family=family, horizon=0.4, steady_from=0.1)
+    assert not isinstance(ds, tuple) and not ds["lost_lock"].values.any()
+    peak = np.degrees(ds["peak_position_steady"].values.reshape(2, 2))  # design x dsat
+    assert peak[1, 0] == pytest.approx(peak[0, 0], abs=0.05), peak
+    assert peak[1, 1] < 0.8 * peak[0, 1], peak
