@@ -143,7 +143,7 @@ LAYERS = [
     ("jaxobs.reproduce",),
     # tuning: it changes gains (and exports the tuned observer)
     # the results folder, checkpoints, and what a solver minimises (the objective's protocol)
-    ("jaxobs_tuning.outdir", "jaxobs_tuning.checkpoint", "jaxobs_tuning.base"),
+    ("jaxobs_tuning.outdir", "jaxobs_tuning.checkpoint", "jaxobs_tuning.base", "jaxobs_tuning.minimisers"),
     # the C export's code generator (jaxpr -> C) is beside the rest: it knows no observer
     ("jaxobs_tuning.export.ir", "jaxobs_tuning.export.c99"),
     ("jaxobs_tuning.export.lower",),

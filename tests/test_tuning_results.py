@@ -269,6 +269,32 @@ def test_bfgs_records_every_iteration_with_a_readable_reason(tmp_path, capsys):
     assert len(err) == 1 and "solver.learning_rate" in err[0] and "bfgs" in err[0]
 
 
+def test_nelder_mead_respects_the_bounds_and_reports_its_evaluations(tmp_path, capsys):
+    """``kind = "nelder_mead"`` (gradient-free, docs/tuning.md): the tuned gain is the best recorded iterate, inside
+    its bounds (the simplex lives in θ, the bounds' unconstrained coordinate), and the reason and timing.json give
+    the objective evaluations; a learning rate is refused at --check."""
+    text = GOOD.replace('kind = "adam"', 'kind = "nelder_mead"')
+    path = tmp_path / "job.toml"
+    path.write_text(text)
+    assert main(["tune", str(path), "--out", str(tmp_path / "o"), "--quiet"]) == 0
+    res = _strict_json(tmp_path / "o" / "result.json")
+    hist = _strict_json(tmp_path / "o" / "history.json")
+    timing = _strict_json(tmp_path / "o" / "timing.json")
+    assert res["status"] in ("converged", "budget", "no_improvement") and res["iterations"] == 3
+    assert all(1000.0 < h["gains"]["lam"] < 100000.0 for h in hist)
+    if res["status"] != "no_improvement":
+        assert res["gains"]["tuned"]["lam"] == pytest.approx(min(hist, key=lambda h: h["value"])["gains"]["lam"])
+    # d + 1 = 2 for the first simplex and each shrink, 2 for each of the 2 later steps: even, at least 6
+    assert timing["evaluations"] >= 6 and timing["evaluations"] % 2 == 0
+    if res["status"] != "no_improvement":  # that reason is the outcome's alone
+        assert f"({timing['evaluations']} objective evaluations)" in res["reason"]
+    capsys.readouterr()
+    path.write_text(text.replace("steps = 3", "steps = 3\nlearning_rate = 0.1"))
+    assert main(["tune", str(path), "--check"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "solver.learning_rate" in err[0] and "nelder_mead" in err[0]
+
+
 def test_report_names_scenarios_in_the_objectives_order():
     """responses.png names its scenario by the values jaxobs_tuning.report enumerates: the job's own order, grid or
     sampled."""

@@ -55,6 +55,35 @@ class AbstractObjective(eqx.Module):
             ``(value, gradient, diverged count, overflowed count)``.
         """
 
+    def plain_value(self, theta: jax.Array, scenarios: Any) -> jax.Array:
+        """The objective at ``theta`` without its derivative, traceable: what a gradient-free minimiser
+        (Nelder–Mead, :mod:`jaxobs_tuning.minimisers`) minimises.  :meth:`value` unless a subclass has a program
+        without the derivative.
+
+        Args:
+            theta: The free gains' vector.
+            scenarios: The batch; None for an objective without data.
+
+        Returns:
+            The scalar objective.
+        """
+        return self.value(theta, scenarios)
+
+    def plain_value_diverged(self, theta: jax.Array, scenarios: Any) -> tuple[Any, int]:
+        """:meth:`plain_value` and the scenarios that diverged, from one batch evaluation (a gradient-free
+        solver's record of an iterate).  From :meth:`value_grad_diverged_overflowed` unless a subclass has a
+        program without the derivative.
+
+        Args:
+            theta: The free gains' vector.
+            scenarios: The batch; None for an objective without data.
+
+        Returns:
+            ``(value, diverged count)``.
+        """
+        value, _, diverged, _ = self.value_grad_diverged_overflowed(theta, scenarios)
+        return value, diverged
+
     def value_grad_diverged(self, theta: jax.Array, scenarios: Any) -> tuple[Any, Any, int]:
         """:meth:`value_grad_diverged_overflowed` without the overflow count.
 

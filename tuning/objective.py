@@ -162,6 +162,12 @@ def _per_scenario_vg(objective, theta, scenarios):
 
 
 @eqx.filter_jit
+def _per_scenario_plain(objective, theta, scenarios):
+    """:meth:`Objective._per_scenario_plain_value` as one program (as :func:`_per_scenario_vg`)."""
+    return objective._per_scenario_plain_value(theta, scenarios)
+
+
+@eqx.filter_jit
 def _response_program(objective, theta, sig):
     return objective._response(theta, sig)
 
@@ -315,6 +321,38 @@ class Objective(AbstractObjective):
         v = jnp.where(good, v, self.penalty)
         g = jnp.where(good[:, None], g, 0.0)
         return v, g, good, over
+
+    def _per_scenario_plain_value(self, theta, scenarios):
+        """Per scenario the value without its derivative, the penalty where the run or the value is not finite
+        (no gradient: one that would not be finite, as an rms of an error exactly 0 has, costs nothing here)."""
+        v, ok = jax.vmap(lambda sig: self._one(theta, sig))(scenarios)
+        good = ok & jnp.isfinite(v)
+        return jnp.where(good, v, self.penalty), good
+
+    def plain_value(self, theta: jax.Array, scenarios: Any) -> jax.Array:
+        """The objective at ``theta`` without its derivative (a gradient-free minimiser's; no tangent is pushed).
+
+        Args:
+            theta: The free gains' vector.
+            scenarios: The batch (leading axis the scenarios).
+
+        Returns:
+            The scalar objective.
+        """
+        return self.aggregation(_per_scenario_plain(self, theta, scenarios)[0])
+
+    def plain_value_diverged(self, theta: jax.Array, scenarios: Any) -> tuple[jax.Array, int]:
+        """:meth:`plain_value` and how many scenarios diverged (their run or value not finite).
+
+        Args:
+            theta: The free gains' vector.
+            scenarios: The batch (leading axis the scenarios).
+
+        Returns:
+            ``(value, diverged count)``.
+        """
+        v, good = _per_scenario_plain(self, theta, scenarios)
+        return self.aggregation(v), int(np.sum(~np.asarray(good)))
 
     def _aggregate_with_grad(self, theta, scenarios):
         v, g, _, _ = _per_scenario_vg(self, theta, scenarios)

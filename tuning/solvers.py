@@ -39,6 +39,7 @@ from jaxobs.runtime.progress import Progress
 
 from .base import AbstractObjective
 from .checkpoint import DIGEST, MAX_CHECKPOINT_BYTES, check_state, content_digest
+from .minimisers import best_iterate, evaluations, gradient_free, minimiser_reason
 from .outdir import atomic_write_bytes
 
 __all__ = [
@@ -140,8 +141,12 @@ def _bar(solver: AbstractSolver, quiet: bool) -> Progress:
     return bar
 
 
-def _evaluate(objective: AbstractObjective, theta, scenarios):
-    """(value, gradient, diverged, overflowed) at ``theta`` on ``scenarios``."""
+def _evaluate(objective: AbstractObjective, theta, scenarios, plain: bool = False):
+    """(value, gradient, diverged, overflowed) at ``theta`` on ``scenarios``; ``plain``: without the derivative
+    (a gradient-free minimiser's: no gradient, nothing overflows)."""
+    if plain:
+        value, ndiv = objective.plain_value_diverged(theta, scenarios)
+        return value, None, ndiv, 0
     return objective.value_grad_diverged_overflowed(theta, scenarios)
 
 
@@ -495,20 +500,6 @@ class OptaxSolver(AbstractSolver):
         )
 
 
-def _minimiser_reason(result, name: str) -> tuple[bool, str]:
-    """(finished by its own test, a sentence) for an optimistix RESULTS value of the minimiser ``name``."""
-    R = optx.RESULTS
-    if result == R.successful:
-        return True, f"converged: {name}'s relative change of θ and of the objective fell below tol"
-    if result == R.nonlinear_max_steps_reached:
-        return False, f"budget: {name} used its max_steps"
-    if result == R.nonlinear_divergence:
-        return False, f"{name} diverged"
-    if result == R.nonfinite:
-        return False, f"{name} met a non-finite objective or gradient"
-    return False, f"{name} stopped: {R[result] or 'unknown reason'}"
-
-
 @dataclass(frozen=True)
 class OptimistixSolver(AbstractSolver):
     """An optimistix minimiser (``optx.BFGS(rtol, atol)``, ...) run step by step (init / step /
@@ -562,8 +553,10 @@ class OptimistixSolver(AbstractSolver):
         """
         t_start = time.time()
         solver = self.minimiser
-        # the objective and its scenarios are optimistix's args: inputs of the compiled step, not its constants
-        fn = lambda th, args: (args[0].value(th, args[1]), None)  # noqa: E731
+        # the objective and its scenarios are optimistix's args: inputs of the compiled step, not its constants;
+        # a gradient-free minimiser takes the objective without its derivative (jaxobs_tuning.minimisers)
+        free = gradient_free(solver)
+        fn = lambda th, args: ((args[0].plain_value if free else args[0].value)(th, args[1]), None)  # noqa: E731
         data = (objective, scenarios)
         tags = frozenset()
         f_struct = jax.ShapeDtypeStruct((), theta0.dtype)
@@ -572,7 +565,7 @@ class OptimistixSolver(AbstractSolver):
         terminate = eqx.filter_jit(lambda y, st, args: solver.terminate(fn, y, args, {}, st, tags))
         y = theta0
         bar = _bar(self, quiet)
-        value, _, ndiv, nover = _evaluate(objective, y, scenarios)
+        value, _, ndiv, nover = _evaluate(objective, y, scenarios, free)
         history = [_entry(objective, 0, value, ndiv, y)]
         if nover:
             bar.close()
@@ -586,9 +579,10 @@ class OptimistixSolver(AbstractSolver):
                 result, n = res, n - 1
                 break
             y_new, state, _ = step(y, state, data)
+            y_new = best_iterate(solver, y_new, state)
             if not bool(jnp.all(y_new == y)):  # an accepted step: record the new iterate
                 y = y_new
-                value, _, ndiv, nover = _evaluate(objective, y, scenarios)
+                value, _, ndiv, nover = _evaluate(objective, y, scenarios, free)
                 history.append(_entry(objective, n, value, ndiv, y))
                 if nover:
                     bar.close()
@@ -601,7 +595,9 @@ class OptimistixSolver(AbstractSolver):
             if bool(done):
                 result = res
         bar.close()
-        finished, sentence = _minimiser_reason(result, type(solver).__name__)
+        finished, sentence = minimiser_reason(result, type(solver).__name__)
+        evals = evaluations(solver, state, int(jnp.size(theta0)))
+        sentence += "" if evals is None else f" ({evals} objective evaluations)"
         status, reason, best = decide_status(history, finished, self.tol, sentence, sentence)
         if not finished and status == "converged":  # pragma: no cover - decide_status returns budget then
             status = "budget"
@@ -613,7 +609,7 @@ class OptimistixSolver(AbstractSolver):
             status=status,
             reason=reason if status != "budget" or "budget" in reason else f"{sentence} ({reason})",
             best_iteration=None if best is None else history[best]["iteration"],
-            timing=dict(solver_s=time.time() - t_start),
+            timing=dict(solver_s=time.time() - t_start, **({} if evals is None else {"evaluations": evals})),
         )
 
 

@@ -16,7 +16,17 @@ import optimistix as optx
 from .aggregations import AbstractAggregation, CVaR, Mean, SmoothMax
 from .solvers import AbstractSolver, OptaxSolver, OptimistixSolver
 
-__all__ = ["AGGREGATIONS", "SCHEDULES", "OPTAX", "MINIMISERS", "SOLVER_KINDS", "aggregation", "solver", "one_of"]
+__all__ = [
+    "AGGREGATIONS",
+    "SCHEDULES",
+    "OPTAX",
+    "MINIMISERS",
+    "NM_SIMPLEX",
+    "SOLVER_KINDS",
+    "aggregation",
+    "solver",
+    "one_of",
+]
 
 # objective.aggregate: name -> the aggregation, from objective.alpha (CVaR) and objective.temperature (smooth max)
 AGGREGATIONS: dict[str, Callable] = {
@@ -33,8 +43,19 @@ SCHEDULES: dict[str, Callable] = {
 
 # solver.kind: an optax transformation of a learning rate (or schedule), run by OptaxSolver ...
 OPTAX: dict[str, Callable] = {"adam": optax.adam, "adamw": optax.adamw, "sgd": optax.sgd}
-# ... or an optimistix minimiser of a tolerance (relative and absolute), run by OptimistixSolver
-MINIMISERS: dict[str, Callable] = {"bfgs": lambda tol: optx.BFGS(rtol=tol, atol=tol)}
+# Nelder–Mead's first simplex: θ0 and θ0 + NM_SIMPLEX along each θ axis.  θ is the gains' unconstrained coordinate
+# (jaxobs_tuning.params: a logistic of log g between the bounds), so 0.5 moves a gain bounded over two decades by
+# a factor of about 1.8 near the middle of its range: a first look past the roughness of a peak objective.
+# optimistix's own default (5 % of θ0, plus 2.5e-4) is a finite-difference stencil: at θ0 = 0 (a gain at the
+# geometric middle of its bounds) it would probe 2.5e-4, well inside the ripple a limit cycle puts on the peak.
+NM_SIMPLEX = 0.5
+# ... or an optimistix minimiser of a tolerance (relative and absolute), run by OptimistixSolver.  "nelder_mead" is
+# gradient-free: for objectives whose gradient is not their trend (a steady peak through a limit cycle, a max over
+# samples: the AD derivative is that of one sample and one period, docs/tuning.md)
+MINIMISERS: dict[str, Callable] = {
+    "bfgs": lambda tol: optx.BFGS(rtol=tol, atol=tol),
+    "nelder_mead": lambda tol: optx.NelderMead(rtol=tol, atol=tol, rdelta=0.0, adelta=NM_SIMPLEX),
+}
 SOLVER_KINDS = (*OPTAX, *MINIMISERS)
 # the [solver] keys only an optax solver reads (a minimiser refuses them)
 OPTAX_ONLY = ("learning_rate", "schedule", "patience", "checkpoint_every")

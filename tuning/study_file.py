@@ -572,10 +572,9 @@ def _drive_designs(raw: dict, base: Path, ts_file: float | None) -> tuple[dict, 
                 allowed = ", ".join([*names, *(a for a, c in _ALIAS_CLASS.items() if c in names)])
                 raise JobError(f"{where}.closed_form", f"must be one of {allowed}, got {show(comp)}")
             info = COMPONENTS[comp]
-            values = {**info.defaults, **info.closed_form(info.ctor(**info.defaults))}
-            if ts_file is not None:
-                values["ts"] = ts_file
-            try:
+            try:  # designed at the drive's period, as it runs (the reduced-order flux observer's matched pole)
+                values = info.defaults_at(ts_file)
+                values.update(info.closed_form(info.ctor(**values)))
                 return info.ctor(**values)
             except (ValueError, TypeError, ArithmeticError) as e:
                 raise JobError(where, str(e)) from None

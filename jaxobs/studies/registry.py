@@ -53,8 +53,12 @@ class Registered:
         dual: whether it runs on a dual three-phase machine (its αβ subspace, :mod:`jaxobs.drive.dual`).
         why_not_salient: the one-line reason of a refusal on a salient machine.
         why_not_dual: the one-line reason of a refusal on a dual three-phase machine.
-        defaults: a job's constructor values before its ``[component]`` and ``[gains]`` tables.
+        defaults: a job's constructor values before its ``[component]`` and ``[gains]`` tables, at the class's
+            default sample time.
         aliases: short names of the closed form (``jaxobs closed-form``, study files, ``export --design``).
+        defaults_for_ts: where some defaults are a closed form that depends on the sample time (the reduced-order
+            flux observer's matched-pole speed gains), the defaults at a given period T_s (s); None: ``defaults``
+            hold at every period (:meth:`defaults_at`).
     """
 
     cls: type
@@ -66,6 +70,22 @@ class Registered:
     why_not_salient: str = ""
     why_not_dual: str = ""
     aliases: tuple = ()
+    defaults_for_ts: Callable[[float], dict] | None = None
+
+    def defaults_at(self, ts: float | None) -> dict:
+        """A job's constructor values before its tables, at the sample time the component will run at: a drive
+        job's observer runs at its drive file's period, and a closed form designed at another period would put
+        its poles elsewhere (the reduced-order flux observer's matched pole α' = (1 − e^{−α_o T_s})/T_s).
+
+        Args:
+            ts: The period, s (None: the class's default).
+
+        Returns:
+            name -> value (a new dict; ``ts`` itself is not among them).
+        """
+        if ts is None or self.defaults_for_ts is None:
+            return dict(self.defaults)
+        return self.defaults_for_ts(float(ts))
 
     @property
     def name(self) -> str:
@@ -174,12 +194,12 @@ def _leso_defaults(**gains):
     return dict(Rs=papers.IPMSM_002["Rs"], Lq=papers.IPMSM_002["Lq"], **gains, **_pll(papers.LESO_PLL_HZ))
 
 
-def _rofo_defaults() -> dict:
-    # the closed form (ReducedOrderFluxObserver.closed_form) at the default ts, in Python floats; the machine's
-    # values are placeholders a drive job binds (002's IPMSM, the entry's default machine)
+def _rofo_defaults(ts: float = 1e-4) -> dict:
+    # the closed form (ReducedOrderFluxObserver.closed_form) at the period ts (default: the class's), in Python
+    # floats; the machine's values are placeholders a drive job binds (002's IPMSM, the entry's default machine)
     # (matched_pole in plain floats: importing the registry runs no JAX computation, which would start JAX before
     # the command line sets its device count)
-    am = rofo.matched_pole(2 * math.pi * rofo.ROFO_ALPHA_O_HZ, 1e-4)
+    am = rofo.matched_pole(2 * math.pi * rofo.ROFO_ALPHA_O_HZ, ts)
     k_theta, k_omega = 2.0 * am, am * am
     machine = {k: papers.IPMSM_002[k] for k in ("Rs", "Ld", "Lq", "psi_f")}
     gains = dict(c_sigma=rofo.ROFO_C_SIGMA, zeta_inf=rofo.ROFO_ZETA_INF, k_theta=k_theta, k_omega=k_omega)
@@ -284,6 +304,7 @@ _ENTRIES = (
         ReducedOrderFluxObserver,
         signal="drive",
         defaults=_rofo_defaults(),
+        defaults_for_ts=_rofo_defaults,  # its speed gains are the matched pole at the period it runs at
         machines=_LESO_MACHINES,
         salient=True,
         dual=False,
@@ -339,11 +360,13 @@ def _model_at(spec: tuple, values: dict):
 
 def closed_form_gains(name: str, component: Any = None) -> dict[str, float]:
     """A registered class's closed-form gains as floats (name -> value), at ``component``'s nominal frequency
-    ``omega_n`` where it has one (the FLLs); the gains of :meth:`Registered.gains`.
+    ``omega_n`` where it has one (the FLLs) and at its sample time (the reduced-order flux observer's matched
+    pole depends on it); the gains of :meth:`Registered.gains`.
 
     Args:
         name: a class name or alias.
-        component: an instance whose ``omega_n`` the closed form takes, or None (the paper's).
+        component: an instance whose ``omega_n`` and ``ts`` the closed form takes, or None (the paper's, at the
+            class's default ts).
 
     Returns:
         gain name -> float.
@@ -351,5 +374,7 @@ def closed_form_gains(name: str, component: Any = None) -> dict[str, float]:
     entry = registered(name)
     takes_omega_n = "omega_n" in entry.cls.closed_form_design().inputs
     kw = {"omega_n": float(component.omega_n)} if component is not None and takes_omega_n else {}
+    if component is not None:  # every closed form takes the constructor's ts (the period it is designed at)
+        kw["ts"] = float(component.ts)
     obs = entry.cls.closed_form(**kw)
     return {g: float(getattr(obs, g)) for g in entry.gains}

@@ -131,6 +131,11 @@ def _export(args) -> int:
         kw["ts"] = args.ts
     if args.rule is not None:
         kw["rule"] = RULES[args.rule]()
+    df = _drive_file(args)
+    if args.result is None and df is not None and args.ts is None:
+        # a closed form designed at the drive's period, not rebuilt there from the default's (the reduced-order
+        # flux observer's matched-pole speed gains depend on the period)
+        kw["ts"] = df.ts
     if args.result is not None:
         obs = observer_from_result(args.result, gains=args.gains, notes=notes)
         if kw:
@@ -141,7 +146,6 @@ def _export(args) -> int:
         obs = observer_from_design(args.design, **kw)
         source = f"closed form {args.design}, {DESIGNS[args.design].closed_form_design().rule}"
     signal = None
-    df = _drive_file(args)
     record_drive = None
     if df is not None:
         why = REGISTRY[type(obs).__name__].refusal(df.machine) if type(obs).__name__ in REGISTRY else None

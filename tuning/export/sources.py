@@ -102,7 +102,9 @@ def observer_from_result(
             f"result file {str(path)!r}: status 'diverged': the tuned gains are not a design "
             "(export --gains closed_form instead)"
         )
-    values = dict(info.defaults)
+    # the defaults at the result's period: the job's own values where they depend on it (registry defaults_at)
+    values = info.defaults_at(float(res["ts"]) if "ts" in res else None)
+    values.pop("ts", None)  # set below, from the result, as before
     values.update({canonical_key(info.ctor, k): v for k, v in res.get("job", {}).get("component", {}).items()})
     values.update(table)
     kw = {}

@@ -51,6 +51,22 @@ class ComponentInfo:
         for name, value in {**facts, "machines": e.machines}.items():
             object.__setattr__(self, name, value)  # a frozen dataclass's fields, set once
 
+    def defaults_at(self, ts: float | None) -> dict:
+        """A job's constructor values before its tables at the period the component runs at (a drive job's: its
+        drive file's), the closed-form defaults that depend on it designed there
+        (:meth:`jaxobs.studies.registry.Registered.defaults_at`).
+
+        Args:
+            ts: The period, s (None: the class's default).
+
+        Returns:
+            name -> value, with ``ts`` set where given.
+        """
+        out = self.entry.defaults_at(ts)
+        if ts is not None:
+            out["ts"] = float(ts)
+        return out
+
     @property
     def closed_form_source(self) -> str:
         """The class's closed form's source, in one line (``ClosedForm.source``)."""

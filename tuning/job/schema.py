@@ -246,9 +246,10 @@ def _parse_job_table(raw: dict) -> tuple[str, str, int]:
     return name, comp, seed
 
 
-def _parse_component(comp_t: dict, comp: str, info: ComponentInfo) -> dict:
-    """``[component]``: the component's defaults with the table's values (each a number of its defaults)."""
-    values = dict(info.defaults)
+def _parse_component(comp_t: dict, comp: str, info: ComponentInfo, ts: float | None = None) -> dict:
+    """``[component]``: the component's defaults at the period ``ts`` (None: its class's; ``values["ts"]`` set
+    otherwise) with the table's values (each a number of its defaults)."""
+    values = info.defaults_at(ts)
     for k in comp_t:
         key = canonical_key(info.ctor, k)  # a flux observer's omega_init may be written omega0
         if key not in info.defaults:
@@ -540,6 +541,10 @@ def parse_job(raw: dict, base: Path | None = None) -> Job:
     freq_n = float(values.get("omega_n", W_N)) / (2 * math.pi)
     gains = _parse_gains(raw, comp, info, values)
     scen, drive, ts = _parse_scenarios_and_drive(raw, comp, info, values, seed, freq_n, ts, base)
+    if "ts" in values:  # a drive job at its drive file's period: the defaults designed at that period, read again
+        values = _parse_component(comp_t, comp, info, ts)
+        values.update(parse_observer_speed(raw, info))
+        gains = _parse_gains(raw, comp, info, values)
     alpha = values.get("speed", {}).get("alpha_o")
     bad = None if alpha is None else alpha_o_out_of_range(alpha, ts)
     if bad:
