@@ -506,12 +506,15 @@ def test_the_d_priority_voltage_limit_has_finite_derivatives():
     from pathlib import Path
 
     path = Path(__file__).resolve().parents[1] / "docs" / "examples" / "pmsyrm_5p6kw_sat.toml"
-    foc = D.read_drive(path).drive_for(sensorless=True).foc
+    drive = D.read_drive(path).drive_for(sensorless=True)
+    assert isinstance(drive, D.Drive)
+    foc = drive.foc
     assert foc.d_priority
     cs = eqx.tree_at(lambda s: s.int_d, foc.init(), -3.0 * foc.u_max)  # u_d* far beyond the limit: clipped
 
     def voltage(i_a):
-        inp = D.FOCInput(jnp.asarray(1), i_a, 0.0, 0.0, 300.0, 150.0, 150.0)  # k = 1: the speed loop holds
+        zero, w_e, w_m = jnp.asarray(0.0), jnp.asarray(300.0), jnp.asarray(150.0)
+        inp = D.FOCInput(jnp.asarray(1), i_a, zero, zero, w_e, w_m, w_m)  # k = 1: the speed loop holds
         _, out = foc.step(cs, inp)
         return jnp.stack([out.u_a, out.u_b])
 

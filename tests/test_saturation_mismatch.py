@@ -95,11 +95,13 @@ def test_the_ascent_s_derivative_matches_central_differences():
 
     from benchmarks.saturation_mismatch import DRIVE, closed_forms
     from benchmarks.saturation_worst import Evaluator, check
-    from jaxobs.drive import read_drive
+    from jaxobs.drive import Drive, read_drive
     from jaxobs.scenarios.families.drive import DriveScenarios
 
     f = read_drive(DRIVE)
-    drive = dataclasses.replace(f.drive_for(sensorless=True), settle=0.05)  # a short settle: a cheap case
+    drive = f.drive_for(sensorless=True)
+    assert isinstance(drive, Drive)
+    drive = dataclasses.replace(drive, settle=0.05)  # a short settle: a cheap case
     ev = Evaluator(DriveScenarios(f.machine, drive), closed_forms(drive.ts)["rofo"], [900.0], float(f.machine.T_rated),
                    0.05, 3)  # fmt: skip
     (r,) = check(ev, [0.5], [0])
