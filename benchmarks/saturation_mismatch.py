@@ -2,7 +2,7 @@
 and the designs ranked by how much the mismatch costs them.
 
 ``python -m benchmarks.saturation_mismatch [--dsat V ...] [--speeds PU ...] [--load PU] [--designs NAME ...]
-[--result RESULT.json] [--ascent N] [--json FILE]``
+[--result RESULT.json] [--ascent N] [--ascent-designs NAME ...] [--json FILE]``
 
 One drive study (:func:`jaxobs.studies.study.run_study` on :class:`jaxobs.scenarios.families.drive.DriveScenarios`,
 float64) of the drive file ``docs/examples/pmsyrm_5p6kw_sat.toml`` (Hinkkanen et al. 2017's algebraic flux map,
@@ -17,9 +17,12 @@ over the grid and where, the sensitivity (worst peak minus the worst peak at dsa
 designs ranked by sensitivity (a design that loses lock anywhere ranks first, by its lost scenarios).
 
 ``--result RESULT.json`` adds a tuning result's design (``jaxobs_tuning.results.load_result`` + ``tuned_component``)
-as ``<component>_tuned`` beside the closed forms.  ``--ascent N`` refines the most sensitive design's worst case by
-gradient: N projected ascent steps of the steady peak position error over dsat in :data:`ASCENT_BOX`, at the grid
-worst case's speed, one simulation per step (``jax.value_and_grad`` through the closed loop).
+as ``<component>_tuned`` beside the closed forms.  ``--ascent N`` finds every design's worst case by gradients
+(``--ascent-designs``: some of them; :mod:`benchmarks.saturation_worst`): N rounds of a projected gradient ascent
+of the steady rms position error over dsat in :data:`ASCENT_BOX` at each speed, from the grid points that held
+lock, its forward-mode derivatives checked against central differences at every start and at the worst found (a
+start where they disagree, the metric not smooth there, is not climbed; a loss of lock is reported as such); the
+designs ranked by the mismatch's lost scenarios, then by the rise of their worst rms over dsat = 0.
 """
 
 from __future__ import annotations
@@ -31,7 +34,7 @@ import os
 import sys
 import time
 from pathlib import Path
-from typing import Any, cast
+from typing import Any
 
 ROOT = Path(__file__).resolve().parents[1]
 DRIVE = ROOT / "docs" / "examples" / "pmsyrm_5p6kw_sat.toml"
@@ -42,7 +45,6 @@ SPEEDS_PU = (0.5, 0.8)
 LOAD_PU = 1.0  # of rated torque (29.7 N·m)
 HORIZON = 0.2  # s; each run starts steady (the observer settled 0.2 s before t = 0), scored from horizon/2
 ASCENT_BOX = (-0.5, 2.0)  # the gradient ascent's dsat range
-ASCENT_STEP = 0.5  # the ascent's step on dsat per step, at the gradient's sign (the metric's scale varies)
 FAMILIES = ("rofo", "cleso", "gileso", "faleso", "soifo", "soifo2", "lpf")
 
 
@@ -127,62 +129,6 @@ def summarize(grid: dict, dsat, speeds_rpm) -> dict:
     }
 
 
-def ascent(design: Any, speed_rpm: float, load_nm: float, start: float, steps: int) -> list[dict]:
-    """Projected gradient ascent of the steady peak position error over dsat: one closed-loop simulation per step.
-
-    The step is :data:`ASCENT_STEP` times the gradient's sign (a peak's gradient is that of one sample, its scale
-    unknown beforehand), halved whenever the error falls, clipped to :data:`ASCENT_BOX`.
-    """
-    import equinox as eqx
-    import jax
-    import jax.numpy as jnp
-
-    import jaxobs
-    from jaxobs import drive as D
-    from jaxobs import metrics
-    from jaxobs.drive import read_drive
-    from jaxobs.drive.saturation import AlgebraicSaturation
-    from jaxobs.scenarios.families.drive import bind_observer
-
-    f = read_drive(DRIVE)
-    par, drive = f.machine, f.drive_for(sensorless=True)
-    sat = par.sat
-    if not isinstance(drive, D.Drive) or not isinstance(sat, AlgebraicSaturation):
-        raise ValueError(f"{DRIVE}: the ascent needs a single drive with an algebraic saturation map")
-
-    def coeffs(s):  # the map's saturation coefficients of a scenario's true machine (the dsat axis's)
-        m = cast(AlgebraicSaturation, s.par.sat)
-        return m.a_dd, m.a_qq, m.a_dq
-
-    n = round(HORIZON / drive.ts)
-
-    # the study's own scenario (jaxobs.drive.scenario_batch: steady at the speed and load), its map's saturation
-    # coefficients then scaled by the traced 1 + dsat as the study's dsat axis scales them
-    base = jax.tree.map(
-        lambda x: x[0], D.scenario_batch(D.Scenario(par), ("speed_rpm", "load_nm"), [(speed_rpm, load_nm)])
-    )
-
-    def peak(v):
-        k = 1.0 + v
-        sc = eqx.tree_at(coeffs, base, (sat.a_dd * k, sat.a_qq * k, sat.a_dq * k))
-        o = jaxobs.simulate(D.ClosedLoop(drive, bind_observer(design, sc), sc), HORIZON).outputs
-        e = metrics.wrap(o.obs.theta - o.theta_e)[n // 2 :]
-        return jnp.degrees(jnp.max(jnp.abs(e)))
-
-    f_g = jax.jit(jax.value_and_grad(peak))
-    v, step, best, rows = float(start), ASCENT_STEP, -math.inf, []
-    for _ in range(steps):  # a few steps, each a whole simulation: not a loop over time steps
-        t0 = time.time()
-        val, g = f_g(jnp.asarray(v))
-        val, g = float(val), float(g)
-        rows.append({"dsat": v, "peak_deg": val, "grad": g, "seconds": time.time() - t0})
-        if val < best:
-            step /= 2
-        best = max(best, val)
-        v = min(max(v + step * math.copysign(1.0, g), ASCENT_BOX[0]), ASCENT_BOX[1]) if g else v
-    return rows
-
-
 def rank(summary: dict) -> list[str]:
     """The designs, most sensitive first: by the scenarios the mismatch loses (lost at some dsat != 0 at a speed that
     held at dsat = 0: lock lost is the worst an observer can do), then by the sensitivity."""
@@ -214,6 +160,112 @@ def compare(tuned: str, grids: dict, dsat, speeds_rpm, job_grid: dict) -> list[d
     return rows
 
 
+def gradient_worst(designs: dict, grids: dict, dsat, speeds_rpm, load_nm: float, iters: int, names) -> dict:
+    """The worst case by gradients per design (:mod:`benchmarks.saturation_worst`), printed; the designs ranked by it.
+
+    Args:
+        designs: name -> observer (the study's).
+        grids: name -> the study's grid of that design.
+        dsat: The grid's dsat values.
+        speeds_rpm: The grid's speeds.
+        load_nm: The load.
+        iters: The ascent's line-search rounds.
+        names: The designs to climb (None: all).
+
+    Returns:
+        name -> the ascent's findings and its sensitivity; ``ranking`` and ``most_sensitive``.
+    """
+    from jaxobs.drive import Drive, read_drive
+    from jaxobs.scenarios.families.drive import DriveScenarios
+
+    from . import saturation_worst as W
+
+    f = read_drive(DRIVE)
+    drive = f.drive_for(sensorless=True)
+    assert isinstance(drive, Drive)
+    family = DriveScenarios(f.machine, drive)
+    names = [k for k in designs if names is None or k in names]
+    found, sens = {}, {}
+    for k in names:
+        ev = W.Evaluator(family, designs[k], speeds_rpm, load_nm, HORIZON, W.BATCH)
+        found[k] = W.climb(ev, grids[k], dsat, ASCENT_BOX, iters)
+        sens[k] = W.sensitivity(found[k], grids[k], dsat, speeds_rpm)
+    order = W.rank_by_gradient(sens)
+    took = ", ".join(f"{k} {found[k]['seconds']:.0f} s" for k in names)
+    print(f"ascent per design (compilation included): {took}")
+    print(f"worst case by gradients: steady rms position error (deg) over dsat in {list(ASCENT_BOX)} at each speed,")
+    print(
+        f"{iters} rounds of projected gradient ascent (Armijo line search) from every held grid point; d rms / d dsat"
+    )
+    print(f"by forward mode (AD) against central differences (FD, h = {W.FD_STEP:g}); rough: they differ by more than")
+    print(
+        f"{W.SMOOTH_RTOL:.0%} + {W.SMOOTH_ATOL:g} deg/unit (not climbed); v-lim: share of periods at the voltage limit"
+    )
+    print(f"  {'design':<12}{'dsat':>6}{'r/min':>7}{'rms':>8}{'peak':>8}{'AD':>11}{'FD':>11}{'v-lim':>7}  verdict")
+    for k in order:
+        w = found[k]["worst"]
+        for tag, r in [("", r) for r in found[k]["starts"]] + ([("worst", w)] if w is not None else []):
+            verdict = "lost lock" if r["lost_lock"] else ("smooth" if r["smooth"] else "rough")
+            verdict += " (minimum)" if r["minimum"] and not r["smooth"] else ""
+            print(f"  {k if tag == '' else k + ' worst':<12}{r['dsat']:6.3g}{r['speed_rpm']:7g}{r['rms_deg']:8.2f}"
+                  f"{r['peak_deg']:8.2f}{r['ad']:11.4g}{r['fd']:11.4g}{r['at_v_limit']:7.1%}  {verdict}")  # fmt: skip
+    i0 = list(dsat).index(0.0)
+    print("designs ranked by gradients (lost by the mismatch first, then by sens = worst held rms - rms at dsat 0 at")
+    print("the same speed); worst: the grid's and the ascent's, (dsat, r/min):")
+    print(
+        f"  {'design':<12}{'rms@0 by speed':>16}  {'grid worst':<22}{'gradient worst':<22}{'sens':>7}  lost by mismatch"
+    )
+    for k in order:
+        g, z, fw = grids[k], sens[k], found[k]["worst"]
+        at0 = "/".join(
+            "lost" if g["lost_lock"][i0][j] else f"{g['rms_deg'][i0][j]:.2f}" for j in range(len(speeds_rpm))
+        )
+        gw = _grid_worst_rms(g, dsat, speeds_rpm)
+        fws = "no smooth start" if fw is None else f"{fw['rms_deg']:.2f} ({fw['dsat']:.3g}, {fw['speed_rpm']:g})"
+        lost = ", ".join(f"({d:.3g}, {r:g})" for d, r in z["lost_by_mismatch"]) or "-"
+        lost = lost if math.isfinite(z["sensitivity_deg"]) else "no reference: lost at dsat 0 at every speed"
+        print(f"  {k:<12}{at0:>16}  {gw:<22}{fws:<22}{z['sensitivity_deg']:7.2f}  {lost}")
+    held_max = {k: _worst_held(grids[k], found[k]["worst"]) for k in order}
+    by_worst = sorted((k for k in order if math.isfinite(held_max[k])), key=lambda k: -held_max[k])
+    print("by the worst held rms alone (grid or gradient, any speed):", end=" ")
+    print(", ".join(f"{k} {held_max[k]:.2f}" for k in by_worst))
+    top = sens[order[0]]
+    if top["lost_by_mismatch"]:
+        d, r = top["lost_by_mismatch"][0]
+        why = f"loses lock at dsat {d:.3g}, {r:g} r/min; {len(top['lost_by_mismatch'])} scenarios lost by the mismatch"
+    else:
+        why = f"worst rms {top['worst_rms_deg']:.2f} deg by the {top['by']}, at dsat {top['at']['dsat']:.3g}, " \
+              f"{top['at']['speed_rpm']:g} r/min; sens {top['sensitivity_deg']:.2f} deg"  # fmt: skip
+    print(f"most sensitive: {order[0]} ({why})")
+    held = [k for k in order if not sens[k]["lost_by_mismatch"]]
+    if held and held[0] != order[0]:
+        h = sens[held[0]]
+        print(
+            f"most sensitive that holds lock: {held[0]} (worst rms {h['worst_rms_deg']:.2f} deg by the {h['by']}, at "
+            f"dsat {h['at']['dsat']:.3g}, {h['at']['speed_rpm']:g} r/min; sens {h['sensitivity_deg']:.2f} deg)"
+        )
+    return {"designs": {k: {**found[k], **sens[k]} for k in names}, "ranking": order, "most_sensitive": order[0]}
+
+
+def _worst_held(g: dict, found_worst: dict | None) -> float:
+    """The largest rms among the grid's held scenarios and the ascent's worst (if held); nan: none held."""
+    rows = zip(g["rms_deg"], g["lost_lock"], strict=True)
+    xs = [x for row, lk in rows for x, b in zip(row, lk, strict=True) if not b]
+    if found_worst is not None and not found_worst["lost_lock"]:
+        xs.append(found_worst["rms_deg"])
+    return max(xs) if xs else math.nan
+
+
+def _grid_worst_rms(g: dict, dsat, speeds_rpm) -> str:
+    """The grid's worst held rms and where, as text."""
+    cells = [(g["rms_deg"][i][j], v, r) for i, v in enumerate(dsat) for j, r in enumerate(speeds_rpm)
+             if not g["lost_lock"][i][j]]  # fmt: skip
+    if not cells:
+        return "all lost"
+    x, v, r = max(cells)
+    return f"{x:.2f} ({v:g}, {r:g})"
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run the study (and the ascent), print the table, write ``--json``."""
     ap = argparse.ArgumentParser(
@@ -224,7 +276,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--load", type=float, default=LOAD_PU, help="of rated torque")
     ap.add_argument("--designs", nargs="+", choices=FAMILIES, default=list(FAMILIES))
     ap.add_argument("--result", type=Path, help="a tuning result.json: its design added as <component>_tuned")
-    ap.add_argument("--ascent", type=int, default=0, help="gradient-ascent steps on the most sensitive design")
+    ap.add_argument("--ascent", type=int, default=0, help="gradient-ascent rounds per design (worst case by gradients)")
+    ap.add_argument("--ascent-designs", nargs="+", help="the designs the ascent runs (default: every design studied)")
     ap.add_argument("--json", type=Path)
     a = ap.parse_args(argv)
     if 0.0 not in a.dsat:
@@ -246,6 +299,11 @@ def main(argv: list[str] | None = None) -> int:
     if a.result is not None:
         tuned, comp, job_grid = tuned_design(a.result, drive.ts)
         designs[tuned] = comp
+    if a.ascent < 0:
+        ap.error("--ascent must be >= 0 (rounds)")
+    unknown = sorted(set(a.ascent_designs or ()) - set(designs))
+    if unknown:
+        ap.error(f"--ascent-designs: {', '.join(unknown)} not studied; allowed: {', '.join(designs)}")
     t0 = time.time()
     grids = study(designs, a.dsat, speeds, load)
     seconds = time.time() - t0
@@ -293,16 +351,7 @@ def main(argv: list[str] | None = None) -> int:
     if a.result is not None:
         out["tuned"] = compare(tuned, grids, a.dsat, speeds, job_grid)
     if a.ascent:
-        w = summary[closed[0]]["worst_at"]
-        start = min(max(w["dsat"], ASCENT_BOX[0]), ASCENT_BOX[1])
-        rows = ascent(designs[closed[0]], w["speed_rpm"], load, start, a.ascent)
-        print(f"gradient ascent of {closed[0]}'s peak over dsat in {list(ASCENT_BOX)} at {w['speed_rpm']:g} r/min:")
-        for r in rows:
-            print(
-                f"  dsat {r['dsat']:6.3f}  peak {r['peak_deg']:8.3f} deg  d/d dsat {r['grad']:9.3g}"
-                f"  {r['seconds']:.0f} s"
-            )
-        out["ascent"] = rows
+        out["gradient"] = gradient_worst(designs, grids, a.dsat, speeds, load, a.ascent, a.ascent_designs)
     if a.json:
         a.json.write_text(json.dumps(out, indent=1))
     return 0

@@ -497,3 +497,27 @@ def test_an_observer_at_another_period_than_the_drive_is_refused():
     with pytest.raises(ValueError, match=r"observer runs at ts = 0.0001 s, the drive at 5e-05 s: they must agree"):
         D.ClosedLoop(drive, jaxobs.FALESO(par.Rs, par.Lq), sc)
     assert D.ClosedLoop(drive, jaxobs.FALESO(par.Rs, par.Lq, ts=drive.ts), sc).observer.ts == drive.ts
+
+
+def test_the_d_priority_voltage_limit_has_finite_derivatives():
+    """A drive file with field weakening keeps u_d* first (``d_priority``): beyond the limit u_d* is clipped to
+    ±u_max and u_q* gets no room.  That room's square root was taken at 0, whose infinite slope times the clip's zero
+    tangent made the voltage's derivative, and every derivative of the run after it, NaN."""
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[1] / "docs" / "examples" / "pmsyrm_5p6kw_sat.toml"
+    drive = D.read_drive(path).drive_for(sensorless=True)
+    assert isinstance(drive, D.Drive)
+    foc = drive.foc
+    assert foc.d_priority
+    cs = eqx.tree_at(lambda s: s.int_d, foc.init(), -3.0 * foc.u_max)  # u_d* far beyond the limit: clipped
+
+    def voltage(i_a):
+        zero, w_e, w_m = jnp.asarray(0.0), jnp.asarray(300.0), jnp.asarray(150.0)
+        inp = D.FOCInput(jnp.asarray(1), i_a, zero, zero, w_e, w_m, w_m)  # k = 1: the speed loop holds
+        _, out = foc.step(cs, inp)
+        return jnp.stack([out.u_a, out.u_b])
+
+    u, du = jax.jvp(voltage, (jnp.asarray(2.0),), (jnp.asarray(1.0),))
+    assert float(jnp.hypot(u[0], u[1])) == pytest.approx(float(foc.u_max), rel=1e-6)  # on the limit, all of it u_d
+    assert np.all(np.isfinite(np.asarray(du)))

@@ -35,6 +35,19 @@ def safe_norm2(x: Real, y: Real) -> jax.Array:
     return jnp.where(ok, jnp.sqrt(jnp.where(ok, sq, 1.0)), 0.0)
 
 
+def safe_sqrt(x: Real) -> jax.Array:
+    """√x for x > 0, 0 elsewhere (x ≤ 0, e.g. a room clamped to 0), with a zero gradient there.
+
+    Args:
+        x: The radicand.
+
+    Returns:
+        The root, 0 where ``x`` ≤ 0.
+    """
+    ok = x > 0.0
+    return jnp.where(ok, jnp.sqrt(jnp.where(ok, x, 1.0)), 0.0)
+
+
 def safe_atan2(y: Real, x: Real) -> jax.Array:
     """atan2(y, x), 0 at the origin with a zero gradient there.
 

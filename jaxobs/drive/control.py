@@ -85,7 +85,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax.core import Tracer
 
-from ..core.numerics import safe_norm2, wrap
+from ..core.numerics import safe_norm2, safe_sqrt, wrap
 from ..core.trig import sincos
 from ..core.validate import check_nonnegative, check_positive, check_sample_time
 from . import _policy
@@ -688,7 +688,7 @@ class FOC(AbstractComponent):
             id_fw = fw.update(cs.id_fw, mag, u_max, w_e, est.Ld, self.i_max, ts, *fw_lo)
         if self.d_priority:  # u_d* kept (the flux held where field weakening needs it), u_q* takes what is left
             u_d = jnp.clip(u_d, -u_max, u_max)
-            room = jnp.sqrt(jnp.maximum(u_max * u_max - u_d * u_d, 0.0))
+            room = safe_sqrt(u_max * u_max - u_d * u_d)  # 0 at a clipped u_d*, where a bare √ made gradients NaN
             u_q = jnp.clip(u_q, -room, room)
         else:
             u_d, u_q = u_d * scale, u_q * scale
