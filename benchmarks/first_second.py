@@ -23,7 +23,7 @@ commands that must answer without a compilation (``help``, ``drive-check``, :dat
 the listener (registering it imports JAX, the very cost they are timed for): no phases, and the row says
 whether JAX was imported at all.
 
-The commands (:data:`COMMANDS`) and the issue's targets (:data:`TARGETS`, wall seconds on a quiet machine):
+The commands (:data:`COMMANDS`) and the project's targets (:data:`TARGETS`, wall seconds on a quiet machine):
 ``jaxobs --help`` ≤ 0.5 s; ``jaxobs drive check`` of the lab IPMSM file ≤ 2 s; the default job
 (``make-run``) ≤ 20 s cold and warm ≤ 25 s and ≤ 0.40 of its cold run; a C-LESO result's envelope at
 200 points × 3 designs (``envelope-200x3``, ``--result`` the result.json of ``jaxobs tune
@@ -373,7 +373,7 @@ def summary(rows: list[dict], cpus: int | None = None) -> str:
                 mark = "†" if max(r["load"]) > cpus / 2 else ""
                 loaded |= bool(mark)
                 word = "" if met is None else (": met" if met else ": **not met**")
-                n = f" (median of {len(runs)})" if len(runs) > 1 else ""
+                n = "" if len(runs) == 1 else " (lower of 2)" if len(runs) == 2 else f" (median of {len(runs)})"
                 src = f" [{r['source']}]" if r.get("source") else ""
                 cells.append(f"{_s(r['wall_s'])} / {_s(r['cpu_s'])}{word}{n}, {r['load'][0]:.1f}–{r['load'][1]:.1f}"
                              f"{mark}{src}")  # fmt: skip

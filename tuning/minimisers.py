@@ -63,7 +63,7 @@ def minimiser_reason(result: Any, name: str) -> tuple[bool, str]:
     if result == R.successful:
         return True, f"converged: {name}'s relative change of θ and of the objective fell below tol"
     if result == R.nonlinear_max_steps_reached:
-        return False, f"budget: {name} used its max_steps"
+        return False, f"budget: {name} took its solver.steps"
     if result == R.nonlinear_divergence:
         return False, f"{name} diverged"
     if result == R.nonfinite:

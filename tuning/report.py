@@ -149,7 +149,7 @@ def convergence_figure(history: list, name: str, objective: str | None = None, b
     """
     fig, ax = _subplots(figsize=(6.4, 4.0 if objective else 3.5))
     it, val = [h["iteration"] for h in history], [h["value"] for h in history]
-    ax.plot(it, val, lw=1.2, marker=".", ms=4, label="objective J at each iteration")
+    ax.plot(it, val, lw=1.2, marker=".", ms=4, label="objective J of each design scored")
     # a log scale where every value is positive; an objective with a margin term (sosoifo.toml) goes negative,
     # and a log axis drew nothing at all.  Not near the largest double either: a log axis pads its range by
     # decades, and a run at 1.3e307 (weights of 1e308, tuned in forward mode) made matplotlib's tick
