@@ -394,7 +394,12 @@ def summary(rows: list[dict], cpus: int | None = None) -> str:
 def load_rows(path: str) -> list[dict]:
     """The rows of an earlier ``--out`` file, each marked with the file's name (``source``); a file from before
     the trees were labelled (its rows name a tree's folder) gets the labels of :func:`labels` in its order."""
-    data = json.loads(Path(path).read_text())
+    try:
+        data = json.loads(Path(path).read_text())
+    except (OSError, ValueError) as e:  # a missing file, or the .txt beside the .json
+        raise SystemExit(f"first_second: --with {path}: not an earlier --out file ({type(e).__name__}: {e})") from None
+    if not isinstance(data, dict) or not isinstance(data.get("rows"), list):
+        raise SystemExit(f"first_second: --with {path}: not an earlier --out file (no 'rows')")
     trees = list(data.get("trees") or {})
     names = dict(zip(trees, labels(trees))) if trees else {}
     out = []
