@@ -11,6 +11,7 @@ import numpy as np
 
 from .. import papers
 from ._filekeys import PSI_F_KEYS
+from ._reflimit import ERROR_LIMIT_PU, reference_margin
 from ._steady import base_speed, fw_voltage, no_load_rpm, policy_currents, rpm_of, speed_limit, steady_voltage
 from .control import FOC, IfStartup
 from .hardware import Inverter, Sensors
@@ -439,6 +440,16 @@ def controller(
         fw_obj = VoltageFeedbackFW(2 * math.pi * ctl.get("fw_bandwidth_hz", 20.0), margin, bounded=True)
     advance = ctl.get("advance", n_use)
     rec("advance", advance, "periods", "the timing's use delay (Latency.use_delay)", "advance" in ctl)
+    # |i| <= i_max at every sample: the PIs' error limit and the references' margin below i_max (jaxobs.drive._reflimit)
+    # (control.current_margin = false: the references on i_max itself, the papers' benches)
+    on = ctl.get("current_margin", True)
+    margin_i = reference_margin(loops["alpha_c"] * loops["ts"], n_use, ERROR_LIMIT_PU) if on else 0.0
+    e_lim = ERROR_LIMIT_PU if on else 0.0
+    rec("i_ref_max", loops["i_max"] * (1.0 - margin_i), "A", f"(1 − h) i_max, h = 1.25 o E = {margin_i:.3%}: o the "
+        "current loop's step overshoot with its delay, E the error limit (jaxobs.drive._reflimit; "
+        "control.current_margin)", "current_margin" in ctl)  # fmt: skip
+    rec("error_limit", e_lim * loops["i_max"], "A", "E i_max, E = 0.1: the current PIs' longest error (a step onto "
+        "the circle becomes a ramp; jaxobs.drive._reflimit; 0: off)", "current_margin" in ctl)  # fmt: skip
     foc_kw = dict(
         alpha_c=loops["alpha_c"],
         alpha_s=loops["alpha_s"],
@@ -452,6 +463,8 @@ def controller(
         speed_schedule=loops["speed_schedule"],
         d_priority=fw,
         flux_map=machine.sat is not None,
+        current_margin=margin_i,
+        error_limit=e_lim,
     )
     foc = FOC.imc(machine, **foc_kw)
     for g in ("kp_d", "ki_d", "kp_q", "ki_q", "kp_w", "ki_w"):
