@@ -130,7 +130,8 @@ Derived defaults (each recorded in :attr:`DriveFile.derived` with its rule):
   i_ref_max = (1 − h) i_max, h = 1.25 o E, o the designed current loop's step overshoot with its delay (5.7 % at
   the derived α_c: h = 0.71 %); the capability is drawn within i_ref_max (:mod:`jaxobs.drive._reflimit`).
 - **Speed limit** (one rule, :func:`speed_limit`; ``jaxobs drive check`` prints it, tune, study and envelope
-  use it): the no-load voltage bound, ωe ψf = u_dc/√3, or ωe (ψf − Ld i_max) = u_dc/√3 with field weakening;
+  use it): the no-load voltage bound, ωe ψf = u_dc/√3, or ωe (ψf − Ld i_max) = u_dc/√3 with field weakening (on a
+  saturation map its flux there instead, |ψ(max(−i_max, −ψf/Ld), 0)|; the base speed, too, from the map's flux);
   within ``max_speed_rpm`` where given; where the voltage leaves the speed unbounded (ψf/Ld ≤ i_max) and no
   ``max_speed_rpm`` is given, :data:`MECH_SPEED_PU` (3) × the rated speed, ASSUMED.
 - **ψf from a datasheet**: exactly one of ``psi_f``, ``ke_v_per_krpm_ll_rms``, ``ke_v_per_krpm_ll_peak``,
@@ -353,7 +354,7 @@ def drive_from_table(raw: dict[str, Any], name: str = "drive", base: str | Path 
     f_s, ts, sampling, latency, n_use = timing(inv, w_rated, rec)
     u_max = machine_quantities(m, inv, kt, rec)
     i_max, policy, i_d_r, i_q_r = current_limit(m, ctl, rec)
-    fw, margin = base_speed_table(m, inv, ctl, w_rated, u_max, i_max, (i_d_r, i_q_r), rec)
+    fw, margin = base_speed_table(m, inv, ctl, w_rated, u_max, i_max, (i_d_r, i_q_r), rec, machine)
     alpha_c = current_loop(m, ctl, f_s, ts, n_use, rec)
     alpha_s, schedule, w_est, speed_every, t_w = speed_loop(ctl, f_s, ts, alpha_c, rec)
     loops = dict(alpha_c=alpha_c, alpha_s=alpha_s, i_max=i_max, ts=ts, speed_every=speed_every, id_mode=policy,
