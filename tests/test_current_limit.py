@@ -6,12 +6,12 @@ from rated speed into field weakening (to the top point of ``drive check --simul
 
 Exactly: |i| ≤ i_max at every sample, to float rounding (TOL). The references stay within i_ref_max = (1 − h) i_max
 and the current PIs see an error of at most 0.1 i_max (``jaxobs.drive._reflimit``: h = 1.25 × the designed loop's
-step overshoot 5.68 % × 0.1 = 0.71 %). Measured peaks |i|/i_max (start, speed step, load step): PM-SyRM 0.9958,
-0.9660, 0.9925 (its top point 2207 r/min, 1.5 × the map's base speed); traction 0.9984, 0.9628, 0.8807. Before the
-margin and the error limit: PM-SyRM 1.0034 (its start: i* stepped 0.947 → 1.0 × i_max when the speed loop reached
-the circle, the current 0.34 % over it 5 periods later), traction 1.0104 (its start's step of i* from 0.73 to 1.0 ×
-i_max, 1.010 for 3 periods): the discrete current loop's step overshoot, the voltage computed from the samples at
-t_k acting 1.5 periods later.
+step overshoot 5.68 % × 0.1 = 0.71 %). Measured peaks |i|/i_max (start, speed step, load step): PM-SyRM 0.9952,
+0.9865, 0.9925 (its top point 2207 r/min, 1.5 × the map's base speed; its steady starts the map's); traction 0.9984,
+0.9628, 0.8807. Before the margin and the error limit: PM-SyRM 1.0034 (its start: i* stepped 0.947 → 1.0 × i_max
+when the speed loop reached the circle, the current 0.34 % over it 5 periods later), traction 1.0104 (its start's
+step of i* from 0.73 to 1.0 × i_max, 1.010 for 3 periods): the discrete current loop's step overshoot, the voltage
+computed from the samples at t_k acting 1.5 periods later.
 Earlier still (before bounded field weakening, u_d priority at the voltage limit and the current loop on the
 flux map) the PM-SyRM start drew 1.102 × i_max (its q current loop rang on the secant inductance, 6× the
 saturated incremental one).

@@ -107,6 +107,12 @@ def steady_point(
     carried, and the drive decelerates from there).  ``id_fw`` is then i_d* less the
     policy's i_d.  Below base speed Δi_d = 0 and the point is the policy's, unchanged.
 
+    A true machine with a saturation map (``par.sat``): the torque 1.5 p (ψd i_q − ψq i_d) and the voltage
+    (Rs i_d − ωe ψq, Rs i_q + ωe ψd) are the map's flux ψ(i) at the currents, as the plant has them (its state
+    starts at that flux, :meth:`jaxobs.drive.PMSM.init`); the constants' point was no steady state on the
+    5.6-kW PM-SyRM of ``docs/examples/pmsyrm_5p6kw_sat.toml`` (its currents drifted at 6800 A/s in the first
+    periods at 1800 r/min and rated load, and field weakening started from zero: 31 r/min of speed error).
+
     Args:
         est: The machine the controller assumes.
         id_mode: Its i_d policy, ``"zero"`` or ``"mtpa"``.
@@ -130,8 +136,23 @@ def steady_point(
         i_d = policy_id(id_mode, est, iq)
         return rotate_by(i_d if dfw is None else i_d + dfw, iq, offset)
 
-    def voltage(i_d, i_q):
+    sat = par.sat
+
+    def const_voltage(i_d, i_q):
         return par.Rs * i_d - w_e * par.Lq * i_q, par.Rs * i_q + w_e * (par.Ld * i_d + par.psi_f)
+
+    def map_voltage(i_d, i_q):  # the true machine's map: its flux at the currents (docstring)
+        assert sat is not None
+        pd, pq = sat.flux(i_d, i_q)
+        return par.Rs * i_d - w_e * pq, par.Rs * i_q + w_e * pd
+
+    def map_torque(i_d, i_q):
+        assert sat is not None
+        pd, pq = sat.flux(i_d, i_q)
+        return 1.5 * par.p * (pd * i_q - pq * i_d)
+
+    voltage = const_voltage if sat is None else map_voltage
+    te_of = (lambda i_d, i_q: torque_dq(par, i_d, i_q)) if sat is None else map_torque
 
     need = t_load + par.B * omega_m
 
@@ -142,7 +163,7 @@ def steady_point(
         # |offset| < 90° where a steady state exists; the floor keeps a wilder offset finite
         i_q = need / (1.5 * par.p * par.psi_f * jnp.maximum(jnp.cos(offset), 0.1))
         for _ in range(4):  # Newton on T_e(i_q*) − need
-            te, dte = jax.jvp(lambda iq: torque_dq(par, *rotor_currents(iq, dfw)), (i_q,), (jnp.ones_like(i_q),))
+            te, dte = jax.jvp(lambda iq: te_of(*rotor_currents(iq, dfw)), (i_q,), (jnp.ones_like(i_q),))
             i_q = i_q - (te - need) / dte
         iq_max = policy_iq_limit(id_mode, est, i_max)[0]
         return jnp.clip(i_q, -iq_max, iq_max)
@@ -166,14 +187,27 @@ def steady_point(
         def solve_iq_at(idr):  # i_q* that carries the load at i_d* = idr (Newton from the policy's)
             iq = iq_pol
             for _ in range(4):
-                te, dte = jax.jvp(lambda q: torque_dq(par, *rotate_by(idr, q, offset)), (iq,), (jnp.ones_like(iq),))
+                te, dte = jax.jvp(lambda q: te_of(*rotate_by(idr, q, offset)), (iq,), (jnp.ones_like(iq),))
                 iq = iq - (te - need) / jnp.where(jnp.abs(dte) > 1e-12, dte, 1.0)
             return iq
 
         idr, iqr = id_pol, iq_pol
-        for _ in range(8):  # Newton on i_d* (|u|² is a convex quadratic in it), then i_q* for the torque
-            f, df = jax.jvp(lambda d: excess(d, iqr), (idr,), (jnp.ones_like(idr),))
-            idr = jnp.clip(idr - f / jnp.where(jnp.abs(df) > 1e-12, df, 1.0), lo, id_pol)
+        if sat is None:
+            for _ in range(8):  # Newton on i_d* (|u|² is a convex quadratic in it), then i_q* for the torque
+                f, df = jax.jvp(lambda d: excess(d, iqr), (idr,), (jnp.ones_like(idr),))
+                idr = jnp.clip(idr - f / jnp.where(jnp.abs(df) > 1e-12, df, 1.0), lo, id_pol)
+                iqr = solve_iq_at(idr)
+        else:
+            # on a map the partial derivative at a fixed i_q* overshot to the stop and back, a 2-cycle (the PM-SyRM
+            # at 1800 r/min): Newton on the excess along the torque's curve, |u|²(i_d*, i_q*(i_d*)) − (m u_max)²,
+            # kept within its bracket (a step outside it bisects); the excess falls as i_d* does, to the stop
+            bracket = (lo, id_pol)
+            for _ in range(12):
+                f, df = jax.jvp(lambda d: excess(d, solve_iq_at(d)), (idr,), (jnp.ones_like(idr),))
+                bracket = (jnp.where(f > 0, bracket[0], idr), jnp.where(f > 0, idr, bracket[1]))
+                step = idr - f / jnp.where(jnp.abs(df) > 1e-12, df, 1.0)
+                inside = (step > bracket[0]) & (step < bracket[1])
+                idr = jnp.where(inside, step, 0.5 * (bracket[0] + bracket[1]))
             iqr = solve_iq_at(idr)
         # the limits the controller puts on i_q* there (jaxobs.drive.weakening, point 3)
         room = jnp.minimum(fw.limit_room(idr, i_max), mtpv_iq(est, idr))
