@@ -3,7 +3,7 @@
 
 from __future__ import annotations
 
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -137,22 +137,7 @@ def steady_point(
         return rotate_by(i_d if dfw is None else i_d + dfw, iq, offset)
 
     sat = par.sat
-
-    def const_voltage(i_d, i_q):
-        return par.Rs * i_d - w_e * par.Lq * i_q, par.Rs * i_q + w_e * (par.Ld * i_d + par.psi_f)
-
-    def map_voltage(i_d, i_q):  # the true machine's map: its flux at the currents (docstring)
-        assert sat is not None
-        pd, pq = sat.flux(i_d, i_q)
-        return par.Rs * i_d - w_e * pq, par.Rs * i_q + w_e * pd
-
-    def map_torque(i_d, i_q):
-        assert sat is not None
-        pd, pq = sat.flux(i_d, i_q)
-        return 1.5 * par.p * (pd * i_q - pq * i_d)
-
-    voltage = const_voltage if sat is None else map_voltage
-    te_of = (lambda i_d, i_q: torque_dq(par, i_d, i_q)) if sat is None else map_torque
+    voltage, te_of = _true_machine(par, w_e)
 
     need = t_load + par.B * omega_m
 
@@ -197,17 +182,8 @@ def steady_point(
                 f, df = jax.jvp(lambda d: excess(d, iqr), (idr,), (jnp.ones_like(idr),))
                 idr = jnp.clip(idr - f / jnp.where(jnp.abs(df) > 1e-12, df, 1.0), lo, id_pol)
                 iqr = solve_iq_at(idr)
-        else:
-            # on a map the partial derivative at a fixed i_q* overshot to the stop and back, a 2-cycle (the PM-SyRM
-            # at 1800 r/min): Newton on the excess along the torque's curve, |u|²(i_d*, i_q*(i_d*)) − (m u_max)²,
-            # kept within its bracket (a step outside it bisects); the excess falls as i_d* does, to the stop
-            bracket = (lo, id_pol)
-            for _ in range(12):
-                f, df = jax.jvp(lambda d: excess(d, solve_iq_at(d)), (idr,), (jnp.ones_like(idr),))
-                bracket = (jnp.where(f > 0, bracket[0], idr), jnp.where(f > 0, idr, bracket[1]))
-                step = idr - f / jnp.where(jnp.abs(df) > 1e-12, df, 1.0)
-                inside = (step > bracket[0]) & (step < bracket[1])
-                idr = jnp.where(inside, step, 0.5 * (bracket[0] + bracket[1]))
+        else:  # on a map: along the torque's curve, in a bracket (_bracketed_newton)
+            idr = _bracketed_newton(lambda d: excess(d, solve_iq_at(d)), lo, id_pol)
             iqr = solve_iq_at(idr)
         # the limits the controller puts on i_q* there (jaxobs.drive.weakening, point 3)
         room = jnp.minimum(fw.limit_room(idr, i_max), mtpv_iq(est, idr))
@@ -232,3 +208,38 @@ def steady_point(
         offset=z + offset,
         id_fw=z + id_fw,
     )
+
+
+def _true_machine(par: PMSMParams, w_e: jax.Array | float) -> tuple[Any, Any]:
+    """The true machine's steady voltage (u_d, u_q)(i_d, i_q) at ω_e and its torque T_e(i_d, i_q): the constants'
+    (the operations as they always were), or the map's flux at the currents (``par.sat``, :func:`steady_point`)."""
+    sat = par.sat
+    if sat is None:
+        return (
+            lambda i_d, i_q: (par.Rs * i_d - w_e * par.Lq * i_q, par.Rs * i_q + w_e * (par.Ld * i_d + par.psi_f)),
+            lambda i_d, i_q: torque_dq(par, i_d, i_q),
+        )
+
+    def voltage(i_d, i_q):
+        pd, pq = sat.flux(i_d, i_q)
+        return par.Rs * i_d - w_e * pq, par.Rs * i_q + w_e * pd
+
+    def torque(i_d, i_q):
+        pd, pq = sat.flux(i_d, i_q)
+        return 1.5 * par.p * (pd * i_q - pq * i_d)
+
+    return voltage, torque
+
+
+def _bracketed_newton(g: Any, lo: jax.Array, hi: jax.Array, iters: int = 12) -> jax.Array:
+    """The root of ``g`` (> 0 at ``hi``, falling as its argument does) in [lo, hi] by Newton from ``hi``, a step
+    outside the bracket bisecting it (the stop ``lo`` where g stays > 0).  Field weakening's i_d* on a map: the
+    partial derivative at a fixed i_q* overshot to the stop and back, a 2-cycle (the PM-SyRM at 1800 r/min)."""
+    x, bracket = hi, (lo, hi)
+    for _ in range(iters):
+        f, df = jax.jvp(g, (x,), (jnp.ones_like(x),))
+        bracket = (jnp.where(f > 0, bracket[0], x), jnp.where(f > 0, x, bracket[1]))
+        step = x - f / jnp.where(jnp.abs(df) > 1e-12, df, 1.0)
+        inside = (step > bracket[0]) & (step < bracket[1])
+        x = jnp.where(inside, step, 0.5 * (bracket[0] + bracket[1]))
+    return x
