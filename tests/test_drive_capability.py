@@ -74,7 +74,9 @@ def test_the_map_curve_is_feasible_on_the_map_and_starts_at_its_mtpa():
     m = f.machine
     n = np.array([0.0, 1800.0, 4000.0, 9000.0])
     c = f.capability(n)
-    i_max, u_lim = f.derived["i_ref_max"].value, f.derived["fw_margin"].value * f.derived["u_max"].value
+    i_max = float(f.derived["i_ref_max"].value)
+    u_lim = float(f.derived["fw_margin"].value) * float(f.derived["u_max"].value)
+    assert m.sat is not None
     assert np.all(np.isfinite(c["torque"]))
     pd, pq = (np.asarray(v) for v in _map_flux(m.sat, c["i_d"], c["i_q"]))
     assert np.all(np.hypot(c["i_d"], c["i_q"]) <= i_max * (1 + 1e-12))
