@@ -68,12 +68,15 @@ def test_without_field_weakening_the_curve_keeps_the_policys_i_d():
 
 def test_the_map_curve_is_feasible_on_the_map_and_starts_at_its_mtpa():
     """The saturated PM-SyRM (its map's flux): every point lies within the circle and meets the voltage on the
-    map; at standstill the torque is the map's MTPA torque at i_max (within the grid's 0.5 %)."""
+    map; at standstill the torque is the map's MTPA torque on the references' circle i_ref_max (within the grid's
+    0.5 %)."""
     f = D.read_drive(EXAMPLES / "pmsyrm_5p6kw_sat.toml")
     m = f.machine
     n = np.array([0.0, 1800.0, 4000.0, 9000.0])
     c = f.capability(n)
-    i_max, u_lim = f.derived["i_max"].value, f.derived["fw_margin"].value * f.derived["u_max"].value
+    i_max = float(f.derived["i_ref_max"].value)
+    u_lim = float(f.derived["fw_margin"].value) * float(f.derived["u_max"].value)
+    assert m.sat is not None
     assert np.all(np.isfinite(c["torque"]))
     pd, pq = (np.asarray(v) for v in _map_flux(m.sat, c["i_d"], c["i_q"]))
     assert np.all(np.hypot(c["i_d"], c["i_q"]) <= i_max * (1 + 1e-12))
@@ -91,9 +94,10 @@ def test_drive_check_prints_the_capability_and_draws_it(tmp_path, capsys):
     rc = main(["drive", "check", "--no-cache", str(EXAMPLES / "traction_ipmsm.toml"), "--figure", str(fig)])
     out = capsys.readouterr().out
     assert rc == 0
-    assert "capability (steady maximum torque; |i| <= i_max = 240 A, |u| <= fw_margin × u_dc/√3 = 164.54 V" in out
+    # the references' circle, 0.71 % below the 240 A limit (jaxobs.drive._reflimit)
+    assert "capability (steady maximum torque; |i| <= i_ref_max = 238.3 A, |u| <= fw_margin × u_dc/√3 = 164.54 V" in out
     rows = {ln.split()[0]: ln.split() for ln in out.splitlines() if ln.startswith("  ") and ln.split()[0][0].isdigit()}
-    assert rows["0"][1:2] == ["160.6"] and rows["0"][-1] == "current"
+    assert rows["0"][1:2] == ["158.7"] and rows["0"][-1] == "current"
     assert rows["3996.6"][1] == "103.1" and rows["3996.6"][-1] == "voltage+i_d_stop"  # at −ψf/Ld, under u
     assert rows["12000"][1] == "34.35"
     assert fig.stat().st_size > 10_000 and fig.read_bytes()[:4] == b"\x89PNG"

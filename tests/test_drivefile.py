@@ -390,3 +390,36 @@ def test_tune_and_study_refuse_a_speed_above_the_files_limit():
     ):
         check_speed_axes({"speed_rpm": [50000.0]}, "scenarios.grid", "traction_ipmsm", f)
     check_speed_axes({"speed_rpm": [11000.0]}, "scenarios.grid", "traction_ipmsm", f)
+
+
+def test_a_saturation_map_sets_the_speed_limit_and_the_base_speed():
+    """The saturated PM-SyRM: its speed limit is the map's no-load bound at the FOC's stop i_d = −i_max (|ψ| =
+    0.100 Vs: 14869 r/min; the constants' ψf − Ld i_max = 0.078 Vs claimed 19131), the same in drive check and
+    the envelope; its base speed is where the map's flux at the rated torque's currents reaches u_max (1472 r/min;
+    the constants gave 1424)."""
+    from jaxobs.analysis.envelope import speed_limit_rpm
+    from jaxobs.drive._steady import policy_currents
+    from jaxobs.drive.weakening import map_flux_at, map_speed_flux
+
+    f = read_drive(ROOT / "docs" / "examples" / "pmsyrm_5p6kw_sat.toml")
+    m, d = f.machine, f.derived
+    i_max, u_max = float(d["i_max"].value), float(d["u_max"].value)
+    flux, at_stop = map_speed_flux(m, i_max, True), map_flux_at(m, -i_max, 0.0)
+    assert flux is not None and at_stop is not None
+    pd, pq = at_stop
+    assert flux == pytest.approx(math.hypot(pd, pq), rel=1e-6) and 0.09 < flux < 0.11
+    n_lim = u_max / flux / m.p * 60 / (2 * math.pi)
+    assert f.speed_limit_rpm == pytest.approx(n_lim, rel=1e-12) == d["max_speed_fw_rpm"].value
+    assert 14800 < f.speed_limit_rpm < 14900 and "map" in d["speed_limit_rpm"].rule
+    assert speed_limit_rpm(m, f.drive) == f.speed_limit_rpm  # one rule: the envelope's is the file's
+    assert float(f.capability([0.9 * f.speed_limit_rpm])["torque"][0]) > 0  # within fw_margin of it: torque left
+    # the base speed: the steady |u| at the rated torque's currents on the map reaches u_max there
+    i_d, i_q = policy_currents({"p": m.p, "Ld": float(m.Ld), "Lq": float(m.Lq), "psi_f": float(m.psi_f)}, "mtpa",
+                               float(m.T_rated))  # fmt: skip
+    at_rated = map_flux_at(m, i_d, i_q)
+    assert at_rated is not None
+    pd, pq = at_rated
+    w = float(d["base_speed_rpm"].value) * m.p * jaxobs.drive.RPM
+    u = math.hypot(float(m.Rs) * i_d - w * pq, float(m.Rs) * i_q + w * pd)
+    assert u == pytest.approx(u_max, rel=1e-9)
+    assert 1460 < float(d["base_speed_rpm"].value) < 1480 and "map" in d["base_speed_rpm"].rule

@@ -62,8 +62,9 @@ LAYERS = [
     ("jaxobs.signals._logs", "jaxobs.drive.pwm", "jaxobs.drive.weakening"),
     ("jaxobs.signals._read",),  # the recordings reader: one file as a family's scenarios
     ("jaxobs.signals",),
-    # the FOC's parts: the I-f start-up, the i_d policy's maps, its interface types; the steady operating point
-    ("jaxobs.drive.startup", "jaxobs.drive._policy", "jaxobs.drive._foctypes"),
+    # the FOC's parts: the I-f start-up, the i_d policy's maps, its interface types, the current limit at every
+    # sample; the steady operating point
+    ("jaxobs.drive.startup", "jaxobs.drive._policy", "jaxobs.drive._foctypes", "jaxobs.drive._reflimit"),
     ("jaxobs.drive._operating",),
     ("jaxobs.scenarios", "jaxobs.drive.plant", "jaxobs.drive.dual", "jaxobs.drive.control", "jaxobs.drive.scenario"),
     ("jaxobs.drive._zerospeed",),  # scenarios through and at zero speed, made from a base Scenario

@@ -92,3 +92,23 @@ def test_saturated_plant_conserves_power():
         dw = 1.5 * (float(par.Ld) * i_d * did + float(D.lq_incremental(par, i_q)) * i_q * diq)
         p_mech = float(D.torque(par, i_d, i_q, x[3])) * float(x[2])
         assert p_in == pytest.approx(loss + dw + p_mech, rel=1e-4), (p_in, loss, dw, p_mech)
+
+
+@pytest.mark.parametrize("rpm, load, was", [(900.0, 29.7, 343.0), (1800.0, 29.7, 6797.0)])
+def test_a_steady_start_on_the_map_is_steady(rpm, load, was):
+    """The saturated PM-SyRM (``docs/examples/pmsyrm_5p6kw_sat.toml``) started steady, sensored: its operating point
+    is the map's (torque and voltage from its flux at the currents, field weakening's equilibrium on it at 1800
+    r/min), so the first samples' current hardly moves (measured 0.21 and 1.4 A/s); from the constants' point it
+    drifted at ``was`` A/s, and at 1800 r/min the speed fell 31 r/min while field weakening found its i_d."""
+    from pathlib import Path
+
+    from jaxobs.runtime import simulate
+
+    f = D.read_drive(Path(__file__).parents[1] / "docs" / "examples" / "pmsyrm_5p6kw_sat.toml")
+    sc = D.Scenario(f.machine, speed_ref=D.Profile.constant(rpm * D.RPM), omega_m0=rpm * D.RPM,
+                    load=D.Profile.constant(load))  # fmt: skip
+    out = simulate(D.ClosedLoop(f.drive_for(sensorless=False), None, sc), 0.01).outputs
+    i_d, i_q = np.asarray(out.i_d), np.asarray(out.i_q)
+    di_dt = np.hypot(np.diff(i_d[:11]), np.diff(i_q[:11])) / f.ts
+    assert di_dt.max() < 20.0 < was / 10, di_dt.max()
+    assert np.max(np.abs(np.asarray(out.speed_rpm) - rpm)) < 0.01

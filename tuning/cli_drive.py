@@ -64,7 +64,7 @@ _SECTIONS = (
     ("timing", ("ts", "use_delay", "advance", "speed_every")),
     ("current loop", ("alpha_c", "alpha_c_ts", "current_phase_margin", "kp_d", "ki_d", "kp_q", "ki_q")),
     ("speed loop", ("alpha_s", "omega_est", "speed_schedule", "kp_w", "ki_w")),
-    ("limits and policy", ("i_max", "id_policy", "field_weakening", "fw_margin")),
+    ("limits and policy", ("i_max", "i_ref_max", "error_limit", "id_policy", "field_weakening", "fw_margin")),
     ("sensors", ("adc_lsb", "i_noise", "encoder_angle_step", "encoder_speed_step")),
     ("I-f start-up", ("if_current", "if_switch_rpm", "if_ramp_s")),
 )
@@ -96,6 +96,7 @@ def _capability(f: DriveFile) -> list[str]:
     """Print the capability table; the warnings it finds."""
     d = f.derived
     i_max, u_max, m_fw = (float(d[k].value) for k in ("i_max", "u_max", "fw_margin"))
+    i_ref = float(d.get("i_ref_max", d["i_max"]).value)  # the references' circle: where the current limit binds
     n = _table_speeds(f)
     c = f.capability(n)
     near = _NEAR if f.machine.sat is None else 1e-2  # a map's grid binds within about 1 %
@@ -105,7 +106,8 @@ def _capability(f: DriveFile) -> list[str]:
         if d["field_weakening"].value
         else f"field weakening off: the {d['id_policy'].value} i_d policy"
     )
-    print(f"capability (steady maximum torque; |i| <= i_max = {i_max:.5g} A, |u| <= fw_margin × u_dc/√3 = "
+    lim = f"i_ref_max = {i_ref:.5g} A" if i_ref < i_max else f"i_max = {i_max:.5g} A"
+    print(f"capability (steady maximum torque; |i| <= {lim}, |u| <= fw_margin × u_dc/√3 = "
           f"{m_fw * u_max:.5g} V; {flux}; {fw}):")  # fmt: skip
     print(f"  {'speed':>9} {'torque':>9} {'power':>8} {'i_d':>8} {'i_q':>8} {'|i|/i_max':>9} {'|u|/u_max':>9}  limit")
     print(f"  {'r/min':>9} {'N·m':>9} {'kW':>8} {'A':>8} {'A':>8}")
@@ -113,7 +115,7 @@ def _capability(f: DriveFile) -> list[str]:
     # field weakening's own stop at −ψf/Ld (where it lies inside the circle), and the MTPV line it respects on an
     # inverse-salient machine (jaxobs.drive.weakening): limits of the reference, named where they bind
     weak = bool(d["field_weakening"].value)
-    stop = -float(m.psi_f) / float(m.Ld) if weak and float(m.psi_f) / float(m.Ld) < i_max else None
+    stop = -float(m.psi_f) / float(m.Ld) if weak and float(m.psi_f) / float(m.Ld) < i_ref else None
     mtpv = mtpv_iq_np(m, c["i_d"]) if weak else np.full(len(n), np.inf)
     for k in range(len(n)):
         te, i_d, i_q, u = (float(c[key][k]) for key in ("torque", "i_d", "i_q", "u"))
@@ -121,7 +123,8 @@ def _capability(f: DriveFile) -> list[str]:
             print(f"  {n[k]:>9.5g} {'none':>9}  no current within the limits fits the voltage")
             continue
         i_r = float(np.hypot(i_d, i_q)) / i_max
-        binds = [w for w, on in (("current", i_r >= 1 - near), ("voltage", u / u_max >= m_fw * (1 - near)),
+        on_circle = i_r * i_max / i_ref >= 1 - near
+        binds = [w for w, on in (("current", on_circle), ("voltage", u / u_max >= m_fw * (1 - near)),
                                  ("i_d_stop", stop is not None and i_d <= stop * (1 - near)),
                                  ("MTPV", i_q >= mtpv[k] * (1 - near))) if on]  # fmt: skip
         power = te * n[k] * 2 * np.pi / 60 / 1e3

@@ -32,6 +32,7 @@ from ..drive import (
     drive_speed_limit_rpm,
     speed_limit,
 )
+from ..drive.weakening import map_speed_flux
 from ..observers import AbstractObserver
 from ..scenarios.families import DRIVE_STUDY_AXES, AbstractFamily, DriveScenarios, bind_observer
 from .envelope_layout import ENVELOPE_VARIABLES
@@ -68,7 +69,8 @@ def speed_limit_rpm(
     """The highest speed (r/min) ``drive`` may ask of ``machine``: the drive file's one rule.
 
     The rule (:func:`jaxobs.drive.drivefile.speed_limit`): the no-load voltage bound, ωe ψf = u_max, or with the
-    FOC's field weakening ωe (ψf − Ld i_max) = u_max; then the mechanical limit.
+    FOC's field weakening ωe (ψf − Ld i_max) = u_max (a saturation map's flux there where the machine has one);
+    then the mechanical limit.
 
     Args:
         machine: the machine.
@@ -83,15 +85,17 @@ def speed_limit_rpm(
     if drive is None:
         return drive_speed_limit_rpm(machine)
     foc = drive.ctrl.foc if isinstance(drive, DualDrive) else drive.foc  # the dual drive: per phase, the same bound
+    weak = foc.field_weakening is not None
     return speed_limit(
         machine.p,
         float(machine.psi_f),
         float(machine.Ld),
         float(foc.i_max),
         float(drive.inverter.u_max),
-        foc.field_weakening is not None,
+        weak,
         float(machine.n_rated),
         max_speed_rpm,
+        map_speed_flux(machine, float(foc.i_max), weak),  # a saturation map's flux (None: the constants)
     )[0]
 
 

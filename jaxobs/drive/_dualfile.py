@@ -77,7 +77,8 @@ class SetFile(Protocol):
 
 def dual_foc_kw(foc_kw: Mapping[str, Any], drop: tuple[str, ...] = ("alpha_c", "alpha_s")) -> dict[str, Any]:
     """The single set's :meth:`FOC.imc` keywords as :meth:`DualFOC.imc` takes them: without ``drop``, and without the
-    single drive's current-limit features (``d_priority``, ``flux_map``, the bounded field weakening), which
+    single drive's current-limit features (``d_priority``, ``flux_map``, the bounded field weakening, the references'
+    margin and the error limit of :mod:`jaxobs.drive._reflimit`), which
     the dual loops (``jaxobs.drive.dual_loop``) do not run: a ``[dual]`` file builds 002's dual bench unchanged.
 
     Args:
@@ -87,7 +88,8 @@ def dual_foc_kw(foc_kw: Mapping[str, Any], drop: tuple[str, ...] = ("alpha_c", "
     Returns:
         The keywords.
     """
-    kw = {k: v for k, v in foc_kw.items() if k not in (*drop, "d_priority", "flux_map")}
+    single_only = ("d_priority", "flux_map", "current_margin", "error_limit")
+    kw = {k: v for k, v in foc_kw.items() if k not in (*drop, *single_only)}
     fw = kw.get("field_weakening")
     if isinstance(fw, VoltageFeedbackFW) and fw.bounded:
         kw["field_weakening"] = VoltageFeedbackFW(float(fw.alpha_fw), float(fw.margin), float(fw.omega_min))

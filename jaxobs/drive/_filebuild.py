@@ -11,6 +11,7 @@ import numpy as np
 
 from .. import papers
 from ._filekeys import PSI_F_KEYS
+from ._reflimit import ERROR_LIMIT_PU, reference_margin
 from ._steady import base_speed, fw_voltage, no_load_rpm, policy_currents, rpm_of, speed_limit, steady_voltage
 from .control import FOC, IfStartup
 from .hardware import Inverter, Sensors
@@ -18,7 +19,7 @@ from .latency import Latency, PeriodStart, PWMCentre
 from .loop import SETTLE_PERIODS
 from .machine import RPM, PMSMParams, QSaturation, psi_f_from_ke, psi_f_from_kt
 from .saturation import AlgebraicSaturation, FluxTable
-from .weakening import FW_MARGIN, VoltageFeedbackFW
+from .weakening import FW_MARGIN, VoltageFeedbackFW, map_flux_at, map_speed_flux
 
 __all__ = [
     "ALPHA_C_TS_MAX",
@@ -243,8 +244,13 @@ def base_speed_table(
     i_max: float,
     rated: tuple[float, float],
     rec: Record,
+    machine: PMSMParams | None = None,
 ) -> tuple[bool, float]:
     """The voltage: the rated point's, the base speed, the speed range and the field weakening.
+
+    On a saturation map (``machine.sat``) the base speed, the no-load bound with field weakening and the speed
+    limit take the map's flux (the rated torque's currents, the FOC's no-load stop); the rated point's voltage and
+    field weakening's default stay the constants' (what the controller assumes).
 
     Args:
         m: The checked ``[machine]`` table.
@@ -255,6 +261,7 @@ def base_speed_table(
         i_max: The current limit, A.
         rated: The rated point's ``(i_d, i_q)``, A.
         rec: The record the derived values and warnings go to.
+        machine: The machine (its map, where it has one); None: the constants alone.
 
     Returns:
         ``(field weakening on, its margin)``.
@@ -266,12 +273,17 @@ def base_speed_table(
     i_d_r, i_q_r = rated
     u_rated = steady_voltage(m, w_rated, i_d_r, i_q_r)
     rec("u_rated_point", u_rated, "V", "steady |u| at rated torque and speed")
-    rec("base_speed_rpm", rpm_of(base_speed(m, i_d_r, i_q_r, u_max), p), "r/min",
-                 "the speed where rated torque's |u| reaches u_max")  # fmt: skip
+    on_map = machine is not None and machine.sat is not None
+    flux_r = map_flux_at(machine, i_d_r, i_q_r) if machine is not None else None
+    on_map_rule = " (the map's flux at its currents)" if on_map else ""
+    rec("base_speed_rpm", rpm_of(base_speed(m, i_d_r, i_q_r, u_max, flux_r), p), "r/min",
+        "the speed where rated torque's |u| reaches u_max" + on_map_rule)  # fmt: skip
     n_emf = rec("emf_speed_rpm", no_load_rpm(u_max, m["psi_f"], p), "r/min",
                 "no-load speed where ωe ψf = u_max (no weakening)")  # fmt: skip
-    rec("max_speed_fw_rpm", no_load_rpm(u_max, m["psi_f"] - m["Ld"] * i_max, p), "r/min",
-        "no-load ωe (ψf − Ld i_max) = u_max (inf: i_char ≤ i_max, unbounded by the voltage)")  # fmt: skip
+    fw_flux = map_speed_flux(machine, i_max, True) if machine is not None else None
+    rec("max_speed_fw_rpm", no_load_rpm(u_max, m["psi_f"] - m["Ld"] * i_max if fw_flux is None else fw_flux, p),
+        "r/min", "no-load ωe (ψf − Ld i_max) = u_max (inf: i_char ≤ i_max, unbounded by the voltage)" if not on_map
+        else "no-load ωe |ψ| = u_max, the map's flux at i_d = max(−i_max, −ψf/Ld)")  # fmt: skip
     fw_needed = u_rated > u_max
     margin = rec("fw_margin", ctl.get("fw_margin", FW_MARGIN), "1",
                  "5 % of u_max left to the current PIs (jaxobs.drive.weakening)", "fw_margin" in ctl)  # fmt: skip
@@ -280,7 +292,8 @@ def base_speed_table(
     rec("field_weakening", fw, "", "on when the rated point needs |u| > fw_margin × u_dc/√3, or machine.max_speed_rpm "
         "lies above emf_speed_rpm (where the back EMF alone reaches u_max)", "field_weakening" in ctl)  # fmt: skip
     limit, limit_rule = speed_limit(p, m["psi_f"], m["Ld"], i_max, u_max, fw, m["rated_speed_rpm"],
-                                    m.get("max_speed_rpm"))  # fmt: skip
+                                    m.get("max_speed_rpm"), fw_flux if fw else map_speed_flux(machine, i_max, False)
+                                    if machine is not None else None)  # fmt: skip
     rec("speed_limit_rpm", limit, "r/min", limit_rule, "max_speed_rpm" in m)
     if fw_needed:
         id_top = min(i_d_r, 0.0)
@@ -439,6 +452,16 @@ def controller(
         fw_obj = VoltageFeedbackFW(2 * math.pi * ctl.get("fw_bandwidth_hz", 20.0), margin, bounded=True)
     advance = ctl.get("advance", n_use)
     rec("advance", advance, "periods", "the timing's use delay (Latency.use_delay)", "advance" in ctl)
+    # |i| <= i_max at every sample: the PIs' error limit and the references' margin below i_max (jaxobs.drive._reflimit)
+    # (control.current_margin = false: the references on i_max itself, the papers' benches)
+    on = ctl.get("current_margin", True)
+    margin_i = reference_margin(loops["alpha_c"] * loops["ts"], n_use, ERROR_LIMIT_PU) if on else 0.0
+    e_lim = ERROR_LIMIT_PU if on else 0.0
+    rec("i_ref_max", loops["i_max"] * (1.0 - margin_i), "A", f"(1 − h) i_max, h = 1.25 o E = {margin_i:.3%}: o the "
+        "current loop's step overshoot with its delay, E the error limit (jaxobs.drive._reflimit; "
+        "control.current_margin)", "current_margin" in ctl)  # fmt: skip
+    rec("error_limit", e_lim * loops["i_max"], "A", "E i_max, E = 0.1: the current PIs' longest error (a step onto "
+        "the circle becomes a ramp; jaxobs.drive._reflimit; 0: off)", "current_margin" in ctl)  # fmt: skip
     foc_kw = dict(
         alpha_c=loops["alpha_c"],
         alpha_s=loops["alpha_s"],
@@ -452,6 +475,8 @@ def controller(
         speed_schedule=loops["speed_schedule"],
         d_priority=fw,
         flux_map=machine.sat is not None,
+        current_margin=margin_i,
+        error_limit=e_lim,
     )
     foc = FOC.imc(machine, **foc_kw)
     for g in ("kp_d", "ki_d", "kp_q", "ki_q", "kp_w", "ki_w"):

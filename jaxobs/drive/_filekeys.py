@@ -78,6 +78,7 @@ DRIVE_FILE_KEYS: dict[str, dict[str, KeySpec]] = {
         "field_weakening": KeySpec("bool"),
         "fw_bandwidth_hz": KeySpec(_F, 0.01, 1e4, unit="Hz"),
         "fw_margin": KeySpec(_F, 0.5, 1.0, unit="1"),
+        "current_margin": KeySpec("bool"),
         "speed_schedule": KeySpec(_F, 0.0, 1000.0, unit="1"),
         "setpoint_weight": KeySpec(_F, 0.0, 1.0, unit="1"),
         "advance": KeySpec(_F, 0.0, 3.0, unit="periods"),

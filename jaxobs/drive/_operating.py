@@ -3,7 +3,7 @@
 
 from __future__ import annotations
 
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -107,6 +107,12 @@ def steady_point(
     carried, and the drive decelerates from there).  ``id_fw`` is then i_d* less the
     policy's i_d.  Below base speed Δi_d = 0 and the point is the policy's, unchanged.
 
+    A true machine with a saturation map (``par.sat``): the torque 1.5 p (ψd i_q − ψq i_d) and the voltage
+    (Rs i_d − ωe ψq, Rs i_q + ωe ψd) are the map's flux ψ(i) at the currents, as the plant has them (its state
+    starts at that flux, :meth:`jaxobs.drive.PMSM.init`); the constants' point was no steady state on the
+    5.6-kW PM-SyRM of ``docs/examples/pmsyrm_5p6kw_sat.toml`` (its currents drifted at 6800 A/s in the first
+    periods at 1800 r/min and rated load, and field weakening started from zero: 31 r/min of speed error).
+
     Args:
         est: The machine the controller assumes.
         id_mode: Its i_d policy, ``"zero"`` or ``"mtpa"``.
@@ -130,8 +136,8 @@ def steady_point(
         i_d = policy_id(id_mode, est, iq)
         return rotate_by(i_d if dfw is None else i_d + dfw, iq, offset)
 
-    def voltage(i_d, i_q):
-        return par.Rs * i_d - w_e * par.Lq * i_q, par.Rs * i_q + w_e * (par.Ld * i_d + par.psi_f)
+    sat = par.sat
+    voltage, te_of = _true_machine(par, w_e)
 
     need = t_load + par.B * omega_m
 
@@ -142,7 +148,7 @@ def steady_point(
         # |offset| < 90° where a steady state exists; the floor keeps a wilder offset finite
         i_q = need / (1.5 * par.p * par.psi_f * jnp.maximum(jnp.cos(offset), 0.1))
         for _ in range(4):  # Newton on T_e(i_q*) − need
-            te, dte = jax.jvp(lambda iq: torque_dq(par, *rotor_currents(iq, dfw)), (i_q,), (jnp.ones_like(i_q),))
+            te, dte = jax.jvp(lambda iq: te_of(*rotor_currents(iq, dfw)), (i_q,), (jnp.ones_like(i_q),))
             i_q = i_q - (te - need) / dte
         iq_max = policy_iq_limit(id_mode, est, i_max)[0]
         return jnp.clip(i_q, -iq_max, iq_max)
@@ -166,14 +172,18 @@ def steady_point(
         def solve_iq_at(idr):  # i_q* that carries the load at i_d* = idr (Newton from the policy's)
             iq = iq_pol
             for _ in range(4):
-                te, dte = jax.jvp(lambda q: torque_dq(par, *rotate_by(idr, q, offset)), (iq,), (jnp.ones_like(iq),))
+                te, dte = jax.jvp(lambda q: te_of(*rotate_by(idr, q, offset)), (iq,), (jnp.ones_like(iq),))
                 iq = iq - (te - need) / jnp.where(jnp.abs(dte) > 1e-12, dte, 1.0)
             return iq
 
         idr, iqr = id_pol, iq_pol
-        for _ in range(8):  # Newton on i_d* (|u|² is a convex quadratic in it), then i_q* for the torque
-            f, df = jax.jvp(lambda d: excess(d, iqr), (idr,), (jnp.ones_like(idr),))
-            idr = jnp.clip(idr - f / jnp.where(jnp.abs(df) > 1e-12, df, 1.0), lo, id_pol)
+        if sat is None:
+            for _ in range(8):  # Newton on i_d* (|u|² is a convex quadratic in it), then i_q* for the torque
+                f, df = jax.jvp(lambda d: excess(d, iqr), (idr,), (jnp.ones_like(idr),))
+                idr = jnp.clip(idr - f / jnp.where(jnp.abs(df) > 1e-12, df, 1.0), lo, id_pol)
+                iqr = solve_iq_at(idr)
+        else:  # on a map: along the torque's curve, in a bracket (_bracketed_newton)
+            idr = _bracketed_newton(lambda d: excess(d, solve_iq_at(d)), lo, id_pol)
             iqr = solve_iq_at(idr)
         # the limits the controller puts on i_q* there (jaxobs.drive.weakening, point 3)
         room = jnp.minimum(fw.limit_room(idr, i_max), mtpv_iq(est, idr))
@@ -198,3 +208,38 @@ def steady_point(
         offset=z + offset,
         id_fw=z + id_fw,
     )
+
+
+def _true_machine(par: PMSMParams, w_e: jax.Array | float) -> tuple[Any, Any]:
+    """The true machine's steady voltage (u_d, u_q)(i_d, i_q) at ω_e and its torque T_e(i_d, i_q): the constants'
+    (the operations as they always were), or the map's flux at the currents (``par.sat``, :func:`steady_point`)."""
+    sat = par.sat
+    if sat is None:
+        return (
+            lambda i_d, i_q: (par.Rs * i_d - w_e * par.Lq * i_q, par.Rs * i_q + w_e * (par.Ld * i_d + par.psi_f)),
+            lambda i_d, i_q: torque_dq(par, i_d, i_q),
+        )
+
+    def voltage(i_d, i_q):
+        pd, pq = sat.flux(i_d, i_q)
+        return par.Rs * i_d - w_e * pq, par.Rs * i_q + w_e * pd
+
+    def torque(i_d, i_q):
+        pd, pq = sat.flux(i_d, i_q)
+        return 1.5 * par.p * (pd * i_q - pq * i_d)
+
+    return voltage, torque
+
+
+def _bracketed_newton(g: Any, lo: jax.Array, hi: jax.Array, iters: int = 12) -> jax.Array:
+    """The root of ``g`` (> 0 at ``hi``, falling as its argument does) in [lo, hi] by Newton from ``hi``, a step
+    outside the bracket bisecting it (the stop ``lo`` where g stays > 0).  Field weakening's i_d* on a map: the
+    partial derivative at a fixed i_q* overshot to the stop and back, a 2-cycle (the PM-SyRM at 1800 r/min)."""
+    x, bracket = hi, (lo, hi)
+    for _ in range(iters):
+        f, df = jax.jvp(g, (x,), (jnp.ones_like(x),))
+        bracket = (jnp.where(f > 0, bracket[0], x), jnp.where(f > 0, x, bracket[1]))
+        step = x - f / jnp.where(jnp.abs(df) > 1e-12, df, 1.0)
+        inside = (step > bracket[0]) & (step < bracket[1])
+        x = jnp.where(inside, step, 0.5 * (bracket[0] + bracket[1]))
+    return x

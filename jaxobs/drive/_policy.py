@@ -1,6 +1,18 @@
-"""The FOC's i_d policy (zero or MTPA) and its maps between torque and current (:mod:`jaxobs.drive.control`'s
-module doc: torque to current under MTPA), with the rotor-frame helpers the controller and its steady operating
-point share."""
+"""The FOC's i_d policy (zero or MTPA) and its maps between torque and current, with the rotor-frame helpers the
+controller (:mod:`jaxobs.drive.control`) and its steady operating point share.
+
+Torque to current under MTPA.  The speed PI's output is the torque command T* in
+units of the magnet's current, i_lin = T*/K̂_t (K̂_t = 1.5 p ψ̂f): its gains above
+(jaxobs.drive.control) place the double pole at −α_s on any machine.  With i_d* = 0 that is i_q* itself.
+Under MTPA on a salient machine the torque per i_q grows with the load (the
+reluctance term (L̂d − L̂q) i_d i_q), so i_q* = i_lin would raise the loop's gain
+with the load (1.8× at rated load on a machine with Lq = 4 Ld whose reluctance
+carries 23 % of the rated torque); instead i_q* is the MTPA current whose torque on
+the assumed machine is K̂_t i_lin (:meth:`jaxobs.drive.FOC.mtpa_iq`, Newton's method), and the
+loop keeps its designed bandwidth at every load (``tests/test_mtpa_speed_loop.py``,
+a +1 % step at 500 r/min: 1.008–1.011 α_s from no load to 1.5× rated load, where
+i_q* = i_lin measured 1.069, 1.117 and 1.141 α_s at half, full and 1.5× rated).
+"""
 
 from __future__ import annotations
 

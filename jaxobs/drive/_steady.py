@@ -108,7 +108,9 @@ def fw_voltage(m: dict[str, Any], w_e: float, torque: float, i_max: float, id_to
     return best
 
 
-def base_speed(m: dict[str, Any], i_d: float, i_q: float, u_max: float) -> float:
+def base_speed(
+    m: dict[str, Any], i_d: float, i_q: float, u_max: float, flux: tuple[float, float] | None = None
+) -> float:
     """ω_e (rad/s) at which the steady |u| at (i_d, i_q) reaches u_max: the root of a quadratic in ω_e.
 
     Args:
@@ -116,11 +118,13 @@ def base_speed(m: dict[str, Any], i_d: float, i_q: float, u_max: float) -> float
         i_d: The d current, A.
         i_q: The q current, A.
         u_max: The voltage limit, V.
+        flux: (ψd, ψq) at (i_d, i_q), Vs: a saturation map's (:func:`jaxobs.drive.weakening.map_flux_at`); None:
+            the constants', (ψf + Ld i_d, Lq i_q).
 
     Returns:
         ω_e, rad/s (0 where |u| already exceeds u_max at standstill).
     """
-    a, b = m["Lq"] * i_q, m["Ld"] * i_d + m["psi_f"]
+    a, b = (m["Lq"] * i_q, m["Ld"] * i_d + m["psi_f"]) if flux is None else (flux[1], flux[0])
     rs = m["Rs"]
     qa = a * a + b * b
     qb = 2 * rs * (-i_d * a + i_q * b)
@@ -168,14 +172,17 @@ def speed_limit(
     weakening: bool,
     rated_speed_rpm: float,
     max_speed_rpm: float | None = None,
+    flux: float | None = None,
 ) -> tuple[float, str]:
     """The one speed limit of a drive (r/min, either direction) and its rule, which ``jaxobs drive check``
     prints and ``tune``, ``study`` and ``envelope`` use.
 
     The voltage's no-load bound: ωe ψf = u_max without field weakening (the FOC cannot hold even zero current
     above it); ωe (ψf − Ld i_max) = u_max with it (i_d stops at max(−i_max, −ψf/Ld): unbounded where
-    Ld i_max ≥ ψf).  Then the mechanical limit: ``max_speed_rpm`` (``[machine] max_speed_rpm``) where given,
-    else :data:`MECH_SPEED_PU` × the rated speed where the voltage leaves the speed unbounded.
+    Ld i_max ≥ ψf); on a saturation map the map's flux there, ``flux`` (:func:`jaxobs.drive.weakening.map_speed_flux`:
+    |ψ(i_d,lo, 0)|; the constants' line overstated the PM-SyRM of ``docs/examples/pmsyrm_5p6kw_sat.toml`` by 29 %,
+    19131 against 14869 r/min).  Then the mechanical limit: ``max_speed_rpm`` (``[machine] max_speed_rpm``) where
+    given, else :data:`MECH_SPEED_PU` × the rated speed where the voltage leaves the speed unbounded.
 
     Args:
         p: The pole pairs.
@@ -186,13 +193,18 @@ def speed_limit(
         weakening: Whether the FOC weakens the field.
         rated_speed_rpm: The rated speed, r/min.
         max_speed_rpm: The mechanical limit, r/min, or None.
+        flux: A saturation map's flux at the no-load stop, Vs (None: the constants').
 
     Returns:
         ``(limit, rule)``.
     """
-    flux = psi_f - Ld * i_max if weakening else psi_f
+    if flux is None:
+        flux = psi_f - Ld * i_max if weakening else psi_f
+        why = "no-load ωe (ψf − Ld i_max) = u_max" if weakening else "no-load ωe ψf = u_max"
+    else:
+        at = "i_d = max(−i_max, −ψf/Ld)" if weakening else "i = 0"
+        why = f"no-load ωe |ψ| = u_max, the map's flux at {at}"
     n_v = no_load_rpm(u_max, flux, p)
-    why = "no-load ωe (ψf − Ld i_max) = u_max" if weakening else "no-load ωe ψf = u_max"
     if max_speed_rpm is not None:
         return min(n_v, float(max_speed_rpm)), f"min({why}, machine.max_speed_rpm)"
     if math.isinf(n_v):

@@ -32,6 +32,7 @@ from .hardware import Inverter
 from .latency import Latency
 from .loop import Drive
 from .machine import PMSMParams
+from .weakening import map_speed_flux
 
 __all__ = [
     "IF_SUDDEN_LOAD_PU",
@@ -260,7 +261,8 @@ def drive_speed_limit_rpm(machine: PMSMParams, inverter: Inverter | None = None)
     """The highest speed a drive may ask of ``machine``.
 
     The speed at which the back EMF alone, ωe ψf, reaches the inverter's voltage limit u_max = U_dc/√3: the
-    drive file's one rule without field weakening (:func:`jaxobs.drive.drivefile.speed_limit`; a drive file
+    drive file's one rule without field weakening (a saturation map's no-load flux where the machine has one;
+    :func:`jaxobs.drive.drivefile.speed_limit`; a drive file
     states its own: ``DriveFile.derived["speed_limit_rpm"]``).  Above it an FOC without field
     weakening (i_d* is 0 or MTPA, never negative) cannot hold even zero current:
     the machine would run away from its reference.
@@ -276,4 +278,4 @@ def drive_speed_limit_rpm(machine: PMSMParams, inverter: Inverter | None = None)
     """
     u_max = float((Inverter() if inverter is None else inverter).u_max)
     return speed_limit(machine.p, float(machine.psi_f), float(machine.Ld), math.inf, u_max, False,
-                       float(machine.n_rated))[0]  # fmt: skip
+                       float(machine.n_rated), None, map_speed_flux(machine, math.inf, False))[0]  # fmt: skip

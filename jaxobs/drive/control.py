@@ -1,50 +1,34 @@
 """Field-oriented control: dq current PI with decoupling, speed PI, I-f start-up.
 
-Current loop (every control period T_s, 10 kHz in 000): PI in the rotor frame
-with the cross-coupling and PM terms fed forward from the *assumed* machine
-(``est_par``):
+Current loop (every control period T_s, 10 kHz in 000): PI in the rotor frame with the cross-coupling and PM
+terms fed forward from the *assumed* machine (``est_par``):
 
     u_d* = k_pd e_d + ∫k_id e_d − ω̂e L̂q i_q
     u_q* = k_pq e_q + ∫k_iq e_q + ω̂e (L̂d i_d + ψ̂f)
 
-IMC tuning (the default, :meth:`FOC.imc`): k_p = α_c L̂, k_i = α_c R̂s, which
-cancels the R–L pole and leaves i/i* = α_c/(s + α_c), time constant 1/α_c
-(plus the 1.5-sample delay of computation and PWM, small when α_c T_s ≪ 1).
+IMC tuning (the default, :meth:`FOC.imc`): k_p = α_c L̂, k_i = α_c R̂s, which cancels the R–L pole and leaves
+i/i* = α_c/(s + α_c) (plus the 1.5-sample delay of computation and PWM, small when α_c T_s ≪ 1).
 
-Speed loop (every ``speed_every`` periods, 1 kHz in 000): two-degree-of-freedom
-PI from speed to i_q*, i_q* = k_pω (b ω* − ω) + k_iω ∫(ω* − ω), with the
-mechanics J s ω = K_t i_q (K_t = 1.5 p ψ̂f).  Pole placement puts both
-closed-loop poles at −α_s: k_pω = 2α_s Ĵ/K_t, k_iω = α_s² Ĵ/K_t.  The default
-setpoint weight b = 0 (I-P, as motulator's 2DOF PI) gives ω/ω* = α_s²/(s + α_s)²
-without the PI zero's overshoot; b = 1 is the plain PI.  Load rejection is the
-same for both.
-Conditional integration keeps the integrators from winding up when the
-current limit (speed loop) or the voltage limit (current loop) is reached.
+Speed loop (every ``speed_every`` periods, 1 kHz in 000): two-degree-of-freedom PI from speed to i_q*,
+i_q* = k_pω (b ω* − ω) + k_iω ∫(ω* − ω), with the mechanics J s ω = K_t i_q (K_t = 1.5 p ψ̂f).  Pole placement puts
+both closed-loop poles at −α_s: k_pω = 2α_s Ĵ/K_t, k_iω = α_s² Ĵ/K_t.  The default setpoint weight b = 0 (I-P, as
+motulator's 2DOF PI) gives ω/ω* = α_s²/(s + α_s)² without the PI zero's overshoot; b = 1 is the plain PI.  Load
+rejection is the same for both.  Conditional integration keeps the integrators from winding up when the current
+limit (speed loop) or the voltage limit (current loop) is reached.
 
-i_d* = 0 by default; ``id_mode="mtpa"`` gives the IPMSM's maximum torque per
-ampere, i_d = ψf/(2(Lq − Ld)) − √(ψf²/(4(Lq − Ld)²) + i_q²) (i_d = 0 for Ld = Lq).
-``field_weakening=VoltageFeedbackFW()`` adds a negative i_d above base speed
-(:mod:`jaxobs.drive.weakening`); off by default.
+i_d* = 0 by default; ``id_mode="mtpa"`` gives the IPMSM's maximum torque per ampere, i_d = ψf/(2(Lq − Ld)) −
+√(ψf²/(4(Lq − Ld)²) + i_q²) (i_d = 0 for Ld = Lq).  ``field_weakening=VoltageFeedbackFW()`` adds a negative i_d
+above base speed (:mod:`jaxobs.drive.weakening`); off by default.
 
-Torque to current under MTPA.  The speed PI's output is the torque command T* in
-units of the magnet's current, i_lin = T*/K̂_t (K̂_t = 1.5 p ψ̂f): its gains above
-place the double pole at −α_s on any machine.  With i_d* = 0 that is i_q* itself.
-Under MTPA on a salient machine the torque per i_q grows with the load (the
-reluctance term (L̂d − L̂q) i_d i_q), so i_q* = i_lin would raise the loop's gain
-with the load (1.8× at rated load on a machine with Lq = 4 Ld whose reluctance
-carries 23 % of the rated torque); instead i_q* is the MTPA current whose torque on
-the assumed machine is K̂_t i_lin (:meth:`FOC.mtpa_iq`, Newton's method), and the
-loop keeps its designed bandwidth at every load (``tests/test_mtpa_speed_loop.py``,
-a +1 % step at 500 r/min: 1.008–1.011 α_s from no load to 1.5× rated load, where
-i_q* = i_lin measured 1.069, 1.117 and 1.141 α_s at half, full and 1.5× rated).
+Torque to current under MTPA (the speed loop's gain kept at every load): :mod:`jaxobs.drive._policy`.
 
-Current limit: the circle |i*| ≤ i_max at every sample (standstill, I-f and its blend
-included).  i_d has priority: i_d* is kept within ±i_max and i_q* takes what the circle
-leaves, |i_q*| ≤ √(i_max² − i_d*²).  Under MTPA the speed loop's output is limited to the
-torque of the MTPA point on the circle (:meth:`FOC.iq_limit`), so the MTPA current
-it asks for is on the circle at most.  With field weakening the weakened reference
-keeps the speed loop's torque while it can and is cut by the circle, MTPV and the
-voltage (:mod:`jaxobs.drive.weakening`).  With i_d* = 0 the circle is |i_q*| ≤ i_max.
+Current limit: the circle |i*| ≤ i_ref at every sample (standstill, I-f and its blend included), i_ref =
+(1 − ``current_margin``) i_max.  i_d has priority: i_d* is kept within ±i_ref and i_q* takes what the circle
+leaves, |i_q*| ≤ √(i_ref² − i_d*²).  Under MTPA the speed loop's output is limited to the torque of the MTPA point
+on the circle (:meth:`FOC.iq_limit`), so the MTPA current it asks for is on the circle at most.  With field
+weakening the weakened reference keeps the speed loop's torque while it can and is cut by the circle, MTPV and
+the voltage (:mod:`jaxobs.drive.weakening`).  The current itself within i_max at every sample (the margin below
+it and the current PIs' ``error_limit``, a drive file's): :mod:`jaxobs.drive._reflimit`.
 
 The voltage limit: the vector u* beyond u_max is scaled back onto the circle, its direction kept (the default).
 ``d_priority=True`` (a drive file with field weakening) keeps u_d* (clipped to ±u_max) and gives u_q* what is
@@ -54,22 +38,19 @@ saturated).  ``flux_map=True`` (a drive file with a saturation map) runs the cur
 (``est.sat``): k_pd, k_pq = α_c L_dd, α_c L_qq, its incremental inductances at i* (the integral gains α_c R̂s
 unchanged), and the decoupling −ω̂e ψq, ω̂e ψd of its flux at the measured current (as motulator's flux-map
 controllers): the secant L̂q at the rated MTPA point is 6× the saturated incremental inductance near i_max on
-that PM-SyRM (0.102 against 0.017 H), and the q loop rang from standstill: 1.10 × i_max in a standstill start at
-rated load (1.0064 with the gains alone, 1.0034 with the map's decoupling too, ``tests/test_current_limit.py``).
+that PM-SyRM (0.102 against 0.017 H); the q loop rang from standstill (1.10 × i_max, ``tests/test_current_limit.py``).
 
-Speed-loop anti-windup: conditional integration on the torque *realised*: the
-integrator stops while the speed loop's output is not realised (beyond the circle's
-torque, or cut by field weakening's limits: the reference's torque on the assumed
-machine, in K̂_t units) and the speed error pushes further.  Stopping only at the
-circle's torque let the integrator wind up while field weakening cut i_q*: a
-1000 → 2000 r/min step at 14 N·m on the lab IPMSM of ``docs/examples/ipmsm_2p2kw_lab.toml``
-overshot by 47.6 r/min; it now does not overshoot (``tests/test_weakening.py`` holds it within 5 r/min).
+Speed-loop anti-windup: conditional integration on the torque *realised*: the integrator stops while the speed
+loop's output is not realised (beyond the circle's torque, or cut by field weakening's limits: the reference's
+torque on the assumed machine, in K̂_t units) and the speed error pushes further.  Stopping only at the circle's
+torque let the integrator wind up while field weakening cut i_q*: a 1000 → 2000 r/min step at 14 N·m on the lab
+IPMSM of ``docs/examples/ipmsm_2p2kw_lab.toml`` overshot by 47.6 r/min; it now does not overshoot
+(``tests/test_weakening.py`` holds it within 5 r/min).
 
-Delay compensation: the voltage computed from the samples at τ_k acts ``advance``
-periods later on average (1.5 with sampling at the period start and one period of
-computation: :mod:`jaxobs.drive.latency`), so the controller rotates its output
-ahead by ``advance`` × ω̂e T_s; ``advance = 0`` is no compensation
-(``delay_compensation=False`` is ``advance=0``).
+Delay compensation: the voltage computed from the samples at τ_k acts ``advance`` periods later on average (1.5
+with sampling at the period start and one period of computation: :mod:`jaxobs.drive.latency`), so the controller
+rotates its output ahead by ``advance`` × ω̂e T_s; ``advance = 0`` is no compensation (``delay_compensation=False``
+is ``advance=0``).
 
 I-f start-up from standstill (:class:`IfStartup`, the design and its reasons): :mod:`jaxobs.drive.startup`.
 """
@@ -96,6 +77,7 @@ from ._foctypes import IfPhase
 from ._operating import OperatingPoint as OperatingPoint
 from ._operating import steady_point
 from ._policy import policy_id, policy_iq_limit, policy_iq_lin, policy_mtpa_iq, policy_torque, rotate_by, torque_dq
+from ._reflimit import limit_error
 from .component import AbstractComponent
 from .machine import PMSMParams
 from .startup import IfStartup as IfStartup
@@ -124,7 +106,7 @@ class FOC(AbstractComponent):
         ki_q: q current loop's integral gain, V/(A·s) (≥ 0).
         kp_w: Speed loop's proportional gain, A/(rad/s), mechanical speed (> 0).
         ki_w: Speed loop's integral gain, A/rad (≥ 0).
-        i_max: The current-vector limit, A (> 0).
+        i_max: The current-vector limit, A (> 0): the references' circle at (1 − ``current_margin``) × it.
         ts: The current-loop period, s.
         speed_every: The speed loop runs every this many periods (an integer ≥ 1).
         id_mode: The i_d* policy: ``"zero"`` or ``"mtpa"``.
@@ -137,6 +119,8 @@ class FOC(AbstractComponent):
         d_priority: The voltage limit keeps u_d* and gives u_q* what is left (module doc), else it scales the vector.
         flux_map: Where ``est`` has a saturation map, the current loop runs on it: k_pd and k_pq scale with its
             incremental inductances at i*, the decoupling is its flux at i (module doc); else the constants.
+        current_margin: h in [0, 0.5]: the references' circle i_ref = (1 − h) i_max (:mod:`jaxobs.drive._reflimit`).
+        error_limit: E in [0, 0.5]: the current PIs see |i* − i| ≤ E i_max (:mod:`jaxobs.drive._reflimit`); 0: off.
         est: The machine the controller assumes (:class:`PMSMParams`; keyword, required).
         u_max: The voltage limit for anti-windup and field weakening, V (> 0; keyword, required).
         startup: An :class:`IfStartup` (None: closed loop from t = 0).
@@ -162,6 +146,8 @@ class FOC(AbstractComponent):
     speed_schedule: float = eqx.field(static=True)  # N > 0: speed-loop bandwidth min(α_s, |ωe*|/N); 0: fixed
     d_priority: bool = eqx.field(static=True)  # the voltage limit keeps u_d* first (else scales the vector)
     flux_map: bool = eqx.field(static=True)  # the current loop on est.sat: k_p at L_inc(i*), decoupling ψ(i)
+    current_margin: float = eqx.field(static=True)  # h: the references' circle at (1 − h) i_max
+    error_limit: float = eqx.field(static=True)  # E: the current PIs see |i* − i| ≤ E i_max (0: off)
     field_weakening: VoltageFeedbackFW | None  # None: i_d* is the policy's (zero or MTPA)
     est: PMSMParams  # the machine the controller assumes
     u_max: jax.Array  # voltage limit for anti-windup and field weakening, V
@@ -188,6 +174,8 @@ class FOC(AbstractComponent):
         speed_schedule=0.0,
         d_priority=False,
         flux_map=False,
+        current_margin=0.0,
+        error_limit=0.0,
         est,
         u_max,
         startup=None,
@@ -243,6 +231,10 @@ class FOC(AbstractComponent):
         if not isinstance(flux_map, bool):
             raise ValueError(f"{own}.flux_map must be True or False, got {flux_map!r}")
         self.flux_map = flux_map
+        for key, val in (("current_margin", current_margin), ("error_limit", error_limit)):
+            if isinstance(val, bool) or not (0.0 <= float(val) <= 0.5):
+                raise ValueError(f"{own}.{key} must be a per-unit number in [0, 0.5], got {val!r}")
+        self.current_margin, self.error_limit = float(current_margin), float(error_limit)
 
     @classmethod
     def imc(
@@ -289,6 +281,11 @@ class FOC(AbstractComponent):
             u_max=DEFAULT_U_MAX if u_max is None else u_max,
             **kw,
         )
+
+    @property
+    def i_ref(self) -> jax.Array:
+        """The references' circle, A: (1 − ``current_margin``) × i_max (i_max itself without a margin)."""
+        return self.i_max if self.current_margin == 0.0 else self.i_max * (1.0 - self.current_margin)
 
     def speed_gains(self, omega_m_ref: jax.Array | float) -> tuple[jax.Array, jax.Array]:
         """(k_pω, k_iω) of the speed loop at the mechanical speed reference ω_m* (rad/s).
@@ -414,7 +411,7 @@ class FOC(AbstractComponent):
             est=self.est,
             id_mode=self.id_mode,
             outer=self.outer,
-            i_max=self.i_max,
+            i_max=self.i_ref,
             u_max=self.u_max,
             field_weakening=self.field_weakening,
             par=par,
@@ -474,7 +471,7 @@ class FOC(AbstractComponent):
         Returns:
             ``(|i_q*| on the policy's curve at |i| = i_max, the speed loop's output limit in K̂_t units)``, A.
         """
-        return policy_iq_limit(self.id_mode, est, self.i_max)
+        return policy_iq_limit(self.id_mode, est, self.i_ref)
 
     def step(self, cs: ControllerState, inp: FOCInput) -> tuple[ControllerState, FOCOutput]:
         """One current-loop period: the voltage to apply over the next period.
@@ -506,8 +503,8 @@ class FOC(AbstractComponent):
             )
         # the current circle, whatever set the references (the blend after an I-f switch, an I-f current above
         # i_max): |i*| ≤ i_max at every sample, i_d first (an identity where the circle is not reached)
-        id_ref = jnp.clip(id_ref, -self.i_max, self.i_max)
-        iq_ref = VoltageFeedbackFW.limit_iq(iq_ref, id_ref, self.i_max)
+        id_ref = jnp.clip(id_ref, -self.i_ref, self.i_ref)
+        iq_ref = VoltageFeedbackFW.limit_iq(iq_ref, id_ref, self.i_ref)
         u_a, u_b, int_d, int_q, id_fw = self._current_loop(cs, inp, th, w_e, (id_ref, iq_ref), (int_d0, int_q0), fw_lo)
         new = ControllerState(
             int_d=int_d,
@@ -603,9 +600,9 @@ class FOC(AbstractComponent):
         if fw is not None:
             # the weakened reference within the stop, the circle, MTPV and the voltage (jaxobs.drive.weakening)
             id_pol = id_ref
-            id_ref, iq_ref, capped, fw_lo = fw.references(est, id_pol, iq_cmd, cs.id_fw, w_e, self.u_max, self.i_max)
+            id_ref, iq_ref, capped, fw_lo = fw.references(est, id_pol, iq_cmd, cs.id_fw, w_e, self.u_max, self.i_ref)
             if fw.bounded:  # the gain on the reference path's slope (jaxobs.drive.weakening, "Bounded")
-                slope = fw.path_slope(est, id_pol, iq_cmd, cs.id_fw, w_e, self.u_max, self.i_max)
+                slope = fw.path_slope(est, id_pol, iq_cmd, cs.id_fw, w_e, self.u_max, self.i_ref)
             real = jnp.where(capped, torque_dq(est, id_ref, iq_ref) / est.kt, iq_sat)
         # conditional integration on the torque realised (in K̂_t units): freeze while the speed loop's output is
         # not realised (the circle's torque, or field weakening's limits) and the error pushes further.  Without
@@ -668,6 +665,8 @@ class FOC(AbstractComponent):
         i_d = c * inp.i_a + s * inp.i_b
         i_q = -s * inp.i_a + c * inp.i_b
         e_d, e_q = id_ref - i_d, iq_ref - i_q
+        if self.error_limit > 0.0:  # a step becomes a ramp that ends within the margin (jaxobs.drive._reflimit)
+            e_d, e_q = limit_error(e_d, e_q, self.error_limit * self.i_max)
         kp_d, kp_q = self.kp_d, self.kp_q
         if self.flux_map and est.sat is not None:
             # IMC on the map's incremental inductance at the reference, where the current settles: k_p = α_c L_inc
@@ -685,7 +684,7 @@ class FOC(AbstractComponent):
         if fw is None:
             id_fw = cs.id_fw
         else:
-            id_fw = fw.update(cs.id_fw, mag, u_max, w_e, est.Ld, self.i_max, ts, *fw_lo)
+            id_fw = fw.update(cs.id_fw, mag, u_max, w_e, est.Ld, self.i_ref, ts, *fw_lo)
         if self.d_priority:  # u_d* kept (the flux held where field weakening needs it), u_q* takes what is left
             u_d = jnp.clip(u_d, -u_max, u_max)
             room = safe_sqrt(u_max * u_max - u_d * u_d)  # 0 at a clipped u_d*, where a bare √ made gradients NaN

@@ -72,6 +72,7 @@ The file (SI units, or the unit in the key's name; ``[machine]``'s keys from ``p
     field_weakening = false    # VoltageFeedbackFW
     fw_bandwidth_hz = 20.0
     fw_margin = 0.95           # m: field weakening holds |u*| at m u_dc/√3, in [0.5, 1] (default 0.95)
+    current_margin = true      # |i| <= i_max at every sample: references below i_max, error limit (_reflimit)
     speed_schedule = 0.0       # N > 0: speed loop at min(α_s, |ωe*|/N) (docs/stability.md)
     setpoint_weight = 0.0      # b: 0 is I-P, 1 is PI
     advance = 1.5              # delay compensation, periods (default: the timing's use delay)
@@ -124,8 +125,13 @@ Derived defaults (each recorded in :attr:`DriveFile.derived` with its rule):
   ``max_speed_rpm`` lies above the speed where the back EMF alone reaches u_dc/√3; the file is refused when no
   i_d within the current circle reaches the rated point under u_dc/√3.  ``fw_margin`` = 0.95 by default
   (:data:`jaxobs.drive.weakening.FW_MARGIN`: 5 % of the voltage left to the current PIs).
+- **The current limit at every sample** (``current_margin = true``, the default; the shipped benches set it
+  false): the current PIs see an error of at most E i_max (E = 0.1) and the references' circle lies at
+  i_ref_max = (1 − h) i_max, h = 1.25 o E, o the designed current loop's step overshoot with its delay (5.7 % at
+  the derived α_c: h = 0.71 %); the capability is drawn within i_ref_max (:mod:`jaxobs.drive._reflimit`).
 - **Speed limit** (one rule, :func:`speed_limit`; ``jaxobs drive check`` prints it, tune, study and envelope
-  use it): the no-load voltage bound, ωe ψf = u_dc/√3, or ωe (ψf − Ld i_max) = u_dc/√3 with field weakening;
+  use it): the no-load voltage bound, ωe ψf = u_dc/√3, or ωe (ψf − Ld i_max) = u_dc/√3 with field weakening (on a
+  saturation map its flux there instead, |ψ(max(−i_max, −ψf/Ld), 0)|; the base speed, too, from the map's flux);
   within ``max_speed_rpm`` where given; where the voltage leaves the speed unbounded (ψf/Ld ≤ i_max) and no
   ``max_speed_rpm`` is given, :data:`MECH_SPEED_PU` (3) × the rated speed, ASSUMED.
 - **ψf from a datasheet**: exactly one of ``psi_f``, ``ke_v_per_krpm_ll_rms``, ``ke_v_per_krpm_ll_peak``,
@@ -258,8 +264,9 @@ class DriveFile:
 
     def capability(self, speeds_rpm: Sequence[float] | np.ndarray) -> dict[str, np.ndarray]:
         """The steady torque–speed capability at ``speeds_rpm`` (:func:`~jaxobs.drive.weakening.capability_curve`
-        with this file's controller: its i_max, its field weakening and i_d policy, fw_margin × u_dc/√3; the
-        machine's saturation map where the file has one, else the constant inductances).  The voltage is the
+        with this file's controller: its references' circle (``i_ref_max``, else i_max), its field weakening and i_d
+        policy, fw_margin × u_dc/√3; the machine's saturation map where the file has one, else the constant
+        inductances).  The voltage is the
         FOC's u_max = u_dc/√3 under a hexagon too: the inscribed circle of the hexagon is the largest voltage a
         steady sinusoidal current gets without overmodulation's harmonics, and field weakening holds |u*| at
         fw_margin of it (the hexagon's vertices are transient headroom).  A ``[dual]`` file's: one set's.
@@ -273,7 +280,8 @@ class DriveFile:
         """
         d, m = self.derived, self.machine
         w_e = np.asarray(speeds_rpm, float) * m.p * RPM
-        return capability_curve(m, w_e, float(d["u_max"].value), float(d["i_max"].value),
+        i_ref = d.get("i_ref_max", d["i_max"]).value  # the currents the controller asks for (jaxobs.drive._reflimit)
+        return capability_curve(m, w_e, float(d["u_max"].value), float(i_ref),
                                 float(d["fw_margin"].value), weakening=bool(d["field_weakening"].value),
                                 id_mode=str(d["id_policy"].value))  # fmt: skip
 
@@ -346,7 +354,7 @@ def drive_from_table(raw: dict[str, Any], name: str = "drive", base: str | Path 
     f_s, ts, sampling, latency, n_use = timing(inv, w_rated, rec)
     u_max = machine_quantities(m, inv, kt, rec)
     i_max, policy, i_d_r, i_q_r = current_limit(m, ctl, rec)
-    fw, margin = base_speed_table(m, inv, ctl, w_rated, u_max, i_max, (i_d_r, i_q_r), rec)
+    fw, margin = base_speed_table(m, inv, ctl, w_rated, u_max, i_max, (i_d_r, i_q_r), rec, machine)
     alpha_c = current_loop(m, ctl, f_s, ts, n_use, rec)
     alpha_s, schedule, w_est, speed_every, t_w = speed_loop(ctl, f_s, ts, alpha_c, rec)
     loops = dict(alpha_c=alpha_c, alpha_s=alpha_s, i_max=i_max, ts=ts, speed_every=speed_every, id_mode=policy,
@@ -381,7 +389,9 @@ def _dual_drive_file(raw: dict[str, Any], t: dict[str, dict[str, Any]], name: st
     dual, drive, extra, warned = dual_drive_file(
         single, raw, t["dual"], lowered=lowered is not None, pm=(PM_MIN_DEG, PM_WARN_DEG)
     )
-    derived = {**single.derived, **{k: Derived(*v) for k, v in extra.items()}}
+    # the dual loops run without the single FOC's reference margin and error limit (dual_foc_kw)
+    kept = {k: v for k, v in single.derived.items() if k not in ("i_ref_max", "error_limit")}
+    derived = {**kept, **{k: Derived(*v) for k, v in extra.items()}}
     table = {k: raw[k] for k in DRIVE_FILE_KEYS if k in raw}
     warnings = single.warnings + warned
     return dataclasses.replace(single, dual=dual, drive=drive, derived=derived, table=table, warnings=warnings)

@@ -86,6 +86,8 @@ __all__ = [
     "capability_curve",
     "capability_torque",
     "id_stop",
+    "map_flux_at",
+    "map_speed_flux",
     "mtpv_iq",
     "mtpv_iq_np",
     "voltage_iq_range",
@@ -494,6 +496,47 @@ def _constant_curve(est, w, u_max, i_max, margin, n):
 @eqx.filter_jit
 def _map_flux(sat, i_d, i_q):
     return sat.flux(i_d, i_q)
+
+
+def map_speed_flux(machine: PMSMParams, i_max: float, weakening: bool, n: int = 201) -> float | None:
+    """The flux (Vs) a drive's no-load speed bound turns into voltage on ``machine``'s saturation map: the least
+    |ψ(i_d, 0)| of the map over the d currents the FOC may ask for at no load, i_d in [i_d,lo, 0] with field
+    weakening (i_d,lo = max(−i_max, −ψ̂f/L̂d), the FOC's stop: :func:`id_stop`), i_d = 0 without; ``n`` points (the
+    map's flux is monotonic along i_d, so the grid's least is the stop's, or 0 where ψd crosses zero).  None
+    without a map (the rule is then the constants', ψf − Ld i_max: :func:`jaxobs.drive.drivefile.speed_limit`).
+
+    Args:
+        machine: The machine (its ``sat`` the map, its ``psi_f`` and ``Ld`` the controller's constants).
+        i_max: The current limit, A.
+        weakening: Whether the FOC weakens the field.
+        n: Grid points.
+
+    Returns:
+        The flux, Vs, or None.
+    """
+    if machine.sat is None:
+        return None
+    lo = max(-float(i_max), min(-float(machine.psi_f) / float(machine.Ld), 0.0)) if weakening else 0.0
+    i_d = np.linspace(lo, 0.0, int(n))
+    pd, pq = (np.asarray(v, float) for v in _map_flux(machine.sat, jnp.asarray(i_d), jnp.asarray(np.zeros_like(i_d))))
+    return float(np.min(np.hypot(pd, pq)))
+
+
+def map_flux_at(machine: PMSMParams, i_d: float, i_q: float) -> tuple[float, float] | None:
+    """(ψd, ψq) (Vs) of ``machine``'s saturation map at one current, or None without a map (a check's number).
+
+    Args:
+        machine: The machine.
+        i_d: The d current, A.
+        i_q: The q current, A.
+
+    Returns:
+        ``(ψd, ψq)``, Vs, or None.
+    """
+    if machine.sat is None:
+        return None
+    pd, pq = _map_flux(machine.sat, jnp.asarray(np.array([i_d], float)), jnp.asarray(np.array([i_q], float)))
+    return float(np.asarray(pd)[0]), float(np.asarray(pq)[0])
 
 
 def _points_curve(machine, w, u_max, margin, i_d, i_q, flux=None):

@@ -31,6 +31,10 @@ from jaxobs.observers import (
 
 from .codegen import CStep
 
+# a drive record's first-period shapes (drive_test_signal) and what each adds to the record's description
+_STARTS = {"": "", "flux": ", first period carries psi(0)/ts", "alpha": ", first period on alpha only",
+           "aligned": ", rotor at theta = 0 where the observer's angle starts"}  # fmt: skip
+
 if TYPE_CHECKING:
     from jaxobs.core.discretize import AbstractRule
     from jaxobs.drive import Drive, PMSMParams
@@ -76,7 +80,7 @@ def drive_test_signal(
     """Sampled (u_α, u_β, i_α, i_β) of a surface PMSM turning at electrical speed ``omega``, with a +10 % speed
     step at n/3 and a +30° angle jump at 2n/3.
 
-    θ(0) = π/2; i = I (−sin θ, cos θ) (q-axis current, I = min(5 A, ψ/(2L)) unless given),
+    θ(0) = π/2 (0 with ``start="aligned"``); i = I (−sin θ, cos θ) (q-axis current, I = min(5 A, ψ/(2L)) unless given),
     e = ω ψ (−sin θ, cos θ) (002 eq 5), u = R i + L di/dt + e.  ``u`` at sample k is the voltage applied
     over [t_k, t_k+1] (its period average: R i + e averaged over 8 midpoints, L Δi/ts exactly), as a drive
     observer expects; ``i`` is sampled at t_k.
@@ -90,7 +94,14 @@ def drive_test_signal(
     - ``"alpha"``: the first voltage and the first two current samples have no β component, so the first
       back EMF is on α only.  After a single back-EMF sample the two SOGIs of a SOIFO hold proportional
       states, the cross product whose sign gives the direction of rotation is 0 but for rounding, and
-      the signed ω̂ is ±|ω̂| by chance; with a β-free first sample that product is exactly 0.
+      the signed ω̂ is ±|ω̂| by chance; with a β-free first sample that product is exactly 0;
+    - ``"aligned"``: the rotor starts at θ = 0, where an observer whose angle is its own state starts it
+      (the reduced-order flux observer: θ̂ = 0).  From θ = π/2 its first 0.1 s are a large-signal search
+      for the angle (ω̂ swinging through ±120 rad/s and through 0 several times, the flux estimate up to 3 ×
+      ψf), a trajectory whose float32 rounding grows with every turn: on the 5.6-kW PM-SyRM's flux map
+      (``docs/examples/pmsyrm_5p6kw_sat.toml``) the float32 JAX step itself ended 5.9e-4 from its float64 run
+      where ω̂ crossed 0 (step 577), the C 4.9e-4 from the float32 golden, both against a 1e-4 tolerance that
+      is absolute there; aligned, it tracks from the first sample.
 
     Args:
         ts: The sample time, s.
@@ -100,19 +111,20 @@ def drive_test_signal(
         L: The inductance, H.
         psi: The rotor flux ψ, Wb.
         current: The q-axis current I, A (default min(5 A, ψ/(2L))).
-        start: ``""``, ``"flux"`` or ``"alpha"``, as above.
+        start: ``""``, ``"flux"``, ``"alpha"`` or ``"aligned"``, as above.
 
     Returns:
         ``(float32 array (n_steps, 4), a one-line description)``.
     """
-    if start not in ("", "flux", "alpha"):
-        raise ValueError(f"drive_test_signal: start must be '', 'flux' or 'alpha', got {start!r}")
+    if start not in _STARTS:
+        raise ValueError(f"drive_test_signal: start must be '', 'flux', 'alpha' or 'aligned', got {start!r}")
+    th_start = 0.0 if start == "aligned" else np.pi / 2
     current = min(5.0, 0.5 * psi / L) if current is None else current
     t1, t2 = (n_steps // 3) * ts, (2 * n_steps // 3) * ts
 
     def theta(t):
         return (
-            np.pi / 2
+            th_start
             + omega * t
             + np.where(t >= t1, 0.1 * omega * (t - t1), 0.0)
             + np.where(t >= t2, np.radians(30.0), 0.0)
@@ -137,7 +149,7 @@ def drive_test_signal(
     elif start == "alpha":
         u[0, 1] = i[0, 1] = i[1, 1] = 0.0
     data = np.concatenate([u, i], axis=1).astype(np.float32)
-    first = {"": "", "flux": ", first period carries psi(0)/ts", "alpha": ", first period on alpha only"}[start]
+    first = _STARTS[start]
     doc = (
         f"PMSM u/i at {omega / (2 * np.pi):g} Hz electrical (psi = {psi:g} Wb, I = {current:.3g} A, "
         f"Rs = {Rs:g} ohm, L = {L:g} H){first}, +10 % speed step at {t1:g} s, +30 deg angle jump at {t2:g} s, "
@@ -221,12 +233,13 @@ def drive_recording(
 
     Export the observer bound to the same machine and speed (``observer.bind(machine, ω_e)``).
 
-    The rotor starts at θe = π/2, where the q-axis current and the back EMF lie on −α, so the
-    β components of the first samples are small.  ``start`` shapes the first period as
+    The rotor starts at θe = π/2 (0 with ``start="aligned"``), where the q-axis current and the back EMF lie on
+    −α, so the β components of the first samples are small.  ``start`` shapes the first period as
     :func:`drive_test_signal` does (the reasons are there): ``"flux"`` adds the rotor flux at t = 0,
     ψf (cos θe0, sin θe0), divided by ts to the first voltage (the pure integrator's initial value);
     ``"alpha"`` zeroes the β components of the first voltage and the first two currents (a few
-    per cent of their amplitude at θe0 = π/2: 5 % of the voltage, the ω_e L i_q drop; 3 % of the current).
+    per cent of their amplitude at θe0 = π/2: 5 % of the voltage, the ω_e L i_q drop; 3 % of the current);
+    ``"aligned"`` starts the rotor at θe0 = 0, where the reduced-order flux observer starts its own angle.
 
     Args:
         observer: The drive observer.
@@ -236,7 +249,7 @@ def drive_recording(
         rpm: The speed, r/min (default the bench's).
         load: The load before and after the step, × T_rated.
         speed_step: The speed reference's relative step.
-        start: ``""``, ``"flux"`` or ``"alpha"``, as above.
+        start: ``""``, ``"flux"``, ``"alpha"`` or ``"aligned"``, as above.
         encoder: Whether to append two columns, the true electrical angle θe (rad, wrapped) and speed ωe
             (rad/s) at t_k: what an encoder would record beside u and i (the shipped example recording,
             ``tuning/presets/recordings/``, is made this way).
@@ -248,8 +261,8 @@ def drive_recording(
     Returns:
         ``(float32 array (n_steps, 4 or 6), a one-line description)``.
     """
-    if start not in ("", "flux", "alpha"):
-        raise ValueError(f"drive_recording: start must be '', 'flux' or 'alpha', got {start!r}")
+    if start not in _STARTS:
+        raise ValueError(f"drive_recording: start must be '', 'flux', 'alpha' or 'aligned', got {start!r}")
     import jaxobs
     from jaxobs import drive as D
 
@@ -266,7 +279,7 @@ def drive_recording(
         speed_ref=D.Scenario.speed_rpm([0.0, t1], [rpm, (1 + speed_step) * rpm]),
         load=D.Scenario.load_steps([0.0, t2], [load[0] * t_rated, load[1] * t_rated]),
         omega_m0=rpm * D.RPM,
-        theta_e0=math.pi / 2,
+        theta_e0=0.0 if start == "aligned" else math.pi / 2,
     )
     if drive is None:
         drive = D.bench_drive(machine, sensorless=False, settle=0.0, ts=ts)  # the encoder closes the loop
@@ -298,7 +311,7 @@ def drive_recording(
         f"{load[0]:g} T_rated, speed reference {speed_step:+.0%} at {t1:g} s, load to {load[1]:g} T_rated at "
         f"{t2:g} s, ideal sensors, ts = {ts:g} s"
     )
-    doc += {"": "", "flux": ", first period carries psi(0)/ts", "alpha": ", first period on alpha only"}[start]
+    doc += _STARTS[start]
     return data.astype(np.float32), doc
 
 
@@ -383,8 +396,10 @@ def golden_outputs(obs32: AbstractObserver, state0: Any, step: CStep, u: np.ndar
 
 # How a drive recording's first period is shaped (drive_test_signal explains why): the flux the
 # integrators cannot know for a pure integrator or an LPF, a beta-free first back EMF for the SOIFOs,
-# whose signed speed is otherwise the sign of a rounding error.  Any other observer: unshaped.
-_RECORD_START = {PureIntegratorFlux: "flux", LPFFlux: "flux", SOIFO: "alpha", SecondOrderSOIFO: "alpha"}
+# whose signed speed is otherwise the sign of a rounding error, the rotor where the reduced-order flux
+# observer starts its own angle.  Any other observer: unshaped.
+_RECORD_START = {PureIntegratorFlux: "flux", LPFFlux: "flux", SOIFO: "alpha", SecondOrderSOIFO: "alpha",
+                 ReducedOrderFluxObserver: "aligned"}  # fmt: skip
 
 
 def record_start(observer: AbstractObserver) -> str:
@@ -395,7 +410,8 @@ def record_start(observer: AbstractObserver) -> str:
         observer: Any observer.
 
     Returns:
-        ``"flux"`` (a pure integrator or LPF), ``"alpha"`` (the SOIFOs) or ``""``.
+        ``"flux"`` (a pure integrator or LPF), ``"alpha"`` (the SOIFOs), ``"aligned"`` (the reduced-order flux
+        observer) or ``""``.
     """
     return _RECORD_START.get(type(observer), "")
 
