@@ -99,6 +99,14 @@ COMMANDS = {
         *("--speeds", "2", "--loads", "1", "--horizon", "0.5"),
         *("--out", "OUT", "--force", "--quiet"),
     ],
+    # a new user's map of the traction IPMSM: 4 speeds x 3 loads of its reduced-order flux observer job's two
+    # designs (docs/examples/traction_rofo_tune.toml; a tree from before that file cannot run it)
+    "envelope-traction-4x3": [
+        "envelope",
+        str(PRESETS.parents[1] / "docs" / "examples" / "traction_rofo_tune.toml"),
+        *("--speeds", "4", "--loads", "3"),
+        *("--out", "OUT", "--force", "--quiet"),
+    ],
     # `make test` as the Makefile runs it (-q only shortens its output); opt-in: about 14 min a tree
     "make-test": ["PYTEST", "-m", "not slow and not repro", "-n", "auto", "-q"],
 }
@@ -113,6 +121,7 @@ TARGETS = {
     "drive-check": {"any": 2.0},
     "make-run": {"cold": 20.0, "warm": 25.0, "warm_ratio": 0.40},
     "envelope-200x3": {"cold": 30.0, "warm": 15.0},
+    "envelope-traction-4x3": {"cold": 120.0},
     "make-test": {"cold": 360.0},
 }
 
