@@ -50,7 +50,6 @@ runs, after its throughput rows (:mod:`benchmarks.extra`).
 from __future__ import annotations
 
 import argparse
-import importlib.util
 import json
 import os
 import resource
@@ -157,7 +156,10 @@ def _worker(report: str, mode: str, argv: list[str]) -> int:
                 spans[kinds[event]].append((start, end))
 
         jax.monitoring.register_event_time_span_listener(on_span)
-    if importlib.util.find_spec("jaxobs_tuning.cli_entry") is not None:
+    import jaxobs_tuning
+
+    # the tree's own files decide: find_spec would also find this checkout's module through its editable install
+    if any((Path(p) / "cli_entry.py").is_file() for p in jaxobs_tuning.__path__):
         from jaxobs_tuning.cli_entry import main
     else:  # a tree from before the console script's own entry: it was jaxobs_tuning.cli:main
         from jaxobs_tuning.cli import main
