@@ -417,3 +417,21 @@ def test_leso_drive_job_runs(tmp_path):
     res = json.loads((tmp_path / "o" / "result.json").read_text())
     assert res["scores"]["tuned"]["diverged"] == 0
     assert res["gains"]["closed_form"]["k2"] == pytest.approx(papers.FALESO_K2)
+
+
+def test_a_gain_on_its_bound_reads_back_to_a_finite_theta():
+    """A solver's θ far out rounds the gain onto its bound in float64 (a Nelder–Mead expansion reaches it); reading
+    that gain back to θ (the result after tuning) gives a finite θ whose gain is the bound, not log 0's "math domain
+    error", for two bounds and for one."""
+    from jaxobs_tuning.params import GainSpec
+
+    both = GainSpec("zeta_inf", 0.2, 0.1, 2.0)
+    on_lower = float(both.from_theta(jnp.asarray(-60.0, jnp.float64)))
+    assert on_lower == pytest.approx(0.1, rel=1e-15)  # the sigmoid rounded onto the bound (exp(log 0.1): ±1 ulp)
+    # on the bound, and one ulp outside it (exp(log(lower)) may round below: log of a negative was the error)
+    for g in (on_lower, 0.1, math.nextafter(0.1, 0.0), 2.0, math.nextafter(2.0, 3.0)):
+        th = both.to_theta(g)
+        assert math.isfinite(th) and float(both.from_theta(jnp.asarray(th, jnp.float64))) == pytest.approx(g, rel=1e-12)
+    one = GainSpec("k", 1.0, 0.5, None)
+    th = one.to_theta(0.5)
+    assert math.isfinite(th) and float(one.from_theta(jnp.asarray(th, jnp.float64))) == pytest.approx(0.5, rel=1e-12)

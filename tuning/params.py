@@ -63,13 +63,16 @@ class GainSpec:
         """
         z = math.log(g) if self.log else g
         lo, hi = self._z_bounds()
+        # A gain on its bound (a solver's θ run far out: from about |θ| = 37 the sigmoid rounds to the bound in
+        # float64, as a Nelder–Mead expansion reaches) maps to the finite θ of a point _EDGE inside it, not to
+        # log 0: the run's result is read back to θ after tuning, which failed there with "math domain error".
         if lo is not None and hi is not None:
-            u = (z - lo) / (hi - lo)
+            u = min(max((z - lo) / (hi - lo), _EDGE), 1.0 - _EDGE)
             return math.log(u / (1 - u))
         if lo is not None:
-            return _softplus_inv(z - lo)
+            return _softplus_inv(max(z - lo, _EDGE))
         if hi is not None:
-            return _softplus_inv(hi - z)
+            return _softplus_inv(max(hi - z, _EDGE))
         return z
 
     def from_theta(self, th: jax.Array) -> jax.Array:
@@ -99,6 +102,9 @@ def _leaf(component: eqx.Module, name: str) -> jax.Array:
     for part in name.split("."):
         node = getattr(node, part)
     return cast(jax.Array, node)  # a gain's leaf: the parser names only array fields
+
+
+_EDGE = 1e-15  # how far inside its bounds a gain on a bound is read back (to_theta)
 
 
 def _softplus_inv(y: float) -> float:
