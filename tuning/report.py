@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import itertools
 import math
+import textwrap
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -147,7 +148,9 @@ def convergence_figure(history: list, name: str, objective: str | None = None, b
         best: the iteration whose design is the tuned one (the result's ``best_iteration``); None: the least
             value among the iterations that diverged in no scenario (none marked where every one diverged).
     """
-    fig, ax = _subplots(figsize=(6.4, 4.0 if objective else 3.5))
+    # the definition wrapped to the figure's width (a long metric's name ran past both edges), a line each
+    lines = [w for line in (objective or "").split("\n") for w in textwrap.wrap(line, 105)] if objective else []
+    fig, ax = _subplots(figsize=(6.4, 3.5 + 0.25 * len(lines)))
     it, val = [h["iteration"] for h in history], [h["value"] for h in history]
     ax.plot(it, val, lw=1.2, marker=".", ms=4, label="objective J of each design scored")
     # a log scale where every value is positive; an objective with a margin term (sosoifo.toml) goes negative,
@@ -171,8 +174,8 @@ def convergence_figure(history: list, name: str, objective: str | None = None, b
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=8)
     if objective:
-        fig.text(0.5, 0.015, objective, ha="center", va="bottom", fontsize=8, color="0.2")
-    fig.tight_layout(rect=(0, 0.09 if objective else 0, 1, 1))
+        fig.text(0.5, 0.015, "\n".join(lines), ha="center", va="bottom", fontsize=8, color="0.2")
+    fig.tight_layout(rect=(0, 0.01 + 0.16 * len(lines) / (3.5 + 0.25 * len(lines)), 1, 1))
     return fig
 
 
