@@ -1,6 +1,7 @@
 """Fuzzing what a run reads besides its job file: result.json files fed to `study` and
 `export` (jaxobs_tuning.results.load_result, then tuned_component as a study builds it) and CSV recordings
-(jaxobs.signals.read_recording).  Every input ends accepted or refused with a one-line ValueError: never
+(jaxobs.signals.read_recording).  Every input ends accepted or refused with a one-line ValueError raised by one
+of jaxobs's checks (the command line shows it as bad input, not as an internal error): never
 another exception (a traceback), never a hang, and never an input known to be invalid accepted
 ("accepted-invalid": a gain that is not a finite JSON number, an unknown gain or component, a CSV field
 that is not a strict number).  The counts are printed (`pytest -s`).  The study-file fuzz is in
@@ -19,6 +20,7 @@ import pytest
 
 from jaxobs import papers
 from jaxobs.signals import read_recording
+from jaxobs_tuning.cli_run import _raised_by_a_check
 from jaxobs_tuning.results import load_result, tuned_component
 
 HANG_S = 10.0  # CPU seconds of this process (time.process_time): other processes' load does not stretch them
@@ -171,6 +173,9 @@ def _fuzz(cases, path, read, what):
             if "\n" in str(e) or len(str(e)) > 400:
                 counts["tracebacks"] += 1
                 bad.append(f"{label}: not one line: {str(e)[:200]!r}")
+            elif not _raised_by_a_check(e):  # the command line would show it as an internal error, with a log
+                counts["tracebacks"] += 1
+                bad.append(f"{label}: a ValueError no check raised: {str(e)[:200]!r}")
         except Exception as e:  # noqa: BLE001 - counted: a traceback in the command line
             counts["tracebacks"] += 1
             bad.append(f"{label}: {type(e).__name__}: {str(e)[:200]}")
@@ -275,11 +280,9 @@ def test_fuzzed_checkpoints_are_all_refused(tmp_path):
     ckpt = tmp_path / "c.npz"
 
     def resume(path):
-        try:
-            _run(path, resume=True)
-        except CheckpointError as e:  # a ValueError: refused in one line
-            raise ValueError(str(e)) from None
+        _run(path, resume=True)  # refused: a CheckpointError, a ValueError
 
+    assert issubclass(CheckpointError, ValueError)
     counts = _fuzz(cases, ckpt, resume, "checkpoints")
     assert counts["tried"] >= 200 and counts["accepted"] == 0
 

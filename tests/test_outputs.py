@@ -168,6 +168,31 @@ def test_internal_error_is_one_line_with_a_log(tmp_path, capsys, monkeypatch):
     assert not (tmp_path / "o" / LOCK).exists()
 
 
+def test_a_value_error_of_ours_is_an_internal_error_and_a_check_is_bad_input(tmp_path, capsys, monkeypatch):
+    """Both are ValueError: one raised by an operation (math.log(-1), as a gain one ulp outside its bound once
+    did) is a fault with its traceback in a log, exit 1; one raised by a check is the user's, one line, exit 2."""
+    import math
+
+    path = tmp_path / "job.toml"
+    path.write_text(GOOD)
+
+    def domain(*a, **k):
+        return math.log(-1.0)
+
+    monkeypatch.setattr("jaxobs_tuning.cli.run_job", domain)
+    assert main(["tune", str(path), "--out", str(tmp_path / "o")]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "internal error (ValueError): math domain error" in err[0] and "error.log" in err[0]
+    assert "math.log(-1.0)" in (tmp_path / "o" / "error.log").read_text()
+    # a check's verdict, raised by jaxobs: one line, exit 2, no log
+    monkeypatch.undo()
+    bad = tmp_path / "bad.toml"
+    bad.write_text(GOOD.replace("init = 12337.0", "init = -1.0"))
+    assert main(["tune", str(bad), "--out", str(tmp_path / "b")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("jaxobs: error: ") and "traceback" not in err[0]
+
+
 # --------------------------------------------------------------------------
 # checkpoints: kill at every point, resume bit-identically
 # --------------------------------------------------------------------------

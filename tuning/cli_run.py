@@ -9,6 +9,8 @@ jobs, their solvers, optax and optimistix: about half a second) that a drive fil
 from __future__ import annotations
 
 import argparse
+import linecache
+import os
 import sys
 import tempfile
 import traceback
@@ -17,6 +19,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import NoReturn
 
+import jaxobs
 from jaxobs import use_compile_cache, use_host_devices
 
 from .cli_common import native_stderr_to_log
@@ -96,8 +99,10 @@ def run_parser(parser: argparse.ArgumentParser, argv: Sequence[str] | None = Non
             use_compile_cache()  # before any compilation: compiled programs are reused by the next process
         with native_stderr_to_log(getattr(args, "quiet", False)):  # XLA's own alarms to a log under --quiet
             return args.func(args)
-    except ValueError as e:  # bad input, job-file errors (JobError) included: one line, exit 2
-        print(f"jaxobs: error: {e}", file=sys.stderr)
+    except ValueError as e:
+        if not _raised_by_a_check(e):  # numpy, JAX, math.log...: a fault of ours, not the user's input
+            return _internal_error(e, args)
+        print(f"jaxobs: error: {e}", file=sys.stderr)  # bad input, job-file errors (JobError) included
         return 2
     except OSError as e:  # an output folder that cannot be made or written, a file that cannot be read
         where = f": {e.filename}" if e.filename else ""
@@ -112,12 +117,41 @@ def run_parser(parser: argparse.ArgumentParser, argv: Sequence[str] | None = Non
         print(f"{start}jaxobs: interrupted{_interrupt_hint(args)}", file=sys.stderr)
         return 130
     except (Exception, MemoryError) as e:  # an internal error: the traceback to a log, one line here
-        log = _write_error_log(getattr(args, "log_dir", None))
-        what = "out of memory" if isinstance(e, MemoryError) else f"internal error ({type(e).__name__})"
-        print(f"jaxobs: {what}: {' '.join(str(e).split())[:120]} — traceback in {log}", file=sys.stderr)
-        return 1
+        return _internal_error(e, args)
     finally:
         warnings.showwarning = shown
+
+
+# the folders of the two packages, each with its separator (``.../tuning/``, ``.../jaxobs/``)
+_OURS = tuple(str(Path(f).resolve().parent) + os.sep for f in (__file__, jaxobs.__file__))
+
+
+def _raised_by_a_check(e: BaseException) -> bool:
+    """Whether ``e`` is a check's verdict on the input: raised by a ``raise`` statement in jaxobs or its tuning
+    package (a field's range, a job file's key, a recording's column), not by a library or an operation of ours
+    that met a value it cannot take (``math.log(-1)``, a shape NumPy cannot broadcast, JAX's own ``ValueError``).
+
+    Both are ``ValueError``; only the first is the user's to fix, and shown as one line.  The second is a fault
+    of ours: one line too, but its traceback goes to a log, as for any internal error.  Told apart by where the
+    exception was raised (its traceback's last frame) and how (that line is a ``raise``).
+    """
+    tb = e.__traceback__
+    if tb is None:
+        return False
+    while tb.tb_next is not None:
+        tb = tb.tb_next
+    filename = str(Path(tb.tb_frame.f_code.co_filename).resolve())
+    if not filename.startswith(_OURS):
+        return False
+    return linecache.getline(filename, tb.tb_lineno).lstrip().startswith("raise")
+
+
+def _internal_error(e: BaseException, args: argparse.Namespace | None) -> int:
+    """One line for an internal error, its traceback in a log (``args.log_dir``, else a temporary file); exit 1."""
+    log = _write_error_log(getattr(args, "log_dir", None))
+    what = "out of memory" if isinstance(e, MemoryError) else f"internal error ({type(e).__name__})"
+    print(f"jaxobs: {what}: {' '.join(str(e).split())[:120]} — traceback in {log}", file=sys.stderr)
+    return 1
 
 
 def _interrupt_hint(args: argparse.Namespace | None) -> str:
