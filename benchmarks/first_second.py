@@ -432,7 +432,9 @@ def main(argv=None) -> int:
         "--cmd",
         nargs="+",
         choices=sorted(COMMANDS),
-        help="commands to time (default make-run, or none with --with: the earlier files' table alone; each "
+        metavar="CMD",  # the choices listed once, in the help, not twice in the usage line
+        help=f"commands to time, of {', '.join(sorted(COMMANDS))} (default make-run, or none with --with: the "
+        "earlier files' table alone; each "
         "one's command line is in COMMANDS, this file; make-test takes about 14 min a tree: run it alone, merge it "
         "with --with)",
     )
