@@ -296,3 +296,27 @@ def test_table_from_csv_is_the_inline_table(tmp_path):
     from_csv = drive_from_table(raw, "x", tmp_path).machine.sat
     np.testing.assert_array_equal(from_csv.coef_d, inline.coef_d)
     np.testing.assert_array_equal(from_csv.coef_q, inline.coef_q)
+
+
+def test_a_run_on_a_map_traces_few_flux_solves(monkeypatch):
+    """The steady start on a saturation map iterates in loops, each body traced once: tracing one sensorless run on
+    the 5.6-kW PM-SyRM traces the map's flux (a Newton solve of its own) 54 times.  With its Newton iterations as
+    Python loops it traced 456 (42 s of tracing, a compile past 10 GiB): counted, not timed, so a slower machine
+    cannot fail it."""
+
+    from jaxobs import simulate
+    from jaxobs.drive import read_drive
+    from jaxobs.observers import ReducedOrderFluxObserver
+    from jaxobs.scenarios.families.drive import DriveScenarios
+
+    f = read_drive(Path(__file__).parents[1] / "docs" / "examples" / "pmsyrm_5p6kw_sat.toml")
+    drive = f.drive_for(sensorless=True)
+    family = DriveScenarios(f.machine, drive)  # type: ignore[arg-type]  # a single machine's drive
+    sc = family.build(["speed_rpm", "load_nm"], [(900.0, 29.7)])
+    sc = jax.tree.map(lambda x: x[0], sc)
+    design = ReducedOrderFluxObserver.closed_form(ts=drive.ts)
+    calls = []
+    flux = AlgebraicSaturation.flux
+    monkeypatch.setattr(AlgebraicSaturation, "flux", lambda self, *a, **k: calls.append(1) or flux(self, *a, **k))
+    jax.make_jaxpr(lambda s: simulate(family.system(design, s), 0.01))(sc)
+    assert 0 < len(calls) <= 80, len(calls)
