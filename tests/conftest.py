@@ -103,14 +103,15 @@ def pytest_terminal_summary(terminalreporter):
 # ``JAXOBS_TEST_TIMES=<file>``: one line per test phase appended as it ends (wall s, the worker's peak RSS in MiB,
 # the node id), so that a run killed before pytest's own --durations table (a time-out, memory exhausted) still
 # tells which tests took the time and the memory.  CI's slow suite sets it and prints the file's slowest lines.
-def pytest_runtest_logreport(report):
+@pytest.hookimpl(wrapper=True)  # where the test runs (an xdist worker, or this process): each report written once
+def pytest_runtest_makereport(item, call):
+    report = yield
     path = os.environ.get("JAXOBS_TEST_TIMES")
-    # under xdist the controller sees each worker's report again (``report.node``, its worker): written once, there
-    if not path or getattr(report, "node", None) is not None or (report.when != "call" and report.duration < 1.0):
-        return
-    import resource
+    if path and (report.when == "call" or report.duration >= 1.0):
+        import resource
 
-    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss // 1024
-    worker = os.environ.get("PYTEST_XDIST_WORKER", "-")
-    with open(path, "a") as f:  # one short write per line: the workers' lines do not interleave
-        f.write(f"{report.duration:9.1f} s {peak:7d} MiB {worker} {report.when} {report.nodeid}\n")
+        peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss // 1024
+        worker = os.environ.get("PYTEST_XDIST_WORKER", "-")
+        with open(path, "a") as f:  # one short write per line: the workers' lines do not interleave
+            f.write(f"{report.duration:9.1f} s {peak:7d} MiB {worker} {report.when} {report.nodeid}\n")
+    return report
